@@ -1,0 +1,334 @@
+#include "run_job.h"
+
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+#include "cpu_gradient.h"
+#include "files.h"
+#include "gradient_pass.h"
+#include "sampling.h"
+#include "synthetic.h"
+#include "volume_io.h"
+#include "vk_context.h"
+
+namespace isotouch::app {
+namespace {
+
+namespace fs = std::filesystem;
+using servo::Vec3;
+
+double percentile(std::vector<std::int64_t> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t k = std::min(v.size() - 1, std::size_t(std::ceil(q * double(v.size()))) - 1);
+  return double(v[q <= 0 ? 0 : k]);
+}
+
+std::string fmt(double v, int prec = 6) {
+  std::ostringstream s;
+  s << std::setprecision(prec) << v;
+  return s.str();
+}
+
+std::string trace_csv(const std::vector<servo::TraceRow>& trace) {
+  std::ostringstream s;
+  s << "t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,"
+       "plane_update,tick_ns\n";
+  s << std::setprecision(9);
+  for (const auto& r : trace)
+    s << r.t_s << ',' << r.hip_m.x << ',' << r.hip_m.y << ',' << r.hip_m.z << ',' << r.vhip_m.x
+      << ',' << r.vhip_m.y << ',' << r.vhip_m.z << ',' << r.force_n.x << ',' << r.force_n.y << ','
+      << r.force_n.z << ',' << int(r.contact) << ',' << int(r.plane_update) << ',' << r.tick_ns
+      << '\n';
+  return s.str();
+}
+
+// gnuplot single-quoted string: a quote is written twice.
+std::string gq(const std::string& s) {
+  std::string o = "'";
+  for (char c : s) o += c == '\'' ? std::string("''") : std::string(1, c);
+  return o + "'";
+}
+
+bool draw_plots(const Scene& scene, const std::string& dir, const servo::TouchScript& script,
+                std::string& note) {
+  const std::string csv = fs::absolute(fs::path(dir) / "trace.csv").string();
+  const std::string fd = fs::absolute(fs::path(dir) / "force_depth.png").string();
+  const std::string tt = fs::absolute(fs::path(dir) / "tick_time.png").string();
+  const std::string pid = std::to_string(::getpid());
+  std::ostringstream g;
+  g << "# Plots of " << dir << "/trace.csv; re-run with: gnuplot plots.gp\n"
+    << "set datafile separator ','\n"
+    << "set terminal pngcairo size 1100,760 font 'Sans,10'\n"
+    << "set output " << gq(fd + ".tmp-" + pid) << "\n"
+    << "set multiplot layout 2,1 title " << gq("isotouch - " + scene.name + ": HRI force and penetration (simulated device)") << "\n"
+    << "set grid\nset key top left\n"
+    << "set object 1 rect from " << script.t_press << ", graph 0 to " << script.t_stroke
+    << ", graph 1 fc rgb '#eeeeff' fs solid 0.5 behind\n"
+    << "set object 2 rect from " << script.t_stroke << ", graph 0 to " << script.t_lift
+    << ", graph 1 fc rgb '#eeffee' fs solid 0.5 behind\n"
+    << "set ylabel '|F| [N]'\n"
+    << "plot " << gq(csv) << " every ::1 using 1:(sqrt($8**2+$9**2+$10**2)) with lines lw 1.5 lc rgb '#c0392b' title '|F| on the device', "
+    << scene.hri.force_limit_n << " with lines dt 2 lc rgb '#555555' title 'force limit'\n"
+    << "set xlabel 't [s]   (blue: press and hold, green: stroke)'\n"
+    << "set ylabel 'penetration [mm]'\n"
+    << "plot " << gq(csv) << " every ::1 using 1:(1000*sqrt(($2-$5)**2+($3-$6)**2+($4-$7)**2)) with lines lw 1.5 lc rgb '#2471a3' title '|HIP - VHIP|'\n"
+    << "unset multiplot\n"
+    << "unset object 1\nunset object 2\n"
+    << "set terminal pngcairo size 1100,420 font 'Sans,10'\n"
+    << "set output " << gq(tt + ".tmp-" + pid) << "\n"
+    << "set title " << gq("HRI servo tick wall time (this machine, CPU)") << "\n"
+    << "set logscale y\nset xlabel 't [s]'\nset ylabel 'tick [ns]'\n"
+    << "plot " << gq(csv) << " every ::1 using 1:13 with points pt 7 ps 0.3 lc rgb '#7d3c98' title 'HriRenderer::tick'\n";
+  const std::string gp = (fs::path(dir) / "plots.gp").string();
+  write_file_atomic(gp, g.str());
+  const int rc = run_program("gnuplot", gp);
+  if (rc != 0) {
+    std::remove((fd + ".tmp-" + pid).c_str());
+    std::remove((tt + ".tmp-" + pid).c_str());
+    note = rc < 0 ? "gnuplot not found (Debian: gnuplot-nox); plots not drawn"
+                  : "gnuplot failed (exit " + std::to_string(rc) + "); plots not drawn";
+    return false;
+  }
+  fs::rename(fd + ".tmp-" + pid, fd);
+  fs::rename(tt + ".tmp-" + pid, tt);
+  return true;
+}
+
+}  // namespace
+
+RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  using clock = std::chrono::steady_clock;
+  RunMetrics m;
+
+  // 1. Volume in.
+  engine::Volume vol;
+  if (!scene.volume_path.empty()) {
+    log << "volume   " << scene.volume_path << "\n";
+    vol = engine::load_volume(scene.volume_path);
+  } else {
+    vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
+  }
+  m.volume_path = vol.path;
+  m.dims = vol.grid.dims;
+  m.spacing_m = vol.grid.spacing_m;
+  log << "         " << vol.grid.dims[0] << " x " << vol.grid.dims[1] << " x " << vol.grid.dims[2]
+      << " voxels, spacing " << fmt(vol.grid.spacing_m.x * 1e3) << " x " << fmt(vol.grid.spacing_m.y * 1e3)
+      << " x " << fmt(vol.grid.spacing_m.z * 1e3) << " mm, " << vol.component_type << " via " << vol.reader
+      << ", values [" << vol.min_value << ", " << vol.max_value << "]\n";
+  if (!vol.direction_is_identity)
+    log << "warning: the file's direction cosines are not identity; isotouch works in the grid frame\n";
+  if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
+    throw std::runtime_error(scene.file + ": field 'isovalue': " + fmt(scene.hri.tau) +
+                             " is outside the data range [" + fmt(vol.min_value) + ", " +
+                             fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
+
+  // 2. Engine: gradient pass on the GPU, CPU reference beside it.
+  engine::ContextOptions co;
+  co.device = opt.device;
+  auto ctx = engine::VulkanContext::create(co);
+  if (!ctx) throw std::runtime_error("Vulkan: " + ctx.error);
+  engine::VulkanContext& vk = **ctx.value;
+  m.gpu_device = vk.info().name;
+  m.gpu_device_type = vk.info().type;
+  log << "device   " << m.gpu_device << " (" << m.gpu_device_type << ", " << vk.info().driver << ")\n";
+  engine::GradientPass pass(vk);
+  engine::GradientTimings gt;
+  auto field = std::make_shared<servo::SampleField>(pass.run(vol, &gt, opt.max_binding_bytes));
+  field->version = 1;
+  m.gpu_gradient_ms = gt.gradient_ms;
+  m.gpu_upload_ms = gt.upload_ms;
+  m.gpu_download_ms = gt.download_ms;
+  m.gpu_submit_wall_ms = gt.submit_wall_ms;
+  m.gpu_slabs = gt.slabs;
+  m.gpu_timestamps = gt.gpu_timestamps;
+  const auto c0 = clock::now();
+  const servo::SampleField ref = engine::compute_samples_cpu(vol);
+  m.cpu_gradient_ms = std::chrono::duration<double, std::milli>(clock::now() - c0).count();
+  const engine::GradientDiff diff = engine::compare_gradients(*field, ref);
+  m.max_abs_diff = diff.max_abs_all;
+  m.max_rel_diff = diff.max_rel;
+  for (int k = 0; k < 3; ++k) m.max_abs_diff_xyz[k] = diff.max_abs[k];
+  log << "gradient GPU " << fmt(m.gpu_gradient_ms, 4) << " ms (" << gt.slabs << " slab"
+      << (gt.slabs > 1 ? "s" : "") << ")   CPU reference " << fmt(m.cpu_gradient_ms, 4)
+      << " ms   max |GPU - CPU| = " << fmt(m.max_abs_diff, 3) << " (relative " << fmt(m.max_rel_diff, 3)
+      << ")\n";
+
+  // 3. Publish the samples: the servo reads them through the one publication point.
+  servo::TripleBuffer<servo::SampleField> published;
+  published.publish(field);
+
+  // 4. Script, device, servo.
+  servo::HriParams hp = scene.hri;
+  servo::TouchScript script = servo::make_touch_script(*field, hp, scene.script);
+  servo::WorkspaceTransform xf;
+  xf.scale = scene.workspace_scale;
+  xf.translation_m = vol.grid.centre_m();
+  Vec3 start_w, v0;
+  script.at(0.0, start_w, v0);
+  servo::SimDevice device(scene.device, xf.to_device(start_w));
+  servo::HriRenderer renderer(hp);
+  log << "script   contact at (" << fmt(script.contact_point_m.x * 1e3, 4) << ", "
+      << fmt(script.contact_point_m.y * 1e3, 4) << ", " << fmt(script.contact_point_m.z * 1e3, 4)
+      << ") mm, normal (" << fmt(script.contact_normal.x, 3) << ", " << fmt(script.contact_normal.y, 3)
+      << ", " << fmt(script.contact_normal.z, 3) << "), " << fmt(script.duration_s, 3) << " s at "
+      << fmt(hp.rate_hz) << " Hz\n";
+
+  const bool tty = opt.progress && ::isatty(STDERR_FILENO);
+  auto progress = [&](long k, long total) {
+    if (!opt.progress) return;
+    const int pct = int(100 * k / total);
+    if (tty) {
+      std::cerr << "\rservo    [" << std::string(std::size_t(pct / 4), '#')
+                << std::string(std::size_t(25 - pct / 4), '.') << "] " << std::setw(3) << pct << "%  "
+                << k << "/" << total << " ticks" << (k == total ? "\n" : "") << std::flush;
+    } else if (k == total || (k - 1) % (total / 4 + 1) == 0) {
+      std::cerr << "servo    " << k << "/" << total << " ticks (" << pct << "%)\n";
+    }
+  };
+  const std::vector<servo::TraceRow> trace =
+      servo::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress);
+
+  // 5. Figures.
+  m.ticks = long(trace.size());
+  std::vector<std::int64_t> ns;
+  ns.reserve(trace.size());
+  double sum_ns = 0, err2 = 0, fsum = 0;
+  for (const auto& r : trace) {
+    ns.push_back(r.tick_ns);
+    sum_ns += double(r.tick_ns);
+    m.plane_updates += r.plane_update;
+    m.saturated_ticks += r.saturated;
+    m.fault_ticks += r.fault;
+    if (!r.contact) continue;
+    ++m.contact_ticks;
+    const double f = servo::norm(r.force_n);
+    fsum += f;
+    m.max_force_n = std::max(m.max_force_n, f);
+    m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
+    // Distance of the VHIP from the isosurface of the trilinear field, first order:
+    // |f(VHIP) - tau| / |grad f(VHIP)| with the exact gradient of the interpolant.
+    const double fv = servo::sample_value(*field, r.vhip_m);
+    const double gn = servo::norm(servo::trilinear_field_gradient(*field, r.vhip_m));
+    const double e = gn > 0 ? std::abs(fv - hp.tau) / gn : 0.0;
+    err2 += e * e;
+    m.surface_err_max_m = std::max(m.surface_err_max_m, e);
+  }
+  m.tick_ns_median = percentile(ns, 0.5);
+  m.tick_ns_p99 = percentile(ns, 0.99);
+  m.tick_ns_max = ns.empty() ? 0 : double(*std::max_element(ns.begin(), ns.end()));
+  m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
+  if (m.contact_ticks) {
+    m.surface_err_rms_m = std::sqrt(err2 / double(m.contact_ticks));
+    m.mean_contact_force_n = fsum / double(m.contact_ticks);
+  }
+
+  // 6. Outputs, each written whole or not at all.
+  const std::string dir = opt.out_dir;
+  fs::create_directories(dir);
+  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace));
+  if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
+  else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+
+  nlohmann::ordered_json j;
+  j["scene"] = {{"file", scene.file}, {"name", scene.name}};
+  j["volume"] = {{"path", m.volume_path},
+                 {"dims", m.dims},
+                 {"spacing_m", {m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}},
+                 {"reader", vol.reader},
+                 {"component_type", vol.component_type},
+                 {"value_range", {vol.min_value, vol.max_value}}};
+  j["isovalue"] = hp.tau;
+  j["inside"] = hp.inside == servo::InsideIs::kAbove ? "above" : "below";
+  j["gpu"] = {{"device", m.gpu_device},
+              {"device_type", m.gpu_device_type},
+              {"passes", {"gradient"}},
+              {"gradient_ms", m.gpu_gradient_ms},
+              {"gradient_ms_source", m.gpu_timestamps ? "gpu-timestamps" : "wall-clock"},
+              {"submit_wall_ms", m.gpu_submit_wall_ms},
+              {"upload_ms", m.gpu_upload_ms},
+              {"download_ms", m.gpu_download_ms},
+              {"slabs", m.gpu_slabs}};
+  j["cpu"] = {{"gradient_ms", m.cpu_gradient_ms}};
+  j["gpu_vs_cpu"] = {{"gradient_max_abs_diff", m.max_abs_diff},
+                     {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
+                     {"gradient_max_rel_diff", m.max_rel_diff}};
+  j["servo"] = {{"algorithm", "HRI (intermediate virtual plane, Figure 2)"},
+                {"rate_hz", hp.rate_hz},
+                {"plane_update_period", hp.plane_update_period},
+                {"stiffness_n_per_m", hp.stiffness_n_per_m},
+                {"damping_n_s_per_m", hp.damping_n_s_per_m},
+                {"force_limit_n", hp.force_limit_n},
+                {"ticks", m.ticks},
+                {"plane_updates", m.plane_updates},
+                {"tick_ns", {{"median", m.tick_ns_median}, {"p99", m.tick_ns_p99},
+                             {"max", m.tick_ns_max}, {"mean", m.tick_ns_mean}}}};
+  j["contact"] = {{"ticks", m.contact_ticks},
+                  {"max_force_n", m.max_force_n},
+                  {"mean_force_n", m.mean_contact_force_n},
+                  {"max_penetration_m", m.max_penetration_m},
+                  {"saturated_ticks", m.saturated_ticks},
+                  {"fault_ticks", m.fault_ticks}};
+  j["error"] = {{"surface_distance_m", {{"rms", m.surface_err_rms_m}, {"max", m.surface_err_max_m},
+                                        {"method", "|f(VHIP) - tau| / |grad f(VHIP)|, trilinear f and its exact gradient"}}}};
+  j["script"] = {{"contact_point_m", {script.contact_point_m.x, script.contact_point_m.y, script.contact_point_m.z}},
+                 {"contact_normal", {script.contact_normal.x, script.contact_normal.y, script.contact_normal.z}},
+                 {"duration_s", script.duration_s}};
+  j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
+                             : nlohmann::ordered_json::array();
+  write_file_atomic((fs::path(dir) / "summary.json").string(), j.dump(2) + "\n");
+
+  std::ostringstream md;
+  md << "# isotouch run: " << scene.name << "\n\n";
+  if (!scene.description.empty()) md << scene.description << "\n\n";
+  md << "A simulated point-mass device, pulled by a scripted operator hand, approaches the isosurface, "
+        "presses in, strokes along it and lifts off. Forces come from the HRI servo (intermediate "
+        "virtual plane, the paper's Figure 2) reading the sample field that the Vulkan gradient pass wrote.\n\n";
+  md << "| | |\n|---|---|\n"
+     << "| volume | `" << m.volume_path << "` (" << m.dims[0] << " x " << m.dims[1] << " x " << m.dims[2]
+     << ", spacing " << fmt(m.spacing_m.x * 1e3) << " x " << fmt(m.spacing_m.y * 1e3) << " x "
+     << fmt(m.spacing_m.z * 1e3) << " mm, " << vol.component_type << ") |\n"
+     << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == servo::InsideIs::kAbove ? ">" : "<")
+     << " isovalue) |\n"
+     << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
+     << "| gradient pass | GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
+     << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
+     << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
+     << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3) << ", relative to max |grad| "
+     << fmt(m.max_rel_diff, 3) << " |\n"
+     << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
+     << " N s/m, n = " << hp.plane_update_period << ", " << fmt(hp.rate_hz) << " Hz, force limit "
+     << fmt(hp.force_limit_n) << " N |\n"
+     << "| ticks | " << m.ticks << " (" << m.contact_ticks << " in contact, " << m.plane_updates
+     << " plane updates, " << m.saturated_ticks << " saturated, " << m.fault_ticks << " faults) |\n"
+     << "| tick wall time | median " << fmt(m.tick_ns_median) << " ns, p99 " << fmt(m.tick_ns_p99)
+     << " ns, max " << fmt(m.tick_ns_max) << " ns |\n"
+     << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
+     << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
+     << "| surface error of the VHIP | RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm, max "
+     << fmt(m.surface_err_max_m * 1e3, 4) << " mm (" << fmt(m.surface_err_rms_m / m.spacing_m.x, 3)
+     << " voxel RMS) |\n\n";
+  md << "## Error against run time\n\nAt a median tick of " << fmt(m.tick_ns_median) << " ns (p99 "
+     << fmt(m.tick_ns_p99) << " ns) with the plane recomputed every " << hp.plane_update_period
+     << " ticks, the VHIP stayed within " << fmt(m.surface_err_max_m * 1e3, 4)
+     << " mm of the trilinear isosurface (RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm).\n\n";
+  if (m.plots_drawn)
+    md << "## Force and penetration\n\n![force and penetration against time](force_depth.png)\n\n"
+       << "## Servo tick time\n\n![tick wall time](tick_time.png)\n\n";
+  else
+    md << "Plots: " << m.plot_note << ".\n\n";
+  md << "Files: `trace.csv` (one row per tick), `summary.json`, `plots.gp` (gnuplot script for the plots).\n";
+  write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
+  return m;
+}
+
+}  // namespace isotouch::app

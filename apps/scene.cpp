@@ -1,0 +1,208 @@
+#include "scene.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace isotouch::app {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void fail(const std::string& field, const std::string& what) const {
+    throw SceneError(file_ + ": field '" + field + "': " + what);
+  }
+
+  void only(const json& obj, const std::string& where, std::set<std::string> allowed) const {
+    if (!obj.is_object()) fail(where, "must be an object, got " + obj.dump());
+    for (auto it = obj.begin(); it != obj.end(); ++it)
+      if (!allowed.count(it.key())) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        fail(where.empty() ? it.key() : where + "." + it.key(), "unknown field (allowed: " + list + ")");
+      }
+  }
+
+  double number(const json& obj, const std::string& where, const std::string& key, double def,
+                double lo, double hi, bool lo_open = false) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_number()) fail(f, "must be a number, got " + v.dump());
+    const double d = v.get<double>();
+    if (!std::isfinite(d) || d < lo || d > hi || (lo_open && d == lo)) {
+      std::ostringstream s;
+      s << "must be in " << (lo_open ? "(" : "[") << lo << ", " << hi << "], got " << v.dump();
+      fail(f, s.str());
+    }
+    return d;
+  }
+
+  int integer(const json& obj, const std::string& where, const std::string& key, int def, int lo,
+              int hi) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_number_integer()) fail(f, "must be an integer, got " + v.dump());
+    const auto i = v.get<long long>();
+    if (i < lo || i > hi)
+      fail(f, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v.dump());
+    return int(i);
+  }
+
+  servo::Vec3 vec3(const json& obj, const std::string& where, const std::string& key,
+                   servo::Vec3 def) const {
+    const std::string f = where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() || !v[2].is_number())
+      fail(f, "must be an array of 3 numbers, got " + v.dump());
+    servo::Vec3 r{v[0].get<double>(), v[1].get<double>(), v[2].get<double>()};
+    if (!servo::finite(r) || std::abs(r.x) > 1e6 || std::abs(r.y) > 1e6 || std::abs(r.z) > 1e6)
+      fail(f, "must be finite and of sane size, got " + v.dump());
+    return r;
+  }
+
+  std::string string(const json& obj, const std::string& where, const std::string& key,
+                     const std::string& def) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    if (!obj.at(key).is_string()) fail(f, "must be a string, got " + obj.at(key).dump());
+    return obj.at(key).get<std::string>();
+  }
+
+  bool boolean(const json& obj, const std::string& where, const std::string& key, bool def) const {
+    if (!obj.contains(key)) return def;
+    if (!obj.at(key).is_boolean()) fail(where + "." + key, "must be true or false, got " + obj.at(key).dump());
+    return obj.at(key).get<bool>();
+  }
+
+  const json& section(const json& root, const std::string& key) const {
+    static const json empty = json::object();
+    return root.contains(key) ? root.at(key) : empty;
+  }
+
+ private:
+  std::string file_;
+};
+
+}  // namespace
+
+Scene parse_scene(const std::string& text, const std::string& path) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw SceneError(path + ": not valid JSON: " + e.what());
+  }
+  const Reader r(path);
+  r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
+                    "script", "outputs"});
+  Scene s;
+  s.file = path;
+  s.name = r.string(root, "", "name", fs::path(path).stem().string());
+  s.description = r.string(root, "", "description", "");
+  for (char c : s.name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_'))
+      r.fail("name", "may hold only letters, digits, '-' and '_', got \"" + s.name + "\"");
+
+  if (!root.contains("volume")) r.fail("volume", "is required");
+  const json& vol = root.at("volume");
+  r.only(vol, "volume", {"path", "synthetic", "dims", "spacing_m", "radius_vox", "attribution"});
+  if (vol.contains("path") == vol.contains("synthetic"))
+    r.fail("volume", "needs exactly one of 'path' or 'synthetic'");
+  if (vol.contains("path")) {
+    const std::string p = r.string(vol, "volume", "path", "");
+    if (p.empty()) r.fail("volume.path", "must not be empty");
+    const fs::path pp(p);
+    s.volume_path = pp.is_absolute() ? p : (fs::path(path).parent_path() / pp).lexically_normal().string();
+  } else {
+    s.synthetic.kind = r.string(vol, "volume", "synthetic", "");
+    if (s.synthetic.kind != "sphere")
+      r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind + "\" (known: sphere)");
+    if (vol.contains("dims")) {
+      const json& d = vol.at("dims");
+      if (!d.is_array() || d.size() != 3) r.fail("volume.dims", "must be [x, y, z], got " + d.dump());
+      for (int a = 0; a < 3; ++a) {
+        if (!d[std::size_t(a)].is_number_integer() || d[std::size_t(a)].get<long long>() < 2 ||
+            d[std::size_t(a)].get<long long>() > 1024)
+          r.fail("volume.dims", "each must be an integer in [2, 1024], got " + d.dump());
+        s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
+      }
+    }
+    s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 0, 1, true);
+    s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
+  }
+
+  if (!root.contains("isovalue")) r.fail("isovalue", "is required");
+  s.hri.tau = r.number(root, "", "isovalue", 0, -1e30, 1e30);
+  const std::string inside = r.string(root, "", "inside", "above");
+  if (inside == "above") s.hri.inside = servo::InsideIs::kAbove;
+  else if (inside == "below") s.hri.inside = servo::InsideIs::kBelow;
+  else r.fail("inside", "must be \"above\" (value > isovalue is inside) or \"below\", got \"" + inside + "\"");
+
+  const json& sv = r.section(root, "servo");
+  r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
+                       "force_limit_n"});
+  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
+  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
+  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
+  s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
+  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+
+  const json& dv = r.section(root, "device");
+  r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "hand_stiffness_n_per_m",
+                        "hand_damping_n_s_per_m", "substeps", "workspace_scale"});
+  s.device.mass_kg = r.number(dv, "device", "mass_kg", 0.08, 0, 100, true);
+  s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m", 0.01, 0, 1e3);
+  s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
+  s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
+  s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);
+  s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
+  s.hri.world_per_device = s.workspace_scale;
+
+  const json& sc = r.section(root, "script");
+  r.only(sc, "script", {"ray_origin_frac", "ray_direction", "stroke_direction", "approach_distance_m",
+                        "approach_speed_m_s", "press_depth_m", "press_speed_m_s", "hold_s",
+                        "stroke_length_m", "stroke_speed_m_s", "rest_s"});
+  auto& p = s.script;
+  p.ray_origin_frac = r.vec3(sc, "script", "ray_origin_frac", p.ray_origin_frac);
+  p.ray_direction = r.vec3(sc, "script", "ray_direction", p.ray_direction);
+  if (servo::norm(p.ray_direction) == 0.0) r.fail("script.ray_direction", "must not be [0, 0, 0]");
+  p.stroke_direction = r.vec3(sc, "script", "stroke_direction", p.stroke_direction);
+  p.approach_distance_m = r.number(sc, "script", "approach_distance_m", p.approach_distance_m, 0, 1, true);
+  p.approach_speed_m_s = r.number(sc, "script", "approach_speed_m_s", p.approach_speed_m_s, 0, 10, true);
+  p.press_depth_m = r.number(sc, "script", "press_depth_m", p.press_depth_m, 0, 1);
+  p.press_speed_m_s = r.number(sc, "script", "press_speed_m_s", p.press_speed_m_s, 0, 10, true);
+  p.hold_s = r.number(sc, "script", "hold_s", p.hold_s, 0, 3600);
+  p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
+  p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
+  p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+
+  const json& out = r.section(root, "outputs");
+  r.only(out, "outputs", {"trace_csv", "plots"});
+  s.write_trace = r.boolean(out, "outputs", "trace_csv", true);
+  s.draw_plots = r.boolean(out, "outputs", "plots", true);
+  return s;
+}
+
+Scene load_scene(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw SceneError(path + ": no such scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path + ": cannot open the scene file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return parse_scene(ss.str(), path);
+}
+
+}  // namespace isotouch::app

@@ -1,0 +1,8 @@
+# ASan+UBSan for the debug preset (ISOTOUCH_SANITIZE=ON).
+add_library(isotouch_sanitizers INTERFACE)
+add_library(isotouch::sanitizers ALIAS isotouch_sanitizers)
+if(ISOTOUCH_SANITIZE)
+  target_compile_options(isotouch_sanitizers INTERFACE
+    -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined)
+  target_link_options(isotouch_sanitizers INTERFACE -fsanitize=address,undefined)
+endif()

@@ -1,0 +1,117 @@
+// vk_context.h - Vulkan instance, device choice, queue, host-visible buffers.
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <atomic>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace isotouch::engine {
+
+/// Thrown by VK_CHECK: a Vulkan call that cannot fail in a correct program failed.
+struct VulkanError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+[[noreturn]] void vk_check_failed(const char* call, VkResult r, const char* file, int line);
+const char* vk_result_name(VkResult r);
+
+/// Tier-1 errors: prints/throws with file:line, the call and the VkResult name.
+#define VK_CHECK(call)                                                            \
+  do {                                                                            \
+    const VkResult vk_check_result_ = (call);                                     \
+    if (vk_check_result_ != VK_SUCCESS)                                           \
+      ::isotouch::engine::vk_check_failed(#call, vk_check_result_, __FILE__, __LINE__); \
+  } while (0)
+
+/// Tier-2 errors: set-up that can legitimately fail (no device, missing layer) returns
+/// a Result with a reason the caller reports.
+template <class T>
+struct Result {
+  std::optional<T> value;
+  std::string error;
+  explicit operator bool() const { return value.has_value(); }
+  static Result ok(T v) { return {std::move(v), {}}; }
+  static Result fail(std::string why) { return {std::nullopt, std::move(why)}; }
+};
+
+struct ContextOptions {
+  /// Case-insensitive substring of the device name, or a device index ("0", "1").
+  /// Empty: the ISOTOUCH_DEVICE environment variable, else the first discrete GPU,
+  /// integrated GPU, virtual GPU, then CPU (lavapipe) device.
+  std::string device;
+  /// Enable VK_LAYER_KHRONOS_validation and count its messages (also with
+  /// ISOTOUCH_VALIDATION=1). Fails set-up if the layer is not installed.
+  bool validation = false;
+};
+
+/// A host-visible buffer, persistently mapped.
+struct Buffer {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  VkDeviceSize size = 0;
+  void* mapped = nullptr;
+};
+
+struct DeviceInfo {
+  std::string name;
+  std::string type;  ///< "discrete-gpu", "integrated-gpu", "virtual-gpu", "cpu", "other"
+  std::string driver;
+  std::uint32_t api_version = 0;
+};
+
+class VulkanContext {
+ public:
+  static Result<std::unique_ptr<VulkanContext>> create(const ContextOptions& options = {});
+  /// All physical devices, for `isotouch devices`.
+  static Result<std::vector<DeviceInfo>> list_devices();
+  ~VulkanContext();
+  VulkanContext(const VulkanContext&) = delete;
+  VulkanContext& operator=(const VulkanContext&) = delete;
+
+  VkDevice device() const { return device_; }
+  VkQueue queue() const { return queue_; }
+  std::uint32_t queue_family() const { return family_; }
+  const VkPhysicalDeviceProperties& properties() const { return props_; }
+  const DeviceInfo& info() const { return info_; }
+  bool timestamps_supported() const { return timestamp_bits_ > 0; }
+
+  /// Storage buffer in host-visible coherent memory (cached when `readback`).
+  Buffer create_buffer(VkDeviceSize bytes, bool readback);
+  void destroy_buffer(Buffer& b);
+
+  VkCommandBuffer begin_commands();
+  /// Submit, wait on a fence; returns the wall time from submit to signal [ms].
+  double submit_and_wait(VkCommandBuffer cmd);
+
+  /// Validation messages of severity warning or error seen so far.
+  std::uint32_t validation_messages() const { return validation_count_.load(); }
+
+ private:
+  VulkanContext() = default;
+  VkInstance instance_ = VK_NULL_HANDLE;
+  VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+  VkPhysicalDevice phys_ = VK_NULL_HANDLE;
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  VkCommandPool pool_ = VK_NULL_HANDLE;
+  VkFence fence_ = VK_NULL_HANDLE;
+  std::uint32_t family_ = 0;
+  std::uint32_t timestamp_bits_ = 0;
+  VkPhysicalDeviceProperties props_{};
+  VkPhysicalDeviceMemoryProperties mem_props_{};
+  DeviceInfo info_;
+  std::atomic<std::uint32_t> validation_count_{0};
+
+  std::uint32_t find_memory(std::uint32_t bits, VkMemoryPropertyFlags want,
+                            VkMemoryPropertyFlags prefer) const;
+  static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT,
+                                                   VkDebugUtilsMessageTypeFlagsEXT,
+                                                   const VkDebugUtilsMessengerCallbackDataEXT*,
+                                                   void*);
+};
+
+}  // namespace isotouch::engine

@@ -1,0 +1,245 @@
+// The only translation unit that includes ITK and teem headers (slow to compile).
+#include "volume_io.h"
+
+#include <itkImageIOBase.h>
+#include <itkMetaImageIO.h>
+#include <itkNiftiImageIO.h>
+#include <itkNrrdImageIO.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+
+#ifdef ISOTOUCH_HAVE_TEEM
+#include <teem/nrrd.h>
+#endif
+
+namespace isotouch::engine {
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const std::string& path, const std::string& what) {
+  throw VolumeError(path + ": " + what);
+}
+
+std::string lower(std::string s) {
+  for (auto& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+bool is_nrrd(const std::string& path) {
+  const std::string l = lower(path);
+  return ends_with(l, ".nrrd") || ends_with(l, ".nhdr");
+}
+
+template <class T>
+void convert(const char* src, std::size_t n, std::vector<float>& out) {
+  out.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    T v;
+    std::memcpy(&v, src + i * sizeof(T), sizeof(T));
+    out[i] = static_cast<float>(v);
+  }
+}
+
+void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d) {
+  std::uint64_t total = 1;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0) fail(path, "dimension " + std::to_string(a) + " is 0");
+    if (d[a] > (std::uint64_t(1) << 20))
+      fail(path, "absurd dimension " + std::to_string(a) + " = " + std::to_string(d[a]));
+    total *= d[a];
+  }
+  if (total > kMaxVoxels) {
+    std::ostringstream s;
+    s << "absurd dimensions " << d[0] << " x " << d[1] << " x " << d[2] << " (" << total
+      << " voxels; the limit is " << kMaxVoxels << ")";
+    fail(path, s.str());
+  }
+}
+
+void set_spacing_origin(const std::string& path, Volume& v, const double sp_mm[3],
+                        const double org_mm[3]) {
+  for (int a = 0; a < 3; ++a) {
+    if (!(std::isfinite(sp_mm[a]) && sp_mm[a] > 0.0))
+      fail(path, "spacing along axis " + std::to_string(a) + " is " + std::to_string(sp_mm[a]) +
+                     " (must be a positive number of mm)");
+    if (!std::isfinite(org_mm[a])) fail(path, "origin along axis " + std::to_string(a) + " is not finite");
+  }
+  v.grid.spacing_m = {sp_mm[0] * 1e-3, sp_mm[1] * 1e-3, sp_mm[2] * 1e-3};
+  v.grid.origin_m = {org_mm[0] * 1e-3, org_mm[1] * 1e-3, org_mm[2] * 1e-3};
+}
+
+void finish_direction(Volume& v) {
+  const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  v.direction_is_identity = true;
+  for (int i = 0; i < 9; ++i)
+    if (std::abs(v.direction[std::size_t(i)] - id[i]) > 1e-6) v.direction_is_identity = false;
+}
+
+Volume load_itk(const std::string& path) {
+  itk::ImageIOBase::Pointer io;
+  const itk::ImageIOBase::Pointer candidates[] = {
+      itk::MetaImageIO::New().GetPointer(), itk::NrrdImageIO::New().GetPointer(),
+      itk::NiftiImageIO::New().GetPointer()};
+  for (const auto& c : candidates)
+    if (c->CanReadFile(path.c_str())) {
+      io = c;
+      break;
+    }
+  if (!io)
+    fail(path, "not a readable MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr) or NIfTI (.nii/.nii.gz) file");
+  io->SetFileName(path);
+  io->ReadImageInformation();
+
+  const unsigned nd = io->GetNumberOfDimensions();
+  if (nd < 2 || nd > 4) fail(path, "has " + std::to_string(nd) + " dimensions (need 3; 2 is read as one slice)");
+  if (io->GetNumberOfComponents() != 1)
+    fail(path, "has " + std::to_string(io->GetNumberOfComponents()) +
+                   " components per voxel (need a scalar volume)");
+  std::array<std::uint64_t, 3> d{1, 1, 1};
+  double sp[3] = {1, 1, 1}, org[3] = {0, 0, 0};
+  Volume v;
+  for (unsigned a = 0; a < std::min(nd, 3u); ++a) {
+    d[a] = io->GetDimensions(a);
+    sp[a] = io->GetSpacing(a);
+    org[a] = io->GetOrigin(a);
+    const auto dir = io->GetDirection(a);  // column a of the direction matrix
+    for (unsigned r = 0; r < std::min<std::size_t>(dir.size(), 3); ++r)
+      v.direction[r * 3 + a] = dir[r];
+  }
+  if (nd == 4 && io->GetDimensions(3) != 1)
+    fail(path, "is a 4-D series with " + std::to_string(io->GetDimensions(3)) + " volumes (need one)");
+  check_dims(path, d);
+  set_spacing_origin(path, v, sp, org);
+  v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
+
+  using CT = itk::IOComponentEnum;
+  const CT ct = io->GetComponentType();
+  v.component_type = itk::ImageIOBase::GetComponentTypeAsString(ct);
+  const std::size_t n = v.grid.voxel_count();
+  std::size_t bytes_per = io->GetComponentSize();
+  switch (ct) {
+    case CT::UCHAR: case CT::CHAR: case CT::USHORT: case CT::SHORT: case CT::UINT:
+    case CT::INT: case CT::ULONG: case CT::LONG: case CT::ULONGLONG: case CT::LONGLONG:
+    case CT::FLOAT: case CT::DOUBLE:
+      break;
+    default:
+      fail(path, "unknown or unsupported voxel type '" + v.component_type + "'");
+  }
+  std::vector<char> raw(n * bytes_per);
+  io->Read(raw.data());
+  switch (ct) {
+    case CT::UCHAR: convert<std::uint8_t>(raw.data(), n, v.voxels); break;
+    case CT::CHAR: convert<std::int8_t>(raw.data(), n, v.voxels); break;
+    case CT::USHORT: convert<std::uint16_t>(raw.data(), n, v.voxels); break;
+    case CT::SHORT: convert<std::int16_t>(raw.data(), n, v.voxels); break;
+    case CT::UINT: convert<std::uint32_t>(raw.data(), n, v.voxels); break;
+    case CT::INT: convert<std::int32_t>(raw.data(), n, v.voxels); break;
+    case CT::ULONG: case CT::ULONGLONG:
+      if (bytes_per == 8) convert<std::uint64_t>(raw.data(), n, v.voxels);
+      else convert<std::uint32_t>(raw.data(), n, v.voxels);
+      break;
+    case CT::LONG: case CT::LONGLONG:
+      if (bytes_per == 8) convert<std::int64_t>(raw.data(), n, v.voxels);
+      else convert<std::int32_t>(raw.data(), n, v.voxels);
+      break;
+    case CT::FLOAT: convert<float>(raw.data(), n, v.voxels); break;
+    case CT::DOUBLE: convert<double>(raw.data(), n, v.voxels); break;
+    default: break;
+  }
+  v.reader = std::string("itk:") + io->GetNameOfClass();
+  return v;
+}
+
+#ifdef ISOTOUCH_HAVE_TEEM
+Volume load_teem(const std::string& path) {
+  struct NrrdDel {
+    void operator()(Nrrd* n) const { nrrdNuke(n); }
+  };
+  std::unique_ptr<Nrrd, NrrdDel> nin(nrrdNew()), nf(nrrdNew());
+  auto biff_error = [] {
+    char* e = biffGetDone(NRRD);
+    std::string s = e ? e : "unknown teem error";
+    free(e);
+    while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+    return s;
+  };
+  if (nrrdLoad(nin.get(), path.c_str(), nullptr)) fail(path, "teem: " + biff_error());
+  if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
+  std::array<std::uint64_t, 3> d{1, 1, 1};
+  double sp[3] = {1, 1, 1}, org[3] = {0, 0, 0};
+  Volume v;
+  for (unsigned a = 0; a < nin->dim; ++a) {
+    const NrrdAxisInfo& ax = nin->axis[a];
+    d[a] = ax.size;
+    if (AIR_EXISTS(ax.spacing)) {
+      sp[a] = ax.spacing;
+    } else if (nin->spaceDim > 0 && AIR_EXISTS(ax.spaceDirection[0])) {
+      double len = 0;
+      for (unsigned r = 0; r < nin->spaceDim; ++r) len += ax.spaceDirection[r] * ax.spaceDirection[r];
+      sp[a] = std::sqrt(len);
+      for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
+        v.direction[r * 3 + a] = ax.spaceDirection[r] / sp[a];
+    }
+  }
+  if (nin->spaceDim > 0)
+    for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
+      if (AIR_EXISTS(nin->spaceOrigin[r])) org[r] = nin->spaceOrigin[r];
+  check_dims(path, d);
+  set_spacing_origin(path, v, sp, org);
+  v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
+  v.component_type = airEnumStr(nrrdType, nin->type);
+  if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");
+  if (nrrdConvert(nf.get(), nin.get(), nrrdTypeFloat)) fail(path, "teem: " + biff_error());
+  const float* f = static_cast<const float*>(nf->data);
+  v.voxels.assign(f, f + v.grid.voxel_count());
+  v.reader = "teem:nrrdLoad";
+  return v;
+}
+#endif
+
+}  // namespace
+
+Volume load_volume(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "no such file");
+  if (fs::is_directory(path, ec)) fail(path, "is a directory, not a volume file");
+  Volume v;
+  try {
+    v = load_itk(path);
+  } catch (const VolumeError&) {
+    throw;
+  } catch (const std::exception& e) {
+    std::string msg = e.what();
+    // ITK exceptions carry a multi-line location; keep the description line.
+    const auto pos = msg.find("Description:");
+    if (pos != std::string::npos) msg = msg.substr(pos + 12);
+    while (!msg.empty() && (msg.front() == ' ')) msg.erase(0, 1);
+    while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+#ifdef ISOTOUCH_HAVE_TEEM
+    if (is_nrrd(path)) {
+      try {
+        v = load_teem(path);
+      } catch (const VolumeError& te) {
+        fail(path, "ITK could not read it (" + msg + ") and neither could teem (" +
+                       std::string(te.what()).substr(path.size() + 2) + ")");
+      }
+    } else
+#endif
+      fail(path, msg);
+  }
+  v.path = path;
+  finish_direction(v);
+  v.update_stats();
+  return v;
+}
+
+}  // namespace isotouch::engine

@@ -1,0 +1,41 @@
+// headless.h - step the servo at a fixed rate in simulated time (deterministic).
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "hri.h"
+#include "script.h"
+#include "sim_device.h"
+#include "triple_buffer.h"
+#include "workspace.h"
+
+namespace isotouch::servo {
+
+/// One row of the trace (one servo tick).
+struct TraceRow {
+  double t_s = 0;           ///< simulated time [s]
+  Vec3 hip_m;               ///< HIP, world [m]
+  Vec3 vhip_m;              ///< VHIP, world [m]
+  Vec3 force_n;             ///< force sent to the device [N]
+  Vec3 hand_target_m;       ///< operator's hand target, world [m]
+  double penetration_m = 0; ///< |HIP - VHIP| [m] in contact
+  std::int64_t tick_ns = 0; ///< wall time of HriRenderer::tick [ns]
+  bool contact = false;
+  bool plane_update = false;
+  bool saturated = false;
+  bool fault = false;
+};
+
+/// Runs the script to its end at `rate_hz`. Each tick: acquire the newest published
+/// samples, read the device, time HriRenderer::tick with steady_clock, command the force
+/// (held over the period), then advance the device. `progress(tick, total)` is called
+/// every `progress_every` ticks, outside the timed section. Throws std::runtime_error
+/// if nothing was ever published.
+std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
+                                   SimDevice& device, const WorkspaceTransform& world_T_device,
+                                   const TouchScript& script, double rate_hz,
+                                   const std::function<void(long, long)>& progress = {},
+                                   long progress_every = 250);
+
+}  // namespace isotouch::servo

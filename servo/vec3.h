@@ -1,0 +1,35 @@
+// vec3.h - minimal 3-vector for the servo (SI units: m, N, s). Header-only, no allocation.
+#pragma once
+#include <cmath>
+
+namespace isotouch::servo {
+
+struct Vec3 {
+  double x = 0, y = 0, z = 0;
+  constexpr Vec3() = default;
+  constexpr Vec3(double x_, double y_, double z_) : x(x_), y(y_), z(z_) {}
+  constexpr double operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
+  constexpr Vec3 operator+(const Vec3& o) const { return {x + o.x, y + o.y, z + o.z}; }
+  constexpr Vec3 operator-(const Vec3& o) const { return {x - o.x, y - o.y, z - o.z}; }
+  constexpr Vec3 operator-() const { return {-x, -y, -z}; }
+  constexpr Vec3 operator*(double s) const { return {x * s, y * s, z * s}; }
+  constexpr Vec3 operator/(double s) const { return {x / s, y / s, z / s}; }
+  constexpr Vec3& operator+=(const Vec3& o) { x += o.x; y += o.y; z += o.z; return *this; }
+  constexpr Vec3& operator-=(const Vec3& o) { x -= o.x; y -= o.y; z -= o.z; return *this; }
+};
+constexpr Vec3 operator*(double s, const Vec3& v) { return v * s; }
+constexpr double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+inline bool finite(const Vec3& a) {
+  return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
+}
+/// Unit vector along a, or `fallback` where |a| is zero or not finite.
+inline Vec3 normalized_or(const Vec3& a, const Vec3& fallback) {
+  const double n = norm(a);
+  return (n > 0.0 && std::isfinite(n)) ? a / n : fallback;
+}
+
+}  // namespace isotouch::servo

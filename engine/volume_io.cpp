@@ -2,10 +2,14 @@
 #include "volume_io.h"
 
 #include <itkImageIOBase.h>
+#include <itkImageIORegion.h>
 #include <itkMetaImageIO.h>
 #include <itkNiftiImageIO.h>
 #include <itkNrrdImageIO.h>
 
+#include <zlib.h>
+
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -84,6 +88,40 @@ void finish_direction(Volume& v) {
     if (std::abs(v.direction[std::size_t(i)] - id[i]) > 1e-6) v.direction_is_identity = false;
 }
 
+// The gzipped-NIfTI reader does not report a short stream: count the bytes (gzread reads
+// plain files too) and compare with vox_offset + the voxel bytes the header promises.
+void check_nifti_length(const std::string& path, std::size_t data_bytes) {
+  gzFile gz = gzopen(path.c_str(), "rb");
+  if (!gz) fail(path, "cannot open");
+  std::vector<unsigned char> buf(1 << 16);
+  std::uint64_t total = 0;
+  int got = 0;
+  std::int32_t sizeof_hdr = 0;
+  double vox_offset = 0;
+  std::vector<unsigned char> head;
+  while ((got = gzread(gz, buf.data(), unsigned(buf.size()))) > 0) {
+    if (head.size() < 544) head.insert(head.end(), buf.begin(), buf.begin() + std::min(got, 544));
+    total += std::uint64_t(got);
+  }
+  gzclose(gz);
+  if (head.size() >= 348) {
+    std::memcpy(&sizeof_hdr, head.data(), 4);
+    if (sizeof_hdr == 348) {
+      float f;
+      std::memcpy(&f, head.data() + 108, 4);
+      vox_offset = f;
+    } else if (sizeof_hdr == 540 && head.size() >= 176) {
+      std::int64_t o;
+      std::memcpy(&o, head.data() + 168, 8);
+      vox_offset = double(o);
+    }
+  }
+  if (double(total) < vox_offset + double(data_bytes))
+    fail(path, "voxel data truncated: the header promises " + std::to_string(data_bytes) +
+                   " bytes after offset " + std::to_string(std::uint64_t(vox_offset)) +
+                   ", the (decompressed) file holds " + std::to_string(total) + " bytes in all");
+}
+
 Volume load_itk(const std::string& path) {
   itk::ImageIOBase::Pointer io;
   const itk::ImageIOBase::Pointer candidates[] = {
@@ -134,8 +172,36 @@ Volume load_itk(const std::string& path) {
     default:
       fail(path, "unknown or unsupported voxel type '" + v.component_type + "'");
   }
-  std::vector<char> raw(n * bytes_per);
+  // The IO region must cover the whole image, or readers that stream read nothing.
+  itk::ImageIORegion region(nd);
+  for (unsigned a = 0; a < nd; ++a) {
+    region.SetIndex(a, 0);
+    region.SetSize(a, io->GetDimensions(a));
+  }
+  io->SetIORegion(region);
+  // Some ITK readers (MetaImage, gzipped NIfTI) only warn on a short read and leave the
+  // rest of the buffer untouched. Fill with a sentinel; if a tail still holds it, read
+  // again with another: bytes that kept both sentinels were never written.
+  std::vector<char> raw(n * bytes_per, char(0xA5));
   io->Read(raw.data());
+  auto tail_run = [&](char sentinel) {
+    std::size_t k = raw.size();
+    while (k > 0 && raw[k - 1] == sentinel) --k;
+    return k;
+  };
+  const std::size_t end_a = tail_run(char(0xA5));
+  if (raw.size() - end_a >= bytes_per) {
+    std::fill(raw.begin(), raw.end(), char(0x5A));
+    io->Read(raw.data());
+    const std::size_t end_b = tail_run(char(0x5A));
+    const std::size_t written = std::max(end_a, end_b);
+    if (written < raw.size())
+      fail(path, "voxel data truncated: the header promises " + std::to_string(raw.size()) +
+                     " bytes (" + std::to_string(d[0]) + " x " + std::to_string(d[1]) + " x " +
+                     std::to_string(d[2]) + " " + v.component_type + "), the file provides " +
+                     std::to_string(written));
+  }
+  if (std::string(io->GetNameOfClass()) == "NiftiImageIO") check_nifti_length(path, raw.size());
   switch (ct) {
     case CT::UCHAR: convert<std::uint8_t>(raw.data(), n, v.voxels); break;
     case CT::CHAR: convert<std::int8_t>(raw.data(), n, v.voxels); break;

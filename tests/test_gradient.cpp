@@ -1,0 +1,130 @@
+// Gradient pass: CPU reference against analytic truth, GPU against the CPU reference.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "cpu_gradient.h"
+#include "gradient_pass.h"
+#include "synthetic.h"
+#include "volume_io.h"
+#include "vk_context.h"
+
+using namespace isotouch;
+using engine::Volume;
+using servo::Vec3;
+
+namespace {
+const std::string kData = ISOTOUCH_TEST_DATA;
+
+// One Vulkan context for the whole file. No device is a failure, not a skip: CI has lavapipe.
+engine::VulkanContext& vk() {
+  static auto ctx = [] {
+    engine::ContextOptions o;
+    o.validation = true;  // the validation layer must stay silent on every dispatch below
+    auto r = engine::VulkanContext::create(o);
+    if (!r) {
+      o.validation = false;
+      r = engine::VulkanContext::create(o);
+    }
+    if (!r) throw std::runtime_error("no Vulkan device: " + r.error);
+    return std::move(*r.value);
+  }();
+  return *ctx;
+}
+
+void expect_gpu_equals_cpu(const Volume& v, std::uint64_t max_binding = 0, int min_slabs = 1) {
+  engine::GradientPass pass(vk());
+  engine::GradientTimings t;
+  const auto gpu = pass.run(v, &t, max_binding);
+  const auto cpu = engine::compute_samples_cpu(v);
+  const auto d = engine::compare_gradients(gpu, cpu);
+  EXPECT_GE(t.slabs, min_slabs);
+  EXPECT_EQ(d.nonfinite, 0u);
+  EXPECT_GT(d.max_gradient_norm, 0.0);
+  EXPECT_LE(d.max_rel, 1e-6) << v.path << ": max abs " << d.max_abs_all << " of " << d.max_gradient_norm;
+  EXPECT_EQ(d.max_value_abs, 0.0) << "the value channel is copied, not computed";
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+}  // namespace
+
+TEST(CpuGradient, LinearFieldIsExactIncludingBorders) {
+  const Vec3 a{120.0, -40.0, 75.0};  // value per metre
+  const Volume v = engine::make_linear({9, 7, 5}, {2e-3, 1e-3, 3e-3}, a, 10.0);
+  const auto f = engine::compute_samples_cpu(v);
+  for (const auto& s : f.samples) {
+    EXPECT_NEAR(s.gx, a.x, 1e-3 * std::abs(a.x));
+    EXPECT_NEAR(s.gy, a.y, 1e-3 * std::abs(a.y));
+    EXPECT_NEAR(s.gz, a.z, 1e-3 * std::abs(a.z));
+  }
+}
+
+TEST(CpuGradient, SphereDistanceHasUnitSlopeAndRadialDirection) {
+  const Volume v = engine::make_sphere({48, 48, 48}, 1e-3, 15.0);
+  const auto f = engine::compute_samples_cpu(v);
+  const Vec3 c = v.grid.centre_m();
+  int checked = 0;
+  for (int z = 1; z < 47; ++z)
+    for (int y = 1; y < 47; ++y)
+      for (int x = 1; x < 47; ++x) {
+        const Vec3 p = v.grid.to_world({double(x), double(y), double(z)});
+        const double r = servo::norm(p - c) * 1e3;
+        if (std::abs(r - 15.0) > 1.5) continue;  // near the surface
+        const auto& s = f.samples[v.grid.index(x, y, z)];
+        const Vec3 g{s.gx, s.gy, s.gz};
+        EXPECT_NEAR(servo::norm(g), 1000.0, 20.0);  // value in mm, gradient per m
+        const double cosang = servo::dot(g / servo::norm(g), (c - p) / servo::norm(c - p));
+        EXPECT_GT(cosang, std::cos(2.0 * M_PI / 180.0));
+        ++checked;
+      }
+  EXPECT_GT(checked, 1000);
+}
+
+TEST(CpuGradient, OneVoxelAxisHasZeroDerivative) {
+  const Volume v = engine::make_linear({4, 4, 1}, {1e-3, 1e-3, 1e-3}, {1, 2, 3}, 0);
+  for (const auto& s : engine::compute_samples_cpu(v).samples) EXPECT_EQ(s.gz, 0.f);
+}
+
+TEST(GpuGradient, DeviceHasAName) {
+  EXPECT_FALSE(vk().info().name.empty());
+  std::printf("Vulkan device: %s (%s)\n", vk().info().name.c_str(), vk().info().type.c_str());
+}
+
+TEST(GpuGradient, MatchesCpuOnSphere) {
+  expect_gpu_equals_cpu(engine::make_sphere({64, 64, 64}, 1e-3, 20.0));
+}
+
+TEST(GpuGradient, MatchesCpuOnRandomOddSizedVolumeInManySlabs) {
+  const Volume v = engine::make_random({37, 23, 41}, {1.1e-3, 0.7e-3, 2.3e-3}, -1000.f, 3000.f, 7);
+  // Bindings limited to ~3 z-slices of samples: forces slabs and unaligned offsets.
+  expect_gpu_equals_cpu(v, 37 * 23 * 16 * 3 + 256, 10);
+}
+
+TEST(GpuGradient, MatchesCpuOnHeadCt) {
+  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd"));
+}
+
+TEST(GpuGradient, MatchesCpuOnChestCt) {
+  expect_gpu_equals_cpu(
+      engine::load_volume(kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd"));
+}
+
+TEST(GpuGradient, MatchesCpuOnToothBigEndian) {
+  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-tooth/tooth.nhdr"), 4u << 20, 2);
+}
+
+TEST(GpuGradient, EngineCtNeedsSlabsUnderTheDeviceLimit) {
+  // 256 x 256 x 128 samples = 128 MiB: more than lavapipe's 128 MiB binding minus alignment.
+  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-engine/engine.nii.gz"), 0,
+                        vk().properties().limits.maxStorageBufferRange <= (128u << 20) ? 2 : 1);
+}
+
+TEST(GpuGradient, SliceLargerThanBindingIsAClearError) {
+  const Volume v = engine::make_random({64, 64, 4}, {1e-3, 1e-3, 1e-3}, 0.f, 1.f, 1);
+  engine::GradientPass pass(vk());
+  try {
+    pass.run(v, nullptr, 1024);
+    FAIL() << "no error";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find("does not fit"), std::string::npos) << e.what();
+  }
+}

@@ -1,0 +1,200 @@
+// HRI servo (paper Figure 2, eqs. 1-3) on analytic planes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "hri.h"
+#include "sampling.h"
+
+using namespace isotouch::servo;
+
+namespace {
+
+// value = 1000 * (m . (c - x)) [mm]: positive inside (below the plane through c with
+// outward unit normal m). Exact under trilinear interpolation.
+SampleField plane_field(Vec3 m, Vec3 c, bool negate = false) {
+  SampleField f;
+  f.grid.dims = {32, 32, 32};
+  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.samples.resize(f.grid.voxel_count());
+  m = m / norm(m);
+  const double s = negate ? -1.0 : 1.0;
+  for (int z = 0; z < 32; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
+        f.samples[f.grid.index(x, y, z)] = {float(s * 1000.0 * dot(m, c - p)), float(-s * 1000.0 * m.x),
+                                            float(-s * 1000.0 * m.y), float(-s * 1000.0 * m.z)};
+      }
+  return f;
+}
+
+HriParams params(int n = 1) {
+  HriParams p;
+  p.tau = 0;
+  p.stiffness_n_per_m = 500;
+  p.damping_n_s_per_m = 0;
+  p.plane_update_period = n;
+  p.rate_hz = 1000;
+  p.force_limit_n = 10;
+  return p;
+}
+
+const Vec3 kUp{0, 0, 1};
+const Vec3 kC{0.016, 0.016, 0.010};  // plane z = 10 mm
+}  // namespace
+
+TEST(Hri, ForcePushesTheHipBackOut) {
+  const SampleField f = plane_field(kUp, kC);
+  HriRenderer r(params());
+  EXPECT_FALSE(r.tick(f, {0.016, 0.016, 0.012}).contact);  // outside: VHIP = HIP
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.009});      // 1 mm inside
+  ASSERT_TRUE(t.contact);
+  EXPECT_TRUE(t.plane_update);
+  EXPECT_NEAR(t.plane.n.z, 1.0, 1e-6);
+  EXPECT_NEAR(t.vhip_m.z, 0.010, 1e-9);
+  // F = -K d, d = HIP - VHIP = -1 mm along z: +0.5 N, outward.
+  EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
+  EXPECT_NEAR(t.force_n.x, 0.0, 1e-9);
+  EXPECT_NEAR(t.penetration_m, 0.001, 1e-9);
+}
+
+TEST(Hri, DampingResistsPressingIn) {
+  const SampleField f = plane_field(kUp, kC);
+  HriParams p = params();
+  p.damping_n_s_per_m = 2.0;
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.0105});
+  r.tick(f, {0.016, 0.016, 0.0095});                        // enters
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.0090});      // 0.5 mm deeper in 1 ms
+  // -K d = 0.5 N; -B v_d = -2 * (-0.5 m/s) = +1 N: both outward.
+  EXPECT_NEAR(t.force_n.z, 1.5, 1e-6);
+  const HriTick back = r.tick(f, {0.016, 0.016, 0.0099});   // withdrawing at 0.9 m/s
+  // -K d = 0.05 N, -B v_d = -1.8 N: a net pull is clipped, the wall never pulls.
+  EXPECT_EQ(back.force_n.z, 0.0);
+  EXPECT_TRUE(back.contact);
+}
+
+TEST(Hri, StartingInsideGivesNoForce) {
+  const SampleField f = plane_field(kUp, kC);
+  HriRenderer r(params());
+  for (double z = 0.005; z > 0.002; z -= 0.0002) {
+    const HriTick t = r.tick(f, {0.016, 0.016, z});
+    EXPECT_FALSE(t.contact);
+    EXPECT_EQ(norm(t.force_n), 0.0);
+    EXPECT_NEAR(t.vhip_m.z, z, 1e-12);  // VHIP follows the HIP
+  }
+}
+
+TEST(Hri, MovingOutGivesNoForce) {
+  const SampleField f = plane_field(kUp, kC);
+  HriRenderer r(params(5));
+  r.tick(f, {0.016, 0.016, 0.011});
+  ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
+  const HriTick out = r.tick(f, {0.016, 0.016, 0.0105});  // above the plane again
+  EXPECT_FALSE(out.contact);
+  EXPECT_EQ(norm(out.force_n), 0.0);
+  EXPECT_NEAR(out.vhip_m.z, 0.0105, 1e-12);
+  // And re-entering soon after still feels the wall.
+  EXPECT_TRUE(r.tick(f, {0.016, 0.016, 0.0098}).contact);
+}
+
+TEST(Hri, PlaneIsRecomputedEveryNTicks) {
+  for (int n : {1, 2, 5, 10}) {
+    const SampleField f = plane_field({0.2, 0, 1}, kC);  // tilted: p moves as the HIP slides
+    HriRenderer r(params(n));
+    r.tick(f, {0.012, 0.016, 0.013});
+    std::vector<int> updates;
+    VirtualPlane held;
+    for (int k = 0; k < 40; ++k) {
+      const Vec3 hip{0.012 + 1e-4 * k, 0.016, 0.0095 - 0.0002 * (0.012 + 1e-4 * k - 0.016)};
+      const HriTick t = r.tick(f, hip);
+      ASSERT_TRUE(t.contact) << "n=" << n << " k=" << k;
+      if (t.plane_update) {
+        updates.push_back(k);
+        held = t.plane;
+      } else {
+        EXPECT_EQ(t.plane.p.x, held.p.x) << "the plane must be held between updates";
+      }
+    }
+    ASSERT_FALSE(updates.empty());
+    EXPECT_EQ(updates.front(), 0);
+    for (std::size_t i = 1; i < updates.size(); ++i) EXPECT_EQ(updates[i] - updates[i - 1], n) << "n=" << n;
+    EXPECT_EQ(int(updates.size()), (40 + n - 1) / n);
+  }
+}
+
+TEST(Hri, Eq2ProjectsTheHipOntoThePlane) {
+  const Vec3 m = Vec3{0.3, -0.4, 1.0} / norm(Vec3{0.3, -0.4, 1.0});
+  const SampleField f = plane_field(m, kC);
+  HriRenderer r(params());
+  r.tick(f, kC + m * 0.002);
+  const Vec3 hip = kC - m * 0.0015 + Vec3{0.001, 0.0005, 0};
+  const HriTick t = r.tick(f, hip);
+  ASSERT_TRUE(t.contact);
+  EXPECT_NEAR(dot(t.plane.n, m), 1.0, 1e-6);
+  // VHIP on the plane (eq. 1) ...
+  EXPECT_NEAR(dot(t.plane.n, t.vhip_m - t.plane.p), 0.0, 1e-12);
+  // ... and the closest such point: HIP - VHIP parallel to N (eq. 2).
+  const Vec3 d = hip - t.vhip_m;
+  EXPECT_NEAR(norm(cross(d, t.plane.n)), 0.0, 1e-12);
+  EXPECT_NEAR(norm(d), 0.0015 - dot(Vec3{0.001, 0.0005, 0}, m), 1e-7);
+  // F along +N with |F| = K |d|.
+  EXPECT_NEAR(dot(t.force_n, t.plane.n), 500 * norm(d), 1e-9);
+}
+
+TEST(Hri, ForceAboveTheLimitSaturatesKeepingItsDirection) {
+  const Vec3 m = Vec3{1, 1, 1} / std::sqrt(3.0);
+  const SampleField f = plane_field(m, kC);
+  HriParams p = params();
+  p.stiffness_n_per_m = 1e5;
+  p.force_limit_n = 3.3;
+  HriRenderer r(p);
+  r.tick(f, kC + m * 0.001);
+  const HriTick t = r.tick(f, kC - m * 0.004);
+  EXPECT_TRUE(t.saturated);
+  EXPECT_NEAR(norm(t.force_n), 3.3, 1e-9);
+  EXPECT_NEAR(dot(t.force_n / norm(t.force_n), m), 1.0, 1e-9);
+}
+
+TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
+  const SampleField f = plane_field(kUp, kC);
+  HriRenderer r(params());
+  r.tick(f, {0.016, 0.016, 0.011});
+  ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const Vec3 bad : {Vec3{nan, 0, 0}, Vec3{0, std::numeric_limits<double>::infinity(), 0}}) {
+    const HriTick t = r.tick(f, bad);
+    EXPECT_TRUE(t.fault);
+    EXPECT_EQ(norm(t.force_n), 0.0);
+  }
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.009});
+  EXPECT_FALSE(t.fault);
+  EXPECT_TRUE(t.contact);
+  EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
+}
+
+TEST(Hri, InsideBelowConventionForSignedDistance) {
+  // value = signed distance (negative inside): same wall, opposite convention.
+  const SampleField f = plane_field(kUp, kC, /*negate=*/true);
+  HriParams p = params();
+  p.inside = InsideIs::kBelow;
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.012});
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.009});
+  ASSERT_TRUE(t.contact);
+  EXPECT_NEAR(t.plane.n.z, 1.0, 1e-6);
+  EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
+}
+
+TEST(Hri, ZeroGradientFallsBackToAFiniteNormal) {
+  SampleField f = plane_field(kUp, kC);
+  for (auto& s : f.samples) s.gx = s.gy = s.gz = 0.f;  // a flat-gradient field
+  HriRenderer r(params());
+  r.tick(f, {0.016, 0.016, 0.011});
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.009});
+  ASSERT_TRUE(t.contact);
+  EXPECT_TRUE(finite(t.force_n));
+  EXPECT_NEAR(t.plane.n.z, 1.0, 1e-9);  // from HIP toward the previous VHIP
+}

@@ -1,0 +1,61 @@
+// Scene files: the shipped scenes load; bad ones name the file, the field and the value.
+#include <gtest/gtest.h>
+
+#include "scene.h"
+
+using isotouch::app::load_scene;
+using isotouch::app::parse_scene;
+using isotouch::app::SceneError;
+
+namespace {
+const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";
+
+void expect_error(const std::string& text, const std::vector<std::string>& parts) {
+  try {
+    parse_scene(text, "bad.json");
+    FAIL() << "accepted: " << text;
+  } catch (const SceneError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("bad.json: ", 0), 0u) << m;
+    for (const auto& p : parts) EXPECT_NE(m.find(p), std::string::npos) << "'" << p << "' not in: " << m;
+  }
+}
+}  // namespace
+
+TEST(Scene, ShippedScenesLoad) {
+  for (const char* name : {"head", "chest", "sphere"}) {
+    const auto s = load_scene(kScenes + "/" + name + ".json");
+    EXPECT_EQ(s.name, name);
+    EXPECT_GT(s.hri.stiffness_n_per_m, 0);
+    EXPECT_GT(s.hri.force_limit_n, 0);
+  }
+  const auto head = load_scene(kScenes + "/head.json");
+  EXPECT_EQ(head.hri.tau, 1150);
+  EXPECT_NE(head.volume_path.find("data/ct-head-headsq/headsq_64x64x93_int16.mhd"), std::string::npos);
+  EXPECT_EQ(load_scene(kScenes + "/chest.json").hri.tau, -500);
+}
+
+TEST(Scene, RelativeVolumePathIsResolvedAgainstTheSceneFolder) {
+  const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1})", "/a/b/s.json");
+  EXPECT_EQ(s.volume_path, "/a/b/v.mhd");
+}
+
+TEST(Scene, Errors) {
+  expect_error("{", {"not valid JSON"});
+  expect_error(R"({"isovalue": 1})", {"'volume'", "required"});
+  expect_error(R"({"volume": {"path": "v.mhd"}})", {"'isovalue'", "required"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stiffness_n_per_m": -3}})",
+               {"'servo.stiffness_n_per_m'", "-3"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stifness": 3}})",
+               {"'servo.stifness'", "unknown field"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": "high"})", {"'isovalue'", "\"high\""});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"plane_update_period": 0}})",
+               {"'servo.plane_update_period'", "0"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "inside": "up"})", {"'inside'", "up"});
+  expect_error(R"({"volume": {"synthetic": "torus"}, "isovalue": 1})", {"'volume.synthetic'", "torus"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_direction": [0, 0, 0]}})",
+               {"'script.ray_direction'"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_direction": [1, 2]}})",
+               {"'script.ray_direction'", "[1,2]"});
+  expect_error(R"({"volume": {"path": "v.mhd", "synthetic": "sphere"}, "isovalue": 1})", {"exactly one"});
+}

@@ -1,0 +1,120 @@
+// Simulated device, touch script and the headless loop.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "headless.h"
+#include "sampling.h"
+#include "script.h"
+#include "sim_device.h"
+
+using namespace isotouch::servo;
+
+namespace {
+// Sphere of radius R [m] around c as a distance field in mm (positive inside), exact samples.
+SampleField sphere_field(double R) {
+  SampleField f;
+  f.grid.dims = {48, 48, 48};
+  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.samples.resize(f.grid.voxel_count());
+  const Vec3 c = f.grid.centre_m();
+  for (int z = 0; z < 48; ++z)
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 48; ++x) {
+        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
+        const Vec3 u = normalized_or(p - c, {0, 0, 1});
+        f.samples[f.grid.index(x, y, z)] = {float((R - norm(p - c)) * 1000), float(-u.x * 1000),
+                                            float(-u.y * 1000), float(-u.z * 1000)};
+      }
+  return f;
+}
+}  // namespace
+
+TEST(SimDevice, HandSpringBringsTheMassToTheTarget) {
+  SimDevice d({}, {0, 0, 0});
+  for (int k = 0; k < 3000; ++k) d.step(1e-3, {0.01, -0.02, 0.005}, {});
+  EXPECT_NEAR(d.position().x, 0.01, 1e-6);
+  EXPECT_NEAR(d.position().y, -0.02, 1e-6);
+  EXPECT_NEAR(norm(d.velocity()), 0.0, 1e-5);
+}
+
+TEST(SimDevice, RenderedForceActsBackOnTheMotion) {
+  SimDeviceParams p;
+  SimDevice d(p, {0, 0, 0});
+  d.command_force({0, 0, 1.5});  // held (zero-order hold) across steps
+  for (int k = 0; k < 3000; ++k) d.step(1e-3, {0, 0, 0}, {});
+  // Equilibrium: hand spring balances the force, offset = F / K_hand.
+  EXPECT_NEAR(d.position().z, 1.5 / p.hand_stiffness_n_per_m, 1e-6);
+}
+
+TEST(Script, PhasesAndContactPointOnTheSphere) {
+  const double R = 0.015;
+  const SampleField f = sphere_field(R);
+  HriParams h;
+  h.tau = 0;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.ray_direction = {0, 0, -1};
+  sp.stroke_length_m = 0.010;  // stays on the cap of the sphere
+  const TouchScript s = make_touch_script(f, h, sp);
+  const Vec3 c = f.grid.centre_m();
+  EXPECT_NEAR(norm(s.contact_point_m - c), R, 5e-5);  // 0.05 voxel: trilinear field
+  EXPECT_NEAR(s.contact_normal.z, 1.0, 1e-3);
+  EXPECT_LT(0.0, s.t_press);
+  EXPECT_LT(s.t_press, s.t_stroke);
+  EXPECT_LT(s.t_stroke, s.t_lift);
+  EXPECT_LT(s.t_lift, s.duration_s);
+  Vec3 p, v;
+  s.at(0, p, v);
+  EXPECT_NEAR(norm(p - c) - R, sp.approach_distance_m, 5e-5);
+  // Mid-stroke the hand target is press_depth below the surface under it, measured along
+  // the first contact normal (the hand keeps pressing "down"): radially a little less.
+  s.at(0.5 * (s.t_stroke + s.t_lift), p, v);
+  const double dx = p.x - c.x, dy = p.y - c.y;
+  const double surface_z = c.z + std::sqrt(R * R - dx * dx - dy * dy);
+  EXPECT_NEAR(surface_z - p.z, sp.press_depth_m, 2e-4);
+  EXPECT_NEAR(norm(v), sp.stroke_speed_m_s, 0.3 * sp.stroke_speed_m_s);
+}
+
+TEST(Script, RayThatMissesIsAClearError) {
+  const SampleField f = sphere_field(0.015);
+  HriParams h;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.ray_direction = {0, 0, 1};  // away from the sphere
+  EXPECT_THROW(make_touch_script(f, h, sp), std::runtime_error);
+  sp.ray_origin_frac = {0.5, 0.5, 0.5};  // starts inside
+  EXPECT_THROW(make_touch_script(f, h, sp), std::runtime_error);
+}
+
+TEST(Headless, DeterministicAndTouches) {
+  const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
+  HriParams h;
+  h.tau = 0;
+  h.plane_update_period = 5;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.stroke_length_m = 0.015;
+  auto run = [&] {
+    TripleBuffer<SampleField> tb;
+    tb.publish(field);
+    const TouchScript s = make_touch_script(*field, h, sp);
+    WorkspaceTransform xf;
+    xf.translation_m = field->grid.centre_m();
+    Vec3 p0, v0;
+    s.at(0, p0, v0);
+    SimDevice d({}, xf.to_device(p0));
+    HriRenderer r(h);
+    return run_headless(tb, r, d, xf, s, 1000.0);
+  };
+  const auto a = run(), b = run();
+  ASSERT_EQ(a.size(), b.size());
+  long contact = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].hip_m.z, b[i].hip_m.z);
+    ASSERT_EQ(a[i].force_n.z, b[i].force_n.z);
+    contact += a[i].contact;
+    EXPECT_LE(norm(a[i].force_n), h.force_limit_n + 1e-12);
+  }
+  EXPECT_GT(contact, 500);
+}

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# isotouch - the README's two commands.
+#   ./run.sh [SCENE] [--out DIR] [...]  install what is missing, build, run `isotouch run`
+#                                       (default scene: scenes/head.json, output: out/head/)
+#   ./run.sh test [ctest args]          install what is missing, build, run the test suite
+# Debian 12. Needs root or sudo only when packages are missing.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config zlib1g-dev
+  libvulkan-dev glslang-tools mesa-vulkan-drivers vulkan-validationlayers
+  libinsighttoolkit5-dev libteem-dev
+  nlohmann-json3-dev libcli11-dev libgtest-dev
+  gnuplot-nox
+)
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "run.sh: installing missing Debian packages: ${missing[*]}"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  $SUDO apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+echo "run.sh: configuring and building (cmake preset 'release' -> build/)"
+cmake --preset release >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
+rm -f build-configure.log
+cmake --build --preset release -j"$(nproc)"
+
+if [[ "${1:-}" == "test" ]]; then
+  shift
+  exec ctest --preset release -j"$(nproc)" "$@"
+fi
+exec build/bin/isotouch run "$@"

@@ -198,3 +198,38 @@ TEST(Hri, ZeroGradientFallsBackToAFiniteNormal) {
   EXPECT_TRUE(finite(t.force_n));
   EXPECT_NEAR(t.plane.n.z, 1.0, 1e-9);  // from HIP toward the previous VHIP
 }
+
+// ---- The servo tick allocates nothing: count operator new over many ticks. ----
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t n) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+TEST(Hri, TickAllocatesNothing) {
+  const Vec3 m = Vec3{0.2, 0.1, 1} / norm(Vec3{0.2, 0.1, 1});
+  const SampleField f = plane_field(m, kC);
+  HriRenderer r(params(3));
+  long contacts = 0;
+  g_allocations = 0;
+  g_counting = true;
+  for (int k = 0; k < 100000; ++k) {
+    const double s = 1e-3 * std::sin(k * 1e-3);
+    const HriTick t = r.tick(f, kC + Vec3{0.004 * std::cos(k * 2e-3), 0.004 * std::sin(k * 3e-3), 0} + m * s);
+    contacts += t.contact;
+  }
+  g_counting = false;
+  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_GT(contacts, 10000);  // the loop really went through contact and plane updates
+}

@@ -1,0 +1,19 @@
+// libFuzzer target for the scene parser: any input either parses or throws SceneError.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "scene.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string text(reinterpret_cast<const char*>(data), size);
+  try {
+    const isotouch::app::Scene s = isotouch::app::parse_scene(text, "fuzz.json");
+    // Whatever parses must be usable: the invariants the servo relies on hold.
+    if (!(s.hri.stiffness_n_per_m > 0) || !(s.hri.force_limit_n > 0) || s.hri.plane_update_period < 1 ||
+        !(s.hri.rate_hz > 0) || !(s.device.mass_kg > 0))
+      __builtin_trap();
+  } catch (const isotouch::app::SceneError&) {
+  }
+  return 0;
+}

@@ -184,6 +184,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       << fmt(hp.rate_hz) << " Hz\n";
 
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
+  int last_quarter = -1;
   auto progress = [&](long k, long total) {
     if (!opt.progress) return;
     const int pct = int(100 * k / total);
@@ -191,7 +192,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       std::cerr << "\rservo    [" << std::string(std::size_t(pct / 4), '#')
                 << std::string(std::size_t(25 - pct / 4), '.') << "] " << std::setw(3) << pct << "%  "
                 << k << "/" << total << " ticks" << (k == total ? "\n" : "") << std::flush;
-    } else if (k == total || (k - 1) % (total / 4 + 1) == 0) {
+    } else if (pct / 25 != last_quarter) {  // not a terminal: a line per quarter
+      last_quarter = pct / 25;
       std::cerr << "servo    " << k << "/" << total << " ticks (" << pct << "%)\n";
     }
   };

@@ -305,8 +305,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << "| gradient pass | GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
-     << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3) << ", relative to max |grad| "
-     << fmt(m.max_rel_diff, 3) << " |\n"
+     << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3)
+     << "; relative (to the largest gradient magnitude) " << fmt(m.max_rel_diff, 3) << " |\n"
      << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
      << " N s/m, n = " << hp.plane_update_period << ", " << fmt(hp.rate_hz) << " Hz, force limit "
      << fmt(hp.force_limit_n) << " N |\n"

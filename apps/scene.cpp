@@ -160,10 +160,14 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
 
   const json& dv = r.section(root, "device");
-  r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "hand_stiffness_n_per_m",
-                        "hand_damping_n_s_per_m", "substeps", "workspace_scale"});
+  r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "coulomb_friction_n", "encoder_resolution_m",
+                        "force_max_n", "hand_stiffness_n_per_m", "hand_damping_n_s_per_m", "substeps",
+                        "workspace_scale"});
   s.device.mass_kg = r.number(dv, "device", "mass_kg", 0.08, 0, 100, true);
   s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m", 0.01, 0, 1e3);
+  s.device.coulomb_friction_n = r.number(dv, "device", "coulomb_friction_n", 0.0, 0, 100);
+  s.device.encoder_resolution_m = r.number(dv, "device", "encoder_resolution_m", 0.0, 0, 0.01);
+  s.device.force_max_n = r.number(dv, "device", "force_max_n", 10.0, 0, 1000, true);
   s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
   s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
   s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);

@@ -118,3 +118,53 @@ TEST(Headless, DeterministicAndTouches) {
   }
   EXPECT_GT(contact, 500);
 }
+
+TEST(SimDevice, SaturatesAndRefusesNonFiniteCommands) {
+  SimDeviceParams p;
+  p.force_max_n = 2.0;
+  SimDevice d(p, {0, 0, 0});
+  d.command_force({0, 3, 4});
+  EXPECT_NEAR(norm(d.applied_force()), 2.0, 1e-12);
+  EXPECT_NEAR(d.applied_force().y / d.applied_force().z, 0.75, 1e-12);
+  d.command_force({std::nan(""), 0, 0});
+  EXPECT_EQ(norm(d.applied_force()), 0.0);
+  EXPECT_EQ(d.refused_commands(), 1);
+  EXPECT_EQ(d.saturated_commands(), 1);
+}
+
+TEST(SimDevice, EncoderQuantizesTheReading) {
+  SimDeviceParams p;
+  p.encoder_resolution_m = 1e-4;
+  SimDevice d(p, {0.00123, -0.00017, 0.0});
+  EXPECT_NEAR(d.position().x, 0.0012, 1e-12);
+  EXPECT_NEAR(d.position().y, -0.0002, 1e-12);
+  EXPECT_NEAR(d.true_position().x, 0.00123, 1e-15);
+}
+
+TEST(SimDevice, CoulombFrictionHoldsBelowAndSlidesAbove) {
+  SimDeviceParams p;
+  p.coulomb_friction_n = 0.5;
+  p.hand_stiffness_n_per_m = 100;
+  p.hand_damping_n_s_per_m = 0;
+  SimDevice held(p, {0, 0, 0});
+  for (int k = 0; k < 500; ++k) held.step(1e-3, {0.004, 0, 0}, {});  // 0.4 N < 0.5 N
+  EXPECT_EQ(held.true_position().x, 0.0);
+  SimDevice slides(p, {0, 0, 0});
+  for (int k = 0; k < 3000; ++k) slides.step(1e-3, {0.02, 0, 0}, {});  // 2 N > 0.5 N
+  // Comes to rest where the spring force has fallen to the friction level (or closer).
+  EXPECT_GT(slides.true_position().x, 0.02 - 0.5 / 100 - 1e-6);
+  EXPECT_LT(slides.true_position().x, 0.02 + 0.5 / 100 + 1e-6);
+}
+
+TEST(SimDevice, EnergyBookkeepingOfAConstantForce) {
+  SimDeviceParams p;
+  p.hand_stiffness_n_per_m = 0;
+  p.hand_damping_n_s_per_m = 0;
+  p.damping_n_s_per_m = 0;
+  SimDevice d(p, {0, 0, 0});
+  d.command_force({1.0, 0, 0});
+  for (int k = 0; k < 100; ++k) d.step(1e-3, {}, {});
+  // Work = F x = kinetic energy for a free mass.
+  EXPECT_NEAR(d.rendered_work_j(), 1.0 * d.true_position().x, 1e-12);
+  EXPECT_NEAR(d.rendered_work_j(), 0.5 * p.mass_kg * d.velocity().x * d.velocity().x, 1e-3 * d.rendered_work_j());  // Euler: (N+1)/N
+}

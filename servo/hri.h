@@ -27,6 +27,7 @@ struct HriParams {
   double rate_hz = 1000.0;           ///< servo rate [Hz]; the period T = 1/rate
   double force_limit_n = 3.3;        ///< |F| is saturated here, direction kept [N]
   double world_per_device = 1.0;     ///< workspace scale: world [m] per device [m]
+  double max_reach_m = 10.0;         ///< a HIP farther than this from the volume centre is a fault [m]
 };
 
 /// The virtual plane (N, p) of eq. 1: N . (x - p) = 0, N the unit outward normal.
@@ -66,6 +67,15 @@ struct HriTick {
 ///   component along N (d's rate with the plane held; it has no spike at plane updates).
 ///   The wall only pushes: a net pull (F . N < 0, from damping while withdrawing) is
 ///   clipped to zero. |F| is saturated at force_limit_n keeping its direction.
+/// - No pop-through (beyond the paper): when both VHIP and HIP are outside but the
+///   segment VHIP -> HIP is longer than half a voxel, or when a plane update finds the
+///   HIP outside again, the segment is marched (half-voxel steps, at most 4096, then
+///   bisection) for a crossing of the isosurface; if it crosses, the HIP went through a
+///   thin wall and the plane is placed at the first crossing instead of being dropped.
+/// - Device faults: a non-finite HIP, or one farther than max_reach_m from the volume
+///   centre, gives zero force and fault = true. After a non-finite HIP the contact state
+///   is kept; after an absurd one the renderer restarts (VHIP = HIP, no plane) at the
+///   next sane HIP, so it can neither pull nor march across the world.
 class HriRenderer {
  public:
   explicit HriRenderer(const HriParams& params) : params_(params) {}
@@ -93,6 +103,9 @@ class HriRenderer {
  private:
   VirtualPlane compute_plane(const SampleField& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
+  VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
+  /// First isosurface crossing on the segment a -> b, a outside (see class docs).
+  bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
 
   HriParams params_;
   VirtualPlane plane_;
@@ -100,6 +113,7 @@ class HriRenderer {
   Vec3 prev_hip_;
   int c_ = 0;
   bool started_ = false;
+  bool resync_ = false;
 };
 
 }  // namespace isotouch::servo

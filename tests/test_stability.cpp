@@ -1,0 +1,75 @@
+// Stability against Colgate-Schenkel, time-domain passivity, extreme cases, random ticks.
+#include <gtest/gtest.h>
+
+#include "analytic_fields.h"
+#include "stability.h"
+
+using namespace isotouch::servo;
+
+namespace {
+const Vec3 kP{0.016, 0.016, 0.010};
+const Vec3 kUp{0, 0, 1};
+SampleField wall() { return plane_field(kUp, kP); }
+}  // namespace
+
+TEST(Stability, HalfTheBoundIsPassive) {
+  const SampleField f = wall();
+  for (double T : {1e-3, 2.5e-4, 1e-4}) {
+    HeldContact h;
+    h.period_s = T;
+    h.stiffness_n_per_m = 0.5 * colgate_k_max(h.device.damping_n_s_per_m, 0, T);
+    const HeldContactResult r = simulate_held_contact(f, kP, kUp, h);
+    EXPECT_GT(r.contact_ticks, r.ticks / 2);
+    // The energy the display (wall + device damping) handed the user is not positive.
+    EXPECT_LE(r.energy_out_j, 0.0) << "T = " << T;
+    EXPECT_FALSE(r.sustained_oscillation) << "T = " << T;
+  }
+}
+
+TEST(Stability, TwiceTheBoundOscillates) {
+  const SampleField f = wall();
+  for (double T : {1e-3, 2.5e-4, 1e-4}) {
+    HeldContact h;
+    h.period_s = T;
+    h.stiffness_n_per_m = 2.0 * colgate_k_max(h.device.damping_n_s_per_m, 0, T);
+    const HeldContactResult r = simulate_held_contact(f, kP, kUp, h);
+    EXPECT_TRUE(r.sustained_oscillation) << "T = " << T << " early " << r.early_energy_j << " late " << r.late_energy_j;
+    EXPECT_TRUE(r.gains_energy) << "T = " << T;
+  }
+}
+
+TEST(Stability, PassivityControllerStabilisesTwiceTheBound) {
+  const SampleField f = wall();
+  HeldContact h;
+  h.stiffness_n_per_m = 2.0 * colgate_k_max(h.device.damping_n_s_per_m, 0, h.period_s);
+  h.passivity_controller = true;
+  const HeldContactResult r = simulate_held_contact(f, kP, kUp, h);
+  EXPECT_FALSE(r.sustained_oscillation) << "early " << r.early_energy_j << " late " << r.late_energy_j;
+  EXPECT_FALSE(r.nonfinite);
+  EXPECT_GT(r.contact_ticks, r.ticks / 2);
+}
+
+TEST(Stability, MeasuredKmaxIsNearTheColgateBound) {
+  const SampleField f = wall();
+  HeldContact h;
+  const double bound = colgate_k_max(h.device.damping_n_s_per_m, 0, h.period_s);
+  const double k = find_k_max(f, kP, kUp, h, bound / 10, bound * 10);
+  std::printf("T = 1 ms, b = 1 N s/m: K_max measured %.0f N/m, bound %.0f N/m, ratio %.3f\n", k, bound, k / bound);
+  EXPECT_GT(k / bound, 0.7);
+  EXPECT_LT(k / bound, 1.3);
+}
+
+TEST(Extreme, EveryCasePasses) {
+  for (const ExtremeCase& c : run_extreme_cases()) {
+    EXPECT_TRUE(c.passed) << c.name << ": " << c.expectation << " -- " << c.detail;
+    std::printf("%-50s %s  %s\n", c.name.c_str(), c.passed ? "PASS" : "FAIL", c.detail.c_str());
+  }
+}
+
+TEST(Extreme, MillionRandomTicksStayFiniteAndBounded) {
+  double ratio = 0;
+  const long bad = random_tick_property(1000000, 12345, ratio);
+  EXPECT_EQ(bad, 0);
+  EXPECT_LE(ratio, 1.0 + 1e-12);
+  EXPECT_GT(ratio, 0.99);  // the limit was reached: the test exercised saturation
+}

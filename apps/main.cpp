@@ -10,6 +10,7 @@
 #include "gradient_pass.h"
 #include "run_job.h"
 #include "scene.h"
+#include "stability_cmd.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -135,6 +136,15 @@ int main(int argc, char** argv) {
 
   cli.add_subcommand("devices", "List the Vulkan devices");
 
+  auto* stab = cli.add_subcommand(
+      "stability", "Measure the largest stable stiffness K_max against Colgate-Schenkel's bound 2(b-|B|)/T "
+                   "(T = 1, 0.25, 0.1 ms; several b), with and without the passivity controller, and run the "
+                   "extreme cases; write stability.csv, extreme_cases.csv, stability.png, stability.md");
+  std::string stab_out = "out/stability";
+  bool stab_quick = false;
+  stab->add_option("--out,-o", stab_out, "Output folder")->capture_default_str();
+  stab->add_flag("--quick", stab_quick, "Shorter runs and coarser search (for tests)");
+
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -143,6 +153,7 @@ int main(int argc, char** argv) {
   try {
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet);
     if (check->parsed()) return cmd_check(volume, device, slab_mib);
+    if (stab->parsed()) return app::run_stability(stab_out, stab_quick, std::cout);
     return cmd_devices();
   } catch (const std::exception& e) {
     std::cerr << "\nisotouch: error: " << e.what() << "\n";

@@ -3,6 +3,7 @@
 #   ./run.sh [SCENE] [--out DIR] [...]  install what is missing, build, run `isotouch run`
 #                                       (default scene: scenes/head.json, output: out/head/)
 #   ./run.sh test [ctest args]          install what is missing, build, run the test suite
+#                                       (release build, then the servo under ThreadSanitizer)
 # Debian 12. Needs root or sudo only when packages are missing.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -33,6 +34,12 @@ cmake --build --preset release -j"$(nproc)"
 
 if [[ "${1:-}" == "test" ]]; then
   shift
-  exec ctest --preset release -j"$(nproc)" "$@"
+  ctest --preset release -j"$(nproc)" "$@"
+  # The servo again under ThreadSanitizer (servo thread + publisher swapping snapshots).
+  echo "run.sh: ThreadSanitizer build of the servo (cmake preset 'tsan' -> build-tsan/)"
+  cmake --preset tsan >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
+  rm -f build-configure.log
+  cmake --build --preset tsan -j"$(nproc)"
+  exec ctest --preset tsan -j"$(nproc)" "$@"
 fi
 exec build/bin/isotouch run "$@"

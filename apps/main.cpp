@@ -11,6 +11,7 @@
 #include "run_job.h"
 #include "scene.h"
 #include "stability_cmd.h"
+#include "bench_cmd.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -145,6 +146,17 @@ int main(int argc, char** argv) {
   stab->add_option("--out,-o", stab_out, "Output folder")->capture_default_str();
   stab->add_flag("--quick", stab_quick, "Shorter runs and coarser search (for tests)");
 
+  auto* bench = cli.add_subcommand("bench", "Benchmarks that print figures");
+  bench->require_subcommand(1);
+  auto* rt = bench->add_subcommand(
+      "servo-rt", "Real-time servo thread at 1, 4 and 10 kHz while the engine thread publishes: p50/p99/p99.9 "
+                  "of the period error and missed deadlines");
+  app::ServoRtOptions rt_opt;
+  rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(CLI::PositiveNumber);
+  rt->add_flag("--fifo", rt_opt.sched_fifo, "Ask for SCHED_FIFO (needs CAP_SYS_NICE)");
+  rt->add_option("--cpu", rt_opt.cpu, "Pin the servo thread to this CPU");
+  rt->add_option("--csv", rt_opt.out_csv, "Also write the table to this CSV file");
+
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -154,6 +166,10 @@ int main(int argc, char** argv) {
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet);
     if (check->parsed()) return cmd_check(volume, device, slab_mib);
     if (stab->parsed()) return app::run_stability(stab_out, stab_quick, std::cout);
+    if (rt->parsed()) {
+      rt_opt.device = device;
+      return app::run_bench_servo_rt(rt_opt, std::cout);
+    }
     return cmd_devices();
   } catch (const std::exception& e) {
     std::cerr << "\nisotouch: error: " << e.what() << "\n";

@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cstring>
 
 namespace isotouch::servo {
@@ -60,7 +61,9 @@ void ServoThread::stop() {
 void ServoThread::loop() {
   if (cfg_.on_thread_start) cfg_.on_thread_start();
   const std::int64_t period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
-  const std::int64_t spin = std::int64_t(cfg_.spin_us * 1e3);
+  // Spin at most 30 % of a period: a thread that never sleeps is throttled under
+  // SCHED_FIFO (sched_rt_runtime_us) and starves the engine thread on small machines.
+  const std::int64_t spin = std::min(std::int64_t(cfg_.spin_us * 1e3), std::int64_t(0.3 * double(period)));
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
   std::uint64_t last_version = 0;

@@ -19,7 +19,7 @@ struct ServoThreadConfig {
   bool sched_fifo = false;        ///< ask for SCHED_FIFO (needs CAP_SYS_NICE or an rtprio limit)
   int fifo_priority = 80;         ///< SCHED_FIFO priority
   int cpu = -1;                   ///< pin to this CPU; -1: no pinning
-  double spin_us = 150;           ///< the last part of each wait is spun, not slept [us]
+  double spin_us = 150;           ///< the last part of each wait is spun, not slept [us]; at most 30 % of T
   std::size_t record_ticks = 0;   ///< period errors kept (preallocated) for statistics
   WorkspaceTransform world_T_device;
   /// Called once on the servo thread before the loop starts (tests mark the thread).

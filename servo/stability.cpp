@@ -314,10 +314,21 @@ ExtremeCase above_device_limit() {
 
 }  // namespace
 
+namespace {
+using CaseFn = ExtremeCase (*)();
+constexpr CaseFn kCases[] = {stiff_wall, thin_shell_jump, start_deep_inside, leave_reenter, bad_device_input,
+                             zero_gradient, outside_volume, nan_voxels, isovalue_extremes,
+                             update_period_extremes, above_device_limit};
+}  // namespace
+
+int extreme_case_count() { return int(sizeof(kCases) / sizeof(kCases[0])); }
+
+ExtremeCase run_extreme_case(int i) { return kCases[i](); }
+
 std::vector<ExtremeCase> run_extreme_cases() {
-  return {stiff_wall(), thin_shell_jump(), start_deep_inside(), leave_reenter(), bad_device_input(),
-          zero_gradient(), outside_volume(), nan_voxels(), isovalue_extremes(), update_period_extremes(),
-          above_device_limit()};
+  std::vector<ExtremeCase> out;
+  for (int i = 0; i < extreme_case_count(); ++i) out.push_back(run_extreme_case(i));
+  return out;
 }
 
 long random_tick_property(long ticks, unsigned seed, double& max_ratio) {

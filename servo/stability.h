@@ -72,6 +72,9 @@ struct ExtremeCase {
 /// leave/re-enter, NaN/Inf/huge device input, zero gradient, HIP outside the volume, NaN
 /// voxels, isovalue at the data min/max, n = 1 and 1000, force above the device limit).
 std::vector<ExtremeCase> run_extreme_cases();
+int extreme_case_count();
+/// Case i of run_extreme_cases(), 0 <= i < extreme_case_count().
+ExtremeCase run_extreme_case(int i);
 
 /// `ticks` random ticks over random fields, parameters and HIPs (with NaN, Inf, huge
 /// values and long jumps mixed in). Returns the number of outputs that were non-finite

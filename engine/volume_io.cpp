@@ -38,6 +38,23 @@ bool ends_with(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
+// ITK and teem messages carry source locations and call chains; keep the last, most
+// specific line, without the "ITK ERROR: Class(0x...): " prefix.
+std::string last_reason(std::string msg) {
+  const auto e = msg.find("ITK ERROR: ");
+  if (e != std::string::npos) {
+    msg = msg.substr(e + 11);
+    const auto colon = msg.find("): ");
+    if (colon != std::string::npos && colon < 64) msg = msg.substr(colon + 3);
+  }
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  const auto nl = msg.rfind('\n');
+  if (nl != std::string::npos) msg = msg.substr(nl + 1);
+  if (msg.find("Unknown component type") != std::string::npos)
+    msg = "unknown or unsupported voxel type (" + msg + ")";
+  return msg;
+}
+
 bool is_nrrd(const std::string& path) {
   const std::string l = lower(path);
   return ends_with(l, ".nrrd") || ends_with(l, ".nhdr");
@@ -284,19 +301,14 @@ Volume load_volume(const std::string& path) {
   } catch (const VolumeError&) {
     throw;
   } catch (const std::exception& e) {
-    std::string msg = e.what();
-    // ITK exceptions carry a multi-line location; keep the description line.
-    const auto pos = msg.find("Description:");
-    if (pos != std::string::npos) msg = msg.substr(pos + 12);
-    while (!msg.empty() && (msg.front() == ' ')) msg.erase(0, 1);
-    while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+    const std::string msg = last_reason(e.what());
 #ifdef ISOTOUCH_HAVE_TEEM
     if (is_nrrd(path)) {
       try {
         v = load_teem(path);
       } catch (const VolumeError& te) {
         fail(path, "ITK could not read it (" + msg + ") and neither could teem (" +
-                       std::string(te.what()).substr(path.size() + 2) + ")");
+                       last_reason(std::string(te.what()).substr(path.size() + 2)) + ")");
       }
     } else
 #endif

@@ -1,20 +1,37 @@
 // hri.h - Direct Haptic Rendering of Isosurface by Intermediate Representation (HRI).
 //
 // Source: "Direct Haptic Rendering of Isosurface by Intermediate Representation",
-// Figure 2 (servo algorithm), eqs. 1-3, §3.1-3.2. The renderer reads a published
-// SampleField only; tick() allocates nothing, takes no lock and makes no syscall.
+// Figure 2 (servo algorithm), eqs. 1-3, §3.1 (surface effects by constraining the VHIP),
+// §3.2 (plane update every n ticks), §3.3 (force shading, recovery time). The renderer
+// reads a published SampleField only; tick() allocates nothing, takes no lock and makes
+// no syscall.
 #pragma once
 #include <cstdint>
 
-#include "sample_field.h"
-#include "vec3.h"
+#include "renderer.h"
 
 namespace isotouch::servo {
 
-/// Which side of the isovalue is "inside" the object.
-enum class InsideIs : std::uint8_t {
-  kAbove,  ///< value > tau is inside (CT density, the paper's B(v) = 1)
-  kBelow,  ///< value < tau is inside (signed distance fields, negative inside)
+/// How p is found on the segment VHIP -> HIP at a plane update.
+enum class Intersection : std::uint8_t {
+  kLinear,     ///< the paper: linear interpolation of the two end values
+  kSecant,     ///< `intersection_steps` regula-falsi (Illinois) steps on the trilinear field
+  kBisection,  ///< `intersection_steps` bisection steps, then linear inside the last bracket
+};
+
+/// Where N comes from at a plane update.
+enum class NormalSource : std::uint8_t {
+  kSamples,         ///< trilinear blend of the published gradient samples
+  kCentral,         ///< central differences of the trilinear value at p, h = 1/2 voxel (the paper)
+  kTrilinearExact,  ///< the exact gradient of the trilinear interpolant (reference runs)
+};
+
+/// Surface effects by constraining the VHIP (§3.1, after Salisbury et al. 1995).
+struct SurfaceFriction {
+  double mu_s = 0;                 ///< static coefficient: VHIP holds while |F_t| <= mu_s |F_n|
+  double mu_d = 0;                 ///< dynamic coefficient: sliding keeps |F_t| = mu_d |F_n|
+  double viscous_n_s_per_m = 0;    ///< viscous friction: the VHIP drifts at |F_t| / b_v
+  bool any() const { return mu_s > 0 || mu_d > 0 || viscous_n_s_per_m > 0; }
 };
 
 /// HRI parameters. Stiffness and damping act in device space [m of device motion].
@@ -28,25 +45,12 @@ struct HriParams {
   double force_limit_n = 3.3;        ///< |F| is saturated here, direction kept [N]
   double world_per_device = 1.0;     ///< workspace scale: world [m] per device [m]
   double max_reach_m = 10.0;         ///< a HIP farther than this from the volume centre is a fault [m]
-};
-
-/// The virtual plane (N, p) of eq. 1: N . (x - p) = 0, N the unit outward normal.
-struct VirtualPlane {
-  Vec3 n;              ///< unit outward normal (volume frame)
-  Vec3 p;              ///< point on the isosurface (world [m])
-  bool valid = false;  ///< false = the paper's VirtualPlane = (0, 0)
-};
-
-/// What one servo tick produced.
-struct HriTick {
-  Vec3 force_n;               ///< force on the device [N], device axes (= volume axes)
-  Vec3 vhip_m;                ///< VHIP after this tick, world [m]
-  VirtualPlane plane;         ///< the plane in use after this tick
-  double penetration_m = 0;   ///< |HIP - VHIP| in world [m] while in contact, else 0
-  bool contact = false;       ///< a force was rendered from the plane this tick
-  bool plane_update = false;  ///< the plane was (re)computed this tick
-  bool saturated = false;     ///< |F| hit force_limit_n
-  bool fault = false;         ///< non-finite HIP or force: zero force was sent
+  Intersection intersection = Intersection::kLinear;
+  int intersection_steps = 4;        ///< secant / bisection steps
+  NormalSource normal = NormalSource::kSamples;
+  SurfaceFriction friction;
+  bool force_shading = false;        ///< §3.3: shading plane from the normal at the previous VHIP
+  double recovery_time_s = 0;        ///< §3.3: > 0 turns recovery time on [s]
 };
 
 /// The HRI servo renderer (Figure 2).
@@ -57,16 +61,35 @@ struct HriTick {
 ///   rate ("five times slower" in Table 1). We follow §3.2: c is incremented first, so
 ///   with n = 1 the plane is recomputed every tick.
 /// - LinearInterpolation(VHIP, HIP, tau): t = (tau - f(VHIP)) / (f(HIP) - f(VHIP)),
-///   clamped to [0, 1] (0 where the denominator vanishes, e.g. an embedded VHIP).
-/// - SurfaceNormal(p): the trilinear blend of the published gradient samples at p,
-///   negated for InsideIs::kAbove so N points outward. Where that gradient is zero or
-///   not finite: the unit vector from HIP to VHIP, else the previous normal, else +z.
+///   clamped to [0, 1]. The secant and bisection options refine t on the trilinear field
+///   (the two ends bracket tau). When the VHIP is itself inside (embedded, Figure 5b) the
+///   ends do not bracket tau and the linear rule would extrapolate; p is then the surface
+///   point found from the VHIP along its outward normal, searched no farther than twice
+///   the first-order depth plus a quarter voxel (16 bisection steps), else the VHIP.
+/// - SurfaceNormal(p): see NormalSource; negated for InsideIs::kAbove so N points
+///   outward. Where that gradient is zero or not finite: the unit vector from HIP to
+///   VHIP, else the previous normal, else +z.
 /// - Force sign: the paper writes F = K d - B v_d with d = HIP - VHIP, which is the
 ///   force the user exerts on the surface. The force on the device must push the HIP
 ///   back toward the VHIP, so we render F = -K d - B v_d, with v_d the HIP velocity
 ///   component along N (d's rate with the plane held; it has no spike at plane updates).
 ///   The wall only pushes: a net pull (F . N < 0, from damping while withdrawing) is
 ///   clipped to zero. |F| is saturated at force_limit_n keeping its direction.
+/// - Friction (§3.1): the VHIP is held on the plane (the contact point from the tick
+///   before, re-projected when the plane changes) while the tangential spring force
+///   K |VHIP - VHIP_free| stays within mu_s K |d_n|; beyond it the VHIP slides, trailing
+///   the frictionless VHIP_free (eq. 2) at the distance that makes |F_t| = mu_d |F_n|,
+///   and sticks again once that distance is not exceeded. Viscous friction moves the held
+///   VHIP toward VHIP_free by K T / (b_v + K T) of the gap per tick (backward Euler of
+///   b_v dx/dt = K (free - x)), so steady sliding at speed v gives |F_t| = b_v v.
+/// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
+///   previous VHIP with the normal there (same NormalSource) first projects the HIP to a
+///   temporary HIP; the true plane then projects that to the final VHIP. Costs one normal
+///   per tick.
+/// - Recovery time (§3.3, after Mark et al. 1996): when a plane update finds the previous
+///   VHIP embedded (inside the object) and the force magnitude would jump up, the force
+///   keeps the new direction and its magnitude ramps linearly from the previous magnitude
+///   to the new value over recovery_time_s.
 /// - No pop-through (beyond the paper): when both VHIP and HIP are outside but the
 ///   segment VHIP -> HIP is longer than half a voxel, or when a plane update finds the
 ///   HIP outside again, the segment is marched (half-voxel steps, at most 4096, then
@@ -76,22 +99,24 @@ struct HriTick {
 ///   centre, gives zero force and fault = true. After a non-finite HIP the contact state
 ///   is kept; after an absurd one the renderer restarts (VHIP = HIP, no plane) at the
 ///   next sane HIP, so it can neither pull nor march across the world.
-class HriRenderer {
+class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params) : params_(params) {}
 
+  const char* name() const override { return "HRI"; }
   /// Forget contact state (next tick starts as the first tick of a simulation).
-  void reset();
+  void reset() override;
 
   /// One servo tick. @param field the published samples; @param hip_world_m the HIP
   /// in world [m]. A non-finite HIP yields zero force and fault = true; the state is
   /// kept so contact resumes when sane input returns.
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m);
+  HriTick tick(const SampleField& field, const Vec3& hip_world_m) override;
 
   const HriParams& params() const { return params_; }
   const VirtualPlane& plane() const { return plane_; }
   const Vec3& vhip() const { return vhip_; }
   int counter() const { return c_; }
+  bool sliding() const { return sliding_; }
 
   /// Signed excess over the isovalue: > 0 inside, <= 0 outside; NaN counts as outside.
   double excess(double value) const {
@@ -100,20 +125,30 @@ class HriRenderer {
     return e == e ? e : -1.0;
   }
 
+  /// Outward unit normal at x from the configured NormalSource, or `fallback`.
+  Vec3 outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const;
+
  private:
   VirtualPlane compute_plane(const SampleField& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
   VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
+  Vec3 constrain(const SampleField& field, const Vec3& hip, const Vec3& free_vhip);
 
   HriParams params_;
   VirtualPlane plane_;
   Vec3 vhip_;
   Vec3 prev_hip_;
+  double prev_force_mag_ = 0;
   int c_ = 0;
+  int recovery_ticks_left_ = 0;
+  int recovery_ticks_ = 0;
+  double recovery_from_n_ = 0;
   bool started_ = false;
   bool resync_ = false;
+  bool sliding_ = false;
+  bool was_contact_ = false;
 };
 
 }  // namespace isotouch::servo

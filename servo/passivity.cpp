@@ -23,8 +23,7 @@ Vec3 PassivityController::step(const Vec3& x, const Vec3& f_env) {
       f = f - v * alpha_;
     }
   }
-  const double mag = norm(f);
-  if (mag > f_max_) f = f * (f_max_ / mag);
+  saturate(f, f_max_);
   prev_x_ = x;
   prev_f_ = f;
   started_ = true;

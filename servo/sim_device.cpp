@@ -17,13 +17,8 @@ void SimDevice::command_force(const Vec3& f) {
     ++refused_;
     return;
   }
-  const double mag = norm(f);
-  if (mag > p_.force_max_n) {
-    f_cmd_ = f * (p_.force_max_n / mag);
-    ++saturated_;
-  } else {
-    f_cmd_ = f;
-  }
+  f_cmd_ = f;
+  if (saturate(f_cmd_, p_.force_max_n)) ++saturated_;
 }
 
 void SimDevice::step(double dt, const Vec3& target, const Vec3& target_v) {

@@ -32,4 +32,15 @@ inline Vec3 normalized_or(const Vec3& a, const Vec3& fallback) {
   return (n > 0.0 && std::isfinite(n)) ? a / n : fallback;
 }
 
+/// Scale `f` down to magnitude `limit` if it is longer, keeping its direction; the
+/// result is never longer than `limit`, rounding included. Returns true if it scaled.
+inline bool saturate(Vec3& f, double limit) {
+  const double m = norm(f);
+  if (!(m > limit)) return false;
+  f = f * (limit / m);
+  const double m2 = norm(f);
+  if (m2 > limit) f = f * ((limit / m2) * (1.0 - 4e-16));
+  return true;
+}
+
 }  // namespace isotouch::servo

@@ -13,7 +13,7 @@ namespace {
 
 // value = 1000 * (m . (c - x)) [mm]: positive inside (below the plane through c with
 // outward unit normal m). Exact under trilinear interpolation.
-SampleField plane_field(Vec3 m, Vec3 c, bool negate = false) {
+SampleField wall_field(Vec3 m, Vec3 c, bool negate = false) {
   SampleField f;
   f.grid.dims = {32, 32, 32};
   f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
@@ -46,7 +46,7 @@ const Vec3 kC{0.016, 0.016, 0.010};  // plane z = 10 mm
 }  // namespace
 
 TEST(Hri, ForcePushesTheHipBackOut) {
-  const SampleField f = plane_field(kUp, kC);
+  const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());
   EXPECT_FALSE(r.tick(f, {0.016, 0.016, 0.012}).contact);  // outside: VHIP = HIP
   const HriTick t = r.tick(f, {0.016, 0.016, 0.009});      // 1 mm inside
@@ -61,7 +61,7 @@ TEST(Hri, ForcePushesTheHipBackOut) {
 }
 
 TEST(Hri, DampingResistsPressingIn) {
-  const SampleField f = plane_field(kUp, kC);
+  const SampleField f = wall_field(kUp, kC);
   HriParams p = params();
   p.damping_n_s_per_m = 2.0;
   HriRenderer r(p);
@@ -77,7 +77,7 @@ TEST(Hri, DampingResistsPressingIn) {
 }
 
 TEST(Hri, StartingInsideGivesNoForce) {
-  const SampleField f = plane_field(kUp, kC);
+  const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());
   for (double z = 0.005; z > 0.002; z -= 0.0002) {
     const HriTick t = r.tick(f, {0.016, 0.016, z});
@@ -88,7 +88,7 @@ TEST(Hri, StartingInsideGivesNoForce) {
 }
 
 TEST(Hri, MovingOutGivesNoForce) {
-  const SampleField f = plane_field(kUp, kC);
+  const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params(5));
   r.tick(f, {0.016, 0.016, 0.011});
   ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
@@ -102,7 +102,7 @@ TEST(Hri, MovingOutGivesNoForce) {
 
 TEST(Hri, PlaneIsRecomputedEveryNTicks) {
   for (int n : {1, 2, 5, 10}) {
-    const SampleField f = plane_field({0.2, 0, 1}, kC);  // tilted: p moves as the HIP slides
+    const SampleField f = wall_field({0.2, 0, 1}, kC);  // tilted: p moves as the HIP slides
     HriRenderer r(params(n));
     r.tick(f, {0.012, 0.016, 0.013});
     std::vector<int> updates;
@@ -127,7 +127,7 @@ TEST(Hri, PlaneIsRecomputedEveryNTicks) {
 
 TEST(Hri, Eq2ProjectsTheHipOntoThePlane) {
   const Vec3 m = Vec3{0.3, -0.4, 1.0} / norm(Vec3{0.3, -0.4, 1.0});
-  const SampleField f = plane_field(m, kC);
+  const SampleField f = wall_field(m, kC);
   HriRenderer r(params());
   r.tick(f, kC + m * 0.002);
   const Vec3 hip = kC - m * 0.0015 + Vec3{0.001, 0.0005, 0};
@@ -146,7 +146,7 @@ TEST(Hri, Eq2ProjectsTheHipOntoThePlane) {
 
 TEST(Hri, ForceAboveTheLimitSaturatesKeepingItsDirection) {
   const Vec3 m = Vec3{1, 1, 1} / std::sqrt(3.0);
-  const SampleField f = plane_field(m, kC);
+  const SampleField f = wall_field(m, kC);
   HriParams p = params();
   p.stiffness_n_per_m = 1e5;
   p.force_limit_n = 3.3;
@@ -159,7 +159,7 @@ TEST(Hri, ForceAboveTheLimitSaturatesKeepingItsDirection) {
 }
 
 TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
-  const SampleField f = plane_field(kUp, kC);
+  const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());
   r.tick(f, {0.016, 0.016, 0.011});
   ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
@@ -177,7 +177,7 @@ TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
 
 TEST(Hri, InsideBelowConventionForSignedDistance) {
   // value = signed distance (negative inside): same wall, opposite convention.
-  const SampleField f = plane_field(kUp, kC, /*negate=*/true);
+  const SampleField f = wall_field(kUp, kC, /*negate=*/true);
   HriParams p = params();
   p.inside = InsideIs::kBelow;
   HriRenderer r(p);
@@ -189,7 +189,7 @@ TEST(Hri, InsideBelowConventionForSignedDistance) {
 }
 
 TEST(Hri, ZeroGradientFallsBackToAFiniteNormal) {
-  SampleField f = plane_field(kUp, kC);
+  SampleField f = wall_field(kUp, kC);
   for (auto& s : f.samples) s.gx = s.gy = s.gz = 0.f;  // a flat-gradient field
   HriRenderer r(params());
   r.tick(f, {0.016, 0.016, 0.011});
@@ -219,7 +219,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 TEST(Hri, TickAllocatesNothing) {
   const Vec3 m = Vec3{0.2, 0.1, 1} / norm(Vec3{0.2, 0.1, 1});
-  const SampleField f = plane_field(m, kC);
+  const SampleField f = wall_field(m, kC);
   HriRenderer r(params(3));
   long contacts = 0;
   g_allocations = 0;
@@ -232,4 +232,175 @@ TEST(Hri, TickAllocatesNothing) {
   g_counting = false;
   EXPECT_EQ(g_allocations.load(), 0);
   EXPECT_GT(contacts, 10000);  // the loop really went through contact and plane updates
+}
+
+// ---- §3.1 surface effects, §3.3 remedies, intersection and normal options ----
+#include "analytic_fields.h"
+
+namespace {
+HriParams friction_params(double mu_s, double mu_d, double visc = 0) {
+  HriParams p = params();
+  p.friction.mu_s = mu_s;
+  p.friction.mu_d = mu_d;
+  p.friction.viscous_n_s_per_m = visc;
+  return p;
+}
+}  // namespace
+
+TEST(HriFriction, VhipHoldsInsideTheStaticCone) {
+  const SampleField f = wall_field(kUp, kC);
+  HriRenderer r(friction_params(0.5, 0.3));
+  r.tick(f, {0.016, 0.016, 0.011});
+  r.tick(f, {0.016, 0.016, 0.009});  // 1 mm deep: F_n = 0.5 N
+  for (double dx : {0.0001, 0.0002, 0.0004}) {  // K dx <= 0.2 N < mu_s F_n = 0.25 N
+    const HriTick t = r.tick(f, {0.016 + dx, 0.016, 0.009});
+    EXPECT_NEAR(t.vhip_m.x, 0.016, 1e-12) << "dx " << dx;
+    EXPECT_NEAR(t.force_n.x, -500 * dx, 1e-9);  // tangential spring opposes the motion
+    EXPECT_NEAR(t.force_n.z, 0.5, 1e-9);
+    EXPECT_FALSE(r.sliding());
+  }
+}
+
+TEST(HriFriction, SlidingForceIsMuDTimesTheNormalForce) {
+  const SampleField f = wall_field(kUp, kC);
+  HriRenderer r(friction_params(0.5, 0.3));
+  r.tick(f, {0.016, 0.016, 0.011});
+  r.tick(f, {0.016, 0.016, 0.009});
+  for (int k = 1; k <= 20; ++k) {
+    const double x = 0.016 + 0.0005 * k;  // pulls well past the cone
+    const HriTick t = r.tick(f, {x, 0.016, 0.009});
+    if (k < 2) continue;
+    EXPECT_TRUE(r.sliding());
+    EXPECT_NEAR(t.force_n.z, 0.5, 1e-9);
+    EXPECT_NEAR(std::hypot(t.force_n.x, t.force_n.y), 0.3 * 0.5, 1e-9);
+    EXPECT_LT(t.force_n.x, 0.0);
+    EXPECT_NEAR(x - t.vhip_m.x, 0.3 * 0.001, 1e-12);  // trails the free VHIP by mu_d d_n
+  }
+  // Stop: the VHIP sticks again where it is.
+  const HriTick s1 = r.tick(f, {0.026, 0.016, 0.009});
+  const HriTick s2 = r.tick(f, {0.026, 0.016, 0.009});
+  EXPECT_FALSE(r.sliding());
+  EXPECT_EQ(s1.vhip_m.x, s2.vhip_m.x);
+}
+
+TEST(HriFriction, ViscousFrictionForceIsProportionalToSpeed) {
+  const SampleField f = wall_field(kUp, kC);
+  HriRenderer r(friction_params(0, 0, 20.0));
+  r.tick(f, {0.010, 0.016, 0.011});
+  r.tick(f, {0.010, 0.016, 0.009});
+  const double v = 0.01;  // m/s along x
+  HriTick t;
+  for (int k = 1; k <= 400; ++k) t = r.tick(f, {0.010 + v * k * 1e-3, 0.016, 0.009});
+  EXPECT_NEAR(-t.force_n.x, 20.0 * v, 0.02 * 20.0 * v);  // b_v v once the transient is gone
+}
+
+namespace {
+// A concave step: floor z < 10 mm, then a 45-degree ramp rising from x = 20 mm
+// (value > 0 inside, in mm of distance).
+SampleField concave_step() {
+  SampleField f = wall_field(kUp, kC);
+  const float r = float(1000 / std::sqrt(2.0));
+  for (int z = 0; z < 32; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
+        const double floor = 1000 * (0.010 - p.z), ramp = 1000 * ((p.x - 0.020) - (p.z - 0.010)) / std::sqrt(2.0);
+        f.samples[f.grid.index(x, y, z)] = floor > ramp ? Sample{float(floor), 0, 0, -1000}
+                                                        : Sample{float(ramp), r, 0, -r};
+      }
+  return f;
+}
+
+double max_step_sliding_into_the_wall(HriParams p, double* final_force = nullptr) {
+  const SampleField f = concave_step();
+  HriRenderer r(p);
+  r.tick(f, {0.012, 0.016, 0.011});
+  double prev = -1, step = 0;
+  HriTick t;
+  for (int k = 0; k < 400; ++k) {
+    const double x = std::min(0.023, 0.012 + 0.0002 * k);  // slides under the ramp, then holds
+    t = r.tick(f, {x, 0.016, 0.0095});
+    const double m = norm(t.force_n);
+    if (prev >= 0) step = std::max(step, std::abs(m - prev));
+    prev = m;
+  }
+  if (final_force) *final_force = norm(t.force_n);
+  return step;
+}
+}  // namespace
+
+TEST(HriRecovery, RampsTheForceInsteadOfJumping) {
+  HriParams p = params(25);
+  p.stiffness_n_per_m = 2000;
+  p.force_limit_n = 20;
+  double f_plain = 0, f_rec = 0;
+  const double plain = max_step_sliding_into_the_wall(p, &f_plain);
+  p.recovery_time_s = 0.02;
+  const double rec = max_step_sliding_into_the_wall(p, &f_rec);
+  std::printf("concave step, n = 25: max force step %.3f N without recovery, %.3f N with 20 ms\n", plain, rec);
+  EXPECT_GT(plain, 1.0);          // the embedded VHIP makes the force jump
+  EXPECT_LT(rec, 0.25 * plain);   // recovery spreads it out
+  EXPECT_NEAR(f_rec, f_plain, 1e-6);  // and reaches the same force once the ramp is over
+}
+
+TEST(HriForceShading, SmoothsPlaneUpdatesOnACurvedSurface) {
+  const Vec3 c{0.024, 0.024, 0.024};
+  const SampleField f = sphere_field(c, 0.015);
+  auto run = [&](bool shading, double* err) {
+    HriParams p = params(20);
+    p.force_shading = shading;
+    HriRenderer r(p);
+    r.tick(f, c + Vec3{0, 0, 0.017});
+    double prev = -1, step = 0, e = 0;
+    for (int k = 0; k < 2000; ++k) {
+      const double a = 0.6 * k / 2000.0;
+      const HriTick t = r.tick(f, c + Vec3{std::sin(a), 0, std::cos(a)} * 0.0145);
+      const double m = norm(t.force_n);
+      if (prev >= 0) step = std::max(step, std::abs(m - prev));
+      prev = m;
+      e = std::max(e, std::abs(norm(t.vhip_m - c) - 0.015));
+    }
+    *err = e;
+    return step;
+  };
+  double e0 = 0, e1 = 0;
+  const double s0 = run(false, &e0), s1 = run(true, &e1);
+  std::printf("sphere, n = 20: max force step %.4f N -> %.4f N with shading; max VHIP error %.4f -> %.4f mm\n",
+              s0, s1, e0 * 1e3, e1 * 1e3);
+  EXPECT_LT(s1, 0.5 * s0);
+  EXPECT_LT(e1, 0.5 * e0);
+}
+
+TEST(HriOptions, RefinedIntersectionLandsOnTheSurface) {
+  const Vec3 c{0.024, 0.024, 0.024};
+  const SampleField f = sphere_field(c, 0.015);
+  auto plane_value = [&](Intersection m, int steps) {
+    HriParams p = params();
+    p.intersection = m;
+    p.intersection_steps = steps;
+    HriRenderer r(p);
+    r.tick(f, c + Vec3{0.013, 0, 0.010});           // outside (r = 16.4 mm)
+    const HriTick t = r.tick(f, c + Vec3{-0.004, 0, 0.011});  // oblique long step inside
+    return std::abs(sample_value(f, t.plane.p));   // [mm] off the isosurface
+  };
+  const double lin = plane_value(Intersection::kLinear, 0);
+  const double sec = plane_value(Intersection::kSecant, 4);
+  const double bis = plane_value(Intersection::kBisection, 8);
+  std::printf("|f(p)|: linear %.4f, secant(4) %.6f, bisection(8) %.6f mm\n", lin, sec, bis);
+  EXPECT_GT(lin, 0.05);
+  EXPECT_LT(sec, 0.02 * lin);
+  EXPECT_LT(bis, 0.05 * lin);
+}
+
+TEST(HriOptions, EveryNormalSourceGivesTheSphereNormal) {
+  const Vec3 c{0.024, 0.024, 0.024};
+  const SampleField f = sphere_field(c, 0.015);
+  for (NormalSource ns : {NormalSource::kSamples, NormalSource::kCentral, NormalSource::kTrilinearExact}) {
+    HriParams p = params();
+    p.normal = ns;
+    HriRenderer r(p);
+    const Vec3 x = c + Vec3{0.3, -0.5, 0.81} * 0.015;
+    const Vec3 n = r.outward_normal(f, x, {});
+    EXPECT_GT(dot(n, (x - c) / norm(x - c)), std::cos(1.0 * M_PI / 180)) << int(ns);
+  }
 }

@@ -1,0 +1,49 @@
+// renderer.h - the interface every haptic renderer of an isosurface implements.
+#pragma once
+#include <cstdint>
+
+#include "sample_field.h"
+#include "vec3.h"
+
+namespace isotouch::servo {
+
+/// Which side of the isovalue is "inside" the object.
+enum class InsideIs : std::uint8_t {
+  kAbove,  ///< value > tau is inside (CT density, the paper's B(v) = 1)
+  kBelow,  ///< value < tau is inside (signed distance fields, negative inside)
+};
+
+/// The virtual plane (N, p) of eq. 1: N . (x - p) = 0, N the unit outward normal.
+struct VirtualPlane {
+  Vec3 n;              ///< unit outward normal (volume frame)
+  Vec3 p;              ///< point on the isosurface (world [m])
+  bool valid = false;  ///< false = the paper's VirtualPlane = (0, 0)
+};
+
+/// What one servo tick produced (common to HRI and the baselines).
+struct HriTick {
+  Vec3 force_n;               ///< force on the device [N], device axes (= volume axes)
+  Vec3 vhip_m;                ///< VHIP (contact point) after this tick, world [m]
+  VirtualPlane plane;         ///< the plane in use after this tick (HRI only)
+  double penetration_m = 0;   ///< |HIP - VHIP| in world [m] while in contact, else 0
+  bool contact = false;       ///< a contact force was rendered this tick
+  bool plane_update = false;  ///< the plane was (re)computed this tick
+  bool saturated = false;     ///< |F| hit the force limit
+  bool fault = false;         ///< non-finite HIP or force: zero force was sent
+};
+using RenderTick = HriTick;
+
+/// A servo-side renderer: one call per tick, reading published samples only. tick()
+/// must allocate nothing, take no lock and make no syscall.
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  /// Short name for reports ("HRI", "Avila-Sobierajski", "Blezek-Robb").
+  virtual const char* name() const = 0;
+  /// Forget contact state.
+  virtual void reset() = 0;
+  /// @param field published samples; @param hip_world_m HIP in world [m].
+  virtual HriTick tick(const SampleField& field, const Vec3& hip_world_m) = 0;
+};
+
+}  // namespace isotouch::servo

@@ -12,6 +12,7 @@
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
+#include "report_cmd.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -146,6 +147,15 @@ int main(int argc, char** argv) {
   stab->add_option("--out,-o", stab_out, "Output folder")->capture_default_str();
   stab->add_flag("--quick", stab_quick, "Shorter runs and coarser search (for tests)");
 
+  auto* report = cli.add_subcommand(
+      "report", "Error against run time: sweep algorithm (HRI, Avila-Sobierajski, Blezek-Robb) x n x options x "
+                "scene along the same strokes; write error_vs_time.csv/.png/.md");
+  app::ReportOptions rep;
+  report->add_option("--scenes", rep.scenes,
+                     "Scenes: sphere box three-spheres knot head chest, or scene JSON files")
+      ->capture_default_str();
+  report->add_option("--out,-o", rep.out_dir, "Output folder")->capture_default_str();
+
   auto* bench = cli.add_subcommand("bench", "Benchmarks that print figures");
   bench->require_subcommand(1);
   auto* rt = bench->add_subcommand(
@@ -166,6 +176,10 @@ int main(int argc, char** argv) {
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet);
     if (check->parsed()) return cmd_check(volume, device, slab_mib);
     if (stab->parsed()) return app::run_stability(stab_out, stab_quick, std::cout);
+    if (report->parsed()) {
+      rep.device = device;
+      return app::run_report(rep, std::cout);
+    }
     if (rt->parsed()) {
       rt_opt.device = device;
       return app::run_bench_servo_rt(rt_opt, std::cout);

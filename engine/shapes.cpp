@@ -195,10 +195,10 @@ SyntheticScene make_synthetic_scene(const std::string& name) {
     auto shape = std::make_unique<BoxShape>(centre + Vec3{0.3, 0.2, 0.1} * kH, Vec3{16, 12, 9} * kH);
     fill(s.volume, [&](const Vec3& x) { return shape->depth(x) * 1000; });
     s.truth = std::move(shape);
-    sp.ray_origin_frac = {0.35, 0.5, 1.2};
+    sp.ray_origin_frac = {0.55, 0.5, 1.2};
     sp.ray_direction = {0, 0, -1};
     sp.stroke_direction = {1, 0, 0};
-    sp.stroke_length_m = 0.020;
+    sp.stroke_length_m = 0.020;  // over the edge at x = 47.8 mm
     s.description = "box 32 x 24 x 18 voxels in 64^3, off-grid centre, signed distance [mm], tau = 0";
   } else if (name == "three-spheres") {
     const double dens[3] = {150, 300, 600}, R = 9 * kH, w = 4 * kH;
@@ -220,18 +220,41 @@ SyntheticScene make_synthetic_scene(const std::string& name) {
     sp.stroke_length_m = 0.010;
     s.description = "three spheres (radius 9 voxels, densities 150/300/600, 4-voxel edge ramp), tau = 100";
   } else if (name == "knot") {
-    auto shape = std::make_unique<KnotTube>(centre, 16 * kH, 7 * kH, 3.5 * kH);
+    auto shape = std::make_unique<KnotTube>(centre, 14 * kH, 8 * kH, 3.5 * kH);
     fill(s.volume, [&](const Vec3& x) { return shape->depth(x) * 1000; });
+    // Prescribed stroke along the concave side of the inner strand where the centre line
+    // bends hardest (t = pi, radius of curvature 15 voxels): start on the side facing the
+    // centre of curvature, then carry that side along with a rotation-minimizing frame
+    // so the HIP moves along the centre line (concave there), not around the tube.
+    const double a = 3.5 * kH, t0 = M_PI - 0.2, t1 = M_PI + 0.2, depth = 0.0005;
+    auto tangent = [&](double t) { return servo::normalized_or(shape->d1(t), {0, 1, 0}); };
+    const Vec3 c1 = shape->d1(t0), c2 = shape->d2(t0);
+    Vec3 side = servo::normalized_or(c2 - c1 * (servo::dot(c2, c1) / servo::dot(c1, c1)), {1, 0, 0});
+    const Vec3 start = shape->curve(t0) + side * (a + 0.002);
+    const Vec3 in0 = shape->curve(t0) + side * (a - depth);
+    for (int k = 0; k < 50; ++k) s.hip_path.push_back(start);
+    for (int k = 0; k <= 200; ++k) s.hip_path.push_back(start + (in0 - start) * (k / 200.0));
+    s.slide_begin = s.hip_path.size();
+    for (int k = 1; k <= 250; ++k) {  // 10.7 mm in 0.25 s
+      const double t = t0 + (t1 - t0) * k / 250.0;
+      const Vec3 tg = tangent(t);
+      side = servo::normalized_or(side - tg * servo::dot(side, tg), side);
+      s.hip_path.push_back(shape->curve(t) + side * (a - depth));
+    }
+    s.slide_end = s.hip_path.size();
+    const Vec3 end = s.hip_path.back(), out = shape->curve(t1) + side * (a + 0.002);
+    for (int k = 1; k <= 200; ++k) s.hip_path.push_back(end + (out - end) * (k / 200.0));
     s.truth = std::move(shape);
-    // From the hole in the middle out to the inner strand: a concave, saddle-shaped side.
-    sp.ray_origin_frac = {0.5, 0.5, 0.5};
-    sp.ray_direction = {1, 0, 0};
-    sp.stroke_direction = {0, 1, 0};
-    sp.approach_distance_m = 0.004;
+    // For `isotouch run`: into the gap between strands, onto the side of the inner strand
+    // that faces the centre of curvature of the centre line at t = pi.
+    sp.ray_origin_frac = {(31.5 + 12.0) / 63.0, 0.5, 0.5};
+    sp.ray_direction = {-1, 0, 0};
+    sp.stroke_direction = {0, 12, -24};  // C'(pi)
+    sp.approach_distance_m = 0.003;
     sp.press_depth_m = 0.002;
-    sp.stroke_length_m = 0.012;
+    sp.stroke_length_m = 0.010;
     sp.stroke_speed_m_s = 0.03;
-    s.description = "tube of radius 3.5 voxels around a (2,3) torus knot in 64^3, distance [mm], tau = 0";
+    s.description = "tube of radius 3.5 voxels around a (2,3) torus knot (R = 14, r = 8 voxels) in 64^3, distance [mm], tau = 0; prescribed fast stroke (43 mm/s) along the concave side";
   } else {
     throw VolumeError("synthetic:" + name + ": unknown synthetic scene (known: sphere, box, three-spheres, knot)");
   }

@@ -32,8 +32,8 @@ TEST(Shapes, KnotDistanceMatchesBruteForce) {
   const engine::SyntheticScene s = engine::make_synthetic_scene("knot");
   const Vec3 c = s.volume.grid.centre_m();
   auto curve = [&](double t) {
-    const double rho = 0.016 + 0.007 * std::cos(3 * t);
-    return c + Vec3{rho * std::cos(2 * t), rho * std::sin(2 * t), 0.007 * std::sin(3 * t)};
+    const double rho = 0.014 + 0.008 * std::cos(3 * t);
+    return c + Vec3{rho * std::cos(2 * t), rho * std::sin(2 * t), 0.008 * std::sin(3 * t)};
   };
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-0.026, 0.026);
@@ -74,4 +74,22 @@ TEST(Shapes, SampledIsosurfaceLiesOnTheTruth) {
     EXPECT_GT(n_checked, 100) << name;
     EXPECT_LT(worst, 0.1e-3) << name;  // 0.1 voxel
   }
+}
+
+TEST(Shapes, KnotPathSlidesOnTheConcaveSide) {
+  const engine::SyntheticScene s = engine::make_synthetic_scene("knot");
+  ASSERT_GT(s.hip_path.size(), 500u);
+  int deep = 0;
+  for (const Vec3& h : s.hip_path) {
+    const double d = s.truth->depth(h);
+    EXPECT_LT(d, 0.0005 + 1e-9);
+    deep += std::abs(d - 0.0005) < 1e-6;
+  }
+  EXPECT_GE(deep, 250);  // the sliding part holds 0.5 mm deep
+  // Concave along the path: the chord between two sliding points dips into the object
+  // less than the path itself, i.e. the midpoint of the surface points lies outside.
+  Vec3 p0, n0, p1, n1;
+  s.truth->closest(s.hip_path[260], p0, n0);
+  s.truth->closest(s.hip_path[480], p1, n1);
+  EXPECT_LT(s.truth->depth((p0 + p1) * 0.5), 0.0);
 }

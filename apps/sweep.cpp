@@ -1,0 +1,230 @@
+#include "sweep.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+
+#include "cpu_gradient.h"
+#include "gradient_pass.h"
+#include "headless.h"
+#include "hri.h"
+#include "sampling.h"
+#include "synthetic.h"
+#include "scene.h"
+#include "volume_io.h"
+#include "vk_context.h"
+
+#ifndef ISOTOUCH_SOURCE_DIR
+#define ISOTOUCH_SOURCE_DIR "."
+#endif
+
+namespace isotouch::app {
+namespace {
+namespace fs = std::filesystem;
+using servo::Vec3;
+
+std::shared_ptr<servo::SampleField> samples(const engine::Volume& v, engine::VulkanContext* vk) {
+  if (vk) {
+    engine::GradientPass pass(*vk);
+    return std::make_shared<servo::SampleField>(pass.run(v));
+  }
+  return std::make_shared<servo::SampleField>(engine::compute_samples_cpu(v));
+}
+
+std::string scene_file(const std::string& name) {
+  if (name.size() > 5 && name.substr(name.size() - 5) == ".json") return name;
+  const std::string local = "scenes/" + name + ".json";
+  if (fs::exists(local)) return local;
+  return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / (name + ".json")).string();
+}
+
+// Project x onto the isosurface of the trilinear field along its exact gradient (Newton).
+Vec3 project_to_trilinear_surface(const servo::SampleField& f, double tau, Vec3 x) {
+  for (int k = 0; k < 6; ++k) {
+    const Vec3 g = servo::trilinear_field_gradient(f, x);
+    const double g2 = servo::dot(g, g);
+    if (!(g2 > 0)) break;
+    const Vec3 step = g * ((servo::sample_value(f, x) - tau) / g2);
+    x = x - step;
+    if (servo::norm(step) < 1e-10) break;
+  }
+  return x;
+}
+}  // namespace
+
+servo::HriParams reference_params(const SweepScene& s) {
+  servo::HriParams p;
+  p.tau = s.tau;
+  p.inside = s.inside;
+  p.stiffness_n_per_m = s.stiffness_n_per_m;
+  p.damping_n_s_per_m = 0;
+  p.plane_update_period = 1;
+  p.rate_hz = s.rate_hz;
+  p.force_limit_n = 1e3;  // no saturation in comparisons
+  p.intersection = servo::Intersection::kBisection;
+  p.intersection_steps = 40;
+  p.normal = servo::NormalSource::kTrilinearExact;
+  return p;
+}
+
+SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log) {
+  SweepScene s;
+  s.name = name;
+  servo::ScriptParams script;
+  servo::SimDeviceParams dev;
+  const auto names = engine::synthetic_scene_names();
+  if (std::find(names.begin(), names.end(), name) != names.end()) {
+    engine::SyntheticScene syn = engine::make_synthetic_scene(name);
+    s.description = syn.description;
+    s.field = samples(syn.volume, vk);
+    s.truth = std::move(syn.truth);
+    s.tau = syn.tau;
+    script = syn.script;
+    s.hip = syn.hip_path;
+    s.slide_begin = syn.slide_begin;
+    s.slide_end = syn.slide_end;
+  } else {
+    const Scene sc = load_scene(scene_file(name));
+    s.name = sc.name;
+    s.description = sc.description;
+    const engine::Volume v = sc.volume_path.empty()
+                                 ? engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox)
+                                 : engine::load_volume(sc.volume_path);
+    s.field = samples(v, vk);
+    s.tau = sc.hri.tau;
+    s.inside = sc.hri.inside;
+    s.rate_hz = sc.hri.rate_hz;
+    s.stiffness_n_per_m = sc.hri.stiffness_n_per_m;
+    script = sc.script;
+    dev = sc.device;
+  }
+  const Vec3& sp = s.field->grid.spacing_m;
+  s.voxel_m = std::min({sp.x, sp.y, sp.z});
+
+  if (!s.hip.empty()) {  // a prescribed path
+    if (!s.truth) {
+      servo::HriRenderer ref(reference_params(s));
+      s.reference = playback(ref, s).ticks;
+    }
+    log << "scene " << s.name << ": prescribed path of " << s.hip.size() << " ticks\n";
+    return s;
+  }
+  // Record the stroke once, with the reference renderer on the simulated device.
+  servo::HriParams rp = reference_params(s);
+  rp.damping_n_s_per_m = 1.0;
+  rp.force_limit_n = 3.3;
+  const servo::TouchScript ts = servo::make_touch_script(*s.field, rp, script);
+  servo::TripleBuffer<servo::SampleField> tb;
+  tb.publish(s.field);
+  servo::WorkspaceTransform xf;
+  Vec3 p0, v0;
+  ts.at(0, p0, v0);
+  servo::SimDevice device(dev, p0);
+  servo::HriRenderer rec(rp);
+  const auto trace = servo::run_headless(tb, rec, device, xf, ts, s.rate_hz);
+  s.hip.reserve(trace.size());
+  for (const auto& r : trace) s.hip.push_back(r.hip_m);
+  if (!s.truth) {
+    servo::HriRenderer ref(reference_params(s));
+    s.reference = playback(ref, s).ticks;
+  }
+  long contact = 0;
+  for (const auto& r : trace) contact += r.contact;
+  log << "scene " << s.name << ": " << s.hip.size() << " ticks recorded, " << contact << " in contact ("
+      << (s.truth ? "truth: exact shape" : "truth: offline reference, HRI n = 1, exact root and gradient") << ")\n";
+  return s;
+}
+
+Playback playback(servo::Renderer& r, const SweepScene& s) {
+  using clock = std::chrono::steady_clock;
+  r.reset();
+  Playback p;
+  p.ticks.resize(s.hip.size());
+  p.tick_ns.resize(s.hip.size());
+  const servo::SampleField& f = *s.field;
+  for (std::size_t k = 0; k < s.hip.size(); ++k) {
+    const auto t0 = clock::now();
+    p.ticks[k] = r.tick(f, s.hip[k]);
+    const auto t1 = clock::now();
+    p.tick_ns[k] = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
+  }
+  return p;
+}
+
+ErrorFigures measure(const SweepScene& s, const Playback& p) {
+  ErrorFigures e;
+  const double K = s.stiffness_n_per_m;
+  double se2 = 0, an2 = 0, fe2 = 0, sum_ns = 0;
+  long n_angle = 0;
+  std::vector<std::int64_t> ns = p.tick_ns;
+  for (std::size_t k = 0; k < p.ticks.size(); ++k) {
+    sum_ns += double(p.tick_ns[k]);
+    const servo::HriTick& t = p.ticks[k];
+    if (k > 0) {
+      const double step = servo::norm(t.force_n - p.ticks[k - 1].force_n);
+      e.max_force_step_n = std::max(e.max_force_step_n, step);
+      if (k > s.slide_begin && k < s.slide_end) e.max_force_step_slide_n = std::max(e.max_force_step_slide_n, step);
+    }
+    if (!t.contact) continue;
+    ++e.contact_ticks;
+    Vec3 n_true, f_true;
+    double surf = 0;
+    if (s.truth) {
+      Vec3 cp, cn;
+      s.truth->closest(t.vhip_m, cp, cn);
+      surf = servo::norm(t.vhip_m - cp);
+      n_true = cn;
+      // God-object on the true surface: the closest surface point to the HIP, if inside.
+      Vec3 hp, hn;
+      s.truth->closest(s.hip[k], hp, hn);
+      f_true = s.truth->depth(s.hip[k]) > 0 ? (hp - s.hip[k]) * K : Vec3{};
+    } else {
+      const Vec3 q = project_to_trilinear_surface(*s.field, s.tau, t.vhip_m);
+      surf = servo::norm(t.vhip_m - q);
+      const servo::HriTick& r = s.reference[k];
+      f_true = r.force_n;
+      n_true = servo::norm(r.force_n) > 1e-3 ? r.force_n / servo::norm(r.force_n) : Vec3{};  // no angle without a reference force
+    }
+    se2 += surf * surf;
+    fe2 += servo::dot(t.force_n - f_true, t.force_n - f_true);
+    const double fm = servo::norm(t.force_n);
+    if (fm > 1e-3 && servo::norm(n_true) > 0) {
+      const double c = std::clamp(servo::dot(t.force_n / fm, n_true), -1.0, 1.0);
+      const double a = std::acos(c) * 180.0 / M_PI;
+      an2 += a * a;
+      ++n_angle;
+    }
+  }
+  if (!ns.empty()) {
+    e.tick_ns_mean = sum_ns / double(ns.size());
+    std::sort(ns.begin(), ns.end());
+    e.tick_ns_p99 = double(ns[std::min(ns.size() - 1, std::size_t(0.99 * double(ns.size())))]);
+  }
+  if (e.contact_ticks) {
+    e.surface_err_rms_m = std::sqrt(se2 / double(e.contact_ticks));
+    e.force_err_rms_n = std::sqrt(fe2 / double(e.contact_ticks));
+  }
+  if (n_angle) e.angle_err_rms_deg = std::sqrt(an2 / double(n_angle));
+  return e;
+}
+
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps) {
+  using clock = std::chrono::steady_clock;
+  const servo::SampleField& f = *s.field;
+  std::vector<double> per_tick;
+  volatile double sink = 0;
+  for (int i = 0; i < warmup + reps; ++i) {
+    r.reset();
+    const auto t0 = clock::now();
+    for (const Vec3& h : s.hip) sink = sink + r.tick(f, h).force_n.x;
+    const auto t1 = clock::now();
+    if (i >= warmup)
+      per_tick.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count() / double(s.hip.size()));
+  }
+  std::sort(per_tick.begin(), per_tick.end());
+  return per_tick[per_tick.size() / 2];
+}
+
+}  // namespace isotouch::app

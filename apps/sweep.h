@@ -1,0 +1,71 @@
+// sweep.h - scenes with a recorded stroke, replayed through any renderer configuration.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <iosfwd>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer.h"
+#include "shapes.h"
+
+namespace isotouch::engine {
+class VulkanContext;
+}
+
+namespace isotouch::app {
+
+/// A scene prepared for sweeps: samples, truth (synthetic) or a reference (CT), and the
+/// HIP path of one scripted stroke, recorded once so every configuration replays the
+/// same HIP positions (like HAPI's playback device).
+struct SweepScene {
+  std::string name;
+  std::string description;
+  std::shared_ptr<const servo::SampleField> field;
+  std::unique_ptr<engine::Shape> truth;   ///< null for the real CTs
+  double tau = 0;
+  servo::InsideIs inside = servo::InsideIs::kAbove;
+  double rate_hz = 1000;
+  double stiffness_n_per_m = 800;
+  std::vector<servo::Vec3> hip;           ///< HIP per tick, world [m]
+  std::vector<servo::HriTick> reference;  ///< CT only: the offline reference per tick
+  double voxel_m = 1e-3;                  ///< smallest spacing
+  std::size_t slide_begin = 0, slide_end = 0;  ///< ticks that slide on the surface (prescribed paths)
+};
+
+/// Scene names: sphere, box, three-spheres, knot (synthetic), head, chest (the CTs of
+/// scenes/head.json and scenes/chest.json), or a path to a scene JSON file.
+/// The stroke is recorded with the reference renderer (HRI, n = 1, 40 bisection steps,
+/// exact trilinear gradient) driving the simulated device; for CTs the same reference,
+/// replayed on the recorded path, is the truth. Samples come from the Vulkan gradient
+/// pass when `vk` is given, else from the CPU reference (bit-identical).
+SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log);
+
+/// The reference renderer parameters for a scene (see prepare_sweep_scene).
+servo::HriParams reference_params(const SweepScene& s);
+
+struct Playback {
+  std::vector<servo::HriTick> ticks;
+  std::vector<std::int64_t> tick_ns;  ///< wall time of each Renderer::tick [ns]
+};
+/// Replay the recorded HIP path through `r` (reset first).
+Playback playback(servo::Renderer& r, const SweepScene& s);
+
+/// Errors of one configuration against the truth (synthetic) or the reference (CT).
+struct ErrorFigures {
+  double tick_ns_mean = 0, tick_ns_p99 = 0;
+  double surface_err_rms_m = 0;  ///< distance of the VHIP from the true surface, RMS over contact ticks
+  double angle_err_rms_deg = 0;  ///< angle between the force and the true normal
+  double force_err_rms_n = 0;    ///< |F - F_god-object| (synthetic) or |F - F_reference| (CT)
+  double max_force_step_n = 0;   ///< largest |F_k - F_k-1| over the stroke
+  double max_force_step_slide_n = 0;  ///< ... over the sliding ticks only (prescribed paths)
+  long contact_ticks = 0;
+};
+ErrorFigures measure(const SweepScene& s, const Playback& p);
+
+/// Total time of `reps` replays after `warmup` ones, each divided by the tick count;
+/// returns the median [ns per tick].
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps);
+
+}  // namespace isotouch::app

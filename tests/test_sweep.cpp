@@ -1,0 +1,63 @@
+// Sweeps: recorded strokes, playback and error figures against the truth.
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "baselines.h"
+#include "hri.h"
+#include "sweep.h"
+
+using namespace isotouch;
+
+TEST(Sweep, SphereHriN1RefinedStaysWithinTwoHundredthsOfAVoxel) {
+  std::ostringstream log;
+  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
+  ASSERT_GT(s.hip.size(), 1000u);
+  for (servo::Intersection m : {servo::Intersection::kSecant, servo::Intersection::kBisection}) {
+    servo::HriParams p = app::reference_params(s);
+    p.plane_update_period = 1;
+    p.intersection = m;
+    p.intersection_steps = m == servo::Intersection::kSecant ? 4 : 8;
+    p.normal = servo::NormalSource::kSamples;
+    servo::HriRenderer r(p);
+    const app::ErrorFigures e = app::measure(s, app::playback(r, s));
+    EXPECT_GT(e.contact_ticks, 500);
+    EXPECT_LE(e.surface_err_rms_m / s.voxel_m, 0.02);
+    EXPECT_LT(e.angle_err_rms_deg, 1.0);
+  }
+}
+
+TEST(Sweep, ErrorsGrowWithThePlaneUpdatePeriodOnTheSphere) {
+  std::ostringstream log;
+  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
+  double prev = -1;
+  for (int n : {1, 10, 50}) {
+    servo::HriParams p = app::reference_params(s);
+    p.plane_update_period = n;
+    p.intersection = servo::Intersection::kLinear;
+    p.normal = servo::NormalSource::kSamples;
+    servo::HriRenderer r(p);
+    const app::ErrorFigures e = app::measure(s, app::playback(r, s));
+    EXPECT_GT(e.angle_err_rms_deg, prev) << "n = " << n;  // stale planes tilt the force
+    prev = e.angle_err_rms_deg;
+  }
+}
+
+TEST(Sweep, BaselinesReplayAndAreMeasured) {
+  std::ostringstream log;
+  const app::SweepScene s = app::prepare_sweep_scene("knot", nullptr, log);
+  servo::BaselineParams b;
+  b.tau = s.tau;
+  b.stiffness_n_per_m = s.stiffness_n_per_m;
+  b.damping_n_s_per_m = 0;
+  b.force_limit_n = 1e3;
+  servo::AvilaRenderer a(b);
+  servo::BlezekRenderer z(b);
+  for (servo::Renderer* r : std::initializer_list<servo::Renderer*>{&a, &z}) {
+    const app::ErrorFigures e = app::measure(s, app::playback(*r, s));
+    EXPECT_GT(e.contact_ticks, 200) << r->name();
+    EXPECT_LT(e.surface_err_rms_m / s.voxel_m, 0.1) << r->name();
+    EXPECT_LT(e.angle_err_rms_deg, 5.0) << r->name();
+    EXPECT_GT(app::median_ns_per_tick(*r, s, 0, 3), 0.0);
+  }
+}

@@ -15,6 +15,11 @@
 #include "gradient_pass.h"
 #include "servo_thread.h"
 #include "synthetic.h"
+#include "baselines.h"
+#include "hri.h"
+#include "sweep.h"
+
+#include <fstream>
 #include "vk_context.h"
 
 namespace isotouch::app {
@@ -100,6 +105,80 @@ int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
         << ',' << pct(0.99) << ',' << pct(0.999) << ',' << mx << ',' << publications.load() << '\n';
   }
   log << "period error = |actual period - nominal|; missed = ticks that started a whole period late.\n";
+  if (!o.out_csv.empty()) {
+    write_file_atomic(o.out_csv, csv.str());
+    log << "wrote " << o.out_csv << "\n";
+  }
+  return 0;
+}
+
+namespace {
+std::string cpu_model() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto c = line.find(':');
+      return c == std::string::npos ? line : line.substr(c + 2);
+    }
+  return "unknown CPU";
+}
+}  // namespace
+
+int run_bench_table1(const Table1Options& o, std::ostream& log) {
+  using namespace servo;
+  engine::ContextOptions co;
+  co.device = o.device;
+  auto ctx = engine::VulkanContext::create(co);
+  engine::VulkanContext* vk = ctx ? ctx.value->get() : nullptr;
+  log << "bench table1: " << cpu_model() << ", " << std::thread::hardware_concurrency()
+      << " CPUs; one thread; samples from " << (vk ? vk->info().name : "the CPU reference") << "; "
+      << o.warmup << " warm-up + " << o.repetitions << " timed replays of each stroke, median\n";
+  struct PaperRow {
+    const char* scene;
+    const char* label;
+    double hri, blezek, avila;  // us per loop
+  };
+  const PaperRow paper[] = {{"sphere", "sphere (64x64x64)", 39.00, 47.10, 38.30},
+                            {"knot", "knot (64x64x64)", 42.00, 49.10, 41.20},
+                            {"head", "head (paper 128x128x64; here 64x64x93)", 48.00, 59.70, 47.40},
+                            {"chest", "lung (paper 128x128x64; here chest 256x256x64)", 46.80, 57.60, 46.20}};
+  std::ostringstream csv;
+  csv << "scene,algorithm,us_per_loop,rate_khz,paper_us_per_loop,paper_rate_khz\n";
+  std::ostringstream tab;
+  tab << std::fixed;
+  tab << "\n| scene | HRI n=5 [us] | (paper) | Blezek-Robb [us] | (paper) | Avila-Sobierajski [us] | (paper) | "
+         "HRI rate [kHz] | Blezek/HRI | (paper) | Avila/HRI | (paper) |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const PaperRow& pr : paper) {
+    const SweepScene s = prepare_sweep_scene(pr.scene, vk, log);
+    HriParams hp = reference_params(s);
+    hp.plane_update_period = 5;
+    hp.intersection = Intersection::kLinear;
+    hp.normal = NormalSource::kCentral;
+    BaselineParams bp;
+    bp.tau = s.tau;
+    bp.inside = s.inside;
+    bp.stiffness_n_per_m = s.stiffness_n_per_m;
+    bp.force_limit_n = 1e3;
+    HriRenderer hri(hp);
+    BlezekRenderer blezek(bp);
+    AvilaRenderer avila(bp);
+    const double t_hri = median_ns_per_tick(hri, s, o.warmup, o.repetitions) * 1e-3;
+    const double t_bl = median_ns_per_tick(blezek, s, o.warmup, o.repetitions) * 1e-3;
+    const double t_av = median_ns_per_tick(avila, s, o.warmup, o.repetitions) * 1e-3;
+    tab << std::setprecision(3) << "| " << pr.label << " | " << t_hri << " | " << std::setprecision(2) << pr.hri
+        << " | " << std::setprecision(3) << t_bl << " | " << std::setprecision(2) << pr.blezek << " | "
+        << std::setprecision(3) << t_av << " | " << std::setprecision(2) << pr.avila << " | " << std::setprecision(0)
+        << 1e3 / t_hri << " | " << std::setprecision(2) << t_bl / t_hri << " | " << pr.blezek / pr.hri << " | "
+        << t_av / t_hri << " | " << pr.avila / pr.hri << " |\n";
+    for (const auto& [name, t, p] : {std::tuple{"HRI", t_hri, pr.hri}, std::tuple{"Blezek-Robb", t_bl, pr.blezek},
+                                     std::tuple{"Avila-Sobierajski", t_av, pr.avila}})
+      csv << pr.scene << ',' << name << ',' << t << ',' << 1e3 / t << ',' << p << ',' << 1e3 / p << '\n';
+  }
+  log << tab.str()
+      << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "
+         "contact), on this machine; the paper's are whole GHOST servo loops on a 1999 SGI Octane R10000.\n";
   if (!o.out_csv.empty()) {
     write_file_atomic(o.out_csv, csv.str());
     log << "wrote " << o.out_csv << "\n";

@@ -166,6 +166,13 @@ int main(int argc, char** argv) {
   rt->add_flag("--fifo", rt_opt.sched_fifo, "Ask for SCHED_FIFO (needs CAP_SYS_NICE)");
   rt->add_option("--cpu", rt_opt.cpu, "Pin the servo thread to this CPU");
   rt->add_option("--csv", rt_opt.out_csv, "Also write the table to this CSV file");
+  auto* t1 = bench->add_subcommand(
+      "table1", "The paper's Table 1 again: time per servo loop and servo rate of HRI (n = 5), Avila-Sobierajski "
+                "and Blezek-Robb on sphere, knot, head and lung, next to the paper's figures");
+  app::Table1Options t1_opt;
+  t1->add_option("--repetitions", t1_opt.repetitions, "Timed replays per stroke (median)")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  t1->add_option("--csv", t1_opt.out_csv, "Also write the table to this CSV file");
 
   try {
     cli.parse(argc, argv);
@@ -179,6 +186,10 @@ int main(int argc, char** argv) {
     if (report->parsed()) {
       rep.device = device;
       return app::run_report(rep, std::cout);
+    }
+    if (t1->parsed()) {
+      t1_opt.device = device;
+      return app::run_bench_table1(t1_opt, std::cout);
     }
     if (rt->parsed()) {
       rt_opt.device = device;

@@ -17,6 +17,7 @@
 #include "gradient_pass.h"
 #include "sampling.h"
 #include "synthetic.h"
+#include "shapes.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -115,8 +116,10 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
     vol = engine::load_volume(scene.volume_path);
-  } else {
+  } else if (scene.synthetic.kind == "sphere") {
     vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
+  } else {
+    vol = std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
   }
   m.volume_path = vol.path;
   m.dims = vol.grid.dims;
@@ -270,6 +273,14 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                 {"stiffness_n_per_m", hp.stiffness_n_per_m},
                 {"damping_n_s_per_m", hp.damping_n_s_per_m},
                 {"force_limit_n", hp.force_limit_n},
+                {"intersection", hp.intersection == servo::Intersection::kLinear ? "linear"
+                                 : hp.intersection == servo::Intersection::kSecant ? "secant" : "bisection"},
+                {"normal", hp.normal == servo::NormalSource::kSamples ? "samples"
+                           : hp.normal == servo::NormalSource::kCentral ? "central" : "exact"},
+                {"force_shading", hp.force_shading},
+                {"recovery_time_s", hp.recovery_time_s},
+                {"friction", {{"mu_s", hp.friction.mu_s}, {"mu_d", hp.friction.mu_d},
+                              {"viscous_n_s_per_m", hp.friction.viscous_n_s_per_m}}},
                 {"ticks", m.ticks},
                 {"plane_updates", m.plane_updates},
                 {"tick_ns", {{"median", m.tick_ns_median}, {"p99", m.tick_ns_p99},

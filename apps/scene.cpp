@@ -127,8 +127,13 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     s.volume_path = pp.is_absolute() ? p : (fs::path(path).parent_path() / pp).lexically_normal().string();
   } else {
     s.synthetic.kind = r.string(vol, "volume", "synthetic", "");
-    if (s.synthetic.kind != "sphere")
-      r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind + "\" (known: sphere)");
+    if (s.synthetic.kind != "sphere" && s.synthetic.kind != "box" && s.synthetic.kind != "three-spheres" &&
+        s.synthetic.kind != "knot")
+      r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind +
+                                     "\" (known: sphere, box, three-spheres, knot)");
+    if (s.synthetic.kind != "sphere" && (vol.contains("dims") || vol.contains("spacing_m") || vol.contains("radius_vox")))
+      r.fail("volume", "dims, spacing_m and radius_vox apply to the sphere only; \"" + s.synthetic.kind +
+                           "\" is the fixed 64^3 scene of the paper");
     if (vol.contains("dims")) {
       const json& d = vol.at("dims");
       if (!d.is_array() || d.size() != 3) r.fail("volume.dims", "must be [x, y, z], got " + d.dump());
@@ -152,12 +157,36 @@ Scene parse_scene(const std::string& text, const std::string& path) {
 
   const json& sv = r.section(root, "servo");
   r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
-                       "force_limit_n"});
+                       "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
+                       "recovery_time_s", "friction"});
   s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
   s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
   s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
   s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
   s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+  const std::string isect = r.string(sv, "servo", "intersection", "linear");
+  if (isect == "linear") s.hri.intersection = servo::Intersection::kLinear;
+  else if (isect == "secant") s.hri.intersection = servo::Intersection::kSecant;
+  else if (isect == "bisection") s.hri.intersection = servo::Intersection::kBisection;
+  else r.fail("servo.intersection", "must be \"linear\" (the paper), \"secant\" or \"bisection\", got \"" + isect + "\"");
+  s.hri.intersection_steps = r.integer(sv, "servo", "intersection_steps", 4, 1, 64);
+  const std::string normal = r.string(sv, "servo", "normal", "samples");
+  if (normal == "samples") s.hri.normal = servo::NormalSource::kSamples;
+  else if (normal == "central") s.hri.normal = servo::NormalSource::kCentral;
+  else if (normal == "exact") s.hri.normal = servo::NormalSource::kTrilinearExact;
+  else r.fail("servo.normal", "must be \"samples\", \"central\" (the paper) or \"exact\", got \"" + normal + "\"");
+  s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
+  s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s", 0.0, 0, 10);
+  if (sv.contains("friction")) {
+    const json& fr = sv.at("friction");
+    r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
+    s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s", 0, 0, 10);
+    s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d", 0, 0, 10);
+    s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m", 0, 0, 1e3);
+    if (s.hri.friction.mu_d > s.hri.friction.mu_s)
+      r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
+                                        fr.at("mu_d").dump());
+  }
 
   const json& dv = r.section(root, "device");
   r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "coulomb_friction_n", "encoder_resolution_m",

@@ -16,7 +16,7 @@ struct SceneError : std::runtime_error {
 };
 
 struct SyntheticSpec {
-  std::string kind;                     ///< "sphere"
+  std::string kind;                     ///< "sphere", or the fixed scenes "box", "three-spheres", "knot"
   std::array<int, 3> dims{64, 64, 64};  ///< voxels
   double spacing_m = 1e-3;              ///< isotropic voxel size [m]
   double radius_vox = 20;               ///< sphere radius [voxels]

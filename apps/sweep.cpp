@@ -89,9 +89,11 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
     const Scene sc = load_scene(scene_file(name));
     s.name = sc.name;
     s.description = sc.description;
-    const engine::Volume v = sc.volume_path.empty()
-                                 ? engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox)
-                                 : engine::load_volume(sc.volume_path);
+    engine::Volume v;
+    if (!sc.volume_path.empty()) v = engine::load_volume(sc.volume_path);
+    else if (sc.synthetic.kind == "sphere")
+      v = engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox);
+    else v = std::move(engine::make_synthetic_scene(sc.synthetic.kind).volume);
     s.field = samples(v, vk);
     s.tau = sc.hri.tau;
     s.inside = sc.hri.inside;

@@ -23,7 +23,7 @@ void expect_error(const std::string& text, const std::vector<std::string>& parts
 }  // namespace
 
 TEST(Scene, ShippedScenesLoad) {
-  for (const char* name : {"head", "chest", "sphere"}) {
+  for (const char* name : {"head", "chest", "sphere", "knot"}) {
     const auto s = load_scene(kScenes + "/" + name + ".json");
     EXPECT_EQ(s.name, name);
     EXPECT_GT(s.hri.stiffness_n_per_m, 0);
@@ -53,9 +53,27 @@ TEST(Scene, Errors) {
                {"'servo.plane_update_period'", "0"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "inside": "up"})", {"'inside'", "up"});
   expect_error(R"({"volume": {"synthetic": "torus"}, "isovalue": 1})", {"'volume.synthetic'", "torus"});
+  expect_error(R"({"volume": {"synthetic": "knot", "dims": [8, 8, 8]}, "isovalue": 0})", {"'volume'", "sphere only"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_direction": [0, 0, 0]}})",
                {"'script.ray_direction'"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_direction": [1, 2]}})",
                {"'script.ray_direction'", "[1,2]"});
   expect_error(R"({"volume": {"path": "v.mhd", "synthetic": "sphere"}, "isovalue": 1})", {"exactly one"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"intersection": "newton"}})",
+               {"'servo.intersection'", "newton"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"friction": {"mu_s": 0.2, "mu_d": 0.5}}})",
+               {"'servo.friction.mu_d'", "0.5"});
+}
+
+TEST(Scene, ServoOptions) {
+  const auto s = parse_scene(R"({"volume": {"synthetic": "knot"}, "isovalue": 0,
+    "servo": {"intersection": "secant", "intersection_steps": 6, "normal": "central", "force_shading": true,
+              "recovery_time_s": 0.02, "friction": {"mu_s": 0.4, "mu_d": 0.3, "viscous_n_s_per_m": 2}}})", "s.json");
+  EXPECT_EQ(s.hri.intersection, isotouch::servo::Intersection::kSecant);
+  EXPECT_EQ(s.hri.intersection_steps, 6);
+  EXPECT_EQ(s.hri.normal, isotouch::servo::NormalSource::kCentral);
+  EXPECT_TRUE(s.hri.force_shading);
+  EXPECT_DOUBLE_EQ(s.hri.recovery_time_s, 0.02);
+  EXPECT_DOUBLE_EQ(s.hri.friction.mu_d, 0.3);
+  EXPECT_EQ(s.synthetic.kind, "knot");
 }

@@ -1,6 +1,7 @@
 // files.h - output files are written whole or not at all (temp file + rename).
 #pragma once
 #include <string>
+#include <vector>
 
 namespace isotouch::app {
 
@@ -11,5 +12,17 @@ void write_file_atomic(const std::string& path, const std::string& content);
 /// Run a program (PATH lookup) with arguments, wait for it; returns its exit status,
 /// or -1 if it could not be started.
 int run_program(const std::string& program, const std::string& arg);
+
+/// The name an output is written under before it is renamed into place: PATH.tmp-PID.
+std::string temp_name(const std::string& path);
+
+/// A gnuplot single-quoted string literal (quotes doubled).
+std::string gnuplot_quote(const std::string& s);
+
+/// Write `script` to `script_path` and run gnuplot on it. The script must write each
+/// PNG of `pngs` to temp_name(png); on success they are renamed into place, on failure
+/// removed. Returns "" or why the plots were not drawn.
+std::string draw_with_gnuplot(const std::string& script_path, const std::string& script,
+                              const std::vector<std::string>& pngs);
 
 }  // namespace isotouch::app

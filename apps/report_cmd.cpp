@@ -1,6 +1,5 @@
 #include "report_cmd.h"
 
-#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -151,14 +150,13 @@ int run_report(const ReportOptions& o, std::ostream& log) {
   write_file_atomic(csv_path, csv.str());
 
   // Plot: one panel per scene, one colour per algorithm, log axes.
-  const std::string pid = std::to_string(::getpid());
   const std::string png = fs::absolute(fs::path(o.out_dir) / "error_vs_time.png").string();
   const std::string data = fs::absolute(csv_path).string();
   const int cols = scene_names.size() > 3 ? 3 : int(scene_names.size());
   const int lines = int((scene_names.size() + 2) / 3);
   std::ostringstream gp;
   gp << "set datafile separator ','\nset terminal pngcairo size " << 460 * cols << "," << 400 * lines + 40
-     << " font 'Sans,9'\nset termoption noenhanced\nset output '" << png << ".tmp-" << pid << "'\n"
+     << " font 'Sans,9'\nset termoption noenhanced\nset output " << gnuplot_quote(temp_name(png)) << "\n"
      << "set multiplot layout " << lines << "," << cols
      << " title 'Work-precision: RMS surface error of the contact point against mean servo tick time (this machine)'\n"
      << "set logscale xy\nset grid\nset key bottom left font ',8'\n"
@@ -169,18 +167,14 @@ int run_report(const ReportOptions& o, std::ostream& log) {
     gp << "set title '" << sn << "'\nplot ";
     bool first = true;
     for (const auto& [a, colour] : algos) {
-      gp << (first ? "" : ", ") << "'" << data << "' every ::1 using (strcol(1) eq '" << sn << "' && strcol(2) eq '"
+      gp << (first ? "" : ", ") << gnuplot_quote(data) << " every ::1 using (strcol(1) eq '" << sn << "' && strcol(2) eq '"
          << a << "' ? $5 : 1/0):7 with points pt 7 ps 0.9 lc rgb '" << colour << "' title '" << a << "'";
       first = false;
     }
     gp << "\n";
   }
   gp << "unset multiplot\n";
-  const std::string gp_path = (fs::path(o.out_dir) / "error_vs_time.gp").string();
-  write_file_atomic(gp_path, gp.str());
-  const bool plotted = run_program("gnuplot", gp_path) == 0;
-  if (plotted) fs::rename(png + ".tmp-" + pid, png);
-  else std::remove((png + ".tmp-" + pid).c_str());
+  const bool plotted = draw_with_gnuplot((fs::path(o.out_dir) / "error_vs_time.gp").string(), gp.str(), {png}).empty();
 
   // Markdown: Pareto fronts, remedies on the knot, findings.
   std::ostringstream md;

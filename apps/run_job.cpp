@@ -53,56 +53,37 @@ std::string trace_csv(const std::vector<servo::TraceRow>& trace) {
   return s.str();
 }
 
-// gnuplot single-quoted string: a quote is written twice.
-std::string gq(const std::string& s) {
-  std::string o = "'";
-  for (char c : s) o += c == '\'' ? std::string("''") : std::string(1, c);
-  return o + "'";
-}
-
 bool draw_plots(const Scene& scene, const std::string& dir, const servo::TouchScript& script,
                 std::string& note) {
   const std::string csv = fs::absolute(fs::path(dir) / "trace.csv").string();
   const std::string fd = fs::absolute(fs::path(dir) / "force_depth.png").string();
   const std::string tt = fs::absolute(fs::path(dir) / "tick_time.png").string();
-  const std::string pid = std::to_string(::getpid());
   std::ostringstream g;
   g << "# Plots of " << dir << "/trace.csv; re-run with: gnuplot plots.gp\n"
     << "set datafile separator ','\n"
     << "set terminal pngcairo size 1100,760 font 'Sans,10'\n"
-    << "set output " << gq(fd + ".tmp-" + pid) << "\n"
-    << "set multiplot layout 2,1 title " << gq("isotouch - " + scene.name + ": HRI force and penetration (simulated device)") << "\n"
+    << "set output " << gnuplot_quote(temp_name(fd)) << "\n"
+    << "set multiplot layout 2,1 title " << gnuplot_quote("isotouch - " + scene.name + ": HRI force and penetration (simulated device)") << "\n"
     << "set grid\nset key top left\n"
     << "set object 1 rect from " << script.t_press << ", graph 0 to " << script.t_stroke
     << ", graph 1 fc rgb '#eeeeff' fs solid 0.5 behind\n"
     << "set object 2 rect from " << script.t_stroke << ", graph 0 to " << script.t_lift
     << ", graph 1 fc rgb '#eeffee' fs solid 0.5 behind\n"
     << "set ylabel '|F| [N]'\n"
-    << "plot " << gq(csv) << " every ::1 using 1:(sqrt($8**2+$9**2+$10**2)) with lines lw 1.5 lc rgb '#c0392b' title '|F| on the device', "
+    << "plot " << gnuplot_quote(csv) << " every ::1 using 1:(sqrt($8**2+$9**2+$10**2)) with lines lw 1.5 lc rgb '#c0392b' title '|F| on the device', "
     << scene.hri.force_limit_n << " with lines dt 2 lc rgb '#555555' title 'force limit'\n"
     << "set xlabel 't [s]   (blue: press and hold, green: stroke)'\n"
     << "set ylabel 'penetration [mm]'\n"
-    << "plot " << gq(csv) << " every ::1 using 1:(1000*sqrt(($2-$5)**2+($3-$6)**2+($4-$7)**2)) with lines lw 1.5 lc rgb '#2471a3' title '|HIP - VHIP|'\n"
+    << "plot " << gnuplot_quote(csv) << " every ::1 using 1:(1000*sqrt(($2-$5)**2+($3-$6)**2+($4-$7)**2)) with lines lw 1.5 lc rgb '#2471a3' title '|HIP - VHIP|'\n"
     << "unset multiplot\n"
     << "unset object 1\nunset object 2\n"
     << "set terminal pngcairo size 1100,420 font 'Sans,10'\n"
-    << "set output " << gq(tt + ".tmp-" + pid) << "\n"
-    << "set title " << gq("HRI servo tick wall time (this machine, CPU)") << "\n"
+    << "set output " << gnuplot_quote(temp_name(tt)) << "\n"
+    << "set title " << gnuplot_quote("HRI servo tick wall time (this machine, CPU)") << "\n"
     << "set logscale y\nset xlabel 't [s]'\nset ylabel 'tick [ns]'\n"
-    << "plot " << gq(csv) << " every ::1 using 1:13 with points pt 7 ps 0.3 lc rgb '#7d3c98' title 'HriRenderer::tick'\n";
-  const std::string gp = (fs::path(dir) / "plots.gp").string();
-  write_file_atomic(gp, g.str());
-  const int rc = run_program("gnuplot", gp);
-  if (rc != 0) {
-    std::remove((fd + ".tmp-" + pid).c_str());
-    std::remove((tt + ".tmp-" + pid).c_str());
-    note = rc < 0 ? "gnuplot not found (Debian: gnuplot-nox); plots not drawn"
-                  : "gnuplot failed (exit " + std::to_string(rc) + "); plots not drawn";
-    return false;
-  }
-  fs::rename(fd + ".tmp-" + pid, fd);
-  fs::rename(tt + ".tmp-" + pid, tt);
-  return true;
+    << "plot " << gnuplot_quote(csv) << " every ::1 using 1:13 with points pt 7 ps 0.3 lc rgb '#7d3c98' title 'HriRenderer::tick'\n";
+  note = draw_with_gnuplot((fs::path(dir) / "plots.gp").string(), g.str(), {fd, tt});
+  return note.empty();
 }
 
 }  // namespace

@@ -1,6 +1,5 @@
 #include "stability_cmd.h"
 
-#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -102,13 +101,12 @@ int run_stability(const std::string& dir, bool quick, std::ostream& log) {
   write_file_atomic((fs::path(dir) / "extreme_cases.csv").string(), ec.str());
 
   // Plot: measured K_max against the bound, one colour per T, wall and sphere markers.
-  const std::string pid = std::to_string(::getpid());
   const std::string png = fs::absolute(fs::path(dir) / "stability.png").string();
   const std::string data = fs::absolute(fs::path(dir) / "stability.csv").string();
   std::ostringstream g;
   g << "set datafile separator ','\nset terminal pngcairo size 900,700 font 'Sans,10'\n"
     << "set termoption noenhanced\n"
-    << "set output '" << png << ".tmp-" << pid << "'\n"
+    << "set output " << gnuplot_quote(temp_name(png)) << "\n"
     << "set title 'Held contact on the HRI wall: measured K_max against 2 (b - |B|) / T'\n"
     << "set logscale xy\nset grid\nset key top left\n"
     << "set xlabel 'Colgate-Schenkel bound 2 (b - |B|) / T [N/m]'\nset ylabel 'measured K_max [N/m]'\n"
@@ -118,17 +116,13 @@ int run_stability(const std::string& dir, bool quick, std::ostream& log) {
     const double T = periods[i];
     for (const char* shape : {"wall", "sphere"}) {
       const bool w = std::string(shape) == "wall";
-      g << ", '" << data << "' every ::1 using ($2 > " << T * 0.999 << " && $2 < " << T * 1.001
+      g << ", " << gnuplot_quote(data) << " every ::1 using ($2 > " << T * 0.999 << " && $2 < " << T * 1.001
         << " && strcol(1) eq '" << shape << "' ? $5 : 1/0):6 with points pt " << (w ? 7 : 8) << " ps " << (w ? 1.4 : 2.6) << " lc rgb '"
         << colours[i] << "' title 'T = " << T * 1e3 << " ms, " << shape << "'";
     }
   }
   g << "\n";
-  const std::string gp = (fs::path(dir) / "stability.gp").string();
-  write_file_atomic(gp, g.str());
-  const bool plotted = run_program("gnuplot", gp) == 0;
-  if (plotted) fs::rename(png + ".tmp-" + pid, png);
-  else std::remove((png + ".tmp-" + pid).c_str());
+  const bool plotted = draw_with_gnuplot((fs::path(dir) / "stability.gp").string(), g.str(), {png}).empty();
 
   std::ostringstream md;
   md << "# isotouch stability\n\nHeld contact (device mass 80 g, hand spring 50 N/m without damping, 1 N "

@@ -104,8 +104,22 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
   Buffer dst = ctx_.create_buffer(n * sizeof(servo::Sample), true);
   VkDescriptorPool pool = VK_NULL_HANDLE;
   VkQueryPool queries = VK_NULL_HANDLE;
+  // Released on every path out of here, exceptions included.
+  struct Release {
+    VulkanContext& ctx;
+    Buffer& src;
+    Buffer& dst;
+    VkDescriptorPool& pool;
+    VkQueryPool& queries;
+    ~Release() {
+      if (queries) vkDestroyQueryPool(ctx.device(), queries, nullptr);
+      if (pool) vkDestroyDescriptorPool(ctx.device(), pool, nullptr);
+      ctx.destroy_buffer(src);
+      ctx.destroy_buffer(dst);
+    }
+  } release{ctx_, src, dst, pool, queries};
   servo::SampleField out;
-  try {
+  {
     auto t0 = clock::now();
     std::memcpy(src.mapped, vol.voxels.data(), n * sizeof(float));
     t.upload_ms = std::chrono::duration<double, std::milli>(clock::now() - t0).count();
@@ -202,17 +216,7 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
     out.samples.resize(n);
     std::memcpy(out.samples.data(), dst.mapped, n * sizeof(servo::Sample));
     t.download_ms = std::chrono::duration<double, std::milli>(clock::now() - t0).count();
-  } catch (...) {
-    if (queries) vkDestroyQueryPool(ctx_.device(), queries, nullptr);
-    if (pool) vkDestroyDescriptorPool(ctx_.device(), pool, nullptr);
-    ctx_.destroy_buffer(src);
-    ctx_.destroy_buffer(dst);
-    throw;
   }
-  if (queries) vkDestroyQueryPool(ctx_.device(), queries, nullptr);
-  vkDestroyDescriptorPool(ctx_.device(), pool, nullptr);
-  ctx_.destroy_buffer(src);
-  ctx_.destroy_buffer(dst);
   if (timings) *timings = t;
   return out;
 }

@@ -47,6 +47,11 @@ VirtualPlane HriRenderer::plane_at(const SampleField& field, const Vec3& p, cons
   return plane;
 }
 
+bool HriRenderer::long_step(const SampleField& field, const Vec3& a, const Vec3& b) {
+  const Vec3& sp = field.grid.spacing_m;
+  return norm(b - a) > 0.5 * std::min({sp.x, sp.y, sp.z});
+}
+
 bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const Vec3& b,
                                  Vec3& p) const {
   const Vec3& sp = field.grid.spacing_m;
@@ -134,7 +139,7 @@ VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip,
   return plane_at(field, vhip_ + seg * t, hip);
 }
 
-Vec3 HriRenderer::constrain(const SampleField& /*field*/, const Vec3& hip, const Vec3& free_vhip) {
+Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip) {
   // Surface effects by constraining the VHIP (§3.1). Distances in world [m].
   const SurfaceFriction& fr = params_.friction;
   const Vec3& n = plane_.n;
@@ -209,9 +214,11 @@ HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip) {
       out.plane_update = true;
     }
   } else {
-    // Both ends outside: a long step may have jumped over a thin wall.
+    // Both ends outside: a long step may have jumped over a thin wall. Short steps (the
+    // common case) cost nothing here: the length is checked before any sample.
     Vec3 p;
-    if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, p)) {
+    if (long_step(field, vhip_, hip) && !(excess(sample_value(field, vhip_)) > 0.0) &&
+        first_crossing(field, vhip_, hip, p)) {
       plane_ = plane_at(field, p, hip);
       c_ = 0;
       out.plane_update = true;
@@ -231,8 +238,10 @@ HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip) {
     // eq. 2: VHIP = HIP + ((p - HIP) . N) N   (for the goal point)
     const double g = dot(plane_.n, plane_.p - goal);
     const Vec3 free_vhip = g > 0 ? goal + plane_.n * g : goal;
-    const bool embedded = excess(sample_value(field, vhip_)) > 0.0;  // the VHIP of the tick before
-    vhip_ = (params_.friction.any() && was_contact_) ? constrain(field, hip, free_vhip) : free_vhip;
+    // Was the VHIP of the tick before embedded? Only recovery time asks, and only at an update.
+    const bool embedded = params_.recovery_time_s > 0 && out.plane_update && was_contact_ &&
+                          excess(sample_value(field, vhip_)) > 0.0;
+    vhip_ = (params_.friction.any() && was_contact_) ? constrain(hip, free_vhip) : free_vhip;
     if (!(params_.friction.any() && was_contact_)) sliding_ = false;
 
     const double s = 1.0 / params_.world_per_device;
@@ -246,8 +255,7 @@ HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip) {
     // Recovery time: a new plane that leaves the old VHIP embedded would make the force
     // jump; keep the direction and ramp the magnitude instead.
     const double mag = norm(force);
-    if (params_.recovery_time_s > 0 && out.plane_update && was_contact_ && embedded &&
-        mag > prev_force_mag_) {
+    if (embedded && mag > prev_force_mag_) {
       recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s * params_.rate_hz)));
       recovery_ticks_left_ = recovery_ticks_;
       recovery_from_n_ = prev_force_mag_;

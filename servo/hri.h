@@ -134,7 +134,9 @@ class HriRenderer final : public Renderer {
   VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
-  Vec3 constrain(const SampleField& field, const Vec3& hip, const Vec3& free_vhip);
+  Vec3 constrain(const Vec3& hip, const Vec3& free_vhip);
+  /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
+  static bool long_step(const SampleField& field, const Vec3& a, const Vec3& b);
 
   HriParams params_;
   VirtualPlane plane_;

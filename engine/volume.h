@@ -15,22 +15,54 @@ struct VolumeError : std::runtime_error {
 };
 
 /// Scalar volume on a regular grid. Voxels are float, x fastest, then y, then z.
-/// The world frame is the grid frame: world [m] = origin + index * spacing per axis.
-/// The file's direction cosines are kept in `direction` (row-major 3x3) but not applied;
-/// `direction_is_identity` says whether the two frames coincide.
+///
+/// Two frames (both in metres):
+/// - the *grid frame*, index-aligned, in which the servo works:
+///   grid [m] = origin + index * spacing, per axis (`grid.to_world`);
+/// - the *physical frame* of the file (ITK's convention, LPS for medical images):
+///   physical [m] = origin + D (spacing * index), with D = `direction`, whose column a
+///   is the physical unit direction of increasing index a.
+/// Both frames share the origin (voxel (0,0,0)); they coincide when D is identity.
+/// Every point reported to a user must be in the physical frame: use `to_physical`
+/// for points and `direction_apply` for free vectors (forces, normals, gradients).
 struct Volume {
   servo::Grid grid;
   std::vector<float> voxels;          ///< grid.voxel_count() values, in file units
   std::string path;                   ///< where it came from ("synthetic:..." otherwise)
   std::string reader;                 ///< "itk:MetaImageIO", "teem:nrrdLoad", "synthetic"
   std::string component_type;         ///< on-disk type, e.g. "short", "unsigned_short"
-  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< D, row-major 3x3
   bool direction_is_identity = true;
-  float min_value = 0, max_value = 0; ///< over finite voxels
-  std::size_t nan_voxels = 0;         ///< non-finite voxels found
+  float min_value = 0, max_value = 0; ///< over finite voxels; NaN when there is none
+  std::size_t nan_voxels = 0;         ///< voxels that are NaN
+  std::size_t inf_voxels = 0;         ///< voxels that are +Inf or -Inf
+  std::size_t finite_voxels = 0;      ///< voxels that are finite
 
-  /// Recompute min/max/nan_voxels from voxels.
+  /// Recompute min/max and the NaN/Inf/finite counts from voxels.
   void update_stats();
+
+  /// Non-finite voxels (NaN + Inf).
+  std::size_t nonfinite_voxels() const { return nan_voxels + inf_voxels; }
+
+  /// Grid frame point [m] -> physical frame point [m]: origin + D (g - origin).
+  servo::Vec3 to_physical(const servo::Vec3& grid_world_m) const;
+  /// Physical frame point [m] -> grid frame point [m]: origin + D^T (p - origin)
+  /// (D is orthonormal for every format we read).
+  servo::Vec3 to_grid(const servo::Vec3& physical_m) const;
+  /// Grid frame vector -> physical frame vector: D v (forces [N], normals, gradients).
+  servo::Vec3 direction_apply(const servo::Vec3& v) const;
+  /// Physical position [m] of a (continuous) voxel index: origin + D (spacing * index).
+  servo::Vec3 index_to_physical(const servo::Vec3& index) const {
+    return to_physical(grid.to_world(index));
+  }
+
+  /// Three-letter orientation code: for index axes x, y, z in turn, the physical
+  /// direction that axis mostly points toward (largest |component| of D's column),
+  /// in ITK's LPS physical frame: +x = L, -x = R, +y = P, -y = A, +z = S, -z = I.
+  /// Identity D gives "LPS"; a standard RAS NIfTI (ITK flips x and y) gives "RAS";
+  /// a radiological (x-flipped) one gives "LAS". This is the "points toward" convention
+  /// of nibabel's aff2axcodes and of ITK's AnatomicalOrientation::PositiveEnum.
+  std::string orientation() const;
 };
 
 }  // namespace isotouch::engine

@@ -6,6 +6,8 @@
 #include <itkMetaImageIO.h>
 #include <itkNiftiImageIO.h>
 #include <itkNrrdImageIO.h>
+#include <metaImage.h>
+#include <metaUtils.h>
 
 #include <zlib.h>
 
@@ -13,7 +15,9 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #ifdef ISOTOUCH_HAVE_TEEM
@@ -70,32 +74,168 @@ void convert(const char* src, std::size_t n, std::vector<float>& out) {
   }
 }
 
-void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d) {
+// Header field names per format, for messages.
+struct Fields {
+  const char* dims;
+  const char* spacing;
+  const char* origin;
+};
+Fields fields_of(const std::string& reader_class) {
+  if (reader_class == "MetaImageIO") return {"DimSize", "ElementSpacing", "Offset"};
+  if (reader_class == "NiftiImageIO") return {"dim", "pixdim", "qoffset/srow"};
+  return {"sizes", "spacings/space directions", "space origin"};  // NRRD (ITK or teem)
+}
+
+// A size that came from a negative number in the file wraps to a huge unsigned one:
+// say it as the file wrote it.
+std::string as_written(std::uint64_t d) {
+  if (d >= (std::uint64_t(1) << 63)) return std::to_string(std::int64_t(d));
+  if (d >= (std::uint64_t(1) << 31) && d < (std::uint64_t(1) << 32))
+    return std::to_string(std::int64_t(d) - (std::int64_t(1) << 32));
+  return std::to_string(d);
+}
+
+void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d, const char* field) {
   std::uint64_t total = 1;
   for (int a = 0; a < 3; ++a) {
-    if (d[a] == 0) fail(path, "dimension " + std::to_string(a) + " is 0");
-    if (d[a] > (std::uint64_t(1) << 20))
-      fail(path, "absurd dimension " + std::to_string(a) + " = " + std::to_string(d[a]));
+    if (d[a] == 0 || d[a] > (std::uint64_t(1) << 20))
+      fail(path, std::string("field '") + field + "' along axis " + std::to_string(a) + " is " +
+                     as_written(d[a]) + " (must be a voxel count in [1, 1048576])");
     total *= d[a];
   }
   if (total > kMaxVoxels) {
     std::ostringstream s;
-    s << "absurd dimensions " << d[0] << " x " << d[1] << " x " << d[2] << " (" << total
-      << " voxels; the limit is " << kMaxVoxels << ")";
+    s << "absurd dimensions (field '" << field << "') " << d[0] << " x " << d[1] << " x " << d[2] << " ("
+      << total << " voxels; the limit is " << kMaxVoxels << ")";
     fail(path, s.str());
   }
 }
 
-void set_spacing_origin(const std::string& path, Volume& v, const double sp_mm[3],
-                        const double org_mm[3]) {
+// Spacing and origin in mm as the file gives them; the extent bound keeps every march
+// over the volume (script, servo) finite and the coordinates meaningful.
+void set_spacing_origin(const std::string& path, Volume& v, const std::array<std::uint64_t, 3>& d,
+                        const double sp_mm[3], const double org_mm[3], const Fields& f) {
   for (int a = 0; a < 3; ++a) {
-    if (!(std::isfinite(sp_mm[a]) && sp_mm[a] > 0.0))
-      fail(path, "spacing along axis " + std::to_string(a) + " is " + std::to_string(sp_mm[a]) +
-                     " (must be a positive number of mm)");
-    if (!std::isfinite(org_mm[a])) fail(path, "origin along axis " + std::to_string(a) + " is not finite");
+    std::ostringstream s;
+    s << "field '" << f.spacing << "' along axis " << a << " is " << sp_mm[a] << " mm";
+    if (!(std::isfinite(sp_mm[a]) && sp_mm[a] > 0.0)) fail(path, s.str() + " (must be a positive number of mm)");
+    const double extent_m = double(d[a] > 1 ? d[a] - 1 : 1) * sp_mm[a] * 1e-3;
+    if (extent_m > kMaxExtentM) {
+      s << ": the volume's extent along it would be " << extent_m << " m (the limit is " << kMaxExtentM << " m)";
+      fail(path, s.str());
+    }
+    if (!(std::isfinite(org_mm[a]) && std::abs(org_mm[a]) * 1e-3 <= kMaxOriginM)) {
+      std::ostringstream o;
+      o << "field '" << f.origin << "' along axis " << a << " is " << org_mm[a] << " mm (must be finite, within "
+        << kMaxOriginM << " m)";
+      fail(path, o.str());
+    }
   }
   v.grid.spacing_m = {sp_mm[0] * 1e-3, sp_mm[1] * 1e-3, sp_mm[2] * 1e-3};
   v.grid.origin_m = {org_mm[0] * 1e-3, org_mm[1] * 1e-3, org_mm[2] * 1e-3};
+}
+
+// MetaImage: read the header with MetaIO (ITK's own parser) and check what ITK's reader
+// lets through: non-positive DimSize, non-finite ElementSpacing, a missing data file, and
+// a raw file whose size is not HeaderSize + DimSize x ElementType (ITK only warns on a
+// short read, and reads a prefix of a longer file).
+// MetaIO stops at the first number it cannot read (e.g. `ElementSpacing = nan 1 1`) and
+// then complains about a later field, or ITK says "No such file or directory". Only after
+// MetaIO has refused the header: find a numeric field whose value is not a finite number.
+void explain_metaimage_failure(const std::string& path) {
+  static const std::set<std::string> numeric = {
+      "NDims", "DimSize", "ElementSpacing", "ElementSize", "Offset", "Position", "Origin",
+      "TransformMatrix", "Rotation", "Orientation", "CenterOfRotation", "HeaderSize",
+      "ElementNumberOfChannels", "ElementMin", "ElementMax"};
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  for (int n = 0; n < 200 && std::getline(in, line); ++n) {
+    const auto eq = line.find('=');
+    if (eq == std::string::npos) continue;
+    std::string key = line.substr(0, eq), val = line.substr(eq + 1);
+    auto trim = [](std::string& t) {
+      while (!t.empty() && std::isspace(static_cast<unsigned char>(t.back()))) t.pop_back();
+      while (!t.empty() && std::isspace(static_cast<unsigned char>(t.front()))) t.erase(t.begin());
+    };
+    trim(key);
+    trim(val);
+    if (key == "ElementDataFile") break;  // the header ends here
+    if (!numeric.count(key)) continue;
+    std::istringstream toks(val);
+    std::string tok;
+    while (toks >> tok) {
+      char* end = nullptr;
+      const double x = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(x))
+        fail(path, "field '" + key + "' = " + val + ": '" + tok + "' is not a finite number");
+    }
+  }
+}
+
+void check_metaimage(const std::string& path) {
+  MetaImage mi;
+  if (!mi.Read(path.c_str(), false)) {
+    explain_metaimage_failure(path);
+    return;  // else let ITK's reader say what is wrong
+  }
+  const int nd = mi.NDims();
+  if (nd < 1 || nd > 4) return;
+  std::ostringstream dims_s, sp_s;
+  for (int a = 0; a < nd; ++a) {
+    dims_s << (a ? " " : "") << mi.DimSize(a);
+    sp_s << (a ? " " : "") << mi.ElementSpacing(a);
+  }
+  std::uint64_t count = 1;
+  for (int a = 0; a < nd; ++a) {
+    if (mi.DimSize(a) <= 0 || mi.DimSize(a) > (1 << 20))
+      fail(path, "field 'DimSize' = " + dims_s.str() + ": axis " + std::to_string(a) + " is " +
+                     std::to_string(mi.DimSize(a)) + " (must be a voxel count in [1, 1048576])");
+    count *= std::uint64_t(mi.DimSize(a));
+  }
+  for (int a = 0; a < nd; ++a)
+    if (!(std::isfinite(mi.ElementSpacing(a)) && mi.ElementSpacing(a) > 0)) {
+      std::ostringstream s;
+      s << "field 'ElementSpacing' = " << sp_s.str() << ": axis " << a << " is " << mi.ElementSpacing(a)
+        << " (must be a positive number of mm)";
+      fail(path, s.str());
+    }
+  if (count > kMaxVoxels) return;  // check_dims names it
+  const std::string name = mi.ElementDataFileName();
+  if (name.empty() || name == "LOCAL" || name == "Local" || name == "local") return;  // data follow the header
+  if (name.rfind("LIST", 0) == 0 || name.find('%') != std::string::npos) return;    // one file per slice
+  fs::path data(name);
+  if (data.is_relative()) data = fs::path(path).parent_path() / data;
+  std::error_code ec;
+  if (!fs::is_regular_file(data, ec))
+    fail(path, "field 'ElementDataFile' = '" + name + "': no such file (looked for " + data.string() + ")");
+  if (mi.CompressedData()) return;  // size unknown until inflated; the sentinel check covers it
+  int type_bytes = 0;
+  MET_SizeOfType(mi.ElementType(), &type_bytes);
+  char type_name[64] = {};
+  MET_TypeToString(mi.ElementType(), type_name);
+  const int channels = std::max(1, mi.ElementNumberOfChannels());
+  if (type_bytes <= 0) return;  // unknown type: ITK names it
+  const std::uint64_t need = count * std::uint64_t(type_bytes) * std::uint64_t(channels);
+  const std::uint64_t have = fs::file_size(data, ec);
+  if (ec) fail(path, "field 'ElementDataFile' = '" + name + "': cannot read its size (" + ec.message() + ")");
+  const long long hs = mi.HeaderSize();  // -1: the data are the file's last bytes
+  std::ostringstream dx;
+  for (int a = 0; a < nd; ++a) dx << (a ? " x " : "") << mi.DimSize(a);
+  std::ostringstream head;
+  head << "ElementDataFile '" << name << "' holds " << have << " bytes; DimSize " << dx.str() << " of ElementType "
+       << type_name << " (" << type_bytes << " byte" << (type_bytes > 1 ? "s" : "") << " each"
+       << (channels > 1 ? ", " + std::to_string(channels) + " channels" : std::string()) << ") needs ";
+  const std::uint64_t want = (hs > 0 ? std::uint64_t(hs) : 0) + need;
+  const bool bad = hs == -1 ? have < need : have != want;
+  if (bad) {
+    std::string m = head.str();
+    if (hs > 0)
+      m += "HeaderSize = " + std::to_string(hs) + " + " + std::to_string(need) + " = " + std::to_string(want) + " bytes";
+    else
+      m += std::to_string(need) + " bytes";
+    m += have < want ? " (voxel data truncated)" : " (the file is longer: is ElementType or DimSize wrong?)";
+    fail(path, m);
+  }
 }
 
 void finish_direction(Volume& v) {
@@ -151,6 +291,9 @@ Volume load_itk(const std::string& path) {
     }
   if (!io)
     fail(path, "not a readable MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr) or NIfTI (.nii/.nii.gz) file");
+  const std::string cls = io->GetNameOfClass();
+  const Fields fields = fields_of(cls);
+  if (cls == "MetaImageIO") check_metaimage(path);
   io->SetFileName(path);
   io->ReadImageInformation();
 
@@ -172,8 +315,8 @@ Volume load_itk(const std::string& path) {
   }
   if (nd == 4 && io->GetDimensions(3) != 1)
     fail(path, "is a 4-D series with " + std::to_string(io->GetDimensions(3)) + " volumes (need one)");
-  check_dims(path, d);
-  set_spacing_origin(path, v, sp, org);
+  check_dims(path, d, fields.dims);
+  set_spacing_origin(path, v, d, sp, org, fields);
   v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
 
   using CT = itk::IOComponentEnum;
@@ -218,7 +361,7 @@ Volume load_itk(const std::string& path) {
                      std::to_string(d[2]) + " " + v.component_type + "), the file provides " +
                      std::to_string(written));
   }
-  if (std::string(io->GetNameOfClass()) == "NiftiImageIO") check_nifti_length(path, raw.size());
+  if (cls == "NiftiImageIO") check_nifti_length(path, raw.size());
   switch (ct) {
     case CT::UCHAR: convert<std::uint8_t>(raw.data(), n, v.voxels); break;
     case CT::CHAR: convert<std::int8_t>(raw.data(), n, v.voxels); break;
@@ -276,8 +419,9 @@ Volume load_teem(const std::string& path) {
   if (nin->spaceDim > 0)
     for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
       if (AIR_EXISTS(nin->spaceOrigin[r])) org[r] = nin->spaceOrigin[r];
-  check_dims(path, d);
-  set_spacing_origin(path, v, sp, org);
+  const Fields fields = fields_of("teem");
+  check_dims(path, d, fields.dims);
+  set_spacing_origin(path, v, d, sp, org, fields);
   v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
   v.component_type = airEnumStr(nrrdType, nin->type);
   if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");

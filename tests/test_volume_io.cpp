@@ -2,7 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <cstring>
 #include <fstream>
+#include <limits>
 
 #include "volume_io.h"
 
@@ -105,6 +107,7 @@ TEST(VolumeIo, TruncatedMetaImage) {
         "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
         "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\nElementDataFile = t.raw\n");
   expect_error((d / "t.mhd").string(), "voxel data truncated");
+  expect_error((d / "t.mhd").string(), "ElementDataFile 't.raw' holds 380928 bytes");
 }
 
 TEST(VolumeIo, TruncatedNrrd) {
@@ -143,3 +146,132 @@ TEST(VolumeIo, AbsurdDimensions) {
 }
 
 TEST(VolumeIo, DirectoryIsNotAVolume) { expect_error(kData, "is a directory"); }
+
+// ---- Broken MetaImage headers (issue 7, "Input and coordinates") --------------------------
+namespace {
+// A 4 x 4 x 4 MET_SHORT volume: header `extra` lines + raw file of `raw_bytes` bytes.
+fs::path small_mhd(const fs::path& d, const std::string& extra, std::size_t raw_bytes,
+                   const std::string& dims = "4 4 4", const std::string& type = "MET_SHORT",
+                   const std::string& spacing = "1 1 1") {
+  std::string raw(raw_bytes, '\0');
+  for (std::size_t i = 0; i < raw.size(); ++i) raw[i] = char(i % 7);
+  write(d / "s.raw", raw);
+  write(d / "s.mhd", "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n" +
+                         extra + "ElementSpacing = " + spacing + "\nDimSize = " + dims +
+                         "\nElementType = " + type + "\nElementDataFile = s.raw\n");
+  return d / "s.mhd";
+}
+}  // namespace
+
+TEST(VolumeIo, MetaImageExactSizeLoads) {
+  const Volume v = load_volume(small_mhd(temp_dir(), "", 128).string());
+  EXPECT_EQ(v.voxels.size(), 64u);
+  EXPECT_EQ(v.voxels[1], float(2 | (3 << 8)));  // little-endian short from bytes 2, 3
+}
+
+TEST(VolumeIo, MetaImageOneByteShort) {
+  expect_error(small_mhd(temp_dir(), "", 127).string(), "ElementDataFile 's.raw' holds 127 bytes");
+}
+
+TEST(VolumeIo, MetaImageTypeTooSmallForFile) {
+  // MET_UCHAR declared over int16 data: twice the bytes the header asks for.
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_UCHAR").string(),
+               "ElementDataFile 's.raw' holds 128 bytes; DimSize 4 x 4 x 4 of ElementType MET_UCHAR");
+}
+
+TEST(VolumeIo, MetaImageHugeHeaderSize) {
+  expect_error(small_mhd(temp_dir(), "HeaderSize = 1000000\n", 128).string(), "HeaderSize = 1000000");
+}
+
+TEST(VolumeIo, MetaImageHeaderSizeHonoured) {
+  const Volume v = load_volume(small_mhd(temp_dir(), "HeaderSize = 2\n", 130).string());
+  EXPECT_EQ(v.voxels[0], float(2 | (3 << 8)));  // skipped bytes 0, 1
+}
+
+TEST(VolumeIo, MetaImageNanSpacing) {
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_SHORT", "nan 1 1").string(), "ElementSpacing");
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_SHORT", "nan 1 1").string(),
+               "'nan' is not a finite number");
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_SHORT", "1 inf 1").string(), "ElementSpacing");
+}
+
+TEST(VolumeIo, MetaImageAbsurdSpacing) {
+  // 1e300 mm: the extent would hang any march over the volume.
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_SHORT", "1e300 1 1").string(),
+               "ElementSpacing");
+  expect_error(small_mhd(temp_dir(), "", 128, "4 4 4", "MET_SHORT", "4000 1 1").string(),
+               "extent");
+}
+
+TEST(VolumeIo, MetaImageNegativeDims) {
+  expect_error(small_mhd(temp_dir(), "", 128, "-64 4 4").string(), "DimSize");
+  expect_error(small_mhd(temp_dir(), "", 128, "-64 4 4").string(), "-64");
+}
+
+TEST(VolumeIo, MetaImageMissingDataFile) {
+  const fs::path d = temp_dir();
+  const fs::path h = small_mhd(d, "", 128);
+  fs::remove(d / "s.raw");
+  expect_error(h.string(), "s.raw");
+}
+
+// ---- Orientation: physical = origin + D (spacing * index) ----------------------------------
+TEST(VolumeIo, EngineNiftiPhysicalFrame) {
+  // engine.nii.gz: sform_code 1, srow = [1 0 0 -127; 0 1 0 -127; 0 0 1 -64] in RAS (read from
+  // its header with Python). ITK's physical frame is LPS: x_LPS = -x_RAS, y_LPS = -y_RAS.
+  const Volume v = load_volume(kData + "/ct-engine/engine.nii.gz");
+  EXPECT_FALSE(v.direction_is_identity);
+  EXPECT_EQ(v.orientation(), "RAS");
+  for (const auto& idx : {isotouch::servo::Vec3{0, 0, 0}, isotouch::servo::Vec3{10, 200, 77},
+                          isotouch::servo::Vec3{255, 255, 127}}) {
+    const isotouch::servo::Vec3 ras{idx.x - 127, idx.y - 127, idx.z - 64};  // mm, from srow
+    const isotouch::servo::Vec3 p = v.index_to_physical(idx);
+    EXPECT_NEAR(p.x, -ras.x * 1e-3, 1e-9);
+    EXPECT_NEAR(p.y, -ras.y * 1e-3, 1e-9);
+    EXPECT_NEAR(p.z, ras.z * 1e-3, 1e-9);
+    const isotouch::servo::Vec3 g = v.to_grid(p);  // back to the servo's grid frame
+    const isotouch::servo::Vec3 gi = v.grid.to_index(g);
+    EXPECT_NEAR(gi.x, idx.x, 1e-6);
+    EXPECT_NEAR(gi.z, idx.z, 1e-6);
+  }
+}
+
+TEST(VolumeIo, MetaImagePermutedDirection) {
+  // MetaIO's TransformMatrix lists the direction of index axis 0, then 1, then 2:
+  // axis 0 -> +y (P), axis 1 -> -x (R), axis 2 -> +z (S).
+  const Volume v = load_volume(small_mhd(temp_dir(), "TransformMatrix = 0 1 0 -1 0 0 0 0 1\nOffset = 10 20 30\n",
+                                         4 * 4 * 4 * 2, "4 4 4", "MET_SHORT", "2 3 4")
+                                   .string());
+  EXPECT_EQ(v.orientation(), "PRS");
+  // Voxel (1, 2, 3): spacing * index = (2, 6, 12) mm; D that = (-6, 2, 12) mm.
+  const isotouch::servo::Vec3 p = v.index_to_physical({1, 2, 3});
+  EXPECT_NEAR(p.x, (10 - 6) * 1e-3, 1e-12);
+  EXPECT_NEAR(p.y, (20 + 2) * 1e-3, 1e-12);
+  EXPECT_NEAR(p.z, (30 + 12) * 1e-3, 1e-12);
+  const isotouch::servo::Vec3 f = v.direction_apply({1, 0, 0});
+  EXPECT_NEAR(f.y, 1.0, 1e-12);
+}
+
+TEST(VolumeIo, IdentityIsLps) {
+  const Volume v = load_volume(kHead);
+  EXPECT_EQ(v.orientation(), "LPS");
+  const isotouch::servo::Vec3 p = v.index_to_physical({1, 1, 1});
+  EXPECT_NEAR(p.x, 3.2e-3, 1e-12);
+}
+
+TEST(VolumeIo, NonFiniteVoxelsCounted) {
+  const fs::path d = temp_dir();
+  std::string raw(8 * 4, '\0');
+  const float vals[8] = {1.f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+                         -std::numeric_limits<float>::infinity(), 5.f, 2.f, 3.f, 4.f};
+  std::memcpy(raw.data(), vals, sizeof vals);
+  write(d / "f.raw", raw);
+  write(d / "f.mhd", "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     "DimSize = 2 2 2\nElementType = MET_FLOAT\nElementDataFile = f.raw\n");
+  const Volume v = load_volume((d / "f.mhd").string());
+  EXPECT_EQ(v.nan_voxels, 1u);
+  EXPECT_EQ(v.inf_voxels, 2u);
+  EXPECT_EQ(v.finite_voxels, 5u);
+  EXPECT_EQ(v.min_value, 1.f);
+  EXPECT_EQ(v.max_value, 5.f);
+}

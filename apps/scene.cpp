@@ -158,7 +158,11 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   const json& sv = r.section(root, "servo");
   r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
                        "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
-                       "recovery_time_s", "friction"});
+                       "recovery_time_s", "friction", "variant"});
+  const std::string variant = r.string(sv, "servo", "variant", "robust");
+  if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
+  else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
+  else r.fail("servo.variant", "must be \"robust\" (the default) or \"paper\" (Figure 2 as printed), got \"" + variant + "\"");
   s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
   s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
   s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);

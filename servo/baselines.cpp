@@ -10,6 +10,11 @@ namespace {
 bool fault_position(const SampleField& field, const Vec3& hip, double reach) {
   return !finite(hip) || norm(hip - field.grid.centre_m()) > reach;
 }
+/// 1 / the period [1/s]: the measured dt_s when it is positive and finite, else the
+/// nominal 1 / rate.
+double inv_period(double dt_s, double rate_hz) {
+  return (dt_s > 0 && std::isfinite(dt_s)) ? 1.0 / dt_s : rate_hz;
+}
 void finish(HriTick& out, Vec3 force, double limit) {
   if (!finite(force)) {
     force = {};
@@ -20,7 +25,7 @@ void finish(HriTick& out, Vec3 force, double limit) {
 }
 }  // namespace
 
-HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip) {
+HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
   HriTick out;
   if (fault_position(field, hip, p_.max_reach_m)) {
     out.fault = true;
@@ -41,7 +46,7 @@ HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip) {
     const Vec3 n = g_out / gn;
     const double d_est = e / gn;  // world [m]
     const double s = 1.0 / p_.world_per_device;
-    const Vec3 v = (hip - prev_hip_) * (p_.rate_hz * s);
+    const Vec3 v = (hip - prev_hip_) * (inv_period(dt_s, p_.rate_hz) * s);
     force = n * (p_.stiffness_n_per_m * d_est * s) - v * p_.damping_n_s_per_m;
     out.contact = true;
     out.vhip_m = hip + n * d_est;
@@ -60,7 +65,7 @@ Vec3 BlezekRenderer::gradient(const SampleField& field, const Vec3& x) const {
   return finite(g) ? g : Vec3{};
 }
 
-HriTick BlezekRenderer::tick(const SampleField& field, const Vec3& hip) {
+HriTick BlezekRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
   HriTick out;
   if (fault_position(field, hip, p_.max_reach_m)) {
     out.fault = true;
@@ -130,7 +135,7 @@ HriTick BlezekRenderer::tick(const SampleField& field, const Vec3& hip) {
     if (!failed) {
       const double s = 1.0 / p_.world_per_device;
       const Vec3 d = (hip - vhip_) * s;
-      const Vec3 v = (hip - prev_hip_) * (p_.rate_hz * s);
+      const Vec3 v = (hip - prev_hip_) * (inv_period(dt_s, p_.rate_hz) * s);
       force = d * -p_.stiffness_n_per_m - n * (dot(v, n) * p_.damping_n_s_per_m);
       if (dot(force, n) < 0) force = {};
     }

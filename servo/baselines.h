@@ -36,7 +36,8 @@ class AvilaRenderer final : public Renderer {
   explicit AvilaRenderer(const BaselineParams& p) : p_(p) {}
   const char* name() const override { return "Avila-Sobierajski"; }
   void reset() override { started_ = false; }
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m) override;
+  using Renderer::tick;
+  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
 
  private:
   BaselineParams p_;
@@ -66,7 +67,8 @@ class BlezekRenderer final : public Renderer {
   explicit BlezekRenderer(const BaselineParams& p) : p_(p) {}
   const char* name() const override { return "Blezek-Robb"; }
   void reset() override { started_ = false; contact_ = false; }
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m) override;
+  using Renderer::tick;
+  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
 
  private:
   double excess(double v) const {

@@ -163,7 +163,8 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip) {
   return free_vhip + t * (limit / tl);
 }
 
-HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip) {
+HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
+  (void)dt_s;
   HriTick out;
   const bool absurd = finite(hip) && norm(hip - field.grid.centre_m()) > params_.max_reach_m;
   if (!finite(hip) || absurd) {  // a device fault: send nothing

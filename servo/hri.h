@@ -26,6 +26,12 @@ enum class NormalSource : std::uint8_t {
   kTrilinearExact,  ///< the exact gradient of the trilinear interpolant (reference runs)
 };
 
+/// Which HRI servo runs.
+enum class Variant : std::uint8_t {
+  kRobust,  ///< the default: Figure 2 plus the departures listed on HriRenderer
+  kPaper,   ///< Figure 2 exactly as printed (see HriRenderer), for Table 1 and reports
+};
+
 /// Surface effects by constraining the VHIP (§3.1, after Salisbury et al. 1995).
 struct SurfaceFriction {
   double mu_s = 0;                 ///< static coefficient: VHIP holds while |F_t| <= mu_s |F_n|
@@ -36,6 +42,7 @@ struct SurfaceFriction {
 
 /// HRI parameters. Stiffness and damping act in device space [m of device motion].
 struct HriParams {
+  Variant variant = Variant::kRobust;  ///< robust (default) or the paper's Figure 2 as printed
   double tau = 0.0;                  ///< isovalue (value units)
   InsideIs inside = InsideIs::kAbove;
   double stiffness_n_per_m = 800.0;  ///< K [N/m] of device motion (eq. 3)
@@ -110,7 +117,9 @@ class HriRenderer final : public Renderer {
   /// One servo tick. @param field the published samples; @param hip_world_m the HIP
   /// in world [m]. A non-finite HIP yields zero force and fault = true; the state is
   /// kept so contact resumes when sane input returns.
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m) override;
+  /// @param dt_s measured period [s]; <= 0 or non-finite: the nominal 1 / rate_hz.
+  using Renderer::tick;
+  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
 
   const HriParams& params() const { return params_; }
   const VirtualPlane& plane() const { return plane_; }

@@ -42,8 +42,14 @@ class Renderer {
   virtual const char* name() const = 0;
   /// Forget contact state.
   virtual void reset() = 0;
-  /// @param field published samples; @param hip_world_m HIP in world [m].
-  virtual HriTick tick(const SampleField& field, const Vec3& hip_world_m) = 0;
+  /// One tick. @param field published samples; @param hip_world_m HIP in world [m];
+  /// @param dt_s the measured time since the previous tick [s]; dt_s <= 0 or non-finite
+  /// means the nominal period 1/rate_hz (simulations, tests).
+  virtual HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) = 0;
+  /// Tick at the nominal period (same as dt_s = 0).
+  HriTick tick(const SampleField& field, const Vec3& hip_world_m) {
+    return tick(field, hip_world_m, 0.0);
+  }
 };
 
 }  // namespace isotouch::servo

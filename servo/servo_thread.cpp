@@ -2,10 +2,12 @@
 
 #include <pthread.h>
 #include <sched.h>
+#include <sys/mman.h>
+#include <sys/prctl.h>
 #include <time.h>
 
-#include <cerrno>
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 
 namespace isotouch::servo {
@@ -20,9 +22,28 @@ inline void cpu_relax() {
   __builtin_ia32_pause();
 #endif
 }
+
+/// Touch kBytes of this thread's stack below the caller's frame so the loop never takes a
+/// page fault growing it (with memory locked, the pages stay).
+constexpr std::size_t kStackPrefaultBytes = 256 * 1024;
+__attribute__((noinline)) void prefault_stack() {
+  volatile unsigned char buf[kStackPrefaultBytes];
+  for (std::size_t i = 0; i < sizeof(buf); i += 4096) buf[i] = 0;
+  buf[sizeof(buf) - 1] = 0;
+}
+
+/// The last CPU in this thread's allowed set, or -1.
+int last_allowed_cpu() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (pthread_getaffinity_np(pthread_self(), sizeof(set), &set) != 0) return -1;
+  for (int c = CPU_SETSIZE - 1; c >= 0; --c)
+    if (CPU_ISSET(c, &set)) return c;
+  return -1;
+}
 }  // namespace
 
-ServoThread::ServoThread(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
+ServoThread::ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer,
                          HapticDeviceIO& device, ServoThreadConfig config)
     : samples_(samples), renderer_(renderer), device_(device), cfg_(std::move(config)) {
   period_err_.reserve(cfg_.record_ticks);
@@ -31,39 +52,82 @@ ServoThread::ServoThread(TripleBuffer<SampleField>& samples, HriRenderer& render
 ServoThread::~ServoThread() { stop(); }
 
 std::string ServoThread::start() {
+  stop();
   stop_.store(false);
+  ready_.store(false);
   period_err_.clear();
   thread_ = std::thread([this] { loop(); });
-  std::string note;
-  if (cfg_.sched_fifo) {
-    sched_param sp{};
-    sp.sched_priority = cfg_.fifo_priority;
-    const int rc = pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &sp);
-    if (rc != 0)
-      note += "SCHED_FIFO priority " + std::to_string(cfg_.fifo_priority) + " not permitted (" +
-              std::strerror(rc) + "; needs CAP_SYS_NICE or an rtprio limit): running with the default scheduler. ";
-  }
-  if (cfg_.cpu >= 0) {
-    cpu_set_t set;
-    CPU_ZERO(&set);
-    CPU_SET(cfg_.cpu, &set);
-    const int rc = pthread_setaffinity_np(thread_.native_handle(), sizeof(set), &set);
-    if (rc != 0) note += "pinning to CPU " + std::to_string(cfg_.cpu) + " failed (" + std::strerror(rc) + "). ";
-  }
-  return note;
+  ready_.wait(false, std::memory_order_acquire);  // the real-time setup is done
+  return setup_note_;
 }
 
 void ServoThread::stop() {
   stop_.store(true, std::memory_order_relaxed);
   if (thread_.joinable()) thread_.join();
+  if (locked_) {
+    munlockall();
+    locked_ = false;
+  }
+}
+
+std::string ServoThread::setup_realtime() {
+  std::string note;
+  got_fifo_ = false;
+  got_lock_ = locked_;
+  pinned_cpu_ = -1;
+  // Sleep wake-ups exactly on time (the default slack of a normal thread is 50 us).
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+  if (cfg_.pin_cpu) {
+    const int cpu = cfg_.cpu >= 0 ? cfg_.cpu : last_allowed_cpu();
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    int rc = EINVAL;
+    if (cpu >= 0 && cpu < CPU_SETSIZE) {
+      CPU_SET(cpu, &set);
+      rc = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+    }
+    if (rc == 0) pinned_cpu_ = cpu;
+    else
+      note += "servo thread: pinning to CPU " + std::to_string(cpu) + " refused (" + std::strerror(rc) +
+              "): not pinned.\n";
+  }
+  if (cfg_.sched_fifo) {
+    sched_param sp{};
+    sp.sched_priority = std::clamp(cfg_.fifo_priority, sched_get_priority_min(SCHED_FIFO),
+                                   sched_get_priority_max(SCHED_FIFO));
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    if (rc == 0) got_fifo_ = true;
+    else
+      note += "servo thread: SCHED_FIFO priority " + std::to_string(sp.sched_priority) + " refused (" +
+              std::strerror(rc) + "; needs root, CAP_SYS_NICE or an rtprio limit): running with the default "
+              "scheduler, expect missed deadlines under load.\n";
+  }
+  if (cfg_.lock_memory && !locked_) {
+    int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);
+    if (rc != 0 && errno == EINVAL) rc = mlockall(MCL_CURRENT | MCL_FUTURE);  // kernel < 4.4
+    if (rc == 0) locked_ = got_lock_ = true;
+    else
+      note += std::string("servo thread: mlockall refused (") + std::strerror(errno) +
+              "; needs root, CAP_IPC_LOCK or a memlock limit): memory not locked.\n";
+  }
+  // Prefault what the loop touches: its stack and the record buffer (written once, so the
+  // pages exist and, with memory locked, stay). The field is written by the engine before
+  // it is published, so its pages already exist.
+  prefault_stack();
+  period_err_.assign(period_err_.capacity(), 0);
+  period_err_.clear();  // keeps the capacity and the touched pages
+  return note;
 }
 
 void ServoThread::loop() {
+  setup_note_ = setup_realtime();
+  ready_.store(true, std::memory_order_release);
+  ready_.notify_all();
   if (cfg_.on_thread_start) cfg_.on_thread_start();
+
   const std::int64_t period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
-  // Spin at most 30 % of a period: a thread that never sleeps is throttled under
-  // SCHED_FIFO (sched_rt_runtime_us) and starves the engine thread on small machines.
-  const std::int64_t spin = std::min(std::int64_t(cfg_.spin_us * 1e3), std::int64_t(0.3 * double(period)));
+  const std::int64_t spin = std::min(std::int64_t(cfg_.spin_us * 1e3),
+                                     std::int64_t(std::clamp(cfg_.max_spin_fraction, 0.0, 1.0) * double(period)));
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
   std::uint64_t last_version = 0;
@@ -82,6 +146,8 @@ void ServoThread::loop() {
       missed_.fetch_add((t - next) / period, std::memory_order_relaxed);
       next = t;
     }
+    // The measured period: 0 on the first tick (the renderer takes the nominal one).
+    const double dt_s = prev_start >= 0 ? double(t - prev_start) * 1e-9 : 0.0;
     if (prev_start >= 0 && period_err_.size() < period_err_.capacity())
       period_err_.push_back((t - prev_start) - period);  // capacity reserved: no allocation
     prev_start = t;
@@ -97,7 +163,7 @@ void ServoThread::loop() {
         snapshot_changes_.fetch_add(1, std::memory_order_relaxed);
       }
       const Vec3 x = device_.read_position_m();
-      const HriTick out = renderer_.tick(*field, cfg_.world_T_device.to_world(x));
+      const HriTick out = renderer_.tick(*field, cfg_.world_T_device.to_world(x), dt_s);
       device_.write_force_n(out.force_n);
       if (out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
     }

@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "device_io.h"
-#include "hri.h"
+#include "renderer.h"
 #include "triple_buffer.h"
 #include "workspace.h"
 
@@ -16,32 +16,55 @@ namespace isotouch::servo {
 
 struct ServoThreadConfig {
   double rate_hz = 1000;          ///< servo rate, 1 to 10 kHz [Hz]
-  bool sched_fifo = false;        ///< ask for SCHED_FIFO (needs CAP_SYS_NICE or an rtprio limit)
-  int fifo_priority = 80;         ///< SCHED_FIFO priority
-  int cpu = -1;                   ///< pin to this CPU; -1: no pinning
-  double spin_us = 150;           ///< the last part of each wait is spun, not slept [us]; at most 30 % of T
-  std::size_t record_ticks = 0;   ///< period errors kept (preallocated) for statistics
+  /// Ask for SCHED_FIFO at fifo_priority before the first tick (needs root, CAP_SYS_NICE or
+  /// an rtprio limit). Refused: the loop runs under the default scheduler and start() says so.
+  bool sched_fifo = true;
+  int fifo_priority = 80;         ///< SCHED_FIFO priority, 1 to 99
+  /// Pin the servo thread to one CPU before the first tick. Refused: start() says so.
+  bool pin_cpu = true;
+  /// The CPU to pin to; -1: the last CPU this process may run on (CPU 0 takes most of the
+  /// interrupts and housekeeping).
+  int cpu = -1;
+  /// mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) before the first tick, so that no page
+  /// the loop touches is paged out (needs root, CAP_IPC_LOCK or a memlock limit). ONFAULT
+  /// locks pages as they are touched instead of committing every reserved mapping of the
+  /// process (thread stacks, Vulkan heaps); what the loop touches is prefaulted explicitly.
+  /// Released (munlockall) by stop() if start() locked it.
+  bool lock_memory = true;
+  /// The last part of each wait is spun, not slept [us]; at most max_spin_fraction of T.
+  double spin_us = 150;
+  /// A thread that never sleeps is throttled under SCHED_FIFO (sched_rt_runtime_us) and
+  /// starves the engine thread on small machines: spin at most this fraction of T.
+  double max_spin_fraction = 0.5;
+  std::size_t record_ticks = 0;   ///< period errors kept (preallocated, prefaulted) for statistics
   WorkspaceTransform world_T_device;
-  /// Called once on the servo thread before the loop starts (tests mark the thread).
+  /// Called once on the servo thread after the real-time setup, right before the first
+  /// tick (tests mark the thread here to count its allocations).
   std::function<void()> on_thread_start;
 };
 
-/// Fixed-rate loop on CLOCK_MONOTONIC: sleep (clock_nanosleep, absolute) until spin_us
-/// before the deadline, then spin. Each tick: acquire the newest published samples
-/// (lock-free), read the device, HriRenderer::tick, write the force. The tick itself
-/// allocates nothing, takes no lock and makes no syscall; the stop flag is std::atomic.
-/// A tick that starts a whole period late counts as a missed deadline, and the schedule
-/// re-anchors on it (no burst of catch-up ticks).
+/// Fixed-rate loop on CLOCK_MONOTONIC: sleep (clock_nanosleep, absolute, timer slack 1 ns)
+/// until spin_us before the deadline, then spin. Before the first tick the thread asks for
+/// SCHED_FIFO, pins itself to a CPU, locks memory and prefaults its stack and its record
+/// buffer (each optional; what the system refuses is reported by start(), not fatal).
+/// Each tick: acquire the newest published samples (lock-free), read the device,
+/// Renderer::tick with the measured period dt (the clock read is the loop's, not the
+/// tick's: a late tick passes a longer dt, so velocity estimates stay right), write the
+/// force. The tick itself allocates nothing, takes no lock and makes no syscall; the stop
+/// flag is std::atomic. A tick that starts a whole period late counts as a missed
+/// deadline, and the schedule re-anchors on it (no burst of catch-up ticks). After the
+/// loop the device is sent an exact zero force.
 class ServoThread {
  public:
-  ServoThread(TripleBuffer<SampleField>& samples, HriRenderer& renderer, HapticDeviceIO& device,
+  ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer, HapticDeviceIO& device,
               ServoThreadConfig config);
   ~ServoThread();
   ServoThread(const ServoThread&) = delete;
   ServoThread& operator=(const ServoThread&) = delete;
 
-  /// Start the loop. Returns "" or a note on what the system did not allow (SCHED_FIFO,
-  /// pinning); those are not fatal, the loop runs anyway.
+  /// Start the thread, wait until its real-time setup is done (before the first tick), and
+  /// return "" or one line per thing the system did not allow (SCHED_FIFO, pinning, memory
+  /// locking), each with the reason; those are not fatal, the loop runs anyway.
   std::string start();
   /// Ask the loop to stop and join it.
   void stop();
@@ -51,18 +74,28 @@ class ServoThread {
   long faults() const { return faults_.load(std::memory_order_relaxed); }
   long snapshot_changes() const { return snapshot_changes_.load(std::memory_order_relaxed); }
   long empty_ticks() const { return empty_.load(std::memory_order_relaxed); }
+  /// What the real-time setup got (valid after start()).
+  bool got_fifo() const { return got_fifo_; }
+  int pinned_cpu() const { return pinned_cpu_; }  ///< -1: not pinned
+  bool memory_locked() const { return got_lock_; }  ///< the last start() locked memory
   /// Actual period minus nominal period [ns], one per tick after the first (up to
   /// record_ticks). Read after stop().
   const std::vector<std::int64_t>& period_errors_ns() const { return period_err_; }
 
  private:
   void loop();
+  std::string setup_realtime();
   TripleBuffer<SampleField>& samples_;
-  HriRenderer& renderer_;
+  Renderer& renderer_;
   HapticDeviceIO& device_;
   ServoThreadConfig cfg_;
   std::vector<std::int64_t> period_err_;
   std::atomic<bool> stop_{false};
+  std::atomic<bool> ready_{false};
+  std::string setup_note_;  // written by the servo thread before ready_, read after
+  bool got_fifo_ = false, got_lock_ = false;
+  bool locked_ = false;  // memory locked now (released by stop())
+  int pinned_cpu_ = -1;
   std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
   std::thread thread_;
 };

@@ -1,15 +1,19 @@
 // The real-time servo thread: runs, reads snapshots a publisher swaps at full speed,
-// allocates nothing on the servo thread (counted by a replaced operator new), and stays
-// quiet under ThreadSanitizer (the tsan preset runs this file).
+// allocates nothing on the servo thread (counted by a replaced operator new), renders real
+// contact forces, passes the measured period to the renderer, leaves the device with an
+// exact zero force, and stays quiet under ThreadSanitizer (the tsan preset runs this file).
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <new>
 #include <thread>
 
 #include "analytic_fields.h"
+#include "hri.h"
 #include "servo_thread.h"
 
 using namespace isotouch::servo;
@@ -17,6 +21,46 @@ using namespace isotouch::servo;
 namespace {
 thread_local bool t_is_servo = false;
 std::atomic<long> g_servo_allocations{0};
+
+/// A renderer spy: forwards to HRI and keeps the dt of each tick (preallocated).
+class DtSpy final : public Renderer {
+ public:
+  explicit DtSpy(const HriParams& p) : hri_(p) {}
+  const char* name() const override { return "spy"; }
+  void reset() override { hri_.reset(); }
+  HriTick tick(const SampleField& f, const Vec3& hip, double dt_s) override {
+    if (n_ < dt_.size()) dt_[n_++] = dt_s;
+    return hri_.tick(f, hip, dt_s);
+  }
+  std::size_t n() const { return n_; }
+  double dt(std::size_t i) const { return dt_[i]; }
+
+ private:
+  HriRenderer hri_;
+  std::array<double, 4096> dt_{};
+  std::size_t n_ = 0;
+};
+
+/// A device whose HIP comes from 2 mm outside a floor (plane z = 10 mm, inside below) to
+/// 1 mm inside it over the first 200 ticks, then stays; keeps every force it is sent.
+struct ApproachingProbe final : HapticDeviceIO {
+  long writes = 0;
+  Vec3 last{1, 1, 1};
+  double max_f_outside = 0, max_f_inside = 0;
+  long forced_ticks_inside = 0;
+  double z() const { return 0.012 - 0.003 * std::min(1.0, double(writes) / 200.0); }
+  Vec3 read_position_m() override { return {0.016, 0.016, z()}; }
+  void write_force_n(const Vec3& f) override {
+    const double m = norm(f);
+    if (z() > 0.010) max_f_outside = std::max(max_f_outside, m);
+    else {
+      max_f_inside = std::max(max_f_inside, m);
+      if (m > 0) ++forced_ticks_inside;
+    }
+    last = f;
+    ++writes;
+  }
+};
 }  // namespace
 
 void* operator new(std::size_t n) {
@@ -67,7 +111,7 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
       publications.fetch_add(1);
     }
   });
-  servo.start();
+  const std::string note = servo.start();
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   servo.stop();
   stop = true;
@@ -80,31 +124,67 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
   EXPECT_EQ(g_servo_allocations.load(), 0) << "the servo thread allocated";
   EXPECT_EQ(dev.refused_commands(), 0);            // never a NaN force
   EXPECT_FALSE(servo.period_errors_ns().empty());
+  // The real-time setup is asked for by default; whatever was refused is said, nothing else.
+  EXPECT_EQ(note.find("SCHED_FIFO") != std::string::npos, !servo.got_fifo()) << note;
+  EXPECT_EQ(note.find("pinning") != std::string::npos, servo.pinned_cpu() < 0) << note;
+  EXPECT_EQ(note.find("mlockall") != std::string::npos, !servo.memory_locked()) << note;
 }
 
-TEST(ServoThread, StopsPromptlyAndLeavesZeroForce) {
-  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+TEST(ServoThread, RendersContactFromOutsideAndLeavesExactlyZeroForceOnStop) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});  // floor at z = 10 mm
   TripleBuffer<SampleField> published;
   published.publish(std::make_shared<const SampleField>(f));
   HriParams hp;
+  hp.rate_hz = 10000;
   HriRenderer renderer(hp);
-  struct Probe final : HapticDeviceIO {
-    std::atomic<long> writes{0};
-    Vec3 last{1, 1, 1};
-    Vec3 read_position_m() override { return {0.016, 0.016, 0.009}; }  // held inside
-    void write_force_n(const Vec3& f) override {
-      last = f;
-      writes.fetch_add(1);
-    }
-  } probe;
+  ApproachingProbe probe;
   ServoThreadConfig cfg;
-  cfg.rate_hz = 10000;
+  cfg.rate_hz = hp.rate_hz;
   ServoThread servo(published, renderer, probe, cfg);
   servo.start();
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   const auto t0 = std::chrono::steady_clock::now();
   servo.stop();
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(200));
-  EXPECT_GT(probe.writes.load(), 10);
-  EXPECT_EQ(norm(probe.last), 0.0);  // the last command leaves the device unforced
+  // After join the probe is ours to read.
+  ASSERT_GT(probe.writes, 300) << "the probe never got 1 mm inside";
+  EXPECT_EQ(probe.max_f_outside, 0.0);           // free space: no force
+  EXPECT_GT(probe.forced_ticks_inside, 50);      // contact: forces flowed while inside
+  // 1 mm in, K = 800 N/m: about 0.8 N (the damping adds while the probe still moves).
+  EXPECT_GT(probe.max_f_inside, 0.6);
+  EXPECT_LT(probe.max_f_inside, hp.force_limit_n);
+  EXPECT_EQ(probe.last.x, 0.0);                  // the last command after stop: exactly zero
+  EXPECT_EQ(probe.last.y, 0.0);
+  EXPECT_EQ(probe.last.z, 0.0);
+}
+
+TEST(ServoThread, PassesTheMeasuredPeriodToTheRenderer) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(f));
+  HriParams hp;
+  hp.rate_hz = 4000;
+  DtSpy spy(hp);
+  ApproachingProbe probe;
+  ServoThreadConfig cfg;
+  cfg.rate_hz = hp.rate_hz;
+  cfg.record_ticks = 4096;
+  ServoThread servo(published, spy, probe, cfg);
+  servo.start();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  servo.stop();
+  const auto& err = servo.period_errors_ns();
+  ASSERT_GT(spy.n(), 200u);
+  EXPECT_EQ(spy.dt(0), 0.0);  // first tick: no measured period yet, the renderer takes 1/rate
+  const double T = 1.0 / hp.rate_hz;
+  const std::size_t n = std::min(spy.n(), err.size() + 1);
+  long differs_from_nominal = 0;
+  for (std::size_t i = 1; i < n; ++i) {
+    // The dt of tick i is the measured start-to-start time the thread records as period error.
+    const double measured = (double(std::int64_t(std::llround(T * 1e9)) + err[i - 1])) * 1e-9;
+    ASSERT_NEAR(spy.dt(i), measured, 1e-12) << "tick " << i;
+    ASSERT_GT(spy.dt(i), 0.0);
+    if (spy.dt(i) != T) ++differs_from_nominal;
+  }
+  EXPECT_GT(differs_from_nominal, 0) << "every dt was the nominal period: not measured";
 }

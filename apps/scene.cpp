@@ -7,6 +7,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <vector>
 
 namespace isotouch::app {
 namespace {
@@ -98,10 +99,44 @@ class Reader {
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::string& path) {
+  // JSON allows a key twice in one object and keeps the last: a scene with two
+  // "stiffness_n_per_m" would silently use one of them. The parser callback sees every
+  // key in order, with the objects and arrays it sits in.
+  struct Frame {
+    bool object;
+    std::set<std::string> keys;
+    std::string key;
+  };
+  std::vector<Frame> stack;
+  const json::parser_callback_t dup_check = [&](int, json::parse_event_t ev, json& parsed) {
+    switch (ev) {
+      case json::parse_event_t::object_start: stack.push_back({true, {}, {}}); break;
+      case json::parse_event_t::array_start: stack.push_back({false, {}, {}}); break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        if (!stack.empty()) stack.pop_back();
+        break;
+      case json::parse_event_t::key:
+        if (!stack.empty() && parsed.is_string()) {
+          Frame& f = stack.back();
+          f.key = parsed.get<std::string>();
+          if (!f.keys.insert(f.key).second) {
+            std::string field;
+            for (const Frame& fr : stack)
+              field += fr.object ? (field.empty() ? "" : ".") + fr.key : std::string("[]");
+            throw SceneError(path + ": field '" + field +
+                             "': appears twice in the same object (JSON would keep only the last; remove one)");
+          }
+        }
+        break;
+      default: break;
+    }
+    return true;
+  };
   json root;
   try {
-    root = json::parse(text);
-  } catch (const json::parse_error& e) {
+    root = json::parse(text, dup_check);
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e999
     throw SceneError(path + ": not valid JSON: " + e.what());
   }
   const Reader r(path);
@@ -213,6 +248,13 @@ Scene parse_scene(const std::string& text, const std::string& path) {
                         "stroke_length_m", "stroke_speed_m_s", "rest_s"});
   auto& p = s.script;
   p.ray_origin_frac = r.vec3(sc, "script", "ray_origin_frac", p.ray_origin_frac);
+  for (int a = 0; a < 3; ++a)
+    if (p.ray_origin_frac[a] < servo::kRayOriginFracMin || p.ray_origin_frac[a] > servo::kRayOriginFracMax) {
+      std::ostringstream e;
+      e << "each must be in [" << servo::kRayOriginFracMin << ", " << servo::kRayOriginFracMax
+        << "] (fractions of the volume box), got " << sc.at("ray_origin_frac").dump();
+      r.fail("script.ray_origin_frac", e.str());
+    }
   p.ray_direction = r.vec3(sc, "script", "ray_direction", p.ray_direction);
   if (servo::norm(p.ray_direction) == 0.0) r.fail("script.ray_direction", "must not be [0, 0, 0]");
   p.stroke_direction = r.vec3(sc, "script", "stroke_direction", p.stroke_direction);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 #include "sampling.h"
 
@@ -33,16 +34,55 @@ void TouchScript::at(double t, Vec3& pos, Vec3& vel) const {
   vel = dt > 0 ? (b.pos_m - a.pos_m) / dt : Vec3{};
 }
 
+namespace {
+
+// Longest march: the step grows where the ray inside the box is longer than this many
+// steps, so a find_surface call costs at most ~kMaxMarchSteps field samples.
+constexpr long kMaxMarchSteps = 1L << 21;
+// Most stroke points; ds grows for long strokes on fine grids.
+constexpr long kMaxStrokeSteps = 20000;
+
+// Slab test: the part [t0, t1] of origin + dir * t that lies in the grid's box.
+bool clip_to_box(const Grid& g, const Vec3& o, const Vec3& d, double& t0, double& t1) {
+  const Vec3 lo = g.origin_m, hi = g.origin_m + g.extent_m();
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0.0) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
+      continue;
+    }
+    double ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return std::isfinite(t0) && std::isfinite(t1) && t0 <= t1;
+}
+
+std::string mm(const Vec3& v) {
+  std::ostringstream s;
+  s.precision(4);
+  s << "(" << v.x * 1e3 << ", " << v.y * 1e3 << ", " << v.z * 1e3 << ") mm";
+  return s.str();
+}
+
+}  // namespace
+
 bool find_surface(const SampleField& field, const HriRenderer& r, const Vec3& origin,
                   const Vec3& dir, double max_dist, Vec3& hit) {
   const Vec3& sp = field.grid.spacing_m;
-  const double step = 0.25 * std::min({sp.x, sp.y, sp.z});
   if (r.excess(sample_value(field, origin)) > 0.0) return false;
-  double t_out = 0.0;
-  for (double t = step; t <= max_dist; t += step) {
+  // Only the part of the ray inside the volume box can cross the isosurface (outside it
+  // the field is NaN, never inside).
+  double t0 = 0.0, t1 = max_dist;
+  if (!(max_dist > 0.0) || !clip_to_box(field.grid, origin, dir, t0, t1)) return false;
+  const double step = std::max(0.25 * std::min({sp.x, sp.y, sp.z}), (t1 - t0) / double(kMaxMarchSteps));
+  double t_out = t0;
+  const long n = long(std::ceil((t1 - t0) / step)) + 1;
+  for (long i = 1; i <= n; ++i) {
+    const double t = std::min(t0 + double(i) * step, t1);
     if (r.excess(sample_value(field, origin + dir * t)) > 0.0) {
       double lo = t_out, hi = t;
-      for (int i = 0; i < 50; ++i) {
+      for (int k = 0; k < 50; ++k) {
         const double mid = 0.5 * (lo + hi);
         (r.excess(sample_value(field, origin + dir * mid)) > 0.0 ? hi : lo) = mid;
       }
@@ -59,13 +99,21 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
   const Grid& g = field.grid;
   const HriRenderer classify(hri);
   const Vec3 lo = g.origin_m, ext = g.extent_m();
+  for (int a = 0; a < 3; ++a)
+    if (!(p.ray_origin_frac[a] >= kRayOriginFracMin && p.ray_origin_frac[a] <= kRayOriginFracMax)) {
+      std::ostringstream e;
+      e << "script.ray_origin_frac: each must be in [" << kRayOriginFracMin << ", " << kRayOriginFracMax
+        << "] (fractions of the volume box), got " << p.ray_origin_frac[a] << " along axis " << a;
+      throw std::runtime_error(e.str());
+    }
   const Vec3 origin{lo.x + p.ray_origin_frac.x * ext.x, lo.y + p.ray_origin_frac.y * ext.y,
                     lo.z + p.ray_origin_frac.z * ext.z};
   const Vec3 dir = normalized_or(p.ray_direction, {});
   auto describe = [&] {
     std::ostringstream s;
-    s << "script: the ray from (" << origin.x << ", " << origin.y << ", " << origin.z
-      << ") m along (" << dir.x << ", " << dir.y << ", " << dir.z << ")";
+    s.precision(4);
+    s << "script: the ray from " << mm(origin) << " along (" << dir.x << ", " << dir.y << ", " << dir.z
+      << ") (volume box " << mm(lo) << " to " << mm(lo + ext) << ")";
     return s.str();
   };
   if (norm(dir) == 0.0) throw std::runtime_error("script.ray_direction must not be zero");
@@ -101,7 +149,8 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
   s.t_stroke = t;
   // Stroke: keep the hand target press_depth below the surface under it, found by a
   // ray along -n from above each point of the straight tangent line.
-  const double ds = 0.5 * std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z});
+  const double ds = std::max(0.5 * std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z}),
+                             p.stroke_length_m / double(kMaxStrokeSteps));
   const int steps = std::max(1, int(std::ceil(p.stroke_length_m / ds)));
   Vec3 prev = pressed, last_surface = p0;
   for (int i = 1; i <= steps; ++i) {

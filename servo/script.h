@@ -8,6 +8,10 @@
 
 namespace isotouch::servo {
 
+/// Accepted range of each ray_origin_frac component (fractions of the volume box).
+inline constexpr double kRayOriginFracMin = -2.0;
+inline constexpr double kRayOriginFracMax = 3.0;
+
 /// Parameters of the touch script (world [m], s).
 struct ScriptParams {
   Vec3 ray_origin_frac{0.5, 0.5, 1.2};  ///< ray start as a fraction of the volume box
@@ -42,11 +46,16 @@ struct TouchScript {
 
 /// First crossing of the isosurface along a ray (march + bisection on the trilinear
 /// field). Returns false if the ray starts inside or never crosses within max_dist_m.
+/// Only the part of the ray inside the volume box is marched, in steps of a quarter of
+/// the smallest spacing, or longer where that part would take more than 2^21 steps: the
+/// cost is bounded whatever the spacing, the ray origin or max_dist_m.
 bool find_surface(const SampleField& field, const HriRenderer& classify, const Vec3& origin_m,
                   const Vec3& dir_unit, double max_dist_m, Vec3& hit_m);
 
 /// Build the script on `field`. Throws std::runtime_error with a reason (naming the
-/// ray) when the ray never meets the isosurface or starts inside it.
+/// ray, positions in mm) when the ray never meets the isosurface or starts inside it, or
+/// when a ray_origin_frac component is outside [kRayOriginFracMin, kRayOriginFracMax].
+/// The stroke has at most 20000 points whatever the grid.
 TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
                               const ScriptParams& params);
 

@@ -77,3 +77,26 @@ TEST(Scene, ServoOptions) {
   EXPECT_DOUBLE_EQ(s.hri.friction.mu_d, 0.3);
   EXPECT_EQ(s.synthetic.kind, "knot");
 }
+
+// ---- issue 7: duplicate keys, overflowing numbers, ray origin range --------------------------
+TEST(Scene, DuplicateKeyIsAnError) {
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stiffness_n_per_m": 800,
+                   "stiffness_n_per_m": 80000}})",
+               {"'servo.stiffness_n_per_m'", "twice"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "isovalue": 2})", {"'isovalue'", "twice"});
+  // The same key in different objects is fine.
+  EXPECT_NO_THROW(parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1,
+                                  "servo": {"damping_n_s_per_m": 1}, "device": {"damping_n_s_per_m": 1}})",
+                              "ok.json"));
+}
+
+TEST(Scene, NumberOverflowNamesTheFile) {
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1e999})", {"not valid JSON", "1e999"});
+}
+
+TEST(Scene, RayOriginFracRange) {
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_origin_frac": [0.5, 0.5, -1e6]}})",
+               {"'script.ray_origin_frac'", "[-2, 3]", "-1000000"});
+  EXPECT_NO_THROW(parse_scene(
+      R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_origin_frac": [-2, 3, 0.5]}})", "ok.json"));
+}

@@ -16,6 +16,9 @@ void HriRenderer::reset() {
   was_contact_ = false;
   recovery_ticks_left_ = 0;
   prev_force_mag_ = 0;
+  vel_valid_ = false;
+  v_filt_ = {};
+  lost_s_ = 0;
 }
 
 Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const {
@@ -57,18 +60,21 @@ bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const 
   const Vec3& sp = field.grid.spacing_m;
   const double len = norm(b - a);
   const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
-  if (!(len > h) || !std::isfinite(len)) return false;
-  const int steps = int(std::min(4096.0, std::ceil(len / h)));
+  if (!std::isfinite(len) || !(len > 0.0)) return false;
+  // Half-voxel steps, at least 2 (the end point alone says nothing about a thin wall
+  // in between), at most march_budget samples (longer steps beyond that).
+  const int budget = std::max(2, params_.march_budget);
+  const int steps = int(std::clamp(std::ceil(len / h), 2.0, double(budget)));
   double lo = 0.0;
   for (int i = 1; i <= steps; ++i) {
     const double t = double(i) / steps;
     if (excess(sample_value(field, a + (b - a) * t)) > 0.0) {
       double hi = t;
-      for (int k = 0; k < 30; ++k) {
+      for (int k = 0; k < 20; ++k) {
         const double mid = 0.5 * (lo + hi);
         (excess(sample_value(field, a + (b - a) * mid)) > 0.0 ? hi : lo) = mid;
       }
-      p = a + (b - a) * lo;  // last point known outside: on the surface to 1e-9 of len
+      p = a + (b - a) * lo;  // last point known outside: on the surface to 1e-6 of the step
       return true;
     }
     lo = t;
@@ -139,32 +145,104 @@ VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip,
   return plane_at(field, vhip_ + seg * t, hip);
 }
 
-Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip) {
-  // Surface effects by constraining the VHIP (§3.1). Distances in world [m].
+Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
+  // Surface effects by constraining the VHIP (§3.1). Distances in world [m]. The Coulomb
+  // cone is tested first on the held point; only then may viscous friction move it.
   const SurfaceFriction& fr = params_.friction;
   const Vec3& n = plane_.n;
-  Vec3 held = vhip_ - n * dot(n, vhip_ - plane_.p);  // last contact point, on this plane
+  const Vec3 held = vhip_ - n * dot(n, vhip_ - plane_.p);  // last contact point, on this plane
+  Vec3 target = free_vhip;
+  if (fr.mu_s > 0 || fr.mu_d > 0) {
+    const double depth = std::max(0.0, dot(n, plane_.p - hip));  // normal penetration [m]
+    const Vec3 t = held - free_vhip;
+    const double tl = norm(t);
+    if (!sliding_ && tl <= fr.mu_s * depth) return held;  // static: inside the cone
+    const double limit = fr.mu_d * depth;                 // dynamic: |F_t| = mu_d |F_n|
+    if (tl <= limit) {
+      sliding_ = false;
+      return held;
+    }
+    sliding_ = true;
+    target = free_vhip + t * (limit / tl);
+  }
   if (fr.viscous_n_s_per_m > 0) {
-    // Backward Euler of b_v dx/dt = K (free - x): steady sliding gives |F_t| = b_v v exactly.
-    const double kt = params_.stiffness_n_per_m / params_.rate_hz;
-    held = held + (free_vhip - held) * (kt / (fr.viscous_n_s_per_m + kt));
+    // Backward Euler of b_v dx/dt = K (target - x): steady sliding adds |F_t| = b_v v.
+    const double kt = params_.stiffness_n_per_m * dt / params_.world_per_device;
+    return held + (target - held) * (kt / (fr.viscous_n_s_per_m + kt));
   }
-  if (!(fr.mu_s > 0 || fr.mu_d > 0)) return held;
-  const double depth = std::max(0.0, dot(n, plane_.p - hip));  // normal penetration [m]
-  const Vec3 t = held - free_vhip;
-  const double tl = norm(t);
-  if (!sliding_ && tl <= fr.mu_s * depth) return held;        // static: inside the cone
-  const double limit = fr.mu_d * depth;                       // dynamic: |F_t| = mu_d |F_n|
-  if (tl <= limit) {
-    sliding_ = false;
-    return held;
+  return target;
+}
+
+Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const Vec3& v, double dt,
+                                HriTick& out) {
+  const bool robust = params_.variant == Variant::kRobust;
+  // Optional force shading: the plane through the previous VHIP first gives a
+  // temporary HIP, which the true plane then constrains.
+  Vec3 goal = hip;
+  if (params_.force_shading && was_contact_) {
+    const Vec3 ns = outward_normal(field, vhip_, plane_.n);
+    const double behind = dot(ns, vhip_ - hip);
+    if (behind > 0) goal = hip + ns * behind;
   }
-  sliding_ = true;
-  return free_vhip + t * (limit / tl);
+  // eq. 2: VHIP = HIP + ((p - HIP) . N) N   (for the goal point)
+  const double g = dot(plane_.n, plane_.p - goal);
+  const Vec3 free_vhip = (g > 0 || robust) ? goal + plane_.n * g : goal;
+  // Paper variant: was the VHIP of the tick before embedded? Only recovery asks, at an update.
+  const bool embedded = !robust && params_.recovery_time_s > 0 && out.plane_update && was_contact_ &&
+                        excess(sample_value(field, vhip_)) > 0.0;
+  const bool friction = params_.friction.any() && was_contact_;
+  vhip_ = friction ? constrain(hip, free_vhip, dt) : free_vhip;
+  if (!friction) sliding_ = false;
+
+  const double s = 1.0 / params_.world_per_device;
+  const Vec3 d = (hip - vhip_) * s;  // device [m]
+  const Vec3 v_d = plane_.n * dot(v, plane_.n);
+  // eq. 3 with the physical sign: push the HIP back toward the VHIP.
+  Vec3 force = d * -params_.stiffness_n_per_m - v_d * params_.damping_n_s_per_m;
+  if (dot(force, plane_.n) < 0.0) force = {};  // a wall pushes, never pulls
+
+  // Recovery time: ramp the magnitude, keep the new direction.
+  const double mag = norm(force);
+  if (robust) {
+    // Every step of the spring-damper target that a plane creation or update causes is
+    // spread over recovery_time_s: the offset between what was sent and the new target
+    // fades out linearly (an update that does not move the target lets a ramp go on).
+    if (params_.recovery_time_s > 0 && out.plane_update &&
+        std::abs(mag - prev_target_n_) > 0.01 * params_.force_limit_n) {
+      recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
+      recovery_ticks_left_ = recovery_ticks_;
+      recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
+    }
+    prev_target_n_ = mag;
+    if (recovery_ticks_left_ > 0) {
+      --recovery_ticks_left_;
+      const double m = std::max(0.0, mag + recovery_from_n_ * recovery_ticks_left_ / recovery_ticks_);
+      if (mag > 0) force = force * (m / mag);
+      else if (m > 0) force = plane_.n * m;
+    }
+  } else {
+    if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
+      recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
+      recovery_ticks_left_ = recovery_ticks_;
+      recovery_from_n_ = prev_force_mag_;
+    }
+    if (recovery_ticks_left_ > 0) {
+      const double frac = double(recovery_ticks_ - recovery_ticks_left_ + 1) / recovery_ticks_;
+      const double cap = recovery_from_n_ + (mag - recovery_from_n_) * frac;
+      if (mag > cap && mag > 0) force = force * (cap / mag);
+      --recovery_ticks_left_;
+    }
+  }
+  out.contact = true;
+  out.penetration_m = norm(hip - vhip_);
+  return force;
 }
 
 HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
-  (void)dt_s;
+  return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
+}
+
+HriTick HriRenderer::tick_paper(const SampleField& field, const Vec3& hip) {
   HriTick out;
   const bool absurd = finite(hip) && norm(hip - field.grid.centre_m()) > params_.max_reach_m;
   if (!finite(hip) || absurd) {  // a device fault: send nothing
@@ -189,94 +267,173 @@ HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s
   }
   const double f_hip = sample_value(field, hip);
   const bool hip_inside = excess(f_hip) > 0.0;
-
+  // p = LinearInterpolation(VHIP, HIP, tau), N = SurfaceNormal(p).
+  auto linear_plane = [&](double f_vhip) {
+    const double e0 = excess(f_vhip), e1 = excess(f_hip);
+    double t = -e0 / (e1 - e0);
+    if (!std::isfinite(t)) t = 0.0;
+    t = std::clamp(t, 0.0, 1.0);
+    return plane_at(field, vhip_ + (hip - vhip_) * t, hip);
+  };
   if (plane_.valid) {
-    if (++c_ >= params_.plane_update_period) {
+    if (c_ >= params_.plane_update_period) {  // as printed: checked before the increment
       c_ = 0;
-      Vec3 p;
       if (!hip_inside) {
-        // VirtualPlane = (0, 0), unless the HIP went through a thin wall since the VHIP.
-        if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, p)) {
-          plane_ = plane_at(field, p, hip);
-          out.plane_update = true;
-        } else {
-          plane_.valid = false;
-        }
+        plane_.valid = false;
       } else {
-        plane_ = compute_plane(field, sample_value(field, vhip_), f_hip, hip);
+        plane_ = linear_plane(sample_value(field, vhip_));
         out.plane_update = true;
       }
+    } else {
+      ++c_;
     }
   } else if (hip_inside) {
     const double f_vhip = sample_value(field, vhip_);
-    if (!(excess(f_vhip) > 0.0)) {  // the ray VHIP -> HIP enters the object
-      plane_ = compute_plane(field, f_vhip, f_hip, hip);
-      c_ = 0;
-      out.plane_update = true;
-    }
-  } else {
-    // Both ends outside: a long step may have jumped over a thin wall. Short steps (the
-    // common case) cost nothing here: the length is checked before any sample.
-    Vec3 p;
-    if (long_step(field, vhip_, hip) && !(excess(sample_value(field, vhip_)) > 0.0) &&
-        first_crossing(field, vhip_, hip, p)) {
-      plane_ = plane_at(field, p, hip);
-      c_ = 0;
+    if (!(excess(f_vhip) > 0.0)) {
+      plane_ = linear_plane(f_vhip);
       out.plane_update = true;
     }
   }
-
   Vec3 force;
   if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
-    // Optional force shading: the plane through the previous VHIP first gives a
-    // temporary HIP, which the true plane then constrains.
-    Vec3 goal = hip;
-    if (params_.force_shading && was_contact_) {
-      const Vec3 ns = outward_normal(field, vhip_, plane_.n);
-      const double behind = dot(ns, vhip_ - hip);
-      if (behind > 0) goal = hip + ns * behind;
-    }
-    // eq. 2: VHIP = HIP + ((p - HIP) . N) N   (for the goal point)
-    const double g = dot(plane_.n, plane_.p - goal);
-    const Vec3 free_vhip = g > 0 ? goal + plane_.n * g : goal;
-    // Was the VHIP of the tick before embedded? Only recovery time asks, and only at an update.
-    const bool embedded = params_.recovery_time_s > 0 && out.plane_update && was_contact_ &&
-                          excess(sample_value(field, vhip_)) > 0.0;
-    vhip_ = (params_.friction.any() && was_contact_) ? constrain(hip, free_vhip) : free_vhip;
-    if (!(params_.friction.any() && was_contact_)) sliding_ = false;
-
-    const double s = 1.0 / params_.world_per_device;
-    const Vec3 d = (hip - vhip_) * s;                          // device [m]
-    const Vec3 v = (hip - prev_hip_) * (params_.rate_hz * s);  // device [m/s]
-    const Vec3 v_d = plane_.n * dot(v, plane_.n);
-    // eq. 3 with the physical sign: push the HIP back toward the VHIP.
-    force = d * -params_.stiffness_n_per_m - v_d * params_.damping_n_s_per_m;
-    if (dot(force, plane_.n) < 0.0) force = {};  // a wall pushes, never pulls
-
-    // Recovery time: a new plane that leaves the old VHIP embedded would make the force
-    // jump; keep the direction and ramp the magnitude instead.
-    const double mag = norm(force);
-    if (embedded && mag > prev_force_mag_) {
-      recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s * params_.rate_hz)));
-      recovery_ticks_left_ = recovery_ticks_;
-      recovery_from_n_ = prev_force_mag_;
-    }
-    if (recovery_ticks_left_ > 0) {
-      const double frac = double(recovery_ticks_ - recovery_ticks_left_ + 1) / recovery_ticks_;
-      const double cap = recovery_from_n_ + (mag - recovery_from_n_) * frac;
-      if (mag > cap && mag > 0) force = force * (cap / mag);
-      --recovery_ticks_left_;
-    }
-    out.contact = true;
-    out.penetration_m = norm(hip - vhip_);
+    const Vec3 v = (hip - prev_hip_) * (params_.rate_hz / params_.world_per_device);  // device [m/s]
+    force = contact_force(field, hip, v, 1.0 / params_.rate_hz, out);
   } else {
     vhip_ = hip;
     sliding_ = false;
     recovery_ticks_left_ = 0;
+    prev_target_n_ = 0;
+  }
+  if (!std::isfinite(norm(force))) {
+    force = {};
+    out.fault = true;
+  } else {
+    out.saturated = saturate(force, params_.force_limit_n);
+  }
+  prev_hip_ = hip;
+  prev_force_mag_ = norm(force);
+  was_contact_ = out.contact;
+  out.force_n = force;
+  out.vhip_m = vhip_;
+  out.plane = plane_;
+  return out;
+}
+
+HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, double dt_s) {
+  HriTick out;
+  const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : 1.0 / params_.rate_hz;
+  const double elapsed = dt + lost_s_;  // since the last sane tick [s]
+  const bool sane = finite(hip);
+  const bool absurd = sane && norm(hip - field.grid.centre_m()) > params_.max_reach_m;
+  // An implausible jump while a plane is held: the contact state means nothing any more.
+  const bool jump = sane && !absurd && started_ && !resync_ && plane_.valid &&
+                    norm(hip - prev_hip_) > params_.max_speed_m_s * params_.world_per_device * elapsed;
+  if (!sane || absurd || jump) {  // a device fault: send nothing
+    out.fault = true;
+    resync_ = resync_ || absurd || jump;
+    vel_valid_ = false;  // the velocity estimate restarts at the next sane HIP
+    lost_s_ = elapsed;
+    out.vhip_m = vhip_;
+    out.plane = plane_;
+    prev_force_mag_ = 0;
+    prev_target_n_ = 0;
+    recovery_ticks_left_ = 0;
+    return out;
+  }
+  lost_s_ = 0;
+  if (!started_ || resync_) {
+    vhip_ = hip;
+    prev_hip_ = hip;
+    plane_ = {};
+    c_ = 0;
+    started_ = true;
+    resync_ = false;
+    sliding_ = false;
+    was_contact_ = false;
+    recovery_ticks_left_ = 0;
+    prev_force_mag_ = 0;
+    vel_valid_ = false;
+  }
+  // Velocity: backward difference over the measured time, first-order low-pass.
+  const double s = 1.0 / params_.world_per_device;
+  if (vel_valid_) {
+    const Vec3 raw = (hip - prev_hip_) * (s / elapsed);
+    const double fc = params_.velocity_cutoff_hz;
+    const double a = fc > 0 ? elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc)) : 1.0;
+    v_filt_ = v_filt_ + (raw - v_filt_) * a;
+  } else {
+    v_filt_ = {};
+  }
+  vel_valid_ = true;
+
+  const Vec3& sp = field.grid.spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  // The HIP's value is read only when the method needs it.
+  bool have_f_hip = false;
+  double f_hip = 0.0;
+  auto hip_excess = [&]() {
+    if (!have_f_hip) {
+      f_hip = sample_value(field, hip);
+      have_f_hip = true;
+    }
+    return excess(f_hip);
+  };
+  auto set_plane = [&](const VirtualPlane& pl) {
+    plane_ = pl;
+    anchor_ = hip + pl.n * dot(pl.n, pl.p - hip);  // eq. 2 on the new plane
+    c_ = 0;
+    out.plane_update = true;
+  };
+  // Free motion or in front of a plane: did the segment VHIP -> HIP enter the object?
+  auto entry_test = [&]() {
+    const double e_v = excess(sample_value(field, vhip_));
+    Vec3 p;
+    if (hip_excess() > 0.0) {
+      if (!(e_v > 0.0)) set_plane(compute_plane(field, sample_value(field, vhip_), f_hip, hip));
+      else plane_.valid = false;  // both inside: no force (starting inside, §3.1)
+    } else if (!(e_v > 0.0) && long_step(field, vhip_, hip) && first_crossing(field, vhip_, hip, p)) {
+      set_plane(plane_at(field, p, hip));  // a long step through a thin wall
+    } else {
+      plane_.valid = false;
+    }
+  };
+
+  if (plane_.valid) {
+    if (!(dot(plane_.n, hip - plane_.p) < 0.0)) {
+      entry_test();  // in front of the held plane: not in contact with it
+    } else {
+      // Behind the plane: no sample unless an update is due (every n ticks, or early
+      // when the VHIP would slide more than half a voxel from where the plane was made).
+      const Vec3 proj = hip + plane_.n * dot(plane_.n, plane_.p - hip);
+      if (++c_ >= params_.plane_update_period || norm(proj - anchor_) > 0.5 * voxel) {
+        c_ = 0;
+        const double f_vhip = sample_value(field, vhip_);
+        Vec3 p;
+        if (hip_excess() > 0.0 || excess(f_vhip) > 0.0) {
+          // HIP inside, or the VHIP embedded in the near wall (the HIP left through a
+          // far side): the near surface constrains it.
+          set_plane(compute_plane(field, f_vhip, f_hip, hip));
+        } else if (first_crossing(field, vhip_, hip, p)) {
+          set_plane(plane_at(field, p, hip));  // the HIP is beyond a wall it went through
+        } else {
+          plane_.valid = false;  // the surface curved away: the HIP is really outside
+        }
+      }
+    }
+  } else {
+    entry_test();
   }
 
-  const double mag = norm(force);
-  if (!std::isfinite(mag)) {
+  Vec3 force;
+  if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
+    force = contact_force(field, hip, v_filt_, elapsed, out);
+  } else {
+    vhip_ = hip;
+    sliding_ = false;
+    recovery_ticks_left_ = 0;
+    prev_target_n_ = 0;
+  }
+  if (!std::isfinite(norm(force))) {
     force = {};
     out.fault = true;
   } else {

@@ -58,54 +58,96 @@ struct HriParams {
   SurfaceFriction friction;
   bool force_shading = false;        ///< §3.3: shading plane from the normal at the previous VHIP
   double recovery_time_s = 0;        ///< §3.3: > 0 turns recovery time on [s]
+  /// Robust variant: cut-off of the first-order low-pass on the HIP velocity [Hz]
+  /// (0 = the raw backward difference). See HriRenderer, "Velocity".
+  double velocity_cutoff_hz = 0.0;
+  /// Robust variant: while a plane is held, a HIP that moved faster than this [m/s of
+  /// device motion] since the last sane tick is a fault and the renderer resyncs.
+  double max_speed_m_s = 100.0;
+  /// Robust variant: most field samples one march along a segment may take (then bisection).
+  int march_budget = 128;
 };
 
 /// The HRI servo renderer (Figure 2).
 ///
-/// Choices the paper leaves open, and what is done here:
-/// - Plane update period: Figure 2 as printed checks `c >= n` before incrementing,
-///   which recomputes every n+1 ticks; §3.2 says the plane updates at 1/n of the servo
-///   rate ("five times slower" in Table 1). We follow §3.2: c is incremented first, so
-///   with n = 1 the plane is recomputed every tick.
-/// - LinearInterpolation(VHIP, HIP, tau): t = (tau - f(VHIP)) / (f(HIP) - f(VHIP)),
-///   clamped to [0, 1]. The secant and bisection options refine t on the trilinear field
-///   (the two ends bracket tau). When the VHIP is itself inside (embedded, Figure 5b) the
-///   ends do not bracket tau and the linear rule would extrapolate; p is then the surface
-///   point found from the VHIP along its outward normal, searched no farther than twice
-///   the first-order depth plus a quarter voxel (16 bisection steps), else the VHIP.
-/// - SurfaceNormal(p): see NormalSource; negated for InsideIs::kAbove so N points
-///   outward. Where that gradient is zero or not finite: the unit vector from HIP to
-///   VHIP, else the previous normal, else +z.
+/// Two variants (HriParams::variant):
+///
+/// Variant::kPaper is Figure 2 exactly as printed: the counter is checked before it is
+/// incremented (`IF c >= n THEN c = 0 ... ELSE c = c + 1`, so the plane is recomputed
+/// every n+1 ticks); p = LinearInterpolation(VHIP, HIP, tau) (t clamped to [0, 1], and
+/// t = 0 where it is not finite: the only guard added); N = SurfaceNormal(p) from the
+/// configured NormalSource (default: the published gradient samples); the plane is
+/// dropped at an update that finds the HIP outside; no march for thin walls, no search
+/// for the surface from an embedded VHIP, no jump or budget fault; v_d from the backward
+/// difference of the HIP at the nominal period 1/rate; the §3.1 friction and §3.3
+/// shading / recovery options as described below for the paper (recovery only when an
+/// update finds the previous VHIP embedded and the force would rise). Used by Table 1
+/// and `isotouch report` to show what each departure of the robust variant buys.
+///
+/// Common to both:
 /// - Force sign: the paper writes F = K d - B v_d with d = HIP - VHIP, which is the
 ///   force the user exerts on the surface. The force on the device must push the HIP
 ///   back toward the VHIP, so we render F = -K d - B v_d, with v_d the HIP velocity
 ///   component along N (d's rate with the plane held; it has no spike at plane updates).
 ///   The wall only pushes: a net pull (F . N < 0, from damping while withdrawing) is
 ///   clipped to zero. |F| is saturated at force_limit_n keeping its direction.
+/// - SurfaceNormal(p): see NormalSource; negated for InsideIs::kAbove so N points
+///   outward. Where that gradient is zero or not finite: the unit vector from HIP to
+///   VHIP, else the previous normal, else +z.
 /// - Friction (§3.1): the VHIP is held on the plane (the contact point from the tick
 ///   before, re-projected when the plane changes) while the tangential spring force
 ///   K |VHIP - VHIP_free| stays within mu_s K |d_n|; beyond it the VHIP slides, trailing
 ///   the frictionless VHIP_free (eq. 2) at the distance that makes |F_t| = mu_d |F_n|,
-///   and sticks again once that distance is not exceeded. Viscous friction moves the held
-///   VHIP toward VHIP_free by K T / (b_v + K T) of the gap per tick (backward Euler of
-///   b_v dx/dt = K (free - x)), so steady sliding at speed v gives |F_t| = b_v v.
-/// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
-///   previous VHIP with the normal there (same NormalSource) first projects the HIP to a
-///   temporary HIP; the true plane then projects that to the final VHIP. Costs one normal
-///   per tick.
-/// - Recovery time (§3.3, after Mark et al. 1996): when a plane update finds the previous
-///   VHIP embedded (inside the object) and the force magnitude would jump up, the force
-///   keeps the new direction and its magnitude ramps linearly from the previous magnitude
-///   to the new value over recovery_time_s.
-/// - No pop-through (beyond the paper): when both VHIP and HIP are outside but the
-///   segment VHIP -> HIP is longer than half a voxel, or when a plane update finds the
-///   HIP outside again, the segment is marched (half-voxel steps, at most 4096, then
-///   bisection) for a crossing of the isosurface; if it crosses, the HIP went through a
-///   thin wall and the plane is placed at the first crossing instead of being dropped.
+///   and sticks again once that distance is not exceeded. The Coulomb cone is tested on
+///   the held point first; viscous friction then moves the VHIP (only when the cone lets
+///   it move, or when there is no Coulomb friction) toward that target by
+///   K T / (b_v + K T) of the gap per tick (backward Euler of b_v dx/dt = K (x* - x)),
+///   so steady sliding at speed v gives |F_t| = mu_d |F_n| + b_v v.
 /// - Device faults: a non-finite HIP, or one farther than max_reach_m from the volume
 ///   centre, gives zero force and fault = true. After a non-finite HIP the contact state
 ///   is kept; after an absurd one the renderer restarts (VHIP = HIP, no plane) at the
 ///   next sane HIP, so it can neither pull nor march across the world.
+///
+/// Variant::kRobust (the default) departs from Figure 2 as follows, each for a fault a
+/// user would feel (issue 7):
+/// - Update period: c is incremented first, so the plane is recomputed every n ticks as
+///   §3.2 says (n = 1: every tick). It is also recomputed early, on the tick where the
+///   VHIP would move more than half a voxel along the plane from where the plane was
+///   last computed: a stale plane cannot carry the VHIP into the air or into a wall.
+/// - Samples only when the method needs them: while the HIP is behind a held plane and
+///   no update is due, the tick reads no sample (eq. 2 and 3 need none).
+/// - Entry test in front of a held plane: a HIP in front of the plane is not in contact
+///   with it; its value is read and, if it entered an object (or crossed a thin one on
+///   a long step), a new plane is made from the VHIP -> HIP segment at once; otherwise
+///   the plane is dropped. Figure 2 keeps the plane for up to n ticks and feels nothing.
+/// - God-object constraint (Zilles and Salisbury 1995): at an update that finds the HIP
+///   outside but behind the plane, the plane is dropped only when the VHIP is outside
+///   and the segment VHIP -> HIP does not cross the isosurface (the surface curved away).
+///   If the segment enters the object, or the VHIP is embedded, the HIP left through a
+///   far side and the near surface still constrains it: the plane is placed at the first
+///   crossing (or at the surface found from the embedded VHIP).
+/// - Embedded VHIP (Figure 5b): p is the surface point found from the VHIP along its
+///   outward normal, no farther than twice the first-order depth plus a quarter voxel
+///   (16 bisection steps), else the VHIP (the linear rule would extrapolate).
+/// - Thin walls on long steps: when both ends are outside and the segment is longer than
+///   half a voxel, it is marched (half-voxel steps, at most march_budget samples, longer
+///   steps beyond that; then 20 bisection steps) for a first crossing.
+/// - Jumps: while a plane is held, a HIP that moved faster than max_speed_m_s since the
+///   last sane tick is a fault (zero force) and the renderer resyncs at the next tick.
+/// - Velocity: the measured period dt_s (else 1/rate) is used; the backward difference
+///   is filtered by a first-order low-pass (cut-off velocity_cutoff_hz, 0 = unfiltered;
+///   alpha = dt / (dt + 1/(2 pi f_c))), and the estimate restarts at zero after any fault
+///   or resync (time of lost ticks is added to the next dt), so lost ticks give no
+///   damping spike.
+/// - Recovery time (§3.3, after Mark et al. 1996), when recovery_time_s > 0: EVERY plane
+///   creation or update that changes |F| by more than 1 % of the force limit starts a
+///   ramp: |F| goes linearly from the magnitude sent the tick before to the new value
+///   over recovery_time_s, in the new direction (Figure 2 + Mark et al. only ramp an
+///   embedded update upward; a plane made after free ticks then jumps 0 -> K d).
+/// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
+///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
+///   true plane then projects that onto itself, always: the final VHIP lies on the true
+///   plane (the paper's version leaves it at the temporary HIP when that is in front).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params) : params_(params) {}
@@ -143,7 +185,12 @@ class HriRenderer final : public Renderer {
   VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
-  Vec3 constrain(const Vec3& hip, const Vec3& free_vhip);
+  Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
+  HriTick tick_paper(const SampleField& field, const Vec3& hip);
+  HriTick tick_robust(const SampleField& field, const Vec3& hip, double dt_s);
+  /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
+  Vec3 contact_force(const SampleField& field, const Vec3& hip, const Vec3& v_device, double dt,
+                     HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
   static bool long_step(const SampleField& field, const Vec3& a, const Vec3& b);
 
@@ -155,11 +202,17 @@ class HriRenderer final : public Renderer {
   int c_ = 0;
   int recovery_ticks_left_ = 0;
   int recovery_ticks_ = 0;
-  double recovery_from_n_ = 0;
+  double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
+  double prev_target_n_ = 0;    ///< robust: unramped |F| of the tick before [N]
   bool started_ = false;
   bool resync_ = false;
   bool sliding_ = false;
   bool was_contact_ = false;
+  // Robust variant only:
+  Vec3 anchor_;            ///< VHIP where the plane was last computed (world [m])
+  Vec3 v_filt_;            ///< filtered HIP velocity, device [m/s]
+  bool vel_valid_ = false; ///< prev_hip_ is a sane HIP of the tick before
+  double lost_s_ = 0;      ///< time spent in faults since the last sane tick [s]
 };
 
 }  // namespace isotouch::servo

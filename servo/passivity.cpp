@@ -7,7 +7,14 @@ namespace isotouch::servo {
 
 Vec3 PassivityController::step(const Vec3& x, const Vec3& f_env) {
   alpha_ = 0;
-  if (!finite(x) || !finite(f_env)) return {};
+  if (!finite(x) || !finite(f_env)) {
+    // Zero force is sent this tick: the force held over the next period is zero, and the
+    // position of this tick is unknown, so the next sane tick starts the velocity afresh
+    // (it must not charge prev_f_ over a displacement it never acted on).
+    prev_f_ = {};
+    started_ = false;
+    return {};
+  }
   Vec3 v;
   if (started_) {
     // Work done on the environment over the last period by the force that was held.

@@ -56,15 +56,57 @@ std::string gnuplot_quote(const std::string& s) {
   return o + "'";
 }
 
+namespace {
+void replace_all(std::string& s, const std::string& from, const std::string& to) {
+  if (from.empty()) return;
+  for (std::size_t at = s.find(from); at != std::string::npos; at = s.find(from, at + to.size()))
+    s.replace(at, from.size(), to);
+}
+
+/// After every `set terminal` / `set term` line, `set termoption noenhanced`: titles and
+/// keys are printed as written (an underscore is not a subscript).
+std::string with_noenhanced(const std::string& script) {
+  std::string out;
+  std::size_t at = 0;
+  while (at < script.size()) {
+    std::size_t end = script.find('\n', at);
+    const std::string line = script.substr(at, end == std::string::npos ? std::string::npos : end - at);
+    out += line;
+    out += '\n';
+    const std::size_t first = line.find_first_not_of(" \t");
+    if (first != std::string::npos && line.compare(first, 8, "set term") == 0 &&
+        line.compare(first, 14, "set termoption") != 0)
+      out += "set termoption noenhanced\n";
+    if (end == std::string::npos) break;
+    at = end + 1;
+  }
+  return out;
+}
+}  // namespace
+
 std::string draw_with_gnuplot(const std::string& script_path, const std::string& script,
                               const std::vector<std::string>& pngs) {
-  write_file_atomic(script_path, script);
-  const int rc = run_program("gnuplot", script_path);
+  // Two texts of the same script: the saved one names the final PNGs (re-runnable), the
+  // one gnuplot runs now names the temp files, renamed into place only on success.
+  std::string saved = with_noenhanced(script), to_run = saved;
   for (const std::string& png : pngs) {
-    if (rc == 0) std::filesystem::rename(temp_name(png), png);
-    else std::remove(temp_name(png).c_str());
+    replace_all(saved, gnuplot_quote(temp_name(png)), gnuplot_quote(png));
+    replace_all(to_run, gnuplot_quote(png), gnuplot_quote(temp_name(png)));
   }
-  if (rc == 0) return "";
+  write_file_atomic(script_path, saved);
+  const std::string run_path = temp_name(script_path) + "-run";
+  write_file_atomic(run_path, to_run);
+  const int rc = run_program("gnuplot", run_path);
+  std::remove(run_path.c_str());
+  bool renamed = true;
+  for (const std::string& png : pngs) {
+    std::error_code ec;
+    if (rc == 0) std::filesystem::rename(temp_name(png), png, ec);
+    else std::remove(temp_name(png).c_str());
+    if (ec) renamed = false;
+  }
+  if (rc == 0 && renamed) return "";
+  if (rc == 0) return "gnuplot did not write every plot; plots not drawn";
   return rc < 0 ? "gnuplot not found (Debian: gnuplot-nox); plots not drawn"
                 : "gnuplot failed (exit " + std::to_string(rc) + "); plots not drawn";
 }

@@ -19,9 +19,13 @@ std::string temp_name(const std::string& path);
 /// A gnuplot single-quoted string literal (quotes doubled).
 std::string gnuplot_quote(const std::string& s);
 
-/// Write `script` to `script_path` and run gnuplot on it. The script must write each
-/// PNG of `pngs` to temp_name(png); on success they are renamed into place, on failure
-/// removed. Returns "" or why the plots were not drawn.
+/// Draw plots with gnuplot, whole or not at all, and keep a script that can be re-run.
+/// `script` writes each PNG of `pngs` under its final name or under temp_name(png) (both
+/// quoted with gnuplot_quote). Saved to `script_path`: the script naming the final PNGs,
+/// with `set termoption noenhanced` after each `set terminal` (underscores in titles are
+/// printed, not subscripts). Run now: a temp copy (temp_name(script_path) + "-run", removed
+/// afterwards) writing temp_name(png), renamed into place on success, removed on failure.
+/// Returns "" or why the plots were not drawn.
 std::string draw_with_gnuplot(const std::string& script_path, const std::string& script,
                               const std::vector<std::string>& pngs);
 

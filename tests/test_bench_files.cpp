@@ -1,0 +1,81 @@
+// The conclusion line of `bench table1` is computed from the measured rows, and the
+// gnuplot helper keeps a plots script that can be re-run (final PNG names, no enhanced
+// text), writing the plots whole or not at all.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "bench_cmd.h"
+#include "files.h"
+
+using namespace isotouch::app;
+namespace fs = std::filesystem;
+
+TEST(Table1Verdict, CountsTheScenesWhereHriIsNoSlowerThanAvila) {
+  std::vector<Table1Row> rows = {{"sphere", 0.060, 0.070, 0.5, 0.065},
+                                 {"knot", 0.070, 0.080, 0.5, 0.070},   // equal: no slower
+                                 {"head", 0.080, 0.060, 0.5, 0.070},   // slower: ratio 1.14
+                                 {"chest", 0.050, 0.050, 0.5, 0.060}};
+  EXPECT_EQ(table1_verdict(rows),
+            "HRI/Avila <= 1 on 3 of 4 scenes (worst: head 1.14); paper variant (Figure 2 as printed): 2 of 4");
+  rows[2].hri_us = 0.069;
+  EXPECT_EQ(table1_verdict(rows).rfind("HRI/Avila <= 1 on 4 of 4 scenes (worst: knot 1.00)", 0), 0u)
+      << table1_verdict(rows);
+  rows[0].avila_us = 0;  // a failed measurement never counts as met
+  rows[1].hri_us = std::nan("");
+  EXPECT_EQ(table1_verdict(rows).rfind("HRI/Avila <= 1 on 2 of 4 scenes", 0), 0u) << table1_verdict(rows);
+}
+
+namespace {
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+bool have_gnuplot() { return run_program("gnuplot", "--version") == 0; }
+}  // namespace
+
+TEST(Gnuplot, SavedScriptNamesTheFinalPngsAndCanBeRunAgain) {
+  const fs::path dir = fs::temp_directory_path() / ("isotouch-gp-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string data = (dir / "d.csv").string();
+  { std::ofstream(data) << "t,f\n0,1\n1,2\n2,1.5\n"; }
+  const std::string png = (dir / "force_depth.png").string();
+  const std::string gp = (dir / "plots.gp").string();
+  // What run_job writes: the temp name of the PNG, a title with underscores.
+  const std::string script = "set datafile separator ','\nset terminal pngcairo size 300,200\nset output " +
+                             gnuplot_quote(temp_name(png)) + "\nset title " + gnuplot_quote("max_force_step_n") +
+                             "\nplot " + gnuplot_quote(data) + " every ::1 using 1:2 with lines title 'f_n'\n";
+  const std::string why = draw_with_gnuplot(gp, script, {png});
+
+  const std::string saved = slurp(gp);
+  EXPECT_NE(saved.find("set output " + gnuplot_quote(png) + "\n"), std::string::npos) << saved;
+  EXPECT_EQ(saved.find(".tmp-"), std::string::npos) << "the saved script names a temp file:\n" << saved;
+  EXPECT_NE(saved.find("set terminal pngcairo size 300,200\nset termoption noenhanced\n"), std::string::npos)
+      << "underscores in titles would become subscripts:\n" << saved;
+  EXPECT_FALSE(fs::exists(temp_name(png)));
+  EXPECT_FALSE(fs::exists(temp_name(gp) + "-run")) << "the run copy was left behind";
+  if (!have_gnuplot()) {
+    fs::remove_all(dir);
+    GTEST_SKIP() << "gnuplot is not installed: the script text is checked, not run (" << why << ")";
+  }
+  ASSERT_EQ(why, "");
+  ASSERT_TRUE(fs::exists(png));
+  // Re-run the saved script as a user would: it writes the final PNG again.
+  fs::remove(png);
+  EXPECT_EQ(run_program("gnuplot", gp), 0);
+  EXPECT_TRUE(fs::exists(png) && fs::file_size(png) > 0) << "re-running plots.gp wrote no " << png;
+
+  // A script that fails: no PNG appears, no temp file stays.
+  fs::remove(png);
+  EXPECT_NE(draw_with_gnuplot(gp, script + "this is not gnuplot\n", {png}), "");
+  EXPECT_FALSE(fs::exists(png));
+  EXPECT_FALSE(fs::exists(temp_name(png)));
+  fs::remove_all(dir);
+}

@@ -239,6 +239,19 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
   s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
   s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);
+  {
+    // The simulated device raises its substeps to integrate stably (sim_device.h); past
+    // 10000 per servo period the device is too light for its hand to simulate.
+    const double dt = 1.0 / s.hri.rate_hz;
+    if (servo::min_stable_substeps(s.device, dt) > 10000) {
+      std::ostringstream e;
+      e << "must be at least " << servo::min_stable_mass_kg(s.device, dt, 10000)
+        << " kg to simulate stably with the hand (" << s.device.hand_stiffness_n_per_m << " N/m, "
+        << s.device.hand_damping_n_s_per_m << " N s/m) in at most 10000 substeps per " << dt * 1e3
+        << " ms servo period, got " << dv.at("mass_kg").dump();
+      r.fail("device.mass_kg", e.str());
+    }
+  }
   s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
   s.hri.world_per_device = s.workspace_scale;
 

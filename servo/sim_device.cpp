@@ -21,8 +21,34 @@ void SimDevice::command_force(const Vec3& f) {
   if (saturate(f_cmd_, p_.force_max_n)) ++saturated_;
 }
 
+int min_stable_substeps(const SimDeviceParams& p, double dt) {
+  const double m = p.mass_kg, k = p.hand_stiffness_n_per_m;
+  const double c = p.hand_damping_n_s_per_m + p.damping_n_s_per_m;
+  if (!(m > 0 && std::isfinite(m) && dt > 0 && std::isfinite(dt) && k >= 0 && c >= 0 && std::isfinite(k) &&
+        std::isfinite(c)))
+    return kMaxSubsteps + 1;
+  // Largest h with (k h^2 + 2 c h) / m <= 2: the positive root of k h^2 + 2 c h - 2 m,
+  // written 2m / (c + sqrt(c^2 + 2km)) (no cancellation when c^2 >> km; m/c when k = 0).
+  if (k == 0 && c == 0) return 1;  // free mass: any h
+  const double h_max = 2.0 * m / (c + std::sqrt(c * c + 2.0 * k * m));
+  if (!(h_max > 0)) return kMaxSubsteps + 1;
+  const double n = std::ceil(dt / h_max);
+  return n > double(kMaxSubsteps) ? kMaxSubsteps + 1 : std::max(1, int(n));
+}
+
+double min_stable_mass_kg(const SimDeviceParams& p, double dt, int substeps) {
+  const double h = dt / std::max(1, substeps);
+  const double c = p.hand_damping_n_s_per_m + p.damping_n_s_per_m;
+  return 0.5 * (p.hand_stiffness_n_per_m * h * h + 2.0 * c * h);
+}
+
 void SimDevice::step(double dt, const Vec3& target, const Vec3& target_v) {
-  const int steps = std::max(1, p_.substeps);
+  if (dt != cached_dt_) {  // one sqrt per new period length, none per tick
+    cached_dt_ = dt;
+    cached_steps_ = std::min(kMaxSubsteps, std::max({1, p_.substeps, min_stable_substeps(p_, dt)}));
+  }
+  const int steps = cached_steps_;
+  substeps_used_ = steps;
   const double h = dt / steps;
   const double fc = p_.coulomb_friction_n;
   for (int i = 0; i < steps; ++i) {

@@ -5,7 +5,9 @@
 // Coulomb friction, moved by the operator's hand (a spring-damper toward a scripted
 // target) and by the rendered force, which the device clips at its force limit and holds
 // over each servo period (zero-order hold). Motion is integrated with semi-implicit Euler
-// in `substeps` steps per servo period (>= 20 by default).
+// in `substeps` steps per servo period (>= 20 by default), raised automatically to the
+// fewest that integrate stably (min_stable_substeps): a light mass on a stiff, damped
+// hand otherwise diverges to NaN.
 #pragma once
 #include "vec3.h"
 
@@ -22,6 +24,23 @@ struct SimDeviceParams {
   double hand_damping_n_s_per_m = 5;     ///< operator hand damper [N s/m]
   int substeps = 20;                     ///< integration steps per servo period
 };
+
+/// Most substeps per servo period step() will use (bounds its cost).
+inline constexpr int kMaxSubsteps = 100000;
+
+/// Fewest semi-implicit Euler substeps per period dt_s [s] that integrate the device
+/// stably, with a factor-2 margin. Within a substep h the forces acting on the mass m
+/// are the hand spring k = hand_stiffness and the dampers c = hand_damping + damping
+/// (the rendered force is held over the period, so the servo's K and B do not enter).
+/// For x'' = -(c x' + k x)/m the update v+ = v + h F/m, x+ = x + h v+ has the
+/// characteristic polynomial z^2 - (2 - a - b) z + (1 - b), a = h^2 k/m, b = h c/m;
+/// by Jury's test it is stable iff b < 2 and a + 2b < 4. We require a + 2b <= 2.
+/// Returns kMaxSubsteps + 1 when even kMaxSubsteps are too few (or inputs are not
+/// positive and finite).
+int min_stable_substeps(const SimDeviceParams& p, double dt_s);
+
+/// Smallest mass [kg] that min_stable_substeps integrates within `substeps` per dt_s.
+double min_stable_mass_kg(const SimDeviceParams& p, double dt_s, int substeps);
 
 /// Point-mass device. Energies are tracked for passivity measurements.
 class SimDevice {
@@ -44,7 +63,8 @@ class SimDevice {
   const Vec3& applied_force() const { return f_cmd_; }
 
   /// Advance by dt [s] with the hand pulling toward `hand_target_m` (device [m]),
-  /// which moves with velocity `hand_target_v` [m/s].
+  /// which moves with velocity `hand_target_v` [m/s]. Uses
+  /// max(params.substeps, min_stable_substeps(params, dt)) substeps, at most kMaxSubsteps.
   void step(double dt, const Vec3& hand_target_m, const Vec3& hand_target_v);
 
   /// Force the hand applies at the current state [N].
@@ -61,6 +81,8 @@ class SimDevice {
   long refused_commands() const { return refused_; }
   long saturated_commands() const { return saturated_; }
   const SimDeviceParams& params() const { return p_; }
+  /// Substeps the last step() used (0 before the first).
+  int substeps_used() const { return substeps_used_; }
 
  private:
   SimDeviceParams p_;
@@ -71,6 +93,9 @@ class SimDevice {
   double damping_loss_ = 0;
   long refused_ = 0;
   long saturated_ = 0;
+  int substeps_used_ = 0;
+  double cached_dt_ = -1;
+  int cached_steps_ = 0;
 };
 
 }  // namespace isotouch::servo

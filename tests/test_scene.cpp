@@ -100,3 +100,10 @@ TEST(Scene, RayOriginFracRange) {
   EXPECT_NO_THROW(parse_scene(
       R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_origin_frac": [-2, 3, 0.5]}})", "ok.json"));
 }
+
+TEST(Scene, DeviceTooLightToSimulate) {
+  // 1e-4 kg is simulated (the device raises its substeps); 1e-9 kg would need > 10000.
+  EXPECT_NO_THROW(parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "device": {"mass_kg": 1e-4}})", "ok.json"));
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "device": {"mass_kg": 1e-9}})",
+               {"'device.mass_kg'", "1e-09", "at least"});
+}

@@ -1,7 +1,9 @@
 // Simulated device, touch script and the headless loop.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <memory>
 
 #include "headless.h"
 #include "sampling.h"
@@ -167,4 +169,117 @@ TEST(SimDevice, EnergyBookkeepingOfAConstantForce) {
   // Work = F x = kinetic energy for a free mass.
   EXPECT_NEAR(d.rendered_work_j(), 1.0 * d.true_position().x, 1e-12);
   EXPECT_NEAR(d.rendered_work_j(), 0.5 * p.mass_kg * d.velocity().x * d.velocity().x, 1e-3 * d.rendered_work_j());  // Euler: (N+1)/N
+}
+
+// ---- issue 7: a device too light for its substeps diverged to NaN --------------------------
+TEST(SimDevice, MinStableSubstepsMatchesTheJuryBound) {
+  SimDeviceParams p;
+  p.mass_kg = 1e-4;  // hand 300 N/m, 5 + 0.01 N s/m
+  const double dt = 1e-3;
+  const int n = min_stable_substeps(p, dt);
+  // Independent check of the bound: h = dt / n satisfies a + 2b <= 2, h' = dt / (n - 1) not.
+  auto ab = [&](int steps) {
+    const double h = dt / steps;
+    return h * h * p.hand_stiffness_n_per_m / p.mass_kg + 2 * h * (p.hand_damping_n_s_per_m + p.damping_n_s_per_m) / p.mass_kg;
+  };
+  EXPECT_LE(ab(n), 2.0);
+  EXPECT_GT(ab(n - 1), 2.0);
+  EXPECT_EQ(n, 51);
+  EXPECT_EQ(min_stable_substeps(SimDeviceParams{}, dt), 1);  // the default device: 20 are plenty
+  EXPECT_NEAR(min_stable_mass_kg(p, dt, n), 0.5 * (300 * 1e-3 / n * 1e-3 / n + 2 * 5.01 * 1e-3 / n), 1e-15);
+}
+
+TEST(SimDevice, LightDeviceStaysFinite) {
+  // With the old fixed 20 substeps, h c / m = 2.5 > 2: the velocity flips sign and grows
+  // every substep. Now the device raises its substeps and settles on the target.
+  SimDeviceParams p;
+  p.mass_kg = 1e-4;
+  SimDevice d(p, {0, 0, 0});
+  for (int k = 0; k < 2000; ++k) d.step(1e-3, {0.01, 0, 0}, {});
+  EXPECT_EQ(d.substeps_used(), 51);
+  ASSERT_TRUE(finite(d.position()));
+  EXPECT_NEAR(d.position().x, 0.01, 1e-6);
+}
+
+TEST(Headless, LightDeviceHasNoFaults) {
+  // The issue's run: mass 1e-4 kg, 3311 of 3411 ticks were faults. Same loop on a sphere.
+  const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
+  HriParams h;
+  h.tau = 0;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.stroke_length_m = 0.010;
+  TripleBuffer<SampleField> tb;
+  tb.publish(field);
+  const TouchScript s = make_touch_script(*field, h, sp);
+  WorkspaceTransform xf;
+  Vec3 p0, v0;
+  s.at(0, p0, v0);
+  SimDeviceParams dp;
+  dp.mass_kg = 1e-4;
+  SimDevice d(dp, xf.to_device(p0));
+  HriRenderer r(h);
+  const auto trace = run_headless(tb, r, d, xf, s, 1000.0);
+  long faults = 0, contact = 0;
+  for (const auto& row : trace) {
+    faults += row.fault;
+    contact += row.contact;
+    ASSERT_TRUE(finite(row.force_n));
+  }
+  EXPECT_EQ(faults, 0);
+  EXPECT_GT(contact, 300);
+}
+
+// ---- issue 7: the script's march is bounded whatever the grid or the ray --------------------
+TEST(Script, MarchIsBoundedOnAbsurdGrids) {
+  // A grid 1e300 m wide along x and 1 mm along y, z: the old march took 1e303 steps.
+  SampleField f = sphere_field(0.015);
+  f.grid.spacing_m = {1e298, 1e-3, 1e-3};
+  HriParams h;
+  h.tau = 1e9;  // no isosurface: the march runs to the end
+  ScriptParams sp;
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_THROW(make_touch_script(f, h, sp), std::runtime_error);
+  // Along the huge axis: the box itself is 5e299 m long; the step budget bounds it.
+  sp.ray_origin_frac = {-1, 0.5, 0.5};
+  sp.ray_direction = {1, 0, 0};
+  EXPECT_THROW(make_touch_script(f, h, sp), std::runtime_error);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(s, 2.0);
+}
+
+TEST(Script, RayOriginFarAwayIsRejectedOrFast) {
+  const SampleField f = sphere_field(0.015);
+  HriParams h;
+  h.tau = 0;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, -1e6};
+  try {
+    make_touch_script(f, h, sp);
+    FAIL() << "accepted ray_origin_frac z = -1e6";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("ray_origin_frac"), std::string::npos) << e.what();
+  }
+  // Within the accepted range, a far start marches only inside the box: still fast.
+  sp.ray_origin_frac = {0.5, 0.5, 3.0};
+  const auto t0 = std::chrono::steady_clock::now();
+  const TouchScript s = make_touch_script(f, h, sp);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
+  EXPECT_NEAR(norm(s.contact_point_m - f.grid.centre_m()), 0.015, 5e-5);
+}
+
+TEST(Script, MessagesAreInMillimetres) {
+  const SampleField f = sphere_field(0.015);
+  HriParams h;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.ray_direction = {0, 0, 1};
+  try {
+    make_touch_script(f, h, sp);
+    FAIL();
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("(23.5, 23.5, 61.1) mm"), std::string::npos) << m;  // 47 mm * (0.5, 0.5, 1.3)
+    EXPECT_EQ(m.find(") m "), std::string::npos) << m;
+  }
 }

@@ -215,7 +215,9 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   else if (normal == "exact") s.hri.normal = servo::NormalSource::kTrilinearExact;
   else r.fail("servo.normal", "must be \"samples\", \"central\" (the paper) or \"exact\", got \"" + normal + "\"");
   s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
-  s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s", 0.0, 0, 10);
+  // Default 20 ms (robust variant): every force step a plane update causes is ramped (issue 7).
+  s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",
+                                   s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
   if (sv.contains("friction")) {
     const json& fr = sv.at("friction");
     r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});

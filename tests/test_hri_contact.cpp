@@ -1,0 +1,340 @@
+// HRI robust variant: contact faults of issue 7 on analytic fields (servo only).
+// Truth comes from the analytic shapes (exact plate / shell / cylinder geometry), never
+// from the renderer. Each test names the fault it guards; Variant::kPaper (Figure 2 as
+// printed) is run where it shows the fault the robust variant removes.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <limits>
+#include <random>
+
+#include "analytic_fields.h"
+#include "hri.h"
+#include "passivity.h"
+#include "sampling.h"
+
+using namespace isotouch::servo;
+
+namespace {
+
+// Field of `dims`^3 voxels of 1 mm from an analytic value [mm] and gradient [mm/m]
+// (positive inside, InsideIs::kAbove, tau = 0).
+SampleField make_field(int dims, const std::function<double(const Vec3&)>& value,
+                       const std::function<Vec3(const Vec3&)>& grad) {
+  SampleField f;
+  f.grid.dims = {dims, dims, dims};
+  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.samples.resize(f.grid.voxel_count());
+  for (int z = 0; z < dims; ++z)
+    for (int y = 0; y < dims; ++y)
+      for (int x = 0; x < dims; ++x) {
+        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
+        const Vec3 g = grad(p);
+        f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
+      }
+  return f;
+}
+
+// A plate of thickness w [m] through c with unit normal m: inside where |m.(x-c)| < w/2.
+SampleField plate(Vec3 m, Vec3 c, double w, int dims = 40) {
+  return make_field(
+      dims, [=](const Vec3& x) { return 1000.0 * (0.5 * w - std::abs(dot(m, x - c))); },
+      [=](const Vec3& x) { return m * (dot(m, x - c) >= 0 ? -1000.0 : 1000.0); });
+}
+
+HriParams robust(int n, double k = 200.0) {
+  HriParams p;
+  p.tau = 0;
+  p.stiffness_n_per_m = k;
+  p.damping_n_s_per_m = 0;
+  p.plane_update_period = n;
+  p.force_limit_n = 3.3;
+  return p;
+}
+
+Vec3 unit(Vec3 v) { return v / norm(v); }
+
+// A tangent basis (u, w) of the unit normal m.
+void basis(const Vec3& m, Vec3& u, Vec3& w) {
+  const Vec3 a = std::abs(m.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+  u = unit(a - m * dot(a, m));
+  w = Vec3{m.y * u.z - m.z * u.y, m.z * u.x - m.x * u.z, m.x * u.y - m.y * u.x};
+}
+
+struct PropertyResult {
+  long contact_ticks = 0;
+  long vhip_off = 0;   // VHIP more than tol inside the near surface
+  long zero_force = 0; // HIP behind the near surface after touching it, yet |F| = 0
+  double worst_m = 0;  // deepest VHIP below the near surface [m]
+};
+
+// Random strokes against plates 1-4 voxels thick in several orientations: the hand
+// target is beyond the far side; the force stays below the limit (K (w + 4 mm) < 3.3 N).
+PropertyResult plate_property(Variant var, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  PropertyResult res;
+  const Vec3 c{0.020, 0.020, 0.020};
+  for (int run = 0; run < 48; ++run) {
+    const Vec3 m = unit(Vec3{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    const double w = 1e-3 * (1 + run % 4);  // 1..4 voxels
+    const SampleField f = plate(m, c, w);
+    const int n = std::array<int, 4>{1, 5, 10, 25}[std::size_t(run / 4) % 4];
+    HriParams p = robust(n);
+    p.variant = var;
+    p.intersection = Intersection::kSecant;  // p on the trilinear surface, not a chord
+    HriRenderer r(p);
+    Vec3 ta, tb;
+    basis(m, ta, tb);
+    const double beyond = 1e-3 * (1 + 3 * u(rng));  // target this far past the far face
+    const Vec3 start = c + m * (0.5 * w + 0.003);
+    const Vec3 target = c - m * (0.5 * w + beyond);
+    const Vec3 drift = (ta * (u(rng) - 0.5) + tb * (u(rng) - 0.5)) * 0.1;  // up to 0.07 m/s sideways
+    const double speed = 0.01 + 0.03 * u(rng);                             // m/s toward the target
+    bool touched = false;
+    for (int k = 0; k < 1500; ++k) {
+      const double t = k * 1e-3;
+      const double along = std::min(speed * t, norm(target - start));
+      const Vec3 hip = start + unit(target - start) * along + drift * std::min(t, 0.1);
+      const HriTick out = r.tick(f, hip);
+      const double h_near = dot(m, hip - c) - 0.5 * w;        // < 0: behind the near face
+      // The VHIP must stay on the near half and not inside the surface the servo sees
+      // (the trilinear isosurface of the samples: near a 1-2 voxel plate it is not the
+      // analytic face). Depth below it from the field value [mm] -> [m].
+      const double v_near = dot(m, out.vhip_m - c) < 0 ? -1.0 : -1e-3 * std::max(0.0, sample_value(f, out.vhip_m));
+      if (out.contact) touched = true;
+      if (!touched) continue;
+      ++res.contact_ticks;
+      if (v_near < -5e-5) {  // 0.05 voxel: a tangent plane held over the curved trilinear surface
+        ++res.vhip_off;
+        res.worst_m = std::max(res.worst_m, -v_near);
+      }
+      if (h_near < -1e-5 && !(norm(out.force_n) > 0)) ++res.zero_force;
+    }
+  }
+  return res;
+}
+
+}  // namespace
+
+// Fault 1: pop-through of thin structures (god-object guarantee, Zilles and Salisbury).
+TEST(HriContact, ThinPlatesNeverPopThrough) {
+  const PropertyResult robust_res = plate_property(Variant::kRobust, 7);
+  const PropertyResult paper_res = plate_property(Variant::kPaper, 7);
+  std::printf("plates 1-4 voxels, 48 strokes: robust: %ld contact ticks, VHIP inside the near surface or past the mid-plane %ld "
+              "(worst %.4f mm), zero force behind it %ld; paper: %ld, %ld (worst %.3f mm), %ld\n",
+              robust_res.contact_ticks, robust_res.vhip_off, robust_res.worst_m * 1e3, robust_res.zero_force,
+              paper_res.contact_ticks, paper_res.vhip_off, paper_res.worst_m * 1e3, paper_res.zero_force);
+  EXPECT_GT(robust_res.contact_ticks, 20000);
+  EXPECT_EQ(robust_res.vhip_off, 0);
+  EXPECT_EQ(robust_res.zero_force, 0);
+  EXPECT_GT(paper_res.zero_force + paper_res.vhip_off, 0);  // the fault exists as printed
+}
+
+// Fault 1 on a curved thin structure: a spherical shell 1-4 voxels thick, the hand
+// target inside the hollow, drifting sideways.
+TEST(HriContact, ThinShellsNeverPopThrough) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const Vec3 c{0.032, 0.032, 0.032};
+  const double r0 = 0.020;
+  long contact = 0, off = 0, zero = 0;
+  double worst = 0;
+  for (int run = 0; run < 24; ++run) {
+    const double w = 1e-3 * (1 + run % 4);
+    const SampleField f = shell_field(c, r0, w, 64);
+    const double outer = r0 + 0.5 * w;
+    HriParams p = robust(std::array<int, 3>{1, 5, 25}[std::size_t(run) % 3]);
+    p.intersection = Intersection::kSecant;
+    HriRenderer r(p);
+    const Vec3 dir = unit(Vec3{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    Vec3 ta, tb;
+    basis(dir, ta, tb);
+    const Vec3 start = c + dir * (outer + 0.003);
+    const Vec3 target = c + dir * (r0 - 0.5 * w - 1e-3 * (1 + 3 * u(rng)));
+    const Vec3 drift = (ta * (u(rng) - 0.5) + tb * (u(rng) - 0.5)) * 0.1;
+    bool touched = false;
+    for (int k = 0; k < 1500; ++k) {
+      const double t = k * 1e-3;
+      const double along = std::min(0.02 * t, norm(target - start));
+      const Vec3 hip = start + unit(target - start) * along + drift * std::min(t, 0.1);
+      const HriTick out = r.tick(f, hip);
+      if (out.contact) touched = true;
+      if (!touched) continue;
+      ++contact;
+      const double v_out = norm(out.vhip_m - c) < r0 ? -1.0 : -1e-3 * std::max(0.0, sample_value(f, out.vhip_m));
+      if (v_out < -5e-5) {  // 0.05 voxel
+        ++off;
+        worst = std::max(worst, -v_out);
+      }
+      if (norm(hip - c) < outer - 1e-5 && !(norm(out.force_n) > 0)) ++zero;
+    }
+  }
+  std::printf("shells 1-4 voxels, 24 strokes: %ld contact ticks, VHIP > 0.05 mm inside %ld (worst %.4f mm), "
+              "zero force behind the outer surface %ld\n", contact, off, worst * 1e3, zero);
+  EXPECT_GT(contact, 10000);
+  EXPECT_EQ(off, 0);
+  EXPECT_EQ(zero, 0);
+}
+
+// Fault 2: a held plane must not hide another surface. Lift 2.5 mm off a floor and
+// sweep through a 1 mm plate standing on it, with n = 25.
+TEST(HriContact, HeldPlaneDoesNotHideAThinPlate) {
+  const SampleField f = make_field(
+      40,
+      [](const Vec3& x) {
+        const double floor = 1000 * (0.010 - x.z), wall = 1000 * (0.0005 - std::abs(x.x - 0.020));
+        return std::max(floor, wall);
+      },
+      [](const Vec3& x) {
+        const double floor = 1000 * (0.010 - x.z), wall = 1000 * (0.0005 - std::abs(x.x - 0.020));
+        return floor > wall ? Vec3{0, 0, -1000} : Vec3{x.x > 0.020 ? -1000.0 : 1000.0, 0, 0};
+      });
+  auto felt = [&](Variant var) {
+    HriParams p = robust(25, 500);
+    p.variant = var;
+    HriRenderer r(p);
+    r.tick(f, {0.012, 0.020, 0.011});
+    for (int k = 0; k < 2; ++k) r.tick(f, {0.012, 0.020, 0.0095});  // on the floor
+    double fx = 0;
+    for (int k = 0; k < 30; ++k) {  // lift to 2.5 mm, sweep +x at 0.4 m/s into the plate
+      const HriTick t = r.tick(f, {0.012 + 4e-4 * k, 0.020, 0.0125});
+      if (t.contact) fx = std::min(fx, t.force_n.x);
+    }
+    return fx;
+  };
+  const double robust_fx = felt(Variant::kRobust), paper_fx = felt(Variant::kPaper);
+  std::printf("1 mm plate after lifting off the floor, n = 25: F_x robust %.3f N, paper %.3f N\n", robust_fx, paper_fx);
+  EXPECT_LT(robust_fx, -0.2);  // pushed back -x: the plate is felt
+  EXPECT_EQ(paper_fx, 0.0);    // Figure 2 as printed: never felt
+}
+
+// Fault 5: no damping spike after lost ticks; the measured dt drives the velocity.
+TEST(HriContact, NoDampingSpikeAfterLostTicks) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  HriParams p = robust(5, 800);
+  p.damping_n_s_per_m = 1.0;
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.0105});
+  for (int k = 0; k < 20; ++k) r.tick(f, {0.016, 0.016, 0.010 - 0.000375});  // held: spring 0.30 N
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (int k = 0; k < 50; ++k) EXPECT_TRUE(r.tick(f, {nan, 0, 0}).fault);
+  // The hand moved 1 mm sideways while the ticks were lost (20 mm/s).
+  const HriTick t = r.tick(f, {0.017, 0.016, 0.010 - 0.000375});
+  EXPECT_TRUE(t.contact);
+  EXPECT_NEAR(norm(t.force_n), 0.30, 1e-6) << "the spring alone; the old servo gave 1.30 N";
+  // Measured period: 10 um per 0.5 ms tick = 20 mm/s into the wall: B v = 0.02 N more.
+  HriRenderer r2(p);
+  r2.tick(f, {0.016, 0.016, 0.0105}, 5e-4);
+  HriTick u;
+  for (int k = 0; k < 40; ++k) u = r2.tick(f, {0.016, 0.016, 0.0100 - 1e-5 * k}, 5e-4);
+  EXPECT_NEAR(u.force_n.z, 800 * 39e-5 + 1.0 * 0.02, 1e-6);
+}
+
+// Fault 6: Coulomb friction holds the VHIP even when viscous friction is set.
+TEST(HriContact, CoulombConeHoldsWithViscousFriction) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  HriParams p = robust(1, 500);
+  p.friction.mu_s = 0.5;
+  p.friction.mu_d = 0.3;
+  p.friction.viscous_n_s_per_m = 20;
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.011});
+  r.tick(f, {0.016, 0.016, 0.009});  // 1 mm deep: F_n = 0.5 N, cone 0.25 N
+  for (int k = 0; k < 50; ++k) {     // 0.3 mm aside: K dx = 0.15 N < 0.25 N
+    const HriTick t = r.tick(f, {0.0163, 0.016, 0.009});
+    EXPECT_NEAR(t.vhip_m.x, 0.016, 1e-12) << "tick " << k;
+    EXPECT_NEAR(t.force_n.x, -0.15, 1e-9);
+  }
+  EXPECT_FALSE(r.sliding());
+}
+
+// Fault 7: with force shading the final VHIP lies on the true plane and the sphere.
+TEST(HriContact, ForceShadingKeepsTheVhipOnThePlane) {
+  const Vec3 c{0.024, 0.024, 0.024};
+  const SampleField f = sphere_field(c, 0.015);
+  auto run = [&](Variant var, double* off_plane, double* off_sphere) {
+    HriParams p = robust(10, 500);
+    p.variant = var;
+    p.force_shading = true;
+    HriRenderer r(p);
+    r.tick(f, c + Vec3{0, 0, 0.017});
+    *off_plane = *off_sphere = 0;
+    for (int k = 0; k < 2000; ++k) {
+      const double a = 1.2 * k / 2000.0;
+      const double rad = 0.0145 + 0.0003 * std::sin(k * 0.05);  // pressing and easing
+      const HriTick t = r.tick(f, c + Vec3{std::sin(a), 0.2 * std::sin(3 * a), std::cos(a)} * rad);
+      if (!t.contact) continue;
+      *off_plane = std::max(*off_plane, std::abs(dot(t.plane.n, t.vhip_m - t.plane.p)));
+      *off_sphere = std::max(*off_sphere, std::abs(norm(t.vhip_m - c) - 0.015));
+    }
+  };
+  double rp = 0, rs = 0, pp = 0, ps = 0;
+  run(Variant::kRobust, &rp, &rs);
+  run(Variant::kPaper, &pp, &ps);
+  std::printf("force shading on a sphere: VHIP off the plane %.2e / off the sphere %.4f mm (robust), "
+              "%.2e / %.4f mm (paper)\n", rp, rs * 1e3, pp, ps * 1e3);
+  EXPECT_LT(rp, 1e-12);
+  EXPECT_LT(rs, 0.1e-3);
+  EXPECT_GT(pp, 1e-6);  // the paper's rule leaves it off the plane
+}
+
+// Fault 8: a thin branch stroked at 0.5 m/s: no force once the probe has left it.
+TEST(HriContact, StalePlaneDoesNotCarryTheVhipIntoTheAir) {
+  // A cylinder of radius 1.5 mm along y through (20, *, 20) mm.
+  const double rc = 0.0015;
+  const SampleField f = make_field(
+      40, [=](const Vec3& x) { return 1000 * (rc - std::hypot(x.x - 0.020, x.z - 0.020)); },
+      [=](const Vec3& x) {
+        const double d = std::hypot(x.x - 0.020, x.z - 0.020);
+        return d > 0 ? Vec3{x.x - 0.020, 0, x.z - 0.020} * (-1000 / d) : Vec3{};
+      });
+  auto run = [&](Variant var) {
+    HriParams p = robust(25, 800);
+    p.variant = var;
+    HriRenderer r(p);
+    r.tick(f, {0.020, 0.020, 0.0225});
+    for (int k = 0; k < 10; ++k) r.tick(f, {0.020, 0.020, 0.020 + rc - 5e-4 * (k + 1) / 10});
+    double fmax_out = 0;
+    for (int k = 0; k < 40; ++k) {  // stroke +x at 0.5 m/s, 0.5 mm below the top
+      const Vec3 hip{0.020 + 5e-4 * k, 0.020, 0.020 + rc - 5e-4};
+      const HriTick t = r.tick(f, hip);
+      if (std::hypot(hip.x - 0.020, hip.z - 0.020) > rc + 2e-4) fmax_out = std::max(fmax_out, norm(t.force_n));
+    }
+    return fmax_out;
+  };
+  const double robust_f = run(Variant::kRobust), paper_f = run(Variant::kPaper);
+  std::printf("thin branch at 0.5 m/s, n = 25: largest force after leaving it: robust %.3f N, paper %.3f N\n",
+              robust_f, paper_f);
+  EXPECT_LT(robust_f, 0.05);
+  EXPECT_GT(paper_f, 0.2);
+}
+
+// Fault 9: an implausible jump while in contact is a fault and resyncs; a long free
+// jump marches within the budget.
+TEST(HriContact, JumpInContactIsAFault) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  HriRenderer r(robust(5, 500));
+  r.tick(f, {0.016, 0.016, 0.011});
+  EXPECT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
+  const HriTick j = r.tick(f, {0.016, 0.016 + 4.0, 0.009});  // 4 m in 1 ms
+  EXPECT_TRUE(j.fault);
+  EXPECT_EQ(norm(j.force_n), 0.0);
+  const HriTick back = r.tick(f, {0.016, 0.016, 0.009});  // resynced: starts inside, no force
+  EXPECT_FALSE(back.fault);
+  EXPECT_FALSE(back.contact);
+}
+
+// Fault 10: the passivity observer charges no force for a tick that sent none.
+TEST(Passivity, BadInputChargesNothing) {
+  PassivityController pc(1e-3, false, 10.0, 10.0);
+  pc.step({0, 0, 0}, {1, 0, 0});
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(norm(pc.step({nan, 0, 0}, {1, 0, 0})), 0.0);
+  pc.step({0.001, 0, 0}, {1, 0, 0});  // the device moved 1 mm while no force was sent
+  EXPECT_EQ(pc.observed_energy_j(), 0.0);
+  pc.step({0.002, 0, 0}, {1, 0, 0});  // now 1 N was held over 1 mm: -1 mJ
+  EXPECT_NEAR(pc.observed_energy_j(), -1e-3, 1e-15);
+}

@@ -407,16 +407,27 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
       const Vec3 proj = hip + plane_.n * dot(plane_.n, plane_.p - hip);
       if (++c_ >= params_.plane_update_period || norm(proj - anchor_) > 0.5 * voxel) {
         c_ = 0;
-        const double f_vhip = sample_value(field, vhip_);
+        const Vec3 old_n = plane_.n;
+        // Start just in front of the VHIP (it may sit a hair inside the near surface).
+        const Vec3 a = vhip_ + old_n * (0.1 * voxel);
+        const double f_a = sample_value(field, a);
         Vec3 p;
-        if (hip_excess() > 0.0 || excess(f_vhip) > 0.0) {
-          // HIP inside, or the VHIP embedded in the near wall (the HIP left through a
-          // far side): the near surface constrains it.
-          set_plane(compute_plane(field, f_vhip, f_hip, hip));
-        } else if (first_crossing(field, vhip_, hip, p)) {
-          set_plane(plane_at(field, p, hip));  // the HIP is beyond a wall it went through
+        if (excess(f_a) > 0.0) {
+          // The VHIP is embedded (Figure 5b): the surface is searched from it.
+          set_plane(compute_plane(field, sample_value(field, vhip_), hip_excess() > 0.0 ? f_hip : f_a, hip));
+        } else if (hip_excess() > 0.0) {
+          set_plane(compute_plane(field, sample_value(field, vhip_), f_hip, hip));
+        } else if (first_crossing(field, a, hip, p)) {
+          // The HIP is outside beyond a wall it went through: the near surface holds it.
+          set_plane(plane_at(field, p, hip));
         } else {
           plane_.valid = false;  // the surface curved away: the HIP is really outside
+        }
+        // In contact the outward normal cannot turn by more than 90 degrees in one update;
+        // a flipped one comes from the far side of a wall thinner than the gradient stencil.
+        if (plane_.valid && dot(plane_.n, old_n) < 0.0) {
+          plane_.n = old_n;
+          anchor_ = hip + old_n * dot(old_n, plane_.p - hip);
         }
       }
     }

@@ -14,6 +14,7 @@ PACKAGES=(
   libinsighttoolkit5-dev libteem-dev
   nlohmann-json3-dev libcli11-dev libgtest-dev
   gnuplot-nox
+  libopenvdb-dev libboost-iostreams-dev libtbb-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -18,6 +18,7 @@
 #include "sampling.h"
 #include "synthetic.h"
 #include "shapes.h"
+#include "surface_distance.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -40,16 +41,20 @@ std::string fmt(double v, int prec = 6) {
   return s.str();
 }
 
-std::string trace_csv(const std::vector<servo::TraceRow>& trace) {
+// One row per tick; points and forces in the volume's physical frame
+// (world = origin + D (spacing * index)), not the grid frame the servo works in.
+std::string trace_csv(const std::vector<servo::TraceRow>& trace, const engine::Volume& vol) {
   std::ostringstream s;
   s << "t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,"
        "plane_update,tick_ns\n";
   s << std::setprecision(9);
-  for (const auto& r : trace)
-    s << r.t_s << ',' << r.hip_m.x << ',' << r.hip_m.y << ',' << r.hip_m.z << ',' << r.vhip_m.x
-      << ',' << r.vhip_m.y << ',' << r.vhip_m.z << ',' << r.force_n.x << ',' << r.force_n.y << ','
-      << r.force_n.z << ',' << int(r.contact) << ',' << int(r.plane_update) << ',' << r.tick_ns
-      << '\n';
+  for (const auto& r : trace) {
+    const Vec3 hip = vol.to_physical(r.hip_m), vhip = vol.to_physical(r.vhip_m);
+    const Vec3 f = vol.direction_apply(r.force_n);
+    s << r.t_s << ',' << hip.x << ',' << hip.y << ',' << hip.z << ',' << vhip.x << ',' << vhip.y << ','
+      << vhip.z << ',' << f.x << ',' << f.y << ',' << f.z << ',' << int(r.contact) << ','
+      << int(r.plane_update) << ',' << r.tick_ns << '\n';
+  }
   return s.str();
 }
 
@@ -86,6 +91,22 @@ bool draw_plots(const Scene& scene, const std::string& dir, const servo::TouchSc
   return note.empty();
 }
 
+// "finite values [lo, hi]" plus the NaN/Inf counts; never a range for no finite voxels.
+std::string value_range_text(const engine::Volume& vol, const RunMetrics& m) {
+  std::ostringstream s;
+  if (vol.finite_voxels == 0) s << "no finite voxels";
+  else s << "finite values [" << vol.min_value << ", " << vol.max_value << "]";
+  s << ", " << m.nan_voxels << " NaN and " << m.inf_voxels << " Inf voxels";
+  return s.str();
+}
+
+std::string direction_text(const std::array<double, 9>& d) {
+  std::ostringstream s;
+  s << std::setprecision(4) << "[[" << d[0] << ", " << d[1] << ", " << d[2] << "], [" << d[3] << ", " << d[4]
+    << ", " << d[5] << "], [" << d[6] << ", " << d[7] << ", " << d[8] << "]]";
+  return s.str();
+}
+
 }  // namespace
 
 RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
@@ -105,15 +126,24 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   m.volume_path = vol.path;
   m.dims = vol.grid.dims;
   m.spacing_m = vol.grid.spacing_m;
+  m.orientation = vol.orientation();
+  m.direction = vol.direction;
+  m.nan_voxels = vol.nan_voxels;
+  m.inf_voxels = vol.inf_voxels;
+  const bool any_finite = vol.finite_voxels > 0;
   log << "         " << vol.grid.dims[0] << " x " << vol.grid.dims[1] << " x " << vol.grid.dims[2]
       << " voxels, spacing " << fmt(vol.grid.spacing_m.x * 1e3) << " x " << fmt(vol.grid.spacing_m.y * 1e3)
       << " x " << fmt(vol.grid.spacing_m.z * 1e3) << " mm, " << vol.component_type << " via " << vol.reader
-      << ", values [" << vol.min_value << ", " << vol.max_value << "]\n";
-  if (!vol.direction_is_identity)
-    log << "warning: the file's direction cosines are not identity; isotouch works in the grid frame\n";
+      << ", " << value_range_text(vol, m) << "\n"
+      << "         orientation " << m.orientation << " (direction " << direction_text(vol.direction)
+      << "); points below and in trace.csv are in this physical frame\n";
+  if (!any_finite)
+    throw std::runtime_error(scene.file + ": volume " + vol.path + " has no finite voxels (" +
+                             std::to_string(m.nan_voxels) + " NaN, " + std::to_string(m.inf_voxels) +
+                             " Inf): there is no isosurface");
   if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
     throw std::runtime_error(scene.file + ": field 'isovalue': " + fmt(scene.hri.tau) +
-                             " is outside the data range [" + fmt(vol.min_value) + ", " +
+                             " is outside the finite data range [" + fmt(vol.min_value) + ", " +
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 
   // 2. Engine: gradient pass on the GPU, CPU reference beside it.
@@ -161,10 +191,11 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   script.at(0.0, start_w, v0);
   servo::SimDevice device(scene.device, xf.to_device(start_w));
   servo::HriRenderer renderer(hp);
-  log << "script   contact at (" << fmt(script.contact_point_m.x * 1e3, 4) << ", "
-      << fmt(script.contact_point_m.y * 1e3, 4) << ", " << fmt(script.contact_point_m.z * 1e3, 4)
-      << ") mm, normal (" << fmt(script.contact_normal.x, 3) << ", " << fmt(script.contact_normal.y, 3)
-      << ", " << fmt(script.contact_normal.z, 3) << "), " << fmt(script.duration_s, 3) << " s at "
+  const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
+  const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
+  log << "script   contact at (" << fmt(contact_phys.x * 1e3, 4) << ", " << fmt(contact_phys.y * 1e3, 4) << ", "
+      << fmt(contact_phys.z * 1e3, 4) << ") mm " << m.orientation << ", normal (" << fmt(normal_phys.x, 3) << ", "
+      << fmt(normal_phys.y, 3) << ", " << fmt(normal_phys.z, 3) << "), " << fmt(script.duration_s, 3) << " s at "
       << fmt(hp.rate_hz) << " Hz\n";
 
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
@@ -188,40 +219,58 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   m.ticks = long(trace.size());
   std::vector<std::int64_t> ns;
   ns.reserve(trace.size());
-  double sum_ns = 0, err2 = 0, fsum = 0;
+  double sum_ns = 0, err2 = 0, fo2 = 0, fsum = 0;
+  long found = 0;
+  const servo::TraceRow* prev = nullptr;
   for (const auto& r : trace) {
     ns.push_back(r.tick_ns);
     sum_ns += double(r.tick_ns);
     m.plane_updates += r.plane_update;
     m.saturated_ticks += r.saturated;
     m.fault_ticks += r.fault;
+    const servo::TraceRow* last = prev;
+    prev = &r;
     if (!r.contact) continue;
     ++m.contact_ticks;
     const double f = servo::norm(r.force_n);
+    if (last && last->contact) {
+      const double step = std::abs(f - servo::norm(last->force_n));
+      if (step > m.max_force_step_n) {
+        m.max_force_step_n = step;
+        m.max_force_step_t_s = r.t_s;
+      }
+    }
     fsum += f;
     m.max_force_n = std::max(m.max_force_n, f);
     m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
-    // Distance of the VHIP from the isosurface of the trilinear field, first order:
-    // |f(VHIP) - tau| / |grad f(VHIP)| with the exact gradient of the interpolant.
-    const double fv = servo::sample_value(*field, r.vhip_m);
-    const double gn = servo::norm(servo::trilinear_field_gradient(*field, r.vhip_m));
-    const double e = gn > 0 ? std::abs(fv - hp.tau) / gn : 0.0;
-    err2 += e * e;
-    m.surface_err_max_m = std::max(m.surface_err_max_m, e);
+    // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
+    const SurfaceDistance d = distance_to_isosurface(*field, hp.tau, r.vhip_m);
+    m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
+    if (d.found) {
+      ++found;
+      err2 += d.distance_m * d.distance_m;
+      m.surface_err_max_m = std::max(m.surface_err_max_m, d.distance_m);
+    } else {
+      ++m.surface_err_not_found_ticks;
+    }
+    const double fo = first_order_distance(*field, hp.tau, r.vhip_m);
+    fo2 += fo * fo;
+    m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
   }
   m.tick_ns_median = percentile(ns, 0.5);
   m.tick_ns_p99 = percentile(ns, 0.99);
   m.tick_ns_max = ns.empty() ? 0 : double(*std::max_element(ns.begin(), ns.end()));
   m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
   if (m.contact_ticks) {
-    m.surface_err_rms_m = std::sqrt(err2 / double(m.contact_ticks));
     m.mean_contact_force_n = fsum / double(m.contact_ticks);
+    m.first_order_err_rms_m = std::sqrt(fo2 / double(m.contact_ticks));
   }
+  if (found) m.surface_err_rms_m = std::sqrt(err2 / double(found));
 
   // 6. Outputs, each written whole or not at all.
   const std::string dir = opt.out_dir;
   fs::create_directories(dir);
-  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace));
+  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
   if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
   else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
 
@@ -232,7 +281,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                  {"spacing_m", {m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}},
                  {"reader", vol.reader},
                  {"component_type", vol.component_type},
-                 {"value_range", {vol.min_value, vol.max_value}}};
+                 {"value_range", any_finite ? nlohmann::ordered_json{vol.min_value, vol.max_value}
+                                            : nlohmann::ordered_json(nullptr)},
+                 {"nan_voxels", m.nan_voxels},
+                 {"inf_voxels", m.inf_voxels},
+                 {"orientation", m.orientation},
+                 {"direction", m.direction},
+                 {"frame", "points are physical: world = origin + direction * (spacing * index)"}};
   j["isovalue"] = hp.tau;
   j["inside"] = hp.inside == servo::InsideIs::kAbove ? "above" : "below";
   j["gpu"] = {{"device", m.gpu_device},
@@ -270,12 +325,20 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                   {"max_force_n", m.max_force_n},
                   {"mean_force_n", m.mean_contact_force_n},
                   {"max_penetration_m", m.max_penetration_m},
+                  {"max_force_step_n", m.max_force_step_n},
+                  {"max_force_step_t_s", m.max_force_step_t_s},
                   {"saturated_ticks", m.saturated_ticks},
                   {"fault_ticks", m.fault_ticks}};
   j["error"] = {{"surface_distance_m", {{"rms", m.surface_err_rms_m}, {"max", m.surface_err_max_m},
-                                        {"method", "|f(VHIP) - tau| / |grad f(VHIP)|, trilinear f and its exact gradient"}}}};
-  j["script"] = {{"contact_point_m", {script.contact_point_m.x, script.contact_point_m.y, script.contact_point_m.z}},
-                 {"contact_normal", {script.contact_normal.x, script.contact_normal.y, script.contact_normal.z}},
+                                        {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
+                                        {"search_radius_m", m.surface_search_radius_m},
+                                        {"method", "true distance from the VHIP to the isosurface of the trilinear field "
+                                                   "(branch and bound over cells, accurate to 1e-3 voxel)"}}},
+                {"first_order_estimate_m", {{"rms", m.first_order_err_rms_m}, {"max", m.first_order_err_max_m},
+                                            {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
+                                                       "where the field is flat; shown for comparison only"}}}};
+  j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
+                 {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
                  {"duration_s", script.duration_s}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
@@ -290,7 +353,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   md << "| | |\n|---|---|\n"
      << "| volume | `" << m.volume_path << "` (" << m.dims[0] << " x " << m.dims[1] << " x " << m.dims[2]
      << ", spacing " << fmt(m.spacing_m.x * 1e3) << " x " << fmt(m.spacing_m.y * 1e3) << " x "
-     << fmt(m.spacing_m.z * 1e3) << " mm, " << vol.component_type << ") |\n"
+     << fmt(m.spacing_m.z * 1e3) << " mm, " << vol.component_type << "; " << value_range_text(vol, m) << ") |\n"
+     << "| orientation | " << m.orientation << ", direction " << direction_text(m.direction)
+     << "; reported points are in this physical frame (world = origin + D (spacing * index)) |\n"
      << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == servo::InsideIs::kAbove ? ">" : "<")
      << " isovalue) |\n"
      << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
@@ -308,13 +373,30 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << " ns, max " << fmt(m.tick_ns_max) << " ns |\n"
      << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
-     << "| surface error of the VHIP | RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm, max "
-     << fmt(m.surface_err_max_m * 1e3, 4) << " mm (" << fmt(m.surface_err_rms_m / m.spacing_m.x, 3)
-     << " voxel RMS) |\n\n";
+     << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "
+     << fmt(m.max_force_step_t_s, 5) << " s (" << fmt(100 * m.max_force_step_n / hp.force_limit_n, 3)
+     << " % of the force limit) |\n"
+     << "| surface error of the VHIP | true distance to the trilinear isosurface: RMS "
+     << fmt(m.surface_err_rms_m * 1e3, 4) << " mm, max " << fmt(m.surface_err_max_m * 1e3, 4) << " mm ("
+     << fmt(m.surface_err_rms_m / std::min({m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}), 3)
+     << " voxel RMS)" << (m.surface_err_not_found_ticks
+                               ? "; " + std::to_string(m.surface_err_not_found_ticks) +
+                                     " contact ticks with no surface within " + fmt(m.surface_search_radius_m * 1e3, 4) +
+                                     " mm (left out of RMS and max)"
+                               : std::string())
+     << " |\n\n";
+  md << (m.fault_ticks == 0
+             ? std::string("No faults: every tick had a finite HIP and a finite force.\n\n")
+             : "**Faults: " + std::to_string(m.fault_ticks) + " of " + std::to_string(m.ticks) + " ticks (" +
+                   fmt(100.0 * double(m.fault_ticks) / double(std::max(1L, m.ticks)), 3) +
+                   " %) were faults (non-finite or implausible HIP, or a non-finite force); zero force was sent on those ticks.**\n\n");
   md << "## Error against run time\n\nAt a median tick of " << fmt(m.tick_ns_median) << " ns (p99 "
      << fmt(m.tick_ns_p99) << " ns) with the plane recomputed every " << hp.plane_update_period
      << " ticks, the VHIP stayed within " << fmt(m.surface_err_max_m * 1e3, 4)
-     << " mm of the trilinear isosurface (RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm).\n\n";
+     << " mm of the trilinear isosurface (RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm) on the "
+     << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
+     << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
+     << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
   if (m.plots_drawn)
     md << "## Force and penetration\n\n![force and penetration against time](force_depth.png)\n\n"
        << "## Servo tick time\n\n![tick wall time](tick_time.png)\n\n";

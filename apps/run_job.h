@@ -1,5 +1,7 @@
 // run_job.h - the main job: volume -> GPU samples -> HRI servo on a scripted stroke.
 #pragma once
+#include <array>
+#include <cstddef>
 #include <cstdint>
 #include <iosfwd>
 #include <string>
@@ -33,7 +35,21 @@ struct RunMetrics {
   double tick_ns_median = 0, tick_ns_p99 = 0, tick_ns_max = 0, tick_ns_mean = 0;
   long contact_ticks = 0, plane_updates = 0, saturated_ticks = 0, fault_ticks = 0;
   double max_force_n = 0, max_penetration_m = 0, mean_contact_force_n = 0;
+  /// Largest change of |F| [N] between two consecutive ticks that are both in contact.
+  double max_force_step_n = 0;
+  double max_force_step_t_s = 0;  ///< time of the second tick of that step [s]
+  /// True distance [m] of the VHIP from the trilinear isosurface over the contact ticks
+  /// (apps/surface_distance.h: bounded search, accurate to 1e-3 voxel), RMS and max over
+  /// the ticks where a surface was found within surface_search_radius_m.
   double surface_err_rms_m = 0, surface_err_max_m = 0;
+  long surface_err_not_found_ticks = 0;  ///< contact ticks with no surface within the radius
+  double surface_search_radius_m = 0;
+  /// The old first-order estimate |f - tau| / |grad f| (unbounded where the field is
+  /// flat), kept beside the true distance to show the difference.
+  double first_order_err_rms_m = 0, first_order_err_max_m = 0;
+  std::string orientation;               ///< e.g. "LPS" (engine::Volume::orientation)
+  std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major D
+  std::size_t nan_voxels = 0, inf_voxels = 0;
   bool plots_drawn = false;
   std::string plot_note;
 };

@@ -1,10 +1,14 @@
 // isotouch - feel the isosurface inside a volume through a point haptic device (HRI).
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <sstream>
+#include <vector>
 
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
@@ -13,6 +17,7 @@
 #include "stability_cmd.h"
 #include "bench_cmd.h"
 #include "report_cmd.h"
+#include "sim_device.h"
 #include "volume_io.h"
 #include "vk_context.h"
 
@@ -24,6 +29,38 @@ namespace fs = std::filesystem;
 using namespace isotouch;
 
 namespace {
+
+// `isotouch run --help` footer: the scene format in short (README, "Scenes", says more).
+constexpr const char* kSceneHelp = R"(
+Scene file (JSON; unknown or repeated keys are errors; units are in the key names):
+  {
+    "name": "head",                             letters, digits, '-', '_' (default: file stem)
+    "volume": {"path": "../data/ct-head-headsq/headsq_64x64x93_int16.mhd"},
+                                                relative to the scene file; .mhd .mha .nrrd .nhdr .nii .nii.gz
+           or {"synthetic": "sphere", "dims": [64, 64, 64], "spacing_m": 0.001, "radius_vox": 20}
+           or {"synthetic": "box" | "three-spheres" | "knot"}
+    "isovalue": 1150,                           required; in the volume's units (HU for CT)
+    "inside": "above",                          "above": value > isovalue is inside; "below"
+    "servo":  {"stiffness_n_per_m": 800, "damping_n_s_per_m": 1.0, "plane_update_period": 5,
+               "rate_hz": 1000, "force_limit_n": 3.3, ...},       optional; see README, Scenes
+    "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
+    "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
+               "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
+    "outputs": {"trace_csv": true, "plots": true}
+  }
+The script casts a ray from ray_origin_frac (fractions of the volume box, each in [-2, 3])
+to the first isosurface crossing, presses the hand target press_depth_m in, strokes
+stroke_length_m along the surface, and lifts off. Shipped: scenes/head.json, chest.json,
+sphere.json, knot.json.
+
+Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
+Points are reported in the volume's physical frame (origin + direction x spacing x index).
+Exit status: 0 ok; 1 bad input (the message names the file, field and value);
+4 the run had servo fault ticks.
+
+Example:
+  isotouch run scenes/sphere.json --out /tmp/sphere --device llvmpipe
+)";
 
 std::string default_scene() {
   if (fs::exists("scenes/head.json")) return "scenes/head.json";
@@ -38,11 +75,22 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
   opt.device = device;
   opt.progress = !quiet;
   std::cout << "isotouch run: scene " << scene_path << " -> " << out_dir << "/\n";
+  {
+    const double dt = 1.0 / scene.hri.rate_hz;
+    const int need = servo::min_stable_substeps(scene.device, dt);
+    if (need > scene.device.substeps)
+      std::cout << "device   substeps raised from " << scene.device.substeps << " to " << need
+                << " per servo period so the simulated device integrates stably (mass " << scene.device.mass_kg
+                << " kg, hand " << scene.device.hand_stiffness_n_per_m << " N/m and "
+                << scene.device.hand_damping_n_s_per_m << " N s/m)\n";
+  }
   const app::RunMetrics m = app::run_scene(scene, opt, std::cout);
   const auto& hp = scene.hri;
+  const double limit = hp.force_limit_n;
   std::cout << std::setprecision(4)
             << "\n== isotouch summary: " << scene.name << " ==\n"
-            << "  volume        " << m.volume_path << "  (" << m.dims[0] << "x" << m.dims[1] << "x" << m.dims[2] << ")\n"
+            << "  volume        " << m.volume_path << "  (" << m.dims[0] << "x" << m.dims[1] << "x" << m.dims[2]
+            << (m.orientation.empty() ? std::string() : ", orientation " + m.orientation) << ")\n"
             << "  isovalue      " << hp.tau << "\n"
             << "  GPU           " << m.gpu_device << ": gradient " << m.gpu_gradient_ms << " ms; CPU reference "
             << m.cpu_gradient_ms << " ms\n"
@@ -52,11 +100,54 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
             << "  ticks         " << m.ticks << "  (tick median " << m.tick_ns_median << " ns, p99 " << m.tick_ns_p99
             << " ns, max " << m.tick_ns_max << " ns)\n"
             << "  contact       " << m.contact_ticks << " ticks, max force " << m.max_force_n << " N (limit "
-            << hp.force_limit_n << " N), max penetration " << m.max_penetration_m * 1e3 << " mm\n"
+            << limit << " N), max penetration " << m.max_penetration_m * 1e3 << " mm\n"
+            << "  force step    max " << m.max_force_step_n << " N between two contact ticks ("
+            << (limit > 0 ? 100.0 * m.max_force_step_n / limit : 0.0) << " % of the limit, at t = "
+            << m.max_force_step_t_s << " s)\n"
+            << "  faults        " << m.fault_ticks << " of " << m.ticks << " ticks\n"
             << "  surface error RMS " << m.surface_err_rms_m * 1e3 << " mm, max " << m.surface_err_max_m * 1e3 << " mm\n"
             << "  report        " << (fs::path(out_dir) / "report.md").string()
             << (m.plots_drawn ? "  (with plots)" : ("  (" + m.plot_note + ")")) << "\n";
+  if (m.fault_ticks > 0) {
+    std::cerr << "\nisotouch: error: " << m.fault_ticks << " of " << m.ticks
+              << " servo ticks were faults (non-finite input or state; zero force sent): the run is not "
+                 "trustworthy. See "
+              << (fs::path(out_dir) / "trace.csv").string() << " (column fault).\n";
+    return 4;
+  }
   return 0;
+}
+
+// Samples whose gradient is not finite: from non-finite voxels (NaN/Inf in the file),
+// or overflow (finite voxels whose differences exceed float, e.g. values near 1e38).
+struct GradientHealth {
+  std::size_t nonfinite = 0;  ///< samples with a non-finite gradient component
+  std::size_t overflow = 0;   ///< of those, samples whose 3x3x3 neighbourhood is all finite
+  double max_norm = 0;        ///< largest finite |gradient| [value/m]
+};
+GradientHealth gradient_health(const engine::Volume& vol, const servo::SampleField& f) {
+  GradientHealth h;
+  const auto& d = vol.grid.dims;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) {
+        const servo::Sample& s = f.samples[vol.grid.index(x, y, z)];
+        if (std::isfinite(s.gx) && std::isfinite(s.gy) && std::isfinite(s.gz)) {
+          h.max_norm = std::max(h.max_norm, std::sqrt(double(s.gx) * s.gx + double(s.gy) * s.gy + double(s.gz) * s.gz));
+          continue;
+        }
+        ++h.nonfinite;
+        bool finite_input = true;
+        for (int k = std::max(0, z - 1); k <= std::min(d[2] - 1, z + 1) && finite_input; ++k)
+          for (int j = std::max(0, y - 1); j <= std::min(d[1] - 1, y + 1) && finite_input; ++j)
+            for (int i = std::max(0, x - 1); i <= std::min(d[0] - 1, x + 1); ++i)
+              if (!std::isfinite(vol.voxels[vol.grid.index(i, j, k)])) {
+                finite_input = false;
+                break;
+              }
+        h.overflow += finite_input;
+      }
+  return h;
 }
 
 int cmd_check(const std::string& path, const std::string& device, double slab_mib) {
@@ -72,14 +163,36 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
   const auto cpu = engine::compute_samples_cpu(vol);
   const double cpu_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   const auto d = engine::compare_gradients(gpu, cpu);
+  const GradientHealth gh = gradient_health(vol, cpu);
+  const auto& D = vol.direction;
+  const servo::Vec3 far = vol.index_to_physical(
+      {double(vol.grid.dims[0] - 1), double(vol.grid.dims[1] - 1), double(vol.grid.dims[2] - 1)});
   std::cout << std::setprecision(4) << "volume      " << path << " (" << vol.grid.dims[0] << "x" << vol.grid.dims[1]
             << "x" << vol.grid.dims[2] << ", " << vol.component_type << ", " << vol.reader << ")\n"
+            << "spacing     " << vol.grid.spacing_m.x * 1e3 << " x " << vol.grid.spacing_m.y * 1e3 << " x "
+            << vol.grid.spacing_m.z * 1e3 << " mm\n"
+            << "orientation " << vol.orientation() << " (index axes x, y, z point toward; physical frame LPS)"
+            << (vol.direction_is_identity ? ", direction identity" : "") << "\n";
+  if (!vol.direction_is_identity)
+    std::cout << "direction   [" << D[0] << " " << D[1] << " " << D[2] << "; " << D[3] << " " << D[4] << " " << D[5]
+              << "; " << D[6] << " " << D[7] << " " << D[8] << "] (columns: index axes in LPS)\n";
+  std::cout << "corners     voxel (0,0,0) at (" << vol.grid.origin_m.x * 1e3 << ", " << vol.grid.origin_m.y * 1e3
+            << ", " << vol.grid.origin_m.z * 1e3 << ") mm, last voxel at (" << far.x * 1e3 << ", " << far.y * 1e3
+            << ", " << far.z * 1e3 << ") mm (physical)\n"
+            << "values      ";
+  if (vol.finite_voxels > 0)
+    std::cout << "[" << vol.min_value << ", " << vol.max_value << "]";
+  else
+    std::cout << "no finite voxel";
+  std::cout << "; NaN voxels " << vol.nan_voxels << ", Inf voxels " << vol.inf_voxels << " of " << vol.voxels.size()
+            << "\n"
             << "device      " << (*ctx.value)->info().name << " (" << (*ctx.value)->info().type << ")\n"
             << "GPU         gradient " << gt.gradient_ms << " ms (" << (gt.gpu_timestamps ? "timestamps" : "wall")
             << ", " << gt.slabs << " slab(s)), submit-to-fence " << gt.submit_wall_ms << " ms, upload "
             << gt.upload_ms << " ms, download " << gt.download_ms << " ms\n"
             << "CPU         gradient " << cpu_ms << " ms (reference, one thread)\n"
-            << "max |grad|  " << d.max_gradient_norm << " [value/m]\n"
+            << "max |grad|  " << gh.max_norm << " [value/m] over finite gradients; non-finite gradients "
+            << gh.nonfinite << " (" << gh.overflow << " from finite voxels: overflow)\n"
             << "max abs     gx " << d.max_abs[0] << "  gy " << d.max_abs[1] << "  gz " << d.max_abs[2]
             << "  value " << d.max_value_abs << "\n"
             << "max rel     gx " << d.max_abs[0] / std::max(d.max_gradient_norm, 1e-300) << "  gy "
@@ -87,9 +200,26 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
             << d.max_abs[2] / std::max(d.max_gradient_norm, 1e-300) << "  (all " << d.max_rel
             << ", relative to max |grad|)\n";
   if (d.nonfinite) std::cout << "mismatched non-finite samples: " << d.nonfinite << "\n";
-  const bool ok = d.max_rel <= 1e-6;
-  std::cout << (ok ? "PASS" : "FAIL") << "        tolerance 1e-6 relative\n";
-  return ok ? 0 : 3;
+  // A comparison is only meaningful on finite data with a finite gradient somewhere.
+  std::vector<std::string> why;
+  if (vol.nonfinite_voxels() > 0)
+    why.push_back(std::to_string(vol.nonfinite_voxels()) + " non-finite voxels (NaN " + std::to_string(vol.nan_voxels) +
+                  ", Inf " + std::to_string(vol.inf_voxels) + ")");
+  if (gh.overflow > 0)
+    why.push_back(std::to_string(gh.overflow) + " gradients overflow float from finite voxels");
+  if (d.max_rel > 1e-6) {
+    std::ostringstream r;
+    r << "GPU and CPU differ by " << d.max_rel << " relative (tolerance 1e-6)";
+    why.push_back(r.str());
+  }
+  if (why.empty()) {
+    std::cout << "PASS        tolerance 1e-6 relative\n";
+    return 0;
+  }
+  std::cout << "FAIL       ";
+  for (const auto& w : why) std::cout << " " << w << ";";
+  std::cout << "\n";
+  return 3;
 }
 
 int cmd_devices() {
@@ -115,10 +245,13 @@ int main(int argc, char** argv) {
       "  isotouch check data/ct-tooth/tooth.nhdr\n"
       "  ISOTOUCH_DEVICE=llvmpipe isotouch run # choose the Vulkan device"};
   cli.require_subcommand(1);
+  // Options of the main command (--device) are accepted after the subcommand too:
+  // `isotouch run scenes/x.json --device llvmpipe`. Inherited by every subcommand.
+  cli.fallthrough();
   std::string device;
   cli.add_option("--device", device,
                  "Vulkan device: name substring or index (default: $ISOTOUCH_DEVICE, else the first "
-                 "discrete GPU, else lavapipe)");
+                 "discrete GPU, else lavapipe); before or after the subcommand");
 
   auto* run = cli.add_subcommand("run", "Simulate a probe touching and stroking the isosurface of a scene; "
                                         "write trace.csv, summary.json, report.md and plots");
@@ -127,6 +260,7 @@ int main(int argc, char** argv) {
   run->add_option("scene", scene_path, "Scene JSON file")->capture_default_str();
   run->add_option("--out,-o", out_dir, "Output folder (default: out/<scene name>)");
   run->add_flag("--quiet,-q", quiet, "No progress line");
+  run->footer(kSceneHelp);
 
   auto* check = cli.add_subcommand("check", "Compare the GPU gradient with the CPU reference on a volume");
   std::string volume;
@@ -134,7 +268,20 @@ int main(int argc, char** argv) {
   check->add_option("volume", volume, "Volume file (.mhd, .nrrd, .nhdr, .nii, .nii.gz)")->required();
   check->add_option("--max-binding-mib", slab_mib,
                     "Limit storage-buffer bindings to this size (forces z-slabs; default: device limit)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            double v = 0;
+            std::size_t used = 0;
+            try {
+              v = std::stod(text, &used);
+            } catch (const std::exception&) {
+              used = 0;
+            }
+            if (used != text.size() || !(v > 0.0 && v <= 1048576.0))
+              return "must be a number of MiB in (0, 1048576], got " + text;
+            return {};
+          },
+          "MiB in (0, 1048576]"));
 
   cli.add_subcommand("devices", "List the Vulkan devices");
 

@@ -21,7 +21,9 @@ struct ServoRtOptions {
 /// recomputing a 64^3 sculpted sphere on the Vulkan device and publishing it; print the
 /// scheduling the thread got, p50, p99, p99.9 and max of |period error|, the missed
 /// deadlines, the load average, and whether the 10 kHz target (p99.9 <= 20 us, at most 1
-/// miss in 10,000 ticks) was met, computed from the measured figures.
+/// miss in 10,000 ticks) was met, computed from the measured figures. A last row runs
+/// 10 kHz with the engine idle: what the machine alone allows (other processes, a VM's
+/// stolen time).
 int run_bench_servo_rt(const ServoRtOptions& options, std::ostream& log);
 
 struct Table1Options {

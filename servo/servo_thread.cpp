@@ -77,7 +77,22 @@ std::string ServoThread::setup_realtime() {
   pinned_cpu_ = -1;
   // Sleep wake-ups exactly on time (the default slack of a normal thread is 50 us).
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
-  if (cfg_.pin_cpu) {
+  if (cfg_.sched_fifo) {
+    sched_param sp{};
+    sp.sched_priority = std::clamp(cfg_.fifo_priority, sched_get_priority_min(SCHED_FIFO),
+                                   sched_get_priority_max(SCHED_FIFO));
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    if (rc == 0) got_fifo_ = true;
+    else
+      note += "servo thread: SCHED_FIFO priority " + std::to_string(sp.sched_priority) + " refused (" +
+              std::strerror(rc) + "; needs root, CAP_SYS_NICE or an rtprio limit): running with the default "
+              "scheduler, expect missed deadlines under load.\n";
+  }
+  // Automatic pinning only with SCHED_FIFO: a normal thread pinned to a busy CPU cannot
+  // move to an idle one, which costs more than the cache it keeps.
+  if (cfg_.pin_cpu && cfg_.cpu < 0 && !got_fifo_)
+    note += "servo thread: not pinned (no SCHED_FIFO; an explicit CPU is pinned anyway).\n";
+  else if (cfg_.pin_cpu) {
     const int cpu = cfg_.cpu >= 0 ? cfg_.cpu : last_allowed_cpu();
     cpu_set_t set;
     CPU_ZERO(&set);
@@ -90,17 +105,6 @@ std::string ServoThread::setup_realtime() {
     else
       note += "servo thread: pinning to CPU " + std::to_string(cpu) + " refused (" + std::strerror(rc) +
               "): not pinned.\n";
-  }
-  if (cfg_.sched_fifo) {
-    sched_param sp{};
-    sp.sched_priority = std::clamp(cfg_.fifo_priority, sched_get_priority_min(SCHED_FIFO),
-                                   sched_get_priority_max(SCHED_FIFO));
-    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
-    if (rc == 0) got_fifo_ = true;
-    else
-      note += "servo thread: SCHED_FIFO priority " + std::to_string(sp.sched_priority) + " refused (" +
-              std::strerror(rc) + "; needs root, CAP_SYS_NICE or an rtprio limit): running with the default "
-              "scheduler, expect missed deadlines under load.\n";
   }
   if (cfg_.lock_memory && !locked_) {
     int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);

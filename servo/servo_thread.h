@@ -23,7 +23,8 @@ struct ServoThreadConfig {
   /// Pin the servo thread to one CPU before the first tick. Refused: start() says so.
   bool pin_cpu = true;
   /// The CPU to pin to; -1: the last CPU this process may run on (CPU 0 takes most of the
-  /// interrupts and housekeeping).
+  /// interrupts and housekeeping), and only if SCHED_FIFO was granted (a normal thread
+  /// pinned to a busy CPU cannot move to an idle one).
   int cpu = -1;
   /// mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) before the first tick, so that no page
   /// the loop touches is paged out (needs root, CAP_IPC_LOCK or a memlock limit). ONFAULT

@@ -423,12 +423,6 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
         } else {
           plane_.valid = false;  // the surface curved away: the HIP is really outside
         }
-        // In contact the outward normal cannot turn by more than 90 degrees in one update;
-        // a flipped one comes from the far side of a wall thinner than the gradient stencil.
-        if (plane_.valid && dot(plane_.n, old_n) < 0.0) {
-          plane_.n = old_n;
-          anchor_ = hip + old_n * dot(old_n, plane_.p - hip);
-        }
       }
     }
   } else {

@@ -333,6 +333,7 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     resync_ = resync_ || absurd || jump;
     vel_valid_ = false;  // the velocity estimate restarts at the next sane HIP
     lost_s_ = elapsed;
+    vhip_value_known_ = false;
     out.vhip_m = vhip_;
     out.plane = plane_;
     prev_force_mag_ = 0;
@@ -353,6 +354,7 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     recovery_ticks_left_ = 0;
     prev_force_mag_ = 0;
     vel_valid_ = false;
+    vhip_value_known_ = false;
   }
   // Velocity: backward difference over the measured time, first-order low-pass.
   const double s = 1.0 / params_.world_per_device;
@@ -384,14 +386,18 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     c_ = 0;
     out.plane_update = true;
   };
+  // The VHIP's value: in free motion the VHIP is the HIP of the tick before, whose
+  // value that tick read (cached), so free motion costs one sample per tick.
+  auto vhip_value = [&]() { return vhip_value_known_ ? vhip_value_ : sample_value(field, vhip_); };
   // Free motion or in front of a plane: did the segment VHIP -> HIP enter the object?
   auto entry_test = [&]() {
-    const double e_v = excess(sample_value(field, vhip_));
     Vec3 p;
     if (hip_excess() > 0.0) {
-      if (!(e_v > 0.0)) set_plane(compute_plane(field, sample_value(field, vhip_), f_hip, hip));
+      const double f_vhip = vhip_value();
+      if (!(excess(f_vhip) > 0.0)) set_plane(compute_plane(field, f_vhip, f_hip, hip));
       else plane_.valid = false;  // both inside: no force (starting inside, §3.1)
-    } else if (!(e_v > 0.0) && long_step(field, vhip_, hip) && first_crossing(field, vhip_, hip, p)) {
+    } else if (long_step(field, vhip_, hip) && !(excess(vhip_value()) > 0.0) &&
+               first_crossing(field, vhip_, hip, p)) {
       set_plane(plane_at(field, p, hip));  // a long step through a thin wall
     } else {
       plane_.valid = false;
@@ -407,21 +413,23 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
       const Vec3 proj = hip + plane_.n * dot(plane_.n, plane_.p - hip);
       if (++c_ >= params_.plane_update_period || norm(proj - anchor_) > 0.5 * voxel) {
         c_ = 0;
-        const Vec3 old_n = plane_.n;
-        // Start just in front of the VHIP (it may sit a hair inside the near surface).
-        const Vec3 a = vhip_ + old_n * (0.1 * voxel);
-        const double f_a = sample_value(field, a);
         Vec3 p;
-        if (excess(f_a) > 0.0) {
-          // The VHIP is embedded (Figure 5b): the surface is searched from it.
-          set_plane(compute_plane(field, sample_value(field, vhip_), hip_excess() > 0.0 ? f_hip : f_a, hip));
-        } else if (hip_excess() > 0.0) {
+        if (hip_excess() > 0.0) {
+          // HIP inside (VHIP outside, or embedded: compute_plane searches from it).
           set_plane(compute_plane(field, sample_value(field, vhip_), f_hip, hip));
-        } else if (first_crossing(field, a, hip, p)) {
-          // The HIP is outside beyond a wall it went through: the near surface holds it.
-          set_plane(plane_at(field, p, hip));
         } else {
-          plane_.valid = false;  // the surface curved away: the HIP is really outside
+          // HIP outside but behind the plane. Start just in front of the VHIP (it may sit
+          // a hair inside the near surface): if the segment enters the object, the HIP
+          // left through a far side and the near surface still holds it.
+          const Vec3 a = vhip_ + plane_.n * (0.1 * voxel);
+          const double f_a = sample_value(field, a);
+          if (excess(f_a) > 0.0) {
+            set_plane(compute_plane(field, sample_value(field, vhip_), f_a, hip));  // embedded
+          } else if (first_crossing(field, a, hip, p)) {
+            set_plane(plane_at(field, p, hip));
+          } else {
+            plane_.valid = false;  // the surface curved away: the HIP is really outside
+          }
         }
       }
     }
@@ -447,6 +455,8 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   prev_hip_ = hip;
   prev_force_mag_ = norm(force);
   was_contact_ = out.contact;
+  vhip_value_known_ = !out.contact && have_f_hip;  // then VHIP = HIP, whose value was read
+  vhip_value_ = f_hip;
   out.force_n = force;
   out.vhip_m = vhip_;
   out.plane = plane_;

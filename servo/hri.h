@@ -213,6 +213,8 @@ class HriRenderer final : public Renderer {
   Vec3 v_filt_;            ///< filtered HIP velocity, device [m/s]
   bool vel_valid_ = false; ///< prev_hip_ is a sane HIP of the tick before
   double lost_s_ = 0;      ///< time spent in faults since the last sane tick [s]
+  double vhip_value_ = 0;  ///< field value at vhip_ when vhip_value_known_
+  bool vhip_value_known_ = false;
 };
 
 }  // namespace isotouch::servo

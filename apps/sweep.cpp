@@ -11,6 +11,7 @@
 #include "headless.h"
 #include "hri.h"
 #include "sampling.h"
+#include "surface_distance.h"
 #include "synthetic.h"
 #include "scene.h"
 #include "volume_io.h"
@@ -40,18 +41,6 @@ std::string scene_file(const std::string& name) {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / (name + ".json")).string();
 }
 
-// Project x onto the isosurface of the trilinear field along its exact gradient (Newton).
-Vec3 project_to_trilinear_surface(const servo::SampleField& f, double tau, Vec3 x) {
-  for (int k = 0; k < 6; ++k) {
-    const Vec3 g = servo::trilinear_field_gradient(f, x);
-    const double g2 = servo::dot(g, g);
-    if (!(g2 > 0)) break;
-    const Vec3 step = g * ((servo::sample_value(f, x) - tau) / g2);
-    x = x - step;
-    if (servo::norm(step) < 1e-10) break;
-  }
-  return x;
-}
 }  // namespace
 
 servo::HriParams reference_params(const SweepScene& s) {
@@ -169,7 +158,14 @@ ErrorFigures measure(const SweepScene& s, const Playback& p) {
       e.max_force_step_n = std::max(e.max_force_step_n, step);
       if (k > s.slide_begin && k < s.slide_end) e.max_force_step_slide_n = std::max(e.max_force_step_slide_n, step);
     }
-    if (!t.contact) continue;
+    // Inside by more than half a voxel (not a one-tick difference at lift-off between the
+    // trilinear surface and the exact one).
+    const bool inside = s.truth ? s.truth->depth(s.hip[k]) > 0.5 * s.voxel_m
+                                : s.reference[k].contact && s.reference[k].penetration_m > 0.5 * s.voxel_m;
+    if (!t.contact) {
+      if (k > 0 && p.ticks[k - 1].contact && inside) ++e.pop_throughs;
+      continue;
+    }
     ++e.contact_ticks;
     Vec3 n_true, f_true;
     double surf = 0;
@@ -183,8 +179,10 @@ ErrorFigures measure(const SweepScene& s, const Playback& p) {
       s.truth->closest(s.hip[k], hp, hn);
       f_true = s.truth->depth(s.hip[k]) > 0 ? (hp - s.hip[k]) * K : Vec3{};
     } else {
-      const Vec3 q = project_to_trilinear_surface(*s.field, s.tau, t.vhip_m);
-      surf = servo::norm(t.vhip_m - q);
+      // True distance to the trilinear isosurface (bounded search); a VHIP with no surface
+      // within the search radius counts at that radius (a lower bound, never a made-up number).
+      const SurfaceDistance d = distance_to_isosurface(*s.field, s.tau, t.vhip_m);
+      surf = d.found ? d.distance_m : d.lower_bound_m;
       const servo::HriTick& r = s.reference[k];
       f_true = r.force_n;
       n_true = servo::norm(r.force_n) > 1e-3 ? r.force_n / servo::norm(r.force_n) : Vec3{};  // no angle without a reference force

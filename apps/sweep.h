@@ -55,12 +55,17 @@ Playback playback(servo::Renderer& r, const SweepScene& s);
 /// Errors of one configuration against the truth (synthetic) or the reference (CT).
 struct ErrorFigures {
   double tick_ns_mean = 0, tick_ns_p99 = 0;
-  double surface_err_rms_m = 0;  ///< distance of the VHIP from the true surface, RMS over contact ticks
+  /// Distance of the VHIP from the true surface, RMS over contact ticks: the exact shape
+  /// (synthetic) or the true distance to the trilinear isosurface (CTs, surface_distance.h).
+  double surface_err_rms_m = 0;
   double angle_err_rms_deg = 0;  ///< angle between the force and the true normal
   double force_err_rms_n = 0;    ///< |F - F_god-object| (synthetic) or |F - F_reference| (CT)
   double max_force_step_n = 0;   ///< largest |F_k - F_k-1| over the stroke
   double max_force_step_slide_n = 0;  ///< ... over the sliding ticks only (prescribed paths)
   long contact_ticks = 0;
+  /// Contact lost while the HIP is more than half a voxel inside the object (truth: exact
+  /// shape depth, or the reference renderer's penetration on CTs): a pop-through.
+  long pop_throughs = 0;
 };
 ErrorFigures measure(const SweepScene& s, const Playback& p);
 

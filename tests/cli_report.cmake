@@ -1,4 +1,5 @@
-# `isotouch report` on two scenes: the CSV has its exact header and 2 x 50 rows, plus plot and summary.
+# `isotouch report` on two scenes: the CSV has its exact header and 2 x 56 rows (48 HRI, 6 HRI-paper, 2
+# baselines per scene), plus plot and summary with the paper-against-robust table.
 file(REMOVE_RECURSE ${OUT})
 execute_process(COMMAND ${EXE} report --scenes sphere knot --out ${OUT} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
@@ -11,14 +12,22 @@ foreach(f error_vs_time.csv error_vs_time.png error_vs_time.md)
 endforeach()
 file(STRINGS ${OUT}/error_vs_time.csv rows)
 list(GET rows 0 header)
-if(NOT header STREQUAL "scene,algorithm,n,options,tick_ns_mean,tick_ns_p99,surface_err_rms_m,angle_err_rms_deg,force_err_rms_n,max_force_step_n")
+if(NOT header STREQUAL "scene,algorithm,n,options,tick_ns_mean,tick_ns_p99,surface_err_rms_m,angle_err_rms_deg,force_err_rms_n,max_force_step_n,pop_throughs")
   message(FATAL_ERROR "header: ${header}")
 endif()
 list(LENGTH rows n)
-if(NOT n EQUAL 101)
-  message(FATAL_ERROR "expected 100 rows, got ${n} lines")
+if(NOT n EQUAL 113)
+  message(FATAL_ERROR "expected 112 rows, got ${n} lines")
 endif()
 file(READ ${OUT}/error_vs_time.md md)
-if(NOT md MATCHES "Pareto front" OR NOT md MATCHES "remedies on the knot")
+if(NOT md MATCHES "Pareto front" OR NOT md MATCHES "remedies on the knot" OR NOT md MATCHES "Figure 2 as printed against")
   message(FATAL_ERROR "summary incomplete")
+endif()
+# Conclusions are computed: the paper rows are there for both scenes, and the servo text
+# names the stiffness the scenes use (the sweeps' K), not a fixed sentence.
+if(NOT md MATCHES "\\| knot \\| 50 \\| [0-9.e+-]+ / [0-9.e+-]+ \\|" OR NOT md MATCHES "\\| sphere \\| 1 \\|")
+  message(FATAL_ERROR "paper against robust table incomplete")
+endif()
+if(NOT md MATCHES "K = [0-9.e+]+ N/m, B = [0-9.e+-]+ N s/m, force limit [0-9.e+]+ N")
+  message(FATAL_ERROR "servo parameters not printed from the data")
 endif()

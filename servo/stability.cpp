@@ -40,6 +40,7 @@ HeldContactResult simulate_held_contact(const SampleField& field, const Vec3& p0
   const long w1a = long(0.2 * double(r.ticks)), w1b = long(0.45 * double(r.ticks)),
              w2a = long(0.75 * double(r.ticks));
   double e1 = 0, e2 = 0;
+  bool touched = false;
   for (long k = 0; k < r.ticks; ++k) {
     const Vec3 x = dev.position();
     const HriTick out = renderer.tick(field, x);
@@ -47,6 +48,14 @@ HeldContactResult simulate_held_contact(const SampleField& field, const Vec3& p0
     if (!finite(f) || !finite(x)) r.nonfinite = true;
     r.max_force_n = std::max(r.max_force_n, norm(f));
     r.contact_ticks += out.contact;
+    const double depth = -dot(x - p0, n);
+    r.max_hip_depth_m = std::max(r.max_hip_depth_m, depth);
+    if (out.contact) {
+      touched = true;
+      r.max_vhip_off_surface_m = std::max(r.max_vhip_off_surface_m, std::abs(dot(out.vhip_m - p0, n)));
+    } else if (touched && depth > 1e-6) {
+      ++r.inside_without_contact_ticks;
+    }
     dev.command_force(f);
     dev.step(cfg.period_s, target, {});
     const Vec3 v = dev.velocity();
@@ -109,7 +118,9 @@ const Vec3 kC{0.024, 0.024, 0.024};
 
 ExtremeCase stiff_wall() {
   ExtremeCase c{"K = 1e5 N/m (50x the bound at 1 kHz, b = 1 N s/m)",
-                "forces finite and <= F_max = 3.3 N at every tick, with and without the passivity controller", false, ""};
+                "forces finite and <= F_max = 3.3 N at every tick; the contact is held: force whenever the HIP is "
+                "behind the wall, the VHIP on the wall (< 1 um), the HIP no deeper than 2 mm; with and without "
+                "the passivity controller", false, ""};
   const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
   HeldContact h;
   h.stiffness_n_per_m = 1e5;
@@ -117,12 +128,23 @@ ExtremeCase stiff_wall() {
   const HeldContactResult off = simulate_held_contact(f, {0.016, 0.016, 0.010}, {0, 0, 1}, h);
   h.passivity_controller = true;
   const HeldContactResult on = simulate_held_contact(f, {0.016, 0.016, 0.010}, {0, 0, 1}, h);
-  c.passed = !off.nonfinite && !on.nonfinite && off.max_force_n <= 3.3 + 1e-9 && on.max_force_n <= 3.3 + 1e-9;
+  auto held = [](const HeldContactResult& r) {
+    return r.contact_ticks > r.ticks / 4 && r.inside_without_contact_ticks == 0 && r.max_vhip_off_surface_m < 1e-6 &&
+           r.max_hip_depth_m < 2e-3;
+  };
+  c.passed = !off.nonfinite && !on.nonfinite && off.max_force_n <= 3.3 + 1e-9 && on.max_force_n <= 3.3 + 1e-9 &&
+             held(off) && held(on);
+  auto holds = [](const HeldContactResult& r) {
+    return ", " + std::to_string(r.contact_ticks) + "/" + std::to_string(r.ticks) + " ticks in contact, " +
+           std::to_string(r.inside_without_contact_ticks) + " behind the wall without force, VHIP off the wall " +
+           num(r.max_vhip_off_surface_m * 1e3) + " mm, HIP depth " + num(r.max_hip_depth_m * 1e3) + " mm";
+  };
   auto amp = [&](const HeldContactResult& r) { return std::sqrt(2 * r.late_energy_j / (1e5 + 50)) * 1e3; };
   c.detail = "without PC: sustained oscillation " + std::string(off.sustained_oscillation ? "yes" : "no") +
              ", late amplitude ~" + num(amp(off)) + " mm, max |F| " + num(off.max_force_n) +
              " N; with PC: sustained " + (on.sustained_oscillation ? "yes" : "no") + ", late amplitude ~" +
-             num(amp(on)) + " mm, max |F| " + num(on.max_force_n) + " N (saturation limits what the PC can dissipate)";
+             num(amp(on)) + " mm, max |F| " + num(on.max_force_n) + " N (saturation limits what the PC can dissipate)" +
+             "; without PC" + holds(off) + "; with PC" + holds(on);
   return c;
 }
 
@@ -272,7 +294,10 @@ ExtremeCase isovalue_extremes() {
 }
 
 ExtremeCase update_period_extremes() {
-  ExtremeCase c{"n = 1 and n = 1000", "contact rendered, forces bounded and finite; error reported", false, ""};
+  ExtremeCase c{"n = 1 and n = 1000",
+                "held still: the plane is updated exactly every n ticks; stroked along the sphere: contact "
+                "rendered, forces bounded, the VHIP within 0.05 mm of the sphere (early updates keep a stale "
+                "plane from carrying it off)", false, ""};
   const SampleField f = sphere_field(kC, 0.015);
   std::string detail;
   bool ok = true;
@@ -281,6 +306,18 @@ ExtremeCase update_period_extremes() {
     p.plane_update_period = n;
     HriRenderer r(p);
     r.tick(f, kC + Vec3{0, 0, 0.017});
+    // Held still 0.5 mm deep at the top: updates every n ticks, no other.
+    std::vector<long> updates;
+    for (long k = 0; k < 3000; ++k) {
+      const HriTick t = r.tick(f, kC + Vec3{0, 0, 0.0145});
+      ok = ok && t.contact && ok_force(t, 3.3);
+      if (t.plane_update) updates.push_back(k);
+    }
+    bool period_ok = updates.size() >= 2;
+    for (std::size_t i = 1; i < updates.size(); ++i) period_ok = period_ok && updates[i] - updates[i - 1] == n;
+    period_ok = period_ok && long(updates.size()) == 1 + (2999 - updates.front()) / n;
+    ok = ok && period_ok;
+    // Stroked along the sphere, 0.5 mm deep.
     double err = 0;
     long contact = 0;
     for (int k = 0; k < 3000; ++k) {
@@ -292,8 +329,10 @@ ExtremeCase update_period_extremes() {
         err = std::max(err, std::abs(norm(t.vhip_m - kC) - 0.015));
       }
     }
-    ok = ok && contact > 0;
-    detail += "n = " + std::to_string(n) + ": " + std::to_string(contact) + " contact ticks, max VHIP error " + num(err * 1e3) + " mm; ";
+    ok = ok && contact == 3000 && err < 0.05e-3;
+    detail += "n = " + std::to_string(n) + ": held, " + std::to_string(updates.size()) + " plane updates in 3000 ticks (" +
+              (period_ok ? "every n" : "NOT every n") + "); stroke, " + std::to_string(contact) +
+              " contact ticks, max VHIP error " + num(err * 1e3) + " mm; ";
   }
   c.passed = ok;
   c.detail = detail;
@@ -331,7 +370,7 @@ std::vector<ExtremeCase> run_extreme_cases() {
   return out;
 }
 
-long random_tick_property(long ticks, unsigned seed, double& max_ratio) {
+long random_tick_property(long ticks, unsigned seed, double& max_ratio, std::string* detail) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   std::vector<SampleField> fields;
@@ -341,7 +380,7 @@ long random_tick_property(long ticks, unsigned seed, double& max_ratio) {
   fields.push_back(sphere_field(kC, 0.015));
   for (std::size_t i = 0; i < fields[3].samples.size(); i += 7) fields[3].samples[i] = {NAN, NAN, NAN, NAN};
   const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
-  long bad = 0;
+  long bad = 0, nonfinite = 0, above = 0, force_outside = 0, off_normal = 0, pulling = 0, vhip_off = 0, fault_force = 0;
   max_ratio = 0;
   const long per_run = 2000;
   for (long done = 0; done < ticks;) {
@@ -366,10 +405,27 @@ long random_tick_property(long ticks, unsigned seed, double& max_ratio) {
       else x = hip = hip + Vec3{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5} * 4e-4;
       const HriTick t = r.tick(f, x);
       const double fn = norm(t.force_n);
-      if (!finite(t.force_n) || !(fn <= p.force_limit_n * (1 + 1e-12)) || !finite(t.vhip_m)) ++bad;
+      bool b = false;
+      if (!finite(t.force_n) || !finite(t.vhip_m)) b = true, ++nonfinite;
+      if (!(fn <= p.force_limit_n * (1 + 1e-12))) b = true, ++above;
+      if (!t.contact && fn != 0) b = true, ++force_outside;
+      if (t.fault && fn != 0) b = true, ++fault_force;
+      if (t.contact && finite(t.force_n)) {
+        const Vec3& N = t.plane.n;
+        const double fN = dot(t.force_n, N);
+        if (norm(t.force_n - N * fN) > 1e-9 * fn + 1e-12) b = true, ++off_normal;
+        if (fN < -1e-12) b = true, ++pulling;
+        if (!(std::abs(dot(t.vhip_m - t.plane.p, N)) <= 1e-9)) b = true, ++vhip_off;
+      }
+      bad += b;
       if (std::isfinite(fn)) max_ratio = std::max(max_ratio, fn / p.force_limit_n);
     }
   }
+  if (detail)
+    *detail = std::to_string(nonfinite) + " non-finite, " + std::to_string(above) + " above F_max, " +
+              std::to_string(force_outside) + " with force but no contact, " + std::to_string(fault_force) +
+              " faults with force, " + std::to_string(off_normal) + " not along N, " + std::to_string(pulling) +
+              " pulling, " + std::to_string(vhip_off) + " with the VHIP off the plane";
   return bad;
 }
 

@@ -44,6 +44,14 @@ struct HeldContactResult {
   double tolerance_j = 0;              ///< 1 % of the wall's stored energy at equilibrium
   double max_force_n = 0;
   long ticks = 0, contact_ticks = 0;
+  /// Deepest the device (HIP) went behind the surface plane through surface_point [m].
+  double max_hip_depth_m = 0;
+  /// Largest |N . (VHIP - surface_point)| over the contact ticks [m] (0 on the wall: the
+  /// contact point stays on the surface).
+  double max_vhip_off_surface_m = 0;
+  /// Ticks after the first contact where the HIP was more than 1 um behind the surface
+  /// plane but no contact force was rendered (the contact was not held).
+  long inside_without_contact_ticks = 0;
   bool stable() const { return !sustained_oscillation && !gains_energy && !nonfinite; }
 };
 
@@ -77,8 +85,12 @@ int extreme_case_count();
 ExtremeCase run_extreme_case(int i);
 
 /// `ticks` random ticks over random fields, parameters and HIPs (with NaN, Inf, huge
-/// values and long jumps mixed in). Returns the number of outputs that were non-finite
-/// or above the force limit (must be 0) and fills max_force_ratio (max |F| / F_max).
-long random_tick_property(long ticks, unsigned seed, double& max_force_ratio);
+/// values and long jumps mixed in), no friction, shading or recovery. Returns the number
+/// of ticks that broke a property (must be 0) and fills max_force_ratio (max |F| / F_max).
+/// Properties: force and VHIP finite; |F| <= F_max; zero force on every tick without
+/// contact; in contact, F along the plane normal N (|F - (F.N) N| <= 1e-9 |F|), pushing
+/// (F.N >= 0), and the VHIP on the plane (|N . (VHIP - p)| <= 1e-9 m); a fault tick has
+/// zero force. `detail`, if given, receives the count per property.
+long random_tick_property(long ticks, unsigned seed, double& max_force_ratio, std::string* detail = nullptr);
 
 }  // namespace isotouch::servo

@@ -53,9 +53,8 @@ HeldContactResult simulate_held_contact(const SampleField& field, const Vec3& p0
     if (out.contact) {
       touched = true;
       r.max_vhip_off_surface_m = std::max(r.max_vhip_off_surface_m, std::abs(dot(out.vhip_m - p0, n)));
-    } else if (touched && depth > 1e-6) {
-      ++r.inside_without_contact_ticks;
     }
+    if (touched && depth > 1e-6 && (!out.contact || !(norm(out.force_n) > 0))) ++r.inside_without_contact_ticks;
     dev.command_force(f);
     dev.step(cfg.period_s, target, {});
     const Vec3 v = dev.velocity();

@@ -50,7 +50,7 @@ struct HeldContactResult {
   /// contact point stays on the surface).
   double max_vhip_off_surface_m = 0;
   /// Ticks after the first contact where the HIP was more than 1 um behind the surface
-  /// plane but no contact force was rendered (the contact was not held).
+  /// plane but no contact or a zero force was rendered (the contact was not held).
   long inside_without_contact_ticks = 0;
   bool stable() const { return !sustained_oscillation && !gains_energy && !nonfinite; }
 };

@@ -27,13 +27,9 @@ Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const 
     case NormalSource::kSamples:
       g = sample_trilinear(field, x).gradient;
       break;
-    case NormalSource::kCentral: {
-      const Vec3 h = field.grid.spacing_m * 0.5;
-      g = {(sample_value(field, x + Vec3{h.x, 0, 0}) - sample_value(field, x - Vec3{h.x, 0, 0})) / (2 * h.x),
-           (sample_value(field, x + Vec3{0, h.y, 0}) - sample_value(field, x - Vec3{0, h.y, 0})) / (2 * h.y),
-           (sample_value(field, x + Vec3{0, 0, h.z}) - sample_value(field, x - Vec3{0, 0, h.z})) / (2 * h.z)};
+    case NormalSource::kCentral:
+      g = central_difference_gradient(field, x, field.grid.spacing_m * 0.5);
       break;
-    }
     case NormalSource::kTrilinearExact:
       g = trilinear_field_gradient(field, x);
       break;
@@ -90,6 +86,12 @@ VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip,
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double gn0 = e0 > 0.0 ? norm(sample_trilinear(field, vhip_).gradient) : 0.0;
   const double d_est = gn0 > 0 ? e0 / gn0 : voxel;
+  if (e0 > 0.0 && d_est > 1e-4 * voxel && d_est <= 0.05 * voxel && plane_.valid &&
+      params_.variant == Variant::kRobust) {
+    // Shallow embedding (a chord or a plane held over a curved surface): one first-order
+    // step out along the held plane's normal, no search (it costs no extra sample).
+    return plane_at(field, vhip_ + plane_.n * d_est, hip);
+  }
   if (e0 > 0.0 && d_est > 1e-4 * voxel) {
     // The VHIP is embedded (Figure 5b): the two ends do not bracket tau and the linear
     // rule would extrapolate. Look for the surface from the VHIP along its outward
@@ -324,10 +326,13 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : 1.0 / params_.rate_hz;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);
-  const bool absurd = sane && norm(hip - field.grid.centre_m()) > params_.max_reach_m;
+  const Vec3 from_centre = hip - field.grid.centre_m();
+  const bool absurd = sane && dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m;
   // An implausible jump while a plane is held: the contact state means nothing any more.
+  const Vec3 moved = hip - prev_hip_;
+  const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
   const bool jump = sane && !absurd && started_ && !resync_ && plane_.valid &&
-                    norm(hip - prev_hip_) > params_.max_speed_m_s * params_.world_per_device * elapsed;
+                    dot(moved, moved) > max_move * max_move;
   if (!sane || absurd || jump) {  // a device fault: send nothing
     out.fault = true;
     resync_ = resync_ || absurd || jump;
@@ -361,8 +366,12 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   if (vel_valid_) {
     const Vec3 raw = (hip - prev_hip_) * (s / elapsed);
     const double fc = params_.velocity_cutoff_hz;
-    const double a = fc > 0 ? elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc)) : 1.0;
-    v_filt_ = v_filt_ + (raw - v_filt_) * a;
+    if (fc > 0) {
+      const double a = elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
+      v_filt_ = v_filt_ + (raw - v_filt_) * a;
+    } else {
+      v_filt_ = raw;
+    }
   } else {
     v_filt_ = {};
   }
@@ -410,8 +419,8 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     } else {
       // Behind the plane: no sample unless an update is due (every n ticks, or early
       // when the VHIP would slide more than half a voxel from where the plane was made).
-      const Vec3 proj = hip + plane_.n * dot(plane_.n, plane_.p - hip);
-      if (++c_ >= params_.plane_update_period || norm(proj - anchor_) > 0.5 * voxel) {
+      const Vec3 slide = hip + plane_.n * dot(plane_.n, plane_.p - hip) - anchor_;
+      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.25 * voxel * voxel) {
         c_ = 0;
         Vec3 p;
         if (hip_excess() > 0.0) {

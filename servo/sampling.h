@@ -18,6 +18,12 @@ FieldValue sample_trilinear(const SampleField& field, const Vec3& world_m);
 /// Trilinear value only (cheaper: one channel).
 double sample_value(const SampleField& field, const Vec3& world_m);
 
+/// Central differences of the trilinear value at `world_m` with half steps h [m] per
+/// axis: ((f(x + h_x e_x) - f(x - h_x e_x)) / (2 h_x), ...) [units/m]. The same numbers as
+/// six sample_value() calls, with the cell lookups shared (the paper's SurfaceNormal).
+/// Non-finite input or an empty grid gives NaN components.
+Vec3 central_difference_gradient(const SampleField& field, const Vec3& world_m, const Vec3& h_m);
+
 /// Exact gradient of the trilinear value field at `world_m` (derivative of the
 /// interpolant, piecewise bilinear) [units/m]. Used by error metrics, not by HRI.
 Vec3 trilinear_field_gradient(const SampleField& field, const Vec3& world_m);

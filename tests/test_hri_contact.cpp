@@ -343,3 +343,34 @@ TEST(Passivity, BadInputChargesNothing) {
   pc.step({0.002, 0, 0}, {1, 0, 0});  // now 1 N was held over 1 mm: -1 mJ
   EXPECT_NEAR(pc.observed_energy_j(), -1e-3, 1e-15);
 }
+
+// The servo's fast value read and the shared-lookup central differences give the numbers
+// of the direct trilinear formula (sample_trilinear: weights per corner), inside the grid,
+// clamped outside it, and on a 1-voxel axis.
+TEST(Sampling, FastReadsMatchTheDirectTrilinearFormula) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (const std::array<int, 3> dims : {std::array<int, 3>{7, 5, 4}, std::array<int, 3>{6, 1, 3}}) {
+    SampleField f;
+    f.grid.dims = dims;
+    f.grid.spacing_m = {1e-3, 2e-3, 1.5e-3};
+    f.grid.origin_m = {0.01, -0.02, 0.003};
+    f.samples.resize(f.grid.voxel_count());
+    for (Sample& s : f.samples) s = {float(1000 * (u(rng) - 0.5)), 0, 0, 0};
+    const Vec3 ext = f.grid.extent_m();
+    const Vec3 h = f.grid.spacing_m * 0.5;
+    for (int k = 0; k < 2000; ++k) {
+      // -20 % .. 120 % of the extent: clamp-to-edge is exercised too.
+      const Vec3 x = f.grid.origin_m + Vec3{ext.x * (1.4 * u(rng) - 0.2), ext.y * (1.4 * u(rng) - 0.2),
+                                            ext.z * (1.4 * u(rng) - 0.2)};
+      ASSERT_NEAR(sample_value(f, x), sample_trilinear(f, x).value, 1e-9) << k;
+      auto v = [&](const Vec3& p) { return sample_trilinear(f, p).value; };
+      const Vec3 g = central_difference_gradient(f, x, h);
+      EXPECT_NEAR(g.x, (v(x + Vec3{h.x, 0, 0}) - v(x - Vec3{h.x, 0, 0})) / (2 * h.x), 1e-6) << k;
+      EXPECT_NEAR(g.y, (v(x + Vec3{0, h.y, 0}) - v(x - Vec3{0, h.y, 0})) / (2 * h.y), 1e-6) << k;
+      EXPECT_NEAR(g.z, (v(x + Vec3{0, 0, h.z}) - v(x - Vec3{0, 0, h.z})) / (2 * h.z), 1e-6) << k;
+    }
+  }
+  SampleField empty;
+  EXPECT_TRUE(std::isnan(sample_value(empty, {0, 0, 0})));
+}

@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -164,7 +165,8 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
   const double cpu_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   const auto d = engine::compare_gradients(gpu, cpu);
   const GradientHealth gh = gradient_health(vol, cpu);
-  const auto& D = vol.direction;
+  std::array<double, 9> D = vol.direction;
+  for (double& x : D) x += 0.0;  // print -0 as 0
   const servo::Vec3 far = vol.index_to_physical(
       {double(vol.grid.dims[0] - 1), double(vol.grid.dims[1] - 1), double(vol.grid.dims[2] - 1)});
   std::cout << std::setprecision(4) << "volume      " << path << " (" << vol.grid.dims[0] << "x" << vol.grid.dims[1]

@@ -13,6 +13,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (!(s.hri.stiffness_n_per_m > 0) || !(s.hri.force_limit_n > 0) || s.hri.plane_update_period < 1 ||
         !(s.hri.rate_hz > 0) || !(s.device.mass_kg > 0))
       __builtin_trap();
+    // The script's ray starts near the volume box, and the device can be simulated.
+    for (int a = 0; a < 3; ++a)
+      if (!(s.script.ray_origin_frac[a] >= isotouch::servo::kRayOriginFracMin &&
+            s.script.ray_origin_frac[a] <= isotouch::servo::kRayOriginFracMax))
+        __builtin_trap();
+    if (isotouch::servo::min_stable_substeps(s.device, 1.0 / s.hri.rate_hz) > 10000) __builtin_trap();
   } catch (const isotouch::app::SceneError&) {
   }
   return 0;

@@ -43,7 +43,8 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "isovalue": 1150,                           required; in the volume's units (HU for CT)
     "inside": "above",                          "above": value > isovalue is inside; "below"
     "servo":  {"stiffness_n_per_m": 800, "damping_n_s_per_m": 1.0, "plane_update_period": 5,
-               "rate_hz": 1000, "force_limit_n": 3.3, ...},       optional; see README, Scenes
+               "rate_hz": 1000, "force_limit_n": 3.3, "variant": "robust" | "paper", ...},
+                                                optional, like every section below; see README, Scenes
     "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
     "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
                "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
@@ -58,6 +59,8 @@ Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (
 Points are reported in the volume's physical frame (origin + direction x spacing x index).
 Exit status: 0 ok; 1 bad input (the message names the file, field and value);
 4 the run had servo fault ticks.
+
+The Vulkan device: --device NAME|INDEX, before or after `run`, or ISOTOUCH_DEVICE.
 
 Example:
   isotouch run scenes/sphere.json --out /tmp/sphere --device llvmpipe
@@ -202,6 +205,8 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
             << d.max_abs[2] / std::max(d.max_gradient_norm, 1e-300) << "  (all " << d.max_rel
             << ", relative to max |grad|)\n";
   if (d.nonfinite) std::cout << "mismatched non-finite samples: " << d.nonfinite << "\n";
+  if (gh.nonfinite == 0 && gh.max_norm == 0.0)
+    std::cout << "note        the gradient is zero everywhere: a constant volume has no isosurface to feel\n";
   // A comparison is only meaningful on finite data with a finite gradient somewhere.
   std::vector<std::string> why;
   if (vol.nonfinite_voxels() > 0)

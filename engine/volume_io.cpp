@@ -201,14 +201,28 @@ void check_metaimage(const std::string& path) {
     }
   if (count > kMaxVoxels) return;  // check_dims names it
   const std::string name = mi.ElementDataFileName();
-  if (name.empty() || name == "LOCAL" || name == "Local" || name == "local") return;  // data follow the header
-  if (name.rfind("LIST", 0) == 0 || name.find('%') != std::string::npos) return;    // one file per slice
+  if (name.empty()) return;
+  // LOCAL (.mha): the data follow the header, from the byte after the ElementDataFile line.
+  const bool local = name == "LOCAL" || name == "Local" || name == "local";
+  if (name.rfind("LIST", 0) == 0 || name.find('%') != std::string::npos) return;  // one file per slice
   fs::path data(name);
-  if (data.is_relative()) data = fs::path(path).parent_path() / data;
+  if (local) data = path;
+  else if (data.is_relative()) data = fs::path(path).parent_path() / data;
   std::error_code ec;
   if (!fs::is_regular_file(data, ec))
     fail(path, "field 'ElementDataFile' = '" + name + "': no such file (looked for " + data.string() + ")");
   if (mi.CompressedData()) return;  // size unknown until inflated; the sentinel check covers it
+  std::uint64_t data_start = 0;
+  if (local) {
+    std::ifstream in(path, std::ios::binary);
+    std::string head(1 << 16, '\0');
+    in.read(head.data(), std::streamsize(head.size()));
+    head.resize(std::size_t(in.gcount()));
+    const auto key = head.find("ElementDataFile");
+    const auto eol = key == std::string::npos ? key : head.find('\n', key);
+    if (eol == std::string::npos) return;  // ITK will complain
+    data_start = eol + 1;
+  }
   int type_bytes = 0;
   MET_SizeOfType(mi.ElementType(), &type_bytes);
   char type_name[64] = {};
@@ -216,14 +230,18 @@ void check_metaimage(const std::string& path) {
   const int channels = std::max(1, mi.ElementNumberOfChannels());
   if (type_bytes <= 0) return;  // unknown type: ITK names it
   const std::uint64_t need = count * std::uint64_t(type_bytes) * std::uint64_t(channels);
-  const std::uint64_t have = fs::file_size(data, ec);
+  const std::uint64_t file_bytes = fs::file_size(data, ec);
   if (ec) fail(path, "field 'ElementDataFile' = '" + name + "': cannot read its size (" + ec.message() + ")");
-  const long long hs = mi.HeaderSize();  // -1: the data are the file's last bytes
+  const std::uint64_t have = file_bytes >= data_start ? file_bytes - data_start : 0;
+  const long long hs = local ? 0 : mi.HeaderSize();  // -1: the data are the file's last bytes
   std::ostringstream dx;
   for (int a = 0; a < nd; ++a) dx << (a ? " x " : "") << mi.DimSize(a);
   std::ostringstream head;
-  head << "ElementDataFile '" << name << "' holds " << have << " bytes; DimSize " << dx.str() << " of ElementType "
-       << type_name << " (" << type_bytes << " byte" << (type_bytes > 1 ? "s" : "") << " each"
+  if (local)
+    head << "ElementDataFile = LOCAL: the data after the header hold " << have << " bytes; DimSize ";
+  else
+    head << "ElementDataFile '" << name << "' holds " << have << " bytes; DimSize ";
+  head << dx.str() << " of ElementType " << type_name << " (" << type_bytes << " byte" << (type_bytes > 1 ? "s" : "") << " each"
        << (channels > 1 ? ", " + std::to_string(channels) + " channels" : std::string()) << ") needs ";
   const std::uint64_t want = (hs > 0 ? std::uint64_t(hs) : 0) + need;
   const bool bad = hs == -1 ? have < need : have != want;

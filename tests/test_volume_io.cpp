@@ -275,3 +275,21 @@ TEST(VolumeIo, NonFiniteVoxelsCounted) {
   EXPECT_EQ(v.min_value, 1.f);
   EXPECT_EQ(v.max_value, 5.f);
 }
+
+TEST(VolumeIo, MetaImageLocalDataSize) {
+  // .mha: the data follow the header. Exact size loads; one byte short or twice the bytes
+  // (MET_UCHAR over 16-bit data) is an error.
+  const fs::path d = temp_dir();
+  const std::string header = "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                             "DimSize = 4 4 4\nElementType = MET_SHORT\nElementDataFile = LOCAL\n";
+  std::string raw(128, '\0');
+  raw[2] = 7;
+  write(d / "ok.mha", header + raw);
+  EXPECT_EQ(load_volume((d / "ok.mha").string()).voxels[1], 7.f);
+  write(d / "short.mha", header + raw.substr(0, 127));
+  expect_error((d / "short.mha").string(), "LOCAL: the data after the header hold 127 bytes");
+  std::string uchar = header;
+  uchar.replace(uchar.find("MET_SHORT"), 9, "MET_UCHAR");
+  write(d / "uchar.mha", uchar + raw);
+  expect_error((d / "uchar.mha").string(), "hold 128 bytes; DimSize 4 x 4 x 4 of ElementType MET_UCHAR");
+}

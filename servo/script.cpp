@@ -36,11 +36,10 @@ void TouchScript::at(double t, Vec3& pos, Vec3& vel) const {
 
 namespace {
 
-// Longest march: the step grows where the ray inside the box is longer than this many
-// steps, so a find_surface call costs at most ~kMaxMarchSteps field samples.
-constexpr long kMaxMarchSteps = 1L << 21;
-// Most stroke points; ds grows for long strokes on fine grids.
-constexpr long kMaxStrokeSteps = 20000;
+// Most stroke points; ds grows for long strokes on fine grids. Each point marches at most
+// kStrokeMarchSteps samples, so a stroke costs at most ~1e7 samples whatever the grid.
+constexpr long kMaxStrokeSteps = 10000;
+constexpr long kStrokeMarchSteps = 1024;
 
 // Slab test: the part [t0, t1] of origin + dir * t that lies in the grid's box.
 bool clip_to_box(const Grid& g, const Vec3& o, const Vec3& d, double& t0, double& t1) {
@@ -68,14 +67,15 @@ std::string mm(const Vec3& v) {
 }  // namespace
 
 bool find_surface(const SampleField& field, const HriRenderer& r, const Vec3& origin,
-                  const Vec3& dir, double max_dist, Vec3& hit) {
+                  const Vec3& dir, double max_dist, Vec3& hit, long max_steps) {
   const Vec3& sp = field.grid.spacing_m;
   if (r.excess(sample_value(field, origin)) > 0.0) return false;
   // Only the part of the ray inside the volume box can cross the isosurface (outside it
   // the field is NaN, never inside).
   double t0 = 0.0, t1 = max_dist;
   if (!(max_dist > 0.0) || !clip_to_box(field.grid, origin, dir, t0, t1)) return false;
-  const double step = std::max(0.25 * std::min({sp.x, sp.y, sp.z}), (t1 - t0) / double(kMaxMarchSteps));
+  // The step grows where the ray inside the box is longer than max_steps steps.
+  const double step = std::max(0.25 * std::min({sp.x, sp.y, sp.z}), (t1 - t0) / double(std::max(1L, max_steps)));
   double t_out = t0;
   const long n = long(std::ceil((t1 - t0) / step)) + 1;
   for (long i = 1; i <= n; ++i) {
@@ -158,7 +158,7 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
     const Vec3 above = p0 + tangent * sl + n * p.approach_distance_m;
     Vec3 hit;
     if (find_surface(field, classify, above, -n, 3.0 * p.approach_distance_m + p.press_depth_m,
-                     hit))
+                     hit, kStrokeMarchSteps))
       last_surface = hit;
     else
       last_surface = p0 + tangent * sl;

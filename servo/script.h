@@ -49,13 +49,14 @@ struct TouchScript {
 /// Only the part of the ray inside the volume box is marched, in steps of a quarter of
 /// the smallest spacing, or longer where that part would take more than 2^21 steps: the
 /// cost is bounded whatever the spacing, the ray origin or max_dist_m.
+/// `max_steps` caps the samples of the march (the stroke uses 1024 per point).
 bool find_surface(const SampleField& field, const HriRenderer& classify, const Vec3& origin_m,
-                  const Vec3& dir_unit, double max_dist_m, Vec3& hit_m);
+                  const Vec3& dir_unit, double max_dist_m, Vec3& hit_m, long max_steps = 1L << 21);
 
 /// Build the script on `field`. Throws std::runtime_error with a reason (naming the
 /// ray, positions in mm) when the ray never meets the isosurface or starts inside it, or
 /// when a ray_origin_frac component is outside [kRayOriginFracMin, kRayOriginFracMax].
-/// The stroke has at most 20000 points whatever the grid.
+/// The stroke has at most 10000 points whatever the grid.
 TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
                               const ScriptParams& params);
 

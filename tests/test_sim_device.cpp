@@ -284,3 +284,29 @@ TEST(Script, MessagesAreInMillimetres) {
     EXPECT_EQ(m.find(") m "), std::string::npos) << m;
   }
 }
+
+TEST(Script, StrokeIsBoundedOnAbsurdGrids) {
+  // 1 nm along x, 1 mm along y, z: every stroke point marches 38 mm along -z in steps of a
+  // quarter of the smallest spacing: 1.5e8 samples per point, 10000 points (ds = 1 um).
+  SampleField f;
+  f.grid.dims = {8, 48, 48};
+  f.grid.spacing_m = {1e-9, 1e-3, 1e-3};
+  f.samples.assign(f.grid.voxel_count(), Sample{0, 0, 0, 0});
+  for (int z = 0; z < 48; ++z)
+    for (int y = 0; y < 48; ++y)
+      for (int x = 0; x < 8; ++x) f.samples[f.grid.index(x, y, z)] = {float(24 - z), 0, 0, -1e3f};
+  HriParams h;
+  h.tau = 0.5;  // a plane between z = 23 and 24 mm
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.3, 0.9};
+  sp.ray_direction = {0, 0, -1};
+  sp.stroke_direction = {0, 1, 0};
+  sp.stroke_length_m = 0.01;
+  const auto t0 = std::chrono::steady_clock::now();
+  const TouchScript s = make_touch_script(f, h, sp);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  EXPECT_NEAR(s.contact_point_m.z, 23.5e-3, 1e-6);
+  Vec3 p, v;
+  s.at(0.5 * (s.t_stroke + s.t_lift), p, v);
+  EXPECT_NEAR(p.z, 23.5e-3 - sp.press_depth_m, 1e-5);  // the stroke found the plane
+}

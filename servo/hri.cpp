@@ -78,6 +78,26 @@ bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const 
   return false;
 }
 
+bool HriRenderer::surface_from(const SampleField& field, const Vec3& x, double e_x, double grad_norm,
+                               Vec3& p) const {
+  // Along the outward normal at x, no farther than twice the first-order depth
+  // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
+  // 8 voxels; 16 bisection steps.
+  const Vec3& sp = field.grid.spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
+  const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
+  const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
+  if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
+  double lo = 0.0, hi = reach;
+  for (int k = 0; k < 16; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (excess(sample_value(field, x + n0 * mid)) > 0.0 ? lo : hi) = mid;
+  }
+  p = x + n0 * hi;
+  return true;
+}
+
 VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip, double f_hip,
                                         const Vec3& hip) const {
   // p = LinearInterpolation(VHIP, HIP, tau)  (Figure 2, eq. 1), optionally refined.
@@ -95,20 +115,10 @@ VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip,
   if (e0 > 0.0 && d_est > 1e-4 * voxel) {
     // The VHIP is embedded (Figure 5b): the two ends do not bracket tau and the linear
     // rule would extrapolate. Look for the surface from the VHIP along its outward
-    // normal, no farther than twice the first-order depth e0 / |grad| plus a quarter
-    // voxel (so it cannot jump through a thin feature); keep p = VHIP if none. An
-    // embedding below 1e-4 voxel is rounding, not Figure 5b.
-    const Vec3 n0 = outward_normal(field, vhip_, plane_.valid ? plane_.n : Vec3{0, 0, 1});
-    const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
-    if (excess(sample_value(field, vhip_ + n0 * reach)) <= 0.0) {
-      double lo = 0.0, hi = reach;
-      for (int k = 0; k < 16; ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (excess(sample_value(field, vhip_ + n0 * mid)) > 0.0 ? lo : hi) = mid;
-      }
-      return plane_at(field, vhip_ + n0 * hi, hip);
-    }
-    return plane_at(field, vhip_, hip);
+    // normal (see surface_from); keep p = VHIP if none. An embedding below 1e-4 voxel is
+    // rounding, not Figure 5b.
+    Vec3 p;
+    return plane_at(field, surface_from(field, vhip_, e0, gn0, p) ? p : vhip_, hip);
   }
   double t = -e0 / (e1 - e0);
   if (!std::isfinite(t)) t = 0.0;
@@ -399,12 +409,17 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   // value that tick read (cached), so free motion costs one sample per tick.
   auto vhip_value = [&]() { return vhip_value_known_ ? vhip_value_ : sample_value(field, vhip_); };
   // Free motion or in front of a plane: did the segment VHIP -> HIP enter the object?
-  auto entry_test = [&]() {
+  auto entry_test = [&](bool holding) {
     Vec3 p;
     if (hip_excess() > 0.0) {
       const double f_vhip = vhip_value();
-      if (!(excess(f_vhip) > 0.0)) set_plane(compute_plane(field, f_vhip, f_hip, hip));
-      else plane_.valid = false;  // both inside: no force (starting inside, §3.1)
+      // In contact (a plane held) the VHIP is the contact point even when embedded:
+      // compute_plane searches the surface from it. In free motion both ends inside
+      // means no force (starting inside, §3.1).
+      // In contact (a plane held) an embedded VHIP is still the contact point; in free
+      // motion both ends inside means no force (starting inside, §3.1).
+      if (holding || !(excess(f_vhip) > 0.0)) set_plane(compute_plane(field, f_vhip, f_hip, hip));
+      else plane_.valid = false;
     } else if (long_step(field, vhip_, hip) && !(excess(vhip_value()) > 0.0) &&
                first_crossing(field, vhip_, hip, p)) {
       set_plane(plane_at(field, p, hip));  // a long step through a thin wall
@@ -413,9 +428,10 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     }
   };
 
-  if (plane_.valid) {
+  const bool holding = plane_.valid;
+  if (holding) {
     if (!(dot(plane_.n, hip - plane_.p) < 0.0)) {
-      entry_test();  // in front of the held plane: not in contact with it
+      entry_test(true);  // in front of the held plane: not in contact with it
     } else {
       // Behind the plane: no sample unless an update is due (every n ticks, or early
       // when the VHIP would slide more than half a voxel from where the plane was made).
@@ -443,7 +459,16 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
       }
     }
   } else {
-    entry_test();
+    entry_test(false);
+  }
+  // While in contact, a HIP inside the object is never left in front of the plane (a
+  // concave corner or a rough surface, where the VHIP is embedded): the contact goes on
+  // at the surface found from the HIP.
+  if (holding && plane_.valid && have_f_hip && excess(f_hip) > 0.0 &&
+      !(dot(plane_.n, hip - plane_.p) < 0.0)) {
+    Vec3 p;
+    if (surface_from(field, hip, excess(f_hip), norm(sample_trilinear(field, hip).gradient), p))
+      set_plane(plane_at(field, p, hip));
   }
 
   Vec3 force;

@@ -183,6 +183,9 @@ class HriRenderer final : public Renderer {
   VirtualPlane compute_plane(const SampleField& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
   VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
+  /// Surface point p from x (inside, excess e_x, |grad| grad_norm) along the outward normal
+  /// at x, within twice the first-order depth plus a quarter voxel; false if none.
+  bool surface_from(const SampleField& field, const Vec3& x, double e_x, double grad_norm, Vec3& p) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);

@@ -374,3 +374,31 @@ TEST(Sampling, FastReadsMatchTheDirectTrilinearFormula) {
   SampleField empty;
   EXPECT_TRUE(std::isnan(sample_value(empty, {0, 0, 0})));
 }
+
+// In a concave corner the plane may end on the wall while the HIP, backing away from the
+// wall, is still inside the floor: in front of the held plane but inside the object. The
+// contact must go on (a new plane from the VHIP), never zero force inside the object.
+TEST(HriContact, ConcaveCornerKeepsContactInFrontOfTheHeldPlane) {
+  // Floor z < 10 mm, wall x > 20 mm (value: distance inside the union [mm]).
+  const SampleField f = make_field(
+      40, [](const Vec3& x) { return 1000 * std::max(0.010 - x.z, x.x - 0.020); },
+      [](const Vec3& x) { return 0.010 - x.z > x.x - 0.020 ? Vec3{0, 0, -1000} : Vec3{1000, 0, 0}; });
+  for (int n : {1, 5, 25}) {
+    HriRenderer r(robust(n, 500));
+    r.tick(f, {0.015, 0.020, 0.0110});
+    long zero_inside = 0, inside = 0;
+    for (int k = 0; k < 160; ++k) {
+      // 0.5 mm under the floor: slide +x 9 mm into the corner (to 4 mm inside the wall),
+      // then back out -x along the floor, the first 5 mm in one tick (5 m/s).
+      const double x = k < 80 ? 0.015 + 9e-3 * k / 79 : 0.019 - 4e-3 * (k - 80) / 79;
+      const Vec3 hip{x, 0.020, 0.0095};
+      const HriTick t = r.tick(f, hip);
+      if (sample_value(f, hip) > 0) {
+        ++inside;
+        if (!(norm(t.force_n) > 0)) ++zero_inside;
+      }
+    }
+    EXPECT_EQ(inside, 160);
+    EXPECT_EQ(zero_inside, 0) << "n = " << n;
+  }
+}

@@ -64,6 +64,7 @@ TEST(Hri, DampingResistsPressingIn) {
   const SampleField f = wall_field(kUp, kC);
   HriParams p = params();
   p.damping_n_s_per_m = 2.0;
+  p.velocity_cutoff_hz = 0;  // the raw backward difference (the filter: test_hri_contact)
   HriRenderer r(p);
   r.tick(f, {0.016, 0.016, 0.0105});
   r.tick(f, {0.016, 0.016, 0.0095});                        // enters

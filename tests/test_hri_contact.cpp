@@ -238,6 +238,25 @@ TEST(HriContact, NoDampingSpikeAfterLostTicks) {
   EXPECT_NEAR(u.force_n.z, 800 * 39e-5 + 1.0 * 0.02, 1e-6);
 }
 
+// Fault 5: the velocity in the damping term is the first-order low-pass of the backward
+// difference (alpha = dt / (dt + 1 / (2 pi f_c))): pressing in at a constant speed, the
+// damping force follows B v (1 - (1 - alpha)^k).
+TEST(HriContact, DampingUsesTheLowPassVelocity) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  HriParams p = robust(1, 800);
+  p.damping_n_s_per_m = 2.0;
+  p.velocity_cutoff_hz = 200;
+  HriRenderer r(p);
+  const double dt = 1e-3, v = 0.02, a = dt / (dt + 1.0 / (2 * M_PI * 200));
+  for (int k = 0; k <= 30; ++k) {
+    const double z = 0.010 + v * dt * (1 - k);  // on the wall at k = 1, inside from k = 2
+    const HriTick t = r.tick(f, {0.016, 0.016, z});
+    if (k < 2) continue;
+    const double spring = 800 * (0.010 - z);
+    EXPECT_NEAR(t.force_n.z - spring, 2.0 * v * (1 - std::pow(1 - a, k)), 1e-9) << "tick " << k;
+  }
+}
+
 // Fault 6: Coulomb friction holds the VHIP even when viscous friction is set.
 TEST(HriContact, CoulombConeHoldsWithViscousFriction) {
   const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});

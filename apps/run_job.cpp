@@ -333,7 +333,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                                         {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
                                         {"search_radius_m", m.surface_search_radius_m},
                                         {"method", "true distance from the VHIP to the isosurface of the trilinear field "
-                                                   "(branch and bound over cells, accurate to 1e-3 voxel)"}}},
+                                                   "(branch and bound over cells; error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
                 {"first_order_estimate_m", {{"rms", m.first_order_err_rms_m}, {"max", m.first_order_err_max_m},
                                             {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
                                                        "where the field is flat; shown for comparison only"}}}};

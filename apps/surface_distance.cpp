@@ -139,6 +139,7 @@ class Search {
     }
   }
 
+  void set_tolerance(double tol) { tol_ = tol; }
   double best_ = std::numeric_limits<double>::infinity();
   Vec3 best_point_;
   double floor_ = std::numeric_limits<double>::infinity();  // smallest lower bound left unexplored
@@ -194,6 +195,14 @@ SurfaceDistance distance_to_isosurface(const servo::SampleField& field, double t
     out.searched_radius_m = r;
     if (s.best_ <= r || out.budget_exceeded || r >= max_r) break;
     r = std::min(2 * r, max_r);
+  }
+  // Near the surface, a second pass to the relative accuracy (the first one's result is
+  // the starting upper bound, so its cost is about that of the first).
+  const double tol2 = std::max(o.min_tolerance_m > 0 ? o.min_tolerance_m : 1e-6 * h, o.relative_tolerance * s.best_);
+  if (s.best_ <= r && !out.budget_exceeded && tol2 < tol) {
+    s.set_tolerance(tol2);
+    s.floor_ = std::numeric_limits<double>::infinity();
+    s.run(r, out);
   }
   if (s.best_ <= r || (out.budget_exceeded && std::isfinite(s.best_))) {
     out.found = true;

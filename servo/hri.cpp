@@ -7,6 +7,13 @@
 
 namespace isotouch::servo {
 
+HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
+  dt_nominal_s_ = 1.0 / params_.rate_hz;
+  inv_wpd_ = 1.0 / params_.world_per_device;
+  const double fc = params_.velocity_cutoff_hz;
+  alpha_nominal_ = fc > 0 ? dt_nominal_s_ / (dt_nominal_s_ + 1.0 / (2.0 * M_PI * fc)) : 1.0;
+}
+
 void HriRenderer::reset() {
   plane_ = {};
   c_ = 0;
@@ -206,7 +213,7 @@ Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const
   vhip_ = friction ? constrain(hip, free_vhip, dt) : free_vhip;
   if (!friction) sliding_ = false;
 
-  const double s = 1.0 / params_.world_per_device;
+  const double s = inv_wpd_;
   const Vec3 d = (hip - vhip_) * s;  // device [m]
   const Vec3 v_d = plane_.n * dot(v, plane_.n);
   // eq. 3 with the physical sign: push the HIP back toward the VHIP.
@@ -214,8 +221,9 @@ Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const
   if (dot(force, plane_.n) < 0.0) force = {};  // a wall pushes, never pulls
 
   // Recovery time: ramp the magnitude, keep the new direction.
-  const double mag = norm(force);
-  if (robust) {
+  const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
+  const double mag = ramps ? norm(force) : 0.0;
+  if (ramps && robust) {
     // Every step of the spring-damper target that a plane creation or update causes is
     // spread over recovery_time_s: the offset between what was sent and the new target
     // fades out linearly (an update that does not move the target lets a ramp go on).
@@ -232,7 +240,7 @@ Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const
       if (mag > 0) force = force * (m / mag);
       else if (m > 0) force = plane_.n * m;
     }
-  } else {
+  } else if (ramps) {
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
       recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
       recovery_ticks_left_ = recovery_ticks_;
@@ -333,7 +341,7 @@ HriTick HriRenderer::tick_paper(const SampleField& field, const Vec3& hip) {
 
 HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, double dt_s) {
   HriTick out;
-  const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : 1.0 / params_.rate_hz;
+  const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);
   const Vec3 from_centre = hip - field.grid.centre_m();
@@ -372,12 +380,13 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     vhip_value_known_ = false;
   }
   // Velocity: backward difference over the measured time, first-order low-pass.
-  const double s = 1.0 / params_.world_per_device;
+  const double s = inv_wpd_;
   if (vel_valid_) {
-    const Vec3 raw = (hip - prev_hip_) * (s / elapsed);
+    const bool nominal = elapsed == dt_nominal_s_;  // the common case: no division
+    const Vec3 raw = (hip - prev_hip_) * (nominal ? s * params_.rate_hz : s / elapsed);
     const double fc = params_.velocity_cutoff_hz;
     if (fc > 0) {
-      const double a = elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
+      const double a = nominal ? alpha_nominal_ : elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
       v_filt_ = v_filt_ + (raw - v_filt_) * a;
     } else {
       v_filt_ = raw;
@@ -480,14 +489,17 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     recovery_ticks_left_ = 0;
     prev_target_n_ = 0;
   }
-  if (!std::isfinite(norm(force))) {
+  double mag = norm(force);  // one square root unless |F| saturates
+  if (!std::isfinite(mag)) {
     force = {};
+    mag = 0;
     out.fault = true;
-  } else {
+  } else if (mag > params_.force_limit_n) {
     out.saturated = saturate(force, params_.force_limit_n);
+    mag = norm(force);
   }
   prev_hip_ = hip;
-  prev_force_mag_ = norm(force);
+  prev_force_mag_ = mag;
   was_contact_ = out.contact;
   vhip_value_known_ = !out.contact && have_f_hip;  // then VHIP = HIP, whose value was read
   vhip_value_ = f_hip;

@@ -161,7 +161,7 @@ struct HriParams {
 ///   plane (the paper's version leaves it at the temporary HIP when that is in front).
 class HriRenderer final : public Renderer {
  public:
-  explicit HriRenderer(const HriParams& params) : params_(params) {}
+  explicit HriRenderer(const HriParams& params);
 
   const char* name() const override { return "HRI"; }
   /// Forget contact state (next tick starts as the first tick of a simulation).
@@ -223,6 +223,9 @@ class HriRenderer final : public Renderer {
   bool sliding_ = false;
   bool was_contact_ = false;
   // Robust variant only:
+  double dt_nominal_s_ = 1e-3;  ///< 1 / rate_hz [s]
+  double inv_wpd_ = 1.0;        ///< 1 / world_per_device
+  double alpha_nominal_ = 1.0;  ///< low-pass alpha at the nominal period
   Vec3 anchor_;            ///< VHIP where the plane was last computed (world [m])
   Vec3 v_filt_;            ///< filtered HIP velocity, device [m/s]
   bool vel_valid_ = false; ///< prev_hip_ is a sane HIP of the tick before

@@ -2,24 +2,31 @@
 #pragma once
 #include <cstdint>
 
+#include <memory>
+#include <vector>
+
+#include "isotouch_shared.h"
 #include "sample_field.h"
 #include "vk_context.h"
+#include "vk_resources.h"
 #include "volume.h"
 
 namespace isotouch::engine {
 
 struct GradientTimings {
-  double upload_ms = 0;     ///< host copy of the voxels into the mapped src buffer
+  double upload_ms = 0;     ///< host copy of the voxels into the mapped staging (upload) buffer
   double gradient_ms = 0;   ///< device time of all dispatches (GPU timestamps), else wall
   double submit_wall_ms = 0;///< wall time from vkQueueSubmit to the fence signalling
-  double download_ms = 0;   ///< host copy of the samples out of the mapped dst buffer
+  double download_ms = 0;   ///< host copy of the samples out of the mapped readback buffer
   int slabs = 0;            ///< z-slabs dispatched (bindings kept <= max range)
   bool gpu_timestamps = false;
 };
 
 /// Computes the plane-ready SampleField of a volume with shaders/gradient.comp.
 /// The volume is split into z-slabs so that no storage-buffer binding exceeds
-/// maxStorageBufferRange (128 MiB on lavapipe).
+/// maxStorageBufferRange (128 MiB on lavapipe). Voxels go host -> upload buffer ->
+/// device-local buffer; samples device-local -> readback buffer -> host, the copies and
+/// the dispatches recorded into one command buffer (engine/vk_resources.h).
 class GradientPass {
  public:
   explicit GradientPass(VulkanContext& ctx);
@@ -33,12 +40,18 @@ class GradientPass {
   servo::SampleField run(const Volume& volume, GradientTimings* timings = nullptr,
                          std::uint64_t max_binding_bytes = 0);
 
+  /// The z-slabs of a gradient from a float buffer `src` to a vec4 buffer `dst` of this
+  /// grid (the GPU-resident form, for pass chains).
+  /// @throws VolumeError naming `what`, the slice size and the limit if a slice does not fit.
+  std::vector<Slab> plan(const servo::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
+                         const std::string& what) const;
+  /// Records the dispatches of `slabs` (from plan()); no barriers.
+  void record(VkCommandBuffer cmd, DescriptorArena& arena, const servo::Grid& grid,
+              const std::vector<Slab>& slabs) const;
+
  private:
   VulkanContext& ctx_;
-  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
-  VkPipelineLayout layout_ = VK_NULL_HANDLE;
-  VkPipeline pipeline_ = VK_NULL_HANDLE;
-  VkShaderModule module_ = VK_NULL_HANDLE;
+  ComputePipeline<gpu::GradientPush> pipeline_;
 };
 
 }  // namespace isotouch::engine

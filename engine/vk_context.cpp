@@ -71,14 +71,28 @@ bool layer_available(const char* name) {
                      [&](const VkLayerProperties& l) { return std::strcmp(l.layerName, name) == 0; });
 }
 
-Result<VkInstance> make_instance(bool validation) {
+bool layer_has_extension(const char* layer, const char* ext) {
+  std::uint32_t n = 0;
+  vkEnumerateInstanceExtensionProperties(layer, &n, nullptr);
+  std::vector<VkExtensionProperties> e(n);
+  vkEnumerateInstanceExtensionProperties(layer, &n, e.data());
+  return std::any_of(e.begin(), e.end(),
+                     [&](const VkExtensionProperties& x) { return std::strcmp(x.extensionName, ext) == 0; });
+}
+
+Result<VkInstance> make_instance(bool validation, bool sync_validation = false) {
   VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
   app.pApplicationName = "isotouch";
   app.apiVersion = VK_API_VERSION_1_1;
   VkInstanceCreateInfo ci{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
   ci.pApplicationInfo = &app;
   const char* layers[] = {kValidationLayer};
-  const char* exts[] = {VK_EXT_DEBUG_UTILS_EXTENSION_NAME};
+  const char* exts[] = {VK_EXT_DEBUG_UTILS_EXTENSION_NAME, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME};
+  const VkValidationFeatureEnableEXT sync_feature =
+      VK_VALIDATION_FEATURE_ENABLE_SYNCHRONIZATION_VALIDATION_EXT;
+  VkValidationFeaturesEXT features{VK_STRUCTURE_TYPE_VALIDATION_FEATURES_EXT};
+  features.enabledValidationFeatureCount = 1;
+  features.pEnabledValidationFeatures = &sync_feature;
   if (validation) {
     if (!layer_available(kValidationLayer))
       return Result<VkInstance>::fail(
@@ -88,6 +102,11 @@ Result<VkInstance> make_instance(bool validation) {
     ci.ppEnabledLayerNames = layers;
     ci.enabledExtensionCount = 1;
     ci.ppEnabledExtensionNames = exts;
+    if (sync_validation &&
+        layer_has_extension(kValidationLayer, VK_EXT_VALIDATION_FEATURES_EXTENSION_NAME)) {
+      ci.enabledExtensionCount = 2;
+      ci.pNext = &features;
+    }
   }
   VkInstance inst = VK_NULL_HANDLE;
   const VkResult r = vkCreateInstance(&ci, nullptr, &inst);
@@ -144,7 +163,7 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   using R = Result<std::unique_ptr<VulkanContext>>;
   const char* env_val = std::getenv("ISOTOUCH_VALIDATION");
   const bool validation = opt.validation || (env_val && std::string(env_val) == "1");
-  auto inst = make_instance(validation);
+  auto inst = make_instance(validation, opt.synchronization_validation);
   if (!inst) return R::fail(inst.error);
   std::unique_ptr<VulkanContext> ctx(new VulkanContext());
   ctx->instance_ = *inst.value;
@@ -220,6 +239,13 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   vkGetPhysicalDeviceProperties(chosen, &ctx->props_);
   vkGetPhysicalDeviceMemoryProperties(chosen, &ctx->mem_props_);
   {
+    VkPhysicalDeviceMaintenance3Properties m3{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES};
+    VkPhysicalDeviceProperties2 p2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
+    p2.pNext = &m3;
+    vkGetPhysicalDeviceProperties2(chosen, &p2);  // core in Vulkan 1.1, which the instance asks for
+    ctx->max_allocation_ = m3.maxMemoryAllocationSize;
+  }
+  {
     std::uint32_t n = 0;
     vkGetPhysicalDeviceQueueFamilyProperties(chosen, &n, nullptr);
     std::vector<VkQueueFamilyProperties> q(n);
@@ -263,50 +289,6 @@ VulkanContext::~VulkanContext() {
     if (destroy) destroy(instance_, messenger_, nullptr);
   }
   if (instance_) vkDestroyInstance(instance_, nullptr);
-}
-
-std::uint32_t VulkanContext::find_memory(std::uint32_t bits, VkMemoryPropertyFlags want,
-                                         VkMemoryPropertyFlags prefer) const {
-  std::optional<std::uint32_t> fallback;
-  for (std::uint32_t i = 0; i < mem_props_.memoryTypeCount; ++i) {
-    if (!(bits & (1u << i))) continue;
-    const auto f = mem_props_.memoryTypes[i].propertyFlags;
-    if ((f & want) != want) continue;
-    if ((f & prefer) == prefer) return i;
-    if (!fallback) fallback = i;
-  }
-  if (!fallback) throw VulkanError("no host-visible coherent memory type on " + info_.name);
-  return *fallback;
-}
-
-Buffer VulkanContext::create_buffer(VkDeviceSize bytes, bool readback) {
-  Buffer b;
-  b.size = bytes;
-  VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
-  bi.size = bytes;
-  bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
-  bi.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-  VK_CHECK(vkCreateBuffer(device_, &bi, nullptr, &b.buffer));
-  VkMemoryRequirements req;
-  vkGetBufferMemoryRequirements(device_, b.buffer, &req);
-  VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
-  ai.allocationSize = req.size;
-  ai.memoryTypeIndex = find_memory(
-      req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT,
-      readback ? VK_MEMORY_PROPERTY_HOST_CACHED_BIT : VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-  VK_CHECK(vkAllocateMemory(device_, &ai, nullptr, &b.memory));
-  VK_CHECK(vkBindBufferMemory(device_, b.buffer, b.memory, 0));
-  VK_CHECK(vkMapMemory(device_, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped));
-  return b;
-}
-
-void VulkanContext::destroy_buffer(Buffer& b) {
-  if (b.memory) {
-    vkUnmapMemory(device_, b.memory);
-    vkFreeMemory(device_, b.memory, nullptr);
-  }
-  if (b.buffer) vkDestroyBuffer(device_, b.buffer, nullptr);
-  b = {};
 }
 
 VkCommandBuffer VulkanContext::begin_commands() {

@@ -1,4 +1,6 @@
-// vk_context.h - Vulkan instance, device choice, queue, host-visible buffers.
+// vk_context.h - Vulkan instance, device choice, queue, command submission.
+// Resources (buffers, pipelines, barriers) live in vk_resources.h: the context owns
+// no memory of its own beyond its command pool and fence.
 #pragma once
 #include <vulkan/vulkan.h>
 
@@ -46,14 +48,10 @@ struct ContextOptions {
   /// Enable VK_LAYER_KHRONOS_validation and count its messages (also with
   /// ISOTOUCH_VALIDATION=1). Fails set-up if the layer is not installed.
   bool validation = false;
-};
-
-/// A host-visible buffer, persistently mapped.
-struct Buffer {
-  VkBuffer buffer = VK_NULL_HANDLE;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  VkDeviceSize size = 0;
-  void* mapped = nullptr;
+  /// With `validation`: also enable the layer's synchronization validation
+  /// (VK_EXT_validation_features), which reports missing or wrong barriers as hazards.
+  /// Ignored (no error) if the layer does not offer VK_EXT_validation_features.
+  bool synchronization_validation = false;
 };
 
 struct DeviceInfo {
@@ -79,9 +77,12 @@ class VulkanContext {
   const DeviceInfo& info() const { return info_; }
   bool timestamps_supported() const { return timestamp_bits_ > 0; }
 
-  /// Storage buffer in host-visible coherent memory (cached when `readback`).
-  Buffer create_buffer(VkDeviceSize bytes, bool readback);
-  void destroy_buffer(Buffer& b);
+  VkPhysicalDevice physical_device() const { return phys_; }
+  const VkPhysicalDeviceMemoryProperties& memory_properties() const { return mem_props_; }
+  /// Largest single VkDeviceMemory allocation [bytes] (VkPhysicalDeviceMaintenance3Properties).
+  VkDeviceSize max_allocation_bytes() const { return max_allocation_; }
+  /// Largest storage-buffer binding [bytes] (limits.maxStorageBufferRange).
+  VkDeviceSize max_binding_bytes() const { return props_.limits.maxStorageBufferRange; }
 
   VkCommandBuffer begin_commands();
   /// Submit, wait on a fence; returns the wall time from submit to signal [ms].
@@ -103,11 +104,10 @@ class VulkanContext {
   std::uint32_t timestamp_bits_ = 0;
   VkPhysicalDeviceProperties props_{};
   VkPhysicalDeviceMemoryProperties mem_props_{};
+  VkDeviceSize max_allocation_ = 0;
   DeviceInfo info_;
   std::atomic<std::uint32_t> validation_count_{0};
 
-  std::uint32_t find_memory(std::uint32_t bits, VkMemoryPropertyFlags want,
-                            VkMemoryPropertyFlags prefer) const;
   static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT,
                                                    VkDebugUtilsMessageTypeFlagsEXT,
                                                    const VkDebugUtilsMessengerCallbackDataEXT*,

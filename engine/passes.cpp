@@ -1,0 +1,442 @@
+#include "passes.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+#include <stdexcept>
+
+#include "cpu_gradient.h"
+#include "gradient_pass.h"
+#include "isotouch/shaders/brick_minmax_spv.h"
+#include "isotouch/shaders/gaussian1d_spv.h"
+#include "isotouch/shaders/morph1d_spv.h"
+#include "isotouch_shared.h"
+#include "vk_resources.h"
+
+namespace isotouch::engine {
+
+static_assert(sizeof(gpu::Filter1dPush) == 48, "Filter1dPush: 12 4-byte members (std430)");
+static_assert(sizeof(gpu::BrickMinMaxPush) == 48, "BrickMinMaxPush: 12 4-byte members (std430)");
+
+const char* pass_name(PassKind k) {
+  switch (k) {
+    case PassKind::Gaussian: return "gaussian";
+    case PassKind::Closing: return "closing";
+    case PassKind::Gradient: return "gradient";
+    case PassKind::BrickMinMax: return "brick_minmax";
+  }
+  return "?";
+}
+
+std::string PassDesc::label() const {
+  std::ostringstream s;
+  s << pass_name(kind);
+  if (kind == PassKind::Gaussian) s << "(sigma " << sigma_mm << " mm)";
+  if (kind == PassKind::Closing) s << "(radius " << radius_mm << " mm)";
+  if (kind == PassKind::BrickMinMax) s << "(halo " << halo << ")";
+  return s.str();
+}
+
+std::string validate_passes(const std::vector<PassDesc>& p) {
+  if (p.empty()) return "pass list is empty";
+  int gradients = 0, minmax = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const std::string at = "pass " + std::to_string(i) + " (" + pass_name(p[i].kind) + "): ";
+    switch (p[i].kind) {
+      case PassKind::Gaussian:
+        if (!(std::isfinite(p[i].sigma_mm) && p[i].sigma_mm > 0))
+          return at + "sigma_mm must be finite and > 0, got " + std::to_string(p[i].sigma_mm);
+        break;
+      case PassKind::Closing:
+        if (!(std::isfinite(p[i].radius_mm) && p[i].radius_mm >= 0))
+          return at + "radius_mm must be finite and >= 0, got " + std::to_string(p[i].radius_mm);
+        break;
+      case PassKind::Gradient:
+        if (++gradients > 1) return at + "gradient may appear once";
+        break;
+      case PassKind::BrickMinMax:
+        if (++minmax > 1) return at + "brick_minmax may appear once";
+        if (p[i].halo < 0 || p[i].halo > 8) return at + "halo must be 0..8, got " + std::to_string(p[i].halo);
+        break;
+    }
+  }
+  return {};
+}
+
+namespace {
+bool has(const std::vector<PassDesc>& p, PassKind k) {
+  return std::any_of(p.begin(), p.end(), [k](const PassDesc& d) { return d.kind == k; });
+}
+std::uint32_t groups(std::uint64_t n, std::uint32_t wg) { return std::uint32_t((n + wg - 1) / wg); }
+std::uint64_t floats_before(std::uint64_t z, const void* user) {  // slices of float
+  return z * *static_cast<const std::uint64_t*>(user);
+}
+struct BrickLayer {
+  std::uint64_t bytes_per_layer;  // bx * by * 2 floats
+};
+std::uint64_t bricks_before(std::uint64_t z, const void* user) {
+  return (z + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK * static_cast<const BrickLayer*>(user)->bytes_per_layer;
+}
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+}  // namespace
+
+struct PassChain::Impl {
+  VulkanContext& ctx;
+  std::unique_ptr<ComputePipeline<gpu::Filter1dPush>> gauss, morph;
+  std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
+  std::unique_ptr<GradientPass> gradient;
+  std::string last_run;
+  explicit Impl(VulkanContext& c) : ctx(c) {}
+};
+
+PassChain::PassChain(std::unique_ptr<Impl> impl, std::vector<PassDesc> passes)
+    : impl_(std::move(impl)), passes_(std::move(passes)) {}
+PassChain::~PassChain() = default;
+
+Result<std::unique_ptr<PassChain>> PassChain::create(VulkanContext& ctx, std::vector<PassDesc> passes) {
+  using R = Result<std::unique_ptr<PassChain>>;
+  if (std::string e = validate_passes(passes); !e.empty()) return R::fail("pass chain: " + e);
+  auto impl = std::make_unique<Impl>(ctx);
+  // Only the pipelines the list needs.
+  if (has(passes, PassKind::Gaussian))
+    impl->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
+  if (has(passes, PassKind::Closing))
+    impl->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
+  if (has(passes, PassKind::BrickMinMax))
+    impl->minmax = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, brick_minmax_spv, 2, "brick_minmax");
+  if (has(passes, PassKind::Gradient)) impl->gradient = std::make_unique<GradientPass>(ctx);
+  return R::ok(std::unique_ptr<PassChain>(new PassChain(std::move(impl), std::move(passes))));
+}
+
+std::string PassChain::describe() const {
+  std::ostringstream s;
+  s << "passes:";
+  for (std::size_t i = 0; i < passes_.size(); ++i) s << (i ? " -> " : " ") << passes_[i].label();
+  const bool filters = impl_->gauss || impl_->morph;
+  s << "\npipelines created:" << (impl_->gauss ? " gaussian1d" : "") << (impl_->morph ? " morph1d" : "")
+    << (impl_->gradient ? " gradient" : "") << (impl_->minmax ? " brick_minmax" : "");
+  s << "\nleft out (not created, not run):" << (impl_->gauss ? "" : " gaussian1d") << (impl_->morph ? "" : " morph1d")
+    << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax");
+  s << "\nbuffers per run: voxels (float, device-local) + staging" << (filters ? ", ping-pong field (float)" : "")
+    << (filters ? ", field readback" : "") << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
+    << (impl_->gradient ? ", samples (vec4) + readback" : "") << (impl_->minmax ? ", brick ranges + readback" : "");
+  s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
+    << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
+    << (impl_->minmax ? "" : " brick ranges");
+  if (!impl_->last_run.empty()) s << "\nlast run:\n" << impl_->last_run;
+  return s.str();
+}
+
+ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
+  VulkanContext& ctx = impl_->ctx;
+  const auto [nx, ny, nz] = vol.grid.dims;
+  const std::uint64_t n = vol.grid.voxel_count();
+  const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
+  const std::uint64_t slice_bytes = slice * 4;
+  std::uint64_t limit = ctx.max_binding_bytes();
+  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+  const auto& lim = ctx.properties().limits;
+  if (groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X) > lim.maxComputeWorkGroupCount[0] ||
+      groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y) > lim.maxComputeWorkGroupCount[1])
+    throw VolumeError(vol.path + ": volume too wide for one dispatch on " + ctx.info().name);
+
+  auto buffer = [&](std::uint64_t bytes, MemoryIntent intent, const char* what) {
+    auto r = GpuBuffer::create(ctx, bytes, intent, what);
+    if (!r) throw VolumeError(vol.path + ": " + r.error);
+    return std::move(*r.value);
+  };
+  const bool filters = impl_->gauss || impl_->morph;
+
+  // Parameters in voxels, validated (and too-wide kernels rejected) before any allocation.
+  std::vector<GaussianAxes> gaussians;
+  std::vector<std::array<int, 3>> closings;
+  std::vector<float> weights;
+  std::vector<std::array<std::uint32_t, 3>> w_offsets;
+  try {
+    for (const PassDesc& p : passes_) {
+      if (p.kind == PassKind::Gaussian) {
+        gaussians.push_back(gaussian_axes(vol.grid, p.sigma_mm));
+        std::array<std::uint32_t, 3> off{};
+        for (int a = 0; a < 3; ++a) {
+          off[std::size_t(a)] = std::uint32_t(weights.size());
+          const auto& k = gaussians.back().kernel[std::size_t(a)];
+          weights.insert(weights.end(), k.begin(), k.end());
+        }
+        w_offsets.push_back(off);
+      }
+      if (p.kind == PassKind::Closing) closings.push_back(closing_radii(vol.grid, p.radius_mm));
+    }
+  } catch (const std::invalid_argument& e) {
+    throw VolumeError(vol.path + ": " + e.what());
+  }
+
+  GpuBuffer field[2];
+  field[0] = buffer(n * 4, MemoryIntent::DeviceLocal, "voxels");
+  if (filters) field[1] = buffer(n * 4, MemoryIntent::DeviceLocal, "field ping-pong");
+  GpuBuffer up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
+  GpuBuffer w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down;
+  if (!weights.empty()) {
+    w_dev = buffer(weights.size() * 4, MemoryIntent::DeviceLocal, "gaussian weights");
+    w_up = buffer(weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
+  }
+  if (impl_->gradient) {
+    samples = buffer(n * sizeof(servo::Sample), MemoryIntent::DeviceLocal, "samples");
+    samples_down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+  }
+  const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
+                      bz = std::uint32_t((nz + 7) / 8);
+  const std::uint64_t brick_bytes = std::uint64_t(bx) * by * bz * 2 * 4;
+  if (impl_->minmax) {
+    bricks = buffer(brick_bytes, MemoryIntent::DeviceLocal, "brick ranges");
+    bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
+  }
+  if (filters) field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
+
+  // Plan every dispatch (slabs) first: the descriptor arena is sized from the plan.
+  struct Step {
+    std::size_t pass;
+    const ComputePipelineBase* pipe = nullptr;
+    enum { Filter, Gradient, MinMax } type = Filter;
+    gpu::Filter1dPush f{};
+    std::vector<Slab> slabs;
+  };
+  std::vector<Step> steps;
+  int cur = 0;
+  const std::uint64_t float_slice = slice_bytes;
+  BrickLayer layer{std::uint64_t(bx) * by * 2 * 4};
+  std::size_t gi = 0, ci = 0;
+  std::ostringstream info;
+  for (std::size_t i = 0; i < passes_.size(); ++i) {
+    const PassDesc& p = passes_[i];
+    info << "  " << p.label() << ":";
+    if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
+      const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
+      for (int k = 0; k < axes; ++k) {
+        const int axis = k % 3;
+        Step s;
+        s.pass = i;
+        s.type = Step::Filter;
+        s.f.nx = gpu::uint(nx);
+        s.f.ny = gpu::uint(ny);
+        s.f.nz = gpu::uint(nz);
+        s.f.axis = gpu::uint(axis);
+        if (p.kind == PassKind::Gaussian) {
+          s.pipe = impl_->gauss.get();
+          s.f.radius = gpu::uint(gaussians[gi].kernel[std::size_t(axis)].size() / 2);
+          s.f.w_offset = w_offsets[gi][std::size_t(axis)];
+        } else {
+          s.pipe = impl_->morph.get();
+          s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
+          s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
+        }
+        info << " " << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
+        SlabGeometry g;
+        g.nz = std::uint64_t(nz);
+        g.src_bytes_per_slice = slice_bytes;
+        g.halo = axis == 2 ? s.f.radius : 0;
+        g.dst_bytes_before = &floats_before;
+        g.user = &float_slice;
+        g.wg_z = ISOTOUCH_FILTER_WG_Z;
+        auto sl = plan_slabs(ctx, g, field[cur].handle(), field[1 - cur].handle(), limit,
+                             vol.path + ": " + p.label());
+        if (!sl) throw VolumeError(sl.error);
+        s.slabs = std::move(*sl.value);
+        steps.push_back(std::move(s));
+        cur = 1 - cur;
+      }
+      if (p.kind == PassKind::Gaussian) {
+        info << " (sigma " << gaussians[gi].sigma_vox[0] << ", " << gaussians[gi].sigma_vox[1] << ", "
+             << gaussians[gi].sigma_vox[2] << " voxels)";
+        ++gi;
+      } else {
+        ++ci;
+      }
+    } else if (p.kind == PassKind::Gradient) {
+      Step s;
+      s.pass = i;
+      s.type = Step::Gradient;
+      s.slabs = impl_->gradient->plan(vol.grid, field[cur].handle(), samples.handle(), max_binding_bytes, vol.path);
+      steps.push_back(std::move(s));
+    } else {
+      Step s;
+      s.pass = i;
+      s.type = Step::MinMax;
+      s.pipe = impl_->minmax.get();
+      SlabGeometry g;
+      g.nz = std::uint64_t(nz);
+      g.src_bytes_per_slice = slice_bytes;
+      g.halo = std::uint64_t(p.halo);
+      g.z_multiple = ISOTOUCH_BRICK;
+      g.dst_bytes_before = &bricks_before;
+      g.user = &layer;
+      g.wg_z = ISOTOUCH_MINMAX_WG_Z;
+      auto sl = plan_slabs(ctx, g, field[cur].handle(), bricks.handle(), limit, vol.path + ": " + p.label());
+      if (!sl) throw VolumeError(sl.error);
+      s.slabs = std::move(*sl.value);
+      info << " " << bx << "x" << by << "x" << bz << " bricks";
+      steps.push_back(std::move(s));
+    }
+    std::size_t d = 0;
+    for (const Step& s : steps)
+      if (s.pass == i) d += s.slabs.size();
+    info << ", " << d << " dispatch(es)\n";
+  }
+  std::uint32_t sets = 0;
+  for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
+  DescriptorArena arena(ctx, sets, 3 * sets);
+  GpuTimer timer(ctx, std::uint32_t(passes_.size() + 1));
+
+  ChainOutput out;
+  auto t0 = std::chrono::steady_clock::now();
+  std::memcpy(up.mapped(), vol.voxels.data(), n * 4);
+  if (w_up) std::memcpy(w_up.mapped(), weights.data(), weights.size() * 4);
+  out.upload_ms = ms_since(t0);
+
+  VkCommandBuffer cmd = ctx.begin_commands();
+  timer.record_reset(cmd);
+  record_copy(cmd, up, field[0], n * 4);
+  if (w_up) record_copy(cmd, w_up, w_dev, weights.size() * 4);
+  barrier_transfer_to_compute(cmd);
+  timer.mark(cmd, 0);
+  std::vector<int> dispatches(passes_.size(), 0);
+  cur = 0;
+  for (std::size_t k = 0; k < steps.size(); ++k) {
+    const Step& s = steps[k];
+    for (const Slab& sl : s.slabs) {
+      if (s.type == Step::Filter) {
+        gpu::Filter1dPush pc = s.f;
+        pc.z0 = gpu::uint(sl.z0);
+        pc.slab_nz = gpu::uint(sl.nz);
+        pc.src_z0 = gpu::uint(sl.src_z0);
+        pc.src_offset = gpu::uint(sl.src_offset_elems);
+        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+        if (s.pipe == impl_->gauss.get()) {
+          impl_->gauss->bind(cmd, arena, {sl.src, sl.dst, BufferRange{w_dev.handle(), 0, w_dev.size()}});
+          impl_->gauss->push(cmd, pc);
+        } else {
+          impl_->morph->bind(cmd, arena, {sl.src, sl.dst});
+          impl_->morph->push(cmd, pc);
+        }
+        vkCmdDispatch(cmd, groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X), groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y),
+                      groups(sl.nz, ISOTOUCH_FILTER_WG_Z));
+      } else if (s.type == Step::MinMax) {
+        gpu::BrickMinMaxPush pc{};
+        pc.nx = gpu::uint(nx);
+        pc.ny = gpu::uint(ny);
+        pc.nz = gpu::uint(nz);
+        pc.bx = bx;
+        pc.by = by;
+        pc.bz0 = gpu::uint(sl.z0 / ISOTOUCH_BRICK);
+        pc.slab_bz = gpu::uint((sl.nz + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK);
+        pc.src_z0 = gpu::uint(sl.src_z0);
+        pc.src_offset = gpu::uint(sl.src_offset_elems);
+        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+        pc.halo = gpu::uint(passes_[s.pass].halo);
+        impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
+        impl_->minmax->push(cmd, pc);
+        vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
+                      groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+      }
+    }
+    if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
+    dispatches[s.pass] += int(s.slabs.size());
+    if (s.type == Step::Filter) cur = 1 - cur;
+    // The next step reads what this one wrote (and a filter overwrites what the previous
+    // filter read): make this step's writes visible before any later dispatch.
+    barrier_compute_to_compute(cmd);
+    if (k + 1 == steps.size() || steps[k + 1].pass != s.pass) timer.mark(cmd, std::uint32_t(s.pass + 1));
+  }
+  barrier_compute_to_transfer(cmd);
+  if (filters) record_copy(cmd, field[cur], field_down, n * 4);
+  if (samples) record_copy(cmd, samples, samples_down, n * sizeof(servo::Sample));
+  if (bricks) record_copy(cmd, bricks, bricks_down, brick_bytes);
+  barrier_transfer_to_host(cmd);
+  out.submit_wall_ms = ctx.submit_and_wait(cmd);
+
+  for (std::size_t i = 0; i < passes_.size(); ++i) {
+    PassTiming pt;
+    pt.label = passes_[i].label();
+    pt.ms = timer.elapsed_ms(std::uint32_t(i), std::uint32_t(i + 1));
+    pt.dispatches = dispatches[i];
+    out.passes.push_back(pt);
+  }
+  out.gpu_timestamps = timer.enabled();
+
+  t0 = std::chrono::steady_clock::now();
+  if (filters) {
+    out.field.emplace(n);
+    std::memcpy(out.field->data(), field_down.mapped(), n * 4);
+  }
+  if (samples) {
+    out.samples.emplace();
+    out.samples->grid = vol.grid;
+    out.samples->samples.resize(n);
+    std::memcpy(out.samples->samples.data(), samples_down.mapped(), n * sizeof(servo::Sample));
+  }
+  if (bricks) {
+    BrickRanges b;
+    b.bricks = {int(bx), int(by), int(bz)};
+    for (const PassDesc& p : passes_)
+      if (p.kind == PassKind::BrickMinMax) b.halo = p.halo;
+    const std::size_t count = std::size_t(bx) * by * bz;
+    b.min.resize(count);
+    b.max.resize(count);
+    const float* f = static_cast<const float*>(bricks_down.mapped());
+    for (std::size_t i = 0; i < count; ++i) {
+      b.min[i] = f[2 * i];
+      b.max[i] = f[2 * i + 1];
+    }
+    out.bricks = std::move(b);
+  }
+  out.download_ms = ms_since(t0);
+  impl_->last_run = info.str();
+  return out;
+}
+
+ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes) {
+  if (std::string e = validate_passes(passes); !e.empty()) throw std::invalid_argument("pass chain: " + e);
+  ChainOutput out;
+  Volume cur = vol;
+  bool filtered = false;
+  const auto total0 = std::chrono::steady_clock::now();
+  for (const PassDesc& p : passes) {
+    PassTiming pt;
+    pt.label = p.label();
+    const auto t0 = std::chrono::steady_clock::now();
+    switch (p.kind) {
+      case PassKind::Gaussian: {
+        const GaussianAxes a = gaussian_axes(cur.grid, p.sigma_mm);
+        std::vector<float> tmp;
+        for (int axis = 0; axis < 3; ++axis) {
+          gaussian_axis_cpu(cur.voxels, tmp, cur.grid, axis, a.kernel[std::size_t(axis)]);
+          cur.voxels.swap(tmp);
+        }
+        filtered = true;
+        break;
+      }
+      case PassKind::Closing: {
+        const auto r = closing_radii(cur.grid, p.radius_mm);
+        std::vector<float> tmp;
+        for (int k = 0; k < 6; ++k) {
+          morph_axis_cpu(cur.voxels, tmp, cur.grid, k % 3, r[std::size_t(k % 3)], k < 3);
+          cur.voxels.swap(tmp);
+        }
+        filtered = true;
+        break;
+      }
+      case PassKind::Gradient: out.samples = compute_samples_cpu(cur); break;
+      case PassKind::BrickMinMax: out.bricks = brick_minmax_cpu(cur, p.halo); break;
+    }
+    pt.ms = ms_since(t0);
+    out.passes.push_back(pt);
+  }
+  out.submit_wall_ms = ms_since(total0);
+  if (filtered) out.field = std::move(cur.voxels);
+  return out;
+}
+
+}  // namespace isotouch::engine

@@ -1,0 +1,113 @@
+// passes.h - a chain of compute passes over one volume, GPU-resident between passes,
+// and its one-thread CPU reference (issue 8, item 3).
+//
+// A scene lists the passes it needs as PassDesc {kind, parameters}; PassChain creates
+// only the pipelines and buffers that list needs, uploads the volume once, records every
+// pass into ONE command buffer (ping-pong device-local buffers, a compute->compute barrier
+// between dispatches that depend on each other) and reads back only the outputs.
+//
+// Passes (all with clamp-to-edge borders; grid spacing from the volume, sigma/radius in mm):
+// - gaussian(sigma_mm): separable Gaussian, x then y then z; per-axis sigma in voxels =
+//   sigma_mm / spacing_mm, radius ceil(3 sigma_vox), weights normalised in double and
+//   rounded to float once (engine/cpu_filters.h gaussian_kernel), passed in a buffer.
+// - closing(radius_mm): grayscale closing = dilation (max) then erosion (min) with a BOX
+//   structuring element of half-widths floor(radius_mm / spacing_mm) per axis, done
+//   separably (exact for a box: max over a box = max over x of max over y of max over z).
+//   A box is a superset of the ellipsoidal ball of the same radius: it closes gaps up to
+//   the box's width along every axis and up to sqrt(3) x that along diagonals.
+// - gradient: shaders/gradient.comp on the current field (value + central differences).
+// - brick_minmax(halo): (min, max) of every 8^3 brick widened by `halo` voxels (default 1:
+//   the one-voxel stencil of the gradient, so the range covers every voxel a trilinear
+//   sample or a gradient at a voxel in the brick reads).
+// Filters replace the current field; gradient and brick_minmax read it. Each of gradient
+// and brick_minmax may appear once.
+//
+// GPU and CPU do the same float operations in the same order (precise accumulation,
+// -ffp-contract=off): on lavapipe every output agrees bit for bit (tests/test_passes.cpp).
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cpu_filters.h"
+#include "sample_field.h"
+#include "vk_context.h"
+#include "volume.h"
+
+namespace isotouch::engine {
+
+enum class PassKind { Gaussian, Closing, Gradient, BrickMinMax };
+const char* pass_name(PassKind kind);
+
+struct PassDesc {
+  PassKind kind = PassKind::Gradient;
+  double sigma_mm = 0;   ///< Gaussian: standard deviation [mm], > 0
+  double radius_mm = 0;  ///< Closing: structuring element half-width [mm], >= 0
+  int halo = 1;          ///< BrickMinMax: voxels added on each side of a brick, 0..8
+
+  static PassDesc gaussian(double sigma_mm) { return {PassKind::Gaussian, sigma_mm, 0, 1}; }
+  static PassDesc closing(double radius_mm) { return {PassKind::Closing, 0, radius_mm, 1}; }
+  static PassDesc gradient() { return {PassKind::Gradient, 0, 0, 1}; }
+  static PassDesc brick_minmax(int halo = 1) { return {PassKind::BrickMinMax, 0, 0, halo}; }
+  /// "gaussian(sigma 1 mm)", "closing(radius 2 mm)", "gradient", "brick_minmax(halo 1)".
+  std::string label() const;
+};
+
+/// Checks a pass list: non-empty, parameters in range, gradient/brick_minmax at most once.
+/// @return empty string if valid, else the reason (names the pass index and value).
+std::string validate_passes(const std::vector<PassDesc>& passes);
+
+struct PassTiming {
+  std::string label;     ///< PassDesc::label()
+  double ms = -1;        ///< GPU: device time from timestamps (-1 if none); CPU: wall time
+  int dispatches = 0;    ///< GPU dispatches (one per axis per slab); 0 on the CPU
+};
+
+/// What a chain produced. Only the outputs the list asks for are present.
+struct ChainOutput {
+  std::optional<std::vector<float>> field;     ///< field after the last filter, if any filter ran
+  std::optional<servo::SampleField> samples;   ///< gradient output
+  std::optional<BrickRanges> bricks;           ///< brick_minmax output
+  std::vector<PassTiming> passes;              ///< one per PassDesc, in order
+  double upload_ms = 0;       ///< host memcpy into staging
+  double submit_wall_ms = 0;  ///< submit to fence, wall clock (GPU); total (CPU)
+  double download_ms = 0;     ///< host memcpy out of readback buffers
+  bool gpu_timestamps = false;
+};
+
+/// The GPU chain. Create once per pass list, run on any number of volumes.
+class PassChain {
+ public:
+  /// @return error (no throw) if validate_passes() fails.
+  static Result<std::unique_ptr<PassChain>> create(VulkanContext& ctx, std::vector<PassDesc> passes);
+  ~PassChain();
+  PassChain(const PassChain&) = delete;
+  PassChain& operator=(const PassChain&) = delete;
+
+  /// Runs every pass in order in one command buffer.
+  /// @param max_binding_bytes if non-zero, a smaller binding limit than the device's
+  ///        (tests force many z-slabs with it).
+  /// @throws VolumeError naming the volume if a buffer exceeds maxMemoryAllocationSize,
+  ///         a slab does not fit a binding, or a parameter gives too wide a kernel.
+  ChainOutput run(const Volume& volume, std::uint64_t max_binding_bytes = 0);
+
+  /// What this chain runs and what it left out: the passes in order, the pipelines and
+  /// buffers created and those not created; after run(), per-pass kernel sizes in voxels
+  /// and dispatch counts of the last run.
+  std::string describe() const;
+  const std::vector<PassDesc>& passes() const { return passes_; }
+
+ private:
+  struct Impl;
+  explicit PassChain(std::unique_ptr<Impl> impl, std::vector<PassDesc> passes);
+  std::unique_ptr<Impl> impl_;
+  std::vector<PassDesc> passes_;
+};
+
+/// The one-thread CPU reference of a chain, same outputs; PassTiming::ms is wall time.
+/// @throws std::invalid_argument if validate_passes() fails.
+ChainOutput run_chain_cpu(const Volume& volume, const std::vector<PassDesc>& passes);
+
+}  // namespace isotouch::engine

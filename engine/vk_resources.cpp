@@ -1,0 +1,338 @@
+#include "vk_resources.h"
+
+#include <algorithm>
+#include <optional>
+#include <stdexcept>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+namespace isotouch::engine {
+
+const char* intent_name(MemoryIntent i) {
+  switch (i) {
+    case MemoryIntent::DeviceLocal: return "device-local";
+    case MemoryIntent::Upload: return "upload";
+    case MemoryIntent::Readback: return "readback";
+  }
+  return "?";
+}
+
+namespace {
+
+std::optional<std::uint32_t> find_memory(const VkPhysicalDeviceMemoryProperties& mp, std::uint32_t bits,
+                                         VkMemoryPropertyFlags want, VkMemoryPropertyFlags prefer,
+                                         VkDeviceSize bytes) {
+  std::optional<std::uint32_t> fallback;
+  for (std::uint32_t i = 0; i < mp.memoryTypeCount; ++i) {
+    if (!(bits & (1u << i))) continue;
+    const auto f = mp.memoryTypes[i].propertyFlags;
+    if ((f & want) != want) continue;
+    if (mp.memoryHeaps[mp.memoryTypes[i].heapIndex].size < bytes) continue;
+    if ((f & prefer) == prefer) return i;
+    if (!fallback) fallback = i;
+  }
+  return fallback;
+}
+
+}  // namespace
+
+Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
+                                    const std::string& what) {
+  using R = Result<GpuBuffer>;
+  const std::string name = std::string(intent_name(intent)) + " buffer '" + what + "'";
+  if (bytes == 0) return R::fail(name + ": size 0 bytes");
+  if (bytes > ctx.max_allocation_bytes())
+    return R::fail(name + ": " + std::to_string(bytes) + " bytes exceed maxMemoryAllocationSize " +
+                   std::to_string(ctx.max_allocation_bytes()) + " bytes on " + ctx.info().name);
+  GpuBuffer b;
+  b.device_ = ctx.device();
+  b.size_ = bytes;
+  b.intent_ = intent;
+  VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  bi.size = bytes;
+  VkMemoryPropertyFlags want = 0, prefer = 0;
+  switch (intent) {
+    case MemoryIntent::DeviceLocal:
+      bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+                 VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+      want = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+      break;
+    case MemoryIntent::Upload:
+      bi.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
+      want = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+      break;
+    case MemoryIntent::Readback:
+      bi.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+      want = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+      prefer = VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
+      break;
+  }
+  bi.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  VK_CHECK(vkCreateBuffer(b.device_, &bi, nullptr, &b.buffer_));
+  VkMemoryRequirements req;
+  vkGetBufferMemoryRequirements(b.device_, b.buffer_, &req);
+  const auto type = find_memory(ctx.memory_properties(), req.memoryTypeBits, want, prefer, req.size);
+  if (!type)
+    return R::fail(name + ": no memory type for " + std::to_string(req.size) + " bytes on " + ctx.info().name);
+  VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  ai.allocationSize = req.size;
+  ai.memoryTypeIndex = *type;
+  const VkResult r = vkAllocateMemory(b.device_, &ai, nullptr, &b.memory_);
+  if (r != VK_SUCCESS)
+    return R::fail(name + ": vkAllocateMemory of " + std::to_string(req.size) + " bytes failed: " +
+                   vk_result_name(r));
+  VK_CHECK(vkBindBufferMemory(b.device_, b.buffer_, b.memory_, 0));
+  if (intent != MemoryIntent::DeviceLocal)
+    VK_CHECK(vkMapMemory(b.device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_));
+  return R::ok(std::move(b));
+}
+
+GpuBuffer& GpuBuffer::operator=(GpuBuffer&& o) noexcept {
+  if (this != &o) {
+    reset();
+    device_ = o.device_;
+    buffer_ = o.buffer_;
+    memory_ = o.memory_;
+    size_ = o.size_;
+    intent_ = o.intent_;
+    mapped_ = o.mapped_;
+    o.buffer_ = VK_NULL_HANDLE;
+    o.memory_ = VK_NULL_HANDLE;
+    o.mapped_ = nullptr;
+    o.size_ = 0;
+  }
+  return *this;
+}
+
+void GpuBuffer::reset() {
+  // Buffer first, then its memory (the memory must outlive every buffer bound to it).
+  if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
+  if (memory_) {
+    if (mapped_) vkUnmapMemory(device_, memory_);
+    vkFreeMemory(device_, memory_, nullptr);
+  }
+  buffer_ = VK_NULL_HANDLE;
+  memory_ = VK_NULL_HANDLE;
+  mapped_ = nullptr;
+  size_ = 0;
+}
+
+GpuBuffer make_buffer_or_throw(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
+                               const std::string& what) {
+  auto r = GpuBuffer::create(ctx, bytes, intent, what);
+  if (!r) throw VulkanError(r.error);
+  return std::move(*r.value);
+}
+
+void record_copy(VkCommandBuffer cmd, const GpuBuffer& src, const GpuBuffer& dst, VkDeviceSize bytes) {
+  VkBufferCopy c{0, 0, bytes};
+  vkCmdCopyBuffer(cmd, src.handle(), dst.handle(), 1, &c);
+}
+
+namespace {
+void memory_barrier(VkCommandBuffer cmd, VkPipelineStageFlags src_stage, VkAccessFlags src_access,
+                    VkPipelineStageFlags dst_stage, VkAccessFlags dst_access) {
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = src_access;
+  mb.dstAccessMask = dst_access;
+  vkCmdPipelineBarrier(cmd, src_stage, dst_stage, 0, 1, &mb, 0, nullptr, 0, nullptr);
+}
+}  // namespace
+
+void barrier_compute_to_compute(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
+                 VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+}
+void barrier_transfer_to_compute(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
+                 VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+}
+void barrier_compute_to_transfer(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                 VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
+}
+void barrier_transfer_to_host(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
+                 VK_ACCESS_HOST_READ_BIT);
+}
+
+DescriptorArena::DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std::uint32_t max_buffers)
+    : device_(ctx.device()) {
+  VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)};
+  VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  pi.maxSets = std::max<std::uint32_t>(max_sets, 1);
+  pi.poolSizeCount = 1;
+  pi.pPoolSizes = &ps;
+  VK_CHECK(vkCreateDescriptorPool(device_, &pi, nullptr, &pool_));
+}
+
+DescriptorArena::~DescriptorArena() {
+  if (pool_) vkDestroyDescriptorPool(device_, pool_, nullptr);
+}
+
+VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
+  VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
+  ai.descriptorPool = pool_;
+  ai.descriptorSetCount = 1;
+  ai.pSetLayouts = &layout;
+  VkDescriptorSet set;
+  VK_CHECK(vkAllocateDescriptorSets(device_, &ai, &set));
+  return set;
+}
+
+ComputePipelineBase::ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv,
+                                         std::size_t spirv_bytes, std::uint32_t bindings,
+                                         std::uint32_t push_bytes, std::string name)
+    : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes) {
+  VkDevice dev = ctx_.device();
+  std::vector<VkDescriptorSetLayoutBinding> b(bindings);
+  for (std::uint32_t i = 0; i < bindings; ++i) {
+    b[i].binding = i;
+    b[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    b[i].descriptorCount = 1;
+    b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+  }
+  VkDescriptorSetLayoutCreateInfo dl{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
+  dl.bindingCount = bindings;
+  dl.pBindings = b.data();
+  VK_CHECK(vkCreateDescriptorSetLayout(dev, &dl, nullptr, &set_layout_));
+  VkPushConstantRange pr{VK_SHADER_STAGE_COMPUTE_BIT, 0, push_bytes};
+  VkPipelineLayoutCreateInfo pl{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
+  pl.setLayoutCount = 1;
+  pl.pSetLayouts = &set_layout_;
+  pl.pushConstantRangeCount = push_bytes ? 1 : 0;
+  pl.pPushConstantRanges = &pr;
+  VK_CHECK(vkCreatePipelineLayout(dev, &pl, nullptr, &layout_));
+  VkShaderModuleCreateInfo sm{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
+  sm.codeSize = spirv_bytes;
+  sm.pCode = spirv;
+  VK_CHECK(vkCreateShaderModule(dev, &sm, nullptr, &module_));
+  VkComputePipelineCreateInfo cp{VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO};
+  cp.stage = {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO};
+  cp.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+  cp.stage.module = module_;
+  cp.stage.pName = "main";
+  cp.layout = layout_;
+  VK_CHECK(vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &cp, nullptr, &pipeline_));
+}
+
+ComputePipelineBase::~ComputePipelineBase() {
+  VkDevice dev = ctx_.device();
+  if (pipeline_) vkDestroyPipeline(dev, pipeline_, nullptr);
+  if (module_) vkDestroyShaderModule(dev, module_, nullptr);
+  if (layout_) vkDestroyPipelineLayout(dev, layout_, nullptr);
+  if (set_layout_) vkDestroyDescriptorSetLayout(dev, set_layout_, nullptr);
+}
+
+void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
+                               std::initializer_list<BufferRange> buffers) const {
+  if (buffers.size() != bindings_)
+    throw std::logic_error(name_ + ": " + std::to_string(buffers.size()) + " buffers given for " +
+                           std::to_string(bindings_) + " bindings");
+  const VkDeviceSize limit = ctx_.max_binding_bytes();
+  std::vector<VkDescriptorBufferInfo> info;
+  for (const BufferRange& r : buffers) {
+    if (r.range > limit)
+      throw std::logic_error(name_ + ": binding of " + std::to_string(r.range) +
+                             " bytes exceeds maxStorageBufferRange " + std::to_string(limit));
+    info.push_back({r.buffer, r.offset, r.range});
+  }
+  VkDescriptorSet set = arena.allocate(set_layout_);
+  std::vector<VkWriteDescriptorSet> w(bindings_);
+  for (std::uint32_t i = 0; i < bindings_; ++i) {
+    w[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+    w[i].dstSet = set;
+    w[i].dstBinding = i;
+    w[i].descriptorCount = 1;
+    w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    w[i].pBufferInfo = &info[i];
+  }
+  vkUpdateDescriptorSets(ctx_.device(), bindings_, w.data(), 0, nullptr);
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, layout_, 0, 1, &set, 0, nullptr);
+}
+
+void ComputePipelineBase::push_bytes(VkCommandBuffer cmd, const void* data) const {
+  vkCmdPushConstants(cmd, layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, push_size_, data);
+}
+
+GpuTimer::GpuTimer(VulkanContext& ctx, std::uint32_t max_marks) : ctx_(ctx), count_(max_marks) {
+  if (!ctx_.timestamps_supported() || max_marks == 0) return;
+  VkQueryPoolCreateInfo qi{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+  qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+  qi.queryCount = max_marks;
+  VK_CHECK(vkCreateQueryPool(ctx_.device(), &qi, nullptr, &pool_));
+}
+
+GpuTimer::~GpuTimer() {
+  if (pool_) vkDestroyQueryPool(ctx_.device(), pool_, nullptr);
+}
+
+void GpuTimer::record_reset(VkCommandBuffer cmd) {
+  if (pool_) vkCmdResetQueryPool(cmd, pool_, 0, count_);
+}
+
+void GpuTimer::mark(VkCommandBuffer cmd, std::uint32_t i) {
+  if (pool_ && i < count_)
+    vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, pool_, i);
+}
+
+double GpuTimer::elapsed_ms(std::uint32_t a, std::uint32_t b) const {
+  if (!pool_ || a >= count_ || b >= count_) return -1;
+  std::uint64_t ta = 0, tb = 0;
+  const VkQueryResultFlags f = VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT;
+  if (vkGetQueryPoolResults(ctx_.device(), pool_, a, 1, sizeof(ta), &ta, sizeof(ta), f) != VK_SUCCESS ||
+      vkGetQueryPoolResults(ctx_.device(), pool_, b, 1, sizeof(tb), &tb, sizeof(tb), f) != VK_SUCCESS ||
+      tb < ta)
+    return -1;
+  return double(tb - ta) * double(ctx_.properties().limits.timestampPeriod) * 1e-6;
+}
+
+Result<std::vector<Slab>> plan_slabs(const VulkanContext& ctx, const SlabGeometry& g, VkBuffer src,
+                                     VkBuffer dst, std::uint64_t limit, const std::string& what) {
+  using R = Result<std::vector<Slab>>;
+  const auto& lim = ctx.properties().limits;
+  const std::uint64_t align = std::max<std::uint64_t>(lim.minStorageBufferOffsetAlignment, 4);
+  const std::uint64_t m = std::max<std::uint64_t>(g.z_multiple, 1);
+  auto src_range = [&](std::uint64_t z0, std::uint64_t nz) {
+    const std::uint64_t a = z0 > g.halo ? z0 - g.halo : 0;
+    const std::uint64_t b = std::min(g.nz, z0 + nz + g.halo);
+    return std::pair{a, b};
+  };
+  auto fits = [&](std::uint64_t z0, std::uint64_t nz) {
+    const auto [a, b] = src_range(z0, nz);
+    const std::uint64_t s = (b - a) * g.src_bytes_per_slice + align;
+    const std::uint64_t d = g.dst_bytes_before(std::min(g.nz, nz), g.user) + align;  // dst: uniform in z
+    return s <= limit && d <= limit;
+  };
+  // Largest slab (a multiple of m slices) that fits at the worst place (the interior,
+  // where the halo is on both sides); the dispatch count limits it too.
+  std::uint64_t slab = (g.nz + m - 1) / m * m;
+  const std::uint64_t max_units = std::uint64_t(lim.maxComputeWorkGroupCount[2]) * g.wg_z;
+  slab = std::min(slab, max_units * m);
+  while (slab > 0 && !fits(std::min<std::uint64_t>(g.halo, g.nz), slab)) slab -= m;
+  if (slab == 0)
+    return R::fail(what + ": a slab of " + std::to_string(m) + " slice(s) of " +
+                   std::to_string(g.src_bytes_per_slice) + " bytes (plus " + std::to_string(g.halo) +
+                   " halo slice(s) each side) does not fit a storage-buffer binding of " +
+                   std::to_string(limit) + " bytes on " + ctx.info().name);
+  std::vector<Slab> out;
+  for (std::uint64_t z0 = 0; z0 < g.nz; z0 += slab) {
+    Slab s;
+    s.z0 = z0;
+    s.nz = std::min(slab, g.nz - z0);
+    std::tie(s.src_z0, s.src_z1) = src_range(z0, s.nz);
+    const std::uint64_t sb = s.src_z0 * g.src_bytes_per_slice, se = s.src_z1 * g.src_bytes_per_slice;
+    const std::uint64_t db = g.dst_bytes_before(z0, g.user), de = g.dst_bytes_before(z0 + s.nz, g.user);
+    const std::uint64_t sbind = sb / align * align, dbind = db / align * align;
+    s.src = {src, sbind, se - sbind};
+    s.dst = {dst, dbind, de - dbind};
+    s.src_offset_elems = (sb - sbind) / g.src_elem_bytes;
+    s.dst_offset_elems = (db - dbind) / g.dst_elem_bytes;
+    out.push_back(s);
+  }
+  return R::ok(std::move(out));
+}
+
+}  // namespace isotouch::engine

@@ -1,0 +1,201 @@
+// vk_resources.h - buffers with a memory intent, staging, compute pipelines, barriers.
+//
+// The layer the compute passes stand on (issue 8, item 2). Nothing here assumes that
+// device memory is host-visible: compute passes read and write DeviceLocal buffers, the
+// host writes Upload buffers and reads Readback buffers, and copies between them are
+// recorded into the same command buffer as the passes (record_copy + the barriers below).
+// On a unified-memory device (lavapipe, integrated GPUs) the copies are cheap memcpys; on
+// a discrete GPU they are the PCIe transfers they must be.
+//
+// Errors: set-up that can fail on a correct program (a buffer larger than the device's
+// maxMemoryAllocationSize, no memory type of the intent, out of memory) returns a Result
+// whose error names what, the size and the limit; calls that cannot fail use VK_CHECK.
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <initializer_list>
+#include <string>
+
+#include "vk_context.h"
+
+namespace isotouch::engine {
+
+/// What a buffer is for; decides its memory type and usage flags.
+enum class MemoryIntent {
+  DeviceLocal,  ///< read/written by shaders; copy source and destination; never mapped
+  Upload,       ///< host-visible, coherent, mapped: host writes, GPU copies out (staging)
+  Readback,     ///< host-visible, coherent (cached if offered), mapped: GPU copies in, host reads
+};
+const char* intent_name(MemoryIntent intent);
+
+/// One VkBuffer with its own VkDeviceMemory. Move-only; the destructor destroys the buffer
+/// first and then frees (after unmapping) its memory, the order the Vulkan spec requires
+/// for memory still bound to a live buffer.
+class GpuBuffer {
+ public:
+  GpuBuffer() = default;
+  /// @param what a name for error messages ("volume", "samples", ...).
+  /// Fails (no throw) if `bytes` is 0, exceeds maxMemoryAllocationSize, no memory type
+  /// fits the intent, or the allocation fails; the error names what, size and limit.
+  static Result<GpuBuffer> create(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
+                                  const std::string& what);
+  ~GpuBuffer() { reset(); }
+  GpuBuffer(GpuBuffer&& o) noexcept { *this = std::move(o); }
+  GpuBuffer& operator=(GpuBuffer&& o) noexcept;
+  GpuBuffer(const GpuBuffer&) = delete;
+  GpuBuffer& operator=(const GpuBuffer&) = delete;
+
+  void reset();
+  VkBuffer handle() const { return buffer_; }
+  VkDeviceSize size() const { return size_; }
+  MemoryIntent intent() const { return intent_; }
+  /// Host pointer of an Upload or Readback buffer (coherent: no flush needed); null otherwise.
+  void* mapped() const { return mapped_; }
+  explicit operator bool() const { return buffer_ != VK_NULL_HANDLE; }
+
+ private:
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkBuffer buffer_ = VK_NULL_HANDLE;
+  VkDeviceMemory memory_ = VK_NULL_HANDLE;
+  VkDeviceSize size_ = 0;
+  MemoryIntent intent_ = MemoryIntent::DeviceLocal;
+  void* mapped_ = nullptr;
+};
+
+/// create() that throws VolumeError-like std::runtime_error with the Result's message:
+/// for passes whose run() reports errors by exception.
+GpuBuffer make_buffer_or_throw(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
+                               const std::string& what);
+
+/// Records a buffer-to-buffer copy of `bytes` (offsets 0).
+void record_copy(VkCommandBuffer cmd, const GpuBuffer& src, const GpuBuffer& dst, VkDeviceSize bytes);
+
+// Barriers: global memory barriers (buffers only; no images in this engine).
+/// A dispatch's storage writes become visible to the next dispatch's reads and writes.
+void barrier_compute_to_compute(VkCommandBuffer cmd);
+/// A transfer (staging copy) becomes visible to the following dispatches.
+void barrier_transfer_to_compute(VkCommandBuffer cmd);
+/// Dispatch writes become visible to a following copy (to a Readback buffer).
+void barrier_compute_to_transfer(VkCommandBuffer cmd);
+/// Copies into Readback buffers become visible to the host after the fence.
+void barrier_transfer_to_host(VkCommandBuffer cmd);
+
+/// A storage-buffer range bound at one binding of a descriptor set.
+struct BufferRange {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceSize offset = 0;
+  VkDeviceSize range = 0;
+};
+
+/// Descriptor sets for one recording: a pool sized for `max_sets` sets of storage
+/// buffers; freed with the arena (after the command buffer has completed).
+class DescriptorArena {
+ public:
+  DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std::uint32_t max_buffers);
+  ~DescriptorArena();
+  DescriptorArena(const DescriptorArena&) = delete;
+  DescriptorArena& operator=(const DescriptorArena&) = delete;
+  VkDescriptorSet allocate(VkDescriptorSetLayout layout);
+
+ private:
+  VkDevice device_;
+  VkDescriptorPool pool_ = VK_NULL_HANDLE;
+};
+
+/// A compute pipeline over `bindings` storage buffers (binding i = i-th BufferRange given
+/// to bind()) and one push-constant block of `push_bytes`. Use ComputePipeline<Push>.
+class ComputePipelineBase {
+ public:
+  ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv, std::size_t spirv_bytes,
+                      std::uint32_t bindings, std::uint32_t push_bytes, std::string name);
+  ~ComputePipelineBase();
+  ComputePipelineBase(const ComputePipelineBase&) = delete;
+  ComputePipelineBase& operator=(const ComputePipelineBase&) = delete;
+
+  /// Binds the pipeline and a fresh descriptor set with these buffer ranges.
+  /// @throws std::logic_error if the count differs from `bindings` or a range exceeds
+  ///         maxStorageBufferRange (callers plan their slabs so this cannot happen).
+  void bind(VkCommandBuffer cmd, DescriptorArena& arena, std::initializer_list<BufferRange> buffers) const;
+  std::uint32_t bindings() const { return bindings_; }
+  const std::string& name() const { return name_; }
+
+ protected:
+  void push_bytes(VkCommandBuffer cmd, const void* data) const;
+
+ private:
+  VulkanContext& ctx_;
+  std::string name_;
+  std::uint32_t bindings_ = 0;
+  std::uint32_t push_size_ = 0;
+  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
+  VkPipelineLayout layout_ = VK_NULL_HANDLE;
+  VkShaderModule module_ = VK_NULL_HANDLE;
+  VkPipeline pipeline_ = VK_NULL_HANDLE;
+};
+
+/// Typed push constants: Push is the struct from shaders/isotouch_shared.h.
+template <class Push>
+class ComputePipeline : public ComputePipelineBase {
+ public:
+  template <std::size_t N>
+  ComputePipeline(VulkanContext& ctx, const std::uint32_t (&spirv)[N], std::uint32_t bindings,
+                  std::string name)
+      : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name)) {}
+  void push(VkCommandBuffer cmd, const Push& p) const { push_bytes(cmd, &p); }
+};
+
+/// GPU timestamps around the passes of one command buffer (none if unsupported).
+class GpuTimer {
+ public:
+  GpuTimer(VulkanContext& ctx, std::uint32_t max_marks);
+  ~GpuTimer();
+  GpuTimer(const GpuTimer&) = delete;
+  GpuTimer& operator=(const GpuTimer&) = delete;
+  bool enabled() const { return pool_ != VK_NULL_HANDLE; }
+  /// Resets the pool; record before the first mark.
+  void record_reset(VkCommandBuffer cmd);
+  /// Writes timestamp number `i` once all previously recorded commands have completed.
+  void mark(VkCommandBuffer cmd, std::uint32_t i);
+  /// After the fence: milliseconds between marks a and b, or -1 if unavailable.
+  double elapsed_ms(std::uint32_t a, std::uint32_t b) const;
+
+ private:
+  VulkanContext& ctx_;
+  VkQueryPool pool_ = VK_NULL_HANDLE;
+  std::uint32_t count_ = 0;
+};
+
+/// One dispatch's z-slab: slices [z0, z0 + nz) of the output, reading source slices
+/// [src_z0, src_z1) (the slab plus its halo, clamped to the volume). Bindings start at an
+/// offset aligned to minStorageBufferOffsetAlignment; *_offset_elems are the elements
+/// between the binding start and the first element the shader uses.
+struct Slab {
+  std::uint64_t z0 = 0, nz = 0, src_z0 = 0, src_z1 = 0;
+  BufferRange src, dst;
+  std::uint64_t src_offset_elems = 0, dst_offset_elems = 0;
+};
+
+/// How a pass maps z-slices onto its source and destination buffers.
+struct SlabGeometry {
+  std::uint64_t nz = 0;                  ///< slices in the volume
+  std::uint64_t src_bytes_per_slice = 0; ///< source bytes per z-slice
+  std::uint64_t src_elem_bytes = 4;
+  std::uint64_t halo = 0;                ///< source slices needed on each side
+  std::uint64_t z_multiple = 1;          ///< slab starts and sizes are multiples of this
+  /// Destination bytes before slice z (z a multiple of z_multiple, or nz): offset into dst.
+  std::uint64_t (*dst_bytes_before)(std::uint64_t z, const void* user) = nullptr;
+  const void* user = nullptr;
+  std::uint64_t dst_elem_bytes = 4;
+  std::uint32_t wg_z = 1;                ///< workgroup size in z (of slices, or of z_multiple units)
+};
+
+/// Splits a pass into z-slabs so that no binding exceeds `limit` bytes (and no dispatch
+/// exceeds maxComputeWorkGroupCount[2]).
+/// @return empty Result with an error naming `what`, the slice size and the limit if one
+///         slab of z_multiple slices (plus halo) does not fit.
+Result<std::vector<Slab>> plan_slabs(const VulkanContext& ctx, const SlabGeometry& g, VkBuffer src,
+                                     VkBuffer dst, std::uint64_t limit, const std::string& what);
+
+}  // namespace isotouch::engine

@@ -29,6 +29,12 @@ void HriRenderer::reset() {
 }
 
 Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const {
+  double unused;
+  return outward_normal(field, x, fallback, unused);
+}
+
+Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback,
+                                 double& grad_norm) const {
   Vec3 g;
   switch (params_.normal) {
     case NormalSource::kSamples:
@@ -41,6 +47,7 @@ Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const 
       g = trilinear_field_gradient(field, x);
       break;
   }
+  grad_norm = norm(g);
   return normalized_or(params_.inside == InsideIs::kAbove ? -g : g, fallback);
 }
 
@@ -48,7 +55,7 @@ VirtualPlane HriRenderer::plane_at(const SampleField& field, const Vec3& p, cons
   VirtualPlane plane;
   plane.p = p;
   const Vec3 fallback = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
-  plane.n = outward_normal(field, p, fallback);
+  plane.n = outward_normal(field, p, fallback, last_grad_norm_);
   plane.valid = finite(plane.p) && finite(plane.n);
   return plane;
 }
@@ -111,7 +118,12 @@ VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip,
   const double e0 = excess(f_vhip), e1 = excess(f_hip);
   const Vec3& sp = field.grid.spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
-  const double gn0 = e0 > 0.0 ? norm(sample_trilinear(field, vhip_).gradient) : 0.0;
+  // |grad| near the VHIP: the one measured with the held plane's normal (robust, no
+  // sample), else read at the VHIP.
+  const double gn0 = !(e0 > 0.0) ? 0.0
+                     : (params_.variant == Variant::kRobust && plane_.valid && plane_grad_norm_ > 0)
+                         ? plane_grad_norm_
+                         : norm(sample_trilinear(field, vhip_).gradient);
   const double d_est = gn0 > 0 ? e0 / gn0 : voxel;
   if (e0 > 0.0 && d_est > 1e-4 * voxel && d_est <= 0.05 * voxel && plane_.valid &&
       params_.variant == Variant::kRobust) {
@@ -410,6 +422,7 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   };
   auto set_plane = [&](const VirtualPlane& pl) {
     plane_ = pl;
+    plane_grad_norm_ = last_grad_norm_;
     anchor_ = hip + pl.n * dot(pl.n, pl.p - hip);  // eq. 2 on the new plane
     c_ = 0;
     out.plane_update = true;

@@ -191,6 +191,7 @@ class HriRenderer final : public Renderer {
   Vec3 outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const;
 
  private:
+  Vec3 outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback, double& grad_norm) const;
   VirtualPlane compute_plane(const SampleField& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
   VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
@@ -223,6 +224,8 @@ class HriRenderer final : public Renderer {
   bool sliding_ = false;
   bool was_contact_ = false;
   // Robust variant only:
+  mutable double last_grad_norm_ = 0;  ///< |grad| measured by the last plane_at
+  double plane_grad_norm_ = 0;         ///< |grad| where the held plane was made
   double dt_nominal_s_ = 1e-3;  ///< 1 / rate_hz [s]
   double inv_wpd_ = 1.0;        ///< 1 / world_per_device
   double alpha_nominal_ = 1.0;  ///< low-pass alpha at the nominal period

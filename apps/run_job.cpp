@@ -136,7 +136,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       << " x " << fmt(vol.grid.spacing_m.z * 1e3) << " mm, " << vol.component_type << " via " << vol.reader
       << ", " << value_range_text(vol, m) << "\n"
       << "         orientation " << m.orientation << " (direction " << direction_text(vol.direction)
-      << "); points below and in trace.csv are in this physical frame\n";
+      << "); points below and in trace.csv are physical (ITK's LPS frame, origin + D (spacing * index))\n";
   if (!any_finite)
     throw std::runtime_error(scene.file + ": volume " + vol.path + " has no finite voxels (" +
                              std::to_string(m.nan_voxels) + " NaN, " + std::to_string(m.inf_voxels) +
@@ -194,7 +194,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
   const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
   log << "script   contact at (" << fmt(contact_phys.x * 1e3, 4) << ", " << fmt(contact_phys.y * 1e3, 4) << ", "
-      << fmt(contact_phys.z * 1e3, 4) << ") mm " << m.orientation << ", normal (" << fmt(normal_phys.x, 3) << ", "
+      << fmt(contact_phys.z * 1e3, 4) << ") mm (physical, LPS), normal (" << fmt(normal_phys.x, 3) << ", "
       << fmt(normal_phys.y, 3) << ", " << fmt(normal_phys.z, 3) << "), " << fmt(script.duration_s, 3) << " s at "
       << fmt(hp.rate_hz) << " Hz\n";
 
@@ -287,7 +287,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                  {"inf_voxels", m.inf_voxels},
                  {"orientation", m.orientation},
                  {"direction", m.direction},
-                 {"frame", "points are physical: world = origin + direction * (spacing * index)"}};
+                 {"frame", "points and forces are physical (ITK's LPS frame): world = origin + direction * (spacing * index)"}};
   j["isovalue"] = hp.tau;
   j["inside"] = hp.inside == servo::InsideIs::kAbove ? "above" : "below";
   j["gpu"] = {{"device", m.gpu_device},
@@ -333,7 +333,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                                         {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
                                         {"search_radius_m", m.surface_search_radius_m},
                                         {"method", "true distance from the VHIP to the isosurface of the trilinear field "
-                                                   "(branch and bound over cells; error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
+                                                   "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
                 {"first_order_estimate_m", {{"rms", m.first_order_err_rms_m}, {"max", m.first_order_err_max_m},
                                             {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
                                                        "where the field is flat; shown for comparison only"}}}};
@@ -355,7 +355,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << ", spacing " << fmt(m.spacing_m.x * 1e3) << " x " << fmt(m.spacing_m.y * 1e3) << " x "
      << fmt(m.spacing_m.z * 1e3) << " mm, " << vol.component_type << "; " << value_range_text(vol, m) << ") |\n"
      << "| orientation | " << m.orientation << ", direction " << direction_text(m.direction)
-     << "; reported points are in this physical frame (world = origin + D (spacing * index)) |\n"
+     << "; reported points and forces are physical (ITK's LPS frame: origin + D (spacing * index)) |\n"
      << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == servo::InsideIs::kAbove ? ">" : "<")
      << " isovalue) |\n"
      << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"

@@ -61,3 +61,45 @@ TEST(Sweep, BaselinesReplayAndAreMeasured) {
     EXPECT_GT(app::median_ns_per_tick(*r, s, 0, 3), 0.0);
   }
 }
+
+namespace {
+// Replays the reference renderer but drops the contact (zero force) on every 100th tick.
+class DropEvery100 final : public servo::Renderer {
+ public:
+  explicit DropEvery100(const servo::HriParams& p) : r_(p) {}
+  const char* name() const override { return "drop"; }
+  void reset() override {
+    r_.reset();
+    k_ = 0;
+  }
+  using servo::Renderer::tick;
+  servo::HriTick tick(const servo::SampleField& f, const servo::Vec3& hip, double dt) override {
+    servo::HriTick t = r_.tick(f, hip, dt);
+    if (++k_ % 100 == 0) {
+      t.contact = false;
+      t.force_n = {};
+    }
+    return t;
+  }
+
+ private:
+  servo::HriRenderer r_;
+  long k_ = 0;
+};
+}  // namespace
+
+// A pop-through is a contact lost while the HIP is more than half a voxel inside: none for
+// the reference renderer on the sphere; one per dropped tick that is that deep.
+TEST(Sweep, PopThroughsAreCountedAgainstTheTruth) {
+  std::ostringstream log;
+  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
+  servo::HriRenderer ref(app::reference_params(s));
+  EXPECT_EQ(app::measure(s, app::playback(ref, s)).pop_throughs, 0);
+  DropEvery100 drop(app::reference_params(s));
+  long expected = 0;
+  const app::Playback p = app::playback(drop, s);
+  for (std::size_t k = 1; k < s.hip.size(); ++k)
+    expected += (k + 1) % 100 == 0 && p.ticks[k - 1].contact && s.truth->depth(s.hip[k]) > 0.5 * s.voxel_m;
+  EXPECT_GT(expected, 0);
+  EXPECT_EQ(app::measure(s, p).pop_throughs, expected);
+}

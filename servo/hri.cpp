@@ -62,7 +62,9 @@ VirtualPlane HriRenderer::plane_at(const SampleField& field, const Vec3& p, cons
 
 bool HriRenderer::long_step(const SampleField& field, const Vec3& a, const Vec3& b) {
   const Vec3& sp = field.grid.spacing_m;
-  return norm(b - a) > 0.5 * std::min({sp.x, sp.y, sp.z});
+  const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
+  const Vec3 d = b - a;
+  return dot(d, d) > h * h;
 }
 
 bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const Vec3& b,
@@ -359,10 +361,12 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   const Vec3 from_centre = hip - field.grid.centre_m();
   const bool absurd = sane && dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m;
   // An implausible jump while a plane is held: the contact state means nothing any more.
-  const Vec3 moved = hip - prev_hip_;
-  const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
-  const bool jump = sane && !absurd && started_ && !resync_ && plane_.valid &&
-                    dot(moved, moved) > max_move * max_move;
+  auto moved_too_far = [&]() {
+    const Vec3 moved = hip - prev_hip_;
+    const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
+    return dot(moved, moved) > max_move * max_move;
+  };
+  const bool jump = sane && !absurd && started_ && !resync_ && plane_.valid && moved_too_far();
   if (!sane || absurd || jump) {  // a device fault: send nothing
     out.fault = true;
     resync_ = resync_ || absurd || jump;

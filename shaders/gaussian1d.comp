@@ -16,10 +16,6 @@ layout(std430, set = 0, binding = 1) writeonly buffer Dst { float dst[]; };
 layout(std430, set = 0, binding = 2) readonly buffer Weights { float w[]; };
 layout(push_constant) uniform Push { Filter1dPush pc; };
 
-float voxel(uint x, uint y, uint z) {
-  return src[pc.src_offset + ((z - pc.src_z0) * pc.ny + y) * pc.nx + x];
-}
-
 void main() {
   uvec3 g = gl_GlobalInvocationID;
   if (g.x >= pc.nx || g.y >= pc.ny || g.z >= pc.slab_nz) return;
@@ -27,10 +23,12 @@ void main() {
   int n = int(pc.axis == 0u ? pc.nx : (pc.axis == 1u ? pc.ny : pc.nz));
   int i = int(pc.axis == 0u ? x : (pc.axis == 1u ? y : z));
   int r = int(pc.radius);
+  // Voxel j along the axis is src[line + j * stride]: no per-tap branch on the axis.
+  int stride = int(pc.axis == 0u ? 1u : (pc.axis == 1u ? pc.nx : pc.nx * pc.ny));
+  int line = int(pc.src_offset + ((z - pc.src_z0) * pc.ny + y) * pc.nx + x) - i * stride;
   precise float acc = 0.0;
   for (int k = -r; k <= r; ++k) {
-    uint j = uint(clamp(i + k, 0, n - 1));
-    float v = pc.axis == 0u ? voxel(j, y, z) : (pc.axis == 1u ? voxel(x, j, z) : voxel(x, y, j));
+    float v = src[line + clamp(i + k, 0, n - 1) * stride];
     precise float term = w[pc.w_offset + uint(k + r)] * v;
     acc = acc + term;
   }

@@ -1,0 +1,403 @@
+// Filter passes (issue 8, item 3): every pass on the GPU against its CPU reference, with
+// the validation layer on (synchronization validation too) and analytic truth from
+// outside the code: Gaussian of a constant / ramp / delta, closing of a hole / plateau,
+// brick min/max against brute force over the halo'd region.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <limits>
+
+#include "cpu_filters.h"
+#include "cpu_gradient.h"
+#include "passes.h"
+#include "synthetic.h"
+#include "vk_resources.h"
+#include "volume_io.h"
+
+using namespace isotouch;
+using engine::PassDesc;
+using engine::Volume;
+
+namespace {
+const std::string kData = ISOTOUCH_TEST_DATA;
+const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
+const std::string kTooth = kData + "/ct-tooth/tooth.nhdr";
+
+// One context for the file, validation layer and its synchronization validation on: a
+// missing layer is a failure, not a skip (CI installs vulkan-validationlayers).
+engine::VulkanContext& vk() {
+  static auto ctx = [] {
+    engine::ContextOptions o;
+    o.validation = true;
+    o.synchronization_validation = true;
+    auto r = engine::VulkanContext::create(o);
+    if (!r)
+      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
+                               r.error);
+    return std::move(*r.value);
+  }();
+  return *ctx;
+}
+
+// Distance in units in the last place (0 for equal bits or two NaNs).
+std::uint64_t ulp(float a, float b) {
+  if (std::isnan(a) && std::isnan(b)) return 0;
+  auto ord = [](float f) {
+    const std::int64_t i = std::bit_cast<std::int32_t>(f);
+    return i < 0 ? -(i & 0x7fffffff) : i;
+  };
+  const std::int64_t d = ord(a) - ord(b);
+  return std::uint64_t(d < 0 ? -d : d);
+}
+
+struct UlpStats {
+  std::size_t n = 0, differ = 0, first = 0;
+  std::uint64_t max = 0, p99 = 0;
+};
+UlpStats ulp_stats(const std::vector<float>& a, const std::vector<float>& b) {
+  UlpStats s;
+  s.n = a.size();
+  std::vector<std::uint64_t> d(a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    d[i] = ulp(a[i], b[i]);
+    if (d[i] && !s.differ++) s.first = i;
+  }
+  if (d.empty()) return s;
+  s.max = *std::max_element(d.begin(), d.end());
+  const std::size_t k = std::min(d.size() - 1, d.size() * 99 / 100);
+  std::nth_element(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
+  s.p99 = d[k];
+  return s;
+}
+
+std::vector<float> flatten(const servo::SampleField& f) {
+  std::vector<float> v;
+  v.reserve(f.samples.size() * 4);
+  for (const auto& s : f.samples) v.insert(v.end(), {s.value, s.gx, s.gy, s.gz});
+  return v;
+}
+
+// On lavapipe (an IEEE CPU device, `precise`, -ffp-contract=off) every output must agree bit
+// for bit; on another driver the ULP distribution is printed and bounded.
+void expect_same(const std::vector<float>& gpu, const std::vector<float>& cpu, const std::string& what) {
+  ASSERT_EQ(gpu.size(), cpu.size()) << what;
+  const UlpStats s = ulp_stats(gpu, cpu);
+  std::printf("  %-48s %9zu values, %zu differ, ULP max %llu p99 %llu\n", what.c_str(), s.n, s.differ,
+              static_cast<unsigned long long>(s.max), static_cast<unsigned long long>(s.p99));
+  if (vk().info().type == "cpu") {
+    EXPECT_EQ(s.differ, 0u) << what << ": first difference at " << s.first << " (GPU " << gpu[s.first] << ", CPU "
+                            << cpu[s.first] << ")";
+  } else {
+    EXPECT_LE(s.max, 64u) << what;  // FMA contraction / reassociation allowed elsewhere
+  }
+}
+
+void expect_chain_matches_cpu(const Volume& v, const std::vector<PassDesc>& passes, std::uint64_t max_binding = 0,
+                              int min_dispatches = 0) {
+  auto chain = engine::PassChain::create(vk(), passes);
+  ASSERT_TRUE(chain) << chain.error;
+  const engine::ChainOutput g = (*chain.value)->run(v, max_binding);
+  const engine::ChainOutput c = engine::run_chain_cpu(v, passes);
+  std::string name = v.path.substr(v.path.find_last_of('/') + 1) + ":";
+  for (const auto& p : passes) name += " " + p.label();
+  ASSERT_EQ(g.field.has_value(), c.field.has_value());
+  ASSERT_EQ(g.samples.has_value(), c.samples.has_value());
+  ASSERT_EQ(g.bricks.has_value(), c.bricks.has_value());
+  if (c.field) expect_same(*g.field, *c.field, name + " field");
+  if (c.samples) expect_same(flatten(*g.samples), flatten(*c.samples), name + " samples");
+  if (c.bricks) {
+    EXPECT_EQ(g.bricks->bricks, c.bricks->bricks);
+    expect_same(g.bricks->min, c.bricks->min, name + " brick min");
+    expect_same(g.bricks->max, c.bricks->max, name + " brick max");
+  }
+  int dispatches = 0;
+  for (const auto& p : g.passes) dispatches += p.dispatches;
+  EXPECT_GE(dispatches, min_dispatches) << (*chain.value)->describe();
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
+const std::vector<PassDesc> kFull = {PassDesc::gaussian(1.0), PassDesc::closing(2.0), PassDesc::gradient(),
+                                     PassDesc::brick_minmax()};
+
+// The GPU output of a single pass (the shipped path), for the analytic checks.
+engine::ChainOutput gpu(const Volume& v, const std::vector<PassDesc>& passes) {
+  auto chain = engine::PassChain::create(vk(), passes);
+  if (!chain) throw std::runtime_error(chain.error);
+  return (*chain.value)->run(v);
+}
+
+Volume constant(std::array<int, 3> dims, servo::Vec3 spacing, float c) {
+  Volume v = engine::make_random(dims, spacing, 0.0f, 1.0f, 1);
+  std::fill(v.voxels.begin(), v.voxels.end(), c);
+  v.update_stats();
+  return v;
+}
+
+double g1(int k, double sigma) { return std::exp(-double(k) * k / (2 * sigma * sigma)); }
+}  // namespace
+
+// ---------------------------------------------------------------- GPU against CPU
+
+TEST(PassesGpuVsCpu, HeadCt) {
+  const Volume v = engine::load_volume(kHead);
+  expect_chain_matches_cpu(v, kFull);
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(2.5)});
+  expect_chain_matches_cpu(v, {PassDesc::closing(4.0), PassDesc::brick_minmax(2)});
+}
+
+TEST(PassesGpuVsCpu, ChestCt) {
+  const Volume v = engine::load_volume(kChest);
+  expect_chain_matches_cpu(v, kFull);
+  // The issue's scene: sigma 1 mm + gradient + min/max.
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()});
+}
+
+TEST(PassesGpuVsCpu, ToothInManySlabs) {
+  // 4 MiB bindings: 103 x 94 x 161 floats are 6.2 MB, so every pass needs z-slabs, with
+  // halos (z axis of the Gaussian, gradient, bricks) across the slab boundaries.
+  const Volume v = engine::load_volume(kTooth);
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(2.0), PassDesc::closing(2.0), PassDesc::gradient(),
+                               PassDesc::brick_minmax()},
+                           4u << 20, 2 * 9 + 2 + 2);  // >= 2 slabs for every dispatch step
+}
+
+TEST(PassesGpuVsCpu, SyntheticRandomOddSizes) {
+  // NaN-free random data, sizes not a multiple of 8 (partial bricks), anisotropic spacing.
+  const Volume v = engine::make_random({37, 29, 23}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 42);
+  expect_chain_matches_cpu(v, kFull);
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(3.0), PassDesc::closing(3.0), PassDesc::brick_minmax(0)},
+                           64u << 10, 2 * 9 + 2);
+}
+
+// ---------------------------------------------------------------- analytic: Gaussian
+
+TEST(Gaussian, KernelIsNormalisedAndSymmetric) {
+  for (double s : {0.3, 1.0, 2.7}) {
+    const auto w = engine::gaussian_kernel(s);
+    const int r = int(std::ceil(3 * s));
+    ASSERT_EQ(w.size(), std::size_t(2 * r + 1));
+    double sum = 0, norm = 0;
+    for (int k = -r; k <= r; ++k) norm += g1(k, s);
+    for (int k = -r; k <= r; ++k) {
+      sum += w[std::size_t(k + r)];
+      EXPECT_NEAR(w[std::size_t(k + r)], g1(k, s) / norm, 1e-7) << "sigma " << s << " k " << k;
+      EXPECT_EQ(w[std::size_t(k + r)], w[std::size_t(r - k)]);
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-6);
+  }
+  EXPECT_EQ(engine::gaussian_kernel(0.0), std::vector<float>{1.0f});
+}
+
+TEST(Gaussian, ConstantStaysConstant) {
+  const Volume v = constant({19, 17, 13}, {1e-3, 1.3e-3, 2e-3}, 1234.5f);
+  const auto out = gpu(v, {PassDesc::gaussian(1.5)});
+  for (float f : *out.field) ASSERT_NEAR(f, 1234.5f, 1234.5f * 2e-6);  // weights sum to 1 within float rounding
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+TEST(Gaussian, RampStaysRampAwayFromBorders) {
+  // value = 3 x + 5 y - 2 z (index units). A symmetric normalised kernel preserves a linear
+  // function exactly wherever the window does not reach the border (clamp bends it there).
+  const std::array<int, 3> d{24, 22, 26};
+  const servo::Vec3 h{1e-3, 1e-3, 1.5e-3};
+  Volume v = constant(d, h, 0);
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) v.voxels[v.grid.index(x, y, z)] = float(3 * x + 5 * y - 2 * z);
+  const double sigma_mm = 1.5;
+  const auto out = gpu(v, {PassDesc::gaussian(sigma_mm)});
+  const auto axes = engine::gaussian_axes(v.grid, sigma_mm);
+  int r[3];
+  for (int a = 0; a < 3; ++a) r[a] = int(axes.kernel[std::size_t(a)].size() / 2);
+  int checked = 0;
+  for (int z = r[2]; z < d[2] - r[2]; ++z)
+    for (int y = r[1]; y < d[1] - r[1]; ++y)
+      for (int x = r[0]; x < d[0] - r[0]; ++x, ++checked)
+        ASSERT_NEAR((*out.field)[v.grid.index(x, y, z)], 3 * x + 5 * y - 2 * z, 2e-4) << x << " " << y << " " << z;
+  EXPECT_GT(checked, 500);
+  // ... and it does bend at the border (clamp to edge): the ramp is not preserved at x = 0.
+  EXPECT_GT((*out.field)[v.grid.index(0, 11, 13)], float(3 * 0 + 5 * 11 - 2 * 13) + 0.1f);
+}
+
+TEST(Gaussian, DeltaGivesTheNormalisedKernel) {
+  const std::array<int, 3> d{21, 21, 21};
+  const servo::Vec3 h{1e-3, 0.8e-3, 1.6e-3};
+  Volume v = constant(d, h, 0);
+  v.voxels[v.grid.index(10, 10, 10)] = 1.0f;
+  const double sigma_mm = 1.6;
+  const auto out = gpu(v, {PassDesc::gaussian(sigma_mm)});
+  // Truth from the formula, not from gaussian_kernel(): product of 1-D normalised Gaussians.
+  double s[3], norm[3];
+  int r[3];
+  for (int a = 0; a < 3; ++a) {
+    s[a] = sigma_mm / (h[a] * 1e3);
+    r[a] = int(std::ceil(3 * s[a]));
+    norm[a] = 0;
+    for (int k = -r[a]; k <= r[a]; ++k) norm[a] += g1(k, s[a]);
+  }
+  double total = 0;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) {
+        const int k[3] = {x - 10, y - 10, z - 10};
+        double want = 1;
+        for (int a = 0; a < 3; ++a) want *= std::abs(k[a]) <= r[a] ? g1(k[a], s[a]) / norm[a] : 0.0;
+        const float got = (*out.field)[v.grid.index(x, y, z)];
+        total += got;
+        ASSERT_NEAR(got, want, 1e-6 * want + 1e-12) << x << " " << y << " " << z;
+      }
+  EXPECT_NEAR(total, 1.0, 1e-5);
+}
+
+// ---------------------------------------------------------------- analytic: closing
+
+TEST(Closing, FillsASingleDarkVoxel) {
+  Volume v = constant({15, 14, 13}, {1e-3, 1e-3, 1e-3}, 100.0f);
+  v.voxels[v.grid.index(7, 6, 5)] = 0.0f;
+  for (const auto& out : {gpu(v, {PassDesc::closing(1.0)}).field, engine::run_chain_cpu(v, {PassDesc::closing(1.0)}).field})
+    for (float f : *out) ASSERT_EQ(f, 100.0f);
+  // A radius smaller than a voxel is the identity: the hole stays.
+  EXPECT_EQ((*gpu(v, {PassDesc::closing(0.4)}).field)[v.grid.index(7, 6, 5)], 0.0f);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+TEST(Closing, LeavesABrightPlateau) {
+  // A bright box on a dark background is closed under closing with a smaller box.
+  Volume v = constant({20, 18, 16}, {1e-3, 1e-3, 1e-3}, -50.0f);
+  for (int z = 4; z < 12; ++z)
+    for (int y = 5; y < 13; ++y)
+      for (int x = 3; x < 15; ++x) v.voxels[v.grid.index(x, y, z)] = 200.0f;
+  const auto out = gpu(v, {PassDesc::closing(2.0)});
+  EXPECT_EQ(*out.field, v.voxels);
+}
+
+TEST(Closing, FillsAGapNarrowerThanTheElement) {
+  // Two plateaus separated by a 2-voxel dark slot: closing with radius 1 (box 3 wide)
+  // fills it; radius 0 leaves it.
+  Volume v = constant({16, 8, 8}, {1e-3, 1e-3, 1e-3}, 10.0f);
+  for (int z = 0; z < 8; ++z)
+    for (int y = 0; y < 8; ++y)
+      for (int x = 7; x < 9; ++x) v.voxels[v.grid.index(x, y, z)] = 0.0f;
+  const auto closed = gpu(v, {PassDesc::closing(1.0)});
+  for (float f : *closed.field) ASSERT_EQ(f, 10.0f);
+  EXPECT_EQ(*gpu(v, {PassDesc::closing(0.5)}).field, v.voxels);
+}
+
+// ---------------------------------------------------------------- brick min/max
+
+TEST(BrickMinMax, EqualsBruteForceOverTheHaloedBrick) {
+  const Volume v = engine::make_random({27, 19, 17}, {1e-3, 1e-3, 1e-3}, -5.0f, 5.0f, 7);
+  for (int halo : {0, 1, 3}) {
+    const auto out = gpu(v, {PassDesc::brick_minmax(halo)});
+    const auto& b = *out.bricks;
+    ASSERT_EQ(b.bricks, (std::array<int, 3>{4, 3, 3}));
+    std::size_t i = 0;
+    for (int bz = 0; bz < 3; ++bz)
+      for (int by = 0; by < 3; ++by)
+        for (int bx = 0; bx < 4; ++bx, ++i) {
+          float mn = std::numeric_limits<float>::max(), mx = -mn;
+          for (int z = bz * 8 - halo; z <= bz * 8 + 7 + halo; ++z)
+            for (int y = by * 8 - halo; y <= by * 8 + 7 + halo; ++y)
+              for (int x = bx * 8 - halo; x <= bx * 8 + 7 + halo; ++x) {
+                if (x < 0 || y < 0 || z < 0 || x >= 27 || y >= 19 || z >= 17) continue;
+                mn = std::min(mn, v.voxels[v.grid.index(x, y, z)]);
+                mx = std::max(mx, v.voxels[v.grid.index(x, y, z)]);
+              }
+          ASSERT_EQ(b.min[i], mn) << "brick " << bx << " " << by << " " << bz << " halo " << halo;
+          ASSERT_EQ(b.max[i], mx) << "brick " << bx << " " << by << " " << bz << " halo " << halo;
+        }
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+TEST(BrickMinMax, HaloSeesTheNeighbourVoxel) {
+  // One spike at x = 8 (first voxel of brick 1): with halo 1 brick 0 must see it too.
+  Volume v = constant({16, 8, 8}, {1e-3, 1e-3, 1e-3}, 0.0f);
+  v.voxels[v.grid.index(8, 3, 3)] = 1000.0f;
+  const auto b = *gpu(v, {PassDesc::brick_minmax(1)}).bricks;
+  EXPECT_EQ(b.max[0], 1000.0f);
+  EXPECT_EQ(b.max[1], 1000.0f);
+  const auto b0 = *gpu(v, {PassDesc::brick_minmax(0)}).bricks;
+  EXPECT_EQ(b0.max[0], 0.0f);
+}
+
+// ---------------------------------------------------------------- the chain and the layer
+
+TEST(PassChain, CreatesOnlyWhatTheListNeedsAndSaysSo) {
+  auto chain = engine::PassChain::create(vk(), {PassDesc::gaussian(1.0), PassDesc::brick_minmax()});
+  ASSERT_TRUE(chain) << chain.error;
+  const std::string d = (*chain.value)->describe();
+  EXPECT_NE(d.find("pipelines created: gaussian1d brick_minmax"), std::string::npos) << d;
+  EXPECT_NE(d.find("left out (not created, not run): morph1d gradient"), std::string::npos) << d;
+  EXPECT_NE(d.find("samples (16 B/voxel)"), std::string::npos) << d;
+  const auto out = (*chain.value)->run(engine::make_random({9, 9, 9}, {1e-3, 1e-3, 1e-3}, 0, 1, 3));
+  EXPECT_TRUE(out.field && out.bricks);
+  EXPECT_FALSE(out.samples);
+  ASSERT_EQ(out.passes.size(), 2u);
+  EXPECT_NE((*chain.value)->describe().find("last run:"), std::string::npos);
+}
+
+TEST(PassChain, BadListsAreClearErrors) {
+  auto e1 = engine::PassChain::create(vk(), {});
+  EXPECT_FALSE(e1);
+  EXPECT_NE(e1.error.find("empty"), std::string::npos);
+  auto e2 = engine::PassChain::create(vk(), {PassDesc::gaussian(-1.0)});
+  EXPECT_NE(e2.error.find("sigma_mm"), std::string::npos) << e2.error;
+  auto e3 = engine::PassChain::create(vk(), {PassDesc::gradient(), PassDesc::gradient()});
+  EXPECT_NE(e3.error.find("once"), std::string::npos) << e3.error;
+  // A kernel wider than kMaxFilterRadius is rejected at run time, naming the volume.
+  auto c = engine::PassChain::create(vk(), {PassDesc::gaussian(500.0)});
+  ASSERT_TRUE(c);
+  try {
+    (*c.value)->run(engine::make_random({8, 8, 8}, {1e-3, 1e-3, 1e-3}, 0, 1, 3));
+    FAIL() << "expected VolumeError";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find("synthetic"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("exceeds"), std::string::npos) << e.what();
+  }
+}
+
+TEST(VulkanLayer, AllocationLargerThanTheDeviceAllowsIsAClearError) {
+  const VkDeviceSize too_big = vk().max_allocation_bytes() + 1;
+  auto r = engine::GpuBuffer::create(vk(), too_big, engine::MemoryIntent::DeviceLocal, "test");
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error.find(std::to_string(too_big)), std::string::npos) << r.error;
+  EXPECT_NE(r.error.find("maxMemoryAllocationSize " + std::to_string(vk().max_allocation_bytes())), std::string::npos)
+      << r.error;
+  auto ok = engine::GpuBuffer::create(vk(), 1024, engine::MemoryIntent::Readback, "small");
+  ASSERT_TRUE(ok) << ok.error;
+  EXPECT_NE(ok.value->mapped(), nullptr);
+  auto dev = engine::GpuBuffer::create(vk(), 1024, engine::MemoryIntent::DeviceLocal, "small");
+  ASSERT_TRUE(dev) << dev.error;
+  EXPECT_EQ(dev.value->mapped(), nullptr) << "device-local buffers are never mapped";
+}
+
+// ---------------------------------------------------------------- timings (printed)
+
+TEST(PassesTiming, GpuVsOneThreadCpuOnHeadAndChest) {
+  // One run each, printed for the report (not asserted: machine-dependent).
+  std::printf("device: %s (%s)\n", vk().info().name.c_str(), vk().info().type.c_str());
+  for (const std::string& path : {kHead, kChest}) {
+    const Volume v = engine::load_volume(path);
+    const auto chain = engine::PassChain::create(vk(), kFull);
+    ASSERT_TRUE(chain);
+    (*chain.value)->run(v);  // warm-up (pipeline compilation in the driver, page faults)
+    const auto g = (*chain.value)->run(v);
+    const auto c = engine::run_chain_cpu(v, kFull);
+    std::printf("%s %dx%dx%d\n", path.substr(path.find_last_of('/') + 1).c_str(), v.grid.dims[0], v.grid.dims[1],
+                v.grid.dims[2]);
+    for (std::size_t i = 0; i < g.passes.size(); ++i)
+      std::printf("  %-26s GPU %8.2f ms  CPU(1 thread) %8.2f ms  ratio CPU/GPU %5.2f\n", g.passes[i].label.c_str(),
+                  g.passes[i].ms, c.passes[i].ms, g.passes[i].ms > 0 ? c.passes[i].ms / g.passes[i].ms : 0.0);
+    std::printf("  GPU submit->fence %.2f ms, upload %.2f ms, download %.2f ms; CPU total %.2f ms\n", g.submit_wall_ms,
+                g.upload_ms, g.download_ms, c.submit_wall_ms);
+    std::printf("%s\n", (*chain.value)->describe().c_str());
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

@@ -303,7 +303,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   j["gpu_vs_cpu"] = {{"gradient_max_abs_diff", m.max_abs_diff},
                      {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
                      {"gradient_max_rel_diff", m.max_rel_diff}};
-  j["servo"] = {{"algorithm", "HRI (intermediate virtual plane, Figure 2)"},
+  const bool paper = hp.variant == servo::Variant::kPaper;
+  j["servo"] = {{"algorithm", paper ? "HRI, the paper's Figure 2 as printed" : "HRI, robust variant (Figure 2 plus the departures in servo/hri.h)"},
+                {"variant", paper ? "paper" : "robust"},
                 {"rate_hz", hp.rate_hz},
                 {"plane_update_period", hp.plane_update_period},
                 {"stiffness_n_per_m", hp.stiffness_n_per_m},
@@ -349,7 +351,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   if (!scene.description.empty()) md << scene.description << "\n\n";
   md << "A simulated point-mass device, pulled by a scripted operator hand, approaches the isosurface, "
         "presses in, strokes along it and lifts off. Forces come from the HRI servo (intermediate "
-        "virtual plane, the paper's Figure 2) reading the sample field that the Vulkan gradient pass wrote.\n\n";
+        "virtual plane, "
+     << (paper ? "the paper's Figure 2 as printed" : "robust variant: the paper's Figure 2 plus the departures listed in servo/hri.h")
+     << ") reading the sample field that the Vulkan gradient pass wrote.\n\n";
   md << "| | |\n|---|---|\n"
      << "| volume | `" << m.volume_path << "` (" << m.dims[0] << " x " << m.dims[1] << " x " << m.dims[2]
      << ", spacing " << fmt(m.spacing_m.x * 1e3) << " x " << fmt(m.spacing_m.y * 1e3) << " x "
@@ -366,7 +370,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << "; relative (to the largest gradient magnitude) " << fmt(m.max_rel_diff, 3) << " |\n"
      << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
      << " N s/m, n = " << hp.plane_update_period << ", " << fmt(hp.rate_hz) << " Hz, force limit "
-     << fmt(hp.force_limit_n) << " N |\n"
+     << fmt(hp.force_limit_n) << " N, " << (paper ? "paper" : "robust") << " variant, force shading "
+     << (hp.force_shading ? "on" : "off") << ", recovery time " << fmt(hp.recovery_time_s * 1e3) << " ms |\n"
      << "| ticks | " << m.ticks << " (" << m.contact_ticks << " in contact, " << m.plane_updates
      << " plane updates, " << m.saturated_ticks << " saturated, " << m.fault_ticks << " faults) |\n"
      << "| tick wall time | median " << fmt(m.tick_ns_median) << " ns, p99 " << fmt(m.tick_ns_p99)

@@ -142,7 +142,10 @@ ExtremeCase stiff_wall() {
   c.detail = "without PC: sustained oscillation " + std::string(off.sustained_oscillation ? "yes" : "no") +
              ", late amplitude ~" + num(amp(off)) + " mm, max |F| " + num(off.max_force_n) +
              " N; with PC: sustained " + (on.sustained_oscillation ? "yes" : "no") + ", late amplitude ~" +
-             num(amp(on)) + " mm, max |F| " + num(on.max_force_n) + " N (saturation limits what the PC can dissipate)" +
+             num(amp(on)) + " mm, max |F| " + num(on.max_force_n) + " N" +
+             (on.sustained_oscillation && on.max_force_n >= 3.3 - 1e-9
+                  ? " (the PC did not stop it while the force sat at F_max: saturation limits what it can dissipate)"
+                  : "") +
              "; without PC" + holds(off) + "; with PC" + holds(on);
   return c;
 }

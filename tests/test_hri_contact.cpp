@@ -4,6 +4,7 @@
 // printed) is run where it shows the fault the robust variant removes.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <functional>
@@ -84,6 +85,7 @@ PropertyResult plate_property(Variant var, unsigned seed) {
     const int n = std::array<int, 4>{1, 5, 10, 25}[std::size_t(run / 4) % 4];
     HriParams p = robust(n);
     p.variant = var;
+    p.normal = run % 2 ? NormalSource::kTrilinearExact : NormalSource::kSamples;  // both normals
     HriRenderer r(p);
     Vec3 ta, tb;
     basis(m, ta, tb);
@@ -349,6 +351,31 @@ TEST(HriContact, JumpInContactIsAFault) {
   const HriTick back = r.tick(f, {0.016, 0.016, 0.009});  // resynced: starts inside, no force
   EXPECT_FALSE(back.fault);
   EXPECT_FALSE(back.contact);
+}
+
+// Fault 9: a 4 m jump in free motion marches at most march_budget samples (the old
+// half-voxel march took 8000 here). Timed as the fastest of 20 tries, so a busy machine
+// can only make it slower, never pass a march that is too long.
+TEST(HriContact, LongJumpMarchIsBounded) {
+  const SampleField f = plane_field({0, 0, 1}, {0.016, 0.016, 0.010});
+  auto fastest_us = [&](int budget) {
+    HriParams p = robust(5);
+    p.march_budget = budget;
+    double best = 1e9;
+    for (int k = 0; k < 20; ++k) {
+      HriRenderer r(p);
+      r.tick(f, {0.016, 0.016, 0.020});
+      const auto t0 = std::chrono::steady_clock::now();
+      const HriTick t = r.tick(f, {4.016, 0.016, 0.020});  // 4 m in one tick, both ends outside
+      const auto t1 = std::chrono::steady_clock::now();
+      EXPECT_FALSE(t.contact);
+      best = std::min(best, std::chrono::duration<double, std::micro>(t1 - t0).count());
+    }
+    return best;
+  };
+  const double bounded = fastest_us(128), unbounded = fastest_us(1 << 20);
+  std::printf("4 m free jump: %.2f us with the 128-sample budget, %.2f us without\n", bounded, unbounded);
+  EXPECT_LT(bounded, 0.25 * unbounded);
 }
 
 // Fault 10: the passivity observer charges no force for a tick that sent none.

@@ -206,7 +206,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return target;
 }
 
-Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const Vec3& v, double dt,
+[[gnu::always_inline]] inline Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const Vec3& v, double dt,
                                 HriTick& out) {
   const bool robust = params_.variant == Variant::kRobust;
   // Optional force shading: the plane through the previous VHIP first gives a
@@ -461,8 +461,11 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
     } else {
       // Behind the plane: no sample unless an update is due (every n ticks, or early
       // when the VHIP would slide more than half a voxel from where the plane was made).
-      const Vec3 slide = hip + plane_.n * dot(plane_.n, plane_.p - hip) - anchor_;
-      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.25 * voxel * voxel) {
+      auto slid_far = [&]() {
+        const Vec3 slide = hip + plane_.n * dot(plane_.n, plane_.p - hip) - anchor_;
+        return dot(slide, slide) > 0.25 * voxel * voxel;
+      };
+      if (++c_ >= params_.plane_update_period || slid_far()) {
         c_ = 0;
         Vec3 p;
         if (hip_excess() > 0.0) {

@@ -119,14 +119,15 @@ std::string PassChain::describe() const {
   const bool filters = impl_->gauss || impl_->morph;
   s << "\npipelines created:" << (impl_->gauss ? " gaussian1d" : "") << (impl_->morph ? " morph1d" : "")
     << (impl_->gradient ? " gradient" : "") << (impl_->minmax ? " brick_minmax" : "");
+  const bool all = impl_->gauss && impl_->morph && impl_->gradient && impl_->minmax;
   s << "\nleft out (not created, not run):" << (impl_->gauss ? "" : " gaussian1d") << (impl_->morph ? "" : " morph1d")
-    << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax");
+    << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax") << (all ? " none" : "");
   s << "\nbuffers per run: voxels (float, device-local) + staging" << (filters ? ", ping-pong field (float)" : "")
     << (filters ? ", field readback" : "") << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
     << (impl_->gradient ? ", samples (vec4) + readback" : "") << (impl_->minmax ? ", brick ranges + readback" : "");
   s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
     << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
-    << (impl_->minmax ? "" : " brick ranges");
+    << (impl_->minmax ? "" : " brick ranges") << (all ? " none" : "");
   if (!impl_->last_run.empty()) s << "\nlast run:\n" << impl_->last_run;
   return s.str();
 }
@@ -212,7 +213,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   std::ostringstream info;
   for (std::size_t i = 0; i < passes_.size(); ++i) {
     const PassDesc& p = passes_[i];
-    info << "  " << p.label() << ":";
+    info << "  " << p.label();
     if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
       const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
       for (int k = 0; k < axes; ++k) {
@@ -233,7 +234,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
           s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
           s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
         }
-        info << " " << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
+        info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
         SlabGeometry g;
         g.nz = std::uint64_t(nz);
         g.src_bytes_per_slice = slice_bytes;
@@ -277,7 +278,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
       auto sl = plan_slabs(ctx, g, field[cur].handle(), bricks.handle(), limit, vol.path + ": " + p.label());
       if (!sl) throw VolumeError(sl.error);
       s.slabs = std::move(*sl.value);
-      info << " " << bx << "x" << by << "x" << bz << " bricks";
+      info << ": " << bx << "x" << by << "x" << bz << " bricks";
       steps.push_back(std::move(s));
     }
     std::size_t d = 0;

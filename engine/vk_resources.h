@@ -64,8 +64,8 @@ class GpuBuffer {
   void* mapped_ = nullptr;
 };
 
-/// create() that throws VolumeError-like std::runtime_error with the Result's message:
-/// for passes whose run() reports errors by exception.
+/// create() that throws VulkanError with the Result's message, for callers that report
+/// set-up failures by exception.
 GpuBuffer make_buffer_or_throw(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
                                const std::string& what);
 

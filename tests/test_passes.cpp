@@ -364,6 +364,22 @@ TEST(PassChain, BadListsAreClearErrors) {
   }
 }
 
+TEST(VulkanLayer, SliceLargerThanABindingIsAClearError) {
+  // 40 x 40 floats = 6400 bytes per slice against a 4 KiB binding limit.
+  const Volume v = engine::make_random({40, 40, 9}, {1e-3, 1e-3, 1e-3}, 0, 1, 5);
+  auto c = engine::PassChain::create(vk(), {PassDesc::gaussian(1.0)});
+  ASSERT_TRUE(c);
+  try {
+    (*c.value)->run(v, 4096);
+    FAIL() << "expected VolumeError";
+  } catch (const engine::VolumeError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("synthetic"), std::string::npos) << m;
+    EXPECT_NE(m.find("6400 bytes"), std::string::npos) << m;
+    EXPECT_NE(m.find("storage-buffer binding of 4096 bytes"), std::string::npos) << m;
+  }
+}
+
 TEST(VulkanLayer, AllocationLargerThanTheDeviceAllowsIsAClearError) {
   const VkDeviceSize too_big = vk().max_allocation_bytes() + 1;
   auto r = engine::GpuBuffer::create(vk(), too_big, engine::MemoryIntent::DeviceLocal, "test");

@@ -249,8 +249,8 @@ int run_check_all(const CheckAllOptions& opt, std::ostream& out) {
         w << r.ulp.differ << " values differ, ULP max " << r.ulp.max << " (bound " << r.bound_text
           << "), first at index " << r.ulp.first;
       if (r.nonfinite_test || r.nonfinite_ref)
-        w << (r.ulp.max > r.bound ? ", " : "") << r.nonfinite_test << " NaN/Inf on the GPU side, " << r.nonfinite_ref
-          << " on the reference side";
+        w << (r.ulp.max > r.bound ? ", " : "") << r.nonfinite_test << " NaN/Inf in the output, " << r.nonfinite_ref
+          << " in the reference";
       why.push_back(w.str());
     }
   if (vol.nonfinite_voxels() > 0)

@@ -17,6 +17,7 @@
 #include "cpu_gradient.h"
 #include "passes.h"
 #include "synthetic.h"
+#include "ulp.h"
 #include "vk_resources.h"
 #include "volume_io.h"
 
@@ -46,36 +47,8 @@ engine::VulkanContext& vk() {
   return *ctx;
 }
 
-// Distance in units in the last place (0 for equal bits or two NaNs).
-std::uint64_t ulp(float a, float b) {
-  if (std::isnan(a) && std::isnan(b)) return 0;
-  auto ord = [](float f) {
-    const std::int64_t i = std::bit_cast<std::int32_t>(f);
-    return i < 0 ? -(i & 0x7fffffff) : i;
-  };
-  const std::int64_t d = ord(a) - ord(b);
-  return std::uint64_t(d < 0 ? -d : d);
-}
-
-struct UlpStats {
-  std::size_t n = 0, differ = 0, first = 0;
-  std::uint64_t max = 0, p99 = 0;
-};
-UlpStats ulp_stats(const std::vector<float>& a, const std::vector<float>& b) {
-  UlpStats s;
-  s.n = a.size();
-  std::vector<std::uint64_t> d(a.size());
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    d[i] = ulp(a[i], b[i]);
-    if (d[i] && !s.differ++) s.first = i;
-  }
-  if (d.empty()) return s;
-  s.max = *std::max_element(d.begin(), d.end());
-  const std::size_t k = std::min(d.size() - 1, d.size() * 99 / 100);
-  std::nth_element(d.begin(), d.begin() + std::ptrdiff_t(k), d.end());
-  s.p99 = d[k];
-  return s;
-}
+using engine::ulp_stats;
+using engine::UlpStats;
 
 std::vector<float> flatten(const servo::SampleField& f) {
   std::vector<float> v;

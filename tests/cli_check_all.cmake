@@ -1,0 +1,30 @@
+# `isotouch check --all` (issue 8, item 6): run EXE with ARGS ('|'-separated), require exit
+# code RC and output (stdout + stderr) matching REGEX; with RC 0 also no validation message
+# on stderr (engine/vk_context.cpp prints them as "isotouch: Vulkan validation: ...").
+# Usage: cmake -DEXE=isotouch "-DARGS=check|--all|file.mhd|--validation" -DRC=0 "-DREGEX=PASS" -P cli_check_all.cmake
+# With NAN=dir: first write dir/nan.nrrd, a 16^3 ramp with one NaN voxel (no binary needed).
+if(DEFINED NAN)
+  file(MAKE_DIRECTORY ${NAN})
+  set(v "")
+  foreach(i RANGE 4095)
+    if(i EQUAL 2000)
+      string(APPEND v "nan ")
+    else()
+      math(EXPR r "${i} % 97")
+      string(APPEND v "${r} ")
+    endif()
+  endforeach()
+  file(WRITE ${NAN}/nan.nrrd "NRRD0004\ntype: float\ndimension: 3\nsizes: 16 16 16\nspacings: 1 1 1\nencoding: ascii\n\n${v}\n")
+endif()
+string(REPLACE "|" ";" args "${ARGS}")
+execute_process(COMMAND ${EXE} ${args} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err TIMEOUT 300)
+message("${out}${err}")
+if(NOT "${rc}" STREQUAL "${RC}")
+  message(FATAL_ERROR "exit ${rc}, want ${RC}")
+endif()
+if(NOT "${out}${err}" MATCHES "${REGEX}")
+  message(FATAL_ERROR "output does not match '${REGEX}'")
+endif()
+if("${RC}" STREQUAL "0" AND "${err}" MATCHES "Vulkan validation:")
+  message(FATAL_ERROR "validation messages on stderr")
+endif()

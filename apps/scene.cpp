@@ -179,7 +179,8 @@ Scene parse_scene(const std::string& text, const std::string& path) {
         s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
       }
     }
-    s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 0, 1, true);
+    // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script (issue 7).
+    s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
     s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
   }
 

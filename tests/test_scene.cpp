@@ -107,3 +107,13 @@ TEST(Scene, DeviceTooLightToSimulate) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "device": {"mass_kg": 1e-9}})",
                {"'device.mass_kg'", "1e-09", "at least"});
 }
+
+TEST(Scene, SyntheticSpacingRange) {
+  // Issue 7: spacing_m 1e-12 gave a run with no contact tick that exited 0 with a zero error.
+  const std::string pre = R"({"volume": {"synthetic": "sphere", "spacing_m": )";
+  const std::string post = R"(}, "isovalue": 0})";
+  expect_error(pre + "1e-12" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "1e-12"});
+  expect_error(pre + "0.5" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "0.5"});
+  EXPECT_NO_THROW(parse_scene(pre + "1e-6" + post, "ok.json"));
+  EXPECT_NO_THROW(parse_scene(pre + "0.1" + post, "ok.json"));
+}

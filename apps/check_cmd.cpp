@@ -237,7 +237,8 @@ int run_check_all(const CheckAllOptions& opt, std::ostream& out) {
   else
     out << "OpenVDB     not built in (libopenvdb-dev missing): no independent gradient reference\n";
   out << "GPU ms: device timestamps of the passes (submit-to-fence wall time where the device has none); "
-         "CPU ms: the one-thread reference, wall time; "
+         "CPU ms: the one-thread reference, wall time; chain rows: the whole list in one command buffer, "
+         "total time; "
       << dispatches_total << " dispatches in all\n";
 
   std::vector<std::string> why;

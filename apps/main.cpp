@@ -333,8 +333,12 @@ int main(int argc, char** argv) {
                   "of the period error and missed deadlines");
   app::ServoRtOptions rt_opt;
   rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(CLI::PositiveNumber);
-  rt->add_flag("--fifo", rt_opt.sched_fifo, "Ask for SCHED_FIFO (needs CAP_SYS_NICE)");
-  rt->add_option("--cpu", rt_opt.cpu, "Pin the servo thread to this CPU");
+  rt->add_flag("--fifo,!--no-fifo", rt_opt.sched_fifo,
+               "SCHED_FIFO for the servo thread (default on; needs CAP_SYS_NICE, refused -> a note)");
+  rt->add_flag("--pin,!--no-pin", rt_opt.pin_cpu,
+               "Pin the servo thread (default: the last CPU, only under SCHED_FIFO)");
+  rt->add_flag("--mlock,!--no-mlock", rt_opt.lock_memory, "mlockall and prefault before the loop (default on)");
+  rt->add_option("--cpu", rt_opt.cpu, "Pin to this CPU (default: the last one)");
   rt->add_option("--csv", rt_opt.out_csv, "Also write the table to this CSV file");
   auto* t1 = bench->add_subcommand(
       "table1", "The paper's Table 1 again: time per servo loop and servo rate of HRI (n = 5), Avila-Sobierajski "

@@ -159,6 +159,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   engine::GradientTimings gt;
   auto field = std::make_shared<servo::SampleField>(pass.run(vol, &gt, opt.max_binding_bytes));
   field->version = 1;
+  // Outside the volume is outside the object (core::FieldView's background).
+  field->background = core::outside_background(*field, core::Isosurface{scene.hri.tau, scene.hri.inside});
   m.gpu_gradient_ms = gt.gradient_ms;
   m.gpu_upload_ms = gt.upload_ms;
   m.gpu_download_ms = gt.download_ms;
@@ -257,6 +259,24 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     fo2 += fo * fo;
     m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
   }
+  // Steps of |F| that the contact-only figure cannot see (issue 7): a drop to zero while
+  // the HIP is still inside the object, and any step between two consecutive ticks.
+  {
+    const core::FieldView view(*field);
+    const core::Isosurface iso{hp.tau, hp.inside};
+    for (std::size_t i = 1; i < trace.size(); ++i) {
+      const double f0 = servo::norm(trace[i - 1].force_n), f1 = servo::norm(trace[i].force_n);
+      if (std::abs(f1 - f0) > m.max_any_step_n) {
+        m.max_any_step_n = std::abs(f1 - f0);
+        m.max_any_step_t_s = trace[i].t_s;
+      }
+      if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n &&
+          iso.contains(view.value(trace[i].hip_m))) {
+        m.max_release_step_n = f0;
+        m.max_release_step_t_s = trace[i].t_s;
+      }
+    }
+  }
   m.tick_ns_median = percentile(ns, 0.5);
   m.tick_ns_p99 = percentile(ns, 0.99);
   m.tick_ns_max = ns.empty() ? 0 : double(*std::max_element(ns.begin(), ns.end()));
@@ -266,6 +286,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.first_order_err_rms_m = std::sqrt(fo2 / double(m.contact_ticks));
   }
   if (found) m.surface_err_rms_m = std::sqrt(err2 / double(found));
+
+  if (m.contact_ticks == 0)
+    log << "no contact: the probe never touched the isosurface in " << m.ticks
+        << " ticks; the surface error is not known (null in summary.json)\n";
+  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, release inside the object "
+      << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
+      << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
 
   // 6. Outputs, each written whole or not at all.
   const std::string dir = opt.out_dir;
@@ -329,14 +356,21 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                   {"max_penetration_m", m.max_penetration_m},
                   {"max_force_step_n", m.max_force_step_n},
                   {"max_force_step_t_s", m.max_force_step_t_s},
+                  {"max_release_step_n", m.max_release_step_n},
+                  {"max_release_step_t_s", m.max_release_step_t_s},
+                  {"max_any_step_n", m.max_any_step_n},
+                  {"max_any_step_t_s", m.max_any_step_t_s},
                   {"saturated_ticks", m.saturated_ticks},
                   {"fault_ticks", m.fault_ticks}};
-  j["error"] = {{"surface_distance_m", {{"rms", m.surface_err_rms_m}, {"max", m.surface_err_max_m},
+  // No contact tick (or no surface found): there is no error to report, not an error of 0.
+  const auto or_null = [](bool have, double v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  j["error"] = {{"surface_distance_m", {{"rms", or_null(found > 0, m.surface_err_rms_m)}, {"max", or_null(found > 0, m.surface_err_max_m)},
                                         {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
                                         {"search_radius_m", m.surface_search_radius_m},
                                         {"method", "true distance from the VHIP to the isosurface of the trilinear field "
                                                    "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
-                {"first_order_estimate_m", {{"rms", m.first_order_err_rms_m}, {"max", m.first_order_err_max_m},
+                {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
+                                            {"max", or_null(m.contact_ticks > 0, m.first_order_err_max_m)},
                                             {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
                                                        "where the field is flat; shown for comparison only"}}}};
   j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
@@ -381,6 +415,11 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "
      << fmt(m.max_force_step_t_s, 5) << " s (" << fmt(100 * m.max_force_step_n / hp.force_limit_n, 3)
      << " % of the force limit) |\n"
+     << "| largest release step | " << fmt(m.max_release_step_n, 4) << " N at t = " << fmt(m.max_release_step_t_s, 5)
+     << " s (" << fmt(100 * m.max_release_step_n / hp.force_limit_n, 3)
+     << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
+     << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
+     << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
      << "| surface error of the VHIP | true distance to the trilinear isosurface: RMS "
      << fmt(m.surface_err_rms_m * 1e3, 4) << " mm, max " << fmt(m.surface_err_max_m * 1e3, 4) << " mm ("
      << fmt(m.surface_err_rms_m / std::min({m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}), 3)
@@ -395,6 +434,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
              : "**Faults: " + std::to_string(m.fault_ticks) + " of " + std::to_string(m.ticks) + " ticks (" +
                    fmt(100.0 * double(m.fault_ticks) / double(std::max(1L, m.ticks)), 3) +
                    " %) were faults (non-finite or implausible HIP, or a non-finite force); zero force was sent on those ticks.**\n\n");
+  if (m.contact_ticks == 0)
+    md << "**No contact: the probe never touched the isosurface, so there is no surface error to report "
+          "(null in summary.json). Check the isovalue, the volume's spacing and the script.**\n\n";
+  else if (found == 0)
+    md << "**No surface was found within " << fmt(m.surface_search_radius_m * 1e3, 4)
+       << " mm of the VHIP on any contact tick: the surface error is not known (null in summary.json).**\n\n";
+  else
   md << "## Error against run time\n\nAt a median tick of " << fmt(m.tick_ns_median) << " ns (p99 "
      << fmt(m.tick_ns_p99) << " ns) with the plane recomputed every " << hp.plane_update_period
      << " ticks, the VHIP stayed within " << fmt(m.surface_err_max_m * 1e3, 4)

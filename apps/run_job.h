@@ -38,9 +38,18 @@ struct RunMetrics {
   /// Largest change of |F| [N] between two consecutive ticks that are both in contact.
   double max_force_step_n = 0;
   double max_force_step_t_s = 0;  ///< time of the second tick of that step [s]
+  /// Largest |F| [N] on a contact tick whose next tick has no contact while the HIP (at
+  /// that next tick) is still inside the object (trilinear field at the HIP, the scene's
+  /// isovalue and inside): the force drop that max_force_step_n cannot see.
+  double max_release_step_n = 0;
+  double max_release_step_t_s = 0;  ///< time of the tick with no contact [s]
+  /// Largest change of |F| [N] between any two consecutive ticks, in contact or not.
+  double max_any_step_n = 0;
+  double max_any_step_t_s = 0;  ///< time of the second tick of that step [s]
   /// True distance [m] of the VHIP from the trilinear isosurface over the contact ticks
   /// (apps/surface_distance.h: bounded search, accurate to 1e-3 voxel), RMS and max over
   /// the ticks where a surface was found within surface_search_radius_m.
+  /// Both 0 (and null in summary.json) when no contact tick found a surface.
   double surface_err_rms_m = 0, surface_err_max_m = 0;
   long surface_err_not_found_ticks = 0;  ///< contact ticks with no surface within the radius
   double surface_search_radius_m = 0;

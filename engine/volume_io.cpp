@@ -16,6 +16,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -256,7 +257,35 @@ void check_metaimage(const std::string& path) {
   }
 }
 
+// The header field that gave the direction matrix, for messages.
+std::string direction_field(const std::string& reader) {
+  if (reader == "itk:MetaImageIO") return "TransformMatrix";
+  if (reader == "itk:NiftiImageIO") return "sform (srow_x/y/z) or qform (quatern_b/c/d)";
+  return "space directions";  // NRRD, ITK or teem
+}
+
+// D must be orthonormal (|D^T D - I| <= 1e-3 per entry): world = origin + D (spacing *
+// index) and Volume::to_grid use D^T as the inverse. A singular D (TransformMatrix all
+// zeros) would put every point at the origin, a scaling one would rescale the volume
+// behind the spacing's back; both are errors naming the field and the values (issue 7).
 void finish_direction(Volume& v) {
+  const auto& D = v.direction;
+  double worst = 0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double dot = 0;
+      for (int k = 0; k < 3; ++k) dot += D[std::size_t(k * 3 + i)] * D[std::size_t(k * 3 + j)];
+      const double e = std::abs(dot - (i == j ? 1.0 : 0.0));
+      worst = e == e ? std::max(worst, e) : std::numeric_limits<double>::infinity();
+    }
+  if (!(worst <= 1e-3)) {
+    std::ostringstream s;
+    s << "field '" << direction_field(v.reader) << "' gives the direction matrix (columns: index axes) [[" << D[0]
+      << ", " << D[1] << ", " << D[2] << "], [" << D[3] << ", " << D[4] << ", " << D[5] << "], [" << D[6] << ", "
+      << D[7] << ", " << D[8] << "]], which is not orthonormal (max |D^T D - I| = " << worst
+      << ", the limit is 0.001): the direction cosines must be unit and perpendicular (voxel size goes in the spacing)";
+    fail(v.path, s.str());
+  }
   const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   v.direction_is_identity = true;
   for (int i = 0; i < 9; ++i)
@@ -451,12 +480,36 @@ Volume load_teem(const std::string& path) {
 }
 #endif
 
+// NRRD "spacings:" as the header writes it: ITK and teem both put 1 mm in place of a
+// "nan" (NRRD's "no spacing"), which for a scalar volume hides a broken header. Read the
+// header text (up to the first empty line) and fail on a spacing that is not a positive
+// finite number.
+void check_nrrd_spacings(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  for (int n = 0; n < 4096 && std::getline(in, line); ++n) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) break;  // end of the header of a .nrrd
+    if (line.rfind("spacings:", 0) != 0) continue;
+    std::istringstream t(line.substr(9));
+    std::string tok;
+    for (int a = 0; t >> tok; ++a) {
+      char* end = nullptr;
+      const double d = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(d) || d <= 0.0)
+        fail(path, "field 'spacings' along axis " + std::to_string(a) + " is '" + tok +
+                       "' (must be a positive number of mm; ITK and teem would silently use 1 mm)");
+    }
+  }
+}
+
 }  // namespace
 
 Volume load_volume(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
   if (fs::is_directory(path, ec)) fail(path, "is a directory, not a volume file");
+  if (is_nrrd(path)) check_nrrd_spacings(path);
   Volume v;
   try {
     v = load_itk(path);

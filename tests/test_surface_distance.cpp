@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -297,3 +298,40 @@ TEST(SurfaceDistance, AgreesWithOpenVdbOnTheHeadCt) {
                   "the cross-check against an independent method did not run";
 }
 #endif
+
+// Issue 7 (review finding 5): anisotropic spacing, checked against a closed form, not only
+// against OpenVDB. A linear field f(x) = a . x + b is reproduced exactly by trilinear
+// interpolation on any grid, so the isosurface f = 0 is the plane a . x + b = 0 and the
+// distance is |a . p + b| / |a|. Voxels 0.7 x 0.7 x 3 mm (a CT with thick slices), oblique
+// normal; the search boxes must be measured in metres per axis, not in voxels.
+TEST(SurfaceDistance, AnisotropicSpacingPlaneIsExact) {
+  const Vec3 h{0.7e-3, 0.7e-3, 3e-3};
+  const std::array<int, 3> dims{40, 40, 12};  // 27.3 x 27.3 x 33 mm
+  const Vec3 n = servo::normalized_or(Vec3{0.4, -0.3, 0.87}, {0, 0, 1});
+  const Vec3 c{0.0137, 0.0137, 0.0165};       // a point of the plane
+  const Vec3 a = n * 1000.0;                   // value in mm of signed distance
+  const engine::Volume vol = engine::make_linear(dims, h, a, -servo::dot(a, c));
+  const servo::SampleField f = engine::compute_samples_cpu(vol);
+  std::mt19937_64 rng(23);
+  double worst = 0;
+  int tested = 0;
+  for (int k = 0; k < 80; ++k) {
+    const Vec3 p = random_point(rng, {0.004, 0.004, 0.006}, {0.023, 0.023, 0.027});
+    const double exact = std::abs(servo::dot(n, p - c));
+    const Vec3 foot = p - n * servo::dot(n, p - c);
+    if (exact > 0.003 || std::min({foot.x, foot.y}) < 0.001 || std::max({foot.x, foot.y}) > 0.026 ||
+        foot.z < 0.004 || foot.z > 0.029)
+      continue;
+    const app::SurfaceDistance d = app::distance_to_isosurface(f, 0.0, p);
+    ASSERT_TRUE(d.found) << "p = (" << p.x << ", " << p.y << ", " << p.z << ")";
+    // Stated accuracy: min(1e-3 voxel, max(1e-6 voxel, 1 % of d)), voxel = the smallest spacing.
+    const double tol = std::min(0.7e-6, std::max(0.7e-9, 1e-2 * exact)) + 1e-8;
+    EXPECT_GE(d.distance_m, exact - 1e-8);
+    EXPECT_LE(d.distance_m, exact + tol) << "exact " << exact;
+    EXPECT_LE(d.lower_bound_m, exact + 1e-8);
+    worst = std::max(worst, std::abs(d.distance_m - exact));
+    ++tested;
+  }
+  EXPECT_GT(tested, 20);
+  std::printf("anisotropic plane: %d points, max |d - exact| = %.3g m\n", tested, worst);
+}

@@ -293,3 +293,46 @@ TEST(VolumeIo, MetaImageLocalDataSize) {
   write(d / "uchar.mha", uchar + raw);
   expect_error((d / "uchar.mha").string(), "hold 128 bytes; DimSize 4 x 4 x 4 of ElementType MET_UCHAR");
 }
+
+// ---- Direction matrix and NRRD spacings (issue 7, review findings) --------------------------
+TEST(VolumeIo, MetaImageSingularDirection) {
+  // All zeros put every point at the origin ("LLL", every trace point (0,0,0)).
+  expect_error(small_mhd(temp_dir(), "TransformMatrix = 0 0 0 0 0 0 0 0 0\n", 128).string(),
+               "field 'TransformMatrix' gives the direction matrix (columns: index axes) [[0, 0, 0], [0, 0, 0], [0, 0, 0]], "
+               "which is not orthonormal (max |D^T D - I| = 1");
+}
+
+TEST(VolumeIo, MetaImageScalingDirection) {
+  // A factor 2 on axis 0 would silently scale the volume.
+  expect_error(small_mhd(temp_dir(), "TransformMatrix = 2 0 0 0 1 0 0 0 1\n", 128).string(),
+               "field 'TransformMatrix' gives the direction matrix (columns: index axes) [[2, 0, 0], [0, 1, 0], [0, 0, 1]], "
+               "which is not orthonormal (max |D^T D - I| = 3");
+  // Within the tolerance (rounded cosines as scanners write them) it loads.
+  EXPECT_NO_THROW(load_volume(small_mhd(temp_dir(), "TransformMatrix = 1.0004 0 0 0 1 0 0 0 1\n", 128).string()));
+}
+
+TEST(VolumeIo, NrrdSkewedSpaceDirections) {
+  // Unit but not perpendicular: axis 1 at 45 degrees to axis 0.
+  const fs::path d = temp_dir();
+  write(d / "t.raw", std::string(64 * 2, '\0'));
+  write(d / "t.nhdr",
+        "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspace: left-posterior-superior\n"
+        "space directions: (1,0,0) (0.70710678,0.70710678,0) (0,0,1)\ndata file: t.raw\nendian: little\n"
+        "encoding: raw\n");
+  expect_error((d / "t.nhdr").string(), "field 'space directions' gives the direction matrix");
+}
+
+TEST(VolumeIo, NrrdNanSpacing) {
+  // ITK and teem both read "nan" as 1 mm; the header must give a number.
+  const fs::path d = temp_dir();
+  write(d / "t.raw", std::string(64 * 2, '\0'));
+  const std::string tail = "\ndata file: t.raw\nendian: little\nencoding: raw\n";
+  write(d / "t.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: nan 1 1" + tail);
+  expect_error((d / "t.nhdr").string(), "field 'spacings' along axis 0 is 'nan' (must be a positive number of mm");
+  write(d / "t.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: 1 -2 1" + tail);
+  expect_error((d / "t.nhdr").string(), "field 'spacings' along axis 1 is '-2'");
+  write(d / "t.nhdr", "NRRD0004\ntype: short\ndimension: 3\nsizes: 4 4 4\nspacings: 0.5 1 2" + tail);
+  const Volume v = load_volume((d / "t.nhdr").string());
+  EXPECT_DOUBLE_EQ(v.grid.spacing_m.x, 0.5e-3);
+  EXPECT_DOUBLE_EQ(v.grid.spacing_m.z, 2e-3);
+}

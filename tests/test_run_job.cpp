@@ -1,0 +1,180 @@
+// app::run_scene's force-step figures (issue 7, review finding 1), recomputed independently
+// from trace.csv: contact.max_force_step_n (both ticks in contact), max_release_step_n (|F|
+// on a contact tick whose next tick has no contact while the HIP is inside the object) and
+// max_any_step_n (any two consecutive ticks). The inside test here is this file's own
+// trilinear interpolation of the loaded voxels at the trace's physical HIP (Volume::to_grid),
+// not the servo's FieldView.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "run_job.h"
+#include "scene.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+namespace fs = std::filesystem;
+using isotouch::app::RunMetrics;
+using isotouch::app::Scene;
+using isotouch::engine::Volume;
+
+namespace {
+const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";
+
+struct Row {
+  double t, hip[3], f;
+  bool contact;
+};
+
+std::vector<Row> read_trace(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line.rfind("t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,", 0), 0u);
+  std::vector<Row> rows;
+  while (std::getline(in, line)) {
+    std::vector<double> c;
+    std::istringstream s(line);
+    std::string tok;
+    while (std::getline(s, tok, ',')) c.push_back(std::stod(tok));
+    if (c.size() != 13) {
+      ADD_FAILURE() << "bad trace row: " << line;
+      break;
+    }
+    rows.push_back({c[0], {c[1], c[2], c[3]}, std::sqrt(c[7] * c[7] + c[8] * c[8] + c[9] * c[9]), c[10] != 0});
+  }
+  return rows;
+}
+
+// Trilinear value of the voxels at a physical point; NaN outside the voxel-centre box.
+double trilinear(const Volume& v, const double p[3]) {
+  const isotouch::servo::Vec3 g = v.to_grid({p[0], p[1], p[2]});
+  const double idx[3] = {(g.x - v.grid.origin_m.x) / v.grid.spacing_m.x, (g.y - v.grid.origin_m.y) / v.grid.spacing_m.y,
+                         (g.z - v.grid.origin_m.z) / v.grid.spacing_m.z};
+  int i0[3];
+  double fr[3];
+  for (int a = 0; a < 3; ++a) {
+    if (!(idx[a] >= 0 && idx[a] <= v.grid.dims[std::size_t(a)] - 1)) return std::nan("");
+    i0[a] = std::min(int(std::floor(idx[a])), std::max(0, v.grid.dims[std::size_t(a)] - 2));
+    fr[a] = idx[a] - i0[a];
+  }
+  double s = 0;
+  for (int c = 0; c < 8; ++c) {
+    double w = 1;
+    int ix[3];
+    for (int a = 0; a < 3; ++a) {
+      const int b = (c >> a) & 1;
+      w *= b ? fr[a] : 1 - fr[a];
+      ix[a] = std::min(i0[a] + b, v.grid.dims[std::size_t(a)] - 1);
+    }
+    s += w * v.voxels[v.grid.index(ix[0], ix[1], ix[2])];
+  }
+  return s;
+}
+
+struct Steps {
+  double contact = 0, release = 0, any = 0;
+  long releases = 0;
+};
+
+Steps recompute(const std::vector<Row>& rows, const Volume& vol, const Scene& sc) {
+  Steps s;
+  for (std::size_t i = 1; i < rows.size(); ++i) {
+    const double d = std::abs(rows[i].f - rows[i - 1].f);
+    s.any = std::max(s.any, d);
+    if (rows[i].contact && rows[i - 1].contact) s.contact = std::max(s.contact, d);
+    if (rows[i - 1].contact && !rows[i].contact) {
+      const double v = trilinear(vol, rows[i].hip);
+      const bool inside = sc.hri.inside == isotouch::servo::InsideIs::kAbove ? v > sc.hri.tau : v < sc.hri.tau;
+      if (inside) {
+        ++s.releases;
+        s.release = std::max(s.release, rows[i - 1].f);
+      }
+    }
+  }
+  return s;
+}
+
+struct Ran {
+  RunMetrics m;
+  Steps s;
+};
+
+Ran run_and_recompute(Scene sc, const std::string& tag) {
+  sc.draw_plots = false;
+  sc.write_trace = true;
+  const fs::path out = fs::temp_directory_path() /
+                       ("isotouch_run_job_" + tag + "_" +
+                        std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
+  fs::remove_all(out);
+  isotouch::app::RunOptions opt;
+  opt.out_dir = out.string();
+  opt.progress = false;
+  std::ostringstream log;
+  Ran r;
+  r.m = isotouch::app::run_scene(sc, opt, log);
+  const Volume vol = sc.volume_path.empty()
+                         ? isotouch::engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox)
+                         : isotouch::engine::load_volume(sc.volume_path);
+  const auto rows = read_trace(out / "trace.csv");
+  EXPECT_EQ(long(rows.size()), r.m.ticks);
+  r.s = recompute(rows, vol, sc);
+  // trace.csv holds 9 significant digits: the figures agree to that.
+  const double tol = 1e-7 * std::max(1.0, sc.hri.force_limit_n);
+  EXPECT_NEAR(r.m.max_force_step_n, r.s.contact, tol) << tag;
+  EXPECT_NEAR(r.m.max_release_step_n, r.s.release, tol) << tag;
+  EXPECT_NEAR(r.m.max_any_step_n, r.s.any, tol) << tag;
+  fs::remove_all(out);
+  return r;
+}
+}  // namespace
+
+TEST(RunJob, SphereStepsMatchTheTrace) {
+  const Ran r = run_and_recompute(isotouch::app::load_scene(kScenes + "/sphere.json"), "sphere");
+  EXPECT_GT(r.m.contact_ticks, 500);
+  EXPECT_GT(r.m.max_any_step_n, 0.0);  // the press is not free of steps at 1 kHz
+}
+
+TEST(RunJob, StiffSlowSceneShowsItsSteps) {
+  // K = 1e6 N/m at 10 Hz: the force jumps between 0 and the 1000 N limit from one tick to
+  // the next, never on two contact ticks in a row, so the contact-only step says 0 (issue 7).
+  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  sc.hri.stiffness_n_per_m = 1e6;
+  sc.hri.damping_n_s_per_m = 0;
+  sc.hri.rate_hz = 10;
+  sc.hri.force_limit_n = 1000;
+  sc.device.force_max_n = 1000;
+  const Ran r = run_and_recompute(sc, "stiff");
+  EXPECT_GT(r.m.max_any_step_n, 500.0);
+}
+
+TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
+  // The paper's Figure 2 as printed drops the plane while the HIP is inside bone on the
+  // head scene: a release step that the contact-only figure cannot see.
+  Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  sc.hri.variant = isotouch::servo::Variant::kPaper;
+  const Ran r = run_and_recompute(sc, "head_paper");
+  EXPECT_GT(r.s.releases, 0);
+  EXPECT_GT(r.m.max_release_step_n, 0.1);
+  EXPECT_GE(r.m.max_any_step_n, r.m.max_release_step_n);
+}
+
+TEST(RunJob, HeadStepsMatchTheTrace) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  const Ran r = run_and_recompute(sc, "head");
+  EXPECT_GT(r.m.contact_ticks, 500);
+  std::cout << "head: max_force_step_n " << r.m.max_force_step_n << " N, max_release_step_n "
+            << r.m.max_release_step_n << " N (" << r.s.releases << " releases inside), max_any_step_n "
+            << r.m.max_any_step_n << " N, "
+            << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
+  // The default (robust) variant should never let go of bone with force on (below 5 % of
+  // the limit); servo/hri.cpp does not yet (1.74 N at t = 2.899 s): not asserted until it does.
+  if (r.m.max_release_step_n >= 0.05 * sc.hri.force_limit_n)
+    std::cout << "NOTE: head release step " << r.m.max_release_step_n << " N at t = " << r.m.max_release_step_t_s
+              << " s is not below 5 % of the force limit\n";
+}

@@ -420,10 +420,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
-     << "| surface error of the VHIP | true distance to the trilinear isosurface: RMS "
-     << fmt(m.surface_err_rms_m * 1e3, 4) << " mm, max " << fmt(m.surface_err_max_m * 1e3, 4) << " mm ("
-     << fmt(m.surface_err_rms_m / std::min({m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}), 3)
-     << " voxel RMS)" << (m.surface_err_not_found_ticks
+     << "| surface error of the VHIP | "
+     << (found == 0 ? std::string(m.contact_ticks == 0 ? "not known: no contact tick" : "not known: no surface found")
+                    : "true distance to the trilinear isosurface: RMS " + fmt(m.surface_err_rms_m * 1e3, 4) + " mm, max " +
+                          fmt(m.surface_err_max_m * 1e3, 4) + " mm (" +
+                          fmt(m.surface_err_rms_m / std::min({m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}), 3) +
+                          " voxel RMS)")
+     << (m.surface_err_not_found_ticks
                                ? "; " + std::to_string(m.surface_err_not_found_ticks) +
                                      " contact ticks with no surface within " + fmt(m.surface_search_radius_m * 1e3, 4) +
                                      " mm (left out of RMS and max)"

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 
 #include "run_job.h"
@@ -177,4 +178,31 @@ TEST(RunJob, HeadStepsMatchTheTrace) {
   if (r.m.max_release_step_n >= 0.05 * sc.hri.force_limit_n)
     std::cout << "NOTE: head release step " << r.m.max_release_step_n << " N at t = " << r.m.max_release_step_t_s
               << " s is not below 5 % of the force limit\n";
+}
+
+TEST(RunJob, NoContactGivesNullErrorsNotZero) {
+  // Issue 7: a meaningless run (spacing 1e-12 m, below what scene files accept: set here
+  // directly) has no contact tick; its error figures are unknown, not 0.
+  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  sc.synthetic.spacing_m = 1e-12;
+  sc.draw_plots = false;
+  const fs::path out = fs::temp_directory_path() /
+                       ("isotouch_run_job_nocontact_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
+  fs::remove_all(out);
+  isotouch::app::RunOptions opt;
+  opt.out_dir = out.string();
+  opt.progress = false;
+  std::ostringstream log;
+  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  EXPECT_EQ(m.contact_ticks, 0);
+  EXPECT_NE(log.str().find("no contact: the probe never touched the isosurface"), std::string::npos) << log.str();
+  std::ifstream js(out / "summary.json");
+  const std::string j((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_NE(j.find("\"surface_distance_m\": {\n      \"rms\": null,\n      \"max\": null"), std::string::npos) << j;
+  EXPECT_NE(j.find("\"first_order_estimate_m\": {\n      \"rms\": null,\n      \"max\": null"), std::string::npos) << j;
+  std::ifstream md(out / "report.md");
+  const std::string r((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(r.find("**No contact:"), std::string::npos) << r;
+  EXPECT_NE(r.find("| surface error of the VHIP | not known: no contact tick |"), std::string::npos) << r;
+  fs::remove_all(out);
 }

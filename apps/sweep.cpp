@@ -26,12 +26,19 @@ namespace {
 namespace fs = std::filesystem;
 using servo::Vec3;
 
-std::shared_ptr<servo::SampleField> samples(const engine::Volume& v, engine::VulkanContext* vk) {
+/// The published samples of `v`, with the background outside `iso` (outside the volume is
+/// outside the object: core::FieldView).
+std::shared_ptr<servo::SampleField> samples(const engine::Volume& v, engine::VulkanContext* vk,
+                                            const core::Isosurface& iso) {
+  std::shared_ptr<servo::SampleField> f;
   if (vk) {
     engine::GradientPass pass(*vk);
-    return std::make_shared<servo::SampleField>(pass.run(v));
+    f = std::make_shared<servo::SampleField>(pass.run(v));
+  } else {
+    f = std::make_shared<servo::SampleField>(engine::compute_samples_cpu(v));
   }
-  return std::make_shared<servo::SampleField>(engine::compute_samples_cpu(v));
+  f->background = core::outside_background(*f, iso);
+  return f;
 }
 
 std::string scene_file(const std::string& name) {
@@ -67,7 +74,7 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
   if (std::find(names.begin(), names.end(), name) != names.end()) {
     engine::SyntheticScene syn = engine::make_synthetic_scene(name);
     s.description = syn.description;
-    s.field = samples(syn.volume, vk);
+    s.field = samples(syn.volume, vk, {syn.tau, s.inside});
     s.truth = std::move(syn.truth);
     s.tau = syn.tau;
     script = syn.script;
@@ -83,7 +90,7 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
     else if (sc.synthetic.kind == "sphere")
       v = engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox);
     else v = std::move(engine::make_synthetic_scene(sc.synthetic.kind).volume);
-    s.field = samples(v, vk);
+    s.field = samples(v, vk, {sc.hri.tau, sc.hri.inside});
     s.tau = sc.hri.tau;
     s.inside = sc.hri.inside;
     s.rate_hz = sc.hri.rate_hz;

@@ -7,8 +7,8 @@
 
 namespace isotouch::servo {
 namespace {
-bool fault_position(const SampleField& field, const Vec3& hip, double reach) {
-  return !finite(hip) || norm(hip - field.grid.centre_m()) > reach;
+bool fault_position(const FieldView& field, const Vec3& hip, double reach) {
+  return !finite(hip) || norm(hip - field.grid().centre_m()) > reach;
 }
 /// 1 / the period [1/s]: the measured dt_s when it is positive and finite, else the
 /// nominal 1 / rate.
@@ -25,7 +25,7 @@ void finish(HriTick& out, Vec3 force, double limit) {
 }
 }  // namespace
 
-HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
+HriTick AvilaRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
   HriTick out;
   if (fault_position(field, hip, p_.max_reach_m)) {
     out.fault = true;
@@ -37,8 +37,9 @@ HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip, double dt
     started_ = true;
   }
   const FieldValue fv = sample_trilinear(field, hip);
-  const double e = p_.inside == InsideIs::kAbove ? fv.value - p_.tau : p_.tau - fv.value;
-  const Vec3 g_out = p_.inside == InsideIs::kAbove ? -fv.gradient : fv.gradient;
+  const Isosurface iso{p_.tau, p_.inside};
+  const double e = iso.excess(fv.value);
+  const Vec3 g_out = iso.outward(fv.gradient);
   const double gn = norm(g_out);
   Vec3 force;
   out.vhip_m = hip;
@@ -57,15 +58,15 @@ HriTick AvilaRenderer::tick(const SampleField& field, const Vec3& hip, double dt
   return out;
 }
 
-Vec3 BlezekRenderer::gradient(const SampleField& field, const Vec3& x) const {
-  const Vec3 h = field.grid.spacing_m * p_.central_h_voxels;
+Vec3 BlezekRenderer::gradient(const FieldView& field, const Vec3& x) const {
+  const Vec3 h = field.grid().spacing_m * p_.central_h_voxels;
   const Vec3 g{(excess(sample_value(field, x + Vec3{h.x, 0, 0})) - excess(sample_value(field, x - Vec3{h.x, 0, 0}))) / (2 * h.x),
                (excess(sample_value(field, x + Vec3{0, h.y, 0})) - excess(sample_value(field, x - Vec3{0, h.y, 0}))) / (2 * h.y),
                (excess(sample_value(field, x + Vec3{0, 0, h.z})) - excess(sample_value(field, x - Vec3{0, 0, h.z}))) / (2 * h.z)};
   return finite(g) ? g : Vec3{};
 }
 
-HriTick BlezekRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
+HriTick BlezekRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
   HriTick out;
   if (fault_position(field, hip, p_.max_reach_m)) {
     out.fault = true;
@@ -79,7 +80,7 @@ HriTick BlezekRenderer::tick(const SampleField& field, const Vec3& hip, double d
     started_ = true;
   }
   const bool inside = excess(sample_value(field, hip)) > 0;
-  const Vec3& sp = field.grid.spacing_m;
+  const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   if (!inside) {
     contact_ = false;

@@ -37,7 +37,7 @@ class AvilaRenderer final : public Renderer {
   const char* name() const override { return "Avila-Sobierajski"; }
   void reset() override { started_ = false; }
   using Renderer::tick;
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
+  HriTick tick(const FieldView& field, const Vec3& hip_world_m, double dt_s) override;
 
  private:
   BaselineParams p_;
@@ -68,15 +68,14 @@ class BlezekRenderer final : public Renderer {
   const char* name() const override { return "Blezek-Robb"; }
   void reset() override { started_ = false; contact_ = false; }
   using Renderer::tick;
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
+  HriTick tick(const FieldView& field, const Vec3& hip_world_m, double dt_s) override;
 
  private:
   double excess(double v) const {
-    const double e = p_.inside == InsideIs::kAbove ? v - p_.tau : p_.tau - v;
-    return e == e ? e : -1.0;
+    return iso_excess(v, p_.tau, p_.inside);
   }
   /// Outward gradient of the excess by central differences [excess/m]; zero if undefined.
-  Vec3 gradient(const SampleField& field, const Vec3& x) const;
+  Vec3 gradient(const FieldView& field, const Vec3& x) const;
   BaselineParams p_;
   Vec3 vhip_;
   Vec3 prev_hip_;

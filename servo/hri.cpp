@@ -28,12 +28,12 @@ void HriRenderer::reset() {
   lost_s_ = 0;
 }
 
-Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const {
+Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback) const {
   double unused;
   return outward_normal(field, x, fallback, unused);
 }
 
-Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback,
+Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback,
                                  double& grad_norm) const {
   Vec3 g;
   switch (params_.normal) {
@@ -41,17 +41,17 @@ Vec3 HriRenderer::outward_normal(const SampleField& field, const Vec3& x, const 
       g = sample_trilinear(field, x).gradient;
       break;
     case NormalSource::kCentral:
-      g = central_difference_gradient(field, x, field.grid.spacing_m * 0.5);
+      g = central_difference_gradient(field, x, field.grid().spacing_m * 0.5);
       break;
     case NormalSource::kTrilinearExact:
       g = trilinear_field_gradient(field, x);
       break;
   }
   grad_norm = norm(g);
-  return normalized_or(params_.inside == InsideIs::kAbove ? -g : g, fallback);
+  return normalized_or(Isosurface{params_.tau, params_.inside}.outward(g), fallback);
 }
 
-VirtualPlane HriRenderer::plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const {
+VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {
   VirtualPlane plane;
   plane.p = p;
   const Vec3 fallback = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
@@ -60,16 +60,16 @@ VirtualPlane HriRenderer::plane_at(const SampleField& field, const Vec3& p, cons
   return plane;
 }
 
-bool HriRenderer::long_step(const SampleField& field, const Vec3& a, const Vec3& b) {
-  const Vec3& sp = field.grid.spacing_m;
+bool HriRenderer::long_step(const FieldView& field, const Vec3& a, const Vec3& b) {
+  const Vec3& sp = field.grid().spacing_m;
   const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
   const Vec3 d = b - a;
   return dot(d, d) > h * h;
 }
 
-bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const Vec3& b,
+bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Vec3& b,
                                  Vec3& p) const {
-  const Vec3& sp = field.grid.spacing_m;
+  const Vec3& sp = field.grid().spacing_m;
   const double len = norm(b - a);
   const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
   if (!std::isfinite(len) || !(len > 0.0)) return false;
@@ -94,12 +94,12 @@ bool HriRenderer::first_crossing(const SampleField& field, const Vec3& a, const 
   return false;
 }
 
-bool HriRenderer::surface_from(const SampleField& field, const Vec3& x, double e_x, double grad_norm,
+bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm,
                                Vec3& p) const {
   // Along the outward normal at x, no farther than twice the first-order depth
   // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
   // 8 voxels; 16 bisection steps.
-  const Vec3& sp = field.grid.spacing_m;
+  const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
   const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
@@ -114,11 +114,11 @@ bool HriRenderer::surface_from(const SampleField& field, const Vec3& x, double e
   return true;
 }
 
-VirtualPlane HriRenderer::compute_plane(const SampleField& field, double f_vhip, double f_hip,
+VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, double f_hip,
                                         const Vec3& hip) const {
   // p = LinearInterpolation(VHIP, HIP, tau)  (Figure 2, eq. 1), optionally refined.
   const double e0 = excess(f_vhip), e1 = excess(f_hip);
-  const Vec3& sp = field.grid.spacing_m;
+  const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   // |grad| near the VHIP: the one measured with the held plane's normal (robust, no
   // sample), else read at the VHIP.
@@ -206,7 +206,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return target;
 }
 
-[[gnu::always_inline]] inline Vec3 HriRenderer::contact_force(const SampleField& field, const Vec3& hip, const Vec3& v, double dt,
+[[gnu::always_inline]] inline Vec3 HriRenderer::contact_force(const FieldView& field, const Vec3& hip, const Vec3& v, double dt,
                                 HriTick& out) {
   const bool robust = params_.variant == Variant::kRobust;
   // Optional force shading: the plane through the previous VHIP first gives a
@@ -272,13 +272,13 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return force;
 }
 
-HriTick HriRenderer::tick(const SampleField& field, const Vec3& hip, double dt_s) {
+HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
   return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
 }
 
-HriTick HriRenderer::tick_paper(const SampleField& field, const Vec3& hip) {
+HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   HriTick out;
-  const bool absurd = finite(hip) && norm(hip - field.grid.centre_m()) > params_.max_reach_m;
+  const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > params_.max_reach_m;
   if (!finite(hip) || absurd) {  // a device fault: send nothing
     out.fault = true;
     resync_ = resync_ || absurd;
@@ -353,12 +353,12 @@ HriTick HriRenderer::tick_paper(const SampleField& field, const Vec3& hip) {
   return out;
 }
 
-HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, double dt_s) {
+HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
   HriTick out;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);
-  const Vec3 from_centre = hip - field.grid.centre_m();
+  const Vec3 from_centre = hip - field.grid().centre_m();
   const bool absurd = sane && dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m;
   // An implausible jump while a plane is held: the contact state means nothing any more.
   auto moved_too_far = [&]() {
@@ -412,7 +412,7 @@ HriTick HriRenderer::tick_robust(const SampleField& field, const Vec3& hip, doub
   }
   vel_valid_ = true;
 
-  const Vec3& sp = field.grid.spacing_m;
+  const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;

@@ -3,7 +3,7 @@
 // Source: "Direct Haptic Rendering of Isosurface by Intermediate Representation",
 // Figure 2 (servo algorithm), eqs. 1-3, §3.1 (surface effects by constraining the VHIP),
 // §3.2 (plane update every n ticks), §3.3 (force shading, recovery time). The renderer
-// reads a published SampleField only; tick() allocates nothing, takes no lock and makes
+// reads the published field through core::FieldView only; tick() allocates nothing, takes no lock and makes
 // no syscall.
 #pragma once
 #include <cstdint>
@@ -172,7 +172,7 @@ class HriRenderer final : public Renderer {
   /// kept so contact resumes when sane input returns.
   /// @param dt_s measured period [s]; <= 0 or non-finite: the nominal 1 / rate_hz.
   using Renderer::tick;
-  HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) override;
+  HriTick tick(const FieldView& field, const Vec3& hip_world_m, double dt_s) override;
 
   const HriParams& params() const { return params_; }
   const VirtualPlane& plane() const { return plane_; }
@@ -182,32 +182,30 @@ class HriRenderer final : public Renderer {
 
   /// Signed excess over the isovalue: > 0 inside, <= 0 outside; NaN counts as outside.
   double excess(double value) const {
-    const double e = params_.inside == InsideIs::kAbove ? value - params_.tau
-                                                        : params_.tau - value;
-    return e == e ? e : -1.0;
+    return iso_excess(value, params_.tau, params_.inside);
   }
 
   /// Outward unit normal at x from the configured NormalSource, or `fallback`.
-  Vec3 outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback) const;
+  Vec3 outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback) const;
 
  private:
-  Vec3 outward_normal(const SampleField& field, const Vec3& x, const Vec3& fallback, double& grad_norm) const;
-  VirtualPlane compute_plane(const SampleField& field, double f_vhip, double f_hip,
+  Vec3 outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback, double& grad_norm) const;
+  VirtualPlane compute_plane(const FieldView& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
-  VirtualPlane plane_at(const SampleField& field, const Vec3& p, const Vec3& hip) const;
+  VirtualPlane plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const;
   /// Surface point p from x (inside, excess e_x, |grad| grad_norm) along the outward normal
   /// at x, within twice the first-order depth plus a quarter voxel; false if none.
-  bool surface_from(const SampleField& field, const Vec3& x, double e_x, double grad_norm, Vec3& p) const;
+  bool surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm, Vec3& p) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
-  bool first_crossing(const SampleField& field, const Vec3& a, const Vec3& b, Vec3& p) const;
+  bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
-  HriTick tick_paper(const SampleField& field, const Vec3& hip);
-  HriTick tick_robust(const SampleField& field, const Vec3& hip, double dt_s);
+  HriTick tick_paper(const FieldView& field, const Vec3& hip);
+  HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
-  Vec3 contact_force(const SampleField& field, const Vec3& hip, const Vec3& v_device, double dt,
+  Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
                      HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
-  static bool long_step(const SampleField& field, const Vec3& a, const Vec3& b);
+  static bool long_step(const FieldView& field, const Vec3& a, const Vec3& b);
 
   HriParams params_;
   VirtualPlane plane_;

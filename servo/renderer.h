@@ -1,17 +1,11 @@
 // renderer.h - the interface every haptic renderer of an isosurface implements.
 #pragma once
-#include <cstdint>
-
+#include "field_view.h"
+#include "isosurface.h"
 #include "sample_field.h"
 #include "vec3.h"
 
 namespace isotouch::servo {
-
-/// Which side of the isovalue is "inside" the object.
-enum class InsideIs : std::uint8_t {
-  kAbove,  ///< value > tau is inside (CT density, the paper's B(v) = 1)
-  kBelow,  ///< value < tau is inside (signed distance fields, negative inside)
-};
 
 /// The virtual plane (N, p) of eq. 1: N . (x - p) = 0, N the unit outward normal.
 struct VirtualPlane {
@@ -42,14 +36,32 @@ class Renderer {
   virtual const char* name() const = 0;
   /// Forget contact state.
   virtual void reset() = 0;
-  /// One tick. @param field published samples; @param hip_world_m HIP in world [m];
-  /// @param dt_s the measured time since the previous tick [s]; dt_s <= 0 or non-finite
-  /// means the nominal period 1/rate_hz (simulations, tests).
-  virtual HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) = 0;
+  /// One tick. @param field the published samples, read only through core::FieldView
+  /// (dense or, later, bricked: the renderer cannot tell); @param hip_world_m HIP in
+  /// grid-world [m]; @param dt_s the measured time since the previous tick [s]; dt_s <= 0
+  /// or non-finite means the nominal period 1/rate_hz (simulations, tests).
+  /// Every renderer overrides this one. The default renders nothing (zero force,
+  /// fault = true): it is not pure only so that a wrapper written before FieldView that
+  /// overrides the SampleField overload alone (tests/test_servo_thread.cpp's spy) still
+  /// compiles; make it pure once none is left.
+  virtual HriTick tick(const FieldView& field, const Vec3& hip_world_m, double dt_s) {
+    (void)field;
+    (void)hip_world_m;
+    (void)dt_s;
+    HriTick t;
+    t.fault = true;
+    return t;
+  }
+  /// Tick on a dense field: makes the FieldView (a few copies, no allocation) and calls
+  /// the overload above. Virtual only for the wrappers described there.
+  virtual HriTick tick(const SampleField& field, const Vec3& hip_world_m, double dt_s) {
+    return tick(FieldView(field), hip_world_m, dt_s);
+  }
   /// Tick at the nominal period (same as dt_s = 0).
   HriTick tick(const SampleField& field, const Vec3& hip_world_m) {
-    return tick(field, hip_world_m, 0.0);
+    return tick(field, hip_world_m, 0.0);  // the virtual SampleField overload: wrappers see it
   }
+  HriTick tick(const FieldView& field, const Vec3& hip_world_m) { return tick(field, hip_world_m, 0.0); }
 };
 
 }  // namespace isotouch::servo

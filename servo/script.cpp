@@ -125,7 +125,7 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
     throw std::runtime_error(describe() + " never crosses the isovalue " +
                              std::to_string(hri.tau));
   const FieldValue fv = sample_trilinear(field, s.contact_point_m);
-  const Vec3 g_out = hri.inside == InsideIs::kAbove ? -fv.gradient : fv.gradient;
+  const Vec3 g_out = Isosurface{hri.tau, hri.inside}.outward(fv.gradient);
   const Vec3 n = normalized_or(g_out, -dir);
   s.contact_normal = n;
 

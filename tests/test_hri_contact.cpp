@@ -392,7 +392,7 @@ TEST(Passivity, BadInputChargesNothing) {
 
 // The servo's fast value read and the shared-lookup central differences give the numbers
 // of the direct trilinear formula (sample_trilinear: weights per corner), inside the grid,
-// clamped outside it, and on a 1-voxel axis.
+// blending toward the background outside it, and on a 1-voxel axis.
 TEST(Sampling, FastReadsMatchTheDirectTrilinearFormula) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -403,10 +403,11 @@ TEST(Sampling, FastReadsMatchTheDirectTrilinearFormula) {
     f.grid.origin_m = {0.01, -0.02, 0.003};
     f.samples.resize(f.grid.voxel_count());
     for (Sample& s : f.samples) s = {float(1000 * (u(rng) - 0.5)), 0, 0, 0};
+    f.background = 123.0f;  // finite: the reads must agree outside the grid too
     const Vec3 ext = f.grid.extent_m();
     const Vec3 h = f.grid.spacing_m * 0.5;
     for (int k = 0; k < 2000; ++k) {
-      // -20 % .. 120 % of the extent: clamp-to-edge is exercised too.
+      // -20 % .. 120 % of the extent: the border cells and the background are exercised too.
       const Vec3 x = f.grid.origin_m + Vec3{ext.x * (1.4 * u(rng) - 0.2), ext.y * (1.4 * u(rng) - 0.2),
                                             ext.z * (1.4 * u(rng) - 0.2)};
       ASSERT_NEAR(sample_value(f, x), sample_trilinear(f, x).value, 1e-9) << k;

@@ -1,8 +1,9 @@
-// vec3.h - minimal 3-vector for the servo (SI units: m, N, s). Header-only, no allocation.
+// vec3.h - minimal 3-vector shared by engine/ and servo/ (SI units: m, N, s). Header-only,
+// no allocation. Part of isotouch::core (see docs/architecture.md).
 #pragma once
 #include <cmath>
 
-namespace isotouch::servo {
+namespace isotouch::core {
 
 struct Vec3 {
   double x = 0, y = 0, z = 0;
@@ -43,4 +44,9 @@ inline bool saturate(Vec3& f, double limit) {
   return true;
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::core
+
+// servo/ and engine/ name the core types as their own (servo::Vec3, engine::Vec3 ...):
+// qualified lookup follows a using-directive, so no code has to spell core::.
+namespace isotouch::servo { using namespace isotouch::core; }
+namespace isotouch::engine { using namespace isotouch::core; }

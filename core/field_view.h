@@ -1,0 +1,237 @@
+// field_view.h - the one way the renderers (HRI and both baselines) read a sample field.
+// Part of isotouch::core. Header-only: every accessor is inline; nothing allocates, locks
+// or makes a syscall, so the servo tick can call them.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+
+#include "grid.h"
+#include "sample_field.h"
+#include "vec3.h"
+
+namespace isotouch::core {
+
+/// Trilinear value and trilinear-interpolated gradient at a point.
+struct FieldValue {
+  double value = 0;  ///< trilinear value (value units); NaN where a corner is NaN
+  Vec3 gradient;     ///< trilinear blend of the published gradient samples [units/m]
+};
+
+/// A read-only view of a published sample field, in the grid-world frame [m].
+///
+/// Interpolation: trilinear between voxel centres (index space, Grid::to_index).
+///
+/// Outside the grid: every voxel outside [0, n-1] on some axis has the value
+/// `background()` and a zero gradient (OpenVDB's background, not clamp-to-edge). A point
+/// in the one-voxel band around the grid blends the border samples with the background;
+/// farther out it reads the background. With the default NaN background (SampleField)
+/// everything outside the box of voxel centres reads NaN, which iso_excess() counts as
+/// outside: a HIP that leaves the volume leaves the object, and an object cut by the
+/// volume border ends there. With a finite outside value the border cells close the
+/// object with a surface within one voxel of the last sample. (Clamp-to-edge, the rule
+/// before, extended the border voxels to infinity: an object touching the border went
+/// on forever, and its normals there were the border's.)
+///
+/// The memory seam (issue 8 item 4): the only place that touches sample memory is
+/// cell(): the 8 corners of an in-grid cell as a base pointer and three strides, and
+/// voxel() for the checked border path. A bricked field (brick table + pool of 8^3
+/// bricks with a 1-voxel apron, so a cell never straddles two bricks) implements those
+/// two with one table lookup; the renderers, which only see FieldView, do not change.
+///
+/// The view holds pointers into the SampleField: it must not outlive it (the servo makes
+/// one per tick from the snapshot it holds). An empty grid, or fewer samples than voxels,
+/// gives an empty view: NaN values, zero or NaN gradients as documented per call.
+class FieldView {
+ public:
+  FieldView() = default;
+  /// The dense view of `f` (implicit: every renderer call site passing a SampleField keeps working).
+  FieldView(const SampleField& f)  // NOLINT(google-explicit-constructor)
+      : grid_(f.grid), background_(f.background) {
+    if (!f.grid.empty() && f.samples.size() >= f.grid.voxel_count()) {
+      data_ = f.samples.data();
+      stride_[0] = 1;
+      stride_[1] = std::size_t(f.grid.dims[0]);
+      stride_[2] = std::size_t(f.grid.dims[0]) * std::size_t(f.grid.dims[1]);
+    }
+  }
+
+  const Grid& grid() const { return grid_; }
+  /// Value of every voxel outside the grid (see class docs).
+  float background() const { return background_; }
+  bool empty() const { return data_ == nullptr; }
+
+  /// Trilinear value at `world_m` (grid-world [m]); NaN if not finite or empty.
+  /// The servo's hot path (HRI reads values only).
+  double value(const Vec3& world_m) const {
+    if (empty()) return kNaN;
+    return value_at_index(grid_.to_index(world_m));
+  }
+
+  /// Trilinear value and trilinear blend of the gradient samples at `world_m`.
+  /// NaN value (zero gradient) if not finite or empty.
+  FieldValue value_gradient(const Vec3& world_m) const {
+    FieldValue out;
+    Corner c[3];
+    if (empty() || !locate(grid_.to_index(world_m), c)) {
+      out.value = kNaN;
+      return out;
+    }
+    double v = 0, gx = 0, gy = 0, gz = 0;
+    for (int k = 0; k < 2; ++k) {
+      const double wz = k ? c[2].f : 1.0 - c[2].f;
+      const int z = k ? c[2].i1 : c[2].i0;
+      for (int j = 0; j < 2; ++j) {
+        const double wy = j ? c[1].f : 1.0 - c[1].f;
+        const int y = j ? c[1].i1 : c[1].i0;
+        for (int i = 0; i < 2; ++i) {
+          const double w = (i ? c[0].f : 1.0 - c[0].f) * wy * wz;
+          const Sample s = voxel(i ? c[0].i1 : c[0].i0, y, z);
+          v += w * s.value;
+          gx += w * s.gx;
+          gy += w * s.gy;
+          gz += w * s.gz;
+        }
+      }
+    }
+    out.value = v;
+    out.gradient = {gx, gy, gz};
+    return out;
+  }
+
+  /// Central differences of the trilinear value at `world_m` with half steps h [m] per
+  /// axis: ((f(x + h_x e_x) - f(x - h_x e_x)) / (2 h_x), ...) [units/m], the six points
+  /// taken in index space from one to_index (the paper's SurfaceNormal, §2). NaN
+  /// components if not finite or empty.
+  Vec3 central_difference(const Vec3& world_m, const Vec3& h_m) const {
+    if (empty()) return {kNaN, kNaN, kNaN};
+    const Vec3 idx = grid_.to_index(world_m);
+    const Vec3 hi{h_m.x / grid_.spacing_m.x, h_m.y / grid_.spacing_m.y, h_m.z / grid_.spacing_m.z};
+    const double x0 = idx.x - hi.x, x1 = idx.x + hi.x, y0 = idx.y - hi.y, y1 = idx.y + hi.y,
+                 z0 = idx.z - hi.z, z1 = idx.z + hi.z;
+    return {(value_at_index({x1, idx.y, idx.z}) - value_at_index({x0, idx.y, idx.z})) / (2 * h_m.x),
+            (value_at_index({idx.x, y1, idx.z}) - value_at_index({idx.x, y0, idx.z})) / (2 * h_m.y),
+            (value_at_index({idx.x, idx.y, z1}) - value_at_index({idx.x, idx.y, z0})) / (2 * h_m.z)};
+  }
+
+  /// Exact gradient of the trilinear value field at `world_m` (derivative of the
+  /// interpolant, piecewise bilinear) [units/m], background included. Zero if the point
+  /// is not finite or the view is empty. Used by error metrics and reference runs.
+  Vec3 trilinear_gradient(const Vec3& world_m) const {
+    Corner c[3];
+    if (empty() || !locate(grid_.to_index(world_m), c)) return {};
+    double d[3] = {0, 0, 0};
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+          const double v = voxel(i ? c[0].i1 : c[0].i0, j ? c[1].i1 : c[1].i0, k ? c[2].i1 : c[2].i0).value;
+          const double wx = i ? c[0].f : 1 - c[0].f, wy = j ? c[1].f : 1 - c[1].f,
+                       wz = k ? c[2].f : 1 - c[2].f;
+          const double sx = i ? 1.0 : -1.0, sy = j ? 1.0 : -1.0, sz = k ? 1.0 : -1.0;
+          d[0] += sx * wy * wz * v;
+          d[1] += wx * sy * wz * v;
+          d[2] += wx * wy * sz * v;
+        }
+    return {d[0] / grid_.spacing_m.x, d[1] / grid_.spacing_m.y, d[2] / grid_.spacing_m.z};
+  }
+
+  /// Trilinear value at a continuous index (voxel centres at integers); NaN if not
+  /// finite or empty.
+  double value_at_index(const Vec3& idx) const {
+    if (empty()) return kNaN;
+    const int nx = grid_.dims[0], ny = grid_.dims[1], nz = grid_.dims[2];
+    if (in_range(idx.x, nx) && in_range(idx.y, ny) && in_range(idx.z, nz)) {
+      // Fast path: the whole cell is in the grid. One cell lookup, seven lerps.
+      int i0[3];
+      double f[3];
+      inner(idx.x, nx, i0[0], f[0]);
+      inner(idx.y, ny, i0[1], f[1]);
+      inner(idx.z, nz, i0[2], f[2]);
+      const CellRef c = cell(i0[0], i0[1], i0[2]);
+      const Sample* s = c.base;
+      const std::size_t sx = c.sx, sy = c.sy, sz = c.sz;
+      const double c00 = lerp(s[0].value, s[sx].value, f[0]);
+      const double c10 = lerp(s[sy].value, s[sy + sx].value, f[0]);
+      const double c01 = lerp(s[sz].value, s[sz + sx].value, f[0]);
+      const double c11 = lerp(s[sz + sy].value, s[sz + sy + sx].value, f[0]);
+      return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+    }
+    Corner c[3];
+    if (!locate(idx, c)) return kNaN;
+    // Border path: corners outside the grid read the background. Same lerps.
+    auto v = [&](int i, int j, int k) {
+      return double(voxel(i ? c[0].i1 : c[0].i0, j ? c[1].i1 : c[1].i0, k ? c[2].i1 : c[2].i0).value);
+    };
+    const double c00 = lerp(v(0, 0, 0), v(1, 0, 0), c[0].f);
+    const double c10 = lerp(v(0, 1, 0), v(1, 1, 0), c[0].f);
+    const double c01 = lerp(v(0, 0, 1), v(1, 0, 1), c[0].f);
+    const double c11 = lerp(v(0, 1, 1), v(1, 1, 1), c[0].f);
+    return lerp(lerp(c00, c10, c[1].f), lerp(c01, c11, c[1].f), c[2].f);
+  }
+
+  /// Voxel (x, y, z): the sample if it is in the grid, else {background, 0, 0, 0}.
+  /// Requires a non-empty view.
+  Sample voxel(int x, int y, int z) const {
+    if (x < 0 || y < 0 || z < 0 || x >= grid_.dims[0] || y >= grid_.dims[1] || z >= grid_.dims[2])
+      return {background_, 0.f, 0.f, 0.f};
+    return data_[std::size_t(x) * stride_[0] + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
+  }
+
+ private:
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  /// One axis of a cell: lower and upper corner index and the fraction toward the upper.
+  struct Corner {
+    int i0, i1;
+    double f;
+  };
+  /// The 8 corners of an in-grid cell: corner (i, j, k) is base[i*sx + j*sy + k*sz].
+  struct CellRef {
+    const Sample* base;
+    std::size_t sx, sy, sz;
+  };
+
+  static double lerp(double a, double b, double t) { return a + t * (b - a); }
+  /// v within the box of voxel centres [0, n-1] (false for NaN).
+  static bool in_range(double v, int n) { return v >= 0.0 && v <= double(n - 1); }
+  /// In-range axis: lower corner (the last cell holds v = n-1 with f = 1) and fraction.
+  static void inner(double v, int n, int& i0, double& f) {
+    i0 = int(v);
+    if (i0 >= n - 1) i0 = std::max(n - 2, 0);
+    f = n > 1 ? v - i0 : 0.0;
+  }
+  /// Any finite index: corners and fraction per axis (a 1-voxel axis in range uses
+  /// voxel 0 twice); false if a coordinate is not finite. Far outside, the coordinate is
+  /// clamped to 2 voxels beyond the grid, where both corners are background anyway.
+  bool locate(const Vec3& idx, Corner c[3]) const {
+    for (int a = 0; a < 3; ++a) {
+      const int n = grid_.dims[a];
+      double v = idx[a];
+      if (!std::isfinite(v)) return false;
+      if (in_range(v, n)) {
+        inner(v, n, c[a].i0, c[a].f);
+        c[a].i1 = n > 1 ? c[a].i0 + 1 : c[a].i0;
+      } else {
+        v = std::clamp(v, -2.0, double(n) + 1.0);
+        c[a].i0 = int(std::floor(v));
+        c[a].i1 = c[a].i0 + 1;
+        c[a].f = v - c[a].i0;
+      }
+    }
+    return true;
+  }
+  /// The memory seam (see class docs): the in-grid cell with lower corner (x, y, z).
+  CellRef cell(int x, int y, int z) const {
+    return {data_ + std::size_t(x) * stride_[0] + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2],
+            grid_.dims[0] > 1 ? stride_[0] : 0, grid_.dims[1] > 1 ? stride_[1] : 0,
+            grid_.dims[2] > 1 ? stride_[2] : 0};
+  }
+
+  Grid grid_;
+  const Sample* data_ = nullptr;
+  std::size_t stride_[3] = {0, 0, 0};
+  float background_ = std::numeric_limits<float>::quiet_NaN();
+};
+
+}  // namespace isotouch::core

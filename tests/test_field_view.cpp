@@ -1,0 +1,186 @@
+// test_field_view.cpp - core::FieldView and core::Isosurface against brute force written
+// here from the definitions (issue 8 item 1): trilinear weights per corner, the voxel
+// outside the grid = {background, 0, 0, 0}, the excess sign rule.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "field_view.h"
+#include "hri.h"
+#include "isosurface.h"
+#include "sample_field.h"
+
+namespace isotouch {
+namespace {
+using core::FieldView;
+using core::InsideIs;
+using core::Isosurface;
+using core::Sample;
+using core::SampleField;
+using core::Vec3;
+
+SampleField random_field(std::array<int, 3> dims, float background, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  SampleField f;
+  f.grid.dims = dims;
+  f.grid.spacing_m = {1e-3, 2e-3, 1.5e-3};
+  f.grid.origin_m = {0.01, -0.02, 0.003};
+  f.samples.resize(f.grid.voxel_count());
+  for (Sample& s : f.samples) s = {float(500 * u(rng)), float(u(rng)), float(u(rng)), float(u(rng))};
+  f.background = background;
+  return f;
+}
+
+// The definition: voxel (x, y, z) is the sample inside the grid, {background, 0, 0, 0} outside.
+Sample brute_voxel(const SampleField& f, long x, long y, long z) {
+  const auto& d = f.grid.dims;
+  if (x < 0 || y < 0 || z < 0 || x >= d[0] || y >= d[1] || z >= d[2]) return {f.background, 0, 0, 0};
+  return f.samples[f.grid.index(int(x), int(y), int(z))];
+}
+
+// Trilinear by the weight formula: sum over the 8 corners of floor(idx) of w * voxel;
+// on a 1-voxel axis inside [0, 0] the weight is all on voxel 0.
+template <class Get>
+double brute_trilinear(const SampleField& f, const Vec3& world, Get get) {
+  const Vec3 idx = f.grid.to_index(world);
+  double sum = 0;
+  long i0[3];
+  double fr[3];
+  for (int a = 0; a < 3; ++a) {
+    const double v = idx[a];
+    const int n = f.grid.dims[a];
+    i0[a] = long(std::floor(v));
+    if (v == n - 1 && n > 1) i0[a] = n - 2;  // the last cell holds its upper face
+    fr[a] = v - double(i0[a]);
+  }
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const double w = (i ? fr[0] : 1 - fr[0]) * (j ? fr[1] : 1 - fr[1]) * (k ? fr[2] : 1 - fr[2]);
+        if (w == 0) continue;
+        sum += w * get(brute_voxel(f, i0[0] + i, i0[1] + j, i0[2] + k));
+      }
+  return sum;
+}
+
+TEST(FieldView, ValueAndGradientMatchTheDefinitionInsideAtTheBorderAndOutside) {
+  const SampleField f = random_field({7, 5, 4}, -250.0f, 1);
+  const FieldView v(f);
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> u(-0.5, 1.5);  // -50 % .. 150 % of the extent
+  const Vec3 ext = f.grid.extent_m();
+  int outside = 0, band = 0;
+  for (int k = 0; k < 5000; ++k) {
+    const Vec3 x = f.grid.origin_m + Vec3{ext.x * u(rng), ext.y * u(rng), ext.z * u(rng)};
+    const double bv = brute_trilinear(f, x, [](const Sample& s) { return double(s.value); });
+    ASSERT_NEAR(v.value(x), bv, 1e-9) << k;
+    const core::FieldValue fv = v.value_gradient(x);
+    ASSERT_NEAR(fv.value, bv, 1e-9) << k;
+    ASSERT_NEAR(fv.gradient.x, brute_trilinear(f, x, [](const Sample& s) { return double(s.gx); }), 1e-12);
+    ASSERT_NEAR(fv.gradient.z, brute_trilinear(f, x, [](const Sample& s) { return double(s.gz); }), 1e-12);
+    const Vec3 i = f.grid.to_index(x);
+    const bool out = i.x < 0 || i.y < 0 || i.z < 0 || i.x > 6 || i.y > 4 || i.z > 3;
+    outside += out;
+    band += out && i.x > -1 && i.y > -1 && i.z > -1 && i.x < 7 && i.y < 5 && i.z < 4;
+  }
+  EXPECT_GT(outside, 1000);  // the border path was exercised, blends included
+  EXPECT_GT(band, 100);
+  // Far away: exactly the background; not clamp-to-edge.
+  EXPECT_EQ(v.value(f.grid.origin_m + Vec3{1, 1, 1}), -250.0);
+  EXPECT_EQ(v.value(f.grid.origin_m - Vec3{1e300, 0, 0}), -250.0);
+}
+
+TEST(FieldView, ExactTrilinearGradientIsTheDerivativeOfTheValue) {
+  const SampleField f = random_field({6, 1, 3}, 40.0f, 3);  // a 1-voxel axis too
+  const FieldView v(f);
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> u(0.02, 0.98);
+  for (int k = 0; k < 500; ++k) {
+    // Inside cells, off the cell faces (the derivative jumps there); y on its only plane.
+    const Vec3 i{std::floor(6 * u(rng) - 0.5) + u(rng), 0.0, std::floor(3 * u(rng) - 0.5) + u(rng)};
+    const Vec3 x = f.grid.to_world(i);
+    const Vec3 g = v.trilinear_gradient(x);
+    const double h = 1e-7;
+    const Vec3 hx{h, 0, 0}, hz{0, 0, h};
+    auto val = [&](const Vec3& p) { return brute_trilinear(f, p, [](const Sample& s) { return double(s.value); }); };
+    EXPECT_NEAR(g.x, (val(x + hx) - val(x - hx)) / (2 * h), 1e-3 * (1 + std::abs(g.x))) << k;
+    EXPECT_NEAR(g.z, (val(x + hz) - val(x - hz)) / (2 * h), 1e-3 * (1 + std::abs(g.z))) << k;
+  }
+}
+
+TEST(FieldView, NaNBackgroundIsOutsideEveryIsosurfaceAndEmptyFieldsReadNaN) {
+  SampleField f = random_field({4, 4, 4}, std::numeric_limits<float>::quiet_NaN(), 5);
+  for (Sample& s : f.samples) s.value = 100.0f;  // everything in the data is "inside" tau = 0
+  const FieldView v(f);
+  const Vec3 in = f.grid.to_world({1.5, 1.5, 1.5}), just_out = f.grid.to_world({3.2, 1.5, 1.5});
+  for (InsideIs side : {InsideIs::kAbove, InsideIs::kBelow}) {
+    const Isosurface iso{0.0, side};
+    EXPECT_EQ(iso.contains(v.value(in)), side == InsideIs::kAbove);
+    EXPECT_FALSE(iso.contains(v.value(just_out)));  // NaN: outside, whichever side is inside
+  }
+  EXPECT_TRUE(std::isnan(FieldView(SampleField{}).value({0, 0, 0})));
+  SampleField short_field = f;
+  short_field.samples.pop_back();  // fewer samples than voxels: an empty view, never a bad read
+  EXPECT_TRUE(FieldView(short_field).empty());
+  EXPECT_TRUE(std::isnan(FieldView(short_field).value(in)));
+}
+
+TEST(Isosurface, OneSignRuleForBothSides) {
+  const Isosurface above{10.0, InsideIs::kAbove}, below{10.0, InsideIs::kBelow};
+  EXPECT_EQ(above.excess(12.5), 2.5);
+  EXPECT_EQ(below.excess(12.5), -2.5);
+  EXPECT_FALSE(above.contains(10.0));  // the surface itself is outside
+  EXPECT_FALSE(below.contains(10.0));
+  EXPECT_EQ(above.excess(std::nan("")), -1.0);
+  EXPECT_EQ(below.excess(std::nan("")), -1.0);
+  const Vec3 g{1, -2, 3};
+  EXPECT_EQ(above.outward(g).y, 2.0);   // density rises inward: outward is -grad
+  EXPECT_EQ(below.outward(g).y, -2.0);  // distance rises outward: outward is +grad
+  EXPECT_EQ(above.outside_value(-1000, 3000), -1000);
+  EXPECT_EQ(above.outside_value(50, 3000), 10.0);  // nothing in the data is outside: tau
+  EXPECT_EQ(below.outside_value(-5, 8), 10.0);
+  EXPECT_EQ(below.outside_value(-5, 80), 80);
+  SampleField f = random_field({3, 3, 3}, 0.0f, 6);
+  f.samples[4].value = std::numeric_limits<float>::infinity();
+  f.samples[5].value = std::numeric_limits<float>::quiet_NaN();
+  float lo = 1e30f;
+  for (std::size_t i = 0; i < f.samples.size(); ++i)
+    if (i != 4 && i != 5) lo = std::min(lo, f.samples[i].value);
+  EXPECT_EQ(core::outside_background(f, {1000.0, InsideIs::kAbove}), lo);  // Inf and NaN skipped
+}
+
+// The renderers read through FieldView: a SampleField and its view give the same ticks,
+// and a HIP that leaves the volume (default NaN background) leaves the object: no force.
+TEST(FieldView, RenderersSeeTheSameFieldThroughTheViewAndNothingOutside) {
+  SampleField f;
+  f.grid.dims = {16, 16, 16};
+  f.samples.resize(f.grid.voxel_count());
+  for (int z = 0; z < 16; ++z)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) f.samples[f.grid.index(x, y, z)] = {float(1000 * (8e-3 - z * 1e-3)), 0, 0, -1000.0f};
+  servo::HriParams p;
+  p.tau = 0;
+  servo::HriRenderer a(p), b(p);
+  const FieldView v(f);
+  long contact = 0;
+  for (int k = 0; k < 400; ++k) {
+    const Vec3 hip{7.5e-3, 7.5e-3, 10e-3 - 4e-3 * std::sin(k * 0.02)};  // presses 2 mm into z < 8 mm
+    const servo::HriTick ta = a.tick(f, hip), tb = b.tick(v, hip);
+    ASSERT_EQ(ta.force_n.z, tb.force_n.z) << k;
+    contact += ta.contact;
+  }
+  EXPECT_GT(contact, 50);
+  // Outside the grid in x, at the depth that was in contact: nothing to touch.
+  servo::HriRenderer c(p);
+  for (int k = 0; k < 50; ++k) {
+    const servo::HriTick t = c.tick(v, {0.0152 + 1e-4 * k, 7.5e-3, 6e-3});
+    EXPECT_FALSE(t.contact);
+    EXPECT_EQ(norm(t.force_n), 0.0);
+  }
+}
+
+}  // namespace
+}  // namespace isotouch

@@ -8,6 +8,12 @@
 namespace isotouch::servo {
 
 HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
+  if (params_.variant == Variant::kPaper) {
+    // Figure 2: p = LinearInterpolation(VHIP, HIP, tau), N = SurfaceNormal(p) "approximated
+    // by using central difference" (§2): the scene's choices do not apply to the paper.
+    params_.intersection = Intersection::kLinear;
+    params_.normal = NormalSource::kCentral;
+  }
   dt_nominal_s_ = 1.0 / params_.rate_hz;
   inv_wpd_ = 1.0 / params_.world_per_device;
   const double fc = params_.velocity_cutoff_hz;
@@ -22,6 +28,8 @@ void HriRenderer::reset() {
   sliding_ = false;
   was_contact_ = false;
   recovery_ticks_left_ = 0;
+  ramp_left_s_ = 0;
+  after_fault_ = false;
   prev_force_mag_ = 0;
   vel_valid_ = false;
   v_filt_ = {};
@@ -241,16 +249,18 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
     // Every step of the spring-damper target that a plane creation or update causes is
     // spread over recovery_time_s: the offset between what was sent and the new target
     // fades out linearly (an update that does not move the target lets a ramp go on).
-    if (params_.recovery_time_s > 0 && out.plane_update &&
+    // The ramp runs on accumulated time (ramp_dt_s_: this tick's period, clamped), so
+    // neither lost ticks nor one jittery period change its length.
+    if (params_.recovery_time_s > 0 && (out.plane_update || after_fault_) &&
         std::abs(mag - prev_target_n_) > 0.01 * params_.force_limit_n) {
-      recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
-      recovery_ticks_left_ = recovery_ticks_;
+      ramp_left_s_ = params_.recovery_time_s;
       recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
     }
     prev_target_n_ = mag;
-    if (recovery_ticks_left_ > 0) {
-      --recovery_ticks_left_;
-      const double m = std::max(0.0, mag + recovery_from_n_ * recovery_ticks_left_ / recovery_ticks_);
+    if (ramp_left_s_ > 0) {
+      ramp_left_s_ -= ramp_dt_s_;
+      if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
+      const double m = std::max(0.0, mag + recovery_from_n_ * (ramp_left_s_ / params_.recovery_time_s));
       if (mag > 0) force = force * (m / mag);
       else if (m > 0) force = plane_.n * m;
     }
@@ -378,9 +388,12 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     prev_force_mag_ = 0;
     prev_target_n_ = 0;
     recovery_ticks_left_ = 0;
+    ramp_left_s_ = 0;
+    after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
     return out;
   }
   lost_s_ = 0;
+  ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);  // recovery ramp: this tick's period [s]
   if (!started_ || resync_) {
     vhip_ = hip;
     prev_hip_ = hip;
@@ -391,6 +404,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     sliding_ = false;
     was_contact_ = false;
     recovery_ticks_left_ = 0;
+    ramp_left_s_ = 0;
     prev_force_mag_ = 0;
     vel_valid_ = false;
     vhip_value_known_ = false;
@@ -455,6 +469,8 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   };
 
   const bool holding = plane_.valid;
+  const VirtualPlane held = plane_;  // the plane of the tick before (god-object fallback)
+  const double held_grad_norm = plane_grad_norm_;
   if (holding) {
     if (!(dot(plane_.n, hip - plane_.p) < 0.0)) {
       entry_test(true);  // in front of the held plane: not in contact with it
@@ -492,12 +508,32 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   }
   // While in contact, a HIP inside the object is never left in front of the plane (a
   // concave corner or a rough surface, where the VHIP is embedded): the contact goes on
-  // at the surface found from the HIP.
-  if (holding && plane_.valid && have_f_hip && excess(f_hip) > 0.0 &&
-      !(dot(plane_.n, hip - plane_.p) < 0.0)) {
+  // at the surface found from the HIP by the bounded first-order search; failing that,
+  // on a plane along the outward normal at the HIP (never facing away from the held
+  // plane) at the first-order depth e / |grad| (at most 4 voxels); failing that, on the
+  // plane of the tick before if the HIP is behind it.
+  auto behind = [&](const VirtualPlane& pl) { return pl.valid && dot(pl.n, hip - pl.p) < 0.0; };
+  if (holding && have_f_hip && excess(f_hip) > 0.0 && !behind(plane_)) {
     Vec3 p;
-    if (surface_from(field, hip, excess(f_hip), norm(sample_trilinear(field, hip).gradient), p))
-      set_plane(plane_at(field, p, hip));
+    const double e_hip = excess(f_hip);
+    const double gn = norm(sample_trilinear(field, hip).gradient);
+    const Vec3 n_prev = held.valid ? held.n : Vec3{0.0, 0.0, 1.0};
+    if (surface_from(field, hip, e_hip, gn, p)) set_plane(plane_at(field, p, hip));
+    if (!behind(plane_)) {
+      VirtualPlane pl;
+      pl.n = outward_normal(field, hip, n_prev);
+      if (!(dot(pl.n, n_prev) > 0.0)) pl.n = n_prev;  // never toward a far side
+      pl.p = hip + pl.n * (gn > 0 ? std::clamp(e_hip / gn, 1e-3 * voxel, 4.0 * voxel) : 0.25 * voxel);
+      pl.valid = finite(pl.p) && finite(pl.n);
+      if (behind(pl)) {
+        last_grad_norm_ = gn;
+        set_plane(pl);
+      }
+    }
+    if (!behind(plane_) && behind(held)) {
+      set_plane(held);
+      plane_grad_norm_ = held_grad_norm;
+    }
   }
 
   Vec3 force;
@@ -507,8 +543,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     vhip_ = hip;
     sliding_ = false;
     recovery_ticks_left_ = 0;
+    ramp_left_s_ = 0;
     prev_target_n_ = 0;
   }
+  after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates
   if (!std::isfinite(mag)) {
     force = {};

@@ -14,7 +14,7 @@ namespace isotouch::servo {
 
 /// How p is found on the segment VHIP -> HIP at a plane update.
 enum class Intersection : std::uint8_t {
-  kLinear,     ///< the paper: linear interpolation of the two end values
+  kLinear,     ///< the paper (Variant::kPaper always): linear interpolation of the two end values
   kSecant,     ///< `intersection_steps` regula-falsi (Illinois) steps on the trilinear field
   kBisection,  ///< `intersection_steps` bisection steps, then linear inside the last bracket
 };
@@ -22,7 +22,7 @@ enum class Intersection : std::uint8_t {
 /// Where N comes from at a plane update.
 enum class NormalSource : std::uint8_t {
   kSamples,         ///< trilinear blend of the published gradient samples
-  kCentral,         ///< central differences of the trilinear value at p, h = 1/2 voxel (the paper)
+  kCentral,         ///< central differences of the trilinear value at p, h = 1/2 voxel (the paper; Variant::kPaper always)
   kTrilinearExact,  ///< the exact gradient of the trilinear interpolant (reference runs)
 };
 
@@ -77,8 +77,12 @@ struct HriParams {
 /// Variant::kPaper is Figure 2 exactly as printed: the counter is checked before it is
 /// incremented (`IF c >= n THEN c = 0 ... ELSE c = c + 1`, so the plane is recomputed
 /// every n+1 ticks); p = LinearInterpolation(VHIP, HIP, tau) (t clamped to [0, 1], and
-/// t = 0 where it is not finite: the only guard added); N = SurfaceNormal(p) from the
-/// configured NormalSource (default: the published gradient samples); the plane is
+/// t = 0 where it is not finite) always, whatever `intersection` says; N = SurfaceNormal(p)
+/// by central differences at p (NormalSource::kCentral) always, whatever `normal` says
+/// (the paper: N is "approximated by using central difference"). Guards added to the
+/// printed figure, all shared with the robust variant (see "Common to both"): that t
+/// clamp, a net pulling force clipped to zero (the wall pushes, never pulls), |F|
+/// saturated at force_limit_n, a non-finite |F| or HIP sent as zero force; the plane is
 /// dropped at an update that finds the HIP outside; no march for thin walls, no search
 /// for the surface from an embedded VHIP, no jump or budget fault; v_d from the backward
 /// difference of the HIP at the nominal period 1/rate; the §3.1 friction and §3.3
@@ -130,9 +134,15 @@ struct HriParams {
 ///   crossing (or at the surface found from the embedded VHIP).
 /// - Contact goes on while the HIP is inside: if the HIP is inside but in front of the
 ///   held plane (a concave corner, a rough scan) the plane is recomputed at once from the
-///   VHIP -> HIP segment even when the VHIP is embedded, and if a new plane still leaves
-///   the inside HIP in front of it, the plane is put at the surface found from the HIP
-///   along its outward normal (bounded as below). Figure 2 renders zero force there.
+///   VHIP -> HIP segment even when the VHIP is embedded, and if a new plane (this or any
+///   update) still leaves the inside HIP in front of it, the plane is put at the surface
+///   found from the HIP along its outward normal (bounded as below); if none is found (a
+///   noisy scan, coarse voxels), on a plane along the outward normal at the HIP (the held
+///   normal if that one faces away from it) at the first-order depth e / |grad|, at most
+///   4 voxels; else the plane of the tick before is kept. A plane held on the tick before
+///   is thus never dropped while the HIP is inside (god-object); the force change is
+///   ramped as any update (recovery time). Figure 2 renders zero force there (head CT:
+///   1.74 N -> 0 in one tick, 3 mm inside bone).
 /// - Embedded VHIP (Figure 5b): p is the surface point found from the VHIP along its
 ///   outward normal, no farther than twice the first-order depth plus a quarter voxel
 ///   (16 bisection steps), else the VHIP (the linear rule would extrapolate). A shallow
@@ -151,10 +161,15 @@ struct HriParams {
 ///   backward difference at the nominal period gave 1.30 N for a 0.30 N spring after 50
 ///   lost ticks).
 /// - Recovery time (§3.3, after Mark et al. 1996), when recovery_time_s > 0: EVERY plane
-///   creation or update that changes |F| by more than 1 % of the force limit starts a
-///   ramp: |F| goes linearly from the magnitude sent the tick before to the new value
-///   over recovery_time_s, in the new direction (Figure 2 + Mark et al. only ramp an
-///   embedded update upward; a plane made after free ticks then jumps 0 -> K d).
+///   creation or update, and the first contact tick after a fault (zero force was sent),
+///   that changes |F| by more than 1 % of the force limit starts a ramp: |F| goes
+///   linearly from the magnitude sent the tick before to the new value over
+///   recovery_time_s, in the new direction (Figure 2 + Mark et al. only ramp an embedded
+///   update upward; a plane made after free ticks then jumps 0 -> K d). The ramp runs on
+///   accumulated time, each tick adding its measured period clamped to [0, 2/rate]
+///   (never the time of lost ticks), so a ramp started after 50 lost ticks or on one
+///   jittery 10 us period still lasts recovery_time_s (a length in ticks from one
+///   measured period gave 1 tick, or 1800).
 /// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
@@ -213,8 +228,11 @@ class HriRenderer final : public Renderer {
   Vec3 prev_hip_;
   double prev_force_mag_ = 0;
   int c_ = 0;
-  int recovery_ticks_left_ = 0;
-  int recovery_ticks_ = 0;
+  int recovery_ticks_left_ = 0;  ///< paper: ticks left in the recovery ramp
+  int recovery_ticks_ = 0;       ///< paper: ramp length [ticks] at the nominal period
+  double ramp_left_s_ = 0;       ///< robust: time left in the recovery ramp [s]
+  double ramp_dt_s_ = 1e-3;      ///< robust: this tick's period for the ramp, <= 2/rate [s]
+  bool after_fault_ = false;     ///< robust: the tick before was a fault (force was 0)
   double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
   double prev_target_n_ = 0;    ///< robust: unramped |F| of the tick before [N]
   bool started_ = false;

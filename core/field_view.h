@@ -54,6 +54,10 @@ class FieldView {
       stride_[0] = 1;
       stride_[1] = std::size_t(f.grid.dims[0]);
       stride_[2] = std::size_t(f.grid.dims[0]) * std::size_t(f.grid.dims[1]);
+      for (int a = 0; a < 3; ++a) {
+        last_[a] = double(f.grid.dims[a] - 1);
+        step_[a] = f.grid.dims[a] > 1 ? stride_[a] : 0;
+      }
     }
   }
 
@@ -66,15 +70,45 @@ class FieldView {
   /// The servo's hot path (HRI reads values only).
   double value(const Vec3& world_m) const {
     if (empty()) return kNaN;
-    return value_at_index(grid_.to_index(world_m));
+    return value_at_index_nonempty(grid_.to_index(world_m));
   }
 
   /// Trilinear value and trilinear blend of the gradient samples at `world_m`.
   /// NaN value (zero gradient) if not finite or empty.
   FieldValue value_gradient(const Vec3& world_m) const {
     FieldValue out;
+    if (empty()) {
+      out.value = kNaN;
+      return out;
+    }
+    const Vec3 idx = grid_.to_index(world_m);
+    if (in_grid(idx)) {
+      // Fast path: one cell lookup; the same weights and order as the border path.
+      int i0[3];
+      double f[3];
+      for (int a = 0; a < 3; ++a) inner(idx[a], grid_.dims[a], i0[a], f[a]);
+      const CellRef c = cell(i0[0], i0[1], i0[2]);
+      double v = 0, gx = 0, gy = 0, gz = 0;
+      for (int k = 0; k < 2; ++k) {
+        const double wz = k ? f[2] : 1.0 - f[2];
+        for (int j = 0; j < 2; ++j) {
+          const double wy = j ? f[1] : 1.0 - f[1];
+          for (int i = 0; i < 2; ++i) {
+            const double w = (i ? f[0] : 1.0 - f[0]) * wy * wz;
+            const Sample& s = c.base[(i ? c.sx : 0) + (j ? c.sy : 0) + (k ? c.sz : 0)];
+            v += w * s.value;
+            gx += w * s.gx;
+            gy += w * s.gy;
+            gz += w * s.gz;
+          }
+        }
+      }
+      out.value = v;
+      out.gradient = {gx, gy, gz};
+      return out;
+    }
     Corner c[3];
-    if (empty() || !locate(grid_.to_index(world_m), c)) {
+    if (!locate(idx, c)) {
       out.value = kNaN;
       return out;
     }
@@ -140,14 +174,27 @@ class FieldView {
   /// finite or empty.
   double value_at_index(const Vec3& idx) const {
     if (empty()) return kNaN;
-    const int nx = grid_.dims[0], ny = grid_.dims[1], nz = grid_.dims[2];
-    if (in_range(idx.x, nx) && in_range(idx.y, ny) && in_range(idx.z, nz)) {
+    return value_at_index_nonempty(idx);
+  }
+
+  /// Voxel (x, y, z): the sample if it is in the grid, else {background, 0, 0, 0}.
+  /// Requires a non-empty view.
+  Sample voxel(int x, int y, int z) const {
+    if (x < 0 || y < 0 || z < 0 || x >= grid_.dims[0] || y >= grid_.dims[1] || z >= grid_.dims[2])
+      return {background_, 0.f, 0.f, 0.f};
+    return data_[std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
+  }
+
+ private:
+  /// value_at_index on a non-empty view: the in-grid fast path inline, the border out of line.
+  [[gnu::always_inline]] double value_at_index_nonempty(const Vec3& idx) const {
+    if (in_grid(idx)) {
       // Fast path: the whole cell is in the grid. One cell lookup, seven lerps.
       int i0[3];
       double f[3];
-      inner(idx.x, nx, i0[0], f[0]);
-      inner(idx.y, ny, i0[1], f[1]);
-      inner(idx.z, nz, i0[2], f[2]);
+      inner(idx.x, grid_.dims[0], i0[0], f[0]);
+      inner(idx.y, grid_.dims[1], i0[1], f[1]);
+      inner(idx.z, grid_.dims[2], i0[2], f[2]);
       const CellRef c = cell(i0[0], i0[1], i0[2]);
       const Sample* s = c.base;
       const std::size_t sx = c.sx, sy = c.sy, sz = c.sz;
@@ -157,6 +204,10 @@ class FieldView {
       const double c11 = lerp(s[sz + sy].value, s[sz + sy + sx].value, f[0]);
       return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
     }
+    return value_border(idx);
+  }
+  /// The border path of value_at_index: corners outside the grid read the background.
+  [[gnu::noinline]] double value_border(const Vec3& idx) const {
     Corner c[3];
     if (!locate(idx, c)) return kNaN;
     // Border path: corners outside the grid read the background. Same lerps.
@@ -170,15 +221,6 @@ class FieldView {
     return lerp(lerp(c00, c10, c[1].f), lerp(c01, c11, c[1].f), c[2].f);
   }
 
-  /// Voxel (x, y, z): the sample if it is in the grid, else {background, 0, 0, 0}.
-  /// Requires a non-empty view.
-  Sample voxel(int x, int y, int z) const {
-    if (x < 0 || y < 0 || z < 0 || x >= grid_.dims[0] || y >= grid_.dims[1] || z >= grid_.dims[2])
-      return {background_, 0.f, 0.f, 0.f};
-    return data_[std::size_t(x) * stride_[0] + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
-  }
-
- private:
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
   /// One axis of a cell: lower and upper corner index and the fraction toward the upper.
@@ -195,6 +237,10 @@ class FieldView {
   static double lerp(double a, double b, double t) { return a + t * (b - a); }
   /// v within the box of voxel centres [0, n-1] (false for NaN).
   static bool in_range(double v, int n) { return v >= 0.0 && v <= double(n - 1); }
+  /// The index lies in the box of voxel centres on every axis (false for NaN).
+  bool in_grid(const Vec3& i) const {
+    return i.x >= 0.0 && i.x <= last_[0] && i.y >= 0.0 && i.y <= last_[1] && i.z >= 0.0 && i.z <= last_[2];
+  }
   /// In-range axis: lower corner (the last cell holds v = n-1 with f = 1) and fraction.
   static void inner(double v, int n, int& i0, double& f) {
     i0 = int(v);
@@ -223,14 +269,15 @@ class FieldView {
   }
   /// The memory seam (see class docs): the in-grid cell with lower corner (x, y, z).
   CellRef cell(int x, int y, int z) const {
-    return {data_ + std::size_t(x) * stride_[0] + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2],
-            grid_.dims[0] > 1 ? stride_[0] : 0, grid_.dims[1] > 1 ? stride_[1] : 0,
-            grid_.dims[2] > 1 ? stride_[2] : 0};
+    return {data_ + std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2], step_[0], step_[1],
+            step_[2]};
   }
 
   Grid grid_;
   const Sample* data_ = nullptr;
-  std::size_t stride_[3] = {0, 0, 0};
+  std::size_t stride_[3] = {0, 0, 0};  ///< x (always 1), y, z element strides
+  std::size_t step_[3] = {0, 0, 0};    ///< stride, or 0 on a 1-voxel axis
+  double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
 };
 

@@ -215,6 +215,14 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   else if (normal == "central") s.hri.normal = servo::NormalSource::kCentral;
   else if (normal == "exact") s.hri.normal = servo::NormalSource::kTrilinearExact;
   else r.fail("servo.normal", "must be \"samples\", \"central\" (the paper) or \"exact\", got \"" + normal + "\"");
+  // The paper variant is Figure 2 as printed: LinearInterpolation and central differences at p
+  // (servo/hri.h). A scene that asks it for another rule would be silently overridden: refuse.
+  if (s.hri.variant == servo::Variant::kPaper && (isect != "linear" || normal != "central") &&
+      (sv.contains("intersection") || sv.contains("normal")))
+    r.fail(isect != "linear" ? "servo.intersection" : "servo.normal",
+           "the \"paper\" variant always uses linear intersection and central-difference normals "
+           "(Figure 2 as printed); remove the key or use \"variant\": \"robust\", got \"" +
+               (isect != "linear" ? isect : normal) + "\"");
   s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
   // Default 20 ms (robust variant): every force step a plane update causes is ramped (issue 7).
   s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",

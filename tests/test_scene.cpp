@@ -59,6 +59,12 @@ TEST(Scene, Errors) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_direction": [1, 2]}})",
                {"'script.ray_direction'", "[1,2]"});
   expect_error(R"({"volume": {"path": "v.mhd", "synthetic": "sphere"}, "isovalue": 1})", {"exactly one"});
+  // The paper variant cannot be asked for another intersection or normal rule (it would be
+  // silently overridden by Figure 2 as printed).
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"variant": "paper", "normal": "samples"}})",
+               {"'servo.normal'", "paper", "samples"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"variant": "paper", "intersection": "secant"}})",
+               {"'servo.intersection'", "secant"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"intersection": "newton"}})",
                {"'servo.intersection'", "newton"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"friction": {"mu_s": 0.2, "mu_d": 0.5}}})",

@@ -144,7 +144,7 @@ TEST(Isosurface, OneSignRuleForBothSides) {
   EXPECT_EQ(below.outside_value(-5, 8), 10.0);
   EXPECT_EQ(below.outside_value(-5, 80), 80);
   SampleField f = random_field({3, 3, 3}, 0.0f, 6);
-  f.samples[4].value = std::numeric_limits<float>::infinity();
+  f.samples[4].value = -std::numeric_limits<float>::infinity();
   f.samples[5].value = std::numeric_limits<float>::quiet_NaN();
   float lo = 1e30f;
   for (std::size_t i = 0; i < f.samples.size(); ++i)
@@ -173,10 +173,12 @@ TEST(FieldView, RenderersSeeTheSameFieldThroughTheViewAndNothingOutside) {
     contact += ta.contact;
   }
   EXPECT_GT(contact, 50);
-  // Outside the grid in x, at the depth that was in contact: nothing to touch.
+  // Outside the grid in x (15.2 mm and beyond; the last voxel centre is at 15 mm), coming
+  // down from 10 mm to 5.1 mm, through the depth that was in contact: nothing to touch
+  // (clamp-to-edge would have given the border column's values, and contact).
   servo::HriRenderer c(p);
   for (int k = 0; k < 50; ++k) {
-    const servo::HriTick t = c.tick(v, {0.0152 + 1e-4 * k, 7.5e-3, 6e-3});
+    const servo::HriTick t = c.tick(v, {0.0152 + 1e-4 * k, 7.5e-3, 10e-3 - 1e-4 * k});
     EXPECT_FALSE(t.contact);
     EXPECT_EQ(norm(t.force_n), 0.0);
   }

@@ -282,6 +282,24 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return force;
 }
 
+void HriRenderer::restart_at(const Vec3& hip) {
+  // First tick, or the first sane tick after an absurd HIP: free motion from here, no
+  // plane, no ramp, no velocity history (both variants).
+  vhip_ = hip;
+  prev_hip_ = hip;
+  plane_ = {};
+  c_ = 0;
+  started_ = true;
+  resync_ = false;
+  sliding_ = false;
+  was_contact_ = false;
+  recovery_ticks_left_ = 0;
+  ramp_left_s_ = 0;
+  prev_force_mag_ = 0;
+  vel_valid_ = false;
+  vhip_value_known_ = false;
+}
+
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
   return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
 }
@@ -297,18 +315,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     prev_force_mag_ = 0;
     return out;
   }
-  if (!started_ || resync_) {
-    vhip_ = hip;
-    prev_hip_ = hip;
-    plane_ = {};
-    c_ = 0;
-    started_ = true;
-    resync_ = false;
-    sliding_ = false;
-    was_contact_ = false;
-    recovery_ticks_left_ = 0;
-    prev_force_mag_ = 0;
-  }
+  if (!started_ || resync_) restart_at(hip);
   const double f_hip = sample_value(field, hip);
   const bool hip_inside = excess(f_hip) > 0.0;
   // p = LinearInterpolation(VHIP, HIP, tau), N = SurfaceNormal(p).
@@ -394,21 +401,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   }
   lost_s_ = 0;
   ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);  // recovery ramp: this tick's period [s]
-  if (!started_ || resync_) {
-    vhip_ = hip;
-    prev_hip_ = hip;
-    plane_ = {};
-    c_ = 0;
-    started_ = true;
-    resync_ = false;
-    sliding_ = false;
-    was_contact_ = false;
-    recovery_ticks_left_ = 0;
-    ramp_left_s_ = 0;
-    prev_force_mag_ = 0;
-    vel_valid_ = false;
-    vhip_value_known_ = false;
-  }
+  if (!started_ || resync_) restart_at(hip);
   // Velocity: backward difference over the measured time, first-order low-pass.
   const double s = inv_wpd_;
   if (vel_valid_) {
@@ -456,8 +449,6 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
       // In contact (a plane held) the VHIP is the contact point even when embedded:
       // compute_plane searches the surface from it. In free motion both ends inside
       // means no force (starting inside, §3.1).
-      // In contact (a plane held) an embedded VHIP is still the contact point; in free
-      // motion both ends inside means no force (starting inside, §3.1).
       if (holding || !(excess(f_vhip) > 0.0)) set_plane(compute_plane(field, f_vhip, f_hip, hip));
       else plane_.valid = false;
     } else if (long_step(field, vhip_, hip) && !(excess(vhip_value()) > 0.0) &&

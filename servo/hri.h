@@ -214,6 +214,8 @@ class HriRenderer final : public Renderer {
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
+  /// Free motion from `hip` on: no plane, no ramp, no velocity history.
+  void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).

@@ -17,6 +17,9 @@
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
+#include "bench_engine.h"
+#include "export_cmd.h"
+#include "render_cmd.h"
 #include "check_cmd.h"
 #include "report_cmd.h"
 #include "sim_device.h"
@@ -347,6 +350,10 @@ int main(int argc, char** argv) {
   t1->add_option("--repetitions", t1_opt.repetitions, "Timed replays per stroke (median)")
       ->capture_default_str()->check(CLI::PositiveNumber);
   t1->add_option("--csv", t1_opt.out_csv, "Also write the table to this CSV file");
+  // Command modules that keep their options to themselves (apps/subcommand.h).
+  const std::vector<app::Subcommand> modules = {app::add_render_command(cli), app::add_export_command(cli),
+                                                app::add_bench_engine_command(*bench),
+                                                app::add_bench_render_command(*bench)};
 
   try {
     cli.parse(argc, argv);
@@ -378,6 +385,8 @@ int main(int argc, char** argv) {
       t1_opt.device = device;
       return app::run_bench_table1(t1_opt, std::cout);
     }
+    for (const app::Subcommand& m : modules)
+      if (m.app->parsed()) return m.run(device);
     if (rt->parsed()) {
       rt_opt.device = device;
       return app::run_bench_servo_rt(rt_opt, std::cout);

@@ -1,7 +1,8 @@
 // brick_field.h - the sparse (bricked) published snapshot (issue 8, items 4 and 5).
-// Part of isotouch::core, header-only. OWNER: core-bricks helper (this is the contract the
-// engine writes to; the owner fills in the builder, the compact formats and FieldView's
-// bricked mode).
+// Part of isotouch::core, header-only. The storage (BrickStore, the compact sample
+// formats and their decoders) is in sample_field.h, the reads in field_view.h; this file
+// builds a bricked SampleField (make_bricked_field, bricked_input_from_dense), encodes the
+// compact formats and counts bytes (snapshot_bytes).
 //
 // Layout
 // - The grid is cut into bricks of kBrickSize^3 voxels (OpenVDB's leaf size), brick
@@ -16,10 +17,40 @@
 //   with the background value and a zero gradient).
 // - Every other brick is *uniform*: entirely inside or entirely outside the isosurface. It
 //   stores no samples, only its tile value (see tile_value()): every voxel in it reads
-//   {tile, 0, 0, 0}.
+//   {tile, 0, 0, 0}. A cell belongs to the brick of its lower corner, so every cell of a
+//   uniform brick reads the tile at its 8 corners.
+// - Storage (BrickStore): table entry = pool slot of an active brick (slots in ascending
+//   brick id), or BrickStore::kUniform | index into `tiles` (uniform bricks in ascending
+//   brick id). Bytes: 4 per brick (table) + 16 per uniform brick (tile Sample) + 729 *
+//   (16 | 8) per active brick (pool, fp32 | compact) + 32 per active brick (kUnorm16 decode
+//   parameters); the fixed header (grid, format, fp16 scale) is not counted.
+//
+// Compact formats (item 5), 8 bytes per sample, decoded to float in FieldView:
+// - kFp16: value as IEEE binary16 (round to nearest even); gradient per voxel step,
+//   gradient[a] * spacing_m[a], as binary16 (1000 HU/mm = 1e6 HU/m overflows binary16,
+//   1000 HU per 1 mm voxel does not), decoded as half * (1 / spacing) in float.
+//   Worst-case error, |v| <= 65504 (beyond: saturated to +-65504, no bound):
+//     value:    |v' - v| <= 2^-11 |v| + 2^-25
+//     gradient: |g' - g| <= (2^-11 + 2^-22) |g| + 2^-24 / s      (s = spacing_m[a])
+//   (binary16 keeps 11 significant bits: half an ulp is <= 2^-11 |x|, 2^-25 for subnormals;
+//   the float decode adds two roundings of 2^-24).
+// - kUnorm16: per active brick and channel c (value, gx, gy, gz): lo, hi = range of the
+//   finite stored samples inside the grid; scale = (hi - lo) / 65534 rounded up to float;
+//   q = round((x - lo) / scale) in 0..65534; 65535 = NaN (non-finite samples, the apron
+//   beyond the grid). Decoded as lo + q * scale in float. Worst-case error:
+//     |x' - x| <= scale / 2 + 2^-22 max(|lo|, |hi|)
+//   (quantisation half a step, plus the float multiply and add, 2^-24 each on values up
+//   to 2 max(|lo|, |hi|) and max(|lo|, |hi|)).
+// Uniform bricks keep their fp32 tile in every format: their side of the surface is exact.
 #pragma once
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "grid.h"
@@ -28,16 +59,8 @@
 
 namespace isotouch::core {
 
-inline constexpr int kBrickSize = 8;                      ///< voxels per brick edge
-inline constexpr int kBrickStored = kBrickSize + 1;       ///< stored samples per edge (+1 apron)
-inline constexpr int kBrickSamples = kBrickStored * kBrickStored * kBrickStored;  ///< 729
-
-/// How the samples of active bricks are stored (item 5).
-enum class SampleFormat : std::uint8_t {
-  kFp32,     ///< core::Sample, 16 B per sample
-  kFp16,     ///< value + gradient as IEEE half, 8 B per sample
-  kUnorm16,  ///< per-brick normalized 16-bit integers, 8 B per sample
-};
+// kBrickSize, kBrickStored, kBrickSamples, SampleFormat, CompactSample, BrickDecode and
+// BrickStore live in sample_field.h (the published format).
 
 /// Bricks per axis of `g`: ceil(dims / 8).
 inline std::array<int, 3> brick_counts(const Grid& g) {
@@ -77,5 +100,267 @@ struct BrickedInput {
   std::vector<Sample> pool;                 ///< active.size() * kBrickSamples fp32 samples
   std::vector<float> tile;                  ///< one per brick (all bricks); ignored for active ones
 };
+
+/// Stored samples of brick `b` (per-axis brick index) that lie inside the grid, per axis:
+/// min(9, dims - 8 b) (the apron beyond the grid is never read).
+inline std::array<int, 3> stored_in_grid(const Grid& g, const std::array<int, 3>& b) {
+  std::array<int, 3> n{};
+  for (int a = 0; a < 3; ++a) n[std::size_t(a)] = std::min(kBrickStored, g.dims[std::size_t(a)] - kBrickSize * b[std::size_t(a)]);
+  return n;
+}
+
+/// Per-axis brick index of linear brick id `id` with `nb` bricks per axis.
+inline std::array<int, 3> brick_coords(std::size_t id, const std::array<int, 3>& nb) {
+  const std::size_t nx = std::size_t(nb[0]), ny = std::size_t(nb[1]);
+  return {int(id % nx), int(id / nx % ny), int(id / (nx * ny))};
+}
+
+/// IEEE binary16 nearest to `x` (round to nearest, ties to even). Finite values beyond
+/// +-65504 saturate to +-65504 (not Inf); +-Inf and NaN are kept. Encoder only (not the
+/// servo path).
+inline std::uint16_t float_to_half(double x) {
+  if (std::isnan(x)) return 0x7e00u;
+  const std::uint16_t sign = std::signbit(x) ? 0x8000u : 0u;
+  const double a = std::fabs(x);
+  if (std::isinf(a)) return std::uint16_t(sign | 0x7c00u);
+  if (a >= 65504.0) return std::uint16_t(sign | 0x7bffu);
+  if (a < 0x1p-14) return std::uint16_t(sign | std::uint16_t(std::nearbyint(a * 0x1p24)));  // subnormal (or 2^-14)
+  int e = 0;
+  std::frexp(a, &e);                                     // a in [2^(e-1), 2^e)
+  const double m = std::nearbyint(std::ldexp(a, 11 - e));  // 11 significant bits, 1024..2048
+  // m = 2048 carries into the exponent, which is what the bit pattern needs.
+  return std::uint16_t(sign | ((std::uint32_t(e - 1 + 15) << 10) + (std::uint32_t(m) - 1024u)));
+}
+
+namespace detail {
+
+[[noreturn]] inline void bad_bricked_input(const std::string& what) {
+  throw std::invalid_argument("make_bricked_field: " + what);
+}
+
+/// Check `in` against the contract; throws std::invalid_argument naming the field.
+inline void validate(const BrickedInput& in) {
+  if (in.grid.empty())
+    bad_bricked_input("BrickedInput.grid: empty dims " + std::to_string(in.grid.dims[0]) + "x" +
+                      std::to_string(in.grid.dims[1]) + "x" + std::to_string(in.grid.dims[2]));
+  const auto nb = brick_counts(in.grid);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  if (in.tile.size() != total)
+    bad_bricked_input("BrickedInput.tile: " + std::to_string(in.tile.size()) + " values, " + std::to_string(total) +
+                      " bricks");
+  if (in.pool.size() != in.active.size() * std::size_t(kBrickSamples))
+    bad_bricked_input("BrickedInput.pool: " + std::to_string(in.pool.size()) + " samples, " +
+                      std::to_string(in.active.size()) + " active bricks need " +
+                      std::to_string(in.active.size() * std::size_t(kBrickSamples)));
+  for (std::size_t i = 0; i < in.active.size(); ++i)
+    if (in.active[i] >= total || (i > 0 && in.active[i] <= in.active[i - 1]))
+      bad_bricked_input("BrickedInput.active[" + std::to_string(i) + "] = " + std::to_string(in.active[i]) +
+                        ": not ascending or not below " + std::to_string(total) + " bricks");
+}
+
+/// kUnorm16 parameters of one channel from its finite range [lo, hi] (lo > hi: none).
+inline void unorm16_params(double lo, double hi, float& offset, float& scale) {
+  if (!(lo <= hi)) {
+    offset = 0.f;
+    scale = 0.f;
+    return;
+  }
+  offset = float(lo);  // lo is a float value: exact
+  const double range = hi - lo;
+  scale = float(range / double(kUnormMax));
+  if (double(scale) * double(kUnormMax) < range) scale = std::nextafter(scale, std::numeric_limits<float>::infinity());
+}
+
+inline std::uint16_t unorm16_encode(float x, float offset, float scale) {
+  if (!std::isfinite(x)) return kUnormNaN;
+  if (scale == 0.f) return 0;
+  const double q = std::nearbyint((double(x) - double(offset)) / double(scale));
+  return std::uint16_t(std::clamp(q, 0.0, double(kUnormMax)));
+}
+
+/// The compact pool (kFp16 or kUnorm16) of `pool`; `decode` gets one entry per slot (kUnorm16).
+inline std::vector<CompactSample> encode_compact(const BrickedInput& in, SampleFormat f,
+                                                 std::vector<BrickDecode>& decode) {
+  std::vector<CompactSample> out(in.pool.size());
+  const auto nb = brick_counts(in.grid);
+  const double sp[3] = {in.grid.spacing_m.x, in.grid.spacing_m.y, in.grid.spacing_m.z};
+  if (f == SampleFormat::kUnorm16) decode.resize(in.active.size());
+  for (std::size_t slot = 0; slot < in.active.size(); ++slot) {
+    const auto n = stored_in_grid(in.grid, brick_coords(in.active[slot], nb));
+    const Sample* src = in.pool.data() + slot * kBrickSamples;
+    CompactSample* dst = out.data() + slot * kBrickSamples;
+    auto in_grid = [&](int l) {
+      return l % kBrickStored < n[0] && l / kBrickStored % kBrickStored < n[1] &&
+             l / (kBrickStored * kBrickStored) < n[2];
+    };
+    if (f == SampleFormat::kFp16) {
+      for (int l = 0; l < kBrickSamples; ++l) {
+        const Sample& s = src[l];
+        dst[l] = in_grid(l) ? CompactSample{float_to_half(s.value),
+                                            {float_to_half(double(s.gx) * sp[0]), float_to_half(double(s.gy) * sp[1]),
+                                             float_to_half(double(s.gz) * sp[2])}}
+                            : CompactSample{0x7e00u, {0, 0, 0}};
+      }
+      continue;
+    }
+    BrickDecode& d = decode[slot];
+    for (int c = 0; c < 4; ++c) {
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (int l = 0; l < kBrickSamples; ++l) {
+        const float x = (&src[l].value)[c];
+        if (!in_grid(l) || !std::isfinite(x)) continue;
+        lo = std::min(lo, double(x));
+        hi = std::max(hi, double(x));
+      }
+      unorm16_params(lo, hi, d.offset[c], d.scale[c]);
+    }
+    for (int l = 0; l < kBrickSamples; ++l) {
+      const Sample& s = src[l];
+      dst[l] = in_grid(l) ? CompactSample{unorm16_encode(s.value, d.offset[0], d.scale[0]),
+                                          {unorm16_encode(s.gx, d.offset[1], d.scale[1]),
+                                           unorm16_encode(s.gy, d.offset[2], d.scale[2]),
+                                           unorm16_encode(s.gz, d.offset[3], d.scale[3])}}
+                          : CompactSample{kUnormNaN, {kUnormNaN, kUnormNaN, kUnormNaN}};
+    }
+  }
+  return out;
+}
+
+}  // namespace detail
+
+/// Publish `in` as a bricked SampleField in format `f`: grid and background from `in`,
+/// version 0, dense `samples` empty, `bricks` the immutable BrickStore (table, tiles, pool;
+/// fp32 moves `in.pool` into the store, compact formats encode it, see the file comment).
+/// The apron beyond the grid is reset to {background, 0, 0, 0} (fp32) or NaN (compact);
+/// it is never read. @throws std::invalid_argument naming the BrickedInput field that
+/// breaks the contract (tile count, pool size, active ids).
+inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
+  detail::validate(in);
+  auto store = std::make_shared<BrickStore>();
+  store->bricks = brick_counts(in.grid);
+  store->format = f;
+  const std::size_t total = in.tile.size();
+  store->table.resize(total);
+  store->tiles.reserve(total - in.active.size());
+  for (std::size_t id = 0, slot = 0; id < total; ++id) {
+    if (slot < in.active.size() && in.active[slot] == id) {
+      store->table[id] = std::uint32_t(slot++);
+    } else {
+      store->table[id] = BrickStore::kUniform | std::uint32_t(store->tiles.size());
+      store->tiles.push_back({in.tile[id], 0.f, 0.f, 0.f});
+    }
+  }
+  // The apron beyond the grid: the contract's fill, whatever the engine wrote there.
+  for (std::size_t slot = 0; slot < in.active.size(); ++slot) {
+    const auto n = stored_in_grid(in.grid, brick_coords(in.active[slot], store->bricks));
+    if (n[0] == kBrickStored && n[1] == kBrickStored && n[2] == kBrickStored) continue;
+    Sample* s = in.pool.data() + slot * kBrickSamples;
+    for (int k = 0; k < kBrickStored; ++k)
+      for (int j = 0; j < kBrickStored; ++j)
+        for (int i = 0; i < kBrickStored; ++i)
+          if (i >= n[0] || j >= n[1] || k >= n[2]) s[i + kBrickStored * (j + kBrickStored * k)] = {in.background, 0, 0, 0};
+  }
+  if (f == SampleFormat::kFp32) {
+    store->pool = std::make_shared<const std::vector<Sample>>(std::move(in.pool));
+  } else {
+    store->compact = std::make_shared<const std::vector<CompactSample>>(detail::encode_compact(in, f, store->decode));
+    store->fp16_unscale = {float(1.0 / in.grid.spacing_m.x), float(1.0 / in.grid.spacing_m.y),
+                           float(1.0 / in.grid.spacing_m.z)};
+  }
+  SampleField out;
+  out.grid = in.grid;
+  out.background = in.background;
+  out.version = 0;
+  out.bricks = std::move(store);
+  return out;
+}
+
+/// The CPU conversion of a dense field to bricks (tests, scenes comparing dense and
+/// bricked, the reference the GPU sparse chain is checked against): per brick the value
+/// range over its voxels widened by 1 voxel on every side (clipped to the grid; NaN
+/// skipped, like engine brick_minmax with halo 1), tile_value() decides; an active brick
+/// copies its 9^3 samples (beyond the grid: {background, 0, 0, 0}). One departure from
+/// brick_minmax: a brick whose widened range holds a NaN voxel (outside every isosurface)
+/// and whose finite values are inside is active, so it keeps reading NaN where dense does.
+/// Background from `dense`. @throws std::invalid_argument if `dense` is not a dense field
+/// with one sample per voxel.
+inline BrickedInput bricked_input_from_dense(const SampleField& dense, const Isosurface& iso) {
+  const Grid& g = dense.grid;
+  if (dense.bricks || g.empty() || dense.samples.size() != g.voxel_count())
+    throw std::invalid_argument("bricked_input_from_dense: SampleField.samples has " +
+                                std::to_string(dense.samples.size()) + " samples for " +
+                                std::to_string(g.voxel_count()) + " voxels" + (dense.bricks ? " (bricked field)" : ""));
+  BrickedInput in;
+  in.grid = g;
+  in.background = dense.background;
+  const auto nb = brick_counts(g);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  in.tile.assign(total, 0.f);
+  for (std::size_t id = 0; id < total; ++id) {
+    const auto b = brick_coords(id, nb);
+    int lo_i[3], hi_i[3];
+    for (int a = 0; a < 3; ++a) {
+      lo_i[a] = std::max(kBrickSize * b[std::size_t(a)] - 1, 0);
+      hi_i[a] = std::min(kBrickSize * b[std::size_t(a)] + kBrickSize + 1, g.dims[std::size_t(a)]);
+    }
+    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    bool nan = false;
+    for (int z = lo_i[2]; z < hi_i[2]; ++z)
+      for (int y = lo_i[1]; y < hi_i[1]; ++y)
+        for (int x = lo_i[0]; x < hi_i[0]; ++x) {
+          const float v = dense.samples[g.index(x, y, z)].value;
+          if (v != v) {
+            nan = true;
+            continue;
+          }
+          lo = v < lo ? v : lo;
+          hi = v > hi ? v : hi;
+        }
+    float tile = 0.f;
+    const bool uniform = tile_value(lo, hi, iso, dense.background, tile) && !(nan && lo <= hi && iso.contains(tile));
+    if (uniform) {
+      in.tile[id] = tile;
+      continue;
+    }
+    in.active.push_back(std::uint32_t(id));
+    const std::size_t base = in.pool.size();
+    in.pool.resize(base + kBrickSamples, Sample{dense.background, 0.f, 0.f, 0.f});
+    const auto n = stored_in_grid(g, b);
+    for (int k = 0; k < n[2]; ++k)
+      for (int j = 0; j < n[1]; ++j)
+        for (int i = 0; i < n[0]; ++i)
+          in.pool[base + std::size_t(i + kBrickStored * (j + kBrickStored * k))] =
+              dense.samples[g.index(kBrickSize * b[0] + i, kBrickSize * b[1] + j, kBrickSize * b[2] + k)];
+  }
+  return in;
+}
+
+/// Bytes of the dense fp32 snapshot of `g`: voxels * 16.
+inline std::uint64_t dense_fp32_bytes(const Grid& g) { return std::uint64_t(g.voxel_count()) * sizeof(Sample); }
+
+/// Bytes of a published snapshot: dense, voxels * 16; bricked, table (4 per brick) + tiles
+/// (16 per uniform brick) + pool (729 * 16 or 8 per active brick) + kUnorm16 decode
+/// parameters (32 per active brick). The fixed header (grid, format) is not counted.
+inline std::uint64_t snapshot_bytes(const SampleField& f) {
+  if (!f.bricks) return dense_fp32_bytes(f.grid);
+  const BrickStore& b = *f.bricks;
+  const std::uint64_t per_sample = b.format == SampleFormat::kFp32 ? sizeof(Sample) : sizeof(CompactSample);
+  return std::uint64_t(b.table.size()) * sizeof(std::uint32_t) + std::uint64_t(b.tiles.size()) * sizeof(Sample) +
+         std::uint64_t(b.active_bricks()) * kBrickSamples * per_sample +
+         std::uint64_t(b.decode.size()) * sizeof(BrickDecode);
+}
+
+/// Brick counts of a published snapshot: all bricks and the active ones (stored with
+/// samples). A dense field counts its grid's bricks, all active.
+struct BrickUsage {
+  std::size_t total = 0;
+  std::size_t active = 0;
+};
+inline BrickUsage brick_usage(const SampleField& f) {
+  if (f.bricks) return {f.bricks->total_bricks(), f.bricks->active_bricks()};
+  const auto nb = brick_counts(f.grid);
+  const std::size_t n = f.grid.empty() ? 0 : std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  return {n, n};
+}
 
 }  // namespace isotouch::core

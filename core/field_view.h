@@ -3,8 +3,10 @@
 // or makes a syscall, so the servo tick can call them.
 #pragma once
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 
 #include "grid.h"
@@ -36,21 +38,35 @@ struct FieldValue {
 ///
 /// The memory seam (issue 8 item 4): the only place that touches sample memory is
 /// cell(): the 8 corners of an in-grid cell as a base pointer and three strides, and
-/// voxel() for the checked border path. A bricked field (brick table + pool of 8^3
-/// bricks with a 1-voxel apron, so a cell never straddles two bricks) implements those
-/// two with one table lookup; the renderers, which only see FieldView, do not change.
+/// voxel() for the checked border path. A bricked field (brick_field.h: brick table +
+/// pool of 8^3 bricks stored as 9^3 samples, so a cell never straddles two bricks)
+/// implements those two with one table lookup; the renderers, which only see FieldView,
+/// do not change. Bricked reads: a cell belongs to the brick of its lower corner; in an
+/// active brick it reads exactly the dense samples (fp32: bit-identical results), in a
+/// uniform brick every corner reads the tile {tile, 0, 0, 0} (the same side of the
+/// isosurface as the dense field, value constant, gradient zero); voxel() reads the
+/// voxel's own brick. Compact formats decode the corners (brick_field.h gives the error).
 ///
 /// The view holds pointers into the SampleField: it must not outlive it (the servo makes
-/// one per tick from the snapshot it holds). An empty grid, or fewer samples than voxels,
-/// gives an empty view: NaN values, zero or NaN gradients as documented per call.
+/// one per tick from the snapshot it holds). An empty grid, fewer dense samples than
+/// voxels, or an inconsistent brick store gives an empty view: NaN values, zero or NaN
+/// gradients as documented per call.
 class FieldView {
  public:
   FieldView() = default;
-  /// The dense view of `f` (implicit: every renderer call site passing a SampleField keeps working).
+  /// The view of `f`, dense or bricked (implicit: every renderer call site passing a
+  /// SampleField keeps working). A bricked field (`f.bricks` set) is read through its brick
+  /// table; a dense one with fewer samples than voxels gives an empty view.
   FieldView(const SampleField& f)  // NOLINT(google-explicit-constructor)
       : grid_(f.grid), background_(f.background) {
-    if (!f.grid.empty() && f.samples.size() >= f.grid.voxel_count()) {
+    if (f.grid.empty()) return;
+    if (f.bricks) {
+      init_bricked(*f.bricks);
+      return;
+    }
+    if (f.samples.size() >= f.grid.voxel_count()) {
       data_ = f.samples.data();
+      mode_ = Mode::kDense;
       stride_[0] = 1;
       stride_[1] = std::size_t(f.grid.dims[0]);
       stride_[2] = std::size_t(f.grid.dims[0]) * std::size_t(f.grid.dims[1]);
@@ -64,7 +80,9 @@ class FieldView {
   const Grid& grid() const { return grid_; }
   /// Value of every voxel outside the grid (see class docs).
   float background() const { return background_; }
-  bool empty() const { return data_ == nullptr; }
+  bool empty() const { return mode_ == Mode::kEmpty; }
+  /// Reads a brick table (bricked field) rather than a dense array.
+  bool bricked() const { return mode_ == Mode::kBricked || mode_ == Mode::kBrickedCompact; }
 
   /// Trilinear value at `world_m` (grid-world [m]); NaN if not finite or empty.
   /// The servo's hot path (HRI reads values only).
@@ -87,7 +105,8 @@ class FieldView {
       int i0[3];
       double f[3];
       for (int a = 0; a < 3; ++a) inner(idx[a], grid_.dims[a], i0[a], f[a]);
-      const CellRef c = cell(i0[0], i0[1], i0[2]);
+      Sample scratch[8];
+      const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
       double v = 0, gx = 0, gy = 0, gz = 0;
       for (int k = 0; k < 2; ++k) {
         const double wz = k ? f[2] : 1.0 - f[2];
@@ -154,12 +173,20 @@ class FieldView {
   /// is not finite or the view is empty. Used by error metrics and reference runs.
   Vec3 trilinear_gradient(const Vec3& world_m) const {
     Corner c[3];
-    if (empty() || !locate(grid_.to_index(world_m), c)) return {};
+    if (empty()) return {};
+    const Vec3 idx = grid_.to_index(world_m);
+    if (!locate(idx, c)) return {};
+    // In the grid: the corners of cell() (the cell value() interpolates); border: voxel().
+    const bool fast = in_grid(idx);
+    Sample scratch[8];
+    CellRef cr{nullptr, 0, 0, 0};
+    if (fast) cr = cell(c[0].i0, c[1].i0, c[2].i0, scratch);
     double d[3] = {0, 0, 0};
     for (int k = 0; k < 2; ++k)
       for (int j = 0; j < 2; ++j)
         for (int i = 0; i < 2; ++i) {
-          const double v = voxel(i ? c[0].i1 : c[0].i0, j ? c[1].i1 : c[1].i0, k ? c[2].i1 : c[2].i0).value;
+          const double v = fast ? cr.base[(i ? cr.sx : 0) + (j ? cr.sy : 0) + (k ? cr.sz : 0)].value
+                                : voxel(i ? c[0].i1 : c[0].i0, j ? c[1].i1 : c[1].i0, k ? c[2].i1 : c[2].i0).value;
           const double wx = i ? c[0].f : 1 - c[0].f, wy = j ? c[1].f : 1 - c[1].f,
                        wz = k ? c[2].f : 1 - c[2].f;
           const double sx = i ? 1.0 : -1.0, sy = j ? 1.0 : -1.0, sz = k ? 1.0 : -1.0;
@@ -178,11 +205,17 @@ class FieldView {
   }
 
   /// Voxel (x, y, z): the sample if it is in the grid, else {background, 0, 0, 0}.
+  /// Bricked: read from the voxel's own brick (the pool, decoded, or {tile, 0, 0, 0}).
   /// Requires a non-empty view.
   Sample voxel(int x, int y, int z) const {
     if (x < 0 || y < 0 || z < 0 || x >= grid_.dims[0] || y >= grid_.dims[1] || z >= grid_.dims[2])
       return {background_, 0.f, 0.f, 0.f};
-    return data_[std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
+    if (mode_ == Mode::kDense)
+      return data_[std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
+    const std::uint32_t e = brick_entry(x, y, z);
+    if (e & BrickStore::kUniform) return tiles_[e & ~BrickStore::kUniform];
+    const std::size_t i = std::size_t(e) * kBrickSamples + local_offset(x, y, z);
+    return mode_ == Mode::kBricked ? data_[i] : store_->decode_compact(compact_[i], e);
   }
 
  private:
@@ -195,7 +228,8 @@ class FieldView {
       inner(idx.x, grid_.dims[0], i0[0], f[0]);
       inner(idx.y, grid_.dims[1], i0[1], f[1]);
       inner(idx.z, grid_.dims[2], i0[2], f[2]);
-      const CellRef c = cell(i0[0], i0[1], i0[2]);
+      Sample scratch[8];
+      const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
       const Sample* s = c.base;
       const std::size_t sx = c.sx, sy = c.sy, sz = c.sz;
       const double c00 = lerp(s[0].value, s[sx].value, f[0]);
@@ -268,17 +302,82 @@ class FieldView {
     return true;
   }
   /// The memory seam (see class docs): the in-grid cell with lower corner (x, y, z).
-  CellRef cell(int x, int y, int z) const {
-    return {data_ + std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2], step_[0], step_[1],
-            step_[2]};
+  /// Dense: a pointer into the samples. Bricked (one table lookup, the cell's brick is the
+  /// one holding its lower corner): an active brick gives a pointer into its 9^3 stored
+  /// samples, strides (1, 9, 81); a uniform one its tile, strides 0. Compact formats decode
+  /// the 8 corners into `scratch`, strides (1, 2, 4). A 1-voxel axis has stride 0 (dense
+  /// and bricked alike: its upper corner has weight 0 and is never read).
+  [[gnu::always_inline]] CellRef cell(int x, int y, int z, Sample (&scratch)[8]) const {
+    if (mode_ == Mode::kDense)
+      return {data_ + std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2], step_[0], step_[1],
+              step_[2]};
+    const std::uint32_t e = brick_entry(x, y, z);
+    if (e & BrickStore::kUniform) return {tiles_ + (e & ~BrickStore::kUniform), 0, 0, 0};
+    const std::size_t i = std::size_t(e) * kBrickSamples + local_offset(x, y, z);
+    if (mode_ == Mode::kBricked) return {data_ + i, step_[0], step_[1], step_[2]};
+    return decode_cell(e, i, scratch);
+  }
+  /// Compact formats: the 8 corners of the cell at pool index `i` of slot `slot`, decoded.
+  [[gnu::noinline]] CellRef decode_cell(std::uint32_t slot, std::size_t i, Sample (&scratch)[8]) const {
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < 2; ++j)
+        for (int l = 0; l < 2; ++l)
+          scratch[l + 2 * j + 4 * k] =
+              store_->decode_compact(compact_[i + (l ? step_[0] : 0) + (j ? step_[1] : 0) + (k ? step_[2] : 0)], slot);
+    return {scratch, 1, 2, 4};
+  }
+  /// Table entry of the brick holding in-grid voxel (x, y, z).
+  std::uint32_t brick_entry(int x, int y, int z) const {
+    return table_[std::size_t(z >> 3) * nbxy_ + std::size_t(y >> 3) * nbx_ + std::size_t(x >> 3)];
+  }
+  /// Offset of voxel (x, y, z) in its brick's stored samples: i + 9 j + 81 k.
+  static std::size_t local_offset(int x, int y, int z) {
+    return std::size_t(x & 7) + std::size_t(kBrickStored) * std::size_t(y & 7) +
+           std::size_t(kBrickStored * kBrickStored) * std::size_t(z & 7);
+  }
+  /// Set up the bricked mode; an inconsistent store (table size, missing pool) gives an
+  /// empty view.
+  void init_bricked(const BrickStore& b) {
+    const std::array<int, 3> nb = {(grid_.dims[0] + 7) / 8, (grid_.dims[1] + 7) / 8, (grid_.dims[2] + 7) / 8};
+    if (b.bricks != nb || b.table.size() != std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2])) return;
+    const std::size_t slots = b.active_bricks();
+    if (b.format == SampleFormat::kFp32) {
+      if (!b.pool || b.pool->size() < slots * kBrickSamples) return;
+      data_ = b.pool->data();
+      mode_ = Mode::kBricked;
+    } else {
+      if (!b.compact || b.compact->size() < slots * kBrickSamples) return;
+      if (b.format == SampleFormat::kUnorm16 && b.decode.size() < slots) return;
+      compact_ = b.compact->data();
+      mode_ = Mode::kBrickedCompact;
+    }
+    store_ = &b;
+    table_ = b.table.data();
+    tiles_ = b.tiles.data();
+    nbx_ = std::size_t(nb[0]);
+    nbxy_ = std::size_t(nb[0]) * std::size_t(nb[1]);
+    const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
+    for (int a = 0; a < 3; ++a) {
+      last_[a] = double(grid_.dims[a] - 1);
+      step_[a] = grid_.dims[a] > 1 ? st[a] : 0;
+    }
   }
 
+  enum class Mode : std::uint8_t { kEmpty, kDense, kBricked, kBrickedCompact };
+
   Grid grid_;
-  const Sample* data_ = nullptr;
-  std::size_t stride_[3] = {0, 0, 0};  ///< x (always 1), y, z element strides
-  std::size_t step_[3] = {0, 0, 0};    ///< stride, or 0 on a 1-voxel axis
+  Mode mode_ = Mode::kEmpty;
+  const Sample* data_ = nullptr;       ///< dense: the samples; kBricked: the fp32 pool
+  std::size_t stride_[3] = {0, 0, 0};  ///< dense: x (always 1), y, z element strides
+  std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; bricked: 1, 9, 81), 0 on a 1-voxel axis
   double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
+  // Bricked mode (BrickStore): the table, the tiles, the compact pool and its decoder.
+  const std::uint32_t* table_ = nullptr;
+  const Sample* tiles_ = nullptr;
+  const CompactSample* compact_ = nullptr;
+  const BrickStore* store_ = nullptr;
+  std::size_t nbx_ = 0, nbxy_ = 0;     ///< bricks along x; along x times along y
 };
 
 }  // namespace isotouch::core

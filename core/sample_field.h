@@ -1,8 +1,13 @@
-// sample_field.h - the plane-ready sample format the engine publishes and the servo reads.
+// sample_field.h - the plane-ready sample format the engine publishes and the servo reads,
+// dense or bricked (issue 8 items 4 and 5), and how to decode a stored sample.
 // Part of isotouch::core (engine/ writes it, servo/ reads it through core::FieldView).
+// Building a bricked field (the builders, the encoders, byte accounting) is brick_field.h.
 #pragma once
+#include <array>
+#include <bit>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "grid.h"
@@ -21,12 +26,110 @@ struct Sample {
 };
 static_assert(sizeof(Sample) == 16, "Sample must match GLSL vec4");
 
-/// The dense sample field: one Sample per voxel, x fastest, then y, then z.
-/// Immutable once published (engine/ publishes a new one after each edit). Read it
-/// through core::FieldView (field_view.h).
+// ---- Bricks (the layout is documented in brick_field.h) ---------------------------------
+inline constexpr int kBrickSize = 8;                      ///< voxels per brick edge
+inline constexpr int kBrickStored = kBrickSize + 1;       ///< stored samples per edge (+1 apron)
+inline constexpr int kBrickSamples = kBrickStored * kBrickStored * kBrickStored;  ///< 729
+
+/// How the samples of active bricks are stored (item 5).
+enum class SampleFormat : std::uint8_t {
+  kFp32,     ///< core::Sample, 16 B per sample
+  kFp16,     ///< value + gradient as IEEE half, 8 B per sample (gradient scaled, see CompactSample)
+  kUnorm16,  ///< per-brick normalized 16-bit integers, 8 B per sample (see BrickDecode)
+};
+
+/// "fp32" / "fp16" / "unorm16".
+constexpr const char* to_string(SampleFormat f) {
+  return f == SampleFormat::kFp32 ? "fp32" : (f == SampleFormat::kFp16 ? "fp16" : "unorm16");
+}
+
+/// A compact sample (8 bytes), meaning set by the brick store's format:
+/// - kFp16: `value` = IEEE binary16 of the value; `g[a]` = binary16 of gradient[a] *
+///   spacing_m[a], the gradient per voxel step [value units / voxel] (1000 HU/mm is 1e6 HU/m,
+///   beyond binary16's 65504, but 1000 HU per 1 mm voxel). Decoded by half_to_float and a
+///   multiply by 1/spacing (BrickStore::fp16_unscale).
+/// - kUnorm16: q in 0..65534 -> offset + q * scale with the brick's BrickDecode per channel;
+///   65535 is NaN (non-finite values and the apron beyond the grid).
+struct CompactSample {
+  std::uint16_t value;
+  std::uint16_t g[3];
+};
+static_assert(sizeof(CompactSample) == 8, "compact samples are 8 bytes");
+
+/// kUnorm16 decode parameters of one active brick, per channel (value, gx, gy, gz):
+/// decoded = offset[c] + q * scale[c] (float arithmetic), q = 65535 -> NaN.
+struct BrickDecode {
+  float offset[4];
+  float scale[4];
+};
+static_assert(sizeof(BrickDecode) == 32, "");
+
+inline constexpr std::uint16_t kUnormNaN = 0xffff;  ///< the kUnorm16 NaN code
+inline constexpr std::uint16_t kUnormMax = 0xfffe;  ///< largest kUnorm16 level (65534)
+
+/// IEEE binary16 -> float, exact (subnormals, +-Inf and NaN included). No table, no branch
+/// on the normal path: the 15 magnitude bits shifted into a float and scaled by 2^112.
+inline float half_to_float(std::uint16_t h) {
+  const std::uint32_t sign = std::uint32_t(h & 0x8000u) << 16;
+  const std::uint32_t m = std::uint32_t(h & 0x7fffu) << 13;
+  const float mag = m >= 0x0f800000u ? std::bit_cast<float>(m | 0x7f800000u)   // Inf / NaN
+                                     : std::bit_cast<float>(m) * 0x1p112f;      // exact
+  return std::bit_cast<float>(std::bit_cast<std::uint32_t>(mag) | sign);
+}
+
+/// kUnorm16 decode of one channel (see BrickDecode).
+inline float unorm16_to_float(std::uint16_t q, float offset, float scale) {
+  return q == kUnormNaN ? std::numeric_limits<float>::quiet_NaN() : offset + float(q) * scale;
+}
+
+/// The bricked snapshot (items 4 and 5): a brick table, a pool of active bricks and the
+/// uniform bricks' tiles. Immutable once built (brick_field.h: make_bricked_field); shared
+/// through std::shared_ptr<const BrickStore>. The pool is itself held by shared_ptr so that
+/// a later snapshot can reference it (issue 9: unchanged bricks shared between snapshots).
+struct BrickStore {
+  /// Table entry flag: the brick is uniform; the low 31 bits index `tiles`.
+  static constexpr std::uint32_t kUniform = 0x80000000u;
+
+  std::array<int, 3> bricks{0, 0, 0};     ///< bricks per axis, ceil(dims / 8)
+  SampleFormat format = SampleFormat::kFp32;
+  /// One entry per brick, linear id (bz * nby + by) * nbx + bx: the pool slot of an
+  /// active brick (its samples start at slot * kBrickSamples), or kUniform | tile index.
+  std::vector<std::uint32_t> table;
+  /// {tile value, 0, 0, 0} per uniform brick (fp32 in every format: the side of the
+  /// isosurface a uniform brick reads is exact).
+  std::vector<Sample> tiles;
+  std::shared_ptr<const std::vector<Sample>> pool;            ///< kFp32: slots * 729 samples
+  std::shared_ptr<const std::vector<CompactSample>> compact;  ///< kFp16 / kUnorm16: slots * 729
+  std::vector<BrickDecode> decode;                            ///< kUnorm16: one per slot
+  /// kFp16: 1 / spacing_m per axis [1/m]: gradient = half_to_float(g[a]) * fp16_unscale[a].
+  std::array<float, 3> fp16_unscale{1.f, 1.f, 1.f};
+
+  std::size_t total_bricks() const { return table.size(); }
+  std::size_t active_bricks() const { return table.size() - tiles.size(); }
+  /// Sample `local` (0..728, i + 9 j + 81 k) of active slot `slot`, decoded to fp32.
+  Sample stored(std::uint32_t slot, std::size_t local) const {
+    const std::size_t i = std::size_t(slot) * kBrickSamples + local;
+    if (format == SampleFormat::kFp32) return (*pool)[i];
+    return decode_compact((*compact)[i], slot);
+  }
+  /// A compact sample of slot `slot` decoded (kFp16 or kUnorm16).
+  Sample decode_compact(const CompactSample& c, std::uint32_t slot) const {
+    if (format == SampleFormat::kFp16)
+      return {half_to_float(c.value), half_to_float(c.g[0]) * fp16_unscale[0],
+              half_to_float(c.g[1]) * fp16_unscale[1], half_to_float(c.g[2]) * fp16_unscale[2]};
+    const BrickDecode& d = decode[slot];
+    return {unorm16_to_float(c.value, d.offset[0], d.scale[0]), unorm16_to_float(c.g[0], d.offset[1], d.scale[1]),
+            unorm16_to_float(c.g[1], d.offset[2], d.scale[2]), unorm16_to_float(c.g[2], d.offset[3], d.scale[3])};
+  }
+};
+
+/// The published sample field: dense (one Sample per voxel, x fastest, then y, then z) or
+/// bricked (`bricks` set, `samples` empty). Immutable once published (engine/ publishes a
+/// new one after each edit). Read it through core::FieldView (field_view.h), which reads
+/// both the same way.
 struct SampleField {
   Grid grid;
-  std::vector<Sample> samples;  ///< grid.voxel_count() entries
+  std::vector<Sample> samples;  ///< dense: grid.voxel_count() entries; bricked: empty
   std::uint64_t version = 0;    ///< increases with every publication
   /// The value of every voxel outside the grid (its gradient is zero there): FieldView
   /// interpolates toward it across the border cells instead of clamping to the edge.
@@ -35,17 +138,38 @@ struct SampleField {
   /// isosurface sets a finite outside value (Isosurface::outside_value), which closes an
   /// object cut by the volume border with a surface half a voxel beyond the last sample.
   float background = std::numeric_limits<float>::quiet_NaN();
+  /// The bricked representation (brick_field.h: make_bricked_field); null for a dense field.
+  std::shared_ptr<const BrickStore> bricks;
+
+  bool bricked() const { return bricks != nullptr; }
 };
 
 /// The background value that puts everything outside `f`'s grid outside `iso`:
 /// Isosurface::outside_value over the finite sample values (tau itself when there are
 /// none). A scan of the samples: call it when publishing, never in the servo tick.
+/// Bricked: the stored values inside the grid (pool, decoded) and the tiles. A tile keeps
+/// only one bound of its brick's range, so the result can be nearer tau than on the dense
+/// field the bricks came from (it is outside `iso` all the same).
 inline float outside_background(const SampleField& f, const Isosurface& iso) {
   double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (const Sample& s : f.samples) {
-    if (!(s.value == s.value) || s.value - s.value != 0.0f) continue;  // NaN or Inf
-    lo = s.value < lo ? s.value : lo;
-    hi = s.value > hi ? s.value : hi;
+  auto add = [&](float v) {
+    if (!(v == v) || v - v != 0.0f) return;  // NaN or Inf
+    lo = v < lo ? v : lo;
+    hi = v > hi ? v : hi;
+  };
+  for (const Sample& s : f.samples) add(s.value);
+  if (f.bricks) {
+    const BrickStore& b = *f.bricks;
+    for (const Sample& t : b.tiles) add(t.value);
+    for (std::size_t id = 0; id < b.table.size(); ++id) {
+      if (b.table[id] & BrickStore::kUniform) continue;
+      const int bx = int(id % std::size_t(b.bricks[0])), by = int(id / std::size_t(b.bricks[0]) % std::size_t(b.bricks[1])),
+                bz = int(id / (std::size_t(b.bricks[0]) * std::size_t(b.bricks[1])));
+      for (int k = 0; k < kBrickStored && kBrickSize * bz + k < f.grid.dims[2]; ++k)
+        for (int j = 0; j < kBrickStored && kBrickSize * by + j < f.grid.dims[1]; ++j)
+          for (int i = 0; i < kBrickStored && kBrickSize * bx + i < f.grid.dims[0]; ++i)
+            add(b.stored(b.table[id], std::size_t(i + kBrickStored * j + kBrickStored * kBrickStored * k)).value);
+    }
   }
   return float(iso.outside_value(lo, hi));
 }

@@ -1,15 +1,1001 @@
+// bench_engine.cpp - `isotouch bench engine` (issue 8, item 7). See bench_engine.h.
 #include "bench_engine.h"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+#include "files.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+#ifndef ISOTOUCH_SOURCE_DIR
+#define ISOTOUCH_SOURCE_DIR "."
+#endif
 
 namespace isotouch::app {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Formulas
+
+std::uint64_t pass_min_bytes(engine::PassKind kind, std::uint64_t voxels, std::uint64_t bricks) {
+  switch (kind) {
+    case engine::PassKind::Gaussian:
+    case engine::PassKind::Closing: return voxels * 4 + voxels * 4;
+    case engine::PassKind::Gradient: return voxels * 4 + voxels * sizeof(core::Sample);
+    case engine::PassKind::BrickMinMax: return voxels * 4 + bricks * 8;
+  }
+  return 0;
+}
+
+double gb_per_s(double bytes, double ms) {
+  if (!(ms > 0) || !std::isfinite(ms)) return kNaN;
+  return bytes / (ms * 1e-3) / 1e9;
+}
+
+double measure_memcpy_gbps(std::size_t bytes, int tries) {
+  std::vector<unsigned char> src(bytes), dst(bytes);
+  for (std::size_t i = 0; i < bytes; i += 64) src[i] = static_cast<unsigned char>(i >> 6);
+  std::memset(dst.data(), 1, bytes);  // fault every page in before timing
+  double best_ms = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < std::max(1, tries); ++t) {
+    const auto t0 = Clock::now();
+    std::memcpy(dst.data(), src.data(), bytes);
+    best_ms = std::min(best_ms, ms_since(t0));
+  }
+  volatile unsigned char sink = dst[bytes / 2];  // keep the copy
+  (void)sink;
+  return gb_per_s(2.0 * double(bytes), best_ms);
+}
+
+double median(std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return std::isnan(x); }), v.end());
+  if (v.empty()) return kNaN;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+double ratio(double a, double b) {
+  if (!std::isfinite(a) || !std::isfinite(b) || !(b > 0)) return kNaN;
+  return a / b;
+}
+
+// ---------------------------------------------------------------------------------------
+// Verdicts
+
+Verdict verdict_at_most(const std::string& what, double value, double target, int digits,
+                        const std::string& why_missing) {
+  Verdict v;
+  std::ostringstream o;
+  o << std::fixed << std::setprecision(digits);
+  if (!std::isfinite(value)) {
+    o << what << ": not measured" << (why_missing.empty() ? "" : " (" + why_missing + ")") << "; target <= "
+      << target;
+    v.text = o.str();
+    return v;
+  }
+  v.measured = true;
+  v.met = value <= target;
+  o << what << " = " << value << ": target <= " << target << (v.met ? " met" : " NOT met");
+  v.text = o.str();
+  return v;
+}
+
+// ---------------------------------------------------------------------------------------
+// Child processes
+
+namespace {
+// Parent side: read the child's stdout to EOF, reap it with wait4.
+ChildRun collect(pid_t pid, int out_fd, Clock::time_point t0) {
+  ChildRun r;
+  r.started = true;
+  char buf[4096];
+  for (;;) {
+    const ssize_t n = ::read(out_fd, buf, sizeof buf);
+    if (n > 0) {
+      r.out.append(buf, std::size_t(n));
+      continue;
+    }
+    if (n < 0 && errno == EINTR) continue;
+    break;
+  }
+  ::close(out_fd);
+  int status = 0;
+  rusage ru{};
+  pid_t w;
+  do w = ::wait4(pid, &status, 0, &ru);
+  while (w < 0 && errno == EINTR);
+  r.wall_ms = ms_since(t0);
+  if (w < 0) {
+    r.error = std::string("wait4: ") + std::strerror(errno);
+    return r;
+  }
+  r.peak_rss_bytes = std::uint64_t(ru.ru_maxrss) * 1024;  // Linux: KiB
+  if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
+  return r;
+}
+}  // namespace
+
+ChildRun run_child_fork(const std::function<int()>& body) {
+  int p[2];
+  if (::pipe2(p, O_CLOEXEC) != 0) return {false, -1, 0, kNaN, 0, {}, std::string("pipe: ") + std::strerror(errno)};
+  std::cout.flush();
+  std::cerr.flush();
+  std::fflush(nullptr);
+  const auto t0 = Clock::now();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(p[0]);
+    ::close(p[1]);
+    return {false, -1, 0, kNaN, 0, {}, std::string("fork: ") + std::strerror(errno)};
+  }
+  if (pid == 0) {
+    ::dup2(p[1], STDOUT_FILENO);
+    ::close(p[0]);
+    int rc = 1;
+    try {
+      rc = body();
+    } catch (...) {
+      rc = 1;
+    }
+    std::cout.flush();
+    std::fflush(nullptr);
+    ::_exit(rc);
+  }
+  ::close(p[1]);
+  return collect(pid, p[0], t0);
+}
+
+ChildRun run_child_exec(const std::vector<std::string>& argv) {
+  if (argv.empty()) return {false, -1, 0, kNaN, 0, {}, "no program"};
+  std::vector<char*> args;
+  for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  int p[2];
+  if (::pipe2(p, O_CLOEXEC) != 0) return {false, -1, 0, kNaN, 0, {}, std::string("pipe: ") + std::strerror(errno)};
+  std::cout.flush();
+  std::cerr.flush();
+  std::fflush(nullptr);
+  const auto t0 = Clock::now();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(p[0]);
+    ::close(p[1]);
+    return {false, -1, 0, kNaN, 0, {}, std::string("fork: ") + std::strerror(errno)};
+  }
+  if (pid == 0) {
+    ::dup2(p[1], STDOUT_FILENO);  // dup2 clears O_CLOEXEC on the new descriptor
+    ::execv(args[0], args.data());
+    ::_exit(127);
+  }
+  ::close(p[1]);
+  ChildRun r = collect(pid, p[0], t0);
+  if (r.exit_code == 127) r.error = "could not execute " + argv[0] + " (exit 127)";
+  return r;
+}
+
+std::uint64_t self_peak_rss_bytes() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::uint64_t(std::stoull(line.substr(6))) * 1024;  // "... kB"
+  return 0;
+}
+
+std::map<std::string, std::string> parse_key_values(const std::string& text) {
+  std::map<std::string, std::string> kv;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto eq = line.find('=');
+    if (eq == std::string::npos || eq == 0) continue;
+    kv[line.substr(0, eq)] = line.substr(eq + 1);
+  }
+  return kv;
+}
+
+// ---------------------------------------------------------------------------------------
+// Volumes
+
+namespace {
+std::uint64_t splitmix64(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ull;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+}  // namespace
+
+engine::Volume make_noisy_sphere(int n, double spacing_m, double noise_mm, std::uint32_t seed) {
+  engine::Volume v = engine::make_sphere({n, n, n}, spacing_m, 0.375 * n);
+  const std::uint64_t s = std::uint64_t(seed) << 40;
+  for (std::size_t i = 0; i < v.voxels.size(); ++i) {
+    const double u = double(splitmix64(s ^ i) >> 40) / double(1ull << 24);  // [0, 1)
+    v.voxels[i] += float((2.0 * u - 1.0) * noise_mm);
+  }
+  v.update_stats();
+  std::ostringstream name;
+  name << "synthetic:noisy-sphere(" << n << "^3, r=" << 0.375 * n << " vox, noise +-" << noise_mm << " mm)";
+  v.path = name.str();
+  return v;
+}
+
+std::vector<engine::PassDesc> sparse_list(bool with_closing) {
+  std::vector<engine::PassDesc> l = {engine::PassDesc::gaussian(1.0)};
+  if (with_closing) l.push_back(engine::PassDesc::closing(1.0));
+  l.push_back(engine::PassDesc::gradient());
+  return l;
+}
+
+std::vector<engine::PassDesc> dense_list(bool with_closing) {
+  auto l = sparse_list(with_closing);
+  l.push_back(engine::PassDesc::brick_minmax(1));
+  return l;
+}
+
+// ---------------------------------------------------------------------------------------
+// One case
+
+namespace {
+std::string list_label(const std::vector<engine::PassDesc>& l) {
+  std::string s;
+  for (const auto& p : l) s += (s.empty() ? "" : " + ") + p.label();
+  return s;
+}
+
+std::string format_name(core::SampleFormat f) {
+  switch (f) {
+    case core::SampleFormat::kFp32: return "fp32";
+    case core::SampleFormat::kFp16: return "fp16";
+    case core::SampleFormat::kUnorm16: return "unorm16";
+  }
+  return "?";
+}
+
+// Timed samples of one sparse engine at one isovalue.
+struct SparseSamples {
+  bool ok = true;
+  std::string why;
+  std::vector<double> total;
+  std::vector<std::vector<double>> stage;
+  std::vector<std::string> labels;
+  engine::SparseStats stats;
+  void add(const engine::SparseOutput& o) {
+    total.push_back(o.total_ms);
+    if (stage.size() < o.passes.size()) stage.resize(o.passes.size());
+    labels.resize(std::max(labels.size(), o.passes.size()));
+    for (std::size_t i = 0; i < o.passes.size(); ++i) {
+      stage[i].push_back(o.passes[i].ms >= 0 ? o.passes[i].ms : kNaN);
+      labels[i] = o.passes[i].label;
+    }
+    stats = o.stats;
+  }
+  SparseCell cell() const {
+    SparseCell c;
+    c.available = ok && !total.empty();
+    c.why = ok ? (total.empty() ? "no run" : "") : why;
+    if (!c.available) return c;
+    c.total_ms = median(total);
+    c.stage_labels = labels;
+    for (const auto& s : stage) c.stage_ms.push_back(median(s));
+    c.stats = stats;
+    return c;
+  }
+};
+
+// Runs `f` and records a failure in `s` instead of throwing.
+template <class F>
+void guarded(SparseSamples& s, F&& f) {
+  if (!s.ok) return;
+  try {
+    f();
+  } catch (const std::exception& e) {
+    s.ok = false;
+    s.why = e.what();
+  }
+}
+}  // namespace
+
+CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
+                    int repetitions, double memcpy_gbps, std::ostream& progress) {
+  const engine::Volume& v = *c.volume;
+  const auto dense = dense_list(with_closing), sparse = sparse_list(with_closing);
+  CaseResult r;
+  r.name = c.name;
+  r.source = c.source;
+  r.list_label = list_label(dense);
+  r.dims = v.grid.dims;
+  r.voxels = v.grid.voxel_count();
+  const auto bc = core::brick_counts(v.grid);
+  r.bricks = std::uint64_t(bc[0]) * std::uint64_t(bc[1]) * std::uint64_t(bc[2]);
+  r.memcpy_gbps = memcpy_gbps;
+  r.gpu_why = gpu_why;
+
+  std::unique_ptr<engine::PassChain> chain;
+  std::unique_ptr<engine::SparseChain> schain;
+  std::string sparse_why = gpu_why;
+  if (ctx) {
+    try {
+      auto cr = engine::PassChain::create(*ctx, dense);
+      if (cr) chain = std::move(*cr.value);
+      else r.gpu_why = cr.error;
+    } catch (const std::exception& e) {
+      r.gpu_why = e.what();
+    }
+    try {
+      auto sr = engine::SparseChain::create(*ctx, sparse);
+      if (sr) schain = std::move(*sr.value);
+      else sparse_why = sr.error;
+    } catch (const std::exception& e) {
+      sparse_why = e.what();
+    }
+  }
+  const std::size_t np = dense.size(), ni = c.isos.size();
+  std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np);
+  std::vector<double> gpu_wall, cpu_wall;
+  std::vector<SparseSamples> sg(ni), sc(ni);
+  std::vector<float> bg(ni);
+  for (std::size_t k = 0; k < ni; ++k) {
+    bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
+    if (!schain) sg[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
+  }
+  // Warm-up (untimed): first dispatches, allocations, lazy pipeline compiles.
+  if (chain) {
+    progress << "[bench engine] " << c.name << ": warm-up\n" << std::flush;
+    try {
+      (void)chain->run(v);
+    } catch (const std::exception& e) {
+      r.gpu_why = e.what();
+      chain.reset();
+    }
+  }
+  for (std::size_t k = 0; k < ni; ++k) guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
+
+  for (int rep = 0; rep < repetitions; ++rep) {
+    progress << "[bench engine] " << c.name << " (" << v.grid.dims[0] << "x" << v.grid.dims[1] << "x"
+             << v.grid.dims[2] << "): repetition " << rep + 1 << "/" << repetitions << "\n"
+             << std::flush;
+    if (chain) {
+      const auto t0 = Clock::now();
+      const engine::ChainOutput g = chain->run(v);
+      gpu_wall.push_back(ms_since(t0));
+      for (std::size_t i = 0; i < np && i < g.passes.size(); ++i)
+        gpu_ms[i].push_back(g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN);
+    }
+    {
+      const auto t0 = Clock::now();
+      const engine::ChainOutput h = engine::run_chain_cpu(v, dense);
+      cpu_wall.push_back(ms_since(t0));
+      for (std::size_t i = 0; i < np && i < h.passes.size(); ++i) cpu_ms[i].push_back(h.passes[i].ms);
+    }
+    for (std::size_t k = 0; k < ni; ++k) {
+      guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
+      guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
+    }
+  }
+  r.gpu_available = chain != nullptr;
+  for (std::size_t i = 0; i < np; ++i) {
+    PassRow p;
+    p.label = dense[i].label();
+    p.min_bytes = pass_min_bytes(dense[i].kind, r.voxels, r.bricks);
+    p.gpu_ms = median(gpu_ms[i]);
+    p.cpu_ms = median(cpu_ms[i]);
+    r.passes.push_back(p);
+  }
+  r.dense_gpu_wall_ms = median(gpu_wall);
+  r.dense_cpu_wall_ms = median(cpu_wall);
+
+  for (std::size_t k = 0; k < ni; ++k) {
+    IsoResult ir;
+    ir.iso = c.isos[k];
+    ir.gpu = sg[k].cell();
+    ir.cpu = sc[k].cell();
+    if (ir.gpu.available && ir.cpu.available) {
+      const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
+      if (a.bricks_total == b.bricks_total && a.candidates == b.candidates && a.active == b.active &&
+          a.snapshot_bytes == b.snapshot_bytes)
+        ir.gpu_cpu_counts = "same";
+      else {
+        std::ostringstream o;
+        o << "differ: GPU " << a.candidates << "/" << a.active << "/" << a.snapshot_bytes << " B, CPU " << b.candidates
+          << "/" << b.active << "/" << b.snapshot_bytes << " B (candidates/active/bytes)";
+        ir.gpu_cpu_counts = o.str();
+      }
+    }
+    for (const auto f : {core::SampleFormat::kFp32, core::SampleFormat::kFp16, core::SampleFormat::kUnorm16}) {
+      FormatBytes fb;
+      fb.format = f;
+      auto take = [&](const engine::SparseStats& s, const char* eng) {
+        fb.available = true;
+        fb.engine = eng;
+        fb.snapshot_bytes = s.snapshot_bytes;
+        fb.dense_fp32_bytes = s.dense_fp32_bytes;
+      };
+      if (f == core::SampleFormat::kFp32 && (ir.gpu.available || ir.cpu.available)) {
+        take(ir.gpu.available ? ir.gpu.stats : ir.cpu.stats, ir.gpu.available ? "GPU" : "CPU reference");
+      } else {
+        std::string why;
+        if (ir.gpu.available) {
+          try {
+            take(schain->run(v, c.isos[k], bg[k], f).stats, "GPU");
+          } catch (const std::exception& e) {
+            why = std::string("GPU: ") + e.what();
+          }
+        }
+        if (!fb.available && ir.cpu.available) {
+          try {
+            take(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k], f).stats, "CPU reference");
+          } catch (const std::exception& e) {
+            why += (why.empty() ? "" : "; ") + std::string("CPU: ") + e.what();
+          }
+        }
+        if (!fb.available) fb.why = why.empty() ? "sparse: not available (" + ir.gpu.why + ")" : why;
+      }
+      ir.formats.push_back(fb);
+    }
+    r.isos.push_back(ir);
+  }
+  finish_case(r);
+  return r;
+}
+
+void finish_case(CaseResult& r) {
+  auto derive = [&](PassRow& p) {
+    p.gpu_gbps = gb_per_s(double(p.min_bytes), p.gpu_ms);
+    p.cpu_gbps = gb_per_s(double(p.min_bytes), p.cpu_ms);
+    p.gpu_of_memcpy = ratio(p.gpu_gbps, r.memcpy_gbps);
+    p.cpu_of_memcpy = ratio(p.cpu_gbps, r.memcpy_gbps);
+    p.gpu_over_cpu = ratio(p.gpu_ms, p.cpu_ms);
+  };
+  PassRow sum;
+  sum.label = "sum of passes";
+  sum.gpu_ms = sum.cpu_ms = 0;
+  for (PassRow& p : r.passes) {
+    derive(p);
+    sum.min_bytes += p.min_bytes;
+    sum.gpu_ms += p.gpu_ms;  // NaN if any pass has no time
+    sum.cpu_ms += p.cpu_ms;
+  }
+  if (r.passes.empty()) sum.gpu_ms = sum.cpu_ms = kNaN;
+  derive(sum);
+  r.sum = sum;
+  r.dense_gpu_over_cpu_wall = ratio(r.dense_gpu_wall_ms, r.dense_cpu_wall_ms);
+  for (IsoResult& ir : r.isos) {
+    const SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
+    if (s && s->stats.bricks_total > 0) {
+      ir.active_percent = 100.0 * double(s->stats.active) / double(s->stats.bricks_total);
+      ir.candidate_percent = 100.0 * double(s->stats.candidates) / double(s->stats.bricks_total);
+    }
+    for (FormatBytes& f : ir.formats)
+      f.percent = f.available && f.dense_fp32_bytes > 0 ? 100.0 * double(f.snapshot_bytes) / double(f.dense_fp32_bytes)
+                                                        : kNaN;
+    ir.sparse_gpu_over_dense_cpu = ratio(ir.gpu.total_ms, r.dense_cpu_wall_ms);
+    ir.sparse_cpu_over_dense_cpu = ratio(ir.cpu.total_ms, r.dense_cpu_wall_ms);
+    ir.sparse_gpu_over_dense_gpu = ratio(ir.gpu.total_ms, r.dense_gpu_wall_ms);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// 512^3 end to end
+
+int run_big_child(int n, const std::string& device, std::ostream& out, std::ostream& progress) {
+  out << "dim=" << n << "\n";
+  progress << "[bench engine] " << n << "^3: making the noisy sphere\n" << std::flush;
+  auto t0 = Clock::now();
+  const engine::Volume v = make_noisy_sphere(n, 1e-3);
+  out << "make_ms=" << ms_since(t0) << "\n";
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(v.min_value, v.max_value));
+  const auto list = sparse_list(false);
+  std::string note;
+  bool done = false;
+  engine::SparseStats st;
+  try {
+    t0 = Clock::now();
+    engine::ContextOptions co;
+    co.device = device;
+    auto ctx = engine::VulkanContext::create(co);
+    if (!ctx) throw std::runtime_error("Vulkan: " + ctx.error);
+    auto chain = engine::SparseChain::create(**ctx.value, list);
+    if (!chain) throw std::runtime_error(chain.error);
+    out << "setup_ms=" << ms_since(t0) << "\n" << "device=" << (*ctx.value)->info().name << "\n";
+    progress << "[bench engine] " << n << "^3: sparse GPU chain\n" << std::flush;
+    t0 = Clock::now();
+    const engine::SparseOutput o = (*chain.value)->run(v, iso, bg);
+    out << "step_ms=" << ms_since(t0) << "\n" << "engine=sparse GPU\n";
+    st = o.stats;
+    done = true;
+  } catch (const std::exception& e) {
+    note = std::string("sparse GPU: not available (") + e.what() + ")";
+  }
+  if (!done) {
+    try {
+      progress << "[bench engine] " << n << "^3: sparse CPU reference\n" << std::flush;
+      t0 = Clock::now();
+      const engine::SparseOutput o = engine::run_sparse_cpu(v, list, iso, bg);
+      out << "step_ms=" << ms_since(t0) << "\n" << "engine=sparse CPU reference\n";
+      st = o.stats;
+      done = true;
+    } catch (const std::exception& e) {
+      note += std::string("; sparse CPU: not available (") + e.what() + ")";
+    }
+  }
+  if (done)
+    out << "snapshot_bytes=" << st.snapshot_bytes << "\n" << "dense_fp32_bytes=" << st.dense_fp32_bytes << "\n"
+        << "bricks_total=" << st.bricks_total << "\n" << "candidates=" << st.candidates << "\n"
+        << "active=" << st.active << "\n";
+  out << "note=" << note << "\n" << "vm_hwm_bytes=" << self_peak_rss_bytes() << "\n" << std::flush;
+  return done ? 0 : 3;
+}
+
+namespace {
+BigResult run_big(const BenchEngineOptions& o, std::ostream& progress) {
+  BigResult b;
+  b.dim = o.big_dim;
+  std::vector<std::string> argv = {o.self_exe, "bench", "engine", "--big-child", std::to_string(o.big_dim)};
+  if (!o.device.empty()) argv.insert(argv.end(), {"--device", o.device});
+  progress << "[bench engine] " << o.big_dim << "^3 end to end in a child process (" << o.self_exe << ")\n"
+           << std::flush;
+  b.child = run_child_exec(argv);
+  b.kv = parse_key_values(b.child.out);
+  if (!b.child.started) b.note = b.child.error;
+  else if (b.child.signal) b.note = "child killed by signal " + std::to_string(b.child.signal);
+  else if (b.child.exit_code != 0) b.note = "child exit code " + std::to_string(b.child.exit_code);
+  if (b.kv.count("note") && !b.kv["note"].empty()) b.note += (b.note.empty() ? "" : "; ") + b.kv["note"];
+  return b;
+}
+
+// ---------------------------------------------------------------------------------------
+// Report
+
+std::string num(double x, int prec = 2) {
+  if (!std::isfinite(x)) return "n/a";
+  std::ostringstream o;
+  o << std::fixed << std::setprecision(prec) << x;
+  return o.str();
+}
+std::string mib(std::uint64_t b) { return num(double(b) / (1024.0 * 1024.0), 2); }
+std::string tau_text(const core::Isosurface& iso) {
+  std::ostringstream o;
+  o << (iso.tau > 0 ? "+" : "") << iso.tau;
+  return o.str();
+}
+
+// One CSV (long form: one figure per row).
+struct Csv {
+  std::ostringstream s;
+  Csv() { s << "table,case,tau,row,column,value,unit,device\n"; }
+  static std::string q(const std::string& x) {
+    if (x.find_first_of(",\"\n") == std::string::npos) return x;
+    std::string r = "\"";
+    for (char c : x) r += c == '"' ? std::string("\"\"") : std::string(1, c);
+    return r + "\"";
+  }
+  void row(const std::string& table, const std::string& cs, const std::string& tau, const std::string& r,
+           const std::string& col, const std::string& value, const std::string& unit, const std::string& dev) {
+    s << q(table) << ',' << q(cs) << ',' << q(tau) << ',' << q(r) << ',' << q(col) << ',' << q(value) << ','
+      << q(unit) << ',' << q(dev) << '\n';
+  }
+};
+std::string csv_num(double x) {
+  if (!std::isfinite(x)) return "";
+  std::ostringstream o;
+  o << std::setprecision(9) << x;
+  return o.str();
+}
+
+std::string cpu_model() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto c = line.find(':');
+      return c == std::string::npos ? line : line.substr(c + 2);
+    }
+  return "unknown CPU";
+}
+
+std::uint64_t mem_total_bytes() {
+  std::ifstream f("/proc/meminfo");
+  std::string k;
+  std::uint64_t v = 0;
+  std::string unit;
+  while (f >> k >> v >> unit)
+    if (k == "MemTotal:") return v * 1024;
+  return 0;
+}
+
+std::string resolve_data(const std::string& rel) {
+  if (fs::exists(rel)) return rel;
+  return (fs::path(ISOTOUCH_SOURCE_DIR) / rel).string();
+}
+
+struct Devices {
+  std::string gpu, cpu;
+};
+
+void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## Dense passes: time and effective bandwidth\n\n"
+      << "| case | pass | min bytes [MiB] | dense GPU [ms] | dense CPU [ms] | GPU / CPU | GPU [GB/s] | GPU / memcpy "
+         "| CPU [GB/s] | CPU / memcpy |\n"
+      << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    auto line = [&](const PassRow& p) {
+      const std::string g = r.gpu_available ? num(p.gpu_ms) : "n/a (" + r.gpu_why + ")";
+      out << "| " << r.name << " | " << p.label << " | " << mib(p.min_bytes) << " | " << g << " | " << num(p.cpu_ms)
+          << " | " << num(p.gpu_over_cpu, 3) << " | " << num(p.gpu_gbps) << " | " << num(p.gpu_of_memcpy, 3) << " | "
+          << num(p.cpu_gbps) << " | " << num(p.cpu_of_memcpy, 3) << " |\n";
+      const std::string t = "dense";
+      csv.row(t, r.name, "", p.label, "min_bytes", std::to_string(p.min_bytes), "B", "");
+      csv.row(t, r.name, "", p.label, "dense_gpu_ms", csv_num(p.gpu_ms), "ms", d.gpu);
+      csv.row(t, r.name, "", p.label, "dense_cpu_ms", csv_num(p.cpu_ms), "ms", d.cpu);
+      csv.row(t, r.name, "", p.label, "gpu_over_cpu", csv_num(p.gpu_over_cpu), "", "");
+      csv.row(t, r.name, "", p.label, "gpu_gbps", csv_num(p.gpu_gbps), "GB/s", d.gpu);
+      csv.row(t, r.name, "", p.label, "gpu_of_memcpy", csv_num(p.gpu_of_memcpy), "", d.gpu);
+      csv.row(t, r.name, "", p.label, "cpu_gbps", csv_num(p.cpu_gbps), "GB/s", d.cpu);
+      csv.row(t, r.name, "", p.label, "cpu_of_memcpy", csv_num(p.cpu_of_memcpy), "", d.cpu);
+    };
+    for (const auto& p : r.passes) line(p);
+    line(r.sum);
+    out << "| " << r.name << " | end to end (wall) | | " << num(r.dense_gpu_wall_ms) << " | "
+        << num(r.dense_cpu_wall_ms) << " | " << num(r.dense_gpu_over_cpu_wall, 3) << " | | | | |\n";
+    csv.row("dense", r.name, "", "end to end (wall)", "dense_gpu_ms", csv_num(r.dense_gpu_wall_ms), "ms", d.gpu);
+    csv.row("dense", r.name, "", "end to end (wall)", "dense_cpu_ms", csv_num(r.dense_cpu_wall_ms), "ms", d.cpu);
+    csv.row("dense", r.name, "", "end to end (wall)", "gpu_over_cpu", csv_num(r.dense_gpu_over_cpu_wall), "", "");
+  }
+}
+
+std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
+  return c.available ? num(v, prec) : "sparse: not available (" + c.why + ")";
+}
+
+void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
+      << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
+         "[ms] | dense CPU [ms] | sparse GPU / dense CPU | sparse CPU / dense CPU | sparse GPU / dense GPU | GPU vs "
+         "CPU counts |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res)
+    for (const auto& ir : r.isos) {
+      const SparseCell& s = ir.gpu.available ? ir.gpu : ir.cpu;
+      const bool have = s.available;
+      const std::string na = "sparse: not available (" + ir.gpu.why + ")";
+      const std::string tau = tau_text(ir.iso);
+      out << "| " << r.name << " | " << tau << " | " << (have ? std::to_string(s.stats.bricks_total) : na) << " | "
+          << (have ? std::to_string(s.stats.candidates) : na) << " | " << (have ? std::to_string(s.stats.active) : na)
+          << " | " << num(ir.active_percent) << " | " << sparse_cell(ir.gpu, ir.gpu.total_ms) << " | "
+          << sparse_cell(ir.cpu, ir.cpu.total_ms) << " | " << num(r.dense_gpu_wall_ms) << " | "
+          << num(r.dense_cpu_wall_ms) << " | " << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_cpu, 3) << " | "
+          << sparse_cell(ir.cpu, ir.sparse_cpu_over_dense_cpu, 3) << " | "
+          << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_gpu, 3) << " | "
+          << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " |\n";
+      const std::string t = "sparse";
+      if (have) {
+        csv.row(t, r.name, tau, "", "bricks_total", std::to_string(s.stats.bricks_total), "", "");
+        csv.row(t, r.name, tau, "", "candidates", std::to_string(s.stats.candidates), "", "");
+        csv.row(t, r.name, tau, "", "active", std::to_string(s.stats.active), "", "");
+      }
+      csv.row(t, r.name, tau, "", "active_percent", csv_num(ir.active_percent), "%", "");
+      csv.row(t, r.name, tau, "", "candidate_percent", csv_num(ir.candidate_percent), "%", "");
+      csv.row(t, r.name, tau, "", "sparse_gpu_ms", csv_num(ir.gpu.total_ms), "ms", d.gpu);
+      csv.row(t, r.name, tau, "", "sparse_cpu_ms", csv_num(ir.cpu.total_ms), "ms", d.cpu);
+      csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_cpu", csv_num(ir.sparse_gpu_over_dense_cpu), "", "");
+      csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
+      csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_gpu", csv_num(ir.sparse_gpu_over_dense_gpu), "", "");
+    }
+  out << "\n### Sparse stages (medians)\n\n| case | tau | engine | stage | ms |\n|---|---:|---|---|---:|\n";
+  for (const auto& r : res)
+    for (const auto& ir : r.isos)
+      for (const auto* c : {&ir.gpu, &ir.cpu}) {
+        const std::string eng = c == &ir.gpu ? "GPU" : "CPU reference";
+        if (!c->available) {
+          out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | sparse: not available (" << c->why
+              << ") | |\n";
+          continue;
+        }
+        for (std::size_t i = 0; i < c->stage_ms.size(); ++i) {
+          out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | " << c->stage_labels[i] << " | "
+              << num(c->stage_ms[i]) << " |\n";
+          csv.row("sparse_stages", r.name, tau_text(ir.iso), c->stage_labels[i], eng + "_ms", csv_num(c->stage_ms[i]),
+                  "ms", c == &ir.gpu ? d.gpu : d.cpu);
+        }
+      }
+}
+
+void print_bytes(const std::vector<CaseResult>& res, std::ostream& out, Csv& csv) {
+  out << "\n## Published snapshot bytes against dense fp32\n\n"
+      << "| case | tau | format | from | snapshot [MiB] | dense fp32 [MiB] | sparse / dense % |\n"
+      << "|---|---:|---|---|---:|---:|---:|\n";
+  for (const auto& r : res)
+    for (const auto& ir : r.isos)
+      for (const auto& f : ir.formats) {
+        const std::string tau = tau_text(ir.iso);
+        if (!f.available) {
+          out << "| " << r.name << " | " << tau << " | " << format_name(f.format) << " | " << f.why << " | | | |\n";
+          continue;
+        }
+        out << "| " << r.name << " | " << tau << " | " << format_name(f.format) << " | " << f.engine << " | "
+            << mib(f.snapshot_bytes) << " | " << mib(f.dense_fp32_bytes) << " | " << num(f.percent) << " |\n";
+        csv.row("bytes", r.name, tau, format_name(f.format), "snapshot_bytes", std::to_string(f.snapshot_bytes), "B",
+                f.engine);
+        csv.row("bytes", r.name, tau, format_name(f.format), "dense_fp32_bytes", std::to_string(f.dense_fp32_bytes),
+                "B", "");
+        csv.row("bytes", r.name, tau, format_name(f.format), "percent", csv_num(f.percent), "%", "");
+      }
+}
+
+void print_big(const BigResult* b, std::ostream& out, Csv& csv, std::uint64_t mem_total) {
+  out << "\n## 512^3 end to end (child process)\n\n";
+  if (!b) {
+    out << "not run (--quick without --big)\n";
+    return;
+  }
+  auto kv = b->kv;
+  const auto get = [&](const std::string& k) { return kv.count(k) ? kv.at(k) : std::string("n/a"); };
+  out << "| volume | engine | device | step [ms] | setup [ms] | make volume [ms] | child wall [ms] | peak RSS "
+         "wait4 [MiB] | child VmHWM [MiB] | MemTotal [MiB] | snapshot [MiB] | dense fp32 [MiB] | active / bricks | exit "
+         "|\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  const auto to_u = [&](const std::string& k) -> std::uint64_t {
+    try {
+      return kv.count(k) ? std::stoull(kv.at(k)) : 0;
+    } catch (...) {
+      return 0;
+    }
+  };
+  out << "| noisy sphere " << b->dim << "^3, 1 mm, tau 0 | " << get("engine") << " | " << get("device") << " | "
+      << get("step_ms") << " | " << get("setup_ms") << " | " << get("make_ms") << " | " << num(b->child.wall_ms, 0)
+      << " | " << mib(b->child.peak_rss_bytes) << " | " << mib(to_u("vm_hwm_bytes")) << " | " << mib(mem_total)
+      << " | " << (kv.count("snapshot_bytes") ? mib(to_u("snapshot_bytes")) : "n/a") << " | "
+      << (kv.count("dense_fp32_bytes") ? mib(to_u("dense_fp32_bytes")) : "n/a") << " | " << get("active") << " / "
+      << get("bricks_total") << " | "
+      << (b->child.signal ? "signal " + std::to_string(b->child.signal) : std::to_string(b->child.exit_code))
+      << " |\n";
+  if (!b->note.empty()) out << "\nnote: " << b->note << "\n";
+  out << "\nPeak RSS (wait4 ru_maxrss) covers the whole child: making the volume, the Vulkan context, the chain and "
+         "the published snapshot; Linux keeps in it the larger of the pre-exec (a fork of this small parent) and "
+         "post-exec peaks. VmHWM is the child's own post-exec peak.\n";
+  for (const auto& k : {"step_ms", "setup_ms", "make_ms", "snapshot_bytes", "dense_fp32_bytes", "active",
+                        "bricks_total", "vm_hwm_bytes"})
+    if (kv.count(k)) csv.row("big", std::to_string(b->dim) + "^3", "0", "", k, kv.at(k), "", get("device"));
+  csv.row("big", std::to_string(b->dim) + "^3", "0", "", "peak_rss_bytes", std::to_string(b->child.peak_rss_bytes),
+          "B", "");
+  csv.row("big", std::to_string(b->dim) + "^3", "0", "", "exit_code", std::to_string(b->child.exit_code), "", "");
+}
+
+const IsoResult* find_iso(const std::vector<CaseResult>& res, const std::string& name, double tau) {
+  for (const auto& r : res)
+    if (r.name == name)
+      for (const auto& ir : r.isos)
+        if (ir.iso.tau == tau) return &ir;
+  return nullptr;
+}
+
+void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, std::uint64_t mem_total,
+                    std::ostream& out, Csv& csv) {
+  out << "\n## Verdicts (computed from the figures above)\n\n";
+  std::vector<Verdict> vs;
+  const IsoResult* a = find_iso(res, "chest", -500);
+  vs.push_back(verdict_at_most("chest -500 sparse GPU / dense CPU", a ? a->sparse_gpu_over_dense_cpu : kNaN,
+                               1.0 / 3.0, 3, a ? "sparse GPU: " + a->gpu.why : "chest CT not benchmarked"));
+  const IsoResult* b = find_iso(res, "chest", 250);
+  double best = kNaN;
+  std::string best_fmt, why = b ? "" : "chest CT not benchmarked";
+  if (b)
+    for (const auto& f : b->formats) {
+      if (f.available && (!std::isfinite(best) || f.percent < best)) {
+        best = f.percent;
+        best_fmt = format_name(f.format);
+      }
+      if (!f.available && why.empty()) why = f.why;
+    }
+  vs.push_back(verdict_at_most("chest +250 snapshot / dense fp32 bytes (" +
+                                   (best_fmt.empty() ? std::string("no format") : "smallest: " + best_fmt) + ")",
+                               best / 100.0, 0.15, 3, why));
+  if (big) {
+    const bool ran = big->child.started && big->child.exit_code == 0 && big->kv.count("snapshot_bytes");
+    const double frac = ran ? ratio(double(big->child.peak_rss_bytes), double(mem_total)) : kNaN;
+    vs.push_back(verdict_at_most(std::to_string(big->dim) + "^3 end to end (" + (big->kv.count("engine") ? big->kv.at("engine") : std::string("no engine")) +
+                                     "), peak RSS / MemTotal",
+                                 frac, 1.0, 3, big->note.empty() ? "no snapshot" : big->note));
+  } else {
+    vs.push_back(verdict_at_most("512^3 end to end, peak RSS / MemTotal", kNaN, 1.0, 3, "not run: --quick"));
+  }
+  for (const auto& v : vs) {
+    out << "- " << v.text << "\n";
+    csv.row("verdict", "", "", v.text, "met", v.measured ? (v.met ? "1" : "0") : "", "", "");
+  }
+}
+}  // namespace
+
+int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ostream& progress) {
+  BenchEngineOptions o = o_in;
+  if (o.quick) o.repetitions = 1;
+  const std::uint64_t mem_total = mem_total_bytes();
+  // The 512^3 child first, while this process is small (its RSS at fork counts in the
+  // child's ru_maxrss).
+  std::unique_ptr<BigResult> big;
+  if (!o.quick || o.big) big = std::make_unique<BigResult>(run_big(o, progress));
+
+  progress << "[bench engine] memcpy bandwidth\n" << std::flush;
+  const std::size_t memcpy_bytes = std::size_t(256) << 20;
+  const double memcpy_gbps = measure_memcpy_gbps(memcpy_bytes, 5);
+
+  engine::ContextOptions co;
+  co.device = o.device;
+  auto ctx_r = engine::VulkanContext::create(co);
+  engine::VulkanContext* ctx = ctx_r ? ctx_r.value->get() : nullptr;
+  const std::string gpu_why = ctx ? "" : "Vulkan: " + ctx_r.error;
+  Devices dev;
+  dev.gpu = ctx ? ctx->info().name + " (" + ctx->info().type + ", " + ctx->info().driver + ")" : "no Vulkan device";
+  dev.cpu = "one thread, " + cpu_model();
+
+  // Volumes.
+  struct Vol {
+    std::string name, source;
+    std::vector<core::Isosurface> isos;
+    engine::Volume v;
+    std::string error;
+  };
+  const core::InsideIs above = core::InsideIs::kAbove;
+  std::vector<Vol> vols;
+  vols.push_back({"head", "data/ct-head-headsq/headsq_64x64x93_int16.mhd", {{1150, above}, {500, above}}, {}, {}});
+  vols.push_back({"chest",
+                  "data/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd",
+                  {{-500, above}, {250, above}},
+                  {},
+                  {}});
+  int rc = 0;
+  for (auto& v : vols) {
+    try {
+      v.v = engine::load_volume(resolve_data(v.source));
+    } catch (const std::exception& e) {
+      v.error = e.what();
+      rc = 1;
+    }
+  }
+  progress << "[bench engine] making the 256^3 noisy sphere\n" << std::flush;
+  vols.push_back({"sphere256", "", {{0, above}}, make_noisy_sphere(256, 1e-3), {}});
+  vols.back().source = vols.back().v.path + ", 1 mm spacing";
+
+  std::vector<CaseResult> res;
+  for (bool closing : {false, true}) {
+    if (closing && !o.with_closing) break;
+    for (const auto& v : vols) {
+      if (!v.error.empty()) continue;
+      BenchCase c{v.name + (closing ? "+closing" : ""), v.source, &v.v, v.isos};
+      res.push_back(run_case(ctx, gpu_why, c, closing, o.repetitions, memcpy_gbps, progress));
+    }
+  }
+
+  Csv csv;
+  out << "# isotouch bench engine\n\n"
+      << "- GPU columns: " << dev.gpu << (ctx && ctx->info().type == "cpu" ? " - a CPU device (lavapipe), not a GPU" : "")
+      << (ctx ? ", timestamps " + std::string(ctx->timestamps_supported() ? "on" : "off") : "") << "\n"
+      << "- CPU columns: " << dev.cpu << "\n"
+      << "- memcpy: " << num(memcpy_gbps) << " GB/s (std::memcpy of " << (memcpy_bytes >> 20)
+      << " MiB, best of 5, read + write bytes counted), measured in this run\n"
+      << "- repetitions: " << o.repetitions << " per figure, interleaved (dense GPU, dense CPU, sparse GPU, sparse "
+      << "CPU), medians; one untimed GPU warm-up\n"
+      << "- dense pass list: " << list_label(dense_list(false)) << "; sparse: " << list_label(sparse_list(false))
+      << " (brick min/max implied)" << (o.with_closing ? "; second list with closing(radius 1 mm)" : "") << "\n";
+  for (const auto& v : vols) {
+    out << "- " << v.name << ": ";
+    if (!v.error.empty()) {
+      out << "not benchmarked: " << v.error << "\n";
+      continue;
+    }
+    const auto& d = v.v.grid.dims;
+    out << v.source << " (" << d[0] << "x" << d[1] << "x" << d[2] << ", spacing " << num(v.v.grid.spacing_m.x * 1e3, 3)
+        << " x " << num(v.v.grid.spacing_m.y * 1e3, 3) << " x " << num(v.v.grid.spacing_m.z * 1e3, 3)
+        << " mm), isovalues";
+    for (const auto& i : v.isos) out << " " << tau_text(i) << " (inside " << core::to_string(i.inside) << ")";
+    out << "\n";
+  }
+  csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
+  print_dense(res, dev, out, csv);
+  print_sparse(res, dev, out, csv);
+  print_bytes(res, out, csv);
+  print_big(big.get(), out, csv, mem_total);
+  print_verdicts(res, big.get(), mem_total, out, csv);
+  out << "\nmin bytes: gaussian/closing 8 B per voxel (read + write fp32), gradient 20 B (read fp32, write a 16 B "
+         "sample), brick_minmax 4 B per voxel + 8 B per brick. GB/s = min bytes / median time; / memcpy = that "
+         "over the memcpy figure above. GPU pass times are device timestamps; end to end and sparse totals are "
+         "wall clock with all host work. Timings on a shared machine are noisy.\n";
+  if (!o.out_csv.empty()) {
+    write_file_atomic(o.out_csv, csv.s.str());
+    progress << "[bench engine] wrote " << o.out_csv << "\n";
+  }
+  return rc;
+}
+
+namespace {
+constexpr const char* kColumnsHelp = R"(
+Cases: head CT (headsq 64x64x93) at 1150 and 500, chest CT (lungdx 256x256x64) at -500
+and +250, a 256^3 noisy sphere (signed distance in mm to a sphere of radius 96 voxels,
+1 mm spacing, plus uniform noise in [-1, 1) mm; tau 0), all inside above. Dense list:
+gaussian(1 mm) + gradient + brick_minmax(1); sparse list: gaussian(1 mm) + gradient.
+
+Dense table, one row per pass, then the sum of the passes and the end-to-end wall time:
+  min bytes      bytes the pass must read + write at least: gaussian/closing 8 B/voxel,
+                 gradient 20 B/voxel (4 in, 16 out), brick_minmax 4 B/voxel + 8 B/brick
+  dense GPU      PassChain (Vulkan) device time per pass [ms], median (timestamps)
+  dense CPU      run_chain_cpu, one thread, wall time per pass [ms], median
+  GPU / CPU      dense GPU ms / dense CPU ms
+  GB/s           min bytes / time;  / memcpy: that over this machine's memcpy GB/s
+                 (std::memcpy of 256 MiB, best of 5, read + write counted)
+Sparse table, one row per isovalue:
+  bricks, candidates, active   8^3 bricks in all, computed, published with samples
+  active %       100 active / bricks
+  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms]
+  sparse CPU     run_sparse_cpu total_ms, median [ms]
+  dense GPU/CPU  end-to-end wall of the dense chain (same repetitions)
+  ratios         sparse GPU / dense CPU (the must-show), sparse CPU / dense CPU,
+                 sparse GPU / dense GPU
+  GPU vs CPU     whether both sparse engines found the same bricks and bytes
+Stages: the sparse engines' own per-stage times.
+Bytes: published snapshot bytes per sample format (fp32, fp16, unorm16) against the dense
+  fp32 snapshot (16 B per voxel), and the percentage.
+512^3: a 512^3 noisy sphere through the sparse GPU chain (CPU reference if the GPU one is
+  not available) in a child process: step time, setup, peak RSS from wait4 (ru_maxrss),
+  the child's own VmHWM, snapshot bytes.
+Verdicts: computed from the measured figures: chest -500 sparse GPU / dense CPU <= 1/3;
+  chest +250 smallest snapshot / dense fp32 <= 0.15; 512^3 ran, peak RSS <= MemTotal.
+Progress goes to stderr, the report (markdown) to stdout.
+)";
+}  // namespace
+
 Subcommand add_bench_engine_command(CLI::App& bench) {
+  auto opt = std::make_shared<BenchEngineOptions>();
+  auto big_child = std::make_shared<int>(0);
   Subcommand s;
-  s.app = bench.add_subcommand("engine", "Engine passes dense and sparse, GPU and CPU (not built yet)");
-  s.run = [](const std::string&) {
-    std::cerr << "isotouch bench engine: not built yet\n";
-    return 2;
+  s.app = bench.add_subcommand("engine",
+                               "Engine passes dense and sparse, GPU and one-thread CPU reference, on the head CT, the "
+                               "chest CT and a 256^3 synthetic volume: times, bricks active, snapshot bytes, bandwidth "
+                               "against memcpy, ratios, verdicts; a 512^3 volume end to end (time, peak memory)");
+  s.app->add_option("--repetitions", opt->repetitions, "Timed repetitions per figure (median)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  s.app->add_flag("--quick", opt->quick, "One repetition and no 512^3 step (unless --big): for tests");
+  s.app->add_flag("--big", opt->big, "Run the 512^3 step even with --quick");
+  s.app->add_flag("--closing", opt->with_closing, "Also benchmark the list with closing(radius 1 mm)");
+  s.app->add_option("--big-dim", opt->big_dim, "Edge of the end-to-end volume [voxels]")
+      ->capture_default_str()
+      ->check(CLI::Range(8, 1024));
+  s.app->add_option("--csv", opt->out_csv, "Also write every figure to this CSV file (long form)");
+  s.app->add_option("--big-child", *big_child, "internal: run the end-to-end step in this process")->group("");
+  s.app->footer(kColumnsHelp);
+  s.run = [opt, big_child](const std::string& device) {
+    if (*big_child > 0) return run_big_child(*big_child, device, std::cout, std::cerr);
+    opt->device = device;
+    return run_bench_engine(*opt, std::cout, std::cerr);
   };
   return s;
 }
+
 }  // namespace isotouch::app

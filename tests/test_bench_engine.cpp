@@ -1,0 +1,312 @@
+// bench engine (issue 8, item 7): the computing parts of `isotouch bench engine` against
+// independent computations: peak RSS of children that allocate a known amount (fork, and
+// coreutils dd through exec), the minimum-bytes formula from the sample layout, ratios and
+// percents recomputed from a row's own columns, brick counts from ceil(dims / 8), the active
+// bricks from the dense CPU reference's brick min/max, snapshot bytes bounded below by the
+// active bricks' samples, and verdicts that flip where the figure crosses the target.
+// No timed assertions.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <sstream>
+#include <vector>
+
+#include "bench_engine.h"
+#include "cpu_filters.h"
+#include "synthetic.h"
+
+using namespace isotouch;
+using app::kNaN;
+
+namespace {
+constexpr std::uint64_t kMiB = 1024 * 1024;
+
+// Touch every page of a fresh allocation so it is resident.
+int allocate_and_touch(std::size_t bytes) {
+  std::vector<unsigned char> v(bytes);
+  for (std::size_t i = 0; i < bytes; i += 4096) v[i] = static_cast<unsigned char>(i >> 12);
+  volatile unsigned char sink = v[bytes / 3];
+  (void)sink;
+  return 0;
+}
+}  // namespace
+
+// --- child processes first, while this test process is small --------------------------
+
+TEST(BenchEngineChild, ForkPeakRssCoversWhatTheChildAllocated) {
+  const std::size_t bytes = 300 * kMiB;
+  const app::ChildRun r = app::run_child_fork([&] { return allocate_and_touch(bytes); });
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_GE(r.peak_rss_bytes, bytes);
+  // and not absurdly more: the child's 300 MiB plus this small test process
+  EXPECT_LT(r.peak_rss_bytes, bytes + 1024 * kMiB);
+}
+
+TEST(BenchEngineChild, ForkPassesExitCodeAndStdout) {
+  const app::ChildRun r = app::run_child_fork([] {
+    std::printf("alpha=1\nbeta=two words\nnot a pair\n");
+    return 7;
+  });
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_EQ(r.exit_code, 7);
+  const auto kv = app::parse_key_values(r.out);
+  ASSERT_EQ(kv.size(), 2u) << r.out;
+  EXPECT_EQ(kv.at("alpha"), "1");
+  EXPECT_EQ(kv.at("beta"), "two words");
+}
+
+TEST(BenchEngineChild, ExecPeakRssOfDdBuffer) {
+  // coreutils dd allocates one buffer of bs bytes and reads /dev/zero into it: resident.
+  const app::ChildRun r =
+      app::run_child_exec({"/bin/dd", "if=/dev/zero", "of=/dev/null", "bs=200M", "count=1", "status=none"});
+  ASSERT_TRUE(r.started) << r.error;
+  ASSERT_EQ(r.exit_code, 0) << r.error;
+  EXPECT_GE(r.peak_rss_bytes, 200 * kMiB);
+}
+
+TEST(BenchEngineChild, ExecReportsExitCodeSignalAndMissingProgram) {
+  const app::ChildRun a = app::run_child_exec({"/bin/sh", "-c", "echo k=v; exit 3"});
+  EXPECT_EQ(a.exit_code, 3);
+  EXPECT_EQ(app::parse_key_values(a.out).at("k"), "v");
+  const app::ChildRun b = app::run_child_exec({"/bin/sh", "-c", "kill -9 $$"});
+  EXPECT_EQ(b.signal, 9);
+  EXPECT_EQ(b.exit_code, -1);
+  const app::ChildRun c = app::run_child_exec({"/no/such/program"});
+  EXPECT_EQ(c.exit_code, 127);
+  EXPECT_NE(c.error.find("/no/such/program"), std::string::npos);
+}
+
+TEST(BenchEngineChild, SelfPeakRssAtLeastAnAllocation) {
+  allocate_and_touch(64 * kMiB);
+  EXPECT_GE(app::self_peak_rss_bytes(), 64 * kMiB);
+}
+
+// --- formulas ---------------------------------------------------------------------------
+
+TEST(BenchEngineFormula, MinimumBytesFromTheSampleLayout) {
+  const std::uint64_t n = 1000, b = 7;
+  const std::uint64_t f = sizeof(float), sample = 4 * sizeof(float);  // GLSL vec4(value, gx, gy, gz)
+  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Gaussian, n, b), n * f + n * f);
+  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Closing, n, b), n * f + n * f);
+  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Gradient, n, b), n * f + n * sample);
+  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::BrickMinMax, n, b), n * f + b * 2 * f);
+}
+
+TEST(BenchEngineFormula, BandwidthMedianRatio) {
+  EXPECT_DOUBLE_EQ(app::gb_per_s(2e9, 1000.0), 2.0);  // 2e9 B in 1 s
+  EXPECT_DOUBLE_EQ(app::gb_per_s(5e6, 1.0), 5.0);     // 5e6 B in 1 ms
+  EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, 0.0)));
+  EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, kNaN)));
+  EXPECT_DOUBLE_EQ(app::median({3, 1, 2}), 2.0);
+  EXPECT_DOUBLE_EQ(app::median({4, 1, 3, 2}), 2.5);
+  EXPECT_DOUBLE_EQ(app::median({kNaN, 5, kNaN}), 5.0);
+  EXPECT_TRUE(std::isnan(app::median({})));
+  EXPECT_DOUBLE_EQ(app::ratio(1, 4), 0.25);
+  EXPECT_TRUE(std::isnan(app::ratio(1, 0)));
+  EXPECT_TRUE(std::isnan(app::ratio(kNaN, 1)));
+}
+
+TEST(BenchEngineFormula, MemcpyBandwidthIsPositive) {
+  const double g = app::measure_memcpy_gbps(8 * kMiB, 2);
+  EXPECT_TRUE(std::isfinite(g));
+  EXPECT_GT(g, 0.0);
+}
+
+// --- verdicts -----------------------------------------------------------------------------
+
+TEST(BenchEngineVerdict, FlipsWhereTheFigureCrossesTheTarget) {
+  const double t = 1.0 / 3.0;
+  const app::Verdict below = app::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.20, t, 2);
+  EXPECT_TRUE(below.measured);
+  EXPECT_TRUE(below.met);
+  EXPECT_EQ(below.text, "chest -500 sparse GPU / dense CPU = 0.20: target <= 0.33 met");
+  const app::Verdict above = app::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.40, t, 2);
+  EXPECT_TRUE(above.measured);
+  EXPECT_FALSE(above.met);
+  EXPECT_EQ(above.text, "chest -500 sparse GPU / dense CPU = 0.40: target <= 0.33 NOT met");
+  // Either side of the target by one ULP, and at it.
+  EXPECT_TRUE(app::verdict_at_most("x", t, t).met);
+  EXPECT_FALSE(app::verdict_at_most("x", std::nextafter(t, 1.0), t).met);
+  EXPECT_TRUE(app::verdict_at_most("x", std::nextafter(t, 0.0), t).met);
+  const app::Verdict none = app::verdict_at_most("bytes", kNaN, 0.15, 2, "sparse: not available");
+  EXPECT_FALSE(none.measured);
+  EXPECT_FALSE(none.met);
+  EXPECT_NE(none.text.find("not measured (sparse: not available)"), std::string::npos) << none.text;
+}
+
+// --- the synthetic volume -----------------------------------------------------------------
+
+TEST(BenchEngineVolume, NoisySphereIsTheSphereWithinTheNoise) {
+  const int n = 24;
+  const engine::Volume a = app::make_noisy_sphere(n, 1e-3, 1.0, 5);
+  const engine::Volume b = engine::make_sphere({n, n, n}, 1e-3, 0.375 * n);
+  ASSERT_EQ(a.voxels.size(), b.voxels.size());
+  double sum = 0, maxabs = 0;
+  for (std::size_t i = 0; i < a.voxels.size(); ++i) {
+    const double d = double(a.voxels[i]) - double(b.voxels[i]);
+    sum += d;
+    maxabs = std::max(maxabs, std::abs(d));
+  }
+  EXPECT_LE(maxabs, 1.0 + 1e-4);
+  EXPECT_GT(maxabs, 0.9);  // noise is there
+  EXPECT_LT(std::abs(sum / double(a.voxels.size())), 0.05);  // zero mean (uniform, 13824 draws)
+  const engine::Volume c = app::make_noisy_sphere(n, 1e-3, 1.0, 5);
+  EXPECT_EQ(a.voxels, c.voxels);  // reproducible
+}
+
+// --- one case on a small volume -------------------------------------------------------------
+
+namespace {
+engine::VulkanContext* vk(std::string& why) {
+  static std::unique_ptr<engine::VulkanContext> ctx;
+  static std::string err;
+  static bool tried = false;
+  if (!tried) {
+    tried = true;
+    auto r = engine::VulkanContext::create();
+    if (r) ctx = std::move(*r.value);
+    else err = r.error;
+  }
+  why = err;
+  return ctx.get();
+}
+
+// Bytes per sample of a format (core/brick_field.h).
+std::uint64_t sample_bytes(core::SampleFormat f) { return f == core::SampleFormat::kFp32 ? 16 : 8; }
+}  // namespace
+
+TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
+  const int n = 40;  // 5^3 bricks
+  const engine::Volume v = app::make_noisy_sphere(n, 1e-3, 1.0, 3);
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  app::BenchCase c{"small", v.path, &v, {iso}};
+  std::string why;
+  engine::VulkanContext* ctx = vk(why);
+  std::ostringstream progress;
+  const double memcpy_gbps = 10.0;
+  const app::CaseResult r = app::run_case(ctx, why, c, false, 2, memcpy_gbps, progress);
+  EXPECT_NE(progress.str().find("repetition 2/2"), std::string::npos);
+
+  const std::uint64_t nb = 5 * 5 * 5, nv = std::uint64_t(n) * n * n;
+  EXPECT_EQ(r.bricks, nb);
+  EXPECT_EQ(r.voxels, nv);
+  ASSERT_EQ(r.passes.size(), 3u);  // gaussian, gradient, brick_minmax
+  const std::uint64_t want_bytes[3] = {8 * nv, 20 * nv, 4 * nv + 8 * nb};
+  std::uint64_t bytes_sum = 0;
+  double cpu_sum = 0, gpu_sum = 0;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const app::PassRow& p = r.passes[i];
+    EXPECT_EQ(p.min_bytes, want_bytes[i]) << p.label;
+    ASSERT_TRUE(std::isfinite(p.cpu_ms) && p.cpu_ms >= 0) << p.label;
+    // derived columns recomputed from the row's own columns
+    EXPECT_NEAR(p.cpu_gbps, double(p.min_bytes) / (p.cpu_ms * 1e6), 1e-9 * p.cpu_gbps) << p.label;
+    EXPECT_NEAR(p.cpu_of_memcpy, p.cpu_gbps / memcpy_gbps, 1e-12) << p.label;
+    if (ctx && std::isfinite(p.gpu_ms)) {
+      EXPECT_NEAR(p.gpu_gbps, double(p.min_bytes) / (p.gpu_ms * 1e6), 1e-9 * p.gpu_gbps) << p.label;
+      EXPECT_NEAR(p.gpu_of_memcpy, p.gpu_gbps / memcpy_gbps, 1e-12) << p.label;
+      EXPECT_NEAR(p.gpu_over_cpu, p.gpu_ms / p.cpu_ms, 1e-12 * p.gpu_over_cpu) << p.label;
+    }
+    bytes_sum += p.min_bytes;
+    cpu_sum += p.cpu_ms;
+    gpu_sum += p.gpu_ms;
+  }
+  EXPECT_EQ(r.sum.min_bytes, bytes_sum);
+  EXPECT_NEAR(r.sum.cpu_ms, cpu_sum, 1e-9);
+  EXPECT_TRUE(std::isfinite(r.dense_cpu_wall_ms));
+  if (ctx) {
+    EXPECT_TRUE(r.gpu_available) << r.gpu_why;
+    EXPECT_TRUE(std::isfinite(r.dense_gpu_wall_ms));
+    EXPECT_NEAR(r.dense_gpu_over_cpu_wall, r.dense_gpu_wall_ms / r.dense_cpu_wall_ms, 1e-12);
+    if (std::isfinite(gpu_sum)) EXPECT_NEAR(r.sum.gpu_ms, gpu_sum, 1e-9);
+  }
+
+  ASSERT_EQ(r.isos.size(), 1u);
+  const app::IsoResult& ir = r.isos[0];
+  ASSERT_EQ(ir.formats.size(), 3u);
+  const app::SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
+  if (!s) {
+    // The sparse engines are not there yet: every sparse cell says why, no figure is made up.
+    EXPECT_FALSE(ir.gpu.why.empty());
+    EXPECT_FALSE(ir.cpu.why.empty());
+    EXPECT_TRUE(std::isnan(ir.sparse_gpu_over_dense_cpu));
+    EXPECT_TRUE(std::isnan(ir.active_percent));
+    for (const auto& f : ir.formats) {
+      EXPECT_FALSE(f.available);
+      EXPECT_FALSE(f.why.empty());
+    }
+    GTEST_SKIP() << "sparse engines not available: GPU '" << ir.gpu.why << "', CPU '" << ir.cpu.why << "'";
+  }
+  // Bricks: total from ceil(dims / 8); active from the dense CPU reference's brick min/max
+  // (halo 1) of the Gaussian-smoothed field: the bricks whose range straddles tau.
+  EXPECT_EQ(s->stats.bricks_total, nb);
+  const engine::ChainOutput dense = engine::run_chain_cpu(v, app::dense_list(false));
+  ASSERT_TRUE(dense.bricks);
+  std::size_t straddle = 0;
+  const float bg = float(iso.outside_value(v.min_value, v.max_value));
+  for (std::size_t i = 0; i < dense.bricks->count(); ++i) {
+    float tile = 0;
+    straddle += !core::tile_value(dense.bricks->min[i], dense.bricks->max[i], iso, bg, tile);
+  }
+  EXPECT_EQ(s->stats.active, straddle);
+  EXPECT_LE(s->stats.active, s->stats.candidates);
+  EXPECT_LE(s->stats.candidates, s->stats.bricks_total);
+  EXPECT_NEAR(ir.active_percent, 100.0 * double(straddle) / double(nb), 1e-9);
+  EXPECT_NEAR(ir.sparse_gpu_over_dense_cpu, ir.gpu.total_ms / r.dense_cpu_wall_ms, 1e-12);
+  for (const auto& f : ir.formats) {
+    if (!f.available) continue;
+    EXPECT_EQ(f.dense_fp32_bytes, nv * 16);
+    // the active bricks' samples at least, at most that plus 64 B of table/tile per brick
+    const std::uint64_t pool = std::uint64_t(straddle) * core::kBrickSamples * sample_bytes(f.format);
+    EXPECT_GE(f.snapshot_bytes, pool);
+    EXPECT_LE(f.snapshot_bytes, pool + 64 * nb + 4096);
+    EXPECT_NEAR(f.percent, 100.0 * double(f.snapshot_bytes) / double(nv * 16), 1e-9);
+  }
+}
+
+TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
+  // A hand-made row: finish_case must recompute every derived column from these.
+  app::CaseResult r;
+  r.memcpy_gbps = 4.0;
+  app::PassRow p;
+  p.min_bytes = 8'000'000;
+  p.gpu_ms = 2.0;
+  p.cpu_ms = 8.0;
+  r.passes = {p, p};
+  r.dense_gpu_wall_ms = 5.0;
+  r.dense_cpu_wall_ms = 20.0;
+  app::IsoResult ir;
+  ir.gpu.available = true;
+  ir.gpu.total_ms = 4.0;
+  ir.gpu.stats.bricks_total = 200;
+  ir.gpu.stats.active = 30;
+  ir.gpu.stats.candidates = 50;
+  app::FormatBytes fb;
+  fb.available = true;
+  fb.snapshot_bytes = 15;
+  fb.dense_fp32_bytes = 100;
+  ir.formats = {fb};
+  r.isos = {ir};
+  app::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.passes[0].gpu_gbps, 4.0);  // 8e6 B in 2 ms
+  EXPECT_DOUBLE_EQ(r.passes[0].cpu_gbps, 1.0);
+  EXPECT_DOUBLE_EQ(r.passes[0].gpu_of_memcpy, 1.0);
+  EXPECT_DOUBLE_EQ(r.passes[0].cpu_of_memcpy, 0.25);
+  EXPECT_DOUBLE_EQ(r.passes[0].gpu_over_cpu, 0.25);
+  EXPECT_EQ(r.sum.min_bytes, 16'000'000u);
+  EXPECT_DOUBLE_EQ(r.sum.gpu_ms, 4.0);
+  EXPECT_DOUBLE_EQ(r.sum.cpu_ms, 16.0);
+  EXPECT_DOUBLE_EQ(r.dense_gpu_over_cpu_wall, 0.25);
+  EXPECT_DOUBLE_EQ(r.isos[0].sparse_gpu_over_dense_cpu, 0.2);
+  EXPECT_DOUBLE_EQ(r.isos[0].sparse_gpu_over_dense_gpu, 0.8);
+  EXPECT_DOUBLE_EQ(r.isos[0].active_percent, 15.0);
+  EXPECT_DOUBLE_EQ(r.isos[0].candidate_percent, 25.0);
+  EXPECT_DOUBLE_EQ(r.isos[0].formats[0].percent, 15.0);
+  EXPECT_TRUE(std::isnan(r.isos[0].sparse_cpu_over_dense_cpu));  // no CPU figure
+  // A pass without a GPU time makes the GPU sum unknown, not smaller.
+  r.passes[1].gpu_ms = kNaN;
+  app::finish_case(r);
+  EXPECT_TRUE(std::isnan(r.sum.gpu_ms));
+  EXPECT_DOUBLE_EQ(r.sum.cpu_ms, 16.0);
+}

@@ -1,37 +1,344 @@
-// sparse_chain.cpp - the sparse GPU engine (issue 8 item 4). STUB: run() throws until the
-// real implementation lands; create()/describe() already work so callers can link.
+// sparse_chain.cpp - the sparse GPU engine (issue 8 item 4): the chain's filters, gradient
+// and brick min/max computed only on candidate bricks, one workgroup per brick
+// (shaders/sparse_brick.comp), published as a bricked core::SampleField.
+//
+// One run: (host) copy the volume into per-slab staging buffers and take the raw per-brick
+// ranges in the same pass over the voxels; select the candidates (sparse::select); (GPU, one
+// command buffer) staging -> device copies, one dispatch per (slab, pool chunk), readback
+// copies; (host) publish the active bricks (sparse::publish). Every host step is timed in
+// SparseOutput.
 #include "sparse_chain.h"
 
+#include <algorithm>
+#include <chrono>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
 
+#include "cpu_gradient.h"
+#include "isotouch/shaders/sparse_brick_spv.h"
+#include "isotouch_shared.h"
+#include "vk_resources.h"
+
 namespace isotouch::engine {
+
+static_assert(sizeof(gpu::SparseBrickPush) == 112, "SparseBrickPush: 28 4-byte members (std430)");
+static_assert(int(sparse::OpKind::kGauss) == int(ISOTOUCH_SPARSE_OP_GAUSS) &&
+                  int(sparse::OpKind::kMax) == int(ISOTOUCH_SPARSE_OP_MAX) &&
+                  int(sparse::OpKind::kMin) == int(ISOTOUCH_SPARSE_OP_MIN),
+              "op kinds shared with the shader");
+static_assert(ISOTOUCH_SPARSE_SAMPLES == core::kBrickSamples, "9^3 stored samples");
+
+namespace {
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+constexpr std::uint64_t kSlotBytes = std::uint64_t(core::kBrickSamples) * sizeof(core::Sample);  // 11664
+// Shared memory the shader declares: two ping-pong regions, two reduction arrays, a flag.
+constexpr std::uint64_t kSharedBytes = ISOTOUCH_SPARSE_SHARED_FLOATS * 4 + 2 * ISOTOUCH_SPARSE_WG * 4 + 4;
+
+/// Floats the shader's shared buffers A and B need for `plan` (the largest box each one
+/// receives, op 0 writing A, op 1 B, ...; interior bricks, whose boxes are not clipped).
+std::pair<std::uint64_t, std::uint64_t> shared_sizes(const sparse::Plan& plan) {
+  std::uint64_t a = 0, b = 0;
+  int m[3] = {0, 0, 0};
+  if (plan.ops.empty())
+    a = std::uint64_t(plan.region[0]) * std::uint64_t(plan.region[1]) * std::uint64_t(plan.region[2]);
+  for (std::size_t o = 0; o < plan.ops.size(); ++o) {
+    m[plan.ops[o].axis] += plan.ops[o].radius;
+    std::uint64_t box = 1;
+    for (int k = 0; k < 3; ++k) box *= std::uint64_t(plan.region[std::size_t(k)] - 2 * m[k]);
+    (o % 2 == 0 ? a : b) = std::max(o % 2 == 0 ? a : b, box);
+  }
+  return {a, b};
+}
+
+/// A z-range of brick layers, its raw slices and the candidates in it.
+struct SlabPlan {
+  int bz0 = 0, bz1 = 0;            ///< brick layers [bz0, bz1)
+  int src_z0 = 0, src_z1 = 0;      ///< raw slices [src_z0, src_z1): layers + region apron
+  std::size_t c0 = 0, c1 = 0;      ///< candidates [c0, c1)
+  GpuBuffer staging, device;
+};
+struct Chunk {
+  std::size_t slab = 0, c0 = 0, c1 = 0;  ///< candidates [c0, c1) of one slab, one pool buffer
+  GpuBuffer pool, readback;
+};
+}  // namespace
 
 struct SparseChain::Impl {
   VulkanContext& ctx;
   std::vector<PassDesc> passes;
-  Impl(VulkanContext& c, std::vector<PassDesc> p) : ctx(c), passes(std::move(p)) {}
+  ComputePipeline<gpu::SparseBrickPush> pipe;
+  bool keep_input = false;
+  std::string last_run;
+  Impl(VulkanContext& c, std::vector<PassDesc> p)
+      : ctx(c), passes(std::move(p)), pipe(c, sparse_brick_spv, 5, "sparse_brick") {}
 };
 
 SparseChain::SparseChain(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 SparseChain::~SparseChain() = default;
+void SparseChain::set_keep_input(bool keep) { impl_->keep_input = keep; }
 
 Result<std::unique_ptr<SparseChain>> SparseChain::create(VulkanContext& ctx, std::vector<PassDesc> passes) {
   using R = Result<std::unique_ptr<SparseChain>>;
-  if (std::string e = validate_passes(passes); !e.empty()) return R::fail("sparse chain: " + e);
+  if (std::string e = sparse::validate(passes); !e.empty()) return R::fail("sparse chain: " + e);
+  const auto& lim = ctx.properties().limits;
+  if (lim.maxComputeSharedMemorySize < kSharedBytes)
+    return R::fail("sparse chain: sparse_brick.comp needs " + std::to_string(kSharedBytes) +
+                   " bytes of shared memory, " + ctx.info().name + " offers " +
+                   std::to_string(lim.maxComputeSharedMemorySize));
+  if (lim.maxComputeWorkGroupInvocations < ISOTOUCH_SPARSE_WG || lim.maxComputeWorkGroupSize[0] < ISOTOUCH_SPARSE_WG)
+    return R::fail("sparse chain: workgroup of " + std::to_string(ISOTOUCH_SPARSE_WG) + " invocations too large for " +
+                   ctx.info().name);
   return R::ok(std::unique_ptr<SparseChain>(new SparseChain(std::make_unique<Impl>(ctx, std::move(passes)))));
-}
-
-SparseOutput SparseChain::run(const Volume& volume, const core::Isosurface&, float, core::SampleFormat,
-                              std::uint64_t) {
-  throw VolumeError(volume.path + ": sparse chain: not implemented yet");
 }
 
 std::string SparseChain::describe() const {
   std::ostringstream s;
-  s << "sparse chain (stub):";
-  for (const PassDesc& p : impl_->passes) s << ' ' << p.label();
+  s << "sparse chain, passes:";
+  for (std::size_t i = 0; i < impl_->passes.size(); ++i) s << (i ? " -> " : " ") << impl_->passes[i].label();
+  s << " (brick_minmax halo 1 implied)";
+  s << "\npipelines created: sparse_brick (one workgroup of " << ISOTOUCH_SPARSE_WG
+    << " per candidate brick: raw region -> filters -> min/max -> value+gradient of active bricks)";
+  s << "\nleft out (not created, not run): gaussian1d, morph1d, gradient, brick_minmax (the dense passes)";
+  s << "\nbuffers per run: raw voxels per z-slab of brick layers (device-local + staging), candidate ids"
+       " (+ staging), ops + weights (+ staging), candidate ranges (vec4 + readback), brick pool per chunk"
+       " (729 vec4 per candidate, device-local + readback)";
+  s << "\nleft out buffers: ping-pong field, dense samples (16 B/voxel), dense brick ranges";
+  if (!impl_->last_run.empty()) s << "\nlast run: " << impl_->last_run;
   return s.str();
+}
+
+SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, float background,
+                              core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  const auto t_total = std::chrono::steady_clock::now();
+  VulkanContext& ctx = impl_->ctx;
+  const auto& lim = ctx.properties().limits;
+  const auto [nx, ny, nz] = vol.grid.dims;
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
+                      std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
+  const sparse::Plan plan = sparse::make_plan(vol.grid, impl_->passes, vol.path);
+  const auto [shared_a, shared_b] = shared_sizes(plan);
+  if (shared_a + shared_b > ISOTOUCH_SPARSE_SHARED_FLOATS || plan.ops.size() > ISOTOUCH_SPARSE_MAX_OPS)
+    throw VolumeError(vol.path + ": sparse chain: filters of total radius " + std::to_string(plan.radius[0]) + "," +
+                      std::to_string(plan.radius[1]) + "," + std::to_string(plan.radius[2]) +
+                      " voxels need " + std::to_string(shared_a + shared_b) + " floats of shared memory (" +
+                      std::to_string(plan.ops.size()) + " ops); the sparse shader holds " +
+                      std::to_string(ISOTOUCH_SPARSE_SHARED_FLOATS) + " floats and " +
+                      std::to_string(ISOTOUCH_SPARSE_MAX_OPS) + " ops: use the dense chain");
+  std::uint64_t limit = ctx.max_binding_bytes();
+  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+  const std::uint64_t alloc_limit = ctx.max_allocation_bytes() ? ctx.max_allocation_bytes() : limit;
+  const std::uint64_t buf_limit = std::min(limit, alloc_limit);
+  auto buffer = [&](std::uint64_t bytes, MemoryIntent intent, const std::string& what) {
+    auto r = GpuBuffer::create(ctx, std::max<std::uint64_t>(bytes, 16), intent, what);
+    if (!r) throw VolumeError(vol.path + ": sparse chain: " + r.error);
+    return std::move(*r.value);
+  };
+
+  // Slabs of brick layers whose raw slices (plus the region's apron) fit one binding.
+  const auto nb = core::brick_counts(vol.grid);
+  const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
+  const int below = 1 + plan.radius[2], above = 2 + plan.radius[2];
+  auto src_range = [&](int bz0, int bz1) {
+    return std::pair{std::max(8 * bz0 - below, 0), std::min(8 * bz1 + above, nz)};
+  };
+  std::vector<SlabPlan> slabs;
+  for (int bz = 0; bz < nb[2];) {
+    int end = bz + 1;
+    auto bytes = [&](int e) {
+      const auto [a, b] = src_range(bz, e);
+      return std::uint64_t(b - a) * slice * 4;
+    };
+    if (bytes(end) > buf_limit)
+      throw VolumeError(vol.path + ": sparse chain: one brick layer of " + std::to_string(nx) + "x" +
+                        std::to_string(ny) + " voxels (+ " + std::to_string(below + above) +
+                        " apron slices) needs " + std::to_string(bytes(end)) + " bytes, more than a binding of " +
+                        std::to_string(buf_limit) + " bytes on " + ctx.info().name);
+    while (end < nb[2] && bytes(end + 1) <= buf_limit) ++end;
+    SlabPlan s;
+    s.bz0 = bz;
+    s.bz1 = end;
+    std::tie(s.src_z0, s.src_z1) = src_range(bz, end);
+    slabs.push_back(std::move(s));
+    bz = end;
+  }
+
+  // Host: staging copies and raw brick ranges in one pass over the voxels.
+  SparseOutput out;
+  auto t0 = std::chrono::steady_clock::now();
+  for (SlabPlan& s : slabs) {
+    const std::uint64_t bytes = std::uint64_t(s.src_z1 - s.src_z0) * slice * 4;
+    s.staging = buffer(bytes, MemoryIntent::Upload, "raw voxels staging (slab)");
+    s.device = buffer(bytes, MemoryIntent::DeviceLocal, "raw voxels (slab)");
+  }
+  const double alloc_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  sparse::RawRanges raw;
+  raw.init(vol.grid);
+  for (int z = 0; z < nz; ++z) {
+    const float* src = vol.voxels.data() + std::size_t(z) * slice;
+    raw.add_slice(vol.grid, z, src);
+    for (SlabPlan& s : slabs)
+      if (z >= s.src_z0 && z < s.src_z1)
+        std::memcpy(static_cast<char*>(s.staging.mapped()) + std::uint64_t(z - s.src_z0) * slice * 4, src, slice * 4);
+  }
+  const double staging_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const std::size_t nc = sel.candidates.size();
+  const double select_ms = ms_since(t0);
+
+  // Candidates per slab (ascending ids: contiguous), pool chunks within each slab.
+  t0 = std::chrono::steady_clock::now();
+  const std::uint64_t layer = std::uint64_t(nb[0]) * std::uint64_t(nb[1]);
+  const std::size_t max_chunk = std::size_t(
+      std::min<std::uint64_t>(buf_limit / kSlotBytes, lim.maxComputeWorkGroupCount[0]));
+  if (max_chunk == 0)
+    throw VolumeError(vol.path + ": sparse chain: one brick pool slot of " + std::to_string(kSlotBytes) +
+                      " bytes exceeds a binding of " + std::to_string(buf_limit) + " bytes");
+  if (std::uint64_t(std::max<std::size_t>(nc, 1)) * 16 > buf_limit)
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(nc) + " candidate ranges exceed a binding of " +
+                      std::to_string(buf_limit) + " bytes");
+  std::vector<Chunk> chunks;
+  {
+    std::size_t c = 0;
+    for (std::size_t si = 0; si < slabs.size(); ++si) {
+      SlabPlan& s = slabs[si];
+      s.c0 = c;
+      while (c < nc && sel.candidates[c] < std::uint64_t(s.bz1) * layer) ++c;
+      s.c1 = c;
+      for (std::size_t a = s.c0; a < s.c1; a += max_chunk) {
+        Chunk ch;
+        ch.slab = si;
+        ch.c0 = a;
+        ch.c1 = std::min(s.c1, a + max_chunk);
+        const std::uint64_t bytes = std::uint64_t(ch.c1 - ch.c0) * kSlotBytes;
+        ch.pool = buffer(bytes, MemoryIntent::DeviceLocal, "brick pool (chunk)");
+        ch.readback = buffer(bytes, MemoryIntent::Readback, "brick pool readback (chunk)");
+        chunks.push_back(std::move(ch));
+      }
+    }
+  }
+  // Ops + weights, candidate ids.
+  std::vector<std::uint32_t> params(4 * ISOTOUCH_SPARSE_MAX_OPS + plan.weights.size(), 0);
+  for (std::size_t i = 0; i < plan.ops.size(); ++i) {
+    const sparse::Op& o = plan.ops[i];
+    params[4 * i] = std::uint32_t(o.axis);
+    params[4 * i + 1] = std::uint32_t(o.radius);
+    params[4 * i + 2] = std::uint32_t(o.kind);
+    params[4 * i + 3] = o.w_offset;
+  }
+  std::memcpy(params.data() + 4 * ISOTOUCH_SPARSE_MAX_OPS, plan.weights.data(), plan.weights.size() * 4);
+  GpuBuffer params_up = buffer(params.size() * 4, MemoryIntent::Upload, "sparse params staging");
+  GpuBuffer params_dev = buffer(params.size() * 4, MemoryIntent::DeviceLocal, "sparse params");
+  GpuBuffer cand_up = buffer(nc * 4, MemoryIntent::Upload, "candidate ids staging");
+  GpuBuffer cand_dev = buffer(nc * 4, MemoryIntent::DeviceLocal, "candidate ids");
+  GpuBuffer ranges_dev = buffer(nc * 16, MemoryIntent::DeviceLocal, "candidate ranges");
+  GpuBuffer ranges_down = buffer(nc * 16, MemoryIntent::Readback, "candidate ranges readback");
+  std::memcpy(params_up.mapped(), params.data(), params.size() * 4);
+  if (nc) std::memcpy(cand_up.mapped(), sel.candidates.data(), nc * 4);
+  const double setup_ms = alloc_ms + ms_since(t0);
+  out.upload_ms = staging_ms + setup_ms;
+
+  // One command buffer: uploads, one dispatch per chunk, readbacks.
+  DescriptorArena arena(ctx, std::uint32_t(std::max<std::size_t>(chunks.size(), 1)),
+                        5 * std::uint32_t(std::max<std::size_t>(chunks.size(), 1)));
+  GpuTimer timer(ctx, 3);
+  VkCommandBuffer cmd = ctx.begin_commands();
+  timer.record_reset(cmd);
+  for (const SlabPlan& s : slabs) record_copy(cmd, s.staging, s.device, s.staging.size());
+  record_copy(cmd, params_up, params_dev, params_up.size());
+  if (nc) record_copy(cmd, cand_up, cand_dev, nc * 4);
+  barrier_transfer_to_compute(cmd);
+  timer.mark(cmd, 0);
+  const GradientConstants k = gradient_constants(vol.grid);
+  gpu::SparseBrickPush pc{};
+  pc.nx = gpu::uint(nx);
+  pc.ny = gpu::uint(ny);
+  pc.nz = gpu::uint(nz);
+  pc.bx = gpu::uint(nb[0]);
+  pc.by = gpu::uint(nb[1]);
+  pc.sx = gpu::uint(plan.region[0]);
+  pc.sy = gpu::uint(plan.region[1]);
+  pc.sz = gpu::uint(plan.region[2]);
+  pc.rx = gpu::uint(plan.radius[0]);
+  pc.ry = gpu::uint(plan.radius[1]);
+  pc.rz = gpu::uint(plan.radius[2]);
+  pc.n_ops = gpu::uint(plan.ops.size());
+  pc.inside_above = iso.inside == core::InsideIs::kAbove ? 1u : 0u;
+  pc.threshold = sparse::threshold(iso);
+  pc.background = background;
+  pc.buf_b = gpu::uint(shared_a);
+  pc.inv_2h_x = k.inv_2h[0];
+  pc.inv_2h_y = k.inv_2h[1];
+  pc.inv_2h_z = k.inv_2h[2];
+  pc.inv_h_x = k.inv_h[0];
+  pc.inv_h_y = k.inv_h[1];
+  pc.inv_h_z = k.inv_h[2];
+  for (const Chunk& ch : chunks) {
+    const SlabPlan& s = slabs[ch.slab];
+    pc.src_z0 = gpu::uint(s.src_z0);
+    pc.src_offset = 0;
+    pc.cand_offset = gpu::uint(ch.c0);
+    pc.pool_base = gpu::uint(ch.c0);
+    impl_->pipe.bind(cmd, arena,
+                     {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{cand_dev.handle(), 0, cand_dev.size()},
+                      BufferRange{params_dev.handle(), 0, params_dev.size()},
+                      BufferRange{ranges_dev.handle(), 0, ranges_dev.size()},
+                      BufferRange{ch.pool.handle(), 0, ch.pool.size()}});
+    impl_->pipe.push(cmd, pc);
+    vkCmdDispatch(cmd, std::uint32_t(ch.c1 - ch.c0), 1, 1);
+  }
+  barrier_compute_to_transfer(cmd);
+  timer.mark(cmd, 1);
+  if (nc) record_copy(cmd, ranges_dev, ranges_down, nc * 16);
+  for (const Chunk& ch : chunks) record_copy(cmd, ch.pool, ch.readback, ch.pool.size());
+  barrier_transfer_to_host(cmd);
+  timer.mark(cmd, 2);
+  out.submit_wall_ms = ctx.submit_and_wait(cmd);
+
+  // Host: ranges, the shader's decision checked against the host's, publication.
+  t0 = std::chrono::steady_clock::now();
+  std::vector<sparse::CandidateRange> ranges(nc);
+  std::vector<const core::Sample*> where(nc, nullptr);
+  const float* rf = static_cast<const float*>(ranges_down.mapped());
+  for (std::size_t c = 0; c < nc; ++c) {
+    ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
+    float tile = 0;
+    if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))
+      throw std::logic_error(vol.path + ": sparse chain: shader and host disagree on brick " +
+                             std::to_string(sel.candidates[c]) + " (range " + std::to_string(ranges[c].lo) + ".." +
+                             std::to_string(ranges[c].hi) + ", tau " + std::to_string(iso.tau) + ")");
+  }
+  for (const Chunk& ch : chunks)
+    for (std::size_t c = ch.c0; c < ch.c1; ++c)
+      where[c] = static_cast<const core::Sample*>(ch.readback.mapped()) + (c - ch.c0) * core::kBrickSamples;
+  out.download_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return where[c]; }, iso, background, format,
+                  impl_->keep_input, out);
+  out.publish_ms = ms_since(t0);
+
+  const double gpu_ms = timer.elapsed_ms(0, 1), copy_ms = timer.elapsed_ms(1, 2);
+  out.passes.push_back({"raw brick ranges + staging copies (host)", staging_ms, 0});
+  out.passes.push_back({"candidate selection (host)", select_ms, 0});
+  out.passes.push_back({plan.text + " + gradient + min/max on candidates (GPU)", gpu_ms, int(chunks.size())});
+  out.passes.push_back({"readback copies (GPU)", copy_ms, 0});
+  out.stats.slabs = slabs.size();
+  out.stats.dispatches = chunks.size();
+  out.total_ms = ms_since(t_total);
+
+  std::ostringstream info;
+  info << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates
+       << " candidates, " << out.stats.active << " active; region " << plan.region[0] << "x" << plan.region[1] << "x"
+       << plan.region[2] << " (radius " << plan.radius[0] << "," << plan.radius[1] << "," << plan.radius[2]
+       << "; ops: " << plan.text << "), " << slabs.size() << " slab(s), " << chunks.size() << " dispatch(es); snapshot "
+       << out.stats.snapshot_bytes << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
+  impl_->last_run = info.str();
+  return out;
 }
 
 }  // namespace isotouch::engine

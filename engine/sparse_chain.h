@@ -4,7 +4,9 @@
 // bench engine (apps/bench_engine.cpp) and the scene runner (apps/run_job.cpp) code
 // against; the owner may add members but keeps these names and meanings.
 #pragma once
+#include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,6 +23,8 @@ struct SparseStats {
   std::size_t active = 0;            ///< bricks published with samples (smoothed range, halo 1, straddles tau)
   std::uint64_t snapshot_bytes = 0;  ///< bytes of the published snapshot (table + tiles + pool)
   std::uint64_t dense_fp32_bytes = 0;  ///< voxels * 16: the dense fp32 snapshot it replaces
+  std::size_t slabs = 0;       ///< GPU: z-slabs of brick layers (bindings <= the limit); CPU: 0
+  std::size_t dispatches = 0;  ///< GPU: dispatches (one per slab and pool chunk); CPU: 0
 };
 
 /// One sparse run. `field` is a bricked core::SampleField (empty dense samples).
@@ -33,7 +37,86 @@ struct SparseOutput {
   double download_ms = 0;          ///< readback copies
   double publish_ms = 0;           ///< building the bricked SampleField on the host
   double total_ms = 0;             ///< wall clock of run(), everything included
+  /// What was handed to core::make_bricked_field (kept only with keep_input; the field
+  /// owns the pool otherwise). Tests read it.
+  core::BrickedInput input;
 };
+
+
+/// Internals shared by the GPU chain, its CPU reference and the tests.
+namespace sparse {
+
+/// One 1-D filter op of the chain along one axis (Gaussian taps or a box max / min).
+enum class OpKind : std::uint32_t { kGauss = 0, kMax = 1, kMin = 2 };  // = ISOTOUCH_SPARSE_OP_*
+struct Op {
+  int axis = 0;             ///< 0 x, 1 y, 2 z
+  int radius = 0;           ///< taps each side [voxels]
+  OpKind kind = OpKind::kGauss;
+  std::uint32_t w_offset = 0;  ///< first weight of a Gaussian op in Plan::weights
+};
+
+/// What the pass list means on one grid: the 1-D ops in order, their weights, the total
+/// radius and the raw region a candidate brick reads.
+struct Plan {
+  std::vector<Op> ops;
+  std::vector<float> weights;
+  std::array<int, 3> radius{0, 0, 0};     ///< R: sum of the ops' radii per axis [voxels]
+  std::array<int, 3> region{11, 11, 11};  ///< raw region per candidate: 11 + 2 R (brick - 1 .. + 9, + R)
+  std::array<int, 3> reach{1, 1, 1};      ///< bricks each side the widened range spans: floor(R / 8) + 1
+  double rel_eps = 0;   ///< relative widening of a range for the Gaussians' float rounding
+  bool closing = false; ///< a box max/min is in the chain (an all-NaN window gives +-Inf)
+  std::string text;     ///< human-readable op list (describe)
+};
+
+/// Empty if `passes` suits the sparse chain (filters, then one gradient; brick_minmax only
+/// with halo 1, the halo the selection uses), else the reason naming the pass.
+std::string validate(const std::vector<PassDesc>& passes);
+/// @throws VolumeError naming `what` if a kernel is too wide.
+Plan make_plan(const core::Grid& grid, const std::vector<PassDesc>& passes, const std::string& what);
+
+/// Per-brick raw ranges (no halo): min / max of the finite voxels (NaN skipped) and whether
+/// a NaN voxel was seen. Filled one z-slice at a time (the GPU path fills it while copying
+/// the slice into the staging buffer).
+struct RawRanges {
+  std::array<int, 3> bricks{0, 0, 0};
+  std::vector<float> lo, hi;
+  std::vector<std::uint8_t> nan;
+  void init(const core::Grid& grid);
+  void add_slice(const core::Grid& grid, int z, const float* slice);
+};
+
+/// Candidate selection: every brick's raw range widened over the neighbours its stencil
+/// reaches and by the Gaussians' rounding bound (conservative: the smoothed field over
+/// the brick + 1 voxel lies inside it).
+struct Selection {
+  std::vector<float> lo, hi;              ///< widened range per brick
+  std::vector<std::uint8_t> nan;          ///< a NaN voxel in the neighbourhood
+  std::vector<std::uint32_t> candidates;  ///< ascending brick ids
+};
+Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso);
+
+/// The float that gives the same comparisons with float values as the double tau:
+/// kAbove the largest float <= tau, kBelow the smallest float >= tau.
+float threshold(const core::Isosurface& iso);
+
+/// Exact range of one candidate (smoothed brick + 1 voxel): lo, hi, NaN seen.
+struct CandidateRange {
+  float lo, hi;
+  bool nan;
+};
+/// The active rule (core::bricked_input_from_dense): not uniform by tile_value, or
+/// uniform inside with a NaN voxel. Writes the tile of a uniform brick.
+bool is_active(const CandidateRange& r, const core::Isosurface& iso, float background, float& tile);
+
+/// Builds the published field: active candidates (is_active on `ranges[c]`) with the
+/// 729 samples `samples(c)` returns for candidate index c, tiles of the others (from the
+/// exact range for candidates, from the widened range otherwise); fills out.stats,
+/// out.field (core::make_bricked_field) and, with keep_input, out.input.
+void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
+             const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
+             float background, core::SampleFormat format, bool keep_input, SparseOutput& out);
+
+}  // namespace sparse
 
 /// The GPU sparse chain. The pass list is filters (gaussian, closing) then gradient
 /// (required: a snapshot carries gradients); brick_minmax is implied.
@@ -52,6 +135,8 @@ class SparseChain {
                    core::SampleFormat format = core::SampleFormat::kFp32, std::uint64_t max_binding_bytes = 0);
   /// Passes, pipelines and buffers created / left out, and the last run's brick counts.
   std::string describe() const;
+  /// Also return the BrickedInput in SparseOutput::input (a copy of the pool; tests).
+  void set_keep_input(bool keep);
 
  private:
   struct Impl;
@@ -61,7 +146,9 @@ class SparseChain {
 
 /// The one-thread CPU reference of the sparse chain: the same bricks, the same samples
 /// (bit for bit with the dense CPU chain at every published voxel).
+/// @param keep_input also return the BrickedInput in SparseOutput::input.
 SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                            float background, core::SampleFormat format = core::SampleFormat::kFp32);
+                            float background, core::SampleFormat format = core::SampleFormat::kFp32,
+                            bool keep_input = false);
 
 }  // namespace isotouch::engine

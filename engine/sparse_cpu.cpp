@@ -1,13 +1,454 @@
-// sparse_cpu.cpp - one-thread CPU reference of the sparse chain. STUB until the real one lands.
+// sparse_cpu.cpp - the sparse chain's selection, publication and its one-thread CPU
+// reference (engine/sparse_chain.h). Compiled with -ffp-contract=off (engine/CMakeLists.txt):
+// the per-brick computation does the float operations of shaders/sparse_brick.comp, which
+// are those of the dense passes (cpu_filters.cpp, cpu_gradient.cpp), in the same order.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <utility>
 
+#include "cpu_gradient.h"
 #include "sparse_chain.h"
 
 namespace isotouch::engine {
+namespace sparse {
 
-SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>&, const core::Isosurface&, float,
-                            core::SampleFormat) {
-  throw VolumeError(volume.path + ": run_sparse_cpu: not implemented yet");
+namespace {
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr double kU = 0x1p-24;  // unit roundoff of float
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// make_bricked_field(BrickedInput, SampleFormat) when core provides it (found by ADL at
+// instantiation); otherwise the field stays empty and the caller keeps the input.
+template <class In>
+auto make_field(In&& in, core::SampleFormat f, int) -> decltype(make_bricked_field(std::forward<In>(in), f)) {
+  return make_bricked_field(std::forward<In>(in), f);
+}
+template <class In>
+core::SampleField make_field(In&&, core::SampleFormat, long) {
+  return {};
+}
+template <class In>
+constexpr bool can_make_field(int) requires requires(In in) { make_bricked_field(std::move(in), core::SampleFormat::kFp32); } {
+  return true;
+}
+template <class In>
+constexpr bool can_make_field(long) {
+  return false;
+}
+}  // namespace
+
+std::string validate(const std::vector<PassDesc>& p) {
+  if (std::string e = validate_passes(p); !e.empty()) return e;
+  bool gradient = false;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const std::string at = "pass " + std::to_string(i) + " (" + pass_name(p[i].kind) + "): ";
+    switch (p[i].kind) {
+      case PassKind::Gaussian:
+      case PassKind::Closing:
+        if (gradient) return at + "filters must come before the gradient in the sparse chain";
+        break;
+      case PassKind::Gradient: gradient = true; break;
+      case PassKind::BrickMinMax:
+        if (p[i].halo != 1)
+          return at + "the sparse chain selects bricks with halo 1 (the gradient's stencil), got halo " +
+                 std::to_string(p[i].halo);
+        break;
+    }
+  }
+  if (!gradient) return "the sparse chain needs a gradient pass (a snapshot carries gradients)";
+  return {};
+}
+
+Plan make_plan(const core::Grid& grid, const std::vector<PassDesc>& passes, const std::string& what) {
+  Plan plan;
+  double factor = 1.0;
+  try {
+    for (const PassDesc& p : passes) {
+      if (p.kind == PassKind::Gaussian) {
+        const GaussianAxes g = gaussian_axes(grid, p.sigma_mm);
+        for (int a = 0; a < 3; ++a) {
+          const auto& k = g.kernel[std::size_t(a)];
+          const int r = int(k.size() / 2);
+          plan.ops.push_back({a, r, OpKind::kGauss, std::uint32_t(plan.weights.size())});
+          plan.weights.insert(plan.weights.end(), k.begin(), k.end());
+          plan.radius[std::size_t(a)] += r;
+          // See select(): one op moves the bound by at most (n + 3) u max|x|, n = 2r + 1 taps.
+          factor *= 1.0 + double(2 * r + 1 + 3) * kU;
+          plan.text += std::string(plan.text.empty() ? "" : ", ") + "gauss " + "xyz"[a] + " r=" + std::to_string(r);
+        }
+      } else if (p.kind == PassKind::Closing) {
+        const auto r = closing_radii(grid, p.radius_mm);
+        for (int k = 0; k < 6; ++k) {
+          const int a = k % 3;
+          plan.ops.push_back({a, r[std::size_t(a)], k < 3 ? OpKind::kMax : OpKind::kMin, 0});
+          plan.radius[std::size_t(a)] += r[std::size_t(a)];
+          plan.text += std::string(plan.text.empty() ? "" : ", ") + (k < 3 ? "max " : "min ") + "xyz"[a] +
+                       " r=" + std::to_string(r[std::size_t(a)]);
+        }
+        plan.closing = true;
+      }
+    }
+  } catch (const std::invalid_argument& e) {
+    throw VolumeError(what + ": " + e.what());
+  }
+  for (int a = 0; a < 3; ++a) {
+    plan.region[std::size_t(a)] = 11 + 2 * plan.radius[std::size_t(a)];
+    plan.reach[std::size_t(a)] = plan.radius[std::size_t(a)] / 8 + 1;
+  }
+  // The factor's own rounding in double and the 1 + x products: far below this margin.
+  plan.rel_eps = factor > 1.0 ? (factor - 1.0) * (1.0 + 1e-6) : 0.0;
+  if (plan.text.empty()) plan.text = "no filter";
+  return plan;
+}
+
+void RawRanges::init(const core::Grid& g) {
+  bricks = core::brick_counts(g);
+  const std::size_t n = std::size_t(bricks[0]) * std::size_t(bricks[1]) * std::size_t(bricks[2]);
+  lo.assign(n, kInf);
+  hi.assign(n, -kInf);
+  nan.assign(n, 0);
+}
+
+void RawRanges::add_slice(const core::Grid& g, int z, const float* f) {
+  const int nx = g.dims[0], ny = g.dims[1];
+  const std::size_t layer = std::size_t(z / 8) * std::size_t(bricks[0]) * std::size_t(bricks[1]);
+  for (int y = 0; y < ny; ++y) {
+    const float* row = f + std::size_t(y) * std::size_t(nx);
+    const std::size_t b0 = layer + std::size_t(y / 8) * std::size_t(bricks[0]);
+    for (int bx = 0; bx < bricks[0]; ++bx) {
+      const int x0 = bx * 8, x1 = std::min(x0 + 8, nx);
+      float mn = lo[b0 + std::size_t(bx)], mx = hi[b0 + std::size_t(bx)];
+      bool n = false;
+      for (int x = x0; x < x1; ++x) {
+        const float v = row[x];
+        n |= v != v;
+        mn = v < mn ? v : mn;
+        mx = v > mx ? v : mx;
+      }
+      lo[b0 + std::size_t(bx)] = mn;
+      hi[b0 + std::size_t(bx)] = mx;
+      if (n) nan[b0 + std::size_t(bx)] = 1;
+    }
+  }
+}
+
+// Why the widened range is a bound of the smoothed field over the brick + 1 voxel:
+// - a box max / min (closing) returns one of its finite inputs (NaN skipped), so its output
+//   lies in the range of the inputs over its window; an all-NaN window gives -Inf / +Inf,
+//   which is why a NaN in the neighbourhood makes a brick a candidate when a closing runs;
+// - a Gaussian op with n = 2r + 1 taps has float weights w_k >= 0, each the double
+//   e_k / sum e rounded once, so sum w_k <= 1 + u (u = 2^-24); the products and the
+//   running sum are rounded n times, |fl(sum) - sum w_k x_k| <= gamma_{n+1} sum w_k |x_k|
+//   (Higham, Accuracy and Stability, eq. 3.4), gamma_{n+1} = (n+1) u / (1 - (n+1) u).
+//   With A = max |x| over the window: the output lies in [lo - (n + 3) u A, hi + (n + 3) u A]
+//   (u A from the weight sum, (n + 1) u (1 + u) A / (1 - (n+1) u) < (n + 2) u A from the
+//   rounding for n < 2^10) and A grows by the factor 1 + (n + 3) u. Over all ops the bound
+//   moves by A (prod(1 + (n_i + 3) u) - 1) = A rel_eps. Gradual underflow adds at most
+//   2^-149 per rounding: the absolute term below.
+// - NaN outputs (a NaN or +Inf and -Inf in a Gaussian window) are skipped by the range.
+// The neighbourhood: the smoothed voxels [8b - 1, 8b + 8] read raw voxels
+// [8b - 1 - R, 8b + 8 + R], inside bricks b - reach .. b + reach (reach = floor(R/8) + 1).
+Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso) {
+  const auto nb = raw.bricks;
+  const std::size_t total = raw.lo.size();
+  Selection s;
+  s.lo = raw.lo;
+  s.hi = raw.hi;
+  s.nan = raw.nan;
+  std::vector<float> tlo(total), thi(total);
+  std::vector<std::uint8_t> tnan(total);
+  const std::size_t stride[3] = {1, std::size_t(nb[0]), std::size_t(nb[0]) * std::size_t(nb[1])};
+  for (int a = 0; a < 3; ++a) {  // separable min / max / or over the reach, per axis
+    const int r = plan.reach[std::size_t(a)], n = nb[std::size_t(a)];
+    for (std::size_t id = 0; id < total; ++id) {
+      const int i = int(id / stride[a] % std::size_t(n));
+      float mn = kInf, mx = -kInf;
+      std::uint8_t nn = 0;
+      for (int j = std::max(i - r, 0); j <= std::min(i + r, n - 1); ++j) {
+        const std::size_t o = id - std::size_t(i) * stride[a] + std::size_t(j) * stride[a];
+        mn = std::min(mn, s.lo[o]);
+        mx = std::max(mx, s.hi[o]);
+        nn |= s.nan[o];
+      }
+      tlo[id] = mn;
+      thi[id] = mx;
+      tnan[id] = nn;
+    }
+    s.lo.swap(tlo);
+    s.hi.swap(thi);
+    s.nan.swap(tnan);
+  }
+  const double abs_eps = plan.rel_eps > 0 ? double(plan.ops.size() * 130) * 0x1p-149 : 0.0;
+  for (std::size_t id = 0; id < total; ++id) {
+    float& lo = s.lo[id];
+    float& hi = s.hi[id];
+    if (lo <= hi && plan.rel_eps > 0) {
+      const double A = std::max(std::fabs(double(lo)), std::fabs(double(hi)));
+      const double d = A * plan.rel_eps + abs_eps;
+      const double l = double(lo) - d, h = double(hi) + d;
+      lo = float(l);  // rounded outward
+      if (double(lo) > l) lo = std::nextafter(lo, -kInf);
+      hi = float(h);
+      if (double(hi) < h) hi = std::nextafter(hi, kInf);
+    }
+    float tile = 0;
+    const bool uniform = core::tile_value(lo, hi, iso, 0.0f, tile);
+    const bool nan_matters = s.nan[id] && (plan.closing || (lo <= hi && iso.contains(tile)));
+    if (!uniform || nan_matters) s.candidates.push_back(std::uint32_t(id));
+  }
+  return s;
+}
+
+float threshold(const core::Isosurface& iso) {
+  float f = float(iso.tau);
+  if (iso.inside == core::InsideIs::kAbove) {
+    if (double(f) > iso.tau) f = std::nextafter(f, -kInf);
+  } else {
+    if (double(f) < iso.tau) f = std::nextafter(f, kInf);
+  }
+  return f;
+}
+
+bool is_active(const CandidateRange& r, const core::Isosurface& iso, float background, float& tile) {
+  if (!core::tile_value(r.lo, r.hi, iso, background, tile)) return true;
+  return r.nan && r.lo <= r.hi && iso.contains(tile);
+}
+
+void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
+             const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
+             float background, core::SampleFormat format, bool keep_input, SparseOutput& out) {
+  core::BrickedInput in;
+  in.grid = grid;
+  in.background = background;
+  const std::size_t total = sel.lo.size();
+  in.tile.assign(total, 0.0f);
+  std::vector<std::uint8_t> is_cand(total, 0);
+  for (std::uint32_t id : sel.candidates) is_cand[id] = 1;
+  for (std::size_t id = 0; id < total; ++id) {
+    if (is_cand[id]) continue;
+    if (!core::tile_value(sel.lo[id], sel.hi[id], iso, background, in.tile[id]))
+      throw std::logic_error("sparse publish: brick " + std::to_string(id) + " straddles but is no candidate");
+  }
+  std::vector<std::uint8_t> active(sel.candidates.size(), 0);
+  std::size_t n_active = 0;
+  for (std::size_t c = 0; c < sel.candidates.size(); ++c) {
+    float tile = 0;
+    active[c] = is_active(ranges[c], iso, background, tile);
+    if (active[c])
+      ++n_active;
+    else
+      in.tile[sel.candidates[c]] = tile;
+  }
+  in.active.reserve(n_active);
+  in.pool.resize(n_active * std::size_t(core::kBrickSamples));
+  core::Sample* dst = in.pool.data();
+  for (std::size_t c = 0; c < sel.candidates.size(); ++c) {
+    if (!active[c]) continue;
+    in.active.push_back(sel.candidates[c]);
+    const core::Sample* s = samples(c);
+    std::copy(s, s + core::kBrickSamples, dst);
+    dst += core::kBrickSamples;
+  }
+  SparseStats& st = out.stats;
+  st.bricks_total = total;
+  st.candidates = sel.candidates.size();
+  st.active = n_active;
+  const std::uint64_t per_sample = format == core::SampleFormat::kFp32 ? 16 : 8;
+  st.snapshot_bytes = 4 * std::uint64_t(total) + 16 * std::uint64_t(total - n_active) +
+                      std::uint64_t(n_active) * core::kBrickSamples * per_sample +
+                      (format == core::SampleFormat::kUnorm16 ? 32 * std::uint64_t(n_active) : 0);
+  st.dense_fp32_bytes = std::uint64_t(grid.voxel_count()) * 16;
+  if constexpr (can_make_field<core::BrickedInput>(0)) {
+    if (keep_input) {
+      out.field = make_field(core::BrickedInput(in), format, 0);
+      out.input = std::move(in);
+    } else {
+      out.field = make_field(std::move(in), format, 0);
+    }
+  } else {
+    out.input = std::move(in);  // no builder in core yet: the input is the result
+  }
+}
+
+// ---------------------------------------------------------------- CPU reference
+
+namespace {
+
+/// The region of one candidate brick and its computation, operation for operation as
+/// shaders/sparse_brick.comp (the loops run in a different order; every output is one
+/// independent expression, so the order of the outputs does not matter).
+class BrickCpu {
+ public:
+  BrickCpu(const Volume& v, const Plan& p) : vol_(v), plan_(p) {
+    for (int a = 0; a < 3; ++a) S_[a] = p.region[std::size_t(a)];
+    buf_[0].resize(std::size_t(S_[0]) * std::size_t(S_[1]) * std::size_t(S_[2]));
+    buf_[1].resize(buf_[0].size());
+    k_ = gradient_constants(v.grid);
+  }
+
+  CandidateRange range(std::uint32_t id, const std::array<int, 3>& nb) {
+    const auto b = core::brick_coords(id, nb);
+    for (int a = 0; a < 3; ++a) {
+      const int n = vol_.grid.dims[std::size_t(a)];
+      g0_[a] = 8 * b[std::size_t(a)] - 1 - plan_.radius[std::size_t(a)];
+      vlo_[a] = std::max(-g0_[a], 0);
+      vhi_[a] = std::min(S_[a] - 1, n - 1 - g0_[a]);
+    }
+    const int nx = vol_.grid.dims[0], ny = vol_.grid.dims[1];
+    for (int z = vlo_[2]; z <= vhi_[2]; ++z)
+      for (int y = vlo_[1]; y <= vhi_[1]; ++y)
+        for (int x = vlo_[0]; x <= vhi_[0]; ++x)
+          buf_[0][at(x, y, z)] = vol_.voxels[(std::size_t(g0_[2] + z) * std::size_t(ny) + std::size_t(g0_[1] + y)) *
+                                                 std::size_t(nx) +
+                                             std::size_t(g0_[0] + x)];
+    cur_ = 0;
+    int m[3] = {0, 0, 0};
+    for (const Op& op : plan_.ops) {
+      int e[3] = {0, 0, 0};
+      e[op.axis] = op.radius;
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max(m[a] + e[a], vlo_[a]);
+        hi[a] = std::min(S_[a] - 1 - m[a] - e[a], vhi_[a]);
+      }
+      const int stride = op.axis == 0 ? 1 : (op.axis == 1 ? S_[0] : S_[0] * S_[1]);
+      const int ilo = vlo_[op.axis], ihi = vhi_[op.axis], r = op.radius;
+      const float* src = buf_[cur_].data();
+      float* dst = buf_[1 - cur_].data();
+      const float* w = plan_.weights.data() + op.w_offset;
+      for (int z = lo[2]; z <= hi[2]; ++z)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+          for (int x = lo[0]; x <= hi[0]; ++x) {
+            const int l[3] = {x, y, z};
+            const int i = l[op.axis];
+            const int o = int(at(x, y, z));
+            const int line = o - i * stride;
+            if (op.kind == OpKind::kGauss) {
+              float acc = 0.0f;
+              for (int k = -r; k <= r; ++k) {
+                const float v = src[line + std::clamp(i + k, ilo, ihi) * stride];
+                const float term = w[k + r] * v;
+                acc = acc + term;
+              }
+              dst[o] = acc;
+            } else {
+              const bool is_max = op.kind == OpKind::kMax;
+              float mm = is_max ? -kInf : kInf;
+              for (int k = -r; k <= r; ++k) {
+                const float v = src[line + std::clamp(i + k, ilo, ihi) * stride];
+                mm = is_max ? (v > mm ? v : mm) : (v < mm ? v : mm);
+              }
+              dst[o] = mm;
+            }
+          }
+      for (int a = 0; a < 3; ++a) m[a] += e[a];
+      cur_ = 1 - cur_;
+    }
+    CandidateRange rg{kInf, -kInf, false};
+    const float* f = buf_[cur_].data();
+    for (int z = std::max(plan_.radius[2], vlo_[2]); z <= std::min(plan_.radius[2] + 9, vhi_[2]); ++z)
+      for (int y = std::max(plan_.radius[1], vlo_[1]); y <= std::min(plan_.radius[1] + 9, vhi_[1]); ++y)
+        for (int x = std::max(plan_.radius[0], vlo_[0]); x <= std::min(plan_.radius[0] + 9, vhi_[0]); ++x) {
+          const float v = f[at(x, y, z)];
+          rg.nan = rg.nan || v != v;
+          rg.lo = v < rg.lo ? v : rg.lo;
+          rg.hi = v > rg.hi ? v : rg.hi;
+        }
+    rg.lo = rg.lo + 0.0f;  // -0 -> +0, as the shader (whose reduction order differs)
+    rg.hi = rg.hi + 0.0f;
+    return rg;
+  }
+
+  /// The 9^3 samples of the brick of the last range() call.
+  void samples(core::Sample* out, float background) const {
+    const float* f = buf_[cur_].data();
+    const auto& d = vol_.grid.dims;
+    const int sx = S_[0], sxy = S_[0] * S_[1];
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j)
+        for (int i = 0; i < 9; ++i) {
+          const int g[3] = {g0_[0] + 1 + plan_.radius[0] + i, g0_[1] + 1 + plan_.radius[1] + j,
+                            g0_[2] + 1 + plan_.radius[2] + k};
+          core::Sample& s = out[i + 9 * j + 81 * k];
+          if (g[0] >= d[0] || g[1] >= d[1] || g[2] >= d[2]) {
+            s = {background, 0.0f, 0.0f, 0.0f};
+            continue;
+          }
+          const int p = int(at(g[0] - g0_[0], g[1] - g0_[1], g[2] - g0_[2]));
+          const float c = f[p];
+          const float xl = g[0] > 0 ? f[p - 1] : c, xh = g[0] + 1 < d[0] ? f[p + 1] : c;
+          const float yl = g[1] > 0 ? f[p - sx] : c, yh = g[1] + 1 < d[1] ? f[p + sx] : c;
+          const float zl = g[2] > 0 ? f[p - sxy] : c, zh = g[2] + 1 < d[2] ? f[p + sxy] : c;
+          s = {c, diff(g[0], d[0], xl, c, xh, k_.inv_2h[0], k_.inv_h[0]),
+               diff(g[1], d[1], yl, c, yh, k_.inv_2h[1], k_.inv_h[1]),
+               diff(g[2], d[2], zl, c, zh, k_.inv_2h[2], k_.inv_h[2])};
+        }
+  }
+
+ private:
+  static float diff(int i, int n, float lo, float c, float hi, float inv_2h, float inv_h) {
+    if (n < 2) return 0.0f;
+    if (i == 0) return (hi - c) * inv_h;
+    if (i == n - 1) return (c - lo) * inv_h;
+    return (hi - lo) * inv_2h;
+  }
+  std::size_t at(int x, int y, int z) const {
+    return (std::size_t(z) * std::size_t(S_[1]) + std::size_t(y)) * std::size_t(S_[0]) + std::size_t(x);
+  }
+  const Volume& vol_;
+  const Plan& plan_;
+  int S_[3], g0_[3] = {0, 0, 0}, vlo_[3] = {0, 0, 0}, vhi_[3] = {0, 0, 0};
+  std::vector<float> buf_[2];
+  int cur_ = 0;
+  GradientConstants k_{};
+};
+
+}  // namespace
+}  // namespace sparse
+
+SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
+                            float background, core::SampleFormat format, bool keep_input) {
+  if (std::string e = sparse::validate(passes); !e.empty()) throw std::invalid_argument("sparse chain: " + e);
+  const auto t_total = std::chrono::steady_clock::now();
+  SparseOutput out;
+  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
+
+  auto t0 = std::chrono::steady_clock::now();
+  sparse::RawRanges raw;
+  raw.init(vol.grid);
+  const std::size_t slice = std::size_t(vol.grid.dims[0]) * std::size_t(vol.grid.dims[1]);
+  for (int z = 0; z < vol.grid.dims[2]; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
+  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  out.passes.push_back({"raw brick ranges + candidate selection", sparse::ms_since(t0), 0});
+
+  t0 = std::chrono::steady_clock::now();
+  sparse::BrickCpu brick(vol, plan);
+  std::vector<sparse::CandidateRange> ranges(sel.candidates.size());
+  std::vector<core::Sample> pool;  // samples of the active candidates, in candidate order
+  std::vector<std::size_t> slot(sel.candidates.size(), 0);
+  for (std::size_t c = 0; c < sel.candidates.size(); ++c) {
+    ranges[c] = brick.range(sel.candidates[c], raw.bricks);
+    float tile = 0;
+    if (!sparse::is_active(ranges[c], iso, background, tile)) continue;
+    slot[c] = pool.size();
+    pool.resize(pool.size() + core::kBrickSamples);
+    brick.samples(pool.data() + slot[c], background);
+  }
+  out.passes.push_back({plan.text + " + gradient + min/max on candidates", sparse::ms_since(t0), 0});
+
+  t0 = std::chrono::steady_clock::now();
+  sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return pool.data() + slot[c]; }, iso, background,
+                  format, keep_input, out);
+  out.publish_ms = sparse::ms_since(t0);
+  out.total_ms = sparse::ms_since(t_total);
+  out.submit_wall_ms = out.total_ms;
+  return out;
 }
 
 }  // namespace isotouch::engine

@@ -1,0 +1,298 @@
+// Sparse chain (issue 8 item 4): the GPU sparse chain and its CPU reference against the
+// dense CPU chain (run_chain_cpu: truth from outside the sparse code), the validation layer
+// on (any message fails):
+// - every stored sample (729 per active brick, inside the grid) is bit-identical to the
+//   dense chain's sample at that voxel;
+// - the active set equals brute force over the dense smoothed field (range over the brick
+//   + 1 voxel straddles tau) and every uniform brick's tile is on the side of every voxel
+//   of its brick + 1 voxel;
+// - CPU sparse == GPU sparse bit for bit; forced small bindings (many slabs / pool chunks)
+//   give the same result.
+// Plus a disabled benchmark (chest CT, -500 and +250 HU): sparse GPU vs dense CPU.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+
+#include "cpu_filters.h"
+#include "passes.h"
+#include "sparse_chain.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+using namespace isotouch;
+using engine::PassDesc;
+using engine::Volume;
+
+namespace {
+const std::string kData = ISOTOUCH_TEST_DATA;
+const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
+
+engine::VulkanContext& vk() {
+  static auto ctx = [] {
+    engine::ContextOptions o;
+    o.validation = true;
+    o.synchronization_validation = true;
+    auto r = engine::VulkanContext::create(o);
+    if (!r)
+      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
+                               r.error);
+    return std::move(*r.value);
+  }();
+  return *ctx;
+}
+
+core::Isosurface above(double tau) { return {tau, core::InsideIs::kAbove}; }
+
+std::uint32_t bits(float f) { return std::bit_cast<std::uint32_t>(f); }
+bool same(const core::Sample& a, const core::Sample& b) {
+  return bits(a.value) == bits(b.value) && bits(a.gx) == bits(b.gx) && bits(a.gy) == bits(b.gy) &&
+         bits(a.gz) == bits(b.gz);
+}
+
+engine::SparseOutput run_gpu(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
+                             float background, std::uint64_t max_binding = 0) {
+  auto chain = engine::SparseChain::create(vk(), passes);
+  if (!chain) throw std::runtime_error(chain.error);
+  (*chain.value)->set_keep_input(true);
+  engine::SparseOutput out = (*chain.value)->run(v, iso, background, core::SampleFormat::kFp32, max_binding);
+  std::printf("  %s\n", (*chain.value)->describe().c_str());
+  return out;
+}
+
+// Dense CPU truth against one sparse result: samples, active set, tiles.
+void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
+                          const engine::SparseOutput& s, const std::string& what) {
+  const engine::ChainOutput dense = engine::run_chain_cpu(v, passes);
+  ASSERT_TRUE(dense.samples) << what;
+  const auto& d = dense.samples->samples;
+  const core::Grid& g = v.grid;
+  const auto nb = core::brick_counts(g);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  const core::BrickedInput& in = s.input;
+  ASSERT_EQ(in.tile.size(), total) << what;
+  ASSERT_EQ(in.pool.size(), in.active.size() * std::size_t(core::kBrickSamples)) << what;
+  EXPECT_EQ(s.stats.bricks_total, total);
+  EXPECT_EQ(s.stats.active, in.active.size());
+  EXPECT_LE(s.stats.active, s.stats.candidates);
+  std::vector<int> slot(total, -1);
+  for (std::size_t i = 0; i < in.active.size(); ++i) slot[in.active[i]] = int(i);
+  std::size_t brute_active = 0, compared = 0, wrong_samples = 0, wrong_side = 0;
+  for (std::size_t id = 0; id < total; ++id) {
+    const auto b = core::brick_coords(id, nb);
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
+      hi[a] = std::min(8 * b[std::size_t(a)] + 9, g.dims[std::size_t(a)]);
+    }
+    float mn = std::numeric_limits<float>::infinity(), mx = -mn;
+    for (int z = lo[2]; z < hi[2]; ++z)
+      for (int y = lo[1]; y < hi[1]; ++y)
+        for (int x = lo[0]; x < hi[0]; ++x) {
+          const float f = d[g.index(x, y, z)].value;
+          mn = f < mn ? f : mn;
+          mx = f > mx ? f : mx;
+        }
+    // Brute force: straddles iff some voxel is inside and some is not (NaN-free data).
+    bool any_in = false, any_out = false;
+    for (int z = lo[2]; z < hi[2]; ++z)
+      for (int y = lo[1]; y < hi[1]; ++y)
+        for (int x = lo[0]; x < hi[0]; ++x) (iso.contains(d[g.index(x, y, z)].value) ? any_in : any_out) = true;
+    const bool straddles = any_in && any_out;
+    brute_active += straddles;
+    EXPECT_EQ(slot[id] >= 0, straddles) << what << ": brick " << id << " range " << mn << ".." << mx;
+    if (slot[id] < 0) {
+      const bool inside = iso.contains(in.tile[id]);
+      for (int z = lo[2]; z < hi[2]; ++z)
+        for (int y = lo[1]; y < hi[1]; ++y)
+          for (int x = lo[0]; x < hi[0]; ++x) wrong_side += iso.contains(d[g.index(x, y, z)].value) != inside;
+      continue;
+    }
+    const core::Sample* p = in.pool.data() + std::size_t(slot[id]) * core::kBrickSamples;
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j)
+        for (int i = 0; i < 9; ++i) {
+          const int x = 8 * b[0] + i, y = 8 * b[1] + j, z = 8 * b[2] + k;
+          if (x >= g.dims[0] || y >= g.dims[1] || z >= g.dims[2]) continue;
+          ++compared;
+          const core::Sample& got = p[i + 9 * j + 81 * k];
+          const core::Sample& want = d[g.index(x, y, z)];
+          if (!same(got, want) && wrong_samples++ < 5)
+            ADD_FAILURE() << what << ": voxel " << x << "," << y << "," << z << " sparse {" << got.value << ", "
+                          << got.gx << ", " << got.gy << ", " << got.gz << "} dense {" << want.value << ", " << want.gx
+                          << ", " << want.gy << ", " << want.gz << "}";
+        }
+  }
+  EXPECT_EQ(wrong_samples, 0u) << what;
+  EXPECT_EQ(wrong_side, 0u) << what << ": voxels on the other side of their uniform brick's tile";
+  EXPECT_GT(brute_active, 0u) << what << ": the case must have a surface";
+  std::printf("  %-40s %zu bricks, %zu candidates, %zu active (brute force %zu), %zu samples bit-identical\n",
+              what.c_str(), total, s.stats.candidates, s.stats.active, brute_active, compared - wrong_samples);
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
+void expect_same_output(const engine::SparseOutput& a, const engine::SparseOutput& b, const std::string& what) {
+  EXPECT_EQ(a.stats.candidates, b.stats.candidates) << what;
+  ASSERT_EQ(a.input.active, b.input.active) << what;
+  ASSERT_EQ(a.input.pool.size(), b.input.pool.size()) << what;
+  std::size_t diff = 0;
+  for (std::size_t i = 0; i < a.input.pool.size(); ++i) diff += !same(a.input.pool[i], b.input.pool[i]);
+  EXPECT_EQ(diff, 0u) << what << ": pool samples differ";
+  ASSERT_EQ(a.input.tile.size(), b.input.tile.size()) << what;
+  std::size_t tdiff = 0;
+  for (std::size_t i = 0; i < a.input.tile.size(); ++i)
+    if (!std::binary_search(a.input.active.begin(), a.input.active.end(), std::uint32_t(i)))
+      tdiff += bits(a.input.tile[i]) != bits(b.input.tile[i]);
+  EXPECT_EQ(tdiff, 0u) << what << ": tiles differ";
+}
+
+// GPU vs dense, CPU sparse vs GPU sparse, and small bindings vs default.
+void check_case(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso, float background,
+                const std::string& what, std::uint64_t small_binding = 0) {
+  const engine::SparseOutput gpu = run_gpu(v, passes, iso, background);
+  expect_matches_dense(v, passes, iso, gpu, what + " (GPU)");
+  const engine::SparseOutput cpu = engine::run_sparse_cpu(v, passes, iso, background, core::SampleFormat::kFp32, true);
+  expect_same_output(gpu, cpu, what + ": GPU vs CPU sparse");
+  if (small_binding) {
+    const engine::SparseOutput small = run_gpu(v, passes, iso, background, small_binding);
+    expect_same_output(gpu, small, what + ": small bindings");
+    EXPECT_GE(small.stats.slabs, 2u) << what << ": the small binding must force several slabs";
+    EXPECT_GT(small.stats.dispatches, small.stats.slabs) << what << ": ... and several pool chunks";
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+}  // namespace
+
+TEST(SparseChain, HeadCt) {
+  const Volume v = engine::load_volume(kHead);
+  for (double tau : {1150.0, 500.0}) {
+    check_case(v, {PassDesc::gradient()}, above(tau), float(v.min_value), "head gradient tau " + std::to_string(tau));
+    check_case(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()}, above(tau),
+               float(v.min_value), "head gauss 1mm tau " + std::to_string(tau), 512u << 10);
+  }
+}
+
+TEST(SparseChain, ChestCt) {
+  const Volume v = engine::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
+  check_case(v, p, above(-500), -1024.0f, "chest gauss 1mm -500", 8u << 20);
+  check_case(v, p, above(250), -1024.0f, "chest gauss 1mm +250");
+}
+
+TEST(SparseChain, OddSizesAnisotropicBelow) {
+  // Dims not multiples of 8 (partial bricks, the apron beyond the grid), anisotropic
+  // spacing, inside below tau (signed distance, negative inside after negation).
+  Volume v = engine::make_sphere({37, 29, 23}, 1e-3, 9.0, {1.3, -0.7, 0.4});
+  for (float& f : v.voxels) f = -f;
+  v.update_stats();
+  v.grid.spacing_m = {0.8e-3, 1.1e-3, 1.7e-3};
+  const core::Isosurface iso{0.0, core::InsideIs::kBelow};
+  check_case(v, {PassDesc::gaussian(1.2), PassDesc::gradient()}, iso, 1e4f, "sphere odd dims gauss", 80u << 10);
+  // Random data: nearly every brick straddles; every border rule at once.
+  const Volume r = engine::make_random({19, 13, 11}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 7);
+  check_case(r, {PassDesc::gaussian(0.9), PassDesc::gradient()}, above(1000), -1000.0f, "random odd dims gauss");
+}
+
+TEST(SparseChain, ClosingThenGaussian) {
+  const Volume v = engine::load_volume(kHead);
+  const std::vector<PassDesc> p = {PassDesc::closing(1.0), PassDesc::gaussian(0.8), PassDesc::gradient()};
+  check_case(v, p, above(1150), float(v.min_value), "head closing+gauss", 512u << 10);
+  // The head's spacing makes a 1 mm closing radius 0; here it is 1 voxel along x.
+  Volume s = engine::make_sphere({30, 27, 21}, 1e-3, 8.0, {0.5, 0.2, -0.3});
+  s.grid.spacing_m = {1.0e-3, 1.6e-3, 2.5e-3};
+  check_case(s, {PassDesc::closing(1.0), PassDesc::gaussian(0.5), PassDesc::gradient()}, above(0), -1e4f,
+             "sphere closing+gauss", 40u << 10);
+}
+
+TEST(SparseChain, RejectsListsItCannotRun) {
+  EXPECT_FALSE(engine::SparseChain::create(vk(), {PassDesc::gaussian(1.0)}));  // no gradient
+  EXPECT_FALSE(engine::SparseChain::create(vk(), {PassDesc::gradient(), PassDesc::gaussian(1.0)}));
+  EXPECT_FALSE(engine::SparseChain::create(vk(), {PassDesc::gradient(), PassDesc::brick_minmax(2)}));
+  // Too wide for shared memory: an error naming the volume, not a crash.
+  const Volume v = engine::make_sphere({24, 24, 24}, 1e-3, 8.0);
+  auto chain = engine::SparseChain::create(vk(), {PassDesc::gaussian(4.0), PassDesc::gradient()});
+  ASSERT_TRUE(chain);
+  EXPECT_THROW((*chain.value)->run(v, above(0), -1e4f), engine::VolumeError);
+}
+
+// ---------------------------------------------------------------- benchmark (disabled)
+// ISOTOUCH_BENCH_REPS (default 5) runs; median. Run:
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_Bench*'
+namespace {
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+void bench_case(const Volume& v, double tau, int reps) {
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
+  auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
+  ASSERT_TRUE(ctx) << ctx.error;
+  auto sparse = engine::SparseChain::create(**ctx.value, p);
+  ASSERT_TRUE(sparse) << sparse.error;
+  auto dense_gpu = engine::PassChain::create(**ctx.value, p);
+  ASSERT_TRUE(dense_gpu) << dense_gpu.error;
+  std::vector<double> sp, sp_up, sp_gpu, sp_sub, sp_down, sp_pub, dc, dg, sc;
+  engine::SparseOutput last;
+  for (int r = 0; r < reps; ++r) {
+    auto t0 = std::chrono::steady_clock::now();
+    last = (*sparse.value)->run(v, above(tau), -1024.0f);
+    sp.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    sp_up.push_back(last.upload_ms);
+    sp_gpu.push_back(last.passes[2].ms);
+    sp_sub.push_back(last.submit_wall_ms);
+    sp_down.push_back(last.download_ms);
+    sp_pub.push_back(last.publish_ms);
+    t0 = std::chrono::steady_clock::now();
+    const auto c = engine::run_chain_cpu(v, p);
+    dc.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    t0 = std::chrono::steady_clock::now();
+    const auto g = (*dense_gpu.value)->run(v);
+    dg.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    t0 = std::chrono::steady_clock::now();
+    const auto s = engine::run_sparse_cpu(v, p, above(tau), -1024.0f);
+    sc.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  std::printf(
+      "chest tau %+.0f: %zu bricks, %zu candidates (%.1f %%), %zu active (%.1f %%)\n"
+      "  sparse GPU total %.1f ms (host staging+ranges+setup %.1f, GPU kernel %.1f, submit wall %.1f, readback %.1f, "
+      "publish %.1f)\n  dense CPU %.1f ms  ratio sparse GPU / dense CPU = %.3f\n  dense GPU %.1f ms, sparse CPU %.1f ms"
+      " (median of %d)\n",
+      tau, last.stats.bricks_total, last.stats.candidates, 100.0 * double(last.stats.candidates) / double(last.stats.bricks_total),
+      last.stats.active, 100.0 * double(last.stats.active) / double(last.stats.bricks_total), median(sp), median(sp_up),
+      median(sp_gpu), median(sp_sub), median(sp_down), median(sp_pub), median(dc), median(sp) / median(dc), median(dg),
+      median(sc), reps);
+}
+}  // namespace
+
+TEST(SparseChain, DISABLED_BenchChest) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 5;
+  const Volume v = engine::load_volume(kChest);
+  bench_case(v, -500, reps);
+  bench_case(v, 250, reps);
+}
+
+TEST(SparseChain, DISABLED_Bench512) {
+  Volume v = engine::make_sphere({512, 512, 512}, 1e-3, 200.0);
+  auto ctx = engine::VulkanContext::create({});
+  ASSERT_TRUE(ctx) << ctx.error;
+  auto sparse = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
+  ASSERT_TRUE(sparse) << sparse.error;
+  for (int r = 0; r < 2; ++r) {
+    const auto out = (*sparse.value)->run(v, above(0), -1e6f);
+    std::printf("512^3 sphere: total %.1f ms (upload %.1f, submit %.1f, publish %.1f), %zu candidates, %zu active\n",
+                out.total_ms, out.upload_ms, out.submit_wall_ms, out.publish_ms, out.stats.candidates,
+                out.stats.active);
+  }
+  std::printf("%s\n", (*sparse.value)->describe().c_str());
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  std::printf("peak RSS %.1f MiB\n", double(ru.ru_maxrss) / 1024.0);
+}

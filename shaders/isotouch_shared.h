@@ -91,6 +91,59 @@ struct BrickMinMaxPush {
   uint pad0;
 };
 
+// ---- sparse chain (issue 8 item 4; owner: gpu-sparse) ---------------------------------
+// shaders/sparse_brick.comp, engine/sparse_chain.cpp, CPU reference engine/sparse_cpu.cpp.
+// One workgroup per candidate 8^3 brick over its raw region (brick + 1 voxel below, + 2
+// above for the gradient of the 9^3 stored samples, + the filters' total radius R per
+// axis: sx = 11 + 2 rx ...): the first 1-D filter op reads the raw voxels from the src
+// binding, every later op reads the previous op's output in shared memory (two buffers,
+// A at 0 and B at buf_b floats, each as large as the largest output written into it; with
+// no filter the region is loaded into A). The ops come from the params buffer (
+// ISOTOUCH_SPARSE_MAX_OPS uvec4 {axis, radius, kind, weight offset}, then the Gaussian
+// weights as float bits), takes the exact (min, max) of the smoothed brick widened by 1
+// voxel, and if that straddles tau writes the 9^3 samples (value, gradient [value/m]) of
+// the brick to its pool slot. Bindings: 0 raw voxels (float, z-slab), 1 candidate brick
+// ids (uint), 2 params, 3 ranges (vec2 per candidate), 4 pool (vec4, 729 per slot).
+#define ISOTOUCH_SPARSE_WG 128
+#define ISOTOUCH_SPARSE_SHARED_FLOATS 7168u  // both shared buffers together (28 KiB)
+#define ISOTOUCH_SPARSE_MAX_OPS 16u
+#define ISOTOUCH_SPARSE_OP_GAUSS 0u
+#define ISOTOUCH_SPARSE_OP_MAX 1u
+#define ISOTOUCH_SPARSE_OP_MIN 2u
+#define ISOTOUCH_SPARSE_SAMPLES 729u       // 9^3 stored samples per active brick
+struct SparseBrickPush {
+  uint nx;            // volume size in voxels
+  uint ny;
+  uint nz;
+  uint bx;            // bricks along x: ceil(nx / 8)
+  uint by;
+  uint src_z0;        // first slice present in the src binding
+  uint src_offset;    // elements between the src binding start and slice src_z0
+  uint cand_offset;   // candidate index of workgroup 0 of this dispatch
+  uint pool_base;     // candidate index stored in slot 0 of the bound pool
+  uint sx;            // region size in voxels: 11 + 2 R per axis
+  uint sy;
+  uint sz;
+  uint rx;            // total filter radius R per axis [voxels]
+  uint ry;
+  uint rz;
+  uint n_ops;         // 1-D filter ops in the params buffer
+  uint inside_above;  // 1: value > tau is inside (threshold = largest float <= tau);
+                      // 0: value < tau is inside (threshold = smallest float >= tau)
+  float threshold;    // tau as a float that gives the same comparisons as the double tau
+  float background;   // value of the stored samples beyond the grid (gradient 0)
+  float inv_2h_x;     // 1 / (2 spacing) [1/m]
+  float inv_2h_y;
+  float inv_2h_z;
+  float inv_h_x;      // 1 / spacing [1/m]
+  float inv_h_y;
+  float inv_h_z;
+  uint buf_b;         // first float of shared buffer B (A starts at 0)
+  uint pad1;
+  uint pad2;
+};
+// ---- end sparse chain -----------------------------------------------------------------
+
 #ifdef __cplusplus
 }  // namespace isotouch::gpu
 #endif

@@ -52,8 +52,17 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
     "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
                "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
-    "outputs": {"trace_csv": true, "plots": true}
+    "outputs": {"trace_csv": true, "plots": true},
+    "engine": {"passes": [{"gaussian": {"sigma_mm": 1.0}}, {"closing": {"radius_mm": 1}}, "gradient"],
+               "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"}
   }
+engine (optional): the passes that compute the published samples, in order; a pass is its
+name or {"name": {parameters}}: gaussian (sigma_mm > 0), closing (radius_mm >= 0, a box),
+gradient (required, after the filters), brick_minmax (halo 0..8, default 1). Only the listed
+passes' pipelines and buffers are created; report.md and summary.json list what ran and what
+was left out. Default: ["gradient"], mode "sparse" (only 8^3 bricks near the isosurface are
+computed and published), samples "fp32" (16 B per sample; fp16 and unorm16 are 8 B and need
+mode "sparse"). mode "dense" computes every voxel, for comparison.
 The script casts a ray from ray_origin_frac (fractions of the volume box, each in [-2, 3])
 to the first isosurface crossing, presses the hand target press_depth_m in, strokes
 stroke_length_m along the surface, and lifts off. Shipped: scenes/head.json, chest.json,

@@ -37,6 +37,15 @@ struct Row {
   ErrorFigures e;
 };
 
+// One snapshot format on one scene (issue 8 item 5): HRI along the recorded stroke on it.
+struct FormatRow {
+  std::string scene;
+  SnapshotVariant v;  // field dropped after the run
+  FormatFigures f;
+  double tick_ns_mean = 0;
+  double voxel_m = 1e-3;
+};
+
 HriParams hri_base(const SweepScene& s, int n) {
   HriParams p = reference_params(s);
   p.plane_update_period = n;
@@ -44,6 +53,10 @@ HriParams hri_base(const SweepScene& s, int n) {
   p.normal = NormalSource::kSamples;
   return p;
 }
+
+// The HRI configuration the snapshot formats are compared with: the sweep's base (linear
+// intersection, normals from the gradient samples, which is what the formats round), n = 1.
+HriParams format_params(const SweepScene& s) { return hri_base(s, 1); }
 
 BaselineParams baseline_base(const SweepScene& s) {
   BaselineParams b;
@@ -148,6 +161,93 @@ double clock_pair_ns() {
   }
   return std::chrono::duration<double, std::nano>(clock::now() - t0).count() / n;
 }
+std::string formats_csv(const std::vector<FormatRow>& rows) {
+  std::ostringstream csv;
+  csv << "scene,snapshot,bytes,build_ms,bricks_total,bricks_active,tick_ns_mean,contact_ticks,contact_ticks_dense,"
+         "contact_mismatch_ticks,surface_err_rms_m,surface_err_max_m,force_diff_rms_n,force_diff_max_n,mean_force_dense_n\n"
+      << std::setprecision(7);
+  for (const FormatRow& r : rows)
+    csv << r.scene << ',' << r.v.name << ',' << r.v.bytes << ',' << r.v.build_ms << ',' << r.v.bricks_total << ','
+        << r.v.bricks_active << ',' << r.tick_ns_mean << ',' << r.f.contact_ticks << ',' << r.f.contact_ticks_dense << ','
+        << r.f.contact_mismatch_ticks << ',' << r.f.surface_err_rms_m << ',' << r.f.surface_err_max_m << ','
+        << r.f.force_diff_rms_n << ',' << r.f.force_diff_max_n << ',' << r.f.mean_force_dense_n << '\n';
+  return csv.str();
+}
+
+// "## Compact samples": per scene what each snapshot format costs (surface and force error
+// against the dense fp32 run) against what it saves (bytes, time); conclusions from the rows.
+std::string formats_markdown(const std::vector<FormatRow>& rows) {
+  std::ostringstream md;
+  md << "## Compact samples: what they cost against what they save\n\n"
+     << "HRI (n = 1, linear intersection, normals from the gradient samples) along the same recorded stroke on four "
+        "snapshots of the same samples: fp32 dense (16 B per voxel), and bricked (8^3 bricks, only those near the "
+        "isosurface store samples) in fp32 (16 B per sample), fp16 and unorm16 (8 B per sample; core/brick_field.h). "
+        "Surface error: distance of the VHIP from the isosurface of the dense fp32 samples; force difference: "
+        "|F - F(fp32 dense)| over the ticks where either run is in contact, relative to the dense run's mean contact "
+        "force. Build: host time to make the snapshot from the dense samples (median of 3); tick: mean servo tick "
+        "(median of 5 replays); both wall clock on this machine.\n\n"
+     << "| scene | snapshot | bytes | % of dense | bricks active | build [ms] | mean tick [ns] | contact ticks "
+        "(dense) | surface RMS / max [voxel] | force diff RMS / max [N] | force diff RMS [% of mean force] |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::map<std::string, std::uint64_t> dense_bytes;
+  std::map<std::string, double> dense_rms;
+  for (const FormatRow& r : rows)
+    if (r.v.name == "fp32 dense") {
+      dense_bytes[r.scene] = r.v.bytes;
+      dense_rms[r.scene] = r.f.surface_err_rms_m;
+    }
+  auto pct_force = [](const FormatRow& r) {
+    return r.f.mean_force_dense_n > 0 ? 100.0 * r.f.force_diff_rms_n / r.f.mean_force_dense_n : 0.0;
+  };
+  for (const FormatRow& r : rows) {
+    const double pct = 100.0 * double(r.v.bytes) / double(std::max<std::uint64_t>(1, dense_bytes[r.scene]));
+    md << "| " << r.scene << " | " << r.v.name << " | " << r.v.bytes << " | " << g(pct, 3) << " | "
+       << (r.v.bricks_total ? std::to_string(r.v.bricks_active) + " of " + std::to_string(r.v.bricks_total) : "-")
+       << " | " << g(r.v.build_ms, 3) << " | " << g(r.tick_ns_mean) << " | " << r.f.contact_ticks << " ("
+       << r.f.contact_ticks_dense << ") | " << g(r.f.surface_err_rms_m / r.voxel_m, 3) << " / "
+       << g(r.f.surface_err_max_m / r.voxel_m, 3) << " | " << g(r.f.force_diff_rms_n, 3) << " / "
+       << g(r.f.force_diff_max_n, 3) << " | " << g(pct_force(r), 3) << " |\n";
+  }
+  // Conclusions per format, over the scenes: the worst cost and the least saving.
+  md << "\n";
+  for (const char* name : {"fp32 bricked", "fp16 bricked", "unorm16 bricked"}) {
+    double worst_rms_increase = 0, worst_force_pct = 0, worst_force_n = 0, max_pct_bytes = 0, min_pct_bytes = 1e300;
+    double tick_ratio_max = 0, tick_ratio_min = 1e300;
+    long mismatches = 0;
+    int n = 0;
+    std::map<std::string, double> dense_tick;
+    for (const FormatRow& r : rows)
+      if (r.v.name == "fp32 dense") dense_tick[r.scene] = r.tick_ns_mean;
+    for (const FormatRow& r : rows) {
+      if (r.v.name != name) continue;
+      ++n;
+      worst_rms_increase = std::max(worst_rms_increase, (r.f.surface_err_rms_m - dense_rms[r.scene]) / r.voxel_m);
+      worst_force_pct = std::max(worst_force_pct, pct_force(r));
+      worst_force_n = std::max(worst_force_n, r.f.force_diff_max_n);
+      const double pct = 100.0 * double(r.v.bytes) / double(std::max<std::uint64_t>(1, dense_bytes[r.scene]));
+      max_pct_bytes = std::max(max_pct_bytes, pct);
+      min_pct_bytes = std::min(min_pct_bytes, pct);
+      if (dense_tick[r.scene] > 0) {
+        tick_ratio_max = std::max(tick_ratio_max, r.tick_ns_mean / dense_tick[r.scene]);
+        tick_ratio_min = std::min(tick_ratio_min, r.tick_ns_mean / dense_tick[r.scene]);
+      }
+      mismatches += r.f.contact_mismatch_ticks;
+    }
+    if (!n) continue;
+    md << "- **" << name << "** (" << n << " scene" << (n > 1 ? "s" : "") << "): " << g(min_pct_bytes, 3) << " to "
+       << g(max_pct_bytes, 3) << " % of the dense fp32 bytes; ";
+    if (worst_force_n == 0 && mismatches == 0)
+      md << "forces identical to the dense fp32 run on every tick";
+    else
+      md << "surface RMS at most " << g(worst_rms_increase, 3) << " voxel above the dense run's, force difference RMS "
+         << "at most " << g(worst_force_pct, 3) << " % of the mean contact force (max " << g(worst_force_n, 3)
+         << " N), " << mismatches << " ticks with contact on one run only";
+    md << "; mean tick " << g(tick_ratio_min, 3) << " to " << g(tick_ratio_max, 3) << " x the dense run's.\n";
+  }
+  md << "\n";
+  return md.str();
+}
+
 }  // namespace
 
 int run_report(const ReportOptions& o, std::ostream& log) {
@@ -166,8 +266,26 @@ int run_report(const ReportOptions& o, std::ostream& log) {
   std::map<std::string, double> voxel;
   std::map<std::string, Slide> slides;
   std::map<std::string, HriParams> params;  // the HRI parameters every configuration starts from
+  std::vector<FormatRow> formats;
   for (const std::string& name : o.scenes) {
     const SweepScene s = prepare_sweep_scene(name, vk, log);
+    {
+      // Compact samples: the same stroke on fp32 dense, fp32 bricked, fp16 and unorm16.
+      std::vector<SnapshotVariant> vs = snapshot_variants(s);
+      HriRenderer r(format_params(s));
+      const Playback dense = playback(r, s, *vs.front().field);
+      for (SnapshotVariant& v : vs) {
+        FormatRow fr;
+        fr.scene = s.name;
+        fr.f = compare_to_dense(s, playback(r, s, *v.field), dense);
+        fr.tick_ns_mean = median_ns_per_tick(r, s, *v.field, 1, 5);
+        fr.voxel_m = s.voxel_m;
+        v.field.reset();
+        fr.v = std::move(v);
+        formats.push_back(std::move(fr));
+      }
+      log << "  " << s.name << ": " << vs.size() << " snapshot formats\n";
+    }
     scene_names.push_back(s.name);
     descriptions[s.name] = s.description;
     voxel[s.name] = s.voxel_m;
@@ -346,7 +464,10 @@ int run_report(const ReportOptions& o, std::ostream& log) {
         (r.cfg.options == "secant4/samples" || r.cfg.options == "bisect8/samples"))
       md << "Sphere, HRI n = 1, " << r.cfg.options << ": surface error RMS " << g(r.e.surface_err_rms_m / voxel["sphere"], 3)
          << " voxel.\n\n";
-  md << "Files: `error_vs_time.csv` (all " << rows.size() << " configurations), `error_vs_time.gp`.\n";
+  md << formats_markdown(formats);
+  write_file_atomic((fs::path(o.out_dir) / "sample_formats.csv").string(), formats_csv(formats));
+  md << "Files: `error_vs_time.csv` (all " << rows.size() << " configurations), `error_vs_time.gp`, "
+     << "`sample_formats.csv` (" << formats.size() << " snapshot rows).\n";
   write_file_atomic((fs::path(o.out_dir) / "error_vs_time.md").string(), md.str());
   log << "wrote " << o.out_dir << "/error_vs_time.csv (" << rows.size() << " rows), error_vs_time.md"
       << (plotted ? ", error_vs_time.png" : "") << "\n";

@@ -9,12 +9,17 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 
+#include "brick_field.h"
 #include "cpu_gradient.h"
+#include "field_view.h"
 #include "files.h"
-#include "gradient_pass.h"
+#include "passes.h"
+#include "sparse_chain.h"
 #include "sampling.h"
 #include "synthetic.h"
 #include "shapes.h"
@@ -107,11 +112,331 @@ std::string direction_text(const std::array<double, 9>& d) {
   return s.str();
 }
 
+struct EngineRun {
+  std::shared_ptr<servo::SampleField> published;    ///< what the servo reads (version 1, background set)
+  std::shared_ptr<const servo::SampleField> truth;  ///< dense fp32 samples of the same passes
+};
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::vector<PassFigure> figures(const std::vector<engine::PassTiming>& t) {
+  std::vector<PassFigure> out;
+  for (const auto& p : t) out.push_back({p.label, p.ms, p.dispatches});
+  return out;
+}
+
+// GPU-vs-CPU figures of two dense sample fields into m.
+void compare_into(const servo::SampleField& gpu, const servo::SampleField& cpu, RunMetrics& m) {
+  const engine::GradientDiff diff = engine::compare_gradients(gpu, cpu);
+  m.max_abs_diff = diff.max_abs_all;
+  m.max_rel_diff = diff.max_rel;
+  for (int k = 0; k < 3; ++k) m.max_abs_diff_xyz[k] = diff.max_abs[k];
+}
+
+// Dense: PassChain on the GPU (one command buffer), run_chain_cpu as the reference.
+EngineRun run_dense(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                    engine::VulkanContext& vk, const RunOptions& opt, float background, RunMetrics& m) {
+  auto chain = engine::PassChain::create(vk, passes);
+  if (!chain) throw std::runtime_error(vol.path + ": " + chain.error);
+  engine::ChainOutput out = (*chain.value)->run(vol, opt.max_binding_bytes);
+  m.engine_describe = (*chain.value)->describe();
+  m.engine_ran = "PassChain (GPU, dense, one command buffer)";
+  if (!out.samples) throw std::runtime_error(vol.path + ": the pass chain returned no samples");
+  auto field = std::make_shared<servo::SampleField>(std::move(*out.samples));
+  field->background = background;
+  m.gpu_passes = figures(out.passes);
+  m.gpu_upload_ms = out.upload_ms;
+  m.gpu_download_ms = out.download_ms;
+  m.gpu_submit_wall_ms = out.submit_wall_ms;
+  m.gpu_timestamps = out.gpu_timestamps;
+  for (const auto& p : out.passes)
+    if (p.label == "gradient") {
+      m.gpu_gradient_ms = p.ms >= 0 ? p.ms : out.submit_wall_ms;
+      m.gpu_slabs = p.dispatches;
+    }
+  engine::ChainOutput ref = engine::run_chain_cpu(vol, passes);
+  m.reference_ran = "run_chain_cpu (one thread, dense)";
+  m.cpu_passes = figures(ref.passes);
+  for (const auto& p : ref.passes)
+    if (p.label == "gradient") m.cpu_gradient_ms = p.ms;
+  ref.samples->background = background;
+  compare_into(*field, *ref.samples, m);
+  m.snapshot_bytes = std::uint64_t(field->samples.size()) * sizeof(servo::Sample);
+  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(servo::Sample);
+  field->version = 1;
+  return {field, field};
+}
+
+// The dense samples as the bricked snapshot of `format` (core::bricked_input_from_dense +
+// core::make_bricked_field): the stand-in while the sparse chain is not available.
+std::shared_ptr<servo::SampleField> to_bricks(const servo::SampleField& dense, const core::Isosurface& iso,
+                                              core::SampleFormat format, RunMetrics& m) {
+  auto f = std::make_shared<servo::SampleField>(core::make_bricked_field(core::bricked_input_from_dense(dense, iso), format));
+  m.engine_ran = "core::bricked_input_from_dense + core::make_bricked_field";
+  m.bricks_total = f->bricks->table.size();
+  m.bricks_candidates = m.bricks_total;  // every voxel was computed
+  m.bricks_active = f->bricks->table.size() - f->bricks->tiles.size();
+  m.snapshot_bytes = core::snapshot_bytes(*f);
+  return f;
+}
+
+// GPU against CPU snapshot, compared where the servo reads them: value and gradient at
+// every voxel centre through core::FieldView (dense or bricked, any sample format).
+void compare_snapshots(const servo::SampleField& gpu, const servo::SampleField& cpu, RunMetrics& m) {
+  const core::FieldView a(gpu), b(cpu);
+  const core::Grid& g = cpu.grid;
+  double max_abs[3] = {0, 0, 0}, max_grad = 0;
+  const double inf = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i) {
+        const Vec3 w = g.to_world(Vec3{double(i), double(j), double(k)});
+        const core::FieldValue x = a.value_gradient(w), y = b.value_gradient(w);
+        const double dx[3] = {x.gradient.x - y.gradient.x, x.gradient.y - y.gradient.y, x.gradient.z - y.gradient.z};
+        for (int c = 0; c < 3; ++c) {
+          const double d = std::isnan(dx[c]) ? (std::isnan((&x.gradient.x)[c]) == std::isnan((&y.gradient.x)[c]) ? 0 : inf)
+                                             : std::abs(dx[c]);
+          max_abs[c] = std::max(max_abs[c], d);
+        }
+        const double gn = servo::norm(y.gradient);
+        if (std::isfinite(gn)) max_grad = std::max(max_grad, gn);
+      }
+  m.max_abs_diff = std::max({max_abs[0], max_abs[1], max_abs[2]});
+  for (int c = 0; c < 3; ++c) m.max_abs_diff_xyz[c] = max_abs[c];
+  m.max_rel_diff = max_grad > 0 ? m.max_abs_diff / max_grad : m.max_abs_diff;
+}
+
+std::vector<std::string> pass_labels(const std::vector<engine::PassDesc>& passes) {
+  std::vector<std::string> out;
+  for (const auto& p : passes) out.push_back(p.label());
+  return out;
+}
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+nlohmann::ordered_json figures_json(const std::vector<PassFigure>& f) {
+  nlohmann::ordered_json a = nlohmann::ordered_json::array();
+  for (const auto& p : f)
+    a.push_back({{"label", p.label}, {"ms", p.ms >= 0 ? nlohmann::ordered_json(p.ms) : nlohmann::ordered_json(nullptr)},
+                 {"dispatches", p.dispatches}});
+  return a;
+}
+
+// summary.json "engine": the scene's passes with their parameters, what ran (GPU, CPU)
+// and what was left out, the snapshot's mode, format, bricks and bytes.
+nlohmann::ordered_json engine_json(const RunMetrics& m) {
+  nlohmann::ordered_json passes = nlohmann::ordered_json::array();
+  for (const auto& p : m.passes) {
+    nlohmann::ordered_json e = {{"kind", engine::pass_name(p.kind)}, {"label", p.label()}};
+    if (p.kind == engine::PassKind::Gaussian) e["sigma_mm"] = p.sigma_mm;
+    if (p.kind == engine::PassKind::Closing) e["radius_mm"] = p.radius_mm;
+    if (p.kind == engine::PassKind::BrickMinMax) e["halo"] = p.halo;
+    passes.push_back(e);
+  }
+  const auto or_null = [](bool have, auto v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  return {{"mode", m.engine_mode},
+          {"samples", m.sample_format},
+          {"passes", passes},
+          {"gpu", m.engine_ran},
+          {"sparse_fallback", or_null(!m.engine_fallback.empty(), m.engine_fallback)},
+          {"cpu_reference", m.reference_ran},
+          {"gpu_passes", figures_json(m.gpu_passes)},
+          {"cpu_passes", figures_json(m.cpu_passes)},
+          {"upload_ms", m.gpu_upload_ms},
+          {"submit_wall_ms", m.gpu_submit_wall_ms},
+          {"download_ms", m.gpu_download_ms},
+          {"publish_ms", m.publish_ms},
+          {"describe", lines_of(m.engine_describe)},
+          {"bricks", {{"total", or_null(m.bricks_total > 0, m.bricks_total)},
+                      {"candidates", or_null(m.bricks_total > 0, m.bricks_candidates)},
+                      {"active", or_null(m.bricks_total > 0, m.bricks_active)}}},
+          {"snapshot_bytes", m.snapshot_bytes},
+          {"dense_fp32_bytes", m.dense_fp32_bytes},
+          {"snapshot_fraction_of_dense_fp32",
+           m.dense_fp32_bytes ? double(m.snapshot_bytes) / double(m.dense_fp32_bytes) : 0.0}};
+}
+
+std::string pass_list_text(const std::vector<engine::PassDesc>& passes) {
+  std::string s;
+  for (const auto& p : passes) s += (s.empty() ? "" : " -> ") + p.label();
+  return s;
+}
+
+// report.md "## Engine": the passes that ran (GPU and CPU ms), what was left out, the snapshot.
+std::string engine_markdown(const RunMetrics& m) {
+  std::ostringstream md;
+  md << "## Engine\n\n"
+     << "Mode **" << m.engine_mode << "**, samples **" << m.sample_format << "**. Published snapshot computed by "
+     << m.engine_ran << "; CPU reference: " << m.reference_ran << ".";
+  if (!m.engine_fallback.empty())
+    md << " The sparse GPU chain was not used (" << m.engine_fallback
+       << "): the dense chain's samples were converted to bricks instead.";
+  md << "\n\n| stage | GPU [ms] | dispatches |\n|---|---|---|\n";
+  for (const auto& p : m.gpu_passes)
+    md << "| " << p.label << " | " << (p.ms >= 0 ? fmt(p.ms, 4) : std::string("no timestamps")) << " | " << p.dispatches
+       << " |\n";
+  md << "\n| CPU reference stage | CPU [ms] (one thread) |\n|---|---|\n";
+  for (const auto& p : m.cpu_passes) md << "| " << p.label << " | " << fmt(p.ms, 4) << " |\n";
+  md << "\nUpload " << fmt(m.gpu_upload_ms, 4) << " ms, submit to fence " << fmt(m.gpu_submit_wall_ms, 4)
+     << " ms, download " << fmt(m.gpu_download_ms, 4) << " ms" << (m.publish_ms > 0 ? ", publish " + fmt(m.publish_ms, 4) + " ms" : "")
+     << " (wall clock).\n\n";
+  if (m.bricks_total)
+    md << "Bricks (8^3 voxels): " << m.bricks_total << " in all, " << m.bricks_candidates << " computed (candidates), "
+       << m.bricks_active << " published with samples (" << fmt(100.0 * double(m.bricks_active) / double(m.bricks_total), 3)
+       << " %). ";
+  md << "Snapshot " << m.snapshot_bytes << " B against " << m.dense_fp32_bytes << " B for the dense fp32 snapshot ("
+     << fmt(100.0 * double(m.snapshot_bytes) / double(std::max<std::uint64_t>(1, m.dense_fp32_bytes)), 3) << " %).\n\n"
+     << "Pipelines and buffers created and left out:\n\n```\n" << m.engine_describe << "\n```\n\n";
+  return md.str();
+}
+
+bool not_implemented(const std::exception& e) {
+  return std::string(e.what()).find("not implemented") != std::string::npos;
+}
+
+// Sparse: SparseChain on the GPU, run_sparse_cpu as the reference; while either is not
+// implemented yet, the dense chain plus a conversion of its samples to bricks stands in
+// (and the report says so).
+EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                     engine::VulkanContext& vk, const RunOptions& opt, const core::Isosurface& iso,
+                     float background, core::SampleFormat format, RunMetrics& m) {
+  // The dense fp32 samples of the same passes: what the errors are measured against.
+  const auto t_truth = std::chrono::steady_clock::now();
+  engine::ChainOutput dense_ref = engine::run_chain_cpu(vol, passes);
+  const double truth_ms = ms_since(t_truth);
+  auto truth = std::make_shared<servo::SampleField>(std::move(*dense_ref.samples));
+  truth->background = background;
+  truth->version = 1;
+  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(servo::Sample);
+
+  std::optional<engine::SparseOutput> gpu;
+  auto chain = engine::SparseChain::create(vk, passes);
+  if (!chain) throw std::runtime_error(vol.path + ": " + chain.error);
+  try {
+    gpu = (*chain.value)->run(vol, iso, background, format, opt.max_binding_bytes);
+    m.engine_ran = "SparseChain (GPU, candidate bricks only)";
+  } catch (const engine::VolumeError& e) {
+    if (!not_implemented(e)) throw;
+    m.engine_fallback = e.what();
+  }
+  m.engine_describe = (*chain.value)->describe();
+  std::shared_ptr<servo::SampleField> field;
+  if (gpu) {
+    field = std::make_shared<servo::SampleField>(std::move(gpu->field));
+    m.gpu_passes = figures(gpu->passes);
+    m.gpu_upload_ms = gpu->upload_ms;
+    m.gpu_download_ms = gpu->download_ms;
+    m.gpu_submit_wall_ms = gpu->submit_wall_ms;
+    m.publish_ms = gpu->publish_ms;
+    m.gpu_gradient_ms = 0;
+    for (const auto& p : gpu->passes) m.gpu_gradient_ms += std::max(0.0, p.ms);
+    m.gpu_timestamps = !gpu->passes.empty() && gpu->passes.front().ms >= 0;
+    m.bricks_total = gpu->stats.bricks_total;
+    m.bricks_candidates = gpu->stats.candidates;
+    m.bricks_active = gpu->stats.active;
+    m.snapshot_bytes = core::snapshot_bytes(*field);
+  } else {
+    RunMetrics dm;
+    const EngineRun d = run_dense(vol, passes, vk, opt, background, dm);
+    m.engine_describe = dm.engine_describe + "\n(sparse chain not used: " + m.engine_fallback + ")";
+    m.gpu_passes = dm.gpu_passes;
+    m.gpu_upload_ms = dm.gpu_upload_ms;
+    m.gpu_download_ms = dm.gpu_download_ms;
+    m.gpu_submit_wall_ms = dm.gpu_submit_wall_ms;
+    m.gpu_gradient_ms = dm.gpu_gradient_ms;
+    m.gpu_slabs = dm.gpu_slabs;
+    m.gpu_timestamps = dm.gpu_timestamps;
+    const auto t0 = std::chrono::steady_clock::now();
+    field = to_bricks(*d.published, iso, format, m);
+    m.publish_ms = ms_since(t0);
+    m.engine_ran = "PassChain (GPU, dense) + " + m.engine_ran;
+  }
+  // CPU reference of the published snapshot.
+  std::shared_ptr<servo::SampleField> ref;
+  try {
+    engine::SparseOutput cpu = engine::run_sparse_cpu(vol, passes, iso, background, format);
+    m.reference_ran = "run_sparse_cpu (one thread, candidate bricks only)";
+    m.cpu_passes = figures(cpu.passes);
+    ref = std::make_shared<servo::SampleField>(std::move(cpu.field));
+  } catch (const engine::VolumeError& e) {
+    if (!not_implemented(e)) throw;
+    RunMetrics cm;
+    m.cpu_passes = figures(dense_ref.passes);
+    ref = to_bricks(*truth, iso, format, cm);
+    m.reference_ran = "run_chain_cpu (one thread, dense) + " + cm.engine_ran + " (run_sparse_cpu: " + e.what() + ")";
+  }
+  for (const auto& p : dense_ref.passes)
+    if (p.label == "gradient") m.cpu_gradient_ms = p.ms;
+  (void)truth_ms;
+  compare_snapshots(*field, *ref, m);
+  field->version = 1;
+  return {field, truth};
+}
+
+EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::VulkanContext& vk,
+                     const RunOptions& opt, RunMetrics& m, std::ostream& log) {
+  const std::vector<engine::PassDesc> passes = scene_passes(scene);
+  const core::SampleFormat format = scene_sample_format(scene);
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  // Outside the volume is outside the object (core::FieldView's background): from the
+  // volume's finite range, the same in both modes (filters stay within that range).
+  const float background = float(iso.outside_value(vol.min_value, vol.max_value));
+  m.passes = passes;
+  m.engine_mode = scene.engine.mode;
+  m.sample_format = scene.engine.samples;
+  const EngineRun r = scene.engine.mode == "dense"
+                          ? run_dense(vol, passes, vk, opt, background, m)
+                          : run_sparse(vol, passes, vk, opt, iso, background, format, m);
+  log << "engine   " << scene.engine.mode << ", " << m.sample_format << " samples: " << m.engine_ran << "\n";
+  if (!m.engine_fallback.empty()) log << "         (sparse GPU chain not used: " << m.engine_fallback << ")\n";
+  for (std::size_t i = 0; i < m.gpu_passes.size(); ++i)
+    log << "         GPU " << m.gpu_passes[i].label << " " << fmt(m.gpu_passes[i].ms, 4) << " ms ("
+        << m.gpu_passes[i].dispatches << " dispatch(es))\n";
+  for (const auto& p : m.cpu_passes) log << "         CPU " << p.label << " " << fmt(p.ms, 4) << " ms\n";
+  if (m.bricks_total)
+    log << "bricks   " << m.bricks_active << " active of " << m.bricks_total << " (" << m.bricks_candidates
+        << " candidates computed); snapshot " << m.snapshot_bytes << " B against " << m.dense_fp32_bytes
+        << " B dense fp32 (" << fmt(100.0 * double(m.snapshot_bytes) / double(std::max<std::uint64_t>(1, m.dense_fp32_bytes)), 3)
+        << " %)\n";
+  log << "GPU vs CPU max |difference| " << fmt(m.max_abs_diff, 3) << " (relative " << fmt(m.max_rel_diff, 3)
+      << ")\n";
+  return r;
+}
+
 }  // namespace
 
+std::vector<engine::PassDesc> scene_passes(const Scene& scene) {
+  std::vector<engine::PassDesc> out;
+  for (const PassSpec& p : scene.engine.passes) {
+    if (p.kind == "gaussian") out.push_back(engine::PassDesc::gaussian(p.sigma_mm));
+    else if (p.kind == "closing") out.push_back(engine::PassDesc::closing(p.radius_mm));
+    else if (p.kind == "gradient") out.push_back(engine::PassDesc::gradient());
+    else if (p.kind == "brick_minmax") out.push_back(engine::PassDesc::brick_minmax(p.halo));
+    else throw SceneError(scene.file + ": field 'engine.passes': unknown pass \"" + p.kind + "\"");
+  }
+  if (const std::string e = engine::validate_passes(out); !e.empty())
+    throw SceneError(scene.file + ": field 'engine.passes': " + e);
+  return out;
+}
+
+core::SampleFormat scene_sample_format(const Scene& scene) {
+  if (scene.engine.samples == "fp16") return core::SampleFormat::kFp16;
+  if (scene.engine.samples == "unorm16") return core::SampleFormat::kUnorm16;
+  if (scene.engine.samples == "fp32") return core::SampleFormat::kFp32;
+  throw SceneError(scene.file + ": field 'engine.samples': unknown format \"" + scene.engine.samples + "\"");
+}
+
 RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
-  using clock = std::chrono::steady_clock;
   RunMetrics m;
+  (void)scene_passes(scene);  // a bad pass list fails before the volume is read
+  (void)scene_sample_format(scene);
 
   // 1. Volume in.
   engine::Volume vol;
@@ -146,7 +471,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                              " is outside the finite data range [" + fmt(vol.min_value) + ", " +
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 
-  // 2. Engine: gradient pass on the GPU, CPU reference beside it.
+  // 2. Engine: the scene's passes on the GPU (dense or sparse), the CPU reference beside it.
   engine::ContextOptions co;
   co.device = opt.device;
   auto ctx = engine::VulkanContext::create(co);
@@ -155,29 +480,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   m.gpu_device = vk.info().name;
   m.gpu_device_type = vk.info().type;
   log << "device   " << m.gpu_device << " (" << m.gpu_device_type << ", " << vk.info().driver << ")\n";
-  engine::GradientPass pass(vk);
-  engine::GradientTimings gt;
-  auto field = std::make_shared<servo::SampleField>(pass.run(vol, &gt, opt.max_binding_bytes));
-  field->version = 1;
-  // Outside the volume is outside the object (core::FieldView's background).
-  field->background = core::outside_background(*field, core::Isosurface{scene.hri.tau, scene.hri.inside});
-  m.gpu_gradient_ms = gt.gradient_ms;
-  m.gpu_upload_ms = gt.upload_ms;
-  m.gpu_download_ms = gt.download_ms;
-  m.gpu_submit_wall_ms = gt.submit_wall_ms;
-  m.gpu_slabs = gt.slabs;
-  m.gpu_timestamps = gt.gpu_timestamps;
-  const auto c0 = clock::now();
-  const servo::SampleField ref = engine::compute_samples_cpu(vol);
-  m.cpu_gradient_ms = std::chrono::duration<double, std::milli>(clock::now() - c0).count();
-  const engine::GradientDiff diff = engine::compare_gradients(*field, ref);
-  m.max_abs_diff = diff.max_abs_all;
-  m.max_rel_diff = diff.max_rel;
-  for (int k = 0; k < 3; ++k) m.max_abs_diff_xyz[k] = diff.max_abs[k];
-  log << "gradient GPU " << fmt(m.gpu_gradient_ms, 4) << " ms (" << gt.slabs << " slab"
-      << (gt.slabs > 1 ? "s" : "") << ")   CPU reference " << fmt(m.cpu_gradient_ms, 4)
-      << " ms   max |GPU - CPU| = " << fmt(m.max_abs_diff, 3) << " (relative " << fmt(m.max_rel_diff, 3)
-      << ")\n";
+  const EngineRun er = run_engine(scene, vol, vk, opt, m, log);
+  const std::shared_ptr<servo::SampleField>& field = er.published;
+  // What the surface error is measured against, and the script is cast on: the dense fp32
+  // samples of the same passes (CPU reference). For a dense or bricked fp32 snapshot its
+  // isosurface is the published one (the bricks hold the same samples wherever a cell
+  // can straddle tau); for compact samples it is the surface before rounding.
+  const servo::SampleField& truth = *er.truth;
 
   // 3. Publish the samples: the servo reads them through the one publication point.
   servo::TripleBuffer<servo::SampleField> published;
@@ -185,7 +494,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
 
   // 4. Script, device, servo.
   servo::HriParams hp = scene.hri;
-  servo::TouchScript script = servo::make_touch_script(*field, hp, scene.script);
+  servo::TouchScript script = servo::make_touch_script(truth, hp, scene.script);
   servo::WorkspaceTransform xf;
   xf.scale = scene.workspace_scale;
   xf.translation_m = vol.grid.centre_m();
@@ -246,7 +555,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.max_force_n = std::max(m.max_force_n, f);
     m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
     // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
-    const SurfaceDistance d = distance_to_isosurface(*field, hp.tau, r.vhip_m);
+    const SurfaceDistance d = distance_to_isosurface(truth, hp.tau, r.vhip_m);
     m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
     if (d.found) {
       ++found;
@@ -255,7 +564,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     } else {
       ++m.surface_err_not_found_ticks;
     }
-    const double fo = first_order_distance(*field, hp.tau, r.vhip_m);
+    const double fo = first_order_distance(truth, hp.tau, r.vhip_m);
     fo2 += fo * fo;
     m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
   }
@@ -319,7 +628,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   j["inside"] = hp.inside == servo::InsideIs::kAbove ? "above" : "below";
   j["gpu"] = {{"device", m.gpu_device},
               {"device_type", m.gpu_device_type},
-              {"passes", {"gradient"}},
+              {"passes", pass_labels(m.passes)},
               {"gradient_ms", m.gpu_gradient_ms},
               {"gradient_ms_source", m.gpu_timestamps ? "gpu-timestamps" : "wall-clock"},
               {"submit_wall_ms", m.gpu_submit_wall_ms},
@@ -327,6 +636,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
               {"download_ms", m.gpu_download_ms},
               {"slabs", m.gpu_slabs}};
   j["cpu"] = {{"gradient_ms", m.cpu_gradient_ms}};
+  j["engine"] = engine_json(m);
   j["gpu_vs_cpu"] = {{"gradient_max_abs_diff", m.max_abs_diff},
                      {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
                      {"gradient_max_rel_diff", m.max_rel_diff}};
@@ -367,6 +677,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   j["error"] = {{"surface_distance_m", {{"rms", or_null(found > 0, m.surface_err_rms_m)}, {"max", or_null(found > 0, m.surface_err_max_m)},
                                         {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
                                         {"search_radius_m", m.surface_search_radius_m},
+                                        {"measured_on", "the dense fp32 samples of the scene's passes (CPU reference): "
+                                                        "the published isosurface for dense and bricked fp32, the surface "
+                                                        "before rounding for compact samples"},
                                         {"method", "true distance from the VHIP to the isosurface of the trilinear field "
                                                    "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
                 {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
@@ -397,6 +710,14 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == servo::InsideIs::kAbove ? ">" : "<")
      << " isovalue) |\n"
      << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
+     << "| engine | " << m.engine_mode << " mode, " << m.sample_format << " samples, passes "
+     << pass_list_text(m.passes) << "; snapshot " << m.snapshot_bytes << " B ("
+     << fmt(100.0 * double(m.snapshot_bytes) / double(std::max<std::uint64_t>(1, m.dense_fp32_bytes)), 3)
+     << " % of the dense fp32 " << m.dense_fp32_bytes << " B)"
+     << (m.bricks_total ? ", " + std::to_string(m.bricks_active) + " of " + std::to_string(m.bricks_total) + " bricks active"
+                        : std::string())
+     << (m.engine_fallback.empty() ? std::string() : "; **sparse GPU chain not used: " + m.engine_fallback + "**")
+     << " (details below) |\n"
      << "| gradient pass | GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
@@ -451,6 +772,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
      << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
      << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
+  md << engine_markdown(m);
   if (m.plots_drawn)
     md << "## Force and penetration\n\n![force and penetration against time](force_depth.png)\n\n"
        << "## Servo tick time\n\n![tick wall time](tick_time.png)\n\n";

@@ -7,7 +7,9 @@
 #include <string>
 #include <vector>
 
+#include "brick_field.h"
 #include "headless.h"
+#include "passes.h"
 #include "scene.h"
 
 namespace isotouch::app {
@@ -17,6 +19,19 @@ struct RunOptions {
   std::string device;                  ///< Vulkan device choice (see ContextOptions)
   bool progress = true;                ///< progress line on stderr
   std::uint64_t max_binding_bytes = 0; ///< test hook: smaller storage-binding limit
+};
+
+/// The scene's pass list as engine passes (engine.passes), checked with
+/// engine::validate_passes. @throws SceneError "FILE: field 'engine.passes': pass 1 (...): ...".
+std::vector<engine::PassDesc> scene_passes(const Scene& scene);
+/// The scene's engine.samples as a core::SampleFormat.
+core::SampleFormat scene_sample_format(const Scene& scene);
+
+/// One pass (dense) or stage (sparse) as it ran.
+struct PassFigure {
+  std::string label;   ///< engine::PassTiming::label
+  double ms = -1;      ///< GPU: device time (timestamps; -1 if none); CPU: wall time [ms]
+  int dispatches = 0;  ///< GPU dispatches; 0 on the CPU
 };
 
 /// Figures of one run (also written to summary.json).
@@ -61,6 +76,20 @@ struct RunMetrics {
   std::size_t nan_voxels = 0, inf_voxels = 0;
   bool plots_drawn = false;
   std::string plot_note;
+
+  // Engine (issue 8 items 3-5): what computed the published samples.
+  std::string engine_mode;     ///< "dense" or "sparse" (the scene's engine.mode)
+  std::string engine_ran;      ///< what actually computed the published snapshot (GPU)
+  std::string engine_fallback; ///< why the sparse GPU chain was not used; empty if it was (or mode is dense)
+  std::string reference_ran;   ///< what computed the CPU reference
+  std::string sample_format;   ///< "fp32", "fp16", "unorm16"
+  std::vector<engine::PassDesc> passes;  ///< the scene's list, as run
+  std::vector<PassFigure> gpu_passes, cpu_passes;
+  std::string engine_describe; ///< PassChain/SparseChain::describe(): pipelines, buffers created and left out
+  std::size_t bricks_total = 0, bricks_candidates = 0, bricks_active = 0;  ///< sparse only
+  std::uint64_t snapshot_bytes = 0;    ///< bytes of the published snapshot
+  std::uint64_t dense_fp32_bytes = 0;  ///< voxels * 16: the dense fp32 snapshot
+  double publish_ms = 0;               ///< host time building the published snapshot (sparse) [ms]
 };
 
 /// Run one scene end to end and write its outputs into options.out_dir.

@@ -96,6 +96,77 @@ class Reader {
   std::string file_;
 };
 
+// "engine": {"passes": [{"gaussian": {"sigma_mm": 1}}, {"closing": {"radius_mm": 1}}, "gradient"],
+//            "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"}
+// A pass is its name (a string) or an object with one key, the name, holding its parameters.
+// Ranges here name the field; the list's structure is checked again by engine::validate_passes
+// (app::scene_passes) before anything runs.
+PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
+  const std::string where = "engine.passes[" + std::to_string(i) + "]";
+  static const char* kKinds = "\"gaussian\", \"closing\", \"gradient\", \"brick_minmax\"";
+  PassSpec ps;
+  json params = json::object();
+  if (p.is_string()) {
+    ps.kind = p.get<std::string>();
+  } else if (p.is_object() && p.size() == 1) {
+    ps.kind = p.begin().key();
+    params = p.begin().value();
+  } else {
+    r.fail(where, std::string("must be a pass name or {\"name\": {parameters}} with one name (") + kKinds + "), got " +
+                      p.dump());
+  }
+  const std::string at = where + "." + ps.kind;
+  if (ps.kind == "gaussian") {
+    r.only(params, at, {"sigma_mm"});
+    if (!params.contains("sigma_mm")) r.fail(at + ".sigma_mm", "is required (the Gaussian's standard deviation in mm)");
+    ps.sigma_mm = r.number(params, at, "sigma_mm", 0, 0, 1000, true);
+  } else if (ps.kind == "closing") {
+    r.only(params, at, {"radius_mm"});
+    if (!params.contains("radius_mm")) r.fail(at + ".radius_mm", "is required (the box half-width in mm)");
+    ps.radius_mm = r.number(params, at, "radius_mm", 0, 0, 1000);
+  } else if (ps.kind == "gradient") {
+    if (!params.is_object() || !params.empty()) r.fail(at, "takes no parameters, got " + params.dump());
+  } else if (ps.kind == "brick_minmax") {
+    r.only(params, at, {"halo"});
+    ps.halo = r.integer(params, at, "halo", 1, 0, 8);
+  } else {
+    r.fail(where, "unknown pass \"" + ps.kind + "\" (known: " + kKinds + ")");
+  }
+  return ps;
+}
+
+void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
+  r.only(e, "engine", {"passes", "mode", "samples"});
+  if (e.contains("passes")) {
+    const json& list = e.at("passes");
+    if (!list.is_array() || list.empty())
+      r.fail("engine.passes", "must be a non-empty array of passes, got " + list.dump());
+    spec.passes.clear();
+    for (std::size_t i = 0; i < list.size(); ++i) spec.passes.push_back(parse_pass(r, list[i], i));
+    std::size_t gradient = spec.passes.size();
+    for (std::size_t i = 0; i < spec.passes.size(); ++i)
+      if (spec.passes[i].kind == "gradient" && gradient == spec.passes.size()) gradient = i;
+    if (gradient == spec.passes.size())
+      r.fail("engine.passes", "must include \"gradient\" (the servo reads its samples), got " + list.dump());
+    for (std::size_t i = gradient + 1; i < spec.passes.size(); ++i)
+      if (spec.passes[i].kind == "gaussian" || spec.passes[i].kind == "closing")
+        r.fail("engine.passes[" + std::to_string(i) + "]",
+               "a filter after \"gradient\" would change nothing the servo reads; list it before, got " +
+                   list[i].dump());
+  }
+  spec.mode = r.string(e, "engine", "mode", spec.mode);
+  if (spec.mode != "sparse" && spec.mode != "dense")
+    r.fail("engine.mode", "must be \"sparse\" (bricks near the isosurface) or \"dense\" (every voxel), got \"" +
+                              spec.mode + "\"");
+  spec.samples = r.string(e, "engine", "samples", spec.samples);
+  if (spec.samples != "fp32" && spec.samples != "fp16" && spec.samples != "unorm16")
+    r.fail("engine.samples", "must be \"fp32\" (16 B per sample), \"fp16\" or \"unorm16\" (8 B), got \"" +
+                                 spec.samples + "\"");
+  if (spec.samples != "fp32" && spec.mode == "dense")
+    r.fail("engine.samples", "compact samples are stored in bricks: \"" + spec.samples +
+                                 "\" needs \"mode\": \"sparse\" (dense snapshots are fp32)");
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::string& path) {
@@ -141,7 +212,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   }
   const Reader r(path);
   r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
-                    "script", "outputs"});
+                    "script", "outputs", "engine"});
   Scene s;
   s.file = path;
   s.name = r.string(root, "", "name", fs::path(path).stem().string());
@@ -290,6 +361,8 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
   p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
   p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+
+  parse_engine(r, r.section(root, "engine"), s.engine);
 
   const json& out = r.section(root, "outputs");
   r.only(out, "outputs", {"trace_csv", "plots"});

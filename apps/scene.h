@@ -3,6 +3,7 @@
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "hri.h"
 #include "script.h"
@@ -22,6 +23,29 @@ struct SyntheticSpec {
   double radius_vox = 20;               ///< sphere radius [voxels]
 };
 
+/// One engine pass as the scene lists it (engine::PassDesc without the engine's headers:
+/// the scene library builds without Vulkan). Converted and checked with
+/// engine::validate_passes by app::scene_passes (run_job.h).
+struct PassSpec {
+  std::string kind;       ///< "gaussian", "closing", "gradient", "brick_minmax"
+  double sigma_mm = 0;    ///< gaussian: standard deviation [mm], > 0
+  double radius_mm = 0;   ///< closing: structuring element half-width [mm], >= 0
+  int halo = 1;           ///< brick_minmax: voxels added on each side of a brick, 0..8
+};
+
+/// How the scene's samples are computed and published (issue 8 items 3-5).
+struct EngineSpec {
+  /// Passes in order; the default is today's single gradient pass. Filters (gaussian,
+  /// closing) come before "gradient", which is required (the servo reads its samples).
+  std::vector<PassSpec> passes{PassSpec{"gradient"}};
+  /// "sparse": passes on candidate bricks only, a bricked snapshot (engine/sparse_chain.h);
+  /// "dense": every voxel, 16 B per voxel (engine/passes.h), kept for comparison.
+  std::string mode = "sparse";
+  /// Sample format of the published snapshot: "fp32" (16 B), "fp16" or "unorm16" (8 B,
+  /// bricked only).
+  std::string samples = "fp32";
+};
+
 struct Scene {
   std::string file;          ///< the scene file as given
   std::string name;
@@ -34,6 +58,7 @@ struct Scene {
   servo::ScriptParams script;
   bool write_trace = true;
   bool draw_plots = true;
+  EngineSpec engine;         ///< the "engine" section (defaults: gradient only, sparse, fp32)
 };
 
 /// Parse and validate a scene file. Unknown keys are errors (they are usually typos).

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "brick_field.h"
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
 #include "headless.h"
@@ -135,13 +136,14 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
   return s;
 }
 
-Playback playback(servo::Renderer& r, const SweepScene& s) {
+Playback playback(servo::Renderer& r, const SweepScene& s) { return playback(r, s, *s.field); }
+
+Playback playback(servo::Renderer& r, const SweepScene& s, const servo::SampleField& f) {
   using clock = std::chrono::steady_clock;
   r.reset();
   Playback p;
   p.ticks.resize(s.hip.size());
   p.tick_ns.resize(s.hip.size());
-  const servo::SampleField& f = *s.field;
   for (std::size_t k = 0; k < s.hip.size(); ++k) {
     const auto t0 = clock::now();
     p.ticks[k] = r.tick(f, s.hip[k]);
@@ -218,8 +220,12 @@ ErrorFigures measure(const SweepScene& s, const Playback& p) {
 }
 
 double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps) {
+  return median_ns_per_tick(r, s, *s.field, warmup, reps);
+}
+
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, const servo::SampleField& f, int warmup,
+                          int reps) {
   using clock = std::chrono::steady_clock;
-  const servo::SampleField& f = *s.field;
   std::vector<double> per_tick;
   volatile double sink = 0;
   for (int i = 0; i < warmup + reps; ++i) {
@@ -232,6 +238,60 @@ double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, i
   }
   std::sort(per_tick.begin(), per_tick.end());
   return per_tick[per_tick.size() / 2];
+}
+
+std::vector<SnapshotVariant> snapshot_variants(const SweepScene& s) {
+  using clock = std::chrono::steady_clock;
+  std::vector<SnapshotVariant> out;
+  out.push_back({"fp32 dense", s.field, core::snapshot_bytes(*s.field), 0.0, 0, 0});
+  const core::Isosurface iso{s.tau, s.inside};
+  for (const core::SampleFormat f : {core::SampleFormat::kFp32, core::SampleFormat::kFp16, core::SampleFormat::kUnorm16}) {
+    std::vector<double> ms;
+    std::shared_ptr<servo::SampleField> b;
+    for (int rep = 0; rep < 3; ++rep) {
+      const auto t0 = clock::now();
+      b = std::make_shared<servo::SampleField>(core::make_bricked_field(core::bricked_input_from_dense(*s.field, iso), f));
+      ms.push_back(std::chrono::duration<double, std::milli>(clock::now() - t0).count());
+    }
+    std::sort(ms.begin(), ms.end());
+    b->version = s.field->version;
+    SnapshotVariant v{std::string(core::to_string(f)) + " bricked", b, core::snapshot_bytes(*b), ms[1], 0, 0};
+    v.bricks_total = b->bricks->table.size();
+    v.bricks_active = b->bricks->table.size() - b->bricks->tiles.size();
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+FormatFigures compare_to_dense(const SweepScene& s, const Playback& p, const Playback& dense) {
+  FormatFigures e;
+  double se2 = 0, fd2 = 0, fsum = 0;
+  long forced = 0, found = 0;
+  for (std::size_t k = 0; k < p.ticks.size() && k < dense.ticks.size(); ++k) {
+    const servo::HriTick& t = p.ticks[k];
+    const servo::HriTick& d = dense.ticks[k];
+    e.contact_ticks += t.contact;
+    e.contact_ticks_dense += d.contact;
+    e.contact_mismatch_ticks += t.contact != d.contact;
+    if (d.contact) fsum += servo::norm(d.force_n);
+    if (t.contact || d.contact) {
+      const double fd = servo::norm(t.force_n - d.force_n);
+      fd2 += fd * fd;
+      e.force_diff_max_n = std::max(e.force_diff_max_n, fd);
+      ++forced;
+    }
+    if (!t.contact) continue;
+    // A VHIP with no surface within the search radius counts at that radius (a lower bound).
+    const SurfaceDistance sd = distance_to_isosurface(*s.field, s.tau, t.vhip_m);
+    const double dist = sd.found ? sd.distance_m : sd.lower_bound_m;
+    se2 += dist * dist;
+    e.surface_err_max_m = std::max(e.surface_err_max_m, dist);
+    ++found;
+  }
+  if (found) e.surface_err_rms_m = std::sqrt(se2 / double(found));
+  if (forced) e.force_diff_rms_n = std::sqrt(fd2 / double(forced));
+  if (e.contact_ticks_dense) e.mean_force_dense_n = fsum / double(e.contact_ticks_dense);
+  return e;
 }
 
 }  // namespace isotouch::app

@@ -51,6 +51,36 @@ struct Playback {
 };
 /// Replay the recorded HIP path through `r` (reset first).
 Playback playback(servo::Renderer& r, const SweepScene& s);
+/// The same on another snapshot of the scene's samples (e.g. a bricked or compact one).
+Playback playback(servo::Renderer& r, const SweepScene& s, const servo::SampleField& field);
+
+/// One published snapshot of a sweep scene's samples (issue 8 item 5).
+struct SnapshotVariant {
+  std::string name;  ///< "fp32 dense", "fp32 bricked", "fp16 bricked", "unorm16 bricked"
+  std::shared_ptr<const servo::SampleField> field;
+  std::uint64_t bytes = 0;  ///< core::snapshot_bytes: what the snapshot holds in memory [B]
+  /// Host time to build it from the dense fp32 samples (core::bricked_input_from_dense +
+  /// core::make_bricked_field; 0 for the dense one), median of 3 [ms], this machine.
+  double build_ms = 0;
+  std::size_t bricks_total = 0, bricks_active = 0;  ///< 0 for the dense one
+};
+/// The scene's dense fp32 snapshot (s.field) and its bricked fp32, fp16 and unorm16 versions.
+std::vector<SnapshotVariant> snapshot_variants(const SweepScene& s);
+
+/// One snapshot's HRI run against the dense fp32 one's, along the same recorded HIP path.
+struct FormatFigures {
+  long contact_ticks = 0;          ///< ticks in contact on this snapshot
+  long contact_ticks_dense = 0;    ///< ... on the dense fp32 snapshot
+  /// Distance of the VHIP from the isosurface of the dense fp32 samples (surface_distance.h),
+  /// over this snapshot's contact ticks [m]: for the dense snapshot the servo's own error,
+  /// for the others that error plus what the storage costs.
+  double surface_err_rms_m = 0, surface_err_max_m = 0;
+  /// |F - F_dense fp32| over the ticks where either run is in contact [N].
+  double force_diff_rms_n = 0, force_diff_max_n = 0;
+  long contact_mismatch_ticks = 0;  ///< ticks in contact on one snapshot and not the other
+  double mean_force_dense_n = 0;    ///< mean |F| of the dense run over its contact ticks [N] (a scale)
+};
+FormatFigures compare_to_dense(const SweepScene& s, const Playback& p, const Playback& dense);
 
 /// Errors of one configuration against the truth (synthetic) or the reference (CT).
 struct ErrorFigures {
@@ -72,5 +102,8 @@ ErrorFigures measure(const SweepScene& s, const Playback& p);
 /// Total time of `reps` replays after `warmup` ones, each divided by the tick count;
 /// returns the median [ns per tick].
 double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps);
+/// The same on another snapshot of the scene's samples.
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, const servo::SampleField& field, int warmup,
+                          int reps);
 
 }  // namespace isotouch::app

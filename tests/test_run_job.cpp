@@ -5,11 +5,13 @@
 // trilinear interpolation of the loaded voxels at the trace's physical HIP (Volume::to_grid),
 // not the servo's FieldView.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <iterator>
 #include <sstream>
 
@@ -205,3 +207,82 @@ TEST(RunJob, NoContactGivesNullErrorsNotZero) {
   EXPECT_NE(r.find("| surface error of the VHIP | not known: no contact tick |"), std::string::npos) << r;
   fs::remove_all(out);
 }
+
+// ---- issue 8 item 3: dense against bricked on the shipped scenes ------------------------------
+// Each shipped scene runs twice, "engine": {"mode": "dense"} and {"mode": "sparse", "samples":
+// "fp32"}, everything else as shipped; the figures come from the two runs' summary.json.
+// - Contact ticks within 1 % (the issue's figure).
+// - Surface error RMS within 0.02 voxel + 5 % of the dense RMS. Why: both are measured
+//   against the same dense fp32 isosurface, and a bricked fp32 snapshot holds the dense
+//   samples bit for bit in every cell that can straddle the isovalue (core/brick_field.h).
+//   It differs only inside uniform bricks, where every voxel reads its brick's tile value
+//   (the range bound nearest the isovalue): the servo reads those only at a HIP deep inside
+//   the object (the linear or secant intersection along HIP-VHIP), which moves the contact
+//   point along the segment while it stays on the surface's cells: hundredths of a voxel, not
+//   a different surface.
+// - The sparse snapshot is smaller than the dense fp32 one and names its mode and bricks.
+namespace {
+nlohmann::json run_summary(Scene sc, const std::string& mode, const std::string& tag) {
+  sc.engine.mode = mode;
+  sc.engine.samples = "fp32";
+  sc.draw_plots = false;
+  sc.write_trace = false;
+  const fs::path out = fs::temp_directory_path() / ("isotouch_run_modes_" + tag + "_" + mode + "_" +
+                                                    std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
+  fs::remove_all(out);
+  isotouch::app::RunOptions opt;
+  opt.out_dir = out.string();
+  opt.progress = false;
+  std::ostringstream log;
+  (void)isotouch::app::run_scene(sc, opt, log);
+  std::ifstream in(out / "summary.json");
+  nlohmann::json j = nlohmann::json::parse(in);
+  fs::remove_all(out);
+  return j;
+}
+
+struct ModeFigures {
+  long dense_ticks = 0, sparse_ticks = 0;
+  double dense_rms = 0, sparse_rms = 0, voxel = 0;
+};
+
+ModeFigures compare_modes(const std::string& name) {
+  const Scene sc = isotouch::app::load_scene(kScenes + "/" + name + ".json");
+  const nlohmann::json d = run_summary(sc, "dense", name), s = run_summary(sc, "sparse", name);
+  EXPECT_EQ(d["engine"]["mode"], "dense");
+  EXPECT_EQ(s["engine"]["mode"], "sparse");
+  EXPECT_EQ(s["engine"]["samples"], "fp32");
+  // The sparse snapshot is bricked: some bricks are uniform, and it is smaller.
+  EXPECT_TRUE(s["engine"]["bricks"]["active"].is_number()) << s["engine"].dump(2);
+  EXPECT_LT(s["engine"]["bricks"]["active"].get<double>(), s["engine"]["bricks"]["total"].get<double>());
+  EXPECT_LT(s["engine"]["snapshot_bytes"].get<double>(), d["engine"]["snapshot_bytes"].get<double>());
+  EXPECT_EQ(s["engine"]["dense_fp32_bytes"], d["engine"]["snapshot_bytes"]);
+  ModeFigures f;
+  f.dense_ticks = d["contact"]["ticks"].get<long>();
+  f.sparse_ticks = s["contact"]["ticks"].get<long>();
+  const auto& sp = d["volume"]["spacing_m"];
+  f.voxel = std::min({sp[0].get<double>(), sp[1].get<double>(), sp[2].get<double>()});
+  const auto& dr = d["error"]["surface_distance_m"]["rms"];
+  const auto& sr = s["error"]["surface_distance_m"]["rms"];
+  EXPECT_TRUE(dr.is_number() && sr.is_number()) << name << ": no surface error";
+  if (dr.is_number() && sr.is_number()) {
+    f.dense_rms = dr.get<double>();
+    f.sparse_rms = sr.get<double>();
+  }
+  EXPECT_GT(f.dense_ticks, 500) << name;
+  EXPECT_LE(std::abs(f.sparse_ticks - f.dense_ticks), 0.01 * double(f.dense_ticks))
+      << name << ": contact ticks dense " << f.dense_ticks << ", sparse " << f.sparse_ticks;
+  EXPECT_LE(std::abs(f.sparse_rms - f.dense_rms), 0.02 * f.voxel + 0.05 * f.dense_rms)
+      << name << ": surface error RMS dense " << f.dense_rms << " m, sparse " << f.sparse_rms << " m";
+  std::cout << "| " << name << " | " << f.dense_ticks << " | " << f.sparse_ticks << " | " << f.dense_rms / f.voxel
+            << " | " << f.sparse_rms / f.voxel << " | " << d["engine"]["snapshot_bytes"] << " | "
+            << s["engine"]["snapshot_bytes"] << " | " << s["engine"]["bricks"]["active"] << " of "
+            << s["engine"]["bricks"]["total"] << " |\n";
+  return f;
+}
+}  // namespace
+
+TEST(RunModes, SphereDenseAndSparseAgree) { compare_modes("sphere"); }
+TEST(RunModes, KnotDenseAndSparseAgree) { compare_modes("knot"); }
+TEST(RunModes, HeadDenseAndSparseAgree) { compare_modes("head"); }
+TEST(RunModes, ChestDenseAndSparseAgree) { compare_modes("chest"); }

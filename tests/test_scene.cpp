@@ -1,6 +1,7 @@
 // Scene files: the shipped scenes load; bad ones name the file, the field and the value.
 #include <gtest/gtest.h>
 
+#include "run_job.h"
 #include "scene.h"
 
 using isotouch::app::load_scene;
@@ -122,4 +123,87 @@ TEST(Scene, SyntheticSpacingRange) {
   expect_error(pre + "0.5" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "0.5"});
   EXPECT_NO_THROW(parse_scene(pre + "1e-6" + post, "ok.json"));
   EXPECT_NO_THROW(parse_scene(pre + "0.1" + post, "ok.json"));
+}
+
+// ---- issue 8 items 3-5: the "engine" section --------------------------------------------------
+namespace {
+std::string with_engine(const std::string& engine) {
+  return R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "engine": )" + engine + "}";
+}
+}  // namespace
+
+TEST(Scene, EngineDefaultsAreTodaysGradientOnly) {
+  const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1})", "ok.json");
+  ASSERT_EQ(s.engine.passes.size(), 1u);
+  EXPECT_EQ(s.engine.passes[0].kind, "gradient");
+  EXPECT_EQ(s.engine.mode, "sparse");
+  EXPECT_EQ(s.engine.samples, "fp32");
+}
+
+TEST(Scene, EnginePassesWithParameters) {
+  const auto s = parse_scene(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 1.5}}, {"closing": {"radius_mm": 0}},
+      "gradient", {"brick_minmax": {"halo": 2}}], "mode": "dense", "samples": "fp32"})"), "ok.json");
+  ASSERT_EQ(s.engine.passes.size(), 4u);
+  EXPECT_EQ(s.engine.passes[0].kind, "gaussian");
+  EXPECT_DOUBLE_EQ(s.engine.passes[0].sigma_mm, 1.5);
+  EXPECT_EQ(s.engine.passes[1].kind, "closing");
+  EXPECT_DOUBLE_EQ(s.engine.passes[1].radius_mm, 0.0);
+  EXPECT_EQ(s.engine.passes[2].kind, "gradient");
+  EXPECT_EQ(s.engine.passes[3].halo, 2);
+  EXPECT_EQ(s.engine.mode, "dense");
+  const auto c = parse_scene(with_engine(R"({"samples": "unorm16"})"), "ok.json");
+  EXPECT_EQ(c.engine.samples, "unorm16");
+  EXPECT_EQ(c.engine.mode, "sparse");
+}
+
+TEST(Scene, EngineErrorsNameTheField) {
+  expect_error(with_engine(R"({"pases": []})"), {"'engine.pases'", "unknown field"});
+  expect_error(with_engine(R"({"passes": []})"), {"'engine.passes'", "non-empty"});
+  expect_error(with_engine(R"({"passes": "gradient"})"), {"'engine.passes'", "\"gradient\""});
+  expect_error(with_engine(R"({"passes": ["median", "gradient"]})"), {"'engine.passes[0]'", "unknown pass", "median"});
+  expect_error(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 0}}, "gradient"]})"),
+               {"'engine.passes[0].gaussian.sigma_mm'", "got 0"});
+  expect_error(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": -1}}, "gradient"]})"),
+               {"'engine.passes[0].gaussian.sigma_mm'", "-1"});
+  expect_error(with_engine(R"({"passes": ["gaussian", "gradient"]})"), {"'engine.passes[0].gaussian.sigma_mm'", "required"});
+  expect_error(with_engine(R"({"passes": [{"gaussian": {"sigma": 1}}, "gradient"]})"),
+               {"'engine.passes[0].gaussian.sigma'", "unknown field"});
+  expect_error(with_engine(R"({"passes": [{"closing": {"radius_mm": -2}}, "gradient"]})"),
+               {"'engine.passes[0].closing.radius_mm'", "-2"});
+  expect_error(with_engine(R"({"passes": ["gradient", {"brick_minmax": {"halo": 9}}]})"),
+               {"'engine.passes[1].brick_minmax.halo'", "9"});
+  expect_error(with_engine(R"({"passes": [{"gradient": {"x": 1}}]})"), {"'engine.passes[0].gradient'", "no parameters"});
+  expect_error(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 1}, "closing": {"radius_mm": 1}}, "gradient"]})"),
+               {"'engine.passes[0]'", "one name"});
+  expect_error(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 1}}]})"), {"'engine.passes'", "must include \"gradient\""});
+  expect_error(with_engine(R"({"passes": ["gradient", {"gaussian": {"sigma_mm": 1}}]})"),
+               {"'engine.passes[1]'", "after \"gradient\""});
+  expect_error(with_engine(R"({"mode": "bricked"})"), {"'engine.mode'", "bricked"});
+  expect_error(with_engine(R"({"samples": "fp8"})"), {"'engine.samples'", "fp8"});
+  expect_error(with_engine(R"({"mode": "dense", "samples": "fp16"})"), {"'engine.samples'", "fp16", "sparse"});
+  expect_error(with_engine(R"([1])"), {"'engine'", "object"});
+}
+
+TEST(Scene, EnginePassListCheckedByTheEngine) {
+  // Structure rules are engine::validate_passes's (gradient and brick_minmax at most once),
+  // reported as a scene error naming the file and field before anything runs.
+  const auto twice = parse_scene(with_engine(R"({"passes": ["gradient", "gradient"]})"), "bad.json");
+  try {
+    (void)isotouch::app::scene_passes(twice);
+    FAIL() << "gradient twice accepted";
+  } catch (const SceneError& e) {
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("bad.json: field 'engine.passes': ", 0), 0u) << m;
+    EXPECT_NE(m.find("pass 1 (gradient)"), std::string::npos) << m;
+  }
+  const auto ok = parse_scene(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 2}}, {"closing": {"radius_mm": 1}},
+      "gradient"], "samples": "fp16"})"), "ok.json");
+  const auto p = isotouch::app::scene_passes(ok);
+  ASSERT_EQ(p.size(), 3u);
+  EXPECT_EQ(p[0].kind, isotouch::engine::PassKind::Gaussian);
+  EXPECT_DOUBLE_EQ(p[0].sigma_mm, 2.0);
+  EXPECT_EQ(p[1].kind, isotouch::engine::PassKind::Closing);
+  EXPECT_DOUBLE_EQ(p[1].radius_mm, 1.0);
+  EXPECT_EQ(p[2].kind, isotouch::engine::PassKind::Gradient);
+  EXPECT_EQ(isotouch::app::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
 }

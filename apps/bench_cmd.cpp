@@ -17,6 +17,7 @@
 #include "servo_thread.h"
 #include "synthetic.h"
 #include "baselines.h"
+#include "brick_field.h"
 #include "hri.h"
 #include "sweep.h"
 
@@ -191,6 +192,33 @@ std::string table1_verdict(const std::vector<Table1Row>& rows) {
   return s.str();
 }
 
+std::string table1_bricked_verdict(const std::vector<Table1Row>& rows) {
+  auto ratio = [](double num, double den) {
+    const double r = num / den;
+    return num > 0 && den > 0 && std::isfinite(r) ? r : std::numeric_limits<double>::infinity();
+  };
+  int k = 0;
+  double worst = -1, worst16 = -1;
+  std::string worst_scene, worst16_scene;
+  for (const Table1Row& r : rows) {
+    const double q = ratio(r.hri_bricked_us, r.hri_us), q16 = ratio(r.hri_fp16_us, r.hri_us);
+    if (q <= 1.10) ++k;
+    if (q > worst) {
+      worst = q;
+      worst_scene = r.scene;
+    }
+    if (q16 > worst16) {
+      worst16 = q16;
+      worst16_scene = r.scene;
+    }
+  }
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(2) << "bricked/dense <= 1.10 on " << k << " of " << rows.size() << " scenes";
+  if (!rows.empty()) s << " (worst: " << worst_scene << " " << worst << "); fp16/dense: worst " << worst16_scene << " "
+                       << worst16;
+  return s.str();
+}
+
 int run_bench_table1(const Table1Options& o, std::ostream& log) {
   using namespace servo;
   engine::ContextOptions co;
@@ -216,9 +244,10 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
   tab << std::fixed;
   tab << "\n| scene | HRI n=5 [us] | (paper) | HRI as printed [us] | Blezek-Robb [us] | (paper) | "
          "Avila-Sobierajski [us] | (paper) | HRI rate [kHz] | HRI/Avila | (paper) | HRI as printed/Avila | "
-         "Blezek/HRI | (paper) |\n"
-      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+         "Blezek/HRI | (paper) | HRI bricked fp32 [us] | bricked/dense | HRI bricked fp16 [us] | fp16/dense |\n"
+      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<Table1Row> rows;
+  std::ostringstream bytes;
   for (const PaperRow& pr : paper) {
     const SweepScene s = prepare_sweep_scene(pr.scene, vk, log);
     HriParams hp = reference_params(s);
@@ -236,18 +265,37 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
     HriRenderer hri_paper(hp_paper);
     BlezekRenderer blezek(bp);
     AvilaRenderer avila(bp);
-    Renderer* algos[] = {&hri, &hri_paper, &blezek, &avila};
+    HriRenderer hri_bricked(hp), hri_fp16(hp);
+    // The bricked snapshots of the same samples (fp32: bit-identical reads in active bricks).
+    const core::BrickedInput bin = core::bricked_input_from_dense(*s.field, core::Isosurface{s.tau, s.inside});
+    SweepScene s32, s16;
+    s32.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp32));
+    s16.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp16));
+    s32.hip = s16.hip = s.hip;
+    const SweepScene* scenes[] = {&s, &s, &s, &s, &s32, &s16};
+    Renderer* algos[] = {&hri, &hri_paper, &blezek, &avila, &hri_bricked, &hri_fp16};
+    constexpr int kAlgos = 6;
     // Interleaved rounds: every algorithm sees the same clock, cache and load state.
-    for (Renderer* r : algos) median_ns_per_tick(*r, s, o.warmup, 1);
-    std::vector<double> t[4];
+    for (int a = 0; a < kAlgos; ++a) median_ns_per_tick(*algos[a], *scenes[a], o.warmup, 1);
+    std::vector<double> t[kAlgos];
     for (int rep = 0; rep < o.repetitions; ++rep)
-      for (int a = 0; a < 4; ++a) t[a].push_back(median_ns_per_tick(*algos[a], s, 0, 1));
-    double med[4];
-    for (int a = 0; a < 4; ++a) {
+      for (int a = 0; a < kAlgos; ++a) t[a].push_back(median_ns_per_tick(*algos[a], *scenes[a], 0, 1));
+    double med[kAlgos];
+    for (int a = 0; a < kAlgos; ++a) {
       std::sort(t[a].begin(), t[a].end());
       med[a] = t[a][t[a].size() / 2] * 1e-3;
     }
-    Table1Row row{pr.scene, med[0], med[1], med[2], med[3]};
+    Table1Row row{pr.scene, med[0], med[1], med[2], med[3], med[4], med[5]};
+    {
+      const double dense = double(core::snapshot_bytes(*s.field));
+      const core::BrickUsage use = core::brick_usage(*s32.field);
+      bytes << std::fixed << std::setprecision(1) << "  " << pr.scene << ": " << use.active << " of " << use.total
+            << " bricks active (" << 100.0 * double(use.active) / double(std::max<std::size_t>(use.total, 1))
+            << " %); fp32 " << 100.0 * double(core::snapshot_bytes(*s32.field)) / dense << " %, fp16 "
+            << 100.0 * double(core::snapshot_bytes(*s16.field)) / dense << " %, unorm16 "
+            << 100.0 * double(core::snapshot_bytes(core::make_bricked_field(bin, core::SampleFormat::kUnorm16))) / dense
+            << " % of the dense fp32 " << std::setprecision(2) << dense / (1024.0 * 1024.0) << " MiB\n";
+    }
     rows.push_back(row);
     tab << std::setprecision(3) << "| " << pr.label << " | " << row.hri_us << " | " << std::setprecision(2) << pr.hri
         << " | " << std::setprecision(3) << row.hri_paper_us << " | " << row.blezek_us << " | "
@@ -255,13 +303,19 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
         << std::setprecision(2) << pr.avila << " | " << std::setprecision(0) << 1e3 / row.hri_us << " | "
         << std::setprecision(2) << row.hri_us / row.avila_us << " | " << pr.hri / pr.avila << " | "
         << row.hri_paper_us / row.avila_us << " | " << row.blezek_us / row.hri_us << " | " << pr.blezek / pr.hri
-        << " |\n";
+        << " | " << std::setprecision(3) << row.hri_bricked_us << " | " << std::setprecision(2)
+        << row.hri_bricked_us / row.hri_us << " | " << std::setprecision(3) << row.hri_fp16_us << " | "
+        << std::setprecision(2) << row.hri_fp16_us / row.hri_us << " |\n";
     for (const auto& [name, tt, p] :
          {std::tuple{"HRI", row.hri_us, pr.hri}, std::tuple{"HRI as printed", row.hri_paper_us, pr.hri},
-          std::tuple{"Blezek-Robb", row.blezek_us, pr.blezek}, std::tuple{"Avila-Sobierajski", row.avila_us, pr.avila}})
+          std::tuple{"Blezek-Robb", row.blezek_us, pr.blezek}, std::tuple{"Avila-Sobierajski", row.avila_us, pr.avila},
+          std::tuple{"HRI bricked fp32", row.hri_bricked_us, pr.hri}, std::tuple{"HRI bricked fp16", row.hri_fp16_us, pr.hri}})
       csv << pr.scene << ',' << name << ',' << tt << ',' << 1e3 / tt << ',' << p << ',' << 1e3 / p << '\n';
   }
   log << tab.str() << "\n" << table1_verdict(rows) << " (the paper: HRI/Avila 1.01-1.02)\n"
+      << table1_bricked_verdict(rows) << " (issue 8: HRI tick on the bricked snapshot at most 10 % above dense)\n"
+      << "Snapshot bytes (brick table + tiles + pool [+ unorm16 decode] over voxels * 16):\n"
+      << bytes.str()
       << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "
          "contact), on this machine; the paper's are whole GHOST servo loops on a 1999 SGI Octane R10000. "
          "\"HRI as printed\" is the paper's Figure 2 without the departures listed in servo/hri.h.\n";

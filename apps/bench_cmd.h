@@ -43,7 +43,16 @@ struct Table1Row {
   double hri_paper_us = 0;  ///< HRI, Figure 2 exactly as printed (servo::Variant::kPaper)
   double blezek_us = 0;     ///< Blezek-Robb
   double avila_us = 0;      ///< Avila-Sobierajski
+  /// HRI as shipped on the bricked snapshot of the same samples (issue 8 item 4:
+  /// core::bricked_input_from_dense + make_bricked_field), fp32 and fp16 samples.
+  double hri_bricked_us = 0;
+  double hri_fp16_us = 0;
 };
+
+/// "bricked/dense <= 1.10 on k of N scenes (worst: SCENE x.xx); fp16/dense: worst SCENE
+/// x.xx", computed from `rows` (HRI tick on the bricked fp32 snapshot over the dense one);
+/// rows with a non-positive or non-finite time count as not meeting the target.
+std::string table1_bricked_verdict(const std::vector<Table1Row>& rows);
 
 /// The conclusion of a measured Table 1, computed from `rows`: "HRI/Avila <= 1 on k of N
 /// scenes (worst: SCENE x.xx); paper variant: j of N". Never a fixed sentence; rows with a
@@ -56,7 +65,9 @@ std::string table1_verdict(const std::vector<Table1Row>& rows);
 /// Blezek-Robb on sphere 64^3, knot 64^3, head and lung (chest CT), each replaying the same
 /// recorded stroke, interleaved round by round so that all four see the same machine
 /// state; printed next to the paper's figures with the ratios between algorithms and
-/// table1_verdict().
+/// table1_verdict(). Appended columns: the shipped HRI on the bricked fp32 and fp16
+/// snapshots of the same samples (interleaved in the same rounds), their ratio to the dense
+/// tick and table1_bricked_verdict(); then the snapshot bytes per format.
 int run_bench_table1(const Table1Options& options, std::ostream& log);
 
 }  // namespace isotouch::app

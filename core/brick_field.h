@@ -19,9 +19,9 @@
 //   stores no samples, only its tile value (see tile_value()): every voxel in it reads
 //   {tile, 0, 0, 0}. A cell belongs to the brick of its lower corner, so every cell of a
 //   uniform brick reads the tile at its 8 corners.
-// - Storage (BrickStore): table entry = pool slot of an active brick (slots in ascending
-//   brick id), or BrickStore::kUniform | index into `tiles` (uniform bricks in ascending
-//   brick id). Bytes: 4 per brick (table) + 16 per uniform brick (tile Sample) + 729 *
+// - Storage (BrickStore): table entry = pool index of an active brick's first sample,
+//   slot * 729 (slots in ascending brick id), or BrickStore::kUniform | index into `tiles`
+//   (uniform bricks in ascending brick id). Bytes: 4 per brick (table) + 16 per uniform brick (tile Sample) + 729 *
 //   (16 | 8) per active brick (pool, fp32 | compact) + 32 per active brick (kUnorm16 decode
 //   parameters); the fixed header (grid, format, fp16 scale) is not counted.
 //
@@ -152,6 +152,9 @@ inline void validate(const BrickedInput& in) {
     bad_bricked_input("BrickedInput.pool: " + std::to_string(in.pool.size()) + " samples, " +
                       std::to_string(in.active.size()) + " active bricks need " +
                       std::to_string(in.active.size() * std::size_t(kBrickSamples)));
+  if (in.active.size() > BrickStore::kMaxSlots)
+    bad_bricked_input("BrickedInput.active: " + std::to_string(in.active.size()) + " active bricks, at most " +
+                      std::to_string(BrickStore::kMaxSlots));
   for (std::size_t i = 0; i < in.active.size(); ++i)
     if (in.active[i] >= total || (i > 0 && in.active[i] <= in.active[i - 1]))
       bad_bricked_input("BrickedInput.active[" + std::to_string(i) + "] = " + std::to_string(in.active[i]) +
@@ -244,7 +247,7 @@ inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
   store->tiles.reserve(total - in.active.size());
   for (std::size_t id = 0, slot = 0; id < total; ++id) {
     if (slot < in.active.size() && in.active[slot] == id) {
-      store->table[id] = std::uint32_t(slot++);
+      store->table[id] = std::uint32_t(slot++ * kBrickSamples);
     } else {
       store->table[id] = BrickStore::kUniform | std::uint32_t(store->tiles.size());
       store->tiles.push_back({in.tile[id], 0.f, 0.f, 0.f});
@@ -267,6 +270,7 @@ inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
     store->fp16_unscale = {float(1.0 / in.grid.spacing_m.x), float(1.0 / in.grid.spacing_m.y),
                            float(1.0 / in.grid.spacing_m.z)};
   }
+  if (!store->seal(in.grid.dims)) detail::bad_bricked_input("the built store does not seal (internal error)");
   SampleField out;
   out.grid = in.grid;
   out.background = in.background;

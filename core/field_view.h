@@ -214,8 +214,8 @@ class FieldView {
       return data_[std::size_t(x) + std::size_t(y) * stride_[1] + std::size_t(z) * stride_[2]];
     const std::uint32_t e = brick_entry(x, y, z);
     if (e & BrickStore::kUniform) return tiles_[e & ~BrickStore::kUniform];
-    const std::size_t i = std::size_t(e) * kBrickSamples + local_offset(x, y, z);
-    return mode_ == Mode::kBricked ? data_[i] : store_->decode_compact(compact_[i], e);
+    const std::size_t i = std::size_t(e) + local_offset(x, y, z);
+    return mode_ == Mode::kBricked ? data_[i] : store_->decode_compact(compact_[i], BrickStore::slot_of(e));
   }
 
  private:
@@ -313,9 +313,9 @@ class FieldView {
               step_[2]};
     const std::uint32_t e = brick_entry(x, y, z);
     if (e & BrickStore::kUniform) return {tiles_ + (e & ~BrickStore::kUniform), 0, 0, 0};
-    const std::size_t i = std::size_t(e) * kBrickSamples + local_offset(x, y, z);
+    const std::size_t i = std::size_t(e) + local_offset(x, y, z);
     if (mode_ == Mode::kBricked) return {data_ + i, step_[0], step_[1], step_[2]};
-    return decode_cell(e, i, scratch);
+    return decode_cell(BrickStore::slot_of(e), i, scratch);
   }
   /// Compact formats: the 8 corners of the cell at pool index `i` of slot `slot`, decoded.
   [[gnu::noinline]] CellRef decode_cell(std::uint32_t slot, std::size_t i, Sample (&scratch)[8]) const {
@@ -335,27 +335,21 @@ class FieldView {
     return std::size_t(x & 7) + std::size_t(kBrickStored) * std::size_t(y & 7) +
            std::size_t(kBrickStored * kBrickStored) * std::size_t(z & 7);
   }
-  /// Set up the bricked mode; an inconsistent store (table size, missing pool) gives an
-  /// empty view.
+  /// Set up the bricked mode from the store's sealed read pointers (BrickStore::seal
+  /// checked the table and pool lengths once); an unsealed store, or one sealed for other
+  /// dims than this field's grid, gives an empty view. Runs once per tick.
   void init_bricked(const BrickStore& b) {
-    const std::array<int, 3> nb = {(grid_.dims[0] + 7) / 8, (grid_.dims[1] + 7) / 8, (grid_.dims[2] + 7) / 8};
-    if (b.bricks != nb || b.table.size() != std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2])) return;
-    const std::size_t slots = b.active_bricks();
-    if (b.format == SampleFormat::kFp32) {
-      if (!b.pool || b.pool->size() < slots * kBrickSamples) return;
-      data_ = b.pool->data();
-      mode_ = Mode::kBricked;
-    } else {
-      if (!b.compact || b.compact->size() < slots * kBrickSamples) return;
-      if (b.format == SampleFormat::kUnorm16 && b.decode.size() < slots) return;
-      compact_ = b.compact->data();
-      mode_ = Mode::kBrickedCompact;
-    }
+    const BrickStore::Sealed& s = b.sealed();
+    if (s.table == nullptr || s.dims[0] != grid_.dims[0] || s.dims[1] != grid_.dims[1] || s.dims[2] != grid_.dims[2])
+      return;
+    mode_ = s.pool != nullptr ? Mode::kBricked : Mode::kBrickedCompact;
+    data_ = s.pool;
+    compact_ = s.compact;
     store_ = &b;
-    table_ = b.table.data();
-    tiles_ = b.tiles.data();
-    nbx_ = std::size_t(nb[0]);
-    nbxy_ = std::size_t(nb[0]) * std::size_t(nb[1]);
+    table_ = s.table;
+    tiles_ = s.tiles;
+    nbx_ = s.nbx;
+    nbxy_ = s.nbxy;
     const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
     for (int a = 0; a < 3; ++a) {
       last_[a] = double(grid_.dims[a] - 1);

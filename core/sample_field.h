@@ -83,17 +83,38 @@ inline float unorm16_to_float(std::uint16_t q, float offset, float scale) {
 }
 
 /// The bricked snapshot (items 4 and 5): a brick table, a pool of active bricks and the
-/// uniform bricks' tiles. Immutable once built (brick_field.h: make_bricked_field); shared
-/// through std::shared_ptr<const BrickStore>. The pool is itself held by shared_ptr so that
-/// a later snapshot can reference it (issue 9: unchanged bricks shared between snapshots).
+/// uniform bricks' tiles. Immutable once built (brick_field.h: make_bricked_field, which
+/// seal()s it); shared through std::shared_ptr<const BrickStore>. The pool is itself held
+/// by shared_ptr so that a later snapshot can reference it (issue 9: unchanged bricks
+/// shared between snapshots). Not copyable: seal() records pointers into this object.
 struct BrickStore {
+  /// What FieldView copies per tick: read pointers into the store, checked once by seal().
+  struct Sealed {
+    std::array<int, 3> dims{0, 0, 0};       ///< grid dims the table was checked against
+    const std::uint32_t* table = nullptr;   ///< null: not sealed (FieldView reads nothing)
+    const Sample* tiles = nullptr;
+    const Sample* pool = nullptr;           ///< kFp32
+    const CompactSample* compact = nullptr; ///< kFp16 / kUnorm16
+    std::size_t nbx = 0, nbxy = 0;          ///< bricks along x; along x times along y
+  };
+
+  BrickStore() = default;
+  BrickStore(const BrickStore&) = delete;
+  BrickStore& operator=(const BrickStore&) = delete;
+
   /// Table entry flag: the brick is uniform; the low 31 bits index `tiles`.
   static constexpr std::uint32_t kUniform = 0x80000000u;
+  /// Most active bricks a store holds (slot * 729 below kUniform).
+  static constexpr std::size_t kMaxSlots = (std::size_t(kUniform) - 1) / kBrickSamples;
+  /// The slot of an active brick's table entry.
+  static std::uint32_t slot_of(std::uint32_t entry) { return entry / std::uint32_t(kBrickSamples); }
 
   std::array<int, 3> bricks{0, 0, 0};     ///< bricks per axis, ceil(dims / 8)
   SampleFormat format = SampleFormat::kFp32;
-  /// One entry per brick, linear id (bz * nby + by) * nbx + bx: the pool slot of an
-  /// active brick (its samples start at slot * kBrickSamples), or kUniform | tile index.
+  /// One entry per brick, linear id (bz * nby + by) * nbx + bx: for an active brick the
+  /// pool index of its first sample, slot * kBrickSamples (slot = its rank among the active
+  /// bricks; stored premultiplied, which saves a multiply on the servo's dependent load
+  /// chain), or kUniform | tile index for a uniform one. Hence at most kMaxSlots slots.
   std::vector<std::uint32_t> table;
   /// {tile value, 0, 0, 0} per uniform brick (fp32 in every format: the side of the
   /// isosurface a uniform brick reads is exact).
@@ -103,6 +124,31 @@ struct BrickStore {
   std::vector<BrickDecode> decode;                            ///< kUnorm16: one per slot
   /// kFp16: 1 / spacing_m per axis [1/m]: gradient = half_to_float(g[a]) * fp16_unscale[a].
   std::array<float, 3> fp16_unscale{1.f, 1.f, 1.f};
+
+  /// Check the store against a grid of `dims` voxels (bricks, table size, pool and decode
+  /// lengths, table entries in range) and record the read pointers FieldView uses; on
+  /// failure it stays unsealed and returns false. Call after the last change (the store is
+  /// immutable from then on); make_bricked_field does.
+  bool seal(const std::array<int, 3>& dims) {
+    sealed_ = {};
+    const std::size_t nx = std::size_t(dims[0] + 7) >> 3, ny = std::size_t(dims[1] + 7) >> 3,
+                      nz = std::size_t(dims[2] + 7) >> 3;
+    if (dims[0] <= 0 || dims[1] <= 0 || dims[2] <= 0 || bricks[0] != int(nx) || bricks[1] != int(ny) ||
+        bricks[2] != int(nz) || table.size() != nx * ny * nz || tiles.size() > table.size())
+      return false;
+    const std::size_t slots = table.size() - tiles.size();
+    if (slots > kMaxSlots) return false;
+    const std::size_t n = slots * kBrickSamples;
+    if (format == SampleFormat::kFp32 ? (!pool || pool->size() < n) : (!compact || compact->size() < n)) return false;
+    if (format == SampleFormat::kUnorm16 && decode.size() < slots) return false;
+    for (std::uint32_t e : table)
+      if ((e & kUniform) ? (e & ~kUniform) >= tiles.size() : (e % kBrickSamples != 0 || e / kBrickSamples >= slots))
+        return false;
+    sealed_ = {dims, table.data(), tiles.data(), format == SampleFormat::kFp32 ? pool->data() : nullptr,
+               format == SampleFormat::kFp32 ? nullptr : compact->data(), nx, nx * ny};
+    return true;
+  }
+  const Sealed& sealed() const { return sealed_; }
 
   std::size_t total_bricks() const { return table.size(); }
   std::size_t active_bricks() const { return table.size() - tiles.size(); }
@@ -121,6 +167,9 @@ struct BrickStore {
     return {unorm16_to_float(c.value, d.offset[0], d.scale[0]), unorm16_to_float(c.g[0], d.offset[1], d.scale[1]),
             unorm16_to_float(c.g[1], d.offset[2], d.scale[2]), unorm16_to_float(c.g[2], d.offset[3], d.scale[3])};
   }
+
+ private:
+  Sealed sealed_;
 };
 
 /// The published sample field: dense (one Sample per voxel, x fastest, then y, then z) or
@@ -168,7 +217,7 @@ inline float outside_background(const SampleField& f, const Isosurface& iso) {
       for (int k = 0; k < kBrickStored && kBrickSize * bz + k < f.grid.dims[2]; ++k)
         for (int j = 0; j < kBrickStored && kBrickSize * by + j < f.grid.dims[1]; ++j)
           for (int i = 0; i < kBrickStored && kBrickSize * bx + i < f.grid.dims[0]; ++i)
-            add(b.stored(b.table[id], std::size_t(i + kBrickStored * j + kBrickStored * kBrickStored * k)).value);
+            add(b.stored(BrickStore::slot_of(b.table[id]), std::size_t(i + kBrickStored * j + kBrickStored * kBrickStored * k)).value);
     }
   }
   return float(iso.outside_value(lo, hi));

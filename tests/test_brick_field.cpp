@@ -481,6 +481,25 @@ TEST(BrickField, BadInputIsRefusedNamingTheField) {
   f.grid.dims[0] += 8;
   EXPECT_TRUE(FieldView(f).empty());
   EXPECT_TRUE(std::isnan(FieldView(f).value(f.grid.centre_m())));
+  // An unsealed store (built by hand), or one whose table is cut short, reads nothing.
+  const SampleField good = core::make_bricked_field(in, SampleFormat::kFp32);
+  auto copy = std::make_shared<core::BrickStore>();
+  copy->bricks = good.bricks->bricks;
+  copy->table = good.bricks->table;
+  copy->tiles = good.bricks->tiles;
+  copy->pool = good.bricks->pool;
+  SampleField hand = good;
+  hand.bricks = copy;
+  EXPECT_TRUE(FieldView(hand).empty());
+  EXPECT_TRUE(copy->seal(good.grid.dims));
+  EXPECT_FALSE(FieldView(hand).empty());
+  EXPECT_TRUE(same_bits(FieldView(hand).value(good.grid.centre_m()), FieldView(good).value(good.grid.centre_m())));
+  copy->table.pop_back();
+  EXPECT_FALSE(copy->seal(good.grid.dims));
+  EXPECT_TRUE(FieldView(hand).empty());
+  copy->table = good.bricks->table;
+  copy->table[0] = 5;  // not a slot start
+  EXPECT_FALSE(copy->seal(good.grid.dims));
 }
 
 // A scripted stroke over a sphere (down through the surface, slide, up): HIP per tick.

@@ -83,57 +83,77 @@ void main() {
   }
   barrier();
 
-  // Filter ops; m = radius consumed so far per axis (valid band [m, S - 1 - m]).
+  // Filter ops; m = radius consumed so far per axis (valid band [m, S - 1 - m]). No
+  // dynamic indexing of vector components (lavapipe spills those to memory per lane).
   ivec3 m = ivec3(0);
   for (uint o = 0u; o < pc.n_ops; ++o) {
     const int axis = int(params[4u * o]);
     const int r = int(params[4u * o + 1u]);
     const uint kind = params[4u * o + 2u];
     const uint woff = 4u * ISOTOUCH_SPARSE_MAX_OPS + params[4u * o + 3u];
-    ivec3 e = ivec3(0);
-    e[axis] = r;
+    const ivec3 e = ivec3(axis == 0 ? r : 0, axis == 1 ? r : 0, axis == 2 ? r : 0);
     const ivec3 lo = max(m + e, vlo), hi = min(S - 1 - m - e, vhi);
     const ivec3 w = hi - lo + 1;
     const uint count = uint(w.x * w.y * w.z);
-    const bool global_src = o == 0u;  // the first op reads the raw voxels
-    const int stride = global_src ? (axis == 0 ? 1 : (axis == 1 ? int(pc.nx) : gsz))
-                                  : (axis == 0 ? 1 : (axis == 1 ? cw.x : cw.x * cw.y));
-    const int ilo = vlo[axis], ihi = vhi[axis];
-    const uint dbase = (o & 1u) == 0u ? 0u : pc.buf_b;
-    for (uint t = lid; t < count; t += ISOTOUCH_SPARSE_WG) {
-      const ivec3 l = lo + decode(t, w);
-      const int i = l[axis];
-      // Tap j along the axis is at line + j * stride.
-      ivec3 l0 = l;
-      l0[axis] = 0;
-      const int line = global_src ? gbase + l0.z * gsz + l0.y * int(pc.nx) + l0.x
-                                  : int(cbase) + at(l0, clo, cw);
-      float result;
-      if (kind == ISOTOUCH_SPARSE_OP_GAUSS) {
-        precise float acc = 0.0;
-        for (int k = -r; k <= r; ++k) {
-          const int p = line + clamp(i + k, ilo, ihi) * stride;
-          const float v = global_src ? src[p] : fbuf[p];
-          precise float term = uintBitsToFloat(params[woff + uint(k + r)]) * v;
-          acc = acc + term;
+    const int ilo = axis == 0 ? vlo.x : (axis == 1 ? vlo.y : vlo.z);
+    const int ihi = axis == 0 ? vhi.x : (axis == 1 ? vhi.y : vhi.z);
+    const int dbase = (o & 1u) == 0u ? 0 : int(pc.buf_b);
+    const bool gauss = kind == ISOTOUCH_SPARSE_OP_GAUSS, is_max = kind == ISOTOUCH_SPARSE_OP_MAX;
+    if (o == 0u) {  // the first op reads the raw voxels
+      const int stride = axis == 0 ? 1 : (axis == 1 ? int(pc.nx) : gsz);
+      for (uint t = lid; t < count; t += ISOTOUCH_SPARSE_WG) {
+        const ivec3 l = lo + decode(t, w);
+        const int i = axis == 0 ? l.x : (axis == 1 ? l.y : l.z);
+        const int line = gbase + l.z * gsz + l.y * int(pc.nx) + l.x - i * stride;  // tap j at line + j * stride
+        float result;
+        if (gauss) {
+          precise float acc = 0.0;
+          for (int k = -r; k <= r; ++k) {
+            const float v = src[line + clamp(i + k, ilo, ihi) * stride];
+            precise float term = uintBitsToFloat(params[woff + uint(k + r)]) * v;
+            acc = acc + term;
+          }
+          result = acc;
+        } else {
+          float mm = is_max ? uintBitsToFloat(0xff800000u) : uintBitsToFloat(0x7f800000u);
+          for (int k = -r; k <= r; ++k) {
+            const float v = src[line + clamp(i + k, ilo, ihi) * stride];
+            mm = is_max ? (v > mm ? v : mm) : (v < mm ? v : mm);
+          }
+          result = mm;
         }
-        result = acc;
-      } else {
-        const bool is_max = kind == ISOTOUCH_SPARSE_OP_MAX;
-        float mm = is_max ? uintBitsToFloat(0xff800000u) : uintBitsToFloat(0x7f800000u);
-        for (int k = -r; k <= r; ++k) {
-          const int p = line + clamp(i + k, ilo, ihi) * stride;
-          const float v = global_src ? src[p] : fbuf[p];
-          mm = is_max ? (v > mm ? v : mm) : (v < mm ? v : mm);
-        }
-        result = mm;
+        fbuf[dbase + at(l, lo, w)] = result;
       }
-      fbuf[int(dbase) + at(l, lo, w)] = result;
+    } else {
+      const int stride = axis == 0 ? 1 : (axis == 1 ? cw.x : cw.x * cw.y);
+      for (uint t = lid; t < count; t += ISOTOUCH_SPARSE_WG) {
+        const ivec3 l = lo + decode(t, w);
+        const int i = axis == 0 ? l.x : (axis == 1 ? l.y : l.z);
+        const int line = int(cbase) + at(l, clo, cw) - i * stride;  // tap j at line + j * stride
+        float result;
+        if (gauss) {
+          precise float acc = 0.0;
+          for (int k = -r; k <= r; ++k) {
+            const float v = fbuf[line + clamp(i + k, ilo, ihi) * stride];
+            precise float term = uintBitsToFloat(params[woff + uint(k + r)]) * v;
+            acc = acc + term;
+          }
+          result = acc;
+        } else {
+          float mm = is_max ? uintBitsToFloat(0xff800000u) : uintBitsToFloat(0x7f800000u);
+          for (int k = -r; k <= r; ++k) {
+            const float v = fbuf[line + clamp(i + k, ilo, ihi) * stride];
+            mm = is_max ? (v > mm ? v : mm) : (v < mm ? v : mm);
+          }
+          result = mm;
+        }
+        fbuf[dbase + at(l, lo, w)] = result;
+      }
     }
     m += e;
     clo = lo;
     cw = w;
-    cbase = dbase;
+    cbase = uint(dbase);
     barrier();
   }
   const int fb = int(cbase);

@@ -1,24 +1,588 @@
 #include "render_cmd.h"
 
+#include <png.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <csetjmp>
+#include <cstring>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <iostream>
+#include <sstream>
+
+#include "files.h"
+#include "run_job.h"
+#include "shapes.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+#ifndef ISOTOUCH_SOURCE_DIR
+#define ISOTOUCH_SOURCE_DIR "."
+#endif
 
 namespace isotouch::app {
+namespace fs = std::filesystem;
+using core::Vec3;
+
+// ---- PNG ---------------------------------------------------------------------------------
+
+namespace {
+/// libpng with setjmp error handling; only plain data lives in this frame.
+/// @return "" or libpng's message.
+const char* png_write_rows(std::FILE* f, int width, int height, const unsigned char* rgb) {
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  if (!png) return "png_create_write_struct failed";
+  png_infop info = png_create_info_struct(png);
+  if (!info) {
+    png_destroy_write_struct(&png, nullptr);
+    return "png_create_info_struct failed";
+  }
+  if (setjmp(png_jmpbuf(png))) {
+    png_destroy_write_struct(&png, &info);
+    return "libpng error while writing (libpng printed the reason)";
+  }
+  png_init_io(png, f);
+  png_set_compression_level(png, 9);
+  png_set_IHDR(png, info, png_uint_32(width), png_uint_32(height), 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  for (int y = 0; y < height; ++y) png_write_row(png, rgb + std::size_t(y) * std::size_t(width) * 3);
+  png_write_end(png, nullptr);
+  png_destroy_write_struct(&png, &info);
+  return "";
+}
+}  // namespace
+
+void write_png(const std::string& path, int width, int height, const std::vector<std::uint32_t>& rgba) {
+  if (width < 1 || height < 1 || rgba.size() != std::size_t(width) * std::size_t(height))
+    throw std::runtime_error(path + ": image of " + std::to_string(rgba.size()) + " pixels is not " +
+                             std::to_string(width) + " x " + std::to_string(height));
+  std::vector<unsigned char> rgb(rgba.size() * 3);
+  for (std::size_t i = 0; i < rgba.size(); ++i)
+    for (int c = 0; c < 3; ++c) rgb[3 * i + std::size_t(c)] = static_cast<unsigned char>((rgba[i] >> (8 * c)) & 0xffu);
+  const fs::path p(path);
+  if (p.has_parent_path()) fs::create_directories(p.parent_path());
+  const std::string tmp = temp_name(path);
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) throw std::runtime_error(path + ": cannot write (" + tmp + "): " + std::strerror(errno));
+  const std::string err = png_write_rows(f, width, height, rgb.data());
+  const bool closed = std::fclose(f) == 0;
+  if (!err.empty() || !closed) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": " + (err.empty() ? std::string("close failed: ") + std::strerror(errno) : err));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string why = std::strerror(errno);
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": rename from " + tmp + " failed: " + why);
+  }
+}
+
+// ---- volumes, fields, pictures ---------------------------------------------------------
+
+engine::Volume load_scene_volume(const Scene& scene) {
+  if (!scene.volume_path.empty()) return engine::load_volume(scene.volume_path);
+  if (scene.synthetic.kind == "sphere")
+    return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
+  return std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
+}
+
+engine::RaycastField scene_raycast_field(const Scene& scene, const engine::Volume& vol) {
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  if (vol.finite_voxels == 0) throw std::runtime_error(vol.path + ": no finite voxels: there is no isosurface");
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  return engine::make_raycast_field(vol.grid, vol.voxels, iso, bg);
+}
+
+engine::RaycastImage render_picture(engine::VulkanContext* vk, const engine::RaycastField& field,
+                                    const std::array<double, 9>& direction, const PictureRequest& req,
+                                    const std::string& out_png) {
+  const engine::CameraView view = req.view ? *req.view : engine::orbit_view(field.grid, direction, req.camera);
+  engine::RaycastImage img;
+  if (req.cpu || vk == nullptr) {
+    img = engine::render_cpu(field, view, req.style, req.width, req.height, req.prims);
+  } else {
+    auto rc = engine::RayCaster::create(*vk, field);
+    if (!rc) throw std::runtime_error(rc.error);
+    img = (*rc.value)->render(view, req.style, req.width, req.height, req.prims);
+  }
+  if (!out_png.empty()) write_png(out_png, img.width, img.height, img.rgba);
+  return img;
+}
+
+engine::OrbitCamera default_camera(const engine::Volume& vol) {
+  engine::OrbitCamera c;
+  // VTK's headsq (the head scene) has an identity direction, but its slice 0 is the top of
+  // the head (VTK's own Medical examples view it with view-up (0, 0, -1)): superior is -z.
+  if (fs::path(vol.path).filename() == "headsq_64x64x93_int16.mhd") c.up_phys = {0, 0, -1};
+  return c;
+}
+
+double probe_size_m(const core::Grid& g) {
+  const double s = std::max({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z});
+  return 0.6 * std::max(s, 1e-3);
+}
+
+std::vector<gpu::RaycastPrim> probe_prims(const servo::TraceRow& r, double force_limit_n, double u) {
+  std::vector<gpu::RaycastPrim> p;
+  p.push_back(engine::prim_sphere(r.hip_m, 1.2 * u, {0.95f, 0.80f, 0.10f}, 1.0f, true));
+  p.push_back(engine::prim_sphere(r.vhip_m, 1.0 * u, {0.15f, 0.80f, 0.25f}));
+  const double f = norm(r.force_n);
+  if (f > 1e-9 && std::isfinite(f)) {
+    const Vec3 n = r.force_n / f;
+    p.push_back(engine::prim_disc(r.vhip_m, n, 6.0 * u, {0.20f, 0.75f, 0.95f}, 0.45f));
+    const double len = std::min(f / std::max(force_limit_n, 1e-9), 1.5) * 12.0 * u;
+    engine::add_arrow(p, r.vhip_m, r.vhip_m + n * len, 0.35 * u, {0.90f, 0.15f, 0.10f});
+  }
+  return p;
+}
+
+namespace {
+
+/// Blue -> cyan -> green -> yellow -> red for s in [0, 1].
+std::array<float, 3> force_colour(double s) {
+  s = std::clamp(s, 0.0, 1.0);
+  const double r = std::clamp(2.0 * s - 0.5, 0.0, 1.0) * 1.0;
+  const double g = s < 0.75 ? std::clamp(2.0 * s, 0.0, 1.0) : 1.0 - (s - 0.75) * 4.0;
+  const double b = std::clamp(1.0 - 2.5 * s, 0.0, 1.0);
+  return {float(r), float(g), float(b)};
+}
+
+/// The default camera's physical up in grid-world, or the front axis if up is along `view_dir`.
+Vec3 picture_up(const engine::Volume& vol, const Vec3& view_dir) {
+  const auto& D = vol.direction;
+  const engine::OrbitCamera cam = default_camera(vol);
+  for (Vec3 p : {cam.up_phys, -cam.front_phys}) {
+    const Vec3 g{D[0] * p.x + D[3] * p.y + D[6] * p.z, D[1] * p.x + D[4] * p.y + D[7] * p.z,
+                 D[2] * p.x + D[5] * p.y + D[8] * p.z};
+    if (norm(cross(g, view_dir)) > 0.3) return g;
+  }
+  return {1, 0, 0};
+}
+
+}  // namespace
+
+RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, const servo::SampleField& field,
+                              const std::vector<servo::TraceRow>& trace, const std::string& out_png,
+                              engine::VulkanContext* vk, const std::string& device, int width, int height) {
+  RunPicture out;
+  try {
+    if (trace.empty()) throw std::runtime_error("no ticks in the trace");
+    const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+    engine::RaycastField rf = engine::make_raycast_field(vol.grid, vol.voxels, iso, field.background);
+    const double u = probe_size_m(vol.grid);
+    // Contact points, their force range, the mean force direction, the tick of max |F|.
+    double fmax = 0;
+    std::size_t imax = 0, contacts = 0;
+    Vec3 centroid, fsum;
+    for (std::size_t i = 0; i < trace.size(); ++i) {
+      const servo::TraceRow& r = trace[i];
+      if (!r.contact || !finite(r.vhip_m)) continue;
+      ++contacts;
+      centroid += r.vhip_m;
+      fsum += r.force_n;
+      if (norm(r.force_n) > fmax) {
+        fmax = norm(r.force_n);
+        imax = i;
+      }
+    }
+    std::vector<gpu::RaycastPrim> prims;
+    const std::size_t room = ISOTOUCH_RAYCAST_MAX_PRIMS - 16;
+    // The HIP's path: at most 150 segments, thin, seen through the surface.
+    const std::size_t seg_step = std::max<std::size_t>(1, trace.size() / 150);
+    for (std::size_t i = seg_step; i < trace.size(); i += seg_step)
+      if (finite(trace[i - seg_step].hip_m) && finite(trace[i].hip_m) && norm(trace[i].hip_m - trace[i - seg_step].hip_m) > 1e-9)
+        prims.push_back(engine::prim_capsule(trace[i - seg_step].hip_m, trace[i].hip_m, 0.22 * u, {0.85f, 0.85f, 0.85f},
+                                             1.0f, true));
+    // Contact points: at most ~400, coloured by |F| / max |F|.
+    const std::size_t pt_step = std::max<std::size_t>(1, contacts / 400);
+    std::size_t k = 0;
+    for (const servo::TraceRow& r : trace) {
+      if (!r.contact || !finite(r.vhip_m)) continue;
+      if (k++ % pt_step != 0 || prims.size() >= room) continue;
+      prims.push_back(engine::prim_sphere(r.vhip_m, 0.45 * u, force_colour(fmax > 0 ? norm(r.force_n) / fmax : 0)));
+    }
+    Vec3 target, view_dir;
+    if (contacts > 0) {
+      for (const auto& q : probe_prims(trace[imax], scene.hri.force_limit_n, u)) prims.push_back(q);
+      target = centroid / double(contacts);
+      view_dir = norm(fsum) > 0 ? fsum / -norm(fsum) : core::normalized_or(scene.script.ray_direction, Vec3{1, 0, 0});
+    } else {
+      for (const auto& r : trace) target += r.hip_m;
+      target = target / double(trace.size());
+      view_dir = core::normalized_or(scene.script.ray_direction, Vec3{1, 0, 0});
+    }
+    double extent = 0;
+    for (const auto& r : trace)
+      if (finite(r.hip_m)) extent = std::max(extent, norm(r.hip_m - target));
+    const double fov = 35;
+    const double half_width = std::max(1.4 * extent, 0.02);
+    const double dist = half_width / std::tan(0.5 * fov * 3.14159265358979 / 180);
+    PictureRequest req;
+    req.width = width;
+    req.height = height;
+    req.view = engine::look_at(target - view_dir * dist, target, picture_up(vol, view_dir), fov);
+    req.prims = std::move(prims);
+    std::unique_ptr<engine::VulkanContext> own;
+    if (!vk) {
+      engine::ContextOptions co;
+      co.device = device;
+      auto c = engine::VulkanContext::create(co);
+      if (!c) throw std::runtime_error("Vulkan: " + c.error);
+      own = std::move(*c.value);
+      vk = own.get();
+    }
+    const engine::RaycastImage img = render_picture(vk, rf, vol.direction, req, out_png);
+    out.gpu_ms = img.gpu_ms;
+    std::ostringstream c;
+    c << std::setprecision(3) << "isosurface " << scene.hri.tau << " (" << core::to_string(scene.hri.inside)
+      << "); grey: the HIP's path (seen through the surface); dots: " << contacts
+      << " contact ticks (VHIP, every " << pt_step << ") coloured by |F| from 0 N (blue) through green and yellow to "
+      << fmax << " N (red); probe at t = " << trace[imax].t_s
+      << " s (largest force): HIP yellow, VHIP green, virtual plane cyan, force red arrow";
+    out.caption = c.str();
+  } catch (const std::exception& e) {
+    out.error = e.what();
+  }
+  return out;
+}
+
+std::vector<servo::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot read the trace");
+  std::string line;
+  if (!std::getline(in, line) || line.rfind("t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m", 0) != 0)
+    throw std::runtime_error(path + ": not an isotouch trace.csv (header 't_s,hip_x_m,...' expected)");
+  const auto& D = vol.direction;
+  std::vector<servo::TraceRow> rows;
+  long lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty()) continue;
+    double v[11];
+    std::size_t pos = 0;
+    for (int c = 0; c < 11; ++c) {
+      const std::size_t end = line.find(',', pos);
+      const std::string cell = line.substr(pos, end == std::string::npos ? std::string::npos : end - pos);
+      char* stop = nullptr;
+      v[c] = std::strtod(cell.c_str(), &stop);
+      if (cell.empty() || stop != cell.c_str() + cell.size())
+        throw std::runtime_error(path + ": line " + std::to_string(lineno) + ", column " + std::to_string(c + 1) +
+                                 ": not a number: '" + cell + "'");
+      if (end == std::string::npos && c < 10)
+        throw std::runtime_error(path + ": line " + std::to_string(lineno) + ": " + std::to_string(c + 1) +
+                                 " columns, at least 11 expected");
+      pos = end + 1;
+    }
+    servo::TraceRow r;
+    r.t_s = v[0];
+    r.hip_m = vol.to_grid({v[1], v[2], v[3]});
+    r.vhip_m = vol.to_grid({v[4], v[5], v[6]});
+    const Vec3 f{v[7], v[8], v[9]};  // physical -> grid-world: D^T f
+    r.force_n = {D[0] * f.x + D[3] * f.y + D[6] * f.z, D[1] * f.x + D[4] * f.y + D[7] * f.z,
+                 D[2] * f.x + D[5] * f.y + D[8] * f.z};
+    r.contact = v[10] != 0;
+    rows.push_back(r);
+  }
+  if (rows.empty()) throw std::runtime_error(path + ": no rows");
+  return rows;
+}
+
+// ---- isotouch render -----------------------------------------------------------------
+
+namespace {
+
+struct RenderCli {
+  std::string up, front;  ///< physical axes; empty: the volume's default (default_camera)
+  std::string scene;
+  std::string out;
+  int width = 640, height = 640;
+  engine::OrbitCamera cam;
+  std::optional<double> time_s;
+  std::string trace;
+  std::string clip_axis;
+  double clip_at = 0.5;
+  bool no_skip = false;
+  bool cpu = false;
+  float step = 0.5f;
+};
+
+std::string default_scene_path() {
+  if (fs::exists("scenes/head.json")) return "scenes/head.json";
+  return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
+}
+
+/// A clip plane perpendicular to a physical axis ("x", "-y", ...; L, P, S positive) at
+/// fraction `at` of the volume's extent along it; removes the side the axis points to.
+engine::ClipPlane clip_plane(const engine::Volume& vol, const std::string& axis, double at) {
+  static const std::pair<const char*, Vec3> axes[] = {{"x", {1, 0, 0}},  {"-x", {-1, 0, 0}}, {"y", {0, 1, 0}},
+                                                      {"-y", {0, -1, 0}}, {"z", {0, 0, 1}},  {"-z", {0, 0, -1}}};
+  for (const auto& [name, phys] : axes) {
+    if (axis != name) continue;
+    const auto& D = vol.direction;
+    const Vec3 n{D[0] * phys.x + D[3] * phys.y + D[6] * phys.z, D[1] * phys.x + D[4] * phys.y + D[7] * phys.z,
+                 D[2] * phys.x + D[5] * phys.y + D[8] * phys.z};
+    // Extent of the box of voxel centres along n (grid-world).
+    const Vec3 lo = vol.grid.origin_m, hi = vol.grid.origin_m + vol.grid.extent_m();
+    double a = 1e300, b = -1e300;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 p{c & 1 ? hi.x : lo.x, c & 2 ? hi.y : lo.y, c & 4 ? hi.z : lo.z};
+      a = std::min(a, dot(n, p));
+      b = std::max(b, dot(n, p));
+    }
+    // at = 0: the plane at the far end (everything removed); 1: the near end... keep it
+    // simple: the plane at a + at (b - a) along n.
+    const double s = a + at * (b - a);
+    return {n * s, n};
+  }
+  throw std::runtime_error("render: --clip must be one of x, -x, y, -y, z, -z (physical axes), got '" + axis + "'");
+}
+
+/// A physical axis by name: x, -x, y, -y, z, -z (LPS: +x left, +y posterior, +z superior).
+Vec3 parse_axis(const std::string& name, const char* option) {
+  static const std::pair<const char*, Vec3> axes[] = {{"x", {1, 0, 0}},  {"-x", {-1, 0, 0}}, {"y", {0, 1, 0}},
+                                                      {"-y", {0, -1, 0}}, {"z", {0, 0, 1}},  {"-z", {0, 0, -1}}};
+  for (const auto& [n, v] : axes)
+    if (name == n) return v;
+  throw std::runtime_error(std::string("render: ") + option + " must be one of x, -x, y, -y, z, -z, got '" + name + "'");
+}
+
+servo::TraceRow row_at(const std::vector<servo::TraceRow>& rows, double t) {
+  auto it = std::lower_bound(rows.begin(), rows.end(), t, [](const servo::TraceRow& r, double v) { return r.t_s < v; });
+  if (it == rows.end()) --it;
+  return *it;
+}
+
+/// The trace to draw at --time: --trace FILE, else the scene run now into a temporary folder.
+std::vector<servo::TraceRow> trace_for(const Scene& scene, const engine::Volume& vol, const RenderCli& o,
+                                       const std::string& device) {
+  if (!o.trace.empty()) return read_trace_csv(o.trace, vol);
+  const fs::path tmp = fs::temp_directory_path() / ("isotouch-render-" + std::to_string(::getpid()));
+  RunOptions ro;
+  ro.out_dir = tmp.string();
+  ro.device = device;
+  ro.progress = false;
+  Scene s = scene;
+  s.draw_plots = false;
+  s.write_trace = true;
+  std::ostringstream log;
+  std::cout << "render: running the scene to get the probe at t = " << *o.time_s << " s ...\n";
+  try {
+    run_scene(s, ro, log);
+    auto rows = read_trace_csv((tmp / "trace.csv").string(), vol);
+    fs::remove_all(tmp);
+    return rows;
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+}
+
+int cmd_render(const RenderCli& o, const std::string& device) {
+  const Scene scene = load_scene(o.scene);
+  const engine::Volume vol = load_scene_volume(scene);
+  const engine::RaycastField field = scene_raycast_field(scene, vol);
+  PictureRequest req;
+  req.width = o.width;
+  req.height = o.height;
+  req.camera = o.cam;
+  const engine::OrbitCamera def = default_camera(vol);
+  req.camera.up_phys = o.up.empty() ? def.up_phys : parse_axis(o.up, "--up");
+  req.camera.front_phys = o.front.empty() ? def.front_phys : parse_axis(o.front, "--front");
+  req.cpu = o.cpu;
+  req.style.skip_empty = !o.no_skip;
+  req.style.step_vox = o.step;
+  if (!o.clip_axis.empty()) req.style.clip = clip_plane(vol, o.clip_axis, o.clip_at);
+  std::string probe_note;
+  if (o.time_s) {
+    const auto rows = trace_for(scene, vol, o, device);
+    const servo::TraceRow r = row_at(rows, *o.time_s);
+    req.prims = probe_prims(r, scene.hri.force_limit_n, probe_size_m(vol.grid));
+    std::ostringstream s;
+    s << std::setprecision(4) << "probe at t = " << r.t_s << " s: " << (r.contact ? "contact" : "no contact")
+      << ", |F| = " << norm(r.force_n) << " N";
+    probe_note = s.str();
+  }
+  std::unique_ptr<engine::VulkanContext> vk;
+  if (!o.cpu) {
+    engine::ContextOptions co;
+    co.device = device;
+    auto c = engine::VulkanContext::create(co);
+    if (!c) throw std::runtime_error("Vulkan: " + c.error);
+    vk = std::move(*c.value);
+  }
+  const std::string out = o.out.empty() ? scene.name + ".png" : o.out;
+  const engine::RaycastImage img = render_picture(vk.get(), field, vol.direction, req, out);
+  std::size_t hits = 0;
+  for (float d : img.depth) hits += d >= 0;
+  std::cout << "render: wrote " << out << " (" << img.width << " x " << img.height << ", "
+            << (vk ? vk->info().name : std::string("CPU reference")) << ", "
+            << std::setprecision(3) << (img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms) << " ms"
+            << (img.gpu_ms >= 0 ? " GPU" : " wall") << ", " << hits << " surface pixels"
+            << (probe_note.empty() ? "" : "; " + probe_note) << ")\n";
+  return 0;
+}
+
+}  // namespace
+
 Subcommand add_render_command(CLI::App& cli) {
+  auto o = std::make_shared<RenderCli>();
   Subcommand s;
-  s.app = cli.add_subcommand("render", "Ray-cast the scene's isosurface to a PNG (not built yet)");
-  s.run = [](const std::string&) {
-    std::cerr << "isotouch render: not built yet\n";
-    return 2;
+  s.app = cli.add_subcommand(
+      "render",
+      "Ray-cast the scene's isosurface to a PNG (headless, any Vulkan device).\n"
+      "The surface is the trilinear field the servo feels, at the scene's isovalue. Camera: an orbit\n"
+      "around the volume centre; angles in the volume's physical frame (LPS for medical images):\n"
+      "azimuth 0 looks at the face from the front (eye anterior), 90 from the patient's left, -90\n"
+      "from the right, 180 from behind; elevation > 0 looks down from above; physical +z is up.\n"
+      "With --time T the probe at that time of the scene's run is drawn in: HIP (yellow, seen\n"
+      "through the surface), VHIP (green), the virtual plane (translucent cyan disc), the force\n"
+      "(red arrow); the scene is run first unless --trace gives its trace.csv.\n"
+      "Example: isotouch render scenes/head.json --out head.png --azimuth -90 --time 1.2");
+  s.app->add_option("scene", o->scene, "Scene file (default scenes/head.json)");
+  s.app->add_option("--out", o->out, "PNG file to write (default <scene name>.png)");
+  s.app->add_option("--width", o->width, "Image width [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
+  s.app->add_option("--height", o->height, "Image height [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
+  s.app->add_option("--azimuth", o->cam.azimuth_deg, "Camera azimuth about physical +z [deg]")->capture_default_str();
+  s.app->add_option("--elevation", o->cam.elevation_deg, "Camera elevation [deg], in (-90, 90)")
+      ->capture_default_str()
+      ->check(CLI::Range(-89.9, 89.9));
+  s.app->add_option("--zoom", o->cam.zoom, "Zoom: 1 fits the whole volume, 2 is twice as close")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s.app->add_option("--distance", o->cam.distance_m, "Eye to volume centre [m] before zoom (0: fit the volume)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  s.app->add_option("--fov", o->cam.fov_y_deg, "Vertical field of view [deg]")->capture_default_str()->check(CLI::Range(1.0, 120.0));
+  s.app->add_option("--up", o->up, "Physical axis shown up: x, -x, y, -y, z, -z (default z; -z for the headsq CT, "
+                    "which is stored upside down)");
+  s.app->add_option("--front", o->front, "Physical axis the eye is on at azimuth 0 (default -y: anterior)");
+  s.app->add_option("--time", o->time_s, "Draw the probe at this time of the scene's run [s]")->check(CLI::NonNegativeNumber);
+  s.app->add_option("--trace", o->trace, "With --time: the run's trace.csv (default: run the scene now)")
+      ->check(CLI::ExistingFile);
+  s.app->add_option("--clip", o->clip_axis,
+                    "Cut away the half of the volume toward this physical axis: x, -x, y, -y, z, -z "
+                    "(e.g. -y removes the anterior half)");
+  s.app->add_option("--clip-at", o->clip_at, "Where the clip plane lies along that axis, 0..1 of the volume")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  s.app->add_option("--step", o->step, "March step along the ray [voxels]")->capture_default_str()->check(CLI::Range(0.02, 4.0));
+  s.app->add_flag("--no-skip", o->no_skip, "Turn empty-space skipping off (same picture, slower)");
+  s.app->add_flag("--cpu", o->cpu, "Use the CPU reference ray caster instead of Vulkan");
+  s.run = [o](const std::string& device) {
+    RenderCli c = *o;
+    if (c.scene.empty()) c.scene = default_scene_path();
+    if (!c.trace.empty() && !c.time_s) throw std::runtime_error("render: --trace needs --time");
+    return cmd_render(c, device);
   };
   return s;
 }
+
+// ---- isotouch bench render -----------------------------------------------------------
+
+namespace {
+
+struct BenchRow {
+  std::string name;
+  std::array<int, 3> dims{};
+  double ms_skip = 0, ms_noskip = 0;  ///< medians
+  std::size_t pixels_differ = 0;      ///< depth differs between skip on and off
+  std::size_t hits = 0;
+  bool timestamps = true;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? -1 : v[v.size() / 2];
+}
+
+BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, int size, int frames) {
+  const Scene scene = load_scene(scene_path);
+  const engine::Volume vol = load_scene_volume(scene);
+  const engine::RaycastField field = scene_raycast_field(scene, vol);
+  auto rc = engine::RayCaster::create(vk, field);
+  if (!rc) throw std::runtime_error(rc.error);
+  const engine::CameraView view = engine::orbit_view(field.grid, vol.direction, default_camera(vol));
+  BenchRow row;
+  row.name = scene.name;
+  row.dims = vol.grid.dims;
+  engine::RaycastImage last[2];
+  for (int skip = 1; skip >= 0; --skip) {
+    engine::RaycastStyle st;
+    st.skip_empty = skip == 1;
+    std::vector<double> ms;
+    for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
+      engine::RaycastImage img = (*rc.value)->render(view, st, size, size);
+      if (f > 0) ms.push_back(img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms);
+      row.timestamps = row.timestamps && img.gpu_ms >= 0;
+      last[skip] = std::move(img);
+    }
+    (skip ? row.ms_skip : row.ms_noskip) = median(ms);
+  }
+  for (std::size_t i = 0; i < last[0].depth.size(); ++i) {
+    row.pixels_differ += last[0].depth[i] != last[1].depth[i] || last[0].rgba[i] != last[1].rgba[i];
+    row.hits += last[1].depth[i] >= 0;
+  }
+  return row;
+}
+
+int cmd_bench_render(int size, int frames, const std::string& device) {
+  engine::ContextOptions co;
+  co.device = device;
+  auto c = engine::VulkanContext::create(co);
+  if (!c) throw std::runtime_error("Vulkan: " + c.error);
+  engine::VulkanContext& vk = **c.value;
+  const bool cpu_device = vk.info().type == "cpu";
+  std::cout << "isotouch bench render: " << size << " x " << size << " frames, default camera (orbit, azimuth 0, "
+            << "elevation 10 deg, whole volume), step 0.5 voxel, median of " << frames << " frames after one warm-up\n"
+            << "device: " << vk.info().name << " (" << vk.info().type << ", " << vk.info().driver << ")\n\n"
+            << "| scene | voxels | surface pixels | ms/frame skipping | ms/frame no skipping | speed-up | images equal |\n"
+            << "|---|---|---|---|---|---|---|\n";
+  std::vector<BenchRow> rows;
+  for (const char* s : {"head.json", "chest.json"}) {
+    fs::path p = fs::path("scenes") / s;
+    if (!fs::exists(p)) p = fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / s;
+    rows.push_back(bench_scene(vk, p.string(), size, frames));
+    const BenchRow& r = rows.back();
+    std::cout << std::fixed << std::setprecision(1) << "| " << r.name << " | " << r.dims[0] << "x" << r.dims[1] << "x"
+              << r.dims[2] << " | " << r.hits << " | " << r.ms_skip << " | " << r.ms_noskip << " | "
+              << std::setprecision(2) << r.ms_noskip / r.ms_skip << "x | "
+              << (r.pixels_differ == 0 ? "yes" : "NO (" + std::to_string(r.pixels_differ) + " pixels)") << " |\n";
+  }
+  const BenchRow& head = rows[0];
+  const double speedup = head.ms_noskip / head.ms_skip;
+  std::cout << "\n(ms: " << (head.timestamps ? "GPU timestamps around the dispatch" : "submit-to-fence wall time")
+            << "; the machine may be shared: figures vary by tens of %)\n"
+            << std::setprecision(2) << "verdict: head skipping speed-up " << speedup << "x (needs >= 5x): "
+            << (speedup >= 5 ? "PASS" : "FAIL") << "\n"
+            << std::setprecision(1) << "verdict: head " << head.ms_skip << " ms per " << size << "x" << size
+            << " frame with skipping (needs <= 100 ms on lavapipe): "
+            << (!cpu_device ? std::string("n/a (not a CPU device)") : head.ms_skip <= 100 ? "PASS" : "FAIL") << "\n";
+  bool equal = true;
+  for (const auto& r : rows) equal = equal && r.pixels_differ == 0;
+  std::cout << "verdict: skipping on and off give the same images: " << (equal ? "PASS" : "FAIL") << "\n";
+  return 0;
+}
+
+}  // namespace
+
 Subcommand add_bench_render_command(CLI::App& bench) {
+  auto size = std::make_shared<int>(512);
+  auto frames = std::make_shared<int>(5);
   Subcommand s;
-  s.app = bench.add_subcommand("render", "ms per frame of the ray caster (not built yet)");
-  s.run = [](const std::string&) {
-    std::cerr << "isotouch bench render: not built yet\n";
-    return 2;
-  };
+  s.app = bench.add_subcommand("render",
+                               "ms per frame of the ray caster on the head and chest CTs, with and without "
+                               "empty-space skipping (GPU timestamps)");
+  s.app->add_option("--size", *size, "Frame width and height [pixels]")->capture_default_str()->check(CLI::Range(16, 4096));
+  s.app->add_option("--frames", *frames, "Timed frames per configuration (median)")->capture_default_str()->check(CLI::Range(1, 1000));
+  s.run = [size, frames](const std::string& device) { return cmd_bench_render(*size, *frames, device); };
   return s;
 }
+
 }  // namespace isotouch::app

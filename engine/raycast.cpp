@@ -1,1 +1,359 @@
-// raycast.cpp - placeholder; its owner fills it in (issue 8 item 4 / issue 10).
+// raycast.cpp - the GPU ray caster (shaders/raycast.comp), cameras, overlay primitives.
+#include "raycast.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <stdexcept>
+#include <tuple>
+
+#include "isotouch/shaders/raycast_spv.h"
+#include "vk_resources.h"
+
+namespace isotouch::engine {
+
+// The C++ view of the shared structs (std430: 4-byte scalars, offset = 4 * member index).
+static_assert(sizeof(gpu::RaycastParams) == 44 * 4);
+static_assert(offsetof(gpu::RaycastParams, tau) == 8 * 4);
+static_assert(offsetof(gpu::RaycastParams, eye_x) == 12 * 4);
+static_assert(offsetof(gpu::RaycastParams, clip_d) == 19 * 4);
+static_assert(offsetof(gpu::RaycastParams, origin_x) == 28 * 4);
+static_assert(offsetof(gpu::RaycastParams, cap_b) == 43 * 4);
+static_assert(sizeof(gpu::RaycastPrim) == 16 * 4);
+static_assert(offsetof(gpu::RaycastPrim, ax) == 4 * 4);
+static_assert(offsetof(gpu::RaycastPrim, cr) == 7 * 4);
+static_assert(offsetof(gpu::RaycastPrim, cb) == 15 * 4);
+static_assert(sizeof(gpu::RaycastPush) == 16);
+static_assert(ISOTOUCH_BRICK == 8u, "raycast.comp walks 8^3 bricks");
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Vec3 unit(const Vec3& v, const char* what) {
+  const double n = norm(v);
+  if (!(n > 0) || !std::isfinite(n)) throw std::invalid_argument(std::string("raycast: ") + what + " has no direction");
+  return v / n;
+}
+
+/// D^T v: a physical-frame vector in grid-world axes (D orthonormal, row-major).
+Vec3 physical_to_grid(const std::array<double, 9>& D, const Vec3& v) {
+  return {D[0] * v.x + D[3] * v.y + D[6] * v.z, D[1] * v.x + D[4] * v.y + D[7] * v.z,
+          D[2] * v.x + D[5] * v.y + D[8] * v.z};
+}
+
+void widen_faces(RaycastField& f) {
+  if (!(f.background == f.background)) return;  // NaN: outside everything, no widening needed
+  const auto& b = f.bricks;
+  for (int z = 0; z < b[2]; ++z)
+    for (int y = 0; y < b[1]; ++y)
+      for (int x = 0; x < b[0]; ++x) {
+        if (!(x == 0 || y == 0 || z == 0 || x == b[0] - 1 || y == b[1] - 1 || z == b[2] - 1)) continue;
+        const std::size_t i = (std::size_t(z) * std::size_t(b[1]) + std::size_t(y)) * std::size_t(b[0]) + std::size_t(x);
+        f.brick_minmax[2 * i] = std::min(f.brick_minmax[2 * i], f.background);
+        f.brick_minmax[2 * i + 1] = std::max(f.brick_minmax[2 * i + 1], f.background);
+      }
+}
+
+void set3(float& x, float& y, float& z, const Vec3& v) {
+  x = float(v.x);
+  y = float(v.y);
+  z = float(v.z);
+}
+
+}  // namespace
+
+RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
+                                float background, const BrickRanges& r) {
+  if (grid.empty() || values.size() != grid.voxel_count())
+    throw std::invalid_argument("raycast: " + std::to_string(values.size()) + " values for a grid of " +
+                                std::to_string(grid.voxel_count()) + " voxels");
+  for (int a = 0; a < 3; ++a)
+    if (r.bricks[a] != (grid.dims[a] + 7) / 8)
+      throw std::invalid_argument("raycast: brick ranges for " + std::to_string(r.bricks[a]) + " bricks along axis " +
+                                  std::to_string(a) + ", the grid needs " + std::to_string((grid.dims[a] + 7) / 8));
+  if (r.halo != 1) throw std::invalid_argument("raycast: brick ranges need halo 1, got " + std::to_string(r.halo));
+  RaycastField f;
+  f.grid = grid;
+  f.values = std::move(values);
+  f.bricks = r.bricks;
+  f.iso = iso;
+  f.background = background;
+  f.brick_minmax.resize(2 * r.count());
+  for (std::size_t i = 0; i < r.count(); ++i) {
+    f.brick_minmax[2 * i] = r.min[i];
+    f.brick_minmax[2 * i + 1] = r.max[i];
+  }
+  widen_faces(f);
+  return f;
+}
+
+RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
+                                float background) {
+  Volume v;
+  v.grid = grid;
+  v.voxels = std::move(values);
+  const BrickRanges r = brick_minmax_cpu(v, 1);
+  return make_raycast_field(grid, std::move(v.voxels), iso, background, r);
+}
+
+CameraView look_at(const Vec3& eye, const Vec3& target, const Vec3& up, double fov_y_deg) {
+  CameraView v;
+  v.eye = eye;
+  v.forward = unit(target - eye, "look_at: target - eye");
+  v.right = unit(cross(v.forward, up), "look_at: up (parallel to the view direction)");
+  v.up = cross(v.right, v.forward);
+  v.fov_y_deg = fov_y_deg;
+  return v;
+}
+
+CameraView orbit_view(const core::Grid& grid, const std::array<double, 9>& D, const OrbitCamera& cam) {
+  if (!(cam.elevation_deg > -90 && cam.elevation_deg < 90))
+    throw std::invalid_argument("camera: elevation must be in (-90, 90) degrees, got " + std::to_string(cam.elevation_deg));
+  if (!(cam.fov_y_deg > 0 && cam.fov_y_deg < 170))
+    throw std::invalid_argument("camera: field of view must be in (0, 170) degrees, got " + std::to_string(cam.fov_y_deg));
+  if (!(cam.zoom > 0 && std::isfinite(cam.zoom)))
+    throw std::invalid_argument("camera: zoom must be > 0, got " + std::to_string(cam.zoom));
+  if (!(cam.distance_m >= 0 && std::isfinite(cam.distance_m)) || !std::isfinite(cam.azimuth_deg))
+    throw std::invalid_argument("camera: distance must be >= 0 m and azimuth finite");
+  const Vec3 target = cam.target_m.value_or(grid.centre_m());
+  double dist = cam.distance_m;
+  if (dist == 0) {
+    // Fit the bounding sphere of the box of voxel centres (plus the border band).
+    const Vec3 ext = grid.extent_m() + grid.spacing_m * 2.0;
+    const double radius = 0.5 * norm(ext);
+    dist = radius / std::sin(0.5 * cam.fov_y_deg * kPi / 180.0) * 1.02;
+  }
+  dist /= cam.zoom;
+  const double az = cam.azimuth_deg * kPi / 180, el = cam.elevation_deg * kPi / 180;
+  // Physical frame: eye direction from the target; azimuth 0 = the front side.
+  const Vec3 upp = unit(cam.up_phys, "camera up");
+  const Vec3 front = unit(cam.front_phys - upp * dot(cam.front_phys, upp), "camera front (along up)");
+  const Vec3 side = cross(upp, front);
+  const Vec3 eye_dir_phys =
+      (front * std::cos(az) + side * std::sin(az)) * std::cos(el) + upp * std::sin(el);
+  const Vec3 eye_dir = physical_to_grid(D, eye_dir_phys);
+  const Vec3 up = physical_to_grid(D, upp);
+  return look_at(target + eye_dir * dist, target, up, cam.fov_y_deg);
+}
+
+double voxels_per_metre(const core::Grid& g, const Vec3& dir) {
+  return norm(Vec3{dir.x / g.spacing_m.x, dir.y / g.spacing_m.y, dir.z / g.spacing_m.z});
+}
+
+Vec3 pixel_direction(const CameraView& view, int width, int height, int px, int py) {
+  const double focal = 0.5 * height / std::tan(0.5 * view.fov_y_deg * kPi / 180);
+  const double sx = (px + 0.5) - 0.5 * width, sy = 0.5 * height - (py + 0.5);
+  return unit(view.forward * focal + view.right * sx + view.up * sy, "pixel direction");
+}
+
+std::uint32_t style_flags(const RaycastStyle& s) {
+  return (s.skip_empty ? ISOTOUCH_RAYCAST_SKIP : 0u) | (s.clip ? ISOTOUCH_RAYCAST_CLIP : 0u);
+}
+
+gpu::RaycastParams make_params(const RaycastField& f, const CameraView& v, const RaycastStyle& s, int width,
+                               int height) {
+  if (width < 1 || height < 1 || width > 8192 || height > 8192)
+    throw std::invalid_argument("raycast: image size must be 1..8192 pixels per side, got " + std::to_string(width) +
+                                " x " + std::to_string(height));
+  if (!(s.step_vox > 0.01f && s.step_vox <= 4.0f))
+    throw std::invalid_argument("raycast: step must be in (0.01, 4] voxels, got " + std::to_string(s.step_vox));
+  gpu::RaycastParams p{};
+  p.width = std::uint32_t(width);
+  p.height = std::uint32_t(height);
+  p.nx = std::uint32_t(f.grid.dims[0]);
+  p.ny = std::uint32_t(f.grid.dims[1]);
+  p.nz = std::uint32_t(f.grid.dims[2]);
+  p.bx = std::uint32_t(f.bricks[0]);
+  p.by = std::uint32_t(f.bricks[1]);
+  p.bz = std::uint32_t(f.bricks[2]);
+  p.tau = float(f.iso.tau);
+  p.inside_sign = f.iso.inside == core::InsideIs::kAbove ? 1.0f : -1.0f;
+  p.background = f.background;
+  p.step_vox = s.step_vox;
+  set3(p.eye_x, p.eye_y, p.eye_z, v.eye);
+  p.focal_px = float(0.5 * height / std::tan(0.5 * v.fov_y_deg * kPi / 180));
+  set3(p.fwd_x, p.fwd_y, p.fwd_z, v.forward);
+  set3(p.right_x, p.right_y, p.right_z, v.right);
+  set3(p.up_x, p.up_y, p.up_z, v.up);
+  set3(p.origin_x, p.origin_y, p.origin_z, f.grid.origin_m);
+  set3(p.inv_sp_x, p.inv_sp_y, p.inv_sp_z,
+       {1.0 / f.grid.spacing_m.x, 1.0 / f.grid.spacing_m.y, 1.0 / f.grid.spacing_m.z});
+  if (s.clip) {
+    const Vec3 n = unit(s.clip->normal, "clip plane normal");
+    set3(p.clip_nx, p.clip_ny, p.clip_nz, n);
+    p.clip_d = float(-dot(n, s.clip->point_m));
+  }
+  set3(p.surf_r, p.surf_g, p.surf_b, {s.surface[0], s.surface[1], s.surface[2]});
+  set3(p.bg_r, p.bg_g, p.bg_b, {s.background[0], s.background[1], s.background[2]});
+  set3(p.cap_r, p.cap_g, p.cap_b, {s.cap[0], s.cap[1], s.cap[2]});
+  return p;
+}
+
+namespace {
+gpu::RaycastPrim prim(std::uint32_t kind, const Vec3& a, const Vec3& b, double r, std::array<float, 3> rgb,
+                      float alpha, bool xray) {
+  if (!(r > 0) || !std::isfinite(r)) throw std::invalid_argument("raycast: primitive radius must be > 0 m");
+  gpu::RaycastPrim q{};
+  q.kind = kind;
+  q.r0 = float(r);
+  q.alpha = alpha;
+  q.pad0 = xray ? 1.0f : 0.0f;
+  set3(q.ax, q.ay, q.az, a);
+  set3(q.bx, q.by, q.bz, b);
+  q.cr = rgb[0];
+  q.cg = rgb[1];
+  q.cb = rgb[2];
+  return q;
+}
+}  // namespace
+
+gpu::RaycastPrim prim_sphere(const Vec3& c, double r, std::array<float, 3> rgb, float alpha, bool xray) {
+  return prim(ISOTOUCH_RAYCAST_PRIM_SPHERE, c, c, r, rgb, alpha, xray);
+}
+gpu::RaycastPrim prim_disc(const Vec3& c, const Vec3& n, double r, std::array<float, 3> rgb, float alpha) {
+  return prim(ISOTOUCH_RAYCAST_PRIM_DISC, c, unit(n, "disc normal"), r, rgb, alpha, false);
+}
+gpu::RaycastPrim prim_capsule(const Vec3& a, const Vec3& b, double r, std::array<float, 3> rgb, float alpha,
+                              bool xray) {
+  return prim(ISOTOUCH_RAYCAST_PRIM_CAPSULE, a, b, r, rgb, alpha, xray);
+}
+gpu::RaycastPrim prim_cone(const Vec3& base, const Vec3& apex, double r, std::array<float, 3> rgb) {
+  return prim(ISOTOUCH_RAYCAST_PRIM_CONE, base, apex, r, rgb, 1.0f, false);
+}
+void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec3& to, double shaft_r,
+               std::array<float, 3> rgb) {
+  const Vec3 d = to - from;
+  if (!(norm(d) > 0)) return;
+  const Vec3 neck = from + d * 0.75;
+  prims.push_back(prim_capsule(from, neck, shaft_r, rgb));
+  prims.push_back(prim_cone(neck, to, shaft_r * 2.5, rgb));
+}
+
+// ---- GPU ---------------------------------------------------------------------------------
+
+struct RayCaster::Impl {
+  VulkanContext& ctx;
+  RaycastField field;
+  ComputePipeline<gpu::RaycastPush> pipeline;
+  GpuBuffer values, bricks;                // device-local, resident
+  GpuBuffer params, prims;                 // device-local, rewritten per frame
+  GpuBuffer params_up, prims_up;           // staging
+  GpuBuffer image, depth;                  // device-local, sized for the last frame
+  GpuBuffer image_down, depth_down;        // readback
+  std::size_t pixels = 0;
+  Impl(VulkanContext& c, RaycastField f)
+      : ctx(c), field(std::move(f)), pipeline(c, raycast_spv, 6, "raycast") {}
+};
+
+RayCaster::RayCaster(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+RayCaster::~RayCaster() = default;
+const RaycastField& RayCaster::field() const { return impl_->field; }
+
+namespace {
+/// Uploads `bytes` into a new device-local buffer through a staging buffer (one submit).
+Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what) {
+  auto dst = GpuBuffer::create(ctx, bytes, MemoryIntent::DeviceLocal, what);
+  if (!dst) return dst;
+  auto up = GpuBuffer::create(ctx, bytes, MemoryIntent::Upload, what + " staging");
+  if (!up) return Result<GpuBuffer>::fail(up.error);
+  std::memcpy(up.value->mapped(), data, bytes);
+  VkCommandBuffer cmd = ctx.begin_commands();
+  record_copy(cmd, *up.value, *dst.value, bytes);
+  barrier_transfer_to_compute(cmd);
+  ctx.submit_and_wait(cmd);
+  return dst;
+}
+}  // namespace
+
+Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field) {
+  using R = Result<std::unique_ptr<RayCaster>>;
+  const std::size_t vbytes = field.values.size() * sizeof(float);
+  if (vbytes == 0 || field.brick_minmax.empty()) return R::fail("raycast: empty field");
+  if (vbytes > ctx.max_binding_bytes())
+    return R::fail("raycast: the volume's " + std::to_string(vbytes) + " bytes exceed maxStorageBufferRange " +
+                   std::to_string(ctx.max_binding_bytes()) + " bytes on " + ctx.info().name +
+                   " (one dense binding; a bricked snapshot would be needed)");
+  auto impl = std::make_unique<Impl>(ctx, field);
+  auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
+  if (!v) return R::fail(v.error);
+  impl->values = std::move(*v.value);
+  auto b = upload(ctx, impl->field.brick_minmax.data(), impl->field.brick_minmax.size() * sizeof(float),
+                  "raycast brick ranges");
+  if (!b) return R::fail(b.error);
+  impl->bricks = std::move(*b.value);
+  const std::size_t pb = sizeof(gpu::RaycastParams);
+  const std::size_t qb = sizeof(gpu::RaycastPrim) * ISOTOUCH_RAYCAST_MAX_PRIMS;
+  for (auto [buf, bytes, intent, what] :
+       {std::tuple{&impl->params, pb, MemoryIntent::DeviceLocal, "raycast params"},
+        std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
+        std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
+        std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"}}) {
+    auto r = GpuBuffer::create(ctx, bytes, intent, what);
+    if (!r) return R::fail(r.error);
+    *buf = std::move(*r.value);
+  }
+  return R::ok(std::unique_ptr<RayCaster>(new RayCaster(std::move(impl))));
+}
+
+RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style, int width, int height,
+                               const std::vector<gpu::RaycastPrim>& prims) {
+  Impl& m = *impl_;
+  if (prims.size() > ISOTOUCH_RAYCAST_MAX_PRIMS)
+    throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
+                                std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
+  const gpu::RaycastParams P = make_params(m.field, view, style, width, height);
+  const std::size_t pixels = std::size_t(width) * std::size_t(height);
+  if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
+  if (pixels != m.pixels) {
+    m.image = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, "raycast image");
+    m.depth = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, "raycast depth");
+    m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
+    m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+    m.pixels = pixels;
+  }
+  std::memcpy(m.params_up.mapped(), &P, sizeof(P));
+  if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
+  gpu::RaycastPush push{};
+  push.flags = style_flags(style);
+  push.prim_count = std::uint32_t(prims.size());
+
+  DescriptorArena arena(m.ctx, 1, 6);
+  GpuTimer timer(m.ctx, 2);
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  timer.record_reset(cmd);
+  record_copy(cmd, m.params_up, m.params, sizeof(P));
+  if (!prims.empty()) record_copy(cmd, m.prims_up, m.prims, prims.size() * sizeof(gpu::RaycastPrim));
+  barrier_transfer_to_compute(cmd);
+  m.pipeline.bind(cmd, arena,
+                  {{m.params.handle(), 0, m.params.size()},
+                   {m.values.handle(), 0, m.values.size()},
+                   {m.bricks.handle(), 0, m.bricks.size()},
+                   {m.prims.handle(), 0, m.prims.size()},
+                   {m.image.handle(), 0, pixels * 4},
+                   {m.depth.handle(), 0, pixels * 4}});
+  m.pipeline.push(cmd, push);
+  timer.mark(cmd, 0);
+  vkCmdDispatch(cmd, (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+  timer.mark(cmd, 1);
+  barrier_compute_to_transfer(cmd);
+  record_copy(cmd, m.image, m.image_down, pixels * 4);
+  record_copy(cmd, m.depth, m.depth_down, pixels * 4);
+  barrier_transfer_to_host(cmd);
+
+  RaycastImage img;
+  img.width = width;
+  img.height = height;
+  img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
+  img.gpu_ms = timer.elapsed_ms(0, 1);
+  img.rgba.resize(pixels);
+  img.depth.resize(pixels);
+  std::memcpy(img.rgba.data(), m.image_down.mapped(), pixels * 4);
+  std::memcpy(img.depth.data(), m.depth_down.mapped(), pixels * 4);
+  return img;
+}
+
+}  // namespace isotouch::engine

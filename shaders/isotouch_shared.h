@@ -144,6 +144,98 @@ struct SparseBrickPush {
 };
 // ---- end sparse chain -----------------------------------------------------------------
 
+// ---- raycast (issue 10; owner: raycaster) -------------------------------------------
+// First-hit isosurface ray caster (raycast.comp, CPU reference engine/raycast_cpu.cpp).
+// One invocation per pixel, 8x8 tiles. Bindings: 0 params (one RaycastParams), 1 values
+// (float per voxel, x fastest), 2 brick ranges (min, max per 8^3 brick, halo 1, bricks x
+// fastest), 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R in the low byte),
+// 5 depth (float per pixel: ray parameter t [m] of the isosurface hit, -1 if none).
+#define ISOTOUCH_RAYCAST_WG_X 8
+#define ISOTOUCH_RAYCAST_WG_Y 8
+#define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping over the brick grid
+#define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
+#define ISOTOUCH_RAYCAST_PRIM_SPHERE 1u   // a = centre, r0 = radius
+#define ISOTOUCH_RAYCAST_PRIM_DISC 2u     // a = centre, b = unit normal, r0 = radius
+#define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius
+#define ISOTOUCH_RAYCAST_PRIM_CONE 4u     // a = base centre, b = apex, r0 = base radius
+#define ISOTOUCH_RAYCAST_MAX_PRIMS 1024u
+// Per-frame parameters (a storage buffer: more than the 128 guaranteed push bytes).
+// Frames: eye, basis, clip plane and primitives in grid-world [m]; the march runs in index
+// space p_idx = (p - origin) * inv_spacing, with t the ray parameter in metres.
+struct RaycastParams {
+  uint width;        // image size [pixels]
+  uint height;
+  uint nx;           // volume size [voxels]
+  uint ny;
+  uint nz;
+  uint bx;           // bricks per axis: ceil(n / 8)
+  uint by;
+  uint bz;
+  float tau;         // isovalue (value units)
+  float inside_sign; // +1: value > tau is inside; -1: value < tau is inside
+  float background;  // value of every voxel outside the grid (core::FieldView)
+  float step_vox;    // march step, index-space length [voxels]
+  float eye_x;       // camera position, grid-world [m]
+  float eye_y;
+  float eye_z;
+  float focal_px;    // (height / 2) / tan(fov_y / 2) [pixels]
+  float fwd_x;       // unit view direction, grid-world
+  float fwd_y;
+  float fwd_z;
+  float clip_d;      // clip plane: points with dot(clip_n, p) + clip_d > 0 are removed [m]
+  float right_x;     // unit image-right direction
+  float right_y;
+  float right_z;
+  float clip_nx;     // clip plane unit normal, grid-world
+  float up_x;        // unit image-up direction
+  float up_y;
+  float up_z;
+  float clip_ny;
+  float origin_x;    // grid-world position of voxel (0,0,0) [m]
+  float origin_y;
+  float origin_z;
+  float clip_nz;
+  float inv_sp_x;    // 1 / spacing [1/m]
+  float inv_sp_y;
+  float inv_sp_z;
+  float surf_r;      // surface albedo, linear 0..1
+  float surf_g;
+  float surf_b;
+  float bg_r;        // background colour
+  float bg_g;
+  float bg_b;
+  float cap_r;       // colour of the cut face where the clip plane opens the object
+  float cap_g;
+  float cap_b;
+};
+// One overlay primitive (HIP, VHIP, plane disc, force arrow, path, contact points).
+struct RaycastPrim {
+  uint kind;         // ISOTOUCH_RAYCAST_PRIM_*
+  float r0;          // radius [m]
+  float alpha;       // opacity 0..1 (1 opaque)
+  float pad0;
+  float ax;          // point a, grid-world [m]
+  float ay;
+  float az;
+  float cr;          // colour, linear 0..1
+  float bx;          // point or unit normal b, grid-world
+  float by;
+  float bz;
+  float cg;
+  float pad1;
+  float pad2;
+  float pad3;
+  float cb;
+};
+// Push constants: what changes between frames of the same parameters.
+struct RaycastPush {
+  uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
+  uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
+  uint pad0;
+  uint pad1;
+};
+// ---- end raycast ----------------------------------------------------------------------
+
 #ifdef __cplusplus
 }  // namespace isotouch::gpu
 #endif

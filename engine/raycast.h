@@ -1,0 +1,168 @@
+// raycast.h - first-hit isosurface ray casting of a volume (issue 10): the GPU ray caster
+// (shaders/raycast.comp) and its CPU reference (engine/raycast_cpu.cpp, the same math).
+//
+// What is drawn: the isosurface {tau, inside} of the trilinear interpolation of the voxel
+// values, every voxel outside the grid reading `background` (core::FieldView's field, the
+// one the servo feels), refined to under 0.01 voxel along the ray, shaded from the
+// central-difference gradient of that field; an optional clipping plane (the cut face of
+// the object is drawn flat in `cap` colour); overlay primitives (spheres, discs, capsules,
+// cones) for the probe, in grid-world [m].
+//
+// Frames: the camera, clip plane and primitives are in grid-world [m] (core::Grid:
+// world = origin + spacing * index). OrbitCamera is given in the volume's physical frame
+// (LPS for medical images: azimuth about physical +z (superior), azimuth 0 = looking from
+// anterior (-y) toward +y) and turned into grid-world with the direction matrix D, so a
+// RAS NIfTI and an LPS MetaImage of the same head both show the face from the front.
+//
+// Shader input (bindings of RaycastParams in shaders/isotouch_shared.h): dense float
+// values + per-brick (min, max) with halo 1. Swapping in a bricked snapshot
+// (core/brick_field.h) changes only the shader's voxel() (one brick-table lookup, then
+// the 9^3 pool brick: a trilinear cell never straddles two bricks) and its bindings; the
+// march, the brick walk (it reads only the ranges; a uniform brick is a range min = max =
+// tile value) and the CPU reference's voxel() change the same way.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cpu_filters.h"
+#include "isosurface.h"
+#include "isotouch_shared.h"
+#include "vk_context.h"
+#include "volume.h"
+
+namespace isotouch::engine {
+
+using core::Vec3;
+
+/// The field a ray caster draws: dense values on a grid plus per-brick ranges.
+struct RaycastField {
+  core::Grid grid;
+  std::vector<float> values;          ///< grid.voxel_count() values, x fastest
+  std::array<int, 3> bricks{0, 0, 0}; ///< ceil(dims / 8)
+  /// (min, max) per brick, bricks x fastest: the 8^3 brick widened by 1 voxel on each
+  /// side (engine::brick_minmax_cpu, halo 1), and for bricks on the grid's faces also
+  /// the background (the one-voxel band outside the grid blends with it).
+  std::vector<float> brick_minmax;
+  core::Isosurface iso;
+  float background = 0;  ///< value outside the grid (NaN: outside every isosurface)
+};
+
+/// Builds a RaycastField: brick ranges by brick_minmax_cpu(halo 1), widened at the faces.
+/// `background`: e.g. core::outside_background of the samples (what `isotouch run` publishes).
+RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
+                                float background);
+/// The same from brick ranges computed elsewhere (the GPU brick_minmax pass, halo 1).
+/// @throws std::invalid_argument if the ranges do not match the grid or the halo is not 1.
+RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
+                                float background, const BrickRanges& ranges);
+
+/// Camera for one frame, grid-world [m]: eye, unit forward/right/up, vertical field of view.
+struct CameraView {
+  Vec3 eye, forward{0, 1, 0}, right{1, 0, 0}, up{0, 0, 1};
+  double fov_y_deg = 30;
+};
+
+/// Orbit camera around a target, angles in the physical frame (see file comment).
+struct OrbitCamera {
+  double azimuth_deg = 0;    ///< about up_phys; 0: eye on the front side, 90: eye toward cross(up, front) (LPS: left)
+  double elevation_deg = 10; ///< above the horizontal plane [deg], in (-90, 90)
+  double distance_m = 0;     ///< eye to target [m]; 0: fit the volume's bounding sphere
+  double zoom = 1;           ///< distance divided by this (> 0)
+  double fov_y_deg = 30;     ///< vertical field of view [deg], in (0, 170)
+  std::optional<Vec3> target_m;  ///< grid-world [m]; default: the grid's centre
+  /// Physical direction shown up in the picture and the side the eye is on at azimuth 0
+  /// (orthogonal unit vectors). Defaults: LPS superior up, anterior front. A volume stored
+  /// upside down without saying so in its header (VTK's headsq: slice 0 is the top of the
+  /// head, identity direction) needs up = (0, 0, -1).
+  Vec3 up_phys{0, 0, 1};
+  Vec3 front_phys{0, -1, 0};
+};
+
+/// Grid-world camera of an orbit camera. `direction` is D (row-major, physical = origin +
+/// D (world - origin)); identity keeps the physical axes as grid axes.
+/// @throws std::invalid_argument on out-of-range angles, zoom, fov or distance.
+CameraView orbit_view(const core::Grid& grid, const std::array<double, 9>& direction, const OrbitCamera& cam);
+
+/// A camera at `eye` looking at `target` with `up` (grid-world); up is made orthogonal.
+CameraView look_at(const Vec3& eye, const Vec3& target, const Vec3& up, double fov_y_deg);
+
+struct ClipPlane {
+  Vec3 point_m;   ///< a point on the plane, grid-world [m]
+  Vec3 normal;    ///< the removed side: dot(normal, p - point) > 0 is cut away
+};
+
+/// Drawing options of one frame.
+struct RaycastStyle {
+  bool skip_empty = true;          ///< empty-space skipping over the brick grid
+  std::optional<ClipPlane> clip;   ///< cut away one half-space
+  float step_vox = 0.5f;           ///< march step along the ray [voxels of index space]
+  std::array<float, 3> surface{0.89f, 0.85f, 0.76f};  ///< albedo (linear)
+  std::array<float, 3> background{0.08f, 0.09f, 0.12f};
+  std::array<float, 3> cap{0.85f, 0.45f, 0.35f};      ///< the cut face
+};
+
+/// Overlay primitives (grid-world [m], colour linear 0..1).
+gpu::RaycastPrim prim_sphere(const Vec3& centre, double radius_m, std::array<float, 3> rgb, float alpha = 1,
+                             bool xray = false);
+gpu::RaycastPrim prim_disc(const Vec3& centre, const Vec3& normal, double radius_m, std::array<float, 3> rgb,
+                           float alpha);
+gpu::RaycastPrim prim_capsule(const Vec3& a, const Vec3& b, double radius_m, std::array<float, 3> rgb,
+                              float alpha = 1, bool xray = false);
+gpu::RaycastPrim prim_cone(const Vec3& base, const Vec3& apex, double radius_m, std::array<float, 3> rgb);
+/// An arrow from `from` to `to`: a capsule shaft and a cone head (head 25 % of the length).
+void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec3& to, double shaft_radius_m,
+               std::array<float, 3> rgb);
+
+/// One rendered frame. image: RGBA8 per pixel (R in the low byte), rows top to bottom;
+/// depth: ray parameter t [m] of the isosurface (or cut face) hit, -1 where none.
+struct RaycastImage {
+  int width = 0, height = 0;
+  std::vector<std::uint32_t> rgba;
+  std::vector<float> depth;
+  double gpu_ms = -1;        ///< GPU timestamps around the dispatch (-1: none / CPU)
+  double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
+};
+
+/// The per-frame parameter block shared by GPU and CPU (flags not included).
+gpu::RaycastParams make_params(const RaycastField& field, const CameraView& view, const RaycastStyle& style,
+                               int width, int height);
+std::uint32_t style_flags(const RaycastStyle& style);
+
+/// Index-space length of one metre along a ray of grid-world direction `dir` (unit):
+/// |dir / spacing|; t [m] times this is the distance in voxels.
+double voxels_per_metre(const core::Grid& grid, const Vec3& dir);
+/// The unit grid-world direction of pixel (px, py) in `view`, as the shader computes it (double).
+Vec3 pixel_direction(const CameraView& view, int width, int height, int px, int py);
+
+/// The CPU reference: the shader's math in float, one thread.
+RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,
+                        int height, const std::vector<gpu::RaycastPrim>& prims = {});
+
+/// The GPU ray caster: created once per field (values and brick ranges uploaded and kept
+/// resident), then render() any number of frames.
+class RayCaster {
+ public:
+  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or a storage binding
+  /// exceeds maxStorageBufferRange (128 MiB on lavapipe: a bricked snapshot would lift it).
+  static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, const RaycastField& field);
+  ~RayCaster();
+  RayCaster(const RayCaster&) = delete;
+  RayCaster& operator=(const RayCaster&) = delete;
+
+  /// Renders one frame: uploads parameters and primitives, one dispatch, reads back.
+  /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
+  RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
+                      const std::vector<gpu::RaycastPrim>& prims = {});
+  const RaycastField& field() const;
+
+ private:
+  struct Impl;
+  explicit RayCaster(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace isotouch::engine

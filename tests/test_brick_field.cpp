@@ -105,6 +105,11 @@ std::vector<Case> cases() {
                {0.0, InsideIs::kAbove}});
   c.push_back({"sphere finite bg", sphere({24, 24, 24}, {1e-3, 1e-3, 1e-3}, {0.0115, 0.0115, 0.0115}, 0.008, -0.02f),
                {0.0, InsideIs::kAbove}});
+  // A NaN voxel at the centre of a brick that is otherwise entirely inside: the brick must
+  // be active (dense reads NaN, outside, there; a tile would read inside).
+  SampleField holed = sphere({40, 40, 40}, {1e-3, 1e-3, 1e-3}, {0.0195, 0.0195, 0.0195}, 0.014, -0.02f);
+  holed.samples[holed.grid.index(19, 20, 19)].value = kNaNf;
+  c.push_back({"sphere NaN voxel", std::move(holed), {0.0, InsideIs::kAbove}});
   c.push_back({"plane kBelow", plane({26, 17, 9}, kNaNf), {-300.0, InsideIs::kBelow}});
   c.push_back({"noisy CT", noisy_ct({33, 40, 21}, 7, kNaNf), {250.0, InsideIs::kAbove}});
   c.push_back({"noisy CT -500", noisy_ct({33, 40, 21}, 8, -1000.f), {-500.0, InsideIs::kAbove}});
@@ -449,6 +454,31 @@ TEST(BrickField, OutsideBackgroundOnABrickedFieldIsOutsideAndNoFartherThanDense)
       }
     }
   }
+}
+
+// The contract: stored positions beyond the grid hold {background, 0, 0, 0}, whatever
+// the engine wrote there (they are never read; the fill keeps the pool well defined).
+TEST(BrickField, TheApronBeyondTheGridIsTheBackground) {
+  const Case c = cases()[0];  // 37 x 29 x 43: every axis ends inside a brick
+  BrickedInput in = core::bricked_input_from_dense(c.dense, c.iso);
+  for (Sample& s : in.pool) s = {1e30f, 1.f, 2.f, 3.f};  // junk everywhere, in the grid too
+  const auto nb3 = core::brick_counts(c.dense.grid);
+  const SampleField f = core::make_bricked_field(in, SampleFormat::kFp32);
+  long beyond = 0;
+  for (std::size_t slot = 0; slot < in.active.size(); ++slot) {
+    const auto b = core::brick_coords(in.active[slot], nb3);
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j)
+        for (int i = 0; i < 9; ++i) {
+          const bool out = 8 * b[0] + i >= c.dense.grid.dims[0] || 8 * b[1] + j >= c.dense.grid.dims[1] ||
+                           8 * b[2] + k >= c.dense.grid.dims[2];
+          const Sample s = f.bricks->stored(std::uint32_t(slot), std::size_t(i + 9 * j + 81 * k));
+          if (!out) continue;
+          ++beyond;
+          ASSERT_TRUE(std::isnan(s.value) && s.gx == 0 && s.gy == 0 && s.gz == 0);  // background NaN
+        }
+  }
+  EXPECT_GT(beyond, 0);
 }
 
 TEST(BrickField, BadInputIsRefusedNamingTheField) {

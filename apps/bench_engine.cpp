@@ -20,6 +20,7 @@
 #include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <thread>
 
 #include "files.h"
 #include "synthetic.h"
@@ -631,6 +632,15 @@ std::uint64_t mem_total_bytes() {
   return 0;
 }
 
+std::string load_average() {
+  std::ifstream f("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  if (!(f >> a >> b >> c)) return "unknown";
+  std::ostringstream o;
+  o << a << ", " << b << ", " << c;
+  return o.str();
+}
+
 std::string resolve_data(const std::string& rel) {
   if (fs::exists(rel)) return rel;
   return (fs::path(ISOTOUCH_SOURCE_DIR) / rel).string();
@@ -768,8 +778,15 @@ void print_big(const BigResult* b, std::ostream& out, Csv& csv, std::uint64_t me
       return 0;
     }
   };
+  const auto num_of = [&](const std::string& k) {
+    try {
+      return kv.count(k) ? num(std::stod(kv.at(k)), 0) : std::string("n/a");
+    } catch (...) {
+      return std::string("n/a");
+    }
+  };
   out << "| noisy sphere " << b->dim << "^3, 1 mm, tau 0 | " << get("engine") << " | " << get("device") << " | "
-      << get("step_ms") << " | " << get("setup_ms") << " | " << get("make_ms") << " | " << num(b->child.wall_ms, 0)
+      << num_of("step_ms") << " | " << num_of("setup_ms") << " | " << num_of("make_ms") << " | " << num(b->child.wall_ms, 0)
       << " | " << mib(b->child.peak_rss_bytes) << " | " << mib(to_u("vm_hwm_bytes")) << " | " << mib(mem_total)
       << " | " << (kv.count("snapshot_bytes") ? mib(to_u("snapshot_bytes")) : "n/a") << " | "
       << (kv.count("dense_fp32_bytes") ? mib(to_u("dense_fp32_bytes")) : "n/a") << " | " << get("active") << " / "
@@ -870,6 +887,10 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
                   {{-500, above}, {250, above}},
                   {},
                   {}});
+  const auto wanted = [&](const std::string& name) {
+    return o.cases.empty() || std::find(o.cases.begin(), o.cases.end(), name) != o.cases.end();
+  };
+  vols.erase(std::remove_if(vols.begin(), vols.end(), [&](const Vol& v) { return !wanted(v.name); }), vols.end());
   int rc = 0;
   for (auto& v : vols) {
     try {
@@ -879,9 +900,12 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
       rc = 1;
     }
   }
-  progress << "[bench engine] making the 256^3 noisy sphere\n" << std::flush;
-  vols.push_back({"sphere256", "", {{0, above}}, make_noisy_sphere(256, 1e-3), {}});
-  vols.back().source = vols.back().v.path + ", 1 mm spacing";
+  if (wanted("sphere256")) {
+    progress << "[bench engine] making the 256^3 noisy sphere\n" << std::flush;
+    vols.push_back({"sphere256", "", {{0, above}}, make_noisy_sphere(256, 1e-3), {}});
+    vols.back().source = vols.back().v.path + ", 1 mm spacing";
+  }
+  const std::string load_before = load_average();
 
   std::vector<CaseResult> res;
   for (bool closing : {false, true}) {
@@ -898,6 +922,9 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
       << "- GPU columns: " << dev.gpu << (ctx && ctx->info().type == "cpu" ? " - a CPU device (lavapipe), not a GPU" : "")
       << (ctx ? ", timestamps " + std::string(ctx->timestamps_supported() ? "on" : "off") : "") << "\n"
       << "- CPU columns: " << dev.cpu << "\n"
+      << "- machine: " << std::thread::hardware_concurrency() << " hardware threads, MemTotal " << mib(mem_total)
+      << " MiB; load average (1, 5, 15 min) " << load_before << " before the cases, " << load_average()
+      << " after (other work on the machine slows every column)\n"
       << "- memcpy: " << num(memcpy_gbps) << " GB/s (std::memcpy of " << (memcpy_bytes >> 20)
       << " MiB, best of 5, read + write bytes counted), measured in this run\n"
       << "- repetitions: " << o.repetitions << " per figure, interleaved (dense GPU, dense CPU, sparse GPU, sparse "
@@ -987,6 +1014,8 @@ Subcommand add_bench_engine_command(CLI::App& bench) {
   s.app->add_option("--big-dim", opt->big_dim, "Edge of the end-to-end volume [voxels]")
       ->capture_default_str()
       ->check(CLI::Range(8, 1024));
+  s.app->add_option("--cases", opt->cases, "Only these cases: head chest sphere256 (default: all)")
+      ->check(CLI::IsMember({"head", "chest", "sphere256"}));
   s.app->add_option("--csv", opt->out_csv, "Also write every figure to this CSV file (long form)");
   s.app->add_option("--big-child", *big_child, "internal: run the end-to-end step in this process")->group("");
   s.app->footer(kColumnsHelp);

@@ -210,6 +210,7 @@ struct BenchEngineOptions {
   bool big = false;         ///< run the 512^3 step even with --quick
   bool with_closing = false;  ///< also benchmark the list with closing(1 mm)
   int big_dim = 512;
+  std::vector<std::string> cases;  ///< "head", "chest", "sphere256"; empty: all
   std::string out_csv;
   std::string self_exe = "/proc/self/exe";  ///< what run_big re-executes
 };

@@ -15,7 +15,7 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libgtest-dev
   gnuplot-nox
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
-  libpng-dev
+  libpng-dev libassimp-dev
 )
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -338,6 +338,7 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
     m.gpu_gradient_ms = 0;
     for (const auto& p : gpu->passes) m.gpu_gradient_ms += std::max(0.0, p.ms);
     m.gpu_timestamps = !gpu->passes.empty() && gpu->passes.front().ms >= 0;
+    m.gpu_slabs = int(gpu->stats.slabs);
     m.bricks_total = gpu->stats.bricks_total;
     m.bricks_candidates = gpu->stats.candidates;
     m.bricks_active = gpu->stats.active;
@@ -530,8 +531,16 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   m.ticks = long(trace.size());
   std::vector<std::int64_t> ns;
   ns.reserve(trace.size());
-  double sum_ns = 0, err2 = 0, fo2 = 0, fsum = 0;
-  long found = 0;
+  double sum_ns = 0, err2 = 0, fo2 = 0, fsum = 0, dir2 = 0, raw2 = 0;
+  long found = 0, dir_pairs = 0, raw_found = 0;
+  // With filters: the unfiltered data's isosurface, to see how far smoothing moved the surface.
+  std::optional<servo::SampleField> unfiltered;
+  for (const auto& p : m.passes)
+    if (p.kind == engine::PassKind::Gaussian || p.kind == engine::PassKind::Closing) m.has_unfiltered = true;
+  if (m.has_unfiltered) {
+    unfiltered = engine::run_chain_cpu(vol, {engine::PassDesc::gradient()}).samples;
+    unfiltered->background = truth.background;
+  }
   const servo::TraceRow* prev = nullptr;
   for (const auto& r : trace) {
     ns.push_back(r.tick_ns);
@@ -552,6 +561,21 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       }
     }
     fsum += f;
+    if (last && last->contact && f > 0 && servo::norm(last->force_n) > 0) {
+      const double c = std::clamp(servo::dot(r.force_n, last->force_n) / (f * servo::norm(last->force_n)), -1.0, 1.0);
+      const double a = std::acos(c) * 180.0 / M_PI;
+      dir2 += a * a;
+      ++dir_pairs;
+      m.force_dir_step_max_deg = std::max(m.force_dir_step_max_deg, a);
+    }
+    if (unfiltered) {
+      const SurfaceDistance du = distance_to_isosurface(*unfiltered, hp.tau, r.vhip_m);
+      if (du.found) {
+        ++raw_found;
+        raw2 += du.distance_m * du.distance_m;
+        m.unfiltered_err_max_m = std::max(m.unfiltered_err_max_m, du.distance_m);
+      }
+    }
     m.max_force_n = std::max(m.max_force_n, f);
     m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
     // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
@@ -595,6 +619,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.first_order_err_rms_m = std::sqrt(fo2 / double(m.contact_ticks));
   }
   if (found) m.surface_err_rms_m = std::sqrt(err2 / double(found));
+  if (dir_pairs) m.force_dir_step_rms_deg = std::sqrt(dir2 / double(dir_pairs));
+  if (raw_found) m.unfiltered_err_rms_m = std::sqrt(raw2 / double(raw_found));
 
   if (m.contact_ticks == 0)
     log << "no contact: the probe never touched the isosurface in " << m.ticks
@@ -670,6 +696,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                   {"max_release_step_t_s", m.max_release_step_t_s},
                   {"max_any_step_n", m.max_any_step_n},
                   {"max_any_step_t_s", m.max_any_step_t_s},
+                  {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
                   {"saturated_ticks", m.saturated_ticks},
                   {"fault_ticks", m.fault_ticks}};
   // No contact tick (or no surface found): there is no error to report, not an error of 0.
@@ -682,6 +709,11 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                                                         "before rounding for compact samples"},
                                         {"method", "true distance from the VHIP to the isosurface of the trilinear field "
                                                    "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
+                {"surface_distance_to_unfiltered_m",
+                 {{"rms", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_rms_m)},
+                  {"max", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_max_m)},
+                  {"method", "with filters in the pass list: true distance from the VHIP to the isosurface of the "
+                             "unfiltered data (gradient only); null without filters"}}},
                 {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
                                             {"max", or_null(m.contact_ticks > 0, m.first_order_err_max_m)},
                                             {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
@@ -718,7 +750,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                         : std::string())
      << (m.engine_fallback.empty() ? std::string() : "; **sparse GPU chain not used: " + m.engine_fallback + "**")
      << " (details below) |\n"
-     << "| gradient pass | GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
+     << (m.engine_mode == "sparse" ? "| GPU stages (sum) | " : "| gradient pass | ") << "GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
      << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3)
@@ -741,6 +773,12 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
+     << "| force direction step | RMS " << fmt(m.force_dir_step_rms_deg, 3) << " deg, max " << fmt(m.force_dir_step_max_deg, 3)
+     << " deg between consecutive contact ticks |\n"
+     << (m.has_unfiltered && raw_found > 0
+             ? "| distance from the unfiltered data's surface | RMS " + fmt(m.unfiltered_err_rms_m * 1e3, 4) + " mm, max " +
+                   fmt(m.unfiltered_err_max_m * 1e3, 4) + " mm (how far the filters moved the felt surface) |\n"
+             : std::string())
      << "| surface error of the VHIP | "
      << (found == 0 ? std::string(m.contact_ticks == 0 ? "not known: no contact tick" : "not known: no surface found")
                     : "true distance to the trilinear isosurface: RMS " + fmt(m.surface_err_rms_m * 1e3, 4) + " mm, max " +

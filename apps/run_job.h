@@ -90,6 +90,15 @@ struct RunMetrics {
   std::uint64_t snapshot_bytes = 0;    ///< bytes of the published snapshot
   std::uint64_t dense_fp32_bytes = 0;  ///< voxels * 16: the dense fp32 snapshot
   double publish_ms = 0;               ///< host time building the published snapshot (sparse) [ms]
+  /// Angle [deg] between the force directions of two consecutive contact ticks, RMS and max:
+  /// how rough the rendered surface feels (noise in the data shows here).
+  double force_dir_step_rms_deg = 0, force_dir_step_max_deg = 0;
+  /// With filters in the pass list: distance [m] of the VHIP from the isosurface of the
+  /// unfiltered data (gradient only), RMS and max over the contact ticks with a surface
+  /// found: what smoothing moves the felt surface away from the data. has_unfiltered false
+  /// without filters.
+  bool has_unfiltered = false;
+  double unfiltered_err_rms_m = 0, unfiltered_err_max_m = 0;
 };
 
 /// Run one scene end to end and write its outputs into options.out_dir.

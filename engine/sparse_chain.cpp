@@ -284,13 +284,15 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
     pc.src_offset = 0;
     pc.cand_offset = gpu::uint(ch.c0);
     pc.pool_base = gpu::uint(ch.c0);
+    pc.cand_end = gpu::uint(ch.c1);
+    pc.groups = gpu::uint(std::min<std::size_t>(ch.c1 - ch.c0, ISOTOUCH_SPARSE_GROUPS));
     impl_->pipe.bind(cmd, arena,
                      {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{cand_dev.handle(), 0, cand_dev.size()},
                       BufferRange{params_dev.handle(), 0, params_dev.size()},
                       BufferRange{ranges_dev.handle(), 0, ranges_dev.size()},
                       BufferRange{ch.pool.handle(), 0, ch.pool.size()}});
     impl_->pipe.push(cmd, pc);
-    vkCmdDispatch(cmd, std::uint32_t(ch.c1 - ch.c0), 1, 1);
+    vkCmdDispatch(cmd, pc.groups, 1, 1);
   }
   barrier_compute_to_transfer(cmd);
   timer.mark(cmd, 1);

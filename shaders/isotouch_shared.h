@@ -91,59 +91,6 @@ struct BrickMinMaxPush {
   uint pad0;
 };
 
-// ---- sparse chain (issue 8 item 4; owner: gpu-sparse) ---------------------------------
-// shaders/sparse_brick.comp, engine/sparse_chain.cpp, CPU reference engine/sparse_cpu.cpp.
-// One workgroup per candidate 8^3 brick over its raw region (brick + 1 voxel below, + 2
-// above for the gradient of the 9^3 stored samples, + the filters' total radius R per
-// axis: sx = 11 + 2 rx ...): the first 1-D filter op reads the raw voxels from the src
-// binding, every later op reads the previous op's output in shared memory (two buffers,
-// A at 0 and B at buf_b floats, each as large as the largest output written into it; with
-// no filter the region is loaded into A). The ops come from the params buffer (
-// ISOTOUCH_SPARSE_MAX_OPS uvec4 {axis, radius, kind, weight offset}, then the Gaussian
-// weights as float bits), takes the exact (min, max) of the smoothed brick widened by 1
-// voxel, and if that straddles tau writes the 9^3 samples (value, gradient [value/m]) of
-// the brick to its pool slot. Bindings: 0 raw voxels (float, z-slab), 1 candidate brick
-// ids (uint), 2 params, 3 ranges (vec2 per candidate), 4 pool (vec4, 729 per slot).
-#define ISOTOUCH_SPARSE_WG 128
-#define ISOTOUCH_SPARSE_SHARED_FLOATS 7168u  // both shared buffers together (28 KiB)
-#define ISOTOUCH_SPARSE_MAX_OPS 16u
-#define ISOTOUCH_SPARSE_OP_GAUSS 0u
-#define ISOTOUCH_SPARSE_OP_MAX 1u
-#define ISOTOUCH_SPARSE_OP_MIN 2u
-#define ISOTOUCH_SPARSE_SAMPLES 729u       // 9^3 stored samples per active brick
-struct SparseBrickPush {
-  uint nx;            // volume size in voxels
-  uint ny;
-  uint nz;
-  uint bx;            // bricks along x: ceil(nx / 8)
-  uint by;
-  uint src_z0;        // first slice present in the src binding
-  uint src_offset;    // elements between the src binding start and slice src_z0
-  uint cand_offset;   // candidate index of workgroup 0 of this dispatch
-  uint pool_base;     // candidate index stored in slot 0 of the bound pool
-  uint sx;            // region size in voxels: 11 + 2 R per axis
-  uint sy;
-  uint sz;
-  uint rx;            // total filter radius R per axis [voxels]
-  uint ry;
-  uint rz;
-  uint n_ops;         // 1-D filter ops in the params buffer
-  uint inside_above;  // 1: value > tau is inside (threshold = largest float <= tau);
-                      // 0: value < tau is inside (threshold = smallest float >= tau)
-  float threshold;    // tau as a float that gives the same comparisons as the double tau
-  float background;   // value of the stored samples beyond the grid (gradient 0)
-  float inv_2h_x;     // 1 / (2 spacing) [1/m]
-  float inv_2h_y;
-  float inv_2h_z;
-  float inv_h_x;      // 1 / spacing [1/m]
-  float inv_h_y;
-  float inv_h_z;
-  uint buf_b;         // first float of shared buffer B (A starts at 0)
-  uint pad1;
-  uint pad2;
-};
-// ---- end sparse chain -----------------------------------------------------------------
-
 // ---- raycast (issue 10; owner: raycaster) -------------------------------------------
 // First-hit isosurface ray caster (raycast.comp, CPU reference engine/raycast_cpu.cpp).
 // One invocation per pixel, 8x8 tiles. Bindings: 0 params (one RaycastParams), 1 values
@@ -235,6 +182,106 @@ struct RaycastPush {
   uint pad1;
 };
 // ---- end raycast ----------------------------------------------------------------------
+
+// ---- sparse chain (issue 8 item 4; owner: gpu-sparse) ---------------------------------
+// shaders/sparse_brick.comp, engine/sparse_chain.cpp, CPU reference engine/sparse_cpu.cpp.
+// One workgroup per candidate 8^3 brick over its raw region (brick + 1 voxel below, + 2
+// above for the gradient of the 9^3 stored samples, + the filters' total radius R per
+// axis: sx = 11 + 2 rx ...): the first 1-D filter op reads the raw voxels from the src
+// binding, every later op reads the previous op's output in shared memory (two buffers,
+// A at 0 and B at buf_b floats, each as large as the largest output written into it; with
+// no filter the region is loaded into A). The ops come from the params buffer (
+// ISOTOUCH_SPARSE_MAX_OPS uvec4 {axis, radius, kind, weight offset}, then the Gaussian
+// weights as float bits), takes the exact (min, max) of the smoothed brick widened by 1
+// voxel, and if that straddles tau writes the 9^3 samples (value, gradient [value/m]) of
+// the brick to its pool slot. Bindings: 0 raw voxels (float, z-slab), 1 candidate brick
+// ids (uint), 2 params, 3 ranges (vec2 per candidate), 4 pool (vec4, 729 per slot).
+#define ISOTOUCH_SPARSE_WG 8         // one SIMD vector of lavapipe (256 bits)
+#define ISOTOUCH_SPARSE_GROUPS 65535u  // workgroups per dispatch at most (a workgroup loops over the rest)
+#define ISOTOUCH_SPARSE_SHARED_FLOATS 7168u  // both shared buffers together (28 KiB)
+#define ISOTOUCH_SPARSE_MAX_OPS 16u
+#define ISOTOUCH_SPARSE_OP_GAUSS 0u
+#define ISOTOUCH_SPARSE_OP_MAX 1u
+#define ISOTOUCH_SPARSE_OP_MIN 2u
+#define ISOTOUCH_SPARSE_SAMPLES 729u       // 9^3 stored samples per active brick
+struct SparseBrickPush {
+  uint nx;            // volume size in voxels
+  uint ny;
+  uint nz;
+  uint bx;            // bricks along x: ceil(nx / 8)
+  uint by;
+  uint src_z0;        // first slice present in the src binding
+  uint src_offset;    // elements between the src binding start and slice src_z0
+  uint cand_offset;   // candidate index of workgroup 0 of this dispatch
+  uint pool_base;     // candidate index stored in slot 0 of the bound pool
+  uint sx;            // region size in voxels: 11 + 2 R per axis
+  uint sy;
+  uint sz;
+  uint rx;            // total filter radius R per axis [voxels]
+  uint ry;
+  uint rz;
+  uint n_ops;         // 1-D filter ops in the params buffer
+  uint inside_above;  // 1: value > tau is inside (threshold = largest float <= tau);
+                      // 0: value < tau is inside (threshold = smallest float >= tau)
+  float threshold;    // tau as a float that gives the same comparisons as the double tau
+  float background;   // value of the stored samples beyond the grid (gradient 0)
+  float inv_2h_x;     // 1 / (2 spacing) [1/m]
+  float inv_2h_y;
+  float inv_2h_z;
+  float inv_h_x;      // 1 / spacing [1/m]
+  float inv_h_y;
+  float inv_h_z;
+  uint buf_b;         // first float of shared buffer B (A starts at 0)
+  uint cand_end;      // candidates [cand_offset, cand_end) in this dispatch, strided over the workgroups
+  uint groups;        // workgroups in this dispatch (the stride)
+};
+// ---- end sparse chain -----------------------------------------------------------------
+
+// ---- brushes (issue 9 item 1; owner: brushes) -----------------------------------------
+// shaders/brush.comp, engine/brush.cpp, CPU reference engine/brush_cpu.cpp; the model is
+// documented in engine/brush.h. One 8x8x8 workgroup per touched 8^3 brick (a box dispatch
+// over the brick box the brush's voxel-space bounding box touches; one dispatch per z-chunk
+// of brick layers whose slices fit a binding). Bindings: 0 the raw volume (float, x
+// fastest; a window of whole slices starting at linear voxel vol_base), 1 the pre-edit
+// copy that smooth reads (float; window starting at linear voxel src_base; any buffer for
+// the other kinds), 2 dirty flags (uint per brick of the whole box, x fastest, zeroed
+// before the dispatch; 1 where some voxel's bits changed).
+#define ISOTOUCH_BRUSH_WG 8           // 8x8x8 invocations = one 8^3 brick
+#define ISOTOUCH_BRUSH_ADD 0u         // move toward `target` (the material value)
+#define ISOTOUCH_BRUSH_CARVE 1u       // move toward `target` (the empty value)
+#define ISOTOUCH_BRUSH_SMOOTH 2u      // blend toward the 6-neighbour mean of the pre-edit values
+#define ISOTOUCH_BRUSH_DRILL 3u       // move toward `target` (empty), slower on denser voxels
+struct BrushPush {
+  uint nx;              // volume size in voxels
+  uint ny;
+  uint nz;
+  uint kind;            // ISOTOUCH_BRUSH_*
+  uint b0x;             // first brick of this dispatch (brick coordinates)
+  uint b0y;
+  uint b0z;
+  uint box_bx;          // bricks of the whole touched box along x (dirty flag index)
+  uint box_by;          // ... along y
+  uint box_b0z;         // first brick layer of the whole touched box
+  uint vol_base;        // linear voxel index at the start of binding 0
+  uint src_base;        // linear voxel index at the start of binding 1
+  float cx;             // brush centre, index space [voxels]
+  float cy;
+  float cz;
+  float sx;             // spacing [m]
+  float sy;
+  float sz;
+  float radius;         // brush radius [m]
+  float inner;          // weight 1 up to this distance [m]
+  float inv_width;      // 1 / (radius - inner) [1/m]
+  float amount;         // add/carve/drill: step [value units] at weight 1; smooth: blend fraction
+  float target;         // add: material value; carve/drill: empty value [value units]
+  float dens_sign;      // drill: +1 if material > empty, else -1
+  float inv_dens_scale; // drill: 1 / density scale [1/value units]
+  uint pad0;
+  uint pad1;
+  uint pad2;
+};
+// ---- end brushes ----------------------------------------------------------------------
 
 #ifdef __cplusplus
 }  // namespace isotouch::gpu

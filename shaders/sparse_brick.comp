@@ -51,9 +51,12 @@ float diff(int i, int n, float lo, float c, float hi, float inv_2h, float inv_h)
   return (hi - lo) * inv_2h;
 }
 
-void main() {
+void samples(const uint ci, const ivec3 b8, const ivec3 g0, const ivec3 n, const int fb, const ivec3 clo,
+             const ivec3 cw);
+
+// Candidate ci (index into cand[]): stages 1-4 of the file comment.
+void brick(const uint ci) {
   const uint lid = gl_LocalInvocationID.x;
-  const uint ci = pc.cand_offset + gl_WorkGroupID.x;
   const uint id = cand[ci];
   const uint bxy = pc.bx * pc.by;
   const uint bz = id / bxy;
@@ -196,9 +199,14 @@ void main() {
   const bool outside_u = above ? hi_v <= pc.threshold : lo_v >= pc.threshold;
   const bool is_active = !(lo_v > hi_v || outside_u || (inside_u && !has_nan));
   if (lid == 0u) ranges[ci] = vec4(lo_v, hi_v, has_nan ? 1.0 : 0.0, is_active ? 1.0 : 0.0);
-  if (!is_active) return;  // workgroup-uniform
+  if (is_active) samples(ci, b8, g0, n, fb, clo, cw);  // workgroup-uniform branch
+}
 
-  // 4. Samples of the active brick.
+// 4. The 9^3 samples of an active brick into its pool slot.
+void samples(const uint ci, const ivec3 b8, const ivec3 g0, const ivec3 n, const int fb, const ivec3 clo,
+             const ivec3 cw) {
+  const uint lid = gl_LocalInvocationID.x;
+
   const uint slot = (ci - pc.pool_base) * ISOTOUCH_SPARSE_SAMPLES;
   for (uint t = lid; t < ISOTOUCH_SPARSE_SAMPLES; t += ISOTOUCH_SPARSE_WG) {
     const uint k = t / 81u, j = (t - k * 81u) / 9u, i = t - k * 81u - j * 9u;
@@ -218,5 +226,14 @@ void main() {
                diff(gq.z, n.z, zl, c, zh, pc.inv_2h_z, pc.inv_h_z));
     }
     pool[slot + t] = s;
+  }
+}
+
+// Each workgroup takes candidates cand_offset + g, + g + G, ... below cand_end (G workgroups):
+// lavapipe pays a fixed cost per workgroup, far more than a barrier within one.
+void main() {
+  for (uint ci = pc.cand_offset + gl_WorkGroupID.x; ci < pc.cand_end; ci += pc.groups) {
+    brick(ci);
+    barrier();  // the next brick reuses the shared buffers
   }
 }

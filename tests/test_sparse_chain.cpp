@@ -208,7 +208,7 @@ TEST(SparseChain, ClosingThenGaussian) {
   Volume s = engine::make_sphere({30, 27, 21}, 1e-3, 8.0, {0.5, 0.2, -0.3});
   s.grid.spacing_m = {1.0e-3, 1.6e-3, 2.5e-3};
   check_case(s, {PassDesc::closing(1.0), PassDesc::gaussian(0.5), PassDesc::gradient()}, above(0), -1e4f,
-             "sphere closing+gauss", 40u << 10);
+             "sphere closing+gauss", 64u << 10);
 }
 
 TEST(SparseChain, RejectsListsItCannotRun) {

@@ -1,0 +1,176 @@
+// Undo / redo (issue 9 item 3): per-stroke brick backups restore the volume bit for bit
+// in both directions (CPU Sculptor and GPU Sculptor, whose device copy must follow), a
+// brick touched twice in a stroke keeps its first backup, a new stroke after undo drops
+// the redo branch, the memory limit drops the oldest strokes; validation layer on.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cstdint>
+#include <cstring>
+
+#include "brush.h"
+#include "edit_history.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+using namespace isotouch;
+using engine::Brush;
+using engine::BrushKind;
+using engine::Volume;
+
+namespace {
+const std::string kHead = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+
+engine::VulkanContext& vk() {
+  static auto ctx = [] {
+    engine::ContextOptions o;
+    o.validation = true;
+    o.synchronization_validation = true;
+    auto r = engine::VulkanContext::create(o);
+    if (!r) throw std::runtime_error("no Vulkan device with the validation layer: " + r.error);
+    return std::move(*r.value);
+  }();
+  return *ctx;
+}
+
+bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+Brush brush(BrushKind k, core::Vec3 c, double r, const engine::BrushTargets& t) {
+  Brush b;
+  b.kind = k;
+  b.centre_m = c;
+  b.radius_m = r;
+  b.targets = t;
+  b.strength = k == BrushKind::kSmooth ? 0.9 : 300.0;
+  b.force_n = 4;
+  b.rate = 1e5;
+  return b;
+}
+
+TEST(BrickIo, ReadWriteRoundTripAndClippedBricks) {
+  Volume v = engine::make_random({19, 10, 9}, {1e-3, 1e-3, 1e-3}, 0.0f, 1.0f, 5);
+  EXPECT_EQ(engine::brick_total(v.grid), 3u * 2u * 2u);
+  const auto box = engine::brick_box(v.grid, 11);  // (2, 1, 1): x 16..19, y 8..10, z 8..9
+  EXPECT_EQ(box.voxels(), 3u * 2u * 1u);
+  const auto d = engine::read_brick(v, 11);
+  EXPECT_EQ(d[0], v.voxels[v.grid.index(16, 8, 8)]);
+  EXPECT_EQ(d[5], v.voxels[v.grid.index(18, 9, 8)]);
+  std::vector<float> z(d.size(), -7.0f);
+  Volume w = v;
+  engine::write_brick(w, 11, z.data());
+  EXPECT_EQ(w.voxels[v.grid.index(18, 9, 8)], -7.0f);
+  EXPECT_EQ(w.voxels[v.grid.index(15, 9, 8)], v.voxels[v.grid.index(15, 9, 8)]);
+  EXPECT_THROW(engine::brick_box(v.grid, 12), std::out_of_range);
+}
+
+/// Strokes of every kind, overlapping; undo all restores the original, redo all the
+/// edited volume, both bit for bit; on the GPU path the device copy follows.
+void undo_redo_roundtrip(engine::VulkanContext* ctx) {
+  Volume v0 = engine::load_volume(kHead);
+  const auto t = engine::default_targets(v0, {1150.0, core::InsideIs::kAbove});
+  engine::Sculptor s(v0, ctx, 64.0);
+  const core::Vec3 c = v0.grid.centre_m();
+  std::vector<std::vector<float>> states{v0.voxels};
+  const BrushKind kinds[] = {BrushKind::kCarve, BrushKind::kAdd, BrushKind::kSmooth, BrushKind::kDrill};
+  for (int k = 0; k < 4; ++k) {
+    s.begin_stroke();
+    for (int step = 0; step < 5; ++step)  // a stroke: a short drag, bricks touched repeatedly
+      s.apply(brush(kinds[k], c + core::Vec3{0.004 * step, 0.002 * k, 0.001 * step}, 9e-3, t));
+    s.end_stroke();
+    states.push_back(s.volume().voxels);
+    ASSERT_FALSE(same_bits(states[states.size() - 1], states[states.size() - 2]));
+  }
+  EXPECT_EQ(s.history().undo_depth(), 4u);
+  for (int k = 3; k >= 0; --k) {
+    const auto ids = s.undo();
+    EXPECT_FALSE(ids.empty());
+    ASSERT_TRUE(same_bits(s.volume().voxels, states[std::size_t(k)])) << "undo to state " << k;
+    if (s.engine()) {
+      ASSERT_TRUE(same_bits(s.engine()->download_all(), states[std::size_t(k)])) << "device copy";
+    }
+  }
+  EXPECT_TRUE(s.undo().empty());  // nothing left
+  for (int k = 1; k <= 4; ++k) {
+    s.redo();
+    ASSERT_TRUE(same_bits(s.volume().voxels, states[std::size_t(k)])) << "redo to state " << k;
+    if (s.engine()) {
+      ASSERT_TRUE(same_bits(s.engine()->download_all(), states[std::size_t(k)])) << "device copy";
+    }
+  }
+  EXPECT_TRUE(s.redo().empty());
+  // Undo twice, redo once, then a new stroke: the redo branch is gone.
+  s.undo();
+  s.undo();
+  s.redo();
+  s.apply(brush(BrushKind::kCarve, c, 5e-3, t));
+  EXPECT_EQ(s.history().redo_depth(), 0u);
+  EXPECT_TRUE(s.redo().empty());
+  s.undo();
+  ASSERT_TRUE(same_bits(s.volume().voxels, states[3]));
+}
+
+TEST(EditHistory, UndoRedoBitForBitCpu) { undo_redo_roundtrip(nullptr); }
+
+TEST(EditHistory, UndoRedoBitForBitGpu) {
+  undo_redo_roundtrip(&vk());
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
+TEST(EditHistory, BrickTouchedTwiceKeepsItsFirstBackup) {
+  Volume v0 = engine::make_random({24, 24, 24}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 9);
+  engine::EditHistory h(16.0);
+  Volume v = v0;
+  Brush b = brush(BrushKind::kAdd, v.grid.centre_m(), 5e-3, {1000.0f, 0.0f, 1000.0f});
+  b.strength = 10;
+  h.begin_stroke();
+  for (int k = 0; k < 3; ++k) {  // the same bricks, three times
+    h.record(v, engine::touched_bricks(v.grid, b));
+    engine::apply_brush_cpu(v, b);
+  }
+  h.end_stroke(v);
+  std::vector<std::uint32_t> hooked;
+  h.set_on_restore([&](const std::vector<std::uint32_t>& ids) { hooked = ids; });
+  const auto ids = h.undo(v);
+  EXPECT_TRUE(same_bits(v.voxels, v0.voxels)) << "undo must restore the pre-stroke content";
+  EXPECT_EQ(hooked, ids);
+  EXPECT_FALSE(ids.empty());
+}
+
+TEST(EditHistory, UnchangedBricksAreNotKept) {
+  Volume v = engine::make_linear({32, 32, 32}, {1e-3, 1e-3, 1e-3}, {0, 0, 0}, 0.0);
+  engine::EditHistory h(16.0);
+  Brush b = brush(BrushKind::kCarve, v.grid.centre_m(), 6e-3, {1000.0f, 0.0f, 1000.0f});  // already empty
+  h.begin_stroke();
+  h.record(v, engine::touched_bricks(v.grid, b));
+  EXPECT_GT(h.bytes(), 0u);
+  engine::apply_brush_cpu(v, b);
+  h.end_stroke(v);
+  EXPECT_EQ(h.bytes(), 0u);
+  EXPECT_EQ(h.undo_depth(), 0u);
+}
+
+TEST(EditHistory, MemoryLimitDropsTheOldestStrokes) {
+  Volume v0 = engine::make_random({64, 64, 16}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 2);
+  // Each stroke: one brick-centred brush of radius 3 mm touches one brick column (8^3 floats =
+  // 2 KiB per brick); limit 0.01 MiB = 10485 bytes = at most 5 full bricks.
+  engine::Sculptor s(v0, nullptr, 0.01);
+  const engine::BrushTargets t{1000.0f, 0.0f, 1000.0f};
+  std::vector<std::vector<float>> states{v0.voxels};
+  for (int k = 0; k < 6; ++k) {
+    s.apply(brush(BrushKind::kAdd, v0.grid.to_world({8.0 * k + 3.5, 3.5, 3.5}), 2e-3, t));
+    states.push_back(s.volume().voxels);
+    EXPECT_LE(s.history().bytes(), s.history().limit_bytes());
+  }
+  EXPECT_EQ(s.history().limit_bytes(), std::uint64_t(0.01 * 1048576.0));
+  EXPECT_EQ(s.history().dropped_strokes(), 1u);  // 6 strokes of 2048 B: 12288 > 10485, the first goes
+  EXPECT_EQ(s.history().undo_depth(), 5u);
+  EXPECT_EQ(s.history().bytes(), 5u * 2048u);
+  while (!s.undo().empty()) {
+  }
+  EXPECT_TRUE(same_bits(s.volume().voxels, states[1])) << "undo stops after the oldest kept stroke";
+  EXPECT_THROW(engine::EditHistory(-1.0), std::invalid_argument);
+}
+
+}  // namespace

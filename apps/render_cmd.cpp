@@ -309,6 +309,7 @@ struct RenderCli {
   double clip_at = 0.5;
   bool no_skip = false;
   bool cpu = false;
+  bool path = false;
   float step = 0.5f;
 };
 
@@ -371,7 +372,7 @@ std::vector<servo::TraceRow> trace_for(const Scene& scene, const engine::Volume&
   s.draw_plots = false;
   s.write_trace = true;
   std::ostringstream log;
-  std::cout << "render: running the scene to get the probe at t = " << *o.time_s << " s ...\n";
+  std::cout << "render: running the scene to get the probe's trace ...\n";
   try {
     run_scene(s, ro, log);
     auto rows = read_trace_csv((tmp / "trace.csv").string(), vol);
@@ -399,6 +400,16 @@ int cmd_render(const RenderCli& o, const std::string& device) {
   req.style.skip_empty = !o.no_skip;
   req.style.step_vox = o.step;
   if (!o.clip_axis.empty()) req.style.clip = clip_plane(vol, o.clip_axis, o.clip_at);
+  if (o.path) {
+    const auto rows = trace_for(scene, vol, o, device);
+    servo::SampleField sf;
+    sf.background = field.background;
+    const std::string out = o.out.empty() ? scene.name + "_path.png" : o.out;
+    const RunPicture pic = render_run_picture(scene, vol, sf, rows, out, nullptr, device, o.width, o.height);
+    if (!pic.error.empty()) throw std::runtime_error("render --path: " + pic.error);
+    std::cout << "render: wrote " << out << ": " << pic.caption << "\n";
+    return 0;
+  }
   std::string probe_note;
   if (o.time_s) {
     const auto rows = trace_for(scene, vol, o, device);
@@ -473,12 +484,15 @@ Subcommand add_render_command(CLI::App& cli) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
   s.app->add_option("--step", o->step, "March step along the ray [voxels]")->capture_default_str()->check(CLI::Range(0.02, 4.0));
+  s.app->add_flag("--path", o->path,
+                  "Draw the run report's picture instead: the surface around the contact, the HIP's path, the "
+                  "contact points coloured by force (the scene is run unless --trace is given)");
   s.app->add_flag("--no-skip", o->no_skip, "Turn empty-space skipping off (same picture, slower)");
   s.app->add_flag("--cpu", o->cpu, "Use the CPU reference ray caster instead of Vulkan");
   s.run = [o](const std::string& device) {
     RenderCli c = *o;
     if (c.scene.empty()) c.scene = default_scene_path();
-    if (!c.trace.empty() && !c.time_s) throw std::runtime_error("render: --trace needs --time");
+    if (!c.trace.empty() && !c.time_s && !c.path) throw std::runtime_error("render: --trace needs --time or --path");
     return cmd_render(c, device);
   };
   return s;

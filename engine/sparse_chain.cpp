@@ -91,6 +91,18 @@ Result<std::unique_ptr<SparseChain>> SparseChain::create(VulkanContext& ctx, std
   if (lim.maxComputeWorkGroupInvocations < ISOTOUCH_SPARSE_WG || lim.maxComputeWorkGroupSize[0] < ISOTOUCH_SPARSE_WG)
     return R::fail("sparse chain: workgroup of " + std::to_string(ISOTOUCH_SPARSE_WG) + " invocations too large for " +
                    ctx.info().name);
+  // The shader synchronises with subgroupBarrier(): the workgroup must be one subgroup.
+  VkPhysicalDeviceSubgroupProperties sub{};
+  sub.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES;
+  VkPhysicalDeviceProperties2 p2{};
+  p2.sType = VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2;
+  p2.pNext = &sub;
+  vkGetPhysicalDeviceProperties2(ctx.physical_device(), &p2);
+  if (sub.subgroupSize < ISOTOUCH_SPARSE_WG || !(sub.supportedStages & VK_SHADER_STAGE_COMPUTE_BIT) ||
+      !(sub.supportedOperations & VK_SUBGROUP_FEATURE_BASIC_BIT))
+    return R::fail("sparse chain: sparse_brick.comp needs a compute subgroup of at least " +
+                   std::to_string(ISOTOUCH_SPARSE_WG) + " invocations with basic operations; " + ctx.info().name +
+                   " has subgroupSize " + std::to_string(sub.subgroupSize));
   return R::ok(std::unique_ptr<SparseChain>(new SparseChain(std::make_unique<Impl>(ctx, std::move(passes)))));
 }
 
@@ -311,7 +323,7 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
     ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
     float tile = 0;
     if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))
-      throw std::logic_error(vol.path + ": sparse chain: shader and host disagree on brick " +
+      throw std::logic_error(vol.path + ": sparse chain: shader and host disagree on candidate " + std::to_string(c) + ", brick " +
                              std::to_string(sel.candidates[c]) + " (range " + std::to_string(ranges[c].lo) + ".." +
                              std::to_string(ranges[c].hi) + ", tau " + std::to_string(iso.tau) + ")");
   }

@@ -15,6 +15,15 @@
 // Bit-identical with the dense CPU chain (run_chain_cpu) at every stored voxel.
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
+#extension GL_KHR_shader_subgroup_basic : require
+
+// The workgroup is one subgroup (ISOTOUCH_SPARSE_WG <= subgroupSize, checked by the host),
+// so a subgroup barrier with shared-memory ordering synchronises the whole workgroup. On
+// lavapipe it costs nothing, where barrier() switches coroutines.
+void wg_barrier() {
+  subgroupMemoryBarrierShared();
+  subgroupBarrier();
+}
 
 layout(local_size_x = ISOTOUCH_SPARSE_WG) in;
 
@@ -84,7 +93,7 @@ void brick(const uint ci) {
       fbuf[at(l, clo, cw)] = src[gbase + l.z * gsz + l.y * int(pc.nx) + l.x];
     }
   }
-  barrier();
+  wg_barrier();
 
   // Filter ops; m = radius consumed so far per axis (valid band [m, S - 1 - m]). No
   // dynamic indexing of vector components (lavapipe spills those to memory per lane).
@@ -157,7 +166,7 @@ void brick(const uint ci) {
     clo = lo;
     cw = w;
     cbase = uint(dbase);
-    barrier();
+    wg_barrier();
   }
   const int fb = int(cbase);
 
@@ -181,14 +190,14 @@ void brick(const uint ci) {
     red_lo[lid] = mn0;
     red_hi[lid] = mx0;
   }
-  barrier();
+  wg_barrier();
   for (uint s = ISOTOUCH_SPARSE_WG / 2u; s > 0u; s >>= 1u) {
     if (lid < s) {
       const float a = red_lo[lid + s], b = red_hi[lid + s];
       red_lo[lid] = a < red_lo[lid] ? a : red_lo[lid];
       red_hi[lid] = b > red_hi[lid] ? b : red_hi[lid];
     }
-    barrier();
+    wg_barrier();
   }
   const float lo_v = red_lo[0], hi_v = red_hi[0];
   const bool has_nan = s_nan != 0u;
@@ -234,6 +243,6 @@ void samples(const uint ci, const ivec3 b8, const ivec3 g0, const ivec3 n, const
 void main() {
   for (uint ci = pc.cand_offset + gl_WorkGroupID.x; ci < pc.cand_end; ci += pc.groups) {
     brick(ci);
-    barrier();  // the next brick reuses the shared buffers
+    wg_barrier();  // the next brick reuses the shared buffers
   }
 }

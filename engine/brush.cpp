@@ -20,7 +20,8 @@
 
 namespace isotouch::engine {
 
-static_assert(sizeof(gpu::BrushPush) == 112, "BrushPush: 28 4-byte members (std430)");
+static_assert(sizeof(gpu::BrushPush) == 124, "BrushPush: 31 4-byte members (std430)");
+static_assert(sizeof(gpu::BrushPush) <= 128, "within the guaranteed push-constant size");
 static_assert(offsetof(gpu::BrushPush, cx) == 48 && offsetof(gpu::BrushPush, inv_dens_scale) == 96,
               "BrushPush offsets shared with shaders/brush.comp");
 static_assert(ISOTOUCH_BRUSH_WG == ISOTOUCH_BRICK && ISOTOUCH_BRICK == unsigned(core::kBrickSize),
@@ -123,9 +124,11 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
 
   // z-chunks of brick layers whose window (+ 1 slice each side for smooth) fits a binding.
   const int per_chunk = std::max(int(((m.limit - m.align) / slice - 2) / std::uint64_t(K)), 1);  // create() checked >= 1
-  // Pre-edit copy for smooth: slices [zp0, zp1) of the whole box.
-  const int zp0 = std::max(r.lo[2] * K - 1, 0), zp1 = std::min(r.hi[2] * K + 1, nz);
-  if (smooth) m.ensure(m.scratch, std::uint64_t(zp1 - zp0) * slice, MemoryIntent::DeviceLocal, "brush pre-edit copy");
+  // Pre-edit copy for smooth: the touched voxel box + 1 voxel (clipped), compact.
+  const PreBox pb = pre_box(g, r);
+  const std::uint64_t pre_slice = std::uint64_t(pb.hi[0] - pb.lo[0]) * std::uint64_t(pb.hi[1] - pb.lo[1]) * 4;
+  if (smooth) m.ensure(m.scratch, std::uint64_t(pb.hi[2] - pb.lo[2]) * pre_slice, MemoryIntent::DeviceLocal,
+                       "brush pre-edit copy");
   else m.ensure(m.scratch, 16, MemoryIntent::DeviceLocal, "brush pre-edit copy");
   m.ensure(m.flags, nflags * 4, MemoryIntent::DeviceLocal, "brush dirty flags");
   m.ensure(m.flags_down, nflags * 4, MemoryIntent::Readback, "brush dirty flags readback");
@@ -143,8 +146,12 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
   VkCommandBuffer cmd = m.ctx.begin_commands();
   timer.record_reset(cmd);
   if (smooth) {
-    const VkBufferCopy c{std::uint64_t(zp0) * slice, 0, std::uint64_t(zp1 - zp0) * slice};
-    vkCmdCopyBuffer(cmd, m.vol.handle(), m.scratch.handle(), 1, &c);
+    std::vector<VkBufferCopy> rows;
+    const std::uint64_t w = std::uint64_t(pb.hi[0] - pb.lo[0]) * 4;
+    std::uint64_t dst = 0;
+    for (int z = pb.lo[2]; z < pb.hi[2]; ++z)
+      for (int y = pb.lo[1]; y < pb.hi[1]; ++y, dst += w) rows.push_back({std::uint64_t(g.index(pb.lo[0], y, z)) * 4, dst, w});
+    vkCmdCopyBuffer(cmd, m.vol.handle(), m.scratch.handle(), std::uint32_t(rows.size()), rows.data());
   }
   vkCmdFillBuffer(cmd, m.flags.handle(), 0, nflags * 4, 0);
   barrier_transfer_to_compute(cmd);
@@ -155,6 +162,11 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
   pc.box_bx = gpu::uint(box_bx);
   pc.box_by = gpu::uint(box_by);
   pc.box_b0z = gpu::uint(r.lo[2]);
+  pc.pre_x0 = gpu::uint(pb.lo[0]);
+  pc.pre_y0 = gpu::uint(pb.lo[1]);
+  pc.pre_z0 = gpu::uint(pb.lo[2]);
+  pc.pre_w = gpu::uint(pb.hi[0] - pb.lo[0]);
+  pc.pre_h = gpu::uint(pb.hi[1] - pb.lo[1]);
   for (int c = 0; c < chunks; ++c) {
     const int bz0 = r.lo[2] + c * per_chunk, bz1 = std::min(bz0 + per_chunk, r.hi[2]);
     const int z0 = bz0 * K, z1 = std::min(bz1 * K, nz);
@@ -163,7 +175,13 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
     const BufferRange vw = m.window(m.vol, 0, z0, z1, pc.vol_base);
     BufferRange sw{m.scratch.handle(), 0, m.scratch.size()};
     pc.src_base = 0;
-    if (smooth) sw = m.window(m.scratch, zp0, std::max(z0 - 1, 0), std::min(z1 + 1, nz), pc.src_base);
+    if (smooth) {
+      const std::uint64_t b0 = std::uint64_t(std::max(z0 - 1, 0) - pb.lo[2]) * pre_slice;
+      const std::uint64_t e0 = std::uint64_t(std::min(z1 + 1, nz) - pb.lo[2]) * pre_slice;
+      const std::uint64_t off = b0 / m.align * m.align;
+      sw = {m.scratch.handle(), off, e0 - off};
+      pc.src_base = gpu::uint(off / 4);
+    }
     m.pipe.bind(cmd, arena, {vw, sw, BufferRange{m.flags.handle(), 0, m.flags.size()}});
     m.pipe.push(cmd, pc);
     vkCmdDispatch(cmd, std::uint32_t(box_bx), std::uint32_t(box_by), std::uint32_t(bz1 - bz0));

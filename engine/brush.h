@@ -114,6 +114,12 @@ BrickRange touched_range(const core::Grid& grid, const Brush& b);
 /// Their ids, ascending.
 std::vector<std::uint32_t> touched_bricks(const core::Grid& grid, const Brush& b);
 
+/// Smooth's pre-edit copy: the voxels of the brick range + 1 voxel, clipped: [lo, hi).
+struct PreBox {
+  std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
+};
+PreBox pre_box(const core::Grid& grid, const BrickRange& r);
+
 /// The push constants of the brush over `grid` (everything but the dispatch's brick
 /// origin and windows): shared by the shader and the CPU reference.
 gpu::BrushPush make_brush_push(const core::Grid& grid, const Brush& b);

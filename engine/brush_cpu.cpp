@@ -109,6 +109,15 @@ std::vector<std::uint32_t> touched_bricks(const core::Grid& g, const Brush& b) {
   return ids;
 }
 
+PreBox pre_box(const core::Grid& g, const BrickRange& r) {
+  PreBox p;
+  for (std::size_t a = 0; a < 3; ++a) {
+    p.lo[a] = std::max(r.lo[a] * core::kBrickSize - 1, 0);
+    p.hi[a] = std::min(r.hi[a] * core::kBrickSize + 1, g.dims[a]);
+  }
+  return p;
+}
+
 gpu::BrushPush make_brush_push(const core::Grid& g, const Brush& b) {
   gpu::BrushPush p{};
   p.nx = gpu::uint(g.dims[0]);
@@ -153,9 +162,9 @@ bool weight(const gpu::BrushPush& p, int x, int y, int z, float& w) {
   return true;
 }
 
-/// Pre-edit copy of the slices [z0, z1) (smooth reads the neighbours from it).
+/// Pre-edit copy of the box (smooth reads the neighbours from it), x fastest.
 struct PreEdit {
-  int z0 = 0;
+  PreBox box;
   std::vector<float> v;
 };
 
@@ -173,7 +182,9 @@ float new_value(const gpu::BrushPush& p, const core::Grid& g, const PreEdit& pre
         i = std::clamp(i, 0, g.dims[0] - 1);
         j = std::clamp(j, 0, g.dims[1] - 1);
         k = std::clamp(k, 0, g.dims[2] - 1);
-        return pre.v[g.index(i, j, k - pre.z0)];
+        const auto& bx = pre.box;
+        return pre.v[(std::size_t(k - bx.lo[2]) * std::size_t(bx.hi[1] - bx.lo[1]) + std::size_t(j - bx.lo[1])) *
+                         std::size_t(bx.hi[0] - bx.lo[0]) + std::size_t(i - bx.lo[0])];
       };
       const float sum = ((((at(x - 1, y, z) + at(x + 1, y, z)) + at(x, y - 1, z)) + at(x, y + 1, z)) +
                          at(x, y, z - 1)) + at(x, y, z + 1);
@@ -198,10 +209,14 @@ BrushResult apply_brush_cpu(Volume& vol, const Brush& b) {
   const gpu::BrushPush p = make_brush_push(g, b);
   PreEdit pre;
   if (b.kind == BrushKind::kSmooth) {
-    pre.z0 = std::max(r.lo[2] * core::kBrickSize - 1, 0);
-    const int z1 = std::min(r.hi[2] * core::kBrickSize + 1, g.dims[2]);
-    pre.v.assign(vol.voxels.begin() + std::ptrdiff_t(g.index(0, 0, pre.z0)),
-                 vol.voxels.begin() + std::ptrdiff_t(g.index(0, 0, z1)));
+    pre.box = pre_box(g, r);
+    const PreBox& bx = pre.box;
+    const std::size_t w = std::size_t(bx.hi[0] - bx.lo[0]);
+    pre.v.resize(w * std::size_t(bx.hi[1] - bx.lo[1]) * std::size_t(bx.hi[2] - bx.lo[2]));
+    std::size_t k = 0;
+    for (int z = bx.lo[2]; z < bx.hi[2]; ++z)
+      for (int y = bx.lo[1]; y < bx.hi[1]; ++y, k += w)
+        std::memcpy(pre.v.data() + k, vol.voxels.data() + g.index(bx.lo[0], y, z), w * sizeof(float));
   }
   const auto nb = core::brick_counts(g);
   for (int bz = r.lo[2]; bz < r.hi[2]; ++bz)

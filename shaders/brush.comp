@@ -25,7 +25,8 @@ float toward(float v, float target, float step) {
 
 float pre_at(ivec3 q) {
   q = clamp(q, ivec3(0), ivec3(int(pc.nx) - 1, int(pc.ny) - 1, int(pc.nz) - 1));
-  return pre[(uint(q.z) * pc.ny + uint(q.y)) * pc.nx + uint(q.x) - pc.src_base];
+  return pre[(uint(q.z) - pc.pre_z0) * pc.pre_h * pc.pre_w + (uint(q.y) - pc.pre_y0) * pc.pre_w + (uint(q.x) - pc.pre_x0) -
+             pc.src_base];
 }
 
 void main() {

@@ -243,7 +243,7 @@ struct SparseBrickPush {
 // over the brick box the brush's voxel-space bounding box touches; one dispatch per z-chunk
 // of brick layers whose slices fit a binding). Bindings: 0 the raw volume (float, x
 // fastest; a window of whole slices starting at linear voxel vol_base), 1 the pre-edit
-// copy that smooth reads (float; window starting at linear voxel src_base; any buffer for
+// copy that smooth reads (float; the touched box + 1 voxel, compact: pre_*; any buffer for
 // the other kinds), 2 dirty flags (uint per brick of the whole box, x fastest, zeroed
 // before the dispatch; 1 where some voxel's bits changed).
 #define ISOTOUCH_BRUSH_WG 8           // 8x8x8 invocations = one 8^3 brick
@@ -263,7 +263,7 @@ struct BrushPush {
   uint box_by;          // ... along y
   uint box_b0z;         // first brick layer of the whole touched box
   uint vol_base;        // linear voxel index at the start of binding 0
-  uint src_base;        // linear voxel index at the start of binding 1
+  uint src_base;        // elements of the pre-edit box before the start of binding 1
   float cx;             // brush centre, index space [voxels]
   float cy;
   float cz;
@@ -277,9 +277,12 @@ struct BrushPush {
   float target;         // add: material value; carve/drill: empty value [value units]
   float dens_sign;      // drill: +1 if material > empty, else -1
   float inv_dens_scale; // drill: 1 / density scale [1/value units]
+  uint pre_x0;          // smooth: binding 1 holds the box [pre_x0, +pre_w) x [pre_y0, +pre_h) x
+  uint pre_y0;          //   [pre_z0, ...) of pre-edit voxels (touched box + 1 voxel, clipped),
+  uint pre_z0;          //   x fastest; src_base = its elements before the binding start
+  uint pre_w;
+  uint pre_h;
   uint pad0;
-  uint pad1;
-  uint pad2;
 };
 // ---- end brushes ----------------------------------------------------------------------
 

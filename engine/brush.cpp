@@ -288,7 +288,13 @@ BrushResult Sculptor::apply(const Brush& b) {
   const bool own = !history_.stroke_open();
   if (own) history_.begin_stroke();
   history_.record(vol_, touched_bricks(vol_.grid, b));
-  BrushResult r = engine_ ? engine_->apply(b, &vol_) : apply_brush_cpu(vol_, b);
+  BrushResult r;
+  try {
+    r = engine_ ? engine_->apply(b, &vol_) : apply_brush_cpu(vol_, b);
+  } catch (...) {
+    if (own) history_.end_stroke(vol_);  // a failed application leaves no stroke open
+    throw;
+  }
   if (own) history_.end_stroke(vol_);
   return r;
 }

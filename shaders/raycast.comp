@@ -38,12 +38,20 @@ layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)
 
+// Per-invocation copies of the parameters the inner loops read (an SSBO read per use
+// is a gather on a CPU Vulkan device).
+ivec3 g_n;
+float g_bg, g_tau, g_sign;
+uint g_nx, g_ny;
+
 // The memory seam: the only function that reads voxel memory. A bricked snapshot
 // (core/brick_field.h) replaces the body with one brick-table lookup + pool read.
+// Branch-free: the index is clamped into the grid and the background selected after.
 float voxel(ivec3 i) {
-  if (i.x < 0 || i.y < 0 || i.z < 0 || i.x >= int(P.nx) || i.y >= int(P.ny) || i.z >= int(P.nz))
-    return P.background;
-  return vals[(uint(i.z) * P.ny + uint(i.y)) * P.nx + uint(i.x)];
+  bool outside = any(lessThan(i, ivec3(0))) || any(greaterThanEqual(i, g_n));
+  ivec3 c = clamp(i, ivec3(0), g_n - 1);
+  float v = vals[(uint(c.z) * g_ny + uint(c.y)) * g_nx + uint(c.x)];
+  return outside ? g_bg : v;
 }
 
 float lerp1(float a, float b, float t) {
@@ -64,7 +72,7 @@ float field(vec3 p) {
 }
 
 float excess(float v) {
-  precise float e = P.inside_sign * (v - P.tau);
+  precise float e = g_sign * (v - g_tau);
   return e;
 }
 
@@ -309,6 +317,12 @@ void main() {
   uvec2 px = gl_GlobalInvocationID.xy;
   if (px.x >= P.width || px.y >= P.height) return;
   uint pix = px.y * P.width + px.x;
+  g_n = ivec3(int(P.nx), int(P.ny), int(P.nz));
+  g_nx = P.nx;
+  g_ny = P.ny;
+  g_bg = P.background;
+  g_tau = P.tau;
+  g_sign = P.inside_sign;
   vec3 eye = vec3(P.eye_x, P.eye_y, P.eye_z);
   vec3 fwd = vec3(P.fwd_x, P.fwd_y, P.fwd_z), right = vec3(P.right_x, P.right_y, P.right_z);
   vec3 up = vec3(P.up_x, P.up_y, P.up_z);

@@ -286,3 +286,51 @@ TEST(RunModes, SphereDenseAndSparseAgree) { compare_modes("sphere"); }
 TEST(RunModes, KnotDenseAndSparseAgree) { compare_modes("knot"); }
 TEST(RunModes, HeadDenseAndSparseAgree) { compare_modes("head"); }
 TEST(RunModes, ChestDenseAndSparseAgree) { compare_modes("chest"); }
+
+TEST(RunModes, EngineSectionListsWhatRanAndWhatWasLeftOut) {
+  // A Gaussian then the gradient, dense: summary.json lists both passes with the scene's
+  // parameters, a GPU and a CPU time per pass, and the closing and brick_minmax pipelines as
+  // left out (not created); report.md says the same. Sparse: the stages that ran and the
+  // dense passes left out.
+  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  sc.engine.passes = {isotouch::app::PassSpec{"gaussian", 1.0}, isotouch::app::PassSpec{"gradient"}};
+  const nlohmann::json d = run_summary(sc, "dense", "engine_section");
+  const auto& e = d["engine"];
+  ASSERT_EQ(e["passes"].size(), 2u) << e.dump(2);
+  EXPECT_EQ(e["passes"][0]["kind"], "gaussian");
+  EXPECT_DOUBLE_EQ(e["passes"][0]["sigma_mm"].get<double>(), 1.0);
+  EXPECT_EQ(e["passes"][1]["kind"], "gradient");
+  ASSERT_EQ(e["gpu_passes"].size(), 2u);
+  ASSERT_EQ(e["cpu_passes"].size(), 2u);
+  for (int i = 0; i < 2; ++i) EXPECT_EQ(e["gpu_passes"][i]["label"], e["passes"][i]["label"]);
+  std::string left_out;
+  for (const auto& line : e["describe"])
+    if (line.get<std::string>().rfind("left out (not created", 0) == 0) left_out = line;
+  EXPECT_NE(left_out.find("morph1d"), std::string::npos) << e["describe"].dump(2);
+  EXPECT_NE(left_out.find("brick_minmax"), std::string::npos) << left_out;
+  EXPECT_EQ(left_out.find("gaussian1d"), std::string::npos) << left_out;
+  EXPECT_EQ(d["gpu"]["passes"][0], "gaussian(sigma 1 mm)");
+  // Smoothing moved the surface: its distance from the unfiltered data is reported.
+  EXPECT_TRUE(d["error"]["surface_distance_to_unfiltered_m"]["rms"].is_number());
+  const nlohmann::json s = run_summary(sc, "sparse", "engine_section");
+  EXPECT_EQ(s["engine"]["sparse_fallback"], nullptr) << s["engine"].dump(2);
+  bool dense_left_out = false;
+  for (const auto& line : s["engine"]["describe"])
+    dense_left_out |= line.get<std::string>().find("left out") != std::string::npos &&
+                      line.get<std::string>().find("gaussian1d") != std::string::npos;
+  EXPECT_TRUE(dense_left_out) << s["engine"]["describe"].dump(2);
+  EXPECT_LE(s["gpu_vs_cpu"]["gradient_max_rel_diff"].get<double>(), 1e-6);  // as cli_run (lavapipe: 0)
+}
+
+TEST(RunModes, SparseFallsBackToDenseAndSaysWhy) {
+  // sigma 1.5 mm on 1 mm voxels: a Gaussian radius of 5 voxels, wider than the sparse
+  // shader's shared memory holds (engine/sparse_chain.h); the run still publishes bricks
+  // (dense chain + core::bricked_input_from_dense) and names the reason.
+  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  sc.engine.passes = {isotouch::app::PassSpec{"gaussian", 1.5}, isotouch::app::PassSpec{"gradient"}};
+  const nlohmann::json s = run_summary(sc, "sparse", "fallback");
+  ASSERT_TRUE(s["engine"]["sparse_fallback"].is_string()) << s["engine"].dump(2);
+  EXPECT_NE(s["engine"]["gpu"].get<std::string>().find("core::bricked_input_from_dense"), std::string::npos);
+  EXPECT_TRUE(s["engine"]["bricks"]["active"].is_number());
+  EXPECT_GT(s["contact"]["ticks"].get<long>(), 500);
+}

@@ -28,6 +28,7 @@ static_assert(int(sparse::OpKind::kGauss) == int(ISOTOUCH_SPARSE_OP_GAUSS) &&
                   int(sparse::OpKind::kMin) == int(ISOTOUCH_SPARSE_OP_MIN),
               "op kinds shared with the shader");
 static_assert(ISOTOUCH_SPARSE_SAMPLES == core::kBrickSamples, "9^3 stored samples");
+static_assert(ISOTOUCH_SPARSE_WG == 8, "sparse::loop_trips_per_brick counts trips of a workgroup of 8");
 
 namespace {
 double ms_since(std::chrono::steady_clock::time_point t0) {
@@ -35,6 +36,9 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 constexpr std::uint64_t kSlotBytes = std::uint64_t(core::kBrickSamples) * sizeof(core::Sample);  // 11664
 // Shared memory the shader declares: two ping-pong regions, two reduction arrays, a flag.
+/// Workgroups per dispatch by default: lavapipe pays ~0.23 ms per workgroup, so few, but
+/// enough to keep its threads busy to the end.
+constexpr std::uint64_t kDefaultGroups = ISOTOUCH_SPARSE_DEFAULT_GROUPS;
 constexpr std::uint64_t kSharedBytes = ISOTOUCH_SPARSE_SHARED_FLOATS * 4 + 2 * ISOTOUCH_SPARSE_WG * 4 + 4;
 
 /// Floats the shader's shared buffers A and B need for `plan` (the largest box each one
@@ -71,6 +75,7 @@ struct SparseChain::Impl {
   std::vector<PassDesc> passes;
   ComputePipeline<gpu::SparseBrickPush> pipe;
   bool keep_input = false;
+  std::uint32_t max_groups = 0;  ///< 0: kDefaultGroups
   std::string last_run;
   Impl(VulkanContext& c, std::vector<PassDesc> p)
       : ctx(c), passes(std::move(p)), pipe(c, sparse_brick_spv, 5, "sparse_brick") {}
@@ -79,6 +84,7 @@ struct SparseChain::Impl {
 SparseChain::SparseChain(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 SparseChain::~SparseChain() = default;
 void SparseChain::set_keep_input(bool keep) { impl_->keep_input = keep; }
+void SparseChain::set_max_workgroups(std::uint32_t groups) { impl_->max_groups = groups; }
 
 Result<std::unique_ptr<SparseChain>> SparseChain::create(VulkanContext& ctx, std::vector<PassDesc> passes) {
   using R = Result<std::unique_ptr<SparseChain>>;
@@ -266,6 +272,15 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   if (nc) record_copy(cmd, cand_up, cand_dev, nc * 4);
   barrier_transfer_to_compute(cmd);
   timer.mark(cmd, 0);
+  // Workgroups of a dispatch of n candidates: the preferred count, but never so few that a
+  // workgroup loops over more bricks than llvmpipe's loop budget allows (its loops would
+  // silently stop), never more than one per candidate.
+  const std::uint64_t per_group = sparse::max_bricks_per_workgroup(plan);
+  const std::uint64_t preferred = impl_->max_groups ? impl_->max_groups : kDefaultGroups;
+  auto workgroups = [&](std::uint64_t n) {
+    const std::uint64_t needed = (n + per_group - 1) / per_group;
+    return std::min<std::uint64_t>(std::max(preferred, needed), n);
+  };
   const GradientConstants k = gradient_constants(vol.grid);
   gpu::SparseBrickPush pc{};
   pc.nx = gpu::uint(nx);
@@ -297,7 +312,8 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
     pc.cand_offset = gpu::uint(ch.c0);
     pc.pool_base = gpu::uint(ch.c0);
     pc.cand_end = gpu::uint(ch.c1);
-    pc.groups = gpu::uint(std::min<std::size_t>(ch.c1 - ch.c0, ISOTOUCH_SPARSE_GROUPS));
+    pc.groups = gpu::uint(workgroups(ch.c1 - ch.c0));
+    out.stats.workgroups += pc.groups;
     impl_->pipe.bind(cmd, arena,
                      {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{cand_dev.handle(), 0, cand_dev.size()},
                       BufferRange{params_dev.handle(), 0, params_dev.size()},
@@ -320,6 +336,10 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   std::vector<const core::Sample*> where(nc, nullptr);
   const float* rf = static_cast<const float*>(ranges_down.mapped());
   for (std::size_t c = 0; c < nc; ++c) {
+    if (rf[4 * c + 3] == 2.0f)
+      throw std::logic_error(vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
+                             std::to_string(sel.candidates[c]) + ") ran out of llvmpipe's loop budget (65535 trips "
+                             "per invocation); sparse::loop_trips_per_brick underestimates sparse_brick.comp's loops");
     ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
     float tile = 0;
     if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))
@@ -349,7 +369,9 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   info << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates
        << " candidates, " << out.stats.active << " active; region " << plan.region[0] << "x" << plan.region[1] << "x"
        << plan.region[2] << " (radius " << plan.radius[0] << "," << plan.radius[1] << "," << plan.radius[2]
-       << "; ops: " << plan.text << "), " << slabs.size() << " slab(s), " << chunks.size() << " dispatch(es); snapshot "
+       << "; ops: " << plan.text << "), " << slabs.size() << " slab(s), " << chunks.size() << " dispatch(es), " << out.stats.workgroups
+       << " workgroups (<= " << per_group << " bricks each: " << sparse::loop_trips_per_brick(plan)
+       << " loop trips per brick); snapshot "
        << out.stats.snapshot_bytes << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
   impl_->last_run = info.str();
   return out;

@@ -25,6 +25,7 @@ struct SparseStats {
   std::uint64_t dense_fp32_bytes = 0;  ///< voxels * 16: the dense fp32 snapshot it replaces
   std::size_t slabs = 0;       ///< GPU: z-slabs of brick layers (bindings <= the limit); CPU: 0
   std::size_t dispatches = 0;  ///< GPU: dispatches (one per slab and pool chunk); CPU: 0
+  std::size_t workgroups = 0;  ///< GPU: workgroups over all dispatches (each loops over its bricks); CPU: 0
 };
 
 /// One sparse run. `field` is a bricked core::SampleField (empty dense samples).
@@ -95,6 +96,17 @@ struct Selection {
 };
 Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso);
 
+/// Upper bound on the loop back-edges sparse_brick.comp executes for one candidate brick
+/// of `plan` (interior brick, every loop counted with its exit test). llvmpipe / lavapipe
+/// ends EVERY loop of a shader invocation once 65535 back-edges have run in total
+/// (LP_MAX_TGSI_LOOP_ITERATIONS, one counter shared by all loops), silently: a workgroup
+/// must not loop over more than kLoopBudget / this bound bricks.
+std::uint64_t loop_trips_per_brick(const Plan& plan);
+/// Back-edges one workgroup may spend (3/4 of llvmpipe's 65535, a margin for the compiler).
+inline constexpr std::uint64_t kLoopBudget = 49151;
+/// Bricks one workgroup may loop over: kLoopBudget / loop_trips_per_brick, at least 1.
+std::uint64_t max_bricks_per_workgroup(const Plan& plan);
+
 /// The float that gives the same comparisons with float values as the double tau:
 /// kAbove the largest float <= tau, kBelow the smallest float >= tau.
 float threshold(const core::Isosurface& iso);
@@ -137,6 +149,10 @@ class SparseChain {
   std::string describe() const;
   /// Also return the BrickedInput in SparseOutput::input (a copy of the pool; tests).
   void set_keep_input(bool keep);
+  /// Workgroups per dispatch at most (0: the default, chosen for speed on lavapipe). Never
+  /// fewer than the loop budget needs (sparse::max_bricks_per_workgroup); tests set 1 to
+  /// make every workgroup loop over as many bricks as allowed.
+  void set_max_workgroups(std::uint32_t groups);
 
  private:
   struct Impl;

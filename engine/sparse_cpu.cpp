@@ -205,6 +205,40 @@ Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface&
   return s;
 }
 
+std::uint64_t loop_trips_per_brick(const Plan& plan) {
+  // Mirrors shaders/sparse_brick.comp loop by loop; a loop over `count` items with a
+  // workgroup of 8 runs ceil(count / 8) trips, + 1 for the trip that leaves it. llvmpipe
+  // runs both sides of every branch it cannot prove uniform (masked), and a loop on a
+  // side no lane takes still costs one trip.
+  constexpr std::uint64_t kWg = 8;  // ISOTOUCH_SPARSE_WG (sparse_chain.cpp pins it)
+  auto strided = [](std::uint64_t count) { return (count + kWg - 1) / kWg + 1; };
+  auto box = [](const std::array<int, 3>& w) {
+    return std::uint64_t(std::max(w[0], 0)) * std::uint64_t(std::max(w[1], 0)) * std::uint64_t(std::max(w[2], 0));
+  };
+  std::uint64_t trips = 1;  // the workgroup's loop over its bricks
+  trips += plan.ops.empty() ? strided(box(plan.region)) : 1;  // raw region copy
+  trips += plan.ops.size() + 1;                                // loop over the ops
+  std::array<int, 3> m{0, 0, 0};
+  for (const Op& o : plan.ops) {
+    m[std::size_t(o.axis)] += o.radius;
+    std::array<int, 3> w{};
+    for (std::size_t k = 0; k < 3; ++k) w[k] = plan.region[k] - 2 * m[k];
+    const std::uint64_t items = (box(w) + kWg - 1) / kWg;
+    // items, each a loop over the taps (+ 1 for the other kind's tap loop); + 3 for the
+    // first-op / later-op branch not taken
+    trips += items * (std::uint64_t(2 * o.radius + 1) + 1 + 1) + 1 + 3;
+  }
+  trips += strided(10 * 10 * 10);  // range of the brick + 1 voxel
+  trips += 3 + 1;                  // reduction over the 8 lanes
+  trips += strided(729);           // the 9^3 samples of an active brick
+  trips += plan.ops.size() + 2 + 1;  // the budget check after each brick
+  return trips;
+}
+
+std::uint64_t max_bricks_per_workgroup(const Plan& plan) {
+  return std::max<std::uint64_t>(1, kLoopBudget / loop_trips_per_brick(plan));
+}
+
 float threshold(const core::Isosurface& iso) {
   float f = float(iso.tau);
   if (iso.inside == core::InsideIs::kAbove) {

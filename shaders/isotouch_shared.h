@@ -197,7 +197,8 @@ struct RaycastPush {
 // the brick to its pool slot. Bindings: 0 raw voxels (float, z-slab), 1 candidate brick
 // ids (uint), 2 params, 3 ranges (vec2 per candidate), 4 pool (vec4, 729 per slot).
 #define ISOTOUCH_SPARSE_WG 8         // one SIMD vector of lavapipe (256 bits)
-#define ISOTOUCH_SPARSE_GROUPS 65535u  // workgroups per dispatch at most (a workgroup loops over the rest)
+#define ISOTOUCH_SPARSE_DEFAULT_GROUPS 64u  // workgroups per dispatch by default (each loops over
+                                           // its share; the host raises it for llvmpipe's loop budget)
 #define ISOTOUCH_SPARSE_SHARED_FLOATS 7168u  // both shared buffers together (28 KiB)
 #define ISOTOUCH_SPARSE_MAX_OPS 16u
 #define ISOTOUCH_SPARSE_OP_GAUSS 0u

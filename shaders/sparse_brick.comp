@@ -239,10 +239,19 @@ void samples(const uint ci, const ivec3 b8, const ivec3 g0, const ivec3 n, const
 }
 
 // Each workgroup takes candidates cand_offset + g, + g + G, ... below cand_end (G workgroups):
-// lavapipe pays a fixed cost per workgroup, far more than a barrier within one.
+// lavapipe pays a fixed cost per workgroup, far more than a barrier within one. llvmpipe
+// stops EVERY loop of an invocation, silently, once 65535 loop trips have run in total
+// (one counter for all loops): the host keeps the bricks per workgroup under that budget
+// (sparse::loop_trips_per_brick mirrors the loops below; keep them in step).
 void main() {
   for (uint ci = pc.cand_offset + gl_WorkGroupID.x; ci < pc.cand_end; ci += pc.groups) {
     brick(ci);
+    // llvmpipe's loop budget: once spent, every loop runs one trip (and stays so), so a
+    // loop of n_ops + 2 trips that ran fewer says this brick may be cut short: flag it
+    // (ranges[ci].w = 2, the host throws rather than publish it).
+    uint trips = 0u;
+    for (uint i = 0u; i < pc.n_ops + 2u; ++i) ++trips;
+    if (trips != pc.n_ops + 2u && gl_LocalInvocationID.x == 0u) ranges[ci].w = 2.0;
     wg_barrier();  // the next brick reuses the shared buffers
   }
 }

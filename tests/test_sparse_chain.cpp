@@ -58,10 +58,11 @@ bool same(const core::Sample& a, const core::Sample& b) {
 }
 
 engine::SparseOutput run_gpu(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                             float background, std::uint64_t max_binding = 0) {
+                             float background, std::uint64_t max_binding = 0, std::uint32_t max_groups = 0) {
   auto chain = engine::SparseChain::create(vk(), passes);
   if (!chain) throw std::runtime_error(chain.error);
   (*chain.value)->set_keep_input(true);
+  (*chain.value)->set_max_workgroups(max_groups);
   engine::SparseOutput out = (*chain.value)->run(v, iso, background, core::SampleFormat::kFp32, max_binding);
   std::printf("  %s\n", (*chain.value)->describe().c_str());
   return out;
@@ -184,6 +185,26 @@ TEST(SparseChain, ChestCt) {
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
   check_case(v, p, above(-500), -1024.0f, "chest gauss 1mm -500", 8u << 20);
   check_case(v, p, above(250), -1024.0f, "chest gauss 1mm +250");
+}
+
+TEST(SparseChain, OneWorkgroupLoopsOverManyBricks) {
+  // Asking for a single workgroup per dispatch: each workgroup loops over as many bricks as
+  // llvmpipe's loop budget allows (65535 loop trips per invocation, all loops together;
+  // beyond it every loop stops silently and bricks come out empty or half computed). The
+  // chest at -500 HU has ~5300 candidates: ~10 workgroups of ~500 bricks each without the
+  // budget. Truth: the dense CPU chain, and the same result with the default workgroups.
+  const Volume v = engine::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const engine::SparseOutput one = run_gpu(v, p, above(-500), -1024.0f, 0, 1);
+  const std::size_t per = std::size_t(engine::sparse::max_bricks_per_workgroup(
+      engine::sparse::make_plan(v.grid, p, "chest")));
+  ASSERT_GE(per, 4u) << "the case needs several bricks per workgroup";
+  EXPECT_LE(one.stats.workgroups, one.stats.candidates / per + one.stats.dispatches)
+      << "one workgroup asked for: as few as the budget allows, each looping over many bricks";
+  expect_matches_dense(v, p, above(-500), one, "chest -500, 1 workgroup asked for");
+  const engine::SparseOutput def = run_gpu(v, p, above(-500), -1024.0f);
+  expect_same_output(one, def, "chest -500: 1 workgroup asked for vs default");
+  EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
 TEST(SparseChain, OddSizesAnisotropicBelow) {

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <tuple>
 
@@ -27,6 +28,7 @@ static_assert(offsetof(gpu::RaycastPrim, cr) == 7 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cb) == 15 * 4);
 static_assert(sizeof(gpu::RaycastPush) == 16);
 static_assert(ISOTOUCH_BRICK == 8u, "raycast.comp walks 8^3 bricks");
+static_assert(ISOTOUCH_RAYCAST_SUB >= 1u && 8u % ISOTOUCH_RAYCAST_SUB == 0u, "sub-cells tile the 8^3 bricks");
 
 namespace {
 
@@ -54,6 +56,41 @@ void widen_faces(RaycastField& f) {
         const std::size_t i = (std::size_t(z) * std::size_t(b[1]) + std::size_t(y)) * std::size_t(b[0]) + std::size_t(x);
         f.brick_minmax[2 * i] = std::min(f.brick_minmax[2 * i], f.background);
         f.brick_minmax[2 * i + 1] = std::max(f.brick_minmax[2 * i + 1], f.background);
+      }
+}
+
+/// Sub-cell ranges (RaycastField::sub_minmax) from the values: per axis the voxels
+/// [S c, min(S c + S, n - 1)], and the background where S c == 0 or S c + S >= n (a sample
+/// there reads outside the grid). NaN voxels are ignored (min/max by < and >).
+void build_sub_ranges(RaycastField& f) {
+  constexpr int S = int(ISOTOUCH_RAYCAST_SUB);
+  const auto& n = f.grid.dims;
+  for (int a = 0; a < 3; ++a) f.subs[a] = (n[a] + S - 1) / S;
+  const auto& s = f.subs;
+  f.sub_minmax.assign(2 * std::size_t(s[0]) * std::size_t(s[1]) * std::size_t(s[2]), 0.0f);
+  const bool bg_ok = f.background == f.background;
+  std::size_t i = 0;
+  for (int z = 0; z < s[2]; ++z)
+    for (int y = 0; y < s[1]; ++y)
+      for (int x = 0; x < s[0]; ++x, ++i) {
+        float mn = std::numeric_limits<float>::infinity(), mx = -mn;
+        const int x1 = std::min(S * x + S, n[0] - 1), y1 = std::min(S * y + S, n[1] - 1);
+        const int z1 = std::min(S * z + S, n[2] - 1);
+        for (int k = S * z; k <= z1; ++k)
+          for (int j = S * y; j <= y1; ++j) {
+            const float* row = f.values.data() + (std::size_t(k) * std::size_t(n[1]) + std::size_t(j)) * std::size_t(n[0]);
+            for (int q = S * x; q <= x1; ++q) {
+              if (row[q] < mn) mn = row[q];
+              if (row[q] > mx) mx = row[q];
+            }
+          }
+        const bool face = x == 0 || y == 0 || z == 0 || S * x + S >= n[0] || S * y + S >= n[1] || S * z + S >= n[2];
+        if (face && bg_ok) {
+          mn = std::min(mn, f.background);
+          mx = std::max(mx, f.background);
+        }
+        f.sub_minmax[2 * i] = mn;
+        f.sub_minmax[2 * i + 1] = mx;
       }
 }
 
@@ -87,6 +124,7 @@ RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> value
     f.brick_minmax[2 * i + 1] = r.max[i];
   }
   widen_faces(f);
+  build_sub_ranges(f);
   return f;
 }
 
@@ -280,8 +318,10 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
-  auto b = upload(ctx, impl->field.brick_minmax.data(), impl->field.brick_minmax.size() * sizeof(float),
-                  "raycast brick ranges");
+  // Binding 2: the brick ranges, then the sub-cell ranges.
+  std::vector<float> ranges(impl->field.brick_minmax);
+  ranges.insert(ranges.end(), impl->field.sub_minmax.begin(), impl->field.sub_minmax.end());
+  auto b = upload(ctx, ranges.data(), ranges.size() * sizeof(float), "raycast brick and sub-cell ranges");
   if (!b) return R::fail(b.error);
   impl->bricks = std::move(*b.value);
   const std::size_t pb = sizeof(gpu::RaycastParams);

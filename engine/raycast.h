@@ -47,6 +47,12 @@ struct RaycastField {
   /// side (engine::brick_minmax_cpu, halo 1), and for bricks on the grid's faces also
   /// the background (the one-voxel band outside the grid blends with it).
   std::vector<float> brick_minmax;
+  std::array<int, 3> subs{0, 0, 0};  ///< sub-cells per axis: ceil(dims / ISOTOUCH_RAYCAST_SUB)
+  /// (min, max) per sub-cell (the second skipping level, x fastest): the voxels a trilinear
+  /// sample in the sub-cell reads, index [S c, S c + S] per axis (S = ISOTOUCH_RAYCAST_SUB,
+  /// clipped to the grid), and the background for sub-cells on the grid's faces. NaN
+  /// voxels are left out (a sample reading one is outside). Built by make_raycast_field.
+  std::vector<float> sub_minmax;
   core::Isosurface iso;
   float background = 0;  ///< value outside the grid (NaN: outside every isosurface)
 };

@@ -41,6 +41,7 @@ struct Caster {
   std::uint32_t flags;
   const float* vals;
   const float* brick;
+  const float* sub;  ///< sub-cell ranges (RaycastField::sub_minmax)
   const std::vector<gpu::RaycastPrim>& prims;
 
   // The memory seam (see the shader's voxel()).
@@ -88,17 +89,74 @@ struct Caster {
     return -1.0f;
   }
 
-  bool brick_active(int cx, int cy, int cz) const {
-    const std::size_t b = (std::size_t(cz) * P.by + std::uint32_t(cy)) * P.bx + std::uint32_t(cx);
-    const float mn = brick[2 * b], mx = brick[2 * b + 1];
+  /// Whether a (min, max) range can hold an inside value.
+  bool range_active(const float* r, std::size_t b) const {
+    const float mn = r[2 * b], mx = r[2 * b + 1];
     const float em = P.inside_sign > 0.0f ? mx - P.tau : P.tau - mn;
     return em >= 0.0f;
+  }
+  bool brick_active(int cx, int cy, int cz) const {
+    return range_active(brick, (std::size_t(cz) * P.by + std::uint32_t(cy)) * P.bx + std::uint32_t(cx));
+  }
+  static constexpr int kSub = int(ISOTOUCH_RAYCAST_SUB);
+  static int sub_count(std::uint32_t n) { return int((n + ISOTOUCH_RAYCAST_SUB - 1u) / ISOTOUCH_RAYCAST_SUB); }
+  bool sub_active(const int s[3]) const {
+    const std::size_t sx = std::size_t(sub_count(P.nx)), sy = std::size_t(sub_count(P.ny));
+    return range_active(sub, (std::size_t(s[2]) * sy + std::size_t(s[1])) * sx + std::size_t(s[0]));
   }
 
   static float next_boundary(float e, float d, int c, int nb) {
     if (d > 0.0f && c + 1 < nb) return (8.0f * float(c + 1) - e) / d;
     if (d < 0.0f && c > 0) return (8.0f * float(c) - e) / d;
     return kInf;
+  }
+  /// The same for sub-cells c in [lo, hi] (one brick's).
+  static float next_sub_boundary(float e, float d, int c, int lo, int hi) {
+    if (d > 0.0f && c < hi) return (float(kSub) * float(c + 1) - e) / d;
+    if (d < 0.0f && c > lo) return (float(kSub) * float(c) - e) / d;
+    return kInf;
+  }
+
+  /// Samples k in [kl, kh], k >= k_next, in order; k_next moves past them. Returns the refined t or -1.
+  float march_from(F3 e, F3 d, float t0, float t1, float h, int K, float ta, float tb, int& k_next) const {
+    const int kl = std::max(k_next, int(std::floor((ta - t0) / h)));
+    const int kh = std::min(K, int(std::ceil((tb - t0) / h)) + 1);
+    if (kl > kh) return -1.0f;
+    const float t = march(e, d, t0, t1, h, kl, kh);
+    k_next = kh + 1;
+    return t;
+  }
+
+  /// Second level: the sub-cell DDA through brick c over [tb0, tb1]; samples only in
+  /// sub-cells whose range can hold an inside value (the same lattice as march()).
+  float walk_subs(F3 e, F3 d, float t0, float t1, float h, int K, const int c[3], float tb0, float tb1,
+                  int& k_next) const {
+    constexpr int per = 8 / kSub;
+    const int ns[3] = {sub_count(P.nx), sub_count(P.ny), sub_count(P.nz)};
+    const F3 pe = ray_point(e, d, tb0);
+    int lo[3], hi[3], s[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = per * c[a];
+      hi[a] = std::min(lo[a] + per, ns[a]) - 1;
+      s[a] = std::clamp(int(std::floor(pe[a] / float(kSub))), lo[a], hi[a]);
+    }
+    float ts0 = tb0;
+    for (int step = 0; step < 3 * per + 4; ++step) {
+      const float tx = next_sub_boundary(e.x, d.x, s[0], lo[0], hi[0]);
+      const float ty = next_sub_boundary(e.y, d.y, s[1], lo[1], hi[1]);
+      const float tz = next_sub_boundary(e.z, d.z, s[2], lo[2], hi[2]);
+      const float ts1 = std::min(std::min(std::min(tx, ty), tz), tb1);
+      if (sub_active(s)) {
+        const float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
+        if (t >= 0.0f) return t;
+      }
+      if (ts1 >= tb1) break;
+      if (tx <= ty && tx <= tz) s[0] += d.x > 0.0f ? 1 : -1;
+      else if (ty <= tz) s[1] += d.y > 0.0f ? 1 : -1;
+      else s[2] += d.z > 0.0f ? 1 : -1;
+      ts0 = ts1;
+    }
+    return -1.0f;
   }
 
   float walk_bricks(F3 e, F3 d, float t0, float t1, float h, int K) const {
@@ -107,6 +165,7 @@ struct Caster {
     int c[3];
     for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor(pe[a] / 8.0f)), 0, nb[a] - 1);
     float tb0 = t0;
+    int k_next = 1;
     const int max_steps = nb[0] + nb[1] + nb[2] + 4;
     for (int s = 0; s < max_steps; ++s) {
       const float tx = next_boundary(e.x, d.x, c[0], nb[0]);
@@ -114,9 +173,7 @@ struct Caster {
       const float tz = next_boundary(e.z, d.z, c[2], nb[2]);
       const float tb1 = std::min(std::min(std::min(tx, ty), tz), t1);
       if (brick_active(c[0], c[1], c[2])) {
-        const int kl = std::max(1, int(std::floor((tb0 - t0) / h)));
-        const int kh = std::min(K, int(std::ceil((tb1 - t0) / h)) + 1);
-        const float t = march(e, d, t0, t1, h, kl, kh);
+        const float t = walk_subs(e, d, t0, t1, h, K, c, tb0, tb1, k_next);
         if (t >= 0.0f) return t;
       }
       if (tb1 >= t1) break;
@@ -349,7 +406,7 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
                         int height, const std::vector<gpu::RaycastPrim>& prims) {
   const auto c0 = std::chrono::steady_clock::now();
   const gpu::RaycastParams P = make_params(field, view, style, width, height);
-  const Caster c{P, style_flags(style), field.values.data(), field.brick_minmax.data(), prims};
+  const Caster c{P, style_flags(style), field.values.data(), field.brick_minmax.data(), field.sub_minmax.data(), prims};
   RaycastImage img;
   img.width = width;
   img.height = height;

@@ -101,6 +101,11 @@ struct BrickMinMaxPush {
 #define ISOTOUCH_RAYCAST_WG_Y 8
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping over the brick grid
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
+// Sub-cells for the second skipping level: cubes of ISOTOUCH_RAYCAST_SUB voxels (8 / SUB per
+// brick axis, ceil(n / SUB) per grid axis); their (min, max) follow the brick ranges in
+// binding 2 (sub-cells x fastest): voxels [SUB c, SUB c + SUB] (+1 on the high side: what
+// a trilinear sample in the cell reads) and the background on the grid's faces.
+#define ISOTOUCH_RAYCAST_SUB 2u
 #define ISOTOUCH_RAYCAST_PRIM_SPHERE 1u   // a = centre, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_DISC 2u     // a = centre, b = unit normal, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius

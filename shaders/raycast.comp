@@ -20,6 +20,9 @@
 // host) is all outside is skipped; in the others the same lattice samples are taken as
 // without skipping (k from one before the brick to one after), so skipping on and off
 // give the same image: a sample in a skipped brick is outside either way.
+// Second level: inside an active brick a DDA over its sub-cells (SUB^3 voxels, ranges
+// covering [SUB c, SUB c + SUB], built on the host) samples only active sub-cells, again
+// from one sample before to one after; k_next keeps each lattice sample evaluated once.
 //
 // The CPU reference (engine/raycast_cpu.cpp) does the same float operations in the same
 // order; `precise` forbids FMA contraction here, -ffp-contract=off there.
@@ -43,6 +46,9 @@ layout(push_constant) uniform Push { RaycastPush pc; };
 ivec3 g_n;
 float g_bg, g_tau, g_sign;
 uint g_nx, g_ny;
+ivec3 g_ns;       // sub-cells per axis: ceil(n / SUB)
+uint g_sub_base;  // first sub-cell range in binding 2 (after the brick ranges), in ranges
+const int SUB = int(ISOTOUCH_RAYCAST_SUB);
 
 // The memory seam: the only function that reads voxel memory. A bricked snapshot
 // (core/brick_field.h) replaces the body with one brick-table lookup + pool read.
@@ -114,11 +120,17 @@ float march(vec3 e, vec3 d, float t0, float t1, float h, int kl, int kh) {
   return -1.0;
 }
 
-bool brick_active(ivec3 c) {
-  uint b = (uint(c.z) * P.by + uint(c.y)) * P.bx + uint(c.x);
+bool range_active(uint b) {
   float mn = brick[2u * b], mx = brick[2u * b + 1u];
-  precise float em = P.inside_sign > 0.0 ? mx - P.tau : P.tau - mn;
+  precise float em = g_sign > 0.0 ? mx - g_tau : g_tau - mn;
   return em >= 0.0;
+}
+
+bool brick_active(ivec3 c) { return range_active((uint(c.z) * P.by + uint(c.y)) * P.bx + uint(c.x)); }
+
+// Sub-cell ranges follow the brick ranges in binding 2.
+bool sub_active(ivec3 s) {
+  return range_active(g_sub_base + (uint(s.z) * uint(g_ns.y) + uint(s.y)) * uint(g_ns.x) + uint(s.x));
 }
 
 // Parameter of the next brick boundary along one axis, +inf if the ray stays in the
@@ -135,11 +147,66 @@ float next_boundary(float e, float d, int c, int nb) {
   return kInf;
 }
 
+// The same for sub-cells c in [lo, hi] (one brick's).
+float next_sub_boundary(float e, float d, int c, int lo, int hi) {
+  if (d > 0.0 && c < hi) {
+    precise float t = (float(SUB) * float(c + 1) - e) / d;
+    return t;
+  }
+  if (d < 0.0 && c > lo) {
+    precise float t = (float(SUB) * float(c) - e) / d;
+    return t;
+  }
+  return kInf;
+}
+
+// Samples k in [kl, kh] (one before [ta, tb] to one after), k >= k_next, in order;
+// k_next moves past them. Returns the refined t or -1.
+float march_from(vec3 e, vec3 d, float t0, float t1, float h, int K, float ta, float tb, inout int k_next) {
+  precise float ra = (ta - t0) / h;
+  precise float rb = (tb - t0) / h;
+  int kl = max(k_next, int(floor(ra)));
+  int kh = min(K, int(ceil(rb)) + 1);
+  if (kl > kh) return -1.0;
+  float t = march(e, d, t0, t1, h, kl, kh);
+  k_next = kh + 1;
+  return t;
+}
+
+// Second level: the sub-cell DDA through brick c over [tb0, tb1]; samples only in
+// sub-cells whose range can hold an inside value (the same lattice as march()).
+float walk_subs(vec3 e, vec3 d, float t0, float t1, float h, int K, ivec3 c, float tb0, float tb1,
+                inout int k_next) {
+  const int per = 8 / SUB;
+  vec3 pe = ray_point(e, d, tb0);
+  ivec3 lo = per * c;
+  ivec3 hi = min(lo + per, g_ns) - 1;
+  ivec3 s = clamp(ivec3(floor(pe / float(SUB))), lo, hi);
+  float ts0 = tb0;
+  for (int step = 0; step < 3 * per + 4; ++step) {
+    float tx = next_sub_boundary(e.x, d.x, s.x, lo.x, hi.x);
+    float ty = next_sub_boundary(e.y, d.y, s.y, lo.y, hi.y);
+    float tz = next_sub_boundary(e.z, d.z, s.z, lo.z, hi.z);
+    float ts1 = min(min(min(tx, ty), tz), tb1);
+    if (sub_active(s)) {
+      float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
+      if (t >= 0.0) return t;
+    }
+    if (ts1 >= tb1) break;
+    if (tx <= ty && tx <= tz) s.x += d.x > 0.0 ? 1 : -1;
+    else if (ty <= tz) s.y += d.y > 0.0 ? 1 : -1;
+    else s.z += d.z > 0.0 ? 1 : -1;
+    ts0 = ts1;
+  }
+  return -1.0;
+}
+
 float walk_bricks(vec3 e, vec3 d, float t0, float t1, float h, int K) {
   ivec3 nb = ivec3(int(P.bx), int(P.by), int(P.bz));
   vec3 pe = ray_point(e, d, t0);
   ivec3 c = clamp(ivec3(floor(pe / 8.0)), ivec3(0), nb - 1);
   float tb0 = t0;
+  int k_next = 1;
   int max_steps = nb.x + nb.y + nb.z + 4;
   for (int s = 0; s < max_steps; ++s) {
     float tx = next_boundary(e.x, d.x, c.x, nb.x);
@@ -147,9 +214,7 @@ float walk_bricks(vec3 e, vec3 d, float t0, float t1, float h, int K) {
     float tz = next_boundary(e.z, d.z, c.z, nb.z);
     float tb1 = min(min(min(tx, ty), tz), t1);
     if (brick_active(c)) {
-      int kl = max(1, int(floor((tb0 - t0) / h)));
-      int kh = min(K, int(ceil((tb1 - t0) / h)) + 1);
-      float t = march(e, d, t0, t1, h, kl, kh);
+      float t = walk_subs(e, d, t0, t1, h, K, c, tb0, tb1, k_next);
       if (t >= 0.0) return t;
     }
     if (tb1 >= t1) break;
@@ -323,6 +388,8 @@ void main() {
   g_bg = P.background;
   g_tau = P.tau;
   g_sign = P.inside_sign;
+  g_ns = (g_n + SUB - 1) / SUB;
+  g_sub_base = P.bx * P.by * P.bz;
   vec3 eye = vec3(P.eye_x, P.eye_y, P.eye_z);
   vec3 fwd = vec3(P.fwd_x, P.fwd_y, P.fwd_z), right = vec3(P.right_x, P.right_y, P.right_z);
   vec3 up = vec3(P.up_x, P.up_y, P.up_z);

@@ -958,6 +958,22 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
     write_file_atomic(o.out_csv, csv.s.str());
     progress << "[bench engine] wrote " << o.out_csv << "\n";
   }
+  // A figure that could not be measured because something failed is a failure, not a
+  // "not measured" verdict: exit 1 and say which.
+  for (const auto& r : res)
+    for (std::size_t k = 0; k < r.isos.size(); ++k) {
+      const IsoResult& ir = r.isos[k];
+      if ((ctx && !ir.gpu.available) || !ir.cpu.available) {
+        out << "\nFAILED: " << r.name << " #" << k << ": sparse GPU: " << (ir.gpu.available ? "ok" : ir.gpu.why)
+            << "; sparse CPU: " << (ir.cpu.available ? "ok" : ir.cpu.why) << "\n";
+        rc = 1;
+      }
+    }
+  if (big && big->child.started && (big->child.exit_code != 0 || big->child.signal != 0)) {
+    out << "\nFAILED: " << big->dim << "^3 end to end: child exit " << big->child.exit_code << ", signal "
+        << big->child.signal << "\n";
+    rc = 1;
+  }
   return rc;
 }
 

@@ -333,9 +333,17 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
     m.gpu_download_ms = gpu->download_ms;
     m.gpu_submit_wall_ms = gpu->submit_wall_ms;
     m.publish_ms = gpu->publish_ms;
+    // GPU stages only (labels "... (GPU)"): the host stages are wall time, reported apart.
     m.gpu_gradient_ms = 0;
-    for (const auto& p : gpu->passes) m.gpu_gradient_ms += std::max(0.0, p.ms);
-    m.gpu_timestamps = !gpu->passes.empty() && gpu->passes.front().ms >= 0;
+    bool any_gpu = false, all_stamped = true;
+    for (const auto& p : gpu->passes) {
+      if (p.label.size() < 5 || p.label.compare(p.label.size() - 5, 5, "(GPU)") != 0) continue;
+      any_gpu = true;
+      all_stamped = all_stamped && p.ms >= 0;
+      m.gpu_gradient_ms += std::max(0.0, p.ms);
+    }
+    m.gpu_timestamps = any_gpu && all_stamped;
+    if (!m.gpu_timestamps) m.gpu_gradient_ms = gpu->submit_wall_ms;
     m.gpu_slabs = int(gpu->stats.slabs);
     m.bricks_total = gpu->stats.bricks_total;
     m.bricks_candidates = gpu->stats.candidates;

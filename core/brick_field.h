@@ -239,6 +239,19 @@ inline std::vector<CompactSample> encode_compact(const BrickedInput& in, SampleF
 /// breaks the contract (tile count, pool size, active ids).
 inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
   detail::validate(in);
+  // Compact formats must not move a stored value to the other side of any isovalue:
+  // fp16 saturates beyond +-65504 and unorm16 has no code for +-Inf. Refuse such input
+  // (fp32 stores it exactly) instead of publishing a field that reads differently.
+  if (f != SampleFormat::kFp32)
+    for (std::size_t i = 0; i < in.pool.size(); ++i) {
+      const float v = in.pool[i].value;
+      const bool bad = f == SampleFormat::kFp16 ? (std::isfinite(v) && std::fabs(v) > 65504.0f) : std::isinf(v);
+      if (bad)
+        throw std::invalid_argument("make_bricked_field: BrickedInput.pool[" + std::to_string(i) + "].value = " +
+                                    std::to_string(v) + " cannot be stored as " + to_string(f) +
+                                    (f == SampleFormat::kFp16 ? " (|v| > 65504)" : " (no code for Inf)") +
+                                    "; use fp32 samples");
+    }
   auto store = std::make_shared<BrickStore>();
   store->bricks = brick_counts(in.grid);
   store->format = f;

@@ -28,8 +28,15 @@ BrushTargets default_targets(const Volume& vol, const core::Isosurface& iso) {
   const double lo = vol.min_value, hi = vol.max_value;
   BrushTargets t;
   const bool above = iso.inside == core::InsideIs::kAbove;
-  const double material = above ? std::max(hi, iso.tau) : std::min(lo, iso.tau);
+  double material = above ? std::max(hi, iso.tau) : std::min(lo, iso.tau);
   const double empty = iso.outside_value(lo, hi);
+  // A volume with no material (a blank canvas: hi <= tau for "above") would give material
+  // = tau, which is not inside (contains() is strict): push it one data span (at least 1
+  // value unit) past tau so that "add" creates material.
+  if (!iso.contains(material)) {
+    const double span = std::max(std::abs(iso.tau - empty), 1.0);
+    material = above ? iso.tau + span : iso.tau - span;
+  }
   t.material = float(material);
   t.empty = float(empty);
   const double span = std::abs(double(t.material) - double(t.empty));
@@ -189,6 +196,8 @@ float new_value(const gpu::BrushPush& p, const core::Grid& g, const PreEdit& pre
       const float sum = ((((at(x - 1, y, z) + at(x + 1, y, z)) + at(x, y - 1, z)) + at(x, y + 1, z)) +
                          at(x, y, z - 1)) + at(x, y, z + 1);
       const float m = sum * (1.0f / 6.0f);
+      // A NaN/Inf neighbour leaves the voxel as it is (smoothing must not spread NaN holes).
+      if (!std::isfinite(m)) return v;
       return v + (m - v) * (p.amount * w);
     }
   }

@@ -1,4 +1,5 @@
 // edit_history.cpp - per-stroke undo / redo as brick backups (see edit_history.h).
+#include <algorithm>
 #include "edit_history.h"
 
 #include <cmath>
@@ -69,7 +70,8 @@ EditHistory::EditHistory(double limit_mib) {
   if (!(limit_mib >= 0) || !std::isfinite(limit_mib))
     throw std::invalid_argument("EditHistory: field 'limit_mib' must be a finite number >= 0, got " +
                                 std::to_string(limit_mib));
-  limit_ = std::uint64_t(limit_mib * 1048576.0);
+  // Clamped below 2^63 bytes: a larger double does not convert to uint64 (undefined).
+  limit_ = std::uint64_t(std::min(limit_mib * 1048576.0, 9.2e18));
 }
 
 void EditHistory::begin_stroke() {
@@ -106,7 +108,13 @@ void EditHistory::end_stroke(const Volume& vol) {
       ++it;
     }
   }
-  if (!s.bricks.empty()) undo_.push_back(std::move(s));
+  if (s.bytes > limit_) {
+    // A stroke that alone exceeds the limit cannot be kept: drop it, not the older ones.
+    bytes_ -= s.bytes;
+    ++dropped_;
+  } else if (!s.bricks.empty()) {
+    undo_.push_back(std::move(s));
+  }
   enforce_limit();
 }
 
@@ -114,6 +122,12 @@ void EditHistory::enforce_limit() {
   while (bytes_ > limit_ && !undo_.empty()) {
     bytes_ -= undo_.front().bytes;
     undo_.pop_front();
+    ++dropped_;
+  }
+  // Then the redo strokes farthest from the present (the front of redo_ is redone last).
+  while (bytes_ > limit_ && !redo_.empty()) {
+    bytes_ -= redo_.front().bytes;
+    redo_.erase(redo_.begin());
     ++dropped_;
   }
 }

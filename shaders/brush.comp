@@ -58,7 +58,8 @@ void main() {
     precise float sum = ((((pre_at(q - ivec3(1, 0, 0)) + pre_at(q + ivec3(1, 0, 0))) + pre_at(q - ivec3(0, 1, 0))) +
                           pre_at(q + ivec3(0, 1, 0))) + pre_at(q - ivec3(0, 0, 1))) + pre_at(q + ivec3(0, 0, 1));
     precise float m = sum * (1.0 / 6.0);
-    nv = v + (m - v) * (pc.amount * w);
+    // A NaN/Inf neighbour leaves the voxel as it is (as engine/brush_cpu.cpp).
+    nv = (isnan(m) || isinf(m)) ? v : v + (m - v) * (pc.amount * w);
   }
   if (floatBitsToUint(nv) != floatBitsToUint(v)) {
     vol[i] = nv;

@@ -530,6 +530,16 @@ TEST(BrickField, BadInputIsRefusedNamingTheField) {
   copy->table = good.bricks->table;
   copy->table[0] = 5;  // not a slot start
   EXPECT_FALSE(copy->seal(good.grid.dims));
+  // Compact formats refuse what they would move across an isovalue: fp16 beyond 65504
+  // (saturation), unorm16 +-Inf (no code); fp32 stores both.
+  ASSERT_FALSE(in.pool.empty());
+  b = in;
+  b.pool[0].value = 70000.0f;
+  EXPECT_THROW((void)core::make_bricked_field(b, SampleFormat::kFp16), std::invalid_argument);
+  EXPECT_NO_THROW((void)core::make_bricked_field(b, SampleFormat::kUnorm16));
+  b.pool[0].value = std::numeric_limits<float>::infinity();
+  EXPECT_THROW((void)core::make_bricked_field(b, SampleFormat::kUnorm16), std::invalid_argument);
+  EXPECT_NO_THROW((void)core::make_bricked_field(b, SampleFormat::kFp32));
 }
 
 // A scripted stroke over a sphere (down through the surface, slide, up): HIP per tick.

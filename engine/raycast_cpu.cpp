@@ -105,15 +105,15 @@ struct Caster {
     return range_active(sub, (std::size_t(s[2]) * sy + std::size_t(s[1])) * sx + std::size_t(s[0]));
   }
 
-  static float next_boundary(float e, float d, int c, int nb) {
-    if (d > 0.0f && c + 1 < nb) return (8.0f * float(c + 1) - e) / d;
-    if (d < 0.0f && c > 0) return (8.0f * float(c) - e) / d;
+  static float next_boundary(float e, float d, float inv, int c, int nb) {
+    if (d > 0.0f && c + 1 < nb) return (8.0f * float(c + 1) - e) * inv;
+    if (d < 0.0f && c > 0) return (8.0f * float(c) - e) * inv;
     return kInf;
   }
   /// The same for sub-cells c in [lo, hi] (one brick's).
-  static float next_sub_boundary(float e, float d, int c, int lo, int hi) {
-    if (d > 0.0f && c < hi) return (float(kSub) * float(c + 1) - e) / d;
-    if (d < 0.0f && c > lo) return (float(kSub) * float(c) - e) / d;
+  static float next_sub_boundary(float e, float d, float inv, int c, int lo, int hi) {
+    if (d > 0.0f && c < hi) return (float(kSub) * float(c + 1) - e) * inv;
+    if (d < 0.0f && c > lo) return (float(kSub) * float(c) - e) * inv;
     return kInf;
   }
 
@@ -129,7 +129,7 @@ struct Caster {
 
   /// Second level: the sub-cell DDA through brick c over [tb0, tb1]; samples only in
   /// sub-cells whose range can hold an inside value (the same lattice as march()).
-  float walk_subs(F3 e, F3 d, float t0, float t1, float h, int K, const int c[3], float tb0, float tb1,
+  float walk_subs(F3 e, F3 d, F3 inv_d, float t0, float t1, float h, int K, const int c[3], float tb0, float tb1,
                   int& k_next) const {
     constexpr int per = 8 / kSub;
     const int ns[3] = {sub_count(P.nx), sub_count(P.ny), sub_count(P.nz)};
@@ -142,9 +142,9 @@ struct Caster {
     }
     float ts0 = tb0;
     for (int step = 0; step < 3 * per + 4; ++step) {
-      const float tx = next_sub_boundary(e.x, d.x, s[0], lo[0], hi[0]);
-      const float ty = next_sub_boundary(e.y, d.y, s[1], lo[1], hi[1]);
-      const float tz = next_sub_boundary(e.z, d.z, s[2], lo[2], hi[2]);
+      const float tx = next_sub_boundary(e.x, d.x, inv_d.x, s[0], lo[0], hi[0]);
+      const float ty = next_sub_boundary(e.y, d.y, inv_d.y, s[1], lo[1], hi[1]);
+      const float tz = next_sub_boundary(e.z, d.z, inv_d.z, s[2], lo[2], hi[2]);
       const float ts1 = std::min(std::min(std::min(tx, ty), tz), tb1);
       if (sub_active(s)) {
         const float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
@@ -161,6 +161,7 @@ struct Caster {
 
   float walk_bricks(F3 e, F3 d, float t0, float t1, float h, int K) const {
     const int nb[3] = {int(P.bx), int(P.by), int(P.bz)};
+    const F3 inv_d{1.0f / d.x, 1.0f / d.y, 1.0f / d.z};  // +-inf where d = 0 (not used there)
     const F3 pe = ray_point(e, d, t0);
     int c[3];
     for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor(pe[a] / 8.0f)), 0, nb[a] - 1);
@@ -168,12 +169,12 @@ struct Caster {
     int k_next = 1;
     const int max_steps = nb[0] + nb[1] + nb[2] + 4;
     for (int s = 0; s < max_steps; ++s) {
-      const float tx = next_boundary(e.x, d.x, c[0], nb[0]);
-      const float ty = next_boundary(e.y, d.y, c[1], nb[1]);
-      const float tz = next_boundary(e.z, d.z, c[2], nb[2]);
+      const float tx = next_boundary(e.x, d.x, inv_d.x, c[0], nb[0]);
+      const float ty = next_boundary(e.y, d.y, inv_d.y, c[1], nb[1]);
+      const float tz = next_boundary(e.z, d.z, inv_d.z, c[2], nb[2]);
       const float tb1 = std::min(std::min(std::min(tx, ty), tz), t1);
       if (brick_active(c[0], c[1], c[2])) {
-        const float t = walk_subs(e, d, t0, t1, h, K, c, tb0, tb1, k_next);
+        const float t = walk_subs(e, d, inv_d, t0, t1, h, K, c, tb0, tb1, k_next);
         if (t >= 0.0f) return t;
       }
       if (tb1 >= t1) break;

@@ -105,7 +105,7 @@ struct BrickMinMaxPush {
 // brick axis, ceil(n / SUB) per grid axis); their (min, max) follow the brick ranges in
 // binding 2 (sub-cells x fastest): voxels [SUB c, SUB c + SUB] (+1 on the high side: what
 // a trilinear sample in the cell reads) and the background on the grid's faces.
-#define ISOTOUCH_RAYCAST_SUB 2u
+#define ISOTOUCH_RAYCAST_SUB 4u
 #define ISOTOUCH_RAYCAST_PRIM_SPHERE 1u   // a = centre, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_DISC 2u     // a = centre, b = unit normal, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius

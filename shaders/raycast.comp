@@ -47,6 +47,7 @@ ivec3 g_n;
 float g_bg, g_tau, g_sign;
 uint g_nx, g_ny;
 ivec3 g_ns;       // sub-cells per axis: ceil(n / SUB)
+vec3 g_inv_d;     // 1 / d per axis (the DDA boundaries: (plane - e) * inv)
 uint g_sub_base;  // first sub-cell range in binding 2 (after the brick ranges), in ranges
 const int SUB = int(ISOTOUCH_RAYCAST_SUB);
 
@@ -135,26 +136,26 @@ bool sub_active(ivec3 s) {
 
 // Parameter of the next brick boundary along one axis, +inf if the ray stays in the
 // edge brick (or runs parallel to the axis).
-float next_boundary(float e, float d, int c, int nb) {
+float next_boundary(float e, float d, float inv, int c, int nb) {
   if (d > 0.0 && c + 1 < nb) {
-    precise float t = (8.0 * float(c + 1) - e) / d;
+    precise float t = (8.0 * float(c + 1) - e) * inv;
     return t;
   }
   if (d < 0.0 && c > 0) {
-    precise float t = (8.0 * float(c) - e) / d;
+    precise float t = (8.0 * float(c) - e) * inv;
     return t;
   }
   return kInf;
 }
 
 // The same for sub-cells c in [lo, hi] (one brick's).
-float next_sub_boundary(float e, float d, int c, int lo, int hi) {
+float next_sub_boundary(float e, float d, float inv, int c, int lo, int hi) {
   if (d > 0.0 && c < hi) {
-    precise float t = (float(SUB) * float(c + 1) - e) / d;
+    precise float t = (float(SUB) * float(c + 1) - e) * inv;
     return t;
   }
   if (d < 0.0 && c > lo) {
-    precise float t = (float(SUB) * float(c) - e) / d;
+    precise float t = (float(SUB) * float(c) - e) * inv;
     return t;
   }
   return kInf;
@@ -184,9 +185,9 @@ float walk_subs(vec3 e, vec3 d, float t0, float t1, float h, int K, ivec3 c, flo
   ivec3 s = clamp(ivec3(floor(pe / float(SUB))), lo, hi);
   float ts0 = tb0;
   for (int step = 0; step < 3 * per + 4; ++step) {
-    float tx = next_sub_boundary(e.x, d.x, s.x, lo.x, hi.x);
-    float ty = next_sub_boundary(e.y, d.y, s.y, lo.y, hi.y);
-    float tz = next_sub_boundary(e.z, d.z, s.z, lo.z, hi.z);
+    float tx = next_sub_boundary(e.x, d.x, g_inv_d.x, s.x, lo.x, hi.x);
+    float ty = next_sub_boundary(e.y, d.y, g_inv_d.y, s.y, lo.y, hi.y);
+    float tz = next_sub_boundary(e.z, d.z, g_inv_d.z, s.z, lo.z, hi.z);
     float ts1 = min(min(min(tx, ty), tz), tb1);
     if (sub_active(s)) {
       float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
@@ -203,15 +204,17 @@ float walk_subs(vec3 e, vec3 d, float t0, float t1, float h, int K, ivec3 c, flo
 
 float walk_bricks(vec3 e, vec3 d, float t0, float t1, float h, int K) {
   ivec3 nb = ivec3(int(P.bx), int(P.by), int(P.bz));
+  precise vec3 inv_d = 1.0 / d;  // +-inf on an axis the ray is parallel to (not used there)
+  g_inv_d = inv_d;
   vec3 pe = ray_point(e, d, t0);
   ivec3 c = clamp(ivec3(floor(pe / 8.0)), ivec3(0), nb - 1);
   float tb0 = t0;
   int k_next = 1;
   int max_steps = nb.x + nb.y + nb.z + 4;
   for (int s = 0; s < max_steps; ++s) {
-    float tx = next_boundary(e.x, d.x, c.x, nb.x);
-    float ty = next_boundary(e.y, d.y, c.y, nb.y);
-    float tz = next_boundary(e.z, d.z, c.z, nb.z);
+    float tx = next_boundary(e.x, d.x, g_inv_d.x, c.x, nb.x);
+    float ty = next_boundary(e.y, d.y, g_inv_d.y, c.y, nb.y);
+    float tz = next_boundary(e.z, d.z, g_inv_d.z, c.z, nb.z);
     float tb1 = min(min(min(tx, ty), tz), t1);
     if (brick_active(c)) {
       float t = walk_subs(e, d, t0, t1, h, K, c, tb0, tb1, k_next);

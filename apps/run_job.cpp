@@ -19,6 +19,7 @@
 #include "field_view.h"
 #include "files.h"
 #include "passes.h"
+#include "render_cmd.h"
 #include "sparse_chain.h"
 #include "sampling.h"
 #include "synthetic.h"
@@ -640,6 +641,14 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
   if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
   else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+  if (scene.draw_plots) {
+    // The run's picture (ray-cast on the same Vulkan device); never throws.
+    const RunPicture pic = render_run_picture(scene, vol, *field, trace, (fs::path(dir) / "surface.png").string(),
+                                              &vk, opt.device);
+    m.picture_drawn = pic.error.empty();
+    m.picture_note = m.picture_drawn ? pic.caption : pic.error;
+    if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
+  }
 
   nlohmann::ordered_json j;
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
@@ -726,6 +735,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
                  {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
                  {"duration_s", script.duration_s}};
+  j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
+                  {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
   write_file_atomic((fs::path(dir) / "summary.json").string(), j.dump(2) + "\n");
@@ -816,6 +827,11 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
      << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
   md << engine_markdown(m);
+  if (m.picture_drawn)
+    md << "## Where the probe touched\n\n![isosurface, probe path and contact points](surface.png)\n\n"
+       << m.picture_note << "\n\n";
+  else if (!m.picture_note.empty())
+    md << "Picture: not drawn (" << m.picture_note << ").\n\n";
   if (m.plots_drawn)
     md << "## Force and penetration\n\n![force and penetration against time](force_depth.png)\n\n"
        << "## Servo tick time\n\n![tick wall time](tick_time.png)\n\n";

@@ -133,7 +133,9 @@ void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, 
   }
   EXPECT_EQ(wrong_samples, 0u) << what;
   EXPECT_EQ(wrong_side, 0u) << what << ": voxels on the other side of their uniform brick's tile";
-  if (expect_surface) EXPECT_GT(brute_active, 0u) << what << ": the case must have a surface";
+  if (expect_surface) {
+    EXPECT_GT(brute_active, 0u) << what << ": the case must have a surface";
+  }
   std::printf("  %-40s %zu bricks, %zu candidates, %zu active (brute force %zu), %zu samples bit-identical\n",
               what.c_str(), total, s.stats.candidates, s.stats.active, brute_active, compared - wrong_samples);
   EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";

@@ -270,6 +270,9 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   for (const SlabPlan& s : slabs) record_copy(cmd, s.staging, s.device, s.staging.size());
   record_copy(cmd, params_up, params_dev, params_up.size());
   if (nc) record_copy(cmd, cand_up, cand_dev, nc * 4);
+  // Every range record starts as NaN: a record the shader never wrote (a skipped or cut
+  // workgroup on any driver) has no 0/1 decision in .w and is refused below.
+  if (nc) vkCmdFillBuffer(cmd, ranges_dev.handle(), 0, nc * 16, 0x7fc00000u);
   barrier_transfer_to_compute(cmd);
   timer.mark(cmd, 0);
   // Workgroups of a dispatch of n candidates: the preferred count, but never so few that a
@@ -340,6 +343,9 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
       throw std::logic_error(vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
                              std::to_string(sel.candidates[c]) + ") ran out of llvmpipe's loop budget (65535 trips "
                              "per invocation); sparse::loop_trips_per_brick underestimates sparse_brick.comp's loops");
+    if (rf[4 * c + 3] != 0.0f && rf[4 * c + 3] != 1.0f)
+      throw std::logic_error(vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
+                             std::to_string(sel.candidates[c]) + ") was never written by the shader");
     ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
     float tile = 0;
     if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))

@@ -274,6 +274,9 @@ std::vector<servo::TraceRow> read_trace_csv(const std::string& path, const engin
       if (cell.empty() || stop != cell.c_str() + cell.size())
         throw std::runtime_error(path + ": line " + std::to_string(lineno) + ", column " + std::to_string(c + 1) +
                                  ": not a number: '" + cell + "'");
+      if (!std::isfinite(v[c]))  // strtod reads "nan" and "inf": a trace never holds them
+        throw std::runtime_error(path + ": line " + std::to_string(lineno) + ", column " + std::to_string(c + 1) +
+                                 ": not a finite number: '" + cell + "'");
       if (end == std::string::npos && c < 10)
         throw std::runtime_error(path + ": line " + std::to_string(lineno) + ": " + std::to_string(c + 1) +
                                  " columns, at least 11 expected");
@@ -460,7 +463,9 @@ Subcommand add_render_command(CLI::App& cli) {
   s.app->add_option("--out", o->out, "PNG file to write (default <scene name>.png)");
   s.app->add_option("--width", o->width, "Image width [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
   s.app->add_option("--height", o->height, "Image height [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
-  s.app->add_option("--azimuth", o->cam.azimuth_deg, "Camera azimuth about physical +z [deg]")->capture_default_str();
+  s.app->add_option("--azimuth", o->cam.azimuth_deg, "Camera azimuth about physical +z [deg]")
+      ->capture_default_str()
+      ->check(CLI::Range(-3600.0, 3600.0));  // also refuses nan / inf
   s.app->add_option("--elevation", o->cam.elevation_deg, "Camera elevation [deg], in (-90, 90)")
       ->capture_default_str()
       ->check(CLI::Range(-89.9, 89.9));

@@ -178,25 +178,11 @@ ChildRun run_child_exec(const std::vector<std::string>& argv) {
   std::vector<char*> args;
   for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
   args.push_back(nullptr);
-  int p[2];
-  if (::pipe2(p, O_CLOEXEC) != 0) return {false, -1, 0, kNaN, 0, {}, std::string("pipe: ") + std::strerror(errno)};
-  std::cout.flush();
-  std::cerr.flush();
-  std::fflush(nullptr);
-  const auto t0 = Clock::now();
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    ::close(p[0]);
-    ::close(p[1]);
-    return {false, -1, 0, kNaN, 0, {}, std::string("fork: ") + std::strerror(errno)};
-  }
-  if (pid == 0) {
-    ::dup2(p[1], STDOUT_FILENO);  // dup2 clears O_CLOEXEC on the new descriptor
+  // The forked child (stdout already on the pipe) replaces itself; 127 if execv fails.
+  ChildRun r = run_child_fork([&] {
     ::execv(args[0], args.data());
-    ::_exit(127);
-  }
-  ::close(p[1]);
-  ChildRun r = collect(pid, p[0], t0);
+    return 127;
+  });
   if (r.exit_code == 127) r.error = "could not execute " + argv[0] + " (exit 127)";
   return r;
 }

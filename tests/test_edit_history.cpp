@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstring>
 
+#include "vk_test_context.h"
 #include "brush.h"
 #include "edit_history.h"
 #include "synthetic.h"
@@ -21,17 +22,7 @@ using engine::Volume;
 namespace {
 const std::string kHead = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 
-engine::VulkanContext& vk() {
-  static auto ctx = [] {
-    engine::ContextOptions o;
-    o.validation = true;
-    o.synchronization_validation = true;
-    auto r = engine::VulkanContext::create(o);
-    if (!r) throw std::runtime_error("no Vulkan device with the validation layer: " + r.error);
-    return std::move(*r.value);
-  }();
-  return *ctx;
-}
+engine::VulkanContext& vk() { return test::validated_vk(); }
 
 bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;

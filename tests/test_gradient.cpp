@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "vk_test_context.h"
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
 #include "synthetic.h"
@@ -18,21 +19,8 @@ using servo::Vec3;
 namespace {
 const std::string kData = ISOTOUCH_TEST_DATA;
 
-// One Vulkan context for the whole file, with the Khronos validation layer on: every
-// dispatch below must leave it silent. No device, or no validation layer, is a failure,
-// not a skip: CI has lavapipe and vulkan-validationlayers (run.sh PACKAGES).
-engine::VulkanContext& vk() {
-  static auto ctx = [] {
-    engine::ContextOptions o;
-    o.validation = true;
-    auto r = engine::VulkanContext::create(o);
-    if (!r)
-      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
-                               r.error);
-    return std::move(*r.value);
-  }();
-  return *ctx;
-}
+// The validated context (tests/vk_test_context.h): every dispatch below must leave it silent.
+engine::VulkanContext& vk() { return test::validated_vk(); }
 
 // Bit for bit, channel by channel; two NaNs count as equal whatever their payload.
 bool same_bits(float a, float b) {

@@ -13,6 +13,7 @@
 #include <limits>
 #include <utility>
 
+#include "vk_test_context.h"
 #include "cpu_filters.h"
 #include "cpu_gradient.h"
 #include "passes.h"
@@ -31,21 +32,7 @@ const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
 const std::string kTooth = kData + "/ct-tooth/tooth.nhdr";
 
-// One context for the file, validation layer and its synchronization validation on: a
-// missing layer is a failure, not a skip (CI installs vulkan-validationlayers).
-engine::VulkanContext& vk() {
-  static auto ctx = [] {
-    engine::ContextOptions o;
-    o.validation = true;
-    o.synchronization_validation = true;
-    auto r = engine::VulkanContext::create(o);
-    if (!r)
-      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
-                               r.error);
-    return std::move(*r.value);
-  }();
-  return *ctx;
-}
+engine::VulkanContext& vk() { return test::validated_vk(); }
 
 using engine::ulp_stats;
 using engine::UlpStats;

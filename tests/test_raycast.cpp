@@ -11,6 +11,7 @@
 #include <fstream>
 #include <limits>
 
+#include "vk_test_context.h"
 #include "raycast.h"
 #include "render_cmd.h"
 #include "scene.h"
@@ -30,19 +31,7 @@ const std::string kData = ISOTOUCH_TEST_DATA;
 const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 constexpr double kPi = 3.14159265358979323846;
 
-engine::VulkanContext& vk() {
-  static auto ctx = [] {
-    engine::ContextOptions o;
-    o.validation = true;
-    o.synchronization_validation = true;
-    auto r = engine::VulkanContext::create(o);
-    if (!r)
-      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
-                               r.error);
-    return std::move(*r.value);
-  }();
-  return *ctx;
-}
+engine::VulkanContext& vk() { return test::validated_vk(); }
 
 /// A sphere of radius 60 voxels (1 mm) as a signed distance, positive inside, tau 0.
 /// Trilinear interpolation of |x| errs by at most 1/(4 r) = 0.0042 voxel here.

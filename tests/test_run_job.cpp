@@ -107,19 +107,26 @@ struct Ran {
   Steps s;
 };
 
-Ran run_and_recompute(Scene sc, const std::string& tag) {
-  sc.draw_plots = false;
-  sc.write_trace = true;
+/// Runs `sc` without plots into a fresh temporary folder named after `name`; the caller
+/// reads what it needs and removes the folder.
+fs::path run_into_temp(const Scene& sc, const std::string& name, RunMetrics* metrics = nullptr) {
   const fs::path out = fs::temp_directory_path() /
-                       ("isotouch_run_job_" + tag + "_" +
-                        std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
+                       (name + "_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
   fs::remove_all(out);
   isotouch::app::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
+  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  if (metrics) *metrics = m;
+  return out;
+}
+
+Ran run_and_recompute(Scene sc, const std::string& tag) {
+  sc.draw_plots = false;
+  sc.write_trace = true;
   Ran r;
-  r.m = isotouch::app::run_scene(sc, opt, log);
+  const fs::path out = run_into_temp(sc, "isotouch_run_job_" + tag, &r.m);
   const Volume vol = sc.volume_path.empty()
                          ? isotouch::engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox)
                          : isotouch::engine::load_volume(sc.volume_path);
@@ -227,14 +234,7 @@ nlohmann::json run_summary(Scene sc, const std::string& mode, const std::string&
   sc.engine.samples = "fp32";
   sc.draw_plots = false;
   sc.write_trace = false;
-  const fs::path out = fs::temp_directory_path() / ("isotouch_run_modes_" + tag + "_" + mode + "_" +
-                                                    std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
-  fs::remove_all(out);
-  isotouch::app::RunOptions opt;
-  opt.out_dir = out.string();
-  opt.progress = false;
-  std::ostringstream log;
-  (void)isotouch::app::run_scene(sc, opt, log);
+  const fs::path out = run_into_temp(sc, "isotouch_run_modes_" + tag + "_" + mode);
   std::ifstream in(out / "summary.json");
   nlohmann::json j = nlohmann::json::parse(in);
   fs::remove_all(out);

@@ -20,6 +20,7 @@
 #include <cstring>
 #include <limits>
 
+#include "vk_test_context.h"
 #include "cpu_filters.h"
 #include "passes.h"
 #include "sparse_chain.h"
@@ -35,19 +36,7 @@ const std::string kData = ISOTOUCH_TEST_DATA;
 const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
 
-engine::VulkanContext& vk() {
-  static auto ctx = [] {
-    engine::ContextOptions o;
-    o.validation = true;
-    o.synchronization_validation = true;
-    auto r = engine::VulkanContext::create(o);
-    if (!r)
-      throw std::runtime_error("no Vulkan device with the validation layer (Debian: vulkan-validationlayers): " +
-                               r.error);
-    return std::move(*r.value);
-  }();
-  return *ctx;
-}
+engine::VulkanContext& vk() { return test::validated_vk(); }
 
 core::Isosurface above(double tau) { return {tau, core::InsideIs::kAbove}; }
 

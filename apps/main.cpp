@@ -17,9 +17,11 @@
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
+#include "bench_edit.h"
 #include "bench_engine.h"
 #include "export_cmd.h"
 #include "render_cmd.h"
+#include "replay_cmd.h"
 #include "check_cmd.h"
 #include "report_cmd.h"
 #include "sim_device.h"
@@ -84,13 +86,15 @@ std::string default_scene() {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
 }
 
-int cmd_run(const std::string& scene_path, std::string out_dir, const std::string& device, bool quiet) {
+int cmd_run(const std::string& scene_path, std::string out_dir, const std::string& device, bool quiet,
+            const std::string& record_path) {
   const app::Scene scene = app::load_scene(scene_path);
   if (out_dir.empty()) out_dir = (fs::path("out") / scene.name).string();
   app::RunOptions opt;
   opt.out_dir = out_dir;
   opt.device = device;
   opt.progress = !quiet;
+  opt.record_path = record_path;
   std::cout << "isotouch run: scene " << scene_path << " -> " << out_dir << "/\n";
   {
     const double dt = 1.0 / scene.hri.rate_hz;
@@ -280,6 +284,10 @@ int main(int argc, char** argv) {
   run->add_option("scene", scene_path, "Scene JSON file")->capture_default_str();
   run->add_option("--out,-o", out_dir, "Output folder (default: out/<scene name>)");
   run->add_flag("--quiet,-q", quiet, "No progress line");
+  std::string record_path;
+  run->add_option("--record", record_path,
+                  "Also write every device input, button and edit with its time to FILE (replay it with "
+                  "`isotouch replay FILE`)");
   run->footer(kSceneHelp);
 
   auto* check = cli.add_subcommand(
@@ -362,7 +370,8 @@ int main(int argc, char** argv) {
   // Command modules that keep their options to themselves (apps/subcommand.h).
   const std::vector<app::Subcommand> modules = {app::add_render_command(cli), app::add_export_command(cli),
                                                 app::add_bench_engine_command(*bench),
-                                                app::add_bench_render_command(*bench)};
+                                                app::add_bench_render_command(*bench),
+                                                app::add_bench_edit_command(*bench), app::add_replay_command(cli)};
 
   try {
     cli.parse(argc, argv);
@@ -377,7 +386,7 @@ int main(int argc, char** argv) {
     return cli.exit(e);
   }
   try {
-    if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet);
+    if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet, record_path);
     if (check->parsed() && check_all_flag) {
       check_all.volume_path = volume;
       check_all.device = device;

@@ -19,6 +19,9 @@ struct RunOptions {
   std::string device;                  ///< Vulkan device choice (see ContextOptions)
   bool progress = true;                ///< progress line on stderr
   std::uint64_t max_binding_bytes = 0; ///< test hook: smaller storage-binding limit
+  /// `run --record FILE`: also write the recording (apps/record.h: every device input,
+  /// button and edit with its tick and time, and the forces) to this file; "" = none.
+  std::string record_path;
 };
 
 /// The scene's pass list as engine passes (engine.passes), checked with

@@ -1,0 +1,60 @@
+// edit_session.cpp - STUB (lead) until the scene-edits helper fills it in.
+#include "edit_session.h"
+
+#include <chrono>
+
+namespace isotouch::app {
+
+const char* to_string(EditEvent::Kind k) {
+  switch (k) {
+    case EditEvent::Kind::kBrush: return "brush";
+    case EditEvent::Kind::kBeginStroke: return "begin_stroke";
+    case EditEvent::Kind::kEndStroke: return "end_stroke";
+    case EditEvent::Kind::kUndo: return "undo";
+    case EditEvent::Kind::kRedo: return "redo";
+  }
+  return "?";
+}
+
+struct EditSession::Impl {
+  std::unique_ptr<engine::LiveField> live;
+  std::unique_ptr<engine::Sculptor> sculptor;
+  std::vector<EditEvent> log;
+};
+
+EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const engine::LiveFieldOptions& options,
+                         double history_limit_mib)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->live = engine::LiveField::create(vol, options);
+  impl_->sculptor = std::make_unique<engine::Sculptor>(std::move(vol), ctx, history_limit_mib);
+}
+EditSession::~EditSession() = default;
+
+EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out) {
+  const auto t0 = std::chrono::steady_clock::now();
+  EditOutcome o;
+  std::vector<std::uint32_t> changed;
+  switch (e.kind) {
+    case EditEvent::Kind::kBrush: o.brush = impl_->sculptor->apply(e.brush); changed = o.brush.dirty; break;
+    case EditEvent::Kind::kBeginStroke: impl_->sculptor->begin_stroke(); break;
+    case EditEvent::Kind::kEndStroke: impl_->sculptor->end_stroke(); break;
+    case EditEvent::Kind::kUndo: o.restored = impl_->sculptor->undo(); changed = o.restored; break;
+    case EditEvent::Kind::kRedo: o.restored = impl_->sculptor->redo(); changed = o.restored; break;
+  }
+  if (!changed.empty()) {
+    auto snap = impl_->live->update(impl_->sculptor->volume(), changed, &o.update);
+    if (out) out->publish(snap);
+    o.published = true;
+  }
+  impl_->log.push_back(e);
+  o.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return o;
+}
+
+std::shared_ptr<const core::SampleField> EditSession::current() const { return impl_->live->current(); }
+const engine::Volume& EditSession::volume() const { return impl_->sculptor->volume(); }
+engine::Sculptor& EditSession::sculptor() { return *impl_->sculptor; }
+engine::LiveField& EditSession::live() { return *impl_->live; }
+const std::vector<EditEvent>& EditSession::log() const { return impl_->log; }
+
+}  // namespace isotouch::app

@@ -58,7 +58,7 @@ class FieldView {
   /// SampleField keeps working). A bricked field (`f.bricks` set) is read through its brick
   /// table; a dense one with fewer samples than voxels gives an empty view.
   FieldView(const SampleField& f)  // NOLINT(google-explicit-constructor)
-      : grid_(f.grid), background_(f.background) {
+      : grid_(f.grid), background_(f.background), version_(f.version) {
     if (f.grid.empty()) return;
     if (f.bricks) {
       init_bricked(*f.bricks);
@@ -81,6 +81,9 @@ class FieldView {
   /// Value of every voxel outside the grid (see class docs).
   float background() const { return background_; }
   bool empty() const { return mode_ == Mode::kEmpty; }
+  /// The snapshot's SampleField::version (issue 9: an edit publishes version + 1; the
+  /// renderers tell a new snapshot by it). 0 for a default-constructed view.
+  std::uint64_t version() const { return version_; }
   /// Reads a brick table (bricked field) rather than a dense array.
   bool bricked() const { return mode_ == Mode::kBricked || mode_ == Mode::kBrickedCompact; }
 
@@ -366,6 +369,7 @@ class FieldView {
   std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; bricked: 1, 9, 81), 0 on a 1-voxel axis
   double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
+  std::uint64_t version_ = 0;          ///< SampleField::version of the viewed snapshot
   // Bricked mode (BrickStore): the table, the tiles, the compact pool and its decoder.
   const std::uint32_t* table_ = nullptr;
   const Sample* tiles_ = nullptr;

@@ -34,6 +34,10 @@ void HriRenderer::reset() {
   vel_valid_ = false;
   v_filt_ = {};
   lost_s_ = 0;
+  version_known_ = false;
+  edit_tick_ = false;
+  edit_slewing_ = false;
+  prev_force_ = {};
 }
 
 Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback) const {
@@ -251,7 +255,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
     // fades out linearly (an update that does not move the target lets a ramp go on).
     // The ramp runs on accumulated time (ramp_dt_s_: this tick's period, clamped), so
     // neither lost ticks nor one jittery period change its length.
-    if (params_.recovery_time_s > 0 && (out.plane_update || after_fault_) &&
+    if (params_.recovery_time_s > 0 && (out.plane_update || after_fault_) && !edit_tick_ &&
         std::abs(mag - prev_target_n_) > 0.01 * params_.force_limit_n) {
       ramp_left_s_ = params_.recovery_time_s;
       recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
@@ -298,6 +302,36 @@ void HriRenderer::restart_at(const Vec3& hip) {
   prev_force_mag_ = 0;
   vel_valid_ = false;
   vhip_value_known_ = false;
+  edit_slewing_ = false;
+  prev_force_ = {};
+}
+
+bool HriRenderer::note_version(std::uint64_t version) {
+  const bool changed = version_known_ && version != field_version_;
+  field_version_ = version;
+  version_known_ = true;
+  return changed;
+}
+
+double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
+  // |F| moves from the |F| sent the tick before toward the target by at most one step,
+  // in the target's direction (the last one sent if the target is zero); the slew ends on
+  // the tick that reaches the target.
+  const double step = params_.edit_max_step_fraction * params_.force_limit_n;
+  const double sent = std::clamp(mag, std::max(0.0, prev_force_mag_ - step), prev_force_mag_ + step);
+  if (sent == mag) {
+    edit_slewing_ = false;
+    return mag;
+  }
+  if (mag > 0.0) {
+    force = force * (sent / mag);
+    return sent;
+  }
+  if (!(sent > 0.0)) return 0.0;
+  const Vec3 dir = prev_force_mag_ > 0.0 ? prev_force_ / prev_force_mag_ : (plane_.valid ? plane_.n : Vec3{});
+  force = dir * sent;
+  out.contact = true;  // a fading contact force, penetration 0
+  return norm(force);
 }
 
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
@@ -397,11 +431,24 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
+    edit_slewing_ = false;  // zero force was sent: an edit slew ends here
+    prev_force_ = {};
     return out;
   }
   lost_s_ = 0;
   ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);  // recovery ramp: this tick's period [s]
   if (!started_ || resync_) restart_at(hip);
+  // Edits (issue 9 item 2): a new snapshot version. Nothing read from the old snapshot
+  // (the VHIP's cached value, the held plane's |grad|) is used on it.
+  const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version());
+  bool covered_free_vhip = false;  // a free VHIP outside in the old snapshot: a contact point now
+  if (edited) {
+    covered_free_vhip = !plane_.valid && vhip_value_known_ && !(excess(vhip_value_) > 0.0);
+    vhip_value_known_ = false;
+    plane_grad_norm_ = 0;
+    ramp_left_s_ = 0;  // the edit slew takes a running recovery ramp over
+  }
+  edit_tick_ = edited;
   // Velocity: backward difference over the measured time, first-order low-pass.
   const double s = inv_wpd_;
   if (vel_valid_) {
@@ -472,7 +519,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
         const Vec3 slide = hip + plane_.n * dot(plane_.n, plane_.p - hip) - anchor_;
         return dot(slide, slide) > 0.25 * voxel * voxel;
       };
-      if (++c_ >= params_.plane_update_period || slid_far()) {
+      if (++c_ >= params_.plane_update_period || slid_far() || edited) {
         c_ = 0;
         Vec3 p;
         if (hip_excess() > 0.0) {
@@ -495,7 +542,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
       }
     }
   } else {
-    entry_test(false);
+    entry_test(covered_free_vhip);
   }
   // While in contact, a HIP inside the object is never left in front of the plane (a
   // concave corner or a rough surface, where the VHIP is embedded): the contact goes on
@@ -547,10 +594,17 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     out.saturated = saturate(force, params_.force_limit_n);
     mag = norm(force);
   }
+  const bool in_contact = out.contact;  // a plane held the HIP (not an edit's fade-out)
+  if (edited) edit_slewing_ = true;
+  if (edit_slewing_) {
+    if (out.fault) edit_slewing_ = false;
+    else mag = edit_slew(force, mag, out);
+  }
   prev_hip_ = hip;
   prev_force_mag_ = mag;
-  was_contact_ = out.contact;
-  vhip_value_known_ = !out.contact && have_f_hip;  // then VHIP = HIP, whose value was read
+  prev_force_ = force;
+  was_contact_ = in_contact;
+  vhip_value_known_ = !in_contact && have_f_hip;  // then VHIP = HIP, whose value was read
   vhip_value_ = f_hip;
   out.force_n = force;
   out.vhip_m = vhip_;

@@ -68,6 +68,12 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
+  /// Robust variant, edits (source: issue 9 item 2): the largest change of |F| an edit may
+  /// cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
+  /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
+  /// (FieldView::version); see HriRenderer, "Edits". 0 turns the edit handling off: a new
+  /// snapshot is then read at the next plane update like any other, and the force steps.
+  double edit_max_step_fraction = 0.05;
 };
 
 /// The HRI servo renderer (Figure 2).
@@ -174,6 +180,28 @@ struct HriParams {
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
 ///   plane (the paper's version leaves it at the temporary HIP when that is in front).
+/// - Edits (issue 9 item 2), when edit_max_step_fraction > 0: a tick whose snapshot has
+///   another FieldView::version than the last sane tick's is an edit tick. On it the plane
+///   is re-evaluated at once (not at the next n-tick update) with the update rules above,
+///   reading the VHIP's value and |grad| from the new snapshot (nothing cached from the old
+///   one). A VHIP in free motion that was outside in the old snapshot and is inside the new
+///   one (material added over a hovering probe) counts as an embedded contact point: the
+///   proxy is brought out to the new surface (before, the VHIP's value cached from the old
+///   snapshot put a plane between VHIP and HIP at once, a step). From the edit tick on, |F|
+///   is slewed: it moves from the |F| sent the tick before toward this tick's target (the
+///   spring-damper force, saturated) by at most edit_max_step_fraction * force_limit_n per
+///   tick, until the tick it reaches the target. A running recovery ramp is folded into the
+///   slew and none starts on an edit tick; the user's own motion is slewed too while it
+///   lasts, so no tick changes |F| by more than the step. A later edit during the slew
+///   continues it from the |F| sent. Carved under the VHIP: the VHIP goes to the new
+///   surface at once and |F| eases down to K times the new depth. Carved deeper than the
+///   HIP: the plane is dropped and |F| fades out along the last force direction (contact =
+///   true while it fades, penetration 0). Added over the VHIP: the VHIP comes out to the
+///   new surface (the embedded-VHIP search above; an addition deeper than its reach, about
+///   4 voxels, leaves the VHIP where it is) and |F| rises. With the parameter 0 the version
+///   is never read (a run is bit for bit the run without the feature), and without a
+///   version change nothing differs either. Fault ticks (zero force) end the slew. The
+///   paper variant ignores versions (Figure 2 as printed).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params);
@@ -221,6 +249,12 @@ class HriRenderer final : public Renderer {
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
                      HriTick& out);
+  /// Edits: record the snapshot version of a sane tick; true if it differs from the last.
+  bool note_version(std::uint64_t version);
+  /// Edits: limit the change of |F| from the tick before to one step, applied to `force`
+  /// (its |F| = mag [N], after saturation); returns the |F| sent [N] and ends the slew when
+  /// it reaches mag. Sets out.contact for a fade-out without a plane.
+  double edit_slew(Vec3& force, double mag, HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
   static bool long_step(const FieldView& field, const Vec3& a, const Vec3& b);
 
@@ -253,6 +287,12 @@ class HriRenderer final : public Renderer {
   double lost_s_ = 0;      ///< time spent in faults since the last sane tick [s]
   double vhip_value_ = 0;  ///< field value at vhip_ when vhip_value_known_
   bool vhip_value_known_ = false;
+  // Robust variant, edits (issue 9 item 2; see the class docs, "Edits"):
+  std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
+  bool version_known_ = false;       ///< field_version_ holds a version
+  bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)
+  bool edit_slewing_ = false;        ///< |F| is still slewing toward the target after an edit
+  Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]
 };
 
 }  // namespace isotouch::servo

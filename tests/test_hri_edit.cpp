@@ -1,0 +1,358 @@
+// HRI robust variant following edits (issue 9 item 2) on analytic fields, servo only.
+//
+// An "edit" is a second published field (SampleField::version + 1) with the surface moved
+// in (carve) or out (add). Truth comes from the analytic shapes (sim/analytic_fields.h:
+// half-space and sphere, value = 1000 * signed distance [mm], gradient analytic, positive
+// inside, tau = 0) and from the spring law F = K * depth: never from the renderer's own
+// output. The bound under test: an edit changes |F| by at most edit_max_step_fraction *
+// force_limit_n per tick (5 % by default). Each test also runs the renderer with the
+// feature off (edit_max_step_fraction = 0) where that shows the fault the feature removes,
+// so a test that cannot fail is caught.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <vector>
+
+#include "analytic_fields.h"
+#include "hri.h"
+
+using namespace isotouch::servo;
+
+namespace {
+
+constexpr double kVoxel = 1e-3;  // voxel [m] of every field here
+constexpr double kK = 800.0;     // stiffness [N/m]
+constexpr double kLimit = 3.3;   // force limit [N]
+constexpr double kFrac = 0.05;   // the bound of issue 9 item 2
+constexpr double kStep = kFrac * kLimit;  // largest |F| change per tick an edit may cause [N]
+constexpr double kX = 0.016, kY = 0.016;  // the probe's x, y [m] (centre of the 32 mm box)
+
+HriParams params(double frac = kFrac, int n = 5) {
+  HriParams p;
+  p.tau = 0;
+  p.stiffness_n_per_m = kK;
+  p.damping_n_s_per_m = 1.0;
+  p.plane_update_period = n;
+  p.rate_hz = 1000;
+  p.force_limit_n = kLimit;
+  p.edit_max_step_fraction = frac;
+  return p;
+}
+
+/// Floor: inside below z = z0_m [m] (outward normal +z), published as `version`.
+SampleField floor_at(double z0_m, std::uint64_t version) {
+  SampleField f = plane_field({0, 0, 1}, {kX, kY, z0_m});
+  f.version = version;
+  return f;
+}
+
+/// Solid sphere of radius r_m [m] around c, published as `version`.
+SampleField ball(const Vec3& c, double r_m, std::uint64_t version) {
+  SampleField f = sphere_field(c, r_m, 40);
+  f.version = version;
+  return f;
+}
+
+using FieldAt = std::function<const SampleField&(int)>;
+using HipAt = std::function<Vec3(int)>;
+
+/// Ticks 0..n-1 at the nominal period: tick k reads field_at(k) with the HIP at hip_at(k).
+std::vector<HriTick> drive(HriRenderer& r, int n, const FieldAt& field_at, const HipAt& hip_at) {
+  std::vector<HriTick> out;
+  out.reserve(std::size_t(n));
+  for (int k = 0; k < n; ++k) out.push_back(r.tick(field_at(k), hip_at(k)));
+  return out;
+}
+
+/// Largest | |F_k| - |F_k-1| | over the run (|F| before the first tick: 0) [N], and its tick.
+double max_step(const std::vector<HriTick>& t, int* at = nullptr) {
+  double worst = 0, prev = 0;
+  for (std::size_t k = 0; k < t.size(); ++k) {
+    const double m = norm(t[k].force_n);
+    if (std::abs(m - prev) > worst) {
+      worst = std::abs(m - prev);
+      if (at) *at = int(k);
+    }
+    prev = m;
+  }
+  return worst;
+}
+
+/// Largest |F_k - F_k-1| (vector) over ticks [from, to) [N].
+double max_vector_step(const std::vector<HriTick>& t, int from, int to) {
+  double worst = 0;
+  for (int k = std::max(from, 1); k < to; ++k) worst = std::max(worst, norm(t[k].force_n - t[k - 1].force_n));
+  return worst;
+}
+
+/// A HIP that comes down from z = 18 mm at 50 um per tick to z_hold and stays there.
+HipAt press_to(double z_hold) {
+  return [z_hold](int k) { return Vec3{kX, kY, std::max(z_hold, 0.018 - 5e-5 * k)}; };
+}
+
+/// Field `a` before tick `edit`, `b` from it on.
+FieldAt switch_at(const SampleField& a, const SampleField& b, int edit) {
+  return [&a, &b, edit](int k) -> const SampleField& { return k < edit ? a : b; };
+}
+
+}  // namespace
+
+// Carve under the VHIP: the floor is lowered by 1 mm under a HIP held 2.5 mm deep. The
+// VHIP goes to the new floor on the edit tick and |F| eases from K * 2.5 mm = 2.0 N to
+// K * 1.5 mm = 1.2 N in steps of at most 5 % of the limit.
+TEST(HriEdit, CarveUnderTheVhipEasesTheForceDownToTheNewDepth) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  const int edit = 152, ticks = 300;  // 152: mid-period for n = 5 (checked below)
+  const HipAt hip = press_to(0.0135);
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, switch_at(before, after, edit), hip);
+  const auto t0 = drive(off, ticks, switch_at(before, after, edit), hip);
+
+  // The bound, over the whole run (approach, hold, edit, settle), and the direction: +z.
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_LE(max_vector_step(t, 1, ticks), kStep * (1 + 1e-12));
+  // Without the feature the same edit steps by 0.8 N at once (the test can fail).
+  EXPECT_GT(max_step(t0), 3 * kStep);
+
+  // Before the edit: K * 2.5 mm.
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.0025, 1e-5);
+  // Re-evaluated on the edit tick (the feature-off run shows the tick is not an n-tick
+  // update), the VHIP already on the new floor.
+  EXPECT_TRUE(t[edit].plane_update);
+  EXPECT_FALSE(t0[edit].plane_update);
+  EXPECT_NEAR(t[edit].vhip_m.z, 0.015, 1e-3 * kVoxel);
+  // |F| goes down, never up, and reaches K * 1.5 mm after ceil(0.8 / step) = 5 ticks.
+  for (int k = edit; k < edit + 10; ++k) EXPECT_LE(norm(t[k].force_n), norm(t[k - 1].force_n) + 1e-12) << k;
+  EXPECT_GT(norm(t[edit + 3].force_n), kK * 0.0015 + 1e-3);  // still easing: not a jump
+  // Settled: VHIP on the new surface (analytic distance), F = K * new depth along +z.
+  const HriTick& last = t.back();
+  EXPECT_TRUE(last.contact);
+  EXPECT_NEAR(last.vhip_m.z, 0.015, 1e-3 * kVoxel);
+  EXPECT_NEAR(last.force_n.z, kK * 0.0015, 1e-5);
+  EXPECT_NEAR(norm(last.force_n), kK * 0.0015, 1e-5);
+  for (int k = edit + 5; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
+}
+
+// Carve deeper than the HIP: the floor goes from z = 16 mm to 12 mm under a HIP held at
+// 14 mm (1.6 N). The HIP is now in the air: |F| fades to 0 in steps of at most 5 % (along
+// +z, never a pull), then stays 0.
+TEST(HriEdit, CarveDeeperThanTheHipFadesTheForceOut) {
+  const SampleField before = floor_at(0.016, 4), after = floor_at(0.012, 5);
+  const int edit = 153, ticks = 260;
+  const HipAt hip = press_to(0.014);
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, switch_at(before, after, edit), hip);
+  const auto t0 = drive(off, ticks, switch_at(before, after, edit), hip);
+
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.002, 1e-5);
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_GT(max_step(t0), 5 * kStep);  // feature off: 1.6 N -> 0 in one tick
+  // Fading: |F| falls by exactly one step per tick (nothing else changes) along +z.
+  const int fade = int(std::ceil(kK * 0.002 / kStep));  // ticks to reach 0
+  for (int k = edit; k < edit + fade; ++k) {
+    const double m = norm(t[k].force_n);
+    EXPECT_NEAR(m, std::max(0.0, kK * 0.002 - (k - edit + 1) * kStep), 1e-9) << k;
+    if (m > 0) {
+      EXPECT_NEAR(t[k].force_n.z, m, 1e-12) << k;  // pushes out, no sideways part
+      EXPECT_TRUE(t[k].contact) << k;
+    }
+    EXPECT_FALSE(t[k].fault) << k;
+  }
+  for (int k = edit + fade; k < ticks; ++k) {
+    EXPECT_EQ(norm(t[k].force_n), 0.0) << k;
+    EXPECT_FALSE(t[k].contact) << k;
+    EXPECT_NEAR(t[k].vhip_m.z, 0.014, 1e-12) << k;  // free motion: VHIP = HIP
+  }
+}
+
+// Carve deeper than the HIP with the HIP moving slowly down (5 um per tick): the force fades
+// out, then the HIP reaches the new floor and feels it, the bound holding all the way; at the
+// end F = K * depth + B * v along +z.
+TEST(HriEdit, CarveDeeperThanAMovingHipFadesThenTheNewFloorHolds) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.012, 2);
+  const int edit = 400, ticks = 1200;
+  const double v = 5e-3;  // HIP speed [m/s] (5 um per 1 ms tick)
+  const HipAt hip = [v](int k) { return Vec3{kX, kY, 0.017 - v * 1e-3 * k}; };
+  HriRenderer on(params());
+  const auto t = drive(on, ticks, switch_at(before, after, edit), hip);
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_GT(norm(t[edit - 1].force_n), 0.7);           // 1 mm deep before the edit
+  EXPECT_EQ(norm(t[edit + 20].force_n), 0.0);          // faded, in the air
+  const double z_end = hip(ticks - 1).z, depth = 0.012 - z_end;
+  ASSERT_GT(depth, 0.0009);
+  EXPECT_NEAR(t.back().vhip_m.z, 0.012, 1e-3 * kVoxel);
+  EXPECT_NEAR(t.back().force_n.z, kK * depth + 1.0 * v, 1e-4);
+}
+
+// Add over the VHIP: the floor rises from 16 mm to 17.5 mm over a HIP held at 15 mm. The
+// proxy is brought out to the new floor and |F| rises from 0.8 N to K * 2.5 mm = 2.0 N in
+// steps of at most 5 %.
+TEST(HriEdit, AddOverTheVhipBringsTheProxyOutGradually) {
+  const SampleField before = floor_at(0.016, 9), after = floor_at(0.0175, 10);
+  const int edit = 153, ticks = 300;  // 153: mid-period for n = 5 (checked below)
+  const HipAt hip = press_to(0.015);
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, switch_at(before, after, edit), hip);
+  const auto t0 = drive(off, ticks, switch_at(before, after, edit), hip);
+
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.001, 1e-5);
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_LE(max_vector_step(t, 1, ticks), kStep * (1 + 1e-12));
+  EXPECT_GT(max_step(t0), 5 * kStep);  // feature off: 0.8 N -> 2.0 N at the next update
+  EXPECT_TRUE(t[edit].plane_update);
+  EXPECT_FALSE(t0[edit].plane_update);
+  EXPECT_NEAR(t[edit].vhip_m.z, 0.0175, 1e-3 * kVoxel);  // out on the edit tick
+  for (int k = edit; k < edit + 12; ++k) EXPECT_GE(norm(t[k].force_n), norm(t[k - 1].force_n) - 1e-12) << k;
+  EXPECT_LT(norm(t[edit + 3].force_n), kK * 0.0025 - 1e-3);  // still rising: not a jump
+  for (int k = edit + 8; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0025, 1e-5) << k;
+  EXPECT_NEAR(t.back().vhip_m.z, 0.0175, 1e-3 * kVoxel);
+  EXPECT_NEAR(t.back().force_n.z, kK * 0.0025, 1e-5);
+}
+
+// Material added over a hovering probe (free motion, 0.5 mm above the floor; the floor
+// rises by 1.5 mm): the proxy is the HIP of the tick before, outside in the old snapshot,
+// so it is brought out to the new surface and |F| rises to K * 1 mm. Without the feature
+// the value of the VHIP cached from the old snapshot makes a plane at once: 0.8 N in one tick.
+TEST(HriEdit, AddOverAHoveringProbePushesItOutGradually) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.0175, 2);
+  const int edit = 100, ticks = 200;
+  const HipAt hip = press_to(0.0165);
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, switch_at(before, after, edit), hip);
+  const auto t0 = drive(off, ticks, switch_at(before, after, edit), hip);
+
+  EXPECT_FALSE(t[edit - 1].contact);
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_TRUE(t[edit].plane_update);
+  EXPECT_NEAR(norm(t[edit].force_n), kStep, 1e-9);  // one step up, not K * 1 mm at once
+  for (int k = edit + 10; k < ticks; ++k) {
+    EXPECT_NEAR(t[k].force_n.z, kK * 0.001, 1e-5) << k;
+    EXPECT_NEAR(t[k].vhip_m.z, 0.0175, 1e-3 * kVoxel) << k;
+  }
+  EXPECT_GT(max_step(t0), 3 * kStep);  // feature off
+}
+
+// The plane is re-evaluated on the edit tick whatever the update period (n = 20), for a
+// carve and an add, at every phase of the n-tick counter.
+TEST(HriEdit, ThePlaneIsReEvaluatedOnTheEditTick) {
+  for (double z_new : {0.015, 0.0165})
+    for (int edit = 140; edit < 160; ++edit) {
+      const SampleField before = floor_at(0.016, 3), after = floor_at(z_new, 4);
+      HriRenderer r(params(kFrac, 20));
+      const auto t = drive(r, edit + 1, switch_at(before, after, edit), press_to(0.0145));
+      EXPECT_TRUE(t[edit].plane_update) << "edit at " << edit << ", floor " << z_new;
+      EXPECT_NEAR(t[edit].vhip_m.z, z_new, 1e-3 * kVoxel) << "edit at " << edit;
+      EXPECT_NEAR(t[edit].plane.p.z, z_new, 1e-3 * kVoxel);
+    }
+}
+
+// A curved surface and a sliding HIP: a ball of radius 10 mm grows to 11 mm (add) and then
+// shrinks to 9.5 mm (carve) while the HIP slides over its top 1 mm deep at 10 mm/s. Every
+// tick's |F| change stays within the bound; at the end the VHIP lies on the final sphere
+// (within the trilinear interpolation error of a sampled distance, 3 h^2 / (8 r) per the
+// cell's second derivative bound 1/r, doubled for safety) and |F| = K * depth below it.
+TEST(HriEdit, EditsUnderASlidingHipOnASphereKeepTheBound) {
+  const Vec3 c{0.020, 0.020, 0.018};
+  const SampleField b0 = ball(c, 0.010, 1), b1 = ball(c, 0.011, 2), b2 = ball(c, 0.0095, 3);
+  const int add = 300, carve = 600, ticks = 1000;
+  // The HIP: down onto the top, then along x at 10 um per tick, 1 mm below the first
+  // sphere (radius 9 mm around c).
+  const double z_start = std::sqrt(0.009 * 0.009 - 0.004 * 0.004);
+  const HipAt hip = [&](int k) {
+    if (k < 100) return c + Vec3{-0.004, 0, z_start + 0.003 * (1.0 - k / 100.0)};
+    const double x = -0.004 + 1e-5 * (k - 100), zr = std::sqrt(0.009 * 0.009 - x * x);
+    return c + Vec3{x, 0, zr};
+  };
+  const FieldAt field = [&](int k) -> const SampleField& { return k < add ? b0 : (k < carve ? b1 : b2); };
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, field, hip);
+  const auto t0 = drive(off, ticks, field, hip);
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_GT(max_step(t0), 3 * kStep);  // the same run without the feature steps
+  EXPECT_TRUE(t[add].plane_update);
+  EXPECT_TRUE(t[carve].plane_update);
+  for (int k = 0; k < ticks; ++k) EXPECT_FALSE(t[k].fault) << k;
+  const double tol = 2 * 3 * kVoxel * kVoxel / (8 * 0.0085);  // [m]
+  const double r_vhip = norm(t.back().vhip_m - c);
+  EXPECT_NEAR(r_vhip, 0.0095, tol);
+  EXPECT_NEAR(norm(t.back().force_n), kK * (0.0095 - 0.009), kK * tol + 0.01);  // + B v_d of sliding
+  EXPECT_TRUE(t.back().contact);
+}
+
+// Two edits in a row (an add, then a carve 3 ticks later, mid-slew): the slew restarts from
+// the |F| sent, and the bound holds; the force ends at K * the final depth.
+TEST(HriEdit, AnEditDuringTheSlewRestartsItFromTheForceSent) {
+  const SampleField f0 = floor_at(0.016, 1), f1 = floor_at(0.0175, 2), f2 = floor_at(0.0145, 3);
+  const int e1 = 150, e2 = 153, ticks = 260;
+  const FieldAt field = [&](int k) -> const SampleField& { return k < e1 ? f0 : (k < e2 ? f1 : f2); };
+  HriRenderer on(params()), off(params(0));
+  const auto t = drive(on, ticks, field, press_to(0.0135));
+  const auto t0 = drive(off, ticks, field, press_to(0.0135));
+  int worst_at = -1;
+  EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
+  EXPECT_GT(max_step(t0), 3 * kStep);
+  // Up by one step per tick for 3 ticks, then down one step per tick toward K * 1 mm.
+  const double f_before = kK * 0.0025;
+  for (int k = e1; k < e2; ++k) EXPECT_NEAR(norm(t[k].force_n), f_before + (k - e1 + 1) * kStep, 1e-9) << k;
+  EXPECT_NEAR(norm(t[e2].force_n), f_before + 2 * kStep, 1e-9);
+  EXPECT_NEAR(norm(t.back().force_n), kK * 0.001, 1e-5);
+  EXPECT_NEAR(t.back().vhip_m.z, 0.0145, 1e-3 * kVoxel);
+}
+
+// No version change: the trace is bit for bit the trace with the feature off, tick by tick,
+// over approach, press, slide, a NaN HIP (fault), an absurd HIP (resync), lift-off and
+// re-entry, for several parameter sets (period, recovery time, friction, force shading).
+// The paper variant ignores versions: with edits its trace is also the feature-off one.
+TEST(HriEdit, WithoutAnEditTheTraceIsTheOneWithoutTheFeature) {
+  const Vec3 c{0.020, 0.020, 0.018};
+  const SampleField s = ball(c, 0.010, 7), s2 = ball(c, 0.011, 8);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const HipAt hip = [&](int k) -> Vec3 {
+    if (k == 350) return {nan, 0, 0};
+    if (k == 500) return {5.0, 5.0, 5.0};
+    const double a = 0.002 * k;
+    const double r = 0.0115 - 0.003 * std::sin(0.01 * k) * std::sin(0.01 * k);
+    return c + Vec3{r * std::sin(a) * 0.3, r * std::cos(a) * 0.2, r};
+  };
+  auto same = [](const HriTick& a, const HriTick& b) {
+    return a.force_n.x == b.force_n.x && a.force_n.y == b.force_n.y && a.force_n.z == b.force_n.z &&
+           a.vhip_m.x == b.vhip_m.x && a.vhip_m.y == b.vhip_m.y && a.vhip_m.z == b.vhip_m.z &&
+           a.plane.valid == b.plane.valid && a.plane.p.x == b.plane.p.x && a.plane.p.z == b.plane.p.z &&
+           a.plane.n.z == b.plane.n.z && a.contact == b.contact && a.plane_update == b.plane_update &&
+           a.saturated == b.saturated && a.fault == b.fault && a.penetration_m == b.penetration_m;
+  };
+  for (int variant = 0; variant < 5; ++variant) {
+    HriParams p = params(kFrac, variant == 1 ? 1 : 5);
+    if (variant == 2) p.recovery_time_s = 0.02;
+    if (variant == 3) {
+      p.friction.mu_s = 0.4;
+      p.friction.mu_d = 0.3;
+      p.force_shading = true;
+    }
+    if (variant == 4) p.variant = Variant::kPaper;
+    HriParams p_off = p;
+    p_off.edit_max_step_fraction = 0;
+    const int ticks = 1500;
+    HriRenderer on(p), off(p_off);
+    // The paper variant sees an edit every 200 ticks; the robust one never.
+    const FieldAt field = [&](int k) -> const SampleField& { return variant == 4 && (k / 200) % 2 ? s2 : s; };
+    const auto t = drive(on, ticks, field, hip);
+    const auto t0 = drive(off, ticks, field, hip);
+    int contact = 0;
+    for (int k = 0; k < ticks; ++k) {
+      ASSERT_TRUE(same(t[k], t0[k])) << "parameter set " << variant << ", tick " << k;
+      contact += t[k].contact;
+    }
+    EXPECT_GT(contact, 300) << "parameter set " << variant;  // the run does touch
+  }
+}

@@ -181,52 +181,67 @@ inline std::uint16_t unorm16_encode(float x, float offset, float scale) {
   return std::uint16_t(std::clamp(q, 0.0, double(kUnormMax)));
 }
 
+/// The 729 compact samples (kFp16 or kUnorm16) of active brick `b` (per-axis brick index)
+/// of `grid` from its fp32 samples `src`; `d` gets its kUnorm16 decode parameters (unused
+/// for kFp16). Samples beyond the grid get the NaN code. One brick of encode_compact (the
+/// live field, engine/live_field.h, encodes the bricks an edit changed with it).
+inline void encode_brick(const Grid& grid, const std::array<int, 3>& b, const Sample* src, SampleFormat f,
+                         CompactSample* dst, BrickDecode& d) {
+  const auto n = stored_in_grid(grid, b);
+  const double sp[3] = {grid.spacing_m.x, grid.spacing_m.y, grid.spacing_m.z};
+  auto in_grid = [&](int l) {
+    return l % kBrickStored < n[0] && l / kBrickStored % kBrickStored < n[1] && l / (kBrickStored * kBrickStored) < n[2];
+  };
+  if (f == SampleFormat::kFp16) {
+    for (int l = 0; l < kBrickSamples; ++l) {
+      const Sample& s = src[l];
+      dst[l] = in_grid(l) ? CompactSample{float_to_half(s.value),
+                                          {float_to_half(double(s.gx) * sp[0]), float_to_half(double(s.gy) * sp[1]),
+                                           float_to_half(double(s.gz) * sp[2])}}
+                          : CompactSample{0x7e00u, {0, 0, 0}};
+    }
+    return;
+  }
+  for (int c = 0; c < 4; ++c) {
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int l = 0; l < kBrickSamples; ++l) {
+      const float x = (&src[l].value)[c];
+      if (!in_grid(l) || !std::isfinite(x)) continue;
+      lo = std::min(lo, double(x));
+      hi = std::max(hi, double(x));
+    }
+    unorm16_params(lo, hi, d.offset[c], d.scale[c]);
+  }
+  for (int l = 0; l < kBrickSamples; ++l) {
+    const Sample& s = src[l];
+    dst[l] = in_grid(l) ? CompactSample{unorm16_encode(s.value, d.offset[0], d.scale[0]),
+                                        {unorm16_encode(s.gx, d.offset[1], d.scale[1]),
+                                         unorm16_encode(s.gy, d.offset[2], d.scale[2]),
+                                         unorm16_encode(s.gz, d.offset[3], d.scale[3])}}
+                        : CompactSample{kUnormNaN, {kUnormNaN, kUnormNaN, kUnormNaN}};
+  }
+}
+
 /// The compact pool (kFp16 or kUnorm16) of `pool`; `decode` gets one entry per slot (kUnorm16).
 inline std::vector<CompactSample> encode_compact(const BrickedInput& in, SampleFormat f,
                                                  std::vector<BrickDecode>& decode) {
   std::vector<CompactSample> out(in.pool.size());
   const auto nb = brick_counts(in.grid);
-  const double sp[3] = {in.grid.spacing_m.x, in.grid.spacing_m.y, in.grid.spacing_m.z};
   if (f == SampleFormat::kUnorm16) decode.resize(in.active.size());
-  for (std::size_t slot = 0; slot < in.active.size(); ++slot) {
-    const auto n = stored_in_grid(in.grid, brick_coords(in.active[slot], nb));
-    const Sample* src = in.pool.data() + slot * kBrickSamples;
-    CompactSample* dst = out.data() + slot * kBrickSamples;
-    auto in_grid = [&](int l) {
-      return l % kBrickStored < n[0] && l / kBrickStored % kBrickStored < n[1] &&
-             l / (kBrickStored * kBrickStored) < n[2];
-    };
-    if (f == SampleFormat::kFp16) {
-      for (int l = 0; l < kBrickSamples; ++l) {
-        const Sample& s = src[l];
-        dst[l] = in_grid(l) ? CompactSample{float_to_half(s.value),
-                                            {float_to_half(double(s.gx) * sp[0]), float_to_half(double(s.gy) * sp[1]),
-                                             float_to_half(double(s.gz) * sp[2])}}
-                            : CompactSample{0x7e00u, {0, 0, 0}};
-      }
-      continue;
-    }
-    BrickDecode& d = decode[slot];
-    for (int c = 0; c < 4; ++c) {
-      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-      for (int l = 0; l < kBrickSamples; ++l) {
-        const float x = (&src[l].value)[c];
-        if (!in_grid(l) || !std::isfinite(x)) continue;
-        lo = std::min(lo, double(x));
-        hi = std::max(hi, double(x));
-      }
-      unorm16_params(lo, hi, d.offset[c], d.scale[c]);
-    }
-    for (int l = 0; l < kBrickSamples; ++l) {
-      const Sample& s = src[l];
-      dst[l] = in_grid(l) ? CompactSample{unorm16_encode(s.value, d.offset[0], d.scale[0]),
-                                          {unorm16_encode(s.gx, d.offset[1], d.scale[1]),
-                                           unorm16_encode(s.gy, d.offset[2], d.scale[2]),
-                                           unorm16_encode(s.gz, d.offset[3], d.scale[3])}}
-                          : CompactSample{kUnormNaN, {kUnormNaN, kUnormNaN, kUnormNaN}};
-    }
-  }
+  BrickDecode unused{};
+  for (std::size_t slot = 0; slot < in.active.size(); ++slot)
+    encode_brick(in.grid, brick_coords(in.active[slot], nb), in.pool.data() + slot * kBrickSamples, f,
+                 out.data() + slot * kBrickSamples, f == SampleFormat::kUnorm16 ? decode[slot] : unused);
   return out;
+}
+
+/// Empty if a stored value `v` can be kept in format `f` without moving it across an
+/// isovalue, else why not: fp16 saturates beyond +-65504, unorm16 has no code for +-Inf
+/// (fp32 keeps everything).
+inline std::string compact_refusal(float v, SampleFormat f) {
+  if (f == SampleFormat::kFp16 && std::isfinite(v) && std::fabs(v) > 65504.0f) return " (|v| > 65504)";
+  if (f == SampleFormat::kUnorm16 && std::isinf(v)) return " (no code for Inf)";
+  return {};
 }
 
 }  // namespace detail
@@ -245,11 +260,9 @@ inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
   if (f != SampleFormat::kFp32)
     for (std::size_t i = 0; i < in.pool.size(); ++i) {
       const float v = in.pool[i].value;
-      const bool bad = f == SampleFormat::kFp16 ? (std::isfinite(v) && std::fabs(v) > 65504.0f) : std::isinf(v);
-      if (bad)
+      if (const std::string why = detail::compact_refusal(v, f); !why.empty())
         throw std::invalid_argument("make_bricked_field: BrickedInput.pool[" + std::to_string(i) + "].value = " +
-                                    std::to_string(v) + " cannot be stored as " + to_string(f) +
-                                    (f == SampleFormat::kFp16 ? " (|v| > 65504)" : " (no code for Inf)") +
+                                    std::to_string(v) + " cannot be stored as " + to_string(f) + why +
                                     "; use fp32 samples");
     }
   auto store = std::make_shared<BrickStore>();
@@ -364,7 +377,7 @@ inline std::uint64_t snapshot_bytes(const SampleField& f) {
   const std::uint64_t per_sample = b.format == SampleFormat::kFp32 ? sizeof(Sample) : sizeof(CompactSample);
   return std::uint64_t(b.table.size()) * sizeof(std::uint32_t) + std::uint64_t(b.tiles.size()) * sizeof(Sample) +
          std::uint64_t(b.active_bricks()) * kBrickSamples * per_sample +
-         std::uint64_t(b.decode.size()) * sizeof(BrickDecode);
+         (b.format == SampleFormat::kUnorm16 ? std::uint64_t(b.active_bricks()) * sizeof(BrickDecode) : 0);
 }
 
 /// Brick counts of a published snapshot: all bricks and the active ones (stored with

@@ -96,6 +96,7 @@ struct BrickStore {
     const Sample* pool = nullptr;           ///< kFp32
     const CompactSample* compact = nullptr; ///< kFp16 / kUnorm16
     std::size_t nbx = 0, nbxy = 0;          ///< bricks along x; along x times along y
+    const BrickDecode* decode = nullptr;    ///< kUnorm16: one per slot (`decode` or `shared_decode`)
   };
 
   BrickStore() = default;
@@ -113,8 +114,9 @@ struct BrickStore {
   SampleFormat format = SampleFormat::kFp32;
   /// One entry per brick, linear id (bz * nby + by) * nbx + bx: for an active brick the
   /// pool index of its first sample, slot * kBrickSamples (slot = its rank among the active
-  /// bricks; stored premultiplied, which saves a multiply on the servo's dependent load
-  /// chain), or kUniform | tile index for a uniform one. Hence at most kMaxSlots slots.
+  /// bricks, or in an arena store any slot below slot_capacity; stored premultiplied, which
+  /// saves a multiply on the servo's dependent load chain), or kUniform | tile index for a
+  /// uniform one. Hence at most kMaxSlots slots.
   std::vector<std::uint32_t> table;
   /// {tile value, 0, 0, 0} per uniform brick (fp32 in every format: the side of the
   /// isosurface a uniform brick reads is exact).
@@ -124,6 +126,14 @@ struct BrickStore {
   std::vector<BrickDecode> decode;                            ///< kUnorm16: one per slot
   /// kFp16: 1 / spacing_m per axis [1/m]: gradient = half_to_float(g[a]) * fp16_unscale[a].
   std::array<float, 3> fp16_unscale{1.f, 1.f, 1.f};
+  /// Arena stores (engine/live_field.h: one pool shared by the snapshots of an edited
+  /// volume, unchanged bricks not copied): the slots the pool (and the decode table) hold;
+  /// active table entries may name any slot below it, in any order. 0 (make_bricked_field):
+  /// the slots are the active bricks' ranks, below active_bricks().
+  std::size_t slot_capacity = 0;
+  /// kUnorm16 arena stores: one BrickDecode per arena slot, shared by the arena's snapshots;
+  /// used instead of `decode` when set.
+  std::shared_ptr<const std::vector<BrickDecode>> shared_decode;
 
   /// Check the store against a grid of `dims` voxels (bricks, table size, pool and decode
   /// lengths, table entries in range) and record the read pointers FieldView uses; on
@@ -136,16 +146,19 @@ struct BrickStore {
     if (dims[0] <= 0 || dims[1] <= 0 || dims[2] <= 0 || bricks[0] != int(nx) || bricks[1] != int(ny) ||
         bricks[2] != int(nz) || table.size() != nx * ny * nz || tiles.size() > table.size())
       return false;
-    const std::size_t slots = table.size() - tiles.size();
-    if (slots > kMaxSlots) return false;
+    const std::size_t active = table.size() - tiles.size();
+    const std::size_t slots = slot_capacity != 0 ? slot_capacity : active;
+    if (slots > kMaxSlots || active > slots) return false;
     const std::size_t n = slots * kBrickSamples;
     if (format == SampleFormat::kFp32 ? (!pool || pool->size() < n) : (!compact || compact->size() < n)) return false;
-    if (format == SampleFormat::kUnorm16 && decode.size() < slots) return false;
+    const std::vector<BrickDecode>& dec = shared_decode ? *shared_decode : decode;
+    if (format == SampleFormat::kUnorm16 && dec.size() < slots) return false;
     for (std::uint32_t e : table)
       if ((e & kUniform) ? (e & ~kUniform) >= tiles.size() : (e % kBrickSamples != 0 || e / kBrickSamples >= slots))
         return false;
     sealed_ = {dims, table.data(), tiles.data(), format == SampleFormat::kFp32 ? pool->data() : nullptr,
-               format == SampleFormat::kFp32 ? nullptr : compact->data(), nx, nx * ny};
+               format == SampleFormat::kFp32 ? nullptr : compact->data(), nx, nx * ny,
+               format == SampleFormat::kUnorm16 ? dec.data() : nullptr};
     return true;
   }
   const Sealed& sealed() const { return sealed_; }
@@ -163,7 +176,7 @@ struct BrickStore {
     if (format == SampleFormat::kFp16)
       return {half_to_float(c.value), half_to_float(c.g[0]) * fp16_unscale[0],
               half_to_float(c.g[1]) * fp16_unscale[1], half_to_float(c.g[2]) * fp16_unscale[2]};
-    const BrickDecode& d = decode[slot];
+    const BrickDecode& d = sealed_.decode != nullptr ? sealed_.decode[slot] : decode[slot];
     return {unorm16_to_float(c.value, d.offset[0], d.scale[0]), unorm16_to_float(c.g[0], d.offset[1], d.scale[1]),
             unorm16_to_float(c.g[1], d.offset[2], d.scale[2]), unorm16_to_float(c.g[2], d.offset[3], d.scale[3])};
   }

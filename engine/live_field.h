@@ -16,6 +16,30 @@
 // Truth: every snapshot update() returns reads (through core::FieldView) exactly like
 // run_sparse_cpu() on the edited volume with the same passes, isosurface, background and
 // format (same active set, same tiles, samples bit for bit).
+//
+// How (live_field.cpp):
+// - What an edit can change. The live field keeps a copy of the raw voxels as of its newest
+//   snapshot; update() compares each dirty brick with it and takes the box of voxels whose
+//   bits changed. Brick b's published content (exact range over the smoothed brick +- 1
+//   voxel, samples of voxels 8b .. 8b + 8 with the gradient reading one further) reads raw
+//   voxels [8b - 1 - R, 8b + 9 + R] per axis (R: the filters' total radius, sparse::Plan),
+//   so the changed box [x0, x1] reaches bricks ceil((x0 - 9 - R) / 8) .. floor((x1 + 1 + R)
+//   / 8) ("content" bricks). A dirty brick whose raw range changed also changes the
+//   candidate selection of the bricks within the plan's reach (sparse::select): those are
+//   re-selected, and recomputed only if they turn candidate. Every other brick keeps its
+//   table entry. Recomputed bricks run run_sparse_cpu's own per-brick code
+//   (sparse::CandidateCpu, sparse::select_brick): bit for bit the full run (and the GPU).
+// - Sharing. All snapshots of a LiveField keep their active bricks in one fixed-capacity
+//   arena (BrickStore::slot_capacity; never reallocated, so table entries and the servo's
+//   pool pointer stay valid); a snapshot has its own table and tiles (4 B per brick + 16 B
+//   per uniform brick). A recomputed brick whose new samples equal its old slot's bits
+//   keeps the slot; a changed one gets a free slot, written before the snapshot is
+//   published, while no live snapshot uses that slot (the servo may read the previous
+//   snapshot meanwhile: nothing it reads is written). A slot is in use by the contiguous
+//   versions [born, retired); it is freed once no store of those versions is alive (the
+//   stores' shared_ptr deleter, under the arena's mutex, never on a read path). When the
+//   free slots run out (old snapshots held), the current bricks are copied into a new arena
+//   (the old one lives until its last snapshot dies).
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -73,8 +97,11 @@ class LiveField {
   /// The newest snapshot.
   std::shared_ptr<const core::SampleField> current() const;
   const LiveFieldOptions& options() const;
-  /// Bytes of sample memory held for all snapshots alive now (pool slots in use).
+  /// Bytes of sample memory held for all snapshots alive now (pool slots in use: 729 samples
+  /// of 16 B (fp32) or 8 B (fp16, unorm16), + 32 B of decode parameters for unorm16, per slot).
   std::uint64_t pool_bytes() const;
+  /// Bytes of the arenas alive now (every slot, used or free), same units as pool_bytes().
+  std::uint64_t arena_bytes() const;
 
  private:
   struct Impl;

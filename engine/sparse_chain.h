@@ -84,6 +84,10 @@ struct RawRanges {
   std::vector<std::uint8_t> nan;
   void init(const core::Grid& grid);
   void add_slice(const core::Grid& grid, int z, const float* slice);
+  /// Recompute entry `id` alone from `voxels` (the whole volume, x fastest): the same
+  /// values and fold order (z, y, x ascending) as add_slice over every slice. After an
+  /// edit of brick `id` (engine/live_field.h). Requires init(grid) and id < bricks total.
+  void set_brick(const core::Grid& grid, const float* voxels, std::uint32_t id);
 };
 
 /// Candidate selection: every brick's raw range widened over the neighbours its stencil
@@ -95,6 +99,17 @@ struct Selection {
   std::vector<std::uint32_t> candidates;  ///< ascending brick ids
 };
 Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso);
+
+/// select()'s result for one brick (its widened range, NaN flag and whether it is a
+/// candidate), bit for bit the same: the same min / max folds over the neighbours in the
+/// same order, the same rounding widening. For the live field (engine/live_field.h), which
+/// re-selects only the bricks an edit can reach.
+struct BrickSelection {
+  float lo, hi;
+  bool nan;
+  bool candidate;
+};
+BrickSelection select_brick(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso, std::uint32_t id);
 
 /// Upper bound on the loop back-edges sparse_brick.comp executes for one candidate brick
 /// of `plan` (interior brick, every loop counted with its exit test). llvmpipe / lavapipe
@@ -119,6 +134,26 @@ struct CandidateRange {
 /// The active rule (core::bricked_input_from_dense): not uniform by tile_value, or
 /// uniform inside with a NaN voxel. Writes the tile of a uniform brick.
 bool is_active(const CandidateRange& r, const core::Isosurface& iso, float background, float& tile);
+
+class BrickCpu;
+/// run_sparse_cpu's per-candidate computation, one brick at a time (the live field
+/// recomputes the bricks an edit changed with it): range() smooths the brick's raw region
+/// and returns its exact range (smoothed brick + 1 voxel), samples() the 9^3 samples of
+/// the brick of the last range() call (beyond the grid: {background, 0, 0, 0}). Bit for
+/// bit what run_sparse_cpu computes (and so the GPU chain). Holds references to `vol` and
+/// `plan`: they must outlive it.
+class CandidateCpu {
+ public:
+  CandidateCpu(const Volume& vol, const Plan& plan);
+  ~CandidateCpu();
+  CandidateCpu(const CandidateCpu&) = delete;
+  CandidateCpu& operator=(const CandidateCpu&) = delete;
+  CandidateRange range(std::uint32_t id);
+  void samples(core::Sample* out, float background) const;
+
+ private:
+  std::unique_ptr<BrickCpu> impl_;
+};
 
 /// Builds the published field: active candidates (is_active on `ranges[c]`) with the
 /// 729 samples `samples(c)` returns for candidate index c, tiles of the others (from the

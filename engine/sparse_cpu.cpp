@@ -138,6 +138,49 @@ void RawRanges::add_slice(const core::Grid& g, int z, const float* f) {
   }
 }
 
+void RawRanges::set_brick(const core::Grid& g, const float* voxels, std::uint32_t id) {
+  const auto b = core::brick_coords(id, bricks);
+  const int nx = g.dims[0], ny = g.dims[1];
+  const int x0 = b[0] * 8, x1 = std::min(x0 + 8, nx), y0 = b[1] * 8, y1 = std::min(y0 + 8, ny), z0 = b[2] * 8,
+            z1 = std::min(z0 + 8, g.dims[2]);
+  float mn = kInf, mx = -kInf;
+  bool n = false;
+  for (int z = z0; z < z1; ++z)  // add_slice's order: slices, rows, x ascending
+    for (int y = y0; y < y1; ++y) {
+      const float* row = voxels + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx);
+      for (int x = x0; x < x1; ++x) {
+        const float v = row[x];
+        n |= v != v;
+        mn = v < mn ? v : mn;
+        mx = v > mx ? v : mx;
+      }
+    }
+  lo[id] = mn;
+  hi[id] = mx;
+  nan[id] = n ? 1 : 0;
+}
+
+namespace {
+/// The tail of select() for one brick: widens [lo, hi] (the min / max over the reach) by
+/// the Gaussians' rounding bound, outward, and says whether the brick is a candidate.
+bool widen_and_decide(float& lo, float& hi, bool nan, const Plan& plan, const core::Isosurface& iso) {
+  if (lo <= hi && plan.rel_eps > 0) {
+    const double abs_eps = double(plan.ops.size() * 130) * 0x1p-149;
+    const double A = std::max(std::fabs(double(lo)), std::fabs(double(hi)));
+    const double d = A * plan.rel_eps + abs_eps;
+    const double l = double(lo) - d, h = double(hi) + d;
+    lo = float(l);  // rounded outward
+    if (double(lo) > l) lo = std::nextafter(lo, -kInf);
+    hi = float(h);
+    if (double(hi) < h) hi = std::nextafter(hi, kInf);
+  }
+  float tile = 0;
+  const bool uniform = core::tile_value(lo, hi, iso, 0.0f, tile);
+  const bool nan_matters = nan && (plan.closing || (lo <= hi && iso.contains(tile)));
+  return !uniform || nan_matters;
+}
+}  // namespace
+
 // Why the widened range is a bound of the smoothed field over the brick + 1 voxel:
 // - a box max / min (closing) returns one of its finite inputs (NaN skipped), so its output
 //   lies in the range of the inputs over its window; an all-NaN window gives -Inf / +Inf,
@@ -184,25 +227,47 @@ Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface&
     s.hi.swap(thi);
     s.nan.swap(tnan);
   }
-  const double abs_eps = plan.rel_eps > 0 ? double(plan.ops.size() * 130) * 0x1p-149 : 0.0;
-  for (std::size_t id = 0; id < total; ++id) {
-    float& lo = s.lo[id];
-    float& hi = s.hi[id];
-    if (lo <= hi && plan.rel_eps > 0) {
-      const double A = std::max(std::fabs(double(lo)), std::fabs(double(hi)));
-      const double d = A * plan.rel_eps + abs_eps;
-      const double l = double(lo) - d, h = double(hi) + d;
-      lo = float(l);  // rounded outward
-      if (double(lo) > l) lo = std::nextafter(lo, -kInf);
-      hi = float(h);
-      if (double(hi) < h) hi = std::nextafter(hi, kInf);
-    }
-    float tile = 0;
-    const bool uniform = core::tile_value(lo, hi, iso, 0.0f, tile);
-    const bool nan_matters = s.nan[id] && (plan.closing || (lo <= hi && iso.contains(tile)));
-    if (!uniform || nan_matters) s.candidates.push_back(std::uint32_t(id));
-  }
+  for (std::size_t id = 0; id < total; ++id)
+    if (widen_and_decide(s.lo[id], s.hi[id], s.nan[id] != 0, plan, iso)) s.candidates.push_back(std::uint32_t(id));
   return s;
+}
+
+BrickSelection select_brick(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso, std::uint32_t id) {
+  // select()'s three separable passes (x, then y, then z) fold the same values in the same
+  // order as these nested folds: the z pass folds the y pass's results over jz ascending,
+  // each of them the fold over jy of the x pass's, each the fold over jx of the raw ranges.
+  const auto nb = raw.bricks;
+  const auto b = core::brick_coords(id, nb);
+  int lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::max(b[std::size_t(a)] - plan.reach[std::size_t(a)], 0);
+    hi[a] = std::min(b[std::size_t(a)] + plan.reach[std::size_t(a)], nb[std::size_t(a)] - 1);
+  }
+  float mnz = kInf, mxz = -kInf;
+  std::uint8_t nz = 0;
+  for (int z = lo[2]; z <= hi[2]; ++z) {
+    float mny = kInf, mxy = -kInf;
+    std::uint8_t ny = 0;
+    for (int y = lo[1]; y <= hi[1]; ++y) {
+      float mnx = kInf, mxx = -kInf;
+      std::uint8_t nx = 0;
+      const std::size_t row = (std::size_t(z) * std::size_t(nb[1]) + std::size_t(y)) * std::size_t(nb[0]);
+      for (int x = lo[0]; x <= hi[0]; ++x) {
+        mnx = std::min(mnx, raw.lo[row + std::size_t(x)]);
+        mxx = std::max(mxx, raw.hi[row + std::size_t(x)]);
+        nx |= raw.nan[row + std::size_t(x)];
+      }
+      mny = std::min(mny, mnx);
+      mxy = std::max(mxy, mxx);
+      ny |= nx;
+    }
+    mnz = std::min(mnz, mny);
+    mxz = std::max(mxz, mxy);
+    nz |= ny;
+  }
+  BrickSelection out{mnz, mxz, nz != 0, false};
+  out.candidate = widen_and_decide(out.lo, out.hi, out.nan, plan, iso);
+  return out;
 }
 
 std::uint64_t loop_trips_per_brick(const Plan& plan) {
@@ -312,8 +377,6 @@ void publish(const core::Grid& grid, const Selection& sel, const std::vector<Can
 
 // ---------------------------------------------------------------- CPU reference
 
-namespace {
-
 /// The region of one candidate brick and its computation, operation for operation as
 /// shaders/sparse_brick.comp (the loops run in a different order; every output is one
 /// independent expression, so the order of the outputs does not matter).
@@ -399,6 +462,8 @@ class BrickCpu {
     return rg;
   }
 
+  const core::Grid& grid() const { return vol_.grid; }
+
   /// The 9^3 samples of the brick of the last range() call.
   void samples(core::Sample* out, float background) const {
     const float* f = buf_[cur_].data();
@@ -443,7 +508,13 @@ class BrickCpu {
   GradientConstants k_{};
 };
 
-}  // namespace
+CandidateCpu::CandidateCpu(const Volume& vol, const Plan& plan) : impl_(std::make_unique<BrickCpu>(vol, plan)) {}
+CandidateCpu::~CandidateCpu() = default;
+CandidateRange CandidateCpu::range(std::uint32_t id) {
+  return impl_->range(id, core::brick_counts(impl_->grid()));
+}
+void CandidateCpu::samples(core::Sample* out, float background) const { impl_->samples(out, background); }
+
 }  // namespace sparse
 
 SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& passes, const core::Isosurface& iso,

@@ -1,0 +1,621 @@
+// LiveField (issue 9 item 1): the edited volume's snapshot updated brick by brick.
+// Truth from outside the code under test:
+// - after every edit (engine::apply_brush_cpu: add, carve, smooth, drill, small and large,
+//   at the border, bricks turning active -> uniform and back) the snapshot equals a fresh
+//   run_sparse_cpu of the edited volume: the same uniform / active classification, the
+//   same tile per uniform brick, every stored sample bit for bit (compact codes and
+//   unorm16 decode parameters included), and FieldView reads bit for bit at random points;
+//   on the head CT, the chest CT and a synthetic sphere, with {gradient},
+//   {gaussian 1 mm, gradient}, {closing, gradient}, formats fp32 / fp16 / unorm16;
+// - sharing: bricks far from the edit (beyond the stencil's reach, by geometry) keep the
+//   same pool address; an old snapshot held across many updates (and across a move into a
+//   new arena) reads exactly what it read before, also while a reader thread reads it;
+// - memory: with no old snapshot held, the slots in use are exactly the active bricks
+//   after each of thousands of edits, and the arena does not grow;
+// - bad brick ids throw std::out_of_range naming the id, and nothing changes.
+// Plus a disabled benchmark: update() for 2, 5 and 10 mm carve brushes on the chest CT.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "brush.h"
+#include "field_view.h"
+#include "live_field.h"
+#include "sparse_chain.h"
+#include "synthetic.h"
+#include "volume_io.h"
+
+using namespace isotouch;
+using core::BrickStore;
+using core::SampleFormat;
+using engine::Brush;
+using engine::BrushKind;
+using engine::LiveField;
+using engine::LiveFieldOptions;
+using engine::PassDesc;
+using engine::Volume;
+
+namespace {
+const std::string kData = ISOTOUCH_TEST_DATA;
+const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
+
+std::uint32_t bits(float f) { return std::bit_cast<std::uint32_t>(f); }
+std::uint64_t bits(double d) { return std::bit_cast<std::uint64_t>(d); }
+
+struct Case {
+  std::string name;
+  Volume vol;
+  core::Isosurface iso;
+  float background = 0;
+};
+
+// The scenes' volumes and isovalues (scenes/head.json 1150 HU, scenes/chest.json -500 HU,
+// scenes/sphere.json 0), background = the isosurface's outside value over the volume.
+Case make_case(const std::string& name) {
+  Case c;
+  c.name = name;
+  if (name == "head") {
+    c.vol = engine::load_volume(kHead);
+    c.iso = {1150, core::InsideIs::kAbove};
+  } else if (name == "chest") {
+    c.vol = engine::load_volume(kChest);
+    c.iso = {-500, core::InsideIs::kAbove};
+  } else {  // 1 mm voxels, dims not multiples of 8 (partial bricks on the high borders)
+    c.vol = engine::make_sphere({45, 38, 36}, 1e-3, 13.0, {2.0, -1.0, 0.5});
+    c.iso = {0, core::InsideIs::kAbove};
+  }
+  c.background = float(c.iso.outside_value(c.vol.min_value, c.vol.max_value));
+  return c;
+}
+
+const Case& cached(const std::string& name) {
+  static std::map<std::string, Case> cases;
+  auto it = cases.find(name);
+  if (it == cases.end()) it = cases.emplace(name, make_case(name)).first;
+  return it->second;
+}
+
+std::vector<PassDesc> passes_named(const std::string& p) {
+  if (p == "gauss") return {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  if (p == "closing") return {PassDesc::closing(3.5), PassDesc::gradient()};
+  if (p == "wide") return {PassDesc::gaussian(2.7), PassDesc::gradient()};  // R >= 8: reach 2
+  return {PassDesc::gradient()};
+}
+
+LiveFieldOptions options(const Case& c, const std::string& passes, SampleFormat f) {
+  LiveFieldOptions o;
+  o.passes = passes_named(passes);
+  o.iso = c.iso;
+  o.background = c.background;
+  o.format = f;
+  return o;
+}
+
+// Grid-world point at fractions of the grid's extent (0 and 1: the first and last voxel centre).
+core::Vec3 at(const core::Grid& g, double fx, double fy, double fz) {
+  return g.to_world({fx * (g.dims[0] - 1), fy * (g.dims[1] - 1), fz * (g.dims[2] - 1)});
+}
+
+Brush brush(const Case& c, BrushKind kind, core::Vec3 centre, double radius_m, double strength) {
+  Brush b;
+  b.kind = kind;
+  b.centre_m = centre;
+  b.radius_m = radius_m;
+  b.strength = strength;
+  b.falloff = 0.5;
+  b.targets = engine::default_targets(c.vol, c.iso);
+  if (kind == BrushKind::kDrill) {
+    b.force_n = 3.0;
+    b.force_threshold_n = 1.0;
+    b.rate = 2e6;
+    b.dt_s = 1e-3;
+  }
+  return b;
+}
+
+// A sequence of edits: every kind, small (one voxel) to large, inside and at the border
+// (centres on the first / last voxel and beyond), a large carve that empties bricks
+// (active -> uniform outside) and a large add that fills them (-> uniform inside), then
+// the surface coming back.
+std::vector<Brush> sequence(const Case& c, std::size_t n) {
+  const core::Grid& g = c.vol.grid;
+  const double vox = std::max({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z});
+  const double ext = std::min({g.spacing_m.x * g.dims[0], g.spacing_m.y * g.dims[1], g.spacing_m.z * g.dims[2]});
+  const double span = std::max(double(c.vol.max_value) - double(c.vol.min_value), 1.0);
+  std::vector<Brush> s = {
+      brush(c, BrushKind::kCarve, at(g, 0.5, 0.5, 0.5), 2.5 * vox, 0.4 * span),
+      brush(c, BrushKind::kAdd, at(g, 0.3, 0.6, 0.4), 1.0 * vox, 0.5 * span),
+      brush(c, BrushKind::kSmooth, at(g, 0.5, 0.5, 0.5), 3.0 * vox, 0.8),
+      brush(c, BrushKind::kDrill, at(g, 0.62, 0.45, 0.55), 2.0 * vox, 0),
+      brush(c, BrushKind::kCarve, at(g, 0.5, 0.5, 0.5), 0.3 * ext, 2.0 * span),  // empties bricks
+      brush(c, BrushKind::kAdd, at(g, 0.0, 0.0, 0.0), 3.0 * vox, span),         // corner
+      brush(c, BrushKind::kAdd, at(g, 0.5, 0.5, 0.5), 0.22 * ext, 2.0 * span),  // fills bricks
+      brush(c, BrushKind::kCarve, at(g, 1.02, 0.5, 1.0), 2.5 * vox, span),      // beyond the high border
+      brush(c, BrushKind::kSmooth, at(g, 0.5, 0.5, 0.5), 0.25 * ext, 1.0),
+      brush(c, BrushKind::kCarve, at(g, 0.45, 0.55, 0.5), 1.5 * vox, 0.3 * span),
+      brush(c, BrushKind::kDrill, at(g, 0.5, 1.0, 0.0), 3.0 * vox, 0),
+      brush(c, BrushKind::kAdd, at(g, 0.55, 0.4, 0.6), 0.6 * vox, 0.2 * span),
+  };
+  s.resize(std::min(n, s.size()));
+  return s;
+}
+
+/// Everything FieldView reads from a bricked field, per brick: uniform + tile bits, or the
+/// 729 stored samples decoded (bits) + the compact codes + the unorm16 decode parameters.
+struct BrickDump {
+  bool uniform = false;
+  std::uint32_t tile = 0;
+  std::vector<std::uint32_t> samples;   // 4 per stored sample (value, gx, gy, gz bits)
+  std::vector<std::uint16_t> codes;     // 4 per sample (compact formats)
+  std::array<std::uint32_t, 8> decode{};  // unorm16
+  bool operator==(const BrickDump&) const = default;
+};
+
+BrickDump dump(const BrickStore& s, std::size_t id) {
+  BrickDump d;
+  const std::uint32_t e = s.table[id];
+  if (e & BrickStore::kUniform) {
+    d.uniform = true;
+    d.tile = bits(s.tiles[e & ~BrickStore::kUniform].value);
+    return d;
+  }
+  const std::uint32_t slot = BrickStore::slot_of(e);
+  for (std::size_t l = 0; l < std::size_t(core::kBrickSamples); ++l) {
+    const core::Sample x = s.stored(slot, l);
+    d.samples.insert(d.samples.end(), {bits(x.value), bits(x.gx), bits(x.gy), bits(x.gz)});
+    if (s.format != SampleFormat::kFp32) {
+      const core::CompactSample& c = (*s.compact)[std::size_t(e) + l];
+      d.codes.insert(d.codes.end(), {c.value, c.g[0], c.g[1], c.g[2]});
+    }
+  }
+  if (s.format == SampleFormat::kUnorm16) {
+    const core::BrickDecode& p = s.sealed().decode[slot];
+    for (int k = 0; k < 4; ++k) {
+      d.decode[std::size_t(k)] = bits(p.offset[k]);
+      d.decode[std::size_t(k) + 4] = bits(p.scale[k]);
+    }
+  }
+  return d;
+}
+
+/// FieldView value and value_gradient bits at `n` random points over the grid and a
+/// 2-voxel band around it (fixed seed).
+std::vector<std::uint64_t> reads(const core::SampleField& f, int n, std::uint32_t seed) {
+  const core::FieldView v(f);
+  std::mt19937 rng(seed);
+  std::vector<std::uint64_t> out;
+  const core::Grid& g = f.grid;
+  for (int i = 0; i < n; ++i) {
+    double i3[3];
+    for (int a = 0; a < 3; ++a)
+      i3[a] = std::uniform_real_distribution<double>(-2.0, double(g.dims[std::size_t(a)]) + 1.0)(rng);
+    const core::Vec3 idx{i3[0], i3[1], i3[2]};
+    const core::Vec3 p = g.to_world(idx);
+    const core::FieldValue fv = v.value_gradient(p);
+    out.insert(out.end(), {bits(v.value(p)), bits(fv.value), bits(fv.gradient.x), bits(fv.gradient.y),
+                           bits(fv.gradient.z)});
+  }
+  return out;
+}
+
+/// The live snapshot against a fresh run_sparse_cpu of `vol`: classification, tiles,
+/// samples (bits), FieldView reads (bits).
+void expect_full_run(const core::SampleField& live, const Volume& vol, const LiveFieldOptions& o,
+                     const std::string& what) {
+  const engine::SparseOutput full = engine::run_sparse_cpu(vol, o.passes, o.iso, o.background, o.format);
+  ASSERT_TRUE(live.bricks && full.field.bricks) << what;
+  ASSERT_FALSE(core::FieldView(live).empty()) << what << ": the live store does not seal";
+  const BrickStore& a = *live.bricks;
+  const BrickStore& b = *full.field.bricks;
+  ASSERT_EQ(a.table.size(), b.table.size()) << what;
+  EXPECT_EQ(a.active_bricks(), b.active_bricks()) << what;
+  EXPECT_EQ(bits(live.background), bits(full.field.background)) << what;
+  std::size_t wrong_class = 0, wrong_tile = 0, wrong_samples = 0;
+  std::string first;
+  for (std::size_t id = 0; id < a.table.size(); ++id) {
+    const BrickDump x = dump(a, id), y = dump(b, id);
+    if (x == y) continue;
+    std::size_t& n = x.uniform != y.uniform ? wrong_class : (x.uniform ? wrong_tile : wrong_samples);
+    if (wrong_class + wrong_tile + wrong_samples == 0)
+      first = "brick " + std::to_string(id) + (x.uniform ? " uniform" : " active") + " (full run: " +
+              (y.uniform ? "uniform" : "active") + ")";
+    ++n;
+  }
+  EXPECT_EQ(wrong_class, 0u) << what << ": bricks classified differently, first " << first;
+  EXPECT_EQ(wrong_tile, 0u) << what << ": uniform bricks with another tile, first " << first;
+  EXPECT_EQ(wrong_samples, 0u) << what << ": active bricks with other samples, first " << first;
+  EXPECT_EQ(reads(live, 400, 7), reads(full.field, 400, 7)) << what << ": FieldView reads differ";
+}
+
+std::string fmt_name(SampleFormat f) { return core::to_string(f); }
+
+// ---- equality with a full run after every edit ---------------------------------------
+
+struct Combo {
+  std::string volume, passes;
+  SampleFormat format;
+  std::size_t edits;
+};
+
+class LiveFieldMatches : public ::testing::TestWithParam<Combo> {};
+
+TEST_P(LiveFieldMatches, AFullRunAfterEveryEdit) {
+  const Combo& p = GetParam();
+  Case c = cached(p.volume);  // a copy: edited
+  const LiveFieldOptions o = options(c, p.passes, p.format);
+  auto lf = LiveField::create(c.vol, o);
+  expect_full_run(*lf->current(), c.vol, o, p.volume + " first snapshot");
+  EXPECT_EQ(lf->current()->version, 1u);
+  std::size_t activated = 0, deactivated = 0, shared = 0;
+  int k = 0;
+  for (const Brush& b : sequence(c, p.edits)) {
+    const engine::BrushResult r = engine::apply_brush_cpu(c.vol, b);
+    engine::LiveUpdateStats st;
+    const auto before = lf->current();
+    const auto snap = lf->update(c.vol, r.dirty, &st);
+    const std::string what = p.volume + "/" + p.passes + "/" + fmt_name(p.format) + " edit " + std::to_string(k++) +
+                             " (" + engine::to_string(b.kind) + ", r " + std::to_string(b.radius_m * 1e3) + " mm, " +
+                             std::to_string(r.dirty.size()) + " dirty bricks)";
+    ASSERT_EQ(snap, lf->current());
+    EXPECT_EQ(snap->version, before->version + 1) << what;
+    EXPECT_EQ(st.version, snap->version) << what;
+    EXPECT_EQ(st.dirty, r.dirty.size()) << what;
+    EXPECT_EQ(st.active, snap->bricks->active_bricks()) << what;
+    // activated / deactivated against the two tables.
+    std::size_t up = 0, down = 0;
+    for (std::size_t id = 0; id < snap->bricks->table.size(); ++id) {
+      const bool u0 = before->bricks->table[id] & BrickStore::kUniform, u1 = snap->bricks->table[id] & BrickStore::kUniform;
+      up += u0 && !u1;
+      down += !u0 && u1;
+    }
+    EXPECT_EQ(st.activated, up) << what;
+    EXPECT_EQ(st.deactivated, down) << what;
+    activated += up;
+    deactivated += down;
+    shared += st.shared;
+    expect_full_run(*snap, c.vol, o, what);
+    if (HasFailure()) return;
+  }
+  std::printf("  %s/%s/%s: %zu bricks activated, %zu deactivated, %zu shared over the edits\n", p.volume.c_str(),
+              p.passes.c_str(), fmt_name(p.format).c_str(), activated, deactivated, shared);
+  EXPECT_GT(activated, 0u) << "the sequence must turn uniform bricks active";
+  EXPECT_GT(deactivated, 0u) << "the sequence must turn active bricks uniform";
+}
+
+std::vector<Combo> combos() {
+  std::vector<Combo> v;
+  for (const char* vol : {"sphere", "head"})
+    for (const char* pass : {"gradient", "gauss", "closing"})
+      for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kFp16, SampleFormat::kUnorm16})
+        v.push_back({vol, pass, f, 12});
+  v.push_back({"sphere", "wide", SampleFormat::kFp32, 12});
+  v.push_back({"chest", "gradient", SampleFormat::kFp32, 7});
+  for (const char* pass : {"gauss", "closing"}) v.push_back({"chest", pass, SampleFormat::kFp32, 5});
+  v.push_back({"chest", "gradient", SampleFormat::kUnorm16, 5});
+  return v;
+}
+
+INSTANTIATE_TEST_SUITE_P(All, LiveFieldMatches, ::testing::ValuesIn(combos()),
+                         [](const ::testing::TestParamInfo<Combo>& i) {
+                           return i.param.volume + "_" + i.param.passes + "_" + fmt_name(i.param.format);
+                         });
+
+// ---- sharing ---------------------------------------------------------------------------
+
+// Bricks whose 8^3 box lies farther than the stencil's reach (R + 2 voxels: gradient and
+// apron, + 8 for the selection's one-brick neighbourhood) from every dirty brick cannot
+// change: by geometry, not by the code's own sets.
+bool far_from(const std::vector<std::uint32_t>& dirty, std::size_t id, const std::array<int, 3>& nb, int margin_vox) {
+  const auto b = core::brick_coords(id, nb);
+  for (std::uint32_t d : dirty) {
+    const auto e = core::brick_coords(d, nb);
+    bool near = true;
+    for (int a = 0; a < 3; ++a) {
+      const int gap = std::abs(b[std::size_t(a)] - e[std::size_t(a)]) * 8 - 8;  // voxels between the boxes
+      near = near && gap < margin_vox;
+    }
+    if (near) return false;
+  }
+  return true;
+}
+
+const void* address(const BrickStore& s, std::uint32_t entry) {
+  return s.format == SampleFormat::kFp32 ? static_cast<const void*>(s.pool->data() + entry)
+                                         : static_cast<const void*>(s.compact->data() + entry);
+}
+
+TEST(LiveField, UnchangedBricksShareThePoolAndSmallEditsStaySmall) {
+  for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kFp16, SampleFormat::kUnorm16}) {
+    Case c = cached("chest");
+    const LiveFieldOptions o = options(c, "gradient", f);
+    auto lf = LiveField::create(c.vol, o);
+    const std::array<int, 3> nb = core::brick_counts(c.vol.grid);
+    std::mt19937 rng(11);
+    for (int k = 0; k < 6; ++k) {
+      const core::Vec3 centre = at(c.vol.grid, std::uniform_real_distribution<double>(0.2, 0.8)(rng), 0.22,
+                                   std::uniform_real_distribution<double>(0.3, 0.7)(rng));
+      const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve, centre, 5e-3, 800);
+      const auto before = lf->current();
+      const engine::BrushResult r = engine::apply_brush_cpu(c.vol, b);
+      engine::LiveUpdateStats st;
+      const auto after = lf->update(c.vol, r.dirty, &st);
+      const BrickStore &s0 = *before->bricks, &s1 = *after->bricks;
+      std::size_t far = 0, moved = 0, same_slot = 0;
+      for (std::size_t id = 0; id < s1.table.size(); ++id) {
+        const bool a0 = !(s0.table[id] & BrickStore::kUniform), a1 = !(s1.table[id] & BrickStore::kUniform);
+        if (a0 && a1 && address(s0, s0.table[id]) == address(s1, s1.table[id])) ++same_slot;
+        if (!a0 || !a1 || !far_from(r.dirty, id, nb, 2 + 8)) continue;
+        ++far;
+        moved += address(s0, s0.table[id]) != address(s1, s1.table[id]);
+      }
+      EXPECT_EQ(moved, 0u) << fmt_name(f) << " edit " << k << ": active bricks far from the edit moved";
+      EXPECT_GT(far, 100u);
+      EXPECT_EQ(st.shared, same_slot) << fmt_name(f) << " edit " << k;
+      EXPECT_EQ(st.new_bytes, (st.active - st.shared) * (f == SampleFormat::kFp32 ? 729u * 16u
+                                                         : f == SampleFormat::kFp16 ? 729u * 8u : 729u * 8u + 32u));
+      // A 5 mm brush on 1.68 x 1.68 x 5 mm voxels: its voxel box (+1 voxel) spans at most 2
+      // bricks per axis, the gradient and apron one brick more each side at most.
+      EXPECT_LE(st.recomputed, 4u * 4u * 4u) << fmt_name(f) << " edit " << k;
+      EXPECT_LE(st.recomputed, (r.dirty.size() + 1) * 27u);
+      std::printf("  %s 5 mm %s: %zu dirty, %zu recomputed, %zu shared of %zu active, %llu new bytes, %.3f ms\n",
+                  fmt_name(f).c_str(), engine::to_string(b.kind), r.dirty.size(), st.recomputed, st.shared, st.active,
+                  static_cast<unsigned long long>(st.new_bytes), st.total_ms);
+    }
+    expect_full_run(*lf->current(), c.vol, o, "chest after 5 mm edits " + fmt_name(f));
+  }
+}
+
+// A snapshot held across many updates (slots retired and reused around it, its bricks
+// edited again and again) reads exactly what it read when it was published.
+TEST(LiveField, AHeldSnapshotReadsWhatItReadBefore) {
+  for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kUnorm16}) {
+    Case c = cached("head");
+    const LiveFieldOptions o = options(c, "gauss", f);
+    auto lf = LiveField::create(c.vol, o);
+    std::mt19937 rng(5);
+    auto random_edit = [&](double r_vox) {
+      const core::Vec3 centre = at(c.vol.grid, std::uniform_real_distribution<double>(0.3, 0.7)(rng),
+                                   std::uniform_real_distribution<double>(0.3, 0.7)(rng),
+                                   std::uniform_real_distribution<double>(0.3, 0.7)(rng));
+      const Brush b = brush(c, rng() % 2 ? BrushKind::kAdd : BrushKind::kCarve, centre, r_vox * c.vol.grid.spacing_m.x,
+                            1500);
+      return lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty);
+    };
+    random_edit(2);
+    const auto held = lf->current();
+    std::vector<BrickDump> bricks;
+    for (std::size_t id = 0; id < held->bricks->table.size(); ++id) bricks.push_back(dump(*held->bricks, id));
+    const auto read0 = reads(*held, 2000, 3);
+    for (int k = 0; k < 40; ++k) {
+      random_edit(k % 5 == 0 ? 6 : 2);
+      std::size_t differ = 0;
+      for (std::size_t id = 0; id < bricks.size(); ++id) differ += !(dump(*held->bricks, id) == bricks[id]);
+      ASSERT_EQ(differ, 0u) << fmt_name(f) << ": the held snapshot changed after update " << k;
+    }
+    EXPECT_EQ(reads(*held, 2000, 3), read0);
+    expect_full_run(*lf->current(), c.vol, o, "head after 41 edits " + fmt_name(f));
+  }
+}
+
+// The same while a reader thread reads the held snapshot (the servo's situation; run it
+// under TSan too) and a publisher hands each new snapshot over.
+TEST(LiveField, AReaderThreadSeesNoChangeWhileUpdatesRun) {
+  Case c = cached("head");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  std::mutex mu;
+  std::shared_ptr<const core::SampleField> published = lf->current();
+  std::atomic<bool> stop{false};
+  std::atomic<int> snapshots_read{0}, mismatches{0};
+  std::thread reader([&] {
+    while (!stop.load()) {
+      std::shared_ptr<const core::SampleField> s;
+      {
+        std::lock_guard lock(mu);
+        s = published;
+      }
+      const auto r0 = reads(*s, 300, 9);
+      for (int i = 0; i < 3; ++i)
+        if (reads(*s, 300, 9) != r0) mismatches.fetch_add(1);
+      snapshots_read.fetch_add(1);
+    }
+  });
+  std::mt19937 rng(2);
+  for (int k = 0; k < 60; ++k) {
+    const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve,
+                          at(c.vol.grid, std::uniform_real_distribution<double>(0.3, 0.7)(rng), 0.5, 0.5),
+                          2 * c.vol.grid.spacing_m.x, 1500);
+    auto s = lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty);
+    std::lock_guard lock(mu);
+    published = std::move(s);
+  }
+  while (snapshots_read.load() < 5) std::this_thread::yield();
+  stop = true;
+  reader.join();
+  EXPECT_EQ(mismatches.load(), 0);
+  expect_full_run(*lf->current(), c.vol, o, "head after the threaded edits");
+}
+
+// Every snapshot held: the free slots run out and the bricks move into a new arena; every
+// held snapshot still reads what it read, and releasing them frees the old arena.
+TEST(LiveField, ANewArenaWhenHeldSnapshotsFillTheOld) {
+  for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kFp16}) {
+    Case c = cached("head");
+    const LiveFieldOptions o = options(c, "gradient", f);
+    auto lf = LiveField::create(c.vol, o);
+    const std::uint64_t arena0 = lf->arena_bytes();
+    std::vector<std::shared_ptr<const core::SampleField>> held{lf->current()};
+    std::vector<std::vector<std::uint64_t>> seen{reads(*held.back(), 500, 1)};
+    std::mt19937 rng(8);
+    int k = 0;
+    for (; k < 60 && lf->arena_bytes() == arena0; ++k) {
+      const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve,
+                            at(c.vol.grid, std::uniform_real_distribution<double>(0.25, 0.75)(rng), 0.5,
+                               std::uniform_real_distribution<double>(0.25, 0.75)(rng)),
+                            6 * c.vol.grid.spacing_m.x, 2000);
+      held.push_back(lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty));
+      seen.push_back(reads(*held.back(), 500, 1));
+    }
+    ASSERT_GT(lf->arena_bytes(), arena0) << fmt_name(f) << ": no new arena after " << k << " held edits";
+    std::printf("  %s: new arena after %d held edits (%.1f -> %.1f MiB of arenas)\n", fmt_name(f).c_str(), k,
+                double(arena0) / 1048576.0, double(lf->arena_bytes()) / 1048576.0);
+    // Two more edits in the new arena, then every held snapshot is read again.
+    for (int j = 0; j < 2; ++j) {
+      const Brush b = brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5, 0.5), 4 * c.vol.grid.spacing_m.x, 2000);
+      held.push_back(lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty));
+      seen.push_back(reads(*held.back(), 500, 1));
+    }
+    for (std::size_t i = 0; i < held.size(); ++i) EXPECT_EQ(reads(*held[i], 500, 1), seen[i]) << "snapshot " << i;
+    expect_full_run(*lf->current(), c.vol, o, "head after the move to a new arena " + fmt_name(f));
+    const std::uint64_t slot = f == SampleFormat::kFp32 ? 729u * 16u : 729u * 8u;
+    held.clear();  // only the current snapshot is left: the old arena goes, one slot per active brick
+    EXPECT_EQ(lf->pool_bytes(), lf->current()->bricks->active_bricks() * slot);
+    EXPECT_LT(lf->arena_bytes(), arena0 * 2);
+  }
+}
+
+// ---- memory ------------------------------------------------------------------------------
+
+TEST(LiveField, ThousandsOfSmallEditsKeepTheMemoryBounded) {
+  Case c = cached("head");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  const std::uint64_t arena0 = lf->arena_bytes(), slot = 729u * 16u;
+  EXPECT_EQ(lf->pool_bytes(), lf->current()->bricks->active_bricks() * slot);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(0.1, 0.9);
+  std::size_t wrong = 0, new_bricks = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const Brush b = brush(c, k % 3 == 0 ? BrushKind::kAdd : (k % 3 == 1 ? BrushKind::kCarve : BrushKind::kSmooth),
+                          at(c.vol.grid, u(rng), u(rng), u(rng)), 1.5 * c.vol.grid.spacing_m.x,
+                          k % 3 == 2 ? 0.5 : 900);
+    engine::LiveUpdateStats st;
+    (void)lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty, &st);
+    new_bricks += st.active - st.shared;
+    // Nobody holds an old snapshot: exactly one slot per active brick is in use.
+    wrong += lf->pool_bytes() != lf->current()->bricks->active_bricks() * slot;
+  }
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_EQ(lf->arena_bytes(), arena0);
+  EXPECT_GT(new_bricks, lf->arena_bytes() / slot) << "the edits must have reused slots";
+  std::printf("  3000 edits: %zu bricks written, arena %zu slots, %zu in use\n", new_bricks,
+              std::size_t(lf->arena_bytes() / slot), std::size_t(lf->pool_bytes() / slot));
+  expect_full_run(*lf->current(), c.vol, o, "head after 3000 small edits");
+}
+
+// ---- bad input -----------------------------------------------------------------------------
+
+TEST(LiveField, BadIdsThrowNamingTheIdAndChangeNothing) {
+  Case c = cached("sphere");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  const auto before = lf->current();
+  const std::size_t total = before->bricks->total_bricks();
+  // Edit first, then name a bad id among good ones: nothing may be half applied.
+  const engine::BrushResult r =
+      engine::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5, 0.8), 3e-3, 3000));
+  ASSERT_FALSE(r.dirty.empty());
+  for (std::uint32_t bad : {std::uint32_t(total), std::uint32_t(total + 12345), 0xffffffffu}) {
+    std::vector<std::uint32_t> ids = r.dirty;
+    ids.insert(ids.begin() + 1, bad);
+    try {
+      (void)lf->update(c.vol, ids);
+      ADD_FAILURE() << "id " << bad << " accepted";
+    } catch (const std::out_of_range& e) {
+      EXPECT_NE(std::string(e.what()).find(std::to_string(bad)), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(lf->current(), before);
+  }
+  Volume other = engine::make_sphere({40, 38, 36}, 1e-3, 13.0);
+  EXPECT_THROW((void)lf->update(other, {0}), std::invalid_argument);
+  EXPECT_THROW((void)LiveField::create(c.vol, {{PassDesc::gaussian(1.0)}, c.iso, 0.f, SampleFormat::kFp32}),
+               std::invalid_argument);
+  const auto after = lf->update(c.vol, r.dirty);
+  EXPECT_EQ(after->version, before->version + 1);
+  expect_full_run(*after, c.vol, o, "sphere after refused updates");
+  // No change at all: a new version sharing the whole store.
+  const auto same = lf->update(c.vol, r.dirty);
+  EXPECT_EQ(same->version, after->version + 1);
+  EXPECT_EQ(same->bricks, after->bricks);
+  const auto none = lf->update(c.vol, {});
+  EXPECT_EQ(none->version, same->version + 1);
+}
+
+// A compact format refuses a value it cannot hold (core::make_bricked_field's rule): the
+// update throws naming the brick, and the published snapshot and its bookkeeping stay.
+TEST(LiveField, ACompactFormatRefusesWhatItCannotHoldAndStaysAsItWas) {
+  Case c = cached("sphere");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp16);
+  auto lf = LiveField::create(c.vol, o);
+  const auto before = lf->current();
+  const std::uint64_t pool0 = lf->pool_bytes();
+  Volume v = c.vol;
+  // A voxel next to the surface (|distance| < 0.5 mm): its brick is active.
+  const core::Grid& g = v.grid;
+  std::size_t voxel = 0;
+  while (std::fabs(v.voxels[voxel]) >= 0.5f) ++voxel;
+  const int x = int(voxel % std::size_t(g.dims[0])), y = int(voxel / std::size_t(g.dims[0]) % std::size_t(g.dims[1])),
+            z = int(voxel / (std::size_t(g.dims[0]) * std::size_t(g.dims[1])));
+  const auto nb = core::brick_counts(g);
+  const std::uint32_t id = std::uint32_t((z / 8 * nb[1] + y / 8) * nb[0] + x / 8);
+  ASSERT_FALSE(before->bricks->table[id] & BrickStore::kUniform);
+  const float old_value = v.voxels[voxel];
+  v.voxels[voxel] = 70000.f;
+  try {
+    (void)lf->update(v, {id});
+    ADD_FAILURE() << "fp16 accepted 70000";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("fp16"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(lf->current(), before);
+  EXPECT_EQ(lf->pool_bytes(), pool0);
+  v.voxels[voxel] = old_value + 1.f;
+  expect_full_run(*lf->update(v, {id}), v, o, "sphere after a refused fp16 value");
+}
+
+// ---- benchmark (disabled: speed figures are printed, never asserted) --------------------
+
+TEST(LiveField, DISABLED_BenchChestCarve) {
+  Case c = cached("chest");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  std::mt19937 rng(3);
+  for (double r_mm : {2.0, 5.0, 10.0}) {
+    std::vector<double> ms, recomputed;
+    for (int k = 0; k < 200; ++k) {
+      // On the body surface region (y near the chest wall), random x and z.
+      const core::Vec3 centre = at(c.vol.grid, std::uniform_real_distribution<double>(0.25, 0.75)(rng),
+                                   std::uniform_real_distribution<double>(0.15, 0.3)(rng),
+                                   std::uniform_real_distribution<double>(0.2, 0.8)(rng));
+      const engine::BrushResult r =
+          engine::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, centre, r_mm * 1e-3, 600));
+      engine::LiveUpdateStats st;
+      (void)lf->update(c.vol, r.dirty, &st);
+      ms.push_back(st.total_ms);
+      recomputed.push_back(double(st.recomputed));
+    }
+    auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    auto p99 = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      return v[v.size() * 99 / 100];
+    };
+    std::printf("  chest carve %4.1f mm: update median %.3f ms, p99 %.3f ms, recomputed bricks median %.0f\n", r_mm,
+                median(ms), p99(ms), median(recomputed));
+  }
+}
+
+}  // namespace

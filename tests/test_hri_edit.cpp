@@ -309,6 +309,80 @@ TEST(HriEdit, AnEditDuringTheSlewRestartsItFromTheForceSent) {
   EXPECT_NEAR(t.back().vhip_m.z, 0.0145, 1e-3 * kVoxel);
 }
 
+// An edit that also changes the value scale (added material 10 times less steep than the
+// old one, same isosurface): the embedded VHIP's depth is estimated from the new snapshot's
+// gradient, so the search reaches the new surface (the old |grad| would put it ten times
+// too near and leave the VHIP embedded).
+TEST(HriEdit, AddWithAnotherGradientScaleStillFindsTheNewSurface) {
+  SampleField before = floor_at(0.016, 1);
+  for (Sample& v : before.samples) v = {10 * v.value, 10 * v.gx, 10 * v.gy, 10 * v.gz};
+  const SampleField after = floor_at(0.0175, 2);
+  const int edit = 153, ticks = 260;
+  HriRenderer r(params());
+  const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.015));
+  EXPECT_TRUE(t[edit].plane_update);
+  EXPECT_NEAR(t[edit].vhip_m.z, 0.0175, 1e-3 * kVoxel);
+  EXPECT_NEAR(t.back().vhip_m.z, 0.0175, 1e-3 * kVoxel);
+  EXPECT_NEAR(norm(t.back().force_n), kK * 0.0025, 1e-5);
+  EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
+}
+
+// With recovery time on (50 ms), the edit tick starts no recovery ramp: the slew alone
+// governs, so the carve reaches K * the new depth after ceil(0.8 N / step) = 5 ticks
+// (a 50 ms ramp would still be 90 % short of it).
+TEST(HriEdit, OnAnEditTickTheSlewReplacesTheRecoveryRamp) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  const int edit = 152, ticks = 170;
+  HriParams p = params();
+  p.recovery_time_s = 0.05;
+  HriRenderer r(p);
+  const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.0135));
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.0025, 1e-5);
+  EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
+  for (int k = edit + 4; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
+}
+
+// An edit in the middle of a running recovery ramp (the HIP entered 3 mm in one tick, a
+// 50 ms ramp from 0 started, the carve comes 20 ms later): the slew takes the ramp over, so
+// |F| reaches K * the new depth within a few steps instead of ramping on for 30 ms.
+TEST(HriEdit, AnEditDuringARecoveryRampFoldsTheRampIntoTheSlew) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  const int edit = 21, ticks = 80;
+  HriParams p = params();
+  p.recovery_time_s = 0.05;
+  HriRenderer r(p);
+  const HipAt hip = [](int k) { return Vec3{kX, kY, k == 0 ? 0.0165 : 0.0135}; };
+  const auto t = drive(r, ticks, switch_at(before, after, edit), hip);
+  const double sent = norm(t[edit - 1].force_n);
+  ASSERT_LT(sent, kK * 0.0025 * 0.7);  // still ramping up when the edit comes
+  const int reach = int(std::ceil(std::abs(kK * 0.0015 - sent) / kStep));
+  double worst = 0;
+  for (int k = edit; k < ticks; ++k) worst = std::max(worst, std::abs(norm(t[k].force_n) - norm(t[k - 1].force_n)));
+  EXPECT_LE(worst, kStep * (1 + 1e-12));
+  for (int k = edit + reach; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
+}
+
+// The slew ends once |F| reaches the target: after a carve has settled, the user's own
+// quick press (0.4 mm per tick, 0.32 N per tick, more than the step) is felt at once,
+// F = K * depth on every tick (no damping here).
+TEST(HriEdit, AfterTheSlewTheUsersOwnMotionIsNotSlewed) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  const int edit = 152, press = 200, ticks = 206;
+  HriParams p = params();
+  p.damping_n_s_per_m = 0;
+  HriRenderer r(p);
+  const HipAt hip = [&](int k) {
+    const HipAt hold = press_to(0.0135);
+    return k < press ? hold(k) : Vec3{kX, kY, 0.0135 - 4e-4 * (k - press + 1)};
+  };
+  const auto t = drive(r, ticks, switch_at(before, after, edit), hip);
+  EXPECT_NEAR(norm(t[press - 1].force_n), kK * 0.0015, 1e-5);  // settled after the carve
+  for (int k = press; k < ticks; ++k) {
+    EXPECT_NEAR(t[k].force_n.z, kK * (0.015 - hip(k).z), 1e-5) << k;
+    EXPECT_GT(norm(t[k].force_n) - norm(t[k - 1].force_n), 1.5 * kStep) << k;
+  }
+}
+
 // No version change: the trace is bit for bit the trace with the feature off, tick by tick,
 // over approach, press, slide, a NaN HIP (fault), an absurd HIP (resync), lift-off and
 // re-entry, for several parameter sets (period, recovery time, friction, force shading).

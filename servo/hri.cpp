@@ -126,6 +126,30 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   return true;
 }
 
+bool HriRenderer::march_out(const FieldView& field, const Vec3& x, Vec3& p) const {
+  // Half-voxel steps along the outward normal at x, at most march_budget samples, to the
+  // first point outside; then 20 bisection steps. p is the outside end of the last bracket.
+  const Vec3& sp = field.grid().spacing_m;
+  const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
+  const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
+  const int budget = std::max(2, params_.march_budget);
+  double lo = 0.0;
+  for (int i = 1; i <= budget; ++i) {
+    const double t = h * i;
+    if (!(excess(sample_value(field, x + n0 * t)) > 0.0)) {
+      double hi = t;
+      for (int k = 0; k < 20; ++k) {
+        const double mid = 0.5 * (lo + hi);
+        (excess(sample_value(field, x + n0 * mid)) > 0.0 ? lo : hi) = mid;
+      }
+      p = x + n0 * hi;
+      return true;
+    }
+    lo = t;
+  }
+  return false;
+}
+
 VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, double f_hip,
                                         const Vec3& hip) const {
   // p = LinearInterpolation(VHIP, HIP, tau)  (Figure 2, eq. 1), optionally refined.
@@ -150,8 +174,10 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     // rule would extrapolate. Look for the surface from the VHIP along its outward
     // normal (see surface_from); keep p = VHIP if none. An embedding below 1e-4 voxel is
     // rounding, not Figure 5b.
+    // On an edit tick, material added deeper than that reach: march out (march_out).
     Vec3 p;
-    return plane_at(field, surface_from(field, vhip_, e0, gn0, p) ? p : vhip_, hip);
+    const bool found = surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
+    return plane_at(field, found ? p : vhip_, hip);
   }
   double t = -e0 / (e1 - e0);
   if (!std::isfinite(t)) t = 0.0;

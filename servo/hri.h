@@ -197,8 +197,10 @@ struct HriParams {
 ///   surface at once and |F| eases down to K times the new depth. Carved deeper than the
 ///   HIP: the plane is dropped and |F| fades out along the last force direction (contact =
 ///   true while it fades, penetration 0). Added over the VHIP: the VHIP comes out to the
-///   new surface (the embedded-VHIP search above; an addition deeper than its reach, about
-///   4 voxels, leaves the VHIP where it is) and |F| rises. With the parameter 0 the version
+///   new surface (the embedded-VHIP search above; where the addition is deeper than its
+///   reach, 8 voxels at most, a march out along the outward normal at the VHIP, half-voxel
+///   steps, at most march_budget samples, then 20 bisection steps) and |F| rises toward
+///   K times the new depth (saturated at the limit). With the parameter 0 the version
 ///   is never read (a run is bit for bit the run without the feature), and without a
 ///   version change nothing differs either. Fault ticks (zero force) end the slew. The
 ///   paper variant ignores versions (Figure 2 as printed).
@@ -239,6 +241,10 @@ class HriRenderer final : public Renderer {
   /// Surface point p from x (inside, excess e_x, |grad| grad_norm) along the outward normal
   /// at x, within twice the first-order depth plus a quarter voxel; false if none.
   bool surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm, Vec3& p) const;
+  /// Edit ticks: the surface point p from an embedded x (deeper than surface_from reaches)
+  /// marched along the outward normal at x (half-voxel steps, at most march_budget samples,
+  /// 20 bisection steps); false if none.
+  bool march_out(const FieldView& field, const Vec3& x, Vec3& p) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
   bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);

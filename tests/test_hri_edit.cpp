@@ -217,6 +217,23 @@ TEST(HriEdit, AddOverTheVhipBringsTheProxyOutGradually) {
   EXPECT_NEAR(t.back().force_n.z, kK * 0.0025, 1e-5);
 }
 
+// A thick addition (the floor rises by 10 mm over a HIP 1 mm deep, beyond the 8-voxel reach
+// of the bounded embedded-VHIP search): the proxy is still brought out to the new floor,
+// and |F| rises to the saturated K * 11 mm (8.8 N -> the 3.3 N limit) in steps of at most 5 %.
+TEST(HriEdit, AThickAdditionBringsTheProxyOutToo) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.026, 2);
+  const int edit = 153, ticks = 260;
+  HriRenderer r(params());
+  const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.015));
+  EXPECT_TRUE(t[edit].plane_update);
+  EXPECT_NEAR(t[edit].vhip_m.z, 0.026, 1e-3 * kVoxel);
+  EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
+  EXPECT_NEAR(norm(t[edit].force_n), kK * 0.001 + kStep, 1e-5);
+  EXPECT_NEAR(t.back().vhip_m.z, 0.026, 1e-3 * kVoxel);
+  EXPECT_NEAR(t.back().force_n.z, kLimit, 1e-9);
+  EXPECT_TRUE(t.back().saturated);
+}
+
 // Material added over a hovering probe (free motion, 0.5 mm above the floor; the floor
 // rises by 1.5 mm): the proxy is the HIP of the tick before, outside in the old snapshot,
 // so it is brought out to the new surface and |F| rises to K * 1 mm. Without the feature

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <limits>
@@ -15,6 +16,9 @@
 #include <sstream>
 
 #include "brick_field.h"
+#include "brush.h"
+#include "record.h"
+#include "vdb_io.h"
 #include "cpu_gradient.h"
 #include "field_view.h"
 #include "files.h"
@@ -417,6 +421,437 @@ EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::Vulk
   return r;
 }
 
+engine::BrushKind brush_kind(const std::string& k) {
+  if (k == "add") return engine::BrushKind::kAdd;
+  if (k == "carve") return engine::BrushKind::kCarve;
+  if (k == "smooth") return engine::BrushKind::kSmooth;
+  return engine::BrushKind::kDrill;
+}
+
+// The engine brush of a scene brush: centre grid-world [m], application time dt_s [s],
+// drill force |F| [N]; targets from engine::default_targets unless the scene sets them.
+engine::Brush make_brush(const BrushSpec& b, const engine::BrushTargets& defaults, const Vec3& centre_m,
+                         double dt_s, double force_n) {
+  engine::Brush e;
+  e.kind = brush_kind(b.kind);
+  e.centre_m = centre_m;
+  e.radius_m = b.radius_mm * 1e-3;
+  e.strength = b.strength;
+  e.falloff = b.falloff;
+  e.targets = defaults;
+  if (b.has_material) e.targets.material = float(b.material);
+  if (b.has_empty) e.targets.empty = float(b.empty);
+  if (b.density_scale > 0) e.targets.density_scale = float(b.density_scale);
+  e.force_threshold_n = b.force_threshold_n;
+  e.rate = b.rate;
+  e.dt_s = dt_s;
+  e.force_n = force_n;
+  return e;
+}
+
+// Every brush of the scene through engine::validate, before anything runs.
+void check_scene_brushes(const Scene& scene, const engine::Volume& vol) {
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  const engine::BrushTargets def = engine::default_targets(vol, iso);
+  const double dt = scene.edits.every_ticks / scene.hri.rate_hz;
+  auto check = [&](const BrushSpec& b, const std::string& field) {
+    const std::string why = engine::validate(make_brush(b, def, vol.grid.centre_m(), dt, 0.0));
+    if (!why.empty()) throw SceneError(scene.file + ": field '" + field + "': " + why);
+  };
+  check(scene.edits.brush, "edits.brush");
+  for (const TimedEdit& t : scene.edits.timeline)
+    if (t.kind != "undo" && t.kind != "redo") check(t.brush, "edits.timeline[" + std::to_string(t.index) + "]");
+}
+
+// Voxels inside the scene's isosurface (NaN outside).
+long inside_voxels(const engine::Volume& vol, const core::Isosurface& iso) {
+  long n = 0;
+  for (float v : vol.voxels) n += iso.contains(double(v)) ? 1 : 0;
+  return n;
+}
+
+/// One applied event as edits.csv lists it.
+struct EditRow {
+  EditEvent event;
+  std::string source;     ///< "timeline", "button"
+  EditOutcome outcome;
+  double removed_mm3 = 0; ///< cumulative removed volume after this event [mm^3]
+};
+
+// The scene's edits driven from the servo loop (the after-tick hook): timeline entries at
+// their tick, the button's brush at the VHIP while the button is down and the probe in
+// contact. Applies through the EditSession and publishes into the servo's buffer.
+class EditDriver {
+ public:
+  EditDriver(const Scene& scene, SceneSetup& setup, servo::TripleBuffer<servo::SampleField>& out)
+      : scene_(scene), setup_(setup), out_(out), iso_(setup.live.iso),
+        targets_(engine::default_targets(setup.volume, iso_)),
+        dt_(scene.edits.every_ticks / scene.hri.rate_hz),
+        voxel_mm3_(setup.volume.grid.spacing_m.x * setup.volume.grid.spacing_m.y * setup.volume.grid.spacing_m.z * 1e9),
+        inside0_(inside_voxels(setup.volume, iso_)) {
+    const EditsSpec& e = scene.edits;
+    for (std::size_t i = 0; i < e.timeline.size(); ++i) {
+      const TimedEdit& t = e.timeline[i];
+      const long k0 = edit_tick(t.t_s, scene.hri.rate_hz);
+      if (t.kind == "undo" || t.kind == "redo") {
+        plan_.push_back({k0, i, t.kind == "undo" ? Plan::kUndo : Plan::kRedo});
+      } else if (t.duration_s <= 0) {
+        plan_.push_back({k0, i, Plan::kApply});
+      } else {
+        const long k1 = std::max(k0 + 1, edit_tick(t.t_s + t.duration_s, scene.hri.rate_hz));
+        plan_.push_back({k0, i, Plan::kBegin});
+        long last = k0;
+        for (long k = k0; k < k1; k += e.every_ticks) {
+          plan_.push_back({k, i, Plan::kApply});
+          last = k;
+        }
+        plan_.push_back({last, i, Plan::kEnd});
+      }
+    }
+    std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
+  }
+
+  /// The TickHook.
+  void operator()(long k, servo::TraceRow& row) {
+    const double t = double(k) / scene_.hri.rate_hz;
+    // What tick k read (before this tick's edits): the release check's inside test.
+    hip_inside.push_back(iso_.contains(core::FieldView(*setup_.session->current()).value(row.hip_m)) ? 1 : 0);
+    for (; next_ < plan_.size() && plan_[next_].tick <= k; ++next_) {
+      const Plan& p = plan_[next_];
+      const TimedEdit& te = scene_.edits.timeline[p.entry];
+      switch (p.what) {
+        case Plan::kUndo: apply(k, t, EditEvent::Kind::kUndo, {}, "timeline"); break;
+        case Plan::kRedo: apply(k, t, EditEvent::Kind::kRedo, {}, "timeline"); break;
+        case Plan::kBegin: open(k, t, "timeline"); break;
+        case Plan::kEnd: close(k, t, "timeline"); break;
+        case Plan::kApply: {
+          const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
+          const double f = te.brush.force_n >= 0 ? te.brush.force_n : servo::norm(row.force_n);
+          apply(k, t, EditEvent::Kind::kBrush, make_brush(te.brush, targets_, c, dt_, f), "timeline");
+          ++figures.timeline_brushes;
+          break;
+        }
+      }
+    }
+    bool down = false;
+    for (const auto& iv : scene_.edits.button_down)
+      if (t >= iv[0] && t < iv[1]) down = true;
+    row.button = down;
+    if (down && !button_) {
+      press_tick_ = k;
+      open(k, t, "button");
+    }
+    if (!down && button_) close(k, t, "button");
+    button_ = down;
+    if (down && row.contact && (k - press_tick_) % scene_.edits.every_ticks == 0) {
+      apply(k, t, EditEvent::Kind::kBrush,
+            make_brush(scene_.edits.brush, targets_, row.vhip_m, dt_, servo::norm(row.force_n)), "button");
+      ++figures.button_brushes;
+    }
+  }
+
+  /// After the last tick: closes a stroke left open (button still down, stroke past the end).
+  void finish(long last_tick) {
+    const double t = double(last_tick) / scene_.hri.rate_hz;
+    if (open_ > 0) {
+      open_ = 1;
+      close(last_tick, t, "end of run");
+    }
+  }
+
+  std::vector<char> hip_inside;  ///< per tick: the HIP inside the snapshot that tick read
+  std::vector<EditRow> rows;
+  EditFigures figures;
+  long inside_before() const { return inside0_; }
+
+ private:
+  struct Plan {
+    long tick;
+    std::size_t entry;
+    enum What { kBegin, kApply, kEnd, kUndo, kRedo } what;
+  };
+  // Strokes nest: a timeline stroke during a button press (or the reverse) joins the open one.
+  void open(long k, double t, const char* src) {
+    if (open_++ == 0) apply(k, t, EditEvent::Kind::kBeginStroke, {}, src);
+  }
+  void close(long k, double t, const char* src) {
+    if (open_ > 0 && --open_ == 0) apply(k, t, EditEvent::Kind::kEndStroke, {}, src);
+  }
+  void apply(long k, double t, EditEvent::Kind kind, const engine::Brush& b, const char* src) {
+    EditEvent e;
+    e.kind = kind;
+    e.tick = k;
+    e.t_s = t;
+    if (kind == EditEvent::Kind::kBrush) e.brush = b;
+    EditRow r{e, src, setup_.session->apply(e, &out_), 0};
+    if (kind == EditEvent::Kind::kUndo || kind == EditEvent::Kind::kRedo) open_ = 0;  // undo / redo end an open stroke
+    if (kind == EditEvent::Kind::kBrush) {
+      ++figures.brushes;
+      if (figures.first_edit_t_s < 0) figures.first_edit_t_s = t;
+    }
+    if (kind == EditEvent::Kind::kUndo) ++figures.undos;
+    if (kind == EditEvent::Kind::kRedo) ++figures.redos;
+    if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
+    r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
+    rows.push_back(std::move(r));
+  }
+
+  const Scene& scene_;
+  SceneSetup& setup_;
+  servo::TripleBuffer<servo::SampleField>& out_;
+  core::Isosurface iso_;
+  engine::BrushTargets targets_;
+  double dt_, voxel_mm3_;
+  long inside0_, inside_now_ = inside0_;
+  std::vector<Plan> plan_;
+  std::size_t next_ = 0;
+  bool button_ = false;
+  long press_tick_ = 0;
+  int open_ = 0;
+};
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+// edits.csv: one row per applied event, centres physical [mm].
+std::string edits_csv(const std::vector<EditRow>& rows, const engine::Volume& vol) {
+  std::ostringstream s;
+  s << "t_s,tick,event,source,centre_x_mm,centre_y_mm,centre_z_mm,radius_mm,force_n,dirty_bricks,"
+       "recomputed_bricks,published,version,apply_ms,removed_mm3\n"
+    << std::setprecision(9);
+  for (const EditRow& r : rows) {
+    const bool brush = r.event.kind == EditEvent::Kind::kBrush;
+    const Vec3 c = brush ? vol.to_physical(r.event.brush.centre_m) * 1e3 : Vec3{};
+    s << r.event.t_s << ',' << r.event.tick << ',' << (brush ? engine::to_string(r.event.brush.kind) : to_string(r.event.kind))
+      << ',' << r.source << ',' << c.x << ',' << c.y << ',' << c.z << ',' << (brush ? r.event.brush.radius_m * 1e3 : 0.0)
+      << ',' << (brush ? r.event.brush.force_n : 0.0) << ','
+      << (brush ? r.outcome.brush.dirty.size() : r.outcome.restored.size()) << ',' << r.outcome.update.recomputed << ','
+      << int(r.outcome.published) << ',' << r.outcome.update.version << ',' << r.outcome.wall_ms << ',' << r.removed_mm3
+      << '\n';
+  }
+  return s.str();
+}
+
+// edits.png: |F| with the drill threshold, HIP / VHIP depth below the initial contact point,
+// removed volume; button intervals shaded, brush applications marked.
+bool draw_edit_plots(const Scene& scene, const std::string& dir, const servo::TouchScript& script,
+                     const engine::Volume& vol, std::string& note) {
+  const std::string csv = fs::absolute(fs::path(dir) / "trace.csv").string();
+  const std::string ecsv = fs::absolute(fs::path(dir) / "edits.csv").string();
+  const std::string png = fs::absolute(fs::path(dir) / "edits.png").string();
+  const Vec3 c = vol.to_physical(script.contact_point_m), n = vol.direction_apply(script.contact_normal);
+  std::ostringstream depth;  // depth [mm] of trace.csv columns (x, y, z) below the contact point along -n
+  depth << std::setprecision(12);
+  auto dexpr = [&](int col) {
+    std::ostringstream e;
+    e << std::setprecision(12) << "(1000*((" << c.x << "-$" << col << ")*(" << n.x << ")+(" << c.y << "-$" << col + 1
+      << ")*(" << n.y << ")+(" << c.z << "-$" << col + 2 << ")*(" << n.z << ")))";
+    return e.str();
+  };
+  std::ostringstream g;
+  g << "# Edit plots of " << dir << "; re-run with: gnuplot edits.gp\n"
+    << "set datafile separator ','\n"
+    << "set terminal pngcairo size 1100,980 font 'Sans,10'\n"
+    << "set output " << gnuplot_quote(temp_name(png)) << "\n"
+    << "set multiplot layout 3,1 title " << gnuplot_quote("isotouch - " + scene.name + ": force, depth and removed volume while editing") << "\n"
+    << "set grid\nset key top left\n";
+  int obj = 1;
+  for (const auto& iv : scene.edits.button_down)
+    g << "set object " << obj++ << " rect from " << iv[0] << ", graph 0 to " << iv[1]
+      << ", graph 1 fc rgb '#fdebd0' fs solid 0.6 behind\n";
+  g << "set ylabel '|F| [N]'\n"
+    << "plot " << gnuplot_quote(csv) << " every ::1 using 1:(sqrt($8**2+$9**2+$10**2)) with lines lw 1.5 lc rgb '#c0392b' title '|F| on the device', "
+    << gnuplot_quote(ecsv) << " every ::1 using 1:($3 eq 'drill' || $3 eq 'carve' || $3 eq 'add' || $3 eq 'smooth' ? $9 : 1/0) with points pt 7 ps 0.35 lc rgb '#1e8449' title 'brush applied (force given)', ";
+  if (scene.edits.brush.kind == "drill")
+    g << scene.edits.brush.force_threshold_n << " with lines dt 3 lc rgb '#1e8449' title 'drill threshold', ";
+  g << scene.hri.force_limit_n << " with lines dt 2 lc rgb '#555555' title 'force limit'\n"
+    << "set ylabel 'depth [mm]'\n"
+    << "plot " << gnuplot_quote(csv) << " every ::1 using 1:" << dexpr(2) << " with lines lw 1.5 lc rgb '#2471a3' title 'HIP depth', "
+    << gnuplot_quote(csv) << " every ::1 using 1:" << dexpr(5) << " with lines lw 1.5 lc rgb '#7d3c98' title 'VHIP depth', "
+    << "0 with lines dt 2 lc rgb '#555555' title 'initial surface'\n"
+    << "set xlabel 't [s]   (orange: button down)'\n"
+    << "set ylabel 'removed [mm^3]'\n"
+    << "plot " << gnuplot_quote(ecsv) << " every ::1 using 1:15 with steps lw 1.5 lc rgb '#b9770e' title 'removed volume (inside voxels before - now)'\n"
+    << "unset multiplot\n";
+  note = draw_with_gnuplot((fs::path(dir) / "edits.gp").string(), g.str(), {png});
+  return note.empty();
+}
+
+// The figures, files and pictures of a run with edits, into m.edits.
+void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<servo::TraceRow>& trace,
+                  const std::string& dir, RunMetrics& m, std::ostream& log) {
+  EditFigures& e = m.edits;
+  const long after_edit = e.contact_ticks_after_edit;
+  e = d.figures;
+  e.contact_ticks_after_edit = after_edit;
+  e.present = true;
+  EditSession& session = *setup.session;
+  e.events = long(d.rows.size());
+  std::vector<double> upd, brush_ms;
+  for (const EditRow& r : d.rows) {
+    if (r.outcome.published) {
+      ++e.publications;
+      upd.push_back(r.outcome.wall_ms);
+      e.update_ms_max = std::max(e.update_ms_max, r.outcome.wall_ms);
+      e.recomputed_bricks += long(r.outcome.update.recomputed);
+    }
+    if (r.event.kind == EditEvent::Kind::kBrush) {
+      e.dirty_bricks += long(r.outcome.brush.dirty.size());
+      brush_ms.push_back(r.outcome.brush.wall_ms);
+    }
+  }
+  e.update_ms_median = median_of(upd);
+  e.brush_ms_median = median_of(brush_ms);
+  e.last_version = session.current()->version;
+  e.brushes_on_gpu = session.sculptor().on_gpu();
+  e.history_bytes = session.sculptor().history().bytes();
+  e.history_limit_bytes = session.sculptor().history().limit_bytes();
+  e.history_dropped = session.sculptor().history().dropped_strokes();
+  const engine::Volume& after = session.volume();
+  e.inside_voxels_before = d.inside_before();
+  e.inside_voxels_after = inside_voxels(after, setup.live.iso);
+  const auto& sp = after.grid.spacing_m;
+  e.removed_mm3 = double(e.inside_voxels_before - e.inside_voxels_after) * sp.x * sp.y * sp.z * 1e9;
+  const Vec3 cp = setup.script.contact_point_m, n = setup.script.contact_normal;
+  for (const auto& r : trace) {
+    e.max_hip_depth_m = std::max(e.max_hip_depth_m, servo::dot(cp - r.hip_m, n));
+    e.max_vhip_depth_m = std::max(e.max_vhip_depth_m, servo::dot(cp - r.vhip_m, n));
+  }
+  log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
+      << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
+      << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
+      << " ms\n         removed " << fmt(e.removed_mm3, 5) << " mm^3 (" << e.inside_voxels_before - e.inside_voxels_after
+      << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
+      << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
+      << " B\n";
+
+  write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
+  // The edited volume and its isosurface; a failure is said, never fatal.
+  try {
+    if (scene.edits.write_vdb) {
+      SaveVdbOptions vo;
+      vo.iso = setup.live.iso;
+      vo.source_path = setup.volume.path;
+      save_vdb(after, (fs::path(dir) / "drilled.vdb").string(), vo);
+      e.vdb_file = "drilled.vdb";
+    }
+    if (scene.edits.write_stl) {
+      write_stl_binary(extract_mesh(after, setup.live.iso), (fs::path(dir) / "drilled.stl").string());
+      e.stl_file = "drilled.stl";
+    }
+  } catch (const std::exception& x) {
+    e.files_note = x.what();
+    log << "edits    file not written: " << x.what() << "\n";
+  }
+  if (scene.draw_plots) {
+    // Before and after: the same camera (from the run's contact points), unedited and edited voxels.
+    const RunPicture before = render_run_picture(scene, setup.volume, *setup.first, trace,
+                                                 (fs::path(dir) / "before.png").string(), setup.vk.get());
+    const RunPicture aft = render_run_picture(scene, after, *session.current(), trace,
+                                              (fs::path(dir) / "after.png").string(), setup.vk.get());
+    e.before_after_drawn = before.error.empty() && aft.error.empty();
+    e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
+    if (scene.write_trace) {
+      std::string note;
+      e.plot_drawn = draw_edit_plots(scene, dir, setup.script, setup.volume, note);
+      if (!e.plot_drawn) e.before_after_note += " plots: " + note;
+    }
+  }
+}
+
+nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
+  const auto or_null = [](bool have, auto v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  return {{"brush", {{"kind", scene.edits.brush.kind}, {"radius_mm", scene.edits.brush.radius_mm},
+                     {"force_threshold_n", scene.edits.brush.force_threshold_n}, {"rate", scene.edits.brush.rate}}},
+          {"every_ticks", scene.edits.every_ticks},
+          {"brushes_on", e.brushes_on_gpu ? "GPU" : "CPU"},
+          {"events", e.events},
+          {"brush_applications", e.brushes},
+          {"timeline_applications", e.timeline_brushes},
+          {"button_applications", e.button_brushes},
+          {"undo", e.undos},
+          {"redo", e.redos},
+          {"snapshots_published", e.publications},
+          {"last_version", e.last_version},
+          {"first_edit_t_s", or_null(e.first_edit_t_s >= 0, e.first_edit_t_s)},
+          {"dirty_bricks", e.dirty_bricks},
+          {"recomputed_bricks", e.recomputed_bricks},
+          {"update_ms", {{"median", e.update_ms_median}, {"max", e.update_ms_max},
+                         {"what", "EditSession::apply wall time (brush + live field update + publish), publishing events"}}},
+          {"brush_ms_median", e.brush_ms_median},
+          {"history_bytes", e.history_bytes},
+          {"history_limit_bytes", e.history_limit_bytes},
+          {"history_dropped_strokes", e.history_dropped},
+          {"removed_mm3", e.removed_mm3},
+          {"inside_voxels", {{"before", e.inside_voxels_before}, {"after", e.inside_voxels_after}}},
+          {"removed_method", "(inside voxels of the raw volume before - after) x voxel volume; inside = the scene's isovalue and inside, NaN outside"},
+          {"max_hip_depth_m", e.max_hip_depth_m},
+          {"max_vhip_depth_m", e.max_vhip_depth_m},
+          {"depth_method", "distance below the initial contact point along the inward surface normal there (the press direction)"},
+          {"contact_ticks_after_edit", e.contact_ticks_after_edit},
+          {"vdb", or_null(!e.vdb_file.empty(), e.vdb_file)},
+          {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
+          {"files_note", e.files_note},
+          {"pictures", e.before_after_drawn ? nlohmann::ordered_json::array({"before.png", "after.png"}) : nlohmann::ordered_json::array()},
+          {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
+          {"csv", "edits.csv"}};
+}
+
+std::string edits_markdown(const EditFigures& e, const Scene& scene) {
+  std::ostringstream md;
+  const BrushSpec& b = scene.edits.brush;
+  md << "## Edits\n\n"
+     << "Brush **" << b.kind << "**, radius " << fmt(b.radius_mm, 4) << " mm"
+     << (b.kind == "drill" ? ", threshold " + fmt(b.force_threshold_n, 4) + " N, rate " + fmt(b.rate, 6) + " per N s" : std::string())
+     << ", applied every " << scene.edits.every_ticks << " servo ticks while the button is down and the probe is in contact"
+     << " (brushes on the " << (e.brushes_on_gpu ? "GPU" : "CPU") << ").\n\n"
+     << "| | |\n|---|---|\n"
+     << "| applications | " << e.brushes << " (" << e.timeline_brushes << " from the timeline, " << e.button_brushes
+     << " from the button); " << e.undos << " undo, " << e.redos << " redo; " << e.events << " events in all |\n"
+     << "| snapshots | " << e.publications << " published, last version " << e.last_version << " |\n"
+     << "| bricks | " << e.dirty_bricks << " dirty (summed over applications), " << e.recomputed_bricks << " recomputed |\n"
+     << "| update time | median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
+     << " ms (EditSession::apply: brush, live field update, publish; wall clock, this machine); brush median "
+     << fmt(e.brush_ms_median, 4) << " ms |\n"
+     << "| removed volume | **" << fmt(e.removed_mm3, 5) << " mm^3** (" << e.inside_voxels_before << " - "
+     << e.inside_voxels_after << " inside voxels, times the voxel volume) |\n"
+     << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
+     << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
+     << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
+     << e.history_dropped << " strokes dropped) |\n"
+     << "| surface error | measured on the contact ticks before the first edit; " << e.contact_ticks_after_edit
+     << " contact ticks read an edited snapshot and are left out |\n\n";
+  if (e.plot_drawn) md << "![force, depth and removed volume against time](edits.png)\n\n";
+  if (e.before_after_drawn)
+    md << "| before | after |\n|---|---|\n| ![before](before.png) | ![after](after.png) |\n\n";
+  else if (!e.before_after_note.empty())
+    md << "Pictures: not drawn (" << e.before_after_note << ").\n\n";
+  md << "Files: `edits.csv` (one row per event)"
+     << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
+     << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL)")
+     << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
+  return md.str();
+}
+
+// `run --record FILE`: every tick's HIP, button and force, and the edit log.
+void write_recording(const Scene& scene, const SceneSetup& setup, const std::vector<servo::TraceRow>& trace,
+                     const std::string& path) {
+  Recording rec;
+  rec.scene_path = fs::absolute(scene.file).string();
+  std::ifstream in(scene.file, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  rec.scene_text = text.str();
+  rec.rate_hz = setup.hri.rate_hz;
+  rec.ticks.reserve(trace.size());
+  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n});
+  if (setup.session) rec.edits = setup.session->log();
+  save_recording(path, rec);
+}
+
 }  // namespace
 
 std::vector<engine::PassDesc> scene_passes(const Scene& scene) {
@@ -440,13 +875,21 @@ core::SampleFormat scene_sample_format(const Scene& scene) {
   throw SceneError(scene.file + ": field 'engine.samples': unknown format \"" + scene.engine.samples + "\"");
 }
 
-RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
-  RunMetrics m;
+SceneSetup::SceneSetup() = default;
+SceneSetup::SceneSetup(SceneSetup&&) noexcept = default;
+SceneSetup& SceneSetup::operator=(SceneSetup&&) noexcept = default;
+SceneSetup::~SceneSetup() = default;
+
+long edit_tick(double t_s, double rate_hz) { return std::max(0L, long(std::ceil(t_s * rate_hz - 1e-9))); }
+
+SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  SceneSetup s;
+  RunMetrics& m = s.metrics;
   (void)scene_passes(scene);  // a bad pass list fails before the volume is read
   (void)scene_sample_format(scene);
 
   // 1. Volume in.
-  engine::Volume vol;
+  engine::Volume& vol = s.volume;
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
     vol = engine::load_volume(scene.volume_path);
@@ -483,38 +926,71 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   co.device = opt.device;
   auto ctx = engine::VulkanContext::create(co);
   if (!ctx) throw std::runtime_error("Vulkan: " + ctx.error);
-  engine::VulkanContext& vk = **ctx.value;
+  s.vk = std::move(*ctx.value);
+  engine::VulkanContext& vk = *s.vk;
   m.gpu_device = vk.info().name;
   m.gpu_device_type = vk.info().type;
   log << "device   " << m.gpu_device << " (" << m.gpu_device_type << ", " << vk.info().driver << ")\n";
   const EngineRun er = run_engine(scene, vol, vk, opt, m, log);
-  const std::shared_ptr<servo::SampleField>& field = er.published;
+  s.first = er.published;
   // What the surface error is measured against, and the script is cast on: the dense fp32
   // samples of the same passes (CPU reference). For a dense or bricked fp32 snapshot its
   // isosurface is the published one (the bricks hold the same samples wherever a cell
   // can straddle tau); for compact samples it is the surface before rounding.
-  const servo::SampleField& truth = *er.truth;
+  s.truth = er.truth;
+  s.live.passes = scene_passes(scene);
+  s.live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
+  s.live.background = float(s.live.iso.outside_value(vol.min_value, vol.max_value));  // as run_engine
+  s.live.format = scene_sample_format(scene);
 
-  // 3. Publish the samples: the servo reads them through the one publication point.
+  // 3. Script, servo parameters, workspace.
+  s.hri = scene.hri;
+  s.script = servo::make_touch_script(*s.truth, s.hri, scene.script);
+  s.world_T_device.scale = scene.workspace_scale;
+  s.world_T_device.translation_m = vol.grid.centre_m();
+
+  // 4. Edits: the brushes (GPU), the undo history and the live field over a copy of the volume.
+  if (scene.edits.present) {
+    check_scene_brushes(scene, vol);
+    s.session = std::make_unique<EditSession>(engine::Volume(vol), &vk, s.live, scene.edits.history_limit_mib);
+    s.first = s.session->current();
+    log << "edits    " << scene.edits.timeline.size() << " timeline entries, " << scene.edits.button_down.size()
+        << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")
+        << ", undo limit " << fmt(scene.edits.history_limit_mib) << " MiB; first snapshot version "
+        << s.first->version << " (LiveField, " << s.live.passes.size() << " pass(es))\n";
+  }
+  const Vec3 contact_phys = vol.to_physical(s.script.contact_point_m);
+  const Vec3 normal_phys = vol.direction_apply(s.script.contact_normal);
+  log << "script   contact at (" << fmt(contact_phys.x * 1e3, 4) << ", " << fmt(contact_phys.y * 1e3, 4) << ", "
+      << fmt(contact_phys.z * 1e3, 4) << ") mm (physical, LPS), normal (" << fmt(normal_phys.x, 3) << ", "
+      << fmt(normal_phys.y, 3) << ", " << fmt(normal_phys.z, 3) << "), " << fmt(s.script.duration_s, 3) << " s at "
+      << fmt(s.hri.rate_hz) << " Hz\n";
+  return s;
+}
+
+RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  SceneSetup setup = setup_scene(scene, opt, log);
+  RunMetrics& m = setup.metrics;
+  const engine::Volume& vol = setup.volume;
+  engine::VulkanContext& vk = *setup.vk;
+  const std::shared_ptr<const servo::SampleField> field = setup.first;
+  const servo::SampleField& truth = *setup.truth;
+  const bool any_finite = vol.finite_voxels > 0;
+
+  // Publish the samples: the servo reads them through the one publication point.
   servo::TripleBuffer<servo::SampleField> published;
   published.publish(field);
 
-  // 4. Script, device, servo.
-  servo::HriParams hp = scene.hri;
-  servo::TouchScript script = servo::make_touch_script(truth, hp, scene.script);
-  servo::WorkspaceTransform xf;
-  xf.scale = scene.workspace_scale;
-  xf.translation_m = vol.grid.centre_m();
+  // Device and servo.
+  const servo::HriParams hp = setup.hri;
+  const servo::TouchScript& script = setup.script;
+  const servo::WorkspaceTransform xf = setup.world_T_device;
   Vec3 start_w, v0;
   script.at(0.0, start_w, v0);
   servo::SimDevice device(scene.device, xf.to_device(start_w));
   servo::HriRenderer renderer(hp);
   const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
   const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
-  log << "script   contact at (" << fmt(contact_phys.x * 1e3, 4) << ", " << fmt(contact_phys.y * 1e3, 4) << ", "
-      << fmt(contact_phys.z * 1e3, 4) << ") mm (physical, LPS), normal (" << fmt(normal_phys.x, 3) << ", "
-      << fmt(normal_phys.y, 3) << ", " << fmt(normal_phys.z, 3) << "), " << fmt(script.duration_s, 3) << " s at "
-      << fmt(hp.rate_hz) << " Hz\n";
 
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
   int last_quarter = -1;
@@ -530,8 +1006,15 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       std::cerr << "servo    " << k << "/" << total << " ticks (" << pct << "%)\n";
     }
   };
+  std::optional<EditDriver> edits;
+  servo::TickHook hook;
+  if (setup.session) {
+    edits.emplace(scene, setup, published);
+    hook = [&edits](long k, servo::TraceRow& row) { (*edits)(k, row); };
+  }
   const std::vector<servo::TraceRow> trace =
-      servo::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress);
+      servo::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress, 250, hook);
+  if (edits) edits->finish(long(trace.size()) - 1);
 
   // 5. Figures.
   m.ticks = long(trace.size());
@@ -574,6 +1057,12 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       ++dir_pairs;
       m.force_dir_step_max_deg = std::max(m.force_dir_step_max_deg, a);
     }
+    if (edits && r.version > 1) {  // the surface moved: the unedited volume's figures do not apply
+      ++m.edits.contact_ticks_after_edit;
+      m.max_force_n = std::max(m.max_force_n, f);
+      m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
+      continue;
+    }
     if (unfiltered) {
       const SurfaceDistance du = distance_to_isosurface(*unfiltered, hp.tau, r.vhip_m);
       if (du.found) {
@@ -609,8 +1098,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
         m.max_any_step_n = std::abs(f1 - f0);
         m.max_any_step_t_s = trace[i].t_s;
       }
-      if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n &&
-          iso.contains(view.value(trace[i].hip_m))) {
+      const bool inside = edits ? edits->hip_inside[i] != 0 : iso.contains(view.value(trace[i].hip_m));
+      if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n && inside) {
         m.max_release_step_n = f0;
         m.max_release_step_t_s = trace[i].t_s;
       }
@@ -622,7 +1111,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
   if (m.contact_ticks) {
     m.mean_contact_force_n = fsum / double(m.contact_ticks);
-    m.first_order_err_rms_m = std::sqrt(fo2 / double(m.contact_ticks));
+    const long measured = m.contact_ticks - m.edits.contact_ticks_after_edit;
+    if (measured > 0) m.first_order_err_rms_m = std::sqrt(fo2 / double(measured));
   }
   if (found) m.surface_err_rms_m = std::sqrt(err2 / double(found));
   if (dir_pairs) m.force_dir_step_rms_deg = std::sqrt(dir2 / double(dir_pairs));
@@ -649,6 +1139,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
   }
+  if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
 
   nlohmann::ordered_json j;
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
@@ -739,6 +1230,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
+  if (edits) j["edits"] = edits_json(m.edits, scene);
   write_file_atomic((fs::path(dir) / "summary.json").string(), j.dump(2) + "\n");
 
   std::ostringstream md;
@@ -826,6 +1318,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
      << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
      << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
+  if (edits) md << edits_markdown(m.edits, scene);
   md << engine_markdown(m);
   if (m.picture_drawn)
     md << "## Where the probe touched\n\n![isosurface, probe path and contact points](surface.png)\n\n"
@@ -839,6 +1332,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     md << "Plots: " << m.plot_note << ".\n\n";
   md << "Files: `trace.csv` (one row per tick), `summary.json`, `plots.gp` (gnuplot script for the plots).\n";
   write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
+  if (!opt.record_path.empty()) write_recording(scene, setup, trace, opt.record_path);
   return m;
 }
 

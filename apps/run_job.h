@@ -8,9 +8,13 @@
 #include <vector>
 
 #include "brick_field.h"
+#include "edit_session.h"
 #include "headless.h"
+#include "live_field.h"
 #include "passes.h"
 #include "scene.h"
+#include "vk_context.h"
+#include "workspace.h"
 
 namespace isotouch::app {
 
@@ -35,6 +39,40 @@ struct PassFigure {
   std::string label;   ///< engine::PassTiming::label
   double ms = -1;      ///< GPU: device time (timestamps; -1 if none); CPU: wall time [ms]
   int dispatches = 0;  ///< GPU dispatches; 0 on the CPU
+};
+
+/// What the scene's edits did (filled by run_scene when the scene has an "edits" section).
+struct EditFigures {
+  bool present = false;            ///< the scene has edits
+  long events = 0;                 ///< EditEvents applied (brushes, strokes, undo, redo)
+  long brushes = 0;                ///< brush applications
+  long timeline_brushes = 0, button_brushes = 0;  ///< of which from the timeline / the button
+  long undos = 0, redos = 0;
+  long publications = 0;           ///< snapshots published (samples changed)
+  std::uint64_t last_version = 1;  ///< SampleField::version of the last snapshot
+  long dirty_bricks = 0;           ///< sum over applications of the bricks whose voxels changed
+  long recomputed_bricks = 0;      ///< sum over updates of LiveUpdateStats::recomputed
+  double update_ms_median = 0, update_ms_max = 0;  ///< EditSession::apply wall time, publishing events [ms]
+  double brush_ms_median = 0;      ///< BrushResult::wall_ms median [ms]
+  bool brushes_on_gpu = false;     ///< Sculptor::on_gpu()
+  std::uint64_t history_bytes = 0, history_limit_bytes = 0;  ///< undo history at the end
+  std::size_t history_dropped = 0; ///< strokes dropped to stay under the limit
+  double first_edit_t_s = -1;      ///< time of the first brush application [s] (-1: none)
+  /// Contact ticks that read an edited snapshot (version > 1): left out of the surface
+  /// error, which is measured against the unedited volume's dense samples.
+  long contact_ticks_after_edit = 0;
+  /// Inside voxels before minus after, times the voxel volume [mm^3] (the scene's isovalue
+  /// and inside, NaN counts as outside): what the edits removed (negative: added).
+  double removed_mm3 = 0;
+  long inside_voxels_before = 0, inside_voxels_after = 0;
+  /// Depth along the press direction (-contact normal) below the initial contact point [m]:
+  /// deepest HIP and VHIP of the run.
+  double max_hip_depth_m = 0, max_vhip_depth_m = 0;
+  std::string vdb_file, stl_file;  ///< drilled.vdb / drilled.stl as written ("" if not)
+  std::string files_note;          ///< why a file was not written
+  bool before_after_drawn = false; ///< before.png and after.png written
+  bool plot_drawn = false;         ///< edits.png written
+  std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };
 
 /// Figures of one run (also written to summary.json).
@@ -106,7 +144,45 @@ struct RunMetrics {
   /// without filters.
   bool has_unfiltered = false;
   double unfiltered_err_rms_m = 0, unfiltered_err_max_m = 0;
+  /// The scene's edits (present = false without an "edits" section).
+  EditFigures edits;
 };
+
+/// Everything the servo loop of a scene needs, built the same way for `isotouch run` and
+/// `isotouch replay` (which rebuilds the exact pipeline from a recording's scene file).
+/// Frames: grid-world [m] for every point (core::Grid), device [m] through world_T_device.
+struct SceneSetup {
+  engine::Volume volume;                         ///< as loaded, before any edit
+  engine::LiveFieldOptions live;                 ///< passes, isosurface, background, format
+  servo::HriParams hri;                          ///< the renderer's parameters (scene.hri)
+  servo::WorkspaceTransform world_T_device;      ///< world = translation + scale * device
+  servo::TouchScript script;                     ///< the scripted hand (cast on `truth`)
+  /// The first published snapshot (version 1). With edits: the EditSession's (LiveField
+  /// version 1 = run_sparse_cpu, bit-identical to the GPU sparse chain); without edits:
+  /// the GPU chain's output, as before edits existed.
+  std::shared_ptr<const servo::SampleField> first;
+  /// Dense fp32 samples of the scene's passes on the unedited volume (CPU reference): the
+  /// script is cast on it and the surface error measured against it.
+  std::shared_ptr<const servo::SampleField> truth;
+  std::unique_ptr<engine::VulkanContext> vk;     ///< the Vulkan context (engine, brushes, pictures)
+  /// The edit pipeline (brushes on the GPU when there is a device, else the CPU reference)
+  /// when the scene has an "edits" section, else null. Built from a copy of `volume`.
+  std::unique_ptr<EditSession> session;
+  RunMetrics metrics;                            ///< the volume and engine figures (what run_scene reports)
+  SceneSetup();
+  SceneSetup(SceneSetup&&) noexcept;
+  SceneSetup& operator=(SceneSetup&&) noexcept;
+  ~SceneSetup();
+};
+
+/// Loads the scene's volume, runs its engine (GPU chain + CPU reference, the report's
+/// figures), builds the script and, with edits, the EditSession. run_scene starts with it.
+/// @throws as run_scene.
+SceneSetup setup_scene(const Scene& scene, const RunOptions& options, std::ostream& log);
+
+/// The tick after whose render an event at time t_s [s] is applied: the first tick k with
+/// k / rate_hz >= t_s (to 1e-9 tick).
+long edit_tick(double t_s, double rate_hz);
 
 /// Run one scene end to end and write its outputs into options.out_dir.
 /// @throws engine::VolumeError, SceneError, std::runtime_error with a clear reason.

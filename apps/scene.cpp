@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -167,6 +168,109 @@ void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
                                  "\" needs \"mode\": \"sparse\" (dense snapshots are fp32)");
 }
 
+// A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate",
+// "density_scale", "material", "empty" (+ "force_n" on the timeline), each over `base`.
+const std::set<std::string> kBrushKeys{"kind", "radius_mm", "strength", "falloff", "force_threshold_n",
+                                       "rate", "density_scale", "material", "empty"};
+
+BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, BrushSpec base, bool timed) {
+  BrushSpec s = base;
+  s.kind = r.string(b, where, "kind", s.kind);
+  if (s.kind != "add" && s.kind != "carve" && s.kind != "smooth" && s.kind != "drill")
+    r.fail(where + ".kind", "must be \"add\", \"carve\", \"smooth\" or \"drill\"" +
+                                std::string(timed ? " (or \"undo\", \"redo\")" : "") + ", got \"" + s.kind + "\"");
+  s.radius_mm = r.number(b, where, "radius_mm", s.radius_mm, 0, 1000, true);
+  s.strength = r.number(b, where, "strength", s.strength, 0, 1e30);
+  if (s.kind == "smooth" && s.strength > 1)
+    r.fail(where + ".strength", "a smooth brush's strength is a fraction in [0, 1], got " +
+                                    (b.contains("strength") ? b.at("strength").dump() : std::to_string(s.strength)));
+  s.falloff = r.number(b, where, "falloff", s.falloff, 0, 1, true);
+  s.force_threshold_n = r.number(b, where, "force_threshold_n", s.force_threshold_n, 0, 1000);
+  s.rate = r.number(b, where, "rate", s.rate, 0, 1e12);
+  if (b.contains("density_scale")) s.density_scale = r.number(b, where, "density_scale", 0, 0, 1e30, true);
+  if (b.contains("material")) {
+    s.has_material = true;
+    s.material = r.number(b, where, "material", 0, -1e30, 1e30);
+  }
+  if (b.contains("empty")) {
+    s.has_empty = true;
+    s.empty = r.number(b, where, "empty", 0, -1e30, 1e30);
+  }
+  if (timed) s.force_n = r.number(b, where, "force_n", s.force_n, 0, 1000);
+  return s;
+}
+
+std::set<std::string> with(std::set<std::string> a, std::initializer_list<const char*> more) {
+  for (const char* m : more) a.insert(m);
+  return a;
+}
+
+// "edits": {"brush": {...}, "every_ticks": 10, "button": [[t0, t1], ...], "timeline": [...],
+//           "history_limit_mib": 256, "write_vdb": true, "write_stl": true}
+void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
+  r.only(e, "edits", {"brush", "every_ticks", "button", "timeline", "history_limit_mib", "write_vdb", "write_stl"});
+  spec.present = true;
+  if (e.contains("brush")) {
+    r.only(e.at("brush"), "edits.brush", kBrushKeys);
+    spec.brush = parse_brush(r, e.at("brush"), "edits.brush", spec.brush, false);
+  }
+  spec.every_ticks = r.integer(e, "edits", "every_ticks", spec.every_ticks, 1, 1000000);
+  spec.history_limit_mib = r.number(e, "edits", "history_limit_mib", spec.history_limit_mib, 0, 1 << 20);
+  spec.write_vdb = r.boolean(e, "edits", "write_vdb", spec.write_vdb);
+  spec.write_stl = r.boolean(e, "edits", "write_stl", spec.write_stl);
+  if (e.contains("button")) {
+    const json& list = e.at("button");
+    if (!list.is_array()) r.fail("edits.button", "must be an array of [t0, t1] intervals [s], got " + list.dump());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string f = "edits.button[" + std::to_string(i) + "]";
+      const json& iv = list[i];
+      if (!iv.is_array() || iv.size() != 2 || !iv[0].is_number() || !iv[1].is_number())
+        r.fail(f, "must be [t0, t1] in seconds, got " + iv.dump());
+      const double t0 = iv[0].get<double>(), t1 = iv[1].get<double>();
+      if (!std::isfinite(t0) || !std::isfinite(t1) || t0 < 0 || t1 <= t0 || t1 > 1e6)
+        r.fail(f, "must be [t0, t1] with 0 <= t0 < t1 <= 1e6 s, got " + iv.dump());
+      if (!spec.button_down.empty() && t0 < spec.button_down.back()[1])
+        r.fail(f, "intervals must be in order and must not overlap, got " + iv.dump() + " after " +
+                      list[i - 1].dump());
+      spec.button_down.push_back({t0, t1});
+    }
+  }
+  if (e.contains("timeline")) {
+    const json& list = e.at("timeline");
+    if (!list.is_array()) r.fail("edits.timeline", "must be an array of timed edits, got " + list.dump());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string f = "edits.timeline[" + std::to_string(i) + "]";
+      const json& it = list[i];
+      if (!it.is_object()) r.fail(f, "must be an object {\"t_s\": ..., \"kind\": ..., ...}, got " + it.dump());
+      TimedEdit te;
+      te.index = int(i);
+      if (!it.contains("t_s")) r.fail(f + ".t_s", "is required (when the edit is applied, in seconds)");
+      te.t_s = r.number(it, f, "t_s", 0, 0, 1e6);
+      if (!it.contains("kind")) r.fail(f + ".kind", "is required (\"add\", \"carve\", \"smooth\", \"drill\", \"undo\", \"redo\")");
+      te.kind = r.string(it, f, "kind", "");
+      if (te.kind == "undo" || te.kind == "redo") {
+        r.only(it, f, {"t_s", "kind"});
+      } else {
+        r.only(it, f, with(kBrushKeys, {"t_s", "at", "duration_s", "force_n"}));
+        te.brush = parse_brush(r, it, f, spec.brush, true);
+        if (!it.contains("at")) r.fail(f + ".at", "is required: [x, y, z] in mm (physical frame, as trace.csv) or \"vhip\"");
+        const json& at = it.at("at");
+        if (at.is_string()) {
+          if (at.get<std::string>() != "vhip")
+            r.fail(f + ".at", "must be [x, y, z] in mm or \"vhip\", got " + at.dump());
+          te.at_vhip = true;
+        } else {
+          te.at_m = r.vec3(it, f, "at", {}) * 1e-3;
+        }
+        te.duration_s = r.number(it, f, "duration_s", 0, 0, 3600);
+      }
+      spec.timeline.push_back(te);
+    }
+    std::stable_sort(spec.timeline.begin(), spec.timeline.end(),
+                     [](const TimedEdit& a, const TimedEdit& b) { return a.t_s < b.t_s; });
+  }
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::string& path) {
@@ -212,7 +316,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   }
   const Reader r(path);
   r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
-                    "script", "outputs", "engine"});
+                    "script", "outputs", "engine", "edits"});
   Scene s;
   s.file = path;
   s.name = r.string(root, "", "name", fs::path(path).stem().string());
@@ -363,6 +467,12 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
 
   parse_engine(r, r.section(root, "engine"), s.engine);
+  if (root.contains("edits")) {
+    parse_edits(r, root.at("edits"), s.edits);
+    if (s.engine.mode != "sparse")
+      r.fail("edits", "edits publish bricked snapshots brick by brick: they need \"engine\": {\"mode\": \"sparse\"}, got \"" +
+                          s.engine.mode + "\"");
+  }
 
   const json& out = r.section(root, "outputs");
   r.only(out, "outputs", {"trace_csv", "plots"});

@@ -46,6 +46,47 @@ struct EngineSpec {
   std::string samples = "fp32";
 };
 
+/// A brush as the scene gives it (engine::Brush without the engine's headers). Units as
+/// the scene writes them: mm, the volume's value units, N, s.
+struct BrushSpec {
+  std::string kind = "carve";      ///< "add", "carve", "smooth", "drill"
+  double radius_mm = 2.0;          ///< > 0
+  double strength = 100.0;         ///< add/carve: value units per application; smooth: [0, 1]
+  double falloff = 0.5;            ///< soft edge as a fraction of the radius, (0, 1]
+  double force_threshold_n = 1.0;  ///< drill: nothing is removed at or below this |F| [N]
+  double rate = 1000.0;            ///< drill: value units removed per (N above the threshold) per s
+  double density_scale = 0;        ///< drill: > 0, or 0 = engine::default_targets' (|material - empty|)
+  bool has_material = false, has_empty = false;
+  double material = 0, empty = 0;  ///< target values; default engine::default_targets'
+  double force_n = -1;             ///< drill on the timeline: |F| [N]; < 0 = the |F| rendered that tick
+};
+
+/// One timed entry of edits.timeline.
+struct TimedEdit {
+  int index = 0;                  ///< position in the scene file's list (for messages)
+  double t_s = 0;                 ///< applied after the render of tick ceil(t_s * rate) (app::edit_tick)
+  std::string kind;               ///< a brush kind, or "undo" / "redo"
+  bool at_vhip = false;           ///< "at": "vhip": the VHIP of each application's tick
+  servo::Vec3 at_m;               ///< else "at": [x, y, z] mm in the physical frame (trace.csv's), here in m
+  BrushSpec brush;                ///< edits.brush with this entry's overrides
+  double duration_s = 0;          ///< > 0: a stroke, one application every edits.every_ticks ticks over [t_s, t_s + duration_s)
+};
+
+/// The "edits" section (issue 9 item 3): brush defaults, a timeline, the device button.
+struct EditsSpec {
+  bool present = false;               ///< the scene has an "edits" section
+  BrushSpec brush;                    ///< defaults, and the button's brush
+  int every_ticks = 10;               ///< servo ticks between two applications of a stroke / the button
+  /// Intervals [t0, t1) [s] during which the device button is down; while it is down and
+  /// the probe is in contact, `brush` is applied at the VHIP every `every_ticks` ticks (a
+  /// drill with the |F| rendered that tick), one undo stroke per press.
+  std::vector<std::array<double, 2>> button_down;
+  std::vector<TimedEdit> timeline;    ///< sorted by t_s (stable: entries at one time keep their order)
+  double history_limit_mib = 256.0;   ///< undo memory limit [MiB]
+  bool write_vdb = true;              ///< write the edited volume as drilled.vdb
+  bool write_stl = true;              ///< write its isosurface as drilled.stl
+};
+
 struct Scene {
   std::string file;          ///< the scene file as given
   std::string name;
@@ -59,6 +100,7 @@ struct Scene {
   bool write_trace = true;
   bool draw_plots = true;
   EngineSpec engine;         ///< the "engine" section (defaults: gradient only, sparse, fp32)
+  EditsSpec edits;           ///< the "edits" section (present = false without one)
 };
 
 /// Parse and validate a scene file. Unknown keys are errors (they are usually typos).

@@ -10,7 +10,7 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
                                    SimDevice& device, const WorkspaceTransform& xf,
                                    const TouchScript& script, double rate_hz,
                                    const std::function<void(long, long)>& progress,
-                                   long progress_every) {
+                                   long progress_every, const TickHook& after_tick) {
   using clock = std::chrono::steady_clock;
   const double period = 1.0 / rate_hz;
   const long ticks = long(std::ceil(script.duration_s * rate_hz)) + 1;
@@ -42,6 +42,8 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
     r.plane_update = out.plane_update;
     r.saturated = out.saturated;
     r.fault = out.fault;
+    r.version = field->version;
+    if (after_tick) after_tick(k, r);
     if (progress && (k % progress_every == 0 || k + 1 == ticks)) progress(k + 1, ticks);
   }
   return trace;

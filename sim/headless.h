@@ -25,17 +25,25 @@ struct TraceRow {
   bool plane_update = false;
   bool saturated = false;
   bool fault = false;
+  bool button = false;        ///< the device's button (set by the after-tick hook; false without one)
+  std::uint64_t version = 0;  ///< SampleField::version of the snapshot this tick read
 };
+
+/// Called after tick k's render (and the device step) with that tick's row, before tick
+/// k + 1 acquires its samples: what it publishes, tick k + 1 reads (the edit pipeline's
+/// determinism rule, apps/edit_session.h). It may set row.button. Outside the timed section.
+using TickHook = std::function<void(long k, TraceRow& row)>;
 
 /// Runs the script to its end at `rate_hz`. Each tick: acquire the newest published
 /// samples, read the device, time HriRenderer::tick with steady_clock, command the force
 /// (held over the period), then advance the device. `progress(tick, total)` is called
 /// every `progress_every` ticks, outside the timed section. Throws std::runtime_error
-/// if nothing was ever published.
+/// if nothing was ever published. `after_tick`, if set, is called at the end of every tick
+/// (TickHook); without it the loop is exactly what it was before hooks existed.
 std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
                                    SimDevice& device, const WorkspaceTransform& world_T_device,
                                    const TouchScript& script, double rate_hz,
                                    const std::function<void(long, long)>& progress = {},
-                                   long progress_every = 250);
+                                   long progress_every = 250, const TickHook& after_tick = {});
 
 }  // namespace isotouch::servo

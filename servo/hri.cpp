@@ -179,6 +179,13 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     const bool found = surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
     return plane_at(field, found ? p : vhip_, hip);
   }
+  if (edit_tick_ && !(e0 > 0.0) && e1 > 0.0) {
+    // Edit tick, VHIP outside, HIP inside: after a carve the VHIP may be far in the air,
+    // even in a uniform brick whose tile reads the isovalue itself, where the linear rule
+    // would put p at the VHIP. March the segment for its first crossing (first_crossing).
+    Vec3 p;
+    if (first_crossing(field, vhip_, hip, p)) return plane_at(field, p, hip);
+  }
   double t = -e0 / (e1 - e0);
   if (!std::isfinite(t)) t = 0.0;
   t = std::clamp(t, 0.0, 1.0);

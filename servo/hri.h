@@ -184,26 +184,29 @@ struct HriParams {
 ///   another FieldView::version than the last sane tick's is an edit tick. On it the plane
 ///   is re-evaluated at once (not at the next n-tick update) with the update rules above,
 ///   reading the VHIP's value and |grad| from the new snapshot (nothing cached from the old
-///   one). A VHIP in free motion that was outside in the old snapshot and is inside the new
-///   one (material added over a hovering probe) counts as an embedded contact point: the
-///   proxy is brought out to the new surface (before, the VHIP's value cached from the old
-///   snapshot put a plane between VHIP and HIP at once, a step). From the edit tick on, |F|
-///   is slewed: it moves from the |F| sent the tick before toward this tick's target (the
-///   spring-damper force, saturated) by at most edit_max_step_fraction * force_limit_n per
-///   tick, until the tick it reaches the target. A running recovery ramp is folded into the
-///   slew and none starts on an edit tick; the user's own motion is slewed too while it
-///   lasts, so no tick changes |F| by more than the step. A later edit during the slew
-///   continues it from the |F| sent. Carved under the VHIP: the VHIP goes to the new
-///   surface at once and |F| eases down to K times the new depth. Carved deeper than the
-///   HIP: the plane is dropped and |F| fades out along the last force direction (contact =
-///   true while it fades, penetration 0). Added over the VHIP: the VHIP comes out to the
-///   new surface (the embedded-VHIP search above; where the addition is deeper than its
-///   reach, 8 voxels at most, a march out along the outward normal at the VHIP, half-voxel
-///   steps, at most march_budget samples, then 20 bisection steps) and |F| rises toward
-///   K times the new depth (saturated at the limit). With the parameter 0 the version
-///   is never read (a run is bit for bit the run without the feature), and without a
-///   version change nothing differs either. Fault ticks (zero force) end the slew. The
-///   paper variant ignores versions (Figure 2 as printed).
+///   one); with the VHIP outside and the HIP inside, p is the first crossing on the segment
+///   VHIP -> HIP (the march for thin walls below) rather than the linear rule: a carve may
+///   leave the VHIP far in the air, even in a uniform brick whose tile reads the isovalue
+///   itself (p = VHIP by the linear rule). A VHIP in free motion that was outside in the
+///   old snapshot and is inside the new one (material added over a hovering probe) counts
+///   as an embedded contact point: the proxy is brought out to the new surface (before, the
+///   VHIP's value cached from the old snapshot put a plane between VHIP and HIP at once, a
+///   step). From the edit tick on, |F| is slewed: it moves from the |F| sent the tick
+///   before toward this tick's target (the spring-damper force, saturated) by at most
+///   edit_max_step_fraction * force_limit_n per tick, until the tick it reaches the target.
+///   A running recovery ramp is folded into the slew and none starts on an edit tick; the
+///   user's own motion is slewed too while it lasts, so no tick changes |F| by more than
+///   the step. A later edit during the slew continues it from the |F| sent. Carved under
+///   the VHIP: the VHIP goes to the new surface at once and |F| eases down to K times the
+///   new depth. Carved deeper than the HIP: the plane is dropped and |F| fades out along
+///   the last force direction (contact = true while it fades, penetration 0). Added over
+///   the VHIP: the VHIP comes out to the new surface (the embedded-VHIP search above; where
+///   the addition is deeper than its reach, 8 voxels at most, a march out along the outward
+///   normal at the VHIP, half-voxel steps, at most march_budget samples, then 20 bisection
+///   steps) and |F| rises toward K times the new depth (saturated at the limit). With the
+///   parameter 0 the version is never read (a run is bit for bit the run without the
+///   feature), and without a version change nothing differs either. Fault ticks (zero
+///   force) end the slew. The paper variant ignores versions (Figure 2 as printed).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params);

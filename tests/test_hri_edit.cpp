@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "analytic_fields.h"
+#include "brick_field.h"
 #include "hri.h"
 
 using namespace isotouch::servo;
@@ -397,6 +398,38 @@ TEST(HriEdit, AfterTheSlewTheUsersOwnMotionIsNotSlewed) {
   for (int k = press; k < ticks; ++k) {
     EXPECT_NEAR(t[k].force_n.z, kK * (0.015 - hip(k).z), 1e-5) << k;
     EXPECT_GT(norm(t[k].force_n) - norm(t[k - 1].force_n), 1.5 * kStep) << k;
+  }
+}
+
+// The live edit pipeline publishes bricked snapshots: the version reaches the renderer
+// through a bricked FieldView the same way. Carve and add on fp32 bricks converted from the
+// analytic floors: the edit tick re-evaluated (the carve leaves the VHIP in a uniform brick
+// whose tile is the isovalue itself, 0: the linear rule would keep p at the VHIP), the bound
+// held, and the trace of the dense fields within 1e-3 voxel (a HIP deep in a uniform brick
+// reads its tile, not the distance, so the linear rule's p differs by a rounding).
+TEST(HriEdit, BrickedSnapshotsFollowTheEditLikeDenseOnes) {
+  auto bricked = [](const SampleField& dense) {
+    SampleField b = make_bricked_field(bricked_input_from_dense(dense, Isosurface{0.0, InsideIs::kAbove}),
+                                       SampleFormat::kFp32);
+    b.version = dense.version;
+    return b;
+  };
+  for (double z_new : {0.015, 0.0175}) {
+    const SampleField d0 = floor_at(0.016, 1), d1 = floor_at(z_new, 2);
+    const SampleField b0 = bricked(d0), b1 = bricked(d1);
+    ASSERT_TRUE(b1.bricked());
+    const int edit = 152, ticks = 220;
+    HriRenderer rd(params()), rb(params());
+    const auto td = drive(rd, ticks, switch_at(d0, d1, edit), press_to(0.0145));
+    const auto tb = drive(rb, ticks, switch_at(b0, b1, edit), press_to(0.0145));
+    EXPECT_TRUE(tb[edit].plane_update);
+    EXPECT_NEAR(tb[edit].vhip_m.z, z_new, 1e-3 * kVoxel);
+    EXPECT_LE(max_step(tb), kStep * (1 + 1e-12));
+    for (int k = 0; k < ticks; ++k) {
+      ASSERT_NEAR(tb[k].vhip_m.z, td[k].vhip_m.z, 1e-3 * kVoxel) << "floor " << z_new << ", tick " << k;
+      ASSERT_NEAR(tb[k].force_n.z, td[k].force_n.z, kK * 1e-3 * kVoxel) << "floor " << z_new << ", tick " << k;
+    }
+    EXPECT_NEAR(norm(tb.back().force_n), kK * (z_new - 0.0145), kK * 1e-3 * kVoxel);
   }
 }
 

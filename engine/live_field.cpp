@@ -245,8 +245,20 @@ struct LiveField::Impl {
     st->shared_decode = a.decode;
     if (opt.format != core::SampleFormat::kFp32)
       st->fp16_unscale = {float(1.0 / grid.spacing_m.x), float(1.0 / grid.spacing_m.y), float(1.0 / grid.spacing_m.z)};
-    if (!st->seal(grid.dims))
-      throw std::logic_error("live field '" + path + "': the built store does not seal (internal error)");
+    if (!st->seal(grid.dims)) {  // a bug of this file: say which entry
+      std::string first = "none out of range";
+      for (std::size_t id = 0; id < st->table.size(); ++id) {
+        const std::uint32_t e = st->table[id];
+        if ((e & BrickStore::kUniform) ? (e & ~BrickStore::kUniform) >= st->tiles.size()
+                                       : (e % kS != 0 || e / kS >= a.capacity)) {
+          first = "brick " + std::to_string(id) + " entry " + std::to_string(e);
+          break;
+        }
+      }
+      throw std::logic_error("live field '" + path + "': the built store does not seal (internal error; table " +
+                             std::to_string(st->table.size()) + ", tiles " + std::to_string(st->tiles.size()) +
+                             ", arena slots " + std::to_string(a.capacity) + ", first bad entry: " + first + ")");
+    }
     return st;
   }
 

@@ -351,6 +351,10 @@ double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
   // in the target's direction (the last one sent if the target is zero); the slew ends on
   // the tick that reaches the target.
   const double step = params_.edit_max_step_fraction * params_.force_limit_n;
+  if (!(step > 0.0)) {  // a force limit <= 0 or NaN: nothing to slew toward
+    edit_slewing_ = false;
+    return mag;
+  }
   const double sent = std::clamp(mag, std::max(0.0, prev_force_mag_ - step), prev_force_mag_ + step);
   if (sent == mag) {
     edit_slewing_ = false;

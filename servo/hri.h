@@ -71,8 +71,9 @@ struct HriParams {
   /// Robust variant, edits (source: issue 9 item 2): the largest change of |F| an edit may
   /// cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
   /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
-  /// (FieldView::version); see HriRenderer, "Edits". 0 turns the edit handling off: a new
-  /// snapshot is then read at the next plane update like any other, and the force steps.
+  /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
+  /// turns the edit handling off: a new snapshot is then read at the next plane update
+  /// like any other, and the force steps. [1 / tick]
   double edit_max_step_fraction = 0.05;
 };
 

@@ -38,6 +38,28 @@ struct Recording {
   std::vector<EditEvent> edits;     ///< in the order applied (EditEvent::tick ascending)
 };
 
+/// THE FILE (format_version 1): JSON lines (nlohmann-json), one record per line, in order:
+///   {"format":"isotouch-recording","format_version":1,"scene_path":S,"scene_text":S,"rate_hz":D}
+///   {"k":0,"t":D,"hip":[D,D,D],"button":B,"force":[D,D,D]}          one per tick, k = 0, 1, ...
+///   {"edit":"brush","tick":K,"t":D,"brush":{...}}   after tick K's line (K ascending): the
+///        edits applied after tick K's render; "brush" holds every engine::Brush field
+///        (kind, centre_m [m, grid-world], radius_m, strength, falloff, targets {material,
+///        empty, density_scale}, force_n, force_threshold_n, rate, dt_s); kinds "brush",
+///        "begin_stroke", "end_stroke", "undo", "redo" (brush optional for the last four)
+///   {"end":true,"ticks":N,"edits":M}                 last line: a file without it is truncated
+/// Doubles are written shortest-round-trip (nlohmann's dtoa) and read back bit for bit
+/// (subnormals and -0.0 included); the brush's float targets are checked to be floats.
+/// Every number must be finite (times, HIP, forces, brush fields); t strictly ascending.
+inline constexpr const char* kRecordingFormat = "isotouch-recording";
+
+/// The file's text for `r` (what save_recording writes). @throws RecordingError naming
+/// `name`, the tick or edit and the field when `r` cannot be written faithfully (a
+/// non-finite number, edits not ascending or outside the ticks).
+std::string recording_text(const Recording& r, const std::string& name);
+/// Parses a recording's text; `name` is used in messages. Never crashes on garbage: every
+/// problem is a RecordingError naming `name`, the line, the record and the field and value.
+Recording parse_recording(const std::string& text, const std::string& name);
+
 /// Writes `r` atomically (temp file in the same folder, fsync, rename): a crash leaves the
 /// old file or the new one, never half of one. Doubles round-trip exactly.
 /// @throws RecordingError naming the file.

@@ -1,0 +1,394 @@
+// Recordings (issue 9 item 5, apps/record.h): the JSON-lines format round-trips every
+// double bit for bit (random bit patterns incl. subnormals, -0.0, huge), the save is atomic
+// (a write that fails - the file size limit in a child process - leaves the old file
+// whole), bad files are refused with the file, the line, the field and the value named,
+// and garbage (random bytes, truncations and byte flips of a good file) never crashes the
+// loader: it returns a recording or throws RecordingError, nothing else.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <bit>
+#include <csignal>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <random>
+#include <sstream>
+
+#include "record.h"
+
+namespace fs = std::filesystem;
+using isotouch::app::EditEvent;
+using isotouch::app::load_recording;
+using isotouch::app::parse_recording;
+using isotouch::app::RecordedTick;
+using isotouch::app::Recording;
+using isotouch::app::recording_text;
+using isotouch::app::RecordingError;
+using isotouch::app::save_recording;
+using isotouch::core::Vec3;
+using isotouch::engine::BrushKind;
+
+namespace {
+
+fs::path temp_dir(const std::string& tag) {
+  const fs::path d = fs::temp_directory_path() / ("isotouch_test_record_" + tag + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string read(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// A finite double from random bits, with the awkward ones mixed in: subnormals, -0.0,
+/// the largest and smallest normals, and values with 17 significant digits.
+double awkward(std::mt19937_64& rng) {
+  static const double special[] = {0.0,
+                                   -0.0,
+                                   std::numeric_limits<double>::denorm_min(),
+                                   -std::numeric_limits<double>::denorm_min(),
+                                   std::numeric_limits<double>::min(),
+                                   std::nextafter(std::numeric_limits<double>::min(), 0.0),
+                                   std::numeric_limits<double>::max(),
+                                   -std::numeric_limits<double>::max(),
+                                   0.1,
+                                   1.0 / 3.0,
+                                   1e-300,
+                                   123456789012345678.0};
+  const std::uint64_t pick = rng() % 4;
+  if (pick == 0) return special[rng() % std::size(special)];
+  if (pick == 1) {  // subnormal: exponent bits 0
+    return std::bit_cast<double>(rng() & 0x800FFFFFFFFFFFFFull);
+  }
+  for (;;) {  // any finite bit pattern
+    const double d = std::bit_cast<double>(rng());
+    if (std::isfinite(d)) return d;
+  }
+}
+Vec3 awkward3(std::mt19937_64& rng) { return {awkward(rng), awkward(rng), awkward(rng)}; }
+
+/// A float from random bits (finite).
+float awkward_float(std::mt19937_64& rng) {
+  for (;;) {
+    const float f = std::bit_cast<float>(std::uint32_t(rng()));
+    if (std::isfinite(f)) return f;
+  }
+}
+
+/// A recording with random ticks and edits: every number awkward (the format does not
+/// check brushes for sense on save; validity is checked on load only for brush events, so
+/// those get valid values mixed with awkward bits where validate() allows them).
+Recording random_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t edits) {
+  Recording r;
+  r.scene_path = "/tmp/scene \"quoted\" \\ ünïcode.json";
+  r.scene_text = "{\n  \"name\": \"x\",\n\t\"a\": [1, 2]\n}\n\x01\x7f";
+  r.rate_hz = 1000.0 + std::ldexp(double(rng() % 1000), -40);
+  double t = awkward(rng);
+  if (std::abs(t) > 1e300) t = -1e300;
+  for (std::size_t k = 0; k < ticks; ++k) {
+    RecordedTick tk;
+    tk.t_s = t;
+    t = std::nextafter(t, std::numeric_limits<double>::infinity()) + (rng() % 2 ? 1e-3 : 0.0);
+    tk.hip_m = awkward3(rng);
+    tk.force_n = awkward3(rng);
+    tk.button = rng() % 2;
+    r.ticks.push_back(tk);
+  }
+  long tick = 0;
+  for (std::size_t i = 0; i < edits; ++i) {
+    tick = std::min<long>(long(ticks) - 1, tick + long(rng() % 3));
+    EditEvent e;
+    e.kind = EditEvent::Kind(rng() % 5);
+    e.tick = tick;
+    e.t_s = awkward(rng);
+    auto& b = e.brush;
+    b.kind = BrushKind(rng() % 4);
+    b.centre_m = awkward3(rng);
+    b.radius_m = std::ldexp(double(1 + rng() % 1000), -int(10 + rng() % 20));  // (0, 10]
+    b.strength = b.kind == BrushKind::kSmooth ? double(rng() % 1000) / 999.0
+                                              : std::ldexp(double(rng() % 100000), -int(rng() % 30));
+    b.falloff = 1.0 - std::ldexp(double(rng() % 1000), -12);
+    b.targets.material = awkward_float(rng);
+    b.targets.empty = awkward_float(rng);
+    b.targets.density_scale = std::abs(awkward_float(rng)) + 1e-30f;
+    b.force_n = std::abs(awkward(rng)) * 1e-300;  // small, >= 0
+    b.force_threshold_n = std::abs(awkward(rng)) * 1e-300;
+    b.rate = std::ldexp(double(rng() % 100000), -int(rng() % 20));
+    b.dt_s = std::ldexp(1.0, -10);
+    r.edits.push_back(e);
+  }
+  return r;
+}
+
+bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
+bool same_bits(const Vec3& a, const Vec3& b) { return same_bits(a.x, b.x) && same_bits(a.y, b.y) && same_bits(a.z, b.z); }
+
+/// Field-by-field, bit for bit; the first difference in `why`.
+bool identical(const Recording& a, const Recording& b, std::string& why) {
+  if (a.format_version != b.format_version) return why = "format_version", false;
+  if (a.scene_path != b.scene_path) return why = "scene_path", false;
+  if (a.scene_text != b.scene_text) return why = "scene_text", false;
+  if (!same_bits(a.rate_hz, b.rate_hz)) return why = "rate_hz", false;
+  if (a.ticks.size() != b.ticks.size()) return why = "tick count", false;
+  if (a.edits.size() != b.edits.size()) return why = "edit count", false;
+  for (std::size_t k = 0; k < a.ticks.size(); ++k) {
+    const auto &x = a.ticks[k], &y = b.ticks[k];
+    if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) || x.button != y.button)
+      return why = "tick " + std::to_string(k), false;
+  }
+  for (std::size_t i = 0; i < a.edits.size(); ++i) {
+    const auto &x = a.edits[i], &y = b.edits[i];
+    const auto &p = x.brush, &q = y.brush;
+    const bool same = x.kind == y.kind && x.tick == y.tick && same_bits(x.t_s, y.t_s) && p.kind == q.kind &&
+                      same_bits(p.centre_m, q.centre_m) && same_bits(p.radius_m, q.radius_m) &&
+                      same_bits(p.strength, q.strength) && same_bits(p.falloff, q.falloff) &&
+                      std::bit_cast<std::uint32_t>(p.targets.material) == std::bit_cast<std::uint32_t>(q.targets.material) &&
+                      std::bit_cast<std::uint32_t>(p.targets.empty) == std::bit_cast<std::uint32_t>(q.targets.empty) &&
+                      std::bit_cast<std::uint32_t>(p.targets.density_scale) ==
+                          std::bit_cast<std::uint32_t>(q.targets.density_scale) &&
+                      same_bits(p.force_n, q.force_n) && same_bits(p.force_threshold_n, q.force_threshold_n) &&
+                      same_bits(p.rate, q.rate) && same_bits(p.dt_s, q.dt_s);
+    if (!same) return why = "edit " + std::to_string(i), false;
+  }
+  return true;
+}
+
+/// A small valid recording's text: 3 ticks, a brush after tick 1.
+std::string small_text() {
+  Recording r;
+  r.scene_path = "/abs/scene.json";
+  r.scene_text = "{}";
+  r.rate_hz = 1000;
+  for (int k = 0; k < 3; ++k) r.ticks.push_back({k * 1e-3, {0.01, 0.02, 0.03}, k == 1, {0, 0, 0.5 * k}});
+  EditEvent e;
+  e.kind = EditEvent::Kind::kBrush;
+  e.tick = 1;
+  e.t_s = 1e-3;
+  e.brush.kind = BrushKind::kCarve;
+  e.brush.centre_m = {0.01, 0.02, 0.03};
+  r.edits.push_back(e);
+  return recording_text(r, "small");
+}
+
+/// Replaces the first `from` in `s` (must be there).
+std::string replaced(std::string s, const std::string& from, const std::string& to) {
+  const auto at = s.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  if (at != std::string::npos) s.replace(at, from.size(), to);
+  return s;
+}
+
+/// The RecordingError message of parsing `text` ("" if it parsed).
+std::string error_of(const std::string& text) {
+  try {
+    (void)parse_recording(text, "bad.rec");
+  } catch (const RecordingError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(Record, RandomRecordingsRoundTripBitForBit) {
+  std::mt19937_64 rng(20261121);
+  for (int trial = 0; trial < 20; ++trial) {
+    const Recording r = random_recording(rng, 1 + rng() % 300, rng() % 40);
+    const std::string text = recording_text(r, "mem");
+    const Recording back = parse_recording(text, "mem");
+    std::string why;
+    EXPECT_TRUE(identical(r, back, why)) << "trial " << trial << ": " << why;
+    EXPECT_EQ(recording_text(back, "mem"), text) << "trial " << trial;  // a fixed point
+  }
+}
+
+TEST(Record, SaveLoadThroughTheFileIsExact) {
+  const fs::path dir = temp_dir("file");
+  std::mt19937_64 rng(7);
+  const Recording r = random_recording(rng, 2000, 50);
+  save_recording((dir / "a.rec").string(), r);
+  const Recording back = load_recording((dir / "a.rec").string());
+  std::string why;
+  EXPECT_TRUE(identical(r, back, why)) << why;
+  // Nothing but the file is left in the folder (no temp files).
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1);
+  fs::remove_all(dir);
+}
+
+TEST(Record, SpecialDoublesSurviveOneByOne) {
+  // Each one alone as a HIP coordinate, checked against the bits (not the == of doubles,
+  // which would call -0.0 and 0.0 the same).
+  const double v[] = {-0.0, 0.0, std::numeric_limits<double>::denorm_min(), 4.9406564584124654e-324 * 3,
+                      2.2250738585072009e-308, std::numeric_limits<double>::max(), 1e23, 9007199254740993.0,
+                      0.30000000000000004, -1.7976931348623157e308};
+  for (double d : v) {
+    Recording r;
+    r.rate_hz = 1000;
+    r.ticks.push_back({0, {d, -d, d * 0.5}, false, {d, d, d}});
+    const Recording back = parse_recording(recording_text(r, "m"), "m");
+    EXPECT_TRUE(same_bits(back.ticks[0].hip_m, r.ticks[0].hip_m)) << d;
+    EXPECT_TRUE(same_bits(back.ticks[0].force_n, r.ticks[0].force_n)) << d;
+  }
+}
+
+TEST(Record, AFailedSaveLeavesTheOldFileWhole) {
+  const fs::path dir = temp_dir("atomic");
+  const std::string path = (dir / "run.rec").string();
+  std::mt19937_64 rng(3);
+  const Recording old_r = random_recording(rng, 50, 5);
+  save_recording(path, old_r);
+  const std::string old_bytes = read(path);
+  const Recording big = random_recording(rng, 20000, 100);  // ~ MB: over the child's file size limit
+
+  // A child saves with a file size limit of 64 kB: write() fails with EFBIG mid-file (the
+  // signal SIGXFSZ ignored). The child exits 0 when save_recording threw RecordingError.
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    std::signal(SIGXFSZ, SIG_IGN);
+    rlimit lim{65536, 65536};
+    ::setrlimit(RLIMIT_FSIZE, &lim);
+    try {
+      save_recording(path, big);
+    } catch (const RecordingError& e) {
+      const bool named = std::string(e.what()).find(path) != std::string::npos;
+      ::_exit(named ? 0 : 3);
+    } catch (...) {
+      ::_exit(4);
+    }
+    ::_exit(5);  // saved: the limit did not bite
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "3: message without the path, 4: other exception, 5: saved anyway";
+  EXPECT_EQ(read(path), old_bytes);  // the old file, whole
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1) << "a temp file was left";
+
+  // And a recording that cannot be written faithfully (a NaN HIP) is refused before the
+  // file is touched, naming the tick and the field.
+  Recording nan_r = old_r;
+  nan_r.ticks[7].hip_m.y = std::nan("");
+  try {
+    save_recording(path, nan_r);
+    ADD_FAILURE() << "a NaN HIP was saved";
+  } catch (const RecordingError& e) {
+    EXPECT_NE(std::string(e.what()).find("tick 7: field 'hip'"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(read(path), old_bytes);
+  fs::remove_all(dir);
+}
+
+TEST(Record, BadFilesNameTheLineTheFieldAndTheValue) {
+  const std::string good = small_text();
+  ASSERT_EQ(error_of(good), "");
+  // Lines: 1 header, 2 tick 0, 3 tick 1, 4 edit 0, 5 tick 2, 6 end.
+  struct Case {
+    std::string what, text;
+    std::vector<std::string> expect;  // substrings of the message
+  };
+  const std::string no_end = good.substr(0, good.rfind("{\"end\""));
+  const std::vector<Case> cases = {
+      {"truncated: no end record", no_end, {"bad.rec: truncated after line 5", "3 ticks, 1 edits read", "no end record"}},
+      {"truncated mid-line", good.substr(0, good.size() / 2), {"bad.rec: line ", "truncated"}},
+      {"empty", "", {"bad.rec: empty"}},
+      {"wrong type", replaced(good, "\"button\":true", "\"button\":\"yes\""),
+       {"bad.rec: line 3 (tick 1): field 'button'", "true or false", "\"yes\""}},
+      {"NaN HIP as null", replaced(good, "\"hip\":[0.01,0.02,0.03]", "\"hip\":[0.01,null,0.03]"),
+       {"bad.rec: line 2 (tick 0): field 'hip[1]'", "finite number", "null"}},
+      {"NaN HIP as NaN", replaced(good, "\"hip\":[0.01,0.02,0.03]", "\"hip\":[0.01,NaN,0.03]"),
+       {"bad.rec: line 2: not valid JSON"}},
+      {"infinite HIP", replaced(good, "\"hip\":[0.01,0.02,0.03]", "\"hip\":[0.01,1e999,0.03]"),
+       {"bad.rec: line 2: not valid JSON", "1e999"}},
+      {"HIP of 2", replaced(good, "\"hip\":[0.01,0.02,0.03]", "\"hip\":[0.01,0.02]"),
+       {"line 2 (tick 0): field 'hip'", "array of 3", "[0.01,0.02]"}},
+      {"ticks not ascending", replaced(good, "\"t\":0.002", "\"t\":0.001"),
+       {"bad.rec: line 5 (tick 2): field 't'", "0.001 s is not after the previous tick's 0.001 s"}},
+      {"tick skipped", replaced(good, "{\"k\":2", "{\"k\":3"), {"line 5 (tick 2): field 'k'", "expected tick 2, got 3"}},
+      {"unknown brush kind", replaced(good, "\"kind\":\"carve\"", "\"kind\":\"chisel\""),
+       {"bad.rec: line 4 (edit 0): field 'brush.kind'", "unknown brush kind \"chisel\""}},
+      {"unknown edit kind", replaced(good, "\"edit\":\"brush\"", "\"edit\":\"paint\""),
+       {"line 4 (edit 0): field 'edit'", "\"paint\""}},
+      {"invalid brush", replaced(good, "\"radius_m\":0.002", "\"radius_m\":-0.002"),
+       {"line 4 (edit 0): field 'brush'", "radius_m", "-0.002"}},
+      {"target not a float", replaced(good, "\"empty\":0.0", "\"empty\":0.1"),
+       {"line 4 (edit 0): field 'brush.targets.empty'", "float value", "0.1"}},
+      {"edit of another tick", replaced(good, "\"tick\":1", "\"tick\":0"),
+       {"line 4 (edit 0): field 'tick'", "0 is not the tick just before it (1)"}},
+      {"unknown field", replaced(good, "\"button\":true", "\"button\":true,\"buton\":1"),
+       {"line 3 (tick 1): field 'buton'", "unknown field"}},
+      {"format version", replaced(good, "\"format_version\":1", "\"format_version\":2"),
+       {"line 1 (header): field 'format_version'", "2 is not supported"}},
+      {"not a recording", replaced(good, "isotouch-recording", "isotouch-scene"),
+       {"line 1 (header): field 'format'", "\"isotouch-scene\""}},
+      {"end count", replaced(good, "\"ticks\":3", "\"ticks\":4"), {"line 6 (end): field 'ticks'", "says 4, the file has 3"}},
+      {"after the end", good + "{\"k\":3}\n", {"line 7: text after the end record"}},
+      {"rate", replaced(good, "\"rate_hz\":1000.0", "\"rate_hz\":-5"), {"line 1 (header): field 'rate_hz'", "-5"}},
+      {"negative tick", replaced(good, "{\"k\":0", "{\"k\":-1"), {"line 2 (tick 0): field 'k'", "got -1"}},
+      {"not an object", replaced(good, "{\"k\":0,", "[0,{\"k\":0,") + "", {"line 2"}},
+  };
+  for (const Case& c : cases) {
+    const std::string msg = error_of(c.text);
+    EXPECT_FALSE(msg.empty()) << c.what << ": accepted";
+    for (const std::string& s : c.expect) EXPECT_NE(msg.find(s), std::string::npos) << c.what << ": \"" << s << "\" not in: " << msg;
+  }
+}
+
+TEST(Record, MissingFileIsNamed) {
+  try {
+    (void)load_recording("/nonexistent/dir/x.rec");
+    ADD_FAILURE();
+  } catch (const RecordingError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/dir/x.rec: no such recording"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Record, GarbageNeverCrashesTheLoader) {
+  // Corpus: random bytes; every prefix-cut and random byte flips of a good file; a few
+  // hand-made nasties. parse_recording must return or throw RecordingError - any other
+  // exception fails the test, a crash kills it.
+  std::mt19937_64 rng(99);
+  std::vector<std::string> corpus;
+  const std::string good = small_text();
+  for (std::size_t n = 0; n <= good.size(); n += 1 + n / 40) corpus.push_back(good.substr(0, n));
+  for (int i = 0; i < 400; ++i) {
+    std::string s = good;
+    for (int f = 0, flips = 1 + int(rng() % 4); f < flips; ++f) s[rng() % s.size()] = char(rng());
+    corpus.push_back(s);
+  }
+  for (int i = 0; i < 100; ++i) {
+    std::string s(rng() % 300, '\0');
+    for (char& ch : s) ch = char(rng());
+    corpus.push_back(s);
+  }
+  corpus.push_back(std::string(100000, '[') + "\n");
+  corpus.push_back(std::string(100000, '{') + "\n");
+  corpus.push_back("{\"format\":\"isotouch-recording\",\"format_version\":18446744073709551615}\n");
+  corpus.push_back("{\"format\":\"isotouch-recording\",\"format_version\":1,\"scene_path\":\"\\ud800\",\"scene_text\":\"\xff\xfe\",\"rate_hz\":1e308}\n");
+  corpus.push_back(replaced(good, "{\"k\":0", "{\"k\":1e30"));
+  corpus.push_back(replaced(good, "\"tick\":1", "\"tick\":-9223372036854775808"));
+  corpus.push_back(std::string("\0\n\0\n", 4));
+  long parsed = 0, refused = 0;
+  for (const std::string& s : corpus) {
+    try {
+      (void)parse_recording(s, "garbage");
+      ++parsed;
+    } catch (const RecordingError& e) {
+      ++refused;
+      EXPECT_EQ(std::string(e.what()).rfind("garbage: ", 0), 0u) << e.what();
+    } catch (const std::exception& e) {
+      ADD_FAILURE() << "not a RecordingError: " << e.what();
+    }
+  }
+  EXPECT_GT(refused, 400);
+  std::cout << "[ corpus   ] " << corpus.size() << " inputs: " << parsed << " parsed, " << refused << " refused\n";
+}

@@ -657,14 +657,14 @@ bool draw_edit_plots(const Scene& scene, const std::string& dir, const servo::To
     << "set terminal pngcairo size 1100,980 font 'Sans,10'\n"
     << "set output " << gnuplot_quote(temp_name(png)) << "\n"
     << "set multiplot layout 3,1 title " << gnuplot_quote("isotouch - " + scene.name + ": force, depth and removed volume while editing") << "\n"
-    << "set grid\nset key top left\n";
+    << "set grid\nset key top left\nset xrange [0:" << script.duration_s << "]\n";
   int obj = 1;
   for (const auto& iv : scene.edits.button_down)
     g << "set object " << obj++ << " rect from " << iv[0] << ", graph 0 to " << iv[1]
       << ", graph 1 fc rgb '#fdebd0' fs solid 0.6 behind\n";
   g << "set ylabel '|F| [N]'\n"
     << "plot " << gnuplot_quote(csv) << " every ::1 using 1:(sqrt($8**2+$9**2+$10**2)) with lines lw 1.5 lc rgb '#c0392b' title '|F| on the device', "
-    << gnuplot_quote(ecsv) << " every ::1 using 1:($3 eq 'drill' || $3 eq 'carve' || $3 eq 'add' || $3 eq 'smooth' ? $9 : 1/0) with points pt 7 ps 0.35 lc rgb '#1e8449' title 'brush applied (force given)', ";
+    << gnuplot_quote(ecsv) << " every ::1 using 1:($8 > 0 ? $9 : 1/0) with points pt 7 ps 0.35 lc rgb '#1e8449' title 'brush applied (force given)', ";
   if (scene.edits.brush.kind == "drill")
     g << scene.edits.brush.force_threshold_n << " with lines dt 3 lc rgb '#1e8449' title 'drill threshold', ";
   g << scene.hri.force_limit_n << " with lines dt 2 lc rgb '#555555' title 'force limit'\n"
@@ -678,6 +678,19 @@ bool draw_edit_plots(const Scene& scene, const std::string& dir, const servo::To
     << "unset multiplot\n";
   note = draw_with_gnuplot((fs::path(dir) / "edits.gp").string(), g.str(), {png});
   return note.empty();
+}
+
+// The path for a picture, thinned to about 600 ticks (each is an overlay every pixel
+// tests: a 6000-tick path takes minutes on lavapipe); the tick of the largest force kept.
+std::vector<servo::TraceRow> thin_path(const std::vector<servo::TraceRow>& trace) {
+  std::vector<servo::TraceRow> path;
+  const std::size_t every = std::max<std::size_t>(1, trace.size() / 600);
+  std::size_t fmax = 0;
+  for (std::size_t i = 0; i < trace.size(); ++i)
+    if (servo::norm(trace[i].force_n) > servo::norm(trace[fmax].force_n)) fmax = i;
+  for (std::size_t i = 0; i < trace.size(); ++i)
+    if (i % every == 0 || i == fmax) path.push_back(trace[i]);
+  return path;
 }
 
 // The figures, files and pictures of a run with edits, into m.edits.
@@ -748,16 +761,25 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
   }
   if (scene.draw_plots) {
     // Before and after: the same camera (from the run's contact points), unedited and edited voxels.
-    const RunPicture before = render_run_picture(scene, setup.volume, *setup.first, trace,
-                                                 (fs::path(dir) / "before.png").string(), setup.vk.get());
-    const RunPicture aft = render_run_picture(scene, after, *session.current(), trace,
+    const std::vector<servo::TraceRow> path = thin_path(trace);
+    // before.png: surface.png when it was drawn (the same volume, snapshot and path).
+    RunPicture before;
+    std::error_code ec;
+    if (!m.picture_drawn ||
+        !fs::copy_file(fs::path(dir) / "surface.png", fs::path(dir) / "before.png", fs::copy_options::overwrite_existing, ec))
+      before = render_run_picture(scene, setup.volume, *setup.first, path, (fs::path(dir) / "before.png").string(),
+                                  setup.vk.get());
+    const RunPicture aft = render_run_picture(scene, after, *session.current(), path,
                                               (fs::path(dir) / "after.png").string(), setup.vk.get());
     e.before_after_drawn = before.error.empty() && aft.error.empty();
     e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
     if (scene.write_trace) {
       std::string note;
       e.plot_drawn = draw_edit_plots(scene, dir, setup.script, setup.volume, note);
-      if (!e.plot_drawn) e.before_after_note += " plots: " + note;
+      if (!e.plot_drawn) {
+        e.before_after_note += " plots: " + note;
+        log << "edits    plot not drawn: " << note << "\n";
+      }
     }
   }
 }
@@ -1133,7 +1155,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
   if (scene.draw_plots) {
     // The run's picture (ray-cast on the same Vulkan device); never throws.
-    const RunPicture pic = render_run_picture(scene, vol, *field, trace, (fs::path(dir) / "surface.png").string(),
+    // With edits the path is thinned (thin_path): the same picture serves as before.png.
+    const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
+                                              (fs::path(dir) / "surface.png").string(),
                                               &vk, opt.device);
     m.picture_drawn = pic.error.empty();
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;

@@ -207,3 +207,70 @@ TEST(Scene, EnginePassListCheckedByTheEngine) {
   EXPECT_EQ(p[2].kind, isotouch::engine::PassKind::Gradient);
   EXPECT_EQ(isotouch::app::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
 }
+
+// The "edits" section (issue 9 item 3): brush defaults, timeline, button, undo limit.
+TEST(Scene, EditsSectionParses) {
+  const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
+      "brush": {"kind": "drill", "radius_mm": 3, "force_threshold_n": 0.7, "rate": 500, "density_scale": 20},
+      "every_ticks": 5, "button": [[0.5, 1.0], [2, 3]], "history_limit_mib": 8,
+      "timeline": [{"t_s": 2.5, "kind": "undo"},
+                   {"t_s": 1.5, "kind": "carve", "at": [1, 2, 3], "radius_mm": 4, "strength": 50, "duration_s": 0.2},
+                   {"t_s": 1.5, "kind": "add", "at": "vhip", "material": 9}]}})",
+                             "ok.json");
+  ASSERT_TRUE(s.edits.present);
+  EXPECT_EQ(s.edits.brush.kind, "drill");
+  EXPECT_EQ(s.edits.brush.radius_mm, 3);
+  EXPECT_EQ(s.edits.brush.force_threshold_n, 0.7);
+  EXPECT_EQ(s.edits.brush.rate, 500);
+  EXPECT_EQ(s.edits.brush.density_scale, 20);
+  EXPECT_EQ(s.edits.every_ticks, 5);
+  EXPECT_EQ(s.edits.history_limit_mib, 8);
+  ASSERT_EQ(s.edits.button_down.size(), 2u);
+  EXPECT_EQ(s.edits.button_down[1][0], 2);
+  EXPECT_EQ(s.edits.button_down[1][1], 3);
+  ASSERT_EQ(s.edits.timeline.size(), 3u);
+  // Sorted by time, entries at one time in file order; overrides on the defaults.
+  EXPECT_EQ(s.edits.timeline[0].kind, "carve");
+  EXPECT_EQ(s.edits.timeline[0].index, 1);
+  EXPECT_FALSE(s.edits.timeline[0].at_vhip);
+  EXPECT_DOUBLE_EQ(s.edits.timeline[0].at_m.z, 3e-3);  // mm in the file, m here
+  EXPECT_EQ(s.edits.timeline[0].brush.radius_mm, 4);
+  EXPECT_EQ(s.edits.timeline[0].brush.strength, 50);
+  EXPECT_EQ(s.edits.timeline[0].brush.rate, 500);  // inherited from edits.brush
+  EXPECT_EQ(s.edits.timeline[0].duration_s, 0.2);
+  EXPECT_EQ(s.edits.timeline[1].kind, "add");
+  EXPECT_TRUE(s.edits.timeline[1].at_vhip);
+  EXPECT_TRUE(s.edits.timeline[1].brush.has_material);
+  EXPECT_EQ(s.edits.timeline[1].brush.material, 9);
+  EXPECT_EQ(s.edits.timeline[2].kind, "undo");
+  EXPECT_FALSE(parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1})", "x.json").edits.present);
+  EXPECT_TRUE(load_scene(kScenes + "/drill-skull.json").edits.present);
+}
+
+TEST(Scene, EditsErrorsNameTheField) {
+  const std::string head = R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": )";
+  expect_error(head + R"({"brush": {"kind": "chisel"}}})", {"'edits.brush.kind'", "chisel"});
+  expect_error(head + R"({"brush": {"radius_mm": 0}}})", {"'edits.brush.radius_mm'", "0"});
+  expect_error(head + R"({"brush": {"kind": "smooth", "strength": 2}}})", {"'edits.brush.strength'", "2"});
+  expect_error(head + R"({"brush": {"falloff": 1.5}}})", {"'edits.brush.falloff'", "1.5"});
+  expect_error(head + R"({"brush": {"force_n": 1}}})", {"'edits.brush.force_n'", "unknown field"});
+  expect_error(head + R"({"every_ticks": 0}})", {"'edits.every_ticks'", "0"});
+  expect_error(head + R"({"history_limit_mib": -1}})", {"'edits.history_limit_mib'", "-1"});
+  expect_error(head + R"({"button": [[1, 0.5]]}})", {"'edits.button[0]'", "[1,0.5]"});
+  expect_error(head + R"({"button": [[0, 2], [1, 3]]}})", {"'edits.button[1]'", "overlap"});
+  expect_error(head + R"({"button": [0, 1]}})", {"'edits.button[0]'", "[t0, t1]"});
+  expect_error(head + R"({"timeline": [{"kind": "carve", "at": [0, 0, 0]}]}})", {"'edits.timeline[0].t_s'", "required"});
+  expect_error(head + R"({"timeline": [{"t_s": 0, "kind": "carve"}]}})", {"'edits.timeline[0].at'", "required"});
+  expect_error(head + R"({"timeline": [{"t_s": 0, "kind": "carve", "at": "hip"}]}})", {"'edits.timeline[0].at'", "hip"});
+  expect_error(head + R"({"timeline": [{"t_s": 0, "kind": "carve", "at": [1, 2]}]}})", {"'edits.timeline[0].at'", "[1,2]"});
+  expect_error(head + R"({"timeline": [{"t_s": 1, "kind": "undo"}, {"t_s": -1, "kind": "undo"}]}})",
+               {"'edits.timeline[1].t_s'", "-1"});
+  expect_error(head + R"({"timeline": [{"t_s": 1, "kind": "undo", "radius_mm": 2}]}})",
+               {"'edits.timeline[0].radius_mm'", "unknown field"});
+  expect_error(head + R"({"timeline": [{"t_s": 1, "kind": "zap", "at": "vhip"}]}})", {"'edits.timeline[0].kind'", "zap"});
+  expect_error(head + R"({"timeline": [{"t_s": 1, "kind": "drill", "at": "vhip", "force_n": -2}]}})",
+               {"'edits.timeline[0].force_n'", "-2"});
+  expect_error(head + R"({"brush": {}, "undo": 3}})", {"'edits.undo'", "unknown field"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "engine": {"mode": "dense"}, "edits": {}})",
+               {"'edits'", "sparse", "dense"});
+}

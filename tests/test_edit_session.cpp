@@ -1,0 +1,399 @@
+// Edits in scenes (issue 9 items 3 and 6): app::EditSession (undo / redo bit for bit, the
+// snapshot it publishes), the headless loop's after-tick hook (what it publishes, the next
+// tick reads), run_scene with a timeline (carve at the VHIP lands at that tick's VHIP; the
+// removed volume) and the drill-skull scene (the burr goes through the bone).
+// Truth from outside the code under test: brute-force voxel counts over the volume, the
+// sparse CPU reference (run_sparse_cpu) on the unedited volume, trace.csv, this file's own
+// trilinear interpolation along the press ray, and the .vdb written by the run read back.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "edit_session.h"
+#include "field_view.h"
+#include "headless.h"
+#include "run_job.h"
+#include "scene.h"
+#include "sparse_chain.h"
+#include "synthetic.h"
+#include "vdb_io.h"
+#include "vk_test_context.h"
+
+namespace fs = std::filesystem;
+using isotouch::app::EditEvent;
+using isotouch::app::EditSession;
+using isotouch::engine::Brush;
+using isotouch::engine::BrushKind;
+using isotouch::engine::Volume;
+using isotouch::servo::Vec3;
+
+namespace {
+const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";
+
+isotouch::engine::LiveFieldOptions sphere_options() {
+  // Every member given (the default pass list trips GCC 12's -Wmaybe-uninitialized).
+  return isotouch::engine::LiveFieldOptions{{isotouch::engine::PassDesc::gradient()},
+                                            isotouch::core::Isosurface{0.0, isotouch::servo::InsideIs::kAbove},
+                                            -100.f, isotouch::core::SampleFormat::kFp32};
+}
+
+bool same_bits(const Volume& a, const Volume& b) {
+  return a.voxels.size() == b.voxels.size() &&
+         std::memcmp(a.voxels.data(), b.voxels.data(), a.voxels.size() * sizeof(float)) == 0;
+}
+
+// Value and gradient at every voxel centre, through the servo's FieldView, equal bit for bit.
+void expect_same_field(const isotouch::core::SampleField& a, const isotouch::core::SampleField& b) {
+  const isotouch::core::FieldView va(a), vb(b);
+  const auto& g = b.grid;
+  long diff = 0;
+  for (int k = 0; k < g.dims[2]; ++k)
+    for (int j = 0; j < g.dims[1]; ++j)
+      for (int i = 0; i < g.dims[0]; ++i) {
+        const Vec3 w = g.to_world(Vec3{double(i), double(j), double(k)});
+        const auto x = va.value_gradient(w), y = vb.value_gradient(w);
+        if (std::memcmp(&x.value, &y.value, sizeof x.value) != 0 || x.gradient.x != y.gradient.x ||
+            x.gradient.y != y.gradient.y || x.gradient.z != y.gradient.z)
+          ++diff;
+      }
+  EXPECT_EQ(diff, 0) << "voxel centres where the snapshots differ";
+}
+
+Brush carve_at(const Volume& v, std::array<int, 3> idx, double radius_m, double strength) {
+  Brush b;
+  b.kind = BrushKind::kCarve;
+  b.centre_m = v.grid.to_world(Vec3{double(idx[0]), double(idx[1]), double(idx[2])});
+  b.radius_m = radius_m;
+  b.strength = strength;
+  b.falloff = 0.5;
+  b.targets = isotouch::engine::default_targets(v, sphere_options().iso);
+  return b;
+}
+
+EditEvent brush_event(const Brush& b) {
+  EditEvent e;
+  e.kind = EditEvent::Kind::kBrush;
+  e.brush = b;
+  return e;
+}
+EditEvent plain(EditEvent::Kind k) {
+  EditEvent e;
+  e.kind = k;
+  return e;
+}
+
+void undo_redo_round_trip(isotouch::engine::VulkanContext* ctx) {
+  const Volume original = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
+  EditSession s(Volume(original), ctx, sphere_options(), 16.0);
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> buf;
+  buf.publish(s.current());
+  EXPECT_EQ(buf.acquire()->version, 1u);
+
+  // One stroke of two carves, then an add of its own.
+  s.apply(plain(EditEvent::Kind::kBeginStroke), &buf);
+  auto o1 = s.apply(brush_event(carve_at(original, {20, 20, 31}, 4e-3, 3.0)), &buf);
+  auto o2 = s.apply(brush_event(carve_at(original, {22, 20, 31}, 4e-3, 3.0)), &buf);
+  s.apply(plain(EditEvent::Kind::kEndStroke), &buf);
+  EXPECT_TRUE(o1.published);
+  EXPECT_FALSE(o1.brush.dirty.empty());
+  EXPECT_GT(o2.update.version, o1.update.version);
+  const Volume carved = s.volume();
+  EXPECT_FALSE(same_bits(carved, original));
+  Brush add = carve_at(original, {20, 31, 20}, 3e-3, 2.0);
+  add.kind = BrushKind::kAdd;
+  s.apply(brush_event(add), &buf);
+  const Volume edited = s.volume();
+  const std::uint64_t v_edited = buf.acquire()->version;
+  EXPECT_EQ(v_edited, s.current()->version);
+
+  // Undo twice: the original bits, and a published snapshot that reads like the sparse
+  // CPU reference on the original volume.
+  auto u1 = s.apply(plain(EditEvent::Kind::kUndo), &buf);
+  EXPECT_TRUE(u1.published);
+  EXPECT_FALSE(u1.restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), carved));
+  s.apply(plain(EditEvent::Kind::kUndo), &buf);
+  EXPECT_TRUE(same_bits(s.volume(), original));
+  const auto* after_undo = buf.acquire();
+  EXPECT_GT(after_undo->version, v_edited);
+  const auto o = sphere_options();
+  const auto ref = isotouch::engine::run_sparse_cpu(original, o.passes, o.iso, o.background, o.format);
+  expect_same_field(*after_undo, ref.field);
+
+  // Redo twice: the edited bits back.
+  s.apply(plain(EditEvent::Kind::kRedo), &buf);
+  EXPECT_TRUE(same_bits(s.volume(), carved));
+  s.apply(plain(EditEvent::Kind::kRedo), &buf);
+  EXPECT_TRUE(same_bits(s.volume(), edited));
+  const auto ref2 = isotouch::engine::run_sparse_cpu(edited, o.passes, o.iso, o.background, o.format);
+  expect_same_field(*buf.acquire(), ref2.field);
+  EXPECT_EQ(s.log().size(), 9u);  // every event, in order
+  EXPECT_EQ(s.log()[4].kind, EditEvent::Kind::kBrush);
+  EXPECT_EQ(s.log()[8].kind, EditEvent::Kind::kRedo);
+}
+
+// Inside voxels (value > 0 on the positive-inside sphere).
+long inside(const Volume& v) {
+  long n = 0;
+  for (float x : v.voxels) n += x > 0.f;
+  return n;
+}
+
+fs::path temp_dir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / (name + "-" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+struct TraceRow {
+  double t, hip[3], vhip[3], f;
+  bool contact;
+};
+std::vector<TraceRow> read_trace(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  std::vector<TraceRow> rows;
+  while (std::getline(in, line)) {
+    std::vector<double> c;
+    std::istringstream s(line);
+    std::string tok;
+    while (std::getline(s, tok, ',')) c.push_back(std::stod(tok));
+    if (c.size() < 11) break;
+    rows.push_back({c[0], {c[1], c[2], c[3]}, {c[4], c[5], c[6]}, std::sqrt(c[7] * c[7] + c[8] * c[8] + c[9] * c[9]),
+                    c[10] != 0});
+  }
+  return rows;
+}
+std::vector<std::map<std::string, std::string>> read_csv(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> head;
+  {
+    std::istringstream s(line);
+    for (std::string t; std::getline(s, t, ',');) head.push_back(t);
+  }
+  std::vector<std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    std::istringstream s(line);
+    std::map<std::string, std::string> r;
+    std::size_t i = 0;
+    for (std::string t; std::getline(s, t, ',') && i < head.size(); ++i) r[head[i]] = t;
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+// Trilinear value at a grid-world point (identity direction); NaN outside the voxel box.
+double trilinear(const Volume& v, const Vec3& p) {
+  const double idx[3] = {(p.x - v.grid.origin_m.x) / v.grid.spacing_m.x, (p.y - v.grid.origin_m.y) / v.grid.spacing_m.y,
+                         (p.z - v.grid.origin_m.z) / v.grid.spacing_m.z};
+  int i0[3];
+  double fr[3];
+  for (int a = 0; a < 3; ++a) {
+    if (!(idx[a] >= 0 && idx[a] <= v.grid.dims[std::size_t(a)] - 1)) return std::nan("");
+    i0[a] = std::min(int(std::floor(idx[a])), std::max(0, v.grid.dims[std::size_t(a)] - 2));
+    fr[a] = idx[a] - i0[a];
+  }
+  double s = 0;
+  for (int c = 0; c < 8; ++c) {
+    double w = 1;
+    int ix[3];
+    for (int a = 0; a < 3; ++a) {
+      const int b = (c >> a) & 1;
+      w *= b ? fr[a] : 1 - fr[a];
+      ix[a] = std::min(i0[a] + b, v.grid.dims[std::size_t(a)] - 1);
+    }
+    s += w * v.voxels[v.grid.index(ix[0], ix[1], ix[2])];
+  }
+  return s;
+}
+}  // namespace
+
+TEST(EditSession, UndoThenRedoIsBitForBitAndPublishesCpu) { undo_redo_round_trip(nullptr); }
+
+TEST(EditSession, UndoThenRedoIsBitForBitAndPublishesGpu) {
+  auto& vk = isotouch::test::validated_vk();
+  undo_redo_round_trip(&vk);
+  EXPECT_EQ(vk.validation_messages(), 0u);
+}
+
+// A carve strong enough to empty every voxel it reaches removes exactly the inside voxels
+// within its radius (brute force over the volume: the brush's reach is r < radius).
+TEST(EditSession, CarveRemovesTheBruteForceVoxels) {
+  const Volume v = isotouch::engine::make_sphere({48, 48, 48}, 1e-3, 16);
+  const std::array<int, 3> c{24, 24, 39};  // a voxel centre near the top of the sphere
+  const double radius = 5e-3;              // integer squared distances: no voxel at exactly r = radius
+  long expect = 0;
+  for (int k = 0; k < 48; ++k)
+    for (int j = 0; j < 48; ++j)
+      for (int i = 0; i < 48; ++i) {
+        const long d2 = long(i - c[0]) * (i - c[0]) + long(j - c[1]) * (j - c[1]) + long(k - c[2]) * (k - c[2]);
+        if (d2 < 25 && v.voxels[v.grid.index(i, j, k)] > 0.f) ++expect;
+      }
+  ASSERT_GT(expect, 50);
+  EditSession s(Volume(v), nullptr, sphere_options());
+  s.apply(brush_event(carve_at(v, c, radius, 1e9)), nullptr);
+  EXPECT_EQ(inside(v) - inside(s.volume()), expect);
+}
+
+// The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook
+// the trace is what it was.
+TEST(Headless, HookPublishesBeforeTheNextTick) {
+  const std::string text = R"({"volume": {"synthetic": "sphere", "dims": [32, 32, 32], "radius_vox": 10},
+                               "isovalue": 0, "script": {"hold_s": 0.05, "stroke_length_m": 0.005}})";
+  const auto scene = isotouch::app::parse_scene(text, "hook.json");
+  const Volume v = isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 10);
+  const auto o = sphere_options();
+  auto base = std::make_shared<isotouch::core::SampleField>(
+      isotouch::engine::run_sparse_cpu(v, o.passes, o.iso, o.background, o.format).field);
+  base->version = 1;
+  const auto script = isotouch::servo::make_touch_script(*base, scene.hri, scene.script);
+  auto run = [&](const isotouch::servo::TickHook& hook, isotouch::servo::TripleBuffer<isotouch::core::SampleField>& buf) {
+    isotouch::servo::WorkspaceTransform xf;
+    xf.translation_m = v.grid.centre_m();
+    Vec3 p, vel;
+    script.at(0, p, vel);
+    isotouch::servo::SimDevice dev(scene.device, xf.to_device(p));
+    isotouch::servo::HriRenderer r(scene.hri);
+    return isotouch::servo::run_headless(buf, r, dev, xf, script, scene.hri.rate_hz, {}, 250, hook);
+  };
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> b1, b2, b3;
+  b1.publish(base);
+  b2.publish(base);
+  b3.publish(base);
+  const auto plain_trace = run({}, b1);
+  // A hook that publishes nothing: the same trace bit for bit (the button it sets aside).
+  const auto quiet = run([](long k, isotouch::servo::TraceRow& row) { row.button = (k % 2) == 1; }, b2);
+  ASSERT_EQ(plain_trace.size(), quiet.size());
+  for (std::size_t k = 0; k < quiet.size(); ++k) {
+    EXPECT_EQ(quiet[k].button, (k % 2) == 1);
+    EXPECT_FALSE(plain_trace[k].button);
+    EXPECT_EQ(quiet[k].version, 1u);
+    EXPECT_EQ(std::memcmp(&plain_trace[k].force_n, &quiet[k].force_n, sizeof(Vec3)), 0) << "tick " << k;
+    EXPECT_EQ(std::memcmp(&plain_trace[k].hip_m, &quiet[k].hip_m, sizeof(Vec3)), 0) << "tick " << k;
+  }
+  // Same samples under a new version after every tick k: tick k + 1 must read version k + 2.
+  const auto hooked = run(
+      [&](long k, isotouch::servo::TraceRow&) {
+        auto f = std::make_shared<isotouch::core::SampleField>(*base);
+        f->version = std::uint64_t(k + 2);
+        b3.publish(f);
+      },
+      b3);
+  ASSERT_EQ(plain_trace.size(), hooked.size());
+  for (std::size_t k = 0; k < hooked.size(); ++k) ASSERT_EQ(hooked[k].version, k + 1) << "tick " << k;
+}
+
+// The sphere scene with a timeline: a carve at a fixed point before contact, a carve at the
+// VHIP during contact (a stroke of applications). Each "vhip" application is centred on the
+// VHIP that trace.csv lists for its tick; the snapshot version grows; the removed volume in
+// summary.json is the inside voxels of the input minus those of drilled.vdb read back.
+TEST(RunEdits, SphereTimelineCarves) {
+  const Volume v = isotouch::engine::make_sphere({64, 64, 64}, 1e-3, 20);
+  const Vec3 side = v.grid.to_world(Vec3{52, 32, 32});  // on the sphere's +x side, away from the probe
+  std::ostringstream text;
+  text.precision(17);
+  text << R"({"name": "sphere-edits", "volume": {"synthetic": "sphere", "dims": [64, 64, 64], "spacing_m": 0.001,
+              "radius_vox": 20}, "isovalue": 0, "inside": "above",
+              "script": {"hold_s": 0.2, "stroke_length_m": 0.0},
+              "outputs": {"plots": false},
+              "edits": {"brush": {"kind": "carve", "radius_mm": 3, "strength": 1000}, "every_ticks": 10,
+                        "timeline": [{"t_s": 0.2, "kind": "carve", "at": [)"
+       << side.x * 1e3 << ", " << side.y * 1e3 << ", " << side.z * 1e3 << R"(]},
+                                     {"t_s": 1.05, "kind": "carve", "at": "vhip", "radius_mm": 1.5, "strength": 0.3,
+                                      "duration_s": 0.1}]}})";
+  const auto scene = isotouch::app::parse_scene(text.str(), "sphere-edits.json");
+  const fs::path out = temp_dir("isotouch_edits_sphere");
+  isotouch::app::RunOptions opt;
+  opt.out_dir = out.string();
+  opt.progress = false;
+  std::ostringstream log;
+  const auto m = isotouch::app::run_scene(scene, opt, log);
+  ASSERT_TRUE(m.edits.present);
+  EXPECT_EQ(m.edits.timeline_brushes, 11);  // 1 + ceil(100 ticks / 10)
+  EXPECT_GE(m.edits.publications, 2);
+  EXPECT_GT(m.edits.last_version, 2u);
+
+  const auto trace = read_trace(out / "trace.csv");
+  const auto edits = read_csv(out / "edits.csv");
+  ASSERT_EQ(edits.size(), 13u);  // carve, begin, 10 carves, end
+  int at_vhip = 0;
+  for (const auto& e : edits) {
+    if (e.at("event") != "carve" || std::stol(e.at("tick")) < 1000) continue;
+    const auto& r = trace.at(std::size_t(std::stol(e.at("tick"))));
+    ASSERT_TRUE(r.contact) << "tick " << e.at("tick");
+    for (int a = 0; a < 3; ++a)
+      EXPECT_NEAR(std::stod(e.at(std::string("centre_") + "xyz"[a] + "_mm")), r.vhip[a] * 1e3, 1e-5);
+    ++at_vhip;
+  }
+  EXPECT_EQ(at_vhip, 10);
+  // The removed volume against the edited volume read back from drilled.vdb.
+  const auto after = isotouch::app::load_vdb((out / "drilled.vdb").string());
+  const long removed = inside(v) - inside(after.volume);
+  EXPECT_GT(removed, 20);
+  EXPECT_DOUBLE_EQ(m.edits.removed_mm3, double(removed) * 1.0);  // 1 mm^3 voxels
+  std::ifstream js(out / "summary.json");
+  const auto j = nlohmann::json::parse(js);
+  EXPECT_DOUBLE_EQ(j.at("edits").at("removed_mm3").get<double>(), double(removed));
+  EXPECT_TRUE(fs::exists(out / "drilled.stl"));
+  fs::remove_all(out);
+}
+
+// The shipped drill scene: the HIP ends up deeper along the press ray than the bone is thick
+// there (the burr went through), material was removed, and the files and pictures exist.
+TEST(RunEdits, DrillSkullGoesThroughTheBone) {
+  const auto scene = isotouch::app::load_scene(kScenes + "/drill-skull.json");
+  const fs::path out = temp_dir("isotouch_edits_drill");
+  isotouch::app::RunOptions opt;
+  opt.out_dir = out.string();
+  opt.progress = false;
+  std::ostringstream log;
+  const auto m = isotouch::app::run_scene(scene, opt, log);
+  // The bone along the press ray, from this file's own trilinear interpolation of the
+  // unedited volume: from the first point inside (the contact) to the first point outside after it.
+  const auto setup_vol = isotouch::app::load_vdb((out / "drilled.vdb").string());  // edited
+  const Volume before = isotouch::engine::load_volume(scene.volume_path);
+  const auto trace = read_trace(out / "trace.csv");
+  ASSERT_FALSE(trace.empty());
+  const Vec3 dir{1, 0, 0};  // the scene's ray direction
+  // The ray of the HIP at its deepest: start from the first contact tick's HIP, walk along +x.
+  std::size_t first = 0;
+  while (first < trace.size() && !trace[first].contact) ++first;
+  ASSERT_LT(first, trace.size());
+  Vec3 p{trace[first].hip[0] - 0.005, trace[first].hip[1], trace[first].hip[2]};
+  const double step = 0.05e-3;
+  double entry = -1, exit = -1;
+  for (double s = 0; s < 0.05; s += step) {
+    const double val = trilinear(before, p + dir * s);
+    if (entry < 0 && val > 1150) entry = s;
+    if (entry >= 0 && val <= 1150) {
+      exit = s;
+      break;
+    }
+  }
+  ASSERT_GE(entry, 0);
+  ASSERT_GT(exit, entry);
+  const double thickness = exit - entry;
+  double deepest = -1e9;
+  for (const auto& r : trace) deepest = std::max(deepest, r.hip[0] - (p.x + entry));
+  EXPECT_GT(deepest, thickness) << "bone " << thickness * 1e3 << " mm thick, HIP at most " << deepest * 1e3
+                                << " mm past its outer surface";
+  // The edited volume is outside along the ray through the bone (a hole).
+  const double mid = trilinear(setup_vol.volume, p + dir * (0.5 * (entry + exit)));
+  EXPECT_LE(mid, 1150) << "the middle of the bone along the ray is still bone";
+  EXPECT_GT(m.edits.removed_mm3, 0);
+  EXPECT_GT(m.edits.button_brushes, 10);
+  EXPECT_GT(m.edits.max_hip_depth_m, thickness);
+  for (const char* f : {"drilled.vdb", "drilled.stl", "edits.csv", "before.png", "after.png", "edits.png", "report.md"})
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  fs::remove_all(out);
+}

@@ -453,7 +453,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
 
   // ---- 1. latency ----
   std::vector<EditRecord> live;
-  long contact_ticks = 0, servo_ticks = 0;
+  long contact_ticks = 0, servo_ticks = 0, latency_missed = 0;
   {
     servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
     rig.note(servo, servo.start());
@@ -480,6 +480,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     servo_ticks = rig.spy->ticks() - ticks0;
     contact_ticks = rig.spy->contact_ticks() - contact0;
     servo.stop();
+    latency_missed = servo.missed_deadlines();
   }
 
   // ---- 2. sustained: idle, editing (x rounds) ----
@@ -609,16 +610,18 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   for (const auto& p : lo.passes) out << " " << p.label();
   out << ", samples " << scene.engine.samples << "; first snapshot: "
       << (first->bricks ? std::to_string(first->bricks->active_bricks()) : std::string("?")) << " active bricks\n"
-      << "- brushes: " << (session.sculptor().on_gpu() ? "GPU, " + device_text : "CPU reference (one thread)")
-      << "; material " << targets.material << ", empty " << targets.empty << ", strength |material - empty|, falloff 0.5"
-      << "; Vulkan device: " << device_text << "\n"
+      << "- Vulkan device: " << device_text << "\n"
+      << "- brushes: "
+      << (session.sculptor().on_gpu() ? std::string("on the Vulkan device (engine::BrushEngine)")
+                                      : std::string("CPU reference (one thread)"))
+      << "; material " << targets.material << ", empty " << targets.empty << ", strength |material - empty|, falloff 0.5\n"
       << "- servo: HRI at " << num(o.rate_hz, 0) << " Hz (K " << hp.stiffness_n_per_m << " N/m, plane every "
       << hp.plane_update_period << " ticks) on a simulated device pressing " << num(sp.press_depth_m * 1e3, 1)
       << " mm into the surface at (" << num(rig.script.contact_point_m.x * 1e3, 1) << ", "
       << num(rig.script.contact_point_m.y * 1e3, 1) << ", " << num(rig.script.contact_point_m.z * 1e3, 1)
       << ") mm (grid frame) and resting there; " << rig.scheduling << "; in contact on "
       << num(servo_ticks > 0 ? 100.0 * double(contact_ticks) / double(servo_ticks) : kNaN, 1)
-      << " % of the ticks of the latency phase\n";
+      << " % of the ticks of the latency phase, " << latency_missed << " missed deadlines in that phase\n";
   if (!rig.setup_note.empty()) {
     std::string n = rig.setup_note;
     std::replace(n.begin(), n.end(), '\n', ' ');

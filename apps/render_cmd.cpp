@@ -514,7 +514,16 @@ struct BenchRow {
   std::size_t pixels_differ = 0;      ///< depth differs between skip on and off
   std::size_t hits = 0;
   bool timestamps = true;
+  double build_ms = 0;                ///< engine::cell_distances on the host, median
 };
+
+/// /proc/loadavg's first three fields (the machine may be shared), or "n/a".
+std::string load_average() {
+  std::ifstream in("/proc/loadavg");
+  std::string a, b, c;
+  if (!(in >> a >> b >> c)) return "n/a";
+  return a + " " + b + " " + c;
+}
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -531,6 +540,16 @@ BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, i
   BenchRow row;
   row.name = scene.name;
   row.dims = vol.grid.dims;
+  {  // The skipping structure is rebuilt from the values whenever they change: its host cost.
+    std::vector<double> ms;
+    for (int i = 0; i < 5; ++i) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const auto d = engine::cell_distances(field.grid, field.values, field.iso, field.background);
+      ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      if (d.size() != field.cell_dist.size()) throw std::runtime_error("bench render: cell distances changed size");
+    }
+    row.build_ms = median(ms);
+  }
   engine::RaycastImage last[2];
   for (int skip = 1; skip >= 0; --skip) {
     engine::RaycastStyle st;
@@ -561,8 +580,10 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
   std::cout << "isotouch bench render: " << size << " x " << size << " frames, default camera (orbit, azimuth 0, "
             << "elevation 10 deg, whole volume), step 0.5 voxel, median of " << frames << " frames after one warm-up\n"
             << "device: " << vk.info().name << " (" << vk.info().type << ", " << vk.info().driver << ")\n\n"
-            << "| scene | voxels | surface pixels | ms/frame skipping | ms/frame no skipping | speed-up | images equal |\n"
-            << "|---|---|---|---|---|---|---|\n";
+            << "load average before: " << load_average() << "\n\n"
+            << "| scene | voxels | surface pixels | ms/frame skipping | ms/frame no skipping | speed-up | images equal "
+               "| cell distances built [ms, host] |\n"
+            << "|---|---|---|---|---|---|---|---|\n";
   std::vector<BenchRow> rows;
   for (const char* s : {"head.json", "chest.json"}) {
     fs::path p = fs::path("scenes") / s;
@@ -572,11 +593,12 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
     std::cout << std::fixed << std::setprecision(1) << "| " << r.name << " | " << r.dims[0] << "x" << r.dims[1] << "x"
               << r.dims[2] << " | " << r.hits << " | " << r.ms_skip << " | " << r.ms_noskip << " | "
               << std::setprecision(2) << r.ms_noskip / r.ms_skip << "x | "
-              << (r.pixels_differ == 0 ? "yes" : "NO (" + std::to_string(r.pixels_differ) + " pixels)") << " |\n";
+              << (r.pixels_differ == 0 ? "yes" : "NO (" + std::to_string(r.pixels_differ) + " pixels)") << " | "
+              << std::setprecision(1) << r.build_ms << " |\n";
   }
   const BenchRow& head = rows[0];
   const double speedup = head.ms_noskip / head.ms_skip;
-  std::cout << "\n(ms: " << (head.timestamps ? "GPU timestamps around the dispatch" : "submit-to-fence wall time")
+  std::cout << "\nload average after: " << load_average() << "\n(ms: " << (head.timestamps ? "GPU timestamps around the dispatch" : "submit-to-fence wall time")
             << "; the machine may be shared: figures vary by tens of %)\n"
             << std::setprecision(2) << "verdict: head skipping speed-up " << speedup << "x (needs >= 5x): "
             << (speedup >= 5 ? "PASS" : "FAIL") << "\n"

@@ -2,6 +2,7 @@
 #include "raycast.h"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstddef>
@@ -27,8 +28,10 @@ static_assert(offsetof(gpu::RaycastPrim, ax) == 4 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cr) == 7 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cb) == 15 * 4);
 static_assert(sizeof(gpu::RaycastPush) == 16);
-static_assert(ISOTOUCH_BRICK == 8u, "raycast.comp walks 8^3 bricks");
-static_assert(ISOTOUCH_RAYCAST_SUB >= 1u && 8u % ISOTOUCH_RAYCAST_SUB == 0u, "sub-cells tile the 8^3 bricks");
+static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 255u, "cell distances are bytes");
+// llvmpipe's budget of 65535 loop iterations per invocation: the march, the refinement (8),
+// the box (3) and the two overlay loops.
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 8u + 3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 
 namespace {
 
@@ -59,39 +62,66 @@ void widen_faces(RaycastField& f) {
       }
 }
 
-/// Sub-cell ranges (RaycastField::sub_minmax) from the values: per axis the voxels
-/// [S c, min(S c + S, n - 1)], and the background where S c == 0 or S c + S >= n (a sample
-/// there reads outside the grid). NaN voxels are ignored (min/max by < and >).
-void build_sub_ranges(RaycastField& f) {
-  constexpr int S = int(ISOTOUCH_RAYCAST_SUB);
-  const auto& n = f.grid.dims;
-  for (int a = 0; a < 3; ++a) f.subs[a] = (n[a] + S - 1) / S;
-  const auto& s = f.subs;
-  f.sub_minmax.assign(2 * std::size_t(s[0]) * std::size_t(s[1]) * std::size_t(s[2]), 0.0f);
-  const bool bg_ok = f.background == f.background;
-  std::size_t i = 0;
-  for (int z = 0; z < s[2]; ++z)
-    for (int y = 0; y < s[1]; ++y)
-      for (int x = 0; x < s[0]; ++x, ++i) {
-        float mn = std::numeric_limits<float>::infinity(), mx = -mn;
-        const int x1 = std::min(S * x + S, n[0] - 1), y1 = std::min(S * y + S, n[1] - 1);
-        const int z1 = std::min(S * z + S, n[2] - 1);
-        for (int k = S * z; k <= z1; ++k)
-          for (int j = S * y; j <= y1; ++j) {
-            const float* row = f.values.data() + (std::size_t(k) * std::size_t(n[1]) + std::size_t(j)) * std::size_t(n[0]);
-            for (int q = S * x; q <= x1; ++q) {
-              if (row[q] < mn) mn = row[q];
-              if (row[q] > mx) mx = row[q];
-            }
-          }
-        const bool face = x == 0 || y == 0 || z == 0 || S * x + S >= n[0] || S * y + S >= n[1] || S * z + S >= n[2];
-        if (face && bg_ok) {
-          mn = std::min(mn, f.background);
-          mx = std::max(mx, f.background);
+/// A 3-D bit set, x fastest, 64 bits per word, rows padded to whole words.
+struct Bits3 {
+  int nx = 0, ny = 0, nz = 0, words = 0;  ///< bits per axis, words per row
+  std::vector<std::uint64_t> w;
+  Bits3(int x, int y, int z)
+      : nx(x), ny(y), nz(z), words((x + 63) / 64), w(std::size_t(words) * std::size_t(y) * std::size_t(z), 0) {}
+  std::uint64_t* row(int y, int z) { return w.data() + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(words); }
+  const std::uint64_t* row(int y, int z) const {
+    return w.data() + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(words);
+  }
+  void set(int x, int y, int z) { row(y, z)[x >> 6] |= std::uint64_t(1) << (x & 63); }
+  /// Clears every bit with x >= ex, y >= ey or z >= ez (and the row padding).
+  void keep(int ex, int ey, int ez) {
+    for (int z = 0; z < nz; ++z)
+      for (int y = 0; y < ny; ++y) {
+        std::uint64_t* r = row(y, z);
+        for (int i = 0; i < words; ++i) {
+          const int first = 64 * i;
+          if (z >= ez || y >= ey || first >= ex) r[i] = 0;
+          else if (ex - first < 64) r[i] &= (std::uint64_t(1) << (ex - first)) - 1;
         }
-        f.sub_minmax[2 * i] = mn;
-        f.sub_minmax[2 * i + 1] = mx;
       }
+  }
+};
+
+/// out = in dilated by the box [lo, 1]^3 (lo = 0: out(x) = OR of in(x .. x + 1) per axis,
+/// lo = -1: the 3^3 cube). Bits past the set's extent read 0. All three sets have the same
+/// extent; tmp is scratch.
+void dilate(const Bits3& in, Bits3& out, int lo, Bits3& tmp) {
+  const int W = in.words;
+  for (int z = 0; z < in.nz; ++z)  // x: shifting right by 1 brings bit x + 1 down to x
+    for (int y = 0; y < in.ny; ++y) {
+      const std::uint64_t* r = in.row(y, z);
+      std::uint64_t* o = tmp.row(y, z);
+      for (int i = 0; i < W; ++i) {
+        const std::uint64_t next = i + 1 < W ? r[i + 1] : 0, prev = i > 0 ? r[i - 1] : 0;
+        std::uint64_t v = r[i] | (r[i] >> 1) | (next << 63);
+        if (lo < 0) v |= (r[i] << 1) | (prev >> 63);
+        o[i] = v;
+      }
+    }
+  for (int z = 0; z < in.nz; ++z)  // y: OR of the rows y + lo .. y + 1
+    for (int y = 0; y < in.ny; ++y) {
+      std::uint64_t* o = out.row(y, z);
+      std::fill(o, o + W, 0);
+      for (int yy = std::max(0, y + lo); yy <= std::min(in.ny - 1, y + 1); ++yy) {
+        const std::uint64_t* r = tmp.row(yy, z);
+        for (int i = 0; i < W; ++i) o[i] |= r[i];
+      }
+    }
+  for (int z = 0; z < in.nz; ++z)  // z: OR of the planes z + lo .. z + 1
+    for (int y = 0; y < in.ny; ++y) {
+      std::uint64_t* o = tmp.row(y, z);
+      std::fill(o, o + W, 0);
+      for (int zz = std::max(0, z + lo); zz <= std::min(in.nz - 1, z + 1); ++zz) {
+        const std::uint64_t* r = out.row(y, zz);
+        for (int i = 0; i < W; ++i) o[i] |= r[i];
+      }
+    }
+  std::swap(out.w, tmp.w);
 }
 
 void set3(float& x, float& y, float& z, const Vec3& v) {
@@ -101,6 +131,78 @@ void set3(float& x, float& y, float& z, const Vec3& v) {
 }
 
 }  // namespace
+
+std::vector<std::uint8_t> cell_distances(const core::Grid& grid, const std::vector<float>& values,
+                                         const core::Isosurface& iso, float background) {
+  if (grid.empty() || values.size() != grid.voxel_count())
+    throw std::invalid_argument("raycast: cell distances: " + std::to_string(values.size()) +
+                                " values for a grid of " + std::to_string(grid.voxel_count()) + " voxels");
+  const auto& n = grid.dims;
+  const double sign = iso.inside == core::InsideIs::kAbove ? 1.0 : -1.0;
+  const double tau = double(float(iso.tau));  // the shader's isovalue (make_params)
+  double mag = 0;  // max |finite value or background|
+  if (std::isfinite(background)) mag = std::max(mag, std::fabs(double(background)));
+  for (float v : values)
+    if (std::isfinite(v)) mag = std::max(mag, std::fabs(double(v)));
+  const double margin = 1e-5 * (mag + std::fabs(tau));
+  // hot: sign (v - tau) >= -margin, as a float comparison with the bound rounded outward
+  // (a few more hot voxels at most); NaN compares false.
+  const bool above = sign > 0;
+  const float lim = above ? std::nextafter(float(tau - margin), -std::numeric_limits<float>::infinity())
+                          : std::nextafter(float(tau + margin), std::numeric_limits<float>::infinity());
+  auto hot = [above, lim](float v) { return above ? v >= lim : v <= lim; };
+  // Hot voxels at index [-1, n + 1] per axis (stored at + 1), the background outside the grid.
+  Bits3 h(n[0] + 3, n[1] + 3, n[2] + 3);
+  const bool bg_hot = hot(background);
+  for (int z = 0; z < h.nz; ++z)
+    for (int y = 0; y < h.ny; ++y) {
+      const bool in_plane = z >= 1 && z <= n[2] && y >= 1 && y <= n[1];
+      if (!in_plane) {
+        if (bg_hot)
+          for (int x = 0; x < h.nx; ++x) h.set(x, y, z);
+        continue;
+      }
+      const float* r = values.data() + (std::size_t(z - 1) * std::size_t(n[1]) + std::size_t(y - 1)) * std::size_t(n[0]);
+      if (bg_hot) {
+        h.set(0, y, z);
+        h.set(n[0] + 1, y, z);
+        h.set(n[0] + 2, y, z);
+      }
+      std::uint64_t* hw = h.row(y, z);
+      for (int x = 0; x < n[0]; ++x) hw[(x + 1) >> 6] |= std::uint64_t(hot(r[x])) << ((x + 1) & 63);
+    }
+  // Active cells: cell c (stored s = c + 1) has corners at stored voxels s .. s + 1. All
+  // sets share h's extent (n + 3 per axis); cells use the first n + 2, the rest stays 0.
+  const int ex = n[0] + 2, ey = n[1] + 2, ez = n[2] + 2;
+  Bits3 cur(h.nx, h.ny, h.nz), prev(h.nx, h.ny, h.nz), tmp(h.nx, h.ny, h.nz);
+  dilate(h, cur, 0, tmp);
+  cur.keep(ex, ey, ez);
+  const std::size_t cx = std::size_t(ex), cy = std::size_t(ey);
+  std::vector<std::uint8_t> dist(cx * cy * std::size_t(ez), std::uint8_t(ISOTOUCH_RAYCAST_DIST_MAX));
+  // Level r: the cells the r-th dilation by the 3^3 cube newly covers are at distance r.
+  for (unsigned r = 0; r < ISOTOUCH_RAYCAST_DIST_MAX; ++r) {
+    bool any_new = false;
+    for (int z = 0; z < ez; ++z)
+      for (int y = 0; y < ey; ++y) {
+        const std::uint64_t* c = cur.row(y, z);
+        const std::uint64_t* p = prev.row(y, z);  // level r - 1 (all 0 before level 0)
+        std::uint8_t* out = dist.data() + (std::size_t(z) * cy + std::size_t(y)) * cx;
+        for (int i = 0; i < cur.words; ++i) {
+          std::uint64_t fresh = c[i] & ~p[i];
+          any_new = any_new || fresh != 0;
+          while (fresh) {
+            out[std::size_t(64 * i + std::countr_zero(fresh))] = std::uint8_t(r);
+            fresh &= fresh - 1;
+          }
+        }
+      }
+    if (!any_new || r + 1 == ISOTOUCH_RAYCAST_DIST_MAX) break;  // all covered, or the cap
+    std::swap(cur.w, prev.w);  // prev = level r
+    dilate(prev, cur, -1, tmp);
+    cur.keep(ex, ey, ez);  // cur = level r + 1
+  }
+  return dist;
+}
 
 RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
                                 float background, const BrickRanges& r) {
@@ -124,7 +226,7 @@ RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> value
     f.brick_minmax[2 * i + 1] = r.max[i];
   }
   widen_faces(f);
-  build_sub_ranges(f);
+  f.cell_dist = cell_distances(grid, f.values, iso, background);
   return f;
 }
 
@@ -198,6 +300,17 @@ gpu::RaycastParams make_params(const RaycastField& f, const CameraView& v, const
                                 " x " + std::to_string(height));
   if (!(s.step_vox > 0.01f && s.step_vox <= 4.0f))
     throw std::invalid_argument("raycast: step must be in (0.01, 4] voxels, got " + std::to_string(s.step_vox));
+  // A ray's lattice has at most ceil(diagonal of the box [-1, n] / step) + 1 samples.
+  const auto& dims = f.grid.dims;
+  const double diag = std::sqrt(double(dims[0] + 1) * (dims[0] + 1) + double(dims[1] + 1) * (dims[1] + 1) +
+                                double(dims[2] + 1) * (dims[2] + 1));
+  if (diag / s.step_vox + 2 > ISOTOUCH_RAYCAST_MAX_SAMPLES)
+    throw std::invalid_argument("raycast: step " + std::to_string(s.step_vox) + " voxel on a " + std::to_string(dims[0]) +
+                                "x" + std::to_string(dims[1]) + "x" + std::to_string(dims[2]) + " grid needs up to " +
+                                std::to_string(long(diag / s.step_vox + 2)) + " samples per ray, more than " +
+                                std::to_string(ISOTOUCH_RAYCAST_MAX_SAMPLES) +
+                                " (llvmpipe ends an invocation's loops after 65535 iterations); use a step >= " +
+                                std::to_string(diag / (ISOTOUCH_RAYCAST_MAX_SAMPLES - 2)) + " voxel");
   gpu::RaycastParams p{};
   p.width = std::uint32_t(width);
   p.height = std::uint32_t(height);
@@ -276,7 +389,7 @@ struct RayCaster::Impl {
   VulkanContext& ctx;
   RaycastField field;
   ComputePipeline<gpu::RaycastPush> pipeline;
-  GpuBuffer values, bricks;                // device-local, resident
+  GpuBuffer values, cells;                 // device-local, resident
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
   GpuBuffer image, depth;                  // device-local, sized for the last frame
@@ -309,7 +422,12 @@ Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes
 Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field) {
   using R = Result<std::unique_ptr<RayCaster>>;
   const std::size_t vbytes = field.values.size() * sizeof(float);
-  if (vbytes == 0 || field.brick_minmax.empty()) return R::fail("raycast: empty field");
+  const auto& n = field.grid.dims;
+  const std::size_t cells = std::size_t(n[0] + 2) * std::size_t(n[1] + 2) * std::size_t(n[2] + 2);
+  if (vbytes == 0 || vbytes != field.grid.voxel_count() * sizeof(float)) return R::fail("raycast: empty field");
+  if (field.cell_dist.size() != cells)
+    return R::fail("raycast: " + std::to_string(field.cell_dist.size()) + " cell distances for a grid needing " +
+                   std::to_string(cells) + " (build the field with make_raycast_field)");
   if (vbytes > ctx.max_binding_bytes())
     return R::fail("raycast: the volume's " + std::to_string(vbytes) + " bytes exceed maxStorageBufferRange " +
                    std::to_string(ctx.max_binding_bytes()) + " bytes on " + ctx.info().name +
@@ -318,12 +436,12 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
-  // Binding 2: the brick ranges, then the sub-cell ranges.
-  std::vector<float> ranges(impl->field.brick_minmax);
-  ranges.insert(ranges.end(), impl->field.sub_minmax.begin(), impl->field.sub_minmax.end());
-  auto b = upload(ctx, ranges.data(), ranges.size() * sizeof(float), "raycast brick and sub-cell ranges");
+  // Binding 2: the cell distance bytes, padded to whole uints.
+  std::vector<std::uint8_t> cd(impl->field.cell_dist);
+  cd.resize((cd.size() + 3) / 4 * 4, 0);
+  auto b = upload(ctx, cd.data(), cd.size(), "raycast cell distances");
   if (!b) return R::fail(b.error);
-  impl->bricks = std::move(*b.value);
+  impl->cells = std::move(*b.value);
   const std::size_t pb = sizeof(gpu::RaycastParams);
   const std::size_t qb = sizeof(gpu::RaycastPrim) * ISOTOUCH_RAYCAST_MAX_PRIMS;
   for (auto [buf, bytes, intent, what] :
@@ -370,7 +488,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.pipeline.bind(cmd, arena,
                   {{m.params.handle(), 0, m.params.size()},
                    {m.values.handle(), 0, m.values.size()},
-                   {m.bricks.handle(), 0, m.bricks.size()},
+                   {m.cells.handle(), 0, m.cells.size()},
                    {m.prims.handle(), 0, m.prims.size()},
                    {m.image.handle(), 0, pixels * 4},
                    {m.depth.handle(), 0, pixels * 4}});

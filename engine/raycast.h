@@ -15,11 +15,12 @@
 // RAS NIfTI and an LPS MetaImage of the same head both show the face from the front.
 //
 // Shader input (bindings of RaycastParams in shaders/isotouch_shared.h): dense float
-// values + per-brick (min, max) with halo 1. Swapping in a bricked snapshot
-// (core/brick_field.h) changes only the shader's voxel() (one brick-table lookup, then
-// the 9^3 pool brick: a trilinear cell never straddles two bricks) and its bindings; the
-// march, the brick walk (it reads only the ranges; a uniform brick is a range min = max =
-// tile value) and the CPU reference's voxel() change the same way.
+// values + one byte per trilinear cell (chessboard distance to the nearest cell that can
+// hold an inside value; cell_distances(), rebuilt from the values whenever they change).
+// Swapping in a bricked snapshot (core/brick_field.h) changes only the shader's voxel()
+// (one brick-table lookup, then the 9^3 pool brick: a trilinear cell never straddles two
+// bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
+// and the cell bytes of a uniform brick follow from its tile value.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -38,26 +39,42 @@ namespace isotouch::engine {
 
 using core::Vec3;
 
-/// The field a ray caster draws: dense values on a grid plus per-brick ranges.
+/// The field a ray caster draws: dense values on a grid plus its empty-space structure.
 struct RaycastField {
   core::Grid grid;
   std::vector<float> values;          ///< grid.voxel_count() values, x fastest
   std::array<int, 3> bricks{0, 0, 0}; ///< ceil(dims / 8)
   /// (min, max) per brick, bricks x fastest: the 8^3 brick widened by 1 voxel on each
   /// side (engine::brick_minmax_cpu, halo 1), and for bricks on the grid's faces also
-  /// the background (the one-voxel band outside the grid blends with it).
+  /// the background (the one-voxel band outside the grid blends with it). Not read by the
+  /// caster (the cell distances are finer); kept for callers that have GPU ranges.
   std::vector<float> brick_minmax;
-  std::array<int, 3> subs{0, 0, 0};  ///< sub-cells per axis: ceil(dims / ISOTOUCH_RAYCAST_SUB)
-  /// (min, max) per sub-cell (the second skipping level, x fastest): the voxels a trilinear
-  /// sample in the sub-cell reads, index [S c, S c + S] per axis (S = ISOTOUCH_RAYCAST_SUB,
-  /// clipped to the grid), and the background for sub-cells on the grid's faces. NaN
-  /// voxels are left out (a sample reading one is outside). Built by make_raycast_field.
-  std::vector<float> sub_minmax;
+  /// Empty-space skipping (binding 2 of the shader): one byte per trilinear cell c in
+  /// [-1, n] per axis (stored at c + 1, x fastest; n + 2 cells per axis): the chessboard
+  /// distance [cells] to the nearest active cell, 0 for an active one (cell_distances()).
+  std::vector<std::uint8_t> cell_dist;
   core::Isosurface iso;
   float background = 0;  ///< value outside the grid (NaN: outside every isosurface)
 };
 
-/// Builds a RaycastField: brick ranges by brick_minmax_cpu(halo 1), widened at the faces.
+/// The empty-space skipping structure of a volume (RaycastField::cell_dist), from the
+/// values the caller gives (rebuild it when the volume changes: a function of the values
+/// only, host side, O(cells x distance) word operations on bit sets).
+/// Cell c (lower corner c, corners c + {0,1}^3, voxels outside the grid reading
+/// `background`) is active when a corner value v has inside_sign * (v - tau) >= -margin,
+/// margin = 1e-5 (max |finite v or background| + |tau|): the float lerps of a trilinear
+/// value stay within 15 ulps of that bound of the corners' range, so an inactive cell's
+/// samples are outside (a NaN corner makes every sample NaN: outside; it counts as
+/// inactive). Returns (nx + 2)(ny + 2)(nz + 2) bytes: min(chessboard distance [cells] to the
+/// nearest active cell, ISOTOUCH_RAYCAST_DIST_MAX), 0 for active cells. Cells past the
+/// range are pure background: active only if the background is inside, and then every cell
+/// on the range's faces is active too, so distances within the range are exact.
+/// @throws std::invalid_argument if values.size() != grid.voxel_count().
+std::vector<std::uint8_t> cell_distances(const core::Grid& grid, const std::vector<float>& values,
+                                         const core::Isosurface& iso, float background);
+
+/// Builds a RaycastField: brick ranges by brick_minmax_cpu(halo 1), widened at the faces,
+/// and the cell distances (cell_distances()).
 /// `background`: e.g. core::outside_background of the samples (what `isotouch run` publishes).
 RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
                                 float background);

@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 #include "raycast.h"
 
@@ -40,8 +41,7 @@ struct Caster {
   const gpu::RaycastParams& P;
   std::uint32_t flags;
   const float* vals;
-  const float* brick;
-  const float* sub;  ///< sub-cell ranges (RaycastField::sub_minmax)
+  const std::uint8_t* cells;  ///< cell distances (RaycastField::cell_dist)
   const std::vector<gpu::RaycastPrim>& prims;
 
   // The memory seam (see the shader's voxel()).
@@ -81,109 +81,48 @@ struct Caster {
     return t;
   }
 
-  float march(F3 e, F3 d, float t0, float t1, float h, int kl, int kh) const {
-    for (int k = kl; k <= kh; ++k) {
+  /// The plain march: the first inside sample k in [1, K], or 0 (the caller refines).
+  int march(F3 e, F3 d, float t0, float t1, float h, int K) const {
+    for (int k = 1; k <= K; ++k)
+      if (inside_at(e, d, lattice_t(t0, t1, h, k))) return k;
+    return 0;
+  }
+
+  /// The byte of trilinear cell c (lower corner, in [-1, n] per axis; see the shader).
+  unsigned cell_dist(int x, int y, int z) const {
+    const std::size_t cx = std::size_t(P.nx) + 2, cy = std::size_t(P.ny) + 2;
+    return cells[(std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1)];
+  }
+
+  /// The shader's march_skip: the same lattice, inactive cells not evaluated, jumps past
+  /// the box of cells within D - 1 of an inactive cell at distance D.
+  int march_skip(F3 e, F3 d, F3 inv_d, float t0, float t1, float h, int K, float eps) const {
+    int k = 1;
+    while (k <= K) {
       const float t = lattice_t(t0, t1, h, k);
-      if (inside_at(e, d, t)) return refine(e, d, lattice_t(t0, t1, h, k - 1), t);
-    }
-    return -1.0f;
-  }
-
-  /// Whether a (min, max) range can hold an inside value.
-  bool range_active(const float* r, std::size_t b) const {
-    const float mn = r[2 * b], mx = r[2 * b + 1];
-    const float em = P.inside_sign > 0.0f ? mx - P.tau : P.tau - mn;
-    return em >= 0.0f;
-  }
-  bool brick_active(int cx, int cy, int cz) const {
-    return range_active(brick, (std::size_t(cz) * P.by + std::uint32_t(cy)) * P.bx + std::uint32_t(cx));
-  }
-  static constexpr int kSub = int(ISOTOUCH_RAYCAST_SUB);
-  static int sub_count(std::uint32_t n) { return int((n + ISOTOUCH_RAYCAST_SUB - 1u) / ISOTOUCH_RAYCAST_SUB); }
-  bool sub_active(const int s[3]) const {
-    const std::size_t sx = std::size_t(sub_count(P.nx)), sy = std::size_t(sub_count(P.ny));
-    return range_active(sub, (std::size_t(s[2]) * sy + std::size_t(s[1])) * sx + std::size_t(s[0]));
-  }
-
-  static float next_boundary(float e, float d, float inv, int c, int nb) {
-    if (d > 0.0f && c + 1 < nb) return (8.0f * float(c + 1) - e) * inv;
-    if (d < 0.0f && c > 0) return (8.0f * float(c) - e) * inv;
-    return kInf;
-  }
-  /// The same for sub-cells c in [lo, hi] (one brick's).
-  static float next_sub_boundary(float e, float d, float inv, int c, int lo, int hi) {
-    if (d > 0.0f && c < hi) return (float(kSub) * float(c + 1) - e) * inv;
-    if (d < 0.0f && c > lo) return (float(kSub) * float(c) - e) * inv;
-    return kInf;
-  }
-
-  /// Samples k in [kl, kh], k >= k_next, in order; k_next moves past them. Returns the refined t or -1.
-  float march_from(F3 e, F3 d, float t0, float t1, float h, int K, float ta, float tb, int& k_next) const {
-    const int kl = std::max(k_next, int(std::floor((ta - t0) / h)));
-    const int kh = std::min(K, int(std::ceil((tb - t0) / h)) + 1);
-    if (kl > kh) return -1.0f;
-    const float t = march(e, d, t0, t1, h, kl, kh);
-    k_next = kh + 1;
-    return t;
-  }
-
-  /// Second level: the sub-cell DDA through brick c over [tb0, tb1]; samples only in
-  /// sub-cells whose range can hold an inside value (the same lattice as march()).
-  float walk_subs(F3 e, F3 d, F3 inv_d, float t0, float t1, float h, int K, const int c[3], float tb0, float tb1,
-                  int& k_next) const {
-    constexpr int per = 8 / kSub;
-    const int ns[3] = {sub_count(P.nx), sub_count(P.ny), sub_count(P.nz)};
-    const F3 pe = ray_point(e, d, tb0);
-    int lo[3], hi[3], s[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = per * c[a];
-      hi[a] = std::min(lo[a] + per, ns[a]) - 1;
-      s[a] = std::clamp(int(std::floor(pe[a] / float(kSub))), lo[a], hi[a]);
-    }
-    float ts0 = tb0;
-    for (int step = 0; step < 3 * per + 4; ++step) {
-      const float tx = next_sub_boundary(e.x, d.x, inv_d.x, s[0], lo[0], hi[0]);
-      const float ty = next_sub_boundary(e.y, d.y, inv_d.y, s[1], lo[1], hi[1]);
-      const float tz = next_sub_boundary(e.z, d.z, inv_d.z, s[2], lo[2], hi[2]);
-      const float ts1 = std::min(std::min(std::min(tx, ty), tz), tb1);
-      if (sub_active(s)) {
-        const float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
-        if (t >= 0.0f) return t;
+      const F3 p = ray_point(e, d, t);
+      const F3 fl{std::floor(p.x), std::floor(p.y), std::floor(p.z)};
+      const int c[3] = {int(fl.x), int(fl.y), int(fl.z)};
+      const int n[3] = {int(P.nx), int(P.ny), int(P.nz)};
+      bool in_cells = true;
+      for (int a = 0; a < 3; ++a) in_cells = in_cells && c[a] >= -1 && c[a] <= n[a];
+      const unsigned D = in_cells ? cell_dist(c[0], c[1], c[2]) : 0u;
+      if (D == 0u) {
+        if (excess(field(p)) > 0.0f) return k;
+        ++k;
+      } else {
+        const float r = float(D) - eps;
+        float tp[3];
+        for (int a = 0; a < 3; ++a) {
+          const float plane = d[a] > 0.0f ? fl[a] + r : fl[a] - (r - 1.0f);
+          tp[a] = d[a] == 0.0f ? kInf : (plane - e[a]) * inv_d[a];
+        }
+        const float t_exit = std::min(std::min(tp[0], tp[1]), tp[2]);
+        const float kr = (t_exit - t0) / h;
+        k = std::max(k + 1, int(std::min(std::ceil(kr), float(K + 1))));
       }
-      if (ts1 >= tb1) break;
-      if (tx <= ty && tx <= tz) s[0] += d.x > 0.0f ? 1 : -1;
-      else if (ty <= tz) s[1] += d.y > 0.0f ? 1 : -1;
-      else s[2] += d.z > 0.0f ? 1 : -1;
-      ts0 = ts1;
     }
-    return -1.0f;
-  }
-
-  float walk_bricks(F3 e, F3 d, float t0, float t1, float h, int K) const {
-    const int nb[3] = {int(P.bx), int(P.by), int(P.bz)};
-    const F3 inv_d{1.0f / d.x, 1.0f / d.y, 1.0f / d.z};  // +-inf where d = 0 (not used there)
-    const F3 pe = ray_point(e, d, t0);
-    int c[3];
-    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int(std::floor(pe[a] / 8.0f)), 0, nb[a] - 1);
-    float tb0 = t0;
-    int k_next = 1;
-    const int max_steps = nb[0] + nb[1] + nb[2] + 4;
-    for (int s = 0; s < max_steps; ++s) {
-      const float tx = next_boundary(e.x, d.x, inv_d.x, c[0], nb[0]);
-      const float ty = next_boundary(e.y, d.y, inv_d.y, c[1], nb[1]);
-      const float tz = next_boundary(e.z, d.z, inv_d.z, c[2], nb[2]);
-      const float tb1 = std::min(std::min(std::min(tx, ty), tz), t1);
-      if (brick_active(c[0], c[1], c[2])) {
-        const float t = walk_subs(e, d, inv_d, t0, t1, h, K, c, tb0, tb1, k_next);
-        if (t >= 0.0f) return t;
-      }
-      if (tb1 >= t1) break;
-      if (tx <= ty && tx <= tz) c[0] += d.x > 0.0f ? 1 : -1;
-      else if (ty <= tz) c[1] += d.y > 0.0f ? 1 : -1;
-      else c[2] += d.z > 0.0f ? 1 : -1;
-      tb0 = tb1;
-    }
-    return -1.0f;
+    return 0;
   }
 
   void box_interval(F3 e, F3 d, float& tmin, float& tmax) const {
@@ -357,13 +296,31 @@ struct Caster {
     if (t0 <= t1) {
       const float dl = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
       const float h = P.step_vox / dl;
-      const int K = int(std::min(std::ceil((t1 - t0) / h), 1048576.0f));
-      if (inside_at(e, d, t0)) {
+      const int K = int(std::min(std::ceil((t1 - t0) / h), float(ISOTOUCH_RAYCAST_MAX_SAMPLES)));
+      // Sample 0; with skipping, not evaluated where its cell is inactive (the shader's rule).
+      const bool skip = (flags & ISOTOUCH_RAYCAST_SKIP) != 0u;
+      const F3 p0 = ray_point(e, d, t0);
+      const int c0[3] = {int(std::floor(p0.x)), int(std::floor(p0.y)), int(std::floor(p0.z))};
+      bool in_cells = true;
+      for (int a = 0; a < 3; ++a) in_cells = in_cells && c0[a] >= -1 && c0[a] <= int(a == 0 ? P.nx : a == 1 ? P.ny : P.nz);
+      const bool need0 = !skip || !in_cells || cell_dist(c0[0], c0[1], c0[2]) == 0u;
+      if (need0 && excess(field(p0)) > 0.0f) {
         t_hit = t0;
         cap = cap_entry;
-      } else if (K >= 1) {
-        t_hit = (flags & ISOTOUCH_RAYCAST_SKIP) ? walk_bricks(e, d, t0, t1, h, K) : march(e, d, t0, t1, h, 1, K);
       }
+      int k_hit = 0;
+      if (!(t_hit >= 0.0f) && K >= 1) {
+        if (skip) {
+          const F3 inv_d{1.0f / d.x, 1.0f / d.y, 1.0f / d.z};
+          const float mag = std::max(std::max(std::max(std::fabs(e.x), std::fabs(e.y)), std::fabs(e.z)),
+                                     std::max(std::max(float(P.nx), float(P.ny)), float(P.nz)));
+          const float eps = 0.03125f + 4e-6f * (mag + t1 * dl);
+          k_hit = march_skip(e, d, inv_d, t0, t1, h, K, eps);
+        } else {
+          k_hit = march(e, d, t0, t1, h, K);
+        }
+      }
+      if (k_hit > 0) t_hit = refine(e, d, lattice_t(t0, t1, h, k_hit - 1), lattice_t(t0, t1, h, k_hit));
     }
 
     F3 colour{P.bg_r, P.bg_g, P.bg_b};
@@ -407,7 +364,9 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
                         int height, const std::vector<gpu::RaycastPrim>& prims) {
   const auto c0 = std::chrono::steady_clock::now();
   const gpu::RaycastParams P = make_params(field, view, style, width, height);
-  const Caster c{P, style_flags(style), field.values.data(), field.brick_minmax.data(), field.sub_minmax.data(), prims};
+  if (field.cell_dist.size() != std::size_t(P.nx + 2) * (P.ny + 2) * (P.nz + 2))
+    throw std::invalid_argument("raycast: the field has no cell distances for its grid (build it with make_raycast_field)");
+  const Caster c{P, style_flags(style), field.values.data(), field.cell_dist.data(), prims};
   RaycastImage img;
   img.width = width;
   img.height = height;

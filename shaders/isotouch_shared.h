@@ -94,18 +94,24 @@ struct BrickMinMaxPush {
 // ---- raycast (issue 10; owner: raycaster) -------------------------------------------
 // First-hit isosurface ray caster (raycast.comp, CPU reference engine/raycast_cpu.cpp).
 // One invocation per pixel, 8x8 tiles. Bindings: 0 params (one RaycastParams), 1 values
-// (float per voxel, x fastest), 2 brick ranges (min, max per 8^3 brick, halo 1, bricks x
-// fastest), 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R in the low byte),
-// 5 depth (float per pixel: ray parameter t [m] of the isosurface hit, -1 if none).
+// (float per voxel, x fastest), 2 cell distances (one byte per trilinear cell, 4 per uint,
+// see ISOTOUCH_RAYCAST_DIST_MAX), 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
+// in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
+// -1 if none).
 #define ISOTOUCH_RAYCAST_WG_X 8
 #define ISOTOUCH_RAYCAST_WG_Y 8
-#define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping over the brick grid
+#define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
-// Sub-cells for the second skipping level: cubes of ISOTOUCH_RAYCAST_SUB voxels (8 / SUB per
-// brick axis, ceil(n / SUB) per grid axis); their (min, max) follow the brick ranges in
-// binding 2 (sub-cells x fastest): voxels [SUB c, SUB c + SUB] (+1 on the high side: what
-// a trilinear sample in the cell reads) and the background on the grid's faces.
-#define ISOTOUCH_RAYCAST_SUB 4u
+// Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
+// x fastest, byte i in bits 8 (i % 4) of uint i / 4). Cell c (corners c .. c + 1) is active
+// if one of its 8 corner values (background outside the grid) can be inside, with a margin
+// for the rounding of the lerps; its byte is the chessboard distance [cells] to the nearest
+// active cell (0: active), capped at ISOTOUCH_RAYCAST_DIST_MAX (engine/raycast.cpp; each
+// level costs the host one pass over the cells' bit set, and a jump of 31 cells is plenty).
+#define ISOTOUCH_RAYCAST_DIST_MAX 32u
+// llvmpipe ends all loops of an invocation after 65535 iterations in all: the host refuses
+// a step that lets a ray take more lattice samples than this (refine and overlays included).
+#define ISOTOUCH_RAYCAST_MAX_SAMPLES 60000u
 #define ISOTOUCH_RAYCAST_PRIM_SPHERE 1u   // a = centre, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_DISC 2u     // a = centre, b = unit normal, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius

@@ -14,15 +14,13 @@
 // bisections of [t_{k-1}, t_k] and one secant step (bracket h / 256: 0.002 voxel at
 // h = 0.5 voxel). A ray that starts inside (at the clip plane) hits there: the cut face.
 //
-// Empty-space skipping: a 3D DDA over the 8^3 brick grid (brick c covers index
-// [8c, 8c + 8] per axis; the box band [-1, 0) and [8 bx, n] belong to the edge bricks).
-// A brick whose range (min, max, halo 1, edge bricks widened by the background on the
-// host) is all outside is skipped; in the others the same lattice samples are taken as
-// without skipping (k from one before the brick to one after), so skipping on and off
-// give the same image: a sample in a skipped brick is outside either way.
-// Second level: inside an active brick a DDA over its sub-cells (SUB^3 voxels, ranges
-// covering [SUB c, SUB c + SUB], built on the host) samples only active sub-cells, again
-// from one sample before to one after; k_next keeps each lattice sample evaluated once.
+// Empty-space skipping (march_skip): the same lattice samples, but a sample whose
+// trilinear cell is inactive (no corner can be inside: binding 2, built on the host) is
+// not evaluated (one byte load instead of 8 voxel loads), and from an inactive cell at
+// chessboard distance D from the nearest active cell the march jumps to the first sample
+// past the box of cells within D - 1 of it. A skipped sample is outside either way, so
+// skipping on and off give the same image. No nested loops: on a SIMD CPU device every
+// lane of a vector runs each iteration, and one flat loop keeps lanes in step.
 //
 // The CPU reference (engine/raycast_cpu.cpp) does the same float operations in the same
 // order; `precise` forbids FMA contraction here, -ffp-contract=off there.
@@ -33,7 +31,7 @@ layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_
 
 layout(std430, set = 0, binding = 0) readonly buffer ParamsBuf { RaycastParams P; };
 layout(std430, set = 0, binding = 1) readonly buffer Values { float vals[]; };
-layout(std430, set = 0, binding = 2) readonly buffer Bricks { float brick[]; };
+layout(std430, set = 0, binding = 2) readonly buffer CellDist { uint cdist[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
 layout(std430, set = 0, binding = 4) writeonly buffer Image { uint image[]; };
 layout(std430, set = 0, binding = 5) writeonly buffer Depth { float depth[]; };
@@ -46,10 +44,8 @@ layout(push_constant) uniform Push { RaycastPush pc; };
 ivec3 g_n;
 float g_bg, g_tau, g_sign;
 uint g_nx, g_ny;
-ivec3 g_ns;       // sub-cells per axis: ceil(n / SUB)
-vec3 g_inv_d;     // 1 / d per axis (the DDA boundaries: (plane - e) * inv)
-uint g_sub_base;  // first sub-cell range in binding 2 (after the brick ranges), in ranges
-const int SUB = int(ISOTOUCH_RAYCAST_SUB);
+uint g_cx, g_cy;  // cells per axis (n + 2) along x and y
+vec3 g_inv_d;     // 1 / d per axis (exit planes: (plane - e) * inv)
 
 // The memory seam: the only function that reads voxel memory. A bricked snapshot
 // (core/brick_field.h) replaces the body with one brick-table lookup + pool read.
@@ -95,15 +91,41 @@ float lattice_t(float t0, float t1, float h, int k) {
   return min(t, t1);
 }
 
+// field() with the 8 corners of the last cell kept: the 10 samples of refine() lie in a
+// bracket of one step (at most 2 or 3 cells), so most reuse them. Same values as field().
+ivec3 g_cc = ivec3(-2147483647);
+float g_c0, g_c1, g_c2, g_c3, g_c4, g_c5, g_c6, g_c7;
+float field_cached(vec3 p) {
+  vec3 fl = floor(p);
+  ivec3 i = ivec3(fl);
+  precise vec3 f = p - fl;
+  if (any(notEqual(i, g_cc))) {
+    g_cc = i;
+    g_c0 = voxel(i);
+    g_c1 = voxel(i + ivec3(1, 0, 0));
+    g_c2 = voxel(i + ivec3(0, 1, 0));
+    g_c3 = voxel(i + ivec3(1, 1, 0));
+    g_c4 = voxel(i + ivec3(0, 0, 1));
+    g_c5 = voxel(i + ivec3(1, 0, 1));
+    g_c6 = voxel(i + ivec3(0, 1, 1));
+    g_c7 = voxel(i + ivec3(1, 1, 1));
+  }
+  float c00 = lerp1(g_c0, g_c1, f.x);
+  float c10 = lerp1(g_c2, g_c3, f.x);
+  float c01 = lerp1(g_c4, g_c5, f.x);
+  float c11 = lerp1(g_c6, g_c7, f.x);
+  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+}
+
 // [ta, tb]: ta outside, tb inside. 8 bisections, then one secant step in the bracket.
 float refine(vec3 e, vec3 d, float ta, float tb) {
   for (int i = 0; i < 8; ++i) {
     precise float tm = 0.5 * (ta + tb);
-    if (inside_at(e, d, tm)) tb = tm;
+    if (excess(field_cached(ray_point(e, d, tm))) > 0.0) tb = tm;
     else ta = tm;
   }
-  float ea = excess(field(ray_point(e, d, ta)));
-  float eb = excess(field(ray_point(e, d, tb)));
+  float ea = excess(field_cached(ray_point(e, d, ta)));
+  float eb = excess(field_cached(ray_point(e, d, tb)));
   precise float t = 0.5 * (ta + tb);
   if (ea <= 0.0 && eb > 0.0) {
     precise float frac = -ea / (eb - ea);
@@ -112,121 +134,57 @@ float refine(vec3 e, vec3 d, float ta, float tb) {
   return t;
 }
 
-// Searches samples k in [kl, kh] for the first inside one; returns its refined t or -1.
-float march(vec3 e, vec3 d, float t0, float t1, float h, int kl, int kh) {
-  for (int k = kl; k <= kh; ++k) {
+// The plain march: the first inside sample k in [1, K], or 0 if none. The caller refines
+// after the loop (on a SIMD device a refine inside the loop would run once per iteration
+// in which some lane hits, not once per vector).
+int march(vec3 e, vec3 d, float t0, float t1, float h, int K) {
+  for (int k = 1; k <= K; ++k)
+    if (inside_at(e, d, lattice_t(t0, t1, h, k))) return k;
+  return 0;
+}
+
+// Chessboard distance [cells] from trilinear cell c (lower corner, in [-1, n] per axis) to
+// the nearest active cell, 0: active (binding 2, built on the host: engine/raycast.cpp).
+uint cell_dist(ivec3 c) {
+  uvec3 s = uvec3(c + 1);
+  uint i = (s.z * g_cy + s.y) * g_cx + s.x;
+  return (cdist[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu;
+}
+
+// The march with empty-space skipping: the same lattice samples k in [1, K] as march(), in
+// order, one loop. At sample k the byte D of its cell (floor of the same point field()
+// reads) decides: D = 0 (active): field() as in march(); D >= 1: no cell within D - 1
+// cells of it is active, so every sample inside the box of cells [c - D + 1, c + D - 1]
+// is outside; the march goes on at the first sample at or past the box's exit plane on the
+// ray's side, drawn in by `eps` voxels [index space] (the rounding of the lattice, of
+// ray_point and of the exit; the coordinates along the ray only move toward the exit:
+// float + and * are monotonic). Sample k is skipped too (its cell cannot be inside). k
+// grows by at least 1 per iteration: at most K iterations. Returns as march().
+int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int K, float eps) {
+  int k = 1;
+  while (k <= K) {
     float t = lattice_t(t0, t1, h, k);
-    if (inside_at(e, d, t)) return refine(e, d, lattice_t(t0, t1, h, k - 1), t);
-  }
-  return -1.0;
-}
-
-bool range_active(uint b) {
-  float mn = brick[2u * b], mx = brick[2u * b + 1u];
-  precise float em = g_sign > 0.0 ? mx - g_tau : g_tau - mn;
-  return em >= 0.0;
-}
-
-bool brick_active(ivec3 c) { return range_active((uint(c.z) * P.by + uint(c.y)) * P.bx + uint(c.x)); }
-
-// Sub-cell ranges follow the brick ranges in binding 2.
-bool sub_active(ivec3 s) {
-  return range_active(g_sub_base + (uint(s.z) * uint(g_ns.y) + uint(s.y)) * uint(g_ns.x) + uint(s.x));
-}
-
-// Parameter of the next brick boundary along one axis, +inf if the ray stays in the
-// edge brick (or runs parallel to the axis).
-float next_boundary(float e, float d, float inv, int c, int nb) {
-  if (d > 0.0 && c + 1 < nb) {
-    precise float t = (8.0 * float(c + 1) - e) * inv;
-    return t;
-  }
-  if (d < 0.0 && c > 0) {
-    precise float t = (8.0 * float(c) - e) * inv;
-    return t;
-  }
-  return kInf;
-}
-
-// The same for sub-cells c in [lo, hi] (one brick's).
-float next_sub_boundary(float e, float d, float inv, int c, int lo, int hi) {
-  if (d > 0.0 && c < hi) {
-    precise float t = (float(SUB) * float(c + 1) - e) * inv;
-    return t;
-  }
-  if (d < 0.0 && c > lo) {
-    precise float t = (float(SUB) * float(c) - e) * inv;
-    return t;
-  }
-  return kInf;
-}
-
-// Samples k in [kl, kh] (one before [ta, tb] to one after), k >= k_next, in order;
-// k_next moves past them. Returns the refined t or -1.
-float march_from(vec3 e, vec3 d, float t0, float t1, float h, int K, float ta, float tb, inout int k_next) {
-  precise float ra = (ta - t0) / h;
-  precise float rb = (tb - t0) / h;
-  int kl = max(k_next, int(floor(ra)));
-  int kh = min(K, int(ceil(rb)) + 1);
-  if (kl > kh) return -1.0;
-  float t = march(e, d, t0, t1, h, kl, kh);
-  k_next = kh + 1;
-  return t;
-}
-
-// Second level: the sub-cell DDA through brick c over [tb0, tb1]; samples only in
-// sub-cells whose range can hold an inside value (the same lattice as march()).
-float walk_subs(vec3 e, vec3 d, float t0, float t1, float h, int K, ivec3 c, float tb0, float tb1,
-                inout int k_next) {
-  const int per = 8 / SUB;
-  vec3 pe = ray_point(e, d, tb0);
-  ivec3 lo = per * c;
-  ivec3 hi = min(lo + per, g_ns) - 1;
-  ivec3 s = clamp(ivec3(floor(pe / float(SUB))), lo, hi);
-  float ts0 = tb0;
-  for (int step = 0; step < 3 * per + 4; ++step) {
-    float tx = next_sub_boundary(e.x, d.x, g_inv_d.x, s.x, lo.x, hi.x);
-    float ty = next_sub_boundary(e.y, d.y, g_inv_d.y, s.y, lo.y, hi.y);
-    float tz = next_sub_boundary(e.z, d.z, g_inv_d.z, s.z, lo.z, hi.z);
-    float ts1 = min(min(min(tx, ty), tz), tb1);
-    if (sub_active(s)) {
-      float t = march_from(e, d, t0, t1, h, K, ts0, ts1, k_next);
-      if (t >= 0.0) return t;
+    vec3 p = ray_point(e, d, t);
+    vec3 fl = floor(p);
+    ivec3 c = ivec3(fl);
+    bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && all(lessThanEqual(c, g_n));
+    uint D = in_cells ? cell_dist(c) : 0u;
+    if (D == 0u) {
+      if (excess(field(p)) > 0.0) return k;
+      ++k;
+    } else {
+      precise float r = float(D) - eps;
+      precise vec3 hi = fl + r;          // exit plane of a ray going up an axis
+      precise vec3 lo = fl - (r - 1.0);  // and going down
+      vec3 plane = mix(lo, hi, greaterThan(d, vec3(0.0)));
+      precise vec3 tp = (plane - e) * g_inv_d;
+      tp = mix(tp, vec3(kInf), equal(d, vec3(0.0)));
+      float t_exit = min(min(tp.x, tp.y), tp.z);
+      precise float kr = (t_exit - t0) / h;
+      k = max(k + 1, int(min(ceil(kr), float(K + 1))));
     }
-    if (ts1 >= tb1) break;
-    if (tx <= ty && tx <= tz) s.x += d.x > 0.0 ? 1 : -1;
-    else if (ty <= tz) s.y += d.y > 0.0 ? 1 : -1;
-    else s.z += d.z > 0.0 ? 1 : -1;
-    ts0 = ts1;
   }
-  return -1.0;
-}
-
-float walk_bricks(vec3 e, vec3 d, float t0, float t1, float h, int K) {
-  ivec3 nb = ivec3(int(P.bx), int(P.by), int(P.bz));
-  precise vec3 inv_d = 1.0 / d;  // +-inf on an axis the ray is parallel to (not used there)
-  g_inv_d = inv_d;
-  vec3 pe = ray_point(e, d, t0);
-  ivec3 c = clamp(ivec3(floor(pe / 8.0)), ivec3(0), nb - 1);
-  float tb0 = t0;
-  int k_next = 1;
-  int max_steps = nb.x + nb.y + nb.z + 4;
-  for (int s = 0; s < max_steps; ++s) {
-    float tx = next_boundary(e.x, d.x, g_inv_d.x, c.x, nb.x);
-    float ty = next_boundary(e.y, d.y, g_inv_d.y, c.y, nb.y);
-    float tz = next_boundary(e.z, d.z, g_inv_d.z, c.z, nb.z);
-    float tb1 = min(min(min(tx, ty), tz), t1);
-    if (brick_active(c)) {
-      float t = walk_subs(e, d, t0, t1, h, K, c, tb0, tb1, k_next);
-      if (t >= 0.0) return t;
-    }
-    if (tb1 >= t1) break;
-    if (tx <= ty && tx <= tz) c.x += d.x > 0.0 ? 1 : -1;
-    else if (ty <= tz) c.y += d.y > 0.0 ? 1 : -1;
-    else c.z += d.z > 0.0 ? 1 : -1;
-    tb0 = tb1;
-  }
-  return -1.0;
+  return 0;
 }
 
 // Ray against the box [-1, n] per axis (index space): [tmin, tmax], empty if tmin > tmax.
@@ -391,8 +349,8 @@ void main() {
   g_bg = P.background;
   g_tau = P.tau;
   g_sign = P.inside_sign;
-  g_ns = (g_n + SUB - 1) / SUB;
-  g_sub_base = P.bx * P.by * P.bz;
+  g_cx = P.nx + 2u;
+  g_cy = P.ny + 2u;
   vec3 eye = vec3(P.eye_x, P.eye_y, P.eye_z);
   vec3 fwd = vec3(P.fwd_x, P.fwd_y, P.fwd_z), right = vec3(P.right_x, P.right_y, P.right_z);
   vec3 up = vec3(P.up_x, P.up_y, P.up_z);
@@ -429,14 +387,32 @@ void main() {
   if (t0 <= t1) {
     precise float dl = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
     precise float h = P.step_vox / dl;
-    int K = int(min(ceil((t1 - t0) / h), 1048576.0));
-    if (inside_at(e, d, t0)) {
+    // The host bounds the samples per ray (make_params); the min only guards the loops.
+    int K = int(min(ceil((t1 - t0) / h), float(ISOTOUCH_RAYCAST_MAX_SAMPLES)));
+    // Sample 0 (t0); with skipping, not evaluated where its cell is inactive (as in march_skip).
+    bool skip = (pc.flags & ISOTOUCH_RAYCAST_SKIP) != 0u;
+    vec3 p0 = ray_point(e, d, t0);
+    ivec3 c0 = ivec3(floor(p0));
+    bool need0 = !skip || !(all(greaterThanEqual(c0, ivec3(-1))) && all(lessThanEqual(c0, g_n))) || cell_dist(c0) == 0u;
+    if (need0 && excess(field(p0)) > 0.0) {
       t_hit = t0;
       cap = cap_entry;
-    } else if (K >= 1) {
-      t_hit = (pc.flags & ISOTOUCH_RAYCAST_SKIP) != 0u ? walk_bricks(e, d, t0, t1, h, K)
-                                                       : march(e, d, t0, t1, h, 1, K);
     }
+    int k_hit = 0;
+    if (!(t_hit >= 0.0) && K >= 1) {
+      if (skip) {
+        precise vec3 inv_d = 1.0 / d;  // +-inf on an axis the ray is parallel to (not used there)
+        g_inv_d = inv_d;
+        // Rounding allowance: 1/32 voxel + 4e-6 (34 float ulps) of the largest index-space
+        // magnitude along the ray (eye, far end of the box, grid size).
+        float mag = max(max(max(abs(e.x), abs(e.y)), abs(e.z)), max(max(float(P.nx), float(P.ny)), float(P.nz)));
+        precise float eps = 0.03125 + 4e-6 * (mag + t1 * dl);
+        k_hit = march_skip(e, d, t0, t1, h, K, eps);
+      } else {
+        k_hit = march(e, d, t0, t1, h, K);
+      }
+    }
+    if (k_hit > 0) t_hit = refine(e, d, lattice_t(t0, t1, h, k_hit - 1), lattice_t(t0, t1, h, k_hit));
   }
 
   vec3 colour = vec3(P.bg_r, P.bg_g, P.bg_b);

@@ -7,9 +7,13 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <algorithm>
+#include <array>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <string>
+#include <vector>
 
 #include "vk_test_context.h"
 #include "raycast.h"
@@ -223,15 +227,15 @@ TEST(Raycast, SkippingOnAndOffGiveTheSameImage) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
-// Thin features against the second skipping level (sub-cells of ISOTOUCH_RAYCAST_SUB^3
-// voxels): isolated one-voxel blobs (value 1, tau 0.5, the rest 0) at pseudo-random places,
-// so many first hits are samples a voxel before a blob's voxel, in the neighbouring
-// sub-cell (its range must reach one voxel past it); and the same interior with the
-// background inside (1) and the near half clipped away (rays start at the cut, not in the
-// entry band), so the first hit of a ray missing the blobs is the exit band at the grid's
-// faces (the face sub-cells' ranges must include the background). Odd sizes exercise partial edge bricks
-// and sub-cells. Skipping on and off, GPU and CPU reference, from oblique angles: the
-// images must be identical (a sub-cell range too narrow skips the first inside sample).
+// Thin features against the cell distances: isolated one-voxel blobs (value 1, tau 0.5,
+// the rest 0) at pseudo-random places, so many first hits are samples in the cells around a
+// blob's voxel (each of the 8 cells sharing it as a corner must be active, and the jumps
+// from the cells near it must stop before them); and the same interior with the background
+// inside (1) and the near half clipped away (rays start at the cut, not in the entry band),
+// so the first hit of a ray missing the blobs is the exit band at the grid's faces (the
+// cells there must count the background). Odd sizes; skipping on and off, GPU and CPU
+// reference, from oblique angles: the images must be identical (a cell marked inactive or
+// a jump too long skips the first inside sample).
 TEST(Raycast, ThinFeaturesSkippingOnAndOffGiveTheSameImage) {
   core::Grid grid;
   grid.dims = {45, 40, 43};
@@ -268,6 +272,176 @@ TEST(Raycast, ThinFeaturesSkippingOnAndOffGiveTheSameImage) {
     }
   }
   EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+namespace {
+
+/// Thin-feature volume: one-voxel blobs (1) in zeros, about 3 % of the voxels.
+std::vector<float> blobs(const core::Grid& grid, std::uint32_t seed) {
+  std::vector<float> vals(grid.voxel_count(), 0.0f);
+  for (float& v : vals) {
+    seed = seed * 1664525u + 1013904223u;
+    v = (seed >> 24) < 8u ? 1.0f : 0.0f;
+  }
+  return vals;
+}
+
+/// Skipping on and off (GPU and CPU reference) must give identical pictures.
+void expect_skip_invariant(const RaycastField& f, const CameraView& view, RaycastStyle on, int W, int H,
+                           const std::string& what) {
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  RaycastStyle off = on;
+  on.skip_empty = true;
+  off.skip_empty = false;
+  const RaycastImage ga = (*rc.value)->render(view, on, W, H), gb = (*rc.value)->render(view, off, W, H);
+  const RaycastImage ca = engine::render_cpu(f, view, on, W, H), cb = engine::render_cpu(f, view, off, W, H);
+  std::size_t differ_gpu = 0, differ_cpu = 0;
+  for (std::size_t i = 0; i < ga.depth.size(); ++i) {
+    differ_gpu += ga.depth[i] != gb.depth[i] || ga.rgba[i] != gb.rgba[i];
+    differ_cpu += ca.depth[i] != cb.depth[i] || ca.rgba[i] != cb.rgba[i];
+  }
+  EXPECT_EQ(differ_gpu, 0u) << what << ": GPU pixels that differ with and without skipping";
+  EXPECT_EQ(differ_cpu, 0u) << what << ": CPU pixels that differ with and without skipping";
+  EXPECT_GT(hits(gb), std::size_t(W * H / 20)) << what;
+  expect_gpu_matches_cpu(ga, ca, 1e3, what.c_str());
+}
+
+/// Brute force: byte per cell c in [-1, n]^3 (stored at c + 1, x fastest) = min(cap,
+/// chessboard distance to the nearest cell with a corner v (background outside the grid)
+/// that is inside: v > tau above, v < tau below, NaN never).
+std::vector<std::uint8_t> brute_cell_distances(const core::Grid& g, const std::vector<float>& v, double tau,
+                                               bool above, float bg) {
+  const auto& n = g.dims;
+  auto value = [&](int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= n[0] || y >= n[1] || z >= n[2]) return bg;
+    return v[g.index(x, y, z)];
+  };
+  auto inside = [&](float x) { return above ? double(x) > tau : double(x) < tau; };
+  std::vector<std::array<int, 3>> active, all;
+  for (int z = -1; z <= n[2]; ++z)
+    for (int y = -1; y <= n[1]; ++y)
+      for (int x = -1; x <= n[0]; ++x) {
+        bool a = false;
+        for (int k = 0; k < 8; ++k) a = a || inside(value(x + (k & 1), y + ((k >> 1) & 1), z + (k >> 2)));
+        if (a) active.push_back({x, y, z});
+        all.push_back({x, y, z});
+      }
+  std::vector<std::uint8_t> out;
+  for (const auto& c : all) {
+    int best = int(ISOTOUCH_RAYCAST_DIST_MAX);
+    for (const auto& a : active)
+      best = std::min(best, std::max({std::abs(c[0] - a[0]), std::abs(c[1] - a[1]), std::abs(c[2] - a[2])}));
+    out.push_back(std::uint8_t(best));
+  }
+  return out;
+}
+
+}  // namespace
+
+// The skipping structure against its definition, by brute force: random 0/1 volumes
+// (with NaN voxels) of sizes around the 64-bit words of the bit sets, both inside sides,
+// the background outside, inside and NaN; a long thin grid whose distances pass the cap.
+TEST(Raycast, CellDistancesMatchBruteForce) {
+  const std::array<int, 3> sizes[] = {{1, 1, 1}, {7, 5, 9}, {61, 3, 4}, {62, 4, 3}, {63, 2, 3}, {70, 3, 2}};
+  std::uint32_t seed = 99u;
+  int cases = 0;
+  for (const auto& dims : sizes)
+    for (bool above : {true, false})
+      for (float bg : {0.0f, 1.0f, std::numeric_limits<float>::quiet_NaN()}) {
+        core::Grid g;
+        g.dims = dims;
+        std::vector<float> v(g.voxel_count());
+        for (float& x : v) {
+          seed = seed * 1664525u + 1013904223u;
+          const unsigned r = seed >> 24;
+          x = r < 10u ? 1.0f : (r < 14u ? std::numeric_limits<float>::quiet_NaN() : 0.0f);
+        }
+        const core::Isosurface iso{0.5, above ? core::InsideIs::kAbove : core::InsideIs::kBelow};
+        const auto got = engine::cell_distances(g, v, iso, bg);
+        const auto want = brute_cell_distances(g, v, 0.5, above, bg);
+        ASSERT_EQ(got.size(), want.size());
+        std::size_t bad = 0;
+        for (std::size_t i = 0; i < got.size(); ++i) bad += got[i] != want[i];
+        EXPECT_EQ(bad, 0u) << dims[0] << "x" << dims[1] << "x" << dims[2] << " above " << above << " bg " << bg;
+        ++cases;
+      }
+  // 300 x 1 x 1, one inside voxel at x = 0: cells up to x = 300 are 300 cells away (past the cap).
+  core::Grid g;
+  g.dims = {300, 1, 1};
+  std::vector<float> v(300, 0.0f);
+  v[0] = 1.0f;
+  const core::Isosurface iso{0.5, core::InsideIs::kAbove};
+  EXPECT_EQ(engine::cell_distances(g, v, iso, 0.0f), brute_cell_distances(g, v, 0.5, true, 0.0f));
+  EXPECT_EQ(engine::cell_distances(g, v, iso, 0.0f)[301 + 302 * 4], ISOTOUCH_RAYCAST_DIST_MAX);  // x = 300: 300 away
+  EXPECT_EQ(cases, 36);
+}
+
+// A trilinear value in float can exceed the largest corner: lerp a + t (b - a) rounds
+// b - a, and with |a| >> |b| that error (half an ulp of |a|) lands on b. Random pairs
+// (a in [-2000, -500], b the float just below tau) on a 2x1x1 grid, background a: every
+// point (t, 0, 0) whose float trilinear (the shader's lerp order: x, then y, then z) is
+// inside must lie in a cell the structure calls active (byte 0).
+TEST(Raycast, CellsWithRoundedInsideSamplesAreActive) {
+  std::uint32_t seed = 7u;
+  auto uni = [&seed]() {
+    seed = seed * 1664525u + 1013904223u;
+    return float(seed >> 8) / 16777216.0f;  // [0, 1)
+  };
+  auto lerp1 = [](float a, float b, float t) { return a + t * (b - a); };
+  int overshoots = 0, trials = 0;
+  for (int i = 0; i < 20000 && overshoots < 20; ++i) {
+    const float tau = 1.0f + uni();
+    const float b = std::nextafter(tau, 0.0f), a = -500.0f - 1500.0f * uni();
+    for (int j = 0; j < 50; ++j) {
+      const float t = 1.0f - 1e-4f * uni();
+      // Corners (x, y, z): (0|1, 0, 0) = a, b; every other corner is outside the grid: a.
+      const float c00 = lerp1(a, b, t), c10 = lerp1(a, a, t), c01 = lerp1(a, a, t), c11 = lerp1(a, a, t);
+      const float v = lerp1(lerp1(c00, c10, 0.0f), lerp1(c01, c11, 0.0f), 0.0f);
+      ++trials;
+      if (!(v > tau)) continue;
+      ++overshoots;
+      core::Grid g;
+      g.dims = {2, 1, 1};
+      const auto d = engine::cell_distances(g, {a, b}, core::Isosurface{tau, core::InsideIs::kAbove}, a);
+      EXPECT_EQ(d[1 + 4 * 1 + 4 * 3 * 1], 0u) << "a " << a << " b " << b << " t " << t << " value " << v << " > tau " << tau;
+      break;
+    }
+  }
+  std::printf("float trilinear above every corner and above tau: %d cases in %d samples\n", overshoots, trials);
+  EXPECT_GT(overshoots, 0) << "no rounding case found: the test does not exercise the margin";
+}
+
+// Skipping on and off with rays parallel to grid axes (odd image sizes put a row and a
+// column of rays exactly in a coordinate plane: d = 0 on an axis) and from far away (large
+// index coordinates: the rounding allowance of the jumps grows with them).
+TEST(Raycast, AxisParallelAndFarRaysSkippingOnAndOffGiveTheSameImage) {
+  core::Grid grid;
+  grid.dims = {37, 41, 29};
+  const core::Isosurface iso{0.5, core::InsideIs::kAbove};
+  const RaycastField f = engine::make_raycast_field(grid, blobs(grid, 4242u), iso, 0.0f);
+  const Vec3 c = grid.centre_m();
+  for (const Vec3& dir : {Vec3{0, -1, 0}, Vec3{1, 0, 0}, Vec3{0, 0, 1}}) {
+    const Vec3 up = std::fabs(dir.z) > 0.5 ? Vec3{0, 1, 0} : Vec3{0, 0, 1};
+    expect_skip_invariant(f, engine::look_at(c - dir * 0.1, c, up, 35), RaycastStyle{}, 97, 95, "axis-parallel");
+  }
+  // 40 m away (about 1000 volume widths), 0.06 degree field of view: the grid fills the image.
+  expect_skip_invariant(f, engine::look_at(c + Vec3{0.3, -40, 0.2}, c, {0, 0, 1}, 0.06), RaycastStyle{}, 64, 64,
+                        "far eye");
+}
+
+// llvmpipe ends an invocation's loops after 65535 iterations: a step that lets a ray take
+// more than ISOTOUCH_RAYCAST_MAX_SAMPLES lattice samples is refused, not cut short.
+TEST(Raycast, StepThatExceedsTheLoopBudgetIsRefused) {
+  RaycastField f;
+  f.grid.dims = {1000, 1000, 1000};
+  const double diag = std::sqrt(3.0) * 1001;  // the box [-1, n] per axis [voxels]
+  const CameraView view = engine::look_at({-1, -1, -1}, {0.5, 0.5, 0.5}, {0, 0, 1}, 30);
+  RaycastStyle st;
+  st.step_vox = float(diag / ISOTOUCH_RAYCAST_MAX_SAMPLES * 0.9);
+  EXPECT_THROW(engine::make_params(f, view, st, 8, 8), std::invalid_argument);
+  st.step_vox = float(diag / ISOTOUCH_RAYCAST_MAX_SAMPLES * 1.1);
+  EXPECT_NO_THROW(engine::make_params(f, view, st, 8, 8));
 }
 
 // A clip plane through the centre facing the camera removes the near half: what is left

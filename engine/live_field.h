@@ -78,6 +78,9 @@ struct LiveUpdateStats {
 };
 
 /// The edited volume's published snapshot, updated brick by brick.
+/// Threads: create / update / current / pool_bytes / arena_bytes from one (the editing)
+/// thread; the snapshots may be read, copied and released on any thread meanwhile.
+/// Memory: a copy of the raw voxels (to find the voxels an edit changed) + the arena.
 class LiveField {
  public:
   /// Builds the first snapshot of `vol` (version 1) - the same as run_sparse_cpu.

@@ -76,9 +76,13 @@ Case make_case(const std::string& name) {
   } else {  // 1 mm voxels, dims not multiples of 8 (partial bricks on the high borders)
     c.vol = engine::make_sphere({45, 38, 36}, 1e-3, 13.0, {2.0, -1.0, 0.5});
     c.iso = {0, core::InsideIs::kAbove};
-    if (name == "nansphere") {  // NaN voxels deep inside (a brick uniform but for them) and on the surface
+    if (name == "nansphere") {
+      // Large enough for a brick whose whole selection neighbourhood (3^3 bricks) is inside:
+      // NaN voxels there (the brick is active for them alone) and one on the surface, 3
+      // bricks away.
+      c.vol = engine::make_sphere({69, 66, 62}, 1e-3, 29.0, {0.5, -0.5, 0.3});
       const core::Grid& g = c.vol.grid;
-      for (const auto& [x, y, z] : {std::array<int, 3>{22, 18, 17}, {23, 18, 17}, {23, 19, 17}, {24, 17, 31}})
+      for (const auto& [x, y, z] : {std::array<int, 3>{34, 32, 30}, {35, 32, 30}, {35, 33, 30}, {34, 32, 2}})
         c.vol.voxels[g.index(x, y, z)] = std::numeric_limits<float>::quiet_NaN();
       c.vol.update_stats();
     }
@@ -156,6 +160,8 @@ std::vector<Brush> sequence(const Case& c, std::size_t n) {
       brush(c, BrushKind::kDrill, at(g, 0.5, 1.0, 0.0), 3.0 * vox, 0),
       brush(c, BrushKind::kAdd, at(g, 0.55, 0.4, 0.6), 0.6 * vox, 0.2 * span),
   };
+  if (c.name == "nansphere")  // first a small add on the NaN voxels deep inside: the brick stays inside but for them
+    s.insert(s.begin(), brush(c, BrushKind::kAdd, g.to_world({34.5, 32.5, 30.0}), 2e-3, 0.1 * span));
   s.resize(std::min(n, s.size()));
   return s;
 }
@@ -308,8 +314,8 @@ void PrintTo(const Combo& c, std::ostream* os) {
 
 std::vector<Combo> combos() {
   std::vector<Combo> v;
-  for (const char* pass : {"gradient", "gauss", "closing"}) v.push_back({"nansphere", pass, SampleFormat::kFp32, 13});
-  v.push_back({"nansphere", "gradient", SampleFormat::kUnorm16, 13});
+  for (const char* pass : {"gradient", "gauss", "closing"}) v.push_back({"nansphere", pass, SampleFormat::kFp32, 14});
+  v.push_back({"nansphere", "gradient", SampleFormat::kUnorm16, 14});
   for (const char* vol : {"sphere", "head"})
     for (const char* pass : {"gradient", "gauss", "closing"})
       for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kFp16, SampleFormat::kUnorm16})

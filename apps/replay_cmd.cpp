@@ -1,17 +1,189 @@
-// replay_cmd.cpp - STUB (lead) until the record-replay helper fills it in.
+// replay_cmd.cpp - `isotouch replay FILE`: a recording played back through the same
+// renderer and edit pipeline, every force compared bit for bit (see replay_cmd.h).
 #include "replay_cmd.h"
 
+#include <bit>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
 #include <iostream>
+#include <sstream>
+
+#include "brush.h"
+#include "files.h"
+#include "run_job.h"
+#include "scene.h"
 
 namespace isotouch::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << std::setprecision(17) << v;
+  return s.str();
+}
+std::string vec(const core::Vec3& v) { return "(" + num(v.x) + ", " + num(v.y) + ", " + num(v.z) + ")"; }
+
+bool same_bits(const core::Vec3& a, const core::Vec3& b) {
+  return std::bit_cast<std::uint64_t>(a.x) == std::bit_cast<std::uint64_t>(b.x) &&
+         std::bit_cast<std::uint64_t>(a.y) == std::bit_cast<std::uint64_t>(b.y) &&
+         std::bit_cast<std::uint64_t>(a.z) == std::bit_cast<std::uint64_t>(b.z);
+}
+
+/// The scene the recording names, checked to still hold the recorded text.
+Scene recorded_scene(const Recording& rec, const std::string& name) {
+  std::ifstream in(rec.scene_path, std::ios::binary);
+  if (!in)
+    throw ReplayInputError(name + ": the recorded scene " + rec.scene_path + " cannot be read (moved or deleted?)");
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (s.str() != rec.scene_text)
+    throw ReplayInputError(name + ": the scene file " + rec.scene_path +
+                           " changed since it was recorded (its text differs from the recorded one, " +
+                           std::to_string(s.str().size()) + " bytes now, " + std::to_string(rec.scene_text.size()) +
+                           " recorded): a replay would not be of the same run");
+  return load_scene(rec.scene_path);
+}
+
+/// One row of the replay's trace.csv (grid-world frame, as the renderer sees it).
+void trace_row(std::ostringstream& csv, long k, const RecordedTick& t, const core::Vec3& f, double df,
+               std::uint64_t version, long edits) {
+  csv << k << ',' << t.t_s << ',' << t.hip_m.x << ',' << t.hip_m.y << ',' << t.hip_m.z << ',' << t.force_n.x << ','
+      << t.force_n.y << ',' << t.force_n.z << ',' << f.x << ',' << f.y << ',' << f.z << ',' << df << ','
+      << int(same_bits(t.force_n, f)) << ',' << version << ',' << edits << '\n';
+}
+
+/// Applies tick k's recorded edits (events [e, end) with tick == k); returns the new e.
+std::size_t apply_edits(const Recording& rec, std::size_t e, long k, EditSession& session,
+                        servo::TripleBuffer<servo::SampleField>& buf, ReplayResult& r, const std::string& name) {
+  for (; e < rec.edits.size() && rec.edits[e].tick == k; ++e) {
+    try {
+      r.publications += session.apply(rec.edits[e], &buf).published;
+    } catch (const std::exception& ex) {
+      throw ReplayInputError(name + ": edit " + std::to_string(e) + " (" + to_string(rec.edits[e].kind) + ", tick " +
+                             std::to_string(k) + ") was refused by the edit pipeline: " + ex.what());
+    }
+    ++r.edits;
+  }
+  return e;
+}
+
+}  // namespace
+
+ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, std::ostream& log) {
+  const std::string& name = opt.name;
+  const Scene scene = recorded_scene(rec, name);
+  RunOptions ropt;
+  ropt.device = opt.device;
+  ropt.progress = false;
+  SceneSetup setup = setup_scene(scene, ropt, log);
+  if (std::bit_cast<std::uint64_t>(setup.hri.rate_hz) != std::bit_cast<std::uint64_t>(rec.rate_hz))
+    throw ReplayInputError(name + ": recorded at " + num(rec.rate_hz) + " Hz, the scene's servo runs at " +
+                           num(setup.hri.rate_hz) + " Hz");
+  if (!rec.edits.empty() && !setup.session)
+    throw ReplayInputError(name + ": the recording has " + std::to_string(rec.edits.size()) +
+                           " edits but the scene " + rec.scene_path + " has no \"edits\" section");
+
+  servo::TripleBuffer<servo::SampleField> buf;
+  buf.publish(setup.first);
+  servo::HriRenderer renderer(setup.hri);
+  ReplayResult r;
+  std::ostringstream csv;
+  const bool trace = !opt.out_dir.empty();
+  if (trace) {
+    csv << "tick,t_s,hip_x_m,hip_y_m,hip_z_m,f_rec_x_n,f_rec_y_n,f_rec_z_n,f_x_n,f_y_n,f_z_n,df_n,identical,"
+           "version,edits\n"
+        << std::setprecision(17);
+  }
+  const long n = long(rec.ticks.size());
+  std::size_t e = 0;
+  int last_decile = 0;
+  for (long k = 0; k < n; ++k) {
+    const RecordedTick& t = rec.ticks[std::size_t(k)];
+    const servo::SampleField* field = buf.acquire();
+    const servo::HriTick out = renderer.tick(*field, t.hip_m);  // nominal period, as run_headless
+    const double df = servo::norm(out.force_n - t.force_n);
+    const bool same = same_bits(out.force_n, t.force_n);
+    if (!same) {
+      if (r.first_diff_tick < 0) {
+        r.first_diff_tick = k;
+        r.first_diff_t_s = t.t_s;
+        r.first_recorded_n = t.force_n;
+        r.first_replayed_n = out.force_n;
+      }
+      ++r.differing_ticks;
+      r.max_df_n = std::max(r.max_df_n, std::isnan(df) ? INFINITY : df);
+    }
+    const std::uint64_t version = field->version;
+    const long before = r.edits;
+    if (setup.session) e = apply_edits(rec, e, k, *setup.session, buf, r, name);
+    if (trace) trace_row(csv, k, t, out.force_n, df, version, r.edits - before);
+    ++r.ticks;
+    if (opt.progress && n >= 1000 && int(10 * (k + 1) / n) > last_decile) {
+      last_decile = int(10 * (k + 1) / n);
+      std::cerr << "replay   " << (k + 1) << "/" << n << " ticks (" << 10 * last_decile << "%), " << r.differing_ticks
+                << " differing\n";
+    }
+  }
+  if (trace) write_file_atomic((fs::path(opt.out_dir) / "trace.csv").string(), csv.str());
+  return r;
+}
 
 Subcommand add_replay_command(CLI::App& cli) {
-  auto* sub = cli.add_subcommand("replay", "Play a recording (run --record) back and check the forces");
-  auto file = std::make_shared<std::string>();
-  sub->add_option("file", *file, "Recording file")->required();
-  return {sub, [file](const std::string&) {
-            std::cerr << "isotouch replay: not implemented yet\n";
-            return 2;
+  struct Args {
+    std::string file, out;
+    bool quiet = false;
+  };
+  auto a = std::make_shared<Args>();
+  auto* sub = cli.add_subcommand(
+      "replay",
+      "Play a recording (run --record) back through the same renderer and edits and check every force bit for bit.\n"
+      "Exit 0: identical; 1: forces differ (the first differing tick is printed); 2: bad input (unreadable\n"
+      "recording, the scene file changed); 3: the pipeline could not run.");
+  sub->add_option("file", a->file, "Recording file (isotouch run SCENE --record FILE)")->required();
+  sub->add_option("--out", a->out, "Also write the replay's trace.csv (recorded and replayed forces) into DIR");
+  sub->add_flag("--quiet", a->quiet, "No progress lines");
+  return {sub, [a](const std::string& device) {
+            ReplayOptions opt;
+            opt.out_dir = a->out;
+            opt.device = device;
+            opt.progress = !a->quiet;
+            opt.name = a->file;
+            ReplayResult r;
+            try {
+              const Recording rec = load_recording(a->file);
+              std::cout << "isotouch replay: " << a->file << ": " << rec.ticks.size() << " ticks, " << rec.edits.size()
+                        << " edits at " << rec.rate_hz << " Hz, scene " << rec.scene_path << "\n";
+              std::ostringstream setup_log;
+              r = replay_recording(rec, opt, a->quiet ? static_cast<std::ostream&>(setup_log) : std::cout);
+            } catch (const RecordingError& e) {
+              std::cerr << "isotouch replay: " << e.what() << "\n";
+              return 2;
+            } catch (const ReplayInputError& e) {
+              std::cerr << "isotouch replay: " << e.what() << "\n";
+              return 2;
+            } catch (const SceneError& e) {
+              std::cerr << "isotouch replay: the recorded scene: " << e.what() << "\n";
+              return 2;
+            } catch (const std::exception& e) {
+              std::cerr << "isotouch replay: " << a->file << ": could not run the pipeline: " << e.what() << "\n";
+              return 3;
+            }
+            std::cout << "replayed " << r.ticks << " ticks, " << r.edits << " edits (" << r.publications
+                      << " snapshots published); max |dF| " << std::setprecision(6) << r.max_df_n << " N\n";
+            if (!a->out.empty()) std::cout << "trace    " << (fs::path(a->out) / "trace.csv").string() << "\n";
+            if (r.identical()) {
+              std::cout << "IDENTICAL: every force equals the recorded one bit for bit\n";
+              return 0;
+            }
+            std::cout << std::setprecision(17) << "DIFFERENT: " << r.differing_ticks << " of " << r.ticks
+                      << " ticks differ; first at tick " << r.first_diff_tick << " (t = " << r.first_diff_t_s
+                      << " s): recorded " << vec(r.first_recorded_n) << " N, replayed " << vec(r.first_replayed_n)
+                      << " N\n";
+            return 1;
           }};
 }
 

@@ -1,11 +1,56 @@
 // replay_cmd.h - `isotouch replay FILE`: plays a recording back (apps/record.h) and checks
 // the forces (issue 9, item 5). OWNER: record-replay helper.
+//
+// The replay rebuilds the recorded scene's pipeline with app::setup_scene (volume, engine,
+// HriParams, the EditSession and its first snapshot), then for each recorded tick k, in
+// the headless run's order (sim/headless.cpp, apps/edit_session.h's determinism rule):
+// acquire the newest snapshot, HriRenderer::tick(field, recorded HIP) at the nominal
+// period, compare the force with the recorded one bit for bit, then apply tick k's
+// recorded edits through the EditSession, publishing into the buffer tick k + 1 reads.
+// The simulated device is not used: the HIP is the recorded one.
 #pragma once
+#include <iosfwd>
+#include <stdexcept>
+#include <string>
+
+#include "record.h"
 #include "subcommand.h"
 
 namespace isotouch::app {
 
-/// Adds `replay` to the top-level command line.
+/// A recording that cannot be replayed as recorded: the scene file changed or is gone, the
+/// rate differs, edits without an edit pipeline, an edit the pipeline refuses. what()
+/// names the file and the reason. (`replay` exits 2.)
+struct ReplayInputError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct ReplayOptions {
+  std::string out_dir;      ///< if set: trace.csv of the replay written there (atomic)
+  std::string device;       ///< Vulkan device choice (ContextOptions::device)
+  bool progress = true;     ///< a line per 10 % on stderr
+  std::string name = "recording";  ///< the recording's file name, for messages
+};
+
+struct ReplayResult {
+  long ticks = 0;           ///< ticks replayed
+  long edits = 0;           ///< edit events applied
+  long publications = 0;    ///< snapshots published by the edits
+  long differing_ticks = 0; ///< ticks whose force differs from the recorded one in any bit
+  double max_df_n = 0;      ///< max over ticks of |F_replay - F_recorded| [N]
+  long first_diff_tick = -1;        ///< first differing tick, -1 if none
+  double first_diff_t_s = 0;        ///< its time [s]
+  core::Vec3 first_recorded_n, first_replayed_n;  ///< both forces there [N]
+  bool identical() const { return differing_ticks == 0; }
+};
+
+/// Replays `rec` (see the file comment). Log lines go to `log`.
+/// @throws ReplayInputError (changed scene, ...), SceneError, engine errors, std::runtime_error.
+ReplayResult replay_recording(const Recording& rec, const ReplayOptions& options, std::ostream& log);
+
+/// Adds `replay` to the top-level command line. Exit 0: every force identical; 1: forces
+/// differ (the first differing tick printed); 2: bad input (unreadable recording, changed
+/// scene, ...); 3: the pipeline could not run (e.g. no Vulkan device).
 Subcommand add_replay_command(CLI::App& cli);
 
 }  // namespace isotouch::app

@@ -20,6 +20,10 @@
 #include <sstream>
 
 #include "record.h"
+#include "replay_cmd.h"
+#include "run_job.h"
+#include "scene.h"
+#include "synthetic.h"
 
 namespace fs = std::filesystem;
 using isotouch::app::EditEvent;
@@ -391,4 +395,139 @@ TEST(Record, GarbageNeverCrashesTheLoader) {
   }
   EXPECT_GT(refused, 400);
   std::cout << "[ corpus   ] " << corpus.size() << " inputs: " << parsed << " parsed, " << refused << " refused\n";
+}
+
+// ---------------------------------------------------------------- record, then replay
+
+namespace {
+
+/// A synthetic sphere scene with a carve timeline (a carve away from the probe, then a
+/// stroke of carves at the VHIP) and the button drill while in contact; written into `dir`.
+std::string write_edit_scene(const fs::path& dir) {
+  const auto v = isotouch::engine::make_sphere({48, 48, 48}, 1e-3, 15);
+  const Vec3 side = v.grid.to_world(Vec3{38, 24, 24});  // +x side, away from the probe
+  std::ostringstream text;
+  text.precision(17);
+  text << R"({"name": "record-sphere", "volume": {"synthetic": "sphere", "dims": [48, 48, 48], "spacing_m": 0.001,
+              "radius_vox": 15}, "isovalue": 0, "inside": "above",
+              "script": {"hold_s": 0.3, "stroke_length_m": 0.004},
+              "outputs": {"plots": false},
+              "edits": {"brush": {"kind": "drill", "radius_mm": 2, "force_threshold_n": 0.2, "rate": 3000},
+                        "every_ticks": 7, "button": [[0.9, 1.05]],
+                        "timeline": [{"t_s": 0.2, "kind": "carve", "at": [)"
+       << side.x * 1e3 << ", " << side.y * 1e3 << ", " << side.z * 1e3 << R"(], "radius_mm": 3, "strength": 1000},
+                                     {"t_s": 0.7, "kind": "carve", "at": "vhip", "radius_mm": 1.5, "strength": 0.3,
+                                      "duration_s": 0.05}, {"t_s": 1.2, "kind": "undo"}]}})";
+  const fs::path p = dir / "scene.json";
+  std::ofstream(p) << text.str();
+  return p.string();
+}
+
+struct Recorded {
+  fs::path dir, scene, rec;
+};
+
+/// Runs the scene once with --record (shared by the tests below: a run costs seconds).
+const Recorded& recorded_run() {
+  static Recorded r = [] {
+    Recorded x;
+    x.dir = temp_dir("e2e");
+    x.scene = write_edit_scene(x.dir);
+    x.rec = x.dir / "run.rec";
+    isotouch::app::RunOptions opt;
+    opt.out_dir = (x.dir / "out").string();
+    opt.progress = false;
+    opt.record_path = x.rec.string();
+    std::ostringstream log;
+    (void)isotouch::app::run_scene(isotouch::app::load_scene(x.scene.string()), opt, log);
+    return x;
+  }();
+  return r;
+}
+
+isotouch::app::ReplayResult replay(const Recording& rec, const std::string& out = "") {
+  isotouch::app::ReplayOptions o;
+  o.progress = false;
+  o.out_dir = out;
+  std::ostringstream log;
+  return isotouch::app::replay_recording(rec, o, log);
+}
+
+/// Index of the first tick from `from` whose recorded force is non-zero (in contact).
+std::size_t first_pressing_tick(const Recording& r, std::size_t from) {
+  for (std::size_t k = from; k < r.ticks.size(); ++k)
+    if (r.ticks[k].force_n.x != 0 || r.ticks[k].force_n.y != 0 || r.ticks[k].force_n.z != 0) return k;
+  return r.ticks.size();
+}
+
+}  // namespace
+
+TEST(Replay, ARecordedRunWithEditsReplaysToIdenticalForces) {
+  const Recorded& x = recorded_run();
+  const Recording rec = load_recording(x.rec.string());
+  // The recording holds what the run did: every tick of trace.csv, timeline and button edits.
+  long brushes = 0, undos = 0, button_ticks = 0;
+  for (const auto& e : rec.edits) {
+    brushes += e.kind == EditEvent::Kind::kBrush;
+    undos += e.kind == EditEvent::Kind::kUndo;
+  }
+  for (const auto& t : rec.ticks) button_ticks += t.button;
+  EXPECT_GT(brushes, 8);
+  EXPECT_EQ(undos, 1);
+  EXPECT_GT(button_ticks, 100);
+  EXPECT_EQ(rec.scene_text, read(x.scene));
+
+  const auto r = replay(rec, (x.dir / "replay").string());
+  EXPECT_EQ(r.ticks, long(rec.ticks.size()));
+  EXPECT_EQ(r.edits, long(rec.edits.size()));
+  EXPECT_GT(r.publications, 3);
+  EXPECT_TRUE(r.identical()) << r.differing_ticks << " ticks differ, first " << r.first_diff_tick << ", max |dF| "
+                             << r.max_df_n;
+  EXPECT_EQ(r.max_df_n, 0.0);
+  EXPECT_TRUE(fs::exists(x.dir / "replay" / "trace.csv"));
+  // The forces are not all zero (the comparison compares something).
+  EXPECT_LT(first_pressing_tick(rec, 0), rec.ticks.size());
+}
+
+TEST(Replay, OneHipMovedByOneUlpDiffersAtThatTick) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  const std::size_t k = first_pressing_tick(rec, 400);
+  ASSERT_LT(k + 10, rec.ticks.size());
+  Vec3& hip = rec.ticks[k + 10].hip_m;  // a tick in contact
+  hip = {std::nextafter(hip.x, 1.0), std::nextafter(hip.y, 1.0), std::nextafter(hip.z, 1.0)};
+  const auto r = replay(rec);
+  EXPECT_FALSE(r.identical());
+  EXPECT_EQ(r.first_diff_tick, long(k + 10));
+  EXPECT_TRUE(same_bits(r.first_recorded_n, rec.ticks[k + 10].force_n));
+  EXPECT_GT(r.max_df_n, 0.0);
+}
+
+TEST(Replay, OneEditsRadiusChangedDiffersAfterThatEdit) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  // The first brush applied while the probe presses (a carve at the VHIP or the drill).
+  std::size_t i = 0;
+  while (i < rec.edits.size() &&
+         !(rec.edits[i].kind == EditEvent::Kind::kBrush && rec.edits[i].tick > 600)) ++i;
+  ASSERT_LT(i, rec.edits.size());
+  rec.edits[i].brush.radius_m *= 1.5;
+  const auto r = replay(rec);
+  EXPECT_FALSE(r.identical());
+  // Edits of tick k are applied after tick k's render: tick k itself is unchanged.
+  EXPECT_GT(r.first_diff_tick, rec.edits[i].tick);
+  std::cout << "[ edit     ] radius of edit " << i << " (tick " << rec.edits[i].tick << ") x 1.5: first difference at tick "
+            << r.first_diff_tick << ", " << r.differing_ticks << " ticks differ, max |dF| " << r.max_df_n << " N\n";
+}
+
+TEST(Replay, AChangedSceneIsRefused) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  rec.scene_text += " ";  // as if the file had been edited since
+  try {
+    (void)replay(rec);
+    ADD_FAILURE() << "replayed against a changed scene";
+  } catch (const isotouch::app::ReplayInputError& e) {
+    EXPECT_NE(std::string(e.what()).find("changed since it was recorded"), std::string::npos) << e.what();
+  }
 }

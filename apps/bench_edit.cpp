@@ -684,7 +684,12 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       }
     }
   }
-  out << "\nbrush: BrushResult::wall_ms (GPU: dispatch, wait, download of the dirty bricks, undo backup); brush GPU: "
+  std::size_t unchanged = 0;
+  for (const auto& r : live) unchanged += r.changed ? 0 : 1;
+  csv.row("latency", "", "all", "edits_changing_nothing", std::to_string(unchanged), "");
+  out << "\nedits: those that changed some voxel (" << unchanged << " of " << live.size()
+      << " changed none, published nothing and are left out). "
+      << "brush: BrushResult::wall_ms (GPU: dispatch, wait, download of the dirty bricks, undo backup); brush GPU: "
          "device timestamps; update: LiveField::update (passes on the recomputed bricks, the new snapshot); "
          "publish-to-tick: TripleBuffer::publish to the first tick reading it (at most one servo period plus "
          "scheduling delay). recomputed bricks = "

@@ -379,7 +379,7 @@ TEST(Raycast, CellDistancesMatchBruteForce) {
 
 // A trilinear value in float can exceed the largest corner: lerp a + t (b - a) rounds
 // b - a, and with |a| >> |b| that error (half an ulp of |a|) lands on b. Random pairs
-// (a in [-2000, -500], b the float just below tau) on a 2x1x1 grid, background a: every
+// (a in [-2000, -500], b 8 floats below tau) on a 2x1x1 grid, background a: every
 // point (t, 0, 0) whose float trilinear (the shader's lerp order: x, then y, then z) is
 // inside must lie in a cell the structure calls active (byte 0).
 TEST(Raycast, CellsWithRoundedInsideSamplesAreActive) {
@@ -392,7 +392,9 @@ TEST(Raycast, CellsWithRoundedInsideSamplesAreActive) {
   int overshoots = 0, trials = 0;
   for (int i = 0; i < 20000 && overshoots < 20; ++i) {
     const float tau = 1.0f + uni();
-    const float b = std::nextafter(tau, 0.0f), a = -500.0f - 1500.0f * uni();
+    float b = tau;
+    for (int u = 0; u < 8; ++u) b = std::nextafter(b, 0.0f);  // 8 ulps below tau
+    const float a = -500.0f - 1500.0f * uni();
     for (int j = 0; j < 50; ++j) {
       const float t = 1.0f - 1e-4f * uni();
       // Corners (x, y, z): (0|1, 0, 0) = a, b; every other corner is outside the grid: a.

@@ -33,19 +33,22 @@ bool same_bits(const core::Vec3& a, const core::Vec3& b) {
          std::bit_cast<std::uint64_t>(a.z) == std::bit_cast<std::uint64_t>(b.z);
 }
 
-/// The scene the recording names, checked to still hold the recorded text.
-Scene recorded_scene(const Recording& rec, const std::string& name) {
-  std::ifstream in(rec.scene_path, std::ios::binary);
+/// The scene the recording names (a relative path against `dir`), checked to still hold
+/// the recorded text.
+Scene recorded_scene(const Recording& rec, const std::string& name, const std::string& dir) {
+  const fs::path p(rec.scene_path);
+  const std::string path = p.is_relative() && !dir.empty() ? (fs::path(dir) / p).string() : rec.scene_path;
+  std::ifstream in(path, std::ios::binary);
   if (!in)
-    throw ReplayInputError(name + ": the recorded scene " + rec.scene_path + " cannot be read (moved or deleted?)");
+    throw ReplayInputError(name + ": the recorded scene " + path + " cannot be read (moved or deleted?)");
   std::ostringstream s;
   s << in.rdbuf();
   if (s.str() != rec.scene_text)
-    throw ReplayInputError(name + ": the scene file " + rec.scene_path +
+    throw ReplayInputError(name + ": the scene file " + path +
                            " changed since it was recorded (its text differs from the recorded one, " +
                            std::to_string(s.str().size()) + " bytes now, " + std::to_string(rec.scene_text.size()) +
                            " recorded): a replay would not be of the same run");
-  return load_scene(rec.scene_path);
+  return load_scene(path);
 }
 
 /// One row of the replay's trace.csv (grid-world frame, as the renderer sees it).
@@ -75,7 +78,7 @@ std::size_t apply_edits(const Recording& rec, std::size_t e, long k, EditSession
 
 ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, std::ostream& log) {
   const std::string& name = opt.name;
-  const Scene scene = recorded_scene(rec, name);
+  const Scene scene = recorded_scene(rec, name, opt.recording_dir);
   RunOptions ropt;
   ropt.device = opt.device;
   ropt.progress = false;
@@ -152,6 +155,8 @@ Subcommand add_replay_command(CLI::App& cli) {
             opt.device = device;
             opt.progress = !a->quiet;
             opt.name = a->file;
+            opt.recording_dir = fs::path(a->file).parent_path().string();
+            if (opt.recording_dir.empty()) opt.recording_dir = ".";
             ReplayResult r;
             try {
               const Recording rec = load_recording(a->file);

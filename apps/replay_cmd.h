@@ -30,6 +30,9 @@ struct ReplayOptions {
   std::string device;       ///< Vulkan device choice (ContextOptions::device)
   bool progress = true;     ///< a line per 10 % on stderr
   std::string name = "recording";  ///< the recording's file name, for messages
+  /// A relative Recording::scene_path is resolved against this folder (the recording's:
+  /// committed regression recordings name their scene relative to themselves).
+  std::string recording_dir;
 };
 
 struct ReplayResult {

@@ -1,0 +1,51 @@
+# isotouch replay on the committed regression recording (tests/data/recordings/sphere-edits.rec:
+# the sphere with a carve timeline, a stroke at the VHIP, an undo and the button drill) and on
+# copies of it broken on purpose. Each case checks the exit code and the message.
+#   -DEXE=isotouch -DREC=sphere-edits.rec -DSCENE=sphere-edits.json -DOUT=work folder
+file(REMOVE_RECURSE ${OUT})
+file(MAKE_DIRECTORY ${OUT})
+
+function(expect name rc regex)
+  execute_process(COMMAND ${EXE} replay ${ARGN} --quiet RESULT_VARIABLE got OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT got EQUAL rc)
+    message(FATAL_ERROR "${name}: exit ${got}, expected ${rc}\n${out}\n${err}")
+  endif()
+  if(NOT "${out}${err}" MATCHES "${regex}")
+    message(FATAL_ERROR "${name}: output does not match '${regex}':\n${out}\n${err}")
+  endif()
+  message(STATUS "${name}: exit ${got} as expected")
+endfunction()
+
+# 1. As recorded: every force identical, exit 0.
+expect(identical 0 "replayed 2403 ticks, 35 edits.*max \\|dF\\| 0 N.*IDENTICAL" ${REC} --out ${OUT}/trace)
+if(NOT EXISTS ${OUT}/trace/trace.csv)
+  message(FATAL_ERROR "identical: no trace.csv in ${OUT}/trace")
+endif()
+
+file(READ ${REC} rec)
+file(READ ${SCENE} scene)
+
+# 2. One HIP moved (tick 1000, in contact under the drill): exit 1, the first difference at tick 1000.
+string(REGEX REPLACE "(\"k\":1000,\"t\":[^,]*,\"hip\":\\[[^,]*,[^,]*,)[^]]*\\]" "\\10.0311]" moved "${rec}")
+if(moved STREQUAL rec)
+  message(FATAL_ERROR "tick 1000's HIP not found in ${REC}")
+endif()
+file(MAKE_DIRECTORY ${OUT}/moved)
+file(WRITE ${OUT}/moved/sphere-edits.rec "${moved}")
+file(WRITE ${OUT}/moved/sphere-edits.json "${scene}")
+expect(moved_hip 1 "DIFFERENT: [0-9]+ of 2403 ticks differ; first at tick 1000 \\(t = 1 s\\)" ${OUT}/moved/sphere-edits.rec)
+
+# 3. The scene changed since the recording: exit 2, said.
+file(MAKE_DIRECTORY ${OUT}/changed)
+file(WRITE ${OUT}/changed/sphere-edits.rec "${rec}")
+file(WRITE ${OUT}/changed/sphere-edits.json "${scene} ")
+expect(changed_scene 2 "sphere-edits.json changed since it was recorded" ${OUT}/changed/sphere-edits.rec)
+
+# 4. Truncated (the end record cut off): exit 2, said.
+string(FIND "${rec}" "{\"end\"" at)
+string(SUBSTRING "${rec}" 0 ${at} cut)
+file(WRITE ${OUT}/changed/cut.rec "${cut}")
+expect(truncated 2 "cut.rec: truncated after line [0-9]+ \\(2403 ticks, 35 edits read\\): no end record" ${OUT}/changed/cut.rec)
+
+# 5. No such file: exit 2.
+expect(missing 2 "no-such.rec: no such recording" ${OUT}/no-such.rec)

@@ -42,8 +42,18 @@ struct BrushEngine::Impl {
   GpuBuffer scratch, flags, flags_down, box_down, upload;  ///< grown on demand
   std::uint64_t limit = 0;                  ///< binding limit [bytes]
   std::uint64_t align = 4;                  ///< minStorageBufferOffsetAlignment
+  /// Kept between applications (an edit is latency-bound: no pool or query-pool creation
+  /// per brush); the descriptor arena grows when a brush needs more z-chunks.
+  std::unique_ptr<DescriptorArena> arena;
+  GpuTimer timer;
   Impl(VulkanContext& c, const Volume& v)
-      : ctx(c), grid(v.grid), path(v.path), pipe(c, brush_spv, 3, "brush") {}
+      : ctx(c), grid(v.grid), path(v.path), pipe(c, brush_spv, 3, "brush"), timer(c, 2) {}
+  /// The arena, reset, with room for `sets` descriptor sets of 3 buffers.
+  DescriptorArena& arena_for(std::uint32_t sets) {
+    if (!arena || arena->max_sets() < sets) arena = std::make_unique<DescriptorArena>(ctx, sets, 3 * sets);
+    else arena->reset();
+    return *arena;
+  }
 
   std::uint64_t slice_bytes() const { return std::uint64_t(grid.dims[0]) * std::uint64_t(grid.dims[1]) * 4; }
   /// (Re)allocates `b` if it is smaller than `bytes`.
@@ -141,8 +151,8 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
                      "brush box readback");
 
   const int chunks = (box_bz + per_chunk - 1) / per_chunk;
-  DescriptorArena arena(m.ctx, std::uint32_t(chunks), 3 * std::uint32_t(chunks));
-  GpuTimer timer(m.ctx, 2);
+  DescriptorArena& arena = m.arena_for(std::uint32_t(chunks));
+  GpuTimer& timer = m.timer;
   VkCommandBuffer cmd = m.ctx.begin_commands();
   timer.record_reset(cmd);
   if (smooth) {

@@ -161,7 +161,8 @@ DescriptorArena::DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std
     : device_(ctx.device()) {
   VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)};
   VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
-  pi.maxSets = std::max<std::uint32_t>(max_sets, 1);
+  max_sets_ = std::max<std::uint32_t>(max_sets, 1);
+  pi.maxSets = max_sets_;
   pi.poolSizeCount = 1;
   pi.pPoolSizes = &ps;
   VK_CHECK(vkCreateDescriptorPool(device_, &pi, nullptr, &pool_));
@@ -170,6 +171,8 @@ DescriptorArena::DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std
 DescriptorArena::~DescriptorArena() {
   if (pool_) vkDestroyDescriptorPool(device_, pool_, nullptr);
 }
+
+void DescriptorArena::reset() { VK_CHECK(vkResetDescriptorPool(device_, pool_, 0)); }
 
 VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
   VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};

@@ -98,9 +98,14 @@ class DescriptorArena {
   DescriptorArena(const DescriptorArena&) = delete;
   DescriptorArena& operator=(const DescriptorArena&) = delete;
   VkDescriptorSet allocate(VkDescriptorSetLayout layout);
+  /// Returns every set to the pool (vkResetDescriptorPool): reuse the arena for the next
+  /// submission once the previous one has completed (its fence waited on).
+  void reset();
+  std::uint32_t max_sets() const { return max_sets_; }
 
  private:
   VkDevice device_;
+  std::uint32_t max_sets_ = 1;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
 };
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # isotouch - the README's two commands.
 #   ./run.sh [SCENE] [--out DIR] [...]  install what is missing, build, run `isotouch run`
-#                                       (default scene: scenes/head.json, output: out/head/)
+#                                       (no arguments: scenes/head.json then scenes/drill-skull.json,
+#                                       output: out/head/ and out/drill-skull/)
 #   ./run.sh test [ctest args]          install what is missing, build, run the test suite
 #                                       (release build, then the servo under ThreadSanitizer)
 # Debian 12. Needs root or sudo only when packages are missing.
@@ -43,5 +44,10 @@ if [[ "${1:-}" == "test" ]]; then
   rm -f build-configure.log
   cmake --build --preset tsan -j"$(nproc)"
   exec ctest --preset tsan -j"$(nproc)" "$@"
+fi
+if (($# == 0)); then
+  # The main job: touch the skull of the head CT, then drill through it (issue 9).
+  build/bin/isotouch run scenes/head.json
+  exec build/bin/isotouch run scenes/drill-skull.json
 fi
 exec build/bin/isotouch run "$@"

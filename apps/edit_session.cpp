@@ -1,7 +1,9 @@
-// edit_session.cpp - STUB (lead) until the scene-edits helper fills it in.
+// edit_session.cpp - EditSession: Sculptor + LiveField + publication (apps/edit_session.h).
 #include "edit_session.h"
 
 #include <chrono>
+#include <cmath>
+#include <string>
 
 namespace isotouch::app {
 
@@ -15,6 +17,23 @@ const char* to_string(EditEvent::Kind k) {
   }
   return "?";
 }
+
+namespace {
+/// A brush only moves voxels toward its material / empty values (or averages them), so a
+/// snapshot format that holds the volume holds the result if it holds both targets. Checked
+/// BEFORE the volume changes: LiveField::update would refuse the edited volume after the
+/// edit, leaving the volume edited and the snapshot not (review finding).
+void check_storable_targets(const engine::Brush& b, core::SampleFormat f) {
+  if (f == core::SampleFormat::kFp32) return;  // fp32 stores what the volume holds
+  for (const auto& [name, v] : {std::pair<const char*, float>{"material", b.targets.material},
+                                std::pair<const char*, float>{"empty", b.targets.empty}}) {
+    const bool bad = f == core::SampleFormat::kFp16 ? !(std::abs(v) <= 65504.f) : !std::isfinite(v);
+    if (bad)
+      throw engine::BrushError(std::string("brush: targets.") + name + " = " + std::to_string(v) +
+                               " cannot be stored in the " + core::to_string(f) + " snapshot");
+  }
+}
+}  // namespace
 
 struct EditSession::Impl {
   std::unique_ptr<engine::LiveField> live;
@@ -30,9 +49,14 @@ EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const e
 }
 EditSession::~EditSession() = default;
 
+void EditSession::check_storable(const engine::Brush& b) const {
+  check_storable_targets(b, impl_->live->options().format);
+}
+
 EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out) {
   const auto t0 = std::chrono::steady_clock::now();
   EditOutcome o;
+  if (e.kind == EditEvent::Kind::kBrush) check_storable(e.brush);
   std::vector<std::uint32_t> changed;
   switch (e.kind) {
     case EditEvent::Kind::kBrush: o.brush = impl_->sculptor->apply(e.brush); changed = o.brush.dirty; break;

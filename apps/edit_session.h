@@ -57,6 +57,10 @@ class EditSession {
   /// Applies `e` and, when samples changed, publishes the new snapshot into `out` (if not
   /// null). Appends `e` to log(). @throws engine::BrushError on an invalid brush.
   EditOutcome apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out);
+  /// @throws engine::BrushError if the brush's material / empty value cannot be stored in
+  /// the snapshot's sample format (fp16: |v| > 65504 or NaN; unorm16: not finite). apply() checks
+  /// it before changing anything.
+  void check_storable(const engine::Brush& b) const;
   /// The newest snapshot (what apply() last published, or the first one).
   std::shared_ptr<const core::SampleField> current() const;
   const engine::Volume& volume() const;

@@ -56,8 +56,21 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
                "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
     "outputs": {"trace_csv": true, "plots": true},
     "engine": {"passes": [{"gaussian": {"sigma_mm": 1.0}}, {"closing": {"radius_mm": 1}}, "gradient"],
-               "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"}
+               "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"},
+    "edits": {"brush": {"kind": "drill", "radius_mm": 4.5, "falloff": 0.5, "force_threshold_n": 0.5,
+                        "rate": 4000, ...},     also strength, density_scale, material, empty
+              "every_ticks": 10, "button": [[0.5, 4.6]], "history_limit_mib": 64,
+              "write_vdb": true, "write_stl": true,
+              "timeline": [{"t_s": 1.0, "kind": "carve", "at": "vhip" | [x, y, z] (mm), "duration_s": 0.2,
+                            "radius_mm": 3, ...}, {"t_s": 2.0, "kind": "undo" | "redo"}]}
   }
+edits (optional, needs mode "sparse"): sculpting while the servo runs (issue 9). While the
+button is down and the probe is in contact, the brush is applied at the VHIP every
+every_ticks ticks (drill: removal grows with |F| above force_threshold_n), one undo stroke
+per press; timeline brushes fire at their time. Each edit recomputes only the bricks it can
+change and publishes a new snapshot the next tick reads. Outputs add edits.csv, edits.png
+(force, depth and removed volume against time), before.png / after.png, drilled.vdb and
+drilled.stl. Shipped: scenes/drill-skull.json.
 engine (optional): the passes that compute the published samples, in order; a pass is its
 name or {"name": {parameters}}: gaussian (sigma_mm > 0), closing (radius_mm >= 0, a box),
 gradient (required, after the filters), brick_minmax (halo 0..8, default 1). Only the listed
@@ -68,7 +81,8 @@ mode "sparse"). mode "dense" computes every voxel, for comparison.
 The script casts a ray from ray_origin_frac (fractions of the volume box, each in [-2, 3])
 to the first isosurface crossing, presses the hand target press_depth_m in, strokes
 stroke_length_m along the surface, and lifts off. Shipped: scenes/head.json, chest.json,
-sphere.json, knot.json.
+sphere.json, knot.json, drill-skull.json. `run --record FILE` also writes a recording that
+`isotouch replay FILE` plays back, checking every force bit for bit.
 
 Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
 Points are reported in the volume's physical frame (origin + direction x spacing x index).

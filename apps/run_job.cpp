@@ -543,7 +543,9 @@ class EditDriver {
     }
     if (!down && button_) close(k, t, "button");
     button_ = down;
-    if (down && row.contact && (k - press_tick_) % scene_.edits.every_ticks == 0) {
+    // Real contact only: a plane holds the HIP (penetration > 0). An edit's fade-out also
+    // reports contact, with penetration 0 and a force that is not the user's push (review).
+    if (down && row.contact && row.penetration_m > 0 && (k - press_tick_) % scene_.edits.every_ticks == 0) {
       apply(k, t, EditEvent::Kind::kBrush,
             make_brush(scene_.edits.brush, targets_, row.vhip_m, dt_, servo::norm(row.force_n)), "button");
       ++figures.button_brushes;

@@ -347,27 +347,24 @@ bool HriRenderer::note_version(std::uint64_t version) {
 }
 
 double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
-  // |F| moves from the |F| sent the tick before toward the target by at most one step,
-  // in the target's direction (the last one sent if the target is zero); the slew ends on
-  // the tick that reaches the target.
+  // The force VECTOR moves from the one sent the tick before toward the target by at most
+  // one step (so neither |F| nor its direction can jump: a carve that tilts the surface
+  // 45 degrees under a held HIP turns the force over several ticks); the slew ends on the
+  // tick that reaches the target. A zero target fades the last force out along its own
+  // direction (a fading contact, penetration 0).
   const double step = params_.edit_max_step_fraction * params_.force_limit_n;
   if (!(step > 0.0)) {  // a force limit <= 0 or NaN: nothing to slew toward
     edit_slewing_ = false;
     return mag;
   }
-  const double sent = std::clamp(mag, std::max(0.0, prev_force_mag_ - step), prev_force_mag_ + step);
-  if (sent == mag) {
+  const Vec3 gap = force - prev_force_;
+  const double g = norm(gap);
+  if (!(g > step)) {
     edit_slewing_ = false;
     return mag;
   }
-  if (mag > 0.0) {
-    force = force * (sent / mag);
-    return sent;
-  }
-  if (!(sent > 0.0)) return 0.0;
-  const Vec3 dir = prev_force_mag_ > 0.0 ? prev_force_ / prev_force_mag_ : (plane_.valid ? plane_.n : Vec3{});
-  force = dir * sent;
-  out.contact = true;  // a fading contact force, penetration 0
+  force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
+  if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
   return norm(force);
 }
 

@@ -68,8 +68,8 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
-  /// Robust variant, edits (source: issue 9 item 2): the largest change of |F| an edit may
-  /// cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
+  /// Robust variant, edits (source: issue 9 item 2): the largest change of the force
+  /// vector F (hence of |F| and of its direction) an edit may cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
   /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
   /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
   /// turns the edit handling off: a new snapshot is then read at the next plane update
@@ -192,9 +192,11 @@ struct HriParams {
 ///   old snapshot and is inside the new one (material added over a hovering probe) counts
 ///   as an embedded contact point: the proxy is brought out to the new surface (before, the
 ///   VHIP's value cached from the old snapshot put a plane between VHIP and HIP at once, a
-///   step). From the edit tick on, |F| is slewed: it moves from the |F| sent the tick
-///   before toward this tick's target (the spring-damper force, saturated) by at most
-///   edit_max_step_fraction * force_limit_n per tick, until the tick it reaches the target.
+///   step). From the edit tick on, the force vector is slewed: it moves from the F sent the
+///   tick before toward this tick's target (the spring-damper force, saturated) by at most
+///   edit_max_step_fraction * force_limit_n per tick (|F_sent - F_prev| <= step, so a carve
+///   that tilts the surface under the HIP turns the force over several ticks instead of
+///   flipping it: review finding), until the tick it reaches the target.
 ///   A running recovery ramp is folded into the slew and none starts on an edit tick; the
 ///   user's own motion is slewed too while it lasts, so no tick changes |F| by more than
 ///   the step. A later edit during the slew continues it from the |F| sent. Carved under

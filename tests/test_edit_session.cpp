@@ -245,6 +245,26 @@ TEST(EditSession, CarveRemovesTheBruteForceVoxels) {
   EXPECT_EQ(inside(v) - inside(s.volume()), expect);
 }
 
+// A brush whose target an fp16 snapshot cannot hold (|v| > 65504) is refused BEFORE the
+// volume changes: the volume, the snapshot and the log stay as they were (review finding:
+// the volume was edited, then LiveField::update refused the new values).
+TEST(EditSession, UnstorableTargetIsRefusedBeforeTheVolumeChanges) {
+  const Volume v = isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 10);
+  auto opt = sphere_options();
+  opt.format = isotouch::core::SampleFormat::kFp16;
+  EditSession s(Volume(v), nullptr, opt);
+  const auto before = s.current();
+  Brush b = carve_at(v, {16, 16, 25}, 4e-3, 10.0);
+  b.kind = BrushKind::kAdd;
+  b.targets.material = 70000.f;
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), isotouch::engine::BrushError);
+  EXPECT_EQ(std::memcmp(s.volume().voxels.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0);
+  EXPECT_EQ(s.current(), before);
+  EXPECT_TRUE(s.log().empty());
+  b.targets.material = 60000.f;  // storable: applied and published
+  EXPECT_TRUE(s.apply(brush_event(b), nullptr).published);
+}
+
 // The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook
 // the trace is what it was.
 TEST(Headless, HookPublishesBeforeTheNextTick) {

@@ -480,3 +480,25 @@ TEST(HriEdit, WithoutAnEditTheTraceIsTheOneWithoutTheFeature) {
     EXPECT_GT(contact, 300) << "parameter set " << variant;  // the run does touch
   }
 }
+
+// An edit that tilts the surface 45 degrees under a HIP held 2 mm deep (review finding):
+// the force turns from +z to the new normal (1, 0, 1)/sqrt 2. Not only |F| but the force
+// VECTOR may change by at most 5 % of the limit per tick; without the vector slew it
+// turned in one tick (|dF| = 1.17 N, about 7 times the bound). It still ends on the new
+// plane's force (analytic: K times the HIP's depth below the tilted plane, along its normal).
+TEST(HriEdit, AnEditThatTiltsTheSurfaceTurnsTheForceGradually) {
+  const SampleField a = floor_at(0.010, 1);
+  const double s = std::sqrt(0.5);
+  SampleField b = plane_field({s, 0, s}, {kX, kY, 0.010});
+  b.version = 2;
+  const int edit = 300, ticks = 400;
+  HriRenderer on(params());
+  const auto t = drive(on, ticks, switch_at(a, b, edit), press_to(0.008));
+  EXPECT_GT(norm(t[edit - 1].force_n), 1.0);  // pressed before the edit
+  EXPECT_LE(max_vector_step(t, edit - 1, ticks), kStep * (1 + 1e-12));
+  EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
+  const Vec3 n{s, 0, s};
+  const double depth = dot(n, Vec3{kX, kY, 0.010} - Vec3{kX, kY, 0.008});  // 2 mm * cos 45
+  const Vec3 want = n * (kK * depth);
+  EXPECT_LT(norm(t[ticks - 1].force_n - want), 1e-3) << "settled force on the tilted plane";
+}

@@ -695,6 +695,33 @@ std::vector<servo::TraceRow> thin_path(const std::vector<servo::TraceRow>& trace
   return path;
 }
 
+// Before and after, cut open through the press axis: the isosurface of `vol` with a clip
+// plane that contains the axis (the script's ray through its contact point), seen from the
+// removed side, perpendicular to the axis, the axis vertical in the picture. A drilled hole
+// through a wall shows as a gap in the cut face. Grid-world [m].
+engine::RaycastImage render_section(const Scene& scene, const SceneSetup& setup, const engine::Volume& vol,
+                                    const std::string& out_png) {
+  const core::Isosurface iso = setup.live.iso;
+  const engine::RaycastField rf = engine::make_raycast_field(vol.grid, vol.voxels, iso, setup.live.background);
+  const Vec3 axis = core::normalized_or(setup.script.contact_normal * -1.0, Vec3{1, 0, 0});
+  // The volume axis least aligned with the press axis gives the side the camera looks from.
+  const Vec3 cand[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  Vec3 w = cand[0];
+  for (const Vec3& c : cand)
+    if (std::abs(dot(c, axis)) < std::abs(dot(w, axis))) w = c;
+  const Vec3 side = core::normalized_or(cross(axis, w), Vec3{0, 1, 0});  // camera looks along +side
+  const double reach = std::max(scene.script.press_depth_m, 0.01);
+  const Vec3 target = setup.script.contact_point_m + axis * (0.5 * reach);
+  const double fov = 35, half_width = 1.2 * reach + 0.005;
+  const double dist = half_width / std::tan(0.5 * fov * 3.14159265358979 / 180);
+  PictureRequest req;
+  req.width = 640;
+  req.height = 640;
+  req.view = engine::look_at(target - side * dist, target, axis * -1.0, fov);
+  req.style.clip = engine::ClipPlane{setup.script.contact_point_m, side * -1.0};
+  return render_picture(setup.vk.get(), rf, vol.direction, req, out_png);
+}
+
 // The figures, files and pictures of a run with edits, into m.edits.
 void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<servo::TraceRow>& trace,
                   const std::string& dir, RunMetrics& m, std::ostream& log) {
@@ -774,6 +801,14 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     const RunPicture aft = render_run_picture(scene, after, *session.current(), path,
                                               (fs::path(dir) / "after.png").string(), setup.vk.get());
     e.before_after_drawn = before.error.empty() && aft.error.empty();
+    try {
+      if (!setup.vk) throw std::runtime_error("no Vulkan device");
+      render_section(scene, setup, setup.volume, (fs::path(dir) / "section_before.png").string());
+      render_section(scene, setup, after, (fs::path(dir) / "section_after.png").string());
+      e.sections_drawn = true;
+    } catch (const std::exception& x) {
+      e.sections_note = x.what();
+    }
     e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
     if (scene.write_trace) {
       std::string note;
@@ -851,6 +886,12 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   if (e.plot_drawn) md << "![force, depth and removed volume against time](edits.png)\n\n";
   if (e.before_after_drawn)
     md << "| before | after |\n|---|---|\n| ![before](before.png) | ![after](after.png) |\n\n";
+  if (e.sections_drawn)
+    md << "Cut open through the press axis (clip plane containing it, seen from the side; the probe came from "
+          "the top):\n\n| section before | section after |\n|---|---|\n"
+          "| ![section before](section_before.png) | ![section after](section_after.png) |\n\n";
+  else if (!e.sections_note.empty())
+    md << "Sections: not drawn (" << e.sections_note << ").\n\n";
   else if (!e.before_after_note.empty())
     md << "Pictures: not drawn (" << e.before_after_note << ").\n\n";
   md << "Files: `edits.csv` (one row per event)"

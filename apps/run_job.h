@@ -71,6 +71,10 @@ struct EditFigures {
   std::string vdb_file, stl_file;  ///< drilled.vdb / drilled.stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
   bool before_after_drawn = false; ///< before.png and after.png written
+  /// section_before.png / section_after.png: cut open through the press axis (a clip plane
+  /// containing it, seen from the side), where a hole through a thin wall shows.
+  bool sections_drawn = false;
+  std::string sections_note;       ///< why they were not drawn
   bool plot_drawn = false;         ///< edits.png written
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };

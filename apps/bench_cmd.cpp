@@ -26,14 +26,14 @@
 
 namespace isotouch::app {
 
-namespace {
 std::string load_average() {
-  std::ifstream in("/proc/loadavg");
-  std::string a, b, c;
-  if (!(in >> a >> b >> c)) return "unknown";
-  return a + " " + b + " " + c;
+  std::ifstream f("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  if (!(f >> a >> b >> c)) return "unknown";
+  std::ostringstream o;
+  o << a << ", " << b << ", " << c;
+  return o.str();
 }
-}  // namespace
 
 int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
   using namespace servo;
@@ -155,7 +155,6 @@ int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
   return 0;
 }
 
-namespace {
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -166,7 +165,6 @@ std::string cpu_model() {
     }
   return "unknown CPU";
 }
-}  // namespace
 
 std::string table1_verdict(const std::vector<Table1Row>& rows) {
   auto ratio = [](double num, double den) {

@@ -7,6 +7,12 @@
 
 namespace isotouch::app {
 
+/// What every benchmark prints about the machine it ran on (one helper for all of them).
+/// /proc/loadavg's 1, 5 and 15 minute averages as "a, b, c", or "unknown".
+std::string load_average();
+/// /proc/cpuinfo's first "model name", or "unknown CPU".
+std::string cpu_model();
+
 struct ServoRtOptions {
   double seconds = 10;     ///< per rate [s]
   bool sched_fifo = true;  ///< ask for SCHED_FIFO (default; refused -> a note, runs anyway)

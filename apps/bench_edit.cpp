@@ -1,4 +1,5 @@
 // bench_edit.cpp - `isotouch bench edit` (issue 9, item 7). See bench_edit.h.
+#include "bench_cmd.h"
 #include "bench_edit.h"
 
 #include <algorithm>
@@ -199,24 +200,6 @@ std::string csv_num(double v) {
   o << std::setprecision(9) << v;
   return o.str();
 }
-std::string read_load_average() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  if (!(f >> a >> b >> c)) return "unknown";
-  std::ostringstream o;
-  o << a << ", " << b << ", " << c;
-  return o.str();
-}
-std::string read_cpu_model() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown CPU";
-}
 
 /// Long-form CSV: section, radius_mm, brush, metric, value, unit.
 struct Csv {
@@ -380,7 +363,7 @@ std::string default_scene() { return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" /
 
 /// The whole run; throws on a failure to run (caught by run_bench_edit).
 int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
-  const std::string load_before = read_load_average();
+  const std::string load_before = load_average();
   const Scene scene = load_scene(o.scene.empty() ? default_scene() : o.scene);
   if (scene.volume_path.empty()) throw std::runtime_error(scene.file + ": bench edit needs a scene with a volume file");
   progress << "[bench edit] loading " << scene.volume_path << "\n" << std::flush;
@@ -629,8 +612,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   }
   out << "- edit points: " << pts.size() << " isosurface crossings of the first snapshot (seed " << o.seed
       << "), none within " << num(2 * max_r * 1e3, 0) << " mm of the probe; each point is carved, then added back\n"
-      << "- machine: " << std::thread::hardware_concurrency() << " hardware threads (" << read_cpu_model()
-      << "), load average (1, 5, 15 min) " << load_before << " before, " << read_load_average()
+      << "- machine: " << std::thread::hardware_concurrency() << " hardware threads (" << cpu_model()
+      << "), load average (1, 5, 15 min) " << load_before << " before, " << load_average()
       << " after; the machine is shared: other work slows and spreads every figure\n";
 
   out << "\n## Edit-to-haptics latency (incremental: Sculptor + LiveField)\n\n"

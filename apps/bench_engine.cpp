@@ -1,4 +1,5 @@
 // bench_engine.cpp - `isotouch bench engine` (issue 8, item 7). See bench_engine.h.
+#include "bench_cmd.h"
 #include "bench_engine.h"
 
 #include <fcntl.h>
@@ -597,16 +598,6 @@ std::string csv_num(double x) {
   return o.str();
 }
 
-std::string cpu_model() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown CPU";
-}
 
 std::uint64_t mem_total_bytes() {
   std::ifstream f("/proc/meminfo");
@@ -618,14 +609,6 @@ std::uint64_t mem_total_bytes() {
   return 0;
 }
 
-std::string load_average() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  if (!(f >> a >> b >> c)) return "unknown";
-  std::ostringstream o;
-  o << a << ", " << b << ", " << c;
-  return o.str();
-}
 
 std::string resolve_data(const std::string& rel) {
   if (fs::exists(rel)) return rel;

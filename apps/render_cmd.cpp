@@ -1,4 +1,5 @@
 #include "render_cmd.h"
+#include "bench_cmd.h"
 
 #include <png.h>
 #include <unistd.h>
@@ -517,13 +518,6 @@ struct BenchRow {
   double build_ms = 0;                ///< engine::cell_distances on the host, median
 };
 
-/// /proc/loadavg's first three fields (the machine may be shared), or "n/a".
-std::string load_average() {
-  std::ifstream in("/proc/loadavg");
-  std::string a, b, c;
-  if (!(in >> a >> b >> c)) return "n/a";
-  return a + " " + b + " " + c;
-}
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());

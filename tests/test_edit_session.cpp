@@ -24,6 +24,7 @@
 #include "synthetic.h"
 #include "vdb_io.h"
 #include "vk_test_context.h"
+#include "voxel_probe.h"
 
 namespace fs = std::filesystem;
 using isotouch::app::EditEvent;
@@ -193,29 +194,7 @@ std::vector<std::map<std::string, std::string>> read_csv(const fs::path& csv) {
 }
 
 // Trilinear value at a grid-world point (identity direction); NaN outside the voxel box.
-double trilinear(const Volume& v, const Vec3& p) {
-  const double idx[3] = {(p.x - v.grid.origin_m.x) / v.grid.spacing_m.x, (p.y - v.grid.origin_m.y) / v.grid.spacing_m.y,
-                         (p.z - v.grid.origin_m.z) / v.grid.spacing_m.z};
-  int i0[3];
-  double fr[3];
-  for (int a = 0; a < 3; ++a) {
-    if (!(idx[a] >= 0 && idx[a] <= v.grid.dims[std::size_t(a)] - 1)) return std::nan("");
-    i0[a] = std::min(int(std::floor(idx[a])), std::max(0, v.grid.dims[std::size_t(a)] - 2));
-    fr[a] = idx[a] - i0[a];
-  }
-  double s = 0;
-  for (int c = 0; c < 8; ++c) {
-    double w = 1;
-    int ix[3];
-    for (int a = 0; a < 3; ++a) {
-      const int b = (c >> a) & 1;
-      w *= b ? fr[a] : 1 - fr[a];
-      ix[a] = std::min(i0[a] + b, v.grid.dims[std::size_t(a)] - 1);
-    }
-    s += w * v.voxels[v.grid.index(ix[0], ix[1], ix[2])];
-  }
-  return s;
-}
+double trilinear(const Volume& v, const Vec3& p) { return isotouch::test::trilinear_grid(v, p); }
 }  // namespace
 
 TEST(EditSession, UndoThenRedoIsBitForBitAndPublishesCpu) { undo_redo_round_trip(nullptr); }

@@ -15,6 +15,7 @@
 #include <iterator>
 #include <sstream>
 
+#include "voxel_probe.h"
 #include "run_job.h"
 #include "scene.h"
 #include "synthetic.h"
@@ -55,28 +56,7 @@ std::vector<Row> read_trace(const fs::path& csv) {
 
 // Trilinear value of the voxels at a physical point; NaN outside the voxel-centre box.
 double trilinear(const Volume& v, const double p[3]) {
-  const isotouch::servo::Vec3 g = v.to_grid({p[0], p[1], p[2]});
-  const double idx[3] = {(g.x - v.grid.origin_m.x) / v.grid.spacing_m.x, (g.y - v.grid.origin_m.y) / v.grid.spacing_m.y,
-                         (g.z - v.grid.origin_m.z) / v.grid.spacing_m.z};
-  int i0[3];
-  double fr[3];
-  for (int a = 0; a < 3; ++a) {
-    if (!(idx[a] >= 0 && idx[a] <= v.grid.dims[std::size_t(a)] - 1)) return std::nan("");
-    i0[a] = std::min(int(std::floor(idx[a])), std::max(0, v.grid.dims[std::size_t(a)] - 2));
-    fr[a] = idx[a] - i0[a];
-  }
-  double s = 0;
-  for (int c = 0; c < 8; ++c) {
-    double w = 1;
-    int ix[3];
-    for (int a = 0; a < 3; ++a) {
-      const int b = (c >> a) & 1;
-      w *= b ? fr[a] : 1 - fr[a];
-      ix[a] = std::min(i0[a] + b, v.grid.dims[std::size_t(a)] - 1);
-    }
-    s += w * v.voxels[v.grid.index(ix[0], ix[1], ix[2])];
-  }
-  return s;
+  return isotouch::test::trilinear_grid(v, v.to_grid({p[0], p[1], p[2]}));
 }
 
 struct Steps {

@@ -512,6 +512,7 @@ struct BenchRow {
   std::string name;
   std::array<int, 3> dims{};
   double ms_skip = 0, ms_noskip = 0;  ///< medians
+  double march_skip = 0, march_noskip = 0, shade_skip = 0;  ///< medians of the pass times
   std::size_t pixels_differ = 0;      ///< depth differs between skip on and off
   std::size_t hits = 0;
   bool timestamps = true;
@@ -548,14 +549,18 @@ BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, i
   for (int skip = 1; skip >= 0; --skip) {
     engine::RaycastStyle st;
     st.skip_empty = skip == 1;
-    std::vector<double> ms;
+    std::vector<double> ms, march, shade;
     for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
       engine::RaycastImage img = (*rc.value)->render(view, st, size, size);
       if (f > 0) ms.push_back(img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms);
+      if (f > 0) march.push_back(img.march_ms);
+      if (f > 0) shade.push_back(img.shade_ms);
       row.timestamps = row.timestamps && img.gpu_ms >= 0;
       last[skip] = std::move(img);
     }
     (skip ? row.ms_skip : row.ms_noskip) = median(ms);
+    (skip ? row.march_skip : row.march_noskip) = median(march);
+    if (skip) row.shade_skip = median(shade);
   }
   for (std::size_t i = 0; i < last[0].depth.size(); ++i) {
     row.pixels_differ += last[0].depth[i] != last[1].depth[i] || last[0].rgba[i] != last[1].rgba[i];
@@ -576,8 +581,8 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
             << "device: " << vk.info().name << " (" << vk.info().type << ", " << vk.info().driver << ")\n\n"
             << "load average before: " << load_average() << "\n\n"
             << "| scene | voxels | surface pixels | ms/frame skipping | ms/frame no skipping | speed-up | images equal "
-               "| cell distances built [ms, host] |\n"
-            << "|---|---|---|---|---|---|---|---|\n";
+               "| march pass skipping / no skipping [ms] | shade pass [ms] | cell distances built [ms, host] |\n"
+            << "|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<BenchRow> rows;
   for (const char* s : {"head.json", "chest.json"}) {
     fs::path p = fs::path("scenes") / s;
@@ -588,12 +593,14 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
               << r.dims[2] << " | " << r.hits << " | " << r.ms_skip << " | " << r.ms_noskip << " | "
               << std::setprecision(2) << r.ms_noskip / r.ms_skip << "x | "
               << (r.pixels_differ == 0 ? "yes" : "NO (" + std::to_string(r.pixels_differ) + " pixels)") << " | "
-              << std::setprecision(1) << r.build_ms << " |\n";
+              << std::setprecision(1) << r.march_skip << " / " << r.march_noskip << " | " << r.shade_skip << " | "
+              << r.build_ms << " |\n";
   }
   const BenchRow& head = rows[0];
   const double speedup = head.ms_noskip / head.ms_skip;
-  std::cout << "\nload average after: " << load_average() << "\n(ms: " << (head.timestamps ? "GPU timestamps around the dispatch" : "submit-to-fence wall time")
-            << "; the machine may be shared: figures vary by tens of %)\n"
+  std::cout << "\nload average after: " << load_average() << "\n(ms: " << (head.timestamps ? "GPU timestamps around the passes" : "submit-to-fence wall time")
+            << "; the march pass runs every pixel the volume's box projects to, the shade pass only the hit pixels; "
+               "the machine may be shared: figures vary by tens of %)\n"
             << std::setprecision(2) << "verdict: head skipping speed-up " << speedup << "x (needs >= 5x): "
             << (speedup >= 5 ? "PASS" : "FAIL") << "\n"
             << std::setprecision(1) << "verdict: head " << head.ms_skip << " ms per " << size << "x" << size

@@ -11,13 +11,17 @@
 #include <stdexcept>
 #include <tuple>
 
-#include "isotouch/shaders/raycast_spv.h"
+#include "isotouch/shaders/raycast_args_spv.h"
+#include "isotouch/shaders/raycast_march_spv.h"
+#include "isotouch/shaders/raycast_overlay_spv.h"
+#include "isotouch/shaders/raycast_shade_spv.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
 
 // The C++ view of the shared structs (std430: 4-byte scalars, offset = 4 * member index).
 static_assert(sizeof(gpu::RaycastParams) == 44 * 4);
+static_assert(sizeof(gpu::RaycastParams) % 16 == 0, "binding 0 is std140: its struct size rounds up to 16 bytes");
 static_assert(offsetof(gpu::RaycastParams, tau) == 8 * 4);
 static_assert(offsetof(gpu::RaycastParams, eye_x) == 12 * 4);
 static_assert(offsetof(gpu::RaycastParams, clip_d) == 19 * 4);
@@ -28,10 +32,15 @@ static_assert(offsetof(gpu::RaycastPrim, ax) == 4 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cr) == 7 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cb) == 15 * 4);
 static_assert(sizeof(gpu::RaycastPush) == 16);
+static_assert(sizeof(gpu::RaycastCounter) == 16);
+static_assert(offsetof(gpu::RaycastCounter, groups_x) == 0, "VkDispatchIndirectCommand at offset 0");
+static_assert(offsetof(gpu::RaycastCounter, count) == 12);
 static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 255u, "cell distances are bytes");
-// llvmpipe's budget of 65535 loop iterations per invocation: the march, the refinement (8),
-// the box (3) and the two overlay loops.
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 8u + 3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
+// llvmpipe's budget of 65535 loop iterations per invocation: the march and the box (3) in
+// the march pass; the refinement (8) and the box in the shade pass; the box and the two
+// overlay loops in the overlay pass.
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 3u < 65535u);
+static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 
 namespace {
 
@@ -385,18 +394,70 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 
 // ---- GPU ---------------------------------------------------------------------------------
 
+namespace {
+/// The pixels [x0, x1) x [y0, y1) whose rays can meet the box [-1, n] (index space): the
+/// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, widened to
+/// whole tiles of the march pass; the whole image if a corner is not in front of the eye.
+struct PixelRect {
+  std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+PixelRect box_rect(const gpu::RaycastParams& P) {
+  const Vec3 eye{P.eye_x, P.eye_y, P.eye_z}, fwd{P.fwd_x, P.fwd_y, P.fwd_z};
+  const Vec3 right{P.right_x, P.right_y, P.right_z}, up{P.up_x, P.up_y, P.up_z};
+  PixelRect all{0, 0, P.width, P.height};
+  double lo_x = 1e300, hi_x = -1e300, lo_y = 1e300, hi_y = -1e300;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 idx{c & 1 ? double(P.nx) : -1.0, c & 2 ? double(P.ny) : -1.0, c & 4 ? double(P.nz) : -1.0};
+    const Vec3 q{P.origin_x + idx.x / double(P.inv_sp_x), P.origin_y + idx.y / double(P.inv_sp_y),
+                 P.origin_z + idx.z / double(P.inv_sp_z)};
+    const Vec3 v = q - eye;
+    const double z = dot(v, fwd);
+    if (!(z > 1e-9)) return all;
+    // The shader's pixel (px, py) looks along fwd * focal + right * sx + up * sy with
+    // sx = px + 0.5 - W / 2, sy = H / 2 - (py + 0.5).
+    const double px = double(P.focal_px) * dot(v, right) / z + 0.5 * P.width - 0.5;
+    const double py = 0.5 * P.height - 0.5 - double(P.focal_px) * dot(v, up) / z;
+    lo_x = std::min(lo_x, px);
+    hi_x = std::max(hi_x, px);
+    lo_y = std::min(lo_y, py);
+    hi_y = std::max(hi_y, py);
+  }
+  auto clampi = [](double v, std::uint32_t n) { return std::uint32_t(std::clamp(v, 0.0, double(n))); };
+  PixelRect r;
+  r.x0 = clampi(std::floor(lo_x) - 2, P.width) / ISOTOUCH_RAYCAST_WG_X * ISOTOUCH_RAYCAST_WG_X;
+  r.y0 = clampi(std::floor(lo_y) - 2, P.height) / ISOTOUCH_RAYCAST_WG_Y * ISOTOUCH_RAYCAST_WG_Y;
+  r.x1 = clampi(std::ceil(hi_x) + 3, P.width);
+  r.y1 = clampi(std::ceil(hi_y) + 3, P.height);
+  if (r.x1 <= r.x0 || r.y1 <= r.y0) r.x1 = r.x0, r.y1 = r.y0;  // the box is off screen
+  return r;
+}
+}  // namespace
+
 struct RayCaster::Impl {
   VulkanContext& ctx;
   RaycastField field;
-  ComputePipeline<gpu::RaycastPush> pipeline;
+  // The four passes (shaders/raycast_common.glsl), one descriptor layout.
+  ComputePipeline<gpu::RaycastPush> march, args, shade, overlay;
   GpuBuffer values, cells;                 // device-local, resident
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
-  GpuBuffer image, depth;                  // device-local, sized for the last frame
+  GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch
+  // Per pixel, device-local, sized for the last frame: image, depth, linear colour R G B,
+  // hit list, hit sample.
+  GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
   std::size_t pixels = 0;
+  DescriptorArena arena;                   // reset per frame
+  GpuTimer timer;
   Impl(VulkanContext& c, RaycastField f)
-      : ctx(c), field(std::move(f)), pipeline(c, raycast_spv, 6, "raycast") {}
+      : ctx(c),
+        field(std::move(f)),
+        march(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u),
+        args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u),
+        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u),
+        arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
+        timer(c, 4) {}
 };
 
 RayCaster::RayCaster(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -448,7 +509,8 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
        {std::tuple{&impl->params, pb, MemoryIntent::DeviceLocal, "raycast params"},
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
         std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
-        std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"}}) {
+        std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"},
+        std::tuple{&impl->counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"}}) {
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) return R::fail(r.error);
     *buf = std::move(*r.value);
@@ -466,8 +528,11 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   const std::size_t pixels = std::size_t(width) * std::size_t(height);
   if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
   if (pixels != m.pixels) {
-    m.image = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, "raycast image");
-    m.depth = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, "raycast depth");
+    for (auto [buf, what] : {std::pair{&m.image, "raycast image"}, std::pair{&m.depth, "raycast depth"},
+                             std::pair{&m.lin_r, "raycast colour R"}, std::pair{&m.lin_g, "raycast colour G"},
+                             std::pair{&m.lin_b, "raycast colour B"}, std::pair{&m.hits, "raycast hit list"},
+                             std::pair{&m.hit_k, "raycast hit samples"}})
+      *buf = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, what);
     m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
     m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
     m.pixels = pixels;
@@ -478,25 +543,53 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   push.flags = style_flags(style);
   push.prim_count = std::uint32_t(prims.size());
 
-  DescriptorArena arena(m.ctx, 1, 6);
-  GpuTimer timer(m.ctx, 2);
+  m.arena.reset();  // the previous frame's submission has completed (submit_and_wait)
   VkCommandBuffer cmd = m.ctx.begin_commands();
-  timer.record_reset(cmd);
+  m.timer.record_reset(cmd);
   record_copy(cmd, m.params_up, m.params, sizeof(P));
   if (!prims.empty()) record_copy(cmd, m.prims_up, m.prims, prims.size() * sizeof(gpu::RaycastPrim));
+  const std::initializer_list<BufferRange> ranges = {
+      {m.params.handle(), 0, m.params.size()}, {m.values.handle(), 0, m.values.size()},
+      {m.cells.handle(), 0, m.cells.size()},   {m.prims.handle(), 0, m.prims.size()},
+      {m.image.handle(), 0, pixels * 4},       {m.depth.handle(), 0, pixels * 4},
+      {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
+      {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
+      {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()}};
+  const auto tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X;
+  const auto tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y;
+  const PixelRect rect = box_rect(P);  // the march covers only where the box can project
+  gpu::RaycastPush march_push = push;
+  march_push.x0 = rect.x0;
+  march_push.y0 = rect.y0;
+  m.timer.mark(cmd, 0);
+  // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
+  vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);  // hit count 0
+  vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, pack_rgba8(P.bg_r, P.bg_g, P.bg_b));
+  vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, std::bit_cast<std::uint32_t>(-1.0f));
   barrier_transfer_to_compute(cmd);
-  m.pipeline.bind(cmd, arena,
-                  {{m.params.handle(), 0, m.params.size()},
-                   {m.values.handle(), 0, m.values.size()},
-                   {m.cells.handle(), 0, m.cells.size()},
-                   {m.prims.handle(), 0, m.prims.size()},
-                   {m.image.handle(), 0, pixels * 4},
-                   {m.depth.handle(), 0, pixels * 4}});
-  m.pipeline.push(cmd, push);
-  timer.mark(cmd, 0);
-  vkCmdDispatch(cmd, (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
-  timer.mark(cmd, 1);
+  // 1. march every pixel; 2. hit count -> dispatch size; 3. shade the hits; 4. overlays.
+  m.march.bind(cmd, m.arena, ranges);
+  m.march.push(cmd, march_push);
+  if (rect.x1 > rect.x0)
+    vkCmdDispatch(cmd, (rect.x1 - rect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                  (rect.y1 - rect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+  m.timer.mark(cmd, 2);
+  barrier_compute_to_compute(cmd);
+  m.args.bind(cmd, m.arena, ranges);
+  m.args.push(cmd, push);
+  vkCmdDispatch(cmd, 1, 1, 1);
+  barrier_compute_to_indirect(cmd);
+  m.shade.bind(cmd, m.arena, ranges);
+  m.shade.push(cmd, push);
+  vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
+  m.timer.mark(cmd, 3);
+  if (!prims.empty()) {
+    barrier_compute_to_compute(cmd);
+    m.overlay.bind(cmd, m.arena, ranges);
+    m.overlay.push(cmd, push);
+    vkCmdDispatch(cmd, tiles_x, tiles_y, 1);
+  }
+  m.timer.mark(cmd, 1);
   barrier_compute_to_transfer(cmd);
   record_copy(cmd, m.image, m.image_down, pixels * 4);
   record_copy(cmd, m.depth, m.depth_down, pixels * 4);
@@ -506,7 +599,10 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.width = width;
   img.height = height;
   img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
-  img.gpu_ms = timer.elapsed_ms(0, 1);
+  img.gpu_ms = m.timer.elapsed_ms(0, 1);
+  img.march_ms = m.timer.elapsed_ms(0, 2);
+  img.shade_ms = m.timer.elapsed_ms(2, 3);
+  img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.rgba.resize(pixels);
   img.depth.resize(pixels);
   std::memcpy(img.rgba.data(), m.image_down.mapped(), pixels * 4);

@@ -146,7 +146,10 @@ struct RaycastImage {
   int width = 0, height = 0;
   std::vector<std::uint32_t> rgba;
   std::vector<float> depth;
-  double gpu_ms = -1;        ///< GPU timestamps around the dispatch (-1: none / CPU)
+  double gpu_ms = -1;        ///< GPU timestamps around the passes (-1: none / CPU)
+  /// GPU time of the passes (-1: none / CPU): march (every pixel the box projects to),
+  /// shade (hit pixels, with the hit count pass), overlay (0 without primitives).
+  double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
 };
 
@@ -160,6 +163,12 @@ std::uint32_t style_flags(const RaycastStyle& style);
 double voxels_per_metre(const core::Grid& grid, const Vec3& dir);
 /// The unit grid-world direction of pixel (px, py) in `view`, as the shader computes it (double).
 Vec3 pixel_direction(const CameraView& view, int width, int height, int px, int py);
+
+/// The shader's pack_rgba: linear colour 0..1 -> RGBA8 (R in the low byte, alpha 255),
+/// display gamma sqrt, rounded to nearest. The GPU fills every pixel with the background's
+/// packing before the march (engine/raycast.cpp), so host and shader must agree: this is
+/// the CPU reference's own function.
+std::uint32_t pack_rgba8(float r, float g, float b);
 
 /// The CPU reference: the shader's math in float, one thread.
 RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,

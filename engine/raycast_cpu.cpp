@@ -175,10 +175,7 @@ struct Caster {
     return {albedo.x * k + s, albedo.y * k + s, albedo.z * k + s};
   }
 
-  static std::uint32_t pack_rgba(F3 c) {
-    auto u = [](float v) { return std::uint32_t(std::sqrt(std::clamp(v, 0.0f, 1.0f)) * 255.0f + 0.5f); };
-    return u(c.x) | (u(c.y) << 8) | (u(c.z) << 16) | (255u << 24);
-  }
+  static std::uint32_t pack_rgba(F3 c) { return pack_rgba8(c.x, c.y, c.z); }
 
   /// The shader's intersect_prim: t [m] (< 0: miss) and the unit normal.
   static float intersect_prim(const gpu::RaycastPrim& q, F3 ro, F3 rd, F3& normal) {
@@ -359,6 +356,11 @@ struct Caster {
 };
 
 }  // namespace
+
+std::uint32_t pack_rgba8(float r, float g, float b) {
+  auto u = [](float v) { return std::uint32_t(std::sqrt(std::clamp(v, 0.0f, 1.0f)) * 255.0f + 0.5f); };
+  return u(r) | (u(g) << 8) | (u(b) << 16) | (255u << 24);
+}
 
 RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,
                         int height, const std::vector<gpu::RaycastPrim>& prims) {

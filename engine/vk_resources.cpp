@@ -55,7 +55,8 @@ Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, Memo
   switch (intent) {
     case MemoryIntent::DeviceLocal:
       bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
-                 VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+                 VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT |
+                 VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
       want = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
       break;
     case MemoryIntent::Upload:
@@ -144,6 +145,11 @@ void barrier_compute_to_compute(VkCommandBuffer cmd) {
   memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_SHADER_READ_BIT,
                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
 }
+void barrier_compute_to_indirect(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
+                 VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                 VK_ACCESS_INDIRECT_COMMAND_READ_BIT | VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+}
 void barrier_transfer_to_compute(VkCommandBuffer cmd) {
   memory_barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT,
                  VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
@@ -159,12 +165,14 @@ void barrier_transfer_to_host(VkCommandBuffer cmd) {
 
 DescriptorArena::DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std::uint32_t max_buffers)
     : device_(ctx.device()) {
-  VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)};
+  // Any of the buffers may be a uniform buffer (ComputePipeline's uniform_bindings).
+  const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)},
+                                      {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, std::max<std::uint32_t>(max_buffers, 1)}};
   VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   max_sets_ = std::max<std::uint32_t>(max_sets, 1);
   pi.maxSets = max_sets_;
-  pi.poolSizeCount = 1;
-  pi.pPoolSizes = &ps;
+  pi.poolSizeCount = 2;
+  pi.pPoolSizes = ps;
   VK_CHECK(vkCreateDescriptorPool(device_, &pi, nullptr, &pool_));
 }
 
@@ -186,13 +194,14 @@ VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
 
 ComputePipelineBase::ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv,
                                          std::size_t spirv_bytes, std::uint32_t bindings,
-                                         std::uint32_t push_bytes, std::string name)
-    : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes) {
+                                         std::uint32_t push_bytes, std::string name,
+                                         std::uint32_t uniform_bindings)
+    : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes), uniform_(uniform_bindings) {
   VkDevice dev = ctx_.device();
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
   for (std::uint32_t i = 0; i < bindings; ++i) {
     b[i].binding = i;
-    b[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    b[i].descriptorType = descriptor_type(i);
     b[i].descriptorCount = 1;
     b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
   }
@@ -248,7 +257,7 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
     w[i].dstSet = set;
     w[i].dstBinding = i;
     w[i].descriptorCount = 1;
-    w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+    w[i].descriptorType = descriptor_type(i);
     w[i].pBufferInfo = &info[i];
   }
   vkUpdateDescriptorSets(ctx_.device(), bindings_, w.data(), 0, nullptr);

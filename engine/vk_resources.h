@@ -24,7 +24,8 @@ namespace isotouch::engine {
 
 /// What a buffer is for; decides its memory type and usage flags.
 enum class MemoryIntent {
-  DeviceLocal,  ///< read/written by shaders; copy source and destination; never mapped
+  DeviceLocal,  ///< read/written by shaders; copy source and destination; indirect dispatch
+                ///< arguments; never mapped
   Upload,       ///< host-visible, coherent, mapped: host writes, GPU copies out (staging)
   Readback,     ///< host-visible, coherent (cached if offered), mapped: GPU copies in, host reads
 };
@@ -75,6 +76,9 @@ void record_copy(VkCommandBuffer cmd, const GpuBuffer& src, const GpuBuffer& dst
 // Barriers: global memory barriers (buffers only; no images in this engine).
 /// A dispatch's storage writes become visible to the next dispatch's reads and writes.
 void barrier_compute_to_compute(VkCommandBuffer cmd);
+/// A dispatch's storage writes become visible to a following vkCmdDispatchIndirect's
+/// arguments and to its shader.
+void barrier_compute_to_indirect(VkCommandBuffer cmd);
 /// A transfer (staging copy) becomes visible to the following dispatches.
 void barrier_transfer_to_compute(VkCommandBuffer cmd);
 /// Dispatch writes become visible to a following copy (to a Readback buffer).
@@ -109,12 +113,16 @@ class DescriptorArena {
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
 };
 
-/// A compute pipeline over `bindings` storage buffers (binding i = i-th BufferRange given
-/// to bind()) and one push-constant block of `push_bytes`. Use ComputePipeline<Push>.
+/// A compute pipeline over `bindings` buffers (binding i = i-th BufferRange given to bind())
+/// and one push-constant block of `push_bytes`. Use ComputePipeline<Push>. Every binding is
+/// a storage buffer except those whose bit is set in `uniform_bindings` (bit i: binding i is
+/// a uniform buffer: per-dispatch parameters every invocation reads; on llvmpipe a uniform
+/// load at a constant offset is one scalar load, a storage load a per-lane gather).
 class ComputePipelineBase {
  public:
   ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv, std::size_t spirv_bytes,
-                      std::uint32_t bindings, std::uint32_t push_bytes, std::string name);
+                      std::uint32_t bindings, std::uint32_t push_bytes, std::string name,
+                      std::uint32_t uniform_bindings = 0);
   ~ComputePipelineBase();
   ComputePipelineBase(const ComputePipelineBase&) = delete;
   ComputePipelineBase& operator=(const ComputePipelineBase&) = delete;
@@ -134,6 +142,10 @@ class ComputePipelineBase {
   std::string name_;
   std::uint32_t bindings_ = 0;
   std::uint32_t push_size_ = 0;
+  std::uint32_t uniform_ = 0;  ///< bit i: binding i is a uniform buffer
+  VkDescriptorType descriptor_type(std::uint32_t i) const {
+    return (uniform_ >> i) & 1u ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+  }
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout layout_ = VK_NULL_HANDLE;
   VkShaderModule module_ = VK_NULL_HANDLE;
@@ -146,8 +158,8 @@ class ComputePipeline : public ComputePipelineBase {
  public:
   template <std::size_t N>
   ComputePipeline(VulkanContext& ctx, const std::uint32_t (&spirv)[N], std::uint32_t bindings,
-                  std::string name)
-      : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name)) {}
+                  std::string name, std::uint32_t uniform_bindings = 0)
+      : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name), uniform_bindings) {}
   void push(VkCommandBuffer cmd, const Push& p) const { push_bytes(cmd, &p); }
 };
 

@@ -92,14 +92,20 @@ struct BrickMinMaxPush {
 };
 
 // ---- raycast (issue 10; owner: raycaster) -------------------------------------------
-// First-hit isosurface ray caster (raycast.comp, CPU reference engine/raycast_cpu.cpp).
-// One invocation per pixel, 8x8 tiles. Bindings: 0 params (one RaycastParams), 1 values
+// First-hit isosurface ray caster: four passes (raycast_march, raycast_args, raycast_shade,
+// raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
+// engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, 8x8 tiles; shade: one
+// per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
+// RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
 // (float per voxel, x fastest), 2 cell distances (one byte per trilinear cell, 4 per uint,
 // see ISOTOUCH_RAYCAST_DIST_MAX), 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
-// -1 if none).
+// -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
+// RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter.
 #define ISOTOUCH_RAYCAST_WG_X 8
 #define ISOTOUCH_RAYCAST_WG_Y 8
+#define ISOTOUCH_RAYCAST_SHADE_WG 64
+#define ISOTOUCH_RAYCAST_BINDINGS 12
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
@@ -189,8 +195,16 @@ struct RaycastPrim {
 struct RaycastPush {
   uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
   uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
-  uint pad0;
-  uint pad1;
+  uint x0;           // march pass: pixel of its invocation (0, 0); the dispatch covers only
+  uint y0;           //   the tiles the volume's box can project into (engine/raycast.cpp)
+};
+// The hit count of the march pass and, at offset 0, the indirect dispatch of the shade pass
+// (VkDispatchIndirectCommand), written by raycast_args.comp.
+struct RaycastCounter {
+  uint groups_x;
+  uint groups_y;
+  uint groups_z;
+  uint count;        // hit pixels appended by raycast_march.comp
 };
 // ---- end raycast ----------------------------------------------------------------------
 

@@ -1,5 +1,7 @@
-#version 450
-// First-hit isosurface ray caster, one invocation per pixel (issue 10).
+// raycast_common.glsl - what the ray caster's passes share (issue 10): bindings, the
+// trilinear field, the march, the refinement, shading and the overlay primitives.
+// Included by raycast_march.comp, raycast_shade.comp and raycast_overlay.comp; every pass
+// (raycast_args.comp too) binds the same 12 buffers (one descriptor layout, engine/raycast.cpp).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels
@@ -19,22 +21,37 @@
 // not evaluated (one byte load instead of 8 voxel loads), and from an inactive cell at
 // chessboard distance D from the nearest active cell the march jumps to the first sample
 // past the box of cells within D - 1 of it. A skipped sample is outside either way, so
-// skipping on and off give the same image. No nested loops: on a SIMD CPU device every
-// lane of a vector runs each iteration, and one flat loop keeps lanes in step.
+// skipping on and off give the same image. On a SIMD CPU device every lane of a vector runs
+// each iteration of a loop until all are done; the inner loop of march_skip (byte loads
+// only) runs the jumps, the outer one evaluates the field where a cell is active.
 //
 // The CPU reference (engine/raycast_cpu.cpp) does the same float operations in the same
 // order; `precise` forbids FMA contraction here, -ffp-contract=off there.
-#extension GL_GOOGLE_include_directive : require
-#include "isotouch_shared.h"
+//
+// Passes (one command buffer; engine/raycast.cpp): llvmpipe runs an `if` by masking, not by
+// branching, so a pass costs its whole straight-line code for every vector of 8
+// invocations, taken or not. Code only some pixels need therefore runs in its own pass
+// over only those pixels (the host first fills image and depth with the background, -1):
+//   march   (the pixels the box can project to): the ray and its march; appends a hit
+//            pixel to the hit list (nothing else: a store is a per-lane scatter);
+//   args    (one invocation) : the hit count -> the indirect dispatch size of shade;
+//   shade   (hit pixels)     : refinement, normal, shading; writes colour and depth;
+//   overlay (every pixel, only when there are primitives): HIP, VHIP, disc, arrows.
 
-layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_Y, local_size_z = 1) in;
-
-layout(std430, set = 0, binding = 0) readonly buffer ParamsBuf { RaycastParams P; };
+// Binding 0 is a uniform buffer (std140 = std430 for a struct of 4-byte scalars whose size
+// is a multiple of 16): one scalar load per use on llvmpipe, where a storage load is a gather.
+layout(std140, set = 0, binding = 0) uniform ParamsBuf { RaycastParams P; };
 layout(std430, set = 0, binding = 1) readonly buffer Values { float vals[]; };
 layout(std430, set = 0, binding = 2) readonly buffer CellDist { uint cdist[]; };
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
-layout(std430, set = 0, binding = 4) writeonly buffer Image { uint image[]; };
-layout(std430, set = 0, binding = 5) writeonly buffer Depth { float depth[]; };
+layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 per pixel
+layout(std430, set = 0, binding = 5) buffer Depth { float depth[]; };     // t [m] of the hit, -1: none
+layout(std430, set = 0, binding = 6) buffer LinR { float lin_r[]; };      // linear colour per hit pixel
+layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (the overlay pass blends
+layout(std430, set = 0, binding = 8) buffer LinB { float lin_b[]; };      //   into it)
+layout(std430, set = 0, binding = 9) buffer Hits { uint hits[]; };        // hit pixels, in no order
+layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | cap << 31
+layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
 layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)
@@ -134,13 +151,13 @@ float refine(vec3 e, vec3 d, float ta, float tb) {
   return t;
 }
 
-// The plain march: the first inside sample k in [1, K], or 0 if none. The caller refines
-// after the loop (on a SIMD device a refine inside the loop would run once per iteration
-// in which some lane hits, not once per vector).
+// The plain march: the first inside lattice sample k in [0, K], or -1 if none. The caller
+// refines in a later pass (on a SIMD device a refine inside the loop would run once per
+// iteration in which some lane hits, not once per vector).
 int march(vec3 e, vec3 d, float t0, float t1, float h, int K) {
-  for (int k = 1; k <= K; ++k)
+  for (int k = 0; k <= K; ++k)
     if (inside_at(e, d, lattice_t(t0, t1, h, k))) return k;
-  return 0;
+  return -1;
 }
 
 // Chessboard distance [cells] from trilinear cell c (lower corner, in [-1, n] per axis) to
@@ -151,28 +168,29 @@ uint cell_dist(ivec3 c) {
   return (cdist[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu;
 }
 
-// The march with empty-space skipping: the same lattice samples k in [1, K] as march(), in
-// order, one loop. At sample k the byte D of its cell (floor of the same point field()
-// reads) decides: D = 0 (active): field() as in march(); D >= 1: no cell within D - 1
-// cells of it is active, so every sample inside the box of cells [c - D + 1, c + D - 1]
+// The march with empty-space skipping: the same lattice samples k in [0, K] as march(), in
+// order. At sample k the byte D of its cell (floor of the same point field() reads; D = 0
+// outside the cells) decides: D = 0 (active): field() as in march(); D >= 1: no cell within
+// D - 1 cells of it is active, so every sample inside the box of cells [c - D + 1, c + D - 1]
 // is outside; the march goes on at the first sample at or past the box's exit plane on the
 // ray's side, drawn in by `eps` voxels [index space] (the rounding of the lattice, of
 // ray_point and of the exit; the coordinates along the ray only move toward the exit:
 // float + and * are monotonic). Sample k is skipped too (its cell cannot be inside). k
-// grows by at least 1 per iteration: at most K iterations. Returns as march().
+// grows by at least 1 per iteration: at most K + 1 iterations. Returns as march(): a
+// skipped sample is outside either way.
 int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int K, float eps) {
-  int k = 1;
+  int k = 0;
   while (k <= K) {
-    float t = lattice_t(t0, t1, h, k);
-    vec3 p = ray_point(e, d, t);
-    vec3 fl = floor(p);
-    ivec3 c = ivec3(fl);
-    bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && all(lessThanEqual(c, g_n));
-    uint D = in_cells ? cell_dist(c) : 0u;
-    if (D == 0u) {
-      if (excess(field(p)) > 0.0) return k;
-      ++k;
-    } else {
+    vec3 p;
+    // Inactive cells: jump (an inner loop of byte loads only).
+    while (true) {
+      float t = lattice_t(t0, t1, h, k);
+      p = ray_point(e, d, t);
+      vec3 fl = floor(p);
+      ivec3 c = ivec3(fl);
+      bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && all(lessThanEqual(c, g_n));
+      uint D = in_cells ? cell_dist(c) : 0u;
+      if (D == 0u) break;
       precise float r = float(D) - eps;
       precise vec3 hi = fl + r;          // exit plane of a ray going up an axis
       precise vec3 lo = fl - (r - 1.0);  // and going down
@@ -182,9 +200,13 @@ int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int K, float eps) {
       float t_exit = min(min(tp.x, tp.y), tp.z);
       precise float kr = (t_exit - t0) / h;
       k = max(k + 1, int(min(ceil(kr), float(K + 1))));
+      if (k > K) return -1;
     }
+    // An active cell: the field.
+    if (excess(field(p)) > 0.0) return k;
+    ++k;
   }
-  return 0;
+  return -1;
 }
 
 // Ray against the box [-1, n] per axis (index space): [tmin, tmax], empty if tmin > tmax.
@@ -339,10 +361,7 @@ vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
   return vec4(t, dot_safe_normalize(n));
 }
 
-void main() {
-  uvec2 px = gl_GlobalInvocationID.xy;
-  if (px.x >= P.width || px.y >= P.height) return;
-  uint pix = px.y * P.width + px.x;
+void init_globals() {
   g_n = ivec3(int(P.nx), int(P.ny), int(P.nz));
   g_nx = P.nx;
   g_ny = P.ny;
@@ -351,104 +370,59 @@ void main() {
   g_sign = P.inside_sign;
   g_cx = P.nx + 2u;
   g_cy = P.ny + 2u;
-  vec3 eye = vec3(P.eye_x, P.eye_y, P.eye_z);
+}
+
+// One pixel's ray: unit direction `dir` and eye in grid-world [m]; e, d in index space;
+// [t0, t1] its part in the box and the kept half-space (t0 > t1: none); cap_entry: t0 is on
+// the clip plane; h the lattice step [m]; K the last lattice sample.
+struct Ray {
+  vec3 eye, dir, e, d;
+  float t0, t1, h, dl;
+  int K;
+  bool cap_entry;
+};
+
+Ray make_ray(uvec2 px) {
+  Ray r;
+  r.eye = vec3(P.eye_x, P.eye_y, P.eye_z);
   vec3 fwd = vec3(P.fwd_x, P.fwd_y, P.fwd_z), right = vec3(P.right_x, P.right_y, P.right_z);
   vec3 up = vec3(P.up_x, P.up_y, P.up_z);
   precise float sx = (float(px.x) + 0.5) - 0.5 * float(P.width);
   precise float sy = 0.5 * float(P.height) - (float(px.y) + 0.5);
   precise vec3 dsum = fwd * P.focal_px + right * sx + up * sy;
-  vec3 dir = dot_safe_normalize(dsum);
+  r.dir = dot_safe_normalize(dsum);
   vec3 inv_sp = vec3(P.inv_sp_x, P.inv_sp_y, P.inv_sp_z);
-  precise vec3 e = (eye - vec3(P.origin_x, P.origin_y, P.origin_z)) * inv_sp;
-  precise vec3 d = dir * inv_sp;
+  precise vec3 e = (r.eye - vec3(P.origin_x, P.origin_y, P.origin_z)) * inv_sp;
+  precise vec3 d = r.dir * inv_sp;
+  r.e = e;
+  r.d = d;
 
   // The ray's interval in the box and the kept half-space.
   vec2 ti = box_interval(e, d);
-  float t0 = ti.x, t1 = ti.y;
-  bool cap_entry = false;
+  r.t0 = ti.x;
+  r.t1 = ti.y;
+  r.cap_entry = false;
   if ((pc.flags & ISOTOUCH_RAYCAST_CLIP) != 0u) {
     vec3 cn = vec3(P.clip_nx, P.clip_ny, P.clip_nz);
-    precise float g0 = cn.x * eye.x + cn.y * eye.y + cn.z * eye.z + P.clip_d;
-    precise float gd = cn.x * dir.x + cn.y * dir.y + cn.z * dir.z;
+    precise float g0 = cn.x * r.eye.x + cn.y * r.eye.y + cn.z * r.eye.z + P.clip_d;
+    precise float gd = cn.x * r.dir.x + cn.y * r.dir.y + cn.z * r.dir.z;
     if (gd == 0.0) {
-      if (g0 > 0.0) t1 = -1.0;
+      if (g0 > 0.0) r.t1 = -1.0;
     } else {
       precise float tp = -g0 / gd;
-      if (gd > 0.0) t1 = min(t1, tp);
-      else if (tp >= t0) {
-        t0 = tp;
-        cap_entry = true;
+      if (gd > 0.0) r.t1 = min(r.t1, tp);
+      else if (tp >= r.t0) {
+        r.t0 = tp;
+        r.cap_entry = true;
       }
     }
   }
-
-  float t_hit = -1.0;
-  bool cap = false;
-  if (t0 <= t1) {
-    precise float dl = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-    precise float h = P.step_vox / dl;
-    // The host bounds the samples per ray (make_params); the min only guards the loops.
-    int K = int(min(ceil((t1 - t0) / h), float(ISOTOUCH_RAYCAST_MAX_SAMPLES)));
-    // Sample 0 (t0); with skipping, not evaluated where its cell is inactive (as in march_skip).
-    bool skip = (pc.flags & ISOTOUCH_RAYCAST_SKIP) != 0u;
-    vec3 p0 = ray_point(e, d, t0);
-    ivec3 c0 = ivec3(floor(p0));
-    bool need0 = !skip || !(all(greaterThanEqual(c0, ivec3(-1))) && all(lessThanEqual(c0, g_n))) || cell_dist(c0) == 0u;
-    if (need0 && excess(field(p0)) > 0.0) {
-      t_hit = t0;
-      cap = cap_entry;
-    }
-    int k_hit = 0;
-    if (!(t_hit >= 0.0) && K >= 1) {
-      if (skip) {
-        precise vec3 inv_d = 1.0 / d;  // +-inf on an axis the ray is parallel to (not used there)
-        g_inv_d = inv_d;
-        // Rounding allowance: 1/32 voxel + 4e-6 (34 float ulps) of the largest index-space
-        // magnitude along the ray (eye, far end of the box, grid size).
-        float mag = max(max(max(abs(e.x), abs(e.y)), abs(e.z)), max(max(float(P.nx), float(P.ny)), float(P.nz)));
-        precise float eps = 0.03125 + 4e-6 * (mag + t1 * dl);
-        k_hit = march_skip(e, d, t0, t1, h, K, eps);
-      } else {
-        k_hit = march(e, d, t0, t1, h, K);
-      }
-    }
-    if (k_hit > 0) t_hit = refine(e, d, lattice_t(t0, t1, h, k_hit - 1), lattice_t(t0, t1, h, k_hit));
-  }
-
-  vec3 colour = vec3(P.bg_r, P.bg_g, P.bg_b);
-  float t_best = kInf;
-  if (t_hit >= 0.0) {
-    t_best = t_hit;
-    if (cap) {
-      colour = shade(vec3(P.cap_r, P.cap_g, P.cap_b), vec3(P.clip_nx, P.clip_ny, P.clip_nz), dir);
-    } else {
-      vec3 n = surface_normal(ray_point(e, d, t_hit));
-      colour = shade(vec3(P.surf_r, P.surf_g, P.surf_b), n, dir);
-    }
-  }
-  depth[pix] = t_hit;
-
-  // Overlays: opaque primitives by depth, then translucent ones (and x-ray: opaque
-  // primitives hidden behind the surface, shown faintly) blended in order.
-  uint np = min(pc.prim_count, ISOTOUCH_RAYCAST_MAX_PRIMS);
-  for (uint i = 0u; i < np; ++i) {
-    RaycastPrim q = prims[i];
-    if (q.alpha < 1.0) continue;
-    vec4 r = intersect_prim(q, eye, dir);
-    if (r.x > 0.0 && r.x < t_best) {
-      t_best = r.x;
-      colour = shade(vec3(q.cr, q.cg, q.cb), r.yzw, dir);
-    }
-  }
-  for (uint i = 0u; i < np; ++i) {
-    RaycastPrim q = prims[i];
-    bool xray = q.pad0 > 0.0;
-    if (q.alpha >= 1.0 && !xray) continue;
-    vec4 r = intersect_prim(q, eye, dir);
-    if (!(r.x > 0.0)) continue;
-    float a = r.x < t_best ? q.alpha : (xray ? 0.35 : 0.0);
-    if (q.alpha >= 1.0 && r.x <= t_best) a = 0.0;  // drawn in the opaque pass
-    if (a > 0.0) colour = mix(colour, shade(vec3(q.cr, q.cg, q.cb), r.yzw, dir), a);
-  }
-  image[pix] = pack_rgba(colour);
+  precise float dl = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+  r.dl = dl;
+  precise float h = P.step_vox / dl;
+  r.h = h;
+  // The host bounds the samples per ray (make_params); the min only guards the loops.
+  r.K = int(min(ceil((r.t1 - r.t0) / h), float(ISOTOUCH_RAYCAST_MAX_SAMPLES)));
+  return r;
 }
+

@@ -1,0 +1,14 @@
+#version 450
+// Ray caster pass 2 of 4 (issue 10): one invocation turns the hit count of raycast_march.comp
+// into the indirect dispatch size of raycast_shade.comp (whole workgroups, rounded up).
+#extension GL_GOOGLE_include_directive : require
+#include "isotouch_shared.h"
+
+layout(local_size_x = 1, local_size_y = 1, local_size_z = 1) in;
+layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
+
+void main() {
+  ctr.groups_x = (ctr.count + ISOTOUCH_RAYCAST_SHADE_WG - 1u) / ISOTOUCH_RAYCAST_SHADE_WG;
+  ctr.groups_y = 1u;
+  ctr.groups_z = 1u;
+}

@@ -1,0 +1,36 @@
+#version 450
+// Ray caster pass 3 of 4 (issue 10; shaders/raycast_common.glsl): one invocation per hit
+// pixel of raycast_march.comp (indirect dispatch). Rebuilds the pixel's ray (the same float
+// operations as the march), refines the hit in the bracket [t_{k-1}, t_k] (sample 0: t0,
+// no refinement), shades it and writes colour and depth.
+#extension GL_GOOGLE_include_directive : require
+#include "isotouch_shared.h"
+
+layout(local_size_x = ISOTOUCH_RAYCAST_SHADE_WG, local_size_y = 1, local_size_z = 1) in;
+
+#include "raycast_common.glsl"
+
+void main() {
+  uint j = gl_GlobalInvocationID.x;
+  if (j >= ctr.count) return;
+  uint pix = hits[j];
+  uint kc = hit_k[pix];
+  int k = int(kc & 0x7fffffffu);
+  bool cap = (kc & 0x80000000u) != 0u;
+  init_globals();
+  Ray r = make_ray(uvec2(pix % P.width, pix / P.width));
+  float t_hit = r.t0;
+  if (k > 0) t_hit = refine(r.e, r.d, lattice_t(r.t0, r.t1, r.h, k - 1), lattice_t(r.t0, r.t1, r.h, k));
+  vec3 colour;
+  if (cap) {
+    colour = shade(vec3(P.cap_r, P.cap_g, P.cap_b), vec3(P.clip_nx, P.clip_ny, P.clip_nz), r.dir);
+  } else {
+    vec3 n = surface_normal(ray_point(r.e, r.d, t_hit));
+    colour = shade(vec3(P.surf_r, P.surf_g, P.surf_b), n, r.dir);
+  }
+  depth[pix] = t_hit;
+  lin_r[pix] = colour.r;
+  lin_g[pix] = colour.g;
+  lin_b[pix] = colour.b;
+  image[pix] = pack_rgba(colour);
+}

@@ -307,8 +307,10 @@ gpu::RaycastParams make_params(const RaycastField& f, const CameraView& v, const
   if (width < 1 || height < 1 || width > 8192 || height > 8192)
     throw std::invalid_argument("raycast: image size must be 1..8192 pixels per side, got " + std::to_string(width) +
                                 " x " + std::to_string(height));
-  if (!(s.step_vox > 0.01f && s.step_vox <= 4.0f))
-    throw std::invalid_argument("raycast: step must be in (0.01, 4] voxels, got " + std::to_string(s.step_vox));
+  if (!(s.step_vox > 0.01f && s.step_vox <= ISOTOUCH_RAYCAST_MAX_STEP))
+    throw std::invalid_argument("raycast: step must be in (0.01, " + std::to_string(ISOTOUCH_RAYCAST_MAX_STEP) +
+                                "] voxels (the refinement reads the 3x3x3 voxels around one step), got " +
+                                std::to_string(s.step_vox));
   // A ray's lattice has at most ceil(diagonal of the box [-1, n] / step) + 1 samples.
   const auto& dims = f.grid.dims;
   const double diag = std::sqrt(double(dims[0] + 1) * (dims[0] + 1) + double(dims[1] + 1) * (dims[1] + 1) +
@@ -395,19 +397,19 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 // ---- GPU ---------------------------------------------------------------------------------
 
 namespace {
-/// The pixels [x0, x1) x [y0, y1) whose rays can meet the box [-1, n] (index space): the
+/// The pixels [x0, x1) x [y0, y1) whose rays can meet the index-space box [lo, hi]: the
 /// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, widened to
 /// whole tiles of the march pass; the whole image if a corner is not in front of the eye.
 struct PixelRect {
   std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
 };
-PixelRect box_rect(const gpu::RaycastParams& P) {
+PixelRect box_rect(const gpu::RaycastParams& P, std::array<double, 3> lo, std::array<double, 3> hi) {
   const Vec3 eye{P.eye_x, P.eye_y, P.eye_z}, fwd{P.fwd_x, P.fwd_y, P.fwd_z};
   const Vec3 right{P.right_x, P.right_y, P.right_z}, up{P.up_x, P.up_y, P.up_z};
   PixelRect all{0, 0, P.width, P.height};
   double lo_x = 1e300, hi_x = -1e300, lo_y = 1e300, hi_y = -1e300;
   for (int c = 0; c < 8; ++c) {
-    const Vec3 idx{c & 1 ? double(P.nx) : -1.0, c & 2 ? double(P.ny) : -1.0, c & 4 ? double(P.nz) : -1.0};
+    const Vec3 idx{c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]};
     const Vec3 q{P.origin_x + idx.x / double(P.inv_sp_x), P.origin_y + idx.y / double(P.inv_sp_y),
                  P.origin_z + idx.z / double(P.inv_sp_z)};
     const Vec3 v = q - eye;
@@ -431,6 +433,25 @@ PixelRect box_rect(const gpu::RaycastParams& P) {
   if (r.x1 <= r.x0 || r.y1 <= r.y0) r.x1 = r.x0, r.y1 = r.y0;  // the box is off screen
   return r;
 }
+
+/// The index-space box covering every active cell (cell_dist 0; cell c spans [c, c + 1]),
+/// or nullopt if there is none. Samples outside it are in inactive cells or outside the
+/// cells, where the field is the background: outside, else the border cells were active.
+std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active_box(const RaycastField& f) {
+  const int cx = f.grid.dims[0] + 2, cy = f.grid.dims[1] + 2, cz = f.grid.dims[2] + 2;
+  std::array<int, 3> lo{cx, cy, cz}, hi{-1, -1, -1};
+  for (int z = 0; z < cz; ++z)
+    for (int y = 0; y < cy; ++y)
+      for (int x = 0; x < cx; ++x)
+        if (f.cell_dist[(std::size_t(z) * std::size_t(cy) + std::size_t(y)) * std::size_t(cx) + std::size_t(x)] == 0) {
+          lo = {std::min(lo[0], x), std::min(lo[1], y), std::min(lo[2], z)};
+          hi = {std::max(hi[0], x), std::max(hi[1], y), std::max(hi[2], z)};
+        }
+  if (hi[0] < 0) return std::nullopt;
+  // Stored at c + 1: cell c = stored - 1 spans [c, c + 1].
+  return std::pair{std::array<double, 3>{lo[0] - 1.0, lo[1] - 1.0, lo[2] - 1.0},
+                   std::array<double, 3>{double(hi[0]), double(hi[1]), double(hi[2])}};
+}
 }  // namespace
 
 struct RayCaster::Impl {
@@ -447,6 +468,8 @@ struct RayCaster::Impl {
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
   std::size_t pixels = 0;
+  /// Index-space box of the active cells (nullopt: none; skipping then marches nothing).
+  std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
   DescriptorArena arena;                   // reset per frame
   GpuTimer timer;
   Impl(VulkanContext& c, RaycastField f)
@@ -494,6 +517,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
                    std::to_string(ctx.max_binding_bytes()) + " bytes on " + ctx.info().name +
                    " (one dense binding; a bricked snapshot would be needed)");
   auto impl = std::make_unique<Impl>(ctx, field);
+  impl->active = active_box(impl->field);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
@@ -557,7 +581,12 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()}};
   const auto tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X;
   const auto tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y;
-  const PixelRect rect = box_rect(P);  // the march covers only where the box can project
+  // The march covers only where the volume's box (skipping: the active cells' box) projects.
+  PixelRect rect;
+  if (!style.skip_empty)
+    rect = box_rect(P, {-1, -1, -1}, {double(P.nx), double(P.ny), double(P.nz)});
+  else if (m.active)
+    rect = box_rect(P, m.active->first, m.active->second);
   gpu::RaycastPush march_push = push;
   march_push.x0 = rect.x0;
   march_push.y0 = rect.y0;

@@ -185,7 +185,10 @@ class RayCaster {
   RayCaster(const RayCaster&) = delete;
   RayCaster& operator=(const RayCaster&) = delete;
 
-  /// Renders one frame: uploads parameters and primitives, one dispatch, reads back.
+  /// Renders one frame: uploads parameters and primitives, the passes of
+  /// shaders/raycast_common.glsl in one submission, reads back. With skipping, the march
+  /// covers only the pixels the box of active cells projects to (rays elsewhere meet no
+  /// active cell, so no inside sample); without, the pixels the volume's box projects to.
   /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});

@@ -150,11 +150,23 @@ struct Caster {
     return v / std::sqrt(l2);
   }
 
+  /// The shader's surface_normal: per axis, the trilinear interpolation at p's fractions of
+  /// the cells one voxel up and down (field(p +- e_a) but for rounding), halved difference.
   F3 surface_normal(F3 p) const {
+    const F3 fl{std::floor(p.x), std::floor(p.y), std::floor(p.z)};
+    const int i = int(fl.x), j = int(fl.y), k = int(fl.z);
+    const F3 f = p - fl;
+    auto at = [&](int ox, int oy, int oz) {  // field() of cell (i, j, k) + o at fractions f
+      const float c00 = lerp1(voxel(i + ox, j + oy, k + oz), voxel(i + ox + 1, j + oy, k + oz), f.x);
+      const float c10 = lerp1(voxel(i + ox, j + oy + 1, k + oz), voxel(i + ox + 1, j + oy + 1, k + oz), f.x);
+      const float c01 = lerp1(voxel(i + ox, j + oy, k + oz + 1), voxel(i + ox + 1, j + oy, k + oz + 1), f.x);
+      const float c11 = lerp1(voxel(i + ox, j + oy + 1, k + oz + 1), voxel(i + ox + 1, j + oy + 1, k + oz + 1), f.x);
+      return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+    };
     F3 g;
-    g.x = (field(p + F3{1, 0, 0}) - field(p - F3{1, 0, 0})) * 0.5f;
-    g.y = (field(p + F3{0, 1, 0}) - field(p - F3{0, 1, 0})) * 0.5f;
-    g.z = (field(p + F3{0, 0, 1}) - field(p - F3{0, 0, 1})) * 0.5f;
+    g.x = (at(1, 0, 0) - at(-1, 0, 0)) * 0.5f;
+    g.y = (at(0, 1, 0) - at(0, -1, 0)) * 0.5f;
+    g.z = (at(0, 0, 1) - at(0, 0, -1)) * 0.5f;
     const F3 gw = g * F3{P.inv_sp_x, P.inv_sp_y, P.inv_sp_z} * (-P.inside_sign);
     const float l2 = gw.x * gw.x + gw.y * gw.y + gw.z * gw.z;
     if (!(l2 > 0.0f)) return {};

@@ -118,6 +118,9 @@ struct BrickMinMaxPush {
 // llvmpipe ends all loops of an invocation after 65535 iterations in all: the host refuses
 // a step that lets a ray take more lattice samples than this (refine and overlays included).
 #define ISOTOUCH_RAYCAST_MAX_SAMPLES 60000u
+// The largest march step [voxels, index space]: the refinement reads the 3x3x3 voxels around
+// its bracket of one step, whose points must stay within 2 cells per axis (raycast_common.glsl).
+#define ISOTOUCH_RAYCAST_MAX_STEP 0.9f
 #define ISOTOUCH_RAYCAST_PRIM_SPHERE 1u   // a = centre, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_DISC 2u     // a = centre, b = unit normal, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius

@@ -108,41 +108,105 @@ float lattice_t(float t0, float t1, float h, int k) {
   return min(t, t1);
 }
 
-// field() with the 8 corners of the last cell kept: the 10 samples of refine() lie in a
-// bracket of one step (at most 2 or 3 cells), so most reuse them. Same values as field().
-ivec3 g_cc = ivec3(-2147483647);
-float g_c0, g_c1, g_c2, g_c3, g_c4, g_c5, g_c6, g_c7;
-float field_cached(vec3 p) {
+// refine() reads the field from the 3x3x3 voxels around its bracket, loaded once: the
+// bracket [t_{k-1}, t_k] is one lattice step (at most ISOTOUCH_RAYCAST_MAX_STEP < 1 voxel
+// in index space, so its points' floors span at most 2 cells per axis: ray_point is
+// monotonic in t). field_block(p) picks p's 8 corners out of the 27 by selects (no memory
+// access: on llvmpipe every voxel() is a per-lane gather) and lerps them in field()'s order:
+// the same value as field(p).
+ivec3 g_b;  // lower corner of the block [index]
+float g_v000, g_v001, g_v002, g_v010, g_v011, g_v012, g_v020, g_v021, g_v022, g_v100, g_v101, g_v102, g_v110, g_v111, g_v112, g_v120, g_v121, g_v122, g_v200, g_v201, g_v202, g_v210, g_v211, g_v212, g_v220, g_v221, g_v222;
+void load_block(ivec3 b) {
+  g_b = b;
+  g_v000 = voxel(b + ivec3(0, 0, 0));
+  g_v001 = voxel(b + ivec3(1, 0, 0));
+  g_v002 = voxel(b + ivec3(2, 0, 0));
+  g_v010 = voxel(b + ivec3(0, 1, 0));
+  g_v011 = voxel(b + ivec3(1, 1, 0));
+  g_v012 = voxel(b + ivec3(2, 1, 0));
+  g_v020 = voxel(b + ivec3(0, 2, 0));
+  g_v021 = voxel(b + ivec3(1, 2, 0));
+  g_v022 = voxel(b + ivec3(2, 2, 0));
+  g_v100 = voxel(b + ivec3(0, 0, 1));
+  g_v101 = voxel(b + ivec3(1, 0, 1));
+  g_v102 = voxel(b + ivec3(2, 0, 1));
+  g_v110 = voxel(b + ivec3(0, 1, 1));
+  g_v111 = voxel(b + ivec3(1, 1, 1));
+  g_v112 = voxel(b + ivec3(2, 1, 1));
+  g_v120 = voxel(b + ivec3(0, 2, 1));
+  g_v121 = voxel(b + ivec3(1, 2, 1));
+  g_v122 = voxel(b + ivec3(2, 2, 1));
+  g_v200 = voxel(b + ivec3(0, 0, 2));
+  g_v201 = voxel(b + ivec3(1, 0, 2));
+  g_v202 = voxel(b + ivec3(2, 0, 2));
+  g_v210 = voxel(b + ivec3(0, 1, 2));
+  g_v211 = voxel(b + ivec3(1, 1, 2));
+  g_v212 = voxel(b + ivec3(2, 1, 2));
+  g_v220 = voxel(b + ivec3(0, 2, 2));
+  g_v221 = voxel(b + ivec3(1, 2, 2));
+  g_v222 = voxel(b + ivec3(2, 2, 2));
+}
+float field_block(vec3 p) {
   vec3 fl = floor(p);
-  ivec3 i = ivec3(fl);
+  ivec3 o = clamp(ivec3(fl) - g_b, ivec3(0), ivec3(1));  // 0 or 1 (the clamp only guards)
   precise vec3 f = p - fl;
-  if (any(notEqual(i, g_cc))) {
-    g_cc = i;
-    g_c0 = voxel(i);
-    g_c1 = voxel(i + ivec3(1, 0, 0));
-    g_c2 = voxel(i + ivec3(0, 1, 0));
-    g_c3 = voxel(i + ivec3(1, 1, 0));
-    g_c4 = voxel(i + ivec3(0, 0, 1));
-    g_c5 = voxel(i + ivec3(1, 0, 1));
-    g_c6 = voxel(i + ivec3(0, 1, 1));
-    g_c7 = voxel(i + ivec3(1, 1, 1));
-  }
-  float c00 = lerp1(g_c0, g_c1, f.x);
-  float c10 = lerp1(g_c2, g_c3, f.x);
-  float c01 = lerp1(g_c4, g_c5, f.x);
-  float c11 = lerp1(g_c6, g_c7, f.x);
+  bool ox = o.x == 1, oy = o.y == 1, oz = o.z == 1;
+  float x000 = ox ? g_v001 : g_v000;
+  float x001 = ox ? g_v002 : g_v001;
+  float x010 = ox ? g_v011 : g_v010;
+  float x011 = ox ? g_v012 : g_v011;
+  float x020 = ox ? g_v021 : g_v020;
+  float x021 = ox ? g_v022 : g_v021;
+  float x100 = ox ? g_v101 : g_v100;
+  float x101 = ox ? g_v102 : g_v101;
+  float x110 = ox ? g_v111 : g_v110;
+  float x111 = ox ? g_v112 : g_v111;
+  float x120 = ox ? g_v121 : g_v120;
+  float x121 = ox ? g_v122 : g_v121;
+  float x200 = ox ? g_v201 : g_v200;
+  float x201 = ox ? g_v202 : g_v201;
+  float x210 = ox ? g_v211 : g_v210;
+  float x211 = ox ? g_v212 : g_v211;
+  float x220 = ox ? g_v221 : g_v220;
+  float x221 = ox ? g_v222 : g_v221;
+  float y000 = oy ? x010 : x000;
+  float y001 = oy ? x011 : x001;
+  float y010 = oy ? x020 : x010;
+  float y011 = oy ? x021 : x011;
+  float y100 = oy ? x110 : x100;
+  float y101 = oy ? x111 : x101;
+  float y110 = oy ? x120 : x110;
+  float y111 = oy ? x121 : x111;
+  float y200 = oy ? x210 : x200;
+  float y201 = oy ? x211 : x201;
+  float y210 = oy ? x220 : x210;
+  float y211 = oy ? x221 : x211;
+  float v000 = oz ? y100 : y000;
+  float v001 = oz ? y101 : y001;
+  float v010 = oz ? y110 : y010;
+  float v011 = oz ? y111 : y011;
+  float v100 = oz ? y200 : y100;
+  float v101 = oz ? y201 : y101;
+  float v110 = oz ? y210 : y110;
+  float v111 = oz ? y211 : y111;
+  float c00 = lerp1(v000, v001, f.x);
+  float c10 = lerp1(v010, v011, f.x);
+  float c01 = lerp1(v100, v101, f.x);
+  float c11 = lerp1(v110, v111, f.x);
   return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
 }
 
-// [ta, tb]: ta outside, tb inside. 8 bisections, then one secant step in the bracket.
+// [ta, tb]: ta outside, tb inside, one lattice step. 8 bisections, then one secant step in
+// the bracket, on the block of 27 voxels around it.
 float refine(vec3 e, vec3 d, float ta, float tb) {
+  load_block(min(ivec3(floor(ray_point(e, d, ta))), ivec3(floor(ray_point(e, d, tb)))));
   for (int i = 0; i < 8; ++i) {
     precise float tm = 0.5 * (ta + tb);
-    if (excess(field_cached(ray_point(e, d, tm))) > 0.0) tb = tm;
+    if (excess(field_block(ray_point(e, d, tm))) > 0.0) tb = tm;
     else ta = tm;
   }
-  float ea = excess(field_cached(ray_point(e, d, ta)));
-  float eb = excess(field_cached(ray_point(e, d, tb)));
+  float ea = excess(field_block(ray_point(e, d, ta)));
+  float eb = excess(field_block(ray_point(e, d, tb)));
   precise float t = 0.5 * (ta + tb);
   if (ea <= 0.0 && eb > 0.0) {
     precise float frac = -ea / (eb - ea);
@@ -233,12 +297,60 @@ vec3 dot_safe_normalize(vec3 v) {
 }
 
 // Outward unit normal from central differences (one voxel) of the trilinear field, in
-// grid-world (index derivative times 1 / spacing).
+// grid-world (index derivative times 1 / spacing): per axis, the trilinear interpolation at
+// p's fractions of the cells one voxel up and down (= field(p +- e_a) but for rounding). The
+// six share 32 voxels around p's cell, each loaded once.
+float trilerp(float v000, float v001, float v010, float v011, float v100, float v101, float v110,
+              float v111, vec3 f) {  // v<z><y><x>
+  float c00 = lerp1(v000, v001, f.x);
+  float c10 = lerp1(v010, v011, f.x);
+  float c01 = lerp1(v100, v101, f.x);
+  float c11 = lerp1(v110, v111, f.x);
+  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+}
 vec3 surface_normal(vec3 p) {
+  vec3 fl = floor(p);
+  ivec3 c = ivec3(fl);
+  precise vec3 f = p - fl;
+  float wm100 = voxel(c + ivec3(0, 0, -1));
+  float wm101 = voxel(c + ivec3(1, 0, -1));
+  float wm110 = voxel(c + ivec3(0, 1, -1));
+  float wm111 = voxel(c + ivec3(1, 1, -1));
+  float w0m10 = voxel(c + ivec3(0, -1, 0));
+  float w0m11 = voxel(c + ivec3(1, -1, 0));
+  float w00m1 = voxel(c + ivec3(-1, 0, 0));
+  float w000 = voxel(c + ivec3(0, 0, 0));
+  float w001 = voxel(c + ivec3(1, 0, 0));
+  float w002 = voxel(c + ivec3(2, 0, 0));
+  float w01m1 = voxel(c + ivec3(-1, 1, 0));
+  float w010 = voxel(c + ivec3(0, 1, 0));
+  float w011 = voxel(c + ivec3(1, 1, 0));
+  float w012 = voxel(c + ivec3(2, 1, 0));
+  float w020 = voxel(c + ivec3(0, 2, 0));
+  float w021 = voxel(c + ivec3(1, 2, 0));
+  float w1m10 = voxel(c + ivec3(0, -1, 1));
+  float w1m11 = voxel(c + ivec3(1, -1, 1));
+  float w10m1 = voxel(c + ivec3(-1, 0, 1));
+  float w100 = voxel(c + ivec3(0, 0, 1));
+  float w101 = voxel(c + ivec3(1, 0, 1));
+  float w102 = voxel(c + ivec3(2, 0, 1));
+  float w11m1 = voxel(c + ivec3(-1, 1, 1));
+  float w110 = voxel(c + ivec3(0, 1, 1));
+  float w111 = voxel(c + ivec3(1, 1, 1));
+  float w112 = voxel(c + ivec3(2, 1, 1));
+  float w120 = voxel(c + ivec3(0, 2, 1));
+  float w121 = voxel(c + ivec3(1, 2, 1));
+  float w200 = voxel(c + ivec3(0, 0, 2));
+  float w201 = voxel(c + ivec3(1, 0, 2));
+  float w210 = voxel(c + ivec3(0, 1, 2));
+  float w211 = voxel(c + ivec3(1, 1, 2));
   precise vec3 g;
-  g.x = (field(p + vec3(1, 0, 0)) - field(p - vec3(1, 0, 0))) * 0.5;
-  g.y = (field(p + vec3(0, 1, 0)) - field(p - vec3(0, 1, 0))) * 0.5;
-  g.z = (field(p + vec3(0, 0, 1)) - field(p - vec3(0, 0, 1))) * 0.5;
+  g.x = (trilerp(w001, w002, w011, w012, w101, w102, w111, w112, f) -
+         trilerp(w00m1, w000, w01m1, w010, w10m1, w100, w11m1, w110, f)) * 0.5;
+  g.y = (trilerp(w010, w011, w020, w021, w110, w111, w120, w121, f) -
+         trilerp(w0m10, w0m11, w000, w001, w1m10, w1m11, w100, w101, f)) * 0.5;
+  g.z = (trilerp(w100, w101, w110, w111, w200, w201, w210, w211, f) -
+         trilerp(wm100, wm101, wm110, wm111, w000, w001, w010, w011, f)) * 0.5;
   precise vec3 gw = g * vec3(P.inv_sp_x, P.inv_sp_y, P.inv_sp_z) * (-P.inside_sign);
   precise float l2 = gw.x * gw.x + gw.y * gw.y + gw.z * gw.z;
   if (!(l2 > 0.0)) return vec3(0.0);

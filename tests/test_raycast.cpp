@@ -444,6 +444,12 @@ TEST(Raycast, StepThatExceedsTheLoopBudgetIsRefused) {
   EXPECT_THROW(engine::make_params(f, view, st, 8, 8), std::invalid_argument);
   st.step_vox = float(diag / ISOTOUCH_RAYCAST_MAX_SAMPLES * 1.1);
   EXPECT_NO_THROW(engine::make_params(f, view, st, 8, 8));
+  // A step the refinement's 3x3x3 block cannot hold is refused too.
+  f.grid.dims = {10, 10, 10};
+  st.step_vox = ISOTOUCH_RAYCAST_MAX_STEP;
+  EXPECT_NO_THROW(engine::make_params(f, view, st, 8, 8));
+  st.step_vox = 1.0f;
+  EXPECT_THROW(engine::make_params(f, view, st, 8, 8), std::invalid_argument);
 }
 
 // A clip plane through the centre facing the camera removes the near half: what is left

@@ -605,7 +605,7 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
   const BenchRow& head = rows[0];
   const double speedup = head.ms_noskip / head.ms_skip;
   std::cout << "\nload average after: " << load_average() << "\n(ms: " << (head.timestamps ? "GPU timestamps around the passes" : "submit-to-fence wall time")
-            << "; the march pass runs every pixel the volume's box projects to, the shade pass only the hit pixels; "
+            << "; the march pass runs the pixels the volume's box projects to (skipping: the box of the active cells), the shade pass only the hit pixels; "
                "the machine may be shared: figures vary by tens of %)\n"
             << std::setprecision(2) << "verdict: head skipping speed-up " << speedup << "x (needs >= 5x): "
             << (speedup >= 5 ? "PASS" : "FAIL") << "\n"

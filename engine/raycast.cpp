@@ -20,13 +20,14 @@
 namespace isotouch::engine {
 
 // The C++ view of the shared structs (std430: 4-byte scalars, offset = 4 * member index).
-static_assert(sizeof(gpu::RaycastParams) == 44 * 4);
+static_assert(sizeof(gpu::RaycastParams) == 52 * 4);
 static_assert(sizeof(gpu::RaycastParams) % 16 == 0, "binding 0 is std140: its struct size rounds up to 16 bytes");
 static_assert(offsetof(gpu::RaycastParams, tau) == 8 * 4);
 static_assert(offsetof(gpu::RaycastParams, eye_x) == 12 * 4);
 static_assert(offsetof(gpu::RaycastParams, clip_d) == 19 * 4);
 static_assert(offsetof(gpu::RaycastParams, origin_x) == 28 * 4);
 static_assert(offsetof(gpu::RaycastParams, cap_b) == 43 * 4);
+static_assert(offsetof(gpu::RaycastParams, act_hi_z) == 49 * 4);
 static_assert(sizeof(gpu::RaycastPrim) == 16 * 4);
 static_assert(offsetof(gpu::RaycastPrim, ax) == 4 * 4);
 static_assert(offsetof(gpu::RaycastPrim, cr) == 7 * 4);
@@ -351,6 +352,8 @@ gpu::RaycastParams make_params(const RaycastField& f, const CameraView& v, const
   set3(p.surf_r, p.surf_g, p.surf_b, {s.surface[0], s.surface[1], s.surface[2]});
   set3(p.bg_r, p.bg_g, p.bg_b, {s.background[0], s.background[1], s.background[2]});
   set3(p.cap_r, p.cap_g, p.cap_b, {s.cap[0], s.cap[1], s.cap[2]});
+  set3(p.act_lo_x, p.act_lo_y, p.act_lo_z, {-1, -1, -1});
+  set3(p.act_hi_x, p.act_hi_y, p.act_hi_z, {double(dims[0]), double(dims[1]), double(dims[2])});
   return p;
 }
 
@@ -458,7 +461,8 @@ struct RayCaster::Impl {
   VulkanContext& ctx;
   RaycastField field;
   // The four passes (shaders/raycast_common.glsl), one descriptor layout.
-  ComputePipeline<gpu::RaycastPush> march, args, shade, overlay;
+  // march and shade in two variants each (specialization constant 0: skipping; linear colour).
+  ComputePipeline<gpu::RaycastPush> march_skip, march_plain, args, shade_lin, shade, overlay;
   GpuBuffer values, cells;                 // device-local, resident
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
@@ -475,9 +479,11 @@ struct RayCaster::Impl {
   Impl(VulkanContext& c, RaycastField f)
       : ctx(c),
         field(std::move(f)),
-        march(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u),
+        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, {1u}),
+        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, {0u}),
         args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u),
-        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u),
+        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, {1u}),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, {0u}),
         overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u),
         arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 4) {}
@@ -548,7 +554,11 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   if (prims.size() > ISOTOUCH_RAYCAST_MAX_PRIMS)
     throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
                                 std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
-  const gpu::RaycastParams P = make_params(m.field, view, style, width, height);
+  gpu::RaycastParams P = make_params(m.field, view, style, width, height);
+  if (m.active) {  // the skipping march starts and ends at the active cells' box
+    set3(P.act_lo_x, P.act_lo_y, P.act_lo_z, {m.active->first[0], m.active->first[1], m.active->first[2]});
+    set3(P.act_hi_x, P.act_hi_y, P.act_hi_z, {m.active->second[0], m.active->second[1], m.active->second[2]});
+  }
   const std::size_t pixels = std::size_t(width) * std::size_t(height);
   if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
   if (pixels != m.pixels) {
@@ -597,8 +607,9 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, std::bit_cast<std::uint32_t>(-1.0f));
   barrier_transfer_to_compute(cmd);
   // 1. march every pixel; 2. hit count -> dispatch size; 3. shade the hits; 4. overlays.
-  m.march.bind(cmd, m.arena, ranges);
-  m.march.push(cmd, march_push);
+  const auto& march = style.skip_empty ? m.march_skip : m.march_plain;
+  march.bind(cmd, m.arena, ranges);
+  march.push(cmd, march_push);
   if (rect.x1 > rect.x0)
     vkCmdDispatch(cmd, (rect.x1 - rect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
                   (rect.y1 - rect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
@@ -608,8 +619,9 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.args.push(cmd, push);
   vkCmdDispatch(cmd, 1, 1, 1);
   barrier_compute_to_indirect(cmd);
-  m.shade.bind(cmd, m.arena, ranges);
-  m.shade.push(cmd, push);
+  const auto& shade = prims.empty() ? m.shade : m.shade_lin;
+  shade.bind(cmd, m.arena, ranges);
+  shade.push(cmd, push);
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
   m.timer.mark(cmd, 3);
   if (!prims.empty()) {

@@ -195,7 +195,7 @@ VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
 ComputePipelineBase::ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv,
                                          std::size_t spirv_bytes, std::uint32_t bindings,
                                          std::uint32_t push_bytes, std::string name,
-                                         std::uint32_t uniform_bindings)
+                                         std::uint32_t uniform_bindings, std::vector<std::uint32_t> spec)
     : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes), uniform_(uniform_bindings) {
   VkDevice dev = ctx_.device();
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
@@ -225,6 +225,10 @@ ComputePipelineBase::ComputePipelineBase(VulkanContext& ctx, const std::uint32_t
   cp.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
   cp.stage.module = module_;
   cp.stage.pName = "main";
+  std::vector<VkSpecializationMapEntry> entries(spec.size());
+  for (std::uint32_t i = 0; i < spec.size(); ++i) entries[i] = {i, std::uint32_t(i * sizeof(std::uint32_t)), sizeof(std::uint32_t)};
+  VkSpecializationInfo si{std::uint32_t(spec.size()), entries.data(), spec.size() * sizeof(std::uint32_t), spec.data()};
+  if (!spec.empty()) cp.stage.pSpecializationInfo = &si;
   cp.layout = layout_;
   VK_CHECK(vkCreateComputePipelines(dev, VK_NULL_HANDLE, 1, &cp, nullptr, &pipeline_));
 }

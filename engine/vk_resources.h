@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <initializer_list>
 #include <string>
+#include <vector>
 
 #include "vk_context.h"
 
@@ -118,11 +119,13 @@ class DescriptorArena {
 /// a storage buffer except those whose bit is set in `uniform_bindings` (bit i: binding i is
 /// a uniform buffer: per-dispatch parameters every invocation reads; on llvmpipe a uniform
 /// load at a constant offset is one scalar load, a storage load a per-lane gather).
+/// `spec`: specialization constants, constant_id i = spec[i] (32-bit each; a GLSL bool is
+/// 0 or 1): a variant of one shader with the code it does not need folded away.
 class ComputePipelineBase {
  public:
   ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv, std::size_t spirv_bytes,
                       std::uint32_t bindings, std::uint32_t push_bytes, std::string name,
-                      std::uint32_t uniform_bindings = 0);
+                      std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {});
   ~ComputePipelineBase();
   ComputePipelineBase(const ComputePipelineBase&) = delete;
   ComputePipelineBase& operator=(const ComputePipelineBase&) = delete;
@@ -158,8 +161,9 @@ class ComputePipeline : public ComputePipelineBase {
  public:
   template <std::size_t N>
   ComputePipeline(VulkanContext& ctx, const std::uint32_t (&spirv)[N], std::uint32_t bindings,
-                  std::string name, std::uint32_t uniform_bindings = 0)
-      : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name), uniform_bindings) {}
+                  std::string name, std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {})
+      : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name), uniform_bindings,
+                            std::move(spec)) {}
   void push(VkCommandBuffer cmd, const Push& p) const { push_bytes(cmd, &p); }
 };
 

@@ -106,7 +106,8 @@ struct BrickMinMaxPush {
 #define ISOTOUCH_RAYCAST_WG_Y 8
 #define ISOTOUCH_RAYCAST_SHADE_WG 64
 #define ISOTOUCH_RAYCAST_BINDINGS 12
-#define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2)
+#define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
+                                      // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
 // x fastest, byte i in bits 8 (i % 4) of uint i / 4). Cell c (corners c .. c + 1) is active
@@ -174,6 +175,14 @@ struct RaycastParams {
   float cap_r;       // colour of the cut face where the clip plane opens the object
   float cap_g;
   float cap_b;
+  float act_lo_x;    // index-space box of the active cells (skipping: no sample outside it
+  float act_lo_y;    //   can be inside; make_params: the volume's box [-1, n], the GPU
+  float act_lo_z;    //   caster narrows it; the CPU reference does not read it)
+  float act_hi_x;
+  float act_hi_y;
+  float act_hi_z;
+  float pad0;
+  float pad1;
 };
 // One overlay primitive (HIP, VHIP, plane disc, force arrow, path, contact points).
 struct RaycastPrim {

@@ -241,9 +241,9 @@ uint cell_dist(ivec3 c) {
 // ray_point and of the exit; the coordinates along the ray only move toward the exit:
 // float + and * are monotonic). Sample k is skipped too (its cell cannot be inside). k
 // grows by at least 1 per iteration: at most K + 1 iterations. Returns as march(): a
-// skipped sample is outside either way.
-int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int K, float eps) {
-  int k = 0;
+// skipped sample is outside either way. The caller may start at k > 0 and end at K below
+// march()'s where the samples left out lie outside the active cells' box.
+int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int k, int K, float eps) {
   while (k <= K) {
     vec3 p;
     // Inactive cells: jump (an inner loop of byte loads only).
@@ -273,21 +273,24 @@ int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int K, float eps) {
   return -1;
 }
 
-// Ray against the box [-1, n] per axis (index space): [tmin, tmax], empty if tmin > tmax.
-vec2 box_interval(vec3 e, vec3 d) {
+// Ray against the box [lo, hi] per axis (index space): [tmin, tmax], empty if tmin > tmax.
+vec2 box_interval_of(vec3 e, vec3 d, vec3 lo, vec3 hi) {
   float tmin = 0.0, tmax = kInf;
-  vec3 hi = vec3(float(P.nx), float(P.ny), float(P.nz));
   for (int a = 0; a < 3; ++a) {
     if (d[a] == 0.0) {
-      if (e[a] < -1.0 || e[a] > hi[a]) return vec2(1.0, 0.0);
+      if (e[a] < lo[a] || e[a] > hi[a]) return vec2(1.0, 0.0);
       continue;
     }
-    precise float ta = (-1.0 - e[a]) / d[a];
+    precise float ta = (lo[a] - e[a]) / d[a];
     precise float tb = (hi[a] - e[a]) / d[a];
     tmin = max(tmin, min(ta, tb));
     tmax = min(tmax, max(ta, tb));
   }
   return vec2(tmin, tmax);
+}
+// Ray against the volume's box [-1, n] per axis.
+vec2 box_interval(vec3 e, vec3 d) {
+  return box_interval_of(e, d, vec3(-1.0), vec3(float(P.nx), float(P.ny), float(P.nz)));
 }
 
 vec3 dot_safe_normalize(vec3 v) {

@@ -3,14 +3,18 @@
 // A pixel whose ray reaches an inside lattice sample k (sample 0 included) is appended to
 // the hit list, with k in hit_k, for raycast_shade.comp to refine and shade; nothing else is
 // written (the host fills image and depth with the background before: a store is a per-lane
-// scatter on llvmpipe, masked or not). With ISOTOUCH_RAYCAST_SKIP the march skips empty
-// space (march_skip); both marches return the same k.
+// scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY skips empty space
+// (march_skip); both marches return the same k.
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_Y, local_size_z = 1) in;
 
 #include "raycast_common.glsl"
+
+// Specialization constant: one pipeline with skipping (march_skip), one without (march): each
+// carries only its own loop (on llvmpipe a loop not taken still runs once, masked).
+layout(constant_id = 0) const bool SKIP_EMPTY = true;
 
 void main() {
   uvec2 px = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
@@ -23,7 +27,7 @@ void main() {
   // Samples 0 .. K; a hit at sample 0 is the ray's entry point (the cut face where t0 is
   // on the clip plane).
   int k_hit;
-  if ((pc.flags & ISOTOUCH_RAYCAST_SKIP) != 0u) {
+  if (SKIP_EMPTY) {
     precise vec3 inv_d = 1.0 / r.d;  // +-inf on an axis the ray is parallel to (not used there)
     g_inv_d = inv_d;
     // Rounding allowance: 1/32 voxel + 4e-6 (34 float ulps) of the largest index-space
@@ -31,7 +35,15 @@ void main() {
     vec3 e = r.e;
     float mag = max(max(max(abs(e.x), abs(e.y)), abs(e.z)), max(max(float(P.nx), float(P.ny)), float(P.nz)));
     precise float eps = 0.03125 + 4e-6 * (mag + r.t1 * r.dl);
-    k_hit = march_skip(r.e, r.d, r.t0, r.t1, r.h, r.K, eps);
+    // Only the samples in the active cells' box can be inside (a cell outside it is
+    // inactive; outside the cells the field is the background, outside too, or the border
+    // cells would be active): from one sample before the ray enters it to one after it
+    // leaves (a whole step of margin for the rounding of the interval).
+    vec2 ta = box_interval_of(r.e, r.d, vec3(P.act_lo_x, P.act_lo_y, P.act_lo_z),
+                              vec3(P.act_hi_x, P.act_hi_y, P.act_hi_z));
+    int k0 = max(int(floor((ta.x - r.t0) / r.h)) - 1, 0);
+    int k1 = min(int(ceil((ta.y - r.t0) / r.h)) + 1, r.K);
+    k_hit = ta.x <= ta.y ? march_skip(r.e, r.d, r.t0, r.t1, r.h, k0, k1, eps) : -1;
   } else {
     k_hit = march(r.e, r.d, r.t0, r.t1, r.h, r.K);
   }

@@ -10,6 +10,10 @@ layout(local_size_x = ISOTOUCH_RAYCAST_SHADE_WG, local_size_y = 1, local_size_z 
 
 #include "raycast_common.glsl"
 
+// Specialization constant: the linear colour (bindings 6-8) is written only for the overlay
+// pass, i.e. when the frame has primitives (a store is a per-lane scatter on llvmpipe).
+layout(constant_id = 0) const bool WRITE_LINEAR = true;
+
 void main() {
   uint j = gl_GlobalInvocationID.x;
   if (j >= ctr.count) return;
@@ -29,8 +33,10 @@ void main() {
     colour = shade(vec3(P.surf_r, P.surf_g, P.surf_b), n, r.dir);
   }
   depth[pix] = t_hit;
-  lin_r[pix] = colour.r;
-  lin_g[pix] = colour.g;
-  lin_b[pix] = colour.b;
+  if (WRITE_LINEAR) {
+    lin_r[pix] = colour.r;
+    lin_g[pix] = colour.g;
+    lin_b[pix] = colour.b;
+  }
   image[pix] = pack_rgba(colour);
 }

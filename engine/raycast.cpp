@@ -1,4 +1,4 @@
-// raycast.cpp - the GPU ray caster (shaders/raycast.comp), cameras, overlay primitives.
+// raycast.cpp - the GPU ray caster (shaders/raycast_*.comp: march, args, shade, overlay), cameras, overlay primitives.
 #include "raycast.h"
 
 #include <algorithm>

@@ -1,5 +1,5 @@
 // raycast.h - first-hit isosurface ray casting of a volume (issue 10): the GPU ray caster
-// (shaders/raycast.comp) and its CPU reference (engine/raycast_cpu.cpp, the same math).
+// (shaders/raycast_*.comp, shared code raycast_common.glsl) and its CPU reference (engine/raycast_cpu.cpp, the same math).
 //
 // What is drawn: the isosurface {tau, inside} of the trilinear interpolation of the voxel
 // values, every voxel outside the grid reading `background` (core::FieldView's field, the

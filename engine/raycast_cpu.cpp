@@ -1,4 +1,4 @@
-// raycast_cpu.cpp - the CPU reference of shaders/raycast.comp: the same float operations
+// raycast_cpu.cpp - the CPU reference of shaders/raycast_common.glsl and the raycast_*.comp passes: the same float operations
 // in the same order (this file is compiled with -ffp-contract=off; the shader marks its
 // arithmetic `precise`), one thread.
 //

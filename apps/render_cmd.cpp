@@ -489,7 +489,7 @@ Subcommand add_render_command(CLI::App& cli) {
   s.app->add_option("--clip-at", o->clip_at, "Where the clip plane lies along that axis, 0..1 of the volume")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
-  s.app->add_option("--step", o->step, "March step along the ray [voxels]; at most 0.9 (the hit is refined within one step from the 3x3x3 voxels around it)")->capture_default_str()->check(CLI::Range(0.02, double(ISOTOUCH_RAYCAST_MAX_STEP)));
+  s.app->add_option("--step", o->step, "March step along the ray [voxels]; at most 0.9 (the hit is refined within one step from the 3x3x3 voxels around it)")->capture_default_str()->check(CLI::Range(0.02, 0.9));  // ISOTOUCH_RAYCAST_MAX_STEP (make_params compares in float)
   s.app->add_flag("--path", o->path,
                   "Draw the run report's picture instead: the surface around the contact, the HIP's path, the "
                   "contact points coloured by force (the scene is run unless --trace is given)");

@@ -37,10 +37,13 @@ static_assert(sizeof(gpu::RaycastCounter) == 16);
 static_assert(offsetof(gpu::RaycastCounter, groups_x) == 0, "VkDispatchIndirectCommand at offset 0");
 static_assert(offsetof(gpu::RaycastCounter, count) == 12);
 static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 255u, "cell distances are bytes");
-// llvmpipe's budget of 65535 loop iterations per invocation: the march and the box (3) in
-// the march pass; the refinement (8) and the box in the shade pass; the box and the two
-// overlay loops in the overlay pass.
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 3u < 65535u);
+// llvmpipe's budget of 65535 loop iterations per shader invocation (counted per vector of 8
+// lanes): the plain march (one flat loop, at most MAX_SAMPLES + 1 trips) and two boxes (3
+// each) in the march pass (the skipping march may run out; it says so and the shade pass
+// finishes the ray); the finishing plain march, the refinement (8) and the box in the shade
+// pass; the box and the two overlay loops in the overlay pass.
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 8u + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 
 namespace {
@@ -555,9 +558,11 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
                                 std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
   gpu::RaycastParams P = make_params(m.field, view, style, width, height);
-  if (m.active) {  // the skipping march starts and ends at the active cells' box
-    set3(P.act_lo_x, P.act_lo_y, P.act_lo_z, {m.active->first[0], m.active->first[1], m.active->first[2]});
-    set3(P.act_hi_x, P.act_hi_y, P.act_hi_z, {m.active->second[0], m.active->second[1], m.active->second[2]});
+  if (m.active) {  // the skipping march starts and ends at the active cells' box, widened by
+    // 1/16 voxel: a ray grazing its face must not round to "misses the box"
+    const auto& [lo, hi] = *m.active;
+    set3(P.act_lo_x, P.act_lo_y, P.act_lo_z, {lo[0] - 0.0625, lo[1] - 0.0625, lo[2] - 0.0625});
+    set3(P.act_hi_x, P.act_hi_y, P.act_hi_z, {hi[0] + 0.0625, hi[1] + 0.0625, hi[2] + 0.0625});
   }
   const std::size_t pixels = std::size_t(width) * std::size_t(height);
   if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");

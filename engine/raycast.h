@@ -147,8 +147,9 @@ struct RaycastImage {
   std::vector<std::uint32_t> rgba;
   std::vector<float> depth;
   double gpu_ms = -1;        ///< GPU timestamps around the passes (-1: none / CPU)
-  /// GPU time of the passes (-1: none / CPU): march (every pixel the box projects to),
-  /// shade (hit pixels, with the hit count pass), overlay (0 without primitives).
+  /// GPU time of the passes (-1: none / CPU): march (with the background fills before it;
+  /// the pixels the box projects to), shade (hit pixels, with the hit count pass), overlay
+  /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
 };
@@ -175,7 +176,8 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
                         int height, const std::vector<gpu::RaycastPrim>& prims = {});
 
 /// The GPU ray caster: created once per field (values and brick ranges uploaded and kept
-/// resident), then render() any number of frames.
+/// resident), then render() any number of frames, from one thread at a time (a RayCaster
+/// owns one descriptor arena and one timer).
 class RayCaster {
  public:
   /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or a storage binding

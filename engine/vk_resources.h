@@ -80,7 +80,8 @@ void barrier_compute_to_compute(VkCommandBuffer cmd);
 /// A dispatch's storage writes become visible to a following vkCmdDispatchIndirect's
 /// arguments and to its shader.
 void barrier_compute_to_indirect(VkCommandBuffer cmd);
-/// A transfer (staging copy) becomes visible to the following dispatches.
+/// A transfer (staging copy) becomes visible to the following dispatches (storage and
+/// uniform reads).
 void barrier_transfer_to_compute(VkCommandBuffer cmd);
 /// Dispatch writes become visible to a following copy (to a Readback buffer).
 void barrier_compute_to_transfer(VkCommandBuffer cmd);

@@ -116,8 +116,10 @@ struct BrickMinMaxPush {
 // active cell (0: active), capped at ISOTOUCH_RAYCAST_DIST_MAX (engine/raycast.cpp; each
 // level costs the host one pass over the cells' bit set, and a jump of 31 cells is plenty).
 #define ISOTOUCH_RAYCAST_DIST_MAX 32u
-// llvmpipe ends all loops of an invocation after 65535 iterations in all: the host refuses
-// a step that lets a ray take more lattice samples than this (refine and overlays included).
+// llvmpipe ends all loops of a shader invocation after 65535 iterations in all (counted per
+// vector of 8 lanes, per pass): the host refuses a step that lets a ray take more lattice
+// samples than this (the march is one flat loop of at most MAX_SAMPLES + 1 trips; the other
+// loops of the march pass are the two box intersections, 3 trips each).
 #define ISOTOUCH_RAYCAST_MAX_SAMPLES 60000u
 // The largest march step [voxels, index space]: the refinement reads the 3x3x3 voxels around
 // its bracket of one step, whose points must stay within 2 cells per axis (raycast_common.glsl).
@@ -127,7 +129,8 @@ struct BrickMinMaxPush {
 #define ISOTOUCH_RAYCAST_PRIM_CAPSULE 3u  // a, b = segment ends, r0 = radius
 #define ISOTOUCH_RAYCAST_PRIM_CONE 4u     // a = base centre, b = apex, r0 = base radius
 #define ISOTOUCH_RAYCAST_MAX_PRIMS 1024u
-// Per-frame parameters (a storage buffer: more than the 128 guaranteed push bytes).
+// Per-frame parameters: a std140 uniform buffer (binding 0; more than the 128 guaranteed push
+// bytes; std140 = std430 here: 4-byte scalars only, size a multiple of 16).
 // Frames: eye, basis, clip plane and primitives in grid-world [m]; the march runs in index
 // space p_idx = (p - origin) * inv_spacing, with t the ray parameter in metres.
 struct RaycastParams {
@@ -208,7 +211,8 @@ struct RaycastPush {
   uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
   uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
   uint x0;           // march pass: pixel of its invocation (0, 0); the dispatch covers only
-  uint y0;           //   the tiles the volume's box can project into (engine/raycast.cpp)
+  uint y0;           //   the tiles the volume's box (skipping: the active cells' box) can
+                     //   project into (engine/raycast.cpp)
 };
 // The hit count of the march pass and, at offset 0, the indirect dispatch of the shade pass
 // (VkDispatchIndirectCommand), written by raycast_args.comp.

@@ -23,7 +23,9 @@
 // past the box of cells within D - 1 of it. A skipped sample is outside either way, so
 // skipping on and off give the same image. On a SIMD CPU device every lane of a vector runs
 // each iteration of a loop until all are done; the inner loop of march_skip (byte loads
-// only) runs the jumps, the outer one evaluates the field where a cell is active.
+// only) runs the jumps, the outer one evaluates the field where a cell is active. llvmpipe
+// ends every loop of an invocation after 65535 trips in all (per 8-lane vector): a march
+// stopped that way says so, and the shade pass finishes it (a new dispatch, a new budget).
 //
 // The CPU reference (engine/raycast_cpu.cpp) does the same float operations in the same
 // order; `precise` forbids FMA contraction here, -ffp-contract=off there.
@@ -50,7 +52,7 @@ layout(std430, set = 0, binding = 6) buffer LinR { float lin_r[]; };      // lin
 layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (the overlay pass blends
 layout(std430, set = 0, binding = 8) buffer LinB { float lin_b[]; };      //   into it)
 layout(std430, set = 0, binding = 9) buffer Hits { uint hits[]; };        // hit pixels, in no order
-layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | cap << 31
+layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | redo << 30 | cap << 31
 layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
 layout(push_constant) uniform Push { RaycastPush pc; };
 
@@ -215,14 +217,16 @@ float refine(vec3 e, vec3 d, float ta, float tb) {
   return t;
 }
 
-// The plain march: the first inside lattice sample k in [0, K], or -1 if none. The caller
+// The plain march: the first inside lattice sample k in [0, K] (march_from: in [k0, K]),
+// or -1 if none. One flat loop: at most K + 1 trips, within llvmpipe's budget. The caller
 // refines in a later pass (on a SIMD device a refine inside the loop would run once per
 // iteration in which some lane hits, not once per vector).
-int march(vec3 e, vec3 d, float t0, float t1, float h, int K) {
-  for (int k = 0; k <= K; ++k)
+int march_from(vec3 e, vec3 d, float t0, float t1, float h, int k0, int K) {
+  for (int k = k0; k <= K; ++k)
     if (inside_at(e, d, lattice_t(t0, t1, h, k))) return k;
   return -1;
 }
+int march(vec3 e, vec3 d, float t0, float t1, float h, int K) { return march_from(e, d, t0, t1, h, 0, K); }
 
 // Chessboard distance [cells] from trilinear cell c (lower corner, in [-1, n] per axis) to
 // the nearest active cell, 0: active (binding 2, built on the host: engine/raycast.cpp).
@@ -266,11 +270,16 @@ int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int k, int K, float 
       k = max(k + 1, int(min(ceil(kr), float(K + 1))));
       if (k > K) return -1;
     }
-    // An active cell: the field.
+    // An active cell (or the sample where llvmpipe's loop budget stopped the inner loop: an
+    // inactive cell's sample is outside, so evaluating it is harmless): the field.
     if (excess(field(p)) > 0.0) return k;
     ++k;
   }
-  return -1;
+  // The loops end with k <= K only when llvmpipe's loop budget ran out (65535 trips per
+  // invocation and vector: the inner and outer loops together can take up to about
+  // 2 (K + 1) trips, more with lanes out of step): the samples before k are outside, the
+  // rest unknown. -(k + 2): the caller finishes the ray from k with the plain march.
+  return k <= K ? -(k + 2) : -1;
 }
 
 // Ray against the box [lo, hi] per axis (index space): [tmin, tmax], empty if tmin > tmax.

@@ -1,7 +1,8 @@
 #version 450
 // Ray caster pass 1 of 4 (issue 10; shaders/raycast_common.glsl): one invocation per pixel.
 // A pixel whose ray reaches an inside lattice sample k (sample 0 included) is appended to
-// the hit list, with k in hit_k, for raycast_shade.comp to refine and shade; nothing else is
+// the hit list, with k in hit_k, for raycast_shade.comp to refine and shade (and so is a ray
+// whose skipping march llvmpipe's loop budget stopped, marked, for the shade pass to finish); nothing else is
 // written (the host fills image and depth with the background before: a store is a per-lane
 // scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY skips empty space
 // (march_skip); both marches return the same k.
@@ -41,16 +42,20 @@ void main() {
     // leaves (a whole step of margin for the rounding of the interval).
     vec2 ta = box_interval_of(r.e, r.d, vec3(P.act_lo_x, P.act_lo_y, P.act_lo_z),
                               vec3(P.act_hi_x, P.act_hi_y, P.act_hi_z));
-    int k0 = max(int(floor((ta.x - r.t0) / r.h)) - 1, 0);
-    int k1 = min(int(ceil((ta.y - r.t0) / r.h)) + 1, r.K);
+    // (clamped in float first: a far eye must not overflow the int conversion)
+    int k0 = int(clamp(floor((ta.x - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1)));
+    int k1 = int(clamp(ceil((ta.y - r.t0) / r.h) + 1.0, -1.0, float(r.K)));
     k_hit = ta.x <= ta.y ? march_skip(r.e, r.d, r.t0, r.t1, r.h, k0, k1, eps) : -1;
   } else {
     k_hit = march(r.e, r.d, r.t0, r.t1, r.h, r.K);
   }
   bool cap = k_hit == 0 && r.cap_entry;
-  if (k_hit >= 0) {
+  // k_hit <= -2: the skipping march ran out of llvmpipe's loop budget at sample -(k_hit + 2);
+  // the shade pass finishes the ray from there (bit 30).
+  bool redo = k_hit <= -2;
+  if (k_hit >= 0 || redo) {
     uint slot = atomicAdd(ctr.count, 1u);
     hits[slot] = pix;
-    hit_k[pix] = uint(k_hit) | (cap ? 0x80000000u : 0u);
+    hit_k[pix] = redo ? uint(-(k_hit + 2)) | 0x40000000u : uint(k_hit) | (cap ? 0x80000000u : 0u);
   }
 }

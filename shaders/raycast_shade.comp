@@ -15,14 +15,23 @@ layout(local_size_x = ISOTOUCH_RAYCAST_SHADE_WG, local_size_y = 1, local_size_z 
 layout(constant_id = 0) const bool WRITE_LINEAR = true;
 
 void main() {
-  uint j = gl_GlobalInvocationID.x;
+  uint j = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * ISOTOUCH_RAYCAST_SHADE_WG +
+           gl_LocalInvocationID.x;  // a 2-D grid of workgroups (raycast_args.comp)
   if (j >= ctr.count) return;
   uint pix = hits[j];
   uint kc = hit_k[pix];
-  int k = int(kc & 0x7fffffffu);
+  int k = int(kc & 0x3fffffffu);
   bool cap = (kc & 0x80000000u) != 0u;
+  bool redo = (kc & 0x40000000u) != 0u;
   init_globals();
   Ray r = make_ray(uvec2(pix % P.width, pix / P.width));
+  // A skipping march the loop budget stopped at sample k: finish it with the plain march (one
+  // flat loop, within this dispatch's own budget); no inside sample: the pixel stays background.
+  if (redo) {
+    k = march_from(r.e, r.d, r.t0, r.t1, r.h, k, r.K);
+    cap = k == 0 && r.cap_entry;
+  }
+  if (k < 0) return;
   float t_hit = r.t0;
   if (k > 0) t_hit = refine(r.e, r.d, lattice_t(r.t0, r.t1, r.h, k - 1), lattice_t(r.t0, r.t1, r.h, k));
   vec3 colour;

@@ -513,6 +513,7 @@ struct BenchRow {
   std::array<int, 3> dims{};
   double ms_skip = 0, ms_noskip = 0;  ///< medians
   double march_skip = 0, march_noskip = 0, shade_skip = 0;  ///< medians of the pass times
+  double wall_skip = 0, wall_noskip = 0;  ///< medians, submit to fence (with readback)
   std::size_t pixels_differ = 0;      ///< depth differs between skip on and off
   std::size_t hits = 0;
   bool timestamps = true;
@@ -548,7 +549,7 @@ BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, i
   // Skipping on and off alternate frame by frame (a shared machine's speed drifts: both
   // medians see the same drift). Frame 0 of each: warm-up.
   engine::RaycastImage last[2];
-  std::vector<double> ms[2], march[2], shade;
+  std::vector<double> ms[2], march[2], shade, wall[2];
   for (int f = 0; f <= frames; ++f)
     for (int skip = 1; skip >= 0; --skip) {
       engine::RaycastStyle st;
@@ -557,6 +558,7 @@ BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, i
       if (f > 0) {
         ms[skip].push_back(img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms);
         march[skip].push_back(img.march_ms);
+        wall[skip].push_back(img.submit_wall_ms);
         if (skip) shade.push_back(img.shade_ms);
       }
       row.timestamps = row.timestamps && img.gpu_ms >= 0;
@@ -567,6 +569,8 @@ BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, i
   row.march_skip = median(march[1]);
   row.march_noskip = median(march[0]);
   row.shade_skip = median(shade);
+  row.wall_skip = median(wall[1]);
+  row.wall_noskip = median(wall[0]);
   for (std::size_t i = 0; i < last[0].depth.size(); ++i) {
     row.pixels_differ += last[0].depth[i] != last[1].depth[i] || last[0].rgba[i] != last[1].rgba[i];
     row.hits += last[1].depth[i] >= 0;
@@ -587,8 +591,9 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
             << "device: " << vk.info().name << " (" << vk.info().type << ", " << vk.info().driver << ")\n\n"
             << "load average before: " << load_average() << "\n\n"
             << "| scene | voxels | surface pixels | ms/frame skipping | ms/frame no skipping | speed-up | images equal "
-               "| march pass skipping / no skipping [ms] | shade pass [ms] | cell distances built [ms, host] |\n"
-            << "|---|---|---|---|---|---|---|---|---|---|\n";
+               "| march pass skipping / no skipping [ms] | shade pass [ms] | submit to fence skipping / no skipping [ms] "
+               "| cell distances built [ms, host] |\n"
+            << "|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<BenchRow> rows;
   for (const char* s : {"head.json", "chest.json"}) {
     fs::path p = fs::path("scenes") / s;
@@ -600,7 +605,7 @@ int cmd_bench_render(int size, int frames, const std::string& device) {
               << std::setprecision(2) << r.ms_noskip / r.ms_skip << "x | "
               << (r.pixels_differ == 0 ? "yes" : "NO (" + std::to_string(r.pixels_differ) + " pixels)") << " | "
               << std::setprecision(1) << r.march_skip << " / " << r.march_noskip << " | " << r.shade_skip << " | "
-              << r.build_ms << " |\n";
+              << r.wall_skip << " / " << r.wall_noskip << " | " << r.build_ms << " |\n";
   }
   const BenchRow& head = rows[0];
   const double speedup = head.ms_noskip / head.ms_skip;

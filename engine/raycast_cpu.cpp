@@ -78,7 +78,7 @@ struct Caster {
       const float frac = -ea / (eb - ea);
       t = ta + (tb - ta) * frac;
     }
-    return t;
+    return std::clamp(t, ta, tb);  // the shader's clamp (its normal reads a block around the bracket)
   }
 
   /// The plain march: the first inside sample k in [1, K], or 0 (the caller refines).

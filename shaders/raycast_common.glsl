@@ -214,7 +214,9 @@ float refine(vec3 e, vec3 d, float ta, float tb) {
     precise float frac = -ea / (eb - ea);
     t = ta + (tb - ta) * frac;
   }
-  return t;
+  // Within the bracket even where the float sum rounds past tb: surface_normal_block relies
+  // on the hit's cell lying in the block.
+  return clamp(t, ta, tb);
 }
 
 // The plain march: the first inside lattice sample k in [0, K] (march_from: in [k0, K]),
@@ -356,6 +358,73 @@ vec3 surface_normal(vec3 p) {
   float w201 = voxel(c + ivec3(1, 0, 2));
   float w210 = voxel(c + ivec3(0, 1, 2));
   float w211 = voxel(c + ivec3(1, 1, 2));
+  precise vec3 g;
+  g.x = (trilerp(w001, w002, w011, w012, w101, w102, w111, w112, f) -
+         trilerp(w00m1, w000, w01m1, w010, w10m1, w100, w11m1, w110, f)) * 0.5;
+  g.y = (trilerp(w010, w011, w020, w021, w110, w111, w120, w121, f) -
+         trilerp(w0m10, w0m11, w000, w001, w1m10, w1m11, w100, w101, f)) * 0.5;
+  g.z = (trilerp(w100, w101, w110, w111, w200, w201, w210, w211, f) -
+         trilerp(wm100, wm101, wm110, wm111, w000, w001, w010, w011, f)) * 0.5;
+  precise vec3 gw = g * vec3(P.inv_sp_x, P.inv_sp_y, P.inv_sp_z) * (-P.inside_sign);
+  precise float l2 = gw.x * gw.x + gw.y * gw.y + gw.z * gw.z;
+  if (!(l2 > 0.0)) return vec3(0.0);
+  return dot_safe_normalize(gw);
+}
+
+// surface_normal() at a hit p whose cell lies in refine()'s block (the hit is in the bracket):
+// the same 32 voxels, 20 of them picked out of the block by selects and only the 12 of the
+// three faces outside it loaded (per axis, the face at -1 or +2 from p's cell, whichever the
+// block lacks). Same values, same operations: the same normal as surface_normal(p).
+vec3 surface_normal_block(vec3 p) {
+  vec3 fl = floor(p);
+  ivec3 c = ivec3(fl);
+  precise vec3 f = p - fl;
+  ivec3 oc = clamp(c - g_b, ivec3(0), ivec3(1));  // 0 or 1 per axis (the clamp only guards)
+  bool bx = oc.x == 1, by = oc.y == 1, bz = oc.z == 1;
+  float fx00 = voxel(c + ivec3((bx ? 2 : -1), 0, 0));
+  float fx01 = voxel(c + ivec3((bx ? 2 : -1), 0, 1));
+  float fx10 = voxel(c + ivec3((bx ? 2 : -1), 1, 0));
+  float fx11 = voxel(c + ivec3((bx ? 2 : -1), 1, 1));
+  float fy00 = voxel(c + ivec3(0, (by ? 2 : -1), 0));
+  float fy01 = voxel(c + ivec3(0, (by ? 2 : -1), 1));
+  float fy10 = voxel(c + ivec3(1, (by ? 2 : -1), 0));
+  float fy11 = voxel(c + ivec3(1, (by ? 2 : -1), 1));
+  float fz00 = voxel(c + ivec3(0, 0, (bz ? 2 : -1)));
+  float fz01 = voxel(c + ivec3(0, 1, (bz ? 2 : -1)));
+  float fz10 = voxel(c + ivec3(1, 0, (bz ? 2 : -1)));
+  float fz11 = voxel(c + ivec3(1, 1, (bz ? 2 : -1)));
+  float wm100 = bz ? (by ? (bx ? g_v011 : g_v010) : (bx ? g_v001 : g_v000)) : (by ? (bx ? fz00 : fz00) : (bx ? fz00 : fz00));
+  float wm101 = bz ? (by ? (bx ? g_v012 : g_v011) : (bx ? g_v002 : g_v001)) : (by ? (bx ? fz10 : fz10) : (bx ? fz10 : fz10));
+  float wm110 = bz ? (by ? (bx ? g_v021 : g_v020) : (bx ? g_v011 : g_v010)) : (by ? (bx ? fz01 : fz01) : (bx ? fz01 : fz01));
+  float wm111 = bz ? (by ? (bx ? g_v022 : g_v021) : (bx ? g_v012 : g_v011)) : (by ? (bx ? fz11 : fz11) : (bx ? fz11 : fz11));
+  float w0m10 = bz ? (by ? (bx ? g_v101 : g_v100) : (bx ? fy00 : fy00)) : (by ? (bx ? g_v001 : g_v000) : (bx ? fy00 : fy00));
+  float w0m11 = bz ? (by ? (bx ? g_v102 : g_v101) : (bx ? fy10 : fy10)) : (by ? (bx ? g_v002 : g_v001) : (bx ? fy10 : fy10));
+  float w00m1 = bz ? (by ? (bx ? g_v110 : fx00) : (bx ? g_v100 : fx00)) : (by ? (bx ? g_v010 : fx00) : (bx ? g_v000 : fx00));
+  float w000 = bz ? (by ? (bx ? g_v111 : g_v110) : (bx ? g_v101 : g_v100)) : (by ? (bx ? g_v011 : g_v010) : (bx ? g_v001 : g_v000));
+  float w001 = bz ? (by ? (bx ? g_v112 : g_v111) : (bx ? g_v102 : g_v101)) : (by ? (bx ? g_v012 : g_v011) : (bx ? g_v002 : g_v001));
+  float w002 = bz ? (by ? (bx ? fx00 : g_v112) : (bx ? fx00 : g_v102)) : (by ? (bx ? fx00 : g_v012) : (bx ? fx00 : g_v002));
+  float w01m1 = bz ? (by ? (bx ? g_v120 : fx10) : (bx ? g_v110 : fx10)) : (by ? (bx ? g_v020 : fx10) : (bx ? g_v010 : fx10));
+  float w010 = bz ? (by ? (bx ? g_v121 : g_v120) : (bx ? g_v111 : g_v110)) : (by ? (bx ? g_v021 : g_v020) : (bx ? g_v011 : g_v010));
+  float w011 = bz ? (by ? (bx ? g_v122 : g_v121) : (bx ? g_v112 : g_v111)) : (by ? (bx ? g_v022 : g_v021) : (bx ? g_v012 : g_v011));
+  float w012 = bz ? (by ? (bx ? fx10 : g_v122) : (bx ? fx10 : g_v112)) : (by ? (bx ? fx10 : g_v022) : (bx ? fx10 : g_v012));
+  float w020 = bz ? (by ? (bx ? fy00 : fy00) : (bx ? g_v121 : g_v120)) : (by ? (bx ? fy00 : fy00) : (bx ? g_v021 : g_v020));
+  float w021 = bz ? (by ? (bx ? fy10 : fy10) : (bx ? g_v122 : g_v121)) : (by ? (bx ? fy10 : fy10) : (bx ? g_v022 : g_v021));
+  float w1m10 = bz ? (by ? (bx ? g_v201 : g_v200) : (bx ? fy01 : fy01)) : (by ? (bx ? g_v101 : g_v100) : (bx ? fy01 : fy01));
+  float w1m11 = bz ? (by ? (bx ? g_v202 : g_v201) : (bx ? fy11 : fy11)) : (by ? (bx ? g_v102 : g_v101) : (bx ? fy11 : fy11));
+  float w10m1 = bz ? (by ? (bx ? g_v210 : fx01) : (bx ? g_v200 : fx01)) : (by ? (bx ? g_v110 : fx01) : (bx ? g_v100 : fx01));
+  float w100 = bz ? (by ? (bx ? g_v211 : g_v210) : (bx ? g_v201 : g_v200)) : (by ? (bx ? g_v111 : g_v110) : (bx ? g_v101 : g_v100));
+  float w101 = bz ? (by ? (bx ? g_v212 : g_v211) : (bx ? g_v202 : g_v201)) : (by ? (bx ? g_v112 : g_v111) : (bx ? g_v102 : g_v101));
+  float w102 = bz ? (by ? (bx ? fx01 : g_v212) : (bx ? fx01 : g_v202)) : (by ? (bx ? fx01 : g_v112) : (bx ? fx01 : g_v102));
+  float w11m1 = bz ? (by ? (bx ? g_v220 : fx11) : (bx ? g_v210 : fx11)) : (by ? (bx ? g_v120 : fx11) : (bx ? g_v110 : fx11));
+  float w110 = bz ? (by ? (bx ? g_v221 : g_v220) : (bx ? g_v211 : g_v210)) : (by ? (bx ? g_v121 : g_v120) : (bx ? g_v111 : g_v110));
+  float w111 = bz ? (by ? (bx ? g_v222 : g_v221) : (bx ? g_v212 : g_v211)) : (by ? (bx ? g_v122 : g_v121) : (bx ? g_v112 : g_v111));
+  float w112 = bz ? (by ? (bx ? fx11 : g_v222) : (bx ? fx11 : g_v212)) : (by ? (bx ? fx11 : g_v122) : (bx ? fx11 : g_v112));
+  float w120 = bz ? (by ? (bx ? fy01 : fy01) : (bx ? g_v221 : g_v220)) : (by ? (bx ? fy01 : fy01) : (bx ? g_v121 : g_v120));
+  float w121 = bz ? (by ? (bx ? fy11 : fy11) : (bx ? g_v222 : g_v221)) : (by ? (bx ? fy11 : fy11) : (bx ? g_v122 : g_v121));
+  float w200 = bz ? (by ? (bx ? fz00 : fz00) : (bx ? fz00 : fz00)) : (by ? (bx ? g_v211 : g_v210) : (bx ? g_v201 : g_v200));
+  float w201 = bz ? (by ? (bx ? fz10 : fz10) : (bx ? fz10 : fz10)) : (by ? (bx ? g_v212 : g_v211) : (bx ? g_v202 : g_v201));
+  float w210 = bz ? (by ? (bx ? fz01 : fz01) : (bx ? fz01 : fz01)) : (by ? (bx ? g_v221 : g_v220) : (bx ? g_v211 : g_v210));
+  float w211 = bz ? (by ? (bx ? fz11 : fz11) : (bx ? fz11 : fz11)) : (by ? (bx ? g_v222 : g_v221) : (bx ? g_v212 : g_v211));
   precise vec3 g;
   g.x = (trilerp(w001, w002, w011, w012, w101, w102, w111, w112, f) -
          trilerp(w00m1, w000, w01m1, w010, w10m1, w100, w11m1, w110, f)) * 0.5;

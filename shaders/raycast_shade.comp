@@ -32,13 +32,16 @@ void main() {
     cap = k == 0 && r.cap_entry;
   }
   if (k < 0) return;
-  float t_hit = r.t0;
-  if (k > 0) t_hit = refine(r.e, r.d, lattice_t(r.t0, r.t1, r.h, k - 1), lattice_t(r.t0, r.t1, r.h, k));
+  // Sample 0 has no bracket: refine() of [t0, t0] returns t0 (and loads the block around it,
+  // which the normal reads). Unconditional: on llvmpipe an `if` would not skip it anyway.
+  float ta = k > 0 ? lattice_t(r.t0, r.t1, r.h, k - 1) : r.t0;
+  float tb = k > 0 ? lattice_t(r.t0, r.t1, r.h, k) : r.t0;
+  float t_hit = refine(r.e, r.d, ta, tb);
   vec3 colour;
   if (cap) {
     colour = shade(vec3(P.cap_r, P.cap_g, P.cap_b), vec3(P.clip_nx, P.clip_ny, P.clip_nz), r.dir);
   } else {
-    vec3 n = surface_normal(ray_point(r.e, r.d, t_hit));
+    vec3 n = surface_normal_block(ray_point(r.e, r.d, t_hit));  // the block holds the hit's cell
     colour = shade(vec3(P.surf_r, P.surf_g, P.surf_b), n, r.dir);
   }
   depth[pix] = t_hit;

@@ -48,18 +48,6 @@ double ms_between(std::int64_t t0_ns, std::int64_t t1_ns) { return double(t1_ns 
 // ---------------------------------------------------------------------------------------
 // Pure helpers
 
-double percentile(std::vector<double> x, double q) {
-  x.erase(std::remove_if(x.begin(), x.end(), [](double v) { return std::isnan(v); }), x.end());
-  if (x.empty() || std::isnan(q)) return kNaN;
-  std::sort(x.begin(), x.end());
-  q = std::clamp(q, 0.0, 1.0);
-  const double n = double(x.size());
-  // Rank k (1-based) = ceil(q n); the 1e-9 keeps 0.99 * 100 = 99.000000000000014 at 99.
-  std::size_t k = std::size_t(std::max(1.0, std::ceil(q * n - 1e-9)));
-  k = std::min(k, x.size());
-  return x[k - 1];
-}
-
 Spread spread(const std::vector<double>& x) {
   Spread s;
   for (double v : x) s.n += std::isnan(v) ? 0 : 1;

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "stats.h"
 #include "bench_engine.h"
 #include "isosurface.h"
 #include "renderer.h"
@@ -58,10 +59,6 @@ int run_bench_edit(const BenchEditOptions& options, std::ostream& out, std::ostr
 
 // ---------------------------------------------------------------------------------------
 // Pure helpers (tests/test_bench_edit.cpp)
-
-/// Nearest-rank percentile: the smallest value v of `x` such that at least q * n values
-/// are <= v (q in [0, 1]; q = 0 gives the minimum). NaN values are dropped; NaN if none is left.
-double percentile(std::vector<double> x, double q);
 
 /// Median, nearest-rank p99 and max of a sample [same units]; NaN figures if empty.
 struct Spread {

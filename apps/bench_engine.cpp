@@ -74,14 +74,6 @@ double measure_memcpy_gbps(std::size_t bytes, int tries) {
   return gb_per_s(2.0 * double(bytes), best_ms);
 }
 
-double median(std::vector<double> v) {
-  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return std::isnan(x); }), v.end());
-  if (v.empty()) return kNaN;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 double ratio(double a, double b) {
   if (!std::isfinite(a) || !std::isfinite(b) || !(b > 0)) return kNaN;
   return a / b;

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "stats.h"
 #include "brick_field.h"
 #include "passes.h"
 #include "sparse_chain.h"
@@ -47,10 +48,6 @@ double gb_per_s(double bytes, double ms);
 /// touched beforehand, best of `tries`; counted as read + write = 2 x bytes per copy (the
 /// same convention as pass_min_bytes).
 double measure_memcpy_gbps(std::size_t bytes, int tries);
-
-/// Median of `v` (mean of the middle two for an even count); NaN values are dropped;
-/// NaN if nothing is left.
-double median(std::vector<double> v);
 
 /// a / b, NaN unless both are finite and b > 0.
 double ratio(double a, double b);

@@ -1,4 +1,5 @@
 #include "render_cmd.h"
+#include "stats.h"
 #include "bench_cmd.h"
 
 #include <png.h>
@@ -520,11 +521,6 @@ struct BenchRow {
   double build_ms = 0;                ///< engine::cell_distances on the host, median
 };
 
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? -1 : v[v.size() / 2];
-}
 
 BenchRow bench_scene(engine::VulkanContext& vk, const std::string& scene_path, int size, int frames) {
   const Scene scene = load_scene(scene_path);

@@ -15,6 +15,7 @@
 #include <optional>
 #include <sstream>
 
+#include "stats.h"
 #include "brick_field.h"
 #include "brush.h"
 #include "record.h"
@@ -37,13 +38,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using servo::Vec3;
-
-double percentile(std::vector<std::int64_t> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t k = std::min(v.size() - 1, std::size_t(std::ceil(q * double(v.size()))) - 1);
-  return double(v[q <= 0 ? 0 : k]);
-}
 
 std::string fmt(double v, int prec = 6) {
   std::ostringstream s;
@@ -612,12 +606,6 @@ class EditDriver {
   int open_ = 0;
 };
 
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-
 // edits.csv: one row per applied event, centres physical [mm].
 std::string edits_csv(const std::vector<EditRow>& rows, const engine::Volume& vol) {
   std::ostringstream s;
@@ -745,8 +733,8 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       brush_ms.push_back(r.outcome.brush.wall_ms);
     }
   }
-  e.update_ms_median = median_of(upd);
-  e.brush_ms_median = median_of(brush_ms);
+  e.update_ms_median = upd.empty() ? 0 : median(upd);  // 0: no edit ran
+  e.brush_ms_median = brush_ms.empty() ? 0 : median(brush_ms);
   e.last_version = session.current()->version;
   e.brushes_on_gpu = session.sculptor().on_gpu();
   e.history_bytes = session.sculptor().history().bytes();
@@ -1170,8 +1158,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       }
     }
   }
-  m.tick_ns_median = percentile(ns, 0.5);
-  m.tick_ns_p99 = percentile(ns, 0.99);
+  const std::vector<double> ns_d(ns.begin(), ns.end());
+  m.tick_ns_median = ns.empty() ? 0 : percentile(ns_d, 0.5);
+  m.tick_ns_p99 = ns.empty() ? 0 : percentile(ns_d, 0.99);
   m.tick_ns_max = ns.empty() ? 0 : double(*std::max_element(ns.begin(), ns.end()));
   m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
   if (m.contact_ticks) {

@@ -50,15 +50,18 @@ struct Caster {
     return vals[(std::size_t(std::uint32_t(z)) * P.ny + std::uint32_t(y)) * P.nx + std::uint32_t(x)];
   }
   static float lerp1(float a, float b, float t) { return a + t * (b - a); }
-  float field(F3 p) const {
-    const F3 fl{std::floor(p.x), std::floor(p.y), std::floor(p.z)};
-    const int i = int(fl.x), j = int(fl.y), k = int(fl.z);
-    const F3 f = p - fl;
+  /// The trilinear value at fractions f of the cell with lower corner (i, j, k): lerps along
+  /// x, then y, then z (the shader's trilerp).
+  float cell_value(int i, int j, int k, F3 f) const {
     const float c00 = lerp1(voxel(i, j, k), voxel(i + 1, j, k), f.x);
     const float c10 = lerp1(voxel(i, j + 1, k), voxel(i + 1, j + 1, k), f.x);
     const float c01 = lerp1(voxel(i, j, k + 1), voxel(i + 1, j, k + 1), f.x);
     const float c11 = lerp1(voxel(i, j + 1, k + 1), voxel(i + 1, j + 1, k + 1), f.x);
     return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+  }
+  float field(F3 p) const {
+    const F3 fl{std::floor(p.x), std::floor(p.y), std::floor(p.z)};
+    return cell_value(int(fl.x), int(fl.y), int(fl.z), p - fl);
   }
   float excess(float v) const { return P.inside_sign * (v - P.tau); }
   static F3 ray_point(F3 e, F3 d, float t) { return e + t * d; }
@@ -156,13 +159,7 @@ struct Caster {
     const F3 fl{std::floor(p.x), std::floor(p.y), std::floor(p.z)};
     const int i = int(fl.x), j = int(fl.y), k = int(fl.z);
     const F3 f = p - fl;
-    auto at = [&](int ox, int oy, int oz) {  // field() of cell (i, j, k) + o at fractions f
-      const float c00 = lerp1(voxel(i + ox, j + oy, k + oz), voxel(i + ox + 1, j + oy, k + oz), f.x);
-      const float c10 = lerp1(voxel(i + ox, j + oy + 1, k + oz), voxel(i + ox + 1, j + oy + 1, k + oz), f.x);
-      const float c01 = lerp1(voxel(i + ox, j + oy, k + oz + 1), voxel(i + ox + 1, j + oy, k + oz + 1), f.x);
-      const float c11 = lerp1(voxel(i + ox, j + oy + 1, k + oz + 1), voxel(i + ox + 1, j + oy + 1, k + oz + 1), f.x);
-      return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
-    };
+    auto at = [&](int ox, int oy, int oz) { return cell_value(i + ox, j + oy, k + oz, f); };
     F3 g;
     g.x = (at(1, 0, 0) - at(-1, 0, 0)) * 0.5f;
     g.y = (at(0, 1, 0) - at(0, -1, 0)) * 0.5f;

@@ -81,16 +81,25 @@ float lerp1(float a, float b, float t) {
   return r;
 }
 
+// Trilinear interpolation of a cell's 8 corners v<z><y><x> at fractions f: lerps along x,
+// then y, then z (FieldView's order).
+float trilerp(float v000, float v001, float v010, float v011, float v100, float v101, float v110,
+              float v111, vec3 f) {  // v<z><y><x>
+  float c00 = lerp1(v000, v001, f.x);
+  float c10 = lerp1(v010, v011, f.x);
+  float c01 = lerp1(v100, v101, f.x);
+  float c11 = lerp1(v110, v111, f.x);
+  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+}
+
 // Trilinear value at a continuous index (FieldView's lerp order: x, then y, then z).
 float field(vec3 p) {
   vec3 fl = floor(p);
   ivec3 i = ivec3(fl);
   precise vec3 f = p - fl;
-  float c00 = lerp1(voxel(i), voxel(i + ivec3(1, 0, 0)), f.x);
-  float c10 = lerp1(voxel(i + ivec3(0, 1, 0)), voxel(i + ivec3(1, 1, 0)), f.x);
-  float c01 = lerp1(voxel(i + ivec3(0, 0, 1)), voxel(i + ivec3(1, 0, 1)), f.x);
-  float c11 = lerp1(voxel(i + ivec3(0, 1, 1)), voxel(i + ivec3(1, 1, 1)), f.x);
-  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+  return trilerp(voxel(i), voxel(i + ivec3(1, 0, 0)), voxel(i + ivec3(0, 1, 0)), voxel(i + ivec3(1, 1, 0)),
+                 voxel(i + ivec3(0, 0, 1)), voxel(i + ivec3(1, 0, 1)), voxel(i + ivec3(0, 1, 1)),
+                 voxel(i + ivec3(1, 1, 1)), f);
 }
 
 float excess(float v) {
@@ -191,11 +200,7 @@ float field_block(vec3 p) {
   float v101 = oz ? y201 : y101;
   float v110 = oz ? y210 : y110;
   float v111 = oz ? y211 : y111;
-  float c00 = lerp1(v000, v001, f.x);
-  float c10 = lerp1(v010, v011, f.x);
-  float c01 = lerp1(v100, v101, f.x);
-  float c11 = lerp1(v110, v111, f.x);
-  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
+  return trilerp(v000, v001, v010, v011, v100, v101, v110, v111, f);
 }
 
 // [ta, tb]: ta outside, tb inside, one lattice step. 8 bisections, then one secant step in
@@ -310,71 +315,14 @@ vec3 dot_safe_normalize(vec3 v) {
   return r;
 }
 
+
 // Outward unit normal from central differences (one voxel) of the trilinear field, in
 // grid-world (index derivative times 1 / spacing): per axis, the trilinear interpolation at
-// p's fractions of the cells one voxel up and down (= field(p +- e_a) but for rounding). The
-// six share 32 voxels around p's cell, each loaded once.
-float trilerp(float v000, float v001, float v010, float v011, float v100, float v101, float v110,
-              float v111, vec3 f) {  // v<z><y><x>
-  float c00 = lerp1(v000, v001, f.x);
-  float c10 = lerp1(v010, v011, f.x);
-  float c01 = lerp1(v100, v101, f.x);
-  float c11 = lerp1(v110, v111, f.x);
-  return lerp1(lerp1(c00, c10, f.y), lerp1(c01, c11, f.y), f.z);
-}
-vec3 surface_normal(vec3 p) {
-  vec3 fl = floor(p);
-  ivec3 c = ivec3(fl);
-  precise vec3 f = p - fl;
-  float wm100 = voxel(c + ivec3(0, 0, -1));
-  float wm101 = voxel(c + ivec3(1, 0, -1));
-  float wm110 = voxel(c + ivec3(0, 1, -1));
-  float wm111 = voxel(c + ivec3(1, 1, -1));
-  float w0m10 = voxel(c + ivec3(0, -1, 0));
-  float w0m11 = voxel(c + ivec3(1, -1, 0));
-  float w00m1 = voxel(c + ivec3(-1, 0, 0));
-  float w000 = voxel(c + ivec3(0, 0, 0));
-  float w001 = voxel(c + ivec3(1, 0, 0));
-  float w002 = voxel(c + ivec3(2, 0, 0));
-  float w01m1 = voxel(c + ivec3(-1, 1, 0));
-  float w010 = voxel(c + ivec3(0, 1, 0));
-  float w011 = voxel(c + ivec3(1, 1, 0));
-  float w012 = voxel(c + ivec3(2, 1, 0));
-  float w020 = voxel(c + ivec3(0, 2, 0));
-  float w021 = voxel(c + ivec3(1, 2, 0));
-  float w1m10 = voxel(c + ivec3(0, -1, 1));
-  float w1m11 = voxel(c + ivec3(1, -1, 1));
-  float w10m1 = voxel(c + ivec3(-1, 0, 1));
-  float w100 = voxel(c + ivec3(0, 0, 1));
-  float w101 = voxel(c + ivec3(1, 0, 1));
-  float w102 = voxel(c + ivec3(2, 0, 1));
-  float w11m1 = voxel(c + ivec3(-1, 1, 1));
-  float w110 = voxel(c + ivec3(0, 1, 1));
-  float w111 = voxel(c + ivec3(1, 1, 1));
-  float w112 = voxel(c + ivec3(2, 1, 1));
-  float w120 = voxel(c + ivec3(0, 2, 1));
-  float w121 = voxel(c + ivec3(1, 2, 1));
-  float w200 = voxel(c + ivec3(0, 0, 2));
-  float w201 = voxel(c + ivec3(1, 0, 2));
-  float w210 = voxel(c + ivec3(0, 1, 2));
-  float w211 = voxel(c + ivec3(1, 1, 2));
-  precise vec3 g;
-  g.x = (trilerp(w001, w002, w011, w012, w101, w102, w111, w112, f) -
-         trilerp(w00m1, w000, w01m1, w010, w10m1, w100, w11m1, w110, f)) * 0.5;
-  g.y = (trilerp(w010, w011, w020, w021, w110, w111, w120, w121, f) -
-         trilerp(w0m10, w0m11, w000, w001, w1m10, w1m11, w100, w101, f)) * 0.5;
-  g.z = (trilerp(w100, w101, w110, w111, w200, w201, w210, w211, f) -
-         trilerp(wm100, wm101, wm110, wm111, w000, w001, w010, w011, f)) * 0.5;
-  precise vec3 gw = g * vec3(P.inv_sp_x, P.inv_sp_y, P.inv_sp_z) * (-P.inside_sign);
-  precise float l2 = gw.x * gw.x + gw.y * gw.y + gw.z * gw.z;
-  if (!(l2 > 0.0)) return vec3(0.0);
-  return dot_safe_normalize(gw);
-}
-
-// surface_normal() at a hit p whose cell lies in refine()'s block (the hit is in the bracket):
-// the same 32 voxels, 20 of them picked out of the block by selects and only the 12 of the
-// three faces outside it loaded (per axis, the face at -1 or +2 from p's cell, whichever the
-// block lacks). Same values, same operations: the same normal as surface_normal(p).
+// p's fractions of the cells one voxel up and down (= field(p +- e_a) but for rounding;
+// the CPU reference's surface_normal). The six share 32 voxels around p's cell; p's cell
+// lies in refine()'s block (the hit is in the bracket), so 20 of them are picked out of the
+// block by selects and only the 12 of the three faces outside it are loaded (per axis, the
+// face at -1 or +2 from p's cell, whichever the block lacks).
 vec3 surface_normal_block(vec3 p) {
   vec3 fl = floor(p);
   ivec3 c = ivec3(fl);

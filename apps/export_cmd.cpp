@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <sstream>
 #include <iostream>
 #include <memory>
 
@@ -77,9 +78,26 @@ void print_mesh(const MeshStats& s, std::ostream& out) {
         << " edges in 3 or more (of " << s.edges << ")\n";
 }
 
+/// "(N bytes, S s)" for a regular file; a device, FIFO or "-" has no size to report.
+std::string written_text(const std::string& path, double seconds) {
+  std::error_code ec;
+  const bool regular = path != "-" && std::filesystem::is_regular_file(path, ec);
+  std::ostringstream s;
+  if (regular) s << "(" << std::filesystem::file_size(path, ec) << " bytes, " << seconds << " s)";
+  else s << "(written as a stream, " << seconds << " s)";
+  return s.str();
+}
+
 }  // namespace
 
-int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
+int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& err) {
+  // An output to standard output ("-") takes stdout for its bytes: the figures go to stderr.
+  const int to_stdout = int(o.vdb == "-") + int(o.stl == "-") + int(o.obj == "-") + int(o.ply == "-");
+  if (to_stdout > 1) {
+    err << "isotouch export: only one output can be '-' (standard output)\n";
+    return 2;
+  }
+  std::ostream& out = to_stdout ? err : out_stream;
   if (o.volume.empty() == o.scene.empty()) {
     err << "isotouch export: give a VOLUME file or --scene SCENE, one of them (see --help)\n";
     return 2;
@@ -124,8 +142,7 @@ int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << o.vdb << "\n";
     save_vdb(v, o.vdb, SaveVdbOptions{.grid_name = "volume", .iso = iso, .source_path = v.path});
-    out << "wrote       " << o.vdb << " (" << std::filesystem::file_size(o.vdb) << " bytes, " << seconds_since(t)
-        << " s)\n";
+    out << "wrote       " << o.vdb << " " << written_text(o.vdb, seconds_since(t)) << "\n";
   }
   if (!mesh_wanted) return 0;
 
@@ -147,8 +164,7 @@ int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << *path << "\n";
     write(mesh, *path);
-    out << "wrote       " << *path << " (" << std::filesystem::file_size(*path) << " bytes, " << seconds_since(t)
-        << " s)\n";
+    out << "wrote       " << *path << " " << written_text(*path, seconds_since(t)) << "\n";
   }
   if (!st.closed()) {
     err << "isotouch export: the mesh is not closed (see above); written anyway\n";
@@ -168,7 +184,8 @@ Subcommand add_export_command(CLI::App& cli) {
       "VOLUME: .mhd/.mha, .nrrd/.nhdr, .nii/.nii.gz or .vdb (a FloatGrid; a level set means tau 0, inside below).\n"
       "The .vdb keeps every voxel exactly (transform = grid frame [m], direction + isosurface as metadata).\n"
       "Meshes (OpenVDB volumeToMesh) are in the physical frame [m], triangles counter-clockwise seen from\n"
-      "outside. Every file is written whole or not at all (temp file, fsync, rename).\n"
+      "outside. Every file is written whole or not at all (temp file, fsync, rename); a device, FIFO or '-'\n"
+      "(standard output, the figures then go to stderr) is written as a stream; a folder is refused.\n"
       "Exit: 0 done, 1 error (names the file), 2 bad usage, 3 mesh written but not closed.\n"
       "Example: isotouch export data/ct-head-headsq/headsq_64x64x93_int16.mhd --iso 1150 --inside above "
       "--vdb head.vdb --stl head.stl");

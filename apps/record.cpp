@@ -2,6 +2,8 @@
 // bit for bit with every problem named (file, line, record, field, value). See record.h.
 #include "record.h"
 
+#include "output_file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -305,43 +307,13 @@ void parse_end(const json& j, const Recording& r, const Where& w) {
 
 std::string os_error(const std::string& path, const char* what) { return path + ": " + what + ": " + std::strerror(errno); }
 
-/// Writes `content` to a temp file beside `path`, fsyncs it, renames it over `path` and
-/// fsyncs the folder: a crash leaves the old file or the new one.
+/// Writes `content` through the one output writer (io/output_file.h): a crash leaves the
+/// old file or the new one; a device, FIFO or "-" gets the text as a stream.
 void write_atomically(const std::string& path, const std::string& content) {
-  namespace fs = std::filesystem;
-  const fs::path p(path);
-  const std::string dir = p.parent_path().empty() ? std::string(".") : p.parent_path().string();
-  std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX";
-  const int fd = ::mkstemp(tmp.data());
-  if (fd < 0) throw RecordingError(os_error(path, "cannot create a temp file beside it"));
-  auto fail = [&](const char* what) {
-    const std::string msg = os_error(tmp, what);
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw RecordingError(path + ": not saved (the old file, if any, is untouched): " + msg);
-  };
-  for (std::size_t done = 0; done < content.size();) {
-    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) fail("write failed");
-    done += std::size_t(n);
-  }
-  if (::fchmod(fd, 0644) != 0) fail("chmod failed");
-  if (::fsync(fd) != 0) fail("fsync failed");
-  if (::close(fd) != 0) {
-    const std::string msg = os_error(tmp, "close failed");
-    ::unlink(tmp.c_str());
-    throw RecordingError(path + ": not saved: " + msg);
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string msg = os_error(path, "cannot rename the temp file into place");
-    ::unlink(tmp.c_str());
-    throw RecordingError(msg);
-  }
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (dfd >= 0) {  // the rename's durability; the file is whole either way
-    (void)::fsync(dfd);
-    ::close(dfd);
+  try {
+    io::write_output(path, content);
+  } catch (const io::OutputError& e) {
+    throw RecordingError(path + ": not saved (the old file, if any, is untouched): " + e.what());
   }
 }
 

@@ -18,6 +18,7 @@
 #include <sstream>
 
 #include "files.h"
+#include "output_file.h"
 #include "run_job.h"
 #include "shapes.h"
 #include "synthetic.h"
@@ -67,21 +68,20 @@ void write_png(const std::string& path, int width, int height, const std::vector
   std::vector<unsigned char> rgb(rgba.size() * 3);
   for (std::size_t i = 0; i < rgba.size(); ++i)
     for (int c = 0; c < 3; ++c) rgb[3 * i + std::size_t(c)] = static_cast<unsigned char>((rgba[i] >> (8 * c)) & 0xffu);
-  const fs::path p(path);
-  if (p.has_parent_path()) fs::create_directories(p.parent_path());
-  const std::string tmp = temp_name(path);
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw std::runtime_error(path + ": cannot write (" + tmp + "): " + std::strerror(errno));
-  const std::string err = png_write_rows(f, width, height, rgb.data());
-  const bool closed = std::fclose(f) == 0;
-  if (!err.empty() || !closed) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": " + (err.empty() ? std::string("close failed: ") + std::strerror(errno) : err));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": rename from " + tmp + " failed: " + why);
+  const fs::path parent = fs::path(path).parent_path();
+  std::error_code ec;
+  if (!parent.empty() && path != "-") fs::create_directories(parent, ec);
+  try {
+    io::write_output(path, [&](const std::string& file) {
+      std::FILE* f = std::fopen(file.c_str(), "wb");
+      if (!f) throw std::runtime_error(path + ": cannot write (" + file + "): " + std::strerror(errno));
+      const std::string err = png_write_rows(f, width, height, rgb.data());
+      const bool closed = std::fclose(f) == 0;
+      if (!err.empty() || !closed)
+        throw std::runtime_error(path + ": " + (err.empty() ? std::string("close failed: ") + std::strerror(errno) : err));
+    });
+  } catch (const io::OutputError& e) {
+    throw std::runtime_error(e.what());
   }
 }
 

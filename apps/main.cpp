@@ -14,6 +14,7 @@
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
 #include "run_job.h"
+#include "stop_signal.h"
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
@@ -119,7 +120,15 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
                 << " kg, hand " << scene.device.hand_stiffness_n_per_m << " N/m and "
                 << scene.device.hand_damping_n_s_per_m << " N s/m)\n";
   }
-  const app::RunMetrics m = app::run_scene(scene, opt, std::cout);
+  app::install_stop_handlers();  // SIGINT/SIGTERM: stop at the next safe point, folder marked
+  app::RunMetrics m;
+  try {
+    m = app::run_scene(scene, opt, std::cout);
+  } catch (const app::Interrupted& e) {
+    std::cerr << "\nisotouch run: " << e.what() << "; " << (fs::path(out_dir) / "summary.json").string()
+              << " says \"status\": \"interrupted\" and lists the files that were finished\n";
+    return 128 + e.signal;
+  }
   const auto& hp = scene.hri;
   const double limit = hp.force_limit_n;
   std::cout << std::setprecision(4)

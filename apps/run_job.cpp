@@ -1,5 +1,10 @@
 #include "run_job.h"
 
+#include <csignal>
+
+#include "run_folder.h"
+#include "stop_signal.h"
+
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -1021,8 +1026,11 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   return s;
 }
 
-RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+namespace {
+RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  throw_if_stop_requested("start");
   SceneSetup setup = setup_scene(scene, opt, log);
+  throw_if_stop_requested("engine set-up (samples computed, servo not started)");
   RunMetrics& m = setup.metrics;
   const engine::Volume& vol = setup.volume;
   engine::VulkanContext& vk = *setup.vk;
@@ -1048,6 +1056,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
   int last_quarter = -1;
   auto progress = [&](long k, long total) {
+    throw_if_stop_requested("servo simulation, tick " + std::to_string(k) + " of " + std::to_string(total));
     if (!opt.progress) return;
     const int pct = int(100 * k / total);
     if (tty) {
@@ -1179,12 +1188,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
       << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
 
-  // 6. Outputs, each written whole or not at all.
+  // 6. Outputs, each written whole or not at all (RunFolder has made and locked the folder).
   const std::string dir = opt.out_dir;
-  fs::create_directories(dir);
+  throw_if_stop_requested("outputs (servo finished, no file written yet)");
   if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
   if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
   else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+  throw_if_stop_requested("outputs (trace and plots written)");
   if (scene.draw_plots) {
     // The run's picture (ray-cast on the same Vulkan device); never throws.
     // With edits the path is thinned (thin_path): the same picture serves as before.png.
@@ -1195,9 +1205,12 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
   }
+  throw_if_stop_requested("outputs (trace, plots and picture written)");
   if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
+  throw_if_stop_requested("outputs (all but summary.json and report.md written)");
 
   nlohmann::ordered_json j;
+  j["status"] = "complete";
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
   j["volume"] = {{"path", m.volume_path},
                  {"dims", m.dims},
@@ -1390,6 +1403,19 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
   if (!opt.record_path.empty()) write_recording(scene, setup, trace, opt.record_path);
   return m;
+}
+}  // namespace
+
+RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  RunFolder folder(opt.out_dir, scene.file, scene.name);
+  try {
+    return run_scene_steps(scene, opt, log);
+  } catch (const Interrupted& e) {
+    if (folder.mark_interrupted(e.stage, e.signal))
+      log << "\ninterrupted (" << (e.signal == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << e.stage
+          << ": " << (fs::path(opt.out_dir) / "summary.json").string() << " says \"status\": \"interrupted\"\n";
+    throw;
+  }
 }
 
 }  // namespace isotouch::app

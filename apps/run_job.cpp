@@ -2,6 +2,7 @@
 
 #include <csignal>
 
+#include "drill_figure.h"
 #include "run_folder.h"
 #include "stop_signal.h"
 
@@ -802,6 +803,11 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     } catch (const std::exception& x) {
       e.sections_note = x.what();
     }
+    const DrillSite site{setup.script.contact_point_m, setup.script.contact_normal, scene.edits.brush.radius_mm * 1e-3};
+    e.site_figure_note = draw_drill_figure(setup.vk.get(), setup.volume, after, setup.live.iso, site,
+                                           (fs::path(dir) / "drill.png").string());
+    e.site_figure_drawn = e.site_figure_note.empty();
+    if (!e.site_figure_drawn) log << "edits    drill.png not drawn: " << e.site_figure_note << "\n";
     e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
     if (scene.write_trace) {
       std::string note;
@@ -847,7 +853,13 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"vdb", or_null(!e.vdb_file.empty(), e.vdb_file)},
           {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
           {"files_note", e.files_note},
-          {"pictures", e.before_after_drawn ? nlohmann::ordered_json::array({"before.png", "after.png"}) : nlohmann::ordered_json::array()},
+          {"pictures", [&e] {
+             nlohmann::ordered_json a = nlohmann::ordered_json::array();
+             if (e.site_figure_drawn) a.push_back("drill.png");
+             if (e.before_after_drawn) a.insert(a.end(), {"before.png", "after.png"});
+             if (e.sections_drawn) a.insert(a.end(), {"section_before.png", "section_after.png"});
+             return a;
+           }()},
           {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
           {"csv", "edits.csv"}};
 }
@@ -876,6 +888,13 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | measured on the contact ticks before the first edit; " << e.contact_ticks_after_edit
      << " contact ticks read an edited snapshot and are left out |\n\n";
+  if (e.site_figure_drawn)
+    md << "![before (left) and after (right): the site from outside, ringed in orange (2 brush radii), zoomed "
+          "in the framed inset](drill.png)\n\nBefore (left) and after (right), seen from outside along the surface "
+          "normal at the first contact; the orange ring (radius 2 brush radii) marks the site, the framed inset shows "
+          "it up close.\n\n";
+  else if (!e.site_figure_note.empty())
+    md << "drill.png: not drawn (" << e.site_figure_note << ").\n\n";
   if (e.plot_drawn) md << "![force, depth and removed volume against time](edits.png)\n\n";
   if (e.before_after_drawn)
     md << "| before | after |\n|---|---|\n| ![before](before.png) | ![after](after.png) |\n\n";
@@ -904,8 +923,9 @@ void write_recording(const Scene& scene, const SceneSetup& setup, const std::vec
   text << in.rdbuf();
   rec.scene_text = text.str();
   rec.rate_hz = setup.hri.rate_hz;
+  rec.volume_crc32 = volume_crc32(setup.volume);
   rec.ticks.reserve(trace.size());
-  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n});
+  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n, r.vhip_m, r.version, r.fault != 0});
   if (setup.session) rec.edits = setup.session->log();
   save_recording(path, rec);
 }
@@ -1101,6 +1121,13 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     m.fault_ticks += r.fault;
     const servo::TraceRow* last = prev;
     prev = &r;
+    const bool stroking = r.t_s >= script.t_stroke && r.t_s < script.t_lift;
+    m.stroke_ticks += stroking;
+    m.stroke_contact_ticks += stroking && r.contact;
+    if (r.t_s >= script.t_lift && r.contact) {
+      ++m.lift_contact_ticks;
+      m.lift_max_force_n = std::max(m.lift_max_force_n, servo::norm(r.force_n));
+    }
     if (!r.contact) continue;
     ++m.contact_ticks;
     const double f = servo::norm(r.force_n);
@@ -1294,7 +1321,14 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                                                        "where the field is flat; shown for comparison only"}}}};
   j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
                  {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
-                 {"duration_s", script.duration_s}};
+                 {"duration_s", script.duration_s},
+                 {"phases_s", {{"press", script.t_press}, {"stroke", script.t_stroke}, {"lift", script.t_lift}}},
+                 {"stroke_ticks", m.stroke_ticks},
+                 {"stroke_contact_ticks", m.stroke_contact_ticks},
+                 {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
+                                                            : nlohmann::ordered_json(nullptr)},
+                 {"lift_contact_ticks", m.lift_contact_ticks},
+                 {"lift_max_force_n", m.lift_max_force_n}};
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
@@ -1340,6 +1374,11 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << " plane updates, " << m.saturated_ticks << " saturated, " << m.fault_ticks << " faults) |\n"
      << "| tick wall time | median " << fmt(m.tick_ns_median) << " ns, p99 " << fmt(m.tick_ns_p99)
      << " ns, max " << fmt(m.tick_ns_max) << " ns |\n"
+     << "| stroke | " << (m.stroke_ticks ? std::to_string(m.stroke_contact_ticks) + " of " + std::to_string(m.stroke_ticks) +
+                              " stroke ticks in contact (" + fmt(100.0 * double(m.stroke_contact_ticks) / double(m.stroke_ticks), 3) + " %)"
+                        : std::string("no stroke in the script")) << " |\n"
+     << "| lift-off | " << m.lift_contact_ticks << " contact ticks while the hand pulls the probe out, largest |F| "
+     << fmt(m.lift_max_force_n, 4) << " N |\n"
      << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "

@@ -75,6 +75,9 @@ struct EditFigures {
   /// containing it, seen from the side), where a hole through a thin wall shows.
   bool sections_drawn = false;
   std::string sections_note;       ///< why they were not drawn
+  /// drill.png: before | after side by side, a ring marker at the site, a zoomed inset.
+  bool site_figure_drawn = false;
+  std::string site_figure_note;    ///< why it was not drawn
   bool plot_drawn = false;         ///< edits.png written
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };
@@ -142,6 +145,13 @@ struct RunMetrics {
   /// Angle [deg] between the force directions of two consecutive contact ticks, RMS and max:
   /// how rough the rendered surface feels (noise in the data shows here).
   double force_dir_step_rms_deg = 0, force_dir_step_max_deg = 0;
+  /// Ticks of the stroke phase (script t_stroke <= t < t_lift) and how many of them were in
+  /// contact: a stroke that stays on the surface it starts on has a share near 1.
+  long stroke_ticks = 0, stroke_contact_ticks = 0;
+  /// The lift-off (t >= script t_lift): contact ticks and the largest |F| [N] while the hand
+  /// pulls the probe back out (a clean retraction has few and small).
+  long lift_contact_ticks = 0;
+  double lift_max_force_n = 0;
   /// With filters in the pass list: distance [m] of the VHIP from the isosurface of the
   /// unfiltered data (gradient only), RMS and max over the contact ticks with a surface
   /// found: what smoothing moves the felt surface away from the data. has_unfiltered false

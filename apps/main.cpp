@@ -15,6 +15,7 @@
 #include "gradient_pass.h"
 #include "run_job.h"
 #include "stop_signal.h"
+#include "cli_checks.h"
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
@@ -375,7 +376,7 @@ int main(int argc, char** argv) {
       "servo-rt", "Real-time servo thread at 1, 4 and 10 kHz while the engine thread publishes: p50/p99/p99.9 "
                   "of the period error and missed deadlines");
   app::ServoRtOptions rt_opt;
-  rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(CLI::PositiveNumber);
+  rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(app::positive_number());
   rt->add_flag("--fifo,!--no-fifo", rt_opt.sched_fifo,
                "SCHED_FIFO for the servo thread (default on; needs CAP_SYS_NICE, refused -> a note)");
   rt->add_flag("--pin,!--no-pin", rt_opt.pin_cpu,
@@ -388,7 +389,7 @@ int main(int argc, char** argv) {
                 "and Blezek-Robb on sphere, knot, head and lung, next to the paper's figures");
   app::Table1Options t1_opt;
   t1->add_option("--repetitions", t1_opt.repetitions, "Timed replays per stroke (median)")
-      ->capture_default_str()->check(CLI::PositiveNumber);
+      ->capture_default_str()->check(app::positive_number());
   t1->add_option("--csv", t1_opt.out_csv, "Also write the table to this CSV file");
   // Command modules that keep their options to themselves (apps/subcommand.h).
   const std::vector<app::Subcommand> modules = {app::add_render_command(cli), app::add_export_command(cli),

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cpu_gradient.h"
+#include "vdb_io.h"
 #include "gradient_pass.h"
 #include "run_job.h"
 #include "stop_signal.h"
@@ -196,7 +197,7 @@ GradientHealth gradient_health(const engine::Volume& vol, const servo::SampleFie
 }
 
 int cmd_check(const std::string& path, const std::string& device, double slab_mib) {
-  const engine::Volume vol = engine::load_volume(path);
+  const engine::Volume vol = app::load_any_volume(path);
   engine::ContextOptions co;
   co.device = device;
   auto ctx = engine::VulkanContext::create(co);

@@ -1,4 +1,5 @@
 #include "render_cmd.h"
+#include "vdb_io.h"
 #include "stats.h"
 #include "bench_cmd.h"
 
@@ -89,7 +90,7 @@ void write_png(const std::string& path, int width, int height, const std::vector
 // ---- volumes, fields, pictures ---------------------------------------------------------
 
 engine::Volume load_scene_volume(const Scene& scene) {
-  if (!scene.volume_path.empty()) return engine::load_volume(scene.volume_path);
+  if (!scene.volume_path.empty()) return load_any_volume(scene.volume_path);
   if (scene.synthetic.kind == "sphere")
     return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
   return std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);

@@ -22,7 +22,7 @@ const std::vector<std::string>& run_output_files() {
   static const std::vector<std::string> files = {
       "summary.json", "report.md",  "trace.csv",       "plots.gp",       "force_depth.png", "tick_time.png",
       "surface.png",  "edits.csv",  "edits.gp",        "edits.png",      "before.png",      "after.png",
-      "section_before.png", "section_after.png", "drill.png", "drilled.vdb", "drilled.stl"};
+      "section_before.png", "section_after.png", "drill.png", "drilled.vdb", "drilled.nrrd", "drilled.stl"};
   return files;
 }
 

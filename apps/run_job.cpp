@@ -3,6 +3,7 @@
 #include <csignal>
 
 #include "drill_figure.h"
+#include "volume_write.h"
 #include "run_folder.h"
 #include "stop_signal.h"
 
@@ -774,6 +775,10 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       save_vdb(after, (fs::path(dir) / "drilled.vdb").string(), vo);
       e.vdb_file = "drilled.vdb";
     }
+    if (scene.edits.write_nrrd) {
+      engine::save_volume_itk(after, (fs::path(dir) / "drilled.nrrd").string());
+      e.nrrd_file = "drilled.nrrd";
+    }
     if (scene.edits.write_stl) {
       write_stl_binary(extract_mesh(after, setup.live.iso), (fs::path(dir) / "drilled.stl").string());
       e.stl_file = "drilled.stl";
@@ -851,6 +856,7 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"depth_method", "distance below the initial contact point along the inward surface normal there (the press direction)"},
           {"contact_ticks_after_edit", e.contact_ticks_after_edit},
           {"vdb", or_null(!e.vdb_file.empty(), e.vdb_file)},
+          {"nrrd", or_null(!e.nrrd_file.empty(), e.nrrd_file)},
           {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
           {"files_note", e.files_note},
           {"pictures", [&e] {
@@ -908,6 +914,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
     md << "Pictures: not drawn (" << e.before_after_note << ").\n\n";
   md << "Files: `edits.csv` (one row per event)"
      << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
+     << (e.nrrd_file.empty() ? std::string() : ", `" + e.nrrd_file + "` (the same as NRRD, for 3D Slicer)")
      << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL)")
      << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
   return md.str();
@@ -970,7 +977,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   engine::Volume& vol = s.volume;
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
-    vol = engine::load_volume(scene.volume_path);
+    vol = load_any_volume(scene.volume_path);
   } else if (scene.synthetic.kind == "sphere") {
     vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
   } else {

@@ -68,7 +68,7 @@ struct EditFigures {
   /// Depth along the press direction (-contact normal) below the initial contact point [m]:
   /// deepest HIP and VHIP of the run.
   double max_hip_depth_m = 0, max_vhip_depth_m = 0;
-  std::string vdb_file, stl_file;  ///< drilled.vdb / drilled.stl as written ("" if not)
+  std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
   bool before_after_drawn = false; ///< before.png and after.png written
   /// section_before.png / section_after.png: cut open through the press axis (a clip plane

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -583,6 +584,13 @@ void write_test_vdb(const std::string& path, TestVdb kind) {
 #else
   (void)kind;
 #endif
+}
+
+engine::Volume load_any_volume(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".vdb") return load_vdb(path).volume;
+  return engine::load_volume(path);
 }
 
 }  // namespace isotouch::app

@@ -90,9 +90,19 @@ std::string folder_of(const std::string& path) {
   return p.empty() ? std::string(".") : p.string();
 }
 
-/// A fresh empty file from `tmpl` (ending in XXXXXX), readable like an ordinary output.
-std::string make_temp(std::string tmpl, const std::string& for_path) {
-  const int fd = ::mkstemp(tmpl.data());
+/// The extension a writer may pick its format by (".nii.gz", ".vdb", ...; "" for none):
+/// temp files end in it too.
+std::string format_suffix(const std::string& path) {
+  const fs::path name = fs::path(path).filename();
+  std::string ext = name.extension().string();
+  if (ext == ".gz") ext = name.stem().extension().string() + ext;
+  return ext.size() <= 16 ? ext : std::string();
+}
+
+/// A fresh empty file from `tmpl` (XXXXXX followed by `suffix`), readable like an ordinary output.
+std::string make_temp(std::string tmpl, const std::string& for_path, const std::string& suffix = "") {
+  tmpl += suffix;
+  const int fd = ::mkstemps(tmpl.data(), int(suffix.size()));
   if (fd < 0) throw OutputError(os_error(for_path, "cannot create a temp file '" + tmpl + "'", errno));
   ::fchmod(fd, 0644);  // mkstemp makes 0600; outputs are ordinary readable files
   ::close(fd);
@@ -103,14 +113,15 @@ std::string temp_beside(const std::string& resolved) {
   const std::string dir = folder_of(resolved);
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw OutputError(resolved + ": cannot write: folder '" + dir + "' does not exist");
-  return make_temp(resolved + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX", resolved);
+  return make_temp(resolved + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX", resolved, format_suffix(resolved));
 }
 
 std::string temp_elsewhere(const std::string& for_path) {
   std::error_code ec;
   fs::path dir = fs::temp_directory_path(ec);
   if (ec) dir = "/tmp";
-  return make_temp((dir / ("isotouch-output-" + std::to_string(::getpid()) + "-XXXXXX")).string(), for_path);
+  return make_temp((dir / ("isotouch-output-" + std::to_string(::getpid()) + "-XXXXXX")).string(), for_path,
+                   format_suffix(for_path));
 }
 
 /// Renames the finished temp `tmp` (in the target's folder) over `t.resolved`.

@@ -37,7 +37,8 @@ OutputTarget classify_output(const std::string& path);
 
 /// Writes `path` whole or not at all. `fill(file)` writes the content into `file`, a fresh
 /// empty file made for it (beside the final target when that target is replaced, in the
-/// temp folder when it is a stream); on success the file is renamed over the target or
+/// temp folder when it is a stream; its name ends in the target's extension, ".nii.gz"
+/// included, for writers that choose the format by the name); on success the file is renamed over the target or
 /// copied into the stream. When `fill` throws, or any step fails, the temp file is removed
 /// and the old target is untouched (a stream may have received a part). The folder of a
 /// replaced target must exist (a missing one is an error naming it, not created).

@@ -510,11 +510,19 @@ class EditDriver {
       }
     }
     std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
+    const double end_s = setup.script.duration_s;
+    for (std::size_t i = 0; i < e.timeline.size(); ++i)
+      if (e.timeline[i].t_s > end_s) {
+        ++figures.timeline_after_end;
+        note("edits.timeline[" + std::to_string(i) + "] (" + e.timeline[i].kind + " at t = " + fmt(e.timeline[i].t_s, 4) +
+             " s) is after the script's end (" + fmt(end_s, 4) + " s): never applied");
+      }
   }
 
   /// The TickHook.
   void operator()(long k, servo::TraceRow& row) {
     const double t = double(k) / scene_.hri.rate_hz;
+    contact_seen_ = contact_seen_ || row.contact;
     // What tick k read (before this tick's edits): the release check's inside test.
     hip_inside.push_back(iso_.contains(core::FieldView(*setup_.session->current()).value(row.hip_m)) ? 1 : 0);
     for (; next_ < plan_.size() && plan_[next_].tick <= k; ++next_) {
@@ -526,6 +534,11 @@ class EditDriver {
         case Plan::kBegin: open(k, t, "timeline"); break;
         case Plan::kEnd: close(k, t, "timeline"); break;
         case Plan::kApply: {
+          if (te.at_vhip && !contact_seen_ && !row.contact) {
+            if (figures.vhip_before_contact++ == 0)
+              note("t = " + fmt(t, 4) + " s: edits.timeline[" + std::to_string(p.entry) + "] (" + te.kind +
+                   " at \"vhip\") came before any contact: applied at the HIP in free space");
+          }
           const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
           const double f = te.brush.force_n >= 0 ? te.brush.force_n : servo::norm(row.force_n);
           apply(k, t, EditEvent::Kind::kBrush, make_brush(te.brush, targets_, c, dt_, f), "timeline");
@@ -594,9 +607,32 @@ class EditDriver {
     }
     if (kind == EditEvent::Kind::kUndo) ++figures.undos;
     if (kind == EditEvent::Kind::kRedo) ++figures.redos;
+    said_if_nothing(kind, b, r.outcome, t);
     if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
     r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
     rows.push_back(std::move(r));
+  }
+
+  /// One line per kind of edit that did nothing (the first time), into figures.notes.
+  void note(const std::string& s) { figures.notes.push_back(s); }
+  void said_if_nothing(EditEvent::Kind kind, const engine::Brush& b, const EditOutcome& o, double t) {
+    const bool undo = kind == EditEvent::Kind::kUndo, redo = kind == EditEvent::Kind::kRedo;
+    if ((undo || redo) && o.restored.empty()) {
+      long& n = undo ? figures.undo_nothing : figures.redo_nothing;
+      if (n++ == 0) note("t = " + fmt(t, 4) + " s: " + (undo ? "undo with nothing to undo" : "redo with nothing to redo"));
+    }
+    if (kind != EditEvent::Kind::kBrush || !o.brush.dirty.empty()) return;
+    ++figures.brushes_changing_nothing;
+    const auto& g = setup_.volume.grid;
+    const Vec3 lo = g.to_world(Vec3{-0.5, -0.5, -0.5}),
+               hi = g.to_world(Vec3{g.dims[0] - 0.5, g.dims[1] - 0.5, g.dims[2] - 0.5});
+    const Vec3& c = b.centre_m;
+    const double r = b.radius_m;
+    const bool outside = c.x + r < lo.x || c.y + r < lo.y || c.z + r < lo.z || c.x - r > hi.x || c.y - r > hi.y || c.z - r > hi.z;
+    if (outside && figures.brushes_outside++ == 0)
+      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush entirely outside the volume changed nothing");
+    else if (!outside && figures.brushes_changing_nothing - figures.brushes_outside == 1)
+      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush changed no voxel (nothing to remove or add there)");
   }
 
   const Scene& scene_;
@@ -608,7 +644,7 @@ class EditDriver {
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
-  bool button_ = false;
+  bool button_ = false, contact_seen_ = false;
   long press_tick_ = 0;
   int open_ = 0;
 };
@@ -760,10 +796,11 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
       << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
-      << " ms\n         removed " << fmt(e.removed_mm3, 5) << " mm^3 (" << e.inside_voxels_before - e.inside_voxels_after
-      << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
+      << " ms\n         " << (e.removed_mm3 < 0 ? "added " : "removed ") << fmt(std::abs(e.removed_mm3), 5) << " mm^3 ("
+      << std::abs(e.inside_voxels_before - e.inside_voxels_after) << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
       << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
       << " B\n";
+  for (const std::string& n : e.notes) log << "edits    note: " << n << "\n";
 
   write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
   // The edited volume and its isosurface; a failure is said, never fatal.
@@ -848,7 +885,15 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"history_bytes", e.history_bytes},
           {"history_limit_bytes", e.history_limit_bytes},
           {"history_dropped_strokes", e.history_dropped},
-          {"removed_mm3", e.removed_mm3},
+          {"removed_mm3", std::max(0.0, e.removed_mm3)},
+          {"added_mm3", std::max(0.0, -e.removed_mm3)},
+          {"did_nothing", {{"undo_with_nothing_to_undo", e.undo_nothing},
+                           {"redo_with_nothing_to_redo", e.redo_nothing},
+                           {"brushes_changing_no_voxel", e.brushes_changing_nothing},
+                           {"of_which_outside_the_volume", e.brushes_outside},
+                           {"vhip_brushes_before_contact", e.vhip_before_contact},
+                           {"timeline_entries_after_the_end", e.timeline_after_end},
+                           {"notes", e.notes}}},
           {"inside_voxels", {{"before", e.inside_voxels_before}, {"after", e.inside_voxels_after}}},
           {"removed_method", "(inside voxels of the raw volume before - after) x voxel volume; inside = the scene's isovalue and inside, NaN outside"},
           {"max_hip_depth_m", e.max_hip_depth_m},
@@ -886,14 +931,20 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << "| update time | median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
      << " ms (EditSession::apply: brush, live field update, publish; wall clock, this machine); brush median "
      << fmt(e.brush_ms_median, 4) << " ms |\n"
-     << "| removed volume | **" << fmt(e.removed_mm3, 5) << " mm^3** (" << e.inside_voxels_before << " - "
-     << e.inside_voxels_after << " inside voxels, times the voxel volume) |\n"
+     << (e.removed_mm3 < 0 ? "| added volume | **" : "| removed volume | **") << fmt(std::abs(e.removed_mm3), 5)
+     << " mm^3** (" << e.inside_voxels_before << " inside voxels before, " << e.inside_voxels_after
+     << " after, times the voxel volume) |\n"
      << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
      << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
      << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | measured on the contact ticks before the first edit; " << e.contact_ticks_after_edit
      << " contact ticks read an edited snapshot and are left out |\n\n";
+  if (!e.notes.empty()) {
+    md << "Edits that did nothing:\n\n";
+    for (const std::string& n : e.notes) md << "- " << n << "\n";
+    md << "\n";
+  }
   if (e.site_figure_drawn)
     md << "![before (left) and after (right): the site from outside, ringed in orange (2 brush radii), zoomed "
           "in the framed inset](drill.png)\n\nBefore (left) and after (right), seen from outside along the surface "

@@ -48,6 +48,13 @@ struct EditFigures {
   long brushes = 0;                ///< brush applications
   long timeline_brushes = 0, button_brushes = 0;  ///< of which from the timeline / the button
   long undos = 0, redos = 0;
+  /// Edits that did nothing, and why: undo / redo with nothing to undo or redo, brushes that
+  /// changed no voxel (of which entirely outside the volume, and "vhip" brushes before any
+  /// contact), timeline entries after the script's end (never applied). `notes` says each
+  /// kind once with its first time, for the console, summary.json and the report.
+  long undo_nothing = 0, redo_nothing = 0, brushes_changing_nothing = 0, brushes_outside = 0,
+       vhip_before_contact = 0, timeline_after_end = 0;
+  std::vector<std::string> notes;
   long publications = 0;           ///< snapshots published (samples changed)
   std::uint64_t last_version = 1;  ///< SampleField::version of the last snapshot
   long dirty_bricks = 0;           ///< sum over applications of the bricks whose voxels changed
@@ -62,7 +69,8 @@ struct EditFigures {
   /// error, which is measured against the unedited volume's dense samples.
   long contact_ticks_after_edit = 0;
   /// Inside voxels before minus after, times the voxel volume [mm^3] (the scene's isovalue
-  /// and inside, NaN counts as outside): what the edits removed (negative: added).
+  /// and inside, NaN counts as outside): what the edits removed (negative: added; the
+  /// report and summary.json say "added" then, summary.json's removed_mm3 / added_mm3 >= 0).
   double removed_mm3 = 0;
   long inside_voxels_before = 0, inside_voxels_after = 0;
   /// Depth along the press direction (-contact normal) below the initial contact point [m]:

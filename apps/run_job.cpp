@@ -632,7 +632,11 @@ class EditDriver {
     if (outside && figures.brushes_outside++ == 0)
       note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush entirely outside the volume changed nothing");
     else if (!outside && figures.brushes_changing_nothing - figures.brushes_outside == 1)
-      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush changed no voxel (nothing to remove or add there)");
+      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush changed no voxel (" +
+           (b.kind == engine::BrushKind::kDrill && !(b.force_n > b.force_threshold_n)
+                ? "the force, " + fmt(b.force_n, 3) + " N, was not above the drill's threshold of " + fmt(b.force_threshold_n, 3) + " N"
+                : std::string("nothing to remove or add there")) +
+           "); " + "later ones are counted in summary.json edits.did_nothing");
   }
 
   const Scene& scene_;

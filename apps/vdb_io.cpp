@@ -175,7 +175,6 @@ std::string list_grids(const openvdb::GridPtrVec& grids) {
   return s.empty() ? "none" : s;
 }
 
-int floor8(int v) { return v >= 0 ? v / 8 * 8 : -((-v + 7) / 8 * 8); }
 
 template <typename MetaT>
 typename MetaT::ConstPtr meta(const openvdb::GridBase& g, const char* key) {
@@ -226,39 +225,50 @@ LoadedVdb load_vdb(const std::string& path, const std::string& grid_name, std::u
   openvdb::Vec3d scale, trans;
   grid_frame(*grid, path, scale, trans);
 
-  // The box: save_vdb's own (metadata), else the active bbox + margin, 8-aligned.
-  openvdb::CoordBBox box;
+  // The box: save_vdb's own (metadata), else the active bbox + margin, 8-aligned. Corners
+  // and extents are computed in 64 bits: a crafted file's box may span 2^31 voxels, whose
+  // int32 extent (and the voxel count from it) would wrap.
+  std::array<std::int64_t, 3> lo{}, hi{};
   const auto box_min = meta<openvdb::Vec3IMetadata>(*grid, kMetaBoxMin);
   const auto box_dims = meta<openvdb::Vec3IMetadata>(*grid, kMetaDims);
   const openvdb::CoordBBox active = grid->evalActiveVoxelBoundingBox();
+  const auto inside_int32 = [](std::int64_t v) { return v >= INT32_MIN && v <= INT32_MAX; };
   if (box_min && box_dims && box_dims->value().x() > 0 && box_dims->value().y() > 0 && box_dims->value().z() > 0) {
-    const openvdb::Vec3i lo = box_min->value(), n = box_dims->value();
-    box = openvdb::CoordBBox(Coord(lo.x(), lo.y(), lo.z()),
-                             Coord(lo.x() + n.x() - 1, lo.y() + n.y() - 1, lo.z() + n.z() - 1));
+    const openvdb::Vec3i bl = box_min->value(), bn = box_dims->value();
+    bool fits = true;
+    for (int a = 0; a < 3; ++a) {
+      lo[std::size_t(a)] = bl[a];
+      hi[std::size_t(a)] = std::int64_t(bl[a]) + bn[a] - 1;
+      fits = fits && inside_int32(hi[std::size_t(a)]);
+    }
     // Only while the saved box still holds every active voxel (not edited by another tool).
-    out.written_by_isotouch = box.isInside(active);
+    out.written_by_isotouch =
+        fits && openvdb::CoordBBox{Coord{int(lo[0]), int(lo[1]), int(lo[2])}, Coord{int(hi[0]), int(hi[1]), int(hi[2])}}
+                    .isInside(active);
   }
   if (!out.written_by_isotouch) {
-    box = active;
-    box.expand(kVdbLoadMarginVox);
-    Coord lo = box.min(), hi = box.max();
     for (int a = 0; a < 3; ++a) {
-      lo[a] = floor8(lo[a]);
-      hi[a] = floor8(hi[a]) + 7;
+      const auto f8 = [](std::int64_t v) { return v >= 0 ? v / 8 * 8 : -((-v + 7) / 8 * 8); };
+      lo[std::size_t(a)] = f8(std::int64_t(active.min()[a]) - kVdbLoadMarginVox);
+      hi[std::size_t(a)] = f8(std::int64_t(active.max()[a]) + kVdbLoadMarginVox) + 7;
     }
-    box = openvdb::CoordBBox(lo, hi);
   }
-  const openvdb::Coord ext = box.extents();
-  const std::uint64_t n = std::uint64_t(ext.x()) * std::uint64_t(ext.y()) * std::uint64_t(ext.z());
-  if (n > max_voxels || ext.x() > (1 << 20) || ext.y() > (1 << 20) || ext.z() > (1 << 20)) {
+  const std::array<std::int64_t, 3> ext{hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1};
+  const bool each_ok = ext[0] <= (1 << 20) && ext[1] <= (1 << 20) && ext[2] <= (1 << 20) &&
+                       inside_int32(lo[0]) && inside_int32(lo[1]) && inside_int32(lo[2]) && inside_int32(hi[0]) &&
+                       inside_int32(hi[1]) && inside_int32(hi[2]);
+  const std::uint64_t n = each_ok ? std::uint64_t(ext[0]) * std::uint64_t(ext[1]) * std::uint64_t(ext[2]) : 0;
+  if (!each_ok || n > max_voxels) {
     std::ostringstream s;
-    s << where << "bounding box " << box << " is " << ext.x() << " x " << ext.y() << " x " << ext.z() << " = " << n
-      << " voxels, above the limit of " << max_voxels << " voxels for a dense volume";
+    s << where << "bounding box [" << lo[0] << ", " << lo[1] << ", " << lo[2] << "] -> [" << hi[0] << ", " << hi[1] << ", "
+      << hi[2] << "] is " << ext[0] << " x " << ext[1] << " x " << ext[2] << " voxels, above the limit of "
+      << max_voxels << " voxels (and 2^20 per axis) for a dense volume";
     throw VdbError(s.str());
   }
+  const openvdb::CoordBBox box{Coord{int(lo[0]), int(lo[1]), int(lo[2])}, Coord{int(hi[0]), int(hi[1]), int(hi[2])}};
 
   engine::Volume& v = out.volume;
-  v.grid.dims = {ext.x(), ext.y(), ext.z()};
+  v.grid.dims = {int(ext[0]), int(ext[1]), int(ext[2])};
   v.grid.spacing_m = {scale[0], scale[1], scale[2]};
   v.grid.origin_m = {scale[0] * box.min().x() + trans[0], scale[1] * box.min().y() + trans[1],
                      scale[2] * box.min().z() + trans[2]};
@@ -566,6 +576,16 @@ void write_test_vdb(const std::string& path, TestVdb kind) {
       g->setName("far");
       g->tree().setValue(Coord(0, 0, 0), 1.0f);
       g->tree().setValue(Coord(100000, 100000, 100000), 1.0f);
+      grids.push_back(g);
+      break;
+    }
+    case TestVdb::kWrappingBox: {
+      // Active corners whose loaded box (margin 1, 8-aligned) spans 2^31 x 2^17 x 2^16 voxels:
+      // int32 extents wrap, and their product as uint64 is 0 mod 2^64.
+      auto g = FloatGrid::create(0.0f);
+      g->setName("wrap");
+      g->tree().setValue(Coord(-(1 << 30) + 1, 1, 1), 1.0f);
+      g->tree().setValue(Coord((1 << 30) - 2, (1 << 17) - 2, (1 << 16) - 2), 1.0f);
       grids.push_back(g);
       break;
     }

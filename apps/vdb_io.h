@@ -149,6 +149,7 @@ enum class TestVdb {
   kNoFloatGrid,     ///< one Int32Grid and one Vec3SGrid, no FloatGrid
   kEmptyFloatGrid,  ///< a FloatGrid with no active voxel
   kHugeBox,         ///< a FloatGrid with two active voxels 100000 voxels apart on each axis
+  kWrappingBox,     ///< two active voxels whose box is 2^31 x 2^17 x 2^16 (int32 extents wrap)
   kRotated,         ///< a FloatGrid with a 30-degree rotation about z in its transform
 };
 /// Write one of the TestVdb files (not atomic; tests only).

@@ -9,6 +9,7 @@
 #include <metaImage.h>
 #include <metaUtils.h>
 
+#include <unistd.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -108,6 +109,23 @@ void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d, 
     std::ostringstream s;
     s << "absurd dimensions (field '" << field << "') " << d[0] << " x " << d[1] << " x " << d[2] << " ("
       << total << " voxels; the limit is " << kMaxVoxels << ")";
+    fail(path, s.str());
+  }
+}
+
+// The memory a load needs (the file's voxels as read, plus the float copy) against what
+// this machine has: refused before anything is allocated, naming the dims and the bytes.
+void check_memory(const std::string& path, const std::array<std::uint64_t, 3>& d, std::uint64_t bytes_per_voxel,
+                  const std::string& type) {
+  const std::uint64_t n = d[0] * d[1] * d[2];
+  const std::uint64_t need = n * (bytes_per_voxel + sizeof(float));
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  const std::uint64_t have = pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : 0;
+  if (have > 0 && need > have / 4 * 3) {
+    std::ostringstream s;
+    s << d[0] << " x " << d[1] << " x " << d[2] << " voxels of " << type << " need " << (need >> 20)
+      << " MiB to load (the voxels as stored plus a float copy), more than 3/4 of this machine's " << (have >> 20)
+      << " MiB of memory";
     fail(path, s.str());
   }
 }
@@ -326,6 +344,8 @@ void check_nifti_length(const std::string& path, std::size_t data_bytes) {
                    ", the (decompressed) file holds " + std::to_string(total) + " bytes in all");
 }
 
+void check_nrrd_length(const std::string& path, std::uint64_t need);
+
 Volume load_itk(const std::string& path) {
   itk::ImageIOBase::Pointer io;
   const itk::ImageIOBase::Pointer candidates[] = {
@@ -379,6 +399,11 @@ Volume load_itk(const std::string& path) {
     default:
       fail(path, "unknown or unsupported voxel type '" + v.component_type + "'");
   }
+  // Before any allocation: the file must hold the bytes its header promises (a 350-byte
+  // .nii.gz may claim gigabytes) and the machine the memory.
+  if (cls == "NiftiImageIO") check_nifti_length(path, n * bytes_per);
+  if (cls == "NrrdImageIO") check_nrrd_length(path, n * bytes_per);
+  check_memory(path, d, bytes_per, v.component_type);
   // The IO region must cover the whole image, or readers that stream read nothing.
   itk::ImageIORegion region(nd);
   for (unsigned a = 0; a < nd; ++a) {
@@ -408,7 +433,6 @@ Volume load_itk(const std::string& path) {
                      std::to_string(d[2]) + " " + v.component_type + "), the file provides " +
                      std::to_string(written));
   }
-  if (cls == "NiftiImageIO") check_nifti_length(path, raw.size());
   switch (ct) {
     case CT::UCHAR: convert<std::uint8_t>(raw.data(), n, v.voxels); break;
     case CT::CHAR: convert<std::int8_t>(raw.data(), n, v.voxels); break;
@@ -445,6 +469,22 @@ Volume load_teem(const std::string& path) {
     while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
     return s;
   };
+  // The header alone first (teem skips the data): dims and memory are checked before the
+  // data are read and allocated.
+  {
+    struct IoDel {
+      void operator()(NrrdIoState* n) const { nrrdIoStateNix(n); }
+    };
+    std::unique_ptr<NrrdIoState, IoDel> head_only(nrrdIoStateNew());
+    nrrdIoStateSet(head_only.get(), nrrdIoStateSkipData, AIR_TRUE);
+    if (nrrdLoad(nin.get(), path.c_str(), head_only.get())) fail(path, "teem: " + biff_error());
+    if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
+    std::array<std::uint64_t, 3> hd{1, 1, 1};
+    for (unsigned a = 0; a < nin->dim; ++a) hd[a] = nin->axis[a].size;
+    check_dims(path, hd, fields_of("teem").dims);
+    if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");
+    check_memory(path, hd, nrrdTypeSize[nin->type], airEnumStr(nrrdType, nin->type));
+  }
   if (nrrdLoad(nin.get(), path.c_str(), nullptr)) fail(path, "teem: " + biff_error());
   if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
   std::array<std::uint64_t, 3> d{1, 1, 1};
@@ -479,6 +519,52 @@ Volume load_teem(const std::string& path) {
   return v;
 }
 #endif
+
+// A raw-encoded NRRD must hold the bytes its header promises: the attached data after the
+// header's empty line, or one detached "data file". Checked before the voxels are allocated
+// (other encodings and multi-file data: the size is known only once read; the memory cap and
+// the read itself cover them).
+void check_nrrd_length(const std::string& path, std::uint64_t need) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line, encoding, data_file;
+  std::uint64_t header_bytes = 0;
+  bool ended = false;
+  for (int n = 0; n < 4096 && std::getline(in, line); ++n) {
+    header_bytes += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) {
+      ended = true;
+      break;
+    }
+    const auto value = [&](const char* key) {
+      std::string v = line.substr(std::strlen(key));
+      while (!v.empty() && v.front() == ' ') v.erase(v.begin());
+      return v;
+    };
+    if (line.rfind("encoding:", 0) == 0) encoding = value("encoding:");
+    if (line.rfind("data file:", 0) == 0 || line.rfind("datafile:", 0) == 0)
+      data_file = value(line[4] == ' ' ? "data file:" : "datafile:");
+  }
+  if (encoding != "raw") return;
+  std::error_code ec;
+  std::uint64_t have = 0;
+  std::string where;
+  if (data_file.empty()) {
+    if (!ended) return;  // a detached header without a data file line: teem / ITK name it
+    have = fs::file_size(path, ec) - std::min<std::uint64_t>(header_bytes, fs::file_size(path, ec));
+    where = "the data after the header hold ";
+  } else {
+    if (data_file.find(' ') != std::string::npos || data_file == "LIST") return;  // several files
+    fs::path df(data_file);
+    if (df.is_relative()) df = fs::path(path).parent_path() / df;
+    have = fs::file_size(df, ec);
+    where = "field 'data file' = '" + data_file + "' holds ";
+  }
+  if (ec) return;  // missing data file: the reader names it
+  if (have < need)
+    fail(path, "voxel data truncated: " + where + std::to_string(have) + " bytes, the header (field 'sizes', 'type') promises " +
+                   std::to_string(need));
+}
 
 // NRRD "spacings:" as the header writes it: ITK and teem both put 1 mm in place of a
 // "nan" (NRRD's "no spacing"), which for a scalar volume hides a broken header. Read the

@@ -72,7 +72,7 @@ void save_volume_itk(const Volume& v, const std::string& path) {
       w->SetFileName(file);
       w->WriteImageInformation();
       w->Write(v.voxels.data());
-    });
+    }, /*keep_extension=*/true);
   } catch (const itk::ExceptionObject& e) {
     throw VolumeError(path + ": ITK could not write it: " + e.GetDescription());
   } catch (const io::OutputError& e) {

@@ -109,19 +109,20 @@ std::string make_temp(std::string tmpl, const std::string& for_path, const std::
   return tmpl;
 }
 
-std::string temp_beside(const std::string& resolved) {
+std::string temp_beside(const std::string& resolved, bool keep_extension = false) {
   const std::string dir = folder_of(resolved);
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw OutputError(resolved + ": cannot write: folder '" + dir + "' does not exist");
-  return make_temp(resolved + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX", resolved, format_suffix(resolved));
+  return make_temp(resolved + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX", resolved,
+                   keep_extension ? format_suffix(resolved) : std::string());
 }
 
-std::string temp_elsewhere(const std::string& for_path) {
+std::string temp_elsewhere(const std::string& for_path, bool keep_extension = false) {
   std::error_code ec;
   fs::path dir = fs::temp_directory_path(ec);
   if (ec) dir = "/tmp";
   return make_temp((dir / ("isotouch-output-" + std::to_string(::getpid()) + "-XXXXXX")).string(), for_path,
-                   format_suffix(for_path));
+                   keep_extension ? format_suffix(for_path) : std::string());
 }
 
 /// Renames the finished temp `tmp` (in the target's folder) over `t.resolved`.
@@ -179,9 +180,11 @@ OutputTarget classify_output(const std::string& path) {
   return {path, follow_to_missing(path), OutputKind::kReplace};
 }
 
-void write_output(const std::string& path, const std::function<void(const std::string& file)>& fill) {
+void write_output(const std::string& path, const std::function<void(const std::string& file)>& fill,
+                  bool keep_extension) {
   const OutputTarget t = classify_output(path);
-  Unlinker tmp{t.kind == OutputKind::kReplace ? temp_beside(t.resolved) : temp_elsewhere(path)};
+  Unlinker tmp{t.kind == OutputKind::kReplace ? temp_beside(t.resolved, keep_extension)
+                                              : temp_elsewhere(path, keep_extension)};
   fill(tmp.path);
   if (t.kind == OutputKind::kReplace) {
     commit_replace(tmp.path, t);

@@ -37,13 +37,15 @@ OutputTarget classify_output(const std::string& path);
 
 /// Writes `path` whole or not at all. `fill(file)` writes the content into `file`, a fresh
 /// empty file made for it (beside the final target when that target is replaced, in the
-/// temp folder when it is a stream; its name ends in the target's extension, ".nii.gz"
-/// included, for writers that choose the format by the name); on success the file is renamed over the target or
+/// temp folder when it is a stream; with `keep_extension` its name ends in the target's
+/// extension, ".nii.gz" included, for writers that choose the format by the name, otherwise
+/// in ".tmp-PID-XXXXXX" so a left-over temp never matches the target's kind, e.g. *.vdb); on success the file is renamed over the target or
 /// copied into the stream. When `fill` throws, or any step fails, the temp file is removed
 /// and the old target is untouched (a stream may have received a part). The folder of a
 /// replaced target must exist (a missing one is an error naming it, not created).
 /// @throws OutputError naming the path and the OS error; rethrows what `fill` throws.
-void write_output(const std::string& path, const std::function<void(const std::string& file)>& fill);
+void write_output(const std::string& path, const std::function<void(const std::string& file)>& fill,
+                  bool keep_extension = false);
 
 /// write_output of a byte string.
 void write_output(const std::string& path, std::string_view content);

@@ -231,3 +231,21 @@ TEST(OutputFile, PlaceMovesAFinishedFileAcrossFoldersAndIntoStreams) {
   EXPECT_TRUE(is_char_device(dev));
   EXPECT_FALSE(fs::exists(done));
 }
+
+TEST(OutputFile, TempNamesKeepTheExtensionOnlyWhenAsked) {
+  // A left-over temp must not look like an output (*.vdb); writers that pick the format by
+  // the name (ITK) ask for the extension.
+  TempDir d;
+  std::string seen;
+  const auto fill = [&seen](const std::string& f) {
+    seen = f;
+    std::ofstream(f) << "x";
+  };
+  write_output((d.path / "a.vdb").string(), fill);
+  EXPECT_EQ(seen.find(".tmp-"), (d.path / "a.vdb").string().size()) << seen;
+  EXPECT_NE(fs::path(seen).extension(), ".vdb") << seen;
+  write_output((d.path / "b.nii.gz").string(), fill, true);
+  EXPECT_TRUE(seen.ends_with(".nii.gz")) << seen;
+  EXPECT_NE(seen.find("b.nii.gz.tmp-"), std::string::npos) << seen;
+  EXPECT_EQ(slurp(d.path / "b.nii.gz"), "x");
+}

@@ -594,6 +594,11 @@ TEST(VdbIo, BadInputGivesClearErrors) {
   expect_error([&] { load_vdb(tmp / "empty.vdb"); }, {"empty.vdb", "grid 'empty'", "no active voxel"});
   write_test_vdb(tmp / "huge.vdb", TestVdb::kHugeBox);
   expect_error([&] { load_vdb(tmp / "huge.vdb"); }, {"huge.vdb", "grid 'far'", "above the limit"});
+  // A crafted box 2^31 x 2^17 x 2^16: int32 extents wrap and their product is 0 mod 2^64,
+  // which once allocated nothing and let copyToDense write past it.
+  write_test_vdb(tmp / "wrap.vdb", TestVdb::kWrappingBox);
+  expect_error([&] { load_vdb(tmp / "wrap.vdb"); }, {"wrap.vdb", "grid 'wrap'", "2147483648 x 131072 x 65536", "above the limit"});
+  expect_error([&] { load_vdb(tmp / "wrap.vdb", "", ~std::uint64_t(0)); }, {"wrap.vdb", "2147483648 x 131072 x 65536"});
   write_test_vdb(tmp / "rot.vdb", TestVdb::kRotated);
   expect_error([&] { load_vdb(tmp / "rot.vdb"); }, {"rot.vdb", "grid 'rotated'", "rotation"});
   write_test_vdb(tmp / "ls.vdb", TestVdb::kLevelSetSphere);

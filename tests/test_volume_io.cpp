@@ -1,5 +1,9 @@
 // Loaders on the shared data formats and on broken files.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <zlib.h>
 
 #include <filesystem>
 #include <cstring>
@@ -116,7 +120,7 @@ TEST(VolumeIo, TruncatedNrrd) {
   write(d / "t.nhdr",
         "NRRD0004\ntype: unsigned short\ndimension: 3\nsizes: 103 94 161\nspacings: 1 1 1\n"
         "data file: t.raw\nendian: big\nencoding: raw\n");
-  expect_error((d / "t.nhdr").string(), "fread got only");
+  expect_error((d / "t.nhdr").string(), "voxel data truncated: field 'data file' = 't.raw' holds 1000 bytes");
 }
 
 TEST(VolumeIo, TruncatedNiftiGz) {
@@ -335,4 +339,96 @@ TEST(VolumeIo, NrrdNanSpacing) {
   const Volume v = load_volume((d / "t.nhdr").string());
   EXPECT_DOUBLE_EQ(v.grid.spacing_m.x, 0.5e-3);
   EXPECT_DOUBLE_EQ(v.grid.spacing_m.z, 2e-3);
+}
+
+// ---- headers that promise more than the file holds: refused before anything is allocated
+
+namespace {
+/// load_volume(path) in a child process whose address space is capped at `limit` bytes: the
+/// VolumeError message, or "CRASH"/"std::bad_alloc ..." when the load tried to allocate what
+/// the header promised.
+std::string error_under_memory_limit(const std::string& path, std::uint64_t limit) {
+  int fds[2];
+  if (::pipe(fds) != 0) return "pipe failed";
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::close(fds[0]);
+    rlimit r{limit, limit};
+    ::setrlimit(RLIMIT_AS, &r);
+    std::string msg = "loaded";
+    try {
+      (void)load_volume(path);
+    } catch (const VolumeError& e) {
+      msg = e.what();
+    } catch (const std::exception& e) {
+      msg = std::string("std exception: ") + e.what();
+    }
+    (void)!::write(fds[1], msg.data(), msg.size());
+    ::_exit(0);
+  }
+  ::close(fds[1]);
+  std::string out;
+  char buf[4096];
+  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) out.append(buf, std::size_t(n));
+  ::close(fds[0]);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return out.empty() ? "CRASH (status " + std::to_string(status) + ")" : out;
+}
+
+/// A NIfTI-1 header (348 bytes + 4 of extension flag) for dims^3 float32 voxels, no data.
+std::string nifti_header(std::int16_t dim) {
+  std::string h(352, '\0');
+  auto put = [&h](std::size_t at, const void* p, std::size_t n) { std::memcpy(h.data() + at, p, n); };
+  const std::int32_t sizeof_hdr = 348;
+  put(0, &sizeof_hdr, 4);
+  const std::int16_t dims[8] = {3, dim, dim, dim, 1, 1, 1, 1};
+  put(40, dims, sizeof dims);
+  const std::int16_t datatype = 16, bitpix = 32;  // float32
+  put(70, &datatype, 2);
+  put(72, &bitpix, 2);
+  const float pixdim[8] = {1, 1, 1, 1, 1, 1, 1, 1};
+  put(76, pixdim, sizeof pixdim);
+  const float vox_offset = 352;
+  put(108, &vox_offset, 4);
+  put(344, "n+1", 4);
+  return h;
+}
+}  // namespace
+
+TEST(VolumeIo, TinyNiftiGzPromisingGigabytesIsRefusedBeforeAllocating) {
+  const fs::path d = temp_dir();
+  const std::string p = (d / "tiny.nii.gz").string();
+  gzFile gz = gzopen(p.c_str(), "wb");
+  ASSERT_TRUE(gz);
+  const std::string h = nifti_header(1024);  // 1024^3 float32 = 4 GiB promised
+  gzwrite(gz, h.data(), unsigned(h.size()));
+  gzclose(gz);
+  ASSERT_LT(fs::file_size(p), 1000u);
+  const std::string m = error_under_memory_limit(p, std::uint64_t(1) << 30);
+  EXPECT_NE(m.find("voxel data truncated"), std::string::npos) << m;
+  EXPECT_NE(m.find(p), std::string::npos) << m;
+}
+
+TEST(VolumeIo, TinyRawNrrdPromisingGigabytesIsRefusedBeforeAllocating) {
+  const fs::path d = temp_dir();
+  const std::string p = (d / "tiny.nrrd").string();
+  write(p, "NRRD0004\ntype: float\ndimension: 3\nsizes: 1024 1024 1024\nspacings: 1 1 1\nendian: little\n"
+           "encoding: raw\n\n" + std::string(64, '\0'));
+  const std::string m = error_under_memory_limit(p, std::uint64_t(1) << 30);
+  EXPECT_NE(m.find("voxel data truncated"), std::string::npos) << m;
+  EXPECT_NE(m.find("4294967296"), std::string::npos) << m;
+}
+
+TEST(VolumeIo, MoreThanTheMachineHoldsIsRefusedNamingTheMemory) {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  const double have = double(pages) * double(page);
+  // The largest volume the voxel limit allows (2^31 doubles + the float copy) needs 24 GiB.
+  if (have > 30.0 * (1ull << 30)) GTEST_SKIP() << "this machine holds more than any volume isotouch accepts";
+  const fs::path d = temp_dir();
+  const std::string p = (d / "big.nrrd").string();
+  write(p, "NRRD0004\ntype: double\ndimension: 3\nsizes: 2048 1024 1024\nspacings: 0.01 0.01 0.01\nendian: little\n"
+           "encoding: gzip\n\n");
+  const std::string m = error_under_memory_limit(p, std::uint64_t(1) << 30);
+  EXPECT_NE(m.find("more than 3/4 of this machine's"), std::string::npos) << m;
 }

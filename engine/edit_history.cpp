@@ -109,9 +109,14 @@ void EditHistory::end_stroke(const Volume& vol) {
     }
   }
   if (s.bytes > limit_) {
-    // A stroke that alone exceeds the limit cannot be kept: drop it, not the older ones.
+    // A stroke that alone exceeds the limit cannot be kept, and it is a barrier: undoing an
+    // older stroke past it would restore that stroke's bricks under this one's changes, a
+    // state that never existed. The older strokes go with it.
     bytes_ -= s.bytes;
     ++dropped_;
+    for (const Stroke& old : undo_) bytes_ -= old.bytes;
+    dropped_ += undo_.size();
+    undo_.clear();
   } else if (!s.bricks.empty()) {
     undo_.push_back(std::move(s));
   }

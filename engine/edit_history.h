@@ -58,7 +58,9 @@ class EditHistory {
   /// stroke. Call BEFORE the edit changes them. @throws std::logic_error if no stroke is open.
   void record(const Volume& vol, const std::vector<std::uint32_t>& ids);
   /// Closes the open stroke: drops its unchanged backups (bit-identical to `vol`), pushes it
-  /// on the undo stack if anything changed, enforces the memory limit. No-op if none is open.
+  /// on the undo stack if anything changed, enforces the memory limit (oldest strokes first).
+  /// A stroke larger than the limit alone is a barrier: it and every older stroke are
+  /// dropped (undo stops there). No-op if none is open.
   void end_stroke(const Volume& vol);
 
   /// Undoes the newest stroke (ends an open stroke first). Returns the restored brick ids

@@ -164,24 +164,29 @@ TEST(EditHistory, MemoryLimitDropsTheOldestStrokes) {
   EXPECT_THROW(engine::EditHistory(-1.0), std::invalid_argument);
 }
 
-TEST(EditHistory, AStrokeLargerThanTheLimitIsDroppedAloneNotTheOlderOnes) {
+TEST(EditHistory, AStrokeLargerThanTheLimitIsABarrier) {
+  // Stroke A backs up brick X; stroke B changes X and many more bricks and is too large to
+  // keep. Undoing A then would put X back under B's changes: a state that never existed.
+  // B is a barrier: A goes with it, undo stops at B, strokes after B undo as usual.
   Volume v0 = engine::make_random({64, 64, 16}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 2);
   engine::Sculptor s(v0, nullptr, 0.01);  // 10485 bytes: 5 bricks
   const engine::BrushTargets t{1000.0f, 0.0f, 1000.0f};
-  s.apply(brush(BrushKind::kAdd, v0.grid.to_world({3.5, 3.5, 3.5}), 2e-3, t));
+  s.apply(brush(BrushKind::kAdd, v0.grid.to_world({27.5, 27.5, 7.5}), 2e-3, t));  // A: inside B's reach
   s.apply(brush(BrushKind::kAdd, v0.grid.to_world({11.5, 3.5, 3.5}), 2e-3, t));
-  const std::vector<float> after_two = s.volume().voxels;
-  // Radius 10 mm around the centre: about 32 bricks (64 KiB), far over the limit.
-  s.apply(brush(BrushKind::kAdd, v0.grid.to_world({32.0, 32.0, 8.0}), 10e-3, t));
-  EXPECT_EQ(s.history().dropped_strokes(), 1u);
-  EXPECT_EQ(s.history().undo_depth(), 2u) << "the two small strokes are still undoable";
-  EXPECT_LE(s.history().bytes(), s.history().limit_bytes());
-  EXPECT_EQ(s.history().bytes(), 2u * 2048u);
-  s.undo();
-  s.undo();
-  // The big stroke stays applied (it could not be kept); the two small ones are undone.
+  ASSERT_EQ(s.history().undo_depth(), 2u);
+  // B: radius 10 mm around the centre, about 32 bricks (64 KiB), far over the limit.
+  s.apply(brush(BrushKind::kCarve, v0.grid.to_world({32.0, 32.0, 8.0}), 10e-3, t));
+  const std::vector<float> after_b = s.volume().voxels;
+  EXPECT_EQ(s.history().dropped_strokes(), 3u) << "B and the two strokes before it";
   EXPECT_EQ(s.history().undo_depth(), 0u);
-  EXPECT_FALSE(same_bits(s.volume().voxels, after_two));
+  EXPECT_EQ(s.history().bytes(), 0u);
+  EXPECT_TRUE(s.undo().empty()) << "nothing to undo past the barrier";
+  EXPECT_TRUE(same_bits(s.volume().voxels, after_b)) << "an undo past the barrier changed the volume";
+  // C after the barrier: undone back to exactly the state after B.
+  s.apply(brush(BrushKind::kAdd, v0.grid.to_world({3.5, 60.5, 3.5}), 2e-3, t));
+  EXPECT_EQ(s.history().undo_depth(), 1u);
+  EXPECT_FALSE(s.undo().empty());
+  EXPECT_TRUE(same_bits(s.volume().voxels, after_b));
 }
 
 }  // namespace

@@ -275,6 +275,41 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
 
 }  // namespace
 
+// A stroke needs a direction, and a run keeps every tick in memory: the script's length at
+// the servo rate is bounded (a 3600 s hold at 100 kHz, or a stroke at 1e-9 m/s, would
+// otherwise end in an allocation failure naming nothing).
+constexpr double kMaxScriptTicks = 2e7;
+void check_script_length(const Reader& r, const Scene& s) {
+  const servo::ScriptParams& p = s.script;
+  if (p.stroke_length_m > 0 && servo::norm(p.stroke_direction) == 0.0)
+    r.fail("script.stroke_direction", "must not be [0, 0, 0] when script.stroke_length_m is " +
+                                          std::to_string(p.stroke_length_m) + " m (> 0)");
+  struct Part {
+    const char* field;
+    double s;
+  };
+  const Part parts[] = {{"script.rest_s (twice)", 2 * p.rest_s},
+                        {"script.approach_distance_m / approach_speed_m_s (twice)",
+                         2 * p.approach_distance_m / p.approach_speed_m_s},
+                        {"script.press_depth_m / press_speed_m_s (twice)", 2 * p.press_depth_m / p.press_speed_m_s},
+                        {"script.hold_s", p.hold_s},
+                        {"script.stroke_length_m / stroke_speed_m_s", p.stroke_length_m / p.stroke_speed_m_s}};
+  double total = 0;
+  const Part* longest = &parts[0];
+  for (const Part& q : parts) {
+    total += q.s;
+    if (q.s > longest->s) longest = &q;
+  }
+  const double ticks = total * s.hri.rate_hz;
+  if (!(ticks <= kMaxScriptTicks)) {
+    std::ostringstream m;
+    m << "lasts about " << total << " s at servo.rate_hz " << s.hri.rate_hz << " = " << ticks
+      << " ticks, more than the " << kMaxScriptTicks << " a run keeps in memory; the longest part is " << longest->field
+      << " (" << longest->s << " s)";
+    r.fail("script", m.str());
+  }
+}
+
 Scene parse_scene(const std::string& text, const std::string& path) {
   // JSON allows a key twice in one object and keeps the last: a scene with two
   // "stiffness_n_per_m" would silently use one of them. The parser callback sees every
@@ -323,6 +358,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   s.file = path;
   s.name = r.string(root, "", "name", fs::path(path).stem().string());
   s.description = r.string(root, "", "description", "");
+  if (s.name.empty()) r.fail("name", "must not be empty (it names the output folder out/<name>)");
   for (char c : s.name)
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_'))
       r.fail("name", "may hold only letters, digits, '-' and '_', got \"" + s.name + "\"");
@@ -480,6 +516,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   r.only(out, "outputs", {"trace_csv", "plots"});
   s.write_trace = r.boolean(out, "outputs", "trace_csv", true);
   s.draw_plots = r.boolean(out, "outputs", "plots", true);
+  check_script_length(r, s);
   return s;
 }
 

@@ -85,6 +85,16 @@ file(WRITE ${OUT}/far.json "{${vol}, \"script\": {\"ray_origin_frac\": [0.5, 0.5
 expect(scene_ray_origin_far 1 "far.json: field 'script.ray_origin_frac': each must be in \\[-2, 3\\]" run ${OUT}/far.json --out ${OUT}/o)
 file(WRITE ${OUT}/light.json "{${vol}, \"device\": {\"mass_kg\": 1e-9}}")
 expect(scene_device_too_light 1 "light.json: field 'device.mass_kg': must be at least .* kg" run ${OUT}/light.json --out ${OUT}/o)
+# An empty name (out/ itself would be the output folder), a stroke without a direction, and a
+# script too long to keep in memory: each named, before anything runs.
+file(WRITE ${OUT}/noname.json "{${vol}, \"name\": \"\"}")
+expect(scene_empty_name 1 "noname.json: field 'name': must not be empty" run ${OUT}/noname.json --out ${OUT}/o)
+file(WRITE ${OUT}/nostroke.json "{${vol}, \"script\": {\"stroke_direction\": [0, 0, 0]}}")
+expect(scene_zero_stroke 1 "nostroke.json: field 'script.stroke_direction': must not be \\[0, 0, 0\\]" run ${OUT}/nostroke.json --out ${OUT}/o)
+file(WRITE ${OUT}/long.json "{${vol}, \"servo\": {\"rate_hz\": 100000}, \"script\": {\"hold_s\": 3600}}")
+expect(scene_too_long 1 "long.json: field 'script': lasts about .* ticks, more than the .* the longest part is script.hold_s" run ${OUT}/long.json --out ${OUT}/o)
+file(WRITE ${OUT}/slow.json "{${vol}, \"script\": {\"stroke_speed_m_s\": 1e-9}}")
+expect(scene_too_slow 1 "slow.json: field 'script': .* the longest part is script.stroke_length_m / stroke_speed_m_s" run ${OUT}/slow.json --out ${OUT}/o)
 file(WRITE ${OUT}/hugesp.json "{\"volume\": {\"path\": \"hugesp.mhd\"}, \"isovalue\": 1}")
 expect(run_huge_spacing 1 "hugesp.mhd: field 'ElementSpacing'" run ${OUT}/hugesp.json --out ${OUT}/o)
 

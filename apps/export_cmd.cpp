@@ -169,6 +169,9 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
   err << "export: meshed in " << seconds_since(tm) << " s\n";
   const MeshStats st = mesh_stats(mesh);
   print_mesh(st, out);
+  if (mesh.welded_vertices || mesh.dropped_triangles)
+    out << "cleaned     " << mesh.welded_vertices << " coincident vertices welded, " << mesh.dropped_triangles
+        << " zero-area triangles dropped\n";
   if (mesh.triangles.empty()) {
     err << "isotouch export: the isosurface tau " << iso->tau << " (inside " << core::to_string(iso->inside)
         << ") does not cross the volume (values " << v.min_value << " to " << v.max_value << "): no mesh written\n";

@@ -400,16 +400,35 @@ Mesh extract_mesh(const engine::Volume& vol, const core::Isosurface& iso, double
   std::vector<openvdb::Vec4I> quads;
   openvdb::tools::volumeToMesh(*grid, pts, tris, quads, double(tau), adaptivity);
   // Points come in index space (identity transform): index -> grid-world -> physical.
-  mesh.vertices.reserve(pts.size());
-  const auto& g = vol.grid;
-  for (const auto& p : pts)
-    mesh.vertices.push_back(to_physical(vol, g.origin_m.x + double(p[0]) * g.spacing_m.x,
-                                        g.origin_m.y + double(p[1]) * g.spacing_m.y,
-                                        g.origin_m.z + double(p[2]) * g.spacing_m.z));
+  // Points at one position are welded into one vertex (first one kept).
+  std::vector<std::uint32_t> remap(pts.size());
+  {
+    std::map<std::array<float, 3>, std::uint32_t> at;
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      const std::array<float, 3> key{pts[i][0], pts[i][1], pts[i][2]};
+      const auto [it, fresh] = at.emplace(key, std::uint32_t(mesh.vertices.size()));
+      remap[i] = it->second;
+      if (!fresh) {
+        ++mesh.welded_vertices;
+        continue;
+      }
+      const auto& g = vol.grid;
+      mesh.vertices.push_back(to_physical(vol, g.origin_m.x + double(key[0]) * g.spacing_m.x,
+                                          g.origin_m.y + double(key[1]) * g.spacing_m.y,
+                                          g.origin_m.z + double(key[2]) * g.spacing_m.z));
+    }
+  }
   // OpenVDB winds its polygons counter-clockwise seen from outside (the side of values
   // >= iso, here always the outside); reversed where D mirrors space (det D = -1).
   const bool mirror = det3(vol.direction) < 0.0;
   auto add = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+    a = remap[a];
+    b = remap[b];
+    c = remap[c];
+    if (a == b || b == c || a == c) {  // two corners welded: zero area
+      ++mesh.dropped_triangles;
+      return;
+    }
     if (mirror) mesh.triangles.push_back({a, c, b});
     else mesh.triangles.push_back({a, b, c});
   };

@@ -104,13 +104,18 @@ void save_vdb(const engine::Volume& volume, const std::string& path, const SaveV
 struct Mesh {
   std::vector<std::array<double, 3>> vertices;        ///< physical [m]
   std::vector<std::array<std::uint32_t, 3>> triangles;  ///< indices into vertices
+  std::size_t welded_vertices = 0;     ///< extract_mesh: vertices merged into one at the same position
+  std::size_t dropped_triangles = 0;   ///< extract_mesh: zero-area triangles dropped after welding
 };
 
 /// The isosurface of a volume as a closed triangle mesh, by openvdb::tools::volumeToMesh
 /// (quads split into two triangles along their 0-2 diagonal). The volume is copied into a
 /// FloatGrid whose outside (beyond the grid) reads as outside the object, so the mesh is
 /// closed also where the object touches the border: there the surface is half a voxel
-/// beyond the border voxels' centres (a 1-voxel shell mirrors them about tau). NaN voxels
+/// beyond the border voxels' centres (a 1-voxel shell mirrors them about tau). volumeToMesh
+/// can put two vertices at one position (a corner value exactly at tau): those are welded
+/// and the triangles that become degenerate are dropped, so no triangle has zero area and
+/// the mesh stays closed (each edge in exactly two triangles). NaN voxels
 /// count as outside (as in core::Isosurface). tau is compared as a float (OpenVDB's
 /// isovalue type). Vertices are mapped index -> grid-world -> physical [m]; the winding
 /// is flipped where D has determinant -1 so normals still point out.

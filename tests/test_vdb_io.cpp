@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <set>
 #include <fstream>
 #include <map>
 #include <numbers>
@@ -533,6 +534,32 @@ TEST(VdbMesh, ObjectTouchingTheBorderIsClosed) {
 }
 
 // ------------------------------------------------------------------------ level sets
+
+TEST(VdbMesh, ChestMeshHasNoZeroAreaTriangleAndStaysClosed) {
+  // The chest CT at -500 HU: volumeToMesh puts some vertices at one position (values exactly
+  // at tau). Truth by brute force: no two vertices at one position, every triangle of
+  // positive area as float32 (what STL stores), every edge in exactly two triangles.
+  const engine::Volume v =
+      engine::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
+  const Mesh m = extract_mesh(v, Isosurface{-500.0, InsideIs::kAbove});
+  EXPECT_GT(m.dropped_triangles, 0u) << "this volume has coincident vertices to weld";
+  std::set<std::array<double, 3>> seen(m.vertices.begin(), m.vertices.end());
+  EXPECT_EQ(seen.size(), m.vertices.size()) << "two vertices at one position";
+  std::size_t zero = 0;
+  for (const auto& t : m.triangles) {
+    std::array<std::array<float, 3>, 3> p{};
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < 3; ++a) p[k][a] = float(m.vertices[t[k]][a]);
+    const double u[3] = {p[1][0] - p[0][0], p[1][1] - p[0][1], p[1][2] - p[0][2]};
+    const double w[3] = {p[2][0] - p[0][0], p[2][1] - p[0][1], p[2][2] - p[0][2]};
+    const double c[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+    zero += c[0] == 0 && c[1] == 0 && c[2] == 0;
+  }
+  EXPECT_EQ(zero, 0u) << "zero-area triangles";
+  const MeshStats st = mesh_stats(m);
+  EXPECT_TRUE(st.closed()) << st.boundary_edges << " boundary, " << st.nonmanifold_edges << " non-manifold edges";
+  EXPECT_EQ(st.degenerate_triangles, 0u);
+}
 
 TEST(VdbIo, OpenVdbLevelSetSphereLoadsAsInsideBelowInAlignedBricks) {
   TempDir tmp;

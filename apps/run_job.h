@@ -65,8 +65,8 @@ struct EditFigures {
   std::uint64_t history_bytes = 0, history_limit_bytes = 0;  ///< undo history at the end
   std::size_t history_dropped = 0; ///< strokes dropped to stay under the limit
   double first_edit_t_s = -1;      ///< time of the first brush application [s] (-1: none)
-  /// Contact ticks that read an edited snapshot (version > 1): left out of the surface
-  /// error, which is measured against the unedited volume's dense samples.
+  /// Contact ticks that read an edited snapshot (version > 1): their surface error is
+  /// measured against the edited volume they read (dense samples rebuilt per snapshot).
   long contact_ticks_after_edit = 0;
   /// Inside voxels before minus after, times the voxel volume [mm^3] (the scene's isovalue
   /// and inside, NaN counts as outside): what the edits removed (negative: added; the

@@ -366,3 +366,51 @@ TEST(RunJob, EditsThatDoNothingSaySo) {
   EXPECT_NE(report.find("Edits that did nothing"), std::string::npos);
   fs::remove_all(dir);
 }
+
+TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
+  // A carve far from the probe (the sphere's -x cap, t = 0.1 s, before any contact): every
+  // contact tick reads an edited snapshot. Near the probe the surface is still the analytic
+  // sphere (radius 15 mm about the grid centre): the run's surface error must agree with the
+  // VHIP's distance to it, computed here from trace.csv.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_edited_err_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "carved.json") << R"({"name": "carved", "volume": {"synthetic": "sphere", "dims": [48, 48, 48],
+    "spacing_m": 0.001, "radius_vox": 15}, "isovalue": 0, "inside": "above",
+    "script": {"hold_s": 0.1, "stroke_length_m": 0.004}, "outputs": {"plots": false},
+    "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": false,
+      "timeline": [{"t_s": 0.1, "kind": "carve", "at": [9.5, 23.5, 23.5], "radius_mm": 4, "strength": 1000}]}})";
+  const Scene sc = isotouch::app::load_scene((dir / "carved.json").string());
+  isotouch::app::RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  opt.progress = false;
+  std::ostringstream log;
+  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  ASSERT_GT(m.contact_ticks, 100);
+  ASSERT_EQ(m.edits.contact_ticks_after_edit, m.contact_ticks) << "every contact tick read the carved snapshot";
+  EXPECT_EQ(m.surface_err_not_found_ticks, 0);
+  // Analytic distance of each contact VHIP to the sphere, from trace.csv (physical = grid-world here).
+  const Volume vol = isotouch::engine::make_sphere({48, 48, 48}, 1e-3, 15);
+  const auto c = vol.grid.to_world({23.5, 23.5, 23.5});
+  std::ifstream in(dir / "out" / "trace.csv");
+  std::string line;
+  std::getline(in, line);
+  double max_d = 0, sum2 = 0;
+  long n = 0;
+  while (std::getline(in, line)) {
+    std::vector<double> v;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+    if (v.size() < 11 || v[10] == 0) continue;
+    const double dx = v[4] - c.x, dy = v[5] - c.y, dz = v[6] - c.z;
+    const double d = std::abs(std::sqrt(dx * dx + dy * dy + dz * dz) - 0.015);
+    max_d = std::max(max_d, d);
+    sum2 += d * d;
+    ++n;
+  }
+  ASSERT_EQ(n, m.contact_ticks);
+  EXPECT_GT(m.surface_err_rms_m, 0.0) << "measured on no tick";
+  EXPECT_NEAR(m.surface_err_max_m, max_d, 5e-5) << "max against the analytic sphere";
+  EXPECT_NEAR(m.surface_err_rms_m, std::sqrt(sum2 / double(n)), 5e-5);
+  fs::remove_all(dir);
+}

@@ -2,6 +2,8 @@
 #pragma once
 #include <cstdint>
 
+#include <array>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -29,7 +31,7 @@ struct GradientTimings {
 /// the dispatches recorded into one command buffer (engine/vk_resources.h).
 class GradientPass {
  public:
-  explicit GradientPass(VulkanContext& ctx);
+  explicit GradientPass(VulkanContext& ctx, ShaderSet shaders = ShaderSet::Current);
   ~GradientPass();
   GradientPass(const GradientPass&) = delete;
   GradientPass& operator=(const GradientPass&) = delete;
@@ -51,7 +53,10 @@ class GradientPass {
 
  private:
   VulkanContext& ctx_;
-  ComputePipeline<gpu::GradientPush> pipeline_;
+  ShaderSet shaders_;
+  std::unique_ptr<ComputePipeline<gpu::GradientPush>> legacy_;
+  /// gradient_x4 variants by volume size (specialization constants), made on first use.
+  mutable std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> x4_;
 };
 
 }  // namespace isotouch::engine

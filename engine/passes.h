@@ -34,6 +34,7 @@
 #include "cpu_filters.h"
 #include "sample_field.h"
 #include "vk_context.h"
+#include "vk_resources.h"
 #include "volume.h"
 
 namespace isotouch::engine {
@@ -80,8 +81,11 @@ struct ChainOutput {
 /// The GPU chain. Create once per pass list, run on any number of volumes.
 class PassChain {
  public:
+  /// @param shaders Current (default) or the Legacy dense shaders (bench engine compares
+  ///        them); same outputs bit for bit.
   /// @return error (no throw) if validate_passes() fails.
-  static Result<std::unique_ptr<PassChain>> create(VulkanContext& ctx, std::vector<PassDesc> passes);
+  static Result<std::unique_ptr<PassChain>> create(VulkanContext& ctx, std::vector<PassDesc> passes,
+                                                   ShaderSet shaders = ShaderSet::Current);
   ~PassChain();
   PassChain(const PassChain&) = delete;
   PassChain& operator=(const PassChain&) = delete;

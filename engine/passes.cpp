@@ -12,7 +12,7 @@
 #include "gradient_pass.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
-#include "isotouch/shaders/gaussian_x4_spv.h"
+#include "isotouch/shaders/filter_x4_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
 #include "isotouch_shared.h"
 #include "vk_resources.h"
@@ -90,18 +90,21 @@ struct PassChain::Impl {
   VulkanContext& ctx;
   ShaderSet shaders = ShaderSet::Current;
   std::unique_ptr<ComputePipeline<gpu::Filter1dPush>> gauss, morph;
-  /// gaussian_x4 variants by specialization (axis, radius, weights), made on first use.
+  /// filter_x4 variants by specialization (size, axis, radius, weights, mode), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss_x4;
-  const ComputePipeline<gpu::DensePush>* gaussian_x4(const std::array<int, 3>& dims, int axis,
-                                                     const std::vector<float>& w) {
-    std::vector<std::uint32_t> spec(5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+  /// `w`: the Gaussian's weights (mode 0), else empty; `mode` 0 or ISOTOUCH_MORPH_MAX / MIN.
+  const ComputePipeline<gpu::DensePush>* filter_x4(const std::array<int, 3>& dims, int axis, int radius,
+                                                   std::uint32_t mode, const std::vector<float>& w) {
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
     for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(dims[std::size_t(a)]);
     spec[3] = std::uint32_t(axis);
-    spec[4] = std::uint32_t(w.size() / 2);
+    spec[4] = std::uint32_t(radius);
     for (std::size_t k = 0; k < w.size(); ++k) std::memcpy(&spec[5 + k], &w[k], 4);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = mode;  // constant_id 38
     auto& p = gauss_x4[spec];
     if (!p)
-      p = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, gaussian_x4_spv, 2, "gaussian_x4", 0u, spec, 1u);
+      p = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, filter_x4_spv, 2, mode ? "morph_x4" : "gaussian_x4",
+                                                            0u, spec, 1u);
     return p.get();
   }
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
@@ -126,7 +129,7 @@ Result<std::unique_ptr<PassChain>> PassChain::create(VulkanContext& ctx, std::ve
   // Only the pipelines the list needs.
   if (has(passes, PassKind::Gaussian) && shaders == ShaderSet::Legacy)
     impl->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
-  if (has(passes, PassKind::Closing))
+  if (has(passes, PassKind::Closing) && shaders == ShaderSet::Legacy)
     impl->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
   if (has(passes, PassKind::BrickMinMax))
     impl->minmax = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, brick_minmax_spv, 2, "brick_minmax");
@@ -141,15 +144,19 @@ std::string PassChain::describe() const {
   const bool filters = has(passes_, PassKind::Gaussian) || has(passes_, PassKind::Closing);
   const bool gauss = has(passes_, PassKind::Gaussian);
   const bool legacy = impl_->shaders == ShaderSet::Legacy;
-  // The Gaussian's pipelines: gaussian_x4 variants (made per kernel on first run; a radius
-  // above ISOTOUCH_DENSE_MAX_RADIUS takes gaussian1d), or gaussian1d with the legacy set.
+  // The filters' pipelines: filter_x4 variants, "gaussian_x4" / "morph_x4" (made per kernel
+  // on first run; a radius above ISOTOUCH_DENSE_MAX_RADIUS takes gaussian1d / morph1d), or
+  // gaussian1d / morph1d with the legacy set.
+  const bool closing = has(passes_, PassKind::Closing);
   const char* gname = legacy ? " gaussian1d" : " gaussian_x4";
+  const char* mname = legacy ? " morph1d" : " morph_x4";
   s << "\nshaders: " << shader_set_name(impl_->shaders) << (legacy ? "" : " (texel-buffer input, 4 voxels per invocation)");
   s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
-    << (impl_->morph ? " morph1d" : "") << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
+    << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
+    << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
     << (impl_->minmax ? " brick_minmax" : "");
-  const bool all = gauss && impl_->morph && impl_->gradient && impl_->minmax;
-  s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (impl_->morph ? "" : " morph1d")
+  const bool all = gauss && closing && impl_->gradient && impl_->minmax;
+  s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (closing ? "" : (legacy ? " morph1d" : " morph_x4 morph1d"))
     << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax") << (all ? " none" : "");
   const bool direct = impl_->ctx.device_local_is_host_visible();
   s << "\nbuffers per run: voxels (float, device-local)" << (direct ? " written in place (host-visible: no staging)" : " + staging")
@@ -248,7 +255,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
     const ComputePipelineBase* pipe = nullptr;
     enum { Filter, Gradient, MinMax } type = Filter;
     gpu::Filter1dPush f{};
-    const ComputePipeline<gpu::DensePush>* x4 = nullptr;  // gaussian_x4 variant, else the 1-D filter
+    const ComputePipeline<gpu::DensePush>* x4 = nullptr;  // filter_x4 variant, else the 1-D filter
     std::vector<Slab> slabs;
   };
   std::vector<Step> steps;
@@ -276,7 +283,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
           s.f.radius = gpu::uint(kern.size() / 2);
           s.f.w_offset = w_offsets[gi][std::size_t(axis)];
           if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
-            s.x4 = impl_->gaussian_x4(vol.grid.dims, axis, kern);
+            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), 0u, kern);
             s.pipe = s.x4;
           } else {
             if (!impl_->gauss)
@@ -284,9 +291,16 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
             s.pipe = impl_->gauss.get();
           }
         } else {
-          s.pipe = impl_->morph.get();
           s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
           s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
+          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
+            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), s.f.mode, {});
+            s.pipe = s.x4;
+          } else {
+            if (!impl_->morph)
+              impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
+            s.pipe = impl_->morph.get();
+          }
         }
         info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
         SlabGeometry g;

@@ -1,10 +1,14 @@
 #version 450
-// One axis of the separable Gaussian, four voxels of an x-row per invocation
-// (isotouch_shared.h DensePush): dst[i] = sum_{k=-r..r} w[k + r] * src[clamp(i + k)], the
-// axis, the radius and the normalised weights (engine/cpu_filters.cpp gaussian_kernel)
-// specialization constants. The accumulator is `precise` (no FMA contraction, no
-// reassociation) and the taps are summed from k = -r up, exactly as engine/cpu_filters.cpp
-// does, so the result agrees bit for bit. Border: clamp to edge.
+// One axis of a separable filter, four voxels of an x-row per invocation
+// (isotouch_shared.h DensePush), the axis, the radius and the mode specialization constants:
+// - Gaussian: dst[i] = sum_{k=-r..r} w[k + r] * src[clamp(i + k)], the normalised weights
+//   (engine/cpu_filters.cpp gaussian_kernel) specialization constants too. The accumulator
+//   is `precise` (no FMA contraction, no reassociation) and the taps are summed from k = -r
+//   up, exactly as engine/cpu_filters.cpp does, so the result agrees bit for bit.
+// - dilation (max) / erosion (min) over the box window: the running extremum starts at
+//   -inf / +inf and takes a tap only if it compares greater / less, taps from k = -r up,
+//   as engine/cpu_filters.cpp: NaN voxels are skipped.
+// Border: clamp to edge.
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 
@@ -15,7 +19,9 @@ layout(constant_id = 1) const int NY = 1;
 layout(constant_id = 2) const int NZ = 1;
 layout(constant_id = 3) const int AXIS = 0;  // 0 = x, 1 = y, 2 = z
 layout(constant_id = 4) const int R = 0;     // taps on each side, <= ISOTOUCH_DENSE_MAX_RADIUS
+layout(constant_id = 38) const uint MODE = 0u;  // 0 Gaussian, ISOTOUCH_MORPH_MAX, ISOTOUCH_MORPH_MIN
 const int QX = (NX + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
+
 layout(constant_id = 5) const float W0 = 0.0;
 layout(constant_id = 6) const float W1 = 0.0;
 layout(constant_id = 7) const float W2 = 0.0;
@@ -89,6 +95,15 @@ float W_at(int k) {
   return 0.0;
 }
 
+// One tap into the accumulator: weighted sum, or the comparison update of max / min.
+vec4 tap(vec4 acc, int k, vec4 v) {
+  if (MODE == ISOTOUCH_MORPH_MAX) return mix(acc, v, greaterThan(v, acc));
+  if (MODE == ISOTOUCH_MORPH_MIN) return mix(acc, v, lessThan(v, acc));
+  precise vec4 term = W_at(k) * v;
+  precise vec4 sum = acc + term;
+  return sum;
+}
+
 layout(set = 0, binding = 0) uniform samplerBuffer src;
 layout(std430, set = 0, binding = 1) writeonly buffer Dst { float dst[]; };
 layout(std430, set = 0, binding = 1) writeonly buffer Dst4 { vec4 dst4[]; };
@@ -106,15 +121,15 @@ void main() {
   const int z = int(pc.z0) + zs;
   const int slice = nx * ny, src0 = int(pc.src_offset) - int(pc.src_z0) * slice;
   const ivec4 xs = min(ivec4(x0) + ivec4(0, 1, 2, 3), ivec4(nx - 1));
-  precise vec4 acc = vec4(0.0);
+  precise vec4 acc = vec4(MODE == ISOTOUCH_MORPH_MAX ? uintBitsToFloat(0xff800000u)
+                          : MODE == ISOTOUCH_MORPH_MIN ? uintBitsToFloat(0x7f800000u) : 0.0);
   if (AXIS == 0) {
     // The window x0 - r .. x0 + 3 + r, clamped into the row, read once.
     const int row = src0 + z * slice + y * nx;
     float win[ISOTOUCH_DENSE_VOXELS + 2 * ISOTOUCH_DENSE_MAX_RADIUS];
     for (int j = 0; j < 4 + 2 * R; ++j) win[j] = at(row + clamp(x0 - R + j, 0, nx - 1));
     for (int k = 0; k <= 2 * R; ++k) {
-      precise vec4 term = W_at(k) * vec4(win[k], win[k + 1], win[k + 2], win[k + 3]);
-      acc = acc + term;
+      acc = tap(acc, k, vec4(win[k], win[k + 1], win[k + 2], win[k + 3]));
     }
   } else {
     // Voxel j along the axis is row + j * stride (+ the lane's x).
@@ -123,8 +138,7 @@ void main() {
     const int row = AXIS == 1 ? src0 + z * slice : src0 + y * nx;
     for (int k = 0; k <= 2 * R; ++k) {
       const int p = row + clamp(i + k - R, 0, n - 1) * stride;
-      precise vec4 term = W_at(k) * vec4(at(p + xs.x), at(p + xs.y), at(p + xs.z), at(p + xs.w));
-      acc = acc + term;
+      acc = tap(acc, k, vec4(at(p + xs.x), at(p + xs.y), at(p + xs.z), at(p + xs.w)));
     }
   }
   const uint o = pc.dst_offset + uint((zs * ny + y) * nx + x0);

@@ -13,6 +13,8 @@
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
+#include "isotouch/shaders/minmax_bricks_spv.h"
+#include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
 #include "isotouch_shared.h"
 #include "vk_resources.h"
@@ -108,6 +110,10 @@ struct PassChain::Impl {
     return p.get();
   }
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
+  /// Current set's brick min/max in two steps (minmax_rows, minmax_bricks), specialised on
+  /// the bricks along x; made on first use.
+  std::map<std::uint32_t, std::pair<std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>,
+                                    std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>>> minmax_x4;
   std::unique_ptr<GradientPass> gradient;
   std::string last_run;
   /// The last run's buffers by name, reused by the next run of the same sizes: no new
@@ -131,7 +137,7 @@ Result<std::unique_ptr<PassChain>> PassChain::create(VulkanContext& ctx, std::ve
     impl->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
   if (has(passes, PassKind::Closing) && shaders == ShaderSet::Legacy)
     impl->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
-  if (has(passes, PassKind::BrickMinMax))
+  if (has(passes, PassKind::BrickMinMax) && shaders == ShaderSet::Legacy)
     impl->minmax = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, brick_minmax_spv, 2, "brick_minmax");
   if (has(passes, PassKind::Gradient)) impl->gradient = std::make_unique<GradientPass>(ctx, shaders);
   return R::ok(std::unique_ptr<PassChain>(new PassChain(std::move(impl), std::move(passes))));
@@ -148,25 +154,27 @@ std::string PassChain::describe() const {
   // on first run; a radius above ISOTOUCH_DENSE_MAX_RADIUS takes gaussian1d / morph1d), or
   // gaussian1d / morph1d with the legacy set.
   const bool closing = has(passes_, PassKind::Closing);
+  const bool minmax = has(passes_, PassKind::BrickMinMax);
   const char* gname = legacy ? " gaussian1d" : " gaussian_x4";
   const char* mname = legacy ? " morph1d" : " morph_x4";
   s << "\nshaders: " << shader_set_name(impl_->shaders) << (legacy ? "" : " (texel-buffer input, 4 voxels per invocation)");
   s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
     << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
     << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
-    << (impl_->minmax ? " brick_minmax" : "");
-  const bool all = gauss && closing && impl_->gradient && impl_->minmax;
+    << (minmax ? (legacy ? " brick_minmax" : " brick_minmax (minmax_rows + minmax_bricks)") : "");
+  const bool all = gauss && closing && impl_->gradient && minmax;
   s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (closing ? "" : (legacy ? " morph1d" : " morph_x4 morph1d"))
-    << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax") << (all ? " none" : "");
+    << (impl_->gradient ? "" : " gradient") << (minmax ? "" : " brick_minmax") << (all ? " none" : "");
   const bool direct = impl_->ctx.device_local_is_host_visible();
   s << "\nbuffers per run: voxels (float, device-local)" << (direct ? " written in place (host-visible: no staging)" : " + staging")
     << (filters ? ", ping-pong field (float)" : "") << (filters && !direct ? ", field readback" : "")
     << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
     << (impl_->gradient ? (direct ? ", samples (vec4, read in place)" : ", samples (vec4) + readback") : "")
-    << (impl_->minmax ? (direct ? ", brick ranges (read in place)" : ", brick ranges + readback") : "");
+    << (minmax ? (direct ? ", brick ranges (read in place)" : ", brick ranges + readback") : "")
+    << (minmax && !legacy ? ", brick row ranges (8 B per brick column and row of a slab)" : "");
   s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
     << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
-    << (impl_->minmax ? "" : " brick ranges") << (direct ? " staging and readback copies" : "") << (all ? " none" : "");
+    << (minmax ? "" : " brick ranges") << (direct ? " staging and readback copies" : "") << (all ? " none" : "");
   if (!impl_->last_run.empty()) s << "\nlast run:\n" << impl_->last_run;
   return s.str();
 }
@@ -243,7 +251,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
                       bz = std::uint32_t((nz + 7) / 8);
   const std::uint64_t brick_bytes = std::uint64_t(bx) * by * bz * 2 * 4;
-  if (impl_->minmax) {
+  if (has(passes_, PassKind::BrickMinMax)) {
     bricks = buffer(brick_bytes, MemoryIntent::DeviceLocal, "brick ranges");
     if (!direct) bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
   }
@@ -259,6 +267,9 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
     std::vector<Slab> slabs;
   };
   std::vector<Step> steps;
+  const bool legacy = impl_->shaders == ShaderSet::Legacy;
+  std::uint64_t rows_slices = 0;  // most source slices of a brick min/max slab
+  std::uint32_t extra_sets = 0;   // the current brick min/max binds twice per slab
   int cur = 0;
   const std::uint64_t float_slice = slice_bytes;
   BrickLayer layer{std::uint64_t(bx) * by * 2 * 4};
@@ -342,10 +353,14 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
       g.z_multiple = ISOTOUCH_BRICK;
       g.dst_bytes_before = &bricks_before;
       g.user = &layer;
-      g.wg_z = ISOTOUCH_MINMAX_WG_Z;
+      g.wg_z = legacy ? ISOTOUCH_MINMAX_WG_Z : 1;
       auto sl = plan_slabs(ctx, g, field[cur].handle(), bricks.handle(), limit, vol.path + ": " + p.label());
       if (!sl) throw VolumeError(sl.error);
       s.slabs = std::move(*sl.value);
+      for (const Slab& b : s.slabs) {
+        rows_slices = std::max(rows_slices, b.src_z1 - b.src_z0);
+        if (!legacy) ++extra_sets;
+      }
       info << ": " << bx << "x" << by << "x" << bz << " bricks";
       steps.push_back(std::move(s));
     }
@@ -354,8 +369,28 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
       if (s.pass == i) d += s.slabs.size();
     info << ", " << d << " dispatch(es)\n";
   }
-  std::uint32_t sets = 0;
+  std::uint32_t sets = extra_sets;
   for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
+  // Current brick min/max: the row ranges of one slab's source slices (2 floats per brick
+  // column of every row), reused slab after slab.
+  const std::uint64_t rows_bytes = rows_slices * std::uint64_t(ny) * bx * 8;
+  GpuBuffer rows;
+  const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows = nullptr, *mm_bricks = nullptr;
+  if (has(passes_, PassKind::BrickMinMax) && !legacy) {
+    if (rows_slices > lim.maxComputeWorkGroupCount[2])
+      throw VolumeError(vol.path + ": " + std::to_string(rows_slices) + " slices in one brick min/max slab exceed " +
+                        "maxComputeWorkGroupCount[2] on " + ctx.info().name);
+    rows = buffer(rows_bytes, MemoryIntent::DeviceLocal, "brick row ranges");
+    auto& pp = impl_->minmax_x4[bx];
+    if (!pp.first) {
+      pp.first = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_rows_spv, 2, "minmax_rows", 0u,
+                                                                         std::vector<std::uint32_t>{bx}, 1u);
+      pp.second = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_bricks_spv, 2, "minmax_bricks",
+                                                                          0u, std::vector<std::uint32_t>{bx}, 1u);
+    }
+    mm_rows = pp.first.get();
+    mm_bricks = pp.second.get();
+  }
   DescriptorArena arena(ctx, sets, 3 * sets);
   GpuTimer timer(ctx, std::uint32_t(passes_.size() + 1));
 
@@ -423,10 +458,24 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
         pc.src_offset = gpu::uint(sl.src_offset_elems);
         pc.dst_offset = gpu::uint(sl.dst_offset_elems);
         pc.halo = gpu::uint(passes_[s.pass].halo);
-        impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
-        impl_->minmax->push(cmd, pc);
-        vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
-                      groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+        if (mm_rows) {
+          const std::uint64_t src_nz = sl.src_z1 - sl.src_z0;
+          const BufferRange rr{rows.handle(), 0, src_nz * std::uint64_t(ny) * bx * 8};
+          pc.pad0 = gpu::uint(src_nz);
+          mm_rows->bind(cmd, arena, {sl.src, rr});
+          mm_rows->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(src_nz));
+          barrier_compute_to_compute(cmd);
+          mm_bricks->bind(cmd, arena, {rr, sl.dst});
+          mm_bricks->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
+          barrier_compute_to_compute(cmd);  // the next slab rewrites the row ranges
+        } else {
+          impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
+          impl_->minmax->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
+                        groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+        }
       }
     }
     if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
@@ -500,6 +549,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   keep(bricks, "brick ranges");
   keep(bricks_down, "brick ranges readback");
   keep(field_down, "field readback");
+  keep(rows, "brick row ranges");
   return out;
 }
 

@@ -180,6 +180,18 @@ std::string PassChain::describe() const {
 }
 
 ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
+  return run_impl(vol, max_binding_bytes, nullptr);
+}
+
+ChainOutput PassChain::run_in_place(const Volume& vol, InPlace& where, std::uint64_t max_binding_bytes) {
+  where = {};
+  ChainOutput out = run_impl(vol, max_binding_bytes, &where);
+  if (!where.field && out.field) where.field = out.field->data();
+  if (!where.samples && out.samples) where.samples = out.samples->samples.data();
+  return out;
+}
+
+ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_bytes, InPlace* in_place) {
   VulkanContext& ctx = impl_->ctx;
   const auto [nx, ny, nz] = vol.grid.dims;
   const std::uint64_t n = vol.grid.voxel_count();
@@ -507,11 +519,15 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   out.gpu_timestamps = timer.enabled();
 
   t0 = std::chrono::steady_clock::now();
-  if (filters) {
+  if (filters && in_place && direct) {
+    in_place->field = static_cast<const float*>(field[cur].mapped());
+  } else if (filters) {
     out.field.emplace(n);
     std::memcpy(out.field->data(), direct ? field[cur].mapped() : field_down.mapped(), n * 4);
   }
-  if (samples) {
+  if (samples && in_place && direct) {
+    in_place->samples = static_cast<const core::Sample*>(samples.mapped());
+  } else if (samples) {
     out.samples.emplace();
     out.samples->grid = vol.grid;
     out.samples->samples.resize(n);

@@ -97,6 +97,16 @@ class PassChain {
   ///         a slab does not fit a binding, or a parameter gives too wide a kernel.
   ChainOutput run(const Volume& volume, std::uint64_t max_binding_bytes = 0);
 
+  /// The outputs where they lie, valid until the next run: the field after the last filter
+  /// (null without a filter) and the gradient samples (null without a gradient). Where
+  /// device-local memory is host-visible they point into the chain's own buffers (no copy);
+  /// otherwise into `copies`, which run() filled as usual.
+  struct InPlace {
+    const float* field = nullptr;
+    const core::Sample* samples = nullptr;
+  };
+  ChainOutput run_in_place(const Volume& volume, InPlace& where, std::uint64_t max_binding_bytes = 0);
+
   /// What this chain runs and what it left out: the passes in order, the pipelines and
   /// buffers created and those not created; after run(), per-pass kernel sizes in voxels
   /// and dispatch counts of the last run.
@@ -104,6 +114,7 @@ class PassChain {
   const std::vector<PassDesc>& passes() const { return passes_; }
 
  private:
+  ChainOutput run_impl(const Volume& volume, std::uint64_t max_binding_bytes, InPlace* in_place);
   struct Impl;
   explicit PassChain(std::unique_ptr<Impl> impl, std::vector<PassDesc> passes);
   std::unique_ptr<Impl> impl_;

@@ -319,7 +319,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   r.gpu_why = gpu_why;
 
   std::unique_ptr<engine::PassChain> chain, legacy;
-  std::unique_ptr<engine::SparseChain> schain;
+  std::unique_ptr<engine::SparseChain> schain, sbrick;
   std::string sparse_why = gpu_why;
   if (ctx) {
     try {
@@ -334,6 +334,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     try {
       auto sr = engine::SparseChain::create(*ctx, sparse);
       if (sr) schain = std::move(*sr.value);
+      auto br = engine::SparseChain::create(*ctx, sparse);
+      if (br) {
+        sbrick = std::move(*br.value);
+        sbrick->set_strategy(engine::SparseChain::Strategy::PerBrick);
+      }
       else sparse_why = sr.error;
     } catch (const std::exception& e) {
       sparse_why = e.what();
@@ -347,11 +352,12 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
   const bool run_peers = peers && std::isfinite(sigma_mm);
   std::vector<PeerTimes> peer_runs[2];
-  std::vector<SparseSamples> sg(ni), sc(ni);
+  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni);
   std::vector<float> bg(ni);
   for (std::size_t k = 0; k < ni; ++k) {
     bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
     if (!schain) sg[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
+    if (!sbrick) sb[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
   }
   // Warm-up (untimed): first dispatches, allocations, lazy pipeline compiles.
   if (chain) {
@@ -365,7 +371,10 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       legacy.reset();
     }
   }
-  for (std::size_t k = 0; k < ni; ++k) guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
+  for (std::size_t k = 0; k < ni; ++k) {
+    guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
+    guarded(sb[k], [&] { (void)sbrick->run(v, c.isos[k], bg[k]); });
+  }
 
   for (int rep = 0; rep < repetitions; ++rep) {
     progress << "[bench engine] " << c.name << " (" << v.grid.dims[0] << "x" << v.grid.dims[1] << "x"
@@ -395,6 +404,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
+      guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
       guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
     }
   }
@@ -436,6 +446,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     IsoResult ir;
     ir.iso = c.isos[k];
     ir.gpu = sg[k].cell();
+    ir.gpu_per_brick = sb[k].cell();
     ir.cpu = sc[k].cell();
     if (ir.gpu.available && ir.cpu.available) {
       const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
@@ -748,8 +759,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
   out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
       << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
          "[ms] | dense CPU [ms] | sparse GPU / dense CPU | sparse CPU / dense CPU | sparse GPU / dense GPU | GPU vs "
-         "CPU counts |\n"
-      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+         "CPU counts | sparse GPU, per-brick kernel [ms] |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos) {
       const SparseCell& s = ir.gpu.available ? ir.gpu : ir.cpu;
@@ -763,7 +774,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           << num(r.dense_cpu_wall_ms) << " | " << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.cpu, ir.sparse_cpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_gpu, 3) << " | "
-          << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " |\n";
+          << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " | "
+          << sparse_cell(ir.gpu_per_brick, ir.gpu_per_brick.total_ms) << " |\n";
       const std::string t = "sparse";
       if (have) {
         csv.row(t, r.name, tau, "", "bricks_total", std::to_string(s.stats.bricks_total), "", "");
@@ -774,6 +786,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "candidate_percent", csv_num(ir.candidate_percent), "%", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_ms", csv_num(ir.gpu.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_cpu_ms", csv_num(ir.cpu.total_ms), "ms", d.cpu);
+      csv.row(t, r.name, tau, "", "sparse_gpu_per_brick_ms", csv_num(ir.gpu_per_brick.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_cpu", csv_num(ir.sparse_gpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_gpu", csv_num(ir.sparse_gpu_over_dense_gpu), "", "");

@@ -132,6 +132,7 @@ struct FormatBytes {
 struct IsoResult {
   core::Isosurface iso;
   SparseCell gpu, cpu;
+  SparseCell gpu_per_brick;               ///< the same on the per-brick kernel (SparseChain::Strategy::PerBrick)
   std::vector<FormatBytes> formats;       ///< fp32, fp16, unorm16
   double active_percent = kNaN;           ///< 100 active / bricks_total
   double candidate_percent = kNaN;        ///< 100 candidates / bricks_total

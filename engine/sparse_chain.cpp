@@ -136,8 +136,6 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   t0 = std::chrono::steady_clock::now();
   const auto nb = core::brick_counts(vol.grid);
   std::vector<sparse::CandidateRange> ranges(nc);
-  std::vector<core::Sample> pool;
-  std::vector<std::size_t> slot(nc, 0);
   const float inf = std::numeric_limits<float>::infinity();
   for (std::size_t c = 0; c < nc; ++c) {
     const auto b = core::brick_coords(sel.candidates[c], nb);
@@ -160,11 +158,15 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
     rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
     rg.hi = rg.hi + 0.0f;
     ranges[c] = rg;
-    float tile = 0;
-    if (!sparse::is_active(rg, iso, background, tile)) continue;
-    slot[c] = pool.size();
-    pool.resize(pool.size() + core::kBrickSamples);
-    core::Sample* o = pool.data() + slot[c];
+  }
+  const double gather_ms = ms_since(t0);
+  // publish() copies an active candidate's 9^3 samples into the pool right after asking for
+  // them: gathered here from the dense samples into one brick's worth of scratch.
+  t0 = std::chrono::steady_clock::now();
+  std::vector<core::Sample> scratch(core::kBrickSamples);
+  auto gather = [&](std::size_t c) -> const core::Sample* {
+    const auto b = core::brick_coords(sel.candidates[c], nb);
+    core::Sample* o = scratch.data();
     for (int k = 0; k < 9; ++k)
       for (int j = 0; j < 9; ++j)
         for (int i = 0; i < 9; ++i) {
@@ -173,11 +175,9 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
                                       ? core::Sample{background, 0.0f, 0.0f, 0.0f}
                                       : s[std::size_t(g[2]) * slice + std::size_t(g[1]) * std::size_t(nx) + std::size_t(g[0])];
         }
-  }
-  const double gather_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return pool.data() + slot[c]; }, iso, background,
-                  format, keep_input, out);
+    return o;
+  };
+  sparse::publish(vol.grid, sel, ranges, gather, iso, background, format, keep_input, out);
   out.publish_ms = ms_since(t0);
 
   out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
@@ -189,7 +189,8 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
     slabs = p.dispatches;  // the gradient, last: one dispatch per z-slab
   }
   out.passes.push_back({"dense chain wall (upload, submit, in-place outputs)", dense_wall_ms, 0});
-  out.passes.push_back({"candidate ranges + active samples gathered (host)", gather_ms, 0});
+  out.passes.push_back({"candidate ranges (host)", gather_ms, 0});
+  out.passes.push_back({"publish: active samples gathered into the pool (host)", out.publish_ms, 0});
   out.upload_ms = d.upload_ms;
   out.submit_wall_ms = d.submit_wall_ms;
   out.download_ms = d.download_ms;

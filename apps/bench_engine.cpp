@@ -25,6 +25,7 @@
 
 #include "bench_peers.h"
 #include "files.h"
+#include "gradient_pass.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
@@ -419,6 +420,15 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     r.passes.push_back(p);
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
+  if (chain) {
+    try {
+      progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
+      engine::GradientPass floor_pass(*ctx);
+      r.copy_floor_ms = floor_pass.copy_floor_ms(v, std::max(3, repetitions));
+    } catch (const std::exception& e) {
+      progress << "[bench engine] copy floor: " << e.what() << "\n";
+    }
+  }
   if (run_peers)
     for (int t = 0; t < 2; ++t) {
       PeerRow pr;
@@ -537,6 +547,13 @@ void finish_case(CaseResult& r) {
   r.memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? double(r.sum.min_bytes) / (r.memcpy_gbps * 1e9) * 1e3
                                                                   : kNaN;
   r.chain_over_memcpy = ratio(r.sum.gpu_ms, r.memcpy_ms);
+  const double grad_bytes = double(pass_min_bytes(engine::PassKind::Gradient, r.voxels, r.bricks));
+  r.copy_floor_memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? grad_bytes / (r.memcpy_gbps * 1e9) * 1e3
+                                                                             : kNaN;
+  r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
+  r.gradient_over_floor = kNaN;
+  for (const PassRow& p : r.passes)
+    if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
   r.dense_gpu_over_cpu_wall = ratio(r.dense_gpu_wall_ms, r.dense_cpu_wall_ms);
   for (IsoResult& ir : r.isos) {
     const SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
@@ -748,6 +765,20 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
     csv.row("peers", r.name, "", "", "chain_over_peer", csv_num(r.chain_over_peer), "", "");
     csv.row("peers", r.name, "", "", "memcpy_ms", csv_num(r.memcpy_ms), "ms", d.cpu);
     csv.row("peers", r.name, "", "", "chain_over_memcpy", csv_num(r.chain_over_memcpy), "", "");
+  }
+  out << "\nThe device's floor for the gradient's bytes (read 4 B, write a 16 B sample per voxel): copy_x4.comp, "
+         "the gradient pass's texel loads and vec4 stores without arithmetic, median device time; memcpy of the "
+         "same bytes.\n\n| case | copy floor [ms] | memcpy of the same bytes [ms] | floor / memcpy | gradient pass "
+         "[ms] | gradient / floor |\n|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    double grad = kNaN;
+    for (const PassRow& p : r.passes)
+      if (p.label == "gradient") grad = p.gpu_ms;
+    out << "| " << r.name << " | " << num(r.copy_floor_ms) << " | " << num(r.copy_floor_memcpy_ms) << " | "
+        << num(r.floor_over_memcpy) << " | " << num(grad) << " | " << num(r.gradient_over_floor) << " |\n";
+    csv.row("floor", r.name, "", "copy_x4", "copy_floor_ms", csv_num(r.copy_floor_ms), "ms", d.gpu);
+    csv.row("floor", r.name, "", "copy_x4", "floor_over_memcpy", csv_num(r.floor_over_memcpy), "", "");
+    csv.row("floor", r.name, "", "copy_x4", "gradient_over_floor", csv_num(r.gradient_over_floor), "", "");
   }
 }
 

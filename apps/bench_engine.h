@@ -184,6 +184,12 @@ struct CaseResult {
   double chain_over_peer = kNaN;          ///< sum.gpu_ms / fastest_peer_chain_ms
   double memcpy_ms = kNaN;                ///< time memcpy takes for sum.min_bytes at memcpy_gbps
   double chain_over_memcpy = kNaN;        ///< sum.gpu_ms / memcpy_ms
+  /// The device's floor for the gradient's bytes: GradientPass::copy_floor_ms (copy_x4.comp,
+  /// the gradient's texel loads and vec4 stores without arithmetic), median device time.
+  double copy_floor_ms = kNaN;
+  double copy_floor_memcpy_ms = kNaN;     ///< memcpy time of the same bytes (gradient min bytes)
+  double floor_over_memcpy = kNaN;        ///< copy_floor_ms / copy_floor_memcpy_ms
+  double gradient_over_floor = kNaN;      ///< the gradient pass (current shaders) / copy_floor_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

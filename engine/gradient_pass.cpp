@@ -7,6 +7,7 @@
 
 #include "cpu_gradient.h"
 #include "isotouch/shaders/gradient_spv.h"
+#include "isotouch/shaders/copy_x4_spv.h"
 #include "isotouch/shaders/gradient_x4_spv.h"
 #include "isotouch_shared.h"
 
@@ -132,6 +133,53 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const ser
                   group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y),
                   group_count(s.nz, ISOTOUCH_GRADIENT_WG_Z));
   }
+}
+
+double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
+  const auto [nx, ny, nz] = vol.grid.dims;
+  const std::uint64_t n = vol.grid.voxel_count();
+  auto buffer = [&](std::uint64_t bytes, const char* what) {
+    auto r = GpuBuffer::create(ctx_, bytes, MemoryIntent::DeviceLocal, what);
+    if (!r) throw VolumeError(vol.path + ": " + r.error);
+    return std::move(*r.value);
+  };
+  GpuBuffer src = buffer(n * sizeof(float), "voxels (copy floor)");
+  GpuBuffer dst = buffer(n * sizeof(servo::Sample), "samples (copy floor)");
+  GradientPass planner(ctx_, ShaderSet::Current);
+  const std::vector<Slab> slabs = planner.plan(vol.grid, src.handle(), dst.handle(), 0, vol.path);
+  ComputePipeline<gpu::DensePush> pipe(ctx_, copy_x4_spv, 2, "copy_x4", 0u,
+                                       std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)},
+                                       1u);
+  const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
+  std::vector<double> ms;
+  for (int r = 0; r <= runs; ++r) {
+    DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 2 * std::uint32_t(slabs.size()));
+    GpuTimer timer(ctx_, 2);
+    VkCommandBuffer cmd = ctx_.begin_commands();
+    timer.record_reset(cmd);
+    timer.mark(cmd, 0);
+    for (const Slab& s : slabs) {
+      pipe.bind(cmd, arena, {s.src, s.dst});
+      gpu::DensePush pc{};
+      pc.nx = gpu::uint(nx);
+      pc.ny = gpu::uint(ny);
+      pc.nz = gpu::uint(nz);
+      pc.z0 = gpu::uint(s.z0);
+      pc.slab_nz = gpu::uint(s.nz);
+      pc.src_z0 = gpu::uint(s.src_z0);
+      pc.src_offset = gpu::uint(s.src_offset_elems);
+      pc.dst_offset = gpu::uint(s.dst_offset_elems);
+      pc.qx = qx;
+      pipe.push(cmd, pc);
+      vkCmdDispatch(cmd, group_count(std::uint64_t(qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(s.nz));
+    }
+    timer.mark(cmd, 1);
+    const double wall = ctx_.submit_and_wait(cmd);
+    const double dev = timer.elapsed_ms(0, 1);
+    if (r > 0) ms.push_back(dev >= 0 ? dev : wall);  // run 0: first touch of the buffers, untimed
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms.empty() ? -1.0 : ms[ms.size() / 2];
 }
 
 servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings,

@@ -47,6 +47,10 @@ class GradientPass {
   /// @throws VolumeError naming `what`, the slice size and the limit if a slice does not fit.
   std::vector<Slab> plan(const servo::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
                          const std::string& what) const;
+  /// The floor of this pass on this device: shaders/copy_x4.comp (the same texel loads and
+  /// vec4 stores as gradient_x4, no arithmetic) over `volume`, one untimed run and then the
+  /// median device time [ms] of `runs` (wall time without timestamps). Buffers device-local.
+  double copy_floor_ms(const Volume& volume, int runs);
   /// Records the dispatches of `slabs` (from plan()); no barriers.
   void record(VkCommandBuffer cmd, DescriptorArena& arena, const servo::Grid& grid,
               const std::vector<Slab>& slabs) const;

@@ -339,7 +339,15 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   two.itk_gradient_ms = 25;
   two.vdb_gradient_ms = 30;
   r.peers = {one, two};
+  // The copy floor: 1 ms for the gradient's bytes, 20 B per voxel: 1e6 voxels = 20e6 B,
+  // 5 ms of memcpy at 4 GB/s; the pass labelled "gradient" takes 2 ms, twice the floor.
+  r.passes[1].label = "gradient";
+  r.voxels = 1'000'000;
+  r.copy_floor_ms = 1.0;
   app::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.copy_floor_memcpy_ms, 5.0);
+  EXPECT_DOUBLE_EQ(r.floor_over_memcpy, 0.2);
+  EXPECT_DOUBLE_EQ(r.gradient_over_floor, 2.0);
   EXPECT_DOUBLE_EQ(r.passes[0].legacy_over_gpu, 2.5);
   EXPECT_DOUBLE_EQ(r.sum.legacy_gpu_ms, 10.0);
   EXPECT_DOUBLE_EQ(r.sum.legacy_over_gpu, 2.5);

@@ -23,7 +23,9 @@
 #include <stdexcept>
 #include <thread>
 
+#include "bench_peers.h"
 #include "files.h"
+#include "gradient_pass.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
@@ -303,7 +305,7 @@ void guarded(SparseSamples& s, F&& f) {
 }  // namespace
 
 CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
-                    int repetitions, double memcpy_gbps, std::ostream& progress) {
+                    int repetitions, double memcpy_gbps, std::ostream& progress, bool peers) {
   const engine::Volume& v = *c.volume;
   const auto dense = dense_list(with_closing), sparse = sparse_list(with_closing);
   CaseResult r;
@@ -317,45 +319,63 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   r.memcpy_gbps = memcpy_gbps;
   r.gpu_why = gpu_why;
 
-  std::unique_ptr<engine::PassChain> chain;
-  std::unique_ptr<engine::SparseChain> schain;
+  std::unique_ptr<engine::PassChain> chain, legacy;
+  std::unique_ptr<engine::SparseChain> schain, sbrick;
   std::string sparse_why = gpu_why;
   if (ctx) {
     try {
       auto cr = engine::PassChain::create(*ctx, dense);
       if (cr) chain = std::move(*cr.value);
       else r.gpu_why = cr.error;
+      auto lr = engine::PassChain::create(*ctx, dense, engine::ShaderSet::Legacy);
+      if (lr) legacy = std::move(*lr.value);
     } catch (const std::exception& e) {
       r.gpu_why = e.what();
     }
     try {
       auto sr = engine::SparseChain::create(*ctx, sparse);
       if (sr) schain = std::move(*sr.value);
+      auto br = engine::SparseChain::create(*ctx, sparse);
+      if (br) {
+        sbrick = std::move(*br.value);
+        sbrick->set_strategy(engine::SparseChain::Strategy::PerBrick);
+      }
       else sparse_why = sr.error;
     } catch (const std::exception& e) {
       sparse_why = e.what();
     }
   }
   const std::size_t np = dense.size(), ni = c.isos.size();
-  std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np);
-  std::vector<double> gpu_wall, cpu_wall;
-  std::vector<SparseSamples> sg(ni), sc(ni);
+  std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np), legacy_ms(np);
+  std::vector<double> gpu_wall, cpu_wall, legacy_wall;
+  double sigma_mm = kNaN;
+  for (const auto& p : dense)
+    if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
+  const bool run_peers = peers && std::isfinite(sigma_mm);
+  std::vector<PeerTimes> peer_runs[2];
+  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni);
   std::vector<float> bg(ni);
   for (std::size_t k = 0; k < ni; ++k) {
     bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
     if (!schain) sg[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
+    if (!sbrick) sb[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
   }
   // Warm-up (untimed): first dispatches, allocations, lazy pipeline compiles.
   if (chain) {
     progress << "[bench engine] " << c.name << ": warm-up\n" << std::flush;
     try {
       (void)chain->run(v);
+      if (legacy) (void)legacy->run(v);
     } catch (const std::exception& e) {
       r.gpu_why = e.what();
       chain.reset();
+      legacy.reset();
     }
   }
-  for (std::size_t k = 0; k < ni; ++k) guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
+  for (std::size_t k = 0; k < ni; ++k) {
+    guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
+    guarded(sb[k], [&] { (void)sbrick->run(v, c.isos[k], bg[k]); });
+  }
 
   for (int rep = 0; rep < repetitions; ++rep) {
     progress << "[bench engine] " << c.name << " (" << v.grid.dims[0] << "x" << v.grid.dims[1] << "x"
@@ -368,6 +388,15 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       for (std::size_t i = 0; i < np && i < g.passes.size(); ++i)
         gpu_ms[i].push_back(g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN);
     }
+    if (legacy) {
+      const auto t0 = Clock::now();
+      const engine::ChainOutput g = legacy->run(v);
+      legacy_wall.push_back(ms_since(t0));
+      for (std::size_t i = 0; i < np && i < g.passes.size(); ++i)
+        legacy_ms[i].push_back(g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN);
+    }
+    if (run_peers)
+      for (int t = 0; t < 2; ++t) peer_runs[t].push_back(run_peers_once(v, sigma_mm, t + 1));
     {
       const auto t0 = Clock::now();
       const engine::ChainOutput h = engine::run_chain_cpu(v, dense);
@@ -376,6 +405,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
+      guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
       guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
     }
   }
@@ -386,8 +416,39 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     p.min_bytes = pass_min_bytes(dense[i].kind, r.voxels, r.bricks);
     p.gpu_ms = median(gpu_ms[i]);
     p.cpu_ms = median(cpu_ms[i]);
+    p.legacy_gpu_ms = median(legacy_ms[i]);
     r.passes.push_back(p);
   }
+  r.legacy_gpu_wall_ms = median(legacy_wall);
+  if (chain) {
+    try {
+      progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
+      engine::GradientPass floor_pass(*ctx);
+      r.copy_floor_ms = floor_pass.copy_floor_ms(v, std::max(3, repetitions));
+    } catch (const std::exception& e) {
+      progress << "[bench engine] copy floor: " << e.what() << "\n";
+    }
+  }
+  if (run_peers)
+    for (int t = 0; t < 2; ++t) {
+      PeerRow pr;
+      pr.threads = t + 1;
+      std::vector<double> a, b, c2, d2, e;
+      for (const PeerTimes& x : peer_runs[t]) {
+        a.push_back(x.itk_gaussian_ms);
+        b.push_back(x.itk_gradient_ms);
+        c2.push_back(x.itk_pack_ms);
+        d2.push_back(x.vdb_from_dense_ms);
+        e.push_back(x.vdb_gradient_ms);
+        if (pr.why.empty() && !(x.itk_why + x.vdb_why).empty()) pr.why = x.itk_why + " " + x.vdb_why;
+      }
+      pr.itk_gaussian_ms = median(a);
+      pr.itk_gradient_ms = median(b);
+      pr.itk_pack_ms = median(c2);
+      pr.vdb_from_dense_ms = median(d2);
+      pr.vdb_gradient_ms = median(e);
+      r.peers.push_back(pr);
+    }
   r.dense_gpu_wall_ms = median(gpu_wall);
   r.dense_cpu_wall_ms = median(cpu_wall);
 
@@ -395,6 +456,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     IsoResult ir;
     ir.iso = c.isos[k];
     ir.gpu = sg[k].cell();
+    ir.gpu_per_brick = sb[k].cell();
     ir.cpu = sc[k].cell();
     if (ir.gpu.available && ir.cpu.available) {
       const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
@@ -452,6 +514,7 @@ void finish_case(CaseResult& r) {
     p.gpu_of_memcpy = ratio(p.gpu_gbps, r.memcpy_gbps);
     p.cpu_of_memcpy = ratio(p.cpu_gbps, r.memcpy_gbps);
     p.gpu_over_cpu = ratio(p.gpu_ms, p.cpu_ms);
+    p.legacy_over_gpu = ratio(p.legacy_gpu_ms, p.gpu_ms);
   };
   PassRow sum;
   sum.label = "sum of passes";
@@ -462,9 +525,35 @@ void finish_case(CaseResult& r) {
     sum.gpu_ms += p.gpu_ms;  // NaN if any pass has no time
     sum.cpu_ms += p.cpu_ms;
   }
-  if (r.passes.empty()) sum.gpu_ms = sum.cpu_ms = kNaN;
+  sum.legacy_gpu_ms = 0;
+  for (const PassRow& p : r.passes) sum.legacy_gpu_ms += p.legacy_gpu_ms;
+  if (r.passes.empty()) sum.gpu_ms = sum.cpu_ms = sum.legacy_gpu_ms = kNaN;
   derive(sum);
   r.sum = sum;
+  r.fastest_peer_chain_ms = kNaN;
+  r.fastest_peer_chain.clear();
+  for (PeerRow& pr : r.peers) {
+    pr.itk_chain_ms = pr.itk_gaussian_ms + pr.itk_gradient_ms + pr.itk_pack_ms;
+    pr.itk_vdb_chain_ms = pr.itk_gaussian_ms + pr.vdb_from_dense_ms + pr.vdb_gradient_ms;
+    const std::string th = std::to_string(pr.threads) + " thread" + (pr.threads > 1 ? "s" : "");
+    for (const auto& [ms, name] : {std::pair{pr.itk_chain_ms, "ITK Gaussian + ITK gradient + packing, " + th},
+                                   std::pair{pr.itk_vdb_chain_ms, "ITK Gaussian + OpenVDB copyFromDense + gradient, " + th}})
+      if (std::isfinite(ms) && !(ms >= r.fastest_peer_chain_ms)) {
+        r.fastest_peer_chain_ms = ms;
+        r.fastest_peer_chain = name;
+      }
+  }
+  r.chain_over_peer = ratio(r.sum.gpu_ms, r.fastest_peer_chain_ms);
+  r.memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? double(r.sum.min_bytes) / (r.memcpy_gbps * 1e9) * 1e3
+                                                                  : kNaN;
+  r.chain_over_memcpy = ratio(r.sum.gpu_ms, r.memcpy_ms);
+  const double grad_bytes = double(pass_min_bytes(engine::PassKind::Gradient, r.voxels, r.bricks));
+  r.copy_floor_memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? grad_bytes / (r.memcpy_gbps * 1e9) * 1e3
+                                                                             : kNaN;
+  r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
+  r.gradient_over_floor = kNaN;
+  for (const PassRow& p : r.passes)
+    if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
   r.dense_gpu_over_cpu_wall = ratio(r.dense_gpu_wall_ms, r.dense_cpu_wall_ms);
   for (IsoResult& ir : r.isos) {
     const SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
@@ -613,19 +702,22 @@ struct Devices {
 
 void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
   out << "\n## Dense passes: time and effective bandwidth\n\n"
-      << "| case | pass | min bytes [MiB] | dense GPU [ms] | dense CPU [ms] | GPU / CPU | GPU [GB/s] | GPU / memcpy "
-         "| CPU [GB/s] | CPU / memcpy |\n"
-      << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      << "| case | pass | min bytes [MiB] | dense GPU [ms] | legacy shaders [ms] | legacy / current | dense CPU [ms] "
+         "| GPU / CPU | GPU [GB/s] | GPU / memcpy | CPU [GB/s] | CPU / memcpy |\n"
+      << "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const auto& r : res) {
     auto line = [&](const PassRow& p) {
       const std::string g = r.gpu_available ? num(p.gpu_ms) : "n/a (" + r.gpu_why + ")";
-      out << "| " << r.name << " | " << p.label << " | " << mib(p.min_bytes) << " | " << g << " | " << num(p.cpu_ms)
+      out << "| " << r.name << " | " << p.label << " | " << mib(p.min_bytes) << " | " << g << " | "
+          << num(p.legacy_gpu_ms) << " | " << num(p.legacy_over_gpu) << " | " << num(p.cpu_ms)
           << " | " << num(p.gpu_over_cpu, 3) << " | " << num(p.gpu_gbps) << " | " << num(p.gpu_of_memcpy, 3) << " | "
           << num(p.cpu_gbps) << " | " << num(p.cpu_of_memcpy, 3) << " |\n";
       const std::string t = "dense";
       csv.row(t, r.name, "", p.label, "min_bytes", std::to_string(p.min_bytes), "B", "");
       csv.row(t, r.name, "", p.label, "dense_gpu_ms", csv_num(p.gpu_ms), "ms", d.gpu);
       csv.row(t, r.name, "", p.label, "dense_cpu_ms", csv_num(p.cpu_ms), "ms", d.cpu);
+      csv.row(t, r.name, "", p.label, "legacy_gpu_ms", csv_num(p.legacy_gpu_ms), "ms", d.gpu);
+      csv.row(t, r.name, "", p.label, "legacy_over_gpu", csv_num(p.legacy_over_gpu), "", "");
       csv.row(t, r.name, "", p.label, "gpu_over_cpu", csv_num(p.gpu_over_cpu), "", "");
       csv.row(t, r.name, "", p.label, "gpu_gbps", csv_num(p.gpu_gbps), "GB/s", d.gpu);
       csv.row(t, r.name, "", p.label, "gpu_of_memcpy", csv_num(p.gpu_of_memcpy), "", d.gpu);
@@ -635,10 +727,58 @@ void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostr
     for (const auto& p : r.passes) line(p);
     line(r.sum);
     out << "| " << r.name << " | end to end (wall) | | " << num(r.dense_gpu_wall_ms) << " | "
+        << num(r.legacy_gpu_wall_ms) << " | " << num(ratio(r.legacy_gpu_wall_ms, r.dense_gpu_wall_ms)) << " | "
         << num(r.dense_cpu_wall_ms) << " | " << num(r.dense_gpu_over_cpu_wall, 3) << " | | | | |\n";
+    csv.row("dense", r.name, "", "end to end (wall)", "legacy_gpu_ms", csv_num(r.legacy_gpu_wall_ms), "ms", d.gpu);
     csv.row("dense", r.name, "", "end to end (wall)", "dense_gpu_ms", csv_num(r.dense_gpu_wall_ms), "ms", d.gpu);
     csv.row("dense", r.name, "", "end to end (wall)", "dense_cpu_ms", csv_num(r.dense_cpu_wall_ms), "ms", d.cpu);
     csv.row("dense", r.name, "", "end to end (wall)", "gpu_over_cpu", csv_num(r.dense_gpu_over_cpu_wall), "", "");
+  }
+}
+
+void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## Peers on the same cores (wall, medians) against the dense GPU chain\n\n"
+      << "| case | threads | ITK Gaussian | ITK gradient | packing | ITK chain | OpenVDB copyFromDense | OpenVDB "
+         "gradient | ITK Gaussian + OpenVDB chain | note |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res) {
+    for (const auto& p : r.peers) {
+      out << "| " << r.name << " | " << p.threads << " | " << num(p.itk_gaussian_ms) << " | " << num(p.itk_gradient_ms)
+          << " | " << num(p.itk_pack_ms) << " | " << num(p.itk_chain_ms) << " | " << num(p.vdb_from_dense_ms) << " | "
+          << num(p.vdb_gradient_ms) << " | " << num(p.itk_vdb_chain_ms) << " | " << p.why << " |\n";
+      const std::string th = std::to_string(p.threads);
+      csv.row("peers", r.name, "", "threads " + th, "itk_gaussian_ms", csv_num(p.itk_gaussian_ms), "ms", d.cpu);
+      csv.row("peers", r.name, "", "threads " + th, "itk_gradient_ms", csv_num(p.itk_gradient_ms), "ms", d.cpu);
+      csv.row("peers", r.name, "", "threads " + th, "itk_chain_ms", csv_num(p.itk_chain_ms), "ms", d.cpu);
+      csv.row("peers", r.name, "", "threads " + th, "vdb_from_dense_ms", csv_num(p.vdb_from_dense_ms), "ms", d.cpu);
+      csv.row("peers", r.name, "", "threads " + th, "vdb_gradient_ms", csv_num(p.vdb_gradient_ms), "ms", d.cpu);
+      csv.row("peers", r.name, "", "threads " + th, "itk_vdb_chain_ms", csv_num(p.itk_vdb_chain_ms), "ms", d.cpu);
+    }
+  }
+  out << "\n| case | dense GPU chain, device [ms] | fastest peer chain [ms] | which | chain / peer | memcpy of the "
+         "chain's min bytes [ms] | chain / memcpy |\n|---|---:|---:|---|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    out << "| " << r.name << " | " << num(r.sum.gpu_ms) << " | " << num(r.fastest_peer_chain_ms) << " | "
+        << (r.fastest_peer_chain.empty() ? "n/a" : r.fastest_peer_chain) << " | " << num(r.chain_over_peer, 3) << " | "
+        << num(r.memcpy_ms) << " | " << num(r.chain_over_memcpy, 2) << " |\n";
+    csv.row("peers", r.name, "", "", "fastest_peer_chain_ms", csv_num(r.fastest_peer_chain_ms), "ms", d.cpu);
+    csv.row("peers", r.name, "", "", "chain_over_peer", csv_num(r.chain_over_peer), "", "");
+    csv.row("peers", r.name, "", "", "memcpy_ms", csv_num(r.memcpy_ms), "ms", d.cpu);
+    csv.row("peers", r.name, "", "", "chain_over_memcpy", csv_num(r.chain_over_memcpy), "", "");
+  }
+  out << "\nThe device's floor for the gradient's bytes (read 4 B, write a 16 B sample per voxel): copy_x4.comp, "
+         "the gradient pass's texel loads and vec4 stores without arithmetic, median device time; memcpy of the "
+         "same bytes.\n\n| case | copy floor [ms] | memcpy of the same bytes [ms] | floor / memcpy | gradient pass "
+         "[ms] | gradient / floor |\n|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    double grad = kNaN;
+    for (const PassRow& p : r.passes)
+      if (p.label == "gradient") grad = p.gpu_ms;
+    out << "| " << r.name << " | " << num(r.copy_floor_ms) << " | " << num(r.copy_floor_memcpy_ms) << " | "
+        << num(r.floor_over_memcpy) << " | " << num(grad) << " | " << num(r.gradient_over_floor) << " |\n";
+    csv.row("floor", r.name, "", "copy_x4", "copy_floor_ms", csv_num(r.copy_floor_ms), "ms", d.gpu);
+    csv.row("floor", r.name, "", "copy_x4", "floor_over_memcpy", csv_num(r.floor_over_memcpy), "", "");
+    csv.row("floor", r.name, "", "copy_x4", "gradient_over_floor", csv_num(r.gradient_over_floor), "", "");
   }
 }
 
@@ -650,8 +790,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
   out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
       << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
          "[ms] | dense CPU [ms] | sparse GPU / dense CPU | sparse CPU / dense CPU | sparse GPU / dense GPU | GPU vs "
-         "CPU counts |\n"
-      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n";
+         "CPU counts | sparse GPU, per-brick kernel [ms] |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos) {
       const SparseCell& s = ir.gpu.available ? ir.gpu : ir.cpu;
@@ -665,7 +805,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           << num(r.dense_cpu_wall_ms) << " | " << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.cpu, ir.sparse_cpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_gpu, 3) << " | "
-          << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " |\n";
+          << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " | "
+          << sparse_cell(ir.gpu_per_brick, ir.gpu_per_brick.total_ms) << " |\n";
       const std::string t = "sparse";
       if (have) {
         csv.row(t, r.name, tau, "", "bricks_total", std::to_string(s.stats.bricks_total), "", "");
@@ -676,6 +817,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "candidate_percent", csv_num(ir.candidate_percent), "%", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_ms", csv_num(ir.gpu.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_cpu_ms", csv_num(ir.cpu.total_ms), "ms", d.cpu);
+      csv.row(t, r.name, tau, "", "sparse_gpu_per_brick_ms", csv_num(ir.gpu_per_brick.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_cpu", csv_num(ir.sparse_gpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_gpu", csv_num(ir.sparse_gpu_over_dense_gpu), "", "");
@@ -781,6 +923,24 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
   const IsoResult* a = find_iso(res, "chest", -500);
   vs.push_back(verdict_at_most("chest -500 sparse GPU / dense CPU", a ? a->sparse_gpu_over_dense_cpu : kNaN,
                                1.0 / 3.0, 3, a ? "sparse GPU: " + a->gpu.why : "chest CT not benchmarked"));
+  const CaseResult* chest = nullptr;
+  for (const auto& r : res)
+    if (r.name == "chest") chest = &r;
+  const std::string no_chest = "chest CT not benchmarked";
+  vs.push_back(verdict_at_most("chest dense GPU chain / fastest peer chain", chest ? chest->chain_over_peer : kNaN,
+                               1.0 / 3.0, 3, chest ? "no peer or no GPU time" : no_chest));
+  vs.push_back(verdict_at_most("chest dense GPU chain / memcpy of its bytes", chest ? chest->chain_over_memcpy : kNaN,
+                               5.0, 2, chest ? "no GPU time" : no_chest));
+  vs.push_back(verdict_at_most("chest -500 sparse GPU / fastest peer chain",
+                               a && chest ? ratio(a->gpu.total_ms, chest->fastest_peer_chain_ms) : kNaN, 1.0 / 5.0, 3,
+                               a ? "sparse GPU: " + a->gpu.why + " or no peer" : no_chest));
+  for (double tau : {1150.0, 500.0}) {
+    const IsoResult* h = find_iso(res, "head", tau);
+    std::ostringstream what;
+    what << "head " << tau << " sparse GPU / sparse CPU";
+    vs.push_back(verdict_at_most(what.str(), h ? ratio(h->gpu.total_ms, h->cpu.total_ms) : kNaN, 1.0, 3,
+                                 h ? "sparse: " + h->gpu.why + h->cpu.why : "head CT not benchmarked"));
+  }
   const IsoResult* b = find_iso(res, "chest", 250);
   double best = kNaN;
   std::string best_fmt, why = b ? "" : "chest CT not benchmarked";
@@ -874,7 +1034,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
     for (const auto& v : vols) {
       if (!v.error.empty()) continue;
       BenchCase c{v.name + (closing ? "+closing" : ""), v.source, &v.v, v.isos};
-      res.push_back(run_case(ctx, gpu_why, c, closing, o.repetitions, memcpy_gbps, progress));
+      res.push_back(run_case(ctx, gpu_why, c, closing, o.repetitions, memcpy_gbps, progress, o.peers));
     }
   }
 
@@ -907,6 +1067,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   }
   csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
   print_dense(res, dev, out, csv);
+  print_peers(res, dev, out, csv);
   print_sparse(res, dev, out, csv);
   print_bytes(res, out, csv);
   print_big(big.get(), out, csv, mem_total);
@@ -988,6 +1149,8 @@ Subcommand add_bench_engine_command(CLI::App& bench) {
   s.app->add_flag("--quick", opt->quick, "One repetition and no 512^3 step (unless --big): for tests");
   s.app->add_flag("--big", opt->big, "Run the 512^3 step even with --quick");
   s.app->add_flag("--closing", opt->with_closing, "Also benchmark the list with closing(radius 1 mm)");
+  s.app->add_flag("--no-peers", [opt](std::int64_t) { opt->peers = false; },
+                  "Do not time the peers (ITK, OpenVDB) beside the engine");
   s.app->add_option("--big-dim", opt->big_dim, "Edge of the end-to-end volume [voxels]")
       ->capture_default_str()
       ->check(CLI::Range(8, 1024));

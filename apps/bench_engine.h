@@ -132,6 +132,7 @@ struct FormatBytes {
 struct IsoResult {
   core::Isosurface iso;
   SparseCell gpu, cpu;
+  SparseCell gpu_per_brick;               ///< the same on the per-brick kernel (SparseChain::Strategy::PerBrick)
   std::vector<FormatBytes> formats;       ///< fp32, fp16, unorm16
   double active_percent = kNaN;           ///< 100 active / bricks_total
   double candidate_percent = kNaN;        ///< 100 candidates / bricks_total
@@ -149,6 +150,18 @@ struct PassRow {
   double gpu_gbps = kNaN, cpu_gbps = kNaN;  ///< min_bytes / time
   double gpu_of_memcpy = kNaN, cpu_of_memcpy = kNaN;  ///< gbps / memcpy gbps
   double gpu_over_cpu = kNaN;             ///< gpu_ms / cpu_ms
+  double legacy_gpu_ms = kNaN;            ///< median device time of the legacy shaders (ShaderSet::Legacy)
+  double legacy_over_gpu = kNaN;          ///< legacy_gpu_ms / gpu_ms: the rewrite's speed-up
+};
+
+/// The peers at one thread count (medians of run_peers_once, bench_peers.h) and their chains.
+struct PeerRow {
+  int threads = 1;
+  double itk_gaussian_ms = kNaN, itk_gradient_ms = kNaN, itk_pack_ms = kNaN;
+  double vdb_from_dense_ms = kNaN, vdb_gradient_ms = kNaN;
+  double itk_chain_ms = kNaN;      ///< ITK Gaussian + ITK gradient + packing into samples
+  double itk_vdb_chain_ms = kNaN;  ///< ITK Gaussian + OpenVDB copyFromDense + gradient
+  std::string why;                 ///< a peer that could not run, and why
 };
 
 struct CaseResult {
@@ -164,6 +177,19 @@ struct CaseResult {
   double dense_gpu_over_cpu_wall = kNaN;  ///< dense_gpu_wall_ms / dense_cpu_wall_ms
   std::vector<IsoResult> isos;
   double memcpy_gbps = kNaN;
+  double legacy_gpu_wall_ms = kNaN;       ///< median wall of the legacy-shader PassChain::run
+  std::vector<PeerRow> peers;             ///< 1 and 2 threads
+  double fastest_peer_chain_ms = kNaN;    ///< min over the peer rows' chains
+  std::string fastest_peer_chain;         ///< which one
+  double chain_over_peer = kNaN;          ///< sum.gpu_ms / fastest_peer_chain_ms
+  double memcpy_ms = kNaN;                ///< time memcpy takes for sum.min_bytes at memcpy_gbps
+  double chain_over_memcpy = kNaN;        ///< sum.gpu_ms / memcpy_ms
+  /// The device's floor for the gradient's bytes: GradientPass::copy_floor_ms (copy_x4.comp,
+  /// the gradient's texel loads and vec4 stores without arithmetic), median device time.
+  double copy_floor_ms = kNaN;
+  double copy_floor_memcpy_ms = kNaN;     ///< memcpy time of the same bytes (gradient min bytes)
+  double floor_over_memcpy = kNaN;        ///< copy_floor_ms / copy_floor_memcpy_ms
+  double gradient_over_floor = kNaN;      ///< the gradient pass (current shaders) / copy_floor_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same
@@ -171,14 +197,15 @@ struct CaseResult {
 std::vector<engine::PassDesc> dense_list(bool with_closing);
 std::vector<engine::PassDesc> sparse_list(bool with_closing);
 
-/// Runs one case: per repetition, interleaved, dense GPU (PassChain::run), dense CPU
-/// (run_chain_cpu), then per isovalue sparse GPU (SparseChain::run, fp32) and sparse CPU
+/// Runs one case: per repetition, interleaved, dense GPU (PassChain::run, current shaders),
+/// dense GPU with the legacy shaders, dense CPU (run_chain_cpu), the peers at 1 and 2
+/// threads (bench_peers.h; `peers` false skips them), then per isovalue sparse GPU (SparseChain::run, fp32) and sparse CPU
 /// (run_sparse_cpu, fp32); one untimed warm-up of each GPU chain first; fp16 and unorm16
 /// once each for their bytes. `ctx` null: no GPU figures (gpu_why says why). Exceptions of
 /// the sparse engines (e.g. "not implemented yet") are caught and reported in the cells.
 /// Derived columns are filled by finish_case(). Progress lines go to `progress`.
 CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
-                    int repetitions, double memcpy_gbps, std::ostream& progress);
+                    int repetitions, double memcpy_gbps, std::ostream& progress, bool peers = true);
 
 /// Fills every derived column (bandwidths, fractions of memcpy, ratios, percents) from the
 /// measured ones: sum row, active/candidate %, bytes %, the ratios. Idempotent.
@@ -206,6 +233,7 @@ struct BenchEngineOptions {
   bool quick = false;       ///< repetitions 1, no 512^3 unless `big`
   bool big = false;         ///< run the 512^3 step even with --quick
   bool with_closing = false;  ///< also benchmark the list with closing(1 mm)
+  bool peers = true;        ///< time ITK and OpenVDB beside the engine
   int big_dim = 512;
   std::vector<std::string> cases;  ///< "head", "chest", "sphere256"; empty: all
   std::string out_csv;

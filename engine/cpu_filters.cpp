@@ -53,56 +53,72 @@ std::array<int, 3> closing_radii(const servo::Grid& g, double radius_mm) {
 }
 
 namespace {
-// Visits every voxel with its axis coordinate i, the axis length n and the stride along
-// the axis; f(out_index, line_base_index, i) where in[line_base + j * stride] is voxel j.
-template <class F>
-void for_each_line(const servo::Grid& g, int axis, F&& f) {
-  const auto [nx, ny, nz] = g.dims;
-  for (int z = 0; z < nz; ++z)
-    for (int y = 0; y < ny; ++y)
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t o = g.index(x, y, z);
-        const int i = axis == 0 ? x : axis == 1 ? y : z;
-        const std::size_t base = axis == 0 ? g.index(0, y, z) : axis == 1 ? g.index(x, 0, z) : g.index(x, y, 0);
-        f(o, base, i);
-      }
-}
 std::size_t stride_of(const servo::Grid& g, int axis) {
   return axis == 0 ? 1 : axis == 1 ? std::size_t(g.dims[0]) : std::size_t(g.dims[0]) * std::size_t(g.dims[1]);
+}
+
+// One axis of a separable filter written as plain row loops; per output voxel the taps are
+// combined from k = -r up with `op(acc, k, value)`, starting from `start`, so every voxel
+// sees the operations of the per-voxel formula in the same order.
+// x: per row, the interior x in [r, nx - r) reads row[x - r + k] without a clamp; the
+// border voxels clamp. y and z: per output row, each tap's source row (clamped once per
+// row) is combined into the whole row, x innermost.
+template <class Op>
+void filter_axis(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis, int r,
+                 float start, Op op) {
+  out.resize(in.size());
+  const auto [nx, ny, nz] = g.dims;
+  const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y) {
+      const std::size_t base = std::size_t(z) * slice + std::size_t(y) * sx;
+      float* o = out.data() + base;
+      if (axis == 0) {
+        const float* row = in.data() + base;
+        auto clamped = [&](int x) {
+          float acc = start;
+          for (int k = -r; k <= r; ++k) acc = op(acc, k + r, row[std::clamp(x + k, 0, nx - 1)]);
+          o[x] = acc;
+        };
+        const int lo = std::min(r, nx), hi = std::max(lo, nx - r);
+        for (int x = 0; x < lo; ++x) clamped(x);
+        for (int x = lo; x < hi; ++x) {
+          const float* w = row + (x - r);
+          float acc = start;
+          for (int k = 0; k <= 2 * r; ++k) acc = op(acc, k, w[k]);
+          o[x] = acc;
+        }
+        for (int x = hi; x < nx; ++x) clamped(x);
+      } else {
+        const int n = axis == 1 ? ny : nz, i = axis == 1 ? y : z;
+        const std::size_t s = stride_of(g, axis);
+        const float* line = in.data() + base - std::size_t(i) * s;  // voxel j of this column: line[j * s + x]
+        std::fill(o, o + nx, start);
+        for (int k = -r; k <= r; ++k) {
+          const float* src = line + std::size_t(std::clamp(i + k, 0, n - 1)) * s;
+          for (int x = 0; x < nx; ++x) o[x] = op(o[x], k + r, src[x]);
+        }
+      }
+    }
 }
 }  // namespace
 
 void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis,
                        const std::vector<float>& w) {
-  out.resize(in.size());
-  const int n = g.dims[std::size_t(axis)];
-  const int r = int(w.size() / 2);
-  const std::size_t s = stride_of(g, axis);
-  for_each_line(g, axis, [&](std::size_t o, std::size_t base, int i) {
-    float acc = 0.0f;
-    for (int k = -r; k <= r; ++k) {
-      const int j = std::clamp(i + k, 0, n - 1);
-      const float term = w[std::size_t(k + r)] * in[base + std::size_t(j) * s];
-      acc = acc + term;
-    }
-    out[o] = acc;
+  const float* wk = w.data();
+  filter_axis(in, out, g, axis, int(w.size() / 2), 0.0f, [wk](float acc, int k, float v) {
+    const float term = wk[k] * v;
+    return acc + term;
   });
 }
 
 void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis,
                     int r, bool is_max) {
-  out.resize(in.size());
-  const int n = g.dims[std::size_t(axis)];
-  const std::size_t s = stride_of(g, axis);
   const float start = is_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
-  for_each_line(g, axis, [&](std::size_t o, std::size_t base, int i) {
-    float m = start;
-    for (int k = -r; k <= r; ++k) {
-      const float v = in[base + std::size_t(std::clamp(i + k, 0, n - 1)) * s];
-      m = is_max ? (v > m ? v : m) : (v < m ? v : m);
-    }
-    out[o] = m;
-  });
+  if (is_max)
+    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v > m ? v : m; });
+  else
+    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v < m ? v : m; });
 }
 
 Volume gaussian_cpu(const Volume& v, double sigma_mm) {

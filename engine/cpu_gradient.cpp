@@ -14,12 +14,21 @@ GradientConstants gradient_constants(const servo::Grid& g) {
 }
 
 namespace {
-// Mirrors diff() in shaders/gradient.comp operation for operation.
-inline float diff(int i, int n, float lo, float c, float hi, float inv_2h, float inv_h) {
-  if (n < 2) return 0.0f;
-  if (i == 0) return (hi - c) * inv_h;
-  if (i == n - 1) return (c - lo) * inv_h;
-  return (hi - lo) * inv_2h;
+// One axis' derivative for a whole row, as (a - b) * k: the rule of diff() in
+// shaders/gradient.comp (central inside, one-sided at the borders, 0 on a one-voxel axis)
+// decided once per row instead of per voxel. a, b: the rows holding the high and low
+// neighbours (the row itself at a border); flat: a one-voxel axis.
+struct RowDiff {
+  const float* a;
+  const float* b;
+  float k;
+  bool flat;
+};
+RowDiff row_diff(int i, int n, const float* row, std::size_t stride, float inv_2h, float inv_h) {
+  if (n < 2) return {row, row, 0.0f, true};
+  if (i == 0) return {row + stride, row, inv_h, false};
+  if (i == n - 1) return {row, row - stride, inv_h, false};
+  return {row + stride, row - stride, inv_2h, false};
 }
 }  // namespace
 
@@ -31,18 +40,27 @@ servo::SampleField compute_samples_cpu(const Volume& vol) {
   const GradientConstants k = gradient_constants(vol.grid);
   const float* f = vol.voxels.data();
   const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
+  // Plain row loops: the y and z rules per row, x's borders outside the interior loop.
   for (int z = 0; z < nz; ++z)
-    for (int y = 0; y < ny; ++y)
-      for (int x = 0; x < nx; ++x) {
-        const std::size_t i = vol.grid.index(x, y, z);
-        const float c = f[i];
-        const float xl = x > 0 ? f[i - 1] : c, xh = x + 1 < nx ? f[i + 1] : c;
-        const float yl = y > 0 ? f[i - sy] : c, yh = y + 1 < ny ? f[i + sy] : c;
-        const float zl = z > 0 ? f[i - sz] : c, zh = z + 1 < nz ? f[i + sz] : c;
-        out.samples[i] = {c, diff(x, nx, xl, c, xh, k.inv_2h[0], k.inv_h[0]),
-                          diff(y, ny, yl, c, yh, k.inv_2h[1], k.inv_h[1]),
-                          diff(z, nz, zl, c, zh, k.inv_2h[2], k.inv_h[2])};
+    for (int y = 0; y < ny; ++y) {
+      const std::size_t base = std::size_t(z) * sz + std::size_t(y) * sy;
+      const float* row = f + base;
+      servo::Sample* o = out.samples.data() + base;
+      const RowDiff dy = row_diff(y, ny, row, sy, k.inv_2h[1], k.inv_h[1]);
+      const RowDiff dz = row_diff(z, nz, row, sz, k.inv_2h[2], k.inv_h[2]);
+      auto put = [&](int x, float gx) {
+        const float gy = dy.flat ? 0.0f : (dy.a[x] - dy.b[x]) * dy.k;
+        const float gz = dz.flat ? 0.0f : (dz.a[x] - dz.b[x]) * dz.k;
+        o[x] = {row[x], gx, gy, gz};
+      };
+      if (nx < 2) {
+        put(0, 0.0f);
+        continue;
       }
+      put(0, (row[1] - row[0]) * k.inv_h[0]);
+      for (int x = 1; x + 1 < nx; ++x) put(x, (row[x + 1] - row[x - 1]) * k.inv_2h[0]);
+      put(nx - 1, (row[nx - 1] - row[nx - 2]) * k.inv_h[0]);
+    }
   return out;
 }
 

@@ -7,6 +7,8 @@
 
 #include "cpu_gradient.h"
 #include "isotouch/shaders/gradient_spv.h"
+#include "isotouch/shaders/copy_x4_spv.h"
+#include "isotouch/shaders/gradient_x4_spv.h"
 #include "isotouch_shared.h"
 
 namespace isotouch::engine {
@@ -33,7 +35,16 @@ std::uint64_t samples_before(std::uint64_t z, const void* user) {
 }
 }  // namespace
 
-GradientPass::GradientPass(VulkanContext& ctx) : ctx_(ctx), pipeline_(ctx, gradient_spv, 2, "gradient") {}
+static_assert(sizeof(gpu::DensePush) == 64, "DensePush must be 16 4-byte members");
+static_assert(offsetof(gpu::DensePush, qx) == 32 && offsetof(gpu::DensePush, inv_2h_x) == 40 &&
+              offsetof(gpu::DensePush, inv_h_z) == 60);
+
+const char* shader_set_name(ShaderSet s) { return s == ShaderSet::Legacy ? "legacy" : "current"; }
+
+GradientPass::GradientPass(VulkanContext& ctx, ShaderSet shaders) : ctx_(ctx), shaders_(shaders) {
+  if (shaders == ShaderSet::Legacy)
+    legacy_ = std::make_unique<ComputePipeline<GradientPush>>(ctx, gradient_spv, 2, "gradient");
+}
 
 GradientPass::~GradientPass() = default;
 
@@ -43,8 +54,11 @@ std::vector<Slab> GradientPass::plan(const servo::Grid& grid, VkBuffer src, VkBu
   const auto& lim = ctx_.properties().limits;
   std::uint64_t limit = lim.maxStorageBufferRange;
   if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
-  if (group_count(std::uint64_t(nx), ISOTOUCH_GRADIENT_WG_X) > lim.maxComputeWorkGroupCount[0] ||
-      group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y) > lim.maxComputeWorkGroupCount[1])
+  const bool x4 = shaders_ == ShaderSet::Current;
+  const std::uint64_t rows = (std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS * std::uint64_t(ny);
+  if (x4 ? group_count(rows, ISOTOUCH_DENSE_WG) > lim.maxComputeWorkGroupCount[0]
+         : (group_count(std::uint64_t(nx), ISOTOUCH_GRADIENT_WG_X) > lim.maxComputeWorkGroupCount[0] ||
+            group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y) > lim.maxComputeWorkGroupCount[1]))
     throw VolumeError(what + ": volume too wide for one dispatch on " + ctx_.info().name);
   const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
   const std::uint64_t dst_slice_bytes = slice * sizeof(servo::Sample);
@@ -56,7 +70,7 @@ std::vector<Slab> GradientPass::plan(const servo::Grid& grid, VkBuffer src, VkBu
   g.dst_bytes_before = &samples_before;
   g.user = &dst_slice_bytes;
   g.dst_elem_bytes = sizeof(servo::Sample);
-  g.wg_z = ISOTOUCH_GRADIENT_WG_Z;
+  g.wg_z = x4 ? 1 : ISOTOUCH_GRADIENT_WG_Z;
   auto slabs = plan_slabs(ctx_, g, src, dst, limit, what + ": gradient");
   if (!slabs) throw VolumeError(slabs.error);
   return std::move(*slabs.value);
@@ -66,8 +80,39 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const ser
                           const std::vector<Slab>& slabs) const {
   const auto [nx, ny, nz] = grid.dims;
   const GradientConstants k = gradient_constants(grid);
+  if (shaders_ == ShaderSet::Current) {
+    auto& pipe = x4_[grid.dims];
+    if (!pipe)
+      pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(
+          ctx_, gradient_x4_spv, 2, "gradient_x4", 0u,
+          std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)}, 1u);
+    const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
+    for (const Slab& s : slabs) {
+      pipe->bind(cmd, arena, {s.src, s.dst});
+      gpu::DensePush pc{};
+      pc.nx = gpu::uint(nx);
+      pc.ny = gpu::uint(ny);
+      pc.nz = gpu::uint(nz);
+      pc.z0 = gpu::uint(s.z0);
+      pc.slab_nz = gpu::uint(s.nz);
+      pc.src_z0 = gpu::uint(s.src_z0);
+      pc.src_offset = gpu::uint(s.src_offset_elems);
+      pc.dst_offset = gpu::uint(s.dst_offset_elems);
+      pc.qx = qx;
+      pc.inv_2h_x = k.inv_2h[0];
+      pc.inv_2h_y = k.inv_2h[1];
+      pc.inv_2h_z = k.inv_2h[2];
+      pc.inv_h_x = k.inv_h[0];
+      pc.inv_h_y = k.inv_h[1];
+      pc.inv_h_z = k.inv_h[2];
+      pipe->push(cmd, pc);
+      vkCmdDispatch(cmd, group_count(std::uint64_t(qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1,
+                    std::uint32_t(s.nz));
+    }
+    return;
+  }
   for (const Slab& s : slabs) {
-    pipeline_.bind(cmd, arena, {s.src, s.dst});
+    legacy_->bind(cmd, arena, {s.src, s.dst});
     GradientPush pc{};
     pc.nx = gpu::uint(nx);
     pc.ny = gpu::uint(ny);
@@ -83,11 +128,58 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const ser
     pc.inv_h_x = k.inv_h[0];
     pc.inv_h_y = k.inv_h[1];
     pc.inv_h_z = k.inv_h[2];
-    pipeline_.push(cmd, pc);
+    legacy_->push(cmd, pc);
     vkCmdDispatch(cmd, group_count(std::uint64_t(nx), ISOTOUCH_GRADIENT_WG_X),
                   group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y),
                   group_count(s.nz, ISOTOUCH_GRADIENT_WG_Z));
   }
+}
+
+double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
+  const auto [nx, ny, nz] = vol.grid.dims;
+  const std::uint64_t n = vol.grid.voxel_count();
+  auto buffer = [&](std::uint64_t bytes, const char* what) {
+    auto r = GpuBuffer::create(ctx_, bytes, MemoryIntent::DeviceLocal, what);
+    if (!r) throw VolumeError(vol.path + ": " + r.error);
+    return std::move(*r.value);
+  };
+  GpuBuffer src = buffer(n * sizeof(float), "voxels (copy floor)");
+  GpuBuffer dst = buffer(n * sizeof(servo::Sample), "samples (copy floor)");
+  GradientPass planner(ctx_, ShaderSet::Current);
+  const std::vector<Slab> slabs = planner.plan(vol.grid, src.handle(), dst.handle(), 0, vol.path);
+  ComputePipeline<gpu::DensePush> pipe(ctx_, copy_x4_spv, 2, "copy_x4", 0u,
+                                       std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)},
+                                       1u);
+  const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
+  std::vector<double> ms;
+  for (int r = 0; r <= runs; ++r) {
+    DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 2 * std::uint32_t(slabs.size()));
+    GpuTimer timer(ctx_, 2);
+    VkCommandBuffer cmd = ctx_.begin_commands();
+    timer.record_reset(cmd);
+    timer.mark(cmd, 0);
+    for (const Slab& s : slabs) {
+      pipe.bind(cmd, arena, {s.src, s.dst});
+      gpu::DensePush pc{};
+      pc.nx = gpu::uint(nx);
+      pc.ny = gpu::uint(ny);
+      pc.nz = gpu::uint(nz);
+      pc.z0 = gpu::uint(s.z0);
+      pc.slab_nz = gpu::uint(s.nz);
+      pc.src_z0 = gpu::uint(s.src_z0);
+      pc.src_offset = gpu::uint(s.src_offset_elems);
+      pc.dst_offset = gpu::uint(s.dst_offset_elems);
+      pc.qx = qx;
+      pipe.push(cmd, pc);
+      vkCmdDispatch(cmd, group_count(std::uint64_t(qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(s.nz));
+    }
+    timer.mark(cmd, 1);
+    const double wall = ctx_.submit_and_wait(cmd);
+    const double dev = timer.elapsed_ms(0, 1);
+    if (r > 0) ms.push_back(dev >= 0 ? dev : wall);  // run 0: first touch of the buffers, untimed
+  }
+  std::sort(ms.begin(), ms.end());
+  return ms.empty() ? -1.0 : ms[ms.size() / 2];
 }
 
 servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings,
@@ -104,25 +196,35 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
   GpuBuffer dst = buffer(n * sizeof(servo::Sample), MemoryIntent::DeviceLocal, "samples");
   const std::vector<Slab> slabs = plan(vol.grid, src.handle(), dst.handle(), max_binding_bytes, vol.path);
   t.slabs = int(slabs.size());
-  GpuBuffer up = buffer(n * sizeof(float), MemoryIntent::Upload, "voxels staging");
-  GpuBuffer down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+  const bool direct = src.mapped() && dst.mapped();  // zero copy: host-visible device memory
+  GpuBuffer up, down;
+  if (!direct) {
+    up = buffer(n * sizeof(float), MemoryIntent::Upload, "voxels staging");
+    down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+  }
   DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 2 * std::uint32_t(slabs.size()));
   GpuTimer timer(ctx_, 2);
 
   auto t0 = clock::now();
-  std::memcpy(up.mapped(), vol.voxels.data(), n * sizeof(float));
+  std::memcpy(direct ? src.mapped() : up.mapped(), vol.voxels.data(), n * sizeof(float));
   t.upload_ms = std::chrono::duration<double, std::milli>(clock::now() - t0).count();
 
   VkCommandBuffer cmd = ctx_.begin_commands();
   timer.record_reset(cmd);
-  record_copy(cmd, up, src, n * sizeof(float));
-  barrier_transfer_to_compute(cmd);
+  if (!direct) {
+    record_copy(cmd, up, src, n * sizeof(float));
+    barrier_transfer_to_compute(cmd);
+  }
   timer.mark(cmd, 0);
   record(cmd, arena, vol.grid, slabs);
   timer.mark(cmd, 1);
-  barrier_compute_to_transfer(cmd);
-  record_copy(cmd, dst, down, n * sizeof(servo::Sample));
-  barrier_transfer_to_host(cmd);
+  if (direct) {
+    barrier_compute_to_host(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    record_copy(cmd, dst, down, n * sizeof(servo::Sample));
+    barrier_transfer_to_host(cmd);
+  }
   t.submit_wall_ms = ctx_.submit_and_wait(cmd);
   t.gradient_ms = t.submit_wall_ms;
   if (const double ms = timer.elapsed_ms(0, 1); ms >= 0) {
@@ -134,7 +236,7 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
   t0 = clock::now();
   out.grid = vol.grid;
   out.samples.resize(n);
-  std::memcpy(out.samples.data(), down.mapped(), n * sizeof(servo::Sample));
+  std::memcpy(out.samples.data(), direct ? dst.mapped() : down.mapped(), n * sizeof(servo::Sample));
   t.download_ms = std::chrono::duration<double, std::milli>(clock::now() - t0).count();
   if (timings) *timings = t;
   return out;

@@ -2,6 +2,8 @@
 #pragma once
 #include <cstdint>
 
+#include <array>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -29,7 +31,7 @@ struct GradientTimings {
 /// the dispatches recorded into one command buffer (engine/vk_resources.h).
 class GradientPass {
  public:
-  explicit GradientPass(VulkanContext& ctx);
+  explicit GradientPass(VulkanContext& ctx, ShaderSet shaders = ShaderSet::Current);
   ~GradientPass();
   GradientPass(const GradientPass&) = delete;
   GradientPass& operator=(const GradientPass&) = delete;
@@ -45,13 +47,20 @@ class GradientPass {
   /// @throws VolumeError naming `what`, the slice size and the limit if a slice does not fit.
   std::vector<Slab> plan(const servo::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
                          const std::string& what) const;
+  /// The floor of this pass on this device: shaders/copy_x4.comp (the same texel loads and
+  /// vec4 stores as gradient_x4, no arithmetic) over `volume`, one untimed run and then the
+  /// median device time [ms] of `runs` (wall time without timestamps). Buffers device-local.
+  double copy_floor_ms(const Volume& volume, int runs);
   /// Records the dispatches of `slabs` (from plan()); no barriers.
   void record(VkCommandBuffer cmd, DescriptorArena& arena, const servo::Grid& grid,
               const std::vector<Slab>& slabs) const;
 
  private:
   VulkanContext& ctx_;
-  ComputePipeline<gpu::GradientPush> pipeline_;
+  ShaderSet shaders_;
+  std::unique_ptr<ComputePipeline<gpu::GradientPush>> legacy_;
+  /// gradient_x4 variants by volume size (specialization constants), made on first use.
+  mutable std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> x4_;
 };
 
 }  // namespace isotouch::engine

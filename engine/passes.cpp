@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 
@@ -11,6 +12,9 @@
 #include "gradient_pass.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
+#include "isotouch/shaders/filter_x4_spv.h"
+#include "isotouch/shaders/minmax_bricks_spv.h"
+#include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
 #include "isotouch_shared.h"
 #include "vk_resources.h"
@@ -86,10 +90,35 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 
 struct PassChain::Impl {
   VulkanContext& ctx;
+  ShaderSet shaders = ShaderSet::Current;
   std::unique_ptr<ComputePipeline<gpu::Filter1dPush>> gauss, morph;
+  /// filter_x4 variants by specialization (size, axis, radius, weights, mode), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss_x4;
+  /// `w`: the Gaussian's weights (mode 0), else empty; `mode` 0 or ISOTOUCH_MORPH_MAX / MIN.
+  const ComputePipeline<gpu::DensePush>* filter_x4(const std::array<int, 3>& dims, int axis, int radius,
+                                                   std::uint32_t mode, const std::vector<float>& w) {
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(dims[std::size_t(a)]);
+    spec[3] = std::uint32_t(axis);
+    spec[4] = std::uint32_t(radius);
+    for (std::size_t k = 0; k < w.size(); ++k) std::memcpy(&spec[5 + k], &w[k], 4);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = mode;  // constant_id 38
+    auto& p = gauss_x4[spec];
+    if (!p)
+      p = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, filter_x4_spv, 2, mode ? "morph_x4" : "gaussian_x4",
+                                                            0u, spec, 1u);
+    return p.get();
+  }
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
+  /// Current set's brick min/max in two steps (minmax_rows, minmax_bricks), specialised on
+  /// the bricks along x; made on first use.
+  std::map<std::uint32_t, std::pair<std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>,
+                                    std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>>> minmax_x4;
   std::unique_ptr<GradientPass> gradient;
   std::string last_run;
+  /// The last run's buffers by name, reused by the next run of the same sizes: no new
+  /// allocation, and no first-touch page faults inside the timed dispatches.
+  std::map<std::string, GpuBuffer> kept;
   explicit Impl(VulkanContext& c) : ctx(c) {}
 };
 
@@ -97,18 +126,20 @@ PassChain::PassChain(std::unique_ptr<Impl> impl, std::vector<PassDesc> passes)
     : impl_(std::move(impl)), passes_(std::move(passes)) {}
 PassChain::~PassChain() = default;
 
-Result<std::unique_ptr<PassChain>> PassChain::create(VulkanContext& ctx, std::vector<PassDesc> passes) {
+Result<std::unique_ptr<PassChain>> PassChain::create(VulkanContext& ctx, std::vector<PassDesc> passes,
+                                                     ShaderSet shaders) {
   using R = Result<std::unique_ptr<PassChain>>;
   if (std::string e = validate_passes(passes); !e.empty()) return R::fail("pass chain: " + e);
   auto impl = std::make_unique<Impl>(ctx);
+  impl->shaders = shaders;
   // Only the pipelines the list needs.
-  if (has(passes, PassKind::Gaussian))
+  if (has(passes, PassKind::Gaussian) && shaders == ShaderSet::Legacy)
     impl->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
-  if (has(passes, PassKind::Closing))
+  if (has(passes, PassKind::Closing) && shaders == ShaderSet::Legacy)
     impl->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
-  if (has(passes, PassKind::BrickMinMax))
+  if (has(passes, PassKind::BrickMinMax) && shaders == ShaderSet::Legacy)
     impl->minmax = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, brick_minmax_spv, 2, "brick_minmax");
-  if (has(passes, PassKind::Gradient)) impl->gradient = std::make_unique<GradientPass>(ctx);
+  if (has(passes, PassKind::Gradient)) impl->gradient = std::make_unique<GradientPass>(ctx, shaders);
   return R::ok(std::unique_ptr<PassChain>(new PassChain(std::move(impl), std::move(passes))));
 }
 
@@ -116,23 +147,51 @@ std::string PassChain::describe() const {
   std::ostringstream s;
   s << "passes:";
   for (std::size_t i = 0; i < passes_.size(); ++i) s << (i ? " -> " : " ") << passes_[i].label();
-  const bool filters = impl_->gauss || impl_->morph;
-  s << "\npipelines created:" << (impl_->gauss ? " gaussian1d" : "") << (impl_->morph ? " morph1d" : "")
-    << (impl_->gradient ? " gradient" : "") << (impl_->minmax ? " brick_minmax" : "");
-  const bool all = impl_->gauss && impl_->morph && impl_->gradient && impl_->minmax;
-  s << "\nleft out (not created, not run):" << (impl_->gauss ? "" : " gaussian1d") << (impl_->morph ? "" : " morph1d")
-    << (impl_->gradient ? "" : " gradient") << (impl_->minmax ? "" : " brick_minmax") << (all ? " none" : "");
-  s << "\nbuffers per run: voxels (float, device-local) + staging" << (filters ? ", ping-pong field (float)" : "")
-    << (filters ? ", field readback" : "") << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
-    << (impl_->gradient ? ", samples (vec4) + readback" : "") << (impl_->minmax ? ", brick ranges + readback" : "");
+  const bool filters = has(passes_, PassKind::Gaussian) || has(passes_, PassKind::Closing);
+  const bool gauss = has(passes_, PassKind::Gaussian);
+  const bool legacy = impl_->shaders == ShaderSet::Legacy;
+  // The filters' pipelines: filter_x4 variants, "gaussian_x4" / "morph_x4" (made per kernel
+  // on first run; a radius above ISOTOUCH_DENSE_MAX_RADIUS takes gaussian1d / morph1d), or
+  // gaussian1d / morph1d with the legacy set.
+  const bool closing = has(passes_, PassKind::Closing);
+  const bool minmax = has(passes_, PassKind::BrickMinMax);
+  const char* gname = legacy ? " gaussian1d" : " gaussian_x4";
+  const char* mname = legacy ? " morph1d" : " morph_x4";
+  s << "\nshaders: " << shader_set_name(impl_->shaders) << (legacy ? "" : " (texel-buffer input, 4 voxels per invocation)");
+  s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
+    << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
+    << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
+    << (minmax ? (legacy ? " brick_minmax" : " brick_minmax (minmax_rows + minmax_bricks)") : "");
+  const bool all = gauss && closing && impl_->gradient && minmax;
+  s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (closing ? "" : (legacy ? " morph1d" : " morph_x4 morph1d"))
+    << (impl_->gradient ? "" : " gradient") << (minmax ? "" : " brick_minmax") << (all ? " none" : "");
+  const bool direct = impl_->ctx.device_local_is_host_visible();
+  s << "\nbuffers per run: voxels (float, device-local)" << (direct ? " written in place (host-visible: no staging)" : " + staging")
+    << (filters ? ", ping-pong field (float)" : "") << (filters && !direct ? ", field readback" : "")
+    << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
+    << (impl_->gradient ? (direct ? ", samples (vec4, read in place)" : ", samples (vec4) + readback") : "")
+    << (minmax ? (direct ? ", brick ranges (read in place)" : ", brick ranges + readback") : "")
+    << (minmax && !legacy ? ", brick row ranges (8 B per brick column and row of a slab)" : "");
   s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
     << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
-    << (impl_->minmax ? "" : " brick ranges") << (all ? " none" : "");
+    << (minmax ? "" : " brick ranges") << (direct ? " staging and readback copies" : "") << (all ? " none" : "");
   if (!impl_->last_run.empty()) s << "\nlast run:\n" << impl_->last_run;
   return s.str();
 }
 
 ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
+  return run_impl(vol, max_binding_bytes, nullptr);
+}
+
+ChainOutput PassChain::run_in_place(const Volume& vol, InPlace& where, std::uint64_t max_binding_bytes) {
+  where = {};
+  ChainOutput out = run_impl(vol, max_binding_bytes, &where);
+  if (!where.field && out.field) where.field = out.field->data();
+  if (!where.samples && out.samples) where.samples = out.samples->samples.data();
+  return out;
+}
+
+ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_bytes, InPlace* in_place) {
   VulkanContext& ctx = impl_->ctx;
   const auto [nx, ny, nz] = vol.grid.dims;
   const std::uint64_t n = vol.grid.voxel_count();
@@ -144,13 +203,23 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   if (groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X) > lim.maxComputeWorkGroupCount[0] ||
       groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y) > lim.maxComputeWorkGroupCount[1])
     throw VolumeError(vol.path + ": volume too wide for one dispatch on " + ctx.info().name);
+  if (groups((std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS * std::uint64_t(ny), ISOTOUCH_DENSE_WG) >
+      lim.maxComputeWorkGroupCount[0])
+    throw VolumeError(vol.path + ": volume too wide for one dispatch on " + ctx.info().name);
 
   auto buffer = [&](std::uint64_t bytes, MemoryIntent intent, const char* what) {
+    if (auto it = impl_->kept.find(what); it != impl_->kept.end()) {
+      GpuBuffer b = std::move(it->second);
+      impl_->kept.erase(it);
+      const bool mapped_as_now = intent != MemoryIntent::DeviceLocal ||
+                                 (b.mapped() != nullptr) == ctx.device_local_is_host_visible();
+      if (b.size() == bytes && b.intent() == intent && mapped_as_now) return b;
+    }
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) throw VolumeError(vol.path + ": " + r.error);
     return std::move(*r.value);
   };
-  const bool filters = impl_->gauss || impl_->morph;
+  const bool filters = has(passes_, PassKind::Gaussian) || has(passes_, PassKind::Closing);
 
   // Parameters in voxels, validated (and too-wide kernels rejected) before any allocation.
   std::vector<GaussianAxes> gaussians;
@@ -178,24 +247,27 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   GpuBuffer field[2];
   field[0] = buffer(n * 4, MemoryIntent::DeviceLocal, "voxels");
   if (filters) field[1] = buffer(n * 4, MemoryIntent::DeviceLocal, "field ping-pong");
-  GpuBuffer up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
-  GpuBuffer w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down;
+  // Zero copy where device-local memory is host-visible: the host writes the voxels and
+  // reads the outputs in place; otherwise staging and readback buffers and their copies.
+  const bool direct = field[0].mapped() != nullptr;
+  GpuBuffer up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down;
+  if (!direct) up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
   if (!weights.empty()) {
     w_dev = buffer(weights.size() * 4, MemoryIntent::DeviceLocal, "gaussian weights");
-    w_up = buffer(weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
+    if (!direct) w_up = buffer(weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
   }
   if (impl_->gradient) {
     samples = buffer(n * sizeof(servo::Sample), MemoryIntent::DeviceLocal, "samples");
-    samples_down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+    if (!direct) samples_down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
   }
   const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
                       bz = std::uint32_t((nz + 7) / 8);
   const std::uint64_t brick_bytes = std::uint64_t(bx) * by * bz * 2 * 4;
-  if (impl_->minmax) {
+  if (has(passes_, PassKind::BrickMinMax)) {
     bricks = buffer(brick_bytes, MemoryIntent::DeviceLocal, "brick ranges");
-    bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
+    if (!direct) bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
   }
-  if (filters) field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
+  if (filters && !direct) field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
 
   // Plan every dispatch (slabs) first: the descriptor arena is sized from the plan.
   struct Step {
@@ -203,9 +275,13 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
     const ComputePipelineBase* pipe = nullptr;
     enum { Filter, Gradient, MinMax } type = Filter;
     gpu::Filter1dPush f{};
+    const ComputePipeline<gpu::DensePush>* x4 = nullptr;  // filter_x4 variant, else the 1-D filter
     std::vector<Slab> slabs;
   };
   std::vector<Step> steps;
+  const bool legacy = impl_->shaders == ShaderSet::Legacy;
+  std::uint64_t rows_slices = 0;  // most source slices of a brick min/max slab
+  std::uint32_t extra_sets = 0;   // the current brick min/max binds twice per slab
   int cur = 0;
   const std::uint64_t float_slice = slice_bytes;
   BrickLayer layer{std::uint64_t(bx) * by * 2 * 4};
@@ -226,13 +302,28 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
         s.f.nz = gpu::uint(nz);
         s.f.axis = gpu::uint(axis);
         if (p.kind == PassKind::Gaussian) {
-          s.pipe = impl_->gauss.get();
-          s.f.radius = gpu::uint(gaussians[gi].kernel[std::size_t(axis)].size() / 2);
+          const auto& kern = gaussians[gi].kernel[std::size_t(axis)];
+          s.f.radius = gpu::uint(kern.size() / 2);
           s.f.w_offset = w_offsets[gi][std::size_t(axis)];
+          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
+            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), 0u, kern);
+            s.pipe = s.x4;
+          } else {
+            if (!impl_->gauss)
+              impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
+            s.pipe = impl_->gauss.get();
+          }
         } else {
-          s.pipe = impl_->morph.get();
           s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
           s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
+          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
+            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), s.f.mode, {});
+            s.pipe = s.x4;
+          } else {
+            if (!impl_->morph)
+              impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
+            s.pipe = impl_->morph.get();
+          }
         }
         info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
         SlabGeometry g;
@@ -241,7 +332,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
         g.halo = axis == 2 ? s.f.radius : 0;
         g.dst_bytes_before = &floats_before;
         g.user = &float_slice;
-        g.wg_z = ISOTOUCH_FILTER_WG_Z;
+        g.wg_z = s.x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
         auto sl = plan_slabs(ctx, g, field[cur].handle(), field[1 - cur].handle(), limit,
                              vol.path + ": " + p.label());
         if (!sl) throw VolumeError(sl.error);
@@ -274,10 +365,14 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
       g.z_multiple = ISOTOUCH_BRICK;
       g.dst_bytes_before = &bricks_before;
       g.user = &layer;
-      g.wg_z = ISOTOUCH_MINMAX_WG_Z;
+      g.wg_z = legacy ? ISOTOUCH_MINMAX_WG_Z : 1;
       auto sl = plan_slabs(ctx, g, field[cur].handle(), bricks.handle(), limit, vol.path + ": " + p.label());
       if (!sl) throw VolumeError(sl.error);
       s.slabs = std::move(*sl.value);
+      for (const Slab& b : s.slabs) {
+        rows_slices = std::max(rows_slices, b.src_z1 - b.src_z0);
+        if (!legacy) ++extra_sets;
+      }
       info << ": " << bx << "x" << by << "x" << bz << " bricks";
       steps.push_back(std::move(s));
     }
@@ -286,29 +381,67 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
       if (s.pass == i) d += s.slabs.size();
     info << ", " << d << " dispatch(es)\n";
   }
-  std::uint32_t sets = 0;
+  std::uint32_t sets = extra_sets;
   for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
+  // Current brick min/max: the row ranges of one slab's source slices (2 floats per brick
+  // column of every row), reused slab after slab.
+  const std::uint64_t rows_bytes = rows_slices * std::uint64_t(ny) * bx * 8;
+  GpuBuffer rows;
+  const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows = nullptr, *mm_bricks = nullptr;
+  if (has(passes_, PassKind::BrickMinMax) && !legacy) {
+    if (rows_slices > lim.maxComputeWorkGroupCount[2])
+      throw VolumeError(vol.path + ": " + std::to_string(rows_slices) + " slices in one brick min/max slab exceed " +
+                        "maxComputeWorkGroupCount[2] on " + ctx.info().name);
+    rows = buffer(rows_bytes, MemoryIntent::DeviceLocal, "brick row ranges");
+    auto& pp = impl_->minmax_x4[bx];
+    if (!pp.first) {
+      pp.first = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_rows_spv, 2, "minmax_rows", 0u,
+                                                                         std::vector<std::uint32_t>{bx}, 1u);
+      pp.second = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_bricks_spv, 2, "minmax_bricks",
+                                                                          0u, std::vector<std::uint32_t>{bx}, 1u);
+    }
+    mm_rows = pp.first.get();
+    mm_bricks = pp.second.get();
+  }
   DescriptorArena arena(ctx, sets, 3 * sets);
   GpuTimer timer(ctx, std::uint32_t(passes_.size() + 1));
 
   ChainOutput out;
   auto t0 = std::chrono::steady_clock::now();
-  std::memcpy(up.mapped(), vol.voxels.data(), n * 4);
-  if (w_up) std::memcpy(w_up.mapped(), weights.data(), weights.size() * 4);
+  std::memcpy(direct ? field[0].mapped() : up.mapped(), vol.voxels.data(), n * 4);
+  if (w_dev) std::memcpy(direct ? w_dev.mapped() : w_up.mapped(), weights.data(), weights.size() * 4);
   out.upload_ms = ms_since(t0);
 
   VkCommandBuffer cmd = ctx.begin_commands();
   timer.record_reset(cmd);
-  record_copy(cmd, up, field[0], n * 4);
-  if (w_up) record_copy(cmd, w_up, w_dev, weights.size() * 4);
-  barrier_transfer_to_compute(cmd);
+  if (!direct) {
+    record_copy(cmd, up, field[0], n * 4);
+    if (w_up) record_copy(cmd, w_up, w_dev, weights.size() * 4);
+    barrier_transfer_to_compute(cmd);
+  }
   timer.mark(cmd, 0);
   std::vector<int> dispatches(passes_.size(), 0);
   cur = 0;
   for (std::size_t k = 0; k < steps.size(); ++k) {
     const Step& s = steps[k];
     for (const Slab& sl : s.slabs) {
-      if (s.type == Step::Filter) {
+      if (s.type == Step::Filter && s.x4) {
+        gpu::DensePush pc{};
+        pc.nx = s.f.nx;
+        pc.ny = s.f.ny;
+        pc.nz = s.f.nz;
+        pc.z0 = gpu::uint(sl.z0);
+        pc.slab_nz = gpu::uint(sl.nz);
+        pc.src_z0 = gpu::uint(sl.src_z0);
+        pc.src_offset = gpu::uint(sl.src_offset_elems);
+        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+        pc.qx = gpu::uint((std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
+        // One vec4 store per invocation when every row starts on a 16-byte boundary.
+        pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
+        s.x4->bind(cmd, arena, {sl.src, sl.dst});
+        s.x4->push(cmd, pc);
+        vkCmdDispatch(cmd, groups(std::uint64_t(pc.qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(sl.nz));
+      } else if (s.type == Step::Filter) {
         gpu::Filter1dPush pc = s.f;
         pc.z0 = gpu::uint(sl.z0);
         pc.slab_nz = gpu::uint(sl.nz);
@@ -337,10 +470,24 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
         pc.src_offset = gpu::uint(sl.src_offset_elems);
         pc.dst_offset = gpu::uint(sl.dst_offset_elems);
         pc.halo = gpu::uint(passes_[s.pass].halo);
-        impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
-        impl_->minmax->push(cmd, pc);
-        vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
-                      groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+        if (mm_rows) {
+          const std::uint64_t src_nz = sl.src_z1 - sl.src_z0;
+          const BufferRange rr{rows.handle(), 0, src_nz * std::uint64_t(ny) * bx * 8};
+          pc.pad0 = gpu::uint(src_nz);
+          mm_rows->bind(cmd, arena, {sl.src, rr});
+          mm_rows->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(src_nz));
+          barrier_compute_to_compute(cmd);
+          mm_bricks->bind(cmd, arena, {rr, sl.dst});
+          mm_bricks->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
+          barrier_compute_to_compute(cmd);  // the next slab rewrites the row ranges
+        } else {
+          impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
+          impl_->minmax->push(cmd, pc);
+          vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
+                        groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+        }
       }
     }
     if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
@@ -351,11 +498,15 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
     barrier_compute_to_compute(cmd);
     if (k + 1 == steps.size() || steps[k + 1].pass != s.pass) timer.mark(cmd, std::uint32_t(s.pass + 1));
   }
-  barrier_compute_to_transfer(cmd);
-  if (filters) record_copy(cmd, field[cur], field_down, n * 4);
-  if (samples) record_copy(cmd, samples, samples_down, n * sizeof(servo::Sample));
-  if (bricks) record_copy(cmd, bricks, bricks_down, brick_bytes);
-  barrier_transfer_to_host(cmd);
+  if (direct) {
+    barrier_compute_to_host(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    if (filters) record_copy(cmd, field[cur], field_down, n * 4);
+    if (samples) record_copy(cmd, samples, samples_down, n * sizeof(servo::Sample));
+    if (bricks) record_copy(cmd, bricks, bricks_down, brick_bytes);
+    barrier_transfer_to_host(cmd);
+  }
   out.submit_wall_ms = ctx.submit_and_wait(cmd);
 
   for (std::size_t i = 0; i < passes_.size(); ++i) {
@@ -368,15 +519,20 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   out.gpu_timestamps = timer.enabled();
 
   t0 = std::chrono::steady_clock::now();
-  if (filters) {
+  if (filters && in_place && direct) {
+    in_place->field = static_cast<const float*>(field[cur].mapped());
+  } else if (filters) {
     out.field.emplace(n);
-    std::memcpy(out.field->data(), field_down.mapped(), n * 4);
+    std::memcpy(out.field->data(), direct ? field[cur].mapped() : field_down.mapped(), n * 4);
   }
-  if (samples) {
+  if (samples && in_place && direct) {
+    in_place->samples = static_cast<const core::Sample*>(samples.mapped());
+  } else if (samples) {
     out.samples.emplace();
     out.samples->grid = vol.grid;
     out.samples->samples.resize(n);
-    std::memcpy(out.samples->samples.data(), samples_down.mapped(), n * sizeof(servo::Sample));
+    std::memcpy(out.samples->samples.data(), direct ? samples.mapped() : samples_down.mapped(),
+                n * sizeof(servo::Sample));
   }
   if (bricks) {
     BrickRanges b;
@@ -386,7 +542,7 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
     const std::size_t count = std::size_t(bx) * by * bz;
     b.min.resize(count);
     b.max.resize(count);
-    const float* f = static_cast<const float*>(bricks_down.mapped());
+    const float* f = static_cast<const float*>(direct ? bricks.mapped() : bricks_down.mapped());
     for (std::size_t i = 0; i < count; ++i) {
       b.min[i] = f[2 * i];
       b.max[i] = f[2 * i + 1];
@@ -395,6 +551,21 @@ ChainOutput PassChain::run(const Volume& vol, std::uint64_t max_binding_bytes) {
   }
   out.download_ms = ms_since(t0);
   impl_->last_run = info.str();
+  impl_->kept.clear();
+  auto keep = [&](GpuBuffer& b, const char* what) {
+    if (b) impl_->kept[what] = std::move(b);
+  };
+  keep(field[0], "voxels");
+  keep(field[1], "field ping-pong");
+  keep(up, "voxels staging");
+  keep(w_dev, "gaussian weights");
+  keep(w_up, "gaussian weights staging");
+  keep(samples, "samples");
+  keep(samples_down, "samples readback");
+  keep(bricks, "brick ranges");
+  keep(bricks_down, "brick ranges readback");
+  keep(field_down, "field readback");
+  keep(rows, "brick row ranges");
   return out;
 }
 

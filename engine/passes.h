@@ -34,6 +34,7 @@
 #include "cpu_filters.h"
 #include "sample_field.h"
 #include "vk_context.h"
+#include "vk_resources.h"
 #include "volume.h"
 
 namespace isotouch::engine {
@@ -80,8 +81,11 @@ struct ChainOutput {
 /// The GPU chain. Create once per pass list, run on any number of volumes.
 class PassChain {
  public:
+  /// @param shaders Current (default) or the Legacy dense shaders (bench engine compares
+  ///        them); same outputs bit for bit.
   /// @return error (no throw) if validate_passes() fails.
-  static Result<std::unique_ptr<PassChain>> create(VulkanContext& ctx, std::vector<PassDesc> passes);
+  static Result<std::unique_ptr<PassChain>> create(VulkanContext& ctx, std::vector<PassDesc> passes,
+                                                   ShaderSet shaders = ShaderSet::Current);
   ~PassChain();
   PassChain(const PassChain&) = delete;
   PassChain& operator=(const PassChain&) = delete;
@@ -93,6 +97,16 @@ class PassChain {
   ///         a slab does not fit a binding, or a parameter gives too wide a kernel.
   ChainOutput run(const Volume& volume, std::uint64_t max_binding_bytes = 0);
 
+  /// The outputs where they lie, valid until the next run: the field after the last filter
+  /// (null without a filter) and the gradient samples (null without a gradient). Where
+  /// device-local memory is host-visible they point into the chain's own buffers (no copy);
+  /// otherwise into `copies`, which run() filled as usual.
+  struct InPlace {
+    const float* field = nullptr;
+    const core::Sample* samples = nullptr;
+  };
+  ChainOutput run_in_place(const Volume& volume, InPlace& where, std::uint64_t max_binding_bytes = 0);
+
   /// What this chain runs and what it left out: the passes in order, the pipelines and
   /// buffers created and those not created; after run(), per-pass kernel sizes in voxels
   /// and dispatch counts of the last run.
@@ -100,6 +114,7 @@ class PassChain {
   const std::vector<PassDesc>& passes() const { return passes_; }
 
  private:
+  ChainOutput run_impl(const Volume& volume, std::uint64_t max_binding_bytes, InPlace* in_place);
   struct Impl;
   explicit PassChain(std::unique_ptr<Impl> impl, std::vector<PassDesc> passes);
   std::unique_ptr<Impl> impl_;

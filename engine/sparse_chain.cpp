@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -77,6 +78,10 @@ struct SparseChain::Impl {
   bool keep_input = false;
   std::uint32_t max_groups = 0;  ///< 0: kDefaultGroups
   std::string last_run;
+  SparseChain::Strategy strategy = SparseChain::Strategy::Dense;
+  std::unique_ptr<PassChain> dense;  ///< the dense strategy's chain (filters + gradient), made on first use
+  SparseOutput run_dense(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
+                         std::uint64_t max_binding_bytes);
   Impl(VulkanContext& c, std::vector<PassDesc> p)
       : ctx(c), passes(std::move(p)), pipe(c, sparse_brick_spv, 5, "sparse_brick") {}
 };
@@ -85,6 +90,121 @@ SparseChain::SparseChain(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 SparseChain::~SparseChain() = default;
 void SparseChain::set_keep_input(bool keep) { impl_->keep_input = keep; }
 void SparseChain::set_max_workgroups(std::uint32_t groups) { impl_->max_groups = groups; }
+void SparseChain::set_strategy(Strategy s) { impl_->strategy = s; }
+
+SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurface& iso, float background,
+                                          core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  const auto t_total = std::chrono::steady_clock::now();
+  const auto [nx, ny, nz] = vol.grid.dims;
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
+                      std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
+  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
+  if (!dense) {
+    std::vector<PassDesc> list;
+    for (const PassDesc& p : passes)
+      if (p.kind != PassKind::BrickMinMax) list.push_back(p);
+    auto r = PassChain::create(ctx, list, ShaderSet::Current);
+    if (!r) throw VolumeError(vol.path + ": sparse chain: " + r.error);
+    dense = std::move(*r.value);
+  }
+  SparseOutput out;
+  // Host: raw brick ranges and the candidates.
+  auto t0 = std::chrono::steady_clock::now();
+  sparse::RawRanges raw;
+  raw.init(vol.grid);
+  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
+  for (int z = 0; z < nz; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
+  const double raw_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const std::size_t nc = sel.candidates.size();
+  const double select_ms = ms_since(t0);
+
+  // The dense passes, outputs read where they lie.
+  t0 = std::chrono::steady_clock::now();
+  PassChain::InPlace at;
+  const ChainOutput d = dense->run_in_place(vol, at, max_binding_bytes);
+  const double dense_wall_ms = ms_since(t0);
+  const float* f = at.field ? at.field : vol.voxels.data();
+  const core::Sample* s = at.samples;
+  if (!s) throw std::logic_error(vol.path + ": sparse chain: the dense chain returned no samples");
+
+  // Host: each candidate's exact range over its brick + 1 voxel (z, y, x ascending, as
+  // CandidateCpu::range), and the 9^3 samples of the active ones (beyond the grid: the
+  // background with a zero gradient).
+  t0 = std::chrono::steady_clock::now();
+  const auto nb = core::brick_counts(vol.grid);
+  std::vector<sparse::CandidateRange> ranges(nc);
+  const float inf = std::numeric_limits<float>::infinity();
+  for (std::size_t c = 0; c < nc; ++c) {
+    const auto b = core::brick_coords(sel.candidates[c], nb);
+    int lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
+      hi[a] = std::min(8 * b[std::size_t(a)] + 8, vol.grid.dims[std::size_t(a)] - 1);
+    }
+    sparse::CandidateRange rg{inf, -inf, false};
+    for (int z = lo[2]; z <= hi[2]; ++z)
+      for (int y = lo[1]; y <= hi[1]; ++y) {
+        const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
+        for (int x = lo[0]; x <= hi[0]; ++x) {
+          const float v = row[x];
+          rg.nan = rg.nan || v != v;
+          rg.lo = v < rg.lo ? v : rg.lo;
+          rg.hi = v > rg.hi ? v : rg.hi;
+        }
+      }
+    rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
+    rg.hi = rg.hi + 0.0f;
+    ranges[c] = rg;
+  }
+  const double gather_ms = ms_since(t0);
+  // publish() copies an active candidate's 9^3 samples into the pool right after asking for
+  // them: gathered here from the dense samples into one brick's worth of scratch.
+  t0 = std::chrono::steady_clock::now();
+  std::vector<core::Sample> scratch(core::kBrickSamples);
+  auto gather = [&](std::size_t c) -> const core::Sample* {
+    const auto b = core::brick_coords(sel.candidates[c], nb);
+    core::Sample* o = scratch.data();
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j)
+        for (int i = 0; i < 9; ++i) {
+          const int g[3] = {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k};
+          o[i + 9 * j + 81 * k] = g[0] >= nx || g[1] >= ny || g[2] >= nz
+                                      ? core::Sample{background, 0.0f, 0.0f, 0.0f}
+                                      : s[std::size_t(g[2]) * slice + std::size_t(g[1]) * std::size_t(nx) + std::size_t(g[0])];
+        }
+    return o;
+  };
+  sparse::publish(vol.grid, sel, ranges, gather, iso, background, format, keep_input, out);
+  out.publish_ms = ms_since(t0);
+
+  out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
+  out.passes.push_back({"candidate selection (host)", select_ms, 0});
+  int dispatches = 0, slabs = 0;
+  for (const PassTiming& p : d.passes) {
+    out.passes.push_back({p.label + " (GPU, dense)", p.ms, p.dispatches});
+    dispatches += p.dispatches;
+    slabs = p.dispatches;  // the gradient, last: one dispatch per z-slab
+  }
+  out.passes.push_back({"dense chain wall (upload, submit, in-place outputs)", dense_wall_ms, 0});
+  out.passes.push_back({"candidate ranges (host)", gather_ms, 0});
+  out.passes.push_back({"publish: active samples gathered into the pool (host)", out.publish_ms, 0});
+  out.upload_ms = d.upload_ms;
+  out.submit_wall_ms = d.submit_wall_ms;
+  out.download_ms = d.download_ms;
+  out.stats.slabs = std::size_t(slabs);
+  out.stats.dispatches = std::size_t(dispatches);
+  out.total_ms = ms_since(t_total);
+  std::ostringstream info;
+  info << "strategy: dense x4 passes over the volume, candidates gathered on the host; " << nb[0] << "x" << nb[1]
+       << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates << " candidates, "
+       << out.stats.active << " active; " << dispatches << " dispatch(es); snapshot " << out.stats.snapshot_bytes
+       << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
+  last_run = info.str();
+  return out;
+}
 
 Result<std::unique_ptr<SparseChain>> SparseChain::create(VulkanContext& ctx, std::vector<PassDesc> passes) {
   using R = Result<std::unique_ptr<SparseChain>>;
@@ -117,6 +237,17 @@ std::string SparseChain::describe() const {
   s << "sparse chain, passes:";
   for (std::size_t i = 0; i < impl_->passes.size(); ++i) s << (i ? " -> " : " ") << impl_->passes[i].label();
   s << " (brick_minmax halo 1 implied)";
+  if (impl_->strategy == Strategy::Dense) {
+    s << "\nstrategy: dense - the dense chain's x4 passes (filters + gradient, current shaders) over the whole "
+         "volume, outputs read in place; per candidate its exact range and the 9^3 samples of the active ones "
+         "gathered on the host";
+    s << "\nleft out (not created, not run): sparse_brick (per-brick strategy), gaussian1d, morph1d, gradient, "
+         "brick_minmax (legacy dense passes)";
+    if (impl_->dense) s << "\ndense chain: " << impl_->dense->describe();
+    if (!impl_->last_run.empty()) s << "\nlast run: " << impl_->last_run;
+    return s.str();
+  }
+  s << "\nstrategy: per-brick";
   s << "\npipelines created: sparse_brick (one workgroup of " << ISOTOUCH_SPARSE_WG
     << " per candidate brick: raw region -> filters -> min/max -> value+gradient of active bricks)";
   s << "\nleft out (not created, not run): gaussian1d, morph1d, gradient, brick_minmax (the dense passes)";
@@ -130,6 +261,7 @@ std::string SparseChain::describe() const {
 
 SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, float background,
                               core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  if (impl_->strategy == Strategy::Dense) return impl_->run_dense(vol, iso, background, format, max_binding_bytes);
   const auto t_total = std::chrono::steady_clock::now();
   VulkanContext& ctx = impl_->ctx;
   const auto& lim = ctx.properties().limits;

@@ -188,6 +188,15 @@ class SparseChain {
   /// fewer than the loop budget needs (sparse::max_bricks_per_workgroup); tests set 1 to
   /// make every workgroup loop over as many bricks as allowed.
   void set_max_workgroups(std::uint32_t groups);
+  /// How the candidates are computed. Dense (the default): the dense chain's x4 passes
+  /// (PassChain, current shaders) over the whole volume, read in place, then per candidate
+  /// its exact range (smoothed brick + 1 voxel) and the 9^3 samples of the active ones
+  /// gathered on the host - the dense passes reach lavapipe's speed, and a candidate's
+  /// samples are by definition the dense chain's. PerBrick: sparse_brick.comp, one
+  /// shared-memory workgroup per candidate brick recomputing its own halo (kept for
+  /// comparison). Both give the same bits.
+  enum class Strategy { Dense, PerBrick };
+  void set_strategy(Strategy s);
 
  private:
   struct Impl;

@@ -239,6 +239,17 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   vkGetPhysicalDeviceProperties(chosen, &ctx->props_);
   vkGetPhysicalDeviceMemoryProperties(chosen, &ctx->mem_props_);
   {
+    const VkMemoryPropertyFlags host = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    bool any = false, all = true;
+    for (std::uint32_t i = 0; i < ctx->mem_props_.memoryTypeCount; ++i) {
+      const VkMemoryPropertyFlags f = ctx->mem_props_.memoryTypes[i].propertyFlags;
+      if (!(f & VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT)) continue;
+      any = true;
+      all = all && (f & host) == host;
+    }
+    ctx->unified_memory_ = any && all;
+  }
+  {
     VkPhysicalDeviceMaintenance3Properties m3{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_MAINTENANCE_3_PROPERTIES};
     VkPhysicalDeviceProperties2 p2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
     p2.pNext = &m3;

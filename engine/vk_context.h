@@ -84,6 +84,14 @@ class VulkanContext {
   /// Largest storage-buffer binding [bytes] (limits.maxStorageBufferRange).
   VkDeviceSize max_binding_bytes() const { return props_.limits.maxStorageBufferRange; }
 
+  /// True if every device-local memory type is also host-visible and coherent (lavapipe,
+  /// integrated GPUs) and zero copy is allowed: device-local buffers are then mapped, the
+  /// host writes inputs and reads outputs in place, and no staging or readback copy runs.
+  bool device_local_is_host_visible() const { return unified_memory_ && zero_copy_; }
+  /// Turns zero copy off (staging and readback copies as on a discrete GPU), for tests and
+  /// for `bench engine`'s comparison. Affects buffers created afterwards.
+  void allow_zero_copy(bool allow) { zero_copy_ = allow; }
+
   VkCommandBuffer begin_commands();
   /// Submit, wait on a fence; returns the wall time from submit to signal [ms].
   double submit_and_wait(VkCommandBuffer cmd);
@@ -105,6 +113,8 @@ class VulkanContext {
   VkPhysicalDeviceProperties props_{};
   VkPhysicalDeviceMemoryProperties mem_props_{};
   VkDeviceSize max_allocation_ = 0;
+  bool unified_memory_ = false;
+  bool zero_copy_ = true;
   DeviceInfo info_;
   std::atomic<std::uint32_t> validation_count_{0};
 

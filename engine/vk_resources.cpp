@@ -56,8 +56,10 @@ Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, Memo
     case MemoryIntent::DeviceLocal:
       bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
                  VK_BUFFER_USAGE_TRANSFER_DST_BIT | VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT |
-                 VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
+                 VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT | VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
       want = VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT;
+      if (ctx.device_local_is_host_visible())
+        want |= VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
       break;
     case MemoryIntent::Upload:
       bi.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
@@ -84,7 +86,7 @@ Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, Memo
     return R::fail(name + ": vkAllocateMemory of " + std::to_string(req.size) + " bytes failed: " +
                    vk_result_name(r));
   VK_CHECK(vkBindBufferMemory(b.device_, b.buffer_, b.memory_, 0));
-  if (intent != MemoryIntent::DeviceLocal)
+  if (intent != MemoryIntent::DeviceLocal || ctx.device_local_is_host_visible())
     VK_CHECK(vkMapMemory(b.device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_));
   return R::ok(std::move(b));
 }
@@ -155,6 +157,10 @@ void barrier_transfer_to_compute(VkCommandBuffer cmd) {
   memory_barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                  VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT | VK_ACCESS_UNIFORM_READ_BIT);
 }
+void barrier_compute_to_host(VkCommandBuffer cmd) {
+  memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT,
+                 VK_ACCESS_HOST_READ_BIT);
+}
 void barrier_compute_to_transfer(VkCommandBuffer cmd) {
   memory_barrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_ACCESS_SHADER_WRITE_BIT,
                  VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_READ_BIT);
@@ -167,21 +173,39 @@ void barrier_transfer_to_host(VkCommandBuffer cmd) {
 DescriptorArena::DescriptorArena(VulkanContext& ctx, std::uint32_t max_sets, std::uint32_t max_buffers)
     : device_(ctx.device()) {
   // Any of the buffers may be a uniform buffer (ComputePipeline's uniform_bindings).
-  const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)},
-                                      {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, std::max<std::uint32_t>(max_buffers, 1)}};
+  const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, std::max<std::uint32_t>(max_buffers, 1)},
+                                      {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, std::max<std::uint32_t>(max_buffers, 1)},
+                                      {VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, std::max<std::uint32_t>(max_buffers, 1)}};
   VkDescriptorPoolCreateInfo pi{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
   max_sets_ = std::max<std::uint32_t>(max_sets, 1);
   pi.maxSets = max_sets_;
-  pi.poolSizeCount = 2;
+  pi.poolSizeCount = 3;
   pi.pPoolSizes = ps;
   VK_CHECK(vkCreateDescriptorPool(device_, &pi, nullptr, &pool_));
 }
 
 DescriptorArena::~DescriptorArena() {
+  for (VkBufferView v : views_) vkDestroyBufferView(device_, v, nullptr);
   if (pool_) vkDestroyDescriptorPool(device_, pool_, nullptr);
 }
 
-void DescriptorArena::reset() { VK_CHECK(vkResetDescriptorPool(device_, pool_, 0)); }
+void DescriptorArena::reset() {
+  VK_CHECK(vkResetDescriptorPool(device_, pool_, 0));
+  for (VkBufferView v : views_) vkDestroyBufferView(device_, v, nullptr);
+  views_.clear();
+}
+
+VkBufferView DescriptorArena::make_view(const BufferRange& r, VkFormat format) {
+  VkBufferViewCreateInfo vi{VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO};
+  vi.buffer = r.buffer;
+  vi.format = format;
+  vi.offset = r.offset;
+  vi.range = r.range;
+  VkBufferView v = VK_NULL_HANDLE;
+  VK_CHECK(vkCreateBufferView(device_, &vi, nullptr, &v));
+  views_.push_back(v);
+  return v;
+}
 
 VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
   VkDescriptorSetAllocateInfo ai{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO};
@@ -196,8 +220,10 @@ VkDescriptorSet DescriptorArena::allocate(VkDescriptorSetLayout layout) {
 ComputePipelineBase::ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv,
                                          std::size_t spirv_bytes, std::uint32_t bindings,
                                          std::uint32_t push_bytes, std::string name,
-                                         std::uint32_t uniform_bindings, std::vector<std::uint32_t> spec)
-    : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes), uniform_(uniform_bindings) {
+                                         std::uint32_t uniform_bindings, std::vector<std::uint32_t> spec,
+                                         std::uint32_t texel_bindings)
+    : ctx_(ctx), name_(std::move(name)), bindings_(bindings), push_size_(push_bytes), uniform_(uniform_bindings),
+      texel_(texel_bindings) {
   VkDevice dev = ctx_.device();
   std::vector<VkDescriptorSetLayoutBinding> b(bindings);
   for (std::uint32_t i = 0; i < bindings; ++i) {
@@ -248,12 +274,24 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
     throw std::logic_error(name_ + ": " + std::to_string(buffers.size()) + " buffers given for " +
                            std::to_string(bindings_) + " bindings");
   const VkDeviceSize limit = ctx_.max_binding_bytes();
+  const auto& lim = ctx_.properties().limits;
   std::vector<VkDescriptorBufferInfo> info;
+  std::vector<VkBufferView> views(bindings_, VK_NULL_HANDLE);
+  std::uint32_t at = 0;
   for (const BufferRange& r : buffers) {
-    if (r.range > limit)
+    if ((texel_ >> at) & 1u) {
+      if (r.range / 4 > lim.maxTexelBufferElements || r.offset % lim.minTexelBufferOffsetAlignment != 0)
+        throw std::logic_error(name_ + ": texel binding of " + std::to_string(r.range) + " bytes at offset " +
+                               std::to_string(r.offset) + " exceeds maxTexelBufferElements " +
+                               std::to_string(lim.maxTexelBufferElements) + " or misses the alignment " +
+                               std::to_string(lim.minTexelBufferOffsetAlignment));
+      views[at] = arena.make_view(r, VK_FORMAT_R32_SFLOAT);
+    } else if (r.range > limit) {
       throw std::logic_error(name_ + ": binding of " + std::to_string(r.range) +
                              " bytes exceeds maxStorageBufferRange " + std::to_string(limit));
+    }
     info.push_back({r.buffer, r.offset, r.range});
+    ++at;
   }
   VkDescriptorSet set = arena.allocate(set_layout_);
   std::vector<VkWriteDescriptorSet> w(bindings_);
@@ -263,7 +301,10 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
     w[i].dstBinding = i;
     w[i].descriptorCount = 1;
     w[i].descriptorType = descriptor_type(i);
-    w[i].pBufferInfo = &info[i];
+    if ((texel_ >> i) & 1u)
+      w[i].pTexelBufferView = &views[i];
+    else
+      w[i].pBufferInfo = &info[i];
   }
   vkUpdateDescriptorSets(ctx_.device(), bindings_, w.data(), 0, nullptr);
   vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
@@ -310,7 +351,9 @@ Result<std::vector<Slab>> plan_slabs(const VulkanContext& ctx, const SlabGeometr
                                      VkBuffer dst, std::uint64_t limit, const std::string& what) {
   using R = Result<std::vector<Slab>>;
   const auto& lim = ctx.properties().limits;
-  const std::uint64_t align = std::max<std::uint64_t>(lim.minStorageBufferOffsetAlignment, 4);
+  // Bindings may be storage buffers or texel-buffer views: both alignments hold.
+  const std::uint64_t align = std::max<std::uint64_t>(
+      {lim.minStorageBufferOffsetAlignment, lim.minTexelBufferOffsetAlignment, 4});
   const std::uint64_t m = std::max<std::uint64_t>(g.z_multiple, 1);
   auto src_range = [&](std::uint64_t z0, std::uint64_t nz) {
     const std::uint64_t a = z0 > g.halo ? z0 - g.halo : 0;

@@ -4,8 +4,10 @@
 // device memory is host-visible: compute passes read and write DeviceLocal buffers, the
 // host writes Upload buffers and reads Readback buffers, and copies between them are
 // recorded into the same command buffer as the passes (record_copy + the barriers below).
-// On a unified-memory device (lavapipe, integrated GPUs) the copies are cheap memcpys; on
-// a discrete GPU they are the PCIe transfers they must be.
+// On a discrete GPU they are the PCIe transfers they must be. Where every device-local
+// memory type is host-visible and coherent (lavapipe, integrated GPUs) a DeviceLocal buffer
+// is also mapped, and passes that check VulkanContext::device_local_is_host_visible()
+// write their inputs and read their outputs in place: no staging, no readback copy.
 //
 // Errors: set-up that can fail on a correct program (a buffer larger than the device's
 // maxMemoryAllocationSize, no memory type of the intent, out of memory) returns a Result
@@ -23,10 +25,19 @@
 
 namespace isotouch::engine {
 
+/// Which shaders a dense pass runs: Current, shaped for llvmpipe and real GPUs alike
+/// (texel-buffer input, 4 voxels per invocation, 1-D workgroups, specialised constants:
+/// gradient_x4.comp, gaussian_x4.comp), or Legacy (one voxel per invocation, storage-buffer
+/// loads, 8x8x4 workgroups: gradient.comp, gaussian1d.comp), kept for `bench engine`'s
+/// side-by-side comparison. Both give the same bits.
+enum class ShaderSet { Current, Legacy };
+const char* shader_set_name(ShaderSet s);
+
 /// What a buffer is for; decides its memory type and usage flags.
 enum class MemoryIntent {
   DeviceLocal,  ///< read/written by shaders; copy source and destination; indirect dispatch
-                ///< arguments; never mapped
+                ///< arguments; mapped only where device-local memory is host-visible
+                ///< (VulkanContext::device_local_is_host_visible: zero copy)
   Upload,       ///< host-visible, coherent, mapped: host writes, GPU copies out (staging)
   Readback,     ///< host-visible, coherent (cached if offered), mapped: GPU copies in, host reads
 };
@@ -53,7 +64,8 @@ class GpuBuffer {
   VkBuffer handle() const { return buffer_; }
   VkDeviceSize size() const { return size_; }
   MemoryIntent intent() const { return intent_; }
-  /// Host pointer of an Upload or Readback buffer (coherent: no flush needed); null otherwise.
+  /// Host pointer of an Upload or Readback buffer, or of a DeviceLocal one where device-local
+  /// memory is host-visible (coherent: no flush needed); null otherwise.
   void* mapped() const { return mapped_; }
   explicit operator bool() const { return buffer_ != VK_NULL_HANDLE; }
 
@@ -85,6 +97,8 @@ void barrier_compute_to_indirect(VkCommandBuffer cmd);
 void barrier_transfer_to_compute(VkCommandBuffer cmd);
 /// Dispatch writes become visible to a following copy (to a Readback buffer).
 void barrier_compute_to_transfer(VkCommandBuffer cmd);
+/// A dispatch's writes to a mapped (zero-copy) buffer become visible to the host after the fence.
+void barrier_compute_to_host(VkCommandBuffer cmd);
 /// Copies into Readback buffers become visible to the host after the fence.
 void barrier_transfer_to_host(VkCommandBuffer cmd);
 
@@ -104,8 +118,11 @@ class DescriptorArena {
   DescriptorArena(const DescriptorArena&) = delete;
   DescriptorArena& operator=(const DescriptorArena&) = delete;
   VkDescriptorSet allocate(VkDescriptorSetLayout layout);
-  /// Returns every set to the pool (vkResetDescriptorPool): reuse the arena for the next
-  /// submission once the previous one has completed (its fence waited on).
+  /// A buffer view (texel-buffer binding) that lives as long as the arena's sets: destroyed
+  /// by reset() and the destructor, after the command buffer that used it has completed.
+  VkBufferView make_view(const BufferRange& r, VkFormat format);
+  /// Returns every set to the pool (vkResetDescriptorPool) and destroys the views: reuse the
+  /// arena for the next submission once the previous one has completed (its fence waited on).
   void reset();
   std::uint32_t max_sets() const { return max_sets_; }
 
@@ -113,6 +130,7 @@ class DescriptorArena {
   VkDevice device_;
   std::uint32_t max_sets_ = 1;
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
+  std::vector<VkBufferView> views_;
 };
 
 /// A compute pipeline over `bindings` buffers (binding i = i-th BufferRange given to bind())
@@ -122,11 +140,15 @@ class DescriptorArena {
 /// load at a constant offset is one scalar load, a storage load a per-lane gather).
 /// `spec`: specialization constants, constant_id i = spec[i] (32-bit each; a GLSL bool is
 /// 0 or 1): a variant of one shader with the code it does not need folded away.
+/// `texel_bindings` (bit i): binding i is a uniform texel buffer of R32_SFLOAT (GLSL
+/// `samplerBuffer`, read with texelFetch; on llvmpipe a texel fetch takes the gather path,
+/// a storage-buffer load a per-lane loop with a bounds check); bind() makes its view.
 class ComputePipelineBase {
  public:
   ComputePipelineBase(VulkanContext& ctx, const std::uint32_t* spirv, std::size_t spirv_bytes,
                       std::uint32_t bindings, std::uint32_t push_bytes, std::string name,
-                      std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {});
+                      std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {},
+                      std::uint32_t texel_bindings = 0);
   ~ComputePipelineBase();
   ComputePipelineBase(const ComputePipelineBase&) = delete;
   ComputePipelineBase& operator=(const ComputePipelineBase&) = delete;
@@ -147,7 +169,9 @@ class ComputePipelineBase {
   std::uint32_t bindings_ = 0;
   std::uint32_t push_size_ = 0;
   std::uint32_t uniform_ = 0;  ///< bit i: binding i is a uniform buffer
+  std::uint32_t texel_ = 0;    ///< bit i: binding i is a uniform texel buffer (R32_SFLOAT)
   VkDescriptorType descriptor_type(std::uint32_t i) const {
+    if ((texel_ >> i) & 1u) return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
     return (uniform_ >> i) & 1u ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
   }
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
@@ -162,9 +186,10 @@ class ComputePipeline : public ComputePipelineBase {
  public:
   template <std::size_t N>
   ComputePipeline(VulkanContext& ctx, const std::uint32_t (&spirv)[N], std::uint32_t bindings,
-                  std::string name, std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {})
+                  std::string name, std::uint32_t uniform_bindings = 0, std::vector<std::uint32_t> spec = {},
+                  std::uint32_t texel_bindings = 0)
       : ComputePipelineBase(ctx, spirv, sizeof(spirv), bindings, sizeof(Push), std::move(name), uniform_bindings,
-                            std::move(spec)) {}
+                            std::move(spec), texel_bindings) {}
   void push(VkCommandBuffer cmd, const Push& p) const { push_bytes(cmd, &p); }
 };
 

@@ -68,6 +68,39 @@ struct Filter1dPush {
   uint mode;        // morph: ISOTOUCH_MORPH_MAX or ISOTOUCH_MORPH_MIN
 };
 
+// Dense passes shaped for llvmpipe and real GPUs alike (gaussian_x4.comp, gradient_x4.comp):
+// the source is read through a uniform texel buffer (R32_SFLOAT, texelFetch), each
+// invocation computes ISOTOUCH_DENSE_VOXELS consecutive voxels of one x-row (vec4 work),
+// workgroups are 1-D (ISOTOUCH_DENSE_WG x 1 x 1) over the rows of a slab: invocation t of
+// dispatch row z covers row y = t / qx, voxels x0 = 4 (t % qx) .. x0 + 3 (qx = ceil(nx / 4));
+// lanes past nx read clamped voxels and store nothing. Specialization constants: the
+// volume's size (constant_id 0, 1, 2: nx, ny, nz; the index arithmetic folds), and for the
+// Gaussian its axis (3), radius (4) and weights (5 + k: weight k of the 2 radius + 1 taps),
+// so the tap loop unrolls with its weights folded in; radii above ISOTOUCH_DENSE_MAX_RADIUS
+// take gaussian1d.comp. Same z-slab scheme as the 1-D filters; the push constants' sizes
+// are informative (the shaders read the specialised ones).
+#define ISOTOUCH_DENSE_WG 64
+#define ISOTOUCH_DENSE_VOXELS 4
+#define ISOTOUCH_DENSE_MAX_RADIUS 16
+struct DensePush {
+  uint nx;          // volume size in voxels (whole volume)
+  uint ny;
+  uint nz;
+  uint z0;          // first slice of this slab
+  uint slab_nz;     // slices in this slab
+  uint src_z0;      // first slice present in the src binding
+  uint src_offset;  // elements between the src binding start and slice src_z0
+  uint dst_offset;  // elements (floats or vec4 samples) between the dst binding start and slice z0
+  uint qx;          // invocations per x-row: ceil(nx / ISOTOUCH_DENSE_VOXELS)
+  uint vec4_out;    // gaussian: 1 if every row starts 16-byte aligned in dst (one vec4 store)
+  float inv_2h_x;   // gradient: 1 / (2 spacing) [1/m], central difference
+  float inv_2h_y;
+  float inv_2h_z;
+  float inv_h_x;    // gradient: 1 / spacing [1/m], one-sided difference at the borders
+  float inv_h_y;
+  float inv_h_z;
+};
+
 // Per-brick min/max (brick_minmax.comp): one invocation per 8^3 brick (OpenVDB's leaf
 // size), reading the brick's voxels widened by `halo` voxels on every side (clamped to
 // the volume); writes (min, max) as two floats per brick, bricks x fastest. A slab is a

@@ -312,3 +312,57 @@ TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   EXPECT_TRUE(std::isnan(r.sum.gpu_ms));
   EXPECT_DOUBLE_EQ(r.sum.cpu_ms, 16.0);
 }
+
+TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
+  // Two passes of 8e6 B each (16e6 B) in 2 ms each on the GPU, 5 ms each with the legacy
+  // shaders; memcpy 4 GB/s moves 16e6 B in 4 ms. Peers: 1 thread ITK 30 + 40 + 5 = 75 ms,
+  // ITK + OpenVDB 30 + 6 + 20 = 56 ms; 2 threads ITK 20 + 25 + 5 = 50 ms, ITK + OpenVDB
+  // 20 + 6 + 30 = 56 ms: the fastest chain is ITK at 2 threads, 50 ms.
+  app::CaseResult r;
+  r.memcpy_gbps = 4.0;
+  app::PassRow p;
+  p.min_bytes = 8'000'000;
+  p.gpu_ms = 2.0;
+  p.cpu_ms = 8.0;
+  p.legacy_gpu_ms = 5.0;
+  r.passes = {p, p};
+  app::PeerRow one, two;
+  one.threads = 1;
+  one.itk_gaussian_ms = 30;
+  one.itk_gradient_ms = 40;
+  one.itk_pack_ms = 5;
+  one.vdb_from_dense_ms = 6;
+  one.vdb_gradient_ms = 20;
+  two = one;
+  two.threads = 2;
+  two.itk_gaussian_ms = 20;
+  two.itk_gradient_ms = 25;
+  two.vdb_gradient_ms = 30;
+  r.peers = {one, two};
+  // The copy floor: 1 ms for the gradient's bytes, 20 B per voxel: 1e6 voxels = 20e6 B,
+  // 5 ms of memcpy at 4 GB/s; the pass labelled "gradient" takes 2 ms, twice the floor.
+  r.passes[1].label = "gradient";
+  r.voxels = 1'000'000;
+  r.copy_floor_ms = 1.0;
+  app::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.copy_floor_memcpy_ms, 5.0);
+  EXPECT_DOUBLE_EQ(r.floor_over_memcpy, 0.2);
+  EXPECT_DOUBLE_EQ(r.gradient_over_floor, 2.0);
+  EXPECT_DOUBLE_EQ(r.passes[0].legacy_over_gpu, 2.5);
+  EXPECT_DOUBLE_EQ(r.sum.legacy_gpu_ms, 10.0);
+  EXPECT_DOUBLE_EQ(r.sum.legacy_over_gpu, 2.5);
+  EXPECT_DOUBLE_EQ(r.peers[0].itk_chain_ms, 75.0);
+  EXPECT_DOUBLE_EQ(r.peers[0].itk_vdb_chain_ms, 56.0);
+  EXPECT_DOUBLE_EQ(r.peers[1].itk_chain_ms, 50.0);
+  EXPECT_DOUBLE_EQ(r.peers[1].itk_vdb_chain_ms, 56.0);
+  EXPECT_DOUBLE_EQ(r.fastest_peer_chain_ms, 50.0);
+  EXPECT_NE(r.fastest_peer_chain.find("2 threads"), std::string::npos) << r.fastest_peer_chain;
+  EXPECT_NE(r.fastest_peer_chain.find("ITK gradient"), std::string::npos) << r.fastest_peer_chain;
+  EXPECT_DOUBLE_EQ(r.chain_over_peer, 4.0 / 50.0);
+  EXPECT_DOUBLE_EQ(r.memcpy_ms, 4.0);
+  EXPECT_DOUBLE_EQ(r.chain_over_memcpy, 1.0);
+  // A peer that did not run (NaN) is not the fastest.
+  r.peers[1].itk_gradient_ms = kNaN;
+  app::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.fastest_peer_chain_ms, 56.0);
+}

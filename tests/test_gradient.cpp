@@ -141,3 +141,14 @@ TEST(GpuGradient, SliceLargerThanBindingIsAClearError) {
   }
   EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
 }
+
+TEST(GpuGradient, CopyFloorIsAFinitePositiveDeviceTime) {
+  // copy_x4 (the gradient's loads and stores without arithmetic) runs on a volume in several
+  // slabs' worth of dispatches and returns a finite positive time.
+  const engine::Volume v = engine::make_random({67, 45, 33}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 9);
+  engine::GradientPass pass(vk());
+  const double floor_ms = pass.copy_floor_ms(v, 3);
+  EXPECT_TRUE(std::isfinite(floor_ms));
+  EXPECT_GT(floor_ms, 0.0);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

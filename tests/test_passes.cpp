@@ -59,13 +59,16 @@ void expect_same(const std::vector<float>& gpu, const std::vector<float>& cpu, c
   }
 }
 
-void expect_chain_matches_cpu(const Volume& v, const std::vector<PassDesc>& passes, std::uint64_t max_binding = 0,
-                              int min_dispatches = 0) {
-  auto chain = engine::PassChain::create(vk(), passes);
+void expect_chain_matches_cpu_with(engine::ShaderSet shaders, const Volume& v, const std::vector<PassDesc>& passes,
+                                   std::uint64_t max_binding, int min_dispatches) {
+  auto chain = engine::PassChain::create(vk(), passes, shaders);
   ASSERT_TRUE(chain) << chain.error;
   const engine::ChainOutput g = (*chain.value)->run(v, max_binding);
   const engine::ChainOutput c = engine::run_chain_cpu(v, passes);
-  std::string name = v.path.substr(v.path.find_last_of('/') + 1) + ":";
+  std::string name = engine::shader_set_name(shaders);
+  name += " ";
+  name += v.path.substr(v.path.find_last_of('/') + 1);
+  name += ":";
   for (const auto& p : passes) name += " " + p.label();
   ASSERT_EQ(g.field.has_value(), c.field.has_value());
   ASSERT_EQ(g.samples.has_value(), c.samples.has_value());
@@ -81,6 +84,13 @@ void expect_chain_matches_cpu(const Volume& v, const std::vector<PassDesc>& pass
   for (const auto& p : g.passes) dispatches += p.dispatches;
   EXPECT_GE(dispatches, min_dispatches) << (*chain.value)->describe();
   EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
+// Both shader sets (the current texel-buffer x4 shaders and the legacy ones) against the CPU.
+void expect_chain_matches_cpu(const Volume& v, const std::vector<PassDesc>& passes, std::uint64_t max_binding = 0,
+                              int min_dispatches = 0) {
+  expect_chain_matches_cpu_with(engine::ShaderSet::Current, v, passes, max_binding, min_dispatches);
+  expect_chain_matches_cpu_with(engine::ShaderSet::Legacy, v, passes, max_binding, min_dispatches);
 }
 
 const std::vector<PassDesc> kFull = {PassDesc::gaussian(1.0), PassDesc::closing(2.0), PassDesc::gradient(),
@@ -134,6 +144,65 @@ TEST(PassesGpuVsCpu, SyntheticRandomOddSizes) {
   expect_chain_matches_cpu(v, kFull);
   expect_chain_matches_cpu(v, {PassDesc::gaussian(3.0), PassDesc::closing(3.0), PassDesc::brick_minmax(0)},
                            64u << 10, 2 * 9 + 2);
+}
+
+TEST(PassesGpuVsCpu, ThinVolumesAndRowTails) {
+  // Rows of 1, 2, 3, 5 and 9 voxels: the x4 shaders' lanes past the row's end, one-voxel
+  // axes (gradient 0), one-sided borders on both sides of a 4-voxel group.
+  const std::vector<std::array<int, 3>> dims = {{1, 5, 3}, {2, 1, 7}, {3, 4, 1}, {5, 3, 2}, {9, 1, 1}, {4, 4, 4}};
+  std::uint32_t seed = 11;
+  for (const auto& d : dims) {
+    const Volume v = engine::make_random(d, {0.9e-3, 1.0e-3, 1.3e-3}, -100.0f, 100.0f, seed++);
+    expect_chain_matches_cpu(v, {PassDesc::gaussian(1.0), PassDesc::gradient()});
+    expect_chain_matches_cpu(v, {PassDesc::gradient()});
+  }
+}
+
+TEST(PassesGpuVsCpu, GaussianRadiusAtAndAboveTheSpecialisedLimit) {
+  // sigma 5.3 voxels: radius 16, the largest gaussian_x4 holds in specialization constants;
+  // sigma 5.4: radius 17, which takes gaussian1d. Both against the CPU.
+  const Volume v = engine::make_random({41, 37, 40}, {1e-3, 1e-3, 1e-3}, -50.0f, 50.0f, 5);
+  EXPECT_EQ(engine::gaussian_kernel(5.3).size(), 33u);
+  EXPECT_EQ(engine::gaussian_kernel(5.4).size(), 35u);
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(5.3)});
+  expect_chain_matches_cpu(v, {PassDesc::gaussian(5.4)});
+  auto chain = engine::PassChain::create(vk(), {PassDesc::gaussian(5.4)});
+  ASSERT_TRUE(chain) << chain.error;
+  (*chain.value)->run(v);
+  EXPECT_NE((*chain.value)->describe().find("gaussian_x4 gaussian1d"), std::string::npos) << (*chain.value)->describe();
+  // The closing's box: 16 voxels each side in filter_x4, 17 in morph1d.
+  expect_chain_matches_cpu(v, {PassDesc::closing(16.0)});
+  expect_chain_matches_cpu(v, {PassDesc::closing(17.0)});
+  auto closing = engine::PassChain::create(vk(), {PassDesc::closing(17.0)});
+  ASSERT_TRUE(closing) << closing.error;
+  (*closing.value)->run(v);
+  EXPECT_NE((*closing.value)->describe().find("morph_x4 morph1d"), std::string::npos) << (*closing.value)->describe();
+}
+
+TEST(PassesGpuVsCpu, ZeroCopyAndStagingGiveTheSameBits) {
+  // lavapipe's one memory type is device-local, host-visible and coherent: the chain writes
+  // the voxels and reads the outputs in place. With zero copy off it stages and reads back,
+  // as on a discrete GPU; both against the CPU.
+  const Volume v = engine::make_random({37, 29, 23}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 43);
+  if (vk().info().type == "cpu") {
+    EXPECT_TRUE(vk().device_local_is_host_visible());
+  }
+  struct Restore {
+    ~Restore() { vk().allow_zero_copy(true); }
+  } restore;
+  for (bool zero_copy : {true, false}) {
+    vk().allow_zero_copy(zero_copy);
+    auto chain = engine::PassChain::create(vk(), kFull);
+    ASSERT_TRUE(chain) << chain.error;
+    const std::string d = (*chain.value)->describe();
+    const bool direct = vk().device_local_is_host_visible();
+    EXPECT_EQ(d.find("no staging") != std::string::npos, direct) << d;
+    EXPECT_EQ(d.find("+ readback") != std::string::npos, !direct) << d;
+    expect_chain_matches_cpu(v, kFull, 64u << 10, 2 * 9 + 2);
+    // Here the closing's last step (z, radius 0 at 2.3 mm spacing) copies its input, so
+    // both ping-pong buffers hold the final field; a list ending on a Gaussian step does not.
+    expect_chain_matches_cpu(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()});
+  }
 }
 
 // ---------------------------------------------------------------- analytic: Gaussian
@@ -294,8 +363,8 @@ TEST(PassChain, CreatesOnlyWhatTheListNeedsAndSaysSo) {
   auto chain = engine::PassChain::create(vk(), {PassDesc::gaussian(1.0), PassDesc::brick_minmax()});
   ASSERT_TRUE(chain) << chain.error;
   const std::string d = (*chain.value)->describe();
-  EXPECT_NE(d.find("pipelines created: gaussian1d brick_minmax"), std::string::npos) << d;
-  EXPECT_NE(d.find("left out (not created, not run): morph1d gradient"), std::string::npos) << d;
+  EXPECT_NE(d.find("pipelines created: gaussian_x4 brick_minmax"), std::string::npos) << d;
+  EXPECT_NE(d.find("left out (not created, not run): morph_x4 morph1d gradient"), std::string::npos) << d;
   EXPECT_NE(d.find("samples (16 B/voxel)"), std::string::npos) << d;
   const auto out = (*chain.value)->run(engine::make_random({9, 9, 9}, {1e-3, 1e-3, 1e-3}, 0, 1, 3));
   EXPECT_TRUE(out.field && out.bricks);
@@ -352,7 +421,13 @@ TEST(VulkanLayer, AllocationLargerThanTheDeviceAllowsIsAClearError) {
   EXPECT_NE(ok.value->mapped(), nullptr);
   auto dev = engine::GpuBuffer::create(vk(), 1024, engine::MemoryIntent::DeviceLocal, "small");
   ASSERT_TRUE(dev) << dev.error;
-  EXPECT_EQ(dev.value->mapped(), nullptr) << "device-local buffers are never mapped";
+  // Device-local buffers are mapped exactly where device-local memory is host-visible (zero copy).
+  EXPECT_EQ(dev.value->mapped() != nullptr, vk().device_local_is_host_visible());
+  vk().allow_zero_copy(false);
+  auto staged = engine::GpuBuffer::create(vk(), 1024, engine::MemoryIntent::DeviceLocal, "small");
+  vk().allow_zero_copy(true);
+  ASSERT_TRUE(staged) << staged.error;
+  EXPECT_EQ(staged.value->mapped(), nullptr) << "with zero copy off, device-local buffers are not mapped";
 }
 
 // ---------------------------------------------------------------- timings (printed)

@@ -46,10 +46,13 @@ bool same(const core::Sample& a, const core::Sample& b) {
          bits(a.gz) == bits(b.gz);
 }
 
+using Strategy = engine::SparseChain::Strategy;
 engine::SparseOutput run_gpu(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                             float background, std::uint64_t max_binding = 0, std::uint32_t max_groups = 0) {
+                             float background, std::uint64_t max_binding = 0, std::uint32_t max_groups = 0,
+                             Strategy strategy = Strategy::Dense) {
   auto chain = engine::SparseChain::create(vk(), passes);
   if (!chain) throw std::runtime_error(chain.error);
+  (*chain.value)->set_strategy(strategy);
   (*chain.value)->set_keep_input(true);
   (*chain.value)->set_max_workgroups(max_groups);
   engine::SparseOutput out = (*chain.value)->run(v, iso, background, core::SampleFormat::kFp32, max_binding);
@@ -145,20 +148,28 @@ void expect_same_output(const engine::SparseOutput& a, const engine::SparseOutpu
   EXPECT_EQ(tdiff, 0u) << what << ": tiles differ";
 }
 
-// GPU vs dense, CPU sparse vs GPU sparse, and small bindings vs default.
-void check_case(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso, float background,
-                const std::string& what, std::uint64_t small_binding = 0) {
-  const engine::SparseOutput gpu = run_gpu(v, passes, iso, background);
+// GPU vs dense, CPU sparse vs GPU sparse, and small bindings vs default; both strategies
+// (dense x4 passes + host gather, and the per-brick shared-memory kernel).
+void check_case_with(Strategy strategy, const Volume& v, const std::vector<PassDesc>& passes,
+                     const core::Isosurface& iso, float background, const std::string& what_in,
+                     std::uint64_t small_binding) {
+  const std::string what = what_in + (strategy == Strategy::Dense ? " [dense strategy]" : " [per-brick strategy]");
+  const engine::SparseOutput gpu = run_gpu(v, passes, iso, background, 0, 0, strategy);
   expect_matches_dense(v, passes, iso, gpu, what + " (GPU)");
   const engine::SparseOutput cpu = engine::run_sparse_cpu(v, passes, iso, background, core::SampleFormat::kFp32, true);
   expect_same_output(gpu, cpu, what + ": GPU vs CPU sparse");
   if (small_binding) {
-    const engine::SparseOutput small = run_gpu(v, passes, iso, background, small_binding);
+    const engine::SparseOutput small = run_gpu(v, passes, iso, background, small_binding, 0, strategy);
     expect_same_output(gpu, small, what + ": small bindings");
     EXPECT_GE(small.stats.slabs, 2u) << what << ": the small binding must force several slabs";
     EXPECT_GT(small.stats.dispatches, small.stats.slabs) << what << ": ... and several pool chunks";
   }
   EXPECT_EQ(vk().validation_messages(), 0u);
+}
+void check_case(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso, float background,
+                const std::string& what, std::uint64_t small_binding = 0) {
+  check_case_with(Strategy::Dense, v, passes, iso, background, what, small_binding);
+  check_case_with(Strategy::PerBrick, v, passes, iso, background, what, small_binding);
 }
 }  // namespace
 
@@ -186,15 +197,17 @@ TEST(SparseChain, OneWorkgroupLoopsOverManyBricks) {
   // budget. Truth: the dense CPU chain, and the same result with the default workgroups.
   const Volume v = engine::load_volume(kChest);
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
-  const engine::SparseOutput one = run_gpu(v, p, above(-500), -1024.0f, 0, 1);
+  const engine::SparseOutput one = run_gpu(v, p, above(-500), -1024.0f, 0, 1, Strategy::PerBrick);
   const std::size_t per = std::size_t(engine::sparse::max_bricks_per_workgroup(
       engine::sparse::make_plan(v.grid, p, "chest")));
   ASSERT_GE(per, 4u) << "the case needs several bricks per workgroup";
   EXPECT_LE(one.stats.workgroups, one.stats.candidates / per + one.stats.dispatches)
       << "one workgroup asked for: as few as the budget allows, each looping over many bricks";
   expect_matches_dense(v, p, above(-500), one, "chest -500, 1 workgroup asked for");
-  const engine::SparseOutput def = run_gpu(v, p, above(-500), -1024.0f);
+  const engine::SparseOutput def = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::PerBrick);
   expect_same_output(one, def, "chest -500: 1 workgroup asked for vs default");
+  const engine::SparseOutput dense = run_gpu(v, p, above(-500), -1024.0f);
+  expect_same_output(dense, def, "chest -500: dense strategy vs per-brick");
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
@@ -249,7 +262,11 @@ TEST(SparseChain, RejectsListsItCannotRun) {
   const Volume v = engine::make_sphere({24, 24, 24}, 1e-3, 8.0);
   auto chain = engine::SparseChain::create(vk(), {PassDesc::gaussian(4.0), PassDesc::gradient()});
   ASSERT_TRUE(chain);
+  (*chain.value)->set_strategy(engine::SparseChain::Strategy::PerBrick);
   EXPECT_THROW((*chain.value)->run(v, above(0), -1e4f), engine::VolumeError);
+  // The dense strategy has no shared-memory limit: it runs, and matches the dense CPU chain.
+  const std::vector<PassDesc> wide = {PassDesc::gaussian(4.0), PassDesc::gradient()};
+  expect_matches_dense(v, wide, above(0), run_gpu(v, wide, above(0), -1e4f), "sigma 4 mm (dense strategy)");
 }
 
 // ---------------------------------------------------------------- benchmark (disabled)

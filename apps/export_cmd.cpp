@@ -109,7 +109,12 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
     err << "isotouch export: nothing to write: give --vdb, --volume, --stl, --obj and/or --ply\n";
     return 2;
   }
-  if (!o.volume_out.empty() && o.volume_out != "-" && !engine::itk_writable(o.volume_out)) {
+  if (o.volume_out == "-") {
+    err << "isotouch export: --volume -: ITK's writers take the format from the file name; give a name ending in "
+           ".mha, .nrrd, .nii or .nii.gz (a FIFO or device named so is written as a stream)\n";
+    return 2;
+  }
+  if (!o.volume_out.empty() && !engine::itk_writable(o.volume_out)) {
     err << "isotouch export: --volume " << o.volume_out
         << ": the name must end in .mha (MetaImage), .nrrd (NRRD), .nii or .nii.gz (NIfTI)"
         << (o.volume_out.size() > 4 && o.volume_out.substr(o.volume_out.size() - 4) == ".mhd"

@@ -436,6 +436,11 @@ std::uint32_t volume_crc32(const engine::Volume& v) {
     const std::int32_t d32 = d;
     crc = ::crc32(crc, reinterpret_cast<const Bytef*>(&d32), sizeof d32);
   }
+  const double geometry[15] = {v.grid.spacing_m.x, v.grid.spacing_m.y, v.grid.spacing_m.z, v.grid.origin_m.x,
+                               v.grid.origin_m.y,  v.grid.origin_m.z,  v.direction[0],     v.direction[1],
+                               v.direction[2],     v.direction[3],     v.direction[4],     v.direction[5],
+                               v.direction[6],     v.direction[7],     v.direction[8]};
+  crc = ::crc32(crc, reinterpret_cast<const Bytef*>(geometry), sizeof geometry);
   const auto* bytes = reinterpret_cast<const Bytef*>(v.voxels.data());
   std::size_t left = v.voxels.size() * sizeof(float);
   while (left > 0) {  // crc32 takes a uInt length

@@ -65,7 +65,8 @@ struct Recording {
 /// Every number must be finite (times, HIP, forces, brush fields); t strictly ascending.
 inline constexpr const char* kRecordingFormat = "isotouch-recording";
 
-/// CRC-32 (zlib) of a volume's dims and voxel bytes: what replay checks the volume by.
+/// CRC-32 (zlib) of a volume's dims, spacing, origin, direction and voxel bytes: what replay
+/// checks the volume by.
 std::uint32_t volume_crc32(const engine::Volume& volume);
 
 /// The file's text for `r` (what save_recording writes). @throws RecordingError naming

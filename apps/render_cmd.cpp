@@ -320,6 +320,9 @@ struct RenderCli {
   float step = 0.5f;
 };
 
+/// The command's own messages: on stderr when the picture itself goes to standard output.
+std::ostream& say(const RenderCli& o) { return o.out == "-" ? std::cerr : std::cout; }
+
 std::string default_scene_path() {
   if (fs::exists("scenes/head.json")) return "scenes/head.json";
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
@@ -379,7 +382,7 @@ std::vector<servo::TraceRow> trace_for(const Scene& scene, const engine::Volume&
   s.draw_plots = false;
   s.write_trace = true;
   std::ostringstream log;
-  std::cout << "render: running the scene to get the probe's trace ...\n";
+  say(o) << "render: running the scene to get the probe's trace ...\n";
   try {
     run_scene(s, ro, log);
     auto rows = read_trace_csv((tmp / "trace.csv").string(), vol);
@@ -414,7 +417,7 @@ int cmd_render(const RenderCli& o, const std::string& device) {
     const std::string out = o.out.empty() ? scene.name + "_path.png" : o.out;
     const RunPicture pic = render_run_picture(scene, vol, sf, rows, out, nullptr, device, o.width, o.height);
     if (!pic.error.empty()) throw std::runtime_error("render --path: " + pic.error);
-    std::cout << "render: wrote " << out << ": " << pic.caption << "\n";
+    say(o) << "render: wrote " << out << ": " << pic.caption << "\n";
     return 0;
   }
   std::string probe_note;
@@ -450,7 +453,7 @@ int cmd_render(const RenderCli& o, const std::string& device) {
   const engine::RaycastImage img = render_picture(vk.get(), field, vol.direction, req, out);
   std::size_t hits = 0;
   for (float d : img.depth) hits += d >= 0;
-  std::cout << "render: wrote " << out << " (" << img.width << " x " << img.height << ", "
+  say(o) << "render: wrote " << out << " (" << img.width << " x " << img.height << ", "
             << (vk ? vk->info().name : std::string("CPU reference")) << ", "
             << std::setprecision(3) << (img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms) << " ms"
             << (img.gpu_ms >= 0 ? " GPU" : " wall") << ", " << hits << " surface pixels"

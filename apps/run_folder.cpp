@@ -76,24 +76,35 @@ RunFolder::~RunFolder() {
   if (lock_fd_ >= 0) ::close(lock_fd_);  // releases the flock
 }
 
-bool RunFolder::mark_interrupted(const std::string& stage, int signal) const noexcept {
+bool RunFolder::mark(const std::string& status, const std::string& key, const std::string& value,
+                     const std::string& signal, const std::string& note) const noexcept {
   try {
-    nlohmann::ordered_json j = status_json("interrupted", scene_file_, scene_name_);
-    j["signal"] = signal == SIGTERM ? "SIGTERM" : "SIGINT";
-    j["stage"] = stage;
+    nlohmann::ordered_json j = status_json(status, scene_file_, scene_name_);
+    if (!signal.empty()) j["signal"] = signal;
+    j[key] = value;
     nlohmann::ordered_json files = nlohmann::ordered_json::array();
     for (const std::string& f : run_output_files()) {
       std::error_code ec;
       if (f != "summary.json" && fs::exists(fs::path(dir_) / f, ec)) files.push_back(f);
     }
     j["files"] = files;
-    j["note"] = "the run was stopped before it finished: the files listed are whole but the figures of a complete run "
-                "(report.md, the rest of summary.json) were not written";
+    j["note"] = note;
     write_file_atomic((fs::path(dir_) / "summary.json").string(), j.dump(2) + "\n");
     return true;
   } catch (...) {
     return false;
   }
+}
+
+bool RunFolder::mark_interrupted(const std::string& stage, int signal) const noexcept {
+  return mark("interrupted", "stage", stage, signal == SIGTERM ? "SIGTERM" : "SIGINT",
+              "the run was stopped before it finished: the files listed are whole but the figures of a complete run "
+              "(report.md, the rest of summary.json) were not written");
+}
+
+bool RunFolder::mark_failed(const std::string& error) const noexcept {
+  return mark("failed", "error", error, "",
+              "the run stopped on this error: the files listed are whole, the figures of a complete run were not written");
 }
 
 }  // namespace isotouch::app

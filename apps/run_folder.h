@@ -17,8 +17,8 @@ inline constexpr const char* kRunLockFile = ".isotouch-run.lock";
 ///   process ends however it ends): a second run into the same folder is refused;
 /// - the files of an earlier run (run_output_files) are removed, so old and new never mix;
 /// - summary.json says "status": "running" until the run writes its final summary
-///   ("complete"), or mark_interrupted() writes "interrupted" with the stage and the files
-///   that were finished.
+///   ("complete", written last), or mark_interrupted() writes "interrupted" with the stage
+///   and the files that were finished, or mark_failed() "failed" with the error.
 class RunFolder {
  public:
   /// @throws std::runtime_error "DIR: another isotouch run (pid N) is writing this folder ..."
@@ -32,8 +32,13 @@ class RunFolder {
   /// Writes summary.json {"status": "interrupted", "stage", "signal", "files"} (files: the
   /// outputs present now). Never throws (returns false when it could not write).
   bool mark_interrupted(const std::string& stage, int signal) const noexcept;
+  /// Writes summary.json {"status": "failed", "error", "files"}: the run stopped on an error.
+  /// Never throws (returns false when it could not write).
+  bool mark_failed(const std::string& error) const noexcept;
 
  private:
+  bool mark(const std::string& status, const std::string& key, const std::string& value, const std::string& signal,
+            const std::string& note) const noexcept;
   std::string dir_, scene_file_, scene_name_;
   int lock_fd_ = -1;
 };

@@ -3,6 +3,7 @@
 #include <csignal>
 
 #include "drill_figure.h"
+#include "output_file.h"
 #include "volume_write.h"
 #include "run_folder.h"
 #include "stop_signal.h"
@@ -857,9 +858,17 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     const std::vector<servo::TraceRow> path = thin_path(trace);
     // before.png: surface.png when it was drawn (the same volume, snapshot and path).
     RunPicture before;
-    std::error_code ec;
-    if (!m.picture_drawn ||
-        !fs::copy_file(fs::path(dir) / "surface.png", fs::path(dir) / "before.png", fs::copy_options::overwrite_existing, ec))
+    bool copied = false;
+    if (m.picture_drawn) {
+      try {  // through the one writer, like every output
+        io::write_output((fs::path(dir) / "before.png").string(), [&](const std::string& f) {
+          fs::copy_file(fs::path(dir) / "surface.png", f, fs::copy_options::overwrite_existing);
+        });
+        copied = true;
+      } catch (const std::exception&) {
+      }
+    }
+    if (!copied)
       before = render_run_picture(scene, setup.volume, *setup.first, path, (fs::path(dir) / "before.png").string(),
                                   setup.vk.get());
     const RunPicture aft = render_run_picture(scene, after, *session.current(), path,
@@ -1434,7 +1443,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
   if (edits) j["edits"] = edits_json(m.edits, scene);
-  write_file_atomic((fs::path(dir) / "summary.json").string(), j.dump(2) + "\n");
+  const std::string summary_text = j.dump(2) + "\n";
 
   std::ostringstream md;
   md << "# isotouch run: " << scene.name << "\n\n";
@@ -1541,6 +1550,8 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   md << "Files: `trace.csv` (one row per tick), `summary.json`, `plots.gp` (gnuplot script for the plots).\n";
   write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
   if (!opt.record_path.empty()) write_recording(scene, setup, trace, opt.record_path);
+  // Last: "complete" only once every other output is whole.
+  write_file_atomic((fs::path(dir) / "summary.json").string(), summary_text);
   return m;
 }
 }  // namespace
@@ -1553,6 +1564,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     if (folder.mark_interrupted(e.stage, e.signal))
       log << "\ninterrupted (" << (e.signal == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << e.stage
           << ": " << (fs::path(opt.out_dir) / "summary.json").string() << " says \"status\": \"interrupted\"\n";
+    throw;
+  } catch (const std::exception& e) {
+    folder.mark_failed(e.what());
     throw;
   }
 }

@@ -29,9 +29,14 @@ void install_stop_handlers() {
   struct sigaction sa {};
   sa.sa_handler = on_stop_signal;
   sigemptyset(&sa.sa_mask);
-  sa.sa_flags = SA_RESTART;
+  // No SA_RESTART: a call blocked on a FIFO without a reader (or the like) returns EINTR
+  // and the command stops with a named error instead of swallowing the first Ctrl+C.
+  sa.sa_flags = 0;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // A stream output whose reader went away (| head) fails with EPIPE, named, instead of
+  // ending the process silently.
+  std::signal(SIGPIPE, SIG_IGN);
 }
 
 int stop_signal() { return g_signal.load(std::memory_order_relaxed); }

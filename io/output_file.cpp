@@ -61,18 +61,24 @@ void write_all(int fd, const char* data, std::size_t size, const std::string& pa
   }
 }
 
-/// Copies the bytes of `from` to the open descriptor `to` (the output `path`).
+/// Copies the bytes of the open descriptor `in` (read from its start) to `to` (the output `path`).
+void copy_fd(int in, int to, const std::string& path) {
+  std::array<char, 1 << 16> buf{};
+  for (off_t at = 0;;) {
+    const ssize_t n = ::pread(in, buf.data(), buf.size(), at);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw OutputError(os_error(path, "reading the finished output back failed", errno));
+    if (n == 0) return;
+    write_all(to, buf.data(), std::size_t(n), path);
+    at += n;
+  }
+}
+
+/// Copies the bytes of the file `from` to the open descriptor `to` (the output `path`).
 void copy_into(const std::string& from, int to, const std::string& path) {
   Fd in(::open(from.c_str(), O_RDONLY | O_CLOEXEC));
   if (in.fd < 0) throw OutputError(os_error(from, "cannot read back the finished output", errno));
-  std::array<char, 1 << 16> buf{};
-  for (;;) {
-    const ssize_t n = ::read(in.fd, buf.data(), buf.size());
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw OutputError(os_error(from, "read failed", errno));
-    if (n == 0) return;
-    write_all(to, buf.data(), std::size_t(n), path);
-  }
+  copy_fd(in.fd, to, path);
 }
 
 void fsync_file(const std::string& file) {
@@ -99,12 +105,22 @@ std::string format_suffix(const std::string& path) {
   return ext.size() <= 16 ? ext : std::string();
 }
 
+/// The process's umask (read once: umask(2) can only be read by setting it).
+mode_t current_umask() {
+  static const mode_t mask = [] {
+    const mode_t m = ::umask(022);
+    ::umask(m);
+    return m;
+  }();
+  return mask;
+}
+
 /// A fresh empty file from `tmpl` (XXXXXX followed by `suffix`), readable like an ordinary output.
 std::string make_temp(std::string tmpl, const std::string& for_path, const std::string& suffix = "") {
   tmpl += suffix;
   const int fd = ::mkstemps(tmpl.data(), int(suffix.size()));
   if (fd < 0) throw OutputError(os_error(for_path, "cannot create a temp file '" + tmpl + "'", errno));
-  ::fchmod(fd, 0644);  // mkstemp makes 0600; outputs are ordinary readable files
+  ::fchmod(fd, 0666 & ~current_umask());  // mkstemp makes 0600; outputs are ordinary files, as the umask says
   ::close(fd);
   return tmpl;
 }
@@ -133,16 +149,25 @@ void commit_replace(const std::string& tmp, const OutputTarget& t) {
   fsync_folder(folder_of(t.resolved));
 }
 
-/// Writes the finished file `tmp` into the stream `t`, in place.
-void commit_stream(const std::string& tmp, const OutputTarget& t) {
-  if (t.resolved == "-") {
-    copy_into(tmp, STDOUT_FILENO, "standard output");
+/// Writes the finished content (open descriptor `in`) into the stream `t`, in place.
+void commit_stream(int in, const OutputTarget& t) {
+  if (t.fd >= 0) {
+    copy_fd(in, t.fd, t.fd == STDERR_FILENO ? "standard error" : "standard output");
     return;
   }
   Fd out(::open(t.resolved.c_str(), O_WRONLY | O_CLOEXEC | O_NOCTTY));
   if (out.fd < 0) throw OutputError(os_error(t.requested, "cannot open for writing", errno));
-  copy_into(tmp, out.fd, t.requested);
+  copy_fd(in, out.fd, t.requested);
   if (out.close_checked() != 0) throw OutputError(os_error(t.requested, "close failed", errno));
+}
+
+/// commit_stream of a finished file, removed from its folder before the copy starts: a
+/// process killed while it waits for a FIFO's reader leaves no temp file behind.
+void commit_stream_file(const std::string& tmp, const OutputTarget& t) {
+  Fd in(::open(tmp.c_str(), O_RDONLY | O_CLOEXEC));
+  if (in.fd < 0) throw OutputError(os_error(tmp, "cannot read back the finished output", errno));
+  ::unlink(tmp.c_str());
+  commit_stream(in.fd, t);
 }
 
 /// The name a dangling symlink chain (or a plain missing path) ends in.
@@ -163,9 +188,14 @@ std::string follow_to_missing(const std::string& path) {
 
 OutputTarget classify_output(const std::string& path) {
   if (path.empty()) throw OutputError("output path is empty");
-  if (path == "-") return {path, "-", OutputKind::kStream};
+  if (path == "-") return {path, "-", OutputKind::kStream, STDOUT_FILENO};
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0) {  // follows every symlink
+    for (const int fd : {STDOUT_FILENO, STDERR_FILENO}) {  // e.g. /dev/stdout while stdout is a log file
+      struct stat sf {};
+      if (::fstat(fd, &sf) == 0 && sf.st_dev == st.st_dev && sf.st_ino == st.st_ino)
+        return {path, "-", OutputKind::kStream, fd};
+    }
     if (S_ISCHR(st.st_mode) || S_ISFIFO(st.st_mode)) return {path, path, OutputKind::kStream};
     if (!S_ISREG(st.st_mode))
       throw OutputError(path + ": cannot write an output here: it is " + kind_of(st.st_mode) +
@@ -190,7 +220,9 @@ void write_output(const std::string& path, const std::function<void(const std::s
     commit_replace(tmp.path, t);
     tmp.path.clear();  // renamed: nothing left to remove
   } else {
-    commit_stream(tmp.path, t);
+    const std::string done = tmp.path;
+    tmp.path.clear();
+    commit_stream_file(done, t);
   }
 }
 
@@ -207,7 +239,8 @@ void place_output(const std::string& done, const std::string& path) {
   Unlinker finished{done};
   const OutputTarget t = classify_output(path);
   if (t.kind == OutputKind::kStream) {
-    commit_stream(done, t);
+    finished.path.clear();
+    commit_stream_file(done, t);
     return;
   }
   std::error_code ec;

@@ -23,11 +23,14 @@ enum class OutputKind {
 /// Where an output goes, after following symlinks.
 struct OutputTarget {
   std::string requested;  ///< the path as given
-  std::string resolved;   ///< the final target after following symlinks ("/dev/stdout" for "-")
+  std::string resolved;   ///< the final target after following symlinks ("-" for a standard stream)
   OutputKind kind = OutputKind::kReplace;
+  int fd = -1;            ///< a standard stream (1 or 2) the target is: written on that descriptor
 };
 
-/// Classifies `path`: "-" is standard output (stream); a symlink is followed (chains too,
+/// Classifies `path`: "-" is standard output (stream), and so is any path that is the file
+/// standard output or standard error already writes (/dev/stdout redirected to a log
+/// file: written on the descriptor, never replaced); a symlink is followed (chains too,
 /// relative links against the link's folder, at most 40 hops) and its target classified by
 /// the same rules; a regular file or a path that does not exist yet is replaced atomically;
 /// a character device or a FIFO is written as a stream. A directory, a block device, a

@@ -39,4 +39,31 @@ grep -q '"status": "interrupted"' "$out/summary.json" || fail "the refused run t
 "$exe" run "$scene" --out "$out" --quiet > "$out.log" 2>&1 || { cat "$out.log"; fail "the run after the lock was released failed"; }
 grep -q '"status": "complete"' "$out/summary.json" || fail "a finished run's summary.json does not say complete"
 [ -e "$out/report.md" ] || fail "no report.md after a complete run"
+# SIGTERM: exit 143, interrupted.
+"$exe" run "$scene" --out "$out" --quiet > "$out.log" 2>&1 &
+pid=$!
+for _ in $(seq 1 600); do
+  grep -q '"running"' "$out/summary.json" 2>/dev/null && break
+  sleep 0.05
+done
+kill -TERM "$pid"
+wait "$pid"; rc=$?
+[ "$rc" -eq 143 ] || fail "exit $rc after SIGTERM, expected 143"
+grep -q '"signal": "SIGTERM"' "$out/summary.json" || fail "summary.json does not name SIGTERM"
+
+# A run that fails inside (a volume whose data file is truncated): "failed" with the error,
+# the exit code non-zero.
+printf 'ObjectType = Image\nNDims = 3\nDimSize = 8 8 8\nElementType = MET_SHORT\nElementDataFile = bad.raw\n' > "$out.bad.mhd"
+head -c 100 /dev/zero > "$out.bad.raw"
+mv "$out.bad.raw" "$(dirname "$out")/bad.raw"
+printf '{"name": "bad", "volume": {"path": "%s"}, "isovalue": 1}' "$out.bad.mhd" > "$out.bad.json"
+"$exe" run "$out.bad.json" --out "$out" --quiet > "$out.log" 2>&1; rc=$?
+cat "$out.log"
+[ "$rc" -ne 0 ] || fail "a failed run exited 0"
+if grep -q '"status": "failed"' "$out/summary.json"; then
+  grep -q '"error": ".*bad.mhd' "$out/summary.json" || fail "summary.json does not name the error"
+else
+  # the scene loader may refuse the volume before the folder is touched: then the earlier summary stays
+  grep -q '"signal": "SIGTERM"' "$out/summary.json" || fail "summary.json neither failed nor untouched"
+fi
 echo "PASS run folder: interrupted, locked and complete runs"

@@ -249,3 +249,29 @@ TEST(OutputFile, TempNamesKeepTheExtensionOnlyWhenAsked) {
   EXPECT_NE(seen.find("b.nii.gz.tmp-"), std::string::npos) << seen;
   EXPECT_EQ(slurp(d.path / "b.nii.gz"), "x");
 }
+
+TEST(OutputFile, DevStdoutRedirectedToALogIsAppendedNotReplaced) {
+  // `isotouch export ... --stl /dev/stdout >> build.log`: /dev/stdout resolves to the log
+  // file, a regular file; replacing it would throw the log away.
+  TempDir d;
+  const fs::path log = d.path / "build.log";
+  std::ofstream(log) << "earlier lines\n";
+  struct stat before {};
+  ASSERT_EQ(::stat(log.c_str(), &before), 0);
+  std::fflush(stdout);
+  const int saved = ::dup(STDOUT_FILENO);
+  const int fd = ::open(log.c_str(), O_WRONLY | O_APPEND);
+  ASSERT_GE(fd, 0);
+  ::dup2(fd, STDOUT_FILENO);
+  ::close(fd);
+  const auto target = classify_output("/dev/stdout");
+  write_output("/dev/stdout", std::string_view("the output\n"));
+  write_output("/proc/self/fd/1", std::string_view("again\n"));
+  ::dup2(saved, STDOUT_FILENO);
+  ::close(saved);
+  EXPECT_EQ(target.kind, OutputKind::kStream);
+  EXPECT_EQ(slurp(log), "earlier lines\nthe output\nagain\n");
+  struct stat after {};
+  ASSERT_EQ(::stat(log.c_str(), &after), 0);
+  EXPECT_EQ(after.st_ino, before.st_ino) << "the log file was replaced";
+}

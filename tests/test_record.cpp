@@ -604,6 +604,9 @@ TEST(Replay, VolumeChecksumSeesOneVoxel) {
   const std::uint32_t before = isotouch::app::volume_crc32(v);
   v.voxels[1000] = std::nextafter(v.voxels[1000], 1e30f);
   EXPECT_NE(isotouch::app::volume_crc32(v), before);
+  auto w = isotouch::engine::make_sphere({16, 16, 16}, 1e-3, 5);
+  w.grid.spacing_m.z *= 1.5;  // the same voxels, resampled
+  EXPECT_NE(isotouch::app::volume_crc32(w), before);
 }
 
 TEST(Replay, AChangedSceneIsRefused) {

@@ -1108,7 +1108,10 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       const double a = std::acos(c) * 180.0 / M_PI;
       dir2 += a * a;
       ++dir_pairs;
-      m.force_dir_step_max_deg = std::max(m.force_dir_step_max_deg, a);
+      if (a > m.force_dir_step_max_deg) {
+        m.force_dir_step_max_deg = a;
+        m.force_dir_step_max_t_s = r.t_s;
+      }
     }
     if (edits && r.version > 1) {  // the surface moved: the unedited volume's figures do not apply
       ++m.edits.contact_ticks_after_edit;
@@ -1257,6 +1260,8 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                   {"max_release_step_t_s", m.max_release_step_t_s},
                   {"max_any_step_n", m.max_any_step_n},
                   {"max_any_step_t_s", m.max_any_step_t_s},
+                  {"max_direction_step_deg", m.force_dir_step_max_deg},
+                  {"max_direction_step_t_s", m.force_dir_step_max_t_s},
                   {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
                   {"saturated_ticks", m.saturated_ticks},
                   {"fault_ticks", m.fault_ticks}};
@@ -1337,8 +1342,9 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
-     << "| force direction step | RMS " << fmt(m.force_dir_step_rms_deg, 3) << " deg, max " << fmt(m.force_dir_step_max_deg, 3)
-     << " deg between consecutive contact ticks |\n"
+     << "| largest force direction step | " << fmt(m.force_dir_step_max_deg, 3) << " deg at t = "
+     << fmt(m.force_dir_step_max_t_s, 5) << " s (RMS " << fmt(m.force_dir_step_rms_deg, 3)
+     << " deg; angle between the forces of consecutive contact ticks) |\n"
      << (m.has_unfiltered && raw_found > 0
              ? "| distance from the unfiltered data's surface | RMS " + fmt(m.unfiltered_err_rms_m * 1e3, 4) + " mm, max " +
                    fmt(m.unfiltered_err_max_m * 1e3, 4) + " mm (how far the filters moved the felt surface) |\n"

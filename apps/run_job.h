@@ -142,6 +142,7 @@ struct RunMetrics {
   /// Angle [deg] between the force directions of two consecutive contact ticks, RMS and max:
   /// how rough the rendered surface feels (noise in the data shows here).
   double force_dir_step_rms_deg = 0, force_dir_step_max_deg = 0;
+  double force_dir_step_max_t_s = 0;  ///< time of the largest direction step [s]
   /// With filters in the pass list: distance [m] of the VHIP from the isosurface of the
   /// unfiltered data (gradient only), RMS and max over the contact ticks with a surface
   /// found: what smoothing moves the felt surface away from the data. has_unfiltered false

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "sampling.h"
 
@@ -38,6 +39,9 @@ void HriRenderer::reset() {
   edit_tick_ = false;
   edit_slewing_ = false;
   prev_force_ = {};
+  tool_plane_count_ = 0;
+  prev_target_f_ = {};
+  ramp_from_dir_ = {};
 }
 
 Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback) const {
@@ -107,14 +111,14 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
 }
 
 bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm,
-                               Vec3& p) const {
+                               Vec3& p, const Vec3* along) const {
   // Along the outward normal at x, no farther than twice the first-order depth
   // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
   // 8 voxels; 16 bisection steps.
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
-  const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
+  const Vec3 n0 = along ? *along : outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
   if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
   double lo = 0.0, hi = reach;
@@ -176,7 +180,13 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     // rounding, not Figure 5b.
     // On an edit tick, material added deeper than that reach: march out (march_out).
     Vec3 p;
-    const bool found = surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
+    // Robust, with a plane held: first along the held normal, the way the contact point
+    // came in (on a noisy scan the gradient at an embedded point can point sideways, and
+    // the surface found along it lies on another sheet: a plane turned by up to 106 deg in
+    // one update on the head CT).
+    const bool held = params_.variant == Variant::kRobust && plane_.valid;
+    const bool found = (held && surface_from(field, vhip_, e0, gn0, p, &plane_.n)) ||
+                       surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
     return plane_at(field, found ? p : vhip_, hip);
   }
   if (edit_tick_ && !(e0 > 0.0) && e1 > 0.0) {
@@ -283,24 +293,8 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
   const double mag = ramps ? norm(force) : 0.0;
   if (ramps && robust) {
-    // Every step of the spring-damper target that a plane creation or update causes is
-    // spread over recovery_time_s: the offset between what was sent and the new target
-    // fades out linearly (an update that does not move the target lets a ramp go on).
-    // The ramp runs on accumulated time (ramp_dt_s_: this tick's period, clamped), so
-    // neither lost ticks nor one jittery period change its length.
-    if (params_.recovery_time_s > 0 && (out.plane_update || after_fault_) && !edit_tick_ &&
-        std::abs(mag - prev_target_n_) > 0.01 * params_.force_limit_n) {
-      ramp_left_s_ = params_.recovery_time_s;
-      recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
-    }
     prev_target_n_ = mag;
-    if (ramp_left_s_ > 0) {
-      ramp_left_s_ -= ramp_dt_s_;
-      if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
-      const double m = std::max(0.0, mag + recovery_from_n_ * (ramp_left_s_ / params_.recovery_time_s));
-      if (mag > 0) force = force * (m / mag);
-      else if (m > 0) force = plane_.n * m;
-    }
+    force = ramp_force(force, out.plane_update, plane_.n);
   } else if (ramps) {
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
       recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
@@ -317,6 +311,35 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   out.contact = true;
   out.penetration_m = norm(hip - vhip_);
   return force;
+}
+
+Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir) {
+  // Every step of the spring-damper force that a plane creation or update causes (or the
+  // first contact tick after a fault) is spread over recovery_time_s: |F| goes linearly
+  // from the magnitude sent the tick before to the new target (the offset fades out,
+  // never below zero), and the direction turns from the one sent the tick before to the
+  // new one over the same time (normalized linear blend of the two unit vectors), so a
+  // plane that turns turns the force over the ramp too (a magnitude-only ramp sent the
+  // new direction at once: 106 deg in one tick on the head CT). An update that does not
+  // move the target lets a ramp go on. The ramp runs on accumulated time (ramp_dt_s_:
+  // this tick's period, clamped), so neither lost ticks nor one jittery period change its
+  // length.
+  const double mag = norm(force);
+  if (params_.recovery_time_s > 0 && (plane_update || after_fault_) && !edit_tick_ &&
+      norm(force - prev_target_f_) > 0.01 * params_.force_limit_n) {
+    ramp_left_s_ = params_.recovery_time_s;
+    recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
+    ramp_from_dir_ = prev_force_mag_ > 0 ? prev_force_ / prev_force_mag_ : Vec3{};
+  }
+  prev_target_f_ = force;
+  if (!(ramp_left_s_ > 0)) return force;
+  ramp_left_s_ -= ramp_dt_s_;
+  if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
+  const double s = ramp_left_s_ / params_.recovery_time_s;
+  const double m = std::max(0.0, mag + recovery_from_n_ * s);
+  const Vec3 to = mag > 0 ? force / mag : fallback_dir;
+  const bool turn = dot(ramp_from_dir_, ramp_from_dir_) > 0;
+  return normalized_or(turn ? to * (1.0 - s) + ramp_from_dir_ * s : to, to) * m;
 }
 
 void HriRenderer::restart_at(const Vec3& hip) {
@@ -337,6 +360,9 @@ void HriRenderer::restart_at(const Vec3& hip) {
   vhip_value_known_ = false;
   edit_slewing_ = false;
   prev_force_ = {};
+  tool_plane_count_ = 0;
+  prev_target_f_ = {};
+  ramp_from_dir_ = {};
 }
 
 bool HriRenderer::note_version(std::uint64_t version) {
@@ -366,6 +392,209 @@ double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
   force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
   if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
   return norm(force);
+}
+
+// ---- Spherical tool ----
+
+Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
+  // min |x - hip| subject to n_i . (x - p_i) >= r: the optimum is the projection of the HIP
+  // onto the intersection of some active subset (KKT: x = hip + sum l_j n_j, l_j >= 0);
+  // every subset's projection that is feasible is a candidate, the nearest wins.
+  const double r = params_.tool_radius_m;
+  const int m = tool_plane_count_;
+  const ToolPlane* pl = tool_planes_;
+  const double tol = 1e-9;
+  auto feasible = [&](const Vec3& x) {
+    for (int i = 0; i < m; ++i)
+      if (dot(pl[i].n, x - pl[i].p) < r - tol) return false;
+    return true;
+  };
+  if (feasible(hip)) return hip;
+  Vec3 best = hip;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int mask = 1; mask < (1 << m); ++mask) {
+    int idx[3];
+    int k = 0;
+    for (int i = 0; i < m; ++i)
+      if (mask & (1 << i)) idx[k++] = i;
+    double b[3], l[3] = {0, 0, 0};
+    for (int i = 0; i < k; ++i) b[i] = r - dot(pl[idx[i]].n, hip - pl[idx[i]].p);
+    auto g = [&](int i, int j) { return dot(pl[idx[i]].n, pl[idx[j]].n); };
+    if (k == 1) {
+      l[0] = b[0];
+    } else if (k == 2) {
+      const double a = g(0, 0), c = g(0, 1), d = g(1, 1);
+      const double det = a * d - c * c;
+      if (!(std::abs(det) > 1e-9)) continue;
+      l[0] = (b[0] * d - c * b[1]) / det;
+      l[1] = (a * b[1] - c * b[0]) / det;
+    } else {
+      const double a00 = g(0, 0), a01 = g(0, 1), a02 = g(0, 2), a11 = g(1, 1), a12 = g(1, 2), a22 = g(2, 2);
+      const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+      const double det = a00 * c00 + a01 * c01 + a02 * c02;
+      if (!(std::abs(det) > 1e-9)) continue;
+      const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+      l[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det;
+      l[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) / det;
+      l[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det;
+    }
+    bool ok = true;
+    Vec3 x = hip;
+    for (int i = 0; i < k; ++i) {
+      if (!(l[i] >= -tol)) ok = false;
+      x = x + pl[idx[i]].n * l[i];
+    }
+    if (!ok || !feasible(x)) continue;
+    const Vec3 dx = x - hip;
+    const double d2 = dot(dx, dx);
+    if (d2 < best_d2) {
+      best_d2 = d2;
+      best = x;
+    }
+  }
+  if (std::isfinite(best_d2)) return best;
+  // No feasible subset (planes that no sphere of radius r fits between): project onto
+  // the violated planes in turn, a few rounds.
+  Vec3 x = hip;
+  for (int round = 0; round < 8; ++round)
+    for (int i = 0; i < m; ++i) {
+      const double v = r - dot(pl[i].n, x - pl[i].p);
+      if (v > 0) x = x + pl[i].n * v;
+    }
+  return x;
+}
+
+bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q,
+                                  Vec3& n) const {
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const Isosurface iso{params_.tau, params_.inside};
+  // Newton steps along the gradient: x <- x + N e / |grad| (e the excess, N outward).
+  Vec3 y = x;
+  bool converged = false;
+  for (int k = 0; k < 8; ++k) {
+    const FieldValue s = sample_trilinear(field, y);
+    const double e = excess(s.value);
+    const Vec3 go = iso.outward(s.gradient);
+    const double gn = norm(go);
+    if (!std::isfinite(s.value) || !(gn > 0) || !std::isfinite(gn)) break;
+    const double step = e / gn;
+    y = y + go * (step / gn);
+    const Vec3 moved = y - x;
+    if (dot(moved, moved) > reach * reach) return false;
+    if (std::abs(step) < 1e-3 * voxel) {
+      converged = true;
+      break;
+    }
+  }
+  if (!converged) {
+    // March along the normal at x (inward when x is outside, outward when inside),
+    // half-voxel steps within reach, then 20 bisection steps.
+    const bool in = excess(sample_value(field, x)) > 0.0;
+    const Vec3 n0 = outward_normal(field, x, Vec3{0.0, 0.0, 1.0});
+    const Vec3 dir = in ? n0 : n0 * -1.0;
+    const double h = 0.5 * voxel;
+    const int steps = std::max(1, int(std::ceil(reach / h)));
+    double lo = 0.0;
+    bool found = false;
+    for (int i = 1; i <= steps && !found; ++i) {
+      const double t = std::min(reach, h * i);
+      const bool inside = excess(sample_value(field, x + dir * t)) > 0.0;
+      if (inside != in) {
+        double hi = t;
+        for (int k = 0; k < 20; ++k) {
+          const double mid = 0.5 * (lo + hi);
+          ((excess(sample_value(field, x + dir * mid)) > 0.0) == in ? lo : hi) = mid;
+        }
+        y = x + dir * (in ? hi : lo);  // the outside end of the bracket
+        found = true;
+      }
+      lo = t;
+    }
+    if (!found) return false;
+  }
+  q = y;
+  n = outward_normal(field, q, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
+  return finite(q) && finite(n);
+}
+
+void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
+  // From the proxy of the tick before: the nearest surface point gives the first plane;
+  // while the proxy moved toward the HIP under the planes held is still closer than r to
+  // the surface, the point nearest it gives the next one (a groove, a corner).
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double tol = 1e-3 * voxel;
+  tool_plane_count_ = 0;
+  Vec3 x = vhip_;
+  for (int it = 0; it < 3; ++it) {
+    Vec3 q, n;
+    if (!nearest_surface(field, x, r + voxel, q, n)) break;
+    if (it > 0 && dot(n, x - q) >= r - tol) break;  // the proxy is clear of the surface
+    bool same = false;
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, n) > 0.9999 && std::abs(dot(tool_planes_[j].n, q - tool_planes_[j].p)) < tol)
+        same = true;
+    if (same) break;
+    tool_planes_[tool_plane_count_++] = {n, q};
+    x = tool_solve(hip);
+  }
+}
+
+Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out) {
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  bool update = edited && (tool_plane_count_ > 0 || was_contact_);
+  if (tool_plane_count_ > 0 && !update) {
+    bool held = false;  // does any plane hold the HIP?
+    for (int i = 0; i < tool_plane_count_; ++i)
+      if (dot(tool_planes_[i].n, hip - tool_planes_[i].p) < r) held = true;
+    if (!held) {
+      tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
+    } else {
+      const Vec3 slide = tool_solve(hip) - anchor_;
+      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.25 * voxel * voxel) update = true;
+    }
+  }
+  if (tool_plane_count_ == 0 && !update) {
+    // Free motion: one value + gradient read at the HIP. Search only when a surface may
+    // be within reach (first-order distance), or the HIP entered the object.
+    const FieldValue s = sample_trilinear(field, hip);
+    const double e = excess(s.value);
+    const double gn = norm(s.gradient);
+    if (e > 0.0) update = !(excess(sample_value(field, vhip_)) > 0.0);  // starting inside: no force
+    else update = gn > 0 && -e < (r + voxel) * gn;
+  }
+  if (update) {
+    tool_rebuild(field, hip);
+    c_ = 0;
+    anchor_ = tool_solve(hip);
+    out.plane_update = true;
+  }
+  if (tool_plane_count_ > 0) {
+    out.plane.n = tool_planes_[0].n;
+    out.plane.p = tool_planes_[0].p;
+    out.plane.valid = true;
+  }
+  const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+  vhip_ = x;
+  const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
+  const double depth = norm(push);
+  if (!(depth > 0.0)) {
+    prev_target_f_ = {};
+    ramp_from_dir_ = {};
+    ramp_left_s_ = 0;
+    return {};
+  }
+  const Vec3 u = push / depth;
+  Vec3 force = u * (params_.stiffness_n_per_m * depth - params_.damping_n_s_per_m * dot(v_filt_, u));
+  if (dot(force, u) < 0.0) force = {};  // a wall pushes, never pulls
+  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u);
+  out.contact = true;
+  out.penetration_m = norm(hip - x);
+  return force;
 }
 
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
@@ -422,6 +651,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     sliding_ = false;
     recovery_ticks_left_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
   }
   if (!std::isfinite(norm(force))) {
     force = {};
@@ -462,6 +692,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     out.plane = plane_;
     prev_force_mag_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
@@ -502,6 +733,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
+  if (params_.tool_radius_m > 0.0) {
+    const Vec3 force = tool_tick(field, hip, edited, out);
+    return finish_robust(hip, force, edited, false, 0.0, out);
+  }
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
@@ -617,7 +852,13 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
   }
+  return finish_robust(hip, force, edited, have_f_hip, f_hip, out);
+}
+
+HriTick HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
+                                   HriTick& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates
   if (!std::isfinite(mag)) {
@@ -642,7 +883,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   vhip_value_ = f_hip;
   out.force_n = force;
   out.vhip_m = vhip_;
-  out.plane = plane_;
+  if (!(params_.tool_radius_m > 0.0)) out.plane = plane_;
   return out;
 }
 

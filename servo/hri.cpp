@@ -469,25 +469,27 @@ bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double 
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const Isosurface iso{params_.tau, params_.inside};
-  // Newton steps along the gradient: x <- x + N e / |grad| (e the excess, N outward).
-  Vec3 y = x;
-  bool converged = false;
-  for (int k = 0; k < 8; ++k) {
-    const FieldValue s = sample_trilinear(field, y);
-    const double e = excess(s.value);
-    const Vec3 go = iso.outward(s.gradient);
-    const double gn = norm(go);
-    if (!std::isfinite(s.value) || !(gn > 0) || !std::isfinite(gn)) break;
-    const double step = e / gn;
-    y = y + go * (step / gn);
-    const Vec3 moved = y - x;
-    if (dot(moved, moved) > reach * reach) return false;
-    if (std::abs(step) < 1e-3 * voxel) {
-      converged = true;
-      break;
+  // Newton steps along the gradient from `from`: y <- y + N e / |grad| (e the excess, N
+  // outward), each at most one voxel long, at most `steps` reads; true when on the surface.
+  auto newton = [&](Vec3 from, int steps, Vec3& y) {
+    y = from;
+    for (int k = 0; k < steps; ++k) {
+      const FieldValue s = sample_trilinear(field, y);
+      const double e = excess(s.value);
+      const Vec3 go = iso.outward(s.gradient);
+      const double gn = norm(go);
+      if (!std::isfinite(s.value) || !(gn > 0) || !std::isfinite(gn)) return false;
+      const double step = std::clamp(e / gn, -voxel, voxel);
+      y = y + go * (step / gn);
+      const Vec3 moved = y - x;
+      if (dot(moved, moved) > reach * reach) return false;
+      if (std::abs(step) < 1e-3 * voxel) return true;
     }
-  }
-  if (!converged) {
+    return false;
+  };
+  Vec3 y;
+  bool found = newton(x, 8, y);
+  if (!found) {
     // March along the normal at x (inward when x is outside, outward when inside),
     // half-voxel steps within reach, then 20 bisection steps.
     const bool in = excess(sample_value(field, x)) > 0.0;
@@ -496,7 +498,6 @@ bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double 
     const double h = 0.5 * voxel;
     const int steps = std::max(1, int(std::ceil(reach / h)));
     double lo = 0.0;
-    bool found = false;
     for (int i = 1; i <= steps && !found; ++i) {
       const double t = std::min(reach, h * i);
       const bool inside = excess(sample_value(field, x + dir * t)) > 0.0;
@@ -513,32 +514,71 @@ bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double 
     }
     if (!found) return false;
   }
+  n = outward_normal(field, y, normalized_or(x - y, Vec3{0.0, 0.0, 1.0}));
+  // A gradient path ends near, not at, the nearest point of a curved surface: twice, slide
+  // to the foot of x on the tangent plane and come back to the surface (Newton again).
+  for (int round = 0; round < 2; ++round) {
+    const Vec3 off = x - y;
+    const Vec3 tangential = off - n * dot(n, off);
+    if (!(dot(tangential, tangential) > 1e-6 * voxel * voxel)) break;
+    Vec3 y2;
+    if (!newton(y + tangential, 4, y2)) break;
+    y = y2;
+    n = outward_normal(field, y, n);
+  }
   q = y;
-  n = outward_normal(field, q, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
   return finite(q) && finite(n);
 }
 
 void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
-  // From the proxy of the tick before: the nearest surface point gives the first plane;
-  // while the proxy moved toward the HIP under the planes held is still closer than r to
-  // the surface, the point nearest it gives the next one (a groove, a corner).
+  // 1. The surface point nearest the proxy of the tick before gives the first plane.
+  // 2. A held plane that proxy still touches (within a quarter voxel) and that faces
+  //    another way than every new plane (more than 15 deg) is another wall of a groove or
+  //    a corner: it stays (else the proxy, moved toward the HIP under the new plane alone,
+  //    could cross into it).
+  // 3. While the proxy moved toward the HIP under the planes so far is still closer than r
+  //    to the surface, the point nearest it gives the next plane. At most three.
   const double r = params_.tool_radius_m;
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double tol = 1e-3 * voxel;
+  const double reach = 1.8 * r + voxel;
+  ToolPlane held[3];
+  const int held_count = tool_plane_count_;
+  std::copy(tool_planes_, tool_planes_ + held_count, held);
   tool_plane_count_ = 0;
-  Vec3 x = vhip_;
-  for (int it = 0; it < 3; ++it) {
-    Vec3 q, n;
-    if (!nearest_surface(field, x, r + voxel, q, n)) break;
-    if (it > 0 && dot(n, x - q) >= r - tol) break;  // the proxy is clear of the surface
-    bool same = false;
+  auto add = [&](const Vec3& n, const Vec3& q) {
     for (int j = 0; j < tool_plane_count_; ++j)
       if (dot(tool_planes_[j].n, n) > 0.9999 && std::abs(dot(tool_planes_[j].n, q - tool_planes_[j].p)) < tol)
-        same = true;
-    if (same) break;
+        return false;  // the same plane
     tool_planes_[tool_plane_count_++] = {n, q};
-    x = tool_solve(hip);
+    return true;
+  };
+  Vec3 q, n;
+  if (nearest_surface(field, vhip_, reach, q, n)) add(n, q);
+  const double cos15 = 0.9659;
+  for (int i = 0; i < held_count && tool_plane_count_ < 3; ++i) {
+    if (!(dot(held[i].n, vhip_ - held[i].p) < r + 0.25 * voxel)) continue;
+    bool other = true;
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, held[i].n) > cos15) other = false;
+    if (other) add(held[i].n, held[i].p);
+  }
+  while (tool_plane_count_ > 0 && tool_plane_count_ < 3) {
+    const Vec3 x = tool_solve(hip);
+    bool added = false;
+    if (nearest_surface(field, x, reach, q, n) && dot(n, x - q) < r - tol) added = add(n, q);
+    if (!added) {
+      // A gradient path from x can end on a farther sheet (a crease, a thin wall): also
+      // from the point of the sphere that leads toward the HIP, if it is inside.
+      const Vec3 to_hip = hip - x;
+      const double l = norm(to_hip);
+      const Vec3 lead = l > 0 ? x + to_hip * (r / l) : x;
+      if (l > 0 && excess(sample_value(field, lead)) > 0.0 && nearest_surface(field, lead, reach, q, n) &&
+          dot(n, x - q) < r - tol)
+        added = add(n, q);
+    }
+    if (!added) break;  // the proxy is clear of the surface
   }
 }
 
@@ -555,7 +595,10 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
     } else {
       const Vec3 slide = tool_solve(hip) - anchor_;
-      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.25 * voxel * voxel) update = true;
+      // Early when the proxy slid a fifth of a voxel: a tangent plane held over a curved
+      // (or, between voxels, wavy trilinear) surface lets the sphere sink by about
+      // slide^2 * curvature / 2.
+      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.04 * voxel * voxel) update = true;
     }
   }
   if (tool_plane_count_ == 0 && !update) {
@@ -568,7 +611,16 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     else update = gn > 0 && -e < (r + voxel) * gn;
   }
   if (update) {
+    ToolPlane kept[3];
+    const int kept_count = tool_plane_count_;
+    std::copy(tool_planes_, tool_planes_ + kept_count, kept);
     tool_rebuild(field, hip);
+    if (tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
+      // God-object: no surface found near the proxy (a noisy scan, an edit) while the HIP
+      // is inside: the planes of the tick before still hold it.
+      std::copy(kept, kept + kept_count, tool_planes_);
+      tool_plane_count_ = kept_count;
+    }
     c_ = 0;
     anchor_ = tool_solve(hip);
     out.plane_update = true;

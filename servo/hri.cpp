@@ -532,10 +532,10 @@ bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double 
 
 void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   // 1. The surface point nearest the proxy of the tick before gives the first plane.
-  // 2. A held plane that proxy still touches (within a quarter voxel) and that faces
-  //    another way than every new plane (more than 15 deg) is another wall of a groove or
-  //    a corner: it stays (else the proxy, moved toward the HIP under the new plane alone,
-  //    could cross into it).
+  // 2. A held plane that proxy still touches (within a quarter voxel), that faces another
+  //    way than every new plane (more than 15 deg) and whose wall is still there (inside a
+  //    quarter voxel behind its point) is another wall of a groove or a corner: it stays
+  //    (else the proxy, moved toward the HIP under the new plane alone, could cross into it).
   // 3. While the proxy moved toward the HIP under the planes so far is still closer than r
   //    to the surface, the point nearest it gives the next plane. At most three.
   const double r = params_.tool_radius_m;
@@ -554,11 +554,19 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
     tool_planes_[tool_plane_count_++] = {n, q};
     return true;
   };
+  // A point farther than r + 1 voxel from where it was searched is not the wall in
+  // contact (a gradient path through a drilled cavity can end anywhere within reach).
+  auto near = [&](const Vec3& from, const Vec3& q) {
+    const Vec3 d = q - from;
+    return dot(d, d) <= (r + voxel) * (r + voxel);
+  };
   Vec3 q, n;
-  if (nearest_surface(field, vhip_, reach, q, n)) add(n, q);
+  if (nearest_surface(field, vhip_, reach, q, n) && near(vhip_, q)) add(n, q);
   const double cos15 = 0.9659;
   for (int i = 0; i < held_count && tool_plane_count_ < 3; ++i) {
     if (!(dot(held[i].n, vhip_ - held[i].p) < r + 0.25 * voxel)) continue;
+    // ... and only where the wall is still there (an edit may have removed it).
+    if (!(excess(sample_value(field, held[i].p - held[i].n * (0.25 * voxel))) > 0.0)) continue;
     bool other = true;
     for (int j = 0; j < tool_plane_count_; ++j)
       if (dot(tool_planes_[j].n, held[i].n) > cos15) other = false;
@@ -567,7 +575,7 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   while (tool_plane_count_ > 0 && tool_plane_count_ < 3) {
     const Vec3 x = tool_solve(hip);
     bool added = false;
-    if (nearest_surface(field, x, reach, q, n) && dot(n, x - q) < r - tol) added = add(n, q);
+    if (nearest_surface(field, x, reach, q, n) && near(x, q) && dot(n, x - q) < r - tol) added = add(n, q);
     if (!added) {
       // A gradient path from x can end on a farther sheet (a crease, a thin wall): also
       // from the point of the sphere that leads toward the HIP, if it is inside.
@@ -575,7 +583,7 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
       const double l = norm(to_hip);
       const Vec3 lead = l > 0 ? x + to_hip * (r / l) : x;
       if (l > 0 && excess(sample_value(field, lead)) > 0.0 && nearest_surface(field, lead, reach, q, n) &&
-          dot(n, x - q) < r - tol)
+          near(x, q) && dot(n, x - q) < r - tol)
         added = add(n, q);
     }
     if (!added) break;  // the proxy is clear of the surface
@@ -608,7 +616,9 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     const double e = excess(s.value);
     const double gn = norm(s.gradient);
     if (e > 0.0) update = !(excess(sample_value(field, vhip_)) > 0.0);  // starting inside: no force
-    else update = gn > 0 && -e < (r + voxel) * gn;
+    // Where the field is flat (|e| / |grad| beyond 8 voxels: a drilled cavity, uniform
+    // empty value) the first-order distance says nothing: search.
+    else update = !(gn > 0) ? std::isfinite(s.value) : (-e < (r + voxel) * gn || -e > 8.0 * voxel * gn);
   }
   if (update) {
     ToolPlane kept[3];
@@ -616,10 +626,19 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     std::copy(tool_planes_, tool_planes_ + kept_count, kept);
     tool_rebuild(field, hip);
     if (tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
-      // God-object: no surface found near the proxy (a noisy scan, an edit) while the HIP
-      // is inside: the planes of the tick before still hold it.
-      std::copy(kept, kept + kept_count, tool_planes_);
-      tool_plane_count_ = kept_count;
+      // No surface within reach of the proxy while the HIP is inside: material removed
+      // around the tool (a drill), or a noisy scan. The proxy goes toward the HIP up to the
+      // surface on the way (first crossing of the segment; the plane there, the centre r
+      // before it); failing that, the planes of the tick before still hold the HIP.
+      Vec3 q;
+      if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, q)) {
+        const Vec3 n = outward_normal(field, q, normalized_or(vhip_ - hip, kept[0].n));
+        tool_planes_[0] = {n, q};
+        tool_plane_count_ = 1;
+      } else {
+        std::copy(kept, kept + kept_count, tool_planes_);
+        tool_plane_count_ = kept_count;
+      }
     }
     c_ = 0;
     anchor_ = tool_solve(hip);

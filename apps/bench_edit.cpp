@@ -1,5 +1,6 @@
 // bench_edit.cpp - `isotouch bench edit` (issue 9, item 7). See bench_edit.h.
 #include "bench_cmd.h"
+#include "vdb_io.h"
 #include "bench_edit.h"
 
 #include <algorithm>
@@ -355,7 +356,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   const Scene scene = load_scene(o.scene.empty() ? default_scene() : o.scene);
   if (scene.volume_path.empty()) throw std::runtime_error(scene.file + ": bench edit needs a scene with a volume file");
   progress << "[bench edit] loading " << scene.volume_path << "\n" << std::flush;
-  engine::Volume vol = engine::load_volume(scene.volume_path);
+  engine::Volume vol = load_any_volume(scene.volume_path);
   const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
   if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
     throw std::runtime_error(scene.file + ": field 'isovalue': " + num(scene.hri.tau) +

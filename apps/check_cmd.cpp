@@ -1,5 +1,6 @@
 // check_cmd.cpp - `isotouch check --all` (issue 8, item 6). See check_cmd.h.
 #include "check_cmd.h"
+#include "vdb_io.h"
 
 #include <algorithm>
 #include <cmath>
@@ -84,13 +85,13 @@ std::string sci(double v) {
 engine::Volume load(const CheckAllOptions& opt, std::optional<double>& tau, std::string& where) {
   if (opt.scene_path.empty()) {
     where = opt.volume_path;
-    return engine::load_volume(opt.volume_path);
+    return load_any_volume(opt.volume_path);
   }
   const Scene scene = load_scene(opt.scene_path);
   tau = scene.hri.tau;
   if (!scene.volume_path.empty()) {
     where = scene.volume_path + " (scene " + opt.scene_path + ")";
-    return engine::load_volume(scene.volume_path);
+    return load_any_volume(scene.volume_path);
   }
   where = "synthetic " + scene.synthetic.kind + " (scene " + opt.scene_path + ")";
   if (scene.synthetic.kind == "sphere")

@@ -1,9 +1,11 @@
 // export_cmd.cpp - `isotouch export` (issue 9, item 4); see export_cmd.h.
 #include "export_cmd.h"
+#include "volume_write.h"
 
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <sstream>
 #include <iostream>
 #include <memory>
 
@@ -77,16 +79,43 @@ void print_mesh(const MeshStats& s, std::ostream& out) {
         << " edges in 3 or more (of " << s.edges << ")\n";
 }
 
+/// "(N bytes, S s)" for a regular file; a device, FIFO or "-" has no size to report.
+std::string written_text(const std::string& path, double seconds) {
+  std::error_code ec;
+  const bool regular = path != "-" && std::filesystem::is_regular_file(path, ec);
+  std::ostringstream s;
+  if (regular) s << "(" << std::filesystem::file_size(path, ec) << " bytes, " << seconds << " s)";
+  else s << "(written as a stream, " << seconds << " s)";
+  return s.str();
+}
+
 }  // namespace
 
-int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
+int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& err) {
+  // An output to standard output ("-") takes stdout for its bytes: the figures go to stderr.
+  const int to_stdout =
+      int(o.vdb == "-") + int(o.stl == "-") + int(o.obj == "-") + int(o.ply == "-") + int(o.volume_out == "-");
+  if (to_stdout > 1) {
+    err << "isotouch export: only one output can be '-' (standard output)\n";
+    return 2;
+  }
+  std::ostream& out = to_stdout ? err : out_stream;
   if (o.volume.empty() == o.scene.empty()) {
     err << "isotouch export: give a VOLUME file or --scene SCENE, one of them (see --help)\n";
     return 2;
   }
   const bool mesh_wanted = !o.stl.empty() || !o.obj.empty() || !o.ply.empty();
-  if (!mesh_wanted && o.vdb.empty()) {
-    err << "isotouch export: nothing to write: give --vdb, --stl, --obj and/or --ply\n";
+  if (!mesh_wanted && o.vdb.empty() && o.volume_out.empty()) {
+    err << "isotouch export: nothing to write: give --vdb, --volume, --stl, --obj and/or --ply\n";
+    return 2;
+  }
+  if (!o.volume_out.empty() && o.volume_out != "-" && !engine::itk_writable(o.volume_out)) {
+    err << "isotouch export: --volume " << o.volume_out
+        << ": the name must end in .mha (MetaImage), .nrrd (NRRD), .nii or .nii.gz (NIfTI)"
+        << (o.volume_out.size() > 4 && o.volume_out.substr(o.volume_out.size() - 4) == ".mhd"
+                ? " (.mhd writes a second .raw file that cannot be replaced atomically: use .mha)"
+                : "")
+        << "\n";
     return 2;
   }
   if (!o.inside.empty() && o.inside != "above" && o.inside != "below") {
@@ -124,8 +153,13 @@ int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << o.vdb << "\n";
     save_vdb(v, o.vdb, SaveVdbOptions{.grid_name = "volume", .iso = iso, .source_path = v.path});
-    out << "wrote       " << o.vdb << " (" << std::filesystem::file_size(o.vdb) << " bytes, " << seconds_since(t)
-        << " s)\n";
+    out << "wrote       " << o.vdb << " " << written_text(o.vdb, seconds_since(t)) << "\n";
+  }
+  if (!o.volume_out.empty()) {
+    const auto t = std::chrono::steady_clock::now();
+    err << "export: writing " << o.volume_out << "\n";
+    engine::save_volume_itk(v, o.volume_out);
+    out << "wrote       " << o.volume_out << " " << written_text(o.volume_out, seconds_since(t)) << "\n";
   }
   if (!mesh_wanted) return 0;
 
@@ -147,8 +181,7 @@ int run_export(const ExportOptions& o, std::ostream& out, std::ostream& err) {
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << *path << "\n";
     write(mesh, *path);
-    out << "wrote       " << *path << " (" << std::filesystem::file_size(*path) << " bytes, " << seconds_since(t)
-        << " s)\n";
+    out << "wrote       " << *path << " " << written_text(*path, seconds_since(t)) << "\n";
   }
   if (!st.closed()) {
     err << "isotouch export: the mesh is not closed (see above); written anyway\n";
@@ -164,11 +197,13 @@ Subcommand add_export_command(CLI::App& cli) {
       "export", "Write a volume as OpenVDB .vdb and its isosurface as a closed mesh (binary STL, OBJ, PLY)");
   s.app->footer(
       "Usage: isotouch export (VOLUME | --scene SCENE) [--iso TAU --inside above|below]\n"
-      "                  [--vdb OUT.vdb] [--stl OUT.stl] [--obj OUT.obj] [--ply OUT.ply] [--adaptivity A]\n"
+      "                  [--vdb OUT.vdb] [--volume OUT.nrrd|.mha|.nii|.nii.gz] [--stl OUT.stl] [--obj OUT.obj]\n"
+      "                  [--ply OUT.ply] [--adaptivity A]\n"
       "VOLUME: .mhd/.mha, .nrrd/.nhdr, .nii/.nii.gz or .vdb (a FloatGrid; a level set means tau 0, inside below).\n"
       "The .vdb keeps every voxel exactly (transform = grid frame [m], direction + isosurface as metadata).\n"
       "Meshes (OpenVDB volumeToMesh) are in the physical frame [m], triangles counter-clockwise seen from\n"
-      "outside. Every file is written whole or not at all (temp file, fsync, rename).\n"
+      "outside. Every file is written whole or not at all (temp file, fsync, rename); a device, FIFO or '-'\n"
+      "(standard output, the figures then go to stderr) is written as a stream; a folder is refused.\n"
       "Exit: 0 done, 1 error (names the file), 2 bad usage, 3 mesh written but not closed.\n"
       "Example: isotouch export data/ct-head-headsq/headsq_64x64x93_int16.mhd --iso 1150 --inside above "
       "--vdb head.vdb --stl head.stl");
@@ -178,6 +213,9 @@ Subcommand add_export_command(CLI::App& cli) {
   s.app->add_option("--iso", o->iso, "Isovalue tau (value units); overrides the scene's or the .vdb's");
   s.app->add_option("--inside", o->inside, "Which side of tau is the object: above (CT density) or below (signed distance)");
   s.app->add_option("--vdb", o->vdb, "Write the volume as OpenVDB .vdb (FloatGrid 'volume')");
+  s.app->add_option("--volume", o->volume_out,
+                    "Write the volume for 3D Slicer and other tools: .mha (MetaImage), .nrrd, .nii or .nii.gz "
+                    "(ITK; float voxels, spacing, origin and direction kept)");
   s.app->add_option("--stl", o->stl, "Write the isosurface as binary STL (3D printing)");
   s.app->add_option("--obj", o->obj, "Write the isosurface as Wavefront OBJ (with vertex normals)");
   s.app->add_option("--ply", o->ply, "Write the isosurface as binary little-endian PLY (with vertex normals)");

@@ -16,6 +16,7 @@ struct ExportOptions {
   std::optional<double> iso;          ///< --iso: isovalue (value units), overrides scene / .vdb
   std::string inside;                 ///< --inside: "above" / "below" ("" = from scene / .vdb)
   std::string vdb, stl, obj, ply;     ///< outputs ("" = not written)
+  std::string volume_out;             ///< --volume: .mha / .nrrd / .nii / .nii.gz through ITK ("" = not written)
   double adaptivity = 0;              ///< volumeToMesh adaptivity in [0, 1]
 };
 

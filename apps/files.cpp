@@ -1,5 +1,7 @@
 #include "files.h"
 
+#include "output_file.h"
+
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,27 +20,11 @@ namespace isotouch::app {
 std::string temp_name(const std::string& path) { return path + ".tmp-" + std::to_string(::getpid()); }
 
 void write_file_atomic(const std::string& path, const std::string& content) {
-  namespace fs = std::filesystem;
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
   std::error_code ec;
-  const fs::path parent = fs::path(path).parent_path();
-  if (!parent.empty()) fs::create_directories(parent, ec);
-  if (ec) throw std::runtime_error(path + ": cannot create folder: " + ec.message());
-  const std::string tmp = temp_name(path);
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) throw std::runtime_error(tmp + ": cannot open for writing: " + std::strerror(errno));
-    out.write(content.data(), std::streamsize(content.size()));
-    out.flush();
-    if (!out) {
-      std::remove(tmp.c_str());
-      throw std::runtime_error(tmp + ": write failed: " + std::strerror(errno));
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot rename into place: " + why);
-  }
+  if (!parent.empty() && path != "-") std::filesystem::create_directories(parent, ec);
+  if (ec) throw io::OutputError(path + ": cannot create the folder '" + parent.string() + "': " + ec.message());
+  io::write_output(path, content);
 }
 
 int run_program(const std::string& program, const std::string& arg) {
@@ -98,15 +84,20 @@ std::string draw_with_gnuplot(const std::string& script_path, const std::string&
   write_file_atomic(run_path, to_run);
   const int rc = run_program("gnuplot", run_path);
   std::remove(run_path.c_str());
-  bool renamed = true;
+  std::string placed;
   for (const std::string& png : pngs) {
-    std::error_code ec;
-    if (rc == 0) std::filesystem::rename(temp_name(png), png, ec);
-    else std::remove(temp_name(png).c_str());
-    if (ec) renamed = false;
+    if (rc != 0) {
+      std::remove(temp_name(png).c_str());
+      continue;
+    }
+    try {
+      io::place_output(temp_name(png), png);
+    } catch (const std::exception& e) {
+      if (placed.empty()) placed = e.what();
+    }
   }
-  if (rc == 0 && renamed) return "";
-  if (rc == 0) return "gnuplot did not write every plot; plots not drawn";
+  if (rc == 0 && placed.empty()) return "";
+  if (rc == 0) return "gnuplot's plots not placed: " + placed;
   return rc < 0 ? "gnuplot not found (Debian: gnuplot-nox); plots not drawn"
                 : "gnuplot failed (exit " + std::to_string(rc) + "); plots not drawn";
 }

@@ -5,8 +5,10 @@
 
 namespace isotouch::app {
 
-/// Write `content` to `path` via `path.tmp-PID` and rename(2). Creates parent folders.
-/// @throws std::runtime_error naming the path and the OS error.
+/// Write `content` to `path` through the one output writer (io::write_output: a regular
+/// file is replaced atomically, a device, FIFO or "-" written as a stream, a directory
+/// refused). Creates parent folders. @throws io::OutputError (a std::runtime_error) naming
+/// the path and the OS error.
 void write_file_atomic(const std::string& path, const std::string& content);
 
 /// Run a program (PATH lookup) with arguments, wait for it; returns its exit status,

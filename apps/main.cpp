@@ -12,8 +12,11 @@
 #include <vector>
 
 #include "cpu_gradient.h"
+#include "vdb_io.h"
 #include "gradient_pass.h"
 #include "run_job.h"
+#include "stop_signal.h"
+#include "cli_checks.h"
 #include "scene.h"
 #include "stability_cmd.h"
 #include "bench_cmd.h"
@@ -119,7 +122,15 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
                 << " kg, hand " << scene.device.hand_stiffness_n_per_m << " N/m and "
                 << scene.device.hand_damping_n_s_per_m << " N s/m)\n";
   }
-  const app::RunMetrics m = app::run_scene(scene, opt, std::cout);
+  app::install_stop_handlers();  // SIGINT/SIGTERM: stop at the next safe point, folder marked
+  app::RunMetrics m;
+  try {
+    m = app::run_scene(scene, opt, std::cout);
+  } catch (const app::Interrupted& e) {
+    std::cerr << "\nisotouch run: " << e.what() << "; " << (fs::path(out_dir) / "summary.json").string()
+              << " says \"status\": \"interrupted\" and lists the files that were finished\n";
+    return 128 + e.signal;
+  }
   const auto& hp = scene.hri;
   const double limit = hp.force_limit_n;
   std::cout << std::setprecision(4)
@@ -186,7 +197,7 @@ GradientHealth gradient_health(const engine::Volume& vol, const servo::SampleFie
 }
 
 int cmd_check(const std::string& path, const std::string& device, double slab_mib) {
-  const engine::Volume vol = engine::load_volume(path);
+  const engine::Volume vol = app::load_any_volume(path);
   engine::ContextOptions co;
   co.device = device;
   auto ctx = engine::VulkanContext::create(co);
@@ -366,7 +377,7 @@ int main(int argc, char** argv) {
       "servo-rt", "Real-time servo thread at 1, 4 and 10 kHz while the engine thread publishes: p50/p99/p99.9 "
                   "of the period error and missed deadlines");
   app::ServoRtOptions rt_opt;
-  rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(CLI::PositiveNumber);
+  rt->add_option("--seconds", rt_opt.seconds, "Seconds per rate")->capture_default_str()->check(app::positive_number());
   rt->add_flag("--fifo,!--no-fifo", rt_opt.sched_fifo,
                "SCHED_FIFO for the servo thread (default on; needs CAP_SYS_NICE, refused -> a note)");
   rt->add_flag("--pin,!--no-pin", rt_opt.pin_cpu,
@@ -379,7 +390,7 @@ int main(int argc, char** argv) {
                 "and Blezek-Robb on sphere, knot, head and lung, next to the paper's figures");
   app::Table1Options t1_opt;
   t1->add_option("--repetitions", t1_opt.repetitions, "Timed replays per stroke (median)")
-      ->capture_default_str()->check(CLI::PositiveNumber);
+      ->capture_default_str()->check(app::positive_number());
   t1->add_option("--csv", t1_opt.out_csv, "Also write the table to this CSV file");
   // Command modules that keep their options to themselves (apps/subcommand.h).
   const std::vector<app::Subcommand> modules = {app::add_render_command(cli), app::add_export_command(cli),

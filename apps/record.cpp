@@ -2,10 +2,13 @@
 // bit for bit with every problem named (file, line, record, field, value). See record.h.
 #include "record.h"
 
+#include "output_file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -14,6 +17,7 @@
 #include <sstream>
 
 #include <nlohmann/json.hpp>
+#include <zlib.h>
 
 namespace isotouch::app {
 namespace {
@@ -74,6 +78,9 @@ void check_tick(const RecordedTick& t, std::size_t k, const std::string& name) {
   if (!finite3(t.force_n))
     throw RecordingError(at + "force' must be finite, got " + num(t.force_n.x) + " " + num(t.force_n.y) + " " +
                          num(t.force_n.z));
+  if (!finite3(t.vhip_m))
+    throw RecordingError(at + "vhip' must be finite, got " + num(t.vhip_m.x) + " " + num(t.vhip_m.y) + " " +
+                         num(t.vhip_m.z));
 }
 
 void check_edit(const EditEvent& e, std::size_t i, long prev_tick, std::size_t ticks, const std::string& name) {
@@ -243,13 +250,21 @@ json parse_line(const std::string& line, const std::string& name, std::size_t n)
 }
 
 void parse_header(const json& h, Recording& r, const Where& w) {
-  only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz"}, "", w);
   const std::string format = text(h, "format", w);
   if (format != kRecordingFormat)
     throw RecordingError(w.at("format") + ": \"" + format.substr(0, 60) + "\" is not \"" + kRecordingFormat + "\"");
   const long v = integer(h, "format_version", w);
-  if (v != 1) throw RecordingError(w.at("format_version") + ": " + std::to_string(v) + " is not supported (this isotouch reads 1)");
+  if (v != 1 && v != 2)
+    throw RecordingError(w.at("format_version") + ": " + std::to_string(v) + " is not supported (this isotouch reads 1 and 2)");
   r.format_version = int(v);
+  if (v == 1) only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz"}, "", w);
+  else only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32"}, "", w);
+  if (v == 2) {
+    const long crc = integer(h, "volume_crc32", w);
+    if (crc < 0 || crc > long(UINT32_MAX))
+      throw RecordingError(w.at("volume_crc32") + ": must be in [0, 4294967295], got " + std::to_string(crc));
+    r.volume_crc32 = std::uint32_t(crc);
+  }
   r.scene_path = text(h, "scene_path", w);
   r.scene_text = text(h, "scene_text", w);
   r.rate_hz = member_number(h, "rate_hz", w);
@@ -257,7 +272,8 @@ void parse_header(const json& h, Recording& r, const Where& w) {
 }
 
 void parse_tick(const json& j, Recording& r, const Where& w) {
-  only_keys(j, {"k", "t", "hip", "button", "force"}, "", w);
+  if (r.format_version == 1) only_keys(j, {"k", "t", "hip", "button", "force"}, "", w);
+  else only_keys(j, {"k", "t", "hip", "button", "force", "vhip", "version", "fault"}, "", w);
   const long k = integer(j, "k", w);
   if (k != long(r.ticks.size()))
     throw RecordingError(w.at("k") + ": expected tick " + std::to_string(r.ticks.size()) + ", got " + std::to_string(k));
@@ -268,6 +284,16 @@ void parse_tick(const json& j, Recording& r, const Where& w) {
   t.hip_m = vec3(j, "hip", w);
   t.button = boolean(j, "button", w);
   t.force_n = vec3(j, "force", w);
+  if (r.format_version >= 2) {
+    t.vhip_m = vec3(j, "vhip", w);
+    const long version = integer(j, "version", w);
+    if (version < 1) throw RecordingError(w.at("version") + ": must be >= 1 (a published snapshot), got " + std::to_string(version));
+    t.version = std::uint64_t(version);
+    if (j.contains("fault")) {
+      t.fault = boolean(j, "fault", w);
+      if (!t.fault) throw RecordingError(w.at("fault") + ": written only when true, got false");
+    }
+  }
   r.ticks.push_back(t);
 }
 
@@ -305,51 +331,23 @@ void parse_end(const json& j, const Recording& r, const Where& w) {
 
 std::string os_error(const std::string& path, const char* what) { return path + ": " + what + ": " + std::strerror(errno); }
 
-/// Writes `content` to a temp file beside `path`, fsyncs it, renames it over `path` and
-/// fsyncs the folder: a crash leaves the old file or the new one.
+/// Writes `content` through the one output writer (io/output_file.h): a crash leaves the
+/// old file or the new one; a device, FIFO or "-" gets the text as a stream.
 void write_atomically(const std::string& path, const std::string& content) {
-  namespace fs = std::filesystem;
-  const fs::path p(path);
-  const std::string dir = p.parent_path().empty() ? std::string(".") : p.parent_path().string();
-  std::string tmp = path + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX";
-  const int fd = ::mkstemp(tmp.data());
-  if (fd < 0) throw RecordingError(os_error(path, "cannot create a temp file beside it"));
-  auto fail = [&](const char* what) {
-    const std::string msg = os_error(tmp, what);
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw RecordingError(path + ": not saved (the old file, if any, is untouched): " + msg);
-  };
-  for (std::size_t done = 0; done < content.size();) {
-    const ssize_t n = ::write(fd, content.data() + done, content.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) fail("write failed");
-    done += std::size_t(n);
-  }
-  if (::fchmod(fd, 0644) != 0) fail("chmod failed");
-  if (::fsync(fd) != 0) fail("fsync failed");
-  if (::close(fd) != 0) {
-    const std::string msg = os_error(tmp, "close failed");
-    ::unlink(tmp.c_str());
-    throw RecordingError(path + ": not saved: " + msg);
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string msg = os_error(path, "cannot rename the temp file into place");
-    ::unlink(tmp.c_str());
-    throw RecordingError(msg);
-  }
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (dfd >= 0) {  // the rename's durability; the file is whole either way
-    (void)::fsync(dfd);
-    ::close(dfd);
+  try {
+    io::write_output(path, content);
+  } catch (const io::OutputError& e) {
+    throw RecordingError(path + ": not saved (the old file, if any, is untouched): " + e.what());
   }
 }
 
 }  // namespace
 
 std::string recording_text(const Recording& r, const std::string& name) {
-  if (r.format_version != 1)
-    throw RecordingError(name + ": field 'format_version': " + std::to_string(r.format_version) + " cannot be written (1)");
+  if (r.format_version != 1 && r.format_version != 2)
+    throw RecordingError(name + ": field 'format_version': " + std::to_string(r.format_version) + " cannot be written (1 or 2)");
+  if (r.format_version == 2 && !r.volume_crc32)
+    throw RecordingError(name + ": field 'volume_crc32': format 2 needs the volume's checksum");
   if (!(r.rate_hz > 0) || !std::isfinite(r.rate_hz))
     throw RecordingError(name + ": field 'rate_hz': must be finite and > 0, got " + num(r.rate_hz));
   for (std::size_t k = 0; k < r.ticks.size(); ++k) {
@@ -370,15 +368,25 @@ std::string recording_text(const Recording& r, const std::string& name) {
     out += j.dump(-1, ' ', false, ojson::error_handler_t::replace);
     out += '\n';
   };
-  line(ojson{{"format", kRecordingFormat},
-            {"format_version", r.format_version},
-            {"scene_path", r.scene_path},
-            {"scene_text", r.scene_text},
-            {"rate_hz", r.rate_hz}});
+  ojson header{{"format", kRecordingFormat},
+               {"format_version", r.format_version},
+               {"scene_path", r.scene_path},
+               {"scene_text", r.scene_text},
+               {"rate_hz", r.rate_hz}};
+  if (r.format_version >= 2) header["volume_crc32"] = *r.volume_crc32;
+  line(header);
   std::size_t e = 0;
   for (std::size_t k = 0; k < r.ticks.size(); ++k) {
     const RecordedTick& t = r.ticks[k];
-    line(ojson{{"k", k}, {"t", t.t_s}, {"hip", vec_json(t.hip_m)}, {"button", t.button}, {"force", vec_json(t.force_n)}});
+    ojson tick{{"k", k}, {"t", t.t_s}, {"hip", vec_json(t.hip_m)}, {"button", t.button}, {"force", vec_json(t.force_n)}};
+    if (r.format_version >= 2) {
+      if (t.version < 1)
+        throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'version': must be >= 1, got 0");
+      tick["vhip"] = vec_json(t.vhip_m);
+      tick["version"] = t.version;
+      if (t.fault) tick["fault"] = true;
+    }
+    line(tick);
     for (; e < r.edits.size() && r.edits[e].tick == long(k); ++e) {
       const EditEvent& ev = r.edits[e];
       line(ojson{{"edit", to_string(ev.kind)}, {"tick", ev.tick}, {"t", ev.t_s}, {"brush", brush_json(ev.brush)}});
@@ -420,6 +428,23 @@ Recording parse_recording(const std::string& content, const std::string& name) {
     throw RecordingError(name + ": truncated after line " + std::to_string(n) + " (" + std::to_string(r.ticks.size()) +
                          " ticks, " + std::to_string(r.edits.size()) + " edits read): no end record");
   return r;
+}
+
+std::uint32_t volume_crc32(const engine::Volume& v) {
+  uLong crc = ::crc32(0L, Z_NULL, 0);
+  for (const int d : v.grid.dims) {
+    const std::int32_t d32 = d;
+    crc = ::crc32(crc, reinterpret_cast<const Bytef*>(&d32), sizeof d32);
+  }
+  const auto* bytes = reinterpret_cast<const Bytef*>(v.voxels.data());
+  std::size_t left = v.voxels.size() * sizeof(float);
+  while (left > 0) {  // crc32 takes a uInt length
+    const uInt n = uInt(std::min<std::size_t>(left, 1u << 30));
+    crc = ::crc32(crc, bytes, n);
+    bytes += n;
+    left -= n;
+  }
+  return std::uint32_t(crc);
 }
 
 void save_recording(const std::string& path, const Recording& r) {

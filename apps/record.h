@@ -1,11 +1,11 @@
 // record.h - recordings of a run: every device input, button and edit with its time, and
 // the forces sent (issue 9, item 5). `isotouch run --record FILE` writes one;
 // `isotouch replay FILE` plays it back through the same renderer and edit pipeline and
-// checks that the forces are reproduced exactly (the simulation is deterministic).
-// OWNER: record-replay helper. The lead wrote this contract; the owner may add members but
-// keeps these names and meanings.
+// checks that the forces, VHIPs and snapshot versions are reproduced exactly (the simulation
+// is deterministic).
 #pragma once
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -27,20 +27,33 @@ struct RecordedTick {
   core::Vec3 hip_m;       ///< HIP the renderer was given, world [m] (device reading mapped)
   bool button = false;    ///< the device's button
   core::Vec3 force_n;     ///< force sent to the device [N] (checked on replay)
+  /// Format 2: the VHIP after the tick, world [m], and the SampleField::version of the
+  /// snapshot the tick read (both checked on replay; version 0 = not recorded, format 1).
+  core::Vec3 vhip_m;
+  std::uint64_t version = 0;
+  /// Format 2: the tick was a fault (non-finite or implausible HIP, or a non-finite force:
+  /// zero force sent); written only when true, checked on replay.
+  bool fault = false;
 };
 
 struct Recording {
-  int format_version = 1;
+  int format_version = 2;  ///< 2 is written; 1 (no VHIP, version or volume checksum) is still read
   std::string scene_path;  ///< the scene file, absolute
   std::string scene_text;  ///< the scene file's bytes at record time (replay refuses a changed file)
   double rate_hz = 0;      ///< servo rate [Hz]
+  /// Format 2: volume_crc32() of the volume the run loaded (replay refuses another volume).
+  std::optional<std::uint32_t> volume_crc32;
   std::vector<RecordedTick> ticks;  ///< one per tick, tick k at index k
   std::vector<EditEvent> edits;     ///< in the order applied (EditEvent::tick ascending)
 };
 
-/// THE FILE (format_version 1): JSON lines (nlohmann-json), one record per line, in order:
-///   {"format":"isotouch-recording","format_version":1,"scene_path":S,"scene_text":S,"rate_hz":D}
-///   {"k":0,"t":D,"hip":[D,D,D],"button":B,"force":[D,D,D]}          one per tick, k = 0, 1, ...
+/// THE FILE (format_version 2): JSON lines (nlohmann-json), one record per line, in order:
+///   {"format":"isotouch-recording","format_version":2,"scene_path":S,"scene_text":S,"rate_hz":D,
+///    "volume_crc32":U}
+///   {"k":0,"t":D,"hip":[D,D,D],"button":B,"force":[D,D,D],"vhip":[D,D,D],"version":U}
+///                                                    one per tick, k = 0, 1, ...; a fault
+///                                                    tick also has "fault":true
+///   (format_version 1, still read: no volume_crc32, no vhip, no version)
 ///   {"edit":"brush","tick":K,"t":D,"brush":{...}}   after tick K's line (K ascending): the
 ///        edits applied after tick K's render; "brush" holds every engine::Brush field
 ///        (kind, centre_m [m, grid-world], radius_m, strength, falloff, targets {material,
@@ -51,6 +64,9 @@ struct Recording {
 /// (subnormals and -0.0 included); the brush's float targets are checked to be floats.
 /// Every number must be finite (times, HIP, forces, brush fields); t strictly ascending.
 inline constexpr const char* kRecordingFormat = "isotouch-recording";
+
+/// CRC-32 (zlib) of a volume's dims and voxel bytes: what replay checks the volume by.
+std::uint32_t volume_crc32(const engine::Volume& volume);
 
 /// The file's text for `r` (what save_recording writes). @throws RecordingError naming
 /// `name`, the tick or edit and the field when `r` cannot be written faithfully (a

@@ -1,4 +1,5 @@
 #include "render_cmd.h"
+#include "vdb_io.h"
 #include "stats.h"
 #include "bench_cmd.h"
 
@@ -17,7 +18,9 @@
 #include <iostream>
 #include <sstream>
 
+#include "cli_checks.h"
 #include "files.h"
+#include "output_file.h"
 #include "run_job.h"
 #include "shapes.h"
 #include "synthetic.h"
@@ -67,28 +70,27 @@ void write_png(const std::string& path, int width, int height, const std::vector
   std::vector<unsigned char> rgb(rgba.size() * 3);
   for (std::size_t i = 0; i < rgba.size(); ++i)
     for (int c = 0; c < 3; ++c) rgb[3 * i + std::size_t(c)] = static_cast<unsigned char>((rgba[i] >> (8 * c)) & 0xffu);
-  const fs::path p(path);
-  if (p.has_parent_path()) fs::create_directories(p.parent_path());
-  const std::string tmp = temp_name(path);
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw std::runtime_error(path + ": cannot write (" + tmp + "): " + std::strerror(errno));
-  const std::string err = png_write_rows(f, width, height, rgb.data());
-  const bool closed = std::fclose(f) == 0;
-  if (!err.empty() || !closed) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": " + (err.empty() ? std::string("close failed: ") + std::strerror(errno) : err));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": rename from " + tmp + " failed: " + why);
+  const fs::path parent = fs::path(path).parent_path();
+  std::error_code ec;
+  if (!parent.empty() && path != "-") fs::create_directories(parent, ec);
+  try {
+    io::write_output(path, [&](const std::string& file) {
+      std::FILE* f = std::fopen(file.c_str(), "wb");
+      if (!f) throw std::runtime_error(path + ": cannot write (" + file + "): " + std::strerror(errno));
+      const std::string err = png_write_rows(f, width, height, rgb.data());
+      const bool closed = std::fclose(f) == 0;
+      if (!err.empty() || !closed)
+        throw std::runtime_error(path + ": " + (err.empty() ? std::string("close failed: ") + std::strerror(errno) : err));
+    });
+  } catch (const io::OutputError& e) {
+    throw std::runtime_error(e.what());
   }
 }
 
 // ---- volumes, fields, pictures ---------------------------------------------------------
 
 engine::Volume load_scene_volume(const Scene& scene) {
-  if (!scene.volume_path.empty()) return engine::load_volume(scene.volume_path);
+  if (!scene.volume_path.empty()) return load_any_volume(scene.volume_path);
   if (scene.synthetic.kind == "sphere")
     return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
   return std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
@@ -433,6 +435,17 @@ int cmd_render(const RenderCli& o, const std::string& device) {
     if (!c) throw std::runtime_error("Vulkan: " + c.error);
     vk = std::move(*c.value);
   }
+  if (vk) {  // the image is one storage buffer of 4 B per pixel: the device's binding limit bounds it
+    const std::uint64_t limit = vk->max_binding_bytes(), need = 4ull * std::uint64_t(req.width) * std::uint64_t(req.height);
+    if (need > limit) {
+      const auto side = std::uint64_t(std::sqrt(double(limit / 4)));
+      throw std::runtime_error("--width " + std::to_string(req.width) + " x --height " + std::to_string(req.height) + " = " +
+                               std::to_string(need / 4) + " pixels need " + std::to_string(need >> 20) +
+                               " MiB per image buffer; the Vulkan device " + std::string(vk->properties().deviceName) + " binds at most " +
+                               std::to_string(limit >> 20) + " MiB: at most " + std::to_string(limit / 4) +
+                               " pixels (e.g. " + std::to_string(side) + " x " + std::to_string(side) + "), or --cpu");
+    }
+  }
   const std::string out = o.out.empty() ? scene.name + ".png" : o.out;
   const engine::RaycastImage img = render_picture(vk.get(), field, vol.direction, req, out);
   std::size_t hits = 0;
@@ -463,8 +476,8 @@ Subcommand add_render_command(CLI::App& cli) {
       "Example: isotouch render scenes/head.json --out head.png --azimuth -90 --time 1.2");
   s.app->add_option("scene", o->scene, "Scene file (default scenes/head.json)");
   s.app->add_option("--out", o->out, "PNG file to write (default <scene name>.png)");
-  s.app->add_option("--width", o->width, "Image width [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
-  s.app->add_option("--height", o->height, "Image height [pixels]")->capture_default_str()->check(CLI::Range(1, 8192));
+  s.app->add_option("--width", o->width, "Image width [pixels]; width x height at most the device's storage-binding limit / 4 B (lavapipe: 128 MiB, 33554432 pixels)")->capture_default_str()->check(CLI::Range(1, 8192));
+  s.app->add_option("--height", o->height, "Image height [pixels]; see --width")->capture_default_str()->check(CLI::Range(1, 8192));
   s.app->add_option("--azimuth", o->cam.azimuth_deg, "Camera azimuth about physical +z [deg]")
       ->capture_default_str()
       ->check(CLI::Range(-3600.0, 3600.0));  // also refuses nan / inf
@@ -473,15 +486,15 @@ Subcommand add_render_command(CLI::App& cli) {
       ->check(CLI::Range(-89.9, 89.9));
   s.app->add_option("--zoom", o->cam.zoom, "Zoom: 1 fits the whole volume, 2 is twice as close")
       ->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(positive_number());
   s.app->add_option("--distance", o->cam.distance_m, "Eye to volume centre [m] before zoom (0: fit the volume)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_number());
   s.app->add_option("--fov", o->cam.fov_y_deg, "Vertical field of view [deg]")->capture_default_str()->check(CLI::Range(1.0, 120.0));
   s.app->add_option("--up", o->up, "Physical axis shown up: x, -x, y, -y, z, -z (default z; -z for the headsq CT, "
                     "which is stored upside down)");
   s.app->add_option("--front", o->front, "Physical axis the eye is on at azimuth 0 (default -y: anterior)");
-  s.app->add_option("--time", o->time_s, "Draw the probe at this time of the scene's run [s]")->check(CLI::NonNegativeNumber);
+  s.app->add_option("--time", o->time_s, "Draw the probe at this time of the scene's run [s]")->check(non_negative_number());
   s.app->add_option("--trace", o->trace, "With --time: the run's trace.csv (default: run the scene now)")
       ->check(CLI::ExistingFile);
   s.app->add_option("--clip", o->clip_axis,

@@ -86,6 +86,10 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
   if (std::bit_cast<std::uint64_t>(setup.hri.rate_hz) != std::bit_cast<std::uint64_t>(rec.rate_hz))
     throw ReplayInputError(name + ": recorded at " + num(rec.rate_hz) + " Hz, the scene's servo runs at " +
                            num(setup.hri.rate_hz) + " Hz");
+  if (rec.volume_crc32 && *rec.volume_crc32 != volume_crc32(setup.volume))
+    throw ReplayInputError(name + ": the volume " + setup.volume.path + " changed since it was recorded (CRC-32 of its voxels " +
+                           std::to_string(volume_crc32(setup.volume)) + " now, " + std::to_string(*rec.volume_crc32) +
+                           " recorded): a replay would not be of the same run");
   if (!rec.edits.empty() && !setup.session)
     throw ReplayInputError(name + ": the recording has " + std::to_string(rec.edits.size()) +
                            " edits but the scene " + rec.scene_path + " has no \"edits\" section");
@@ -109,16 +113,29 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
     const servo::SampleField* field = buf.acquire();
     const servo::HriTick out = renderer.tick(*field, t.hip_m);  // nominal period, as run_headless
     const double df = servo::norm(out.force_n - t.force_n);
-    const bool same = same_bits(out.force_n, t.force_n);
+    const bool same_force = same_bits(out.force_n, t.force_n);
+    const bool checked = rec.format_version >= 2;  // format 1 recorded the force only
+    const bool same_vhip = !checked || same_bits(out.vhip_m, t.vhip_m);
+    const bool same_version = !checked || field->version == t.version;
+    const bool same_fault = !checked || out.fault == t.fault;
+    const bool same = same_force && same_vhip && same_version && same_fault;
     if (!same) {
       if (r.first_diff_tick < 0) {
         r.first_diff_tick = k;
         r.first_diff_t_s = t.t_s;
         r.first_recorded_n = t.force_n;
         r.first_replayed_n = out.force_n;
+        r.first_recorded_vhip_m = t.vhip_m;
+        r.first_replayed_vhip_m = out.vhip_m;
+        r.first_recorded_version = t.version;
+        r.first_replayed_version = field->version;
+        for (const auto& [differs, what] : {std::pair{!same_force, "force"}, std::pair{!same_vhip, "VHIP"},
+                                            std::pair{!same_version, "snapshot version"},
+                                            std::pair{!same_fault, out.fault ? "fault (the replayed HIP is a fault)" : "fault"}})
+          if (differs) r.first_diff_what += (r.first_diff_what.empty() ? "" : ", ") + std::string(what);
       }
       ++r.differing_ticks;
-      r.max_df_n = std::max(r.max_df_n, std::isnan(df) ? INFINITY : df);
+      if (!same_force) r.max_df_n = std::max(r.max_df_n, std::isnan(df) ? INFINITY : df);
     }
     const std::uint64_t version = field->version;
     const long before = r.edits;
@@ -143,9 +160,10 @@ Subcommand add_replay_command(CLI::App& cli) {
   auto a = std::make_shared<Args>();
   auto* sub = cli.add_subcommand(
       "replay",
-      "Play a recording (run --record) back through the same renderer and edits and check every force bit for bit.\n"
-      "Exit 0: identical; 1: forces differ (the first differing tick is printed); 2: bad input (unreadable\n"
-      "recording, the scene file changed); 3: the pipeline could not run.");
+      "Play a recording (run --record) back through the same renderer and edits and check every force, VHIP\n"
+      "and snapshot version bit for bit (format 1 recordings: forces only).\n"
+      "Exit 0: identical; 1: something differs (the first differing tick is printed); 2: bad input (unreadable\n"
+      "recording, the scene file or the volume changed); 3: the pipeline could not run.");
   sub->add_option("file", a->file, "Recording file (isotouch run SCENE --record FILE)")->required();
   sub->add_option("--out", a->out, "Also write the replay's trace.csv (recorded and replayed forces) into DIR");
   sub->add_flag("--quiet", a->quiet, "No progress lines");
@@ -158,8 +176,10 @@ Subcommand add_replay_command(CLI::App& cli) {
             opt.recording_dir = fs::path(a->file).parent_path().string();
             if (opt.recording_dir.empty()) opt.recording_dir = ".";
             ReplayResult r;
+            int rec_format = 0;
             try {
               const Recording rec = load_recording(a->file);
+              rec_format = rec.format_version;
               std::cout << "isotouch replay: " << a->file << ": " << rec.ticks.size() << " ticks, " << rec.edits.size()
                         << " edits at " << rec.rate_hz << " Hz, scene " << rec.scene_path << "\n";
               std::ostringstream setup_log;
@@ -181,13 +201,20 @@ Subcommand add_replay_command(CLI::App& cli) {
                       << " snapshots published); max |dF| " << std::setprecision(6) << r.max_df_n << " N\n";
             if (!a->out.empty()) std::cout << "trace    " << (fs::path(a->out) / "trace.csv").string() << "\n";
             if (r.identical()) {
-              std::cout << "IDENTICAL: every force equals the recorded one bit for bit\n";
+              std::cout << "IDENTICAL: every force" << (rec_format >= 2 ? ", VHIP and snapshot version" : "")
+                        << " equals the recorded one bit for bit"
+                        << (rec_format >= 2 ? "" : " (format 1 recording: forces only)") << "\n";
               return 0;
             }
             std::cout << std::setprecision(17) << "DIFFERENT: " << r.differing_ticks << " of " << r.ticks
                       << " ticks differ; first at tick " << r.first_diff_tick << " (t = " << r.first_diff_t_s
-                      << " s): recorded " << vec(r.first_recorded_n) << " N, replayed " << vec(r.first_replayed_n)
-                      << " N\n";
+                      << " s) in the " << r.first_diff_what << ": force recorded " << vec(r.first_recorded_n)
+                      << " N, replayed " << vec(r.first_replayed_n) << " N";
+            if (rec_format >= 2)
+              std::cout << "; VHIP recorded " << vec(r.first_recorded_vhip_m) << " m, replayed "
+                        << vec(r.first_replayed_vhip_m) << " m; snapshot version recorded " << r.first_recorded_version
+                        << ", replayed " << r.first_replayed_version;
+            std::cout << "\n";
             return 1;
           }};
 }

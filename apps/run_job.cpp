@@ -1,5 +1,12 @@
 #include "run_job.h"
 
+#include <csignal>
+
+#include "drill_figure.h"
+#include "volume_write.h"
+#include "run_folder.h"
+#include "stop_signal.h"
+
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
@@ -503,11 +510,19 @@ class EditDriver {
       }
     }
     std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
+    const double end_s = setup.script.duration_s;
+    for (std::size_t i = 0; i < e.timeline.size(); ++i)
+      if (e.timeline[i].t_s > end_s) {
+        ++figures.timeline_after_end;
+        note("edits.timeline[" + std::to_string(i) + "] (" + e.timeline[i].kind + " at t = " + fmt(e.timeline[i].t_s, 4) +
+             " s) is after the script's end (" + fmt(end_s, 4) + " s): never applied");
+      }
   }
 
   /// The TickHook.
   void operator()(long k, servo::TraceRow& row) {
     const double t = double(k) / scene_.hri.rate_hz;
+    contact_seen_ = contact_seen_ || row.contact;
     // What tick k read (before this tick's edits): the release check's inside test.
     hip_inside.push_back(iso_.contains(core::FieldView(*setup_.session->current()).value(row.hip_m)) ? 1 : 0);
     for (; next_ < plan_.size() && plan_[next_].tick <= k; ++next_) {
@@ -519,6 +534,11 @@ class EditDriver {
         case Plan::kBegin: open(k, t, "timeline"); break;
         case Plan::kEnd: close(k, t, "timeline"); break;
         case Plan::kApply: {
+          if (te.at_vhip && !contact_seen_ && !row.contact) {
+            if (figures.vhip_before_contact++ == 0)
+              note("t = " + fmt(t, 4) + " s: edits.timeline[" + std::to_string(p.entry) + "] (" + te.kind +
+                   " at \"vhip\") came before any contact: applied at the HIP in free space");
+          }
           const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
           const double f = te.brush.force_n >= 0 ? te.brush.force_n : servo::norm(row.force_n);
           apply(k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f),
@@ -600,9 +620,36 @@ class EditDriver {
     }
     if (kind == EditEvent::Kind::kUndo) ++figures.undos;
     if (kind == EditEvent::Kind::kRedo) ++figures.redos;
+    said_if_nothing(kind, b, r.outcome, t);
     if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
     r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
     rows.push_back(std::move(r));
+  }
+
+  /// One line per kind of edit that did nothing (the first time), into figures.notes.
+  void note(const std::string& s) { figures.notes.push_back(s); }
+  void said_if_nothing(EditEvent::Kind kind, const engine::Brush& b, const EditOutcome& o, double t) {
+    const bool undo = kind == EditEvent::Kind::kUndo, redo = kind == EditEvent::Kind::kRedo;
+    if ((undo || redo) && o.restored.empty()) {
+      long& n = undo ? figures.undo_nothing : figures.redo_nothing;
+      if (n++ == 0) note("t = " + fmt(t, 4) + " s: " + (undo ? "undo with nothing to undo" : "redo with nothing to redo"));
+    }
+    if (kind != EditEvent::Kind::kBrush || !o.brush.dirty.empty()) return;
+    ++figures.brushes_changing_nothing;
+    const auto& g = setup_.volume.grid;
+    const Vec3 lo = g.to_world(Vec3{-0.5, -0.5, -0.5}),
+               hi = g.to_world(Vec3{g.dims[0] - 0.5, g.dims[1] - 0.5, g.dims[2] - 0.5});
+    const Vec3& c = b.centre_m;
+    const double r = b.radius_m;
+    const bool outside = c.x + r < lo.x || c.y + r < lo.y || c.z + r < lo.z || c.x - r > hi.x || c.y - r > hi.y || c.z - r > hi.z;
+    if (outside && figures.brushes_outside++ == 0)
+      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush entirely outside the volume changed nothing");
+    else if (!outside && figures.brushes_changing_nothing - figures.brushes_outside == 1)
+      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush changed no voxel (" +
+           (b.kind == engine::BrushKind::kDrill && !(b.force_n > b.force_threshold_n)
+                ? "the force, " + fmt(b.force_n, 3) + " N, was not above the drill's threshold of " + fmt(b.force_threshold_n, 3) + " N"
+                : std::string("nothing to remove or add there")) +
+           "); " + "later ones are counted in summary.json edits.did_nothing");
   }
 
   const Scene& scene_;
@@ -614,7 +661,7 @@ class EditDriver {
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
-  bool button_ = false;
+  bool button_ = false, contact_seen_ = false;
   long press_tick_ = 0;
   int open_ = 0;
 };
@@ -766,10 +813,11 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
       << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
-      << " ms\n         removed " << fmt(e.removed_mm3, 5) << " mm^3 (" << e.inside_voxels_before - e.inside_voxels_after
-      << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
+      << " ms\n         " << (e.removed_mm3 < 0 ? "added " : "removed ") << fmt(std::abs(e.removed_mm3), 5) << " mm^3 ("
+      << std::abs(e.inside_voxels_before - e.inside_voxels_after) << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
       << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
       << " B\n";
+  for (const std::string& n : e.notes) log << "edits    note: " << n << "\n";
 
   write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
   // The edited volume and its isosurface; a failure is said, never fatal.
@@ -780,6 +828,10 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       vo.source_path = setup.volume.path;
       save_vdb(after, (fs::path(dir) / "drilled.vdb").string(), vo);
       e.vdb_file = "drilled.vdb";
+    }
+    if (scene.edits.write_nrrd) {
+      engine::save_volume_itk(after, (fs::path(dir) / "drilled.nrrd").string());
+      e.nrrd_file = "drilled.nrrd";
     }
     if (scene.edits.write_stl) {
       write_stl_binary(extract_mesh(after, setup.live.iso), (fs::path(dir) / "drilled.stl").string());
@@ -810,6 +862,11 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     } catch (const std::exception& x) {
       e.sections_note = x.what();
     }
+    const DrillSite site{setup.script.contact_point_m, setup.script.contact_normal, scene.edits.brush.radius_mm * 1e-3};
+    e.site_figure_note = draw_drill_figure(setup.vk.get(), setup.volume, after, setup.live.iso, site,
+                                           (fs::path(dir) / "drill.png").string());
+    e.site_figure_drawn = e.site_figure_note.empty();
+    if (!e.site_figure_drawn) log << "edits    drill.png not drawn: " << e.site_figure_note << "\n";
     e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
     if (scene.write_trace) {
       std::string note;
@@ -845,7 +902,15 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"history_bytes", e.history_bytes},
           {"history_limit_bytes", e.history_limit_bytes},
           {"history_dropped_strokes", e.history_dropped},
-          {"removed_mm3", e.removed_mm3},
+          {"removed_mm3", std::max(0.0, e.removed_mm3)},
+          {"added_mm3", std::max(0.0, -e.removed_mm3)},
+          {"did_nothing", {{"undo_with_nothing_to_undo", e.undo_nothing},
+                           {"redo_with_nothing_to_redo", e.redo_nothing},
+                           {"brushes_changing_no_voxel", e.brushes_changing_nothing},
+                           {"of_which_outside_the_volume", e.brushes_outside},
+                           {"vhip_brushes_before_contact", e.vhip_before_contact},
+                           {"timeline_entries_after_the_end", e.timeline_after_end},
+                           {"notes", e.notes}}},
           {"inside_voxels", {{"before", e.inside_voxels_before}, {"after", e.inside_voxels_after}}},
           {"removed_method", "(inside voxels of the raw volume before - after) x voxel volume; inside = the scene's isovalue and inside, NaN outside"},
           {"max_hip_depth_m", e.max_hip_depth_m},
@@ -853,9 +918,16 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"depth_method", "distance below the initial contact point along the inward surface normal there (the press direction)"},
           {"contact_ticks_after_edit", e.contact_ticks_after_edit},
           {"vdb", or_null(!e.vdb_file.empty(), e.vdb_file)},
+          {"nrrd", or_null(!e.nrrd_file.empty(), e.nrrd_file)},
           {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
           {"files_note", e.files_note},
-          {"pictures", e.before_after_drawn ? nlohmann::ordered_json::array({"before.png", "after.png"}) : nlohmann::ordered_json::array()},
+          {"pictures", [&e] {
+             nlohmann::ordered_json a = nlohmann::ordered_json::array();
+             if (e.site_figure_drawn) a.push_back("drill.png");
+             if (e.before_after_drawn) a.insert(a.end(), {"before.png", "after.png"});
+             if (e.sections_drawn) a.insert(a.end(), {"section_before.png", "section_after.png"});
+             return a;
+           }()},
           {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
           {"csv", "edits.csv"}};
 }
@@ -876,14 +948,27 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << "| update time | median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
      << " ms (EditSession::apply: brush, live field update, publish; wall clock, this machine); brush median "
      << fmt(e.brush_ms_median, 4) << " ms |\n"
-     << "| removed volume | **" << fmt(e.removed_mm3, 5) << " mm^3** (" << e.inside_voxels_before << " - "
-     << e.inside_voxels_after << " inside voxels, times the voxel volume) |\n"
+     << (e.removed_mm3 < 0 ? "| added volume | **" : "| removed volume | **") << fmt(std::abs(e.removed_mm3), 5)
+     << " mm^3** (" << e.inside_voxels_before << " inside voxels before, " << e.inside_voxels_after
+     << " after, times the voxel volume) |\n"
      << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
      << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
      << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | measured on the contact ticks before the first edit; " << e.contact_ticks_after_edit
      << " contact ticks read an edited snapshot and are left out |\n\n";
+  if (!e.notes.empty()) {
+    md << "Edits that did nothing:\n\n";
+    for (const std::string& n : e.notes) md << "- " << n << "\n";
+    md << "\n";
+  }
+  if (e.site_figure_drawn)
+    md << "![before (left) and after (right): the site from outside, ringed in orange (2 brush radii), zoomed "
+          "in the framed inset](drill.png)\n\nBefore (left) and after (right), seen from outside along the surface "
+          "normal at the first contact; the orange ring (radius 2 brush radii) marks the site, the framed inset shows "
+          "it up close.\n\n";
+  else if (!e.site_figure_note.empty())
+    md << "drill.png: not drawn (" << e.site_figure_note << ").\n\n";
   if (e.plot_drawn) md << "![force, depth and removed volume against time](edits.png)\n\n";
   if (e.before_after_drawn)
     md << "| before | after |\n|---|---|\n| ![before](before.png) | ![after](after.png) |\n\n";
@@ -897,6 +982,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
     md << "Pictures: not drawn (" << e.before_after_note << ").\n\n";
   md << "Files: `edits.csv` (one row per event)"
      << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
+     << (e.nrrd_file.empty() ? std::string() : ", `" + e.nrrd_file + "` (the same as NRRD, for 3D Slicer)")
      << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL)")
      << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
   return md.str();
@@ -912,8 +998,9 @@ void write_recording(const Scene& scene, const SceneSetup& setup, const std::vec
   text << in.rdbuf();
   rec.scene_text = text.str();
   rec.rate_hz = setup.hri.rate_hz;
+  rec.volume_crc32 = volume_crc32(setup.volume);
   rec.ticks.reserve(trace.size());
-  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n});
+  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n, r.vhip_m, r.version, r.fault != 0});
   if (setup.session) rec.edits = setup.session->log();
   save_recording(path, rec);
 }
@@ -958,7 +1045,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   engine::Volume& vol = s.volume;
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
-    vol = engine::load_volume(scene.volume_path);
+    vol = load_any_volume(scene.volume_path);
   } else if (scene.synthetic.kind == "sphere") {
     vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
   } else {
@@ -1034,8 +1121,11 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   return s;
 }
 
-RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+namespace {
+RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  throw_if_stop_requested("start");
   SceneSetup setup = setup_scene(scene, opt, log);
+  throw_if_stop_requested("engine set-up (samples computed, servo not started)");
   RunMetrics& m = setup.metrics;
   const engine::Volume& vol = setup.volume;
   engine::VulkanContext& vk = *setup.vk;
@@ -1061,6 +1151,7 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
   int last_quarter = -1;
   auto progress = [&](long k, long total) {
+    throw_if_stop_requested("servo simulation, tick " + std::to_string(k) + " of " + std::to_string(total));
     if (!opt.progress) return;
     const int pct = int(100 * k / total);
     if (tty) {
@@ -1105,6 +1196,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.fault_ticks += r.fault;
     const servo::TraceRow* last = prev;
     prev = &r;
+    const bool stroking = r.t_s >= script.t_stroke && r.t_s < script.t_lift;
+    m.stroke_ticks += stroking;
+    m.stroke_contact_ticks += stroking && r.contact;
+    if (r.t_s >= script.t_lift && r.contact) {
+      ++m.lift_contact_ticks;
+      m.lift_max_force_n = std::max(m.lift_max_force_n, servo::norm(r.force_n));
+    }
     if (!r.contact) continue;
     ++m.contact_ticks;
     const double f = servo::norm(r.force_n);
@@ -1195,12 +1293,13 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
       << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
       << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
 
-  // 6. Outputs, each written whole or not at all.
+  // 6. Outputs, each written whole or not at all (RunFolder has made and locked the folder).
   const std::string dir = opt.out_dir;
-  fs::create_directories(dir);
+  throw_if_stop_requested("outputs (servo finished, no file written yet)");
   if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
   if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
   else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+  throw_if_stop_requested("outputs (trace and plots written)");
   if (scene.draw_plots) {
     // The run's picture (ray-cast on the same Vulkan device); never throws.
     // With edits the path is thinned (thin_path): the same picture serves as before.png.
@@ -1211,9 +1310,12 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
   }
+  throw_if_stop_requested("outputs (trace, plots and picture written)");
   if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
+  throw_if_stop_requested("outputs (all but summary.json and report.md written)");
 
   nlohmann::ordered_json j;
+  j["status"] = "complete";
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
   j["volume"] = {{"path", m.volume_path},
                  {"dims", m.dims},
@@ -1300,7 +1402,14 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
                                                        "where the field is flat; shown for comparison only"}}}};
   j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
                  {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
-                 {"duration_s", script.duration_s}};
+                 {"duration_s", script.duration_s},
+                 {"phases_s", {{"press", script.t_press}, {"stroke", script.t_stroke}, {"lift", script.t_lift}}},
+                 {"stroke_ticks", m.stroke_ticks},
+                 {"stroke_contact_ticks", m.stroke_contact_ticks},
+                 {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
+                                                            : nlohmann::ordered_json(nullptr)},
+                 {"lift_contact_ticks", m.lift_contact_ticks},
+                 {"lift_max_force_n", m.lift_max_force_n}};
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
@@ -1350,6 +1459,11 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
      << " plane updates, " << m.saturated_ticks << " saturated, " << m.fault_ticks << " faults) |\n"
      << "| tick wall time | median " << fmt(m.tick_ns_median) << " ns, p99 " << fmt(m.tick_ns_p99)
      << " ns, max " << fmt(m.tick_ns_max) << " ns |\n"
+     << "| stroke | " << (m.stroke_ticks ? std::to_string(m.stroke_contact_ticks) + " of " + std::to_string(m.stroke_ticks) +
+                              " stroke ticks in contact (" + fmt(100.0 * double(m.stroke_contact_ticks) / double(m.stroke_ticks), 3) + " %)"
+                        : std::string("no stroke in the script")) << " |\n"
+     << "| lift-off | " << m.lift_contact_ticks << " contact ticks while the hand pulls the probe out, largest |F| "
+     << fmt(m.lift_max_force_n, 4) << " N |\n"
      << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "
@@ -1414,6 +1528,19 @@ RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& lo
   write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
   if (!opt.record_path.empty()) write_recording(scene, setup, trace, opt.record_path);
   return m;
+}
+}  // namespace
+
+RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  RunFolder folder(opt.out_dir, scene.file, scene.name);
+  try {
+    return run_scene_steps(scene, opt, log);
+  } catch (const Interrupted& e) {
+    if (folder.mark_interrupted(e.stage, e.signal))
+      log << "\ninterrupted (" << (e.signal == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << e.stage
+          << ": " << (fs::path(opt.out_dir) / "summary.json").string() << " says \"status\": \"interrupted\"\n";
+    throw;
+  }
 }
 
 }  // namespace isotouch::app

@@ -48,6 +48,13 @@ struct EditFigures {
   long brushes = 0;                ///< brush applications
   long timeline_brushes = 0, button_brushes = 0;  ///< of which from the timeline / the button
   long undos = 0, redos = 0;
+  /// Edits that did nothing, and why: undo / redo with nothing to undo or redo, brushes that
+  /// changed no voxel (of which entirely outside the volume, and "vhip" brushes before any
+  /// contact), timeline entries after the script's end (never applied). `notes` says each
+  /// kind once with its first time, for the console, summary.json and the report.
+  long undo_nothing = 0, redo_nothing = 0, brushes_changing_nothing = 0, brushes_outside = 0,
+       vhip_before_contact = 0, timeline_after_end = 0;
+  std::vector<std::string> notes;
   long publications = 0;           ///< snapshots published (samples changed)
   std::uint64_t last_version = 1;  ///< SampleField::version of the last snapshot
   long dirty_bricks = 0;           ///< sum over applications of the bricks whose voxels changed
@@ -62,19 +69,23 @@ struct EditFigures {
   /// error, which is measured against the unedited volume's dense samples.
   long contact_ticks_after_edit = 0;
   /// Inside voxels before minus after, times the voxel volume [mm^3] (the scene's isovalue
-  /// and inside, NaN counts as outside): what the edits removed (negative: added).
+  /// and inside, NaN counts as outside): what the edits removed (negative: added; the
+  /// report and summary.json say "added" then, summary.json's removed_mm3 / added_mm3 >= 0).
   double removed_mm3 = 0;
   long inside_voxels_before = 0, inside_voxels_after = 0;
   /// Depth along the press direction (-contact normal) below the initial contact point [m]:
   /// deepest HIP and VHIP of the run.
   double max_hip_depth_m = 0, max_vhip_depth_m = 0;
-  std::string vdb_file, stl_file;  ///< drilled.vdb / drilled.stl as written ("" if not)
+  std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
   bool before_after_drawn = false; ///< before.png and after.png written
   /// section_before.png / section_after.png: cut open through the press axis (a clip plane
   /// containing it, seen from the side), where a hole through a thin wall shows.
   bool sections_drawn = false;
   std::string sections_note;       ///< why they were not drawn
+  /// drill.png: before | after side by side, a ring marker at the site, a zoomed inset.
+  bool site_figure_drawn = false;
+  std::string site_figure_note;    ///< why it was not drawn
   bool plot_drawn = false;         ///< edits.png written
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };
@@ -143,6 +154,13 @@ struct RunMetrics {
   /// how rough the rendered surface feels (noise in the data shows here).
   double force_dir_step_rms_deg = 0, force_dir_step_max_deg = 0;
   double force_dir_step_max_t_s = 0;  ///< time of the largest direction step [s]
+  /// Ticks of the stroke phase (script t_stroke <= t < t_lift) and how many of them were in
+  /// contact: a stroke that stays on the surface it starts on has a share near 1.
+  long stroke_ticks = 0, stroke_contact_ticks = 0;
+  /// The lift-off (t >= script t_lift): contact ticks and the largest |F| [N] while the hand
+  /// pulls the probe back out (a clean retraction has few and small).
+  long lift_contact_ticks = 0;
+  double lift_max_force_n = 0;
   /// With filters in the pass list: distance [m] of the VHIP from the isosurface of the
   /// unfiltered data (gradient only), RMS and max over the contact ticks with a surface
   /// found: what smoothing moves the felt surface away from the data. has_unfiltered false

@@ -206,9 +206,10 @@ std::set<std::string> with(std::set<std::string> a, std::initializer_list<const 
 }
 
 // "edits": {"brush": {...}, "every_ticks": 10, "button": [[t0, t1], ...], "timeline": [...],
-//           "history_limit_mib": 256, "write_vdb": true, "write_stl": true}
+//           "history_limit_mib": 256, "write_vdb": true, "write_nrrd": true, "write_stl": true}
 void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
-  r.only(e, "edits", {"brush", "every_ticks", "button", "timeline", "history_limit_mib", "write_vdb", "write_stl"});
+  r.only(e, "edits",
+         {"brush", "every_ticks", "button", "timeline", "history_limit_mib", "write_vdb", "write_nrrd", "write_stl"});
   spec.present = true;
   if (e.contains("brush")) {
     r.only(e.at("brush"), "edits.brush", kBrushKeys);
@@ -217,6 +218,7 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
   spec.every_ticks = r.integer(e, "edits", "every_ticks", spec.every_ticks, 1, 1000000);
   spec.history_limit_mib = r.number(e, "edits", "history_limit_mib", spec.history_limit_mib, 0, 1 << 20);
   spec.write_vdb = r.boolean(e, "edits", "write_vdb", spec.write_vdb);
+  spec.write_nrrd = r.boolean(e, "edits", "write_nrrd", spec.write_nrrd);
   spec.write_stl = r.boolean(e, "edits", "write_stl", spec.write_stl);
   if (e.contains("button")) {
     const json& list = e.at("button");

@@ -84,6 +84,7 @@ struct EditsSpec {
   std::vector<TimedEdit> timeline;    ///< sorted by t_s (stable: entries at one time keep their order)
   double history_limit_mib = 256.0;   ///< undo memory limit [MiB]
   bool write_vdb = true;              ///< write the edited volume as drilled.vdb
+  bool write_nrrd = true;             ///< also as drilled.nrrd (ITK: 3D Slicer opens it)
   bool write_stl = true;              ///< write its isosurface as drilled.stl
 };
 

@@ -1,4 +1,5 @@
 #include "sweep.h"
+#include "vdb_io.h"
 
 #include <algorithm>
 #include <chrono>
@@ -87,7 +88,7 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
     s.name = sc.name;
     s.description = sc.description;
     engine::Volume v;
-    if (!sc.volume_path.empty()) v = engine::load_volume(sc.volume_path);
+    if (!sc.volume_path.empty()) v = load_any_volume(sc.volume_path);
     else if (sc.synthetic.kind == "sphere")
       v = engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox);
     else v = std::move(engine::make_synthetic_scene(sc.synthetic.kind).volume);

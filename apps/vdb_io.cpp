@@ -3,11 +3,14 @@
 // one that includes Assimp (mesh file writers). See vdb_io.h for the frames and contracts.
 #include "vdb_io.h"
 
+#include "output_file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -41,39 +44,15 @@ std::string os_error(const std::string& path, const std::string& what) {
   return path + ": " + what + ": " + std::strerror(errno);
 }
 
-void fsync_path(const std::string& path, bool directory) {
-  const int fd = ::open(path.c_str(), O_RDONLY | (directory ? O_DIRECTORY : 0) | O_CLOEXEC);
-  if (fd < 0) throw VdbError(os_error(path, "cannot open to fsync"));
-  const int rc = ::fsync(fd);
-  const int err = errno;
-  ::close(fd);
-  errno = err;
-  if (rc != 0) throw VdbError(os_error(path, "fsync failed"));
-}
 
-/// Writes `path` whole or not at all: `write(tmp)` fills a fresh temp file
-/// PATH.tmp-PID-XXXXXX (same folder, so the rename is atomic), which is then fsync'ed and
-/// renamed over `path`; the folder is fsync'ed so the rename itself is durable.
+/// Writes `path` whole or not at all through the one output writer (io/output_file.h):
+/// `write(tmp)` fills a fresh temp file, renamed over a regular file or copied into a
+/// device, FIFO or "-".
 void write_atomically(const std::string& path, const std::function<void(const std::string&)>& write) {
-  namespace fs = std::filesystem;
-  const fs::path target(path);
-  const std::string dir = target.parent_path().empty() ? "." : target.parent_path().string();
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec)) throw VdbError(path + ": cannot write: folder '" + dir + "' does not exist");
-  std::string tmpl = path + ".tmp-" + std::to_string(::getpid()) + "-XXXXXX";
-  const int fd = ::mkstemp(tmpl.data());
-  if (fd < 0) throw VdbError(os_error(path, "cannot create a temp file in '" + dir + "'"));
-  ::fchmod(fd, 0644);  // mkstemp makes 0600; outputs are ordinary readable files
-  ::close(fd);
-  const std::string tmp = tmpl;
   try {
-    write(tmp);
-    fsync_path(tmp, false);
-    if (::rename(tmp.c_str(), path.c_str()) != 0) throw VdbError(os_error(path, "cannot rename '" + tmp + "' into place"));
-    fsync_path(dir, true);
-  } catch (...) {
-    ::unlink(tmp.c_str());
-    throw;
+    io::write_output(path, write);
+  } catch (const io::OutputError& e) {
+    throw VdbError(e.what());
   }
 }
 
@@ -605,6 +584,13 @@ void write_test_vdb(const std::string& path, TestVdb kind) {
 #else
   (void)kind;
 #endif
+}
+
+engine::Volume load_any_volume(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".vdb") return load_vdb(path).volume;
+  return engine::load_volume(path);
 }
 
 }  // namespace isotouch::app

@@ -66,6 +66,12 @@ struct LoadedVdb {
 LoadedVdb load_vdb(const std::string& path, const std::string& grid_name = "",
                    std::uint64_t max_voxels = engine::kMaxVoxels);
 
+/// Any volume file isotouch reads: a .vdb (its first FloatGrid, through load_vdb) or what
+/// engine::load_volume reads (MetaImage, NRRD, NIfTI). run, render, check and export all
+/// load through this, so whatever export writes goes wherever a volume does.
+/// @throws VdbError or engine::VolumeError naming the file.
+engine::Volume load_any_volume(const std::string& path);
+
 struct SaveVdbOptions {
   std::string grid_name = "volume";          ///< name of the FloatGrid written
   std::optional<core::Isosurface> iso;       ///< saved as metadata (and sets the background)

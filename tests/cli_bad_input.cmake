@@ -92,6 +92,9 @@ expect(run_huge_spacing 1 "hugesp.mhd: field 'ElementSpacing'" run ${OUT}/hugesp
 expect(max_binding_negative 105 "--max-binding-mib: must be a number of MiB in \\(0, 1048576\\], got -1" check ${OUT}/ramp.nrrd --max-binding-mib -1)
 expect(run_help_scene_format 0 "Scene file \\(JSON.*\"isovalue\".*Example:" run --help)
 expect(device_after_subcommand 0 "PASS" check ${OUT}/ramp.nrrd --device 0)
+# Range errors give readable bounds (no 300 digits of DBL_MAX).
+expect(zoom_zero 105 "^--zoom: must be a finite number > 0, got 0\nRun with" render --zoom 0)
+expect(distance_negative 105 "--distance: must be a finite number >= 0, got -1" render --distance -1)
 
 if(failures)
   message(FATAL_ERROR "${failures}")

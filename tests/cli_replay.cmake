@@ -35,6 +35,17 @@ file(WRITE ${OUT}/moved/sphere-edits.rec "${moved}")
 file(WRITE ${OUT}/moved/sphere-edits.json "${scene}")
 expect(moved_hip 1 "DIFFERENT: [0-9]+ of 2403 ticks differ; first at tick 1000 \\(t = 1 s\\)" ${OUT}/moved/sphere-edits.rec)
 
+# 2b. A HIP of 1e300 hand-edited into a free-space tick (tick 20, the device at rest): the force
+# and the VHIP stay as recorded, the replayed tick is a fault: exit 1, found at tick 20.
+string(REGEX REPLACE "(\"k\":20,\"t\":[^,]*,\"hip\":\\[)[^,]*," "\\11e300," absurd "${rec}")
+if(absurd STREQUAL rec)
+  message(FATAL_ERROR "tick 20's HIP not found in ${REC}")
+endif()
+file(MAKE_DIRECTORY ${OUT}/absurd)
+file(WRITE ${OUT}/absurd/sphere-edits.rec "${absurd}")
+file(WRITE ${OUT}/absurd/sphere-edits.json "${scene}")
+expect(absurd_hip 1 "DIFFERENT: [0-9]+ of 2403 ticks differ; first at tick 20 \\(t = 0.02 s\\) in the fault" ${OUT}/absurd/sphere-edits.rec)
+
 # 3. The scene changed since the recording: exit 2, said.
 file(MAKE_DIRECTORY ${OUT}/changed)
 file(WRITE ${OUT}/changed/sphere-edits.rec "${rec}")

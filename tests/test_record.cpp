@@ -96,6 +96,7 @@ Recording random_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t 
   r.scene_path = "/tmp/scene \"quoted\" \\ ünïcode.json";
   r.scene_text = "{\n  \"name\": \"x\",\n\t\"a\": [1, 2]\n}\n\x01\x7f";
   r.rate_hz = 1000.0 + std::ldexp(double(rng() % 1000), -40);
+  r.volume_crc32 = std::uint32_t(rng());
   double t = awkward(rng);
   if (std::abs(t) > 1e300) t = -1e300;
   for (std::size_t k = 0; k < ticks; ++k) {
@@ -104,6 +105,9 @@ Recording random_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t 
     t = std::nextafter(t, std::numeric_limits<double>::infinity()) + (rng() % 2 ? 1e-3 : 0.0);
     tk.hip_m = awkward3(rng);
     tk.force_n = awkward3(rng);
+    tk.vhip_m = awkward3(rng);
+    tk.version = 1 + rng() % (1ull << 62);
+    tk.fault = rng() % 7 == 0;
     tk.button = rng() % 2;
     r.ticks.push_back(tk);
   }
@@ -142,11 +146,13 @@ bool identical(const Recording& a, const Recording& b, std::string& why) {
   if (a.scene_path != b.scene_path) return why = "scene_path", false;
   if (a.scene_text != b.scene_text) return why = "scene_text", false;
   if (!same_bits(a.rate_hz, b.rate_hz)) return why = "rate_hz", false;
+  if (a.volume_crc32 != b.volume_crc32) return why = "volume_crc32", false;
   if (a.ticks.size() != b.ticks.size()) return why = "tick count", false;
   if (a.edits.size() != b.edits.size()) return why = "edit count", false;
   for (std::size_t k = 0; k < a.ticks.size(); ++k) {
     const auto &x = a.ticks[k], &y = b.ticks[k];
-    if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) || x.button != y.button)
+    if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) ||
+        x.button != y.button || !same_bits(x.vhip_m, y.vhip_m) || x.version != y.version || x.fault != y.fault)
       return why = "tick " + std::to_string(k), false;
   }
   for (std::size_t i = 0; i < a.edits.size(); ++i) {
@@ -172,7 +178,9 @@ std::string small_text() {
   r.scene_path = "/abs/scene.json";
   r.scene_text = "{}";
   r.rate_hz = 1000;
-  for (int k = 0; k < 3; ++k) r.ticks.push_back({k * 1e-3, {0.01, 0.02, 0.03}, k == 1, {0, 0, 0.5 * k}});
+  r.volume_crc32 = 123456789u;
+  for (int k = 0; k < 3; ++k)
+    r.ticks.push_back({k * 1e-3, {0.01, 0.02, 0.03}, k == 1, {0, 0, 0.5 * k}, {0.01, 0.02, 0.025}, std::uint64_t(k + 1)});
   EditEvent e;
   e.kind = EditEvent::Kind::kBrush;
   e.tick = 1;
@@ -237,11 +245,30 @@ TEST(Record, SpecialDoublesSurviveOneByOne) {
   for (double d : v) {
     Recording r;
     r.rate_hz = 1000;
-    r.ticks.push_back({0, {d, -d, d * 0.5}, false, {d, d, d}});
+    r.volume_crc32 = 0;
+    r.ticks.push_back({0, {d, -d, d * 0.5}, false, {d, d, d}, {d, d, -d}, 1});
     const Recording back = parse_recording(recording_text(r, "m"), "m");
     EXPECT_TRUE(same_bits(back.ticks[0].hip_m, r.ticks[0].hip_m)) << d;
     EXPECT_TRUE(same_bits(back.ticks[0].force_n, r.ticks[0].force_n)) << d;
+    EXPECT_TRUE(same_bits(back.ticks[0].vhip_m, r.ticks[0].vhip_m)) << d;
   }
+}
+
+TEST(Record, FormatOneRecordingsStillLoad) {
+  // A format 1 file (no volume checksum, VHIP or version): read, and written back as format 1.
+  Recording r;
+  r.format_version = 1;
+  r.scene_path = "/abs/scene.json";
+  r.rate_hz = 1000;
+  r.ticks.push_back({0, {0.01, 0.02, 0.03}, false, {0, 0, 0.5}});
+  const std::string text = recording_text(r, "v1");
+  EXPECT_EQ(text.find("vhip"), std::string::npos);
+  EXPECT_EQ(text.find("volume_crc32"), std::string::npos);
+  const Recording back = parse_recording(text, "v1");
+  EXPECT_EQ(back.format_version, 1);
+  EXPECT_FALSE(back.volume_crc32.has_value());
+  EXPECT_EQ(back.ticks[0].version, 0u);
+  EXPECT_EQ(recording_text(back, "v1"), text);
 }
 
 TEST(Record, AFailedSaveLeavesTheOldFileWhole) {
@@ -330,8 +357,19 @@ TEST(Record, BadFilesNameTheLineTheFieldAndTheValue) {
        {"line 4 (edit 0): field 'tick'", "0 is not the tick just before it (1)"}},
       {"unknown field", replaced(good, "\"button\":true", "\"button\":true,\"buton\":1"),
        {"line 3 (tick 1): field 'buton'", "unknown field"}},
-      {"format version", replaced(good, "\"format_version\":1", "\"format_version\":2"),
-       {"line 1 (header): field 'format_version'", "2 is not supported"}},
+      {"format version", replaced(good, "\"format_version\":2", "\"format_version\":3"),
+       {"line 1 (header): field 'format_version'", "3 is not supported"}},
+      {"no volume checksum", replaced(good, ",\"volume_crc32\":123456789", ""),
+       {"line 1 (header): field 'volume_crc32'"}},
+      {"checksum out of range", replaced(good, "\"volume_crc32\":123456789", "\"volume_crc32\":4294967296"),
+       {"line 1 (header): field 'volume_crc32'", "4294967296"}},
+      {"no VHIP", replaced(good, ",\"vhip\":[0.01,0.02,0.025]", ""), {"line 2 (tick 0): field 'vhip'"}},
+      {"fault false", replaced(good, "\"version\":1", "\"version\":1,\"fault\":false"),
+       {"line 2 (tick 0): field 'fault'", "only when true"}},
+      {"snapshot version 0", replaced(good, "\"version\":1", "\"version\":0"),
+       {"line 2 (tick 0): field 'version'", "got 0"}},
+      {"format 1 with a VHIP", replaced(good, "\"format_version\":2", "\"format_version\":1"),
+       {"line 1 (header): field 'volume_crc32'", "unknown field"}},
       {"not a recording", replaced(good, "isotouch-recording", "isotouch-scene"),
        {"line 1 (header): field 'format'", "\"isotouch-scene\""}},
       {"end count", replaced(good, "\"ticks\":3", "\"ticks\":4"), {"line 6 (end): field 'ticks'", "says 4, the file has 3"}},
@@ -518,6 +556,54 @@ TEST(Replay, OneEditsRadiusChangedDiffersAfterThatEdit) {
   EXPECT_GT(r.first_diff_tick, rec.edits[i].tick);
   std::cout << "[ edit     ] radius of edit " << i << " (tick " << rec.edits[i].tick << ") x 1.5: first difference at tick "
             << r.first_diff_tick << ", " << r.differing_ticks << " ticks differ, max |dF| " << r.max_df_n << " N\n";
+}
+
+TEST(Replay, AnAbsurdHipInFreeSpaceIsNotIdentical) {
+  // A HIP of 1e300 in a tick before any contact, the device at rest: the renderer sends zero
+  // force as recorded and keeps the VHIP where it was, so force and VHIP agree; the replayed
+  // tick is a fault and the recorded one was not.
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  ASSERT_EQ(rec.format_version, 2);
+  const std::size_t k = 20;
+  ASSERT_LT(k, first_pressing_tick(rec, 0)) << "tick 20 must be in free space";
+  rec.ticks[k].hip_m = {1e300, rec.ticks[k].hip_m.y, rec.ticks[k].hip_m.z};
+  const auto r = replay(rec);
+  EXPECT_FALSE(r.identical());
+  EXPECT_EQ(r.first_diff_tick, long(k));
+  EXPECT_NE(r.first_diff_what.find("fault"), std::string::npos) << r.first_diff_what;
+}
+
+TEST(Replay, ARecordedSnapshotVersionThatDiffersIsNotIdentical) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  const std::size_t k = rec.ticks.size() / 2;
+  ASSERT_GT(rec.ticks[k].version, 1u) << "the middle of the run reads an edited snapshot";
+  rec.ticks[k].version -= 1;  // as if that tick had read the snapshot before
+  const auto r = replay(rec);
+  EXPECT_FALSE(r.identical());
+  EXPECT_EQ(r.first_diff_tick, long(k));
+  EXPECT_EQ(r.first_diff_what, "snapshot version");
+}
+
+TEST(Replay, AnotherVolumeIsRefused) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  ASSERT_TRUE(rec.volume_crc32.has_value());
+  *rec.volume_crc32 ^= 1u;  // as if the volume file had changed since
+  try {
+    (void)replay(rec);
+    ADD_FAILURE() << "replayed against another volume";
+  } catch (const isotouch::app::ReplayInputError& e) {
+    EXPECT_NE(std::string(e.what()).find("changed since it was recorded (CRC-32"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Replay, VolumeChecksumSeesOneVoxel) {
+  auto v = isotouch::engine::make_sphere({16, 16, 16}, 1e-3, 5);
+  const std::uint32_t before = isotouch::app::volume_crc32(v);
+  v.voxels[1000] = std::nextafter(v.voxels[1000], 1e30f);
+  EXPECT_NE(isotouch::app::volume_crc32(v), before);
 }
 
 TEST(Replay, AChangedSceneIsRefused) {

@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <unistd.h>
+
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -144,8 +146,11 @@ TEST(RunJob, StiffSlowSceneShowsItsSteps) {
 
 TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
   // The paper's Figure 2 as printed drops the plane while the HIP is inside bone on the
-  // head scene: a release step that the contact-only figure cannot see.
+  // head CT's mandibular ramus (the head scene's earlier stroke: in along +x at 70 % of the
+  // height): a release step that the contact-only figure cannot see.
   Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  sc.script.ray_origin_frac = {-0.2, 0.5, 0.7};
+  sc.script.ray_direction = {1, 0, 0};
   sc.hri.variant = isotouch::servo::Variant::kPaper;
   const Ran r = run_and_recompute(sc, "head_paper");
   EXPECT_GT(r.s.releases, 0);
@@ -313,4 +318,51 @@ TEST(RunModes, SparseFallsBackToDenseAndSaysWhy) {
   EXPECT_NE(s["engine"]["gpu"].get<std::string>().find("core::bricked_input_from_dense"), std::string::npos);
   EXPECT_TRUE(s["engine"]["bricks"]["active"].is_number());
   EXPECT_GT(s["contact"]["ticks"].get<long>(), 500);
+}
+
+TEST(RunJob, EditsThatDoNothingSaySo) {
+  // A sphere (48^3, 1 mm voxels, radius 15 voxels, centre at voxel 23.5): an undo and a redo
+  // with nothing to undo / redo, a carve entirely outside the volume, a "vhip" carve before
+  // any contact, a timeline entry after the script's end, and an add of material.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_noop_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "noop.json") << R"({"name": "noop", "volume": {"synthetic": "sphere", "dims": [48, 48, 48],
+    "spacing_m": 0.001, "radius_vox": 15}, "isovalue": 0, "inside": "above",
+    "script": {"hold_s": 0.1, "stroke_length_m": 0.002}, "outputs": {"plots": false},
+    "edits": {"brush": {"kind": "drill", "radius_mm": 2}, "write_vdb": false, "write_nrrd": false, "write_stl": false,
+      "timeline": [{"t_s": 0.01, "kind": "undo"}, {"t_s": 0.02, "kind": "redo"},
+                   {"t_s": 0.03, "kind": "carve", "at": [500, 500, 500], "radius_mm": 3},
+                   {"t_s": 0.04, "kind": "carve", "at": "vhip", "radius_mm": 1},
+                   {"t_s": 0.05, "kind": "add", "at": [23.5, 23.5, 23.5], "radius_mm": 22, "strength": 1000},
+                   {"t_s": 100, "kind": "undo"}]}})";
+  const Scene sc = isotouch::app::load_scene((dir / "noop.json").string());
+  isotouch::app::RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  opt.progress = false;
+  std::ostringstream log;
+  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const auto& e = m.edits;
+  EXPECT_EQ(e.undo_nothing, 1);
+  EXPECT_EQ(e.redo_nothing, 1);
+  EXPECT_EQ(e.brushes_outside, 1);
+  EXPECT_EQ(e.vhip_before_contact, 1);
+  EXPECT_EQ(e.timeline_after_end, 1);
+  EXPECT_GE(e.brushes_changing_nothing, 2);  // the outside carve and the carve in free space
+  EXPECT_LT(e.removed_mm3, 0) << "the add made the object bigger";
+  const std::string text = log.str();
+  for (const char* s : {"undo with nothing to undo", "redo with nothing to redo", "entirely outside the volume",
+                        "before any contact", "after the script's end", "changed no voxel", "added "})
+    EXPECT_NE(text.find(s), std::string::npos) << s << " not in the log:\n" << text;
+  EXPECT_EQ(text.find("removed -"), std::string::npos) << text;
+  std::ifstream in(dir / "out" / "summary.json");
+  const auto j = nlohmann::json::parse(in);
+  EXPECT_EQ(j.at("edits").at("removed_mm3").get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(j.at("edits").at("added_mm3").get<double>(), -e.removed_mm3);
+  EXPECT_EQ(j.at("edits").at("did_nothing").at("notes").size(), 6u);  // the five above and the free-space carve
+  std::ifstream md(dir / "out" / "report.md");
+  const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_NE(report.find("| added volume | **"), std::string::npos);
+  EXPECT_NE(report.find("Edits that did nothing"), std::string::npos);
+  fs::remove_all(dir);
 }

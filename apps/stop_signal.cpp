@@ -1,0 +1,45 @@
+#include "stop_signal.h"
+
+#include <csignal>
+
+#include <atomic>
+
+namespace isotouch::app {
+namespace {
+
+std::atomic<int> g_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free, "the handler may only touch a lock-free atomic");
+
+extern "C" void on_stop_signal(int sig) {
+  int expected = 0;
+  if (!g_signal.compare_exchange_strong(expected, sig)) {
+    std::signal(sig, SIG_DFL);  // asked twice: stop now
+    std::raise(sig);
+  }
+}
+
+}  // namespace
+
+Interrupted::Interrupted(int sig, std::string where)
+    : std::runtime_error("interrupted by " + std::string(sig == SIGTERM ? "SIGTERM" : "SIGINT") + " during " + where),
+      signal(sig),
+      stage(std::move(where)) {}
+
+void install_stop_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_stop_signal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = SA_RESTART;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+int stop_signal() { return g_signal.load(std::memory_order_relaxed); }
+
+void throw_if_stop_requested(const std::string& stage) {
+  if (const int s = stop_signal()) throw Interrupted(s, stage);
+}
+
+void request_stop_for_test(int sig) { g_signal.store(sig, std::memory_order_relaxed); }
+
+}  // namespace isotouch::app

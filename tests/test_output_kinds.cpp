@@ -1,0 +1,170 @@
+// Every kind of output isotouch writes (PNG, CSV, JSON, .vdb, STL/OBJ/PLY, recordings,
+// gnuplot plots) goes through the one output writer: a character device or FIFO is written
+// in place, a symlink is followed, a directory refused; none of them is ever replaced.
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <future>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "files.h"
+#include "record.h"
+#include "render_cmd.h"
+#include "synthetic.h"
+#include "vdb_io.h"
+
+namespace fs = std::filesystem;
+using namespace isotouch;
+
+namespace {
+
+struct TempDir {
+  fs::path path;
+  TempDir() {
+    std::string t = (fs::temp_directory_path() / "isotouch-kinds-XXXXXX").string();
+    path = ::mkdtemp(t.data());
+  }
+  ~TempDir() {
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+mode_t type_of(const fs::path& p) {
+  struct stat st {};
+  return ::lstat(p.c_str(), &st) == 0 ? (st.st_mode & S_IFMT) : 0;
+}
+
+/// A small volume and its mesh for the writers that need one.
+struct Fixtures {
+  engine::Volume vol = engine::make_sphere({12, 12, 12}, 0.001, 4.0);
+  app::Mesh mesh;
+  app::Recording rec;
+  Fixtures() {
+    mesh.vertices = {{0, 0, 0}, {0.001, 0, 0}, {0, 0.001, 0}, {0, 0, 0.001}};
+    mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    rec.scene_path = "/nowhere/scene.json";
+    rec.scene_text = "{}";
+    rec.rate_hz = 1000;
+  }
+};
+
+struct Kind {
+  std::string name;
+  std::function<void(const std::string&)> write;
+};
+
+std::vector<Kind> kinds(const Fixtures& f) {
+  return {
+      {"png", [](const std::string& p) { app::write_png(p, 2, 2, {0xff0000ffu, 0xff00ff00u, 0xffff0000u, 0xffffffffu}); }},
+      {"csv", [](const std::string& p) { app::write_file_atomic(p, "t_s,f_n\n0,0\n"); }},
+      {"json", [](const std::string& p) { app::write_file_atomic(p, "{\"status\": \"complete\"}\n"); }},
+      {"vdb", [&f](const std::string& p) { app::save_vdb(f.vol, p); }},
+      {"stl", [&f](const std::string& p) { app::write_stl_binary(f.mesh, p); }},
+      {"obj", [&f](const std::string& p) { app::write_obj(f.mesh, p); }},
+      {"ply", [&f](const std::string& p) { app::write_ply(f.mesh, p); }},
+      {"recording", [&f](const std::string& p) { app::save_recording(p, f.rec); }},
+  };
+}
+
+}  // namespace
+
+TEST(OutputKinds, EveryKindWritesARegularFileAndThroughASymlink) {
+  Fixtures f;
+  for (const Kind& k : kinds(f)) {
+    SCOPED_TRACE(k.name);
+    TempDir d;
+    const fs::path plain = d.path / ("out." + k.name);
+    k.write(plain.string());
+    ASSERT_EQ(type_of(plain), S_IFREG);
+    const std::string bytes = slurp(plain);
+    EXPECT_FALSE(bytes.empty());
+    fs::create_directories(d.path / "real");
+    const fs::path target = d.path / "real" / ("file." + k.name), link = d.path / ("link." + k.name);
+    std::ofstream(target) << "old";
+    fs::create_symlink(target, link);
+    k.write(link.string());
+    EXPECT_EQ(type_of(link), S_IFLNK) << "the symlink was replaced";
+    if (k.name == "vdb") EXPECT_EQ(slurp(target).size(), bytes.size());  // OpenVDB stamps a UUID per file
+    else EXPECT_EQ(slurp(target), bytes) << "the symlink's target holds the new output";
+  }
+}
+
+TEST(OutputKinds, EveryKindWritesACharacterDeviceInPlace) {
+  Fixtures f;
+  for (const Kind& k : kinds(f)) {
+    SCOPED_TRACE(k.name);
+    TempDir d;
+    const fs::path dev = d.path / "null", link = d.path / ("to-null." + k.name);
+    if (::mknod(dev.c_str(), S_IFCHR | 0666, makedev(1, 3)) != 0) GTEST_SKIP() << "mknod not permitted here";
+    fs::create_symlink(dev, link);
+    k.write(dev.string());
+    EXPECT_EQ(type_of(dev), S_IFCHR) << "the device node was replaced by a regular file";
+    k.write(link.string());
+    EXPECT_EQ(type_of(link), S_IFLNK);
+    EXPECT_EQ(type_of(dev), S_IFCHR);
+  }
+}
+
+TEST(OutputKinds, EveryKindWritesAFifoAsAStream) {
+  Fixtures f;
+  for (const Kind& k : kinds(f)) {
+    SCOPED_TRACE(k.name);
+    TempDir d;
+    const fs::path plain = d.path / ("out." + k.name), fifo = d.path / "pipe";
+    k.write(plain.string());
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    auto reader = std::async(std::launch::async, [&] { return slurp(fifo); });
+    k.write(fifo.string());
+    const std::string streamed = reader.get();
+    EXPECT_EQ(type_of(fifo), S_IFIFO);
+    if (k.name == "vdb") EXPECT_EQ(streamed.size(), slurp(plain).size());  // OpenVDB stamps a UUID per file
+    else EXPECT_EQ(streamed, slurp(plain));
+  }
+}
+
+TEST(OutputKinds, EveryKindRefusesADirectoryNamingIt) {
+  Fixtures f;
+  for (const Kind& k : kinds(f)) {
+    SCOPED_TRACE(k.name);
+    TempDir d;
+    const fs::path dir = d.path / ("folder." + k.name);
+    fs::create_directories(dir);
+    try {
+      k.write(dir.string());
+      ADD_FAILURE() << "a directory must be refused";
+    } catch (const std::exception& e) {
+      EXPECT_NE(std::string(e.what()).find(dir.string()), std::string::npos) << e.what();
+    }
+    EXPECT_TRUE(fs::is_directory(dir));
+  }
+}
+
+TEST(OutputKinds, GnuplotPlotsFollowASymlinkedPng) {
+  if (app::run_program("gnuplot", "--version") != 0) GTEST_SKIP() << "gnuplot not installed";
+  TempDir d;
+  fs::create_directories(d.path / "elsewhere");
+  const fs::path png = d.path / "plot.png", target = d.path / "elsewhere" / "plot.png";
+  fs::create_symlink(target, png);
+  const std::string script = "set terminal pngcairo size 64,48\nset output " +
+                             app::gnuplot_quote(app::temp_name(png.string())) + "\nplot x\n";
+  EXPECT_EQ(app::draw_with_gnuplot((d.path / "plots.gp").string(), script, {png.string()}), "");
+  EXPECT_EQ(type_of(png), S_IFLNK);
+  EXPECT_EQ(type_of(target), S_IFREG);
+  EXPECT_GT(fs::file_size(target), 0u);
+}

@@ -617,8 +617,11 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     const double gn = norm(s.gradient);
     if (e > 0.0) update = !(excess(sample_value(field, vhip_)) > 0.0);  // starting inside: no force
     // Where the field is flat (|e| / |grad| beyond 8 voxels: a drilled cavity, uniform
-    // empty value) the first-order distance says nothing: search.
-    else update = !(gn > 0) ? std::isfinite(s.value) : (-e < (r + voxel) * gn || -e > 8.0 * voxel * gn);
+    // empty value, air) the first-order distance says nothing: search there every n ticks.
+    else {
+      const bool flat = !(gn > 0) ? std::isfinite(s.value) : -e > 8.0 * voxel * gn;
+      update = (gn > 0 && -e < (r + voxel) * gn) || (flat && ++c_ >= params_.plane_update_period);
+    }
   }
   if (update) {
     ToolPlane kept[3];

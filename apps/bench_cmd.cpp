@@ -245,7 +245,7 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
          "Blezek/HRI | (paper) | HRI bricked fp32 [us] | bricked/dense | HRI bricked fp16 [us] | fp16/dense |\n"
       << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<Table1Row> rows;
-  std::ostringstream bytes;
+  std::ostringstream bytes, tools;
   for (const PaperRow& pr : paper) {
     const SweepScene s = prepare_sweep_scene(pr.scene, vk, log);
     HriParams hp = reference_params(s);
@@ -264,15 +264,19 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
     BlezekRenderer blezek(bp);
     AvilaRenderer avila(bp);
     HriRenderer hri_bricked(hp), hri_fp16(hp);
+    // The same stroke with a spherical tool of 2 voxels' radius (HriParams::tool_radius_m).
+    HriParams hp_tool = hp;
+    hp_tool.tool_radius_m = 2.0 * std::min({s.field->grid.spacing_m.x, s.field->grid.spacing_m.y, s.field->grid.spacing_m.z});
+    HriRenderer hri_tool(hp_tool);
     // The bricked snapshots of the same samples (fp32: bit-identical reads in active bricks).
     const core::BrickedInput bin = core::bricked_input_from_dense(*s.field, core::Isosurface{s.tau, s.inside});
     SweepScene s32, s16;
     s32.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp32));
     s16.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp16));
     s32.hip = s16.hip = s.hip;
-    const SweepScene* scenes[] = {&s, &s, &s, &s, &s32, &s16};
-    Renderer* algos[] = {&hri, &hri_paper, &blezek, &avila, &hri_bricked, &hri_fp16};
-    constexpr int kAlgos = 6;
+    const SweepScene* scenes[] = {&s, &s, &s, &s, &s32, &s16, &s};
+    Renderer* algos[] = {&hri, &hri_paper, &blezek, &avila, &hri_bricked, &hri_fp16, &hri_tool};
+    constexpr int kAlgos = 7;
     // Interleaved rounds: every algorithm sees the same clock, cache and load state.
     for (int a = 0; a < kAlgos; ++a) median_ns_per_tick(*algos[a], *scenes[a], o.warmup, 1);
     std::vector<double> t[kAlgos];
@@ -295,6 +299,9 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
             << " % of the dense fp32 " << std::setprecision(2) << dense / (1024.0 * 1024.0) << " MiB\n";
     }
     rows.push_back(row);
+    tools << std::fixed << std::setprecision(3) << "  " << pr.scene << ": HRI with a spherical tool of radius "
+          << hp_tool.tool_radius_m * 1e3 << " mm (2 voxels) " << med[6] << " us per tick, " << std::setprecision(2)
+          << med[6] / row.hri_us << " x the point (" << std::setprecision(3) << row.hri_us << " us)\n";
     tab << std::setprecision(3) << "| " << pr.label << " | " << row.hri_us << " | " << std::setprecision(2) << pr.hri
         << " | " << std::setprecision(3) << row.hri_paper_us << " | " << row.blezek_us << " | "
         << std::setprecision(2) << pr.blezek << " | " << std::setprecision(3) << row.avila_us << " | "
@@ -312,6 +319,9 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
   }
   log << tab.str() << "\n" << table1_verdict(rows) << " (the paper: HRI/Avila 1.01-1.02)\n"
       << table1_bricked_verdict(rows) << " (issue 8: HRI tick on the bricked snapshot at most 10 % above dense)\n"
+      << "The same strokes with a spherical tool (the HIP is the tool's centre; its surface meets the isosurface "
+         "earlier, so contact differs from the point's):\n"
+      << tools.str()
       << "Snapshot bytes (brick table + tiles + pool [+ unorm16 decode] over voxels * 16):\n"
       << bytes.str()
       << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "

@@ -544,7 +544,8 @@ class EditDriver {
           }
           const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
           const double f = te.brush.force_n >= 0 ? te.brush.force_n : servo::norm(row.force_n);
-          apply(k, t, EditEvent::Kind::kBrush, make_brush(te.brush, targets_, c, dt_, f), "timeline");
+          apply(k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f),
+                "timeline");
           ++figures.timeline_brushes;
           break;
         }
@@ -564,9 +565,21 @@ class EditDriver {
     // reports contact, with penetration 0 and a force that is not the user's push (review).
     if (down && row.contact && row.penetration_m > 0 && (k - press_tick_) % scene_.edits.every_ticks == 0) {
       apply(k, t, EditEvent::Kind::kBrush,
-            make_brush(scene_.edits.brush, targets_, row.vhip_m, dt_, servo::norm(row.force_n)), "button");
+            make_brush(at_tool(scene_.edits.brush), targets_, row.vhip_m, dt_, servo::norm(row.force_n)), "button");
       ++figures.button_brushes;
     }
+  }
+
+  /// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP
+  /// is the tool's centre and the brush takes the tool's size, reaching one voxel (the
+  /// largest spacing: the surface the burr touches lies within one cell of it) past its
+  /// surface, so it removes what the burr's surface touches; a point keeps the scene's radius.
+  BrushSpec at_tool(const BrushSpec& b) const {
+    if (!(scene_.hri.tool_radius_m > 0)) return b;
+    const auto& sp = setup_.volume.grid.spacing_m;
+    BrushSpec t = b;
+    t.radius_mm = 1e3 * (scene_.hri.tool_radius_m + std::max({sp.x, sp.y, sp.z}));
+    return t;
   }
 
   /// After the last tick: closes a stroke left open (button still down, stroke past the end).
@@ -1239,7 +1252,10 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
       const double a = std::acos(c) * 180.0 / M_PI;
       dir2 += a * a;
       ++dir_pairs;
-      m.force_dir_step_max_deg = std::max(m.force_dir_step_max_deg, a);
+      if (a > m.force_dir_step_max_deg) {
+        m.force_dir_step_max_deg = a;
+        m.force_dir_step_max_t_s = r.t_s;
+      }
     }
     if (edits && r.version > 1) {  // the surface moved: measured against the edited volume the tick read
       ++m.edits.contact_ticks_after_edit;
@@ -1389,6 +1405,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                            : hp.normal == servo::NormalSource::kCentral ? "central" : "exact"},
                 {"force_shading", hp.force_shading},
                 {"recovery_time_s", hp.recovery_time_s},
+                {"tool_radius_mm", hp.tool_radius_m * 1e3},
                 {"friction", {{"mu_s", hp.friction.mu_s}, {"mu_d", hp.friction.mu_d},
                               {"viscous_n_s_per_m", hp.friction.viscous_n_s_per_m}}},
                 {"ticks", m.ticks},
@@ -1405,6 +1422,8 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                   {"max_release_step_t_s", m.max_release_step_t_s},
                   {"max_any_step_n", m.max_any_step_n},
                   {"max_any_step_t_s", m.max_any_step_t_s},
+                  {"max_direction_step_deg", m.force_dir_step_max_deg},
+                  {"max_direction_step_t_s", m.force_dir_step_max_t_s},
                   {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
                   {"saturated_ticks", m.saturated_ticks},
                   {"fault_ticks", m.fault_ticks}};
@@ -1478,7 +1497,11 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
      << " N s/m, n = " << hp.plane_update_period << ", " << fmt(hp.rate_hz) << " Hz, force limit "
      << fmt(hp.force_limit_n) << " N, " << (paper ? "paper" : "robust") << " variant, force shading "
-     << (hp.force_shading ? "on" : "off") << ", recovery time " << fmt(hp.recovery_time_s * 1e3) << " ms |\n"
+     << (hp.force_shading ? "on" : "off") << ", recovery time " << fmt(hp.recovery_time_s * 1e3) << " ms"
+     << (hp.tool_radius_m > 0 ? ", spherical tool of radius " + fmt(hp.tool_radius_m * 1e3) +
+                                    " mm (the VHIP is its centre; brushes at the VHIP take its radius + the largest voxel spacing)"
+                              : std::string(", point tool"))
+     << " |\n"
      << "| ticks | " << m.ticks << " (" << m.contact_ticks << " in contact, " << m.plane_updates
      << " plane updates, " << m.saturated_ticks << " saturated, " << m.fault_ticks << " faults) |\n"
      << "| tick wall time | median " << fmt(m.tick_ns_median) << " ns, p99 " << fmt(m.tick_ns_p99)
@@ -1498,8 +1521,9 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
-     << "| force direction step | RMS " << fmt(m.force_dir_step_rms_deg, 3) << " deg, max " << fmt(m.force_dir_step_max_deg, 3)
-     << " deg between consecutive contact ticks |\n"
+     << "| largest force direction step | " << fmt(m.force_dir_step_max_deg, 3) << " deg at t = "
+     << fmt(m.force_dir_step_max_t_s, 5) << " s (RMS " << fmt(m.force_dir_step_rms_deg, 3)
+     << " deg; angle between the forces of consecutive contact ticks) |\n"
      << (m.has_unfiltered && raw_found > 0
              ? "| distance from the unfiltered data's surface | RMS " + fmt(m.unfiltered_err_rms_m * 1e3, 4) + " mm, max " +
                    fmt(m.unfiltered_err_max_m * 1e3, 4) + " mm (how far the filters moved the felt surface) |\n"

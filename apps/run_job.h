@@ -153,6 +153,7 @@ struct RunMetrics {
   /// Angle [deg] between the force directions of two consecutive contact ticks, RMS and max:
   /// how rough the rendered surface feels (noise in the data shows here).
   double force_dir_step_rms_deg = 0, force_dir_step_max_deg = 0;
+  double force_dir_step_max_t_s = 0;  ///< time of the largest direction step [s]
   /// Ticks of the stroke phase (script t_stroke <= t < t_lift) and how many of them were in
   /// contact: a stroke that stays on the surface it starts on has a share near 1.
   long stroke_ticks = 0, stroke_contact_ticks = 0;

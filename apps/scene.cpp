@@ -407,7 +407,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   const json& sv = r.section(root, "servo");
   r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
                        "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
-                       "recovery_time_s", "friction", "variant"});
+                       "recovery_time_s", "friction", "variant", "tool"});
   const std::string variant = r.string(sv, "servo", "variant", "robust");
   if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
   else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
@@ -449,6 +449,21 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     if (s.hri.friction.mu_d > s.hri.friction.mu_s)
       r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
                                         fr.at("mu_d").dump());
+  }
+
+  // The spherical tool: its centre is the HIP, its surface is kept outside the isosurface
+  // (robust variant only; servo/hri.h, "Spherical tool").
+  if (sv.contains("tool")) {
+    const json& tl = sv.at("tool");
+    if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r}, got " + tl.dump());
+    r.only(tl, "servo.tool", {"radius_mm"});
+    s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
+    if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
+      r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
+                                     "\"variant\": \"robust\" for a tool of radius " + tl.at("radius_mm").dump() + " mm");
+    if (s.hri.tool_radius_m > 0 && (s.hri.friction.any() || s.hri.force_shading))
+      r.fail("servo.tool.radius_mm", "friction and force shading are not implemented for a spherical tool; "
+                                     "remove them or set radius_mm to 0, got " + tl.at("radius_mm").dump());
   }
 
   const json& dv = r.section(root, "device");

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "sampling.h"
 
@@ -38,6 +39,9 @@ void HriRenderer::reset() {
   edit_tick_ = false;
   edit_slewing_ = false;
   prev_force_ = {};
+  tool_plane_count_ = 0;
+  prev_target_f_ = {};
+  ramp_from_dir_ = {};
 }
 
 Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback) const {
@@ -107,14 +111,14 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
 }
 
 bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm,
-                               Vec3& p) const {
+                               Vec3& p, const Vec3* along) const {
   // Along the outward normal at x, no farther than twice the first-order depth
   // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
   // 8 voxels; 16 bisection steps.
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
-  const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
+  const Vec3 n0 = along ? *along : outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
   if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
   double lo = 0.0, hi = reach;
@@ -176,7 +180,13 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     // rounding, not Figure 5b.
     // On an edit tick, material added deeper than that reach: march out (march_out).
     Vec3 p;
-    const bool found = surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
+    // Robust, with a plane held: first along the held normal, the way the contact point
+    // came in (on a noisy scan the gradient at an embedded point can point sideways, and
+    // the surface found along it lies on another sheet: a plane turned by up to 106 deg in
+    // one update on the head CT).
+    const bool held = params_.variant == Variant::kRobust && plane_.valid;
+    const bool found = (held && surface_from(field, vhip_, e0, gn0, p, &plane_.n)) ||
+                       surface_from(field, vhip_, e0, gn0, p) || (edit_tick_ && march_out(field, vhip_, p));
     return plane_at(field, found ? p : vhip_, hip);
   }
   if (edit_tick_ && !(e0 > 0.0) && e1 > 0.0) {
@@ -283,24 +293,8 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
   const double mag = ramps ? norm(force) : 0.0;
   if (ramps && robust) {
-    // Every step of the spring-damper target that a plane creation or update causes is
-    // spread over recovery_time_s: the offset between what was sent and the new target
-    // fades out linearly (an update that does not move the target lets a ramp go on).
-    // The ramp runs on accumulated time (ramp_dt_s_: this tick's period, clamped), so
-    // neither lost ticks nor one jittery period change its length.
-    if (params_.recovery_time_s > 0 && (out.plane_update || after_fault_) && !edit_tick_ &&
-        std::abs(mag - prev_target_n_) > 0.01 * params_.force_limit_n) {
-      ramp_left_s_ = params_.recovery_time_s;
-      recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
-    }
     prev_target_n_ = mag;
-    if (ramp_left_s_ > 0) {
-      ramp_left_s_ -= ramp_dt_s_;
-      if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
-      const double m = std::max(0.0, mag + recovery_from_n_ * (ramp_left_s_ / params_.recovery_time_s));
-      if (mag > 0) force = force * (m / mag);
-      else if (m > 0) force = plane_.n * m;
-    }
+    force = ramp_force(force, out.plane_update, plane_.n);
   } else if (ramps) {
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
       recovery_ticks_ = std::max(1, int(std::lround(params_.recovery_time_s / dt)));
@@ -317,6 +311,35 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   out.contact = true;
   out.penetration_m = norm(hip - vhip_);
   return force;
+}
+
+Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir) {
+  // Every step of the spring-damper force that a plane creation or update causes (or the
+  // first contact tick after a fault) is spread over recovery_time_s: |F| goes linearly
+  // from the magnitude sent the tick before to the new target (the offset fades out,
+  // never below zero), and the direction turns from the one sent the tick before to the
+  // new one over the same time (normalized linear blend of the two unit vectors), so a
+  // plane that turns turns the force over the ramp too (a magnitude-only ramp sent the
+  // new direction at once: 106 deg in one tick on the head CT). An update that does not
+  // move the target lets a ramp go on. The ramp runs on accumulated time (ramp_dt_s_:
+  // this tick's period, clamped), so neither lost ticks nor one jittery period change its
+  // length.
+  const double mag = norm(force);
+  if (params_.recovery_time_s > 0 && (plane_update || after_fault_) && !edit_tick_ &&
+      norm(force - prev_target_f_) > 0.01 * params_.force_limit_n) {
+    ramp_left_s_ = params_.recovery_time_s;
+    recovery_from_n_ = prev_force_mag_ - mag;  // offset to fade out [N]
+    ramp_from_dir_ = prev_force_mag_ > 0 ? prev_force_ / prev_force_mag_ : Vec3{};
+  }
+  prev_target_f_ = force;
+  if (!(ramp_left_s_ > 0)) return force;
+  ramp_left_s_ -= ramp_dt_s_;
+  if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
+  const double s = ramp_left_s_ / params_.recovery_time_s;
+  const double m = std::max(0.0, mag + recovery_from_n_ * s);
+  const Vec3 to = mag > 0 ? force / mag : fallback_dir;
+  const bool turn = dot(ramp_from_dir_, ramp_from_dir_) > 0;
+  return normalized_or(turn ? to * (1.0 - s) + ramp_from_dir_ * s : to, to) * m;
 }
 
 void HriRenderer::restart_at(const Vec3& hip) {
@@ -337,6 +360,9 @@ void HriRenderer::restart_at(const Vec3& hip) {
   vhip_value_known_ = false;
   edit_slewing_ = false;
   prev_force_ = {};
+  tool_plane_count_ = 0;
+  prev_target_f_ = {};
+  ramp_from_dir_ = {};
 }
 
 bool HriRenderer::note_version(std::uint64_t version) {
@@ -366,6 +392,283 @@ double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
   force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
   if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
   return norm(force);
+}
+
+// ---- Spherical tool ----
+
+Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
+  // min |x - hip| subject to n_i . (x - p_i) >= r: the optimum is the projection of the HIP
+  // onto the intersection of some active subset (KKT: x = hip + sum l_j n_j, l_j >= 0);
+  // every subset's projection that is feasible is a candidate, the nearest wins.
+  const double r = params_.tool_radius_m;
+  const int m = tool_plane_count_;
+  const ToolPlane* pl = tool_planes_;
+  const double tol = 1e-9;
+  auto feasible = [&](const Vec3& x) {
+    for (int i = 0; i < m; ++i)
+      if (dot(pl[i].n, x - pl[i].p) < r - tol) return false;
+    return true;
+  };
+  if (feasible(hip)) return hip;
+  Vec3 best = hip;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int mask = 1; mask < (1 << m); ++mask) {
+    int idx[3];
+    int k = 0;
+    for (int i = 0; i < m; ++i)
+      if (mask & (1 << i)) idx[k++] = i;
+    double b[3], l[3] = {0, 0, 0};
+    for (int i = 0; i < k; ++i) b[i] = r - dot(pl[idx[i]].n, hip - pl[idx[i]].p);
+    auto g = [&](int i, int j) { return dot(pl[idx[i]].n, pl[idx[j]].n); };
+    if (k == 1) {
+      l[0] = b[0];
+    } else if (k == 2) {
+      const double a = g(0, 0), c = g(0, 1), d = g(1, 1);
+      const double det = a * d - c * c;
+      if (!(std::abs(det) > 1e-9)) continue;
+      l[0] = (b[0] * d - c * b[1]) / det;
+      l[1] = (a * b[1] - c * b[0]) / det;
+    } else {
+      const double a00 = g(0, 0), a01 = g(0, 1), a02 = g(0, 2), a11 = g(1, 1), a12 = g(1, 2), a22 = g(2, 2);
+      const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+      const double det = a00 * c00 + a01 * c01 + a02 * c02;
+      if (!(std::abs(det) > 1e-9)) continue;
+      const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+      l[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det;
+      l[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) / det;
+      l[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det;
+    }
+    bool ok = true;
+    Vec3 x = hip;
+    for (int i = 0; i < k; ++i) {
+      if (!(l[i] >= -tol)) ok = false;
+      x = x + pl[idx[i]].n * l[i];
+    }
+    if (!ok || !feasible(x)) continue;
+    const Vec3 dx = x - hip;
+    const double d2 = dot(dx, dx);
+    if (d2 < best_d2) {
+      best_d2 = d2;
+      best = x;
+    }
+  }
+  if (std::isfinite(best_d2)) return best;
+  // No feasible subset (planes that no sphere of radius r fits between): project onto
+  // the violated planes in turn, a few rounds.
+  Vec3 x = hip;
+  for (int round = 0; round < 8; ++round)
+    for (int i = 0; i < m; ++i) {
+      const double v = r - dot(pl[i].n, x - pl[i].p);
+      if (v > 0) x = x + pl[i].n * v;
+    }
+  return x;
+}
+
+bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q,
+                                  Vec3& n) const {
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const Isosurface iso{params_.tau, params_.inside};
+  // Newton steps along the gradient from `from`: y <- y + N e / |grad| (e the excess, N
+  // outward), each at most one voxel long, at most `steps` reads; true when on the surface.
+  auto newton = [&](Vec3 from, int steps, Vec3& y) {
+    y = from;
+    for (int k = 0; k < steps; ++k) {
+      const FieldValue s = sample_trilinear(field, y);
+      const double e = excess(s.value);
+      const Vec3 go = iso.outward(s.gradient);
+      const double gn = norm(go);
+      if (!std::isfinite(s.value) || !(gn > 0) || !std::isfinite(gn)) return false;
+      const double step = std::clamp(e / gn, -voxel, voxel);
+      y = y + go * (step / gn);
+      const Vec3 moved = y - x;
+      if (dot(moved, moved) > reach * reach) return false;
+      if (std::abs(step) < 1e-3 * voxel) return true;
+    }
+    return false;
+  };
+  Vec3 y;
+  bool found = newton(x, 8, y);
+  if (!found) {
+    // March along the normal at x (inward when x is outside, outward when inside),
+    // half-voxel steps within reach, then 20 bisection steps.
+    const bool in = excess(sample_value(field, x)) > 0.0;
+    const Vec3 n0 = outward_normal(field, x, Vec3{0.0, 0.0, 1.0});
+    const Vec3 dir = in ? n0 : n0 * -1.0;
+    const double h = 0.5 * voxel;
+    const int steps = std::max(1, int(std::ceil(reach / h)));
+    double lo = 0.0;
+    for (int i = 1; i <= steps && !found; ++i) {
+      const double t = std::min(reach, h * i);
+      const bool inside = excess(sample_value(field, x + dir * t)) > 0.0;
+      if (inside != in) {
+        double hi = t;
+        for (int k = 0; k < 20; ++k) {
+          const double mid = 0.5 * (lo + hi);
+          ((excess(sample_value(field, x + dir * mid)) > 0.0) == in ? lo : hi) = mid;
+        }
+        y = x + dir * (in ? hi : lo);  // the outside end of the bracket
+        found = true;
+      }
+      lo = t;
+    }
+    if (!found) return false;
+  }
+  n = outward_normal(field, y, normalized_or(x - y, Vec3{0.0, 0.0, 1.0}));
+  // A gradient path ends near, not at, the nearest point of a curved surface: twice, slide
+  // to the foot of x on the tangent plane and come back to the surface (Newton again).
+  for (int round = 0; round < 2; ++round) {
+    const Vec3 off = x - y;
+    const Vec3 tangential = off - n * dot(n, off);
+    if (!(dot(tangential, tangential) > 1e-6 * voxel * voxel)) break;
+    Vec3 y2;
+    if (!newton(y + tangential, 4, y2)) break;
+    y = y2;
+    n = outward_normal(field, y, n);
+  }
+  q = y;
+  return finite(q) && finite(n);
+}
+
+void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
+  // 1. The surface point nearest the proxy of the tick before gives the first plane.
+  // 2. A held plane that proxy still touches (within a quarter voxel), that faces another
+  //    way than every new plane (more than 15 deg) and whose wall is still there (inside a
+  //    quarter voxel behind its point) is another wall of a groove or a corner: it stays
+  //    (else the proxy, moved toward the HIP under the new plane alone, could cross into it).
+  // 3. While the proxy moved toward the HIP under the planes so far is still closer than r
+  //    to the surface, the point nearest it gives the next plane. At most three.
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double tol = 1e-3 * voxel;
+  const double reach = 1.8 * r + voxel;
+  ToolPlane held[3];
+  const int held_count = tool_plane_count_;
+  std::copy(tool_planes_, tool_planes_ + held_count, held);
+  tool_plane_count_ = 0;
+  auto add = [&](const Vec3& n, const Vec3& q) {
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, n) > 0.9999 && std::abs(dot(tool_planes_[j].n, q - tool_planes_[j].p)) < tol)
+        return false;  // the same plane
+    tool_planes_[tool_plane_count_++] = {n, q};
+    return true;
+  };
+  // A point farther than r + 1 voxel from where it was searched is not the wall in
+  // contact (a gradient path through a drilled cavity can end anywhere within reach).
+  auto near = [&](const Vec3& from, const Vec3& q) {
+    const Vec3 d = q - from;
+    return dot(d, d) <= (r + voxel) * (r + voxel);
+  };
+  Vec3 q, n;
+  if (nearest_surface(field, vhip_, reach, q, n) && near(vhip_, q)) add(n, q);
+  const double cos15 = 0.9659;
+  for (int i = 0; i < held_count && tool_plane_count_ < 3; ++i) {
+    if (!(dot(held[i].n, vhip_ - held[i].p) < r + 0.25 * voxel)) continue;
+    // ... and only where the wall is still there (an edit may have removed it).
+    if (!(excess(sample_value(field, held[i].p - held[i].n * (0.25 * voxel))) > 0.0)) continue;
+    bool other = true;
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, held[i].n) > cos15) other = false;
+    if (other) add(held[i].n, held[i].p);
+  }
+  while (tool_plane_count_ > 0 && tool_plane_count_ < 3) {
+    const Vec3 x = tool_solve(hip);
+    bool added = false;
+    if (nearest_surface(field, x, reach, q, n) && near(x, q) && dot(n, x - q) < r - tol) added = add(n, q);
+    if (!added) {
+      // A gradient path from x can end on a farther sheet (a crease, a thin wall): also
+      // from the point of the sphere that leads toward the HIP, if it is inside.
+      const Vec3 to_hip = hip - x;
+      const double l = norm(to_hip);
+      const Vec3 lead = l > 0 ? x + to_hip * (r / l) : x;
+      if (l > 0 && excess(sample_value(field, lead)) > 0.0 && nearest_surface(field, lead, reach, q, n) &&
+          near(x, q) && dot(n, x - q) < r - tol)
+        added = add(n, q);
+    }
+    if (!added) break;  // the proxy is clear of the surface
+  }
+}
+
+Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out) {
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  bool update = edited && (tool_plane_count_ > 0 || was_contact_);
+  if (tool_plane_count_ > 0 && !update) {
+    bool held = false;  // does any plane hold the HIP?
+    for (int i = 0; i < tool_plane_count_; ++i)
+      if (dot(tool_planes_[i].n, hip - tool_planes_[i].p) < r) held = true;
+    if (!held) {
+      tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
+    } else {
+      const Vec3 slide = tool_solve(hip) - anchor_;
+      // Early when the proxy slid a fifth of a voxel: a tangent plane held over a curved
+      // (or, between voxels, wavy trilinear) surface lets the sphere sink by about
+      // slide^2 * curvature / 2.
+      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.04 * voxel * voxel) update = true;
+    }
+  }
+  if (tool_plane_count_ == 0 && !update) {
+    // Free motion: one value + gradient read at the HIP. Search only when a surface may
+    // be within reach (first-order distance), or the HIP entered the object.
+    const FieldValue s = sample_trilinear(field, hip);
+    const double e = excess(s.value);
+    const double gn = norm(s.gradient);
+    if (e > 0.0) update = !(excess(sample_value(field, vhip_)) > 0.0);  // starting inside: no force
+    // Where the field is flat (|e| / |grad| beyond 8 voxels: a drilled cavity, uniform
+    // empty value, air) the first-order distance says nothing: search there every n ticks.
+    else {
+      const bool flat = !(gn > 0) ? std::isfinite(s.value) : -e > 8.0 * voxel * gn;
+      update = (gn > 0 && -e < (r + voxel) * gn) || (flat && ++c_ >= params_.plane_update_period);
+    }
+  }
+  if (update) {
+    ToolPlane kept[3];
+    const int kept_count = tool_plane_count_;
+    std::copy(tool_planes_, tool_planes_ + kept_count, kept);
+    tool_rebuild(field, hip);
+    if (tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
+      // No surface within reach of the proxy while the HIP is inside: material removed
+      // around the tool (a drill), or a noisy scan. The proxy goes toward the HIP up to the
+      // surface on the way (first crossing of the segment; the plane there, the centre r
+      // before it); failing that, the planes of the tick before still hold the HIP.
+      Vec3 q;
+      if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, q)) {
+        const Vec3 n = outward_normal(field, q, normalized_or(vhip_ - hip, kept[0].n));
+        tool_planes_[0] = {n, q};
+        tool_plane_count_ = 1;
+      } else {
+        std::copy(kept, kept + kept_count, tool_planes_);
+        tool_plane_count_ = kept_count;
+      }
+    }
+    c_ = 0;
+    anchor_ = tool_solve(hip);
+    out.plane_update = true;
+  }
+  if (tool_plane_count_ > 0) {
+    out.plane.n = tool_planes_[0].n;
+    out.plane.p = tool_planes_[0].p;
+    out.plane.valid = true;
+  }
+  const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+  vhip_ = x;
+  const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
+  const double depth = norm(push);
+  if (!(depth > 0.0)) {
+    prev_target_f_ = {};
+    ramp_from_dir_ = {};
+    ramp_left_s_ = 0;
+    return {};
+  }
+  const Vec3 u = push / depth;
+  Vec3 force = u * (params_.stiffness_n_per_m * depth - params_.damping_n_s_per_m * dot(v_filt_, u));
+  if (dot(force, u) < 0.0) force = {};  // a wall pushes, never pulls
+  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u);
+  out.contact = true;
+  out.penetration_m = norm(hip - x);
+  return force;
 }
 
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
@@ -422,6 +725,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     sliding_ = false;
     recovery_ticks_left_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
   }
   if (!std::isfinite(norm(force))) {
     force = {};
@@ -462,6 +766,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     out.plane = plane_;
     prev_force_mag_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
@@ -502,6 +807,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
+  if (params_.tool_radius_m > 0.0) {
+    const Vec3 force = tool_tick(field, hip, edited, out);
+    return finish_robust(hip, force, edited, false, 0.0, out);
+  }
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
@@ -617,7 +926,13 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     prev_target_n_ = 0;
+    prev_target_f_ = {};
   }
+  return finish_robust(hip, force, edited, have_f_hip, f_hip, out);
+}
+
+HriTick HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
+                                   HriTick& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates
   if (!std::isfinite(mag)) {
@@ -642,7 +957,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   vhip_value_ = f_hip;
   out.force_n = force;
   out.vhip_m = vhip_;
-  out.plane = plane_;
+  if (!(params_.tool_radius_m > 0.0)) out.plane = plane_;
   return out;
 }
 

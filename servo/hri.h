@@ -75,6 +75,16 @@ struct HriParams {
   /// turns the edit handling off: a new snapshot is then read at the next plane update
   /// like any other, and the force steps. [1 / tick]
   double edit_max_step_fraction = 0.05;
+  /// Robust variant: radius of a spherical tool [m, world]; 0 = a point (the paper). The
+  /// HIP is the tool's centre; see HriRenderer, "Spherical tool".
+  double tool_radius_m = 0.0;
+};
+
+/// One constraint plane of the spherical tool: the tool centre x is held where
+/// n . (x - p) >= radius, (n, p) the outward normal and a point of the isosurface.
+struct ToolPlane {
+  Vec3 n;
+  Vec3 p;
 };
 
 /// The HRI servo renderer (Figure 2).
@@ -210,6 +220,25 @@ struct HriParams {
 ///   parameter 0 the version is never read (a run is bit for bit the run without the
 ///   feature), and without a version change nothing differs either. Fault ticks (zero
 ///   force) end the slew. The paper variant ignores versions (Figure 2 as printed).
+///
+/// Spherical tool (robust variant, tool_radius_m = r > 0). The HIP is the tool's centre,
+/// the VHIP (proxy) the centre of a sphere of radius r kept outside the isosurface, the
+/// HRI way: at a plane update the isosurface point q nearest the proxy within r + 1 voxel
+/// is found (Newton steps along the gradient, x <- x + N e / |grad|, at most 8 trilinear
+/// reads; a march along the normal when they do not converge) and gives the plane (N, q),
+/// N the outward normal at q; the proxy is the point nearest the HIP with
+/// N_i . (x - q_i) >= r for every held plane (god-object with several active constraints:
+/// the best of the at most 7 active subsets, closed-form solves). While the proxy so
+/// placed is still closer than r to the surface (a groove, a corner), the point nearest it
+/// gives the next plane: at most three planes. Between updates (every n ticks; early when
+/// the proxy slides half a voxel from where the planes were made, or on an edit tick) the
+/// tick reads no sample while a plane holds the HIP; in free motion it reads the value and
+/// gradient at the HIP and searches for planes only when the first-order distance
+/// -e / |grad| is below r + 1 voxel (or the HIP is inside while the proxy of the tick
+/// before is outside). Force: F = K (proxy - HIP) - B v_u u, u the unit push direction,
+/// no pull; an update that steps the force vector by more than 1 % of the limit fades the
+/// step out over recovery_time_s (direction and magnitude); edits slew as for the point.
+/// Friction and force shading do not apply to the tool (the scene refuses them).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params);
@@ -229,6 +258,14 @@ class HriRenderer final : public Renderer {
   const VirtualPlane& plane() const { return plane_; }
   const Vec3& vhip() const { return vhip_; }
   int counter() const { return c_; }
+  /// Spherical tool: planes held after the last tick (0 = free motion).
+  int tool_plane_count() const { return tool_plane_count_; }
+  const ToolPlane& tool_plane(int i) const { return tool_planes_[i]; }
+  /// Spherical tool: the centre nearest `hip` outside every held plane offset by the radius.
+  Vec3 tool_solve(const Vec3& hip) const;
+  /// Spherical tool: the isosurface point q nearest x within `reach` [m] and the outward
+  /// normal there; false if none was found.
+  bool nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q, Vec3& n) const;
   bool sliding() const { return sliding_; }
 
   /// Signed excess over the isovalue: > 0 inside, <= 0 outside; NaN counts as outside.
@@ -246,7 +283,11 @@ class HriRenderer final : public Renderer {
   VirtualPlane plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const;
   /// Surface point p from x (inside, excess e_x, |grad| grad_norm) along the outward normal
   /// at x, within twice the first-order depth plus a quarter voxel; false if none.
-  bool surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm, Vec3& p) const;
+  /// `along`: search along this unit vector instead of the outward normal at x.
+  bool surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm, Vec3& p,
+                    const Vec3* along = nullptr) const;
+  /// Robust recovery ramp of the force vector (see "Recovery time"); returns the force to send.
+  Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir);
   /// Edit ticks: the surface point p from an embedded x (deeper than surface_from reaches)
   /// marched along the outward normal at x (half-voxel steps, at most march_budget samples,
   /// 20 bisection steps); false if none.
@@ -258,6 +299,8 @@ class HriRenderer final : public Renderer {
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
+  /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
+  HriTick finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
                      HriTick& out);
@@ -267,6 +310,10 @@ class HriRenderer final : public Renderer {
   /// (its |F| = mag [N], after saturation); returns the |F| sent [N] and ends the slew when
   /// it reaches mag. Sets out.contact for a fade-out without a plane.
   double edit_slew(Vec3& force, double mag, HriTick& out);
+  /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
+  void tool_rebuild(const FieldView& field, const Vec3& hip);
+  /// Spherical tool: this tick's force (before saturation); sets out.contact, vhip_.
+  Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
   static bool long_step(const FieldView& field, const Vec3& a, const Vec3& b);
 
@@ -305,6 +352,11 @@ class HriRenderer final : public Renderer {
   bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)
   bool edit_slewing_ = false;        ///< |F| is still slewing toward the target after an edit
   Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]
+  Vec3 prev_target_f_;               ///< robust: unramped force of the tick before [N]
+  Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)
+  // Spherical tool:
+  ToolPlane tool_planes_[3];
+  int tool_plane_count_ = 0;
 };
 
 }  // namespace isotouch::servo

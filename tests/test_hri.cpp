@@ -1,7 +1,9 @@
 // HRI servo (paper Figure 2, eqs. 1-3) on analytic planes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include "hri.h"
@@ -365,6 +367,40 @@ TEST(HriRecovery, RampsAPlaneMadeAfterFreeTicks) {
   EXPECT_NEAR(f_rec, f_plain, 1e-9);       // and reaches the same force once the ramp is over
 }
 
+
+// A plane update that turns the plane turns the force over the recovery time, not in one
+// tick: the wall under a held HIP is replaced by one tilted 60 deg about the same point
+// (same snapshot version semantics off: edit_max_step_fraction = 0, so the next n-tick
+// update reads it like any plane). Truth: the two analytic normals.
+TEST(HriRecovery, PlaneTurnTurnsTheForceOverTheRamp) {
+  const Vec3 tilted{std::sin(M_PI / 3), 0.0, std::cos(M_PI / 3)};  // 60 deg from +z
+  const SampleField a = wall_field(kUp, kC), b = wall_field(tilted, kC);
+  const Vec3 hip = kC - (kUp + tilted) * 0.0005;  // 0.87 mm below both walls
+  auto run = [&](double rec) {
+    HriParams p = params(5);
+    p.recovery_time_s = rec;
+    p.edit_max_step_fraction = 0;
+    HriRenderer r(p);
+    for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);  // free ticks above
+    for (int k = 0; k < 60; ++k) r.tick(a, hip);             // pressed, the ramp over
+    double worst = 0;
+    Vec3 prev = r.tick(a, hip).force_n;
+    HriTick t;
+    for (int k = 0; k < 60; ++k) {
+      t = r.tick(b, hip);
+      const double c = dot(t.force_n, prev) / (norm(t.force_n) * norm(prev));
+      worst = std::max(worst, std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / M_PI);
+      prev = t.force_n;
+    }
+    EXPECT_NEAR(dot(t.force_n / norm(t.force_n), tilted), 1.0, 1e-9);  // ends along the new normal
+    return worst;
+  };
+  const double plain = run(0), ramped = run(0.02);
+  std::printf("plane turned 60 deg: largest direction step %.2f deg without recovery, %.2f deg with 20 ms\n", plain,
+              ramped);
+  EXPECT_NEAR(plain, 60.0, 1e-6);  // the fault: all at once
+  EXPECT_LT(ramped, 60.0 / 20 * 1.5);  // about 3 deg per tick over 20 ticks
+}
 
 // Sliding into a concave corner with n = 25: the robust variant's early update (half a
 // voxel of VHIP travel) and recovery keep the force steps near the physical rate K v.

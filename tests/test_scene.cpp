@@ -86,6 +86,19 @@ TEST(Scene, ServoOptions) {
 }
 
 // ---- issue 7: duplicate keys, overflowing numbers, ray origin range --------------------------
+TEST(Scene, SphericalTool) {
+  const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": )";
+  EXPECT_EQ(parse_scene(base + "{}}", "s.json").hri.tool_radius_m, 0.0);  // the point by default
+  EXPECT_DOUBLE_EQ(parse_scene(base + R"({"tool": {"radius_mm": 4.5}}})", "s.json").hri.tool_radius_m, 0.0045);
+  expect_error(base + R"({"tool": {"radius_mm": -1}}})", {"'servo.tool.radius_mm'", "-1"});
+  expect_error(base + R"({"tool": {"radius_mm": "big"}}})", {"'servo.tool.radius_mm'", "\"big\""});
+  expect_error(base + R"({"tool": {"radius": 2}}})", {"'servo.tool.radius'", "unknown"});
+  expect_error(base + R"({"tool": 2}})", {"'servo.tool'", "2"});
+  expect_error(base + R"({"variant": "paper", "tool": {"radius_mm": 2}}})", {"'servo.tool.radius_mm'", "paper"});
+  expect_error(base + R"({"force_shading": true, "tool": {"radius_mm": 2}}})", {"'servo.tool.radius_mm'", "shading"});
+  EXPECT_EQ(parse_scene(base + R"({"variant": "paper", "tool": {"radius_mm": 0}}})", "s.json").hri.tool_radius_m, 0.0);
+}
+
 TEST(Scene, DuplicateKeyIsAnError) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stiffness_n_per_m": 800,
                    "stiffness_n_per_m": 80000}})",

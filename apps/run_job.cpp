@@ -1235,6 +1235,11 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     if (r.t_s >= script.t_lift && r.contact) {
       ++m.lift_contact_ticks;
       m.lift_max_force_n = std::max(m.lift_max_force_n, servo::norm(r.force_n));
+      const double outward = servo::dot(r.force_n, script.contact_normal);
+      if (outward < 0) {
+        ++m.lift_inward_ticks;
+        m.lift_max_inward_force_n = std::max(m.lift_max_inward_force_n, -outward);
+      }
     }
     if (!r.contact) continue;
     ++m.contact_ticks;
@@ -1456,7 +1461,9 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                  {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
                                                             : nlohmann::ordered_json(nullptr)},
                  {"lift_contact_ticks", m.lift_contact_ticks},
-                 {"lift_max_force_n", m.lift_max_force_n}};
+                 {"lift_max_force_n", m.lift_max_force_n},
+                 {"lift_inward_ticks", m.lift_inward_ticks},
+                 {"lift_max_inward_force_n", m.lift_max_inward_force_n}};
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
@@ -1510,7 +1517,9 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                               " stroke ticks in contact (" + fmt(100.0 * double(m.stroke_contact_ticks) / double(m.stroke_ticks), 3) + " %)"
                         : std::string("no stroke in the script")) << " |\n"
      << "| lift-off | " << m.lift_contact_ticks << " contact ticks while the hand pulls the probe out, largest |F| "
-     << fmt(m.lift_max_force_n, 4) << " N |\n"
+     << fmt(m.lift_max_force_n, 4) << " N; " << m.lift_inward_ticks
+     << " of them pull the probe into the object (largest inward component " << fmt(m.lift_max_inward_force_n, 4)
+     << " N) |\n"
      << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "

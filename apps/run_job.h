@@ -161,6 +161,10 @@ struct RunMetrics {
   /// pulls the probe back out (a clean retraction has few and small).
   long lift_contact_ticks = 0;
   double lift_max_force_n = 0;
+  /// Of those, the ticks whose force pushes into the object (against the outward normal at
+  /// the first contact: the hole "grabs" the probe) and the largest such component [N].
+  long lift_inward_ticks = 0;
+  double lift_max_inward_force_n = 0;
   /// With filters in the pass list: distance [m] of the VHIP from the isosurface of the
   /// unfiltered data (gradient only), RMS and max over the contact ticks with a surface
   /// found: what smoothing moves the felt surface away from the data. has_unfiltered false

@@ -414,3 +414,56 @@ TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
   EXPECT_NEAR(m.surface_err_rms_m, std::sqrt(sum2 / double(n)), 5e-5);
   fs::remove_all(dir);
 }
+
+TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
+  // summary.json's stroke share and lift-off figures recomputed from trace.csv (physical
+  // frame; the head CT's direction is the identity) and the phases it reports.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_lift_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  sc.draw_plots = false;
+  isotouch::app::RunOptions opt;
+  opt.out_dir = dir.string();
+  opt.progress = false;
+  std::ostringstream log;
+  (void)isotouch::app::run_scene(sc, opt, log);
+  std::ifstream js(dir / "summary.json");
+  const auto j = nlohmann::json::parse(js);
+  const auto& s = j.at("script");
+  const double t_stroke = s.at("phases_s").at("stroke"), t_lift = s.at("phases_s").at("lift");
+  const auto n = s.at("contact_normal");
+  std::ifstream in(dir / "trace.csv");
+  std::string line;
+  std::getline(in, line);
+  long stroke = 0, stroke_contact = 0, lift = 0, inward = 0;
+  double lift_max = 0, inward_max = 0;
+  while (std::getline(in, line)) {
+    std::vector<double> v;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+    const bool contact = v[10] != 0;
+    if (v[0] >= t_stroke && v[0] < t_lift) {
+      ++stroke;
+      stroke_contact += contact;
+    }
+    if (v[0] >= t_lift && contact) {
+      ++lift;
+      lift_max = std::max(lift_max, std::sqrt(v[7] * v[7] + v[8] * v[8] + v[9] * v[9]));
+      const double out = v[7] * n[0].get<double>() + v[8] * n[1].get<double>() + v[9] * n[2].get<double>();
+      if (out < 0) {
+        ++inward;
+        inward_max = std::max(inward_max, -out);
+      }
+    }
+  }
+  ASSERT_GT(stroke, 100);
+  EXPECT_EQ(s.at("stroke_ticks").get<long>(), stroke);
+  EXPECT_EQ(s.at("stroke_contact_ticks").get<long>(), stroke_contact);
+  EXPECT_DOUBLE_EQ(s.at("stroke_contact_fraction").get<double>(), double(stroke_contact) / double(stroke));
+  EXPECT_EQ(s.at("lift_contact_ticks").get<long>(), lift);
+  EXPECT_GT(lift, 0) << "the release at lift-off is in contact for a while";
+  EXPECT_NEAR(s.at("lift_max_force_n").get<double>(), lift_max, 1e-6);  // trace.csv keeps 9 digits
+  EXPECT_EQ(s.at("lift_inward_ticks").get<long>(), inward);
+  EXPECT_NEAR(s.at("lift_max_inward_force_n").get<double>(), inward_max, 1e-6);
+  fs::remove_all(dir);
+}

@@ -842,7 +842,7 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       << std::abs(e.inside_voxels_before - e.inside_voxels_after) << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
       << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
       << " B\n";
-  for (const std::string& n : e.notes) log << "edits    note: " << n << "\n";
+  for (const std::string& note : e.notes) log << "edits    note: " << note << "\n";
 
   write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
   // The edited volume and its isosurface; a failure is said, never fatal.
@@ -1220,6 +1220,19 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     unfiltered = engine::run_chain_cpu(vol, {engine::PassDesc::gradient()}).samples;
     unfiltered->background = truth.background;
   }
+  // One contact tick's surface error (true distance, first-order estimate) into the figures.
+  const auto add_error = [&](const SurfaceDistance& d, double fo) {
+    m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
+    if (d.found) {
+      ++found;
+      err2 += d.distance_m * d.distance_m;
+      m.surface_err_max_m = std::max(m.surface_err_max_m, d.distance_m);
+    } else {
+      ++m.surface_err_not_found_ticks;
+    }
+    fo2 += fo * fo;
+    m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
+  };
   const servo::TraceRow* prev = nullptr;
   for (const auto& r : trace) {
     ns.push_back(r.tick_ns);
@@ -1267,19 +1280,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
       m.max_force_n = std::max(m.max_force_n, f);
       m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
       const auto it = edits->edited_distance.find(long(&r - trace.data()));
-      if (it != edits->edited_distance.end()) {
-        const SurfaceDistance& d = it->second.d;
-        m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
-        if (d.found) {
-          ++found;
-          err2 += d.distance_m * d.distance_m;
-          m.surface_err_max_m = std::max(m.surface_err_max_m, d.distance_m);
-        } else {
-          ++m.surface_err_not_found_ticks;
-        }
-        fo2 += it->second.first_order_m * it->second.first_order_m;
-        m.first_order_err_max_m = std::max(m.first_order_err_max_m, it->second.first_order_m);
-      }
+      if (it != edits->edited_distance.end()) add_error(it->second.d, it->second.first_order_m);
       continue;
     }
     if (unfiltered) {
@@ -1293,18 +1294,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     m.max_force_n = std::max(m.max_force_n, f);
     m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
     // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
-    const SurfaceDistance d = distance_to_isosurface(truth, hp.tau, r.vhip_m);
-    m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
-    if (d.found) {
-      ++found;
-      err2 += d.distance_m * d.distance_m;
-      m.surface_err_max_m = std::max(m.surface_err_max_m, d.distance_m);
-    } else {
-      ++m.surface_err_not_found_ticks;
-    }
-    const double fo = first_order_distance(truth, hp.tau, r.vhip_m);
-    fo2 += fo * fo;
-    m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
+    add_error(distance_to_isosurface(truth, hp.tau, r.vhip_m), first_order_distance(truth, hp.tau, r.vhip_m));
   }
   // Steps of |F| that the contact-only figure cannot see (issue 7): a drop to zero while
   // the HIP is still inside the object, and any step between two consecutive ticks.

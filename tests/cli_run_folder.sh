@@ -8,6 +8,14 @@
 set -u
 exe=$1 scene=$2 out=$3
 fail() { echo "FAIL: $*"; exit 1; }
+# Waits (at most 30 s) until summary.json says the run in the folder is running.
+wait_running() {
+  for _ in $(seq 1 600); do
+    grep -q '"running"' "$out/summary.json" 2>/dev/null && return 0
+    sleep 0.05
+  done
+  return 1
+}
 rm -rf "$out"; mkdir -p "$out"
 echo "earlier run's report" > "$out/report.md"
 echo '{"status": "complete"}' > "$out/summary.json"
@@ -15,11 +23,7 @@ echo "the user's own file" > "$out/notes.txt"
 
 "$exe" run "$scene" --out "$out" --quiet > "$out.log" 2>&1 &
 pid=$!
-for _ in $(seq 1 600); do
-  grep -q '"running"' "$out/summary.json" 2>/dev/null && break
-  sleep 0.05
-done
-grep -q '"running"' "$out/summary.json" || fail "summary.json never said running"
+wait_running || fail "summary.json never said running"
 kill -INT "$pid"
 wait "$pid"; rc=$?
 cat "$out.log"
@@ -42,10 +46,7 @@ grep -q '"status": "complete"' "$out/summary.json" || fail "a finished run's sum
 # SIGTERM: exit 143, interrupted.
 "$exe" run "$scene" --out "$out" --quiet > "$out.log" 2>&1 &
 pid=$!
-for _ in $(seq 1 600); do
-  grep -q '"running"' "$out/summary.json" 2>/dev/null && break
-  sleep 0.05
-done
+wait_running || fail "summary.json never said running"
 kill -TERM "$pid"
 wait "$pid"; rc=$?
 [ "$rc" -eq 143 ] || fail "exit $rc after SIGTERM, expected 143"

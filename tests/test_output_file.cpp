@@ -15,9 +15,13 @@
 
 #include <gtest/gtest.h>
 
+#include "temp_dir.h"
+
 #include "output_file.h"
 
 namespace fs = std::filesystem;
+using isotouch::test::slurp;
+using TempDir = isotouch::test::TempDir;
 using isotouch::io::OutputError;
 using isotouch::io::OutputKind;
 using isotouch::io::classify_output;
@@ -26,24 +30,7 @@ using isotouch::io::write_output;
 
 namespace {
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    std::string t = (fs::temp_directory_path() / "isotouch-output-test-XXXXXX").string();
-    path = ::mkdtemp(t.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 bool is_char_device(const fs::path& p) {
   struct stat st {};

@@ -15,6 +15,8 @@
 
 #include <gtest/gtest.h>
 
+#include "temp_dir.h"
+
 #include "files.h"
 #include "record.h"
 #include "render_cmd.h"
@@ -23,28 +25,13 @@
 #include "volume_write.h"
 
 namespace fs = std::filesystem;
+using isotouch::test::slurp;
+using TempDir = isotouch::test::TempDir;
 using namespace isotouch;
 
 namespace {
 
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    std::string t = (fs::temp_directory_path() / "isotouch-kinds-XXXXXX").string();
-    path = ::mkdtemp(t.data());
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 mode_t type_of(const fs::path& p) {
   struct stat st {};

@@ -49,8 +49,8 @@ struct Table1Row {
   double hri_paper_us = 0;  ///< HRI, Figure 2 exactly as printed (servo::Variant::kPaper)
   double blezek_us = 0;     ///< Blezek-Robb
   double avila_us = 0;      ///< Avila-Sobierajski
-  /// HRI as shipped on the bricked snapshot of the same samples (issue 8 item 4:
-  /// core::bricked_input_from_dense + make_bricked_field), fp32 and fp16 samples.
+  /// HRI as shipped on the bricked snapshot of the same samples
+  /// (core::bricked_input_from_dense + make_bricked_field), fp32 and fp16 samples.
   double hri_bricked_us = 0;
   double hri_fp16_us = 0;
 };

@@ -1,4 +1,4 @@
-// bench_edit.cpp - `isotouch bench edit` (issue 9, item 7). See bench_edit.h.
+// bench_edit.cpp - `isotouch bench edit`. See bench_edit.h.
 #include "bench_cmd.h"
 #include "vdb_io.h"
 #include "bench_edit.h"

@@ -1,6 +1,5 @@
 // bench_edit.h - `isotouch bench edit`: edit-to-haptics latency, sustained edit rate and
-// servo misses while sculpting the chest CT, against a dense full recompute (issue 9,
-// item 7). OWNER: bench-edit helper.
+// servo misses while sculpting the chest CT, against a dense full recompute.
 //
 // One run, one process, on the scene's volume (default scenes/chest.json: its isovalue,
 // inside, passes and sample format):

@@ -1,4 +1,4 @@
-// bench_engine.cpp - `isotouch bench engine` (issue 8, item 7). See bench_engine.h.
+// bench_engine.cpp - `isotouch bench engine`. See bench_engine.h.
 #include "bench_cmd.h"
 #include "bench_engine.h"
 

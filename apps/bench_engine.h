@@ -1,4 +1,4 @@
-// bench_engine.h - `isotouch bench engine` (issue 8, item 7): the engine's passes dense and
+// bench_engine.h - `isotouch bench engine`: the engine's passes dense and
 // sparse, on the GPU (Vulkan; lavapipe here) and in the one-thread CPU reference, on the head
 // CT, the chest CT and a 256^3 synthetic volume; bricks active, published snapshot bytes
 // against dense fp32, each pass's effective bandwidth against this machine's memcpy

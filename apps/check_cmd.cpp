@@ -1,4 +1,4 @@
-// check_cmd.cpp - `isotouch check --all` (issue 8, item 6). See check_cmd.h.
+// check_cmd.cpp - `isotouch check --all`. See check_cmd.h.
 #include "check_cmd.h"
 #include "vdb_io.h"
 
@@ -147,7 +147,7 @@ int run_check_all(const CheckAllOptions& opt, std::ostream& out) {
       << "passes      ";
   for (std::size_t i = 0; i < passes.size(); ++i) out << (i ? ", " : "") << passes[i].label();
   out << (opt.scene_path.empty() ? " (default list)"
-                                 : " (default list: scene files do not list passes yet, issue 8 item 4)")
+                                 : " (default list)")
       << "\n"
       << "rule        GPU vs CPU " << bound_text
       << (cpu_device ? " (a CPU device does the same float operations in the same order)"

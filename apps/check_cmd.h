@@ -1,4 +1,4 @@
-// check_cmd.h - `isotouch check --all VOLUME [--scene S]` (issue 8, item 6): every engine
+// check_cmd.h - `isotouch check --all VOLUME [--scene S]`: every engine
 // pass on the GPU against its one-thread CPU reference, and the gradient against OpenVDB's
 // central differences as an independent reference.
 #pragma once

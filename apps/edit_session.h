@@ -1,9 +1,7 @@
-// edit_session.h - one edited volume kept in step with what the servo feels (issue 9,
-// items 1-3): the Sculptor (raw volume, GPU brushes, undo), the LiveField (snapshot updated
+// edit_session.h - one edited volume kept in step with what the servo feels: the
+// Sculptor (raw volume, GPU brushes, undo), the LiveField (snapshot updated
 // brick by brick) and the publication into the servo's TripleBuffer. Used by the scene
 // runner (timeline and button edits), `isotouch replay` and `isotouch bench edit`.
-// OWNER: scene-edits helper. The lead wrote this contract; the owner may add members but
-// keeps these names and meanings.
 //
 // Determinism (what record / replay relies on): the same events applied in the same order
 // to the same volume give bit-identical snapshots, whether the brushes run on the GPU or on

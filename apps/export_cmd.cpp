@@ -1,4 +1,4 @@
-// export_cmd.cpp - `isotouch export` (issue 9, item 4); see export_cmd.h.
+// export_cmd.cpp - `isotouch export`; see export_cmd.h.
 #include "export_cmd.h"
 #include "volume_write.h"
 

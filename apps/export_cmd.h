@@ -1,5 +1,5 @@
 // export_cmd.h - `isotouch export`: a volume or a scene's volume to OpenVDB .vdb and its
-// isosurface to STL / OBJ / PLY (issue 9, item 4).
+// isosurface to STL / OBJ / PLY.
 #pragma once
 #include <optional>
 #include <ostream>

@@ -1,5 +1,5 @@
 // record.h - recordings of a run: every device input, button and edit with its time, and
-// the forces sent (issue 9, item 5). `isotouch run --record FILE` writes one;
+// the forces sent. `isotouch run --record FILE` writes one;
 // `isotouch replay FILE` plays it back through the same renderer and edit pipeline and
 // checks that the forces, VHIPs and snapshot versions are reproduced exactly (the simulation
 // is deterministic).

@@ -37,7 +37,7 @@ struct Row {
   ErrorFigures e;
 };
 
-// One snapshot format on one scene (issue 8 item 5): HRI along the recorded stroke on it.
+// One snapshot format on one scene: HRI along the recorded stroke on it.
 struct FormatRow {
   std::string scene;
   SnapshotVariant v;  // field dropped after the run

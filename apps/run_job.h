@@ -137,7 +137,7 @@ struct RunMetrics {
   bool picture_drawn = false;
   std::string picture_note;
 
-  // Engine (issue 8 items 3-5): what computed the published samples.
+  // Engine: what computed the published samples.
   std::string engine_mode;     ///< "dense" or "sparse" (the scene's engine.mode)
   std::string engine_ran;      ///< what actually computed the published snapshot (GPU)
   std::string engine_fallback; ///< why the sparse GPU chain was not used; empty if it was (or mode is dense)

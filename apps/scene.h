@@ -33,7 +33,7 @@ struct PassSpec {
   int halo = 1;           ///< brick_minmax: voxels added on each side of a brick, 0..8
 };
 
-/// How the scene's samples are computed and published (issue 8 items 3-5).
+/// How the scene's samples are computed and published.
 struct EngineSpec {
   /// Passes in order; the default is today's single gradient pass. Filters (gaussian,
   /// closing) come before "gradient", which is required (the servo reads its samples).
@@ -72,7 +72,7 @@ struct TimedEdit {
   double duration_s = 0;          ///< > 0: a stroke, one application every edits.every_ticks ticks over [t_s, t_s + duration_s)
 };
 
-/// The "edits" section (issue 9 item 3): brush defaults, a timeline, the device button.
+/// The "edits" section: brush defaults, a timeline, the device button.
 struct EditsSpec {
   bool present = false;               ///< the scene has an "edits" section
   BrushSpec brush;                    ///< defaults, and the button's brush

@@ -54,7 +54,7 @@ Playback playback(servo::Renderer& r, const SweepScene& s);
 /// The same on another snapshot of the scene's samples (e.g. a bricked or compact one).
 Playback playback(servo::Renderer& r, const SweepScene& s, const servo::SampleField& field);
 
-/// One published snapshot of a sweep scene's samples (issue 8 item 5).
+/// One published snapshot of a sweep scene's samples.
 struct SnapshotVariant {
   std::string name;  ///< "fp32 dense", "fp32 bricked", "fp16 bricked", "unorm16 bricked"
   std::shared_ptr<const servo::SampleField> field;

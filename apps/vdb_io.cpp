@@ -1,4 +1,4 @@
-// vdb_io.cpp - OpenVDB in and out, and the isosurface as STL / OBJ / PLY (issue 9, item 4).
+// vdb_io.cpp - OpenVDB in and out, and the isosurface as STL / OBJ / PLY.
 // The only translation unit besides openvdb_check.cpp that includes OpenVDB, and the only
 // one that includes Assimp (mesh file writers). See vdb_io.h for the frames and contracts.
 #include "vdb_io.h"

@@ -1,4 +1,4 @@
-// vdb_io.h - OpenVDB in and out, and the isosurface as a mesh (issue 9, item 4).
+// vdb_io.h - OpenVDB in and out, and the isosurface as a mesh.
 //
 // A plain C++ API: every OpenVDB include stays in vdb_io.cpp (slow to compile), every mesh
 // library include too (Assimp, Debian libassimp-dev).

@@ -1,4 +1,4 @@
-// brick_field.h - the sparse (bricked) published snapshot (issue 8, items 4 and 5).
+// brick_field.h - the sparse (bricked) published snapshot.
 // Part of isotouch::core, header-only. The storage (BrickStore, the compact sample
 // formats and their decoders) is in sample_field.h, the reads in field_view.h; this file
 // builds a bricked SampleField (make_bricked_field, bricked_input_from_dense), encodes the

@@ -36,7 +36,7 @@ struct FieldValue {
 /// before, extended the border voxels to infinity: an object touching the border went
 /// on forever, and its normals there were the border's.)
 ///
-/// The memory seam (issue 8 item 4): the only place that touches sample memory is
+/// The memory seam: the only place that touches sample memory is
 /// cell(): the 8 corners of an in-grid cell as a base pointer and three strides, and
 /// voxel() for the checked border path. A bricked field (brick_field.h: brick table +
 /// pool of 8^3 bricks stored as 9^3 samples, so a cell never straddles two bricks)

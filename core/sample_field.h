@@ -1,5 +1,5 @@
 // sample_field.h - the plane-ready sample format the engine publishes and the servo reads,
-// dense or bricked (issue 8 items 4 and 5), and how to decode a stored sample.
+// dense or bricked, and how to decode a stored sample.
 // Part of isotouch::core (engine/ writes it, servo/ reads it through core::FieldView).
 // Building a bricked field (the builders, the encoders, byte accounting) is brick_field.h.
 #pragma once

@@ -1,6 +1,5 @@
 // brush.h - sculpting brushes on the raw volume, on the GPU with a CPU reference, and the
-// C++ API the sculpting app and the scene timeline call (issue 9, items 1 and 3).
-// OWNER: brushes helper.
+// C++ API the sculpting app and the scene timeline call.
 //
 // THE BRUSH MODEL
 // Frames: the brush centre is in grid-world [m] (core::Grid: world = origin + spacing *

@@ -1,5 +1,4 @@
-// edit_history.h - per-stroke undo / redo of volume edits as brick backups (issue 9,
-// item 3). OWNER: brushes helper.
+// edit_history.h - per-stroke undo / redo of volume edits as brick backups.
 //
 // Bricks: the 8^3 bricks of core/brick_field.h, ids linear, x fastest, ceil(dims / 8) per
 // axis; brick (bx, by, bz) holds the voxels [8 bx, min(8 bx + 8, nx)) x ... (clipped at the

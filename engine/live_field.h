@@ -1,5 +1,5 @@
-// live_field.h - the published snapshot of a volume that is being edited (issue 9, item 1).
-// OWNER: live-field helper. This header is the contract that the scene runner
+// live_field.h - the published snapshot of a volume that is being edited.
+// This header is the contract that the scene runner
 // (apps/edit_session.*), `isotouch bench edit` and `isotouch replay` code against; the owner
 // may add members but keeps these names and meanings.
 //

@@ -1,5 +1,5 @@
 // passes.h - a chain of compute passes over one volume, GPU-resident between passes,
-// and its one-thread CPU reference (issue 8, item 3).
+// and its one-thread CPU reference.
 //
 // A scene lists the passes it needs as PassDesc {kind, parameters}; PassChain creates
 // only the pipelines and buffers that list needs, uploads the volume once, records every

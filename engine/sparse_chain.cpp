@@ -1,4 +1,4 @@
-// sparse_chain.cpp - the sparse GPU engine (issue 8 item 4): the chain's filters, gradient
+// sparse_chain.cpp - the sparse GPU engine: the chain's filters, gradient
 // and brick min/max computed only on candidate bricks, one workgroup per brick
 // (shaders/sparse_brick.comp), published as a bricked core::SampleField.
 //

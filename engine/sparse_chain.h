@@ -1,6 +1,6 @@
-// sparse_chain.h - the sparse GPU engine (issue 8, item 4): passes computed only on the
+// sparse_chain.h - the sparse GPU engine: passes computed only on the
 // bricks whose value range can straddle the isovalue, published as a bricked SampleField
-// (core/brick_field.h). OWNER: gpu-sparse helper. This header is the contract that
+// (core/brick_field.h). This header is the contract that
 // bench engine (apps/bench_engine.cpp) and the scene runner (apps/run_job.cpp) code
 // against; the owner may add members but keeps these names and meanings.
 #pragma once

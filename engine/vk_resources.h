@@ -1,6 +1,6 @@
 // vk_resources.h - buffers with a memory intent, staging, compute pipelines, barriers.
 //
-// The layer the compute passes stand on (issue 8, item 2). Nothing here assumes that
+// The layer the compute passes stand on. Nothing here assumes that
 // device memory is host-visible: compute passes read and write DeviceLocal buffers, the
 // host writes Upload buffers and reads Readback buffers, and copies between them are
 // recorded into the same command buffer as the passes (record_copy + the barriers below).

@@ -777,7 +777,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   lost_s_ = 0;
   ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);  // recovery ramp: this tick's period [s]
   if (!started_ || resync_) restart_at(hip);
-  // Edits (issue 9 item 2): a new snapshot version. Nothing read from the old snapshot
+  // Edits: a new snapshot version. Nothing read from the old snapshot
   // (the VHIP's cached value, the held plane's |grad|) is used on it.
   const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version());
   bool covered_free_vhip = false;  // a free VHIP outside in the old snapshot: a contact point now

@@ -68,7 +68,7 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
-  /// Robust variant, edits (source: issue 9 item 2): the largest change of the force
+  /// Robust variant, edits: the largest change of the force
   /// vector F (hence of |F| and of its direction) an edit may cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
   /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
   /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
@@ -191,7 +191,7 @@ struct ToolPlane {
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
 ///   plane (the paper's version leaves it at the temporary HIP when that is in front).
-/// - Edits (issue 9 item 2), when edit_max_step_fraction > 0: a tick whose snapshot has
+/// - Edits, when edit_max_step_fraction > 0: a tick whose snapshot has
 ///   another FieldView::version than the last sane tick's is an edit tick. On it the plane
 ///   is re-evaluated at once (not at the next n-tick update) with the update rules above,
 ///   reading the VHIP's value and |grad| from the new snapshot (nothing cached from the old
@@ -346,7 +346,7 @@ class HriRenderer final : public Renderer {
   double lost_s_ = 0;      ///< time spent in faults since the last sane tick [s]
   double vhip_value_ = 0;  ///< field value at vhip_ when vhip_value_known_
   bool vhip_value_known_ = false;
-  // Robust variant, edits (issue 9 item 2; see the class docs, "Edits"):
+  // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version
   bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)

@@ -1,5 +1,5 @@
 #version 450
-// Brushes (issue 9 item 1; layout: shaders/isotouch_shared.h, "brushes"; model:
+// Brushes (layout: shaders/isotouch_shared.h, "brushes"; model:
 // engine/brush.h). One 8x8x8 workgroup per touched 8^3 brick, one invocation per voxel.
 // Every voxel inside the brush gets its new value from its own pre-edit value (read
 // before it is written, by this invocation only) and, for smooth, its face neighbours

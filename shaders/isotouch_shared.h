@@ -124,7 +124,7 @@ struct BrickMinMaxPush {
   uint pad0;
 };
 
-// ---- raycast (issue 10; owner: raycaster) -------------------------------------------
+// ---- raycast (issue 10) -------------------------------------------
 // First-hit isosurface ray caster: four passes (raycast_march, raycast_args, raycast_shade,
 // raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
 // engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, 8x8 tiles; shade: one
@@ -257,7 +257,7 @@ struct RaycastCounter {
 };
 // ---- end raycast ----------------------------------------------------------------------
 
-// ---- sparse chain (issue 8 item 4; owner: gpu-sparse) ---------------------------------
+// ---- sparse chain ---------------------------------
 // shaders/sparse_brick.comp, engine/sparse_chain.cpp, CPU reference engine/sparse_cpu.cpp.
 // One workgroup per candidate 8^3 brick over its raw region (brick + 1 voxel below, + 2
 // above for the gradient of the 9^3 stored samples, + the filters' total radius R per
@@ -312,7 +312,7 @@ struct SparseBrickPush {
 };
 // ---- end sparse chain -----------------------------------------------------------------
 
-// ---- brushes (issue 9 item 1; owner: brushes) -----------------------------------------
+// ---- brushes -----------------------------------------
 // shaders/brush.comp, engine/brush.cpp, CPU reference engine/brush_cpu.cpp; the model is
 // documented in engine/brush.h. One 8x8x8 workgroup per touched 8^3 brick (a box dispatch
 // over the brick box the brush's voxel-space bounding box touches; one dispatch per z-chunk

@@ -1,4 +1,4 @@
-# `isotouch check --all` (issue 8, item 6): run EXE with ARGS ('|'-separated), require exit
+# `isotouch check --all`: run EXE with ARGS ('|'-separated), require exit
 # code RC and output (stdout + stderr) matching REGEX; with RC 0 also no validation message
 # on stderr (engine/vk_context.cpp prints them as "isotouch: Vulkan validation: ...").
 # Usage: cmake -DEXE=isotouch "-DARGS=check|--all|file.mhd|--validation" -DRC=0 "-DREGEX=PASS" -P cli_check_all.cmake

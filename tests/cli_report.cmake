@@ -31,7 +31,7 @@ endif()
 if(NOT md MATCHES "K = [0-9.e+]+ N/m, B = [0-9.e+-]+ N s/m, force limit [0-9.e+]+ N")
   message(FATAL_ERROR "servo parameters not printed from the data")
 endif()
-# Compact samples (issue 8 item 5): sample_formats.csv has its header and, per scene, the four
+# Compact samples: sample_formats.csv has its header and, per scene, the four
 # snapshots; bricked bytes below dense, compact (8 B per sample) below bricked fp32 (16 B);
 # the markdown has the table and a computed conclusion per format.
 if(NOT EXISTS ${OUT}/sample_formats.csv)

@@ -1,4 +1,4 @@
-// bench engine (issue 8, item 7): the computing parts of `isotouch bench engine` against
+// bench engine: the computing parts of `isotouch bench engine` against
 // independent computations: peak RSS of children that allocate a known amount (fork, and
 // coreutils dd through exec), the minimum-bytes formula from the sample layout, ratios and
 // percents recomputed from a row's own columns, brick counts from ceil(dims / 8), the active

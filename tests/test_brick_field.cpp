@@ -1,4 +1,4 @@
-// test_brick_field.cpp - the bricked snapshot (issue 8 items 4 and 5) against the dense one
+// test_brick_field.cpp - the bricked snapshot against the dense one
 // and against brute force written here from the contract in core/brick_field.h:
 // - fp32 bricked reads are bit-identical to dense in every cell whose lower corner lies in
 //   an active brick, and on the same side of the isosurface everywhere else in the grid;

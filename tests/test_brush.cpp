@@ -1,4 +1,4 @@
-// Brushes (issue 9 item 1): every brush on the GPU against the CPU reference bit for bit
+// Brushes: every brush on the GPU against the CPU reference bit for bit
 // (lavapipe), on a synthetic volume and the head CT, at the border, straddling brick
 // borders, with small bindings (z-chunks); the CPU reference against brute-force formulas
 // written here in double (falloff profile of a carve on a constant volume, add never past

@@ -1,4 +1,4 @@
-// Undo / redo (issue 9 item 3): per-stroke brick backups restore the volume bit for bit
+// Undo / redo: per-stroke brick backups restore the volume bit for bit
 // in both directions (CPU Sculptor and GPU Sculptor, whose device copy must follow), a
 // brick touched twice in a stroke keeps its first backup, a new stroke after undo drops
 // the redo branch, the memory limit drops the oldest strokes; validation layer on.

@@ -1,4 +1,4 @@
-// Edits in scenes (issue 9 items 3 and 6): app::EditSession (undo / redo bit for bit, the
+// Edits in scenes: app::EditSession (undo / redo bit for bit, the
 // snapshot it publishes), the headless loop's after-tick hook (what it publishes, the next
 // tick reads), run_scene with a timeline (carve at the VHIP lands at that tick's VHIP; the
 // removed volume) and the drill-skull scene (the burr goes through the bone).

@@ -1,5 +1,5 @@
 // test_field_view.cpp - core::FieldView and core::Isosurface against brute force written
-// here from the definitions (issue 8 item 1): trilinear weights per corner, the voxel
+// here from the definitions: trilinear weights per corner, the voxel
 // outside the grid = {background, 0, 0, 0}, the excess sign rule.
 #include <gtest/gtest.h>
 

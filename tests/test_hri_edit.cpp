@@ -1,4 +1,4 @@
-// HRI robust variant following edits (issue 9 item 2) on analytic fields, servo only.
+// HRI robust variant following edits on analytic fields, servo only.
 //
 // An "edit" is a second published field (SampleField::version + 1) with the surface moved
 // in (carve) or out (add). Truth comes from the analytic shapes (sim/analytic_fields.h:
@@ -28,7 +28,7 @@ namespace {
 constexpr double kVoxel = 1e-3;  // voxel [m] of every field here
 constexpr double kK = 800.0;     // stiffness [N/m]
 constexpr double kLimit = 3.3;   // force limit [N]
-constexpr double kFrac = 0.05;   // the bound of issue 9 item 2
+constexpr double kFrac = 0.05;   // the edit slew's bound: 5 % of the force limit per tick
 constexpr double kStep = kFrac * kLimit;  // largest |F| change per tick an edit may cause [N]
 constexpr double kX = 0.016, kY = 0.016;  // the probe's x, y [m] (centre of the 32 mm box)
 

@@ -1,4 +1,4 @@
-// LiveField (issue 9 item 1): the edited volume's snapshot updated brick by brick.
+// LiveField: the edited volume's snapshot updated brick by brick.
 // Truth from outside the code under test:
 // - after every edit (engine::apply_brush_cpu: add, carve, smooth, drill, small and large,
 //   at the border, bricks turning active -> uniform and back) the snapshot equals a fresh

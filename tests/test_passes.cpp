@@ -1,4 +1,4 @@
-// Filter passes (issue 8, item 3): every pass on the GPU against its CPU reference, with
+// Filter passes: every pass on the GPU against its CPU reference, with
 // the validation layer on (synchronization validation too) and analytic truth from
 // outside the code: Gaussian of a constant / ramp / delta, closing of a hole / plateau,
 // brick min/max against brute force over the halo'd region.

@@ -1,4 +1,4 @@
-// Recordings (issue 9 item 5, apps/record.h): the JSON-lines format round-trips every
+// Recordings (apps/record.h): the JSON-lines format round-trips every
 // double bit for bit (random bit patterns incl. subnormals, -0.0, huge), the save is atomic
 // (a write that fails - the file size limit in a child process - leaves the old file
 // whole), bad files are refused with the file, the line, the field and the value named,

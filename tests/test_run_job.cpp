@@ -200,7 +200,7 @@ TEST(RunJob, NoContactGivesNullErrorsNotZero) {
   fs::remove_all(out);
 }
 
-// ---- issue 8 item 3: dense against bricked on the shipped scenes ------------------------------
+// ---- dense against bricked on the shipped scenes ------------------------------
 // Each shipped scene runs twice, "engine": {"mode": "dense"} and {"mode": "sparse", "samples":
 // "fp32"}, everything else as shipped; the figures come from the two runs' summary.json.
 // - Contact ticks within 1 % (the issue's figure).

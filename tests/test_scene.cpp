@@ -138,7 +138,7 @@ TEST(Scene, SyntheticSpacingRange) {
   EXPECT_NO_THROW(parse_scene(pre + "0.1" + post, "ok.json"));
 }
 
-// ---- issue 8 items 3-5: the "engine" section --------------------------------------------------
+// ---- the "engine" section --------------------------------------------------
 namespace {
 std::string with_engine(const std::string& engine) {
   return R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "engine": )" + engine + "}";
@@ -221,7 +221,7 @@ TEST(Scene, EnginePassListCheckedByTheEngine) {
   EXPECT_EQ(isotouch::app::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
 }
 
-// The "edits" section (issue 9 item 3): brush defaults, timeline, button, undo limit.
+// The "edits" section: brush defaults, timeline, button, undo limit.
 TEST(Scene, EditsSectionParses) {
   const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
       "brush": {"kind": "drill", "radius_mm": 3, "force_threshold_n": 0.7, "rate": 500, "density_scale": 20},

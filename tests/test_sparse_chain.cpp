@@ -1,4 +1,4 @@
-// Sparse chain (issue 8 item 4): the GPU sparse chain and its CPU reference against the
+// Sparse chain: the GPU sparse chain and its CPU reference against the
 // dense CPU chain (run_chain_cpu: truth from outside the sparse code), the validation layer
 // on (any message fails):
 // - every stored sample (729 per active brick, inside the grid) is bit-identical to the

@@ -1,4 +1,4 @@
-// test_vdb_io.cpp - OpenVDB in and out, mesh export (issue 9, item 4; apps/vdb_io.h).
+// test_vdb_io.cpp - OpenVDB in and out, mesh export (apps/vdb_io.h).
 // Truth from outside the code under test: analytic spheres (area 4 pi r^2, volume), brute
 // force edge counts, our own tiny STL/OBJ/PLY readers, OpenVDB's own level-set sphere, and
 // a child process killed with SIGKILL while it saves. OpenVDB only through apps/vdb_io.h.

@@ -15,6 +15,7 @@
 #include "files.h"
 #include "gradient_pass.h"
 #include "servo_thread.h"
+#include "sim_device_io.h"
 #include "synthetic.h"
 #include "baselines.h"
 #include "brick_field.h"
@@ -25,6 +26,27 @@
 #include "vk_context.h"
 
 namespace isotouch::app {
+using eval::median_ns_per_tick;
+using eval::prepare_sweep_scene;
+using eval::reference_params;
+using io::write_file_atomic;
+using sim::make_touch_script;
+using sim::SimDevice;
+using sim::SimDeviceIO;
+using core::SampleField;
+using core::Vec3;
+using eval::SweepScene;
+using servo::BaselineParams;
+using servo::HriParams;
+using servo::Intersection;
+using servo::NormalSource;
+using servo::Renderer;
+using servo::ServoThread;
+using servo::ServoThreadConfig;
+using servo::TripleBuffer;
+using servo::Variant;
+using sim::ScriptParams;
+using sim::TouchScript;
 
 std::string load_average() {
   std::ifstream f("/proc/loadavg");

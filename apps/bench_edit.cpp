@@ -35,6 +35,15 @@
 #endif
 
 namespace isotouch::app {
+using eval::median;
+using eval::percentile;
+using io::load_any_volume;
+using io::load_scene;
+using io::write_file_atomic;
+using io::Scene;
+using session::EditEvent;
+using session::EditOutcome;
+using session::EditSession;
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
@@ -203,7 +212,7 @@ struct Csv {
 /// One timed edit. Times [ms]; NaN where not measured.
 struct EditRecord {
   double radius_mm = 0;
-  engine::BrushKind kind = engine::BrushKind::kCarve;
+  session::BrushKind kind = session::BrushKind::kCarve;
   bool changed = false;           ///< the brush changed some voxel (a snapshot was published)
   bool seen = false;              ///< the servo read the new snapshot within kSeenTimeoutS
   double total_ms = kNaN;         ///< submitted -> first tick reading it
@@ -214,9 +223,9 @@ struct EditRecord {
   double dirty = kNaN, recomputed = kNaN;  ///< bricks
 };
 
-engine::Brush make_brush(engine::BrushKind k, const core::Vec3& centre, double radius_m,
-                         const engine::BrushTargets& t) {
-  engine::Brush b;
+session::Brush make_brush(session::BrushKind k, const core::Vec3& centre, double radius_m,
+                         const session::BrushTargets& t) {
+  session::Brush b;
   b.kind = k;
   b.centre_m = centre;
   b.radius_m = radius_m;
@@ -243,9 +252,9 @@ struct Rig {
   servo::TripleBuffer<core::SampleField> published;
   std::unique_ptr<servo::HriRenderer> hri;
   std::unique_ptr<VersionSpy> spy;
-  servo::TouchScript script;
-  std::unique_ptr<servo::SimDevice> device;
-  std::unique_ptr<servo::SimDeviceIO> io;
+  sim::TouchScript script;
+  std::unique_ptr<sim::SimDevice> device;
+  std::unique_ptr<sim::SimDeviceIO> io;
   double rate_hz = 4000;
   std::string setup_note;  // what the system refused (SCHED_FIFO, pinning, mlock), once
   std::string scheduling;  // what the servo got
@@ -265,7 +274,7 @@ struct Rig {
 };
 
 /// Applies `b` through the session, publishes, waits for the servo to read it.
-EditRecord timed_live_edit(EditSession& session, Rig& rig, const engine::Brush& b) {
+EditRecord timed_live_edit(EditSession& session, Rig& rig, const session::Brush& b) {
   EditRecord r;
   r.radius_mm = b.radius_m * 1e3;
   r.kind = b.kind;
@@ -315,7 +324,7 @@ void period_stats(const servo::ServoThread& s, Phase& p) {
 }
 
 /// Copies the voxels of the brick box of `b` (the only voxels it can change) into `out`.
-void copy_box(const engine::Volume& v, const engine::BrickRange& r, std::vector<float>& out) {
+void copy_box(const engine::Volume& v, const session::BrickRange& r, std::vector<float>& out) {
   out.clear();
   const auto& d = v.grid.dims;
   const int x0 = r.lo[0] * 8, x1 = std::min(r.hi[0] * 8, d[0]);
@@ -329,15 +338,15 @@ void copy_box(const engine::Volume& v, const engine::BrickRange& r, std::vector<
 
 /// Replays `brushes` on `start` with the CPU reference (bit for bit the GPU brushes:
 /// tests/test_brush.cpp), counting voxel changes; `equal`: the result equals `end`.
-std::uint64_t replay_count(engine::Volume start, const std::vector<engine::Brush>& brushes, const engine::Volume& end,
+std::uint64_t replay_count(engine::Volume start, const std::vector<session::Brush>& brushes, const engine::Volume& end,
                            bool& equal) {
   std::uint64_t n = 0;
   std::vector<float> before, after;
   for (const auto& b : brushes) {
-    const engine::BrickRange r = engine::touched_range(start.grid, b);
+    const session::BrickRange r = session::touched_range(start.grid, b);
     if (r.empty()) continue;
     copy_box(start, r, before);
-    (void)engine::apply_brush_cpu(start, b);
+    (void)session::apply_brush_cpu(start, b);
     copy_box(start, r, after);
     n += changed_voxels(before.data(), after.data(), before.size());
   }
@@ -346,7 +355,7 @@ std::uint64_t replay_count(engine::Volume start, const std::vector<engine::Brush
   return n;
 }
 
-const char* kind_name(engine::BrushKind k) { return engine::to_string(k); }
+const char* kind_name(session::BrushKind k) { return session::to_string(k); }
 
 std::string default_scene() { return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "chest.json").string(); }
 
@@ -362,12 +371,12 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     throw std::runtime_error(scene.file + ": field 'isovalue': " + num(scene.hri.tau) +
                              " is outside the data range of " + vol.path);
 
-  engine::LiveFieldOptions lo;
+  session::LiveFieldOptions lo;
   lo.passes = scene_passes(scene);
   lo.iso = iso;
   lo.background = float(iso.outside_value(vol.min_value, vol.max_value));
   lo.format = scene_sample_format(scene);
-  const engine::BrushTargets targets = engine::default_targets(vol, iso);
+  const session::BrushTargets targets = session::default_targets(vol, iso);
 
   // Vulkan: brushes and the dense chain on the device when there is one.
   engine::ContextOptions co;
@@ -393,15 +402,15 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   servo::HriParams hp = scene.hri;
   hp.rate_hz = o.rate_hz;
   rig.hri = std::make_unique<servo::HriRenderer>(hp);
-  servo::ScriptParams sp = scene.script;
+  sim::ScriptParams sp = scene.script;
   sp.approach_distance_m = std::min(sp.approach_distance_m, 0.002);
   sp.rest_s = 0;
   sp.hold_s = 1e6;  // press, then rest on the surface for the whole run
-  rig.script = servo::make_touch_script(*first, hp, sp);
+  rig.script = sim::make_touch_script(*first, hp, sp);
   core::Vec3 p0, v0;
   rig.script.at(0, p0, v0);
-  rig.device = std::make_unique<servo::SimDevice>(scene.device, p0);
-  rig.io = std::make_unique<servo::SimDeviceIO>(*rig.device, rig.script, 1.0 / o.rate_hz);
+  rig.device = std::make_unique<sim::SimDevice>(scene.device, p0);
+  rig.io = std::make_unique<sim::SimDeviceIO>(*rig.device, rig.script, 1.0 / o.rate_hz);
   rig.spy = std::make_unique<VersionSpy>(*rig.hri, std::size_t(1) << 20);
   rig.published.publish(first);
 
@@ -415,7 +424,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   auto point = [&](std::size_t k) { return pts[k % pts.size()]; };
   // Edit i of radius index ri: point (ri * per_radius + i / 2), carve then add.
   auto latency_brush = [&](int ri, int i) {
-    const auto kind = i % 2 == 0 ? engine::BrushKind::kCarve : engine::BrushKind::kAdd;
+    const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
     return make_brush(kind, point(std::size_t(ri) * per_radius + std::size_t(i / 2)), kRadiiMm[ri] * 1e-3, targets);
   };
 
@@ -433,8 +442,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     const std::int64_t until = now_ns() + 2'000'000'000;
     while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     progress << "[bench edit] warm-up\n" << std::flush;
-    (void)timed_live_edit(session, rig, make_brush(engine::BrushKind::kCarve, point(pts.size() - 1), 5e-3, targets));
-    (void)timed_live_edit(session, rig, make_brush(engine::BrushKind::kAdd, point(pts.size() - 1), 5e-3, targets));
+    (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kCarve, point(pts.size() - 1), 5e-3, targets));
+    (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kAdd, point(pts.size() - 1), 5e-3, targets));
     const long ticks0 = rig.spy->ticks(), contact0 = rig.spy->contact_ticks();
     for (int ri = 0; ri < 3; ++ri) {
       progress << "[bench edit] latency: " << o.edits_per_radius << " edits of radius " << kRadiiMm[ri] << " mm\n"
@@ -466,7 +475,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       Phase ph;
       ph.editing = editing;
       ph.round = round;
-      std::vector<engine::Brush> done;
+      std::vector<session::Brush> done;
       std::unique_ptr<engine::Volume> start;
       if (editing) start = std::make_unique<engine::Volume>(session.volume());
       {
@@ -479,8 +488,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
         } else {
           int i = 0;
           while (now_ns() < t_end) {
-            const auto kind = i % 2 == 0 ? engine::BrushKind::kCarve : engine::BrushKind::kAdd;
-            const engine::Brush b = make_brush(kind, point(next_point + std::size_t(i / 2)), 5e-3, targets);
+            const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
+            const session::Brush b = make_brush(kind, point(next_point + std::size_t(i / 2)), 5e-3, targets);
             EditEvent ev;
             ev.brush = b;
             const EditOutcome oc = session.apply(ev, nullptr);
@@ -519,7 +528,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     dense_engine = chain ? "GPU PassChain on " + ctx->info().name + ", dense fp32"
                          : "run_chain_cpu (one thread, dense fp32)" + (chain_why.empty() ? "" : ": " + chain_why);
     progress << "[bench edit] dense: " << dense_engine << "\n" << std::flush;
-    engine::Sculptor sculptor(original, brush_ctx);
+    session::Sculptor sculptor(original, brush_ctx);
     std::uint64_t version = session.current()->version + 1;
     servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
     rig.note(servo, servo.start());
@@ -539,12 +548,12 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       for (int i = 0; i < o.dense_edits; ++i) {
         std::this_thread::sleep_for(std::chrono::microseconds(
             1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
-        const engine::Brush b = latency_brush(ri, i);
+        const session::Brush b = latency_brush(ri, i);
         EditRecord r;
         r.radius_mm = kRadiiMm[ri];
         r.kind = b.kind;
         const std::int64_t t0 = now_ns();
-        const engine::BrushResult br = sculptor.apply(b);
+        const session::BrushResult br = sculptor.apply(b);
         const std::int64_t t1 = now_ns();
         std::shared_ptr<const core::SampleField> f = recompute();
         const std::uint64_t ver = f->version;
@@ -584,7 +593,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       << (first->bricks ? std::to_string(first->bricks->active_bricks()) : std::string("?")) << " active bricks\n"
       << "- Vulkan device: " << device_text << "\n"
       << "- brushes: "
-      << (session.sculptor().on_gpu() ? std::string("on the Vulkan device (engine::BrushEngine)")
+      << (session.sculptor().on_gpu() ? std::string("on the Vulkan device (session::BrushEngine)")
                                       : std::string("CPU reference (one thread)"))
       << "; material " << targets.material << ", empty " << targets.empty << ", strength |material - empty|, falloff 0.5\n"
       << "- servo: HRI at " << num(o.rate_hz, 0) << " Hz (K " << hp.stiffness_n_per_m << " N/m, plane every "
@@ -622,8 +631,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   std::vector<double> live_median(3, kNaN);
   for (int ri = 0; ri < 3; ++ri) {
     const double rad = kRadiiMm[ri];
-    for (int kind : {int(engine::BrushKind::kCarve), int(engine::BrushKind::kAdd), -1}) {
-      const std::string kname = kind < 0 ? "all" : kind_name(engine::BrushKind(kind));
+    for (int kind : {int(session::BrushKind::kCarve), int(session::BrushKind::kAdd), -1}) {
+      const std::string kname = kind < 0 ? "all" : kind_name(session::BrushKind(kind));
       const Spread tot = spread(pick(live, rad, kind, [](const EditRecord& r) { return r.total_ms; }));
       const double brush = median(pick(live, rad, kind, [](const EditRecord& r) { return r.brush_ms; }));
       const double gpu = median(pick(live, rad, kind, [](const EditRecord& r) { return r.brush_gpu_ms; }));

@@ -34,6 +34,8 @@
 #endif
 
 namespace isotouch::app {
+using eval::median;
+using io::write_file_atomic;
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
@@ -1015,7 +1017,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   int rc = 0;
   for (auto& v : vols) {
     try {
-      v.v = engine::load_volume(resolve_data(v.source));
+      v.v = io::load_volume(resolve_data(v.source));
     } catch (const std::exception& e) {
       v.error = e.what();
       rc = 1;

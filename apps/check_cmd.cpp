@@ -22,6 +22,9 @@
 #include "volume_io.h"
 
 namespace isotouch::app {
+using io::load_any_volume;
+using io::load_scene;
+using io::Scene;
 namespace {
 
 // One output of one pass, test (GPU or OpenVDB) against reference.
@@ -62,7 +65,7 @@ Row compare(std::string pass, std::string output, const std::vector<float>& t, c
   return row;
 }
 
-std::vector<float> flatten(const servo::SampleField& f) {
+std::vector<float> flatten(const core::SampleField& f) {
   std::vector<float> v;
   v.reserve(f.samples.size() * 4);
   for (const auto& s : f.samples) v.insert(v.end(), {s.value, s.gx, s.gy, s.gz});
@@ -96,7 +99,7 @@ engine::Volume load(const CheckAllOptions& opt, std::optional<double>& tau, std:
   where = "synthetic " + scene.synthetic.kind + " (scene " + opt.scene_path + ")";
   if (scene.synthetic.kind == "sphere")
     return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
-  return std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
+  return std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
 }
 
 bool env_validation() {

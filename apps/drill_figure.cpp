@@ -8,6 +8,7 @@
 #include "render_cmd.h"
 
 namespace isotouch::app {
+using core::Vec3;
 namespace {
 
 using core::Vec3;

@@ -16,6 +16,19 @@
 #include "volume_io.h"
 
 namespace isotouch::app {
+using io::extract_mesh;
+using io::load_scene;
+using io::load_vdb;
+using io::mesh_stats;
+using io::save_vdb;
+using io::LoadedVdb;
+using io::Mesh;
+using io::MeshStats;
+using io::SaveVdbOptions;
+using io::Scene;
+using io::write_obj;
+using io::write_ply;
+using io::write_stl_binary;
 namespace {
 
 bool ends_with(const std::string& s, const std::string& suffix) {
@@ -41,11 +54,11 @@ Input load_input(const ExportOptions& o, std::ostream& err) {
     if (!scene.volume_path.empty()) {
       err << "export: loading " << scene.volume_path << " (scene " << o.scene << ")\n";
       if (ends_with(scene.volume_path, ".vdb")) in.volume = load_vdb(scene.volume_path, o.grid).volume;
-      else in.volume = engine::load_volume(scene.volume_path);
+      else in.volume = io::load_volume(scene.volume_path);
     } else if (scene.synthetic.kind == "sphere") {
       in.volume = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
     } else {
-      in.volume = std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
+      in.volume = std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
     }
     return in;
   }
@@ -57,7 +70,7 @@ Input load_input(const ExportOptions& o, std::ostream& err) {
     in.iso = l.suggested;
     in.iso_source = l.grid_class == "level set" && !l.written_by_isotouch ? "level set" : ".vdb metadata";
   } else {
-    in.volume = engine::load_volume(o.volume);
+    in.volume = io::load_volume(o.volume);
   }
   return in;
 }
@@ -114,7 +127,7 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
            ".mha, .nrrd, .nii or .nii.gz (a FIFO or device named so is written as a stream)\n";
     return 2;
   }
-  if (!o.volume_out.empty() && !engine::itk_writable(o.volume_out)) {
+  if (!o.volume_out.empty() && !io::itk_writable(o.volume_out)) {
     err << "isotouch export: --volume " << o.volume_out
         << ": the name must end in .mha (MetaImage), .nrrd (NRRD), .nii or .nii.gz (NIfTI)"
         << (o.volume_out.size() > 4 && o.volume_out.substr(o.volume_out.size() - 4) == ".mhd"
@@ -163,7 +176,7 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
   if (!o.volume_out.empty()) {
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << o.volume_out << "\n";
-    engine::save_volume_itk(v, o.volume_out);
+    io::save_volume_itk(v, o.volume_out);
     out << "wrote       " << o.volume_out << " " << written_text(o.volume_out, seconds_since(t)) << "\n";
   }
   if (!mesh_wanted) return 0;

@@ -14,6 +14,7 @@
 #include "cpu_gradient.h"
 #include "vdb_io.h"
 #include "gradient_pass.h"
+#include "live_cmd.h"
 #include "run_job.h"
 #include "stop_signal.h"
 #include "cli_checks.h"
@@ -103,9 +104,19 @@ std::string default_scene() {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
 }
 
+int cmd_run_live(const std::string& scene_path, const std::string& device, bool quiet, const std::string& record_path) {
+  const io::Scene scene = io::load_scene(scene_path);
+  app::LiveOptions opt;
+  opt.run.device = device;
+  opt.run.progress = !quiet;
+  opt.run.record_path = record_path;
+  std::cout << "isotouch run --live: scene " << scene_path << "\n";
+  return app::run_live(scene, opt, std::cout);
+}
+
 int cmd_run(const std::string& scene_path, std::string out_dir, const std::string& device, bool quiet,
             const std::string& record_path) {
-  const app::Scene scene = app::load_scene(scene_path);
+  const io::Scene scene = io::load_scene(scene_path);
   if (out_dir.empty()) out_dir = (fs::path("out") / scene.name).string();
   app::RunOptions opt;
   opt.out_dir = out_dir;
@@ -115,18 +126,18 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
   std::cout << "isotouch run: scene " << scene_path << " -> " << out_dir << "/\n";
   {
     const double dt = 1.0 / scene.hri.rate_hz;
-    const int need = servo::min_stable_substeps(scene.device, dt);
+    const int need = sim::min_stable_substeps(scene.device, dt);
     if (need > scene.device.substeps)
       std::cout << "device   substeps raised from " << scene.device.substeps << " to " << need
                 << " per servo period so the simulated device integrates stably (mass " << scene.device.mass_kg
                 << " kg, hand " << scene.device.hand_stiffness_n_per_m << " N/m and "
                 << scene.device.hand_damping_n_s_per_m << " N s/m)\n";
   }
-  app::install_stop_handlers();  // SIGINT/SIGTERM: stop at the next safe point, folder marked
+  session::install_stop_handlers();  // SIGINT/SIGTERM: stop at the next safe point, folder marked
   app::RunMetrics m;
   try {
     m = app::run_scene(scene, opt, std::cout);
-  } catch (const app::Interrupted& e) {
+  } catch (const session::Interrupted& e) {
     std::cerr << "\nisotouch run: " << e.what() << "; " << (fs::path(out_dir) / "summary.json").string()
               << " says \"status\": \"interrupted\" and lists the files that were finished\n";
     return 128 + e.signal;
@@ -171,13 +182,13 @@ struct GradientHealth {
   std::size_t overflow = 0;   ///< of those, samples whose 3x3x3 neighbourhood is all finite
   double max_norm = 0;        ///< largest finite |gradient| [value/m]
 };
-GradientHealth gradient_health(const engine::Volume& vol, const servo::SampleField& f) {
+GradientHealth gradient_health(const engine::Volume& vol, const core::SampleField& f) {
   GradientHealth h;
   const auto& d = vol.grid.dims;
   for (int z = 0; z < d[2]; ++z)
     for (int y = 0; y < d[1]; ++y)
       for (int x = 0; x < d[0]; ++x) {
-        const servo::Sample& s = f.samples[vol.grid.index(x, y, z)];
+        const core::Sample& s = f.samples[vol.grid.index(x, y, z)];
         if (std::isfinite(s.gx) && std::isfinite(s.gy) && std::isfinite(s.gz)) {
           h.max_norm = std::max(h.max_norm, std::sqrt(double(s.gx) * s.gx + double(s.gy) * s.gy + double(s.gz) * s.gz));
           continue;
@@ -197,7 +208,7 @@ GradientHealth gradient_health(const engine::Volume& vol, const servo::SampleFie
 }
 
 int cmd_check(const std::string& path, const std::string& device, double slab_mib) {
-  const engine::Volume vol = app::load_any_volume(path);
+  const engine::Volume vol = io::load_any_volume(path);
   engine::ContextOptions co;
   co.device = device;
   auto ctx = engine::VulkanContext::create(co);
@@ -212,7 +223,7 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
   const GradientHealth gh = gradient_health(vol, cpu);
   std::array<double, 9> D = vol.direction;
   for (double& x : D) x += 0.0;  // print -0 as 0
-  const servo::Vec3 far = vol.index_to_physical(
+  const core::Vec3 far = vol.index_to_physical(
       {double(vol.grid.dims[0] - 1), double(vol.grid.dims[1] - 1), double(vol.grid.dims[2] - 1)});
   std::cout << std::setprecision(4) << "volume      " << path << " (" << vol.grid.dims[0] << "x" << vol.grid.dims[1]
             << "x" << vol.grid.dims[2] << ", " << vol.component_type << ", " << vol.reader << ")\n"
@@ -313,6 +324,12 @@ int main(int argc, char** argv) {
   run->add_option("--record", record_path,
                   "Also write every device input, button and edit with its time to FILE (replay it with "
                   "`isotouch replay FILE`)");
+  bool live = false;
+  run->add_flag("--live", live,
+                "Run the scene in real time on the live session's threads: the servo thread (SCHED_FIFO when "
+                "allowed) drives the simulated device, an edit thread applies the button drill and the timeline; "
+                "with --record FILE the recording is streamed while it runs (FILE.part until it stops; a killed "
+                "run leaves FILE.part, replayable up to its last chunk)");
   run->footer(kSceneHelp);
 
   auto* check = cli.add_subcommand(
@@ -411,6 +428,7 @@ int main(int argc, char** argv) {
     return cli.exit(e);
   }
   try {
+    if (run->parsed() && live) return cmd_run_live(scene_path, device, quiet, record_path);
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet, record_path);
     if (check->parsed() && check_all_flag) {
       check_all.volume_path = volume;

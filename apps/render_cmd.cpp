@@ -31,6 +31,15 @@
 #endif
 
 namespace isotouch::app {
+using core::cross;
+using core::dot;
+using core::finite;
+using core::norm;
+using eval::median;
+using io::load_any_volume;
+using io::load_scene;
+using core::Vec3;
+using io::Scene;
 namespace fs = std::filesystem;
 using core::Vec3;
 
@@ -93,7 +102,7 @@ engine::Volume load_scene_volume(const Scene& scene) {
   if (!scene.volume_path.empty()) return load_any_volume(scene.volume_path);
   if (scene.synthetic.kind == "sphere")
     return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
-  return std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
+  return std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
 }
 
 engine::RaycastField scene_raycast_field(const Scene& scene, const engine::Volume& vol) {
@@ -132,7 +141,7 @@ double probe_size_m(const core::Grid& g) {
   return 0.6 * std::max(s, 1e-3);
 }
 
-std::vector<gpu::RaycastPrim> probe_prims(const servo::TraceRow& r, double force_limit_n, double u) {
+std::vector<gpu::RaycastPrim> probe_prims(const sim::TraceRow& r, double force_limit_n, double u) {
   std::vector<gpu::RaycastPrim> p;
   p.push_back(engine::prim_sphere(r.hip_m, 1.2 * u, {0.95f, 0.80f, 0.10f}, 1.0f, true));
   p.push_back(engine::prim_sphere(r.vhip_m, 1.0 * u, {0.15f, 0.80f, 0.25f}));
@@ -171,8 +180,8 @@ Vec3 picture_up(const engine::Volume& vol, const Vec3& view_dir) {
 
 }  // namespace
 
-RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, const servo::SampleField& field,
-                              const std::vector<servo::TraceRow>& trace, const std::string& out_png,
+RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, const core::SampleField& field,
+                              const std::vector<sim::TraceRow>& trace, const std::string& out_png,
                               engine::VulkanContext* vk, const std::string& device, int width, int height) {
   RunPicture out;
   try {
@@ -185,7 +194,7 @@ RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, con
     std::size_t imax = 0, contacts = 0;
     Vec3 centroid, fsum;
     for (std::size_t i = 0; i < trace.size(); ++i) {
-      const servo::TraceRow& r = trace[i];
+      const sim::TraceRow& r = trace[i];
       if (!r.contact || !finite(r.vhip_m)) continue;
       ++contacts;
       centroid += r.vhip_m;
@@ -206,7 +215,7 @@ RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, con
     // Contact points: at most ~400, coloured by |F| / max |F|.
     const std::size_t pt_step = std::max<std::size_t>(1, contacts / 400);
     std::size_t k = 0;
-    for (const servo::TraceRow& r : trace) {
+    for (const sim::TraceRow& r : trace) {
       if (!r.contact || !finite(r.vhip_m)) continue;
       if (k++ % pt_step != 0 || prims.size() >= room) continue;
       prims.push_back(engine::prim_sphere(r.vhip_m, 0.45 * u, force_colour(fmax > 0 ? norm(r.force_n) / fmax : 0)));
@@ -256,14 +265,14 @@ RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, con
   return out;
 }
 
-std::vector<servo::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol) {
+std::vector<sim::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot read the trace");
   std::string line;
   if (!std::getline(in, line) || line.rfind("t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m", 0) != 0)
     throw std::runtime_error(path + ": not an isotouch trace.csv (header 't_s,hip_x_m,...' expected)");
   const auto& D = vol.direction;
-  std::vector<servo::TraceRow> rows;
+  std::vector<sim::TraceRow> rows;
   long lineno = 1;
   while (std::getline(in, line)) {
     ++lineno;
@@ -286,7 +295,7 @@ std::vector<servo::TraceRow> read_trace_csv(const std::string& path, const engin
                                  " columns, at least 11 expected");
       pos = end + 1;
     }
-    servo::TraceRow r;
+    sim::TraceRow r;
     r.t_s = v[0];
     r.hip_m = vol.to_grid({v[1], v[2], v[3]});
     r.vhip_m = vol.to_grid({v[4], v[5], v[6]});
@@ -363,14 +372,14 @@ Vec3 parse_axis(const std::string& name, const char* option) {
   throw std::runtime_error(std::string("render: ") + option + " must be one of x, -x, y, -y, z, -z, got '" + name + "'");
 }
 
-servo::TraceRow row_at(const std::vector<servo::TraceRow>& rows, double t) {
-  auto it = std::lower_bound(rows.begin(), rows.end(), t, [](const servo::TraceRow& r, double v) { return r.t_s < v; });
+sim::TraceRow row_at(const std::vector<sim::TraceRow>& rows, double t) {
+  auto it = std::lower_bound(rows.begin(), rows.end(), t, [](const sim::TraceRow& r, double v) { return r.t_s < v; });
   if (it == rows.end()) --it;
   return *it;
 }
 
 /// The trace to draw at --time: --trace FILE, else the scene run now into a temporary folder.
-std::vector<servo::TraceRow> trace_for(const Scene& scene, const engine::Volume& vol, const RenderCli& o,
+std::vector<sim::TraceRow> trace_for(const Scene& scene, const engine::Volume& vol, const RenderCli& o,
                                        const std::string& device) {
   if (!o.trace.empty()) return read_trace_csv(o.trace, vol);
   const fs::path tmp = fs::temp_directory_path() / ("isotouch-render-" + std::to_string(::getpid()));
@@ -412,7 +421,7 @@ int cmd_render(const RenderCli& o, const std::string& device) {
   if (!o.clip_axis.empty()) req.style.clip = clip_plane(vol, o.clip_axis, o.clip_at);
   if (o.path) {
     const auto rows = trace_for(scene, vol, o, device);
-    servo::SampleField sf;
+    core::SampleField sf;
     sf.background = field.background;
     const std::string out = o.out.empty() ? scene.name + "_path.png" : o.out;
     const RunPicture pic = render_run_picture(scene, vol, sf, rows, out, nullptr, device, o.width, o.height);
@@ -423,7 +432,7 @@ int cmd_render(const RenderCli& o, const std::string& device) {
   std::string probe_note;
   if (o.time_s) {
     const auto rows = trace_for(scene, vol, o, device);
-    const servo::TraceRow r = row_at(rows, *o.time_s);
+    const sim::TraceRow r = row_at(rows, *o.time_s);
     req.prims = probe_prims(r, scene.hri.force_limit_n, probe_size_m(vol.grid));
     std::ostringstream s;
     s << std::setprecision(4) << "probe at t = " << r.t_s << " s: " << (r.contact ? "contact" : "no contact")

@@ -29,10 +29,10 @@ Subcommand add_bench_render_command(CLI::App& bench);
 void write_png(const std::string& path, int width, int height, const std::vector<std::uint32_t>& rgba);
 
 /// The scene's volume, as `isotouch run` loads it (file, or the synthetic shape).
-engine::Volume load_scene_volume(const Scene& scene);
+engine::Volume load_scene_volume(const io::Scene& scene);
 /// The ray caster's field of a volume at the scene's isovalue: background = the value
 /// `isotouch run` publishes outside the grid (core::Isosurface::outside_value of the range).
-engine::RaycastField scene_raycast_field(const Scene& scene, const engine::Volume& vol);
+engine::RaycastField scene_raycast_field(const io::Scene& scene, const engine::Volume& vol);
 
 /// The orbit camera that shows `vol` the right way up (physical +z up, anterior front,
 /// except for volumes known to be stored otherwise: the headsq CT is upside down).
@@ -59,7 +59,7 @@ engine::RaycastImage render_picture(engine::VulkanContext* vk, const engine::Ray
 /// VHIP (green sphere), the virtual plane (translucent cyan disc through the VHIP, normal
 /// along the force; none without force) and the force (red arrow from the VHIP, length
 /// |F| / force_limit x 12 size units). `size_m`: the size unit [m] (probe_size_m).
-std::vector<gpu::RaycastPrim> probe_prims(const servo::TraceRow& row, double force_limit_n, double size_m);
+std::vector<gpu::RaycastPrim> probe_prims(const sim::TraceRow& row, double force_limit_n, double size_m);
 /// A size unit for overlays: 0.6 x the largest voxel spacing, at least 0.6 mm [m].
 double probe_size_m(const core::Grid& grid);
 
@@ -80,13 +80,13 @@ struct RunPicture {
 /// @param field the published snapshot (its `background` is used; values from `vol`)
 /// @param trace the run's ticks, grid-world (as run_headless returns them)
 /// @param vk    a Vulkan context to reuse, or null to create one on `device`
-RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, const servo::SampleField& field,
-                              const std::vector<servo::TraceRow>& trace, const std::string& out_png,
+RunPicture render_run_picture(const io::Scene& scene, const engine::Volume& vol, const core::SampleField& field,
+                              const std::vector<sim::TraceRow>& trace, const std::string& out_png,
                               engine::VulkanContext* vk = nullptr, const std::string& device = "",
                               int width = 800, int height = 600);
 
 /// trace.csv (physical frame, written by `isotouch run`) read back into grid-world rows
 /// (t, HIP, VHIP, force, contact). @throws std::runtime_error naming the file, line and column.
-std::vector<servo::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol);
+std::vector<sim::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol);
 
 }  // namespace isotouch::app

@@ -16,6 +16,18 @@
 #include "scene.h"
 
 namespace isotouch::app {
+using core::to_string;
+using io::load_recording;
+using io::load_scene;
+using io::volume_crc32;
+using io::write_file_atomic;
+using session::to_string;
+using io::RecordedTick;
+using io::Recording;
+using io::RecordingError;
+using io::Scene;
+using io::SceneError;
+using session::EditSession;
 namespace {
 
 namespace fs = std::filesystem;
@@ -61,13 +73,29 @@ void trace_row(std::ostringstream& csv, long k, const RecordedTick& t, const cor
 
 /// Applies tick k's recorded edits (events [e, end) with tick == k); returns the new e.
 std::size_t apply_edits(const Recording& rec, std::size_t e, long k, EditSession& session,
-                        servo::TripleBuffer<servo::SampleField>& buf, ReplayResult& r, const std::string& name) {
+                        servo::TripleBuffer<core::SampleField>& buf, ReplayResult& r, const std::string& name) {
   for (; e < rec.edits.size() && rec.edits[e].tick == k; ++e) {
     try {
       r.publications += session.apply(rec.edits[e], &buf).published;
     } catch (const std::exception& ex) {
       throw ReplayInputError(name + ": edit " + std::to_string(e) + " (" + to_string(rec.edits[e].kind) + ", tick " +
                              std::to_string(k) + ") was refused by the edit pipeline: " + ex.what());
+    }
+    ++r.edits;
+  }
+  return e;
+}
+
+/// Format 3: applies recorded edits in order while the session's snapshot is older than
+/// `version` (the one the next tick read live).
+std::size_t apply_edits_upto(const Recording& rec, std::size_t e, std::uint64_t version, EditSession& session,
+                             servo::TripleBuffer<core::SampleField>& buf, ReplayResult& r, const std::string& name) {
+  for (; e < rec.edits.size() && session.current()->version < version; ++e) {
+    try {
+      r.publications += session.apply(rec.edits[e], &buf).published;
+    } catch (const std::exception& ex) {
+      throw ReplayInputError(name + ": edit " + std::to_string(e) + " (" + to_string(rec.edits[e].kind) +
+                             ") was refused by the edit pipeline: " + ex.what());
     }
     ++r.edits;
   }
@@ -94,7 +122,7 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
     throw ReplayInputError(name + ": the recording has " + std::to_string(rec.edits.size()) +
                            " edits but the scene " + rec.scene_path + " has no \"edits\" section");
 
-  servo::TripleBuffer<servo::SampleField> buf;
+  servo::TripleBuffer<core::SampleField> buf;
   buf.publish(setup.first);
   servo::HriRenderer renderer(setup.hri);
   ReplayResult r;
@@ -106,13 +134,18 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
         << std::setprecision(17);
   }
   const long n = long(rec.ticks.size());
+  const bool live = rec.format_version >= 3;
   std::size_t e = 0;
   int last_decile = 0;
   for (long k = 0; k < n; ++k) {
     const RecordedTick& t = rec.ticks[std::size_t(k)];
-    const servo::SampleField* field = buf.acquire();
-    const servo::HriTick out = renderer.tick(*field, t.hip_m);  // nominal period, as run_headless
-    const double df = servo::norm(out.force_n - t.force_n);
+    // A live recording (format 3): the edits applied before this tick read its snapshot,
+    // in the recorded order, up to the version the tick read live.
+    if (live && setup.session) e = apply_edits_upto(rec, e, t.version, *setup.session, buf, r, name);
+    const core::SampleField* field = buf.acquire();
+    // Simulated runs: the nominal period, as run_headless; live ones: the measured dt.
+    const servo::HriTick out = live ? renderer.tick(*field, t.hip_m, t.dt_s) : renderer.tick(*field, t.hip_m);
+    const double df = core::norm(out.force_n - t.force_n);
     const bool same_force = same_bits(out.force_n, t.force_n);
     const bool checked = rec.format_version >= 2;  // format 1 recorded the force only
     const bool same_vhip = !checked || same_bits(out.vhip_m, t.vhip_m);
@@ -139,7 +172,7 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
     }
     const std::uint64_t version = field->version;
     const long before = r.edits;
-    if (setup.session) e = apply_edits(rec, e, k, *setup.session, buf, r, name);
+    if (setup.session && !live) e = apply_edits(rec, e, k, *setup.session, buf, r, name);
     if (trace) trace_row(csv, k, t, out.force_n, df, version, r.edits - before);
     ++r.ticks;
     if (opt.progress && n >= 1000 && int(10 * (k + 1) / n) > last_decile) {
@@ -148,6 +181,8 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
                 << " differing\n";
     }
   }
+  // Live: edits applied after the last recorded tick read anything (they change no tick).
+  if (live && setup.session) apply_edits_upto(rec, e, UINT64_MAX, *setup.session, buf, r, name);
   if (trace) write_file_atomic((fs::path(opt.out_dir) / "trace.csv").string(), csv.str());
   return r;
 }
@@ -178,14 +213,23 @@ Subcommand add_replay_command(CLI::App& cli) {
             ReplayResult r;
             int rec_format = 0;
             try {
-              const Recording rec = load_recording(a->file);
+              // A live session's recording may be cut short (FILE.part after a crash): replayed
+              // up to its last whole line.
+              const Recording rec = load_recording(a->file, /*allow_incomplete=*/true);
               rec_format = rec.format_version;
+              if (!rec.complete)
+                std::cout << "isotouch replay: " << a->file << " has no end record (the live session did not stop "
+                          << "cleanly): replaying the " << rec.ticks.size() << " ticks written before the cut\n";
               std::cout << "isotouch replay: " << a->file << ": " << rec.ticks.size() << " ticks, " << rec.edits.size()
                         << " edits at " << rec.rate_hz << " Hz, scene " << rec.scene_path << "\n";
               std::ostringstream setup_log;
               r = replay_recording(rec, opt, a->quiet ? static_cast<std::ostream&>(setup_log) : std::cout);
             } catch (const RecordingError& e) {
               std::cerr << "isotouch replay: " << e.what() << "\n";
+              std::error_code ec;
+              if (!fs::exists(a->file, ec) && fs::is_regular_file(a->file + ".part", ec))
+                std::cerr << "isotouch replay: " << a->file << ".part exists: the live session that wrote it did not "
+                          << "stop cleanly; replay that file (up to its last chunk)\n";
               return 2;
             } catch (const ReplayInputError& e) {
               std::cerr << "isotouch replay: " << e.what() << "\n";

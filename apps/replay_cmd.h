@@ -1,9 +1,9 @@
-// replay_cmd.h - `isotouch replay FILE`: plays a recording back (apps/record.h) and checks
+// replay_cmd.h - `isotouch replay FILE`: plays a recording back (io/record.h) and checks
 // the forces, the VHIPs and the snapshot versions each tick read.
 //
 // The replay rebuilds the recorded scene's pipeline with app::setup_scene (volume, engine,
 // HriParams, the EditSession and its first snapshot), then for each recorded tick k, in
-// the headless run's order (sim/headless.cpp, apps/edit_session.h's determinism rule):
+// the headless run's order (sim/headless.cpp, session/edit_session.h's determinism rule):
 // acquire the newest snapshot, HriRenderer::tick(field, recorded HIP) at the nominal
 // period, compare the force, the VHIP and the snapshot's version with the recorded ones bit
 // for bit (format 1 recordings: the force only), then apply tick k's
@@ -31,7 +31,7 @@ struct ReplayOptions {
   std::string device;       ///< Vulkan device choice (ContextOptions::device)
   bool progress = true;     ///< a line per 10 % on stderr
   std::string name = "recording";  ///< the recording's file name, for messages
-  /// A relative Recording::scene_path is resolved against this folder (the recording's:
+  /// A relative io::Recording::scene_path is resolved against this folder (the recording's:
   /// committed regression recordings name their scene relative to themselves).
   std::string recording_dir;
 };
@@ -53,7 +53,7 @@ struct ReplayResult {
 
 /// Replays `rec` (see the file comment). Log lines go to `log`.
 /// @throws ReplayInputError (changed scene, ...), SceneError, engine errors, std::runtime_error.
-ReplayResult replay_recording(const Recording& rec, const ReplayOptions& options, std::ostream& log);
+ReplayResult replay_recording(const io::Recording& rec, const ReplayOptions& options, std::ostream& log);
 
 /// Adds `replay` to the top-level command line. Exit 0: every force identical; 1: forces
 /// differ (the first differing tick printed); 2: bad input (unreadable recording, changed

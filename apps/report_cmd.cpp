@@ -20,6 +20,29 @@
 #include "vk_context.h"
 
 namespace isotouch::app {
+using core::norm;
+using eval::compare_to_dense;
+using eval::measure;
+using eval::median_ns_per_tick;
+using eval::playback;
+using eval::prepare_sweep_scene;
+using eval::reference_params;
+using eval::snapshot_variants;
+using io::draw_with_gnuplot;
+using io::gnuplot_quote;
+using io::temp_name;
+using io::write_file_atomic;
+using eval::ErrorFigures;
+using eval::FormatFigures;
+using eval::Playback;
+using eval::SnapshotVariant;
+using eval::SweepScene;
+using servo::BaselineParams;
+using servo::HriParams;
+using servo::Intersection;
+using servo::NormalSource;
+using servo::Renderer;
+using servo::Variant;
 namespace {
 namespace fs = std::filesystem;
 using namespace servo;

@@ -43,10 +43,44 @@
 #include "vk_context.h"
 
 namespace isotouch::app {
+using core::cross;
+using core::dot;
+using core::to_string;
+using eval::distance_to_isosurface;
+using eval::first_order_distance;
+using eval::median;
+using eval::percentile;
+using io::draw_with_gnuplot;
+using io::extract_mesh;
+using io::gnuplot_quote;
+using io::load_any_volume;
+using io::save_recording;
+using io::save_vdb;
+using io::temp_name;
+using io::volume_crc32;
+using io::write_file_atomic;
+using io::write_stl_binary;
+using session::throw_if_stop_requested;
+using session::to_string;
+using core::Vec3;
+using eval::SurfaceDistance;
+using io::BrushSpec;
+using io::EditsSpec;
+using io::PassSpec;
+using io::Recording;
+using io::RunFolder;
+using io::SaveVdbOptions;
+using io::Scene;
+using io::SceneError;
+using io::TimedEdit;
+using session::EditEvent;
+using session::EditOutcome;
+using session::EditSession;
+using session::Interrupted;
 namespace {
 
 namespace fs = std::filesystem;
-using servo::Vec3;
+using core::Vec3;
 
 std::string fmt(double v, int prec = 6) {
   std::ostringstream s;
@@ -56,7 +90,7 @@ std::string fmt(double v, int prec = 6) {
 
 // One row per tick; points and forces in the volume's physical frame
 // (world = origin + D (spacing * index)), not the grid frame the servo works in.
-std::string trace_csv(const std::vector<servo::TraceRow>& trace, const engine::Volume& vol) {
+std::string trace_csv(const std::vector<sim::TraceRow>& trace, const engine::Volume& vol) {
   std::ostringstream s;
   s << "t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,"
        "plane_update,tick_ns\n";
@@ -71,7 +105,7 @@ std::string trace_csv(const std::vector<servo::TraceRow>& trace, const engine::V
   return s.str();
 }
 
-bool draw_plots(const Scene& scene, const std::string& dir, const servo::TouchScript& script,
+bool draw_plots(const Scene& scene, const std::string& dir, const sim::TouchScript& script,
                 std::string& note) {
   const std::string csv = fs::absolute(fs::path(dir) / "trace.csv").string();
   const std::string fd = fs::absolute(fs::path(dir) / "force_depth.png").string();
@@ -121,8 +155,8 @@ std::string direction_text(const std::array<double, 9>& d) {
 }
 
 struct EngineRun {
-  std::shared_ptr<servo::SampleField> published;    ///< what the servo reads (version 1, background set)
-  std::shared_ptr<const servo::SampleField> truth;  ///< dense fp32 samples of the same passes
+  std::shared_ptr<core::SampleField> published;    ///< what the servo reads (version 1, background set)
+  std::shared_ptr<const core::SampleField> truth;  ///< dense fp32 samples of the same passes
 };
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
@@ -136,7 +170,7 @@ std::vector<PassFigure> figures(const std::vector<engine::PassTiming>& t) {
 }
 
 // GPU-vs-CPU figures of two dense sample fields into m.
-void compare_into(const servo::SampleField& gpu, const servo::SampleField& cpu, RunMetrics& m) {
+void compare_into(const core::SampleField& gpu, const core::SampleField& cpu, RunMetrics& m) {
   const engine::GradientDiff diff = engine::compare_gradients(gpu, cpu);
   m.max_abs_diff = diff.max_abs_all;
   m.max_rel_diff = diff.max_rel;
@@ -152,7 +186,7 @@ EngineRun run_dense(const engine::Volume& vol, const std::vector<engine::PassDes
   m.engine_describe = (*chain.value)->describe();
   m.engine_ran = "PassChain (GPU, dense, one command buffer)";
   if (!out.samples) throw std::runtime_error(vol.path + ": the pass chain returned no samples");
-  auto field = std::make_shared<servo::SampleField>(std::move(*out.samples));
+  auto field = std::make_shared<core::SampleField>(std::move(*out.samples));
   field->background = background;
   m.gpu_passes = figures(out.passes);
   m.gpu_upload_ms = out.upload_ms;
@@ -171,17 +205,17 @@ EngineRun run_dense(const engine::Volume& vol, const std::vector<engine::PassDes
     if (p.label == "gradient") m.cpu_gradient_ms = p.ms;
   ref.samples->background = background;
   compare_into(*field, *ref.samples, m);
-  m.snapshot_bytes = std::uint64_t(field->samples.size()) * sizeof(servo::Sample);
-  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(servo::Sample);
+  m.snapshot_bytes = std::uint64_t(field->samples.size()) * sizeof(core::Sample);
+  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(core::Sample);
   field->version = 1;
   return {field, field};
 }
 
 // The dense samples as the bricked snapshot of `format` (core::bricked_input_from_dense +
 // core::make_bricked_field): the stand-in while the sparse chain is not available.
-std::shared_ptr<servo::SampleField> to_bricks(const servo::SampleField& dense, const core::Isosurface& iso,
+std::shared_ptr<core::SampleField> to_bricks(const core::SampleField& dense, const core::Isosurface& iso,
                                               core::SampleFormat format, RunMetrics& m) {
-  auto f = std::make_shared<servo::SampleField>(core::make_bricked_field(core::bricked_input_from_dense(dense, iso), format));
+  auto f = std::make_shared<core::SampleField>(core::make_bricked_field(core::bricked_input_from_dense(dense, iso), format));
   m.engine_ran = "core::bricked_input_from_dense + core::make_bricked_field";
   m.bricks_total = f->bricks->table.size();
   m.bricks_candidates = m.bricks_total;  // every voxel was computed
@@ -192,7 +226,7 @@ std::shared_ptr<servo::SampleField> to_bricks(const servo::SampleField& dense, c
 
 // GPU against CPU snapshot, compared where the servo reads them: value and gradient at
 // every voxel centre through core::FieldView (dense or bricked, any sample format).
-void compare_snapshots(const servo::SampleField& gpu, const servo::SampleField& cpu, RunMetrics& m) {
+void compare_snapshots(const core::SampleField& gpu, const core::SampleField& cpu, RunMetrics& m) {
   const core::FieldView a(gpu), b(cpu);
   const core::Grid& g = cpu.grid;
   double max_abs[3] = {0, 0, 0}, max_grad = 0;
@@ -208,7 +242,7 @@ void compare_snapshots(const servo::SampleField& gpu, const servo::SampleField& 
                                              : std::abs(dx[c]);
           max_abs[c] = std::max(max_abs[c], d);
         }
-        const double gn = servo::norm(y.gradient);
+        const double gn = core::norm(y.gradient);
         if (std::isfinite(gn)) max_grad = std::max(max_grad, gn);
       }
   m.max_abs_diff = std::max({max_abs[0], max_abs[1], max_abs[2]});
@@ -316,10 +350,10 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
   const auto t_truth = std::chrono::steady_clock::now();
   engine::ChainOutput dense_ref = engine::run_chain_cpu(vol, passes);
   const double truth_ms = ms_since(t_truth);
-  auto truth = std::make_shared<servo::SampleField>(std::move(*dense_ref.samples));
+  auto truth = std::make_shared<core::SampleField>(std::move(*dense_ref.samples));
   truth->background = background;
   truth->version = 1;
-  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(servo::Sample);
+  m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(core::Sample);
 
   std::optional<engine::SparseOutput> gpu;
   auto chain = engine::SparseChain::create(vk, passes);
@@ -333,9 +367,9 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
     m.engine_fallback = e.what();
   }
   m.engine_describe = (*chain.value)->describe();
-  std::shared_ptr<servo::SampleField> field;
+  std::shared_ptr<core::SampleField> field;
   if (gpu) {
-    field = std::make_shared<servo::SampleField>(std::move(gpu->field));
+    field = std::make_shared<core::SampleField>(std::move(gpu->field));
     m.gpu_passes = figures(gpu->passes);
     m.gpu_upload_ms = gpu->upload_ms;
     m.gpu_download_ms = gpu->download_ms;
@@ -374,12 +408,12 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
     m.engine_ran = "PassChain (GPU, dense) + " + m.engine_ran;
   }
   // CPU reference of the published snapshot.
-  std::shared_ptr<servo::SampleField> ref;
+  std::shared_ptr<core::SampleField> ref;
   try {
     engine::SparseOutput cpu = engine::run_sparse_cpu(vol, passes, iso, background, format);
     m.reference_ran = "run_sparse_cpu (one thread, candidate bricks only)";
     m.cpu_passes = figures(cpu.passes);
-    ref = std::make_shared<servo::SampleField>(std::move(cpu.field));
+    ref = std::make_shared<core::SampleField>(std::move(cpu.field));
   } catch (const engine::VolumeError& e) {
     RunMetrics cm;
     m.cpu_passes = figures(dense_ref.passes);
@@ -424,41 +458,20 @@ EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::Vulk
   return r;
 }
 
-engine::BrushKind brush_kind(const std::string& k) {
-  if (k == "add") return engine::BrushKind::kAdd;
-  if (k == "carve") return engine::BrushKind::kCarve;
-  if (k == "smooth") return engine::BrushKind::kSmooth;
-  return engine::BrushKind::kDrill;
+session::BrushKind brush_kind(const std::string& k) {
+  if (k == "add") return session::BrushKind::kAdd;
+  if (k == "carve") return session::BrushKind::kCarve;
+  if (k == "smooth") return session::BrushKind::kSmooth;
+  return session::BrushKind::kDrill;
 }
 
-// The engine brush of a scene brush: centre grid-world [m], application time dt_s [s],
-// drill force |F| [N]; targets from engine::default_targets unless the scene sets them.
-engine::Brush make_brush(const BrushSpec& b, const engine::BrushTargets& defaults, const Vec3& centre_m,
-                         double dt_s, double force_n) {
-  engine::Brush e;
-  e.kind = brush_kind(b.kind);
-  e.centre_m = centre_m;
-  e.radius_m = b.radius_mm * 1e-3;
-  e.strength = b.strength;
-  e.falloff = b.falloff;
-  e.targets = defaults;
-  if (b.has_material) e.targets.material = float(b.material);
-  if (b.has_empty) e.targets.empty = float(b.empty);
-  if (b.density_scale > 0) e.targets.density_scale = float(b.density_scale);
-  e.force_threshold_n = b.force_threshold_n;
-  e.rate = b.rate;
-  e.dt_s = dt_s;
-  e.force_n = force_n;
-  return e;
-}
-
-// Every brush of the scene through engine::validate, before anything runs.
+// Every brush of the scene through session::validate, before anything runs.
 void check_scene_brushes(const Scene& scene, const engine::Volume& vol) {
   const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
-  const engine::BrushTargets def = engine::default_targets(vol, iso);
+  const session::BrushTargets def = session::default_targets(vol, iso);
   const double dt = scene.edits.every_ticks / scene.hri.rate_hz;
   auto check = [&](const BrushSpec& b, const std::string& field) {
-    const std::string why = engine::validate(make_brush(b, def, vol.grid.centre_m(), dt, 0.0));
+    const std::string why = session::validate(make_brush(b, def, vol.grid.centre_m(), dt, 0.0));
     if (!why.empty()) throw SceneError(scene.file + ": field '" + field + "': " + why);
   };
   check(scene.edits.brush, "edits.brush");
@@ -486,9 +499,9 @@ struct EditRow {
 // contact. Applies through the EditSession and publishes into the servo's buffer.
 class EditDriver {
  public:
-  EditDriver(const Scene& scene, SceneSetup& setup, servo::TripleBuffer<servo::SampleField>& out)
+  EditDriver(const Scene& scene, SceneSetup& setup, servo::TripleBuffer<core::SampleField>& out)
       : scene_(scene), setup_(setup), out_(out), iso_(setup.live.iso),
-        targets_(engine::default_targets(setup.volume, iso_)),
+        targets_(session::default_targets(setup.volume, iso_)),
         dt_(scene.edits.every_ticks / scene.hri.rate_hz),
         voxel_mm3_(setup.volume.grid.spacing_m.x * setup.volume.grid.spacing_m.y * setup.volume.grid.spacing_m.z * 1e9),
         inside0_(inside_voxels(setup.volume, iso_)) {
@@ -522,7 +535,7 @@ class EditDriver {
   }
 
   /// The TickHook.
-  void operator()(long k, servo::TraceRow& row) {
+  void operator()(long k, sim::TraceRow& row) {
     const double t = double(k) / scene_.hri.rate_hz;
     contact_seen_ = contact_seen_ || row.contact;
     if (row.contact && row.version > 1) measure_edited(k, row);
@@ -543,7 +556,7 @@ class EditDriver {
                    " at \"vhip\") came before any contact: applied at the HIP in free space");
           }
           const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
-          const double f = te.brush.force_n >= 0 ? te.brush.force_n : servo::norm(row.force_n);
+          const double f = te.brush.force_n >= 0 ? te.brush.force_n : core::norm(row.force_n);
           apply(k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f),
                 "timeline");
           ++figures.timeline_brushes;
@@ -565,7 +578,7 @@ class EditDriver {
     // reports contact, with penetration 0 and a force that is not the user's push (review).
     if (down && row.contact && row.penetration_m > 0 && (k - press_tick_) % scene_.edits.every_ticks == 0) {
       apply(k, t, EditEvent::Kind::kBrush,
-            make_brush(at_tool(scene_.edits.brush), targets_, row.vhip_m, dt_, servo::norm(row.force_n)), "button");
+            make_brush(at_tool(scene_.edits.brush), targets_, row.vhip_m, dt_, core::norm(row.force_n)), "button");
       ++figures.button_brushes;
     }
   }
@@ -574,13 +587,7 @@ class EditDriver {
   /// is the tool's centre and the brush takes the tool's size, reaching one voxel (the
   /// largest spacing: the surface the burr touches lies within one cell of it) past its
   /// surface, so it removes what the burr's surface touches; a point keeps the scene's radius.
-  BrushSpec at_tool(const BrushSpec& b) const {
-    if (!(scene_.hri.tool_radius_m > 0)) return b;
-    const auto& sp = setup_.volume.grid.spacing_m;
-    BrushSpec t = b;
-    t.radius_mm = 1e3 * (scene_.hri.tool_radius_m + std::max({sp.x, sp.y, sp.z}));
-    return t;
-  }
+  BrushSpec at_tool(const BrushSpec& b) const { return brush_at_tool(scene_, setup_.volume, b); }
 
   /// After the last tick: closes a stroke left open (button still down, stroke past the end).
   void finish(long last_tick) {
@@ -616,7 +623,7 @@ class EditDriver {
   void close(long k, double t, const char* src) {
     if (open_ > 0 && --open_ == 0) apply(k, t, EditEvent::Kind::kEndStroke, {}, src);
   }
-  void apply(long k, double t, EditEvent::Kind kind, const engine::Brush& b, const char* src) {
+  void apply(long k, double t, EditEvent::Kind kind, const session::Brush& b, const char* src) {
     EditEvent e;
     e.kind = kind;
     e.tick = k;
@@ -638,9 +645,9 @@ class EditDriver {
 
   /// At tick k (before its edits) the session's volume is the one whose snapshot the tick
   /// read: its dense samples are rebuilt once per snapshot version.
-  void measure_edited(long k, const servo::TraceRow& row) {
+  void measure_edited(long k, const sim::TraceRow& row) {
     if (!truth_ || truth_version_ != row.version) {
-      truth_ = std::make_shared<servo::SampleField>(
+      truth_ = std::make_shared<core::SampleField>(
           std::move(*engine::run_chain_cpu(setup_.session->volume(), scene_passes(scene_)).samples));
       truth_->background = setup_.truth->background;
       truth_version_ = row.version;
@@ -651,7 +658,7 @@ class EditDriver {
 
   /// One line per kind of edit that did nothing (the first time), into figures.notes.
   void note(const std::string& s) { figures.notes.push_back(s); }
-  void said_if_nothing(EditEvent::Kind kind, const engine::Brush& b, const EditOutcome& o, double t) {
+  void said_if_nothing(EditEvent::Kind kind, const session::Brush& b, const EditOutcome& o, double t) {
     const bool undo = kind == EditEvent::Kind::kUndo, redo = kind == EditEvent::Kind::kRedo;
     if ((undo || redo) && o.restored.empty()) {
       long& n = undo ? figures.undo_nothing : figures.redo_nothing;
@@ -666,10 +673,10 @@ class EditDriver {
     const double r = b.radius_m;
     const bool outside = c.x + r < lo.x || c.y + r < lo.y || c.z + r < lo.z || c.x - r > hi.x || c.y - r > hi.y || c.z - r > hi.z;
     if (outside && figures.brushes_outside++ == 0)
-      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush entirely outside the volume changed nothing");
+      note("t = " + fmt(t, 4) + " s: a " + session::to_string(b.kind) + " brush entirely outside the volume changed nothing");
     else if (!outside && figures.brushes_changing_nothing - figures.brushes_outside == 1)
-      note("t = " + fmt(t, 4) + " s: a " + engine::to_string(b.kind) + " brush changed no voxel (" +
-           (b.kind == engine::BrushKind::kDrill && !(b.force_n > b.force_threshold_n)
+      note("t = " + fmt(t, 4) + " s: a " + session::to_string(b.kind) + " brush changed no voxel (" +
+           (b.kind == session::BrushKind::kDrill && !(b.force_n > b.force_threshold_n)
                 ? "the force, " + fmt(b.force_n, 3) + " N, was not above the drill's threshold of " + fmt(b.force_threshold_n, 3) + " N"
                 : std::string("nothing to remove or add there")) +
            "); " + "later ones are counted in summary.json edits.did_nothing");
@@ -677,14 +684,14 @@ class EditDriver {
 
   const Scene& scene_;
   SceneSetup& setup_;
-  servo::TripleBuffer<servo::SampleField>& out_;
+  servo::TripleBuffer<core::SampleField>& out_;
   core::Isosurface iso_;
-  engine::BrushTargets targets_;
+  session::BrushTargets targets_;
   double dt_, voxel_mm3_;
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
-  std::shared_ptr<servo::SampleField> truth_;
+  std::shared_ptr<core::SampleField> truth_;
   std::uint64_t truth_version_ = 0;
   bool button_ = false, contact_seen_ = false;
   long press_tick_ = 0;
@@ -700,7 +707,7 @@ std::string edits_csv(const std::vector<EditRow>& rows, const engine::Volume& vo
   for (const EditRow& r : rows) {
     const bool brush = r.event.kind == EditEvent::Kind::kBrush;
     const Vec3 c = brush ? vol.to_physical(r.event.brush.centre_m) * 1e3 : Vec3{};
-    s << r.event.t_s << ',' << r.event.tick << ',' << (brush ? engine::to_string(r.event.brush.kind) : to_string(r.event.kind))
+    s << r.event.t_s << ',' << r.event.tick << ',' << (brush ? session::to_string(r.event.brush.kind) : to_string(r.event.kind))
       << ',' << r.source << ',' << c.x << ',' << c.y << ',' << c.z << ',' << (brush ? r.event.brush.radius_m * 1e3 : 0.0)
       << ',' << (brush ? r.event.brush.force_n : 0.0) << ','
       << (brush ? r.outcome.brush.dirty.size() : r.outcome.restored.size()) << ',' << r.outcome.update.recomputed << ','
@@ -712,7 +719,7 @@ std::string edits_csv(const std::vector<EditRow>& rows, const engine::Volume& vo
 
 // edits.png: |F| with the drill threshold, HIP / VHIP depth below the initial contact point,
 // removed volume; button intervals shaded, brush applications marked.
-bool draw_edit_plots(const Scene& scene, const std::string& dir, const servo::TouchScript& script,
+bool draw_edit_plots(const Scene& scene, const std::string& dir, const sim::TouchScript& script,
                      const engine::Volume& vol, std::string& note) {
   const std::string csv = fs::absolute(fs::path(dir) / "trace.csv").string();
   const std::string ecsv = fs::absolute(fs::path(dir) / "edits.csv").string();
@@ -757,12 +764,12 @@ bool draw_edit_plots(const Scene& scene, const std::string& dir, const servo::To
 
 // The path for a picture, thinned to about 600 ticks (each is an overlay every pixel
 // tests: a 6000-tick path takes minutes on lavapipe); the tick of the largest force kept.
-std::vector<servo::TraceRow> thin_path(const std::vector<servo::TraceRow>& trace) {
-  std::vector<servo::TraceRow> path;
+std::vector<sim::TraceRow> thin_path(const std::vector<sim::TraceRow>& trace) {
+  std::vector<sim::TraceRow> path;
   const std::size_t every = std::max<std::size_t>(1, trace.size() / 600);
   std::size_t fmax = 0;
   for (std::size_t i = 0; i < trace.size(); ++i)
-    if (servo::norm(trace[i].force_n) > servo::norm(trace[fmax].force_n)) fmax = i;
+    if (core::norm(trace[i].force_n) > core::norm(trace[fmax].force_n)) fmax = i;
   for (std::size_t i = 0; i < trace.size(); ++i)
     if (i % every == 0 || i == fmax) path.push_back(trace[i]);
   return path;
@@ -796,7 +803,7 @@ engine::RaycastImage render_section(const Scene& scene, const SceneSetup& setup,
 }
 
 // The figures, files and pictures of a run with edits, into m.edits.
-void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<servo::TraceRow>& trace,
+void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
                   const std::string& dir, RunMetrics& m, std::ostream& log) {
   EditFigures& e = m.edits;
   const long after_edit = e.contact_ticks_after_edit;
@@ -832,8 +839,8 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
   e.removed_mm3 = double(e.inside_voxels_before - e.inside_voxels_after) * sp.x * sp.y * sp.z * 1e9;
   const Vec3 cp = setup.script.contact_point_m, n = setup.script.contact_normal;
   for (const auto& r : trace) {
-    e.max_hip_depth_m = std::max(e.max_hip_depth_m, servo::dot(cp - r.hip_m, n));
-    e.max_vhip_depth_m = std::max(e.max_vhip_depth_m, servo::dot(cp - r.vhip_m, n));
+    e.max_hip_depth_m = std::max(e.max_hip_depth_m, core::dot(cp - r.hip_m, n));
+    e.max_vhip_depth_m = std::max(e.max_vhip_depth_m, core::dot(cp - r.vhip_m, n));
   }
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
@@ -855,7 +862,7 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       e.vdb_file = "drilled.vdb";
     }
     if (scene.edits.write_nrrd) {
-      engine::save_volume_itk(after, (fs::path(dir) / "drilled.nrrd").string());
+      io::save_volume_itk(after, (fs::path(dir) / "drilled.nrrd").string());
       e.nrrd_file = "drilled.nrrd";
     }
     if (scene.edits.write_stl) {
@@ -868,7 +875,7 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
   }
   if (scene.draw_plots) {
     // Before and after: the same camera (from the run's contact points), unedited and edited voxels.
-    const std::vector<servo::TraceRow> path = thin_path(trace);
+    const std::vector<sim::TraceRow> path = thin_path(trace);
     // before.png: surface.png when it was drawn (the same volume, snapshot and path).
     RunPicture before;
     bool copied = false;
@@ -1022,7 +1029,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
 }
 
 // `run --record FILE`: every tick's HIP, button and force, and the edit log.
-void write_recording(const Scene& scene, const SceneSetup& setup, const std::vector<servo::TraceRow>& trace,
+void write_recording(const Scene& scene, const SceneSetup& setup, const std::vector<sim::TraceRow>& trace,
                      const std::string& path) {
   Recording rec;
   rec.scene_path = fs::absolute(scene.file).string();
@@ -1039,6 +1046,34 @@ void write_recording(const Scene& scene, const SceneSetup& setup, const std::vec
 }
 
 }  // namespace
+
+session::Brush make_brush(const BrushSpec& b, const session::BrushTargets& defaults, const Vec3& centre_m,
+                         double dt_s, double force_n) {
+  session::Brush e;
+  e.kind = brush_kind(b.kind);
+  e.centre_m = centre_m;
+  e.radius_m = b.radius_mm * 1e-3;
+  e.strength = b.strength;
+  e.falloff = b.falloff;
+  e.targets = defaults;
+  if (b.has_material) e.targets.material = float(b.material);
+  if (b.has_empty) e.targets.empty = float(b.empty);
+  if (b.density_scale > 0) e.targets.density_scale = float(b.density_scale);
+  e.force_threshold_n = b.force_threshold_n;
+  e.rate = b.rate;
+  e.dt_s = dt_s;
+  e.force_n = force_n;
+  return e;
+}
+
+
+io::BrushSpec brush_at_tool(const Scene& scene, const engine::Volume& vol, const io::BrushSpec& b) {
+  if (!(scene.hri.tool_radius_m > 0)) return b;
+  const auto& sp = vol.grid.spacing_m;
+  io::BrushSpec t = b;
+  t.radius_mm = 1e3 * (scene.hri.tool_radius_m + std::max({sp.x, sp.y, sp.z}));
+  return t;
+}
 
 std::vector<engine::PassDesc> scene_passes(const Scene& scene) {
   std::vector<engine::PassDesc> out;
@@ -1082,7 +1117,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   } else if (scene.synthetic.kind == "sphere") {
     vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
   } else {
-    vol = std::move(engine::make_synthetic_scene(scene.synthetic.kind).volume);
+    vol = std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
   }
   m.volume_path = vol.path;
   m.dims = vol.grid.dims;
@@ -1131,7 +1166,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
 
   // 3. Script, servo parameters, workspace.
   s.hri = scene.hri;
-  s.script = servo::make_touch_script(*s.truth, s.hri, scene.script);
+  s.script = sim::make_touch_script(*s.truth, s.hri, scene.script);
   s.world_T_device.scale = scene.workspace_scale;
   s.world_T_device.translation_m = vol.grid.centre_m();
 
@@ -1162,21 +1197,21 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   RunMetrics& m = setup.metrics;
   const engine::Volume& vol = setup.volume;
   engine::VulkanContext& vk = *setup.vk;
-  const std::shared_ptr<const servo::SampleField> field = setup.first;
-  const servo::SampleField& truth = *setup.truth;
+  const std::shared_ptr<const core::SampleField> field = setup.first;
+  const core::SampleField& truth = *setup.truth;
   const bool any_finite = vol.finite_voxels > 0;
 
   // Publish the samples: the servo reads them through the one publication point.
-  servo::TripleBuffer<servo::SampleField> published;
+  servo::TripleBuffer<core::SampleField> published;
   published.publish(field);
 
   // Device and servo.
   const servo::HriParams hp = setup.hri;
-  const servo::TouchScript& script = setup.script;
+  const sim::TouchScript& script = setup.script;
   const servo::WorkspaceTransform xf = setup.world_T_device;
   Vec3 start_w, v0;
   script.at(0.0, start_w, v0);
-  servo::SimDevice device(scene.device, xf.to_device(start_w));
+  sim::SimDevice device(scene.device, xf.to_device(start_w));
   servo::HriRenderer renderer(hp);
   const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
   const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
@@ -1197,13 +1232,13 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     }
   };
   std::optional<EditDriver> edits;
-  servo::TickHook hook;
+  sim::TickHook hook;
   if (setup.session) {
     edits.emplace(scene, setup, published);
-    hook = [&edits](long k, servo::TraceRow& row) { (*edits)(k, row); };
+    hook = [&edits](long k, sim::TraceRow& row) { (*edits)(k, row); };
   }
-  const std::vector<servo::TraceRow> trace =
-      servo::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress, 250, hook);
+  const std::vector<sim::TraceRow> trace =
+      sim::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress, 250, hook);
   if (edits) edits->finish(long(trace.size()) - 1);
 
   // 5. Figures.
@@ -1213,7 +1248,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   double sum_ns = 0, err2 = 0, fo2 = 0, fsum = 0, dir2 = 0, raw2 = 0;
   long found = 0, dir_pairs = 0, raw_found = 0;
   // With filters: the unfiltered data's isosurface, to see how far smoothing moved the surface.
-  std::optional<servo::SampleField> unfiltered;
+  std::optional<core::SampleField> unfiltered;
   for (const auto& p : m.passes)
     if (p.kind == engine::PassKind::Gaussian || p.kind == engine::PassKind::Closing) m.has_unfiltered = true;
   if (m.has_unfiltered) {
@@ -1233,22 +1268,22 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     fo2 += fo * fo;
     m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
   };
-  const servo::TraceRow* prev = nullptr;
+  const sim::TraceRow* prev = nullptr;
   for (const auto& r : trace) {
     ns.push_back(r.tick_ns);
     sum_ns += double(r.tick_ns);
     m.plane_updates += r.plane_update;
     m.saturated_ticks += r.saturated;
     m.fault_ticks += r.fault;
-    const servo::TraceRow* last = prev;
+    const sim::TraceRow* last = prev;
     prev = &r;
     const bool stroking = r.t_s >= script.t_stroke && r.t_s < script.t_lift;
     m.stroke_ticks += stroking;
     m.stroke_contact_ticks += stroking && r.contact;
     if (r.t_s >= script.t_lift && r.contact) {
       ++m.lift_contact_ticks;
-      m.lift_max_force_n = std::max(m.lift_max_force_n, servo::norm(r.force_n));
-      const double outward = servo::dot(r.force_n, script.contact_normal);
+      m.lift_max_force_n = std::max(m.lift_max_force_n, core::norm(r.force_n));
+      const double outward = core::dot(r.force_n, script.contact_normal);
       if (outward < 0) {
         ++m.lift_inward_ticks;
         m.lift_max_inward_force_n = std::max(m.lift_max_inward_force_n, -outward);
@@ -1256,17 +1291,17 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     }
     if (!r.contact) continue;
     ++m.contact_ticks;
-    const double f = servo::norm(r.force_n);
+    const double f = core::norm(r.force_n);
     if (last && last->contact) {
-      const double step = std::abs(f - servo::norm(last->force_n));
+      const double step = std::abs(f - core::norm(last->force_n));
       if (step > m.max_force_step_n) {
         m.max_force_step_n = step;
         m.max_force_step_t_s = r.t_s;
       }
     }
     fsum += f;
-    if (last && last->contact && f > 0 && servo::norm(last->force_n) > 0) {
-      const double c = std::clamp(servo::dot(r.force_n, last->force_n) / (f * servo::norm(last->force_n)), -1.0, 1.0);
+    if (last && last->contact && f > 0 && core::norm(last->force_n) > 0) {
+      const double c = std::clamp(core::dot(r.force_n, last->force_n) / (f * core::norm(last->force_n)), -1.0, 1.0);
       const double a = std::acos(c) * 180.0 / M_PI;
       dir2 += a * a;
       ++dir_pairs;
@@ -1302,7 +1337,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     const core::FieldView view(*field);
     const core::Isosurface iso{hp.tau, hp.inside};
     for (std::size_t i = 1; i < trace.size(); ++i) {
-      const double f0 = servo::norm(trace[i - 1].force_n), f1 = servo::norm(trace[i].force_n);
+      const double f0 = core::norm(trace[i - 1].force_n), f1 = core::norm(trace[i].force_n);
       if (std::abs(f1 - f0) > m.max_any_step_n) {
         m.max_any_step_n = std::abs(f1 - f0);
         m.max_any_step_t_s = trace[i].t_s;
@@ -1371,7 +1406,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                  {"direction", m.direction},
                  {"frame", "points and forces are physical (ITK's LPS frame): world = origin + direction * (spacing * index)"}};
   j["isovalue"] = hp.tau;
-  j["inside"] = hp.inside == servo::InsideIs::kAbove ? "above" : "below";
+  j["inside"] = hp.inside == core::InsideIs::kAbove ? "above" : "below";
   j["gpu"] = {{"device", m.gpu_device},
               {"device_type", m.gpu_device_type},
               {"passes", pass_labels(m.passes)},
@@ -1475,7 +1510,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << fmt(m.spacing_m.z * 1e3) << " mm, " << vol.component_type << "; " << value_range_text(vol, m) << ") |\n"
      << "| orientation | " << m.orientation << ", direction " << direction_text(m.direction)
      << "; reported points and forces are physical (ITK's LPS frame: origin + D (spacing * index)) |\n"
-     << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == servo::InsideIs::kAbove ? ">" : "<")
+     << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == core::InsideIs::kAbove ? ">" : "<")
      << " isovalue) |\n"
      << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
      << "| engine | " << m.engine_mode << " mode, " << m.sample_format << " samples, passes "

@@ -23,16 +23,27 @@ struct RunOptions {
   std::string device;                  ///< Vulkan device choice (see ContextOptions)
   bool progress = true;                ///< progress line on stderr
   std::uint64_t max_binding_bytes = 0; ///< test hook: smaller storage-binding limit
-  /// `run --record FILE`: also write the recording (apps/record.h: every device input,
+  /// `run --record FILE`: also write the recording (io/record.h: every device input,
   /// button and edit with its tick and time, and the forces) to this file; "" = none.
   std::string record_path;
 };
 
 /// The scene's pass list as engine passes (engine.passes), checked with
 /// engine::validate_passes. @throws SceneError "FILE: field 'engine.passes': pass 1 (...): ...".
-std::vector<engine::PassDesc> scene_passes(const Scene& scene);
+std::vector<engine::PassDesc> scene_passes(const io::Scene& scene);
+/// The engine brush of a scene brush: centre grid-world [m], application time dt_s [s],
+/// drill force |F| [N]; targets from `defaults` (session::default_targets) unless the scene
+/// sets them.
+session::Brush make_brush(const io::BrushSpec& b, const session::BrushTargets& defaults, const core::Vec3& centre_m,
+                          double dt_s, double force_n);
+/// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP is
+/// the tool's centre and the brush takes the tool's size, reaching one voxel (the largest
+/// spacing: the surface the burr touches lies within one cell of it) past its surface, so it
+/// removes what the burr's surface touches; a point tool keeps the scene's radius.
+io::BrushSpec brush_at_tool(const io::Scene& scene, const engine::Volume& vol, const io::BrushSpec& b);
+
 /// The scene's engine.samples as a core::SampleFormat.
-core::SampleFormat scene_sample_format(const Scene& scene);
+core::SampleFormat scene_sample_format(const io::Scene& scene);
 
 /// One pass (dense) or stage (sparse) as it ran.
 struct PassFigure {
@@ -59,7 +70,7 @@ struct EditFigures {
   std::uint64_t last_version = 1;  ///< SampleField::version of the last snapshot
   long dirty_bricks = 0;           ///< sum over applications of the bricks whose voxels changed
   long recomputed_bricks = 0;      ///< sum over updates of LiveUpdateStats::recomputed
-  double update_ms_median = 0, update_ms_max = 0;  ///< EditSession::apply wall time, publishing events [ms]
+  double update_ms_median = 0, update_ms_max = 0;  ///< session::EditSession::apply wall time, publishing events [ms]
   double brush_ms_median = 0;      ///< BrushResult::wall_ms median [ms]
   bool brushes_on_gpu = false;     ///< Sculptor::on_gpu()
   std::uint64_t history_bytes = 0, history_limit_bytes = 0;  ///< undo history at the end
@@ -94,7 +105,7 @@ struct EditFigures {
 struct RunMetrics {
   std::string volume_path;
   std::array<int, 3> dims{};
-  servo::Vec3 spacing_m;
+  core::Vec3 spacing_m;
   std::string gpu_device;
   std::string gpu_device_type;
   double gpu_gradient_ms = 0, gpu_upload_ms = 0, gpu_download_ms = 0, gpu_submit_wall_ms = 0;
@@ -118,7 +129,7 @@ struct RunMetrics {
   double max_any_step_n = 0;
   double max_any_step_t_s = 0;  ///< time of the second tick of that step [s]
   /// True distance [m] of the VHIP from the trilinear isosurface over the contact ticks
-  /// (apps/surface_distance.h: bounded search, accurate to 1e-3 voxel), RMS and max over
+  /// (eval/surface_distance.h: bounded search, accurate to 1e-3 voxel), RMS and max over
   /// the ticks where a surface was found within surface_search_radius_m.
   /// Both 0 (and null in summary.json) when no contact tick found a surface.
   double surface_err_rms_m = 0, surface_err_max_m = 0;
@@ -180,21 +191,21 @@ struct RunMetrics {
 /// Frames: grid-world [m] for every point (core::Grid), device [m] through world_T_device.
 struct SceneSetup {
   engine::Volume volume;                         ///< as loaded, before any edit
-  engine::LiveFieldOptions live;                 ///< passes, isosurface, background, format
+  session::LiveFieldOptions live;                 ///< passes, isosurface, background, format
   servo::HriParams hri;                          ///< the renderer's parameters (scene.hri)
   servo::WorkspaceTransform world_T_device;      ///< world = translation + scale * device
-  servo::TouchScript script;                     ///< the scripted hand (cast on `truth`)
-  /// The first published snapshot (version 1). With edits: the EditSession's (LiveField
+  sim::TouchScript script;                     ///< the scripted hand (cast on `truth`)
+  /// The first published snapshot (version 1). With edits: the session::EditSession's (LiveField
   /// version 1 = run_sparse_cpu, bit-identical to the GPU sparse chain); without edits:
   /// the GPU chain's output, as before edits existed.
-  std::shared_ptr<const servo::SampleField> first;
+  std::shared_ptr<const core::SampleField> first;
   /// Dense fp32 samples of the scene's passes on the unedited volume (CPU reference): the
   /// script is cast on it and the surface error measured against it.
-  std::shared_ptr<const servo::SampleField> truth;
+  std::shared_ptr<const core::SampleField> truth;
   std::unique_ptr<engine::VulkanContext> vk;     ///< the Vulkan context (engine, brushes, pictures)
   /// The edit pipeline (brushes on the GPU when there is a device, else the CPU reference)
   /// when the scene has an "edits" section, else null. Built from a copy of `volume`.
-  std::unique_ptr<EditSession> session;
+  std::unique_ptr<session::EditSession> session;
   RunMetrics metrics;                            ///< the volume and engine figures (what run_scene reports)
   SceneSetup();
   SceneSetup(SceneSetup&&) noexcept;
@@ -203,9 +214,9 @@ struct SceneSetup {
 };
 
 /// Loads the scene's volume, runs its engine (GPU chain + CPU reference, the report's
-/// figures), builds the script and, with edits, the EditSession. run_scene starts with it.
+/// figures), builds the script and, with edits, the session::EditSession. run_scene starts with it.
 /// @throws as run_scene.
-SceneSetup setup_scene(const Scene& scene, const RunOptions& options, std::ostream& log);
+SceneSetup setup_scene(const io::Scene& scene, const RunOptions& options, std::ostream& log);
 
 /// The tick after whose render an event at time t_s [s] is applied: the first tick k with
 /// k / rate_hz >= t_s (to 1e-9 tick).
@@ -213,6 +224,6 @@ long edit_tick(double t_s, double rate_hz);
 
 /// Run one scene end to end and write its outputs into options.out_dir.
 /// @throws engine::VolumeError, SceneError, std::runtime_error with a clear reason.
-RunMetrics run_scene(const Scene& scene, const RunOptions& options, std::ostream& log);
+RunMetrics run_scene(const io::Scene& scene, const RunOptions& options, std::ostream& log);
 
 }  // namespace isotouch::app

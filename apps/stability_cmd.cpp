@@ -13,6 +13,20 @@
 #include "stability.h"
 
 namespace isotouch::app {
+using io::draw_with_gnuplot;
+using io::gnuplot_quote;
+using io::temp_name;
+using io::write_file_atomic;
+using sim::colgate_k_max;
+using sim::find_k_max;
+using sim::plane_field;
+using sim::random_tick_property;
+using sim::run_extreme_cases;
+using sim::sphere_field;
+using core::SampleField;
+using core::Vec3;
+using sim::ExtremeCase;
+using sim::HeldContact;
 namespace {
 namespace fs = std::filesystem;
 using namespace servo;

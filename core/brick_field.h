@@ -184,7 +184,7 @@ inline std::uint16_t unorm16_encode(float x, float offset, float scale) {
 /// The 729 compact samples (kFp16 or kUnorm16) of active brick `b` (per-axis brick index)
 /// of `grid` from its fp32 samples `src`; `d` gets its kUnorm16 decode parameters (unused
 /// for kFp16). Samples beyond the grid get the NaN code. One brick of encode_compact (the
-/// live field, engine/live_field.h, encodes the bricks an edit changed with it).
+/// live field, session/live_field.h, encodes the bricks an edit changed with it).
 inline void encode_brick(const Grid& grid, const std::array<int, 3>& b, const Sample* src, SampleFormat f,
                          CompactSample* dst, BrickDecode& d) {
   const auto n = stored_in_grid(grid, b);

@@ -126,7 +126,7 @@ struct BrickStore {
   std::vector<BrickDecode> decode;                            ///< kUnorm16: one per slot
   /// kFp16: 1 / spacing_m per axis [1/m]: gradient = half_to_float(g[a]) * fp16_unscale[a].
   std::array<float, 3> fp16_unscale{1.f, 1.f, 1.f};
-  /// Arena stores (engine/live_field.h: one pool shared by the snapshots of an edited
+  /// Arena stores (session/live_field.h: one pool shared by the snapshots of an edited
   /// volume, unchanged bricks not copied): the slots the pool (and the decode table) hold;
   /// active table entries may name any slot below it, in any order. 0 (make_bricked_field):
   /// the slots are the active bricks' ranks, below active_bricks().

@@ -45,8 +45,3 @@ inline bool saturate(Vec3& f, double limit) {
 }
 
 }  // namespace isotouch::core
-
-// servo/ and engine/ name the core types as their own (servo::Vec3, engine::Vec3 ...):
-// qualified lookup follows a using-directive, so no code has to spell core::.
-namespace isotouch::servo { using namespace isotouch::core; }
-namespace isotouch::engine { using namespace isotouch::core; }

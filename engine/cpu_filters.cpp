@@ -26,7 +26,7 @@ std::vector<float> gaussian_kernel(double sigma_vox) {
   return w;
 }
 
-GaussianAxes gaussian_axes(const servo::Grid& g, double sigma_mm) {
+GaussianAxes gaussian_axes(const core::Grid& g, double sigma_mm) {
   if (!(std::isfinite(sigma_mm) && sigma_mm > 0))
     throw std::invalid_argument("gaussian: sigma_mm must be finite and > 0, got " + std::to_string(sigma_mm));
   GaussianAxes a;
@@ -37,7 +37,7 @@ GaussianAxes gaussian_axes(const servo::Grid& g, double sigma_mm) {
   return a;
 }
 
-std::array<int, 3> closing_radii(const servo::Grid& g, double radius_mm) {
+std::array<int, 3> closing_radii(const core::Grid& g, double radius_mm) {
   if (!(std::isfinite(radius_mm) && radius_mm >= 0))
     throw std::invalid_argument("closing: radius_mm must be finite and >= 0, got " + std::to_string(radius_mm));
   std::array<int, 3> r{};
@@ -53,7 +53,7 @@ std::array<int, 3> closing_radii(const servo::Grid& g, double radius_mm) {
 }
 
 namespace {
-std::size_t stride_of(const servo::Grid& g, int axis) {
+std::size_t stride_of(const core::Grid& g, int axis) {
   return axis == 0 ? 1 : axis == 1 ? std::size_t(g.dims[0]) : std::size_t(g.dims[0]) * std::size_t(g.dims[1]);
 }
 
@@ -64,7 +64,7 @@ std::size_t stride_of(const servo::Grid& g, int axis) {
 // border voxels clamp. y and z: per output row, each tap's source row (clamped once per
 // row) is combined into the whole row, x innermost.
 template <class Op>
-void filter_axis(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis, int r,
+void filter_axis(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis, int r,
                  float start, Op op) {
   out.resize(in.size());
   const auto [nx, ny, nz] = g.dims;
@@ -103,7 +103,7 @@ void filter_axis(const std::vector<float>& in, std::vector<float>& out, const se
 }
 }  // namespace
 
-void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis,
+void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis,
                        const std::vector<float>& w) {
   const float* wk = w.data();
   filter_axis(in, out, g, axis, int(w.size() / 2), 0.0f, [wk](float acc, int k, float v) {
@@ -112,7 +112,7 @@ void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, co
   });
 }
 
-void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& g, int axis,
+void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis,
                     int r, bool is_max) {
   const float start = is_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
   if (is_max)

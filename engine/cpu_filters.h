@@ -3,6 +3,7 @@
 // thread, so that GPU and CPU agree bit for bit on an IEEE device (this file is compiled
 // with -ffp-contract=off: no FMA contraction).
 #pragma once
+#include "core_names.h"
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -26,19 +27,19 @@ struct GaussianAxes {
   std::array<std::vector<float>, 3> kernel;  ///< gaussian_kernel(sigma_vox[a])
 };
 /// @throws std::invalid_argument if sigma_mm is not finite and > 0, or a kernel is too wide.
-GaussianAxes gaussian_axes(const servo::Grid& grid, double sigma_mm);
+GaussianAxes gaussian_axes(const core::Grid& grid, double sigma_mm);
 
 /// Per-axis box radius of the closing [voxels]: floor(radius_mm / spacing_mm + 1e-9), i.e.
 /// every voxel whose centre lies within radius_mm of the centre along that axis.
 /// @throws std::invalid_argument if radius_mm is not finite and >= 0, or too wide.
-std::array<int, 3> closing_radii(const servo::Grid& grid, double radius_mm);
+std::array<int, 3> closing_radii(const core::Grid& grid, double radius_mm);
 
 /// One axis of the separable Gaussian with clamp-to-edge: out[i] = sum_k w[k+r] * in[clamp(i+k)].
-void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& grid,
+void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& grid,
                        int axis, const std::vector<float>& kernel);
 /// One axis of a box dilation (is_max) or erosion, radius r each side, clamp to edge;
 /// NaN voxels are skipped (a window of only NaN gives -inf / +inf).
-void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const servo::Grid& grid, int axis,
+void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& grid, int axis,
                     int radius, bool is_max);
 
 /// Separable Gaussian smoothing, x then y then z (sigma in mm, per-axis sigma in voxels).

@@ -4,7 +4,7 @@
 
 namespace isotouch::engine {
 
-GradientConstants gradient_constants(const servo::Grid& g) {
+GradientConstants gradient_constants(const core::Grid& g) {
   GradientConstants c{};
   for (int a = 0; a < 3; ++a) {
     c.inv_2h[a] = float(1.0 / (2.0 * g.spacing_m[a]));
@@ -32,8 +32,8 @@ RowDiff row_diff(int i, int n, const float* row, std::size_t stride, float inv_2
 }
 }  // namespace
 
-servo::SampleField compute_samples_cpu(const Volume& vol) {
-  servo::SampleField out;
+core::SampleField compute_samples_cpu(const Volume& vol) {
+  core::SampleField out;
   out.grid = vol.grid;
   const auto [nx, ny, nz] = vol.grid.dims;
   out.samples.resize(vol.grid.voxel_count());
@@ -45,7 +45,7 @@ servo::SampleField compute_samples_cpu(const Volume& vol) {
     for (int y = 0; y < ny; ++y) {
       const std::size_t base = std::size_t(z) * sz + std::size_t(y) * sy;
       const float* row = f + base;
-      servo::Sample* o = out.samples.data() + base;
+      core::Sample* o = out.samples.data() + base;
       const RowDiff dy = row_diff(y, ny, row, sy, k.inv_2h[1], k.inv_h[1]);
       const RowDiff dz = row_diff(z, nz, row, sz, k.inv_2h[2], k.inv_h[2]);
       auto put = [&](int x, float gx) {
@@ -71,13 +71,13 @@ servo::SampleField compute_samples_cpu(const Volume& vol) {
 
 namespace isotouch::engine {
 
-GradientDiff compare_gradients(const servo::SampleField& a, const servo::SampleField& b) {
+GradientDiff compare_gradients(const core::SampleField& a, const core::SampleField& b) {
   if (a.grid.dims != b.grid.dims || a.samples.size() != b.samples.size())
     throw std::invalid_argument("compare_gradients: grids differ");
   GradientDiff d;
   for (std::size_t i = 0; i < a.samples.size(); ++i) {
-    const servo::Sample& s = a.samples[i];
-    const servo::Sample& r = b.samples[i];
+    const core::Sample& s = a.samples[i];
+    const core::Sample& r = b.samples[i];
     const double da[3] = {std::abs(double(s.gx) - r.gx), std::abs(double(s.gy) - r.gy),
                           std::abs(double(s.gz) - r.gz)};
     const double gn = std::sqrt(double(r.gx) * r.gx + double(r.gy) * r.gy + double(r.gz) * r.gz);

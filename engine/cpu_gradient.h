@@ -1,5 +1,6 @@
 // cpu_gradient.h - CPU reference of the gradient pass (shaders/gradient.comp).
 #pragma once
+#include "core_names.h"
 #include "sample_field.h"
 #include "volume.h"
 
@@ -11,11 +12,11 @@ struct GradientConstants {
   float inv_2h[3];  ///< 1 / (2 spacing) [1/m]
   float inv_h[3];   ///< 1 / spacing [1/m]
 };
-GradientConstants gradient_constants(const servo::Grid& grid);
+GradientConstants gradient_constants(const core::Grid& grid);
 
 /// Value and gradient per voxel: central differences in world units [value/m] inside,
 /// one-sided differences at the borders, 0 along an axis of one voxel.
-servo::SampleField compute_samples_cpu(const Volume& volume);
+core::SampleField compute_samples_cpu(const Volume& volume);
 
 }  // namespace isotouch::engine
 
@@ -31,6 +32,6 @@ struct GradientDiff {
   std::size_t nonfinite = 0;      ///< samples where either side is not finite
 };
 /// @throws std::invalid_argument if the grids differ.
-GradientDiff compare_gradients(const servo::SampleField& test, const servo::SampleField& ref);
+GradientDiff compare_gradients(const core::SampleField& test, const core::SampleField& ref);
 
 }  // namespace isotouch::engine

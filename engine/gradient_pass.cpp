@@ -22,9 +22,9 @@ static_assert(offsetof(GradientPush, dst_offset) == 28);
 static_assert(offsetof(GradientPush, inv_2h_x) == 32);
 static_assert(offsetof(GradientPush, inv_h_x) == 44);
 static_assert(offsetof(GradientPush, inv_h_z) == 52);
-static_assert(sizeof(servo::Sample) == 16 && offsetof(servo::Sample, value) == 0 &&
-                  offsetof(servo::Sample, gx) == 4 && offsetof(servo::Sample, gz) == 12,
-              "servo::Sample must match the vec4 written by gradient.comp");
+static_assert(sizeof(core::Sample) == 16 && offsetof(core::Sample, value) == 0 &&
+                  offsetof(core::Sample, gx) == 4 && offsetof(core::Sample, gz) == 12,
+              "core::Sample must match the vec4 written by gradient.comp");
 
 namespace {
 std::uint32_t group_count(std::uint64_t n, std::uint32_t wg) {
@@ -48,7 +48,7 @@ GradientPass::GradientPass(VulkanContext& ctx, ShaderSet shaders) : ctx_(ctx), s
 
 GradientPass::~GradientPass() = default;
 
-std::vector<Slab> GradientPass::plan(const servo::Grid& grid, VkBuffer src, VkBuffer dst,
+std::vector<Slab> GradientPass::plan(const core::Grid& grid, VkBuffer src, VkBuffer dst,
                                      std::uint64_t max_binding_bytes, const std::string& what) const {
   const auto [nx, ny, nz] = grid.dims;
   const auto& lim = ctx_.properties().limits;
@@ -61,7 +61,7 @@ std::vector<Slab> GradientPass::plan(const servo::Grid& grid, VkBuffer src, VkBu
             group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y) > lim.maxComputeWorkGroupCount[1]))
     throw VolumeError(what + ": volume too wide for one dispatch on " + ctx_.info().name);
   const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
-  const std::uint64_t dst_slice_bytes = slice * sizeof(servo::Sample);
+  const std::uint64_t dst_slice_bytes = slice * sizeof(core::Sample);
   SlabGeometry g;
   g.nz = std::uint64_t(nz);
   g.src_bytes_per_slice = slice * 4;
@@ -69,14 +69,14 @@ std::vector<Slab> GradientPass::plan(const servo::Grid& grid, VkBuffer src, VkBu
   g.halo = 1;
   g.dst_bytes_before = &samples_before;
   g.user = &dst_slice_bytes;
-  g.dst_elem_bytes = sizeof(servo::Sample);
+  g.dst_elem_bytes = sizeof(core::Sample);
   g.wg_z = x4 ? 1 : ISOTOUCH_GRADIENT_WG_Z;
   auto slabs = plan_slabs(ctx_, g, src, dst, limit, what + ": gradient");
   if (!slabs) throw VolumeError(slabs.error);
   return std::move(*slabs.value);
 }
 
-void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const servo::Grid& grid,
+void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
                           const std::vector<Slab>& slabs) const {
   const auto [nx, ny, nz] = grid.dims;
   const GradientConstants k = gradient_constants(grid);
@@ -144,7 +144,7 @@ double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
     return std::move(*r.value);
   };
   GpuBuffer src = buffer(n * sizeof(float), "voxels (copy floor)");
-  GpuBuffer dst = buffer(n * sizeof(servo::Sample), "samples (copy floor)");
+  GpuBuffer dst = buffer(n * sizeof(core::Sample), "samples (copy floor)");
   GradientPass planner(ctx_, ShaderSet::Current);
   const std::vector<Slab> slabs = planner.plan(vol.grid, src.handle(), dst.handle(), 0, vol.path);
   ComputePipeline<gpu::DensePush> pipe(ctx_, copy_x4_spv, 2, "copy_x4", 0u,
@@ -182,7 +182,7 @@ double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
   return ms.empty() ? -1.0 : ms[ms.size() / 2];
 }
 
-servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings,
+core::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings,
                                      std::uint64_t max_binding_bytes) {
   using clock = std::chrono::steady_clock;
   GradientTimings t;
@@ -193,14 +193,14 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
     return std::move(*r.value);
   };
   GpuBuffer src = buffer(n * sizeof(float), MemoryIntent::DeviceLocal, "voxels");
-  GpuBuffer dst = buffer(n * sizeof(servo::Sample), MemoryIntent::DeviceLocal, "samples");
+  GpuBuffer dst = buffer(n * sizeof(core::Sample), MemoryIntent::DeviceLocal, "samples");
   const std::vector<Slab> slabs = plan(vol.grid, src.handle(), dst.handle(), max_binding_bytes, vol.path);
   t.slabs = int(slabs.size());
   const bool direct = src.mapped() && dst.mapped();  // zero copy: host-visible device memory
   GpuBuffer up, down;
   if (!direct) {
     up = buffer(n * sizeof(float), MemoryIntent::Upload, "voxels staging");
-    down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+    down = buffer(n * sizeof(core::Sample), MemoryIntent::Readback, "samples readback");
   }
   DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 2 * std::uint32_t(slabs.size()));
   GpuTimer timer(ctx_, 2);
@@ -222,7 +222,7 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
     barrier_compute_to_host(cmd);
   } else {
     barrier_compute_to_transfer(cmd);
-    record_copy(cmd, dst, down, n * sizeof(servo::Sample));
+    record_copy(cmd, dst, down, n * sizeof(core::Sample));
     barrier_transfer_to_host(cmd);
   }
   t.submit_wall_ms = ctx_.submit_and_wait(cmd);
@@ -232,11 +232,11 @@ servo::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings
     t.gpu_timestamps = true;
   }
 
-  servo::SampleField out;
+  core::SampleField out;
   t0 = clock::now();
   out.grid = vol.grid;
   out.samples.resize(n);
-  std::memcpy(out.samples.data(), direct ? dst.mapped() : down.mapped(), n * sizeof(servo::Sample));
+  std::memcpy(out.samples.data(), direct ? dst.mapped() : down.mapped(), n * sizeof(core::Sample));
   t.download_ms = std::chrono::duration<double, std::milli>(clock::now() - t0).count();
   if (timings) *timings = t;
   return out;

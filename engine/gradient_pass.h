@@ -1,5 +1,6 @@
 // gradient_pass.h - the "gradient" compute pass: value + gradient per voxel on the GPU.
 #pragma once
+#include "core_names.h"
 #include <cstdint>
 
 #include <array>
@@ -39,20 +40,20 @@ class GradientPass {
   /// @param max_binding_bytes if non-zero, a smaller binding limit than the device's
   ///        (tests use it to force many slabs on small volumes).
   /// @throws VolumeError if one z-slice alone exceeds the binding limit.
-  servo::SampleField run(const Volume& volume, GradientTimings* timings = nullptr,
+  core::SampleField run(const Volume& volume, GradientTimings* timings = nullptr,
                          std::uint64_t max_binding_bytes = 0);
 
   /// The z-slabs of a gradient from a float buffer `src` to a vec4 buffer `dst` of this
   /// grid (the GPU-resident form, for pass chains).
   /// @throws VolumeError naming `what`, the slice size and the limit if a slice does not fit.
-  std::vector<Slab> plan(const servo::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
+  std::vector<Slab> plan(const core::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
                          const std::string& what) const;
   /// The floor of this pass on this device: shaders/copy_x4.comp (the same texel loads and
   /// vec4 stores as gradient_x4, no arithmetic) over `volume`, one untimed run and then the
   /// median device time [ms] of `runs` (wall time without timestamps). Buffers device-local.
   double copy_floor_ms(const Volume& volume, int runs);
   /// Records the dispatches of `slabs` (from plan()); no barriers.
-  void record(VkCommandBuffer cmd, DescriptorArena& arena, const servo::Grid& grid,
+  void record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
               const std::vector<Slab>& slabs) const;
 
  private:

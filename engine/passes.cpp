@@ -257,8 +257,8 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     if (!direct) w_up = buffer(weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
   }
   if (impl_->gradient) {
-    samples = buffer(n * sizeof(servo::Sample), MemoryIntent::DeviceLocal, "samples");
-    if (!direct) samples_down = buffer(n * sizeof(servo::Sample), MemoryIntent::Readback, "samples readback");
+    samples = buffer(n * sizeof(core::Sample), MemoryIntent::DeviceLocal, "samples");
+    if (!direct) samples_down = buffer(n * sizeof(core::Sample), MemoryIntent::Readback, "samples readback");
   }
   const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
                       bz = std::uint32_t((nz + 7) / 8);
@@ -503,7 +503,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   } else {
     barrier_compute_to_transfer(cmd);
     if (filters) record_copy(cmd, field[cur], field_down, n * 4);
-    if (samples) record_copy(cmd, samples, samples_down, n * sizeof(servo::Sample));
+    if (samples) record_copy(cmd, samples, samples_down, n * sizeof(core::Sample));
     if (bricks) record_copy(cmd, bricks, bricks_down, brick_bytes);
     barrier_transfer_to_host(cmd);
   }
@@ -532,7 +532,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     out.samples->grid = vol.grid;
     out.samples->samples.resize(n);
     std::memcpy(out.samples->samples.data(), direct ? samples.mapped() : samples_down.mapped(),
-                n * sizeof(servo::Sample));
+                n * sizeof(core::Sample));
   }
   if (bricks) {
     BrickRanges b;

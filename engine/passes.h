@@ -25,6 +25,7 @@
 // GPU and CPU do the same float operations in the same order (precise accumulation,
 // -ffp-contract=off): on lavapipe every output agrees bit for bit (tests/test_passes.cpp).
 #pragma once
+#include "core_names.h"
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -69,7 +70,7 @@ struct PassTiming {
 /// What a chain produced. Only the outputs the list asks for are present.
 struct ChainOutput {
   std::optional<std::vector<float>> field;     ///< field after the last filter, if any filter ran
-  std::optional<servo::SampleField> samples;   ///< gradient output
+  std::optional<core::SampleField> samples;   ///< gradient output
   std::optional<BrickRanges> bricks;           ///< brick_minmax output
   std::vector<PassTiming> passes;              ///< one per PassDesc, in order
   double upload_ms = 0;       ///< host memcpy into staging

@@ -22,6 +22,7 @@
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
 // and the cell bytes of a uniform brick follow from its tile value.
 #pragma once
+#include "core_names.h"
 #include <array>
 #include <cstdint>
 #include <memory>

@@ -4,6 +4,7 @@
 // bench engine (apps/bench_engine.cpp) and the scene runner (apps/run_job.cpp) code
 // against; the owner may add members but keeps these names and meanings.
 #pragma once
+#include "core_names.h"
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -86,7 +87,7 @@ struct RawRanges {
   void add_slice(const core::Grid& grid, int z, const float* slice);
   /// Recompute entry `id` alone from `voxels` (the whole volume, x fastest): the same
   /// values and fold order (z, y, x ascending) as add_slice over every slice. After an
-  /// edit of brick `id` (engine/live_field.h). Requires init(grid) and id < bricks total.
+  /// edit of brick `id` (session/live_field.h). Requires init(grid) and id < bricks total.
   void set_brick(const core::Grid& grid, const float* voxels, std::uint32_t id);
 };
 
@@ -102,7 +103,7 @@ Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface&
 
 /// select()'s result for one brick (its widened range, NaN flag and whether it is a
 /// candidate), bit for bit the same: the same min / max folds over the neighbours in the
-/// same order, the same rounding widening. For the live field (engine/live_field.h), which
+/// same order, the same rounding widening. For the live field (session/live_field.h), which
 /// re-selects only the bricks an edit can reach.
 struct BrickSelection {
   float lo, hi;

@@ -1,5 +1,6 @@
 // synthetic.h - analytic test volumes with known truth.
 #pragma once
+#include "core_names.h"
 #include <array>
 #include <cstdint>
 
@@ -15,10 +16,10 @@ Volume make_sphere(std::array<int, 3> dims, double spacing_m, double radius_vox,
                    std::array<double, 3> centre_offset_vox = {0, 0, 0});
 
 /// value(x) = a . x (world [m]) + b: central differences are exact on it.
-Volume make_linear(std::array<int, 3> dims, servo::Vec3 spacing_m, servo::Vec3 a, double b);
+Volume make_linear(std::array<int, 3> dims, core::Vec3 spacing_m, core::Vec3 a, double b);
 
 /// Uniform random values in [lo, hi) from a fixed seed (for GPU-vs-CPU checks).
-Volume make_random(std::array<int, 3> dims, servo::Vec3 spacing_m, float lo, float hi,
+Volume make_random(std::array<int, 3> dims, core::Vec3 spacing_m, float lo, float hi,
                    std::uint32_t seed);
 
 }  // namespace isotouch::engine

@@ -13,6 +13,7 @@
 // maxMemoryAllocationSize, no memory type of the intent, out of memory) returns a Result
 // whose error names what, the size and the limit; calls that cannot fail use VK_CHECK.
 #pragma once
+#include "core_names.h"
 #include <vulkan/vulkan.h>
 
 #include <cstddef>

@@ -26,20 +26,20 @@ void Volume::update_stats() {
   max_value = finite_voxels == 0 ? none : hi;
 }
 
-servo::Vec3 Volume::direction_apply(const servo::Vec3& v) const {
+core::Vec3 Volume::direction_apply(const core::Vec3& v) const {
   const auto& d = direction;
   return {d[0] * v.x + d[1] * v.y + d[2] * v.z, d[3] * v.x + d[4] * v.y + d[5] * v.z,
           d[6] * v.x + d[7] * v.y + d[8] * v.z};
 }
 
-servo::Vec3 Volume::to_physical(const servo::Vec3& g) const {
+core::Vec3 Volume::to_physical(const core::Vec3& g) const {
   return grid.origin_m + direction_apply(g - grid.origin_m);
 }
 
-servo::Vec3 Volume::to_grid(const servo::Vec3& p) const {
+core::Vec3 Volume::to_grid(const core::Vec3& p) const {
   const auto& d = direction;
-  const servo::Vec3 r = p - grid.origin_m;
-  return grid.origin_m + servo::Vec3{d[0] * r.x + d[3] * r.y + d[6] * r.z,
+  const core::Vec3 r = p - grid.origin_m;
+  return grid.origin_m + core::Vec3{d[0] * r.x + d[3] * r.y + d[6] * r.z,
                                      d[1] * r.x + d[4] * r.y + d[7] * r.z,
                                      d[2] * r.x + d[5] * r.y + d[8] * r.z};
 }

@@ -1,5 +1,6 @@
 // volume.h - a scalar volume as loaded from disk or made synthetically.
 #pragma once
+#include "core_names.h"
 #include <array>
 #include <stdexcept>
 #include <string>
@@ -26,7 +27,7 @@ struct VolumeError : std::runtime_error {
 /// Every point reported to a user must be in the physical frame: use `to_physical`
 /// for points and `direction_apply` for free vectors (forces, normals, gradients).
 struct Volume {
-  servo::Grid grid;
+  core::Grid grid;
   std::vector<float> voxels;          ///< grid.voxel_count() values, in file units
   std::string path;                   ///< where it came from ("synthetic:..." otherwise)
   std::string reader;                 ///< "itk:MetaImageIO", "teem:nrrdLoad", "synthetic"
@@ -45,14 +46,14 @@ struct Volume {
   std::size_t nonfinite_voxels() const { return nan_voxels + inf_voxels; }
 
   /// Grid frame point [m] -> physical frame point [m]: origin + D (g - origin).
-  servo::Vec3 to_physical(const servo::Vec3& grid_world_m) const;
+  core::Vec3 to_physical(const core::Vec3& grid_world_m) const;
   /// Physical frame point [m] -> grid frame point [m]: origin + D^T (p - origin)
   /// (D is orthonormal for every format we read).
-  servo::Vec3 to_grid(const servo::Vec3& physical_m) const;
+  core::Vec3 to_grid(const core::Vec3& physical_m) const;
   /// Grid frame vector -> physical frame vector: D v (forces [N], normals, gradients).
-  servo::Vec3 direction_apply(const servo::Vec3& v) const;
+  core::Vec3 direction_apply(const core::Vec3& v) const;
   /// Physical position [m] of a (continuous) voxel index: origin + D (spacing * index).
-  servo::Vec3 index_to_physical(const servo::Vec3& index) const {
+  core::Vec3 index_to_physical(const core::Vec3& index) const {
     return to_physical(grid.to_world(index));
   }
 

@@ -1,6 +1,7 @@
 // baselines.h - the two methods the HRI paper compares against (its Table 1), under the
 // same Renderer interface and the same force conventions as HriRenderer.
 #pragma once
+#include "core_names.h"
 #include "renderer.h"
 
 namespace isotouch::servo {

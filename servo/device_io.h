@@ -1,5 +1,8 @@
 // device_io.h - the device side of the servo loop (HAPI: updateDeviceValues / sendOutput).
 #pragma once
+#include "core_names.h"
+#include <cstdint>
+
 #include "vec3.h"
 
 namespace isotouch::servo {
@@ -14,13 +17,8 @@ class HapticDeviceIO {
   /// Force to render until the next call [N], device axes. Must accept any finite value
   /// (the device clips at its own limit) and refuse non-finite ones.
   virtual void write_force_n(const Vec3& force_n) = 0;
+  /// The buttons as of the last read_position_m() (bit i: button i down); 0 without buttons.
+  virtual std::uint32_t buttons() { return 0; }
 };
 
 }  // namespace isotouch::servo
-
-// Transitional: SimDeviceIO moved to sim/sim_device_io.h (isotouch::sim). Code that gets it
-// through servo_thread.h (apps/bench_cmd.cpp, tests/test_servo_thread.cpp) still sees it
-// wherever sim/ is on the include path; include "sim_device_io.h" there and drop this.
-#if __has_include("sim_device_io.h")
-#include "sim_device_io.h"
-#endif

@@ -6,6 +6,7 @@
 // reads the published field through core::FieldView only; tick() allocates nothing, takes no lock and makes
 // no syscall.
 #pragma once
+#include "core_names.h"
 #include <cstdint>
 
 #include "renderer.h"

@@ -7,6 +7,7 @@
 // this tick would be negative, so the environment never hands out more than it took in.
 // Allocation-free, lock-free: safe in the servo tick.
 #pragma once
+#include "core_names.h"
 #include "vec3.h"
 
 namespace isotouch::servo {

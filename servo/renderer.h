@@ -1,5 +1,6 @@
 // renderer.h - the interface every haptic renderer of an isosurface implements.
 #pragma once
+#include "core_names.h"
 #include "field_view.h"
 #include "isosurface.h"
 #include "sample_field.h"

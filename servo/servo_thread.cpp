@@ -135,6 +135,7 @@ void ServoThread::loop() {
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
   std::uint64_t last_version = 0;
+  bool was_paused = false;
   while (!stop_.load(std::memory_order_relaxed)) {
     next += period;
     // Wait: sleep to just before the deadline, then spin (outside the tick).
@@ -158,6 +159,7 @@ void ServoThread::loop() {
 
     // ---- the tick: no allocation, no lock, no syscall ----
     const SampleField* field = samples_.acquire();
+    const bool paused = paused_.load(std::memory_order_relaxed);
     if (!field) {
       device_.write_force_n({});
       empty_.fetch_add(1, std::memory_order_relaxed);
@@ -166,10 +168,26 @@ void ServoThread::loop() {
         last_version = field->version;
         snapshot_changes_.fetch_add(1, std::memory_order_relaxed);
       }
+      TickRecord rec;
+      rec.k = ticks_.load(std::memory_order_relaxed);
+      rec.t_ns = t;
+      rec.dt_s = dt_s;
+      rec.version = field->version;
       const Vec3 x = device_.read_position_m();
-      const HriTick out = renderer_.tick(*field, cfg_.world_T_device.to_world(x), dt_s);
-      device_.write_force_n(out.force_n);
-      if (out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
+      rec.buttons = device_.buttons();
+      rec.hip_m = cfg_.world_T_device.to_world(x);
+      rec.paused = paused;
+      if (paused) {
+        device_.write_force_n({});
+        was_paused = true;
+      } else {
+        if (was_paused) renderer_.reset();
+        was_paused = false;
+        rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
+        device_.write_force_n(rec.out.force_n);
+        if (rec.out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
+      }
+      if (cfg_.observer) cfg_.observer->on_tick(rec);
     }
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }

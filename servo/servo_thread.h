@@ -1,5 +1,6 @@
 // servo_thread.h - the fixed-rate real-time servo thread.
 #pragma once
+#include "core_names.h"
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -13,6 +14,28 @@
 #include "workspace.h"
 
 namespace isotouch::servo {
+
+/// One servo tick as the servo thread ran it: what the device gave, what the renderer
+/// answered, and when. Handed to a TickObserver on the servo thread.
+struct TickRecord {
+  long k = 0;                 ///< tick index (0 = the first tick)
+  std::int64_t t_ns = 0;      ///< the tick's start, CLOCK_MONOTONIC [ns]
+  double dt_s = 0;            ///< the measured period passed to the renderer [s] (0 on the first tick)
+  Vec3 hip_m;                 ///< HIP, world [m] (the device reading mapped)
+  std::uint32_t buttons = 0;  ///< the device's buttons (bit i: button i down)
+  HriTick out;                ///< the renderer's answer (force, VHIP, plane, contact, fault)
+  std::uint64_t version = 0;  ///< SampleField::version of the snapshot the tick read
+  bool paused = false;        ///< paused: zero force sent, the renderer not ticked
+};
+
+/// Sees every tick on the servo thread, after the force was written. on_tick() runs inside
+/// the tick: it must allocate nothing, take no lock and make no syscall (push into
+/// preallocated lock-free queues, store atomics).
+class TickObserver {
+ public:
+  virtual ~TickObserver() = default;
+  virtual void on_tick(const TickRecord& tick) noexcept = 0;
+};
 
 struct ServoThreadConfig {
   double rate_hz = 1000;          ///< servo rate, 1 to 10 kHz [Hz]
@@ -44,6 +67,8 @@ struct ServoThreadConfig {
   /// Called once on the servo thread after the real-time setup, right before the first
   /// tick (tests mark the thread here to count its allocations).
   std::function<void()> on_thread_start;
+  /// Sees every tick with a published snapshot (null: none). Not owned; must outlive the thread.
+  TickObserver* observer = nullptr;
 };
 
 /// Fixed-rate loop on CLOCK_MONOTONIC: sleep (clock_nanosleep, absolute, timer slack 1 ns)
@@ -69,8 +94,13 @@ class ServoThread {
   /// return "" or one line per thing the system did not allow (SCHED_FIFO, pinning, memory
   /// locking), each with the reason; those are not fatal, the loop runs anyway.
   std::string start();
-  /// Ask the loop to stop and join it.
+  /// Ask the loop to stop and join it. The device's last force is an exact zero.
   void stop();
+  /// Paused: every tick sends an exact zero force and the renderer is not ticked (its
+  /// contact state is reset on resume, so a resumed probe inside the object is not pulled
+  /// out through the plane it held before). Any thread.
+  void pause(bool paused) { paused_.store(paused, std::memory_order_relaxed); }
+  bool paused() const { return paused_.load(std::memory_order_relaxed); }
 
   long ticks() const { return ticks_.load(std::memory_order_relaxed); }
   long missed_deadlines() const { return missed_.load(std::memory_order_relaxed); }
@@ -95,6 +125,7 @@ class ServoThread {
   std::vector<std::int64_t> period_err_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> ready_{false};
+  std::atomic<bool> paused_{false};
   std::string setup_note_;  // written by the servo thread before ready_, read after
   bool got_fifo_ = false, got_lock_ = false;
   bool locked_ = false;  // memory locked now (released by stop())

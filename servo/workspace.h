@@ -1,5 +1,6 @@
 // workspace.h - the map from device space to the volume's world space.
 #pragma once
+#include "core_names.h"
 #include "vec3.h"
 
 namespace isotouch::servo {

@@ -313,8 +313,8 @@ struct SparseBrickPush {
 // ---- end sparse chain -----------------------------------------------------------------
 
 // ---- brushes -----------------------------------------
-// shaders/brush.comp, engine/brush.cpp, CPU reference engine/brush_cpu.cpp; the model is
-// documented in engine/brush.h. One 8x8x8 workgroup per touched 8^3 brick (a box dispatch
+// shaders/brush.comp, session/brush.cpp, CPU reference session/brush_cpu.cpp; the model is
+// documented in session/brush.h. One 8x8x8 workgroup per touched 8^3 brick (a box dispatch
 // over the brick box the brush's voxel-space bounding box touches; one dispatch per z-chunk
 // of brick layers whose slices fit a binding). Bindings: 0 the raw volume (float, x
 // fastest; a window of whole slices starting at linear voxel vol_base), 1 the pre-edit

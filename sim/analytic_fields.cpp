@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 namespace {
 template <class F>
 SampleField make(int dims, double h, F&& f) {
@@ -46,4 +46,4 @@ SampleField shell_field(Vec3 c, double r, double t, int dims, double h) {
   });
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -1,9 +1,10 @@
 // analytic_fields.h - sample fields with exact values and gradients (known truth).
 // For servo-side experiments and tests that must not depend on the engine or Vulkan.
 #pragma once
+#include "servo_names.h"
 #include "sample_field.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 /// Half-space wall: value = 1000 * (n . (c - x)) [mm], positive inside (behind the plane
 /// through c with outward unit normal n). Exact under trilinear interpolation.
@@ -17,4 +18,4 @@ SampleField sphere_field(Vec3 c, double r, int dims = 48, double h = 1e-3);
 /// value = 1000 * (thickness/2 - | |x - c| - r |) [mm], positive inside the shell wall.
 SampleField shell_field(Vec3 c, double r, double thickness, int dims = 96, double h = 1e-3);
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

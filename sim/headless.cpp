@@ -4,7 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
                                    SimDevice& device, const WorkspaceTransform& xf,
@@ -49,4 +49,4 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
   return trace;
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

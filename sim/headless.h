@@ -1,5 +1,6 @@
 // headless.h - step the servo at a fixed rate in simulated time (deterministic).
 #pragma once
+#include "servo_names.h"
 #include <cstdint>
 #include <functional>
 #include <vector>
@@ -10,7 +11,7 @@
 #include "triple_buffer.h"
 #include "workspace.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 /// One row of the trace (one servo tick).
 struct TraceRow {
@@ -31,7 +32,7 @@ struct TraceRow {
 
 /// Called after tick k's render (and the device step) with that tick's row, before tick
 /// k + 1 acquires its samples: what it publishes, tick k + 1 reads (the edit pipeline's
-/// determinism rule, apps/edit_session.h). It may set row.button. Outside the timed section.
+/// determinism rule, session/edit_session.h). It may set row.button. Outside the timed section.
 using TickHook = std::function<void(long k, TraceRow& row)>;
 
 /// Runs the script to its end at `rate_hz`. Each tick: acquire the newest published
@@ -46,4 +47,4 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
                                    const std::function<void(long, long)>& progress = {},
                                    long progress_every = 250, const TickHook& after_tick = {});
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -8,7 +8,7 @@
 
 #include "sampling.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 void TouchScript::at(double t, Vec3& pos, Vec3& vel) const {
   vel = {};
@@ -174,4 +174,4 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
   return s;
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

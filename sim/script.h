@@ -1,12 +1,13 @@
 // script.h - scripted operator motion: approach, press, stroke along the surface, lift.
 #pragma once
+#include "servo_names.h"
 #include <string>
 #include <vector>
 
 #include "hri.h"
 #include "sample_field.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 /// Accepted range of each ray_origin_frac component (fractions of the volume box).
 inline constexpr double kRayOriginFracMin = -2.0;
@@ -60,4 +61,4 @@ bool find_surface(const SampleField& field, const HriRenderer& classify, const V
 TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
                               const ScriptParams& params);
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 Vec3 SimDevice::position() const {
   const double q = p_.encoder_resolution_m;
@@ -77,4 +77,4 @@ void SimDevice::step(double dt, const Vec3& target, const Vec3& target_v) {
   }
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -9,9 +9,10 @@
 // fewest that integrate stably (min_stable_substeps): a light mass on a stiff, damped
 // hand otherwise diverges to NaN.
 #pragma once
+#include "servo_names.h"
 #include "vec3.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 /// Physical parameters of the simulated device and hand (device space, SI units).
 struct SimDeviceParams {
@@ -98,4 +99,4 @@ class SimDevice {
   int cached_steps_ = 0;
 };
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -10,7 +10,7 @@
 #include "passivity.h"
 #include "sampling.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 HeldContactResult simulate_held_contact(const SampleField& field, const Vec3& p0, const Vec3& normal,
                                         const HeldContact& cfg) {
@@ -436,4 +436,4 @@ long random_tick_property(long ticks, unsigned seed, double& max_ratio, std::str
   return bad;
 }
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -1,5 +1,6 @@
 // stability.h - stiff walls, passivity and extreme inputs: measured, not assumed.
 #pragma once
+#include "servo_names.h"
 #include <string>
 #include <vector>
 
@@ -7,7 +8,7 @@
 #include "sample_field.h"
 #include "sim_device.h"
 
-namespace isotouch::servo {
+namespace isotouch::sim {
 
 /// A held contact: the device comes in at approach speed, the operator's hand (a weak
 /// spring, little damping) keeps pushing it into the surface with push_force_n.
@@ -93,4 +94,4 @@ ExtremeCase run_extreme_case(int i);
 /// zero force. `detail`, if given, receives the count per property.
 long random_tick_property(long ticks, unsigned seed, double& max_force_ratio, std::string* detail = nullptr);
 
-}  // namespace isotouch::servo
+}  // namespace isotouch::sim

@@ -6,7 +6,9 @@
 #include "analytic_fields.h"
 #include "baselines.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 const Vec3 kUp{0, 0, 1};

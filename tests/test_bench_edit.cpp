@@ -14,7 +14,7 @@
 #include "synthetic.h"
 
 using namespace isotouch;
-using app::percentile;
+using eval::percentile;
 
 namespace {
 const double kNaN = std::numeric_limits<double>::quiet_NaN();

@@ -99,10 +99,10 @@ TEST(BenchEngineFormula, BandwidthMedianRatio) {
   EXPECT_DOUBLE_EQ(app::gb_per_s(5e6, 1.0), 5.0);     // 5e6 B in 1 ms
   EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, 0.0)));
   EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, kNaN)));
-  EXPECT_DOUBLE_EQ(app::median({3, 1, 2}), 2.0);
-  EXPECT_DOUBLE_EQ(app::median({4, 1, 3, 2}), 2.5);
-  EXPECT_DOUBLE_EQ(app::median({kNaN, 5, kNaN}), 5.0);
-  EXPECT_TRUE(std::isnan(app::median({})));
+  EXPECT_DOUBLE_EQ(eval::median({3, 1, 2}), 2.0);
+  EXPECT_DOUBLE_EQ(eval::median({4, 1, 3, 2}), 2.5);
+  EXPECT_DOUBLE_EQ(eval::median({kNaN, 5, kNaN}), 5.0);
+  EXPECT_TRUE(std::isnan(eval::median({})));
   EXPECT_DOUBLE_EQ(app::ratio(1, 4), 0.25);
   EXPECT_TRUE(std::isnan(app::ratio(1, 0)));
   EXPECT_TRUE(std::isnan(app::ratio(kNaN, 1)));

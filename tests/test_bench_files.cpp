@@ -13,6 +13,7 @@
 #include "files.h"
 
 using namespace isotouch::app;
+using namespace isotouch::io;
 namespace fs = std::filesystem;
 
 TEST(Table1Verdict, CountsTheScenesWhereHriIsNoSlowerThanAvila) {

@@ -21,8 +21,8 @@
 #include "volume_io.h"
 
 using namespace isotouch;
-using engine::Brush;
-using engine::BrushKind;
+using session::Brush;
+using session::BrushKind;
 using engine::Volume;
 
 namespace {
@@ -34,7 +34,7 @@ engine::VulkanContext& vk() { return test::validated_vk(); }
 
 constexpr BrushKind kKinds[] = {BrushKind::kAdd, BrushKind::kCarve, BrushKind::kSmooth, BrushKind::kDrill};
 
-Brush make(BrushKind k, core::Vec3 c, double radius, const engine::BrushTargets& t) {
+Brush make(BrushKind k, core::Vec3 c, double radius, const session::BrushTargets& t) {
   Brush b;
   b.kind = k;
   b.centre_m = c;
@@ -73,14 +73,14 @@ std::size_t bits_differ(const std::vector<float>& a, const std::vector<float>& b
 /// one: GPU volume == mirror == CPU bit for bit, dirty sets equal and equal to the diff.
 void gpu_vs_cpu(const Volume& start, const std::vector<Brush>& brushes, std::uint64_t max_binding = 0,
                 bool expect_chunks = false) {
-  auto eng = engine::BrushEngine::create(vk(), start, max_binding);
+  auto eng = session::BrushEngine::create(vk(), start, max_binding);
   ASSERT_TRUE(eng) << eng.error;
   Volume cpu = start, mirror = start;
   for (std::size_t i = 0; i < brushes.size(); ++i) {
     const Brush& b = brushes[i];
     SCOPED_TRACE(std::string(to_string(b.kind)) + " #" + std::to_string(i));
     const std::vector<float> before = cpu.voxels;
-    const auto rc = engine::apply_brush_cpu(cpu, b);
+    const auto rc = session::apply_brush_cpu(cpu, b);
     const auto rg = (*eng.value)->apply(b, &mirror);
     EXPECT_EQ(rg.touched, rc.touched);
     EXPECT_EQ(rg.dirty, rc.dirty);
@@ -95,7 +95,7 @@ void gpu_vs_cpu(const Volume& start, const std::vector<Brush>& brushes, std::uin
 }
 
 /// Brushes of every kind at the centre, near each border, straddling brick borders.
-std::vector<Brush> brush_set(const Volume& v, const engine::BrushTargets& t, double radius) {
+std::vector<Brush> brush_set(const Volume& v, const session::BrushTargets& t, double radius) {
   const core::Grid& g = v.grid;
   std::vector<core::Vec3> at = {
       g.centre_m(),
@@ -114,13 +114,13 @@ std::vector<Brush> brush_set(const Volume& v, const engine::BrushTargets& t, dou
 TEST(Brush, GpuMatchesCpuBitForBitOnRandomVolume) {
   Volume v = engine::make_random({37, 29, 21}, {1e-3, 1.3e-3, 0.9e-3}, -500.0f, 1500.0f, 7);
   v.update_stats();
-  const auto t = engine::default_targets(v, {300.0, core::InsideIs::kAbove});
+  const auto t = session::default_targets(v, {300.0, core::InsideIs::kAbove});
   gpu_vs_cpu(v, brush_set(v, t, 6e-3));
 }
 
 TEST(Brush, GpuMatchesCpuBitForBitOnHeadCt) {
-  Volume v = engine::load_volume(kHead);
-  const auto t = engine::default_targets(v, {1150.0, core::InsideIs::kAbove});
+  Volume v = io::load_volume(kHead);
+  const auto t = session::default_targets(v, {1150.0, core::InsideIs::kAbove});
   auto set = brush_set(v, t, 10e-3);
   auto small = brush_set(v, t, 3e-3);
   set.insert(set.end(), small.begin(), small.end());
@@ -128,8 +128,8 @@ TEST(Brush, GpuMatchesCpuBitForBitOnHeadCt) {
 }
 
 TEST(Brush, SmallBindingsSplitIntoChunksAndStillMatch) {
-  Volume v = engine::load_volume(kHead);
-  const auto t = engine::default_targets(v, {1150.0, core::InsideIs::kAbove});
+  Volume v = io::load_volume(kHead);
+  const auto t = session::default_targets(v, {1150.0, core::InsideIs::kAbove});
   // 64 x 64 floats = 16 KiB per slice: 200 KiB holds 1 brick layer (+ 2 halo slices).
   std::vector<Brush> b;
   for (BrushKind k : kKinds) b.push_back(make(k, v.grid.centre_m(), 30e-3, t));
@@ -142,7 +142,7 @@ TEST(Brush, InsideBelowSignedDistance) {
   for (float& x : v.voxels) x = -x;
   v.update_stats();
   const core::Isosurface iso{0.0, core::InsideIs::kBelow};
-  const auto t = engine::default_targets(v, iso);
+  const auto t = session::default_targets(v, iso);
   EXPECT_LT(t.material, 0.0f);
   EXPECT_GT(t.empty, 0.0f);
   gpu_vs_cpu(v, brush_set(v, t, 5e-3));
@@ -151,12 +151,12 @@ TEST(Brush, InsideBelowSignedDistance) {
   Volume c = v;
   Brush carve = make(BrushKind::kCarve, v.grid.centre_m(), 4e-3, t);
   carve.strength = 1e6;
-  engine::apply_brush_cpu(c, carve);
+  session::apply_brush_cpu(c, carve);
   EXPECT_FALSE(iso.contains(c.voxels[v.grid.index(16, 16, 16)]));
   EXPECT_EQ(c.voxels[v.grid.index(16, 16, 16)], t.empty);
   Brush add = make(BrushKind::kAdd, v.grid.to_world({2, 2, 2}), 3e-3, t);
   add.strength = 1e6;
-  engine::apply_brush_cpu(c, add);
+  session::apply_brush_cpu(c, add);
   EXPECT_TRUE(iso.contains(c.voxels[v.grid.index(2, 2, 2)]));
 }
 
@@ -174,12 +174,12 @@ double dist_m(const core::Grid& g, int x, int y, int z, core::Vec3 c) {
 
 TEST(Brush, CarveOnConstantVolumeIsTheFalloffProfile) {
   Volume v = engine::make_linear({30, 30, 30}, {1e-3, 1.5e-3, 0.8e-3}, {0, 0, 0}, 1000.0);
-  const engine::BrushTargets t{1000.0f, 0.0f, 1000.0f};
+  const session::BrushTargets t{1000.0f, 0.0f, 1000.0f};
   const core::Vec3 c = v.grid.to_world({14.3, 12.6, 15.1});
   Brush b = make(BrushKind::kCarve, c, 9e-3, t);
   b.strength = 400;
   b.falloff = 0.7;
-  engine::apply_brush_cpu(v, b);
+  session::apply_brush_cpu(v, b);
   int inside = 0;
   for (int z = 0; z < 30; ++z)
     for (int y = 0; y < 30; ++y)
@@ -196,11 +196,11 @@ TEST(Brush, CarveOnConstantVolumeIsTheFalloffProfile) {
 
 TEST(Brush, AddNeverExceedsTheTarget) {
   Volume v = engine::make_random({24, 24, 24}, {1e-3, 1e-3, 1e-3}, 0.0f, 900.0f, 3);
-  const engine::BrushTargets t{1000.0f, -1000.0f, 2000.0f};
+  const session::BrushTargets t{1000.0f, -1000.0f, 2000.0f};
   const Volume start = v;
   Brush b = make(BrushKind::kAdd, v.grid.centre_m(), 8e-3, t);
   b.strength = 333;
-  for (int k = 0; k < 6; ++k) engine::apply_brush_cpu(v, b);
+  for (int k = 0; k < 6; ++k) session::apply_brush_cpu(v, b);
   int at_target = 0;
   for (std::size_t i = 0; i < v.voxels.size(); ++i) {
     ASSERT_LE(v.voxels[i], 1000.0f);
@@ -210,7 +210,7 @@ TEST(Brush, AddNeverExceedsTheTarget) {
   EXPECT_GT(at_target, 100);
   // A single application moves by strength * w, clamped (brute force on every voxel).
   Volume one = start;
-  engine::apply_brush_cpu(one, b);
+  session::apply_brush_cpu(one, b);
   for (int z = 0; z < 24; ++z)
     for (int y = 0; y < 24; ++y)
       for (int x = 0; x < 24; ++x) {
@@ -226,7 +226,7 @@ TEST(Brush, DrillThresholdAndDensity) {
   for (int z = 0; z < 24; ++z)
     for (int y = 0; y < 24; ++y)
       for (int x = 12; x < 24; ++x) v.voxels[v.grid.index(x, y, z)] = 1500.0f;
-  const engine::BrushTargets t{3000.0f, -1000.0f, 1000.0f};
+  const session::BrushTargets t{3000.0f, -1000.0f, 1000.0f};
   Brush b = make(BrushKind::kDrill, v.grid.to_world({11.5, 12, 12}), 5e-3, t);
   b.rate = 2e5;  // [HU / (N s)]
   b.dt_s = 1e-3;
@@ -234,13 +234,13 @@ TEST(Brush, DrillThresholdAndDensity) {
   for (double f : {0.0, 0.5, 1.0}) {
     b.force_n = f;
     Volume w = v;
-    const auto r = engine::apply_brush_cpu(w, b);
+    const auto r = session::apply_brush_cpu(w, b);
     EXPECT_TRUE(r.dirty.empty());
     EXPECT_EQ(bits_differ(w.voxels, v.voxels), 0u);
   }
   b.force_n = 3.0;  // 2 N above: a = 2e5 * 1e-3 * 2 = 400 HU at w = 1, density factor 1
   Volume w = v;
-  engine::apply_brush_cpu(w, b);
+  session::apply_brush_cpu(w, b);
   const int y = 12, z = 12;
   const std::size_t soft = v.grid.index(11, y, z), bone = v.grid.index(12, y, z);  // same distance 0.5 mm
   const double removed_soft = 40.0 - w.voxels[soft], removed_bone = 1500.0 - w.voxels[bone];
@@ -252,7 +252,7 @@ TEST(Brush, DrillThresholdAndDensity) {
   EXPECT_NEAR(removed_bone, 400.0 * wgt / (1 + 2500.0 / 1000.0), 0.01);
   // Never below empty, however long it drills.
   b.force_n = 1e3;
-  for (int k = 0; k < 5; ++k) engine::apply_brush_cpu(w, b);
+  for (int k = 0; k < 5; ++k) session::apply_brush_cpu(w, b);
   for (float x : w.voxels) ASSERT_GE(x, -1000.0f);
   EXPECT_EQ(w.voxels[soft], -1000.0f);
 }
@@ -262,7 +262,7 @@ TEST(Brush, SmoothBlendsTowardTheNeighbourMeanOfThePreEditVolume) {
   const Volume start = v;
   Brush b = make(BrushKind::kSmooth, v.grid.to_world({1.0, 9.0, 8.0}), 5e-3, {1.0f, 0.0f, 1.0f});
   b.strength = 0.8;
-  engine::apply_brush_cpu(v, b);
+  session::apply_brush_cpu(v, b);
   const auto& g = v.grid;
   auto at = [&](int x, int y, int z) {
     x = std::clamp(x, 0, g.dims[0] - 1);
@@ -291,7 +291,7 @@ TEST(Brush, SmoothDoesNotSpreadNaN) {
   b.strength = 0.8;
   gpu_vs_cpu(v, {b});
   Volume cpu = v;
-  engine::apply_brush_cpu(cpu, b);
+  session::apply_brush_cpu(cpu, b);
   std::size_t nan = 0;
   for (float x : cpu.voxels) nan += std::isnan(x) ? 1 : 0;
   EXPECT_EQ(nan, 1u) << "smoothing spread the NaN voxel";
@@ -307,16 +307,16 @@ TEST(Brush, DefaultTargetsOnABlankCanvasAreInside) {
   v.min_value = 0.0f;
   v.max_value = 0.0f;
   const core::Isosurface above{0.5, core::InsideIs::kAbove}, below{-0.5, core::InsideIs::kBelow};
-  EXPECT_TRUE(above.contains(engine::default_targets(v, above).material));
-  EXPECT_FALSE(above.contains(engine::default_targets(v, above).empty));
-  EXPECT_TRUE(below.contains(engine::default_targets(v, below).material));
-  EXPECT_FALSE(below.contains(engine::default_targets(v, below).empty));
+  EXPECT_TRUE(above.contains(session::default_targets(v, above).material));
+  EXPECT_FALSE(above.contains(session::default_targets(v, above).empty));
+  EXPECT_TRUE(below.contains(session::default_targets(v, below).material));
+  EXPECT_FALSE(below.contains(session::default_targets(v, below).empty));
 }
 
 TEST(Brush, TouchedBricksCoverTheBrushAndMissOutside) {
   Volume v = engine::make_random({40, 40, 40}, {1e-3, 1e-3, 1e-3}, 0.0f, 1.0f, 1);
   Brush b = make(BrushKind::kCarve, v.grid.to_world({7.9, 8.0, 30.0}), 3e-3, {1.0f, 0.0f, 1.0f});
-  const auto ids = engine::touched_bricks(v.grid, b);
+  const auto ids = session::touched_bricks(v.grid, b);
   // Every voxel within the radius lies in a touched brick (brute force).
   const auto nb = core::brick_counts(v.grid);
   for (int z = 0; z < 40; ++z)
@@ -327,8 +327,8 @@ TEST(Brush, TouchedBricksCoverTheBrushAndMissOutside) {
           ASSERT_TRUE(std::binary_search(ids.begin(), ids.end(), id)) << x << "," << y << "," << z;
         }
   b.centre_m = v.grid.to_world({-10, 5, 5});
-  EXPECT_TRUE(engine::touched_bricks(v.grid, b).empty());
-  auto eng = engine::BrushEngine::create(vk(), v);
+  EXPECT_TRUE(session::touched_bricks(v.grid, b).empty());
+  auto eng = session::BrushEngine::create(vk(), v);
   ASSERT_TRUE(eng) << eng.error;
   EXPECT_TRUE((*eng.value)->apply(b).dirty.empty());
 }
@@ -337,27 +337,27 @@ TEST(Brush, InvalidBrushNamesTheField) {
   Volume v = engine::make_random({8, 8, 8}, {1e-3, 1e-3, 1e-3}, 0.0f, 1.0f, 1);
   Brush b = make(BrushKind::kSmooth, v.grid.centre_m(), 2e-3, {1.0f, 0.0f, 1.0f});
   b.strength = 2;
-  EXPECT_NE(engine::validate(b).find("'strength'"), std::string::npos);
+  EXPECT_NE(session::validate(b).find("'strength'"), std::string::npos);
   b.strength = 0.5;
   b.radius_m = -1;
-  EXPECT_NE(engine::validate(b).find("'radius_m'"), std::string::npos);
+  EXPECT_NE(session::validate(b).find("'radius_m'"), std::string::npos);
   b.radius_m = 1e-3;
   b.falloff = 0;
-  EXPECT_NE(engine::validate(b).find("'falloff'"), std::string::npos);
+  EXPECT_NE(session::validate(b).find("'falloff'"), std::string::npos);
   b.falloff = 0.5;
   b.centre_m.x = std::nan("");
-  EXPECT_THROW(engine::apply_brush_cpu(v, b), engine::BrushError);
+  EXPECT_THROW(session::apply_brush_cpu(v, b), session::BrushError);
 }
 
 // Not an assertion: time per application on the chest CT, GPU (this device) and CPU,
 // radii 2, 5, 10 mm, median of repeated applications. Printed for the report.
 TEST(Brush, DISABLED_BenchChest) {  // run with --gtest_also_run_disabled_tests
-  Volume v = engine::load_volume(kChest);
-  const auto t = engine::default_targets(v, {-500.0, core::InsideIs::kAbove});
+  Volume v = io::load_volume(kChest);
+  const auto t = session::default_targets(v, {-500.0, core::InsideIs::kAbove});
   engine::ContextOptions o;
   auto ctx = engine::VulkanContext::create(o);  // no validation layer: it would time itself
   ASSERT_TRUE(ctx) << ctx.error;
-  auto eng = engine::BrushEngine::create(**ctx.value, v);
+  auto eng = session::BrushEngine::create(**ctx.value, v);
   ASSERT_TRUE(eng) << eng.error;
   Volume mirror = v, cpu = v;
   auto median = [](std::vector<double> x) {
@@ -371,7 +371,7 @@ TEST(Brush, DISABLED_BenchChest) {  // run with --gtest_also_run_disabled_tests
       std::size_t touched = 0, dirty = 0;
       for (int rep = 0; rep < 9; ++rep) {
         const auto rg = (*eng.value)->apply(b, &mirror);
-        const auto rc = engine::apply_brush_cpu(cpu, b);
+        const auto rc = session::apply_brush_cpu(cpu, b);
         gw.push_back(rg.wall_ms);
         gg.push_back(rg.gpu_ms);
         cw.push_back(rc.wall_ms);

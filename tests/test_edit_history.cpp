@@ -15,8 +15,8 @@
 #include "volume_io.h"
 
 using namespace isotouch;
-using engine::Brush;
-using engine::BrushKind;
+using session::Brush;
+using session::BrushKind;
 using engine::Volume;
 
 namespace {
@@ -28,7 +28,7 @@ bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
 }
 
-Brush brush(BrushKind k, core::Vec3 c, double r, const engine::BrushTargets& t) {
+Brush brush(BrushKind k, core::Vec3 c, double r, const session::BrushTargets& t) {
   Brush b;
   b.kind = k;
   b.centre_m = c;
@@ -42,26 +42,26 @@ Brush brush(BrushKind k, core::Vec3 c, double r, const engine::BrushTargets& t) 
 
 TEST(BrickIo, ReadWriteRoundTripAndClippedBricks) {
   Volume v = engine::make_random({19, 10, 9}, {1e-3, 1e-3, 1e-3}, 0.0f, 1.0f, 5);
-  EXPECT_EQ(engine::brick_total(v.grid), 3u * 2u * 2u);
-  const auto box = engine::brick_box(v.grid, 11);  // (2, 1, 1): x 16..19, y 8..10, z 8..9
+  EXPECT_EQ(session::brick_total(v.grid), 3u * 2u * 2u);
+  const auto box = session::brick_box(v.grid, 11);  // (2, 1, 1): x 16..19, y 8..10, z 8..9
   EXPECT_EQ(box.voxels(), 3u * 2u * 1u);
-  const auto d = engine::read_brick(v, 11);
+  const auto d = session::read_brick(v, 11);
   EXPECT_EQ(d[0], v.voxels[v.grid.index(16, 8, 8)]);
   EXPECT_EQ(d[5], v.voxels[v.grid.index(18, 9, 8)]);
   std::vector<float> z(d.size(), -7.0f);
   Volume w = v;
-  engine::write_brick(w, 11, z.data());
+  session::write_brick(w, 11, z.data());
   EXPECT_EQ(w.voxels[v.grid.index(18, 9, 8)], -7.0f);
   EXPECT_EQ(w.voxels[v.grid.index(15, 9, 8)], v.voxels[v.grid.index(15, 9, 8)]);
-  EXPECT_THROW(engine::brick_box(v.grid, 12), std::out_of_range);
+  EXPECT_THROW(session::brick_box(v.grid, 12), std::out_of_range);
 }
 
 /// Strokes of every kind, overlapping; undo all restores the original, redo all the
 /// edited volume, both bit for bit; on the GPU path the device copy follows.
 void undo_redo_roundtrip(engine::VulkanContext* ctx) {
-  Volume v0 = engine::load_volume(kHead);
-  const auto t = engine::default_targets(v0, {1150.0, core::InsideIs::kAbove});
-  engine::Sculptor s(v0, ctx, 64.0);
+  Volume v0 = io::load_volume(kHead);
+  const auto t = session::default_targets(v0, {1150.0, core::InsideIs::kAbove});
+  session::Sculptor s(v0, ctx, 64.0);
   const core::Vec3 c = v0.grid.centre_m();
   std::vector<std::vector<float>> states{v0.voxels};
   const BrushKind kinds[] = {BrushKind::kCarve, BrushKind::kAdd, BrushKind::kSmooth, BrushKind::kDrill};
@@ -111,14 +111,14 @@ TEST(EditHistory, UndoRedoBitForBitGpu) {
 
 TEST(EditHistory, BrickTouchedTwiceKeepsItsFirstBackup) {
   Volume v0 = engine::make_random({24, 24, 24}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 9);
-  engine::EditHistory h(16.0);
+  session::EditHistory h(16.0);
   Volume v = v0;
   Brush b = brush(BrushKind::kAdd, v.grid.centre_m(), 5e-3, {1000.0f, 0.0f, 1000.0f});
   b.strength = 10;
   h.begin_stroke();
   for (int k = 0; k < 3; ++k) {  // the same bricks, three times
-    h.record(v, engine::touched_bricks(v.grid, b));
-    engine::apply_brush_cpu(v, b);
+    h.record(v, session::touched_bricks(v.grid, b));
+    session::apply_brush_cpu(v, b);
   }
   h.end_stroke(v);
   std::vector<std::uint32_t> hooked;
@@ -131,12 +131,12 @@ TEST(EditHistory, BrickTouchedTwiceKeepsItsFirstBackup) {
 
 TEST(EditHistory, UnchangedBricksAreNotKept) {
   Volume v = engine::make_linear({32, 32, 32}, {1e-3, 1e-3, 1e-3}, {0, 0, 0}, 0.0);
-  engine::EditHistory h(16.0);
+  session::EditHistory h(16.0);
   Brush b = brush(BrushKind::kCarve, v.grid.centre_m(), 6e-3, {1000.0f, 0.0f, 1000.0f});  // already empty
   h.begin_stroke();
-  h.record(v, engine::touched_bricks(v.grid, b));
+  h.record(v, session::touched_bricks(v.grid, b));
   EXPECT_GT(h.bytes(), 0u);
-  engine::apply_brush_cpu(v, b);
+  session::apply_brush_cpu(v, b);
   h.end_stroke(v);
   EXPECT_EQ(h.bytes(), 0u);
   EXPECT_EQ(h.undo_depth(), 0u);
@@ -146,8 +146,8 @@ TEST(EditHistory, MemoryLimitDropsTheOldestStrokes) {
   Volume v0 = engine::make_random({64, 64, 16}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 2);
   // Each stroke: one brick-centred brush of radius 3 mm touches one brick column (8^3 floats =
   // 2 KiB per brick); limit 0.01 MiB = 10485 bytes = at most 5 full bricks.
-  engine::Sculptor s(v0, nullptr, 0.01);
-  const engine::BrushTargets t{1000.0f, 0.0f, 1000.0f};
+  session::Sculptor s(v0, nullptr, 0.01);
+  const session::BrushTargets t{1000.0f, 0.0f, 1000.0f};
   std::vector<std::vector<float>> states{v0.voxels};
   for (int k = 0; k < 6; ++k) {
     s.apply(brush(BrushKind::kAdd, v0.grid.to_world({8.0 * k + 3.5, 3.5, 3.5}), 2e-3, t));
@@ -161,7 +161,7 @@ TEST(EditHistory, MemoryLimitDropsTheOldestStrokes) {
   while (!s.undo().empty()) {
   }
   EXPECT_TRUE(same_bits(s.volume().voxels, states[1])) << "undo stops after the oldest kept stroke";
-  EXPECT_THROW(engine::EditHistory(-1.0), std::invalid_argument);
+  EXPECT_THROW(session::EditHistory(-1.0), std::invalid_argument);
 }
 
 TEST(EditHistory, AStrokeLargerThanTheLimitIsABarrier) {
@@ -169,8 +169,8 @@ TEST(EditHistory, AStrokeLargerThanTheLimitIsABarrier) {
   // keep. Undoing A then would put X back under B's changes: a state that never existed.
   // B is a barrier: A goes with it, undo stops at B, strokes after B undo as usual.
   Volume v0 = engine::make_random({64, 64, 16}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 2);
-  engine::Sculptor s(v0, nullptr, 0.01);  // 10485 bytes: 5 bricks
-  const engine::BrushTargets t{1000.0f, 0.0f, 1000.0f};
+  session::Sculptor s(v0, nullptr, 0.01);  // 10485 bytes: 5 bricks
+  const session::BrushTargets t{1000.0f, 0.0f, 1000.0f};
   s.apply(brush(BrushKind::kAdd, v0.grid.to_world({27.5, 27.5, 7.5}), 2e-3, t));  // A: inside B's reach
   s.apply(brush(BrushKind::kAdd, v0.grid.to_world({11.5, 3.5, 3.5}), 2e-3, t));
   ASSERT_EQ(s.history().undo_depth(), 2u);

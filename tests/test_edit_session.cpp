@@ -1,4 +1,4 @@
-// Edits in scenes: app::EditSession (undo / redo bit for bit, the
+// Edits in scenes: session::EditSession (undo / redo bit for bit, the
 // snapshot it publishes), the headless loop's after-tick hook (what it publishes, the next
 // tick reads), run_scene with a timeline (carve at the VHIP lands at that tick's VHIP; the
 // removed volume) and the drill-skull scene (the burr goes through the bone).
@@ -27,20 +27,20 @@
 #include "voxel_probe.h"
 
 namespace fs = std::filesystem;
-using isotouch::app::EditEvent;
-using isotouch::app::EditSession;
-using isotouch::engine::Brush;
-using isotouch::engine::BrushKind;
+using isotouch::session::EditEvent;
+using isotouch::session::EditSession;
+using isotouch::session::Brush;
+using isotouch::session::BrushKind;
 using isotouch::engine::Volume;
-using isotouch::servo::Vec3;
+using isotouch::core::Vec3;
 
 namespace {
 const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";
 
-isotouch::engine::LiveFieldOptions sphere_options() {
+isotouch::session::LiveFieldOptions sphere_options() {
   // Every member given (the default pass list trips GCC 12's -Wmaybe-uninitialized).
-  return isotouch::engine::LiveFieldOptions{{isotouch::engine::PassDesc::gradient()},
-                                            isotouch::core::Isosurface{0.0, isotouch::servo::InsideIs::kAbove},
+  return isotouch::session::LiveFieldOptions{{isotouch::engine::PassDesc::gradient()},
+                                            isotouch::core::Isosurface{0.0, isotouch::core::InsideIs::kAbove},
                                             -100.f, isotouch::core::SampleFormat::kFp32};
 }
 
@@ -73,7 +73,7 @@ Brush carve_at(const Volume& v, std::array<int, 3> idx, double radius_m, double 
   b.radius_m = radius_m;
   b.strength = strength;
   b.falloff = 0.5;
-  b.targets = isotouch::engine::default_targets(v, sphere_options().iso);
+  b.targets = isotouch::session::default_targets(v, sphere_options().iso);
   return b;
 }
 
@@ -236,7 +236,7 @@ TEST(EditSession, UnstorableTargetIsRefusedBeforeTheVolumeChanges) {
   Brush b = carve_at(v, {16, 16, 25}, 4e-3, 10.0);
   b.kind = BrushKind::kAdd;
   b.targets.material = 70000.f;
-  EXPECT_THROW(s.apply(brush_event(b), nullptr), isotouch::engine::BrushError);
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), isotouch::session::BrushError);
   EXPECT_EQ(std::memcmp(s.volume().voxels.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0);
   EXPECT_EQ(s.current(), before);
   EXPECT_TRUE(s.log().empty());
@@ -249,21 +249,21 @@ TEST(EditSession, UnstorableTargetIsRefusedBeforeTheVolumeChanges) {
 TEST(Headless, HookPublishesBeforeTheNextTick) {
   const std::string text = R"({"volume": {"synthetic": "sphere", "dims": [32, 32, 32], "radius_vox": 10},
                                "isovalue": 0, "script": {"hold_s": 0.05, "stroke_length_m": 0.005}})";
-  const auto scene = isotouch::app::parse_scene(text, "hook.json");
+  const auto scene = isotouch::io::parse_scene(text, "hook.json");
   const Volume v = isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 10);
   const auto o = sphere_options();
   auto base = std::make_shared<isotouch::core::SampleField>(
       isotouch::engine::run_sparse_cpu(v, o.passes, o.iso, o.background, o.format).field);
   base->version = 1;
-  const auto script = isotouch::servo::make_touch_script(*base, scene.hri, scene.script);
-  auto run = [&](const isotouch::servo::TickHook& hook, isotouch::servo::TripleBuffer<isotouch::core::SampleField>& buf) {
+  const auto script = isotouch::sim::make_touch_script(*base, scene.hri, scene.script);
+  auto run = [&](const isotouch::sim::TickHook& hook, isotouch::servo::TripleBuffer<isotouch::core::SampleField>& buf) {
     isotouch::servo::WorkspaceTransform xf;
     xf.translation_m = v.grid.centre_m();
     Vec3 p, vel;
     script.at(0, p, vel);
-    isotouch::servo::SimDevice dev(scene.device, xf.to_device(p));
+    isotouch::sim::SimDevice dev(scene.device, xf.to_device(p));
     isotouch::servo::HriRenderer r(scene.hri);
-    return isotouch::servo::run_headless(buf, r, dev, xf, script, scene.hri.rate_hz, {}, 250, hook);
+    return isotouch::sim::run_headless(buf, r, dev, xf, script, scene.hri.rate_hz, {}, 250, hook);
   };
   isotouch::servo::TripleBuffer<isotouch::core::SampleField> b1, b2, b3;
   b1.publish(base);
@@ -271,7 +271,7 @@ TEST(Headless, HookPublishesBeforeTheNextTick) {
   b3.publish(base);
   const auto plain_trace = run({}, b1);
   // A hook that publishes nothing: the same trace bit for bit (the button it sets aside).
-  const auto quiet = run([](long k, isotouch::servo::TraceRow& row) { row.button = (k % 2) == 1; }, b2);
+  const auto quiet = run([](long k, isotouch::sim::TraceRow& row) { row.button = (k % 2) == 1; }, b2);
   ASSERT_EQ(plain_trace.size(), quiet.size());
   for (std::size_t k = 0; k < quiet.size(); ++k) {
     EXPECT_EQ(quiet[k].button, (k % 2) == 1);
@@ -282,7 +282,7 @@ TEST(Headless, HookPublishesBeforeTheNextTick) {
   }
   // Same samples under a new version after every tick k: tick k + 1 must read version k + 2.
   const auto hooked = run(
-      [&](long k, isotouch::servo::TraceRow&) {
+      [&](long k, isotouch::sim::TraceRow&) {
         auto f = std::make_shared<isotouch::core::SampleField>(*base);
         f->version = std::uint64_t(k + 2);
         b3.publish(f);
@@ -310,7 +310,7 @@ TEST(RunEdits, SphereTimelineCarves) {
        << side.x * 1e3 << ", " << side.y * 1e3 << ", " << side.z * 1e3 << R"(]},
                                      {"t_s": 1.05, "kind": "carve", "at": "vhip", "radius_mm": 1.5, "strength": 0.3,
                                       "duration_s": 0.1}]}})";
-  const auto scene = isotouch::app::parse_scene(text.str(), "sphere-edits.json");
+  const auto scene = isotouch::io::parse_scene(text.str(), "sphere-edits.json");
   const fs::path out = temp_dir("isotouch_edits_sphere");
   isotouch::app::RunOptions opt;
   opt.out_dir = out.string();
@@ -336,7 +336,7 @@ TEST(RunEdits, SphereTimelineCarves) {
   }
   EXPECT_EQ(at_vhip, 10);
   // The removed volume against the edited volume read back from drilled.vdb.
-  const auto after = isotouch::app::load_vdb((out / "drilled.vdb").string());
+  const auto after = isotouch::io::load_vdb((out / "drilled.vdb").string());
   const long removed = inside(v) - inside(after.volume);
   EXPECT_GT(removed, 20);
   EXPECT_DOUBLE_EQ(m.edits.removed_mm3, double(removed) * 1.0);  // 1 mm^3 voxels
@@ -351,7 +351,7 @@ TEST(RunEdits, SphereTimelineCarves) {
 // there (the burr went through), the VHIP crossed the bone's middle where the bone is gone
 // now, material was removed, and the files exist.
 TEST(RunEdits, DrillSkullGoesThroughTheBone) {
-  auto scene = isotouch::app::load_scene(kScenes + "/drill-skull.json");
+  auto scene = isotouch::io::load_scene(kScenes + "/drill-skull.json");
   scene.draw_plots = false;  // pictures take most of the run's time on lavapipe; cli_run_drill_skull checks them
   const fs::path out = temp_dir("isotouch_edits_drill");
   isotouch::app::RunOptions opt;
@@ -361,8 +361,8 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   const auto m = isotouch::app::run_scene(scene, opt, log);
   // The bone along the press ray, from this file's own trilinear interpolation of the
   // unedited volume: from the first point inside (the contact) to the first point outside after it.
-  const auto setup_vol = isotouch::app::load_vdb((out / "drilled.vdb").string());  // edited
-  const Volume before = isotouch::engine::load_volume(scene.volume_path);
+  const auto setup_vol = isotouch::io::load_vdb((out / "drilled.vdb").string());  // edited
+  const Volume before = isotouch::io::load_volume(scene.volume_path);
   const auto trace = read_trace(out / "trace.csv");
   ASSERT_FALSE(trace.empty());
   // The press ray: from the contact point along the inward normal (summary.json, physical
@@ -389,14 +389,14 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   const double thickness = exit - entry;
   const Vec3 outer = p + dir * entry;
   double deepest = -1e9;
-  for (const auto& r : trace) deepest = std::max(deepest, isotouch::servo::dot(Vec3{r.hip[0], r.hip[1], r.hip[2]} - outer, dir));
+  for (const auto& r : trace) deepest = std::max(deepest, isotouch::core::dot(Vec3{r.hip[0], r.hip[1], r.hip[2]} - outer, dir));
   EXPECT_GT(deepest, thickness) << "bone " << thickness * 1e3 << " mm thick, HIP at most " << deepest * 1e3
                                 << " mm past its outer surface";
   // Where the HIP crossed the middle of the bone's thickness, the edited volume is no longer
   // bone (the probe went through a hole, not through bone the servo failed to render).
   bool crossed = false;
   for (const auto& r : trace) {
-    if (!r.contact || isotouch::servo::dot(Vec3{r.vhip[0], r.vhip[1], r.vhip[2]} - outer, dir) < 0.5 * thickness) continue;
+    if (!r.contact || isotouch::core::dot(Vec3{r.vhip[0], r.vhip[1], r.vhip[2]} - outer, dir) < 0.5 * thickness) continue;
     crossed = true;
     // The VHIP of that tick sat on the surface of the snapshot it read (the HIP is inside,
     // by the penetration); the drill only lowers values afterwards.

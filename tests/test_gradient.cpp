@@ -14,7 +14,7 @@
 
 using namespace isotouch;
 using engine::Volume;
-using servo::Vec3;
+using core::Vec3;
 
 namespace {
 const std::string kData = ISOTOUCH_TEST_DATA;
@@ -44,7 +44,7 @@ void expect_gpu_equals_cpu(const Volume& v, std::uint64_t max_binding = 0, int m
     // in the same order). Exact equality of every channel of every sample.
     std::size_t differ = 0, first = 0;
     for (std::size_t i = 0; i < cpu.samples.size(); ++i) {
-      const servo::Sample &a = gpu.samples[i], &b = cpu.samples[i];
+      const core::Sample &a = gpu.samples[i], &b = cpu.samples[i];
       if (!(same_bits(a.value, b.value) && same_bits(a.gx, b.gx) && same_bits(a.gy, b.gy) && same_bits(a.gz, b.gz)))
         first = differ++ ? first : i;
     }
@@ -79,12 +79,12 @@ TEST(CpuGradient, SphereDistanceHasUnitSlopeAndRadialDirection) {
     for (int y = 1; y < 47; ++y)
       for (int x = 1; x < 47; ++x) {
         const Vec3 p = v.grid.to_world({double(x), double(y), double(z)});
-        const double r = servo::norm(p - c) * 1e3;
+        const double r = core::norm(p - c) * 1e3;
         if (std::abs(r - 15.0) > 1.5) continue;  // near the surface
         const auto& s = f.samples[v.grid.index(x, y, z)];
         const Vec3 g{s.gx, s.gy, s.gz};
-        EXPECT_NEAR(servo::norm(g), 1000.0, 20.0);  // value in mm, gradient per m
-        const double cosang = servo::dot(g / servo::norm(g), (c - p) / servo::norm(c - p));
+        EXPECT_NEAR(core::norm(g), 1000.0, 20.0);  // value in mm, gradient per m
+        const double cosang = core::dot(g / core::norm(g), (c - p) / core::norm(c - p));
         EXPECT_GT(cosang, std::cos(2.0 * M_PI / 180.0));
         ++checked;
       }
@@ -112,21 +112,21 @@ TEST(GpuGradient, MatchesCpuOnRandomOddSizedVolumeInManySlabs) {
 }
 
 TEST(GpuGradient, MatchesCpuOnHeadCt) {
-  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd"));
+  expect_gpu_equals_cpu(io::load_volume(kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd"));
 }
 
 TEST(GpuGradient, MatchesCpuOnChestCt) {
   expect_gpu_equals_cpu(
-      engine::load_volume(kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd"));
+      io::load_volume(kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd"));
 }
 
 TEST(GpuGradient, MatchesCpuOnToothBigEndian) {
-  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-tooth/tooth.nhdr"), 4u << 20, 2);
+  expect_gpu_equals_cpu(io::load_volume(kData + "/ct-tooth/tooth.nhdr"), 4u << 20, 2);
 }
 
 TEST(GpuGradient, EngineCtNeedsSlabsUnderTheDeviceLimit) {
   // 256 x 256 x 128 samples = 128 MiB: more than lavapipe's 128 MiB binding minus alignment.
-  expect_gpu_equals_cpu(engine::load_volume(kData + "/ct-engine/engine.nii.gz"), 0,
+  expect_gpu_equals_cpu(io::load_volume(kData + "/ct-engine/engine.nii.gz"), 0,
                         vk().properties().limits.maxStorageBufferRange <= (128u << 20) ? 2 : 1);
 }
 

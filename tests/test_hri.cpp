@@ -7,9 +7,12 @@
 #include <limits>
 
 #include "hri.h"
+#include "analytic_fields.h"
 #include "sampling.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 
@@ -245,7 +248,6 @@ TEST(Hri, TickAllocatesNothing) {
 }
 
 // ---- §3.1 surface effects, §3.3 remedies, intersection and normal options ----
-#include "analytic_fields.h"
 
 namespace {
 HriParams friction_params(double mu_s, double mu_d, double visc = 0) {

@@ -17,7 +17,9 @@
 #include "passivity.h"
 #include "sampling.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 

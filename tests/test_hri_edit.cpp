@@ -21,7 +21,9 @@
 #include "brick_field.h"
 #include "hri.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 

@@ -1,6 +1,6 @@
 // HRI robust variant with a spherical tool (HriParams::tool_radius_m > 0).
 // Truth from outside the renderer: the true distance from the proxy centre to the
-// isosurface of the trilinear field (app::distance_to_isosurface, branch and bound over
+// isosurface of the trilinear field (eval::distance_to_isosurface, branch and bound over
 // cells) on analytic shapes (sphere, plates 1-4 voxels thick, grooves, corners), the side
 // of the surface from the trilinear value itself.
 #include <gtest/gtest.h>
@@ -17,7 +17,9 @@
 #include "sampling.h"
 #include "surface_distance.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 
@@ -95,10 +97,10 @@ struct ToolResult {
 // Signed true distance from x to the trilinear isosurface (negative inside), searched
 // within `radius` (+inf beyond).
 double signed_distance(const SampleField& f, const Vec3& x, double radius) {
-  isotouch::app::SurfaceDistanceOptions o;
+  isotouch::eval::SurfaceDistanceOptions o;
   o.max_radius_m = radius;
   o.tolerance_m = 2e-3 * kVoxel;
-  const auto d = isotouch::app::distance_to_isosurface(f, 0.0, x, o);
+  const auto d = isotouch::eval::distance_to_isosurface(f, 0.0, x, o);
   const double dist = d.found ? d.distance_m : 1e300;
   return sample_value(f, x) > 0.0 ? -dist : dist;
 }

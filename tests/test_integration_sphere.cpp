@@ -11,7 +11,7 @@
 #include "vk_context.h"
 
 using namespace isotouch;
-using servo::Vec3;
+using core::Vec3;
 
 namespace {
 struct Errors {
@@ -25,8 +25,8 @@ Errors slide(int n, Vec3 ray_dir, Vec3 origin_frac, Vec3 stroke_dir) {
   auto ctx = engine::VulkanContext::create();
   if (!ctx) throw std::runtime_error("no Vulkan device: " + ctx.error);
   engine::GradientPass pass(**ctx.value);
-  auto field = std::make_shared<const servo::SampleField>(pass.run(vol));
-  servo::TripleBuffer<servo::SampleField> tb;
+  auto field = std::make_shared<const core::SampleField>(pass.run(vol));
+  servo::TripleBuffer<core::SampleField> tb;
   tb.publish(field);
 
   servo::HriParams hp;
@@ -34,21 +34,21 @@ Errors slide(int n, Vec3 ray_dir, Vec3 origin_frac, Vec3 stroke_dir) {
   hp.plane_update_period = n;
   hp.stiffness_n_per_m = 800;
   hp.damping_n_s_per_m = 1.0;
-  servo::ScriptParams sp;
+  sim::ScriptParams sp;
   sp.ray_origin_frac = origin_frac;
   sp.ray_direction = ray_dir;
   sp.stroke_direction = stroke_dir;
   sp.press_depth_m = 0.004;
   sp.stroke_length_m = 0.025;
   sp.stroke_speed_m_s = 0.02;
-  const servo::TouchScript s = servo::make_touch_script(*field, hp, sp);
+  const sim::TouchScript s = sim::make_touch_script(*field, hp, sp);
   servo::WorkspaceTransform xf;
   xf.translation_m = vol.grid.centre_m();
   Vec3 p0, v0;
   s.at(0, p0, v0);
-  servo::SimDevice dev({}, xf.to_device(p0));
+  sim::SimDevice dev({}, xf.to_device(p0));
   servo::HriRenderer r(hp);
-  const auto trace = servo::run_headless(tb, r, dev, xf, s, 1000.0);
+  const auto trace = sim::run_headless(tb, r, dev, xf, s, 1000.0);
 
   const Vec3 c = vol.grid.centre_m();
   const double R = R_vox * h;
@@ -56,11 +56,11 @@ Errors slide(int n, Vec3 ray_dir, Vec3 origin_frac, Vec3 stroke_dir) {
   for (const auto& row : trace) {
     if (!row.contact || row.t_s < s.t_stroke || row.t_s > s.t_lift) continue;
     ++e.sliding_ticks;
-    e.max_surface_vox = std::max(e.max_surface_vox, std::abs(servo::norm(row.vhip_m - c) - R) / h);
-    const double f = servo::norm(row.force_n);
+    e.max_surface_vox = std::max(e.max_surface_vox, std::abs(core::norm(row.vhip_m - c) - R) / h);
+    const double f = core::norm(row.force_n);
     if (f < 0.05) continue;  // direction of a vanishing force is meaningless
-    const Vec3 n_true = (row.vhip_m - c) / servo::norm(row.vhip_m - c);
-    const double cosang = std::clamp(servo::dot(row.force_n / f, n_true), -1.0, 1.0);
+    const Vec3 n_true = (row.vhip_m - c) / core::norm(row.vhip_m - c);
+    const double cosang = std::clamp(core::dot(row.force_n / f, n_true), -1.0, 1.0);
     e.max_angle_deg = std::max(e.max_angle_deg, std::acos(cosang) * 180.0 / M_PI);
   }
   return e;
@@ -77,7 +77,7 @@ TEST(SphereIntegration, SlidingOverTheTopWithPlaneEveryTick) {
 }
 
 TEST(SphereIntegration, SlidingObliquelyAcrossVoxelAxes) {
-  const Vec3 d = Vec3{-1, -0.7, -0.4} / servo::norm(Vec3{-1, -0.7, -0.4});
+  const Vec3 d = Vec3{-1, -0.7, -0.4} / core::norm(Vec3{-1, -0.7, -0.4});
   const Errors e = slide(1, d, {1.1, 0.95, 0.8}, {0.3, -1, 0.5});
   std::printf("n=1 oblique: %ld sliding ticks, max surface error %.4f voxel, max angle %.3f deg\n",
               e.sliding_ticks, e.max_surface_vox, e.max_angle_deg);

@@ -1,6 +1,6 @@
 // LiveField: the edited volume's snapshot updated brick by brick.
 // Truth from outside the code under test:
-// - after every edit (engine::apply_brush_cpu: add, carve, smooth, drill, small and large,
+// - after every edit (session::apply_brush_cpu: add, carve, smooth, drill, small and large,
 //   at the border, bricks turning active -> uniform and back) the snapshot equals a fresh
 //   run_sparse_cpu of the edited volume: the same uniform / active classification, the
 //   same tile per uniform brick, every stored sample bit for bit (compact codes and
@@ -40,10 +40,10 @@
 using namespace isotouch;
 using core::BrickStore;
 using core::SampleFormat;
-using engine::Brush;
-using engine::BrushKind;
-using engine::LiveField;
-using engine::LiveFieldOptions;
+using session::Brush;
+using session::BrushKind;
+using session::LiveField;
+using session::LiveFieldOptions;
 using engine::PassDesc;
 using engine::Volume;
 
@@ -68,10 +68,10 @@ Case make_case(const std::string& name) {
   Case c;
   c.name = name;
   if (name == "head") {
-    c.vol = engine::load_volume(kHead);
+    c.vol = io::load_volume(kHead);
     c.iso = {1150, core::InsideIs::kAbove};
   } else if (name == "chest") {
-    c.vol = engine::load_volume(kChest);
+    c.vol = io::load_volume(kChest);
     c.iso = {-500, core::InsideIs::kAbove};
   } else {  // 1 mm voxels, dims not multiples of 8 (partial bricks on the high borders)
     c.vol = engine::make_sphere({45, 38, 36}, 1e-3, 13.0, {2.0, -1.0, 0.5});
@@ -126,7 +126,7 @@ Brush brush(const Case& c, BrushKind kind, core::Vec3 centre, double radius_m, d
   b.radius_m = radius_m;
   b.strength = strength;
   b.falloff = 0.5;
-  b.targets = engine::default_targets(c.vol, c.iso);
+  b.targets = session::default_targets(c.vol, c.iso);
   if (kind == BrushKind::kDrill) {
     b.force_n = 3.0;
     b.force_threshold_n = 1.0;
@@ -275,12 +275,12 @@ TEST_P(LiveFieldMatches, AFullRunAfterEveryEdit) {
   std::size_t activated = 0, deactivated = 0, shared = 0;
   int k = 0;
   for (const Brush& b : sequence(c, p.edits)) {
-    const engine::BrushResult r = engine::apply_brush_cpu(c.vol, b);
-    engine::LiveUpdateStats st;
+    const session::BrushResult r = session::apply_brush_cpu(c.vol, b);
+    session::LiveUpdateStats st;
     const auto before = lf->current();
     const auto snap = lf->update(c.vol, r.dirty, &st);
     const std::string what = p.volume + "/" + p.passes + "/" + fmt_name(p.format) + " edit " + std::to_string(k++) +
-                             " (" + engine::to_string(b.kind) + ", r " + std::to_string(b.radius_m * 1e3) + " mm, " +
+                             " (" + session::to_string(b.kind) + ", r " + std::to_string(b.radius_m * 1e3) + " mm, " +
                              std::to_string(r.dirty.size()) + " dirty bricks)";
     ASSERT_EQ(snap, lf->current());
     EXPECT_EQ(snap->version, before->version + 1) << what;
@@ -368,8 +368,8 @@ TEST(LiveField, UnchangedBricksShareThePoolAndSmallEditsStaySmall) {
                                    std::uniform_real_distribution<double>(0.3, 0.7)(rng));
       const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve, centre, 5e-3, 800);
       const auto before = lf->current();
-      const engine::BrushResult r = engine::apply_brush_cpu(c.vol, b);
-      engine::LiveUpdateStats st;
+      const session::BrushResult r = session::apply_brush_cpu(c.vol, b);
+      session::LiveUpdateStats st;
       const auto after = lf->update(c.vol, r.dirty, &st);
       const BrickStore &s0 = *before->bricks, &s1 = *after->bricks;
       std::size_t far = 0, moved = 0, same_slot = 0;
@@ -390,7 +390,7 @@ TEST(LiveField, UnchangedBricksShareThePoolAndSmallEditsStaySmall) {
       EXPECT_LE(st.recomputed, 4u * 4u * 4u) << fmt_name(f) << " edit " << k;
       EXPECT_LE(st.recomputed, (r.dirty.size() + 1) * 27u);
       std::printf("  %s 5 mm %s: %zu dirty, %zu recomputed, %zu shared of %zu active, %llu new bytes, %.3f ms\n",
-                  fmt_name(f).c_str(), engine::to_string(b.kind), r.dirty.size(), st.recomputed, st.shared, st.active,
+                  fmt_name(f).c_str(), session::to_string(b.kind), r.dirty.size(), st.recomputed, st.shared, st.active,
                   static_cast<unsigned long long>(st.new_bytes), st.total_ms);
     }
     expect_full_run(*lf->current(), c.vol, o, "chest after 5 mm edits " + fmt_name(f));
@@ -411,7 +411,7 @@ TEST(LiveField, AHeldSnapshotReadsWhatItReadBefore) {
                                    std::uniform_real_distribution<double>(0.3, 0.7)(rng));
       const Brush b = brush(c, rng() % 2 ? BrushKind::kAdd : BrushKind::kCarve, centre, r_vox * c.vol.grid.spacing_m.x,
                             1500);
-      return lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty);
+      return lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty);
     };
     random_edit(2);
     const auto held = lf->current();
@@ -463,7 +463,7 @@ TEST(LiveField, AReaderThreadSeesNoChangeWhileUpdatesRun) {
     const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve,
                           at(c.vol.grid, std::uniform_real_distribution<double>(0.3, 0.7)(rng), 0.5, 0.5),
                           2 * c.vol.grid.spacing_m.x, 1500);
-    auto s = lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty);
+    auto s = lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty);
     std::lock_guard lock(mu);
     published = std::move(s);
   }
@@ -491,7 +491,7 @@ TEST(LiveField, ANewArenaWhenHeldSnapshotsFillTheOld) {
                             at(c.vol.grid, std::uniform_real_distribution<double>(0.25, 0.75)(rng), 0.5,
                                std::uniform_real_distribution<double>(0.25, 0.75)(rng)),
                             6 * c.vol.grid.spacing_m.x, 2000);
-      held.push_back(lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty));
+      held.push_back(lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty));
       seen.push_back(reads(*held.back(), 500, 1));
     }
     ASSERT_GT(lf->arena_bytes(), arena0) << fmt_name(f) << ": no new arena after " << k << " held edits";
@@ -500,7 +500,7 @@ TEST(LiveField, ANewArenaWhenHeldSnapshotsFillTheOld) {
     // Two more edits in the new arena, then every held snapshot is read again.
     for (int j = 0; j < 2; ++j) {
       const Brush b = brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5, 0.5), 4 * c.vol.grid.spacing_m.x, 2000);
-      held.push_back(lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty));
+      held.push_back(lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty));
       seen.push_back(reads(*held.back(), 500, 1));
     }
     for (std::size_t i = 0; i < held.size(); ++i) EXPECT_EQ(reads(*held[i], 500, 1), seen[i]) << "snapshot " << i;
@@ -527,8 +527,8 @@ TEST(LiveField, ThousandsOfSmallEditsKeepTheMemoryBounded) {
     const Brush b = brush(c, k % 3 == 0 ? BrushKind::kAdd : (k % 3 == 1 ? BrushKind::kCarve : BrushKind::kSmooth),
                           at(c.vol.grid, u(rng), u(rng), u(rng)), 1.5 * c.vol.grid.spacing_m.x,
                           k % 3 == 2 ? 0.5 : 900);
-    engine::LiveUpdateStats st;
-    (void)lf->update(c.vol, engine::apply_brush_cpu(c.vol, b).dirty, &st);
+    session::LiveUpdateStats st;
+    (void)lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty, &st);
     new_bricks += st.active - st.shared;
     // Nobody holds an old snapshot: exactly one slot per active brick is in use.
     wrong += lf->pool_bytes() != lf->current()->bricks->active_bricks() * slot;
@@ -550,8 +550,8 @@ TEST(LiveField, BadIdsThrowNamingTheIdAndChangeNothing) {
   const auto before = lf->current();
   const std::size_t total = before->bricks->total_bricks();
   // Edit first, then name a bad id among good ones: nothing may be half applied.
-  const engine::BrushResult r =
-      engine::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5, 0.8), 3e-3, 3000));
+  const session::BrushResult r =
+      session::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5, 0.8), 3e-3, 3000));
   ASSERT_FALSE(r.dirty.empty());
   for (std::uint32_t bad : {std::uint32_t(total), std::uint32_t(total + 12345), 0xffffffffu}) {
     std::vector<std::uint32_t> ids = r.dirty;
@@ -643,9 +643,9 @@ TEST(LiveField, DISABLED_BenchChestCarve) {
       int slow = 0;  // > 2 ms: on a loaded 2-core VM, the scheduler's 4 ms ticks (either phase)
       for (int k = 0; k < 300; ++k) {
         const core::Vec3 centre = surface[std::uniform_int_distribution<std::size_t>(0, surface.size() - 1)(rng)];
-        const engine::BrushResult r =
-            engine::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, centre, r_mm * 1e-3, 600));
-        engine::LiveUpdateStats st;
+        const session::BrushResult r =
+            session::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, centre, r_mm * 1e-3, 600));
+        session::LiveUpdateStats st;
         (void)lf->update(c.vol, r.dirty, &st);
         ms.push_back(st.total_ms);
         recompute.push_back(st.recompute_ms);

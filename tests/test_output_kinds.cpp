@@ -41,15 +41,15 @@ mode_t type_of(const fs::path& p) {
 /// A small volume and its mesh for the writers that need one.
 struct Fixtures {
   engine::Volume vol = engine::make_sphere({12, 12, 12}, 0.001, 4.0);
-  app::Mesh mesh;
-  app::Recording rec;
+  io::Mesh mesh;
+  io::Recording rec;
   Fixtures() {
     mesh.vertices = {{0, 0, 0}, {0.001, 0, 0}, {0, 0.001, 0}, {0, 0, 0.001}};
     mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
     rec.scene_path = "/nowhere/scene.json";
     rec.scene_text = "{}";
     rec.rate_hz = 1000;
-    rec.volume_crc32 = app::volume_crc32(vol);
+    rec.volume_crc32 = io::volume_crc32(vol);
     rec.ticks.push_back({0, {0.001, 0.002, 0.003}, false, {0, 0, 0.5}, {0.001, 0.002, 0.0025}, 1});
   }
 };
@@ -62,15 +62,15 @@ struct Kind {
 std::vector<Kind> kinds(const Fixtures& f) {
   return {
       {"png", [](const std::string& p) { app::write_png(p, 2, 2, {0xff0000ffu, 0xff00ff00u, 0xffff0000u, 0xffffffffu}); }},
-      {"csv", [](const std::string& p) { app::write_file_atomic(p, "t_s,f_n\n0,0\n"); }},
-      {"json", [](const std::string& p) { app::write_file_atomic(p, "{\"status\": \"complete\"}\n"); }},
-      {"vdb", [&f](const std::string& p) { app::save_vdb(f.vol, p); }},
-      {"stl", [&f](const std::string& p) { app::write_stl_binary(f.mesh, p); }},
-      {"obj", [&f](const std::string& p) { app::write_obj(f.mesh, p); }},
-      {"ply", [&f](const std::string& p) { app::write_ply(f.mesh, p); }},
-      {"recording", [&f](const std::string& p) { app::save_recording(p, f.rec); }},
-      {"nrrd", [&f](const std::string& p) { engine::save_volume_itk(f.vol, p); }},
-      {"nii.gz", [&f](const std::string& p) { engine::save_volume_itk(f.vol, p); }},
+      {"csv", [](const std::string& p) { io::write_file_atomic(p, "t_s,f_n\n0,0\n"); }},
+      {"json", [](const std::string& p) { io::write_file_atomic(p, "{\"status\": \"complete\"}\n"); }},
+      {"vdb", [&f](const std::string& p) { io::save_vdb(f.vol, p); }},
+      {"stl", [&f](const std::string& p) { io::write_stl_binary(f.mesh, p); }},
+      {"obj", [&f](const std::string& p) { io::write_obj(f.mesh, p); }},
+      {"ply", [&f](const std::string& p) { io::write_ply(f.mesh, p); }},
+      {"recording", [&f](const std::string& p) { io::save_recording(p, f.rec); }},
+      {"nrrd", [&f](const std::string& p) { io::save_volume_itk(f.vol, p); }},
+      {"nii.gz", [&f](const std::string& p) { io::save_volume_itk(f.vol, p); }},
   };
 }
 
@@ -151,14 +151,14 @@ TEST(OutputKinds, EveryKindRefusesADirectoryNamingIt) {
 }
 
 TEST(OutputKinds, GnuplotPlotsFollowASymlinkedPng) {
-  if (app::run_program("gnuplot", "--version") != 0) GTEST_SKIP() << "gnuplot not installed";
+  if (io::run_program("gnuplot", "--version") != 0) GTEST_SKIP() << "gnuplot not installed";
   TempDir d;
   fs::create_directories(d.path / "elsewhere");
   const fs::path png = d.path / "plot.png", target = d.path / "elsewhere" / "plot.png";
   fs::create_symlink(target, png);
   const std::string script = "set terminal pngcairo size 64,48\nset output " +
-                             app::gnuplot_quote(app::temp_name(png.string())) + "\nplot x\n";
-  EXPECT_EQ(app::draw_with_gnuplot((d.path / "plots.gp").string(), script, {png.string()}), "");
+                             io::gnuplot_quote(io::temp_name(png.string())) + "\nplot x\n";
+  EXPECT_EQ(io::draw_with_gnuplot((d.path / "plots.gp").string(), script, {png.string()}), "");
   EXPECT_EQ(type_of(png), S_IFLNK);
   EXPECT_EQ(type_of(target), S_IFREG);
   EXPECT_GT(fs::file_size(target), 0u);

@@ -37,7 +37,7 @@ engine::VulkanContext& vk() { return test::validated_vk(); }
 using engine::ulp_stats;
 using engine::UlpStats;
 
-std::vector<float> flatten(const servo::SampleField& f) {
+std::vector<float> flatten(const core::SampleField& f) {
   std::vector<float> v;
   v.reserve(f.samples.size() * 4);
   for (const auto& s : f.samples) v.insert(v.end(), {s.value, s.gx, s.gy, s.gz});
@@ -103,7 +103,7 @@ engine::ChainOutput gpu(const Volume& v, const std::vector<PassDesc>& passes) {
   return (*chain.value)->run(v);
 }
 
-Volume constant(std::array<int, 3> dims, servo::Vec3 spacing, float c) {
+Volume constant(std::array<int, 3> dims, core::Vec3 spacing, float c) {
   Volume v = engine::make_random(dims, spacing, 0.0f, 1.0f, 1);
   std::fill(v.voxels.begin(), v.voxels.end(), c);
   v.update_stats();
@@ -116,14 +116,14 @@ double g1(int k, double sigma) { return std::exp(-double(k) * k / (2 * sigma * s
 // ---------------------------------------------------------------- GPU against CPU
 
 TEST(PassesGpuVsCpu, HeadCt) {
-  const Volume v = engine::load_volume(kHead);
+  const Volume v = io::load_volume(kHead);
   expect_chain_matches_cpu(v, kFull);
   expect_chain_matches_cpu(v, {PassDesc::gaussian(2.5)});
   expect_chain_matches_cpu(v, {PassDesc::closing(4.0), PassDesc::brick_minmax(2)});
 }
 
 TEST(PassesGpuVsCpu, ChestCt) {
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   expect_chain_matches_cpu(v, kFull);
   // The scene: sigma 1 mm + gradient + min/max.
   expect_chain_matches_cpu(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()});
@@ -132,7 +132,7 @@ TEST(PassesGpuVsCpu, ChestCt) {
 TEST(PassesGpuVsCpu, ToothInManySlabs) {
   // 4 MiB bindings: 103 x 94 x 161 floats are 6.2 MB, so every pass needs z-slabs, with
   // halos (z axis of the Gaussian, gradient, bricks) across the slab boundaries.
-  const Volume v = engine::load_volume(kTooth);
+  const Volume v = io::load_volume(kTooth);
   expect_chain_matches_cpu(v, {PassDesc::gaussian(2.0), PassDesc::closing(2.0), PassDesc::gradient(),
                                PassDesc::brick_minmax()},
                            4u << 20, 2 * 9 + 2 + 2);  // >= 2 slabs for every dispatch step
@@ -235,7 +235,7 @@ TEST(Gaussian, RampStaysRampAwayFromBorders) {
   // value = 3 x + 5 y - 2 z (index units). A symmetric normalised kernel preserves a linear
   // function exactly wherever the window does not reach the border (clamp bends it there).
   const std::array<int, 3> d{24, 22, 26};
-  const servo::Vec3 h{1e-3, 1e-3, 1.5e-3};
+  const core::Vec3 h{1e-3, 1e-3, 1.5e-3};
   Volume v = constant(d, h, 0);
   for (int z = 0; z < d[2]; ++z)
     for (int y = 0; y < d[1]; ++y)
@@ -257,7 +257,7 @@ TEST(Gaussian, RampStaysRampAwayFromBorders) {
 
 TEST(Gaussian, DeltaGivesTheNormalisedKernel) {
   const std::array<int, 3> d{21, 21, 21};
-  const servo::Vec3 h{1e-3, 0.8e-3, 1.6e-3};
+  const core::Vec3 h{1e-3, 0.8e-3, 1.6e-3};
   Volume v = constant(d, h, 0);
   v.voxels[v.grid.index(10, 10, 10)] = 1.0f;
   const double sigma_mm = 1.6;
@@ -442,7 +442,7 @@ TEST(PassesTiming, GpuVsOneThreadCpuOnHeadAndChest) {
   // The full chain on both volumes, then the chest scene (sigma 1 mm + gradient + min/max).
   const std::vector<PassDesc> scene = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
   for (const auto& [path, list] : {std::pair{kHead, kFull}, std::pair{kChest, kFull}, std::pair{kChest, scene}}) {
-    const Volume v = engine::load_volume(path);
+    const Volume v = io::load_volume(path);
     const auto chain = engine::PassChain::create(ctx, list);
     ASSERT_TRUE(chain);
     (*chain.value)->run(v);  // warm-up (pipeline compilation in the driver, page faults)

@@ -118,7 +118,7 @@ TEST(Raycast, SphereGpuMatchesCpuPerPixel) {
 }
 
 TEST(Raycast, HeadCtGpuMatchesCpuPerPixel) {
-  const engine::Volume vol = engine::load_volume(kHead);
+  const engine::Volume vol = io::load_volume(kHead);
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
   const RaycastField f = engine::make_raycast_field(vol.grid, vol.voxels, iso,
                                                     float(iso.outside_value(vol.min_value, vol.max_value)));
@@ -197,7 +197,7 @@ TEST(Raycast, CoveredPixelsMatchProjectedArea) {
 // Skipping over bricks whose range cannot hold the isosurface takes the same lattice
 // samples: the images must be identical, on the sphere and on a real CT from other angles.
 TEST(Raycast, SkippingOnAndOffGiveTheSameImage) {
-  const engine::Volume head = engine::load_volume(kHead);
+  const engine::Volume head = io::load_volume(kHead);
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
   const RaycastField hf = engine::make_raycast_field(head.grid, head.voxels, iso,
                                                      float(iso.outside_value(head.min_value, head.max_value)));
@@ -595,7 +595,7 @@ TEST(Raycast, ProbePrimitivesAreDrawn) {
   const SphereCase s;
   const RaycastField f = s.field();
   const CameraView view = s.view(0.25, 40);
-  servo::TraceRow row;
+  sim::TraceRow row;
   row.hip_m = s.centre() + Vec3{0, -s.r_m + 0.002, 0};
   row.vhip_m = s.centre() + Vec3{0, -s.r_m, 0};
   row.force_n = {0, -1.5, 0};

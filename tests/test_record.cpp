@@ -1,4 +1,4 @@
-// Recordings (apps/record.h): the JSON-lines format round-trips every
+// Recordings (io/record.h): the JSON-lines format round-trips every
 // double bit for bit (random bit patterns incl. subnormals, -0.0, huge), the save is atomic
 // (a write that fails - the file size limit in a child process - leaves the old file
 // whole), bad files are refused with the file, the line, the field and the value named,
@@ -26,16 +26,16 @@
 #include "synthetic.h"
 
 namespace fs = std::filesystem;
-using isotouch::app::EditEvent;
-using isotouch::app::load_recording;
-using isotouch::app::parse_recording;
-using isotouch::app::RecordedTick;
-using isotouch::app::Recording;
-using isotouch::app::recording_text;
-using isotouch::app::RecordingError;
-using isotouch::app::save_recording;
+using isotouch::session::EditEvent;
+using isotouch::io::load_recording;
+using isotouch::io::parse_recording;
+using isotouch::io::RecordedTick;
+using isotouch::io::Recording;
+using isotouch::io::recording_text;
+using isotouch::io::RecordingError;
+using isotouch::io::save_recording;
 using isotouch::core::Vec3;
-using isotouch::engine::BrushKind;
+using isotouch::session::BrushKind;
 
 namespace {
 
@@ -152,7 +152,8 @@ bool identical(const Recording& a, const Recording& b, std::string& why) {
   for (std::size_t k = 0; k < a.ticks.size(); ++k) {
     const auto &x = a.ticks[k], &y = b.ticks[k];
     if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) ||
-        x.button != y.button || !same_bits(x.vhip_m, y.vhip_m) || x.version != y.version || x.fault != y.fault)
+        x.button != y.button || !same_bits(x.vhip_m, y.vhip_m) || x.version != y.version || x.fault != y.fault ||
+        !same_bits(x.dt_s, y.dt_s))
       return why = "tick " + std::to_string(k), false;
   }
   for (std::size_t i = 0; i < a.edits.size(); ++i) {
@@ -221,6 +222,75 @@ TEST(Record, RandomRecordingsRoundTripBitForBit) {
     EXPECT_TRUE(identical(r, back, why)) << "trial " << trial << ": " << why;
     EXPECT_EQ(recording_text(back, "mem"), text) << "trial " << trial;  // a fixed point
   }
+}
+
+/// A live session's recording (format 3): measured dt per tick, edits with the tick count
+/// when they were applied (ascending, possibly past the last tick line).
+Recording live_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t edits) {
+  Recording r = random_recording(rng, ticks, edits);
+  r.format_version = 3;
+  for (std::size_t k = 0; k < r.ticks.size(); ++k)
+    r.ticks[k].dt_s = k == 0 ? 0.0 : std::ldexp(double(1 + rng() % 100000), -int(17 + rng() % 10));
+  if (!r.edits.empty()) r.edits.back().tick = long(ticks);  // applied after the last tick ran
+  return r;
+}
+
+TEST(Record, LiveRecordingsRoundTripBitForBit) {
+  std::mt19937_64 rng(3);
+  for (int trial = 0; trial < 10; ++trial) {
+    const Recording r = live_recording(rng, 1 + rng() % 300, 1 + rng() % 40);
+    const std::string text = recording_text(r, "mem");
+    const Recording back = parse_recording(text, "mem");
+    std::string why;
+    EXPECT_TRUE(identical(r, back, why)) << "trial " << trial << ": " << why;
+    EXPECT_TRUE(back.complete);
+    EXPECT_NE(text.find("\"dt\":"), std::string::npos);
+  }
+}
+
+TEST(Record, ACutLiveRecordingLoadsUpToItsLastWholeLine) {
+  std::mt19937_64 rng(4);
+  const Recording r = live_recording(rng, 50, 5);
+  const std::string text = recording_text(r, "mem");
+  // Cut in the middle of tick 30's line (after a SIGKILL the last chunk may end anywhere).
+  const std::size_t at = text.find("{\"k\":30,");
+  ASSERT_NE(at, std::string::npos);
+  const std::string cut = text.substr(0, at + 20);
+  EXPECT_THROW((void)parse_recording(cut, "cut"), RecordingError);  // refused unless allowed
+  const Recording back = parse_recording(cut, "cut", /*allow_incomplete=*/true);
+  EXPECT_FALSE(back.complete);
+  ASSERT_EQ(back.ticks.size(), 30u);
+  for (std::size_t k = 0; k < 30; ++k) {
+    EXPECT_TRUE(same_bits(back.ticks[k].dt_s, r.ticks[k].dt_s)) << k;
+    EXPECT_TRUE(same_bits(back.ticks[k].force_n, r.ticks[k].force_n)) << k;
+  }
+  // Cut at a line end: the same, with no partial line to drop.
+  const Recording whole_lines = parse_recording(text.substr(0, at), "cut", true);
+  EXPECT_EQ(whole_lines.ticks.size(), 30u);
+  // A simulated run's recording (format 2) is never accepted cut: it is written whole.
+  std::mt19937_64 rng2(5);
+  const std::string two = recording_text(random_recording(rng2, 50, 0), "mem");
+  EXPECT_THROW((void)parse_recording(two.substr(0, two.size() / 2), "cut", true), RecordingError);
+}
+
+TEST(Record, LiveRecordingsRefuseBadDtAndEditsOutOfOrder) {
+  std::mt19937_64 rng(6);
+  Recording r = live_recording(rng, 10, 3);
+  const std::string text = recording_text(r, "mem");
+  const std::string dt1 = "\"dt\":";
+  const std::size_t at = text.find(dt1, text.find("{\"k\":2,"));
+  ASSERT_NE(at, std::string::npos);
+  const std::size_t end = text.find(',', at);
+  std::string neg = text;
+  neg.replace(at + dt1.size(), end - at - dt1.size(), "-0.001");
+  try {
+    (void)parse_recording(neg, "neg.rec");
+    ADD_FAILURE() << "a negative dt was accepted";
+  } catch (const RecordingError& e) {
+    EXPECT_NE(std::string(e.what()).find("field 'dt': must be in [0, 3600) s, got -0.001"), std::string::npos) << e.what();
+  }
+  r.edits[2].tick = r.edits[1].tick - 1;
+  EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
 }
 
 TEST(Record, SaveLoadThroughTheFileIsExact) {
@@ -357,8 +427,8 @@ TEST(Record, BadFilesNameTheLineTheFieldAndTheValue) {
        {"line 4 (edit 0): field 'tick'", "0 is not the tick just before it (1)"}},
       {"unknown field", replaced(good, "\"button\":true", "\"button\":true,\"buton\":1"),
        {"line 3 (tick 1): field 'buton'", "unknown field"}},
-      {"format version", replaced(good, "\"format_version\":2", "\"format_version\":3"),
-       {"line 1 (header): field 'format_version'", "3 is not supported"}},
+      {"format version", replaced(good, "\"format_version\":2", "\"format_version\":4"),
+       {"line 1 (header): field 'format_version'", "4 is not supported"}},
       {"no volume checksum", replaced(good, ",\"volume_crc32\":123456789", ""),
        {"line 1 (header): field 'volume_crc32'"}},
       {"checksum out of range", replaced(good, "\"volume_crc32\":123456789", "\"volume_crc32\":4294967296"),
@@ -477,7 +547,7 @@ const Recorded& recorded_run() {
     opt.progress = false;
     opt.record_path = x.rec.string();
     std::ostringstream log;
-    (void)isotouch::app::run_scene(isotouch::app::load_scene(x.scene.string()), opt, log);
+    (void)isotouch::app::run_scene(isotouch::io::load_scene(x.scene.string()), opt, log);
     return x;
   }();
   return r;
@@ -601,12 +671,12 @@ TEST(Replay, AnotherVolumeIsRefused) {
 
 TEST(Replay, VolumeChecksumSeesOneVoxel) {
   auto v = isotouch::engine::make_sphere({16, 16, 16}, 1e-3, 5);
-  const std::uint32_t before = isotouch::app::volume_crc32(v);
+  const std::uint32_t before = isotouch::io::volume_crc32(v);
   v.voxels[1000] = std::nextafter(v.voxels[1000], 1e30f);
-  EXPECT_NE(isotouch::app::volume_crc32(v), before);
+  EXPECT_NE(isotouch::io::volume_crc32(v), before);
   auto w = isotouch::engine::make_sphere({16, 16, 16}, 1e-3, 5);
   w.grid.spacing_m.z *= 1.5;  // the same voxels, resampled
-  EXPECT_NE(isotouch::app::volume_crc32(w), before);
+  EXPECT_NE(isotouch::io::volume_crc32(w), before);
 }
 
 TEST(Replay, AChangedSceneIsRefused) {

@@ -43,7 +43,7 @@ std::string error_of(const std::string& path, const engine::Volume& vol) {
 
 TEST(RenderCmd, TraceOfARunReadsBackTickForTick) {
   const fs::path dir = temp_dir("trace");
-  app::Scene sc = app::load_scene(kScenes + "/sphere.json");
+  io::Scene sc = io::load_scene(kScenes + "/sphere.json");
   sc.draw_plots = false;
   app::RunOptions opt;
   opt.out_dir = dir.string();
@@ -112,7 +112,7 @@ TEST(RenderCmd, SpherePictureCoversTheProjectedDisc) {
   // The CPU reference ray caster on an analytic sphere seen from far: the surface pixels
   // cover pi r'^2 of the image, r' the sphere's projected radius.
   const engine::Volume vol = engine::make_sphere({48, 48, 48}, 1e-3, 15);
-  app::Scene sc = app::load_scene(kScenes + "/sphere.json");
+  io::Scene sc = io::load_scene(kScenes + "/sphere.json");
   const engine::RaycastField field = app::scene_raycast_field(sc, vol);
   app::PictureRequest req;
   req.width = req.height = 160;

@@ -25,7 +25,7 @@
 
 namespace fs = std::filesystem;
 using isotouch::app::RunMetrics;
-using isotouch::app::Scene;
+using isotouch::io::Scene;
 using isotouch::engine::Volume;
 
 namespace {
@@ -74,7 +74,7 @@ Steps recompute(const std::vector<Row>& rows, const Volume& vol, const Scene& sc
     if (rows[i].contact && rows[i - 1].contact) s.contact = std::max(s.contact, d);
     if (rows[i - 1].contact && !rows[i].contact) {
       const double v = trilinear(vol, rows[i].hip);
-      const bool inside = sc.hri.inside == isotouch::servo::InsideIs::kAbove ? v > sc.hri.tau : v < sc.hri.tau;
+      const bool inside = sc.hri.inside == isotouch::core::InsideIs::kAbove ? v > sc.hri.tau : v < sc.hri.tau;
       if (inside) {
         ++s.releases;
         s.release = std::max(s.release, rows[i - 1].f);
@@ -111,7 +111,7 @@ Ran run_and_recompute(Scene sc, const std::string& tag) {
   const fs::path out = run_into_temp(sc, "isotouch_run_job_" + tag, &r.m);
   const Volume vol = sc.volume_path.empty()
                          ? isotouch::engine::make_sphere(sc.synthetic.dims, sc.synthetic.spacing_m, sc.synthetic.radius_vox)
-                         : isotouch::engine::load_volume(sc.volume_path);
+                         : isotouch::io::load_volume(sc.volume_path);
   const auto rows = read_trace(out / "trace.csv");
   EXPECT_EQ(long(rows.size()), r.m.ticks);
   r.s = recompute(rows, vol, sc);
@@ -126,7 +126,7 @@ Ran run_and_recompute(Scene sc, const std::string& tag) {
 }  // namespace
 
 TEST(RunJob, SphereStepsMatchTheTrace) {
-  const Ran r = run_and_recompute(isotouch::app::load_scene(kScenes + "/sphere.json"), "sphere");
+  const Ran r = run_and_recompute(isotouch::io::load_scene(kScenes + "/sphere.json"), "sphere");
   EXPECT_GT(r.m.contact_ticks, 500);
   EXPECT_GT(r.m.max_any_step_n, 0.0);  // the press is not free of steps at 1 kHz
 }
@@ -134,7 +134,7 @@ TEST(RunJob, SphereStepsMatchTheTrace) {
 TEST(RunJob, StiffSlowSceneShowsItsSteps) {
   // K = 1e6 N/m at 10 Hz: the force jumps between 0 and the 1000 N limit from one tick to
   // the next, never on two contact ticks in a row, so the contact-only step says 0 (issue 7).
-  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
   sc.hri.stiffness_n_per_m = 1e6;
   sc.hri.damping_n_s_per_m = 0;
   sc.hri.rate_hz = 10;
@@ -148,7 +148,7 @@ TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
   // The paper's Figure 2 as printed drops the plane while the HIP is inside bone on the
   // head CT's mandibular ramus (the head scene's earlier stroke: in along +x at 70 % of the
   // height): a release step that the contact-only figure cannot see.
-  Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  Scene sc = isotouch::io::load_scene(kScenes + "/head.json");
   sc.script.ray_origin_frac = {-0.2, 0.5, 0.7};
   sc.script.ray_direction = {1, 0, 0};
   sc.hri.variant = isotouch::servo::Variant::kPaper;
@@ -160,7 +160,7 @@ TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
 
 TEST(RunJob, HeadStepsMatchTheTrace) {
   const auto t0 = std::chrono::steady_clock::now();
-  const Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  const Scene sc = isotouch::io::load_scene(kScenes + "/head.json");
   const Ran r = run_and_recompute(sc, "head");
   EXPECT_GT(r.m.contact_ticks, 500);
   std::cout << "head: max_force_step_n " << r.m.max_force_step_n << " N, max_release_step_n "
@@ -176,7 +176,7 @@ TEST(RunJob, HeadStepsMatchTheTrace) {
 TEST(RunJob, NoContactGivesNullErrorsNotZero) {
   // Issue 7: a meaningless run (spacing 1e-12 m, below what scene files accept: set here
   // directly) has no contact tick; its error figures are unknown, not 0.
-  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
+  Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
   sc.synthetic.spacing_m = 1e-12;
   sc.draw_plots = false;
   const fs::path out = fs::temp_directory_path() /
@@ -232,7 +232,7 @@ struct ModeFigures {
 };
 
 ModeFigures compare_modes(const std::string& name) {
-  const Scene sc = isotouch::app::load_scene(kScenes + "/" + name + ".json");
+  const Scene sc = isotouch::io::load_scene(kScenes + "/" + name + ".json");
   const nlohmann::json d = run_summary(sc, "dense", name), s = run_summary(sc, "sparse", name);
   EXPECT_EQ(d["engine"]["mode"], "dense");
   EXPECT_EQ(s["engine"]["mode"], "sparse");
@@ -277,8 +277,8 @@ TEST(RunModes, EngineSectionListsWhatRanAndWhatWasLeftOut) {
   // parameters, a GPU and a CPU time per pass, and the closing and brick_minmax pipelines as
   // left out (not created); report.md says the same. Sparse: the stages that ran and the
   // dense passes left out.
-  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
-  sc.engine.passes = {isotouch::app::PassSpec{"gaussian", 1.0}, isotouch::app::PassSpec{"gradient"}};
+  Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
+  sc.engine.passes = {isotouch::io::PassSpec{"gaussian", 1.0}, isotouch::io::PassSpec{"gradient"}};
   const nlohmann::json d = run_summary(sc, "dense", "engine_section");
   const auto& e = d["engine"];
   ASSERT_EQ(e["passes"].size(), 2u) << e.dump(2);
@@ -311,8 +311,8 @@ TEST(RunModes, AWideGaussianRunsSparseWithoutFallback) {
   // sigma 1.5 mm on 1 mm voxels: a Gaussian radius of 5 voxels, wider than the per-brick
   // kernel's shared memory held (it fell back to the dense chain then); the sparse chain on
   // dense-style passes has no such limit: bricks published, GPU equal to the CPU reference.
-  Scene sc = isotouch::app::load_scene(kScenes + "/sphere.json");
-  sc.engine.passes = {isotouch::app::PassSpec{"gaussian", 1.5}, isotouch::app::PassSpec{"gradient"}};
+  Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
+  sc.engine.passes = {isotouch::io::PassSpec{"gaussian", 1.5}, isotouch::io::PassSpec{"gradient"}};
   const nlohmann::json s = run_summary(sc, "sparse", "fallback");
   EXPECT_TRUE(s["engine"]["sparse_fallback"].is_null()) << s["engine"].dump(2);
   EXPECT_TRUE(s["engine"]["bricks"]["active"].is_number());
@@ -336,7 +336,7 @@ TEST(RunJob, EditsThatDoNothingSaySo) {
                    {"t_s": 0.04, "kind": "carve", "at": "vhip", "radius_mm": 1},
                    {"t_s": 0.05, "kind": "add", "at": [23.5, 23.5, 23.5], "radius_mm": 22, "strength": 1000},
                    {"t_s": 100, "kind": "undo"}]}})";
-  const Scene sc = isotouch::app::load_scene((dir / "noop.json").string());
+  const Scene sc = isotouch::io::load_scene((dir / "noop.json").string());
   isotouch::app::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
@@ -380,7 +380,7 @@ TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
     "script": {"hold_s": 0.1, "stroke_length_m": 0.004}, "outputs": {"plots": false},
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": false,
       "timeline": [{"t_s": 0.1, "kind": "carve", "at": [9.5, 23.5, 23.5], "radius_mm": 4, "strength": 1000}]}})";
-  const Scene sc = isotouch::app::load_scene((dir / "carved.json").string());
+  const Scene sc = isotouch::io::load_scene((dir / "carved.json").string());
   isotouch::app::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
@@ -420,7 +420,7 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
   // frame; the head CT's direction is the identity) and the phases it reports.
   const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_lift_" + std::to_string(::getpid()));
   fs::remove_all(dir);
-  Scene sc = isotouch::app::load_scene(kScenes + "/head.json");
+  Scene sc = isotouch::io::load_scene(kScenes + "/head.json");
   sc.draw_plots = false;
   isotouch::app::RunOptions opt;
   opt.out_dir = dir.string();

@@ -4,9 +4,9 @@
 #include "run_job.h"
 #include "scene.h"
 
-using isotouch::app::load_scene;
-using isotouch::app::parse_scene;
-using isotouch::app::SceneError;
+using isotouch::io::load_scene;
+using isotouch::io::parse_scene;
+using isotouch::io::SceneError;
 
 namespace {
 const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";

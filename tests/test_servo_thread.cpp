@@ -15,8 +15,11 @@
 #include "analytic_fields.h"
 #include "hri.h"
 #include "servo_thread.h"
+#include "sim_device_io.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 thread_local bool t_is_servo = false;

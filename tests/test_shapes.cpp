@@ -9,27 +9,27 @@
 #include "shapes.h"
 
 using namespace isotouch;
-using servo::Vec3;
+using core::Vec3;
 
 TEST(Shapes, TruthIsConsistent) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(0.005, 0.058);
-  for (const std::string& name : engine::synthetic_scene_names()) {
-    const engine::SyntheticScene s = engine::make_synthetic_scene(name);
+  for (const std::string& name : eval::synthetic_scene_names()) {
+    const eval::SyntheticScene s = eval::make_synthetic_scene(name);
     for (int i = 0; i < 300; ++i) {
       const Vec3 x{u(rng), u(rng), u(rng)};
       Vec3 p, n;
       s.truth->closest(x, p, n);
-      EXPECT_NEAR(servo::norm(n), 1.0, 1e-12) << name;
+      EXPECT_NEAR(core::norm(n), 1.0, 1e-12) << name;
       EXPECT_NEAR(s.truth->depth(p), 0.0, 1e-9) << name;  // the closest point is on the surface
       // |depth| is the distance to that point (inside and outside)
-      EXPECT_NEAR(std::abs(s.truth->depth(x)), servo::norm(x - p), 1e-9) << name;
+      EXPECT_NEAR(std::abs(s.truth->depth(x)), core::norm(x - p), 1e-9) << name;
     }
   }
 }
 
 TEST(Shapes, KnotDistanceMatchesBruteForce) {
-  const engine::SyntheticScene s = engine::make_synthetic_scene("knot");
+  const eval::SyntheticScene s = eval::make_synthetic_scene("knot");
   const Vec3 c = s.volume.grid.centre_m();
   auto curve = [&](double t) {
     const double rho = 0.014 + 0.008 * std::cos(3 * t);
@@ -40,7 +40,7 @@ TEST(Shapes, KnotDistanceMatchesBruteForce) {
   for (int i = 0; i < 40; ++i) {
     const Vec3 x = c + Vec3{u(rng), u(rng), u(rng) * 0.4};
     double best = 1e300;
-    for (int k = 0; k < 200000; ++k) best = std::min(best, servo::norm(curve(2 * M_PI * k / 200000) - x));
+    for (int k = 0; k < 200000; ++k) best = std::min(best, core::norm(curve(2 * M_PI * k / 200000) - x));
     EXPECT_NEAR(s.truth->depth(x), 0.0035 - best, 2e-7);
   }
 }
@@ -48,9 +48,9 @@ TEST(Shapes, KnotDistanceMatchesBruteForce) {
 TEST(Shapes, SampledIsosurfaceLiesOnTheTruth) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> u(0.004, 0.059);
-  for (const std::string& name : engine::synthetic_scene_names()) {
-    const engine::SyntheticScene s = engine::make_synthetic_scene(name);
-    const servo::SampleField f = engine::compute_samples_cpu(s.volume);
+  for (const std::string& name : eval::synthetic_scene_names()) {
+    const eval::SyntheticScene s = eval::make_synthetic_scene(name);
+    const core::SampleField f = engine::compute_samples_cpu(s.volume);
     double worst = 0;
     int n_checked = 0;
     for (int i = 0; i < 2000 && n_checked < 300; ++i) {
@@ -61,9 +61,9 @@ TEST(Shapes, SampledIsosurfaceLiesOnTheTruth) {
       if (name == "box" || name == "three-spheres") {
         Vec3 p2, n2;
         s.truth->closest(p + n * -0.0025, p2, n2);
-        if (servo::norm(p2 - p) > 1e-6) continue;
+        if (core::norm(p2 - p) > 1e-6) continue;
       }
-      const double g = servo::norm(servo::trilinear_field_gradient(f, p));
+      const double g = core::norm(servo::trilinear_field_gradient(f, p));
       if (!(g > 0)) continue;
       const double dist = std::abs(servo::sample_value(f, p) - s.tau) / g;  // first order
       worst = std::max(worst, dist);
@@ -77,7 +77,7 @@ TEST(Shapes, SampledIsosurfaceLiesOnTheTruth) {
 }
 
 TEST(Shapes, KnotPathSlidesOnTheConcaveSide) {
-  const engine::SyntheticScene s = engine::make_synthetic_scene("knot");
+  const eval::SyntheticScene s = eval::make_synthetic_scene("knot");
   ASSERT_GT(s.hip_path.size(), 500u);
   int deep = 0;
   for (const Vec3& h : s.hip_path) {

@@ -10,7 +10,9 @@
 #include "script.h"
 #include "sim_device.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 // Sphere of radius R [m] around c as a distance field in mm (positive inside), exact samples.

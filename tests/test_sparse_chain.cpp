@@ -174,7 +174,7 @@ void check_case(const Volume& v, const std::vector<PassDesc>& passes, const core
 }  // namespace
 
 TEST(SparseChain, HeadCt) {
-  const Volume v = engine::load_volume(kHead);
+  const Volume v = io::load_volume(kHead);
   for (double tau : {1150.0, 500.0}) {
     check_case(v, {PassDesc::gradient()}, above(tau), float(v.min_value), "head gradient tau " + std::to_string(tau));
     check_case(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()}, above(tau),
@@ -183,7 +183,7 @@ TEST(SparseChain, HeadCt) {
 }
 
 TEST(SparseChain, ChestCt) {
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
   check_case(v, p, above(-500), -1024.0f, "chest gauss 1mm -500", 8u << 20);
   check_case(v, p, above(250), -1024.0f, "chest gauss 1mm +250");
@@ -195,7 +195,7 @@ TEST(SparseChain, OneWorkgroupLoopsOverManyBricks) {
   // beyond it every loop stops silently and bricks come out empty or half computed). The
   // chest at -500 HU has ~5300 candidates: ~10 workgroups of ~500 bricks each without the
   // budget. Truth: the dense CPU chain, and the same result with the default workgroups.
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
   const engine::SparseOutput one = run_gpu(v, p, above(-500), -1024.0f, 0, 1, Strategy::PerBrick);
   const std::size_t per = std::size_t(engine::sparse::max_bricks_per_workgroup(
@@ -226,7 +226,7 @@ TEST(SparseChain, OddSizesAnisotropicBelow) {
 }
 
 TEST(SparseChain, ClosingThenGaussian) {
-  const Volume v = engine::load_volume(kHead);
+  const Volume v = io::load_volume(kHead);
   const std::vector<PassDesc> p = {PassDesc::closing(1.0), PassDesc::gaussian(0.8), PassDesc::gradient()};
   check_case(v, p, above(1150), float(v.min_value), "head closing+gauss", 512u << 10);
   // The head's spacing makes a 1 mm closing radius 0; here it is 1 voxel along x.
@@ -322,7 +322,7 @@ void bench_case(const Volume& v, double tau, int reps) {
 TEST(SparseChain, DISABLED_BenchChest) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 5;
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   bench_case(v, -500, reps);
   bench_case(v, 250, reps);
 }

@@ -4,7 +4,9 @@
 #include "analytic_fields.h"
 #include "stability.h"
 
+using namespace isotouch::core;
 using namespace isotouch::servo;
+using namespace isotouch::sim;
 
 namespace {
 const Vec3 kP{0.016, 0.016, 0.010};

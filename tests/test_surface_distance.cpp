@@ -1,4 +1,4 @@
-// True distance to the trilinear isosurface (apps/surface_distance.h) against analytic truth
+// True distance to the trilinear isosurface (eval/surface_distance.h) against analytic truth
 // (plane, sphere, a nearly flat field) and against an independent method: OpenVDB's mesh of
 // the same volume's isosurface with brute-force point-to-triangle distances.
 #include <gtest/gtest.h>
@@ -24,7 +24,7 @@
 #endif
 
 using namespace isotouch;
-using servo::Vec3;
+using core::Vec3;
 
 namespace {
 
@@ -41,20 +41,20 @@ Vec3 random_point(std::mt19937_64& rng, Vec3 lo, Vec3 hi) {
 // A plane is exactly linear, so trilinear interpolation reproduces it: the distance is
 // |n . (p - c)| up to the float rounding of the sample values (~1e-9 m here).
 TEST(SurfaceDistance, PlaneIsExact) {
-  const Vec3 n = servo::normalized_or(Vec3{0.3, -0.5, 0.8}, {0, 0, 1});
+  const Vec3 n = core::normalized_or(Vec3{0.3, -0.5, 0.8}, {0, 0, 1});
   const Vec3 c{0.016, 0.016, 0.016};
-  const servo::SampleField f = servo::plane_field(n, c);  // 32^3, 1 mm, value in mm
+  const core::SampleField f = sim::plane_field(n, c);  // 32^3, 1 mm, value in mm
   std::mt19937_64 rng(7);
   const double tol = 1e-6;  // the default: 1e-3 voxel
   double worst = 0;
   int tested = 0;
   for (int k = 0; k < 120; ++k) {
     const Vec3 p0 = random_point(rng, {0.006, 0.006, 0.006}, {0.026, 0.026, 0.026});
-    const Vec3 p = p0 - n * (servo::dot(n, p0 - c) * 0.6);  // within 3 mm or so of the plane
-    const double exact = std::abs(servo::dot(n, p - c));
-    const Vec3 foot = p - n * servo::dot(n, p - c);
+    const Vec3 p = p0 - n * (core::dot(n, p0 - c) * 0.6);  // within 3 mm or so of the plane
+    const double exact = std::abs(core::dot(n, p - c));
+    const Vec3 foot = p - n * core::dot(n, p - c);
     if (std::min({foot.x, foot.y, foot.z}) < 0.001 || std::max({foot.x, foot.y, foot.z}) > 0.030) continue;
-    const app::SurfaceDistance d = app::distance_to_isosurface(f, 0.0, p);
+    const eval::SurfaceDistance d = eval::distance_to_isosurface(f, 0.0, p);
     ASSERT_TRUE(d.found) << "p = (" << p.x << ", " << p.y << ", " << p.z << ")";
     EXPECT_GE(d.distance_m, exact - 1e-8);          // a point on the surface: never too small
     EXPECT_LE(d.distance_m, exact + std::min(tol, std::max(1e-9, 1e-2 * exact)) + 1e-8);  // the stated accuracy
@@ -75,16 +75,16 @@ TEST(SurfaceDistance, PlaneIsExact) {
 // within eps of | |p - c| - r |.
 TEST(SurfaceDistance, SphereWithinTheTrilinearBound) {
   const double r = 0.015, h = 1e-3;
-  const servo::SampleField f = servo::sphere_field(kC, r);
+  const core::SampleField f = sim::sphere_field(kC, r);
   const double eps = 3 * h * h / (8 * (r - std::sqrt(3.0) * h - 0.1 * h));
   std::mt19937_64 rng(11);
   double worst = 0;
   for (int k = 0; k < 300; ++k) {
     const Vec3 p = random_point(rng, kC - Vec3{0.02, 0.02, 0.02}, kC + Vec3{0.02, 0.02, 0.02});
-    const double rho = servo::norm(p - kC);
+    const double rho = core::norm(p - kC);
     if (std::abs(rho - r) > 0.004) continue;  // within 4 voxels of the surface (cost grows with distance)
     const double exact = std::abs(rho - r);
-    const app::SurfaceDistance d = app::distance_to_isosurface(f, 0.0, p);
+    const eval::SurfaceDistance d = eval::distance_to_isosurface(f, 0.0, p);
     ASSERT_TRUE(d.found);
     EXPECT_NEAR(d.distance_m, exact, eps + 1e-6) << "rho = " << rho;
     EXPECT_NEAR(servo::sample_value(f, d.closest_m), 0.0, 1e-3);
@@ -97,7 +97,7 @@ TEST(SurfaceDistance, SphereWithinTheTrilinearBound) {
 // surface 6.2 mm away. |f - tau| / |grad f| says kilometres; the true distance is exact
 // (the field depends on x only, so the surface is the plane where the x ramp crosses tau).
 TEST(SurfaceDistance, FlatFieldGivesTheTrueDistanceNotThousandsOfMm) {
-  servo::SampleField f;
+  core::SampleField f;
   f.grid.dims = {40, 12, 12};
   f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
   f.samples.resize(f.grid.voxel_count());
@@ -109,9 +109,9 @@ TEST(SurfaceDistance, FlatFieldGivesTheTrueDistanceNotThousandsOfMm) {
   const double v26 = vx(26), v27 = vx(27);
   const double xs = (26 + (tau - v26) / (v27 - v26)) * 1e-3;  // exact crossing on the x ramp
   const Vec3 p{0.0203, 0.0055, 0.0061};
-  const double old = app::first_order_distance(f, tau, p);
+  const double old = eval::first_order_distance(f, tau, p);
   EXPECT_GT(old, 1.0) << "the field must be flat enough to fool the first-order estimate";
-  const app::SurfaceDistance d = app::distance_to_isosurface(f, tau, p);
+  const eval::SurfaceDistance d = eval::distance_to_isosurface(f, tau, p);
   ASSERT_TRUE(d.found);
   EXPECT_NEAR(d.distance_m, xs - p.x, 1e-6 + 1e-9);
   EXPECT_GE(d.distance_m, xs - p.x - 1e-9);
@@ -120,19 +120,19 @@ TEST(SurfaceDistance, FlatFieldGivesTheTrueDistanceNotThousandsOfMm) {
 }
 
 TEST(SurfaceDistance, NoSurfaceWithinTheRadiusSaysSo) {
-  const servo::SampleField f = servo::sphere_field(kC, 0.015);
-  app::SurfaceDistanceOptions o;
+  const core::SampleField f = sim::sphere_field(kC, 0.015);
+  eval::SurfaceDistanceOptions o;
   o.max_radius_m = 0.003;
   // 10 mm from the sphere surface, searched to 3 mm only.
-  const app::SurfaceDistance d = app::distance_to_isosurface(f, 0.0, kC + Vec3{0, 0, 0.005}, o);
+  const eval::SurfaceDistance d = eval::distance_to_isosurface(f, 0.0, kC + Vec3{0, 0, 0.005}, o);
   EXPECT_FALSE(d.found);
   EXPECT_TRUE(std::isinf(d.distance_m));
   EXPECT_GE(d.lower_bound_m, 0.003 - 1e-12);
   // No crossing at all (isovalue above every value) and bad input: not found, never a number.
-  EXPECT_FALSE(app::distance_to_isosurface(f, 1e6, kC).found);
-  EXPECT_FALSE(app::distance_to_isosurface(f, 0.0, Vec3{NAN, 0, 0}).found);
+  EXPECT_FALSE(eval::distance_to_isosurface(f, 1e6, kC).found);
+  EXPECT_FALSE(eval::distance_to_isosurface(f, 0.0, Vec3{NAN, 0, 0}).found);
   // The default radius (64 voxels) reaches a surface 10 mm away.
-  const app::SurfaceDistance far = app::distance_to_isosurface(f, 0.0, kC + Vec3{0, 0, 0.005});
+  const eval::SurfaceDistance far = eval::distance_to_isosurface(f, 0.0, kC + Vec3{0, 0, 0.005});
   ASSERT_TRUE(far.found);
   EXPECT_NEAR(far.distance_m, 0.010, 0.05e-3);
 }
@@ -142,15 +142,15 @@ namespace {
 // Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
 Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = servo::dot(ab, ap), d2 = servo::dot(ac, ap);
+  const double d1 = core::dot(ab, ap), d2 = core::dot(ac, ap);
   if (d1 <= 0 && d2 <= 0) return a;
   const Vec3 bp = p - b;
-  const double d3 = servo::dot(ab, bp), d4 = servo::dot(ac, bp);
+  const double d3 = core::dot(ab, bp), d4 = core::dot(ac, bp);
   if (d3 >= 0 && d4 <= d3) return b;
   const double vc = d1 * d4 - d3 * d2;
   if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
   const Vec3 cp = p - c;
-  const double d5 = servo::dot(ab, cp), d6 = servo::dot(ac, cp);
+  const double d5 = core::dot(ab, cp), d6 = core::dot(ac, cp);
   if (d6 >= 0 && d5 <= d6) return c;
   const double vb = d5 * d2 - d1 * d6;
   if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
@@ -179,8 +179,8 @@ struct VdbStats {
 };
 VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, double tau) {
   VdbStats st;
-  const servo::SampleField f = engine::compute_samples_cpu(vol);
-  const servo::Grid& g = f.grid;
+  const core::SampleField f = engine::compute_samples_cpu(vol);
+  const core::Grid& g = f.grid;
   const double hmin = std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z});
 
   openvdb::initialize();
@@ -225,7 +225,7 @@ VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, doubl
   std::uniform_int_distribution<std::size_t> pick(0, T.size() - 1);
   std::uniform_real_distribution<double> u(-1, 1);
   const double s = 0.05e-3, tol = 1e-3 * hmin;
-  const double cell_diag = servo::norm(g.spacing_m);
+  const double cell_diag = core::norm(g.spacing_m);
   double worst_brute = 0, worst_mesh = 0, sum_mesh = 0, worst_on_surface = 0, ms = 0;
   int tested = 0;
   while (tested < 50) {
@@ -236,7 +236,7 @@ VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, doubl
       continue;
     const Vec3 p = g.to_world(idx);
     const auto t0 = std::chrono::steady_clock::now();
-    const app::SurfaceDistance d = app::distance_to_isosurface(f, tau, p);
+    const eval::SurfaceDistance d = eval::distance_to_isosurface(f, tau, p);
     ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     EXPECT_TRUE(d.found);
     if (!d.found) return st;
@@ -254,7 +254,7 @@ VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, doubl
             const double b = vdb_value(q + e) - tau;
             if (a * b > 0) continue;
             const double w = a == b ? 0.0 : a / (a - b);
-            brute = std::min(brute, servo::norm(q + e * w - p));
+            brute = std::min(brute, core::norm(q + e * w - p));
           }
         }
     EXPECT_GE(brute, d.distance_m - tol - 1e-7) << "OpenVDB's sampler found a nearer surface point";
@@ -262,7 +262,7 @@ VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, doubl
     worst_brute = std::max(worst_brute, std::abs(brute - d.distance_m));
     // 2. The mesh.
     double mesh = 1e300;
-    for (const auto& tr : T) mesh = std::min(mesh, servo::norm(p - closest_on_triangle(p, P[tr[0]], P[tr[1]], P[tr[2]])));
+    for (const auto& tr : T) mesh = std::min(mesh, core::norm(p - closest_on_triangle(p, P[tr[0]], P[tr[1]], P[tr[2]])));
     EXPECT_LT(std::abs(d.distance_m - mesh), cell_diag);
     worst_mesh = std::max(worst_mesh, std::abs(d.distance_m - mesh));
     sum_mesh += std::abs(d.distance_m - mesh);
@@ -283,7 +283,7 @@ VdbStats compare_with_openvdb(const char* what, const engine::Volume& vol, doubl
 }  // namespace
 
 TEST(SurfaceDistance, AgreesWithOpenVdbOnTheHeadCt) {
-  compare_with_openvdb("head CT", engine::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd"), 1150);
+  compare_with_openvdb("head CT", io::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd"), 1150);
 }
 
 // A smooth surface: here OpenVDB's mesh is close to the trilinear surface, so the two
@@ -307,22 +307,22 @@ TEST(SurfaceDistance, AgreesWithOpenVdbOnTheHeadCt) {
 TEST(SurfaceDistance, AnisotropicSpacingPlaneIsExact) {
   const Vec3 h{0.7e-3, 0.7e-3, 3e-3};
   const std::array<int, 3> dims{40, 40, 12};  // 27.3 x 27.3 x 33 mm
-  const Vec3 n = servo::normalized_or(Vec3{0.4, -0.3, 0.87}, {0, 0, 1});
+  const Vec3 n = core::normalized_or(Vec3{0.4, -0.3, 0.87}, {0, 0, 1});
   const Vec3 c{0.0137, 0.0137, 0.0165};       // a point of the plane
   const Vec3 a = n * 1000.0;                   // value in mm of signed distance
-  const engine::Volume vol = engine::make_linear(dims, h, a, -servo::dot(a, c));
-  const servo::SampleField f = engine::compute_samples_cpu(vol);
+  const engine::Volume vol = engine::make_linear(dims, h, a, -core::dot(a, c));
+  const core::SampleField f = engine::compute_samples_cpu(vol);
   std::mt19937_64 rng(23);
   double worst = 0;
   int tested = 0;
   for (int k = 0; k < 80; ++k) {
     const Vec3 p = random_point(rng, {0.004, 0.004, 0.006}, {0.023, 0.023, 0.027});
-    const double exact = std::abs(servo::dot(n, p - c));
-    const Vec3 foot = p - n * servo::dot(n, p - c);
+    const double exact = std::abs(core::dot(n, p - c));
+    const Vec3 foot = p - n * core::dot(n, p - c);
     if (exact > 0.003 || std::min({foot.x, foot.y}) < 0.001 || std::max({foot.x, foot.y}) > 0.026 ||
         foot.z < 0.004 || foot.z > 0.029)
       continue;
-    const app::SurfaceDistance d = app::distance_to_isosurface(f, 0.0, p);
+    const eval::SurfaceDistance d = eval::distance_to_isosurface(f, 0.0, p);
     ASSERT_TRUE(d.found) << "p = (" << p.x << ", " << p.y << ", " << p.z << ")";
     // Stated accuracy: min(1e-3 voxel, max(1e-6 voxel, 1 % of d)), voxel = the smallest spacing.
     const double tol = std::min(0.7e-6, std::max(0.7e-9, 1e-2 * exact)) + 1e-8;

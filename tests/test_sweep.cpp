@@ -11,16 +11,16 @@ using namespace isotouch;
 
 TEST(Sweep, SphereHriN1RefinedStaysWithinTwoHundredthsOfAVoxel) {
   std::ostringstream log;
-  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
+  const eval::SweepScene s = eval::prepare_sweep_scene("sphere", nullptr, log);
   ASSERT_GT(s.hip.size(), 1000u);
   for (servo::Intersection m : {servo::Intersection::kSecant, servo::Intersection::kBisection}) {
-    servo::HriParams p = app::reference_params(s);
+    servo::HriParams p = eval::reference_params(s);
     p.plane_update_period = 1;
     p.intersection = m;
     p.intersection_steps = m == servo::Intersection::kSecant ? 4 : 8;
     p.normal = servo::NormalSource::kSamples;
     servo::HriRenderer r(p);
-    const app::ErrorFigures e = app::measure(s, app::playback(r, s));
+    const eval::ErrorFigures e = eval::measure(s, eval::playback(r, s));
     EXPECT_GT(e.contact_ticks, 500);
     EXPECT_LE(e.surface_err_rms_m / s.voxel_m, 0.02);
     EXPECT_LT(e.angle_err_rms_deg, 1.0);
@@ -29,15 +29,15 @@ TEST(Sweep, SphereHriN1RefinedStaysWithinTwoHundredthsOfAVoxel) {
 
 TEST(Sweep, ErrorsGrowWithThePlaneUpdatePeriodOnTheSphere) {
   std::ostringstream log;
-  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
+  const eval::SweepScene s = eval::prepare_sweep_scene("sphere", nullptr, log);
   double prev = -1;
   for (int n : {1, 10, 50}) {
-    servo::HriParams p = app::reference_params(s);
+    servo::HriParams p = eval::reference_params(s);
     p.plane_update_period = n;
     p.intersection = servo::Intersection::kLinear;
     p.normal = servo::NormalSource::kSamples;
     servo::HriRenderer r(p);
-    const app::ErrorFigures e = app::measure(s, app::playback(r, s));
+    const eval::ErrorFigures e = eval::measure(s, eval::playback(r, s));
     EXPECT_GT(e.angle_err_rms_deg, prev) << "n = " << n;  // stale planes tilt the force
     prev = e.angle_err_rms_deg;
   }
@@ -45,7 +45,7 @@ TEST(Sweep, ErrorsGrowWithThePlaneUpdatePeriodOnTheSphere) {
 
 TEST(Sweep, BaselinesReplayAndAreMeasured) {
   std::ostringstream log;
-  const app::SweepScene s = app::prepare_sweep_scene("knot", nullptr, log);
+  const eval::SweepScene s = eval::prepare_sweep_scene("knot", nullptr, log);
   servo::BaselineParams b;
   b.tau = s.tau;
   b.stiffness_n_per_m = s.stiffness_n_per_m;
@@ -54,11 +54,11 @@ TEST(Sweep, BaselinesReplayAndAreMeasured) {
   servo::AvilaRenderer a(b);
   servo::BlezekRenderer z(b);
   for (servo::Renderer* r : std::initializer_list<servo::Renderer*>{&a, &z}) {
-    const app::ErrorFigures e = app::measure(s, app::playback(*r, s));
+    const eval::ErrorFigures e = eval::measure(s, eval::playback(*r, s));
     EXPECT_GT(e.contact_ticks, 200) << r->name();
     EXPECT_LT(e.surface_err_rms_m / s.voxel_m, 0.1) << r->name();
     EXPECT_LT(e.angle_err_rms_deg, 5.0) << r->name();
-    EXPECT_GT(app::median_ns_per_tick(*r, s, 0, 3), 0.0);
+    EXPECT_GT(eval::median_ns_per_tick(*r, s, 0, 3), 0.0);
   }
 }
 
@@ -73,7 +73,7 @@ class DropEvery100 final : public servo::Renderer {
     k_ = 0;
   }
   using servo::Renderer::tick;
-  servo::HriTick tick(const servo::SampleField& f, const servo::Vec3& hip, double dt) override {
+  servo::HriTick tick(const core::SampleField& f, const core::Vec3& hip, double dt) override {
     servo::HriTick t = r_.tick(f, hip, dt);
     if (++k_ % 100 == 0) {
       t.contact = false;
@@ -92,14 +92,14 @@ class DropEvery100 final : public servo::Renderer {
 // the reference renderer on the sphere; one per dropped tick that is that deep.
 TEST(Sweep, PopThroughsAreCountedAgainstTheTruth) {
   std::ostringstream log;
-  const app::SweepScene s = app::prepare_sweep_scene("sphere", nullptr, log);
-  servo::HriRenderer ref(app::reference_params(s));
-  EXPECT_EQ(app::measure(s, app::playback(ref, s)).pop_throughs, 0);
-  DropEvery100 drop(app::reference_params(s));
+  const eval::SweepScene s = eval::prepare_sweep_scene("sphere", nullptr, log);
+  servo::HriRenderer ref(eval::reference_params(s));
+  EXPECT_EQ(eval::measure(s, eval::playback(ref, s)).pop_throughs, 0);
+  DropEvery100 drop(eval::reference_params(s));
   long expected = 0;
-  const app::Playback p = app::playback(drop, s);
+  const eval::Playback p = eval::playback(drop, s);
   for (std::size_t k = 1; k < s.hip.size(); ++k)
     expected += (k + 1) % 100 == 0 && p.ticks[k - 1].contact && s.truth->depth(s.hip[k]) > 0.5 * s.voxel_m;
   EXPECT_GT(expected, 0);
-  EXPECT_EQ(app::measure(s, p).pop_throughs, expected);
+  EXPECT_EQ(eval::measure(s, p).pop_throughs, expected);
 }

@@ -1,7 +1,7 @@
-// test_vdb_io.cpp - OpenVDB in and out, mesh export (apps/vdb_io.h).
+// test_vdb_io.cpp - OpenVDB in and out, mesh export (io/vdb_io.h).
 // Truth from outside the code under test: analytic spheres (area 4 pi r^2, volume), brute
 // force edge counts, our own tiny STL/OBJ/PLY readers, OpenVDB's own level-set sphere, and
-// a child process killed with SIGKILL while it saves. OpenVDB only through apps/vdb_io.h.
+// a child process killed with SIGKILL while it saves. OpenVDB only through io/vdb_io.h.
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -32,6 +32,20 @@
 extern char** environ;
 
 namespace isotouch::app {
+using core::dot;
+using io::LoadedVdb;
+using io::Mesh;
+using io::MeshStats;
+using io::VdbError;
+using io::extract_mesh;
+using io::load_vdb;
+using io::mesh_stats;
+using io::save_vdb;
+using io::write_obj;
+using io::write_ply;
+using io::write_stl_binary;
+using io::write_test_vdb;
+using io::TestVdb;
 namespace {
 
 namespace fs = std::filesystem;
@@ -133,7 +147,7 @@ TEST(VdbIo, SyntheticRoundTripIsBitIdentical) {
 TEST(VdbIo, HeadCtRoundTripIsBitIdentical) {
   TempDir tmp;
   const std::string src = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
-  const engine::Volume v = engine::load_volume(src);
+  const engine::Volume v = io::load_volume(src);
   const std::string path = tmp / "head.vdb";
   save_vdb(v, path, {.grid_name = "ct", .iso = Isosurface{1150, InsideIs::kAbove}, .source_path = ""});
   const LoadedVdb l = load_vdb(path);
@@ -540,7 +554,7 @@ TEST(VdbMesh, ChestMeshHasNoZeroAreaTriangleAndStaysClosed) {
   // at tau). Truth by brute force: no two vertices at one position, every triangle of
   // positive area as float32 (what STL stores), every edge in exactly two triangles.
   const engine::Volume v =
-      engine::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
+      io::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
   const Mesh m = extract_mesh(v, Isosurface{-500.0, InsideIs::kAbove});
   EXPECT_GT(m.dropped_triangles, 0u) << "this volume has coincident vertices to weld";
   std::set<std::array<double, 3>> seen(m.vertices.begin(), m.vertices.end());

@@ -12,7 +12,7 @@
 
 #include "volume_io.h"
 
-using isotouch::engine::load_volume;
+using isotouch::io::load_volume;
 using isotouch::engine::Volume;
 using isotouch::engine::VolumeError;
 namespace fs = std::filesystem;
@@ -226,15 +226,15 @@ TEST(VolumeIo, EngineNiftiPhysicalFrame) {
   const Volume v = load_volume(kData + "/ct-engine/engine.nii.gz");
   EXPECT_FALSE(v.direction_is_identity);
   EXPECT_EQ(v.orientation(), "RAS");
-  for (const auto& idx : {isotouch::servo::Vec3{0, 0, 0}, isotouch::servo::Vec3{10, 200, 77},
-                          isotouch::servo::Vec3{255, 255, 127}}) {
-    const isotouch::servo::Vec3 ras{idx.x - 127, idx.y - 127, idx.z - 64};  // mm, from srow
-    const isotouch::servo::Vec3 p = v.index_to_physical(idx);
+  for (const auto& idx : {isotouch::core::Vec3{0, 0, 0}, isotouch::core::Vec3{10, 200, 77},
+                          isotouch::core::Vec3{255, 255, 127}}) {
+    const isotouch::core::Vec3 ras{idx.x - 127, idx.y - 127, idx.z - 64};  // mm, from srow
+    const isotouch::core::Vec3 p = v.index_to_physical(idx);
     EXPECT_NEAR(p.x, -ras.x * 1e-3, 1e-9);
     EXPECT_NEAR(p.y, -ras.y * 1e-3, 1e-9);
     EXPECT_NEAR(p.z, ras.z * 1e-3, 1e-9);
-    const isotouch::servo::Vec3 g = v.to_grid(p);  // back to the servo's grid frame
-    const isotouch::servo::Vec3 gi = v.grid.to_index(g);
+    const isotouch::core::Vec3 g = v.to_grid(p);  // back to the servo's grid frame
+    const isotouch::core::Vec3 gi = v.grid.to_index(g);
     EXPECT_NEAR(gi.x, idx.x, 1e-6);
     EXPECT_NEAR(gi.z, idx.z, 1e-6);
   }
@@ -248,18 +248,18 @@ TEST(VolumeIo, MetaImagePermutedDirection) {
                                    .string());
   EXPECT_EQ(v.orientation(), "PRS");
   // Voxel (1, 2, 3): spacing * index = (2, 6, 12) mm; D that = (-6, 2, 12) mm.
-  const isotouch::servo::Vec3 p = v.index_to_physical({1, 2, 3});
+  const isotouch::core::Vec3 p = v.index_to_physical({1, 2, 3});
   EXPECT_NEAR(p.x, (10 - 6) * 1e-3, 1e-12);
   EXPECT_NEAR(p.y, (20 + 2) * 1e-3, 1e-12);
   EXPECT_NEAR(p.z, (30 + 12) * 1e-3, 1e-12);
-  const isotouch::servo::Vec3 f = v.direction_apply({1, 0, 0});
+  const isotouch::core::Vec3 f = v.direction_apply({1, 0, 0});
   EXPECT_NEAR(f.y, 1.0, 1e-12);
 }
 
 TEST(VolumeIo, IdentityIsLps) {
   const Volume v = load_volume(kHead);
   EXPECT_EQ(v.orientation(), "LPS");
-  const isotouch::servo::Vec3 p = v.index_to_physical({1, 1, 1});
+  const isotouch::core::Vec3 p = v.index_to_physical({1, 1, 1});
   EXPECT_NEAR(p.x, 3.2e-3, 1e-12);
 }
 

@@ -1,4 +1,4 @@
-// Volumes written through ITK (.mha, .nrrd, .nii, .nii.gz) read back by engine::load_volume
+// Volumes written through ITK (.mha, .nrrd, .nii, .nii.gz) read back by io::load_volume
 // with every voxel bit for bit, the spacing, origin and a rotated direction.
 #include <unistd.h>
 
@@ -37,8 +37,8 @@ TEST(VolumeWrite, EveryFormatRoundTripsVoxelsSpacingOriginDirection) {
   for (const std::string ext : {".mha", ".nrrd", ".nii", ".nii.gz"}) {
     SCOPED_TRACE(ext);
     const std::string path = (dir / ("v" + ext)).string();
-    engine::save_volume_itk(v, path);
-    const engine::Volume back = engine::load_volume(path);
+    io::save_volume_itk(v, path);
+    const engine::Volume back = io::load_volume(path);
     ASSERT_EQ(back.grid.dims, v.grid.dims);
     EXPECT_EQ(std::memcmp(back.voxels.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0) << "voxels differ";
     EXPECT_NEAR(back.grid.spacing_m.x, v.grid.spacing_m.x, 1e-10);  // NIfTI stores float32
@@ -55,7 +55,7 @@ TEST(VolumeWrite, BadNamesAreRefusedAndNothingIsWritten) {
   const engine::Volume v = engine::make_sphere({8, 8, 8}, 1e-3, 3);
   for (const std::string name : {"v.mhd", "v.png", "v"}) {
     try {
-      engine::save_volume_itk(v, (dir / name).string());
+      io::save_volume_itk(v, (dir / name).string());
       ADD_FAILURE() << name << " was accepted";
     } catch (const engine::VolumeError& e) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();

@@ -12,7 +12,7 @@ namespace isotouch::test {
 
 /// Trilinear value of `v`'s voxels at grid-world point `p` [m] (Grid: origin + spacing *
 /// index, no direction); NaN outside the box of voxel centres.
-inline double trilinear_grid(const engine::Volume& v, const servo::Vec3& p) {
+inline double trilinear_grid(const engine::Volume& v, const core::Vec3& p) {
   const double idx[3] = {(p.x - v.grid.origin_m.x) / v.grid.spacing_m.x, (p.y - v.grid.origin_m.y) / v.grid.spacing_m.y,
                          (p.z - v.grid.origin_m.z) / v.grid.spacing_m.z};
   int i0[3];

@@ -1,0 +1,174 @@
+#include "live_cmd.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "hri.h"
+#include "live_session.h"
+#include "record.h"
+#include "sim_device_io.h"
+#include "stats.h"
+#include "stop_signal.h"
+
+namespace isotouch::app {
+namespace {
+
+std::string ms(double v) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(3) << v;
+  return s.str();
+}
+
+/// The timeline as events due at a time: single applications, strokes (begin, an
+/// application every edits.every_ticks ticks, end), undo and redo.
+struct Due {
+  double t_s;
+  session::EditEvent::Kind kind;
+  const io::TimedEdit* entry;  // brushes only
+};
+
+std::vector<Due> timeline(const io::Scene& scene) {
+  std::vector<Due> due;
+  const double every_s = scene.edits.every_ticks / scene.hri.rate_hz;
+  using K = session::EditEvent::Kind;
+  for (const io::TimedEdit& t : scene.edits.timeline) {
+    if (t.kind == "undo" || t.kind == "redo") {
+      due.push_back({t.t_s, t.kind == "undo" ? K::kUndo : K::kRedo, nullptr});
+    } else if (t.duration_s <= 0) {
+      due.push_back({t.t_s, K::kBrush, &t});
+    } else {
+      due.push_back({t.t_s, K::kBeginStroke, nullptr});
+      for (double s = t.t_s; s < t.t_s + t.duration_s; s += every_s) due.push_back({s, K::kBrush, &t});
+      due.push_back({t.t_s + t.duration_s, K::kEndStroke, nullptr});
+    }
+  }
+  std::stable_sort(due.begin(), due.end(), [](const Due& a, const Due& b) { return a.t_s < b.t_s; });
+  return due;
+}
+
+session::LiveSessionConfig live_config(const io::Scene& scene, const SceneSetup& setup, const session::EditSession& edits,
+                                       const LiveOptions& o) {
+  session::LiveSessionConfig c;
+  c.servo.rate_hz = scene.hri.rate_hz;
+  c.servo.sched_fifo = o.sched_fifo;
+  c.servo.pin_cpu = o.sched_fifo;
+  c.servo.lock_memory = o.sched_fifo;
+  c.servo.world_T_device = setup.world_T_device;
+  c.servo.record_ticks = std::size_t(std::ceil(setup.script.duration_s * scene.hri.rate_hz)) + 16;
+  const session::BrushTargets targets = session::default_targets(setup.volume, setup.live.iso);
+  if (scene.edits.present && !scene.edits.button_down.empty()) {
+    session::ButtonDrill d;
+    d.brush = make_brush(brush_at_tool(scene, setup.volume, scene.edits.brush), targets, {},
+                         scene.edits.every_ticks / scene.hri.rate_hz, 0.0);
+    d.every_ticks = scene.edits.every_ticks;
+    c.drill = d;
+  }
+  c.flush_interval_s = o.flush_interval_s;
+  c.record_path = o.run.record_path;
+  if (!c.record_path.empty()) {
+    c.record_header.scene_path = std::filesystem::absolute(scene.file).string();
+    std::ifstream in(scene.file, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    c.record_header.scene_text = text.str();
+    c.record_header.rate_hz = scene.hri.rate_hz;
+    c.record_header.volume_crc32 = io::volume_crc32(edits.volume());
+  }
+  return c;
+}
+
+/// Submits the timeline's events that are due at `t` (index `next` moves on).
+void submit_due(const std::vector<Due>& due, std::size_t& next, double t, const io::Scene& scene, const SceneSetup& setup,
+                session::LiveSession& live) {
+  const session::BrushTargets targets = session::default_targets(setup.volume, setup.live.iso);
+  for (; next < due.size() && due[next].t_s <= t; ++next) {
+    session::EditEvent e;
+    e.kind = due[next].kind;
+    if (e.kind == session::EditEvent::Kind::kBrush) {
+      const io::TimedEdit& te = *due[next].entry;
+      const session::Observed now = live.observe();
+      const core::Vec3 c = te.at_vhip ? now.vhip_m : setup.volume.to_grid(te.at_m);
+      const double f = te.brush.force_n >= 0 ? te.brush.force_n : core::norm(now.force_n);
+      e.brush = make_brush(te.at_vhip ? brush_at_tool(scene, setup.volume, te.brush) : te.brush, targets, c,
+                           scene.edits.every_ticks / scene.hri.rate_hz, f);
+    }
+    live.submit(e);
+  }
+}
+
+void print_stats(const session::LiveStats& s, double seconds, std::ostream& log) {
+  log << "live     " << s.ticks << " ticks in " << ms(seconds) << " s, " << s.missed_deadlines << " missed deadlines, "
+      << s.faults << " faults\n";
+  log << "edits    " << s.edits_requested << " requested, " << s.edits_applied << " applied, " << s.edits_refused
+      << " refused, " << s.edits_dropped << " dropped (queue full or stopped), " << s.publications
+      << " snapshots published\n";
+  if (!s.edit_to_haptics_ms.empty())
+    log << "latency  edit-to-haptics (request tick to the first tick reading the new snapshot), "
+        << s.edit_to_haptics_ms.size() << " edits: median " << ms(eval::median(s.edit_to_haptics_ms)) << " ms, p99 "
+        << ms(eval::percentile(s.edit_to_haptics_ms, 0.99)) << " ms, max "
+        << ms(*std::max_element(s.edit_to_haptics_ms.begin(), s.edit_to_haptics_ms.end())) << " ms\n";
+}
+
+}  // namespace
+
+int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
+  RunOptions ropt = o.run;
+  SceneSetup setup = setup_scene(scene, ropt, log);
+  // Every live session edits through an EditSession (one without an "edits" section too:
+  // the API may edit); its first snapshot is what the servo reads first.
+  std::unique_ptr<session::EditSession> own;
+  session::EditSession* edits = setup.session.get();
+  if (!edits) {
+    own = std::make_unique<session::EditSession>(setup.volume, setup.vk.get(), setup.live, scene.edits.history_limit_mib);
+    edits = own.get();
+  }
+  servo::TripleBuffer<core::SampleField> buffer;
+  buffer.publish(edits->current());
+  servo::HriRenderer renderer(setup.hri);
+  core::Vec3 start_w, v0;
+  setup.script.at(0.0, start_w, v0);
+  sim::SimDevice device(scene.device, setup.world_T_device.to_device(start_w));
+  sim::SimDeviceIO io(device, setup.script, 1.0 / scene.hri.rate_hz, setup.world_T_device, &scene.edits.button_down);
+
+  session::install_stop_handlers();
+  session::LiveSession live(*edits, buffer, renderer, io, live_config(scene, setup, *edits, o));
+  const std::vector<Due> due = timeline(scene);
+  std::size_t next = 0;
+  const double duration = setup.script.duration_s;
+  log << "live     " << scene.name << ": " << ms(duration) << " s at " << scene.hri.rate_hz << " Hz"
+      << (o.run.record_path.empty() ? std::string() : ", recording to " + o.run.record_path) << "\n";
+  if (const std::string note = live.start(); !note.empty()) log << "servo    " << note << "\n";
+  int last_second = 0;
+  const bool tty = o.run.progress && ::isatty(STDERR_FILENO);
+  while (live.elapsed_s() < duration && session::stop_signal() == 0) {
+    submit_due(due, next, live.elapsed_s(), scene, setup, live);
+    std::this_thread::sleep_for(std::chrono::microseconds(500));
+    if (o.run.progress && int(live.elapsed_s()) > last_second) {
+      last_second = int(live.elapsed_s());
+      const session::LiveStats s = live.stats();
+      std::cerr << "live     " << last_second << " s, " << s.ticks << " ticks, " << s.missed_deadlines << " missed, "
+                << s.edits_applied << " edits" << (tty ? "\r" : "\n") << std::flush;
+    }
+  }
+  if (tty) std::cerr << "\n";
+  const double seconds = live.elapsed_s();
+  live.stop();
+  const session::LiveStats s = live.stats();
+  if (session::stop_signal() != 0) log << "live     stopped by signal " << session::stop_signal() << " after " << ms(seconds) << " s\n";
+  print_stats(s, seconds, log);
+  if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
+  // Stopped by a signal: the recording is complete, but the run did not run its course.
+  if (session::stop_signal() != 0) return 128 + session::stop_signal();
+  return s.faults > 0 ? 4 : 0;
+}
+
+}  // namespace isotouch::app

@@ -1,0 +1,26 @@
+// live_cmd.h - `isotouch run SCENE --live`: the scene in real time on the live session's
+// threads (session/live_session.h): the servo thread drives the simulated device (the
+// scene's scripted hand) at the scene's rate, the edit thread applies the button drill and
+// the timeline, and `--record FILE` streams a format 3 recording that `isotouch replay`
+// reproduces bit for bit.
+#pragma once
+#include <iosfwd>
+#include <string>
+
+#include "run_job.h"
+
+namespace isotouch::app {
+
+struct LiveOptions {
+  RunOptions run;                ///< device, progress, record_path (out_dir: unused)
+  bool sched_fifo = true;        ///< ask for SCHED_FIFO and pinning (refused: said, not fatal)
+  double flush_interval_s = 0.1; ///< the recording's chunk interval [s]
+};
+
+/// Runs `scene` live for its script's duration (or until SIGINT / SIGTERM). Prints the
+/// servo's ticks, missed deadlines and faults, the edits and their edit-to-haptics latency.
+/// @return 0; 4 when servo ticks were faults; 128 + the signal when SIGINT / SIGTERM stopped
+/// it (the servo stopped with zero force, the recording closed and complete). @throws as run_scene, io::RecordingError.
+int run_live(const io::Scene& scene, const LiveOptions& options, std::ostream& log);
+
+}  // namespace isotouch::app

@@ -1,0 +1,548 @@
+#include "scene.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <vector>
+
+namespace isotouch::io {
+namespace {
+
+using nlohmann::json;
+namespace fs = std::filesystem;
+
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void fail(const std::string& field, const std::string& what) const {
+    throw SceneError(file_ + ": field '" + field + "': " + what);
+  }
+
+  void only(const json& obj, const std::string& where, std::set<std::string> allowed) const {
+    if (!obj.is_object()) fail(where, "must be an object, got " + obj.dump());
+    for (auto it = obj.begin(); it != obj.end(); ++it)
+      if (!allowed.count(it.key())) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        fail(where.empty() ? it.key() : where + "." + it.key(), "unknown field (allowed: " + list + ")");
+      }
+  }
+
+  double number(const json& obj, const std::string& where, const std::string& key, double def,
+                double lo, double hi, bool lo_open = false) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_number()) fail(f, "must be a number, got " + v.dump());
+    const double d = v.get<double>();
+    if (!std::isfinite(d) || d < lo || d > hi || (lo_open && d == lo)) {
+      std::ostringstream s;
+      s << "must be in " << (lo_open ? "(" : "[") << lo << ", " << hi << "], got " << v.dump();
+      fail(f, s.str());
+    }
+    return d;
+  }
+
+  int integer(const json& obj, const std::string& where, const std::string& key, int def, int lo,
+              int hi) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_number_integer()) fail(f, "must be an integer, got " + v.dump());
+    const auto i = v.get<long long>();
+    if (i < lo || i > hi)
+      fail(f, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v.dump());
+    return int(i);
+  }
+
+  core::Vec3 vec3(const json& obj, const std::string& where, const std::string& key,
+                   core::Vec3 def) const {
+    const std::string f = where + "." + key;
+    if (!obj.contains(key)) return def;
+    const json& v = obj.at(key);
+    if (!v.is_array() || v.size() != 3 || !v[0].is_number() || !v[1].is_number() || !v[2].is_number())
+      fail(f, "must be an array of 3 numbers, got " + v.dump());
+    core::Vec3 r{v[0].get<double>(), v[1].get<double>(), v[2].get<double>()};
+    if (!core::finite(r) || std::abs(r.x) > 1e6 || std::abs(r.y) > 1e6 || std::abs(r.z) > 1e6)
+      fail(f, "must be finite and of sane size, got " + v.dump());
+    return r;
+  }
+
+  std::string string(const json& obj, const std::string& where, const std::string& key,
+                     const std::string& def) const {
+    const std::string f = where.empty() ? key : where + "." + key;
+    if (!obj.contains(key)) return def;
+    if (!obj.at(key).is_string()) fail(f, "must be a string, got " + obj.at(key).dump());
+    return obj.at(key).get<std::string>();
+  }
+
+  bool boolean(const json& obj, const std::string& where, const std::string& key, bool def) const {
+    if (!obj.contains(key)) return def;
+    if (!obj.at(key).is_boolean()) fail(where + "." + key, "must be true or false, got " + obj.at(key).dump());
+    return obj.at(key).get<bool>();
+  }
+
+  const json& section(const json& root, const std::string& key) const {
+    static const json empty = json::object();
+    return root.contains(key) ? root.at(key) : empty;
+  }
+
+ private:
+  std::string file_;
+};
+
+// "engine": {"passes": [{"gaussian": {"sigma_mm": 1}}, {"closing": {"radius_mm": 1}}, "gradient"],
+//            "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"}
+// A pass is its name (a string) or an object with one key, the name, holding its parameters.
+// Ranges here name the field; the list's structure is checked again by engine::validate_passes
+// (app::scene_passes) before anything runs.
+PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
+  const std::string where = "engine.passes[" + std::to_string(i) + "]";
+  static const char* kKinds = "\"gaussian\", \"closing\", \"gradient\", \"brick_minmax\"";
+  PassSpec ps;
+  json params = json::object();
+  if (p.is_string()) {
+    ps.kind = p.get<std::string>();
+  } else if (p.is_object() && p.size() == 1) {
+    ps.kind = p.begin().key();
+    params = p.begin().value();
+  } else {
+    r.fail(where, std::string("must be a pass name or {\"name\": {parameters}} with one name (") + kKinds + "), got " +
+                      p.dump());
+  }
+  const std::string at = where + "." + ps.kind;
+  if (ps.kind == "gaussian") {
+    r.only(params, at, {"sigma_mm"});
+    if (!params.contains("sigma_mm")) r.fail(at + ".sigma_mm", "is required (the Gaussian's standard deviation in mm)");
+    ps.sigma_mm = r.number(params, at, "sigma_mm", 0, 0, 1000, true);
+  } else if (ps.kind == "closing") {
+    r.only(params, at, {"radius_mm"});
+    if (!params.contains("radius_mm")) r.fail(at + ".radius_mm", "is required (the box half-width in mm)");
+    ps.radius_mm = r.number(params, at, "radius_mm", 0, 0, 1000);
+  } else if (ps.kind == "gradient") {
+    if (!params.is_object() || !params.empty()) r.fail(at, "takes no parameters, got " + params.dump());
+  } else if (ps.kind == "brick_minmax") {
+    r.only(params, at, {"halo"});
+    ps.halo = r.integer(params, at, "halo", 1, 0, 8);
+  } else {
+    r.fail(where, "unknown pass \"" + ps.kind + "\" (known: " + kKinds + ")");
+  }
+  return ps;
+}
+
+void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
+  r.only(e, "engine", {"passes", "mode", "samples"});
+  if (e.contains("passes")) {
+    const json& list = e.at("passes");
+    if (!list.is_array() || list.empty())
+      r.fail("engine.passes", "must be a non-empty array of passes, got " + list.dump());
+    spec.passes.clear();
+    for (std::size_t i = 0; i < list.size(); ++i) spec.passes.push_back(parse_pass(r, list[i], i));
+    std::size_t gradient = spec.passes.size();
+    for (std::size_t i = 0; i < spec.passes.size(); ++i)
+      if (spec.passes[i].kind == "gradient" && gradient == spec.passes.size()) gradient = i;
+    if (gradient == spec.passes.size())
+      r.fail("engine.passes", "must include \"gradient\" (the servo reads its samples), got " + list.dump());
+    for (std::size_t i = gradient + 1; i < spec.passes.size(); ++i)
+      if (spec.passes[i].kind == "gaussian" || spec.passes[i].kind == "closing")
+        r.fail("engine.passes[" + std::to_string(i) + "]",
+               "a filter after \"gradient\" would change nothing the servo reads; list it before, got " +
+                   list[i].dump());
+  }
+  spec.mode = r.string(e, "engine", "mode", spec.mode);
+  if (spec.mode != "sparse" && spec.mode != "dense")
+    r.fail("engine.mode", "must be \"sparse\" (bricks near the isosurface) or \"dense\" (every voxel), got \"" +
+                              spec.mode + "\"");
+  spec.samples = r.string(e, "engine", "samples", spec.samples);
+  if (spec.samples != "fp32" && spec.samples != "fp16" && spec.samples != "unorm16")
+    r.fail("engine.samples", "must be \"fp32\" (16 B per sample), \"fp16\" or \"unorm16\" (8 B), got \"" +
+                                 spec.samples + "\"");
+  if (spec.samples != "fp32" && spec.mode == "dense")
+    r.fail("engine.samples", "compact samples are stored in bricks: \"" + spec.samples +
+                                 "\" needs \"mode\": \"sparse\" (dense snapshots are fp32)");
+}
+
+// A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate",
+// "density_scale", "material", "empty" (+ "force_n" on the timeline), each over `base`.
+const std::set<std::string> kBrushKeys{"kind", "radius_mm", "strength", "falloff", "force_threshold_n",
+                                       "rate", "density_scale", "material", "empty"};
+
+BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, BrushSpec base, bool timed) {
+  BrushSpec s = base;
+  s.kind = r.string(b, where, "kind", s.kind);
+  if (s.kind != "add" && s.kind != "carve" && s.kind != "smooth" && s.kind != "drill")
+    r.fail(where + ".kind", "must be \"add\", \"carve\", \"smooth\" or \"drill\"" +
+                                std::string(timed ? " (or \"undo\", \"redo\")" : "") + ", got \"" + s.kind + "\"");
+  s.radius_mm = r.number(b, where, "radius_mm", s.radius_mm, 0, 1000, true);
+  s.strength = r.number(b, where, "strength", s.strength, 0, 1e30);
+  if (s.kind == "smooth" && s.strength > 1)
+    r.fail(where + ".strength", "a smooth brush's strength is a fraction in [0, 1], got " +
+                                    (b.contains("strength") ? b.at("strength").dump() : std::to_string(s.strength)));
+  s.falloff = r.number(b, where, "falloff", s.falloff, 0, 1, true);
+  s.force_threshold_n = r.number(b, where, "force_threshold_n", s.force_threshold_n, 0, 1000);
+  s.rate = r.number(b, where, "rate", s.rate, 0, 1e12);
+  if (b.contains("density_scale")) s.density_scale = r.number(b, where, "density_scale", 0, 0, 1e30, true);
+  if (b.contains("material")) {
+    s.has_material = true;
+    s.material = r.number(b, where, "material", 0, -1e30, 1e30);
+  }
+  if (b.contains("empty")) {
+    s.has_empty = true;
+    s.empty = r.number(b, where, "empty", 0, -1e30, 1e30);
+  }
+  if (timed) s.force_n = r.number(b, where, "force_n", s.force_n, 0, 1000);
+  return s;
+}
+
+std::set<std::string> with(std::set<std::string> a, std::initializer_list<const char*> more) {
+  for (const char* m : more) a.insert(m);
+  return a;
+}
+
+// "edits": {"brush": {...}, "every_ticks": 10, "button": [[t0, t1], ...], "timeline": [...],
+//           "history_limit_mib": 256, "write_vdb": true, "write_nrrd": true, "write_stl": true}
+void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
+  r.only(e, "edits",
+         {"brush", "every_ticks", "button", "timeline", "history_limit_mib", "write_vdb", "write_nrrd", "write_stl"});
+  spec.present = true;
+  if (e.contains("brush")) {
+    r.only(e.at("brush"), "edits.brush", kBrushKeys);
+    spec.brush = parse_brush(r, e.at("brush"), "edits.brush", spec.brush, false);
+  }
+  spec.every_ticks = r.integer(e, "edits", "every_ticks", spec.every_ticks, 1, 1000000);
+  spec.history_limit_mib = r.number(e, "edits", "history_limit_mib", spec.history_limit_mib, 0, 1 << 20);
+  spec.write_vdb = r.boolean(e, "edits", "write_vdb", spec.write_vdb);
+  spec.write_nrrd = r.boolean(e, "edits", "write_nrrd", spec.write_nrrd);
+  spec.write_stl = r.boolean(e, "edits", "write_stl", spec.write_stl);
+  if (e.contains("button")) {
+    const json& list = e.at("button");
+    if (!list.is_array()) r.fail("edits.button", "must be an array of [t0, t1] intervals [s], got " + list.dump());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string f = "edits.button[" + std::to_string(i) + "]";
+      const json& iv = list[i];
+      if (!iv.is_array() || iv.size() != 2 || !iv[0].is_number() || !iv[1].is_number())
+        r.fail(f, "must be [t0, t1] in seconds, got " + iv.dump());
+      const double t0 = iv[0].get<double>(), t1 = iv[1].get<double>();
+      if (!std::isfinite(t0) || !std::isfinite(t1) || t0 < 0 || t1 <= t0 || t1 > 1e6)
+        r.fail(f, "must be [t0, t1] with 0 <= t0 < t1 <= 1e6 s, got " + iv.dump());
+      if (!spec.button_down.empty() && t0 < spec.button_down.back()[1])
+        r.fail(f, "intervals must be in order and must not overlap, got " + iv.dump() + " after " +
+                      list[i - 1].dump());
+      spec.button_down.push_back({t0, t1});
+    }
+  }
+  if (e.contains("timeline")) {
+    const json& list = e.at("timeline");
+    if (!list.is_array()) r.fail("edits.timeline", "must be an array of timed edits, got " + list.dump());
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      const std::string f = "edits.timeline[" + std::to_string(i) + "]";
+      const json& it = list[i];
+      if (!it.is_object()) r.fail(f, "must be an object {\"t_s\": ..., \"kind\": ..., ...}, got " + it.dump());
+      TimedEdit te;
+      te.index = int(i);
+      if (!it.contains("t_s")) r.fail(f + ".t_s", "is required (when the edit is applied, in seconds)");
+      te.t_s = r.number(it, f, "t_s", 0, 0, 1e6);
+      if (!it.contains("kind")) r.fail(f + ".kind", "is required (\"add\", \"carve\", \"smooth\", \"drill\", \"undo\", \"redo\")");
+      te.kind = r.string(it, f, "kind", "");
+      if (te.kind == "undo" || te.kind == "redo") {
+        r.only(it, f, {"t_s", "kind"});
+      } else {
+        r.only(it, f, with(kBrushKeys, {"t_s", "at", "duration_s", "force_n"}));
+        te.brush = parse_brush(r, it, f, spec.brush, true);
+        if (!it.contains("at")) r.fail(f + ".at", "is required: [x, y, z] in mm (physical frame, as trace.csv) or \"vhip\"");
+        const json& at = it.at("at");
+        if (at.is_string()) {
+          if (at.get<std::string>() != "vhip")
+            r.fail(f + ".at", "must be [x, y, z] in mm or \"vhip\", got " + at.dump());
+          te.at_vhip = true;
+        } else {
+          te.at_m = r.vec3(it, f, "at", {}) * 1e-3;
+        }
+        te.duration_s = r.number(it, f, "duration_s", 0, 0, 3600);
+      }
+      spec.timeline.push_back(te);
+    }
+    std::stable_sort(spec.timeline.begin(), spec.timeline.end(),
+                     [](const TimedEdit& a, const TimedEdit& b) { return a.t_s < b.t_s; });
+  }
+}
+
+}  // namespace
+
+// A stroke needs a direction, and a run keeps every tick in memory: the script's length at
+// the servo rate is bounded (a 3600 s hold at 100 kHz, or a stroke at 1e-9 m/s, would
+// otherwise end in an allocation failure naming nothing).
+constexpr double kMaxScriptTicks = 2e7;
+void check_script_length(const Reader& r, const Scene& s) {
+  const sim::ScriptParams& p = s.script;
+  if (p.stroke_length_m > 0 && core::norm(p.stroke_direction) == 0.0)
+    r.fail("script.stroke_direction", "must not be [0, 0, 0] when script.stroke_length_m is " +
+                                          std::to_string(p.stroke_length_m) + " m (> 0)");
+  struct Part {
+    const char* field;
+    double s;
+  };
+  const Part parts[] = {{"script.rest_s (twice)", 2 * p.rest_s},
+                        {"script.approach_distance_m / approach_speed_m_s (twice)",
+                         2 * p.approach_distance_m / p.approach_speed_m_s},
+                        {"script.press_depth_m / press_speed_m_s (twice)", 2 * p.press_depth_m / p.press_speed_m_s},
+                        {"script.hold_s", p.hold_s},
+                        {"script.stroke_length_m / stroke_speed_m_s", p.stroke_length_m / p.stroke_speed_m_s}};
+  double total = 0;
+  const Part* longest = &parts[0];
+  for (const Part& q : parts) {
+    total += q.s;
+    if (q.s > longest->s) longest = &q;
+  }
+  const double ticks = total * s.hri.rate_hz;
+  if (!(ticks <= kMaxScriptTicks)) {
+    std::ostringstream m;
+    m << "lasts about " << total << " s at servo.rate_hz " << s.hri.rate_hz << " = " << ticks
+      << " ticks, more than the " << kMaxScriptTicks << " a run keeps in memory; the longest part is " << longest->field
+      << " (" << longest->s << " s)";
+    r.fail("script", m.str());
+  }
+}
+
+Scene parse_scene(const std::string& text, const std::string& path) {
+  // JSON allows a key twice in one object and keeps the last: a scene with two
+  // "stiffness_n_per_m" would silently use one of them. The parser callback sees every
+  // key in order, with the objects and arrays it sits in.
+  struct Frame {
+    bool object;
+    std::set<std::string> keys;
+    std::string key;
+  };
+  std::vector<Frame> stack;
+  const json::parser_callback_t dup_check = [&](int, json::parse_event_t ev, json& parsed) {
+    switch (ev) {
+      case json::parse_event_t::object_start: stack.push_back({true, {}, {}}); break;
+      case json::parse_event_t::array_start: stack.push_back({false, {}, {}}); break;
+      case json::parse_event_t::object_end:
+      case json::parse_event_t::array_end:
+        if (!stack.empty()) stack.pop_back();
+        break;
+      case json::parse_event_t::key:
+        if (!stack.empty() && parsed.is_string()) {
+          Frame& f = stack.back();
+          f.key = parsed.get<std::string>();
+          if (!f.keys.insert(f.key).second) {
+            std::string field;
+            for (const Frame& fr : stack)
+              field += fr.object ? (field.empty() ? "" : ".") + fr.key : std::string("[]");
+            throw SceneError(path + ": field '" + field +
+                             "': appears twice in the same object (JSON would keep only the last; remove one)");
+          }
+        }
+        break;
+      default: break;
+    }
+    return true;
+  };
+  json root;
+  try {
+    root = json::parse(text, dup_check);
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e999
+    throw SceneError(path + ": not valid JSON: " + e.what());
+  }
+  const Reader r(path);
+  r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
+                    "script", "outputs", "engine", "edits"});
+  Scene s;
+  s.file = path;
+  s.name = r.string(root, "", "name", fs::path(path).stem().string());
+  s.description = r.string(root, "", "description", "");
+  if (s.name.empty()) r.fail("name", "must not be empty (it names the output folder out/<name>)");
+  for (char c : s.name)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_'))
+      r.fail("name", "may hold only letters, digits, '-' and '_', got \"" + s.name + "\"");
+
+  if (!root.contains("volume")) r.fail("volume", "is required");
+  const json& vol = root.at("volume");
+  r.only(vol, "volume", {"path", "synthetic", "dims", "spacing_m", "radius_vox", "attribution"});
+  if (vol.contains("path") == vol.contains("synthetic"))
+    r.fail("volume", "needs exactly one of 'path' or 'synthetic'");
+  if (vol.contains("path")) {
+    const std::string p = r.string(vol, "volume", "path", "");
+    if (p.empty()) r.fail("volume.path", "must not be empty");
+    const fs::path pp(p);
+    s.volume_path = pp.is_absolute() ? p : (fs::path(path).parent_path() / pp).lexically_normal().string();
+  } else {
+    s.synthetic.kind = r.string(vol, "volume", "synthetic", "");
+    if (s.synthetic.kind != "sphere" && s.synthetic.kind != "box" && s.synthetic.kind != "three-spheres" &&
+        s.synthetic.kind != "knot")
+      r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind +
+                                     "\" (known: sphere, box, three-spheres, knot)");
+    if (s.synthetic.kind != "sphere" && (vol.contains("dims") || vol.contains("spacing_m") || vol.contains("radius_vox")))
+      r.fail("volume", "dims, spacing_m and radius_vox apply to the sphere only; \"" + s.synthetic.kind +
+                           "\" is the fixed 64^3 scene of the paper");
+    if (vol.contains("dims")) {
+      const json& d = vol.at("dims");
+      if (!d.is_array() || d.size() != 3) r.fail("volume.dims", "must be [x, y, z], got " + d.dump());
+      for (int a = 0; a < 3; ++a) {
+        if (!d[std::size_t(a)].is_number_integer() || d[std::size_t(a)].get<long long>() < 2 ||
+            d[std::size_t(a)].get<long long>() > 1024)
+          r.fail("volume.dims", "each must be an integer in [2, 1024], got " + d.dump());
+        s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
+      }
+    }
+    // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script (issue 7).
+    s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
+    s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
+  }
+
+  if (!root.contains("isovalue")) r.fail("isovalue", "is required");
+  s.hri.tau = r.number(root, "", "isovalue", 0, -1e30, 1e30);
+  const std::string inside = r.string(root, "", "inside", "above");
+  if (inside == "above") s.hri.inside = core::InsideIs::kAbove;
+  else if (inside == "below") s.hri.inside = core::InsideIs::kBelow;
+  else r.fail("inside", "must be \"above\" (value > isovalue is inside) or \"below\", got \"" + inside + "\"");
+
+  const json& sv = r.section(root, "servo");
+  r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
+                       "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
+                       "recovery_time_s", "friction", "variant", "tool"});
+  const std::string variant = r.string(sv, "servo", "variant", "robust");
+  if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
+  else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
+  else r.fail("servo.variant", "must be \"robust\" (the default) or \"paper\" (Figure 2 as printed), got \"" + variant + "\"");
+  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
+  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
+  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
+  s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
+  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+  const std::string isect = r.string(sv, "servo", "intersection", "linear");
+  if (isect == "linear") s.hri.intersection = servo::Intersection::kLinear;
+  else if (isect == "secant") s.hri.intersection = servo::Intersection::kSecant;
+  else if (isect == "bisection") s.hri.intersection = servo::Intersection::kBisection;
+  else r.fail("servo.intersection", "must be \"linear\" (the paper), \"secant\" or \"bisection\", got \"" + isect + "\"");
+  s.hri.intersection_steps = r.integer(sv, "servo", "intersection_steps", 4, 1, 64);
+  const std::string normal = r.string(sv, "servo", "normal", "samples");
+  if (normal == "samples") s.hri.normal = servo::NormalSource::kSamples;
+  else if (normal == "central") s.hri.normal = servo::NormalSource::kCentral;
+  else if (normal == "exact") s.hri.normal = servo::NormalSource::kTrilinearExact;
+  else r.fail("servo.normal", "must be \"samples\", \"central\" (the paper) or \"exact\", got \"" + normal + "\"");
+  // The paper variant is Figure 2 as printed: LinearInterpolation and central differences at p
+  // (servo/hri.h). A scene that asks it for another rule would be silently overridden: refuse.
+  if (s.hri.variant == servo::Variant::kPaper && (isect != "linear" || normal != "central") &&
+      (sv.contains("intersection") || sv.contains("normal")))
+    r.fail(isect != "linear" ? "servo.intersection" : "servo.normal",
+           "the \"paper\" variant always uses linear intersection and central-difference normals "
+           "(Figure 2 as printed); remove the key or use \"variant\": \"robust\", got \"" +
+               (isect != "linear" ? isect : normal) + "\"");
+  s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
+  // Default 20 ms (robust variant): every force step a plane update causes is ramped (issue 7).
+  s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",
+                                   s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
+  if (sv.contains("friction")) {
+    const json& fr = sv.at("friction");
+    r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
+    s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s", 0, 0, 10);
+    s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d", 0, 0, 10);
+    s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m", 0, 0, 1e3);
+    if (s.hri.friction.mu_d > s.hri.friction.mu_s)
+      r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
+                                        fr.at("mu_d").dump());
+  }
+
+  // The spherical tool: its centre is the HIP, its surface is kept outside the isosurface
+  // (robust variant only; servo/hri.h, "Spherical tool").
+  if (sv.contains("tool")) {
+    const json& tl = sv.at("tool");
+    if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r}, got " + tl.dump());
+    r.only(tl, "servo.tool", {"radius_mm"});
+    s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
+    if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
+      r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
+                                     "\"variant\": \"robust\" for a tool of radius " + tl.at("radius_mm").dump() + " mm");
+    if (s.hri.tool_radius_m > 0 && (s.hri.friction.any() || s.hri.force_shading))
+      r.fail("servo.tool.radius_mm", "friction and force shading are not implemented for a spherical tool; "
+                                     "remove them or set radius_mm to 0, got " + tl.at("radius_mm").dump());
+  }
+
+  const json& dv = r.section(root, "device");
+  r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "coulomb_friction_n", "encoder_resolution_m",
+                        "force_max_n", "hand_stiffness_n_per_m", "hand_damping_n_s_per_m", "substeps",
+                        "workspace_scale"});
+  s.device.mass_kg = r.number(dv, "device", "mass_kg", 0.08, 0, 100, true);
+  s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m", 0.01, 0, 1e3);
+  s.device.coulomb_friction_n = r.number(dv, "device", "coulomb_friction_n", 0.0, 0, 100);
+  s.device.encoder_resolution_m = r.number(dv, "device", "encoder_resolution_m", 0.0, 0, 0.01);
+  s.device.force_max_n = r.number(dv, "device", "force_max_n", 10.0, 0, 1000, true);
+  s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
+  s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
+  s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);
+  {
+    // The simulated device raises its substeps to integrate stably (sim_device.h); past
+    // 10000 per servo period the device is too light for its hand to simulate.
+    const double dt = 1.0 / s.hri.rate_hz;
+    if (sim::min_stable_substeps(s.device, dt) > 10000) {
+      std::ostringstream e;
+      e << "must be at least " << sim::min_stable_mass_kg(s.device, dt, 10000)
+        << " kg to simulate stably with the hand (" << s.device.hand_stiffness_n_per_m << " N/m, "
+        << s.device.hand_damping_n_s_per_m << " N s/m) in at most 10000 substeps per " << dt * 1e3
+        << " ms servo period, got " << dv.at("mass_kg").dump();
+      r.fail("device.mass_kg", e.str());
+    }
+  }
+  s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
+  s.hri.world_per_device = s.workspace_scale;
+
+  const json& sc = r.section(root, "script");
+  r.only(sc, "script", {"ray_origin_frac", "ray_direction", "stroke_direction", "approach_distance_m",
+                        "approach_speed_m_s", "press_depth_m", "press_speed_m_s", "hold_s",
+                        "stroke_length_m", "stroke_speed_m_s", "rest_s"});
+  auto& p = s.script;
+  p.ray_origin_frac = r.vec3(sc, "script", "ray_origin_frac", p.ray_origin_frac);
+  for (int a = 0; a < 3; ++a)
+    if (p.ray_origin_frac[a] < sim::kRayOriginFracMin || p.ray_origin_frac[a] > sim::kRayOriginFracMax) {
+      std::ostringstream e;
+      e << "each must be in [" << sim::kRayOriginFracMin << ", " << sim::kRayOriginFracMax
+        << "] (fractions of the volume box), got " << sc.at("ray_origin_frac").dump();
+      r.fail("script.ray_origin_frac", e.str());
+    }
+  p.ray_direction = r.vec3(sc, "script", "ray_direction", p.ray_direction);
+  if (core::norm(p.ray_direction) == 0.0) r.fail("script.ray_direction", "must not be [0, 0, 0]");
+  p.stroke_direction = r.vec3(sc, "script", "stroke_direction", p.stroke_direction);
+  p.approach_distance_m = r.number(sc, "script", "approach_distance_m", p.approach_distance_m, 0, 1, true);
+  p.approach_speed_m_s = r.number(sc, "script", "approach_speed_m_s", p.approach_speed_m_s, 0, 10, true);
+  p.press_depth_m = r.number(sc, "script", "press_depth_m", p.press_depth_m, 0, 1);
+  p.press_speed_m_s = r.number(sc, "script", "press_speed_m_s", p.press_speed_m_s, 0, 10, true);
+  p.hold_s = r.number(sc, "script", "hold_s", p.hold_s, 0, 3600);
+  p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
+  p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
+  p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+
+  parse_engine(r, r.section(root, "engine"), s.engine);
+  if (root.contains("edits")) {
+    parse_edits(r, root.at("edits"), s.edits);
+    if (s.engine.mode != "sparse")
+      r.fail("edits", "edits publish bricked snapshots brick by brick: they need \"engine\": {\"mode\": \"sparse\"}, got \"" +
+                          s.engine.mode + "\"");
+  }
+
+  const json& out = r.section(root, "outputs");
+  r.only(out, "outputs", {"trace_csv", "plots"});
+  s.write_trace = r.boolean(out, "outputs", "trace_csv", true);
+  s.draw_plots = r.boolean(out, "outputs", "plots", true);
+  check_script_length(r, s);
+  return s;
+}
+
+Scene load_scene(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw SceneError(path + ": no such scene file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path + ": cannot open the scene file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return parse_scene(ss.str(), path);
+}
+
+}  // namespace isotouch::io

@@ -1,0 +1,627 @@
+// The only translation unit that includes ITK and teem headers (slow to compile).
+#include "volume_io.h"
+
+#include <itkImageIOBase.h>
+#include <itkImageIORegion.h>
+#include <itkMetaImageIO.h>
+#include <itkNiftiImageIO.h>
+#include <itkNrrdImageIO.h>
+#include <metaImage.h>
+#include <metaUtils.h>
+
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <set>
+#include <sstream>
+
+#ifdef ISOTOUCH_HAVE_TEEM
+#include <teem/nrrd.h>
+#endif
+
+namespace isotouch::io {
+using core::dot;
+using engine::Volume;
+using engine::VolumeError;
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const std::string& path, const std::string& what) {
+  throw VolumeError(path + ": " + what);
+}
+
+std::string lower(std::string s) {
+  for (auto& c : s) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// ITK and teem messages carry source locations and call chains; keep the last, most
+// specific line, without the "ITK ERROR: Class(0x...): " prefix.
+std::string last_reason(std::string msg) {
+  const auto e = msg.find("ITK ERROR: ");
+  if (e != std::string::npos) {
+    msg = msg.substr(e + 11);
+    const auto colon = msg.find("): ");
+    if (colon != std::string::npos && colon < 64) msg = msg.substr(colon + 3);
+  }
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  const auto nl = msg.rfind('\n');
+  if (nl != std::string::npos) msg = msg.substr(nl + 1);
+  if (msg.find("Unknown component type") != std::string::npos)
+    msg = "unknown or unsupported voxel type (" + msg + ")";
+  return msg;
+}
+
+bool is_nrrd(const std::string& path) {
+  const std::string l = lower(path);
+  return ends_with(l, ".nrrd") || ends_with(l, ".nhdr");
+}
+
+template <class T>
+void convert(const char* src, std::size_t n, std::vector<float>& out) {
+  out.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    T v;
+    std::memcpy(&v, src + i * sizeof(T), sizeof(T));
+    out[i] = static_cast<float>(v);
+  }
+}
+
+// Header field names per format, for messages.
+struct Fields {
+  const char* dims;
+  const char* spacing;
+  const char* origin;
+};
+Fields fields_of(const std::string& reader_class) {
+  if (reader_class == "MetaImageIO") return {"DimSize", "ElementSpacing", "Offset"};
+  if (reader_class == "NiftiImageIO") return {"dim", "pixdim", "qoffset/srow"};
+  return {"sizes", "spacings/space directions", "space origin"};  // NRRD (ITK or teem)
+}
+
+// A size that came from a negative number in the file wraps to a huge unsigned one:
+// say it as the file wrote it.
+std::string as_written(std::uint64_t d) {
+  if (d >= (std::uint64_t(1) << 63)) return std::to_string(std::int64_t(d));
+  if (d >= (std::uint64_t(1) << 31) && d < (std::uint64_t(1) << 32))
+    return std::to_string(std::int64_t(d) - (std::int64_t(1) << 32));
+  return std::to_string(d);
+}
+
+void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d, const char* field) {
+  std::uint64_t total = 1;
+  for (int a = 0; a < 3; ++a) {
+    if (d[a] == 0 || d[a] > (std::uint64_t(1) << 20))
+      fail(path, std::string("field '") + field + "' along axis " + std::to_string(a) + " is " +
+                     as_written(d[a]) + " (must be a voxel count in [1, 1048576])");
+    total *= d[a];
+  }
+  if (total > kMaxVoxels) {
+    std::ostringstream s;
+    s << "absurd dimensions (field '" << field << "') " << d[0] << " x " << d[1] << " x " << d[2] << " ("
+      << total << " voxels; the limit is " << kMaxVoxels << ")";
+    fail(path, s.str());
+  }
+}
+
+// The memory a load needs (the file's voxels as read, plus the float copy) against what
+// this machine has: refused before anything is allocated, naming the dims and the bytes.
+void check_memory(const std::string& path, const std::array<std::uint64_t, 3>& d, std::uint64_t bytes_per_voxel,
+                  const std::string& type) {
+  const std::uint64_t n = d[0] * d[1] * d[2];
+  const std::uint64_t need = n * (bytes_per_voxel + sizeof(float));
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  const std::uint64_t have = pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : 0;
+  if (have > 0 && need > have / 4 * 3) {
+    std::ostringstream s;
+    s << d[0] << " x " << d[1] << " x " << d[2] << " voxels of " << type << " need " << (need >> 20)
+      << " MiB to load (the voxels as stored plus a float copy), more than 3/4 of this machine's " << (have >> 20)
+      << " MiB of memory";
+    fail(path, s.str());
+  }
+}
+
+// Spacing and origin in mm as the file gives them; the extent bound keeps every march
+// over the volume (script, servo) finite and the coordinates meaningful.
+void set_spacing_origin(const std::string& path, Volume& v, const std::array<std::uint64_t, 3>& d,
+                        const double sp_mm[3], const double org_mm[3], const Fields& f) {
+  for (int a = 0; a < 3; ++a) {
+    std::ostringstream s;
+    s << "field '" << f.spacing << "' along axis " << a << " is " << sp_mm[a] << " mm";
+    if (!(std::isfinite(sp_mm[a]) && sp_mm[a] > 0.0)) fail(path, s.str() + " (must be a positive number of mm)");
+    const double extent_m = double(d[a] > 1 ? d[a] - 1 : 1) * sp_mm[a] * 1e-3;
+    if (extent_m > kMaxExtentM) {
+      s << ": the volume's extent along it would be " << extent_m << " m (the limit is " << kMaxExtentM << " m)";
+      fail(path, s.str());
+    }
+    if (!(std::isfinite(org_mm[a]) && std::abs(org_mm[a]) * 1e-3 <= kMaxOriginM)) {
+      std::ostringstream o;
+      o << "field '" << f.origin << "' along axis " << a << " is " << org_mm[a] << " mm (must be finite, within "
+        << kMaxOriginM << " m)";
+      fail(path, o.str());
+    }
+  }
+  v.grid.spacing_m = {sp_mm[0] * 1e-3, sp_mm[1] * 1e-3, sp_mm[2] * 1e-3};
+  v.grid.origin_m = {org_mm[0] * 1e-3, org_mm[1] * 1e-3, org_mm[2] * 1e-3};
+}
+
+// MetaImage: read the header with MetaIO (ITK's own parser) and check what ITK's reader
+// lets through: non-positive DimSize, non-finite ElementSpacing, a missing data file, and
+// a raw file whose size is not HeaderSize + DimSize x ElementType (ITK only warns on a
+// short read, and reads a prefix of a longer file).
+// MetaIO stops at the first number it cannot read (e.g. `ElementSpacing = nan 1 1`) and
+// then complains about a later field, or ITK says "No such file or directory". Only after
+// MetaIO has refused the header: find a numeric field whose value is not a finite number.
+void explain_metaimage_failure(const std::string& path) {
+  static const std::set<std::string> numeric = {
+      "NDims", "DimSize", "ElementSpacing", "ElementSize", "Offset", "Position", "Origin",
+      "TransformMatrix", "Rotation", "Orientation", "CenterOfRotation", "HeaderSize",
+      "ElementNumberOfChannels", "ElementMin", "ElementMax"};
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  for (int n = 0; n < 200 && std::getline(in, line); ++n) {
+    const auto eq = line.find('=');
+    if (eq == std::string::npos) continue;
+    std::string key = line.substr(0, eq), val = line.substr(eq + 1);
+    auto trim = [](std::string& t) {
+      while (!t.empty() && std::isspace(static_cast<unsigned char>(t.back()))) t.pop_back();
+      while (!t.empty() && std::isspace(static_cast<unsigned char>(t.front()))) t.erase(t.begin());
+    };
+    trim(key);
+    trim(val);
+    if (key == "ElementDataFile") break;  // the header ends here
+    if (!numeric.count(key)) continue;
+    std::istringstream toks(val);
+    std::string tok;
+    while (toks >> tok) {
+      char* end = nullptr;
+      const double x = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(x))
+        fail(path, "field '" + key + "' = " + val + ": '" + tok + "' is not a finite number");
+    }
+  }
+}
+
+void check_metaimage(const std::string& path) {
+  MetaImage mi;
+  if (!mi.Read(path.c_str(), false)) {
+    explain_metaimage_failure(path);
+    return;  // else let ITK's reader say what is wrong
+  }
+  const int nd = mi.NDims();
+  if (nd < 1 || nd > 4) return;
+  std::ostringstream dims_s, sp_s;
+  for (int a = 0; a < nd; ++a) {
+    dims_s << (a ? " " : "") << mi.DimSize(a);
+    sp_s << (a ? " " : "") << mi.ElementSpacing(a);
+  }
+  std::uint64_t count = 1;
+  for (int a = 0; a < nd; ++a) {
+    if (mi.DimSize(a) <= 0 || mi.DimSize(a) > (1 << 20))
+      fail(path, "field 'DimSize' = " + dims_s.str() + ": axis " + std::to_string(a) + " is " +
+                     std::to_string(mi.DimSize(a)) + " (must be a voxel count in [1, 1048576])");
+    count *= std::uint64_t(mi.DimSize(a));
+  }
+  for (int a = 0; a < nd; ++a)
+    if (!(std::isfinite(mi.ElementSpacing(a)) && mi.ElementSpacing(a) > 0)) {
+      std::ostringstream s;
+      s << "field 'ElementSpacing' = " << sp_s.str() << ": axis " << a << " is " << mi.ElementSpacing(a)
+        << " (must be a positive number of mm)";
+      fail(path, s.str());
+    }
+  if (count > kMaxVoxels) return;  // check_dims names it
+  const std::string name = mi.ElementDataFileName();
+  if (name.empty()) return;
+  // LOCAL (.mha): the data follow the header, from the byte after the ElementDataFile line.
+  const bool local = name == "LOCAL" || name == "Local" || name == "local";
+  if (name.rfind("LIST", 0) == 0 || name.find('%') != std::string::npos) return;  // one file per slice
+  fs::path data(name);
+  if (local) data = path;
+  else if (data.is_relative()) data = fs::path(path).parent_path() / data;
+  std::error_code ec;
+  if (!fs::is_regular_file(data, ec))
+    fail(path, "field 'ElementDataFile' = '" + name + "': no such file (looked for " + data.string() + ")");
+  if (mi.CompressedData()) return;  // size unknown until inflated; the sentinel check covers it
+  std::uint64_t data_start = 0;
+  if (local) {
+    std::ifstream in(path, std::ios::binary);
+    std::string head(1 << 16, '\0');
+    in.read(head.data(), std::streamsize(head.size()));
+    head.resize(std::size_t(in.gcount()));
+    const auto key = head.find("ElementDataFile");
+    const auto eol = key == std::string::npos ? key : head.find('\n', key);
+    if (eol == std::string::npos) return;  // ITK will complain
+    data_start = eol + 1;
+  }
+  int type_bytes = 0;
+  MET_SizeOfType(mi.ElementType(), &type_bytes);
+  char type_name[64] = {};
+  MET_TypeToString(mi.ElementType(), type_name);
+  const int channels = std::max(1, mi.ElementNumberOfChannels());
+  if (type_bytes <= 0) return;  // unknown type: ITK names it
+  const std::uint64_t need = count * std::uint64_t(type_bytes) * std::uint64_t(channels);
+  const std::uint64_t file_bytes = fs::file_size(data, ec);
+  if (ec) fail(path, "field 'ElementDataFile' = '" + name + "': cannot read its size (" + ec.message() + ")");
+  const std::uint64_t have = file_bytes >= data_start ? file_bytes - data_start : 0;
+  const long long hs = local ? 0 : mi.HeaderSize();  // -1: the data are the file's last bytes
+  std::ostringstream dx;
+  for (int a = 0; a < nd; ++a) dx << (a ? " x " : "") << mi.DimSize(a);
+  std::ostringstream head;
+  if (local)
+    head << "ElementDataFile = LOCAL: the data after the header hold " << have << " bytes; DimSize ";
+  else
+    head << "ElementDataFile '" << name << "' holds " << have << " bytes; DimSize ";
+  head << dx.str() << " of ElementType " << type_name << " (" << type_bytes << " byte" << (type_bytes > 1 ? "s" : "") << " each"
+       << (channels > 1 ? ", " + std::to_string(channels) + " channels" : std::string()) << ") needs ";
+  const std::uint64_t want = (hs > 0 ? std::uint64_t(hs) : 0) + need;
+  const bool bad = hs == -1 ? have < need : have != want;
+  if (bad) {
+    std::string m = head.str();
+    if (hs > 0)
+      m += "HeaderSize = " + std::to_string(hs) + " + " + std::to_string(need) + " = " + std::to_string(want) + " bytes";
+    else
+      m += std::to_string(need) + " bytes";
+    m += have < want ? " (voxel data truncated)" : " (the file is longer: is ElementType or DimSize wrong?)";
+    fail(path, m);
+  }
+}
+
+// The header field that gave the direction matrix, for messages.
+std::string direction_field(const std::string& reader) {
+  if (reader == "itk:MetaImageIO") return "TransformMatrix";
+  if (reader == "itk:NiftiImageIO") return "sform (srow_x/y/z) or qform (quatern_b/c/d)";
+  return "space directions";  // NRRD, ITK or teem
+}
+
+// D must be orthonormal (|D^T D - I| <= 1e-3 per entry): world = origin + D (spacing *
+// index) and Volume::to_grid use D^T as the inverse. A singular D (TransformMatrix all
+// zeros) would put every point at the origin, a scaling one would rescale the volume
+// behind the spacing's back; both are errors naming the field and the values (issue 7).
+void finish_direction(Volume& v) {
+  const auto& D = v.direction;
+  double worst = 0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double dot = 0;
+      for (int k = 0; k < 3; ++k) dot += D[std::size_t(k * 3 + i)] * D[std::size_t(k * 3 + j)];
+      const double e = std::abs(dot - (i == j ? 1.0 : 0.0));
+      worst = e == e ? std::max(worst, e) : std::numeric_limits<double>::infinity();
+    }
+  if (!(worst <= 1e-3)) {
+    std::ostringstream s;
+    s << "field '" << direction_field(v.reader) << "' gives the direction matrix (columns: index axes) [[" << D[0]
+      << ", " << D[1] << ", " << D[2] << "], [" << D[3] << ", " << D[4] << ", " << D[5] << "], [" << D[6] << ", "
+      << D[7] << ", " << D[8] << "]], which is not orthonormal (max |D^T D - I| = " << worst
+      << ", the limit is 0.001): the direction cosines must be unit and perpendicular (voxel size goes in the spacing)";
+    fail(v.path, s.str());
+  }
+  const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  v.direction_is_identity = true;
+  for (int i = 0; i < 9; ++i)
+    if (std::abs(v.direction[std::size_t(i)] - id[i]) > 1e-6) v.direction_is_identity = false;
+}
+
+// The gzipped-NIfTI reader does not report a short stream: count the bytes (gzread reads
+// plain files too) and compare with vox_offset + the voxel bytes the header promises.
+void check_nifti_length(const std::string& path, std::size_t data_bytes) {
+  gzFile gz = gzopen(path.c_str(), "rb");
+  if (!gz) fail(path, "cannot open");
+  std::vector<unsigned char> buf(1 << 16);
+  std::uint64_t total = 0;
+  int got = 0;
+  std::int32_t sizeof_hdr = 0;
+  double vox_offset = 0;
+  std::vector<unsigned char> head;
+  while ((got = gzread(gz, buf.data(), unsigned(buf.size()))) > 0) {
+    if (head.size() < 544) head.insert(head.end(), buf.begin(), buf.begin() + std::min(got, 544));
+    total += std::uint64_t(got);
+  }
+  gzclose(gz);
+  if (head.size() >= 348) {
+    std::memcpy(&sizeof_hdr, head.data(), 4);
+    if (sizeof_hdr == 348) {
+      float f;
+      std::memcpy(&f, head.data() + 108, 4);
+      vox_offset = f;
+    } else if (sizeof_hdr == 540 && head.size() >= 176) {
+      std::int64_t o;
+      std::memcpy(&o, head.data() + 168, 8);
+      vox_offset = double(o);
+    }
+  }
+  if (double(total) < vox_offset + double(data_bytes))
+    fail(path, "voxel data truncated: the header promises " + std::to_string(data_bytes) +
+                   " bytes after offset " + std::to_string(std::uint64_t(vox_offset)) +
+                   ", the (decompressed) file holds " + std::to_string(total) + " bytes in all");
+}
+
+void check_nrrd_length(const std::string& path, std::uint64_t need);
+
+Volume load_itk(const std::string& path) {
+  itk::ImageIOBase::Pointer io;
+  const itk::ImageIOBase::Pointer candidates[] = {
+      itk::MetaImageIO::New().GetPointer(), itk::NrrdImageIO::New().GetPointer(),
+      itk::NiftiImageIO::New().GetPointer()};
+  for (const auto& c : candidates)
+    if (c->CanReadFile(path.c_str())) {
+      io = c;
+      break;
+    }
+  if (!io)
+    fail(path, "not a readable MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr) or NIfTI (.nii/.nii.gz) file");
+  const std::string cls = io->GetNameOfClass();
+  const Fields fields = fields_of(cls);
+  if (cls == "MetaImageIO") check_metaimage(path);
+  io->SetFileName(path);
+  io->ReadImageInformation();
+
+  const unsigned nd = io->GetNumberOfDimensions();
+  if (nd < 2 || nd > 4) fail(path, "has " + std::to_string(nd) + " dimensions (need 3; 2 is read as one slice)");
+  if (io->GetNumberOfComponents() != 1)
+    fail(path, "has " + std::to_string(io->GetNumberOfComponents()) +
+                   " components per voxel (need a scalar volume)");
+  std::array<std::uint64_t, 3> d{1, 1, 1};
+  double sp[3] = {1, 1, 1}, org[3] = {0, 0, 0};
+  Volume v;
+  for (unsigned a = 0; a < std::min(nd, 3u); ++a) {
+    d[a] = io->GetDimensions(a);
+    sp[a] = io->GetSpacing(a);
+    org[a] = io->GetOrigin(a);
+    const auto dir = io->GetDirection(a);  // column a of the direction matrix
+    for (unsigned r = 0; r < std::min<std::size_t>(dir.size(), 3); ++r)
+      v.direction[r * 3 + a] = dir[r];
+  }
+  if (nd == 4 && io->GetDimensions(3) != 1)
+    fail(path, "is a 4-D series with " + std::to_string(io->GetDimensions(3)) + " volumes (need one)");
+  check_dims(path, d, fields.dims);
+  set_spacing_origin(path, v, d, sp, org, fields);
+  v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
+
+  using CT = itk::IOComponentEnum;
+  const CT ct = io->GetComponentType();
+  v.component_type = itk::ImageIOBase::GetComponentTypeAsString(ct);
+  const std::size_t n = v.grid.voxel_count();
+  std::size_t bytes_per = io->GetComponentSize();
+  switch (ct) {
+    case CT::UCHAR: case CT::CHAR: case CT::USHORT: case CT::SHORT: case CT::UINT:
+    case CT::INT: case CT::ULONG: case CT::LONG: case CT::ULONGLONG: case CT::LONGLONG:
+    case CT::FLOAT: case CT::DOUBLE:
+      break;
+    default:
+      fail(path, "unknown or unsupported voxel type '" + v.component_type + "'");
+  }
+  // Before any allocation: the file must hold the bytes its header promises (a 350-byte
+  // .nii.gz may claim gigabytes) and the machine the memory.
+  if (cls == "NiftiImageIO") check_nifti_length(path, n * bytes_per);
+  if (cls == "NrrdImageIO") check_nrrd_length(path, n * bytes_per);
+  check_memory(path, d, bytes_per, v.component_type);
+  // The IO region must cover the whole image, or readers that stream read nothing.
+  itk::ImageIORegion region(nd);
+  for (unsigned a = 0; a < nd; ++a) {
+    region.SetIndex(a, 0);
+    region.SetSize(a, io->GetDimensions(a));
+  }
+  io->SetIORegion(region);
+  // Some ITK readers (MetaImage, gzipped NIfTI) only warn on a short read and leave the
+  // rest of the buffer untouched. Fill with a sentinel; if a tail still holds it, read
+  // again with another: bytes that kept both sentinels were never written.
+  std::vector<char> raw(n * bytes_per, char(0xA5));
+  io->Read(raw.data());
+  auto tail_run = [&](char sentinel) {
+    std::size_t k = raw.size();
+    while (k > 0 && raw[k - 1] == sentinel) --k;
+    return k;
+  };
+  const std::size_t end_a = tail_run(char(0xA5));
+  if (raw.size() - end_a >= bytes_per) {
+    std::fill(raw.begin(), raw.end(), char(0x5A));
+    io->Read(raw.data());
+    const std::size_t end_b = tail_run(char(0x5A));
+    const std::size_t written = std::max(end_a, end_b);
+    if (written < raw.size())
+      fail(path, "voxel data truncated: the header promises " + std::to_string(raw.size()) +
+                     " bytes (" + std::to_string(d[0]) + " x " + std::to_string(d[1]) + " x " +
+                     std::to_string(d[2]) + " " + v.component_type + "), the file provides " +
+                     std::to_string(written));
+  }
+  switch (ct) {
+    case CT::UCHAR: convert<std::uint8_t>(raw.data(), n, v.voxels); break;
+    case CT::CHAR: convert<std::int8_t>(raw.data(), n, v.voxels); break;
+    case CT::USHORT: convert<std::uint16_t>(raw.data(), n, v.voxels); break;
+    case CT::SHORT: convert<std::int16_t>(raw.data(), n, v.voxels); break;
+    case CT::UINT: convert<std::uint32_t>(raw.data(), n, v.voxels); break;
+    case CT::INT: convert<std::int32_t>(raw.data(), n, v.voxels); break;
+    case CT::ULONG: case CT::ULONGLONG:
+      if (bytes_per == 8) convert<std::uint64_t>(raw.data(), n, v.voxels);
+      else convert<std::uint32_t>(raw.data(), n, v.voxels);
+      break;
+    case CT::LONG: case CT::LONGLONG:
+      if (bytes_per == 8) convert<std::int64_t>(raw.data(), n, v.voxels);
+      else convert<std::int32_t>(raw.data(), n, v.voxels);
+      break;
+    case CT::FLOAT: convert<float>(raw.data(), n, v.voxels); break;
+    case CT::DOUBLE: convert<double>(raw.data(), n, v.voxels); break;
+    default: break;
+  }
+  v.reader = std::string("itk:") + io->GetNameOfClass();
+  return v;
+}
+
+#ifdef ISOTOUCH_HAVE_TEEM
+Volume load_teem(const std::string& path) {
+  struct NrrdDel {
+    void operator()(Nrrd* n) const { nrrdNuke(n); }
+  };
+  std::unique_ptr<Nrrd, NrrdDel> nin(nrrdNew()), nf(nrrdNew());
+  auto biff_error = [] {
+    char* e = biffGetDone(NRRD);
+    std::string s = e ? e : "unknown teem error";
+    free(e);
+    while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+    return s;
+  };
+  // The header alone first (teem skips the data): dims and memory are checked before the
+  // data are read and allocated.
+  {
+    struct IoDel {
+      void operator()(NrrdIoState* n) const { nrrdIoStateNix(n); }
+    };
+    std::unique_ptr<NrrdIoState, IoDel> head_only(nrrdIoStateNew());
+    nrrdIoStateSet(head_only.get(), nrrdIoStateSkipData, AIR_TRUE);
+    if (nrrdLoad(nin.get(), path.c_str(), head_only.get())) fail(path, "teem: " + biff_error());
+    if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
+    std::array<std::uint64_t, 3> hd{1, 1, 1};
+    for (unsigned a = 0; a < nin->dim; ++a) hd[a] = nin->axis[a].size;
+    check_dims(path, hd, fields_of("teem").dims);
+    if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");
+    check_memory(path, hd, nrrdTypeSize[nin->type], airEnumStr(nrrdType, nin->type));
+  }
+  if (nrrdLoad(nin.get(), path.c_str(), nullptr)) fail(path, "teem: " + biff_error());
+  if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
+  std::array<std::uint64_t, 3> d{1, 1, 1};
+  double sp[3] = {1, 1, 1}, org[3] = {0, 0, 0};
+  Volume v;
+  for (unsigned a = 0; a < nin->dim; ++a) {
+    const NrrdAxisInfo& ax = nin->axis[a];
+    d[a] = ax.size;
+    if (AIR_EXISTS(ax.spacing)) {
+      sp[a] = ax.spacing;
+    } else if (nin->spaceDim > 0 && AIR_EXISTS(ax.spaceDirection[0])) {
+      double len = 0;
+      for (unsigned r = 0; r < nin->spaceDim; ++r) len += ax.spaceDirection[r] * ax.spaceDirection[r];
+      sp[a] = std::sqrt(len);
+      for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
+        v.direction[r * 3 + a] = ax.spaceDirection[r] / sp[a];
+    }
+  }
+  if (nin->spaceDim > 0)
+    for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
+      if (AIR_EXISTS(nin->spaceOrigin[r])) org[r] = nin->spaceOrigin[r];
+  const Fields fields = fields_of("teem");
+  check_dims(path, d, fields.dims);
+  set_spacing_origin(path, v, d, sp, org, fields);
+  v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
+  v.component_type = airEnumStr(nrrdType, nin->type);
+  if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");
+  if (nrrdConvert(nf.get(), nin.get(), nrrdTypeFloat)) fail(path, "teem: " + biff_error());
+  const float* f = static_cast<const float*>(nf->data);
+  v.voxels.assign(f, f + v.grid.voxel_count());
+  v.reader = "teem:nrrdLoad";
+  return v;
+}
+#endif
+
+// A raw-encoded NRRD must hold the bytes its header promises: the attached data after the
+// header's empty line, or one detached "data file". Checked before the voxels are allocated
+// (other encodings and multi-file data: the size is known only once read; the memory cap and
+// the read itself cover them).
+void check_nrrd_length(const std::string& path, std::uint64_t need) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line, encoding, data_file;
+  std::uint64_t header_bytes = 0;
+  bool ended = false;
+  for (int n = 0; n < 4096 && std::getline(in, line); ++n) {
+    header_bytes += line.size() + 1;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) {
+      ended = true;
+      break;
+    }
+    const auto value = [&](const char* key) {
+      std::string v = line.substr(std::strlen(key));
+      while (!v.empty() && v.front() == ' ') v.erase(v.begin());
+      return v;
+    };
+    if (line.rfind("encoding:", 0) == 0) encoding = value("encoding:");
+    if (line.rfind("data file:", 0) == 0 || line.rfind("datafile:", 0) == 0)
+      data_file = value(line[4] == ' ' ? "data file:" : "datafile:");
+  }
+  if (encoding != "raw") return;
+  std::error_code ec;
+  std::uint64_t have = 0;
+  std::string where;
+  if (data_file.empty()) {
+    if (!ended) return;  // a detached header without a data file line: teem / ITK name it
+    have = fs::file_size(path, ec) - std::min<std::uint64_t>(header_bytes, fs::file_size(path, ec));
+    where = "the data after the header hold ";
+  } else {
+    if (data_file.find(' ') != std::string::npos || data_file == "LIST") return;  // several files
+    fs::path df(data_file);
+    if (df.is_relative()) df = fs::path(path).parent_path() / df;
+    have = fs::file_size(df, ec);
+    where = "field 'data file' = '" + data_file + "' holds ";
+  }
+  if (ec) return;  // missing data file: the reader names it
+  if (have < need)
+    fail(path, "voxel data truncated: " + where + std::to_string(have) + " bytes, the header (field 'sizes', 'type') promises " +
+                   std::to_string(need));
+}
+
+// NRRD "spacings:" as the header writes it: ITK and teem both put 1 mm in place of a
+// "nan" (NRRD's "no spacing"), which for a scalar volume hides a broken header. Read the
+// header text (up to the first empty line) and fail on a spacing that is not a positive
+// finite number.
+void check_nrrd_spacings(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  for (int n = 0; n < 4096 && std::getline(in, line); ++n) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty()) break;  // end of the header of a .nrrd
+    if (line.rfind("spacings:", 0) != 0) continue;
+    std::istringstream t(line.substr(9));
+    std::string tok;
+    for (int a = 0; t >> tok; ++a) {
+      char* end = nullptr;
+      const double d = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || !std::isfinite(d) || d <= 0.0)
+        fail(path, "field 'spacings' along axis " + std::to_string(a) + " is '" + tok +
+                       "' (must be a positive number of mm; ITK and teem would silently use 1 mm)");
+    }
+  }
+}
+
+}  // namespace
+
+Volume load_volume(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail(path, "no such file");
+  if (fs::is_directory(path, ec)) fail(path, "is a directory, not a volume file");
+  if (is_nrrd(path)) check_nrrd_spacings(path);
+  Volume v;
+  try {
+    v = load_itk(path);
+  } catch (const VolumeError&) {
+    throw;
+  } catch (const std::exception& e) {
+    const std::string msg = last_reason(e.what());
+#ifdef ISOTOUCH_HAVE_TEEM
+    if (is_nrrd(path)) {
+      try {
+        v = load_teem(path);
+      } catch (const VolumeError& te) {
+        fail(path, "ITK could not read it (" + msg + ") and neither could teem (" +
+                       last_reason(std::string(te.what()).substr(path.size() + 2)) + ")");
+      }
+    } else
+#endif
+      fail(path, msg);
+  }
+  v.path = path;
+  finish_direction(v);
+  v.update_stats();
+  return v;
+}
+
+}  // namespace isotouch::io

@@ -1,0 +1,174 @@
+// edit_history.cpp - per-stroke undo / redo as brick backups (see edit_history.h).
+#include <algorithm>
+#include "edit_history.h"
+
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+#include "brick_field.h"
+
+namespace isotouch::session {
+using engine::Volume;
+
+std::size_t brick_total(const core::Grid& grid) {
+  const auto nb = core::brick_counts(grid);
+  return std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+}
+
+BrickBox brick_box(const core::Grid& grid, std::uint32_t id) {
+  const auto nb = core::brick_counts(grid);
+  if (grid.empty() || id >= brick_total(grid))
+    throw std::out_of_range("brick id " + std::to_string(id) + " out of range: the grid has " +
+                            std::to_string(brick_total(grid)) + " bricks");
+  const std::uint32_t b[3] = {id % std::uint32_t(nb[0]), (id / std::uint32_t(nb[0])) % std::uint32_t(nb[1]),
+                              id / (std::uint32_t(nb[0]) * std::uint32_t(nb[1]))};
+  BrickBox box;
+  for (std::size_t a = 0; a < 3; ++a) {
+    box.lo[a] = int(b[a]) * core::kBrickSize;
+    box.hi[a] = std::min(box.lo[a] + core::kBrickSize, grid.dims[a]);
+  }
+  return box;
+}
+
+namespace {
+/// Calls f(offset in the volume, offset in the brick, row length) for every x-row of the brick.
+template <class F>
+void for_rows(const core::Grid& g, const BrickBox& b, F&& f) {
+  const std::size_t row = std::size_t(b.hi[0] - b.lo[0]);
+  std::size_t k = 0;
+  for (int z = b.lo[2]; z < b.hi[2]; ++z)
+    for (int y = b.lo[1]; y < b.hi[1]; ++y, k += row) f(g.index(b.lo[0], y, z), k, row);
+}
+void check_volume(const Volume& vol) {
+  if (vol.voxels.size() != vol.grid.voxel_count())
+    throw std::invalid_argument(vol.path + ": volume has " + std::to_string(vol.voxels.size()) + " voxels for " +
+                                std::to_string(vol.grid.voxel_count()) + " grid points");
+}
+}  // namespace
+
+std::vector<float> read_brick(const Volume& vol, std::uint32_t id) {
+  check_volume(vol);
+  const BrickBox b = brick_box(vol.grid, id);
+  std::vector<float> out(b.voxels());
+  for_rows(vol.grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
+    std::memcpy(out.data() + k, vol.voxels.data() + v, n * sizeof(float));
+  });
+  return out;
+}
+
+void write_brick(Volume& vol, std::uint32_t id, const float* data) {
+  check_volume(vol);
+  const BrickBox b = brick_box(vol.grid, id);
+  for_rows(vol.grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
+    std::memcpy(vol.voxels.data() + v, data + k, n * sizeof(float));
+  });
+}
+
+EditHistory::EditHistory(double limit_mib) {
+  if (!(limit_mib >= 0) || !std::isfinite(limit_mib))
+    throw std::invalid_argument("EditHistory: field 'limit_mib' must be a finite number >= 0, got " +
+                                std::to_string(limit_mib));
+  // Clamped below 2^63 bytes: a larger double does not convert to uint64 (undefined).
+  limit_ = std::uint64_t(std::min(limit_mib * 1048576.0, 9.2e18));
+}
+
+void EditHistory::begin_stroke() {
+  if (open_) throw std::logic_error("EditHistory::begin_stroke: a stroke is already open (end_stroke first)");
+  for (const Stroke& s : redo_) bytes_ -= s.bytes;
+  redo_.clear();
+  open_.emplace();
+}
+
+void EditHistory::record(const Volume& vol, const std::vector<std::uint32_t>& ids) {
+  if (!open_) throw std::logic_error("EditHistory::record: no open stroke (begin_stroke first)");
+  for (std::uint32_t id : ids) {
+    if (open_->bricks.count(id)) continue;  // first touch in this stroke only
+    std::vector<float> data = read_brick(vol, id);
+    const std::uint64_t n = data.size() * sizeof(float);
+    open_->bricks.emplace(id, std::move(data));
+    open_->bytes += n;
+    bytes_ += n;
+  }
+}
+
+void EditHistory::end_stroke(const Volume& vol) {
+  if (!open_) return;
+  Stroke s = std::move(*open_);
+  open_.reset();
+  for (auto it = s.bricks.begin(); it != s.bricks.end();) {
+    const std::vector<float> now = read_brick(vol, it->first);
+    if (std::memcmp(now.data(), it->second.data(), now.size() * sizeof(float)) == 0) {
+      const std::uint64_t n = it->second.size() * sizeof(float);
+      s.bytes -= n;
+      bytes_ -= n;
+      it = s.bricks.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  if (s.bytes > limit_) {
+    // A stroke that alone exceeds the limit cannot be kept, and it is a barrier: undoing an
+    // older stroke past it would restore that stroke's bricks under this one's changes, a
+    // state that never existed. The older strokes go with it.
+    bytes_ -= s.bytes;
+    ++dropped_;
+    for (const Stroke& old : undo_) bytes_ -= old.bytes;
+    dropped_ += undo_.size();
+    undo_.clear();
+  } else if (!s.bricks.empty()) {
+    undo_.push_back(std::move(s));
+  }
+  enforce_limit();
+}
+
+void EditHistory::enforce_limit() {
+  while (bytes_ > limit_ && !undo_.empty()) {
+    bytes_ -= undo_.front().bytes;
+    undo_.pop_front();
+    ++dropped_;
+  }
+  // Then the redo strokes farthest from the present (the front of redo_ is redone last).
+  while (bytes_ > limit_ && !redo_.empty()) {
+    bytes_ -= redo_.front().bytes;
+    redo_.erase(redo_.begin());
+    ++dropped_;
+  }
+}
+
+std::vector<std::uint32_t> EditHistory::swap_in(Stroke& s, Volume& vol) {
+  std::vector<std::uint32_t> ids;
+  ids.reserve(s.bricks.size());
+  for (auto& [id, data] : s.bricks) {
+    std::vector<float> now = read_brick(vol, id);
+    write_brick(vol, id, data.data());
+    data = std::move(now);
+    ids.push_back(id);
+  }
+  if (on_restore_ && !ids.empty()) on_restore_(ids);
+  return ids;
+}
+
+std::vector<std::uint32_t> EditHistory::undo(Volume& vol) {
+  end_stroke(vol);
+  if (undo_.empty()) return {};
+  Stroke s = std::move(undo_.back());
+  undo_.pop_back();
+  std::vector<std::uint32_t> ids = swap_in(s, vol);
+  redo_.push_back(std::move(s));
+  return ids;
+}
+
+std::vector<std::uint32_t> EditHistory::redo(Volume& vol) {
+  end_stroke(vol);
+  if (redo_.empty()) return {};
+  Stroke s = std::move(redo_.back());
+  redo_.pop_back();
+  std::vector<std::uint32_t> ids = swap_in(s, vol);
+  undo_.push_back(std::move(s));
+  return ids;
+}
+
+}  // namespace isotouch::session

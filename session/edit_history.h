@@ -1,0 +1,99 @@
+// edit_history.h - per-stroke undo / redo of volume edits as brick backups.
+//
+// Bricks: the 8^3 bricks of core/brick_field.h, ids linear, x fastest, ceil(dims / 8) per
+// axis; brick (bx, by, bz) holds the voxels [8 bx, min(8 bx + 8, nx)) x ... (clipped at the
+// far borders). A backup is the brick's raw float voxels (engine::Volume::voxels, file
+// units), row by row, x fastest: 4 bytes per voxel of the clipped brick.
+//
+// A stroke (begin_stroke .. end_stroke) records the pre-edit content of every brick it
+// touches for the FIRST time (a brick touched again in the same stroke keeps its first
+// backup). end_stroke drops the backups of bricks whose content did not change (bit for
+// bit). Undo swaps the stroke's backups with the volume's current content of those
+// bricks, so the stroke then holds the post-edit content and redo swaps back: both
+// directions restore bit for bit. A new stroke after undo drops the redo branch.
+// Memory limit: the payload bytes (undo + redo strokes and the open stroke) are kept under
+// `limit_mib` MiB by dropping the oldest undo strokes first (counted in dropped_strokes());
+// the open stroke is never dropped while it is open, so it may exceed the limit until
+// end_stroke, where it is dropped too if it alone exceeds the limit.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <optional>
+#include <vector>
+
+#include "volume.h"
+
+namespace isotouch::session {
+
+/// Voxels [lo, hi) of brick `id` of `grid` (clipped to the grid), index space.
+struct BrickBox {
+  std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  std::size_t voxels() const {
+    return std::size_t(hi[0] - lo[0]) * std::size_t(hi[1] - lo[1]) * std::size_t(hi[2] - lo[2]);
+  }
+};
+/// @throws std::out_of_range naming the id and the brick count if `id` is not a brick of `grid`.
+BrickBox brick_box(const core::Grid& grid, std::uint32_t id);
+/// Number of 8^3 bricks of `grid` (ceil(dims / 8) product).
+std::size_t brick_total(const core::Grid& grid);
+/// The brick's voxels, x fastest over the clipped box.
+std::vector<float> read_brick(const engine::Volume& vol, std::uint32_t id);
+/// Writes `data` (brick_box(id).voxels() floats, x fastest) into the brick.
+void write_brick(engine::Volume& vol, std::uint32_t id, const float* data);
+
+/// Undo / redo history of strokes over one engine::Volume (CPU side).
+class EditHistory {
+ public:
+  /// @param limit_mib payload limit [MiB] (1 MiB = 2^20 bytes); must be >= 0.
+  explicit EditHistory(double limit_mib = 256.0);
+
+  /// Opens a stroke and drops the redo branch. @throws std::logic_error if one is open.
+  void begin_stroke();
+  bool stroke_open() const { return open_.has_value(); }
+  /// Records the pre-edit content of the bricks in `ids` not yet recorded in the open
+  /// stroke. Call BEFORE the edit changes them. @throws std::logic_error if no stroke is open.
+  void record(const engine::Volume& vol, const std::vector<std::uint32_t>& ids);
+  /// Closes the open stroke: drops its unchanged backups (bit-identical to `vol`), pushes it
+  /// on the undo stack if anything changed, enforces the memory limit (oldest strokes first).
+  /// A stroke larger than the limit alone is a barrier: it and every older stroke are
+  /// dropped (undo stops there). No-op if none is open.
+  void end_stroke(const engine::Volume& vol);
+
+  /// Undoes the newest stroke (ends an open stroke first). Returns the restored brick ids
+  /// (ascending; empty if there was nothing to undo) and calls the on_restore hook with them.
+  std::vector<std::uint32_t> undo(engine::Volume& vol);
+  /// Redoes the newest undone stroke; same return and hook as undo().
+  std::vector<std::uint32_t> redo(engine::Volume& vol);
+
+  /// Called with the restored brick ids after undo / redo changed `vol` (e.g. to upload
+  /// them to the GPU copy of the volume).
+  void set_on_restore(std::function<void(const std::vector<std::uint32_t>&)> hook) { on_restore_ = std::move(hook); }
+
+  std::size_t undo_depth() const { return undo_.size(); }
+  std::size_t redo_depth() const { return redo_.size(); }
+  /// Payload bytes held now: 4 per backed-up voxel, undo + redo + the open stroke.
+  std::uint64_t bytes() const { return bytes_; }
+  std::uint64_t limit_bytes() const { return limit_; }
+  /// Strokes dropped so far to stay under the limit (oldest first).
+  std::size_t dropped_strokes() const { return dropped_; }
+
+ private:
+  struct Stroke {
+    std::map<std::uint32_t, std::vector<float>> bricks;  ///< id -> content (pre-edit, or post-edit once undone)
+    std::uint64_t bytes = 0;
+  };
+  std::vector<std::uint32_t> swap_in(Stroke& s, engine::Volume& vol);
+  void enforce_limit();
+
+  std::deque<Stroke> undo_;  ///< oldest first
+  std::vector<Stroke> redo_; ///< newest undone last
+  std::optional<Stroke> open_;
+  std::uint64_t bytes_ = 0, limit_ = 0;
+  std::size_t dropped_ = 0;
+  std::function<void(const std::vector<std::uint32_t>&)> on_restore_;
+};
+
+}  // namespace isotouch::session

@@ -1,0 +1,84 @@
+// edit_session.cpp - EditSession: Sculptor + LiveField + publication (session/edit_session.h).
+#include "edit_session.h"
+
+#include <chrono>
+#include <cmath>
+#include <string>
+
+namespace isotouch::session {
+
+const char* to_string(EditEvent::Kind k) {
+  switch (k) {
+    case EditEvent::Kind::kBrush: return "brush";
+    case EditEvent::Kind::kBeginStroke: return "begin_stroke";
+    case EditEvent::Kind::kEndStroke: return "end_stroke";
+    case EditEvent::Kind::kUndo: return "undo";
+    case EditEvent::Kind::kRedo: return "redo";
+  }
+  return "?";
+}
+
+namespace {
+/// A brush only moves voxels toward its material / empty values (or averages them), so a
+/// snapshot format that holds the volume holds the result if it holds both targets. Checked
+/// BEFORE the volume changes: LiveField::update would refuse the edited volume after the
+/// edit, leaving the volume edited and the snapshot not (review finding).
+void check_storable_targets(const session::Brush& b, core::SampleFormat f) {
+  if (f == core::SampleFormat::kFp32) return;  // fp32 stores what the volume holds
+  for (const auto& [name, v] : {std::pair<const char*, float>{"material", b.targets.material},
+                                std::pair<const char*, float>{"empty", b.targets.empty}}) {
+    const bool bad = f == core::SampleFormat::kFp16 ? !(std::abs(v) <= 65504.f) : !std::isfinite(v);
+    if (bad)
+      throw session::BrushError(std::string("brush: targets.") + name + " = " + std::to_string(v) +
+                               " cannot be stored in the " + core::to_string(f) + " snapshot");
+  }
+}
+}  // namespace
+
+struct EditSession::Impl {
+  std::unique_ptr<session::LiveField> live;
+  std::unique_ptr<session::Sculptor> sculptor;
+  std::vector<EditEvent> log;
+};
+
+EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
+                         double history_limit_mib)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->live = session::LiveField::create(vol, options);
+  impl_->sculptor = std::make_unique<session::Sculptor>(std::move(vol), ctx, history_limit_mib);
+}
+EditSession::~EditSession() = default;
+
+void EditSession::check_storable(const session::Brush& b) const {
+  check_storable_targets(b, impl_->live->options().format);
+}
+
+EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out) {
+  const auto t0 = std::chrono::steady_clock::now();
+  EditOutcome o;
+  if (e.kind == EditEvent::Kind::kBrush) check_storable(e.brush);
+  std::vector<std::uint32_t> changed;
+  switch (e.kind) {
+    case EditEvent::Kind::kBrush: o.brush = impl_->sculptor->apply(e.brush); changed = o.brush.dirty; break;
+    case EditEvent::Kind::kBeginStroke: impl_->sculptor->begin_stroke(); break;
+    case EditEvent::Kind::kEndStroke: impl_->sculptor->end_stroke(); break;
+    case EditEvent::Kind::kUndo: o.restored = impl_->sculptor->undo(); changed = o.restored; break;
+    case EditEvent::Kind::kRedo: o.restored = impl_->sculptor->redo(); changed = o.restored; break;
+  }
+  if (!changed.empty()) {
+    auto snap = impl_->live->update(impl_->sculptor->volume(), changed, &o.update);
+    if (out) out->publish(snap);
+    o.published = true;
+  }
+  impl_->log.push_back(e);
+  o.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return o;
+}
+
+std::shared_ptr<const core::SampleField> EditSession::current() const { return impl_->live->current(); }
+const engine::Volume& EditSession::volume() const { return impl_->sculptor->volume(); }
+session::Sculptor& EditSession::sculptor() { return *impl_->sculptor; }
+session::LiveField& EditSession::live() { return *impl_->live; }
+const std::vector<EditEvent>& EditSession::log() const { return impl_->log; }
+
+}  // namespace isotouch::session

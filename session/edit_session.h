@@ -1,0 +1,75 @@
+// edit_session.h - one edited volume kept in step with what the servo feels: the
+// Sculptor (raw volume, GPU brushes, undo), the LiveField (snapshot updated
+// brick by brick) and the publication into the servo's TripleBuffer. Used by the scene
+// runner (timeline and button edits), `isotouch replay` and `isotouch bench edit`.
+//
+// Determinism (what record / replay relies on): the same events applied in the same order
+// to the same volume give bit-identical snapshots, whether the brushes run on the GPU or on
+// the CPU reference (tests/test_brush.cpp: bit for bit). In the headless run, the events
+// of tick k are applied AFTER tick k's render, in order, and the new snapshot is published
+// before tick k + 1 acquires (so tick k + 1 reads it).
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "brush.h"
+#include "live_field.h"
+#include "triple_buffer.h"
+
+namespace isotouch::session {
+
+/// One edit as the timeline, the button, the API or a recording gives it.
+struct EditEvent {
+  enum class Kind : std::uint8_t { kBrush, kBeginStroke, kEndStroke, kUndo, kRedo };
+  Kind kind = Kind::kBrush;
+  long tick = 0;        ///< servo tick after whose render it is applied (headless runs)
+  double t_s = 0;       ///< that tick's simulated time [s]
+  session::Brush brush;  ///< kBrush only: the brush as applied (centre in grid-world [m])
+};
+/// "brush", "begin_stroke", "end_stroke", "undo", "redo".
+const char* to_string(EditEvent::Kind k);
+
+/// What applying one event did.
+struct EditOutcome {
+  session::BrushResult brush;                 ///< kBrush: touched / dirty bricks, times
+  std::vector<std::uint32_t> restored;       ///< kUndo / kRedo: bricks restored
+  session::LiveUpdateStats update;            ///< the snapshot update (zero if nothing changed)
+  bool published = false;                    ///< a new snapshot was published
+  double wall_ms = 0;                        ///< apply(), everything included [ms]
+};
+
+class EditSession {
+ public:
+  /// @param vol the raw volume (moved in); @param ctx null: CPU brushes; @param options the
+  /// scene's passes, isosurface, background and sample format; @param history_limit_mib undo
+  /// memory limit [MiB]. Builds the first snapshot (version 1).
+  /// @throws engine::VolumeError / std::invalid_argument as LiveField::create and Sculptor.
+  EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
+              double history_limit_mib = 256.0);
+  ~EditSession();
+  EditSession(const EditSession&) = delete;
+  EditSession& operator=(const EditSession&) = delete;
+
+  /// Applies `e` and, when samples changed, publishes the new snapshot into `out` (if not
+  /// null). Appends `e` to log(). @throws session::BrushError on an invalid brush.
+  EditOutcome apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out);
+  /// @throws session::BrushError if the brush's material / empty value cannot be stored in
+  /// the snapshot's sample format (fp16: |v| > 65504 or NaN; unorm16: not finite). apply() checks
+  /// it before changing anything.
+  void check_storable(const session::Brush& b) const;
+  /// The newest snapshot (what apply() last published, or the first one).
+  std::shared_ptr<const core::SampleField> current() const;
+  const engine::Volume& volume() const;
+  session::Sculptor& sculptor();
+  session::LiveField& live();
+  /// Every event applied so far, in order.
+  const std::vector<EditEvent>& log() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace isotouch::session

@@ -1,0 +1,634 @@
+// live_field.cpp - the edited volume's published snapshot, updated brick by brick (issue 9,
+// item 1). The design is in live_field.h. Compiled with -ffp-contract=off like the CPU
+// reference it calls (engine/sparse_cpu.cpp), although every float operation on samples
+// happens there: this file selects bricks, compares bits and moves samples.
+#include "live_field.h"
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstring>
+#include <map>
+#include <mutex>
+#include <set>
+#include <stdexcept>
+
+#include "sparse_chain.h"
+
+namespace isotouch::session {
+using core::BrickStore;
+using engine::Volume;
+using engine::VolumeError;
+namespace sparse = engine::sparse;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using core::BrickStore;
+constexpr std::size_t kS = core::kBrickSamples;  // 729 samples per slot
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+/// floor(a / b) for b > 0 and any sign of a.
+int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/// Sample memory of one slot [B]: 729 samples + the kUnorm16 decode parameters.
+std::uint64_t slot_bytes(core::SampleFormat f) {
+  return f == core::SampleFormat::kFp32 ? kS * sizeof(core::Sample)
+                                        : kS * sizeof(core::CompactSample) +
+                                              (f == core::SampleFormat::kUnorm16 ? sizeof(core::BrickDecode) : 0);
+}
+
+/// Arena slots for `active` active bricks: room for half as many again (at least 256) of
+/// changed bricks before old snapshots held by someone force a copy into a new arena.
+std::size_t capacity_for(std::size_t active) {
+  return std::min(BrickStore::kMaxSlots, active + std::max<std::size_t>(active / 2, 256));
+}
+
+/// The pool memory shared by the snapshots of one LiveField (see live_field.h): a fixed
+/// number of slots of 729 samples, never reallocated. The sample memory is written only
+/// by update() (one thread) into slots no live snapshot uses; the bookkeeping of which
+/// slots are free is under `mu`, shared with the stores' deleters (any thread).
+struct Arena {
+  Arena(std::size_t slots, core::SampleFormat f) : capacity(slots), format(f), born(slots, 0) {
+    if (f == core::SampleFormat::kFp32) {
+      pool = std::make_shared<std::vector<core::Sample>>(slots * kS);
+      samples = pool->data();
+    } else {
+      compact = std::make_shared<std::vector<core::CompactSample>>(slots * kS);
+      codes = compact->data();
+      if (f == core::SampleFormat::kUnorm16) {
+        decode = std::make_shared<std::vector<core::BrickDecode>>(slots);
+        params = decode->data();
+      }
+    }
+    free_slots.reserve(slots);
+    for (std::size_t s = slots; s-- > 0;) free_slots.push_back(std::uint32_t(s));  // pop order 0, 1, ...
+  }
+
+  /// Takes `n` free slots into `out`; false (nothing taken) if fewer are free.
+  bool take(std::size_t n, std::vector<std::uint32_t>& out) {
+    std::lock_guard lock(mu);
+    if (free_slots.size() < n) return false;
+    out.assign(free_slots.end() - std::ptrdiff_t(n), free_slots.end());
+    free_slots.resize(free_slots.size() - n);
+    return true;
+  }
+  /// Slots taken but never published (update() failed).
+  void give_back(const std::vector<std::uint32_t>& slots) {
+    std::lock_guard lock(mu);
+    free_slots.insert(free_slots.end(), slots.begin(), slots.end());
+  }
+  /// A store of `version` is about to be published: it uses `born` for the first time and
+  /// no longer uses `retired` (slots of the previous store). Throws (bad_alloc) only before
+  /// changing anything.
+  void publish(std::uint64_t version, const std::vector<std::uint32_t>& born_slots,
+               const std::vector<std::uint32_t>& retired) {
+    std::lock_guard lock(mu);
+    live.insert(version);
+    for (std::uint32_t s : born_slots) born[s] = version;
+    for (std::uint32_t s : retired) retire_locked({s, born[s], version});
+  }
+  /// The store of `version` died (its deleter, any thread).
+  void release(std::uint64_t version) noexcept {
+    std::lock_guard lock(mu);
+    live.erase(version);
+    auto node = blocked.extract(version);
+    if (!node.empty())
+      for (const Retired& r : node.mapped()) retire_locked(r);
+  }
+  std::size_t used() const {
+    std::lock_guard lock(mu);
+    return capacity - free_slots.size();
+  }
+
+  const std::size_t capacity;
+  const core::SampleFormat format;
+  std::shared_ptr<std::vector<core::Sample>> pool;          ///< kFp32
+  std::shared_ptr<std::vector<core::CompactSample>> compact;  ///< kFp16 / kUnorm16
+  std::shared_ptr<std::vector<core::BrickDecode>> decode;   ///< kUnorm16
+  core::Sample* samples = nullptr;                          ///< writable views of the above
+  core::CompactSample* codes = nullptr;
+  core::BrickDecode* params = nullptr;
+
+ private:
+  /// A slot used by store versions [born, retired).
+  struct Retired {
+    std::uint32_t slot;
+    std::uint64_t born, retired;
+  };
+  /// Free `r` unless a live store of a version in [born, retired) uses it; then park it
+  /// under the oldest such version, to be looked at again when that store dies.
+  void retire_locked(const Retired& r) noexcept {
+    try {
+      const auto it = live.lower_bound(r.born);
+      if (it != live.end() && *it < r.retired)
+        blocked[*it].push_back(r);
+      else
+        free_slots.push_back(r.slot);  // capacity reserved: no allocation
+    } catch (...) {
+      // Out of memory while parking: the slot is lost to this arena (never reused, so
+      // never overwritten under a reader), which is safe.
+    }
+  }
+
+  mutable std::mutex mu;
+  std::vector<std::uint32_t> free_slots;
+  std::vector<std::uint64_t> born;  ///< per slot: the first store version that uses it
+  std::set<std::uint64_t> live;     ///< versions of the arena's stores alive now
+  std::map<std::uint64_t, std::vector<Retired>> blocked;
+};
+
+/// Deleter of a published store: tells its arena (armed after publication; unarmed it
+/// only deletes, for a store that was never published).
+struct StoreDeleter {
+  std::shared_ptr<Arena> arena;
+  std::uint64_t version = 0;
+  void operator()(const BrickStore* s) const noexcept {
+    if (arena) arena->release(version);
+    delete s;
+  }
+};
+
+std::uint32_t bits(float f) { return std::bit_cast<std::uint32_t>(f); }
+
+/// One brick whose published entry changes in this update.
+struct Change {
+  std::uint32_t id = 0;
+  bool active = false;
+  float tile = 0;           ///< uniform: the tile value
+  std::size_t scratch = 0;  ///< active: index of its samples in the update's scratch
+  std::uint32_t slot = 0;   ///< active: the arena slot it is written to
+};
+
+}  // namespace
+
+struct LiveField::Impl {
+  LiveFieldOptions opt;
+  core::Grid grid;
+  std::string path;
+  sparse::Plan plan;
+  std::array<int, 3> nb{0, 0, 0};
+  std::size_t total = 0;
+  std::vector<float> shadow;             ///< the raw voxels as of `cur`
+  sparse::RawRanges raw;                 ///< their per-brick ranges
+  std::vector<std::uint8_t> candidate;   ///< per brick: select() made it a candidate (as of `cur`)
+  std::vector<std::uint32_t> tile_owner; ///< per tile of cur's store: its brick
+  std::shared_ptr<Arena> arena;          ///< cur's arena
+  std::vector<std::weak_ptr<Arena>> old_arenas;
+  std::shared_ptr<const core::SampleField> cur;
+  std::uint64_t version = 0;  ///< cur's SampleField::version
+  // Per-update scratch, by generation (no clearing).
+  std::vector<std::uint32_t> work_mark, content_mark, dirty_mark;
+  std::uint32_t gen = 0;
+
+  void next_gen() {
+    if (++gen == 0) {
+      std::fill(work_mark.begin(), work_mark.end(), 0u);
+      std::fill(content_mark.begin(), content_mark.end(), 0u);
+      std::fill(dirty_mark.begin(), dirty_mark.end(), 0u);
+      gen = 1;
+    }
+  }
+
+  /// Refuses a sample value that the format cannot hold (as core::make_bricked_field does).
+  void check_storable(const core::Sample* s, std::uint32_t id) const {
+    if (opt.format == core::SampleFormat::kFp32) return;
+    for (std::size_t l = 0; l < kS; ++l)
+      if (const std::string why = core::detail::compact_refusal(s[l].value, opt.format); !why.empty())
+        throw std::invalid_argument("live field '" + path + "': brick " + std::to_string(id) + " sample " +
+                                    std::to_string(l) + " value = " + std::to_string(s[l].value) +
+                                    " cannot be stored as " + core::to_string(opt.format) + why + "; use fp32 samples");
+  }
+
+  /// Writes brick `id`'s 729 fp32 samples into `slot` of `a`, in the arena's format.
+  void write_slot(Arena& a, std::uint32_t slot, std::uint32_t id, const core::Sample* s) const {
+    if (a.format == core::SampleFormat::kFp32) {
+      std::memcpy(a.samples + std::size_t(slot) * kS, s, kS * sizeof(core::Sample));
+      return;
+    }
+    core::BrickDecode unused{};
+    core::detail::encode_brick(grid, core::brick_coords(id, nb), s, a.format, a.codes + std::size_t(slot) * kS,
+                               a.params ? a.params[slot] : unused);
+  }
+
+  /// Copies slot `from` of `src` to slot `to` of `dst` (same format).
+  static void copy_slot(const Arena& src, std::uint32_t from, Arena& dst, std::uint32_t to) {
+    if (src.format == core::SampleFormat::kFp32) {
+      std::memcpy(dst.samples + std::size_t(to) * kS, src.samples + std::size_t(from) * kS, kS * sizeof(core::Sample));
+      return;
+    }
+    std::memcpy(dst.codes + std::size_t(to) * kS, src.codes + std::size_t(from) * kS, kS * sizeof(core::CompactSample));
+    if (src.params) dst.params[to] = src.params[from];
+  }
+
+  /// The new samples `s` of brick `id` equal, bit for bit once stored, slot `slot` of `a`.
+  bool same_as_slot(const Arena& a, std::uint32_t slot, std::uint32_t id, const core::Sample* s) const {
+    if (a.format == core::SampleFormat::kFp32)
+      return std::memcmp(a.samples + std::size_t(slot) * kS, s, kS * sizeof(core::Sample)) == 0;
+    core::CompactSample enc[kS];
+    core::BrickDecode d{};
+    core::detail::encode_brick(grid, core::brick_coords(id, nb), s, a.format, enc, d);
+    if (std::memcmp(a.codes + std::size_t(slot) * kS, enc, sizeof enc) != 0) return false;
+    return !a.params || std::memcmp(&a.params[slot], &d, sizeof d) == 0;
+  }
+
+  /// A store over arena `a` with the given table and tiles, sealed.
+  std::unique_ptr<BrickStore> make_store(const Arena& a, std::vector<std::uint32_t> table,
+                                         std::vector<core::Sample> tiles) const {
+    auto st = std::make_unique<BrickStore>();
+    st->bricks = nb;
+    st->format = opt.format;
+    st->table = std::move(table);
+    st->tiles = std::move(tiles);
+    st->slot_capacity = a.capacity;
+    st->pool = a.pool;
+    st->compact = a.compact;
+    st->shared_decode = a.decode;
+    if (opt.format != core::SampleFormat::kFp32)
+      st->fp16_unscale = {float(1.0 / grid.spacing_m.x), float(1.0 / grid.spacing_m.y), float(1.0 / grid.spacing_m.z)};
+    if (!st->seal(grid.dims)) {  // a bug of this file: say which entry
+      std::string first = "none out of range";
+      for (std::size_t id = 0; id < st->table.size(); ++id) {
+        const std::uint32_t e = st->table[id];
+        if ((e & BrickStore::kUniform) ? (e & ~BrickStore::kUniform) >= st->tiles.size()
+                                       : (e % kS != 0 || e / kS >= a.capacity)) {
+          first = "brick " + std::to_string(id) + " entry " + std::to_string(e);
+          break;
+        }
+      }
+      throw std::logic_error("live field '" + path + "': the built store does not seal (internal error; table " +
+                             std::to_string(st->table.size()) + ", tiles " + std::to_string(st->tiles.size()) +
+                             ", arena slots " + std::to_string(a.capacity) + ", first bad entry: " + first + ")");
+    }
+    return st;
+  }
+
+  /// Publishes `store` (over `a`) as version `v`: registers it with the arena, whose slots
+  /// `born` it uses first and `retired` it no longer uses. Nothing after the arena's
+  /// publish can fail.
+  std::shared_ptr<const core::SampleField> publish(std::unique_ptr<BrickStore> store, const std::shared_ptr<Arena>& a,
+                                                   std::uint64_t v, const std::vector<std::uint32_t>& born,
+                                                   const std::vector<std::uint32_t>& retired) const {
+    std::shared_ptr<const BrickStore> sp(store.release(), StoreDeleter{});
+    auto field = std::make_shared<core::SampleField>();
+    field->grid = grid;
+    field->background = opt.background;
+    field->version = v;
+    field->bricks = sp;
+    a->publish(v, born, retired);
+    StoreDeleter* d = std::get_deleter<StoreDeleter>(sp);
+    d->arena = a;
+    d->version = v;
+    return field;
+  }
+
+  /// The first snapshot (version 1), everything computed: run_sparse_cpu's steps, the
+  /// active bricks written into a new arena.
+  void build(const Volume& vol);
+  /// The bricks whose content or selection the edit of `dirty` can change; updates `raw`
+  /// (old entries saved in `raw_undo`) and fills `changed` (dirty bricks whose bits changed).
+  void find_work(const Volume& vol, const std::vector<std::uint32_t>& dirty, std::vector<std::uint32_t>& work,
+                 std::vector<std::uint32_t>& changed, std::vector<std::pair<std::uint32_t, std::array<float, 3>>>& raw_undo);
+};
+
+void LiveField::Impl::build(const Volume& vol) {
+  raw.init(grid);
+  const std::size_t slice = std::size_t(grid.dims[0]) * std::size_t(grid.dims[1]);
+  for (int z = 0; z < grid.dims[2]; ++z) raw.add_slice(grid, z, vol.voxels.data() + std::size_t(z) * slice);
+  const sparse::Selection sel = sparse::select(raw, plan, opt.iso);
+  candidate.assign(total, 0);
+  for (std::uint32_t id : sel.candidates) candidate[id] = 1;
+  std::vector<float> tile(total, 0.f);
+  for (std::size_t id = 0; id < total; ++id)
+    if (!candidate[id] && !core::tile_value(sel.lo[id], sel.hi[id], opt.iso, opt.background, tile[id]))
+      throw std::logic_error("live field: brick " + std::to_string(id) + " straddles but is no candidate");
+  sparse::CandidateCpu cpu(vol, plan);
+  std::vector<core::Sample> samples;
+  std::vector<std::uint32_t> active;
+  for (std::uint32_t id : sel.candidates) {
+    const sparse::CandidateRange r = cpu.range(id);
+    if (!sparse::is_active(r, opt.iso, opt.background, tile[id])) continue;
+    samples.resize(samples.size() + kS);
+    cpu.samples(samples.data() + samples.size() - kS, opt.background);
+    check_storable(samples.data() + samples.size() - kS, id);
+    active.push_back(id);
+  }
+  auto a = std::make_shared<Arena>(capacity_for(active.size()), opt.format);
+  std::vector<std::uint32_t> slots;
+  if (!a->take(active.size(), slots)) throw std::logic_error("live field: arena smaller than its first snapshot");
+  std::vector<std::uint32_t> table(total);
+  std::vector<core::Sample> tiles;
+  tiles.reserve(total - active.size());
+  tile_owner.clear();
+  tile_owner.reserve(total);
+  for (std::size_t id = 0, k = 0; id < total; ++id) {
+    if (k < active.size() && active[k] == id) {
+      write_slot(*a, slots[k], std::uint32_t(id), samples.data() + k * kS);
+      table[id] = slots[k] * std::uint32_t(kS);
+      ++k;
+    } else {
+      table[id] = BrickStore::kUniform | std::uint32_t(tiles.size());
+      tiles.push_back({tile[id], 0.f, 0.f, 0.f});
+      tile_owner.push_back(std::uint32_t(id));
+    }
+  }
+  cur = publish(make_store(*a, std::move(table), std::move(tiles)), a, 1, slots, {});
+  arena = std::move(a);
+  version = 1;
+}
+
+void LiveField::Impl::find_work(const Volume& vol, const std::vector<std::uint32_t>& dirty,
+                                std::vector<std::uint32_t>& work, std::vector<std::uint32_t>& changed,
+                                std::vector<std::pair<std::uint32_t, std::array<float, 3>>>& raw_undo) {
+  const int nx = grid.dims[0], ny = grid.dims[1];
+  auto mark_box = [&](const int lo[3], const int hi[3], bool content) {
+    for (int z = std::max(lo[2], 0); z <= std::min(hi[2], nb[2] - 1); ++z)
+      for (int y = std::max(lo[1], 0); y <= std::min(hi[1], nb[1] - 1); ++y)
+        for (int x = std::max(lo[0], 0); x <= std::min(hi[0], nb[0] - 1); ++x) {
+          const std::uint32_t id = std::uint32_t((std::size_t(z) * std::size_t(nb[1]) + std::size_t(y)) * std::size_t(nb[0]) + std::size_t(x));
+          if (work_mark[id] != gen) {
+            work_mark[id] = gen;
+            work.push_back(id);
+          }
+          if (content) content_mark[id] = gen;
+        }
+  };
+  for (std::uint32_t d : dirty) {
+    if (dirty_mark[d] == gen) continue;  // duplicate
+    dirty_mark[d] = gen;
+    // The box of voxels whose bits changed (the shadow is the volume as of `cur`).
+    const auto b = core::brick_coords(d, nb);
+    int lo[3] = {1 << 30, 1 << 30, 1 << 30}, hi[3] = {-1, -1, -1};
+    const int x0 = 8 * b[0], x1 = std::min(x0 + 8, nx), y0 = 8 * b[1], y1 = std::min(y0 + 8, ny), z0 = 8 * b[2],
+              z1 = std::min(z0 + 8, grid.dims[2]);
+    for (int z = z0; z < z1; ++z)
+      for (int y = y0; y < y1; ++y) {
+        const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx);
+        const float* now = vol.voxels.data() + row;
+        const float* was = shadow.data() + row;
+        if (std::memcmp(now + x0, was + x0, std::size_t(x1 - x0) * sizeof(float)) == 0) continue;
+        for (int x = x0; x < x1; ++x)
+          if (bits(now[x]) != bits(was[x])) {
+            lo[0] = std::min(lo[0], x);
+            hi[0] = std::max(hi[0], x);
+          }
+        lo[1] = std::min(lo[1], y);
+        hi[1] = std::max(hi[1], y);
+        lo[2] = std::min(lo[2], z);
+        hi[2] = std::max(hi[2], z);
+      }
+    if (hi[0] < 0) continue;  // listed, but no bit changed
+    changed.push_back(d);
+    // Content: brick c reads raw voxels [8c - 1 - R, 8c + 9 + R] (exact range over the
+    // smoothed brick +- 1 voxel; samples up to the apron 8c + 8, whose gradient reads 8c + 9).
+    int clo[3], chi[3];
+    for (int a = 0; a < 3; ++a) {
+      const int r = plan.radius[std::size_t(a)];
+      clo[a] = floor_div(lo[a] - 9 - r + 7, 8);  // ceil((lo - 9 - R) / 8)
+      chi[a] = floor_div(hi[a] + 1 + r, 8);
+    }
+    mark_box(clo, chi, true);
+    // Selection: the raw range of d feeds the widened range of the bricks within reach.
+    const std::array<float, 3> old{raw.lo[d], raw.hi[d], raw.nan[d] ? 1.f : 0.f};
+    raw.set_brick(grid, vol.voxels.data(), d);
+    if (bits(raw.lo[d]) != bits(old[0]) || bits(raw.hi[d]) != bits(old[1]) || (raw.nan[d] != 0) != (old[2] != 0)) {
+      raw_undo.push_back({d, old});
+      int slo[3], shi[3];
+      for (int a = 0; a < 3; ++a) {
+        slo[a] = b[std::size_t(a)] - plan.reach[std::size_t(a)];
+        shi[a] = b[std::size_t(a)] + plan.reach[std::size_t(a)];
+      }
+      mark_box(slo, shi, false);
+    }
+  }
+}
+
+LiveField::LiveField(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+LiveField::~LiveField() = default;
+
+std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldOptions& options) {
+  const std::string why = sparse::validate(options.passes);
+  if (!why.empty()) throw std::invalid_argument("live field: " + why);
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    throw VolumeError(vol.path + ": live field: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
+                      std::to_string(vol.grid.dims[0]) + "x" + std::to_string(vol.grid.dims[1]) + "x" +
+                      std::to_string(vol.grid.dims[2]));
+  auto impl = std::make_unique<Impl>();
+  impl->opt = options;
+  impl->grid = vol.grid;
+  impl->path = vol.path;
+  impl->plan = sparse::make_plan(vol.grid, options.passes, vol.path);
+  impl->nb = core::brick_counts(vol.grid);
+  impl->total = std::size_t(impl->nb[0]) * std::size_t(impl->nb[1]) * std::size_t(impl->nb[2]);
+  impl->shadow = vol.voxels;
+  impl->work_mark.assign(impl->total, 0);
+  impl->content_mark.assign(impl->total, 0);
+  impl->dirty_mark.assign(impl->total, 0);
+  impl->build(vol);
+  return std::unique_ptr<LiveField>(new LiveField(std::move(impl)));
+}
+
+std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, const std::vector<std::uint32_t>& dirty,
+                                                           LiveUpdateStats* stats) {
+  const auto t0 = Clock::now();
+  Impl& m = *impl_;
+  for (std::uint32_t id : dirty)
+    if (id >= m.total)
+      throw std::out_of_range("live field: dirty brick id " + std::to_string(id) + " is out of range (" +
+                              std::to_string(m.total) + " bricks)");
+  if (vol.grid.dims != m.grid.dims || vol.voxels.size() != m.shadow.size())
+    throw std::invalid_argument("live field: volume '" + vol.path + "' has dims " + std::to_string(vol.grid.dims[0]) +
+                                "x" + std::to_string(vol.grid.dims[1]) + "x" + std::to_string(vol.grid.dims[2]) +
+                                " and " + std::to_string(vol.voxels.size()) + " voxels; the live field holds " +
+                                std::to_string(m.grid.dims[0]) + "x" + std::to_string(m.grid.dims[1]) + "x" +
+                                std::to_string(m.grid.dims[2]));
+  LiveUpdateStats st;
+  st.dirty = dirty.size();
+  const BrickStore& old = *m.cur->bricks;
+  const core::SampleFormat fmt = m.opt.format;
+  m.next_gen();
+
+  std::vector<std::uint32_t> work, changed, taken;
+  std::vector<std::pair<std::uint32_t, std::array<float, 3>>> raw_undo;
+  std::shared_ptr<Arena> fresh;  // a new arena when the current one is full
+  try {
+    // 1. What the edit can change, then the new state of those bricks.
+    m.find_work(vol, dirty, work, changed, raw_undo);
+    std::sort(work.begin(), work.end());
+    std::vector<Change> changes;
+    std::vector<std::pair<std::uint32_t, std::uint8_t>> cand_changes;
+    std::vector<core::Sample> scratch;
+    std::unique_ptr<sparse::CandidateCpu> cpu;
+    for (std::uint32_t id : work) {
+      const sparse::BrickSelection sel = sparse::select_brick(m.raw, m.plan, m.opt.iso, id);
+      if (std::uint8_t(sel.candidate) != m.candidate[id]) cand_changes.push_back({id, std::uint8_t(sel.candidate)});
+      Change c;
+      c.id = id;
+      if (!sel.candidate) {
+        if (!core::tile_value(sel.lo, sel.hi, m.opt.iso, m.opt.background, c.tile))
+          throw std::logic_error("live field: brick " + std::to_string(id) + " straddles but is no candidate");
+      } else if (m.content_mark[id] != m.gen && m.candidate[id]) {
+        continue;  // still a candidate, nothing it reads changed: as before
+      } else {
+        if (!cpu) cpu = std::make_unique<sparse::CandidateCpu>(vol, m.plan);
+        const sparse::CandidateRange r = cpu->range(id);
+        ++st.recomputed;
+        if (sparse::is_active(r, m.opt.iso, m.opt.background, c.tile)) {
+          c.active = true;
+          c.scratch = scratch.size();
+          scratch.resize(scratch.size() + kS);
+          cpu->samples(scratch.data() + c.scratch, m.opt.background);
+          m.check_storable(scratch.data() + c.scratch, id);
+        }
+      }
+      // Keep what did not change: the same tile bits, or the same stored samples.
+      const std::uint32_t e = old.table[id];
+      const bool was_uniform = (e & BrickStore::kUniform) != 0;
+      if (!c.active && was_uniform && bits(old.tiles[e & ~BrickStore::kUniform].value) == bits(c.tile)) continue;
+      if (c.active && !was_uniform &&
+          m.same_as_slot(*m.arena, BrickStore::slot_of(e), id, scratch.data() + c.scratch))
+        continue;
+      changes.push_back(c);
+    }
+    const auto t1 = Clock::now();
+    st.recompute_ms = ms_between(t0, t1);
+
+    // 2. Slots for the changed active bricks; a new arena if the current one is full.
+    std::size_t need = 0, activated = 0, deactivated = 0;
+    for (const Change& c : changes) {
+      need += c.active;
+      const bool was_uniform = (old.table[c.id] & BrickStore::kUniform) != 0;
+      activated += c.active && was_uniform;
+      deactivated += !c.active && !was_uniform;
+    }
+    std::vector<std::uint32_t> table = old.table;
+    std::vector<core::Sample> tiles = old.tiles;
+    std::vector<std::uint32_t> owner = m.tile_owner;
+    std::vector<std::uint32_t> born;
+    Arena* target = m.arena.get();
+    if (!m.arena->take(need, taken)) {
+      // Old snapshots hold the free slots: copy the bricks that stay into a new arena.
+      const std::size_t active_new = old.active_bricks() + activated - deactivated;
+      fresh = std::make_shared<Arena>(capacity_for(active_new), fmt);
+      std::vector<std::uint8_t> moving(m.total, 0);
+      for (const Change& c : changes) moving[c.id] = 1;
+      std::vector<std::uint32_t> keep;
+      for (std::size_t id = 0; id < m.total; ++id)
+        if (!(table[id] & BrickStore::kUniform) && !moving[id]) keep.push_back(std::uint32_t(id));
+      if (!fresh->take(keep.size(), born)) throw std::logic_error("live field: new arena too small");
+      for (std::size_t k = 0; k < keep.size(); ++k) {
+        Impl::copy_slot(*m.arena, BrickStore::slot_of(table[keep[k]]), *fresh, born[k]);
+        table[keep[k]] = born[k] * std::uint32_t(kS);
+      }
+      if (!fresh->take(need, taken)) throw std::logic_error("live field: new arena too small");
+      target = fresh.get();
+      st.new_bytes += std::uint64_t(keep.size()) * slot_bytes(fmt);
+    }
+
+    // 3. Write the new slots (no live snapshot uses them) and patch the table and tiles.
+    std::vector<std::uint32_t> retired;
+    std::size_t k = 0;
+    for (Change& c : changes) {
+      const std::uint32_t e = table[c.id];
+      const bool was_uniform = (e & BrickStore::kUniform) != 0;
+      if (!was_uniform && !fresh) retired.push_back(BrickStore::slot_of(e));
+      if (c.active) {
+        c.slot = taken[k++];
+        m.write_slot(*target, c.slot, c.id, scratch.data() + c.scratch);
+        if (was_uniform) {  // drop its tile: the last tile takes its index
+          const std::uint32_t t = e & ~BrickStore::kUniform;
+          tiles[t] = tiles.back();
+          owner[t] = owner.back();
+          table[owner[t]] = BrickStore::kUniform | t;
+          tiles.pop_back();
+          owner.pop_back();
+        }
+        table[c.id] = c.slot * std::uint32_t(kS);
+      } else if (was_uniform) {
+        tiles[e & ~BrickStore::kUniform] = {c.tile, 0.f, 0.f, 0.f};
+      } else {
+        table[c.id] = BrickStore::kUniform | std::uint32_t(tiles.size());
+        tiles.push_back({c.tile, 0.f, 0.f, 0.f});
+        owner.push_back(c.id);
+      }
+    }
+    born.insert(born.end(), taken.begin(), taken.end());
+    st.new_bytes += std::uint64_t(need) * slot_bytes(fmt);
+    st.activated = activated;
+    st.deactivated = deactivated;
+
+    // 4. Publish: a new store when an entry changed, else the same store under a new version.
+    const std::uint64_t v = m.version + 1;
+    if (fresh) m.old_arenas.reserve(m.old_arenas.size() + 1);  // no allocation after publishing
+    std::shared_ptr<const core::SampleField> next;
+    if (changes.empty() && !fresh) {
+      auto f = std::make_shared<core::SampleField>(*m.cur);
+      f->version = v;
+      next = std::move(f);
+    } else {
+      const std::shared_ptr<Arena>& a = fresh ? fresh : m.arena;
+      next = m.publish(m.make_store(*a, std::move(table), std::move(tiles)), a, v, born, retired);
+    }
+    // Committed: nothing below throws.
+    taken.clear();
+    raw_undo.clear();
+    const int nx = m.grid.dims[0], ny = m.grid.dims[1];
+    for (std::uint32_t d : changed) {  // the shadow follows the published volume
+      const auto b = core::brick_coords(d, m.nb);
+      const int x0 = 8 * b[0], n = std::min(x0 + 8, nx) - x0;
+      for (int z = 8 * b[2]; z < std::min(8 * b[2] + 8, m.grid.dims[2]); ++z)
+        for (int y = 8 * b[1]; y < std::min(8 * b[1] + 8, ny); ++y) {
+          const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + std::size_t(x0);
+          std::memcpy(m.shadow.data() + row, vol.voxels.data() + row, std::size_t(n) * sizeof(float));
+        }
+    }
+    for (const auto& [id, flag] : cand_changes) m.candidate[id] = flag;
+    if (next->bricks != m.cur->bricks) m.tile_owner.swap(owner);
+    if (fresh) {
+      m.old_arenas.push_back(m.arena);
+      m.arena = fresh;
+      std::erase_if(m.old_arenas, [](const std::weak_ptr<Arena>& w) { return w.expired(); });
+    }
+    m.cur = std::move(next);
+    m.version = v;
+    st.active = m.cur->bricks->active_bricks();
+    st.shared = fresh ? 0 : st.active - need;
+    st.version = v;
+    const auto t2 = Clock::now();
+    st.publish_ms = ms_between(t1, t2);
+    st.total_ms = ms_between(t0, t2);
+  } catch (...) {
+    // Nothing was published: the raw ranges and the slots go back as they were.
+    for (auto it = raw_undo.rbegin(); it != raw_undo.rend(); ++it) {
+      m.raw.lo[it->first] = it->second[0];
+      m.raw.hi[it->first] = it->second[1];
+      m.raw.nan[it->first] = it->second[2] != 0.f ? 1 : 0;
+    }
+    if (!taken.empty() && !fresh) m.arena->give_back(taken);
+    throw;
+  }
+  if (stats) *stats = st;
+  return m.cur;
+}
+
+std::shared_ptr<const core::SampleField> LiveField::current() const { return impl_->cur; }
+const LiveFieldOptions& LiveField::options() const { return impl_->opt; }
+
+std::uint64_t LiveField::pool_bytes() const {
+  std::uint64_t slots = impl_->arena->used();
+  for (const auto& w : impl_->old_arenas)
+    if (auto a = w.lock()) slots += a->used();
+  return slots * slot_bytes(impl_->opt.format);
+}
+
+std::uint64_t LiveField::arena_bytes() const {
+  std::uint64_t slots = impl_->arena->capacity;
+  for (const auto& w : impl_->old_arenas)
+    if (auto a = w.lock()) slots += a->capacity;
+  return slots * slot_bytes(impl_->opt.format);
+}
+
+}  // namespace isotouch::session

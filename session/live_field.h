@@ -1,0 +1,117 @@
+// live_field.h - the published snapshot of a volume that is being edited.
+// This header is the contract that the scene runner
+// (session/edit_session.*), `isotouch bench edit` and `isotouch replay` code against; the owner
+// may add members but keeps these names and meanings.
+//
+// After an edit changed the raw voxels of some bricks (Sculptor returns their ids),
+// update() recomputes the scene's passes (gradient, Gaussian, closing: the sparse chain's
+// pass list, engine/sparse_chain.h) only where the published samples can change - the
+// dirty bricks widened by the stencil's reach plus the gradient and the 1-voxel apron -
+// re-decides which of those bricks are active or uniform (the sparse chain's rule:
+// core::bricked_input_from_dense / sparse::is_active), and publishes a new bricked
+// core::SampleField whose unchanged bricks are SHARED with the previous snapshot (their
+// samples are not copied: same pool memory), while the previous snapshot stays valid and
+// unchanged for as long as someone (the servo) holds it.
+//
+// Truth: every snapshot update() returns reads (through core::FieldView) exactly like
+// run_sparse_cpu() on the edited volume with the same passes, isosurface, background and
+// format (same active set, same tiles, samples bit for bit).
+//
+// How (live_field.cpp):
+// - What an edit can change. The live field keeps a copy of the raw voxels as of its newest
+//   snapshot; update() compares each dirty brick with it and takes the box of voxels whose
+//   bits changed. Brick b's published content (exact range over the smoothed brick +- 1
+//   voxel, samples of voxels 8b .. 8b + 8 with the gradient reading one further) reads raw
+//   voxels [8b - 1 - R, 8b + 9 + R] per axis (R: the filters' total radius, sparse::Plan),
+//   so the changed box [x0, x1] reaches bricks ceil((x0 - 9 - R) / 8) .. floor((x1 + 1 + R)
+//   / 8) ("content" bricks). A dirty brick whose raw range changed also changes the
+//   candidate selection of the bricks within the plan's reach (sparse::select): those are
+//   re-selected, and recomputed only if they turn candidate. Every other brick keeps its
+//   table entry. Recomputed bricks run run_sparse_cpu's own per-brick code
+//   (sparse::CandidateCpu, sparse::select_brick): bit for bit the full run (and the GPU).
+// - Sharing. All snapshots of a LiveField keep their active bricks in one fixed-capacity
+//   arena (BrickStore::slot_capacity; never reallocated, so table entries and the servo's
+//   pool pointer stay valid); a snapshot has its own table and tiles (4 B per brick + 16 B
+//   per uniform brick). A recomputed brick whose new samples equal its old slot's bits
+//   keeps the slot; a changed one gets a free slot, written before the snapshot is
+//   published, while no live snapshot uses that slot (the servo may read the previous
+//   snapshot meanwhile: nothing it reads is written). A slot is in use by the contiguous
+//   versions [born, retired); it is freed once no store of those versions is alive (the
+//   stores' shared_ptr deleter, under the arena's mutex, never on a read path). When the
+//   free slots run out (old snapshots held), the current bricks are copied into a new arena
+//   (the old one lives until its last snapshot dies).
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "isosurface.h"
+#include "passes.h"
+#include "sample_field.h"
+#include "volume.h"
+
+namespace isotouch::engine {
+class VulkanContext;
+}
+
+namespace isotouch::session {
+
+struct LiveFieldOptions {
+  std::vector<engine::PassDesc> passes{engine::PassDesc{}};  ///< filters then gradient (sparse_chain.h's rule); default: gradient
+  core::Isosurface iso;                      ///< selects the active bricks
+  float background = 0.f;                    ///< the published background (outside the grid)
+  core::SampleFormat format = core::SampleFormat::kFp32;
+};
+
+/// What one update() did.
+struct LiveUpdateStats {
+  std::size_t dirty = 0;        ///< dirty bricks given
+  std::size_t recomputed = 0;   ///< bricks whose range / samples were recomputed (dirty + reach)
+  std::size_t activated = 0;    ///< bricks uniform before, active now
+  std::size_t deactivated = 0;  ///< bricks active before, uniform now
+  std::size_t active = 0;       ///< active bricks in the new snapshot
+  std::size_t shared = 0;       ///< active bricks whose samples are shared with the previous snapshot
+  std::uint64_t new_bytes = 0;  ///< sample bytes written for this snapshot (the rest is shared)
+  double recompute_ms = 0;      ///< passes on the recomputed bricks [ms]
+  double publish_ms = 0;        ///< building the new snapshot (table, tiles, pool slots) [ms]
+  double total_ms = 0;          ///< update(), everything included [ms]
+  std::uint64_t version = 0;    ///< the new snapshot's SampleField::version
+};
+
+/// The edited volume's published snapshot, updated brick by brick.
+/// Threads: create / update / current / pool_bytes / arena_bytes from one (the editing)
+/// thread; the snapshots may be read, copied and released on any thread meanwhile.
+/// Memory: a copy of the raw voxels (to find the voxels an edit changed) + the arena.
+class LiveField {
+ public:
+  /// Builds the first snapshot of `vol` (version 1) - the same as run_sparse_cpu.
+  /// @throws VolumeError naming the volume, or std::invalid_argument naming the pass, if
+  ///         the pass list does not suit the sparse chain.
+  static std::unique_ptr<LiveField> create(const engine::Volume& vol, const LiveFieldOptions& options);
+  ~LiveField();
+  LiveField(const LiveField&) = delete;
+  LiveField& operator=(const LiveField&) = delete;
+
+  /// `vol` is the volume create() saw, edited in bricks `dirty` (ids as in
+  /// core/brick_field.h, any order, duplicates allowed; ids out of range throw
+  /// std::out_of_range naming the id). Returns the new snapshot (version + 1), which
+  /// shares every brick the edit could not change with the previous one.
+  std::shared_ptr<const core::SampleField> update(const engine::Volume& vol, const std::vector<std::uint32_t>& dirty,
+                                                  LiveUpdateStats* stats = nullptr);
+  /// The newest snapshot.
+  std::shared_ptr<const core::SampleField> current() const;
+  const LiveFieldOptions& options() const;
+  /// Bytes of sample memory held for all snapshots alive now (pool slots in use: 729 samples
+  /// of 16 B (fp32) or 8 B (fp16, unorm16), + 32 B of decode parameters for unorm16, per slot).
+  std::uint64_t pool_bytes() const;
+  /// Bytes of the arenas alive now (every slot, used or free), same units as pool_bytes().
+  std::uint64_t arena_bytes() const;
+
+ private:
+  struct Impl;
+  explicit LiveField(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace isotouch::session

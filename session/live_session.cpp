@@ -1,0 +1,354 @@
+#include "live_session.h"
+
+#include <fcntl.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+#include "output_file.h"
+
+namespace isotouch::session {
+namespace {
+
+std::int64_t now_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+// observe()'s seqlock stores Observed as relaxed atomic words (no plain data race).
+constexpr std::size_t kObsWords = (sizeof(Observed) + 7) / 8;
+static_assert(std::is_trivially_copyable_v<Observed>);
+
+std::string os_error(const std::string& path, const char* what) {
+  return path + ": " + what + ": " + std::strerror(errno);
+}
+
+void write_all(int fd, const std::string& text, const std::string& path) {
+  const char* p = text.data();
+  std::size_t left = text.size();
+  while (left > 0) {
+    const ssize_t n = ::write(fd, p, left);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw io::RecordingError(os_error(path, "write failed"));
+    p += n;
+    left -= std::size_t(n);
+  }
+}
+
+io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
+  io::RecordedTick t;
+  t.t_s = t_s;
+  t.dt_s = r.dt_s;
+  t.hip_m = r.hip_m;
+  t.button = (r.buttons & 1u) != 0;
+  t.force_n = r.out.force_n;
+  t.vhip_m = r.out.vhip_m;
+  t.version = r.version;
+  t.fault = r.out.fault;
+  return t;
+}
+
+}  // namespace
+
+// The observed tick as relaxed atomic words, written under obs_seq_ (a seqlock).
+struct LiveSessionObs {
+  std::array<std::atomic<std::uint64_t>, kObsWords> words{};
+};
+
+LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+                         servo::HapticDeviceIO& device, LiveSessionConfig config)
+    : edits_(edits),
+      buffer_(buffer),
+      cfg_(std::move(config)),
+      servo_(buffer, renderer, device, [this] {
+        servo::ServoThreadConfig c = cfg_.servo;
+        c.observer = this;
+        return c;
+      }()),
+      ticks_(std::size_t(std::max(2.0, std::ceil(std::clamp(cfg_.servo.rate_hz, 1.0, 1e5) * 2.0)))),
+      servo_edits_(cfg_.edit_queue),
+      api_edits_(cfg_.edit_queue) {
+  if (!(cfg_.servo.rate_hz >= 1 && cfg_.servo.rate_hz <= 1e5))
+    throw std::invalid_argument("live session: servo rate " + std::to_string(cfg_.servo.rate_hz) + " Hz is not in [1, 100000]");
+  if (!(cfg_.flush_interval_s > 0 && cfg_.flush_interval_s <= 1.0))
+    throw std::invalid_argument("live session: flush interval " + std::to_string(cfg_.flush_interval_s) +
+                                " s is not in (0, 1]");
+  if (cfg_.drill && cfg_.drill->every_ticks < 1)
+    throw std::invalid_argument("live session: drill every_ticks must be >= 1");
+  seen_size_ = 1u << 16;
+  seen_ns_ = std::make_unique<std::atomic<std::int64_t>[]>(seen_size_);
+  for (std::size_t i = 0; i < seen_size_; ++i) seen_ns_[i].store(-1, std::memory_order_relaxed);
+  obs_store_ = std::make_unique<LiveSessionObs>();
+  if (!cfg_.record_path.empty()) {
+    cfg_.record_header.format_version = 3;
+    cfg_.record_header.ticks.clear();
+    cfg_.record_header.edits.clear();
+    part_path_ = cfg_.record_path + ".part";
+    // Refuse what cannot take a recording before anything runs (a directory, a socket...).
+    try {
+      io::classify_output(cfg_.record_path);
+    } catch (const io::OutputError& e) {
+      throw io::RecordingError(e.what());
+    }
+    fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd_ < 0) throw io::RecordingError(os_error(part_path_, "cannot create the recording"));
+    try {
+      write_all(fd_, io::recording_header_line(cfg_.record_header, cfg_.record_path), part_path_);
+      if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
+    } catch (...) {
+      ::close(fd_);
+      ::unlink(part_path_.c_str());
+      throw;
+    }
+  }
+}
+
+LiveSession::~LiveSession() {
+  try {
+    stop();
+  } catch (...) {
+    // The destructor cannot report; stop() called explicitly does.
+  }
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::string LiveSession::start() {
+  if (running_.exchange(true)) return "";
+  start_ns_ = now_ns();
+  stop_edits_.store(false);
+  stop_recorder_.store(false);
+  if (fd_ >= 0) record_thread_ = std::thread([this] { record_loop(); });
+  edit_thread_ = std::thread([this] { edit_loop(); });
+  return servo_.start();
+}
+
+double LiveSession::elapsed_s() const { return double(now_ns() - start_ns_) * 1e-9; }
+
+bool LiveSession::submit(const EditEvent& e) {
+  requested_.fetch_add(1, std::memory_order_relaxed);
+  if (api_edits_.push(Request{e, now_ns()})) return true;
+  dropped_edits_.fetch_add(1, std::memory_order_relaxed);
+  return false;
+}
+
+// ---------------------------------------------------------------- servo thread
+
+void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
+  Observed o;
+  o.tick = r.k;
+  o.hip_m = r.hip_m;
+  o.vhip_m = r.out.vhip_m;
+  o.force_n = r.out.force_n;
+  o.plane = r.out.plane;
+  o.contact = r.out.contact;
+  o.version = r.version;
+  std::uint64_t w[kObsWords] = {};
+  std::memcpy(w, &o, sizeof o);
+  auto& words = obs_store_->words;
+  const std::uint64_t s = obs_seq_.load(std::memory_order_relaxed);
+  obs_seq_.store(s + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  for (std::size_t i = 0; i < kObsWords; ++i) words[i].store(w[i], std::memory_order_relaxed);
+  obs_seq_.store(s + 2, std::memory_order_release);
+}
+
+Observed LiveSession::observe() const {
+  const auto& words = obs_store_->words;
+  std::uint64_t w[kObsWords];
+  for (;;) {
+    const std::uint64_t s0 = obs_seq_.load(std::memory_order_acquire);
+    if (s0 & 1) continue;
+    for (std::size_t i = 0; i < kObsWords; ++i) w[i] = words[i].load(std::memory_order_relaxed);
+    std::atomic_thread_fence(std::memory_order_acquire);
+    if (obs_seq_.load(std::memory_order_relaxed) == s0) break;
+  }
+  Observed o;
+  if (obs_seq_.load(std::memory_order_relaxed) == 0) return o;
+  std::memcpy(&o, w, sizeof o);
+  return o;
+}
+
+void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
+  if (r.version != last_version_) {
+    last_version_ = r.version;
+    std::int64_t expected = -1;
+    seen_ns_[r.version % seen_size_].compare_exchange_strong(expected, r.t_ns, std::memory_order_release);
+  }
+  if (fd_ >= 0 && !ticks_.push(r)) dropped_ticks_.fetch_add(1, std::memory_order_relaxed);
+  publish_observed(r);
+  if (!cfg_.drill) return;
+  // The button drill at the VHIP (see ButtonDrill).
+  const bool down = (r.buttons & 1u) != 0;
+  const double t = double(r.t_ns - start_ns_) * 1e-9;
+  auto ask = [&](EditEvent::Kind kind, const Brush& b) {
+    EditEvent e;
+    e.kind = kind;
+    e.tick = r.k;
+    e.t_s = t;
+    e.brush = b;
+    requested_.fetch_add(1, std::memory_order_relaxed);
+    if (!servo_edits_.push(Request{e, r.t_ns})) dropped_edits_.fetch_add(1, std::memory_order_relaxed);
+  };
+  if (down && !button_) {
+    press_tick_ = r.k;
+    ask(EditEvent::Kind::kBeginStroke, {});
+  }
+  if (!down && button_) ask(EditEvent::Kind::kEndStroke, {});
+  button_ = down;
+  if (down && !r.paused && r.out.contact && r.out.penetration_m > 0 && (r.k - press_tick_) % cfg_.drill->every_ticks == 0) {
+    Brush b = cfg_.drill->brush;
+    b.centre_m = r.out.vhip_m;
+    b.force_n = core::norm(r.out.force_n);
+    ask(EditEvent::Kind::kBrush, b);
+  }
+}
+
+// ---------------------------------------------------------------- edit thread
+
+void LiveSession::edit_loop() {
+  Request q;
+  while (!stop_edits_.load(std::memory_order_acquire)) {
+    bool any = false;
+    for (servo::SpscRing<Request>* ring : {&servo_edits_, &api_edits_}) {
+      while (!stop_edits_.load(std::memory_order_relaxed) && ring->pop(q)) {
+        any = true;
+        // The tick after which it is applied: ticks that start from now on may read it.
+        q.event.tick = servo_.ticks();
+        if (ring == &api_edits_) q.event.t_s = double(q.asked_ns - start_ns_) * 1e-9;
+        try {
+          const EditOutcome out = edits_.apply(q.event, &buffer_);
+          std::lock_guard lock(edits_mu_);
+          ++applied_;
+          applied_pending_.push_back(q.event);
+          if (out.published) {
+            ++publications_;
+            published_.emplace_back(edits_.current()->version, q.asked_ns);
+          }
+        } catch (const std::exception&) {
+          std::lock_guard lock(edits_mu_);
+          ++refused_;
+        }
+      }
+    }
+    if (!any) {
+      const timespec ts{0, 200000};  // 0.2 ms: the edit thread is not real time
+      nanosleep(&ts, nullptr);
+    }
+  }
+}
+
+// ---------------------------------------------------------------- recorder thread
+
+void LiveSession::record_chunk(bool final) {
+  std::string text;
+  std::vector<EditEvent> edits;
+  {
+    std::lock_guard lock(edits_mu_);
+    edits.swap(applied_pending_);
+  }
+  // Ticks first: an edit's tick count never exceeds the ticks pushed before it was taken.
+  servo::TickRecord r;
+  while (ticks_.pop(r)) {
+    // t: the session's servo clock, strictly ascending (two ticks never share a reading,
+    // but a recording must not depend on that).
+    double t = double(r.t_ns - start_ns_) * 1e-9;
+    if (recorded_ticks_ > 0 && !(t > last_t_)) t = std::nextafter(last_t_, INFINITY);
+    last_t_ = t;
+    text += io::recording_tick_line(recorded_ticks_, recorded(r, t), 3, cfg_.record_path);
+    ++recorded_ticks_;
+  }
+  for (const EditEvent& e : edits) {
+    text += io::recording_edit_line(e, cfg_.record_path);
+    ++recorded_edits_;
+  }
+  if (final) text += io::recording_end_line(std::size_t(recorded_ticks_), std::size_t(recorded_edits_));
+  if (!text.empty()) write_all(fd_, text, part_path_);
+  if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
+}
+
+void LiveSession::record_loop() {
+  const auto interval = std::chrono::duration<double>(cfg_.flush_interval_s);
+  auto next = std::chrono::steady_clock::now() + interval;
+  while (!stop_recorder_.load(std::memory_order_acquire)) {
+    const timespec ts{0, 1000000};
+    nanosleep(&ts, nullptr);
+    if (std::chrono::steady_clock::now() < next) continue;
+    next += interval;
+    if (!record_error_.empty()) continue;
+    try {
+      record_chunk(false);
+    } catch (const std::exception& e) {
+      record_error_ = e.what();
+    }
+  }
+}
+
+// ---------------------------------------------------------------- stop
+
+void LiveSession::stop() {
+  if (!running_.load() && fd_ >= 0) {  // never started: no recording to keep
+    ::close(fd_);
+    fd_ = -1;
+    ::unlink(part_path_.c_str());
+    return;
+  }
+  if (!running_.load() || stopped_) return;
+  stopped_ = true;
+  servo_.stop();  // the device's last force: an exact zero
+  stop_edits_.store(true, std::memory_order_release);
+  if (edit_thread_.joinable()) edit_thread_.join();
+  Request q;
+  while (servo_edits_.pop(q) || api_edits_.pop(q)) dropped_edits_.fetch_add(1, std::memory_order_relaxed);
+  stop_recorder_.store(true, std::memory_order_release);
+  if (record_thread_.joinable()) record_thread_.join();
+  if (fd_ < 0) return;
+  if (record_error_.empty()) {
+    try {
+      if (dropped_ticks_.load() > 0)
+        throw io::RecordingError(part_path_ + ": " + std::to_string(dropped_ticks_.load()) +
+                                 " ticks were not recorded (the recorder fell behind): the recording is incomplete");
+      record_chunk(true);
+    } catch (const std::exception& e) {
+      record_error_ = e.what();
+    }
+  }
+  ::close(fd_);
+  fd_ = -1;
+  if (!record_error_.empty()) throw io::RecordingError(record_error_ + " (what was written is in " + part_path_ + ")");
+  try {
+    io::place_output(part_path_, cfg_.record_path);
+  } catch (const io::OutputError& e) {
+    record_error_ = e.what();
+    throw io::RecordingError(record_error_);
+  }
+}
+
+LiveStats LiveSession::stats() const {
+  LiveStats s;
+  s.ticks = servo_.ticks();
+  s.missed_deadlines = servo_.missed_deadlines();
+  s.faults = servo_.faults();
+  s.edits_requested = requested_.load();
+  s.edits_dropped = dropped_edits_.load();
+  s.ticks_not_recorded = dropped_ticks_.load();
+  std::lock_guard lock(edits_mu_);
+  s.edits_applied = applied_;
+  s.edits_refused = refused_;
+  s.publications = publications_;
+  for (const auto& [version, asked] : published_) {
+    const std::int64_t seen = seen_ns_[version % seen_size_].load(std::memory_order_acquire);
+    if (seen >= 0 && seen >= asked) s.edit_to_haptics_ms.push_back(double(seen - asked) * 1e-6);
+  }
+  s.record_error = record_error_;
+  return s;
+}
+
+}  // namespace isotouch::session

@@ -1,0 +1,161 @@
+// live_session.h - a sculpting session in real time: the servo thread, an edit thread and
+// a streaming recorder around one EditSession.
+//
+//   device --read--> ServoThread (SCHED_FIFO) --write--> device
+//                      |  TickObserver, inside the tick (no allocation, lock or syscall):
+//                      |   - the tick record     -> SpscRing<TickRecord> -> recorder thread
+//                      |   - the button drill    -> SpscRing<EditEvent>  -> edit thread
+//                      |   - latest VHIP/force   -> seqlock              -> observe()
+//   submit() (UI/API) ----------------------------> SpscRing<EditEvent>  -> edit thread
+//   edit thread: EditSession::apply (GPU or CPU brushes, live field) -> TripleBuffer::publish
+//                -> the servo's next acquire(); each applied edit -> recorder thread
+//   recorder thread: every flush interval, the ticks and edits so far as JSON lines
+//                (io/record.h, format 3) appended to FILE.part and fdatasync'ed; stop()
+//                writes the end record and renames FILE.part to FILE.
+//
+// Replay (`isotouch replay FILE`): each tick reads the snapshot version it read live, with
+// the dt it measured; edits are applied in the recorded order. A SIGKILLed session leaves
+// FILE.part, readable up to its last chunk (load_recording(..., allow_incomplete)).
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "edit_session.h"
+#include "record.h"
+#include "renderer.h"
+#include "servo_thread.h"
+#include "spsc_ring.h"
+
+namespace isotouch::session {
+
+struct LiveSessionObs;
+
+/// The button drill: while button 0 is down and the probe is in contact (a plane holds the
+/// HIP), every `every_ticks` ticks a brush is applied at the VHIP with the force the user
+/// applies; a press opens a stroke (one undo step), a release closes it.
+struct ButtonDrill {
+  Brush brush;          ///< the template: centre and force_n are set per application
+  long every_ticks = 1;
+};
+
+struct LiveSessionConfig {
+  servo::ServoThreadConfig servo;  ///< rate, real-time setup, world_T_device (observer: set by the session)
+  std::optional<ButtonDrill> drill;
+  /// "" = no recording. Else streamed to record_path + ".part" and renamed at stop().
+  std::string record_path;
+  io::Recording record_header;     ///< scene path and text, rate, volume CRC (format set to 3)
+  double flush_interval_s = 0.1;   ///< the recorder writes and fdatasyncs a chunk this often
+  std::size_t edit_queue = 4096;   ///< requests each edit queue holds
+};
+
+/// What a frame loop reads without locks (a consistent copy of one tick).
+struct Observed {
+  long tick = -1;             ///< -1: no tick yet
+  core::Vec3 hip_m, vhip_m, force_n;
+  servo::VirtualPlane plane;
+  bool contact = false;
+  std::uint64_t version = 0;  ///< snapshot version that tick read
+};
+
+/// Counters of a running or stopped session.
+struct LiveStats {
+  long ticks = 0, missed_deadlines = 0, faults = 0;
+  long edits_requested = 0, edits_applied = 0, edits_refused = 0;
+  long edits_dropped = 0;     ///< the edit queue was full (servo side or submit())
+  long ticks_not_recorded = 0;  ///< the recorder's ring was full (recording incomplete)
+  long publications = 0;
+  /// Per published edit: from the start of the tick that asked for it (servo side) or the
+  /// submit() call (API) to the start of the first tick that read its snapshot [ms].
+  std::vector<double> edit_to_haptics_ms;
+  std::string setup_note;     ///< what the system refused at start (SCHED_FIFO, pinning, locking)
+  std::string record_error;   ///< "" or why the recording failed
+};
+
+class LiveSession final : private servo::TickObserver {
+ public:
+  /// `edits` holds the volume and publishes into `buffer` (its first snapshot already
+  /// published); `renderer` and `device` are used by the servo thread only. None owned.
+  /// @throws std::invalid_argument on a bad config (rate, flush interval), io::RecordingError
+  ///         if the recording cannot be created (names the file).
+  LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+              servo::HapticDeviceIO& device, LiveSessionConfig config);
+  ~LiveSession();  ///< stop()s if running
+  LiveSession(const LiveSession&) = delete;
+  LiveSession& operator=(const LiveSession&) = delete;
+
+  /// Starts the recorder, the edit thread, then the servo thread. Returns what the system
+  /// refused of the real-time setup ("" if nothing), as ServoThread::start.
+  std::string start();
+  /// Paused: zero force every tick (the servo keeps running, edits still apply).
+  void pause(bool paused) { servo_.pause(paused); }
+  /// Stops the servo (its last force an exact zero), then the edit thread (requests still
+  /// queued are dropped and counted), then the recorder (end record, fsync, rename).
+  /// Idempotent. @throws io::RecordingError if the recording could not be completed.
+  void stop();
+
+  /// An edit from the UI or the API (one producer thread). Its tick and t_s are set when it
+  /// is applied. False if the queue is full.
+  bool submit(const EditEvent& e);
+  /// The latest tick, consistent, without locks. Any thread.
+  Observed observe() const;
+  /// Time since start() on the servo's clock [s].
+  double elapsed_s() const;
+  LiveStats stats() const;  ///< after stop(): complete; while running: the counters only
+
+ private:
+  struct Request {            // an edit on its way to the edit thread
+    EditEvent event;
+    std::int64_t asked_ns = 0;  // when it was asked for (tick start or submit())
+  };
+  void on_tick(const servo::TickRecord& r) noexcept override;
+  void edit_loop();
+  void record_loop();
+  void record_chunk(bool final);
+  void publish_observed(const servo::TickRecord& r) noexcept;
+
+  EditSession& edits_;
+  servo::TripleBuffer<core::SampleField>& buffer_;
+  LiveSessionConfig cfg_;
+  servo::ServoThread servo_;
+  servo::SpscRing<servo::TickRecord> ticks_;
+  servo::SpscRing<Request> servo_edits_, api_edits_;
+  std::atomic<bool> running_{false}, stop_edits_{false}, stop_recorder_{false};
+  std::thread edit_thread_, record_thread_;
+  std::int64_t start_ns_ = 0;
+
+  // Servo-thread state (on_tick only).
+  bool button_ = false;
+  long press_tick_ = 0;
+  std::uint64_t last_version_ = 0;
+  // First tick start that read each version, indexed by version % size (servo writes, edit
+  // thread / stop() read after the fact).
+  std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
+  std::size_t seen_size_ = 0;
+
+  // Seqlock for observe().
+  mutable std::atomic<std::uint64_t> obs_seq_{0};
+  std::unique_ptr<LiveSessionObs> obs_store_;
+
+  std::atomic<long> dropped_edits_{0}, dropped_ticks_{0}, requested_{0};
+  // Edit thread -> recorder and stats (not real time: a mutex is fine here).
+  mutable std::mutex edits_mu_;
+  std::vector<EditEvent> applied_pending_;  // not yet written
+  std::vector<std::pair<std::uint64_t, std::int64_t>> published_;  // (version, asked_ns)
+  long applied_ = 0, refused_ = 0, publications_ = 0;
+
+  // Recorder thread.
+  int fd_ = -1;
+  std::string part_path_;
+  long recorded_ticks_ = 0, recorded_edits_ = 0;
+  double last_t_ = 0;
+  std::string record_error_;
+  bool stopped_ = false;
+};
+
+}  // namespace isotouch::session

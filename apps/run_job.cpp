@@ -1041,7 +1041,14 @@ void write_recording(const Scene& scene, const SceneSetup& setup, const std::vec
   rec.volume_crc32 = volume_crc32(setup.volume);
   rec.ticks.reserve(trace.size());
   for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n, r.vhip_m, r.version, r.fault != 0});
-  if (setup.session) rec.edits = setup.session->log();
+  if (setup.session) {
+    if (setup.session->log_dropped() > 0)
+      throw io::RecordingError(path + ": not written: the run applied " +
+                               std::to_string(setup.session->log().size() + setup.session->log_dropped()) +
+                               " edits, more than the " + std::to_string(setup.session->log_limit()) +
+                               " an edit log keeps (a recording without all of them would not replay)");
+    rec.edits = setup.session->log();
+  }
   save_recording(path, rec);
 }
 

@@ -39,6 +39,8 @@ struct EditSession::Impl {
   std::unique_ptr<session::LiveField> live;
   std::unique_ptr<session::Sculptor> sculptor;
   std::vector<EditEvent> log;
+  std::size_t log_limit = std::size_t(1) << 20;
+  std::size_t log_dropped = 0;
 };
 
 EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
@@ -70,7 +72,8 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
     if (out) out->publish(snap);
     o.published = true;
   }
-  impl_->log.push_back(e);
+  if (impl_->log.size() < impl_->log_limit) impl_->log.push_back(e);
+  else ++impl_->log_dropped;
   o.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return o;
 }
@@ -80,5 +83,15 @@ const engine::Volume& EditSession::volume() const { return impl_->sculptor->volu
 session::Sculptor& EditSession::sculptor() { return *impl_->sculptor; }
 session::LiveField& EditSession::live() { return *impl_->live; }
 const std::vector<EditEvent>& EditSession::log() const { return impl_->log; }
+void EditSession::set_log_limit(std::size_t events) {
+  impl_->log_limit = events;
+  if (impl_->log.size() > events) {
+    impl_->log_dropped += impl_->log.size() - events;
+    impl_->log.resize(events);
+    impl_->log.shrink_to_fit();
+  }
+}
+std::size_t EditSession::log_limit() const { return impl_->log_limit; }
+std::size_t EditSession::log_dropped() const { return impl_->log_dropped; }
 
 }  // namespace isotouch::session

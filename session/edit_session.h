@@ -64,8 +64,14 @@ class EditSession {
   const engine::Volume& volume() const;
   session::Sculptor& sculptor();
   session::LiveField& live();
-  /// Every event applied so far, in order.
+  /// The events applied so far, in order: the first log_limit() of them (a recording of a
+  /// simulated run is written from it; a live session records as it goes and sets 0).
   const std::vector<EditEvent>& log() const;
+  /// At most this many events are kept in log() (default 2^20, about 150 MiB); later ones
+  /// are counted in log_dropped() instead, so a long session's memory stays bounded.
+  void set_log_limit(std::size_t events);
+  std::size_t log_limit() const;
+  std::size_t log_dropped() const;
 
  private:
   struct Impl;

@@ -83,6 +83,7 @@ LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleFie
                                 " s is not in (0, 1]");
   if (cfg_.drill && cfg_.drill->every_ticks < 1)
     throw std::invalid_argument("live session: drill every_ticks must be >= 1");
+  edits_.set_log_limit(0);  // the session records its edits itself; memory stays bounded
   seen_size_ = 1u << 16;
   seen_ns_ = std::make_unique<std::atomic<std::int64_t>[]>(seen_size_);
   for (std::size_t i = 0; i < seen_size_; ++i) seen_ns_[i].store(-1, std::memory_order_relaxed);

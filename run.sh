@@ -18,6 +18,8 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libpng-dev libassimp-dev
 )
+# `./run.sh test` also builds the libFuzzer targets with clang.
+if [[ "${1:-}" == "test" ]]; then PACKAGES+=(clang-14 libclang-rt-14-dev); fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -43,10 +45,28 @@ if [[ "${1:-}" == "test" ]]; then
   cmake --preset tsan >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
   rm -f build-configure.log
   cmake --build --preset tsan -j"$(nproc)"
-  exec ctest --preset tsan -j"$(nproc)" "$@"
+  ctest --preset tsan -j"$(nproc)" "$@"
+  # Every parser of ours under libFuzzer (ASan + UBSan) for a few seconds on its corpus: a
+  # crash, a sanitizer report or a broken invariant fails the suite (the input is kept in
+  # build-fuzz/crash-*). Longer runs: see tests/CMakeLists.txt.
+  echo "run.sh: libFuzzer targets (cmake preset 'fuzz' -> build-fuzz/), ${ISOTOUCH_FUZZ_SECONDS:-10} s each"
+  cmake --preset fuzz >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
+  rm -f build-configure.log
+  cmake --build --preset fuzz -j"$(nproc)"
+  for t in scene recording volume vdb; do
+    mkdir -p "build-fuzz/corpus_$t"
+    if ! build-fuzz/bin/fuzz_$t "build-fuzz/corpus_$t" "tests/fuzz/corpus_$t" -max_total_time="${ISOTOUCH_FUZZ_SECONDS:-10}" \
+        -timeout=30 -rss_limit_mb=4096 -artifact_prefix=build-fuzz/ -print_final_stats=1 >"build-fuzz/fuzz_$t.log" 2>&1; then
+      tail -n 60 "build-fuzz/fuzz_$t.log"
+      echo "run.sh: fuzz_$t FAILED (log: build-fuzz/fuzz_$t.log)"
+      exit 1
+    fi
+    echo "run.sh: fuzz_$t: $(grep -E '^stat::number_of_executed_units' "build-fuzz/fuzz_$t.log" | awk '{print $2}') inputs, no failure"
+  done
+  exit 0
 fi
 if (($# == 0)); then
-  # The main job: touch the skull of the head CT, then drill through it (issue 9).
+  # The main job: touch the skull of the head CT, then drill through it.
   build/bin/isotouch run scenes/head.json
   exec build/bin/isotouch run scenes/drill-skull.json
 fi

@@ -67,7 +67,7 @@ template <class Op>
 void filter_axis(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis, int r,
                  float start, Op op) {
   out.resize(in.size());
-  const auto [nx, ny, nz] = g.dims;
+  const int nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];  // not a structured binding: clang 14 cannot capture one
   const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
   for (int z = 0; z < nz; ++z)
     for (int y = 0; y < ny; ++y) {

@@ -95,7 +95,7 @@ void SparseChain::set_strategy(Strategy s) { impl_->strategy = s; }
 SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurface& iso, float background,
                                           core::SampleFormat format, std::uint64_t max_binding_bytes) {
   const auto t_total = std::chrono::steady_clock::now();
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];  // lambdas capture these (clang 14: not bindings)
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
                       std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
@@ -265,7 +265,7 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   const auto t_total = std::chrono::steady_clock::now();
   VulkanContext& ctx = impl_->ctx;
   const auto& lim = ctx.properties().limits;
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];  // lambdas capture these (clang 14: not bindings)
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
                       std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));

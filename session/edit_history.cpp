@@ -79,7 +79,7 @@ void EditHistory::begin_stroke() {
   if (open_) throw std::logic_error("EditHistory::begin_stroke: a stroke is already open (end_stroke first)");
   for (const Stroke& s : redo_) bytes_ -= s.bytes;
   redo_.clear();
-  open_.emplace();
+  open_ = Stroke{};
 }
 
 void EditHistory::record(const Volume& vol, const std::vector<std::uint32_t>& ids) {

@@ -1,0 +1,250 @@
+// LiveSession: the servo thread, the edit thread and the streaming recorder around one
+// EditSession, on a synthetic sphere with CPU brushes (no Vulkan device needed).
+// Truth from outside the class: an EditSession of the test's own replays the recorded
+// edits to the versions the ticks recorded; the device wrapper sees every force written.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include <unistd.h>
+
+#include "edit_session.h"
+#include "field_view.h"
+#include "hri.h"
+#include "live_session.h"
+#include "record.h"
+#include "sim_device_io.h"
+#include "synthetic.h"
+
+namespace fs = std::filesystem;
+using isotouch::core::Vec3;
+using isotouch::engine::Volume;
+using isotouch::session::EditEvent;
+using isotouch::session::EditSession;
+using isotouch::session::LiveSession;
+using isotouch::session::LiveSessionConfig;
+
+namespace {
+
+isotouch::session::LiveFieldOptions sphere_options() {
+  return isotouch::session::LiveFieldOptions{{isotouch::engine::PassDesc::gradient()},
+                                            isotouch::core::Isosurface{0.0, isotouch::core::InsideIs::kAbove},
+                                            -100.f, isotouch::core::SampleFormat::kFp32};
+}
+
+/// The simulated device, with every force written counted: how many were non-zero while
+/// the session was paused, and the last one.
+class WatchedIO final : public isotouch::servo::HapticDeviceIO {
+ public:
+  explicit WatchedIO(isotouch::servo::HapticDeviceIO& inner) : inner_(inner) {}
+  Vec3 read_position_m() override { return inner_.read_position_m(); }
+  std::uint32_t buttons() override { return button.load() ? 1u : 0u; }
+  void write_force_n(const Vec3& f) override {
+    writes.fetch_add(1);
+    if (watch_pause.load() && (f.x != 0 || f.y != 0 || f.z != 0)) nonzero_while_paused.fetch_add(1);
+    last_zero.store(f.x == 0 && f.y == 0 && f.z == 0);
+    if (std::isfinite(f.x + f.y + f.z) && f.x * f.x + f.y * f.y + f.z * f.z > 0) nonzero.fetch_add(1);
+    inner_.write_force_n(f);
+  }
+  std::atomic<long> writes{0}, nonzero{0}, nonzero_while_paused{0};
+  std::atomic<bool> last_zero{false}, watch_pause{false}, button{false};
+
+ private:
+  isotouch::servo::HapticDeviceIO& inner_;
+};
+
+struct Rig {
+  Volume vol = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12.0);
+  EditSession edits{Volume(vol), nullptr, sphere_options()};
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> buffer;
+  isotouch::servo::HriParams hp;
+  std::unique_ptr<isotouch::servo::HriRenderer> renderer;
+  isotouch::sim::TouchScript script;
+  std::unique_ptr<isotouch::sim::SimDevice> device;
+  std::unique_ptr<isotouch::sim::SimDeviceIO> sim_io;
+  std::unique_ptr<WatchedIO> io;
+  Rig() {
+    buffer.publish(edits.current());
+    hp.tau = 0;
+    hp.rate_hz = 1000;
+    hp.stiffness_n_per_m = 300;
+    renderer = std::make_unique<isotouch::servo::HriRenderer>(hp);
+    isotouch::sim::ScriptParams sp;
+    sp.ray_origin_frac = {0.5, 0.5, 1.2};
+    sp.stroke_length_m = 0.006;
+    sp.hold_s = 0.5;
+    script = isotouch::sim::make_touch_script(*edits.current(), hp, sp);
+    Vec3 p0, v0;
+    script.at(0, p0, v0);
+    device = std::make_unique<isotouch::sim::SimDevice>(isotouch::sim::SimDeviceParams{}, p0);
+    sim_io = std::make_unique<isotouch::sim::SimDeviceIO>(*device, script, 1.0 / hp.rate_hz);
+    io = std::make_unique<WatchedIO>(*sim_io);
+  }
+  LiveSessionConfig config(const std::string& record = "") const {
+    LiveSessionConfig c;
+    c.servo.rate_hz = hp.rate_hz;
+    c.servo.sched_fifo = false;  // tests share the machine
+    c.servo.pin_cpu = false;
+    c.servo.lock_memory = false;
+    c.flush_interval_s = 0.02;
+    c.record_path = record;
+    c.record_header.scene_path = "/test/sphere.json";
+    c.record_header.scene_text = "{}";
+    c.record_header.rate_hz = hp.rate_hz;
+    c.record_header.volume_crc32 = 1;
+    return c;
+  }
+};
+
+void wait_until(const std::function<bool()>& done, double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (!done() && std::chrono::steady_clock::now() < end) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+}
+
+EditEvent carve(const Vec3& centre) {
+  EditEvent e;
+  e.kind = EditEvent::Kind::kBrush;
+  e.brush.kind = isotouch::session::BrushKind::kCarve;
+  e.brush.centre_m = centre;
+  e.brush.radius_m = 3e-3;
+  e.brush.strength = 1e9;
+  e.brush.targets = {12.f, -100.f, 1.f};
+  return e;
+}
+
+fs::path temp_dir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / (name + "-" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+}  // namespace
+
+// The API's edits reach the servo: every submitted carve is applied and published, the
+// servo reads each new version, and the recording replays: an EditSession of the test's
+// own, given the recorded edits in order, is at each tick's recorded version exactly when
+// that tick says, and HRI fed the recorded HIPs and dts gives the recorded forces bit for bit.
+TEST(LiveSession, SubmittedEditsArePublishedReadAndRecorded) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live");
+  const std::string rec_path = (dir / "s.rec").string();
+  {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config(rec_path));
+    live.start();
+    wait_until([&] { return live.observe().tick > 200; }, 10);
+    const Vec3 c = rig.vol.grid.centre_m();
+    for (int i = 0; i < 5; ++i) {
+      ASSERT_TRUE(live.submit(carve(c + Vec3{0.004 * (i - 2), -0.008, 0})));
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    wait_until([&] { return live.observe().version >= 6; }, 10);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_TRUE(fs::exists(rec_path + ".part"));  // streaming while it runs
+    live.stop();
+    const auto s = live.stats();
+    EXPECT_EQ(s.edits_applied, 5);
+    EXPECT_EQ(s.publications, 5);
+    EXPECT_EQ(s.edits_dropped, 0);
+    EXPECT_EQ(s.ticks_not_recorded, 0);
+    EXPECT_EQ(s.edit_to_haptics_ms.size(), 5u);  // every published version was read by a tick
+    EXPECT_TRUE(rig.io->last_zero.load()) << "the device's last force was not zero";
+  }
+  EXPECT_FALSE(fs::exists(rec_path + ".part"));
+  const auto rec = isotouch::io::load_recording(rec_path);
+  EXPECT_TRUE(rec.complete);
+  EXPECT_EQ(rec.format_version, 3);
+  ASSERT_GT(rec.ticks.size(), 200u);
+  ASSERT_EQ(rec.edits.size(), 5u);
+  // Replay: the test's own EditSession and renderer.
+  EditSession replica(Volume(rig.vol), nullptr, sphere_options());
+  isotouch::servo::HriRenderer hri(rig.hp);
+  std::size_t e = 0, differ = 0;
+  for (std::size_t k = 0; k < rec.ticks.size(); ++k) {
+    const auto& t = rec.ticks[k];
+    while (e < rec.edits.size() && replica.current()->version < t.version) replica.apply(rec.edits[e++], nullptr);
+    ASSERT_EQ(replica.current()->version, t.version) << "tick " << k;
+    const auto out = hri.tick(*replica.current(), t.hip_m, t.dt_s);
+    if (std::memcmp(&out.force_n, &t.force_n, sizeof out.force_n) != 0) ++differ;
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_EQ(e, rec.edits.size());
+  fs::remove_all(dir);
+}
+
+// Pause: the servo keeps ticking and sends exact zeros; resume renders again.
+TEST(LiveSession, PauseSendsZeroForce) {
+  Rig rig;
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config());
+  live.start();
+  wait_until([&] { return rig.io->nonzero.load() > 50; }, 10);  // pressing on the sphere
+  ASSERT_GT(rig.io->nonzero.load(), 50) << "the probe never touched the sphere";
+  live.pause(true);
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the tick in flight finishes
+  rig.io->watch_pause = true;
+  const long before = rig.io->writes.load();
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  rig.io->watch_pause = false;
+  EXPECT_GT(rig.io->writes.load() - before, 20) << "the servo stopped ticking while paused";
+  EXPECT_EQ(rig.io->nonzero_while_paused.load(), 0);
+  const long nz = rig.io->nonzero.load();
+  live.pause(false);
+  wait_until([&] { return rig.io->nonzero.load() > nz + 20; }, 10);
+  EXPECT_GT(rig.io->nonzero.load(), nz + 20) << "no force after resume";
+  live.stop();
+  EXPECT_TRUE(rig.io->last_zero.load());
+}
+
+// The button drill: while the button is down and the probe in contact, brushes are asked
+// for from the servo thread at the VHIP, inside one stroke.
+TEST(LiveSession, ButtonDrillAsksFromTheServoSide) {
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  isotouch::session::ButtonDrill d;
+  d.brush = carve({}).brush;
+  d.brush.kind = isotouch::session::BrushKind::kDrill;
+  d.brush.force_threshold_n = 0.0;
+  d.brush.rate = 1e6;
+  d.every_ticks = 5;
+  c.drill = d;
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+  live.start();
+  wait_until([&] { return rig.io->nonzero.load() > 50; }, 10);
+  rig.io->button = true;
+  wait_until([&] { return live.stats().edits_applied >= 12; }, 10);
+  rig.io->button = false;
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  live.stop();
+  const auto s = live.stats();
+  EXPECT_GE(s.edits_applied, 12);  // begin stroke + brushes (+ end stroke)
+  EXPECT_GT(s.publications, 0);
+  EXPECT_EQ(s.edits_refused, 0);
+  EXPECT_LT(rig.edits.volume().voxels[rig.vol.grid.index(20, 20, 31)], rig.vol.voxels[rig.vol.grid.index(20, 20, 31)])
+      << "the drill removed nothing under the probe";
+}
+
+// A recording that cannot be created is refused before anything runs, naming the file.
+TEST(LiveSession, AnUnwritableRecordingIsRefusedUpFront) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live-bad");
+  try {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config((dir / "no" / "such" / "s.rec").string()));
+    ADD_FAILURE() << "a recording in a missing folder was accepted";
+  } catch (const isotouch::io::RecordingError& e) {
+    EXPECT_NE(std::string(e.what()).find("s.rec"), std::string::npos) << e.what();
+  }
+  try {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config(dir.string()));
+    ADD_FAILURE() << "a directory as the recording was accepted";
+  } catch (const isotouch::io::RecordingError& e) {
+    EXPECT_NE(std::string(e.what()).find("directory"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
+}

@@ -347,6 +347,61 @@ void check_nifti_length(const std::string& path, std::size_t data_bytes) {
                    ", the (decompressed) file holds " + std::to_string(total) + " bytes in all");
 }
 
+// NIfTI's orientation fields go to ITK's matrix code, which aborts the process on a
+// non-finite element (vnl_matrix: "matrix has non-finite elements", abort()): check them
+// here, before ITK reads the header. NIfTI-1 (348-byte header, floats) and NIfTI-2 (540,
+// doubles), either byte order, plain or gzipped.
+void check_nifti_header(const std::string& path) {
+  gzFile gz = gzopen(path.c_str(), "rb");
+  if (!gz) fail(path, "cannot open");
+  unsigned char h[540] = {};
+  const int got = gzread(gz, h, sizeof h);
+  gzclose(gz);
+  if (got < 348) return;  // ITK refuses it itself
+  std::int32_t size = 0;
+  std::memcpy(&size, h, 4);
+  const bool swap = size == std::int32_t(__builtin_bswap32(348)) || size == std::int32_t(__builtin_bswap32(540));
+  if (swap) size = std::int32_t(__builtin_bswap32(std::uint32_t(size)));
+  const bool two = size == 540;
+  if (size != 348 && !(two && got >= 540)) return;
+  auto number = [&](std::size_t at) -> double {
+    if (two) {
+      std::uint64_t u;
+      std::memcpy(&u, h + at, 8);
+      if (swap) u = __builtin_bswap64(u);
+      double d;
+      std::memcpy(&d, &u, 8);
+      return d;
+    }
+    std::uint32_t u;
+    std::memcpy(&u, h + at, 4);
+    if (swap) u = __builtin_bswap32(u);
+    float f;
+    std::memcpy(&f, &u, 4);
+    return f;
+  };
+  const std::size_t w = two ? 8 : 4;
+  struct Field {
+    const char* name;
+    std::size_t at1, at2;  // NIfTI-1, NIfTI-2 byte offsets
+    int count;
+  };
+  const Field fields[] = {{"pixdim", 76, 104, 8},      {"quatern_b", 256, 352, 1}, {"quatern_c", 260, 360, 1},
+                          {"quatern_d", 264, 368, 1},  {"qoffset_x", 268, 376, 1}, {"qoffset_y", 272, 384, 1},
+                          {"qoffset_z", 276, 392, 1},  {"srow_x", 280, 400, 4},    {"srow_y", 296, 432, 4},
+                          {"srow_z", 312, 464, 4}};
+  for (const Field& f : fields)
+    for (int i = 0; i < f.count; ++i) {
+      const double v = number((two ? f.at2 : f.at1) + std::size_t(i) * w);
+      if (!std::isfinite(v) || std::abs(v) > 1e30) {
+        std::ostringstream m;
+        m << "NIfTI header field '" << f.name << (f.count > 1 ? "[" + std::to_string(i) + "]" : std::string()) << "' is "
+          << v << ": the orientation and voxel size must be finite";
+        fail(path, m.str());
+      }
+    }
+}
+
 void check_nrrd_length(const std::string& path, std::uint64_t need);
 
 Volume load_itk(const std::string& path) {
@@ -364,6 +419,7 @@ Volume load_itk(const std::string& path) {
   const std::string cls = io->GetNameOfClass();
   const Fields fields = fields_of(cls);
   if (cls == "MetaImageIO") check_metaimage(path);
+  if (cls == "NiftiImageIO") check_nifti_header(path);
   io->SetFileName(path);
   io->ReadImageInformation();
 

@@ -22,6 +22,7 @@
 
 #include "vk_test_context.h"
 #include "cpu_filters.h"
+#include "isotouch_shared.h"
 #include "passes.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
@@ -49,7 +50,7 @@ bool same(const core::Sample& a, const core::Sample& b) {
 using Strategy = engine::SparseChain::Strategy;
 engine::SparseOutput run_gpu(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
                              float background, std::uint64_t max_binding = 0, std::uint32_t max_groups = 0,
-                             Strategy strategy = Strategy::Dense) {
+                             Strategy strategy = Strategy::Lists) {
   auto chain = engine::SparseChain::create(vk(), passes);
   if (!chain) throw std::runtime_error(chain.error);
   (*chain.value)->set_strategy(strategy);
@@ -148,12 +149,17 @@ void expect_same_output(const engine::SparseOutput& a, const engine::SparseOutpu
   EXPECT_EQ(tdiff, 0u) << what << ": tiles differ";
 }
 
-// GPU vs dense, CPU sparse vs GPU sparse, and small bindings vs default; both strategies
-// (dense x4 passes + host gather, and the per-brick shared-memory kernel).
+const char* strategy_name(Strategy s) {
+  return s == Strategy::Lists ? " [lists strategy]" : s == Strategy::Dense ? " [dense strategy]" : " [per-brick strategy]";
+}
+
+// GPU vs dense, CPU sparse vs GPU sparse, and small bindings vs default; every strategy
+// (x4 passes on the candidates' work lists, dense x4 passes + host gather, the per-brick
+// shared-memory kernel).
 void check_case_with(Strategy strategy, const Volume& v, const std::vector<PassDesc>& passes,
                      const core::Isosurface& iso, float background, const std::string& what_in,
                      std::uint64_t small_binding) {
-  const std::string what = what_in + (strategy == Strategy::Dense ? " [dense strategy]" : " [per-brick strategy]");
+  const std::string what = what_in + strategy_name(strategy);
   const engine::SparseOutput gpu = run_gpu(v, passes, iso, background, 0, 0, strategy);
   expect_matches_dense(v, passes, iso, gpu, what + " (GPU)");
   const engine::SparseOutput cpu = engine::run_sparse_cpu(v, passes, iso, background, core::SampleFormat::kFp32, true);
@@ -168,6 +174,7 @@ void check_case_with(Strategy strategy, const Volume& v, const std::vector<PassD
 }
 void check_case(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso, float background,
                 const std::string& what, std::uint64_t small_binding = 0) {
+  check_case_with(Strategy::Lists, v, passes, iso, background, what, small_binding);
   check_case_with(Strategy::Dense, v, passes, iso, background, what, small_binding);
   check_case_with(Strategy::PerBrick, v, passes, iso, background, what, small_binding);
 }
@@ -206,8 +213,10 @@ TEST(SparseChain, OneWorkgroupLoopsOverManyBricks) {
   expect_matches_dense(v, p, above(-500), one, "chest -500, 1 workgroup asked for");
   const engine::SparseOutput def = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::PerBrick);
   expect_same_output(one, def, "chest -500: 1 workgroup asked for vs default");
-  const engine::SparseOutput dense = run_gpu(v, p, above(-500), -1024.0f);
+  const engine::SparseOutput dense = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::Dense);
   expect_same_output(dense, def, "chest -500: dense strategy vs per-brick");
+  const engine::SparseOutput lists = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::Lists);
+  expect_same_output(lists, def, "chest -500: lists strategy vs per-brick");
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
@@ -264,9 +273,73 @@ TEST(SparseChain, RejectsListsItCannotRun) {
   ASSERT_TRUE(chain);
   (*chain.value)->set_strategy(engine::SparseChain::Strategy::PerBrick);
   EXPECT_THROW((*chain.value)->run(v, above(0), -1e4f), engine::VolumeError);
-  // The dense strategy has no shared-memory limit: it runs, and matches the dense CPU chain.
+  // The dense and lists strategies have no shared-memory limit: they run, and match the
+  // dense CPU chain.
   const std::vector<PassDesc> wide = {PassDesc::gaussian(4.0), PassDesc::gradient()};
-  expect_matches_dense(v, wide, above(0), run_gpu(v, wide, above(0), -1e4f), "sigma 4 mm (dense strategy)");
+  expect_matches_dense(v, wide, above(0), run_gpu(v, wide, above(0), -1e4f, 0, 0, Strategy::Dense),
+                       "sigma 4 mm (dense strategy)");
+  expect_matches_dense(v, wide, above(0), run_gpu(v, wide, above(0), -1e4f, 0, 0, Strategy::Lists),
+                       "sigma 4 mm (lists strategy)");
+}
+
+TEST(SparseChain, ListsRunAFilterWiderThanTheX4ShaderAsDense) {
+  // Sigma 6 mm at 1 mm spacing: radius 18 > ISOTOUCH_DENSE_MAX_RADIUS taps a side, more than
+  // filter_list_x4 unrolls; the lists strategy runs the dense one (whose chain takes the 1-D
+  // shaders) and says so. Truth: the dense CPU chain.
+  const Volume v = engine::make_sphere({40, 36, 34}, 1e-3, 12.0);
+  const std::vector<PassDesc> wide = {PassDesc::gaussian(6.0), PassDesc::gradient()};
+  auto chain = engine::SparseChain::create(vk(), wide);
+  ASSERT_TRUE(chain) << chain.error;
+  (*chain.value)->set_keep_input(true);
+  const engine::SparseOutput out = (*chain.value)->run(v, above(0), -1e4f);
+  EXPECT_NE((*chain.value)->describe().find("ran as dense"), std::string::npos) << (*chain.value)->describe();
+  expect_matches_dense(v, wide, above(0), out, "sigma 6 mm (lists strategy, run as dense)");
+}
+
+TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
+  // Brute force: the quads whose 4 voxels meet some candidate's extent (8 b - lo .. 8 b + 7
+  // + hi, clipped), each exactly once, sorted by z, y, x, in units of at most
+  // ISOTOUCH_LIST_QUADS quads of one row; z_first indexes the slices.
+  core::Grid g;
+  g.dims = {45, 30, 21};
+  const auto nb = core::brick_counts(g);
+  std::vector<std::uint32_t> cand;
+  for (std::uint32_t id = 0; id < std::uint32_t(nb[0] * nb[1] * nb[2]); ++id)
+    if ((id * 2654435761u) % 7u < 2u) cand.push_back(id);
+  for (const engine::sparse::Extent e :
+       {engine::sparse::Extent{{4, 1, 1}, {8, 2, 2}}, engine::sparse::Extent{{8, 3, 0}, {4, 0, 5}},
+        engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
+    const engine::sparse::WorkList w = engine::sparse::make_work_list(g, cand, e, "grid");
+    const int qx = (g.dims[0] + 3) / 4;
+    std::vector<int> want(std::size_t(qx) * std::size_t(g.dims[1]) * std::size_t(g.dims[2]), 0), got(want.size(), 0);
+    for (std::uint32_t id : cand) {
+      const auto b = core::brick_coords(id, nb);
+      for (int z = std::max(8 * b[2] - e.lo[2], 0); z <= std::min(8 * b[2] + 7 + e.hi[2], g.dims[2] - 1); ++z)
+        for (int y = std::max(8 * b[1] - e.lo[1], 0); y <= std::min(8 * b[1] + 7 + e.hi[1], g.dims[1] - 1); ++y)
+          for (int x = std::max(8 * b[0] - e.lo[0], 0); x <= std::min(8 * b[0] + 7 + e.hi[0], g.dims[0] - 1); ++x)
+            want[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(x / 4)] = 1;
+    }
+    ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
+    std::uint64_t quads = 0;
+    long last = -1;
+    for (std::size_t u = 0; u < w.unit_count(); ++u) {
+      const int row = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int z = row / g.dims[1], y = row % g.dims[1];
+      const int q0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
+      ASSERT_TRUE(n >= 1 && n <= int(ISOTOUCH_LIST_QUADS)) << "unit " << u;
+      EXPECT_TRUE(u >= w.z_first[std::size_t(z)] && u < w.z_first[std::size_t(z) + 1]) << "unit " << u << " z " << z;
+      for (int q = q0; q < q0 + n; ++q) {
+        ASSERT_LT(q, qx);
+        const long at = (long(z) * g.dims[1] + y) * qx + q;
+        EXPECT_GT(at, last) << "unit " << u << ": not sorted or a quad twice";
+        last = at;
+        ++got[std::size_t(at)];
+        ++quads;
+      }
+    }
+    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2];
+    EXPECT_EQ(quads, w.quads);
+  }
 }
 
 // ---------------------------------------------------------------- benchmark (disabled)

@@ -320,7 +320,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   r.gpu_why = gpu_why;
 
   std::unique_ptr<engine::PassChain> chain, legacy;
-  std::unique_ptr<engine::SparseChain> schain, sbrick;
+  std::unique_ptr<engine::SparseChain> schain, sdense, sbrick;
   std::string sparse_why = gpu_why;
   if (ctx) {
     try {
@@ -335,6 +335,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     try {
       auto sr = engine::SparseChain::create(*ctx, sparse);
       if (sr) schain = std::move(*sr.value);
+      auto dr = engine::SparseChain::create(*ctx, sparse);
+      if (dr) {
+        sdense = std::move(*dr.value);
+        sdense->set_strategy(engine::SparseChain::Strategy::Dense);
+      }
       auto br = engine::SparseChain::create(*ctx, sparse);
       if (br) {
         sbrick = std::move(*br.value);
@@ -353,12 +358,13 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
   const bool run_peers = peers && std::isfinite(sigma_mm);
   std::vector<PeerTimes> peer_runs[2];
-  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni);
+  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni), sd(ni);
   std::vector<float> bg(ni);
   for (std::size_t k = 0; k < ni; ++k) {
     bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
     if (!schain) sg[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
     if (!sbrick) sb[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
+    if (!sdense) sd[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
   }
   // Warm-up (untimed): first dispatches, allocations, lazy pipeline compiles.
   if (chain) {
@@ -375,6 +381,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   for (std::size_t k = 0; k < ni; ++k) {
     guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
     guarded(sb[k], [&] { (void)sbrick->run(v, c.isos[k], bg[k]); });
+    guarded(sd[k], [&] { (void)sdense->run(v, c.isos[k], bg[k]); });
   }
 
   for (int rep = 0; rep < repetitions; ++rep) {
@@ -406,6 +413,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
       guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
+      guarded(sd[k], [&] { sd[k].add(sdense->run(v, c.isos[k], bg[k])); });
       guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
     }
   }
@@ -457,6 +465,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     ir.iso = c.isos[k];
     ir.gpu = sg[k].cell();
     ir.gpu_per_brick = sb[k].cell();
+    ir.gpu_dense = sd[k].cell();
     ir.cpu = sc[k].cell();
     if (ir.gpu.available && ir.cpu.available) {
       const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
@@ -790,8 +799,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
   out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
       << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
          "[ms] | dense CPU [ms] | sparse GPU / dense CPU | sparse CPU / dense CPU | sparse GPU / dense GPU | GPU vs "
-         "CPU counts | sparse GPU, per-brick kernel [ms] |\n"
-      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
+         "CPU counts | sparse GPU, dense strategy [ms] | sparse GPU, per-brick kernel [ms] |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos) {
       const SparseCell& s = ir.gpu.available ? ir.gpu : ir.cpu;
@@ -806,6 +815,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           << sparse_cell(ir.cpu, ir.sparse_cpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_gpu, 3) << " | "
           << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " | "
+          << sparse_cell(ir.gpu_dense, ir.gpu_dense.total_ms) << " | "
           << sparse_cell(ir.gpu_per_brick, ir.gpu_per_brick.total_ms) << " |\n";
       const std::string t = "sparse";
       if (have) {
@@ -817,6 +827,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "candidate_percent", csv_num(ir.candidate_percent), "%", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_ms", csv_num(ir.gpu.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_cpu_ms", csv_num(ir.cpu.total_ms), "ms", d.cpu);
+      csv.row(t, r.name, tau, "", "sparse_gpu_dense_strategy_ms", csv_num(ir.gpu_dense.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_per_brick_ms", csv_num(ir.gpu_per_brick.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_cpu", csv_num(ir.sparse_gpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
@@ -825,8 +836,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
   out << "\n### Sparse stages (medians)\n\n| case | tau | engine | stage | ms |\n|---|---:|---|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos)
-      for (const auto* c : {&ir.gpu, &ir.cpu}) {
-        const std::string eng = c == &ir.gpu ? "GPU" : "CPU reference";
+      for (const auto* c : {&ir.gpu, &ir.gpu_dense, &ir.cpu}) {
+        const std::string eng = c == &ir.gpu ? "GPU (lists)" : c == &ir.gpu_dense ? "GPU (dense strategy)" : "CPU reference";
         if (!c->available) {
           out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | sparse: not available (" << c->why
               << ") | |\n";
@@ -836,7 +847,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | " << c->stage_labels[i] << " | "
               << num(c->stage_ms[i]) << " |\n";
           csv.row("sparse_stages", r.name, tau_text(ir.iso), c->stage_labels[i], eng + "_ms", csv_num(c->stage_ms[i]),
-                  "ms", c == &ir.gpu ? d.gpu : d.cpu);
+                  "ms", c == &ir.cpu ? d.cpu : d.gpu);
         }
       }
 }
@@ -1117,7 +1128,10 @@ Dense table, one row per pass, then the sum of the passes and the end-to-end wal
 Sparse table, one row per isovalue:
   bricks, candidates, active   8^3 bricks in all, computed, published with samples
   active %       100 active / bricks
-  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms]
+  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms], default
+                 strategy: x4 passes on work lists of the candidate bricks' quads
+  dense strategy the same chain running the dense x4 passes over the whole volume
+  per-brick      the same chain on the per-brick shared-memory kernel
   sparse CPU     run_sparse_cpu total_ms, median [ms]
   dense GPU/CPU  end-to-end wall of the dense chain (same repetitions)
   ratios         sparse GPU / dense CPU (the must-show), sparse CPU / dense CPU,

@@ -131,7 +131,9 @@ struct FormatBytes {
 
 struct IsoResult {
   core::Isosurface iso;
-  SparseCell gpu, cpu;
+  SparseCell cpu;
+  SparseCell gpu;                         ///< the GPU chain's default strategy (SparseChain::Strategy::Lists)
+  SparseCell gpu_dense;                   ///< the same on the dense x4 passes over the whole volume (Strategy::Dense)
   SparseCell gpu_per_brick;               ///< the same on the per-brick kernel (SparseChain::Strategy::PerBrick)
   std::vector<FormatBytes> formats;       ///< fp32, fp16, unorm16
   double active_percent = kNaN;           ///< 100 active / bricks_total

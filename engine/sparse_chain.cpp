@@ -74,62 +74,66 @@ struct Chunk {
   GpuBuffer pool, readback;
 };
 
-/// The host's part after the passes: each candidate's exact range over its brick + 1 voxel
-/// of the filtered field `f` (z, y, x ascending, as CandidateCpu::range) and the 9^3 samples
-/// of the active ones gathered from the dense-addressed samples `s` (beyond the grid: the
-/// background with a zero gradient) straight into publish()'s pool. Sets out.publish_ms;
-/// `ranges_ms` the time of the ranges.
+/// The host's part after the passes, on sparse::host_threads() threads: each candidate's
+/// exact range over its brick + 1 voxel of the filtered field `f` (z, y, x ascending, as
+/// CandidateCpu::range) and the 9^3 samples of the active ones copied row by row from the
+/// dense-addressed samples `s` (beyond the grid: the background with a zero gradient)
+/// straight into the published pool. Sets out.publish_ms; `ranges_ms` the time of the ranges.
 void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float* f, const core::Sample* s,
                     const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
                     SparseOutput& out, double& ranges_ms) {
   const auto [nx, ny, nz] = vol.grid.dims;
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
   const std::size_t nc = sel.candidates.size();
+  const unsigned threads = sparse::host_threads();
   auto t0 = std::chrono::steady_clock::now();
   const auto nb = core::brick_counts(vol.grid);
   std::vector<sparse::CandidateRange> ranges(nc);
   const float inf = std::numeric_limits<float>::infinity();
-  for (std::size_t c = 0; c < nc; ++c) {
-    const auto b = core::brick_coords(sel.candidates[c], nb);
-    int lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
-      hi[a] = std::min(8 * b[std::size_t(a)] + 8, vol.grid.dims[std::size_t(a)] - 1);
-    }
-    sparse::CandidateRange rg{inf, -inf, false};
-    for (int z = lo[2]; z <= hi[2]; ++z)
-      for (int y = lo[1]; y <= hi[1]; ++y) {
-        const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
-        for (int x = lo[0]; x <= hi[0]; ++x) {
-          const float v = row[x];
-          rg.nan = rg.nan || v != v;
-          rg.lo = v < rg.lo ? v : rg.lo;
-          rg.hi = v > rg.hi ? v : rg.hi;
-        }
+  sparse::parallel_for(nc, threads, 64, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      const auto b = core::brick_coords(sel.candidates[c], nb);
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
+        hi[a] = std::min(8 * b[std::size_t(a)] + 8, vol.grid.dims[std::size_t(a)] - 1);
       }
-    rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
-    rg.hi = rg.hi + 0.0f;
-    ranges[c] = rg;
-  }
-  ranges_ms = ms_since(t0);
-  // publish() copies an active candidate's 9^3 samples into the pool right after asking for
-  // them: gathered here from the dense samples into one brick's worth of scratch.
-  t0 = std::chrono::steady_clock::now();
-  std::vector<core::Sample> scratch(core::kBrickSamples);
-  auto gather = [&](std::size_t c) -> const core::Sample* {
-    const auto b = core::brick_coords(sel.candidates[c], nb);
-    core::Sample* o = scratch.data();
-    for (int k = 0; k < 9; ++k)
-      for (int j = 0; j < 9; ++j)
-        for (int i = 0; i < 9; ++i) {
-          const int g[3] = {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k};
-          o[i + 9 * j + 81 * k] = g[0] >= nx || g[1] >= ny || g[2] >= nz
-                                      ? core::Sample{background, 0.0f, 0.0f, 0.0f}
-                                      : s[std::size_t(g[2]) * slice + std::size_t(g[1]) * std::size_t(nx) + std::size_t(g[0])];
+      sparse::CandidateRange rg{inf, -inf, false};
+      for (int z = lo[2]; z <= hi[2]; ++z)
+        for (int y = lo[1]; y <= hi[1]; ++y) {
+          const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
+          for (int x = lo[0]; x <= hi[0]; ++x) {
+            const float v = row[x];
+            rg.nan = rg.nan || v != v;
+            rg.lo = v < rg.lo ? v : rg.lo;
+            rg.hi = v > rg.hi ? v : rg.hi;
+          }
         }
-    return o;
+      rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
+      rg.hi = rg.hi + 0.0f;
+      ranges[c] = rg;
+    }
+  });
+  ranges_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
+  auto fill = [&](std::size_t c, core::Sample* o) {
+    const auto b = core::brick_coords(sel.candidates[c], nb);
+    const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j) {
+        core::Sample* d = o + 9 * j + 81 * k;
+        const int y = 8 * b[1] + j, z = 8 * b[2] + k;
+        int i = 0;
+        if (y < ny && z < nz) {
+          std::memcpy(d, s + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx) + std::size_t(x0),
+                      std::size_t(in_x) * sizeof(core::Sample));
+          i = in_x;
+        }
+        for (; i < 9; ++i) d[i] = outside;
+      }
   };
-  sparse::publish(vol.grid, sel, ranges, gather, iso, background, format, keep_input, out);
+  sparse::publish_fill(vol.grid, sel, ranges, fill, threads, iso, background, format, keep_input, out);
   out.publish_ms = ms_since(t0);
 }
 }  // namespace
@@ -264,12 +268,24 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
 
-  // Host: raw brick ranges, the candidates, the work lists.
+  // Host, in one pass over the voxels on sparse::host_threads() threads (whole brick layers
+  // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
+  // the voxels copied into the input field (or its staging buffer).
   auto t0 = std::chrono::steady_clock::now();
+  const std::uint64_t n = vol.grid.voxel_count();
+  GpuBuffer* field0 = &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path);
+  GpuBuffer* up = direct ? nullptr : &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path);
+  char* input = static_cast<char*>(direct ? field0->mapped() : up->mapped());
   sparse::RawRanges raw;
   raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  for (int z = 0; z < nz; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
+  sparse::parallel_for(std::size_t(nz), sparse::host_threads(), 8, [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z) {
+      const float* src = vol.voxels.data() + z * slice;
+      raw.add_slice(vol.grid, int(z), src);
+      std::memcpy(input + z * slice * 4, src, slice * 4);
+    }
+  });
   const double raw_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const sparse::Selection sel = sparse::select(raw, plan, iso);
@@ -290,24 +306,20 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   // Buffers: two dense-addressed fields (ping-pong; the input is field 0), the samples, the
   // work lists; staging and readback only where device-local memory is not host-visible.
   t0 = std::chrono::steady_clock::now();
-  const std::uint64_t n = vol.grid.voxel_count();
   const std::uint64_t list_bytes = std::max<std::uint64_t>(total_units, 1) * 8;
   if (list_bytes / 4 > lim.maxTexelBufferElements)
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(list_bytes / 4) +
                       " work-list texels exceed maxTexelBufferElements " + std::to_string(lim.maxTexelBufferElements) +
                       " on " + ctx.info().name);
-  GpuBuffer* field[2] = {&kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path),
-                         K ? &kept_buffer("lists: field 1", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr};
+  GpuBuffer* field[2] = {field0, K ? &kept_buffer("lists: field 1", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr};
   GpuBuffer& samples = kept_buffer("lists: samples", n * 16, MemoryIntent::DeviceLocal, vol.path);
   GpuBuffer& list_buf = kept_buffer("lists: work lists", list_bytes, MemoryIntent::DeviceLocal, vol.path);
-  GpuBuffer *up = nullptr, *list_up = nullptr, *field_down = nullptr, *samples_down = nullptr;
+  GpuBuffer *list_up = nullptr, *field_down = nullptr, *samples_down = nullptr;
   if (!direct) {
-    up = &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path);
     list_up = &kept_buffer("lists: work lists staging", list_bytes, MemoryIntent::Upload, vol.path);
     field_down = &kept_buffer("lists: field readback", n * 4, MemoryIntent::Readback, vol.path);
     samples_down = &kept_buffer("lists: samples readback", n * 16, MemoryIntent::Readback, vol.path);
   }
-  std::memcpy(direct ? field[0]->mapped() : up->mapped(), vol.voxels.data(), n * 4);
   {
     char* dst = static_cast<char*>(direct ? list_buf.mapped() : list_up->mapped());
     for (std::size_t k = 0; k <= K; ++k)
@@ -436,9 +448,9 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, smp, iso, background, format, keep_input, out, ranges_ms);
 
-  out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
+  out.passes.push_back({"raw brick ranges + input copy (host)", raw_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
-  out.passes.push_back({"work lists (host)", lists_ms, 0});
+  out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
   std::ostringstream info;
   const auto nb = core::brick_counts(vol.grid);
   info << "strategy: lists; " << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total

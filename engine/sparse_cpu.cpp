@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 #include "cpu_gradient.h"
@@ -319,9 +321,51 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
   return r.nan && r.lo <= r.hi && iso.contains(tile);
 }
 
+void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
+                  const std::function<void(std::size_t, std::size_t)>& body) {
+  grain = std::max<std::size_t>(grain, 1);
+  const std::size_t parts = std::max<std::size_t>(1, std::min<std::size_t>(threads, (n + grain - 1) / grain));
+  if (parts <= 1) {
+    if (n) body(0, n);
+    return;
+  }
+  const std::size_t per = (n / grain + parts - 1) / parts * grain;
+  std::vector<std::thread> pool;
+  std::exception_ptr error;
+  std::mutex m;
+  auto run = [&](std::size_t b, std::size_t e) {
+    try {
+      body(b, e);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(m);
+      if (!error) error = std::current_exception();
+    }
+  };
+  std::size_t b = 0;
+  for (std::size_t p = 0; p + 1 < parts && b + per < n; ++p, b += per) pool.emplace_back(run, b, b + per);
+  run(b, n);
+  for (std::thread& t : pool) t.join();
+  if (error) std::rethrow_exception(error);
+}
+
+unsigned host_threads() { return std::clamp(std::thread::hardware_concurrency(), 1u, 8u); }
+
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
              float background, core::SampleFormat format, bool keep_input, SparseOutput& out) {
+  publish_fill(
+      grid, sel, ranges,
+      [&](std::size_t c, core::Sample* dst) {
+        const core::Sample* s = samples(c);
+        std::copy(s, s + core::kBrickSamples, dst);
+      },
+      1, iso, background, format, keep_input, out);
+}
+
+void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
+                  const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
+                  const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
+                  SparseOutput& out) {
   core::BrickedInput in;
   in.grid = grid;
   in.background = background;
@@ -345,15 +389,17 @@ void publish(const core::Grid& grid, const Selection& sel, const std::vector<Can
       in.tile[sel.candidates[c]] = tile;
   }
   in.active.reserve(n_active);
+  std::vector<std::size_t> cand_of_slot;
+  cand_of_slot.reserve(n_active);
+  for (std::size_t c = 0; c < sel.candidates.size(); ++c)
+    if (active[c]) {
+      in.active.push_back(sel.candidates[c]);
+      cand_of_slot.push_back(c);
+    }
   in.pool.resize(n_active * std::size_t(core::kBrickSamples));
-  core::Sample* dst = in.pool.data();
-  for (std::size_t c = 0; c < sel.candidates.size(); ++c) {
-    if (!active[c]) continue;
-    in.active.push_back(sel.candidates[c]);
-    const core::Sample* s = samples(c);
-    std::copy(s, s + core::kBrickSamples, dst);
-    dst += core::kBrickSamples;
-  }
+  parallel_for(n_active, threads, 16, [&](std::size_t b, std::size_t e) {
+    for (std::size_t slot = b; slot < e; ++slot) fill(cand_of_slot[slot], in.pool.data() + slot * core::kBrickSamples);
+  });
   SparseStats& st = out.stats;
   st.bricks_total = total;
   st.candidates = sel.candidates.size();

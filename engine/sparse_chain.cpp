@@ -19,14 +19,13 @@
 
 #include "cpu_gradient.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
-#include "isotouch/shaders/gradient_list_x4_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
 
-static_assert(sizeof(gpu::ListPush) == 64, "ListPush: 16 4-byte members (std430)");
+static_assert(sizeof(gpu::ListPush) == 32, "ListPush: 8 4-byte members (std430)");
 static_assert(sizeof(gpu::SparseBrickPush) == 112, "SparseBrickPush: 28 4-byte members (std430)");
 static_assert(int(sparse::OpKind::kGauss) == int(ISOTOUCH_SPARSE_OP_GAUSS) &&
                   int(sparse::OpKind::kMax) == int(ISOTOUCH_SPARSE_OP_MAX) &&
@@ -76,9 +75,10 @@ struct Chunk {
 
 /// The host's part after the passes, on sparse::host_threads() threads: each candidate's
 /// exact range over its brick + 1 voxel of the filtered field `f` (z, y, x ascending, as
-/// CandidateCpu::range) and the 9^3 samples of the active ones copied row by row from the
-/// dense-addressed samples `s` (beyond the grid: the background with a zero gradient)
-/// straight into the published pool. Sets out.publish_ms; `ranges_ms` the time of the ranges.
+/// CandidateCpu::range) and the 9^3 samples of the active ones written straight into the
+/// published pool: copied row by row from the dense-addressed samples `s`, or, with `s`
+/// null, computed from `f` (sparse::brick_samples); beyond the grid the background with a
+/// zero gradient. Sets out.publish_ms; `ranges_ms` the time of the ranges.
 void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float* f, const core::Sample* s,
                     const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
                     SparseOutput& out, double& ranges_ms) {
@@ -119,6 +119,10 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
   auto fill = [&](std::size_t c, core::Sample* o) {
     const auto b = core::brick_coords(sel.candidates[c], nb);
+    if (!s) {
+      sparse::brick_samples(vol.grid, f, b, background, o);
+      return;
+    }
     const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);
     for (int k = 0; k < 9; ++k)
       for (int j = 0; j < 9; ++j) {
@@ -152,9 +156,8 @@ struct SparseChain::Impl {
   SparseOutput run_lists(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
                          std::uint64_t max_binding_bytes);
   /// The list strategy's pipelines: filter_list_x4 by specialization (as PassChain's
-  /// filter_x4), gradient_list_x4 by volume size; made on first use.
+  /// filter_x4), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> filter_list;
-  std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> gradient_list;
   /// The list strategy's buffers by name, kept from run to run (no new allocation and no
   /// first-touch page faults inside the timed dispatches when the sizes repeat).
   std::map<std::string, GpuBuffer> kept;
@@ -270,12 +273,14 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
 
   // Host, in one pass over the voxels on sparse::host_threads() threads (whole brick layers
   // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
-  // the voxels copied into the input field (or its staging buffer).
+  // the voxels copied into the input field (or its staging buffer) where a filter runs.
   auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t n = vol.grid.voxel_count();
-  GpuBuffer* field0 = &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path);
-  GpuBuffer* up = direct ? nullptr : &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path);
-  char* input = static_cast<char*>(direct ? field0->mapped() : up->mapped());
+  const bool filters = !plan.ops.empty();
+  GpuBuffer* field0 = filters ? &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr;
+  GpuBuffer* up =
+      filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
+  char* input = !filters ? nullptr : static_cast<char*>(direct ? field0->mapped() : up->mapped());
   sparse::RawRanges raw;
   raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
@@ -283,7 +288,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
     for (std::size_t z = z0; z < z1; ++z) {
       const float* src = vol.voxels.data() + z * slice;
       raw.add_slice(vol.grid, int(z), src);
-      std::memcpy(input + z * slice * 4, src, slice * 4);
+      if (input) std::memcpy(input + z * slice * 4, src, slice * 4);
     }
   });
   const double raw_ms = ms_since(t0);
@@ -296,15 +301,15 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   std::vector<sparse::WorkList> lists;
   std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
   std::uint64_t total_units = 0;
-  for (std::size_t k = 0; k <= K; ++k) {
+  for (std::size_t k = 0; k < K; ++k) {
     lists.push_back(sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();
   }
   const double lists_ms = ms_since(t0);
 
-  // Buffers: two dense-addressed fields (ping-pong; the input is field 0), the samples, the
-  // work lists; staging and readback only where device-local memory is not host-visible.
+  // Buffers: two dense-addressed fields (ping-pong; the input is field 0) and the work
+  // lists; staging and readback only where device-local memory is not host-visible.
   t0 = std::chrono::steady_clock::now();
   const std::uint64_t list_bytes = std::max<std::uint64_t>(total_units, 1) * 8;
   if (list_bytes / 4 > lim.maxTexelBufferElements)
@@ -312,25 +317,22 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
                       " work-list texels exceed maxTexelBufferElements " + std::to_string(lim.maxTexelBufferElements) +
                       " on " + ctx.info().name);
   GpuBuffer* field[2] = {field0, K ? &kept_buffer("lists: field 1", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr};
-  GpuBuffer& samples = kept_buffer("lists: samples", n * 16, MemoryIntent::DeviceLocal, vol.path);
-  GpuBuffer& list_buf = kept_buffer("lists: work lists", list_bytes, MemoryIntent::DeviceLocal, vol.path);
-  GpuBuffer *list_up = nullptr, *field_down = nullptr, *samples_down = nullptr;
-  if (!direct) {
+  GpuBuffer* list_buf = K ? &kept_buffer("lists: work lists", list_bytes, MemoryIntent::DeviceLocal, vol.path) : nullptr;
+  GpuBuffer *list_up = nullptr, *field_down = nullptr;
+  if (!direct && K) {
     list_up = &kept_buffer("lists: work lists staging", list_bytes, MemoryIntent::Upload, vol.path);
     field_down = &kept_buffer("lists: field readback", n * 4, MemoryIntent::Readback, vol.path);
-    samples_down = &kept_buffer("lists: samples readback", n * 16, MemoryIntent::Readback, vol.path);
   }
-  {
-    char* dst = static_cast<char*>(direct ? list_buf.mapped() : list_up->mapped());
-    for (std::size_t k = 0; k <= K; ++k)
-      std::memcpy(dst + base[k] * 8, lists[k].units.data(), lists[k].units.size() * 4);
+  if (K) {
+    char* dst = static_cast<char*>(direct ? list_buf->mapped() : list_up->mapped());
+    for (std::size_t k = 0; k < K; ++k) std::memcpy(dst + base[k] * 8, lists[k].units.data(), lists[k].units.size() * 4);
   }
   out.upload_ms = ms_since(t0);
 
-  // Slabs and dispatches: op k reads field k % 2 and writes the other; the gradient reads
-  // field K % 2. A slab's units are those of its slices (the lists are sorted by z).
+  // Slabs and dispatches: op k reads field k % 2 and writes the other. A slab's units are
+  // those of its slices (the lists are sorted by z).
   auto floats_before = +[](std::uint64_t z, const void* u) { return z * *static_cast<const std::uint64_t*>(u); };
-  const std::uint64_t slice_bytes = std::uint64_t(slice) * 4, sample_slice_bytes = std::uint64_t(slice) * 16;
+  const std::uint64_t slice_bytes = std::uint64_t(slice) * 4;
   struct Stage {
     const ComputePipeline<gpu::ListPush>* pipe = nullptr;
     std::vector<Slab> slabs;
@@ -338,115 +340,96 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   };
   std::vector<Stage> stages;
   std::uint32_t sets = 0;
-  for (std::size_t k = 0; k <= K; ++k) {
+  for (std::size_t k = 0; k < K; ++k) {
     Stage st;
+    const sparse::Op& op = plan.ops[k];
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
+    spec[3] = std::uint32_t(op.axis);
+    spec[4] = std::uint32_t(op.radius);
+    if (op.kind == sparse::OpKind::kGauss)
+      std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
+    auto& p = filter_list[spec];
+    if (!p)
+      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
+                                                           0b101u);
+    st.pipe = p.get();
+    st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
+               " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
     SlabGeometry g;
     g.nz = std::uint64_t(nz);
     g.src_bytes_per_slice = slice_bytes;
     g.dst_bytes_before = floats_before;
-    if (k < K) {
-      const sparse::Op& op = plan.ops[k];
-      std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
-      for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
-      spec[3] = std::uint32_t(op.axis);
-      spec[4] = std::uint32_t(op.radius);
-      if (op.kind == sparse::OpKind::kGauss)
-        std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
-      spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
-      auto& p = filter_list[spec];
-      if (!p)
-        p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
-                                                             0b101u);
-      st.pipe = p.get();
-      st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
-                 " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
-      g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
-      g.user = &slice_bytes;
-      auto sl = plan_slabs(ctx, g, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
-      if (!sl) throw VolumeError(sl.error);
-      st.slabs = std::move(*sl.value);
-    } else {
-      auto& p = gradient_list[vol.grid.dims];
-      if (!p)
-        p = std::make_unique<ComputePipeline<gpu::ListPush>>(
-            ctx, gradient_list_x4_spv, 3, "gradient_list_x4", 0u,
-            std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)}, 0b101u);
-      st.pipe = p.get();
-      st.label = "gradient";
-      g.halo = 1;
-      g.user = &sample_slice_bytes;
-      g.dst_elem_bytes = 16;
-      auto sl = plan_slabs(ctx, g, field[K % 2]->handle(), samples.handle(), limit, vol.path + ": gradient");
-      if (!sl) throw VolumeError(sl.error);
-      st.slabs = std::move(*sl.value);
-    }
+    g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
+    g.user = &slice_bytes;
+    auto sl = plan_slabs(ctx, g, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
+    if (!sl) throw VolumeError(sl.error);
+    st.slabs = std::move(*sl.value);
     sets += std::uint32_t(st.slabs.size());
     stages.push_back(std::move(st));
   }
-  DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
-  GpuTimer timer(ctx, std::uint32_t(K + 2));
-  const GradientConstants gk = gradient_constants(vol.grid);
-  VkCommandBuffer cmd = ctx.begin_commands();
-  timer.record_reset(cmd);
-  if (!direct) {
-    record_copy(cmd, *up, *field[0], n * 4);
-    record_copy(cmd, *list_up, list_buf, list_bytes);
-    barrier_transfer_to_compute(cmd);
-  }
-  timer.mark(cmd, 0);
-  const BufferRange list_range{list_buf.handle(), 0, list_bytes};
   int dispatches = 0;
-  for (std::size_t k = 0; k <= K; ++k) {
-    const sparse::WorkList& w = lists[k];
-    for (const Slab& sl : stages[k].slabs) {
-      const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
-      if (u1 == u0) continue;
-      const std::uint64_t groups = (u1 - u0) * ISOTOUCH_LIST_QUADS / ISOTOUCH_DENSE_WG +
-                                   ((u1 - u0) * ISOTOUCH_LIST_QUADS % ISOTOUCH_DENSE_WG ? 1 : 0);
-      const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
-      const std::uint64_t gy = (groups + gx - 1) / gx;
-      if (gy > lim.maxComputeWorkGroupCount[1])
-        throw VolumeError(vol.path + ": sparse chain: " + std::to_string(groups) + " workgroups exceed one dispatch on " +
-                          ctx.info().name);
-      gpu::ListPush pc{};
-      pc.z0 = gpu::uint(sl.z0);
-      pc.src_z0 = gpu::uint(sl.src_z0);
-      pc.src_offset = gpu::uint(sl.src_offset_elems);
-      pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-      pc.unit0 = gpu::uint(base[k] + u0);
-      pc.units = gpu::uint(u1 - u0);
-      pc.groups_x = gpu::uint(gx);
-      pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
-      pc.inv_2h_x = gk.inv_2h[0];
-      pc.inv_2h_y = gk.inv_2h[1];
-      pc.inv_2h_z = gk.inv_2h[2];
-      pc.inv_h_x = gk.inv_h[0];
-      pc.inv_h_y = gk.inv_h[1];
-      pc.inv_h_z = gk.inv_h[2];
-      stages[k].pipe->bind(cmd, arena, {sl.src, sl.dst, list_range});
-      stages[k].pipe->push(cmd, pc);
-      vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t(gy), 1);
-      ++dispatches;
+  std::vector<double> stage_ms(K, 0.0);
+  if (K) {
+    DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
+    GpuTimer timer(ctx, std::uint32_t(K + 1));
+    VkCommandBuffer cmd = ctx.begin_commands();
+    timer.record_reset(cmd);
+    if (!direct) {
+      record_copy(cmd, *up, *field[0], n * 4);
+      record_copy(cmd, *list_up, *list_buf, list_bytes);
+      barrier_transfer_to_compute(cmd);
     }
-    // The next stage reads what this one wrote, and overwrites what this one read.
-    barrier_compute_to_compute(cmd);
-    timer.mark(cmd, std::uint32_t(k + 1));
+    timer.mark(cmd, 0);
+    const BufferRange list_range{list_buf->handle(), 0, list_bytes};
+    for (std::size_t k = 0; k < K; ++k) {
+      const sparse::WorkList& w = lists[k];
+      for (const Slab& sl : stages[k].slabs) {
+        const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
+        if (u1 == u0) continue;
+        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_QUADS;
+        const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
+        const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
+        const std::uint64_t gy = (groups + gx - 1) / gx;
+        if (gy > lim.maxComputeWorkGroupCount[1])
+          throw VolumeError(vol.path + ": sparse chain: " + std::to_string(groups) +
+                            " workgroups exceed one dispatch on " + ctx.info().name);
+        gpu::ListPush pc{};
+        pc.z0 = gpu::uint(sl.z0);
+        pc.src_z0 = gpu::uint(sl.src_z0);
+        pc.src_offset = gpu::uint(sl.src_offset_elems);
+        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+        pc.unit0 = gpu::uint(base[k] + u0);
+        pc.units = gpu::uint(u1 - u0);
+        pc.groups_x = gpu::uint(gx);
+        pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
+        stages[k].pipe->bind(cmd, arena, {sl.src, sl.dst, list_range});
+        stages[k].pipe->push(cmd, pc);
+        vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t(gy), 1);
+        ++dispatches;
+      }
+      // The next op reads what this one wrote, and overwrites what this one read.
+      barrier_compute_to_compute(cmd);
+      timer.mark(cmd, std::uint32_t(k + 1));
+    }
+    if (direct) {
+      barrier_compute_to_host(cmd);
+    } else {
+      barrier_compute_to_transfer(cmd);
+      record_copy(cmd, *field[K % 2], *field_down, n * 4);
+      barrier_transfer_to_host(cmd);
+    }
+    out.submit_wall_ms = ctx.submit_and_wait(cmd);
+    for (std::size_t k = 0; k < K; ++k) stage_ms[k] = timer.elapsed_ms(std::uint32_t(k), std::uint32_t(k + 1));
   }
-  if (direct) {
-    barrier_compute_to_host(cmd);
-  } else {
-    barrier_compute_to_transfer(cmd);
-    record_copy(cmd, *field[K % 2], *field_down, n * 4);
-    record_copy(cmd, samples, *samples_down, n * 16);
-    barrier_transfer_to_host(cmd);
-  }
-  out.submit_wall_ms = ctx.submit_and_wait(cmd);
 
-  // Host: ranges and samples read where they lie.
-  const float* f = static_cast<const float*>(direct ? field[K % 2]->mapped() : field_down->mapped());
-  const auto* smp = static_cast<const core::Sample*>(direct ? samples.mapped() : samples_down->mapped());
+  // Host: ranges and samples from the last filter's output where it lies (the raw voxels
+  // without a filter).
+  const float* f = !K ? vol.voxels.data()
+                      : static_cast<const float*>(direct ? field[K % 2]->mapped() : field_down->mapped());
   double ranges_ms = 0;
-  finish_on_host(vol, sel, f, smp, iso, background, format, keep_input, out, ranges_ms);
+  finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
 
   out.passes.push_back({"raw brick ranges + input copy (host)", raw_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
@@ -454,19 +437,19 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   std::ostringstream info;
   const auto nb = core::brick_counts(vol.grid);
   info << "strategy: lists; " << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total
-       << " bricks, " << out.stats.candidates << " candidates, " << out.stats.active << " active; quads per pass:";
-  for (std::size_t k = 0; k <= K; ++k) {
+       << " bricks, " << out.stats.candidates << " candidates, " << out.stats.active << " active; quads per filter:";
+  for (std::size_t k = 0; k < K; ++k) {
     const double pct = 100.0 * double(lists[k].quads) * ISOTOUCH_DENSE_VOXELS / double(n);
     std::ostringstream lab;
     lab.precision(3);
     lab << stages[k].label << " (GPU, list: " << pct << " % of the voxels)";
-    out.passes.push_back({lab.str(), timer.elapsed_ms(std::uint32_t(k), std::uint32_t(k + 1)), 0});
+    out.passes.push_back({lab.str(), stage_ms[k], 0});
     info << " " << stages[k].label << " " << lists[k].quads;
   }
   out.passes.push_back({"candidate ranges (host)", ranges_ms, 0});
-  out.passes.push_back({"publish: active samples gathered into the pool (host)", out.publish_ms, 0});
+  out.passes.push_back({"publish: active samples computed into the pool (host)", out.publish_ms, 0});
   out.stats.dispatches = std::size_t(dispatches);
-  out.stats.slabs = stages.back().slabs.size();
+  out.stats.slabs = K ? stages.back().slabs.size() : 0;
   out.total_ms = ms_since(t_total);
   info << "; " << dispatches << " dispatch(es), " << total_units << " units; snapshot " << out.stats.snapshot_bytes
        << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
@@ -506,10 +489,10 @@ std::string SparseChain::describe() const {
   for (std::size_t i = 0; i < impl_->passes.size(); ++i) s << (i ? " -> " : " ") << impl_->passes[i].label();
   s << " (brick_minmax halo 1 implied)";
   if (impl_->strategy == Strategy::Lists) {
-    s << "\nstrategy: lists - filter_list_x4 and gradient_list_x4 (the dense x4 passes' code) on the quads of "
-         "the candidate bricks dilated by the rest of the stencil, each quad once per pass; dense-addressed "
-         "buffers read in place; per candidate its exact range and the 9^3 samples of the active ones gathered "
-         "on the host";
+    s << "\nstrategy: lists - filter_list_x4 (the dense filters' x4 code) on the quads of the candidate bricks "
+         "dilated by the rest of the stencil, each quad once per pass; dense-addressed buffers read in place; "
+         "per candidate its exact range and the active ones' 9^3 samples computed on the host straight into the "
+         "published pool";
     s << "\nleft out (not created, not run): sparse_brick (per-brick strategy), the dense passes (a filter "
          "wider than " << ISOTOUCH_DENSE_MAX_RADIUS << " voxels a side runs the dense strategy)";
     if (!impl_->last_run.empty()) s << "\nlast run: " << impl_->last_run;

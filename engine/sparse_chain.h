@@ -141,11 +141,11 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
 struct Extent {
   std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
 };
-/// The extents of the list strategy's stages, worked backwards from what the host reads: the
-/// gradient's output (the 9^3 samples, 8 b .. 8 b + 8, rounded to quads) and the last
-/// filter's output (the gradient's input and the candidate range, 8 b - 1 .. 8 b + 8); each
-/// op's output (quads) widened by its radius along its axis is what the op before it must
-/// give. Entry k < ops: op k's output; entry ops: the gradient's output.
+/// The extents of the list strategy's filter ops, worked backwards from what the host reads
+/// of the last one's output (the candidate range, 8 b - 1 .. 8 b + 8, and the gradient's
+/// input for the 9^3 samples, 8 b - 1 .. 8 b + 9): each op's output (whole quads along x)
+/// widened by its radius along its axis is what the op before it must give. Entry k: op k's
+/// output.
 std::vector<Extent> list_extents(const Plan& plan);
 
 /// One stage's work list: the quads (4 voxels of an x-row) of the union of the candidates'
@@ -189,6 +189,12 @@ class CandidateCpu {
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
              float background, core::SampleFormat format, bool keep_input, SparseOutput& out);
+/// The 9^3 samples of brick `b` (brick coordinates; i + 9 j + 81 k) from the dense field `f`
+/// of `grid`: value and gradient with the float operations of compute_samples_cpu (central
+/// differences inside, one-sided at the borders), so bit for bit the dense chain's samples;
+/// beyond the grid {background, 0, 0, 0}. Reads f at the brick's voxels - 1 .. + 9.
+void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
+                   core::Sample* out);
 /// publish() with the active candidates' samples written straight into the pool:
 /// `fill(c, dst)` writes the 729 samples of candidate index c at dst, called from `threads`
 /// threads at once (each on its own candidates; 1: this thread only).
@@ -235,12 +241,13 @@ class SparseChain {
   /// samples are by definition the dense chain's. PerBrick: sparse_brick.comp, one
   /// shared-memory workgroup per candidate brick recomputing its own halo (kept for
   /// comparison). All three give the same bits.
-  /// Lists (the default): the dense passes' x4 shaders on work lists (filter_list_x4.comp,
-  /// gradient_list_x4.comp): each pass computes only the quads of the candidate bricks
-  /// dilated by the rest of the stencil (sparse::list_extents), halos shared between
-  /// neighbouring candidates and computed once, dense-addressed buffers read in place; then
-  /// the candidates' ranges and samples on the host as Dense. A filter wider than
-  /// ISOTOUCH_DENSE_MAX_RADIUS runs as Dense.
+  /// Lists (the default): the dense filters' x4 shader on work lists (filter_list_x4.comp):
+  /// each pass computes only the quads of the candidate bricks dilated by the rest of the
+  /// stencil (sparse::list_extents), halos shared between neighbouring candidates and
+  /// computed once, dense-addressed buffers read in place; then on the host the candidates'
+  /// ranges and the active ones' samples computed straight into the published pool
+  /// (sparse::brick_samples: the gradient's 16 B per voxel are never written twice). A
+  /// filter wider than ISOTOUCH_DENSE_MAX_RADIUS runs as Dense.
   enum class Strategy { Lists, Dense, PerBrick };
   void set_strategy(Strategy s);
 

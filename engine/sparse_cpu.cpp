@@ -321,6 +321,51 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
   return r.nan && r.lo <= r.hi && iso.contains(tile);
 }
 
+void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
+                   core::Sample* out) {
+  const auto [nx, ny, nz] = grid.dims;
+  const GradientConstants k = gradient_constants(grid);
+  const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
+  const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);
+  const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
+  // One axis' rule for a whole row, as compute_samples_cpu: (a[x] - b[x]) * k, 0 when flat.
+  struct Rule {
+    const float* a;
+    const float* b;
+    float k;
+    bool flat;
+  };
+  auto rule = [](int i, int n, const float* row, std::size_t stride, float inv_2h, float inv_h) {
+    if (n < 2) return Rule{row, row, 0.0f, true};
+    if (i == 0) return Rule{row + stride, row, inv_h, false};
+    if (i == n - 1) return Rule{row, row - stride, inv_h, false};
+    return Rule{row + stride, row - stride, inv_2h, false};
+  };
+  for (int kk = 0; kk < 9; ++kk)
+    for (int j = 0; j < 9; ++j) {
+      core::Sample* o = out + 9 * j + 81 * kk;
+      const int y = 8 * b[1] + j, z = 8 * b[2] + kk;
+      int i = 0;
+      if (y < ny && z < nz) {
+        const float* row = f + std::size_t(z) * sz + std::size_t(y) * sy;
+        const Rule dy = rule(y, ny, row, sy, k.inv_2h[1], k.inv_h[1]);
+        const Rule dz = rule(z, nz, row, sz, k.inv_2h[2], k.inv_h[2]);
+        for (; i < in_x; ++i) {
+          const int x = x0 + i;
+          float gx = 0.0f;
+          if (nx >= 2)
+            gx = x == 0        ? (row[1] - row[0]) * k.inv_h[0]
+                 : x == nx - 1 ? (row[nx - 1] - row[nx - 2]) * k.inv_h[0]
+                               : (row[x + 1] - row[x - 1]) * k.inv_2h[0];
+          const float gy = dy.flat ? 0.0f : (dy.a[x] - dy.b[x]) * dy.k;
+          const float gz = dz.flat ? 0.0f : (dz.a[x] - dz.b[x]) * dz.k;
+          o[i] = {row[x], gx, gy, gz};
+        }
+      }
+      for (; i < 9; ++i) o[i] = outside;
+    }
+}
+
 void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
                   const std::function<void(std::size_t, std::size_t)>& body) {
   grain = std::max<std::size_t>(grain, 1);

@@ -14,18 +14,12 @@ int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 std::vector<Extent> list_extents(const Plan& plan) {
   const std::size_t n = plan.ops.size();
-  std::vector<Extent> e(n + 1);
-  // The gradient's output: the 9^3 samples 8 b .. 8 b + 8, x in whole quads.
-  Extent g;
-  g.hi = {ceil4(1), 1, 1};
-  e[n] = g;
-  // What the last filter gives: the gradient's input (its output widened by 1 voxel) and the
-  // candidate range (8 b - 1 .. 8 b + 8).
+  std::vector<Extent> e(n);
+  // What the host reads of the last filter's output: the candidate range (8 b - 1 ..
+  // 8 b + 8) and the gradient's input for the 9^3 samples (8 b - 1 .. 8 b + 9).
   Extent need;
-  for (int a = 0; a < 3; ++a) {
-    need.lo[std::size_t(a)] = std::max(g.lo[std::size_t(a)] + 1, 1);
-    need.hi[std::size_t(a)] = std::max(g.hi[std::size_t(a)] + 1, 1);
-  }
+  need.lo = {1, 1, 1};
+  need.hi = {2, 2, 2};
   for (std::size_t k = n; k-- > 0;) {
     Extent out = need;
     out.lo[0] = ceil4(out.lo[0]);

@@ -101,8 +101,8 @@ struct DensePush {
   float inv_h_z;
 };
 
-// The sparse chain's passes on work lists (filter_list_x4.comp, gradient_list_x4.comp,
-// shaders/work_list.glsl): the dense passes' quads, but only those of the rows a list names.
+// The sparse chain's filters on work lists (filter_list_x4.comp, shaders/work_list.glsl):
+// the dense filters' quads, but only those of the rows a list names.
 // A unit is a run of at most ISOTOUCH_LIST_QUADS quads of one row; ISOTOUCH_LIST_QUADS
 // consecutive invocations take one unit. Buffers are dense-addressed as in DensePush.
 #define ISOTOUCH_LIST_QUADS 8u
@@ -111,19 +111,11 @@ struct ListPush {
   uint z0;          // first slice of this slab (dst_offset is the element of its voxel 0)
   uint src_z0;      // first slice present in the src binding
   uint src_offset;  // elements between the src binding start and slice src_z0
-  uint dst_offset;  // elements (floats or vec4 samples) between the dst binding start and slice z0
+  uint dst_offset;  // elements between the dst binding start and slice z0
   uint unit0;       // first unit of this dispatch in the list binding
   uint units;       // units of this dispatch (all in slices z0 ..)
   uint groups_x;    // workgroups along x of the 2-D dispatch
-  uint vec4_out;    // filters: 1 if every row starts 16-byte aligned in dst (one vec4 store)
-  float inv_2h_x;   // gradient: 1 / (2 spacing) [1/m], central difference
-  float inv_2h_y;
-  float inv_2h_z;
-  float inv_h_x;    // gradient: 1 / spacing [1/m], one-sided difference at the borders
-  float inv_h_y;
-  float inv_h_z;
-  uint pad0;
-  uint pad1;
+  uint vec4_out;    // 1 if every row starts 16-byte aligned in dst (one vec4 store)
 };
 
 // Per-brick min/max (brick_minmax.comp): one invocation per 8^3 brick (OpenVDB's leaf

@@ -1,4 +1,4 @@
-// work_list.glsl - the quads of a sparse pass (isotouch_shared.h ListPush): binding 2 holds
+// work_list.glsl - the quads of a sparse filter pass (filter_list_x4.comp) (isotouch_shared.h ListPush): binding 2 holds
 // the work units, two texels each: the row y + NY z and q0 * ISOTOUCH_LIST_PACK + n, the
 // row's quads q0 .. q0 + n - 1 (n <= ISOTOUCH_LIST_QUADS; integers below 2^24, exact in a
 // float texel). ISOTOUCH_LIST_QUADS consecutive invocations take one unit, one quad each:

@@ -21,6 +21,7 @@
 #include "isotouch/shaders/filter_list_x4_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
+#include "parallel.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
@@ -73,7 +74,7 @@ struct Chunk {
   GpuBuffer pool, readback;
 };
 
-/// The host's part after the passes, on sparse::host_threads() threads: each candidate's
+/// The host's part after the passes, on hardware_threads() threads: each candidate's
 /// exact range over its brick + 1 voxel of the filtered field `f` (z, y, x ascending, as
 /// CandidateCpu::range) and the 9^3 samples of the active ones written straight into the
 /// published pool: copied row by row from the dense-addressed samples `s`, or, with `s`
@@ -85,12 +86,12 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   const auto [nx, ny, nz] = vol.grid.dims;
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
   const std::size_t nc = sel.candidates.size();
-  const unsigned threads = sparse::host_threads();
+  const unsigned threads = hardware_threads();
   auto t0 = std::chrono::steady_clock::now();
   const auto nb = core::brick_counts(vol.grid);
   std::vector<sparse::CandidateRange> ranges(nc);
   const float inf = std::numeric_limits<float>::infinity();
-  sparse::parallel_for(nc, threads, 64, [&](std::size_t c0, std::size_t c1) {
+  parallel_for(nc, threads, 64, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
       const auto b = core::brick_coords(sel.candidates[c], nb);
       int lo[3], hi[3];
@@ -271,7 +272,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
 
-  // Host, in one pass over the voxels on sparse::host_threads() threads (whole brick layers
+  // Host, in one pass over the voxels on hardware_threads() threads (whole brick layers
   // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
   // the voxels copied into the input field (or its staging buffer) where a filter runs.
   auto t0 = std::chrono::steady_clock::now();
@@ -284,7 +285,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   sparse::RawRanges raw;
   raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  sparse::parallel_for(std::size_t(nz), sparse::host_threads(), 8, [&](std::size_t z0, std::size_t z1) {
+  parallel_for(std::size_t(nz), hardware_threads(), 8, [&](std::size_t z0, std::size_t z1) {
     for (std::size_t z = z0; z < z1; ++z) {
       const float* src = vol.voxels.data() + z * slice;
       raw.add_slice(vol.grid, int(z), src);

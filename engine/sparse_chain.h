@@ -202,12 +202,6 @@ void publish_fill(const core::Grid& grid, const Selection& sel, const std::vecto
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
                   const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
                   SparseOutput& out);
-/// Runs body(begin, end) over [0, n) split in `threads` contiguous parts, each on its own
-/// thread (the last on the calling one); parts are multiples of `grain`.
-void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
-                  const std::function<void(std::size_t, std::size_t)>& body);
-/// Threads for the host's share of the sparse chain: the hardware's, at most 8.
-unsigned host_threads();
 
 }  // namespace sparse
 

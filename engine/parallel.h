@@ -1,0 +1,17 @@
+// parallel.h - the host's threads for the engine's CPU work: row loops split in contiguous
+// parts, one std::thread each (no pool: the parts are long, a few ms and more).
+#pragma once
+#include <cstddef>
+#include <functional>
+
+namespace isotouch::engine {
+
+/// Runs body(begin, end) over [0, n) split in at most `threads` contiguous parts, each on
+/// its own thread (the last on the calling one); part sizes are multiples of `grain` (the
+/// last one excepted). The first exception a part throws is rethrown after all have ended.
+void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
+                  const std::function<void(std::size_t, std::size_t)>& body);
+/// The hardware's threads (std::thread::hardware_concurrency), 1 .. 8.
+unsigned hardware_threads();
+
+}  // namespace isotouch::engine

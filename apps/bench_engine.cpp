@@ -26,6 +26,7 @@
 #include "bench_peers.h"
 #include "files.h"
 #include "gradient_pass.h"
+#include "parallel.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
@@ -352,7 +353,8 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   }
   const std::size_t np = dense.size(), ni = c.isos.size();
   std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np), legacy_ms(np);
-  std::vector<double> gpu_wall, cpu_wall, legacy_wall;
+  std::vector<double> gpu_wall, cpu_wall, legacy_wall, cpu_mt_wall;
+  r.cpu_backend_threads = engine::hardware_threads();
   double sigma_mm = kNaN;
   for (const auto& p : dense)
     if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
@@ -409,6 +411,18 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       const engine::ChainOutput h = engine::run_chain_cpu(v, dense);
       cpu_wall.push_back(ms_since(t0));
       for (std::size_t i = 0; i < np && i < h.passes.size(); ++i) cpu_ms[i].push_back(h.passes[i].ms);
+      if (r.cpu_backend_threads > 1) {
+        const auto t1 = Clock::now();
+        const engine::ChainOutput m = engine::run_chain_cpu(v, dense, r.cpu_backend_threads);
+        cpu_mt_wall.push_back(ms_since(t1));
+        // Bit for bit the reference: the samples (every voxel) and the brick ranges.
+        const bool same = h.samples && m.samples && h.bricks && m.bricks &&
+                          h.samples->samples.size() == m.samples->samples.size() &&
+                          std::memcmp(h.samples->samples.data(), m.samples->samples.data(),
+                                      h.samples->samples.size() * sizeof(core::Sample)) == 0 &&
+                          h.bricks->min == m.bricks->min && h.bricks->max == m.bricks->max;
+        r.cpu_backend_same_bits = (rep == 0 || r.cpu_backend_same_bits) && same;
+      }
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
@@ -459,6 +473,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
   r.dense_gpu_wall_ms = median(gpu_wall);
   r.dense_cpu_wall_ms = median(cpu_wall);
+  r.dense_cpu_mt_wall_ms = median(cpu_mt_wall);
 
   for (std::size_t k = 0; k < ni; ++k) {
     IsoResult ir;
@@ -795,6 +810,24 @@ std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
   return c.available ? num(v, prec) : "sparse: not available (" + c.why + ")";
 }
 
+void print_cpu_backend(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## CPU backend (where no Vulkan device exists): the dense chain's rows split among threads\n\n"
+      << "| case | threads | dense CPU chain [ms] | one-thread reference [ms] | speed-up | bits |\n"
+      << "|---|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res) {
+    if (r.cpu_backend_threads < 2) {
+      out << "| " << r.name << " | 1 | not run: one hardware thread | | | |\n";
+      continue;
+    }
+    out << "| " << r.name << " | " << r.cpu_backend_threads << " | " << num(r.dense_cpu_mt_wall_ms) << " | "
+        << num(r.dense_cpu_wall_ms) << " | " << num(ratio(r.dense_cpu_wall_ms, r.dense_cpu_mt_wall_ms)) << " | "
+        << (r.cpu_backend_same_bits ? "same as the reference (samples, brick ranges)" : "DIFFER from the reference")
+        << " |\n";
+    csv.row("cpu_backend", r.name, "", std::to_string(r.cpu_backend_threads) + " threads", "dense_cpu_ms",
+            csv_num(r.dense_cpu_mt_wall_ms), "ms", d.cpu);
+  }
+}
+
 void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
   out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
       << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
@@ -1079,6 +1112,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
   print_dense(res, dev, out, csv);
   print_peers(res, dev, out, csv);
+  print_cpu_backend(res, dev, out, csv);
   print_sparse(res, dev, out, csv);
   print_bytes(res, out, csv);
   print_big(big.get(), out, csv, mem_total);

@@ -176,6 +176,9 @@ struct CaseResult {
   PassRow sum;                            ///< sum over the passes (bytes and times)
   double dense_gpu_wall_ms = kNaN;        ///< median wall of PassChain::run (upload..download)
   double dense_cpu_wall_ms = kNaN;        ///< median wall of run_chain_cpu
+  unsigned cpu_backend_threads = 0;       ///< threads of the multi-threaded CPU backend (0: not run)
+  double dense_cpu_mt_wall_ms = kNaN;     ///< median wall of run_chain_cpu on cpu_backend_threads threads
+  bool cpu_backend_same_bits = false;     ///< every repetition's output bit for bit the one-thread reference's
   double dense_gpu_over_cpu_wall = kNaN;  ///< dense_gpu_wall_ms / dense_cpu_wall_ms
   std::vector<IsoResult> isos;
   double memcpy_gbps = kNaN;

@@ -443,7 +443,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
     const double pct = 100.0 * double(lists[k].quads) * ISOTOUCH_DENSE_VOXELS / double(n);
     std::ostringstream lab;
     lab.precision(3);
-    lab << stages[k].label << " (GPU, list: " << pct << " % of the voxels)";
+    lab << stages[k].label << " on " << pct << " % of the voxels (GPU)";
     out.passes.push_back({lab.str(), stage_ms[k], 0});
     info << " " << stages[k].label << " " << lists[k].quads;
   }

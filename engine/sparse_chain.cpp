@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -91,30 +92,43 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   const auto nb = core::brick_counts(vol.grid);
   std::vector<sparse::CandidateRange> ranges(nc);
   const float inf = std::numeric_limits<float>::infinity();
-  parallel_for(nc, threads, 64, [&](std::size_t c0, std::size_t c1) {
-    for (std::size_t c = c0; c < c1; ++c) {
-      const auto b = core::brick_coords(sel.candidates[c], nb);
-      int lo[3], hi[3];
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
-        hi[a] = std::min(8 * b[std::size_t(a)] + 8, vol.grid.dims[std::size_t(a)] - 1);
-      }
-      sparse::CandidateRange rg{inf, -inf, false};
-      for (int z = lo[2]; z <= hi[2]; ++z)
-        for (int y = lo[1]; y <= hi[1]; ++y) {
+  // Streamed row by row (the field is read in memory order, not 100 scattered rows per
+  // candidate): every row of slice z updates the candidates whose brick + 1 voxel holds it.
+  // Min / max over a set do not depend on the order (NaN skipped, -0 made +0 at the end).
+  // Threads take whole brick layers: each candidate is folded by one thread.
+  std::vector<std::int32_t> cand_of(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), -1);
+  for (std::size_t c = 0; c < nc; ++c) cand_of[sel.candidates[c]] = std::int32_t(c);
+  for (sparse::CandidateRange& r : ranges) r = {inf, -inf, false};
+  parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
+    for (int bz = int(bz0); bz < int(bz1); ++bz)
+      for (int z = std::max(8 * bz - 1, 0); z <= std::min(8 * bz + 8, nz - 1); ++z)
+        for (int y = 0; y < ny; ++y) {
           const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
-          for (int x = lo[0]; x <= hi[0]; ++x) {
-            const float v = row[x];
-            rg.nan = rg.nan || v != v;
-            rg.lo = v < rg.lo ? v : rg.lo;
-            rg.hi = v > rg.hi ? v : rg.hi;
+          for (int by = std::max((y - 8 + 7) / 8, 0); by <= std::min((y + 1) / 8, nb[1] - 1); ++by) {
+            const std::int32_t* cands =
+                cand_of.data() + (std::size_t(bz) * std::size_t(nb[1]) + std::size_t(by)) * std::size_t(nb[0]);
+            for (int bx = 0; bx < nb[0]; ++bx) {
+              if (cands[bx] < 0) continue;
+              sparse::CandidateRange& rg = ranges[std::size_t(cands[bx])];
+              float mn = rg.lo, mx = rg.hi;
+              bool n = false;
+              for (int x = std::max(8 * bx - 1, 0); x <= std::min(8 * bx + 8, nx - 1); ++x) {
+                const float v = row[x];
+                n |= v != v;
+                mn = v < mn ? v : mn;
+                mx = v > mx ? v : mx;
+              }
+              rg.lo = mn;
+              rg.hi = mx;
+              rg.nan = rg.nan || n;
+            }
           }
         }
-      rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
-      rg.hi = rg.hi + 0.0f;
-      ranges[c] = rg;
-    }
   });
+  for (sparse::CandidateRange& r : ranges) {
+    r.lo = r.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
+    r.hi = r.hi + 0.0f;
+  }
   ranges_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const core::Sample outside{background, 0.0f, 0.0f, 0.0f};

@@ -9,6 +9,10 @@
 #include <stdexcept>
 #include <utility>
 
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
+
 #include "cpu_gradient.h"
 #include "parallel.h"
 #include "sparse_chain.h"
@@ -320,6 +324,23 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
   return r.nan && r.lo <= r.hi && iso.contains(tile);
 }
 
+namespace {
+/// A fresh pool of tens of MB costs a page fault per 4 KiB page when first written (most of
+/// publication's time on the chest); transparent huge pages, where the kernel offers them
+/// on request, take one fault per 2 MiB. Advice only: nothing changes where they are off.
+void advise_huge_pages(void* p, std::size_t bytes) {
+#ifdef __linux__
+  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
+  const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
+  const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(kHuge - 1);
+  if (e > b) (void)madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
+#else
+  (void)p;
+  (void)bytes;
+#endif
+}
+}  // namespace
+
 void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
                    core::Sample* out) {
   const auto [nx, ny, nz] = grid.dims;
@@ -411,6 +432,8 @@ void publish_fill(const core::Grid& grid, const Selection& sel, const std::vecto
       in.active.push_back(sel.candidates[c]);
       cand_of_slot.push_back(c);
     }
+  in.pool.reserve(n_active * std::size_t(core::kBrickSamples));
+  advise_huge_pages(in.pool.data(), in.pool.capacity() * sizeof(core::Sample));
   in.pool.resize(n_active * std::size_t(core::kBrickSamples));
   parallel_for(n_active, threads, 16, [&](std::size_t b, std::size_t e) {
     for (std::size_t slot = b; slot < e; ++slot) fill(cand_of_slot[slot], in.pool.data() + slot * core::kBrickSamples);

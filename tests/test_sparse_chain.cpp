@@ -10,6 +10,7 @@
 //   give the same result.
 // Plus a disabled benchmark (chest CT, -500 and +250 HU): sparse GPU vs dense CPU.
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -428,7 +429,7 @@ TEST(SparseChain, DISABLED_Bench512) {
 //   voxel, no arithmetic) over the same three work lists: lavapipe's cost of touching those
 //   quads at all;
 // - publication: memcpy of the active bricks' 729 samples each into a fresh pool (the bytes
-//   the published snapshot must receive, page faults included).
+//   the published snapshot must receive, page faults included, huge pages asked for).
 // The sum of the floors over the one-thread dense CPU chain is the best ratio this design
 // can reach here. Run:
 //   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_LimitChest*'
@@ -546,7 +547,12 @@ TEST(SparseChain, DISABLED_LimitChest) {
     const double dense_floor = floor_dense();
     t0 = std::chrono::steady_clock::now();
     {
-      std::vector<core::Sample> pool(n_active * core::kBrickSamples);
+      std::vector<core::Sample> pool;
+      pool.reserve(n_active * core::kBrickSamples);  // huge pages as publish_fill asks for them
+      const std::uintptr_t huge = std::uintptr_t(2) << 20, p0 = reinterpret_cast<std::uintptr_t>(pool.data());
+      const std::uintptr_t hb = (p0 + huge - 1) & ~(huge - 1), he = (p0 + pool.capacity() * 16) & ~(huge - 1);
+      if (he > hb) (void)madvise(reinterpret_cast<void*>(hb), he - hb, MADV_HUGEPAGE);
+      pool.resize(n_active * core::kBrickSamples);
       const auto* s = static_cast<const core::Sample*>(f1.mapped());  // any source of the same bytes
       for (std::size_t b = 0; b < n_active; ++b)
         std::memcpy(pool.data() + b * core::kBrickSamples, s + (b * core::kBrickSamples) % (n / 4 - core::kBrickSamples),

@@ -403,7 +403,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
       for (const Slab& sl : stages[k].slabs) {
         const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
         if (u1 == u0) continue;
-        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_QUADS;
+        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_INVOCATIONS;
         const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
         const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
         const std::uint64_t gy = (groups + gx - 1) / gx;

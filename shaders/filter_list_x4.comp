@@ -11,9 +11,14 @@ layout(push_constant) uniform Push { ListPush pc; };
 #include "work_list.glsl"
 
 void main() {
-  int x0, y, z;
-  if (!list_quad(x0, y, z)) return;
+  int y, z, q0, n, lane;
+  if (!list_unit(y, z, q0, n, lane)) return;
   const int src0 = int(pc.src_offset) - int(pc.src_z0) * NX * NY;
-  const vec4 acc = filter_quad(x0, y, z, src0);
-  store_quad(pc.dst_offset + uint(((z - int(pc.z0)) * NY + y) * NX + x0), x0, acc, pc.vec4_out != 0u);
+  for (int k = 0; k < int(ISOTOUCH_LIST_QUADS / ISOTOUCH_LIST_INVOCATIONS); ++k) {
+    const int q = lane + k * int(ISOTOUCH_LIST_INVOCATIONS);
+    if (q >= n) break;
+    const int x0 = (q0 + q) * ISOTOUCH_DENSE_VOXELS;
+    const vec4 acc = filter_quad(x0, y, z, src0);
+    store_quad(pc.dst_offset + uint(((z - int(pc.z0)) * NY + y) * NX + x0), x0, acc, pc.vec4_out != 0u);
+  }
 }

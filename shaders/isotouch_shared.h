@@ -103,9 +103,11 @@ struct DensePush {
 
 // The sparse chain's filters on work lists (filter_list_x4.comp, shaders/work_list.glsl):
 // the dense filters' quads, but only those of the rows a list names.
-// A unit is a run of at most ISOTOUCH_LIST_QUADS quads of one row; ISOTOUCH_LIST_QUADS
-// consecutive invocations take one unit. Buffers are dense-addressed as in DensePush.
+// A unit is a run of at most ISOTOUCH_LIST_QUADS quads of one row; ISOTOUCH_LIST_INVOCATIONS
+// consecutive invocations take one unit (ISOTOUCH_LIST_QUADS / ISOTOUCH_LIST_INVOCATIONS
+// quads each at most). Buffers are dense-addressed as in DensePush.
 #define ISOTOUCH_LIST_QUADS 8u
+#define ISOTOUCH_LIST_INVOCATIONS 4u
 #define ISOTOUCH_LIST_PACK 16u  // a unit's second texel: q0 * ISOTOUCH_LIST_PACK + quads
 struct ListPush {
   uint z0;          // first slice of this slab (dst_offset is the element of its voxel 0)

@@ -485,7 +485,8 @@ TEST(SparseChain, DISABLED_LimitChest) {
       gpu::ListPush pc{};
       pc.unit0 = base[k];
       pc.units = std::uint32_t(w.unit_count());
-      const std::uint64_t groups = (std::uint64_t(pc.units) * ISOTOUCH_LIST_QUADS + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
+      const std::uint64_t groups =
+          (std::uint64_t(pc.units) * ISOTOUCH_LIST_INVOCATIONS + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
       pc.groups_x = std::uint32_t(std::min<std::uint64_t>(groups, 65535));
       pc.vec4_out = 1;
       const engine::GpuBuffer& src = k % 2 ? f1 : f0;

@@ -299,6 +299,24 @@ TEST(SparseChain, ListsRunAFilterWiderThanTheX4ShaderAsDense) {
   expect_matches_dense(v, wide, above(0), out, "sigma 6 mm (lists strategy, run as dense)");
 }
 
+TEST(SparseChain, ListsWithStagingCopiesGiveTheSameBits) {
+  // Where device-local memory is not host-visible (a discrete GPU) the lists strategy
+  // stages the voxels and the work lists and reads the last field back; lavapipe runs that
+  // path with zero copy turned off. Truth: the dense CPU chain; and the zero-copy run.
+  const Volume v = engine::make_sphere({37, 29, 23}, 1e-3, 9.0, {1.3, -0.7, 0.4});
+  const std::vector<PassDesc> p = {PassDesc::closing(1.0), PassDesc::gaussian(1.0), PassDesc::gradient()};
+  struct Restore {
+    ~Restore() { vk().allow_zero_copy(true); }
+  } restore;
+  const engine::SparseOutput direct = run_gpu(v, p, above(0), -1e4f);
+  vk().allow_zero_copy(false);
+  ASSERT_FALSE(vk().device_local_is_host_visible());
+  const engine::SparseOutput staged = run_gpu(v, p, above(0), -1e4f, 48u << 10);
+  expect_matches_dense(v, p, above(0), staged, "sphere closing+gauss, staging copies, small bindings");
+  expect_same_output(direct, staged, "zero copy vs staging copies");
+  EXPECT_GE(staged.stats.slabs, 2u) << "the small binding must force several slabs";
+}
+
 TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
   // Brute force: the quads whose 4 voxels meet some candidate's extent (8 b - lo .. 8 b + 7
   // + hi, clipped), each exactly once, sorted by z, y, x, in units of at most

@@ -251,11 +251,13 @@ class SparseChain {
   std::unique_ptr<Impl> impl_;
 };
 
-/// The one-thread CPU reference of the sparse chain: the same bricks, the same samples
-/// (bit for bit with the dense CPU chain at every published voxel).
+/// The CPU reference of the sparse chain: the same bricks, the same samples (bit for bit
+/// with the dense CPU chain at every published voxel). One thread by default (the
+/// reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan device
+/// exists): the candidates split among that many threads, the same bits.
 /// @param keep_input also return the BrickedInput in SparseOutput::input.
 SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
                             float background, core::SampleFormat format = core::SampleFormat::kFp32,
-                            bool keep_input = false);
+                            bool keep_input = false, unsigned threads = 1);
 
 }  // namespace isotouch::engine

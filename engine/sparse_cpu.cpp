@@ -602,7 +602,7 @@ void CandidateCpu::samples(core::Sample* out, float background) const { impl_->s
 }  // namespace sparse
 
 SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                            float background, core::SampleFormat format, bool keep_input) {
+                            float background, core::SampleFormat format, bool keep_input, unsigned threads) {
   if (std::string e = sparse::validate(passes); !e.empty()) throw std::invalid_argument("sparse chain: " + e);
   const auto t_total = std::chrono::steady_clock::now();
   SparseOutput out;
@@ -616,24 +616,39 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
   const sparse::Selection sel = sparse::select(raw, plan, iso);
   out.passes.push_back({"raw brick ranges + candidate selection", sparse::ms_since(t0), 0});
 
+  // Candidates in contiguous parts, one thread each with its own brick buffers and pool of
+  // the active ones' samples (every candidate's computation is the same whichever thread
+  // runs it).
   t0 = std::chrono::steady_clock::now();
-  sparse::BrickCpu brick(vol, plan);
-  std::vector<sparse::CandidateRange> ranges(sel.candidates.size());
-  std::vector<core::Sample> pool;  // samples of the active candidates, in candidate order
-  std::vector<std::size_t> slot(sel.candidates.size(), 0);
-  for (std::size_t c = 0; c < sel.candidates.size(); ++c) {
-    ranges[c] = brick.range(sel.candidates[c], raw.bricks);
-    float tile = 0;
-    if (!sparse::is_active(ranges[c], iso, background, tile)) continue;
-    slot[c] = pool.size();
-    pool.resize(pool.size() + core::kBrickSamples);
-    brick.samples(pool.data() + slot[c], background);
-  }
+  const std::size_t nc = sel.candidates.size();
+  std::vector<sparse::CandidateRange> ranges(nc);
+  std::vector<const core::Sample*> where(nc, nullptr);
+  const unsigned parts = std::max(1u, threads);
+  std::vector<std::vector<core::Sample>> pools(parts);
+  std::vector<std::pair<std::size_t, std::size_t>> spans;
+  const std::size_t per = (nc + parts - 1) / parts;
+  for (std::size_t b = 0; b < nc; b += per) spans.push_back({b, std::min(nc, b + per)});
+  parallel_for(spans.size(), parts, 1, [&](std::size_t s0, std::size_t s1) {
+    for (std::size_t si = s0; si < s1; ++si) {
+      sparse::BrickCpu brick(vol, plan);
+      std::vector<core::Sample>& pool = pools[si];
+      std::vector<std::size_t> slot;
+      for (std::size_t c = spans[si].first; c < spans[si].second; ++c) {
+        ranges[c] = brick.range(sel.candidates[c], raw.bricks);
+        float tile = 0;
+        if (!sparse::is_active(ranges[c], iso, background, tile)) continue;
+        slot.push_back(c);
+        pool.resize(pool.size() + core::kBrickSamples);
+        brick.samples(pool.data() + pool.size() - core::kBrickSamples, background);
+      }
+      for (std::size_t i = 0; i < slot.size(); ++i) where[slot[i]] = pool.data() + i * core::kBrickSamples;
+    }
+  });
   out.passes.push_back({plan.text + " + gradient + min/max on candidates", sparse::ms_since(t0), 0});
 
   t0 = std::chrono::steady_clock::now();
-  sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return pool.data() + slot[c]; }, iso, background,
-                  format, keep_input, out);
+  sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return where[c]; }, iso, background, format,
+                  keep_input, out);
   out.publish_ms = sparse::ms_since(t0);
   out.total_ms = sparse::ms_since(t_total);
   out.submit_wall_ms = out.total_ms;

@@ -317,6 +317,26 @@ TEST(SparseChain, ListsWithStagingCopiesGiveTheSameBits) {
   EXPECT_GE(staged.stats.slabs, 2u) << "the small binding must force several slabs";
 }
 
+TEST(SparseChain, CpuBackendThreadsGiveTheReferenceBitForBit) {
+  // The multi-threaded sparse CPU backend (candidates split among threads) against the
+  // one-thread reference and the dense CPU chain: the same bricks, tiles and samples.
+  const Volume v = engine::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const engine::SparseOutput one = engine::run_sparse_cpu(v, p, above(-500), -1024.0f, core::SampleFormat::kFp32, true);
+  for (unsigned threads : {2u, 3u}) {
+    const engine::SparseOutput many =
+        engine::run_sparse_cpu(v, p, above(-500), -1024.0f, core::SampleFormat::kFp32, true, threads);
+    std::printf("  chest -500 sparse CPU: %u threads %.1f ms, one thread %.1f ms\n", threads, many.total_ms,
+                one.total_ms);
+    expect_same_output(one, many, "sparse CPU, " + std::to_string(threads) + " threads vs one");
+  }
+  const Volume odd = engine::make_random({19, 13, 11}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 7);
+  const std::vector<PassDesc> q = {PassDesc::closing(1.0), PassDesc::gaussian(0.9), PassDesc::gradient()};
+  expect_matches_dense(odd, q, above(1000),
+                       engine::run_sparse_cpu(odd, q, above(1000), -1000.0f, core::SampleFormat::kFp32, true, 3),
+                       "random odd dims, sparse CPU 3 threads");
+}
+
 TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
   // Brute force: the quads whose 4 voxels meet some candidate's extent (8 b - lo .. 8 b + 7
   // + hi, clipped), each exactly once, sorted by z, y, x, in units of at most

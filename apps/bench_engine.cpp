@@ -360,7 +360,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
   const bool run_peers = peers && std::isfinite(sigma_mm);
   std::vector<PeerTimes> peer_runs[2];
-  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni), sd(ni);
+  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni), sd(ni), smt(ni);
   std::vector<float> bg(ni);
   for (std::size_t k = 0; k < ni; ++k) {
     bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
@@ -429,6 +429,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
       guarded(sd[k], [&] { sd[k].add(sdense->run(v, c.isos[k], bg[k])); });
       guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
+      if (r.cpu_backend_threads > 1)
+        guarded(smt[k], [&] {
+          smt[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k], core::SampleFormat::kFp32, false,
+                                            r.cpu_backend_threads));
+        });
     }
   }
   r.gpu_available = chain != nullptr;
@@ -481,6 +486,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     ir.gpu = sg[k].cell();
     ir.gpu_per_brick = sb[k].cell();
     ir.gpu_dense = sd[k].cell();
+    ir.cpu_mt = smt[k].cell();
     ir.cpu = sc[k].cell();
     if (ir.gpu.available && ir.cpu.available) {
       const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
@@ -826,6 +832,22 @@ void print_cpu_backend(const std::vector<CaseResult>& res, const Devices& d, std
     csv.row("cpu_backend", r.name, "", std::to_string(r.cpu_backend_threads) + " threads", "dense_cpu_ms",
             csv_num(r.dense_cpu_mt_wall_ms), "ms", d.cpu);
   }
+  out << "\n| case | tau | threads | sparse CPU [ms] | one-thread sparse reference [ms] | speed-up | counts |\n"
+      << "|---|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res)
+    for (const auto& ir : r.isos) {
+      if (r.cpu_backend_threads < 2) continue;
+      const bool same = ir.cpu_mt.available && ir.cpu.available &&
+                        ir.cpu_mt.stats.candidates == ir.cpu.stats.candidates &&
+                        ir.cpu_mt.stats.active == ir.cpu.stats.active &&
+                        ir.cpu_mt.stats.snapshot_bytes == ir.cpu.stats.snapshot_bytes;
+      out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << r.cpu_backend_threads << " | "
+          << sparse_cell(ir.cpu_mt, ir.cpu_mt.total_ms) << " | " << sparse_cell(ir.cpu, ir.cpu.total_ms) << " | "
+          << num(ratio(ir.cpu.total_ms, ir.cpu_mt.total_ms)) << " | "
+          << (same ? "same bricks and bytes as the reference" : "differ or not run") << " |\n";
+      csv.row("cpu_backend", r.name, tau_text(ir.iso), std::to_string(r.cpu_backend_threads) + " threads",
+              "sparse_cpu_ms", csv_num(ir.cpu_mt.total_ms), "ms", d.cpu);
+    }
 }
 
 void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {

@@ -131,7 +131,8 @@ struct FormatBytes {
 
 struct IsoResult {
   core::Isosurface iso;
-  SparseCell cpu;
+  SparseCell cpu;                         ///< the CPU reference (run_sparse_cpu, one thread)
+  SparseCell cpu_mt;                      ///< the multi-threaded CPU backend (run_sparse_cpu, CaseResult::cpu_backend_threads)
   SparseCell gpu;                         ///< the GPU chain's default strategy (SparseChain::Strategy::Lists)
   SparseCell gpu_dense;                   ///< the same on the dense x4 passes over the whole volume (Strategy::Dense)
   SparseCell gpu_per_brick;               ///< the same on the per-brick kernel (SparseChain::Strategy::PerBrick)

@@ -37,4 +37,9 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
 
 unsigned hardware_threads() { return std::clamp(std::thread::hardware_concurrency(), 1u, 8u); }
 
+unsigned threads_for(unsigned long long voxels, unsigned wanted) {
+  const unsigned long long by_work = std::max(1ull, voxels / kMinVoxelsPerThread);
+  return unsigned(std::min<unsigned long long>({by_work, std::max(1u, wanted), 8ull}));
+}
+
 }  // namespace isotouch::engine

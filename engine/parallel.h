@@ -13,5 +13,10 @@ void parallel_for(std::size_t n, unsigned threads, std::size_t grain,
                   const std::function<void(std::size_t, std::size_t)>& body);
 /// The hardware's threads (std::thread::hardware_concurrency), 1 .. 8.
 unsigned hardware_threads();
+/// Threads worth starting for `voxels` voxels of work: one per kMinVoxelsPerThread, at most
+/// hardware_threads() and at most `wanted` (starting a thread costs tens of microseconds,
+/// milliseconds on a loaded machine: small volumes stay on the calling thread).
+inline constexpr unsigned long long kMinVoxelsPerThread = 1ull << 19;
+unsigned threads_for(unsigned long long voxels, unsigned wanted);
 
 }  // namespace isotouch::engine

@@ -10,6 +10,7 @@
 
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
+#include "parallel.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
@@ -571,6 +572,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
 
 ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes, unsigned threads) {
   if (std::string e = validate_passes(passes); !e.empty()) throw std::invalid_argument("pass chain: " + e);
+  threads = threads_for(vol.grid.voxel_count(), threads);
   ChainOutput out;
   Volume cur = vol;
   bool filtered = false;

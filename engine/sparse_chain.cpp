@@ -87,7 +87,7 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   const auto [nx, ny, nz] = vol.grid.dims;
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
   const std::size_t nc = sel.candidates.size();
-  const unsigned threads = hardware_threads();
+  const unsigned threads = threads_for(std::uint64_t(nc) * 1000u, hardware_threads());
   auto t0 = std::chrono::steady_clock::now();
   const auto nb = core::brick_counts(vol.grid);
   std::vector<sparse::CandidateRange> ranges(nc);
@@ -299,7 +299,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   sparse::RawRanges raw;
   raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  parallel_for(std::size_t(nz), hardware_threads(), 8, [&](std::size_t z0, std::size_t z1) {
+  parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
     for (std::size_t z = z0; z < z1; ++z) {
       const float* src = vol.voxels.data() + z * slice;
       raw.add_slice(vol.grid, int(z), src);

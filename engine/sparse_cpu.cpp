@@ -623,7 +623,7 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
   const std::size_t nc = sel.candidates.size();
   std::vector<sparse::CandidateRange> ranges(nc);
   std::vector<const core::Sample*> where(nc, nullptr);
-  const unsigned parts = std::max(1u, threads);
+  const unsigned parts = threads_for(std::uint64_t(nc) * std::uint64_t(plan.region[0] * plan.region[1] * plan.region[2]), threads);
   std::vector<std::vector<core::Sample>> pools(parts);
   std::vector<std::pair<std::size_t, std::size_t>> spans;
   const std::size_t per = (nc + parts - 1) / parts;

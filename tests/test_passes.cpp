@@ -17,6 +17,7 @@
 #include "vk_test_context.h"
 #include "cpu_filters.h"
 #include "cpu_gradient.h"
+#include "parallel.h"
 #include "passes.h"
 #include "synthetic.h"
 #include "ulp.h"
@@ -212,9 +213,10 @@ TEST(CpuBackend, ThreadsGiveTheOneThreadReferenceBitForBit) {
   // The multi-threaded CPU backend (run_chain_cpu with threads > 1: every pass's rows split
   // among the threads) against the one-thread reference: every output bit for bit, on the
   // chest (a real volume) and an odd-sized random one (every border rule, parts of unequal
-  // size: 7 slices over 2 and 3 threads, more threads than brick layers).
+  // size: 389 slices over 2 and 3 threads; large enough for 3 threads by threads_for).
   const Volume chest = engine::load_volume(kChest);
-  const Volume odd = engine::make_random({19, 13, 7}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 11);
+  const Volume odd = engine::make_random({67, 61, 389}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 11);
+  ASSERT_EQ(engine::threads_for(odd.grid.voxel_count(), 3), 3u);
   const std::vector<PassDesc> list = {PassDesc::closing(1.0), PassDesc::gaussian(1.0), PassDesc::gradient(),
                                       PassDesc::brick_minmax()};
   for (const Volume* v : {&chest, &odd}) {

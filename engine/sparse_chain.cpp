@@ -508,8 +508,9 @@ std::string SparseChain::describe() const {
          "dilated by the rest of the stencil, each quad once per pass; dense-addressed buffers read in place; "
          "per candidate its exact range and the active ones' 9^3 samples computed on the host straight into the "
          "published pool";
-    s << "\nleft out (not created, not run): sparse_brick (per-brick strategy), the dense passes (a filter "
-         "wider than " << ISOTOUCH_DENSE_MAX_RADIUS << " voxels a side runs the dense strategy)";
+    s << "\nleft out (not created, not run): sparse_brick (per-brick strategy); the dense passes filter_x4, "
+         "gaussian1d, morph1d, gradient_x4, gradient, brick_minmax (a filter wider than "
+      << ISOTOUCH_DENSE_MAX_RADIUS << " voxels a side runs the dense strategy)";
     if (!impl_->last_run.empty()) s << "\nlast run: " << impl_->last_run;
     return s.str();
   }

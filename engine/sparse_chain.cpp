@@ -1,12 +1,16 @@
-// sparse_chain.cpp - the sparse GPU engine: the chain's filters, gradient
-// and brick min/max computed only on candidate bricks, one workgroup per brick
-// (shaders/sparse_brick.comp), published as a bricked core::SampleField.
+// sparse_chain.cpp - the sparse GPU engine: the chain's filters, gradient and brick min/max
+// computed only on candidate bricks, published as a bricked core::SampleField. Three
+// strategies (SparseChain::Strategy), the same bits:
 //
-// One run: (host) copy the volume into per-slab staging buffers and take the raw per-brick
-// ranges in the same pass over the voxels; select the candidates (sparse::select); (GPU, one
-// command buffer) staging -> device copies, one dispatch per (slab, pool chunk), readback
-// copies; (host) publish the active bricks (sparse::publish). Every host step is timed in
-// SparseOutput.
+// Lists (the default), one run: (host, hardware threads) the raw per-brick ranges taken while
+// the voxels are copied into the input field; the candidates (sparse::select); one work list
+// per filter op (sparse::make_work_list: the quads of the candidates' extents); (GPU, one
+// command buffer) one filter_list_x4 dispatch per op and z-slab; (host) the candidates'
+// exact ranges and the active ones' samples computed into the published pool.
+// Dense: the dense chain over the whole volume, ranges and samples gathered on the host.
+// PerBrick: (host) the voxels copied into per-slab staging buffers with the raw ranges;
+// (GPU) staging -> device copies, one sparse_brick.comp dispatch per (slab, pool chunk),
+// readback copies; (host) publish the active bricks. Every host step is timed in SparseOutput.
 #include "sparse_chain.h"
 
 #include <algorithm>

@@ -26,6 +26,7 @@
 #include "bench_peers.h"
 #include "files.h"
 #include "gradient_pass.h"
+#include "parallel.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
@@ -322,7 +323,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   r.gpu_why = gpu_why;
 
   std::unique_ptr<engine::PassChain> chain, legacy;
-  std::unique_ptr<engine::SparseChain> schain, sbrick;
+  std::unique_ptr<engine::SparseChain> schain, sdense, sbrick;
   std::string sparse_why = gpu_why;
   if (ctx) {
     try {
@@ -337,6 +338,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     try {
       auto sr = engine::SparseChain::create(*ctx, sparse);
       if (sr) schain = std::move(*sr.value);
+      auto dr = engine::SparseChain::create(*ctx, sparse);
+      if (dr) {
+        sdense = std::move(*dr.value);
+        sdense->set_strategy(engine::SparseChain::Strategy::Dense);
+      }
       auto br = engine::SparseChain::create(*ctx, sparse);
       if (br) {
         sbrick = std::move(*br.value);
@@ -349,18 +355,20 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   }
   const std::size_t np = dense.size(), ni = c.isos.size();
   std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np), legacy_ms(np);
-  std::vector<double> gpu_wall, cpu_wall, legacy_wall;
+  std::vector<double> gpu_wall, cpu_wall, legacy_wall, cpu_mt_wall;
+  r.cpu_backend_threads = engine::hardware_threads();
   double sigma_mm = kNaN;
   for (const auto& p : dense)
     if (p.kind == engine::PassKind::Gaussian) sigma_mm = p.sigma_mm;
   const bool run_peers = peers && std::isfinite(sigma_mm);
   std::vector<PeerTimes> peer_runs[2];
-  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni);
+  std::vector<SparseSamples> sg(ni), sc(ni), sb(ni), sd(ni), smt(ni);
   std::vector<float> bg(ni);
   for (std::size_t k = 0; k < ni; ++k) {
     bg[k] = float(c.isos[k].outside_value(v.min_value, v.max_value));
     if (!schain) sg[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
     if (!sbrick) sb[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
+    if (!sdense) sd[k] = {false, sparse_why.empty() ? "no GPU" : sparse_why, {}, {}, {}, {}};
   }
   // Warm-up (untimed): first dispatches, allocations, lazy pipeline compiles.
   if (chain) {
@@ -377,6 +385,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   for (std::size_t k = 0; k < ni; ++k) {
     guarded(sg[k], [&] { (void)schain->run(v, c.isos[k], bg[k]); });
     guarded(sb[k], [&] { (void)sbrick->run(v, c.isos[k], bg[k]); });
+    guarded(sd[k], [&] { (void)sdense->run(v, c.isos[k], bg[k]); });
   }
 
   for (int rep = 0; rep < repetitions; ++rep) {
@@ -404,11 +413,29 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       const engine::ChainOutput h = engine::run_chain_cpu(v, dense);
       cpu_wall.push_back(ms_since(t0));
       for (std::size_t i = 0; i < np && i < h.passes.size(); ++i) cpu_ms[i].push_back(h.passes[i].ms);
+      if (r.cpu_backend_threads > 1) {
+        const auto t1 = Clock::now();
+        const engine::ChainOutput m = engine::run_chain_cpu(v, dense, r.cpu_backend_threads);
+        cpu_mt_wall.push_back(ms_since(t1));
+        // Bit for bit the reference: the samples (every voxel) and the brick ranges.
+        const bool same = h.samples && m.samples && h.bricks && m.bricks &&
+                          h.samples->samples.size() == m.samples->samples.size() &&
+                          std::memcmp(h.samples->samples.data(), m.samples->samples.data(),
+                                      h.samples->samples.size() * sizeof(core::Sample)) == 0 &&
+                          h.bricks->min == m.bricks->min && h.bricks->max == m.bricks->max;
+        r.cpu_backend_same_bits = (rep == 0 || r.cpu_backend_same_bits) && same;
+      }
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
       guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
+      guarded(sd[k], [&] { sd[k].add(sdense->run(v, c.isos[k], bg[k])); });
       guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
+      if (r.cpu_backend_threads > 1)
+        guarded(smt[k], [&] {
+          smt[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k], core::SampleFormat::kFp32, false,
+                                            r.cpu_backend_threads));
+        });
     }
   }
   r.gpu_available = chain != nullptr;
@@ -453,12 +480,15 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
   r.dense_gpu_wall_ms = median(gpu_wall);
   r.dense_cpu_wall_ms = median(cpu_wall);
+  r.dense_cpu_mt_wall_ms = median(cpu_mt_wall);
 
   for (std::size_t k = 0; k < ni; ++k) {
     IsoResult ir;
     ir.iso = c.isos[k];
     ir.gpu = sg[k].cell();
     ir.gpu_per_brick = sb[k].cell();
+    ir.gpu_dense = sd[k].cell();
+    ir.cpu_mt = smt[k].cell();
     ir.cpu = sc[k].cell();
     if (ir.gpu.available && ir.cpu.available) {
       const auto &a = ir.gpu.stats, &b = ir.cpu.stats;
@@ -788,12 +818,46 @@ std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
   return c.available ? num(v, prec) : "sparse: not available (" + c.why + ")";
 }
 
+void print_cpu_backend(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## CPU backend (where no Vulkan device exists): the dense chain's rows split among threads\n\n"
+      << "| case | threads | dense CPU chain [ms] | one-thread reference [ms] | speed-up | bits |\n"
+      << "|---|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res) {
+    if (r.cpu_backend_threads < 2) {
+      out << "| " << r.name << " | 1 | not run: one hardware thread | | | |\n";
+      continue;
+    }
+    out << "| " << r.name << " | " << r.cpu_backend_threads << " | " << num(r.dense_cpu_mt_wall_ms) << " | "
+        << num(r.dense_cpu_wall_ms) << " | " << num(ratio(r.dense_cpu_wall_ms, r.dense_cpu_mt_wall_ms)) << " | "
+        << (r.cpu_backend_same_bits ? "same as the reference (samples, brick ranges)" : "DIFFER from the reference")
+        << " |\n";
+    csv.row("cpu_backend", r.name, "", std::to_string(r.cpu_backend_threads) + " threads", "dense_cpu_ms",
+            csv_num(r.dense_cpu_mt_wall_ms), "ms", d.cpu);
+  }
+  out << "\n| case | tau | threads | sparse CPU [ms] | one-thread sparse reference [ms] | speed-up | counts |\n"
+      << "|---|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res)
+    for (const auto& ir : r.isos) {
+      if (r.cpu_backend_threads < 2) continue;
+      const bool same = ir.cpu_mt.available && ir.cpu.available &&
+                        ir.cpu_mt.stats.candidates == ir.cpu.stats.candidates &&
+                        ir.cpu_mt.stats.active == ir.cpu.stats.active &&
+                        ir.cpu_mt.stats.snapshot_bytes == ir.cpu.stats.snapshot_bytes;
+      out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << r.cpu_backend_threads << " | "
+          << sparse_cell(ir.cpu_mt, ir.cpu_mt.total_ms) << " | " << sparse_cell(ir.cpu, ir.cpu.total_ms) << " | "
+          << num(ratio(ir.cpu.total_ms, ir.cpu_mt.total_ms)) << " | "
+          << (same ? "same bricks and bytes as the reference" : "differ or not run") << " |\n";
+      csv.row("cpu_backend", r.name, tau_text(ir.iso), std::to_string(r.cpu_backend_threads) + " threads",
+              "sparse_cpu_ms", csv_num(ir.cpu_mt.total_ms), "ms", d.cpu);
+    }
+}
+
 void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
   out << "\n## Sparse: bricks and time (fp32 snapshot)\n\n"
       << "| case | tau | bricks | candidates | active | active % | sparse GPU [ms] | sparse CPU [ms] | dense GPU "
          "[ms] | dense CPU [ms] | sparse GPU / dense CPU | sparse CPU / dense CPU | sparse GPU / dense GPU | GPU vs "
-         "CPU counts | sparse GPU, per-brick kernel [ms] |\n"
-      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n";
+         "CPU counts | sparse GPU, dense strategy [ms] | sparse GPU, per-brick kernel [ms] |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos) {
       const SparseCell& s = ir.gpu.available ? ir.gpu : ir.cpu;
@@ -808,6 +872,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           << sparse_cell(ir.cpu, ir.sparse_cpu_over_dense_cpu, 3) << " | "
           << sparse_cell(ir.gpu, ir.sparse_gpu_over_dense_gpu, 3) << " | "
           << (ir.gpu_cpu_counts.empty() ? "n/a" : ir.gpu_cpu_counts) << " | "
+          << sparse_cell(ir.gpu_dense, ir.gpu_dense.total_ms) << " | "
           << sparse_cell(ir.gpu_per_brick, ir.gpu_per_brick.total_ms) << " |\n";
       const std::string t = "sparse";
       if (have) {
@@ -819,6 +884,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "candidate_percent", csv_num(ir.candidate_percent), "%", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_ms", csv_num(ir.gpu.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_cpu_ms", csv_num(ir.cpu.total_ms), "ms", d.cpu);
+      csv.row(t, r.name, tau, "", "sparse_gpu_dense_strategy_ms", csv_num(ir.gpu_dense.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_per_brick_ms", csv_num(ir.gpu_per_brick.total_ms), "ms", d.gpu);
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_cpu", csv_num(ir.sparse_gpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
@@ -827,8 +893,8 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
   out << "\n### Sparse stages (medians)\n\n| case | tau | engine | stage | ms |\n|---|---:|---|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos)
-      for (const auto* c : {&ir.gpu, &ir.cpu}) {
-        const std::string eng = c == &ir.gpu ? "GPU" : "CPU reference";
+      for (const auto* c : {&ir.gpu, &ir.gpu_dense, &ir.cpu}) {
+        const std::string eng = c == &ir.gpu ? "GPU (lists)" : c == &ir.gpu_dense ? "GPU (dense strategy)" : "CPU reference";
         if (!c->available) {
           out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | sparse: not available (" << c->why
               << ") | |\n";
@@ -838,7 +904,7 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
           out << "| " << r.name << " | " << tau_text(ir.iso) << " | " << eng << " | " << c->stage_labels[i] << " | "
               << num(c->stage_ms[i]) << " |\n";
           csv.row("sparse_stages", r.name, tau_text(ir.iso), c->stage_labels[i], eng + "_ms", csv_num(c->stage_ms[i]),
-                  "ms", c == &ir.gpu ? d.gpu : d.cpu);
+                  "ms", c == &ir.cpu ? d.cpu : d.gpu);
         }
       }
 }
@@ -1070,6 +1136,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
   print_dense(res, dev, out, csv);
   print_peers(res, dev, out, csv);
+  print_cpu_backend(res, dev, out, csv);
   print_sparse(res, dev, out, csv);
   print_bytes(res, out, csv);
   print_big(big.get(), out, csv, mem_total);
@@ -1119,7 +1186,10 @@ Dense table, one row per pass, then the sum of the passes and the end-to-end wal
 Sparse table, one row per isovalue:
   bricks, candidates, active   8^3 bricks in all, computed, published with samples
   active %       100 active / bricks
-  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms]
+  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms], default
+                 strategy: x4 passes on work lists of the candidate bricks' quads
+  dense strategy the same chain running the dense x4 passes over the whole volume
+  per-brick      the same chain on the per-brick shared-memory kernel
   sparse CPU     run_sparse_cpu total_ms, median [ms]
   dense GPU/CPU  end-to-end wall of the dense chain (same repetitions)
   ratios         sparse GPU / dense CPU (the must-show), sparse CPU / dense CPU,

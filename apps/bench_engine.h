@@ -131,7 +131,10 @@ struct FormatBytes {
 
 struct IsoResult {
   core::Isosurface iso;
-  SparseCell gpu, cpu;
+  SparseCell cpu;                         ///< the CPU reference (run_sparse_cpu, one thread)
+  SparseCell cpu_mt;                      ///< the multi-threaded CPU backend (run_sparse_cpu, CaseResult::cpu_backend_threads)
+  SparseCell gpu;                         ///< the GPU chain's default strategy (SparseChain::Strategy::Lists)
+  SparseCell gpu_dense;                   ///< the same on the dense x4 passes over the whole volume (Strategy::Dense)
   SparseCell gpu_per_brick;               ///< the same on the per-brick kernel (SparseChain::Strategy::PerBrick)
   std::vector<FormatBytes> formats;       ///< fp32, fp16, unorm16
   double active_percent = kNaN;           ///< 100 active / bricks_total
@@ -174,6 +177,9 @@ struct CaseResult {
   PassRow sum;                            ///< sum over the passes (bytes and times)
   double dense_gpu_wall_ms = kNaN;        ///< median wall of PassChain::run (upload..download)
   double dense_cpu_wall_ms = kNaN;        ///< median wall of run_chain_cpu
+  unsigned cpu_backend_threads = 0;       ///< threads of the multi-threaded CPU backend (0: not run)
+  double dense_cpu_mt_wall_ms = kNaN;     ///< median wall of run_chain_cpu on cpu_backend_threads threads
+  bool cpu_backend_same_bits = false;     ///< every repetition's output bit for bit the one-thread reference's
   double dense_gpu_over_cpu_wall = kNaN;  ///< dense_gpu_wall_ms / dense_cpu_wall_ms
   std::vector<IsoResult> isos;
   double memcpy_gbps = kNaN;

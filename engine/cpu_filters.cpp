@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "parallel.h"
+
 namespace isotouch::engine {
 
 std::vector<float> gaussian_kernel(double sigma_vox) {
@@ -63,13 +65,16 @@ std::size_t stride_of(const core::Grid& g, int axis) {
 // x: per row, the interior x in [r, nx - r) reads row[x - r + k] without a clamp; the
 // border voxels clamp. y and z: per output row, each tap's source row (clamped once per
 // row) is combined into the whole row, x innermost.
+// `threads`: the slices split in contiguous parts, one thread each (every output row is
+// computed by one thread as above: the same bits for any count).
 template <class Op>
 void filter_axis(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis, int r,
-                 float start, Op op) {
+                 float start, Op op, unsigned threads) {
   out.resize(in.size());
   const int nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];  // not a structured binding: clang 14 cannot capture one
   const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
-  for (int z = 0; z < nz; ++z)
+  parallel_for(std::size_t(nz), threads, 1, [&](std::size_t z_begin, std::size_t z_end) {
+  for (int z = int(z_begin); z < int(z_end); ++z)
     for (int y = 0; y < ny; ++y) {
       const std::size_t base = std::size_t(z) * slice + std::size_t(y) * sx;
       float* o = out.data() + base;
@@ -100,25 +105,29 @@ void filter_axis(const std::vector<float>& in, std::vector<float>& out, const co
         }
       }
     }
+  });
 }
 }  // namespace
 
 void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis,
-                       const std::vector<float>& w) {
+                       const std::vector<float>& w, unsigned threads) {
   const float* wk = w.data();
-  filter_axis(in, out, g, axis, int(w.size() / 2), 0.0f, [wk](float acc, int k, float v) {
-    const float term = wk[k] * v;
-    return acc + term;
-  });
+  filter_axis(
+      in, out, g, axis, int(w.size() / 2), 0.0f,
+      [wk](float acc, int k, float v) {
+        const float term = wk[k] * v;
+        return acc + term;
+      },
+      threads);
 }
 
 void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& g, int axis,
-                    int r, bool is_max) {
+                    int r, bool is_max, unsigned threads) {
   const float start = is_max ? -std::numeric_limits<float>::infinity() : std::numeric_limits<float>::infinity();
   if (is_max)
-    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v > m ? v : m; });
+    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v > m ? v : m; }, threads);
   else
-    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v < m ? v : m; });
+    filter_axis(in, out, g, axis, r, start, [](float m, int, float v) { return v < m ? v : m; }, threads);
 }
 
 Volume gaussian_cpu(const Volume& v, double sigma_mm) {
@@ -146,7 +155,7 @@ Volume closing_cpu(const Volume& v, double radius_mm) {
   return out;
 }
 
-BrickRanges brick_minmax_cpu(const Volume& v, int halo) {
+BrickRanges brick_minmax_cpu(const Volume& v, int halo, unsigned threads) {
   BrickRanges b;
   b.halo = halo;
   const auto [nx, ny, nz] = v.grid.dims;
@@ -155,10 +164,12 @@ BrickRanges brick_minmax_cpu(const Volume& v, int halo) {
   b.min.assign(count, 0.0f);
   b.max.assign(count, 0.0f);
   const float inf = std::numeric_limits<float>::infinity();
-  std::size_t o = 0;
-  for (int bz = 0; bz < b.bricks[2]; ++bz)
+  parallel_for(std::size_t(b.bricks[2]), threads, 1, [&](std::size_t bz_begin, std::size_t bz_end) {
+  for (int bz = int(bz_begin); bz < int(bz_end); ++bz)
     for (int by = 0; by < b.bricks[1]; ++by)
-      for (int bx = 0; bx < b.bricks[0]; ++bx, ++o) {
+      for (int bx = 0; bx < b.bricks[0]; ++bx) {
+        const std::size_t o = (std::size_t(bz) * std::size_t(b.bricks[1]) + std::size_t(by)) * std::size_t(b.bricks[0]) +
+                              std::size_t(bx);
         const int x0 = std::max(bx * 8 - halo, 0), x1 = std::min(bx * 8 + 8 + halo, nx);
         const int y0 = std::max(by * 8 - halo, 0), y1 = std::min(by * 8 + 8 + halo, ny);
         const int z0 = std::max(bz * 8 - halo, 0), z1 = std::min(bz * 8 + 8 + halo, nz);
@@ -173,6 +184,7 @@ BrickRanges brick_minmax_cpu(const Volume& v, int halo) {
         b.min[o] = mn;
         b.max[o] = mx;
       }
+  });
   return b;
 }
 

@@ -1,6 +1,7 @@
 // cpu_filters.h - CPU references of the filter passes (shaders/gaussian1d.comp,
-// morph1d.comp, brick_minmax.comp): the same float operations in the same order, one
-// thread, so that GPU and CPU agree bit for bit on an IEEE device (this file is compiled
+// morph1d.comp, brick_minmax.comp): the same float operations in the same order (one
+// thread, or the rows split among threads: each voxel's operations stay the same), so that
+// GPU and CPU agree bit for bit on an IEEE device (this file is compiled
 // with -ffp-contract=off: no FMA contraction).
 #pragma once
 #include "core_names.h"
@@ -35,12 +36,14 @@ GaussianAxes gaussian_axes(const core::Grid& grid, double sigma_mm);
 std::array<int, 3> closing_radii(const core::Grid& grid, double radius_mm);
 
 /// One axis of the separable Gaussian with clamp-to-edge: out[i] = sum_k w[k+r] * in[clamp(i+k)].
+/// `threads` > 1: the slices split among that many threads, the same bits (each voxel's
+/// operations do not depend on the split).
 void gaussian_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& grid,
-                       int axis, const std::vector<float>& kernel);
+                       int axis, const std::vector<float>& kernel, unsigned threads = 1);
 /// One axis of a box dilation (is_max) or erosion, radius r each side, clamp to edge;
 /// NaN voxels are skipped (a window of only NaN gives -inf / +inf).
 void morph_axis_cpu(const std::vector<float>& in, std::vector<float>& out, const core::Grid& grid, int axis,
-                    int radius, bool is_max);
+                    int radius, bool is_max, unsigned threads = 1);
 
 /// Separable Gaussian smoothing, x then y then z (sigma in mm, per-axis sigma in voxels).
 Volume gaussian_cpu(const Volume& v, double sigma_mm);
@@ -55,6 +58,7 @@ struct BrickRanges {
   std::vector<float> min, max;         ///< one per brick, x fastest
   std::size_t count() const { return min.size(); }
 };
-BrickRanges brick_minmax_cpu(const Volume& v, int halo = 1);
+/// `threads` > 1: the brick layers split among that many threads, the same bits.
+BrickRanges brick_minmax_cpu(const Volume& v, int halo = 1, unsigned threads = 1);
 
 }  // namespace isotouch::engine

@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <limits>
 #include "cpu_gradient.h"
+#include "parallel.h"
 
 namespace isotouch::engine {
 
@@ -32,7 +33,7 @@ RowDiff row_diff(int i, int n, const float* row, std::size_t stride, float inv_2
 }
 }  // namespace
 
-core::SampleField compute_samples_cpu(const Volume& vol) {
+core::SampleField compute_samples_cpu(const Volume& vol, unsigned threads) {
   core::SampleField out;
   out.grid = vol.grid;
   const auto [nx, ny, nz] = vol.grid.dims;
@@ -41,7 +42,8 @@ core::SampleField compute_samples_cpu(const Volume& vol) {
   const float* f = vol.voxels.data();
   const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
   // Plain row loops: the y and z rules per row, x's borders outside the interior loop.
-  for (int z = 0; z < nz; ++z)
+  parallel_for(std::size_t(nz), threads, 1, [&](std::size_t z_begin, std::size_t z_end) {
+  for (int z = int(z_begin); z < int(z_end); ++z)
     for (int y = 0; y < ny; ++y) {
       const std::size_t base = std::size_t(z) * sz + std::size_t(y) * sy;
       const float* row = f + base;
@@ -61,6 +63,7 @@ core::SampleField compute_samples_cpu(const Volume& vol) {
       for (int x = 1; x + 1 < nx; ++x) put(x, (row[x + 1] - row[x - 1]) * k.inv_2h[0]);
       put(nx - 1, (row[nx - 1] - row[nx - 2]) * k.inv_h[0]);
     }
+  });
   return out;
 }
 

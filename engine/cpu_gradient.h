@@ -16,7 +16,8 @@ GradientConstants gradient_constants(const core::Grid& grid);
 
 /// Value and gradient per voxel: central differences in world units [value/m] inside,
 /// one-sided differences at the borders, 0 along an axis of one voxel.
-core::SampleField compute_samples_cpu(const Volume& volume);
+/// `threads` > 1: the slices split among that many threads, the same bits.
+core::SampleField compute_samples_cpu(const Volume& volume, unsigned threads = 1);
 
 }  // namespace isotouch::engine
 

@@ -10,6 +10,7 @@
 
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
+#include "parallel.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
@@ -569,8 +570,9 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   return out;
 }
 
-ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes) {
+ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes, unsigned threads) {
   if (std::string e = validate_passes(passes); !e.empty()) throw std::invalid_argument("pass chain: " + e);
+  threads = threads_for(vol.grid.voxel_count(), threads);
   ChainOutput out;
   Volume cur = vol;
   bool filtered = false;
@@ -584,7 +586,7 @@ ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes
         const GaussianAxes a = gaussian_axes(cur.grid, p.sigma_mm);
         std::vector<float> tmp;
         for (int axis = 0; axis < 3; ++axis) {
-          gaussian_axis_cpu(cur.voxels, tmp, cur.grid, axis, a.kernel[std::size_t(axis)]);
+          gaussian_axis_cpu(cur.voxels, tmp, cur.grid, axis, a.kernel[std::size_t(axis)], threads);
           cur.voxels.swap(tmp);
         }
         filtered = true;
@@ -594,14 +596,14 @@ ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes
         const auto r = closing_radii(cur.grid, p.radius_mm);
         std::vector<float> tmp;
         for (int k = 0; k < 6; ++k) {
-          morph_axis_cpu(cur.voxels, tmp, cur.grid, k % 3, r[std::size_t(k % 3)], k < 3);
+          morph_axis_cpu(cur.voxels, tmp, cur.grid, k % 3, r[std::size_t(k % 3)], k < 3, threads);
           cur.voxels.swap(tmp);
         }
         filtered = true;
         break;
       }
-      case PassKind::Gradient: out.samples = compute_samples_cpu(cur); break;
-      case PassKind::BrickMinMax: out.bricks = brick_minmax_cpu(cur, p.halo); break;
+      case PassKind::Gradient: out.samples = compute_samples_cpu(cur, threads); break;
+      case PassKind::BrickMinMax: out.bricks = brick_minmax_cpu(cur, p.halo, threads); break;
     }
     pt.ms = ms_since(t0);
     out.passes.push_back(pt);

@@ -122,8 +122,10 @@ class PassChain {
   std::vector<PassDesc> passes_;
 };
 
-/// The one-thread CPU reference of a chain, same outputs; PassTiming::ms is wall time.
+/// The CPU reference of a chain, same outputs; PassTiming::ms is wall time. One thread by
+/// default (the reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan
+/// device exists): every pass's rows split among that many threads, bit for bit the same.
 /// @throws std::invalid_argument if validate_passes() fails.
-ChainOutput run_chain_cpu(const Volume& volume, const std::vector<PassDesc>& passes);
+ChainOutput run_chain_cpu(const Volume& volume, const std::vector<PassDesc>& passes, unsigned threads = 1);
 
 }  // namespace isotouch::engine

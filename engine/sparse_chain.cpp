@@ -1,28 +1,37 @@
-// sparse_chain.cpp - the sparse GPU engine: the chain's filters, gradient
-// and brick min/max computed only on candidate bricks, one workgroup per brick
-// (shaders/sparse_brick.comp), published as a bricked core::SampleField.
+// sparse_chain.cpp - the sparse GPU engine: the chain's filters, gradient and brick min/max
+// computed only on candidate bricks, published as a bricked core::SampleField. Three
+// strategies (SparseChain::Strategy), the same bits:
 //
-// One run: (host) copy the volume into per-slab staging buffers and take the raw per-brick
-// ranges in the same pass over the voxels; select the candidates (sparse::select); (GPU, one
-// command buffer) staging -> device copies, one dispatch per (slab, pool chunk), readback
-// copies; (host) publish the active bricks (sparse::publish). Every host step is timed in
-// SparseOutput.
+// Lists (the default), one run: (host, hardware threads) the raw per-brick ranges taken while
+// the voxels are copied into the input field; the candidates (sparse::select); one work list
+// per filter op (sparse::make_work_list: the quads of the candidates' extents); (GPU, one
+// command buffer) one filter_list_x4 dispatch per op and z-slab; (host) the candidates'
+// exact ranges and the active ones' samples computed into the published pool.
+// Dense: the dense chain over the whole volume, ranges and samples gathered on the host.
+// PerBrick: (host) the voxels copied into per-slab staging buffers with the raw ranges;
+// (GPU) staging -> device copies, one sparse_brick.comp dispatch per (slab, pool chunk),
+// readback copies; (host) publish the active bricks. Every host step is timed in SparseOutput.
 #include "sparse_chain.h"
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 
 #include "cpu_gradient.h"
+#include "isotouch/shaders/filter_list_x4_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
+#include "parallel.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
 
+static_assert(sizeof(gpu::ListPush) == 32, "ListPush: 8 4-byte members (std430)");
 static_assert(sizeof(gpu::SparseBrickPush) == 112, "SparseBrickPush: 28 4-byte members (std430)");
 static_assert(int(sparse::OpKind::kGauss) == int(ISOTOUCH_SPARSE_OP_GAUSS) &&
                   int(sparse::OpKind::kMax) == int(ISOTOUCH_SPARSE_OP_MAX) &&
@@ -69,6 +78,87 @@ struct Chunk {
   std::size_t slab = 0, c0 = 0, c1 = 0;  ///< candidates [c0, c1) of one slab, one pool buffer
   GpuBuffer pool, readback;
 };
+
+/// The host's part after the passes, on hardware_threads() threads: each candidate's
+/// exact range over its brick + 1 voxel of the filtered field `f` (z, y, x ascending, as
+/// CandidateCpu::range) and the 9^3 samples of the active ones written straight into the
+/// published pool: copied row by row from the dense-addressed samples `s`, or, with `s`
+/// null, computed from `f` (sparse::brick_samples); beyond the grid the background with a
+/// zero gradient. Sets out.publish_ms; `ranges_ms` the time of the ranges.
+void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float* f, const core::Sample* s,
+                    const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
+                    SparseOutput& out, double& ranges_ms) {
+  const auto [nx, ny, nz] = vol.grid.dims;
+  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
+  const std::size_t nc = sel.candidates.size();
+  const unsigned threads = threads_for(std::uint64_t(nc) * 1000u, hardware_threads());
+  auto t0 = std::chrono::steady_clock::now();
+  const auto nb = core::brick_counts(vol.grid);
+  std::vector<sparse::CandidateRange> ranges(nc);
+  const float inf = std::numeric_limits<float>::infinity();
+  // Streamed row by row (the field is read in memory order, not 100 scattered rows per
+  // candidate): every row of slice z updates the candidates whose brick + 1 voxel holds it.
+  // Min / max over a set do not depend on the order (NaN skipped, -0 made +0 at the end).
+  // Threads take whole brick layers: each candidate is folded by one thread.
+  std::vector<std::int32_t> cand_of(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), -1);
+  for (std::size_t c = 0; c < nc; ++c) cand_of[sel.candidates[c]] = std::int32_t(c);
+  for (sparse::CandidateRange& r : ranges) r = {inf, -inf, false};
+  parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
+    for (int bz = int(bz0); bz < int(bz1); ++bz)
+      for (int z = std::max(8 * bz - 1, 0); z <= std::min(8 * bz + 8, nz - 1); ++z)
+        for (int y = 0; y < ny; ++y) {
+          const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
+          for (int by = std::max((y - 8 + 7) / 8, 0); by <= std::min((y + 1) / 8, nb[1] - 1); ++by) {
+            const std::int32_t* cands =
+                cand_of.data() + (std::size_t(bz) * std::size_t(nb[1]) + std::size_t(by)) * std::size_t(nb[0]);
+            for (int bx = 0; bx < nb[0]; ++bx) {
+              if (cands[bx] < 0) continue;
+              sparse::CandidateRange& rg = ranges[std::size_t(cands[bx])];
+              float mn = rg.lo, mx = rg.hi;
+              bool n = false;
+              for (int x = std::max(8 * bx - 1, 0); x <= std::min(8 * bx + 8, nx - 1); ++x) {
+                const float v = row[x];
+                n |= v != v;
+                mn = v < mn ? v : mn;
+                mx = v > mx ? v : mx;
+              }
+              rg.lo = mn;
+              rg.hi = mx;
+              rg.nan = rg.nan || n;
+            }
+          }
+        }
+  });
+  for (sparse::CandidateRange& r : ranges) {
+    r.lo = r.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
+    r.hi = r.hi + 0.0f;
+  }
+  ranges_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
+  auto fill = [&](std::size_t c, core::Sample* o) {
+    const auto b = core::brick_coords(sel.candidates[c], nb);
+    if (!s) {
+      sparse::brick_samples(vol.grid, f, b, background, o);
+      return;
+    }
+    const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);
+    for (int k = 0; k < 9; ++k)
+      for (int j = 0; j < 9; ++j) {
+        core::Sample* d = o + 9 * j + 81 * k;
+        const int y = 8 * b[1] + j, z = 8 * b[2] + k;
+        int i = 0;
+        if (y < ny && z < nz) {
+          std::memcpy(d, s + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx) + std::size_t(x0),
+                      std::size_t(in_x) * sizeof(core::Sample));
+          i = in_x;
+        }
+        for (; i < 9; ++i) d[i] = outside;
+      }
+  };
+  sparse::publish_fill(vol.grid, sel, ranges, fill, threads, iso, background, format, keep_input, out);
+  out.publish_ms = ms_since(t0);
+}
 }  // namespace
 
 struct SparseChain::Impl {
@@ -78,10 +168,28 @@ struct SparseChain::Impl {
   bool keep_input = false;
   std::uint32_t max_groups = 0;  ///< 0: kDefaultGroups
   std::string last_run;
-  SparseChain::Strategy strategy = SparseChain::Strategy::Dense;
+  SparseChain::Strategy strategy = SparseChain::Strategy::Lists;
   std::unique_ptr<PassChain> dense;  ///< the dense strategy's chain (filters + gradient), made on first use
   SparseOutput run_dense(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
                          std::uint64_t max_binding_bytes);
+  SparseOutput run_lists(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
+                         std::uint64_t max_binding_bytes);
+  /// The list strategy's pipelines: filter_list_x4 by specialization (as PassChain's
+  /// filter_x4), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> filter_list;
+  /// The list strategy's buffers by name, kept from run to run (no new allocation and no
+  /// first-touch page faults inside the timed dispatches when the sizes repeat).
+  std::map<std::string, GpuBuffer> kept;
+  GpuBuffer& kept_buffer(const std::string& name, std::uint64_t bytes, MemoryIntent intent, const std::string& path) {
+    GpuBuffer& b = kept[name];
+    if (!b || b.size() < bytes || b.intent() != intent) {
+      b.reset();
+      auto r = GpuBuffer::create(ctx, std::max<std::uint64_t>(bytes, 16), intent, name);
+      if (!r) throw VolumeError(path + ": sparse chain: " + r.error);
+      b = std::move(*r.value);
+    }
+    return b;
+  }
   Impl(VulkanContext& c, std::vector<PassDesc> p)
       : ctx(c), passes(std::move(p)), pipe(c, sparse_brick_spv, 5, "sparse_brick") {}
 };
@@ -118,7 +226,6 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   const double raw_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const sparse::Selection sel = sparse::select(raw, plan, iso);
-  const std::size_t nc = sel.candidates.size();
   const double select_ms = ms_since(t0);
 
   // The dense passes, outputs read where they lie.
@@ -130,56 +237,9 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   const core::Sample* s = at.samples;
   if (!s) throw std::logic_error(vol.path + ": sparse chain: the dense chain returned no samples");
 
-  // Host: each candidate's exact range over its brick + 1 voxel (z, y, x ascending, as
-  // CandidateCpu::range), and the 9^3 samples of the active ones (beyond the grid: the
-  // background with a zero gradient).
-  t0 = std::chrono::steady_clock::now();
-  const auto nb = core::brick_counts(vol.grid);
-  std::vector<sparse::CandidateRange> ranges(nc);
-  const float inf = std::numeric_limits<float>::infinity();
-  for (std::size_t c = 0; c < nc; ++c) {
-    const auto b = core::brick_coords(sel.candidates[c], nb);
-    int lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = std::max(8 * b[std::size_t(a)] - 1, 0);
-      hi[a] = std::min(8 * b[std::size_t(a)] + 8, vol.grid.dims[std::size_t(a)] - 1);
-    }
-    sparse::CandidateRange rg{inf, -inf, false};
-    for (int z = lo[2]; z <= hi[2]; ++z)
-      for (int y = lo[1]; y <= hi[1]; ++y) {
-        const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
-        for (int x = lo[0]; x <= hi[0]; ++x) {
-          const float v = row[x];
-          rg.nan = rg.nan || v != v;
-          rg.lo = v < rg.lo ? v : rg.lo;
-          rg.hi = v > rg.hi ? v : rg.hi;
-        }
-      }
-    rg.lo = rg.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
-    rg.hi = rg.hi + 0.0f;
-    ranges[c] = rg;
-  }
-  const double gather_ms = ms_since(t0);
-  // publish() copies an active candidate's 9^3 samples into the pool right after asking for
-  // them: gathered here from the dense samples into one brick's worth of scratch.
-  t0 = std::chrono::steady_clock::now();
-  std::vector<core::Sample> scratch(core::kBrickSamples);
-  auto gather = [&](std::size_t c) -> const core::Sample* {
-    const auto b = core::brick_coords(sel.candidates[c], nb);
-    core::Sample* o = scratch.data();
-    for (int k = 0; k < 9; ++k)
-      for (int j = 0; j < 9; ++j)
-        for (int i = 0; i < 9; ++i) {
-          const int g[3] = {8 * b[0] + i, 8 * b[1] + j, 8 * b[2] + k};
-          o[i + 9 * j + 81 * k] = g[0] >= nx || g[1] >= ny || g[2] >= nz
-                                      ? core::Sample{background, 0.0f, 0.0f, 0.0f}
-                                      : s[std::size_t(g[2]) * slice + std::size_t(g[1]) * std::size_t(nx) + std::size_t(g[0])];
-        }
-    return o;
-  };
-  sparse::publish(vol.grid, sel, ranges, gather, iso, background, format, keep_input, out);
-  out.publish_ms = ms_since(t0);
-
+  double ranges_ms = 0;
+  finish_on_host(vol, sel, f, s, iso, background, format, keep_input, out, ranges_ms);
+  const double gather_ms = ranges_ms;
   out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   int dispatches = 0, slabs = 0;
@@ -198,9 +258,219 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   out.stats.dispatches = std::size_t(dispatches);
   out.total_ms = ms_since(t_total);
   std::ostringstream info;
+  const auto nb = core::brick_counts(vol.grid);
   info << "strategy: dense x4 passes over the volume, candidates gathered on the host; " << nb[0] << "x" << nb[1]
        << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates << " candidates, "
        << out.stats.active << " active; " << dispatches << " dispatch(es); snapshot " << out.stats.snapshot_bytes
+       << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
+  last_run = info.str();
+  return out;
+}
+
+SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurface& iso, float background,
+                                          core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  const auto t_total = std::chrono::steady_clock::now();
+  const auto [nx, ny, nz] = vol.grid.dims;
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
+                      std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
+  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
+  for (const sparse::Op& op : plan.ops)
+    if (op.radius > int(ISOTOUCH_DENSE_MAX_RADIUS)) {
+      // filter_x4 unrolls at most ISOTOUCH_DENSE_MAX_RADIUS taps a side; the dense chain
+      // takes the 1-D shaders for wider kernels.
+      SparseOutput out = run_dense(vol, iso, background, format, max_binding_bytes);
+      last_run = "strategy lists: a filter of radius " + std::to_string(op.radius) + " > " +
+                 std::to_string(ISOTOUCH_DENSE_MAX_RADIUS) + " ran as dense; " + last_run;
+      return out;
+    }
+  const auto& lim = ctx.properties().limits;
+  std::uint64_t limit = ctx.max_binding_bytes();
+  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+  const bool direct = ctx.device_local_is_host_visible();
+  SparseOutput out;
+
+  // Host, in one pass over the voxels on hardware_threads() threads (whole brick layers
+  // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
+  // the voxels copied into the input field (or its staging buffer) where a filter runs.
+  auto t0 = std::chrono::steady_clock::now();
+  const std::uint64_t n = vol.grid.voxel_count();
+  const bool filters = !plan.ops.empty();
+  GpuBuffer* field0 = filters ? &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr;
+  GpuBuffer* up =
+      filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
+  char* input = !filters ? nullptr : static_cast<char*>(direct ? field0->mapped() : up->mapped());
+  sparse::RawRanges raw;
+  raw.init(vol.grid);
+  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
+  parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
+    for (std::size_t z = z0; z < z1; ++z) {
+      const float* src = vol.voxels.data() + z * slice;
+      raw.add_slice(vol.grid, int(z), src);
+      if (input) std::memcpy(input + z * slice * 4, src, slice * 4);
+    }
+  });
+  const double raw_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const double select_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
+  const std::size_t K = plan.ops.size();
+  std::vector<sparse::WorkList> lists;
+  std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
+  std::uint64_t total_units = 0;
+  for (std::size_t k = 0; k < K; ++k) {
+    lists.push_back(sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
+    base.push_back(total_units);
+    total_units += lists.back().unit_count();
+  }
+  const double lists_ms = ms_since(t0);
+
+  // Buffers: two dense-addressed fields (ping-pong; the input is field 0) and the work
+  // lists; staging and readback only where device-local memory is not host-visible.
+  t0 = std::chrono::steady_clock::now();
+  const std::uint64_t list_bytes = std::max<std::uint64_t>(total_units, 1) * 8;
+  if (list_bytes / 4 > lim.maxTexelBufferElements)
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(list_bytes / 4) +
+                      " work-list texels exceed maxTexelBufferElements " + std::to_string(lim.maxTexelBufferElements) +
+                      " on " + ctx.info().name);
+  GpuBuffer* field[2] = {field0, K ? &kept_buffer("lists: field 1", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr};
+  GpuBuffer* list_buf = K ? &kept_buffer("lists: work lists", list_bytes, MemoryIntent::DeviceLocal, vol.path) : nullptr;
+  GpuBuffer *list_up = nullptr, *field_down = nullptr;
+  if (!direct && K) {
+    list_up = &kept_buffer("lists: work lists staging", list_bytes, MemoryIntent::Upload, vol.path);
+    field_down = &kept_buffer("lists: field readback", n * 4, MemoryIntent::Readback, vol.path);
+  }
+  if (K) {
+    char* dst = static_cast<char*>(direct ? list_buf->mapped() : list_up->mapped());
+    for (std::size_t k = 0; k < K; ++k) std::memcpy(dst + base[k] * 8, lists[k].units.data(), lists[k].units.size() * 4);
+  }
+  out.upload_ms = ms_since(t0);
+
+  // Slabs and dispatches: op k reads field k % 2 and writes the other. A slab's units are
+  // those of its slices (the lists are sorted by z).
+  auto floats_before = +[](std::uint64_t z, const void* u) { return z * *static_cast<const std::uint64_t*>(u); };
+  const std::uint64_t slice_bytes = std::uint64_t(slice) * 4;
+  struct Stage {
+    const ComputePipeline<gpu::ListPush>* pipe = nullptr;
+    std::vector<Slab> slabs;
+    std::string label;
+  };
+  std::vector<Stage> stages;
+  std::uint32_t sets = 0;
+  for (std::size_t k = 0; k < K; ++k) {
+    Stage st;
+    const sparse::Op& op = plan.ops[k];
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
+    spec[3] = std::uint32_t(op.axis);
+    spec[4] = std::uint32_t(op.radius);
+    if (op.kind == sparse::OpKind::kGauss)
+      std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
+    auto& p = filter_list[spec];
+    if (!p)
+      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
+                                                           0b101u);
+    st.pipe = p.get();
+    st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
+               " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
+    SlabGeometry g;
+    g.nz = std::uint64_t(nz);
+    g.src_bytes_per_slice = slice_bytes;
+    g.dst_bytes_before = floats_before;
+    g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
+    g.user = &slice_bytes;
+    auto sl = plan_slabs(ctx, g, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
+    if (!sl) throw VolumeError(sl.error);
+    st.slabs = std::move(*sl.value);
+    sets += std::uint32_t(st.slabs.size());
+    stages.push_back(std::move(st));
+  }
+  int dispatches = 0;
+  std::vector<double> stage_ms(K, 0.0);
+  if (K) {
+    DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
+    GpuTimer timer(ctx, std::uint32_t(K + 1));
+    VkCommandBuffer cmd = ctx.begin_commands();
+    timer.record_reset(cmd);
+    if (!direct) {
+      record_copy(cmd, *up, *field[0], n * 4);
+      record_copy(cmd, *list_up, *list_buf, list_bytes);
+      barrier_transfer_to_compute(cmd);
+    }
+    timer.mark(cmd, 0);
+    const BufferRange list_range{list_buf->handle(), 0, list_bytes};
+    for (std::size_t k = 0; k < K; ++k) {
+      const sparse::WorkList& w = lists[k];
+      for (const Slab& sl : stages[k].slabs) {
+        const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
+        if (u1 == u0) continue;
+        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_INVOCATIONS;
+        const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
+        const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
+        const std::uint64_t gy = (groups + gx - 1) / gx;
+        if (gy > lim.maxComputeWorkGroupCount[1])
+          throw VolumeError(vol.path + ": sparse chain: " + std::to_string(groups) +
+                            " workgroups exceed one dispatch on " + ctx.info().name);
+        gpu::ListPush pc{};
+        pc.z0 = gpu::uint(sl.z0);
+        pc.src_z0 = gpu::uint(sl.src_z0);
+        pc.src_offset = gpu::uint(sl.src_offset_elems);
+        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+        pc.unit0 = gpu::uint(base[k] + u0);
+        pc.units = gpu::uint(u1 - u0);
+        pc.groups_x = gpu::uint(gx);
+        pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
+        stages[k].pipe->bind(cmd, arena, {sl.src, sl.dst, list_range});
+        stages[k].pipe->push(cmd, pc);
+        vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t(gy), 1);
+        ++dispatches;
+      }
+      // The next op reads what this one wrote, and overwrites what this one read.
+      barrier_compute_to_compute(cmd);
+      timer.mark(cmd, std::uint32_t(k + 1));
+    }
+    if (direct) {
+      barrier_compute_to_host(cmd);
+    } else {
+      barrier_compute_to_transfer(cmd);
+      record_copy(cmd, *field[K % 2], *field_down, n * 4);
+      barrier_transfer_to_host(cmd);
+    }
+    out.submit_wall_ms = ctx.submit_and_wait(cmd);
+    for (std::size_t k = 0; k < K; ++k) stage_ms[k] = timer.elapsed_ms(std::uint32_t(k), std::uint32_t(k + 1));
+  }
+
+  // Host: ranges and samples from the last filter's output where it lies (the raw voxels
+  // without a filter).
+  const float* f = !K ? vol.voxels.data()
+                      : static_cast<const float*>(direct ? field[K % 2]->mapped() : field_down->mapped());
+  double ranges_ms = 0;
+  finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
+
+  out.passes.push_back({"raw brick ranges + input copy (host)", raw_ms, 0});
+  out.passes.push_back({"candidate selection (host)", select_ms, 0});
+  out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
+  std::ostringstream info;
+  const auto nb = core::brick_counts(vol.grid);
+  info << "strategy: lists; " << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total
+       << " bricks, " << out.stats.candidates << " candidates, " << out.stats.active << " active; quads per filter:";
+  for (std::size_t k = 0; k < K; ++k) {
+    const double pct = 100.0 * double(lists[k].quads) * ISOTOUCH_DENSE_VOXELS / double(n);
+    std::ostringstream lab;
+    lab.precision(3);
+    lab << stages[k].label << " on " << pct << " % of the voxels (GPU)";
+    out.passes.push_back({lab.str(), stage_ms[k], 0});
+    info << " " << stages[k].label << " " << lists[k].quads;
+  }
+  out.passes.push_back({"candidate ranges (host)", ranges_ms, 0});
+  out.passes.push_back({"publish: active samples computed into the pool (host)", out.publish_ms, 0});
+  out.stats.dispatches = std::size_t(dispatches);
+  out.stats.slabs = K ? stages.back().slabs.size() : 0;
+  out.total_ms = ms_since(t_total);
+  info << "; " << dispatches << " dispatch(es), " << total_units << " units; snapshot " << out.stats.snapshot_bytes
        << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
   last_run = info.str();
   return out;
@@ -237,6 +507,17 @@ std::string SparseChain::describe() const {
   s << "sparse chain, passes:";
   for (std::size_t i = 0; i < impl_->passes.size(); ++i) s << (i ? " -> " : " ") << impl_->passes[i].label();
   s << " (brick_minmax halo 1 implied)";
+  if (impl_->strategy == Strategy::Lists) {
+    s << "\nstrategy: lists - filter_list_x4 (the dense filters' x4 code) on the quads of the candidate bricks "
+         "dilated by the rest of the stencil, each quad once per pass; dense-addressed buffers read in place; "
+         "per candidate its exact range and the active ones' 9^3 samples computed on the host straight into the "
+         "published pool";
+    s << "\nleft out (not created, not run): sparse_brick (per-brick strategy); the dense passes filter_x4, "
+         "gaussian1d, morph1d, gradient_x4, gradient, brick_minmax (a filter wider than "
+      << ISOTOUCH_DENSE_MAX_RADIUS << " voxels a side runs the dense strategy)";
+    if (!impl_->last_run.empty()) s << "\nlast run: " << impl_->last_run;
+    return s.str();
+  }
   if (impl_->strategy == Strategy::Dense) {
     s << "\nstrategy: dense - the dense chain's x4 passes (filters + gradient, current shaders) over the whole "
          "volume, outputs read in place; per candidate its exact range and the 9^3 samples of the active ones "
@@ -261,6 +542,7 @@ std::string SparseChain::describe() const {
 
 SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, float background,
                               core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  if (impl_->strategy == Strategy::Lists) return impl_->run_lists(vol, iso, background, format, max_binding_bytes);
   if (impl_->strategy == Strategy::Dense) return impl_->run_dense(vol, iso, background, format, max_binding_bytes);
   const auto t_total = std::chrono::steady_clock::now();
   VulkanContext& ctx = impl_->ctx;

@@ -136,6 +136,33 @@ struct CandidateRange {
 /// uniform inside with a NaN voxel. Writes the tile of a uniform brick.
 bool is_active(const CandidateRange& r, const core::Isosurface& iso, float background, float& tile);
 
+/// The voxels one stage of the list strategy computes around every candidate brick b:
+/// 8 b - lo .. 8 b + 7 + hi along each axis (clipped to the grid); along x lo and hi are
+/// multiples of 4 (whole quads, ISOTOUCH_DENSE_VOXELS).
+struct Extent {
+  std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
+};
+/// The extents of the list strategy's filter ops, worked backwards from what the host reads
+/// of the last one's output (the candidate range, 8 b - 1 .. 8 b + 8, and the gradient's
+/// input for the 9^3 samples, 8 b - 1 .. 8 b + 9): each op's output (whole quads along x)
+/// widened by its radius along its axis is what the op before it must give. Entry k: op k's
+/// output.
+std::vector<Extent> list_extents(const Plan& plan);
+
+/// One stage's work list: the quads (4 voxels of an x-row) of the union of the candidates'
+/// extents, each once, as units of at most ISOTOUCH_LIST_QUADS quads of one row (two floats
+/// each, shaders/work_list.glsl), sorted by z then y then x.
+struct WorkList {
+  std::vector<float> units;               ///< 2 per unit: y + ny z, q0 * ISOTOUCH_LIST_PACK + quads
+  std::vector<std::uint32_t> z_first;     ///< nz + 1 entries: the first unit of slice z
+  std::uint64_t quads = 0;                ///< quads in all
+  std::size_t unit_count() const { return units.size() / 2; }
+};
+/// @throws VolumeError naming `what` if the grid is too large for exact float texels (rows
+///         or quads per row of 2^24 and more).
+WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                        const std::string& what);
+
 class BrickCpu;
 /// run_sparse_cpu's per-candidate computation, one brick at a time (the live field
 /// recomputes the bricks an edit changed with it): range() smooths the brick's raw region
@@ -163,6 +190,19 @@ class CandidateCpu {
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
              float background, core::SampleFormat format, bool keep_input, SparseOutput& out);
+/// The 9^3 samples of brick `b` (brick coordinates; i + 9 j + 81 k) from the dense field `f`
+/// of `grid`: value and gradient with the float operations of compute_samples_cpu (central
+/// differences inside, one-sided at the borders), so bit for bit the dense chain's samples;
+/// beyond the grid {background, 0, 0, 0}. Reads f at the brick's voxels - 1 .. + 9.
+void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
+                   core::Sample* out);
+/// publish() with the active candidates' samples written straight into the pool:
+/// `fill(c, dst)` writes the 729 samples of candidate index c at dst, called from `threads`
+/// threads at once (each on its own candidates; 1: this thread only).
+void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
+                  const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
+                  const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
+                  SparseOutput& out);
 
 }  // namespace sparse
 
@@ -189,14 +229,21 @@ class SparseChain {
   /// fewer than the loop budget needs (sparse::max_bricks_per_workgroup); tests set 1 to
   /// make every workgroup loop over as many bricks as allowed.
   void set_max_workgroups(std::uint32_t groups);
-  /// How the candidates are computed. Dense (the default): the dense chain's x4 passes
+  /// How the candidates are computed. Dense: the dense chain's x4 passes
   /// (PassChain, current shaders) over the whole volume, read in place, then per candidate
   /// its exact range (smoothed brick + 1 voxel) and the 9^3 samples of the active ones
   /// gathered on the host - the dense passes reach lavapipe's speed, and a candidate's
   /// samples are by definition the dense chain's. PerBrick: sparse_brick.comp, one
   /// shared-memory workgroup per candidate brick recomputing its own halo (kept for
-  /// comparison). Both give the same bits.
-  enum class Strategy { Dense, PerBrick };
+  /// comparison). All three give the same bits.
+  /// Lists (the default): the dense filters' x4 shader on work lists (filter_list_x4.comp):
+  /// each pass computes only the quads of the candidate bricks dilated by the rest of the
+  /// stencil (sparse::list_extents), halos shared between neighbouring candidates and
+  /// computed once, dense-addressed buffers read in place; then on the host the candidates'
+  /// ranges and the active ones' samples computed straight into the published pool
+  /// (sparse::brick_samples: the gradient's 16 B per voxel are never written twice). A
+  /// filter wider than ISOTOUCH_DENSE_MAX_RADIUS runs as Dense.
+  enum class Strategy { Lists, Dense, PerBrick };
   void set_strategy(Strategy s);
 
  private:
@@ -205,11 +252,13 @@ class SparseChain {
   std::unique_ptr<Impl> impl_;
 };
 
-/// The one-thread CPU reference of the sparse chain: the same bricks, the same samples
-/// (bit for bit with the dense CPU chain at every published voxel).
+/// The CPU reference of the sparse chain: the same bricks, the same samples (bit for bit
+/// with the dense CPU chain at every published voxel). One thread by default (the
+/// reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan device
+/// exists): the candidates split among that many threads, the same bits.
 /// @param keep_input also return the BrickedInput in SparseOutput::input.
 SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
                             float background, core::SampleFormat format = core::SampleFormat::kFp32,
-                            bool keep_input = false);
+                            bool keep_input = false, unsigned threads = 1);
 
 }  // namespace isotouch::engine

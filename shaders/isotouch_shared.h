@@ -101,6 +101,25 @@ struct DensePush {
   float inv_h_z;
 };
 
+// The sparse chain's filters on work lists (filter_list_x4.comp, shaders/work_list.glsl):
+// the dense filters' quads, but only those of the rows a list names.
+// A unit is a run of at most ISOTOUCH_LIST_QUADS quads of one row; ISOTOUCH_LIST_INVOCATIONS
+// consecutive invocations take one unit (ISOTOUCH_LIST_QUADS / ISOTOUCH_LIST_INVOCATIONS
+// quads each at most). Buffers are dense-addressed as in DensePush.
+#define ISOTOUCH_LIST_QUADS 8u
+#define ISOTOUCH_LIST_INVOCATIONS 4u
+#define ISOTOUCH_LIST_PACK 16u  // a unit's second texel: q0 * ISOTOUCH_LIST_PACK + quads
+struct ListPush {
+  uint z0;          // first slice of this slab (dst_offset is the element of its voxel 0)
+  uint src_z0;      // first slice present in the src binding
+  uint src_offset;  // elements between the src binding start and slice src_z0
+  uint dst_offset;  // elements between the dst binding start and slice z0
+  uint unit0;       // first unit of this dispatch in the list binding
+  uint units;       // units of this dispatch (all in slices z0 ..)
+  uint groups_x;    // workgroups along x of the 2-D dispatch
+  uint vec4_out;    // 1 if every row starts 16-byte aligned in dst (one vec4 store)
+};
+
 // Per-brick min/max (brick_minmax.comp): one invocation per 8^3 brick (OpenVDB's leaf
 // size), reading the brick's voxels widened by `halo` voxels on every side (clamped to
 // the volume); writes (min, max) as two floats per brick, bricks x fastest. A slab is a

@@ -223,9 +223,21 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
     EXPECT_NEAR(r.dense_gpu_over_cpu_wall, r.dense_gpu_wall_ms / r.dense_cpu_wall_ms, 1e-12);
     if (std::isfinite(gpu_sum)) EXPECT_NEAR(r.sum.gpu_ms, gpu_sum, 1e-9);
   }
+  // The multi-threaded CPU backend: timed where the machine has several threads, and its
+  // output checked bit for bit against the one-thread reference in every repetition.
+  if (r.cpu_backend_threads > 1) {
+    EXPECT_TRUE(std::isfinite(r.dense_cpu_mt_wall_ms));
+    EXPECT_TRUE(r.cpu_backend_same_bits);
+  }
 
   ASSERT_EQ(r.isos.size(), 1u);
   const app::IsoResult& ir = r.isos[0];
+  if (ctx) {
+    // Every GPU strategy timed beside the default (lists): the dense one and the per-brick kernel.
+    EXPECT_TRUE(ir.gpu.available) << ir.gpu.why;
+    EXPECT_TRUE(ir.gpu_dense.available && std::isfinite(ir.gpu_dense.total_ms)) << ir.gpu_dense.why;
+    EXPECT_TRUE(ir.gpu_per_brick.available && std::isfinite(ir.gpu_per_brick.total_ms)) << ir.gpu_per_brick.why;
+  }
   ASSERT_EQ(ir.formats.size(), 3u);
   const app::SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
   if (!s) {

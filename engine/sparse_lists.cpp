@@ -1,0 +1,95 @@
+// sparse_lists.cpp - the work lists of the sparse chain's list strategy (engine/sparse_chain.h):
+// which quads each pass computes so that the host reads exact candidate ranges and samples.
+#include <algorithm>
+
+#include "isotouch_shared.h"
+#include "sparse_chain.h"
+
+namespace isotouch::engine::sparse {
+
+namespace {
+int ceil4(int v) { return (v + 3) / 4 * 4; }
+int floor_div(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+}  // namespace
+
+std::vector<Extent> list_extents(const Plan& plan) {
+  const std::size_t n = plan.ops.size();
+  std::vector<Extent> e(n);
+  // What the host reads of the last filter's output: the candidate range (8 b - 1 ..
+  // 8 b + 8) and the gradient's input for the 9^3 samples (8 b - 1 .. 8 b + 9).
+  Extent need;
+  need.lo = {1, 1, 1};
+  need.hi = {2, 2, 2};
+  for (std::size_t k = n; k-- > 0;) {
+    Extent out = need;
+    out.lo[0] = ceil4(out.lo[0]);
+    out.hi[0] = ceil4(out.hi[0]);
+    e[k] = out;
+    need = out;
+    need.lo[std::size_t(plan.ops[k].axis)] += plan.ops[k].radius;
+    need.hi[std::size_t(plan.ops[k].axis)] += plan.ops[k].radius;
+  }
+  return e;
+}
+
+WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                        const std::string& what) {
+  const auto [nx, ny, nz] = grid.dims;
+  const int qx = (nx + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS);
+  if (std::uint64_t(ny) * std::uint64_t(nz) >= (1u << 24) ||
+      std::uint64_t(qx) * ISOTOUCH_LIST_PACK >= (1u << 24))
+    throw VolumeError(what + ": sparse chain: " + std::to_string(nx) + "x" + std::to_string(ny) + "x" +
+                      std::to_string(nz) + " is too large for the work lists (rows and quads below 2^24)");
+  const auto nb = core::brick_counts(grid);
+  const std::size_t nbx = std::size_t(nb[0]), nby = std::size_t(nb[1]), nbz = std::size_t(nb[2]);
+  std::vector<std::uint8_t> mark(nbx * nby * nbz, 0);
+  for (std::uint32_t id : candidates) mark[id] = 1;
+  // Brick layers whose extent covers index i along axis a: 8 b - lo <= i <= 8 b + 7 + hi.
+  auto bricks_at = [&](int i, int a) {
+    const int b0 = std::max(floor_div(i - 7 - e.hi[std::size_t(a)] + 7, 8), 0);
+    const int b1 = std::min(floor_div(i + e.lo[std::size_t(a)], 8), nb[std::size_t(a)] - 1);
+    return std::pair{b0, b1};
+  };
+  WorkList w;
+  w.z_first.assign(std::size_t(nz) + 1, 0);
+  std::vector<std::uint8_t> col(nbx, 0);
+  std::vector<std::pair<int, int>> runs;  // quads [first, last] of the current row class
+  for (int z = 0; z < nz; ++z) {
+    const auto [bz0, bz1] = bricks_at(z, 2);
+    std::pair<int, int> prev{-1, -2};
+    for (int y = 0; y < ny; ++y) {
+      const auto by = bricks_at(y, 1);
+      if (by != prev) {  // rows with the same brick rows share their runs
+        prev = by;
+        std::fill(col.begin(), col.end(), std::uint8_t(0));
+        for (int bz = bz0; bz <= bz1; ++bz)
+          for (int b = by.first; b <= by.second; ++b) {
+            const std::uint8_t* m = mark.data() + (std::size_t(bz) * std::size_t(nb[1]) + std::size_t(b)) * std::size_t(nb[0]);
+            for (int bx = 0; bx < nb[0]; ++bx) col[std::size_t(bx)] |= m[bx];
+          }
+        runs.clear();
+        for (int bx = 0; bx < nb[0]; ++bx) {
+          if (!col[std::size_t(bx)]) continue;
+          const int q0 = std::max(8 * bx - e.lo[0], 0) / 4;
+          const int q1 = std::min(8 * bx + 7 + e.hi[0], nx - 1) / 4;
+          if (!runs.empty() && q0 <= runs.back().second + 1)
+            runs.back().second = std::max(runs.back().second, q1);
+          else
+            runs.push_back({q0, q1});
+        }
+      }
+      const float row = float(y + ny * z);
+      for (const auto& [q0, q1] : runs)
+        for (int q = q0; q <= q1; q += int(ISOTOUCH_LIST_QUADS)) {
+          const int n = std::min(q1 - q + 1, int(ISOTOUCH_LIST_QUADS));
+          w.units.push_back(row);
+          w.units.push_back(float(q * int(ISOTOUCH_LIST_PACK) + n));
+          w.quads += std::uint64_t(n);
+        }
+    }
+    w.z_first[std::size_t(z) + 1] = std::uint32_t(w.unit_count());
+  }
+  return w;
+}
+
+}  // namespace isotouch::engine::sparse

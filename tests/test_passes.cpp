@@ -214,7 +214,7 @@ TEST(CpuBackend, ThreadsGiveTheOneThreadReferenceBitForBit) {
   // among the threads) against the one-thread reference: every output bit for bit, on the
   // chest (a real volume) and an odd-sized random one (every border rule, parts of unequal
   // size: 389 slices over 2 and 3 threads; large enough for 3 threads by threads_for).
-  const Volume chest = engine::load_volume(kChest);
+  const Volume chest = io::load_volume(kChest);
   const Volume odd = engine::make_random({67, 61, 389}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 11);
   ASSERT_EQ(engine::threads_for(odd.grid.voxel_count(), 3), 3u);
   const std::vector<PassDesc> list = {PassDesc::closing(1.0), PassDesc::gaussian(1.0), PassDesc::gradient(),

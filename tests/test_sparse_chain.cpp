@@ -320,7 +320,7 @@ TEST(SparseChain, ListsWithStagingCopiesGiveTheSameBits) {
 TEST(SparseChain, CpuBackendThreadsGiveTheReferenceBitForBit) {
   // The multi-threaded sparse CPU backend (candidates split among threads) against the
   // one-thread reference and the dense CPU chain: the same bricks, tiles and samples.
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
   const engine::SparseOutput one = engine::run_sparse_cpu(v, p, above(-500), -1024.0f, core::SampleFormat::kFp32, true);
   for (unsigned threads : {2u, 3u}) {
@@ -474,7 +474,7 @@ TEST(SparseChain, DISABLED_Bench512) {
 TEST(SparseChain, DISABLED_LimitChest) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 7;
-  const Volume v = engine::load_volume(kChest);
+  const Volume v = io::load_volume(kChest);
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
   auto ctxr = engine::VulkanContext::create({});  // no validation layer: timings
   ASSERT_TRUE(ctxr) << ctxr.error;

@@ -358,12 +358,24 @@ void check_nifti_header(const std::string& path) {
   const int got = gzread(gz, h, sizeof h);
   gzclose(gz);
   if (got < 348) return;  // ITK refuses it itself
+  // Which header: the magic, as the NIfTI library decides (it does not trust sizeof_hdr),
+  // else a 348 size field (Analyze 7.5). Byte order: dim[0] must be 1..7, as the library checks.
+  const bool two = got >= 540 && (std::memcmp(h + 4, "n+2", 4) == 0 || std::memcmp(h + 4, "ni2", 4) == 0);
   std::int32_t size = 0;
   std::memcpy(&size, h, 4);
-  const bool swap = size == std::int32_t(__builtin_bswap32(348)) || size == std::int32_t(__builtin_bswap32(540));
-  if (swap) size = std::int32_t(__builtin_bswap32(std::uint32_t(size)));
-  const bool two = size == 540;
-  if (size != 348 && !(two && got >= 540)) return;
+  const bool one = std::memcmp(h + 344, "n+1", 4) == 0 || std::memcmp(h + 344, "ni1", 4) == 0 || size == 348 ||
+                   size == std::int32_t(__builtin_bswap32(348));
+  if (!two && !one) return;
+  bool swap = false;
+  if (two) {
+    std::int64_t d0;
+    std::memcpy(&d0, h + 16, 8);
+    swap = d0 < 1 || d0 > 7;
+  } else {
+    std::int16_t d0;
+    std::memcpy(&d0, h + 40, 2);
+    swap = d0 < 1 || d0 > 7;
+  }
   auto number = [&](std::size_t at) -> double {
     if (two) {
       std::uint64_t u;
@@ -405,6 +417,9 @@ void check_nifti_header(const std::string& path) {
 void check_nrrd_length(const std::string& path, std::uint64_t need);
 
 Volume load_itk(const std::string& path) {
+  // Before any ITK reader looks at it (NiftiImageIO::CanReadFile already builds the matrices):
+  // a file with a NIfTI header size must have finite orientation fields.
+  check_nifti_header(path);
   itk::ImageIOBase::Pointer io;
   const itk::ImageIOBase::Pointer candidates[] = {
       itk::MetaImageIO::New().GetPointer(), itk::NrrdImageIO::New().GetPointer(),
@@ -419,7 +434,6 @@ Volume load_itk(const std::string& path) {
   const std::string cls = io->GetNameOfClass();
   const Fields fields = fields_of(cls);
   if (cls == "MetaImageIO") check_metaimage(path);
-  if (cls == "NiftiImageIO") check_nifti_header(path);
   io->SetFileName(path);
   io->ReadImageInformation();
 

@@ -92,7 +92,7 @@ PeerTimes run_peers_once(const engine::Volume& v, double sigma_mm, int threads) 
   try {
     openvdb::initialize();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-    const auto [nx, ny, nz] = v.grid.dims;
+    const int nx = v.grid.dims[0], ny = v.grid.dims[1], nz = v.grid.dims[2];
     const openvdb::CoordBBox box(openvdb::Coord(0, 0, 0), openvdb::Coord(nx - 1, ny - 1, nz - 1));
     // x fastest, as in engine::Volume: OpenVDB's LayoutXYZ. The Gaussian's output when ITK
     // ran (the chain's input to the gradient), else the raw voxels.

@@ -158,7 +158,7 @@ Volume closing_cpu(const Volume& v, double radius_mm) {
 BrickRanges brick_minmax_cpu(const Volume& v, int halo, unsigned threads) {
   BrickRanges b;
   b.halo = halo;
-  const auto [nx, ny, nz] = v.grid.dims;
+  const int nx = v.grid.dims[0], ny = v.grid.dims[1], nz = v.grid.dims[2];
   for (int a = 0; a < 3; ++a) b.bricks[std::size_t(a)] = (v.grid.dims[std::size_t(a)] + 7) / 8;
   const std::size_t count = std::size_t(b.bricks[0]) * std::size_t(b.bricks[1]) * std::size_t(b.bricks[2]);
   b.min.assign(count, 0.0f);

@@ -36,7 +36,7 @@ RowDiff row_diff(int i, int n, const float* row, std::size_t stride, float inv_2
 core::SampleField compute_samples_cpu(const Volume& vol, unsigned threads) {
   core::SampleField out;
   out.grid = vol.grid;
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   out.samples.resize(vol.grid.voxel_count());
   const GradientConstants k = gradient_constants(vol.grid);
   const float* f = vol.voxels.data();

@@ -50,7 +50,7 @@ GradientPass::~GradientPass() = default;
 
 std::vector<Slab> GradientPass::plan(const core::Grid& grid, VkBuffer src, VkBuffer dst,
                                      std::uint64_t max_binding_bytes, const std::string& what) const {
-  const auto [nx, ny, nz] = grid.dims;
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const auto& lim = ctx_.properties().limits;
   std::uint64_t limit = lim.maxStorageBufferRange;
   if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
@@ -78,7 +78,7 @@ std::vector<Slab> GradientPass::plan(const core::Grid& grid, VkBuffer src, VkBuf
 
 void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
                           const std::vector<Slab>& slabs) const {
-  const auto [nx, ny, nz] = grid.dims;
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const GradientConstants k = gradient_constants(grid);
   if (shaders_ == ShaderSet::Current) {
     auto& pipe = x4_[grid.dims];
@@ -136,7 +136,7 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const cor
 }
 
 double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const std::uint64_t n = vol.grid.voxel_count();
   auto buffer = [&](std::uint64_t bytes, const char* what) {
     auto r = GpuBuffer::create(ctx_, bytes, MemoryIntent::DeviceLocal, what);

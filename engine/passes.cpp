@@ -194,7 +194,7 @@ ChainOutput PassChain::run_in_place(const Volume& vol, InPlace& where, std::uint
 
 ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_bytes, InPlace* in_place) {
   VulkanContext& ctx = impl_->ctx;
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const std::uint64_t n = vol.grid.voxel_count();
   const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
   const std::uint64_t slice_bytes = slice * 4;

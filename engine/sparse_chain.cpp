@@ -88,7 +88,7 @@ struct Chunk {
 void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float* f, const core::Sample* s,
                     const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
                     SparseOutput& out, double& ranges_ms) {
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
   const std::size_t nc = sel.candidates.size();
   const unsigned threads = threads_for(std::uint64_t(nc) * 1000u, hardware_threads());
@@ -270,7 +270,7 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
 SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurface& iso, float background,
                                           core::SampleFormat format, std::uint64_t max_binding_bytes) {
   const auto t_total = std::chrono::steady_clock::now();
-  const auto [nx, ny, nz] = vol.grid.dims;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
                       std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));

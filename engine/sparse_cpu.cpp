@@ -343,7 +343,7 @@ void advise_huge_pages(void* p, std::size_t bytes) {
 
 void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
                    core::Sample* out) {
-  const auto [nx, ny, nz] = grid.dims;
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const GradientConstants k = gradient_constants(grid);
   const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
   const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);

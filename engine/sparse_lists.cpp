@@ -34,7 +34,7 @@ std::vector<Extent> list_extents(const Plan& plan) {
 
 WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
                         const std::string& what) {
-  const auto [nx, ny, nz] = grid.dims;
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const int qx = (nx + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS);
   if (std::uint64_t(ny) * std::uint64_t(nz) >= (1u << 24) ||
       std::uint64_t(qx) * ISOTOUCH_LIST_PACK >= (1u << 24))

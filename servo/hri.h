@@ -223,22 +223,30 @@ struct ToolPlane {
 ///
 /// Spherical tool (robust variant, tool_radius_m = r > 0). The HIP is the tool's centre,
 /// the VHIP (proxy) the centre of a sphere of radius r kept outside the isosurface, the
-/// HRI way: at a plane update the isosurface point q nearest the proxy within r + 1 voxel
-/// is found (Newton steps along the gradient, x <- x + N e / |grad|, at most 8 trilinear
-/// reads; a march along the normal when they do not converge) and gives the plane (N, q),
-/// N the outward normal at q; the proxy is the point nearest the HIP with
-/// N_i . (x - q_i) >= r for every held plane (god-object with several active constraints:
-/// the best of the at most 7 active subsets, closed-form solves). While the proxy so
-/// placed is still closer than r to the surface (a groove, a corner), the point nearest it
-/// gives the next plane: at most three planes. Between updates (every n ticks; early when
-/// the proxy slides half a voxel from where the planes were made, or on an edit tick) the
-/// tick reads no sample while a plane holds the HIP; in free motion it reads the value and
-/// gradient at the HIP and searches for planes only when the first-order distance
-/// -e / |grad| is below r + 1 voxel (or the HIP is inside while the proxy of the tick
-/// before is outside). Force: F = K (proxy - HIP) - B v_u u, u the unit push direction,
-/// no pull; an update that steps the force vector by more than 1 % of the limit fades the
-/// step out over recovery_time_s (direction and magnitude); edits slew as for the point.
-/// Friction and force shading do not apply to the tool (the scene refuses them).
+/// HRI way with several intermediate planes (god-object with several active constraints):
+/// the proxy is the point nearest the HIP with N_i . (x - q_i) >= r for every held plane
+/// (N_i, q_i) (the best feasible projection onto at most three of them, closed-form
+/// solves). At a plane update the cells of the trilinear field within r + 1 voxel of the
+/// proxy are scanned (surface_scan: a cell holds the surface exactly when its corners
+/// straddle tau; its point nearest the proxy by projections onto the linearised patch,
+/// else its nearest edge crossing), and the planes are chosen nearest first: a surface
+/// point already behind a chosen plane (or on it) cannot come nearer than r to a proxy
+/// that plane holds, so only the points in front of every chosen plane add one (normal
+/// from the point toward the proxy), at most kMaxToolPlanes. Walls of a groove, the three
+/// faces of a corner and the blobs of a one-voxel plate each get their plane, including
+/// those within the margin that the proxy reaches only while it slides. If the proxy so
+/// placed moved more than a quarter voxel from the scan's centre, the scan is repeated
+/// there (at most twice). Updates: every n ticks, and early when the proxy is more than
+/// 0.2 voxel from the last scan's centre (so no surface beyond the scanned margin can come
+/// within r), or on an edit tick. In free motion the tick reads no sample: the last scan
+/// proved the surface no nearer than its nearest point, and the next scan comes when the
+/// HIP has moved that far less r. Where the scan box would exceed kScanSide samples per
+/// axis (a tool of many voxels), the nearest point is found by Newton steps along the
+/// gradient instead (nearest_surface), as before. Force: F = K (proxy - HIP) - B v_u u,
+/// u the unit push direction, no pull; an update that steps the force vector by more than
+/// 1 % of the limit fades the step out over recovery_time_s (direction and magnitude);
+/// edits slew as for the point. Friction and force shading do not apply to the tool (the
+/// scene refuses them).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params);
@@ -312,6 +320,15 @@ class HriRenderer final : public Renderer {
   double edit_slew(Vec3& force, double mag, HriTick& out);
   /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
   void tool_rebuild(const FieldView& field, const Vec3& hip);
+  /// Spherical tool: the planes from Newton searches (tools too large for surface_scan).
+  void tool_rebuild_newton(const FieldView& field, const Vec3& hip);
+  /// Spherical tool: fills scan_ with the surface points of the cells within `reach` of x
+  /// (nearest first) and scan_clear_m_ with the nearest one's distance (reach if none);
+  /// false if the box of cells exceeds kScanSide samples per axis (nothing scanned).
+  bool surface_scan(const FieldView& field, const Vec3& x, double reach);
+  /// Spherical tool: adds a plane for every scanned point within `reach` of x in front of
+  /// every held plane (nearest first); returns the number added.
+  int tool_add_uncovered(const Vec3& x, double reach, double voxel);
   /// Spherical tool: this tick's force (before saturation); sets out.contact, vhip_.
   Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
@@ -355,8 +372,24 @@ class HriRenderer final : public Renderer {
   Vec3 prev_target_f_;               ///< robust: unramped force of the tick before [N]
   Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)
   // Spherical tool:
-  ToolPlane tool_planes_[3];
+ public:
+  static constexpr int kMaxToolPlanes = 6;  ///< planes held at once (a bed of blobs needs more than 3)
+  static constexpr int kScanSide = 20;      ///< samples per axis surface_scan reads at most
+  static constexpr int kMaxScanPoints = 96; ///< surface points surface_scan keeps (the nearest)
+
+ private:
+  struct ScanPoint {
+    Vec3 q;      ///< on the isosurface [m]
+    Vec3 n;      ///< outward normal of the plane it makes
+    double d;    ///< distance from the scan centre [m]
+  };
+  ToolPlane tool_planes_[kMaxToolPlanes];
   int tool_plane_count_ = 0;
+  ScanPoint scan_[kMaxScanPoints];
+  int scan_count_ = 0;
+  double scan_clear_m_ = 0;     ///< distance of the nearest surface point of the last scan [m]
+  bool scan_valid_ = false;     ///< anchor_ is the centre of a complete scan of the field version
+  float scan_excess_[kScanSide * kScanSide * kScanSide];
 };
 
 }  // namespace isotouch::servo

@@ -41,6 +41,7 @@ void HriRenderer::reset() {
   prev_force_ = {};
   tool_plane_count_ = 0;
   scan_valid_ = false;
+  release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};
 }
@@ -54,9 +55,21 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
                                  double& grad_norm) const {
   Vec3 g;
   switch (params_.normal) {
-    case NormalSource::kSamples:
+    case NormalSource::kSamples: {
       g = sample_trilinear(field, x).gradient;
+      if (params_.variant == Variant::kRobust) {
+        // Across a structure one or two voxels thick the blended gradient samples of its
+        // two faces cancel, and what is left (a taper's slope, noise) can point along the
+        // surface: a tapering plate on 3 mm voxels tilted the plane by up to 90 deg and
+        // eq. 2 slid the VHIP into the plate. Where the blend turns more than 30 deg from
+        // the gradient of the trilinear values (the normal of the isosurface rendered),
+        // that gradient is the normal.
+        const Vec3 gt = trilinear_field_gradient(field, x);
+        const double gs = norm(g), gtn = norm(gt);
+        if (gtn > 0 && std::isfinite(gtn) && !(dot(g, gt) > 0.866 * gs * gtn)) g = gt * (gs > 0 && std::isfinite(gs) ? gs / gtn : 1.0);
+      }
       break;
+    }
     case NormalSource::kCentral:
       g = central_difference_gradient(field, x, field.grid().spacing_m * 0.5);
       break;
@@ -85,10 +98,10 @@ bool HriRenderer::long_step(const FieldView& field, const Vec3& a, const Vec3& b
 }
 
 bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Vec3& b,
-                                 Vec3& p) const {
+                                 Vec3& p, double step_voxels) const {
   const Vec3& sp = field.grid().spacing_m;
   const double len = norm(b - a);
-  const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
+  const double h = step_voxels * std::min({sp.x, sp.y, sp.z});
   if (!std::isfinite(len) || !(len > 0.0)) return false;
   // Half-voxel steps, at least 2 (the end point alone says nothing about a thin wall
   // in between), at most march_budget samples (longer steps beyond that).
@@ -171,8 +184,12 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
   if (e0 > 0.0 && d_est > 1e-4 * voxel && d_est <= 0.05 * voxel && plane_.valid &&
       params_.variant == Variant::kRobust) {
     // Shallow embedding (a chord or a plane held over a curved surface): one first-order
-    // step out along the held plane's normal, no search (it costs no extra sample).
-    return plane_at(field, vhip_ + plane_.n * d_est, hip);
+    // step out along the held plane's normal, if that reaches the outside (one sample).
+    // Where |grad| overstates the slope of the trilinear values (a plate one voxel thick
+    // on coarse voxels) the step falls short, and the VHIP sank by 0.2 voxel a few
+    // hundredths of a mm per tick: then the search below.
+    const Vec3 out_p = vhip_ + plane_.n * d_est;
+    if (!(excess(sample_value(field, out_p)) > 0.0)) return plane_at(field, out_p, hip);
   }
   if (e0 > 0.0 && d_est > 1e-4 * voxel) {
     // The VHIP is embedded (Figure 5b): the two ends do not bracket tau and the linear
@@ -363,6 +380,7 @@ void HriRenderer::restart_at(const Vec3& hip) {
   prev_force_ = {};
   tool_plane_count_ = 0;
   scan_valid_ = false;
+  release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};
 }
@@ -385,11 +403,33 @@ double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
     edit_slewing_ = false;
     return mag;
   }
-  const Vec3 gap = force - prev_force_;
+  // The direction first: at most edit_max_turn_deg from the one sent (rotated in the plane
+  // of the two, the target's magnitude kept); then the vector step. Both forces lie in the
+  // cone of that half-angle around the direction sent, so the step stays inside it.
+  Vec3 goal = force;
+  const double prev_mag = norm(prev_force_);
+  bool turned = false;
+  if (prev_mag > 0.0 && mag > 0.0 && params_.edit_max_turn_deg > 0.0) {
+    const Vec3 a = prev_force_ / prev_mag, b = force / mag;
+    const double c = std::clamp(dot(a, b), -1.0, 1.0);
+    const double max_turn = params_.edit_max_turn_deg * M_PI / 180.0;
+    if (std::acos(c) > max_turn) {
+      const Vec3 perp = normalized_or(b - a * c, Vec3{});
+      if (dot(perp, perp) > 0.0) {
+        goal = (a * std::cos(max_turn) + perp * std::sin(max_turn)) * mag;
+        turned = true;
+      }
+    }
+  }
+  const Vec3 gap = goal - prev_force_;
   const double g = norm(gap);
   if (!(g > step)) {
-    edit_slewing_ = false;
-    return mag;
+    if (!turned) {
+      edit_slewing_ = false;
+      return mag;
+    }
+    force = goal;
+    return norm(force);
   }
   force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
   if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
@@ -994,6 +1034,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
     edit_slewing_ = false;  // zero force was sent: an edit slew ends here
+    release_left_s_ = 0;    // and a release fade
     prev_force_ = {};
     return out;
   }
@@ -1099,7 +1140,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
           const double f_a = sample_value(field, a);
           if (excess(f_a) > 0.0) {
             set_plane(compute_plane(field, sample_value(field, vhip_), f_a, hip));  // embedded
-          } else if (first_crossing(field, a, hip, p)) {
+          } else if (first_crossing(field, a, hip, p, 0.2)) {
+            // (fifth-voxel steps: on coarse voxels the trilinear inside of a plate one
+            // voxel thick can be thinner than half a voxel, and the half-voxel march
+            // stepped over it: the plane was dropped with the HIP past the far face)
             set_plane(plane_at(field, p, hip));
           } else {
             plane_.valid = false;  // the surface curved away: the HIP is really outside
@@ -1139,6 +1183,31 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
       plane_grad_norm_ = held_grad_norm;
     }
   }
+  // God-object: the proxy moves on the surface, never through the object. A new plane
+  // whose contact point (eq. 2) is reached from the VHIP of the tick before only through
+  // material (a point of the segment more than 0.05 voxel deep, first order, at 7 interior
+  // points) lies on another sheet: the far face of a thin plate, the other side of a
+  // tapering edge on coarse voxels (a plane there pushed the HIP through at 1.5 N). The
+  // held plane stays while the HIP is behind it. Not on edit ticks (the material moved),
+  // nor from a VHIP now inside (material added under it, or a shallow embedding: the
+  // segment starts in material by right).
+  if (holding && out.plane_update && !edited && plane_.valid && behind(held) &&
+      (dot(plane_.n, held.n) < 0.9999 || std::abs(dot(held.n, plane_.p - held.p)) > 1e-3 * voxel) &&
+      !(excess(sample_value(field, vhip_)) > 0.0)) {
+    const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);
+    const double gn = plane_grad_norm_ > 0 ? plane_grad_norm_ : held_grad_norm;
+    // A plane facing away from the held one is reached through any material at all.
+    const double depth = dot(plane_.n, held.n) < 0.0 ? 0.0 : 0.05 * voxel;
+    bool through = false;
+    for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
+      const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
+      through = e > depth * gn;
+    }
+    if (through) {
+      set_plane(held);
+      plane_grad_norm_ = held_grad_norm;
+    }
+  }
 
   Vec3 force;
   if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
@@ -1167,6 +1236,25 @@ HriTick HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, boo
     mag = norm(force);
   }
   const bool in_contact = out.contact;  // a plane held the HIP (not an edit's fade-out)
+  // Release fade: contact ends with force on (a plane update found the surface curved away
+  // under a HIP still behind the held plane, a drilled-away wall): the force sent the tick
+  // before fades out along its own direction over recovery_time_s (contact, penetration 0)
+  // instead of dropping to zero in one tick. A new contact ends the fade (its ramp starts
+  // from the force sent); an edit slew takes it over.
+  if (in_contact || out.fault || edit_slewing_ || edited || !(params_.recovery_time_s > 0)) {
+    release_left_s_ = 0;
+  } else if (was_contact_ && prev_force_mag_ > 0.01 * params_.force_limit_n) {
+    release_left_s_ = params_.recovery_time_s;
+    release_from_ = prev_force_;
+  }
+  if (release_left_s_ > 0) {
+    release_left_s_ -= ramp_dt_s_;
+    if (release_left_s_ < 1e-9 * params_.recovery_time_s) release_left_s_ = 0;  // rounding
+    force = release_from_ * (release_left_s_ / params_.recovery_time_s);
+    mag = norm(force);
+    out.contact = true;
+    out.penetration_m = 0;
+  }
   if (edited) edit_slewing_ = true;
   if (edit_slewing_) {
     if (out.fault) edit_slewing_ = false;

@@ -68,13 +68,18 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
-  /// Robust variant, edits: the largest change of the force
-  /// vector F (hence of |F| and of its direction) an edit may cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
-  /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
+  /// Robust variant, edits: the largest change of the force vector F (hence of |F|) an
+  /// edit may cause per tick, as a fraction of force_limit_n (0.04: 0.132 N per tick at
+  /// 3.3 N, below the 5 % a shipped scene may step; a full-range change takes 25 ticks,
+  /// 25 ms at 1 kHz). The direction of F turns by at most edit_max_turn_deg per tick too. An edit is a new snapshot version
   /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
   /// turns the edit handling off: a new snapshot is then read at the next plane update
   /// like any other, and the force steps. [1 / tick]
-  double edit_max_step_fraction = 0.05;
+  double edit_max_step_fraction = 0.04;
+  /// Robust variant, edits: the largest turn of the force direction an edit may cause per
+  /// tick [deg] (a small force can turn far within one vector step: 20 deg at 0.26 N
+  /// while drilling through the skull). Applies while edit_max_step_fraction > 0.
+  double edit_max_turn_deg = 10.0;
   /// Robust variant: radius of a spherical tool [m, world]; 0 = a point (the paper). The
   /// HIP is the tool's centre; see HriRenderer, "Spherical tool".
   double tool_radius_m = 0.0;
@@ -187,6 +192,20 @@ struct ToolPlane {
 ///   (never the time of lost ticks), so a ramp started after 50 lost ticks or on one
 ///   jittery 10 us period still lasts recovery_time_s (a length in ticks from one
 ///   measured period gave 1 tick, or 1800).
+/// - Normals on thin structures (NormalSource::kSamples): where the blend of the gradient
+///   samples turns more than 30 deg from the gradient of the trilinear values (the two
+///   faces of a plate one or two voxels thick cancel in the blend), the latter is the
+///   normal. A shallow embedding's first-order step out is taken only if it reaches the
+///   outside (else the embedded search). The "surface curved away" test marches fifth-voxel
+///   steps (a coarse plate's trilinear inside can be thinner than half a voxel).
+/// - Proxy path: a new plane whose contact point is reached from an outside VHIP only
+///   through material (7 points of the segment, deeper than 0.05 voxel first order; any
+///   depth for a plane facing away from the held one) lies on another sheet; the held
+///   plane stays while the HIP is behind it (not on edit ticks).
+/// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
+///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
+///   behind it, a wall drilled away) fades that force out along its direction over
+///   recovery_time_s (contact = true, penetration 0); new contact or a fault ends it.
 /// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
@@ -206,7 +225,8 @@ struct ToolPlane {
 ///   tick before toward this tick's target (the spring-damper force, saturated) by at most
 ///   edit_max_step_fraction * force_limit_n per tick (|F_sent - F_prev| <= step, so a carve
 ///   that tilts the surface under the HIP turns the force over several ticks instead of
-///   flipping it: review finding), until the tick it reaches the target.
+///   flipping it), and its direction turns by at most edit_max_turn_deg per tick, until
+///   the tick it reaches the target.
 ///   A running recovery ramp is folded into the slew and none starts on an edit tick; the
 ///   user's own motion is slewed too while it lasts, so no tick changes |F| by more than
 ///   the step. A later edit during the slew continues it from the |F| sent. Carved under
@@ -301,7 +321,8 @@ class HriRenderer final : public Renderer {
   /// 20 bisection steps); false if none.
   bool march_out(const FieldView& field, const Vec3& x, Vec3& p) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
-  bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p) const;
+  /// `step_voxels`: the march's step [voxels].
+  bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p, double step_voxels = 0.5) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
@@ -371,6 +392,8 @@ class HriRenderer final : public Renderer {
   Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]
   Vec3 prev_target_f_;               ///< robust: unramped force of the tick before [N]
   Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)
+  double release_left_s_ = 0;        ///< robust: time left in a release fade [s]
+  Vec3 release_from_;                ///< robust: force sent on the last contact tick [N]
   // Spherical tool:
  public:
   static constexpr int kMaxToolPlanes = 6;  ///< planes held at once (a bed of blobs needs more than 3)

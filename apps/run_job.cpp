@@ -25,6 +25,7 @@
 #include <sstream>
 
 #include "stats.h"
+#include "stability.h"
 #include "brick_field.h"
 #include "brush.h"
 #include "record.h"
@@ -1220,6 +1221,16 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   script.at(0.0, start_w, v0);
   sim::SimDevice device(scene.device, xf.to_device(start_w));
   servo::HriRenderer renderer(hp);
+  // Colgate and Schenkel's passivity bound for the scene's K, B and rate, with the damping
+  // at the handle b = device + hand damping [N s/m]: a stiffer wall may buzz (K = 1e6 N/m
+  // on the sphere at 1 kHz: 152 on/off flips). Warned in the log and reported.
+  m.k_bound_n_per_m = servo::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+                                           hp.damping_n_s_per_m, 1.0 / hp.rate_hz);
+  m.k_above_bound = !(hp.stiffness_n_per_m <= m.k_bound_n_per_m);
+  if (m.k_above_bound)
+    log << "warning: stiffness " << hp.stiffness_n_per_m << " N/m is above the Colgate-Schenkel bound K_max = "
+        << "2 (b - |B|) / T = " << m.k_bound_n_per_m << " N/m (b = device + hand damping, B = servo damping, "
+        << "T = 1 / rate_hz): the contact may buzz; lower K or B, or raise the rate\n";
   const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
   const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
 
@@ -1305,6 +1316,11 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
         m.max_force_step_n = step;
         m.max_force_step_t_s = r.t_s;
       }
+      const double vstep = servo::norm(r.force_n - last->force_n);
+      if (vstep > m.max_force_vector_step_n) {
+        m.max_force_vector_step_n = vstep;
+        m.max_force_vector_step_t_s = r.t_s;
+      }
     }
     fsum += f;
     if (last && last->contact && f > 0 && core::norm(last->force_n) > 0) {
@@ -1338,19 +1354,16 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
     add_error(distance_to_isosurface(truth, hp.tau, r.vhip_m), first_order_distance(truth, hp.tau, r.vhip_m));
   }
-  // Steps of |F| that the contact-only figure cannot see (issue 7): a drop to zero while
-  // the HIP is still inside the object, and any step between two consecutive ticks.
+  // Steps of |F| that the contact-only figure cannot see: a drop to zero from contact (every
+  // release, inside the object or not), and any step between two consecutive ticks.
   {
-    const core::FieldView view(*field);
-    const core::Isosurface iso{hp.tau, hp.inside};
     for (std::size_t i = 1; i < trace.size(); ++i) {
       const double f0 = core::norm(trace[i - 1].force_n), f1 = core::norm(trace[i].force_n);
       if (std::abs(f1 - f0) > m.max_any_step_n) {
         m.max_any_step_n = std::abs(f1 - f0);
         m.max_any_step_t_s = trace[i].t_s;
       }
-      const bool inside = edits ? edits->hip_inside[i] != 0 : iso.contains(view.value(trace[i].hip_m));
-      if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n && inside) {
+      if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n) {
         m.max_release_step_n = f0;
         m.max_release_step_t_s = trace[i].t_s;
       }
@@ -1372,7 +1385,8 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   if (m.contact_ticks == 0)
     log << "no contact: the probe never touched the isosurface in " << m.ticks
         << " ticks; the surface error is not known (null in summary.json)\n";
-  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, release inside the object "
+  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, F vector "
+      << fmt(m.max_force_vector_step_n, 4) << " N (t = " << fmt(m.max_force_vector_step_t_s, 5) << " s), release "
       << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
       << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
 
@@ -1455,6 +1469,8 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                   {"max_penetration_m", m.max_penetration_m},
                   {"max_force_step_n", m.max_force_step_n},
                   {"max_force_step_t_s", m.max_force_step_t_s},
+                  {"max_force_vector_step_n", m.max_force_vector_step_n},
+                  {"max_force_vector_step_t_s", m.max_force_vector_step_t_s},
                   {"max_release_step_n", m.max_release_step_n},
                   {"max_release_step_t_s", m.max_release_step_t_s},
                   {"max_any_step_n", m.max_any_step_n},
@@ -1463,6 +1479,8 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                   {"max_direction_step_t_s", m.force_dir_step_max_t_s},
                   {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
                   {"saturated_ticks", m.saturated_ticks},
+                  {"stiffness_bound_n_per_m", m.k_bound_n_per_m},
+                  {"stiffness_above_bound", m.k_above_bound},
                   {"fault_ticks", m.fault_ticks}};
   // No contact tick (or no surface found): there is no error to report, not an error of 0.
   const auto or_null = [](bool have, double v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
@@ -1552,6 +1570,9 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << fmt(m.lift_max_force_n, 4) << " N; " << m.lift_inward_ticks
      << " of them pull the probe into the object (largest inward component " << fmt(m.lift_max_inward_force_n, 4)
      << " N) |\n"
+     << "| stiffness bound | K = " << fmt(hp.stiffness_n_per_m, 4) << " N/m, Colgate-Schenkel K_max = 2 (b - |B|) / T = "
+     << fmt(m.k_bound_n_per_m, 4) << " N/m" << (m.k_above_bound ? " (ABOVE the bound: the contact may buzz)" : "")
+     << " |\n"
      << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "
@@ -1559,7 +1580,10 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << " % of the force limit) |\n"
      << "| largest release step | " << fmt(m.max_release_step_n, 4) << " N at t = " << fmt(m.max_release_step_t_s, 5)
      << " s (" << fmt(100 * m.max_release_step_n / hp.force_limit_n, 3)
-     << " % of the force limit; |F| on a contact tick whose next tick has no contact while the HIP is inside the object) |\n"
+     << " % of the force limit; |F| on a contact tick whose next tick has no contact) |\n"
+     << "| largest force vector step in contact | " << fmt(m.max_force_vector_step_n, 4) << " N at t = "
+     << fmt(m.max_force_vector_step_t_s, 5) << " s (" << fmt(100 * m.max_force_vector_step_n / hp.force_limit_n, 3)
+     << " % of the force limit; |F_k - F_k-1| between contact ticks) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
      << "| largest force direction step | " << fmt(m.force_dir_step_max_deg, 3) << " deg at t = "

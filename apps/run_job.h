@@ -120,9 +120,16 @@ struct RunMetrics {
   /// Largest change of |F| [N] between two consecutive ticks that are both in contact.
   double max_force_step_n = 0;
   double max_force_step_t_s = 0;  ///< time of the second tick of that step [s]
-  /// Largest |F| [N] on a contact tick whose next tick has no contact while the HIP (at
-  /// that next tick) is still inside the object (trilinear field at the HIP, the scene's
-  /// isovalue and inside): the force drop that max_force_step_n cannot see.
+  /// Largest change of the force vector |F_k - F_k-1| [N] between two consecutive ticks
+  /// that are both in contact: a turn of the force that |F| alone cannot see.
+  double max_force_vector_step_n = 0;
+  double max_force_vector_step_t_s = 0;  ///< time of the second tick of that step [s]
+  /// Colgate-Schenkel bound 2 (b - |B|) / T [N/m] for the scene (b = device + hand
+  /// damping, B the servo's damping, T = 1 / rate), and whether K exceeds it.
+  double k_bound_n_per_m = 0;
+  bool k_above_bound = false;
+  /// Largest |F| [N] on a contact tick whose next tick has no contact (every release, the
+  /// HIP inside the object or not): the force drop that max_force_step_n cannot see.
   double max_release_step_n = 0;
   double max_release_step_t_s = 0;  ///< time of the tick with no contact [s]
   /// Largest change of |F| [N] between any two consecutive ticks, in contact or not.

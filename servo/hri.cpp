@@ -40,6 +40,8 @@ void HriRenderer::reset() {
   edit_slewing_ = false;
   prev_force_ = {};
   tool_plane_count_ = 0;
+  scan_valid_ = false;
+  release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};
 }
@@ -53,9 +55,21 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
                                  double& grad_norm) const {
   Vec3 g;
   switch (params_.normal) {
-    case NormalSource::kSamples:
+    case NormalSource::kSamples: {
       g = sample_trilinear(field, x).gradient;
+      if (params_.variant == Variant::kRobust) {
+        // Across a structure one or two voxels thick the blended gradient samples of its
+        // two faces cancel, and what is left (a taper's slope, noise) can point along the
+        // surface: a tapering plate on 3 mm voxels tilted the plane by up to 90 deg and
+        // eq. 2 slid the VHIP into the plate. Where the blend turns more than 30 deg from
+        // the gradient of the trilinear values (the normal of the isosurface rendered),
+        // that gradient is the normal.
+        const Vec3 gt = trilinear_field_gradient(field, x);
+        const double gs = norm(g), gtn = norm(gt);
+        if (gtn > 0 && std::isfinite(gtn) && !(dot(g, gt) > 0.866 * gs * gtn)) g = gt * (gs > 0 && std::isfinite(gs) ? gs / gtn : 1.0);
+      }
       break;
+    }
     case NormalSource::kCentral:
       g = central_difference_gradient(field, x, field.grid().spacing_m * 0.5);
       break;
@@ -84,10 +98,10 @@ bool HriRenderer::long_step(const FieldView& field, const Vec3& a, const Vec3& b
 }
 
 bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Vec3& b,
-                                 Vec3& p) const {
+                                 Vec3& p, double step_voxels) const {
   const Vec3& sp = field.grid().spacing_m;
   const double len = norm(b - a);
-  const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
+  const double h = step_voxels * std::min({sp.x, sp.y, sp.z});
   if (!std::isfinite(len) || !(len > 0.0)) return false;
   // Half-voxel steps, at least 2 (the end point alone says nothing about a thin wall
   // in between), at most march_budget samples (longer steps beyond that).
@@ -170,8 +184,12 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
   if (e0 > 0.0 && d_est > 1e-4 * voxel && d_est <= 0.05 * voxel && plane_.valid &&
       params_.variant == Variant::kRobust) {
     // Shallow embedding (a chord or a plane held over a curved surface): one first-order
-    // step out along the held plane's normal, no search (it costs no extra sample).
-    return plane_at(field, vhip_ + plane_.n * d_est, hip);
+    // step out along the held plane's normal, if that reaches the outside (one sample).
+    // Where |grad| overstates the slope of the trilinear values (a plate one voxel thick
+    // on coarse voxels) the step falls short, and the VHIP sank by 0.2 voxel a few
+    // hundredths of a mm per tick: then the search below.
+    const Vec3 out_p = vhip_ + plane_.n * d_est;
+    if (!(excess(sample_value(field, out_p)) > 0.0)) return plane_at(field, out_p, hip);
   }
   if (e0 > 0.0 && d_est > 1e-4 * voxel) {
     // The VHIP is embedded (Figure 5b): the two ends do not bracket tau and the linear
@@ -361,6 +379,8 @@ void HriRenderer::restart_at(const Vec3& hip) {
   edit_slewing_ = false;
   prev_force_ = {};
   tool_plane_count_ = 0;
+  scan_valid_ = false;
+  release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};
 }
@@ -383,11 +403,33 @@ double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
     edit_slewing_ = false;
     return mag;
   }
-  const Vec3 gap = force - prev_force_;
+  // The direction first: at most edit_max_turn_deg from the one sent (rotated in the plane
+  // of the two, the target's magnitude kept); then the vector step. Both forces lie in the
+  // cone of that half-angle around the direction sent, so the step stays inside it.
+  Vec3 goal = force;
+  const double prev_mag = norm(prev_force_);
+  bool turned = false;
+  if (prev_mag > 0.0 && mag > 0.0 && params_.edit_max_turn_deg > 0.0) {
+    const Vec3 a = prev_force_ / prev_mag, b = force / mag;
+    const double c = std::clamp(dot(a, b), -1.0, 1.0);
+    const double max_turn = params_.edit_max_turn_deg * M_PI / 180.0;
+    if (std::acos(c) > max_turn) {
+      const Vec3 perp = normalized_or(b - a * c, Vec3{});
+      if (dot(perp, perp) > 0.0) {
+        goal = (a * std::cos(max_turn) + perp * std::sin(max_turn)) * mag;
+        turned = true;
+      }
+    }
+  }
+  const Vec3 gap = goal - prev_force_;
   const double g = norm(gap);
   if (!(g > step)) {
-    edit_slewing_ = false;
-    return mag;
+    if (!turned) {
+      edit_slewing_ = false;
+      return mag;
+    }
+    force = goal;
+    return norm(force);
   }
   force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
   if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
@@ -413,6 +455,7 @@ Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
   Vec3 best = hip;
   double best_d2 = std::numeric_limits<double>::infinity();
   for (int mask = 1; mask < (1 << m); ++mask) {
+    if (__builtin_popcount(unsigned(mask)) > 3) continue;  // at most 3 independent constraints in 3-D
     int idx[3];
     int k = 0;
     for (int i = 0; i < m; ++i)
@@ -530,7 +573,7 @@ bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double 
   return finite(q) && finite(n);
 }
 
-void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
+void HriRenderer::tool_rebuild_newton(const FieldView& field, const Vec3& hip) {
   // 1. The surface point nearest the proxy of the tick before gives the first plane.
   // 2. A held plane that proxy still touches (within a quarter voxel), that faces another
   //    way than every new plane (more than 15 deg) and whose wall is still there (inside a
@@ -543,7 +586,7 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double tol = 1e-3 * voxel;
   const double reach = 1.8 * r + voxel;
-  ToolPlane held[3];
+  ToolPlane held[kMaxToolPlanes];
   const int held_count = tool_plane_count_;
   std::copy(tool_planes_, tool_planes_ + held_count, held);
   tool_plane_count_ = 0;
@@ -590,11 +633,223 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   }
 }
 
+bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double reach) {
+  // Every cell whose box lies within `reach` of x: the trilinear field on a cell lies
+  // between its corners' extremes, so the cell holds the surface exactly when its corners
+  // straddle tau (a NaN corner: no surface, as everywhere in the servo). In such a cell
+  // the point nearest x is sought by projecting x onto the patch linearised at the current
+  // point (y <- x - g (e + g . (x - y)) / |g|^2, clamped to the cell; 6 rounds, then 2
+  // Newton steps onto the patch); where that does not land on the patch, or an edge
+  // crossing (an exact surface point: the field is linear along an edge) is nearer, the
+  // nearest edge crossing. The kMaxScanPoints nearest points are kept.
+  const Grid& grid = field.grid();
+  const Vec3& sp = grid.spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const Vec3 ix = grid.to_index(x);
+  if (!finite(ix) || !(reach > 0)) return false;
+  int lo[3], n[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = int(std::floor(ix[a] - reach / sp[a]));
+    n[a] = int(std::ceil(ix[a] + reach / sp[a])) - lo[a] + 1;  // samples on this axis
+    if (n[a] > kScanSide || n[a] < 2) return false;
+  }
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      for (int i = 0; i < n[0]; ++i) {
+        const double v = field.value_at_index({double(lo[0] + i), double(lo[1] + j), double(lo[2] + k)});
+        scan_excess_[(k * n[1] + j) * n[0] + i] = std::isfinite(v) ? float(excess(v)) : std::nanf("");
+      }
+  scan_count_ = 0;
+  scan_clear_m_ = reach;
+  const double tol = 1e-3 * voxel;
+  const Isosurface iso{params_.tau, params_.inside};
+  const bool x_outside = !(excess(field.value(x)) > 0.0);
+  auto keep = [&](const Vec3& q, const Vec3& n_out, double d) {
+    if (scan_count_ == kMaxScanPoints) {
+      int far = 0;
+      for (int c = 1; c < scan_count_; ++c)
+        if (scan_[c].d > scan_[far].d) far = c;
+      if (!(d < scan_[far].d)) return;
+      scan_[far] = {q, n_out, d};
+    } else {
+      scan_[scan_count_++] = {q, n_out, d};
+    }
+  };
+  for (int ck = 0; ck + 1 < n[2]; ++ck)
+    for (int cj = 0; cj + 1 < n[1]; ++cj)
+      for (int ci = 0; ci + 1 < n[0]; ++ci) {
+        const int c0[3] = {ci, cj, ck};
+        // x relative to the cell's lower corner [m], and the cell's box distance.
+        double xa[3];
+        double box2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          xa[a] = (ix[a] - double(lo[a] + c0[a])) * sp[a];
+          const double out = std::max({0.0, -xa[a], xa[a] - sp[a]});
+          box2 += out * out;
+        }
+        const Vec3 X{xa[0], xa[1], xa[2]};
+        if (box2 > reach * reach) continue;
+        double e[8];
+        bool in = false, outside = false, nan = false;
+        for (int c = 0; c < 8; ++c) {
+          const float v = scan_excess_[((ck + (c >> 2)) * n[1] + cj + ((c >> 1) & 1)) * n[0] + ci + (c & 1)];
+          nan = nan || !std::isfinite(v);
+          e[c] = v;
+          (v > 0.0f ? in : outside) = true;
+        }
+        if (nan || !in || !outside) continue;
+        // Trilinear excess and its gradient [1/m] at u in [0,1]^3 (corner c = i + 2 j + 4 k).
+        auto eval = [&](const Vec3& u, Vec3& g) {
+          const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
+          const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
+          const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
+          const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
+          g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z +
+                 (e[7] - e[6]) * u.y * u.z) / sp.x;
+          g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
+          g.z = (e1 - e0) / sp.z;
+          return e0 * z0 + e1 * u.z;
+        };
+        auto clamp_u = [&](const Vec3& y) {
+          return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0),
+                      std::clamp(y.z / sp.z, 0.0, 1.0)};
+        };
+        // The nearest edge crossing.
+        Vec3 best;
+        double best_d2 = std::numeric_limits<double>::infinity();
+        for (int a = 0; a < 3; ++a) {
+          const int step = 1 << a;
+          for (int c = 0; c < 8; ++c) {
+            if (c & step) continue;
+            const double ea = e[c], eb = e[c + step];
+            if ((ea > 0.0) == (eb > 0.0)) continue;
+            double ya[3] = {double(c & 1) * sp.x, double((c >> 1) & 1) * sp.y, double(c >> 2) * sp.z};
+            ya[a] = sp[a] * (ea / (ea - eb));
+            const Vec3 y{ya[0], ya[1], ya[2]};
+            const Vec3 d = X - y;
+            if (dot(d, d) < best_d2) {
+              best_d2 = dot(d, d);
+              best = y;
+            }
+          }
+        }
+        // Projections onto the linearised patch from the cell point nearest x; a component
+        // held at a face of the cell (the target beyond it) stays there and the others
+        // solve the linearised problem on that face.
+        // Two starts: the cell point nearest x, and the nearest edge crossing (a cell may
+        // hold two sheets of a saddle).
+        bool converged = false;
+        Vec3 g;
+        const Vec3 starts[2] = {clamp_u(X), std::isfinite(best_d2) ? clamp_u(best) : clamp_u(X)};
+        for (int start = 0; start < (std::isfinite(best_d2) ? 2 : 1); ++start) {
+        Vec3 u = starts[start];
+        for (int it = 0; it < 10; ++it) {
+          const double ya[3] = {u.x * sp.x, u.y * sp.y, u.z * sp.z};
+          const double ev = eval(u, g);
+          double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
+          double g2 = dot(g, g);
+          if (!(g2 > 0)) break;
+          const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
+          for (int a = 0; a < 3; ++a) {
+            const double t = xa[a] - ga[a] * lx / g2;
+            const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
+            if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
+              ga[a] = 0;
+              xa2[a] = ya[a];
+            }
+          }
+          g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
+          if (!(g2 > 0)) break;
+          const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
+          u = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
+        }
+        {
+          const Vec3 y{u.x * sp.x, u.y * sp.y, u.z * sp.z};
+          const double ev = eval(u, g);
+          const double gn = norm(g);
+          const Vec3 d = X - y;
+          const bool on = gn > 0 && std::abs(ev) < tol * gn;
+          converged = converged || on;
+          if (on && dot(d, d) < best_d2) {
+            best_d2 = dot(d, d);
+            best = y;
+          }
+        }
+        }
+        if (!std::isfinite(best_d2)) continue;
+        const double dist = std::sqrt(best_d2);
+        Vec3 gq;
+        eval(clamp_u(best), gq);
+        const Vec3 q = grid.to_world(
+            {double(lo[0] + ci) + best.x / sp.x, double(lo[1] + cj) + best.y / sp.y, double(lo[2] + ck) + best.z / sp.z});
+        // The plane's normal: toward x from an x outside (the nearest point's normal, and
+        // defined at creases); the outward gradient where x is inside or on the surface.
+        const Vec3 n_grad = normalized_or(gq * -1.0, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
+        const Vec3 n_out = x_outside && dist > tol ? (x - q) / dist : n_grad;
+        (void)iso;
+        keep(q, n_out, dist);
+        // The free-motion clearance: the point found where the projections converged, else
+        // the cell's box distance (a proven lower bound).
+        scan_clear_m_ = std::min(scan_clear_m_, converged ? dist : std::sqrt(box2));
+      }
+  // Nearest first (insertion sort: at most kMaxScanPoints).
+  for (int a = 1; a < scan_count_; ++a)
+    for (int b = a; b > 0 && scan_[b].d < scan_[b - 1].d; --b) std::swap(scan_[b], scan_[b - 1]);
+  return true;
+}
+
+int HriRenderer::tool_add_uncovered(const Vec3& x, double reach, double voxel) {
+  // A scanned point behind a held plane, or on it to 0.01 voxel, cannot come nearer than
+  // r (less that) to a proxy the plane holds; every other point within reach adds a plane
+  // through it facing x (nearest first).
+  const double cover = 0.01 * voxel;
+  int added = 0;
+  for (int c = 0; c < scan_count_ && tool_plane_count_ < kMaxToolPlanes; ++c) {
+    const ScanPoint& s = scan_[c];
+    if (s.d > reach) break;
+    bool covered = false;
+    for (int i = 0; i < tool_plane_count_ && !covered; ++i)
+      covered = dot(tool_planes_[i].n, s.q - tool_planes_[i].p) < cover;
+    if (covered) continue;
+    const double d = norm(x - s.q);
+    const Vec3 n = d > 1e-3 * voxel && dot(x - s.q, s.n) > 0 ? (x - s.q) / d : s.n;
+    tool_planes_[tool_plane_count_++] = {n, s.q};
+    ++added;
+  }
+  return added;
+}
+
+void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
+  // The planes from scans of the cells around the proxy (see the class docs); a tool too
+  // large for the scan box: Newton searches (tool_rebuild_newton).
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double reach = r + voxel;
+  Vec3 centre = vhip_;
+  scan_valid_ = false;
+  for (int pass = 0; pass < 3; ++pass) {
+    if (!surface_scan(field, centre, reach)) {
+      if (pass == 0) tool_rebuild_newton(field, hip);
+      return;
+    }
+    if (pass == 0) tool_plane_count_ = 0;
+    tool_add_uncovered(centre, reach, voxel);
+    anchor_ = centre;
+    scan_valid_ = true;
+    const Vec3 y = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+    const Vec3 moved = y - centre;
+    if (dot(moved, moved) <= 0.0625 * voxel * voxel) break;
+    centre = y;
+  }
+}
+
 Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out) {
   const double r = params_.tool_radius_m;
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   bool update = edited && (tool_plane_count_ > 0 || was_contact_);
+  if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
   if (tool_plane_count_ > 0 && !update) {
     bool held = false;  // does any plane hold the HIP?
     for (int i = 0; i < tool_plane_count_; ++i)
@@ -603,13 +858,20 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
     } else {
       const Vec3 slide = tool_solve(hip) - anchor_;
-      // Early when the proxy slid a fifth of a voxel: a tangent plane held over a curved
-      // (or, between voxels, wavy trilinear) surface lets the sphere sink by about
+      // Early when the proxy is 0.2 voxel from the scan's centre: the scan covered the
+      // surface within r + 1 voxel of it, and a tangent plane held over a curved (or,
+      // between voxels, wavy trilinear) surface lets the sphere sink by about
       // slide^2 * curvature / 2.
       if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.04 * voxel * voxel) update = true;
     }
   }
-  if (tool_plane_count_ == 0 && !update) {
+  if (tool_plane_count_ == 0 && !update && scan_valid_) {
+    // Free motion after a scan: no surface is nearer to its centre than scan_clear_m_, so
+    // none is within r of a HIP that moved less than that less r (0.01 voxel to spare).
+    const Vec3 moved = hip - anchor_;
+    const double room = scan_clear_m_ - r - 0.01 * voxel;
+    update = !(room > 0) || dot(moved, moved) > room * room;
+  } else if (tool_plane_count_ == 0 && !update) {
     // Free motion: one value + gradient read at the HIP. Search only when a surface may
     // be within reach (first-order distance), or the HIP entered the object.
     const FieldValue s = sample_trilinear(field, hip);
@@ -624,7 +886,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     }
   }
   if (update) {
-    ToolPlane kept[3];
+    ToolPlane kept[kMaxToolPlanes];
     const int kept_count = tool_plane_count_;
     std::copy(tool_planes_, tool_planes_ + kept_count, kept);
     tool_rebuild(field, hip);
@@ -634,6 +896,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       // surface on the way (first crossing of the segment; the plane there, the centre r
       // before it); failing that, the planes of the tick before still hold the HIP.
       Vec3 q;
+      scan_valid_ = false;  // these planes are not the scan's
       if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, q)) {
         const Vec3 n = outward_normal(field, q, normalized_or(vhip_ - hip, kept[0].n));
         tool_planes_[0] = {n, q};
@@ -644,7 +907,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       }
     }
     c_ = 0;
-    anchor_ = tool_solve(hip);
+    if (!scan_valid_) anchor_ = tool_solve(hip);
     out.plane_update = true;
   }
   if (tool_plane_count_ > 0) {
@@ -771,6 +1034,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
     edit_slewing_ = false;  // zero force was sent: an edit slew ends here
+    release_left_s_ = 0;    // and a release fade
     prev_force_ = {};
     return out;
   }
@@ -876,7 +1140,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
           const double f_a = sample_value(field, a);
           if (excess(f_a) > 0.0) {
             set_plane(compute_plane(field, sample_value(field, vhip_), f_a, hip));  // embedded
-          } else if (first_crossing(field, a, hip, p)) {
+          } else if (first_crossing(field, a, hip, p, 0.2)) {
+            // (fifth-voxel steps: on coarse voxels the trilinear inside of a plate one
+            // voxel thick can be thinner than half a voxel, and the half-voxel march
+            // stepped over it: the plane was dropped with the HIP past the far face)
             set_plane(plane_at(field, p, hip));
           } else {
             plane_.valid = false;  // the surface curved away: the HIP is really outside
@@ -916,6 +1183,31 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
       plane_grad_norm_ = held_grad_norm;
     }
   }
+  // God-object: the proxy moves on the surface, never through the object. A new plane
+  // whose contact point (eq. 2) is reached from the VHIP of the tick before only through
+  // material (a point of the segment more than 0.05 voxel deep, first order, at 7 interior
+  // points) lies on another sheet: the far face of a thin plate, the other side of a
+  // tapering edge on coarse voxels (a plane there pushed the HIP through at 1.5 N). The
+  // held plane stays while the HIP is behind it. Not on edit ticks (the material moved),
+  // nor from a VHIP now inside (material added under it, or a shallow embedding: the
+  // segment starts in material by right).
+  if (holding && out.plane_update && !edited && plane_.valid && behind(held) &&
+      (dot(plane_.n, held.n) < 0.9999 || std::abs(dot(held.n, plane_.p - held.p)) > 1e-3 * voxel) &&
+      !(excess(sample_value(field, vhip_)) > 0.0)) {
+    const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);
+    const double gn = plane_grad_norm_ > 0 ? plane_grad_norm_ : held_grad_norm;
+    // A plane facing away from the held one is reached through any material at all.
+    const double depth = dot(plane_.n, held.n) < 0.0 ? 0.0 : 0.05 * voxel;
+    bool through = false;
+    for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
+      const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
+      through = e > depth * gn;
+    }
+    if (through) {
+      set_plane(held);
+      plane_grad_norm_ = held_grad_norm;
+    }
+  }
 
   Vec3 force;
   if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
@@ -944,6 +1236,25 @@ HriTick HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, boo
     mag = norm(force);
   }
   const bool in_contact = out.contact;  // a plane held the HIP (not an edit's fade-out)
+  // Release fade: contact ends with force on (a plane update found the surface curved away
+  // under a HIP still behind the held plane, a drilled-away wall): the force sent the tick
+  // before fades out along its own direction over recovery_time_s (contact, penetration 0)
+  // instead of dropping to zero in one tick. A new contact ends the fade (its ramp starts
+  // from the force sent); an edit slew takes it over.
+  if (in_contact || out.fault || edit_slewing_ || edited || !(params_.recovery_time_s > 0)) {
+    release_left_s_ = 0;
+  } else if (was_contact_ && prev_force_mag_ > 0.01 * params_.force_limit_n) {
+    release_left_s_ = params_.recovery_time_s;
+    release_from_ = prev_force_;
+  }
+  if (release_left_s_ > 0) {
+    release_left_s_ -= ramp_dt_s_;
+    if (release_left_s_ < 1e-9 * params_.recovery_time_s) release_left_s_ = 0;  // rounding
+    force = release_from_ * (release_left_s_ / params_.recovery_time_s);
+    mag = norm(force);
+    out.contact = true;
+    out.penetration_m = 0;
+  }
   if (edited) edit_slewing_ = true;
   if (edit_slewing_) {
     if (out.fault) edit_slewing_ = false;

@@ -69,13 +69,18 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
-  /// Robust variant, edits: the largest change of the force
-  /// vector F (hence of |F| and of its direction) an edit may cause per tick, as a fraction of force_limit_n (0.05: 0.165 N per tick at 3.3 N, so a
-  /// full-range change takes 20 ticks, 20 ms at 1 kHz). An edit is a new snapshot version
+  /// Robust variant, edits: the largest change of the force vector F (hence of |F|) an
+  /// edit may cause per tick, as a fraction of force_limit_n (0.04: 0.132 N per tick at
+  /// 3.3 N, below the 5 % a shipped scene may step; a full-range change takes 25 ticks,
+  /// 25 ms at 1 kHz). The direction of F turns by at most edit_max_turn_deg per tick too. An edit is a new snapshot version
   /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
   /// turns the edit handling off: a new snapshot is then read at the next plane update
   /// like any other, and the force steps. [1 / tick]
-  double edit_max_step_fraction = 0.05;
+  double edit_max_step_fraction = 0.04;
+  /// Robust variant, edits: the largest turn of the force direction an edit may cause per
+  /// tick [deg] (a small force can turn far within one vector step: 20 deg at 0.26 N
+  /// while drilling through the skull). Applies while edit_max_step_fraction > 0.
+  double edit_max_turn_deg = 10.0;
   /// Robust variant: radius of a spherical tool [m, world]; 0 = a point (the paper). The
   /// HIP is the tool's centre; see HriRenderer, "Spherical tool".
   double tool_radius_m = 0.0;
@@ -188,6 +193,20 @@ struct ToolPlane {
 ///   (never the time of lost ticks), so a ramp started after 50 lost ticks or on one
 ///   jittery 10 us period still lasts recovery_time_s (a length in ticks from one
 ///   measured period gave 1 tick, or 1800).
+/// - Normals on thin structures (NormalSource::kSamples): where the blend of the gradient
+///   samples turns more than 30 deg from the gradient of the trilinear values (the two
+///   faces of a plate one or two voxels thick cancel in the blend), the latter is the
+///   normal. A shallow embedding's first-order step out is taken only if it reaches the
+///   outside (else the embedded search). The "surface curved away" test marches fifth-voxel
+///   steps (a coarse plate's trilinear inside can be thinner than half a voxel).
+/// - Proxy path: a new plane whose contact point is reached from an outside VHIP only
+///   through material (7 points of the segment, deeper than 0.05 voxel first order; any
+///   depth for a plane facing away from the held one) lies on another sheet; the held
+///   plane stays while the HIP is behind it (not on edit ticks).
+/// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
+///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
+///   behind it, a wall drilled away) fades that force out along its direction over
+///   recovery_time_s (contact = true, penetration 0); new contact or a fault ends it.
 /// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
@@ -207,7 +226,8 @@ struct ToolPlane {
 ///   tick before toward this tick's target (the spring-damper force, saturated) by at most
 ///   edit_max_step_fraction * force_limit_n per tick (|F_sent - F_prev| <= step, so a carve
 ///   that tilts the surface under the HIP turns the force over several ticks instead of
-///   flipping it: review finding), until the tick it reaches the target.
+///   flipping it), and its direction turns by at most edit_max_turn_deg per tick, until
+///   the tick it reaches the target.
 ///   A running recovery ramp is folded into the slew and none starts on an edit tick; the
 ///   user's own motion is slewed too while it lasts, so no tick changes |F| by more than
 ///   the step. A later edit during the slew continues it from the |F| sent. Carved under
@@ -224,22 +244,30 @@ struct ToolPlane {
 ///
 /// Spherical tool (robust variant, tool_radius_m = r > 0). The HIP is the tool's centre,
 /// the VHIP (proxy) the centre of a sphere of radius r kept outside the isosurface, the
-/// HRI way: at a plane update the isosurface point q nearest the proxy within r + 1 voxel
-/// is found (Newton steps along the gradient, x <- x + N e / |grad|, at most 8 trilinear
-/// reads; a march along the normal when they do not converge) and gives the plane (N, q),
-/// N the outward normal at q; the proxy is the point nearest the HIP with
-/// N_i . (x - q_i) >= r for every held plane (god-object with several active constraints:
-/// the best of the at most 7 active subsets, closed-form solves). While the proxy so
-/// placed is still closer than r to the surface (a groove, a corner), the point nearest it
-/// gives the next plane: at most three planes. Between updates (every n ticks; early when
-/// the proxy slides half a voxel from where the planes were made, or on an edit tick) the
-/// tick reads no sample while a plane holds the HIP; in free motion it reads the value and
-/// gradient at the HIP and searches for planes only when the first-order distance
-/// -e / |grad| is below r + 1 voxel (or the HIP is inside while the proxy of the tick
-/// before is outside). Force: F = K (proxy - HIP) - B v_u u, u the unit push direction,
-/// no pull; an update that steps the force vector by more than 1 % of the limit fades the
-/// step out over recovery_time_s (direction and magnitude); edits slew as for the point.
-/// Friction and force shading do not apply to the tool (the scene refuses them).
+/// HRI way with several intermediate planes (god-object with several active constraints):
+/// the proxy is the point nearest the HIP with N_i . (x - q_i) >= r for every held plane
+/// (N_i, q_i) (the best feasible projection onto at most three of them, closed-form
+/// solves). At a plane update the cells of the trilinear field within r + 1 voxel of the
+/// proxy are scanned (surface_scan: a cell holds the surface exactly when its corners
+/// straddle tau; its point nearest the proxy by projections onto the linearised patch,
+/// else its nearest edge crossing), and the planes are chosen nearest first: a surface
+/// point already behind a chosen plane (or on it) cannot come nearer than r to a proxy
+/// that plane holds, so only the points in front of every chosen plane add one (normal
+/// from the point toward the proxy), at most kMaxToolPlanes. Walls of a groove, the three
+/// faces of a corner and the blobs of a one-voxel plate each get their plane, including
+/// those within the margin that the proxy reaches only while it slides. If the proxy so
+/// placed moved more than a quarter voxel from the scan's centre, the scan is repeated
+/// there (at most twice). Updates: every n ticks, and early when the proxy is more than
+/// 0.2 voxel from the last scan's centre (so no surface beyond the scanned margin can come
+/// within r), or on an edit tick. In free motion the tick reads no sample: the last scan
+/// proved the surface no nearer than its nearest point, and the next scan comes when the
+/// HIP has moved that far less r. Where the scan box would exceed kScanSide samples per
+/// axis (a tool of many voxels), the nearest point is found by Newton steps along the
+/// gradient instead (nearest_surface), as before. Force: F = K (proxy - HIP) - B v_u u,
+/// u the unit push direction, no pull; an update that steps the force vector by more than
+/// 1 % of the limit fades the step out over recovery_time_s (direction and magnitude);
+/// edits slew as for the point. Friction and force shading do not apply to the tool (the
+/// scene refuses them).
 class HriRenderer final : public Renderer {
  public:
   explicit HriRenderer(const HriParams& params);
@@ -294,7 +322,8 @@ class HriRenderer final : public Renderer {
   /// 20 bisection steps); false if none.
   bool march_out(const FieldView& field, const Vec3& x, Vec3& p) const;
   /// First isosurface crossing on the segment a -> b, a outside (see class docs).
-  bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p) const;
+  /// `step_voxels`: the march's step [voxels].
+  bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p, double step_voxels = 0.5) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
@@ -313,6 +342,15 @@ class HriRenderer final : public Renderer {
   double edit_slew(Vec3& force, double mag, HriTick& out);
   /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
   void tool_rebuild(const FieldView& field, const Vec3& hip);
+  /// Spherical tool: the planes from Newton searches (tools too large for surface_scan).
+  void tool_rebuild_newton(const FieldView& field, const Vec3& hip);
+  /// Spherical tool: fills scan_ with the surface points of the cells within `reach` of x
+  /// (nearest first) and scan_clear_m_ with the nearest one's distance (reach if none);
+  /// false if the box of cells exceeds kScanSide samples per axis (nothing scanned).
+  bool surface_scan(const FieldView& field, const Vec3& x, double reach);
+  /// Spherical tool: adds a plane for every scanned point within `reach` of x in front of
+  /// every held plane (nearest first); returns the number added.
+  int tool_add_uncovered(const Vec3& x, double reach, double voxel);
   /// Spherical tool: this tick's force (before saturation); sets out.contact, vhip_.
   Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
@@ -355,9 +393,27 @@ class HriRenderer final : public Renderer {
   Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]
   Vec3 prev_target_f_;               ///< robust: unramped force of the tick before [N]
   Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)
+  double release_left_s_ = 0;        ///< robust: time left in a release fade [s]
+  Vec3 release_from_;                ///< robust: force sent on the last contact tick [N]
   // Spherical tool:
-  ToolPlane tool_planes_[3];
+ public:
+  static constexpr int kMaxToolPlanes = 6;  ///< planes held at once (a bed of blobs needs more than 3)
+  static constexpr int kScanSide = 20;      ///< samples per axis surface_scan reads at most
+  static constexpr int kMaxScanPoints = 96; ///< surface points surface_scan keeps (the nearest)
+
+ private:
+  struct ScanPoint {
+    Vec3 q;      ///< on the isosurface [m]
+    Vec3 n;      ///< outward normal of the plane it makes
+    double d;    ///< distance from the scan centre [m]
+  };
+  ToolPlane tool_planes_[kMaxToolPlanes];
   int tool_plane_count_ = 0;
+  ScanPoint scan_[kMaxScanPoints];
+  int scan_count_ = 0;
+  double scan_clear_m_ = 0;     ///< distance of the nearest surface point of the last scan [m]
+  bool scan_valid_ = false;     ///< anchor_ is the centre of a complete scan of the field version
+  float scan_excess_[kScanSide * kScanSide * kScanSide];
 };
 
 }  // namespace isotouch::servo

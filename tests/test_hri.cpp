@@ -569,3 +569,43 @@ TEST(HriOptions, EveryNormalSourceGivesTheSphereNormal) {
     EXPECT_GT(dot(n, (x - c) / norm(x - c)), std::cos(1.0 * M_PI / 180)) << int(ns);
   }
 }
+
+// Release fade: a plane update that finds the surface gone under a HIP still behind the
+// held plane (here the wall is swapped for one 4 mm lower without a new snapshot version,
+// so the update reads it like any plane: the HIP, 1 mm below the old wall, is 3 mm above
+// the new one) ends contact with 0.5 N on. With a 20 ms recovery time the force fades out
+// along its direction over 20 ticks (steps of 0.5 / 20 N, contact kept while it fades);
+// without it, it drops to zero in one tick.
+TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
+  const SampleField a = wall_field(kUp, kC), b = wall_field(kUp, kC - kUp * 0.004);
+  const Vec3 hip = kC - kUp * 0.001;
+  auto run = [&](double rec, double* last_contact_force) {
+    HriParams p = params(5);
+    p.recovery_time_s = rec;
+    p.edit_max_step_fraction = 0;
+    HriRenderer r(p);
+    for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);
+    for (int k = 0; k < 60; ++k) r.tick(a, hip);
+    double prev = norm(r.tick(a, hip).force_n), worst = 0;
+    *last_contact_force = prev;
+    bool released = false;
+    for (int k = 0; k < 60; ++k) {
+      const HriTick t = r.tick(b, hip);
+      const double m = norm(t.force_n);
+      worst = std::max(worst, std::abs(m - prev));
+      if (t.contact) EXPECT_GE(dot(t.force_n, kUp), 0.999 * m);  // along the last direction
+      released = released || !t.contact;
+      prev = m;
+    }
+    EXPECT_TRUE(released);
+    EXPECT_EQ(prev, 0.0);
+    return worst;
+  };
+  double f_rec = 0, f_plain = 0;
+  const double faded = run(0.02, &f_rec), plain = run(0, &f_plain);
+  std::printf("release by a plane update from %.3f N: largest step %.4f N with 20 ms recovery, %.4f N without\n", f_rec,
+              faded, plain);
+  EXPECT_NEAR(f_rec, 0.5, 1e-9);
+  EXPECT_NEAR(plain, 0.5, 1e-9);
+  EXPECT_LE(faded, 0.5 / 20 * (1 + 1e-9));
+}

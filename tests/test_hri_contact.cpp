@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <random>
@@ -526,3 +528,107 @@ TEST(HriContact, NoisyCoarseScanNeverDropsContactInside) {
   EXPECT_EQ(releases, 0);
 }
 
+
+// Pop-through at a tapering edge on coarse voxels: a plate 1-2 voxels (3-6 mm) thick on
+// 3 mm voxels whose thickness tapers linearly to zero over 15 mm toward an edge. The hand
+// presses through it (target 2-6 mm past the far face) and strokes toward the edge, along
+// the taper, or along the edge; K (w + 6 mm) stays below the limit. The god-object
+// guarantee: the proxy never passes through material. Truth: the analytic mid-plane and
+// the trilinear field itself: a tick whose VHIP moved from the near side of the mid-plane to
+// more than half a voxel beyond it on a segment (from the VHIP of the tick before, 64
+// points) that touches the inside of the object, while |F| is below the limit, is a
+// pop-through (a one-voxel plate's trilinear surface can lie at the mid-plane itself). Sliding round the edge (or
+// through a hole the coarse trilinear field leaves in the tapered tip) stays outside the
+// material and is allowed. Also reported: the deepest VHIP (first order, |grad| of the
+// analytic field), bounded at a quarter voxel.
+// Not yet met: 6 of 36 strokes pop through at 0.56-1.96 N (a plane update lands on the far
+// face while the HIP is past it, or drops the plane with the HIP past the far face);
+// disabled, run with --gtest_also_run_disabled_tests (HRI_TAPER_DEBUG=1 lists the ticks).
+TEST(HriContact, DISABLED_TaperingPlateEdgeOnCoarseVoxelsNeverPopsThrough) {
+  const int dims = 24;
+  const double h = 3e-3;
+  const Vec3 c{0.036, 0.036, 0.036};
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  long contact_ticks = 0, through = 0, strokes_through = 0;
+  double worst = 0;
+  for (int run = 0; run < 36; ++run) {
+    const Vec3 m = unit(Vec3{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    Vec3 ta, tb;
+    basis(m, ta, tb);
+    const double w0 = h * (1.0 + (run % 2)), taper = 0.015;
+    // Thickness w(s), s = ta . (x - c): w0 for s <= -taper, 0 at the edge s = 0 and beyond.
+    auto half = [&](const Vec3& x, double& dhalf_ds) {
+      const double s = dot(ta, x - c);
+      const double f = std::clamp(-s / taper, 0.0, 1.0);
+      dhalf_ds = (s > -taper && s < 0) ? -0.5 * w0 / taper : 0.0;
+      return 0.5 * w0 * f;
+    };
+    SampleField f;
+    f.grid.dims = {dims, dims, dims};
+    f.grid.spacing_m = {h, h, h};
+    f.samples.resize(f.grid.voxel_count());
+    for (int z = 0; z < dims; ++z)
+      for (int y = 0; y < dims; ++y)
+        for (int x = 0; x < dims; ++x) {
+          const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
+          double dh;
+          const double hw = half(p, dh);
+          const double d = dot(m, p - c);
+          const Vec3 g = m * (d >= 0 ? -1000.0 : 1000.0) + ta * (1000.0 * dh);
+          f.samples[f.grid.index(x, y, z)] = {float(1000.0 * (hw - std::abs(d))), float(g.x), float(g.y), float(g.z)};
+        }
+    HriParams p = robust(std::array<int, 3>{1, 5, 10}[std::size_t(run / 2) % 3], 200);
+    p.damping_n_s_per_m = 0.5;
+    p.intersection = Intersection::kSecant;
+    p.recovery_time_s = 0.02;
+    HriRenderer r(p);
+    // Start over the full-thickness part (or on the taper), press through, then stroke:
+    // 0 toward the edge (+ta), 1 along the taper (tb) at mid-taper, 2 along the edge's tip.
+    const int kind = (run / 6) % 3;
+    const double s0 = kind == 0 ? -0.022 : (kind == 1 ? -0.0075 : -0.003);
+    const Vec3 stroke = kind == 0 ? ta : tb * (u(rng) < 0.5 ? 1.0 : -1.0);
+    const double beyond = 0.002 + 0.004 * u(rng);
+    const Vec3 base = c + ta * s0 + tb * (0.01 * (u(rng) - 0.5));
+    const Vec3 start = base + m * (0.5 * w0 + 0.006);
+    const double press = 0.5 * w0 + 0.006 + 0.5 * w0 + beyond;
+    const double speed = 0.02 + 0.02 * u(rng);
+    Vec3 prev_vhip = start;
+    bool touched = false;
+    bool this_through = false;
+    for (int k = 0; k < 1500; ++k) {
+      const double t = k * 1e-3;
+      const double down = std::min(0.04 * t, press);
+      const double along = std::clamp(speed * (t - 0.4), 0.0, 0.024);
+      const Vec3 hip = start - m * down + stroke * along;
+      const HriTick out = r.tick(f, hip);
+      if (out.contact) touched = true;
+      if (touched) contact_ticks += out.contact;
+      if (norm(out.force_n) < 0.999 * p.force_limit_n) {
+        const double side0 = dot(m, prev_vhip - c), side1 = dot(m, out.vhip_m - c);
+        double deepest = -1e300;
+        for (int i = 0; i <= 64; ++i) deepest = std::max(deepest, sample_value(f, prev_vhip + (out.vhip_m - prev_vhip) * (i / 64.0)));
+        const double embed_vox = sample_value(f, out.vhip_m) / (1000.0 * h);  // value [mm of distance] / voxel [mm]
+        if (out.contact) worst = std::max(worst, embed_vox);
+        if (side0 > 0 && side1 < -0.5 * h && deepest > 0) {
+          if (std::getenv("HRI_TAPER_DEBUG"))
+            std::printf("  run %d kind %d n %d k %d contact %d update %d |F| %.3f, vhip side %.2f -> %.2f mm, "
+                        "hip side %.2f mm, hip s %.2f mm, moved %.2f mm\n",
+                        run, kind, p.plane_update_period, k, int(out.contact), int(out.plane_update), norm(out.force_n),
+                        1e3 * side0, 1e3 * side1, 1e3 * dot(m, hip - c), 1e3 * dot(ta, hip - c),
+                        1e3 * norm(out.vhip_m - prev_vhip));
+          ++through;
+          this_through = true;
+        }
+      }
+      prev_vhip = out.vhip_m;
+    }
+    strokes_through += this_through;
+  }
+  std::printf("tapering plates 1-2 voxels on 3 mm voxels, 36 strokes: %ld contact ticks, %ld pop-throughs (%ld strokes), "
+              "deepest VHIP %.3f voxel\n",
+              contact_ticks, through, strokes_through, worst);
+  EXPECT_GT(contact_ticks, 8000);
+  EXPECT_EQ(through, 0);
+  EXPECT_LT(worst, 0.25);
+}

@@ -504,3 +504,36 @@ TEST(HriEdit, AnEditThatTiltsTheSurfaceTurnsTheForceGradually) {
   const Vec3 want = n * (kK * depth);
   EXPECT_LT(norm(t[ticks - 1].force_n - want), 1e-3) << "settled force on the tilted plane";
 }
+
+// A small force turns far within one vector step: held 0.3 mm deep, an edit that tilts the
+// surface 60 degrees would turn the force by about 40 degrees in one tick at the 5 % step.
+// The direction turns by at most edit_max_turn_deg (10) per tick; with the turn limit off
+// (0) the fault shows. Truth: the analytic normals of the two planes.
+TEST(HriEdit, AnEditTurnsASmallForceByAtMostTheTurnLimitPerTick) {
+  const SampleField a = floor_at(0.010, 1);
+  const Vec3 n{std::sin(M_PI / 3), 0, std::cos(M_PI / 3)};
+  SampleField b = plane_field(n, {kX, kY, 0.010});
+  b.version = 2;
+  const int edit = 300, ticks = 400;
+  auto worst_turn = [&](double turn_deg, Vec3* last) {
+    HriParams p = params();
+    p.edit_max_turn_deg = turn_deg;
+    HriRenderer r(p);
+    const auto t = drive(r, ticks, switch_at(a, b, edit), press_to(0.0097));
+    double worst = 0;
+    for (int k = edit; k < ticks; ++k) {
+      const double m0 = norm(t[k - 1].force_n), m1 = norm(t[k].force_n);
+      if (!(m0 > 0 && m1 > 0)) continue;
+      worst = std::max(worst, std::acos(std::clamp(dot(t[k].force_n, t[k - 1].force_n) / (m0 * m1), -1.0, 1.0)));
+    }
+    *last = t[ticks - 1].force_n;
+    return worst * 180.0 / M_PI;
+  };
+  Vec3 last_on, last_off;
+  const double on = worst_turn(10.0, &last_on), off = worst_turn(0.0, &last_off);
+  std::printf("edit tilting the surface 60 deg under 0.24 N: largest turn per tick %.2f deg (limit 10), %.2f deg without\n",
+              on, off);
+  EXPECT_LE(on, 10.0 + 1e-9);
+  EXPECT_GT(off, 20.0);
+  EXPECT_GT(dot(last_on / norm(last_on), n), 0.9999);  // it still ends along the new normal
+}

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <random>
 
@@ -122,7 +123,13 @@ void stroke(const SampleField& f, HriRenderer& r, const Vec3& start, const Vec3&
     if (d > 1e299) continue;
     ++res.ticks_checked;
     res.worst_m = std::min(res.worst_m, d - rad);
-    if (d < rad - 0.05 * kVoxel) ++res.violations;
+    if (d < rad - 0.05 * kVoxel) {
+      ++res.violations;
+      if (std::getenv("HRI_TOOL_DEBUG"))
+        std::printf("  k %d contact %d planes %d update %d d-r %.4f vox |F| %.3f hip-proxy %.4f vox\n", k, int(out.contact),
+                    r.tool_plane_count(), int(out.plane_update), (d - rad) / kVoxel, norm(out.force_n),
+                    norm(hip - out.vhip_m) / kVoxel);
+    }
   }
 }
 
@@ -190,23 +197,22 @@ TEST(HriTool, ThinPlatesKeepTheToolOnTheNearSide) {
   EXPECT_GE(res.worst_m, -0.05 * kVoxel);
 }
 
-// Plates 1 voxel thick: the trilinear isosurface is a row of blobs there, and the
-// nearest-point search along gradient paths misses the nearest blob (measured: worst
-// -0.21 voxel, 3 of 16 strokes). Not yet met: disabled, run with
-// --gtest_also_run_disabled_tests.
-TEST(HriTool, DISABLED_OneVoxelPlatesKeepTheToolOnTheNearSide) {
+// Plates 1 voxel thick: the trilinear isosurface is a perforated sheet of blobs there; a
+// tool sliding over it rests on several blobs and meets new ones as it slides, each of
+// which must hold a plane before the sphere reaches it.
+TEST(HriTool, OneVoxelPlatesKeepTheToolOnTheNearSide) {
   const ToolResult res = plate_strokes(1, 1, 5);
   print("plates 1 voxel", res);
+  EXPECT_GT(res.contact_ticks, 5000);
   EXPECT_EQ(res.violations, 0);
   EXPECT_GE(res.worst_m, -0.05 * kVoxel);
 }
 
 // Grooves (two walls at 70-110 degrees) and corners (three walls): the tool pressed into
 // the crease and slid along and across it; two and three planes must hold at once.
-// Not yet met (measured: grooves 28 of 5823 ticks below r - 0.05 voxel, worst -0.31 voxel;
-// corners 179 of 6324, worst -0.58 voxel): the nearest-point search misses the second
-// wall near the rounded trilinear crease. Disabled; run with --gtest_also_run_disabled_tests.
-TEST(HriTool, DISABLED_GroovesAndCornersHoldSeveralPlanes) {
+// Near the rounded trilinear crease the walls are several planes each (more than three
+// may be held; at most three are active at once).
+TEST(HriTool, GroovesAndCornersHoldSeveralPlanes) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   ToolResult groove, corner;
@@ -241,7 +247,7 @@ TEST(HriTool, DISABLED_GroovesAndCornersHoldSeveralPlanes) {
   EXPECT_EQ(groove.violations, 0);
   EXPECT_EQ(corner.violations, 0);
   EXPECT_GE(groove.max_planes, 2);
-  EXPECT_EQ(corner.max_planes, 3);
+  EXPECT_GE(corner.max_planes, 3);
 }
 
 // The proxy constrained by a wall sits exactly r from it and the force is K times the

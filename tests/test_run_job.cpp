@@ -1,9 +1,10 @@
-// app::run_scene's force-step figures (issue 7, review finding 1), recomputed independently
-// from trace.csv: contact.max_force_step_n (both ticks in contact), max_release_step_n (|F|
-// on a contact tick whose next tick has no contact while the HIP is inside the object) and
-// max_any_step_n (any two consecutive ticks). The inside test here is this file's own
-// trilinear interpolation of the loaded voxels at the trace's physical HIP (Volume::to_grid),
-// not the servo's FieldView.
+// app::run_scene's force-step figures, recomputed independently from trace.csv:
+// contact.max_force_step_n (|F|, both ticks in contact), max_force_vector_step_n
+// (|F_k - F_k-1|, both ticks in contact), max_release_step_n (|F| on a contact tick whose
+// next tick has no contact) and max_any_step_n (any two consecutive ticks). Releases with
+// the HIP inside the object are counted apart, by this file's own trilinear interpolation
+// of the loaded voxels at the trace's physical HIP (Volume::to_grid), not the servo's
+// FieldView.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -32,7 +33,7 @@ namespace {
 const std::string kScenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes";
 
 struct Row {
-  double t, hip[3], f;
+  double t, hip[3], f, fv[3];
   bool contact;
 };
 
@@ -51,7 +52,8 @@ std::vector<Row> read_trace(const fs::path& csv) {
       ADD_FAILURE() << "bad trace row: " << line;
       break;
     }
-    rows.push_back({c[0], {c[1], c[2], c[3]}, std::sqrt(c[7] * c[7] + c[8] * c[8] + c[9] * c[9]), c[10] != 0});
+    rows.push_back({c[0], {c[1], c[2], c[3]}, std::sqrt(c[7] * c[7] + c[8] * c[8] + c[9] * c[9]), {c[7], c[8], c[9]},
+                    c[10] != 0});
   }
   return rows;
 }
@@ -62,8 +64,8 @@ double trilinear(const Volume& v, const double p[3]) {
 }
 
 struct Steps {
-  double contact = 0, release = 0, any = 0;
-  long releases = 0;
+  double contact = 0, vector = 0, release = 0, release_inside = 0, any = 0;
+  long releases = 0;  ///< releases with the HIP inside the object
 };
 
 Steps recompute(const std::vector<Row>& rows, const Volume& vol, const Scene& sc) {
@@ -71,13 +73,19 @@ Steps recompute(const std::vector<Row>& rows, const Volume& vol, const Scene& sc
   for (std::size_t i = 1; i < rows.size(); ++i) {
     const double d = std::abs(rows[i].f - rows[i - 1].f);
     s.any = std::max(s.any, d);
-    if (rows[i].contact && rows[i - 1].contact) s.contact = std::max(s.contact, d);
+    if (rows[i].contact && rows[i - 1].contact) {
+      s.contact = std::max(s.contact, d);
+      const double dx = rows[i].fv[0] - rows[i - 1].fv[0], dy = rows[i].fv[1] - rows[i - 1].fv[1],
+                   dz = rows[i].fv[2] - rows[i - 1].fv[2];
+      s.vector = std::max(s.vector, std::sqrt(dx * dx + dy * dy + dz * dz));
+    }
     if (rows[i - 1].contact && !rows[i].contact) {
+      s.release = std::max(s.release, rows[i - 1].f);
       const double v = trilinear(vol, rows[i].hip);
       const bool inside = sc.hri.inside == isotouch::core::InsideIs::kAbove ? v > sc.hri.tau : v < sc.hri.tau;
       if (inside) {
         ++s.releases;
-        s.release = std::max(s.release, rows[i - 1].f);
+        s.release_inside = std::max(s.release_inside, rows[i - 1].f);
       }
     }
   }
@@ -118,6 +126,8 @@ Ran run_and_recompute(Scene sc, const std::string& tag) {
   // trace.csv holds 9 significant digits: the figures agree to that.
   const double tol = 1e-7 * std::max(1.0, sc.hri.force_limit_n);
   EXPECT_NEAR(r.m.max_force_step_n, r.s.contact, tol) << tag;
+  EXPECT_NEAR(r.m.max_force_vector_step_n, r.s.vector, 2 * tol) << tag;
+  EXPECT_GE(r.m.max_force_vector_step_n, r.m.max_force_step_n - tol) << tag;
   EXPECT_NEAR(r.m.max_release_step_n, r.s.release, tol) << tag;
   EXPECT_NEAR(r.m.max_any_step_n, r.s.any, tol) << tag;
   fs::remove_all(out);
@@ -128,6 +138,8 @@ Ran run_and_recompute(Scene sc, const std::string& tag) {
 TEST(RunJob, SphereStepsMatchTheTrace) {
   const Ran r = run_and_recompute(isotouch::io::load_scene(kScenes + "/sphere.json"), "sphere");
   EXPECT_GT(r.m.contact_ticks, 500);
+  EXPECT_FALSE(r.m.k_above_bound);  // 800 N/m against 2 (5.01 - 1) / 1 ms = 8020 N/m
+  EXPECT_NEAR(r.m.k_bound_n_per_m, 8020.0, 1e-6);
   EXPECT_GT(r.m.max_any_step_n, 0.0);  // the press is not free of steps at 1 kHz
 }
 
@@ -142,6 +154,11 @@ TEST(RunJob, StiffSlowSceneShowsItsSteps) {
   sc.device.force_max_n = 1000;
   const Ran r = run_and_recompute(sc, "stiff");
   EXPECT_GT(r.m.max_any_step_n, 500.0);
+  // Above Colgate and Schenkel's bound 2 (b - |B|) / T, b the damping at the handle
+  // (device + hand), and said so.
+  const double b = sc.device.damping_n_s_per_m + sc.device.hand_damping_n_s_per_m;
+  EXPECT_NEAR(r.m.k_bound_n_per_m, 2.0 * b * 10.0, 1e-9);
+  EXPECT_TRUE(r.m.k_above_bound);
 }
 
 TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
@@ -154,7 +171,8 @@ TEST(RunJob, HeadPaperVariantReleasesInsideBone) {
   sc.hri.variant = isotouch::servo::Variant::kPaper;
   const Ran r = run_and_recompute(sc, "head_paper");
   EXPECT_GT(r.s.releases, 0);
-  EXPECT_GT(r.m.max_release_step_n, 0.1);
+  EXPECT_GT(r.s.release_inside, 0.1);
+  EXPECT_GE(r.m.max_release_step_n, r.s.release_inside);
   EXPECT_GE(r.m.max_any_step_n, r.m.max_release_step_n);
 }
 
@@ -164,13 +182,17 @@ TEST(RunJob, HeadStepsMatchTheTrace) {
   const Ran r = run_and_recompute(sc, "head");
   EXPECT_GT(r.m.contact_ticks, 500);
   std::cout << "head: max_force_step_n " << r.m.max_force_step_n << " N, max_release_step_n "
-            << r.m.max_release_step_n << " N (" << r.s.releases << " releases inside), max_any_step_n "
+            << r.m.max_release_step_n << " N (" << r.s.releases << " releases inside), max_force_vector_step_n "
+            << r.m.max_force_vector_step_n << " N, max_any_step_n "
             << r.m.max_any_step_n << " N, "
             << std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() << " s\n";
-  // The default (robust) variant never lets go of bone with force on: below 5 % of the
-  // limit (it was 1.74 N at t = 2.899 s before the servo held contact while inside).
+  // The default (robust) variant lets go of bone (every release, the HIP inside or not) and
+  // turns the force between contact ticks by less than 5 % of the limit (inside: 1.74 N at
+  // t = 2.899 s before the servo held contact while inside).
   EXPECT_LT(r.m.max_release_step_n, 0.05 * sc.hri.force_limit_n)
       << "at t = " << r.m.max_release_step_t_s << " s";
+  EXPECT_LT(r.m.max_force_vector_step_n, 0.05 * sc.hri.force_limit_n)
+      << "at t = " << r.m.max_force_vector_step_t_s << " s";
 }
 
 TEST(RunJob, NoContactGivesNullErrorsNotZero) {

@@ -1224,7 +1224,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   // Colgate and Schenkel's passivity bound for the scene's K, B and rate, with the damping
   // at the handle b = device + hand damping [N s/m]: a stiffer wall may buzz (K = 1e6 N/m
   // on the sphere at 1 kHz: 152 on/off flips). Warned in the log and reported.
-  m.k_bound_n_per_m = servo::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+  m.k_bound_n_per_m = sim::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
                                            hp.damping_n_s_per_m, 1.0 / hp.rate_hz);
   m.k_above_bound = !(hp.stiffness_n_per_m <= m.k_bound_n_per_m);
   if (m.k_above_bound)
@@ -1316,7 +1316,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
         m.max_force_step_n = step;
         m.max_force_step_t_s = r.t_s;
       }
-      const double vstep = servo::norm(r.force_n - last->force_n);
+      const double vstep = core::norm(r.force_n - last->force_n);
       if (vstep > m.max_force_vector_step_n) {
         m.max_force_vector_step_n = vstep;
         m.max_force_vector_step_t_s = r.t_s;

@@ -340,7 +340,7 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
       csv << pr.scene << ',' << name << ',' << tt << ',' << 1e3 / tt << ',' << p << ',' << 1e3 / p << '\n';
   }
   log << tab.str() << "\n" << table1_verdict(rows) << " (the paper: HRI/Avila 1.01-1.02)\n"
-      << table1_bricked_verdict(rows) << " (issue 8: HRI tick on the bricked snapshot at most 10 % above dense)\n"
+      << table1_bricked_verdict(rows) << " (HRI tick on the bricked snapshot at most 10 % above dense)\n"
       << "The same strokes with a spherical tool (the HIP is the tool's centre; its surface meets the isosurface "
          "earlier, so contact differs from the point's):\n"
       << tools.str()

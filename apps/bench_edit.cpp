@@ -763,7 +763,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     out << "- " << vd.text << "\n";
     csv.row("verdict", "", "", "\"" + vd.text + "\"", vd.measured ? (vd.met ? "1" : "0") : "", "");
   }
-  out << "\nTargets from issue 9 (on lavapipe): 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more "
+  out << "\nTargets (on lavapipe): 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more "
          "servo misses than idle. A missed target is a result, not a failure (exit 0).\n";
   for (const auto& f : failures) {
     out << "\nFAILED: " << f << "\n";
@@ -809,7 +809,7 @@ isovalue, inside, passes and sample format):
               voxel changes/s (replayed on the CPU reference), missed deadlines, period errors.
 The servo: HRI at --rate Hz on a simulated device pressed into the surface (the scene's
 script, then resting), SCHED_FIFO + pinning + mlock when the system allows.
-Verdicts against issue 9: 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more
+Verdicts against the targets: 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more
 servo misses (per tick) than idle. Exit 0 whether or not a target is met; 1 when something
 failed to run. Report (markdown) on stdout, progress on stderr. Timings on a shared machine
 are noisy: run it when the machine is quiet and repeat.

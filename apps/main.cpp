@@ -68,7 +68,7 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
               "timeline": [{"t_s": 1.0, "kind": "carve", "at": "vhip" | [x, y, z] (mm), "duration_s": 0.2,
                             "radius_mm": 3, ...}, {"t_s": 2.0, "kind": "undo" | "redo"}]}
   }
-edits (optional, needs mode "sparse"): sculpting while the servo runs (issue 9). While the
+edits (optional, needs mode "sparse"): sculpting while the servo runs. While the
 button is down and the probe is in contact, the brush is applied at the VHIP every
 every_ticks ticks (drill: removal grows with |F| above force_threshold_n), one undo stroke
 per press; timeline brushes fire at their time. Each edit recomputes only the bricks it can

@@ -1,4 +1,4 @@
-// render_cmd.h - `isotouch render` and `isotouch bench render` (issue 10), PNG writing
+// render_cmd.h - `isotouch render` and `isotouch bench render`, PNG writing
 // and the report pictures other commands call (run report, sculpt before/after).
 //
 // Frames: pictures are drawn in grid-world [m] (core::Grid); the orbit camera's angles

@@ -150,7 +150,7 @@ struct RunMetrics {
   std::size_t nan_voxels = 0, inf_voxels = 0;
   bool plots_drawn = false;
   std::string plot_note;
-  /// surface.png (issue 10): the isosurface, the HIP path and the contact points coloured
+  /// surface.png: the isosurface, the HIP path and the contact points coloured
   /// by |F| (app::render_run_picture); caption, or why it was not drawn.
   bool picture_drawn = false;
   std::string picture_note;

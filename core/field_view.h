@@ -81,7 +81,7 @@ class FieldView {
   /// Value of every voxel outside the grid (see class docs).
   float background() const { return background_; }
   bool empty() const { return mode_ == Mode::kEmpty; }
-  /// The snapshot's SampleField::version (issue 9: an edit publishes version + 1; the
+  /// The snapshot's SampleField::version (an edit publishes version + 1; the
   /// renderers tell a new snapshot by it). 0 for a default-constructed view.
   std::uint64_t version() const { return version_; }
   /// Reads a brick table (bricked field) rather than a dense array.

@@ -85,7 +85,7 @@ inline float unorm16_to_float(std::uint16_t q, float offset, float scale) {
 /// The bricked snapshot (items 4 and 5): a brick table, a pool of active bricks and the
 /// uniform bricks' tiles. Immutable once built (brick_field.h: make_bricked_field, which
 /// seal()s it); shared through std::shared_ptr<const BrickStore>. The pool is itself held
-/// by shared_ptr so that a later snapshot can reference it (issue 9: unchanged bricks
+/// by shared_ptr so that a later snapshot can reference it (unchanged bricks
 /// shared between snapshots). Not copyable: seal() records pointers into this object.
 struct BrickStore {
   /// What FieldView copies per tick: read pointers into the store, checked once by seal().

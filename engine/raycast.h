@@ -1,4 +1,4 @@
-// raycast.h - first-hit isosurface ray casting of a volume (issue 10): the GPU ray caster
+// raycast.h - first-hit isosurface ray casting of a volume: the GPU ray caster
 // (shaders/raycast_*.comp, shared code raycast_common.glsl) and its CPU reference (engine/raycast_cpu.cpp, the same math).
 //
 // What is drawn: the isosurface {tau, inside} of the trilinear interpolation of the voxel

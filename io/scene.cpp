@@ -392,7 +392,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
         s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
       }
     }
-    // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script (issue 7).
+    // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script.
     s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
     s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
   }
@@ -437,7 +437,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
            "(Figure 2 as printed); remove the key or use \"variant\": \"robust\", got \"" +
                (isect != "linear" ? isect : normal) + "\"");
   s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
-  // Default 20 ms (robust variant): every force step a plane update causes is ramped (issue 7).
+  // Default 20 ms (robust variant): every force step a plane update causes is ramped.
   s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",
                                    s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
   if (sv.contains("friction")) {

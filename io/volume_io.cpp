@@ -288,7 +288,7 @@ std::string direction_field(const std::string& reader) {
 // D must be orthonormal (|D^T D - I| <= 1e-3 per entry): world = origin + D (spacing *
 // index) and Volume::to_grid use D^T as the inverse. A singular D (TransformMatrix all
 // zeros) would put every point at the origin, a scaling one would rescale the volume
-// behind the spacing's back; both are errors naming the field and the values (issue 7).
+// behind the spacing's back; both are errors naming the field and the values.
 void finish_direction(Volume& v) {
   const auto& D = v.direction;
   double worst = 0;

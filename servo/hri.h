@@ -138,7 +138,7 @@ struct ToolPlane {
 ///   next sane HIP, so it can neither pull nor march across the world.
 ///
 /// Variant::kRobust (the default) departs from Figure 2 as follows, each for a fault a
-/// user would feel (issue 7):
+/// user would feel:
 /// - Update period: c is incremented first, so the plane is recomputed every n ticks as
 ///   §3.2 says (n = 1: every tick). It is also recomputed early, on the tick where the
 ///   VHIP would move more than half a voxel along the plane from where the plane was

@@ -1,4 +1,4 @@
-// live_field.cpp - the edited volume's published snapshot, updated brick by brick (issue 9,
+// live_field.cpp - the edited volume's published snapshot, updated brick by brick (
 // item 1). The design is in live_field.h. Compiled with -ffp-contract=off like the CPU
 // reference it calls (engine/sparse_cpu.cpp), although every float operation on samples
 // happens there: this file selects bricks, compares bits and moves samples.

@@ -143,7 +143,7 @@ struct BrickMinMaxPush {
   uint pad0;
 };
 
-// ---- raycast (issue 10) -------------------------------------------
+// ---- raycast -------------------------------------------
 // First-hit isosurface ray caster: four passes (raycast_march, raycast_args, raycast_shade,
 // raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
 // engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, 8x8 tiles; shade: one

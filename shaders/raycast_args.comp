@@ -1,5 +1,5 @@
 #version 450
-// Ray caster pass 2 of 4 (issue 10): one invocation turns the hit count of raycast_march.comp
+// Ray caster pass 2 of 4: one invocation turns the hit count of raycast_march.comp
 // into the indirect dispatch size of raycast_shade.comp (whole workgroups, rounded up).
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"

@@ -1,4 +1,4 @@
-// raycast_common.glsl - what the ray caster's passes share (issue 10): bindings, the
+// raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
 // Included by raycast_march.comp, raycast_shade.comp and raycast_overlay.comp; every pass
 // (raycast_args.comp too) binds the same 12 buffers (one descriptor layout, engine/raycast.cpp).

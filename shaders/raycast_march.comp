@@ -1,5 +1,5 @@
 #version 450
-// Ray caster pass 1 of 4 (issue 10; shaders/raycast_common.glsl): one invocation per pixel.
+// Ray caster pass 1 of 4 (shaders/raycast_common.glsl): one invocation per pixel.
 // A pixel whose ray reaches an inside lattice sample k (sample 0 included) is appended to
 // the hit list, with k in hit_k, for raycast_shade.comp to refine and shade (and so is a ray
 // whose skipping march llvmpipe's loop budget stopped, marked, for the shade pass to finish); nothing else is

@@ -1,4 +1,4 @@
-# Bad input on the command line (issue 7): each case must exit non-zero (or as stated)
+# Bad input on the command line: each case must exit non-zero (or as stated)
 # quickly, with a message that names the file, the field and the value.
 # Usage: cmake -DEXE=isotouch -DOUT=dir -DDATA=data-dir -P cli_bad_input.cmake
 file(REMOVE_RECURSE ${OUT})

@@ -54,7 +54,7 @@ string(JSON ndir LENGTH "${js}" volume direction)
 if(NOT faults EQUAL 0)
   message(FATAL_ERROR "contact.fault_ticks = ${faults}")
 endif()
-# contact.max_force_step_n below 5 % of the force limit on every shipped scene (issue 7).
+# contact.max_force_step_n below 5 % of the force limit on every shipped scene.
 if(NOT DEFINED STEP_LIMIT)
   set(STEP_LIMIT 0.165)  # 5 % of the shipped scenes' 3.3 N
 endif()

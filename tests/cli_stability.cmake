@@ -17,7 +17,7 @@ endif()
 if(NOT out MATCHES "K_max / bound per servo period")
   message(FATAL_ERROR "no ratio summary printed")
 endif()
-# The reading of the table is computed from its rows (issue 7): it says what it compared.
+# The reading of the table is computed from its rows: it says what it compared.
 file(READ ${OUT}/stability.md md)
 if(NOT md MATCHES "Reading it \\(computed from the rows above\\): with B = 0, K_max / bound ranges from [0-9.]+ to [0-9.]+ over [0-9]+ rows")
   message(FATAL_ERROR "stability.md: no computed reading of the B = 0 rows")

@@ -341,7 +341,7 @@ double max_step_sliding_into_the_wall(HriParams p, double* final_force = nullptr
 }
 }  // namespace
 
-// Fault 4 (issue 7): recovery time must ramp EVERY force step a plane causes, including
+// Fault 4: recovery time must ramp EVERY force step a plane causes, including
 // a plane made after free ticks (the paper's rule only ramps an embedded update upward).
 TEST(HriRecovery, RampsAPlaneMadeAfterFreeTicks) {
   const SampleField f = wall_field(kUp, kC);

@@ -1,4 +1,4 @@
-// HRI robust variant: contact faults of issue 7 on analytic fields (servo only).
+// HRI robust variant: contact faults on analytic fields (servo only).
 // Truth comes from the analytic shapes (exact plate / shell / cylinder geometry), never
 // from the renderer. Each test names the fault it guards; Variant::kPaper (Figure 2 as
 // printed) is run where it shows the fault the robust variant removes.

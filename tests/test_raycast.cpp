@@ -1,4 +1,4 @@
-// Ray caster (issue 10): GPU against the CPU reference per pixel, an analytic sphere
+// Ray caster: GPU against the CPU reference per pixel, an analytic sphere
 // against the exact ray-sphere intersection (double precision, computed here), the covered
 // pixel count against the sphere's exact projected area, skipping on/off, the clip plane.
 // The validation layer (with synchronization validation) is on; any message fails.

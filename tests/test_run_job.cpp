@@ -145,7 +145,7 @@ TEST(RunJob, SphereStepsMatchTheTrace) {
 
 TEST(RunJob, StiffSlowSceneShowsItsSteps) {
   // K = 1e6 N/m at 10 Hz: the force jumps between 0 and the 1000 N limit from one tick to
-  // the next, never on two contact ticks in a row, so the contact-only step says 0 (issue 7).
+  // the next, never on two contact ticks in a row, so the contact-only step says 0.
   Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
   sc.hri.stiffness_n_per_m = 1e6;
   sc.hri.damping_n_s_per_m = 0;

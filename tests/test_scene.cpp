@@ -85,7 +85,7 @@ TEST(Scene, ServoOptions) {
   EXPECT_EQ(s.synthetic.kind, "knot");
 }
 
-// ---- issue 7: duplicate keys, overflowing numbers, ray origin range --------------------------
+// ---- duplicate keys, overflowing numbers, ray origin range --------------------------
 TEST(Scene, SphericalTool) {
   const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": )";
   EXPECT_EQ(parse_scene(base + "{}}", "s.json").hri.tool_radius_m, 0.0);  // the point by default

@@ -173,7 +173,7 @@ TEST(SimDevice, EnergyBookkeepingOfAConstantForce) {
   EXPECT_NEAR(d.rendered_work_j(), 0.5 * p.mass_kg * d.velocity().x * d.velocity().x, 1e-3 * d.rendered_work_j());  // Euler: (N+1)/N
 }
 
-// ---- issue 7: a device too light for its substeps diverged to NaN --------------------------
+// ---- a device too light for its substeps diverged to NaN --------------------------
 TEST(SimDevice, MinStableSubstepsMatchesTheJuryBound) {
   SimDeviceParams p;
   p.mass_kg = 1e-4;  // hand 300 N/m, 5 + 0.01 N s/m
@@ -232,7 +232,7 @@ TEST(Headless, LightDeviceHasNoFaults) {
   EXPECT_GT(contact, 300);
 }
 
-// ---- issue 7: the script's march is bounded whatever the grid or the ray --------------------
+// ---- the script's march is bounded whatever the grid or the ray --------------------
 // Wall-clock bound for the bounded marches below: the bounded march takes 0.1-0.7 s in a
 // release build and a few seconds under ThreadSanitizer; the unbounded one takes minutes
 // (release) to hours (TSan), so 30 s separates them on any build.

@@ -151,7 +151,7 @@ TEST(VolumeIo, AbsurdDimensions) {
 
 TEST(VolumeIo, DirectoryIsNotAVolume) { expect_error(kData, "is a directory"); }
 
-// ---- Broken MetaImage headers (issue 7, "Input and coordinates") --------------------------
+// ---- Broken MetaImage headers ("Input and coordinates") --------------------------
 namespace {
 // A 4 x 4 x 4 MET_SHORT volume: header `extra` lines + raw file of `raw_bytes` bytes.
 fs::path small_mhd(const fs::path& d, const std::string& extra, std::size_t raw_bytes,
@@ -298,7 +298,7 @@ TEST(VolumeIo, MetaImageLocalDataSize) {
   expect_error((d / "uchar.mha").string(), "hold 128 bytes; DimSize 4 x 4 x 4 of ElementType MET_UCHAR");
 }
 
-// ---- Direction matrix and NRRD spacings (issue 7, review findings) --------------------------
+// ---- Direction matrix and NRRD spacings (review findings) --------------------------
 TEST(VolumeIo, MetaImageSingularDirection) {
   // All zeros put every point at the origin ("LLL", every trace point (0,0,0)).
   expect_error(small_mhd(temp_dir(), "TransformMatrix = 0 0 0 0 0 0 0 0 0\n", 128).string(),

@@ -1,5 +1,6 @@
 #pragma once
-// The core and servo vocabulary that sim/ names without a prefix, declared by sim/ for itself.
+// The core vocabulary (core/vocabulary.h) and the servo names that sim/ uses without a
+// prefix, declared by sim/ for itself.
 #include "baselines.h"
 #include "device_io.h"
 #include "hri.h"
@@ -11,29 +12,7 @@
 #include "workspace.h"
 
 namespace isotouch::sim {
-using core::Vec3;
-using core::Grid;
-using core::Sample;
-using core::SampleField;
-using core::FieldView;
-using core::FieldValue;
-using core::InsideIs;
-using core::Isosurface;
-using core::SampleFormat;
-using core::CompactSample;
-using core::BrickDecode;
-using core::BrickStore;
-using core::BrickedInput;
-using core::BrickUsage;
-using core::kBrickSize;
-using core::kBrickStored;
-using core::kBrickSamples;
-using core::kUnormNaN;
-using core::kUnormMax;
-using core::iso_excess;
-using core::float_to_half;
-using core::half_to_float;
-using core::unorm16_to_float;
+using namespace core::vocabulary;
 using servo::AvilaRenderer;
 using servo::BaselineParams;
 using servo::BlezekRenderer;

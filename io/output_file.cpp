@@ -52,15 +52,6 @@ const char* kind_of(mode_t m) {
   return "not a regular file, a character device or a FIFO";
 }
 
-void write_all(int fd, const char* data, std::size_t size, const std::string& path) {
-  for (std::size_t done = 0; done < size;) {
-    const ssize_t n = ::write(fd, data + done, size - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw OutputError(os_error(path, "write failed", n < 0 ? errno : EIO));
-    done += std::size_t(n);
-  }
-}
-
 /// Copies the bytes of the open descriptor `in` (read from its start) to `to` (the output `path`).
 void copy_fd(int in, int to, const std::string& path) {
   std::array<char, 1 << 16> buf{};
@@ -185,6 +176,16 @@ std::string follow_to_missing(const std::string& path) {
 }
 
 }  // namespace
+
+void write_all(int fd, const char* data, std::size_t size, const std::string& path) {
+  for (std::size_t done = 0; done < size;) {
+    const ssize_t n = ::write(fd, data + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw OutputError(os_error(path, "write failed", n < 0 ? errno : EIO));
+    done += std::size_t(n);
+  }
+}
+
 
 OutputTarget classify_output(const std::string& path) {
   if (path.empty()) throw OutputError("output path is empty");

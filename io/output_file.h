@@ -59,4 +59,9 @@ void write_output(const std::string& path, std::string_view content);
 /// failure. @throws OutputError naming the path.
 void place_output(const std::string& done, const std::string& path);
 
+/// Writes all `size` bytes to the open descriptor `fd` (retried on EINTR and short writes):
+/// for a file that must grow in place, such as a live session's streamed recording.
+/// @throws OutputError naming `path` and the OS error.
+void write_all(int fd, const char* data, std::size_t size, const std::string& path);
+
 }  // namespace isotouch::io

@@ -408,7 +408,7 @@ void check_nifti_header(const std::string& path) {
       if (!std::isfinite(v) || std::abs(v) > 1e30) {
         std::ostringstream m;
         m << "NIfTI header field '" << f.name << (f.count > 1 ? "[" + std::to_string(i) + "]" : std::string()) << "' is "
-          << v << ": the orientation and voxel size must be finite";
+          << v << ": the orientation and voxel size must be finite and at most 1e30 in magnitude";
         fail(path, m.str());
       }
     }

@@ -17,10 +17,9 @@
 namespace isotouch::session {
 namespace {
 
+// The servo's clock (CLOCK_MONOTONIC, as steady_clock on Linux): tick times and submit() times compare.
 std::int64_t now_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 // observe()'s seqlock stores Observed as relaxed atomic words (no plain data race).
@@ -29,18 +28,6 @@ static_assert(std::is_trivially_copyable_v<Observed>);
 
 std::string os_error(const std::string& path, const char* what) {
   return path + ": " + what + ": " + std::strerror(errno);
-}
-
-void write_all(int fd, const std::string& text, const std::string& path) {
-  const char* p = text.data();
-  std::size_t left = text.size();
-  while (left > 0) {
-    const ssize_t n = ::write(fd, p, left);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw io::RecordingError(os_error(path, "write failed"));
-    p += n;
-    left -= std::size_t(n);
-  }
 }
 
 io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
@@ -102,7 +89,8 @@ LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleFie
     fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
     if (fd_ < 0) throw io::RecordingError(os_error(part_path_, "cannot create the recording"));
     try {
-      write_all(fd_, io::recording_header_line(cfg_.record_header, cfg_.record_path), part_path_);
+      const std::string header = io::recording_header_line(cfg_.record_header, cfg_.record_path);
+      io::write_all(fd_, header.data(), header.size(), part_path_);
       if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
     } catch (...) {
       ::close(fd_);
@@ -271,7 +259,7 @@ void LiveSession::record_chunk(bool final) {
     ++recorded_edits_;
   }
   if (final) text += io::recording_end_line(std::size_t(recorded_ticks_), std::size_t(recorded_edits_));
-  if (!text.empty()) write_all(fd_, text, part_path_);
+  if (!text.empty()) io::write_all(fd_, text.data(), text.size(), part_path_);
   if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
 }
 

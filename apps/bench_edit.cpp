@@ -4,6 +4,7 @@
 #include "bench_edit.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -21,6 +22,7 @@
 #include "field_view.h"
 #include "files.h"
 #include "hri.h"
+#include "live_session.h"
 #include "passes.h"
 #include "run_job.h"
 #include "scene.h"
@@ -311,6 +313,7 @@ struct Phase {
   double err_p99_us = kNaN, err_p999_us = kNaN, err_max_us = kNaN;
   long edits = 0;
   std::uint64_t voxel_changes = 0;
+  std::vector<double> edit_to_haptics_ms;  ///< editing: per published edit, submit() to the first tick reading it
   bool replay_equal = true;
 };
 
@@ -479,31 +482,42 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       std::unique_ptr<engine::Volume> start;
       if (editing) start = std::make_unique<engine::Volume>(session.volume());
       {
-        servo::ServoThread servo(rig.published, *rig.spy, *rig.io,
-                                 rig.config(std::size_t(o.rate_hz * o.seconds * 1.5) + 64));
-        rig.note(servo, servo.start());
+        // The live session: its servo thread, and its edit thread applying what this thread
+        // submits (at most two edits in flight, so the edit thread never waits for work).
+        session::LiveSessionConfig lc;
+        lc.servo = rig.config(std::size_t(o.rate_hz * o.seconds * 1.5) + 64);
+        std::atomic<long> applied{0};
+        lc.on_applied = [&](const EditEvent& e, const EditOutcome& oc, session::EditSource) {
+          if (oc.error.empty() && e.kind == EditEvent::Kind::kBrush) done.push_back(e.brush);
+          applied.fetch_add(1, std::memory_order_release);
+        };
+        session::LiveSession editing_session(session, rig.published, *rig.spy, *rig.io, std::move(lc));
+        rig.note(*editing_session.servo_thread(), editing_session.start());
         const std::int64_t t0 = now_ns(), t_end = t0 + std::int64_t(o.seconds * 1e9);
         if (!editing) {
           std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(t_end)));
         } else {
-          int i = 0;
+          long i = 0;
           while (now_ns() < t_end) {
+            if (i - applied.load(std::memory_order_acquire) >= 2) {
+              std::this_thread::sleep_for(std::chrono::microseconds(50));
+              continue;
+            }
             const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
-            const session::Brush b = make_brush(kind, point(next_point + std::size_t(i / 2)), 5e-3, targets);
             EditEvent ev;
-            ev.brush = b;
-            const EditOutcome oc = session.apply(ev, nullptr);
-            if (oc.published) rig.published.publish(session.current());
-            done.push_back(b);
+            ev.brush = make_brush(kind, point(next_point + std::size_t(i / 2)), 5e-3, targets);
+            if (!editing_session.submit(ev)) throw std::runtime_error("sustained: the live session's edit queue refused an edit");
             ++i;
           }
           next_point += std::size_t(i + 1) / 2;
         }
         ph.seconds = ms_between(t0, now_ns()) * 1e-3;
-        servo.stop();
-        ph.ticks = servo.ticks();
-        ph.missed = servo.missed_deadlines();
-        period_stats(servo, ph);
+        editing_session.stop();  // queued edits are dropped (counted); `done` holds what was applied
+        const session::LiveStats st = editing_session.stats();
+        ph.ticks = st.ticks;
+        ph.missed = st.missed_deadlines;
+        ph.edit_to_haptics_ms = st.edit_to_haptics_ms;
+        period_stats(*editing_session.servo_thread(), ph);
       }
       if (editing) {
         progress << "[bench edit] counting voxel changes (CPU replay of " << done.size() << " edits)\n" << std::flush;
@@ -703,11 +717,14 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
 
   out << "\n## Sustained 5 mm edits while the servo runs at " << num(o.rate_hz, 0) << " Hz\n\n"
       << "Back-to-back 5 mm edits (carve, add, at new surface points) for " << o.seconds << " s, against the servo "
-      << "with the engine idle for as long, in this process; voxel changes counted by replaying the same edits on "
-         "the CPU reference afterwards (a voxel changed twice counts twice).\n\n"
-      << "| phase | round | length [s] | edits | edits/s | voxel changes | voxel changes/s | servo ticks | missed | "
-         "missed per 10,000 | abs period error p99 [us] | p99.9 [us] | max [us] |\n"
-      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      << "with the engine idle for as long, in this process, both on a session::LiveSession (the servo thread, and "
+         "the edit thread applying what the bench submits, two edits in flight); edit-to-haptics from submit() to "
+         "the first tick reading the snapshot (queueing included); voxel changes counted by replaying the same "
+         "edits on the CPU reference afterwards (a voxel changed twice counts twice).\n\n"
+      << "| phase | round | length [s] | edits | edits/s | edit-to-haptics median [ms] | p99 [ms] | voxel changes | "
+         "voxel changes/s | servo ticks | missed | missed per 10,000 | abs period error p99 [us] | p99.9 [us] | max [us] |\n"
+      << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  std::vector<double> ed_e2h;
   long ed_missed = 0, ed_ticks = 0, id_missed = 0, id_ticks = 0, ed_edits = 0;
   double ed_seconds = 0;
   std::uint64_t ed_vox = 0;
@@ -717,6 +734,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     out << "| " << name << " | " << p.round << " | " << num(p.seconds, 2) << " | "
         << (p.editing ? std::to_string(p.edits) : "-") << " | "
         << (p.editing ? num(double(p.edits) / p.seconds, 1) : "-") << " | "
+        << (p.editing ? num(percentile(p.edit_to_haptics_ms, 0.5), 3) : "-") << " | "
+        << (p.editing ? num(percentile(p.edit_to_haptics_ms, 0.99), 3) : "-") << " | "
         << (p.editing ? std::to_string(p.voxel_changes) : "-") << " | "
         << (p.editing ? num(double(p.voxel_changes) / p.seconds, 0) : "-") << " | " << p.ticks << " | " << p.missed
         << " | " << num(p.ticks > 0 ? 1e4 * double(p.missed) / double(p.ticks) : kNaN, 2) << " | "
@@ -737,6 +756,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       ed_edits += p.edits;
       ed_seconds += p.seconds;
       ed_vox += p.voxel_changes;
+      ed_e2h.insert(ed_e2h.end(), p.edit_to_haptics_ms.begin(), p.edit_to_haptics_ms.end());
+      csv.row("sustained_editing", "5", r, "edit_to_haptics_median_ms", csv_num(percentile(p.edit_to_haptics_ms, 0.5)), "ms");
       replay_ok = replay_ok && p.replay_equal;
     } else {
       id_missed += p.missed;
@@ -758,6 +779,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   vs.push_back(verdict_at_most("5 mm edit-to-haptics median [ms]", med5, 1.0, 3, "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_most("5 mm edit-to-haptics p99 [ms]", p99_5, 5.0, 3, "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_least("sustained 5 mm edits per second", rate, 200.0, 1, "no editing phase"));
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(ed_e2h, 0.5), 1.0,
+                               3, "no sustained edit was read by the servo"));
   vs.push_back(misses_verdict(ed_missed, ed_ticks, id_missed, id_ticks));
   for (const auto& vd : vs) {
     out << "- " << vd.text << "\n";
@@ -805,7 +828,9 @@ isovalue, inside, passes and sample format):
               PassChain, or run_chain_cpu without a device) and published the same way;
               dense / incremental = ratio of the medians.
   sustained   back-to-back 5 mm edits for --seconds while the servo runs, against the servo
-              with the engine idle for as long (idle, editing; --rounds times): edits/s,
+              with the engine idle for as long (idle, editing; --rounds times), both on a
+              live session (its servo thread; its edit thread applies what the bench
+              submits): edits/s, edit-to-haptics (submit to the first tick reading it),
               voxel changes/s (replayed on the CPU reference), missed deadlines, period errors.
 The servo: HRI at --rate Hz on a simulated device pressed into the surface (the scene's
 script, then resting), SCHED_FIFO + pinning + mlock when the system allows.

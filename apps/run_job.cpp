@@ -28,6 +28,7 @@
 #include "stability.h"
 #include "brick_field.h"
 #include "brush.h"
+#include "live_session.h"
 #include "record.h"
 #include "vdb_io.h"
 #include "cpu_gradient.h"
@@ -495,13 +496,14 @@ struct EditRow {
   double removed_mm3 = 0; ///< cumulative removed volume after this event [mm^3]
 };
 
-// The scene's edits driven from the servo loop (the after-tick hook): timeline entries at
-// their tick, the button's brush at the VHIP while the button is down and the probe in
-// contact. Applies through the EditSession and publishes into the servo's buffer.
+// The scene's edits in a simulated session (LiveSession::run_simulated): the timeline's
+// entries are submitted at their tick from the after-tick hook (the API side); the button
+// drill at the VHIP is the session's own (servo side). Every applied edit comes back
+// through on_applied() with its outcome, for edits.csv and the figures.
 class EditDriver {
  public:
-  EditDriver(const Scene& scene, SceneSetup& setup, servo::TripleBuffer<core::SampleField>& out)
-      : scene_(scene), setup_(setup), out_(out), iso_(setup.live.iso),
+  EditDriver(const Scene& scene, SceneSetup& setup)
+      : scene_(scene), setup_(setup), iso_(setup.live.iso),
         targets_(session::default_targets(setup.volume, iso_)),
         dt_(scene.edits.every_ticks / scene.hri.rate_hz),
         voxel_mm3_(setup.volume.grid.spacing_m.x * setup.volume.grid.spacing_m.y * setup.volume.grid.spacing_m.z * 1e9),
@@ -535,8 +537,14 @@ class EditDriver {
       }
   }
 
-  /// The TickHook.
-  void operator()(long k, sim::TraceRow& row) {
+  /// The session's button drill: the scene's brush at the tool, every every_ticks ticks.
+  session::ButtonDrill drill() const {
+    return {make_brush(at_tool(scene_.edits.brush), targets_, {}, dt_, 0), scene_.edits.every_ticks};
+  }
+
+  /// SimulatedRun::after_tick: measures what tick k read, then submits the timeline's
+  /// entries due at k (applied before tick k + 1).
+  void operator()(session::LiveSession& live, long k, const sim::TraceRow& row) {
     const double t = double(k) / scene_.hri.rate_hz;
     contact_seen_ = contact_seen_ || row.contact;
     if (row.contact && row.version > 1) measure_edited(k, row);
@@ -546,10 +554,10 @@ class EditDriver {
       const Plan& p = plan_[next_];
       const TimedEdit& te = scene_.edits.timeline[p.entry];
       switch (p.what) {
-        case Plan::kUndo: apply(k, t, EditEvent::Kind::kUndo, {}, "timeline"); break;
-        case Plan::kRedo: apply(k, t, EditEvent::Kind::kRedo, {}, "timeline"); break;
-        case Plan::kBegin: open(k, t, "timeline"); break;
-        case Plan::kEnd: close(k, t, "timeline"); break;
+        case Plan::kUndo: submit(live, k, t, EditEvent::Kind::kUndo, {}); break;
+        case Plan::kRedo: submit(live, k, t, EditEvent::Kind::kRedo, {}); break;
+        case Plan::kBegin: submit(live, k, t, EditEvent::Kind::kBeginStroke, {}); break;
+        case Plan::kEnd: submit(live, k, t, EditEvent::Kind::kEndStroke, {}); break;
         case Plan::kApply: {
           if (te.at_vhip && !contact_seen_ && !row.contact) {
             if (figures.vhip_before_contact++ == 0)
@@ -558,30 +566,35 @@ class EditDriver {
           }
           const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
           const double f = te.brush.force_n >= 0 ? te.brush.force_n : core::norm(row.force_n);
-          apply(k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f),
-                "timeline");
+          submit(live, k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f));
           ++figures.timeline_brushes;
           break;
         }
       }
     }
-    bool down = false;
-    for (const auto& iv : scene_.edits.button_down)
-      if (t >= iv[0] && t < iv[1]) down = true;
-    row.button = down;
-    if (down && !button_) {
-      press_tick_ = k;
-      open(k, t, "button");
+  }
+
+  /// LiveSessionConfig::on_applied: one row of edits.csv and the figures.
+  void on_applied(const EditEvent& applied, const EditOutcome& outcome, session::EditSource source) {
+    if (!outcome.error.empty()) return;  // simulated: the session rethrows; the run fails
+    EditEvent e = applied;
+    e.tick = std::max(0L, applied.tick - 1);  // edits.csv: the tick after which it was applied
+    const EditEvent::Kind kind = e.kind;
+    const char* src = source == session::EditSource::kButton ? "button"
+                      : source == session::EditSource::kApi  ? "timeline"
+                                                              : "end of run";
+    EditRow r{e, src, outcome, 0};
+    if (kind == EditEvent::Kind::kBrush) {
+      ++figures.brushes;
+      if (source == session::EditSource::kButton) ++figures.button_brushes;
+      if (figures.first_edit_t_s < 0) figures.first_edit_t_s = e.t_s;
     }
-    if (!down && button_) close(k, t, "button");
-    button_ = down;
-    // Real contact only: a plane holds the HIP (penetration > 0). An edit's fade-out also
-    // reports contact, with penetration 0 and a force that is not the user's push (review).
-    if (down && row.contact && row.penetration_m > 0 && (k - press_tick_) % scene_.edits.every_ticks == 0) {
-      apply(k, t, EditEvent::Kind::kBrush,
-            make_brush(at_tool(scene_.edits.brush), targets_, row.vhip_m, dt_, core::norm(row.force_n)), "button");
-      ++figures.button_brushes;
-    }
+    if (kind == EditEvent::Kind::kUndo) ++figures.undos;
+    if (kind == EditEvent::Kind::kRedo) ++figures.redos;
+    said_if_nothing(kind, e.brush, r.outcome, e.t_s);
+    if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
+    r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
+    rows.push_back(std::move(r));
   }
 
   /// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP
@@ -589,15 +602,6 @@ class EditDriver {
   /// largest spacing: the surface the burr touches lies within one cell of it) past its
   /// surface, so it removes what the burr's surface touches; a point keeps the scene's radius.
   BrushSpec at_tool(const BrushSpec& b) const { return brush_at_tool(scene_, setup_.volume, b); }
-
-  /// After the last tick: closes a stroke left open (button still down, stroke past the end).
-  void finish(long last_tick) {
-    const double t = double(last_tick) / scene_.hri.rate_hz;
-    if (open_ > 0) {
-      open_ = 1;
-      close(last_tick, t, "end of run");
-    }
-  }
 
   std::vector<char> hip_inside;  ///< per tick: the HIP inside the snapshot that tick read
   /// Contact ticks that read an edited snapshot: the VHIP's true and first-order distance
@@ -617,31 +621,13 @@ class EditDriver {
     std::size_t entry;
     enum What { kBegin, kApply, kEnd, kUndo, kRedo } what;
   };
-  // Strokes nest: a timeline stroke during a button press (or the reverse) joins the open one.
-  void open(long k, double t, const char* src) {
-    if (open_++ == 0) apply(k, t, EditEvent::Kind::kBeginStroke, {}, src);
-  }
-  void close(long k, double t, const char* src) {
-    if (open_ > 0 && --open_ == 0) apply(k, t, EditEvent::Kind::kEndStroke, {}, src);
-  }
-  void apply(long k, double t, EditEvent::Kind kind, const session::Brush& b, const char* src) {
+  static void submit(session::LiveSession& live, long k, double t, EditEvent::Kind kind, const session::Brush& b) {
     EditEvent e;
     e.kind = kind;
     e.tick = k;
     e.t_s = t;
     if (kind == EditEvent::Kind::kBrush) e.brush = b;
-    EditRow r{e, src, setup_.session->apply(e, &out_), 0};
-    if (kind == EditEvent::Kind::kUndo || kind == EditEvent::Kind::kRedo) open_ = 0;  // undo / redo end an open stroke
-    if (kind == EditEvent::Kind::kBrush) {
-      ++figures.brushes;
-      if (figures.first_edit_t_s < 0) figures.first_edit_t_s = t;
-    }
-    if (kind == EditEvent::Kind::kUndo) ++figures.undos;
-    if (kind == EditEvent::Kind::kRedo) ++figures.redos;
-    said_if_nothing(kind, b, r.outcome, t);
-    if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
-    r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
-    rows.push_back(std::move(r));
+    if (!live.submit(e)) throw std::runtime_error("edits: the session's edit queue is full at t = " + fmt(t, 4) + " s");
   }
 
   /// At tick k (before its edits) the session's volume is the one whose snapshot the tick
@@ -685,7 +671,6 @@ class EditDriver {
 
   const Scene& scene_;
   SceneSetup& setup_;
-  servo::TripleBuffer<core::SampleField>& out_;
   core::Isosurface iso_;
   session::BrushTargets targets_;
   double dt_, voxel_mm3_;
@@ -694,9 +679,7 @@ class EditDriver {
   std::size_t next_ = 0;
   std::shared_ptr<core::SampleField> truth_;
   std::uint64_t truth_version_ = 0;
-  bool button_ = false, contact_seen_ = false;
-  long press_tick_ = 0;
-  int open_ = 0;
+  bool contact_seen_ = false;
 };
 
 // edits.csv: one row per applied event, centres physical [mm].
@@ -1029,30 +1012,6 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   return md.str();
 }
 
-// `run --record FILE`: every tick's HIP, button and force, and the edit log.
-void write_recording(const Scene& scene, const SceneSetup& setup, const std::vector<sim::TraceRow>& trace,
-                     const std::string& path) {
-  Recording rec;
-  rec.scene_path = fs::absolute(scene.file).string();
-  std::ifstream in(scene.file, std::ios::binary);
-  std::ostringstream text;
-  text << in.rdbuf();
-  rec.scene_text = text.str();
-  rec.rate_hz = setup.hri.rate_hz;
-  rec.volume_crc32 = volume_crc32(setup.volume);
-  rec.ticks.reserve(trace.size());
-  for (const auto& r : trace) rec.ticks.push_back({r.t_s, r.hip_m, r.button, r.force_n, r.vhip_m, r.version, r.fault != 0});
-  if (setup.session) {
-    if (setup.session->log_dropped() > 0)
-      throw io::RecordingError(path + ": not written: the run applied " +
-                               std::to_string(setup.session->log().size() + setup.session->log_dropped()) +
-                               " edits, more than the " + std::to_string(setup.session->log_limit()) +
-                               " an edit log keeps (a recording without all of them would not replay)");
-    rec.edits = setup.session->log();
-  }
-  save_recording(path, rec);
-}
-
 }  // namespace
 
 session::Brush make_brush(const BrushSpec& b, const session::BrushTargets& defaults, const Vec3& centre_m,
@@ -1074,6 +1033,18 @@ session::Brush make_brush(const BrushSpec& b, const session::BrushTargets& defau
   return e;
 }
 
+
+io::Recording recording_header(const Scene& scene, const SceneSetup& setup) {
+  Recording rec;
+  rec.scene_path = fs::absolute(scene.file).string();
+  std::ifstream in(scene.file, std::ios::binary);
+  std::ostringstream text;
+  text << in.rdbuf();
+  rec.scene_text = text.str();
+  rec.rate_hz = setup.hri.rate_hz;
+  rec.volume_crc32 = volume_crc32(setup.volume);
+  return rec;
+}
 
 io::BrushSpec brush_at_tool(const Scene& scene, const engine::Volume& vol, const io::BrushSpec& b) {
   if (!(scene.hri.tool_radius_m > 0)) return b;
@@ -1198,68 +1169,72 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
 }
 
 namespace {
-RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
-  throw_if_stop_requested("start");
-  SceneSetup setup = setup_scene(scene, opt, log);
-  throw_if_stop_requested("engine set-up (samples computed, servo not started)");
-  RunMetrics& m = setup.metrics;
-  const engine::Volume& vol = setup.volume;
-  engine::VulkanContext& vk = *setup.vk;
-  const std::shared_ptr<const core::SampleField> field = setup.first;
-  const core::SampleField& truth = *setup.truth;
-  const bool any_finite = vol.finite_voxels > 0;
-
-  // Publish the samples: the servo reads them through the one publication point.
-  servo::TripleBuffer<core::SampleField> published;
-  published.publish(field);
-
-  // Device and servo.
-  const servo::HriParams hp = setup.hri;
-  const sim::TouchScript& script = setup.script;
-  const servo::WorkspaceTransform xf = setup.world_T_device;
-  Vec3 start_w, v0;
-  script.at(0.0, start_w, v0);
-  sim::SimDevice device(scene.device, xf.to_device(start_w));
-  servo::HriRenderer renderer(hp);
-  // Colgate and Schenkel's passivity bound for the scene's K, B and rate, with the damping
-  // at the handle b = device + hand damping [N s/m]: a stiffer wall may buzz (K = 1e6 N/m
-  // on the sphere at 1 kHz: 152 on/off flips). Warned in the log and reported.
-  m.k_bound_n_per_m = sim::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
-                                           hp.damping_n_s_per_m, 1.0 / hp.rate_hz);
-  m.k_above_bound = !(hp.stiffness_n_per_m <= m.k_bound_n_per_m);
-  if (m.k_above_bound)
-    log << "warning: stiffness " << hp.stiffness_n_per_m << " N/m is above the Colgate-Schenkel bound K_max = "
-        << "2 (b - |B|) / T = " << m.k_bound_n_per_m << " N/m (b = device + hand damping, B = servo damping, "
-        << "T = 1 / rate_hz): the contact may buzz; lower K or B, or raise the rate\n";
-  const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
-  const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
-
+// The servo simulation's progress line (a bar on a terminal, a line per quarter in a log),
+// and the stop check between ticks.
+std::function<void(long, long)> servo_progress(const RunOptions& opt) {
   const bool tty = opt.progress && ::isatty(STDERR_FILENO);
-  int last_quarter = -1;
-  auto progress = [&](long k, long total) {
+  auto last_quarter = std::make_shared<int>(-1);
+  return [tty, last_quarter, show = opt.progress](long k, long total) {
     throw_if_stop_requested("servo simulation, tick " + std::to_string(k) + " of " + std::to_string(total));
-    if (!opt.progress) return;
+    if (!show) return;
     const int pct = int(100 * k / total);
     if (tty) {
       std::cerr << "\rservo    [" << std::string(std::size_t(pct / 4), '#')
                 << std::string(std::size_t(25 - pct / 4), '.') << "] " << std::setw(3) << pct << "%  "
                 << k << "/" << total << " ticks" << (k == total ? "\n" : "") << std::flush;
-    } else if (pct / 25 != last_quarter) {  // not a terminal: a line per quarter
-      last_quarter = pct / 25;
+    } else if (pct / 25 != *last_quarter) {  // not a terminal: a line per quarter
+      *last_quarter = pct / 25;
       std::cerr << "servo    " << k << "/" << total << " ticks (" << pct << "%)\n";
     }
   };
-  std::optional<EditDriver> edits;
-  sim::TickHook hook;
-  if (setup.session) {
-    edits.emplace(scene, setup, published);
-    hook = [&edits](long k, sim::TraceRow& row) { (*edits)(k, row); };
-  }
-  const std::vector<sim::TraceRow> trace =
-      sim::run_headless(published, renderer, device, xf, script, hp.rate_hz, progress, 250, hook);
-  if (edits) edits->finish(long(trace.size()) - 1);
+}
 
-  // 5. Figures.
+// The scene in the live session's simulated mode: the servo, the edits and the recorder
+// clocked in simulated time on this thread (what the app and `run --live` run on threads).
+std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const RunOptions& opt,
+                                    servo::TripleBuffer<core::SampleField>& published, std::optional<EditDriver>& edits) {
+  const servo::HriParams& hp = setup.hri;
+  const servo::WorkspaceTransform& xf = setup.world_T_device;
+  const sim::TouchScript& script = setup.script;
+  Vec3 start_w, v0;
+  script.at(0.0, start_w, v0);
+  sim::SimDevice device(scene.device, xf.to_device(start_w));
+  servo::HriRenderer renderer(hp);
+  session::LiveSessionConfig lc;
+  lc.servo.rate_hz = hp.rate_hz;
+  lc.servo.world_T_device = xf;
+  if (edits) {
+    lc.drill = edits->drill();
+    lc.on_applied = [&edits](const EditEvent& e, const EditOutcome& o, session::EditSource src) { edits->on_applied(e, o, src); };
+  }
+  if (!opt.record_path.empty()) {
+    lc.record_path = opt.record_path;
+    lc.record_header = recording_header(scene, setup);
+  }
+  session::LiveSession live(setup.session.get(), published, renderer, std::move(lc));
+  session::SimulatedRun sr;
+  sr.device = &device;
+  sr.script = &script;
+  sr.world_T_device = xf;
+  if (edits) {
+    sr.button_down = scene.edits.button_down;
+    sr.after_tick = [&edits, &live](long k, sim::TraceRow& row) { (*edits)(live, k, row); };
+  }
+  sr.progress = servo_progress(opt);
+  std::vector<sim::TraceRow> trace = live.run_simulated(sr);
+  live.stop();  // the recording: end record, fsync, rename
+  return trace;
+}
+
+// The trace's figures into `m`: tick times, contact forces and their steps, the stroke and
+// lift-off, and the VHIP's surface error (against the edited volume a tick read, with edits).
+// Returns how many contact ticks found a surface (true distance; unfiltered data).
+std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, const SceneSetup& setup,
+                                    const EditDriver* edits, RunMetrics& m) {
+  const servo::HriParams& hp = setup.hri;
+  const sim::TouchScript& script = setup.script;
+  const core::SampleField& truth = *setup.truth;
+  const engine::Volume& vol = setup.volume;
   m.ticks = long(trace.size());
   std::vector<std::int64_t> ns;
   ns.reserve(trace.size());
@@ -1382,35 +1357,19 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   if (dir_pairs) m.force_dir_step_rms_deg = std::sqrt(dir2 / double(dir_pairs));
   if (raw_found) m.unfiltered_err_rms_m = std::sqrt(raw2 / double(raw_found));
 
-  if (m.contact_ticks == 0)
-    log << "no contact: the probe never touched the isosurface in " << m.ticks
-        << " ticks; the surface error is not known (null in summary.json)\n";
-  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, F vector "
-      << fmt(m.max_force_vector_step_n, 4) << " N (t = " << fmt(m.max_force_vector_step_t_s, 5) << " s), release "
-      << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
-      << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
+  return {found, raw_found};
+}
 
-  // 6. Outputs, each written whole or not at all (RunFolder has made and locked the folder).
-  const std::string dir = opt.out_dir;
-  throw_if_stop_requested("outputs (servo finished, no file written yet)");
-  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
-  if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
-  else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
-  throw_if_stop_requested("outputs (trace and plots written)");
-  if (scene.draw_plots) {
-    // The run's picture (ray-cast on the same Vulkan device); never throws.
-    // With edits the path is thinned (thin_path): the same picture serves as before.png.
-    const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
-                                              (fs::path(dir) / "surface.png").string(),
-                                              &vk, opt.device);
-    m.picture_drawn = pic.error.empty();
-    m.picture_note = m.picture_drawn ? pic.caption : pic.error;
-    if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
-  }
-  throw_if_stop_requested("outputs (trace, plots and picture written)");
-  if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
-  throw_if_stop_requested("outputs (all but summary.json and report.md written)");
-
+// The run's summary.json ("status": "complete": written last, once every other output is whole).
+nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
+                                    long raw_found, bool with_edits) {
+  const engine::Volume& vol = setup.volume;
+  const servo::HriParams& hp = setup.hri;
+  const sim::TouchScript& script = setup.script;
+  const bool any_finite = vol.finite_voxels > 0;
+  const bool paper = hp.variant == servo::Variant::kPaper;
+  const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
+  const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
   nlohmann::ordered_json j;
   j["status"] = "complete";
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
@@ -1442,7 +1401,6 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   j["gpu_vs_cpu"] = {{"gradient_max_abs_diff", m.max_abs_diff},
                      {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
                      {"gradient_max_rel_diff", m.max_rel_diff}};
-  const bool paper = hp.variant == servo::Variant::kPaper;
   j["servo"] = {{"algorithm", paper ? "HRI, the paper's Figure 2 as printed" : "HRI, robust variant (Figure 2 plus the departures in servo/hri.h)"},
                 {"variant", paper ? "paper" : "robust"},
                 {"rate_hz", hp.rate_hz},
@@ -1518,9 +1476,16 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
-  if (edits) j["edits"] = edits_json(m.edits, scene);
-  const std::string summary_text = j.dump(2) + "\n";
+  if (with_edits) j["edits"] = edits_json(m.edits, scene);
+  return j;
+}
 
+// The run's report.md.
+std::string report_markdown(const Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
+                            long raw_found, bool with_edits) {
+  const engine::Volume& vol = setup.volume;
+  const servo::HriParams& hp = setup.hri;
+  const bool paper = hp.variant == servo::Variant::kPaper;
   std::ostringstream md;
   md << "# isotouch run: " << scene.name << "\n\n";
   if (!scene.description.empty()) md << scene.description << "\n\n";
@@ -1624,7 +1589,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
      << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
      << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
      << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
-  if (edits) md << edits_markdown(m.edits, scene);
+  if (with_edits) md << edits_markdown(m.edits, scene);
   md << engine_markdown(m);
   if (m.picture_drawn)
     md << "## Where the probe touched\n\n![isosurface, probe path and contact points](surface.png)\n\n"
@@ -1637,8 +1602,67 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   else
     md << "Plots: " << m.plot_note << ".\n\n";
   md << "Files: `trace.csv` (one row per tick), `summary.json`, `plots.gp` (gnuplot script for the plots).\n";
-  write_file_atomic((fs::path(dir) / "report.md").string(), md.str());
-  if (!opt.record_path.empty()) write_recording(scene, setup, trace, opt.record_path);
+  return md.str();
+}
+
+RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  throw_if_stop_requested("start");
+  SceneSetup setup = setup_scene(scene, opt, log);
+  throw_if_stop_requested("engine set-up (samples computed, servo not started)");
+  RunMetrics& m = setup.metrics;
+  const engine::Volume& vol = setup.volume;
+  const std::shared_ptr<const core::SampleField> field = setup.first;
+  const servo::HriParams& hp = setup.hri;
+  const sim::TouchScript& script = setup.script;
+  // Colgate and Schenkel's passivity bound for the scene's K, B and rate, with the damping
+  // at the handle b = device + hand damping [N s/m]: a stiffer wall may buzz (K = 1e6 N/m
+  // on the sphere at 1 kHz: 152 on/off flips). Warned in the log and reported.
+  m.k_bound_n_per_m = sim::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+                                           hp.damping_n_s_per_m, 1.0 / hp.rate_hz);
+  m.k_above_bound = !(hp.stiffness_n_per_m <= m.k_bound_n_per_m);
+  if (m.k_above_bound)
+    log << "warning: stiffness " << hp.stiffness_n_per_m << " N/m is above the Colgate-Schenkel bound K_max = "
+        << "2 (b - |B|) / T = " << m.k_bound_n_per_m << " N/m (b = device + hand damping, B = servo damping, "
+        << "T = 1 / rate_hz): the contact may buzz; lower K or B, or raise the rate\n";
+
+  // Publish the samples: the servo reads them through the one publication point.
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(field);
+  std::optional<EditDriver> edits;
+  if (setup.session) edits.emplace(scene, setup);
+  const std::vector<sim::TraceRow> trace = simulate(scene, setup, opt, published, edits);
+  const auto [found, raw_found] = trace_figures(trace, setup, edits ? &*edits : nullptr, m);
+  if (m.contact_ticks == 0)
+    log << "no contact: the probe never touched the isosurface in " << m.ticks
+        << " ticks; the surface error is not known (null in summary.json)\n";
+  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, F vector "
+      << fmt(m.max_force_vector_step_n, 4) << " N (t = " << fmt(m.max_force_vector_step_t_s, 5) << " s), release "
+      << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
+      << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
+
+  // 6. Outputs, each written whole or not at all (RunFolder has made and locked the folder).
+  const std::string dir = opt.out_dir;
+  throw_if_stop_requested("outputs (servo finished, no file written yet)");
+  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
+  if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
+  else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+  throw_if_stop_requested("outputs (trace and plots written)");
+  if (scene.draw_plots) {
+    // The run's picture (ray-cast on the same Vulkan device); never throws.
+    // With edits the path is thinned (thin_path): the same picture serves as before.png.
+    const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
+                                              (fs::path(dir) / "surface.png").string(),
+                                              setup.vk.get(), opt.device);
+    m.picture_drawn = pic.error.empty();
+    m.picture_note = m.picture_drawn ? pic.caption : pic.error;
+    if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
+  }
+  throw_if_stop_requested("outputs (trace, plots and picture written)");
+  if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
+  throw_if_stop_requested("outputs (all but summary.json and report.md written)");
+
+  const std::string summary_text = summary_json(scene, setup, m, found, raw_found, edits.has_value()).dump(2) + "\n";
+  write_file_atomic((fs::path(dir) / "report.md").string(), report_markdown(scene, setup, m, found, raw_found, edits.has_value()));
   // Last: "complete" only once every other output is whole.
   write_file_atomic((fs::path(dir) / "summary.json").string(), summary_text);
   return m;

@@ -11,6 +11,7 @@
 #include "edit_session.h"
 #include "headless.h"
 #include "live_field.h"
+#include "record.h"
 #include "passes.h"
 #include "scene.h"
 #include "vk_context.h"
@@ -228,6 +229,10 @@ SceneSetup setup_scene(const io::Scene& scene, const RunOptions& options, std::o
 /// The tick after whose render an event at time t_s [s] is applied: the first tick k with
 /// k / rate_hz >= t_s (to 1e-9 tick).
 long edit_tick(double t_s, double rate_hz);
+
+/// The header of a recording of `scene` (format 3 once a LiveSession streams it): the scene
+/// file's path and text, the servo rate and the CRC-32 of the unedited volume.
+io::Recording recording_header(const io::Scene& scene, const SceneSetup& setup);
 
 /// Run one scene end to end and write its outputs into options.out_dir.
 /// @throws engine::VolumeError, SceneError, std::runtime_error with a clear reason.

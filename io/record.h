@@ -40,10 +40,11 @@ struct RecordedTick {
 };
 
 struct Recording {
-  /// 2: a simulated run (`isotouch run --record`), written whole at the end. 3: a live
-  /// session (`run --live --record`), streamed while it runs: ticks carry their measured
-  /// dt, and edits the servo tick count when they were applied. 1 (no VHIP, version or
-  /// volume checksum) is still read.
+  /// 3: a session::LiveSession's (`isotouch run --record`, simulated time, and `run --live
+  /// --record`), streamed while it runs: ticks carry their measured dt (0: the nominal
+  /// period), and edits the servo tick count when they were applied. 2 (a simulated run's,
+  /// written whole at the end by earlier versions) and 1 (no VHIP, version or volume
+  /// checksum) are still read.
   int format_version = 2;
   /// False: the file has no end record (a live session killed before it stopped); every
   /// whole line before the cut was read. Only format 3 files may be incomplete.

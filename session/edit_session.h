@@ -38,6 +38,7 @@ struct EditOutcome {
   session::LiveUpdateStats update;            ///< the snapshot update (zero if nothing changed)
   bool published = false;                    ///< a new snapshot was published
   double wall_ms = 0;                        ///< apply(), everything included [ms]
+  std::string error;                         ///< a LiveSession's listener only: apply() threw this (refused)
 };
 
 class EditSession {

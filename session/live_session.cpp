@@ -52,14 +52,18 @@ struct LiveSessionObs {
 
 LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
                          servo::HapticDeviceIO& device, LiveSessionConfig config)
+    : LiveSession(&edits, buffer, renderer, std::move(config)) {
+  servo::ServoThreadConfig c = cfg_.servo;
+  c.observer = this;
+  servo_ = std::make_unique<servo::ServoThread>(buffer, renderer, device, std::move(c));
+}
+
+LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+                         LiveSessionConfig config)
     : edits_(edits),
       buffer_(buffer),
+      renderer_(renderer),
       cfg_(std::move(config)),
-      servo_(buffer, renderer, device, [this] {
-        servo::ServoThreadConfig c = cfg_.servo;
-        c.observer = this;
-        return c;
-      }()),
       ticks_(std::size_t(std::max(2.0, std::ceil(std::clamp(cfg_.servo.rate_hz, 1.0, 1e5) * 2.0)))),
       servo_edits_(cfg_.edit_queue),
       api_edits_(cfg_.edit_queue) {
@@ -70,33 +74,36 @@ LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleFie
                                 " s is not in (0, 1]");
   if (cfg_.drill && cfg_.drill->every_ticks < 1)
     throw std::invalid_argument("live session: drill every_ticks must be >= 1");
-  edits_.set_log_limit(0);  // the session records its edits itself; memory stays bounded
+  if (edits_) edits_->set_log_limit(0);  // the session records its edits itself; memory stays bounded
   seen_size_ = 1u << 16;
   seen_ns_ = std::make_unique<std::atomic<std::int64_t>[]>(seen_size_);
   for (std::size_t i = 0; i < seen_size_; ++i) seen_ns_[i].store(-1, std::memory_order_relaxed);
   obs_store_ = std::make_unique<LiveSessionObs>();
-  if (!cfg_.record_path.empty()) {
-    cfg_.record_header.format_version = 3;
-    cfg_.record_header.ticks.clear();
-    cfg_.record_header.edits.clear();
-    part_path_ = cfg_.record_path + ".part";
-    // Refuse what cannot take a recording before anything runs (a directory, a socket...).
-    try {
-      io::classify_output(cfg_.record_path);
-    } catch (const io::OutputError& e) {
-      throw io::RecordingError(e.what());
-    }
-    fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-    if (fd_ < 0) throw io::RecordingError(os_error(part_path_, "cannot create the recording"));
-    try {
-      const std::string header = io::recording_header_line(cfg_.record_header, cfg_.record_path);
-      io::write_all(fd_, header.data(), header.size(), part_path_);
-      if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
-    } catch (...) {
-      ::close(fd_);
-      ::unlink(part_path_.c_str());
-      throw;
-    }
+  if (!cfg_.record_path.empty()) open_recording();
+}
+
+void LiveSession::open_recording() {
+  cfg_.record_header.format_version = 3;
+  cfg_.record_header.ticks.clear();
+  cfg_.record_header.edits.clear();
+  part_path_ = cfg_.record_path + ".part";
+  // Refuse what cannot take a recording before anything runs (a directory, a socket...).
+  try {
+    io::classify_output(cfg_.record_path);
+  } catch (const io::OutputError& e) {
+    throw io::RecordingError(e.what());
+  }
+  fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  if (fd_ < 0) throw io::RecordingError(os_error(part_path_, "cannot create the recording"));
+  try {
+    const std::string header = io::recording_header_line(cfg_.record_header, cfg_.record_path);
+    io::write_all(fd_, header.data(), header.size(), part_path_);
+    if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
+  } catch (...) {
+    ::close(fd_);
+    fd_ = -1;
+    ::unlink(part_path_.c_str());
+    throw;
   }
 }
 
@@ -110,20 +117,31 @@ LiveSession::~LiveSession() {
 }
 
 std::string LiveSession::start() {
+  if (!servo_) throw std::logic_error("live session: start() needs a device (this session is for run_simulated() only)");
+  if (simulated_) throw std::logic_error("live session: start() after run_simulated()");
   if (running_.exchange(true)) return "";
   start_ns_ = now_ns();
   stop_edits_.store(false);
   stop_recorder_.store(false);
   if (fd_ >= 0) record_thread_ = std::thread([this] { record_loop(); });
-  edit_thread_ = std::thread([this] { edit_loop(); });
-  return servo_.start();
+  if (edits_) edit_thread_ = std::thread([this] { edit_loop(); });
+  return servo_->start();
 }
 
-double LiveSession::elapsed_s() const { return double(now_ns() - start_ns_) * 1e-9; }
+std::int64_t LiveSession::clock_ns() const {
+  return simulated_ ? sim_now_ns_.load(std::memory_order_relaxed) : now_ns();
+}
+
+double LiveSession::elapsed_s() const { return double(clock_ns() - start_ns_) * 1e-9; }
 
 bool LiveSession::submit(const EditEvent& e) {
   requested_.fetch_add(1, std::memory_order_relaxed);
-  if (api_edits_.push(Request{e, now_ns()})) return true;
+  if (!edits_) {  // nothing to edit: refused, never queued
+    std::lock_guard lock(edits_mu_);
+    ++refused_;
+    return false;
+  }
+  if (api_edits_.push(Request{e, clock_ns()})) return true;
   dropped_edits_.fetch_add(1, std::memory_order_relaxed);
   return false;
 }
@@ -173,10 +191,11 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
   }
   if (fd_ >= 0 && !ticks_.push(r)) dropped_ticks_.fetch_add(1, std::memory_order_relaxed);
   publish_observed(r);
-  if (!cfg_.drill) return;
+  if (!cfg_.drill || !edits_) return;
   // The button drill at the VHIP (see ButtonDrill).
   const bool down = (r.buttons & 1u) != 0;
-  const double t = double(r.t_ns - start_ns_) * 1e-9;
+  // Simulated: the scene's clock k / rate exactly (as the timeline's); live: the servo's.
+  const double t = simulated_ ? double(r.k) / cfg_.servo.rate_hz : double(r.t_ns - start_ns_) * 1e-9;
   auto ask = [&](EditEvent::Kind kind, const Brush& b) {
     EditEvent e;
     e.kind = kind;
@@ -202,6 +221,44 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
 
 // ---------------------------------------------------------------- edit thread
 
+void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, bool rethrow) {
+  using Kind = EditEvent::Kind;
+  EditEvent& e = q.event;
+  // The tick after which it is applied: ticks from ticks_done on may read it.
+  e.tick = ticks_done;
+  if (source == EditSource::kApi && !simulated_) e.t_s = double(q.asked_ns - start_ns_) * 1e-9;
+  // Strokes nest: a stroke opened by one source while the other's is open joins it; only
+  // the outermost begin and end reach the history (one undo step).
+  if (e.kind == Kind::kBeginStroke && stroke_depth_++ > 0) return;
+  if (e.kind == Kind::kEndStroke && (stroke_depth_ == 0 || --stroke_depth_ > 0)) return;
+  EditOutcome out;
+  try {
+    out = edits_->apply(e, &buffer_);
+  } catch (const std::exception& ex) {
+    {
+      std::lock_guard lock(edits_mu_);
+      ++refused_;
+    }
+    if (rethrow) throw;
+    if (cfg_.on_applied) {
+      out.error = ex.what();
+      cfg_.on_applied(e, out, source);
+    }
+    return;
+  }
+  if (e.kind == Kind::kUndo || e.kind == Kind::kRedo) stroke_depth_ = 0;  // they end an open stroke
+  {
+    std::lock_guard lock(edits_mu_);
+    ++applied_;
+    applied_pending_.push_back(e);
+    if (out.published) {
+      ++publications_;
+      published_.emplace_back(edits_->current()->version, q.asked_ns);
+    }
+  }
+  if (cfg_.on_applied) cfg_.on_applied(e, out, source);
+}
+
 void LiveSession::edit_loop() {
   Request q;
   while (!stop_edits_.load(std::memory_order_acquire)) {
@@ -209,22 +266,7 @@ void LiveSession::edit_loop() {
     for (servo::SpscRing<Request>* ring : {&servo_edits_, &api_edits_}) {
       while (!stop_edits_.load(std::memory_order_relaxed) && ring->pop(q)) {
         any = true;
-        // The tick after which it is applied: ticks that start from now on may read it.
-        q.event.tick = servo_.ticks();
-        if (ring == &api_edits_) q.event.t_s = double(q.asked_ns - start_ns_) * 1e-9;
-        try {
-          const EditOutcome out = edits_.apply(q.event, &buffer_);
-          std::lock_guard lock(edits_mu_);
-          ++applied_;
-          applied_pending_.push_back(q.event);
-          if (out.published) {
-            ++publications_;
-            published_.emplace_back(edits_.current()->version, q.asked_ns);
-          }
-        } catch (const std::exception&) {
-          std::lock_guard lock(edits_mu_);
-          ++refused_;
-        }
+        apply_request(q, ring == &api_edits_ ? EditSource::kApi : EditSource::kButton, servo_->ticks(), false);
       }
     }
     if (!any) {
@@ -232,6 +274,62 @@ void LiveSession::edit_loop() {
       nanosleep(&ts, nullptr);
     }
   }
+}
+
+// ---------------------------------------------------------------- simulated mode
+
+void LiveSession::drain_simulated(long ticks_done) {
+  Request q;
+  // The API side first (a scene's timeline), then the button drill: the order `isotouch run`
+  // has always applied them in.
+  while (api_edits_.pop(q)) apply_request(q, EditSource::kApi, ticks_done, true);
+  while (servo_edits_.pop(q)) apply_request(q, EditSource::kButton, ticks_done, true);
+}
+
+std::vector<sim::TraceRow> LiveSession::run_simulated(const SimulatedRun& run) {
+  if (running_.load() || simulated_) throw std::logic_error("live session: run_simulated() on a session that ran");
+  if (!run.device || !run.script) throw std::invalid_argument("live session: run_simulated() needs a device and a script");
+  simulated_ = true;
+  start_ns_ = 0;
+  const double rate = cfg_.servo.rate_hz;
+  const long flush_ticks = std::max(1L, long(std::llround(cfg_.flush_interval_s * rate)));
+  const sim::TickHook hook = [&](long k, sim::TraceRow& row) {
+    servo::TickRecord r;
+    r.k = k;
+    r.t_ns = std::int64_t(std::llround(double(k) * 1e9 / rate));
+    r.dt_s = 0;  // the nominal period
+    r.hip_m = row.hip_m;
+    const double t = double(k) / rate;
+    for (const auto& iv : run.button_down)
+      if (t >= iv[0] && t < iv[1]) r.buttons = 1;
+    row.button = r.buttons != 0;
+    r.out.force_n = row.force_n;
+    r.out.vhip_m = row.vhip_m;
+    r.out.plane = row.plane;
+    r.out.penetration_m = row.penetration_m;
+    r.out.contact = row.contact;
+    r.out.plane_update = row.plane_update;
+    r.out.saturated = row.saturated;
+    r.out.fault = row.fault;
+    r.version = row.version;
+    sim_now_ns_.store(r.t_ns, std::memory_order_relaxed);
+    if (run.after_tick) run.after_tick(k, row);
+    on_tick(r);
+    sim_ticks_ = k + 1;
+    if (edits_) drain_simulated(k + 1);
+    if (fd_ >= 0 && sim_ticks_ % flush_ticks == 0) record_chunk(false);
+  };
+  std::vector<sim::TraceRow> trace = sim::run_headless(buffer_, renderer_, *run.device, run.world_T_device, *run.script,
+                                                       rate, run.progress, run.progress_every, hook);
+  if (edits_ && stroke_depth_ > 0) {  // a stroke left open (button still down at the end)
+    stroke_depth_ = 1;
+    Request q;
+    q.event.kind = EditEvent::Kind::kEndStroke;
+    q.event.t_s = double(sim_ticks_ - 1) / rate;
+    q.asked_ns = sim_now_ns_.load(std::memory_order_relaxed);
+    apply_request(q, EditSource::kEndOfRun, sim_ticks_, true);
+  }
+  return trace;
 }
 
 // ---------------------------------------------------------------- recorder thread
@@ -283,6 +381,12 @@ void LiveSession::record_loop() {
 // ---------------------------------------------------------------- stop
 
 void LiveSession::stop() {
+  if (simulated_) {
+    if (stopped_) return;
+    stopped_ = true;
+    finish_recording();
+    return;
+  }
   if (!running_.load() && fd_ >= 0) {  // never started: no recording to keep
     ::close(fd_);
     fd_ = -1;
@@ -291,13 +395,17 @@ void LiveSession::stop() {
   }
   if (!running_.load() || stopped_) return;
   stopped_ = true;
-  servo_.stop();  // the device's last force: an exact zero
+  servo_->stop();  // the device's last force: an exact zero
   stop_edits_.store(true, std::memory_order_release);
   if (edit_thread_.joinable()) edit_thread_.join();
   Request q;
   while (servo_edits_.pop(q) || api_edits_.pop(q)) dropped_edits_.fetch_add(1, std::memory_order_relaxed);
   stop_recorder_.store(true, std::memory_order_release);
   if (record_thread_.joinable()) record_thread_.join();
+  finish_recording();
+}
+
+void LiveSession::finish_recording() {
   if (fd_ < 0) return;
   if (record_error_.empty()) {
     try {
@@ -322,9 +430,13 @@ void LiveSession::stop() {
 
 LiveStats LiveSession::stats() const {
   LiveStats s;
-  s.ticks = servo_.ticks();
-  s.missed_deadlines = servo_.missed_deadlines();
-  s.faults = servo_.faults();
+  if (servo_) {
+    s.ticks = servo_->ticks();
+    s.missed_deadlines = servo_->missed_deadlines();
+    s.faults = servo_->faults();
+  } else {
+    s.ticks = sim_ticks_;
+  }
   s.edits_requested = requested_.load();
   s.edits_dropped = dropped_edits_.load();
   s.ticks_not_recorded = dropped_ticks_.load();

@@ -13,6 +13,13 @@
 //                (io/record.h, format 3) appended to FILE.part and fdatasync'ed; stop()
 //                writes the end record and renames FILE.part to FILE.
 //
+// Simulated mode (run_simulated(), what `isotouch run` uses): the same session without
+// threads, clocked in simulated time on the caller's thread, deterministically: each tick
+// runs through sim::run_headless (the one simulated tick loop) with a simulated device;
+// after the tick, the frame/API side (SimulatedRun::after_tick) may submit(); then the
+// queued edits are applied (API side first, then the button drill), so tick k + 1 reads
+// what tick k asked for; the recorder writes a chunk every flush interval of simulated time.
+//
 // Replay (`isotouch replay FILE`): each tick reads the snapshot version it read live, with
 // the dt it measured; edits are applied in the recorded order. A SIGKILLed session leaves
 // FILE.part, readable up to its last chunk (load_recording(..., allow_incomplete)).
@@ -26,7 +33,11 @@
 #include <thread>
 #include <vector>
 
+#include <array>
+#include <functional>
+
 #include "edit_session.h"
+#include "headless.h"
 #include "record.h"
 #include "renderer.h"
 #include "servo_thread.h"
@@ -44,6 +55,17 @@ struct ButtonDrill {
   long every_ticks = 1;
 };
 
+/// Where an applied edit came from.
+enum class EditSource : std::uint8_t {
+  kButton,    ///< the button drill at the VHIP (servo side)
+  kApi,       ///< submit(): the UI, a scene's timeline, a script
+  kEndOfRun,  ///< run_simulated() closing a stroke left open at the end
+};
+
+/// Called after each edit the session applies (or refuses, with `error` set), on the edit
+/// thread (live) or the caller's thread (simulated). Not real time.
+using EditListener = std::function<void(const EditEvent& e, const EditOutcome& outcome, EditSource source)>;
+
 struct LiveSessionConfig {
   servo::ServoThreadConfig servo;  ///< rate, real-time setup, world_T_device (observer: set by the session)
   std::optional<ButtonDrill> drill;
@@ -52,6 +74,22 @@ struct LiveSessionConfig {
   io::Recording record_header;     ///< scene path and text, rate, volume CRC (format set to 3)
   double flush_interval_s = 0.1;   ///< the recorder writes and fdatasyncs a chunk this often
   std::size_t edit_queue = 4096;   ///< requests each edit queue holds
+  EditListener on_applied;         ///< optional: sees every applied edit with its outcome
+};
+
+/// What run_simulated() clocks: a simulated device pulled by a scripted hand, at the
+/// servo rate of the session's config, to the script's end (sim::run_headless).
+struct SimulatedRun {
+  sim::SimDevice* device = nullptr;          ///< not owned
+  const sim::TouchScript* script = nullptr;  ///< not owned
+  servo::WorkspaceTransform world_T_device;
+  /// Button 0 is down on tick k when k / rate_hz is in some [t0, t1) [s].
+  std::vector<std::array<double, 2>> button_down;
+  /// After tick k's render and device step, before the edits of tick k are applied: sees
+  /// the volume that tick read; may submit() (the timeline) and set row.button.
+  sim::TickHook after_tick;
+  std::function<void(long, long)> progress;  ///< (ticks done, total) every progress_every ticks
+  long progress_every = 250;
 };
 
 /// What a frame loop reads without locks (a consistent copy of one tick).
@@ -85,6 +123,10 @@ class LiveSession final : private servo::TickObserver {
   ///         if the recording cannot be created (names the file).
   LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
               servo::HapticDeviceIO& device, LiveSessionConfig config);
+  /// A session for run_simulated() only (start() refuses: there is no device). `edits` may be
+  /// null: a session that only feels its published snapshot (submit() then refuses).
+  LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+              LiveSessionConfig config);
   ~LiveSession();  ///< stop()s if running
   LiveSession(const LiveSession&) = delete;
   LiveSession& operator=(const LiveSession&) = delete;
@@ -93,11 +135,20 @@ class LiveSession final : private servo::TickObserver {
   /// refused of the real-time setup ("" if nothing), as ServoThread::start.
   std::string start();
   /// Paused: zero force every tick (the servo keeps running, edits still apply).
-  void pause(bool paused) { servo_.pause(paused); }
+  void pause(bool paused) {
+    if (servo_) servo_->pause(paused);
+  }
   /// Stops the servo (its last force an exact zero), then the edit thread (requests still
   /// queued are dropped and counted), then the recorder (end record, fsync, rename).
   /// Idempotent. @throws io::RecordingError if the recording could not be completed.
   void stop();
+
+  /// Simulated mode: runs every tick of `run` on this thread (see the file comment), closes a
+  /// stroke left open, and returns the trace (one row per tick). Once per session, instead
+  /// of start(); stop() afterwards completes the recording. Edits that throw propagate.
+  /// @throws std::logic_error if the session was started or already ran; std::invalid_argument
+  ///         without a device or script; what an edit or the recorder throws.
+  std::vector<sim::TraceRow> run_simulated(const SimulatedRun& run);
 
   /// An edit from the UI or the API (one producer thread). Its tick and t_s are set when it
   /// is applied. False if the queue is full.
@@ -107,27 +158,43 @@ class LiveSession final : private servo::TickObserver {
   /// Time since start() on the servo's clock [s].
   double elapsed_s() const;
   LiveStats stats() const;  ///< after stop(): complete; while running: the counters only
+  /// The servo thread (its real-time set-up, period errors after stop()); null in a
+  /// session for run_simulated() only.
+  const servo::ServoThread* servo_thread() const { return servo_.get(); }
 
  private:
   struct Request {            // an edit on its way to the edit thread
     EditEvent event;
     std::int64_t asked_ns = 0;  // when it was asked for (tick start or submit())
   };
+  // Applies one request (stroke nesting, listener, counters); `rethrow`: simulated mode.
+  void apply_request(Request& q, EditSource source, long ticks_done, bool rethrow);
+  std::int64_t clock_ns() const;
   void on_tick(const servo::TickRecord& r) noexcept override;
   void edit_loop();
   void record_loop();
   void record_chunk(bool final);
   void publish_observed(const servo::TickRecord& r) noexcept;
 
-  EditSession& edits_;
+  void open_recording();
+  void finish_recording();  // end record, fsync, rename (after the producers stopped)
+  void drain_simulated(long ticks_done);
+
+  EditSession* edits_;  // null: nothing to edit
   servo::TripleBuffer<core::SampleField>& buffer_;
+  servo::Renderer& renderer_;
   LiveSessionConfig cfg_;
-  servo::ServoThread servo_;
+  std::unique_ptr<servo::ServoThread> servo_;  // null: simulated only
   servo::SpscRing<servo::TickRecord> ticks_;
   servo::SpscRing<Request> servo_edits_, api_edits_;
   std::atomic<bool> running_{false}, stop_edits_{false}, stop_recorder_{false};
   std::thread edit_thread_, record_thread_;
   std::int64_t start_ns_ = 0;
+  // Simulated mode: the simulated clock (start of the current tick) and ticks run.
+  bool simulated_ = false;
+  std::atomic<std::int64_t> sim_now_ns_{0};
+  long sim_ticks_ = 0;
+  int stroke_depth_ = 0;  // strokes opened by either source and not closed (edit thread only)
 
   // Servo-thread state (on_tick only).
   bool button_ = false;

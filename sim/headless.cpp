@@ -6,7 +6,7 @@
 
 namespace isotouch::sim {
 
-std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
+std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, servo::Renderer& renderer,
                                    SimDevice& device, const WorkspaceTransform& xf,
                                    const TouchScript& script, double rate_hz,
                                    const std::function<void(long, long)>& progress,
@@ -22,7 +22,7 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
     const Vec3 hip = xf.to_world(device.position());
 
     const auto t0 = clock::now();
-    const HriTick out = renderer.tick(*field, hip);
+    const HriTick out = renderer.tick(*field, hip);  // the nominal period
     const auto t1 = clock::now();
 
     device.command_force(out.force_n);
@@ -37,6 +37,7 @@ std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRender
     r.force_n = out.force_n;
     r.hand_target_m = tgt_w;
     r.penetration_m = out.penetration_m;
+    r.plane = out.plane;
     r.tick_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
     r.contact = out.contact;
     r.plane_update = out.plane_update;

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "hri.h"
+#include "renderer.h"
 #include "script.h"
 #include "sim_device.h"
 #include "triple_buffer.h"
@@ -28,6 +29,7 @@ struct TraceRow {
   bool fault = false;
   bool button = false;        ///< the device's button (set by the after-tick hook; false without one)
   std::uint64_t version = 0;  ///< SampleField::version of the snapshot this tick read
+  servo::VirtualPlane plane;  ///< the plane in use after this tick (HRI; invalid for the baselines)
 };
 
 /// Called after tick k's render (and the device step) with that tick's row, before tick
@@ -36,12 +38,12 @@ struct TraceRow {
 using TickHook = std::function<void(long k, TraceRow& row)>;
 
 /// Runs the script to its end at `rate_hz`. Each tick: acquire the newest published
-/// samples, read the device, time HriRenderer::tick with steady_clock, command the force
+/// samples, read the device, time Renderer::tick (nominal period) with steady_clock, command the force
 /// (held over the period), then advance the device. `progress(tick, total)` is called
 /// every `progress_every` ticks, outside the timed section. Throws std::runtime_error
 /// if nothing was ever published. `after_tick`, if set, is called at the end of every tick
 /// (TickHook); without it the loop is exactly what it was before hooks existed.
-std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, HriRenderer& renderer,
+std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, servo::Renderer& renderer,
                                    SimDevice& device, const WorkspaceTransform& world_T_device,
                                    const TouchScript& script, double rate_hz,
                                    const std::function<void(long, long)>& progress = {},

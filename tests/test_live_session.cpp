@@ -248,3 +248,123 @@ TEST(LiveSession, AnUnwritableRecordingIsRefusedUpFront) {
   }
   fs::remove_all(dir);
 }
+
+// ------------------------------------------------------------------ simulated mode
+
+namespace {
+
+// The rig's script and device, fresh: the same start every time.
+struct SimRig : Rig {
+  isotouch::session::SimulatedRun run() {
+    isotouch::session::SimulatedRun r;
+    r.device = device.get();
+    r.script = &script;
+    return r;
+  }
+};
+
+isotouch::session::ButtonDrill test_drill() {
+  isotouch::session::ButtonDrill d;
+  d.brush = carve({}).brush;
+  d.brush.kind = isotouch::session::BrushKind::kDrill;
+  d.brush.force_threshold_n = 0.0;
+  d.brush.rate = 1e6;
+  d.every_ticks = 5;
+  return d;
+}
+
+bool same(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+}  // namespace
+
+// Without edits the simulated session is the plain simulated tick loop: every row equals
+// sim::run_headless's on a second, identical rig, bit for bit.
+TEST(LiveSessionSimulated, WithoutEditsItIsTheHeadlessLoop) {
+  SimRig a, b;
+  LiveSession live(nullptr, a.buffer, *a.renderer, a.config());
+  const auto ta = live.run_simulated(a.run());
+  const auto tb = isotouch::sim::run_headless(b.buffer, *b.renderer, *b.device, {}, b.script, b.hp.rate_hz);
+  ASSERT_EQ(ta.size(), tb.size());
+  long contact = 0;
+  for (std::size_t k = 0; k < ta.size(); ++k) {
+    ASSERT_TRUE(same(ta[k].hip_m, tb[k].hip_m) && same(ta[k].force_n, tb[k].force_n) && same(ta[k].vhip_m, tb[k].vhip_m))
+        << "tick " << k;
+    contact += ta[k].contact;
+  }
+  EXPECT_GT(contact, 100) << "the script never touched the sphere: the comparison says little";
+  EXPECT_FALSE(live.submit(carve({}))) << "a session without an EditSession accepted an edit";
+  EXPECT_EQ(live.stats().ticks, long(ta.size()));
+}
+
+// The button drill in simulated time: what tick k asks for is applied before tick k + 1,
+// which reads its snapshot; two runs give the same trace and edits bit for bit; the
+// streamed recording holds every tick and every applied edit.
+TEST(LiveSessionSimulated, DrillEditsAreReadByTheNextTickDeterministically) {
+  const fs::path dir = temp_dir("isotouch-live-sim");
+  std::vector<std::vector<isotouch::sim::TraceRow>> traces;
+  std::vector<std::vector<std::pair<long, std::uint64_t>>> published(2);
+  for (int i = 0; i < 2; ++i) {
+    SimRig rig;
+    LiveSessionConfig c = rig.config(i == 0 ? (dir / "sim.rec").string() : "");
+    c.drill = test_drill();
+    c.on_applied = [&, i](const EditEvent& e, const isotouch::session::EditOutcome& o, isotouch::session::EditSource s) {
+      EXPECT_EQ(s, isotouch::session::EditSource::kButton);
+      if (o.published) published[std::size_t(i)].emplace_back(e.tick, rig.edits.current()->version);
+    };
+    LiveSession live(&rig.edits, rig.buffer, *rig.renderer, c);
+    auto run = rig.run();
+    run.button_down = {{0.05, 0.9}};
+    traces.push_back(live.run_simulated(run));
+    live.stop();
+    if (i == 0) {
+      const auto rec = isotouch::io::load_recording((dir / "sim.rec").string());
+      EXPECT_EQ(rec.format_version, 3);
+      EXPECT_EQ(rec.ticks.size(), traces[0].size());
+      EXPECT_EQ(long(rec.edits.size()), live.stats().edits_applied);
+    }
+  }
+  ASSERT_GT(published[0].size(), 5u) << "the drill published too few snapshots to test";
+  ASSERT_EQ(published[0], published[1]);
+  ASSERT_EQ(traces[0].size(), traces[1].size());
+  for (std::size_t k = 0; k < traces[0].size(); ++k)
+    ASSERT_TRUE(same(traces[0][k].force_n, traces[1][k].force_n) && traces[0][k].version == traces[1][k].version)
+        << "tick " << k;
+  // The drill asks on ticks 50 + 5 j (pressed at 0.05 s, every 5 ticks): each is applied
+  // right after the tick that asked (tick count k + 1), and the last snapshot published
+  // after tick k is what tick k + 1 reads.
+  for (std::size_t i = 0; i < published[0].size(); ++i) {
+    const auto [ticks_done, version] = published[0][i];
+    EXPECT_EQ((ticks_done - 1 - 50) % 5, 0) << "an edit asked for on a drill tick was applied " << ticks_done
+                                              << " ticks in: not right after the tick that asked";
+    if (i + 1 < published[0].size() && published[0][i + 1].first == ticks_done) continue;
+    ASSERT_LT(std::size_t(ticks_done), traces[0].size());
+    EXPECT_EQ(traces[0][std::size_t(ticks_done)].version, version) << "tick " << ticks_done;
+    EXPECT_LT(traces[0][std::size_t(ticks_done) - 1].version, version) << "tick " << ticks_done - 1 << " read it early";
+  }
+  fs::remove_all(dir);
+}
+
+// A stroke the API opens while the button's is open joins it and outlives the release: one
+// undo takes back the whole press and the API's carve after the release, every voxel.
+TEST(LiveSessionSimulated, StrokesFromBothSourcesNestIntoOneUndoStep) {
+  SimRig rig;
+  LiveSessionConfig c = rig.config();
+  c.drill = test_drill();
+  LiveSession live(&rig.edits, rig.buffer, *rig.renderer, c);
+  auto run = rig.run();
+  run.button_down = {{0.05, 0.9}};
+  run.after_tick = [&](long k, isotouch::sim::TraceRow&) {
+    EditEvent e;
+    if (k == 300) e.kind = EditEvent::Kind::kBeginStroke;
+    else if (k == 1000) e = carve(rig.vol.grid.to_world(Vec3{20, 20, 31}));  // after the release (0.9 s)
+    else if (k == 1200) e.kind = EditEvent::Kind::kEndStroke;
+    else return;
+    ASSERT_TRUE(live.submit(e));
+  };
+  live.run_simulated(run);
+  ASSERT_NE(rig.edits.volume().voxels, rig.vol.voxels) << "nothing was edited";
+  EditEvent undo;
+  undo.kind = EditEvent::Kind::kUndo;
+  rig.edits.apply(undo, &rig.buffer);
+  EXPECT_EQ(rig.edits.volume().voxels, rig.vol.voxels) << "one undo did not take back the whole nested stroke";
+}

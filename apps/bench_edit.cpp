@@ -483,7 +483,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       if (editing) start = std::make_unique<engine::Volume>(session.volume());
       {
         // The live session: its servo thread, and its edit thread applying what this thread
-        // submits (at most two edits in flight, so the edit thread never waits for work).
+        // submits, one at a time: edit-to-haptics is an edit's own, not a queue's.
         session::LiveSessionConfig lc;
         lc.servo = rig.config(std::size_t(o.rate_hz * o.seconds * 1.5) + 64);
         std::atomic<long> applied{0};
@@ -499,7 +499,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
         } else {
           long i = 0;
           while (now_ns() < t_end) {
-            if (i - applied.load(std::memory_order_acquire) >= 2) {
+            if (i - applied.load(std::memory_order_acquire) >= 1) {
               std::this_thread::sleep_for(std::chrono::microseconds(50));
               continue;
             }
@@ -718,8 +718,8 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   out << "\n## Sustained 5 mm edits while the servo runs at " << num(o.rate_hz, 0) << " Hz\n\n"
       << "Back-to-back 5 mm edits (carve, add, at new surface points) for " << o.seconds << " s, against the servo "
       << "with the engine idle for as long, in this process, both on a session::LiveSession (the servo thread, and "
-         "the edit thread applying what the bench submits, two edits in flight); edit-to-haptics from submit() to "
-         "the first tick reading the snapshot (queueing included); voxel changes counted by replaying the same "
+         "the edit thread applying what the bench submits, one edit in flight: the next is submitted when the last was applied); edit-to-haptics from submit() to "
+         "the first tick reading the snapshot; voxel changes counted by replaying the same "
          "edits on the CPU reference afterwards (a voxel changed twice counts twice).\n\n"
       << "| phase | round | length [s] | edits | edits/s | edit-to-haptics median [ms] | p99 [ms] | voxel changes | "
          "voxel changes/s | servo ticks | missed | missed per 10,000 | abs period error p99 [us] | p99.9 [us] | max [us] |\n"

@@ -58,7 +58,7 @@ class FieldView {
   /// SampleField keeps working). A bricked field (`f.bricks` set) is read through its brick
   /// table; a dense one with fewer samples than voxels gives an empty view.
   FieldView(const SampleField& f)  // NOLINT(google-explicit-constructor)
-      : grid_(f.grid), background_(f.background), version_(f.version) {
+      : grid_(f.grid), background_(f.background), version_(f.version), changed_(f.changed) {
     if (f.grid.empty()) return;
     if (f.bricks) {
       init_bricked(*f.bricks);
@@ -84,6 +84,8 @@ class FieldView {
   /// The snapshot's SampleField::version (an edit publishes version + 1; the
   /// renderers tell a new snapshot by it). 0 for a default-constructed view.
   std::uint64_t version() const { return version_; }
+  /// What changed since the previous version (SampleField::changed; unknown for a default view).
+  const SampleField::ChangedBox& changed() const { return changed_; }
   /// Reads a brick table (bricked field) rather than a dense array.
   bool bricked() const { return mode_ == Mode::kBricked || mode_ == Mode::kBrickedCompact; }
 
@@ -370,6 +372,7 @@ class FieldView {
   double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
   std::uint64_t version_ = 0;          ///< SampleField::version of the viewed snapshot
+  SampleField::ChangedBox changed_;   ///< SampleField::changed of the viewed snapshot
   // Bricked mode (BrickStore): the table, the tiles, the compact pool and its decoder.
   const std::uint32_t* table_ = nullptr;
   const Sample* tiles_ = nullptr;

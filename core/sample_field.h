@@ -202,6 +202,16 @@ struct SampleField {
   float background = std::numeric_limits<float>::quiet_NaN();
   /// The bricked representation (brick_field.h: make_bricked_field); null for a dense field.
   std::shared_ptr<const BrickStore> bricks;
+  /// The voxels whose samples may differ from the previous version's: index space, [lo, hi)
+  /// per axis. `known` false (the default: a first snapshot, a dense recompute): anything
+  /// may have changed. The live field sets it from the bricks whose published entries
+  /// changed; the servo leaves a new version that changed nothing near the probe alone.
+  struct ChangedBox {
+    std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
+    bool known = false;
+    bool empty() const { return lo[0] >= hi[0] || lo[1] >= hi[1] || lo[2] >= hi[2]; }
+  };
+  ChangedBox changed;
 
   bool bricked() const { return bricks != nullptr; }
 };

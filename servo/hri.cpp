@@ -392,6 +392,36 @@ bool HriRenderer::note_version(std::uint64_t version) {
   return changed;
 }
 
+bool HriRenderer::edit_reaches(const FieldView& field, const Vec3& hip) const {
+  const SampleField::ChangedBox& box = field.changed();
+  if (!box.known) return true;
+  if (box.empty()) return false;
+  // What this renderer read from the old snapshot lies within `reach` of the HIP, the VHIP
+  // or (free motion after a scan) the scan's centre: the values at the VHIP and the held
+  // plane, the planes of the tool's scan, the scan's clearance.
+  double reach = params_.tool_radius_m;
+  if (params_.tool_radius_m > 0 && scan_valid_) reach = std::max(reach, scan_clear_m_);
+  const Vec3& sp = field.grid().spacing_m;
+  const Vec3 r_idx{reach / sp.x, reach / sp.y, reach / sp.z};
+  Vec3 lo = field.grid().to_index(hip), hi = lo;
+  const auto take = [&](const Vec3& w) {
+    const Vec3 i = field.grid().to_index(w);
+    lo = {std::min(lo.x, i.x), std::min(lo.y, i.y), std::min(lo.z, i.z)};
+    hi = {std::max(hi.x, i.x), std::max(hi.y, i.y), std::max(hi.z, i.z)};
+  };
+  take(vhip_);
+  if (params_.tool_radius_m > 0 && scan_valid_) take(anchor_);
+  // A sample at voxel v is read for points within one cell of it: 2 voxels to spare.
+  const double a_lo[3] = {lo.x - r_idx.x, lo.y - r_idx.y, lo.z - r_idx.z};
+  const double a_hi[3] = {hi.x + r_idx.x, hi.y + r_idx.y, hi.z + r_idx.z};
+  for (int a = 0; a < 3; ++a) {
+    // Non-finite points (a fault) compare false: treated as reached.
+    if (a_hi[a] < double(box.lo[a]) - 2.0) return false;
+    if (a_lo[a] > double(box.hi[a] - 1) + 2.0) return false;
+  }
+  return true;
+}
+
 double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
   // The force VECTOR moves from the one sent the tick before toward the target by at most
   // one step (so neither |F| nor its direction can jump: a carve that tilts the surface
@@ -1043,7 +1073,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   if (!started_ || resync_) restart_at(hip);
   // Edits: a new snapshot version. Nothing read from the old snapshot
   // (the VHIP's cached value, the held plane's |grad|) is used on it.
-  const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version());
+  const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version()) && edit_reaches(field, hip);
   bool covered_free_vhip = false;  // a free VHIP outside in the old snapshot: a contact point now
   if (edited) {
     covered_free_vhip = !plane_.valid && vhip_value_known_ && !(excess(vhip_value_) > 0.0);

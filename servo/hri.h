@@ -336,6 +336,9 @@ class HriRenderer final : public Renderer {
                      HriTick& out);
   /// Edits: record the snapshot version of a sane tick; true if it differs from the last.
   bool note_version(std::uint64_t version);
+  /// A new snapshot changed samples this renderer reads (its FieldView::changed box within
+  /// reach of the HIP, the VHIP or the tool's scan); unknown boxes always reach.
+  bool edit_reaches(const FieldView& field, const Vec3& hip) const;
   /// Edits: limit the change of |F| from the tick before to one step, applied to `force`
   /// (its |F| = mag [N], after saturation); returns the |F| sent [N] and ends the slew when
   /// it reaches mag. Sets out.contact for a fade-out without a plane.

@@ -271,12 +271,14 @@ struct LiveField::Impl {
   /// publish can fail.
   std::shared_ptr<const core::SampleField> publish(std::unique_ptr<BrickStore> store, const std::shared_ptr<Arena>& a,
                                                    std::uint64_t v, const std::vector<std::uint32_t>& born,
-                                                   const std::vector<std::uint32_t>& retired) const {
+                                                   const std::vector<std::uint32_t>& retired,
+                                                   const core::SampleField::ChangedBox& changed = {}) const {
     std::shared_ptr<const BrickStore> sp(store.release(), StoreDeleter{});
     auto field = std::make_shared<core::SampleField>();
     field->grid = grid;
     field->background = opt.background;
     field->version = v;
+    field->changed = changed;
     field->bricks = sp;
     a->publish(v, born, retired);
     StoreDeleter* d = std::get_deleter<StoreDeleter>(sp);
@@ -562,15 +564,26 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
 
     // 4. Publish: a new store when an entry changed, else the same store under a new version.
     const std::uint64_t v = m.version + 1;
+    core::SampleField::ChangedBox box;  // the voxels of the bricks whose entries changed
+    box.known = true;
+    box.lo = {m.grid.dims[0], m.grid.dims[1], m.grid.dims[2]};
+    for (const Change& c : changes) {
+      const auto b = core::brick_coords(c.id, m.nb);
+      for (int a = 0; a < 3; ++a) {
+        box.lo[a] = std::min(box.lo[a], 8 * b[a]);
+        box.hi[a] = std::max(box.hi[a], std::min(8 * b[a] + 8, m.grid.dims[a]));
+      }
+    }
     if (fresh) m.old_arenas.reserve(m.old_arenas.size() + 1);  // no allocation after publishing
     std::shared_ptr<const core::SampleField> next;
     if (changes.empty() && !fresh) {
       auto f = std::make_shared<core::SampleField>(*m.cur);
       f->version = v;
+      f->changed = box;  // nothing
       next = std::move(f);
     } else {
       const std::shared_ptr<Arena>& a = fresh ? fresh : m.arena;
-      next = m.publish(m.make_store(*a, std::move(table), std::move(tiles)), a, v, born, retired);
+      next = m.publish(m.make_store(*a, std::move(table), std::move(tiles)), a, v, born, retired, box);
     }
     // Committed: nothing below throws.
     taken.clear();

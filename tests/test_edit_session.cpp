@@ -419,6 +419,7 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   // the servo failed to render; past the bone's middle it is where the drill removed bone.
   const auto rec = isotouch::io::load_recording(opt.record_path);
   ASSERT_EQ(rec.ticks.size(), trace.size());
+  ASSERT_EQ(rec.format_version, 3);
   isotouch::session::LiveFieldOptions lo;
   lo.passes = isotouch::app::scene_passes(scene);
   lo.iso = isotouch::core::Isosurface{scene.hri.tau, scene.hri.inside};
@@ -443,7 +444,9 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
       }
     }
     const std::uint64_t v0 = replica.current()->version;
-    for (; e < rec.edits.size() && rec.edits[e].tick == long(k); ++e) replica.apply(rec.edits[e], nullptr);
+    // Format 3: an edit's tick is the number of ticks run when it was applied (k + 1 for
+    // one applied after tick k), so tick k + 1 is the first that may read it.
+    for (; e < rec.edits.size() && rec.edits[e].tick == long(k) + 1; ++e) replica.apply(rec.edits[e], nullptr);
     versions_seen += replica.current()->version != v0;
   }
   EXPECT_GT(checked, 500);

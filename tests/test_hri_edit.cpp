@@ -537,3 +537,39 @@ TEST(HriEdit, AnEditTurnsASmallForceByAtMostTheTurnLimitPerTick) {
   EXPECT_GT(off, 20.0);
   EXPECT_GT(dot(last_on / norm(last_on), n), 0.9999);  // it still ends along the new normal
 }
+
+// An edit far from the probe (its snapshot's changed box more than the reach away) is not
+// an edit for the servo: no plane re-evaluation, no slew; the trace is bit for bit the one
+// without the new snapshot. The same snapshot with its box over the probe, or with no box
+// (unknown), is an edit (the plane is re-evaluated on that tick).
+TEST(HriEdit, AnEditFarFromTheProbeLeavesTheTraceAlone) {
+  const SampleField a = floor_at(0.010, 3);
+  ASSERT_GE(a.grid.dims[0], 24);
+  SampleField far = a;
+  far.version = 4;
+  // Material added in the corner brick, 8 voxels, far from the probe at (16, 16, ~8) voxels.
+  for (int z = 0; z < 4; ++z)
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 4; ++x) far.samples[a.grid.index(x, y, z + 20)].value = 1000.f;
+  far.changed = {{0, 0, 20}, {4, 4, 24}, true};
+  SampleField near = far, unknown = far;
+  near.changed = {{12, 12, 4}, {20, 20, 12}, true};
+  unknown.changed = {};
+  const auto same = [](const HriTick& x, const HriTick& y) {
+    return x.force_n.x == y.force_n.x && x.force_n.y == y.force_n.y && x.force_n.z == y.force_n.z &&
+           x.vhip_m.x == y.vhip_m.x && x.vhip_m.y == y.vhip_m.y && x.vhip_m.z == y.vhip_m.z &&
+           x.plane_update == y.plane_update && x.contact == y.contact;
+  };
+  const HipAt hip = press_to(0.0075);  // 2.5 mm into the floor, held
+  const int ticks = 400, edit = 203;   // not a plane-update tick of its own (n = 5)
+  HriRenderer r0(params()), r_far(params()), r_near(params()), r_unknown(params());
+  const auto t0 = drive(r0, ticks, [&](int) -> const SampleField& { return a; }, hip);
+  const auto t_far = drive(r_far, ticks, switch_at(a, far, edit), hip);
+  const auto t_near = drive(r_near, ticks, switch_at(a, near, edit), hip);
+  const auto t_unknown = drive(r_unknown, ticks, switch_at(a, unknown, edit), hip);
+  ASSERT_TRUE(t0[edit].contact) << "the probe must press on the floor when the edit comes";
+  for (int k = 0; k < ticks; ++k) ASSERT_TRUE(same(t0[k], t_far[k])) << "far edit, tick " << k;
+  EXPECT_FALSE(t0[edit].plane_update);
+  EXPECT_TRUE(t_near[edit].plane_update) << "an edit over the probe was not seen";
+  EXPECT_TRUE(t_unknown[edit].plane_update) << "a snapshot without a changed box was not an edit";
+}

@@ -397,6 +397,47 @@ TEST(LiveField, UnchangedBricksShareThePoolAndSmallEditsStaySmall) {
   }
 }
 
+// Each update's snapshot says which voxels may differ from the previous one (its changed
+// box): brute force over every voxel, every sample that differs lies inside it, and the box
+// is a small part of the grid. The first snapshot's box is unknown.
+TEST(LiveField, TheChangedBoxHoldsEverySampleThatChanged) {
+  Case c = cached("chest");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  EXPECT_FALSE(lf->current()->changed.known);
+  const auto& g = c.vol.grid;
+  std::mt19937 rng(5);
+  for (int k = 0; k < 4; ++k) {
+    const core::Vec3 centre = at(g, std::uniform_real_distribution<double>(0.2, 0.8)(rng), 0.22,
+                                 std::uniform_real_distribution<double>(0.3, 0.7)(rng));
+    const auto before = lf->current();
+    const session::BrushResult r =
+        session::apply_brush_cpu(c.vol, brush(c, BrushKind::kAdd, centre, 5e-3, 800));
+    const auto after = lf->update(c.vol, r.dirty);
+    const core::SampleField::ChangedBox& box = after->changed;
+    ASSERT_TRUE(box.known);
+    const core::FieldView v0(*before), v1(*after);
+    long changed = 0, outside = 0;
+    for (int z = 0; z < g.dims[2]; ++z)
+      for (int y = 0; y < g.dims[1]; ++y)
+        for (int x = 0; x < g.dims[0]; ++x) {
+          const core::Sample a = v0.voxel(x, y, z), b = v1.voxel(x, y, z);
+          if (std::memcmp(&a, &b, sizeof a) == 0) continue;
+          ++changed;
+          const bool in = x >= box.lo[0] && x < box.hi[0] && y >= box.lo[1] && y < box.hi[1] && z >= box.lo[2] &&
+                          z < box.hi[2];
+          outside += !in;
+        }
+    EXPECT_GT(changed, 0) << "edit " << k << " changed no sample";
+    EXPECT_EQ(outside, 0) << "edit " << k << ": changed samples outside the box";
+    const double box_voxels = double(box.hi[0] - box.lo[0]) * (box.hi[1] - box.lo[1]) * (box.hi[2] - box.lo[2]);
+    EXPECT_LT(box_voxels, 0.05 * double(g.voxel_count())) << "edit " << k << ": the box is most of the grid";
+  }
+  // An update that changes no sample publishes an empty box.
+  const auto same = lf->update(c.vol, {});
+  EXPECT_TRUE(same->changed.known && same->changed.empty());
+}
+
 // A snapshot held across many updates (slots retired and reused around it, its bricks
 // edited again and again) reads exactly what it read when it was published.
 TEST(LiveField, AHeldSnapshotReadsWhatItReadBefore) {

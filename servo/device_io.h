@@ -1,14 +1,74 @@
-// device_io.h - the device side of the servo loop (HAPI: updateDeviceValues / sendOutput).
+// device_io.h - the device side of the servo loop (HAPI: updateDeviceValues / sendOutput):
+// the device model (capabilities, status, one reading per tick) and its interface.
 #pragma once
 #include "core_names.h"
+#include <cmath>
 #include <cstdint>
+#include <limits>
+#include <string>
 
 #include "vec3.h"
 
 namespace isotouch::servo {
 
-/// A haptic device as the servo thread sees it. Both calls happen once per tick on the
-/// servo thread and must not allocate, lock or block.
+/// What a device can do. Device frame, SI units. Defaults: a device without limits (the
+/// simulated one): an infinite workspace, force and gains.
+struct DeviceCaps {
+  std::string name = "device";  ///< for messages ("Polhem v1", "isotouch-devemu", ...)
+  int dof = 3;                  ///< translational degrees of freedom with force
+  Vec3 workspace_min_m{-INFINITY, -INFINITY, -INFINITY};  ///< workspace box, device [m]
+  Vec3 workspace_max_m{INFINITY, INFINITY, INFINITY};
+  double max_force_n = INFINITY;              ///< largest |F| the device renders [N]
+  double max_stiffness_n_per_m = INFINITY;    ///< largest stable stiffness [N/m]
+  double max_damping_n_s_per_m = INFINITY;    ///< largest stable damping [N s/m]
+  double native_rate_hz = 0;                  ///< the device's own report rate [Hz] (0: the servo's)
+  int buttons = 0;                            ///< number of buttons
+  double position_resolution_m = 0;           ///< smallest position step [m] (0: continuous)
+  double watchdog_s = 0;                      ///< the device zeroes its force after this long without output [s] (0: none)
+
+  /// True if `p` [m, device] is finite and inside the workspace box.
+  bool contains(const Vec3& p) const {
+    return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && p.x >= workspace_min_m.x &&
+           p.y >= workspace_min_m.y && p.z >= workspace_min_m.z && p.x <= workspace_max_m.x &&
+           p.y <= workspace_max_m.y && p.z <= workspace_max_m.z;
+  }
+};
+
+/// The device's state as the servo sees it at a tick.
+enum class DeviceStatus : std::uint8_t {
+  kOk,            ///< a report arrived and the device reports no fault
+  kStale,         ///< no fresh report within the backend's own timeout
+  kDisconnected,  ///< the link is down (unplugged, emulator gone); the backend reconnects
+  kFault,         ///< the device reports a fault (or sent a report that is refused)
+};
+
+inline const char* to_string(DeviceStatus s) {
+  switch (s) {
+    case DeviceStatus::kOk: return "ok";
+    case DeviceStatus::kStale: return "stale";
+    case DeviceStatus::kDisconnected: return "disconnected";
+    case DeviceStatus::kFault: return "fault";
+  }
+  return "?";
+}
+
+/// One reading of the device: the newest report and when it arrived.
+struct DeviceReading {
+  Vec3 position_m;              ///< end effector, device [m]
+  std::uint32_t buttons = 0;    ///< bit i: button i down
+  DeviceStatus status = DeviceStatus::kOk;
+  /// CLOCK_MONOTONIC when the host received the report [ns]; 0: synchronous (the reading
+  /// is made by the call itself, always fresh: the simulated, null and playback devices).
+  std::int64_t received_ns = 0;
+  std::uint64_t sequence = 0;       ///< the report's sequence number (0: the protocol has none)
+  std::uint32_t device_time_us = 0; ///< the device's clock when it sent the report [us] (wraps)
+  /// Incremented when the link came back after a disconnect (the servo ramps the force in).
+  std::uint32_t connection = 0;
+};
+
+/// A haptic device as the servo thread sees it. read(), read_position_m(), buttons() and
+/// write_force_n() happen on the servo thread once per tick and must not allocate, lock,
+/// block or make a syscall (backends with I/O do it on their own threads).
 class HapticDeviceIO {
  public:
   virtual ~HapticDeviceIO() = default;
@@ -19,6 +79,21 @@ class HapticDeviceIO {
   virtual void write_force_n(const Vec3& force_n) = 0;
   /// The buttons as of the last read_position_m() (bit i: button i down); 0 without buttons.
   virtual std::uint32_t buttons() { return 0; }
+  /// The newest reading. Default: a synchronous device (read_position_m(), then buttons()).
+  virtual DeviceReading read() {
+    DeviceReading r;
+    r.position_m = read_position_m();
+    r.buttons = buttons();
+    return r;
+  }
+  /// What the device can do (any thread; fixed once the device is open).
+  virtual DeviceCaps caps() const { return {}; }
+  /// Force output on or off (off: the device is sent zero force with its enable flag
+  /// cleared). Any thread.
+  virtual void enable_force(bool on) { (void)on; }
+  /// The sequence number of the report the next write_force_n() answers (echoed in the
+  /// output report, so the device can measure report-to-force latency). Servo thread.
+  virtual void answer(std::uint64_t sequence) { (void)sequence; }
 };
 
 }  // namespace isotouch::servo

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 
 namespace isotouch::servo {
@@ -30,6 +31,32 @@ __attribute__((noinline)) void prefault_stack() {
   volatile unsigned char buf[kStackPrefaultBytes];
   for (std::size_t i = 0; i < sizeof(buf); i += 4096) buf[i] = 0;
   buf[sizeof(buf) - 1] = 0;
+}
+
+/// The status the servo acts on at tick start `t`: the device's own; stale when an
+/// asynchronous report is older than `stale_ns`; fault with `refused` set when an ok
+/// report's position is non-finite or outside the device's workspace box.
+DeviceStatus judge(const DeviceReading& d, std::int64_t t, std::int64_t stale_ns, const DeviceCaps& caps,
+                   bool& refused) {
+  refused = false;
+  if (d.status != DeviceStatus::kOk) return d.status;
+  if (d.received_ns != 0 && t - d.received_ns > stale_ns) return DeviceStatus::kStale;
+  if (!caps.contains(d.position_m)) {
+    refused = true;
+    return DeviceStatus::kFault;
+  }
+  return DeviceStatus::kOk;
+}
+
+/// `f` [N] scaled by the ramp factor in [0, 1] and clamped to |F| <= max_n (direction
+/// kept); a non-finite result is an exact zero.
+Vec3 ramp_and_clamp(const Vec3& f, double ramp, double max_n, bool& clamped) {
+  Vec3 out = f * ramp;
+  const double m = norm(out);
+  clamped = m > max_n;
+  if (clamped) out = out * (max_n / m);
+  if (!std::isfinite(out.x) || !std::isfinite(out.y) || !std::isfinite(out.z)) return {};
+  return out;
 }
 
 /// The last CPU in this thread's allowed set, or -1.
@@ -56,6 +83,8 @@ std::string ServoThread::start() {
   stop_.store(false);
   ready_.store(false);
   period_err_.clear();
+  caps_ = device_.caps();
+  device_.enable_force(true);
   thread_ = std::thread([this] { loop(); });
   ready_.wait(false, std::memory_order_acquire);  // the real-time setup is done
   return setup_note_;
@@ -63,7 +92,10 @@ std::string ServoThread::start() {
 
 void ServoThread::stop() {
   stop_.store(true, std::memory_order_relaxed);
-  if (thread_.joinable()) thread_.join();
+  if (thread_.joinable()) {
+    thread_.join();
+    device_.enable_force(false);
+  }
   if (locked_) {
     munlockall();
     locked_ = false;
@@ -136,6 +168,12 @@ void ServoThread::loop() {
   std::int64_t prev_start = -1;
   std::uint64_t last_version = 0;
   bool was_paused = false;
+  const std::int64_t stale_ns =
+      cfg_.stale_timeout_s > 0 ? std::int64_t(cfg_.stale_timeout_s * 1e9) : 2 * period;
+  const double ramp_ns = std::max(cfg_.ramp_in_s, 0.0) * 1e9;
+  std::int64_t ramp_start = -1;  // tick start of the ramp in progress; -1: (re)start it
+  std::uint32_t connection = 0;
+  bool first = true;
   while (!stop_.load(std::memory_order_relaxed)) {
     next += period;
     // Wait: sleep to just before the deadline, then spin (outside the tick).
@@ -173,18 +211,40 @@ void ServoThread::loop() {
       rec.t_ns = t;
       rec.dt_s = dt_s;
       rec.version = field->version;
-      const Vec3 x = device_.read_position_m();
-      rec.buttons = device_.buttons();
-      rec.hip_m = cfg_.world_T_device.to_world(x);
+      const DeviceReading d = device_.read();
+      if (first || d.connection != connection) ramp_start = -1;  // enabled, or reconnected
+      first = false;
+      connection = d.connection;
+      rec.buttons = d.buttons;
+      rec.hip_m = cfg_.world_T_device.to_world(d.position_m);
+      rec.report_ns = d.received_ns;
       rec.paused = paused;
-      if (paused) {
+      bool refused = false;
+      rec.device_status = judge(d, t, stale_ns, caps_, refused);
+      status_.store(std::uint8_t(rec.device_status), std::memory_order_relaxed);
+      if (rec.device_status != DeviceStatus::kOk) {
+        device_.write_force_n({});  // within this tick
+        count_not_ok(rec.device_status, refused);
+        ramp_start = -1;
+        was_paused = true;  // the renderer is reset before the next good tick
+      } else if (paused) {
         device_.write_force_n({});
         was_paused = true;
+        ramp_start = -1;  // resumed: ramp in again
       } else {
         if (was_paused) renderer_.reset();
         was_paused = false;
+        if (ramp_start < 0) {
+          ramp_start = t;
+          ramps_.fetch_add(1, std::memory_order_relaxed);
+        }
         rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
-        device_.write_force_n(rec.out.force_n);
+        const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
+        bool clamped = false;
+        rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);
+        if (clamped) clamped_.fetch_add(1, std::memory_order_relaxed);
+        device_.answer(d.sequence);
+        device_.write_force_n(rec.force_sent_n);
         if (rec.out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
       }
       if (cfg_.observer) cfg_.observer->on_tick(rec);
@@ -192,6 +252,24 @@ void ServoThread::loop() {
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }
   device_.write_force_n({});  // leave the device with no force
+}
+
+void ServoThread::count_not_ok(DeviceStatus s, bool refused) {
+  if (refused) refused_.fetch_add(1, std::memory_order_relaxed);
+  else if (s == DeviceStatus::kStale) stale_.fetch_add(1, std::memory_order_relaxed);
+  else if (s == DeviceStatus::kDisconnected) disconnected_.fetch_add(1, std::memory_order_relaxed);
+  else dev_fault_.fetch_add(1, std::memory_order_relaxed);
+}
+
+DeviceCounters ServoThread::device_counters() const {
+  DeviceCounters c;
+  c.stale = stale_.load(std::memory_order_relaxed);
+  c.disconnected = disconnected_.load(std::memory_order_relaxed);
+  c.fault = dev_fault_.load(std::memory_order_relaxed);
+  c.refused = refused_.load(std::memory_order_relaxed);
+  c.ramps = ramps_.load(std::memory_order_relaxed);
+  c.clamped = clamped_.load(std::memory_order_relaxed);
+  return c;
 }
 
 }  // namespace isotouch::servo

@@ -26,6 +26,12 @@ struct TickRecord {
   HriTick out;                ///< the renderer's answer (force, VHIP, plane, contact, fault)
   std::uint64_t version = 0;  ///< SampleField::version of the snapshot the tick read
   bool paused = false;        ///< paused: zero force sent, the renderer not ticked
+  /// The device's status as the servo judged it (stale: no report within the timeout;
+  /// fault: the device said so or the report was refused). Not ok: zero force was sent and
+  /// the renderer was not ticked.
+  DeviceStatus device_status = DeviceStatus::kOk;
+  Vec3 force_sent_n;          ///< what was written: out.force_n ramped in and clamped [N], device axes
+  std::int64_t report_ns = 0; ///< when the host received the report this tick read [ns] (0: synchronous)
 };
 
 /// Sees every tick on the servo thread, after the force was written. on_tick() runs inside
@@ -69,6 +75,23 @@ struct ServoThreadConfig {
   std::function<void()> on_thread_start;
   /// Sees every tick with a published snapshot (null: none). Not owned; must outlive the thread.
   TickObserver* observer = nullptr;
+  /// A report older than this at the start of a tick is stale: zero force that tick [s].
+  /// 0: two servo periods. Synchronous devices (DeviceReading::received_ns == 0) are never stale.
+  double stale_timeout_s = 0;
+  /// After the force is enabled (start()) and whenever the device comes back (ok again after
+  /// stale, disconnected, fault or a refused report; a reconnection) the force is scaled
+  /// from 0 to 1 linearly over this time, so a HIP inside the object gives no jolt [s].
+  double ramp_in_s = 0.05;
+};
+
+/// Counters of the device side of the servo (ticks unless said otherwise).
+struct DeviceCounters {
+  long stale = 0;         ///< ticks with no fresh report within the timeout
+  long disconnected = 0;  ///< ticks with the link down
+  long fault = 0;         ///< ticks the device reported a fault
+  long refused = 0;       ///< ticks whose report was refused (non-finite or outside the workspace)
+  long ramps = 0;         ///< force ramp-ins started (enable, recovery, reconnection)
+  long clamped = 0;       ///< ticks whose force was clamped to the device's maximum
 };
 
 /// Fixed-rate loop on CLOCK_MONOTONIC: sleep (clock_nanosleep, absolute, timer slack 1 ns)
@@ -82,6 +105,12 @@ struct ServoThreadConfig {
 /// flag is std::atomic. A tick that starts a whole period late counts as a missed
 /// deadline, and the schedule re-anchors on it (no burst of catch-up ticks). After the
 /// loop the device is sent an exact zero force.
+///
+/// Safety, every tick, before the renderer: a reading whose status is not ok, that is older
+/// than stale_timeout_s, or that is refused (non-finite or outside the device's workspace
+/// box) gives an exact zero force in that same tick and is counted (DeviceCounters); the
+/// renderer is not ticked and is reset before the next good tick. The force then ramps in
+/// over ramp_in_s, and |F| is clamped to DeviceCaps::max_force_n.
 class ServoThread {
  public:
   ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer, HapticDeviceIO& device,
@@ -107,6 +136,10 @@ class ServoThread {
   long faults() const { return faults_.load(std::memory_order_relaxed); }
   long snapshot_changes() const { return snapshot_changes_.load(std::memory_order_relaxed); }
   long empty_ticks() const { return empty_.load(std::memory_order_relaxed); }
+  /// The device side's counters (any thread; consistent per counter).
+  DeviceCounters device_counters() const;
+  /// The status the last tick judged (any thread).
+  DeviceStatus device_status() const { return DeviceStatus(status_.load(std::memory_order_relaxed)); }
   /// What the real-time setup got (valid after start()).
   bool got_fifo() const { return got_fifo_; }
   int pinned_cpu() const { return pinned_cpu_; }  ///< -1: not pinned
@@ -118,6 +151,7 @@ class ServoThread {
  private:
   void loop();
   std::string setup_realtime();
+  void count_not_ok(DeviceStatus s, bool refused);
   TripleBuffer<SampleField>& samples_;
   Renderer& renderer_;
   HapticDeviceIO& device_;
@@ -131,6 +165,9 @@ class ServoThread {
   bool locked_ = false;  // memory locked now (released by stop())
   int pinned_cpu_ = -1;
   std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
+  std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0};
+  std::atomic<std::uint8_t> status_{0};
+  DeviceCaps caps_;  // read once at start()
   std::thread thread_;
 };
 

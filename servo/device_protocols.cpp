@@ -1,0 +1,90 @@
+#include "device_protocols.h"
+
+#include <algorithm>
+#include <cstring>
+
+#include "hid_report.h"
+
+namespace isotouch::servo {
+
+std::string V1Protocol::handshake(ReportLink& link, DeviceCaps& caps) {
+  std::array<std::uint8_t, hid::kFeatureSize> buf{};
+  const int n = link.get_feature(hid::kFeatureId, buf);
+  if (n < 0) return "no capabilities feature report (is this an isotouch protocol v1 device?)";
+  if (hid::Decoded d = hid::decode_caps(std::span(buf.data(), std::size_t(n)), caps); !d) return d.error;
+  return {};
+}
+
+std::string V1Protocol::decode_input(std::span<const std::uint8_t> bytes, DeviceReading& r) {
+  hid::InputReport in;
+  if (hid::Decoded d = hid::decode(bytes, in); !d) return d.error;
+  r.position_m = in.position_m;
+  r.buttons = in.buttons;
+  r.sequence = in.sequence;
+  r.device_time_us = in.device_time_us;
+  r.status = (in.flags & (hid::kFault | hid::kNotHomed)) ? DeviceStatus::kFault : DeviceStatus::kOk;
+  return {};
+}
+
+std::size_t V1Protocol::encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
+                                      std::span<std::uint8_t> buf) {
+  hid::OutputReport o;
+  o.enable = enable;
+  o.sequence = ++sequence_;
+  o.answers = std::uint32_t(answers);
+  o.force_n = force_n;
+  const auto b = hid::encode(o);
+  std::copy(b.begin(), b.end(), buf.begin());
+  return b.size();
+}
+
+std::string PolhemProtocol::handshake(ReportLink& link, DeviceCaps& caps) {
+  (void)link;  // the Polhem has no feature report: its capabilities are polhem_v1's
+  caps = hid::polhem::caps();
+  return {};
+}
+
+std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, DeviceReading& r) {
+  hid::polhem::Input in;
+  if (hid::Decoded d = hid::polhem::decode(bytes, in); !d) return d.error;
+  encoders_.store(in.encoder);
+  r.position_m = hid::polhem::position_m(in.encoder);
+  r.buttons = in.encoder[3] > 5000 ? 1u : 0u;
+  r.status = DeviceStatus::kOk;
+  if (in.info == 1 && !calibrated_) calibrate_ = true;
+  if (in.info == 0) calibrated_ = false;
+  return {};
+}
+
+std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
+                                          std::span<std::uint8_t> buf) {
+  (void)answers;  // the Polhem's reports carry no sequence
+  const Vec3 amps = enable ? hid::polhem::motor_currents_a(force_n, encoders_.load()) : Vec3{};
+  const auto b = hid::polhem::encode_currents(amps);
+  buf[0] = 0;  // no report IDs: hidapi wants a leading 0
+  std::copy(b.begin(), b.end(), buf.begin() + 1);
+  return b.size() + 1;
+}
+
+std::size_t PolhemProtocol::pending_command(std::span<std::uint8_t> buf) {
+  if (!calibrate_) return 0;
+  calibrate_ = false;
+  calibrated_ = true;
+  const auto b = hid::polhem::encode_calibrate();
+  buf[0] = 0;
+  std::copy(b.begin(), b.end(), buf.begin() + 1);
+  return b.size() + 1;
+}
+
+std::unique_ptr<DeviceProtocol> protocol_for(std::uint16_t vid, std::uint16_t pid) {
+  if (vid == kV1Vid && pid == kV1Pid) return std::make_unique<V1Protocol>();
+  if (vid == hid::polhem::kVid && pid == hid::polhem::kPid) return std::make_unique<PolhemProtocol>();
+  return nullptr;
+}
+
+std::string protocol_name(std::uint16_t vid, std::uint16_t pid) {
+  const auto p = protocol_for(vid, pid);
+  return p ? p->name() : "";
+}
+
+}  // namespace isotouch::servo

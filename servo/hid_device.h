@@ -1,0 +1,50 @@
+// hid_device.h - haptic devices on USB HID through hidapi (hidraw backend): the link, the
+// device list, and opening a device by VID:PID[:serial] or by path.
+#pragma once
+#include "core_names.h"
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "report_device.h"
+
+namespace isotouch::servo {
+
+/// One HID device as hidapi lists it.
+struct HidInfo {
+  std::uint16_t vid = 0, pid = 0;
+  std::string serial, path, manufacturer, product;
+  std::string protocol;  ///< a protocol isotouch speaks ("isotouch-v1", "polhem") or ""
+};
+
+/// Every HID device hidapi sees (empty without hidraw devices). @throws std::runtime_error
+/// if hidapi cannot start.
+std::vector<HidInfo> list_hid_devices();
+
+/// "hid:VID:PID[:SERIAL]" (hex IDs) or "hid:PATH" (/dev/hidrawN) as a link.
+class HidLink final : public ReportLink {
+ public:
+  /// `path` non-empty: open by path; else by vid:pid and serial ("" = the first).
+  HidLink(std::uint16_t vid, std::uint16_t pid, std::string serial, std::string path);
+  ~HidLink() override;
+  std::string name() const override;
+  std::string open() override;
+  void close() override;
+  int read(std::span<std::uint8_t> buf, int timeout_ms) override;
+  bool write(std::span<const std::uint8_t> report) override;
+  int get_feature(std::uint8_t id, std::span<std::uint8_t> buf) override;
+
+ private:
+  std::uint16_t vid_, pid_;
+  std::string serial_, path_;
+  void* dev_ = nullptr;  // hid_device*
+};
+
+/// Parses "VID:PID[:SERIAL]" or "PATH" (starts with '/') and opens the device with the
+/// protocol its VID:PID names (by path: looked up in the device list). @throws
+/// std::invalid_argument on a bad spec or an unknown protocol, std::runtime_error if it
+/// cannot be opened (the message names it and says why: permissions, not present).
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec);
+
+}  // namespace isotouch::servo

@@ -1,0 +1,109 @@
+// hid_report.h - the HID reports of the devices isotouch drives: encode and decode only (no
+// I/O). Our own protocol v1 (docs/hid-protocol.md) and the Polhem (WoodenHaptics /
+// haptikfabriken) USB HID reports.
+#pragma once
+#include "core_names.h"
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+
+#include "device_io.h"
+#include "vec3.h"
+
+namespace isotouch::servo::hid {
+
+// ---------------------------------------------------------------------------------------
+// Protocol v1 (docs/hid-protocol.md). Little-endian; byte 0 is the report ID; the last two
+// bytes are a CRC-16/CCITT-FALSE of the bytes before them.
+// ---------------------------------------------------------------------------------------
+constexpr std::uint8_t kVersion = 1;
+constexpr std::uint8_t kInputId = 0x01;    ///< device -> host, every device period
+constexpr std::uint8_t kOutputId = 0x02;   ///< host -> device, every servo tick
+constexpr std::uint8_t kFeatureId = 0x03;  ///< capabilities (GET_FEATURE)
+constexpr std::size_t kInputSize = 32, kOutputSize = 28, kFeatureSize = 64;
+constexpr double kPositionUnitM = 1e-6;    ///< position: int32 micrometres
+constexpr double kForceUnitN = 1e-3;       ///< force: int32 millinewtons
+
+/// Input report status flags.
+enum InputFlags : std::uint16_t {
+  kForceEnabled = 1u << 0,  ///< the amplifiers are on
+  kFault = 1u << 1,         ///< the device detected a fault (over-current, encoder error)
+  kWatchdog = 1u << 2,      ///< no output report within the watchdog time: force zeroed
+  kNotHomed = 1u << 3,      ///< position not calibrated yet (refused by the host)
+};
+
+/// Device -> host: one position sample.
+struct InputReport {
+  std::uint16_t flags = 0;
+  std::uint32_t sequence = 0;        ///< +1 per report sent (wraps)
+  std::uint32_t device_time_us = 0;  ///< the device's clock at sampling [us] (wraps)
+  Vec3 position_m;                   ///< end effector, device frame [m]
+  std::uint32_t buttons = 0;         ///< bit i: button i down
+};
+
+/// Host -> device: the force to render until the next report.
+struct OutputReport {
+  bool enable = false;       ///< false: the device zeroes its force and keeps reporting
+  std::uint32_t sequence = 0;  ///< +1 per report the host sends (wraps)
+  std::uint32_t answers = 0;   ///< the input sequence the force was computed from
+  Vec3 force_n;              ///< device frame [N]
+};
+
+/// Why a report was refused ("" = accepted).
+struct Decoded {
+  std::string error;
+  explicit operator bool() const { return error.empty(); }
+};
+
+std::array<std::uint8_t, kInputSize> encode(const InputReport& r);
+/// Non-finite or out-of-range forces are encoded as zero with enable cleared.
+std::array<std::uint8_t, kOutputSize> encode(const OutputReport& r);
+/// Capabilities; the name is cut to 14 bytes.
+std::array<std::uint8_t, kFeatureSize> encode_caps(const DeviceCaps& c);
+
+/// Decoders: any bytes; a refused report says why (size, ID, version, CRC, range).
+Decoded decode(std::span<const std::uint8_t> bytes, InputReport& out);
+Decoded decode(std::span<const std::uint8_t> bytes, OutputReport& out);
+Decoded decode_caps(std::span<const std::uint8_t> bytes, DeviceCaps& out);
+
+std::uint16_t crc16(std::span<const std::uint8_t> bytes);
+
+// ---------------------------------------------------------------------------------------
+// Polhem (haptikfabriken / WoodenHaptics "PolhemUSB" firmware on an mbed LPC1768): USB HID
+// VID 0x1234 PID 0x0006, reports without ID, 14 bytes each way, little-endian int16:
+//   in:  encoder a, b, c, d, e, f [counts], info (1: calibration requested)
+//   out: motor current a, b, c [mA], command (0: currents, 1: set encoders), attr 0..2
+// The host computes position and motor currents with the "polhem_v1" kinematics of
+// haptikfabrikenapi (the WoodenHaptics serial chain, gravity constant 0). The firmware turns
+// the motors off 0.5 s after the last output report.
+// ---------------------------------------------------------------------------------------
+namespace polhem {
+constexpr std::uint16_t kVid = 0x1234, kPid = 0x0006;
+constexpr std::size_t kReportSize = 14;
+constexpr double kMaxCurrentA = 2.0;  ///< the host caps each motor here (ESCON 24/4)
+
+struct Input {
+  std::array<std::int16_t, 6> encoder{};
+  std::int16_t info = 0;
+};
+Decoded decode(std::span<const std::uint8_t> bytes, Input& out);
+std::array<std::uint8_t, kReportSize> encode(const Input& in);
+/// The 14 bytes of a current command (each clamped to +-kMaxCurrentA; non-finite: 0).
+std::array<std::uint8_t, kReportSize> encode_currents(const Vec3& amps);
+/// The calibration command: sets the encoder counters to the polhem_v1 calibration pose
+/// (sent when the device's info says its calibration switch was pressed).
+std::array<std::uint8_t, kReportSize> encode_calibrate();
+/// Decodes an output report's currents [A] (command 0 only).
+Decoded decode_currents(std::span<const std::uint8_t> bytes, Vec3& amps);
+
+/// Forward kinematics: encoder counts (a, b, c) -> position, device frame [m].
+Vec3 position_m(const std::array<std::int16_t, 6>& encoder);
+/// Jacobian transpose: force [N] at the end effector -> motor currents [A].
+Vec3 motor_currents_a(const Vec3& force_n, const std::array<std::int16_t, 6>& encoder);
+/// The Polhem v1's capabilities (workspace: a 0.2 m cube around its origin).
+DeviceCaps caps();
+}  // namespace polhem
+
+}  // namespace isotouch::servo::hid

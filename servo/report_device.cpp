@@ -1,0 +1,196 @@
+#include "report_device.h"
+
+#include <sys/prctl.h>
+#include <time.h>
+
+#include <array>
+#include <chrono>
+#include <stdexcept>
+
+namespace isotouch::servo {
+namespace {
+std::int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+void sleep_ns(std::int64_t ns) {
+  const timespec ts{time_t(ns / 1000000000LL), long(ns % 1000000000LL)};
+  nanosleep(&ts, nullptr);
+}
+constexpr std::size_t kMaxReport = 256;
+}  // namespace
+
+ReportDevice::ReportDevice(std::unique_ptr<ReportLink> link, std::unique_ptr<DeviceProtocol> protocol,
+                           ReportDeviceOptions options)
+    : link_(std::move(link)), protocol_(std::move(protocol)), opt_(options) {
+  DeviceReading r;
+  r.status = DeviceStatus::kDisconnected;
+  reading_.store(r);
+}
+
+ReportDevice::~ReportDevice() { close(); }
+
+void ReportDevice::open() {
+  if (reader_.joinable()) return;
+  if (std::string e = link_->open(); !e.empty()) throw std::runtime_error(link_->name() + ": " + e);
+  if (std::string e = protocol_->handshake(*link_, caps_); !e.empty()) {
+    link_->close();
+    throw std::runtime_error(link_->name() + ": " + e);
+  }
+  up_ = true;
+  stop_ = false;
+  reader_ = std::thread([this] { reader_loop(); });
+  writer_ = std::thread([this] { writer_loop(); });
+}
+
+void ReportDevice::close() {
+  if (!reader_.joinable()) return;
+  enabled_ = false;
+  stop_ = true;
+  writer_.join();  // its last report: a disabled zero force
+  reader_.join();
+  std::lock_guard lock(link_mu_);
+  link_->close();
+  up_ = false;
+}
+
+void ReportDevice::write_force_n(const Vec3& force_n) {
+  // Servo thread: one store into the latest-value cell, no syscall. Non-finite: zero.
+  const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
+  output_.store(Output{ok ? force_n : Vec3{}, answers_, ++writes_});
+}
+
+DeviceCaps ReportDevice::caps() const { return caps_; }
+
+LinkCounters ReportDevice::counters() const {
+  LinkCounters c;
+  c.reports = reports_.load(), c.garbage = garbage_.load(), c.gaps = gaps_.load();
+  c.duplicates = duplicates_.load(), c.reordered = reordered_.load(), c.disconnects = disconnects_.load();
+  c.reconnects = reconnects_.load(), c.writes = sent_.load(), c.write_errors = write_errors_.load();
+  return c;
+}
+
+std::string ReportDevice::last_error() const {
+  std::lock_guard lock(note_mu_);
+  return last_error_;
+}
+
+void ReportDevice::note(const std::string& error) {
+  std::lock_guard lock(note_mu_);
+  last_error_ = error;
+}
+
+void ReportDevice::link_down(const std::string& why) {
+  DeviceReading r = reading_.load();
+  r.status = DeviceStatus::kDisconnected;
+  reading_.store(r);  // the servo's next tick sends zero force
+  {
+    std::lock_guard lock(link_mu_);
+    up_ = false;
+    link_->close();
+  }
+  disconnects_.fetch_add(1);
+  note(link_->name() + ": link down (" + why + ")");
+}
+
+bool ReportDevice::reconnect() {
+  std::lock_guard lock(link_mu_);
+  if (!link_->open().empty()) return false;
+  DeviceCaps c;
+  if (!protocol_->handshake(*link_, c).empty()) {
+    link_->close();
+    return false;
+  }
+  up_ = true;
+  ++connection_;
+  have_sequence_ = false;  // a restarted device counts from anywhere
+  reconnects_.fetch_add(1);
+  return true;
+}
+
+void ReportDevice::accept(const DeviceReading& in) {
+  if (protocol_->sequenced()) {
+    const std::uint32_t seq = std::uint32_t(in.sequence);
+    const std::uint32_t step = seq - last_sequence_;  // modulo 2^32
+    if (have_sequence_ && step == 0) {
+      duplicates_.fetch_add(1);
+      return;
+    }
+    if (have_sequence_ && step > 0x80000000u) {
+      reordered_.fetch_add(1);
+      return;
+    }
+    if (have_sequence_ && step > 1) gaps_.fetch_add(long(step - 1));
+    last_sequence_ = seq;
+    have_sequence_ = true;
+  }
+  DeviceReading r = in;
+  r.received_ns = now_ns();
+  r.connection = connection_;
+  reading_.store(r);
+  reports_.fetch_add(1);
+}
+
+void ReportDevice::reader_loop() {
+  std::array<std::uint8_t, kMaxReport> buf{};
+  std::array<std::uint8_t, kMaxReport> cmd{};
+  const auto retry_ns = std::int64_t(opt_.reconnect_interval_s * 1e9);
+  while (!stop_.load()) {
+    if (!up_.load()) {
+      if (!reconnect()) sleep_ns(retry_ns);
+      continue;
+    }
+    const int n = link_->read(buf, 20);
+    if (n < 0) {
+      link_down("read failed or end of stream");
+      continue;
+    }
+    if (n == 0) continue;  // the servo judges staleness from received_ns
+    DeviceReading r;
+    if (std::string e = protocol_->decode_input(std::span(buf.data(), std::size_t(n)), r); !e.empty()) {
+      garbage_.fetch_add(1);
+      note(link_->name() + ": refused " + e);
+      continue;
+    }
+    accept(r);
+    if (const std::size_t m = protocol_->pending_command(cmd)) send(std::span(cmd.data(), m));
+  }
+}
+
+bool ReportDevice::send(std::span<const std::uint8_t> report) {
+  std::lock_guard lock(link_mu_);
+  if (!up_.load()) return false;
+  if (!link_->write(report)) {
+    write_errors_.fetch_add(1);
+    return false;
+  }
+  sent_.fetch_add(1);
+  return true;
+}
+
+void ReportDevice::writer_loop() {
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
+  std::array<std::uint8_t, kMaxReport> buf{};
+  const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
+  const auto keepalive_ns = std::int64_t(opt_.keepalive_s * 1e9);
+  std::uint64_t sent_count = 0;
+  std::int64_t last_send = 0;
+  while (!stop_.load()) {
+    const Output o = output_.load();
+    const bool enable = enabled_.load(std::memory_order_relaxed);
+    const std::int64_t t = now_ns();
+    if (o.count != sent_count || t - last_send >= keepalive_ns) {
+      // Disabled: a zero force with enable cleared (the device keeps reporting).
+      const std::size_t n = protocol_->encode_output(enable ? o.force_n : Vec3{}, enable, o.answers, buf);
+      send(std::span(buf.data(), n));
+      sent_count = o.count;
+      last_send = t;
+    }
+    sleep_ns(poll_ns);
+  }
+  const std::size_t n = protocol_->encode_output({}, false, 0, buf);
+  send(std::span(buf.data(), n));
+}
+
+}  // namespace isotouch::servo

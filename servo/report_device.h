@@ -1,0 +1,148 @@
+// report_device.h - a haptic device that talks in reports over a link (hidapi, or a
+// Unix-domain socket to isotouch-devemu): the link and protocol interfaces, and the device
+// with its reader and writer threads. The servo thread only touches two latest-value cells.
+#pragma once
+#include "core_names.h"
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+
+#include "device_io.h"
+#include "latest_value.h"
+
+namespace isotouch::servo {
+
+/// A byte link to a device: one whole report per read or write. Used by the device's
+/// reader and writer threads (never the servo's). Only the reader thread opens and closes.
+class ReportLink {
+ public:
+  virtual ~ReportLink() = default;
+  /// "hid:1234:0006", "emu:/tmp/devemu.sock" (for messages).
+  virtual std::string name() const = 0;
+  /// Opens or reopens the link; "" on success, else why not.
+  virtual std::string open() = 0;
+  virtual void close() = 0;
+  /// One report into `buf`, waiting at most `timeout_ms`: its size; 0 on timeout; -1 if
+  /// the link is down (EOF, unplugged).
+  virtual int read(std::span<std::uint8_t> buf, int timeout_ms) = 0;
+  /// Sends one report (byte 0: the report ID, 0 for devices without IDs). False if down.
+  virtual bool write(std::span<const std::uint8_t> report) = 0;
+  /// Reads feature report `id` into `buf` (byte 0 = id): its size, or -1.
+  virtual int get_feature(std::uint8_t id, std::span<std::uint8_t> buf) = 0;
+};
+
+/// How a device's reports are read and written. decode_input() runs on the reader thread,
+/// encode_output() on the writer thread (implementations keep shared state in atomics).
+class DeviceProtocol {
+ public:
+  virtual ~DeviceProtocol() = default;
+  virtual const char* name() const = 0;
+  /// Whether input reports carry sequence numbers (counted for gaps, duplicates, reordering).
+  virtual bool sequenced() const { return true; }
+  /// After (re)opening: reads the capabilities; "" or why the device is refused.
+  virtual std::string handshake(ReportLink& link, DeviceCaps& caps) = 0;
+  /// One input report -> `r` (position, buttons, sequence, device time, status); "" or
+  /// why it is refused (garbage).
+  virtual std::string decode_input(std::span<const std::uint8_t> bytes, DeviceReading& r) = 0;
+  /// The report that commands `force_n` [N, device] (enable false: zero force, disabled);
+  /// `answers`: the input sequence the force was computed from. Returns the size in `buf`.
+  virtual std::size_t encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
+                                    std::span<std::uint8_t> buf) = 0;
+  /// A report to send after decode_input() when the device asked for something (Polhem:
+  /// calibration); 0 = none.
+  virtual std::size_t pending_command(std::span<std::uint8_t> buf) {
+    (void)buf;
+    return 0;
+  }
+};
+
+/// Counters of the link (reader and writer threads; any thread may read).
+struct LinkCounters {
+  long reports = 0;     ///< input reports accepted
+  long garbage = 0;     ///< input reports refused by the protocol
+  long gaps = 0;        ///< input reports missing by their sequence numbers
+  long duplicates = 0;  ///< input reports with the sequence number of the previous one (dropped)
+  long reordered = 0;   ///< input reports older than one already accepted (dropped)
+  long disconnects = 0; ///< times the link went down
+  long reconnects = 0;  ///< times it came back
+  long writes = 0;      ///< output reports sent
+  long write_errors = 0;
+};
+
+struct ReportDeviceOptions {
+  double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
+  double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
+  double keepalive_s = 0.01;           ///< with nothing new to send, resend the last output this often [s]
+};
+
+/// A device behind a ReportLink and a DeviceProtocol. open() connects and reads the
+/// capabilities (failure: std::runtime_error naming the link and the reason); then a reader
+/// thread publishes each accepted input report (DeviceReading, received_ns = arrival) into a
+/// latest-value cell that read() loads, and a writer thread sends each force the servo
+/// wrote (polled every write_poll_us; the servo makes no syscall). A link that goes down
+/// publishes kDisconnected at once and is reopened every reconnect_interval_s; a reopened
+/// link increments DeviceReading::connection (the servo ramps the force in). Refused
+/// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
+/// reason is kept (last_error()).
+class ReportDevice final : public HapticDeviceIO {
+ public:
+  ReportDevice(std::unique_ptr<ReportLink> link, std::unique_ptr<DeviceProtocol> protocol,
+               ReportDeviceOptions options = {});
+  ~ReportDevice() override;  ///< close()
+  /// Connects, reads the capabilities, starts the threads. @throws std::runtime_error.
+  void open();
+  /// Sends a disabled zero force, stops the threads, closes the link. Idempotent.
+  void close();
+
+  // HapticDeviceIO (servo thread: loads and stores of latest-value cells only).
+  Vec3 read_position_m() override { return read().position_m; }
+  std::uint32_t buttons() override { return read().buttons; }
+  DeviceReading read() override { return reading_.load(); }
+  void write_force_n(const Vec3& force_n) override;
+  void answer(std::uint64_t sequence) override { answers_ = sequence; }
+  DeviceCaps caps() const override;
+  void enable_force(bool on) override { enabled_.store(on, std::memory_order_relaxed); }
+
+  LinkCounters counters() const;
+  std::string last_error() const;  ///< why the last report was refused or the link dropped ("" none)
+  std::string name() const { return link_->name(); }
+
+ private:
+  struct Output {
+    Vec3 force_n;
+    std::uint64_t answers = 0;
+    std::uint64_t count = 0;  // +1 per write_force_n()
+  };
+  void reader_loop();
+  void writer_loop();
+  bool reconnect();
+  void accept(const DeviceReading& r);
+  void link_down(const std::string& why);
+  void note(const std::string& error);
+  bool send(std::span<const std::uint8_t> report);
+
+  std::unique_ptr<ReportLink> link_;
+  std::unique_ptr<DeviceProtocol> protocol_;
+  ReportDeviceOptions opt_;
+  DeviceCaps caps_;
+  LatestValue<DeviceReading> reading_;
+  LatestValue<Output> output_;
+  std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
+  std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
+  std::uint32_t connection_ = 0;            // reader thread
+  std::uint32_t last_sequence_ = 0;         // reader thread
+  bool have_sequence_ = false;              // reader thread: last_sequence_ is set
+  mutable std::mutex link_mu_;              // open/close vs write (not the servo)
+  mutable std::mutex note_mu_;
+  std::string last_error_;
+  std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
+      reconnects_{0}, sent_{0}, write_errors_{0};
+  std::thread reader_, writer_;
+};
+
+}  // namespace isotouch::servo

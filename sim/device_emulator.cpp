@@ -1,0 +1,284 @@
+#include "device_emulator.h"
+
+#include <fcntl.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+#include "hid_report.h"
+
+namespace isotouch::sim {
+namespace {
+std::int64_t now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+void sleep_until(std::int64_t t) {
+  const timespec ts{time_t(t / 1000000000LL), long(t % 1000000000LL)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+constexpr std::size_t kSentRing = 1 << 14;
+}  // namespace
+
+DeviceEmulator::DeviceEmulator(EmuConfig config)
+    : cfg_(std::move(config)), dev_(cfg_.device, cfg_.path.empty() ? cfg_.hold_m : cfg_.path.front().p_m),
+      rng_(cfg_.faults.seed), sent_ns_(kSentRing, 0) {
+  if (!(cfg_.rate_hz >= 1 && cfg_.rate_hz <= 8000))
+    throw std::invalid_argument("device emulator: rate " + std::to_string(cfg_.rate_hz) + " Hz is not in [1, 8000]");
+  stats_.latency_us.reserve(std::size_t(std::max(1.0, cfg_.seconds) * cfg_.rate_hz) + 16);
+}
+
+DeviceEmulator::~DeviceEmulator() {
+  close_host();
+  close_listener();
+}
+
+void DeviceEmulator::listen() {
+  if (listen_fd_ >= 0) return;
+  sockaddr_un addr{};
+  if (cfg_.socket_path.empty() || cfg_.socket_path.size() >= sizeof(addr.sun_path))
+    throw std::runtime_error("device emulator: socket path '" + cfg_.socket_path + "' is empty or longer than " +
+                             std::to_string(sizeof(addr.sun_path) - 1) + " bytes");
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, cfg_.socket_path.c_str(), cfg_.socket_path.size() + 1);
+  ::unlink(cfg_.socket_path.c_str());
+  listen_fd_ = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+  if (listen_fd_ < 0 || ::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0 ||
+      ::listen(listen_fd_, 1) != 0) {
+    const std::string e = std::strerror(errno);
+    close_listener();
+    throw std::runtime_error("device emulator: cannot listen on " + cfg_.socket_path + ": " + e);
+  }
+}
+
+void DeviceEmulator::close_listener() {
+  if (listen_fd_ < 0) return;
+  ::close(listen_fd_);
+  listen_fd_ = -1;
+  ::unlink(cfg_.socket_path.c_str());
+}
+
+void DeviceEmulator::close_host() {
+  if (host_fd_ >= 0) ::close(host_fd_);
+  host_fd_ = -1;
+  enabled_ = false;
+  force_n_ = {};
+}
+
+void DeviceEmulator::accept_host() {
+  if (host_fd_ >= 0 || listen_fd_ < 0) return;
+  const int fd = ::accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC | SOCK_NONBLOCK);
+  if (fd < 0) return;
+  host_fd_ = fd;
+  last_output_ns_ = now_ns();
+  std::lock_guard lock(stats_mu_);
+  ++stats_.connections;
+}
+
+void DeviceEmulator::transmit(const std::uint8_t* b, std::size_t n) {
+  if (host_fd_ < 0) return;
+  if (::send(host_fd_, b, n, MSG_NOSIGNAL | MSG_DONTWAIT) < 0 && errno != EAGAIN) close_host();  // host gone
+}
+
+bool DeviceEmulator::chance(double p) {
+  return p > 0 && std::uniform_real_distribution<double>(0.0, 1.0)(rng_) < p;
+}
+
+Vec3 DeviceEmulator::hand_target(double t) const {
+  if (cfg_.path.empty()) {
+    const double s = cfg_.sine_amplitude_m * std::sin(2 * M_PI * cfg_.sine_hz * t);
+    return cfg_.hold_m + Vec3{0, 0, s};
+  }
+  const double span = cfg_.path.back().t_s - cfg_.path.front().t_s;
+  if (span > 0) t = cfg_.path.front().t_s + std::fmod(t, span);
+  const auto it = std::lower_bound(cfg_.path.begin(), cfg_.path.end(), t,
+                                   [](const PathPoint& p, double v) { return p.t_s < v; });
+  if (it == cfg_.path.begin()) return it->p_m;
+  if (it == cfg_.path.end()) return cfg_.path.back().p_m;
+  const PathPoint& a = *(it - 1);
+  const double u = it->t_s > a.t_s ? (t - a.t_s) / (it->t_s - a.t_s) : 1.0;
+  return a.p_m + (it->p_m - a.p_m) * u;
+}
+
+void DeviceEmulator::serve_host(std::int64_t now) {
+  std::array<std::uint8_t, 256> b{};
+  while (host_fd_ >= 0) {
+    const ssize_t n = ::recv(host_fd_, b.data(), b.size(), MSG_DONTWAIT);
+    if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) {
+      close_host();  // the host went away
+      return;
+    }
+    if (n < 0) return;
+    if (n == 1 && b[0] == servo::hid::kFeatureId) {  // GET_FEATURE: the capabilities
+      const auto caps = servo::hid::encode_caps(cfg_.caps);
+      transmit(caps.data(), caps.size());
+      continue;
+    }
+    servo::hid::OutputReport o;
+    std::lock_guard lock(stats_mu_);
+    if (!servo::hid::decode(std::span(b.data(), std::size_t(n)), o)) {
+      ++stats_.outputs_refused;
+      continue;
+    }
+    ++stats_.outputs_received;
+    last_output_ns_ = now;
+    watchdog_tripped_ = false;
+    enabled_ = o.enable;
+    force_n_ = o.enable ? o.force_n : Vec3{};
+    if (o.enable) stats_.max_force_n = std::max(stats_.max_force_n, norm(o.force_n));
+    std::int64_t& sent = sent_ns_[o.answers % kSentRing];
+    if (sent > 0) {
+      stats_.latency_us.push_back(double(now - sent) * 1e-3);
+      sent = 0;  // the first answer only
+    }
+  }
+}
+
+void DeviceEmulator::send_report(std::int64_t now, double t_s) {
+  servo::hid::InputReport r;
+  r.sequence = ++seq_;
+  r.device_time_us = std::uint32_t(std::int64_t(t_s * 1e6));
+  r.position_m = dev_.position();
+  r.flags = (enabled_ ? servo::hid::kForceEnabled : 0) | (watchdog_tripped_ ? servo::hid::kWatchdog : 0);
+  auto bytes = servo::hid::encode(r);
+  const EmuFaults& f = cfg_.faults;
+  std::lock_guard lock(stats_mu_);
+  if (chance(f.drop)) {
+    ++stats_.dropped;
+    return;
+  }
+  if (chance(f.garbage)) {
+    for (auto& x : bytes) x = std::uint8_t(rng_());
+    ++stats_.garbled;
+  } else {
+    sent_ns_[r.sequence % kSentRing] = now;
+  }
+  if (chance(f.delay)) {
+    pending_.push_back({now + std::int64_t(f.delay_ms * 1e6), bytes});
+    ++stats_.delayed;
+    return;
+  }
+  if (hold_next_) {  // the held report goes after this one: reordered
+    transmit(bytes.data(), bytes.size());
+    transmit(held_.bytes.data(), held_.bytes.size());
+    hold_next_ = false;
+    ++stats_.reports_sent;
+    return;
+  }
+  if (chance(f.reorder)) {
+    held_ = {now, bytes};
+    hold_next_ = true;
+    ++stats_.reordered;
+    return;
+  }
+  transmit(bytes.data(), bytes.size());
+  ++stats_.reports_sent;
+  if (chance(f.duplicate)) {
+    transmit(bytes.data(), bytes.size());
+    ++stats_.duplicated;
+  }
+}
+
+void DeviceEmulator::tick(std::int64_t now, double t_s) {
+  const EmuFaults& f = cfg_.faults;
+  if (f.disconnect_at_s >= 0 && t_s >= f.disconnect_at_s && !disconnected_) {
+    disconnected_ = true;
+    close_host();
+    close_listener();
+    std::lock_guard lock(stats_mu_);
+    stats_.disconnect_ns = now_ns();
+  }
+  if (disconnected_ && !relistened_ && f.reconnect_after_s >= 0 && t_s >= f.disconnect_at_s + f.reconnect_after_s) {
+    relistened_ = true;
+    listen();
+  }
+  accept_host();
+  serve_host(now);
+  // The device's own watchdog: no output report for the caps' watchdog time -> no force.
+  if (cfg_.caps.watchdog_s > 0 && enabled_ && now - last_output_ns_ > std::int64_t(cfg_.caps.watchdog_s * 1e9)) {
+    enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;
+    std::lock_guard lock(stats_mu_);
+    ++stats_.watchdog_trips;
+  }
+  const double T = 1.0 / cfg_.rate_hz;
+  dev_.command_force(force_n_);
+  const Vec3 a = hand_target(t_s + T), b = hand_target(t_s);
+  dev_.step(T, a, (a - b) / T);
+  const bool frozen = f.freeze_at_s >= 0 && t_s >= f.freeze_at_s && t_s < f.freeze_at_s + f.freeze_for_s;
+  if (host_fd_ >= 0 && !frozen) send_report(now, t_s);
+  for (auto it = pending_.begin(); it != pending_.end();) {  // delayed reports that are due
+    if (it->due_ns <= now) {
+      transmit(it->bytes.data(), it->bytes.size());
+      it = pending_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
+EmuStats DeviceEmulator::run() {
+  listen();
+  const auto period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
+  const std::int64_t start = now_ns();
+  std::int64_t next = start;
+  for (long k = 0; !stop_.load(); ++k) {
+    const double t_s = double(k) / cfg_.rate_hz;
+    if (cfg_.seconds > 0 && t_s >= cfg_.seconds) break;
+    next += period;
+    sleep_until(next);
+    const std::int64_t now = now_ns();
+    if (now - next > 10 * period) next = now;  // fell far behind (a stopped process): re-anchor
+    tick(now, t_s);
+  }
+  close_host();
+  close_listener();
+  return stats();
+}
+
+EmuStats DeviceEmulator::stats() const {
+  std::lock_guard lock(stats_mu_);
+  return stats_;
+}
+
+std::vector<PathPoint> load_path_csv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(path + ": cannot open the hand path");
+  std::vector<PathPoint> out;
+  std::string line;
+  std::getline(in, line);  // header
+  for (int no = 2; std::getline(in, line); ++no) {
+    if (line.empty()) continue;
+    std::istringstream s(line);
+    PathPoint p;
+    double v[4];
+    for (int i = 0; i < 4; ++i) {
+      std::string cell;
+      std::getline(s, cell, ',');
+      char* end = nullptr;
+      v[i] = std::strtod(cell.c_str(), &end);
+      if (cell.empty() || *end != '\0' || !std::isfinite(v[i]))
+        throw std::runtime_error(path + ":" + std::to_string(no) + ": column " + std::to_string(i + 1) + " ('" + cell +
+                                 "') is not a finite number (expected t_s,x_m,y_m,z_m)");
+    }
+    p.t_s = v[0];
+    p.p_m = Vec3{v[1], v[2], v[3]};
+    if (!out.empty() && !(p.t_s > out.back().t_s))
+      throw std::runtime_error(path + ":" + std::to_string(no) + ": time " + std::to_string(p.t_s) + " s does not increase");
+    out.push_back(p);
+  }
+  if (out.empty()) throw std::runtime_error(path + ": the hand path has no rows");
+  return out;
+}
+
+}  // namespace isotouch::sim

@@ -1,0 +1,118 @@
+// device_emulator.h - the firmware side of isotouch protocol v1, simulated: a point mass
+// pulled by the operator's hand (sim::SimDevice) on its own clock, serving one host at a
+// time over a Unix-domain SOCK_SEQPACKET socket, with injectable faults. isotouch-devemu is
+// this class behind a command line; tests and `bench device` run it on a thread.
+#pragma once
+#include "servo_names.h"
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "device_io.h"
+#include "sim_device.h"
+
+namespace isotouch::sim {
+
+/// Faults, each applied to every input report with its probability, or at a time [s of the
+/// emulator's clock since run() began].
+struct EmuFaults {
+  double drop = 0;        ///< probability a report is not sent
+  double duplicate = 0;   ///< probability a report is sent twice
+  double reorder = 0;     ///< probability a report is held back and sent after the next
+  double garbage = 0;     ///< probability random bytes are sent instead
+  double delay = 0;       ///< probability a report is sent delay_ms late
+  double delay_ms = 5;
+  double freeze_at_s = -1, freeze_for_s = 0;  ///< no reports at all in [at, at + for) (the link stays up)
+  double disconnect_at_s = -1;                ///< the connection and the socket close here
+  double reconnect_after_s = -1;              ///< ... and the socket listens again this much later (< 0: never)
+  std::uint32_t seed = 1;
+};
+
+/// One row of a scripted hand path (device frame).
+struct PathPoint {
+  double t_s = 0;
+  Vec3 p_m;
+};
+
+struct EmuConfig {
+  std::string socket_path;        ///< created (an old socket file there is replaced)
+  double rate_hz = 1000;          ///< the device's report rate, 1 to 8 kHz [Hz]
+  double seconds = 0;             ///< run this long; 0: until stop()
+  SimDeviceParams device;         ///< mass, damping, hand spring (force_max_n: the actuator)
+  /// The hand's target, device frame, looped by time; empty: hold `hold_m`.
+  std::vector<PathPoint> path;
+  Vec3 hold_m;                    ///< the hand's target without a path [m]
+  /// Without a path: the hand moves the target up and down by this much [m] at sine_hz.
+  double sine_amplitude_m = 0, sine_hz = 1;
+  servo::DeviceCaps caps;         ///< sent in the feature report (workspace, limits, rate)
+  EmuFaults faults;
+};
+
+/// What the emulator measured (after run() returned, or a copy while it runs).
+struct EmuStats {
+  long reports_sent = 0, outputs_received = 0, outputs_refused = 0, connections = 0;
+  long dropped = 0, duplicated = 0, reordered = 0, garbled = 0, delayed = 0;
+  long watchdog_trips = 0;
+  /// Report-to-force latency: from sending input report N to receiving the output report
+  /// that answers N [us], one per answered report (the first answer of each).
+  std::vector<double> latency_us;
+  double max_force_n = 0;          ///< largest |F| received with enable set [N]
+  std::int64_t disconnect_ns = 0;  ///< CLOCK_MONOTONIC when the timed disconnect closed the link (0: none)
+};
+
+/// The emulated device. run() blocks until `seconds` passed or stop() was called.
+class DeviceEmulator {
+ public:
+  explicit DeviceEmulator(EmuConfig config);
+  ~DeviceEmulator();
+  /// Creates the socket (std::runtime_error naming the path if it cannot) and listens; after
+  /// this returns a host can connect.
+  void listen();
+  /// The clock loop (calls listen() if it was not). Returns the statistics.
+  EmuStats run();
+  void stop() { stop_.store(true); }
+  /// Connection closed and the socket removed now (from another thread: a "kill").
+  EmuStats stats() const;
+
+ private:
+  struct Pending {
+    std::int64_t due_ns;
+    std::array<std::uint8_t, 32> bytes;
+  };
+  void tick(std::int64_t now, double t_s);
+  void serve_host(std::int64_t now);
+  void send_report(std::int64_t now, double t_s);
+  void transmit(const std::uint8_t* b, std::size_t n);
+  void accept_host();
+  void close_host();
+  void close_listener();
+  Vec3 hand_target(double t_s) const;
+  bool chance(double p);
+
+  EmuConfig cfg_;
+  SimDevice dev_;
+  int listen_fd_ = -1, host_fd_ = -1;
+  std::atomic<bool> stop_{false};
+  std::mt19937 rng_;
+  std::uint32_t seq_ = 0;
+  Vec3 force_n_;
+  bool enabled_ = false;
+  std::int64_t last_output_ns_ = 0;
+  bool watchdog_tripped_ = false, disconnected_ = false, relistened_ = false;
+  std::vector<std::int64_t> sent_ns_;  // by sequence % size
+  std::vector<Pending> pending_;       // delayed or held back reports
+  bool hold_next_ = false;
+  Pending held_{};
+  mutable std::mutex stats_mu_;
+  EmuStats stats_;
+};
+
+/// Reads a hand path CSV: a header line, then t_s,x_m,y_m,z_m rows (device frame), times
+/// increasing. @throws std::runtime_error naming the file, line and field.
+std::vector<PathPoint> load_path_csv(const std::string& path);
+
+}  // namespace isotouch::sim

@@ -76,9 +76,15 @@ std::string ReportDevice::last_error() const {
   return last_error_;
 }
 
-void ReportDevice::note(const std::string& error) {
+std::string ReportDevice::last_refusal() const {
+  std::lock_guard lock(note_mu_);
+  return last_refusal_;
+}
+
+void ReportDevice::note(const std::string& error, bool refusal) {
   std::lock_guard lock(note_mu_);
   last_error_ = error;
+  if (refusal) last_refusal_ = error;
 }
 
 void ReportDevice::link_down(const std::string& why) {
@@ -150,7 +156,7 @@ void ReportDevice::reader_loop() {
     DeviceReading r;
     if (std::string e = protocol_->decode_input(std::span(buf.data(), std::size_t(n)), r); !e.empty()) {
       garbage_.fetch_add(1);
-      note(link_->name() + ": refused " + e);
+      note(link_->name() + ": refused " + e, true);
       continue;
     }
     accept(r);

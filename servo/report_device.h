@@ -109,7 +109,8 @@ class ReportDevice final : public HapticDeviceIO {
   void enable_force(bool on) override { enabled_.store(on, std::memory_order_relaxed); }
 
   LinkCounters counters() const;
-  std::string last_error() const;  ///< why the last report was refused or the link dropped ("" none)
+  std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
+  std::string last_refusal() const;  ///< why the last refused report was refused ("" none)
   std::string name() const { return link_->name(); }
 
  private:
@@ -123,7 +124,7 @@ class ReportDevice final : public HapticDeviceIO {
   bool reconnect();
   void accept(const DeviceReading& r);
   void link_down(const std::string& why);
-  void note(const std::string& error);
+  void note(const std::string& error, bool refusal = false);
   bool send(std::span<const std::uint8_t> report);
 
   std::unique_ptr<ReportLink> link_;
@@ -139,7 +140,7 @@ class ReportDevice final : public HapticDeviceIO {
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
   mutable std::mutex link_mu_;              // open/close vs write (not the servo)
   mutable std::mutex note_mu_;
-  std::string last_error_;
+  std::string last_error_, last_refusal_;
   std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
       reconnects_{0}, sent_{0}, write_errors_{0};
   std::thread reader_, writer_;

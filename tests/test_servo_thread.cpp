@@ -191,3 +191,181 @@ TEST(ServoThread, PassesTheMeasuredPeriodToTheRenderer) {
   }
   EXPECT_GT(differs_from_nominal, 0) << "every dt was the nominal period: not measured";
 }
+
+// ---- Device safety: stale, refused, faults, ramp-in, clamp ----
+namespace {
+/// Pushes a constant force (0, 0, 1) N wherever the HIP is.
+class ConstantForce final : public Renderer {
+ public:
+  const char* name() const override { return "constant"; }
+  void reset() override { resets.fetch_add(1); }
+  HriTick tick(const FieldView&, const Vec3&, double) override {
+    HriTick t;
+    t.force_n = {0, 0, 1};
+    return t;
+  }
+  std::atomic<long> resets{0};
+};
+
+/// An asynchronous device the test steers: `fresh` reports arrive now, otherwise the last
+/// one ages; `status` and `position` are what the next report says.
+struct SteeredDevice final : HapticDeviceIO {
+  std::atomic<bool> fresh{true};
+  std::atomic<int> status{int(DeviceStatus::kOk)};
+  std::atomic<double> z{0.0};
+  std::atomic<std::uint32_t> connection{0};
+  std::atomic<std::int64_t> last_ns{0};
+  DeviceCaps c;
+  Vec3 read_position_m() override { return read().position_m; }
+  void write_force_n(const Vec3&) override {}
+  DeviceCaps caps() const override { return c; }
+  DeviceReading read() override {
+    DeviceReading r;
+    if (fresh.load()) last_ns.store(std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                         std::chrono::steady_clock::now().time_since_epoch()).count());
+    r.received_ns = last_ns.load();
+    r.status = DeviceStatus(status.load());
+    r.position_m = Vec3{0, 0, z.load()};
+    r.connection = connection.load();
+    return r;
+  }
+};
+
+/// Keeps every tick's report age, status and sent force (preallocated; read after stop()).
+struct TickLog final : TickObserver {
+  static constexpr std::size_t kMax = 8192;
+  std::array<std::int64_t, kMax> age_ns{};
+  std::array<DeviceStatus, kMax> status{};
+  std::array<double, kMax> force{};
+  std::atomic<std::size_t> n{0};
+  void on_tick(const TickRecord& r) noexcept override {
+    const std::size_t i = n.load(std::memory_order_relaxed);
+    if (i >= kMax) return;
+    age_ns[i] = r.t_ns - r.report_ns;
+    status[i] = r.device_status;
+    force[i] = norm(r.force_sent_n);
+    n.store(i + 1, std::memory_order_release);
+  }
+};
+
+struct SafetyRig {
+  TripleBuffer<SampleField> published;
+  ConstantForce renderer;
+  SteeredDevice dev;
+  TickLog log;
+  std::unique_ptr<ServoThread> servo;
+  explicit SafetyRig(double ramp_in_s = 0.0) {
+    published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+    dev.c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
+    dev.c.workspace_max_m = Vec3{0.1, 0.1, 0.1};
+    ServoThreadConfig cfg;
+    cfg.rate_hz = 1000;
+    cfg.sched_fifo = cfg.pin_cpu = cfg.lock_memory = false;
+    cfg.observer = &log;
+    cfg.ramp_in_s = ramp_in_s;
+    servo = std::make_unique<ServoThread>(published, renderer, dev, cfg);
+  }
+  void run_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
+};
+}  // namespace
+
+TEST(ServoSafety, AStaleReportGivesZeroForceInTheSameTick) {
+  SafetyRig rig;
+  rig.servo->start();
+  rig.run_ms(60);
+  rig.dev.fresh = false;  // the device stops reporting
+  rig.run_ms(60);
+  rig.dev.fresh = true;
+  rig.run_ms(60);
+  rig.servo->stop();
+  const std::size_t n = rig.log.n.load();
+  ASSERT_GT(n, 100u);
+  const std::int64_t timeout = 2'000'000;  // two periods at 1 kHz
+  long stale = 0, forced = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (rig.log.age_ns[i] > timeout) {
+      ++stale;
+      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i << ": a report " << rig.log.age_ns[i] << " ns old still forced";
+      EXPECT_EQ(rig.log.status[i], DeviceStatus::kStale) << "tick " << i;
+    } else if (rig.log.force[i] > 0) {
+      ++forced;
+    }
+  }
+  EXPECT_GT(stale, 30);   // the 60 ms without reports, less the timeout
+  EXPECT_GT(forced, 60);  // before and after
+  EXPECT_EQ(rig.servo->device_counters().stale, stale);
+  EXPECT_GE(rig.renderer.resets.load(), 1);  // contact state forgotten before force came back
+}
+
+TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {
+  SafetyRig rig;
+  rig.servo->start();
+  rig.run_ms(30);
+  rig.dev.z = NAN;
+  rig.run_ms(30);
+  rig.dev.z = 0.5;  // outside the +-0.1 m box
+  rig.run_ms(30);
+  rig.dev.z = 0.0;
+  rig.run_ms(30);
+  rig.servo->stop();
+  const DeviceCounters c = rig.servo->device_counters();
+  EXPECT_GT(c.refused, 40);
+  long refused_ticks = 0;
+  for (std::size_t i = 0; i < rig.log.n.load(); ++i)
+    if (rig.log.status[i] == DeviceStatus::kFault) {
+      ++refused_ticks;
+      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
+    }
+  EXPECT_EQ(refused_ticks, c.refused);
+}
+
+TEST(ServoSafety, DisconnectedOrFaultyDeviceGetsZeroForce) {
+  SafetyRig rig;
+  rig.servo->start();
+  rig.run_ms(30);
+  rig.dev.status = int(DeviceStatus::kDisconnected);
+  rig.run_ms(30);
+  rig.dev.status = int(DeviceStatus::kFault);
+  rig.run_ms(30);
+  rig.servo->stop();
+  const DeviceCounters c = rig.servo->device_counters();
+  EXPECT_GT(c.disconnected, 15);
+  EXPECT_GT(c.fault, 15);
+  for (std::size_t i = 0; i < rig.log.n.load(); ++i)
+    if (rig.log.status[i] != DeviceStatus::kOk) {
+      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
+    }
+}
+
+TEST(ServoSafety, ForceRampsInAfterEnableAndReconnection) {
+  SafetyRig rig(0.05);
+  rig.servo->start();
+  rig.run_ms(100);
+  rig.dev.connection = 1;  // the link came back
+  rig.run_ms(100);
+  rig.servo->stop();
+  const std::size_t n = rig.log.n.load();
+  ASSERT_GT(n, 150u);
+  EXPECT_LT(rig.log.force[0], 0.05);   // the first tick: nearly nothing
+  EXPECT_LT(rig.log.force[10], 0.35);  // 10 ms of 50
+  EXPECT_GT(rig.log.force[10], 0.05);
+  EXPECT_EQ(rig.log.force[80], 1.0);   // ramped in: the full force
+  for (std::size_t i = 1; i < 40; ++i) EXPECT_GE(rig.log.force[i], rig.log.force[i - 1]) << "tick " << i;
+  EXPECT_EQ(rig.servo->device_counters().ramps, 2);
+  // After the reconnection the force dropped and rose again.
+  double lowest_after = 1.0;
+  for (std::size_t i = 90; i < n; ++i) lowest_after = std::min(lowest_after, rig.log.force[i]);
+  EXPECT_LT(lowest_after, 0.1);
+}
+
+TEST(ServoSafety, ForceIsClampedToTheDeviceMaximum) {
+  SafetyRig clamped;  // the limit set before start (caps are read at start)
+  clamped.dev.c.max_force_n = 0.25;
+  clamped.servo->start();
+  clamped.run_ms(40);
+  clamped.servo->stop();
+  ASSERT_GT(clamped.log.n.load(), 20u);
+  for (std::size_t i = 0; i < clamped.log.n.load(); ++i) EXPECT_LE(clamped.log.force[i], 0.25 + 1e-12);
+  EXPECT_NEAR(clamped.log.force[clamped.log.n.load() - 1], 0.25, 1e-12);
+  EXPECT_GT(clamped.servo->device_counters().clamped, 20);
+}

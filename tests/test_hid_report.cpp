@@ -1,0 +1,194 @@
+// The report codecs: protocol v1 round trips (input, output, capabilities), every malformed
+// report refused with its reason, forces that cannot be encoded sent as a disabled zero; the
+// Polhem's 14-byte reports and kinematics (position, Jacobian transpose by virtual work).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "device_protocols.h"
+#include "hid_report.h"
+
+using namespace isotouch::core;
+using namespace isotouch::servo;
+using namespace isotouch::servo::hid;
+
+TEST(HidReport, InputRoundTripsAtMicrometreResolution) {
+  InputReport in;
+  in.flags = kForceEnabled | kWatchdog;
+  in.sequence = 0xFFFFFFF0u;
+  in.device_time_us = 123456789u;
+  in.position_m = Vec3{0.0123456, -0.0999999, 0.05};
+  in.buttons = 0x5;
+  const auto b = encode(in);
+  ASSERT_EQ(b.size(), kInputSize);
+  EXPECT_EQ(b[0], kInputId);
+  InputReport out;
+  ASSERT_TRUE(decode(b, out)) << decode(b, out).error;
+  EXPECT_EQ(out.flags, in.flags);
+  EXPECT_EQ(out.sequence, in.sequence);
+  EXPECT_EQ(out.device_time_us, in.device_time_us);
+  EXPECT_EQ(out.buttons, in.buttons);
+  EXPECT_NEAR(out.position_m.x, in.position_m.x, 0.5e-6);
+  EXPECT_NEAR(out.position_m.y, in.position_m.y, 0.5e-6);
+  EXPECT_NEAR(out.position_m.z, in.position_m.z, 0.5e-6);
+}
+
+TEST(HidReport, OutputRoundTripsAndNonFiniteForceIsADisabledZero) {
+  OutputReport o;
+  o.enable = true, o.sequence = 7, o.answers = 41, o.force_n = Vec3{1.234, -3.3, 0.0004};
+  OutputReport back;
+  ASSERT_TRUE(decode(encode(o), back));
+  EXPECT_TRUE(back.enable);
+  EXPECT_EQ(back.sequence, 7u);
+  EXPECT_EQ(back.answers, 41u);
+  EXPECT_NEAR(back.force_n.x, 1.234, 0.5e-3);
+  EXPECT_NEAR(back.force_n.y, -3.3, 0.5e-3);
+  EXPECT_EQ(back.force_n.z, 0.0);
+  for (double bad : {double(NAN), double(INFINITY), 1e12}) {
+    o.force_n = Vec3{1, bad, 1};
+    ASSERT_TRUE(decode(encode(o), back));
+    EXPECT_FALSE(back.enable) << bad;
+    EXPECT_EQ(back.force_n.x, 0.0);
+    EXPECT_EQ(back.force_n.y, 0.0);
+  }
+}
+
+TEST(HidReport, CapabilitiesRoundTrip) {
+  DeviceCaps c;
+  c.name = "a-very-long-device-name";
+  c.dof = 3, c.buttons = 2, c.native_rate_hz = 4000, c.watchdog_s = 0.05;
+  c.workspace_min_m = Vec3{-0.1, -0.08, -0.05};
+  c.workspace_max_m = Vec3{0.1, 0.08, 0.12};
+  c.max_force_n = 8.5, c.max_stiffness_n_per_m = 2500, c.max_damping_n_s_per_m = 12.5;
+  c.position_resolution_m = 2.5e-6;
+  DeviceCaps d;
+  ASSERT_TRUE(decode_caps(encode_caps(c), d));
+  EXPECT_EQ(d.name, "a-very-long-de");  // 14 bytes
+  EXPECT_EQ(d.dof, 3);
+  EXPECT_EQ(d.buttons, 2);
+  EXPECT_EQ(d.native_rate_hz, 4000);
+  EXPECT_DOUBLE_EQ(d.watchdog_s, 0.05);
+  EXPECT_NEAR(d.workspace_min_m.y, -0.08, 1e-9);
+  EXPECT_NEAR(d.workspace_max_m.z, 0.12, 1e-9);
+  EXPECT_DOUBLE_EQ(d.max_force_n, 8.5);
+  EXPECT_DOUBLE_EQ(d.max_stiffness_n_per_m, 2500);
+  EXPECT_DOUBLE_EQ(d.max_damping_n_s_per_m, 12.5);
+  EXPECT_NEAR(d.position_resolution_m, 2.5e-6, 1e-15);
+  // Unbounded limits stay unbounded.
+  DeviceCaps inf;
+  inf.max_force_n = 5;
+  ASSERT_TRUE(decode_caps(encode_caps(inf), d));
+  EXPECT_TRUE(std::isinf(d.max_stiffness_n_per_m));
+  EXPECT_TRUE(std::isinf(d.workspace_max_m.x));
+}
+
+TEST(HidReport, MalformedReportsAreRefusedWithTheirReason) {
+  InputReport in;
+  in.position_m = Vec3{0.01, 0.02, 0.03};
+  const auto good = encode(in);
+  InputReport out;
+  auto why = [&](std::vector<std::uint8_t> b) { return decode(b, out).error; };
+  std::vector<std::uint8_t> b(good.begin(), good.end());
+  EXPECT_NE(why({b.begin(), b.end() - 1}).find("31 bytes, expected 32"), std::string::npos);
+  EXPECT_NE(why({}).find("0 bytes"), std::string::npos);
+  auto id = b;
+  id[0] = 9;
+  EXPECT_NE(why(id).find("report ID 9"), std::string::npos);
+  auto ver = b;
+  ver[1] = 2;
+  EXPECT_NE(why(ver).find("protocol version 2"), std::string::npos);
+  for (std::size_t i = 2; i < b.size(); ++i) {  // any flipped bit: the CRC catches it
+    auto flip = b;
+    flip[i] ^= 0x10;
+    EXPECT_NE(why(flip).find("CRC"), std::string::npos) << "byte " << i;
+  }
+  OutputReport o;
+  EXPECT_FALSE(decode(std::vector<std::uint8_t>(good.begin(), good.end()), o));  // an input is not an output
+  DeviceCaps caps;
+  caps.max_force_n = 0;
+  DeviceCaps back;
+  EXPECT_NE(decode_caps(encode_caps(caps), back).error.find("maximum force 0 N"), std::string::npos);
+}
+
+TEST(HidReport, V1ProtocolMapsFlagsToStatus) {
+  V1Protocol p;
+  InputReport in;
+  DeviceReading r;
+  in.flags = kForceEnabled;
+  ASSERT_EQ(p.decode_input(encode(in), r), "");
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  in.flags = kFault;
+  ASSERT_EQ(p.decode_input(encode(in), r), "");
+  EXPECT_EQ(r.status, DeviceStatus::kFault);
+  in.flags = kNotHomed;
+  ASSERT_EQ(p.decode_input(encode(in), r), "");
+  EXPECT_EQ(r.status, DeviceStatus::kFault);
+  std::array<std::uint8_t, 64> buf{};
+  const std::size_t n = p.encode_output(Vec3{1, 2, 3}, true, 99, buf);
+  OutputReport o;
+  ASSERT_TRUE(decode(std::span(buf.data(), n), o));
+  EXPECT_EQ(o.answers, 99u);
+  EXPECT_EQ(o.sequence, 1u);
+  EXPECT_NEAR(o.force_n.z, 3.0, 1e-9);
+}
+
+TEST(Polhem, ReportsRoundTripAndCurrentsAreCapped) {
+  polhem::Input in;
+  in.encoder = {100, -200, 300, 5001, -5, 6};
+  in.info = 1;
+  polhem::Input out;
+  ASSERT_TRUE(polhem::decode(polhem::encode(in), out));
+  EXPECT_EQ(out.encoder, in.encoder);
+  EXPECT_EQ(out.info, 1);
+  auto bad = polhem::encode(in);
+  bad[12] = 7;
+  EXPECT_NE(polhem::decode(bad, out).error.find("info 7"), std::string::npos);
+  EXPECT_FALSE(polhem::decode(std::vector<std::uint8_t>(15, 0), out));
+  Vec3 amps;
+  ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{0.5, -9, NAN}), amps));
+  EXPECT_DOUBLE_EQ(amps.x, 0.5);
+  EXPECT_DOUBLE_EQ(amps.y, -polhem::kMaxCurrentA);  // capped
+  EXPECT_DOUBLE_EQ(amps.z, 0.0);                    // non-finite: no current
+  EXPECT_FALSE(polhem::decode_currents(polhem::encode_calibrate(), amps));  // a command, not currents
+}
+
+TEST(Polhem, JacobianTransposeMatchesVirtualWork) {
+  // tau . dq = F . dx: the currents times the torque constant, mapped back through the
+  // capstan ratios, are the work per count of each motor.
+  const std::array<std::int16_t, 6> e{150, -400, 900, 0, 0, 0};
+  const Vec3 f{1.0, -0.5, 2.0};
+  const Vec3 amps = polhem::motor_currents_a(f, e);
+  const double kt = 0.0538, step = 2 * M_PI / 2000;  // [N m / A], motor radians per count
+  for (int j = 0; j < 3; ++j) {
+    auto ep = e, em = e;
+    ep[std::size_t(j)] += 1, em[std::size_t(j)] -= 1;
+    const Vec3 dx = (polhem::position_m(ep) - polhem::position_m(em)) / 2.0;  // per count
+    const double work = dot(f, dx);
+    const double a = j == 0 ? amps.x : j == 1 ? amps.y : amps.z;
+    EXPECT_NEAR(a * kt * step, work, 1e-3 * std::abs(work) + 1e-9) << "motor " << j;
+  }
+}
+
+TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
+  PolhemProtocol p;
+  polhem::Input in;
+  in.encoder = {10, 20, 30, 6000, 0, 0};
+  in.info = 1;
+  DeviceReading r;
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  EXPECT_EQ(r.buttons, 1u);  // encoder d above 5000
+  std::array<std::uint8_t, 64> buf{};
+  ASSERT_EQ(p.pending_command(buf), 15u);
+  EXPECT_EQ(buf[0], 0);
+  EXPECT_EQ(buf[1 + 6], 1);  // command 1
+  EXPECT_EQ(p.pending_command(buf), 0u);  // once
+  ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, true, 0, buf), 15u);
+  EXPECT_EQ(buf[0], 0);
+  Vec3 amps;
+  ASSERT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, 14), amps));
+  EXPECT_GT(norm(amps), 0.0);
+  ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, false, 0, buf), 15u);  // disabled: no current
+  ASSERT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, 14), amps));
+  EXPECT_EQ(norm(amps), 0.0);
+}

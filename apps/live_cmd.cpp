@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include "haptic_device.h"
 #include "hri.h"
 #include "live_session.h"
 #include "record.h"
@@ -118,6 +120,50 @@ void print_stats(const session::LiveStats& s, double seconds, std::ostream& log)
         << ms(*std::max_element(s.edit_to_haptics_ms.begin(), s.edit_to_haptics_ms.end())) << " ms\n";
 }
 
+/// Forwards to the device and measures what the servo sent (atomics only: servo thread).
+class ForceMeter final : public servo::HapticDeviceIO {
+ public:
+  explicit ForceMeter(servo::HapticDeviceIO& d) : d_(d) {}
+  core::Vec3 read_position_m() override { return d_.read_position_m(); }
+  std::uint32_t buttons() override { return d_.buttons(); }
+  servo::DeviceReading read() override { return d_.read(); }
+  servo::DeviceCaps caps() const override { return d_.caps(); }
+  void enable_force(bool on) override { d_.enable_force(on); }
+  void answer(std::uint64_t s) override { d_.answer(s); }
+  void write_force_n(const core::Vec3& f) override {
+    const double m = core::norm(f);
+    if (m > 0) forced_.fetch_add(1, std::memory_order_relaxed);
+    if (m > max_.load(std::memory_order_relaxed)) max_.store(m, std::memory_order_relaxed);
+    d_.write_force_n(f);
+  }
+  long forced_ticks() const { return forced_.load(); }
+  double max_force_n() const { return max_.load(); }
+
+ private:
+  servo::HapticDeviceIO& d_;
+  std::atomic<long> forced_{0};
+  std::atomic<double> max_{0};
+};
+
+/// The device's figures after the run; true if it was lost or faulty.
+bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::ServoThread& servo, std::ostream& log) {
+  const servo::DeviceCounters c = servo.device_counters();
+  log << "device   " << d.description << ": " << meter.forced_ticks() << " ticks with force, max |F| "
+      << ms(meter.max_force_n()) << " N; stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
+      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped
+";
+  if (d.report) {
+    const servo::LinkCounters l = d.report->counters();
+    log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
+        << l.duplicates << " duplicates, " << l.reordered << " reordered, " << l.disconnects << " disconnects, "
+        << l.reconnects << " reconnects, " << l.writes << " output reports
+";
+    if (!d.report->last_refusal().empty()) log << "link     last refused: " << d.report->last_refusal() << "
+";
+  }
+  return c.disconnected > 0 || c.fault > 0 || c.refused > 0;
+}
+
 }  // namespace
 
 int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
@@ -134,18 +180,16 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   servo::TripleBuffer<core::SampleField> buffer;
   buffer.publish(edits->current());
   servo::HriRenderer renderer(setup.hri);
-  core::Vec3 start_w, v0;
-  setup.script.at(0.0, start_w, v0);
-  sim::SimDevice device(scene.device, setup.world_T_device.to_device(start_w));
-  sim::SimDeviceIO io(device, setup.script, 1.0 / scene.hri.rate_hz, setup.world_T_device, &scene.edits.button_down);
-
+  HapticDevice device = open_haptic_device(o.haptic, scene, setup);
+  ForceMeter meter(*device.io);
   session::install_stop_handlers();
-  session::LiveSession live(*edits, buffer, renderer, io, live_config(scene, setup, *edits, o));
+  session::LiveSession live(*edits, buffer, renderer, meter, live_config(scene, setup, *edits, o));
   const std::vector<Due> due = timeline(scene);
   std::size_t next = 0;
   const double duration = setup.script.duration_s;
   log << "live     " << scene.name << ": " << ms(duration) << " s at " << scene.hri.rate_hz << " Hz"
       << (o.run.record_path.empty() ? std::string() : ", recording to " + o.run.record_path) << "\n";
+  if (device.kind != "sim") log << "device   " << device.description << "\n";
   if (const std::string note = live.start(); !note.empty()) log << "servo    " << note << "\n";
   int last_second = 0;
   const bool tty = o.run.progress && ::isatty(STDERR_FILENO);
@@ -165,10 +209,12 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   const session::LiveStats s = live.stats();
   if (session::stop_signal() != 0) log << "live     stopped by signal " << session::stop_signal() << " after " << ms(seconds) << " s\n";
   print_stats(s, seconds, log);
+  const bool device_lost = device.kind != "sim" && print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
   // Stopped by a signal: the recording is complete, but the run did not run its course.
   if (session::stop_signal() != 0) return 128 + session::stop_signal();
-  return s.faults > 0 ? 4 : 0;
+  if (s.faults > 0) return 4;
+  return device_lost ? 5 : 0;
 }
 
 }  // namespace isotouch::app

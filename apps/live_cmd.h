@@ -15,11 +15,15 @@ struct LiveOptions {
   RunOptions run;                ///< device, progress, record_path (out_dir: unused)
   bool sched_fifo = true;        ///< ask for SCHED_FIFO and pinning (refused: said, not fatal)
   double flush_interval_s = 0.1; ///< the recording's chunk interval [s]
+  std::string haptic = "sim";    ///< the device: `--haptic KIND:ARGS` (apps/haptic_device.h)
 };
 
 /// Runs `scene` live for its script's duration (or until SIGINT / SIGTERM). Prints the
 /// servo's ticks, missed deadlines and faults, the edits and their edit-to-haptics latency.
-/// @return 0; 4 when servo ticks were faults; 128 + the signal when SIGINT / SIGTERM stopped
+/// With a device other than `sim`, also prints the device's counters (reports, refused,
+/// gaps, stale / disconnected / fault ticks, ramps, clamps) and the force it rendered.
+/// @return 0; 4 when servo ticks were faults; 5 when the device was disconnected, faulty or
+/// sent refused reports during the run; 128 + the signal when SIGINT / SIGTERM stopped
 /// it (the servo stopped with zero force, the recording closed and complete). @throws as run_scene, io::RecordingError.
 int run_live(const io::Scene& scene, const LiveOptions& options, std::ostream& log);
 

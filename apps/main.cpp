@@ -27,6 +27,8 @@
 #include "render_cmd.h"
 #include "replay_cmd.h"
 #include "check_cmd.h"
+#include "devices_cmd.h"
+#include "bench_device.h"
 #include "report_cmd.h"
 #include "sim_device.h"
 #include "volume_io.h"
@@ -104,9 +106,11 @@ std::string default_scene() {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
 }
 
-int cmd_run_live(const std::string& scene_path, const std::string& device, bool quiet, const std::string& record_path) {
+int cmd_run_live(const std::string& scene_path, const std::string& device, bool quiet, const std::string& record_path,
+                 const std::string& haptic) {
   const io::Scene scene = io::load_scene(scene_path);
   app::LiveOptions opt;
+  opt.haptic = haptic;
   opt.run.device = device;
   opt.run.progress = !quiet;
   opt.run.record_path = record_path;
@@ -282,16 +286,6 @@ int cmd_check(const std::string& path, const std::string& device, double slab_mi
   return 3;
 }
 
-int cmd_devices() {
-  auto devs = engine::VulkanContext::list_devices();
-  if (!devs) throw std::runtime_error("Vulkan: " + devs.error);
-  for (std::size_t i = 0; i < devs.value->size(); ++i) {
-    const auto& d = (*devs.value)[i];
-    std::cout << i << ": " << d.name << " (" << d.type << ", " << d.driver << ")\n";
-  }
-  return 0;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -330,6 +324,12 @@ int main(int argc, char** argv) {
                 "allowed) drives the simulated device, an edit thread applies the button drill and the timeline; "
                 "with --record FILE the recording is streamed while it runs (FILE.part until it stops; a killed "
                 "run leaves FILE.part, replayable up to its last chunk)");
+  std::string haptic = "sim";
+  run->add_option("--haptic", haptic,
+                  "With --live: the haptic device, KIND[:ARGS]: sim (the scene's simulated device, default), null, "
+                  "playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
+                  "(isotouch-devemu); `isotouch devices` lists the HID devices")
+      ->capture_default_str();
   run->footer(kSceneHelp);
 
   auto* check = cli.add_subcommand(
@@ -368,7 +368,7 @@ int main(int argc, char** argv) {
           },
           "MiB in (0, 1048576]"));
 
-  cli.add_subcommand("devices", "List the Vulkan devices");
+  cli.add_subcommand("devices", "List the Vulkan devices and the HID devices (VID:PID, serial, path, known protocol)");
 
   auto* stab = cli.add_subcommand(
       "stability", "Measure the largest stable stiffness K_max against Colgate-Schenkel's bound 2(b-|B|)/T "
@@ -413,10 +413,13 @@ int main(int argc, char** argv) {
   const std::vector<app::Subcommand> modules = {app::add_render_command(cli), app::add_export_command(cli),
                                                 app::add_bench_engine_command(*bench),
                                                 app::add_bench_render_command(*bench),
-                                                app::add_bench_edit_command(*bench), app::add_replay_command(cli)};
+                                                app::add_bench_edit_command(*bench), app::add_replay_command(cli),
+                                                app::add_bench_device_command(*bench)};
 
   try {
     cli.parse(argc, argv);
+    if (run->parsed() && !live && run->count("--haptic") > 0)
+      throw CLI::ValidationError("--haptic needs --live (a simulated run drives the scene's simulated device)");
     if (check->parsed()) {
       if (!check_all_flag && (!check_all.scene_path.empty() || check_all.validation || check_all.inject_mismatch))
         throw CLI::ValidationError("--scene, --validation and --inject-mismatch need --all");
@@ -428,7 +431,7 @@ int main(int argc, char** argv) {
     return cli.exit(e);
   }
   try {
-    if (run->parsed() && live) return cmd_run_live(scene_path, device, quiet, record_path);
+    if (run->parsed() && live) return cmd_run_live(scene_path, device, quiet, record_path, haptic);
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet, record_path);
     if (check->parsed() && check_all_flag) {
       check_all.volume_path = volume;
@@ -452,7 +455,7 @@ int main(int argc, char** argv) {
       rt_opt.device = device;
       return app::run_bench_servo_rt(rt_opt, std::cout);
     }
-    return cmd_devices();
+    return app::run_devices(std::cout);
   } catch (const std::exception& e) {
     std::cerr << "\nisotouch: error: " << e.what() << "\n";
     return 1;

@@ -42,6 +42,13 @@ void ReportDevice::open() {
   stop_ = false;
   reader_ = std::thread([this] { reader_loop(); });
   writer_ = std::thread([this] { writer_loop(); });
+  // The servo starts on a live reading, not on the initial "disconnected" one.
+  for (int i = 0; i < 1000 && reports_.load() == 0; ++i) sleep_ns(1'000'000);
+  if (reports_.load() == 0) {
+    const std::string why = last_error();
+    close();
+    throw std::runtime_error(link_->name() + ": no input report within 1 s" + (why.empty() ? "" : " (" + why + ")"));
+  }
 }
 
 void ReportDevice::close() {

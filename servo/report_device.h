@@ -94,7 +94,8 @@ class ReportDevice final : public HapticDeviceIO {
   ReportDevice(std::unique_ptr<ReportLink> link, std::unique_ptr<DeviceProtocol> protocol,
                ReportDeviceOptions options = {});
   ~ReportDevice() override;  ///< close()
-  /// Connects, reads the capabilities, starts the threads. @throws std::runtime_error.
+  /// Connects, reads the capabilities, starts the threads and waits for the first input
+  /// report (1 s at most). @throws std::runtime_error naming the link and the reason.
   void open();
   /// Sends a disabled zero force, stops the threads, closes the link. Idempotent.
   void close();

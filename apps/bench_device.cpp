@@ -1,0 +1,215 @@
+#include "bench_device.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+#include "analytic_fields.h"
+#include "bench_cmd.h"
+#include "device_emulator.h"
+#include "device_protocols.h"
+#include "report_device.h"
+#include "servo_thread.h"
+#include "socket_link.h"
+#include "stats.h"
+
+namespace isotouch::app {
+namespace {
+using core::Vec3;
+
+/// A wall at device z = 0 (inside below), 500 N/m: the emulator's hand holds the HIP in
+/// it, so every tick renders a force (the figures are the link's, not the renderer's).
+class Wall final : public servo::Renderer {
+ public:
+  const char* name() const override { return "wall"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView&, const Vec3& hip, double) override {
+    servo::HriTick t;
+    if (hip.z < 0) t.force_n = {0, 0, -500.0 * hip.z};
+    return t;
+  }
+};
+
+/// Each tick's start and sent |F| (preallocated; read after the servo stopped).
+struct TickLog final : servo::TickObserver {
+  std::vector<std::int64_t> t_ns;
+  std::vector<double> force;
+  std::atomic<std::size_t> n{0};
+  explicit TickLog(std::size_t max) : t_ns(max), force(max) {}
+  void on_tick(const servo::TickRecord& r) noexcept override {
+    const std::size_t i = n.load(std::memory_order_relaxed);
+    if (i >= t_ns.size()) return;
+    t_ns[i] = r.t_ns, force[i] = core::norm(r.force_sent_n);
+    n.store(i + 1, std::memory_order_release);
+  }
+};
+
+struct EmuRun {
+  sim::EmuStats emu;
+  servo::LinkCounters link;
+  servo::DeviceCounters dev;
+  long ticks = 0, missed = 0;
+  double seconds = 0;
+  std::string setup_note;
+};
+
+/// The emulator at `rate_hz` for `seconds` (faults as given) against a servo at the same rate.
+EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults& faults, bool fifo, TickLog* log) {
+  sim::EmuConfig c;
+  c.socket_path = "/tmp/isotouch-bench-device-" + std::to_string(::getpid()) + ".sock";
+  c.rate_hz = rate_hz;
+  c.seconds = seconds;
+  c.hold_m = Vec3{0, 0, -0.003};
+  c.caps.name = "bench-emu";
+  c.caps.max_force_n = 10;
+  c.caps.native_rate_hz = rate_hz;
+  c.caps.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
+  c.caps.workspace_max_m = Vec3{0.1, 0.1, 0.1};
+  c.faults = faults;
+  sim::DeviceEmulator emu(c);
+  emu.listen();
+  EmuRun out;
+  std::thread emu_thread([&] { out.emu = emu.run(); });
+  servo::ReportDevice dev(std::make_unique<servo::SocketLink>(c.socket_path), std::make_unique<servo::V1Protocol>());
+  try {
+    dev.open();
+  } catch (...) {
+    emu.stop();
+    emu_thread.join();
+    throw;
+  }
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+  Wall wall;
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = rate_hz;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
+  sc.observer = log;
+  servo::ServoThread servo(published, wall, dev, sc);
+  const auto t0 = std::chrono::steady_clock::now();
+  out.setup_note = servo.start();
+  emu_thread.join();
+  servo.stop();
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  out.ticks = servo.ticks();
+  out.missed = servo.missed_deadlines();
+  out.dev = servo.device_counters();
+  dev.close();
+  out.link = dev.counters();
+  return out;
+}
+
+BenchDeviceRow measure_rate(double rate_hz, double seconds, bool fifo, std::string& note) {
+  const EmuRun r = run_against_emulator(rate_hz, seconds, {}, fifo, nullptr);
+  if (note.empty()) note = r.setup_note;
+  BenchDeviceRow row;
+  row.rate_hz = rate_hz;
+  row.seconds = r.seconds;
+  row.report_rate_hz = double(r.link.reports) / seconds;
+  row.answered = long(r.emu.latency_us.size());
+  if (!r.emu.latency_us.empty()) {
+    row.p50_us = eval::percentile(r.emu.latency_us, 0.5);
+    row.p99_us = eval::percentile(r.emu.latency_us, 0.99);
+    row.max_us = *std::max_element(r.emu.latency_us.begin(), r.emu.latency_us.end());
+  }
+  row.ticks = r.ticks, row.missed = r.missed, row.stale = r.dev.stale;
+  return row;
+}
+
+DisconnectTrial disconnect_trial(bool fifo, std::uint32_t seed) {
+  sim::EmuFaults f;
+  f.disconnect_at_s = 0.15;
+  f.seed = seed;
+  TickLog log(4096);
+  const EmuRun r = run_against_emulator(1000, 0.25, f, fifo, &log);
+  DisconnectTrial t;
+  const std::int64_t at = r.emu.disconnect_ns;
+  t.zero_after_us = NAN;
+  for (std::size_t i = 0; i < log.n.load(); ++i) {
+    if (log.t_ns[i] <= at) continue;
+    if (log.force[i] > 0) ++t.forced_ticks_after;
+    else if (std::isnan(t.zero_after_us)) t.zero_after_us = double(log.t_ns[i] - at) * 1e-3;
+  }
+  return t;
+}
+
+std::string fixed(double v, int digits = 1) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(digits) << v;
+  return s.str();
+}
+}  // namespace
+
+std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
+                                               const std::vector<DisconnectTrial>& trials) {
+  std::vector<std::string> v;
+  const auto one = std::find_if(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.rate_hz == 1000; });
+  if (one == rows.end() || one->answered == 0 || !std::isfinite(one->p99_us))
+    v.push_back("p99 report-to-force at 1 kHz: not measured: target <= 1000 us NOT met");
+  else
+    v.push_back("p99 report-to-force at 1 kHz = " + fixed(one->p99_us) + " us: target <= 1000 us " +
+                (one->p99_us <= 1000 ? "met" : "NOT met"));
+  long good = 0;
+  for (const DisconnectTrial& t : trials) good += t.forced_ticks_after <= 1 && std::isfinite(t.zero_after_us);
+  v.push_back("zero force within one tick of a disconnect in " + std::to_string(good) + " of " +
+              std::to_string(trials.size()) + " trials: " +
+              (!trials.empty() && good == long(trials.size()) ? "met" : "NOT met"));
+  return v;
+}
+
+int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
+  log << "bench device: report-to-force over isotouch-devemu's emulator (protocol v1, Unix-domain socket), "
+      << o.seconds << " s per rate; " << cpu_model() << ", load " << load_average() << "\n";
+  std::string note;
+  std::vector<BenchDeviceRow> rows;
+  for (double rate : {1000.0, 4000.0, 8000.0}) rows.push_back(measure_rate(rate, o.seconds, o.sched_fifo, note));
+  if (!note.empty()) log << note;
+  log << "\n| rate [Hz] | reports/s | answered | p50 [us] | p99 [us] | max [us] | servo ticks | missed | stale ticks |\n"
+         "|---|---|---|---|---|---|---|---|---|\n";
+  for (const BenchDeviceRow& r : rows)
+    log << "| " << r.rate_hz << " | " << fixed(r.report_rate_hz) << " | " << r.answered << " | " << fixed(r.p50_us)
+        << " | " << fixed(r.p99_us) << " | " << fixed(r.max_us) << " | " << r.ticks << " | " << r.missed << " | "
+        << r.stale << " |\n";
+  std::vector<DisconnectTrial> trials;
+  for (int i = 0; i < o.disconnect_trials; ++i) trials.push_back(disconnect_trial(o.sched_fifo, std::uint32_t(i + 1)));
+  log << "\ndisconnect trials at 1 kHz (the emulator closes the link while the servo renders ~0.56 N):\n";
+  for (std::size_t i = 0; i < trials.size(); ++i)
+    log << "  trial " << i + 1 << ": " << trials[i].forced_ticks_after << " ticks forced after it, first zero-force tick "
+        << fixed(trials[i].zero_after_us) << " us after it\n";
+  log << "\n";
+  for (const std::string& v : bench_device_verdicts(rows, trials)) log << "verdict  " << v << "\n";
+  if (!o.out_csv.empty()) {
+    std::ofstream csv(o.out_csv);
+    csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";
+    for (const BenchDeviceRow& r : rows)
+      csv << r.rate_hz << ',' << r.report_rate_hz << ',' << r.answered << ',' << r.p50_us << ',' << r.p99_us << ','
+          << r.max_us << ',' << r.ticks << ',' << r.missed << ',' << r.stale << '\n';
+    if (!csv) throw std::runtime_error(o.out_csv + ": cannot write the CSV");
+  }
+  return std::all_of(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.answered == 0; }) ? 1 : 0;
+}
+
+Subcommand add_bench_device_command(CLI::App& bench) {
+  auto o = std::make_shared<BenchDeviceOptions>();
+  auto* sub = bench.add_subcommand(
+      "device", "Report-to-force latency (p50/p99/max) and report rate at 1, 4 and 8 kHz against the device "
+                "emulator over its socket, servo misses, and disconnect trials (zero force within one tick)");
+  sub->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(CLI::Range(0.1, 600.0));
+  sub->add_option("--trials", o->disconnect_trials, "Disconnect trials at 1 kHz")->capture_default_str()->check(CLI::Range(1, 1000));
+  sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");
+  sub->add_flag_callback("--quick", [o] { o->seconds = 0.5, o->disconnect_trials = 3; }, "0.5 s per rate and 3 trials (CI)");
+  sub->add_option("--csv", o->out_csv, "Also write the rows to this CSV file");
+  return {sub, [o](const std::string&) { return run_bench_device(*o, std::cout); }};
+}
+
+}  // namespace isotouch::app

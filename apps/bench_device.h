@@ -1,0 +1,47 @@
+// bench_device.h - `isotouch bench device`: the device link measured against the emulator
+// (sim/device_emulator.h over the Unix-domain socket link, protocol v1), in real time.
+#pragma once
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "subcommand.h"
+
+namespace isotouch::app {
+
+struct BenchDeviceOptions {
+  double seconds = 3;          ///< per rate [s]
+  int disconnect_trials = 10;  ///< at 1 kHz
+  bool sched_fifo = true;      ///< SCHED_FIFO for the servo thread (refused: a note)
+  std::string out_csv;         ///< also write the rows here (optional)
+};
+
+/// One rate's figures.
+struct BenchDeviceRow {
+  double rate_hz = 0;            ///< the device's report rate = the servo rate [Hz]
+  double seconds = 0;            ///< measured wall time [s]
+  double report_rate_hz = 0;     ///< input reports the host accepted per second [Hz]
+  double p50_us = 0, p99_us = 0, max_us = 0;  ///< report-to-force latency [us]
+  long answered = 0;             ///< reports whose force came back
+  long ticks = 0, missed = 0;    ///< servo ticks and missed deadlines
+  long stale = 0;                ///< servo ticks with a stale report
+};
+
+/// One disconnect trial: the emulator closes the link while the servo renders a force.
+struct DisconnectTrial {
+  long forced_ticks_after = 0;   ///< servo ticks that started after the disconnect and still sent force
+  double zero_after_us = 0;      ///< from the disconnect to the start of the first zero-force tick [us]
+};
+
+/// "p99 report-to-force at 1 kHz = X us: target <= 1000 us met|NOT met" and "zero force
+/// within one tick of a disconnect in k of N trials: met|NOT met", from the data.
+std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
+                                               const std::vector<DisconnectTrial>& trials);
+
+/// Measures 1, 4 and 8 kHz and the disconnect trials; prints a table, the verdicts and
+/// the machine. @return 0; 1 if nothing could be measured.
+int run_bench_device(const BenchDeviceOptions& options, std::ostream& log);
+
+Subcommand add_bench_device_command(CLI::App& bench);
+
+}  // namespace isotouch::app

@@ -1,0 +1,56 @@
+#include "devices_cmd.h"
+
+#include <cstdio>
+#include <ostream>
+#include <stdexcept>
+
+#include "hid_device.h"
+#include "vk_context.h"
+
+namespace isotouch::app {
+namespace {
+std::string hex4(unsigned v) {
+  char b[8];
+  std::snprintf(b, sizeof(b), "%04x", v & 0xFFFFu);
+  return b;
+}
+
+bool print_vulkan(std::ostream& out) {
+  out << "Vulkan devices (--device NAME|INDEX):\n";
+  auto devs = engine::VulkanContext::list_devices();
+  if (!devs) {
+    out << "  none: Vulkan: " << devs.error << "\n";
+    return false;
+  }
+  for (std::size_t i = 0; i < devs.value->size(); ++i) {
+    const auto& d = (*devs.value)[i];
+    out << i << ": " << d.name << " (" << d.type << ", " << d.driver << ")\n";
+  }
+  return true;
+}
+
+bool print_hid(std::ostream& out) {
+  out << "HID devices (--haptic hid:VID:PID[:SERIAL] or hid:PATH):\n";
+  std::vector<servo::HidInfo> hid;
+  try {
+    hid = servo::list_hid_devices();
+  } catch (const std::exception& e) {
+    out << "  none: " << e.what() << "\n";
+    return false;
+  }
+  if (hid.empty()) out << "  none (no /dev/hidraw* devices readable; isotouch-devemu: --haptic emu:SOCKET)\n";
+  for (const servo::HidInfo& i : hid)
+    out << "  " << hex4(i.vid) << ":" << hex4(i.pid) << "  serial '" << i.serial << "'  " << i.path << "  "
+        << i.manufacturer << " " << i.product << "  protocol: "
+        << (i.protocol.empty() ? "none known" : i.protocol) << "\n";
+  return true;
+}
+}  // namespace
+
+int run_devices(std::ostream& out) {
+  const bool vk = print_vulkan(out);
+  const bool hid = print_hid(out);
+  return vk || hid ? 0 : 1;
+}
+
+}  // namespace isotouch::app

@@ -1,0 +1,12 @@
+// devices_cmd.h - `isotouch devices`: the Vulkan devices (for --device) and the HID devices
+// (for --haptic hid:...), with the protocol isotouch speaks to each, if any.
+#pragma once
+#include <iosfwd>
+
+namespace isotouch::app {
+
+/// Prints both lists. A Vulkan error is printed and the HID list still follows.
+/// @return 0; 1 if neither list could be read.
+int run_devices(std::ostream& out);
+
+}  // namespace isotouch::app

@@ -1,0 +1,103 @@
+#include "haptic_device.h"
+
+#include <sstream>
+#include <stdexcept>
+
+#include "device_protocols.h"
+#include "hid_device.h"
+#include "null_device_io.h"
+#include "playback_device_io.h"
+#include "record.h"
+#include "sim_device_io.h"
+#include "socket_link.h"
+
+namespace isotouch::app {
+namespace {
+constexpr const char* kKinds = "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET";
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+/// The HIPs of a trace.csv (physical frame) or a recording (world), in device metres.
+std::vector<sim::PlaybackSample> playback_samples(const std::string& file, const SceneSetup& setup) {
+  std::vector<sim::PlaybackSample> out;
+  const servo::WorkspaceTransform& xf = setup.world_T_device;
+  if (file.size() > 4 && file.substr(file.size() - 4) == ".rec") {
+    const io::Recording rec = io::load_recording(file, true);
+    for (const io::RecordedTick& t : rec.ticks) out.push_back({t.t_s, xf.to_device(t.hip_m), t.button ? 1u : 0u});
+    if (out.empty()) throw std::runtime_error(file + ": the recording has no ticks");
+    return out;
+  }
+  out = sim::load_trace_hips(file);
+  for (sim::PlaybackSample& s : out) s.position_m = xf.to_device(setup.volume.to_grid(s.position_m));
+  return out;
+}
+
+HapticDevice open_report(const std::string& kind, const std::string& arg) {
+  HapticDevice d;
+  d.kind = kind;
+  std::unique_ptr<servo::ReportDevice> dev;
+  if (kind == "hid") {
+    dev = servo::open_hid_device(arg);
+  } else {
+    dev = std::make_unique<servo::ReportDevice>(std::make_unique<servo::SocketLink>(arg),
+                                                std::make_unique<servo::V1Protocol>());
+    dev->open();
+  }
+  const servo::DeviceCaps c = dev->caps();
+  d.description = dev->name() + " (" + c.name + ", " + num(c.native_rate_hz) + " Hz, max " + num(c.max_force_n) + " N)";
+  d.report = dev.get();
+  d.io = std::move(dev);
+  return d;
+}
+}  // namespace
+
+std::string check_caps(const servo::HriParams& hri, const servo::DeviceCaps& caps) {
+  std::string e;
+  auto over = [&](const char* what, double v, const char* limit, double max) {
+    if (v > max) e += std::string(e.empty() ? "" : "; ") + what + " " + num(v) + " exceeds the device's " + limit + " " + num(max);
+  };
+  over("servo.stiffness_n_per_m", hri.stiffness_n_per_m, "maximum stiffness", caps.max_stiffness_n_per_m);
+  over("servo.damping_n_s_per_m", hri.damping_n_s_per_m, "maximum damping", caps.max_damping_n_s_per_m);
+  over("servo.force_limit_n", hri.force_limit_n, "maximum force", caps.max_force_n);
+  return e;
+}
+
+HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup) {
+  const std::size_t colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon);
+  const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu";
+  if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
+  if (!needs_arg && colon != std::string::npos)
+    throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");
+  core::Vec3 start_w, v0;
+  setup.script.at(0.0, start_w, v0);
+  const double T = 1.0 / scene.hri.rate_hz;
+  HapticDevice d;
+  d.kind = kind;
+  if (kind == "sim") {
+    d.sim = std::make_unique<sim::SimDevice>(scene.device, setup.world_T_device.to_device(start_w));
+    d.io = std::make_unique<sim::SimDeviceIO>(*d.sim, setup.script, T, setup.world_T_device, &scene.edits.button_down);
+    d.description = "sim (the scene's simulated device and scripted hand)";
+  } else if (kind == "null") {
+    d.io = std::make_unique<sim::NullDeviceIO>(setup.world_T_device.to_device(start_w));
+    d.description = "null (zero force, fixed at the script's start)";
+  } else if (kind == "playback") {
+    auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, setup), T);
+    d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
+    d.io = std::move(p);
+  } else if (kind == "hid" || kind == "emu") {
+    d = open_report(kind, arg);
+  } else {
+    throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
+  }
+  if (const std::string e = check_caps(setup.hri, d.io->caps()); !e.empty())
+    throw std::runtime_error("--haptic " + spec + ": the scene's renderer does not fit the device: " + e);
+  return d;
+}
+
+}  // namespace isotouch::app

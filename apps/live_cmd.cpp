@@ -150,16 +150,13 @@ bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
   const servo::DeviceCounters c = servo.device_counters();
   log << "device   " << d.description << ": " << meter.forced_ticks() << " ticks with force, max |F| "
       << ms(meter.max_force_n()) << " N; stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
-      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped
-";
+      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
   if (d.report) {
     const servo::LinkCounters l = d.report->counters();
     log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
         << l.duplicates << " duplicates, " << l.reordered << " reordered, " << l.disconnects << " disconnects, "
-        << l.reconnects << " reconnects, " << l.writes << " output reports
-";
-    if (!d.report->last_refusal().empty()) log << "link     last refused: " << d.report->last_refusal() << "
-";
+        << l.reconnects << " reconnects, " << l.writes << " output reports\n";
+    if (!d.report->last_refusal().empty()) log << "link     last refused: " << d.report->last_refusal() << "\n";
   }
   return c.disconnected > 0 || c.fault > 0 || c.refused > 0;
 }

@@ -1,6 +1,7 @@
 #include "device_emulator.h"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -227,6 +228,21 @@ void DeviceEmulator::tick(std::int64_t now, double t_s) {
   }
 }
 
+void DeviceEmulator::wait_until(std::int64_t t) {
+  // Output reports are taken (and timestamped) as they arrive, not at the next tick: the
+  // measured report-to-force latency is the host's, not this clock's phase.
+  for (std::int64_t now = now_ns(); now < t; now = now_ns()) {
+    if (host_fd_ < 0) {
+      sleep_until(t);
+      return;
+    }
+    pollfd p{host_fd_, POLLIN, 0};
+    const std::int64_t left = t - now;
+    const timespec ts{time_t(left / 1000000000LL), long(left % 1000000000LL)};
+    if (::ppoll(&p, 1, &ts, nullptr) > 0) serve_host(now_ns());
+  }
+}
+
 EmuStats DeviceEmulator::run() {
   listen();
   const auto period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
@@ -236,7 +252,7 @@ EmuStats DeviceEmulator::run() {
     const double t_s = double(k) / cfg_.rate_hz;
     if (cfg_.seconds > 0 && t_s >= cfg_.seconds) break;
     next += period;
-    sleep_until(next);
+    wait_until(next);
     const std::int64_t now = now_ns();
     if (now - next > 10 * period) next = now;  // fell far behind (a stopped process): re-anchor
     tick(now, t_s);

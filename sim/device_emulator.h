@@ -85,6 +85,7 @@ class DeviceEmulator {
   };
   void tick(std::int64_t now, double t_s);
   void serve_host(std::int64_t now);
+  void wait_until(std::int64_t t);
   void send_report(std::int64_t now, double t_s);
   void transmit(const std::uint8_t* b, std::size_t n);
   void accept_host();

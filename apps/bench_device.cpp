@@ -76,11 +76,14 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   c.caps.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
   c.caps.workspace_max_m = Vec3{0.1, 0.1, 0.1};
   c.faults = faults;
+  c.fifo_priority = fifo ? 75 : 0;
   sim::DeviceEmulator emu(c);
   emu.listen();
   EmuRun out;
   std::thread emu_thread([&] { out.emu = emu.run(); });
-  servo::ReportDevice dev(std::make_unique<servo::SocketLink>(c.socket_path), std::make_unique<servo::V1Protocol>());
+  servo::ReportDeviceOptions ro;
+  ro.fifo_priority = fifo ? 70 : 0;
+  servo::ReportDevice dev(std::make_unique<servo::SocketLink>(c.socket_path), std::make_unique<servo::V1Protocol>(), ro);
   try {
     dev.open();
   } catch (...) {
@@ -97,7 +100,7 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   sc.observer = log;
   servo::ServoThread servo(published, wall, dev, sc);
   const auto t0 = std::chrono::steady_clock::now();
-  out.setup_note = servo.start();
+  out.setup_note = servo.start() + dev.realtime_note();
   emu_thread.join();
   servo.stop();
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

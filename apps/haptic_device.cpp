@@ -36,15 +36,17 @@ std::vector<sim::PlaybackSample> playback_samples(const std::string& file, const
   return out;
 }
 
-HapticDevice open_report(const std::string& kind, const std::string& arg) {
+HapticDevice open_report(const std::string& kind, const std::string& arg, int fifo) {
   HapticDevice d;
   d.kind = kind;
   std::unique_ptr<servo::ReportDevice> dev;
   if (kind == "hid") {
-    dev = servo::open_hid_device(arg);
+    dev = servo::open_hid_device(arg, fifo);
   } else {
+    servo::ReportDeviceOptions o;
+    o.fifo_priority = fifo;
     dev = std::make_unique<servo::ReportDevice>(std::make_unique<servo::SocketLink>(arg),
-                                                std::make_unique<servo::V1Protocol>());
+                                                std::make_unique<servo::V1Protocol>(), o);
     dev->open();
   }
   const servo::DeviceCaps c = dev->caps();
@@ -66,7 +68,8 @@ std::string check_caps(const servo::HriParams& hri, const servo::DeviceCaps& cap
   return e;
 }
 
-HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup) {
+HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup,
+                                int io_fifo_priority) {
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
@@ -91,7 +94,7 @@ HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene,
     d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
     d.io = std::move(p);
   } else if (kind == "hid" || kind == "emu") {
-    d = open_report(kind, arg);
+    d = open_report(kind, arg, io_fifo_priority);
   } else {
     throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
   }

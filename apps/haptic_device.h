@@ -31,7 +31,9 @@ struct HapticDevice {
 /// @throws std::invalid_argument on a bad spec (names the kind and what is wrong, lists the
 /// kinds), std::runtime_error if the device cannot be opened or its capabilities refuse the
 /// scene's renderer (check_caps).
-HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup);
+/// `io_fifo_priority` > 0: a hid or emu device's reader and writer threads ask for SCHED_FIFO.
+HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup,
+                                int io_fifo_priority = 0);
 
 /// "" if the renderer's stiffness, damping and force limit are within the device's
 /// capabilities, else one line naming each offending value and the device's limit.

@@ -163,6 +163,27 @@ bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
 
 }  // namespace
 
+int write_hand_path(const io::Scene& scene, const std::string& path, std::ostream& log) {
+  RunOptions ropt;
+  ropt.progress = false;
+  const SceneSetup setup = setup_scene(scene, ropt, log);
+  std::ostringstream csv;
+  csv << "t_s,x_m,y_m,z_m\n" << std::setprecision(9);
+  const double step = 1e-3;
+  for (long k = 0; double(k) * step <= setup.script.duration_s; ++k) {
+    core::Vec3 p, v;
+    setup.script.at(double(k) * step, p, v);
+    const core::Vec3 d = setup.world_T_device.to_device(p);
+    csv << double(k) * step << ',' << d.x << ',' << d.y << ',' << d.z << '\n';
+  }
+  std::ofstream out(path, std::ios::binary);
+  out << csv.str();
+  if (!out.flush()) throw std::runtime_error(path + ": cannot write the hand path");
+  log << "hand path " << path << ": " << setup.script.duration_s << " s of the scene's scripted hand, device frame "
+      << "(isotouch-devemu --path " << path << ")\n";
+  return 0;
+}
+
 int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   RunOptions ropt = o.run;
   SceneSetup setup = setup_scene(scene, ropt, log);
@@ -177,7 +198,7 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   servo::TripleBuffer<core::SampleField> buffer;
   buffer.publish(edits->current());
   servo::HriRenderer renderer(setup.hri);
-  HapticDevice device = open_haptic_device(o.haptic, scene, setup);
+  HapticDevice device = open_haptic_device(o.haptic, scene, setup, o.sched_fifo ? 70 : 0);
   ForceMeter meter(*device.io);
   session::install_stop_handlers();
   session::LiveSession live(*edits, buffer, renderer, meter, live_config(scene, setup, *edits, o));
@@ -187,6 +208,7 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   log << "live     " << scene.name << ": " << ms(duration) << " s at " << scene.hri.rate_hz << " Hz"
       << (o.run.record_path.empty() ? std::string() : ", recording to " + o.run.record_path) << "\n";
   if (device.kind != "sim") log << "device   " << device.description << "\n";
+  if (device.report && !device.report->realtime_note().empty()) log << "device   " << device.report->realtime_note() << "\n";
   if (const std::string note = live.start(); !note.empty()) log << "servo    " << note << "\n";
   int last_second = 0;
   const bool tty = o.run.progress && ::isatty(STDERR_FILENO);

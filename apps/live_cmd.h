@@ -27,4 +27,9 @@ struct LiveOptions {
 /// it (the servo stopped with zero force, the recording closed and complete). @throws as run_scene, io::RecordingError.
 int run_live(const io::Scene& scene, const LiveOptions& options, std::ostream& log);
 
+/// Writes the scene's scripted hand target as isotouch-devemu's --path CSV (t_s,x_m,y_m,z_m,
+/// device frame, every ms), so the emulator's hand plays the scene. @return 0.
+/// @throws as setup_scene; std::runtime_error if FILE cannot be written.
+int write_hand_path(const io::Scene& scene, const std::string& path, std::ostream& log);
+
 }  // namespace isotouch::app

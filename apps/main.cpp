@@ -330,6 +330,10 @@ int main(int argc, char** argv) {
                   "playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
                   "(isotouch-devemu); `isotouch devices` lists the HID devices")
       ->capture_default_str();
+  std::string hand_path;
+  run->add_option("--hand-path", hand_path,
+                  "Write the scene's scripted hand (device frame, t_s,x_m,y_m,z_m every ms) to FILE for "
+                  "isotouch-devemu --path, and exit");
   run->footer(kSceneHelp);
 
   auto* check = cli.add_subcommand(
@@ -431,6 +435,7 @@ int main(int argc, char** argv) {
     return cli.exit(e);
   }
   try {
+    if (run->parsed() && !hand_path.empty()) return app::write_hand_path(io::load_scene(scene_path), hand_path, std::cout);
     if (run->parsed() && live) return cmd_run_live(scene_path, device, quiet, record_path, haptic);
     if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet, record_path);
     if (check->parsed() && check_all_flag) {

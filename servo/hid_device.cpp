@@ -98,7 +98,7 @@ int HidLink::get_feature(std::uint8_t id, std::span<std::uint8_t> buf) {
   return hid_get_feature_report(static_cast<hid_device*>(dev_), buf.data(), buf.size());
 }
 
-std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec) {
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority) {
   std::uint16_t vid = 0, pid = 0;
   std::string serial, path;
   if (!spec.empty() && spec[0] == '/') {
@@ -119,7 +119,9 @@ std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec) {
   if (!protocol)
     throw std::invalid_argument("--haptic hid:" + spec + ": no known protocol for " + hex4(vid) + ":" + hex4(pid) +
                                 " (known: isotouch protocol v1 " + hex4(kV1Vid) + ":" + hex4(kV1Pid) + ", Polhem 1234:0006)");
-  auto dev = std::make_unique<ReportDevice>(std::make_unique<HidLink>(vid, pid, serial, path), std::move(protocol));
+  ReportDeviceOptions o;
+  o.fifo_priority = fifo_priority;
+  auto dev = std::make_unique<ReportDevice>(std::make_unique<HidLink>(vid, pid, serial, path), std::move(protocol), o);
   dev->open();
   return dev;
 }

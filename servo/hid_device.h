@@ -45,6 +45,6 @@ class HidLink final : public ReportLink {
 /// protocol its VID:PID names (by path: looked up in the device list). @throws
 /// std::invalid_argument on a bad spec or an unknown protocol, std::runtime_error if it
 /// cannot be opened (the message names it and says why: permissions, not present).
-std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec);
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority = 0);
 
 }  // namespace isotouch::servo

@@ -1,10 +1,13 @@
 #include "report_device.h"
 
+#include <pthread.h>
+#include <sched.h>
 #include <sys/prctl.h>
 #include <time.h>
 
 #include <array>
 #include <chrono>
+#include <cstring>
 #include <stdexcept>
 
 namespace isotouch::servo {
@@ -145,7 +148,23 @@ void ReportDevice::accept(const DeviceReading& in) {
   reports_.fetch_add(1);
 }
 
+void ReportDevice::ask_fifo() {
+  if (opt_.fifo_priority <= 0) return;
+  sched_param sp{};
+  sp.sched_priority = opt_.fifo_priority;
+  if (const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp); rc != 0) {
+    std::lock_guard lock(note_mu_);
+    realtime_note_ = link_->name() + ": SCHED_FIFO for the device threads refused (" + std::strerror(rc) + ")";
+  }
+}
+
+std::string ReportDevice::realtime_note() const {
+  std::lock_guard lock(note_mu_);
+  return realtime_note_;
+}
+
 void ReportDevice::reader_loop() {
+  ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   std::array<std::uint8_t, kMaxReport> cmd{};
   const auto retry_ns = std::int64_t(opt_.reconnect_interval_s * 1e9);
@@ -184,6 +203,7 @@ bool ReportDevice::send(std::span<const std::uint8_t> report) {
 
 void ReportDevice::writer_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
+  ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
   const auto keepalive_ns = std::int64_t(opt_.keepalive_s * 1e9);

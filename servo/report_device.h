@@ -78,6 +78,10 @@ struct ReportDeviceOptions {
   double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
   double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
   double keepalive_s = 0.01;           ///< with nothing new to send, resend the last output this often [s]
+  /// > 0: the reader and writer threads ask for SCHED_FIFO at this priority (below the
+  /// servo's 80: they feed it). Refused (no CAP_SYS_NICE): they run under the default
+  /// scheduler, said by realtime_note().
+  int fifo_priority = 0;
 };
 
 /// A device behind a ReportLink and a DeviceProtocol. open() connects and reads the
@@ -113,6 +117,8 @@ class ReportDevice final : public HapticDeviceIO {
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
   std::string last_refusal() const;  ///< why the last refused report was refused ("" none)
   std::string name() const { return link_->name(); }
+  /// "" or why the I/O threads did not get SCHED_FIFO (valid after open()).
+  std::string realtime_note() const;
 
  private:
   struct Output {
@@ -121,6 +127,7 @@ class ReportDevice final : public HapticDeviceIO {
     std::uint64_t count = 0;  // +1 per write_force_n()
   };
   void reader_loop();
+  void ask_fifo();
   void writer_loop();
   bool reconnect();
   void accept(const DeviceReading& r);
@@ -141,7 +148,7 @@ class ReportDevice final : public HapticDeviceIO {
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
   mutable std::mutex link_mu_;              // open/close vs write (not the servo)
   mutable std::mutex note_mu_;
-  std::string last_error_, last_refusal_;
+  std::string last_error_, last_refusal_, realtime_note_;
   std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
       reconnects_{0}, sent_{0}, write_errors_{0};
   std::thread reader_, writer_;

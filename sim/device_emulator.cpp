@@ -2,6 +2,9 @@
 
 #include <fcntl.h>
 #include <poll.h>
+#include <pthread.h>
+#include <sched.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -245,6 +248,12 @@ void DeviceEmulator::wait_until(std::int64_t t) {
 
 EmuStats DeviceEmulator::run() {
   listen();
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+  if (cfg_.fifo_priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = cfg_.fifo_priority;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);  // refused: runs anyway
+  }
   const auto period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
   const std::int64_t start = now_ns();
   std::int64_t next = start;

@@ -50,6 +50,7 @@ struct EmuConfig {
   double sine_amplitude_m = 0, sine_hz = 1;
   servo::DeviceCaps caps;         ///< sent in the feature report (workspace, limits, rate)
   EmuFaults faults;
+  int fifo_priority = 0;          ///< > 0: run() asks for SCHED_FIFO (firmware-like timing); refused: ignored
 };
 
 /// What the emulator measured (after run() returned, or a copy while it runs).

@@ -157,6 +157,8 @@ bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
         << l.duplicates << " duplicates, " << l.reordered << " reordered, " << l.disconnects << " disconnects, "
         << l.reconnects << " reconnects, " << l.writes << " output reports\n";
     if (!d.report->last_refusal().empty()) log << "link     last refused: " << d.report->last_refusal() << "\n";
+    if (!d.report->last_error().empty() && d.report->last_error() != d.report->last_refusal())
+      log << "link     last error: " << d.report->last_error() << "\n";
   }
   return c.disconnected > 0 || c.fault > 0 || c.refused > 0;
 }

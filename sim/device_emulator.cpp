@@ -86,6 +86,7 @@ void DeviceEmulator::accept_host() {
   if (fd < 0) return;
   host_fd_ = fd;
   last_output_ns_ = now_ns();
+  connected_at_s_ = clock_s_;  // the hand's path starts with each connection
   std::lock_guard lock(stats_mu_);
   ++stats_.connections;
 }
@@ -217,7 +218,9 @@ void DeviceEmulator::tick(std::int64_t now, double t_s) {
   }
   const double T = 1.0 / cfg_.rate_hz;
   dev_.command_force(force_n_);
-  const Vec3 a = hand_target(t_s + T), b = hand_target(t_s);
+  clock_s_ = t_s;
+  const double tp = t_s - connected_at_s_;
+  const Vec3 a = hand_target(tp + T), b = hand_target(tp);
   dev_.step(T, a, (a - b) / T);
   const bool frozen = f.freeze_at_s >= 0 && t_s >= f.freeze_at_s && t_s < f.freeze_at_s + f.freeze_for_s;
   if (host_fd_ >= 0 && !frozen) send_report(now, t_s);

@@ -43,7 +43,7 @@ struct EmuConfig {
   double rate_hz = 1000;          ///< the device's report rate, 1 to 8 kHz [Hz]
   double seconds = 0;             ///< run this long; 0: until stop()
   SimDeviceParams device;         ///< mass, damping, hand spring (force_max_n: the actuator)
-  /// The hand's target, device frame, looped by time; empty: hold `hold_m`.
+  /// The hand's target, device frame, by time since the host connected, looped; empty: hold `hold_m`.
   std::vector<PathPoint> path;
   Vec3 hold_m;                    ///< the hand's target without a path [m]
   /// Without a path: the hand moves the target up and down by this much [m] at sine_hz.
@@ -107,6 +107,7 @@ class DeviceEmulator {
   bool watchdog_tripped_ = false, disconnected_ = false, relistened_ = false;
   std::vector<std::int64_t> sent_ns_;  // by sequence % size
   std::vector<Pending> pending_;       // delayed or held back reports
+  double clock_s_ = 0, connected_at_s_ = 0;  // the emulator's time, and when the host connected [s]
   bool hold_next_ = false;
   Pending held_{};
   mutable std::mutex stats_mu_;

@@ -31,7 +31,7 @@ int main(int argc, char** argv) {
       "Example:\n"
       "  isotouch-devemu --socket /tmp/dev.sock --rate 1000 --path hand.csv --drop 0.01\n"};
   sim::EmuConfig c;
-  c.caps.name = "isotouch-devemu";
+  c.caps.name = "devemu";
   c.caps.buttons = 1;
   c.caps.position_resolution_m = 1e-6;
   double half_mm = 150, max_force = 10, watchdog_ms = 50;
@@ -40,7 +40,7 @@ int main(int argc, char** argv) {
   cli.add_option("--socket", c.socket_path, "Unix-domain socket to listen on (replaced if it exists)")->required();
   cli.add_option("--rate", c.rate_hz, "Report rate [Hz]")->capture_default_str()->check(CLI::Range(1.0, 8000.0));
   cli.add_option("--seconds", c.seconds, "Run this long, 0 = until SIGINT/SIGTERM")->capture_default_str()->check(CLI::NonNegativeNumber);
-  cli.add_option("--path", path_csv, "Hand path CSV: header, then t_s,x_m,y_m,z_m rows (device frame), looped");
+  cli.add_option("--path", path_csv, "Hand path CSV: header, then t_s,x_m,y_m,z_m rows (device frame), from each connection, looped (isotouch run SCENE --hand-path FILE writes one)");
   cli.add_option("--hold", hold, "Without --path: the hand holds this point x,y,z [m]")->delimiter(',')->expected(3);
   cli.add_option("--sine-mm", c.sine_amplitude_m, "Without --path: the hand moves +-this many mm along z")->check(CLI::NonNegativeNumber);
   cli.add_option("--sine-hz", c.sine_hz, "... at this frequency [Hz]")->capture_default_str()->check(CLI::PositiveNumber);
@@ -50,6 +50,8 @@ int main(int argc, char** argv) {
   cli.add_option("--max-force", max_force, "Maximum force, also the actuator's saturation [N]")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--workspace-mm", half_mm, "Workspace: a cube of +-this many mm")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--watchdog-ms", watchdog_ms, "No output report this long: the force is zeroed (0: off)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  bool fifo = true;
+  cli.add_flag("--fifo,!--no-fifo", fifo, "Run the device clock under SCHED_FIFO priority 75 when allowed (default on)");
   auto* faults = cli.add_option_group("Faults", "Probabilities are per input report; times are [s] since start");
   sim::EmuFaults& f = c.faults;
   faults->add_option("--drop", f.drop, "Probability a report is dropped")->check(CLI::Range(0.0, 1.0));
@@ -72,6 +74,7 @@ int main(int argc, char** argv) {
   c.caps.native_rate_hz = c.rate_hz;
   c.caps.watchdog_s = watchdog_ms * 1e-3;
   c.hold_m = core::Vec3{hold[0], hold[1], hold[2]};
+  c.fifo_priority = fifo ? 75 : 0;
   try {
     if (!path_csv.empty()) c.path = sim::load_path_csv(path_csv);
     sim::DeviceEmulator emu(c);

@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# `isotouch run SCENE --live --haptic emu:SOCKET` against an isotouch-devemu process:
+#  1. the emulator's hand plays the scene's scripted hand (run --hand-path): the live run
+#     feels the skull (ticks with force, a force of the order of the simulated run's), no
+#     disconnect, fault or refused report, exit 0; the emulator received the forces;
+#  2. the emulator SIGKILLed mid-run: the run reports disconnected ticks and exits 5;
+#  3. bad --haptic specs: a clear message and exit 1.
+# usage: cli_run_live_emu.sh ISOTOUCH DEVEMU SCENE OUT
+set -u
+exe=$1 emu=$2 scene=$3 out=$4
+fail() { echo "FAIL: $*"; exit 1; }
+rm -rf "$out"; mkdir -p "$out"
+sock=$out/dev.sock
+
+"$exe" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1 || { cat "$out/path.log"; fail "--hand-path exited $?"; }
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 > "$out/emu.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+"$exe" run "$scene" --live --haptic "emu:$sock" --quiet > "$out/run.log" 2>&1; rc=$?
+cat "$out/run.log"
+kill -TERM "$emu_pid"; wait "$emu_pid"
+cat "$out/emu.log"
+[ "$rc" -eq 0 ] || fail "run --live --haptic emu exited $rc"
+line=$(grep '^device .*ticks with force' "$out/run.log") || fail "no device summary"
+forced=$(echo "$line" | sed -E 's/.*: ([0-9]+) ticks with force.*/\1/')
+fmax=$(echo "$line" | sed -E 's/.*max \|F\| ([0-9.]+) N.*/\1/')
+[ "$forced" -ge 300 ] || fail "only $forced ticks with force: the skull was not felt"
+awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f < 3.3) }' || fail "max |F| $fmax N is not of the order of the simulated run's (2 N)"
+echo "$line" | grep -q "disconnected 0, fault 0, refused 0" || fail "device faults in a clean run"
+grep -q "outputs received" "$out/emu.log" || fail "the emulator printed no summary"
+
+# 2. The emulator killed mid-run: zero force, counted, exit 5.
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 > "$out/emu2.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+( sleep 1.5; kill -KILL "$emu_pid" ) &
+"$exe" run "$scene" --live --haptic "emu:$sock" --quiet > "$out/run2.log" 2>&1; rc=$?
+wait
+cat "$out/run2.log"
+[ "$rc" -eq 5 ] || fail "a killed emulator: exit $rc, expected 5"
+grep -Eq "disconnected [1-9][0-9]*," "$out/run2.log" || fail "no disconnected ticks counted"
+grep -q "link down" "$out/run2.log" || fail "the log does not say the link went down"
+
+# 3. Bad specs.
+"$exe" run "$scene" --live --haptic "bogus:1" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "unknown kind 'bogus'" "$out/bad.log" || { cat "$out/bad.log"; fail "bogus kind: exit $rc"; }
+"$exe" run "$scene" --live --haptic "emu:$out/none.sock" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
+"$exe" run "$scene" --live --haptic "hid:zz:1" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "vendor ID 'zz' is not a hex USB ID" "$out/bad.log" || { cat "$out/bad.log"; fail "bad hid spec: exit $rc"; }
+echo "PASS run --live --haptic emu"

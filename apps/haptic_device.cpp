@@ -73,6 +73,8 @@ HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene,
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "emu")
+    throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
   const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu";
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
   if (!needs_arg && colon != std::string::npos)
@@ -93,10 +95,8 @@ HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene,
     auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, setup), T);
     d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
     d.io = std::move(p);
-  } else if (kind == "hid" || kind == "emu") {
-    d = open_report(kind, arg, io_fifo_priority);
   } else {
-    throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
+    d = open_report(kind, arg, io_fifo_priority);
   }
   if (const std::string e = check_caps(setup.hri, d.io->caps()); !e.empty())
     throw std::runtime_error("--haptic " + spec + ": the scene's renderer does not fit the device: " + e);

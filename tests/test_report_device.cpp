@@ -1,0 +1,144 @@
+// ReportDevice over a scripted link (no I/O, deterministic): the newest accepted report is
+// what the servo reads; duplicates and reordered reports are dropped, gaps, garbage counted;
+// the force written reaches the link as an output report answering the report it used; a
+// closed device's last output is a disabled zero force; no first report -> a clear error.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <deque>
+#include <mutex>
+#include <thread>
+
+#include "device_protocols.h"
+#include "hid_report.h"
+#include "report_device.h"
+
+using namespace isotouch::core;
+using namespace isotouch::servo;
+
+namespace {
+struct Script {
+  std::mutex mu;
+  std::deque<std::vector<std::uint8_t>> in;   // reports the "device" sends
+  std::vector<std::vector<std::uint8_t>> out; // reports the host wrote
+};
+
+class ScriptedLink final : public ReportLink {
+ public:
+  explicit ScriptedLink(Script& s) : s_(s) {}
+  std::string name() const override { return "scripted"; }
+  std::string open() override { return {}; }
+  void close() override {}
+  int read(std::span<std::uint8_t> buf, int) override {
+    {
+      std::lock_guard lock(s_.mu);
+      if (!s_.in.empty()) {
+        const auto r = s_.in.front();
+        s_.in.pop_front();
+        std::copy(r.begin(), r.end(), buf.begin());
+        return int(r.size());
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    return 0;
+  }
+  bool write(std::span<const std::uint8_t> r) override {
+    std::lock_guard lock(s_.mu);
+    s_.out.emplace_back(r.begin(), r.end());
+    return true;
+  }
+  int get_feature(std::uint8_t, std::span<std::uint8_t> buf) override {
+    DeviceCaps c;
+    c.name = "scripted";
+    c.max_force_n = 4;
+    const auto b = hid::encode_caps(c);
+    std::copy(b.begin(), b.end(), buf.begin());
+    return int(b.size());
+  }
+
+ private:
+  Script& s_;
+};
+
+std::vector<std::uint8_t> input(std::uint32_t seq, double z) {
+  hid::InputReport r;
+  r.sequence = seq;
+  r.position_m = Vec3{0, 0, z};
+  const auto b = hid::encode(r);
+  return {b.begin(), b.end()};
+}
+
+void wait_for(const std::function<bool()>& done) {
+  for (int i = 0; i < 2000 && !done(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+}
+}  // namespace
+
+TEST(ReportDevice, DropsDuplicatesAndReorderedReportsAndCountsGapsAndGarbage) {
+  Script s;
+  s.in = {input(1, 0.001), input(2, 0.002), input(2, 0.020), input(4, 0.004), input(3, 0.030),
+          std::vector<std::uint8_t>(32, 0xAB), input(5, 0.005)};
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
+  dev.open();
+  wait_for([&] { return dev.counters().reports >= 4 && dev.counters().garbage >= 1; });
+  const LinkCounters c = dev.counters();
+  EXPECT_EQ(c.reports, 4);     // 1, 2, 4, 5
+  EXPECT_EQ(c.duplicates, 1);  // the second 2
+  EXPECT_EQ(c.reordered, 1);   // 3 after 4
+  EXPECT_EQ(c.gaps, 1);        // 3 missing between 2 and 4 (it came late, and was dropped)
+  EXPECT_EQ(c.garbage, 1);
+  EXPECT_NE(dev.last_refusal().find("report ID 171"), std::string::npos) << dev.last_refusal();
+  const DeviceReading r = dev.read();
+  EXPECT_EQ(r.sequence, 5u);
+  EXPECT_NEAR(r.position_m.z, 0.005, 1e-9);  // never the duplicate's or the late report's
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  EXPECT_GT(r.received_ns, 0);
+  EXPECT_DOUBLE_EQ(dev.caps().max_force_n, 4.0);
+  dev.close();
+}
+
+TEST(ReportDevice, TheForceGoesOutAnsweringItsReportAndEndsAsADisabledZero) {
+  Script s;
+  s.in = {input(7, 0.001)};
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
+  dev.open();
+  dev.enable_force(true);
+  dev.answer(dev.read().sequence);
+  dev.write_force_n(Vec3{0, 0, 1.5});
+  auto find = [&](hid::OutputReport& o) {
+    std::lock_guard lock(s.mu);
+    for (const auto& b : s.out)
+      if (hid::decode(b, o) && o.enable && o.answers == 7) return true;
+    return false;
+  };
+  hid::OutputReport o;
+  wait_for([&] { return find(o); });
+  ASSERT_TRUE(find(o));
+  EXPECT_NEAR(o.force_n.z, 1.5, 1e-9);
+  dev.write_force_n(Vec3{NAN, 0, 0});  // never sent as NaN
+  dev.close();
+  std::lock_guard lock(s.mu);
+  ASSERT_FALSE(s.out.empty());
+  hid::OutputReport last;
+  ASSERT_TRUE(hid::decode(s.out.back(), last));
+  EXPECT_FALSE(last.enable);
+  EXPECT_EQ(last.force_n.x, 0.0);
+  EXPECT_EQ(last.force_n.z, 0.0);
+  for (const auto& b : s.out) {
+    hid::OutputReport any;
+    ASSERT_TRUE(hid::decode(b, any));
+    EXPECT_TRUE(std::isfinite(any.force_n.x));
+  }
+}
+
+TEST(ReportDevice, NoFirstReportIsAClearError) {
+  Script s;
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
+  try {
+    dev.open();
+    FAIL() << "opened without a report";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("scripted: no input report within 1 s"), std::string::npos) << e.what();
+  }
+}

@@ -145,8 +145,8 @@ class ForceMeter final : public servo::HapticDeviceIO {
   std::atomic<double> max_{0};
 };
 
-/// The device's figures after the run; true if it was lost or faulty.
-bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::ServoThread& servo, std::ostream& log) {
+/// The device's figures after the run.
+void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::ServoThread& servo, std::ostream& log) {
   const servo::DeviceCounters c = servo.device_counters();
   log << "device   " << d.description << ": " << meter.forced_ticks() << " ticks with force, max |F| "
       << ms(meter.max_force_n()) << " N; stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
@@ -160,7 +160,6 @@ bool print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
     if (!d.report->last_error().empty() && d.report->last_error() != d.report->last_refusal())
       log << "link     last error: " << d.report->last_error() << "\n";
   }
-  return c.disconnected > 0 || c.fault > 0 || c.refused > 0;
 }
 
 }  // namespace
@@ -221,7 +220,8 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
       last_second = int(live.elapsed_s());
       const session::LiveStats s = live.stats();
       std::cerr << "live     " << last_second << " s, " << s.ticks << " ticks, " << s.missed_deadlines << " missed, "
-                << s.edits_applied << " edits" << (tty ? "\r" : "\n") << std::flush;
+                << s.edits_applied << " edits, device " << servo::to_string(live.servo_thread()->device_status())
+                << (tty ? "    \r" : "\n") << std::flush;
     }
   }
   if (tty) std::cerr << "\n";
@@ -230,7 +230,11 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   const session::LiveStats s = live.stats();
   if (session::stop_signal() != 0) log << "live     stopped by signal " << session::stop_signal() << " after " << ms(seconds) << " s\n";
   print_stats(s, seconds, log);
-  const bool device_lost = device.kind != "sim" && print_device(device, meter, *live.servo_thread(), log);
+  // The device's figures: always for a real or emulated device; for the simulated ones
+  // only when the servo refused or zeroed something (a non-finite simulated HIP).
+  const servo::DeviceCounters dc = live.servo_thread()->device_counters();
+  const bool device_lost = dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0;
+  if (device.report || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
   // Stopped by a signal: the recording is complete, but the run did not run its course.
   if (session::stop_signal() != 0) return 128 + session::stop_signal();

@@ -20,8 +20,9 @@ struct LiveOptions {
 
 /// Runs `scene` live for its script's duration (or until SIGINT / SIGTERM). Prints the
 /// servo's ticks, missed deadlines and faults, the edits and their edit-to-haptics latency.
-/// With a device other than `sim`, also prints the device's counters (reports, refused,
-/// gaps, stale / disconnected / fault ticks, ramps, clamps) and the force it rendered.
+/// With a hid or emu device (or any device whose reports the servo zeroed), also prints the
+/// device's counters (reports, refused, gaps, stale / disconnected / fault ticks, ramps,
+/// clamps) and the force it rendered.
 /// @return 0; 4 when servo ticks were faults; 5 when the device was disconnected, faulty or
 /// sent refused reports during the run; 128 + the signal when SIGINT / SIGTERM stopped
 /// it (the servo stopped with zero force, the recording closed and complete). @throws as run_scene, io::RecordingError.

@@ -93,7 +93,8 @@ sphere.json, knot.json, drill-skull.json. `run --record FILE` also writes a reco
 Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
 Points are reported in the volume's physical frame (origin + direction x spacing x index).
 Exit status: 0 ok; 1 bad input (the message names the file, field and value);
-4 the run had servo fault ticks.
+4 the run had servo fault ticks; 5 (--live) the haptic device was disconnected, faulty or sent
+refused reports.
 
 The Vulkan device: --device NAME|INDEX, before or after `run`, or ISOTOUCH_DEVICE.
 

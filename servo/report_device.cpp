@@ -5,7 +5,6 @@
 #include <sys/prctl.h>
 #include <time.h>
 
-#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstring>
@@ -69,7 +68,7 @@ void ReportDevice::close() {
 void ReportDevice::write_force_n(const Vec3& force_n) {
   // Servo thread: one store into the latest-value cell, no syscall. Non-finite: zero.
   const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
-  output_.store(Output{ok ? force_n : Vec3{}, answers_, ++writes_, now_ns()});
+  output_.store(Output{ok ? force_n : Vec3{}, answers_, ++writes_});
 }
 
 DeviceCaps ReportDevice::caps() const { return caps_; }
@@ -203,31 +202,25 @@ bool ReportDevice::send(std::span<const std::uint8_t> report) {
 }
 
 void ReportDevice::writer_loop() {
-  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the wake-up is the latency
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
-  const auto early_ns = std::int64_t(opt_.write_early_us * 1e3);
   const auto keepalive_ns = std::int64_t(opt_.keepalive_s * 1e9);
   std::uint64_t sent_count = 0;
-  std::int64_t last_send = 0, last_write = 0, period = 0;
+  std::int64_t last_send = 0;
   while (!stop_.load()) {
     const Output o = output_.load();
     const bool enable = enabled_.load(std::memory_order_relaxed);
-    std::int64_t t = now_ns();
+    const std::int64_t t = now_ns();
     if (o.count != sent_count || t - last_send >= keepalive_ns) {
       // Disabled: a zero force with enable cleared (the device keeps reporting).
       const std::size_t n = protocol_->encode_output(enable ? o.force_n : Vec3{}, enable, o.answers, buf);
       send(std::span(buf.data(), n));
-      if (o.count == sent_count + 1 && last_write > 0)  // consecutive writes: the servo's period
-        period = std::clamp<std::int64_t>(o.t_ns - last_write, 50'000, 10'000'000);
-      if (o.count != sent_count) last_write = o.t_ns;
       sent_count = o.count;
-      last_send = t = now_ns();
+      last_send = t;
     }
-    // Sleep until just before the next write is due (unknown or overdue: poll).
-    const std::int64_t due = period > 0 ? last_write + period - early_ns : 0;
-    sleep_ns(due > t + poll_ns ? std::min(due - t, keepalive_ns) : poll_ns);
+    sleep_ns(poll_ns);
   }
   const std::size_t n = protocol_->encode_output({}, false, 0, buf);
   send(std::span(buf.data(), n));

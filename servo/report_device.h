@@ -76,10 +76,7 @@ struct LinkCounters {
 
 struct ReportDeviceOptions {
   double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
-  /// The writer sleeps until just before the servo's next write is due (the servo's period
-  /// is learned from its writes), then looks for it this often until it comes [us].
-  double write_poll_us = 10;
-  double write_early_us = 30;          ///< wake this long before the next write is due [us]
+  double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
   double keepalive_s = 0.01;           ///< with nothing new to send, resend the last output this often [s]
   /// > 0: the reader and writer threads ask for SCHED_FIFO at this priority (below the
   /// servo's 80: they feed it). Refused (no CAP_SYS_NICE): they run under the default
@@ -91,8 +88,7 @@ struct ReportDeviceOptions {
 /// capabilities (failure: std::runtime_error naming the link and the reason); then a reader
 /// thread publishes each accepted input report (DeviceReading, received_ns = arrival) into a
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
-/// wrote (it sleeps until shortly before the servo's next write is due and polls from
-/// there: one or a few wake-ups per tick; the servo makes no syscall). A link that goes down
+/// wrote (polled every write_poll_us; the servo makes no syscall). A link that goes down
 /// publishes kDisconnected at once and is reopened every reconnect_interval_s; a reopened
 /// link increments DeviceReading::connection (the servo ramps the force in). Refused
 /// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
@@ -129,7 +125,6 @@ class ReportDevice final : public HapticDeviceIO {
     Vec3 force_n;
     std::uint64_t answers = 0;
     std::uint64_t count = 0;  // +1 per write_force_n()
-    std::int64_t t_ns = 0;    // CLOCK_MONOTONIC of the write (vDSO: no syscall)
   };
   void reader_loop();
   void ask_fifo();

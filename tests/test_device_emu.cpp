@@ -116,7 +116,7 @@ struct Rig {
 TEST(DeviceEmu, TheHandPressesAndTheForceFlowsBothWays) {
   Rig rig;
   rig.run(0.4);
-  EXPECT_GT(rig.forced_ticks(), 200);                         // the wall pushed back
+  EXPECT_GT(rig.forced_ticks(), 150);                         // the wall pushed back
   EXPECT_GT(rig.stats.outputs_received, 300);                 // forces reached the device
   EXPECT_GT(rig.stats.max_force_n, 0.3);
   EXPECT_LT(rig.stats.max_force_n, 1.5);

@@ -79,9 +79,13 @@ struct ServoThreadConfig {
   /// 0: two servo periods. Synchronous devices (DeviceReading::received_ns == 0) are never stale.
   double stale_timeout_s = 0;
   /// After the force is enabled (start()) and whenever the device comes back (ok again after
-  /// stale, disconnected, fault or a refused report; a reconnection) the force is scaled
-  /// from 0 to 1 linearly over this time, so a HIP inside the object gives no jolt [s].
+  /// a disconnect, a fault, a refused report, stale reports for longer than stale_restart_s,
+  /// a reconnection, or a pause) the force is scaled from 0 to 1 linearly over this time and
+  /// the renderer starts afresh, so a HIP inside the object gives no jolt [s].
   double ramp_in_s = 0.05;
+  /// Stale ticks for up to this long (a late report or two) give zero force on those ticks
+  /// but keep the renderer's contact state and the force level when reports resume [s].
+  double stale_restart_s = 0.02;
 };
 
 /// Counters of the device side of the servo (ticks unless said otherwise).
@@ -109,8 +113,9 @@ struct DeviceCounters {
 /// Safety, every tick, before the renderer: a reading whose status is not ok, that is older
 /// than stale_timeout_s, or that is refused (non-finite or outside the device's workspace
 /// box) gives an exact zero force in that same tick and is counted (DeviceCounters); the
-/// renderer is not ticked and is reset before the next good tick. The force then ramps in
-/// over ramp_in_s, and |F| is clamped to DeviceCaps::max_force_n.
+/// renderer is not ticked; unless it was a short run of stale ticks (stale_restart_s) it is
+/// reset before the next good tick and the force ramps in over ramp_in_s. |F| is clamped to
+/// DeviceCaps::max_force_n.
 class ServoThread {
  public:
   ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer, HapticDeviceIO& device,

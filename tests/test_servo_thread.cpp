@@ -254,7 +254,7 @@ struct SafetyRig {
   SteeredDevice dev;
   TickLog log;
   std::unique_ptr<ServoThread> servo;
-  explicit SafetyRig(double ramp_in_s = 0.0) {
+  explicit SafetyRig(double ramp_in_s = 0.0, double stale_restart_s = 0.02) {
     published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
     dev.c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
     dev.c.workspace_max_m = Vec3{0.1, 0.1, 0.1};
@@ -263,6 +263,7 @@ struct SafetyRig {
     cfg.sched_fifo = cfg.pin_cpu = cfg.lock_memory = false;
     cfg.observer = &log;
     cfg.ramp_in_s = ramp_in_s;
+    cfg.stale_restart_s = stale_restart_s;
     servo = std::make_unique<ServoThread>(published, renderer, dev, cfg);
   }
   void run_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
@@ -295,6 +296,22 @@ TEST(ServoSafety, AStaleReportGivesZeroForceInTheSameTick) {
   EXPECT_GT(forced, 60);  // before and after
   EXPECT_EQ(rig.servo->device_counters().stale, stale);
   EXPECT_GE(rig.renderer.resets.load(), 1);  // contact state forgotten before force came back
+}
+
+TEST(ServoSafety, AShortStaleBlipZeroesThoseTicksButKeepsTheContact) {
+  SafetyRig rig(0.05, 0.2);  // blips up to 200 ms keep the contact state
+  rig.servo->start();
+  rig.run_ms(80);
+  rig.dev.fresh = false;
+  rig.run_ms(10);
+  rig.dev.fresh = true;
+  rig.run_ms(20);
+  rig.servo->stop();
+  const DeviceCounters c = rig.servo->device_counters();
+  EXPECT_GT(c.stale, 0);
+  EXPECT_EQ(c.ramps, 1);                     // only the one after enable
+  EXPECT_EQ(rig.renderer.resets.load(), 0);  // the contact state was kept
+  EXPECT_EQ(rig.log.force[rig.log.n.load() - 1], 1.0);  // straight back to the full force
 }
 
 TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {

@@ -172,6 +172,8 @@ void ServoThread::loop() {
       cfg_.stale_timeout_s > 0 ? std::int64_t(cfg_.stale_timeout_s * 1e9) : 2 * period;
   const double ramp_ns = std::max(cfg_.ramp_in_s, 0.0) * 1e9;
   std::int64_t ramp_start = -1;  // tick start of the ramp in progress; -1: (re)start it
+  std::int64_t not_ok_since = -1;  // start of the current run of not-ok ticks; -1: none
+  const auto restart_ns = std::int64_t(std::max(cfg_.stale_restart_s, 0.0) * 1e9);
   std::uint32_t connection = 0;
   bool first = true;
   while (!stop_.load(std::memory_order_relaxed)) {
@@ -225,8 +227,13 @@ void ServoThread::loop() {
       if (rec.device_status != DeviceStatus::kOk) {
         device_.write_force_n({});  // within this tick
         count_not_ok(rec.device_status, refused);
-        ramp_start = -1;
-        was_paused = true;  // the renderer is reset before the next good tick
+        if (not_ok_since < 0) not_ok_since = t;
+        // A blip of stale ticks keeps the contact state and the force level; anything
+        // longer, or a device that was lost or faulty, starts over with a ramp.
+        if (rec.device_status != DeviceStatus::kStale || t - not_ok_since > restart_ns) {
+          ramp_start = -1;
+          was_paused = true;  // the renderer is reset before the next good tick
+        }
       } else if (paused) {
         device_.write_force_n({});
         was_paused = true;
@@ -234,6 +241,7 @@ void ServoThread::loop() {
       } else {
         if (was_paused) renderer_.reset();
         was_paused = false;
+        not_ok_since = -1;
         if (ramp_start < 0) {
           ramp_start = t;
           ramps_.fetch_add(1, std::memory_order_relaxed);

@@ -3,6 +3,7 @@
 
 #include <gdcmScanner.h>
 #include <gdcmTag.h>
+#include <gdcmTrace.h>
 #include <itkGDCMImageIO.h>
 #include <itkGDCMSeriesFileNames.h>
 #include <itkImage.h>
@@ -15,7 +16,9 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <iomanip>
 #include <map>
 #include <set>
@@ -72,7 +75,7 @@ std::string itk_reason(std::string msg) {
 const gdcm::Tag kModality(0x0008, 0x0060), kSeriesDescription(0x0008, 0x103e), kSliceThickness(0x0018, 0x0050),
     kSpacingBetweenSlices(0x0018, 0x0088), kSeriesUid(0x0020, 0x000e), kPosition(0x0020, 0x0032),
     kOrientation(0x0020, 0x0037), kSamplesPerPixel(0x0028, 0x0002), kFrames(0x0028, 0x0008), kRows(0x0028, 0x0010),
-    kColumns(0x0028, 0x0011), kPixelSpacing(0x0028, 0x0030);
+    kColumns(0x0028, 0x0011), kPixelSpacing(0x0028, 0x0030), kBitsAllocated(0x0028, 0x0100);
 
 std::string trimmed(const char* s) {
   std::string t = s ? s : "";
@@ -101,6 +104,58 @@ std::vector<double> numbers(const char* s, std::size_t want) {
   return out;
 }
 
+// ITK's and GDCM's warnings and errors go to stderr as they happen (a folder without a
+// series, positions that are not unique); this reader says what is wrong in its exception
+// instead. Both switches are global: restored on the way out.
+struct QuietItkGdcm {
+  const bool itk_warnings = itk::Object::GetGlobalWarningDisplay();
+  const bool gdcm_warnings = gdcm::Trace::GetWarningFlag(), gdcm_errors = gdcm::Trace::GetErrorFlag();
+  QuietItkGdcm() {
+    itk::Object::GlobalWarningDisplayOff();
+    gdcm::Trace::WarningOff();
+    gdcm::Trace::ErrorOff();
+  }
+  ~QuietItkGdcm() {
+    itk::Object::SetGlobalWarningDisplay(itk_warnings);
+    gdcm::Trace::SetWarning(gdcm_warnings);
+    gdcm::Trace::SetError(gdcm_errors);
+  }
+  QuietItkGdcm(const QuietItkGdcm&) = delete;
+  QuietItkGdcm& operator=(const QuietItkGdcm&) = delete;
+};
+
+// Uncompressed pixel data must be whole: GDCM reads a file cut short without complaint
+// (the missing pixels come back as whatever the buffer held). Find the Pixel Data element
+// (7FE0,0010) whose length is the `expected` bytes (implicit VR: tag, 4-byte length;
+// explicit VR: tag, OB/OW, 2 reserved bytes, 4-byte length) in the file's first 1 MiB and
+// compare the file's size with its end. Encapsulated (compressed) data: not checked here.
+void check_pixel_data_whole(const std::string& folder, const std::string& where, const std::string& file,
+                            std::uint64_t expected) {
+  std::error_code ec;
+  const std::uint64_t size = fs::file_size(file, ec);
+  if (ec) fail(folder, where + ": cannot read the size of " + name_of(file) + " (" + ec.message() + ")");
+  std::ifstream in(file, std::ios::binary);
+  std::string head(std::size_t(std::min<std::uint64_t>(size, 1 << 20)), '\0');
+  in.read(head.data(), std::streamsize(head.size()));
+  head.resize(std::size_t(in.gcount()));
+  const std::string tag("\xe0\x7f\x10\x00", 4);
+  for (std::size_t at = head.find(tag); at != std::string::npos; at = head.find(tag, at + 1)) {
+    for (const std::size_t len_at : {at + 4, at + 8}) {
+      if (len_at == at + 8 && !(head.compare(at + 4, 2, "OW") == 0 || head.compare(at + 4, 2, "OB") == 0)) continue;
+      if (len_at + 4 > head.size()) continue;
+      std::uint32_t len = 0;
+      std::memcpy(&len, head.data() + len_at, 4);
+      if (len != expected && len != expected + 1) continue;
+      const std::uint64_t end = len_at + 4 + std::uint64_t(len);
+      if (size < end)
+        fail(folder, where + ": " + name_of(file) + " is truncated: its Pixel Data (7FE0,0010) is " + std::to_string(len) +
+                         " bytes, the file holds " + std::to_string(size > len_at + 4 ? size - len_at - 4 : 0) +
+                         " of them");
+      return;
+    }
+  }
+}
+
 struct Slice {
   std::string file;
   V3 position{};  // ImagePositionPatient [mm]
@@ -110,6 +165,7 @@ struct Slice {
 }  // namespace
 
 Volume load_dicom_series(const std::string& folder, const std::string& series_uid, DicomSeriesInfo* info_out) {
+  const QuietItkGdcm quiet;
   DicomSeriesInfo info;
   std::error_code ec;
   if (!fs::exists(folder, ec)) fail(folder, "no such folder");
@@ -171,8 +227,10 @@ Volume load_dicom_series(const std::string& folder, const std::string& series_ui
     }
   }
   if (!others.empty())
-    info.notes.push_back("ignored " + std::to_string(others.size()) + " file" + (others.size() > 1 ? "s" : "") +
-                         " that are not DICOM image slices: " + some_names(others));
+    info.notes.push_back("ignored " + std::to_string(others.size()) +
+                         (others.size() > 1 ? " files that are not DICOM image slices: "
+                                            : " file that is not a DICOM image slice: ") +
+                         some_names(others));
   info.series_uid = uid;
   const std::vector<std::string>& files = series[uid];
   const std::string where = "DICOM series " + uid;
@@ -180,7 +238,8 @@ Volume load_dicom_series(const std::string& folder, const std::string& series_ui
   // Every slice's header.
   gdcm::Scanner scan;
   for (const gdcm::Tag& t : {kModality, kSeriesDescription, kSliceThickness, kSpacingBetweenSlices, kSeriesUid,
-                             kPosition, kOrientation, kSamplesPerPixel, kFrames, kRows, kColumns, kPixelSpacing})
+                             kPosition, kOrientation, kSamplesPerPixel, kFrames, kRows, kColumns, kPixelSpacing,
+                             kBitsAllocated})
     scan.AddTag(t);
   if (!scan.Scan(files)) fail(folder, where + ": cannot read the slices' headers");
   auto value = [&](const std::string& f, const gdcm::Tag& t) -> const char* {
@@ -340,6 +399,11 @@ Volume load_dicom_series(const std::string& folder, const std::string& series_ui
       fail(folder, where + ": " + std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " +
                        std::to_string(dims[2]) + " voxels need " + std::to_string(need >> 20) +
                        " MiB to load, more than 3/4 of this machine's " + std::to_string(have >> 20) + " MiB");
+  }
+
+  for (const auto& f : files) {
+    const int bits = std::atoi(trimmed(value(f, kBitsAllocated)).c_str());
+    if (bits > 0) check_pixel_data_whole(folder, where, f, dims[0] * dims[1] * std::uint64_t(bits) / 8);
   }
 
   // The pixels, in the sorted order, rescaled by GDCM (RescaleSlope, RescaleIntercept).

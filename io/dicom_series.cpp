@@ -203,8 +203,9 @@ Volume load_dicom_series(const std::string& folder, const std::string& series_ui
   for (const auto& f : all)
     if (!in_series.count(fs::path(f).lexically_normal().string())) others.push_back(f);
   if (series.empty())
-    fail(folder, "no DICOM files: none of its " + std::to_string(all.size()) + " file" +
-                     (all.size() > 1 ? "s" : "") + " (" + some_names(all) + ") is a DICOM image slice");
+    fail(folder, all.size() == 1 ? "no DICOM files: its one file (" + some_names(all) + ") is not a DICOM image slice"
+                                 : "no DICOM files: none of its " + std::to_string(all.size()) + " files (" +
+                                       some_names(all) + ") is a DICOM image slice");
   info.series_in_folder = series.size();
 
   std::string uid = series_uid;

@@ -220,7 +220,8 @@ Subcommand add_export_command(CLI::App& cli) {
       "Usage: isotouch export (VOLUME | --scene SCENE) [--iso TAU --inside above|below]\n"
       "                  [--vdb OUT.vdb] [--volume OUT.nrrd|.mha|.nii|.nii.gz] [--stl OUT.stl] [--obj OUT.obj]\n"
       "                  [--ply OUT.ply] [--adaptivity A]\n"
-      "VOLUME: .mhd/.mha, .nrrd/.nhdr, .nii/.nii.gz or .vdb (a FloatGrid; a level set means tau 0, inside below).\n"
+      "VOLUME: .mhd/.mha, .nrrd/.nhdr, .nii/.nii.gz, .vdb (a FloatGrid; a level set means tau 0, inside below)\n"
+      "or a DICOM series folder (its slices, in HU; with several series, the one with the most slices).\n"
       "The .vdb keeps every voxel exactly (transform = grid frame [m], direction + isosurface as metadata).\n"
       "Meshes (OpenVDB volumeToMesh) are in the physical frame [m], triangles counter-clockwise seen from\n"
       "outside. Every file is written whole or not at all (temp file, fsync, rename); a device, FIFO or '-'\n"
@@ -228,7 +229,7 @@ Subcommand add_export_command(CLI::App& cli) {
       "Exit: 0 done, 1 error (names the file), 2 bad usage, 3 mesh written but not closed.\n"
       "Example: isotouch export data/ct-head-headsq/headsq_64x64x93_int16.mhd --iso 1150 --inside above "
       "--vdb head.vdb --stl head.stl");
-  s.app->add_option("volume", o->volume, "Volume file (.mhd .nrrd .nii .vdb ...)");
+  s.app->add_option("volume", o->volume, "Volume file (.mhd .nrrd .nii .vdb ...) or DICOM series folder");
   s.app->add_option("--scene", o->scene, "Scene file: its volume and its isosurface (tau, inside)");
   s.app->add_option("--grid", o->grid, ".vdb input: the grid to read (default: the first float grid)");
   s.app->add_option("--iso", o->iso, "Isovalue tau (value units); overrides the scene's or the .vdb's");

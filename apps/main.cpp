@@ -50,6 +50,7 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "name": "head",                             letters, digits, '-', '_' (default: file stem)
     "volume": {"path": "../data/ct-head-headsq/headsq_64x64x93_int16.mhd"},
                                                 relative to the scene file; .mhd .mha .nrrd .nhdr .nii .nii.gz
+                                                .vdb, or a DICOM series folder (one file per slice)
            or {"synthetic": "sphere", "dims": [64, 64, 64], "spacing_m": 0.001, "radius_vox": 20}
            or {"synthetic": "box" | "three-spheres" | "knot"}
     "isovalue": 1150,                           required; in the volume's units (HU for CT)
@@ -87,7 +88,8 @@ mode "sparse"). mode "dense" computes every voxel, for comparison.
 The script casts a ray from ray_origin_frac (fractions of the volume box, each in [-2, 3])
 to the first isosurface crossing, presses the hand target press_depth_m in, strokes
 stroke_length_m along the surface, and lifts off. Shipped: scenes/head.json, chest.json,
-sphere.json, knot.json, drill-skull.json. `run --record FILE` also writes a recording that
+chest-full.json (the chest's DICOM series at full resolution), sphere.json, knot.json,
+drill-skull.json. `run --record FILE` also writes a recording that
 `isotouch replay FILE` plays back, checking every force bit for bit.
 
 Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
@@ -298,6 +300,7 @@ int main(int argc, char** argv) {
       "  isotouch run                          # default scene scenes/head.json -> out/head/\n"
       "  isotouch run scenes/chest.json --out /tmp/chest\n"
       "  isotouch check data/ct-tooth/tooth.nhdr\n"
+      "  isotouch check data/ct-chest-lungdx-a0001/dicom-5mm   # a DICOM series folder\n"
       "  ISOTOUCH_DEVICE=llvmpipe isotouch run # choose the Vulkan device"};
   cli.require_subcommand(1);
   // Options of the main command (--device) are accepted after the subcommand too:
@@ -344,7 +347,9 @@ int main(int argc, char** argv) {
   double slab_mib = 0;
   app::CheckAllOptions check_all;
   bool check_all_flag = false;
-  check->add_option("volume", volume, "Volume file (.mhd, .nrrd, .nhdr, .nii, .nii.gz); not with --scene");
+  check->add_option("volume", volume,
+                    "Volume file (.mhd, .mha, .nrrd, .nhdr, .nii, .nii.gz, .vdb) or DICOM series folder (its slices; "
+                    "with several series, the one with the most slices); not with --scene");
   check->add_flag("--all", check_all_flag,
                   "Every pass (gaussian 1 mm, closing 1 mm, gradient, brick_minmax) on the GPU against its "
                   "one-thread CPU reference, the gradient against OpenVDB too: a table of max abs/relative "

@@ -1,5 +1,7 @@
-// The only translation unit that includes ITK and teem headers (slow to compile).
+// With dicom_series.cpp, the only translation units that include ITK and teem headers (slow to compile).
 #include "volume_io.h"
+
+#include "dicom_series.h"
 
 #include <itkImageIOBase.h>
 #include <itkImageIORegion.h>
@@ -17,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <memory>
 #include <set>
@@ -667,7 +670,13 @@ void check_nrrd_spacings(const std::string& path) {
 Volume load_volume(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
-  if (fs::is_directory(path, ec)) fail(path, "is a directory, not a volume file");
+  if (fs::is_directory(path, ec)) {
+    // A folder is a DICOM series (its slices): what the reader chose or ignored is said on stderr.
+    DicomSeriesInfo info;
+    Volume v = load_dicom_series(path, "", &info);
+    for (const auto& note : info.notes) std::cerr << "isotouch: note: " << path << ": " << note << "\n";
+    return v;
+  }
   if (is_nrrd(path)) check_nrrd_spacings(path);
   Volume v;
   try {

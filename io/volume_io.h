@@ -1,4 +1,5 @@
-// volume_io.h - read MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr) and NIfTI (.nii/.nii.gz).
+// volume_io.h - read MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr), NIfTI (.nii/.nii.gz) and
+// DICOM series folders.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -21,7 +22,11 @@ inline constexpr double kMaxOriginM = 1000.0;
 /// NRRD headers that ITK rejects but teem accepts (e.g. `spacings` together with
 /// `space`, as in VTK's headsq quarter.nhdr) are read with teem's nrrdLoad.
 /// The direction matrix is kept in engine::Volume::direction (see engine::Volume for the two frames).
-/// @throws VolumeError naming the file, the header field and its value: missing file,
+/// A folder is read as a DICOM series with io::load_dicom_series (dicom_series.h: one
+/// series, the one with the most slices when there are several; its notes, such as which
+/// series was taken, go to stderr as "isotouch: note: FOLDER: ...").
+/// @throws VolumeError naming the file, the header field and its value (for a folder, what
+///         load_dicom_series throws): missing file,
 ///         unknown format, unknown voxel type, more than one component, dimensions not in
 ///         [1, 2^20] (said as the file wrote them, e.g. `DimSize` -64) or above kMaxVoxels
 ///         in all, spacing not finite and positive, extent above kMaxExtentM, origin not

@@ -149,7 +149,10 @@ TEST(VolumeIo, AbsurdDimensions) {
   expect_error((d / "t.mhd").string(), "absurd dimensions");
 }
 
-TEST(VolumeIo, DirectoryIsNotAVolume) { expect_error(kData, "is a directory"); }
+// A folder is read as a DICOM series (test_dicom_series.cpp); data/ holds none.
+TEST(VolumeIo, FolderWithoutDicomIsNotAVolume) {
+  expect_error(kData, "no DICOM files: its one file (README.md) is not a DICOM image slice");
+}
 
 // ---- Broken MetaImage headers ("Input and coordinates") --------------------------
 namespace {

@@ -656,4 +656,80 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   return img;
 }
 
+RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const std::vector<std::uint32_t>& bricks) {
+  Impl& m = *impl_;
+  const auto t0 = std::chrono::steady_clock::now();
+  RaycastField& f = m.field;
+  if (values.size() != f.values.size())
+    throw std::invalid_argument("raycast update: " + std::to_string(values.size()) + " values for a grid of " +
+                                std::to_string(f.values.size()) + " voxels");
+  const auto& n = f.grid.dims;
+  const std::array<std::uint32_t, 3> nb{std::uint32_t((n[0] + 7) / 8), std::uint32_t((n[1] + 7) / 8),
+                                        std::uint32_t((n[2] + 7) / 8)};
+  const std::uint64_t brick_count = std::uint64_t(nb[0]) * nb[1] * nb[2];
+  std::vector<std::uint32_t> ids(bricks);
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  UpdateStats st;
+  // Voxel rows of the bricks: host copy, then one copy region per row.
+  std::vector<VkBufferCopy> regions;
+  for (std::uint32_t id : ids) {
+    if (id >= brick_count)
+      throw std::invalid_argument("raycast update: brick id " + std::to_string(id) + " out of range (the grid has " +
+                                  std::to_string(brick_count) + " bricks)");
+    const int bx = int(id % nb[0]), by = int(id / nb[0] % nb[1]), bz = int(id / (std::uint64_t(nb[0]) * nb[1]));
+    const int x0 = 8 * bx, x1 = std::min(n[0], x0 + 8);
+    for (int z = 8 * bz; z < std::min(n[2], 8 * bz + 8); ++z)
+      for (int y = 8 * by; y < std::min(n[1], 8 * by + 8); ++y) {
+        const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x0);
+        std::memcpy(f.values.data() + at, values.data() + at, std::size_t(x1 - x0) * sizeof(float));
+        regions.push_back({at * sizeof(float), at * sizeof(float), std::size_t(x1 - x0) * sizeof(float)});
+      }
+  }
+  st.bricks = ids.size();
+  // The cell distances of the new values; upload the span that differs.
+  std::vector<std::uint8_t> cd = cell_distances(f.grid, f.values, f.iso, f.background);
+  std::size_t lo = cd.size(), hi = 0;
+  for (std::size_t i = 0; i < cd.size(); ++i)
+    if (cd[i] != f.cell_dist[i]) {
+      lo = std::min(lo, i);
+      hi = i + 1;
+    }
+  f.cell_dist = std::move(cd);
+  VkBufferCopy cell_region{};
+  if (hi > lo) {  // whole uints (binding 2 packs 4 bytes per uint)
+    lo = lo / 4 * 4;
+    hi = std::min((hi + 3) / 4 * 4, std::size_t(m.cells.size()));
+    cell_region = {0, lo, hi - lo};
+    m.active = active_box(f);
+  }
+  std::size_t bytes = 0;
+  for (const VkBufferCopy& r : regions) bytes += r.size;
+  st.value_bytes = bytes;
+  st.cell_bytes = cell_region.size;
+  if (bytes + cell_region.size > 0) {
+    GpuBuffer up = make_buffer_or_throw(m.ctx, bytes + cell_region.size, MemoryIntent::Upload, "raycast update staging");
+    auto* dst = static_cast<std::uint8_t*>(up.mapped());
+    std::size_t o = 0;
+    for (VkBufferCopy& r : regions) {  // pack the rows, then read them from the staging buffer
+      std::memcpy(dst + o, reinterpret_cast<const std::uint8_t*>(f.values.data()) + r.srcOffset, r.size);
+      r.srcOffset = o;
+      o += r.size;
+    }
+    if (cell_region.size) {
+      std::vector<std::uint8_t> padded(f.cell_dist);
+      padded.resize(m.cells.size(), 0);
+      std::memcpy(dst + o, padded.data() + cell_region.dstOffset, cell_region.size);
+      cell_region.srcOffset = o;
+    }
+    VkCommandBuffer cmd = m.ctx.begin_commands();
+    if (!regions.empty()) vkCmdCopyBuffer(cmd, up.handle(), m.values.handle(), std::uint32_t(regions.size()), regions.data());
+    if (cell_region.size) vkCmdCopyBuffer(cmd, up.handle(), m.cells.handle(), 1, &cell_region);
+    barrier_transfer_to_compute(cmd);
+    m.ctx.submit_and_wait(cmd);
+  }
+  st.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return st;
+}
+
 }  // namespace isotouch::engine

@@ -626,3 +626,53 @@ TEST(Raycast, PngIsWrittenWholeAndReadable) {
   EXPECT_THROW(app::write_png("/proc/no/such/dir/x.png", 6, 4, px), std::exception);
   EXPECT_THROW(app::write_png(path, 5, 4, px), std::runtime_error);
 }
+
+// The picture follows an edit incrementally: RayCaster::update with the bricks a brush
+// changed gives, bit for bit, the image and depth of a ray caster created on the edited
+// volume (the truth: a full rebuild). Carve and add brushes on the head CT, then undo-like
+// restoration of the original values.
+TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
+  const engine::Volume vol = io::load_volume(kHead);
+  const core::Isosurface iso{1150, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const RaycastField f0 = engine::make_raycast_field(vol.grid, vol.voxels, iso, bg);
+  const CameraView view = engine::orbit_view(f0.grid, vol.direction, app::default_camera(vol));
+  auto rc = engine::RayCaster::create(vk(), f0);
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& inc = **rc.value;
+  const std::vector<gpu::RaycastPrim> prims = {engine::prim_sphere(vol.grid.centre_m(), 2e-3, {1, 1, 0})};
+  const RaycastImage before = inc.render(view, RaycastStyle{}, 96, 96, prims);
+  // Edit the values in a box of voxels (as a brush does) and note the bricks it touches.
+  std::vector<float> edited = vol.voxels;
+  const auto& n = vol.grid.dims;
+  std::vector<std::uint32_t> dirty;
+  auto edit_box = [&](int x0, int x1, int y0, int y1, int z0, int z1, float v) {
+    for (int z = z0; z < z1; ++z)
+      for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+          edited[(std::size_t(z) * n[1] + y) * n[0] + x] = v;
+          dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
+        }
+  };
+  edit_box(20, 44, 0, 30, 30, 60, -1000.f);  // carve the front of the skull away
+  edit_box(28, 36, 50, 64, 70, 93, 2000.f);  // add bone at the back, up to the grid's faces
+  const engine::RayCaster::UpdateStats st = inc.update(edited, dirty);
+  EXPECT_GT(st.bricks, 0u);
+  EXPECT_LT(st.value_bytes, vol.voxels.size() * sizeof(float)) << "the whole volume was uploaded";
+  EXPECT_GT(st.cell_bytes, 0u);
+  const RaycastImage after = inc.render(view, RaycastStyle{}, 96, 96, prims);
+  auto full = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, edited, iso, bg));
+  ASSERT_TRUE(full) << full.error;
+  const RaycastImage truth = (*full.value)->render(view, RaycastStyle{}, 96, 96, prims);
+  EXPECT_NE(after.rgba, before.rgba) << "the edit is not visible";
+  EXPECT_EQ(after.rgba, truth.rgba);
+  EXPECT_EQ(after.depth, truth.depth);
+  EXPECT_EQ(inc.field().cell_dist, (*full.value)->field().cell_dist);
+  // Back to the original values (an undo): the first picture again, bit for bit.
+  inc.update(vol.voxels, dirty);
+  const RaycastImage undone = inc.render(view, RaycastStyle{}, 96, 96, prims);
+  EXPECT_EQ(undone.rgba, before.rgba);
+  EXPECT_EQ(undone.depth, before.depth);
+  EXPECT_THROW(inc.update(vol.voxels, {std::uint32_t(1) << 30}), std::invalid_argument);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

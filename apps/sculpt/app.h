@@ -1,0 +1,36 @@
+// app.h - isotouch-sculpt: a window where a person sculpts a volume and feels it.
+//
+// One LiveSession (servo thread at the scene's rate on a simulated device coupled to the
+// mouse, edit thread, optional recorder) holds the volume; the window's thread draws each
+// frame with the compute ray caster (engine::RayCaster, updated brick by brick after each
+// applied edit), steers the hand target from the mouse and submits the tools' brushes,
+// undo and redo through LiveSession::submit.
+#pragma once
+#include <optional>
+#include <ostream>
+#include <string>
+
+namespace isotouch::sculpt {
+
+struct Options {
+  std::string input;                ///< a scene (.json) or a volume file
+  std::optional<double> iso;        ///< a volume's isovalue (required for a volume)
+  std::string inside = "above";     ///< a volume's inside: "above" or "below"
+  std::string script;               ///< input script (JSON), "" = none
+  std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
+  std::string record;               ///< the session's recording (scenes only)
+  std::string save_path;            ///< Ctrl+S target (.vdb); default: OUT/sculpted.vdb next to the input name
+  int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
+  int width = 1024, height = 768;
+  bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
+  bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
+  bool sched_fifo = false;          ///< ask for SCHED_FIFO for the servo thread
+  std::string device;               ///< Vulkan device choice
+};
+
+/// Runs the window until it is closed, the script quits or `frames` frames were drawn.
+/// Returns the exit code: 0, 1 on bad input or set-up failure (reason on `log`), 3 if
+/// validation reported messages.
+int run_sculpt(const Options& o, std::ostream& log);
+
+}  // namespace isotouch::sculpt

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The sculpting window as a person would use it, under Xvfb with Vulkan validation on: open
+# the head CT, orbit, move the probe onto the skull, carve, undo (tests/sculpt/carve.json).
+# Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
+# the pixels around the brush, undo restored the picture exactly; no validation message,
+# exit 0; the session's recording replays in `isotouch replay`.
+# Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
+set -euo pipefail
+bin=$1 iso=$2 src=$3
+out=${4:-$(mktemp -d)}
+if ! command -v xvfb-run >/dev/null; then
+  echo "SKIP: xvfb-run is not installed (Debian: xvfb xauth); the sculpting window cannot be tested headless"
+  exit 77
+fi
+mkdir -p "$out"
+rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec
+set +e
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/carve.json" \
+  --screenshot "$out/last.png" --record "$out/session.rec" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
+rc=${PIPESTATUS[0]}
+set -e
+if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
+if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
+python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
+set +e
+"$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
+rc=$?
+set -e
+cat "$out/replay.log"
+if [ "$rc" -ne 0 ] || ! grep -q "^IDENTICAL" "$out/replay.log"; then echo "FAIL: the recording does not replay identically"; exit 1; fi
+echo "PASS sculpt: screenshots in $out"

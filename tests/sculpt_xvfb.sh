@@ -15,7 +15,7 @@ fi
 mkdir -p "$out"
 rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec
 set +e
-xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/carve.json" \
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/tests/sculpt/head-sculpt.json" --script "$src/tests/sculpt/carve.json" \
   --screenshot "$out/last.png" --record "$out/session.rec" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
 rc=${PIPESTATUS[0]}
 set -e

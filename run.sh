@@ -17,6 +17,7 @@ PACKAGES=(
   gnuplot-nox
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libpng-dev libassimp-dev
+  libglfw3-dev xvfb xauth python3
 )
 # `./run.sh test` also builds the libFuzzer targets with clang.
 if [[ "${1:-}" == "test" ]]; then PACKAGES+=(clang-14 libclang-rt-14-dev); fi

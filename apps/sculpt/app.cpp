@@ -288,6 +288,8 @@ int run_sculpt(const Options& o, std::ostream& log) {
   bool waiting = false;
   int code = 0;
   engine::RaycastImage img;
+  std::vector<std::uint32_t> upscaled;
+  std::array<int, 2> last_fb{0, 0};
   int frame = 0;
   auto last_frame = Clock::now();
   std::string status;
@@ -423,9 +425,11 @@ int run_sculpt(const Options& o, std::ostream& log) {
 
     // The hand: on the cursor's ray, push_m behind the surface the last frame showed there.
     const Ray ray = cursor_ray(view, fb[0], fb[1], input.px, input.py);
-    if (!img.depth.empty() && img.width == fb[0] && img.height == fb[1]) {
-      const int cx = std::clamp(int(std::lround(input.px)), 0, fb[0] - 1), cy = std::clamp(int(std::lround(input.py)), 0, fb[1] - 1);
-      const float t = img.depth[std::size_t(cy) * std::size_t(fb[0]) + std::size_t(cx)];
+    const int rw = std::max(1, int(std::lround(fb[0] * o.render_scale))), rh = std::max(1, int(std::lround(fb[1] * o.render_scale)));
+    if (!img.depth.empty() && img.width == rw && img.height == rh) {
+      const int cx = std::clamp(int(std::lround(input.px * rw / fb[0])), 0, rw - 1);
+      const int cy = std::clamp(int(std::lround(input.py * rh / fb[1])), 0, rh - 1);
+      const float t = img.depth[std::size_t(cy) * std::size_t(rw) + std::size_t(cx)];
       if (t > 0) hand_t = double(t) + push_m;
     }
     const Vec3 hand_world = ray.origin + ray.dir * hand_t;
@@ -463,10 +467,19 @@ int run_sculpt(const Options& o, std::ostream& log) {
     const auto r0 = Clock::now();
     const std::vector<gpu::RaycastPrim> prims =
         overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
-    img = caster.render(view, style, fb[0], fb[1], prims);
+    img = caster.render(view, style, rw, rh, prims);
     render_ms.push_back(ms_since(r0));
     const auto p0 = Clock::now();
-    const bool shown = window.present(img.rgba, img.width, img.height);
+    const std::vector<std::uint32_t>* shown_px = &img.rgba;
+    if (rw != fb[0] || rh != fb[1]) {  // a lower render scale: nearest-neighbour up to the window
+      upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
+      for (int y = 0; y < fb[1]; ++y) {
+        const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
+        for (int x = 0; x < fb[0]; ++x) upscaled[std::size_t(y) * std::size_t(fb[0]) + std::size_t(x)] = img.rgba[sy + std::size_t(std::min(rw - 1, x * rw / fb[0]))];
+      }
+      shown_px = &upscaled;
+    }
+    const bool shown = window.present(*shown_px, fb[0], fb[1]);
     present_ms.push_back(ms_since(p0));
     if (shown) {
       std::lock_guard<std::mutex> lock(feed.mu);
@@ -476,13 +489,14 @@ int run_sculpt(const Options& o, std::ostream& log) {
     }
     for (const std::string& s : shots) {
       try {
-        app::write_png(s, img.width, img.height, img.rgba);
+        app::write_png(s, fb[0], fb[1], *shown_px);
         log << "sculpt   screenshot " << s << "\n";
       } catch (const std::exception& e) {
         log << "isotouch-sculpt: " << e.what() << "\n";
         code = 1;
       }
     }
+    last_fb = fb;
     const auto end = Clock::now();
     if (frame > 0) frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
     last_frame = end;
@@ -511,7 +525,8 @@ int run_sculpt(const Options& o, std::ostream& log) {
   const session::LiveStats st = session->stats();
   if (!o.screenshot.empty() && !img.rgba.empty()) {
     try {
-      app::write_png(o.screenshot, img.width, img.height, img.rgba);
+      if (upscaled.empty()) app::write_png(o.screenshot, img.width, img.height, img.rgba);
+      else app::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
       log << "sculpt   screenshot " << o.screenshot << "\n";
     } catch (const std::exception& e) {
       log << "isotouch-sculpt: " << e.what() << "\n";
@@ -528,8 +543,8 @@ int run_sculpt(const Options& o, std::ostream& log) {
       log << "stats    " << what << ": n " << v.size() << ", median " << fixed(eval::median(v), 2) << " ms, p95 "
           << fixed(eval::percentile(v, 0.95), 2) << " ms, max " << fixed(*std::max_element(v.begin(), v.end()), 2) << " ms\n";
     };
-    log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s at " << img.width << "x" << img.height
-        << " on " << vk.info().name << "\n";
+    log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
+        << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << "\n";
     line("frame time", frame_ms);
     line("render (ray caster)", render_ms);
     line("present", present_ms);

@@ -22,6 +22,7 @@ struct Options {
   std::string save_path;            ///< Ctrl+S target (.vdb); default: OUT/sculpted.vdb next to the input name
   int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
   int width = 1024, height = 768;
+  double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
   bool sched_fifo = false;          ///< ask for SCHED_FIFO for the servo thread

@@ -25,6 +25,8 @@ int main(int argc, char** argv) {
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
   cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
+  cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
+      ->check(CLI::Range(0.1, 1.0));
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo", o.sched_fifo, "ask for SCHED_FIFO, CPU pinning and locked memory for the servo thread");

@@ -636,12 +636,23 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
   const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
   const RaycastField f0 = engine::make_raycast_field(vol.grid, vol.voxels, iso, bg);
-  const CameraView view = engine::orbit_view(f0.grid, vol.direction, app::default_camera(vol));
+  const std::vector<gpu::RaycastPrim> prims = {engine::prim_sphere(vol.grid.centre_m(), 2e-3, {1, 1, 0})};
+  // Three views (front, side, back): every edit below shows in one of them.
+  std::vector<CameraView> views;
+  for (double az : {0.0, 90.0, 180.0}) {
+    engine::OrbitCamera cam = app::default_camera(vol);
+    cam.azimuth_deg = az;
+    views.push_back(engine::orbit_view(f0.grid, vol.direction, cam));
+  }
+  auto render_all = [&](engine::RayCaster& r) {
+    std::vector<RaycastImage> out;
+    for (const CameraView& v : views) out.push_back(r.render(v, RaycastStyle{}, 96, 96, prims));
+    return out;
+  };
   auto rc = engine::RayCaster::create(vk(), f0);
   ASSERT_TRUE(rc) << rc.error;
   engine::RayCaster& inc = **rc.value;
-  const std::vector<gpu::RaycastPrim> prims = {engine::prim_sphere(vol.grid.centre_m(), 2e-3, {1, 1, 0})};
-  const RaycastImage before = inc.render(view, RaycastStyle{}, 96, 96, prims);
+  const auto before = render_all(inc);
   // Edit the values in a box of voxels (as a brush does) and note the bricks it touches.
   std::vector<float> edited = vol.voxels;
   const auto& n = vol.grid.dims;
@@ -656,23 +667,28 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   };
   edit_box(20, 44, 0, 30, 30, 60, -1000.f);  // carve the front of the skull away
   edit_box(28, 36, 50, 64, 70, 93, 2000.f);  // add bone at the back, up to the grid's faces
+  edit_box(2, 8, 2, 8, 80, 90, 2000.f);      // and a block in empty space (cells that turn active)
   const engine::RayCaster::UpdateStats st = inc.update(edited, dirty);
   EXPECT_GT(st.bricks, 0u);
   EXPECT_LT(st.value_bytes, vol.voxels.size() * sizeof(float)) << "the whole volume was uploaded";
   EXPECT_GT(st.cell_bytes, 0u);
-  const RaycastImage after = inc.render(view, RaycastStyle{}, 96, 96, prims);
+  const auto after = render_all(inc);
   auto full = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, edited, iso, bg));
   ASSERT_TRUE(full) << full.error;
-  const RaycastImage truth = (*full.value)->render(view, RaycastStyle{}, 96, 96, prims);
-  EXPECT_NE(after.rgba, before.rgba) << "the edit is not visible";
-  EXPECT_EQ(after.rgba, truth.rgba);
-  EXPECT_EQ(after.depth, truth.depth);
+  const auto truth = render_all(**full.value);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    EXPECT_NE(after[v].rgba, before[v].rgba) << "view " << v << ": the edit is not visible";
+    EXPECT_EQ(after[v].rgba, truth[v].rgba) << "view " << v;
+    EXPECT_EQ(after[v].depth, truth[v].depth) << "view " << v;
+  }
   EXPECT_EQ(inc.field().cell_dist, (*full.value)->field().cell_dist);
   // Back to the original values (an undo): the first picture again, bit for bit.
   inc.update(vol.voxels, dirty);
-  const RaycastImage undone = inc.render(view, RaycastStyle{}, 96, 96, prims);
-  EXPECT_EQ(undone.rgba, before.rgba);
-  EXPECT_EQ(undone.depth, before.depth);
+  const auto undone = render_all(inc);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    EXPECT_EQ(undone[v].rgba, before[v].rgba) << "view " << v;
+    EXPECT_EQ(undone[v].depth, before[v].depth) << "view " << v;
+  }
   EXPECT_THROW(inc.update(vol.voxels, {std::uint32_t(1) << 30}), std::invalid_argument);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }

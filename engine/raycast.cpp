@@ -594,8 +594,6 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()}};
-  const auto tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X;
-  const auto tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y;
   // The march covers only where the volume's box (skipping: the active cells' box) projects.
   PixelRect rect;
   if (!style.skip_empty)
@@ -630,10 +628,35 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
   m.timer.mark(cmd, 3);
   if (!prims.empty()) {
+    // Only the pixels the primitives' bounding box (index space) projects to: a pixel whose
+    // ray meets no primitive would be written with the colour the shade pass gave it.
+    std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
+    auto grow = [&](double x, double y, double z, double r) {
+      const double p[3] = {x, y, z};
+      const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
+      const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
+      for (int a = 0; a < 3; ++a) {
+        plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
+        phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
+      }
+    };
+    bool finite = true;
+    for (const gpu::RaycastPrim& q : prims) {
+      finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
+               std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
+      grow(q.ax, q.ay, q.az, q.r0);
+      if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
+    }
+    const PixelRect orect = finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
+    gpu::RaycastPush overlay_push = push;
+    overlay_push.x0 = orect.x0;
+    overlay_push.y0 = orect.y0;
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
-    m.overlay.push(cmd, push);
-    vkCmdDispatch(cmd, tiles_x, tiles_y, 1);
+    m.overlay.push(cmd, overlay_push);
+    if (orect.x1 > orect.x0)
+      vkCmdDispatch(cmd, (orect.x1 - orect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                    (orect.y1 - orect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   }
   m.timer.mark(cmd, 1);
   barrier_compute_to_transfer(cmd);

@@ -278,6 +278,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
   double push_m = 5e-3;       // the hand this far behind the surface under the cursor
   double hand_t = norm(vol.grid.centre_m() - view.eye);  // hand depth along the cursor ray [m]
   const double unit = app::probe_size_m(vol.grid);
+  std::vector<double> march_ms, shade_ms, overlay_ms;
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
   std::vector<Clock::time_point> brush_submitted;  // per submitted brush
   long brushes_measured = 0;
@@ -469,6 +470,11 @@ int run_sculpt(const Options& o, std::ostream& log) {
         overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
     img = caster.render(view, style, rw, rh, prims);
     render_ms.push_back(ms_since(r0));
+    if (img.march_ms >= 0) {
+      march_ms.push_back(img.march_ms);
+      shade_ms.push_back(img.shade_ms);
+      overlay_ms.push_back(img.overlay_ms);
+    }
     const auto p0 = Clock::now();
     const std::vector<std::uint32_t>* shown_px = &img.rgba;
     if (rw != fb[0] || rh != fb[1]) {  // a lower render scale: nearest-neighbour up to the window
@@ -547,6 +553,9 @@ int run_sculpt(const Options& o, std::ostream& log) {
         << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << "\n";
     line("frame time", frame_ms);
     line("render (ray caster)", render_ms);
+    line("  march pass (GPU timestamps)", march_ms);
+    line("  shade pass (GPU timestamps)", shade_ms);
+    line("  overlay pass (GPU timestamps)", overlay_ms);
     line("present", present_ms);
     line("picture update (changed bricks)", update_ms);
     line("edit-to-pixels (submit to the first frame showing it)", latency_ms);

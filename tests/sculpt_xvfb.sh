@@ -3,7 +3,7 @@
 # the head CT, orbit, move the probe onto the skull, carve, undo (tests/sculpt/carve.json).
 # Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
 # the pixels around the brush, undo restored the picture exactly; no validation message,
-# exit 0; the session's recording replays in `isotouch replay`.
+# exit 0; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -21,6 +21,14 @@ rc=${PIPESTATUS[0]}
 set -e
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
 if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
+# The window was resized at the end: the swapchain was recreated and the last frame has the new size.
+grep -q "swapchain recreated [1-9]" "$out/log.txt" || { echo "FAIL: the resize did not recreate the swapchain"; exit 1; }
+python3 - "$out/last.png" <<'PY' || { echo "FAIL: last.png does not have the resized window's size"; exit 1; }
+import struct, sys
+w, h = struct.unpack(">II", open(sys.argv[1], "rb").read()[16:24])
+print(f"last.png: {w}x{h}")
+sys.exit(0 if (w, h) == (400, 300) else 1)
+PY
 python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1

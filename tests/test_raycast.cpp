@@ -692,3 +692,52 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   EXPECT_THROW(inc.update(vol.voxels, {std::uint32_t(1) << 30}), std::invalid_argument);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
+
+// The same on a volume larger than the reach of the cell distances' local recompute (a
+// sphere of 200^3 voxels): edits one at a time, each far from the others, each update must
+// leave exactly the cell distances of a full rebuild and recompute only around the edit;
+// one edit that raises the largest |value| recomputes every cell.
+TEST(Raycast, IncrementalUpdateRecomputesCellDistancesLocally) {
+  const engine::Volume vol = engine::make_sphere({200, 200, 200}, 1e-3, 60);
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  auto rc = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& inc = **rc.value;
+  std::vector<float> v = vol.voxels;
+  const auto& n = vol.grid.dims;
+  const int nbx = (n[0] + 7) / 8, nby = (n[1] + 7) / 8;
+  const std::size_t cells = std::size_t(n[0] + 2) * (n[1] + 2) * (n[2] + 2);
+  auto edit = [&](int x0, int y0, int z0, int size, float value) {
+    std::vector<std::uint32_t> dirty;
+    for (int z = z0; z < z0 + size; ++z)
+      for (int y = y0; y < y0 + size; ++y)
+        for (int x = x0; x < x0 + size; ++x) {
+          v[(std::size_t(z) * n[1] + y) * n[0] + x] = value;
+          dirty.push_back(std::uint32_t((z / 8 * nby + y / 8) * nbx + x / 8));
+        }
+    return inc.update(v, dirty);
+  };
+  const float inside = vol.max_value * 0.5f, outside = vol.min_value * 0.5f;
+  struct Case { int x, y, z, size; float value; bool local; };
+  for (const Case& c : {Case{96, 96, 36, 8, outside, true},     // carve into the sphere's bottom
+                        Case{4, 4, 4, 5, inside, true},         // a block in empty space, at a corner
+                        Case{180, 20, 100, 6, inside, true},    // another, near a face
+                        Case{96, 160, 96, 4, outside, true},    // carve near the sphere's side
+                        Case{100, 100, 180, 3, vol.max_value * 4, false}}) {  // a new largest |value|
+    const engine::RayCaster::UpdateStats st = edit(c.x, c.y, c.z, c.size, c.value);
+    const RaycastField truth = engine::make_raycast_field(vol.grid, v, iso, bg);
+    EXPECT_EQ(inc.field().cell_dist, truth.cell_dist) << "edit at " << c.x << " " << c.y << " " << c.z;
+    if (c.local)
+      EXPECT_LT(st.cells_recomputed, cells / 4) << "edit at " << c.x << " " << c.y << " " << c.z;
+    else
+      EXPECT_EQ(st.cells_recomputed, cells);
+  }
+  const CameraView view = engine::look_at(vol.grid.centre_m() + Vec3{0.05, -0.3, 0.08}, vol.grid.centre_m(), {0, 0, 1}, 40);
+  auto full = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, v, iso, bg));
+  ASSERT_TRUE(full) << full.error;
+  const RaycastImage a = inc.render(view, RaycastStyle{}, 96, 96), b = (*full.value)->render(view, RaycastStyle{}, 96, 96);
+  EXPECT_EQ(a.rgba, b.rgba);
+  EXPECT_EQ(a.depth, b.depth);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

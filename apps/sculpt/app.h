@@ -25,7 +25,7 @@ struct Options {
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
-  bool sched_fifo = false;          ///< ask for SCHED_FIFO for the servo thread
+  bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
   std::string device;               ///< Vulkan device choice
 };
 

@@ -29,7 +29,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.1, 1.0));
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
-  cli.add_flag("--sched-fifo", o.sched_fifo, "ask for SCHED_FIFO, CPU pinning and locked memory for the servo thread");
+  cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
+               "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
   cli.add_option("--device", o.device, "Vulkan device: name substring or index");
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;

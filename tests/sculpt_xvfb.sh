@@ -3,7 +3,7 @@
 # the head CT, orbit, move the probe onto the skull, carve, undo (tests/sculpt/carve.json).
 # Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
 # the pixels around the brush, undo restored the picture exactly; no validation message,
-# exit 0; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
+# exit 0; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -13,14 +13,19 @@ if ! command -v xvfb-run >/dev/null; then
   exit 77
 fi
 mkdir -p "$out"
-rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec
+rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec "$out"/sculpted.vdb "$out"/sculpted.stl
 set +e
 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/tests/sculpt/head-sculpt.json" --script "$src/tests/sculpt/carve.json" \
-  --screenshot "$out/last.png" --record "$out/session.rec" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
+  --screenshot "$out/last.png" --record "$out/session.rec" --save "$out/sculpted.vdb" --export "$out/sculpted.stl" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
 rc=${PIPESTATUS[0]}
 set -e
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
 if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
+# Ctrl+S and Ctrl+E after the carve: the edited volume as .vdb, its isosurface as STL.
+for f in sculpted.vdb sculpted.stl; do
+  [ -s "$out/$f" ] || { echo "FAIL: $f was not written"; exit 1; }
+done
+if grep -q "save failed\|export failed" "$out/log.txt"; then echo "FAIL: save or export failed"; exit 1; fi
 # The window was resized at the end: the swapchain was recreated and the last frame has the new size.
 grep -q "swapchain recreated [1-9]" "$out/log.txt" || { echo "FAIL: the resize did not recreate the swapchain"; exit 1; }
 python3 - "$out/last.png" <<'PY' || { echo "FAIL: last.png does not have the resized window's size"; exit 1; }

@@ -308,6 +308,26 @@ int run_sculpt(const Options& o, std::ostream& log) {
     }
     log << "sculpt   " << status << "\n";
   };
+  auto export_mesh = [&](const std::string& path) {
+    engine::Volume out = vol;
+    {
+      std::lock_guard<std::mutex> lock(feed.mu);
+      out.voxels = feed.values;
+    }
+    try {
+      const io::Mesh mesh = io::extract_mesh(out, live.iso);
+      const std::string ext = fs::path(path).extension().string();
+      if (ext == ".obj") io::write_obj(mesh, path);
+      else if (ext == ".ply") io::write_ply(mesh, path);
+      else io::write_stl_binary(mesh, path);
+      status = "exported " + path;
+    } catch (const std::exception& e) {
+      status = std::string("export failed: ") + e.what();
+    }
+    log << "sculpt   " << status << "\n";
+  };
+  const std::string export_path =
+      o.export_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.stl") : o.export_path;
   const std::string save_path = o.save_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.vdb") : o.save_path;
   auto handle_key = [&](const Input::Key& k) {
     using K = session::EditEvent::Kind;
@@ -333,6 +353,13 @@ int run_sculpt(const Options& o, std::ostream& log) {
       case GLFW_KEY_Q: glfwSetWindowShouldClose(window.handle(), GLFW_TRUE); break;
       case GLFW_KEY_S:
         if (k.ctrl) save(save_path);
+        break;
+      case GLFW_KEY_E:
+        if (k.ctrl) export_mesh(export_path);
+        break;
+      case GLFW_KEY_C:  // clip: cut away the half toward the eye, through the camera's target
+        if (style.clip) style.clip.reset();
+        else style.clip = engine::ClipPlane{camera.cam.target_m ? *camera.cam.target_m : vol.grid.centre_m(), -view.forward};
         break;
       case GLFW_KEY_Z:
       case GLFW_KEY_Y:

@@ -20,6 +20,7 @@ struct Options {
   std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
   std::string record;               ///< the session's recording (scenes only)
   std::string save_path;            ///< Ctrl+S target (.vdb); default: OUT/sculpted.vdb next to the input name
+  std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl
   int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
   int width = 1024, height = 768;
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)

@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
       "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
       "right drag = orbit, middle drag = pan.\n"
       "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
-      "Ctrl+S save (.vdb, atomic), arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay, Esc/Q quit.",
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay, Esc/Q quit.",
       "isotouch-sculpt"};
   cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
   cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT)");
@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   cli.add_option("--frames", o.frames, "exit 0 after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
   cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
+  cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
       ->check(CLI::Range(0.1, 1.0));

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <condition_variable>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -50,6 +51,7 @@ std::string fixed(double v, int p = 1) {
 /// changed, copied into `values` (the edited volume as the picture should show it).
 struct PictureFeed {
   std::mutex mu;
+  std::condition_variable applied;     // notified after each applied or refused event
   std::vector<float> values;
   std::vector<std::uint32_t> pending;  // bricks changed since the frame last took them
   long brushes_done = 0;               // brushes applied or refused, in submission order
@@ -242,6 +244,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
       feed.brush_changed.push_back(out.error.empty() && !ids.empty());
     }
     ++feed.events_done;
+    feed.applied.notify_all();
   };
 
   // The probe: a point-mass device coupled to the hand the mouse moves, starting at rest
@@ -475,10 +478,15 @@ int run_sculpt(const Options& o, std::ostream& log) {
       if (e.kind == session::EditEvent::Kind::kBrush) brush_submitted.push_back(Clock::now());
     }
 
-    // The picture follows the applied edits: only the changed bricks are uploaded.
+    // The picture follows the applied edits: only the changed bricks are uploaded. A brush
+    // submitted this frame is waited for (at most --edit-wait-ms) so that this frame shows it.
     long drawn_brushes;
     {
-      std::lock_guard<std::mutex> lock(feed.mu);
+      std::unique_lock<std::mutex> lock(feed.mu);
+      const long want = long(brush_submitted.size());
+      if (o.edit_wait_ms > 0 && feed.brushes_done < want)
+        feed.applied.wait_for(lock, std::chrono::duration<double, std::milli>(o.edit_wait_ms),
+                              [&] { return feed.brushes_done >= want; });
       if (!feed.pending.empty()) {
         const auto t0 = Clock::now();
         caster.update(feed.values, feed.pending);

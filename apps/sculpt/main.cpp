@@ -28,6 +28,9 @@ int main(int argc, char** argv) {
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
       ->check(CLI::Range(0.1, 1.0));
+  cli.add_option("--edit-wait-ms", o.edit_wait_ms,
+                 "a frame waits at most this long for the brush it submitted, so that it shows it (0: never)")
+      ->check(CLI::Range(0.0, 1000.0));
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,

@@ -99,6 +99,17 @@ void on_key(GLFWwindow*, int key, int, int action, int mods) {
     g_input->keys.push_back({key, (mods & GLFW_MOD_CONTROL) != 0, (mods & GLFW_MOD_SHIFT) != 0});
 }
 
+/// --bench: the probe onto the surface at the centre, a 30-frame carve stroke moving right, undo.
+std::string bench_script_text() {
+  std::ostringstream t;
+  t << R"({"events": [{"orbit": [20, 0]}, {"cursor": [0.5, 0.45]}, {"tool": "carve", "radius_mm": 8, "strength": 0.5},
+    {"wait": "contact", "timeout_s": 30}, {"after_frames": 5, "scroll": 2}, {"press": "left"})";
+  for (int i = 0; i < 30; ++i) t << R"(, {"cursor": [)" << 0.5 + 0.004 * i << ", 0.45]}";
+  t << R"(, {"release": "left"}, {"wait": "edits", "timeout_s": 30}, {"key": "z", "mods": ["ctrl"]},
+    {"wait": "edits", "timeout_s": 30}, {"after_frames": 10, "quit": true}]})";
+  return t.str();
+}
+
 /// The scene to sculpt: the scene file, or a scene made for a volume file.
 io::Scene input_scene(const Options& o) {
   const fs::path p(o.input);
@@ -125,6 +136,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
   std::vector<InputEvent> script;
   try {
     if (!o.script.empty()) script = load_input_script(o.script);
+    else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     scene = input_scene(o);
@@ -575,7 +587,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
     }
   }
   if (next_event < script.size()) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
-  if (o.stats) {
+  if (o.stats || o.bench) {
     auto line = [&](const char* what, const std::vector<double>& v) {
       if (v.empty()) {
         log << "stats    " << what << ": none\n";
@@ -599,6 +611,22 @@ int run_sculpt(const Options& o, std::ostream& log) {
         << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
         << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
         << window.recreations() << " times\n";
+  }
+  if (o.bench) {
+    auto verdict = [&](const std::string& what, const std::vector<double>& v, double q, double limit) {
+      if (v.empty()) {
+        log << "verdict: " << what << ": no samples: FAIL\n";
+        return;
+      }
+      const double x = q == 0.5 ? eval::median(v) : eval::percentile(v, q);
+      log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 0) << " ms): "
+          << (x <= limit ? "PASS" : "FAIL (" + fixed(x / limit, 2) + "x the target)") << "\n";
+    };
+    verdict("frame time median at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]), frame_ms, 0.5, 50);
+    verdict("frame time p95", frame_ms, 0.95, 80);
+    verdict("edit-to-pixels median", latency_ms, 0.5, 100);
+    log << "verdict: servo missed deadlines " << st.missed_deadlines << " of " << st.ticks
+        << " ticks (compare with `isotouch bench servo-rt` run in the same hour)\n";
   }
   if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
   if (vk.validation_messages() > 0) {

@@ -25,6 +25,7 @@ struct Options {
   int width = 1024, height = 768;
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
   double edit_wait_ms = 50;         ///< a frame waits this long at most for the brush it submitted (0: never)
+  bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)

@@ -31,6 +31,9 @@ int main(int argc, char** argv) {
   cli.add_option("--edit-wait-ms", o.edit_wait_ms,
                  "a frame waits at most this long for the brush it submitted, so that it shows it (0: never)")
       ->check(CLI::Range(0.0, 1000.0));
+  cli.add_flag("--bench", o.bench,
+               "run a scripted sculpt (probe onto the surface, a carve stroke, undo; or --script) and print frame "
+               "time, edit-to-pixels and servo figures with verdicts against the targets (50 / 80 / 100 ms)");
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,

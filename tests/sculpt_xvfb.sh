@@ -3,7 +3,7 @@
 # the head CT, orbit, move the probe onto the skull, carve, undo (tests/sculpt/carve.json).
 # Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
 # the pixels around the brush, undo restored the picture exactly; no validation message,
-# exit 0; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
+# exit 0; dropped files: errors keep the old volume, a good one opens; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -35,6 +35,17 @@ print(f"last.png: {w}x{h}")
 sys.exit(0 if (w, h) == (400, 300) else 1)
 PY
 python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
+# Dropped files (tests/sculpt/drop.json): a scene that is not one and a missing volume show
+# their error and the head stays; the chest volume opens in a new session (the head's isovalue).
+set +e
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/drop.json" \
+  --frames 10 --size 320 --validation > "$out/drop.txt" 2>&1
+rc=$?
+set -e
+cat "$out/drop.txt"
+if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with dropped files exited $rc"; exit 1; fi
+[ "$(grep -c "cannot open .*(keeping head)" "$out/drop.txt")" -eq 2 ] || { echo "FAIL: a bad drop did not keep the old volume"; exit 1; }
+grep -q "^sculpt   sculpt: 256x256x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest did not open"; exit 1; }
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
 rc=$?

@@ -11,6 +11,7 @@
 #include <iomanip>
 #include <condition_variable>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -71,6 +72,7 @@ struct Input {
     bool ctrl, shift;
   };
   std::vector<Key> keys;
+  std::vector<std::string> drops;   // files dropped on the window
   bool cursor_seen = false;
 };
 
@@ -94,6 +96,9 @@ void on_button(GLFWwindow*, int b, int action, int) {
   if (i >= 0) g_input->down[i] = action == GLFW_PRESS;
 }
 void on_scroll(GLFWwindow*, double, double dy) { g_input->scroll += dy; }
+void on_drop(GLFWwindow*, int n, const char** paths) {
+  for (int i = 0; i < n; ++i) g_input->drops.emplace_back(paths[i]);
+}
 void on_key(GLFWwindow*, int key, int, int action, int mods) {
   if (action == GLFW_PRESS || action == GLFW_REPEAT)
     g_input->keys.push_back({key, (mods & GLFW_MOD_CONTROL) != 0, (mods & GLFW_MOD_SHIFT) != 0});
@@ -129,7 +134,7 @@ std::string tool_line(const ToolState& t) {
 
 }  // namespace
 
-int run_sculpt(const Options& o, std::ostream& log) {
+int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
   // --- input: the scene, the volume, the script ----------------------------------------
   io::Scene scene;
   engine::Volume vol;
@@ -183,6 +188,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
   glfwSetMouseButtonCallback(window.handle(), on_button);
   glfwSetScrollCallback(window.handle(), on_scroll);
   glfwSetKeyCallback(window.handle(), on_key);
+  glfwSetDropCallback(window.handle(), on_drop);
 
   // --- the session: edits (CPU brushes: the GPU queue belongs to the window's thread) ------
   session::LiveFieldOptions live;
@@ -386,6 +392,32 @@ int run_sculpt(const Options& o, std::ostream& log) {
     }
   };
 
+  // A dropped file: read it here first; only one that can be read ends this session.
+  auto try_open = [&](const std::string& path) -> bool {
+    Options next = o;
+    next.input = path;
+    next.script.clear();
+    next.record.clear();
+    if (fs::path(path).extension() != ".json") {
+      next.iso = scene.hri.tau;
+      next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
+    }
+    try {
+      const io::Scene sc = input_scene(next);
+      const engine::Volume v = app::load_scene_volume(sc);
+      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
+        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" + fixed(v.min_value, 3) +
+                                 ", " + fixed(v.max_value, 3) + "]");
+    } catch (const std::exception& e) {
+      status = "cannot open " + path + ": " + e.what() + " (keeping " + scene.name + ")";
+      log << "sculpt   " << status << "\n";
+      return false;
+    }
+    if (!reopen) return false;
+    *reopen = next;
+    log << "sculpt   opening " << path << "\n";
+    return true;
+  };
   const Clock::time_point t_start = Clock::now();
   while (!window.should_close()) {
     if (o.frames > 0 && frame >= o.frames) break;
@@ -441,6 +473,7 @@ int run_sculpt(const Options& o, std::ostream& log) {
         case EK::kScreenshot: shots.push_back((shot_dir / ev.text).string()); break;
         case EK::kResize: glfwSetWindowSize(window.handle(), int(ev.xy[0]), int(ev.xy[1])); break;
         case EK::kQuit: quit = true; break;
+        case EK::kDrop: input.drops.push_back(ev.text); break;
         case EK::kWait: break;
       }
       ++next_event;
@@ -449,9 +482,14 @@ int run_sculpt(const Options& o, std::ostream& log) {
     if (quit) break;
     if (wait_frames > 0 && !waiting) --wait_frames;
 
-    // Keys, camera drags, the wheel.
+    // Keys, camera drags, the wheel, dropped files.
     for (const Input::Key& k : input.keys) handle_key(k);
     input.keys.clear();
+    bool reopening = false;
+    for (const std::string& path : input.drops)
+      if (!reopening) reopening = try_open(path);
+    input.drops.clear();
+    if (reopening) break;
     const bool ctrl = glfwGetKey(window.handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
                       glfwGetKey(window.handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS;
     const double dx = input.px - input.last_px, dy = input.py - input.last_py;

@@ -35,6 +35,10 @@ struct Options {
 /// Runs the window until it is closed, the script quits or `frames` frames were drawn.
 /// Returns the exit code: 0, 1 on bad input or set-up failure (reason on `log`), 3 if
 /// validation reported messages.
-int run_sculpt(const Options& o, std::ostream& log);
+/// A volume file or scene dropped on the window (or a script's "drop") that could be read
+/// sets `*reopen` to the options for it (a volume: the current isovalue and inside) and ends
+/// this session; the caller runs it next. One that cannot be read shows its error (log and
+/// window title) and the session goes on with the old volume.
+int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen = nullptr);
 
 }  // namespace isotouch::sculpt

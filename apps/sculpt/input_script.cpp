@@ -3,6 +3,7 @@
 #include <GLFW/glfw3.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -135,6 +136,10 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
           ev.kind = K::kResize;
           ev.xy = pair(v, "resize");
           if (ev.xy[0] < 1 || ev.xy[1] < 1 || ev.xy[0] > 8192 || ev.xy[1] > 8192) fail("field 'resize' must be in [1, 8192], got " + v.dump());
+        } else if (k == "drop") {
+          ev.kind = K::kDrop;
+          ev.text = v.is_string() ? v.get<std::string>() : "";
+          if (ev.text.empty()) fail("field 'drop' must be a file name, got " + v.dump());
         } else if (k == "quit") {
           ev.kind = K::kQuit;
         } else {
@@ -142,7 +147,7 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         }
       }
     }
-    if (actions != 1) fail("needs exactly one action (cursor, press, release, scroll, key, tool, orbit, zoom, wait, screenshot, resize, quit), got " + std::to_string(actions));
+    if (actions != 1) fail("needs exactly one action (cursor, press, release, scroll, key, tool, orbit, zoom, wait, screenshot, drop, resize, quit), got " + std::to_string(actions));
     out.push_back(ev);
   }
   return out;
@@ -153,7 +158,11 @@ std::vector<InputEvent> load_input_script(const std::string& path) {
   if (!in) throw ScriptError(path + ": cannot read the input script");
   std::ostringstream s;
   s << in.rdbuf();
-  return parse_input_script(s.str(), path);
+  std::vector<InputEvent> evs = parse_input_script(s.str(), path);
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  for (InputEvent& e : evs)
+    if (e.kind == InputEvent::Kind::kDrop && std::filesystem::path(e.text).is_relative()) e.text = (dir / e.text).string();
+  return evs;
 }
 
 }  // namespace isotouch::sculpt

@@ -13,6 +13,7 @@
 //   {"wait": "contact" | "edits", "timeout_s": 10}   hold the script until the probe is in
 //                                  contact / every submitted edit is applied and drawn
 //   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
+//   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
 //   {"resize": [w, h]}, {"quit": true}
 #pragma once
 #include <array>
@@ -27,14 +28,14 @@ struct ScriptError : std::runtime_error {
 };
 
 struct InputEvent {
-  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit };
+  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop };
   Kind kind = Kind::kQuit;
   int after_frames = 1;
   std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy)
   int button = 0;                  ///< 0 left, 1 right, 2 middle
   int key = 0;                     ///< GLFW key code
   bool ctrl = false, shift = false;
-  std::string text;                ///< tool name, wait condition, screenshot name
+  std::string text;                ///< tool name, wait condition, screenshot name, dropped file
   double radius_mm = -1, strength = -1, timeout_s = 10;
 };
 

@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 
 #include <iostream>
+#include <optional>
 
 #include "app.h"
 
@@ -42,7 +43,13 @@ int main(int argc, char** argv) {
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;
   try {
-    return isotouch::sculpt::run_sculpt(o, std::cerr);
+    // A file dropped on the window that can be read opens in a new session.
+    for (;;) {
+      std::optional<isotouch::sculpt::Options> next;
+      const int rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
+      if (rc != 0 || !next) return rc;
+      o = *next;
+    }
   } catch (const std::exception& e) {
     std::cerr << "isotouch-sculpt: " << e.what() << "\n";
     return 1;

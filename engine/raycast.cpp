@@ -145,18 +145,35 @@ void set3(float& x, float& y, float& z, const Vec3& v) {
 
 }  // namespace
 
+namespace {
+/// max |finite value or background|: the scale of cell_distances' margin.
+double value_magnitude(const std::vector<float>& values, float background) {
+  double mag = 0;
+  if (std::isfinite(background)) mag = std::max(mag, std::fabs(double(background)));
+  for (float v : values)
+    if (std::isfinite(v)) mag = std::max(mag, std::fabs(double(v)));
+  return mag;
+}
+std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std::vector<float>& values,
+                                              const core::Isosurface& iso, float background, double mag);
+}  // namespace
+
 std::vector<std::uint8_t> cell_distances(const core::Grid& grid, const std::vector<float>& values,
                                          const core::Isosurface& iso, float background) {
   if (grid.empty() || values.size() != grid.voxel_count())
     throw std::invalid_argument("raycast: cell distances: " + std::to_string(values.size()) +
                                 " values for a grid of " + std::to_string(grid.voxel_count()) + " voxels");
+  return cell_distances_with(grid, values, iso, background, value_magnitude(values, background));
+}
+
+namespace {
+/// cell_distances() with the margin's scale `mag` given (a sub-box of a volume uses the
+/// whole volume's).
+std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std::vector<float>& values,
+                                              const core::Isosurface& iso, float background, double mag) {
   const auto& n = grid.dims;
   const double sign = iso.inside == core::InsideIs::kAbove ? 1.0 : -1.0;
   const double tau = double(float(iso.tau));  // the shader's isovalue (make_params)
-  double mag = 0;  // max |finite value or background|
-  if (std::isfinite(background)) mag = std::max(mag, std::fabs(double(background)));
-  for (float v : values)
-    if (std::isfinite(v)) mag = std::max(mag, std::fabs(double(v)));
   const double margin = 1e-5 * (mag + std::fabs(tau));
   // hot: sign (v - tau) >= -margin, as a float comparison with the bound rounded outward
   // (a few more hot voxels at most); NaN compares false.
@@ -216,6 +233,7 @@ std::vector<std::uint8_t> cell_distances(const core::Grid& grid, const std::vect
   }
   return dist;
 }
+}  // namespace
 
 RaycastField make_raycast_field(const core::Grid& grid, std::vector<float> values, core::Isosurface iso,
                                 float background, const BrickRanges& r) {
@@ -475,6 +493,7 @@ struct RayCaster::Impl {
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
   std::size_t pixels = 0;
+  double mag = 0;  // the cell distances' margin scale (value_magnitude) as last computed
   /// Index-space box of the active cells (nullopt: none; skipping then marches nothing).
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
   DescriptorArena arena;                   // reset per frame
@@ -527,6 +546,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
                    " (one dense binding; a bricked snapshot would be needed)");
   auto impl = std::make_unique<Impl>(ctx, field);
   impl->active = active_box(impl->field);
+  impl->mag = value_magnitude(impl->field.values, impl->field.background);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
@@ -594,8 +614,6 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()}};
-  const auto tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X;
-  const auto tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y;
   // The march covers only where the volume's box (skipping: the active cells' box) projects.
   PixelRect rect;
   if (!style.skip_empty)
@@ -630,10 +648,35 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
   m.timer.mark(cmd, 3);
   if (!prims.empty()) {
+    // Only the pixels the primitives' bounding box (index space) projects to: a pixel whose
+    // ray meets no primitive would be written with the colour the shade pass gave it.
+    std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
+    auto grow = [&](double x, double y, double z, double r) {
+      const double p[3] = {x, y, z};
+      const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
+      const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
+      for (int a = 0; a < 3; ++a) {
+        plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
+        phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
+      }
+    };
+    bool finite = true;
+    for (const gpu::RaycastPrim& q : prims) {
+      finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
+               std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
+      grow(q.ax, q.ay, q.az, q.r0);
+      if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
+    }
+    const PixelRect orect = finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
+    gpu::RaycastPush overlay_push = push;
+    overlay_push.x0 = orect.x0;
+    overlay_push.y0 = orect.y0;
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
-    m.overlay.push(cmd, push);
-    vkCmdDispatch(cmd, tiles_x, tiles_y, 1);
+    m.overlay.push(cmd, overlay_push);
+    if (orect.x1 > orect.x0)
+      vkCmdDispatch(cmd, (orect.x1 - orect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                    (orect.y1 - orect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   }
   m.timer.mark(cmd, 1);
   barrier_compute_to_transfer(cmd);
@@ -654,6 +697,132 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   std::memcpy(img.rgba.data(), m.image_down.mapped(), pixels * 4);
   std::memcpy(img.depth.data(), m.depth_down.mapped(), pixels * 4);
   return img;
+}
+
+RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const std::vector<std::uint32_t>& bricks) {
+  Impl& m = *impl_;
+  const auto t0 = std::chrono::steady_clock::now();
+  RaycastField& f = m.field;
+  if (values.size() != f.values.size())
+    throw std::invalid_argument("raycast update: " + std::to_string(values.size()) + " values for a grid of " +
+                                std::to_string(f.values.size()) + " voxels");
+  const auto& n = f.grid.dims;
+  const std::array<std::uint32_t, 3> nb{std::uint32_t((n[0] + 7) / 8), std::uint32_t((n[1] + 7) / 8),
+                                        std::uint32_t((n[2] + 7) / 8)};
+  const std::uint64_t brick_count = std::uint64_t(nb[0]) * nb[1] * nb[2];
+  std::vector<std::uint32_t> ids(bricks);
+  std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
+  UpdateStats st;
+  // Voxel rows of the bricks: host copy, then one copy region per row.
+  std::vector<VkBufferCopy> regions;
+  for (std::uint32_t id : ids) {
+    if (id >= brick_count)
+      throw std::invalid_argument("raycast update: brick id " + std::to_string(id) + " out of range (the grid has " +
+                                  std::to_string(brick_count) + " bricks)");
+    const int bx = int(id % nb[0]), by = int(id / nb[0] % nb[1]), bz = int(id / (std::uint64_t(nb[0]) * nb[1]));
+    const int x0 = 8 * bx, x1 = std::min(n[0], x0 + 8);
+    for (int z = 8 * bz; z < std::min(n[2], 8 * bz + 8); ++z)
+      for (int y = 8 * by; y < std::min(n[1], 8 * by + 8); ++y) {
+        const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x0);
+        std::memcpy(f.values.data() + at, values.data() + at, std::size_t(x1 - x0) * sizeof(float));
+        regions.push_back({at * sizeof(float), at * sizeof(float), std::size_t(x1 - x0) * sizeof(float)});
+      }
+  }
+  st.bricks = ids.size();
+  // The cell distances of the new values, recomputed only where they can change: a cell's
+  // activity depends on its 8 corners (cells vbox.lo - 1 .. vbox.hi - 1 can change), its
+  // distance (capped: only active cells within DIST_MAX - 1 count) on the activity within
+  // DIST_MAX - 1 cells, so the cells within DIST_MAX of a changed one are recomputed from
+  // the voxels within 2 DIST_MAX, the rest of the volume reading as it is. The margin's
+  // scale is the whole volume's; if it changed, every cell is recomputed.
+  std::size_t lo = f.cell_dist.size(), hi = 0;
+  const std::size_t cx = std::size_t(n[0] + 2), cy = std::size_t(n[1] + 2);
+  if (!ids.empty()) {
+    std::array<int, 3> vlo{n[0], n[1], n[2]}, vhi{0, 0, 0};  // changed voxels [vlo, vhi)
+    for (std::uint32_t id : ids) {
+      const int b[3] = {int(id % nb[0]), int(id / nb[0] % nb[1]), int(id / (std::uint64_t(nb[0]) * nb[1]))};
+      for (int a = 0; a < 3; ++a) {
+        vlo[a] = std::min(vlo[a], 8 * b[a]);
+        vhi[a] = std::max(vhi[a], std::min(n[a], 8 * b[a] + 8));
+      }
+    }
+    const double mag = value_magnitude(f.values, f.background);
+    const int R = int(ISOTOUCH_RAYCAST_DIST_MAX);
+    std::array<int, 3> olo{}, ohi{}, slo{}, shi{};  // cells [olo, ohi] recomputed; voxels [slo, shi) read
+    for (int a = 0; a < 3; ++a) {
+      olo[a] = std::max(-1, vlo[a] - 1 - R);
+      ohi[a] = std::min(n[a], vhi[a] - 1 + R);
+      slo[a] = std::max(0, vlo[a] - 1 - 2 * R - 1);
+      shi[a] = std::min(n[a], vhi[a] + 2 * R + 1);
+    }
+    auto write = [&](std::size_t i, std::uint8_t v) {
+      if (f.cell_dist[i] != v) {
+        f.cell_dist[i] = v;
+        lo = std::min(lo, i);
+        hi = std::max(hi, i + 1);
+      }
+    };
+    if (mag != m.mag) {
+      const std::vector<std::uint8_t> cd = cell_distances_with(f.grid, f.values, f.iso, f.background, mag);
+      for (std::size_t i = 0; i < cd.size(); ++i) write(i, cd[i]);
+      m.mag = mag;
+      st.cells_recomputed = cd.size();
+    } else {
+      core::Grid sub = f.grid;
+      sub.dims = {shi[0] - slo[0], shi[1] - slo[1], shi[2] - slo[2]};
+      std::vector<float> sv(sub.voxel_count());
+      for (int z = slo[2]; z < shi[2]; ++z)
+        for (int y = slo[1]; y < shi[1]; ++y) {
+          const std::size_t from = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(slo[0]);
+          const std::size_t to = (std::size_t(z - slo[2]) * std::size_t(sub.dims[1]) + std::size_t(y - slo[1])) * std::size_t(sub.dims[0]);
+          std::copy(f.values.begin() + long(from), f.values.begin() + long(from) + sub.dims[0], sv.begin() + long(to));
+        }
+      const std::vector<std::uint8_t> cd = cell_distances_with(sub, sv, f.iso, f.background, mag);
+      const std::size_t sx = std::size_t(sub.dims[0] + 2), sy = std::size_t(sub.dims[1] + 2);
+      st.cells_recomputed = std::uint64_t(ohi[0] - olo[0] + 1) * std::uint64_t(ohi[1] - olo[1] + 1) * std::uint64_t(ohi[2] - olo[2] + 1);
+      for (int z = olo[2]; z <= ohi[2]; ++z)
+        for (int y = olo[1]; y <= ohi[1]; ++y)
+          for (int x = olo[0]; x <= ohi[0]; ++x)  // cell c stored at c + 1, in both
+            write((std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1),
+                  cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)]);
+    }
+  }
+  VkBufferCopy cell_region{};
+  if (hi > lo) {  // whole uints (binding 2 packs 4 bytes per uint)
+    lo = lo / 4 * 4;
+    hi = std::min((hi + 3) / 4 * 4, std::size_t(m.cells.size()));
+    cell_region = {0, lo, hi - lo};
+    m.active = active_box(f);
+  }
+  std::size_t bytes = 0;
+  for (const VkBufferCopy& r : regions) bytes += r.size;
+  st.value_bytes = bytes;
+  st.cell_bytes = cell_region.size;
+  if (bytes + cell_region.size > 0) {
+    GpuBuffer up = make_buffer_or_throw(m.ctx, bytes + cell_region.size, MemoryIntent::Upload, "raycast update staging");
+    auto* dst = static_cast<std::uint8_t*>(up.mapped());
+    std::size_t o = 0;
+    for (VkBufferCopy& r : regions) {  // pack the rows, then read them from the staging buffer
+      std::memcpy(dst + o, reinterpret_cast<const std::uint8_t*>(f.values.data()) + r.srcOffset, r.size);
+      r.srcOffset = o;
+      o += r.size;
+    }
+    if (cell_region.size) {
+      // The bytes [lo, hi); past the last cell, the zero padding of the last uint.
+      const std::size_t have = std::min(std::size_t(cell_region.size), f.cell_dist.size() - std::size_t(cell_region.dstOffset));
+      std::memcpy(dst + o, f.cell_dist.data() + cell_region.dstOffset, have);
+      std::memset(dst + o + have, 0, std::size_t(cell_region.size) - have);
+      cell_region.srcOffset = o;
+    }
+    VkCommandBuffer cmd = m.ctx.begin_commands();
+    if (!regions.empty()) vkCmdCopyBuffer(cmd, up.handle(), m.values.handle(), std::uint32_t(regions.size()), regions.data());
+    if (cell_region.size) vkCmdCopyBuffer(cmd, up.handle(), m.cells.handle(), 1, &cell_region);
+    barrier_transfer_to_compute(cmd);
+    m.ctx.submit_and_wait(cmd);
+  }
+  st.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  return st;
 }
 
 }  // namespace isotouch::engine

@@ -197,6 +197,26 @@ class RayCaster {
                       const std::vector<gpu::RaycastPrim>& prims = {});
   const RaycastField& field() const;
 
+  /// What one update() did.
+  struct UpdateStats {
+    std::size_t bricks = 0;           ///< 8^3 bricks whose voxels were copied
+    std::uint64_t value_bytes = 0;    ///< voxel bytes uploaded (the bricks' rows only)
+    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed)
+    std::uint64_t cells_recomputed = 0;  ///< cells whose distance was recomputed on the host
+    double ms = 0;                    ///< update(), everything included [ms]
+  };
+  /// The picture follows an edit: copies the voxels of bricks `bricks` (ids as in
+  /// core/brick_field.h: 8^3 bricks, x fastest; duplicates allowed) from `values` (the whole
+  /// edited volume, grid.voxel_count() values, x fastest) into the field and uploads only
+  /// those bricks' rows to the device; the cell distances are recomputed on the host only
+  /// within DIST_MAX cells of the changed voxels (from the voxels within 2 DIST_MAX; all of
+  /// them if the margin's scale, the largest |value|, changed): the result equals a full
+  /// rebuild's (cell_distances()), and only the span of bytes that changed is uploaded. The next render() then draws exactly what RayCaster::create
+  /// on make_raycast_field(grid, values, ...) would draw (field().brick_minmax is not updated:
+  /// the caster does not read it). Same thread as render().
+  /// @throws std::invalid_argument on a size mismatch or an id out of range (names it).
+  UpdateStats update(const std::vector<float>& values, const std::vector<std::uint32_t>& bricks);
+
  private:
   struct Impl;
   explicit RayCaster(std::unique_ptr<Impl> impl);

@@ -80,7 +80,8 @@ bool layer_has_extension(const char* layer, const char* ext) {
                      [&](const VkExtensionProperties& x) { return std::strcmp(x.extensionName, ext) == 0; });
 }
 
-Result<VkInstance> make_instance(bool validation, bool sync_validation = false) {
+Result<VkInstance> make_instance(bool validation, bool sync_validation = false,
+                                 const std::vector<std::string>& extra = {}) {
   VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
   app.pApplicationName = "isotouch";
   app.apiVersion = VK_API_VERSION_1_1;
@@ -107,6 +108,18 @@ Result<VkInstance> make_instance(bool validation, bool sync_validation = false) 
       ci.enabledExtensionCount = 2;
       ci.pNext = &features;
     }
+  }
+  // A window system's extensions come after the validation ones (which stay first).
+  std::vector<const char*> all(exts, exts + ci.enabledExtensionCount);
+  for (const std::string& e : extra) {
+    if (!layer_has_extension(nullptr, e.c_str()))
+      return Result<VkInstance>::fail("the Vulkan instance lacks extension " + e +
+                                      " (a window needs it; is a Vulkan WSI driver installed?)");
+    all.push_back(e.c_str());
+  }
+  if (!extra.empty()) {
+    ci.enabledExtensionCount = std::uint32_t(all.size());
+    ci.ppEnabledExtensionNames = all.data();
   }
   VkInstance inst = VK_NULL_HANDLE;
   const VkResult r = vkCreateInstance(&ci, nullptr, &inst);
@@ -163,7 +176,7 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   using R = Result<std::unique_ptr<VulkanContext>>;
   const char* env_val = std::getenv("ISOTOUCH_VALIDATION");
   const bool validation = opt.validation || (env_val && std::string(env_val) == "1");
-  auto inst = make_instance(validation, opt.synchronization_validation);
+  auto inst = make_instance(validation, opt.synchronization_validation, opt.instance_extensions);
   if (!inst) return R::fail(inst.error);
   std::unique_ptr<VulkanContext> ctx(new VulkanContext());
   ctx->instance_ = *inst.value;
@@ -273,6 +286,18 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   VkDeviceCreateInfo di{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
   di.queueCreateInfoCount = 1;
   di.pQueueCreateInfos = &qi;
+  const char* swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
+  if (opt.swapchain) {
+    std::uint32_t n = 0;
+    vkEnumerateDeviceExtensionProperties(chosen, nullptr, &n, nullptr);
+    std::vector<VkExtensionProperties> e(n);
+    vkEnumerateDeviceExtensionProperties(chosen, nullptr, &n, e.data());
+    if (std::none_of(e.begin(), e.end(),
+                     [&](const VkExtensionProperties& x) { return std::strcmp(x.extensionName, swapchain_ext) == 0; }))
+      return R::fail("Vulkan device '" + ctx->info_.name + "' lacks " + swapchain_ext + " (needed to show a window)");
+    di.enabledExtensionCount = 1;
+    di.ppEnabledExtensionNames = &swapchain_ext;
+  }
   const VkResult r = vkCreateDevice(chosen, &di, nullptr, &ctx->device_);
   if (r != VK_SUCCESS)
     return R::fail("vkCreateDevice on '" + ctx->info_.name + "' failed: " + vk_result_name(r));

@@ -53,6 +53,12 @@ struct ContextOptions {
   /// (VK_EXT_validation_features), which reports missing or wrong barriers as hazards.
   /// Ignored (no error) if the layer does not offer VK_EXT_validation_features.
   bool synchronization_validation = false;
+  /// Extra instance extensions (a window system's, e.g. what glfwGetRequiredInstanceExtensions
+  /// names). Empty: the headless instance as before. Set-up fails naming a missing one.
+  std::vector<std::string> instance_extensions;
+  /// Enable VK_KHR_swapchain on the device (a window presents); set-up fails if the chosen
+  /// device lacks it. False: the headless device as before.
+  bool swapchain = false;
 };
 
 struct DeviceInfo {
@@ -71,6 +77,7 @@ class VulkanContext {
   VulkanContext(const VulkanContext&) = delete;
   VulkanContext& operator=(const VulkanContext&) = delete;
 
+  VkInstance instance() const { return instance_; }
   VkDevice device() const { return device_; }
   VkQueue queue() const { return queue_; }
   std::uint32_t queue_family() const { return family_; }

@@ -10,7 +10,9 @@ layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_
 #include "raycast_common.glsl"
 
 void main() {
-  uvec2 px = gl_GlobalInvocationID.xy;
+  // The dispatch covers only the pixels the primitives' box projects to, from (x0, y0)
+  // (engine/raycast.cpp); every other pixel keeps the shade pass's colour.
+  uvec2 px = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
   if (px.x >= P.width || px.y >= P.height) return;
   uint pix = px.y * P.width + px.x;
   Ray r = make_ray(px);

@@ -626,3 +626,118 @@ TEST(Raycast, PngIsWrittenWholeAndReadable) {
   EXPECT_THROW(app::write_png("/proc/no/such/dir/x.png", 6, 4, px), std::exception);
   EXPECT_THROW(app::write_png(path, 5, 4, px), std::runtime_error);
 }
+
+// The picture follows an edit incrementally: RayCaster::update with the bricks a brush
+// changed gives, bit for bit, the image and depth of a ray caster created on the edited
+// volume (the truth: a full rebuild). Carve and add brushes on the head CT, then undo-like
+// restoration of the original values.
+TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
+  const engine::Volume vol = io::load_volume(kHead);
+  const core::Isosurface iso{1150, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const RaycastField f0 = engine::make_raycast_field(vol.grid, vol.voxels, iso, bg);
+  const std::vector<gpu::RaycastPrim> prims = {engine::prim_sphere(vol.grid.centre_m(), 2e-3, {1, 1, 0})};
+  // Three views (front, side, back): every edit below shows in one of them.
+  std::vector<CameraView> views;
+  for (double az : {0.0, 90.0, 180.0}) {
+    engine::OrbitCamera cam = app::default_camera(vol);
+    cam.azimuth_deg = az;
+    views.push_back(engine::orbit_view(f0.grid, vol.direction, cam));
+  }
+  auto render_all = [&](engine::RayCaster& r) {
+    std::vector<RaycastImage> out;
+    for (const CameraView& v : views) out.push_back(r.render(v, RaycastStyle{}, 96, 96, prims));
+    return out;
+  };
+  auto rc = engine::RayCaster::create(vk(), f0);
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& inc = **rc.value;
+  const auto before = render_all(inc);
+  // Edit the values in a box of voxels (as a brush does) and note the bricks it touches.
+  std::vector<float> edited = vol.voxels;
+  const auto& n = vol.grid.dims;
+  std::vector<std::uint32_t> dirty;
+  auto edit_box = [&](int x0, int x1, int y0, int y1, int z0, int z1, float v) {
+    for (int z = z0; z < z1; ++z)
+      for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+          edited[(std::size_t(z) * n[1] + y) * n[0] + x] = v;
+          dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
+        }
+  };
+  edit_box(20, 44, 0, 30, 30, 60, -1000.f);  // carve the front of the skull away
+  edit_box(28, 36, 50, 64, 70, 93, 2000.f);  // add bone at the back, up to the grid's faces
+  edit_box(2, 8, 2, 8, 80, 90, 2000.f);      // and a block in empty space (cells that turn active)
+  const engine::RayCaster::UpdateStats st = inc.update(edited, dirty);
+  EXPECT_GT(st.bricks, 0u);
+  EXPECT_LT(st.value_bytes, vol.voxels.size() * sizeof(float)) << "the whole volume was uploaded";
+  EXPECT_GT(st.cell_bytes, 0u);
+  const auto after = render_all(inc);
+  auto full = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, edited, iso, bg));
+  ASSERT_TRUE(full) << full.error;
+  const auto truth = render_all(**full.value);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    EXPECT_NE(after[v].rgba, before[v].rgba) << "view " << v << ": the edit is not visible";
+    EXPECT_EQ(after[v].rgba, truth[v].rgba) << "view " << v;
+    EXPECT_EQ(after[v].depth, truth[v].depth) << "view " << v;
+  }
+  EXPECT_EQ(inc.field().cell_dist, (*full.value)->field().cell_dist);
+  // Back to the original values (an undo): the first picture again, bit for bit.
+  inc.update(vol.voxels, dirty);
+  const auto undone = render_all(inc);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    EXPECT_EQ(undone[v].rgba, before[v].rgba) << "view " << v;
+    EXPECT_EQ(undone[v].depth, before[v].depth) << "view " << v;
+  }
+  EXPECT_THROW(inc.update(vol.voxels, {std::uint32_t(1) << 30}), std::invalid_argument);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+// The same on a volume larger than the reach of the cell distances' local recompute (a
+// sphere of 200^3 voxels): edits one at a time, each far from the others, each update must
+// leave exactly the cell distances of a full rebuild and recompute only around the edit;
+// one edit that raises the largest |value| recomputes every cell.
+TEST(Raycast, IncrementalUpdateRecomputesCellDistancesLocally) {
+  const engine::Volume vol = engine::make_sphere({200, 200, 200}, 1e-3, 60);
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  auto rc = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& inc = **rc.value;
+  std::vector<float> v = vol.voxels;
+  const auto& n = vol.grid.dims;
+  const int nbx = (n[0] + 7) / 8, nby = (n[1] + 7) / 8;
+  const std::size_t cells = std::size_t(n[0] + 2) * (n[1] + 2) * (n[2] + 2);
+  auto edit = [&](int x0, int y0, int z0, int size, float value) {
+    std::vector<std::uint32_t> dirty;
+    for (int z = z0; z < z0 + size; ++z)
+      for (int y = y0; y < y0 + size; ++y)
+        for (int x = x0; x < x0 + size; ++x) {
+          v[(std::size_t(z) * n[1] + y) * n[0] + x] = value;
+          dirty.push_back(std::uint32_t((z / 8 * nby + y / 8) * nbx + x / 8));
+        }
+    return inc.update(v, dirty);
+  };
+  const float inside = vol.max_value * 0.5f, outside = vol.min_value * 0.5f;
+  struct Case { int x, y, z, size; float value; bool local; };
+  for (const Case& c : {Case{96, 96, 36, 8, outside, true},     // carve into the sphere's bottom
+                        Case{4, 4, 4, 5, inside, true},         // a block in empty space, at a corner
+                        Case{180, 20, 100, 6, inside, true},    // another, near a face
+                        Case{96, 160, 96, 4, outside, true},    // carve near the sphere's side
+                        Case{100, 100, 180, 3, vol.max_value * 4, false}}) {  // a new largest |value|
+    const engine::RayCaster::UpdateStats st = edit(c.x, c.y, c.z, c.size, c.value);
+    const RaycastField truth = engine::make_raycast_field(vol.grid, v, iso, bg);
+    EXPECT_EQ(inc.field().cell_dist, truth.cell_dist) << "edit at " << c.x << " " << c.y << " " << c.z;
+    if (c.local)
+      EXPECT_LT(st.cells_recomputed, cells / 4) << "edit at " << c.x << " " << c.y << " " << c.z;
+    else
+      EXPECT_EQ(st.cells_recomputed, cells);
+  }
+  const CameraView view = engine::look_at(vol.grid.centre_m() + Vec3{0.05, -0.3, 0.08}, vol.grid.centre_m(), {0, 0, 1}, 40);
+  auto full = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, v, iso, bg));
+  ASSERT_TRUE(full) << full.error;
+  const RaycastImage a = inc.render(view, RaycastStyle{}, 96, 96), b = (*full.value)->render(view, RaycastStyle{}, 96, 96);
+  EXPECT_EQ(a.rgba, b.rgba);
+  EXPECT_EQ(a.depth, b.depth);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

@@ -1,0 +1,678 @@
+#include "app.h"
+
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <condition_variable>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <thread>
+
+#include "coupled_hand_device.h"
+#include "edit_session.h"
+#include "frame.h"
+#include "hri.h"
+#include "input_script.h"
+#include "live_session.h"
+#include "raycast.h"
+#include "record.h"
+#include "render_cmd.h"
+#include "run_job.h"
+#include "scene.h"
+#include "stats.h"
+#include "tools.h"
+#include "vdb_io.h"
+#include "volume_io.h"
+#include "window.h"
+
+namespace isotouch::sculpt {
+
+namespace fs = std::filesystem;
+using core::Vec3;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+std::string fixed(double v, int p = 1) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(p) << v;
+  return s.str();
+}
+
+/// What the edit thread hands the frame thread: the voxels of the bricks the applied edits
+/// changed, copied into `values` (the edited volume as the picture should show it).
+struct PictureFeed {
+  std::mutex mu;
+  std::condition_variable applied;     // notified after each applied or refused event
+  std::vector<float> values;
+  std::vector<std::uint32_t> pending;  // bricks changed since the frame last took them
+  long brushes_done = 0;               // brushes applied or refused, in submission order
+  std::vector<char> brush_changed;     // per brush: it changed some voxel
+  long events_done = 0;                // every event applied or refused
+  std::string last_error;
+};
+
+/// Input state fed by GLFW's callbacks and by the script.
+struct Input {
+  double px = 0, py = 0;            // cursor, framebuffer pixels
+  bool down[3] = {false, false, false};
+  double last_px = 0, last_py = 0;  // cursor at the previous frame (drags)
+  double scroll = 0;
+  struct Key {
+    int key;
+    bool ctrl, shift;
+  };
+  std::vector<Key> keys;
+  std::vector<std::string> drops;   // files dropped on the window
+  bool cursor_seen = false;
+};
+
+Input* g_input = nullptr;  // GLFW callbacks (one window)
+
+double fb_scale(GLFWwindow* w) {  // framebuffer pixels per screen unit
+  int ww = 0, wh = 0, fw = 0, fh = 0;
+  glfwGetWindowSize(w, &ww, &wh);
+  glfwGetFramebufferSize(w, &fw, &fh);
+  return ww > 0 ? double(fw) / ww : 1.0;
+}
+
+void on_cursor(GLFWwindow* w, double x, double y) {
+  const double s = fb_scale(w);
+  g_input->px = x * s;
+  g_input->py = y * s;
+  g_input->cursor_seen = true;
+}
+void on_button(GLFWwindow*, int b, int action, int) {
+  const int i = b == GLFW_MOUSE_BUTTON_LEFT ? 0 : b == GLFW_MOUSE_BUTTON_RIGHT ? 1 : b == GLFW_MOUSE_BUTTON_MIDDLE ? 2 : -1;
+  if (i >= 0) g_input->down[i] = action == GLFW_PRESS;
+}
+void on_scroll(GLFWwindow*, double, double dy) { g_input->scroll += dy; }
+void on_drop(GLFWwindow*, int n, const char** paths) {
+  for (int i = 0; i < n; ++i) g_input->drops.emplace_back(paths[i]);
+}
+void on_key(GLFWwindow*, int key, int, int action, int mods) {
+  if (action == GLFW_PRESS || action == GLFW_REPEAT)
+    g_input->keys.push_back({key, (mods & GLFW_MOD_CONTROL) != 0, (mods & GLFW_MOD_SHIFT) != 0});
+}
+
+/// --bench: the probe onto the surface at the centre, a 30-frame carve stroke moving right, undo.
+std::string bench_script_text() {
+  std::ostringstream t;
+  t << R"({"events": [{"orbit": [20, 0]}, {"cursor": [0.5, 0.45]}, {"tool": "carve", "radius_mm": 8, "strength": 0.5},
+    {"wait": "contact", "timeout_s": 30}, {"after_frames": 5, "scroll": 2}, {"press": "left"})";
+  for (int i = 0; i < 30; ++i) t << R"(, {"cursor": [)" << 0.5 + 0.004 * i << ", 0.45]}";
+  t << R"(, {"release": "left"}, {"wait": "edits", "timeout_s": 30}, {"key": "z", "mods": ["ctrl"]},
+    {"wait": "edits", "timeout_s": 30}, {"after_frames": 10, "quit": true}]})";
+  return t.str();
+}
+
+/// The scene to sculpt: the scene file, or a scene made for a volume file.
+io::Scene input_scene(const Options& o) {
+  const fs::path p(o.input);
+  if (p.extension() == ".json") return io::load_scene(o.input);
+  if (!o.iso) throw std::runtime_error(o.input + ": a volume needs --iso VALUE (the isovalue in the volume's units)");
+  if (o.inside != "above" && o.inside != "below")
+    throw std::runtime_error("--inside must be \"above\" or \"below\", got \"" + o.inside + "\"");
+  std::ostringstream t;
+  t << std::setprecision(17) << "{\"name\": \"sculpt\", \"volume\": {\"path\": \"" << fs::absolute(p).string()
+    << "\"}, \"isovalue\": " << *o.iso << ", \"inside\": \"" << o.inside << "\"}";
+  return io::parse_scene(t.str(), o.input);
+}
+
+std::string tool_line(const ToolState& t) {
+  return std::string(session::to_string(t.kind)) + " r " + fixed(t.radius_m * 1e3) + " mm, strength " + fixed(t.strength, 2);
+}
+
+}  // namespace
+
+int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
+  // --- input: the scene, the volume, the script ----------------------------------------
+  io::Scene scene;
+  engine::Volume vol;
+  std::vector<InputEvent> script;
+  try {
+    if (!o.script.empty()) script = load_input_script(o.script);
+    else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
+    if (!o.record.empty() && fs::path(o.input).extension() != ".json")
+      throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
+    scene = input_scene(o);
+    vol = app::load_scene_volume(scene);
+    if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
+      throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
+                               fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
+                               ": there is no isosurface");
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    return 1;
+  }
+  const fs::path shot_dir = o.screenshot.empty() ? fs::path(".") : fs::path(o.screenshot).parent_path();
+
+  // --- window and Vulkan --------------------------------------------------------------
+  auto exts = init_glfw();
+  if (!exts) {
+    log << "isotouch-sculpt: " << exts.error << "\n";
+    return 1;
+  }
+  struct GlfwGuard {
+    ~GlfwGuard() { shutdown_glfw(); }
+  } glfw_guard;
+  engine::ContextOptions co;
+  co.device = o.device;
+  co.validation = o.validation;
+  co.instance_extensions = *exts.value;
+  co.swapchain = true;
+  auto ctx = engine::VulkanContext::create(co);
+  if (!ctx) {
+    log << "isotouch-sculpt: " << ctx.error << "\n";
+    return 1;
+  }
+  engine::VulkanContext& vk = **ctx.value;
+  auto win = Window::create(vk, o.width, o.height, "isotouch-sculpt: " + scene.name);
+  if (!win) {
+    log << "isotouch-sculpt: " << win.error << "\n";
+    return 1;
+  }
+  Window& window = **win.value;
+  Input input;
+  g_input = &input;
+  glfwSetCursorPosCallback(window.handle(), on_cursor);
+  glfwSetMouseButtonCallback(window.handle(), on_button);
+  glfwSetScrollCallback(window.handle(), on_scroll);
+  glfwSetKeyCallback(window.handle(), on_key);
+  glfwSetDropCallback(window.handle(), on_drop);
+
+  // --- the session: edits (CPU brushes: the GPU queue belongs to the window's thread) ------
+  session::LiveFieldOptions live;
+  live.passes = app::scene_passes(scene);
+  live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
+  live.background = float(live.iso.outside_value(vol.min_value, vol.max_value));
+  live.format = app::scene_sample_format(scene);
+  std::unique_ptr<session::EditSession> edits;
+  try {
+    edits = std::make_unique<session::EditSession>(engine::Volume(vol), nullptr, live, scene.edits.history_limit_mib);
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << o.input << ": " << e.what() << "\n";
+    return 1;
+  }
+  servo::TripleBuffer<core::SampleField> buffer;
+  buffer.publish(edits->current());
+  servo::HriRenderer renderer(scene.hri);
+  servo::WorkspaceTransform xf;  // as `isotouch run`: the device's origin at the grid's centre
+  xf.scale = scene.workspace_scale;
+  xf.translation_m = vol.grid.centre_m();
+
+  // The picture: the raw volume at the scene's isovalue (what `isotouch render` draws).
+  PictureFeed feed;
+  feed.values = vol.voxels;
+  auto rc = engine::RayCaster::create(vk, app::scene_raycast_field(scene, vol));
+  if (!rc) {
+    log << "isotouch-sculpt: " << rc.error << "\n";
+    return 1;
+  }
+  engine::RayCaster& caster = **rc.value;
+
+  session::LiveSessionConfig cfg;
+  cfg.servo.rate_hz = scene.hri.rate_hz;
+  cfg.servo.sched_fifo = o.sched_fifo;
+  cfg.servo.pin_cpu = o.sched_fifo;
+  cfg.servo.lock_memory = o.sched_fifo;
+  cfg.servo.world_T_device = xf;
+  cfg.record_path = o.record;
+  if (!o.record.empty()) {
+    cfg.record_header.scene_path = fs::absolute(scene.file).string();
+    std::ifstream in(scene.file, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    cfg.record_header.scene_text = text.str();
+    cfg.record_header.rate_hz = scene.hri.rate_hz;
+    cfg.record_header.volume_crc32 = io::volume_crc32(vol);
+  }
+  session::EditSession* es = edits.get();
+  const auto nbx = std::uint32_t((vol.grid.dims[0] + 7) / 8), nby = std::uint32_t((vol.grid.dims[1] + 7) / 8);
+  cfg.on_applied = [&feed, es, nbx, nby](const session::EditEvent& e, const session::EditOutcome& out, session::EditSource) {
+    using K = session::EditEvent::Kind;
+    const std::vector<std::uint32_t>& ids = e.kind == K::kBrush ? out.brush.dirty : out.restored;
+    const engine::Volume& v = es->volume();
+    const auto& n = v.grid.dims;
+    std::lock_guard<std::mutex> lock(feed.mu);
+    if (out.error.empty())
+      for (std::uint32_t id : ids) {
+        const int bx = int(id % nbx), by = int(id / nbx % nby), bz = int(id / (nbx * nby));
+        const int x0 = 8 * bx, x1 = std::min(n[0], x0 + 8);
+        for (int z = 8 * bz; z < std::min(n[2], 8 * bz + 8); ++z)
+          for (int y = 8 * by; y < std::min(n[1], 8 * by + 8); ++y) {
+            const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x0);
+            std::copy(v.voxels.begin() + long(at), v.voxels.begin() + long(at) + (x1 - x0), feed.values.begin() + long(at));
+          }
+        feed.pending.push_back(id);
+      }
+    else
+      feed.last_error = out.error;
+    if (e.kind == K::kBrush) {
+      ++feed.brushes_done;
+      feed.brush_changed.push_back(out.error.empty() && !ids.empty());
+    }
+    ++feed.events_done;
+    feed.applied.notify_all();
+  };
+
+  // The probe: a point-mass device coupled to the hand the mouse moves, starting at rest
+  // just outside the volume's box in front of the camera.
+  CameraControl camera;
+  camera.cam = app::default_camera(vol);
+  engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
+  sim::CoupledHandDevice device(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
+
+  std::unique_ptr<session::LiveSession> session;
+  try {
+    session = std::make_unique<session::LiveSession>(*edits, buffer, renderer, device, cfg);
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    return 1;
+  }
+  const std::string note = session->start();
+  if (!note.empty()) log << "servo    " << note << "\n";
+  log << "sculpt   " << scene.name << ": " << vol.grid.dims[0] << "x" << vol.grid.dims[1] << "x" << vol.grid.dims[2]
+      << " voxels, isovalue " << scene.hri.tau << ", servo " << scene.hri.rate_hz << " Hz, device " << vk.info().name
+      << ", present mode " << window.present_mode() << "\n";
+
+  // --- the frame loop -----------------------------------------------------------------
+  ToolState tool;
+  tool.targets = session::default_targets(vol, live.iso);
+  {
+    const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
+    tool.radius_m = std::max(4e-3, 2.5 * sp);
+  }
+  Stroke stroke;
+  engine::RaycastStyle style;
+  bool overlay = true;
+  double push_m = 5e-3;       // the hand this far behind the surface under the cursor
+  double hand_t = norm(vol.grid.centre_m() - view.eye);  // hand depth along the cursor ray [m]
+  const double unit = app::probe_size_m(vol.grid);
+  std::vector<double> march_ms, shade_ms, overlay_ms;
+  std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
+  std::vector<Clock::time_point> brush_submitted;  // per submitted brush
+  long brushes_measured = 0;
+  long events_submitted = 0;
+  std::size_t next_event = 0;
+  int wait_frames = script.empty() ? 0 : script[0].after_frames;
+  Clock::time_point wait_since = Clock::now();
+  bool waiting = false;
+  int code = 0;
+  engine::RaycastImage img;
+  std::vector<std::uint32_t> upscaled;
+  std::array<int, 2> last_fb{0, 0};
+  int frame = 0;
+  auto last_frame = Clock::now();
+  std::string status;
+  auto save = [&](const std::string& path) {
+    engine::Volume out = vol;
+    {
+      std::lock_guard<std::mutex> lock(feed.mu);
+      out.voxels = feed.values;
+    }
+    try {
+      io::save_vdb(out, path, io::SaveVdbOptions{});
+      status = "saved " + path;
+    } catch (const std::exception& e) {
+      status = std::string("save failed: ") + e.what();
+    }
+    log << "sculpt   " << status << "\n";
+  };
+  auto export_mesh = [&](const std::string& path) {
+    engine::Volume out = vol;
+    {
+      std::lock_guard<std::mutex> lock(feed.mu);
+      out.voxels = feed.values;
+    }
+    try {
+      const io::Mesh mesh = io::extract_mesh(out, live.iso);
+      const std::string ext = fs::path(path).extension().string();
+      if (ext == ".obj") io::write_obj(mesh, path);
+      else if (ext == ".ply") io::write_ply(mesh, path);
+      else io::write_stl_binary(mesh, path);
+      status = "exported " + path;
+    } catch (const std::exception& e) {
+      status = std::string("export failed: ") + e.what();
+    }
+    log << "sculpt   " << status << "\n";
+  };
+  const std::string export_path =
+      o.export_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.stl") : o.export_path;
+  const std::string save_path = o.save_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.vdb") : o.save_path;
+  auto handle_key = [&](const Input::Key& k) {
+    using K = session::EditEvent::Kind;
+    session::EditEvent e;
+    switch (k.key) {
+      case GLFW_KEY_1: tool.kind = session::BrushKind::kAdd; break;
+      case GLFW_KEY_2: tool.kind = session::BrushKind::kCarve; break;
+      case GLFW_KEY_3: tool.kind = session::BrushKind::kSmooth; break;
+      case GLFW_KEY_4: tool.kind = session::BrushKind::kDrill; break;
+      case GLFW_KEY_LEFT_BRACKET: tool.radius_m = std::max(0.5e-3, tool.radius_m / 1.25); break;
+      case GLFW_KEY_RIGHT_BRACKET: tool.radius_m = std::min(0.1, tool.radius_m * 1.25); break;
+      case GLFW_KEY_MINUS: tool.strength = std::max(0.01, tool.strength / 1.25); break;
+      case GLFW_KEY_EQUAL: tool.strength = std::min(1.0, tool.strength * 1.25); break;
+      case GLFW_KEY_H: overlay = !overlay; break;
+      case GLFW_KEY_LEFT: camera.orbit(-5, 0); break;
+      case GLFW_KEY_RIGHT: camera.orbit(5, 0); break;
+      case GLFW_KEY_UP: camera.orbit(0, 5); break;
+      case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
+      case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
+      case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
+      case GLFW_KEY_R: camera.cam = app::default_camera(vol); break;
+      case GLFW_KEY_ESCAPE:
+      case GLFW_KEY_Q: glfwSetWindowShouldClose(window.handle(), GLFW_TRUE); break;
+      case GLFW_KEY_S:
+        if (k.ctrl) save(save_path);
+        break;
+      case GLFW_KEY_E:
+        if (k.ctrl) export_mesh(export_path);
+        break;
+      case GLFW_KEY_C:  // clip: cut away the half toward the eye, through the camera's target
+        if (style.clip) style.clip.reset();
+        else style.clip = engine::ClipPlane{camera.cam.target_m ? *camera.cam.target_m : vol.grid.centre_m(), -view.forward};
+        break;
+      case GLFW_KEY_Z:
+      case GLFW_KEY_Y:
+        if (!k.ctrl || stroke.open()) break;  // not in the middle of a stroke
+        e.kind = (k.key == GLFW_KEY_Y || k.shift) ? K::kRedo : K::kUndo;
+        if (session->submit(e)) ++events_submitted;
+        break;
+      default: break;
+    }
+  };
+
+  // A dropped file: read it here first; only one that can be read ends this session.
+  auto try_open = [&](const std::string& path) -> bool {
+    Options next = o;
+    next.input = path;
+    next.script.clear();
+    next.record.clear();
+    if (fs::path(path).extension() != ".json") {
+      next.iso = scene.hri.tau;
+      next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
+    }
+    try {
+      const io::Scene sc = input_scene(next);
+      const engine::Volume v = app::load_scene_volume(sc);
+      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
+        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" + fixed(v.min_value, 3) +
+                                 ", " + fixed(v.max_value, 3) + "]");
+    } catch (const std::exception& e) {
+      status = "cannot open " + path + ": " + e.what() + " (keeping " + scene.name + ")";
+      log << "sculpt   " << status << "\n";
+      return false;
+    }
+    if (!reopen) return false;
+    *reopen = next;
+    log << "sculpt   opening " << path << "\n";
+    return true;
+  };
+  const Clock::time_point t_start = Clock::now();
+  while (!window.should_close()) {
+    if (o.frames > 0 && frame >= o.frames) break;
+    glfwPollEvents();
+    const auto fb = window.framebuffer_size();
+    if (fb[0] == 0 || fb[1] == 0) {  // minimised: the session keeps running, nothing is drawn
+      glfwWaitEventsTimeout(0.05);
+      continue;
+    }
+    // The script: events due this frame (a wait holds it).
+    bool quit = false;
+    std::vector<std::string> shots;
+    while (next_event < script.size()) {
+      const InputEvent& ev = script[next_event];
+      if (wait_frames > 0) break;
+      using EK = InputEvent::Kind;
+      if (ev.kind == EK::kWait) {
+        if (!waiting) {
+          waiting = true;
+          wait_since = Clock::now();
+        }
+        bool met;
+        if (ev.text == "contact") {
+          met = session->observe().contact;
+        } else {
+          std::lock_guard<std::mutex> lock(feed.mu);
+          met = feed.events_done >= events_submitted && feed.pending.empty() && brushes_measured >= feed.brushes_done;
+        }
+        if (!met && ms_since(wait_since) < ev.timeout_s * 1e3) break;
+        if (!met) log << "script   event " << next_event << ": wait for " << ev.text << " timed out after " << ev.timeout_s << " s\n";
+        waiting = false;
+      }
+      switch (ev.kind) {
+        case EK::kCursor:
+          input.px = ev.xy[0] * (fb[0] - 1);
+          input.py = ev.xy[1] * (fb[1] - 1);
+          input.cursor_seen = true;
+          break;
+        case EK::kPress: input.down[ev.button] = true; break;
+        case EK::kRelease: input.down[ev.button] = false; break;
+        case EK::kScroll:
+          if (ev.ctrl) camera.zoom_by(std::pow(1.1, ev.xy[0]));
+          else input.scroll += ev.xy[0];
+          break;
+        case EK::kKey: input.keys.push_back({ev.key, ev.ctrl, ev.shift}); break;
+        case EK::kTool:
+          tool.kind = *tool_from_name(ev.text);
+          if (ev.radius_mm > 0) tool.radius_m = ev.radius_mm * 1e-3;
+          if (ev.strength >= 0) tool.strength = ev.strength;
+          break;
+        case EK::kOrbit: camera.orbit(ev.xy[0], ev.xy[1]); break;
+        case EK::kZoom: camera.zoom_by(ev.xy[0]); break;
+        case EK::kScreenshot: shots.push_back((shot_dir / ev.text).string()); break;
+        case EK::kResize: glfwSetWindowSize(window.handle(), int(ev.xy[0]), int(ev.xy[1])); break;
+        case EK::kQuit: quit = true; break;
+        case EK::kDrop: input.drops.push_back(ev.text); break;
+        case EK::kWait: break;
+      }
+      ++next_event;
+      if (next_event < script.size()) wait_frames = script[next_event].after_frames;
+    }
+    if (quit) break;
+    if (wait_frames > 0 && !waiting) --wait_frames;
+
+    // Keys, camera drags, the wheel, dropped files.
+    for (const Input::Key& k : input.keys) handle_key(k);
+    input.keys.clear();
+    bool reopening = false;
+    for (const std::string& path : input.drops)
+      if (!reopening) reopening = try_open(path);
+    input.drops.clear();
+    if (reopening) break;
+    const bool ctrl = glfwGetKey(window.handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
+                      glfwGetKey(window.handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS;
+    const double dx = input.px - input.last_px, dy = input.py - input.last_py;
+    if (input.down[1]) camera.orbit(-0.3 * dx, 0.3 * dy);
+    if (input.down[2]) camera.pan(view, vol.grid, dx / fb[1], dy / fb[1]);
+    input.last_px = input.px;
+    input.last_py = input.py;
+    if (input.scroll != 0) {
+      if (ctrl) camera.zoom_by(std::pow(1.1, input.scroll));
+      else push_m = std::clamp(push_m + 1e-3 * input.scroll, -0.02, 0.05);
+      input.scroll = 0;
+    }
+    view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+
+    // The hand: on the cursor's ray, push_m behind the surface the last frame showed there.
+    const Ray ray = cursor_ray(view, fb[0], fb[1], input.px, input.py);
+    const int rw = std::max(1, int(std::lround(fb[0] * o.render_scale))), rh = std::max(1, int(std::lround(fb[1] * o.render_scale)));
+    if (!img.depth.empty() && img.width == rw && img.height == rh) {
+      const int cx = std::clamp(int(std::lround(input.px * rw / fb[0])), 0, rw - 1);
+      const int cy = std::clamp(int(std::lround(input.py * rh / fb[1])), 0, rh - 1);
+      const float t = img.depth[std::size_t(cy) * std::size_t(rw) + std::size_t(cx)];
+      if (t > 0) hand_t = double(t) + push_m;
+    }
+    const Vec3 hand_world = ray.origin + ray.dir * hand_t;
+    if (input.cursor_seen) device.set_hand_target(xf.to_device(hand_world));
+
+    // Tools: one application per frame while the left button is held and the probe touches.
+    const session::Observed obs = session->observe();
+    const auto now = Clock::now();
+    const double dt_s = std::chrono::duration<double>(now - last_frame).count();
+    std::vector<session::EditEvent> evs;
+    stroke.frame(input.down[0], obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
+    for (const session::EditEvent& e : evs) {
+      if (!session->submit(e)) continue;
+      ++events_submitted;
+      if (e.kind == session::EditEvent::Kind::kBrush) brush_submitted.push_back(Clock::now());
+    }
+
+    // The picture follows the applied edits: only the changed bricks are uploaded. A brush
+    // submitted this frame is waited for (at most --edit-wait-ms) so that this frame shows it.
+    long drawn_brushes;
+    {
+      std::unique_lock<std::mutex> lock(feed.mu);
+      const long want = long(brush_submitted.size());
+      if (o.edit_wait_ms > 0 && feed.brushes_done < want)
+        feed.applied.wait_for(lock, std::chrono::duration<double, std::milli>(o.edit_wait_ms),
+                              [&] { return feed.brushes_done >= want; });
+      if (!feed.pending.empty()) {
+        const auto t0 = Clock::now();
+        caster.update(feed.values, feed.pending);
+        update_ms.push_back(ms_since(t0));
+        feed.pending.clear();
+      }
+      drawn_brushes = feed.brushes_done;
+      if (!feed.last_error.empty()) {
+        status = "edit refused: " + feed.last_error;
+        log << "sculpt   " << status << "\n";
+        feed.last_error.clear();
+      }
+    }
+    const auto r0 = Clock::now();
+    const std::vector<gpu::RaycastPrim> prims =
+        overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
+    img = caster.render(view, style, rw, rh, prims);
+    render_ms.push_back(ms_since(r0));
+    if (img.march_ms >= 0) {
+      march_ms.push_back(img.march_ms);
+      shade_ms.push_back(img.shade_ms);
+      overlay_ms.push_back(img.overlay_ms);
+    }
+    const auto p0 = Clock::now();
+    const std::vector<std::uint32_t>* shown_px = &img.rgba;
+    if (rw != fb[0] || rh != fb[1]) {  // a lower render scale: nearest-neighbour up to the window
+      upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
+      for (int y = 0; y < fb[1]; ++y) {
+        const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
+        for (int x = 0; x < fb[0]; ++x) upscaled[std::size_t(y) * std::size_t(fb[0]) + std::size_t(x)] = img.rgba[sy + std::size_t(std::min(rw - 1, x * rw / fb[0]))];
+      }
+      shown_px = &upscaled;
+    }
+    const bool shown = window.present(*shown_px, fb[0], fb[1]);
+    present_ms.push_back(ms_since(p0));
+    if (shown) {
+      std::lock_guard<std::mutex> lock(feed.mu);
+      for (; brushes_measured < drawn_brushes; ++brushes_measured)
+        if (feed.brush_changed[std::size_t(brushes_measured)])
+          latency_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - brush_submitted[std::size_t(brushes_measured)]).count());
+    }
+    for (const std::string& s : shots) {
+      try {
+        app::write_png(s, fb[0], fb[1], *shown_px);
+        log << "sculpt   screenshot " << s << "\n";
+      } catch (const std::exception& e) {
+        log << "isotouch-sculpt: " << e.what() << "\n";
+        code = 1;
+      }
+    }
+    last_fb = fb;
+    const auto end = Clock::now();
+    if (frame > 0) frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
+    last_frame = end;
+    ++frame;
+    if (frame % 15 == 0) {
+      const session::LiveStats st = session->stats();
+      std::ostringstream title;
+      title << "isotouch-sculpt: " << scene.name << " | " << tool_line(tool) << " | |F| " << fixed(norm(obs.force_n), 2)
+            << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
+            << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed" << (status.empty() ? "" : " | " + status);
+      glfwSetWindowTitle(window.handle(), title.str().c_str());
+    }
+  }
+  const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
+  if (stroke.open()) {
+    session::EditEvent e;
+    e.kind = session::EditEvent::Kind::kEndStroke;
+    session->submit(e);
+  }
+  try {
+    session->stop();
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    code = 1;
+  }
+  const session::LiveStats st = session->stats();
+  if (!o.screenshot.empty() && !img.rgba.empty()) {
+    try {
+      if (upscaled.empty()) app::write_png(o.screenshot, img.width, img.height, img.rgba);
+      else app::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
+      log << "sculpt   screenshot " << o.screenshot << "\n";
+    } catch (const std::exception& e) {
+      log << "isotouch-sculpt: " << e.what() << "\n";
+      code = 1;
+    }
+  }
+  if (next_event < script.size()) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
+  if (o.stats || o.bench) {
+    auto line = [&](const char* what, const std::vector<double>& v) {
+      if (v.empty()) {
+        log << "stats    " << what << ": none\n";
+        return;
+      }
+      log << "stats    " << what << ": n " << v.size() << ", median " << fixed(eval::median(v), 2) << " ms, p95 "
+          << fixed(eval::percentile(v, 0.95), 2) << " ms, max " << fixed(*std::max_element(v.begin(), v.end()), 2) << " ms\n";
+    };
+    log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
+        << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << "\n";
+    line("frame time", frame_ms);
+    line("render (ray caster)", render_ms);
+    line("  march pass (GPU timestamps)", march_ms);
+    line("  shade pass (GPU timestamps)", shade_ms);
+    line("  overlay pass (GPU timestamps)", overlay_ms);
+    line("present", present_ms);
+    line("picture update (changed bricks)", update_ms);
+    line("edit-to-pixels (submit to the first frame showing it)", latency_ms);
+    line("edit-to-haptics", st.edit_to_haptics_ms);
+    log << "stats    servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed deadlines, " << st.faults
+        << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
+        << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
+        << window.recreations() << " times\n";
+  }
+  if (o.bench) {
+    auto verdict = [&](const std::string& what, const std::vector<double>& v, double q, double limit) {
+      if (v.empty()) {
+        log << "verdict: " << what << ": no samples: FAIL\n";
+        return;
+      }
+      const double x = q == 0.5 ? eval::median(v) : eval::percentile(v, q);
+      log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 0) << " ms): "
+          << (x <= limit ? "PASS" : "FAIL (" + fixed(x / limit, 2) + "x the target)") << "\n";
+    };
+    verdict("frame time median at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]), frame_ms, 0.5, 50);
+    verdict("frame time p95", frame_ms, 0.95, 80);
+    verdict("edit-to-pixels median", latency_ms, 0.5, 100);
+    log << "verdict: servo missed deadlines " << st.missed_deadlines << " of " << st.ticks
+        << " ticks (compare with `isotouch bench servo-rt` run in the same hour)\n";
+  }
+  if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
+  if (vk.validation_messages() > 0) {
+    log << "isotouch-sculpt: " << vk.validation_messages() << " Vulkan validation messages\n";
+    if (code == 0) code = 3;
+  }
+  g_input = nullptr;
+  return code;
+}
+
+}  // namespace isotouch::sculpt

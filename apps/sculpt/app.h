@@ -1,0 +1,44 @@
+// app.h - isotouch-sculpt: a window where a person sculpts a volume and feels it.
+//
+// One LiveSession (servo thread at the scene's rate on a simulated device coupled to the
+// mouse, edit thread, optional recorder) holds the volume; the window's thread draws each
+// frame with the compute ray caster (engine::RayCaster, updated brick by brick after each
+// applied edit), steers the hand target from the mouse and submits the tools' brushes,
+// undo and redo through LiveSession::submit.
+#pragma once
+#include <optional>
+#include <ostream>
+#include <string>
+
+namespace isotouch::sculpt {
+
+struct Options {
+  std::string input;                ///< a scene (.json) or a volume file
+  std::optional<double> iso;        ///< a volume's isovalue (required for a volume)
+  std::string inside = "above";     ///< a volume's inside: "above" or "below"
+  std::string script;               ///< input script (JSON), "" = none
+  std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
+  std::string record;               ///< the session's recording (scenes only)
+  std::string save_path;            ///< Ctrl+S target (.vdb); default: OUT/sculpted.vdb next to the input name
+  std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl
+  int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
+  int width = 1024, height = 768;
+  double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
+  double edit_wait_ms = 50;         ///< a frame waits this long at most for the brush it submitted (0: never)
+  bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets
+  bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
+  bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
+  bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
+  std::string device;               ///< Vulkan device choice
+};
+
+/// Runs the window until it is closed, the script quits or `frames` frames were drawn.
+/// Returns the exit code: 0, 1 on bad input or set-up failure (reason on `log`), 3 if
+/// validation reported messages.
+/// A volume file or scene dropped on the window (or a script's "drop") that could be read
+/// sets `*reopen` to the options for it (a volume: the current isovalue and inside) and ends
+/// this session; the caller runs it next. One that cannot be read shows its error (log and
+/// window title) and the session goes on with the old volume.
+int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen = nullptr);
+
+}  // namespace isotouch::sculpt

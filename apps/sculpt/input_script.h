@@ -1,0 +1,48 @@
+// input_script.h - input events that drive the sculpting window without a person.
+//
+// FILE (JSON): {"events": [EVENT, ...]}, run in order. Each EVENT is one object with
+// "after_frames": N (frames drawn after the previous event before this one; default 1) and
+// exactly one action:
+//   {"cursor": [fx, fy]}           the cursor at fractions of the framebuffer (0..1, y down)
+//   {"press": "left"|"right"|"middle"} / {"release": ...}
+//   {"scroll": dy}                 the wheel (probe depth; with "mods": ["ctrl"]: zoom)
+//   {"key": "Z", "mods": ["ctrl", "shift"]}   a key press (letters, digits, "[", "]", "-",
+//                                  "=", "left", "right", "up", "down", "pageup", "pagedown", "escape")
+//   {"tool": "carve", "radius_mm": 6, "strength": 0.3}   tool change (radius, strength optional)
+//   {"orbit": [d_azimuth_deg, d_elevation_deg]}, {"zoom": factor}
+//   {"wait": "contact" | "edits", "timeout_s": 10}   hold the script until the probe is in
+//                                  contact / every submitted edit is applied and drawn
+//   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
+//   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
+//   {"resize": [w, h]}, {"quit": true}
+#pragma once
+#include <array>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace isotouch::sculpt {
+
+struct ScriptError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct InputEvent {
+  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop };
+  Kind kind = Kind::kQuit;
+  int after_frames = 1;
+  std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy)
+  int button = 0;                  ///< 0 left, 1 right, 2 middle
+  int key = 0;                     ///< GLFW key code
+  bool ctrl = false, shift = false;
+  std::string text;                ///< tool name, wait condition, screenshot name, dropped file
+  double radius_mm = -1, strength = -1, timeout_s = 10;
+};
+
+/// Parses a script's text; `name` is used in messages. @throws ScriptError naming the file,
+/// the event's index and the field and value.
+std::vector<InputEvent> parse_input_script(const std::string& text, const std::string& name);
+/// Reads and parses FILE. @throws ScriptError (also when it cannot be read).
+std::vector<InputEvent> load_input_script(const std::string& path);
+
+}  // namespace isotouch::sculpt

@@ -1,0 +1,57 @@
+// isotouch-sculpt - a window where a person sculpts a volume and feels it (apps/sculpt/app.h).
+#include <CLI/CLI.hpp>
+
+#include <iostream>
+#include <optional>
+
+#include "app.h"
+
+int main(int argc, char** argv) {
+  isotouch::sculpt::Options o;
+  CLI::App cli{
+      "isotouch-sculpt: sculpt a volume and feel it. The mouse steers the probe (a simulated device coupled to "
+      "the hand), the left button applies the tool while the probe touches the surface.\n"
+      "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
+      "right drag = orbit, middle drag = pan.\n"
+      "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay, Esc/Q quit.",
+      "isotouch-sculpt"};
+  cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
+  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT)");
+  cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
+      ->check(CLI::IsMember({"above", "below"}));
+  cli.add_option("--script", o.script, "input events to run (JSON, see apps/sculpt/input_script.h)")->check(CLI::ExistingFile);
+  cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
+  cli.add_option("--frames", o.frames, "exit 0 after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
+  cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
+  cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
+  cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
+  cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
+  cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
+      ->check(CLI::Range(0.1, 1.0));
+  cli.add_option("--edit-wait-ms", o.edit_wait_ms,
+                 "a frame waits at most this long for the brush it submitted, so that it shows it (0: never)")
+      ->check(CLI::Range(0.0, 1000.0));
+  cli.add_flag("--bench", o.bench,
+               "run a scripted sculpt (probe onto the surface, a carve stroke, undo; or --script) and print frame "
+               "time, edit-to-pixels and servo figures with verdicts against the targets (50 / 80 / 100 ms)");
+  cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
+  cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
+  cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
+               "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
+  cli.add_option("--device", o.device, "Vulkan device: name substring or index");
+  CLI11_PARSE(cli, argc, argv);
+  o.height = o.width * 3 / 4;
+  try {
+    // A file dropped on the window that can be read opens in a new session.
+    for (;;) {
+      std::optional<isotouch::sculpt::Options> next;
+      const int rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
+      if (rc != 0 || !next) return rc;
+      o = *next;
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "isotouch-sculpt: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,277 @@
+#include "window.h"
+
+#define GLFW_INCLUDE_NONE
+#define GLFW_INCLUDE_VULKAN
+#include <GLFW/glfw3.h>
+
+#include <algorithm>
+#include <cstring>
+
+namespace isotouch::sculpt {
+
+using engine::Result;
+
+engine::Result<std::vector<std::string>> init_glfw() {
+  using R = Result<std::vector<std::string>>;
+  glfwSetErrorCallback(nullptr);
+  if (!glfwInit()) {
+    const char* why = nullptr;
+    glfwGetError(&why);
+    return R::fail(std::string("cannot open a window: glfwInit failed: ") + (why ? why : "no reason given") +
+                   " (is DISPLAY set? headless: run under xvfb-run -a)");
+  }
+  if (!glfwVulkanSupported()) {
+    glfwTerminate();
+    return R::fail("cannot open a window: GLFW finds no Vulkan loader (Debian: libvulkan1)");
+  }
+  std::uint32_t n = 0;
+  const char** names = glfwGetRequiredInstanceExtensions(&n);
+  if (!names) {
+    glfwTerminate();
+    return R::fail("cannot open a window: no Vulkan surface extension for this window system");
+  }
+  std::vector<std::string> out(names, names + n);
+  return R::ok(out);
+}
+
+void shutdown_glfw() { glfwTerminate(); }
+
+Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int width, int height,
+                                               const std::string& title) {
+  using R = Result<std::unique_ptr<Window>>;
+  std::unique_ptr<Window> w(new Window(ctx));
+  glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
+  glfwWindowHint(GLFW_RESIZABLE, GLFW_TRUE);
+  w->win_ = glfwCreateWindow(width, height, title.c_str(), nullptr, nullptr);
+  if (!w->win_) {
+    const char* why = nullptr;
+    glfwGetError(&why);
+    return R::fail(std::string("cannot create the window: ") + (why ? why : "GLFW gave no reason"));
+  }
+  if (const VkResult r = glfwCreateWindowSurface(ctx.instance(), w->win_, nullptr, &w->surface_); r != VK_SUCCESS)
+    return R::fail(std::string("cannot create a Vulkan surface for the window: ") + engine::vk_result_name(r));
+  VkBool32 ok = VK_FALSE;
+  vkGetPhysicalDeviceSurfaceSupportKHR(ctx.physical_device(), ctx.queue_family(), w->surface_, &ok);
+  if (!ok)
+    return R::fail("Vulkan device '" + ctx.info().name + "' cannot present to this window from its compute queue");
+  VkDevice dev = ctx.device();
+  VkSemaphoreCreateInfo si{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
+  VK_CHECK(vkCreateSemaphore(dev, &si, nullptr, &w->acquired_));
+  VkFenceCreateInfo fi{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+  VK_CHECK(vkCreateFence(dev, &fi, nullptr, &w->fence_));
+  VkCommandPoolCreateInfo pi{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+  pi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+  pi.queueFamilyIndex = ctx.queue_family();
+  VK_CHECK(vkCreateCommandPool(dev, &pi, nullptr, &w->pool_));
+  VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+  ai.commandPool = w->pool_;
+  ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  ai.commandBufferCount = 1;
+  VK_CHECK(vkAllocateCommandBuffers(dev, &ai, &w->cmd_));
+  if (std::string e = w->make_swapchain(); !e.empty()) return R::fail(e);
+  return R::ok(std::move(w));
+}
+
+Window::~Window() {
+  VkDevice dev = ctx_.device();
+  vkDeviceWaitIdle(dev);
+  destroy_swapchain();
+  staging_.reset();
+  if (pool_) vkDestroyCommandPool(dev, pool_, nullptr);
+  if (fence_) vkDestroyFence(dev, fence_, nullptr);
+  if (acquired_) vkDestroySemaphore(dev, acquired_, nullptr);
+  if (surface_) vkDestroySurfaceKHR(ctx_.instance(), surface_, nullptr);
+  if (win_) glfwDestroyWindow(win_);
+}
+
+bool Window::should_close() const { return glfwWindowShouldClose(win_); }
+
+std::array<int, 2> Window::framebuffer_size() const {
+  int w = 0, h = 0;
+  glfwGetFramebufferSize(win_, &w, &h);
+  if (glfwGetWindowAttrib(win_, GLFW_ICONIFIED)) return {0, 0};
+  return {w, h};
+}
+
+void Window::destroy_swapchain() {
+  VkDevice dev = ctx_.device();
+  for (VkSemaphore s : done_) vkDestroySemaphore(dev, s, nullptr);
+  done_.clear();
+  images_.clear();
+  if (swapchain_) vkDestroySwapchainKHR(dev, swapchain_, nullptr);
+  swapchain_ = VK_NULL_HANDLE;
+}
+
+std::string Window::make_swapchain() {
+  VkPhysicalDevice pd = ctx_.physical_device();
+  VkDevice dev = ctx_.device();
+  VkSurfaceCapabilitiesKHR caps{};
+  VK_CHECK(vkGetPhysicalDeviceSurfaceCapabilitiesKHR(pd, surface_, &caps));
+  if (!(caps.supportedUsageFlags & VK_IMAGE_USAGE_TRANSFER_DST_BIT))
+    return "the window's swapchain images cannot be copied into (no TRANSFER_DST usage)";
+  std::uint32_t n = 0;
+  vkGetPhysicalDeviceSurfaceFormatsKHR(pd, surface_, &n, nullptr);
+  std::vector<VkSurfaceFormatKHR> formats(n);
+  vkGetPhysicalDeviceSurfaceFormatsKHR(pd, surface_, &n, formats.data());
+  // The picture is already display-encoded (the ray caster's gamma): a UNORM image shows it as is.
+  format_ = VK_FORMAT_UNDEFINED;
+  VkColorSpaceKHR space = VK_COLOR_SPACE_SRGB_NONLINEAR_KHR;
+  for (VkFormat want : {VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_B8G8R8A8_UNORM})
+    for (const auto& f : formats)
+      if (format_ == VK_FORMAT_UNDEFINED && f.format == want) {
+        format_ = f.format;
+        space = f.colorSpace;
+      }
+  if (format_ == VK_FORMAT_UNDEFINED) return "the window offers neither an RGBA8 nor a BGRA8 UNORM swapchain format";
+  swizzle_ = format_ == VK_FORMAT_B8G8R8A8_UNORM;
+  vkGetPhysicalDeviceSurfacePresentModesKHR(pd, surface_, &n, nullptr);
+  std::vector<VkPresentModeKHR> modes(n);
+  vkGetPhysicalDeviceSurfacePresentModesKHR(pd, surface_, &n, modes.data());
+  // Never wait for a vertical blank: the frame loop's own pace is what we measure.
+  VkPresentModeKHR mode = VK_PRESENT_MODE_FIFO_KHR;
+  present_mode_name_ = "fifo";
+  for (auto [m, name] : {std::pair{VK_PRESENT_MODE_MAILBOX_KHR, "mailbox"}, std::pair{VK_PRESENT_MODE_IMMEDIATE_KHR, "immediate"}})
+    if (mode == VK_PRESENT_MODE_FIFO_KHR && std::find(modes.begin(), modes.end(), m) != modes.end()) {
+      mode = m;
+      present_mode_name_ = name;
+    }
+  VkExtent2D ext = caps.currentExtent;
+  if (ext.width == 0xFFFFFFFFu) {
+    const auto fb = framebuffer_size();
+    ext = {std::uint32_t(fb[0]), std::uint32_t(fb[1])};
+  }
+  ext.width = std::clamp(ext.width, caps.minImageExtent.width, caps.maxImageExtent.width);
+  ext.height = std::clamp(ext.height, caps.minImageExtent.height, caps.maxImageExtent.height);
+  if (ext.width == 0 || ext.height == 0) {  // minimised: try again when restored
+    extent_ = ext;
+    stale_ = true;
+    return "";
+  }
+  std::uint32_t count = std::max(caps.minImageCount + 1, 2u);
+  if (caps.maxImageCount) count = std::min(count, caps.maxImageCount);
+  VkSwapchainCreateInfoKHR ci{VK_STRUCTURE_TYPE_SWAPCHAIN_CREATE_INFO_KHR};
+  ci.surface = surface_;
+  ci.minImageCount = count;
+  ci.imageFormat = format_;
+  ci.imageColorSpace = space;
+  ci.imageExtent = ext;
+  ci.imageArrayLayers = 1;
+  ci.imageUsage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+  ci.imageSharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ci.preTransform = caps.currentTransform;
+  ci.compositeAlpha = (caps.supportedCompositeAlpha & VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR)
+                          ? VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR
+                          : VkCompositeAlphaFlagBitsKHR(caps.supportedCompositeAlpha & -caps.supportedCompositeAlpha);
+  ci.presentMode = mode;
+  ci.clipped = VK_TRUE;
+  ci.oldSwapchain = swapchain_;
+  VkSwapchainKHR sc = VK_NULL_HANDLE;
+  if (const VkResult r = vkCreateSwapchainKHR(dev, &ci, nullptr, &sc); r != VK_SUCCESS)
+    return std::string("cannot create the window's swapchain: ") + engine::vk_result_name(r);
+  destroy_swapchain();
+  swapchain_ = sc;
+  extent_ = ext;
+  vkGetSwapchainImagesKHR(dev, swapchain_, &n, nullptr);
+  images_.resize(n);
+  vkGetSwapchainImagesKHR(dev, swapchain_, &n, images_.data());
+  VkSemaphoreCreateInfo si{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
+  done_.resize(n);
+  for (auto& s : done_) VK_CHECK(vkCreateSemaphore(dev, &si, nullptr, &s));
+  stale_ = false;
+  return "";
+}
+
+bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
+  VkDevice dev = ctx_.device();
+  if (in_flight_) {  // the previous copy has finished: its staging buffer and semaphores are free
+    VK_CHECK(vkWaitForFences(dev, 1, &fence_, VK_TRUE, UINT64_MAX));
+    VK_CHECK(vkResetFences(dev, 1, &fence_));
+    in_flight_ = false;
+  }
+  const auto fb = framebuffer_size();
+  if (fb[0] == 0 || fb[1] == 0) return false;
+  if (stale_ || !swapchain_ || std::uint32_t(fb[0]) != extent_.width || std::uint32_t(fb[1]) != extent_.height) {
+    vkQueueWaitIdle(ctx_.queue());
+    if (std::string e = make_swapchain(); !e.empty()) throw engine::VulkanError(e);
+    ++recreations_;
+    if (!swapchain_ || stale_) return false;
+  }
+  std::uint32_t index = 0;
+  VkResult r = vkAcquireNextImageKHR(dev, swapchain_, UINT64_MAX, acquired_, VK_NULL_HANDLE, &index);
+  if (r == VK_ERROR_OUT_OF_DATE_KHR) {
+    stale_ = true;
+    return false;
+  }
+  if (r == VK_SUBOPTIMAL_KHR) stale_ = true;  // present this one, then recreate
+  else if (r != VK_SUCCESS) engine::vk_check_failed("vkAcquireNextImageKHR", r, __FILE__, __LINE__);
+
+  const VkDeviceSize bytes = VkDeviceSize(w) * VkDeviceSize(h) * 4;
+  if (!staging_ || staging_.size() < bytes)
+    staging_ = engine::make_buffer_or_throw(ctx_, bytes, engine::MemoryIntent::Upload, "window picture staging");
+  auto* dst = static_cast<std::uint32_t*>(staging_.mapped());
+  if (swizzle_) {
+    for (std::size_t i = 0, e = std::size_t(w) * std::size_t(h); i < e; ++i) {
+      const std::uint32_t p = rgba[i];
+      dst[i] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
+    }
+  } else {
+    std::memcpy(dst, rgba.data(), bytes);
+  }
+  VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+  VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+  bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+  VK_CHECK(vkBeginCommandBuffer(cmd_, &bi));
+  VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+  b.srcAccessMask = 0;
+  b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = images_[index];
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0, nullptr,
+                       1, &b);
+  VkClearColorValue black{};
+  vkCmdClearColorImage(cmd_, images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, &black, 1, &b.subresourceRange);
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &mb, 0, nullptr, 0,
+                       nullptr);
+  VkBufferImageCopy region{};
+  region.bufferRowLength = std::uint32_t(w);
+  region.bufferImageHeight = std::uint32_t(h);
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageExtent = {std::min(std::uint32_t(w), extent_.width), std::min(std::uint32_t(h), extent_.height), 1};
+  vkCmdCopyBufferToImage(cmd_, staging_.handle(), images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = 0;
+  b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  b.newLayout = VK_IMAGE_LAYOUT_PRESENT_SRC_KHR;
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0, 0, nullptr, 0,
+                       nullptr, 1, &b);
+  VK_CHECK(vkEndCommandBuffer(cmd_));
+  const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
+  VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  si.waitSemaphoreCount = 1;
+  si.pWaitSemaphores = &acquired_;
+  si.pWaitDstStageMask = &wait_stage;
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &cmd_;
+  si.signalSemaphoreCount = 1;
+  si.pSignalSemaphores = &done_[index];
+  VK_CHECK(vkQueueSubmit(ctx_.queue(), 1, &si, fence_));
+  in_flight_ = true;
+  VkPresentInfoKHR pi{VK_STRUCTURE_TYPE_PRESENT_INFO_KHR};
+  pi.waitSemaphoreCount = 1;
+  pi.pWaitSemaphores = &done_[index];
+  pi.swapchainCount = 1;
+  pi.pSwapchains = &swapchain_;
+  pi.pImageIndices = &index;
+  r = vkQueuePresentKHR(ctx_.queue(), &pi);
+  if (r == VK_ERROR_OUT_OF_DATE_KHR || r == VK_SUBOPTIMAL_KHR) stale_ = true;
+  else if (r != VK_SUCCESS) engine::vk_check_failed("vkQueuePresentKHR", r, __FILE__, __LINE__);
+  return true;
+}
+
+}  // namespace isotouch::sculpt

@@ -1,0 +1,73 @@
+// window.h - a GLFW window that shows RGBA8 pictures through a Vulkan swapchain.
+//
+// The compute ray caster draws into a buffer; present() copies that picture into the
+// acquired swapchain image (vkCmdCopyBufferToImage, no graphics pipeline) and presents it.
+// The swapchain is recreated when it is out of date or suboptimal or the framebuffer size
+// changed; a minimised window (size 0) presents nothing until it is restored.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "vk_context.h"
+#include "vk_resources.h"
+
+struct GLFWwindow;
+
+namespace isotouch::sculpt {
+
+/// GLFW's own set-up, once per process (glfwInit + the instance extensions a surface needs).
+/// Fails with GLFW's message (no display, no Vulkan loader).
+engine::Result<std::vector<std::string>> init_glfw();
+void shutdown_glfw();
+
+class Window {
+ public:
+  /// A window of `width` x `height` screen units on `ctx` (created with the extensions of
+  /// init_glfw() and swapchain = true). Fails naming the step (surface, present support,
+  /// surface format, transfer usage of swapchain images).
+  static engine::Result<std::unique_ptr<Window>> create(engine::VulkanContext& ctx, int width, int height,
+                                                        const std::string& title);
+  ~Window();
+  Window(const Window&) = delete;
+  Window& operator=(const Window&) = delete;
+
+  GLFWwindow* handle() const { return win_; }
+  bool should_close() const;
+  /// Framebuffer size in pixels ({0, 0} while minimised).
+  std::array<int, 2> framebuffer_size() const;
+  /// Shows `rgba` (R in the low byte, rows top to bottom, `w` x `h`) in the next swapchain
+  /// image; the part outside the swapchain's extent is cut, the rest left as it was.
+  /// Returns false when nothing was presented (minimised, swapchain recreated this frame).
+  bool present(const std::vector<std::uint32_t>& rgba, int w, int h);
+  int recreations() const { return recreations_; }
+  const std::string& present_mode() const { return present_mode_name_; }
+
+ private:
+  Window(engine::VulkanContext& ctx) : ctx_(ctx) {}
+  std::string make_swapchain();  // "" or why not
+  void destroy_swapchain();
+
+  engine::VulkanContext& ctx_;
+  GLFWwindow* win_ = nullptr;
+  VkSurfaceKHR surface_ = VK_NULL_HANDLE;
+  VkSwapchainKHR swapchain_ = VK_NULL_HANDLE;
+  VkFormat format_ = VK_FORMAT_UNDEFINED;
+  bool swizzle_ = false;  // BGRA swapchain: swap R and B
+  VkExtent2D extent_{0, 0};
+  std::vector<VkImage> images_;
+  std::vector<VkSemaphore> done_;  // one per swapchain image: the copy finished, present may read
+  VkSemaphore acquired_ = VK_NULL_HANDLE;
+  VkFence fence_ = VK_NULL_HANDLE;
+  VkCommandPool pool_ = VK_NULL_HANDLE;
+  VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  engine::GpuBuffer staging_;  // the picture, host-written, copied into the image
+  bool in_flight_ = false;
+  bool stale_ = false;  // recreate before the next frame
+  int recreations_ = 0;
+  std::string present_mode_name_;
+};
+
+}  // namespace isotouch::sculpt

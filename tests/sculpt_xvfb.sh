@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The sculpting window as a person would use it, under Xvfb with Vulkan validation on: open
+# the head CT, orbit, move the probe onto the skull, carve, undo (tests/sculpt/carve.json).
+# Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
+# the pixels around the brush, undo restored the picture exactly; no validation message,
+# exit 0; dropped files: errors keep the old volume, a good one opens; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
+# Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
+set -euo pipefail
+bin=$1 iso=$2 src=$3
+out=${4:-$(mktemp -d)}
+if ! command -v xvfb-run >/dev/null; then
+  echo "SKIP: xvfb-run is not installed (Debian: xvfb xauth); the sculpting window cannot be tested headless"
+  exit 77
+fi
+mkdir -p "$out"
+rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec "$out"/sculpted.vdb "$out"/sculpted.stl
+set +e
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/tests/sculpt/head-sculpt.json" --script "$src/tests/sculpt/carve.json" \
+  --screenshot "$out/last.png" --record "$out/session.rec" --save "$out/sculpted.vdb" --export "$out/sculpted.stl" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
+rc=${PIPESTATUS[0]}
+set -e
+if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
+if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
+# Ctrl+S and Ctrl+E after the carve: the edited volume as .vdb, its isosurface as STL.
+for f in sculpted.vdb sculpted.stl; do
+  [ -s "$out/$f" ] || { echo "FAIL: $f was not written"; exit 1; }
+done
+if grep -q "save failed\|export failed" "$out/log.txt"; then echo "FAIL: save or export failed"; exit 1; fi
+# The window was resized at the end: the swapchain was recreated and the last frame has the new size.
+grep -q "swapchain recreated [1-9]" "$out/log.txt" || { echo "FAIL: the resize did not recreate the swapchain"; exit 1; }
+python3 - "$out/last.png" <<'PY' || { echo "FAIL: last.png does not have the resized window's size"; exit 1; }
+import struct, sys
+w, h = struct.unpack(">II", open(sys.argv[1], "rb").read()[16:24])
+print(f"last.png: {w}x{h}")
+sys.exit(0 if (w, h) == (400, 300) else 1)
+PY
+python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
+# Dropped files (tests/sculpt/drop.json): a scene that is not one and a missing volume show
+# their error and the head stays; the chest volume opens in a new session (the head's isovalue).
+set +e
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/drop.json" \
+  --frames 10 --size 320 --validation > "$out/drop.txt" 2>&1
+rc=$?
+set -e
+cat "$out/drop.txt"
+if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with dropped files exited $rc"; exit 1; fi
+[ "$(grep -c "cannot open .*(keeping head)" "$out/drop.txt")" -eq 2 ] || { echo "FAIL: a bad drop did not keep the old volume"; exit 1; }
+grep -q "^sculpt   sculpt: 256x256x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest did not open"; exit 1; }
+set +e
+"$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
+rc=$?
+set -e
+cat "$out/replay.log"
+if [ "$rc" -ne 0 ] || ! grep -q "^IDENTICAL" "$out/replay.log"; then echo "FAIL: the recording does not replay identically"; exit 1; fi
+echo "PASS sculpt: screenshots in $out"

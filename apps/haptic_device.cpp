@@ -22,9 +22,9 @@ std::string num(double v) {
 }
 
 /// The HIPs of a trace.csv (physical frame) or a recording (world), in device metres.
-std::vector<sim::PlaybackSample> playback_samples(const std::string& file, const SceneSetup& setup) {
+std::vector<sim::PlaybackSample> playback_samples(const std::string& file, const DeviceSetup& ds) {
   std::vector<sim::PlaybackSample> out;
-  const servo::WorkspaceTransform& xf = setup.world_T_device;
+  const servo::WorkspaceTransform& xf = ds.world_T_device;
   if (file.size() > 4 && file.substr(file.size() - 4) == ".rec") {
     const io::Recording rec = io::load_recording(file, true);
     for (const io::RecordedTick& t : rec.ticks) out.push_back({t.t_s, xf.to_device(t.hip_m), t.button ? 1u : 0u});
@@ -32,7 +32,7 @@ std::vector<sim::PlaybackSample> playback_samples(const std::string& file, const
     return out;
   }
   out = sim::load_trace_hips(file);
-  for (sim::PlaybackSample& s : out) s.position_m = xf.to_device(setup.volume.to_grid(s.position_m));
+  for (sim::PlaybackSample& s : out) s.position_m = xf.to_device(ds.volume->to_grid(s.position_m));
   return out;
 }
 
@@ -68,8 +68,17 @@ std::string check_caps(const servo::HriParams& hri, const servo::DeviceCaps& cap
   return e;
 }
 
-HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup,
-                                int io_fifo_priority) {
+DeviceSetup device_setup(const io::Scene& scene, const SceneSetup& setup) {
+  DeviceSetup ds;
+  ds.scene = &scene;
+  ds.volume = &setup.volume;
+  ds.hri = setup.hri;
+  ds.world_T_device = setup.world_T_device;
+  ds.script = &setup.script;
+  return ds;
+}
+
+HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, int io_fifo_priority) {
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
@@ -79,26 +88,29 @@ HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene,
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
   if (!needs_arg && colon != std::string::npos)
     throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");
-  core::Vec3 start_w, v0;
-  setup.script.at(0.0, start_w, v0);
+  if (kind == "sim" && !ds.script)
+    throw std::invalid_argument("--haptic " + spec + ": sim needs the scene's scripted hand, which this front end has not");
+  core::Vec3 start_w = ds.start_world_m, v0;
+  if (ds.script) ds.script->at(0.0, start_w, v0);
+  const io::Scene& scene = *ds.scene;
   const double T = 1.0 / scene.hri.rate_hz;
   HapticDevice d;
   d.kind = kind;
   if (kind == "sim") {
-    d.sim = std::make_unique<sim::SimDevice>(scene.device, setup.world_T_device.to_device(start_w));
-    d.io = std::make_unique<sim::SimDeviceIO>(*d.sim, setup.script, T, setup.world_T_device, &scene.edits.button_down);
+    d.sim = std::make_unique<sim::SimDevice>(scene.device, ds.world_T_device.to_device(start_w));
+    d.io = std::make_unique<sim::SimDeviceIO>(*d.sim, *ds.script, T, ds.world_T_device, &scene.edits.button_down);
     d.description = "sim (the scene's simulated device and scripted hand)";
   } else if (kind == "null") {
-    d.io = std::make_unique<sim::NullDeviceIO>(setup.world_T_device.to_device(start_w));
+    d.io = std::make_unique<sim::NullDeviceIO>(ds.world_T_device.to_device(start_w));
     d.description = "null (zero force, fixed at the script's start)";
   } else if (kind == "playback") {
-    auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, setup), T);
+    auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, ds), T);
     d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
     d.io = std::move(p);
   } else {
     d = open_report(kind, arg, io_fifo_priority);
   }
-  if (const std::string e = check_caps(setup.hri, d.io->caps()); !e.empty())
+  if (const std::string e = check_caps(ds.hri, d.io->caps()); !e.empty())
     throw std::runtime_error("--haptic " + spec + ": the scene's renderer does not fit the device: " + e);
   return d;
 }

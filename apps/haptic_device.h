@@ -27,13 +27,28 @@ struct HapticDevice {
   std::unique_ptr<sim::SimDevice> sim;      ///< the simulated device behind io (sim only)
 };
 
-/// Parses and opens `spec` for `scene` (its script, device model, rate and workspace map).
+/// What a device is opened for: the scene's device model and rate, the renderer its caps are
+/// checked against, the workspace map, and where the HIP starts.
+struct DeviceSetup {
+  const io::Scene* scene = nullptr;              ///< device model, servo rate, button-down times
+  const engine::Volume* volume = nullptr;        ///< a trace.csv's physical frame -> world
+  servo::HriParams hri;                          ///< checked against the device's caps
+  servo::WorkspaceTransform world_T_device;      ///< world = translation + scale * device
+  /// The scripted hand of `sim` (which needs it: null refuses `sim`); the HIP of `null`
+  /// stays at the script's start, else at `start_world_m`.
+  const sim::TouchScript* script = nullptr;
+  core::Vec3 start_world_m{};                    ///< `null`'s fixed HIP without a script [m, world]
+};
+
+/// The DeviceSetup of a scene set up for `isotouch run` (its script, volume, renderer, map).
+DeviceSetup device_setup(const io::Scene& scene, const SceneSetup& setup);
+
+/// Parses and opens `spec` for `ds` (see DeviceSetup).
 /// @throws std::invalid_argument on a bad spec (names the kind and what is wrong, lists the
 /// kinds), std::runtime_error if the device cannot be opened or its capabilities refuse the
 /// scene's renderer (check_caps).
 /// `io_fifo_priority` > 0: a hid or emu device's reader and writer threads ask for SCHED_FIFO.
-HapticDevice open_haptic_device(const std::string& spec, const io::Scene& scene, const SceneSetup& setup,
-                                int io_fifo_priority = 0);
+HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, int io_fifo_priority = 0);
 
 /// "" if the renderer's stiffness, damping and force limit are within the device's
 /// capabilities, else one line naming each offending value and the device's limit.

@@ -199,7 +199,7 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   servo::TripleBuffer<core::SampleField> buffer;
   buffer.publish(edits->current());
   servo::HriRenderer renderer(setup.hri);
-  HapticDevice device = open_haptic_device(o.haptic, scene, setup, o.sched_fifo ? 70 : 0);
+  HapticDevice device = open_haptic_device(o.haptic, device_setup(scene, setup), o.sched_fifo ? 70 : 0);
   ForceMeter meter(*device.io);
   session::install_stop_handlers();
   session::LiveSession live(*edits, buffer, renderer, meter, live_config(scene, setup, *edits, o));

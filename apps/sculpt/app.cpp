@@ -18,6 +18,7 @@
 #include "coupled_hand_device.h"
 #include "edit_session.h"
 #include "frame.h"
+#include "haptic_device.h"
 #include "hri.h"
 #include "input_script.h"
 #include "live_session.h"
@@ -156,6 +157,20 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   }
   const fs::path shot_dir = o.screenshot.empty() ? fs::path(".") : fs::path(o.screenshot).parent_path();
 
+  // --- the device: the mouse-coupled simulated probe, or one from --haptic (opened just before
+  // the servo starts: an emulator's hand path and a device's watchdog start with the link) ----
+  servo::WorkspaceTransform xf;  // as `isotouch run`: the device's origin at the grid's centre
+  xf.scale = scene.workspace_scale;
+  xf.translation_m = vol.grid.centre_m();
+  CameraControl camera;
+  camera.cam = app::default_camera(vol);
+  engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  // The probe starts at rest just outside the volume's box in front of the camera.
+  const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
+  sim::CoupledHandDevice mouse_device(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
+  const bool mouse = o.haptic == "mouse";
+  app::HapticDevice haptic;
+
   // --- window and Vulkan --------------------------------------------------------------
   auto exts = init_glfw();
   if (!exts) {
@@ -206,9 +221,6 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   servo::TripleBuffer<core::SampleField> buffer;
   buffer.publish(edits->current());
   servo::HriRenderer renderer(scene.hri);
-  servo::WorkspaceTransform xf;  // as `isotouch run`: the device's origin at the grid's centre
-  xf.scale = scene.workspace_scale;
-  xf.translation_m = vol.grid.centre_m();
 
   // The picture: the raw volume at the scene's isovalue (what `isotouch render` draws).
   PictureFeed feed;
@@ -265,14 +277,23 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     feed.applied.notify_all();
   };
 
-  // The probe: a point-mass device coupled to the hand the mouse moves, starting at rest
-  // just outside the volume's box in front of the camera.
-  CameraControl camera;
-  camera.cam = app::default_camera(vol);
-  engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
-  const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
-  sim::CoupledHandDevice device(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
-
+  if (!mouse) {
+    try {
+      app::DeviceSetup ds;
+      ds.scene = &scene;
+      ds.volume = &vol;
+      ds.hri = scene.hri;
+      ds.world_T_device = xf;
+      ds.start_world_m = start_world;
+      haptic = app::open_haptic_device(o.haptic, ds, o.sched_fifo ? 70 : 0);
+    } catch (const std::exception& e) {
+      log << "isotouch-sculpt: " << e.what() << " (or mouse, the default)\n";
+      return 1;
+    }
+    log << "device   " << haptic.description << "\n";
+    if (haptic.report && !haptic.report->realtime_note().empty()) log << "device   " << haptic.report->realtime_note() << "\n";
+  }
+  servo::HapticDeviceIO& device = mouse ? static_cast<servo::HapticDeviceIO&>(mouse_device) : *haptic.io;
   std::unique_ptr<session::LiveSession> session;
   try {
     session = std::make_unique<session::LiveSession>(*edits, buffer, renderer, device, cfg);
@@ -514,7 +535,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       if (t > 0) hand_t = double(t) + push_m;
     }
     const Vec3 hand_world = ray.origin + ray.dir * hand_t;
-    if (input.cursor_seen) device.set_hand_target(xf.to_device(hand_world));
+    if (input.cursor_seen && mouse) mouse_device.set_hand_target(xf.to_device(hand_world));
 
     // Tools: one application per frame while the left button is held and the probe touches.
     const session::Observed obs = session->observe();
@@ -597,7 +618,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       std::ostringstream title;
       title << "isotouch-sculpt: " << scene.name << " | " << tool_line(tool) << " | |F| " << fixed(norm(obs.force_n), 2)
             << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
-            << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed" << (status.empty() ? "" : " | " + status);
+            << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed"
+            << (mouse ? std::string() : std::string(" | device ") + servo::to_string(session->servo_thread()->device_status()))
+            << (status.empty() ? "" : " | " + status);
       glfwSetWindowTitle(window.handle(), title.str().c_str());
     }
   }
@@ -649,6 +672,16 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
         << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
         << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
         << window.recreations() << " times\n";
+  }
+  if (!mouse) {
+    const servo::DeviceCounters c = session->servo_thread()->device_counters();
+    log << "device   " << haptic.description << ": stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
+        << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
+    if (haptic.report) {
+      const servo::LinkCounters l = haptic.report->counters();
+      log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
+          << l.disconnects << " disconnects, " << l.reconnects << " reconnects, " << l.writes << " output reports\n";
+    }
   }
   if (o.bench) {
     auto verdict = [&](const std::string& what, const std::vector<double>& v, double q, double limit) {

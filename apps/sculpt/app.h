@@ -30,6 +30,9 @@ struct Options {
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
   std::string device;               ///< Vulkan device choice
+  /// The haptic device: "mouse" (a simulated device coupled to the hand the mouse steers) or
+  /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET).
+  std::string haptic = "mouse";
 };
 
 /// Runs the window until it is closed, the script quits or `frames` frames were drawn.

@@ -40,6 +40,10 @@ int main(int argc, char** argv) {
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
                "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
   cli.add_option("--device", o.device, "Vulkan device: name substring or index");
+  cli.add_option("--haptic", o.haptic,
+                 "the haptic device: mouse (default: a simulated device coupled to the hand the mouse steers), "
+                 "null, playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
+                 "(isotouch-devemu); a device's caps must fit the scene's stiffness, damping and force limit");
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;
   try {

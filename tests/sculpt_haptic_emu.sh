@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# isotouch-sculpt --haptic emu:SOCKET under Xvfb: the window's probe is an isotouch-devemu
+# process playing the head scene's scripted hand (isotouch run --hand-path), so the person's
+# hand is the emulator's. Checks: the window opened the device (its line in the log), the
+# emulator received forces and felt the skull (its max |F| of the order of the simulated
+# run's 2 N), no disconnected, fault or refused tick; a bad spec or a missing socket: exit 1.
+# Usage: sculpt_haptic_emu.sh SCULPT_BIN ISOTOUCH_BIN DEVEMU_BIN SOURCE_DIR OUT_DIR. Exit 77 without xvfb-run.
+set -u
+bin=$1 iso=$2 emu=$3 src=$4 out=$5
+fail() { echo "FAIL: $*"; exit 1; }
+command -v xvfb-run >/dev/null || { echo "SKIP: xvfb-run is not installed"; exit 77; }
+rm -rf "$out"; mkdir -p "$out"
+sock=$out/dev.sock
+scene=$src/scenes/head.json
+
+xvfb-run -a "$bin" "$scene" --haptic sim > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "sim needs the scene's scripted hand" "$out/bad.log" || { cat "$out/bad.log"; fail "--haptic sim: exit $rc"; }
+xvfb-run -a "$bin" "$scene" --haptic "emu:$out/none.sock" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
+
+"$iso" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1 || { cat "$out/path.log"; fail "--hand-path failed"; }
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 60 > "$out/emu.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+# The hand path takes a few seconds: 20 s of frames at most (a frame is 0.1-0.3 s on lavapipe).
+xvfb-run -a -s "-screen 0 640x480x24" "$bin" "$scene" --haptic "emu:$sock" --frames 80 --size 256 --stats \
+  > "$out/sculpt.log" 2>&1; rc=$?
+kill -TERM "$emu_pid" 2>/dev/null; wait "$emu_pid"
+cat "$out/sculpt.log" "$out/emu.log"
+[ "$rc" -eq 0 ] || fail "isotouch-sculpt --haptic emu exited $rc"
+grep -q "^device   emu:$sock" "$out/sculpt.log" || fail "the window did not report the device"
+grep -Eq "^device   .*disconnected 0, fault 0, refused 0" "$out/sculpt.log" || fail "device faults in a clean run"
+grep -Eq "^link     [1-9][0-9]* reports" "$out/sculpt.log" || fail "no input reports read"
+fmax=$(sed -nE 's/.*max \|F\| ([0-9.e+-]+) N.*/\1/p' "$out/emu.log")
+[ -n "$fmax" ] || fail "the emulator printed no max force"
+awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f < 3.3) }' || fail "the emulator's max |F| $fmax N: the skull was not felt through the window"
+echo "PASS sculpt --haptic emu"

@@ -24,6 +24,7 @@
 #include <set>
 #include <sstream>
 
+#include "itk_reason.h"
 #include "volume_io.h"
 
 namespace isotouch::io {
@@ -55,20 +56,6 @@ std::string some_names(const std::vector<std::string>& files, std::size_t shown 
   for (std::size_t i = 0; i < files.size() && i < shown; ++i) s += (i ? ", " : "") + name_of(files[i]);
   if (files.size() > shown) s += " and " + std::to_string(files.size() - shown) + " more";
   return s;
-}
-
-// ITK messages carry source locations; keep the last, most specific line.
-std::string itk_reason(std::string msg) {
-  const auto e = msg.find("ITK ERROR: ");
-  if (e != std::string::npos) {
-    msg = msg.substr(e + 11);
-    const auto colon = msg.find("): ");
-    if (colon != std::string::npos && colon < 64) msg = msg.substr(colon + 3);
-  }
-  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
-  const auto nl = msg.rfind('\n');
-  if (nl != std::string::npos) msg = msg.substr(nl + 1);
-  return msg;
 }
 
 // The tags read from every slice's header (gdcm::Scanner stops before the pixel data).

@@ -1,5 +1,6 @@
 // With dicom_series.cpp, the only translation units that include ITK and teem headers (slow to compile).
 #include "volume_io.h"
+#include "itk_reason.h"
 
 #include "dicom_series.h"
 
@@ -48,23 +49,6 @@ std::string lower(std::string s) {
 
 bool ends_with(const std::string& s, const std::string& suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-// ITK and teem messages carry source locations and call chains; keep the last, most
-// specific line, without the "ITK ERROR: Class(0x...): " prefix.
-std::string last_reason(std::string msg) {
-  const auto e = msg.find("ITK ERROR: ");
-  if (e != std::string::npos) {
-    msg = msg.substr(e + 11);
-    const auto colon = msg.find("): ");
-    if (colon != std::string::npos && colon < 64) msg = msg.substr(colon + 3);
-  }
-  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
-  const auto nl = msg.rfind('\n');
-  if (nl != std::string::npos) msg = msg.substr(nl + 1);
-  if (msg.find("Unknown component type") != std::string::npos)
-    msg = "unknown or unsupported voxel type (" + msg + ")";
-  return msg;
 }
 
 bool is_nrrd(const std::string& path) {
@@ -667,6 +651,24 @@ void check_nrrd_spacings(const std::string& path) {
 
 }  // namespace
 
+// ITK and teem messages carry source locations and call chains; keep the last, most
+// specific line, without the "ITK ERROR: Class(0x...): " prefix.
+std::string itk_reason(std::string msg) {
+  const auto e = msg.find("ITK ERROR: ");
+  if (e != std::string::npos) {
+    msg = msg.substr(e + 11);
+    const auto colon = msg.find("): ");
+    if (colon != std::string::npos && colon < 64) msg = msg.substr(colon + 3);
+  }
+  while (!msg.empty() && (msg.back() == '\n' || msg.back() == ' ')) msg.pop_back();
+  const auto nl = msg.rfind('\n');
+  if (nl != std::string::npos) msg = msg.substr(nl + 1);
+  if (msg.find("Unknown component type") != std::string::npos)
+    msg = "unknown or unsupported voxel type (" + msg + ")";
+  return msg;
+}
+
+
 Volume load_volume(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail(path, "no such file");
@@ -684,14 +686,14 @@ Volume load_volume(const std::string& path) {
   } catch (const VolumeError&) {
     throw;
   } catch (const std::exception& e) {
-    const std::string msg = last_reason(e.what());
+    const std::string msg = itk_reason(e.what());
 #ifdef ISOTOUCH_HAVE_TEEM
     if (is_nrrd(path)) {
       try {
         v = load_teem(path);
       } catch (const VolumeError& te) {
         fail(path, "ITK could not read it (" + msg + ") and neither could teem (" +
-                       last_reason(std::string(te.what()).substr(path.size() + 2)) + ")");
+                       itk_reason(std::string(te.what()).substr(path.size() + 2)) + ")");
       }
     } else
 #endif

@@ -19,6 +19,7 @@
 #include <stdexcept>
 
 #include "hid_report.h"
+#include "playback_device_io.h"
 
 namespace isotouch::sim {
 namespace {
@@ -280,32 +281,13 @@ EmuStats DeviceEmulator::stats() const {
 }
 
 std::vector<PathPoint> load_path_csv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open the hand path");
   std::vector<PathPoint> out;
-  std::string line;
-  std::getline(in, line);  // header
-  for (int no = 2; std::getline(in, line); ++no) {
-    if (line.empty()) continue;
-    std::istringstream s(line);
+  for (const TimedPoint& r : load_timed_points(path, "the hand path", "t_s,x_m,y_m,z_m")) {
     PathPoint p;
-    double v[4];
-    for (int i = 0; i < 4; ++i) {
-      std::string cell;
-      std::getline(s, cell, ',');
-      char* end = nullptr;
-      v[i] = std::strtod(cell.c_str(), &end);
-      if (cell.empty() || *end != '\0' || !std::isfinite(v[i]))
-        throw std::runtime_error(path + ":" + std::to_string(no) + ": column " + std::to_string(i + 1) + " ('" + cell +
-                                 "') is not a finite number (expected t_s,x_m,y_m,z_m)");
-    }
-    p.t_s = v[0];
-    p.p_m = Vec3{v[1], v[2], v[3]};
-    if (!out.empty() && !(p.t_s > out.back().t_s))
-      throw std::runtime_error(path + ":" + std::to_string(no) + ": time " + std::to_string(p.t_s) + " s does not increase");
+    p.t_s = r.t_s;
+    p.p_m = r.p_m;
     out.push_back(p);
   }
-  if (out.empty()) throw std::runtime_error(path + ": the hand path has no rows");
   return out;
 }
 

@@ -24,14 +24,12 @@ Vec3 PlaybackDeviceIO::read_position_m() {
   return samples_[i_].position_m;
 }
 
-std::vector<PlaybackSample> load_trace_hips(const std::string& path) {
+std::vector<TimedPoint> load_timed_points(const std::string& path, const std::string& what, const std::string& expected) {
   std::ifstream in(path);
-  if (!in) throw std::runtime_error(path + ": cannot open the trace");
+  if (!in) throw std::runtime_error(path + ": cannot open " + what);
   std::string line;
-  std::getline(in, line);
-  if (line.rfind("t_s,hip_x_m,hip_y_m,hip_z_m", 0) != 0)
-    throw std::runtime_error(path + ":1: not a trace.csv (the header must start t_s,hip_x_m,hip_y_m,hip_z_m)");
-  std::vector<PlaybackSample> out;
+  std::getline(in, line);  // the header
+  std::vector<TimedPoint> out;
   for (int no = 2; std::getline(in, line); ++no) {
     if (line.empty()) continue;
     std::istringstream s(line);
@@ -43,13 +41,25 @@ std::vector<PlaybackSample> load_trace_hips(const std::string& path) {
       v[i] = std::strtod(cell.c_str(), &end);
       if (cell.empty() || *end != '\0' || !std::isfinite(v[i]))
         throw std::runtime_error(path + ":" + std::to_string(no) + ": column " + std::to_string(i + 1) + " ('" + cell +
-                                 "') is not a finite number");
+                                 "') is not a finite number" + (expected.empty() ? "" : " (expected " + expected + ")"));
     }
     if (!out.empty() && !(v[0] > out.back().t_s))
       throw std::runtime_error(path + ":" + std::to_string(no) + ": t_s " + std::to_string(v[0]) + " does not increase");
-    out.push_back({v[0], Vec3{v[1], v[2], v[3]}, 0});
+    out.push_back({v[0], Vec3{v[1], v[2], v[3]}});
   }
-  if (out.empty()) throw std::runtime_error(path + ": the trace has no rows");
+  if (out.empty()) throw std::runtime_error(path + ": " + what + " has no rows");
+  return out;
+}
+
+std::vector<PlaybackSample> load_trace_hips(const std::string& path) {
+  {
+    std::ifstream in(path);
+    std::string header;
+    if (in && std::getline(in, header) && header.rfind("t_s,hip_x_m,hip_y_m,hip_z_m", 0) != 0)
+      throw std::runtime_error(path + ":1: not a trace.csv (the header must start t_s,hip_x_m,hip_y_m,hip_z_m)");
+  }
+  std::vector<PlaybackSample> out;
+  for (const TimedPoint& r : load_timed_points(path, "the trace")) out.push_back({r.t_s, r.p_m, 0});
   return out;
 }
 

@@ -43,6 +43,20 @@ class PlaybackDeviceIO final : public servo::HapticDeviceIO {
   Vec3 last_;
 };
 
+/// One row of a CSV whose first four columns are a time [s] and a position x, y, z [m].
+struct TimedPoint {
+  double t_s;
+  Vec3 p_m;
+};
+
+/// Reads the first four columns of every row after the header of `path` (`what` names the
+/// file's kind in errors: "the trace", "the hand path"): finite numbers, times strictly
+/// increasing; later columns are ignored.
+/// @throws std::runtime_error naming the file, line, column and value (`expected` is appended
+/// to a bad number's message), or a file without rows.
+std::vector<TimedPoint> load_timed_points(const std::string& path, const std::string& what,
+                                          const std::string& expected = "");
+
 /// Reads the HIP columns of a trace.csv (`t_s,hip_x_m,hip_y_m,hip_z_m,...`, as written by
 /// `isotouch run`): positions in the frame the file uses (the caller maps them).
 /// @throws std::runtime_error naming the file, line and column.

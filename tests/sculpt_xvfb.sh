@@ -4,6 +4,8 @@
 # Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
 # the pixels around the brush, undo restored the picture exactly; no validation message,
 # exit 0; dropped files: errors keep the old volume, a good one opens; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
+# With SCULPT_EXPECT_OVERLAY=1 (a build with Dear ImGui): the panels were set up and drawn
+# (the screenshots are the ray caster's picture, without them); --no-overlay draws none.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -21,6 +23,11 @@ rc=${PIPESTATUS[0]}
 set -e
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
 if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
+if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
+  grep -q "^overlay  Dear ImGui [0-9.]*$" "$out/log.txt" || { echo "FAIL: the Dear ImGui overlay was not set up"; exit 1; }
+  grep -q "^stats    overlay Dear ImGui [0-9.]* drawn in [1-9][0-9]* of " "$out/log.txt" ||
+    { echo "FAIL: the Dear ImGui overlay was not drawn"; exit 1; }
+fi
 # Ctrl+S and Ctrl+E after the carve: the edited volume as .vdb, its isosurface as STL.
 for f in sculpted.vdb sculpted.stl; do
   [ -s "$out/$f" ] || { echo "FAIL: $f was not written"; exit 1; }
@@ -39,13 +46,14 @@ python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screen
 # their error and the head stays; the chest volume opens in a new session (the head's isovalue).
 set +e
 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/drop.json" \
-  --frames 10 --size 320 --validation > "$out/drop.txt" 2>&1
+  --frames 10 --size 320 --validation --no-overlay > "$out/drop.txt" 2>&1
 rc=$?
 set -e
 cat "$out/drop.txt"
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with dropped files exited $rc"; exit 1; fi
 [ "$(grep -c "cannot open .*(keeping head)" "$out/drop.txt")" -eq 2 ] || { echo "FAIL: a bad drop did not keep the old volume"; exit 1; }
 grep -q "^sculpt   sculpt: 256x256x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest did not open"; exit 1; }
+if grep -q "^overlay  " "$out/drop.txt"; then echo "FAIL: --no-overlay still set up the overlay"; exit 1; fi
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
 rc=$?

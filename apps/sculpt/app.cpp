@@ -22,6 +22,7 @@
 #include "hri.h"
 #include "input_script.h"
 #include "live_session.h"
+#include "overlay.h"
 #include "raycast.h"
 #include "record.h"
 #include "render_cmd.h"
@@ -79,6 +80,33 @@ struct Input {
 
 Input* g_input = nullptr;  // GLFW callbacks (one window)
 
+// The Dear ImGui panels' share of GLFW's events (no-ops in a build without them): ImGui
+// sees every event, and a press or wheel over a panel is not the sculpt's.
+#if ISOTOUCH_WITH_IMGUI
+Overlay* g_panels = nullptr;
+bool panels_want_mouse() { return g_panels && g_panels->wants_mouse(); }
+bool panels_want_keyboard() { return g_panels && g_panels->wants_keyboard(); }
+void panels_button(GLFWwindow* w, int b, int action, int mods) {
+  if (g_panels) g_panels->mouse_button(w, b, action, mods);
+}
+void panels_scroll(GLFWwindow* w, double dx, double dy) {
+  if (g_panels) g_panels->scroll(w, dx, dy);
+}
+void panels_key(GLFWwindow* w, int key, int scancode, int action, int mods) {
+  if (g_panels) g_panels->key(w, key, scancode, action, mods);
+}
+void on_char(GLFWwindow* w, unsigned int c) {
+  if (g_panels) g_panels->character(w, c);
+}
+#else
+bool panels_want_mouse() { return false; }
+bool panels_want_keyboard() { return false; }
+void panels_button(GLFWwindow*, int, int, int) {}
+void panels_scroll(GLFWwindow*, double, double) {}
+void panels_key(GLFWwindow*, int, int, int, int) {}
+void on_char(GLFWwindow*, unsigned int) {}
+#endif
+
 double fb_scale(GLFWwindow* w) {  // framebuffer pixels per screen unit
   int ww = 0, wh = 0, fw = 0, fh = 0;
   glfwGetWindowSize(w, &ww, &wh);
@@ -92,15 +120,22 @@ void on_cursor(GLFWwindow* w, double x, double y) {
   g_input->py = y * s;
   g_input->cursor_seen = true;
 }
-void on_button(GLFWwindow*, int b, int action, int) {
+void on_button(GLFWwindow* w, int b, int action, int mods) {
+  panels_button(w, b, action, mods);
+  if (action == GLFW_PRESS && panels_want_mouse()) return;  // a click on a panel
   const int i = b == GLFW_MOUSE_BUTTON_LEFT ? 0 : b == GLFW_MOUSE_BUTTON_RIGHT ? 1 : b == GLFW_MOUSE_BUTTON_MIDDLE ? 2 : -1;
   if (i >= 0) g_input->down[i] = action == GLFW_PRESS;
 }
-void on_scroll(GLFWwindow*, double, double dy) { g_input->scroll += dy; }
+void on_scroll(GLFWwindow* w, double dx, double dy) {
+  panels_scroll(w, dx, dy);
+  if (!panels_want_mouse()) g_input->scroll += dy;
+}
 void on_drop(GLFWwindow*, int n, const char** paths) {
   for (int i = 0; i < n; ++i) g_input->drops.emplace_back(paths[i]);
 }
-void on_key(GLFWwindow*, int key, int, int action, int mods) {
+void on_key(GLFWwindow* w, int key, int scancode, int action, int mods) {
+  panels_key(w, key, scancode, action, mods);
+  if (panels_want_keyboard()) return;  // typing into a panel's field
   if (action == GLFW_PRESS || action == GLFW_REPEAT)
     g_input->keys.push_back({key, (mods & GLFW_MOD_CONTROL) != 0, (mods & GLFW_MOD_SHIFT) != 0});
 }
@@ -127,6 +162,27 @@ io::Scene input_scene(const Options& o) {
   t << std::setprecision(17) << "{\"name\": \"sculpt\", \"volume\": {\"path\": \"" << fs::absolute(p).string()
     << "\"}, \"isovalue\": " << *o.iso << ", \"inside\": \"" << o.inside << "\"}";
   return io::parse_scene(t.str(), o.input);
+}
+
+/// The stats panel's volume line: dims, spacing, orientation.
+std::string volume_line(const engine::Volume& v) {
+  const auto& d = v.grid.dims;
+  const Vec3& s = v.grid.spacing_m;
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]) + " voxels, spacing " +
+         fixed(s.x * 1e3, 3) + " x " + fixed(s.y * 1e3, 3) + " x " + fixed(s.z * 1e3, 3) + " mm, " + v.orientation();
+}
+
+/// The servo's figures for the stats panel; the tick rate is measured over `seconds` since
+/// the last refresh.
+void refresh_servo(PanelStats& p, const session::LiveStats& st, double seconds) {
+  if (seconds > 0) p.servo_rate_hz = double(st.ticks - p.ticks) / seconds;
+  p.ticks = st.ticks;
+  p.missed_deadlines = st.missed_deadlines;
+  p.faults = st.faults;
+  if (!st.edit_to_haptics_ms.empty()) {
+    p.edit_to_haptics_last_ms = st.edit_to_haptics_ms.back();
+    p.edit_to_haptics_median_ms = eval::median(st.edit_to_haptics_ms);
+  }
 }
 
 std::string tool_line(const ToolState& t) {
@@ -204,6 +260,23 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   glfwSetScrollCallback(window.handle(), on_scroll);
   glfwSetKeyCallback(window.handle(), on_key);
   glfwSetDropCallback(window.handle(), on_drop);
+  glfwSetCharCallback(window.handle(), on_char);
+#if ISOTOUCH_WITH_IMGUI
+  std::unique_ptr<Overlay> panels;  // the tool and stats panels, drawn over the picture
+  if (o.overlay) {
+    auto made = Overlay::create(vk, window);
+    if (made) {
+      panels = std::move(*made.value);
+      log << "overlay  " << Overlay::version() << "\n";
+    } else {
+      log << "overlay  not drawn: " << made.error << "\n";
+    }
+  }
+  g_panels = panels.get();
+  struct PanelsGuard {
+    ~PanelsGuard() { g_panels = nullptr; }
+  } panels_guard;
+#endif
 
   // --- the session: edits (CPU brushes: the GPU queue belongs to the window's thread) ------
   session::LiveFieldOptions live;
@@ -314,6 +387,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
     tool.radius_m = std::max(4e-3, 2.5 * sp);
   }
+  PanelStats panel;
+  panel.servo_target_hz = scene.hri.rate_hz;
+  panel.volume = volume_line(vol);
+  auto panel_refreshed = Clock::now();
   Stroke stroke;
   engine::RaycastStyle style;
   bool overlay = true;
@@ -379,10 +456,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       case GLFW_KEY_2: tool.kind = session::BrushKind::kCarve; break;
       case GLFW_KEY_3: tool.kind = session::BrushKind::kSmooth; break;
       case GLFW_KEY_4: tool.kind = session::BrushKind::kDrill; break;
-      case GLFW_KEY_LEFT_BRACKET: tool.radius_m = std::max(0.5e-3, tool.radius_m / 1.25); break;
-      case GLFW_KEY_RIGHT_BRACKET: tool.radius_m = std::min(0.1, tool.radius_m * 1.25); break;
-      case GLFW_KEY_MINUS: tool.strength = std::max(0.01, tool.strength / 1.25); break;
-      case GLFW_KEY_EQUAL: tool.strength = std::min(1.0, tool.strength * 1.25); break;
+      case GLFW_KEY_LEFT_BRACKET: step_radius(tool, false); break;
+      case GLFW_KEY_RIGHT_BRACKET: step_radius(tool, true); break;
+      case GLFW_KEY_MINUS: step_strength(tool, false); break;
+      case GLFW_KEY_EQUAL: step_strength(tool, true); break;
       case GLFW_KEY_H: overlay = !overlay; break;
       case GLFW_KEY_LEFT: camera.orbit(-5, 0); break;
       case GLFW_KEY_RIGHT: camera.orbit(5, 0); break;
@@ -591,6 +668,17 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       }
       shown_px = &upscaled;
     }
+#if ISOTOUCH_WITH_IMGUI
+    if (panels) {
+      panel.frame_ms = frame_ms.empty() ? 0 : frame_ms.back();
+      panel.force_n = norm(obs.force_n);
+      panel.contact = obs.contact;
+      panel.device = mouse ? std::string("mouse (simulated device coupled to the hand)")
+                           : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
+      panel.status = status;
+      panels->build(tool, panel, overlay);
+    }
+#endif
     const bool shown = window.present(*shown_px, fb[0], fb[1]);
     present_ms.push_back(ms_since(p0));
     if (shown) {
@@ -615,6 +703,8 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     ++frame;
     if (frame % 15 == 0) {
       const session::LiveStats st = session->stats();
+      refresh_servo(panel, st, std::chrono::duration<double>(end - panel_refreshed).count());
+      panel_refreshed = end;
       std::ostringstream title;
       title << "isotouch-sculpt: " << scene.name << " | " << tool_line(tool) << " | |F| " << fixed(norm(obs.force_n), 2)
             << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
@@ -672,6 +762,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
         << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
         << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
         << window.recreations() << " times\n";
+#if ISOTOUCH_WITH_IMGUI
+    if (panels) log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame << " frames\n";
+#endif
   }
   if (!mouse) {
     const servo::DeviceCounters c = session->servo_thread()->device_counters();

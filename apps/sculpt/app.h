@@ -29,6 +29,7 @@ struct Options {
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
+  bool overlay = true;              ///< the Dear ImGui tool and stats panels (a build with Dear ImGui)
   std::string device;               ///< Vulkan device choice
   /// The haptic device: "mouse" (a simulated device coupled to the hand the mouse steers) or
   /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET).

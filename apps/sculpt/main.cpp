@@ -14,7 +14,7 @@ int main(int argc, char** argv) {
       "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
       "right drag = orbit, middle drag = pan.\n"
       "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
-      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay, Esc/Q quit.",
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay (probe glyphs and panels), Esc/Q quit.",
       "isotouch-sculpt"};
   cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
   cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT)");
@@ -39,6 +39,8 @@ int main(int argc, char** argv) {
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
                "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
+  cli.add_flag("--overlay,!--no-overlay", o.overlay,
+               "the tool and stats panels (Dear ImGui) over the picture (default on, in a build with Dear ImGui)");
   cli.add_option("--device", o.device, "Vulkan device: name substring or index");
   cli.add_option("--haptic", o.haptic,
                  "the haptic device: mouse (default: a simulated device coupled to the hand the mouse steers), "

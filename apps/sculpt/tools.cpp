@@ -14,6 +14,14 @@ std::optional<session::BrushKind> tool_from_name(const std::string& name) {
   return std::nullopt;
 }
 
+void step_radius(ToolState& t, bool up) {
+  t.radius_m = up ? std::min(kMaxRadiusM, t.radius_m * 1.25) : std::max(kMinRadiusM, t.radius_m / 1.25);
+}
+
+void step_strength(ToolState& t, bool up) {
+  t.strength = up ? std::min(kMaxStrength, t.strength * 1.25) : std::max(kMinStrength, t.strength / 1.25);
+}
+
 session::Brush make_tool_brush(const ToolState& t, const core::Vec3& centre_m, double force_n, double dt_s) {
   session::Brush b;
   b.kind = t.kind;

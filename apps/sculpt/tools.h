@@ -20,6 +20,13 @@ struct ToolState {
   session::BrushTargets targets;
 };
 
+/// The radius and strength limits; the keys ([ ] - =) and the overlay's widgets keep to them.
+inline constexpr double kMinRadiusM = 0.5e-3, kMaxRadiusM = 0.1;
+inline constexpr double kMinStrength = 0.01, kMaxStrength = 1.0;
+/// One key step: the radius or strength times 1.25 (`up`) or divided by it, within the limits.
+void step_radius(ToolState& t, bool up);
+void step_strength(ToolState& t, bool up);
+
 /// "add", "carve", "smooth", "drill" -> kind; nullopt otherwise.
 std::optional<session::BrushKind> tool_from_name(const std::string& name);
 

@@ -95,6 +95,7 @@ std::array<int, 2> Window::framebuffer_size() const {
 
 void Window::destroy_swapchain() {
   VkDevice dev = ctx_.device();
+  if (hook_ && !images_.empty()) hook_->swapchain_gone();
   for (VkSemaphore s : done_) vkDestroySemaphore(dev, s, nullptr);
   done_.clear();
   images_.clear();
@@ -109,6 +110,8 @@ std::string Window::make_swapchain() {
   VK_CHECK(vkGetPhysicalDeviceSurfaceCapabilitiesKHR(pd, surface_, &caps));
   if (!(caps.supportedUsageFlags & VK_IMAGE_USAGE_TRANSFER_DST_BIT))
     return "the window's swapchain images cannot be copied into (no TRANSFER_DST usage)";
+  if (hook_ && !(caps.supportedUsageFlags & VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT))
+    return "the window's swapchain images cannot be drawn into (no COLOR_ATTACHMENT usage)";
   std::uint32_t n = 0;
   vkGetPhysicalDeviceSurfaceFormatsKHR(pd, surface_, &n, nullptr);
   std::vector<VkSurfaceFormatKHR> formats(n);
@@ -157,6 +160,7 @@ std::string Window::make_swapchain() {
   ci.imageExtent = ext;
   ci.imageArrayLayers = 1;
   ci.imageUsage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+  if (hook_) ci.imageUsage |= VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT;  // the hook draws into it
   ci.imageSharingMode = VK_SHARING_MODE_EXCLUSIVE;
   ci.preTransform = caps.currentTransform;
   ci.compositeAlpha = (caps.supportedCompositeAlpha & VK_COMPOSITE_ALPHA_OPAQUE_BIT_KHR)
@@ -178,7 +182,28 @@ std::string Window::make_swapchain() {
   done_.resize(n);
   for (auto& s : done_) VK_CHECK(vkCreateSemaphore(dev, &si, nullptr, &s));
   stale_ = false;
+  if (hook_) return hook_->swapchain_ready(format_, extent_, images_);
   return "";
+}
+
+Result<bool> Window::attach(FrameHook* hook) {
+  using R = Result<bool>;
+  VK_CHECK(vkDeviceWaitIdle(ctx_.device()));
+  if (in_flight_) {
+    VK_CHECK(vkWaitForFences(ctx_.device(), 1, &fence_, VK_TRUE, UINT64_MAX));
+    VK_CHECK(vkResetFences(ctx_.device(), 1, &fence_));
+    in_flight_ = false;
+  }
+  if (hook_ && !images_.empty()) hook_->swapchain_gone();
+  hook_ = hook;
+  if (!hook_) return R::ok(true);  // the images keep their usage: nothing to remake
+  if (std::string e = make_swapchain(); !e.empty()) {
+    if (!images_.empty()) hook_->swapchain_gone();
+    hook_ = nullptr;
+    stale_ = true;  // the next frame remakes a swapchain without the hook
+    return R::fail(e);
+  }
+  return R::ok(true);
 }
 
 bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
@@ -244,12 +269,16 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {std::min(std::uint32_t(w), extent_.width), std::min(std::uint32_t(h), extent_.height), 1};
   vkCmdCopyBufferToImage(cmd_, staging_.handle(), images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
-  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-  b.dstAccessMask = 0;
-  b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
-  b.newLayout = VK_IMAGE_LAYOUT_PRESENT_SRC_KHR;
-  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0, 0, nullptr, 0,
-                       nullptr, 1, &b);
+  if (hook_) {
+    hook_->record(cmd_, index);
+  } else {
+    b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    b.dstAccessMask = 0;
+    b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.newLayout = VK_IMAGE_LAYOUT_PRESENT_SRC_KHR;
+    vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0, 0, nullptr, 0,
+                         nullptr, 1, &b);
+  }
   VK_CHECK(vkEndCommandBuffer(cmd_));
   const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
   VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};

@@ -3,7 +3,8 @@
 // The compute ray caster draws into a buffer; present() copies that picture into the
 // acquired swapchain image (vkCmdCopyBufferToImage, no graphics pipeline) and presents it.
 // The swapchain is recreated when it is out of date or suboptimal or the framebuffer size
-// changed; a minimised window (size 0) presents nothing until it is restored.
+// changed; a minimised window (size 0) presents nothing until it is restored. A FrameHook
+// (the Dear ImGui overlay) may draw over the picture before it is presented.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -22,6 +23,21 @@ namespace isotouch::sculpt {
 /// Fails with GLFW's message (no display, no Vulkan loader).
 engine::Result<std::vector<std::string>> init_glfw();
 void shutdown_glfw();
+
+/// Drawing after the picture is in the swapchain image, recorded into the frame's command
+/// buffer. Its resources that name swapchain images (views, framebuffers) follow the
+/// swapchain: made in swapchain_ready(), released in swapchain_gone().
+class FrameHook {
+ public:
+  virtual ~FrameHook() = default;
+  /// The swapchain was (re)created with these images. Returns "" or why the hook cannot draw.
+  virtual std::string swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) = 0;
+  /// The swapchain's images are about to be destroyed (the device is idle).
+  virtual void swapchain_gone() = 0;
+  /// Records the drawing into image `index`, which the picture's copy left in
+  /// TRANSFER_DST_OPTIMAL; the image must end in PRESENT_SRC_KHR.
+  virtual void record(VkCommandBuffer cmd, std::uint32_t index) = 0;
+};
 
 class Window {
  public:
@@ -42,6 +58,10 @@ class Window {
   /// image; the part outside the swapchain's extent is cut, the rest left as it was.
   /// Returns false when nothing was presented (minimised, swapchain recreated this frame).
   bool present(const std::vector<std::uint32_t>& rgba, int w, int h);
+  /// Draws `hook` into every presented frame from now on (nullptr: none), remaking the
+  /// swapchain so that its images can be colour attachments. Fails naming why (no
+  /// COLOR_ATTACHMENT usage, the hook's own set-up); the window then has no hook.
+  engine::Result<bool> attach(FrameHook* hook);
   int recreations() const { return recreations_; }
   const std::string& present_mode() const { return present_mode_name_; }
 
@@ -63,6 +83,7 @@ class Window {
   VkFence fence_ = VK_NULL_HANDLE;
   VkCommandPool pool_ = VK_NULL_HANDLE;
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
+  FrameHook* hook_ = nullptr;
   engine::GpuBuffer staging_;  // the picture, host-written, copied into the image
   bool in_flight_ = false;
   bool stale_ = false;  // recreate before the next frame

@@ -1,0 +1,302 @@
+#include "overlay.h"
+
+#define GLFW_INCLUDE_NONE
+#define GLFW_INCLUDE_VULKAN
+#include <GLFW/glfw3.h>
+
+#include <imgui.h>
+#include <imgui_impl_glfw.h>
+#include <imgui_impl_vulkan.h>
+
+#include <algorithm>
+#include <array>
+#include <utility>
+
+namespace isotouch::sculpt {
+
+using engine::Result;
+
+namespace {
+
+// ImGui's Vulkan backend reports each VkResult here: a failure is a bug, as with VK_CHECK.
+void check_imgui_vk(VkResult r) {
+  if (r < 0) engine::vk_check_failed("Dear ImGui's Vulkan backend", r, __FILE__, __LINE__);
+}
+
+bool queue_has_graphics(const engine::VulkanContext& ctx) {
+  std::uint32_t n = 0;
+  vkGetPhysicalDeviceQueueFamilyProperties(ctx.physical_device(), &n, nullptr);
+  std::vector<VkQueueFamilyProperties> q(n);
+  vkGetPhysicalDeviceQueueFamilyProperties(ctx.physical_device(), &n, q.data());
+  return ctx.queue_family() < n && (q[ctx.queue_family()].queueFlags & VK_QUEUE_GRAPHICS_BIT);
+}
+
+/// A value with its own -/+ buttons: the buttons do what the keys do.
+template <class Step>
+void step_buttons(const char* id, ToolState& tool, Step step) {
+  ImGui::PushID(id);
+  if (ImGui::SmallButton("-")) step(tool, false);
+  ImGui::SameLine();
+  if (ImGui::SmallButton("+")) step(tool, true);
+  ImGui::PopID();
+}
+
+void tool_panel(ToolState& tool) {
+  ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowBgAlpha(0.8f);
+  ImGui::Begin("Tool", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  using K = session::BrushKind;
+  constexpr std::array<std::pair<K, const char*>, 4> kinds{
+      {{K::kAdd, "add (1)"}, {K::kCarve, "carve (2)"}, {K::kSmooth, "smooth (3)"}, {K::kDrill, "drill (4)"}}};
+  for (std::size_t i = 0; i < kinds.size(); ++i) {
+    if (i % 2) ImGui::SameLine();
+    if (ImGui::RadioButton(kinds[i].second, tool.kind == kinds[i].first)) tool.kind = kinds[i].first;
+  }
+  float radius_mm = float(tool.radius_m * 1e3);
+  if (ImGui::SliderFloat("radius mm ([ ])", &radius_mm, float(kMinRadiusM * 1e3), float(kMaxRadiusM * 1e3), "%.1f",
+                         ImGuiSliderFlags_Logarithmic))
+    tool.radius_m = std::clamp(double(radius_mm) * 1e-3, kMinRadiusM, kMaxRadiusM);
+  ImGui::SameLine();
+  step_buttons("radius", tool, step_radius);
+  float strength = float(tool.strength);
+  if (ImGui::SliderFloat("strength (- =)", &strength, float(kMinStrength), float(kMaxStrength), "%.2f",
+                         ImGuiSliderFlags_Logarithmic))
+    tool.strength = std::clamp(double(strength), kMinStrength, kMaxStrength);
+  ImGui::SameLine();
+  step_buttons("strength", tool, step_strength);
+  ImGui::End();
+}
+
+void stats_panel(const PanelStats& s) {
+  ImGui::SetNextWindowPos(ImVec2(8, 130), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowBgAlpha(0.8f);
+  ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
+  ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
+  if (s.tick_p99_us) ImGui::Text("tick p99    %.1f us", *s.tick_p99_us);
+  else ImGui::TextDisabled("tick p99    n/a (the servo reports its periods after stop)");
+  if (s.edit_to_haptics_last_ms)
+    ImGui::Text("edit->feel  %.2f ms last, %.2f ms median", *s.edit_to_haptics_last_ms,
+                s.edit_to_haptics_median_ms.value_or(0.0));
+  else ImGui::TextDisabled("edit->feel  no edit yet");
+  ImGui::Text("frame       %.1f ms (%.0f fps)", s.frame_ms, s.frame_ms > 0 ? 1e3 / s.frame_ms : 0.0);
+  ImGui::Text("|F|         %.2f N%s", s.force_n, s.contact ? ", contact" : "");
+  ImGui::Separator();
+  ImGui::TextUnformatted(("volume      " + s.volume).c_str());
+  ImGui::TextUnformatted(("device      " + s.device).c_str());
+  if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
+  ImGui::End();
+}
+
+}  // namespace
+
+std::string Overlay::version() { return std::string("Dear ImGui ") + IMGUI_VERSION; }
+
+Result<std::unique_ptr<Overlay>> Overlay::create(engine::VulkanContext& ctx, Window& window) {
+  using R = Result<std::unique_ptr<Overlay>>;
+  if (!queue_has_graphics(ctx))
+    return R::fail("the Vulkan device's compute queue family cannot draw (no GRAPHICS): no overlay");
+  std::unique_ptr<Overlay> o(new Overlay(ctx, window));
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  o->imgui_context_ = true;
+  ImGuiIO& io = ImGui::GetIO();
+  io.IniFilename = nullptr;  // no imgui.ini in the working folder: panels start where the code puts them
+  ImGui::StyleColorsDark();
+  // The app's own callbacks forward GLFW's events (mouse_button() etc.).
+  if (!ImGui_ImplGlfw_InitForVulkan(window.handle(), false)) return R::fail("Dear ImGui's GLFW backend did not start");
+  o->glfw_backend_ = true;
+  if (std::string e = o->make_descriptor_pool(); !e.empty()) return R::fail(e);
+  // The swapchain is remade with COLOR_ATTACHMENT usage; swapchain_ready() sets up the rest.
+  if (auto a = window.attach(o.get()); !a) return R::fail(a.error);
+  return R::ok(std::move(o));
+}
+
+Overlay::~Overlay() {
+  vkDeviceWaitIdle(ctx_.device());
+  window_.attach(nullptr);  // calls swapchain_gone() if attached
+  swapchain_gone();
+  shutdown_vulkan_backend();
+  if (pool_) vkDestroyDescriptorPool(ctx_.device(), pool_, nullptr);
+  if (glfw_backend_) ImGui_ImplGlfw_Shutdown();
+  if (imgui_context_) ImGui::DestroyContext();
+}
+
+std::string Overlay::make_descriptor_pool() {
+  // ImGui 1.86 needs one combined image sampler (its font texture); a few spare for a re-init.
+  VkDescriptorPoolSize size{VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 4};
+  VkDescriptorPoolCreateInfo ci{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
+  ci.flags = VK_DESCRIPTOR_POOL_CREATE_FREE_DESCRIPTOR_SET_BIT;
+  ci.maxSets = 4;
+  ci.poolSizeCount = 1;
+  ci.pPoolSizes = &size;
+  if (const VkResult r = vkCreateDescriptorPool(ctx_.device(), &ci, nullptr, &pool_); r != VK_SUCCESS)
+    return std::string("cannot create the overlay's descriptor pool: ") + engine::vk_result_name(r);
+  return "";
+}
+
+std::string Overlay::make_render_pass(VkFormat format) {
+  // Draws over the picture (LOAD); record() moves the image to COLOR_ATTACHMENT_OPTIMAL first.
+  VkAttachmentDescription att{};
+  att.format = format;
+  att.samples = VK_SAMPLE_COUNT_1_BIT;
+  att.loadOp = VK_ATTACHMENT_LOAD_OP_LOAD;
+  att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  att.initialLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
+  att.finalLayout = VK_IMAGE_LAYOUT_PRESENT_SRC_KHR;
+  VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  VkSubpassDescription sub{};
+  sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  sub.colorAttachmentCount = 1;
+  sub.pColorAttachments = &ref;
+  VkSubpassDependency dep{};
+  dep.srcSubpass = VK_SUBPASS_EXTERNAL;
+  dep.dstSubpass = 0;
+  dep.srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  dep.dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  dep.srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  dep.dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  VkRenderPassCreateInfo ci{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
+  ci.attachmentCount = 1;
+  ci.pAttachments = &att;
+  ci.subpassCount = 1;
+  ci.pSubpasses = &sub;
+  ci.dependencyCount = 1;
+  ci.pDependencies = &dep;
+  if (const VkResult r = vkCreateRenderPass(ctx_.device(), &ci, nullptr, &pass_); r != VK_SUCCESS)
+    return std::string("cannot create the overlay's render pass: ") + engine::vk_result_name(r);
+  format_ = format;
+  return "";
+}
+
+std::string Overlay::init_vulkan_backend(VkFormat format) {
+  if (std::string e = make_render_pass(format); !e.empty()) return e;
+  ImGui_ImplVulkan_InitInfo info{};
+  info.Instance = ctx_.instance();
+  info.PhysicalDevice = ctx_.physical_device();
+  info.Device = ctx_.device();
+  info.QueueFamily = ctx_.queue_family();
+  info.Queue = ctx_.queue();
+  info.DescriptorPool = pool_;
+  // The window keeps one frame in flight (it waits for the previous one before recording),
+  // so two sets of ImGui's vertex buffers suffice whatever the swapchain's image count.
+  info.MinImageCount = 2;
+  info.ImageCount = 2;
+  info.MSAASamples = VK_SAMPLE_COUNT_1_BIT;
+  info.CheckVkResultFn = check_imgui_vk;
+  if (!ImGui_ImplVulkan_Init(&info, pass_)) return "Dear ImGui's Vulkan backend did not start";
+  vulkan_backend_ = true;
+  // The font atlas, uploaded once per backend start.
+  VkCommandBuffer cmd = ctx_.begin_commands();
+  if (!ImGui_ImplVulkan_CreateFontsTexture(cmd)) return "Dear ImGui could not record its font upload";
+  ctx_.submit_and_wait(cmd);
+  ImGui_ImplVulkan_DestroyFontUploadObjects();
+  return "";
+}
+
+void Overlay::shutdown_vulkan_backend() {
+  if (vulkan_backend_) {
+    ImGui_ImplVulkan_Shutdown();
+    VK_CHECK(vkResetDescriptorPool(ctx_.device(), pool_, 0));  // the font's set
+    vulkan_backend_ = false;
+  }
+  if (pass_) vkDestroyRenderPass(ctx_.device(), pass_, nullptr);
+  pass_ = VK_NULL_HANDLE;
+  format_ = VK_FORMAT_UNDEFINED;
+}
+
+std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) {
+  swapchain_gone();
+  if (format != format_) {  // the first swapchain, or a new format: ImGui's pipeline follows the render pass
+    shutdown_vulkan_backend();
+    if (std::string e = init_vulkan_backend(format); !e.empty()) return e;
+  }
+  VkDevice dev = ctx_.device();
+  extent_ = extent;
+  images_ = images;
+  for (VkImage image : images) {
+    VkImageViewCreateInfo vi{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
+    vi.image = image;
+    vi.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    vi.format = format;
+    vi.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+    VkImageView view = VK_NULL_HANDLE;
+    if (const VkResult r = vkCreateImageView(dev, &vi, nullptr, &view); r != VK_SUCCESS)
+      return std::string("cannot create a view of a swapchain image: ") + engine::vk_result_name(r);
+    views_.push_back(view);
+    VkFramebufferCreateInfo fi{VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO};
+    fi.renderPass = pass_;
+    fi.attachmentCount = 1;
+    fi.pAttachments = &view;
+    fi.width = extent.width;
+    fi.height = extent.height;
+    fi.layers = 1;
+    VkFramebuffer fb = VK_NULL_HANDLE;
+    if (const VkResult r = vkCreateFramebuffer(dev, &fi, nullptr, &fb); r != VK_SUCCESS)
+      return std::string("cannot create the overlay's framebuffer: ") + engine::vk_result_name(r);
+    framebuffers_.push_back(fb);
+  }
+  return "";
+}
+
+void Overlay::swapchain_gone() {
+  VkDevice dev = ctx_.device();
+  for (VkFramebuffer fb : framebuffers_) vkDestroyFramebuffer(dev, fb, nullptr);
+  for (VkImageView v : views_) vkDestroyImageView(dev, v, nullptr);
+  framebuffers_.clear();
+  views_.clear();
+  images_.clear();
+}
+
+void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
+  // After the picture's copy: transfer writes done, then the image becomes a colour attachment.
+  VkImageMemoryBarrier b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER};
+  b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  b.dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+  b.newLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
+  b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+  b.image = images_[index];
+  b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, 0, 0,
+                       nullptr, 0, nullptr, 1, &b);
+  VkRenderPassBeginInfo rb{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
+  rb.renderPass = pass_;
+  rb.framebuffer = framebuffers_[index];
+  rb.renderArea = {{0, 0}, extent_};
+  vkCmdBeginRenderPass(cmd, &rb, VK_SUBPASS_CONTENTS_INLINE);
+  ImDrawData* dd = ImGui::GetDrawData();
+  if (dd && dd->TotalVtxCount > 0) {
+    ImGui_ImplVulkan_RenderDrawData(dd, cmd);
+    ++frames_drawn_;
+  }
+  vkCmdEndRenderPass(cmd);
+}
+
+void Overlay::build(ToolState& tool, const PanelStats& stats, bool visible) {
+  if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
+  ImGui_ImplVulkan_NewFrame();
+  ImGui_ImplGlfw_NewFrame();
+  ImGui::NewFrame();
+  if (visible) {
+    tool_panel(tool);
+    stats_panel(stats);
+  }
+  ImGui::Render();
+}
+
+bool Overlay::wants_mouse() const { return ImGui::GetIO().WantCaptureMouse; }
+bool Overlay::wants_keyboard() const { return ImGui::GetIO().WantTextInput; }
+
+void Overlay::mouse_button(GLFWwindow* w, int button, int action, int mods) {
+  ImGui_ImplGlfw_MouseButtonCallback(w, button, action, mods);
+}
+void Overlay::scroll(GLFWwindow* w, double dx, double dy) { ImGui_ImplGlfw_ScrollCallback(w, dx, dy); }
+void Overlay::key(GLFWwindow* w, int k, int scancode, int action, int mods) {
+  ImGui_ImplGlfw_KeyCallback(w, k, scancode, action, mods);
+}
+void Overlay::character(GLFWwindow* w, unsigned int c) { ImGui_ImplGlfw_CharCallback(w, c); }
+
+}  // namespace isotouch::sculpt

@@ -168,8 +168,8 @@ io::Scene input_scene(const Options& o) {
 std::string volume_line(const engine::Volume& v) {
   const auto& d = v.grid.dims;
   const Vec3& s = v.grid.spacing_m;
-  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]) + " voxels, spacing " +
-         fixed(s.x * 1e3, 3) + " x " + fixed(s.y * 1e3, 3) + " x " + fixed(s.z * 1e3, 3) + " mm, " + v.orientation();
+  return std::to_string(d[0]) + "x" + std::to_string(d[1]) + "x" + std::to_string(d[2]) + ", " + fixed(s.x * 1e3, 2) +
+         " x " + fixed(s.y * 1e3, 2) + " x " + fixed(s.z * 1e3, 2) + " mm, " + v.orientation();
 }
 
 /// The servo's figures for the stats panel; the tick rate is measured over `seconds` since
@@ -673,7 +673,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       panel.frame_ms = frame_ms.empty() ? 0 : frame_ms.back();
       panel.force_n = norm(obs.force_n);
       panel.contact = obs.contact;
-      panel.device = mouse ? std::string("mouse (simulated device coupled to the hand)")
+      panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
                            : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
       panel.status = status;
       panels->build(tool, panel, overlay);

@@ -68,13 +68,14 @@ void tool_panel(ToolState& tool) {
 }
 
 void stats_panel(const PanelStats& s) {
-  ImGui::SetNextWindowPos(ImVec2(8, 130), ImGuiCond_FirstUseEver);
+  // Bottom left, out of the way of the volume, which the camera centres.
+  ImGui::SetNextWindowPos(ImVec2(8, ImGui::GetIO().DisplaySize.y - 8), ImGuiCond_FirstUseEver, ImVec2(0, 1));
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
   ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
   ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
   if (s.tick_p99_us) ImGui::Text("tick p99    %.1f us", *s.tick_p99_us);
-  else ImGui::TextDisabled("tick p99    n/a (the servo reports its periods after stop)");
+  else ImGui::TextDisabled("tick p99    n/a while the servo runs");
   if (s.edit_to_haptics_last_ms)
     ImGui::Text("edit->feel  %.2f ms last, %.2f ms median", *s.edit_to_haptics_last_ms,
                 s.edit_to_haptics_median_ms.value_or(0.0));

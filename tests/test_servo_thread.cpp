@@ -235,12 +235,14 @@ struct SteeredDevice final : HapticDeviceIO {
 struct TickLog final : TickObserver {
   static constexpr std::size_t kMax = 8192;
   std::array<std::int64_t, kMax> age_ns{};
+  std::array<std::int64_t, kMax> t_ns{};
   std::array<DeviceStatus, kMax> status{};
   std::array<double, kMax> force{};
   std::atomic<std::size_t> n{0};
   void on_tick(const TickRecord& r) noexcept override {
     const std::size_t i = n.load(std::memory_order_relaxed);
     if (i >= kMax) return;
+    t_ns[i] = r.t_ns;
     age_ns[i] = r.t_ns - r.report_ns;
     status[i] = r.device_status;
     force[i] = norm(r.force_sent_n);
@@ -267,6 +269,14 @@ struct SafetyRig {
     servo = std::make_unique<ServoThread>(published, renderer, dev, cfg);
   }
   void run_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
+  /// Waits until the servo ran `k` more ticks (10 s at most): counts that do not depend on
+  /// how much CPU a loaded machine leaves the servo thread.
+  void run_ticks(std::size_t k) {
+    const std::size_t target = log.n.load() + k;
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (log.n.load() < target && std::chrono::steady_clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
 };
 }  // namespace
 
@@ -339,11 +349,11 @@ TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {
 TEST(ServoSafety, DisconnectedOrFaultyDeviceGetsZeroForce) {
   SafetyRig rig;
   rig.servo->start();
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.dev.status = int(DeviceStatus::kDisconnected);
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.dev.status = int(DeviceStatus::kFault);
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.servo->stop();
   const DeviceCounters c = rig.servo->device_counters();
   EXPECT_GT(c.disconnected, 15);
@@ -357,21 +367,31 @@ TEST(ServoSafety, DisconnectedOrFaultyDeviceGetsZeroForce) {
 TEST(ServoSafety, ForceRampsInAfterEnableAndReconnection) {
   SafetyRig rig(0.05);
   rig.servo->start();
-  rig.run_ms(100);
-  rig.dev.connection = 1;  // the link came back
-  rig.run_ms(100);
+  rig.run_ticks(100);
+  // The link comes back once the first ramp (50 ms) is over and the full force was sent.
+  const auto full = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (rig.log.t_ns[rig.log.n.load() - 1] - rig.log.t_ns[0] < 60'000'000 && std::chrono::steady_clock::now() < full)
+    rig.run_ticks(1);
+  const std::size_t before = rig.log.n.load();
+  rig.dev.connection = 1;
+  rig.run_ticks(100);
   rig.servo->stop();
   const std::size_t n = rig.log.n.load();
-  ASSERT_GT(n, 150u);
-  EXPECT_LT(rig.log.force[0], 0.05);   // the first tick: nearly nothing
-  EXPECT_LT(rig.log.force[10], 0.35);  // 10 ms of 50
-  EXPECT_GT(rig.log.force[10], 0.05);
-  EXPECT_EQ(rig.log.force[80], 1.0);   // ramped in: the full force
-  for (std::size_t i = 1; i < 40; ++i) EXPECT_GE(rig.log.force[i], rig.log.force[i - 1]) << "tick " << i;
+  ASSERT_GT(n, before + 50);
+  // The force is the renderer's 1 N times the ramp factor (tick time since enable) / 50 ms.
+  const std::int64_t t0 = rig.log.t_ns[0];
+  std::size_t ramped = 0;
+  for (std::size_t i = 0; i < before; ++i) {
+    const double expect = std::min(1.0, double(rig.log.t_ns[i] - t0) / 50e6);
+    EXPECT_NEAR(rig.log.force[i], expect, 1e-9) << "tick " << i;
+    if (expect > 0.0 && expect < 1.0) ++ramped;
+  }
+  EXPECT_GT(ramped, 5u);                              // the ramp spanned several ticks
+  EXPECT_EQ(rig.log.force[before - 1], 1.0);          // ramped in: the full force
   EXPECT_EQ(rig.servo->device_counters().ramps, 2);
-  // After the reconnection (100 ms; the first ramp ended at 50 ms) the force dropped and rose again.
+  // After the reconnection the force dropped and rose again.
   double lowest_after = 1.0;
-  for (std::size_t i = 55; i < n; ++i) lowest_after = std::min(lowest_after, rig.log.force[i]);
+  for (std::size_t i = before; i < n; ++i) lowest_after = std::min(lowest_after, rig.log.force[i]);
   EXPECT_LT(lowest_after, 0.1);
 }
 

@@ -362,240 +362,316 @@ const char* kind_name(session::BrushKind k) { return session::to_string(k); }
 
 std::string default_scene() { return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "chest.json").string(); }
 
-/// The whole run; throws on a failure to run (caught by run_bench_edit).
-int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
-  const std::string load_before = load_average();
-  const Scene scene = load_scene(o.scene.empty() ? default_scene() : o.scene);
+/// Everything the three measurements share: the scene, the edited session, the servo rig
+/// and the edit points. Built once by set_up(); not movable (the rig's triple buffer).
+struct Bench {
+  const BenchEditOptions& o;
+  std::ostream& progress;
+  std::string load_before;
+  Scene scene;
+  core::Isosurface iso;
+  session::LiveFieldOptions lo;
+  session::BrushTargets targets;
+  std::unique_ptr<engine::VulkanContext> ctx_owner;
+  engine::VulkanContext* ctx = nullptr;
+  engine::VulkanContext* brush_ctx = nullptr;
+  std::string device_text;
+  engine::Volume original;  ///< the unedited volume (the dense comparison starts from it)
+  std::unique_ptr<EditSession> session;
+  std::shared_ptr<const core::SampleField> first;
+  std::size_t total_bricks = 0;
+  Rig rig;
+  servo::HriParams hp;
+  sim::ScriptParams sp;
+  std::vector<core::Vec3> pts;
+  std::size_t per_radius = 0;
+  double max_r = 0;
+  std::mt19937 jitter;
+  std::vector<std::string> failures;
+
+  Bench(const BenchEditOptions& opt, std::ostream& prog) : o(opt), progress(prog), jitter(opt.seed + 17) {}
+  Bench(const Bench&) = delete;
+  Bench& operator=(const Bench&) = delete;
+
+  core::Vec3 point(std::size_t k) const { return pts[k % pts.size()]; }
+  /// Edit i of radius index ri: point (ri * per_radius + i / 2), carve then add.
+  session::Brush latency_brush(int ri, int i) const {
+    const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
+    return make_brush(kind, point(std::size_t(ri) * per_radius + std::size_t(i / 2)), kRadiiMm[ri] * 1e-3, targets);
+  }
+  /// A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick.
+  void jitter_sleep() {
+    std::this_thread::sleep_for(
+        std::chrono::microseconds(1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
+  }
+};
+
+/// Loads the scene and volume, opens the Vulkan device, builds the first snapshot, the
+/// servo rig resting on the surface and the edit points away from it.
+void set_up(Bench& b) {
+  const BenchEditOptions& o = b.o;
+  b.load_before = load_average();
+  b.scene = load_scene(o.scene.empty() ? default_scene() : o.scene);
+  const Scene& scene = b.scene;
   if (scene.volume_path.empty()) throw std::runtime_error(scene.file + ": bench edit needs a scene with a volume file");
-  progress << "[bench edit] loading " << scene.volume_path << "\n" << std::flush;
+  b.progress << "[bench edit] loading " << scene.volume_path << "\n" << std::flush;
   engine::Volume vol = load_any_volume(scene.volume_path);
-  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  b.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
   if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
     throw std::runtime_error(scene.file + ": field 'isovalue': " + num(scene.hri.tau) +
                              " is outside the data range of " + vol.path);
 
-  session::LiveFieldOptions lo;
-  lo.passes = scene_passes(scene);
-  lo.iso = iso;
-  lo.background = float(iso.outside_value(vol.min_value, vol.max_value));
-  lo.format = scene_sample_format(scene);
-  const session::BrushTargets targets = session::default_targets(vol, iso);
+  b.lo.passes = scene_passes(scene);
+  b.lo.iso = b.iso;
+  b.lo.background = float(b.iso.outside_value(vol.min_value, vol.max_value));
+  b.lo.format = scene_sample_format(scene);
+  b.targets = session::default_targets(vol, b.iso);
 
   // Vulkan: brushes and the dense chain on the device when there is one.
   engine::ContextOptions co;
   co.device = o.device;
   auto ctx_r = engine::VulkanContext::create(co);
-  engine::VulkanContext* ctx = ctx_r ? ctx_r.value->get() : nullptr;
-  const std::string device_text =
-      ctx ? ctx->info().name + " (" + ctx->info().type + ", " + ctx->info().driver + ")" +
-                (ctx->info().type == "cpu" ? ": a CPU device (lavapipe), not a GPU" : "")
-          : "none (" + ctx_r.error + ")";
-  engine::VulkanContext* brush_ctx = o.brushes == "gpu" ? ctx : nullptr;
-  const engine::Volume original = vol;  // the dense comparison starts from it
+  if (ctx_r) b.ctx_owner = std::move(*ctx_r.value);
+  b.ctx = b.ctx_owner.get();
+  b.device_text = b.ctx ? b.ctx->info().name + " (" + b.ctx->info().type + ", " + b.ctx->info().driver + ")" +
+                              (b.ctx->info().type == "cpu" ? ": a CPU device (lavapipe), not a GPU" : "")
+                        : "none (" + ctx_r.error + ")";
+  b.brush_ctx = o.brushes == "gpu" ? b.ctx : nullptr;
+  b.original = vol;
 
-  progress << "[bench edit] first snapshot (" << (brush_ctx ? "GPU" : "CPU") << " brushes)\n" << std::flush;
-  EditSession session(std::move(vol), brush_ctx, lo);
-  const std::shared_ptr<const core::SampleField> first = session.current();
-  const engine::Volume& v = session.volume();
-  const std::size_t total_bricks = first->bricks ? first->bricks->total_bricks() : 0;
+  b.progress << "[bench edit] first snapshot (" << (b.brush_ctx ? "GPU" : "CPU") << " brushes)\n" << std::flush;
+  b.session = std::make_unique<EditSession>(std::move(vol), b.brush_ctx, b.lo);
+  b.first = b.session->current();
+  b.total_bricks = b.first->bricks ? b.first->bricks->total_bricks() : 0;
 
   // The servo: HRI at rate_hz on a simulated device pressing on the surface and resting there.
-  Rig rig;
+  Rig& rig = b.rig;
   rig.rate_hz = o.rate_hz;
-  servo::HriParams hp = scene.hri;
-  hp.rate_hz = o.rate_hz;
-  rig.hri = std::make_unique<servo::HriRenderer>(hp);
-  sim::ScriptParams sp = scene.script;
-  sp.approach_distance_m = std::min(sp.approach_distance_m, 0.002);
-  sp.rest_s = 0;
-  sp.hold_s = 1e6;  // press, then rest on the surface for the whole run
-  rig.script = sim::make_touch_script(*first, hp, sp);
+  b.hp = scene.hri;
+  b.hp.rate_hz = o.rate_hz;
+  rig.hri = std::make_unique<servo::HriRenderer>(b.hp);
+  b.sp = scene.script;
+  b.sp.approach_distance_m = std::min(b.sp.approach_distance_m, 0.002);
+  b.sp.rest_s = 0;
+  b.sp.hold_s = 1e6;  // press, then rest on the surface for the whole run
+  rig.script = sim::make_touch_script(*b.first, b.hp, b.sp);
   core::Vec3 p0, v0;
   rig.script.at(0, p0, v0);
   rig.device = std::make_unique<sim::SimDevice>(scene.device, p0);
   rig.io = std::make_unique<sim::SimDeviceIO>(*rig.device, rig.script, 1.0 / o.rate_hz);
   rig.spy = std::make_unique<VersionSpy>(*rig.hri, std::size_t(1) << 20);
-  rig.published.publish(first);
+  rig.published.publish(b.first);
 
   // Edit points: surface crossings of the first snapshot, away from the probe.
-  const double max_r = kRadiiMm[2] * 1e-3;
-  const std::size_t per_radius = std::size_t(o.edits_per_radius + 1) / 2;
-  const std::size_t want = 3 * per_radius + 4096;
-  const std::vector<core::Vec3> pts =
-      surface_points(*first, iso, want, o.seed, rig.script.contact_point_m, 2.0 * max_r);
-  if (pts.empty()) throw std::runtime_error("no surface crossing away from the probe in " + v.path);
-  auto point = [&](std::size_t k) { return pts[k % pts.size()]; };
-  // Edit i of radius index ri: point (ri * per_radius + i / 2), carve then add.
-  auto latency_brush = [&](int ri, int i) {
-    const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
-    return make_brush(kind, point(std::size_t(ri) * per_radius + std::size_t(i / 2)), kRadiiMm[ri] * 1e-3, targets);
-  };
+  b.max_r = kRadiiMm[2] * 1e-3;
+  b.per_radius = std::size_t(o.edits_per_radius + 1) / 2;
+  const std::size_t want = 3 * b.per_radius + 4096;
+  b.pts = surface_points(*b.first, b.iso, want, o.seed, rig.script.contact_point_m, 2.0 * b.max_r);
+  if (b.pts.empty()) throw std::runtime_error("no surface crossing away from the probe in " + b.session->volume().path);
+}
 
-  int rc = 0;
-  std::vector<std::string> failures;
-  std::mt19937 jitter(o.seed + 17);
+/// What the latency phase measured.
+struct Latency {
+  std::vector<EditRecord> edits;
+  long contact_ticks = 0, servo_ticks = 0, missed = 0;
+};
 
-  // ---- 1. latency ----
-  std::vector<EditRecord> live;
-  long contact_ticks = 0, servo_ticks = 0, latency_missed = 0;
-  {
-    servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
-    rig.note(servo, servo.start());
-    // Let the probe reach the surface (<= 2 s), then warm up (first dispatches, pipelines).
-    const std::int64_t until = now_ns() + 2'000'000'000;
-    while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    progress << "[bench edit] warm-up\n" << std::flush;
-    (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kCarve, point(pts.size() - 1), 5e-3, targets));
-    (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kAdd, point(pts.size() - 1), 5e-3, targets));
-    const long ticks0 = rig.spy->ticks(), contact0 = rig.spy->contact_ticks();
-    for (int ri = 0; ri < 3; ++ri) {
-      progress << "[bench edit] latency: " << o.edits_per_radius << " edits of radius " << kRadiiMm[ri] << " mm\n"
+/// 1. One edit at a time through the session, each timed to the first tick reading it.
+Latency measure_latency(Bench& b) {
+  Latency l;
+  Rig& rig = b.rig;
+  EditSession& session = *b.session;
+  servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
+  rig.note(servo, servo.start());
+  // Let the probe reach the surface (<= 2 s), then warm up (first dispatches, pipelines).
+  const std::int64_t until = now_ns() + 2'000'000'000;
+  while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  b.progress << "[bench edit] warm-up\n" << std::flush;
+  const core::Vec3 warm = b.point(b.pts.size() - 1);
+  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kCarve, warm, 5e-3, b.targets));
+  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kAdd, warm, 5e-3, b.targets));
+  const long ticks0 = rig.spy->ticks(), contact0 = rig.spy->contact_ticks();
+  for (int ri = 0; ri < 3; ++ri) {
+    b.progress << "[bench edit] latency: " << b.o.edits_per_radius << " edits of radius " << kRadiiMm[ri] << " mm\n"
                << std::flush;
-      for (int i = 0; i < o.edits_per_radius; ++i) {
-        // A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick.
-        std::this_thread::sleep_for(std::chrono::microseconds(
-            1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
-        live.push_back(timed_live_edit(session, rig, latency_brush(ri, i)));
-        if (live.back().changed && !live.back().seen)
-          failures.push_back("latency: the servo did not read snapshot " + std::to_string(session.current()->version) +
+    for (int i = 0; i < b.o.edits_per_radius; ++i) {
+      b.jitter_sleep();
+      l.edits.push_back(timed_live_edit(session, rig, b.latency_brush(ri, i)));
+      if (l.edits.back().changed && !l.edits.back().seen)
+        b.failures.push_back("latency: the servo did not read snapshot " + std::to_string(session.current()->version) +
                              " within " + num(kSeenTimeoutS, 1) + " s");
-      }
     }
-    servo_ticks = rig.spy->ticks() - ticks0;
-    contact_ticks = rig.spy->contact_ticks() - contact0;
-    servo.stop();
-    latency_missed = servo.missed_deadlines();
   }
+  l.servo_ticks = rig.spy->ticks() - ticks0;
+  l.contact_ticks = rig.spy->contact_ticks() - contact0;
+  servo.stop();
+  l.missed = servo.missed_deadlines();
+  return l;
+}
 
-  // ---- 2. sustained: idle, editing (x rounds) ----
+/// One sustained phase on a session::LiveSession: its servo thread, and its edit thread
+/// applying what this thread submits, one at a time (edit-to-haptics is an edit's own, not
+/// a queue's). Editing: back-to-back 5 mm edits from surface point `next_point` on, which
+/// moves past the points used. Returns the phase and the brushes applied (`done`).
+Phase sustained_phase(Bench& b, bool editing, int round, std::size_t& next_point, std::vector<session::Brush>& done) {
+  Phase ph;
+  ph.editing = editing;
+  ph.round = round;
+  session::LiveSessionConfig lc;
+  lc.servo = b.rig.config(std::size_t(b.o.rate_hz * b.o.seconds * 1.5) + 64);
+  std::atomic<long> applied{0};
+  lc.on_applied = [&](const EditEvent& e, const EditOutcome& oc, session::EditSource) {
+    if (oc.error.empty() && e.kind == EditEvent::Kind::kBrush) done.push_back(e.brush);
+    applied.fetch_add(1, std::memory_order_release);
+  };
+  session::LiveSession live(*b.session, b.rig.published, *b.rig.spy, *b.rig.io, std::move(lc));
+  b.rig.note(*live.servo_thread(), live.start());
+  const std::int64_t t0 = now_ns(), t_end = t0 + std::int64_t(b.o.seconds * 1e9);
+  if (!editing) {
+    std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(t_end)));
+  } else {
+    long i = 0;
+    while (now_ns() < t_end) {
+      if (i - applied.load(std::memory_order_acquire) >= 1) {
+        std::this_thread::sleep_for(std::chrono::microseconds(50));
+        continue;
+      }
+      const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
+      EditEvent ev;
+      ev.brush = make_brush(kind, b.point(next_point + std::size_t(i / 2)), 5e-3, b.targets);
+      if (!live.submit(ev)) throw std::runtime_error("sustained: the live session's edit queue refused an edit");
+      ++i;
+    }
+    next_point += std::size_t(i + 1) / 2;
+  }
+  ph.seconds = ms_between(t0, now_ns()) * 1e-3;
+  live.stop();  // queued edits are dropped (counted); `done` holds what was applied
+  const session::LiveStats st = live.stats();
+  ph.ticks = st.ticks;
+  ph.missed = st.missed_deadlines;
+  ph.edit_to_haptics_ms = st.edit_to_haptics_ms;
+  period_stats(*live.servo_thread(), ph);
+  return ph;
+}
+
+/// 2. Idle and editing phases, --rounds times; the edits' voxel changes are counted by
+/// replaying them on the CPU reference.
+std::vector<Phase> measure_sustained(Bench& b) {
   std::vector<Phase> phases;
-  std::size_t next_point = 3 * per_radius;
-  for (int round = 1; round <= o.rounds; ++round)
+  std::size_t next_point = 3 * b.per_radius;
+  for (int round = 1; round <= b.o.rounds; ++round)
     for (bool editing : {false, true}) {
-      progress << "[bench edit] sustained round " << round << ": " << (editing ? "editing" : "idle") << " "
-               << o.seconds << " s\n"
-               << std::flush;
-      Phase ph;
-      ph.editing = editing;
-      ph.round = round;
+      b.progress << "[bench edit] sustained round " << round << ": " << (editing ? "editing" : "idle") << " "
+                 << b.o.seconds << " s\n"
+                 << std::flush;
       std::vector<session::Brush> done;
       std::unique_ptr<engine::Volume> start;
-      if (editing) start = std::make_unique<engine::Volume>(session.volume());
-      {
-        // The live session: its servo thread, and its edit thread applying what this thread
-        // submits, one at a time: edit-to-haptics is an edit's own, not a queue's.
-        session::LiveSessionConfig lc;
-        lc.servo = rig.config(std::size_t(o.rate_hz * o.seconds * 1.5) + 64);
-        std::atomic<long> applied{0};
-        lc.on_applied = [&](const EditEvent& e, const EditOutcome& oc, session::EditSource) {
-          if (oc.error.empty() && e.kind == EditEvent::Kind::kBrush) done.push_back(e.brush);
-          applied.fetch_add(1, std::memory_order_release);
-        };
-        session::LiveSession editing_session(session, rig.published, *rig.spy, *rig.io, std::move(lc));
-        rig.note(*editing_session.servo_thread(), editing_session.start());
-        const std::int64_t t0 = now_ns(), t_end = t0 + std::int64_t(o.seconds * 1e9);
-        if (!editing) {
-          std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(t_end)));
-        } else {
-          long i = 0;
-          while (now_ns() < t_end) {
-            if (i - applied.load(std::memory_order_acquire) >= 1) {
-              std::this_thread::sleep_for(std::chrono::microseconds(50));
-              continue;
-            }
-            const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
-            EditEvent ev;
-            ev.brush = make_brush(kind, point(next_point + std::size_t(i / 2)), 5e-3, targets);
-            if (!editing_session.submit(ev)) throw std::runtime_error("sustained: the live session's edit queue refused an edit");
-            ++i;
-          }
-          next_point += std::size_t(i + 1) / 2;
-        }
-        ph.seconds = ms_between(t0, now_ns()) * 1e-3;
-        editing_session.stop();  // queued edits are dropped (counted); `done` holds what was applied
-        const session::LiveStats st = editing_session.stats();
-        ph.ticks = st.ticks;
-        ph.missed = st.missed_deadlines;
-        ph.edit_to_haptics_ms = st.edit_to_haptics_ms;
-        period_stats(*editing_session.servo_thread(), ph);
-      }
+      if (editing) start = std::make_unique<engine::Volume>(b.session->volume());
+      Phase ph = sustained_phase(b, editing, round, next_point, done);
       if (editing) {
-        progress << "[bench edit] counting voxel changes (CPU replay of " << done.size() << " edits)\n" << std::flush;
+        b.progress << "[bench edit] counting voxel changes (CPU replay of " << done.size() << " edits)\n" << std::flush;
         ph.edits = long(done.size());
-        ph.voxel_changes = replay_count(std::move(*start), done, session.volume(), ph.replay_equal);
+        ph.voxel_changes = replay_count(std::move(*start), done, b.session->volume(), ph.replay_equal);
       }
       phases.push_back(ph);
     }
+  return phases;
+}
 
-  // ---- 3. the same edits with a dense full recompute ----
-  std::vector<EditRecord> dense;
-  std::string dense_engine = "none";
-  if (o.dense_edits > 0) {
-    const auto passes = scene_passes(scene);
-    std::unique_ptr<engine::PassChain> chain;
-    std::string chain_why;
-    if (ctx) {
-      auto cr = engine::PassChain::create(*ctx, passes);
-      if (cr) chain = std::move(*cr.value);
-      else chain_why = cr.error;
-    }
-    dense_engine = chain ? "GPU PassChain on " + ctx->info().name + ", dense fp32"
-                         : "run_chain_cpu (one thread, dense fp32)" + (chain_why.empty() ? "" : ": " + chain_why);
-    progress << "[bench edit] dense: " << dense_engine << "\n" << std::flush;
-    session::Sculptor sculptor(original, brush_ctx);
-    std::uint64_t version = session.current()->version + 1;
-    servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
-    rig.note(servo, servo.start());
-    auto recompute = [&]() {
-      engine::ChainOutput c = chain ? chain->run(sculptor.volume()) : engine::run_chain_cpu(sculptor.volume(), passes);
-      if (!c.samples) throw std::runtime_error("dense chain: no samples (the pass list has no gradient)");
-      auto f = std::make_shared<core::SampleField>(std::move(*c.samples));
-      f->background = lo.background;
-      f->version = version++;
-      if (f->version >= rig.spy->capacity()) throw std::runtime_error("dense: snapshot versions past the spy's capacity");
-      return std::shared_ptr<const core::SampleField>(std::move(f));
-    };
-    (void)recompute();  // warm-up
-    for (int ri = 0; ri < 3; ++ri) {
-      progress << "[bench edit] dense: " << o.dense_edits << " edits of radius " << kRadiiMm[ri] << " mm\n"
-               << std::flush;
-      for (int i = 0; i < o.dense_edits; ++i) {
-        std::this_thread::sleep_for(std::chrono::microseconds(
-            1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
-        const session::Brush b = latency_brush(ri, i);
-        EditRecord r;
-        r.radius_mm = kRadiiMm[ri];
-        r.kind = b.kind;
-        const std::int64_t t0 = now_ns();
-        const session::BrushResult br = sculptor.apply(b);
-        const std::int64_t t1 = now_ns();
-        std::shared_ptr<const core::SampleField> f = recompute();
-        const std::uint64_t ver = f->version;
-        const std::int64_t t2 = now_ns();
-        rig.published.publish(std::move(f));
-        const std::int64_t ts = wait_seen(*rig.spy, ver, kSeenTimeoutS);
-        r.changed = true;
-        r.brush_ms = br.wall_ms;
-        r.brush_gpu_ms = br.gpu_ms >= 0 ? br.gpu_ms : kNaN;
-        r.update_ms = ms_between(t1, t2);
-        r.dirty = double(br.dirty.size());
-        r.recomputed = double(total_bricks);
-        if (ts != 0) {
-          r.seen = true;
-          r.total_ms = ms_between(t0, ts);
-          r.publish_to_tick_ms = ms_between(t2, ts);
-        } else {
-          failures.push_back("dense: the servo did not read snapshot " + std::to_string(ver) + " within " +
-                             num(kSeenTimeoutS, 1) + " s");
-        }
-        dense.push_back(r);
-      }
-    }
-    servo.stop();
+/// What the dense comparison measured.
+struct Dense {
+  std::vector<EditRecord> edits;
+  std::string engine = "none";
+};
+
+/// 3. The first latency edits again on the unedited volume, each followed by the whole
+/// volume's passes (GPU PassChain, or run_chain_cpu without a device), published densely.
+Dense measure_dense(Bench& b) {
+  Dense d;
+  if (b.o.dense_edits <= 0) return d;
+  Rig& rig = b.rig;
+  const auto passes = scene_passes(b.scene);
+  std::unique_ptr<engine::PassChain> chain;
+  std::string chain_why;
+  if (b.ctx) {
+    auto cr = engine::PassChain::create(*b.ctx, passes);
+    if (cr) chain = std::move(*cr.value);
+    else chain_why = cr.error;
   }
+  d.engine = chain ? "GPU PassChain on " + b.ctx->info().name + ", dense fp32"
+                   : "run_chain_cpu (one thread, dense fp32)" + (chain_why.empty() ? "" : ": " + chain_why);
+  b.progress << "[bench edit] dense: " << d.engine << "\n" << std::flush;
+  session::Sculptor sculptor(b.original, b.brush_ctx);
+  std::uint64_t version = b.session->current()->version + 1;
+  servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
+  rig.note(servo, servo.start());
+  auto recompute = [&]() {
+    engine::ChainOutput c = chain ? chain->run(sculptor.volume()) : engine::run_chain_cpu(sculptor.volume(), passes);
+    if (!c.samples) throw std::runtime_error("dense chain: no samples (the pass list has no gradient)");
+    auto f = std::make_shared<core::SampleField>(std::move(*c.samples));
+    f->background = b.lo.background;
+    f->version = version++;
+    if (f->version >= rig.spy->capacity()) throw std::runtime_error("dense: snapshot versions past the spy's capacity");
+    return std::shared_ptr<const core::SampleField>(std::move(f));
+  };
+  (void)recompute();  // warm-up
+  for (int ri = 0; ri < 3; ++ri) {
+    b.progress << "[bench edit] dense: " << b.o.dense_edits << " edits of radius " << kRadiiMm[ri] << " mm\n"
+               << std::flush;
+    for (int i = 0; i < b.o.dense_edits; ++i) {
+      b.jitter_sleep();
+      const session::Brush br_in = b.latency_brush(ri, i);
+      EditRecord r;
+      r.radius_mm = kRadiiMm[ri];
+      r.kind = br_in.kind;
+      const std::int64_t t0 = now_ns();
+      const session::BrushResult br = sculptor.apply(br_in);
+      const std::int64_t t1 = now_ns();
+      std::shared_ptr<const core::SampleField> f = recompute();
+      const std::uint64_t ver = f->version;
+      const std::int64_t t2 = now_ns();
+      rig.published.publish(std::move(f));
+      const std::int64_t ts = wait_seen(*rig.spy, ver, kSeenTimeoutS);
+      r.changed = true;
+      r.brush_ms = br.wall_ms;
+      r.brush_gpu_ms = br.gpu_ms >= 0 ? br.gpu_ms : kNaN;
+      r.update_ms = ms_between(t1, t2);
+      r.dirty = double(br.dirty.size());
+      r.recomputed = double(b.total_bricks);
+      if (ts != 0) {
+        r.seen = true;
+        r.total_ms = ms_between(t0, ts);
+        r.publish_to_tick_ms = ms_between(t2, ts);
+      } else {
+        b.failures.push_back("dense: the servo did not read snapshot " + std::to_string(ver) + " within " +
+                             num(kSeenTimeoutS, 1) + " s");
+      }
+      d.edits.push_back(r);
+    }
+  }
+  servo.stop();
+  return d;
+}
 
-  // ---- report ----
-  Csv csv;
+/// The run's set-up: volume, scene, device, brushes, servo, edit points, machine.
+void write_header(std::ostream& out, Bench& b, const Latency& lat) {
+  const BenchEditOptions& o = b.o;
+  const Scene& scene = b.scene;
+  const engine::Volume& v = b.session->volume();
+  const core::Isosurface& iso = b.iso;
+  const auto& lo = b.lo;
+  const auto& first = b.first;
+  const auto& targets = b.targets;
+  const auto& hp = b.hp;
+  const auto& sp = b.sp;
+  const Rig& rig = b.rig;
+  const std::size_t total_bricks = b.total_bricks;
+  const std::string& device_text = b.device_text;
+  const long servo_ticks = lat.servo_ticks, contact_ticks = lat.contact_ticks, latency_missed = lat.missed;
+  const std::string& load_before = b.load_before;
+  const double max_r = b.max_r;
+  const auto& pts = b.pts;
+  EditSession& session = *b.session;
   const auto& g = v.grid;
   out << "# isotouch bench edit\n\n"
       << "- volume: " << v.path << " (" << g.dims[0] << " x " << g.dims[1] << " x " << g.dims[2] << ", spacing "
@@ -627,7 +703,31 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       << "- machine: " << std::thread::hardware_concurrency() << " hardware threads (" << cpu_model()
       << "), load average (1, 5, 15 min) " << load_before << " before, " << load_average()
       << " after; the machine is shared: other work slows and spreads every figure\n";
+}
 
+/// Medians of the latency table that the dense table and the verdicts use.
+struct LatencyFigures {
+  double med5 = kNaN, p99_5 = kNaN;
+  std::vector<double> live_median = std::vector<double>(3, kNaN);  ///< per radius, all kinds
+};
+
+/// Picks `field` of the changed edits of `radius` (and `kind`, -1: all).
+template <class F>
+std::vector<double> pick(const std::vector<EditRecord>& recs, double radius, int kind, F field) {
+  std::vector<double> x;
+  for (const auto& r : recs)
+    if (r.radius_mm == radius && (kind < 0 || int(r.kind) == kind) && r.changed) x.push_back(field(r));
+  return x;
+}
+
+LatencyFigures write_latency(std::ostream& out, Csv& csv, const Bench& b, const Latency& lat) {
+  const BenchEditOptions& o = b.o;
+  const std::vector<EditRecord>& live = lat.edits;
+  const std::size_t total_bricks = b.total_bricks;
+  LatencyFigures fig;
+  double& med5 = fig.med5;
+  double& p99_5 = fig.p99_5;
+  std::vector<double>& live_median = fig.live_median;
   out << "\n## Edit-to-haptics latency (incremental: Sculptor + LiveField)\n\n"
       << "From the edit submitted (EditSession::apply on the engine thread) to the first servo tick that reads the "
          "new snapshot (its steady_clock time, noted by the tick). Medians of the parts; "
@@ -635,14 +735,6 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       << "| radius [mm] | brush | edits | median [ms] | p99 [ms] | max [ms] | brush [ms] | brush GPU [ms] | update [ms] "
          "| publish-to-tick [ms] | publish-to-tick p99 [ms] | dirty bricks | recomputed bricks |\n"
       << "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-  auto pick = [](const std::vector<EditRecord>& recs, double radius, int kind /* -1 all */, auto field) {
-    std::vector<double> x;
-    for (const auto& r : recs)
-      if (r.radius_mm == radius && (kind < 0 || int(r.kind) == kind) && r.changed) x.push_back(field(r));
-    return x;
-  };
-  double med5 = kNaN, p99_5 = kNaN;
-  std::vector<double> live_median(3, kNaN);
   for (int ri = 0; ri < 3; ++ri) {
     const double rad = kRadiiMm[ri];
     for (int kind : {int(session::BrushKind::kCarve), int(session::BrushKind::kAdd), -1}) {
@@ -690,6 +782,14 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
          "scheduling delay). recomputed bricks = "
       << total_bricks << " means a full recompute.\n";
 
+  return fig;
+}
+
+void write_dense(std::ostream& out, Csv& csv, const Bench& b, const Dense& d, const LatencyFigures& fig) {
+  const BenchEditOptions& o = b.o;
+  const std::vector<EditRecord>& dense = d.edits;
+  const std::string& dense_engine = d.engine;
+  const std::vector<double>& live_median = fig.live_median;
   out << "\n## The same edits with a dense full recompute\n\n"
       << "Engine: " << dense_engine << "; the whole volume's passes again after each brush, published as a dense "
       << "snapshot; " << o.dense_edits << " edits per radius (the first ones of the latency series, on the unedited "
@@ -714,7 +814,20 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
     csv.row("dense", rs, "all", "publish_to_tick_median_ms", csv_num(ptt), "ms");
     csv.row("dense", rs, "all", "dense_over_incremental", csv_num(q), "");
   }
+}
 
+/// The editing phases taken together, for the verdicts.
+struct SustainedFigures {
+  std::vector<double> ed_e2h;
+  long ed_missed = 0, ed_ticks = 0, id_missed = 0, id_ticks = 0;
+  double rate = kNaN;
+};
+
+SustainedFigures write_sustained(std::ostream& out, Csv& csv, const Bench& b, const std::vector<Phase>& phases) {
+  const BenchEditOptions& o = b.o;
+  SustainedFigures fig;
+  std::vector<double>& ed_e2h = fig.ed_e2h;
+  long &ed_missed = fig.ed_missed, &ed_ticks = fig.ed_ticks, &id_missed = fig.id_missed, &id_ticks = fig.id_ticks;
   out << "\n## Sustained 5 mm edits while the servo runs at " << num(o.rate_hz, 0) << " Hz\n\n"
       << "Back-to-back 5 mm edits (carve, add, at new surface points) for " << o.seconds << " s, against the servo "
       << "with the engine idle for as long, in this process, both on a session::LiveSession (the servo thread, and "
@@ -724,8 +837,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       << "| phase | round | length [s] | edits | edits/s | edit-to-haptics median [ms] | p99 [ms] | voxel changes | "
          "voxel changes/s | servo ticks | missed | missed per 10,000 | abs period error p99 [us] | p99.9 [us] | max [us] |\n"
       << "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
-  std::vector<double> ed_e2h;
-  long ed_missed = 0, ed_ticks = 0, id_missed = 0, id_ticks = 0, ed_edits = 0;
+  long ed_edits = 0;
   double ed_seconds = 0;
   std::uint64_t ed_vox = 0;
   bool replay_ok = true;
@@ -764,7 +876,7 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       id_ticks += p.ticks;
     }
   }
-  const double rate = ed_seconds > 0 ? double(ed_edits) / ed_seconds : kNaN;
+  const double rate = fig.rate = ed_seconds > 0 ? double(ed_edits) / ed_seconds : kNaN;
   out << "\nAll editing rounds: " << num(rate, 1) << " edits/s, "
       << num(ed_seconds > 0 ? double(ed_vox) / ed_seconds : kNaN, 0) << " voxel changes/s. CPU replay "
       << (replay_ok ? "equals the edited volume bit for bit"
@@ -773,29 +885,53 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
       << ".\n";
   csv.row("sustained_editing", "5", "all", "edits_per_s", csv_num(rate), "1/s");
   csv.row("sustained_editing", "5", "all", "replay_equal", replay_ok ? "1" : "0", "");
+  return fig;
+}
 
+/// The verdicts and what failed to run; returns the exit code (1 if something failed).
+int write_verdicts(std::ostream& out, Csv& csv, const Bench& b, const Latency& lat, const LatencyFigures& lf,
+                   const SustainedFigures& sf) {
+  const double med5 = lf.med5, p99_5 = lf.p99_5, rate = sf.rate;
+  int rc = 0;
   out << "\n## Verdicts (computed from the figures above)\n\n";
   std::vector<Verdict> vs;
   vs.push_back(verdict_at_most("5 mm edit-to-haptics median [ms]", med5, 1.0, 3, "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_most("5 mm edit-to-haptics p99 [ms]", p99_5, 5.0, 3, "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_least("sustained 5 mm edits per second", rate, 200.0, 1, "no editing phase"));
-  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(ed_e2h, 0.5), 1.0,
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(sf.ed_e2h, 0.5), 1.0,
                                3, "no sustained edit was read by the servo"));
-  vs.push_back(misses_verdict(ed_missed, ed_ticks, id_missed, id_ticks));
+  vs.push_back(misses_verdict(sf.ed_missed, sf.ed_ticks, sf.id_missed, sf.id_ticks));
   for (const auto& vd : vs) {
     out << "- " << vd.text << "\n";
     csv.row("verdict", "", "", "\"" + vd.text + "\"", vd.measured ? (vd.met ? "1" : "0") : "", "");
   }
   out << "\nTargets (on lavapipe): 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more "
          "servo misses than idle. A missed target is a result, not a failure (exit 0).\n";
-  for (const auto& f : failures) {
+  for (const auto& f : b.failures) {
     out << "\nFAILED: " << f << "\n";
     rc = 1;
   }
-  if (servo_ticks <= 0) {
+  if (lat.servo_ticks <= 0) {
     out << "\nFAILED: the servo made no tick during the latency phase\n";
     rc = 1;
   }
+  return rc;
+}
+
+/// The whole run; throws on a failure to run (caught by run_bench_edit).
+int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
+  Bench b(o, progress);
+  set_up(b);
+  const Latency lat = measure_latency(b);
+  const std::vector<Phase> phases = measure_sustained(b);
+  const Dense dense = measure_dense(b);
+
+  Csv csv;
+  write_header(out, b, lat);
+  const LatencyFigures lf = write_latency(out, csv, b, lat);
+  write_dense(out, csv, b, dense, lf);
+  const SustainedFigures sf = write_sustained(out, csv, b, phases);
+  const int rc = write_verdicts(out, csv, b, lat, lf, sf);
   if (!o.out_csv.empty()) {
     write_file_atomic(o.out_csv, csv.s.str());
     progress << "[bench edit] wrote " << o.out_csv << "\n";

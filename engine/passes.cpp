@@ -25,51 +25,6 @@ namespace isotouch::engine {
 static_assert(sizeof(gpu::Filter1dPush) == 48, "Filter1dPush: 12 4-byte members (std430)");
 static_assert(sizeof(gpu::BrickMinMaxPush) == 48, "BrickMinMaxPush: 12 4-byte members (std430)");
 
-const char* pass_name(PassKind k) {
-  switch (k) {
-    case PassKind::Gaussian: return "gaussian";
-    case PassKind::Closing: return "closing";
-    case PassKind::Gradient: return "gradient";
-    case PassKind::BrickMinMax: return "brick_minmax";
-  }
-  return "?";
-}
-
-std::string PassDesc::label() const {
-  std::ostringstream s;
-  s << pass_name(kind);
-  if (kind == PassKind::Gaussian) s << "(sigma " << sigma_mm << " mm)";
-  if (kind == PassKind::Closing) s << "(radius " << radius_mm << " mm)";
-  if (kind == PassKind::BrickMinMax) s << "(halo " << halo << ")";
-  return s.str();
-}
-
-std::string validate_passes(const std::vector<PassDesc>& p) {
-  if (p.empty()) return "pass list is empty";
-  int gradients = 0, minmax = 0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    const std::string at = "pass " + std::to_string(i) + " (" + pass_name(p[i].kind) + "): ";
-    switch (p[i].kind) {
-      case PassKind::Gaussian:
-        if (!(std::isfinite(p[i].sigma_mm) && p[i].sigma_mm > 0))
-          return at + "sigma_mm must be finite and > 0, got " + std::to_string(p[i].sigma_mm);
-        break;
-      case PassKind::Closing:
-        if (!(std::isfinite(p[i].radius_mm) && p[i].radius_mm >= 0))
-          return at + "radius_mm must be finite and >= 0, got " + std::to_string(p[i].radius_mm);
-        break;
-      case PassKind::Gradient:
-        if (++gradients > 1) return at + "gradient may appear once";
-        break;
-      case PassKind::BrickMinMax:
-        if (++minmax > 1) return at + "brick_minmax may appear once";
-        if (p[i].halo < 0 || p[i].halo > 8) return at + "halo must be 0..8, got " + std::to_string(p[i].halo);
-        break;
-    }
-  }
-  return {};
-}
-
 namespace {
 bool has(const std::vector<PassDesc>& p, PassKind k) {
   return std::any_of(p.begin(), p.end(), [k](const PassDesc& d) { return d.kind == k; });
@@ -567,49 +522,6 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   keep(bricks_down, "brick ranges readback");
   keep(field_down, "field readback");
   keep(rows, "brick row ranges");
-  return out;
-}
-
-ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes, unsigned threads) {
-  if (std::string e = validate_passes(passes); !e.empty()) throw std::invalid_argument("pass chain: " + e);
-  threads = threads_for(vol.grid.voxel_count(), threads);
-  ChainOutput out;
-  Volume cur = vol;
-  bool filtered = false;
-  const auto total0 = std::chrono::steady_clock::now();
-  for (const PassDesc& p : passes) {
-    PassTiming pt;
-    pt.label = p.label();
-    const auto t0 = std::chrono::steady_clock::now();
-    switch (p.kind) {
-      case PassKind::Gaussian: {
-        const GaussianAxes a = gaussian_axes(cur.grid, p.sigma_mm);
-        std::vector<float> tmp;
-        for (int axis = 0; axis < 3; ++axis) {
-          gaussian_axis_cpu(cur.voxels, tmp, cur.grid, axis, a.kernel[std::size_t(axis)], threads);
-          cur.voxels.swap(tmp);
-        }
-        filtered = true;
-        break;
-      }
-      case PassKind::Closing: {
-        const auto r = closing_radii(cur.grid, p.radius_mm);
-        std::vector<float> tmp;
-        for (int k = 0; k < 6; ++k) {
-          morph_axis_cpu(cur.voxels, tmp, cur.grid, k % 3, r[std::size_t(k % 3)], k < 3, threads);
-          cur.voxels.swap(tmp);
-        }
-        filtered = true;
-        break;
-      }
-      case PassKind::Gradient: out.samples = compute_samples_cpu(cur, threads); break;
-      case PassKind::BrickMinMax: out.bricks = brick_minmax_cpu(cur, p.halo, threads); break;
-    }
-    pt.ms = ms_since(t0);
-    out.passes.push_back(pt);
-  }
-  out.submit_wall_ms = ms_since(total0);
-  if (filtered) out.field = std::move(cur.voxels);
   return out;
 }
 

@@ -27,6 +27,7 @@
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
 #include "parallel.h"
+#include "passes.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {

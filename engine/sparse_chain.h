@@ -13,9 +13,12 @@
 #include <vector>
 
 #include "brick_field.h"
-#include "passes.h"
+#include "pass_desc.h"
+#include "result.h"
 
 namespace isotouch::engine {
+
+class VulkanContext;
 
 /// What a sparse run found and published.
 struct SparseStats {

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "result.h"
+
 namespace isotouch::engine {
 
 /// Thrown by VK_CHECK: a Vulkan call that cannot fail in a correct program failed.
@@ -30,16 +32,6 @@ const char* vk_result_name(VkResult r);
       ::isotouch::engine::vk_check_failed(#call, vk_check_result_, __FILE__, __LINE__); \
   } while (0)
 
-/// Tier-2 errors: set-up that can legitimately fail (no device, missing layer) returns
-/// a Result with a reason the caller reports.
-template <class T>
-struct Result {
-  std::optional<T> value;
-  std::string error;
-  explicit operator bool() const { return value.has_value(); }
-  static Result ok(T v) { return {std::move(v), {}}; }
-  static Result fail(std::string why) { return {std::nullopt, std::move(why)}; }
-};
 
 struct ContextOptions {
   /// Case-insensitive substring of the device name, or a device index ("0", "1").

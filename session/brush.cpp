@@ -290,42 +290,4 @@ std::vector<float> BrushEngine::download_all() {
   return out;
 }
 
-// ---- Sculptor ---------------------------------------------------------------------------
-
-Sculptor::Sculptor(Volume vol, VulkanContext* ctx, double history_limit_mib, std::uint64_t max_binding_bytes)
-    : vol_(std::move(vol)), history_(history_limit_mib) {
-  if (ctx) {
-    auto r = BrushEngine::create(*ctx, vol_, max_binding_bytes);
-    if (!r) throw VolumeError(r.error);
-    engine_ = std::move(*r.value);
-    history_.set_on_restore([this](const std::vector<std::uint32_t>& ids) { engine_->upload_bricks(vol_, ids); });
-  }
-}
-Sculptor::~Sculptor() = default;
-
-void Sculptor::begin_stroke() {
-  history_.end_stroke(vol_);
-  history_.begin_stroke();
-}
-void Sculptor::end_stroke() { history_.end_stroke(vol_); }
-
-BrushResult Sculptor::apply(const Brush& b) {
-  if (std::string e = validate(b); !e.empty()) throw BrushError(e);
-  const bool own = !history_.stroke_open();
-  if (own) history_.begin_stroke();
-  history_.record(vol_, touched_bricks(vol_.grid, b));
-  BrushResult r;
-  try {
-    r = engine_ ? engine_->apply(b, &vol_) : apply_brush_cpu(vol_, b);
-  } catch (...) {
-    if (own) history_.end_stroke(vol_);  // a failed application leaves no stroke open
-    throw;
-  }
-  if (own) history_.end_stroke(vol_);
-  return r;
-}
-
-std::vector<std::uint32_t> Sculptor::undo() { return history_.undo(vol_); }
-std::vector<std::uint32_t> Sculptor::redo() { return history_.redo(vol_); }
-
 }  // namespace isotouch::session

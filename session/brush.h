@@ -55,8 +55,12 @@
 #include "edit_history.h"
 #include "isosurface.h"
 #include "isotouch_shared.h"
-#include "vk_context.h"
+#include "result.h"
 #include "volume.h"
+
+namespace isotouch::engine {
+class VulkanContext;
+}
 
 namespace isotouch::session {
 
@@ -182,6 +186,19 @@ class Sculptor {
   /// Undo / redo one stroke; return the restored brick ids (dirty for the passes).
   std::vector<std::uint32_t> undo();
   std::vector<std::uint32_t> redo();
+
+  /// The content of some bricks, for rolling an application back.
+  struct BrickBackup {
+    std::vector<std::uint32_t> ids;
+    std::vector<std::vector<float>> data;  ///< read_brick() of each id
+  };
+  BrickBackup save_bricks(const std::vector<std::uint32_t>& ids) const;
+  /// Writes `b` back into the volume (and the GPU copy): the bricks are as when saved.
+  void restore_bricks(const BrickBackup& b);
+  /// Rolls back the last apply(), given what save_bricks() held of its touched bricks
+  /// before it: the voxels as before, and the undo step it pushed (if it was a stroke of
+  /// its own, `undo_depth_before` the history's depth before it) forgotten.
+  void roll_back_apply(const BrickBackup& before, bool own_stroke, std::size_t undo_depth_before);
 
   const engine::Volume& volume() const { return vol_; }
   const EditHistory& history() const { return history_; }

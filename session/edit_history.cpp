@@ -161,6 +161,12 @@ std::vector<std::uint32_t> EditHistory::undo(Volume& vol) {
   return ids;
 }
 
+void EditHistory::discard_newest_stroke() {
+  if (undo_.empty()) return;
+  bytes_ -= undo_.back().bytes;
+  undo_.pop_back();
+}
+
 std::vector<std::uint32_t> EditHistory::redo(Volume& vol) {
   end_stroke(vol);
   if (redo_.empty()) return {};

@@ -67,6 +67,9 @@ class EditHistory {
   std::vector<std::uint32_t> undo(engine::Volume& vol);
   /// Redoes the newest undone stroke; same return and hook as undo().
   std::vector<std::uint32_t> redo(engine::Volume& vol);
+  /// Forgets the newest undo stroke without restoring it (its edit was rolled back by the
+  /// caller, so undoing it would change nothing). No-op if there is none.
+  void discard_newest_stroke();
 
   /// Called with the restored brick ids after undo / redo changed `vol` (e.g. to upload
   /// them to the GPU copy of the volume).

@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <string>
 
 namespace isotouch::session {
@@ -41,6 +42,7 @@ struct EditSession::Impl {
   std::vector<EditEvent> log;
   std::size_t log_limit = std::size_t(1) << 20;
   std::size_t log_dropped = 0;
+  std::function<void()> update_fault;
 };
 
 EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
@@ -59,16 +61,36 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   const auto t0 = std::chrono::steady_clock::now();
   EditOutcome o;
   if (e.kind == EditEvent::Kind::kBrush) check_storable(e.brush);
+  session::Sculptor& sc = *impl_->sculptor;
+  // What a brush may change, kept until its snapshot is built: if that fails, the volume
+  // goes back to it, so that volume and snapshot never disagree.
+  session::Sculptor::BrickBackup before;
+  const bool own_stroke = !sc.history().stroke_open();
+  const std::size_t undo_depth = sc.history().undo_depth();
   std::vector<std::uint32_t> changed;
   switch (e.kind) {
-    case EditEvent::Kind::kBrush: o.brush = impl_->sculptor->apply(e.brush); changed = o.brush.dirty; break;
-    case EditEvent::Kind::kBeginStroke: impl_->sculptor->begin_stroke(); break;
-    case EditEvent::Kind::kEndStroke: impl_->sculptor->end_stroke(); break;
-    case EditEvent::Kind::kUndo: o.restored = impl_->sculptor->undo(); changed = o.restored; break;
-    case EditEvent::Kind::kRedo: o.restored = impl_->sculptor->redo(); changed = o.restored; break;
+    case EditEvent::Kind::kBrush:
+      before = sc.save_bricks(session::touched_bricks(sc.volume().grid, e.brush));
+      o.brush = sc.apply(e.brush);
+      changed = o.brush.dirty;
+      break;
+    case EditEvent::Kind::kBeginStroke: sc.begin_stroke(); break;
+    case EditEvent::Kind::kEndStroke: sc.end_stroke(); break;
+    case EditEvent::Kind::kUndo: o.restored = sc.undo(); changed = o.restored; break;
+    case EditEvent::Kind::kRedo: o.restored = sc.redo(); changed = o.restored; break;
   }
   if (!changed.empty()) {
-    auto snap = impl_->live->update(impl_->sculptor->volume(), changed, &o.update);
+    std::shared_ptr<const core::SampleField> snap;
+    try {
+      if (impl_->update_fault) impl_->update_fault();
+      snap = impl_->live->update(sc.volume(), changed, &o.update);
+    } catch (...) {
+      // LiveField::update publishes nothing when it throws: take the edit back.
+      if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before, own_stroke, undo_depth);
+      else if (e.kind == EditEvent::Kind::kUndo) (void)sc.redo();
+      else (void)sc.undo();
+      throw;
+    }
     if (out) out->publish(snap);
     o.published = true;
   }
@@ -77,6 +99,8 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   o.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return o;
 }
+
+void EditSession::set_update_fault_for_test(std::function<void()> fault) { impl_->update_fault = std::move(fault); }
 
 std::shared_ptr<const core::SampleField> EditSession::current() const { return impl_->live->current(); }
 const engine::Volume& EditSession::volume() const { return impl_->sculptor->volume(); }

@@ -10,6 +10,7 @@
 // before tick k + 1 acquires (so tick k + 1 reads it).
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -55,7 +56,14 @@ class EditSession {
 
   /// Applies `e` and, when samples changed, publishes the new snapshot into `out` (if not
   /// null). Appends `e` to log(). @throws session::BrushError on an invalid brush.
+  /// Strong guarantee: when the new snapshot cannot be built (LiveField::update throws,
+  /// e.g. std::bad_alloc), the edit is taken back (a brush's voxels restored on the host and
+  /// the device and its undo step forgotten; an undo redone; a redo undone), nothing is
+  /// published or logged, and the exception goes on: volume and current() still agree.
   EditOutcome apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out);
+  /// Tests only: `fault` runs just before each snapshot update inside apply(); what it
+  /// throws is handled as LiveField::update's own exception. Empty: none.
+  void set_update_fault_for_test(std::function<void()> fault);
   /// @throws session::BrushError if the brush's material / empty value cannot be stored in
   /// the snapshot's sample format (fp16: |v| > 65504 or NaN; unorm16: not finite). apply() checks
   /// it before changing anything.

@@ -47,7 +47,7 @@
 #include <vector>
 
 #include "isosurface.h"
-#include "passes.h"
+#include "pass_desc.h"
 #include "sample_field.h"
 #include "volume.h"
 

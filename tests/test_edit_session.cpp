@@ -264,6 +264,70 @@ TEST(EditSession, TheEditLogIsBounded) {
   EXPECT_EQ(s.log_dropped(), 4u);
 }
 
+// When the new snapshot cannot be built (here a std::bad_alloc thrown where LiveField::update
+// runs), apply() takes the edit back: the volume equals the one current() was built from,
+// nothing is published or logged, and the undo history is as before (a brush leaves no
+// phantom undo step; an undo is redone). Truth: the volumes of a session that never saw the
+// failing edit, bit for bit.
+void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
+  const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
+  EditSession s(Volume(v), ctx, sphere_options(), 16.0);
+  const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
+  const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
+  ASSERT_TRUE(s.apply(brush_event(a), nullptr).published);
+  const Volume after_a = s.volume();
+  const auto snap_a = s.current();
+  bool fail = true;
+  s.set_update_fault_for_test([&] {
+    if (fail) throw std::bad_alloc();
+  });
+
+  // A brush of its own stroke, and one inside an open stroke.
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  EXPECT_EQ(s.current(), snap_a);
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+  s.apply(plain(EditEvent::Kind::kBeginStroke), nullptr);
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  s.apply(plain(EditEvent::Kind::kEndStroke), nullptr);
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+
+  // An undo that fails is redone: the carve is still there and still undoable.
+  EXPECT_THROW(s.apply(plain(EditEvent::Kind::kUndo), nullptr), std::bad_alloc);
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  EXPECT_EQ(s.current(), snap_a);
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+  EXPECT_EQ(s.sculptor().history().redo_depth(), 0u);
+  EXPECT_EQ(s.log().size(), 3u);  // a, begin, end: the failed events are not logged
+
+  // Without the fault the same events work, and the GPU copy was rolled back too: the
+  // session ends bit for bit where a session that never failed ends.
+  fail = false;
+  ASSERT_TRUE(s.apply(brush_event(b), nullptr).published);
+  EditSession ref(Volume(v), nullptr, sphere_options(), 16.0);
+  ref.apply(brush_event(a), nullptr);
+  ref.apply(brush_event(b), nullptr);
+  EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
+  expect_same_field(*s.current(), *ref.current());
+  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), v));
+  EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  if (auto* eng = s.sculptor().engine()) {
+    const std::vector<float> dev = eng->download_all();
+    EXPECT_EQ(std::memcmp(dev.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0) << "GPU copy";
+  }
+}
+
+TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackCpu) { failed_update_takes_the_edit_back(nullptr); }
+
+TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackGpu) {
+  auto& vk = isotouch::test::validated_vk();
+  failed_update_takes_the_edit_back(&vk);
+  EXPECT_EQ(vk.validation_messages(), 0u);
+}
+
 // The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook
 // the trace is what it was.
 TEST(Headless, HookPublishesBeforeTheNextTick) {

@@ -1,0 +1,31 @@
+// brush_engine_none.cpp - BrushEngine in a build without Vulkan (the ThreadSanitizer preset):
+// it cannot be created, so a Sculptor runs every brush on the CPU reference.
+#include <stdexcept>
+
+#include "brush.h"
+
+namespace isotouch::session {
+
+struct BrushEngine::Impl {
+  core::Grid grid;
+};
+
+BrushEngine::BrushEngine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+BrushEngine::~BrushEngine() = default;
+
+engine::Result<std::unique_ptr<BrushEngine>> BrushEngine::create(engine::VulkanContext&, const engine::Volume& vol,
+                                                                 std::uint64_t) {
+  return engine::Result<std::unique_ptr<BrushEngine>>::fail(vol.path +
+                                                            ": this build of isotouch has no Vulkan: no GPU brushes");
+}
+
+namespace {
+[[noreturn]] void no_vulkan() { throw std::logic_error("BrushEngine: this build of isotouch has no Vulkan"); }
+}  // namespace
+
+BrushResult BrushEngine::apply(const Brush&, engine::Volume*) { no_vulkan(); }
+void BrushEngine::upload_bricks(const engine::Volume&, const std::vector<std::uint32_t>&) { no_vulkan(); }
+std::vector<float> BrushEngine::download_all() { no_vulkan(); }
+const core::Grid& BrushEngine::grid() const { return impl_->grid; }
+
+}  // namespace isotouch::session

@@ -1,0 +1,67 @@
+// sculptor.cpp - Sculptor: the volume, the GPU brush engine (or the CPU reference) and the
+// undo history kept in step (session/brush.h). Builds without Vulkan too: there the brush
+// engine cannot be created (brush_engine_none.cpp) and every brush runs on the CPU reference.
+#include <string>
+
+#include "brush.h"
+
+namespace isotouch::session {
+using engine::Volume;
+using engine::VolumeError;
+using engine::VulkanContext;
+
+Sculptor::Sculptor(Volume vol, VulkanContext* ctx, double history_limit_mib, std::uint64_t max_binding_bytes)
+    : vol_(std::move(vol)), history_(history_limit_mib) {
+  if (ctx) {
+    auto r = BrushEngine::create(*ctx, vol_, max_binding_bytes);
+    if (!r) throw VolumeError(r.error);
+    engine_ = std::move(*r.value);
+    history_.set_on_restore([this](const std::vector<std::uint32_t>& ids) { engine_->upload_bricks(vol_, ids); });
+  }
+}
+Sculptor::~Sculptor() = default;
+
+void Sculptor::begin_stroke() {
+  history_.end_stroke(vol_);
+  history_.begin_stroke();
+}
+void Sculptor::end_stroke() { history_.end_stroke(vol_); }
+
+BrushResult Sculptor::apply(const Brush& b) {
+  if (std::string e = validate(b); !e.empty()) throw BrushError(e);
+  const bool own = !history_.stroke_open();
+  if (own) history_.begin_stroke();
+  history_.record(vol_, touched_bricks(vol_.grid, b));
+  BrushResult r;
+  try {
+    r = engine_ ? engine_->apply(b, &vol_) : apply_brush_cpu(vol_, b);
+  } catch (...) {
+    if (own) history_.end_stroke(vol_);  // a failed application leaves no stroke open
+    throw;
+  }
+  if (own) history_.end_stroke(vol_);
+  return r;
+}
+
+Sculptor::BrickBackup Sculptor::save_bricks(const std::vector<std::uint32_t>& ids) const {
+  BrickBackup b;
+  b.ids = ids;
+  b.data.reserve(ids.size());
+  for (std::uint32_t id : ids) b.data.push_back(read_brick(vol_, id));
+  return b;
+}
+
+void Sculptor::restore_bricks(const BrickBackup& b) {
+  for (std::size_t k = 0; k < b.ids.size(); ++k) write_brick(vol_, b.ids[k], b.data[k].data());
+  if (engine_ && !b.ids.empty()) engine_->upload_bricks(vol_, b.ids);
+}
+
+void Sculptor::roll_back_apply(const BrickBackup& before, bool own_stroke, std::size_t undo_depth_before) {
+  restore_bricks(before);
+  if (own_stroke && history_.undo_depth() == undo_depth_before + 1) history_.discard_newest_stroke();
+}
+
+std::vector<std::uint32_t> Sculptor::undo() { return history_.undo(vol_); }
+std::vector<std::uint32_t> Sculptor::redo() { return history_.redo(vol_); }
+
+}  // namespace isotouch::session

@@ -1,0 +1,71 @@
+// gpu_cpu_compare.h - the one rule by which the tests compare a GPU result with its CPU
+// reference, whatever the device:
+// - a CPU Vulkan device (lavapipe: IEEE arithmetic, `precise`, no FMA contraction, the same
+//   operations in the same order as the -ffp-contract=off CPU reference): every value bit
+//   for bit;
+// - any other device (a GPU may contract to FMA or reassociate): at most `ulp_bound` ULPs
+//   apart, the distribution printed.
+// ISOTOUCH_TEST_GPU_RULE=1 applies the GPU rule on a CPU device too, so the tests that a real
+// GPU runs are exercised without one.
+#pragma once
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "sample_field.h"
+#include "ulp.h"
+#include "vk_context.h"
+
+namespace isotouch::test {
+
+/// Default ULP bound for one GPU pass against its reference on a real GPU.
+inline constexpr std::uint64_t kGpuUlpBound = 64;
+
+/// True where the GPU and CPU results must agree bit for bit (a CPU device).
+inline bool expects_bit_identity(const engine::VulkanContext& ctx) {
+  const char* e = std::getenv("ISOTOUCH_TEST_GPU_RULE");
+  if (e && std::strcmp(e, "1") == 0) return false;
+  return ctx.info().type == "cpu";
+}
+
+/// `gpu` against `cpu` (n floats each) under the rule above.
+inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& ctx, const float* gpu, const float* cpu,
+                                                  std::size_t n, const std::string& what,
+                                                  std::uint64_t ulp_bound = kGpuUlpBound) {
+  const std::vector<float> a(gpu, gpu + n), b(cpu, cpu + n);
+  const engine::UlpStats s = engine::ulp_stats(a, b);
+  std::printf("  %-48s %9zu values, %zu differ, ULP max %llu p99 %llu\n", what.c_str(), s.n, s.differ,
+              static_cast<unsigned long long>(s.max), static_cast<unsigned long long>(s.p99));
+  const bool exact = expects_bit_identity(ctx);
+  if (exact ? s.differ == 0 : s.max <= ulp_bound) return ::testing::AssertionSuccess();
+  return ::testing::AssertionFailure() << what << ": " << s.differ << " of " << s.n << " values differ, ULP max "
+                                       << s.max << " (" << (exact ? "bit identity required on a CPU device" : "bound ")
+                                       << (exact ? std::string() : std::to_string(ulp_bound)) << "), first at "
+                                       << s.first << " (GPU " << a[s.first] << ", CPU " << b[s.first] << ")";
+}
+
+inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& ctx, const std::vector<float>& gpu,
+                                                  const std::vector<float>& cpu, const std::string& what,
+                                                  std::uint64_t ulp_bound = kGpuUlpBound) {
+  if (gpu.size() != cpu.size())
+    return ::testing::AssertionFailure() << what << ": " << gpu.size() << " GPU values, " << cpu.size() << " CPU values";
+  return gpu_matches_cpu(ctx, gpu.data(), cpu.data(), gpu.size(), what, ulp_bound);
+}
+
+/// Samples (value and gradient) compared channel by channel.
+inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& ctx,
+                                                  const std::vector<core::Sample>& gpu,
+                                                  const std::vector<core::Sample>& cpu, const std::string& what,
+                                                  std::uint64_t ulp_bound = kGpuUlpBound) {
+  static_assert(sizeof(core::Sample) == 4 * sizeof(float));
+  if (gpu.size() != cpu.size())
+    return ::testing::AssertionFailure() << what << ": " << gpu.size() << " GPU samples, " << cpu.size() << " CPU samples";
+  return gpu_matches_cpu(ctx, reinterpret_cast<const float*>(gpu.data()), reinterpret_cast<const float*>(cpu.data()),
+                         4 * gpu.size(), what, ulp_bound);
+}
+
+}  // namespace isotouch::test

@@ -1,0 +1,59 @@
+// The engine's CPU code without Vulkan (target isotouch::engine_cpu: the ThreadSanitizer
+// preset builds and runs this): the multi-threaded dense and sparse CPU backends give their
+// one-thread references bit for bit. Truth from outside the threaded code: the one-thread
+// references (themselves checked against brute force and the GPU in test_passes and
+// test_sparse_chain), on synthetic volumes.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "pass_desc.h"
+#include "sparse_chain.h"
+#include "synthetic.h"
+
+namespace engine = isotouch::engine;
+namespace core = isotouch::core;
+using engine::PassDesc;
+
+namespace {
+bool same_sample(const core::Sample& a, const core::Sample& b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+core::Isosurface above(double tau) { return core::Isosurface{tau, core::InsideIs::kAbove}; }
+
+std::size_t differing_samples(const std::vector<core::Sample>& a, const std::vector<core::Sample>& b) {
+  if (a.size() != b.size()) return std::max(a.size(), b.size());
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) n += !same_sample(a[i], b[i]);
+  return n;
+}
+}  // namespace
+
+TEST(CpuBackends, DenseChainThreadsGiveTheReferenceBitForBit) {
+  const engine::Volume v = engine::make_random({37, 29, 23}, {0.9e-3, 1.1e-3, 1.7e-3}, -1000.0f, 3000.0f, 11);
+  const std::vector<PassDesc> p = {PassDesc::closing(1.0), PassDesc::gaussian(1.0), PassDesc::gradient(),
+                                   PassDesc::brick_minmax()};
+  const engine::ChainOutput one = engine::run_chain_cpu(v, p, 1);
+  ASSERT_TRUE(one.samples && one.field && one.bricks);
+  for (unsigned threads : {2u, 3u}) {
+    const engine::ChainOutput many = engine::run_chain_cpu(v, p, threads);
+    ASSERT_TRUE(many.samples && many.field && many.bricks);
+    EXPECT_EQ(differing_samples(one.samples->samples, many.samples->samples), 0u) << threads << " threads";
+    ASSERT_EQ(one.field->size(), many.field->size());
+    EXPECT_EQ(std::memcmp(one.field->data(), many.field->data(), one.field->size() * sizeof(float)), 0)
+        << threads << " threads: filtered field";
+  }
+}
+
+TEST(CpuBackends, SparseChainThreadsGiveTheReferenceBitForBit) {
+  const engine::Volume v = engine::make_sphere({45, 38, 31}, 1e-3, 13.0, {0.7, -1.3, 0.4});
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const engine::SparseOutput one = engine::run_sparse_cpu(v, p, above(0), -1e4f, core::SampleFormat::kFp32, true);
+  ASSERT_GT(one.stats.active, 0u);
+  for (unsigned threads : {2u, 3u}) {
+    const engine::SparseOutput many =
+        engine::run_sparse_cpu(v, p, above(0), -1e4f, core::SampleFormat::kFp32, true, threads);
+    EXPECT_EQ(one.stats.candidates, many.stats.candidates) << threads << " threads";
+    EXPECT_EQ(one.input.active, many.input.active) << threads << " threads";
+    EXPECT_EQ(differing_samples(one.input.pool, many.input.pool), 0u) << threads << " threads: pool samples";
+  }
+}

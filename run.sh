@@ -42,8 +42,9 @@ cmake --build --preset release -j"$(nproc)"
 if [[ "${1:-}" == "test" ]]; then
   shift
   ctest --preset release -j"$(nproc)" "$@"
-  # The servo again under ThreadSanitizer (servo thread + publisher swapping snapshots).
-  echo "run.sh: ThreadSanitizer build of the servo (cmake preset 'tsan' -> build-tsan/)"
+  # What needs no Vulkan again under ThreadSanitizer: servo thread, live session (edit thread
+  # publishing live-field snapshots to the servo thread), threaded CPU chains, queues.
+  echo "run.sh: ThreadSanitizer build of the servo, session and CPU engine (cmake preset 'tsan' -> build-tsan/)"
   cmake --preset tsan >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
   rm -f build-configure.log
   cmake --build --preset tsan -j"$(nproc)"

@@ -1,5 +1,4 @@
-// live_field.cpp - the edited volume's published snapshot, updated brick by brick (
-// item 1). The design is in live_field.h. Compiled with -ffp-contract=off like the CPU
+// live_field.cpp - the edited volume's published snapshot, updated brick by brick. The design is in live_field.h. Compiled with -ffp-contract=off like the CPU
 // reference it calls (engine/sparse_cpu.cpp), although every float operation on samples
 // happens there: this file selects bricks, compares bits and moves samples.
 #include "live_field.h"
@@ -12,6 +11,9 @@
 #include <mutex>
 #include <set>
 #include <stdexcept>
+
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include "sparse_chain.h"
 
@@ -66,20 +68,44 @@ struct Arena {
     }
     free_slots.reserve(slots);
     for (std::size_t s = slots; s-- > 0;) free_slots.push_back(std::uint32_t(s));  // pop order 0, 1, ...
+    is_free.assign(slots, 1);
   }
 
   /// Takes `n` free slots into `out`; false (nothing taken) if fewer are free.
   bool take(std::size_t n, std::vector<std::uint32_t>& out) {
     std::lock_guard lock(mu);
-    if (free_slots.size() < n) return false;
+    if (retired_ || free_slots.size() < n) return false;
     out.assign(free_slots.end() - std::ptrdiff_t(n), free_slots.end());
     free_slots.resize(free_slots.size() - n);
+    for (std::uint32_t s : out) is_free[s] = 0;
     return true;
   }
   /// Slots taken but never published (update() failed).
   void give_back(const std::vector<std::uint32_t>& slots) {
     std::lock_guard lock(mu);
     free_slots.insert(free_slots.end(), slots.begin(), slots.end());
+    for (std::uint32_t s : slots) is_free[s] = 1;
+  }
+  /// A new arena took over (update() copied the current bricks there): no slot of this one
+  /// is taken again. The memory of every slot no live snapshot uses goes back to the system
+  /// now, and that of each slot freed later when its last snapshot dies: a snapshot held for
+  /// long (the first one, say) keeps its own slots resident, not the whole arena.
+  /// `in_use`: the slots of the arena's newest store, which version `version` (in the new
+  /// arena) no longer uses; each is freed once no live store of this arena uses it.
+  void retire(std::uint64_t version, const std::vector<std::uint32_t>& in_use) noexcept {
+    std::lock_guard lock(mu);
+    retired_ = true;
+    for (std::uint32_t s : in_use) retire_locked({s, born[s], version});
+    for (std::size_t s = 0; s < capacity;) {
+      if (!is_free[s]) {
+        ++s;
+        continue;
+      }
+      std::size_t e = s;
+      while (e < capacity && is_free[e]) ++e;
+      decommit(s, e);
+      s = e;
+    }
   }
   /// A store of `version` is about to be published: it uses `born` for the first time and
   /// no longer uses `retired` (slots of the previous store). Throws (bad_alloc) only before
@@ -127,14 +153,37 @@ struct Arena {
       if (it != live.end() && *it < r.retired)
         blocked[*it].push_back(r);
       else
-        free_slots.push_back(r.slot);  // capacity reserved: no allocation
+        free_locked(r.slot);
     } catch (...) {
       // Out of memory while parking: the slot is lost to this arena (never reused, so
       // never overwritten under a reader), which is safe.
     }
   }
 
+  void free_locked(std::uint32_t slot) noexcept {
+    free_slots.push_back(slot);  // capacity reserved: no allocation
+    is_free[slot] = 1;
+    if (!retired_) return;
+    std::size_t lo = slot, hi = std::size_t(slot) + 1;  // the run of free slots around it
+    while (lo > 0 && is_free[lo - 1]) --lo;
+    while (hi < capacity && is_free[hi]) ++hi;
+    decommit(lo, hi);
+  }
+  /// Gives the whole pages of slots [lo, hi) back to the system (madvise MADV_DONTNEED:
+  /// the pages read as zeros if touched again; nothing reads a free slot of a retired
+  /// arena). Pages shared with a slot outside the run are kept.
+  void decommit(std::size_t lo, std::size_t hi) const noexcept {
+    static const std::uintptr_t page = std::uintptr_t(::sysconf(_SC_PAGESIZE));
+    char* base = samples ? reinterpret_cast<char*>(samples) : reinterpret_cast<char*>(codes);
+    const std::size_t per = kS * (samples ? sizeof(core::Sample) : sizeof(core::CompactSample));
+    const std::uintptr_t a = (reinterpret_cast<std::uintptr_t>(base + lo * per) + page - 1) / page * page;
+    const std::uintptr_t b = reinterpret_cast<std::uintptr_t>(base + hi * per) / page * page;
+    if (b > a) (void)::madvise(reinterpret_cast<void*>(a), b - a, MADV_DONTNEED);
+  }
+
   mutable std::mutex mu;
+  bool retired_ = false;
+  std::vector<std::uint8_t> is_free;  ///< per slot: in free_slots
   std::vector<std::uint32_t> free_slots;
   std::vector<std::uint64_t> born;  ///< per slot: the first store version that uses it
   std::set<std::uint64_t> live;     ///< versions of the arena's stores alive now
@@ -456,6 +505,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
   std::vector<std::uint32_t> work, changed, taken;
   std::vector<std::pair<std::uint32_t, std::array<float, 3>>> raw_undo;
   std::shared_ptr<Arena> fresh;  // a new arena when the current one is full
+  std::vector<std::uint32_t> retiring;  // then: the slots the current arena's newest store uses
   try {
     // 1. What the edit can change, then the new state of those bricks.
     m.find_work(vol, dirty, work, changed, raw_undo);
@@ -515,6 +565,8 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
       // Old snapshots hold the free slots: copy the bricks that stay into a new arena.
       const std::size_t active_new = old.active_bricks() + activated - deactivated;
       fresh = std::make_shared<Arena>(capacity_for(active_new), fmt);
+      for (std::uint32_t e : old.table)
+        if (!(e & BrickStore::kUniform)) retiring.push_back(BrickStore::slot_of(e));
       std::vector<std::uint8_t> moving(m.total, 0);
       for (const Change& c : changes) moving[c.id] = 1;
       std::vector<std::uint32_t> keep;
@@ -601,6 +653,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     for (const auto& [id, flag] : cand_changes) m.candidate[id] = flag;
     if (next->bricks != m.cur->bricks) m.tile_owner.swap(owner);
     if (fresh) {
+      m.arena->retire(v, retiring);
       m.old_arenas.push_back(m.arena);
       m.arena = fresh;
       std::erase_if(m.old_arenas, [](const std::weak_ptr<Arena>& w) { return w.expired(); });

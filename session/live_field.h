@@ -38,8 +38,11 @@
 //   snapshot meanwhile: nothing it reads is written). A slot is in use by the contiguous
 //   versions [born, retired); it is freed once no store of those versions is alive (the
 //   stores' shared_ptr deleter, under the arena's mutex, never on a read path). When the
-//   free slots run out (old snapshots held), the current bricks are copied into a new arena
-//   (the old one lives until its last snapshot dies).
+//   free slots run out (old snapshots held), the current bricks are copied into a new arena;
+//   the old one is retired: it lives until its last snapshot dies, but the memory of every
+//   slot no live snapshot uses is given back to the system (madvise), at once and as its
+//   snapshots die, so a snapshot held for long (the first one) pins its own slots, not the
+//   whole arena.
 #pragma once
 #include <cstdint>
 #include <memory>

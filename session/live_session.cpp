@@ -23,7 +23,6 @@ std::int64_t now_ns() {
 }
 
 // observe()'s seqlock stores Observed as relaxed atomic words (no plain data race).
-constexpr std::size_t kObsWords = (sizeof(Observed) + 7) / 8;
 static_assert(std::is_trivially_copyable_v<Observed>);
 
 std::string os_error(const std::string& path, const char* what) {
@@ -44,11 +43,6 @@ io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
 }
 
 }  // namespace
-
-// The observed tick as relaxed atomic words, written under obs_seq_ (a seqlock).
-struct LiveSessionObs {
-  std::array<std::atomic<std::uint64_t>, kObsWords> words{};
-};
 
 LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
                          servo::HapticDeviceIO& device, LiveSessionConfig config)
@@ -78,7 +72,6 @@ LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleFie
   seen_size_ = 1u << 16;
   seen_ns_ = std::make_unique<std::atomic<std::int64_t>[]>(seen_size_);
   for (std::size_t i = 0; i < seen_size_; ++i) seen_ns_[i].store(-1, std::memory_order_relaxed);
-  obs_store_ = std::make_unique<LiveSessionObs>();
   if (!cfg_.record_path.empty()) open_recording();
 }
 
@@ -157,31 +150,10 @@ void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
   o.plane = r.out.plane;
   o.contact = r.out.contact;
   o.version = r.version;
-  std::uint64_t w[kObsWords] = {};
-  std::memcpy(w, &o, sizeof o);
-  auto& words = obs_store_->words;
-  const std::uint64_t s = obs_seq_.load(std::memory_order_relaxed);
-  obs_seq_.store(s + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  for (std::size_t i = 0; i < kObsWords; ++i) words[i].store(w[i], std::memory_order_relaxed);
-  obs_seq_.store(s + 2, std::memory_order_release);
+  observed_.store(o);
 }
 
-Observed LiveSession::observe() const {
-  const auto& words = obs_store_->words;
-  std::uint64_t w[kObsWords];
-  for (;;) {
-    const std::uint64_t s0 = obs_seq_.load(std::memory_order_acquire);
-    if (s0 & 1) continue;
-    for (std::size_t i = 0; i < kObsWords; ++i) w[i] = words[i].load(std::memory_order_relaxed);
-    std::atomic_thread_fence(std::memory_order_acquire);
-    if (obs_seq_.load(std::memory_order_relaxed) == s0) break;
-  }
-  Observed o;
-  if (obs_seq_.load(std::memory_order_relaxed) == 0) return o;
-  std::memcpy(&o, w, sizeof o);
-  return o;
-}
+Observed LiveSession::observe() const { return observed_.load(); }
 
 void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
   if (r.version != last_version_) {

@@ -38,6 +38,7 @@
 
 #include "edit_session.h"
 #include "headless.h"
+#include "latest_value.h"
 #include "record.h"
 #include "renderer.h"
 #include "servo_thread.h"
@@ -45,7 +46,6 @@
 
 namespace isotouch::session {
 
-struct LiveSessionObs;
 
 /// The button drill: while button 0 is down and the probe is in contact (a plane holds the
 /// HIP), every `every_ticks` ticks a brush is applied at the VHIP with the force the user
@@ -205,9 +205,8 @@ class LiveSession final : private servo::TickObserver {
   std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
   std::size_t seen_size_ = 0;
 
-  // Seqlock for observe().
-  mutable std::atomic<std::uint64_t> obs_seq_{0};
-  std::unique_ptr<LiveSessionObs> obs_store_;
+  // What observe() reads: the last tick, written by the servo thread (a seqlock).
+  servo::LatestValue<Observed> observed_;
 
   std::atomic<long> dropped_edits_{0}, dropped_ticks_{0}, requested_{0};
   // Edit thread -> recorder and stats (not real time: a mutex is fine here).

@@ -16,6 +16,9 @@
 // Plus a disabled benchmark: update() for 2, 5 and 10 mm carve brushes on the chest CT.
 #include <gtest/gtest.h>
 
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <bit>
@@ -551,6 +554,52 @@ TEST(LiveField, ANewArenaWhenHeldSnapshotsFillTheOld) {
     EXPECT_EQ(lf->pool_bytes(), lf->current()->bricks->active_bricks() * slot);
     EXPECT_LT(lf->arena_bytes(), arena0 * 2);
   }
+}
+
+// Resident bytes of [p, p + bytes): the pages the system says are in memory (mincore).
+std::uint64_t resident_bytes(const void* p, std::size_t bytes) {
+  const std::uintptr_t page = std::uintptr_t(::sysconf(_SC_PAGESIZE));
+  const std::uintptr_t a = reinterpret_cast<std::uintptr_t>(p) / page * page;
+  const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(p) + bytes + page - 1) / page * page;
+  std::vector<unsigned char> v((b - a) / page);
+  if (::mincore(reinterpret_cast<void*>(a), b - a, v.data()) != 0) return ~std::uint64_t(0);
+  std::uint64_t n = 0;
+  for (unsigned char x : v) n += x & 1u;
+  return n * page;
+}
+
+// Holding the first snapshot while edits go on: once the bricks moved into a new arena, the
+// first arena keeps resident only about its snapshot's own slots (truth: the system's page
+// table, mincore), not all of its capacity; and the first snapshot still reads what it read.
+TEST(LiveField, HoldingTheFirstSnapshotDoesNotPinItsArena) {
+  Case c = cached("head");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  const std::shared_ptr<const core::SampleField> first = lf->current();
+  const std::vector<std::uint64_t> seen = reads(*first, 500, 3);
+  const auto pool = first->bricks->pool;  // the first arena's sample memory
+  const std::size_t slot = 729u * sizeof(core::Sample), capacity = first->bricks->slot_capacity;
+  const std::uint64_t arena_bytes = std::uint64_t(capacity) * slot;
+  const std::uint64_t own = std::uint64_t(first->bricks->active_bricks()) * slot;
+  ASSERT_GE(resident_bytes(pool->data(), arena_bytes), arena_bytes - 8192) << "the arena starts resident";
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0.2, 0.8);
+  int k = 0;
+  for (; k < 400 && lf->current()->bricks->pool == pool; ++k) {
+    const Brush b = brush(c, k % 2 ? BrushKind::kAdd : BrushKind::kCarve, at(c.vol.grid, u(rng), u(rng), u(rng)),
+                          5 * c.vol.grid.spacing_m.x, 2000);
+    (void)lf->update(c.vol, session::apply_brush_cpu(c.vol, b).dirty);  // only the first and the newest are held
+  }
+  ASSERT_NE(lf->current()->bricks->pool, pool) << "no new arena after " << k << " edits";
+  const std::uint64_t after = resident_bytes(pool->data(), arena_bytes);
+  std::printf("  first arena: %zu slots (%.2f MiB), the first snapshot's own %.2f MiB, resident after the move "
+              "%.2f MiB (%d edits)\n",
+              capacity, double(arena_bytes) / 1048576.0, double(own) / 1048576.0, double(after) / 1048576.0, k);
+  // Its own slots, plus at most the two pages each run of them shares with a freed neighbour.
+  EXPECT_LE(after, own + 2 * 4096 * std::uint64_t(first->bricks->active_bricks()));
+  EXPECT_LT(after, arena_bytes * 3 / 4);
+  EXPECT_EQ(reads(*first, 500, 3), seen) << "the first snapshot changed";
+  expect_full_run(*lf->current(), c.vol, o, "head after the first arena was retired");
 }
 
 // ---- memory ------------------------------------------------------------------------------

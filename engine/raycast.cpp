@@ -422,8 +422,8 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 
 namespace {
 /// The pixels [x0, x1) x [y0, y1) whose rays can meet the index-space box [lo, hi]: the
-/// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, widened to
-/// whole tiles of the march pass; the whole image if a corner is not in front of the eye.
+/// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, x0 a multiple
+/// of 8; the whole image if a corner is not in front of the eye.
 struct PixelRect {
   std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
 };
@@ -450,8 +450,8 @@ PixelRect box_rect(const gpu::RaycastParams& P, std::array<double, 3> lo, std::a
   }
   auto clampi = [](double v, std::uint32_t n) { return std::uint32_t(std::clamp(v, 0.0, double(n))); };
   PixelRect r;
-  r.x0 = clampi(std::floor(lo_x) - 2, P.width) / ISOTOUCH_RAYCAST_WG_X * ISOTOUCH_RAYCAST_WG_X;
-  r.y0 = clampi(std::floor(lo_y) - 2, P.height) / ISOTOUCH_RAYCAST_WG_Y * ISOTOUCH_RAYCAST_WG_Y;
+  r.x0 = clampi(std::floor(lo_x) - 2, P.width) / 8 * 8;  // whole vectors of 8 lanes
+  r.y0 = clampi(std::floor(lo_y) - 2, P.height);
   r.x1 = clampi(std::ceil(hi_x) + 3, P.width);
   r.y1 = clampi(std::ceil(hi_y) + 3, P.height);
   if (r.x1 <= r.x0 || r.y1 <= r.y0) r.x1 = r.x0, r.y1 = r.y0;  // the box is off screen
@@ -479,12 +479,14 @@ std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active_bo
 }  // namespace
 
 struct RayCaster::Impl {
+  /// Bindings 1 (values) and 2 (cell distances) are uniform texel buffers.
+  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2);
   VulkanContext& ctx;
   RaycastField field;
   // The four passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   ComputePipeline<gpu::RaycastPush> march_skip, march_plain, args, shade_lin, shade, overlay;
-  GpuBuffer values, cells;                 // device-local, resident
+  GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
   GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch
@@ -498,15 +500,21 @@ struct RayCaster::Impl {
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
   DescriptorArena arena;                   // reset per frame
   GpuTimer timer;
+  /// Specialization constants: 0 the pass's variant, 1-3 the grid's size.
+  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant) {
+    return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2])};
+  }
   Impl(VulkanContext& c, RaycastField f)
       : ctx(c),
         field(std::move(f)),
-        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, {1u}),
-        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, {0u}),
-        args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u),
-        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, {1u}),
-        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, {0u}),
-        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u),
+        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1),
+                   kTexel),
+        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0), kTexel),
+        args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u, {}, kTexel),
+        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, spec(field, 1),
+                  kTexel),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0), kTexel),
+        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0), kTexel),
         arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 4) {}
 };
@@ -540,20 +548,20 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   if (field.cell_dist.size() != cells)
     return R::fail("raycast: " + std::to_string(field.cell_dist.size()) + " cell distances for a grid needing " +
                    std::to_string(cells) + " (build the field with make_raycast_field)");
-  if (vbytes > ctx.max_binding_bytes())
-    return R::fail("raycast: the volume's " + std::to_string(vbytes) + " bytes exceed maxStorageBufferRange " +
-                   std::to_string(ctx.max_binding_bytes()) + " bytes on " + ctx.info().name +
-                   " (one dense binding; a bricked snapshot would be needed)");
+  const std::uint64_t max_texels = ctx.properties().limits.maxTexelBufferElements;
+  if (std::max<std::uint64_t>(field.values.size(), cells) > max_texels)
+    return R::fail("raycast: the volume's " + std::to_string(field.values.size()) + " voxels (" + std::to_string(cells) +
+                   " cells) exceed maxTexelBufferElements " + std::to_string(max_texels) + " on " + ctx.info().name +
+                   " (one texel binding each)");
   auto impl = std::make_unique<Impl>(ctx, field);
   impl->active = active_box(impl->field);
   impl->mag = value_magnitude(impl->field.values, impl->field.background);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
-  // Binding 2: the cell distance bytes, padded to whole uints.
-  std::vector<std::uint8_t> cd(impl->field.cell_dist);
-  cd.resize((cd.size() + 3) / 4 * 4, 0);
-  auto b = upload(ctx, cd.data(), cd.size(), "raycast cell distances");
+  // Binding 2: the cell distances as floats (a texel buffer of R32_SFLOAT).
+  const std::vector<float> cd(impl->field.cell_dist.begin(), impl->field.cell_dist.end());
+  auto b = upload(ctx, cd.data(), cd.size() * sizeof(float), "raycast cell distances");
   if (!b) return R::fail(b.error);
   impl->cells = std::move(*b.value);
   const std::size_t pb = sizeof(gpu::RaycastParams);
@@ -592,8 +600,10 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
                              std::pair{&m.lin_b, "raycast colour B"}, std::pair{&m.hits, "raycast hit list"},
                              std::pair{&m.hit_k, "raycast hit samples"}})
       *buf = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, what);
-    m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
-    m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+    if (!(m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped())) {
+      m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
+      m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+    }
     m.pixels = pixels;
   }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
@@ -679,10 +689,16 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
                     (orect.y1 - orect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   }
   m.timer.mark(cmd, 1);
-  barrier_compute_to_transfer(cmd);
-  record_copy(cmd, m.image, m.image_down, pixels * 4);
-  record_copy(cmd, m.depth, m.depth_down, pixels * 4);
-  barrier_transfer_to_host(cmd);
+  // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
+  const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
+  if (in_place) {
+    barrier_compute_to_host(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    record_copy(cmd, m.image, m.image_down, pixels * 4);
+    record_copy(cmd, m.depth, m.depth_down, pixels * 4);
+    barrier_transfer_to_host(cmd);
+  }
 
   RaycastImage img;
   img.width = width;
@@ -694,8 +710,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.rgba.resize(pixels);
   img.depth.resize(pixels);
-  std::memcpy(img.rgba.data(), m.image_down.mapped(), pixels * 4);
-  std::memcpy(img.depth.data(), m.depth_down.mapped(), pixels * 4);
+  std::memcpy(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels * 4);
+  std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
   return img;
 }
 
@@ -788,11 +804,9 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
                   cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)]);
     }
   }
-  VkBufferCopy cell_region{};
-  if (hi > lo) {  // whole uints (binding 2 packs 4 bytes per uint)
-    lo = lo / 4 * 4;
-    hi = std::min((hi + 3) / 4 * 4, std::size_t(m.cells.size()));
-    cell_region = {0, lo, hi - lo};
+  VkBufferCopy cell_region{};  // binding 2 holds one float per cell
+  if (hi > lo) {
+    cell_region = {0, lo * sizeof(float), (hi - lo) * sizeof(float)};
     m.active = active_box(f);
   }
   std::size_t bytes = 0;
@@ -808,11 +822,9 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       r.srcOffset = o;
       o += r.size;
     }
-    if (cell_region.size) {
-      // The bytes [lo, hi); past the last cell, the zero padding of the last uint.
-      const std::size_t have = std::min(std::size_t(cell_region.size), f.cell_dist.size() - std::size_t(cell_region.dstOffset));
-      std::memcpy(dst + o, f.cell_dist.data() + cell_region.dstOffset, have);
-      std::memset(dst + o + have, 0, std::size_t(cell_region.size) - have);
+    if (cell_region.size) {  // the cells [lo, hi) as floats
+      float* cf = reinterpret_cast<float*>(dst + o);
+      for (std::size_t i = lo; i < hi; ++i) cf[i - lo] = float(f.cell_dist[i]);
       cell_region.srcOffset = o;
     }
     VkCommandBuffer cmd = m.ctx.begin_commands();

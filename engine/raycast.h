@@ -15,8 +15,9 @@
 // RAS NIfTI and an LPS MetaImage of the same head both show the face from the front.
 //
 // Shader input (bindings of RaycastParams in shaders/isotouch_shared.h): dense float
-// values + one byte per trilinear cell (chessboard distance to the nearest cell that can
-// hold an inside value; cell_distances(), rebuilt from the values whenever they change).
+// values + the distance of each trilinear cell (chessboard distance to the nearest cell that can
+// hold an inside value; cell_distances(), rebuilt from the values whenever they change; one
+// byte per cell on the host, one float per cell on the device), both uniform texel buffers.
 // Swapping in a bricked snapshot (core/brick_field.h) changes only the shader's voxel()
 // (one brick-table lookup, then the 9^3 pool brick: a trilinear cell never straddles two
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
@@ -181,8 +182,8 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
 /// owns one descriptor arena and one timer).
 class RayCaster {
  public:
-  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or a storage binding
-  /// exceeds maxStorageBufferRange (128 MiB on lavapipe: a bricked snapshot would lift it).
+  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or the voxels or cells
+  /// exceed maxTexelBufferElements (one texel binding each).
   static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, const RaycastField& field);
   ~RayCaster();
   RayCaster(const RayCaster&) = delete;
@@ -201,7 +202,7 @@ class RayCaster {
   struct UpdateStats {
     std::size_t bricks = 0;           ///< 8^3 bricks whose voxels were copied
     std::uint64_t value_bytes = 0;    ///< voxel bytes uploaded (the bricks' rows only)
-    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed)
+    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed, a float per cell)
     std::uint64_t cells_recomputed = 0;  ///< cells whose distance was recomputed on the host
     double ms = 0;                    ///< update(), everything included [ms]
   };

@@ -458,6 +458,31 @@ PixelRect box_rect(const gpu::RaycastParams& P, std::array<double, 3> lo, std::a
   return r;
 }
 
+/// The pixels the primitives' bounding box (index space, 1 voxel wider) projects to (none
+/// without primitives; the whole image if one is not finite): a pixel whose ray meets no
+/// primitive keeps the colour the shade pass gave it.
+PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::RaycastPrim>& prims, int width, int height) {
+  if (prims.empty()) return {};
+  std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
+  auto grow = [&](double x, double y, double z, double r) {
+    const double p[3] = {x, y, z};
+    const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
+    const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
+    for (int a = 0; a < 3; ++a) {
+      plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
+      phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
+    }
+  };
+  bool finite = true;
+  for (const gpu::RaycastPrim& q : prims) {
+    finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
+             std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
+    grow(q.ax, q.ay, q.az, q.r0);
+    if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
+  }
+  return finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
+}
+
 /// The index-space box covering every active cell (cell_dist 0; cell c spans [c, c + 1]),
 /// or nullopt if there is none. Samples outside it are in inactive cells or outside the
 /// cells, where the field is the background: outside, else the border cells were active.
@@ -500,6 +525,15 @@ struct RayCaster::Impl {
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
   DescriptorArena arena;                   // reset per frame
   GpuTimer timer;
+  // The last frame, kept for the next one (RayCaster::render: reuse): its parameters (the
+  // active box zeroed: skipping does not change a pixel), flags and whether the linear
+  // colour of every hit pixel is in bindings 6-8; the overlay's pixel rectangle; the voxels
+  // update() changed since ([lo, hi) index space, lo > hi: none).
+  bool cache_valid = false, cache_linear = false;
+  gpu::RaycastParams cache_key{};
+  std::uint32_t cache_flags = 0;
+  PixelRect cache_orect;
+  std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size.
   static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant) {
     return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2])};
@@ -605,6 +639,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
     }
     m.pixels = pixels;
+    m.cache_valid = false;
   }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
   if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
@@ -630,14 +665,44 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     rect = box_rect(P, {-1, -1, -1}, {double(P.nx), double(P.ny), double(P.nz)});
   else if (m.active)
     rect = box_rect(P, m.active->first, m.active->second);
+  // Reuse: the same camera, style and size as the last frame: only the pixels whose rays
+  // can meet the voxels update() changed are marched and shaded again (within 3 voxels of
+  // them: the trilinear cells, the refinement's block and the normal's neighbours), and the
+  // overlay is redrawn over its old and new rectangles; every other pixel stays as it was,
+  // which is what a full frame would draw there.
+  gpu::RaycastParams key = P;
+  set3(key.act_lo_x, key.act_lo_y, key.act_lo_z, {0, 0, 0});
+  set3(key.act_hi_x, key.act_hi_y, key.act_hi_z, {0, 0, 0});
+  const PixelRect orect = overlay_rect(P, prims, width, height);
+  const bool needs_linear = orect.x1 > orect.x0 || m.cache_orect.x1 > m.cache_orect.x0;
+  const bool reuse = m.cache_valid && m.cache_flags == push.flags && std::memcmp(&key, &m.cache_key, sizeof key) == 0 &&
+                     (!needs_linear || m.cache_linear);
+  const bool dirty = m.dirty_lo[0] < m.dirty_hi[0];
+  if (reuse) {
+    PixelRect d;
+    if (dirty)
+      d = box_rect(P, {m.dirty_lo[0] - 3.0, m.dirty_lo[1] - 3.0, m.dirty_lo[2] - 3.0},
+                   {m.dirty_hi[0] + 2.0, m.dirty_hi[1] + 2.0, m.dirty_hi[2] + 2.0});
+    rect = {std::max(rect.x0, d.x0), std::max(rect.y0, d.y0), std::min(rect.x1, d.x1), std::min(rect.y1, d.y1)};
+    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) rect = PixelRect{};
+  }
   gpu::RaycastPush march_push = push;
   march_push.x0 = rect.x0;
   march_push.y0 = rect.y0;
   m.timer.mark(cmd, 0);
   // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
   vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);  // hit count 0
-  vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, pack_rgba8(P.bg_r, P.bg_g, P.bg_b));
-  vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, std::bit_cast<std::uint32_t>(-1.0f));
+  const std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b), no_hit = std::bit_cast<std::uint32_t>(-1.0f);
+  if (!reuse) {
+    vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
+    vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, no_hit);
+  } else {
+    for (std::uint32_t y = rect.y0; y < rect.y1; ++y) {  // the rows of the region drawn again
+      const VkDeviceSize at = (VkDeviceSize(y) * std::uint32_t(width) + rect.x0) * 4, n = VkDeviceSize(rect.x1 - rect.x0) * 4;
+      vkCmdFillBuffer(cmd, m.image.handle(), at, n, bg);
+      vkCmdFillBuffer(cmd, m.depth.handle(), at, n, no_hit);
+    }
+  }
   barrier_transfer_to_compute(cmd);
   // 1. march every pixel; 2. hit count -> dispatch size; 3. shade the hits; 4. overlays.
   const auto& march = style.skip_empty ? m.march_skip : m.march_plain;
@@ -652,41 +717,28 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.args.push(cmd, push);
   vkCmdDispatch(cmd, 1, 1, 1);
   barrier_compute_to_indirect(cmd);
-  const auto& shade = prims.empty() ? m.shade : m.shade_lin;
+  const bool linear = reuse ? m.cache_linear : !prims.empty();  // bindings 6-8 complete after this frame
+  const auto& shade = linear ? m.shade_lin : m.shade;
   shade.bind(cmd, m.arena, ranges);
   shade.push(cmd, push);
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
   m.timer.mark(cmd, 3);
-  if (!prims.empty()) {
-    // Only the pixels the primitives' bounding box (index space) projects to: a pixel whose
-    // ray meets no primitive would be written with the colour the shade pass gave it.
-    std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
-    auto grow = [&](double x, double y, double z, double r) {
-      const double p[3] = {x, y, z};
-      const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
-      const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
-      for (int a = 0; a < 3; ++a) {
-        plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
-        phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
-      }
-    };
-    bool finite = true;
-    for (const gpu::RaycastPrim& q : prims) {
-      finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
-               std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
-      grow(q.ax, q.ay, q.az, q.r0);
-      if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
-    }
-    const PixelRect orect = finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
+  // The overlay over the primitives' rectangle and, reusing, the last frame's (there it
+  // draws the picture without them again, from the linear colour).
+  PixelRect od = orect;
+  if (reuse && m.cache_orect.x1 > m.cache_orect.x0) {
+    const PixelRect& c = m.cache_orect;
+    od = od.x1 > od.x0 ? PixelRect{std::min(od.x0, c.x0), std::min(od.y0, c.y0), std::max(od.x1, c.x1), std::max(od.y1, c.y1)} : c;
+  }
+  if (od.x1 > od.x0) {
     gpu::RaycastPush overlay_push = push;
-    overlay_push.x0 = orect.x0;
-    overlay_push.y0 = orect.y0;
+    overlay_push.x0 = od.x0;
+    overlay_push.y0 = od.y0;
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
     m.overlay.push(cmd, overlay_push);
-    if (orect.x1 > orect.x0)
-      vkCmdDispatch(cmd, (orect.x1 - orect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                    (orect.y1 - orect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+    vkCmdDispatch(cmd, (od.x1 - od.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                  (od.y1 - od.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   }
   m.timer.mark(cmd, 1);
   // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
@@ -703,7 +755,15 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   RaycastImage img;
   img.width = width;
   img.height = height;
+  img.reused = reuse;
   img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
+  m.cache_valid = true;
+  m.cache_linear = linear;
+  m.cache_key = key;
+  m.cache_flags = push.flags;
+  m.cache_orect = orect;
+  m.dirty_lo = {1, 1, 1};
+  m.dirty_hi = {0, 0, 0};
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);
   img.shade_ms = m.timer.elapsed_ms(2, 3);
@@ -762,6 +822,11 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
         vlo[a] = std::min(vlo[a], 8 * b[a]);
         vhi[a] = std::max(vhi[a], std::min(n[a], 8 * b[a] + 8));
       }
+    }
+    const bool none = m.dirty_lo[0] >= m.dirty_hi[0];
+    for (int a = 0; a < 3; ++a) {  // the next render() draws again where these voxels show
+      m.dirty_lo[a] = none ? vlo[a] : std::min(m.dirty_lo[a], vlo[a]);
+      m.dirty_hi[a] = none ? vhi[a] : std::max(m.dirty_hi[a], vhi[a]);
     }
     const double mag = value_magnitude(f.values, f.background);
     const int R = int(ISOTOUCH_RAYCAST_DIST_MAX);

@@ -154,6 +154,10 @@ struct RaycastImage {
   /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
+  /// GPU: the camera, style and size were the last frame's, so only the pixels where the
+  /// voxels update() changed can show, and the overlay's old and new rectangles, were drawn
+  /// again (the rest of the picture is the last frame's, as a full frame would draw it).
+  bool reused = false;
 };
 
 /// The per-frame parameter block shared by GPU and CPU (flags not included).
@@ -193,6 +197,9 @@ class RayCaster {
   /// shaders/raycast_common.glsl in one submission, reads back. With skipping, the march
   /// covers only the pixels the box of active cells projects to (rays elsewhere meet no
   /// active cell, so no inside sample); without, the pixels the volume's box projects to.
+  /// With the last frame's camera, style and size, only the pixels the voxels changed by
+  /// update() since can reach (3 voxels wider), and the overlay's last and new rectangles,
+  /// are drawn again (RaycastImage::reused); the picture is the one a full frame gives.
   /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});

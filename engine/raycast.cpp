@@ -558,6 +558,19 @@ RayCaster::~RayCaster() = default;
 const RaycastField& RayCaster::field() const { return impl_->field; }
 
 namespace {
+/// Binding 2's texels [t0, t1): texel t holds the distances of cells 4t .. 4t + 3 (0 past
+/// the last), 6 bits each from the low end, as a float (an integer below 2^24: exact).
+std::vector<float> pack_cells(const std::vector<std::uint8_t>& d, std::size_t t0, std::size_t t1) {
+  static_assert(ISOTOUCH_RAYCAST_DIST_MAX < 64u, "6 bits per cell");
+  std::vector<float> out(t1 - t0);
+  for (std::size_t t = t0; t < t1; ++t) {
+    std::uint32_t w = 0;
+    for (std::size_t j = 0; j < 4 && 4 * t + j < d.size(); ++j) w |= std::uint32_t(d[4 * t + j]) << (6 * j);
+    out[t - t0] = float(w);
+  }
+  return out;
+}
+
 /// Uploads `bytes` into a new device-local buffer through a staging buffer (one submit).
 Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what) {
   auto dst = GpuBuffer::create(ctx, bytes, MemoryIntent::DeviceLocal, what);
@@ -583,7 +596,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
     return R::fail("raycast: " + std::to_string(field.cell_dist.size()) + " cell distances for a grid needing " +
                    std::to_string(cells) + " (build the field with make_raycast_field)");
   const std::uint64_t max_texels = ctx.properties().limits.maxTexelBufferElements;
-  if (std::max<std::uint64_t>(field.values.size(), cells) > max_texels)
+  if (std::max<std::uint64_t>(field.values.size(), (cells + 3) / 4) > max_texels)
     return R::fail("raycast: the volume's " + std::to_string(field.values.size()) + " voxels (" + std::to_string(cells) +
                    " cells) exceed maxTexelBufferElements " + std::to_string(max_texels) + " on " + ctx.info().name +
                    " (one texel binding each)");
@@ -594,7 +607,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
   // Binding 2: the cell distances as floats (a texel buffer of R32_SFLOAT).
-  const std::vector<float> cd(impl->field.cell_dist.begin(), impl->field.cell_dist.end());
+  const std::vector<float> cd = pack_cells(impl->field.cell_dist, 0, (impl->field.cell_dist.size() + 3) / 4);
   auto b = upload(ctx, cd.data(), cd.size() * sizeof(float), "raycast cell distances");
   if (!b) return R::fail(b.error);
   impl->cells = std::move(*b.value);
@@ -792,6 +805,8 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   UpdateStats st;
   // Voxel rows of the bricks: host copy, then one copy region per row.
   std::vector<VkBufferCopy> regions;
+  bool max_changed = false;  // a voxel holding the largest |value| was overwritten
+  double new_max = 0;        // the largest finite |value| written
   for (std::uint32_t id : ids) {
     if (id >= brick_count)
       throw std::invalid_argument("raycast update: brick id " + std::to_string(id) + " out of range (the grid has " +
@@ -801,6 +816,10 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
     for (int z = 8 * bz; z < std::min(n[2], 8 * bz + 8); ++z)
       for (int y = 8 * by; y < std::min(n[1], 8 * by + 8); ++y) {
         const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x0);
+        for (std::size_t k = at; k < at + std::size_t(x1 - x0); ++k) {  // the largest |value|: old and new
+          if (std::isfinite(f.values[k]) && std::fabs(double(f.values[k])) >= m.mag) max_changed = true;
+          if (std::isfinite(values[k])) new_max = std::max(new_max, std::fabs(double(values[k])));
+        }
         std::memcpy(f.values.data() + at, values.data() + at, std::size_t(x1 - x0) * sizeof(float));
         regions.push_back({at * sizeof(float), at * sizeof(float), std::size_t(x1 - x0) * sizeof(float)});
       }
@@ -828,7 +847,9 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       m.dirty_lo[a] = none ? vlo[a] : std::min(m.dirty_lo[a], vlo[a]);
       m.dirty_hi[a] = none ? vhi[a] : std::max(m.dirty_hi[a], vhi[a]);
     }
-    const double mag = value_magnitude(f.values, f.background);
+    // The margin's scale (value_magnitude): grown by a new value, else unchanged unless a
+    // voxel that held it was overwritten (then scanned again).
+    const double mag = new_max > m.mag ? new_max : max_changed ? value_magnitude(f.values, f.background) : m.mag;
     const int R = int(ISOTOUCH_RAYCAST_DIST_MAX);
     std::array<int, 3> olo{}, ohi{}, slo{}, shi{};  // cells [olo, ohi] recomputed; voxels [slo, shi) read
     for (int a = 0; a < 3; ++a) {
@@ -849,6 +870,7 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       for (std::size_t i = 0; i < cd.size(); ++i) write(i, cd[i]);
       m.mag = mag;
       st.cells_recomputed = cd.size();
+      m.active = active_box(f);
     } else {
       core::Grid sub = f.grid;
       sub.dims = {shi[0] - slo[0], shi[1] - slo[1], shi[2] - slo[2]};
@@ -862,17 +884,36 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       const std::vector<std::uint8_t> cd = cell_distances_with(sub, sv, f.iso, f.background, mag);
       const std::size_t sx = std::size_t(sub.dims[0] + 2), sy = std::size_t(sub.dims[1] + 2);
       st.cells_recomputed = std::uint64_t(ohi[0] - olo[0] + 1) * std::uint64_t(ohi[1] - olo[1] + 1) * std::uint64_t(ohi[2] - olo[2] + 1);
+      // The active box grows by the cells that turned active (cells that turned inactive
+      // leave it as it was: a larger box only starts the skipping march earlier).
+      std::array<int, 3> alo{n[0] + 1, n[1] + 1, n[2] + 1}, ahi{-2, -2, -2};
       for (int z = olo[2]; z <= ohi[2]; ++z)
         for (int y = olo[1]; y <= ohi[1]; ++y)
-          for (int x = olo[0]; x <= ohi[0]; ++x)  // cell c stored at c + 1, in both
-            write((std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1),
-                  cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)]);
+          for (int x = olo[0]; x <= ohi[0]; ++x) {  // cell c stored at c + 1, in both
+            const std::uint8_t d = cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)];
+            write((std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1), d);
+            if (d == 0) {
+              alo = {std::min(alo[0], x), std::min(alo[1], y), std::min(alo[2], z)};
+              ahi = {std::max(ahi[0], x), std::max(ahi[1], y), std::max(ahi[2], z)};
+            }
+          }
+      if (ahi[0] >= -1) {  // cell c spans [c, c + 1]
+        std::array<double, 3> lo3{double(alo[0]), double(alo[1]), double(alo[2])};
+        std::array<double, 3> hi3{ahi[0] + 1.0, ahi[1] + 1.0, ahi[2] + 1.0};
+        if (m.active)
+          for (int a = 0; a < 3; ++a) {
+            lo3[a] = std::min(lo3[a], m.active->first[a]);
+            hi3[a] = std::max(hi3[a], m.active->second[a]);
+          }
+        m.active = std::pair{lo3, hi3};
+      }
     }
   }
-  VkBufferCopy cell_region{};  // binding 2 holds one float per cell
+  VkBufferCopy cell_region{};  // binding 2 holds 4 cells per float (pack_cells)
   if (hi > lo) {
+    lo /= 4;  // now texels
+    hi = (hi + 3) / 4;
     cell_region = {0, lo * sizeof(float), (hi - lo) * sizeof(float)};
-    m.active = active_box(f);
   }
   std::size_t bytes = 0;
   for (const VkBufferCopy& r : regions) bytes += r.size;
@@ -887,9 +928,9 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       r.srcOffset = o;
       o += r.size;
     }
-    if (cell_region.size) {  // the cells [lo, hi) as floats
-      float* cf = reinterpret_cast<float*>(dst + o);
-      for (std::size_t i = lo; i < hi; ++i) cf[i - lo] = float(f.cell_dist[i]);
+    if (cell_region.size) {  // the texels [lo, hi)
+      const std::vector<float> packed = pack_cells(f.cell_dist, lo, hi);
+      std::memcpy(dst + o, packed.data(), packed.size() * sizeof(float));
       cell_region.srcOffset = o;
     }
     VkCommandBuffer cmd = m.ctx.begin_commands();

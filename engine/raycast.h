@@ -17,7 +17,8 @@
 // Shader input (bindings of RaycastParams in shaders/isotouch_shared.h): dense float
 // values + the distance of each trilinear cell (chessboard distance to the nearest cell that can
 // hold an inside value; cell_distances(), rebuilt from the values whenever they change; one
-// byte per cell on the host, one float per cell on the device), both uniform texel buffers.
+// byte per cell on the host, 4 cells per float texel on the device), both uniform texel
+// buffers: a volume up to maxTexelBufferElements voxels (2^27 on lavapipe: 512^3) renders.
 // Swapping in a bricked snapshot (core/brick_field.h) changes only the shader's voxel()
 // (one brick-table lookup, then the 9^3 pool brick: a trilinear cell never straddles two
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
@@ -209,7 +210,7 @@ class RayCaster {
   struct UpdateStats {
     std::size_t bricks = 0;           ///< 8^3 bricks whose voxels were copied
     std::uint64_t value_bytes = 0;    ///< voxel bytes uploaded (the bricks' rows only)
-    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed, a float per cell)
+    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed, 4 cells per float)
     std::uint64_t cells_recomputed = 0;  ///< cells whose distance was recomputed on the host
     double ms = 0;                    ///< update(), everything included [ms]
   };

@@ -151,7 +151,8 @@ struct BrickMinMaxPush {
 // per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
 // RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
 // (uniform texel buffer, R32_SFLOAT per voxel, x fastest), 2 cell distances (uniform texel
-// buffer, R32_SFLOAT per trilinear cell holding its distance, see ISOTOUCH_RAYCAST_DIST_MAX),
+// buffer, R32_SFLOAT: 4 trilinear cells per texel, 6 bits each from the low end, as an exact
+// integer; see ISOTOUCH_RAYCAST_DIST_MAX),
 // 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
 // -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
@@ -164,7 +165,7 @@ struct BrickMinMaxPush {
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
-// x fastest; one byte per cell on the host, one float per cell on the device). Cell c (corners c .. c + 1) is active
+// x fastest; one byte per cell on the host, 4 cells per float texel on the device). Cell c (corners c .. c + 1) is active
 // if one of its 8 corner values (background outside the grid) can be inside, with a margin
 // for the rounding of the lerps; its byte is the chessboard distance [cells] to the nearest
 // active cell (0: active), capped at ISOTOUCH_RAYCAST_DIST_MAX (engine/raycast.cpp; each

@@ -46,7 +46,7 @@ layout(std140, set = 0, binding = 0) uniform ParamsBuf { RaycastParams P; };
 // Bindings 1 and 2 are uniform texel buffers (R32_SFLOAT, texelFetch): on llvmpipe a texel
 // fetch is one vector gather, a storage-buffer load a per-lane loop with a bounds check.
 layout(set = 0, binding = 1) uniform samplerBuffer vals;    // voxel values, x fastest
-layout(set = 0, binding = 2) uniform samplerBuffer cdist;   // one float per trilinear cell
+layout(set = 0, binding = 2) uniform samplerBuffer cdist;   // 4 trilinear cells per float, 6 bits each
 // The grid's size as specialization constants (one pipeline per field): the voxel and cell
 // index arithmetic folds to constant multiplies. Scalars only: glslang turns a float() of a
 // specialization constant into a conversion that Vulkan's SPIR-V does not allow, and the
@@ -246,7 +246,9 @@ int march(vec3 e, vec3 d, float t0, float t1, float h, int K) { return march_fro
 // The index is clamped into the cells (a caller's select may evaluate it for any c).
 uint cell_dist(ivec3 c) {
   int sx = clamp(c.x + 1, 0, NX + 1), sy = clamp(c.y + 1, 0, NY + 1), sz = clamp(c.z + 1, 0, NZ + 1);
-  return uint(texelFetch(cdist, (sz * (NY + 2) + sy) * (NX + 2) + sx).x);
+  int i = (sz * (NY + 2) + sy) * (NX + 2) + sx;
+  uint w = uint(texelFetch(cdist, i >> 2).x);  // an integer below 2^24, exact in float
+  return (w >> (6u * uint(i & 3))) & 63u;
 }
 
 // The march with empty-space skipping: the same lattice samples k in [0, K] as march(), in

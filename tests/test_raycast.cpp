@@ -693,6 +693,44 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
+// A volume larger than one storage binding (maxStorageBufferRange, 128 MiB on lavapipe): a
+// 512^3 float sphere (512 MiB) renders through the texel bindings as the CPU reference
+// draws it, and an edit on its far corner brick (the last texels) shows.
+TEST(Raycast, VolumeLargerThanOneStorageBindingRenders) {
+  engine::Volume vol = engine::make_sphere({512, 512, 512}, 0.5e-3, 200);
+  ASSERT_GT(vol.voxels.size() * sizeof(float), vk().max_binding_bytes());
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const core::Grid grid = vol.grid;
+  const RaycastField f = engine::make_raycast_field(grid, std::move(vol.voxels), iso, bg);
+  if (f.values.size() > vk().properties().limits.maxTexelBufferElements)
+    GTEST_SKIP() << "this device's maxTexelBufferElements is below 512^3";
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  const Vec3 c = grid.centre_m();
+  const CameraView view = engine::look_at(c + Vec3{0.18, -0.3, 0.24}, c, {0, 0, 1}, 40);
+  const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, 64, 64);
+  expect_gpu_matches_cpu(g, engine::render_cpu(f, view, RaycastStyle{}, 64, 64), 1e3, "512^3 sphere");
+  EXPECT_GT(hits(g), 500u);
+  // Fill the far corner (x, z = 480..511, y = 0..31: toward the eye; 4^3 bricks, the last
+  // voxels) with material.
+  std::vector<float> edited = f.values;
+  std::vector<std::uint32_t> bricks;
+  for (int z = 480; z < 512; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 480; x < 512; ++x) {
+        edited[(std::size_t(z) * 512 + std::size_t(y)) * 512 + std::size_t(x)] = 100.f;
+        bricks.push_back(std::uint32_t((z / 8 * 64 + y / 8) * 64 + x / 8));
+      }
+  (*rc.value)->update(edited, bricks);
+  const RaycastImage e = (*rc.value)->render(view, RaycastStyle{}, 64, 64);
+  std::size_t nearer = 0;  // the block lies in front of the sphere as seen from the eye
+  for (std::size_t i = 0; i < e.depth.size(); ++i) nearer += e.depth[i] >= 0 && (g.depth[i] < 0 || e.depth[i] < g.depth[i] - 0.01f);
+  EXPECT_GT(nearer, 10u) << "the block added at the far corner does not show";
+  expect_gpu_matches_cpu(e, engine::render_cpu((*rc.value)->field(), view, RaycastStyle{}, 64, 64), 1e3, "512^3 edited");
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 // Frames with the last frame's camera draw again only where the probe or an edit can show
 // (RaycastImage::reused), and each equals, bit for bit, a full frame of a new ray caster on
 // the same values (the truth): the probe moved, the probe gone, an edit (carve in front of

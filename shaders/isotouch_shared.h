@@ -277,6 +277,14 @@ struct RaycastCounter {
   uint groups_z;
   uint count;        // hit pixels appended by raycast_march.comp
 };
+// The floor of a frame on this device (raycast_floor.comp, tests/bench_raycast_floor.cpp):
+// one invocation per pixel, rows of ISOTOUCH_RAYCAST_WG_X; push constants.
+struct RaycastFloorPush {
+  uint width;        // frame size [pixels]
+  uint height;
+  uint pad0;
+  uint pad1;
+};
 // ---- end raycast ----------------------------------------------------------------------
 
 // ---- sparse chain ---------------------------------

@@ -43,7 +43,8 @@ sys.exit(0 if (w, h) == (400, 300) else 1)
 PY
 python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
 # Dropped files (tests/sculpt/drop.json): a scene that is not one and a missing volume show
-# their error and the head stays; the chest volume opens in a new session (the head's isovalue).
+# their error and the head stays; the chest's DICOM series folder loads on a background thread
+# while the head session goes on drawing, then opens in a new session (the head's isovalue).
 set +e
 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/drop.json" \
   --frames 10 --size 320 --validation --no-overlay > "$out/drop.txt" 2>&1
@@ -52,7 +53,9 @@ set -e
 cat "$out/drop.txt"
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with dropped files exited $rc"; exit 1; fi
 [ "$(grep -c "cannot open .*(keeping head)" "$out/drop.txt")" -eq 2 ] || { echo "FAIL: a bad drop did not keep the old volume"; exit 1; }
-grep -q "^sculpt   sculpt: 256x256x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest did not open"; exit 1; }
+grep -q "^sculpt   opening .*dicom-5mm (loaded in [0-9.]* s, [1-9][0-9]* frames drawn meanwhile)" "$out/drop.txt" ||
+  { echo "FAIL: the dropped series did not load while the session went on drawing"; exit 1; }
+grep -q "^sculpt   sculpt: 512x512x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest series did not open"; exit 1; }
 if grep -q "^overlay  " "$out/drop.txt"; then echo "FAIL: --no-overlay still set up the overlay"; exit 1; fi
 # The isovalue slider (tests/sculpt/iso.json): let go at 500 HU, the session restarts there
 # with the volume as edited; the skin (500) covers more pixels than the skull (1150), and the

@@ -11,6 +11,8 @@
 #include <iomanip>
 #include <limits>
 #include <condition_variable>
+#include <deque>
+#include <future>
 #include <mutex>
 #include <optional>
 #include <sstream>
@@ -38,9 +40,9 @@
 namespace isotouch::sculpt {
 
 struct Carried {
-  engine::Volume volume;             ///< as edited, min and max refreshed
-  engine::OrbitCamera camera;
-  ToolState tool;
+  engine::Volume volume;             ///< as edited (min and max refreshed), or as a dropped file loaded
+  std::optional<engine::OrbitCamera> camera;  ///< none: the volume's default
+  std::optional<ToolState> tool;     ///< none: the default tool
   std::vector<InputEvent> script;    ///< the script's events after the one that restarted
 };
 
@@ -247,7 +249,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   xf.scale = scene.workspace_scale;
   xf.translation_m = vol.grid.centre_m();
   CameraControl camera;
-  camera.cam = o.carried ? o.carried->camera : app::default_camera(vol);
+  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : app::default_camera(vol);
   engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
   // The probe starts at rest just outside the volume's box in front of the camera.
   const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
@@ -410,9 +412,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
 
   // --- the frame loop -----------------------------------------------------------------
   ToolState tool;
-  if (o.carried) tool = o.carried->tool;
+  if (o.carried && o.carried->tool) tool = *o.carried->tool;
   tool.targets = session::default_targets(vol, live.iso);
-  if (!o.carried) {
+  if (!(o.carried && o.carried->tool)) {
     const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
     tool.radius_m = std::max(4e-3, 2.5 * sp);
   }
@@ -521,32 +523,64 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     }
   };
 
-  // A dropped file: read it here first; only one that can be read ends this session.
-  auto try_open = [&](const std::string& path) -> bool {
+  // Dropped files load one at a time on a background thread while this session goes on (the
+  // Stats panel shows the progress); one that loads ends this session and the next starts on
+  // it; one that cannot be read shows its error and the session keeps its volume.
+  struct Loading {
+    std::string path;
+    Options next;
+    std::future<std::shared_ptr<Carried>> result;
+    Clock::time_point since;
+    int frame = 0;  // frames drawn when it started
+  };
+  std::optional<Loading> loading;
+  std::deque<std::string> drop_queue;
+  auto start_load = [&](const std::string& path) {
     Options next = o;
     next.input = path;
     next.script.clear();
     next.record.clear();
     next.carried = nullptr;
-    if (fs::path(path).extension() == ".json") next.iso.reset();
-    if (fs::path(path).extension() != ".json") {
+    if (fs::path(path).extension() == ".json") {
+      next.iso.reset();
+    } else {
       next.iso = scene.hri.tau;
       next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
     }
+    log << "sculpt   loading " << path << "\n";
+    loading = Loading{path, next, std::async(std::launch::async, [next] {
+                        const io::Scene sc = input_scene(next);
+                        auto c = std::make_shared<Carried>();
+                        c->volume = app::load_scene_volume(sc);
+                        const engine::Volume& v = c->volume;
+                        if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
+                          throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
+                                                   fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
+                        return c;
+                      }),
+                      Clock::now(), frame};
+  };
+  // True when a dropped file has loaded and this session should end for it.
+  auto poll_load = [&]() -> bool {
+    if (!loading && !drop_queue.empty()) {
+      start_load(drop_queue.front());
+      drop_queue.pop_front();
+    }
+    if (!loading || loading->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
+    Loading done = std::move(*loading);
+    loading.reset();
     try {
-      const io::Scene sc = input_scene(next);
-      const engine::Volume v = app::load_scene_volume(sc);
-      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
-        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" + fixed(v.min_value, 3) +
-                                 ", " + fixed(v.max_value, 3) + "]");
+      done.next.carried = done.result.get();
     } catch (const std::exception& e) {
-      status = "cannot open " + path + ": " + e.what() + " (keeping " + scene.name + ")";
+      status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
       log << "sculpt   " << status << "\n";
       return false;
     }
     if (!reopen) return false;
-    *reopen = next;
-    log << "sculpt   opening " << path << "\n";
+    *reopen = done.next;
+    log << "sculpt   opening " << done.path << " (loaded in " << fixed(ms_since(done.since) / 1e3, 2) << " s, "
+        << frame - done.frame << " frames drawn meanwhile)\n";
+    drop_queue.clear();
     return true;
   };
   // The isovalue slider let go at `tau`: this session ends and the next one starts at tau
@@ -659,11 +693,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     // Keys, camera drags, the wheel, dropped files.
     for (const Input::Key& k : input.keys) handle_key(k);
     input.keys.clear();
-    bool reopening = false;
-    for (const std::string& path : input.drops)
-      if (!reopening) reopening = try_open(path);
+    for (const std::string& path : input.drops) drop_queue.push_back(path);
     input.drops.clear();
-    if (reopening) break;
+    if (poll_load()) break;
     const bool ctrl = glfwGetKey(window.handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
                       glfwGetKey(window.handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS;
     const double dx = input.px - input.last_px, dy = input.py - input.last_py;
@@ -752,6 +784,8 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
                            : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
       panel.status = status;
+      panel.loading = loading ? loading->path : std::string();
+      panel.loading_s = loading ? ms_since(loading->since) / 1e3 : 0.0;
       panels->build(tool, iso_ctl, panel, overlay);
     }
 #endif
@@ -789,10 +823,16 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
             << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
             << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed"
             << (mouse ? std::string() : std::string(" | device ") + servo::to_string(session->servo_thread()->device_status()))
-            << (status.empty() ? "" : " | " + status);
+            << (loading ? " | loading " + loading->path : std::string()) << (status.empty() ? "" : " | " + status);
       glfwSetWindowTitle(window.handle(), title.str().c_str());
     }
   }
+  // --frames reached while a dropped file loads: it opens next, as if it had loaded in time.
+  if (o.frames > 0 && frame >= o.frames && !restarting)
+    while (loading || !drop_queue.empty()) {
+      if (loading) loading->result.wait();
+      if (poll_load()) break;
+    }
   const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
   if (stroke.open()) {
     session::EditEvent e;

@@ -9,6 +9,8 @@
 #include <imgui_impl_vulkan.h>
 
 #include <algorithm>
+#include <cmath>
+#include <string>
 #include <array>
 #include <utility>
 
@@ -91,6 +93,13 @@ void stats_panel(const PanelStats& s) {
   ImGui::TextUnformatted(("volume      " + s.volume).c_str());
   ImGui::TextUnformatted(("device      " + s.device).c_str());
   if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
+  if (!s.loading.empty()) {
+    // The readers report no fraction done: the bar sweeps once a second while the file loads,
+    // with the time so far (the session keeps running meanwhile).
+    ImGui::TextWrapped("loading %s", s.loading.c_str());
+    const std::string label = std::to_string(int(s.loading_s * 10) / 10) + "." + std::to_string(int(s.loading_s * 10) % 10) + " s";
+    ImGui::ProgressBar(float(s.loading_s - std::floor(s.loading_s)), ImVec2(-1, 0), label.c_str());
+  }
   ImGui::End();
 }
 

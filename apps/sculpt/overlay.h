@@ -37,6 +37,8 @@ struct PanelStats {
   std::string volume;                 ///< dims, spacing, orientation
   std::string device;                 ///< the haptic device and the status its last tick judged
   std::string status;                 ///< the last save, export or drop message
+  std::string loading;                ///< a dropped file loading in the background ("" = none)
+  double loading_s = 0;               ///< for this long [s]
 };
 
 class Overlay final : public FrameHook {

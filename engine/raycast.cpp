@@ -422,8 +422,8 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 
 namespace {
 /// The pixels [x0, x1) x [y0, y1) whose rays can meet the index-space box [lo, hi]: the
-/// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, widened to
-/// whole tiles of the march pass; the whole image if a corner is not in front of the eye.
+/// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, x0 a multiple
+/// of 8; the whole image if a corner is not in front of the eye.
 struct PixelRect {
   std::uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
 };
@@ -450,12 +450,37 @@ PixelRect box_rect(const gpu::RaycastParams& P, std::array<double, 3> lo, std::a
   }
   auto clampi = [](double v, std::uint32_t n) { return std::uint32_t(std::clamp(v, 0.0, double(n))); };
   PixelRect r;
-  r.x0 = clampi(std::floor(lo_x) - 2, P.width) / ISOTOUCH_RAYCAST_WG_X * ISOTOUCH_RAYCAST_WG_X;
-  r.y0 = clampi(std::floor(lo_y) - 2, P.height) / ISOTOUCH_RAYCAST_WG_Y * ISOTOUCH_RAYCAST_WG_Y;
+  r.x0 = clampi(std::floor(lo_x) - 2, P.width) / 8 * 8;  // whole vectors of 8 lanes
+  r.y0 = clampi(std::floor(lo_y) - 2, P.height);
   r.x1 = clampi(std::ceil(hi_x) + 3, P.width);
   r.y1 = clampi(std::ceil(hi_y) + 3, P.height);
   if (r.x1 <= r.x0 || r.y1 <= r.y0) r.x1 = r.x0, r.y1 = r.y0;  // the box is off screen
   return r;
+}
+
+/// The pixels the primitives' bounding box (index space, 1 voxel wider) projects to (none
+/// without primitives; the whole image if one is not finite): a pixel whose ray meets no
+/// primitive keeps the colour the shade pass gave it.
+PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::RaycastPrim>& prims, int width, int height) {
+  if (prims.empty()) return {};
+  std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
+  auto grow = [&](double x, double y, double z, double r) {
+    const double p[3] = {x, y, z};
+    const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
+    const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
+    for (int a = 0; a < 3; ++a) {
+      plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
+      phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
+    }
+  };
+  bool finite = true;
+  for (const gpu::RaycastPrim& q : prims) {
+    finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
+             std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
+    grow(q.ax, q.ay, q.az, q.r0);
+    if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
+  }
+  return finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
 }
 
 /// The index-space box covering every active cell (cell_dist 0; cell c spans [c, c + 1]),
@@ -479,12 +504,14 @@ std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active_bo
 }  // namespace
 
 struct RayCaster::Impl {
+  /// Bindings 1 (values) and 2 (cell distances) are uniform texel buffers.
+  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2);
   VulkanContext& ctx;
   RaycastField field;
   // The four passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   ComputePipeline<gpu::RaycastPush> march_skip, march_plain, args, shade_lin, shade, overlay;
-  GpuBuffer values, cells;                 // device-local, resident
+  GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
   GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch
@@ -498,15 +525,30 @@ struct RayCaster::Impl {
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
   DescriptorArena arena;                   // reset per frame
   GpuTimer timer;
+  // The last frame, kept for the next one (RayCaster::render: reuse): its parameters (the
+  // active box zeroed: skipping does not change a pixel), flags and whether the linear
+  // colour of every hit pixel is in bindings 6-8; the overlay's pixel rectangle; the voxels
+  // update() changed since ([lo, hi) index space, lo > hi: none).
+  bool cache_valid = false, cache_linear = false;
+  gpu::RaycastParams cache_key{};
+  std::uint32_t cache_flags = 0;
+  PixelRect cache_orect;
+  std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
+  /// Specialization constants: 0 the pass's variant, 1-3 the grid's size.
+  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant) {
+    return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2])};
+  }
   Impl(VulkanContext& c, RaycastField f)
       : ctx(c),
         field(std::move(f)),
-        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, {1u}),
-        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, {0u}),
-        args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u),
-        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, {1u}),
-        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, {0u}),
-        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u),
+        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1),
+                   kTexel),
+        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0), kTexel),
+        args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u, {}, kTexel),
+        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, spec(field, 1),
+                  kTexel),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0), kTexel),
+        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0), kTexel),
         arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 4) {}
 };
@@ -516,6 +558,19 @@ RayCaster::~RayCaster() = default;
 const RaycastField& RayCaster::field() const { return impl_->field; }
 
 namespace {
+/// Binding 2's texels [t0, t1): texel t holds the distances of cells 4t .. 4t + 3 (0 past
+/// the last), 6 bits each from the low end, as a float (an integer below 2^24: exact).
+std::vector<float> pack_cells(const std::vector<std::uint8_t>& d, std::size_t t0, std::size_t t1) {
+  static_assert(ISOTOUCH_RAYCAST_DIST_MAX < 64u, "6 bits per cell");
+  std::vector<float> out(t1 - t0);
+  for (std::size_t t = t0; t < t1; ++t) {
+    std::uint32_t w = 0;
+    for (std::size_t j = 0; j < 4 && 4 * t + j < d.size(); ++j) w |= std::uint32_t(d[4 * t + j]) << (6 * j);
+    out[t - t0] = float(w);
+  }
+  return out;
+}
+
 /// Uploads `bytes` into a new device-local buffer through a staging buffer (one submit).
 Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what) {
   auto dst = GpuBuffer::create(ctx, bytes, MemoryIntent::DeviceLocal, what);
@@ -540,20 +595,20 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   if (field.cell_dist.size() != cells)
     return R::fail("raycast: " + std::to_string(field.cell_dist.size()) + " cell distances for a grid needing " +
                    std::to_string(cells) + " (build the field with make_raycast_field)");
-  if (vbytes > ctx.max_binding_bytes())
-    return R::fail("raycast: the volume's " + std::to_string(vbytes) + " bytes exceed maxStorageBufferRange " +
-                   std::to_string(ctx.max_binding_bytes()) + " bytes on " + ctx.info().name +
-                   " (one dense binding; a bricked snapshot would be needed)");
+  const std::uint64_t max_texels = ctx.properties().limits.maxTexelBufferElements;
+  if (std::max<std::uint64_t>(field.values.size(), (cells + 3) / 4) > max_texels)
+    return R::fail("raycast: the volume's " + std::to_string(field.values.size()) + " voxels (" + std::to_string(cells) +
+                   " cells) exceed maxTexelBufferElements " + std::to_string(max_texels) + " on " + ctx.info().name +
+                   " (one texel binding each)");
   auto impl = std::make_unique<Impl>(ctx, field);
   impl->active = active_box(impl->field);
   impl->mag = value_magnitude(impl->field.values, impl->field.background);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
-  // Binding 2: the cell distance bytes, padded to whole uints.
-  std::vector<std::uint8_t> cd(impl->field.cell_dist);
-  cd.resize((cd.size() + 3) / 4 * 4, 0);
-  auto b = upload(ctx, cd.data(), cd.size(), "raycast cell distances");
+  // Binding 2: the cell distances as floats (a texel buffer of R32_SFLOAT).
+  const std::vector<float> cd = pack_cells(impl->field.cell_dist, 0, (impl->field.cell_dist.size() + 3) / 4);
+  auto b = upload(ctx, cd.data(), cd.size() * sizeof(float), "raycast cell distances");
   if (!b) return R::fail(b.error);
   impl->cells = std::move(*b.value);
   const std::size_t pb = sizeof(gpu::RaycastParams);
@@ -592,9 +647,12 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
                              std::pair{&m.lin_b, "raycast colour B"}, std::pair{&m.hits, "raycast hit list"},
                              std::pair{&m.hit_k, "raycast hit samples"}})
       *buf = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, what);
-    m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
-    m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+    if (!(m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped())) {
+      m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
+      m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+    }
     m.pixels = pixels;
+    m.cache_valid = false;
   }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
   if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
@@ -620,14 +678,44 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     rect = box_rect(P, {-1, -1, -1}, {double(P.nx), double(P.ny), double(P.nz)});
   else if (m.active)
     rect = box_rect(P, m.active->first, m.active->second);
+  // Reuse: the same camera, style and size as the last frame: only the pixels whose rays
+  // can meet the voxels update() changed are marched and shaded again (within 3 voxels of
+  // them: the trilinear cells, the refinement's block and the normal's neighbours), and the
+  // overlay is redrawn over its old and new rectangles; every other pixel stays as it was,
+  // which is what a full frame would draw there.
+  gpu::RaycastParams key = P;
+  set3(key.act_lo_x, key.act_lo_y, key.act_lo_z, {0, 0, 0});
+  set3(key.act_hi_x, key.act_hi_y, key.act_hi_z, {0, 0, 0});
+  const PixelRect orect = overlay_rect(P, prims, width, height);
+  const bool needs_linear = orect.x1 > orect.x0 || m.cache_orect.x1 > m.cache_orect.x0;
+  const bool reuse = m.cache_valid && m.cache_flags == push.flags && std::memcmp(&key, &m.cache_key, sizeof key) == 0 &&
+                     (!needs_linear || m.cache_linear);
+  const bool dirty = m.dirty_lo[0] < m.dirty_hi[0];
+  if (reuse) {
+    PixelRect d;
+    if (dirty)
+      d = box_rect(P, {m.dirty_lo[0] - 3.0, m.dirty_lo[1] - 3.0, m.dirty_lo[2] - 3.0},
+                   {m.dirty_hi[0] + 2.0, m.dirty_hi[1] + 2.0, m.dirty_hi[2] + 2.0});
+    rect = {std::max(rect.x0, d.x0), std::max(rect.y0, d.y0), std::min(rect.x1, d.x1), std::min(rect.y1, d.y1)};
+    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) rect = PixelRect{};
+  }
   gpu::RaycastPush march_push = push;
   march_push.x0 = rect.x0;
   march_push.y0 = rect.y0;
   m.timer.mark(cmd, 0);
   // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
   vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);  // hit count 0
-  vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, pack_rgba8(P.bg_r, P.bg_g, P.bg_b));
-  vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, std::bit_cast<std::uint32_t>(-1.0f));
+  const std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b), no_hit = std::bit_cast<std::uint32_t>(-1.0f);
+  if (!reuse) {
+    vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
+    vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, no_hit);
+  } else {
+    for (std::uint32_t y = rect.y0; y < rect.y1; ++y) {  // the rows of the region drawn again
+      const VkDeviceSize at = (VkDeviceSize(y) * std::uint32_t(width) + rect.x0) * 4, n = VkDeviceSize(rect.x1 - rect.x0) * 4;
+      vkCmdFillBuffer(cmd, m.image.handle(), at, n, bg);
+      vkCmdFillBuffer(cmd, m.depth.handle(), at, n, no_hit);
+    }
+  }
   barrier_transfer_to_compute(cmd);
   // 1. march every pixel; 2. hit count -> dispatch size; 3. shade the hits; 4. overlays.
   const auto& march = style.skip_empty ? m.march_skip : m.march_plain;
@@ -642,60 +730,61 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.args.push(cmd, push);
   vkCmdDispatch(cmd, 1, 1, 1);
   barrier_compute_to_indirect(cmd);
-  const auto& shade = prims.empty() ? m.shade : m.shade_lin;
+  const bool linear = reuse ? m.cache_linear : !prims.empty();  // bindings 6-8 complete after this frame
+  const auto& shade = linear ? m.shade_lin : m.shade;
   shade.bind(cmd, m.arena, ranges);
   shade.push(cmd, push);
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
   m.timer.mark(cmd, 3);
-  if (!prims.empty()) {
-    // Only the pixels the primitives' bounding box (index space) projects to: a pixel whose
-    // ray meets no primitive would be written with the colour the shade pass gave it.
-    std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
-    auto grow = [&](double x, double y, double z, double r) {
-      const double p[3] = {x, y, z};
-      const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
-      const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
-      for (int a = 0; a < 3; ++a) {
-        plo[a] = std::min(plo[a], (p[a] - r - org[a]) * inv[a] - 1.0);
-        phi[a] = std::max(phi[a], (p[a] + r - org[a]) * inv[a] + 1.0);
-      }
-    };
-    bool finite = true;
-    for (const gpu::RaycastPrim& q : prims) {
-      finite = finite && std::isfinite(q.ax) && std::isfinite(q.ay) && std::isfinite(q.az) && std::isfinite(q.r0) &&
-               std::isfinite(q.bx) && std::isfinite(q.by) && std::isfinite(q.bz);
-      grow(q.ax, q.ay, q.az, q.r0);
-      if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) grow(q.bx, q.by, q.bz, q.r0);
-    }
-    const PixelRect orect = finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
+  // The overlay over the primitives' rectangle and, reusing, the last frame's (there it
+  // draws the picture without them again, from the linear colour).
+  PixelRect od = orect;
+  if (reuse && m.cache_orect.x1 > m.cache_orect.x0) {
+    const PixelRect& c = m.cache_orect;
+    od = od.x1 > od.x0 ? PixelRect{std::min(od.x0, c.x0), std::min(od.y0, c.y0), std::max(od.x1, c.x1), std::max(od.y1, c.y1)} : c;
+  }
+  if (od.x1 > od.x0) {
     gpu::RaycastPush overlay_push = push;
-    overlay_push.x0 = orect.x0;
-    overlay_push.y0 = orect.y0;
+    overlay_push.x0 = od.x0;
+    overlay_push.y0 = od.y0;
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
     m.overlay.push(cmd, overlay_push);
-    if (orect.x1 > orect.x0)
-      vkCmdDispatch(cmd, (orect.x1 - orect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                    (orect.y1 - orect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+    vkCmdDispatch(cmd, (od.x1 - od.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                  (od.y1 - od.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   }
   m.timer.mark(cmd, 1);
-  barrier_compute_to_transfer(cmd);
-  record_copy(cmd, m.image, m.image_down, pixels * 4);
-  record_copy(cmd, m.depth, m.depth_down, pixels * 4);
-  barrier_transfer_to_host(cmd);
+  // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
+  const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
+  if (in_place) {
+    barrier_compute_to_host(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    record_copy(cmd, m.image, m.image_down, pixels * 4);
+    record_copy(cmd, m.depth, m.depth_down, pixels * 4);
+    barrier_transfer_to_host(cmd);
+  }
 
   RaycastImage img;
   img.width = width;
   img.height = height;
+  img.reused = reuse;
   img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
+  m.cache_valid = true;
+  m.cache_linear = linear;
+  m.cache_key = key;
+  m.cache_flags = push.flags;
+  m.cache_orect = orect;
+  m.dirty_lo = {1, 1, 1};
+  m.dirty_hi = {0, 0, 0};
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);
   img.shade_ms = m.timer.elapsed_ms(2, 3);
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.rgba.resize(pixels);
   img.depth.resize(pixels);
-  std::memcpy(img.rgba.data(), m.image_down.mapped(), pixels * 4);
-  std::memcpy(img.depth.data(), m.depth_down.mapped(), pixels * 4);
+  std::memcpy(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels * 4);
+  std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
   return img;
 }
 
@@ -716,6 +805,8 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   UpdateStats st;
   // Voxel rows of the bricks: host copy, then one copy region per row.
   std::vector<VkBufferCopy> regions;
+  bool max_changed = false;  // a voxel holding the largest |value| was overwritten
+  double new_max = 0;        // the largest finite |value| written
   for (std::uint32_t id : ids) {
     if (id >= brick_count)
       throw std::invalid_argument("raycast update: brick id " + std::to_string(id) + " out of range (the grid has " +
@@ -725,6 +816,10 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
     for (int z = 8 * bz; z < std::min(n[2], 8 * bz + 8); ++z)
       for (int y = 8 * by; y < std::min(n[1], 8 * by + 8); ++y) {
         const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x0);
+        for (std::size_t k = at; k < at + std::size_t(x1 - x0); ++k) {  // the largest |value|: old and new
+          if (std::isfinite(f.values[k]) && std::fabs(double(f.values[k])) >= m.mag) max_changed = true;
+          if (std::isfinite(values[k])) new_max = std::max(new_max, std::fabs(double(values[k])));
+        }
         std::memcpy(f.values.data() + at, values.data() + at, std::size_t(x1 - x0) * sizeof(float));
         regions.push_back({at * sizeof(float), at * sizeof(float), std::size_t(x1 - x0) * sizeof(float)});
       }
@@ -747,7 +842,14 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
         vhi[a] = std::max(vhi[a], std::min(n[a], 8 * b[a] + 8));
       }
     }
-    const double mag = value_magnitude(f.values, f.background);
+    const bool none = m.dirty_lo[0] >= m.dirty_hi[0];
+    for (int a = 0; a < 3; ++a) {  // the next render() draws again where these voxels show
+      m.dirty_lo[a] = none ? vlo[a] : std::min(m.dirty_lo[a], vlo[a]);
+      m.dirty_hi[a] = none ? vhi[a] : std::max(m.dirty_hi[a], vhi[a]);
+    }
+    // The margin's scale (value_magnitude): grown by a new value, else unchanged unless a
+    // voxel that held it was overwritten (then scanned again).
+    const double mag = new_max > m.mag ? new_max : max_changed ? value_magnitude(f.values, f.background) : m.mag;
     const int R = int(ISOTOUCH_RAYCAST_DIST_MAX);
     std::array<int, 3> olo{}, ohi{}, slo{}, shi{};  // cells [olo, ohi] recomputed; voxels [slo, shi) read
     for (int a = 0; a < 3; ++a) {
@@ -768,6 +870,7 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       for (std::size_t i = 0; i < cd.size(); ++i) write(i, cd[i]);
       m.mag = mag;
       st.cells_recomputed = cd.size();
+      m.active = active_box(f);
     } else {
       core::Grid sub = f.grid;
       sub.dims = {shi[0] - slo[0], shi[1] - slo[1], shi[2] - slo[2]};
@@ -781,19 +884,36 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       const std::vector<std::uint8_t> cd = cell_distances_with(sub, sv, f.iso, f.background, mag);
       const std::size_t sx = std::size_t(sub.dims[0] + 2), sy = std::size_t(sub.dims[1] + 2);
       st.cells_recomputed = std::uint64_t(ohi[0] - olo[0] + 1) * std::uint64_t(ohi[1] - olo[1] + 1) * std::uint64_t(ohi[2] - olo[2] + 1);
+      // The active box grows by the cells that turned active (cells that turned inactive
+      // leave it as it was: a larger box only starts the skipping march earlier).
+      std::array<int, 3> alo{n[0] + 1, n[1] + 1, n[2] + 1}, ahi{-2, -2, -2};
       for (int z = olo[2]; z <= ohi[2]; ++z)
         for (int y = olo[1]; y <= ohi[1]; ++y)
-          for (int x = olo[0]; x <= ohi[0]; ++x)  // cell c stored at c + 1, in both
-            write((std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1),
-                  cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)]);
+          for (int x = olo[0]; x <= ohi[0]; ++x) {  // cell c stored at c + 1, in both
+            const std::uint8_t d = cd[(std::size_t(z - slo[2] + 1) * sy + std::size_t(y - slo[1] + 1)) * sx + std::size_t(x - slo[0] + 1)];
+            write((std::size_t(z + 1) * cy + std::size_t(y + 1)) * cx + std::size_t(x + 1), d);
+            if (d == 0) {
+              alo = {std::min(alo[0], x), std::min(alo[1], y), std::min(alo[2], z)};
+              ahi = {std::max(ahi[0], x), std::max(ahi[1], y), std::max(ahi[2], z)};
+            }
+          }
+      if (ahi[0] >= -1) {  // cell c spans [c, c + 1]
+        std::array<double, 3> lo3{double(alo[0]), double(alo[1]), double(alo[2])};
+        std::array<double, 3> hi3{ahi[0] + 1.0, ahi[1] + 1.0, ahi[2] + 1.0};
+        if (m.active)
+          for (int a = 0; a < 3; ++a) {
+            lo3[a] = std::min(lo3[a], m.active->first[a]);
+            hi3[a] = std::max(hi3[a], m.active->second[a]);
+          }
+        m.active = std::pair{lo3, hi3};
+      }
     }
   }
-  VkBufferCopy cell_region{};
-  if (hi > lo) {  // whole uints (binding 2 packs 4 bytes per uint)
-    lo = lo / 4 * 4;
-    hi = std::min((hi + 3) / 4 * 4, std::size_t(m.cells.size()));
-    cell_region = {0, lo, hi - lo};
-    m.active = active_box(f);
+  VkBufferCopy cell_region{};  // binding 2 holds 4 cells per float (pack_cells)
+  if (hi > lo) {
+    lo /= 4;  // now texels
+    hi = (hi + 3) / 4;
+    cell_region = {0, lo * sizeof(float), (hi - lo) * sizeof(float)};
   }
   std::size_t bytes = 0;
   for (const VkBufferCopy& r : regions) bytes += r.size;
@@ -808,11 +928,9 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       r.srcOffset = o;
       o += r.size;
     }
-    if (cell_region.size) {
-      // The bytes [lo, hi); past the last cell, the zero padding of the last uint.
-      const std::size_t have = std::min(std::size_t(cell_region.size), f.cell_dist.size() - std::size_t(cell_region.dstOffset));
-      std::memcpy(dst + o, f.cell_dist.data() + cell_region.dstOffset, have);
-      std::memset(dst + o + have, 0, std::size_t(cell_region.size) - have);
+    if (cell_region.size) {  // the texels [lo, hi)
+      const std::vector<float> packed = pack_cells(f.cell_dist, lo, hi);
+      std::memcpy(dst + o, packed.data(), packed.size() * sizeof(float));
       cell_region.srcOffset = o;
     }
     VkCommandBuffer cmd = m.ctx.begin_commands();

@@ -15,8 +15,10 @@
 // RAS NIfTI and an LPS MetaImage of the same head both show the face from the front.
 //
 // Shader input (bindings of RaycastParams in shaders/isotouch_shared.h): dense float
-// values + one byte per trilinear cell (chessboard distance to the nearest cell that can
-// hold an inside value; cell_distances(), rebuilt from the values whenever they change).
+// values + the distance of each trilinear cell (chessboard distance to the nearest cell that can
+// hold an inside value; cell_distances(), rebuilt from the values whenever they change; one
+// byte per cell on the host, 4 cells per float texel on the device), both uniform texel
+// buffers: a volume up to maxTexelBufferElements voxels (2^27 on lavapipe: 512^3) renders.
 // Swapping in a bricked snapshot (core/brick_field.h) changes only the shader's voxel()
 // (one brick-table lookup, then the 9^3 pool brick: a trilinear cell never straddles two
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
@@ -153,6 +155,10 @@ struct RaycastImage {
   /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
+  /// GPU: the camera, style and size were the last frame's, so only the pixels where the
+  /// voxels update() changed can show, and the overlay's old and new rectangles, were drawn
+  /// again (the rest of the picture is the last frame's, as a full frame would draw it).
+  bool reused = false;
 };
 
 /// The per-frame parameter block shared by GPU and CPU (flags not included).
@@ -181,8 +187,8 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
 /// owns one descriptor arena and one timer).
 class RayCaster {
  public:
-  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or a storage binding
-  /// exceeds maxStorageBufferRange (128 MiB on lavapipe: a bricked snapshot would lift it).
+  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or the voxels or cells
+  /// exceed maxTexelBufferElements (one texel binding each).
   static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, const RaycastField& field);
   ~RayCaster();
   RayCaster(const RayCaster&) = delete;
@@ -192,6 +198,9 @@ class RayCaster {
   /// shaders/raycast_common.glsl in one submission, reads back. With skipping, the march
   /// covers only the pixels the box of active cells projects to (rays elsewhere meet no
   /// active cell, so no inside sample); without, the pixels the volume's box projects to.
+  /// With the last frame's camera, style and size, only the pixels the voxels changed by
+  /// update() since can reach (3 voxels wider), and the overlay's last and new rectangles,
+  /// are drawn again (RaycastImage::reused); the picture is the one a full frame gives.
   /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});
@@ -201,7 +210,7 @@ class RayCaster {
   struct UpdateStats {
     std::size_t bricks = 0;           ///< 8^3 bricks whose voxels were copied
     std::uint64_t value_bytes = 0;    ///< voxel bytes uploaded (the bricks' rows only)
-    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed)
+    std::uint64_t cell_bytes = 0;     ///< cell-distance bytes uploaded (the span that changed, 4 cells per float)
     std::uint64_t cells_recomputed = 0;  ///< cells whose distance was recomputed on the host
     double ms = 0;                    ///< update(), everything included [ms]
   };

@@ -162,6 +162,11 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
     seen_ns_[r.version % seen_size_].compare_exchange_strong(expected, r.t_ns, std::memory_order_release);
   }
   if (fd_ >= 0 && !ticks_.push(r)) dropped_ticks_.fetch_add(1, std::memory_order_relaxed);
+  if (r.dt_s > 0) {  // the period error's histogram (no allocation, no lock)
+    const double err_us = std::fabs(r.dt_s - 1.0 / cfg_.servo.rate_hz) * 1e6;
+    const std::size_t bin = std::min(kPeriodBins - 1, std::size_t(err_us / kPeriodBinUs));
+    period_hist_[bin].fetch_add(1, std::memory_order_relaxed);
+  }
   publish_observed(r);
   if (!cfg_.drill || !edits_) return;
   // The button drill at the VHIP (see ButtonDrill).
@@ -412,6 +417,19 @@ LiveStats LiveSession::stats() const {
   s.edits_requested = requested_.load();
   s.edits_dropped = dropped_edits_.load();
   s.ticks_not_recorded = dropped_ticks_.load();
+  std::uint64_t total = 0;
+  for (const auto& b : period_hist_) total += b.load(std::memory_order_relaxed);
+  if (total > 0) {
+    const auto rank = std::uint64_t(std::ceil(0.99 * double(total)));
+    std::uint64_t seen = 0;
+    for (std::size_t i = 0; i < kPeriodBins; ++i) {
+      seen += period_hist_[i].load(std::memory_order_relaxed);
+      if (seen >= rank) {
+        s.period_error_p99_us = double(i + 1) * kPeriodBinUs;
+        break;
+      }
+    }
+  }
   std::lock_guard lock(edits_mu_);
   s.edits_applied = applied_;
   s.edits_refused = refused_;

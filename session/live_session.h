@@ -102,6 +102,9 @@ struct Observed {
 };
 
 /// Counters of a running or stopped session.
+/// Bin width of LiveStats::period_error_p99_us's histogram [us].
+inline constexpr double kPeriodBinUs = 2.0;
+
 struct LiveStats {
   long ticks = 0, missed_deadlines = 0, faults = 0;
   long edits_requested = 0, edits_applied = 0, edits_refused = 0;
@@ -111,6 +114,10 @@ struct LiveStats {
   /// Per published edit: from the start of the tick that asked for it (servo side) or the
   /// submit() call (API) to the start of the first tick that read its snapshot [ms].
   std::vector<double> edit_to_haptics_ms;
+  /// p99 (nearest rank) of |measured period - nominal period| over the ticks so far [us],
+  /// from a histogram of kPeriodBinUs bins (a bin's upper edge; the last bin collects every
+  /// error past the range); -1 before the second tick. Available while the servo runs.
+  double period_error_p99_us = -1;
   std::string setup_note;     ///< what the system refused at start (SCHED_FIFO, pinning, locking)
   std::string record_error;   ///< "" or why the recording failed
 };
@@ -204,6 +211,10 @@ class LiveSession final : private servo::TickObserver {
   // thread / stop() read after the fact).
   std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
   std::size_t seen_size_ = 0;
+
+  // |period error| histogram (servo writes with relaxed increments; stats() reads).
+  static constexpr std::size_t kPeriodBins = 4096;
+  std::array<std::atomic<std::uint32_t>, kPeriodBins> period_hist_{};
 
   // What observe() reads: the last tick, written by the servo thread (a seqlock).
   servo::LatestValue<Observed> observed_;

@@ -146,23 +146,26 @@ struct BrickMinMaxPush {
 // ---- raycast -------------------------------------------
 // First-hit isosurface ray caster: four passes (raycast_march, raycast_args, raycast_shade,
 // raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
-// engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, 8x8 tiles; shade: one
+// engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, rows of 64 pixels
+// (long 1-D workgroups run faster on llvmpipe than 8x8 tiles); shade: one
 // per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
 // RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
-// (float per voxel, x fastest), 2 cell distances (one byte per trilinear cell, 4 per uint,
-// see ISOTOUCH_RAYCAST_DIST_MAX), 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
+// (uniform texel buffer, R32_SFLOAT per voxel, x fastest), 2 cell distances (uniform texel
+// buffer, R32_SFLOAT: 4 trilinear cells per texel, 6 bits each from the low end, as an exact
+// integer; see ISOTOUCH_RAYCAST_DIST_MAX),
+// 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
 // -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
 // RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter.
-#define ISOTOUCH_RAYCAST_WG_X 8
-#define ISOTOUCH_RAYCAST_WG_Y 8
+#define ISOTOUCH_RAYCAST_WG_X 64
+#define ISOTOUCH_RAYCAST_WG_Y 1
 #define ISOTOUCH_RAYCAST_SHADE_WG 64
 #define ISOTOUCH_RAYCAST_BINDINGS 12
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
-// x fastest, byte i in bits 8 (i % 4) of uint i / 4). Cell c (corners c .. c + 1) is active
+// x fastest; one byte per cell on the host, 4 cells per float texel on the device). Cell c (corners c .. c + 1) is active
 // if one of its 8 corner values (background outside the grid) can be inside, with a margin
 // for the rounding of the lerps; its byte is the chessboard distance [cells] to the nearest
 // active cell (0: active), capped at ISOTOUCH_RAYCAST_DIST_MAX (engine/raycast.cpp; each
@@ -273,6 +276,14 @@ struct RaycastCounter {
   uint groups_y;
   uint groups_z;
   uint count;        // hit pixels appended by raycast_march.comp
+};
+// The floor of a frame on this device (raycast_floor.comp, tests/bench_raycast_floor.cpp):
+// one invocation per pixel, rows of ISOTOUCH_RAYCAST_WG_X; push constants.
+struct RaycastFloorPush {
+  uint width;        // frame size [pixels]
+  uint height;
+  uint pad0;
+  uint pad1;
 };
 // ---- end raycast ----------------------------------------------------------------------
 

@@ -1,7 +1,7 @@
 // raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
 // Included by raycast_march.comp, raycast_shade.comp and raycast_overlay.comp; every pass
-// (raycast_args.comp too) binds the same 12 buffers (one descriptor layout, engine/raycast.cpp).
+// (raycast_args.comp too) binds the same 12 bindings (one descriptor layout, engine/raycast.cpp).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels
@@ -43,8 +43,18 @@
 // Binding 0 is a uniform buffer (std140 = std430 for a struct of 4-byte scalars whose size
 // is a multiple of 16): one scalar load per use on llvmpipe, where a storage load is a gather.
 layout(std140, set = 0, binding = 0) uniform ParamsBuf { RaycastParams P; };
-layout(std430, set = 0, binding = 1) readonly buffer Values { float vals[]; };
-layout(std430, set = 0, binding = 2) readonly buffer CellDist { uint cdist[]; };
+// Bindings 1 and 2 are uniform texel buffers (R32_SFLOAT, texelFetch): on llvmpipe a texel
+// fetch is one vector gather, a storage-buffer load a per-lane loop with a bounds check.
+layout(set = 0, binding = 1) uniform samplerBuffer vals;    // voxel values, x fastest
+layout(set = 0, binding = 2) uniform samplerBuffer cdist;   // 4 trilinear cells per float, 6 bits each
+// The grid's size as specialization constants (one pipeline per field): the voxel and cell
+// index arithmetic folds to constant multiplies. Scalars only: glslang turns a float() of a
+// specialization constant into a conversion that Vulkan's SPIR-V does not allow, and the
+// validation layer's spirv-opt folds vector expressions of them (ivec3(NX, NY, NZ) - 1)
+// into invalid SPIR-V for some sizes (45 x 40 x 43).
+layout(constant_id = 1) const int NX = 1;
+layout(constant_id = 2) const int NY = 1;
+layout(constant_id = 3) const int NZ = 1;
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
 layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 per pixel
 layout(std430, set = 0, binding = 5) buffer Depth { float depth[]; };     // t [m] of the hit, -1: none
@@ -58,21 +68,17 @@ layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)
 
-// Per-invocation copies of the parameters the inner loops read (an SSBO read per use
-// is a gather on a CPU Vulkan device).
-ivec3 g_n;
+// Per-invocation copies of the parameters the inner loops read.
 float g_bg, g_tau, g_sign;
-uint g_nx, g_ny;
-uint g_cx, g_cy;  // cells per axis (n + 2) along x and y
 vec3 g_inv_d;     // 1 / d per axis (exit planes: (plane - e) * inv)
 
 // The memory seam: the only function that reads voxel memory. A bricked snapshot
 // (core/brick_field.h) replaces the body with one brick-table lookup + pool read.
 // Branch-free: the index is clamped into the grid and the background selected after.
 float voxel(ivec3 i) {
-  bool outside = any(lessThan(i, ivec3(0))) || any(greaterThanEqual(i, g_n));
-  ivec3 c = clamp(i, ivec3(0), g_n - 1);
-  float v = vals[(uint(c.z) * g_ny + uint(c.y)) * g_nx + uint(c.x)];
+  bool outside = any(lessThan(i, ivec3(0))) || i.x >= NX || i.y >= NY || i.z >= NZ;
+  int cx = clamp(i.x, 0, NX - 1), cy = clamp(i.y, 0, NY - 1), cz = clamp(i.z, 0, NZ - 1);
+  float v = texelFetch(vals, (cz * NY + cy) * NX + cx).x;
   return outside ? g_bg : v;
 }
 
@@ -237,10 +243,12 @@ int march(vec3 e, vec3 d, float t0, float t1, float h, int K) { return march_fro
 
 // Chessboard distance [cells] from trilinear cell c (lower corner, in [-1, n] per axis) to
 // the nearest active cell, 0: active (binding 2, built on the host: engine/raycast.cpp).
+// The index is clamped into the cells (a caller's select may evaluate it for any c).
 uint cell_dist(ivec3 c) {
-  uvec3 s = uvec3(c + 1);
-  uint i = (s.z * g_cy + s.y) * g_cx + s.x;
-  return (cdist[i >> 2u] >> ((i & 3u) * 8u)) & 0xffu;
+  int sx = clamp(c.x + 1, 0, NX + 1), sy = clamp(c.y + 1, 0, NY + 1), sz = clamp(c.z + 1, 0, NZ + 1);
+  int i = (sz * (NY + 2) + sy) * (NX + 2) + sx;
+  uint w = uint(texelFetch(cdist, i >> 2).x);  // an integer below 2^24, exact in float
+  return (w >> (6u * uint(i & 3))) & 63u;
 }
 
 // The march with empty-space skipping: the same lattice samples k in [0, K] as march(), in
@@ -263,7 +271,7 @@ int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int k, int K, float 
       p = ray_point(e, d, t);
       vec3 fl = floor(p);
       ivec3 c = ivec3(fl);
-      bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && all(lessThanEqual(c, g_n));
+      bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && c.x <= NX && c.y <= NY && c.z <= NZ;
       uint D = in_cells ? cell_dist(c) : 0u;
       if (D == 0u) break;
       precise float r = float(D) - eps;
@@ -503,14 +511,9 @@ vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
 }
 
 void init_globals() {
-  g_n = ivec3(int(P.nx), int(P.ny), int(P.nz));
-  g_nx = P.nx;
-  g_ny = P.ny;
   g_bg = P.background;
   g_tau = P.tau;
   g_sign = P.inside_sign;
-  g_cx = P.nx + 2u;
-  g_cy = P.ny + 2u;
 }
 
 // One pixel's ray: unit direction `dir` and eye in grid-world [m]; e, d in index space;

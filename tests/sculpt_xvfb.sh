@@ -43,7 +43,8 @@ sys.exit(0 if (w, h) == (400, 300) else 1)
 PY
 python3 "$src/tests/sculpt/png_check.py" "$out" 0.5 0.45 || { echo "FAIL: screenshots"; exit 1; }
 # Dropped files (tests/sculpt/drop.json): a scene that is not one and a missing volume show
-# their error and the head stays; the chest volume opens in a new session (the head's isovalue).
+# their error and the head stays; the chest's DICOM series folder loads on a background thread
+# while the head session goes on drawing, then opens in a new session (the head's isovalue).
 set +e
 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/drop.json" \
   --frames 10 --size 320 --validation --no-overlay > "$out/drop.txt" 2>&1
@@ -52,8 +53,38 @@ set -e
 cat "$out/drop.txt"
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with dropped files exited $rc"; exit 1; fi
 [ "$(grep -c "cannot open .*(keeping head)" "$out/drop.txt")" -eq 2 ] || { echo "FAIL: a bad drop did not keep the old volume"; exit 1; }
-grep -q "^sculpt   sculpt: 256x256x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest did not open"; exit 1; }
+grep -q "^sculpt   opening .*dicom-5mm (loaded in [0-9.]* s, [1-9][0-9]* frames drawn meanwhile)" "$out/drop.txt" ||
+  { echo "FAIL: the dropped series did not load while the session went on drawing"; exit 1; }
+grep -q "^sculpt   sculpt: 512x512x64 voxels" "$out/drop.txt" || { echo "FAIL: the dropped chest series did not open"; exit 1; }
 if grep -q "^overlay  " "$out/drop.txt"; then echo "FAIL: --no-overlay still set up the overlay"; exit 1; fi
+# The isovalue slider (tests/sculpt/iso.json): let go at 500 HU, the session restarts there
+# with the volume as edited; the skin (500) covers more pixels than the skull (1150), and the
+# probe finds contact on the new surface, so the servo follows the new isovalue too.
+mkdir -p "$out/iso"
+rm -f "$out"/iso/*.png
+set +e
+xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/iso.json" \
+  --screenshot "$out/iso/last.png" --size 320 --validation --no-overlay > "$out/iso.txt" 2>&1
+rc=$?
+set -e
+cat "$out/iso.txt"
+if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt with an isovalue change exited $rc"; exit 1; fi
+if grep -q "timed out\|ended before" "$out/iso.txt"; then echo "FAIL: the isovalue script did not run its course"; exit 1; fi
+grep -q "^sculpt   isovalue 500: the session restarts" "$out/iso.txt" || { echo "FAIL: the isovalue change did not restart the session"; exit 1; }
+grep -q "^sculpt   head: 64x64x93 voxels, isovalue 500," "$out/iso.txt" || { echo "FAIL: the restarted session is not at isovalue 500"; exit 1; }
+python3 - "$src/tests/sculpt/png_check.py" "$out/iso" <<'PY' || { echo "FAIL: the picture did not follow the isovalue"; exit 1; }
+import collections, importlib.util, sys
+spec = importlib.util.spec_from_file_location("png_check", sys.argv[1])
+m = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(m)
+lit = {}
+for n in ("iso-before", "iso-after"):
+    w, h, px = m.read_png(f"{sys.argv[2]}/{n}.png")
+    bg = collections.Counter(px).most_common(1)[0][0]
+    lit[n] = sum(p != bg for p in px) / len(px)
+print(f"lit pixels: skull (1150) {lit['iso-before']:.1%}, skin (500) {lit['iso-after']:.1%}")
+sys.exit(0 if lit["iso-after"] > 1.1 * lit["iso-before"] else 1)
+PY
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
 rc=$?

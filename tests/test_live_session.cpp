@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -202,6 +203,28 @@ TEST(LiveSession, PauseSendsZeroForce) {
   EXPECT_GT(rig.io->nonzero.load(), nz + 20) << "no force after resume";
   live.stop();
   EXPECT_TRUE(rig.io->last_zero.load());
+}
+
+// The period error's p99 is there while the servo runs (the sculpting window's Stats panel
+// reads it), and after stop() it matches, to one histogram bin, the nearest-rank p99 of the
+// servo thread's own record of every period error.
+TEST(LiveSession, PeriodErrorP99WhileRunningMatchesTheServosRecord) {
+  Rig rig;
+  LiveSessionConfig cfg = rig.config();
+  cfg.servo.record_ticks = 1000000;
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, cfg);
+  live.start();
+  wait_until([&] { return live.stats().ticks > 300; }, 10);
+  EXPECT_GE(live.stats().period_error_p99_us, 0.0) << "no p99 while the servo runs";
+  live.stop();
+  const double p99 = live.stats().period_error_p99_us;
+  std::vector<double> err_us;
+  for (std::int64_t e : live.servo_thread()->period_errors_ns()) err_us.push_back(std::fabs(double(e)) * 1e-3);
+  ASSERT_GT(err_us.size(), 300u);
+  std::sort(err_us.begin(), err_us.end());
+  const double truth = err_us[std::size_t(std::ceil(0.99 * double(err_us.size()))) - 1];
+  EXPECT_GE(p99, truth - 1e-6) << "the histogram's p99 lies below the servo's";
+  EXPECT_LE(p99, truth + isotouch::session::kPeriodBinUs + 1e-6) << "more than one bin above the servo's p99";
 }
 
 // The button drill: while the button is down and the probe in contact, brushes are asked

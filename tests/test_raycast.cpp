@@ -693,6 +693,103 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
+// A volume larger than one storage binding (maxStorageBufferRange, 128 MiB on lavapipe): a
+// 512^3 float sphere (512 MiB) renders through the texel bindings as the CPU reference
+// draws it, and an edit on its far corner brick (the last texels) shows.
+TEST(Raycast, VolumeLargerThanOneStorageBindingRenders) {
+  engine::Volume vol = engine::make_sphere({512, 512, 512}, 0.5e-3, 200);
+  ASSERT_GT(vol.voxels.size() * sizeof(float), vk().max_binding_bytes());
+  const core::Isosurface iso{0.0, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const core::Grid grid = vol.grid;
+  const RaycastField f = engine::make_raycast_field(grid, std::move(vol.voxels), iso, bg);
+  if (f.values.size() > vk().properties().limits.maxTexelBufferElements)
+    GTEST_SKIP() << "this device's maxTexelBufferElements is below 512^3";
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  const Vec3 c = grid.centre_m();
+  const CameraView view = engine::look_at(c + Vec3{0.18, -0.3, 0.24}, c, {0, 0, 1}, 40);
+  const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, 64, 64);
+  expect_gpu_matches_cpu(g, engine::render_cpu(f, view, RaycastStyle{}, 64, 64), 1e3, "512^3 sphere");
+  EXPECT_GT(hits(g), 500u);
+  // Fill the far corner (x, z = 480..511, y = 0..31: toward the eye; 4^3 bricks, the last
+  // voxels) with material.
+  std::vector<float> edited = f.values;
+  std::vector<std::uint32_t> bricks;
+  for (int z = 480; z < 512; ++z)
+    for (int y = 0; y < 32; ++y)
+      for (int x = 480; x < 512; ++x) {
+        edited[(std::size_t(z) * 512 + std::size_t(y)) * 512 + std::size_t(x)] = 100.f;
+        bricks.push_back(std::uint32_t((z / 8 * 64 + y / 8) * 64 + x / 8));
+      }
+  (*rc.value)->update(edited, bricks);
+  const RaycastImage e = (*rc.value)->render(view, RaycastStyle{}, 64, 64);
+  std::size_t nearer = 0;  // the block lies in front of the sphere as seen from the eye
+  for (std::size_t i = 0; i < e.depth.size(); ++i) nearer += e.depth[i] >= 0 && (g.depth[i] < 0 || e.depth[i] < g.depth[i] - 0.01f);
+  EXPECT_GT(nearer, 10u) << "the block added at the far corner does not show";
+  expect_gpu_matches_cpu(e, engine::render_cpu((*rc.value)->field(), view, RaycastStyle{}, 64, 64), 1e3, "512^3 edited");
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+// Frames with the last frame's camera draw again only where the probe or an edit can show
+// (RaycastImage::reused), and each equals, bit for bit, a full frame of a new ray caster on
+// the same values (the truth): the probe moved, the probe gone, an edit (carve in front of
+// the camera, bone added behind the skull), the edit undone, and the frames that cannot
+// reuse (no linear colour kept, another style).
+TEST(Raycast, ReusedFramesEqualFullFrames) {
+  const engine::Volume vol = io::load_volume(kHead);
+  const core::Isosurface iso{1150, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const CameraView view = engine::orbit_view(vol.grid, vol.direction, app::default_camera(vol));
+  const Vec3 c = vol.grid.centre_m();
+  const std::vector<gpu::RaycastPrim> at_a = {engine::prim_sphere(c + Vec3{0, -0.06, 0.01}, 4e-3, {1, 1, 0})};
+  const std::vector<gpu::RaycastPrim> at_b = {engine::prim_sphere(c + Vec3{0.02, -0.06, -0.01}, 4e-3, {0, 1, 0}),
+                                              engine::prim_capsule(c, c + Vec3{0, -0.08, 0}, 1e-3, {1, 0, 0})};
+  RaycastStyle clipped;
+  clipped.clip = engine::ClipPlane{c, {0, -1, 0}};
+  auto truth = [&](const std::vector<float>& values, const RaycastStyle& st, const std::vector<gpu::RaycastPrim>& prims) {
+    auto fresh = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, values, iso, bg));
+    EXPECT_TRUE(fresh) << fresh.error;
+    return (*fresh.value)->render(view, st, 320, 240, prims);
+  };
+  auto expect_same = [](const RaycastImage& got, const RaycastImage& want, bool reused, const char* what) {
+    EXPECT_EQ(got.reused, reused) << what;
+    EXPECT_TRUE(got.rgba == want.rgba) << what << ": colours differ from a full frame";
+    EXPECT_TRUE(got.depth == want.depth) << what << ": depths differ from a full frame";
+  };
+  auto rc = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& r = **rc.value;
+  expect_same(r.render(view, RaycastStyle{}, 320, 240), truth(vol.voxels, RaycastStyle{}, {}), false, "first frame");
+  expect_same(r.render(view, RaycastStyle{}, 320, 240, at_a), truth(vol.voxels, RaycastStyle{}, at_a), false,
+              "a probe on a frame without linear colour");
+  expect_same(r.render(view, RaycastStyle{}, 320, 240, at_b), truth(vol.voxels, RaycastStyle{}, at_b), true, "probe moved");
+  expect_same(r.render(view, RaycastStyle{}, 320, 240), truth(vol.voxels, RaycastStyle{}, {}), true, "probe gone");
+  // Edits: carve into the front of the skull, add bone at the back (hidden) and in empty space.
+  std::vector<float> edited = vol.voxels;
+  const auto& n = vol.grid.dims;
+  std::vector<std::uint32_t> dirty;
+  auto edit_box = [&](int x0, int x1, int y0, int y1, int z0, int z1, float v) {
+    for (int z = z0; z < z1; ++z)
+      for (int y = y0; y < y1; ++y)
+        for (int x = x0; x < x1; ++x) {
+          edited[(std::size_t(z) * n[1] + y) * n[0] + x] = v;
+          dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
+        }
+  };
+  edit_box(26, 34, 0, 14, 40, 48, -1000.f);
+  edit_box(28, 36, 50, 64, 70, 93, 2000.f);
+  edit_box(2, 8, 2, 8, 80, 90, 2000.f);
+  r.update(edited, dirty);
+  const RaycastImage carved = r.render(view, RaycastStyle{}, 320, 240, at_a);
+  expect_same(carved, truth(edited, RaycastStyle{}, at_a), true, "after the edits");
+  expect_same(r.render(view, clipped, 320, 240, at_a), truth(edited, clipped, at_a), false, "another style");
+  r.update(vol.voxels, dirty);
+  expect_same(r.render(view, clipped, 320, 240, at_b), truth(vol.voxels, clipped, at_b), true, "the edits undone, clipped");
+  EXPECT_NE(carved.rgba, truth(vol.voxels, RaycastStyle{}, at_a).rgba) << "the carve is not visible";
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 // The same on a volume larger than the reach of the cell distances' local recompute (a
 // sphere of 200^3 voxels): edits one at a time, each far from the others, each update must
 // leave exactly the cell distances of a full rebuild and recompute only around the edit;

@@ -9,7 +9,10 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <limits>
 #include <condition_variable>
+#include <deque>
+#include <future>
 #include <mutex>
 #include <optional>
 #include <sstream>
@@ -35,6 +38,13 @@
 #include "window.h"
 
 namespace isotouch::sculpt {
+
+struct Carried {
+  engine::Volume volume;             ///< as edited (min and max refreshed), or as a dropped file loaded
+  std::optional<engine::OrbitCamera> camera;  ///< none: the volume's default
+  std::optional<ToolState> tool;     ///< none: the default tool
+  std::vector<InputEvent> script;    ///< the script's events after the one that restarted
+};
 
 namespace fs = std::filesystem;
 using core::Vec3;
@@ -154,7 +164,11 @@ std::string bench_script_text() {
 /// The scene to sculpt: the scene file, or a scene made for a volume file.
 io::Scene input_scene(const Options& o) {
   const fs::path p(o.input);
-  if (p.extension() == ".json") return io::load_scene(o.input);
+  if (p.extension() == ".json") {
+    io::Scene sc = io::load_scene(o.input);
+    if (o.iso) sc.hri.tau = *o.iso;
+    return sc;
+  }
   if (!o.iso) throw std::runtime_error(o.input + ": a volume needs --iso VALUE (the isovalue in the volume's units)");
   if (o.inside != "above" && o.inside != "below")
     throw std::runtime_error("--inside must be \"above\" or \"below\", got \"" + o.inside + "\"");
@@ -162,6 +176,20 @@ io::Scene input_scene(const Options& o) {
   t << std::setprecision(17) << "{\"name\": \"sculpt\", \"volume\": {\"path\": \"" << fs::absolute(p).string()
     << "\"}, \"isovalue\": " << *o.iso << ", \"inside\": \"" << o.inside << "\"}";
   return io::parse_scene(t.str(), o.input);
+}
+
+/// The range of a volume's finite voxels, after edits.
+void refresh_range(engine::Volume& v) {
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (float x : v.voxels)
+    if (std::isfinite(x)) {
+      lo = std::min(lo, x);
+      hi = std::max(hi, x);
+    }
+  if (lo <= hi) {
+    v.min_value = lo;
+    v.max_value = hi;
+  }
 }
 
 /// The stats panel's volume line: dims, spacing, orientation.
@@ -179,6 +207,7 @@ void refresh_servo(PanelStats& p, const session::LiveStats& st, double seconds) 
   p.ticks = st.ticks;
   p.missed_deadlines = st.missed_deadlines;
   p.faults = st.faults;
+  if (st.period_error_p99_us >= 0) p.tick_p99_us = st.period_error_p99_us;
   if (!st.edit_to_haptics_ms.empty()) {
     p.edit_to_haptics_last_ms = st.edit_to_haptics_ms.back();
     p.edit_to_haptics_median_ms = eval::median(st.edit_to_haptics_ms);
@@ -197,12 +226,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   engine::Volume vol;
   std::vector<InputEvent> script;
   try {
-    if (!o.script.empty()) script = load_input_script(o.script);
+    if (o.carried) script = o.carried->script;
+    else if (!o.script.empty()) script = load_input_script(o.script);
     else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     scene = input_scene(o);
-    vol = app::load_scene_volume(scene);
+    vol = o.carried ? o.carried->volume : app::load_scene_volume(scene);
     if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
       throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
                                fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
@@ -219,7 +249,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   xf.scale = scene.workspace_scale;
   xf.translation_m = vol.grid.centre_m();
   CameraControl camera;
-  camera.cam = app::default_camera(vol);
+  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : app::default_camera(vol);
   engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
   // The probe starts at rest just outside the volume's box in front of the camera.
   const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
@@ -382,11 +412,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
 
   // --- the frame loop -----------------------------------------------------------------
   ToolState tool;
+  if (o.carried && o.carried->tool) tool = *o.carried->tool;
   tool.targets = session::default_targets(vol, live.iso);
-  {
+  if (!(o.carried && o.carried->tool)) {
     const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
     tool.radius_m = std::max(4e-3, 2.5 * sp);
   }
+  IsoControl iso_ctl{scene.hri.tau, vol.min_value, vol.max_value, false};
   PanelStats panel;
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
@@ -399,6 +431,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   const double unit = app::probe_size_m(vol.grid);
   std::vector<double> march_ms, shade_ms, overlay_ms;
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
+  std::vector<double> frame_full_ms, frame_reused_ms;  // frames whose picture was drawn whole / reused
   std::vector<Clock::time_point> brush_submitted;  // per submitted brush
   long brushes_measured = 0;
   long events_submitted = 0;
@@ -490,32 +523,100 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     }
   };
 
-  // A dropped file: read it here first; only one that can be read ends this session.
-  auto try_open = [&](const std::string& path) -> bool {
+  // Dropped files load one at a time on a background thread while this session goes on (the
+  // Stats panel shows the progress); one that loads ends this session and the next starts on
+  // it; one that cannot be read shows its error and the session keeps its volume.
+  struct Loading {
+    std::string path;
+    Options next;
+    std::future<std::shared_ptr<Carried>> result;
+    Clock::time_point since;
+    int frame = 0;  // frames drawn when it started
+  };
+  std::optional<Loading> loading;
+  std::deque<std::string> drop_queue;
+  auto start_load = [&](const std::string& path) {
     Options next = o;
     next.input = path;
     next.script.clear();
     next.record.clear();
-    if (fs::path(path).extension() != ".json") {
+    next.carried = nullptr;
+    if (fs::path(path).extension() == ".json") {
+      next.iso.reset();
+    } else {
       next.iso = scene.hri.tau;
       next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
     }
+    log << "sculpt   loading " << path << "\n";
+    loading = Loading{path, next, std::async(std::launch::async, [next] {
+                        const io::Scene sc = input_scene(next);
+                        auto c = std::make_shared<Carried>();
+                        c->volume = app::load_scene_volume(sc);
+                        const engine::Volume& v = c->volume;
+                        if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
+                          throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
+                                                   fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
+                        return c;
+                      }),
+                      Clock::now(), frame};
+  };
+  // True when a dropped file has loaded and this session should end for it.
+  auto poll_load = [&]() -> bool {
+    if (!loading && !drop_queue.empty()) {
+      start_load(drop_queue.front());
+      drop_queue.pop_front();
+    }
+    if (!loading || loading->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return false;
+    Loading done = std::move(*loading);
+    loading.reset();
     try {
-      const io::Scene sc = input_scene(next);
-      const engine::Volume v = app::load_scene_volume(sc);
-      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
-        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" + fixed(v.min_value, 3) +
-                                 ", " + fixed(v.max_value, 3) + "]");
+      done.next.carried = done.result.get();
     } catch (const std::exception& e) {
-      status = "cannot open " + path + ": " + e.what() + " (keeping " + scene.name + ")";
+      status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
       log << "sculpt   " << status << "\n";
       return false;
     }
     if (!reopen) return false;
-    *reopen = next;
-    log << "sculpt   opening " << path << "\n";
+    *reopen = done.next;
+    log << "sculpt   opening " << done.path << " (loaded in " << fixed(ms_since(done.since) / 1e3, 2) << " s, "
+        << frame - done.frame << " frames drawn meanwhile)\n";
+    drop_queue.clear();
     return true;
   };
+  // The isovalue slider let go at `tau`: this session ends and the next one starts at tau
+  // with the volume as edited, the camera, the tool and the rest of the script.
+  auto restart_at = [&](double tau) -> bool {
+    iso_ctl.committed = false;
+    if (!(tau > vol.min_value && tau < vol.max_value) || tau == scene.hri.tau) {
+      iso_ctl.value = scene.hri.tau;
+      if (tau != scene.hri.tau) {
+        status = "isovalue " + fixed(tau, 1) + " is outside the volume's range (" + fixed(vol.min_value, 1) + ", " +
+                 fixed(vol.max_value, 1) + "): kept " + fixed(scene.hri.tau, 1);
+        log << "sculpt   " << status << "\n";
+      }
+      return false;
+    }
+    if (!reopen) return false;
+    auto c = std::make_shared<Carried>();
+    c->volume = vol;
+    {
+      std::lock_guard<std::mutex> lock(feed.mu);
+      c->volume.voxels = feed.values;
+    }
+    refresh_range(c->volume);
+    c->camera = camera.cam;
+    c->tool = tool;
+    c->script.assign(script.begin() + long(std::min(next_event, script.size())), script.end());
+    Options next = o;
+    next.iso = tau;
+    next.record.clear();
+    next.carried = std::move(c);
+    *reopen = next;
+    log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
+        << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
+    return true;
+  };
+  bool restarting = false;  // the script goes on in the next session
   const Clock::time_point t_start = Clock::now();
   while (!window.should_close()) {
     if (o.frames > 0 && frame >= o.frames) break;
@@ -572,22 +673,29 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
         case EK::kResize: glfwSetWindowSize(window.handle(), int(ev.xy[0]), int(ev.xy[1])); break;
         case EK::kQuit: quit = true; break;
         case EK::kDrop: input.drops.push_back(ev.text); break;
+        case EK::kIso:
+          iso_ctl.value = ev.xy[0];
+          iso_ctl.committed = true;
+          break;
         case EK::kWait: break;
       }
       ++next_event;
       if (next_event < script.size()) wait_frames = script[next_event].after_frames;
+      if (iso_ctl.committed) break;  // the rest of the script runs in the restarted session
     }
     if (quit) break;
     if (wait_frames > 0 && !waiting) --wait_frames;
+    if (iso_ctl.committed && restart_at(iso_ctl.value)) {
+      restarting = true;
+      break;
+    }
 
     // Keys, camera drags, the wheel, dropped files.
     for (const Input::Key& k : input.keys) handle_key(k);
     input.keys.clear();
-    bool reopening = false;
-    for (const std::string& path : input.drops)
-      if (!reopening) reopening = try_open(path);
+    for (const std::string& path : input.drops) drop_queue.push_back(path);
     input.drops.clear();
-    if (reopening) break;
+    if (poll_load()) break;
     const bool ctrl = glfwGetKey(window.handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
                       glfwGetKey(window.handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS;
     const double dx = input.px - input.last_px, dy = input.py - input.last_py;
@@ -676,7 +784,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
                            : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
       panel.status = status;
-      panels->build(tool, panel, overlay);
+      panel.loading = loading ? loading->path : std::string();
+      panel.loading_s = loading ? ms_since(loading->since) / 1e3 : 0.0;
+      panels->build(tool, iso_ctl, panel, overlay);
     }
 #endif
     const bool shown = window.present(*shown_px, fb[0], fb[1]);
@@ -698,7 +808,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     }
     last_fb = fb;
     const auto end = Clock::now();
-    if (frame > 0) frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
+    if (frame > 0) {
+      frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
+      (img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
+    }
     last_frame = end;
     ++frame;
     if (frame % 15 == 0) {
@@ -710,10 +823,16 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
             << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
             << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed"
             << (mouse ? std::string() : std::string(" | device ") + servo::to_string(session->servo_thread()->device_status()))
-            << (status.empty() ? "" : " | " + status);
+            << (loading ? " | loading " + loading->path : std::string()) << (status.empty() ? "" : " | " + status);
       glfwSetWindowTitle(window.handle(), title.str().c_str());
     }
   }
+  // --frames reached while a dropped file loads: it opens next, as if it had loaded in time.
+  if (o.frames > 0 && frame >= o.frames && !restarting)
+    while (loading || !drop_queue.empty()) {
+      if (loading) loading->result.wait();
+      if (poll_load()) break;
+    }
   const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
   if (stroke.open()) {
     session::EditEvent e;
@@ -737,7 +856,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       code = 1;
     }
   }
-  if (next_event < script.size()) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
+  if (next_event < script.size() && !restarting) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
   if (o.stats || o.bench) {
     auto line = [&](const char* what, const std::vector<double>& v) {
       if (v.empty()) {
@@ -750,6 +869,8 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
         << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << "\n";
     line("frame time", frame_ms);
+    line("  frames drawn whole (first, camera or style changed)", frame_full_ms);
+    line("  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
     line("render (ray caster)", render_ms);
     line("  march pass (GPU timestamps)", march_ms);
     line("  shade pass (GPU timestamps)", shade_ms);
@@ -758,7 +879,8 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     line("picture update (changed bricks)", update_ms);
     line("edit-to-pixels (submit to the first frame showing it)", latency_ms);
     line("edit-to-haptics", st.edit_to_haptics_ms);
-    log << "stats    servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed deadlines, " << st.faults
+    log << "stats    servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed deadlines, period error p99 "
+        << (st.period_error_p99_us >= 0 ? fixed(st.period_error_p99_us, 0) + " us" : std::string("n/a")) << ", " << st.faults
         << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
         << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
         << window.recreations() << " times\n";

@@ -6,15 +6,20 @@
 // applied edit), steers the hand target from the mouse and submits the tools' brushes,
 // undo and redo through LiveSession::submit.
 #pragma once
+#include <memory>
 #include <optional>
 #include <ostream>
 #include <string>
 
 namespace isotouch::sculpt {
 
+/// What a session restarted at a new isovalue keeps: the edited volume, the camera, the
+/// tool (defined in app.cpp).
+struct Carried;
+
 struct Options {
   std::string input;                ///< a scene (.json) or a volume file
-  std::optional<double> iso;        ///< a volume's isovalue (required for a volume)
+  std::optional<double> iso;        ///< a volume's isovalue (required for a volume); a scene's, overriding its own
   std::string inside = "above";     ///< a volume's inside: "above" or "below"
   std::string script;               ///< input script (JSON), "" = none
   std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
@@ -34,6 +39,9 @@ struct Options {
   /// The haptic device: "mouse" (a simulated device coupled to the hand the mouse steers) or
   /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET).
   std::string haptic = "mouse";
+  /// Set by the isovalue slider's restart: the volume as edited (not re-read from `input`),
+  /// the camera and the tool.
+  std::shared_ptr<const Carried> carried;
 };
 
 /// Runs the window until it is closed, the script quits or `frames` frames were drawn.
@@ -42,7 +50,9 @@ struct Options {
 /// A volume file or scene dropped on the window (or a script's "drop") that could be read
 /// sets `*reopen` to the options for it (a volume: the current isovalue and inside) and ends
 /// this session; the caller runs it next. One that cannot be read shows its error (log and
-/// window title) and the session goes on with the old volume.
+/// window title) and the session goes on with the old volume. The isovalue slider (or a
+/// script's "iso") ends the session the same way, with the edited volume carried over (the
+/// undo history starts afresh, a recording stops).
 int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen = nullptr);
 
 }  // namespace isotouch::sculpt

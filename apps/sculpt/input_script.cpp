@@ -140,6 +140,9 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
           ev.kind = K::kDrop;
           ev.text = v.is_string() ? v.get<std::string>() : "";
           if (ev.text.empty()) fail("field 'drop' must be a file name, got " + v.dump());
+        } else if (k == "iso") {
+          ev.kind = K::kIso;
+          ev.xy[0] = num(v, "iso");
         } else if (k == "quit") {
           ev.kind = K::kQuit;
         } else {
@@ -147,7 +150,7 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         }
       }
     }
-    if (actions != 1) fail("needs exactly one action (cursor, press, release, scroll, key, tool, orbit, zoom, wait, screenshot, drop, resize, quit), got " + std::to_string(actions));
+    if (actions != 1) fail("needs exactly one action (cursor, press, release, scroll, key, tool, orbit, zoom, wait, screenshot, drop, iso, resize, quit), got " + std::to_string(actions));
     out.push_back(ev);
   }
   return out;

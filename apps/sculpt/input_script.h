@@ -14,6 +14,8 @@
 //                                  contact / every submitted edit is applied and drawn
 //   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
 //   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
+//   {"iso": value}                 the isovalue slider let go at `value` (the session restarts
+//                                  at it with the edited volume; the script goes on there)
 //   {"resize": [w, h]}, {"quit": true}
 #pragma once
 #include <array>
@@ -28,10 +30,10 @@ struct ScriptError : std::runtime_error {
 };
 
 struct InputEvent {
-  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop };
+  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop, kIso };
   Kind kind = Kind::kQuit;
   int after_frames = 1;
-  std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy)
+  std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy), isovalue (x)
   int button = 0;                  ///< 0 left, 1 right, 2 middle
   int key = 0;                     ///< GLFW key code
   bool ctrl = false, shift = false;

@@ -17,7 +17,7 @@ int main(int argc, char** argv) {
       "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay (probe glyphs and panels), Esc/Q quit.",
       "isotouch-sculpt"};
   cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
-  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT)");
+  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's");
   cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
       ->check(CLI::IsMember({"above", "below"}));
   cli.add_option("--script", o.script, "input events to run (JSON, see apps/sculpt/input_script.h)")->check(CLI::ExistingFile);

@@ -9,6 +9,8 @@
 #include <imgui_impl_vulkan.h>
 
 #include <algorithm>
+#include <cmath>
+#include <string>
 #include <array>
 #include <utility>
 
@@ -41,7 +43,7 @@ void step_buttons(const char* id, ToolState& tool, Step step) {
   ImGui::PopID();
 }
 
-void tool_panel(ToolState& tool) {
+void tool_panel(ToolState& tool, IsoControl& iso) {
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Tool", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
@@ -64,6 +66,11 @@ void tool_panel(ToolState& tool) {
     tool.strength = std::clamp(double(strength), kMinStrength, kMaxStrength);
   ImGui::SameLine();
   step_buttons("strength", tool, step_strength);
+  // The isovalue: dragging shows the value; letting go restarts the session at it.
+  float v = float(iso.value);
+  ImGui::SliderFloat("isovalue", &v, float(iso.lo), float(iso.hi), "%.1f");
+  if (ImGui::IsItemActive() || ImGui::IsItemEdited()) iso.value = std::clamp(double(v), iso.lo, iso.hi);
+  if (ImGui::IsItemDeactivatedAfterEdit()) iso.committed = true;
   ImGui::End();
 }
 
@@ -74,8 +81,8 @@ void stats_panel(const PanelStats& s) {
   ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
   ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
   ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
-  if (s.tick_p99_us) ImGui::Text("tick p99    %.1f us", *s.tick_p99_us);
-  else ImGui::TextDisabled("tick p99    n/a while the servo runs");
+  if (s.tick_p99_us) ImGui::Text("tick p99    %.0f us (|period error|)", *s.tick_p99_us);
+  else ImGui::TextDisabled("tick p99    n/a (no ticks yet)");
   if (s.edit_to_haptics_last_ms)
     ImGui::Text("edit->feel  %.2f ms last, %.2f ms median", *s.edit_to_haptics_last_ms,
                 s.edit_to_haptics_median_ms.value_or(0.0));
@@ -86,6 +93,13 @@ void stats_panel(const PanelStats& s) {
   ImGui::TextUnformatted(("volume      " + s.volume).c_str());
   ImGui::TextUnformatted(("device      " + s.device).c_str());
   if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
+  if (!s.loading.empty()) {
+    // The readers report no fraction done: the bar sweeps once a second while the file loads,
+    // with the time so far (the session keeps running meanwhile).
+    ImGui::TextWrapped("loading %s", s.loading.c_str());
+    const std::string label = std::to_string(int(s.loading_s * 10) / 10) + "." + std::to_string(int(s.loading_s * 10) % 10) + " s";
+    ImGui::ProgressBar(float(s.loading_s - std::floor(s.loading_s)), ImVec2(-1, 0), label.c_str());
+  }
   ImGui::End();
 }
 
@@ -276,13 +290,13 @@ void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
   vkCmdEndRenderPass(cmd);
 }
 
-void Overlay::build(ToolState& tool, const PanelStats& stats, bool visible) {
+void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible) {
   if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
   ImGui_ImplVulkan_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
   if (visible) {
-    tool_panel(tool);
+    tool_panel(tool, iso);
     stats_panel(stats);
   }
   ImGui::Render();

@@ -17,12 +17,19 @@
 
 namespace isotouch::sculpt {
 
+/// The tool panel's isovalue slider: the session's isovalue, the volume's range; `committed`
+/// is set (by build()) when the user lets go of a changed slider, with the new `value`.
+struct IsoControl {
+  double value = 0, lo = 0, hi = 1;  ///< value units (HU for CT)
+  bool committed = false;
+};
+
 /// What the stats panel shows, filled by the frame loop.
 struct PanelStats {
   double servo_target_hz = 0;
   double servo_rate_hz = 0;           ///< measured: ticks per second over the last refresh
   long ticks = 0, missed_deadlines = 0, faults = 0;
-  std::optional<double> tick_p99_us;  ///< p99 |period error|; none while the servo runs
+  std::optional<double> tick_p99_us;  ///< p99 |period error| [us] so far (session::LiveStats); none before two ticks
   std::optional<double> edit_to_haptics_last_ms, edit_to_haptics_median_ms;
   double frame_ms = 0;
   double force_n = 0;
@@ -30,6 +37,8 @@ struct PanelStats {
   std::string volume;                 ///< dims, spacing, orientation
   std::string device;                 ///< the haptic device and the status its last tick judged
   std::string status;                 ///< the last save, export or drop message
+  std::string loading;                ///< a dropped file loading in the background ("" = none)
+  double loading_s = 0;               ///< for this long [s]
 };
 
 class Overlay final : public FrameHook {
@@ -43,9 +52,10 @@ class Overlay final : public FrameHook {
 
   /// "Dear ImGui 1.86".
   static std::string version();
-  /// This frame's panels (`visible` false: none); the tool widgets change `tool`. Drawn by
+  /// This frame's panels (`visible` false: none); the tool widgets change `tool`, the isovalue
+/// slider `iso` (the frame loop restarts the session at a committed value). Drawn by
   /// the window's next present().
-  void build(ToolState& tool, const PanelStats& stats, bool visible);
+  void build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible);
   /// The mouse is over a panel or dragging a widget: clicks and the wheel are ImGui's.
   bool wants_mouse() const;
   /// A text field (Ctrl+click on a slider) has the keyboard.

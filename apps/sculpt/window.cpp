@@ -1,5 +1,8 @@
 #include "window.h"
 
+#include <chrono>
+#include <thread>
+
 #define GLFW_INCLUDE_NONE
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
@@ -14,7 +17,14 @@ using engine::Result;
 engine::Result<std::vector<std::string>> init_glfw() {
   using R = Result<std::vector<std::string>>;
   glfwSetErrorCallback(nullptr);
-  if (!glfwInit()) {
+  // A session that follows another (a dropped file, a new isovalue) may find the X server
+  // resetting after its last client left (Xvfb without -noreset): try again for up to 2 s.
+  bool up = glfwInit();
+  for (int i = 0; !up && i < 20; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    up = glfwInit();
+  }
+  if (!up) {
     const char* why = nullptr;
     glfwGetError(&why);
     return R::fail(std::string("cannot open a window: glfwInit failed: ") + (why ? why : "no reason given") +

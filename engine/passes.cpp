@@ -11,9 +11,11 @@
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
 #include "parallel.h"
+#include "sparse_chain.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
+#include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
@@ -70,6 +72,19 @@ std::string validate_passes(const std::vector<PassDesc>& p) {
   return {};
 }
 
+std::vector<std::uint32_t> fused_gaussian_spec(const std::array<int, 3>& dims,
+                                               const std::array<std::vector<float>, 3>& kernels) {
+  constexpr std::size_t kTaps = 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+  std::vector<std::uint32_t> spec(6 + 3 * kTaps, 0u);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (kernels[a].size() > kTaps) throw std::logic_error("fused_gaussian_spec: kernel wider than the fused shader");
+    spec[a] = std::uint32_t(dims[a]);
+    spec[3 + a] = std::uint32_t(kernels[a].size() / 2);
+    std::memcpy(&spec[6 + a * kTaps], kernels[a].data(), kernels[a].size() * 4);
+  }
+  return spec;
+}
+
 namespace {
 bool has(const std::vector<PassDesc>& p, PassKind k) {
   return std::any_of(p.begin(), p.end(), [k](const PassDesc& d) { return d.kind == k; });
@@ -96,20 +111,26 @@ struct PassChain::Impl {
   /// filter_x4 variants by specialization (size, axis, radius, weights, mode), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss_x4;
   /// `w`: the Gaussian's weights (mode 0), else empty; `mode` 0 or ISOTOUCH_MORPH_MAX / MIN.
+  /// `vec4_in`: the source viewed as quads (quad_slabs()).
   const ComputePipeline<gpu::DensePush>* filter_x4(const std::array<int, 3>& dims, int axis, int radius,
-                                                   std::uint32_t mode, const std::vector<float>& w) {
-    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+                                                   std::uint32_t mode, const std::vector<float>& w, bool vec4_in) {
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
     for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(dims[std::size_t(a)]);
     spec[3] = std::uint32_t(axis);
     spec[4] = std::uint32_t(radius);
     for (std::size_t k = 0; k < w.size(); ++k) std::memcpy(&spec[5 + k], &w[k], 4);
     spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = mode;  // constant_id 38
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2] = vec4_in ? 1u : 0u;  // constant_id 39
     auto& p = gauss_x4[spec];
-    if (!p)
+    if (!p) {
       p = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, filter_x4_spv, 2, mode ? "morph_x4" : "gaussian_x4",
                                                             0u, spec, 1u);
+      if (vec4_in) p->set_texel_vec4(1u);
+    }
     return p.get();
   }
+  /// gauss_fused_list variants by specialization (fused_gaussian_spec), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> fused;
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
   /// Current set's brick min/max in two steps (minmax_rows, minmax_bricks), specialised on
   /// the bricks along x; made on first use.
@@ -274,12 +295,14 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   struct Step {
     std::size_t pass;
     const ComputePipelineBase* pipe = nullptr;
-    enum { Filter, Gradient, MinMax } type = Filter;
+    enum { Filter, Fused, Gradient, MinMax } type = Filter;
+    const ComputePipeline<gpu::ListPush>* fused = nullptr;  // gauss_fused_list over every column
     gpu::Filter1dPush f{};
     const ComputePipeline<gpu::DensePush>* x4 = nullptr;  // filter_x4 variant, else the 1-D filter
     std::vector<Slab> slabs;
   };
   std::vector<Step> steps;
+  sparse::WorkList columns;  // every column of quads, made for the first fused Gaussian
   const bool legacy = impl_->shaders == ShaderSet::Legacy;
   std::uint64_t rows_slices = 0;  // most source slices of a brick min/max slab
   std::uint32_t extra_sets = 0;   // the current brick min/max binds twice per slab
@@ -291,7 +314,42 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   for (std::size_t i = 0; i < passes_.size(); ++i) {
     const PassDesc& p = passes_[i];
     info << "  " << p.label();
-    if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
+    // A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
+    // list of every column of quads, where the field is one binding and read in place.
+    bool fuse = p.kind == PassKind::Gaussian && !legacy && direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
+                n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
+    for (int a = 0; a < 3 && fuse; ++a)
+      fuse = gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+    if (fuse) {
+      if (columns.units.empty()) {
+        const auto nb = core::brick_counts(vol.grid);
+        std::vector<std::uint32_t> all(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]));
+        for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
+        columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path);
+      }
+      const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gaussians[gi].kernel);
+      auto& pipe = impl_->fused[spec];
+      if (!pipe) {
+        pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
+                                                                spec, 0b101u);
+        pipe->set_texel_vec4(1u);
+      }
+      Step s;
+      s.pass = i;
+      s.type = Step::Fused;
+      s.fused = pipe.get();
+      Slab whole;
+      whole.nz = std::uint64_t(nz);
+      whole.src_z1 = std::uint64_t(nz);
+      whole.src = {field[cur].handle(), 0, n * 4};
+      whole.dst = {field[1 - cur].handle(), 0, n * 4};
+      s.slabs.push_back(whole);
+      steps.push_back(std::move(s));
+      cur = 1 - cur;
+      info << ": x, y, z fused in one pass (" << columns.unit_count() << " columns; sigma " << gaussians[gi].sigma_vox[0]
+           << ", " << gaussians[gi].sigma_vox[1] << ", " << gaussians[gi].sigma_vox[2] << " voxels)";
+      ++gi;
+    } else if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
       const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
       for (int k = 0; k < axes; ++k) {
         const int axis = k % 3;
@@ -302,30 +360,17 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
         s.f.ny = gpu::uint(ny);
         s.f.nz = gpu::uint(nz);
         s.f.axis = gpu::uint(axis);
-        if (p.kind == PassKind::Gaussian) {
-          const auto& kern = gaussians[gi].kernel[std::size_t(axis)];
+        const bool gauss = p.kind == PassKind::Gaussian;
+        const std::vector<float> no_weights;
+        const std::vector<float>& kern = gauss ? gaussians[gi].kernel[std::size_t(axis)] : no_weights;
+        if (gauss) {
           s.f.radius = gpu::uint(kern.size() / 2);
           s.f.w_offset = w_offsets[gi][std::size_t(axis)];
-          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
-            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), 0u, kern);
-            s.pipe = s.x4;
-          } else {
-            if (!impl_->gauss)
-              impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
-            s.pipe = impl_->gauss.get();
-          }
         } else {
           s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
           s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
-          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
-            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), s.f.mode, {});
-            s.pipe = s.x4;
-          } else {
-            if (!impl_->morph)
-              impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
-            s.pipe = impl_->morph.get();
-          }
         }
+        const bool x4 = impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS;
         info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
         SlabGeometry g;
         g.nz = std::uint64_t(nz);
@@ -333,11 +378,24 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
         g.halo = axis == 2 ? s.f.radius : 0;
         g.dst_bytes_before = &floats_before;
         g.user = &float_slice;
-        g.wg_z = s.x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
+        g.wg_z = x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
         auto sl = plan_slabs(ctx, g, field[cur].handle(), field[1 - cur].handle(), limit,
                              vol.path + ": " + p.label());
         if (!sl) throw VolumeError(sl.error);
         s.slabs = std::move(*sl.value);
+        if (x4) {
+          s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), gauss ? 0u : s.f.mode, kern,
+                                  slabs_hold_quads(nx, s.slabs));
+          s.pipe = s.x4;
+        } else if (gauss) {
+          if (!impl_->gauss)
+            impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
+          s.pipe = impl_->gauss.get();
+        } else {
+          if (!impl_->morph)
+            impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
+          s.pipe = impl_->morph.get();
+        }
         steps.push_back(std::move(s));
         cur = 1 - cur;
       }
@@ -381,6 +439,11 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     for (const Step& s : steps)
       if (s.pass == i) d += s.slabs.size();
     info << ", " << d << " dispatch(es)\n";
+  }
+  GpuBuffer columns_buf;  // the fused Gaussian's column list, written in place
+  if (!columns.units.empty()) {
+    columns_buf = buffer(columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
+    std::memcpy(columns_buf.mapped(), columns.units.data(), columns.units.size() * 4);
   }
   std::uint32_t sets = extra_sets;
   for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
@@ -426,7 +489,16 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   for (std::size_t k = 0; k < steps.size(); ++k) {
     const Step& s = steps[k];
     for (const Slab& sl : s.slabs) {
-      if (s.type == Step::Filter && s.x4) {
+      if (s.type == Step::Fused) {
+        gpu::ListPush pc{};
+        pc.units = gpu::uint(columns.unit_count());
+        const std::uint64_t g = groups(columns.unit_count(), ISOTOUCH_DENSE_WG);
+        const std::uint64_t gx = std::min<std::uint64_t>(g, lim.maxComputeWorkGroupCount[0]);
+        pc.groups_x = gpu::uint(gx);
+        s.fused->bind(cmd, arena, {sl.src, sl.dst, BufferRange{columns_buf.handle(), 0, columns_buf.size()}});
+        s.fused->push(cmd, pc);
+        vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t((g + gx - 1) / gx), 1);
+      } else if (s.type == Step::Filter && s.x4) {
         gpu::DensePush pc{};
         pc.nx = s.f.nx;
         pc.ny = s.f.ny;
@@ -493,7 +565,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     }
     if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
     dispatches[s.pass] += int(s.slabs.size());
-    if (s.type == Step::Filter) cur = 1 - cur;
+    if (s.type == Step::Filter || s.type == Step::Fused) cur = 1 - cur;
     // The next step reads what this one wrote (and a filter overwrites what the previous
     // filter read): make this step's writes visible before any later dispatch.
     barrier_compute_to_compute(cmd);
@@ -567,6 +639,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   keep(bricks_down, "brick ranges readback");
   keep(field_down, "field readback");
   keep(rows, "brick row ranges");
+  keep(columns_buf, "fused gaussian columns");
   return out;
 }
 

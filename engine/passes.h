@@ -122,6 +122,12 @@ class PassChain {
   std::vector<PassDesc> passes_;
 };
 
+/// Specialization constants of shaders/gauss_fused_list.comp (the Gaussian's x, y and z
+/// passes in one): the grid's size, the radii and the 2 r + 1 float weights of each axis,
+/// bit for bit. Every radius <= ISOTOUCH_FUSED_MAX_RADIUS.
+std::vector<std::uint32_t> fused_gaussian_spec(const std::array<int, 3>& dims,
+                                               const std::array<std::vector<float>, 3>& kernels);
+
 /// The CPU reference of a chain, same outputs; PassTiming::ms is wall time. One thread by
 /// default (the reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan
 /// device exists): every pass's rows split among that many threads, bit for bit the same.

@@ -24,6 +24,7 @@
 
 #include "cpu_gradient.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
+#include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
 #include "parallel.h"
@@ -177,6 +178,8 @@ struct SparseChain::Impl {
   /// The list strategy's pipelines: filter_list_x4 by specialization (as PassChain's
   /// filter_x4), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> filter_list;
+  /// gauss_fused_list by specialization (size, radii, weights), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> fused_pipes;
   /// The list strategy's buffers by name, kept from run to run (no new allocation and no
   /// first-touch page faults inside the timed dispatches when the sizes repeat).
   std::map<std::string, GpuBuffer> kept;
@@ -219,13 +222,7 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   SparseOutput out;
   // Host: raw brick ranges and the candidates.
   auto t0 = std::chrono::steady_clock::now();
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
-  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  for (int z = 0; z < nz; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
-  const double raw_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads());
   const double select_ms = ms_since(t0);
 
   // The dense passes, outputs read where they lie.
@@ -240,7 +237,6 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, s, iso, background, format, keep_input, out, ranges_ms);
   const double gather_ms = ranges_ms;
-  out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   int dispatches = 0, slabs = 0;
   for (const PassTiming& p : d.passes) {
@@ -290,9 +286,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
 
-  // Host, in one pass over the voxels on hardware_threads() threads (whole brick layers
-  // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
-  // the voxels copied into the input field (or its staging buffer) where a filter runs.
+  // Host, on hardware_threads() threads: the voxels copied into the input field (or its
+  // staging buffer) where a filter runs; the candidates.
   auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t n = vol.grid.voxel_count();
   const bool filters = !plan.ops.empty();
@@ -300,28 +295,28 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   GpuBuffer* up =
       filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
   char* input = !filters ? nullptr : static_cast<char*>(direct ? field0->mapped() : up->mapped());
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
-    for (std::size_t z = z0; z < z1; ++z) {
-      const float* src = vol.voxels.data() + z * slice;
-      raw.add_slice(vol.grid, int(z), src);
-      if (input) std::memcpy(input + z * slice * 4, src, slice * 4);
-    }
-  });
+  if (input)
+    parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
+      std::memcpy(input + z0 * slice * 4, vol.voxels.data() + z0 * slice, (z1 - z0) * slice * 4);
+    });
   const double raw_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads());
   const double select_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
-  const std::size_t K = plan.ops.size();
+  // One Gaussian whose field fits one binding and one texel view runs as ONE fused pass
+  // (gauss_fused_list.comp) over columns of the last extent's quads; other chains run one
+  // pass per op over its extent's quads.
+  const bool fused = sparse::fusable(plan, vol.grid) && n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
+  const std::size_t K = fused ? 1 : plan.ops.size();  // stages (dispatch rounds)
   std::vector<sparse::WorkList> lists;
   std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
   std::uint64_t total_units = 0;
   for (std::size_t k = 0; k < K; ++k) {
-    lists.push_back(sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
+    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path)
+                          : sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();
   }
@@ -359,21 +354,35 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   };
   std::vector<Stage> stages;
   std::uint32_t sets = 0;
-  for (std::size_t k = 0; k < K; ++k) {
+  for (std::size_t k = 0; k < K && fused; ++k) {
+    Stage st;
+    std::array<std::vector<float>, 3> kernels;
+    for (std::size_t a = 0; a < 3; ++a) {
+      const sparse::Op& op = plan.ops[a];
+      kernels[a].assign(plan.weights.begin() + op.w_offset, plan.weights.begin() + op.w_offset + 2 * op.radius + 1);
+    }
+    const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+    auto& p = fused_pipes[spec];
+    if (!p) {
+      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u, spec,
+                                                           0b101u);
+      p->set_texel_vec4(1u);
+    }
+    st.pipe = p.get();
+    st.label = "gaussian x r=" + std::to_string(plan.ops[0].radius) + " + y r=" + std::to_string(plan.ops[1].radius) +
+               " + z r=" + std::to_string(plan.ops[2].radius) + " fused";
+    Slab whole;
+    whole.nz = std::uint64_t(nz);
+    whole.src_z1 = std::uint64_t(nz);
+    whole.src = {field[0]->handle(), 0, n * 4};
+    whole.dst = {field[1]->handle(), 0, n * 4};
+    st.slabs.push_back(whole);
+    sets += 1;
+    stages.push_back(std::move(st));
+  }
+  for (std::size_t k = 0; k < K && !fused; ++k) {
     Stage st;
     const sparse::Op& op = plan.ops[k];
-    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
-    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
-    spec[3] = std::uint32_t(op.axis);
-    spec[4] = std::uint32_t(op.radius);
-    if (op.kind == sparse::OpKind::kGauss)
-      std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
-    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
-    auto& p = filter_list[spec];
-    if (!p)
-      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
-                                                           0b101u);
-    st.pipe = p.get();
     st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
                " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
     SlabGeometry g;
@@ -385,6 +394,22 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
     auto sl = plan_slabs(ctx, g, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
     if (!sl) throw VolumeError(sl.error);
     st.slabs = std::move(*sl.value);
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
+    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
+    spec[3] = std::uint32_t(op.axis);
+    spec[4] = std::uint32_t(op.radius);
+    if (op.kind == sparse::OpKind::kGauss)
+      std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
+    const bool quads = slabs_hold_quads(nx, st.slabs);
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2] = quads ? 1u : 0u;  // constant_id 39: quad input
+    auto& p = filter_list[spec];
+    if (!p) {
+      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
+                                                           0b101u);
+      if (quads) p->set_texel_vec4(1u);
+    }
+    st.pipe = p.get();
     sets += std::uint32_t(st.slabs.size());
     stages.push_back(std::move(st));
   }
@@ -407,7 +432,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
       for (const Slab& sl : stages[k].slabs) {
         const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
         if (u1 == u0) continue;
-        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_INVOCATIONS;
+        const std::uint64_t invocations = (u1 - u0) * (fused ? 1u : ISOTOUCH_LIST_INVOCATIONS);
         const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
         const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
         const std::uint64_t gy = (groups + gx - 1) / gx;
@@ -450,8 +475,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
 
-  out.passes.push_back({"raw brick ranges + input copy (host)", raw_ms, 0});
-  out.passes.push_back({"candidate selection (host)", select_ms, 0});
+  out.passes.push_back({"input copy (host)", raw_ms, 0});
+  out.passes.push_back({"candidate selection: raw ranges over the bricks' windows (host)", select_ms, 0});
   out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
   std::ostringstream info;
   const auto nb = core::brick_counts(vol.grid);
@@ -608,18 +633,15 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   }
   const double alloc_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
   for (int z = 0; z < nz; ++z) {
     const float* src = vol.voxels.data() + std::size_t(z) * slice;
-    raw.add_slice(vol.grid, z, src);
     for (SlabPlan& s : slabs)
       if (z >= s.src_z0 && z < s.src_z1)
         std::memcpy(static_cast<char*>(s.staging.mapped()) + std::uint64_t(z - s.src_z0) * slice * 4, src, slice * 4);
   }
   const double staging_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso);
   const std::size_t nc = sel.candidates.size();
   const double select_ms = ms_since(t0);
 
@@ -777,7 +799,7 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   out.publish_ms = ms_since(t0);
 
   const double gpu_ms = timer.elapsed_ms(0, 1), copy_ms = timer.elapsed_ms(1, 2);
-  out.passes.push_back({"raw brick ranges + staging copies (host)", staging_ms, 0});
+  out.passes.push_back({"staging copies (host)", staging_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   out.passes.push_back({plan.text + " + gradient + min/max on candidates (GPU)", gpu_ms, int(chunks.size())});
   out.passes.push_back({"readback copies (GPU)", copy_ms, 0});

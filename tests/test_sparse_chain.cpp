@@ -460,8 +460,9 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     const Volume* v;
     double tau;
   };
-  for (const Case& c : {Case{&head, 500.0}, Case{&chest, -500.0}, Case{&noisy, 0.0}}) {
-    const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  for (const Case& c : {Case{&head, 500.0}, Case{&chest, -500.0}, Case{&noisy, 0.0}})
+  for (const std::vector<PassDesc>& p : {std::vector<PassDesc>{PassDesc::gaussian(1.0), PassDesc::gradient()},
+                                         std::vector<PassDesc>{PassDesc::gradient()}}) {
     const engine::sparse::Plan plan = engine::sparse::make_plan(c.v->grid, p, c.v->path);
     const engine::sparse::Selection sel = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2);
     const engine::sparse::Selection one = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 1);
@@ -495,8 +496,8 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     }
     EXPECT_EQ(missed, 0u) << c.v->path << ": straddling bricks that are no candidates";
     EXPECT_GT(straddling, 0u) << c.v->path;
-    std::printf("  %s tau %g: %zu candidates, %zu straddling (brute force)\n", c.v->path.c_str(), c.tau,
-                sel.candidates.size(), straddling);
+    std::printf("  %s tau %g, %zu passes: %zu candidates, %zu straddling (brute force)\n", c.v->path.c_str(), c.tau,
+                p.size(), sel.candidates.size(), straddling);
   }
 }
 

@@ -101,7 +101,8 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   // candidate): every row of slice z updates the candidates whose brick + 1 voxel holds it.
   // Min / max over a set do not depend on the order (NaN skipped, -0 made +0 at the end).
   // Threads take whole brick layers: each candidate is folded by one thread.
-  std::vector<std::int32_t> cand_of(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), -1);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  std::vector<std::int32_t> cand_of(total, -1);
   for (std::size_t c = 0; c < nc; ++c) cand_of[sel.candidates[c]] = std::int32_t(c);
   for (sparse::CandidateRange& r : ranges) r = {inf, -inf, false};
   parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {

@@ -1009,6 +1009,15 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
     vs.push_back(verdict_at_most(what.str(), h ? ratio(h->gpu.total_ms, h->cpu.total_ms) : kNaN, 1.0, 3,
                                  h ? "sparse: " + h->gpu.why + h->cpu.why : "head CT not benchmarked"));
   }
+  // The stricter reading of "GPU no slower than CPU": against the fastest CPU path measured
+  // here for the same snapshot's samples, the dense one-thread CPU chain.
+  for (double tau : {1150.0, 500.0}) {
+    const IsoResult* h = find_iso(res, "head", tau);
+    std::ostringstream what;
+    what << "head " << tau << " sparse GPU / dense CPU chain";
+    vs.push_back(verdict_at_most(what.str(), h ? h->sparse_gpu_over_dense_cpu : kNaN, 1.0, 3,
+                                 h ? "sparse GPU: " + h->gpu.why : "head CT not benchmarked"));
+  }
   const IsoResult* b = find_iso(res, "chest", 250);
   double best = kNaN;
   std::string best_fmt, why = b ? "" : "chest CT not benchmarked";
@@ -1202,7 +1211,10 @@ Bytes: published snapshot bytes per sample format (fp32, fp16, unorm16) against 
   not available) in a child process: step time, setup, peak RSS from wait4 (ru_maxrss),
   the child's own VmHWM, snapshot bytes.
 Verdicts: computed from the measured figures: chest -500 sparse GPU / dense CPU <= 1/3;
-  chest +250 smallest snapshot / dense fp32 <= 0.15; 512^3 ran, peak RSS <= MemTotal.
+  chest dense GPU chain / fastest peer chain <= 1/3 and / memcpy of its bytes <= 5;
+  chest -500 sparse GPU / fastest peer chain <= 1/5; head sparse GPU / sparse CPU <= 1 and
+  / dense CPU chain <= 1; chest +250 smallest snapshot / dense fp32 <= 0.15; 512^3 ran,
+  peak RSS <= MemTotal.
 Progress goes to stderr, the report (markdown) to stdout.
 )";
 }  // namespace

@@ -81,11 +81,14 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const cor
   const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const GradientConstants k = gradient_constants(grid);
   if (shaders_ == ShaderSet::Current) {
-    auto& pipe = x4_[grid.dims];
-    if (!pipe)
+    const bool quads = slabs_hold_quads(nx, slabs);
+    auto& pipe = x4_[{nx, ny, nz, quads ? 1 : 0}];
+    if (!pipe) {
       pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(
           ctx_, gradient_x4_spv, 2, "gradient_x4", 0u,
-          std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)}, 1u);
+          std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz), quads ? 1u : 0u}, 1u);
+      if (quads) pipe->set_texel_vec4(1u);
+    }
     const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
     for (const Slab& s : slabs) {
       pipe->bind(cmd, arena, {s.src, s.dst});
@@ -147,9 +150,11 @@ double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
   GpuBuffer dst = buffer(n * sizeof(core::Sample), "samples (copy floor)");
   GradientPass planner(ctx_, ShaderSet::Current);
   const std::vector<Slab> slabs = planner.plan(vol.grid, src.handle(), dst.handle(), 0, vol.path);
-  ComputePipeline<gpu::DensePush> pipe(ctx_, copy_x4_spv, 2, "copy_x4", 0u,
-                                       std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz)},
-                                       1u);
+  const bool quads = slabs_hold_quads(nx, slabs);  // the gradient's own input form
+  ComputePipeline<gpu::DensePush> pipe(
+      ctx_, copy_x4_spv, 2, "copy_x4", 0u,
+      std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz), quads ? 1u : 0u}, 1u);
+  if (quads) pipe.set_texel_vec4(1u);
   const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
   std::vector<double> ms;
   for (int r = 0; r <= runs; ++r) {

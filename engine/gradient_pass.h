@@ -60,8 +60,9 @@ class GradientPass {
   VulkanContext& ctx_;
   ShaderSet shaders_;
   std::unique_ptr<ComputePipeline<gpu::GradientPush>> legacy_;
-  /// gradient_x4 variants by volume size (specialization constants), made on first use.
-  mutable std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> x4_;
+  /// gradient_x4 variants by volume size and quad input (specialization constants: nx, ny,
+  /// nz, VEC4_IN), made on first use.
+  mutable std::map<std::array<int, 4>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> x4_;
 };
 
 }  // namespace isotouch::engine

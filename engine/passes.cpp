@@ -11,9 +11,11 @@
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
 #include "parallel.h"
+#include "sparse_chain.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
+#include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
@@ -24,6 +26,19 @@ namespace isotouch::engine {
 
 static_assert(sizeof(gpu::Filter1dPush) == 48, "Filter1dPush: 12 4-byte members (std430)");
 static_assert(sizeof(gpu::BrickMinMaxPush) == 48, "BrickMinMaxPush: 12 4-byte members (std430)");
+
+std::vector<std::uint32_t> fused_gaussian_spec(const std::array<int, 3>& dims,
+                                               const std::array<std::vector<float>, 3>& kernels) {
+  constexpr std::size_t kTaps = 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+  std::vector<std::uint32_t> spec(6 + 3 * kTaps, 0u);
+  for (std::size_t a = 0; a < 3; ++a) {
+    if (kernels[a].size() > kTaps) throw std::logic_error("fused_gaussian_spec: kernel wider than the fused shader");
+    spec[a] = std::uint32_t(dims[a]);
+    spec[3 + a] = std::uint32_t(kernels[a].size() / 2);
+    std::memcpy(&spec[6 + a * kTaps], kernels[a].data(), kernels[a].size() * 4);
+  }
+  return spec;
+}
 
 namespace {
 bool has(const std::vector<PassDesc>& p, PassKind k) {
@@ -44,6 +59,170 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
+namespace {
+/// One step of a chain's recording: a filter axis, the fused Gaussian, the gradient or the
+/// brick min/max, with its z-slabs.
+struct ChainStep {
+  std::size_t pass;
+  const ComputePipelineBase* pipe = nullptr;
+  enum { Filter, Fused, Gradient, MinMax } type = Filter;
+  const ComputePipeline<gpu::ListPush>* fused = nullptr;       // gauss_fused_list over every column
+  gpu::Filter1dPush f{};
+  const ComputePipeline<gpu::DensePush>* x4 = nullptr;         // filter_x4 variant, else the 1-D filter
+  const ComputePipeline<gpu::Filter1dPush>* f1d = nullptr;     // gaussian1d (reads the weights) or morph1d
+  std::vector<Slab> slabs;
+};
+/// Every buffer of one run (absent ones empty), kept by name for the next run.
+struct ChainBuffers {
+  GpuBuffer field[2], up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down, rows, columns;
+};
+/// What the dispatches of one slab need besides the step: sizes, the brick min/max pair,
+/// the buffers they bind.
+struct SlabArgs {
+  int nx, ny, nz;
+  std::uint32_t bx, by;
+  std::uint64_t column_units;
+  const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows, *mm_bricks, *minmax_legacy;
+  const ChainBuffers* b;
+  const VkPhysicalDeviceLimits* lim;
+  int halo;
+};
+
+/// Records the dispatches of one slab of step `s` (no barrier after the last).
+void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s, const Slab& sl, const SlabArgs& a) {
+  const int nx = a.nx, ny = a.ny, nz = a.nz;
+  if (s.type == ChainStep::Fused) {
+    gpu::ListPush pc{};
+    pc.units = gpu::uint(a.column_units);
+    const std::uint64_t g = groups(a.column_units, ISOTOUCH_DENSE_WG);
+    const std::uint64_t gx = std::min<std::uint64_t>(g, a.lim->maxComputeWorkGroupCount[0]);
+    pc.groups_x = gpu::uint(gx);
+    s.fused->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->columns.handle(), 0, a.b->columns.size()}});
+    s.fused->push(cmd, pc);
+    vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t((g + gx - 1) / gx), 1);
+  } else if (s.type == ChainStep::Filter && s.x4) {
+    gpu::DensePush pc{};
+    pc.nx = s.f.nx;
+    pc.ny = s.f.ny;
+    pc.nz = s.f.nz;
+    pc.z0 = gpu::uint(sl.z0);
+    pc.slab_nz = gpu::uint(sl.nz);
+    pc.src_z0 = gpu::uint(sl.src_z0);
+    pc.src_offset = gpu::uint(sl.src_offset_elems);
+    pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+    pc.qx = gpu::uint((std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
+    // One vec4 store per invocation when every row starts on a 16-byte boundary.
+    pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
+    s.x4->bind(cmd, arena, {sl.src, sl.dst});
+    s.x4->push(cmd, pc);
+    vkCmdDispatch(cmd, groups(std::uint64_t(pc.qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(sl.nz));
+  } else if (s.type == ChainStep::Filter) {
+    gpu::Filter1dPush pc = s.f;
+    pc.z0 = gpu::uint(sl.z0);
+    pc.slab_nz = gpu::uint(sl.nz);
+    pc.src_z0 = gpu::uint(sl.src_z0);
+    pc.src_offset = gpu::uint(sl.src_offset_elems);
+    pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+    if (s.f1d->bindings() == 3)  // gaussian1d: the weights buffer
+      s.f1d->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->w_dev.handle(), 0, a.b->w_dev.size()}});
+    else
+      s.f1d->bind(cmd, arena, {sl.src, sl.dst});
+    s.f1d->push(cmd, pc);
+    vkCmdDispatch(cmd, groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X), groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y),
+                  groups(sl.nz, ISOTOUCH_FILTER_WG_Z));
+  } else if (s.type == ChainStep::MinMax) {
+    gpu::BrickMinMaxPush pc{};
+    pc.nx = gpu::uint(nx);
+    pc.ny = gpu::uint(ny);
+    pc.nz = gpu::uint(nz);
+    pc.bx = a.bx;
+    pc.by = a.by;
+    pc.bz0 = gpu::uint(sl.z0 / ISOTOUCH_BRICK);
+    pc.slab_bz = gpu::uint((sl.nz + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK);
+    pc.src_z0 = gpu::uint(sl.src_z0);
+    pc.src_offset = gpu::uint(sl.src_offset_elems);
+    pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+    pc.halo = gpu::uint(a.halo);
+    if (a.mm_rows) {
+      const std::uint64_t src_nz = sl.src_z1 - sl.src_z0;
+      const BufferRange rr{a.b->rows.handle(), 0, src_nz * std::uint64_t(ny) * a.bx * 8};
+      pc.pad0 = gpu::uint(src_nz);
+      a.mm_rows->bind(cmd, arena, {sl.src, rr});
+      a.mm_rows->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(src_nz));
+      barrier_compute_to_compute(cmd);
+      a.mm_bricks->bind(cmd, arena, {rr, sl.dst});
+      a.mm_bricks->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
+      barrier_compute_to_compute(cmd);  // the next slab rewrites the row ranges
+    } else {
+      a.minmax_legacy->bind(cmd, arena, {sl.src, sl.dst});
+      a.minmax_legacy->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(a.bx, ISOTOUCH_MINMAX_WG_X), groups(a.by, ISOTOUCH_MINMAX_WG_Y),
+                    groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
+    }
+  }
+}
+
+/// The outputs of a finished run into `out` (copies), or their addresses into `in_place`
+/// where the buffers are host-visible; `cur` the field after the last filter.
+void read_outputs(const Volume& vol, const std::vector<PassDesc>& passes, const ChainBuffers& b, int cur, bool direct,
+                  bool filters, const std::array<std::uint32_t, 3>& nb, PassChain::InPlace* in_place,
+                  ChainOutput& out) {
+  const std::uint64_t n = vol.grid.voxel_count();
+  if (filters && in_place && direct) {
+    in_place->field = static_cast<const float*>(b.field[cur].mapped());
+  } else if (filters) {
+    out.field.emplace(n);
+    std::memcpy(out.field->data(), direct ? b.field[cur].mapped() : b.field_down.mapped(), n * 4);
+  }
+  if (b.samples && in_place && direct) {
+    in_place->samples = static_cast<const core::Sample*>(b.samples.mapped());
+  } else if (b.samples) {
+    out.samples.emplace();
+    out.samples->grid = vol.grid;
+    out.samples->samples.resize(n);
+    std::memcpy(out.samples->samples.data(), direct ? b.samples.mapped() : b.samples_down.mapped(),
+                n * sizeof(core::Sample));
+  }
+  if (b.bricks) {
+    BrickRanges r;
+    r.bricks = {int(nb[0]), int(nb[1]), int(nb[2])};
+    for (const PassDesc& p : passes)
+      if (p.kind == PassKind::BrickMinMax) r.halo = p.halo;
+    const std::size_t count = std::size_t(nb[0]) * nb[1] * nb[2];
+    r.min.resize(count);
+    r.max.resize(count);
+    const float* f = static_cast<const float*>(direct ? b.bricks.mapped() : b.bricks_down.mapped());
+    for (std::size_t i = 0; i < count; ++i) {
+      r.min[i] = f[2 * i];
+      r.max[i] = f[2 * i + 1];
+    }
+    out.bricks = std::move(r);
+  }
+}
+
+/// Keeps this run's buffers by name for the next run of the same sizes.
+void keep_buffers(ChainBuffers& b, std::map<std::string, GpuBuffer>& kept) {
+  kept.clear();
+  auto keep = [&](GpuBuffer& g, const char* what) {
+    if (g) kept[what] = std::move(g);
+  };
+  keep(b.field[0], "voxels");
+  keep(b.field[1], "field ping-pong");
+  keep(b.up, "voxels staging");
+  keep(b.w_dev, "gaussian weights");
+  keep(b.w_up, "gaussian weights staging");
+  keep(b.samples, "samples");
+  keep(b.samples_down, "samples readback");
+  keep(b.bricks, "brick ranges");
+  keep(b.bricks_down, "brick ranges readback");
+  keep(b.field_down, "field readback");
+  keep(b.rows, "brick row ranges");
+  keep(b.columns, "fused gaussian columns");
+}
+}  // namespace
+
 struct PassChain::Impl {
   VulkanContext& ctx;
   ShaderSet shaders = ShaderSet::Current;
@@ -51,20 +230,26 @@ struct PassChain::Impl {
   /// filter_x4 variants by specialization (size, axis, radius, weights, mode), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss_x4;
   /// `w`: the Gaussian's weights (mode 0), else empty; `mode` 0 or ISOTOUCH_MORPH_MAX / MIN.
+  /// `vec4_in`: the source viewed as quads (quad_slabs()).
   const ComputePipeline<gpu::DensePush>* filter_x4(const std::array<int, 3>& dims, int axis, int radius,
-                                                   std::uint32_t mode, const std::vector<float>& w) {
-    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+                                                   std::uint32_t mode, const std::vector<float>& w, bool vec4_in) {
+    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
     for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(dims[std::size_t(a)]);
     spec[3] = std::uint32_t(axis);
     spec[4] = std::uint32_t(radius);
     for (std::size_t k = 0; k < w.size(); ++k) std::memcpy(&spec[5 + k], &w[k], 4);
     spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = mode;  // constant_id 38
+    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2] = vec4_in ? 1u : 0u;  // constant_id 39
     auto& p = gauss_x4[spec];
-    if (!p)
+    if (!p) {
       p = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, filter_x4_spv, 2, mode ? "morph_x4" : "gaussian_x4",
                                                             0u, spec, 1u);
+      if (vec4_in) p->set_texel_vec4(1u);
+    }
     return p.get();
   }
+  /// gauss_fused_list variants by specialization (fused_gaussian_spec), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> fused;
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
   /// Current set's brick min/max in two steps (minmax_rows, minmax_bricks), specialised on
   /// the bricks along x; made on first use.
@@ -200,13 +385,16 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     throw VolumeError(vol.path + ": " + e.what());
   }
 
-  GpuBuffer field[2];
+  ChainBuffers bufs;
+  GpuBuffer(&field)[2] = bufs.field;
   field[0] = buffer(n * 4, MemoryIntent::DeviceLocal, "voxels");
   if (filters) field[1] = buffer(n * 4, MemoryIntent::DeviceLocal, "field ping-pong");
   // Zero copy where device-local memory is host-visible: the host writes the voxels and
   // reads the outputs in place; otherwise staging and readback buffers and their copies.
   const bool direct = field[0].mapped() != nullptr;
-  GpuBuffer up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down;
+  GpuBuffer &up = bufs.up, &w_dev = bufs.w_dev, &w_up = bufs.w_up, &samples = bufs.samples,
+            &samples_down = bufs.samples_down, &bricks = bufs.bricks, &bricks_down = bufs.bricks_down,
+            &field_down = bufs.field_down;
   if (!direct) up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
   if (!weights.empty()) {
     w_dev = buffer(weights.size() * 4, MemoryIntent::DeviceLocal, "gaussian weights");
@@ -226,15 +414,9 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   if (filters && !direct) field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
 
   // Plan every dispatch (slabs) first: the descriptor arena is sized from the plan.
-  struct Step {
-    std::size_t pass;
-    const ComputePipelineBase* pipe = nullptr;
-    enum { Filter, Gradient, MinMax } type = Filter;
-    gpu::Filter1dPush f{};
-    const ComputePipeline<gpu::DensePush>* x4 = nullptr;  // filter_x4 variant, else the 1-D filter
-    std::vector<Slab> slabs;
-  };
+  using Step = ChainStep;
   std::vector<Step> steps;
+  sparse::WorkList columns;  // every column of quads, made for the first fused Gaussian
   const bool legacy = impl_->shaders == ShaderSet::Legacy;
   std::uint64_t rows_slices = 0;  // most source slices of a brick min/max slab
   std::uint32_t extra_sets = 0;   // the current brick min/max binds twice per slab
@@ -246,7 +428,43 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   for (std::size_t i = 0; i < passes_.size(); ++i) {
     const PassDesc& p = passes_[i];
     info << "  " << p.label();
-    if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
+    // A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
+    // list of every column of quads, where the field is one binding and read in place.
+    bool fuse = p.kind == PassKind::Gaussian && !legacy && direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
+                n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
+    for (int a = 0; a < 3 && fuse; ++a)
+      fuse = gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+    if (fuse) {
+      if (columns.units.empty()) {
+        const auto nb = core::brick_counts(vol.grid);
+        const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+        std::vector<std::uint32_t> all(total);
+        for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
+        columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path);
+      }
+      const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gaussians[gi].kernel);
+      auto& pipe = impl_->fused[spec];
+      if (!pipe) {
+        pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
+                                                                spec, 0b101u);
+        pipe->set_texel_vec4(1u);
+      }
+      Step s;
+      s.pass = i;
+      s.type = Step::Fused;
+      s.fused = pipe.get();
+      Slab whole;
+      whole.nz = std::uint64_t(nz);
+      whole.src_z1 = std::uint64_t(nz);
+      whole.src = {field[cur].handle(), 0, n * 4};
+      whole.dst = {field[1 - cur].handle(), 0, n * 4};
+      s.slabs.push_back(whole);
+      steps.push_back(std::move(s));
+      cur = 1 - cur;
+      info << ": x, y, z fused in one pass (" << columns.unit_count() << " columns; sigma " << gaussians[gi].sigma_vox[0]
+           << ", " << gaussians[gi].sigma_vox[1] << ", " << gaussians[gi].sigma_vox[2] << " voxels)";
+      ++gi;
+    } else if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
       const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
       for (int k = 0; k < axes; ++k) {
         const int axis = k % 3;
@@ -257,30 +475,17 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
         s.f.ny = gpu::uint(ny);
         s.f.nz = gpu::uint(nz);
         s.f.axis = gpu::uint(axis);
-        if (p.kind == PassKind::Gaussian) {
-          const auto& kern = gaussians[gi].kernel[std::size_t(axis)];
+        const bool gauss = p.kind == PassKind::Gaussian;
+        const std::vector<float> no_weights;
+        const std::vector<float>& kern = gauss ? gaussians[gi].kernel[std::size_t(axis)] : no_weights;
+        if (gauss) {
           s.f.radius = gpu::uint(kern.size() / 2);
           s.f.w_offset = w_offsets[gi][std::size_t(axis)];
-          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
-            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), 0u, kern);
-            s.pipe = s.x4;
-          } else {
-            if (!impl_->gauss)
-              impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
-            s.pipe = impl_->gauss.get();
-          }
         } else {
           s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
           s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
-          if (impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS) {
-            s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), s.f.mode, {});
-            s.pipe = s.x4;
-          } else {
-            if (!impl_->morph)
-              impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
-            s.pipe = impl_->morph.get();
-          }
         }
+        const bool x4 = impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS;
         info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
         SlabGeometry g;
         g.nz = std::uint64_t(nz);
@@ -288,11 +493,24 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
         g.halo = axis == 2 ? s.f.radius : 0;
         g.dst_bytes_before = &floats_before;
         g.user = &float_slice;
-        g.wg_z = s.x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
+        g.wg_z = x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
         auto sl = plan_slabs(ctx, g, field[cur].handle(), field[1 - cur].handle(), limit,
                              vol.path + ": " + p.label());
         if (!sl) throw VolumeError(sl.error);
         s.slabs = std::move(*sl.value);
+        if (x4) {
+          s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), gauss ? 0u : s.f.mode, kern,
+                                  slabs_hold_quads(nx, s.slabs));
+          s.pipe = s.x4;
+        } else if (gauss) {
+          if (!impl_->gauss)
+            impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
+          s.pipe = s.f1d = impl_->gauss.get();
+        } else {
+          if (!impl_->morph)
+            impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
+          s.pipe = s.f1d = impl_->morph.get();
+        }
         steps.push_back(std::move(s));
         cur = 1 - cur;
       }
@@ -337,12 +555,17 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
       if (s.pass == i) d += s.slabs.size();
     info << ", " << d << " dispatch(es)\n";
   }
+  GpuBuffer& columns_buf = bufs.columns;  // the fused Gaussian's column list, written in place
+  if (!columns.units.empty()) {
+    columns_buf = buffer(columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
+    std::memcpy(columns_buf.mapped(), columns.units.data(), columns.units.size() * 4);
+  }
   std::uint32_t sets = extra_sets;
   for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
   // Current brick min/max: the row ranges of one slab's source slices (2 floats per brick
   // column of every row), reused slab after slab.
   const std::uint64_t rows_bytes = rows_slices * std::uint64_t(ny) * bx * 8;
-  GpuBuffer rows;
+  GpuBuffer& rows = bufs.rows;
   const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows = nullptr, *mm_bricks = nullptr;
   if (has(passes_, PassKind::BrickMinMax) && !legacy) {
     if (rows_slices > lim.maxComputeWorkGroupCount[2])
@@ -380,75 +603,12 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   cur = 0;
   for (std::size_t k = 0; k < steps.size(); ++k) {
     const Step& s = steps[k];
-    for (const Slab& sl : s.slabs) {
-      if (s.type == Step::Filter && s.x4) {
-        gpu::DensePush pc{};
-        pc.nx = s.f.nx;
-        pc.ny = s.f.ny;
-        pc.nz = s.f.nz;
-        pc.z0 = gpu::uint(sl.z0);
-        pc.slab_nz = gpu::uint(sl.nz);
-        pc.src_z0 = gpu::uint(sl.src_z0);
-        pc.src_offset = gpu::uint(sl.src_offset_elems);
-        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-        pc.qx = gpu::uint((std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
-        // One vec4 store per invocation when every row starts on a 16-byte boundary.
-        pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
-        s.x4->bind(cmd, arena, {sl.src, sl.dst});
-        s.x4->push(cmd, pc);
-        vkCmdDispatch(cmd, groups(std::uint64_t(pc.qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(sl.nz));
-      } else if (s.type == Step::Filter) {
-        gpu::Filter1dPush pc = s.f;
-        pc.z0 = gpu::uint(sl.z0);
-        pc.slab_nz = gpu::uint(sl.nz);
-        pc.src_z0 = gpu::uint(sl.src_z0);
-        pc.src_offset = gpu::uint(sl.src_offset_elems);
-        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-        if (s.pipe == impl_->gauss.get()) {
-          impl_->gauss->bind(cmd, arena, {sl.src, sl.dst, BufferRange{w_dev.handle(), 0, w_dev.size()}});
-          impl_->gauss->push(cmd, pc);
-        } else {
-          impl_->morph->bind(cmd, arena, {sl.src, sl.dst});
-          impl_->morph->push(cmd, pc);
-        }
-        vkCmdDispatch(cmd, groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X), groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y),
-                      groups(sl.nz, ISOTOUCH_FILTER_WG_Z));
-      } else if (s.type == Step::MinMax) {
-        gpu::BrickMinMaxPush pc{};
-        pc.nx = gpu::uint(nx);
-        pc.ny = gpu::uint(ny);
-        pc.nz = gpu::uint(nz);
-        pc.bx = bx;
-        pc.by = by;
-        pc.bz0 = gpu::uint(sl.z0 / ISOTOUCH_BRICK);
-        pc.slab_bz = gpu::uint((sl.nz + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK);
-        pc.src_z0 = gpu::uint(sl.src_z0);
-        pc.src_offset = gpu::uint(sl.src_offset_elems);
-        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-        pc.halo = gpu::uint(passes_[s.pass].halo);
-        if (mm_rows) {
-          const std::uint64_t src_nz = sl.src_z1 - sl.src_z0;
-          const BufferRange rr{rows.handle(), 0, src_nz * std::uint64_t(ny) * bx * 8};
-          pc.pad0 = gpu::uint(src_nz);
-          mm_rows->bind(cmd, arena, {sl.src, rr});
-          mm_rows->push(cmd, pc);
-          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(src_nz));
-          barrier_compute_to_compute(cmd);
-          mm_bricks->bind(cmd, arena, {rr, sl.dst});
-          mm_bricks->push(cmd, pc);
-          vkCmdDispatch(cmd, groups(std::uint64_t(bx) * by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
-          barrier_compute_to_compute(cmd);  // the next slab rewrites the row ranges
-        } else {
-          impl_->minmax->bind(cmd, arena, {sl.src, sl.dst});
-          impl_->minmax->push(cmd, pc);
-          vkCmdDispatch(cmd, groups(bx, ISOTOUCH_MINMAX_WG_X), groups(by, ISOTOUCH_MINMAX_WG_Y),
-                        groups(pc.slab_bz, ISOTOUCH_MINMAX_WG_Z));
-        }
-      }
-    }
+    SlabArgs args{nx, ny, nz, bx, by, columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(), &bufs, &lim,
+                  passes_[s.pass].halo};
+    for (const Slab& sl : s.slabs) record_slab(cmd, arena, s, sl, args);
     if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
     dispatches[s.pass] += int(s.slabs.size());
-    if (s.type == Step::Filter) cur = 1 - cur;
+    if (s.type == Step::Filter || s.type == Step::Fused) cur = 1 - cur;
     // The next step reads what this one wrote (and a filter overwrites what the previous
     // filter read): make this step's writes visible before any later dispatch.
     barrier_compute_to_compute(cmd);
@@ -475,53 +635,10 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   out.gpu_timestamps = timer.enabled();
 
   t0 = std::chrono::steady_clock::now();
-  if (filters && in_place && direct) {
-    in_place->field = static_cast<const float*>(field[cur].mapped());
-  } else if (filters) {
-    out.field.emplace(n);
-    std::memcpy(out.field->data(), direct ? field[cur].mapped() : field_down.mapped(), n * 4);
-  }
-  if (samples && in_place && direct) {
-    in_place->samples = static_cast<const core::Sample*>(samples.mapped());
-  } else if (samples) {
-    out.samples.emplace();
-    out.samples->grid = vol.grid;
-    out.samples->samples.resize(n);
-    std::memcpy(out.samples->samples.data(), direct ? samples.mapped() : samples_down.mapped(),
-                n * sizeof(core::Sample));
-  }
-  if (bricks) {
-    BrickRanges b;
-    b.bricks = {int(bx), int(by), int(bz)};
-    for (const PassDesc& p : passes_)
-      if (p.kind == PassKind::BrickMinMax) b.halo = p.halo;
-    const std::size_t count = std::size_t(bx) * by * bz;
-    b.min.resize(count);
-    b.max.resize(count);
-    const float* f = static_cast<const float*>(direct ? bricks.mapped() : bricks_down.mapped());
-    for (std::size_t i = 0; i < count; ++i) {
-      b.min[i] = f[2 * i];
-      b.max[i] = f[2 * i + 1];
-    }
-    out.bricks = std::move(b);
-  }
+  read_outputs(vol, passes_, bufs, cur, direct, filters, {bx, by, bz}, in_place, out);
   out.download_ms = ms_since(t0);
   impl_->last_run = info.str();
-  impl_->kept.clear();
-  auto keep = [&](GpuBuffer& b, const char* what) {
-    if (b) impl_->kept[what] = std::move(b);
-  };
-  keep(field[0], "voxels");
-  keep(field[1], "field ping-pong");
-  keep(up, "voxels staging");
-  keep(w_dev, "gaussian weights");
-  keep(w_up, "gaussian weights staging");
-  keep(samples, "samples");
-  keep(samples_down, "samples readback");
-  keep(bricks, "brick ranges");
-  keep(bricks_down, "brick ranges readback");
-  keep(field_down, "field readback");
-  keep(rows, "brick row ranges");
+  keep_buffers(bufs, impl_->kept);
   return out;
 }
 

@@ -82,4 +82,10 @@ class PassChain {
   std::vector<PassDesc> passes_;
 };
 
+/// Specialization constants of shaders/gauss_fused_list.comp (the Gaussian's x, y and z
+/// passes in one): the grid's size, the radii and the 2 r + 1 float weights of each axis,
+/// bit for bit. Every radius <= ISOTOUCH_FUSED_MAX_RADIUS.
+std::vector<std::uint32_t> fused_gaussian_spec(const std::array<int, 3>& dims,
+                                               const std::array<std::vector<float>, 3>& kernels);
+
 }  // namespace isotouch::engine

@@ -24,6 +24,7 @@
 
 #include "cpu_gradient.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
+#include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
 #include "isotouch_shared.h"
 #include "parallel.h"
@@ -101,7 +102,8 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   // candidate): every row of slice z updates the candidates whose brick + 1 voxel holds it.
   // Min / max over a set do not depend on the order (NaN skipped, -0 made +0 at the end).
   // Threads take whole brick layers: each candidate is folded by one thread.
-  std::vector<std::int32_t> cand_of(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), -1);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  std::vector<std::int32_t> cand_of(total, -1);
   for (std::size_t c = 0; c < nc; ++c) cand_of[sel.candidates[c]] = std::int32_t(c);
   for (sparse::CandidateRange& r : ranges) r = {inf, -inf, false};
   parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
@@ -160,7 +162,45 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   sparse::publish_fill(vol.grid, sel, ranges, fill, threads, iso, background, format, keep_input, out);
   out.publish_ms = ms_since(t0);
 }
+/// The per-brick kernel's candidate ranges (vec4 records: lo, hi, NaN seen, its active
+/// decision) read back, each checked: written by the shader, within llvmpipe's loop budget,
+/// and the shader's decision the host's (sparse::is_active on the same range).
+/// @throws std::logic_error naming the candidate and brick otherwise.
+std::vector<sparse::CandidateRange> checked_ranges(const Volume& vol, const sparse::Selection& sel, const float* rf,
+                                                   const core::Isosurface& iso, float background) {
+  const std::size_t nc = sel.candidates.size();
+  std::vector<sparse::CandidateRange> ranges(nc);
+  for (std::size_t c = 0; c < nc; ++c) {
+    const std::string at = vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
+                           std::to_string(sel.candidates[c]) + ")";
+    if (rf[4 * c + 3] == 2.0f)
+      throw std::logic_error(at + " ran out of llvmpipe's loop budget (65535 trips per invocation); "
+                                  "sparse::loop_trips_per_brick underestimates sparse_brick.comp's loops");
+    if (rf[4 * c + 3] != 0.0f && rf[4 * c + 3] != 1.0f) throw std::logic_error(at + " was never written by the shader");
+    ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
+    float tile = 0;
+    if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))
+      throw std::logic_error(at + ": shader and host disagree (range " + std::to_string(ranges[c].lo) + ".." +
+                             std::to_string(ranges[c].hi) + ", tau " + std::to_string(iso.tau) + ")");
+  }
+  return ranges;
+}
 }  // namespace
+
+/// One dispatch round of the list strategy: its pipeline, its z-slabs, its label.
+struct ListStage {
+  const ComputePipeline<gpu::ListPush>* pipe = nullptr;
+  std::vector<Slab> slabs;
+  std::string label;
+  std::uint64_t invocations_per_unit = ISOTOUCH_LIST_INVOCATIONS;  ///< 1 for the fused pass's columns
+};
+/// The buffers a list run records into: the ping-pong fields (field 0 the input), the work
+/// lists, and the staging / readback buffers where memory is not host-visible (else null).
+struct ListBuffers {
+  GpuBuffer* field[2] = {nullptr, nullptr};
+  GpuBuffer *up = nullptr, *list_buf = nullptr, *list_up = nullptr, *field_down = nullptr;
+  std::uint64_t list_bytes = 0;
+};
 
 struct SparseChain::Impl {
   VulkanContext& ctx;
@@ -173,11 +213,23 @@ struct SparseChain::Impl {
   std::unique_ptr<PassChain> dense;  ///< the dense strategy's chain (filters + gradient), made on first use
   SparseOutput run_dense(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
                          std::uint64_t max_binding_bytes);
+  /// The list strategy's steps: the fused Gaussian's stage, one filter op's stage, and the
+  /// command buffer of all stages (device time per stage).
+  ListStage fused_stage(const Volume& vol, const sparse::Plan& plan, const ListBuffers& b);
+  ListStage filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k, const ListBuffers& b,
+                         std::uint64_t limit);
+  std::vector<double> record_lists(const Volume& vol, const std::vector<ListStage>& stages,
+                                   const std::vector<sparse::WorkList>& lists, const std::vector<std::uint64_t>& base,
+                                   const ListBuffers& b, bool direct, SparseOutput& out, int& dispatches);
+  SparseOutput run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
+                             core::SampleFormat format, std::uint64_t max_binding_bytes);
   SparseOutput run_lists(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
                          std::uint64_t max_binding_bytes);
   /// The list strategy's pipelines: filter_list_x4 by specialization (as PassChain's
   /// filter_x4), made on first use.
   std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> filter_list;
+  /// gauss_fused_list by specialization (size, radii, weights), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> fused_pipes;
   /// The list strategy's buffers by name, kept from run to run (no new allocation and no
   /// first-touch page faults inside the timed dispatches when the sizes repeat).
   std::map<std::string, GpuBuffer> kept;
@@ -220,13 +272,7 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   SparseOutput out;
   // Host: raw brick ranges and the candidates.
   auto t0 = std::chrono::steady_clock::now();
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
-  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  for (int z = 0; z < nz; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
-  const double raw_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads());
   const double select_ms = ms_since(t0);
 
   // The dense passes, outputs read where they lie.
@@ -241,7 +287,6 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, s, iso, background, format, keep_input, out, ranges_ms);
   const double gather_ms = ranges_ms;
-  out.passes.push_back({"raw brick ranges (host)", raw_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   int dispatches = 0, slabs = 0;
   for (const PassTiming& p : d.passes) {
@@ -268,6 +313,134 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   return out;
 }
 
+ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& plan, const ListBuffers& b) {
+  const std::uint64_t n = vol.grid.voxel_count();
+  std::array<std::vector<float>, 3> kernels;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const sparse::Op& op = plan.ops[a];
+    kernels[a].assign(plan.weights.begin() + op.w_offset, plan.weights.begin() + op.w_offset + 2 * op.radius + 1);
+  }
+  const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+  auto& p = fused_pipes[spec];
+  if (!p) {
+    p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u, spec,
+                                                         0b101u);
+    p->set_texel_vec4(1u);
+  }
+  ListStage st;
+  st.pipe = p.get();
+  st.invocations_per_unit = 1;
+  st.label = "gaussian x r=" + std::to_string(plan.ops[0].radius) + " + y r=" + std::to_string(plan.ops[1].radius) +
+             " + z r=" + std::to_string(plan.ops[2].radius) + " fused";
+  Slab whole;
+  whole.nz = std::uint64_t(vol.grid.dims[2]);
+  whole.src_z1 = whole.nz;
+  whole.src = {b.field[0]->handle(), 0, n * 4};
+  whole.dst = {b.field[1]->handle(), 0, n * 4};
+  st.slabs.push_back(whole);
+  return st;
+}
+
+ListStage SparseChain::Impl::filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k,
+                                          const ListBuffers& b, std::uint64_t limit) {
+  const sparse::Op& op = plan.ops[k];
+  ListStage st;
+  st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
+             " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
+  const std::uint64_t slice_bytes = std::uint64_t(vol.grid.dims[0]) * std::uint64_t(vol.grid.dims[1]) * 4;
+  SlabGeometry g;
+  g.nz = std::uint64_t(vol.grid.dims[2]);
+  g.src_bytes_per_slice = slice_bytes;
+  g.dst_bytes_before = +[](std::uint64_t z, const void* u) { return z * *static_cast<const std::uint64_t*>(u); };
+  g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
+  g.user = &slice_bytes;
+  auto sl = plan_slabs(ctx, g, b.field[k % 2]->handle(), b.field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
+  if (!sl) throw VolumeError(sl.error);
+  st.slabs = std::move(*sl.value);
+  std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
+  for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
+  spec[3] = std::uint32_t(op.axis);
+  spec[4] = std::uint32_t(op.radius);
+  if (op.kind == sparse::OpKind::kGauss)
+    std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
+  spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
+  const bool quads = slabs_hold_quads(vol.grid.dims[0], st.slabs);
+  spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2] = quads ? 1u : 0u;  // constant_id 39: quad input
+  auto& p = filter_list[spec];
+  if (!p) {
+    p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
+                                                         0b101u);
+    if (quads) p->set_texel_vec4(1u);
+  }
+  st.pipe = p.get();
+  return st;
+}
+
+std::vector<double> SparseChain::Impl::record_lists(const Volume& vol, const std::vector<ListStage>& stages,
+                                                    const std::vector<sparse::WorkList>& lists,
+                                                    const std::vector<std::uint64_t>& base, const ListBuffers& b,
+                                                    bool direct, SparseOutput& out, int& dispatches) {
+  const auto& lim = ctx.properties().limits;
+  const std::size_t K = stages.size();
+  const std::uint64_t n = vol.grid.voxel_count();
+  const int nx = vol.grid.dims[0];
+  std::uint32_t sets = 0;
+  for (const ListStage& st : stages) sets += std::uint32_t(st.slabs.size());
+  DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
+  GpuTimer timer(ctx, std::uint32_t(K + 1));
+  VkCommandBuffer cmd = ctx.begin_commands();
+  timer.record_reset(cmd);
+  if (!direct) {
+    record_copy(cmd, *b.up, *b.field[0], n * 4);
+    record_copy(cmd, *b.list_up, *b.list_buf, b.list_bytes);
+    barrier_transfer_to_compute(cmd);
+  }
+  timer.mark(cmd, 0);
+  const BufferRange list_range{b.list_buf->handle(), 0, b.list_bytes};
+  for (std::size_t k = 0; k < K; ++k) {
+    const sparse::WorkList& w = lists[k];
+    for (const Slab& sl : stages[k].slabs) {
+      // A slab's units are those of its slices (the lists are sorted by z).
+      const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
+      if (u1 == u0) continue;
+      const std::uint64_t invocations = (u1 - u0) * stages[k].invocations_per_unit;
+      const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
+      const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
+      const std::uint64_t gy = (groups + gx - 1) / gx;
+      if (gy > lim.maxComputeWorkGroupCount[1])
+        throw VolumeError(vol.path + ": sparse chain: " + std::to_string(groups) + " workgroups exceed one dispatch on " +
+                          ctx.info().name);
+      gpu::ListPush pc{};
+      pc.z0 = gpu::uint(sl.z0);
+      pc.src_z0 = gpu::uint(sl.src_z0);
+      pc.src_offset = gpu::uint(sl.src_offset_elems);
+      pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+      pc.unit0 = gpu::uint(base[k] + u0);
+      pc.units = gpu::uint(u1 - u0);
+      pc.groups_x = gpu::uint(gx);
+      pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
+      stages[k].pipe->bind(cmd, arena, {sl.src, sl.dst, list_range});
+      stages[k].pipe->push(cmd, pc);
+      vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t(gy), 1);
+      ++dispatches;
+    }
+    // The next op reads what this one wrote, and overwrites what this one read.
+    barrier_compute_to_compute(cmd);
+    timer.mark(cmd, std::uint32_t(k + 1));
+  }
+  if (direct) {
+    barrier_compute_to_host(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    record_copy(cmd, *b.field[K % 2], *b.field_down, n * 4);
+    barrier_transfer_to_host(cmd);
+  }
+  out.submit_wall_ms = ctx.submit_and_wait(cmd);
+  std::vector<double> ms(K, 0.0);
+  for (std::size_t k = 0; k < K; ++k) ms[k] = timer.elapsed_ms(std::uint32_t(k), std::uint32_t(k + 1));
+  return ms;
+}
+
 SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurface& iso, float background,
                                           core::SampleFormat format, std::uint64_t max_binding_bytes) {
   const auto t_total = std::chrono::steady_clock::now();
@@ -291,9 +464,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
 
-  // Host, in one pass over the voxels on hardware_threads() threads (whole brick layers
-  // each, so every brick folds its voxels in add_slice's order): the raw brick ranges, and
-  // the voxels copied into the input field (or its staging buffer) where a filter runs.
+  // Host, on hardware_threads() threads: the voxels copied into the input field (or its
+  // staging buffer) where a filter runs; the candidates.
   auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t n = vol.grid.voxel_count();
   const bool filters = !plan.ops.empty();
@@ -301,28 +473,28 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   GpuBuffer* up =
       filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
   char* input = !filters ? nullptr : static_cast<char*>(direct ? field0->mapped() : up->mapped());
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
-    for (std::size_t z = z0; z < z1; ++z) {
-      const float* src = vol.voxels.data() + z * slice;
-      raw.add_slice(vol.grid, int(z), src);
-      if (input) std::memcpy(input + z * slice * 4, src, slice * 4);
-    }
-  });
+  if (input)
+    parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
+      std::memcpy(input + z0 * slice * 4, vol.voxels.data() + z0 * slice, (z1 - z0) * slice * 4);
+    });
   const double raw_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads());
   const double select_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
-  const std::size_t K = plan.ops.size();
+  // One Gaussian whose field fits one binding and one texel view runs as ONE fused pass
+  // (gauss_fused_list.comp) over columns of the last extent's quads; other chains run one
+  // pass per op over its extent's quads.
+  const bool fused = sparse::fusable(plan, vol.grid) && n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
+  const std::size_t K = fused ? 1 : plan.ops.size();  // stages (dispatch rounds)
   std::vector<sparse::WorkList> lists;
   std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
   std::uint64_t total_units = 0;
   for (std::size_t k = 0; k < K; ++k) {
-    lists.push_back(sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
+    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path)
+                          : sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();
   }
@@ -349,100 +521,15 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   }
   out.upload_ms = ms_since(t0);
 
-  // Slabs and dispatches: op k reads field k % 2 and writes the other. A slab's units are
-  // those of its slices (the lists are sorted by z).
-  auto floats_before = +[](std::uint64_t z, const void* u) { return z * *static_cast<const std::uint64_t*>(u); };
-  const std::uint64_t slice_bytes = std::uint64_t(slice) * 4;
-  struct Stage {
-    const ComputePipeline<gpu::ListPush>* pipe = nullptr;
-    std::vector<Slab> slabs;
-    std::string label;
-  };
-  std::vector<Stage> stages;
-  std::uint32_t sets = 0;
-  for (std::size_t k = 0; k < K; ++k) {
-    Stage st;
-    const sparse::Op& op = plan.ops[k];
-    std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
-    for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(vol.grid.dims[std::size_t(a)]);
-    spec[3] = std::uint32_t(op.axis);
-    spec[4] = std::uint32_t(op.radius);
-    if (op.kind == sparse::OpKind::kGauss)
-      std::memcpy(&spec[5], plan.weights.data() + op.w_offset, std::size_t(2 * op.radius + 1) * 4);
-    spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1] = std::uint32_t(op.kind);  // constant_id 38: the mode
-    auto& p = filter_list[spec];
-    if (!p)
-      p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, filter_list_x4_spv, 3, "filter_list_x4", 0u, spec,
-                                                           0b101u);
-    st.pipe = p.get();
-    st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
-               " " + "xyz"[op.axis] + " r=" + std::to_string(op.radius);
-    SlabGeometry g;
-    g.nz = std::uint64_t(nz);
-    g.src_bytes_per_slice = slice_bytes;
-    g.dst_bytes_before = floats_before;
-    g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
-    g.user = &slice_bytes;
-    auto sl = plan_slabs(ctx, g, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
-    if (!sl) throw VolumeError(sl.error);
-    st.slabs = std::move(*sl.value);
-    sets += std::uint32_t(st.slabs.size());
-    stages.push_back(std::move(st));
-  }
+  // Stages: the fused pass, or one per op (op k reads field k % 2 and writes the other);
+  // then one command buffer of their dispatches.
+  const ListBuffers bufs{{field[0], field[1]}, up, list_buf, list_up, field_down, list_bytes};
+  std::vector<ListStage> stages;
+  for (std::size_t k = 0; k < K; ++k)
+    stages.push_back(fused ? fused_stage(vol, plan, bufs) : filter_stage(vol, plan, k, bufs, limit));
   int dispatches = 0;
-  std::vector<double> stage_ms(K, 0.0);
-  if (K) {
-    DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
-    GpuTimer timer(ctx, std::uint32_t(K + 1));
-    VkCommandBuffer cmd = ctx.begin_commands();
-    timer.record_reset(cmd);
-    if (!direct) {
-      record_copy(cmd, *up, *field[0], n * 4);
-      record_copy(cmd, *list_up, *list_buf, list_bytes);
-      barrier_transfer_to_compute(cmd);
-    }
-    timer.mark(cmd, 0);
-    const BufferRange list_range{list_buf->handle(), 0, list_bytes};
-    for (std::size_t k = 0; k < K; ++k) {
-      const sparse::WorkList& w = lists[k];
-      for (const Slab& sl : stages[k].slabs) {
-        const std::uint64_t u0 = w.z_first[sl.z0], u1 = w.z_first[sl.z0 + sl.nz];
-        if (u1 == u0) continue;
-        const std::uint64_t invocations = (u1 - u0) * ISOTOUCH_LIST_INVOCATIONS;
-        const std::uint64_t groups = (invocations + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
-        const std::uint64_t gx = std::min<std::uint64_t>(groups, lim.maxComputeWorkGroupCount[0]);
-        const std::uint64_t gy = (groups + gx - 1) / gx;
-        if (gy > lim.maxComputeWorkGroupCount[1])
-          throw VolumeError(vol.path + ": sparse chain: " + std::to_string(groups) +
-                            " workgroups exceed one dispatch on " + ctx.info().name);
-        gpu::ListPush pc{};
-        pc.z0 = gpu::uint(sl.z0);
-        pc.src_z0 = gpu::uint(sl.src_z0);
-        pc.src_offset = gpu::uint(sl.src_offset_elems);
-        pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-        pc.unit0 = gpu::uint(base[k] + u0);
-        pc.units = gpu::uint(u1 - u0);
-        pc.groups_x = gpu::uint(gx);
-        pc.vec4_out = (nx % ISOTOUCH_DENSE_VOXELS == 0 && sl.dst_offset_elems % ISOTOUCH_DENSE_VOXELS == 0) ? 1u : 0u;
-        stages[k].pipe->bind(cmd, arena, {sl.src, sl.dst, list_range});
-        stages[k].pipe->push(cmd, pc);
-        vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t(gy), 1);
-        ++dispatches;
-      }
-      // The next op reads what this one wrote, and overwrites what this one read.
-      barrier_compute_to_compute(cmd);
-      timer.mark(cmd, std::uint32_t(k + 1));
-    }
-    if (direct) {
-      barrier_compute_to_host(cmd);
-    } else {
-      barrier_compute_to_transfer(cmd);
-      record_copy(cmd, *field[K % 2], *field_down, n * 4);
-      barrier_transfer_to_host(cmd);
-    }
-    out.submit_wall_ms = ctx.submit_and_wait(cmd);
-    for (std::size_t k = 0; k < K; ++k) stage_ms[k] = timer.elapsed_ms(std::uint32_t(k), std::uint32_t(k + 1));
-  }
+  const std::vector<double> stage_ms =
+      K ? record_lists(vol, stages, lists, base, bufs, direct, out, dispatches) : std::vector<double>{};
 
   // Host: ranges and samples from the last filter's output where it lies (the raw voxels
   // without a filter).
@@ -451,8 +538,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
 
-  out.passes.push_back({"raw brick ranges + input copy (host)", raw_ms, 0});
-  out.passes.push_back({"candidate selection (host)", select_ms, 0});
+  out.passes.push_back({"input copy (host)", raw_ms, 0});
+  out.passes.push_back({"candidate selection: raw ranges over the bricks' windows (host)", select_ms, 0});
   out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
   std::ostringstream info;
   const auto nb = core::brick_counts(vol.grid);
@@ -543,16 +630,23 @@ std::string SparseChain::describe() const {
 
 SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, float background,
                               core::SampleFormat format, std::uint64_t max_binding_bytes) {
-  if (impl_->strategy == Strategy::Lists) return impl_->run_lists(vol, iso, background, format, max_binding_bytes);
-  if (impl_->strategy == Strategy::Dense) return impl_->run_dense(vol, iso, background, format, max_binding_bytes);
+  switch (impl_->strategy) {
+    case Strategy::Lists: return impl_->run_lists(vol, iso, background, format, max_binding_bytes);
+    case Strategy::Dense: return impl_->run_dense(vol, iso, background, format, max_binding_bytes);
+    case Strategy::PerBrick: break;
+  }
+  return impl_->run_per_brick(vol, iso, background, format, max_binding_bytes);
+}
+
+SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
+                                              core::SampleFormat format, std::uint64_t max_binding_bytes) {
   const auto t_total = std::chrono::steady_clock::now();
-  VulkanContext& ctx = impl_->ctx;
   const auto& lim = ctx.properties().limits;
   const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];  // lambdas capture these (clang 14: not bindings)
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
                       std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
-  const sparse::Plan plan = sparse::make_plan(vol.grid, impl_->passes, vol.path);
+  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
   const auto [shared_a, shared_b] = shared_sizes(plan);
   if (shared_a + shared_b > ISOTOUCH_SPARSE_SHARED_FLOATS || plan.ops.size() > ISOTOUCH_SPARSE_MAX_OPS)
     throw VolumeError(vol.path + ": sparse chain: filters of total radius " + std::to_string(plan.radius[0]) + "," +
@@ -609,18 +703,15 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   }
   const double alloc_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
   for (int z = 0; z < nz; ++z) {
     const float* src = vol.voxels.data() + std::size_t(z) * slice;
-    raw.add_slice(vol.grid, z, src);
     for (SlabPlan& s : slabs)
       if (z >= s.src_z0 && z < s.src_z1)
         std::memcpy(static_cast<char*>(s.staging.mapped()) + std::uint64_t(z - s.src_z0) * slice * 4, src, slice * 4);
   }
   const double staging_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso);
   const std::size_t nc = sel.candidates.size();
   const double select_ms = ms_since(t0);
 
@@ -694,7 +785,7 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   // workgroup loops over more bricks than llvmpipe's loop budget allows (its loops would
   // silently stop), never more than one per candidate.
   const std::uint64_t per_group = sparse::max_bricks_per_workgroup(plan);
-  const std::uint64_t preferred = impl_->max_groups ? impl_->max_groups : kDefaultGroups;
+  const std::uint64_t preferred = max_groups ? max_groups : kDefaultGroups;
   auto workgroups = [&](std::uint64_t n) {
     const std::uint64_t needed = (n + per_group - 1) / per_group;
     return std::min<std::uint64_t>(std::max(preferred, needed), n);
@@ -732,12 +823,12 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
     pc.cand_end = gpu::uint(ch.c1);
     pc.groups = gpu::uint(workgroups(ch.c1 - ch.c0));
     out.stats.workgroups += pc.groups;
-    impl_->pipe.bind(cmd, arena,
+    pipe.bind(cmd, arena,
                      {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{cand_dev.handle(), 0, cand_dev.size()},
                       BufferRange{params_dev.handle(), 0, params_dev.size()},
                       BufferRange{ranges_dev.handle(), 0, ranges_dev.size()},
                       BufferRange{ch.pool.handle(), 0, ch.pool.size()}});
-    impl_->pipe.push(cmd, pc);
+    pipe.push(cmd, pc);
     vkCmdDispatch(cmd, pc.groups, 1, 1);
   }
   barrier_compute_to_transfer(cmd);
@@ -750,35 +841,20 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
 
   // Host: ranges, the shader's decision checked against the host's, publication.
   t0 = std::chrono::steady_clock::now();
-  std::vector<sparse::CandidateRange> ranges(nc);
+  const std::vector<sparse::CandidateRange> ranges =
+      checked_ranges(vol, sel, static_cast<const float*>(ranges_down.mapped()), iso, background);
   std::vector<const core::Sample*> where(nc, nullptr);
-  const float* rf = static_cast<const float*>(ranges_down.mapped());
-  for (std::size_t c = 0; c < nc; ++c) {
-    if (rf[4 * c + 3] == 2.0f)
-      throw std::logic_error(vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
-                             std::to_string(sel.candidates[c]) + ") ran out of llvmpipe's loop budget (65535 trips "
-                             "per invocation); sparse::loop_trips_per_brick underestimates sparse_brick.comp's loops");
-    if (rf[4 * c + 3] != 0.0f && rf[4 * c + 3] != 1.0f)
-      throw std::logic_error(vol.path + ": sparse chain: candidate " + std::to_string(c) + " (brick " +
-                             std::to_string(sel.candidates[c]) + ") was never written by the shader");
-    ranges[c] = {rf[4 * c], rf[4 * c + 1], rf[4 * c + 2] != 0.0f};
-    float tile = 0;
-    if (sparse::is_active(ranges[c], iso, background, tile) != (rf[4 * c + 3] != 0.0f))
-      throw std::logic_error(vol.path + ": sparse chain: shader and host disagree on candidate " + std::to_string(c) + ", brick " +
-                             std::to_string(sel.candidates[c]) + " (range " + std::to_string(ranges[c].lo) + ".." +
-                             std::to_string(ranges[c].hi) + ", tau " + std::to_string(iso.tau) + ")");
-  }
   for (const Chunk& ch : chunks)
     for (std::size_t c = ch.c0; c < ch.c1; ++c)
       where[c] = static_cast<const core::Sample*>(ch.readback.mapped()) + (c - ch.c0) * core::kBrickSamples;
   out.download_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return where[c]; }, iso, background, format,
-                  impl_->keep_input, out);
+                  keep_input, out);
   out.publish_ms = ms_since(t0);
 
   const double gpu_ms = timer.elapsed_ms(0, 1), copy_ms = timer.elapsed_ms(1, 2);
-  out.passes.push_back({"raw brick ranges + staging copies (host)", staging_ms, 0});
+  out.passes.push_back({"staging copies (host)", staging_ms, 0});
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   out.passes.push_back({plan.text + " + gradient + min/max on candidates (GPU)", gpu_ms, int(chunks.size())});
   out.passes.push_back({"readback copies (GPU)", copy_ms, 0});
@@ -794,7 +870,7 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
        << " workgroups (<= " << per_group << " bricks each: " << sparse::loop_trips_per_brick(plan)
        << " loop trips per brick); snapshot "
        << out.stats.snapshot_bytes << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
-  impl_->last_run = info.str();
+  last_run = info.str();
   return out;
 }
 

@@ -80,8 +80,8 @@ std::string validate(const std::vector<PassDesc>& passes);
 Plan make_plan(const core::Grid& grid, const std::vector<PassDesc>& passes, const std::string& what);
 
 /// Per-brick raw ranges (no halo): min / max of the finite voxels (NaN skipped) and whether
-/// a NaN voxel was seen. Filled one z-slice at a time (the GPU path fills it while copying
-/// the slice into the staging buffer).
+/// a NaN voxel was seen. Filled one z-slice at a time. The live field keeps them to see which
+/// edited bricks changed.
 struct RawRanges {
   std::array<int, 3> bricks{0, 0, 0};
   std::vector<float> lo, hi;
@@ -94,26 +94,31 @@ struct RawRanges {
   void set_brick(const core::Grid& grid, const float* voxels, std::uint32_t id);
 };
 
-/// Candidate selection: every brick's raw range widened over the neighbours its stencil
-/// reaches and by the Gaussians' rounding bound (conservative: the smoothed field over
-/// the brick + 1 voxel lies inside it).
+/// Candidate selection: every brick's raw range over exactly the window its smoothed brick
+/// + 1 voxel reads (voxels 8 b - 1 - R .. 8 b + 8 + R per axis, clipped to the grid),
+/// widened by the Gaussians' rounding bound (conservative: the smoothed field over the
+/// brick + 1 voxel lies inside it).
 struct Selection {
   std::vector<float> lo, hi;              ///< widened range per brick
-  std::vector<std::uint8_t> nan;          ///< a NaN voxel in the neighbourhood
+  std::vector<std::uint8_t> nan;          ///< a NaN voxel in the window
   std::vector<std::uint32_t> candidates;  ///< ascending brick ids
 };
-Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso);
+/// `voxels`: the whole volume of `grid`, x fastest; `threads` > 1 splits the slices (the
+/// same bits for any count).
+Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, const core::Isosurface& iso,
+                 unsigned threads = 1);
 
 /// select()'s result for one brick (its widened range, NaN flag and whether it is a
-/// candidate), bit for bit the same: the same min / max folds over the neighbours in the
-/// same order, the same rounding widening. For the live field (session/live_field.h), which
-/// re-selects only the bricks an edit can reach.
+/// candidate), bit for bit the same (min / max over the same window; the order of the folds
+/// does not change them, -0 is made +0). For the live field (session/live_field.h), which
+/// re-selects only the bricks an edit can reach (those whose window holds a changed voxel).
 struct BrickSelection {
   float lo, hi;
   bool nan;
   bool candidate;
 };
-BrickSelection select_brick(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso, std::uint32_t id);
+BrickSelection select_brick(const core::Grid& grid, const float* voxels, const Plan& plan,
+                            const core::Isosurface& iso, std::uint32_t id);
 
 /// Upper bound on the loop back-edges sparse_brick.comp executes for one candidate brick
 /// of `plan` (interior brick, every loop counted with its exit test). llvmpipe / lavapipe
@@ -165,6 +170,17 @@ struct WorkList {
 ///         or quads per row of 2^24 and more).
 WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
                         const std::string& what);
+
+/// The fused Gaussian's work list (shaders/gauss_fused_list.comp): columns of output quads,
+/// one unit per (x-quad q, slice z, rows y0 .. y0 + n - 1), n < ISOTOUCH_LIST_PACK, covering
+/// the union of the candidates' extents `e` (the last filter's, list_extents()), each quad
+/// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z.
+/// @throws VolumeError naming `what` if the grid is too large for exact float texels.
+WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                          const std::string& what);
+/// Whether `plan` is one Gaussian (x, y, z, in that order) that gauss_fused_list.comp can run:
+/// radii <= ISOTOUCH_FUSED_MAX_RADIUS and rows of whole quads (nx a multiple of 4).
+bool fusable(const Plan& plan, const core::Grid& grid);
 
 class BrickCpu;
 /// run_sparse_cpu's per-candidate computation, one brick at a time (the live field

@@ -200,77 +200,110 @@ bool widen_and_decide(float& lo, float& hi, bool nan, const Plan& plan, const co
 //   moves by A (prod(1 + (n_i + 3) u) - 1) = A rel_eps. Gradual underflow adds at most
 //   2^-149 per rounding: the absolute term below.
 // - NaN outputs (a NaN or +Inf and -Inf in a Gaussian window) are skipped by the range.
-// The neighbourhood: the smoothed voxels [8b - 1, 8b + 8] read raw voxels
-// [8b - 1 - R, 8b + 8 + R], inside bricks b - reach .. b + reach (reach = floor(R/8) + 1).
-Selection select(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso) {
-  const auto nb = raw.bricks;
-  const std::size_t total = raw.lo.size();
-  Selection s;
-  s.lo = raw.lo;
-  s.hi = raw.hi;
-  s.nan = raw.nan;
-  std::vector<float> tlo(total), thi(total);
-  std::vector<std::uint8_t> tnan(total);
-  const std::size_t stride[3] = {1, std::size_t(nb[0]), std::size_t(nb[0]) * std::size_t(nb[1])};
-  for (int a = 0; a < 3; ++a) {  // separable min / max / or over the reach, per axis
-    const int r = plan.reach[std::size_t(a)], n = nb[std::size_t(a)];
-    for (std::size_t id = 0; id < total; ++id) {
-      const int i = int(id / stride[a] % std::size_t(n));
-      float mn = kInf, mx = -kInf;
-      std::uint8_t nn = 0;
-      for (int j = std::max(i - r, 0); j <= std::min(i + r, n - 1); ++j) {
-        const std::size_t o = id - std::size_t(i) * stride[a] + std::size_t(j) * stride[a];
-        mn = std::min(mn, s.lo[o]);
-        mx = std::max(mx, s.hi[o]);
-        nn |= s.nan[o];
-      }
-      tlo[id] = mn;
-      thi[id] = mx;
-      tnan[id] = nn;
-    }
-    s.lo.swap(tlo);
-    s.hi.swap(thi);
-    s.nan.swap(tnan);
+// The window: the smoothed voxels [8b - 1, 8b + 8] read raw voxels [8b - 1 - R, 8b + 8 + R]
+// (clamped to the grid: a clamped tap reads a border voxel of the same window), exactly
+// these and no more - not the whole neighbouring bricks (on the chest at -500 HU, 4082
+// candidates instead of 5310 for 3303 active).
+// Min / max over a set do not depend on the order of the folds (NaN skipped, -0 made +0 at
+// the end): select() and select_brick() agree bit for bit.
+namespace {
+struct Fold {
+  float lo = kInf, hi = -kInf;
+  bool nan = false;
+  void add(float v) {
+    nan = nan || v != v;
+    lo = v < lo ? v : lo;
+    hi = v > hi ? v : hi;
   }
+};
+/// The window of brick index b along an axis of n voxels: [8b - 1 - r, 8b + 8 + r] clipped.
+std::pair<int, int> window(int b, int r, int n) { return {std::max(8 * b - 1 - r, 0), std::min(8 * b + 8 + r, n - 1)}; }
+}  // namespace
+
+Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, const core::Isosurface& iso,
+                 unsigned threads) {
+  const auto nb = core::brick_counts(grid);
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+  const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
+  const std::size_t nbx = std::size_t(nb[0]), layer = nbx * std::size_t(nb[1]);
+  const std::size_t total = layer * std::size_t(nb[2]);
+  Selection s;
+  s.lo.resize(total);
+  s.hi.resize(total);
+  s.nan.resize(total);
+  std::vector<std::uint8_t> cand(total, 0);
+  // Per brick layer: the folds over its z-window, element by element over whole slices;
+  // then per brick row over its y-window, element by element over x; then per brick over
+  // its x-window. Element-wise selects (a NaN voxel never enters lo / hi, it sets its own
+  // flag) that the compiler turns into vector min / max.
+  threads = threads_for(grid.voxel_count(), threads);
+  parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
+    std::vector<float> zlo(slice), zhi(slice), znan(slice), ylo(sx), yhi(sx), ynan(sx);
+    for (std::size_t bz = bz0; bz < bz1; ++bz) {
+      std::fill(zlo.begin(), zlo.end(), kInf);
+      std::fill(zhi.begin(), zhi.end(), -kInf);
+      std::fill(znan.begin(), znan.end(), 0.0f);
+      const auto [za, zb] = window(int(bz), plan.radius[2], nz);
+      for (int z = za; z <= zb; ++z) {
+        const float* v = voxels + std::size_t(z) * slice;
+        float *lo = zlo.data(), *hi = zhi.data(), *nn = znan.data();
+        for (std::size_t i = 0; i < slice; ++i) {
+          const float x = v[i];
+          lo[i] = x < lo[i] ? x : lo[i];
+          hi[i] = x > hi[i] ? x : hi[i];
+          nn[i] = x != x ? 1.0f : nn[i];
+        }
+      }
+      for (int by = 0; by < nb[1]; ++by) {
+        std::fill(ylo.begin(), ylo.end(), kInf);
+        std::fill(yhi.begin(), yhi.end(), -kInf);
+        std::fill(ynan.begin(), ynan.end(), 0.0f);
+        const auto [ya, yb] = window(by, plan.radius[1], ny);
+        for (int y = ya; y <= yb; ++y) {
+          const std::size_t r = std::size_t(y) * sx;
+          const float *l = zlo.data() + r, *h = zhi.data() + r, *n = znan.data() + r;
+          for (std::size_t x = 0; x < sx; ++x) {
+            ylo[x] = l[x] < ylo[x] ? l[x] : ylo[x];
+            yhi[x] = h[x] > yhi[x] ? h[x] : yhi[x];
+            ynan[x] = n[x] > ynan[x] ? n[x] : ynan[x];
+          }
+        }
+        for (int bx = 0; bx < nb[0]; ++bx) {
+          const auto [xa, xb] = window(bx, plan.radius[0], nx);
+          Fold f;
+          for (int x = xa; x <= xb; ++x) {
+            f.lo = ylo[std::size_t(x)] < f.lo ? ylo[std::size_t(x)] : f.lo;
+            f.hi = yhi[std::size_t(x)] > f.hi ? yhi[std::size_t(x)] : f.hi;
+            f.nan = f.nan || ynan[std::size_t(x)] != 0.0f;
+          }
+          const std::size_t id = bz * layer + std::size_t(by) * nbx + std::size_t(bx);
+          s.lo[id] = f.lo + 0.0f;  // -0 -> +0
+          s.hi[id] = f.hi + 0.0f;
+          s.nan[id] = f.nan ? 1 : 0;
+          cand[id] = widen_and_decide(s.lo[id], s.hi[id], f.nan, plan, iso) ? 1 : 0;
+        }
+      }
+    }
+  });
   for (std::size_t id = 0; id < total; ++id)
-    if (widen_and_decide(s.lo[id], s.hi[id], s.nan[id] != 0, plan, iso)) s.candidates.push_back(std::uint32_t(id));
+    if (cand[id]) s.candidates.push_back(std::uint32_t(id));
   return s;
 }
 
-BrickSelection select_brick(const RawRanges& raw, const Plan& plan, const core::Isosurface& iso, std::uint32_t id) {
-  // select()'s three separable passes (x, then y, then z) fold the same values in the same
-  // order as these nested folds: the z pass folds the y pass's results over jz ascending,
-  // each of them the fold over jy of the x pass's, each the fold over jx of the raw ranges.
-  const auto nb = raw.bricks;
-  const auto b = core::brick_coords(id, nb);
-  int lo[3], hi[3];
-  for (int a = 0; a < 3; ++a) {
-    lo[a] = std::max(b[std::size_t(a)] - plan.reach[std::size_t(a)], 0);
-    hi[a] = std::min(b[std::size_t(a)] + plan.reach[std::size_t(a)], nb[std::size_t(a)] - 1);
-  }
-  float mnz = kInf, mxz = -kInf;
-  std::uint8_t nz = 0;
-  for (int z = lo[2]; z <= hi[2]; ++z) {
-    float mny = kInf, mxy = -kInf;
-    std::uint8_t ny = 0;
-    for (int y = lo[1]; y <= hi[1]; ++y) {
-      float mnx = kInf, mxx = -kInf;
-      std::uint8_t nx = 0;
-      const std::size_t row = (std::size_t(z) * std::size_t(nb[1]) + std::size_t(y)) * std::size_t(nb[0]);
-      for (int x = lo[0]; x <= hi[0]; ++x) {
-        mnx = std::min(mnx, raw.lo[row + std::size_t(x)]);
-        mxx = std::max(mxx, raw.hi[row + std::size_t(x)]);
-        nx |= raw.nan[row + std::size_t(x)];
-      }
-      mny = std::min(mny, mnx);
-      mxy = std::max(mxy, mxx);
-      ny |= nx;
+BrickSelection select_brick(const core::Grid& grid, const float* voxels, const Plan& plan,
+                            const core::Isosurface& iso, std::uint32_t id) {
+  const auto b = core::brick_coords(id, core::brick_counts(grid));
+  const int nx = grid.dims[0], ny = grid.dims[1];
+  const auto [x0, x1] = window(b[0], plan.radius[0], nx);
+  const auto [y0, y1] = window(b[1], plan.radius[1], ny);
+  const auto [z0, z1] = window(b[2], plan.radius[2], grid.dims[2]);
+  Fold f;
+  for (int z = z0; z <= z1; ++z)
+    for (int y = y0; y <= y1; ++y) {
+      const float* row = voxels + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx);
+      for (int x = x0; x <= x1; ++x) f.add(row[x]);
     }
-    mnz = std::min(mnz, mny);
-    mxz = std::max(mxz, mxy);
-    nz |= ny;
-  }
-  BrickSelection out{mnz, mxz, nz != 0, false};
+  BrickSelection out{f.lo + 0.0f, f.hi + 0.0f, f.nan, false};
   out.candidate = widen_and_decide(out.lo, out.hi, out.nan, plan, iso);
   return out;
 }
@@ -609,12 +642,8 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
   const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
 
   auto t0 = std::chrono::steady_clock::now();
-  sparse::RawRanges raw;
-  raw.init(vol.grid);
-  const std::size_t slice = std::size_t(vol.grid.dims[0]) * std::size_t(vol.grid.dims[1]);
-  for (int z = 0; z < vol.grid.dims[2]; ++z) raw.add_slice(vol.grid, z, vol.voxels.data() + std::size_t(z) * slice);
-  const sparse::Selection sel = sparse::select(raw, plan, iso);
-  out.passes.push_back({"raw brick ranges + candidate selection", sparse::ms_since(t0), 0});
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, threads);
+  out.passes.push_back({"candidate selection (raw ranges over each brick's window)", sparse::ms_since(t0), 0});
 
   // Candidates in contiguous parts, one thread each with its own brick buffers and pool of
   // the active ones' samples (every candidate's computation is the same whichever thread
@@ -634,7 +663,7 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
       std::vector<core::Sample>& pool = pools[si];
       std::vector<std::size_t> slot;
       for (std::size_t c = spans[si].first; c < spans[si].second; ++c) {
-        ranges[c] = brick.range(sel.candidates[c], raw.bricks);
+        ranges[c] = brick.range(sel.candidates[c], core::brick_counts(vol.grid));
         float tile = 0;
         if (!sparse::is_active(ranges[c], iso, background, tile)) continue;
         slot.push_back(c);

@@ -280,12 +280,16 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
   std::uint32_t at = 0;
   for (const BufferRange& r : buffers) {
     if ((texel_ >> at) & 1u) {
-      if (r.range / 4 > lim.maxTexelBufferElements || r.offset % lim.minTexelBufferOffsetAlignment != 0)
+      const bool v4 = (texel_vec4_ >> at) & 1u;
+      const VkDeviceSize texel = v4 ? 16 : 4;
+      if (r.range / texel > lim.maxTexelBufferElements || r.offset % lim.minTexelBufferOffsetAlignment != 0 ||
+          r.range % texel != 0)
         throw std::logic_error(name_ + ": texel binding of " + std::to_string(r.range) + " bytes at offset " +
                                std::to_string(r.offset) + " exceeds maxTexelBufferElements " +
-                               std::to_string(lim.maxTexelBufferElements) + " or misses the alignment " +
-                               std::to_string(lim.minTexelBufferOffsetAlignment));
-      views[at] = arena.make_view(r, VK_FORMAT_R32_SFLOAT);
+                               std::to_string(lim.maxTexelBufferElements) + ", misses the alignment " +
+                               std::to_string(lim.minTexelBufferOffsetAlignment) + " or is no whole number of " +
+                               std::to_string(texel) + "-byte texels");
+      views[at] = arena.make_view(r, v4 ? VK_FORMAT_R32G32B32A32_SFLOAT : VK_FORMAT_R32_SFLOAT);
     } else if (r.range > limit) {
       throw std::logic_error(name_ + ": binding of " + std::to_string(r.range) +
                              " bytes exceeds maxStorageBufferRange " + std::to_string(limit));
@@ -345,6 +349,13 @@ double GpuTimer::elapsed_ms(std::uint32_t a, std::uint32_t b) const {
       tb < ta)
     return -1;
   return double(tb - ta) * double(ctx_.properties().limits.timestampPeriod) * 1e-6;
+}
+
+bool slabs_hold_quads(int nx, const std::vector<Slab>& slabs) {
+  if (nx % 4 != 0) return false;
+  for (const Slab& s : slabs)
+    if (s.src_offset_elems % 4 != 0 || s.src.offset % 16 != 0 || s.src.range % 16 != 0) return false;
+  return true;
 }
 
 Result<std::vector<Slab>> plan_slabs(const VulkanContext& ctx, const SlabGeometry& g, VkBuffer src,

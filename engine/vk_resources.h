@@ -158,6 +158,9 @@ class ComputePipelineBase {
   /// @throws std::logic_error if the count differs from `bindings` or a range exceeds
   ///         maxStorageBufferRange (callers plan their slabs so this cannot happen).
   void bind(VkCommandBuffer cmd, DescriptorArena& arena, std::initializer_list<BufferRange> buffers) const;
+  /// Bit i: texel binding i is viewed as R32G32B32A32_SFLOAT (texel q = floats 4 q .. 4 q + 3:
+  /// one fetch per quad) instead of R32_SFLOAT. Its ranges must be multiples of 16 bytes.
+  void set_texel_vec4(std::uint32_t mask) { texel_vec4_ = mask; }
   std::uint32_t bindings() const { return bindings_; }
   const std::string& name() const { return name_; }
 
@@ -171,6 +174,7 @@ class ComputePipelineBase {
   std::uint32_t push_size_ = 0;
   std::uint32_t uniform_ = 0;  ///< bit i: binding i is a uniform buffer
   std::uint32_t texel_ = 0;    ///< bit i: binding i is a uniform texel buffer (R32_SFLOAT)
+  std::uint32_t texel_vec4_ = 0;  ///< bit i: that texel buffer's view is R32G32B32A32_SFLOAT
   VkDescriptorType descriptor_type(std::uint32_t i) const {
     if ((texel_ >> i) & 1u) return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
     return (uniform_ >> i) & 1u ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
@@ -238,6 +242,12 @@ struct SlabGeometry {
   std::uint64_t dst_elem_bytes = 4;
   std::uint32_t wg_z = 1;                ///< workgroup size in z (of slices, or of z_multiple units)
 };
+
+/// Whether every slab's source binding holds whole quads of voxels from its first slice on:
+/// rows of `nx` (a multiple of 4) voxels, offsets and ranges multiples of 16 bytes - the
+/// shaders may then read the source as an R32G32B32A32_SFLOAT texel buffer (one fetch per
+/// quad; ComputePipelineBase::set_texel_vec4).
+bool slabs_hold_quads(int nx, const std::vector<Slab>& slabs);
 
 /// Splits a pass into z-slabs so that no binding exceeds `limit` bytes (and no dispatch
 /// exceeds maxComputeWorkGroupCount[2]).

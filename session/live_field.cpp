@@ -349,7 +349,7 @@ void LiveField::Impl::build(const Volume& vol) {
   raw.init(grid);
   const std::size_t slice = std::size_t(grid.dims[0]) * std::size_t(grid.dims[1]);
   for (int z = 0; z < grid.dims[2]; ++z) raw.add_slice(grid, z, vol.voxels.data() + std::size_t(z) * slice);
-  const sparse::Selection sel = sparse::select(raw, plan, opt.iso);
+  const sparse::Selection sel = sparse::select(grid, vol.voxels.data(), plan, opt.iso);
   candidate.assign(total, 0);
   for (std::uint32_t id : sel.candidates) candidate[id] = 1;
   std::vector<float> tile(total, 0.f);
@@ -515,7 +515,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     std::vector<core::Sample> scratch;
     std::unique_ptr<sparse::CandidateCpu> cpu;
     for (std::uint32_t id : work) {
-      const sparse::BrickSelection sel = sparse::select_brick(m.raw, m.plan, m.opt.iso, id);
+      const sparse::BrickSelection sel = sparse::select_brick(m.grid, vol.voxels.data(), m.plan, m.opt.iso, id);
       if (std::uint8_t(sel.candidate) != m.candidate[id]) cand_changes.push_back({id, std::uint8_t(sel.candidate)});
       Change c;
       c.id = id;

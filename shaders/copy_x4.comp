@@ -10,6 +10,7 @@ layout(local_size_x = ISOTOUCH_DENSE_WG, local_size_y = 1, local_size_z = 1) in;
 layout(constant_id = 0) const int NX = 1;
 layout(constant_id = 1) const int NY = 1;
 layout(constant_id = 2) const int NZ = 1;
+layout(constant_id = 3) const bool VEC4_IN = false;  // as gradient_x4.comp: one fetch per quad
 const int QX = (NX + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
 
 layout(set = 0, binding = 0) uniform samplerBuffer src;
@@ -24,8 +25,9 @@ void main() {
   const int z = int(pc.z0) + zs;
   const int row = int(pc.src_offset) + (z - int(pc.src_z0)) * NX * NY + y * NX;
   const ivec4 xs = min(ivec4(x0) + ivec4(0, 1, 2, 3), ivec4(NX - 1));
-  const vec4 c = vec4(texelFetch(src, row + xs.x).x, texelFetch(src, row + xs.y).x, texelFetch(src, row + xs.z).x,
-                      texelFetch(src, row + xs.w).x);
+  const vec4 c = VEC4_IN ? texelFetch(src, (row + x0) / 4)
+                         : vec4(texelFetch(src, row + xs.x).x, texelFetch(src, row + xs.y).x,
+                                texelFetch(src, row + xs.z).x, texelFetch(src, row + xs.w).x);
   const uint o = pc.dst_offset + uint((zs * NY + y) * NX + x0);
   if (x0 + 3 < NX) {
     dst[o] = c.xxxx;

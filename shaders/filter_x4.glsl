@@ -16,6 +16,10 @@ layout(constant_id = 2) const int NZ = 1;
 layout(constant_id = 3) const int AXIS = 0;  // 0 = x, 1 = y, 2 = z
 layout(constant_id = 4) const int R = 0;     // taps on each side, <= ISOTOUCH_DENSE_MAX_RADIUS
 layout(constant_id = 38) const uint MODE = 0u;  // 0 Gaussian, ISOTOUCH_MORPH_MAX, ISOTOUCH_MORPH_MIN
+// The source's view is R32G32B32A32_SFLOAT: texel q is the quad of voxels 4 q .. 4 q + 3, one
+// fetch per quad instead of four (rows start on a quad: NX and the source offset multiples
+// of 4; the host sets it only then).
+layout(constant_id = 39) const bool VEC4_IN = false;
 const int QX = (NX + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
 
 layout(constant_id = 5) const float W0 = 0.0;
@@ -105,6 +109,13 @@ layout(std430, set = 0, binding = 1) writeonly buffer Dst { float dst[]; };
 layout(std430, set = 0, binding = 1) writeonly buffer Dst4 { vec4 dst4[]; };
 
 float at(int i) { return texelFetch(src, i).x; }
+// The quad whose first voxel is element i (i a multiple of 4) of a VEC4_IN source.
+vec4 quad_at(int i) { return texelFetch(src, i / 4); }
+
+// Voxel x0 - R + j of the row at element `row` (VEC4_IN), clamped into the row: the quads
+// x0 / 4 - QN .. x0 / 4 + QN fetched once each; a quad outside the row stands for voxel 0
+// or nx - 1 in every lane (rows hold whole quads: the clamped quad's first or last lane).
+const int QN = (R + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
 
 // The filtered value of voxels x0 .. x0 + 3 of row (y, z) (lanes past the row's end hold
 // voxel nx - 1); src0: the texel of voxel (0, 0, 0) in the source binding.
@@ -114,13 +125,38 @@ vec4 filter_quad(int x0, int y, int z, int src0) {
   const ivec4 xs = min(ivec4(x0) + ivec4(0, 1, 2, 3), ivec4(nx - 1));
   precise vec4 acc = vec4(MODE == ISOTOUCH_MORPH_MAX ? uintBitsToFloat(0xff800000u)
                           : MODE == ISOTOUCH_MORPH_MIN ? uintBitsToFloat(0x7f800000u) : 0.0);
-  if (AXIS == 0) {
+  if (AXIS == 0 && VEC4_IN) {
+    // The quads around x0 (2 QN + 1 fetches), the window read from them.
+    const int row = src0 + z * slice + y * nx, q = x0 / 4;
+    float win[4 * (2 * ((ISOTOUCH_DENSE_MAX_RADIUS + 3) / 4) + 1)];
+    for (int j = 0; j <= 2 * QN; ++j) {
+      const int qj = q + j - QN;
+      vec4 v = quad_at(row + 4 * clamp(qj, 0, QX - 1));
+      if (qj < 0) v = vec4(v.x);
+      if (qj > QX - 1) v = vec4(v.w);
+      win[4 * j] = v.x;
+      win[4 * j + 1] = v.y;
+      win[4 * j + 2] = v.z;
+      win[4 * j + 3] = v.w;
+    }
+    const int s = 4 * QN - R;  // window element of voxel x0 - R
+    for (int k = 0; k <= 2 * R; ++k) {
+      acc = tap(acc, k, vec4(win[s + k], win[s + k + 1], win[s + k + 2], win[s + k + 3]));
+    }
+  } else if (AXIS == 0) {
     // The window x0 - r .. x0 + 3 + r, clamped into the row, read once.
     const int row = src0 + z * slice + y * nx;
     float win[ISOTOUCH_DENSE_VOXELS + 2 * ISOTOUCH_DENSE_MAX_RADIUS];
     for (int j = 0; j < 4 + 2 * R; ++j) win[j] = at(row + clamp(x0 - R + j, 0, nx - 1));
     for (int k = 0; k <= 2 * R; ++k) {
       acc = tap(acc, k, vec4(win[k], win[k + 1], win[k + 2], win[k + 3]));
+    }
+  } else if (VEC4_IN) {
+    const int n = AXIS == 1 ? ny : nz, i = AXIS == 1 ? y : z;
+    const int stride = AXIS == 1 ? nx : slice;
+    const int row = AXIS == 1 ? src0 + z * slice : src0 + y * nx;
+    for (int k = 0; k <= 2 * R; ++k) {
+      acc = tap(acc, k, quad_at(row + clamp(i + k - R, 0, n - 1) * stride + x0));
     }
   } else {
     // Voxel j along the axis is row + j * stride (+ the lane's x).

@@ -13,6 +13,9 @@ layout(local_size_x = ISOTOUCH_DENSE_WG, local_size_y = 1, local_size_z = 1) in;
 layout(constant_id = 0) const int NX = 1;
 layout(constant_id = 1) const int NY = 1;
 layout(constant_id = 2) const int NZ = 1;
+// The source's view is R32G32B32A32_SFLOAT (one fetch per quad of voxels; NX and the source
+// offset multiples of 4, the host sets it only then).
+layout(constant_id = 3) const bool VEC4_IN = false;
 const int QX = (NX + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
 
 layout(set = 0, binding = 0) uniform samplerBuffer src;
@@ -20,7 +23,10 @@ layout(std430, set = 0, binding = 1) writeonly buffer Dst { vec4 dst[]; };
 layout(push_constant) uniform Push { DensePush pc; };
 
 float at(int i) { return texelFetch(src, i).x; }
-vec4 at4(int row, ivec4 xs) { return vec4(at(row + xs.x), at(row + xs.y), at(row + xs.z), at(row + xs.w)); }
+vec4 at4(int row, ivec4 xs) {
+  if (VEC4_IN) return texelFetch(src, (row + xs.x) / 4);  // xs = x0 .. x0 + 3, a whole quad
+  return vec4(at(row + xs.x), at(row + xs.y), at(row + xs.z), at(row + xs.w));
+}
 
 // The derivative along an axis whose index is the same for the 4 voxels.
 vec4 diff_uniform(int i, int n, vec4 lo, vec4 c, vec4 hi, float inv_2h, float inv_h) {
@@ -42,9 +48,18 @@ void main() {
   const ivec4 xi = ivec4(x0) + ivec4(0, 1, 2, 3);
   const ivec4 xs = min(xi, ivec4(nx - 1));
   // x: the 6 voxels x0 - 1 .. x0 + 4, clamped into the row.
-  const float a0 = at(row + max(x0 - 1, 0));
-  const float a5 = at(row + min(x0 + 4, nx - 1));
+  float a0, a5;
   const vec4 c = at4(row, xs);
+  if (VEC4_IN) {
+    // The neighbouring quads, clamped into the row (at a border the voxel itself).
+    const float l = texelFetch(src, (row + max(x0 - 4, 0)) / 4).w;
+    const float h = texelFetch(src, (row + min(x0 + 4, nx - 4)) / 4).x;
+    a0 = x0 > 0 ? l : c.x;
+    a5 = x0 + 4 < nx ? h : c.w;
+  } else {
+    a0 = at(row + max(x0 - 1, 0));
+    a5 = at(row + min(x0 + 4, nx - 1));
+  }
   const vec4 xl = vec4(a0, c.xyz), xh = vec4(c.yzw, a5);
   // A lane past the row's end holds voxel nx - 1 and stores nothing; lane 3's high
   // neighbour a5 is voxel x0 + 4 only when that voxel exists.

@@ -109,6 +109,9 @@ struct DensePush {
 #define ISOTOUCH_LIST_QUADS 8u
 #define ISOTOUCH_LIST_INVOCATIONS 4u
 #define ISOTOUCH_LIST_PACK 16u  // a unit's second texel: q0 * ISOTOUCH_LIST_PACK + quads
+// The fused Gaussian (gauss_fused_list.comp): x, y and z in one pass over columns of quads,
+// radii up to this many voxels a side on every axis; wider kernels take the separate passes.
+#define ISOTOUCH_FUSED_MAX_RADIUS 4
 struct ListPush {
   uint z0;          // first slice of this slab (dst_offset is the element of its voxel 0)
   uint src_z0;      // first slice present in the src binding

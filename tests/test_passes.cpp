@@ -131,6 +131,23 @@ TEST(PassesGpuVsCpu, ChestCt) {
   expect_chain_matches_cpu(v, {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()});
 }
 
+TEST(PassesGpuVsCpu, FusedGaussianRunsAsOnePassWithTheSameBits) {
+  // Rows of whole quads, radii <= ISOTOUCH_FUSED_MAX_RADIUS and zero copy: the Gaussian runs
+  // as one fused dispatch (x, y, z); radius 4 (sigma 1.2 voxels) is the widest it takes, and
+  // a Gaussian after a closing reads the closing's output. Truth: the CPU chain.
+  if (!vk().device_local_is_host_visible()) GTEST_SKIP() << "the fused dense Gaussian needs zero copy";
+  const Volume v = engine::make_random({44, 37, 29}, {1e-3, 1e-3, 1e-3}, -50.0f, 50.0f, 7);
+  for (const auto& p : {std::vector<PassDesc>{PassDesc::gaussian(1.2), PassDesc::gradient()},
+                        std::vector<PassDesc>{PassDesc::closing(1.0), PassDesc::gaussian(0.6), PassDesc::gradient(),
+                                              PassDesc::brick_minmax()}}) {
+    auto chain = engine::PassChain::create(vk(), p);
+    ASSERT_TRUE(chain) << chain.error;
+    (void)(*chain.value)->run(v);
+    EXPECT_NE((*chain.value)->describe().find("fused in one pass"), std::string::npos) << (*chain.value)->describe();
+    expect_chain_matches_cpu_with(engine::ShaderSet::Current, v, p, 0, 0);
+  }
+}
+
 TEST(PassesGpuVsCpu, ToothInManySlabs) {
   // 4 MiB bindings: 103 x 94 x 161 floats are 6.2 MB, so every pass needs z-slabs, with
   // halos (z axis of the Gaussian, gradient, bricks) across the slab boundaries.

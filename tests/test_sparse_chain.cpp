@@ -25,6 +25,7 @@
 #include "cpu_filters.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
+#include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch_shared.h"
 #include "passes.h"
 #include "sparse_chain.h"
@@ -383,6 +384,123 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
   }
 }
 
+TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
+  // Brute force as above for the fused Gaussian's columns: units (q + QX z, y0 * PACK + n)
+  // name the quads whose voxels meet some candidate's extent, each exactly once, sorted by z,
+  // 1 <= n < ISOTOUCH_LIST_PACK.
+  core::Grid g;
+  g.dims = {44, 37, 21};
+  const auto nb = core::brick_counts(g);
+  std::vector<std::uint32_t> cand;
+  for (std::uint32_t id = 0; id < std::uint32_t(nb[0] * nb[1] * nb[2]); ++id)
+    if ((id * 2654435761u) % 7u < 2u) cand.push_back(id);
+  for (const engine::sparse::Extent e :
+       {engine::sparse::Extent{{4, 1, 1}, {4, 2, 2}}, engine::sparse::Extent{{8, 3, 0}, {4, 0, 5}},
+        engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
+    const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid");
+    const int qx = g.dims[0] / 4;
+    std::vector<int> want(std::size_t(qx) * std::size_t(g.dims[1]) * std::size_t(g.dims[2]), 0), got(want.size(), 0);
+    for (std::uint32_t id : cand) {
+      const auto b = core::brick_coords(id, nb);
+      for (int z = std::max(8 * b[2] - e.lo[2], 0); z <= std::min(8 * b[2] + 7 + e.hi[2], g.dims[2] - 1); ++z)
+        for (int y = std::max(8 * b[1] - e.lo[1], 0); y <= std::min(8 * b[1] + 7 + e.hi[1], g.dims[1] - 1); ++y)
+          for (int x = std::max(8 * b[0] - e.lo[0], 0); x <= std::min(8 * b[0] + 7 + e.hi[0], g.dims[0] - 1); ++x)
+            want[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(x / 4)] = 1;
+    }
+    ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
+    std::uint64_t quads = 0;
+    for (std::size_t u = 0; u < w.unit_count(); ++u) {
+      const int a = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int z = a / qx, q = a % qx;
+      const int y0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
+      ASSERT_TRUE(n >= 1 && y0 + n <= g.dims[1]) << "unit " << u;
+      EXPECT_TRUE(u >= w.z_first[std::size_t(z)] && u < w.z_first[std::size_t(z) + 1]) << "unit " << u << " z " << z;
+      for (int y = y0; y < y0 + n; ++y) {
+        ++got[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(q)];
+        ++quads;
+      }
+    }
+    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2];
+    EXPECT_EQ(quads, w.quads);
+  }
+}
+
+TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
+  // The fused one-pass Gaussian (rows of whole quads, radii <= ISOTOUCH_FUSED_MAX_RADIUS)
+  // with zero copy and with staging copies, at a border-heavy size (every brick touches a
+  // face): truth the dense CPU chain.
+  const Volume v = engine::make_sphere({36, 29, 23}, 1e-3, 9.0, {1.3, -0.7, 0.4});
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.2), PassDesc::gradient()};  // radius 4: the widest fused
+  struct Restore {
+    ~Restore() { vk().allow_zero_copy(true); }
+  } restore;
+  auto chain = engine::SparseChain::create(vk(), p);
+  ASSERT_TRUE(chain) << chain.error;
+  (*chain.value)->set_keep_input(true);
+  const engine::SparseOutput direct = (*chain.value)->run(v, above(0), -1e4f);
+  EXPECT_NE((*chain.value)->describe().find("fused"), std::string::npos) << (*chain.value)->describe();
+  expect_matches_dense(v, p, above(0), direct, "sphere gauss 1.2 mm, fused, zero copy");
+  vk().allow_zero_copy(false);
+  ASSERT_FALSE(vk().device_local_is_host_visible());
+  const engine::SparseOutput staged = run_gpu(v, p, above(0), -1e4f);
+  expect_matches_dense(v, p, above(0), staged, "sphere gauss 1.2 mm, fused, staging copies");
+  expect_same_output(direct, staged, "fused: zero copy vs staging copies");
+}
+
+// select() (separable folds over slices, threads) and select_brick() (one brick's window
+// read directly, as the live field does) agree bit for bit on every brick, and every brick
+// whose smoothed brick + 1 voxel straddles tau (brute force on the dense CPU chain) is a
+// candidate, on the CT volumes and on a volume with NaN voxels and -0.
+TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
+  Volume noisy = engine::make_sphere({37, 29, 21}, 1e-3, 9.0);
+  for (std::size_t i = 0; i < noisy.voxels.size(); i += 997) noisy.voxels[i] = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 5; i < noisy.voxels.size(); i += 101) noisy.voxels[i] = -0.0f;
+  const Volume head = io::load_volume(kHead), chest = io::load_volume(kChest);
+  struct Case {
+    const Volume* v;
+    double tau;
+  };
+  for (const Case& c : {Case{&head, 500.0}, Case{&chest, -500.0}, Case{&noisy, 0.0}})
+  for (const std::vector<PassDesc>& p : {std::vector<PassDesc>{PassDesc::gaussian(1.0), PassDesc::gradient()},
+                                         std::vector<PassDesc>{PassDesc::gradient()}}) {
+    const engine::sparse::Plan plan = engine::sparse::make_plan(c.v->grid, p, c.v->path);
+    const engine::sparse::Selection sel = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2);
+    const engine::sparse::Selection one = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 1);
+    EXPECT_EQ(sel.candidates, one.candidates) << c.v->path;
+    std::vector<std::uint8_t> cand(sel.lo.size(), 0);
+    for (std::uint32_t id : sel.candidates) cand[id] = 1;
+    std::size_t differ = 0;
+    for (std::uint32_t id = 0; id < sel.lo.size(); ++id) {
+      const auto b = engine::sparse::select_brick(c.v->grid, c.v->voxels.data(), plan, above(c.tau), id);
+      differ += bits(b.lo) != bits(sel.lo[id]) || bits(b.hi) != bits(sel.hi[id]) || b.nan != (sel.nan[id] != 0) ||
+                b.candidate != (cand[id] != 0);
+    }
+    EXPECT_EQ(differ, 0u) << c.v->path << ": bricks where select_brick differs from select";
+    // Brute force: a brick whose smoothed brick + 1 voxel holds voxels on both sides of tau.
+    const engine::ChainOutput d = engine::run_chain_cpu(*c.v, p);
+    const core::Grid& g = c.v->grid;
+    const auto nb = core::brick_counts(g);
+    std::size_t missed = 0, straddling = 0;
+    for (std::uint32_t id = 0; id < sel.lo.size(); ++id) {
+      const auto b = core::brick_coords(id, nb);
+      bool in = false, out = false;
+      for (int z = std::max(8 * b[2] - 1, 0); z < std::min(8 * b[2] + 9, g.dims[2]); ++z)
+        for (int y = std::max(8 * b[1] - 1, 0); y < std::min(8 * b[1] + 9, g.dims[1]); ++y)
+          for (int x = std::max(8 * b[0] - 1, 0); x < std::min(8 * b[0] + 9, g.dims[0]); ++x) {
+            const float f = d.samples->samples[g.index(x, y, z)].value;
+            if (f != f) continue;
+            (above(c.tau).contains(f) ? in : out) = true;
+          }
+      straddling += in && out;
+      missed += in && out && !cand[id];
+    }
+    EXPECT_EQ(missed, 0u) << c.v->path << ": straddling bricks that are no candidates";
+    EXPECT_GT(straddling, 0u) << c.v->path;
+    std::printf("  %s tau %g, %zu passes: %zu candidates, %zu straddling (brute force)\n", c.v->path.c_str(), c.tau,
+                p.size(), sel.candidates.size(), straddling);
+  }
+}
+
 // ---------------------------------------------------------------- benchmark (disabled)
 // ISOTOUCH_BENCH_REPS (default 5) runs; median. Run:
 //   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_Bench*'
@@ -463,9 +581,10 @@ TEST(SparseChain, DISABLED_Bench512) {
 // The limit of the lists strategy on this machine, measured (not inferred): chest at -500 HU,
 // each stage next to the least its work can cost here, done the cheapest way:
 // - input: memcpy of the voxels into a kept buffer (the bytes the passes must start from);
-// - filters: filter_list_x4 with one tap (radius 0, weight 1: a texel fetch and a store per
-//   voxel, no arithmetic) over the same three work lists: lavapipe's cost of touching those
-//   quads at all;
+// - filters: the fused pass (gauss_fused_list) with one tap per axis (radius 0, weight 1: a
+//   texel fetch and a store per output quad, no arithmetic) over the same columns:
+//   lavapipe's cost of touching those quads at all (and, for comparison, the three separate
+//   one-tap passes of filter_list_x4 over the per-op work lists);
 // - publication: memcpy of the active bricks' 729 samples each into a fresh pool (the bytes
 //   the published snapshot must receive, page faults included, huge pages asked for).
 // The sum of the floors over the one-thread dense CPU chain is the best ratio this design
@@ -483,11 +602,8 @@ TEST(SparseChain, DISABLED_LimitChest) {
   ASSERT_TRUE(chain) << chain.error;
   const core::Isosurface iso = above(-500);
   const engine::sparse::Plan plan = engine::sparse::make_plan(v.grid, p, "chest");
-  engine::sparse::RawRanges raw;
-  raw.init(v.grid);
-  const std::size_t n = v.grid.voxel_count(), slice = std::size_t(v.grid.dims[0]) * std::size_t(v.grid.dims[1]);
-  for (int z = 0; z < v.grid.dims[2]; ++z) raw.add_slice(v.grid, z, v.voxels.data() + std::size_t(z) * slice);
-  const engine::sparse::Selection sel = engine::sparse::select(raw, plan, iso);
+  const std::size_t n = v.grid.voxel_count();
+  const engine::sparse::Selection sel = engine::sparse::select(v.grid, v.voxels.data(), plan, iso);
   const auto ext = engine::sparse::list_extents(plan);
   std::vector<engine::sparse::WorkList> lists;
   std::vector<float> all;
@@ -506,12 +622,14 @@ TEST(SparseChain, DISABLED_LimitChest) {
   engine::GpuBuffer f0 = buf(n * 4, "field 0"), f1 = buf(n * 4, "field 1"), lb = buf(all.size() * 4, "lists");
   std::memcpy(lb.mapped(), all.data(), all.size() * 4);
   std::memset(f1.mapped(), 0, n * 4);
-  std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 1, 0u);
+  std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
   for (int a = 0; a < 3; ++a) spec[std::size_t(a)] = std::uint32_t(v.grid.dims[std::size_t(a)]);
   const float one = 1.0f;
   std::memcpy(&spec[5], &one, 4);  // radius 0, weight 1: dst = 1 * src
+  spec[5 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2] = 1u;  // quad input, as the chain's own passes here
   engine::ComputePipeline<gpu::ListPush> copy(ctx, filter_list_x4_spv, 3, "filter_list_x4 r=0", 0u,
                                               spec, 0b101u);
+  copy.set_texel_vec4(1u);
   auto floor_filters = [&] {
     engine::DescriptorArena arena(ctx, 8, 24);
     engine::GpuTimer timer(ctx, 2);
@@ -539,9 +657,37 @@ TEST(SparseChain, DISABLED_LimitChest) {
     ctx.submit_and_wait(cmd);
     return timer.elapsed_ms(0, 1);
   };
+  // The fused Gaussian's own floor: gauss_fused_list with one tap per axis (radius 0, weight
+  // 1: per output quad one texel fetch and one vec4 store) over the same columns.
+  const engine::sparse::WorkList columns = engine::sparse::make_column_list(v.grid, sel.candidates, ext.back(), "chest");
+  engine::GpuBuffer cb = buf(columns.units.size() * 4, "columns");
+  std::memcpy(cb.mapped(), columns.units.data(), columns.units.size() * 4);
+  engine::ComputePipeline<gpu::ListPush> fused_copy(ctx, gauss_fused_list_spv, 3, "gauss_fused_list r=0", 0u,
+                                                    engine::fused_gaussian_spec(v.grid.dims, {{{1.0f}, {1.0f}, {1.0f}}}),
+                                                    0b101u);
+  fused_copy.set_texel_vec4(1u);
+  auto floor_fused = [&] {
+    engine::DescriptorArena arena(ctx, 2, 6);
+    engine::GpuTimer timer(ctx, 2);
+    VkCommandBuffer cmd = ctx.begin_commands();
+    timer.record_reset(cmd);
+    timer.mark(cmd, 0);
+    gpu::ListPush pc{};
+    pc.units = std::uint32_t(columns.unit_count());
+    const std::uint32_t groups = (pc.units + ISOTOUCH_DENSE_WG - 1) / ISOTOUCH_DENSE_WG;
+    pc.groups_x = std::min<std::uint32_t>(groups, 65535);
+    fused_copy.bind(cmd, arena, {{f0.handle(), 0, n * 4}, {f1.handle(), 0, n * 4}, {cb.handle(), 0, cb.size()}});
+    fused_copy.push(cmd, pc);
+    vkCmdDispatch(cmd, pc.groups_x, (groups + pc.groups_x - 1) / pc.groups_x, 1);
+    timer.mark(cmd, 1);
+    engine::barrier_compute_to_host(cmd);
+    ctx.submit_and_wait(cmd);
+    return timer.elapsed_ms(0, 1);
+  };
   // The same one-tap pass, dense (filter_x4 over every quad of the volume), 3 times: what
   // the work lists cost beyond the quads they name.
   engine::ComputePipeline<gpu::DensePush> dense_copy(ctx, filter_x4_spv, 2, "filter_x4 r=0", 0u, spec, 1u);
+  dense_copy.set_texel_vec4(1u);
   auto floor_dense = [&] {
     engine::DescriptorArena arena(ctx, 8, 24);
     engine::GpuTimer timer(ctx, 2);
@@ -569,7 +715,7 @@ TEST(SparseChain, DISABLED_LimitChest) {
     return timer.elapsed_ms(0, 1);
   };
   std::size_t n_active = 0;
-  std::vector<double> t_total, t_dense, t_in, t_filters, t_pub, t_gpu, t_host, t_dense_floor;
+  std::vector<double> t_total, t_dense, t_in, t_filters, t_pub, t_gpu, t_host, t_dense_floor, t_fused;
   engine::SparseOutput last;
   for (int r = -1; r < reps; ++r) {  // r = -1: warm-up
     auto t0 = std::chrono::steady_clock::now();
@@ -584,6 +730,7 @@ TEST(SparseChain, DISABLED_LimitChest) {
     const double in = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     const double filters = floor_filters();
     const double dense_floor = floor_dense();
+    const double fused = floor_fused();
     t0 = std::chrono::steady_clock::now();
     {
       std::vector<core::Sample> pool;
@@ -607,6 +754,7 @@ TEST(SparseChain, DISABLED_LimitChest) {
     t_in.push_back(in);
     t_filters.push_back(filters);
     t_dense_floor.push_back(dense_floor);
+    t_fused.push_back(fused);
     t_pub.push_back(pub);
     t_gpu.push_back(gpu);
     t_host.push_back(host);
@@ -616,19 +764,21 @@ TEST(SparseChain, DISABLED_LimitChest) {
     if (std::fscanf(f, "%lf %lf %lf", &load[0], &load[1], &load[2]) != 3) load[0] = -1;
     std::fclose(f);
   }
-  const double floor_sum = median(t_in) + median(t_filters) + median(t_pub);
+  const double floor_sum = median(t_in) + median(t_fused) + median(t_pub);
   std::printf(
       "chest -500: %zu candidates, %zu active; lists: %.1f / %.1f / %.1f %% of the voxels; median of %d, load %.2f %.2f %.2f\n"
       "  dense CPU chain, one thread            %8.2f ms\n"
       "  lists strategy, total                  %8.2f ms  (GPU stages %.2f, host stages %.2f)  / dense CPU = %.3f\n"
       "  floor: input memcpy                    %8.2f ms\n"
+      "  floor: fused pass, one tap per axis    %8.2f ms  (lavapipe, device time, %zu columns)\n"
       "  floor: 3 filter passes, one tap        %8.2f ms  (lavapipe, device time; dense, every voxel: %.2f ms)\n"
       "  floor: pool memcpy, fresh allocation   %8.2f ms  (%zu bricks)\n"
       "  floors summed                          %8.2f ms  / dense CPU = %.3f (the target: 0.333)\n",
       sel.candidates.size(), n_active, 100.0 * double(lists[0].quads) * 4 / double(n),
       100.0 * double(lists[1].quads) * 4 / double(n), 100.0 * double(lists[2].quads) * 4 / double(n), reps, load[0],
       load[1], load[2], median(t_dense), median(t_total), median(t_gpu), median(t_host),
-      median(t_total) / median(t_dense), median(t_in), median(t_filters), median(t_dense_floor), median(t_pub), n_active, floor_sum,
+      median(t_total) / median(t_dense), median(t_in), median(t_fused), columns.unit_count(), median(t_filters),
+      median(t_dense_floor), median(t_pub), n_active, floor_sum,
       floor_sum / median(t_dense));
   for (const auto& st : last.passes) std::printf("    %-66s %8.2f ms\n", st.label.c_str(), st.ms);
 }

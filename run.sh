@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # isotouch - the README's two commands.
 #   ./run.sh [SCENE] [--out DIR] [...]  install what is missing, build, run `isotouch run`
-#                                       (no arguments: scenes/head.json then scenes/drill-skull.json,
-#                                       output: out/head/ and out/drill-skull/)
+#                                       (no arguments: scenes/head.json, scenes/drill-skull.json, then
+#                                       scenes/drill-burr.json; output: out/head/, out/drill-skull/, out/drill-burr/)
 #   ./run.sh test [ctest args]          install what is missing, build, run the test suite
 #                                       (release build, then the servo under ThreadSanitizer)
 # Debian 12. Needs root or sudo only when packages are missing.
@@ -73,8 +73,10 @@ if [[ "${1:-}" == "test" ]]; then
   exit 0
 fi
 if (($# == 0)); then
-  # The main job: touch the skull of the head CT, then drill through it.
+  # The main job: touch the skull of the head CT, drill through it with the point tool, then
+  # with the burr as a sphere (its hole the burr's size).
   build/bin/isotouch run scenes/head.json
-  exec build/bin/isotouch run scenes/drill-skull.json
+  build/bin/isotouch run scenes/drill-skull.json
+  exec build/bin/isotouch run scenes/drill-burr.json
 fi
 exec build/bin/isotouch run "$@"

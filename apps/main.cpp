@@ -65,7 +65,7 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "engine": {"passes": [{"gaussian": {"sigma_mm": 1.0}}, {"closing": {"radius_mm": 1}}, "gradient"],
                "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"},
     "edits": {"brush": {"kind": "drill", "radius_mm": 4.5, "falloff": 0.5, "force_threshold_n": 0.5,
-                        "rate": 4000, ...},     also strength, density_scale, material, empty
+                        "removal_per_n_s": 2, ...},  also strength, density_scale, material, empty
               "every_ticks": 10, "button": [[0.5, 4.6]], "history_limit_mib": 64,
               "write_vdb": true, "write_stl": true,
               "timeline": [{"t_s": 1.0, "kind": "carve", "at": "vhip" | [x, y, z] (mm), "duration_s": 0.2,
@@ -73,7 +73,9 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
   }
 edits (optional, needs mode "sparse"): sculpting while the servo runs. While the
 button is down and the probe is in contact, the brush is applied at the VHIP every
-every_ticks ticks (drill: removal grows with |F| above force_threshold_n), one undo stroke
+every_ticks ticks (drill: removal grows with |F| above force_threshold_n; removal_per_n_s is
+the fraction of the material-to-empty value range removed per N above it per s, the same on
+every volume; "rate" gives it in value units per N s instead), one undo stroke
 per press; timeline brushes fire at their time. Each edit recomputes only the bricks it can
 change and publishes a new snapshot the next tick reads. Outputs add edits.csv, edits.png
 (force, depth and removed volume against time), before.png / after.png, drilled.vdb and

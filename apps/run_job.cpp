@@ -2,6 +2,7 @@
 
 #include <csignal>
 
+#include "drill_channel.h"
 #include "drill_figure.h"
 #include "output_file.h"
 #include "volume_write.h"
@@ -509,6 +510,12 @@ class EditDriver {
         voxel_mm3_(setup.volume.grid.spacing_m.x * setup.volume.grid.spacing_m.y * setup.volume.grid.spacing_m.z * 1e9),
         inside0_(inside_voxels(setup.volume, iso_)) {
     const EditsSpec& e = scene.edits;
+    {
+      const session::Brush b = make_brush(e.brush, targets_, {}, dt_, 0);
+      const double range = std::abs(double(b.targets.material) - double(b.targets.empty));
+      figures.drill_rate_value_per_n_s = b.rate;
+      figures.drill_removal_per_n_s = range > 0 ? b.rate / range : 0.0;
+    }
     for (std::size_t i = 0; i < e.timeline.size(); ++i) {
       const TimedEdit& t = e.timeline[i];
       const long k0 = edit_tick(t.t_s, scene.hri.rate_hz);
@@ -786,6 +793,65 @@ engine::RaycastImage render_section(const Scene& scene, const SceneSetup& setup,
   return render_picture(setup.vk.get(), rf, vol.direction, req, out_png);
 }
 
+// Drill scenes: the breakthrough and the channel's open radius (EditFigures).
+void drill_figures(const Scene& scene, const SceneSetup& setup, const std::vector<sim::TraceRow>& trace,
+                   const engine::Volume& after, EditFigures& e, std::ostream& log) {
+  e.drill = true;
+  const double tool = setup.hri.tool_radius_m;
+  e.burr_radius_m = tool > 0 ? tool : scene.edits.brush.radius_mm * 1e-3;
+  std::vector<double> t, f;
+  std::vector<char> down;
+  std::vector<Vec3> centres;
+  for (const auto& r : trace) {
+    t.push_back(r.t_s);
+    f.push_back(core::norm(r.force_n));
+    down.push_back(r.button ? 1 : 0);
+    if (r.button && r.contact) centres.push_back(r.vhip_m);
+  }
+  const eval::Breakthrough b = eval::find_breakthrough(t, f, down, scene.edits.brush.force_threshold_n);
+  e.breakthrough = b.found;
+  e.breakthrough_t_s = b.t_s, e.breakthrough_from_n = b.from_n, e.breakthrough_to_n = b.to_n, e.breakthrough_fall_s = b.fall_s;
+  const eval::ChannelFigures c = eval::measure_channel(setup.volume, after, setup.live.iso, centres,
+                                                       setup.script.contact_normal * -1.0, e.burr_radius_m);
+  e.channel_measured = c.measured;
+  e.channel_slices = c.slices;
+  e.channel_min_open_radius_m = c.min_open_radius_m;
+  e.channel_min_at_depth_m = c.min_at_depth_m;
+  e.channel_min_fraction = c.min_fraction;
+  if (e.breakthrough)
+    log << "drill    breakthrough at t = " << fmt(b.t_s, 5) << " s: |F| fell from " << fmt(b.from_n, 4) << " N to "
+        << fmt(b.to_n, 4) << " N in " << fmt(b.fall_s * 1e3, 4) << " ms\n";
+  else
+    log << "drill    no breakthrough (|F| never fell to a tenth of the drill threshold for good while drilling)\n";
+  if (c.measured)
+    log << "drill    channel: narrowest open radius " << fmt(c.min_open_radius_m * 1e3, 4) << " mm ("
+        << fmt(100 * c.min_fraction, 3) << " % of the burr's " << fmt(e.burr_radius_m * 1e3, 4) << " mm) at "
+        << fmt(c.min_at_depth_m * 1e3, 4) << " mm along the path, " << c.slices << " slices\n";
+}
+
+// The report's rows for the breakthrough and the channel.
+std::string drill_rows(const EditFigures& e, const Scene& scene) {
+  if (!e.drill) return "";
+  std::ostringstream md;
+  md << "| breakthrough | ";
+  if (e.breakthrough)
+    md << "**t = " << fmt(e.breakthrough_t_s, 5) << " s**: |F| fell from " << fmt(e.breakthrough_from_n, 4) << " N to "
+       << fmt(e.breakthrough_to_n, 4) << " N in " << fmt(e.breakthrough_fall_s * 1e3, 4) << " ms (to a tenth of the "
+       << fmt(scene.edits.brush.force_threshold_n, 4) << " N drill threshold, staying there while the button is down) |\n";
+  else
+    md << "none: |F| never fell to a tenth of the " << fmt(scene.edits.brush.force_threshold_n, 4)
+       << " N drill threshold for good while the button was down |\n";
+  md << "| channel | ";
+  if (e.channel_measured)
+    md << "narrowest open radius **" << fmt(e.channel_min_open_radius_m * 1e3, 4) << " mm = "
+       << fmt(100 * e.channel_min_fraction, 3) << " %** of the burr's " << fmt(e.burr_radius_m * 1e3, 4) << " mm, at "
+       << fmt(e.channel_min_at_depth_m * 1e3, 4) << " mm along the burr's path (" << e.channel_slices
+       << " slices a quarter voxel apart where the burr centre passed through material) |\n";
+  else
+    md << "not measured: the burr centre never passed through material |\n";
+  return md.str();
+}
+
 // The figures, files and pictures of a run with edits, into m.edits.
 void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
                   const std::string& dir, RunMetrics& m, std::ostream& log) {
@@ -826,6 +892,7 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     e.max_hip_depth_m = std::max(e.max_hip_depth_m, core::dot(cp - r.hip_m, n));
     e.max_vhip_depth_m = std::max(e.max_vhip_depth_m, core::dot(cp - r.vhip_m, n));
   }
+  if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, after, e, log);
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
       << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
@@ -904,10 +971,26 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
 }
 
 nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
+  const nlohmann::ordered_json drill =
+      !e.drill ? nlohmann::ordered_json(nullptr)
+               : nlohmann::ordered_json{
+                     {"burr_radius_mm", e.burr_radius_m * 1e3},
+                     {"breakthrough", !e.breakthrough ? nlohmann::ordered_json(nullptr)
+                                                      : nlohmann::ordered_json{{"t_s", e.breakthrough_t_s},
+                                                                               {"from_n", e.breakthrough_from_n},
+                                                                               {"to_n", e.breakthrough_to_n},
+                                                                               {"fall_s", e.breakthrough_fall_s}}},
+                     {"channel", !e.channel_measured ? nlohmann::ordered_json(nullptr)
+                                                     : nlohmann::ordered_json{{"slices", e.channel_slices},
+                                                                              {"min_open_radius_mm", e.channel_min_open_radius_m * 1e3},
+                                                                              {"min_at_depth_mm", e.channel_min_at_depth_m * 1e3},
+                                                                              {"min_fraction_of_burr", e.channel_min_fraction}}}};
   const auto or_null = [](bool have, auto v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
   return {{"brush", {{"kind", scene.edits.brush.kind}, {"radius_mm", scene.edits.brush.radius_mm},
-                     {"force_threshold_n", scene.edits.brush.force_threshold_n}, {"rate", scene.edits.brush.rate}}},
+                     {"force_threshold_n", scene.edits.brush.force_threshold_n}, {"rate_value_per_n_s", e.drill_rate_value_per_n_s},
+                     {"removal_per_n_s", e.drill_removal_per_n_s}}},
           {"every_ticks", scene.edits.every_ticks},
+          {"drill", drill},
           {"brushes_on", e.brushes_on_gpu ? "GPU" : "CPU"},
           {"events", e.events},
           {"brush_applications", e.brushes},
@@ -961,7 +1044,9 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   const BrushSpec& b = scene.edits.brush;
   md << "## Edits\n\n"
      << "Brush **" << b.kind << "**, radius " << fmt(b.radius_mm, 4) << " mm"
-     << (b.kind == "drill" ? ", threshold " + fmt(b.force_threshold_n, 4) + " N, rate " + fmt(b.rate, 6) + " per N s" : std::string())
+     << (b.kind == "drill" ? ", threshold " + fmt(b.force_threshold_n, 4) + " N, rate " + fmt(e.drill_removal_per_n_s, 4) +
+                                 " of the material-to-empty range per N s (" + fmt(e.drill_rate_value_per_n_s, 6) + " value units per N s)"
+                           : std::string())
      << ", applied every " << scene.edits.every_ticks << " servo ticks while the button is down and the probe is in contact"
      << " (brushes on the " << (e.brushes_on_gpu ? "GPU" : "CPU") << ").\n\n"
      << "| | |\n|---|---|\n"
@@ -977,6 +1062,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << " after, times the voxel volume) |\n"
      << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
      << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
+     << drill_rows(e, scene)
      << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | every contact tick against the volume whose snapshot it read; " << e.contact_ticks_after_edit
@@ -1014,6 +1100,11 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
 
 }  // namespace
 
+double drill_rate(const BrushSpec& b, const session::BrushTargets& t) {
+  if (!(b.removal_per_n_s >= 0)) return b.rate;
+  return b.removal_per_n_s * std::abs(double(t.material) - double(t.empty));
+}
+
 session::Brush make_brush(const BrushSpec& b, const session::BrushTargets& defaults, const Vec3& centre_m,
                          double dt_s, double force_n) {
   session::Brush e;
@@ -1027,7 +1118,7 @@ session::Brush make_brush(const BrushSpec& b, const session::BrushTargets& defau
   if (b.has_empty) e.targets.empty = float(b.empty);
   if (b.density_scale > 0) e.targets.density_scale = float(b.density_scale);
   e.force_threshold_n = b.force_threshold_n;
-  e.rate = b.rate;
+  e.rate = drill_rate(b, e.targets);
   e.dt_s = dt_s;
   e.force_n = force_n;
   return e;

@@ -37,6 +37,9 @@ std::vector<engine::PassDesc> scene_passes(const io::Scene& scene);
 /// sets them.
 session::Brush make_brush(const io::BrushSpec& b, const session::BrushTargets& defaults, const core::Vec3& centre_m,
                           double dt_s, double force_n);
+/// The drill's rate in value units per (N s): "rate" as given, or "removal_per_n_s" times
+/// the targets' |material - empty|.
+double drill_rate(const io::BrushSpec& b, const session::BrushTargets& t);
 /// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP is
 /// the tool's centre and the brush takes the tool's size, reaching one voxel (the largest
 /// spacing: the surface the burr touches lies within one cell of it) past its surface, so it
@@ -56,6 +59,9 @@ struct PassFigure {
 /// What the scene's edits did (filled by run_scene when the scene has an "edits" section).
 struct EditFigures {
   bool present = false;            ///< the scene has edits
+  /// The scene brush's drill rate in value units per (N s), and as the fraction of the
+  /// brush's |material - empty| range per (N s) (the same on every volume).
+  double drill_rate_value_per_n_s = 0, drill_removal_per_n_s = 0;
   long events = 0;                 ///< EditEvents applied (brushes, strokes, undo, redo)
   long brushes = 0;                ///< brush applications
   long timeline_brushes = 0, button_brushes = 0;  ///< of which from the timeline / the button
@@ -88,6 +94,16 @@ struct EditFigures {
   /// Depth along the press direction (-contact normal) below the initial contact point [m]:
   /// deepest HIP and VHIP of the run.
   double max_hip_depth_m = 0, max_vhip_depth_m = 0;
+  /// Drill scenes: the breakthrough (|F| falling to a tenth of the drill threshold and staying
+  /// there while the button is down, eval::find_breakthrough) and the open radius of the
+  /// channel along the burr centres' path (eval::measure_channel, burr radius = the tool's,
+  /// else the brush's).
+  bool drill = false;
+  bool breakthrough = false;
+  double breakthrough_t_s = 0, breakthrough_from_n = 0, breakthrough_to_n = 0, breakthrough_fall_s = 0;
+  bool channel_measured = false;
+  int channel_slices = 0;
+  double burr_radius_m = 0, channel_min_open_radius_m = 0, channel_min_at_depth_m = 0, channel_min_fraction = 0;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
   bool before_after_drawn = false; ///< before.png and after.png written

@@ -168,10 +168,11 @@ void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
                                  "\" needs \"mode\": \"sparse\" (dense snapshots are fp32)");
 }
 
-// A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate",
-// "density_scale", "material", "empty" (+ "force_n" on the timeline), each over `base`.
+// A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate"
+// or "removal_per_n_s", "density_scale", "material", "empty" (+ "force_n" on the timeline),
+// each over `base`.
 const std::set<std::string> kBrushKeys{"kind", "radius_mm", "strength", "falloff", "force_threshold_n",
-                                       "rate", "density_scale", "material", "empty"};
+                                       "rate", "removal_per_n_s", "density_scale", "material", "empty"};
 
 BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, BrushSpec base, bool timed) {
   BrushSpec s = base;
@@ -186,7 +187,12 @@ BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, 
                                     (b.contains("strength") ? b.at("strength").dump() : std::to_string(s.strength)));
   s.falloff = r.number(b, where, "falloff", s.falloff, 0, 1, true);
   s.force_threshold_n = r.number(b, where, "force_threshold_n", s.force_threshold_n, 0, 1000);
+  if (b.contains("rate") && b.contains("removal_per_n_s"))
+    r.fail(where + ".removal_per_n_s", "give the drill's rate once: \"rate\" (value units per N s) or "
+                                       "\"removal_per_n_s\" (fraction of |material - empty| per N s), not both");
   s.rate = r.number(b, where, "rate", s.rate, 0, 1e12);
+  if (b.contains("rate")) s.removal_per_n_s = -1;
+  if (b.contains("removal_per_n_s")) s.removal_per_n_s = r.number(b, where, "removal_per_n_s", 0, 0, 1e6);
   if (b.contains("density_scale")) s.density_scale = r.number(b, where, "density_scale", 0, 0, 1e30, true);
   if (b.contains("material")) {
     s.has_material = true;

@@ -55,6 +55,10 @@ struct BrushSpec {
   double falloff = 0.5;            ///< soft edge as a fraction of the radius, (0, 1]
   double force_threshold_n = 1.0;  ///< drill: nothing is removed at or below this |F| [N]
   double rate = 1000.0;            ///< drill: value units removed per (N above the threshold) per s
+  /// drill: the same in units that mean the same on every volume: the fraction of the
+  /// brush's |material - empty| removed per (N above the threshold) per s at density
+  /// factor 1 (0.01: 1 % of the range per N s). < 0 = not given ("rate" holds).
+  double removal_per_n_s = -1;
   double density_scale = 0;        ///< drill: > 0, or 0 = session::default_targets' (|material - empty|)
   bool has_material = false, has_empty = false;
   double material = 0, empty = 0;  ///< target values; default session::default_targets'

@@ -1239,6 +1239,8 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     }
   }
 
+  if (holding && !edited) keep_proxy_outside(field, hip, held, voxel, out);
+
   Vec3 force;
   if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
     force = contact_force(field, hip, v_filt_, elapsed, out);
@@ -1251,6 +1253,112 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     prev_target_f_ = {};
   }
   return finish_robust(hip, force, edited, have_f_hip, f_hip, out);
+}
+
+bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel,
+                               Vec3& p, double min_depth_voxels) const {
+  // Steps of a fifth voxel, and at least 64 per segment (a tapered tip's inside is a sliver).
+  const double len = norm(b - a);
+  if (!std::isfinite(len) || !(len > 0.0)) return false;
+  const int steps = int(std::clamp(std::ceil(len / (0.2 * voxel)), 64.0, 256.0));
+  auto at = [&](double t) { return a + (b - a) * t; };
+  auto e_at = [&](double t) { return excess(sample_value(field, at(t))); };
+  // The entry in (lo, hi], lo outside and hi inside: 20 bisection steps.
+  auto bisect = [&](double lo, double hi) {
+    for (int k = 0; k < 20; ++k) {
+      const double mid = 0.5 * (lo + hi);
+      (e_at(mid) > 0.0 ? hi : lo) = mid;
+    }
+    return lo;
+  };
+  const double deeper = e_a > 0.0 ? 2.0 * e_a : 0.0;
+  bool out_seen = !(e_a > 0.0);
+  double lo = 0.0;
+  for (int i = 1; i <= steps; ++i) {
+    const double e = e_at(double(i) / steps);
+    if (!(e > 0.0)) {
+      out_seen = true;
+      lo = double(i) / steps;
+      continue;
+    }
+    if (!out_seen && !(e > deeper)) continue;  // still leaving an embedded start
+    // Entered material (or went deeper than the start). One that comes out again passed
+    // through it. A path that ends in material at its deepest point ends on a plane held
+    // over a curved surface (a chord): the embedded-VHIP search brings it out; one that
+    // was deeper than twice its end's excess went through a plate to the far face.
+    int j = i;
+    double deepest = e, e_end = e, t_deep = double(i) / steps;
+    while (j < steps && (e_end = e_at(double(j + 1) / steps)) > 0.0) {
+      ++j;
+      if (e_end > deepest) deepest = e_end, t_deep = double(j) / steps;
+    }
+    if (j == steps && !(deepest > 2.0 * e_end)) return false;
+    if (j < steps && out_seen && min_depth_voxels > 0.0 &&
+        !(deepest > min_depth_voxels * voxel * norm(sample_trilinear(field, at(t_deep)).gradient))) {
+      lo = double(j + 1) / steps;  // a shallow bump: go on past it
+      i = j + 1;
+      continue;
+    }
+    p = at(out_seen ? bisect(lo, double(i) / steps) : 0.0);
+    return true;
+  }
+  return false;
+}
+
+void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
+                                     double voxel, HriTick& out) {
+  // Where the proxy goes this tick: onto the plane (eq. 2, frictionless) or to the HIP.
+  const bool behind = plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0;
+  const Vec3 to = behind ? hip + plane_.n * dot(plane_.n, plane_.p - hip) : hip;
+  const Vec3 move = to - vhip_;
+  // Sliding on a held plane moves the proxy less than a quarter voxel per tick; only a
+  // longer move (a plane update, a drop, a long free step) is checked.
+  if (!(dot(move, move) > 0.0625 * voxel * voxel)) return;
+  // A HIP inside the material is held on this side by the rules above (on a noisy scan
+  // the proxy's path over the bumps of the surface dips into it); a HIP that came out
+  // beyond the material may have passed through it.
+  if (excess(sample_value(field, hip)) > 0.0) return;
+  // The path enters material after leaving it, or goes deeper than an embedded VHIP is, or
+  // leaves an embedded VHIP against the held normal (out through the far side).
+  const double e0 = excess(sample_value(field, vhip_));
+  Vec3 p;
+  const bool out_far = e0 > 0.0 && held.valid && dot(move, held.n) < -0.25 * voxel;
+  if (!path_through(field, vhip_, to, e0, voxel, p) && !out_far) return;
+  if (e0 > 0.0 && (out_far || dot(p - vhip_, p - vhip_) == 0.0)) {
+    // Through from an embedded VHIP: the proxy comes out to the surface along the held normal.
+    const double gn = norm(sample_trilinear(field, vhip_).gradient);
+    Vec3 q;
+    if (held.valid && surface_from(field, vhip_, e0, gn, q, &held.n)) p = q;
+  }
+  // The proxy would pass through material: it stays at p, held there by the surface's
+  // plane there (unless it faces away from the held one) or else the held plane's normal,
+  // if the HIP is behind it and sliding on it enters no material nor goes back through the
+  // held plane; else by the plane through p facing the HIP.
+  const double e_p = excess(sample_value(field, p));
+  auto holds = [&](const VirtualPlane& c) {
+    Vec3 again;
+    const Vec3 slid = hip + c.n * dot(c.n, c.p - hip);
+    return c.valid && dot(c.n, hip - c.p) < 0.0 && !(held.valid && dot(slid - p, held.n) < -0.25 * voxel) &&
+           !path_through(field, p, slid, e_p, voxel, again);
+  };
+  VirtualPlane pl = plane_at(field, p, hip);
+  const double gn_pl = last_grad_norm_;
+  if (held.valid && !(dot(pl.n, held.n) > 0.0)) pl.valid = false;
+  if (!holds(pl)) {
+    pl.p = p;
+    pl.n = held.valid ? held.n : Vec3{};
+    pl.valid = held.valid;
+    if (!holds(pl)) {
+      pl.n = normalized_or(p - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
+      pl.valid = finite(pl.n) && finite(pl.p) && dot(pl.n, hip - pl.p) < 0.0;
+    }
+  }
+  if (!pl.valid) return;
+  plane_ = pl;
+  plane_grad_norm_ = gn_pl;
+  anchor_ = p;
+  c_ = 0;
+  out.plane_update = true;
 }
 
 HriTick HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,

@@ -202,7 +202,20 @@ struct ToolPlane {
 /// - Proxy path: a new plane whose contact point is reached from an outside VHIP only
 ///   through material (7 points of the segment, deeper than 0.05 voxel first order; any
 ///   depth for a plane facing away from the held one) lies on another sheet; the held
-///   plane stays while the HIP is behind it (not on edit ticks).
+///   plane stays while the HIP is behind it (not on edit ticks). Then, on every tick that
+///   held a plane before, moves the proxy more than a quarter voxel (an update, a drop, a
+///   slide) and finds the HIP outside the material (it may have come out through a far
+///   face; a HIP inside is held by the rules above, and on a noisy scan the proxy's path
+///   over the surface's bumps dips into it), the proxy's straight path is checked at 64 or
+///   more points
+///   (keep_proxy_outside): one that enters material and comes out again, goes deeper than
+///   an embedded VHIP started, or leaves an embedded VHIP back through the held plane by
+///   more than a quarter voxel passes through a thin wall (a tapering edge on coarse
+///   voxels, where the trilinear inside is a sliver): the proxy stays at the entry (from an
+///   embedded VHIP: the surface along the held normal) on the surface's plane there, else
+///   on the held normal, else on the plane facing the HIP, whichever keeps it out of the
+///   material. A path that ends inside at its deepest point is a chord under a plane held
+///   over a curved surface and is let through (the embedded search brings it out).
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
 ///   behind it, a wall drilled away) fades that force out along its direction over
@@ -325,6 +338,20 @@ class HriRenderer final : public Renderer {
   /// `step_voxels`: the march's step [voxels].
   bool first_crossing(const FieldView& field, const Vec3& a, const Vec3& b, Vec3& p, double step_voxels = 0.5) const;
   Vec3 constrain(const Vec3& hip, const Vec3& free_vhip, double dt);
+  /// God-object guard (point, robust): if this tick's proxy move (onto the plane, or to
+  /// the HIP when free) of more than a quarter voxel from an outside VHIP enters material,
+  /// the plane is put at the first crossing instead (sets out.plane_update).
+  /// See the class docs, "Proxy path" (the check of every long proxy move).
+  void keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held, double voxel,
+                          HriTick& out);
+  /// The segment a -> b (excess e_a at a) passes through material: it enters (or, from an
+  /// embedded a, goes deeper than 2 e_a) and comes out again, or ends inside at less than
+  /// half its deepest excess (a path that ends inside at its deepest is a chord under a
+  /// plane held over a curved surface: not counted); p: the entry point (a for "deeper").
+  /// min_depth_voxels > 0: a path that enters and comes out no deeper than that (first
+  /// order) is a bump, not counted.
+  bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p,
+                    double min_depth_voxels = 0.0) const;
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);

@@ -96,6 +96,23 @@ if(NOT md MATCHES "largest force step in contact" OR NOT md MATCHES "largest rel
    NOT md MATCHES "largest force step, any ticks" OR NOT md MATCHES "\\| orientation \\|")
   message(FATAL_ERROR "report.md lacks the force step or the orientation")
 endif()
+# -DCHANNEL_MIN=f (a drill scene): the burr broke through (a force drop with its time in
+# summary.json and report.md) and the channel's narrowest open radius is at least f of the
+# burr's along the whole path where the burr centre passed through bone.
+if(DEFINED CHANNEL_MIN)
+  string(JSON bt ERROR_VARIABLE bt_err GET "${js}" edits drill breakthrough t_s)
+  string(JSON frac ERROR_VARIABLE frac_err GET "${js}" edits drill channel min_fraction_of_burr)
+  if(bt_err OR frac_err OR NOT bt MATCHES "^[0-9]" OR NOT frac MATCHES "^[0-9]")
+    message(FATAL_ERROR "edits.drill: no breakthrough time or channel figure (${bt_err} ${frac_err})")
+  endif()
+  if(frac LESS CHANNEL_MIN)
+    message(FATAL_ERROR "edits.drill.channel.min_fraction_of_burr = ${frac} < ${CHANNEL_MIN}")
+  endif()
+  if(NOT md MATCHES "\\| breakthrough \\| \\*\\*t = " OR NOT md MATCHES "\\| channel \\| narrowest open radius")
+    message(FATAL_ERROR "report.md lacks the breakthrough or the channel row")
+  endif()
+  message(STATUS "drill: breakthrough at ${bt} s, narrowest channel ${frac} of the burr")
+endif()
 file(STRINGS ${OUT}/trace.csv header LIMIT_COUNT 1)
 if(NOT header STREQUAL "t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,plane_update,tick_ns")
   message(FATAL_ERROR "trace.csv header: ${header}")

@@ -541,10 +541,10 @@ TEST(HriContact, NoisyCoarseScanNeverDropsContactInside) {
 // through a hole the coarse trilinear field leaves in the tapered tip) stays outside the
 // material and is allowed. Also reported: the deepest VHIP (first order, |grad| of the
 // analytic field), bounded at a quarter voxel.
-// Not yet met: 6 of 36 strokes pop through at 0.56-1.96 N (a plane update lands on the far
-// face while the HIP is past it, or drops the plane with the HIP past the far face);
-// disabled, run with --gtest_also_run_disabled_tests (HRI_TAPER_DEBUG=1 lists the ticks).
-TEST(HriContact, DISABLED_TaperingPlateEdgeOnCoarseVoxelsNeverPopsThrough) {
+// Without the proxy-path check (keep_proxy_outside) 6 of 36 strokes pop through at
+// 0.56-1.96 N (a plane update lands on the far face while the HIP is past it, or drops the
+// plane with the HIP past the far face). HRI_TAPER_DEBUG=1 lists the ticks.
+TEST(HriContact, TaperingPlateEdgeOnCoarseVoxelsNeverPopsThrough) {
   const int dims = 24;
   const double h = 3e-3;
   const Vec3 c{0.036, 0.036, 0.036};

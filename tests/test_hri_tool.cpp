@@ -17,6 +17,7 @@
 #include "hri.h"
 #include "sampling.h"
 #include "surface_distance.h"
+#include "volume_io.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -273,4 +274,134 @@ TEST(HriTool, WallForceIsKTimesTheDepthBelowTheOffsetSurface) {
   out = r.tick(f, kCentre + m * (rad + 0.0002));
   EXPECT_FALSE(out.contact);
   EXPECT_EQ(norm(out.force_n), 0.0);
+}
+
+// Thin bone on shipped data: the chest CT's ribs at +250 HU (2 x 2 x 5 mm voxels: a rib is
+// one to three voxels thick, its edges taper), the robust point servo (n = 1, 5 and 10,
+// K = 200 N/m so that pressing 8 mm past the surface stays below the limit). Strokes start
+// 3 mm outside a rib-surface voxel (value above 250 HU with a face neighbour below, a bone
+// run of at most 3 voxels along the gradient: thin bone), press 8 mm in along the inward
+// gradient and then stroke 20 mm along the rib's edge: the tangent in which the bone
+// ends soonest (found by walking the surface voxels). Truth: the trilinear field of the
+// samples itself, brute force at 64 points: a tick (|F| below the limit) whose proxy
+// moved more than a quarter voxel from where it was on a straight path that enters bone
+// and comes out again (it went through the rib) is a pop-through (shorter moves are chords
+// over a bump of the surface). The HIP has to leave through the far side in some
+// strokes (checked), so the test can see one.
+// Not yet met: without the proxy-path check 13 pop-throughs in 12 of the 48 strokes; with
+// it 4 (4 strokes): there the HIP is inside bone when the proxy crosses, and the check is
+// made only for a HIP outside (made for every HIP it gives 0 here, but holds the proxy back
+// on the bumps of the noisy head CT: force steps of 0.18 N there). Disabled; run with
+// --gtest_also_run_disabled_tests
+// (HRI_RIB_DEBUG=1 lists the ticks).
+TEST(HriShippedData, DISABLED_ChestRibEdgesNeverPopThrough) {
+  const isotouch::engine::Volume vol =
+      isotouch::io::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
+  SampleField f;
+  f.grid = vol.grid;
+  f.background = -1024.0f;
+  f.samples.resize(f.grid.voxel_count());
+  const auto& d = f.grid.dims;
+  auto v = [&](int x, int y, int z) {
+    x = std::clamp(x, 0, d[0] - 1), y = std::clamp(y, 0, d[1] - 1), z = std::clamp(z, 0, d[2] - 1);
+    return double(vol.voxels[f.grid.index(x, y, z)]);
+  };
+  const Vec3 sp = f.grid.spacing_m;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x)
+        f.samples[f.grid.index(x, y, z)] = {float(v(x, y, z)), float((v(x + 1, y, z) - v(x - 1, y, z)) / (2 * sp.x)),
+                                            float((v(x, y + 1, z) - v(x, y - 1, z)) / (2 * sp.y)),
+                                            float((v(x, y, z + 1) - v(x, y, z - 1)) / (2 * sp.z))};
+  const double tau = 250.0, voxel = std::min({sp.x, sp.y, sp.z});
+  // Thin rib-surface voxels, away from the borders.
+  std::vector<std::array<int, 3>> seeds;
+  for (int z = 4; z < d[2] - 4; ++z)
+    for (int y = 16; y < d[1] - 16; ++y)
+      for (int x = 16; x < d[0] - 16; ++x) {
+        if (!(v(x, y, z) > tau)) continue;
+        const bool surface = v(x - 1, y, z) <= tau || v(x + 1, y, z) <= tau || v(x, y - 1, z) <= tau ||
+                             v(x, y + 1, z) <= tau || v(x, y, z - 1) <= tau || v(x, y, z + 1) <= tau;
+        if (!surface) continue;
+        const Sample& s = f.samples[f.grid.index(x, y, z)];
+        const Vec3 g{s.gx, s.gy, s.gz};
+        if (!(norm(g) > 0)) continue;
+        const Vec3 in = g / norm(g);  // toward higher values: into bone
+        int run = 0;
+        for (int k = 1; k <= 6; ++k) {
+          const Vec3 q = f.grid.to_world({double(x), double(y), double(z)}) + in * (k * 0.5 * voxel);
+          if (sample_value(f, q) > tau) run = k;
+        }
+        if (run >= 1 && run <= 6) seeds.push_back({x, y, z});  // bone ends within 3 mm inward
+      }
+  ASSERT_GT(seeds.size(), 100u);
+  std::mt19937 rng(2021);
+  long contact_ticks = 0, through = 0, strokes_through = 0, far_side = 0;
+  const int strokes = 48;
+  for (int run = 0; run < strokes; ++run) {
+    const auto& sd = seeds[std::uniform_int_distribution<std::size_t>(0, seeds.size() - 1)(rng)];
+    const Vec3 c = f.grid.to_world({double(sd[0]), double(sd[1]), double(sd[2])});
+    const Sample& s = f.samples[f.grid.index(sd[0], sd[1], sd[2])];
+    const Vec3 out = Vec3{s.gx, s.gy, s.gz} / -norm(Vec3{s.gx, s.gy, s.gz});
+    Vec3 ta, tb;
+    basis(out, ta, tb);
+    // The rib's edge: of 8 tangents, the one along which bone (just under the surface) ends soonest.
+    Vec3 along = ta;
+    double soonest = 1e300;
+    for (int a = 0; a < 8; ++a) {
+      const Vec3 t = ta * std::cos(a * M_PI / 4) + tb * std::sin(a * M_PI / 4);
+      for (int k = 1; k <= 20; ++k)
+        if (!(sample_value(f, c - out * (0.5 * voxel) + t * (k * 0.5 * voxel)) > tau)) {
+          if (k < soonest) soonest = k, along = t;
+          break;
+        }
+    }
+    HriParams p;
+    p.tau = tau;
+    p.inside = InsideIs::kAbove;
+    p.plane_update_period = std::array<int, 3>{1, 5, 10}[std::size_t(run) % 3];
+    p.stiffness_n_per_m = 200;
+    p.damping_n_s_per_m = 0.5;
+    p.intersection = Intersection::kSecant;
+    p.recovery_time_s = 0.02;
+    HriRenderer r(p);
+    const Vec3 start = c + out * 0.003;
+    Vec3 prev_vhip = start;
+    bool this_through = false, went_far = false;
+    for (int k = 0; k < 1200; ++k) {
+      const double t = k * 1e-3;
+      const double down = std::min(0.04 * t, 0.011);
+      const double stroke = std::clamp(0.04 * (t - 0.3), 0.0, 0.020);
+      const Vec3 hip = start - out * down + along * stroke;
+      const HriTick o = r.tick(f, hip);
+      contact_ticks += o.contact;
+      if (!(sample_value(f, hip) > tau) && dot(out, hip - c) < -voxel) went_far = true;
+      if (norm(o.force_n) < 0.999 * p.force_limit_n) {
+        bool in = false, out_again = false;
+        for (int i = 1; i < 64 && !out_again; ++i) {
+          const bool inside = sample_value(f, prev_vhip + (o.vhip_m - prev_vhip) * (i / 64.0)) > tau;
+          in = in || inside;
+          out_again = in && !inside;
+        }
+        const bool ends_out = !(sample_value(f, o.vhip_m) > tau) && !(sample_value(f, prev_vhip) > tau);
+        const bool long_move = norm(o.vhip_m - prev_vhip) > 0.25 * voxel;  // not a chord over a bump
+        if (long_move && in && (out_again || ends_out) && !(sample_value(f, prev_vhip) > tau)) {
+          if (std::getenv("HRI_RIB_DEBUG"))
+            std::printf("  stroke %d n %d k %d |F| %.3f moved %.2f mm update %d\n", run, p.plane_update_period, k,
+                        norm(o.force_n), 1e3 * norm(o.vhip_m - prev_vhip), int(o.plane_update));
+          ++through;
+          this_through = true;
+        }
+      }
+      prev_vhip = o.vhip_m;
+    }
+    strokes_through += this_through;
+    far_side += went_far;
+  }
+  std::printf("chest ribs at +250 HU, %d strokes along thin edges: %ld contact ticks, HIP past the far side in %ld strokes, "
+              "%ld pop-throughs (%ld strokes)\n",
+              strokes, contact_ticks, far_side, through, strokes_through);
+  EXPECT_GT(far_side, 5);
+  EXPECT_GT(contact_ticks, 10000);
+  EXPECT_EQ(through, 0);
 }

@@ -221,6 +221,27 @@ TEST(Scene, EnginePassListCheckedByTheEngine) {
   EXPECT_EQ(isotouch::app::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
 }
 
+// The drill's rate as a fraction of the material-to-empty range per N s: the same removal
+// on 8-bit and HU data (rate in value units = fraction x |material - empty|); "rate" and
+// "removal_per_n_s" together are refused.
+TEST(Scene, DrillRemovalPerNsMeansTheSameOnEveryVolume) {
+  const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
+      "brush": {"kind": "drill", "removal_per_n_s": 0.25}}})", "ok.json");
+  EXPECT_EQ(s.edits.brush.removal_per_n_s, 0.25);
+  isotouch::session::BrushTargets hu{3071.0f, -1024.0f, 4095.0f}, u8{255.0f, 0.0f, 255.0f};
+  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(s.edits.brush, hu), 0.25 * 4095.0);
+  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(s.edits.brush, u8), 0.25 * 255.0);
+  const auto v = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
+      "brush": {"kind": "drill", "rate": 700}}})", "ok.json");
+  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(v.edits.brush, u8), 700.0);  // value units as given
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
+      "brush": {"kind": "drill", "rate": 700, "removal_per_n_s": 0.1}}})",
+               {"edits.brush.removal_per_n_s", "not both"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
+      "brush": {"kind": "drill", "removal_per_n_s": -1}}})",
+               {"edits.brush.removal_per_n_s"});
+}
+
 // The "edits" section: brush defaults, timeline, button, undo limit.
 TEST(Scene, EditsSectionParses) {
   const auto s = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {

@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "vk_test_context.h"
+#include "gpu_cpu_compare.h"
 #include "cpu_filters.h"
 #include "cpu_gradient.h"
 #include "parallel.h"
@@ -46,19 +47,10 @@ std::vector<float> flatten(const core::SampleField& f) {
   return v;
 }
 
-// On lavapipe (an IEEE CPU device, `precise`, -ffp-contract=off) every output must agree bit
-// for bit; on another driver the ULP distribution is printed and bounded.
+// The one rule (tests/gpu_cpu_compare.h): bit for bit on a CPU device (lavapipe: IEEE,
+// `precise`, -ffp-contract=off), within a ULP bound on a GPU; the distribution is printed.
 void expect_same(const std::vector<float>& gpu, const std::vector<float>& cpu, const std::string& what) {
-  ASSERT_EQ(gpu.size(), cpu.size()) << what;
-  const UlpStats s = ulp_stats(gpu, cpu);
-  std::printf("  %-48s %9zu values, %zu differ, ULP max %llu p99 %llu\n", what.c_str(), s.n, s.differ,
-              static_cast<unsigned long long>(s.max), static_cast<unsigned long long>(s.p99));
-  if (vk().info().type == "cpu") {
-    EXPECT_EQ(s.differ, 0u) << what << ": first difference at " << s.first << " (GPU " << gpu[s.first] << ", CPU "
-                            << cpu[s.first] << ")";
-  } else {
-    EXPECT_LE(s.max, 64u) << what;  // FMA contraction / reassociation allowed elsewhere
-  }
+  EXPECT_TRUE(isotouch::test::gpu_matches_cpu(vk(), gpu, cpu, what));
 }
 
 void expect_chain_matches_cpu_with(engine::ShaderSet shaders, const Volume& v, const std::vector<PassDesc>& passes,
@@ -203,7 +195,7 @@ TEST(PassesGpuVsCpu, ZeroCopyAndStagingGiveTheSameBits) {
   // the voxels and reads the outputs in place. With zero copy off it stages and reads back,
   // as on a discrete GPU; both against the CPU.
   const Volume v = engine::make_random({37, 29, 23}, {0.7e-3, 1.1e-3, 2.3e-3}, -1000.0f, 3000.0f, 43);
-  if (vk().info().type == "cpu") {
+  if (isotouch::test::expects_bit_identity(vk())) {
     EXPECT_TRUE(vk().device_local_is_host_visible());
   }
   struct Restore {

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "vk_test_context.h"
+#include "gpu_cpu_compare.h"
 #include "raycast.h"
 #include "render_cmd.h"
 #include "scene.h"
@@ -93,7 +94,7 @@ void expect_gpu_matches_cpu(const RaycastImage& g, const RaycastImage& c, double
   }
   // On a CPU device (lavapipe) the shader and the reference do the same float operations:
   // every depth must be bit-identical (the allowance below is for GPUs' own arithmetic).
-  if (vk().info().type == "cpu") EXPECT_EQ(identical, g.depth.size()) << what << ": depths not bit-identical on a CPU device";
+  if (isotouch::test::expects_bit_identity(vk())) EXPECT_EQ(identical, g.depth.size()) << what << ": depths not bit-identical on a CPU device";
   const std::size_t allow = g.depth.size() / 1000;
   EXPECT_LE(depth_bad, allow) << what << ": pixels whose hit differs GPU vs CPU (worst " << worst << " voxel)";
   EXPECT_LE(colour_bad, allow) << what << ": pixels whose colour differs by more than 3 levels";

@@ -94,7 +94,9 @@ void expect_gpu_matches_cpu(const RaycastImage& g, const RaycastImage& c, double
   }
   // On a CPU device (lavapipe) the shader and the reference do the same float operations:
   // every depth must be bit-identical (the allowance below is for GPUs' own arithmetic).
-  if (isotouch::test::expects_bit_identity(vk())) EXPECT_EQ(identical, g.depth.size()) << what << ": depths not bit-identical on a CPU device";
+  if (isotouch::test::expects_bit_identity(vk())) {
+    EXPECT_EQ(identical, g.depth.size()) << what << ": depths not bit-identical on a CPU device";
+  }
   const std::size_t allow = g.depth.size() / 1000;
   EXPECT_LE(depth_bad, allow) << what << ": pixels whose hit differs GPU vs CPU (worst " << worst << " voxel)";
   EXPECT_LE(colour_bad, allow) << what << ": pixels whose colour differs by more than 3 levels";
@@ -495,7 +497,9 @@ TEST(Raycast, VolumeWithNoActiveCellIsAllBackground) {
       EXPECT_EQ(hits(g), 0u);
       EXPECT_EQ(g.depth, c.depth);
       EXPECT_EQ(g.rgba, c.rgba);
-      if (prims) EXPECT_NE(std::count(g.rgba.begin(), g.rgba.end(), g.rgba[0]), std::ptrdiff_t(g.rgba.size()));
+      if (prims) {
+        EXPECT_NE(std::count(g.rgba.begin(), g.rgba.end(), g.rgba[0]), std::ptrdiff_t(g.rgba.size()));
+      }
     }
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
@@ -632,6 +636,20 @@ TEST(Raycast, PngIsWrittenWholeAndReadable) {
 // changed gives, bit for bit, the image and depth of a ray caster created on the edited
 // volume (the truth: a full rebuild). Carve and add brushes on the head CT, then undo-like
 // restoration of the original values.
+namespace {
+/// Sets the voxels of the box [lo, hi) of `voxels` (dims `n`, x fastest) to `v` and notes
+/// the brick of each (ids as in core/brick_field.h, duplicates allowed) in `dirty`.
+void set_box(std::vector<float>& voxels, std::vector<std::uint32_t>& dirty, const std::array<int, 3>& n,
+             std::array<int, 3> lo, std::array<int, 3> hi, float v) {
+  for (int z = lo[2]; z < hi[2]; ++z)
+    for (int y = lo[1]; y < hi[1]; ++y)
+      for (int x = lo[0]; x < hi[0]; ++x) {
+        voxels[(std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x)] = v;
+        dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
+      }
+}
+}  // namespace
+
 TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   const engine::Volume vol = io::load_volume(kHead);
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
@@ -659,12 +677,7 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   const auto& n = vol.grid.dims;
   std::vector<std::uint32_t> dirty;
   auto edit_box = [&](int x0, int x1, int y0, int y1, int z0, int z1, float v) {
-    for (int z = z0; z < z1; ++z)
-      for (int y = y0; y < y1; ++y)
-        for (int x = x0; x < x1; ++x) {
-          edited[(std::size_t(z) * n[1] + y) * n[0] + x] = v;
-          dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
-        }
+    set_box(edited, dirty, n, {x0, y0, z0}, {x1, y1, z1}, v);
   };
   edit_box(20, 44, 0, 30, 30, 60, -1000.f);  // carve the front of the skull away
   edit_box(28, 36, 50, 64, 70, 93, 2000.f);  // add bone at the back, up to the grid's faces
@@ -771,12 +784,7 @@ TEST(Raycast, ReusedFramesEqualFullFrames) {
   const auto& n = vol.grid.dims;
   std::vector<std::uint32_t> dirty;
   auto edit_box = [&](int x0, int x1, int y0, int y1, int z0, int z1, float v) {
-    for (int z = z0; z < z1; ++z)
-      for (int y = y0; y < y1; ++y)
-        for (int x = x0; x < x1; ++x) {
-          edited[(std::size_t(z) * n[1] + y) * n[0] + x] = v;
-          dirty.push_back(std::uint32_t((z / 8 * ((n[1] + 7) / 8) + y / 8) * ((n[0] + 7) / 8) + x / 8));
-        }
+    set_box(edited, dirty, n, {x0, y0, z0}, {x1, y1, z1}, v);
   };
   edit_box(26, 34, 0, 14, 40, 48, -1000.f);
   edit_box(28, 36, 50, 64, 70, 93, 2000.f);

@@ -364,6 +364,24 @@ TEST(SparseChain, CpuBackendThreadsGiveTheReferenceBitForBit) {
                        "random odd dims, sparse CPU 3 threads");
 }
 
+namespace {
+/// Brute force: 1 for every quad (4 voxels of an x-row, `qx` per row; index (z ny + y) qx +
+/// x / 4) with a voxel in some candidate's extent 8 b - lo .. 8 b + 7 + hi (clipped).
+std::vector<int> quads_meeting(const core::Grid& g, const std::vector<std::uint32_t>& cand,
+                               const engine::sparse::Extent& e, int qx) {
+  const auto nb = core::brick_counts(g);
+  std::vector<int> want(std::size_t(qx) * std::size_t(g.dims[1]) * std::size_t(g.dims[2]), 0);
+  for (std::uint32_t id : cand) {
+    const auto b = core::brick_coords(id, nb);
+    for (int z = std::max(8 * b[2] - e.lo[2], 0); z <= std::min(8 * b[2] + 7 + e.hi[2], g.dims[2] - 1); ++z)
+      for (int y = std::max(8 * b[1] - e.lo[1], 0); y <= std::min(8 * b[1] + 7 + e.hi[1], g.dims[1] - 1); ++y)
+        for (int x = std::max(8 * b[0] - e.lo[0], 0); x <= std::min(8 * b[0] + 7 + e.hi[0], g.dims[0] - 1); ++x)
+          want[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(x / 4)] = 1;
+  }
+  return want;
+}
+}  // namespace
+
 TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
   // Brute force: the quads whose 4 voxels meet some candidate's extent (8 b - lo .. 8 b + 7
   // + hi, clipped), each exactly once, sorted by z, y, x, in units of at most
@@ -379,14 +397,8 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
         engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
     const engine::sparse::WorkList w = engine::sparse::make_work_list(g, cand, e, "grid");
     const int qx = (g.dims[0] + 3) / 4;
-    std::vector<int> want(std::size_t(qx) * std::size_t(g.dims[1]) * std::size_t(g.dims[2]), 0), got(want.size(), 0);
-    for (std::uint32_t id : cand) {
-      const auto b = core::brick_coords(id, nb);
-      for (int z = std::max(8 * b[2] - e.lo[2], 0); z <= std::min(8 * b[2] + 7 + e.hi[2], g.dims[2] - 1); ++z)
-        for (int y = std::max(8 * b[1] - e.lo[1], 0); y <= std::min(8 * b[1] + 7 + e.hi[1], g.dims[1] - 1); ++y)
-          for (int x = std::max(8 * b[0] - e.lo[0], 0); x <= std::min(8 * b[0] + 7 + e.hi[0], g.dims[0] - 1); ++x)
-            want[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(x / 4)] = 1;
-    }
+    const std::vector<int> want = quads_meeting(g, cand, e, qx);
+    std::vector<int> got(want.size(), 0);
     ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
     std::uint64_t quads = 0;
     long last = -1;
@@ -425,14 +437,8 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
         engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
     const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid");
     const int qx = g.dims[0] / 4;
-    std::vector<int> want(std::size_t(qx) * std::size_t(g.dims[1]) * std::size_t(g.dims[2]), 0), got(want.size(), 0);
-    for (std::uint32_t id : cand) {
-      const auto b = core::brick_coords(id, nb);
-      for (int z = std::max(8 * b[2] - e.lo[2], 0); z <= std::min(8 * b[2] + 7 + e.hi[2], g.dims[2] - 1); ++z)
-        for (int y = std::max(8 * b[1] - e.lo[1], 0); y <= std::min(8 * b[1] + 7 + e.hi[1], g.dims[1] - 1); ++y)
-          for (int x = std::max(8 * b[0] - e.lo[0], 0); x <= std::min(8 * b[0] + 7 + e.hi[0], g.dims[0] - 1); ++x)
-            want[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(x / 4)] = 1;
-    }
+    const std::vector<int> want = quads_meeting(g, cand, e, qx);
+    std::vector<int> got(want.size(), 0);
     ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
     std::uint64_t quads = 0;
     for (std::size_t u = 0; u < w.unit_count(); ++u) {

@@ -31,7 +31,7 @@ inline constexpr int kBrickSize = 8;                      ///< voxels per brick 
 inline constexpr int kBrickStored = kBrickSize + 1;       ///< stored samples per edge (+1 apron)
 inline constexpr int kBrickSamples = kBrickStored * kBrickStored * kBrickStored;  ///< 729
 
-/// How the samples of active bricks are stored (item 5).
+/// How the samples of active bricks are stored.
 enum class SampleFormat : std::uint8_t {
   kFp32,     ///< core::Sample, 16 B per sample
   kFp16,     ///< value + gradient as IEEE half, 8 B per sample (gradient scaled, see CompactSample)

@@ -78,6 +78,7 @@ EditHistory::EditHistory(double limit_mib) {
 void EditHistory::begin_stroke() {
   if (open_) throw std::logic_error("EditHistory::begin_stroke: a stroke is already open (end_stroke first)");
   for (const Stroke& s : redo_) bytes_ -= s.bytes;
+  dropped_redo_ = std::move(redo_);  // kept (not counted) until the next stroke, undo or redo
   redo_.clear();
   open_ = Stroke{};
 }
@@ -153,6 +154,7 @@ std::vector<std::uint32_t> EditHistory::swap_in(Stroke& s, Volume& vol) {
 
 std::vector<std::uint32_t> EditHistory::undo(Volume& vol) {
   end_stroke(vol);
+  dropped_redo_.clear();
   if (undo_.empty()) return {};
   Stroke s = std::move(undo_.back());
   undo_.pop_back();
@@ -165,10 +167,17 @@ void EditHistory::discard_newest_stroke() {
   if (undo_.empty()) return;
   bytes_ -= undo_.back().bytes;
   undo_.pop_back();
+  // The redo branch that stroke dropped comes back.
+  for (const Stroke& s : redo_) bytes_ -= s.bytes;  // none: the stroke's begin emptied it
+  for (const Stroke& s : dropped_redo_) bytes_ += s.bytes;
+  redo_ = std::move(dropped_redo_);
+  dropped_redo_.clear();
+  enforce_limit();
 }
 
 std::vector<std::uint32_t> EditHistory::redo(Volume& vol) {
   end_stroke(vol);
+  dropped_redo_.clear();
   if (redo_.empty()) return {};
   Stroke s = std::move(redo_.back());
   redo_.pop_back();

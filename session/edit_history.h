@@ -68,7 +68,9 @@ class EditHistory {
   /// Redoes the newest undone stroke; same return and hook as undo().
   std::vector<std::uint32_t> redo(engine::Volume& vol);
   /// Forgets the newest undo stroke without restoring it (its edit was rolled back by the
-  /// caller, so undoing it would change nothing). No-op if there is none.
+  /// caller, so undoing it would change nothing) and gives back the redo branch that
+  /// stroke's begin_stroke() dropped. Call it right after that stroke ended. No-op if there
+  /// is no undo stroke.
   void discard_newest_stroke();
 
   /// Called with the restored brick ids after undo / redo changed `vol` (e.g. to upload
@@ -93,6 +95,7 @@ class EditHistory {
 
   std::deque<Stroke> undo_;  ///< oldest first
   std::vector<Stroke> redo_; ///< newest undone last
+  std::vector<Stroke> dropped_redo_;  ///< the redo branch the newest stroke dropped (discard_newest_stroke gives it back)
   std::optional<Stroke> open_;
   std::uint64_t bytes_ = 0, limit_ = 0;
   std::size_t dropped_ = 0;

@@ -23,7 +23,7 @@ namespace {
 /// A brush only moves voxels toward its material / empty values (or averages them), so a
 /// snapshot format that holds the volume holds the result if it holds both targets. Checked
 /// BEFORE the volume changes: LiveField::update would refuse the edited volume after the
-/// edit, leaving the volume edited and the snapshot not (review finding).
+/// edit, leaving the volume edited and the snapshot not.
 void check_storable_targets(const session::Brush& b, core::SampleFormat f) {
   if (f == core::SampleFormat::kFp32) return;  // fp32 stores what the volume holds
   for (const auto& [name, v] : {std::pair<const char*, float>{"material", b.targets.material},
@@ -85,10 +85,14 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
       if (impl_->update_fault) impl_->update_fault();
       snap = impl_->live->update(sc.volume(), changed, &o.update);
     } catch (...) {
-      // LiveField::update publishes nothing when it throws: take the edit back.
-      if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before, own_stroke, undo_depth);
-      else if (e.kind == EditEvent::Kind::kUndo) (void)sc.redo();
-      else (void)sc.undo();
+      // LiveField::update publishes nothing when it throws: take the edit back. The
+      // update's exception is the one that goes on.
+      try {
+        if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before, own_stroke, undo_depth);
+        else if (e.kind == EditEvent::Kind::kUndo) (void)sc.redo();
+        else (void)sc.undo();
+      } catch (...) {
+      }
       throw;
     }
     if (out) out->publish(snap);

@@ -164,9 +164,10 @@ struct Arena {
     free_slots.push_back(slot);  // capacity reserved: no allocation
     is_free[slot] = 1;
     if (!retired_) return;
-    std::size_t lo = slot, hi = std::size_t(slot) + 1;  // the run of free slots around it
-    while (lo > 0 && is_free[lo - 1]) --lo;
-    while (hi < capacity && is_free[hi]) ++hi;
+    // The slot's own pages and those it shares with a free neighbour (a slot is larger than
+    // a page, so a page spans two slots at most; a neighbour's other pages went with it).
+    const std::size_t lo = slot > 0 && is_free[slot - 1] ? slot - 1 : slot;
+    const std::size_t hi = std::size_t(slot) + 1 < capacity && is_free[slot + 1] ? slot + 2 : std::size_t(slot) + 1;
     decommit(lo, hi);
   }
   /// Gives the whole pages of slots [lo, hi) back to the system (madvise MADV_DONTNEED:

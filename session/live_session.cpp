@@ -22,7 +22,7 @@ std::int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// observe()'s seqlock stores Observed as relaxed atomic words (no plain data race).
+// observe() reads Observed through servo::LatestValue, which holds trivially copyable values.
 static_assert(std::is_trivially_copyable_v<Observed>);
 
 std::string os_error(const std::string& path, const char* what) {

@@ -7,6 +7,7 @@
 
 #include <cstring>
 
+#include "parallel.h"
 #include "pass_desc.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
@@ -29,7 +30,9 @@ std::size_t differing_samples(const std::vector<core::Sample>& a, const std::vec
 }  // namespace
 
 TEST(CpuBackends, DenseChainThreadsGiveTheReferenceBitForBit) {
-  const engine::Volume v = engine::make_random({37, 29, 23}, {0.9e-3, 1.1e-3, 1.7e-3}, -1000.0f, 3000.0f, 11);
+  // Large enough that 2 and 3 threads are started (engine::threads_for: one per 2^19 voxels).
+  const engine::Volume v = engine::make_random({128, 128, 97}, {0.9e-3, 1.1e-3, 1.7e-3}, -1000.0f, 3000.0f, 11);
+  ASSERT_EQ(engine::threads_for(v.grid.voxel_count(), 3), 3u);
   const std::vector<PassDesc> p = {PassDesc::closing(1.0), PassDesc::gaussian(1.0), PassDesc::gradient(),
                                    PassDesc::brick_minmax()};
   const engine::ChainOutput one = engine::run_chain_cpu(v, p, 1);
@@ -45,10 +48,13 @@ TEST(CpuBackends, DenseChainThreadsGiveTheReferenceBitForBit) {
 }
 
 TEST(CpuBackends, SparseChainThreadsGiveTheReferenceBitForBit) {
-  const engine::Volume v = engine::make_sphere({45, 38, 31}, 1e-3, 13.0, {0.7, -1.3, 0.4});
+  // A sphere filling most of the grid: enough candidate work for 2 and 3 threads.
+  const engine::Volume v = engine::make_sphere({160, 150, 140}, 1e-3, 66.0, {0.7, -1.3, 0.4});
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
   const engine::SparseOutput one = engine::run_sparse_cpu(v, p, above(0), -1e4f, core::SampleFormat::kFp32, true);
   ASSERT_GT(one.stats.active, 0u);
+  // Candidates x their 17^3-voxel raw regions must reach 3 x 2^19 voxels for 3 threads.
+  ASSERT_GT(one.stats.candidates * 17u * 17u * 17u, 3u * engine::kMinVoxelsPerThread);
   for (unsigned threads : {2u, 3u}) {
     const engine::SparseOutput many =
         engine::run_sparse_cpu(v, p, above(0), -1e4f, core::SampleFormat::kFp32, true, threads);

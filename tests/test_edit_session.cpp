@@ -305,7 +305,7 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   // session ends bit for bit where a session that never failed ends.
   fail = false;
   ASSERT_TRUE(s.apply(brush_event(b), nullptr).published);
-  EditSession ref(Volume(v), nullptr, sphere_options(), 16.0);
+  EditSession ref(Volume(v), ctx, sphere_options(), 16.0);  // the same device: the same bits
   ref.apply(brush_event(a), nullptr);
   ref.apply(brush_event(b), nullptr);
   EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
@@ -314,6 +314,17 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
   EXPECT_TRUE(same_bits(s.volume(), v));
   EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  // A failed brush after the undos keeps the redo branch a new stroke would have dropped.
+  ASSERT_EQ(s.sculptor().history().redo_depth(), 2u);
+  fail = true;
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
+  EXPECT_TRUE(same_bits(s.volume(), v));
+  EXPECT_EQ(s.sculptor().history().redo_depth(), 2u) << "the failed brush dropped the redo branch";
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 0u);
+  fail = false;
+  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kRedo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
   if (auto* eng = s.sculptor().engine()) {
     const std::vector<float> dev = eng->download_all();
     EXPECT_EQ(std::memcmp(dev.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0) << "GPU copy";
@@ -503,7 +514,9 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
       worst_excess = std::max(worst_excess, value - scene.hri.tau);
       ++checked;
       if (isotouch::core::dot(v - outer, dir) >= 0.5 * thickness) {
-        if (!crossed) EXPECT_GT(trilinear(before, v), 1150) << "past the middle, the VHIP was not where bone had been";
+        if (!crossed) {
+          EXPECT_GT(trilinear(before, v), 1150) << "past the middle, the VHIP was not where bone had been";
+        }
         crossed = true;
       }
     }

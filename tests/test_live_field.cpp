@@ -596,7 +596,7 @@ TEST(LiveField, HoldingTheFirstSnapshotDoesNotPinItsArena) {
               "%.2f MiB (%d edits)\n",
               capacity, double(arena_bytes) / 1048576.0, double(own) / 1048576.0, double(after) / 1048576.0, k);
   // Its own slots, plus at most the two pages each run of them shares with a freed neighbour.
-  EXPECT_LE(after, own + 2 * 4096 * std::uint64_t(first->bricks->active_bricks()));
+  EXPECT_LE(after, own + 2 * std::uint64_t(::sysconf(_SC_PAGESIZE)) * std::uint64_t(first->bricks->active_bricks()));
   EXPECT_LT(after, arena_bytes * 3 / 4);
   EXPECT_EQ(reads(*first, 500, 3), seen) << "the first snapshot changed";
   expect_full_run(*lf->current(), c.vol, o, "head after the first arena was retired");

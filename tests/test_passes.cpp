@@ -63,7 +63,10 @@ void expect_chain_matches_cpu_with(engine::ShaderSet shaders, const Volume& v, c
   name += " ";
   name += v.path.substr(v.path.find_last_of('/') + 1);
   name += ":";
-  for (const auto& p : passes) name += " " + p.label();
+  for (const auto& p : passes) {
+    name += ' ';
+    name += p.label();
+  }
   ASSERT_EQ(g.field.has_value(), c.field.has_value());
   ASSERT_EQ(g.samples.has_value(), c.samples.has_value());
   ASSERT_EQ(g.bricks.has_value(), c.bricks.has_value());

@@ -25,7 +25,9 @@ line=$(grep '^device .*ticks with force' "$out/run.log") || fail "no device summ
 forced=$(echo "$line" | sed -E 's/.*: ([0-9]+) ticks with force.*/\1/')
 fmax=$(echo "$line" | sed -E 's/.*max \|F\| ([0-9.]+) N.*/\1/')
 [ "$forced" -ge 300 ] || fail "only $forced ticks with force: the skull was not felt"
-awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f < 3.3) }' || fail "max |F| $fmax N is not of the order of the simulated run's (2 N)"
+# Felt (well above zero) and never beyond the device limit of the scene (3.3 N); a loaded
+# machine that stalls the servo lets the hand push deeper, up to the clamp.
+awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f <= 3.3) }' || fail "max |F| $fmax N: not felt, or beyond the 3.3 N limit"
 echo "$line" | grep -q "disconnected 0, fault 0, refused 0" || fail "device faults in a clean run"
 grep -q "outputs received" "$out/emu.log" || fail "the emulator printed no summary"
 

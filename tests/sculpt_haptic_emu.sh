@@ -13,10 +13,14 @@ rm -rf "$out"; mkdir -p "$out"
 sock=$out/dev.sock
 scene=$src/scenes/head.json
 
-xvfb-run -a "$bin" "$scene" --haptic sim > "$out/bad.log" 2>&1; rc=$?
-[ "$rc" -eq 1 ] && grep -q "sim needs the scene's scripted hand" "$out/bad.log" || { cat "$out/bad.log"; fail "--haptic sim: exit $rc"; }
-xvfb-run -a "$bin" "$scene" --haptic "emu:$out/none.sock" > "$out/bad.log" 2>&1; rc=$?
-[ "$rc" -eq 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
+# The app's own exit code, written by the shell xvfb-run starts: xvfb-run itself may exit 5
+# when its clean-up races a client that quits at once ("problem while cleaning up").
+app_rc() { sed -n 's/^app exit \([0-9]*\)$/\1/p' "$1"; }
+xvfb-run -a sh -c '"$@"; echo "app exit $?"' sh "$bin" "$scene" --haptic sim > "$out/bad.log" 2>&1; rc=$(app_rc "$out/bad.log")
+[ "$rc" = 1 ] && grep -q "sim needs the scene's scripted hand" "$out/bad.log" || { cat "$out/bad.log"; fail "--haptic sim: exit $rc"; }
+xvfb-run -a sh -c '"$@"; echo "app exit $?"' sh "$bin" "$scene" --haptic "emu:$out/none.sock" > "$out/bad.log" 2>&1
+rc=$(app_rc "$out/bad.log")
+[ "$rc" = 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
 
 "$iso" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1 || { cat "$out/path.log"; fail "--hand-path failed"; }
 "$emu" --socket "$sock" --path "$out/hand.csv" --seconds 60 > "$out/emu.log" 2>&1 &
@@ -33,5 +37,7 @@ grep -Eq "^device   .*disconnected 0, fault 0, refused 0" "$out/sculpt.log" || f
 grep -Eq "^link     [1-9][0-9]* reports" "$out/sculpt.log" || fail "no input reports read"
 fmax=$(sed -nE 's/.*max \|F\| ([0-9.e+-]+) N.*/\1/p' "$out/emu.log")
 [ -n "$fmax" ] || fail "the emulator printed no max force"
-awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f < 3.3) }' || fail "the emulator's max |F| $fmax N: the skull was not felt through the window"
+# Felt through the window, and never beyond the scene's 3.3 N force limit (plus the
+# protocol's fixed-point rounding): a stalled servo lets the hand push in up to the clamp.
+awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f <= 3.31) }' || fail "the emulator's max |F| $fmax N: not felt through the window, or beyond the 3.3 N limit"
 echo "PASS sculpt --haptic emu"

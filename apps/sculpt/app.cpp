@@ -89,6 +89,11 @@ class BackgroundLoad {
     std::unique_lock<std::mutex> lock(st_->mu);
     st_->cv.wait(lock, [&] { return st_->done; });
   }
+  /// Waits at most `seconds`; true if it is done.
+  bool wait_for(double seconds) const {
+    std::unique_lock<std::mutex> lock(st_->mu);
+    return st_->cv.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return st_->done; });
+  }
   /// The loaded volume (after ready()); rethrows what the load threw.
   std::shared_ptr<Carried> get() const {
     std::lock_guard<std::mutex> lock(st_->mu);
@@ -636,6 +641,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     BackgroundLoad result;
     Clock::time_point since;
     int frame = 0;  // frames drawn when it started
+    bool sim_waited = false;  // the simulated clock waited for it once
   };
   std::optional<Loading> loading;
   std::deque<std::string> drop_queue;
@@ -670,7 +676,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       start_load(drop_queue.front());
       drop_queue.pop_front();
     }
-    if (loading && o.sim_clock) loading->result.wait();  // the simulated clock waits for it: the same frame every run
+    // The simulated clock waits for it (the same frame every run), for a minute at most: a
+    // reader blocked longer goes on in the background, as on the real clock.
+    if (loading && o.sim_clock && !loading->sim_waited) {
+      loading->sim_waited = true;
+      if (!loading->result.wait_for(60))
+        log << "sculpt   " << loading->path << " still loading after 60 s: the simulated clock goes on without it\n";
+    }
     if (!loading || !loading->result.ready()) return false;
     Loading done = std::move(*loading);
     loading.reset();

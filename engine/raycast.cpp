@@ -505,13 +505,17 @@ std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active_bo
 
 struct RayCaster::Impl {
   /// Bindings 1 (values) and 2 (cell distances) are uniform texel buffers.
-  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2);
+  /// Binding 12 (quads) is one too, viewed as R32G32B32A32_SFLOAT.
+  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2) | (1u << 12);
+  static constexpr std::uint32_t kVec4 = 1u << 12;
   VulkanContext& ctx;
   RaycastField field;
+  bool use_quads = false;  // binding 12 holds the quads (shaders/raycast_common.glsl)
   // The four passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   ComputePipeline<gpu::RaycastPush> march_skip, march_plain, args, shade_lin, shade, overlay;
   GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
+  GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
   GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch
@@ -534,28 +538,33 @@ struct RayCaster::Impl {
   std::uint32_t cache_flags = 0;
   PixelRect cache_orect;
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
-  /// Specialization constants: 0 the pass's variant, 1-3 the grid's size.
-  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant) {
-    return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2])};
+  /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
+  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant, bool quads) {
+    return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2]),
+            quads ? 1u : 0u};
   }
-  Impl(VulkanContext& c, RaycastField f)
+  Impl(VulkanContext& c, RaycastField f, bool q)
       : ctx(c),
         field(std::move(f)),
-        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1),
+        use_quads(q),
+        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1, q),
                    kTexel),
-        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0), kTexel),
+        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0, q), kTexel),
         args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u, {}, kTexel),
-        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u, spec(field, 1),
-                  kTexel),
-        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0), kTexel),
-        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0), kTexel),
+        shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u,
+                  spec(field, 1, q), kTexel),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0, q), kTexel),
+        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0, q), kTexel),
         arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
-        timer(c, 4) {}
+        timer(c, 4) {
+    for (auto* p : {&march_skip, &march_plain, &args, &shade_lin, &shade, &overlay}) p->set_texel_vec4(kVec4);
+  }
 };
 
 RayCaster::RayCaster(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 RayCaster::~RayCaster() = default;
 const RaycastField& RayCaster::field() const { return impl_->field; }
+bool RayCaster::quads() const { return impl_->use_quads; }
 
 namespace {
 /// Binding 2's texels [t0, t1): texel t holds the distances of cells 4t .. 4t + 3 (0 past
@@ -569,6 +578,31 @@ std::vector<float> pack_cells(const std::vector<std::uint8_t>& d, std::size_t t0
     out[t - t0] = float(w);
   }
   return out;
+}
+
+/// The most device memory the quads may take (4 floats per cell, next to the voxels' 1):
+/// beyond it, the 1-float path alone (a 512^3 volume would need 2.2 GB more).
+constexpr std::uint64_t kQuadBudgetBytes = 1ull << 30;
+
+/// Binding 12's texels of the base corners (x0 .. x1 - 1, y, z), each in [-1, n]: the
+/// voxels (x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1) of plane z, the background outside
+/// the grid (shaders/raycast_common.glsl, quad()), 4 floats per texel into `out`.
+void quad_row(const RaycastField& f, int x0, int x1, int y, int z, float* out) {
+  const auto& n = f.grid.dims;
+  auto v = [&](int x, int yy) {
+    if (x < 0 || yy < 0 || z < 0 || x >= n[0] || yy >= n[1] || z >= n[2]) return f.background;
+    return f.values[(std::size_t(z) * std::size_t(n[1]) + std::size_t(yy)) * std::size_t(n[0]) + std::size_t(x)];
+  };
+  for (int x = x0; x < x1; ++x, out += 4) {
+    out[0] = v(x, y);
+    out[1] = v(x + 1, y);
+    out[2] = v(x, y + 1);
+    out[3] = v(x + 1, y + 1);
+  }
+}
+/// The texel of base corner (x, y, z) (the cells' layout: stored at b + 1, x fastest).
+std::size_t quad_index(const std::array<int, 3>& n, int x, int y, int z) {
+  return (std::size_t(z + 1) * std::size_t(n[1] + 2) + std::size_t(y + 1)) * std::size_t(n[0] + 2) + std::size_t(x + 1);
 }
 
 /// Uploads `bytes` into a new device-local buffer through a staging buffer (one submit).
@@ -586,7 +620,7 @@ Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes
 }
 }  // namespace
 
-Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field) {
+Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field, bool quads) {
   using R = Result<std::unique_ptr<RayCaster>>;
   const std::size_t vbytes = field.values.size() * sizeof(float);
   const auto& n = field.grid.dims;
@@ -600,7 +634,11 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
     return R::fail("raycast: the volume's " + std::to_string(field.values.size()) + " voxels (" + std::to_string(cells) +
                    " cells) exceed maxTexelBufferElements " + std::to_string(max_texels) + " on " + ctx.info().name +
                    " (one texel binding each)");
-  auto impl = std::make_unique<Impl>(ctx, field);
+  // Quads where they fit one texel binding, one allocation and the budget.
+  const std::uint64_t quad_bytes = std::uint64_t(cells) * 16;
+  const bool use_quads = quads && cells <= max_texels && quad_bytes <= kQuadBudgetBytes &&
+                         (ctx.max_allocation_bytes() == 0 || quad_bytes <= ctx.max_allocation_bytes());
+  auto impl = std::make_unique<Impl>(ctx, field, use_quads);
   impl->active = active_box(impl->field);
   impl->mag = value_magnitude(impl->field.values, impl->field.background);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
@@ -611,6 +649,18 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   auto b = upload(ctx, cd.data(), cd.size() * sizeof(float), "raycast cell distances");
   if (!b) return R::fail(b.error);
   impl->cells = std::move(*b.value);
+  if (use_quads) {  // binding 12: every base corner's quad
+    std::vector<float> q(std::size_t(quad_bytes / sizeof(float)));
+    for (int z = -1; z <= n[2]; ++z)
+      for (int y = -1; y <= n[1]; ++y) quad_row(impl->field, -1, n[0] + 1, y, z, q.data() + 4 * quad_index(n, -1, y, z));
+    auto qb = upload(ctx, q.data(), q.size() * sizeof(float), "raycast quads");
+    if (!qb) return R::fail(qb.error);
+    impl->quads = std::move(*qb.value);
+  } else {
+    auto qb = GpuBuffer::create(ctx, 16, MemoryIntent::DeviceLocal, "raycast quads (unused)");
+    if (!qb) return R::fail(qb.error);
+    impl->quads = std::move(*qb.value);
+  }
   const std::size_t pb = sizeof(gpu::RaycastParams);
   const std::size_t qb = sizeof(gpu::RaycastPrim) * ISOTOUCH_RAYCAST_MAX_PRIMS;
   for (auto [buf, bytes, intent, what] :
@@ -671,7 +721,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.image.handle(), 0, pixels * 4},       {m.depth.handle(), 0, pixels * 4},
       {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
-      {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()}};
+      {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
+      {m.quads.handle(), 0, m.quads.size()}};
   // The march covers only where the volume's box (skipping: the active cells' box) projects.
   PixelRect rect;
   if (!style.skip_empty)
@@ -833,6 +884,8 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   // scale is the whole volume's; if it changed, every cell is recomputed.
   std::size_t lo = f.cell_dist.size(), hi = 0;
   const std::size_t cx = std::size_t(n[0] + 2), cy = std::size_t(n[1] + 2);
+  std::vector<float> quad_rows;            // binding 12: the quads of the changed voxels, row by row
+  std::vector<VkBufferCopy> quad_regions;  // (srcOffset: into quad_rows, bytes)
   if (!ids.empty()) {
     std::array<int, 3> vlo{n[0], n[1], n[2]}, vhi{0, 0, 0};  // changed voxels [vlo, vhi)
     for (std::uint32_t id : ids) {
@@ -841,6 +894,16 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
         vlo[a] = std::min(vlo[a], 8 * b[a]);
         vhi[a] = std::max(vhi[a], std::min(n[a], 8 * b[a] + 8));
       }
+    }
+    if (m.use_quads) {  // a voxel (x, y, z) is in the quads of base corners (x - 1 .. x, y - 1 .. y, z)
+      const int qx0 = vlo[0] - 1, qx1 = vhi[0];
+      for (int z = vlo[2]; z < vhi[2]; ++z)
+        for (int y = vlo[1] - 1; y < vhi[1]; ++y) {
+          const std::size_t o = quad_rows.size();
+          quad_rows.resize(o + 4 * std::size_t(qx1 - qx0));
+          quad_row(f, qx0, qx1, y, z, quad_rows.data() + o);
+          quad_regions.push_back({o * sizeof(float), quad_index(n, qx0, y, z) * 16, std::size_t(qx1 - qx0) * 16});
+        }
     }
     const bool none = m.dirty_lo[0] >= m.dirty_hi[0];
     for (int a = 0; a < 3; ++a) {  // the next render() draws again where these voxels show
@@ -919,8 +982,10 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   for (const VkBufferCopy& r : regions) bytes += r.size;
   st.value_bytes = bytes;
   st.cell_bytes = cell_region.size;
-  if (bytes + cell_region.size > 0) {
-    GpuBuffer up = make_buffer_or_throw(m.ctx, bytes + cell_region.size, MemoryIntent::Upload, "raycast update staging");
+  st.quad_bytes = quad_rows.size() * sizeof(float);
+  if (bytes + cell_region.size + st.quad_bytes > 0) {
+    GpuBuffer up = make_buffer_or_throw(m.ctx, bytes + cell_region.size + st.quad_bytes, MemoryIntent::Upload,
+                                        "raycast update staging");
     auto* dst = static_cast<std::uint8_t*>(up.mapped());
     std::size_t o = 0;
     for (VkBufferCopy& r : regions) {  // pack the rows, then read them from the staging buffer
@@ -932,10 +997,17 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
       const std::vector<float> packed = pack_cells(f.cell_dist, lo, hi);
       std::memcpy(dst + o, packed.data(), packed.size() * sizeof(float));
       cell_region.srcOffset = o;
+      o += cell_region.size;
+    }
+    if (!quad_rows.empty()) {
+      std::memcpy(dst + o, quad_rows.data(), st.quad_bytes);
+      for (VkBufferCopy& r : quad_regions) r.srcOffset += o;
     }
     VkCommandBuffer cmd = m.ctx.begin_commands();
     if (!regions.empty()) vkCmdCopyBuffer(cmd, up.handle(), m.values.handle(), std::uint32_t(regions.size()), regions.data());
     if (cell_region.size) vkCmdCopyBuffer(cmd, up.handle(), m.cells.handle(), 1, &cell_region);
+    if (!quad_regions.empty())
+      vkCmdCopyBuffer(cmd, up.handle(), m.quads.handle(), std::uint32_t(quad_regions.size()), quad_regions.data());
     barrier_transfer_to_compute(cmd);
     m.ctx.submit_and_wait(cmd);
   }

@@ -259,54 +259,86 @@ void LiveSession::drain_simulated(long ticks_done) {
   Request q;
   // The API side first (a scene's timeline), then the button drill: the order `isotouch run`
   // has always applied them in.
-  while (api_edits_.pop(q)) apply_request(q, EditSource::kApi, ticks_done, true);
-  while (servo_edits_.pop(q)) apply_request(q, EditSource::kButton, ticks_done, true);
+  while (api_edits_.pop(q)) apply_request(q, EditSource::kApi, ticks_done, !stepped_);
+  while (servo_edits_.pop(q)) apply_request(q, EditSource::kButton, ticks_done, !stepped_);
+}
+
+void LiveSession::begin_simulated(bool stepped) {
+  if (running_.load()) throw std::logic_error("live session: simulated mode on a session that was started");
+  if (simulated_ && (!stepped_ || !stepped)) throw std::logic_error("live session: run_simulated() on a session that ran");
+  if (finished_) throw std::logic_error("live session: step_simulated() after finish_simulated()");
+  simulated_ = true;
+  stepped_ = stepped;
+  start_ns_ = 0;
+}
+
+void LiveSession::simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row) {
+  const double rate = cfg_.servo.rate_hz;
+  const long flush_ticks = std::max(1L, long(std::llround(cfg_.flush_interval_s * rate)));
+  servo::TickRecord r;
+  r.k = k;
+  r.t_ns = std::int64_t(std::llround(double(k) * 1e9 / rate));
+  r.dt_s = 0;  // the nominal period
+  r.hip_m = row.hip_m;
+  const double t = double(k) / rate;
+  for (const auto& iv : run.button_down)
+    if (t >= iv[0] && t < iv[1]) r.buttons = 1;
+  row.button = r.buttons != 0;
+  r.out.force_n = row.force_n;
+  r.out.vhip_m = row.vhip_m;
+  r.out.plane = row.plane;
+  r.out.penetration_m = row.penetration_m;
+  r.out.contact = row.contact;
+  r.out.plane_update = row.plane_update;
+  r.out.saturated = row.saturated;
+  r.out.fault = row.fault;
+  r.version = row.version;
+  sim_now_ns_.store(r.t_ns, std::memory_order_relaxed);
+  if (run.after_tick) run.after_tick(k, row);
+  on_tick(r);
+  sim_ticks_ = k + 1;
+  if (edits_) drain_simulated(k + 1);
+  if (fd_ >= 0 && sim_ticks_ % flush_ticks == 0) record_chunk(false);
 }
 
 std::vector<sim::TraceRow> LiveSession::run_simulated(const SimulatedRun& run) {
-  if (running_.load() || simulated_) throw std::logic_error("live session: run_simulated() on a session that ran");
   if (!run.device || !run.script) throw std::invalid_argument("live session: run_simulated() needs a device and a script");
-  simulated_ = true;
-  start_ns_ = 0;
-  const double rate = cfg_.servo.rate_hz;
-  const long flush_ticks = std::max(1L, long(std::llround(cfg_.flush_interval_s * rate)));
-  const sim::TickHook hook = [&](long k, sim::TraceRow& row) {
-    servo::TickRecord r;
-    r.k = k;
-    r.t_ns = std::int64_t(std::llround(double(k) * 1e9 / rate));
-    r.dt_s = 0;  // the nominal period
-    r.hip_m = row.hip_m;
-    const double t = double(k) / rate;
-    for (const auto& iv : run.button_down)
-      if (t >= iv[0] && t < iv[1]) r.buttons = 1;
-    row.button = r.buttons != 0;
-    r.out.force_n = row.force_n;
-    r.out.vhip_m = row.vhip_m;
-    r.out.plane = row.plane;
-    r.out.penetration_m = row.penetration_m;
-    r.out.contact = row.contact;
-    r.out.plane_update = row.plane_update;
-    r.out.saturated = row.saturated;
-    r.out.fault = row.fault;
-    r.version = row.version;
-    sim_now_ns_.store(r.t_ns, std::memory_order_relaxed);
-    if (run.after_tick) run.after_tick(k, row);
-    on_tick(r);
-    sim_ticks_ = k + 1;
-    if (edits_) drain_simulated(k + 1);
-    if (fd_ >= 0 && sim_ticks_ % flush_ticks == 0) record_chunk(false);
-  };
+  begin_simulated(false);
+  const sim::TickHook hook = [&](long k, sim::TraceRow& row) { simulated_tick(run, k, row); };
   std::vector<sim::TraceRow> trace = sim::run_headless(buffer_, renderer_, *run.device, run.world_T_device, *run.script,
-                                                       rate, run.progress, run.progress_every, hook);
-  if (edits_ && stroke_depth_ > 0) {  // a stroke left open (button still down at the end)
+                                                       cfg_.servo.rate_hz, run.progress, run.progress_every, hook);
+  finish_simulated();
+  return trace;
+}
+
+std::vector<sim::TraceRow> LiveSession::step_simulated(const SimulatedRun& run, long ticks) {
+  if (!run.device || !run.script) throw std::invalid_argument("live session: step_simulated() needs a device and a script");
+  if (ticks < 0) throw std::invalid_argument("live session: step_simulated() of " + std::to_string(ticks) + " ticks");
+  begin_simulated(true);
+  std::vector<sim::TraceRow> rows;
+  rows.reserve(std::size_t(ticks));
+  for (long i = 0; i < ticks; ++i) {
+    const long k = sim_ticks_;
+    rows.push_back(sim::headless_tick(buffer_, renderer_, *run.device, run.world_T_device, *run.script,
+                                      cfg_.servo.rate_hz, k));
+    simulated_tick(run, k, rows.back());
+  }
+  return rows;
+}
+
+void LiveSession::finish_simulated() {
+  if (!simulated_ || finished_) return;
+  finished_ = true;
+  if (!edits_) return;
+  drain_simulated(sim_ticks_);  // what was submitted after the last tick
+  if (stroke_depth_ > 0) {  // a stroke left open (button still down at the end)
     stroke_depth_ = 1;
     Request q;
     q.event.kind = EditEvent::Kind::kEndStroke;
-    q.event.t_s = double(sim_ticks_ - 1) / rate;
+    q.event.t_s = double(sim_ticks_ - 1) / cfg_.servo.rate_hz;
     q.asked_ns = sim_now_ns_.load(std::memory_order_relaxed);
-    apply_request(q, EditSource::kEndOfRun, sim_ticks_, true);
+    apply_request(q, EditSource::kEndOfRun, sim_ticks_, !stepped_);
   }
-  return trace;
 }
 
 // ---------------------------------------------------------------- recorder thread
@@ -361,6 +393,8 @@ void LiveSession::stop() {
   if (simulated_) {
     if (stopped_) return;
     stopped_ = true;
+    Request q;  // submitted after the last tick and not finished: dropped, as live
+    while (servo_edits_.pop(q) || api_edits_.pop(q)) dropped_edits_.fetch_add(1, std::memory_order_relaxed);
     finish_recording();
     return;
   }
@@ -425,7 +459,8 @@ LiveStats LiveSession::stats() const {
     for (std::size_t i = 0; i < kPeriodBins; ++i) {
       seen += period_hist_[i].load(std::memory_order_relaxed);
       if (seen >= rank) {
-        s.period_error_p99_us = double(i + 1) * kPeriodBinUs;
+        s.period_error_p99_beyond = i + 1 == kPeriodBins;
+        s.period_error_p99_us = s.period_error_p99_beyond ? kPeriodRangeUs : double(i + 1) * kPeriodBinUs;
         break;
       }
     }

@@ -104,6 +104,9 @@ struct Observed {
 /// Counters of a running or stopped session.
 /// Bin width of LiveStats::period_error_p99_us's histogram [us].
 inline constexpr double kPeriodBinUs = 2.0;
+/// Bins of that histogram; the last one starts at kPeriodRangeUs [us].
+inline constexpr std::size_t kPeriodBins = 4096;
+inline constexpr double kPeriodRangeUs = double(kPeriodBins - 1) * kPeriodBinUs;
 
 struct LiveStats {
   long ticks = 0, missed_deadlines = 0, faults = 0;
@@ -115,9 +118,12 @@ struct LiveStats {
   /// submit() call (API) to the start of the first tick that read its snapshot [ms].
   std::vector<double> edit_to_haptics_ms;
   /// p99 (nearest rank) of |measured period - nominal period| over the ticks so far [us],
-  /// from a histogram of kPeriodBinUs bins (a bin's upper edge; the last bin collects every
-  /// error past the range); -1 before the second tick. Available while the servo runs.
+  /// from a histogram of kPeriodBins bins of kPeriodBinUs (a bin's upper edge); -1 before
+  /// the second tick. Available while the servo runs. Past the histogram's range (the last
+  /// bin collects every error from kPeriodRangeUs on) it is kPeriodRangeUs and
+  /// period_error_p99_beyond is set: the p99 is at least that, its value unknown.
   double period_error_p99_us = -1;
+  bool period_error_p99_beyond = false;
   std::string setup_note;     ///< what the system refused at start (SCHED_FIFO, pinning, locking)
   std::string record_error;   ///< "" or why the recording failed
 };
@@ -156,6 +162,24 @@ class LiveSession final : private servo::TickObserver {
   /// @throws std::logic_error if the session was started or already ran; std::invalid_argument
   ///         without a device or script; what an edit or the recorder throws.
   std::vector<sim::TraceRow> run_simulated(const SimulatedRun& run);
+  /// Simulated mode a piece at a time, for a caller that owns the clock (a window's frame
+  /// loop on a simulated clock): runs the session's next `ticks` ticks exactly as
+  /// run_simulated() runs its ticks (tick k at k / rate_hz, its hand target from run.script
+  /// at that time: the script's clock is the session's; after_tick; then the queued edits),
+  /// and returns their rows. Any number of calls (with any device and script: the caller
+  /// keeps the device from one call to the next) instead of start() or run_simulated();
+  /// edits submitted between calls are applied after the next tick. Run in pieces of any
+  /// size, the ticks, edits and recording are those of one run_simulated(). An edit that
+  /// throws is refused as in a live session (counted; on_applied sees its error).
+  /// @throws std::logic_error after start(), run_simulated() or finish_simulated();
+  ///         std::invalid_argument without a device or script or with ticks < 0; what the recorder throws.
+  std::vector<sim::TraceRow> step_simulated(const SimulatedRun& run, long ticks);
+  /// Ends simulated mode: applies the edits submitted since the last tick (after it) and
+  /// closes a stroke left open (EditSource::kEndOfRun); no more ticks. run_simulated() ends
+  /// with it; a stepped session calls it before stop() (stop() alone drops what is queued).
+  /// Idempotent; nothing outside simulated mode. Edits that throw propagate (after
+  /// run_simulated()) or are refused (stepped), as in the ticks before.
+  void finish_simulated();
 
   /// An edit from the UI or the API (one producer thread). Its tick and t_s are set when it
   /// is applied. False if the queue is full.
@@ -186,6 +210,10 @@ class LiveSession final : private servo::TickObserver {
   void open_recording();
   void finish_recording();  // end record, fsync, rename (after the producers stopped)
   void drain_simulated(long ticks_done);
+  void begin_simulated(bool stepped);
+  // The session's side of simulated tick k (its row already rendered): the tick record, the
+  // after-tick hook, the observer, the queued edits, the recorder's chunk.
+  void simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row);
 
   EditSession* edits_;  // null: nothing to edit
   servo::TripleBuffer<core::SampleField>& buffer_;
@@ -199,6 +227,8 @@ class LiveSession final : private servo::TickObserver {
   std::int64_t start_ns_ = 0;
   // Simulated mode: the simulated clock (start of the current tick) and ticks run.
   bool simulated_ = false;
+  bool stepped_ = false;   // simulated by step_simulated()
+  bool finished_ = false;  // finish_simulated() ran: no more ticks
   std::atomic<std::int64_t> sim_now_ns_{0};
   long sim_ticks_ = 0;
   int stroke_depth_ = 0;  // strokes opened by either source and not closed (edit thread only)
@@ -213,7 +243,6 @@ class LiveSession final : private servo::TickObserver {
   std::size_t seen_size_ = 0;
 
   // |period error| histogram (servo writes with relaxed increments; stats() reads).
-  static constexpr std::size_t kPeriodBins = 4096;
   std::array<std::atomic<std::uint32_t>, kPeriodBins> period_hist_{};
 
   // What observe() reads: the last tick, written by the servo thread (a seqlock).

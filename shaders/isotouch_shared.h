@@ -159,11 +159,12 @@ struct BrickMinMaxPush {
 // 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
 // -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
-// RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter.
+// RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter, 12 the
+// voxels as quads (uniform texel buffer, R32G32B32A32_SFLOAT; shaders/raycast_common.glsl).
 #define ISOTOUCH_RAYCAST_WG_X 64
 #define ISOTOUCH_RAYCAST_WG_Y 1
 #define ISOTOUCH_RAYCAST_SHADE_WG 64
-#define ISOTOUCH_RAYCAST_BINDINGS 12
+#define ISOTOUCH_RAYCAST_BINDINGS 13
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away

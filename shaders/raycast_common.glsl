@@ -1,7 +1,7 @@
 // raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
 // Included by raycast_march.comp, raycast_shade.comp and raycast_overlay.comp; every pass
-// (raycast_args.comp too) binds the same 12 bindings (one descriptor layout, engine/raycast.cpp).
+// (raycast_args.comp too) binds the same 13 bindings (one descriptor layout, engine/raycast.cpp).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels
@@ -30,6 +30,15 @@
 // The CPU reference (engine/raycast_cpu.cpp) does the same float operations in the same
 // order; `precise` forbids FMA contraction here, -ffp-contract=off there.
 //
+// Quads (binding 12, QUADS): the voxels again, 4 per texel (R32G32B32A32_SFLOAT): texel b
+// holds the corners (x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1) of plane z for every base
+// corner b = (x, y, z) in [-1, n] per axis (the cells' layout; background outside the grid),
+// so a trilinear sample reads 2 texels instead of 8 (on llvmpipe a fetch of 4 floats costs
+// about what a fetch of one does: tests/bench_raycast_floor.cpp), the refinement's block 12
+// instead of 27 and the normal's faces 5 instead of 12. The same floats in the same order:
+// the picture is the one the 1-float path draws. Left out (QUADS false) where they would not
+// fit one texel binding or the memory budget (engine/raycast.cpp).
+//
 // Passes (one command buffer; engine/raycast.cpp): llvmpipe runs an `if` by masking, not by
 // branching, so a pass costs its whole straight-line code for every vector of 8
 // invocations, taken or not. Code only some pixels need therefore runs in its own pass
@@ -55,6 +64,8 @@ layout(set = 0, binding = 2) uniform samplerBuffer cdist;   // 4 trilinear cells
 layout(constant_id = 1) const int NX = 1;
 layout(constant_id = 2) const int NY = 1;
 layout(constant_id = 3) const int NZ = 1;
+layout(constant_id = 4) const bool QUADS = false;
+layout(set = 0, binding = 12) uniform samplerBuffer quads;  // 4 voxels per texel (see above)
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
 layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 per pixel
 layout(std430, set = 0, binding = 5) buffer Depth { float depth[]; };     // t [m] of the hit, -1: none
@@ -82,6 +93,16 @@ float voxel(ivec3 i) {
   return outside ? g_bg : v;
 }
 
+// The quad of base corner b (components: (x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1) of
+// plane b.z). A base corner outside [-1, n] on some axis has every corner outside the grid:
+// the background. Branch-free, as voxel().
+vec4 quad(ivec3 b) {
+  bool outside = any(lessThan(b, ivec3(-1))) || b.x > NX || b.y > NY || b.z > NZ;
+  int cx = clamp(b.x, -1, NX) + 1, cy = clamp(b.y, -1, NY) + 1, cz = clamp(b.z, -1, NZ) + 1;
+  vec4 q = texelFetch(quads, (cz * (NY + 2) + cy) * (NX + 2) + cx);
+  return outside ? vec4(g_bg) : q;
+}
+
 float lerp1(float a, float b, float t) {
   precise float r = a + t * (b - a);
   return r;
@@ -103,6 +124,10 @@ float field(vec3 p) {
   vec3 fl = floor(p);
   ivec3 i = ivec3(fl);
   precise vec3 f = p - fl;
+  if (QUADS) {
+    vec4 a = quad(i), b = quad(i + ivec3(0, 0, 1));
+    return trilerp(a.x, a.y, a.z, a.w, b.x, b.y, b.z, b.w, f);
+  }
   return trilerp(voxel(i), voxel(i + ivec3(1, 0, 0)), voxel(i + ivec3(0, 1, 0)), voxel(i + ivec3(1, 1, 0)),
                  voxel(i + ivec3(0, 0, 1)), voxel(i + ivec3(1, 0, 1)), voxel(i + ivec3(0, 1, 1)),
                  voxel(i + ivec3(1, 1, 1)), f);
@@ -135,6 +160,15 @@ ivec3 g_b;  // lower corner of the block [index]
 float g_v000, g_v001, g_v002, g_v010, g_v011, g_v012, g_v020, g_v021, g_v022, g_v100, g_v101, g_v102, g_v110, g_v111, g_v112, g_v120, g_v121, g_v122, g_v200, g_v201, g_v202, g_v210, g_v211, g_v212, g_v220, g_v221, g_v222;
 void load_block(ivec3 b) {
   g_b = b;
+  if (QUADS) {  // per plane, the quads at (0, 0), (1, 0), (0, 1), (1, 1) cover its 3 x 3 voxels
+    vec4 a = quad(b), c = quad(b + ivec3(1, 0, 0)), d = quad(b + ivec3(0, 1, 0)), e = quad(b + ivec3(1, 1, 0));
+    g_v000 = a.x; g_v001 = a.y; g_v002 = c.y; g_v010 = a.z; g_v011 = a.w; g_v012 = c.w; g_v020 = d.z; g_v021 = d.w; g_v022 = e.w;
+    a = quad(b + ivec3(0, 0, 1)); c = quad(b + ivec3(1, 0, 1)); d = quad(b + ivec3(0, 1, 1)); e = quad(b + ivec3(1, 1, 1));
+    g_v100 = a.x; g_v101 = a.y; g_v102 = c.y; g_v110 = a.z; g_v111 = a.w; g_v112 = c.w; g_v120 = d.z; g_v121 = d.w; g_v122 = e.w;
+    a = quad(b + ivec3(0, 0, 2)); c = quad(b + ivec3(1, 0, 2)); d = quad(b + ivec3(0, 1, 2)); e = quad(b + ivec3(1, 1, 2));
+    g_v200 = a.x; g_v201 = a.y; g_v202 = c.y; g_v210 = a.z; g_v211 = a.w; g_v212 = c.w; g_v220 = d.z; g_v221 = d.w; g_v222 = e.w;
+    return;
+  }
   g_v000 = voxel(b + ivec3(0, 0, 0));
   g_v001 = voxel(b + ivec3(1, 0, 0));
   g_v002 = voxel(b + ivec3(2, 0, 0));
@@ -337,18 +371,30 @@ vec3 surface_normal_block(vec3 p) {
   precise vec3 f = p - fl;
   ivec3 oc = clamp(c - g_b, ivec3(0), ivec3(1));  // 0 or 1 per axis (the clamp only guards)
   bool bx = oc.x == 1, by = oc.y == 1, bz = oc.z == 1;
-  float fx00 = voxel(c + ivec3((bx ? 2 : -1), 0, 0));
-  float fx01 = voxel(c + ivec3((bx ? 2 : -1), 0, 1));
-  float fx10 = voxel(c + ivec3((bx ? 2 : -1), 1, 0));
-  float fx11 = voxel(c + ivec3((bx ? 2 : -1), 1, 1));
-  float fy00 = voxel(c + ivec3(0, (by ? 2 : -1), 0));
-  float fy01 = voxel(c + ivec3(0, (by ? 2 : -1), 1));
-  float fy10 = voxel(c + ivec3(1, (by ? 2 : -1), 0));
-  float fy11 = voxel(c + ivec3(1, (by ? 2 : -1), 1));
-  float fz00 = voxel(c + ivec3(0, 0, (bz ? 2 : -1)));
-  float fz01 = voxel(c + ivec3(0, 1, (bz ? 2 : -1)));
-  float fz10 = voxel(c + ivec3(1, 0, (bz ? 2 : -1)));
-  float fz11 = voxel(c + ivec3(1, 1, (bz ? 2 : -1)));
+  float fx00, fx01, fx10, fx11, fy00, fy01, fy10, fy11, fz00, fz01, fz10, fz11;
+  if (QUADS) {  // the x face: 2 quads (components x, z); the y face: 2 (x, y); the z face: 1
+    int xf = bx ? 2 : -1, yf = by ? 2 : -1, zf = bz ? 2 : -1;
+    vec4 a = quad(c + ivec3(xf, 0, 0)), b = quad(c + ivec3(xf, 0, 1));
+    fx00 = a.x; fx10 = a.z; fx01 = b.x; fx11 = b.z;
+    a = quad(c + ivec3(0, yf, 0));
+    b = quad(c + ivec3(0, yf, 1));
+    fy00 = a.x; fy10 = a.y; fy01 = b.x; fy11 = b.y;
+    a = quad(c + ivec3(0, 0, zf));
+    fz00 = a.x; fz10 = a.y; fz01 = a.z; fz11 = a.w;
+  } else {
+    fx00 = voxel(c + ivec3((bx ? 2 : -1), 0, 0));
+    fx01 = voxel(c + ivec3((bx ? 2 : -1), 0, 1));
+    fx10 = voxel(c + ivec3((bx ? 2 : -1), 1, 0));
+    fx11 = voxel(c + ivec3((bx ? 2 : -1), 1, 1));
+    fy00 = voxel(c + ivec3(0, (by ? 2 : -1), 0));
+    fy01 = voxel(c + ivec3(0, (by ? 2 : -1), 1));
+    fy10 = voxel(c + ivec3(1, (by ? 2 : -1), 0));
+    fy11 = voxel(c + ivec3(1, (by ? 2 : -1), 1));
+    fz00 = voxel(c + ivec3(0, 0, (bz ? 2 : -1)));
+    fz01 = voxel(c + ivec3(0, 1, (bz ? 2 : -1)));
+    fz10 = voxel(c + ivec3(1, 0, (bz ? 2 : -1)));
+    fz11 = voxel(c + ivec3(1, 1, (bz ? 2 : -1)));
+  }
   float wm100 = bz ? (by ? (bx ? g_v011 : g_v010) : (bx ? g_v001 : g_v000)) : (by ? (bx ? fz00 : fz00) : (bx ? fz00 : fz00));
   float wm101 = bz ? (by ? (bx ? g_v012 : g_v011) : (bx ? g_v002 : g_v001)) : (by ? (bx ? fz10 : fz10) : (bx ? fz10 : fz10));
   float wm110 = bz ? (by ? (bx ? g_v021 : g_v020) : (bx ? g_v011 : g_v010)) : (by ? (bx ? fz01 : fz01) : (bx ? fz01 : fz01));

@@ -6,44 +6,51 @@
 
 namespace isotouch::sim {
 
+TraceRow headless_tick(TripleBuffer<SampleField>& samples, servo::Renderer& renderer, SimDevice& device,
+                       const WorkspaceTransform& xf, const TouchScript& script, double rate_hz, long k) {
+  using clock = std::chrono::steady_clock;
+  const double period = 1.0 / rate_hz;
+  const double t = double(k) * period;
+  const SampleField* field = samples.acquire();
+  if (!field) throw std::runtime_error("servo: no sample field was published");
+  const Vec3 hip = xf.to_world(device.position());
+
+  const auto t0 = clock::now();
+  const HriTick out = renderer.tick(*field, hip);  // the nominal period
+  const auto t1 = clock::now();
+
+  device.command_force(out.force_n);
+  Vec3 tgt_w, tgt_v;
+  script.at(t + period, tgt_w, tgt_v);
+  device.step(period, xf.to_device(tgt_w), tgt_v / xf.scale);
+
+  TraceRow r;
+  r.t_s = t;
+  r.hip_m = hip;
+  r.vhip_m = out.vhip_m;
+  r.force_n = out.force_n;
+  r.hand_target_m = tgt_w;
+  r.penetration_m = out.penetration_m;
+  r.plane = out.plane;
+  r.tick_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
+  r.contact = out.contact;
+  r.plane_update = out.plane_update;
+  r.saturated = out.saturated;
+  r.fault = out.fault;
+  r.version = field->version;
+  return r;
+}
+
 std::vector<TraceRow> run_headless(TripleBuffer<SampleField>& samples, servo::Renderer& renderer,
                                    SimDevice& device, const WorkspaceTransform& xf,
                                    const TouchScript& script, double rate_hz,
                                    const std::function<void(long, long)>& progress,
                                    long progress_every, const TickHook& after_tick) {
-  using clock = std::chrono::steady_clock;
-  const double period = 1.0 / rate_hz;
   const long ticks = long(std::ceil(script.duration_s * rate_hz)) + 1;
   std::vector<TraceRow> trace(std::size_t(ticks), TraceRow{});
   for (long k = 0; k < ticks; ++k) {
-    const double t = double(k) * period;
-    const SampleField* field = samples.acquire();
-    if (!field) throw std::runtime_error("servo: no sample field was published");
-    const Vec3 hip = xf.to_world(device.position());
-
-    const auto t0 = clock::now();
-    const HriTick out = renderer.tick(*field, hip);  // the nominal period
-    const auto t1 = clock::now();
-
-    device.command_force(out.force_n);
-    Vec3 tgt_w, tgt_v;
-    script.at(t + period, tgt_w, tgt_v);
-    device.step(period, xf.to_device(tgt_w), tgt_v / xf.scale);
-
     TraceRow& r = trace[std::size_t(k)];
-    r.t_s = t;
-    r.hip_m = hip;
-    r.vhip_m = out.vhip_m;
-    r.force_n = out.force_n;
-    r.hand_target_m = tgt_w;
-    r.penetration_m = out.penetration_m;
-    r.plane = out.plane;
-    r.tick_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
-    r.contact = out.contact;
-    r.plane_update = out.plane_update;
-    r.saturated = out.saturated;
-    r.fault = out.fault;
-    r.version = field->version;
+    r = headless_tick(samples, renderer, device, xf, script, rate_hz, k);
     if (after_tick) after_tick(k, r);
     if (progress && (k % progress_every == 0 || k + 1 == ticks)) progress(k + 1, ticks);
   }

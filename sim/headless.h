@@ -37,6 +37,14 @@ struct TraceRow {
 /// determinism rule, session/edit_session.h). It may set row.button. Outside the timed section.
 using TickHook = std::function<void(long k, TraceRow& row)>;
 
+/// Tick k of run_headless (t = k / rate_hz): acquire the newest published samples, read
+/// the device, time Renderer::tick, command the force, advance the device one period toward
+/// the script's hand target at t + period. A caller that owns the clock (a window's frame
+/// loop on a simulated clock) runs ticks one at a time through this; run_headless is a loop of it.
+/// Throws std::runtime_error if nothing was ever published.
+TraceRow headless_tick(TripleBuffer<SampleField>& samples, servo::Renderer& renderer, SimDevice& device,
+                       const WorkspaceTransform& world_T_device, const TouchScript& script, double rate_hz, long k);
+
 /// Runs the script to its end at `rate_hz`. Each tick: acquire the newest published
 /// samples, read the device, time Renderer::tick (nominal period) with steady_clock, command the force
 /// (held over the period), then advance the device. `progress(tick, total)` is called

@@ -45,12 +45,19 @@ int main(int argc, char** argv) {
   vk.submit_and_wait(cmd);
   std::printf("bench_raycast_floor: %d x %d frame, one invocation per pixel (rows of %u), %s, median of %d frames\n\n",
               width, height, unsigned(ISOTOUCH_RAYCAST_WG_X), vk.info().name.c_str(), frames);
-  std::printf("| texel fetches per pixel | ms per frame | ns per pixel |\n|---:|---:|---:|\n");
+  std::printf("| texel fetches per pixel | texel | ms per frame | ns per pixel |\n|---:|---|---:|---:|\n");
   engine::DescriptorArena arena(vk, 2, 4);
   engine::GpuTimer timer(vk, 2);
-  for (std::uint32_t f : {0u, 8u, 27u, 64u, 128u}) {
-    engine::ComputePipeline<gpu::RaycastFloorPush> pipe(vk, raycast_floor_spv, 2, "raycast floor", 0u, {f, kVoxels - 1},
-                                                        1u);
+  struct Case {
+    std::uint32_t fetches;
+    bool vec4;
+  };
+  for (const Case cs : {Case{0, false}, Case{2, true}, Case{8, false}, Case{8, true}, Case{27, false}, Case{64, false},
+                        Case{64, true}, Case{128, false}}) {
+    const std::uint32_t f = cs.fetches;
+    engine::ComputePipeline<gpu::RaycastFloorPush> pipe(vk, raycast_floor_spv, 2, "raycast floor", 0u,
+                                                        {f, (cs.vec4 ? kVoxels / 4 : kVoxels) - 1, cs.vec4 ? 1u : 0u}, 1u);
+    if (cs.vec4) pipe.set_texel_vec4(1u);
     std::vector<double> ms;
     for (int k = 0; k <= frames; ++k) {
       arena.reset();
@@ -67,7 +74,7 @@ int main(int argc, char** argv) {
     }
     std::sort(ms.begin(), ms.end());
     const double med = ms[ms.size() / 2];
-    std::printf("| %u | %.2f | %.1f |\n", f, med, med * 1e6 / double(pixels));
+    std::printf("| %u | %s | %.2f | %.1f |\n", f, cs.vec4 ? "4 floats" : "1 float", med, med * 1e6 / double(pixels));
   }
   return 0;
 }

@@ -4,6 +4,10 @@
 # Checks (tests/sculpt/png_check.py): the surface and the probe are drawn, the carve changed
 # the pixels around the brush, undo restored the picture exactly; no validation message,
 # exit 0; dropped files: errors keep the old volume, a good one opens; Ctrl+S and Ctrl+E write the .vdb and the STL; a resize recreates the swapchain; the session's recording replays in `isotouch replay`.
+# The carve runs on the simulated clock (--sim-clock) twice: the same recording and screenshots
+# byte for byte. An undo in the frame the isovalue changes is in the volume the new session
+# carries (both clocks). A dropped file that never finishes loading (a FIFO) does not keep the
+# window from closing.
 # With SCULPT_EXPECT_OVERLAY=1 (a build with Dear ImGui): the panels were set up and drawn
 # (the screenshots are the ray caster's picture, without them); --no-overlay draws none.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
@@ -15,13 +19,29 @@ if ! command -v xvfb-run >/dev/null; then
   exit 77
 fi
 mkdir -p "$out"
-rm -f "$out"/{probe,before,carved,undone,last}.png "$out"/session.rec "$out"/sculpted.vdb "$out"/sculpted.stl
+carve_run() {  # carve_run DIR: the carve script on the simulated clock, into DIR
+  mkdir -p "$1"
+  rm -f "$1"/{probe,before,carved,undone,last}.png "$1"/session.rec "$1"/sculpted.vdb "$1"/sculpted.stl
+  xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/tests/sculpt/head-sculpt.json" --script "$src/tests/sculpt/carve.json" \
+    --screenshot "$1/last.png" --record "$1/session.rec" --save "$1/sculpted.vdb" --export "$1/sculpted.stl" --size 512 \
+    --validation --stats --sim-clock
+}
 set +e
-xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/tests/sculpt/head-sculpt.json" --script "$src/tests/sculpt/carve.json" \
-  --screenshot "$out/last.png" --record "$out/session.rec" --save "$out/sculpted.vdb" --export "$out/sculpted.stl" --size 512 --validation --stats 2>&1 | tee "$out/log.txt"
+carve_run "$out" 2>&1 | tee "$out/log.txt"
 rc=${PIPESTATUS[0]}
 set -e
 if [ "$rc" -ne 0 ]; then echo "FAIL: isotouch-sculpt exited $rc"; exit 1; fi
+grep -q "^sculpt   simulated clock: 33 servo ticks" "$out/log.txt" || { echo "FAIL: --sim-clock did not run the simulated clock"; exit 1; }
+# Again: the simulated clock gives the same recording and screenshots, byte for byte.
+set +e
+carve_run "$out/again" > "$out/again.txt" 2>&1
+rc=$?
+set -e
+if [ "$rc" -ne 0 ]; then cat "$out/again.txt"; echo "FAIL: isotouch-sculpt exited $rc (second run)"; exit 1; fi
+for f in probe.png before.png carved.png undone.png last.png session.rec; do
+  cmp -s "$out/$f" "$out/again/$f" || { echo "FAIL: $f differs between two runs on the simulated clock"; exit 1; }
+done
+echo "simulated clock: the recording and 5 screenshots are the same in two runs"
 if grep -q "timed out\|ended before" "$out/log.txt"; then echo "FAIL: the script did not run its course"; exit 1; fi
 if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
   grep -q "^overlay  Dear ImGui [0-9.]*$" "$out/log.txt" || { echo "FAIL: the Dear ImGui overlay was not set up"; exit 1; }
@@ -85,6 +105,42 @@ for n in ("iso-before", "iso-after"):
 print(f"lit pixels: skull (1150) {lit['iso-before']:.1%}, skin (500) {lit['iso-after']:.1%}")
 sys.exit(0 if lit["iso-after"] > 1.1 * lit["iso-before"] else 1)
 PY
+# Ctrl+Z in the frame the isovalue changes (tests/sculpt/iso-undo.json): the undo is applied
+# before the new session takes the volume, so after going back to 1150 the picture is the one
+# before the carve, exactly (simulated clock: always; real time: the restart waits for it).
+for clock in --sim-clock --real-time; do
+  d="$out/iso-undo$clock"
+  mkdir -p "$d"
+  rm -f "$d"/*.png
+  set +e
+  xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/iso-undo.json" \
+    --screenshot "$d/last.png" --size 320 --validation --no-overlay $([ "$clock" = --sim-clock ] && echo --sim-clock) > "$d/log.txt" 2>&1
+  rc=$?
+  set -e
+  if [ "$rc" -ne 0 ]; then cat "$d/log.txt"; echo "FAIL: isotouch-sculpt (iso-undo $clock) exited $rc"; exit 1; fi
+  if grep -q "timed out\|ended before" "$d/log.txt"; then cat "$d/log.txt"; echo "FAIL: the iso-undo script did not run its course ($clock)"; exit 1; fi
+  ! cmp -s "$d/iso-undo-before.png" "$d/iso-undo-carved.png" || { echo "FAIL: the carve changed nothing ($clock): the check says little"; exit 1; }
+  cmp -s "$d/iso-undo-before.png" "$d/iso-undo-after.png" ||
+    { echo "FAIL: the undo in the isovalue's frame was lost in the restart ($clock)"; exit 1; }
+done
+echo "iso-undo: the undo in the isovalue's frame is in the restarted volume (both clocks)"
+# A dropped file whose reader blocks (a FIFO named .mhd: open() waits for a writer that
+# never comes): quitting abandons the load instead of waiting for it, and exits 0.
+rm -f "$out/slow.mhd"
+mkfifo "$out/slow.mhd"
+printf '{"events": [{"drop": "%s"}, {"after_frames": 3, "quit": true}]}\n' "$out/slow.mhd" > "$out/drop-slow.json"
+set +e
+timeout 120 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$out/drop-slow.json" \
+  --size 320 --no-overlay > "$out/drop-slow.txt" 2>&1
+rc=$?
+set -e
+cat "$out/drop-slow.txt"
+# A reader still blocked (the app waited and was killed): a writer releases it.
+[ "$rc" -eq 124 ] && timeout 5 bash -c ": > '$out/slow.mhd'"
+rm -f "$out/slow.mhd"
+if [ "$rc" -ne 0 ]; then echo "FAIL: quitting while a file loads exited $rc (124: it waited for the load)"; exit 1; fi
+grep -q "^sculpt   abandoned loading .*slow.mhd (still reading after" "$out/drop-slow.txt" ||
+  { echo "FAIL: the blocked load was not abandoned"; exit 1; }
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1
 rc=$?

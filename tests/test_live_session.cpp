@@ -227,6 +227,34 @@ TEST(LiveSession, PeriodErrorP99WhileRunningMatchesTheServosRecord) {
   EXPECT_LE(p99, truth + isotouch::session::kPeriodBinUs + 1e-6) << "more than one bin above the servo's p99";
 }
 
+// A servo whose every tick runs 12 ms late: every period error is past the histogram's
+// range (8.19 ms), so the p99 is reported as beyond it, at its lower edge, never as a value.
+TEST(LiveSession, PeriodErrorP99PastTheHistogramIsMarkedBeyond) {
+  class SlowIO final : public isotouch::servo::HapticDeviceIO {
+   public:
+    explicit SlowIO(isotouch::servo::HapticDeviceIO& inner) : inner_(inner) {}
+    Vec3 read_position_m() override {
+      std::this_thread::sleep_for(std::chrono::milliseconds(12));
+      return inner_.read_position_m();
+    }
+    std::uint32_t buttons() override { return 0; }
+    void write_force_n(const Vec3& f) override { inner_.write_force_n(f); }
+
+   private:
+    isotouch::servo::HapticDeviceIO& inner_;
+  };
+  Rig rig;
+  SlowIO slow(*rig.io);
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, slow, rig.config());
+  live.start();
+  wait_until([&] { return live.stats().ticks > 12; }, 10);
+  live.stop();
+  const auto st = live.stats();
+  ASSERT_GT(st.ticks, 12);
+  EXPECT_TRUE(st.period_error_p99_beyond) << "p99 " << st.period_error_p99_us << " us shown as a value";
+  EXPECT_EQ(st.period_error_p99_us, isotouch::session::kPeriodRangeUs);
+}
+
 // The button drill: while the button is down and the probe in contact, brushes are asked
 // for from the servo thread at the VHIP, inside one stroke.
 TEST(LiveSession, ButtonDrillAsksFromTheServoSide) {
@@ -392,4 +420,80 @@ TEST(LiveSessionSimulated, StrokesFromBothSourcesNestIntoOneUndoStep) {
   undo.kind = EditEvent::Kind::kUndo;
   rig.edits.apply(undo, &rig.buffer);
   EXPECT_EQ(rig.edits.volume().voxels, rig.vol.voxels) << "one undo did not take back the whole nested stroke";
+}
+
+// Stepped (a window's frame loop on a simulated clock): the same session run in pieces of
+// 1, 7, 33 and 250 ticks gives run_simulated()'s rows, edits and recording, byte for byte,
+// with the button drill and the API's edits from the after-tick hook; an edit submitted
+// after the last piece is applied by finish_simulated(), and step_simulated() refuses a
+// session that ran or finished.
+TEST(LiveSessionSimulated, SteppedInPiecesItIsOneRun) {
+  const fs::path dir = temp_dir("isotouch-live-step");
+  std::vector<std::vector<isotouch::sim::TraceRow>> traces(2);
+  std::vector<std::vector<std::pair<long, std::uint64_t>>> published(2);
+  std::vector<std::vector<float>> voxels(2);
+  for (int i = 0; i < 2; ++i) {
+    SimRig rig;
+    LiveSessionConfig c = rig.config((dir / (std::to_string(i) + ".rec")).string());
+    c.drill = test_drill();
+    c.on_applied = [&, i](const EditEvent& e, const isotouch::session::EditOutcome& o, isotouch::session::EditSource) {
+      if (o.published) published[std::size_t(i)].emplace_back(e.tick, rig.edits.current()->version);
+    };
+    LiveSession live(&rig.edits, rig.buffer, *rig.renderer, c);
+    auto run = rig.run();
+    run.button_down = {{0.05, 0.9}};
+    run.after_tick = [&](long k, isotouch::sim::TraceRow&) {
+      if (k == 700) {
+        ASSERT_TRUE(live.submit(carve(rig.vol.grid.to_world(Vec3{20, 20, 31}))));
+      }
+    };
+    if (i == 0) {
+      traces[0] = live.run_simulated(run);
+      EXPECT_THROW(live.step_simulated(run, 1), std::logic_error);
+    } else {
+      const long sizes[] = {1, 7, 33, 250};
+      for (int j = 0; traces[1].size() < traces[0].size(); ++j) {
+        const long n = std::min(sizes[j % 4], long(traces[0].size() - traces[1].size()));
+        for (const auto& row : live.step_simulated(run, n)) traces[1].push_back(row);
+      }
+      live.finish_simulated();
+      EXPECT_THROW(live.step_simulated(run, 1), std::logic_error);
+      EXPECT_THROW(live.run_simulated(run), std::logic_error);
+    }
+    live.stop();
+    voxels[std::size_t(i)] = rig.edits.volume().voxels;
+  }
+  ASSERT_GT(published[0].size(), 5u) << "too few snapshots were published to test";
+  EXPECT_EQ(published[0], published[1]);
+  EXPECT_EQ(voxels[0], voxels[1]);
+  ASSERT_EQ(traces[0].size(), traces[1].size());
+  for (std::size_t k = 0; k < traces[0].size(); ++k)
+    ASSERT_TRUE(same(traces[0][k].hip_m, traces[1][k].hip_m) && same(traces[0][k].force_n, traces[1][k].force_n) &&
+                traces[0][k].version == traces[1][k].version && traces[0][k].t_s == traces[1][k].t_s &&
+                traces[0][k].button == traces[1][k].button)
+        << "tick " << k;
+  auto slurp = [](const fs::path& p) {
+    std::ifstream in(p, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+  };
+  const std::string r0 = slurp(dir / "0.rec"), r1 = slurp(dir / "1.rec");
+  EXPECT_GT(r0.size(), 1000u);
+  EXPECT_TRUE(r0 == r1) << "the stepped session's recording differs";
+
+  // An edit submitted after the last piece: finish_simulated() applies it (stop() alone drops it).
+  for (const bool finish : {true, false}) {
+    SimRig rig;
+    LiveSession live(&rig.edits, rig.buffer, *rig.renderer, rig.config());
+    auto run = rig.run();
+    live.step_simulated(run, 10);
+    ASSERT_TRUE(live.submit(carve(rig.vol.grid.to_world(Vec3{20, 20, 31}))));
+    if (finish) live.finish_simulated();
+    live.stop();
+    EXPECT_EQ(live.stats().edits_applied, finish ? 1 : 0);
+    EXPECT_EQ(live.stats().edits_dropped, finish ? 0 : 1);
+    EXPECT_EQ(rig.edits.volume().voxels != rig.vol.voxels, finish);
+  }
+  fs::remove_all(dir);
 }

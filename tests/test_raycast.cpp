@@ -126,16 +126,24 @@ TEST(Raycast, HeadCtGpuMatchesCpuPerPixel) {
   const RaycastField f = engine::make_raycast_field(vol.grid, vol.voxels, iso,
                                                     float(iso.outside_value(vol.min_value, vol.max_value)));
   const CameraView view = engine::orbit_view(f.grid, vol.direction, app::default_camera(vol));
-  auto rc = engine::RayCaster::create(vk(), f);
-  ASSERT_TRUE(rc) << rc.error;
-  for (bool skip : {true, false}) {
-    RaycastStyle st;
-    st.skip_empty = skip;
-    const RaycastImage g = (*rc.value)->render(view, st, 80, 80);
-    const RaycastImage c = engine::render_cpu(f, view, st, 80, 80);
-    EXPECT_GT(hits(g), 500u);
-    // Anisotropic voxels (3.2 x 3.2 x 1.5 mm): the largest voxels per metre bounds them all.
-    expect_gpu_matches_cpu(g, c, 1.0 / 1.5e-3, skip ? "head, skipping" : "head, no skipping");
+  // The voxels read 4 per texel (quads) and 1 per texel; with and without skipping; with a
+  // clip plane through the centre (the cut face: the border of the field's cells too).
+  for (bool quads : {true, false}) {
+    auto rc = engine::RayCaster::create(vk(), f, quads);
+    ASSERT_TRUE(rc) << rc.error;
+    EXPECT_EQ((*rc.value)->quads(), quads);
+    for (int k = 0; k < 3; ++k) {
+      RaycastStyle st;
+      st.skip_empty = k != 1;
+      if (k == 2) st.clip = engine::ClipPlane{f.grid.centre_m(), -view.forward};
+      const RaycastImage g = (*rc.value)->render(view, st, 80, 80);
+      const RaycastImage c = engine::render_cpu(f, view, st, 80, 80);
+      EXPECT_GT(hits(g), 500u);
+      // Anisotropic voxels (3.2 x 3.2 x 1.5 mm): the largest voxels per metre bounds them all.
+      const std::string what = std::string("head, ") + (quads ? "quads, " : "1 float, ") +
+                               (k == 0 ? "skipping" : k == 1 ? "no skipping" : "clipped");
+      expect_gpu_matches_cpu(g, c, 1.0 / 1.5e-3, what.c_str());
+    }
   }
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
@@ -696,6 +704,17 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
     EXPECT_EQ(after[v].depth, truth[v].depth) << "view " << v;
   }
   EXPECT_EQ(inc.field().cell_dist, (*full.value)->field().cell_dist);
+  // The voxels read 1 per texel (no quads): the same pictures, so the quads updated above
+  // hold the edited voxels.
+  auto plain = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, edited, iso, bg), false);
+  ASSERT_TRUE(plain) << plain.error;
+  EXPECT_TRUE(inc.quads()) << "the head's caster does not read quads: the test above says nothing about them";
+  EXPECT_FALSE((*plain.value)->quads());
+  const auto one_float = render_all(**plain.value);
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    EXPECT_EQ(after[v].rgba, one_float[v].rgba) << "view " << v << ": quads and 1 float per texel differ";
+    EXPECT_EQ(after[v].depth, one_float[v].depth) << "view " << v;
+  }
   // Back to the original values (an undo): the first picture again, bit for bit.
   inc.update(vol.voxels, dirty);
   const auto undone = render_all(inc);
@@ -721,6 +740,7 @@ TEST(Raycast, VolumeLargerThanOneStorageBindingRenders) {
     GTEST_SKIP() << "this device's maxTexelBufferElements is below 512^3";
   auto rc = engine::RayCaster::create(vk(), f);
   ASSERT_TRUE(rc) << rc.error;
+  EXPECT_FALSE((*rc.value)->quads()) << "514^3 quads (2.2 GB) are beyond the budget and the texel limit";
   const Vec3 c = grid.centre_m();
   const CameraView view = engine::look_at(c + Vec3{0.18, -0.3, 0.24}, c, {0, 0, 1}, 40);
   const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, 64, 64);

@@ -33,6 +33,12 @@ struct Options {
   bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
+  /// The session's simulated mode on the frame's clock: each frame advances the servo by
+  /// sim_frame_ms of simulated time (whole ticks) on this thread, and the edits are applied
+  /// in step with it, so a script gives the same recording and screenshots every run. The
+  /// window's own mouse and keys are ignored (the script is the only input); the mouse probe only.
+  bool sim_clock = false;
+  double sim_frame_ms = 1000.0 / 30.0;
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
   bool overlay = true;              ///< the Dear ImGui tool and stats panels (a build with Dear ImGui)
   std::string device;               ///< Vulkan device choice
@@ -54,5 +60,10 @@ struct Options {
 /// script's "iso") ends the session the same way, with the edited volume carried over (the
 /// undo history starts afresh, a recording stops).
 int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen = nullptr);
+
+/// Dropped files still loading on their (detached) threads, abandoned by the sessions that
+/// started them. The process must not run its static destructors under such a thread: exit
+/// with std::_Exit after flushing when this is not 0.
+int loads_running();
 
 }  // namespace isotouch::sculpt

@@ -1,6 +1,8 @@
 // isotouch-sculpt - a window where a person sculpts a volume and feels it (apps/sculpt/app.h).
 #include <CLI/CLI.hpp>
 
+#include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <optional>
 
@@ -36,6 +38,12 @@ int main(int argc, char** argv) {
                "run a scripted sculpt (probe onto the surface, a carve stroke, undo; or --script) and print frame "
                "time, edit-to-pixels and servo figures with verdicts against the targets (50 / 80 / 100 ms)");
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
+  cli.add_flag("--sim-clock", o.sim_clock,
+               "run the servo and the edits on a simulated clock, one frame's worth of ticks per frame, on the "
+               "window's thread: a script then gives the same recording and screenshots every run (the window's own "
+               "mouse and keys are ignored; the mouse probe only)");
+  cli.add_option("--sim-frame-ms", o.sim_frame_ms, "simulated time per frame with --sim-clock [ms] (whole servo ticks)")
+      ->check(CLI::Range(0.1, 1000.0));
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
                "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
@@ -48,16 +56,26 @@ int main(int argc, char** argv) {
                  "(isotouch-devemu); a device's caps must fit the scene's stiffness, damping and force limit");
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;
+  int rc = 1;
   try {
     // A file dropped on the window that can be read opens in a new session.
     for (;;) {
       std::optional<isotouch::sculpt::Options> next;
-      const int rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
-      if (rc != 0 || !next) return rc;
+      rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
+      if (rc != 0 || !next) break;
       o = *next;
     }
   } catch (const std::exception& e) {
     std::cerr << "isotouch-sculpt: " << e.what() << "\n";
-    return 1;
+    rc = 1;
   }
+  // A dropped file still loading (a reader blocked on its file system): everything is written
+  // and closed; exit without waiting for it or running static destructors under it.
+  if (isotouch::sculpt::loads_running() > 0) {
+    std::cout.flush();
+    std::cerr.flush();
+    std::fflush(nullptr);
+    std::_Exit(rc);
+  }
+  return rc;
 }

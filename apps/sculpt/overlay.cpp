@@ -81,7 +81,8 @@ void stats_panel(const PanelStats& s) {
   ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
   ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
   ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
-  if (s.tick_p99_us) ImGui::Text("tick p99    %.0f us (|period error|)", *s.tick_p99_us);
+  if (s.tick_p99_us && s.tick_p99_beyond) ImGui::Text("tick p99    > %.1f ms (|period error|, past the histogram)", *s.tick_p99_us * 1e-3);
+  else if (s.tick_p99_us) ImGui::Text("tick p99    %.0f us (|period error|)", *s.tick_p99_us);
   else ImGui::TextDisabled("tick p99    n/a (no ticks yet)");
   if (s.edit_to_haptics_last_ms)
     ImGui::Text("edit->feel  %.2f ms last, %.2f ms median", *s.edit_to_haptics_last_ms,

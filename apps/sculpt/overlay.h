@@ -30,6 +30,7 @@ struct PanelStats {
   double servo_rate_hz = 0;           ///< measured: ticks per second over the last refresh
   long ticks = 0, missed_deadlines = 0, faults = 0;
   std::optional<double> tick_p99_us;  ///< p99 |period error| [us] so far (session::LiveStats); none before two ticks
+  bool tick_p99_beyond = false;       ///< past the histogram's range: the p99 is at least tick_p99_us
   std::optional<double> edit_to_haptics_last_ms, edit_to_haptics_median_ms;
   double frame_ms = 0;
   double force_n = 0;

@@ -181,9 +181,11 @@ std::vector<sim::TraceRow> thin_path(const std::vector<sim::TraceRow>& trace) {
 }
 
 // The figures, files and pictures of a run with edits, into m.edits.
-void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
-                  const std::string& dir, RunMetrics& m, std::ostream& log) {
-  EditFigures& e = m.edits;
+namespace {
+
+// The edit figures of a run: counts and times from the applied events, the undo history,
+// the removed volume and the deepest HIP and VHIP.
+void edit_figures(const SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace, EditFigures& e) {
   const long after_edit = e.contact_ticks_after_edit;
   e = d.figures;
   e.contact_ticks_after_edit = after_edit;
@@ -220,7 +222,10 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     e.max_hip_depth_m = std::max(e.max_hip_depth_m, core::dot(cp - r.hip_m, n));
     e.max_vhip_depth_m = std::max(e.max_vhip_depth_m, core::dot(cp - r.vhip_m, n));
   }
-  if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, after, e, log);
+}
+
+// The edit figures in the log.
+void log_edits(const EditFigures& e, std::ostream& log) {
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
       << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
@@ -229,9 +234,13 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
       << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
       << " B\n";
   for (const std::string& note : e.notes) log << "edits    note: " << note << "\n";
+}
 
-  write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
-  // The edited volume and its isosurface; a failure is said, never fatal.
+// The edited volume (.vdb, .nrrd) and its isosurface (.stl) as the scene asks; a failure is
+// said in e.files_note, never fatal.
+void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::string& dir, EditFigures& e,
+                        std::ostream& log) {
+  const engine::Volume& after = setup.session->volume();
   try {
     if (scene.edits.write_vdb) {
       SaveVdbOptions vo;
@@ -252,50 +261,68 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
     e.files_note = x.what();
     log << "edits    file not written: " << x.what() << "\n";
   }
-  if (scene.draw_plots) {
-    // Before and after: the same camera (from the run's contact points), unedited and edited voxels.
-    const std::vector<sim::TraceRow> path = thin_path(trace);
-    // before.png: surface.png when it was drawn (the same volume, snapshot and path).
-    RunPicture before;
-    bool copied = false;
-    if (m.picture_drawn) {
-      try {  // through the one writer, like every output
-        io::write_output((fs::path(dir) / "before.png").string(), [&](const std::string& f) {
-          fs::copy_file(fs::path(dir) / "surface.png", f, fs::copy_options::overwrite_existing);
-        });
-        copied = true;
-      } catch (const std::exception&) {
-      }
-    }
-    if (!copied)
-      before = render_run_picture(scene, setup.volume, *setup.first, path, (fs::path(dir) / "before.png").string(),
-                                  setup.vk.get());
-    const RunPicture aft = render_run_picture(scene, after, *session.current(), path,
-                                              (fs::path(dir) / "after.png").string(), setup.vk.get());
-    e.before_after_drawn = before.error.empty() && aft.error.empty();
-    try {
-      if (!setup.vk) throw std::runtime_error("no Vulkan device");
-      render_section(scene, setup, setup.volume, (fs::path(dir) / "section_before.png").string());
-      render_section(scene, setup, after, (fs::path(dir) / "section_after.png").string());
-      e.sections_drawn = true;
-    } catch (const std::exception& x) {
-      e.sections_note = x.what();
-    }
-    const DrillSite site{setup.script.contact_point_m, setup.script.contact_normal, scene.edits.brush.radius_mm * 1e-3};
-    e.site_figure_note = draw_drill_figure(setup.vk.get(), setup.volume, after, setup.live.iso, site,
-                                           (fs::path(dir) / "drill.png").string());
-    e.site_figure_drawn = e.site_figure_note.empty();
-    if (!e.site_figure_drawn) log << "edits    drill.png not drawn: " << e.site_figure_note << "\n";
-    e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
-    if (scene.write_trace) {
-      std::string note;
-      e.plot_drawn = draw_edit_plots(scene, dir, setup.script, setup.volume, note);
-      if (!e.plot_drawn) {
-        e.before_after_note += " plots: " + note;
-        log << "edits    plot not drawn: " << note << "\n";
-      }
+}
+
+// Before and after: surface.png's camera on the unedited and the edited volume, the sections
+// through the press axis, drill.png and edits.png.
+void edit_pictures(const Scene& scene, const SceneSetup& setup, const std::vector<sim::TraceRow>& trace,
+                   const std::string& dir, bool surface_drawn, EditFigures& e, std::ostream& log) {
+  const engine::Volume& after = setup.session->volume();
+  // Before and after: the same camera (from the run's contact points), unedited and edited voxels.
+  const std::vector<sim::TraceRow> path = thin_path(trace);
+  // before.png: surface.png when it was drawn (the same volume, snapshot and path).
+  RunPicture before;
+  bool copied = false;
+  if (surface_drawn) {
+    try {  // through the one writer, like every output
+      io::write_output((fs::path(dir) / "before.png").string(), [&](const std::string& f) {
+        fs::copy_file(fs::path(dir) / "surface.png", f, fs::copy_options::overwrite_existing);
+      });
+      copied = true;
+    } catch (const std::exception&) {
     }
   }
+  if (!copied)
+    before = render_run_picture(scene, setup.volume, *setup.first, path, (fs::path(dir) / "before.png").string(),
+                                setup.vk.get());
+  const RunPicture aft = render_run_picture(scene, after, *setup.session->current(), path,
+                                            (fs::path(dir) / "after.png").string(), setup.vk.get());
+  e.before_after_drawn = before.error.empty() && aft.error.empty();
+  try {
+    if (!setup.vk) throw std::runtime_error("no Vulkan device");
+    render_section(scene, setup, setup.volume, (fs::path(dir) / "section_before.png").string());
+    render_section(scene, setup, after, (fs::path(dir) / "section_after.png").string());
+    e.sections_drawn = true;
+  } catch (const std::exception& x) {
+    e.sections_note = x.what();
+  }
+  const DrillSite site{setup.script.contact_point_m, setup.script.contact_normal, scene.edits.brush.radius_mm * 1e-3};
+  e.site_figure_note = draw_drill_figure(setup.vk.get(), setup.volume, after, setup.live.iso, site,
+                                         (fs::path(dir) / "drill.png").string());
+  e.site_figure_drawn = e.site_figure_note.empty();
+  if (!e.site_figure_drawn) log << "edits    drill.png not drawn: " << e.site_figure_note << "\n";
+  e.before_after_note = e.before_after_drawn ? aft.caption : before.error + " " + aft.error;
+  if (scene.write_trace) {
+    std::string note;
+    e.plot_drawn = draw_edit_plots(scene, dir, setup.script, setup.volume, note);
+    if (!e.plot_drawn) {
+      e.before_after_note += " plots: " + note;
+      log << "edits    plot not drawn: " << note << "\n";
+    }
+  }
+}
+
+}  // namespace
+
+void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
+                  const std::string& dir, RunMetrics& m, std::ostream& log) {
+  EditFigures& e = m.edits;
+  edit_figures(setup, d, trace, e);
+  if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, setup.session->volume(), e, log);
+  log_edits(e, log);
+  write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
+  write_edited_files(scene, setup, dir, e, log);
+  if (scene.draw_plots) edit_pictures(scene, setup, trace, dir, m.picture_drawn, e, log);
 }
 
 }  // namespace isotouch::run

@@ -278,31 +278,123 @@ std::string direction_text(const std::array<double, 9>& d) {
   return s.str();
 }
 
+// summary.json "volume": the file, its grid, values and frame.
+nlohmann::ordered_json volume_json(const engine::Volume& vol, const RunMetrics& m) {
+  const bool any_finite = vol.finite_voxels > 0;
+  return {{"path", m.volume_path},
+          {"dims", m.dims},
+          {"spacing_m", {m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}},
+          {"reader", vol.reader},
+          {"component_type", vol.component_type},
+          {"value_range", any_finite ? nlohmann::ordered_json{vol.min_value, vol.max_value}
+                                     : nlohmann::ordered_json(nullptr)},
+          {"nan_voxels", m.nan_voxels},
+          {"inf_voxels", m.inf_voxels},
+          {"orientation", m.orientation},
+          {"direction", m.direction},
+          {"frame", "points and forces are physical (ITK's LPS frame): world = origin + direction * (spacing * index)"}};
+}
+
+// summary.json "servo": the renderer, its parameters and tick times.
+nlohmann::ordered_json servo_json(const servo::HriParams& hp, const RunMetrics& m) {
+  const bool paper = hp.variant == servo::Variant::kPaper;
+  return {{"algorithm", paper ? "HRI, the paper's Figure 2 as printed" : "HRI, robust variant (Figure 2 plus the departures in servo/hri.h)"},
+          {"variant", paper ? "paper" : "robust"},
+          {"rate_hz", hp.rate_hz},
+          {"plane_update_period", hp.plane_update_period},
+          {"stiffness_n_per_m", hp.stiffness_n_per_m},
+          {"damping_n_s_per_m", hp.damping_n_s_per_m},
+          {"force_limit_n", hp.force_limit_n},
+          {"intersection", hp.intersection == servo::Intersection::kLinear ? "linear"
+                           : hp.intersection == servo::Intersection::kSecant ? "secant" : "bisection"},
+          {"normal", hp.normal == servo::NormalSource::kSamples ? "samples"
+                     : hp.normal == servo::NormalSource::kCentral ? "central" : "exact"},
+          {"force_shading", hp.force_shading},
+          {"recovery_time_s", hp.recovery_time_s},
+          {"tool_radius_mm", hp.tool_radius_m * 1e3},
+          {"friction", {{"mu_s", hp.friction.mu_s}, {"mu_d", hp.friction.mu_d},
+                        {"viscous_n_s_per_m", hp.friction.viscous_n_s_per_m}}},
+          {"ticks", m.ticks},
+          {"plane_updates", m.plane_updates},
+          {"tick_ns", {{"median", m.tick_ns_median}, {"p99", m.tick_ns_p99},
+                       {"max", m.tick_ns_max}, {"mean", m.tick_ns_mean}}}};
+}
+
+// summary.json "contact": forces, their steps, saturation, the stiffness bound, faults.
+nlohmann::ordered_json contact_json(const RunMetrics& m) {
+  return {{"ticks", m.contact_ticks},
+          {"max_force_n", m.max_force_n},
+          {"mean_force_n", m.mean_contact_force_n},
+          {"max_penetration_m", m.max_penetration_m},
+          {"max_force_step_n", m.max_force_step_n},
+          {"max_force_step_t_s", m.max_force_step_t_s},
+          {"max_force_vector_step_n", m.max_force_vector_step_n},
+          {"max_force_vector_step_t_s", m.max_force_vector_step_t_s},
+          {"max_release_step_n", m.max_release_step_n},
+          {"max_release_step_t_s", m.max_release_step_t_s},
+          {"max_any_step_n", m.max_any_step_n},
+          {"max_any_step_t_s", m.max_any_step_t_s},
+          {"max_direction_step_deg", m.force_dir_step_max_deg},
+          {"max_direction_step_t_s", m.force_dir_step_max_t_s},
+          {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
+          {"saturated_ticks", m.saturated_ticks},
+          {"stiffness_bound_n_per_m", m.k_bound_n_per_m},
+          {"stiffness_above_bound", m.k_above_bound},
+          {"fault_ticks", m.fault_ticks}};
+}
+
+// summary.json "error": the VHIP's true distance from the isosurface (and from the unfiltered
+// data's), and the first-order estimate beside it; null where nothing was measured.
+nlohmann::ordered_json error_json(const RunMetrics& m, long found, long raw_found) {
+  // No contact tick (or no surface found): there is no error to report, not an error of 0.
+  const auto or_null = [](bool have, double v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  return {{"surface_distance_m", {{"rms", or_null(found > 0, m.surface_err_rms_m)}, {"max", or_null(found > 0, m.surface_err_max_m)},
+                                  {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
+                                  {"search_radius_m", m.surface_search_radius_m},
+                                  {"measured_on", "the dense fp32 samples of the scene's passes (CPU reference): "
+                                                  "the published isosurface for dense and bricked fp32, the surface "
+                                                  "before rounding for compact samples; a tick that read an edited "
+                                                  "snapshot against the edited volume it read"},
+                                  {"method", "true distance from the VHIP to the isosurface of the trilinear field "
+                                             "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
+          {"surface_distance_to_unfiltered_m",
+           {{"rms", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_rms_m)},
+            {"max", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_max_m)},
+            {"method", "with filters in the pass list: true distance from the VHIP to the isosurface of the "
+                       "unfiltered data (gradient only); null without filters"}}},
+          {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
+                                      {"max", or_null(m.contact_ticks > 0, m.first_order_err_max_m)},
+                                      {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
+                                                 "where the field is flat; shown for comparison only"}}}};
+}
+
+// summary.json "script": the contact point and normal (physical), the phases, stroke and lift-off.
+nlohmann::ordered_json script_json(const engine::Volume& vol, const sim::TouchScript& script, const RunMetrics& m) {
+  const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
+  const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
+  return {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
+          {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
+          {"duration_s", script.duration_s},
+          {"phases_s", {{"press", script.t_press}, {"stroke", script.t_stroke}, {"lift", script.t_lift}}},
+          {"stroke_ticks", m.stroke_ticks},
+          {"stroke_contact_ticks", m.stroke_contact_ticks},
+          {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
+                                                     : nlohmann::ordered_json(nullptr)},
+          {"lift_contact_ticks", m.lift_contact_ticks},
+          {"lift_max_force_n", m.lift_max_force_n},
+          {"lift_inward_ticks", m.lift_inward_ticks},
+          {"lift_max_inward_force_n", m.lift_max_inward_force_n}};
+}
+
 // The run's summary.json ("status": "complete": written last, once every other output is whole).
 nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
                                     long raw_found, bool with_edits) {
   const engine::Volume& vol = setup.volume;
   const servo::HriParams& hp = setup.hri;
-  const sim::TouchScript& script = setup.script;
-  const bool any_finite = vol.finite_voxels > 0;
-  const bool paper = hp.variant == servo::Variant::kPaper;
-  const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
-  const Vec3 normal_phys = vol.direction_apply(script.contact_normal);
   nlohmann::ordered_json j;
   j["status"] = "complete";
   j["scene"] = {{"file", scene.file}, {"name", scene.name}};
-  j["volume"] = {{"path", m.volume_path},
-                 {"dims", m.dims},
-                 {"spacing_m", {m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}},
-                 {"reader", vol.reader},
-                 {"component_type", vol.component_type},
-                 {"value_range", any_finite ? nlohmann::ordered_json{vol.min_value, vol.max_value}
-                                            : nlohmann::ordered_json(nullptr)},
-                 {"nan_voxels", m.nan_voxels},
-                 {"inf_voxels", m.inf_voxels},
-                 {"orientation", m.orientation},
-                 {"direction", m.direction},
-                 {"frame", "points and forces are physical (ITK's LPS frame): world = origin + direction * (spacing * index)"}};
+  j["volume"] = volume_json(vol, m);
   j["isovalue"] = hp.tau;
   j["inside"] = hp.inside == core::InsideIs::kAbove ? "above" : "below";
   j["gpu"] = {{"device", m.gpu_device},
@@ -319,77 +411,10 @@ nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup,
   j["gpu_vs_cpu"] = {{"gradient_max_abs_diff", m.max_abs_diff},
                      {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
                      {"gradient_max_rel_diff", m.max_rel_diff}};
-  j["servo"] = {{"algorithm", paper ? "HRI, the paper's Figure 2 as printed" : "HRI, robust variant (Figure 2 plus the departures in servo/hri.h)"},
-                {"variant", paper ? "paper" : "robust"},
-                {"rate_hz", hp.rate_hz},
-                {"plane_update_period", hp.plane_update_period},
-                {"stiffness_n_per_m", hp.stiffness_n_per_m},
-                {"damping_n_s_per_m", hp.damping_n_s_per_m},
-                {"force_limit_n", hp.force_limit_n},
-                {"intersection", hp.intersection == servo::Intersection::kLinear ? "linear"
-                                 : hp.intersection == servo::Intersection::kSecant ? "secant" : "bisection"},
-                {"normal", hp.normal == servo::NormalSource::kSamples ? "samples"
-                           : hp.normal == servo::NormalSource::kCentral ? "central" : "exact"},
-                {"force_shading", hp.force_shading},
-                {"recovery_time_s", hp.recovery_time_s},
-                {"tool_radius_mm", hp.tool_radius_m * 1e3},
-                {"friction", {{"mu_s", hp.friction.mu_s}, {"mu_d", hp.friction.mu_d},
-                              {"viscous_n_s_per_m", hp.friction.viscous_n_s_per_m}}},
-                {"ticks", m.ticks},
-                {"plane_updates", m.plane_updates},
-                {"tick_ns", {{"median", m.tick_ns_median}, {"p99", m.tick_ns_p99},
-                             {"max", m.tick_ns_max}, {"mean", m.tick_ns_mean}}}};
-  j["contact"] = {{"ticks", m.contact_ticks},
-                  {"max_force_n", m.max_force_n},
-                  {"mean_force_n", m.mean_contact_force_n},
-                  {"max_penetration_m", m.max_penetration_m},
-                  {"max_force_step_n", m.max_force_step_n},
-                  {"max_force_step_t_s", m.max_force_step_t_s},
-                  {"max_force_vector_step_n", m.max_force_vector_step_n},
-                  {"max_force_vector_step_t_s", m.max_force_vector_step_t_s},
-                  {"max_release_step_n", m.max_release_step_n},
-                  {"max_release_step_t_s", m.max_release_step_t_s},
-                  {"max_any_step_n", m.max_any_step_n},
-                  {"max_any_step_t_s", m.max_any_step_t_s},
-                  {"max_direction_step_deg", m.force_dir_step_max_deg},
-                  {"max_direction_step_t_s", m.force_dir_step_max_t_s},
-                  {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
-                  {"saturated_ticks", m.saturated_ticks},
-                  {"stiffness_bound_n_per_m", m.k_bound_n_per_m},
-                  {"stiffness_above_bound", m.k_above_bound},
-                  {"fault_ticks", m.fault_ticks}};
-  // No contact tick (or no surface found): there is no error to report, not an error of 0.
-  const auto or_null = [](bool have, double v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
-  j["error"] = {{"surface_distance_m", {{"rms", or_null(found > 0, m.surface_err_rms_m)}, {"max", or_null(found > 0, m.surface_err_max_m)},
-                                        {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
-                                        {"search_radius_m", m.surface_search_radius_m},
-                                        {"measured_on", "the dense fp32 samples of the scene's passes (CPU reference): "
-                                                        "the published isosurface for dense and bricked fp32, the surface "
-                                                        "before rounding for compact samples; a tick that read an edited "
-                                                        "snapshot against the edited volume it read"},
-                                        {"method", "true distance from the VHIP to the isosurface of the trilinear field "
-                                                   "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
-                {"surface_distance_to_unfiltered_m",
-                 {{"rms", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_rms_m)},
-                  {"max", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_max_m)},
-                  {"method", "with filters in the pass list: true distance from the VHIP to the isosurface of the "
-                             "unfiltered data (gradient only); null without filters"}}},
-                {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
-                                            {"max", or_null(m.contact_ticks > 0, m.first_order_err_max_m)},
-                                            {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
-                                                       "where the field is flat; shown for comparison only"}}}};
-  j["script"] = {{"contact_point_m", {contact_phys.x, contact_phys.y, contact_phys.z}},
-                 {"contact_normal", {normal_phys.x, normal_phys.y, normal_phys.z}},
-                 {"duration_s", script.duration_s},
-                 {"phases_s", {{"press", script.t_press}, {"stroke", script.t_stroke}, {"lift", script.t_lift}}},
-                 {"stroke_ticks", m.stroke_ticks},
-                 {"stroke_contact_ticks", m.stroke_contact_ticks},
-                 {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
-                                                            : nlohmann::ordered_json(nullptr)},
-                 {"lift_contact_ticks", m.lift_contact_ticks},
-                 {"lift_max_force_n", m.lift_max_force_n},
-                 {"lift_inward_ticks", m.lift_inward_ticks},
-                 {"lift_max_inward_force_n", m.lift_max_inward_force_n}};
+  j["servo"] = servo_json(hp, m);
+  j["contact"] = contact_json(m);
+  j["error"] = error_json(m, found, raw_found);
+  j["script"] = script_json(vol, setup.script, m);
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
@@ -398,20 +423,9 @@ nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup,
   return j;
 }
 
-// The run's report.md.
-std::string report_markdown(const Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
-                            long raw_found, bool with_edits) {
-  const engine::Volume& vol = setup.volume;
-  const servo::HriParams& hp = setup.hri;
-  const bool paper = hp.variant == servo::Variant::kPaper;
+// report.md's table: the volume, the Vulkan device and the engine.
+std::string volume_rows(const RunMetrics& m, const engine::Volume& vol, const servo::HriParams& hp) {
   std::ostringstream md;
-  md << "# isotouch run: " << scene.name << "\n\n";
-  if (!scene.description.empty()) md << scene.description << "\n\n";
-  md << "A simulated point-mass device, pulled by a scripted operator hand, approaches the isosurface, "
-        "presses in, strokes along it and lifts off. Forces come from the HRI servo (intermediate "
-        "virtual plane, "
-     << (paper ? "the paper's Figure 2 as printed" : "robust variant: the paper's Figure 2 plus the departures listed in servo/hri.h")
-     << ") reading the sample field that the Vulkan gradient pass wrote.\n\n";
   md << "| | |\n|---|---|\n"
      << "| volume | `" << m.volume_path << "` (" << m.dims[0] << " x " << m.dims[1] << " x " << m.dims[2]
      << ", spacing " << fmt(m.spacing_m.x * 1e3) << " x " << fmt(m.spacing_m.y * 1e3) << " x "
@@ -433,8 +447,15 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
      << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3)
-     << "; relative (to the largest gradient magnitude) " << fmt(m.max_rel_diff, 3) << " |\n"
-     << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
+     << "; relative (to the largest gradient magnitude) " << fmt(m.max_rel_diff, 3) << " |\n";
+  return md.str();
+}
+
+// report.md's table: the servo, its ticks, the stroke, the lift-off and the stiffness bound.
+std::string servo_rows(const RunMetrics& m, const servo::HriParams& hp) {
+  const bool paper = hp.variant == servo::Variant::kPaper;
+  std::ostringstream md;
+  md << "| servo | K = " << fmt(hp.stiffness_n_per_m) << " N/m, B = " << fmt(hp.damping_n_s_per_m)
      << " N s/m, n = " << hp.plane_update_period << ", " << fmt(hp.rate_hz) << " Hz, force limit "
      << fmt(hp.force_limit_n) << " N, " << (paper ? "paper" : "robust") << " variant, force shading "
      << (hp.force_shading ? "on" : "off") << ", recovery time " << fmt(hp.recovery_time_s * 1e3) << " ms"
@@ -455,8 +476,14 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
      << " N) |\n"
      << "| stiffness bound | K = " << fmt(hp.stiffness_n_per_m, 4) << " N/m, Colgate-Schenkel K_max = 2 (b - |B|) / T = "
      << fmt(m.k_bound_n_per_m, 4) << " N/m" << (m.k_above_bound ? " (ABOVE the bound: the contact may buzz)" : "")
-     << " |\n"
-     << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
+     << " |\n";
+  return md.str();
+}
+
+// report.md's table: contact forces, their steps and the surface error.
+std::string contact_rows(const RunMetrics& m, const servo::HriParams& hp, long found, long raw_found) {
+  std::ostringstream md;
+  md << "| contact | max force " << fmt(m.max_force_n, 4) << " N, mean " << fmt(m.mean_contact_force_n, 4)
      << " N, max penetration " << fmt(m.max_penetration_m * 1e3, 4) << " mm |\n"
      << "| largest force step in contact | " << fmt(m.max_force_step_n, 4) << " N at t = "
      << fmt(m.max_force_step_t_s, 5) << " s (" << fmt(100 * m.max_force_step_n / hp.force_limit_n, 3)
@@ -488,6 +515,24 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
                                      " mm (left out of RMS and max)"
                                : std::string())
      << " |\n\n";
+  return md.str();
+}
+
+// The run's report.md.
+std::string report_markdown(const Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
+                            long raw_found, bool with_edits) {
+  const engine::Volume& vol = setup.volume;
+  const servo::HriParams& hp = setup.hri;
+  const bool paper = hp.variant == servo::Variant::kPaper;
+  std::ostringstream md;
+  md << "# isotouch run: " << scene.name << "\n\n";
+  if (!scene.description.empty()) md << scene.description << "\n\n";
+  md << "A simulated point-mass device, pulled by a scripted operator hand, approaches the isosurface, "
+        "presses in, strokes along it and lifts off. Forces come from the HRI servo (intermediate "
+        "virtual plane, "
+     << (paper ? "the paper's Figure 2 as printed" : "robust variant: the paper's Figure 2 plus the departures listed in servo/hri.h")
+     << ") reading the sample field that the Vulkan gradient pass wrote.\n\n";
+  md << volume_rows(m, vol, hp) << servo_rows(m, hp) << contact_rows(m, hp, found, raw_found);
   md << (m.fault_ticks == 0
              ? std::string("No faults: every tick had a finite HIP and a finite force.\n\n")
              : "**Faults: " + std::to_string(m.fault_ticks) + " of " + std::to_string(m.ticks) + " ticks (" +

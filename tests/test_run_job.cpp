@@ -1,4 +1,4 @@
-// app::run_scene's force-step figures, recomputed independently from trace.csv:
+// run::run_scene's force-step figures, recomputed independently from trace.csv:
 // contact.max_force_step_n (|F|, both ticks in contact), max_force_vector_step_n
 // (|F_k - F_k-1|, both ticks in contact), max_release_step_n (|F| on a contact tick whose
 // next tick has no contact) and max_any_step_n (any two consecutive ticks). Releases with
@@ -19,13 +19,14 @@
 #include <sstream>
 
 #include "voxel_probe.h"
-#include "run_job.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
 namespace fs = std::filesystem;
-using isotouch::app::RunMetrics;
+using isotouch::run::RunMetrics;
 using isotouch::io::Scene;
 using isotouch::engine::Volume;
 
@@ -103,11 +104,11 @@ fs::path run_into_temp(const Scene& sc, const std::string& name, RunMetrics* met
   const fs::path out = fs::temp_directory_path() /
                        (name + "_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
   fs::remove_all(out);
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   if (metrics) *metrics = m;
   return out;
 }
@@ -204,11 +205,11 @@ TEST(RunJob, NoContactGivesNullErrorsNotZero) {
   const fs::path out = fs::temp_directory_path() /
                        ("isotouch_run_job_nocontact_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
   fs::remove_all(out);
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   EXPECT_EQ(m.contact_ticks, 0);
   EXPECT_NE(log.str().find("no contact: the probe never touched the isosurface"), std::string::npos) << log.str();
   std::ifstream js(out / "summary.json");
@@ -359,11 +360,11 @@ TEST(RunJob, EditsThatDoNothingSaySo) {
                    {"t_s": 0.05, "kind": "add", "at": [23.5, 23.5, 23.5], "radius_mm": 22, "strength": 1000},
                    {"t_s": 100, "kind": "undo"}]}})";
   const Scene sc = isotouch::io::load_scene((dir / "noop.json").string());
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   const auto& e = m.edits;
   EXPECT_EQ(e.undo_nothing, 1);
   EXPECT_EQ(e.redo_nothing, 1);
@@ -403,11 +404,11 @@ TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": false,
       "timeline": [{"t_s": 0.1, "kind": "carve", "at": [9.5, 23.5, 23.5], "radius_mm": 4, "strength": 1000}]}})";
   const Scene sc = isotouch::io::load_scene((dir / "carved.json").string());
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   ASSERT_GT(m.contact_ticks, 100);
   ASSERT_EQ(m.edits.contact_ticks_after_edit, m.contact_ticks) << "every contact tick read the carved snapshot";
   EXPECT_EQ(m.surface_err_not_found_ticks, 0);
@@ -444,11 +445,11 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
   fs::remove_all(dir);
   Scene sc = isotouch::io::load_scene(kScenes + "/head.json");
   sc.draw_plots = false;
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = false;
   std::ostringstream log;
-  (void)isotouch::app::run_scene(sc, opt, log);
+  (void)isotouch::run::run_scene(sc, opt, log);
   std::ifstream js(dir / "summary.json");
   const auto j = nlohmann::json::parse(js);
   const auto& s = j.at("script");

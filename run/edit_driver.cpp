@@ -128,7 +128,8 @@ void EditDriver::measure_edited(long k, const sim::TraceRow& row) {
     truth_version_ = row.version;
   }
   edited_distance[k] = {distance_to_isosurface(*truth_, scene_.hri.tau, row.vhip_m),
-                        first_order_distance(*truth_, scene_.hri.tau, row.vhip_m)};
+                        first_order_distance(*truth_, scene_.hri.tau, row.vhip_m),
+                        iso_.contains(core::FieldView(*truth_).value(row.vhip_m))};
 }
 
 void EditDriver::said_if_nothing(EditEvent::Kind kind, const session::Brush& b, const EditOutcome& o, double t) {

@@ -62,6 +62,7 @@ class EditDriver {
   struct EditedDistance {
     SurfaceDistance d;
     double first_order_m = 0;
+    bool vhip_inside = false;  ///< the VHIP inside that volume's isosurface
   };
   std::map<long, EditedDistance> edited_distance;
   std::vector<EditRow> rows;

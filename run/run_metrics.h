@@ -69,6 +69,14 @@ struct EditFigures {
   double burr_radius_m = 0, channel_min_open_radius_m = 0, channel_min_at_depth_m = 0, channel_min_fraction = 0;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
+  /// drilled.stl's mesh (io::extract_mesh: coincident vertices welded, zero-area triangles
+  /// dropped; io::mesh_stats): closed when every edge is in exactly two triangles; its
+  /// enclosed volume (divergence theorem, > 0 with normals out) beside the inside voxels'
+  /// volume after the edits [mm^3].
+  bool mesh_measured = false;
+  std::size_t mesh_triangles = 0, mesh_dropped_triangles = 0, mesh_boundary_edges = 0, mesh_nonmanifold_edges = 0;
+  bool mesh_closed = false;
+  double mesh_volume_mm3 = 0, inside_voxels_volume_mm3 = 0;
   bool before_after_drawn = false; ///< before.png and after.png written
   /// section_before.png / section_after.png: cut open through the press axis (a clip plane
   /// containing it, seen from the side), where a hole through a thin wall shows.

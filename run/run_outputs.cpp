@@ -236,6 +236,24 @@ void log_edits(const EditFigures& e, std::ostream& log) {
   for (const std::string& note : e.notes) log << "edits    note: " << note << "\n";
 }
 
+// The mesh written as drilled.stl: closed or not, and the volume it encloses against the
+// inside voxels' volume.
+void mesh_figures(const io::Mesh& mesh, const engine::Volume& after, EditFigures& e, std::ostream& log) {
+  const io::MeshStats st = io::mesh_stats(mesh);
+  const auto& sp = after.grid.spacing_m;
+  e.mesh_measured = true;
+  e.mesh_triangles = st.triangles;
+  e.mesh_dropped_triangles = mesh.dropped_triangles;
+  e.mesh_boundary_edges = st.boundary_edges;
+  e.mesh_nonmanifold_edges = st.nonmanifold_edges;
+  e.mesh_closed = st.closed();
+  e.mesh_volume_mm3 = st.signed_volume_m3 * 1e9;
+  e.inside_voxels_volume_mm3 = double(e.inside_voxels_after) * sp.x * sp.y * sp.z * 1e9;
+  log << "edits    drilled.stl: " << st.triangles << " triangles (" << mesh.dropped_triangles
+      << " zero-area dropped), " << (st.closed() ? "closed" : "NOT closed") << ", encloses "
+      << fmt(e.mesh_volume_mm3, 6) << " mm^3 (inside voxels: " << fmt(e.inside_voxels_volume_mm3, 6) << " mm^3)\n";
+}
+
 // The edited volume (.vdb, .nrrd) and its isosurface (.stl) as the scene asks; a failure is
 // said in e.files_note, never fatal.
 void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::string& dir, EditFigures& e,
@@ -254,8 +272,10 @@ void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::
       e.nrrd_file = "drilled.nrrd";
     }
     if (scene.edits.write_stl) {
-      write_stl_binary(extract_mesh(after, setup.live.iso), (fs::path(dir) / "drilled.stl").string());
+      const io::Mesh mesh = extract_mesh(after, setup.live.iso);
+      write_stl_binary(mesh, (fs::path(dir) / "drilled.stl").string());
       e.stl_file = "drilled.stl";
+      mesh_figures(mesh, after, e, log);
     }
   } catch (const std::exception& x) {
     e.files_note = x.what();

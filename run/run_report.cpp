@@ -109,6 +109,23 @@ std::string engine_markdown(const RunMetrics& m) {
   return md.str();
 }
 
+// The report's row for drilled.stl: closed or not, and its enclosed volume.
+std::string mesh_row(const EditFigures& e) {
+  if (!e.mesh_measured) return "";
+  std::ostringstream md;
+  md << "| " << e.stl_file << " | " << e.mesh_triangles << " triangles (" << e.mesh_dropped_triangles
+     << " zero-area triangles dropped), "
+     << (e.mesh_closed ? std::string("**closed** (every edge in exactly two triangles)")
+                       : "**not closed**: " + std::to_string(e.mesh_boundary_edges) + " edges in one triangle, " +
+                             std::to_string(e.mesh_nonmanifold_edges) + " in three or more")
+     << "; encloses " << fmt(e.mesh_volume_mm3, 6) << " mm^3 (the inside voxels after the edits: "
+     << fmt(e.inside_voxels_volume_mm3, 6) << " mm^3";
+  if (e.inside_voxels_volume_mm3 > 0)
+    md << ", " << fmt(100.0 * (e.mesh_volume_mm3 / e.inside_voxels_volume_mm3 - 1.0), 3) << " %";
+  md << ") |\n";
+  return md.str();
+}
+
 // The report's rows for the breakthrough and the channel.
 std::string drill_rows(const EditFigures& e, const Scene& scene) {
   if (!e.drill) return "";
@@ -190,6 +207,17 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"nrrd", or_null(!e.nrrd_file.empty(), e.nrrd_file)},
           {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
           {"files_note", e.files_note},
+          {"mesh", !e.mesh_measured ? nlohmann::ordered_json(nullptr)
+                                    : nlohmann::ordered_json{{"file", e.stl_file},
+                                                             {"triangles", e.mesh_triangles},
+                                                             {"zero_area_triangles_dropped", e.mesh_dropped_triangles},
+                                                             {"closed", e.mesh_closed},
+                                                             {"boundary_edges", e.mesh_boundary_edges},
+                                                             {"nonmanifold_edges", e.mesh_nonmanifold_edges},
+                                                             {"enclosed_volume_mm3", e.mesh_volume_mm3},
+                                                             {"inside_voxels_volume_mm3", e.inside_voxels_volume_mm3},
+                                                             {"method", "closed: every edge in exactly two triangles; "
+                                                                        "enclosed volume by the divergence theorem (> 0: normals out)"}}},
           {"pictures", [&e] {
              nlohmann::ordered_json a = nlohmann::ordered_json::array();
              if (e.site_figure_drawn) a.push_back("drill.png");
@@ -224,7 +252,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << " after, times the voxel volume) |\n"
      << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
      << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
-     << drill_rows(e, scene)
+     << drill_rows(e, scene) << mesh_row(e)
      << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | every contact tick against the volume whose snapshot it read; " << e.contact_ticks_after_edit
@@ -345,9 +373,14 @@ nlohmann::ordered_json contact_json(const RunMetrics& m) {
 
 // summary.json "error": the VHIP's true distance from the isosurface (and from the unfiltered
 // data's), and the first-order estimate beside it; null where nothing was measured.
-nlohmann::ordered_json error_json(const RunMetrics& m, long found, long raw_found) {
+nlohmann::ordered_json error_json(const RunMetrics& m, const servo::HriParams& hp, long found, long raw_found) {
   // No contact tick (or no surface found): there is no error to report, not an error of 0.
   const auto or_null = [](bool have, double v) { return have ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  const std::string tool = hp.tool_radius_m > 0
+                               ? "; with the spherical tool (radius " + fmt(hp.tool_radius_m * 1e3) +
+                                     " mm) the VHIP is its centre and the error is that of its surface: |distance - r|, "
+                                     "distance + r where the centre is inside the object"
+                               : std::string();
   return {{"surface_distance_m", {{"rms", or_null(found > 0, m.surface_err_rms_m)}, {"max", or_null(found > 0, m.surface_err_max_m)},
                                   {"ticks_without_surface_within_radius", m.surface_err_not_found_ticks},
                                   {"search_radius_m", m.surface_search_radius_m},
@@ -356,7 +389,8 @@ nlohmann::ordered_json error_json(const RunMetrics& m, long found, long raw_foun
                                                   "before rounding for compact samples; a tick that read an edited "
                                                   "snapshot against the edited volume it read"},
                                   {"method", "true distance from the VHIP to the isosurface of the trilinear field "
-                                             "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))"}}},
+                                             "(branch and bound over cells, error below min(1e-3 voxel, max(1e-6 voxel, 1 % of the distance)))" +
+                                             tool}}},
           {"surface_distance_to_unfiltered_m",
            {{"rms", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_rms_m)},
             {"max", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_max_m)},
@@ -413,7 +447,7 @@ nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup,
                      {"gradient_max_rel_diff", m.max_rel_diff}};
   j["servo"] = servo_json(hp, m);
   j["contact"] = contact_json(m);
-  j["error"] = error_json(m, found, raw_found);
+  j["error"] = error_json(m, hp, found, raw_found);
   j["script"] = script_json(vol, setup.script, m);
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
@@ -503,9 +537,10 @@ std::string contact_rows(const RunMetrics& m, const servo::HriParams& hp, long f
              ? "| distance from the unfiltered data's surface | RMS " + fmt(m.unfiltered_err_rms_m * 1e3, 4) + " mm, max " +
                    fmt(m.unfiltered_err_max_m * 1e3, 4) + " mm (how far the filters moved the felt surface) |\n"
              : std::string())
-     << "| surface error of the VHIP | "
+     << (hp.tool_radius_m > 0 ? "| surface error of the tool's surface | " : "| surface error of the VHIP | ")
      << (found == 0 ? std::string(m.contact_ticks == 0 ? "not known: no contact tick" : "not known: no surface found")
-                    : "true distance to the trilinear isosurface: RMS " + fmt(m.surface_err_rms_m * 1e3, 4) + " mm, max " +
+                    : std::string(hp.tool_radius_m > 0 ? "|true distance of its centre (the VHIP) to the trilinear isosurface - r|"
+                                                       : "true distance to the trilinear isosurface") + ": RMS " + fmt(m.surface_err_rms_m * 1e3, 4) + " mm, max " +
                           fmt(m.surface_err_max_m * 1e3, 4) + " mm (" +
                           fmt(m.surface_err_rms_m / std::min({m.spacing_m.x, m.spacing_m.y, m.spacing_m.z}), 3) +
                           " voxel RMS)")
@@ -547,7 +582,9 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
   else
   md << "## Error against run time\n\nAt a median tick of " << fmt(m.tick_ns_median) << " ns (p99 "
      << fmt(m.tick_ns_p99) << " ns) with the plane recomputed every " << hp.plane_update_period
-     << " ticks, the VHIP stayed within " << fmt(m.surface_err_max_m * 1e3, 4)
+     << " ticks, " << (hp.tool_radius_m > 0 ? "the tool's surface (radius " + fmt(hp.tool_radius_m * 1e3, 4) + " mm about the VHIP)"
+                                           : std::string("the VHIP"))
+     << " stayed within " << fmt(m.surface_err_max_m * 1e3, 4)
      << " mm of the trilinear isosurface (RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm) on the "
      << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
      << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)

@@ -6,6 +6,7 @@
 #include <optional>
 #include <vector>
 
+#include "field_view.h"
 #include "names.h"
 #include "pass_desc.h"
 
@@ -72,8 +73,24 @@ void direction_step(const sim::TraceRow& r, const sim::TraceRow& last, double f,
   }
 }
 
+/// The surface error of the tool from a distance d [m] of the VHIP to the isosurface: with a
+/// spherical tool of radius r the VHIP is the tool's centre, r outside the surface when the
+/// tool's surface rests on it, so the error is |d - r|, and d + r with the centre inside the
+/// object. A point tool (r = 0): d.
+double tool_error(double d, bool centre_inside, double r) {
+  if (!(r > 0)) return d;
+  return centre_inside ? d + r : std::abs(d - r);
+}
+
+/// The VHIP inside the isosurface of `field` (the scene's isovalue and inside).
+bool vhip_inside(const core::SampleField& field, const core::Isosurface& iso, const sim::TraceRow& r) {
+  return iso.contains(core::FieldView(field).value(r.vhip_m));
+}
+
 /// One contact tick's surface error (true distance, first-order estimate) into the figures.
-void add_error(const SurfaceDistance& d, double fo, RunMetrics& m, ContactSums& s) {
+void add_error(SurfaceDistance d, double fo, bool inside, double r, RunMetrics& m, ContactSums& s) {
+  if (d.found) d.distance_m = tool_error(d.distance_m, inside, r);
+  fo = tool_error(fo, inside, r);
   m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
   if (d.found) {
     ++s.found;
@@ -87,13 +104,14 @@ void add_error(const SurfaceDistance& d, double fo, RunMetrics& m, ContactSums& 
 }
 
 /// The VHIP's distance from the unfiltered data's isosurface on one contact tick.
-void add_unfiltered_error(const core::SampleField& unfiltered, double tau, const sim::TraceRow& r, RunMetrics& m,
-                          ContactSums& s) {
-  const SurfaceDistance du = distance_to_isosurface(unfiltered, tau, r.vhip_m);
+void add_unfiltered_error(const core::SampleField& unfiltered, const core::Isosurface& iso, double tool_r,
+                          const sim::TraceRow& r, RunMetrics& m, ContactSums& s) {
+  const SurfaceDistance du = distance_to_isosurface(unfiltered, iso.tau, r.vhip_m);
   if (!du.found) return;
+  const double e = tool_error(du.distance_m, tool_r > 0 && vhip_inside(unfiltered, iso, r), tool_r);
   ++s.raw_found;
-  s.raw2 += du.distance_m * du.distance_m;
-  m.unfiltered_err_max_m = std::max(m.unfiltered_err_max_m, du.distance_m);
+  s.raw2 += e * e;
+  m.unfiltered_err_max_m = std::max(m.unfiltered_err_max_m, e);
 }
 
 /// Steps of |F| that the contact-only figure cannot see: a drop to zero from contact (every
@@ -132,7 +150,8 @@ void tick_times(const std::vector<sim::TraceRow>& trace, RunMetrics& m) {
 
 std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, const SceneSetup& setup,
                                     const EditDriver* edits, RunMetrics& m) {
-  const double tau = setup.hri.tau;
+  const double tau = setup.hri.tau, tool_r = setup.hri.tool_radius_m;
+  const core::Isosurface iso = setup.live.iso;
   const core::SampleField& truth = *setup.truth;
   m.ticks = long(trace.size());
   ContactSums s;
@@ -156,12 +175,14 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
     if (edits && r.version > 1) {  // the surface moved: measured against the edited volume the tick read
       ++m.edits.contact_ticks_after_edit;
       const auto it = edits->edited_distance.find(long(&r - trace.data()));
-      if (it != edits->edited_distance.end()) add_error(it->second.d, it->second.first_order_m, m, s);
+      if (it != edits->edited_distance.end())
+        add_error(it->second.d, it->second.first_order_m, it->second.vhip_inside, tool_r, m, s);
       continue;
     }
-    if (unfiltered) add_unfiltered_error(*unfiltered, tau, r, m, s);
+    if (unfiltered) add_unfiltered_error(*unfiltered, iso, tool_r, r, m, s);
     // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
-    add_error(distance_to_isosurface(truth, tau, r.vhip_m), first_order_distance(truth, tau, r.vhip_m), m, s);
+    add_error(distance_to_isosurface(truth, tau, r.vhip_m), first_order_distance(truth, tau, r.vhip_m),
+              tool_r > 0 && vhip_inside(truth, iso, r), tool_r, m, s);
   }
   release_and_any_steps(trace, m);
   tick_times(trace, m);

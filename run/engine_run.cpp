@@ -117,6 +117,56 @@ void compare_snapshots(const core::SampleField& gpu, const core::SampleField& cp
   m.max_rel_diff = max_grad > 0 ? m.max_abs_diff / max_grad : m.max_abs_diff;
 }
 
+// The sparse GPU chain's snapshot and figures into m.
+std::shared_ptr<core::SampleField> sparse_gpu_field(engine::SparseOutput& gpu, RunMetrics& m) {
+  auto field = std::make_shared<core::SampleField>(std::move(gpu.field));
+  m.gpu_passes = figures(gpu.passes);
+  m.gpu_upload_ms = gpu.upload_ms;
+  m.gpu_download_ms = gpu.download_ms;
+  m.gpu_submit_wall_ms = gpu.submit_wall_ms;
+  m.publish_ms = gpu.publish_ms;
+  // GPU stages only (labels "... (GPU)"): the host stages are wall time, reported apart.
+  m.gpu_gradient_ms = 0;
+  bool any_gpu = false, all_stamped = true;
+  for (const auto& p : gpu.passes) {
+    if (p.label.size() < 5 || p.label.compare(p.label.size() - 5, 5, "(GPU)") != 0) continue;
+    any_gpu = true;
+    all_stamped = all_stamped && p.ms >= 0;
+    m.gpu_gradient_ms += std::max(0.0, p.ms);
+  }
+  m.gpu_timestamps = any_gpu && all_stamped;
+  if (!m.gpu_timestamps) m.gpu_gradient_ms = gpu.submit_wall_ms;
+  m.gpu_slabs = int(gpu.stats.slabs);
+  m.bricks_total = gpu.stats.bricks_total;
+  m.bricks_candidates = gpu.stats.candidates;
+  m.bricks_active = gpu.stats.active;
+  m.snapshot_bytes = core::snapshot_bytes(*field);
+  return field;
+}
+
+// Where the sparse GPU chain cannot run the scene: the dense chain's samples converted to
+// bricks, its figures into m (m.engine_fallback says why).
+std::shared_ptr<core::SampleField> dense_stand_in(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                                                  engine::VulkanContext& vk, const RunOptions& opt,
+                                                  const core::Isosurface& iso, float background,
+                                                  core::SampleFormat format, RunMetrics& m) {
+  RunMetrics dm;
+  const EngineRun d = run_dense(vol, passes, vk, opt, background, dm);
+  m.engine_describe = dm.engine_describe + "\n(sparse chain not used: " + m.engine_fallback + ")";
+  m.gpu_passes = dm.gpu_passes;
+  m.gpu_upload_ms = dm.gpu_upload_ms;
+  m.gpu_download_ms = dm.gpu_download_ms;
+  m.gpu_submit_wall_ms = dm.gpu_submit_wall_ms;
+  m.gpu_gradient_ms = dm.gpu_gradient_ms;
+  m.gpu_slabs = dm.gpu_slabs;
+  m.gpu_timestamps = dm.gpu_timestamps;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto field = to_bricks(*d.published, iso, format, m);
+  m.publish_ms = ms_since(t0);
+  m.engine_ran = "PassChain (GPU, dense) + " + m.engine_ran;
+  return field;
+}
+
 // Sparse: SparseChain on the GPU, run_sparse_cpu as the reference; while either is not
 // implemented yet, the dense chain plus a conversion of its samples to bricks stands in
 // (and the report says so).
@@ -144,46 +194,8 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
     m.engine_fallback = e.what();
   }
   m.engine_describe = (*chain.value)->describe();
-  std::shared_ptr<core::SampleField> field;
-  if (gpu) {
-    field = std::make_shared<core::SampleField>(std::move(gpu->field));
-    m.gpu_passes = figures(gpu->passes);
-    m.gpu_upload_ms = gpu->upload_ms;
-    m.gpu_download_ms = gpu->download_ms;
-    m.gpu_submit_wall_ms = gpu->submit_wall_ms;
-    m.publish_ms = gpu->publish_ms;
-    // GPU stages only (labels "... (GPU)"): the host stages are wall time, reported apart.
-    m.gpu_gradient_ms = 0;
-    bool any_gpu = false, all_stamped = true;
-    for (const auto& p : gpu->passes) {
-      if (p.label.size() < 5 || p.label.compare(p.label.size() - 5, 5, "(GPU)") != 0) continue;
-      any_gpu = true;
-      all_stamped = all_stamped && p.ms >= 0;
-      m.gpu_gradient_ms += std::max(0.0, p.ms);
-    }
-    m.gpu_timestamps = any_gpu && all_stamped;
-    if (!m.gpu_timestamps) m.gpu_gradient_ms = gpu->submit_wall_ms;
-    m.gpu_slabs = int(gpu->stats.slabs);
-    m.bricks_total = gpu->stats.bricks_total;
-    m.bricks_candidates = gpu->stats.candidates;
-    m.bricks_active = gpu->stats.active;
-    m.snapshot_bytes = core::snapshot_bytes(*field);
-  } else {
-    RunMetrics dm;
-    const EngineRun d = run_dense(vol, passes, vk, opt, background, dm);
-    m.engine_describe = dm.engine_describe + "\n(sparse chain not used: " + m.engine_fallback + ")";
-    m.gpu_passes = dm.gpu_passes;
-    m.gpu_upload_ms = dm.gpu_upload_ms;
-    m.gpu_download_ms = dm.gpu_download_ms;
-    m.gpu_submit_wall_ms = dm.gpu_submit_wall_ms;
-    m.gpu_gradient_ms = dm.gpu_gradient_ms;
-    m.gpu_slabs = dm.gpu_slabs;
-    m.gpu_timestamps = dm.gpu_timestamps;
-    const auto t0 = std::chrono::steady_clock::now();
-    field = to_bricks(*d.published, iso, format, m);
-    m.publish_ms = ms_since(t0);
-    m.engine_ran = "PassChain (GPU, dense) + " + m.engine_ran;
-  }
+  std::shared_ptr<core::SampleField> field = gpu ? sparse_gpu_field(*gpu, m)
+                                                 : dense_stand_in(vol, passes, vk, opt, iso, background, format, m);
   // CPU reference of the published snapshot.
   std::shared_ptr<core::SampleField> ref;
   try {

@@ -121,13 +121,12 @@ SceneSetup::~SceneSetup() = default;
 
 long edit_tick(double t_s, double rate_hz) { return std::max(0L, long(std::ceil(t_s * rate_hz - 1e-9))); }
 
-SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
-  SceneSetup s;
-  RunMetrics& m = s.metrics;
-  (void)scene_passes(scene);  // a bad pass list fails before the volume is read
-  (void)scene_sample_format(scene);
+namespace {
 
-  // 1. Volume in.
+// 1. Volume in: the scene's file or synthetic shape, its figures into m; a volume without
+// finite voxels, or an isovalue outside their range, has no isosurface.
+void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
+  RunMetrics& m = s.metrics;
   engine::Volume& vol = s.volume;
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
@@ -159,8 +158,14 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
     throw std::runtime_error(scene.file + ": field 'isovalue': " + fmt(scene.hri.tau) +
                              " is outside the finite data range [" + fmt(vol.min_value) + ", " +
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
+}
 
-  // 2. Engine: the scene's passes on the GPU (dense or sparse), the CPU reference beside it.
+// 2. Engine: the scene's passes on the GPU (dense or sparse), the CPU reference beside it;
+// the snapshot the servo reads first, the truth the error is measured against, the live
+// field's options.
+void run_engine_step(const Scene& scene, const RunOptions& opt, SceneSetup& s, std::ostream& log) {
+  RunMetrics& m = s.metrics;
+  const engine::Volume& vol = s.volume;
   engine::ContextOptions co;
   co.device = opt.device;
   auto ctx = engine::VulkanContext::create(co);
@@ -181,23 +186,35 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   s.live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
   s.live.background = float(s.live.iso.outside_value(vol.min_value, vol.max_value));  // as run_engine
   s.live.format = scene_sample_format(scene);
+}
 
+// 4. Edits: the brushes (GPU), the undo history and the live field over a copy of the volume.
+void make_edit_session(const Scene& scene, SceneSetup& s, std::ostream& log) {
+  if (!scene.edits.present) return;
+  check_scene_brushes(scene, s.volume);
+  s.session = std::make_unique<EditSession>(engine::Volume(s.volume), s.vk.get(), s.live, scene.edits.history_limit_mib);
+  s.first = s.session->current();
+  log << "edits    " << scene.edits.timeline.size() << " timeline entries, " << scene.edits.button_down.size()
+      << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")
+      << ", undo limit " << fmt(scene.edits.history_limit_mib) << " MiB; first snapshot version "
+      << s.first->version << " (LiveField, " << s.live.passes.size() << " pass(es))\n";
+}
+
+}  // namespace
+
+SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  SceneSetup s;
+  (void)scene_passes(scene);  // a bad pass list fails before the volume is read
+  (void)scene_sample_format(scene);
+  load_volume(scene, s, log);
+  run_engine_step(scene, opt, s, log);
   // 3. Script, servo parameters, workspace.
   s.hri = scene.hri;
   s.script = sim::make_touch_script(*s.truth, s.hri, scene.script);
   s.world_T_device.scale = scene.workspace_scale;
-  s.world_T_device.translation_m = vol.grid.centre_m();
-
-  // 4. Edits: the brushes (GPU), the undo history and the live field over a copy of the volume.
-  if (scene.edits.present) {
-    check_scene_brushes(scene, vol);
-    s.session = std::make_unique<EditSession>(engine::Volume(vol), &vk, s.live, scene.edits.history_limit_mib);
-    s.first = s.session->current();
-    log << "edits    " << scene.edits.timeline.size() << " timeline entries, " << scene.edits.button_down.size()
-        << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")
-        << ", undo limit " << fmt(scene.edits.history_limit_mib) << " MiB; first snapshot version "
-        << s.first->version << " (LiveField, " << s.live.passes.size() << " pass(es))\n";
-  }
+  s.world_T_device.translation_m = s.volume.grid.centre_m();
+  make_edit_session(scene, s, log);
+  const engine::Volume& vol = s.volume;
   const Vec3 contact_phys = vol.to_physical(s.script.contact_point_m);
   const Vec3 normal_phys = vol.direction_apply(s.script.contact_normal);
   log << "script   contact at (" << fmt(contact_phys.x * 1e3, 4) << ", " << fmt(contact_phys.y * 1e3, 4) << ", "

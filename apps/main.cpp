@@ -15,6 +15,7 @@
 #include "vdb_io.h"
 #include "gradient_pass.h"
 #include "live_cmd.h"
+#include "run_cmd.h"
 #include "run_job.h"
 #include "stop_signal.h"
 #include "cli_checks.h"
@@ -42,147 +43,6 @@ namespace fs = std::filesystem;
 using namespace isotouch;
 
 namespace {
-
-// `isotouch run --help` footer: the scene format in short (README, "Scenes", says more).
-constexpr const char* kSceneHelp = R"(
-Scene file (JSON; unknown or repeated keys are errors; units are in the key names):
-  {
-    "name": "head",                             letters, digits, '-', '_' (default: file stem)
-    "volume": {"path": "../data/ct-head-headsq/headsq_64x64x93_int16.mhd"},
-                                                relative to the scene file; .mhd .mha .nrrd .nhdr .nii .nii.gz
-                                                .vdb, or a DICOM series folder (one file per slice)
-           or {"synthetic": "sphere", "dims": [64, 64, 64], "spacing_m": 0.001, "radius_vox": 20}
-           or {"synthetic": "box" | "three-spheres" | "knot"}
-    "isovalue": 1150,                           required; in the volume's units (HU for CT)
-    "inside": "above",                          "above": value > isovalue is inside; "below"
-    "servo":  {"stiffness_n_per_m": 800, "damping_n_s_per_m": 1.0, "plane_update_period": 5,
-               "rate_hz": 1000, "force_limit_n": 3.3, "variant": "robust" | "paper", ...},
-                                                optional, like every section below; see README, Scenes
-    "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
-    "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
-               "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
-    "outputs": {"trace_csv": true, "plots": true},
-    "engine": {"passes": [{"gaussian": {"sigma_mm": 1.0}}, {"closing": {"radius_mm": 1}}, "gradient"],
-               "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"},
-    "edits": {"brush": {"kind": "drill", "radius_mm": 4.5, "falloff": 0.5, "force_threshold_n": 0.5,
-                        "removal_per_n_s": 2, ...},  also strength, density_scale, material, empty
-              "every_ticks": 10, "button": [[0.5, 4.6]], "history_limit_mib": 64,
-              "write_vdb": true, "write_stl": true,
-              "timeline": [{"t_s": 1.0, "kind": "carve", "at": "vhip" | [x, y, z] (mm), "duration_s": 0.2,
-                            "radius_mm": 3, ...}, {"t_s": 2.0, "kind": "undo" | "redo"}]}
-  }
-edits (optional, needs mode "sparse"): sculpting while the servo runs. While the
-button is down and the probe is in contact, the brush is applied at the VHIP every
-every_ticks ticks (drill: removal grows with |F| above force_threshold_n; removal_per_n_s is
-the fraction of the material-to-empty value range removed per N above it per s, the same on
-every volume; "rate" gives it in value units per N s instead), one undo stroke
-per press; timeline brushes fire at their time. Each edit recomputes only the bricks it can
-change and publishes a new snapshot the next tick reads. Outputs add edits.csv, edits.png
-(force, depth and removed volume against time), before.png / after.png, drilled.vdb and
-drilled.stl. Shipped: scenes/drill-skull.json.
-engine (optional): the passes that compute the published samples, in order; a pass is its
-name or {"name": {parameters}}: gaussian (sigma_mm > 0), closing (radius_mm >= 0, a box),
-gradient (required, after the filters), brick_minmax (halo 0..8, default 1). Only the listed
-passes' pipelines and buffers are created; report.md and summary.json list what ran and what
-was left out. Default: ["gradient"], mode "sparse" (only 8^3 bricks near the isosurface are
-computed and published), samples "fp32" (16 B per sample; fp16 and unorm16 are 8 B and need
-mode "sparse"). mode "dense" computes every voxel, for comparison.
-The script casts a ray from ray_origin_frac (fractions of the volume box, each in [-2, 3])
-to the first isosurface crossing, presses the hand target press_depth_m in, strokes
-stroke_length_m along the surface, and lifts off. Shipped: scenes/head.json, chest.json,
-chest-full.json (the chest's DICOM series at full resolution), sphere.json, knot.json,
-drill-skull.json. `run --record FILE` also writes a recording that
-`isotouch replay FILE` plays back, checking every force bit for bit.
-
-Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
-Points are reported in the volume's physical frame (origin + direction x spacing x index).
-Exit status: 0 ok; 1 bad input (the message names the file, field and value);
-4 the run had servo fault ticks; 5 (--live) the haptic device was disconnected, faulty or sent
-refused reports.
-
-The Vulkan device: --device NAME|INDEX, before or after `run`, or ISOTOUCH_DEVICE.
-
-Example:
-  isotouch run scenes/sphere.json --out /tmp/sphere --device llvmpipe
-)";
-
-std::string default_scene() {
-  if (fs::exists("scenes/head.json")) return "scenes/head.json";
-  return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
-}
-
-int cmd_run_live(const std::string& scene_path, const std::string& device, bool quiet, const std::string& record_path,
-                 const std::string& haptic) {
-  const io::Scene scene = io::load_scene(scene_path);
-  app::LiveOptions opt;
-  opt.haptic = haptic;
-  opt.run.device = device;
-  opt.run.progress = !quiet;
-  opt.run.record_path = record_path;
-  std::cout << "isotouch run --live: scene " << scene_path << "\n";
-  return app::run_live(scene, opt, std::cout);
-}
-
-int cmd_run(const std::string& scene_path, std::string out_dir, const std::string& device, bool quiet,
-            const std::string& record_path) {
-  const io::Scene scene = io::load_scene(scene_path);
-  if (out_dir.empty()) out_dir = (fs::path("out") / scene.name).string();
-  app::RunOptions opt;
-  opt.out_dir = out_dir;
-  opt.device = device;
-  opt.progress = !quiet;
-  opt.record_path = record_path;
-  std::cout << "isotouch run: scene " << scene_path << " -> " << out_dir << "/\n";
-  {
-    const double dt = 1.0 / scene.hri.rate_hz;
-    const int need = sim::min_stable_substeps(scene.device, dt);
-    if (need > scene.device.substeps)
-      std::cout << "device   substeps raised from " << scene.device.substeps << " to " << need
-                << " per servo period so the simulated device integrates stably (mass " << scene.device.mass_kg
-                << " kg, hand " << scene.device.hand_stiffness_n_per_m << " N/m and "
-                << scene.device.hand_damping_n_s_per_m << " N s/m)\n";
-  }
-  session::install_stop_handlers();  // SIGINT/SIGTERM: stop at the next safe point, folder marked
-  app::RunMetrics m;
-  try {
-    m = app::run_scene(scene, opt, std::cout);
-  } catch (const session::Interrupted& e) {
-    std::cerr << "\nisotouch run: " << e.what() << "; " << (fs::path(out_dir) / "summary.json").string()
-              << " says \"status\": \"interrupted\" and lists the files that were finished\n";
-    return 128 + e.signal;
-  }
-  const auto& hp = scene.hri;
-  const double limit = hp.force_limit_n;
-  std::cout << std::setprecision(4)
-            << "\n== isotouch summary: " << scene.name << " ==\n"
-            << "  volume        " << m.volume_path << "  (" << m.dims[0] << "x" << m.dims[1] << "x" << m.dims[2]
-            << (m.orientation.empty() ? std::string() : ", orientation " + m.orientation) << ")\n"
-            << "  isovalue      " << hp.tau << "\n"
-            << "  GPU           " << m.gpu_device << ": gradient " << m.gpu_gradient_ms << " ms; CPU reference "
-            << m.cpu_gradient_ms << " ms\n"
-            << "  GPU vs CPU    max abs " << m.max_abs_diff << ", relative " << m.max_rel_diff << "\n"
-            << "  servo         HRI, n = " << hp.plane_update_period << ", " << hp.rate_hz << " Hz, K = "
-            << hp.stiffness_n_per_m << " N/m, B = " << hp.damping_n_s_per_m << " N s/m\n"
-            << "  ticks         " << m.ticks << "  (tick median " << m.tick_ns_median << " ns, p99 " << m.tick_ns_p99
-            << " ns, max " << m.tick_ns_max << " ns)\n"
-            << "  contact       " << m.contact_ticks << " ticks, max force " << m.max_force_n << " N (limit "
-            << limit << " N), max penetration " << m.max_penetration_m * 1e3 << " mm\n"
-            << "  force step    max " << m.max_force_step_n << " N between two contact ticks ("
-            << (limit > 0 ? 100.0 * m.max_force_step_n / limit : 0.0) << " % of the limit, at t = "
-            << m.max_force_step_t_s << " s)\n"
-            << "  faults        " << m.fault_ticks << " of " << m.ticks << " ticks\n"
-            << "  surface error RMS " << m.surface_err_rms_m * 1e3 << " mm, max " << m.surface_err_max_m * 1e3 << " mm\n"
-            << "  report        " << (fs::path(out_dir) / "report.md").string()
-            << (m.plots_drawn ? "  (with plots)" : ("  (" + m.plot_note + ")")) << "\n";
-  if (m.fault_ticks > 0) {
-    std::cerr << "\nisotouch: error: " << m.fault_ticks << " of " << m.ticks
-              << " servo ticks were faults (non-finite input or state; zero force sent): the run is not "
-                 "trustworthy. See "
-              << (fs::path(out_dir) / "trace.csv").string() << " (column fault).\n";
-    return 4;
-  }
-  return 0;
-}
 
 // Samples whose gradient is not finite: from non-finite voxels (NaN/Inf in the file),
 // or overflow (finite voxels whose differences exceed float, e.g. values near 1e38).
@@ -313,34 +173,7 @@ int main(int argc, char** argv) {
                  "Vulkan device: name substring or index (default: $ISOTOUCH_DEVICE, else the first "
                  "discrete GPU, else lavapipe); before or after the subcommand");
 
-  auto* run = cli.add_subcommand("run", "Simulate a probe touching and stroking the isosurface of a scene; "
-                                        "write trace.csv, summary.json, report.md and plots");
-  std::string scene_path = default_scene(), out_dir;
-  bool quiet = false;
-  run->add_option("scene", scene_path, "Scene JSON file")->capture_default_str();
-  run->add_option("--out,-o", out_dir, "Output folder (default: out/<scene name>)");
-  run->add_flag("--quiet,-q", quiet, "No progress line");
-  std::string record_path;
-  run->add_option("--record", record_path,
-                  "Also write every device input, button and edit with its time to FILE (replay it with "
-                  "`isotouch replay FILE`)");
-  bool live = false;
-  run->add_flag("--live", live,
-                "Run the scene in real time on the live session's threads: the servo thread (SCHED_FIFO when "
-                "allowed) drives the simulated device, an edit thread applies the button drill and the timeline; "
-                "with --record FILE the recording is streamed while it runs (FILE.part until it stops; a killed "
-                "run leaves FILE.part, replayable up to its last chunk)");
-  std::string haptic = "sim";
-  run->add_option("--haptic", haptic,
-                  "With --live: the haptic device, KIND[:ARGS]: sim (the scene's simulated device, default), null, "
-                  "playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
-                  "(isotouch-devemu); `isotouch devices` lists the HID devices")
-      ->capture_default_str();
-  std::string hand_path;
-  run->add_option("--hand-path", hand_path,
-                  "Write the scene's scripted hand (device frame, t_s,x_m,y_m,z_m every ms) to FILE for "
-                  "isotouch-devemu --path, and exit");
-  run->footer(kSceneHelp);
+  const app::Subcommand run = app::add_run_command(cli);
 
   auto* check = cli.add_subcommand(
       "check", "Compare the GPU gradient with the CPU reference on a volume; with --all, every engine pass "
@@ -430,8 +263,6 @@ int main(int argc, char** argv) {
 
   try {
     cli.parse(argc, argv);
-    if (run->parsed() && !live && run->count("--haptic") > 0)
-      throw CLI::ValidationError("--haptic needs --live (a simulated run drives the scene's simulated device)");
     if (check->parsed()) {
       if (!check_all_flag && (!check_all.scene_path.empty() || check_all.validation || check_all.inject_mismatch))
         throw CLI::ValidationError("--scene, --validation and --inject-mismatch need --all");
@@ -443,9 +274,7 @@ int main(int argc, char** argv) {
     return cli.exit(e);
   }
   try {
-    if (run->parsed() && !hand_path.empty()) return app::write_hand_path(io::load_scene(scene_path), hand_path, std::cout);
-    if (run->parsed() && live) return cmd_run_live(scene_path, device, quiet, record_path, haptic);
-    if (run->parsed()) return cmd_run(scene_path, out_dir, device, quiet, record_path);
+    if (run.app->parsed()) return run.run(device);
     if (check->parsed() && check_all_flag) {
       check_all.volume_path = volume;
       check_all.device = device;

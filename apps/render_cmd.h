@@ -1,20 +1,9 @@
-// render_cmd.h - `isotouch render` and `isotouch bench render`, PNG writing
-// and the report pictures other commands call (run report, sculpt before/after).
-//
-// Frames: pictures are drawn in grid-world [m] (core::Grid); the orbit camera's angles
-// are physical (engine::OrbitCamera: azimuth 0 looks at the face of an LPS head from the
-// front, +z physical up). trace.csv is physical and is turned back into grid-world with
-// the volume's direction matrix; TraceRow (sim/headless.h) is grid-world already.
+// render_cmd.h - `isotouch render` and `isotouch bench render`. The pictures themselves
+// (PNG writing, cameras, overlays, the run report's picture) are the run job's: run/picture.h.
 #pragma once
-#include <optional>
-#include <string>
-#include <vector>
-
-#include "headless.h"
-#include "raycast.h"
-#include "scene.h"
+#include "picture.h"
 #include "subcommand.h"
-#include "volume.h"
+#include "trace_csv.h"
 
 namespace isotouch::app {
 
@@ -23,70 +12,17 @@ Subcommand add_render_command(CLI::App& cli);
 /// Adds `render` under `bench`.
 Subcommand add_bench_render_command(CLI::App& bench);
 
-/// Writes an RGBA8 image (R in the low byte, rows top to bottom) as an 8-bit RGB PNG with
-/// libpng, through PATH.tmp-PID and rename(2): never a half file.
-/// @throws std::runtime_error naming the path and libpng's or the OS's message.
-void write_png(const std::string& path, int width, int height, const std::vector<std::uint32_t>& rgba);
-
-/// The scene's volume, as `isotouch run` loads it (file, or the synthetic shape).
-engine::Volume load_scene_volume(const io::Scene& scene);
-/// The ray caster's field of a volume at the scene's isovalue: background = the value
-/// `isotouch run` publishes outside the grid (core::Isosurface::outside_value of the range).
-engine::RaycastField scene_raycast_field(const io::Scene& scene, const engine::Volume& vol);
-
-/// The orbit camera that shows `vol` the right way up (physical +z up, anterior front,
-/// except for volumes known to be stored otherwise: the headsq CT is upside down).
-engine::OrbitCamera default_camera(const engine::Volume& vol);
-
-/// What one picture shows and how.
-struct PictureRequest {
-  int width = 640, height = 640;
-  engine::OrbitCamera camera;               ///< used unless `view` is set
-  std::optional<engine::CameraView> view;   ///< an explicit grid-world camera
-  engine::RaycastStyle style;
-  std::vector<gpu::RaycastPrim> prims;      ///< overlays, grid-world [m]
-  bool cpu = false;                         ///< the CPU reference instead of the GPU
-};
-
-/// Renders `field` and writes `out_png` (the sculpt scene calls it for before and after).
-/// `direction`: the volume's D (for the orbit camera's physical angles).
-/// @return the frame (image, depth, timings); throws on a Vulkan or PNG failure.
-engine::RaycastImage render_picture(engine::VulkanContext* vk, const engine::RaycastField& field,
-                                    const std::array<double, 9>& direction, const PictureRequest& req,
-                                    const std::string& out_png);
-
-/// The probe at one tick, grid-world: HIP (yellow sphere, seen through the surface),
-/// VHIP (green sphere), the virtual plane (translucent cyan disc through the VHIP, normal
-/// along the force; none without force) and the force (red arrow from the VHIP, length
-/// |F| / force_limit x 12 size units). `size_m`: the size unit [m] (probe_size_m).
-std::vector<gpu::RaycastPrim> probe_prims(const sim::TraceRow& row, double force_limit_n, double size_m);
-/// A size unit for overlays: 0.6 x the largest voxel spacing, at least 0.6 mm [m].
-double probe_size_m(const core::Grid& grid);
-
-/// Result of render_run_picture: "" error when written; caption says what the colours mean.
-struct RunPicture {
-  std::string error;    ///< why no picture was written ("" if written)
-  std::string caption;  ///< e.g. "contact points coloured by |F| from 0 N (blue) to 3.3 N (red) ..."
-  double gpu_ms = -1;
-};
-
-/// The run report's picture: the isosurface around the contact, the HIP's path (thin grey,
-/// seen through the surface), the contact points (VHIP at contact ticks) coloured by |F|
-/// (blue 0 -> green -> yellow -> red at the run's max |F|), and the probe at the tick of
-/// the largest force. Camera: looking against the mean contact force (from outside the
-/// surface) at the contact points' centroid, physical +z up. Never throws: a failure
-/// (no Vulkan device, unwritable path) comes back in RunPicture::error.
-/// @param vol   the run's volume (grid, values, direction D)
-/// @param field the published snapshot (its `background` is used; values from `vol`)
-/// @param trace the run's ticks, grid-world (as run_headless returns them)
-/// @param vk    a Vulkan context to reuse, or null to create one on `device`
-RunPicture render_run_picture(const io::Scene& scene, const engine::Volume& vol, const core::SampleField& field,
-                              const std::vector<sim::TraceRow>& trace, const std::string& out_png,
-                              engine::VulkanContext* vk = nullptr, const std::string& device = "",
-                              int width = 800, int height = 600);
-
-/// trace.csv (physical frame, written by `isotouch run`) read back into grid-world rows
-/// (t, HIP, VHIP, force, contact). @throws std::runtime_error naming the file, line and column.
-std::vector<sim::TraceRow> read_trace_csv(const std::string& path, const engine::Volume& vol);
+// The picture names the commands (and the sculpting app) use without a prefix.
+using run::default_camera;
+using run::load_scene_volume;
+using run::PictureRequest;
+using run::probe_prims;
+using run::probe_size_m;
+using run::read_trace_csv;
+using run::render_picture;
+using run::render_run_picture;
+using run::RunPicture;
+using run::scene_raycast_field;
+using run::write_png;
 
 }  // namespace isotouch::app

@@ -332,14 +332,11 @@ ChainOutput PassChain::run_in_place(const Volume& vol, InPlace& where, std::uint
   return out;
 }
 
-ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_bytes, InPlace* in_place) {
-  VulkanContext& ctx = impl_->ctx;
-  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
-  const std::uint64_t n = vol.grid.voxel_count();
-  const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
-  const std::uint64_t slice_bytes = slice * 4;
-  std::uint64_t limit = ctx.max_binding_bytes();
-  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+namespace {
+
+/// Throws when a row of slices needs more workgroups than one dispatch may have.
+void check_dispatch_width(VulkanContext& ctx, const Volume& vol) {
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1];
   const auto& lim = ctx.properties().limits;
   if (groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X) > lim.maxComputeWorkGroupCount[0] ||
       groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y) > lim.maxComputeWorkGroupCount[1])
@@ -347,283 +344,394 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   if (groups((std::uint64_t(nx) + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS * std::uint64_t(ny), ISOTOUCH_DENSE_WG) >
       lim.maxComputeWorkGroupCount[0])
     throw VolumeError(vol.path + ": volume too wide for one dispatch on " + ctx.info().name);
+}
 
-  auto buffer = [&](std::uint64_t bytes, MemoryIntent intent, const char* what) {
-    if (auto it = impl_->kept.find(what); it != impl_->kept.end()) {
+/// A buffer for this run: the last run's buffer of the same name when its size, intent and
+/// mapping still fit (no new allocation), else a new one.
+struct BufferSource {
+  VulkanContext& ctx;
+  std::map<std::string, GpuBuffer>& kept;
+  const std::string& path;
+  GpuBuffer operator()(std::uint64_t bytes, MemoryIntent intent, const char* what) const {
+    if (auto it = kept.find(what); it != kept.end()) {
       GpuBuffer b = std::move(it->second);
-      impl_->kept.erase(it);
+      kept.erase(it);
       const bool mapped_as_now = intent != MemoryIntent::DeviceLocal ||
                                  (b.mapped() != nullptr) == ctx.device_local_is_host_visible();
       if (b.size() == bytes && b.intent() == intent && mapped_as_now) return b;
     }
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
-    if (!r) throw VolumeError(vol.path + ": " + r.error);
+    if (!r) throw VolumeError(path + ": " + r.error);
     return std::move(*r.value);
-  };
-  const bool filters = has(passes_, PassKind::Gaussian) || has(passes_, PassKind::Closing);
+  }
+};
 
-  // Parameters in voxels, validated (and too-wide kernels rejected) before any allocation.
+/// The filters' parameters in voxels: each Gaussian's kernels (their weights packed in one
+/// array, with each axis's offset) and each closing's radii.
+struct FilterParams {
   std::vector<GaussianAxes> gaussians;
   std::vector<std::array<int, 3>> closings;
   std::vector<float> weights;
   std::vector<std::array<std::uint32_t, 3>> w_offsets;
+};
+
+/// Validated (and too-wide kernels rejected) before any allocation.
+FilterParams filter_params(const Volume& vol, const std::vector<PassDesc>& passes) {
+  FilterParams fp;
   try {
-    for (const PassDesc& p : passes_) {
+    for (const PassDesc& p : passes) {
       if (p.kind == PassKind::Gaussian) {
-        gaussians.push_back(gaussian_axes(vol.grid, p.sigma_mm));
+        fp.gaussians.push_back(gaussian_axes(vol.grid, p.sigma_mm));
         std::array<std::uint32_t, 3> off{};
         for (int a = 0; a < 3; ++a) {
-          off[std::size_t(a)] = std::uint32_t(weights.size());
-          const auto& k = gaussians.back().kernel[std::size_t(a)];
-          weights.insert(weights.end(), k.begin(), k.end());
+          off[std::size_t(a)] = std::uint32_t(fp.weights.size());
+          const auto& k = fp.gaussians.back().kernel[std::size_t(a)];
+          fp.weights.insert(fp.weights.end(), k.begin(), k.end());
         }
-        w_offsets.push_back(off);
+        fp.w_offsets.push_back(off);
       }
-      if (p.kind == PassKind::Closing) closings.push_back(closing_radii(vol.grid, p.radius_mm));
+      if (p.kind == PassKind::Closing) fp.closings.push_back(closing_radii(vol.grid, p.radius_mm));
     }
   } catch (const std::invalid_argument& e) {
     throw VolumeError(vol.path + ": " + e.what());
   }
+  return fp;
+}
 
-  ChainBuffers bufs;
-  GpuBuffer(&field)[2] = bufs.field;
-  field[0] = buffer(n * 4, MemoryIntent::DeviceLocal, "voxels");
-  if (filters) field[1] = buffer(n * 4, MemoryIntent::DeviceLocal, "field ping-pong");
-  // Zero copy where device-local memory is host-visible: the host writes the voxels and
-  // reads the outputs in place; otherwise staging and readback buffers and their copies.
-  const bool direct = field[0].mapped() != nullptr;
-  GpuBuffer &up = bufs.up, &w_dev = bufs.w_dev, &w_up = bufs.w_up, &samples = bufs.samples,
-            &samples_down = bufs.samples_down, &bricks = bufs.bricks, &bricks_down = bufs.bricks_down,
-            &field_down = bufs.field_down;
-  if (!direct) up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
-  if (!weights.empty()) {
-    w_dev = buffer(weights.size() * 4, MemoryIntent::DeviceLocal, "gaussian weights");
-    if (!direct) w_up = buffer(weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
-  }
-  if (impl_->gradient) {
-    samples = buffer(n * sizeof(core::Sample), MemoryIntent::DeviceLocal, "samples");
-    if (!direct) samples_down = buffer(n * sizeof(core::Sample), MemoryIntent::Readback, "samples readback");
-  }
-  const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
-                      bz = std::uint32_t((nz + 7) / 8);
-  const std::uint64_t brick_bytes = std::uint64_t(bx) * by * bz * 2 * 4;
-  if (has(passes_, PassKind::BrickMinMax)) {
-    bricks = buffer(brick_bytes, MemoryIntent::DeviceLocal, "brick ranges");
-    if (!direct) bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
-  }
-  if (filters && !direct) field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
+/// What every planning step reads: the volume, sizes, limits and the chain's buffers.
+struct ChainInput {
+  VulkanContext& ctx;
+  const Volume& vol;
+  const FilterParams& fp;
+  ChainBuffers& bufs;
+  std::uint64_t n, slice_bytes, limit, max_binding_bytes;
+  std::uint32_t bx, by, bz;
+  bool direct, legacy, filters;
+  const std::uint64_t* float_slice;  ///< SlabGeometry::user of the filters (bytes per slice)
+  const BrickLayer* layer;           ///< SlabGeometry::user of the brick min/max
+};
 
-  // Plan every dispatch (slabs) first: the descriptor arena is sized from the plan.
-  using Step = ChainStep;
-  std::vector<Step> steps;
-  sparse::WorkList columns;  // every column of quads, made for the first fused Gaussian
-  const bool legacy = impl_->shaders == ShaderSet::Legacy;
-  std::uint64_t rows_slices = 0;  // most source slices of a brick min/max slab
-  std::uint32_t extra_sets = 0;   // the current brick min/max binds twice per slab
-  int cur = 0;
-  const std::uint64_t float_slice = slice_bytes;
-  BrickLayer layer{std::uint64_t(bx) * by * 2 * 4};
-  std::size_t gi = 0, ci = 0;
-  std::ostringstream info;
-  for (std::size_t i = 0; i < passes_.size(); ++i) {
-    const PassDesc& p = passes_[i];
-    info << "  " << p.label();
-    // A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
-    // list of every column of quads, where the field is one binding and read in place.
-    bool fuse = p.kind == PassKind::Gaussian && !legacy && direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
-                n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
-    for (int a = 0; a < 3 && fuse; ++a)
-      fuse = gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
-    if (fuse) {
-      if (columns.units.empty()) {
-        const auto nb = core::brick_counts(vol.grid);
-        const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
-        std::vector<std::uint32_t> all(total);
-        for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
-        columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path);
-      }
-      const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gaussians[gi].kernel);
-      auto& pipe = impl_->fused[spec];
-      if (!pipe) {
-        pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
-                                                                spec, 0b101u);
-        pipe->set_texel_vec4(1u);
-      }
-      Step s;
-      s.pass = i;
-      s.type = Step::Fused;
-      s.fused = pipe.get();
-      Slab whole;
-      whole.nz = std::uint64_t(nz);
-      whole.src_z1 = std::uint64_t(nz);
-      whole.src = {field[cur].handle(), 0, n * 4};
-      whole.dst = {field[1 - cur].handle(), 0, n * 4};
-      s.slabs.push_back(whole);
-      steps.push_back(std::move(s));
-      cur = 1 - cur;
-      info << ": x, y, z fused in one pass (" << columns.unit_count() << " columns; sigma " << gaussians[gi].sigma_vox[0]
-           << ", " << gaussians[gi].sigma_vox[1] << ", " << gaussians[gi].sigma_vox[2] << " voxels)";
-      ++gi;
+/// Allocates the run's buffers into in.bufs: the voxels and, with filters, the ping-pong
+/// field; staging and readback copies only where device-local memory is not host-visible
+/// (in.direct: the host writes the voxels and reads the outputs in place).
+void make_buffers(const BufferSource& buffer, const std::vector<PassDesc>& passes, bool gradient, ChainInput& in) {
+  ChainBuffers& b = in.bufs;
+  const std::uint64_t n = in.n;
+  b.field[0] = buffer(n * 4, MemoryIntent::DeviceLocal, "voxels");
+  if (in.filters) b.field[1] = buffer(n * 4, MemoryIntent::DeviceLocal, "field ping-pong");
+  in.direct = b.field[0].mapped() != nullptr;
+  const bool direct = in.direct;
+  if (!direct) b.up = buffer(n * 4, MemoryIntent::Upload, "voxels staging");
+  if (!in.fp.weights.empty()) {
+    b.w_dev = buffer(in.fp.weights.size() * 4, MemoryIntent::DeviceLocal, "gaussian weights");
+    if (!direct) b.w_up = buffer(in.fp.weights.size() * 4, MemoryIntent::Upload, "gaussian weights staging");
+  }
+  if (gradient) {
+    b.samples = buffer(n * sizeof(core::Sample), MemoryIntent::DeviceLocal, "samples");
+    if (!direct) b.samples_down = buffer(n * sizeof(core::Sample), MemoryIntent::Readback, "samples readback");
+  }
+  const std::uint64_t brick_bytes = std::uint64_t(in.bx) * in.by * in.bz * 2 * 4;
+  if (has(passes, PassKind::BrickMinMax)) {
+    b.bricks = buffer(brick_bytes, MemoryIntent::DeviceLocal, "brick ranges");
+    if (!direct) b.bricks_down = buffer(brick_bytes, MemoryIntent::Readback, "brick ranges readback");
+  }
+  if (in.filters && !direct) b.field_down = buffer(n * 4, MemoryIntent::Readback, "field readback");
+}
+
+/// The planned dispatches of a run, and what recording them needs.
+struct ChainPlan {
+  std::vector<ChainStep> steps;
+  sparse::WorkList columns;       ///< every column of quads, made for the first fused Gaussian
+  std::uint64_t rows_slices = 0;  ///< most source slices of a brick min/max slab
+  std::uint32_t extra_sets = 0;   ///< the current brick min/max binds twice per slab
+  int cur = 0;                    ///< the field buffer the next pass reads
+  std::size_t gi = 0, ci = 0;     ///< the next Gaussian's and closing's parameters
+  std::ostringstream info;        ///< describe()'s "last run" lines
+};
+
+/// A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
+/// list of every column of quads, where the field is one binding and read in place.
+bool fusable(const ChainInput& in, const PassDesc& p, std::size_t gi) {
+  const int nx = in.vol.grid.dims[0];
+  bool fuse = p.kind == PassKind::Gaussian && !in.legacy && in.direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
+              in.n * 4 <= in.limit && in.n / 4 <= in.ctx.properties().limits.maxTexelBufferElements;
+  for (int a = 0; a < 3 && fuse; ++a)
+    fuse = in.fp.gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+  return fuse;
+}
+
+template <class ChainImpl>
+void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
+  const Volume& vol = in.vol;
+  const std::uint64_t n = in.n;
+  const auto& gauss = in.fp.gaussians[plan.gi];
+  if (plan.columns.units.empty()) {
+    const auto nb = core::brick_counts(vol.grid);
+    const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+    std::vector<std::uint32_t> all(total);
+    for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
+    plan.columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path);
+  }
+  const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gauss.kernel);
+  auto& pipe = impl.fused[spec];
+  if (!pipe) {
+    pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(in.ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
+                                                            spec, 0b101u);
+    pipe->set_texel_vec4(1u);
+  }
+  ChainStep s;
+  s.pass = i;
+  s.type = ChainStep::Fused;
+  s.fused = pipe.get();
+  Slab whole;
+  whole.nz = std::uint64_t(vol.grid.dims[2]);
+  whole.src_z1 = std::uint64_t(vol.grid.dims[2]);
+  whole.src = {in.bufs.field[plan.cur].handle(), 0, n * 4};
+  whole.dst = {in.bufs.field[1 - plan.cur].handle(), 0, n * 4};
+  s.slabs.push_back(whole);
+  plan.steps.push_back(std::move(s));
+  plan.cur = 1 - plan.cur;
+  plan.info << ": x, y, z fused in one pass (" << plan.columns.unit_count() << " columns; sigma " << gauss.sigma_vox[0]
+            << ", " << gauss.sigma_vox[1] << ", " << gauss.sigma_vox[2] << " voxels)";
+  ++plan.gi;
+}
+
+/// One axis (k < 3) of a Gaussian, or of a closing (k < 3 the max, then the min).
+template <class ChainImpl>
+ChainStep plan_filter_axis(ChainImpl& impl, const ChainInput& in, const PassDesc& p, std::size_t i, int k,
+                           ChainPlan& plan) {
+  const int nx = in.vol.grid.dims[0], ny = in.vol.grid.dims[1], nz = in.vol.grid.dims[2];
+  const int axis = k % 3;
+  ChainStep s;
+  s.pass = i;
+  s.type = ChainStep::Filter;
+  s.f.nx = gpu::uint(nx);
+  s.f.ny = gpu::uint(ny);
+  s.f.nz = gpu::uint(nz);
+  s.f.axis = gpu::uint(axis);
+  const bool gauss = p.kind == PassKind::Gaussian;
+  const std::vector<float> no_weights;
+  const std::vector<float>& kern = gauss ? in.fp.gaussians[plan.gi].kernel[std::size_t(axis)] : no_weights;
+  if (gauss) {
+    s.f.radius = gpu::uint(kern.size() / 2);
+    s.f.w_offset = in.fp.w_offsets[plan.gi][std::size_t(axis)];
+  } else {
+    s.f.radius = gpu::uint(in.fp.closings[plan.ci][std::size_t(axis)]);
+    s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
+  }
+  const bool x4 = impl.shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS;
+  plan.info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "")
+            << " r=" << s.f.radius;
+  SlabGeometry g;
+  g.nz = std::uint64_t(nz);
+  g.src_bytes_per_slice = in.slice_bytes;
+  g.halo = axis == 2 ? s.f.radius : 0;
+  g.dst_bytes_before = &floats_before;
+  g.user = in.float_slice;
+  g.wg_z = x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
+  auto sl = plan_slabs(in.ctx, g, in.bufs.field[plan.cur].handle(), in.bufs.field[1 - plan.cur].handle(), in.limit,
+                       in.vol.path + ": " + p.label());
+  if (!sl) throw VolumeError(sl.error);
+  s.slabs = std::move(*sl.value);
+  if (x4) {
+    s.x4 = impl.filter_x4(in.vol.grid.dims, axis, int(s.f.radius), gauss ? 0u : s.f.mode, kern,
+                          slabs_hold_quads(nx, s.slabs));
+    s.pipe = s.x4;
+  } else if (gauss) {
+    if (!impl.gauss)
+      impl.gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(in.ctx, gaussian1d_spv, 3, "gaussian1d");
+    s.pipe = s.f1d = impl.gauss.get();
+  } else {
+    if (!impl.morph) impl.morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(in.ctx, morph1d_spv, 2, "morph1d");
+    s.pipe = s.f1d = impl.morph.get();
+  }
+  return s;
+}
+
+/// A Gaussian (3 axes) or a closing (6: max then min along each axis), one step per axis.
+template <class ChainImpl>
+void plan_separable(ChainImpl& impl, const ChainInput& in, const PassDesc& p, std::size_t i, ChainPlan& plan) {
+  const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
+  for (int k = 0; k < axes; ++k) {
+    plan.steps.push_back(plan_filter_axis(impl, in, p, i, k, plan));
+    plan.cur = 1 - plan.cur;
+  }
+  if (p.kind == PassKind::Gaussian) {
+    const auto& g = in.fp.gaussians[plan.gi];
+    plan.info << " (sigma " << g.sigma_vox[0] << ", " << g.sigma_vox[1] << ", " << g.sigma_vox[2] << " voxels)";
+    ++plan.gi;
+  } else {
+    ++plan.ci;
+  }
+}
+
+/// The brick min/max over z-slabs that start on brick boundaries.
+template <class ChainImpl>
+void plan_minmax(ChainImpl& impl, const ChainInput& in, const PassDesc& p, std::size_t i, ChainPlan& plan) {
+  ChainStep s;
+  s.pass = i;
+  s.type = ChainStep::MinMax;
+  s.pipe = impl.minmax.get();
+  SlabGeometry g;
+  g.nz = std::uint64_t(in.vol.grid.dims[2]);
+  g.src_bytes_per_slice = in.slice_bytes;
+  g.halo = std::uint64_t(p.halo);
+  g.z_multiple = ISOTOUCH_BRICK;
+  g.dst_bytes_before = &bricks_before;
+  g.user = in.layer;
+  g.wg_z = in.legacy ? ISOTOUCH_MINMAX_WG_Z : 1;
+  auto sl = plan_slabs(in.ctx, g, in.bufs.field[plan.cur].handle(), in.bufs.bricks.handle(), in.limit,
+                       in.vol.path + ": " + p.label());
+  if (!sl) throw VolumeError(sl.error);
+  s.slabs = std::move(*sl.value);
+  for (const Slab& b : s.slabs) {
+    plan.rows_slices = std::max(plan.rows_slices, b.src_z1 - b.src_z0);
+    if (!in.legacy) ++plan.extra_sets;
+  }
+  plan.info << ": " << in.bx << "x" << in.by << "x" << in.bz << " bricks";
+  plan.steps.push_back(std::move(s));
+}
+
+/// Every dispatch of the run (z-slabs within the binding limit), pass by pass: planned before
+/// anything is recorded, so that the descriptor arena is sized from the plan.
+template <class ChainImpl>
+void plan_chain(ChainImpl& impl, const std::vector<PassDesc>& passes, const ChainInput& in, ChainPlan& plan) {
+  for (std::size_t i = 0; i < passes.size(); ++i) {
+    const PassDesc& p = passes[i];
+    plan.info << "  " << p.label();
+    if (fusable(in, p, plan.gi)) {
+      plan_fused_gaussian(impl, in, i, plan);
     } else if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
-      const int axes = p.kind == PassKind::Gaussian ? 3 : 6;
-      for (int k = 0; k < axes; ++k) {
-        const int axis = k % 3;
-        Step s;
-        s.pass = i;
-        s.type = Step::Filter;
-        s.f.nx = gpu::uint(nx);
-        s.f.ny = gpu::uint(ny);
-        s.f.nz = gpu::uint(nz);
-        s.f.axis = gpu::uint(axis);
-        const bool gauss = p.kind == PassKind::Gaussian;
-        const std::vector<float> no_weights;
-        const std::vector<float>& kern = gauss ? gaussians[gi].kernel[std::size_t(axis)] : no_weights;
-        if (gauss) {
-          s.f.radius = gpu::uint(kern.size() / 2);
-          s.f.w_offset = w_offsets[gi][std::size_t(axis)];
-        } else {
-          s.f.radius = gpu::uint(closings[ci][std::size_t(axis)]);
-          s.f.mode = k < 3 ? ISOTOUCH_MORPH_MAX : ISOTOUCH_MORPH_MIN;
-        }
-        const bool x4 = impl_->shaders == ShaderSet::Current && s.f.radius <= ISOTOUCH_DENSE_MAX_RADIUS;
-        info << (k ? ", " : ": ") << "xyz"[axis] << (p.kind == PassKind::Closing ? (k < 3 ? "max" : "min") : "") << " r=" << s.f.radius;
-        SlabGeometry g;
-        g.nz = std::uint64_t(nz);
-        g.src_bytes_per_slice = slice_bytes;
-        g.halo = axis == 2 ? s.f.radius : 0;
-        g.dst_bytes_before = &floats_before;
-        g.user = &float_slice;
-        g.wg_z = x4 ? 1 : ISOTOUCH_FILTER_WG_Z;
-        auto sl = plan_slabs(ctx, g, field[cur].handle(), field[1 - cur].handle(), limit,
-                             vol.path + ": " + p.label());
-        if (!sl) throw VolumeError(sl.error);
-        s.slabs = std::move(*sl.value);
-        if (x4) {
-          s.x4 = impl_->filter_x4(vol.grid.dims, axis, int(s.f.radius), gauss ? 0u : s.f.mode, kern,
-                                  slabs_hold_quads(nx, s.slabs));
-          s.pipe = s.x4;
-        } else if (gauss) {
-          if (!impl_->gauss)
-            impl_->gauss = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, gaussian1d_spv, 3, "gaussian1d");
-          s.pipe = s.f1d = impl_->gauss.get();
-        } else {
-          if (!impl_->morph)
-            impl_->morph = std::make_unique<ComputePipeline<gpu::Filter1dPush>>(ctx, morph1d_spv, 2, "morph1d");
-          s.pipe = s.f1d = impl_->morph.get();
-        }
-        steps.push_back(std::move(s));
-        cur = 1 - cur;
-      }
-      if (p.kind == PassKind::Gaussian) {
-        info << " (sigma " << gaussians[gi].sigma_vox[0] << ", " << gaussians[gi].sigma_vox[1] << ", "
-             << gaussians[gi].sigma_vox[2] << " voxels)";
-        ++gi;
-      } else {
-        ++ci;
-      }
+      plan_separable(impl, in, p, i, plan);
     } else if (p.kind == PassKind::Gradient) {
-      Step s;
+      ChainStep s;
       s.pass = i;
-      s.type = Step::Gradient;
-      s.slabs = impl_->gradient->plan(vol.grid, field[cur].handle(), samples.handle(), max_binding_bytes, vol.path);
-      steps.push_back(std::move(s));
+      s.type = ChainStep::Gradient;
+      s.slabs = impl.gradient->plan(in.vol.grid, in.bufs.field[plan.cur].handle(), in.bufs.samples.handle(),
+                                    in.max_binding_bytes, in.vol.path);
+      plan.steps.push_back(std::move(s));
     } else {
-      Step s;
-      s.pass = i;
-      s.type = Step::MinMax;
-      s.pipe = impl_->minmax.get();
-      SlabGeometry g;
-      g.nz = std::uint64_t(nz);
-      g.src_bytes_per_slice = slice_bytes;
-      g.halo = std::uint64_t(p.halo);
-      g.z_multiple = ISOTOUCH_BRICK;
-      g.dst_bytes_before = &bricks_before;
-      g.user = &layer;
-      g.wg_z = legacy ? ISOTOUCH_MINMAX_WG_Z : 1;
-      auto sl = plan_slabs(ctx, g, field[cur].handle(), bricks.handle(), limit, vol.path + ": " + p.label());
-      if (!sl) throw VolumeError(sl.error);
-      s.slabs = std::move(*sl.value);
-      for (const Slab& b : s.slabs) {
-        rows_slices = std::max(rows_slices, b.src_z1 - b.src_z0);
-        if (!legacy) ++extra_sets;
-      }
-      info << ": " << bx << "x" << by << "x" << bz << " bricks";
-      steps.push_back(std::move(s));
+      plan_minmax(impl, in, p, i, plan);
     }
     std::size_t d = 0;
-    for (const Step& s : steps)
+    for (const ChainStep& s : plan.steps)
       if (s.pass == i) d += s.slabs.size();
-    info << ", " << d << " dispatch(es)\n";
+    plan.info << ", " << d << " dispatch(es)\n";
   }
-  GpuBuffer& columns_buf = bufs.columns;  // the fused Gaussian's column list, written in place
-  if (!columns.units.empty()) {
-    columns_buf = buffer(columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
-    std::memcpy(columns_buf.mapped(), columns.units.data(), columns.units.size() * 4);
-  }
-  std::uint32_t sets = extra_sets;
-  for (const Step& s : steps) sets += std::uint32_t(s.slabs.size());
-  // Current brick min/max: the row ranges of one slab's source slices (2 floats per brick
-  // column of every row), reused slab after slab.
-  const std::uint64_t rows_bytes = rows_slices * std::uint64_t(ny) * bx * 8;
-  GpuBuffer& rows = bufs.rows;
-  const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows = nullptr, *mm_bricks = nullptr;
-  if (has(passes_, PassKind::BrickMinMax) && !legacy) {
-    if (rows_slices > lim.maxComputeWorkGroupCount[2])
-      throw VolumeError(vol.path + ": " + std::to_string(rows_slices) + " slices in one brick min/max slab exceed " +
-                        "maxComputeWorkGroupCount[2] on " + ctx.info().name);
-    rows = buffer(rows_bytes, MemoryIntent::DeviceLocal, "brick row ranges");
-    auto& pp = impl_->minmax_x4[bx];
-    if (!pp.first) {
-      pp.first = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_rows_spv, 2, "minmax_rows", 0u,
-                                                                         std::vector<std::uint32_t>{bx}, 1u);
-      pp.second = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(ctx, minmax_bricks_spv, 2, "minmax_bricks",
-                                                                          0u, std::vector<std::uint32_t>{bx}, 1u);
-    }
-    mm_rows = pp.first.get();
-    mm_bricks = pp.second.get();
-  }
-  DescriptorArena arena(ctx, sets, 3 * sets);
-  GpuTimer timer(ctx, std::uint32_t(passes_.size() + 1));
+}
 
-  ChainOutput out;
-  auto t0 = std::chrono::steady_clock::now();
-  std::memcpy(direct ? field[0].mapped() : up.mapped(), vol.voxels.data(), n * 4);
-  if (w_dev) std::memcpy(direct ? w_dev.mapped() : w_up.mapped(), weights.data(), weights.size() * 4);
-  out.upload_ms = ms_since(t0);
+/// The current set's brick min/max: the row ranges of one slab's source slices (2 floats per
+/// brick column of every row, reused slab after slab) and its two pipelines. Null pipelines
+/// without a brick min/max or with the legacy set.
+template <class ChainImpl>
+std::pair<const ComputePipeline<gpu::BrickMinMaxPush>*, const ComputePipeline<gpu::BrickMinMaxPush>*> minmax_rows(
+    ChainImpl& impl, const std::vector<PassDesc>& passes, const BufferSource& buffer, const ChainInput& in,
+    const ChainPlan& plan) {
+  if (!has(passes, PassKind::BrickMinMax) || in.legacy) return {nullptr, nullptr};
+  const auto& lim = in.ctx.properties().limits;
+  if (plan.rows_slices > lim.maxComputeWorkGroupCount[2])
+    throw VolumeError(in.vol.path + ": " + std::to_string(plan.rows_slices) + " slices in one brick min/max slab exceed " +
+                      "maxComputeWorkGroupCount[2] on " + in.ctx.info().name);
+  const std::uint64_t rows_bytes = plan.rows_slices * std::uint64_t(in.vol.grid.dims[1]) * in.bx * 8;
+  in.bufs.rows = buffer(rows_bytes, MemoryIntent::DeviceLocal, "brick row ranges");
+  auto& pp = impl.minmax_x4[in.bx];
+  if (!pp.first) {
+    pp.first = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(in.ctx, minmax_rows_spv, 2, "minmax_rows", 0u,
+                                                                       std::vector<std::uint32_t>{in.bx}, 1u);
+    pp.second = std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(in.ctx, minmax_bricks_spv, 2, "minmax_bricks",
+                                                                        0u, std::vector<std::uint32_t>{in.bx}, 1u);
+  }
+  return {pp.first.get(), pp.second.get()};
+}
 
+/// Records the planned steps (uploads first where staging is used, a barrier after each
+/// step, a timestamp after each pass, the readback copies last), submits and waits.
+/// Returns the dispatches per pass; plan.cur ends on the field buffer the last filter wrote.
+template <class ChainImpl>
+std::vector<int> record_and_submit(ChainImpl& impl, const std::vector<PassDesc>& passes, const ChainInput& in,
+                                   const SlabArgs& proto, DescriptorArena& arena, GpuTimer& timer, ChainPlan& plan,
+                                   ChainOutput& out) {
+  VulkanContext& ctx = in.ctx;
+  ChainBuffers& b = in.bufs;
+  const std::uint64_t n = in.n;
   VkCommandBuffer cmd = ctx.begin_commands();
   timer.record_reset(cmd);
-  if (!direct) {
-    record_copy(cmd, up, field[0], n * 4);
-    if (w_up) record_copy(cmd, w_up, w_dev, weights.size() * 4);
+  if (!in.direct) {
+    record_copy(cmd, b.up, b.field[0], n * 4);
+    if (b.w_up) record_copy(cmd, b.w_up, b.w_dev, in.fp.weights.size() * 4);
     barrier_transfer_to_compute(cmd);
   }
   timer.mark(cmd, 0);
-  std::vector<int> dispatches(passes_.size(), 0);
-  cur = 0;
+  std::vector<int> dispatches(passes.size(), 0);
+  plan.cur = 0;
+  const std::vector<ChainStep>& steps = plan.steps;
   for (std::size_t k = 0; k < steps.size(); ++k) {
-    const Step& s = steps[k];
-    SlabArgs args{nx, ny, nz, bx, by, columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(), &bufs, &lim,
-                  passes_[s.pass].halo};
+    const ChainStep& s = steps[k];
+    SlabArgs args = proto;
+    args.halo = passes[s.pass].halo;
     for (const Slab& sl : s.slabs) record_slab(cmd, arena, s, sl, args);
-    if (s.type == Step::Gradient) impl_->gradient->record(cmd, arena, vol.grid, s.slabs);
+    if (s.type == ChainStep::Gradient) impl.gradient->record(cmd, arena, in.vol.grid, s.slabs);
     dispatches[s.pass] += int(s.slabs.size());
-    if (s.type == Step::Filter || s.type == Step::Fused) cur = 1 - cur;
+    if (s.type == ChainStep::Filter || s.type == ChainStep::Fused) plan.cur = 1 - plan.cur;
     // The next step reads what this one wrote (and a filter overwrites what the previous
     // filter read): make this step's writes visible before any later dispatch.
     barrier_compute_to_compute(cmd);
     if (k + 1 == steps.size() || steps[k + 1].pass != s.pass) timer.mark(cmd, std::uint32_t(s.pass + 1));
   }
-  if (direct) {
+  if (in.direct) {
     barrier_compute_to_host(cmd);
   } else {
     barrier_compute_to_transfer(cmd);
-    if (filters) record_copy(cmd, field[cur], field_down, n * 4);
-    if (samples) record_copy(cmd, samples, samples_down, n * sizeof(core::Sample));
-    if (bricks) record_copy(cmd, bricks, bricks_down, brick_bytes);
+    if (in.filters) record_copy(cmd, b.field[plan.cur], b.field_down, n * 4);
+    if (b.samples) record_copy(cmd, b.samples, b.samples_down, n * sizeof(core::Sample));
+    if (b.bricks) record_copy(cmd, b.bricks, b.bricks_down, std::uint64_t(in.bx) * in.by * in.bz * 2 * 4);
     barrier_transfer_to_host(cmd);
   }
   out.submit_wall_ms = ctx.submit_and_wait(cmd);
+  return dispatches;
+}
+
+}  // namespace
+
+ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_bytes, InPlace* in_place) {
+  VulkanContext& ctx = impl_->ctx;
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
+  std::uint64_t limit = ctx.max_binding_bytes();
+  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+  check_dispatch_width(ctx, vol);
+  const BufferSource buffer{ctx, impl_->kept, vol.path};
+  const FilterParams fp = filter_params(vol, passes_);
+
+  ChainBuffers bufs;
+  const std::uint32_t bx = std::uint32_t((nx + 7) / 8), by = std::uint32_t((ny + 7) / 8),
+                      bz = std::uint32_t((nz + 7) / 8);
+  const std::uint64_t slice_bytes = std::uint64_t(nx) * std::uint64_t(ny) * 4;
+  const BrickLayer layer{std::uint64_t(bx) * by * 2 * 4};
+  ChainInput in{ctx, vol, fp, bufs, vol.grid.voxel_count(), slice_bytes, limit, max_binding_bytes, bx, by, bz,
+                false, impl_->shaders == ShaderSet::Legacy,
+                has(passes_, PassKind::Gaussian) || has(passes_, PassKind::Closing), &slice_bytes, &layer};
+  make_buffers(buffer, passes_, impl_->gradient != nullptr, in);
+
+  ChainPlan plan;
+  plan_chain(*impl_, passes_, in, plan);
+  if (!plan.columns.units.empty()) {  // the fused Gaussian's column list, written in place
+    bufs.columns = buffer(plan.columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
+    std::memcpy(bufs.columns.mapped(), plan.columns.units.data(), plan.columns.units.size() * 4);
+  }
+  std::uint32_t sets = plan.extra_sets;
+  for (const ChainStep& s : plan.steps) sets += std::uint32_t(s.slabs.size());
+  const auto [mm_rows, mm_bricks] = minmax_rows(*impl_, passes_, buffer, in, plan);
+  DescriptorArena arena(ctx, sets, 3 * sets);
+  GpuTimer timer(ctx, std::uint32_t(passes_.size() + 1));
+
+  ChainOutput out;
+  auto t0 = std::chrono::steady_clock::now();
+  std::memcpy(in.direct ? bufs.field[0].mapped() : bufs.up.mapped(), vol.voxels.data(), in.n * 4);
+  if (bufs.w_dev) std::memcpy(in.direct ? bufs.w_dev.mapped() : bufs.w_up.mapped(), fp.weights.data(), fp.weights.size() * 4);
+  out.upload_ms = ms_since(t0);
+  const SlabArgs proto{nx, ny, nz, bx, by, plan.columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(), &bufs,
+                       &ctx.properties().limits, 0};
+  const std::vector<int> dispatches = record_and_submit(*impl_, passes_, in, proto, arena, timer, plan, out);
 
   for (std::size_t i = 0; i < passes_.size(); ++i) {
     PassTiming pt;
@@ -635,9 +743,9 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   out.gpu_timestamps = timer.enabled();
 
   t0 = std::chrono::steady_clock::now();
-  read_outputs(vol, passes_, bufs, cur, direct, filters, {bx, by, bz}, in_place, out);
+  read_outputs(vol, passes_, bufs, plan.cur, in.direct, in.filters, {bx, by, bz}, in_place, out);
   out.download_ms = ms_since(t0);
-  impl_->last_run = info.str();
+  impl_->last_run = plan.info.str();
   keep_buffers(bufs, impl_->kept);
   return out;
 }

@@ -638,15 +638,11 @@ SparseOutput SparseChain::run(const Volume& vol, const core::Isosurface& iso, fl
   return impl_->run_per_brick(vol, iso, background, format, max_binding_bytes);
 }
 
-SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
-                                              core::SampleFormat format, std::uint64_t max_binding_bytes) {
-  const auto t_total = std::chrono::steady_clock::now();
-  const auto& lim = ctx.properties().limits;
-  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];  // lambdas capture these (clang 14: not bindings)
-  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
-    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
-                      std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
-  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
+namespace {
+
+/// The per-brick shader holds the plan's filters in its shared memory and op table, or the
+/// scene needs the dense chain (the message says so).
+void check_per_brick_plan(const Volume& vol, const sparse::Plan& plan) {
   const auto [shared_a, shared_b] = shared_sizes(plan);
   if (shared_a + shared_b > ISOTOUCH_SPARSE_SHARED_FLOATS || plan.ops.size() > ISOTOUCH_SPARSE_MAX_OPS)
     throw VolumeError(vol.path + ": sparse chain: filters of total radius " + std::to_string(plan.radius[0]) + "," +
@@ -655,17 +651,23 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
                       std::to_string(plan.ops.size()) + " ops); the sparse shader holds " +
                       std::to_string(ISOTOUCH_SPARSE_SHARED_FLOATS) + " floats and " +
                       std::to_string(ISOTOUCH_SPARSE_MAX_OPS) + " ops: use the dense chain");
-  std::uint64_t limit = ctx.max_binding_bytes();
-  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
-  const std::uint64_t alloc_limit = ctx.max_allocation_bytes() ? ctx.max_allocation_bytes() : limit;
-  const std::uint64_t buf_limit = std::min(limit, alloc_limit);
-  auto buffer = [&](std::uint64_t bytes, MemoryIntent intent, const std::string& what) {
-    auto r = GpuBuffer::create(ctx, std::max<std::uint64_t>(bytes, 16), intent, what);
-    if (!r) throw VolumeError(vol.path + ": sparse chain: " + r.error);
-    return std::move(*r.value);
-  };
+}
 
-  // Slabs of brick layers whose raw slices (plus the region's apron) fit one binding.
+/// A new buffer of at least 16 bytes, or a VolumeError naming the volume.
+struct PerBrickBuffer {
+  VulkanContext& ctx;
+  const std::string& path;
+  GpuBuffer operator()(std::uint64_t bytes, MemoryIntent intent, const std::string& what) const {
+    auto r = GpuBuffer::create(ctx, std::max<std::uint64_t>(bytes, 16), intent, what);
+    if (!r) throw VolumeError(path + ": sparse chain: " + r.error);
+    return std::move(*r.value);
+  }
+};
+
+/// Slabs of brick layers whose raw slices (plus the region's apron) fit one binding.
+std::vector<SlabPlan> per_brick_slabs(const VulkanContext& ctx, const Volume& vol, const sparse::Plan& plan,
+                                      std::uint64_t buf_limit) {
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const auto nb = core::brick_counts(vol.grid);
   const std::uint64_t slice = std::uint64_t(nx) * std::uint64_t(ny);
   const int below = 1 + plan.radius[2], above = 2 + plan.radius[2];
@@ -692,9 +694,13 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
     slabs.push_back(std::move(s));
     bz = end;
   }
+  return slabs;
+}
 
-  // Host: staging copies and raw brick ranges in one pass over the voxels.
-  SparseOutput out;
+/// Each slab's raw slices: a staging and a device-local buffer, the staging ones filled in
+/// one pass over the voxels. Returns the allocation and the copy wall times [ms].
+std::pair<double, double> stage_slabs(const Volume& vol, const PerBrickBuffer& buffer, std::vector<SlabPlan>& slabs) {
+  const std::uint64_t slice = std::uint64_t(vol.grid.dims[0]) * std::uint64_t(vol.grid.dims[1]);
   auto t0 = std::chrono::steady_clock::now();
   for (SlabPlan& s : slabs) {
     const std::uint64_t bytes = std::uint64_t(s.src_z1 - s.src_z0) * slice * 4;
@@ -703,23 +709,24 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
   }
   const double alloc_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
-  for (int z = 0; z < nz; ++z) {
+  for (int z = 0; z < vol.grid.dims[2]; ++z) {
     const float* src = vol.voxels.data() + std::size_t(z) * slice;
     for (SlabPlan& s : slabs)
       if (z >= s.src_z0 && z < s.src_z1)
         std::memcpy(static_cast<char*>(s.staging.mapped()) + std::uint64_t(z - s.src_z0) * slice * 4, src, slice * 4);
   }
-  const double staging_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso);
-  const std::size_t nc = sel.candidates.size();
-  const double select_ms = ms_since(t0);
+  return {alloc_ms, ms_since(t0)};
+}
 
-  // Candidates per slab (ascending ids: contiguous), pool chunks within each slab.
-  t0 = std::chrono::steady_clock::now();
+/// Candidates per slab (ascending ids: contiguous), pool chunks within each slab, each chunk
+/// within a binding and a dispatch's workgroup count.
+std::vector<Chunk> per_brick_chunks(const VulkanContext& ctx, const Volume& vol, const sparse::Selection& sel,
+                                    std::uint64_t buf_limit, const PerBrickBuffer& buffer, std::vector<SlabPlan>& slabs) {
+  const auto nb = core::brick_counts(vol.grid);
+  const std::size_t nc = sel.candidates.size();
   const std::uint64_t layer = std::uint64_t(nb[0]) * std::uint64_t(nb[1]);
   const std::size_t max_chunk = std::size_t(
-      std::min<std::uint64_t>(buf_limit / kSlotBytes, lim.maxComputeWorkGroupCount[0]));
+      std::min<std::uint64_t>(buf_limit / kSlotBytes, ctx.properties().limits.maxComputeWorkGroupCount[0]));
   if (max_chunk == 0)
     throw VolumeError(vol.path + ": sparse chain: one brick pool slot of " + std::to_string(kSlotBytes) +
                       " bytes exceeds a binding of " + std::to_string(buf_limit) + " bytes");
@@ -727,26 +734,29 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
     throw VolumeError(vol.path + ": sparse chain: " + std::to_string(nc) + " candidate ranges exceed a binding of " +
                       std::to_string(buf_limit) + " bytes");
   std::vector<Chunk> chunks;
-  {
-    std::size_t c = 0;
-    for (std::size_t si = 0; si < slabs.size(); ++si) {
-      SlabPlan& s = slabs[si];
-      s.c0 = c;
-      while (c < nc && sel.candidates[c] < std::uint64_t(s.bz1) * layer) ++c;
-      s.c1 = c;
-      for (std::size_t a = s.c0; a < s.c1; a += max_chunk) {
-        Chunk ch;
-        ch.slab = si;
-        ch.c0 = a;
-        ch.c1 = std::min(s.c1, a + max_chunk);
-        const std::uint64_t bytes = std::uint64_t(ch.c1 - ch.c0) * kSlotBytes;
-        ch.pool = buffer(bytes, MemoryIntent::DeviceLocal, "brick pool (chunk)");
-        ch.readback = buffer(bytes, MemoryIntent::Readback, "brick pool readback (chunk)");
-        chunks.push_back(std::move(ch));
-      }
+  std::size_t c = 0;
+  for (std::size_t si = 0; si < slabs.size(); ++si) {
+    SlabPlan& s = slabs[si];
+    s.c0 = c;
+    while (c < nc && sel.candidates[c] < std::uint64_t(s.bz1) * layer) ++c;
+    s.c1 = c;
+    for (std::size_t a = s.c0; a < s.c1; a += max_chunk) {
+      Chunk ch;
+      ch.slab = si;
+      ch.c0 = a;
+      ch.c1 = std::min(s.c1, a + max_chunk);
+      const std::uint64_t bytes = std::uint64_t(ch.c1 - ch.c0) * kSlotBytes;
+      ch.pool = buffer(bytes, MemoryIntent::DeviceLocal, "brick pool (chunk)");
+      ch.readback = buffer(bytes, MemoryIntent::Readback, "brick pool readback (chunk)");
+      chunks.push_back(std::move(ch));
     }
   }
-  // Ops + weights, candidate ids.
+  return chunks;
+}
+
+/// The shader's parameter buffer: 4 words per op (axis, radius, kind, weights' offset) for
+/// ISOTOUCH_SPARSE_MAX_OPS ops, then the weights.
+std::vector<std::uint32_t> per_brick_params(const sparse::Plan& plan) {
   std::vector<std::uint32_t> params(4 * ISOTOUCH_SPARSE_MAX_OPS + plan.weights.size(), 0);
   for (std::size_t i = 0; i < plan.ops.size(); ++i) {
     const sparse::Op& o = plan.ops[i];
@@ -756,45 +766,18 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
     params[4 * i + 3] = o.w_offset;
   }
   std::memcpy(params.data() + 4 * ISOTOUCH_SPARSE_MAX_OPS, plan.weights.data(), plan.weights.size() * 4);
-  GpuBuffer params_up = buffer(params.size() * 4, MemoryIntent::Upload, "sparse params staging");
-  GpuBuffer params_dev = buffer(params.size() * 4, MemoryIntent::DeviceLocal, "sparse params");
-  GpuBuffer cand_up = buffer(nc * 4, MemoryIntent::Upload, "candidate ids staging");
-  GpuBuffer cand_dev = buffer(nc * 4, MemoryIntent::DeviceLocal, "candidate ids");
-  GpuBuffer ranges_dev = buffer(nc * 16, MemoryIntent::DeviceLocal, "candidate ranges");
-  GpuBuffer ranges_down = buffer(nc * 16, MemoryIntent::Readback, "candidate ranges readback");
-  std::memcpy(params_up.mapped(), params.data(), params.size() * 4);
-  if (nc) std::memcpy(cand_up.mapped(), sel.candidates.data(), nc * 4);
-  const double setup_ms = alloc_ms + ms_since(t0);
-  out.upload_ms = staging_ms + setup_ms;
+  return params;
+}
 
-  // One command buffer: uploads, one dispatch per chunk, readbacks.
-  DescriptorArena arena(ctx, std::uint32_t(std::max<std::size_t>(chunks.size(), 1)),
-                        5 * std::uint32_t(std::max<std::size_t>(chunks.size(), 1)));
-  GpuTimer timer(ctx, 3);
-  VkCommandBuffer cmd = ctx.begin_commands();
-  timer.record_reset(cmd);
-  for (const SlabPlan& s : slabs) record_copy(cmd, s.staging, s.device, s.staging.size());
-  record_copy(cmd, params_up, params_dev, params_up.size());
-  if (nc) record_copy(cmd, cand_up, cand_dev, nc * 4);
-  // Every range record starts as NaN: a record the shader never wrote (a skipped or cut
-  // workgroup on any driver) has no 0/1 decision in .w and is refused below.
-  if (nc) vkCmdFillBuffer(cmd, ranges_dev.handle(), 0, nc * 16, 0x7fc00000u);
-  barrier_transfer_to_compute(cmd);
-  timer.mark(cmd, 0);
-  // Workgroups of a dispatch of n candidates: the preferred count, but never so few that a
-  // workgroup loops over more bricks than llvmpipe's loop budget allows (its loops would
-  // silently stop), never more than one per candidate.
-  const std::uint64_t per_group = sparse::max_bricks_per_workgroup(plan);
-  const std::uint64_t preferred = max_groups ? max_groups : kDefaultGroups;
-  auto workgroups = [&](std::uint64_t n) {
-    const std::uint64_t needed = (n + per_group - 1) / per_group;
-    return std::min<std::uint64_t>(std::max(preferred, needed), n);
-  };
+/// The push constants every chunk's dispatch shares (the chunk's own fields left 0).
+gpu::SparseBrickPush per_brick_push(const Volume& vol, const sparse::Plan& plan, const core::Isosurface& iso,
+                                    float background) {
+  const auto nb = core::brick_counts(vol.grid);
   const GradientConstants k = gradient_constants(vol.grid);
   gpu::SparseBrickPush pc{};
-  pc.nx = gpu::uint(nx);
-  pc.ny = gpu::uint(ny);
-  pc.nz = gpu::uint(nz);
+  pc.nx = gpu::uint(vol.grid.dims[0]);
+  pc.ny = gpu::uint(vol.grid.dims[1]);
+  pc.nz = gpu::uint(vol.grid.dims[2]);
   pc.bx = gpu::uint(nb[0]);
   pc.by = gpu::uint(nb[1]);
   pc.sx = gpu::uint(plan.region[0]);
@@ -807,13 +790,55 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
   pc.inside_above = iso.inside == core::InsideIs::kAbove ? 1u : 0u;
   pc.threshold = sparse::threshold(iso);
   pc.background = background;
-  pc.buf_b = gpu::uint(shared_a);
+  pc.buf_b = gpu::uint(shared_sizes(plan).first);
   pc.inv_2h_x = k.inv_2h[0];
   pc.inv_2h_y = k.inv_2h[1];
   pc.inv_2h_z = k.inv_2h[2];
   pc.inv_h_x = k.inv_h[0];
   pc.inv_h_y = k.inv_h[1];
   pc.inv_h_z = k.inv_h[2];
+  return pc;
+}
+
+/// The buffers of the parameters, the candidate ids and the candidate ranges.
+struct PerBrickIo {
+  GpuBuffer params_up, params_dev, cand_up, cand_dev, ranges_dev, ranges_down;
+};
+
+/// The shader's inputs and outputs besides the slabs and chunks, the inputs written.
+PerBrickIo per_brick_io(const PerBrickBuffer& buffer, const sparse::Plan& plan, const sparse::Selection& sel) {
+  const std::size_t nc = sel.candidates.size();
+  const std::vector<std::uint32_t> params = per_brick_params(plan);
+  PerBrickIo io{buffer(params.size() * 4, MemoryIntent::Upload, "sparse params staging"),
+                buffer(params.size() * 4, MemoryIntent::DeviceLocal, "sparse params"),
+                buffer(nc * 4, MemoryIntent::Upload, "candidate ids staging"),
+                buffer(nc * 4, MemoryIntent::DeviceLocal, "candidate ids"),
+                buffer(nc * 16, MemoryIntent::DeviceLocal, "candidate ranges"),
+                buffer(nc * 16, MemoryIntent::Readback, "candidate ranges readback")};
+  std::memcpy(io.params_up.mapped(), params.data(), params.size() * 4);
+  if (nc) std::memcpy(io.cand_up.mapped(), sel.candidates.data(), nc * 4);
+  return io;
+}
+
+/// One command buffer: the uploads, one dispatch per chunk, the readbacks; submitted and
+/// waited for. `workgroups(n)`: the workgroups of a dispatch of n candidates.
+template <class Workgroups>
+void record_per_brick(VulkanContext& ctx, const ComputePipeline<gpu::SparseBrickPush>& pipe,
+                      const std::vector<SlabPlan>& slabs, const std::vector<Chunk>& chunks, const PerBrickIo& io,
+                      std::size_t nc, gpu::SparseBrickPush pc, const Workgroups& workgroups, GpuTimer& timer,
+                      SparseOutput& out) {
+  DescriptorArena arena(ctx, std::uint32_t(std::max<std::size_t>(chunks.size(), 1)),
+                        5 * std::uint32_t(std::max<std::size_t>(chunks.size(), 1)));
+  VkCommandBuffer cmd = ctx.begin_commands();
+  timer.record_reset(cmd);
+  for (const SlabPlan& s : slabs) record_copy(cmd, s.staging, s.device, s.staging.size());
+  record_copy(cmd, io.params_up, io.params_dev, io.params_up.size());
+  if (nc) record_copy(cmd, io.cand_up, io.cand_dev, nc * 4);
+  // Every range record starts as NaN: a record the shader never wrote (a skipped or cut
+  // workgroup on any driver) has no 0/1 decision in .w and is refused below.
+  if (nc) vkCmdFillBuffer(cmd, io.ranges_dev.handle(), 0, nc * 16, 0x7fc00000u);
+  barrier_transfer_to_compute(cmd);
+  timer.mark(cmd, 0);
   for (const Chunk& ch : chunks) {
     const SlabPlan& s = slabs[ch.slab];
     pc.src_z0 = gpu::uint(s.src_z0);
@@ -824,25 +849,84 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
     pc.groups = gpu::uint(workgroups(ch.c1 - ch.c0));
     out.stats.workgroups += pc.groups;
     pipe.bind(cmd, arena,
-                     {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{cand_dev.handle(), 0, cand_dev.size()},
-                      BufferRange{params_dev.handle(), 0, params_dev.size()},
-                      BufferRange{ranges_dev.handle(), 0, ranges_dev.size()},
-                      BufferRange{ch.pool.handle(), 0, ch.pool.size()}});
+              {BufferRange{s.device.handle(), 0, s.device.size()}, BufferRange{io.cand_dev.handle(), 0, io.cand_dev.size()},
+               BufferRange{io.params_dev.handle(), 0, io.params_dev.size()},
+               BufferRange{io.ranges_dev.handle(), 0, io.ranges_dev.size()},
+               BufferRange{ch.pool.handle(), 0, ch.pool.size()}});
     pipe.push(cmd, pc);
     vkCmdDispatch(cmd, pc.groups, 1, 1);
   }
   barrier_compute_to_transfer(cmd);
   timer.mark(cmd, 1);
-  if (nc) record_copy(cmd, ranges_dev, ranges_down, nc * 16);
+  if (nc) record_copy(cmd, io.ranges_dev, io.ranges_down, nc * 16);
   for (const Chunk& ch : chunks) record_copy(cmd, ch.pool, ch.readback, ch.pool.size());
   barrier_transfer_to_host(cmd);
   timer.mark(cmd, 2);
   out.submit_wall_ms = ctx.submit_and_wait(cmd);
+}
+
+/// describe()'s "last run" line of a per-brick run.
+std::string per_brick_info(const Volume& vol, const sparse::Plan& plan, std::size_t slabs, std::size_t chunks,
+                           std::uint64_t per_group, const SparseOutput& out) {
+  const auto nb = core::brick_counts(vol.grid);
+  std::ostringstream info;
+  info << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates
+       << " candidates, " << out.stats.active << " active; region " << plan.region[0] << "x" << plan.region[1] << "x"
+       << plan.region[2] << " (radius " << plan.radius[0] << "," << plan.radius[1] << "," << plan.radius[2]
+       << "; ops: " << plan.text << "), " << slabs << " slab(s), " << chunks << " dispatch(es), " << out.stats.workgroups
+       << " workgroups (<= " << per_group << " bricks each: " << sparse::loop_trips_per_brick(plan)
+       << " loop trips per brick); snapshot "
+       << out.stats.snapshot_bytes << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
+  return info.str();
+}
+
+}  // namespace
+
+SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
+                                              core::SampleFormat format, std::uint64_t max_binding_bytes) {
+  const auto t_total = std::chrono::steady_clock::now();
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    throw VolumeError(vol.path + ": sparse chain: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
+                      std::to_string(nx) + "x" + std::to_string(ny) + "x" + std::to_string(nz));
+  const sparse::Plan plan = sparse::make_plan(vol.grid, passes, vol.path);
+  check_per_brick_plan(vol, plan);
+  std::uint64_t limit = ctx.max_binding_bytes();
+  if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
+  const std::uint64_t alloc_limit = ctx.max_allocation_bytes() ? ctx.max_allocation_bytes() : limit;
+  const std::uint64_t buf_limit = std::min(limit, alloc_limit);
+  const PerBrickBuffer buffer{ctx, vol.path};
+  std::vector<SlabPlan> slabs = per_brick_slabs(ctx, vol, plan, buf_limit);
+
+  // Host: staging copies, then the candidates (raw brick ranges in one pass over the voxels).
+  SparseOutput out;
+  const auto [alloc_ms, staging_ms] = stage_slabs(vol, buffer, slabs);
+  auto t0 = std::chrono::steady_clock::now();
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso);
+  const std::size_t nc = sel.candidates.size();
+  const double select_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const std::vector<Chunk> chunks = per_brick_chunks(ctx, vol, sel, buf_limit, buffer, slabs);
+  const PerBrickIo io = per_brick_io(buffer, plan, sel);
+  out.upload_ms = staging_ms + (alloc_ms + ms_since(t0));
+
+  // Workgroups of a dispatch of n candidates: the preferred count, but never so few that a
+  // workgroup loops over more bricks than llvmpipe's loop budget allows (its loops would
+  // silently stop), never more than one per candidate.
+  const std::uint64_t per_group = sparse::max_bricks_per_workgroup(plan);
+  const std::uint64_t preferred = max_groups ? max_groups : kDefaultGroups;
+  auto workgroups = [&](std::uint64_t n) {
+    const std::uint64_t needed = (n + per_group - 1) / per_group;
+    return std::min<std::uint64_t>(std::max(preferred, needed), n);
+  };
+  GpuTimer timer(ctx, 3);
+  record_per_brick(ctx, pipe, slabs, chunks, io, nc, per_brick_push(vol, plan, iso, background), workgroups, timer,
+                   out);
 
   // Host: ranges, the shader's decision checked against the host's, publication.
   t0 = std::chrono::steady_clock::now();
   const std::vector<sparse::CandidateRange> ranges =
-      checked_ranges(vol, sel, static_cast<const float*>(ranges_down.mapped()), iso, background);
+      checked_ranges(vol, sel, static_cast<const float*>(io.ranges_down.mapped()), iso, background);
   std::vector<const core::Sample*> where(nc, nullptr);
   for (const Chunk& ch : chunks)
     for (std::size_t c = ch.c0; c < ch.c1; ++c)
@@ -861,16 +945,7 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
   out.stats.slabs = slabs.size();
   out.stats.dispatches = chunks.size();
   out.total_ms = ms_since(t_total);
-
-  std::ostringstream info;
-  info << nb[0] << "x" << nb[1] << "x" << nb[2] << " = " << out.stats.bricks_total << " bricks, " << out.stats.candidates
-       << " candidates, " << out.stats.active << " active; region " << plan.region[0] << "x" << plan.region[1] << "x"
-       << plan.region[2] << " (radius " << plan.radius[0] << "," << plan.radius[1] << "," << plan.radius[2]
-       << "; ops: " << plan.text << "), " << slabs.size() << " slab(s), " << chunks.size() << " dispatch(es), " << out.stats.workgroups
-       << " workgroups (<= " << per_group << " bricks each: " << sparse::loop_trips_per_brick(plan)
-       << " loop trips per brick); snapshot "
-       << out.stats.snapshot_bytes << " B vs dense fp32 " << out.stats.dense_fp32_bytes << " B";
-  last_run = info.str();
+  last_run = per_brick_info(vol, plan, slabs.size(), chunks.size(), per_group, out);
   return out;
 }
 

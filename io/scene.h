@@ -25,7 +25,7 @@ struct SyntheticSpec {
 
 /// One engine pass as the scene lists it (engine::PassDesc without the engine's headers:
 /// the scene library builds without Vulkan). Converted and checked with
-/// engine::validate_passes by app::scene_passes (run_job.h).
+/// engine::validate_passes by run::scene_passes (run/scene_setup.h).
 struct PassSpec {
   std::string kind;       ///< "gaussian", "closing", "gradient", "brick_minmax"
   double sigma_mm = 0;    ///< gaussian: standard deviation [mm], > 0

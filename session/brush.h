@@ -196,9 +196,10 @@ class Sculptor {
   /// Writes `b` back into the volume (and the GPU copy): the bricks are as when saved.
   void restore_bricks(const BrickBackup& b);
   /// Rolls back the last apply(), given what save_bricks() held of its touched bricks
-  /// before it: the voxels as before, and the undo step it pushed (if it was a stroke of
-  /// its own, `undo_depth_before` the history's depth before it) forgotten.
-  void roll_back_apply(const BrickBackup& before, bool own_stroke, std::size_t undo_depth_before);
+  /// before it: the voxels as before, and the undo step it pushed forgotten when it was a
+  /// stroke of its own that is still the newest undo step (not one the memory limit
+  /// dropped, nor one that changed nothing). Call it before any other edit.
+  void roll_back_apply(const BrickBackup& before);
 
   const engine::Volume& volume() const { return vol_; }
   const EditHistory& history() const { return history_; }
@@ -210,6 +211,7 @@ class Sculptor {
   engine::Volume vol_;
   std::unique_ptr<BrushEngine> engine_;
   EditHistory history_;
+  std::uint64_t last_own_stroke_ = 0;  ///< the stroke the last apply() opened itself (0: it ran inside one)
 };
 
 }  // namespace isotouch::session

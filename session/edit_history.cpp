@@ -81,6 +81,7 @@ void EditHistory::begin_stroke() {
   dropped_redo_ = std::move(redo_);  // kept (not counted) until the next stroke, undo or redo
   redo_.clear();
   open_ = Stroke{};
+  open_->serial = ++serials_;
 }
 
 void EditHistory::record(const Volume& vol, const std::vector<std::uint32_t>& ids) {

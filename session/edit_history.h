@@ -72,6 +72,11 @@ class EditHistory {
   /// stroke's begin_stroke() dropped. Call it right after that stroke ended. No-op if there
   /// is no undo stroke.
   void discard_newest_stroke();
+  /// Serial numbers of strokes (1, 2, ... in the order they were opened): the open stroke's
+  /// and the newest undo stroke's, 0 for none. A stroke that ended with no change, or was
+  /// dropped by the memory limit, is never the newest undo stroke.
+  std::uint64_t open_stroke_serial() const { return open_ ? open_->serial : 0; }
+  std::uint64_t newest_stroke_serial() const { return undo_.empty() ? 0 : undo_.back().serial; }
 
   /// Called with the restored brick ids after undo / redo changed `vol` (e.g. to upload
   /// them to the GPU copy of the volume).
@@ -89,6 +94,7 @@ class EditHistory {
   struct Stroke {
     std::map<std::uint32_t, std::vector<float>> bricks;  ///< id -> content (pre-edit, or post-edit once undone)
     std::uint64_t bytes = 0;
+    std::uint64_t serial = 0;  ///< begin_stroke's count: which stroke this is
   };
   std::vector<std::uint32_t> swap_in(Stroke& s, engine::Volume& vol);
   void enforce_limit();
@@ -99,6 +105,7 @@ class EditHistory {
   std::optional<Stroke> open_;
   std::uint64_t bytes_ = 0, limit_ = 0;
   std::size_t dropped_ = 0;
+  std::uint64_t serials_ = 0;  ///< strokes opened so far
   std::function<void(const std::vector<std::uint32_t>&)> on_restore_;
 };
 

@@ -65,8 +65,6 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   // What a brush may change, kept until its snapshot is built: if that fails, the volume
   // goes back to it, so that volume and snapshot never disagree.
   session::Sculptor::BrickBackup before;
-  const bool own_stroke = !sc.history().stroke_open();
-  const std::size_t undo_depth = sc.history().undo_depth();
   std::vector<std::uint32_t> changed;
   switch (e.kind) {
     case EditEvent::Kind::kBrush:
@@ -88,7 +86,7 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
       // LiveField::update publishes nothing when it throws: take the edit back. The
       // update's exception is the one that goes on.
       try {
-        if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before, own_stroke, undo_depth);
+        if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before);
         else if (e.kind == EditEvent::Kind::kUndo) (void)sc.redo();
         else (void)sc.undo();
       } catch (...) {

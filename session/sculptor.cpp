@@ -31,6 +31,7 @@ BrushResult Sculptor::apply(const Brush& b) {
   if (std::string e = validate(b); !e.empty()) throw BrushError(e);
   const bool own = !history_.stroke_open();
   if (own) history_.begin_stroke();
+  last_own_stroke_ = own ? history_.open_stroke_serial() : 0;
   history_.record(vol_, touched_bricks(vol_.grid, b));
   BrushResult r;
   try {
@@ -56,9 +57,12 @@ void Sculptor::restore_bricks(const BrickBackup& b) {
   if (engine_ && !b.ids.empty()) engine_->upload_bricks(vol_, b.ids);
 }
 
-void Sculptor::roll_back_apply(const BrickBackup& before, bool own_stroke, std::size_t undo_depth_before) {
+void Sculptor::roll_back_apply(const BrickBackup& before) {
   restore_bricks(before);
-  if (own_stroke && history_.undo_depth() == undo_depth_before + 1) history_.discard_newest_stroke();
+  // By identity, not by depth: the limit may have dropped older strokes as this one was
+  // pushed (the depth unchanged), and a stroke that changed nothing was never pushed.
+  if (last_own_stroke_ != 0 && history_.newest_stroke_serial() == last_own_stroke_) history_.discard_newest_stroke();
+  last_own_stroke_ = 0;
 }
 
 std::vector<std::uint32_t> Sculptor::undo() { return history_.undo(vol_); }

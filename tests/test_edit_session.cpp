@@ -19,7 +19,8 @@
 #include "field_view.h"
 #include "headless.h"
 #include "record.h"
-#include "run_job.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
@@ -339,6 +340,37 @@ TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackGpu) {
   EXPECT_EQ(vk.validation_messages(), 0u);
 }
 
+// A brush whose stroke fits the undo history's memory limit only by pushing the older
+// stroke out, and whose snapshot then fails, is taken back without leaving an undo step:
+// its voxels are restored, so undoing its step would change nothing. The older stroke is
+// gone for good (the limit dropped it), so nothing is left to undo. Truth: the volume after
+// the first brush, bit for bit, and an undo that restores nothing.
+TEST(EditSession, AFailedBrushThatPushedAStrokeOutLeavesNoUndoStep) {
+  const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
+  const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
+  const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
+  const auto stroke_bytes = [&](const Brush& x) {
+    EditSession m(Volume(v), nullptr, sphere_options(), 16.0);
+    m.apply(brush_event(x), nullptr);
+    return m.sculptor().history().bytes();
+  };
+  const std::uint64_t bytes_a = stroke_bytes(a), bytes_b = stroke_bytes(b);
+  const double limit = 1.25 * double(std::max(bytes_a, bytes_b));  // room for either, not both
+  ASSERT_LT(limit, double(bytes_a + bytes_b));
+  EditSession s(Volume(v), nullptr, sphere_options(), limit / double(1u << 20));
+  ASSERT_TRUE(s.apply(brush_event(a), nullptr).published);
+  ASSERT_EQ(s.sculptor().history().undo_depth(), 1u);
+  const Volume after_a = s.volume();
+  s.set_update_fault_for_test([] { throw std::bad_alloc(); });
+  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
+  s.set_update_fault_for_test({});
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  EXPECT_EQ(s.sculptor().history().dropped_strokes(), 1u) << "b's stroke pushed a's out";
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 0u) << "the failed brush left an undo step";
+  EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty()) << "an undo step that changes nothing";
+  EXPECT_TRUE(same_bits(s.volume(), after_a));
+}
+
 // The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook
 // the trace is what it was.
 TEST(Headless, HookPublishesBeforeTheNextTick) {
@@ -407,11 +439,11 @@ TEST(RunEdits, SphereTimelineCarves) {
                                       "duration_s": 0.1}]}})";
   const auto scene = isotouch::io::parse_scene(text.str(), "sphere-edits.json");
   const fs::path out = temp_dir("isotouch_edits_sphere");
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
-  const auto m = isotouch::app::run_scene(scene, opt, log);
+  const auto m = isotouch::run::run_scene(scene, opt, log);
   ASSERT_TRUE(m.edits.present);
   EXPECT_EQ(m.edits.timeline_brushes, 11);  // 1 + ceil(100 ticks / 10)
   EXPECT_GE(m.edits.publications, 2);
@@ -449,12 +481,12 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   auto scene = isotouch::io::load_scene(kScenes + "/drill-skull.json");
   scene.draw_plots = false;  // pictures take most of the run's time on lavapipe; cli_run_drill_skull checks them
   const fs::path out = temp_dir("isotouch_edits_drill");
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   opt.record_path = (out / "run.rec").string();
   std::ostringstream log;
-  const auto m = isotouch::app::run_scene(scene, opt, log);
+  const auto m = isotouch::run::run_scene(scene, opt, log);
   // The bone along the press ray, from this file's own trilinear interpolation of the
   // unedited volume: from the first point inside (the contact) to the first point outside after it.
   const Volume before = isotouch::io::load_volume(scene.volume_path);
@@ -496,10 +528,10 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   ASSERT_EQ(rec.ticks.size(), trace.size());
   ASSERT_EQ(rec.format_version, 3);
   isotouch::session::LiveFieldOptions lo;
-  lo.passes = isotouch::app::scene_passes(scene);
+  lo.passes = isotouch::run::scene_passes(scene);
   lo.iso = isotouch::core::Isosurface{scene.hri.tau, scene.hri.inside};
   lo.background = float(lo.iso.outside_value(before.min_value, before.max_value));
-  lo.format = isotouch::app::scene_sample_format(scene);
+  lo.format = isotouch::run::scene_sample_format(scene);
   EditSession replica(Volume(before), nullptr, lo);
   std::size_t e = 0;
   bool crossed = false;

@@ -18,7 +18,7 @@
 #include "vk_test_context.h"
 #include "gpu_cpu_compare.h"
 #include "raycast.h"
-#include "render_cmd.h"
+#include "picture.h"
 #include "scene.h"
 #include "synthetic.h"
 #include "volume_io.h"
@@ -125,7 +125,7 @@ TEST(Raycast, HeadCtGpuMatchesCpuPerPixel) {
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
   const RaycastField f = engine::make_raycast_field(vol.grid, vol.voxels, iso,
                                                     float(iso.outside_value(vol.min_value, vol.max_value)));
-  const CameraView view = engine::orbit_view(f.grid, vol.direction, app::default_camera(vol));
+  const CameraView view = engine::orbit_view(f.grid, vol.direction, run::default_camera(vol));
   // The voxels read 4 per texel (quads) and 1 per texel; with and without skipping; with a
   // clip plane through the centre (the cut face: the border of the field's cells too).
   for (bool quads : {true, false}) {
@@ -220,7 +220,7 @@ TEST(Raycast, SkippingOnAndOffGiveTheSameImage) {
   };
   std::vector<Case> cases;
   for (double az : {0.0, 63.0, 200.0}) {
-    engine::OrbitCamera cam = app::default_camera(head);
+    engine::OrbitCamera cam = run::default_camera(head);
     cam.azimuth_deg = az;
     cam.elevation_deg = az / 5;
     cases.push_back({&hf, engine::orbit_view(hf.grid, head.direction, cam)});
@@ -613,7 +613,7 @@ TEST(Raycast, ProbePrimitivesAreDrawn) {
   row.vhip_m = s.centre() + Vec3{0, -s.r_m, 0};
   row.force_n = {0, -1.5, 0};
   row.contact = true;
-  const auto prims = app::probe_prims(row, 3.0, 1e-3);
+  const auto prims = run::probe_prims(row, 3.0, 1e-3);
   EXPECT_GE(prims.size(), 5u);  // HIP, VHIP, plane, arrow shaft and head
   auto rc = engine::RayCaster::create(vk(), f);
   ASSERT_TRUE(rc) << rc.error;
@@ -630,14 +630,14 @@ TEST(Raycast, ProbePrimitivesAreDrawn) {
 TEST(Raycast, PngIsWrittenWholeAndReadable) {
   const std::string path = (std::filesystem::temp_directory_path() / "isotouch_test_raycast.png").string();
   std::vector<std::uint32_t> px(6 * 4, 0xff00ff00u);
-  app::write_png(path, 6, 4, px);
+  run::write_png(path, 6, 4, px);
   std::ifstream in(path, std::ios::binary);
   char sig[8] = {};
   in.read(sig, 8);
   EXPECT_EQ(std::string(sig, 8), std::string("\x89PNG\r\n\x1a\n", 8));
   std::filesystem::remove(path);
-  EXPECT_THROW(app::write_png("/proc/no/such/dir/x.png", 6, 4, px), std::exception);
-  EXPECT_THROW(app::write_png(path, 5, 4, px), std::runtime_error);
+  EXPECT_THROW(run::write_png("/proc/no/such/dir/x.png", 6, 4, px), std::exception);
+  EXPECT_THROW(run::write_png(path, 5, 4, px), std::runtime_error);
 }
 
 // The picture follows an edit incrementally: RayCaster::update with the bricks a brush
@@ -667,7 +667,7 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
   // Three views (front, side, back): every edit below shows in one of them.
   std::vector<CameraView> views;
   for (double az : {0.0, 90.0, 180.0}) {
-    engine::OrbitCamera cam = app::default_camera(vol);
+    engine::OrbitCamera cam = run::default_camera(vol);
     cam.azimuth_deg = az;
     views.push_back(engine::orbit_view(f0.grid, vol.direction, cam));
   }
@@ -774,7 +774,7 @@ TEST(Raycast, ReusedFramesEqualFullFrames) {
   const engine::Volume vol = io::load_volume(kHead);
   const core::Isosurface iso{1150, core::InsideIs::kAbove};
   const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
-  const CameraView view = engine::orbit_view(vol.grid, vol.direction, app::default_camera(vol));
+  const CameraView view = engine::orbit_view(vol.grid, vol.direction, run::default_camera(vol));
   const Vec3 c = vol.grid.centre_m();
   const std::vector<gpu::RaycastPrim> at_a = {engine::prim_sphere(c + Vec3{0, -0.06, 0.01}, 4e-3, {1, 1, 0})};
   const std::vector<gpu::RaycastPrim> at_b = {engine::prim_sphere(c + Vec3{0.02, -0.06, -0.01}, 4e-3, {0, 1, 0}),

@@ -1,4 +1,4 @@
-// app::run_scene's force-step figures, recomputed independently from trace.csv:
+// run::run_scene's force-step figures, recomputed independently from trace.csv:
 // contact.max_force_step_n (|F|, both ticks in contact), max_force_vector_step_n
 // (|F_k - F_k-1|, both ticks in contact), max_release_step_n (|F| on a contact tick whose
 // next tick has no contact) and max_any_step_n (any two consecutive ticks). Releases with
@@ -10,7 +10,10 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <map>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -19,13 +22,14 @@
 #include <sstream>
 
 #include "voxel_probe.h"
-#include "run_job.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
 namespace fs = std::filesystem;
-using isotouch::app::RunMetrics;
+using isotouch::run::RunMetrics;
 using isotouch::io::Scene;
 using isotouch::engine::Volume;
 
@@ -103,11 +107,11 @@ fs::path run_into_temp(const Scene& sc, const std::string& name, RunMetrics* met
   const fs::path out = fs::temp_directory_path() /
                        (name + "_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
   fs::remove_all(out);
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   if (metrics) *metrics = m;
   return out;
 }
@@ -204,11 +208,11 @@ TEST(RunJob, NoContactGivesNullErrorsNotZero) {
   const fs::path out = fs::temp_directory_path() /
                        ("isotouch_run_job_nocontact_" + std::to_string(::testing::UnitTest::GetInstance()->random_seed()));
   fs::remove_all(out);
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = out.string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   EXPECT_EQ(m.contact_ticks, 0);
   EXPECT_NE(log.str().find("no contact: the probe never touched the isosurface"), std::string::npos) << log.str();
   std::ifstream js(out / "summary.json");
@@ -359,11 +363,11 @@ TEST(RunJob, EditsThatDoNothingSaySo) {
                    {"t_s": 0.05, "kind": "add", "at": [23.5, 23.5, 23.5], "radius_mm": 22, "strength": 1000},
                    {"t_s": 100, "kind": "undo"}]}})";
   const Scene sc = isotouch::io::load_scene((dir / "noop.json").string());
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   const auto& e = m.edits;
   EXPECT_EQ(e.undo_nothing, 1);
   EXPECT_EQ(e.redo_nothing, 1);
@@ -403,11 +407,11 @@ TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": false,
       "timeline": [{"t_s": 0.1, "kind": "carve", "at": [9.5, 23.5, 23.5], "radius_mm": 4, "strength": 1000}]}})";
   const Scene sc = isotouch::io::load_scene((dir / "carved.json").string());
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
   std::ostringstream log;
-  const RunMetrics m = isotouch::app::run_scene(sc, opt, log);
+  const RunMetrics m = isotouch::run::run_scene(sc, opt, log);
   ASSERT_GT(m.contact_ticks, 100);
   ASSERT_EQ(m.edits.contact_ticks_after_edit, m.contact_ticks) << "every contact tick read the carved snapshot";
   EXPECT_EQ(m.surface_err_not_found_ticks, 0);
@@ -444,11 +448,11 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
   fs::remove_all(dir);
   Scene sc = isotouch::io::load_scene(kScenes + "/head.json");
   sc.draw_plots = false;
-  isotouch::app::RunOptions opt;
+  isotouch::run::RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = false;
   std::ostringstream log;
-  (void)isotouch::app::run_scene(sc, opt, log);
+  (void)isotouch::run::run_scene(sc, opt, log);
   std::ifstream js(dir / "summary.json");
   const auto j = nlohmann::json::parse(js);
   const auto& s = j.at("script");
@@ -487,5 +491,153 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
   EXPECT_NEAR(s.at("lift_max_force_n").get<double>(), lift_max, 1e-6);  // trace.csv keeps 9 digits
   EXPECT_EQ(s.at("lift_inward_ticks").get<long>(), inward);
   EXPECT_NEAR(s.at("lift_max_inward_force_n").get<double>(), inward_max, 1e-6);
+  fs::remove_all(dir);
+}
+
+namespace {
+/// Runs a scene given as JSON text (written to DIR/scene.json) into DIR/out.
+RunMetrics run_text(const fs::path& dir, const std::string& json) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "scene.json") << json;
+  const Scene sc = isotouch::io::load_scene((dir / "scene.json").string());
+  isotouch::run::RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  opt.progress = false;
+  std::ostringstream log;
+  return isotouch::run::run_scene(sc, opt, log);
+}
+
+/// RMS and max over the contact ticks of trace.csv of | |VHIP - c| - radius | (physical =
+/// grid-world for the synthetic sphere), and how many contact ticks there were.
+struct SphereError {
+  double rms = 0, max = 0;
+  long n = 0;
+};
+SphereError sphere_error(const fs::path& trace, const isotouch::core::Vec3& c, double radius) {
+  std::ifstream in(trace);
+  std::string line;
+  std::getline(in, line);
+  SphereError e;
+  double sum2 = 0;
+  while (std::getline(in, line)) {
+    std::vector<double> v;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+    if (v.size() < 11 || v[10] == 0) continue;
+    const double dx = v[4] - c.x, dy = v[5] - c.y, dz = v[6] - c.z;
+    const double d = std::abs(std::sqrt(dx * dx + dy * dy + dz * dz) - radius);
+    e.max = std::max(e.max, d);
+    sum2 += d * d;
+    ++e.n;
+  }
+  if (e.n) e.rms = std::sqrt(sum2 / double(e.n));
+  return e;
+}
+}  // namespace
+
+TEST(RunJob, SurfaceErrorWithAToolIsThatOfItsSurface) {
+  // A spherical tool of radius 3 mm on the analytic sphere of radius 15 mm: the VHIP is the
+  // tool's centre, so the surface error is | |VHIP - c| - (15 + 3) mm |, computed here from
+  // trace.csv; without subtracting r it would be about 3 mm. Without edits, and with a carve
+  // far from the probe before the first contact (every contact tick reads an edited snapshot).
+  const Volume vol = isotouch::engine::make_sphere({48, 48, 48}, 1e-3, 15);
+  const auto c = vol.grid.to_world({23.5, 23.5, 23.5});
+  const std::string base = R"({"name": "tool", "volume": {"synthetic": "sphere", "dims": [48, 48, 48],
+    "spacing_m": 0.001, "radius_vox": 15}, "isovalue": 0, "inside": "above",
+    "servo": {"tool": {"radius_mm": 3}},
+    "script": {"hold_s": 0.1, "stroke_length_m": 0.004}, "outputs": {"plots": false})";
+  const std::string carve = R"(, "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": false,
+      "timeline": [{"t_s": 0.1, "kind": "carve", "at": [9.5, 23.5, 23.5], "radius_mm": 4, "strength": 1000}]})";
+  for (const bool edited : {false, true}) {
+    SCOPED_TRACE(edited ? "carved" : "unedited");
+    const fs::path dir = fs::temp_directory_path() /
+                         ("isotouch_run_job_tool_err_" + std::to_string(edited) + "_" + std::to_string(::getpid()));
+    const RunMetrics m = run_text(dir, base + (edited ? carve : "") + "}");
+    ASSERT_GT(m.contact_ticks, 100);
+    if (edited) {
+      ASSERT_EQ(m.edits.contact_ticks_after_edit, m.contact_ticks);
+    }
+    EXPECT_EQ(m.surface_err_not_found_ticks, 0);
+    const SphereError e = sphere_error(dir / "out" / "trace.csv", c, 0.018);
+    ASSERT_EQ(e.n, m.contact_ticks);
+    EXPECT_LT(e.max, 1e-3) << "the tool's surface stays near the sphere";
+    EXPECT_NEAR(m.surface_err_max_m, e.max, 5e-5) << "max against the analytic sphere";
+    EXPECT_NEAR(m.surface_err_rms_m, e.rms, 5e-5);
+    fs::remove_all(dir);
+  }
+}
+
+namespace {
+/// drilled.stl read back on its own (binary STL: 80-byte header, count, 50 bytes a facet):
+/// its triangles, whether each edge (vertices welded by exact float position) is in exactly
+/// two triangles, zero-area triangles, and the enclosed volume (divergence theorem) [m^3].
+struct StlFigures {
+  std::size_t triangles = 0, zero_area = 0, open_edges = 0;
+  double volume_m3 = 0;
+};
+StlFigures read_stl(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char header[80];
+  std::uint32_t n = 0;
+  in.read(header, 80);
+  in.read(reinterpret_cast<char*>(&n), 4);
+  StlFigures f;
+  f.triangles = n;
+  std::map<std::array<float, 3>, std::uint32_t> ids;
+  std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
+  for (std::uint32_t t = 0; t < n && in; ++t) {
+    float rec[12];
+    std::uint16_t attr;
+    in.read(reinterpret_cast<char*>(rec), 48);
+    in.read(reinterpret_cast<char*>(&attr), 2);
+    std::array<std::array<double, 3>, 3> p;
+    std::uint32_t id[3];
+    for (int k = 0; k < 3; ++k) {
+      const std::array<float, 3> q{rec[3 + 3 * k], rec[4 + 3 * k], rec[5 + 3 * k]};
+      id[k] = ids.emplace(q, std::uint32_t(ids.size())).first->second;
+      p[std::size_t(k)] = {q[0], q[1], q[2]};
+    }
+    const auto sub = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+      return std::array<double, 3>{a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+    };
+    const auto u = sub(p[1], p[0]), v = sub(p[2], p[0]);
+    const std::array<double, 3> x{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+    if (x[0] == 0 && x[1] == 0 && x[2] == 0) ++f.zero_area;
+    f.volume_m3 += (p[0][0] * (p[1][1] * p[2][2] - p[1][2] * p[2][1]) - p[0][1] * (p[1][0] * p[2][2] - p[1][2] * p[2][0]) +
+                    p[0][2] * (p[1][0] * p[2][1] - p[1][1] * p[2][0])) / 6.0;
+    for (int k = 0; k < 3; ++k) ++edges[std::minmax(id[k], id[(k + 1) % 3])];
+  }
+  for (const auto& [e, count] : edges) f.open_edges += count != 2;
+  return f;
+}
+}  // namespace
+
+TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
+  // A carve into the sphere with drilled.stl written: summary.json says whether the mesh is
+  // closed and what volume it encloses; both recomputed here from the STL file itself.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_" + std::to_string(::getpid()));
+  const RunMetrics m = run_text(dir, R"({"name": "mesh", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
+    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",
+    "script": {"hold_s": 0.05, "stroke_length_m": 0.002}, "outputs": {"plots": false},
+    "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": true,
+      "timeline": [{"t_s": 0.05, "kind": "carve", "at": [19.5, 19.5, 31.5], "radius_mm": 5, "strength": 1000}]}})");
+  ASSERT_EQ(m.edits.stl_file, "drilled.stl") << m.edits.files_note;
+  std::ifstream js(dir / "out" / "summary.json");
+  const auto j = nlohmann::json::parse(js);
+  const auto& mesh = j.at("edits").at("mesh");
+  ASSERT_TRUE(mesh.is_object()) << "summary.json reports no mesh";
+  const StlFigures f = read_stl(dir / "out" / "drilled.stl");
+  ASSERT_GT(f.triangles, 100u);
+  EXPECT_EQ(mesh.at("triangles").get<std::size_t>(), f.triangles);
+  EXPECT_EQ(f.zero_area, 0u) << "degenerate triangles in the STL";
+  EXPECT_EQ(mesh.at("closed").get<bool>(), f.open_edges == 0);
+  EXPECT_TRUE(mesh.at("closed").get<bool>());
+  const double v_mm3 = f.volume_m3 * 1e9;
+  EXPECT_NEAR(mesh.at("enclosed_volume_mm3").get<double>(), v_mm3, 1e-5 * std::abs(v_mm3)) << "float32 coordinates";
+  // The inside voxels' volume after the carve, counted here from the edited volume's figures.
+  EXPECT_NEAR(mesh.at("inside_voxels_volume_mm3").get<double>(), double(m.edits.inside_voxels_after), 1e-9);
+  EXPECT_NEAR(v_mm3, double(m.edits.inside_voxels_after), 0.1 * double(m.edits.inside_voxels_after))
+      << "the mesh encloses about the inside voxels' volume (1 mm^3 voxels)";
   fs::remove_all(dir);
 }

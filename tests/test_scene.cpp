@@ -1,7 +1,8 @@
 // Scene files: the shipped scenes load; bad ones name the file, the field and the value.
 #include <gtest/gtest.h>
 
-#include "run_job.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 
 using isotouch::io::load_scene;
@@ -202,7 +203,7 @@ TEST(Scene, EnginePassListCheckedByTheEngine) {
   // reported as a scene error naming the file and field before anything runs.
   const auto twice = parse_scene(with_engine(R"({"passes": ["gradient", "gradient"]})"), "bad.json");
   try {
-    (void)isotouch::app::scene_passes(twice);
+    (void)isotouch::run::scene_passes(twice);
     FAIL() << "gradient twice accepted";
   } catch (const SceneError& e) {
     const std::string m = e.what();
@@ -211,14 +212,14 @@ TEST(Scene, EnginePassListCheckedByTheEngine) {
   }
   const auto ok = parse_scene(with_engine(R"({"passes": [{"gaussian": {"sigma_mm": 2}}, {"closing": {"radius_mm": 1}},
       "gradient"], "samples": "fp16"})"), "ok.json");
-  const auto p = isotouch::app::scene_passes(ok);
+  const auto p = isotouch::run::scene_passes(ok);
   ASSERT_EQ(p.size(), 3u);
   EXPECT_EQ(p[0].kind, isotouch::engine::PassKind::Gaussian);
   EXPECT_DOUBLE_EQ(p[0].sigma_mm, 2.0);
   EXPECT_EQ(p[1].kind, isotouch::engine::PassKind::Closing);
   EXPECT_DOUBLE_EQ(p[1].radius_mm, 1.0);
   EXPECT_EQ(p[2].kind, isotouch::engine::PassKind::Gradient);
-  EXPECT_EQ(isotouch::app::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
+  EXPECT_EQ(isotouch::run::scene_sample_format(ok), isotouch::core::SampleFormat::kFp16);
 }
 
 // The drill's rate as a fraction of the material-to-empty range per N s: the same removal
@@ -229,11 +230,11 @@ TEST(Scene, DrillRemovalPerNsMeansTheSameOnEveryVolume) {
       "brush": {"kind": "drill", "removal_per_n_s": 0.25}}})", "ok.json");
   EXPECT_EQ(s.edits.brush.removal_per_n_s, 0.25);
   isotouch::session::BrushTargets hu{3071.0f, -1024.0f, 4095.0f}, u8{255.0f, 0.0f, 255.0f};
-  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(s.edits.brush, hu), 0.25 * 4095.0);
-  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(s.edits.brush, u8), 0.25 * 255.0);
+  EXPECT_DOUBLE_EQ(isotouch::run::drill_rate(s.edits.brush, hu), 0.25 * 4095.0);
+  EXPECT_DOUBLE_EQ(isotouch::run::drill_rate(s.edits.brush, u8), 0.25 * 255.0);
   const auto v = parse_scene(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
       "brush": {"kind": "drill", "rate": 700}}})", "ok.json");
-  EXPECT_DOUBLE_EQ(isotouch::app::drill_rate(v.edits.brush, u8), 700.0);  // value units as given
+  EXPECT_DOUBLE_EQ(isotouch::run::drill_rate(v.edits.brush, u8), 700.0);  // value units as given
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "edits": {
       "brush": {"kind": "drill", "rate": 700, "removal_per_n_s": 0.1}}})",
                {"edits.brush.removal_per_n_s", "not both"});

@@ -5,9 +5,9 @@
 #include <vector>
 
 #include "raycast.h"
-#include "render_cmd.h"
+#include "picture.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 using core::Vec3;
 namespace {
 
@@ -101,4 +101,4 @@ std::string draw_drill_figure(engine::VulkanContext* vk, const engine::Volume& b
   }
 }
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

@@ -7,7 +7,7 @@
 #include "volume.h"
 #include "vk_context.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 
 /// Where the drill went in, grid-world [m].
 struct DrillSite {
@@ -35,4 +35,4 @@ std::string draw_drill_figure(engine::VulkanContext* vk, const engine::Volume& b
                               const core::Isosurface& iso, const DrillSite& site, const std::string& out_png,
                               const DrillFigureLayout& layout = {});
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

@@ -1,0 +1,28 @@
+// engine_run.h - the scene's engine passes as `isotouch run` runs them: the GPU chain
+// (dense or sparse) that computes the published snapshot, the one-thread CPU reference
+// beside it, and the figures comparing the two.
+#pragma once
+#include <iosfwd>
+#include <memory>
+
+#include "run_metrics.h"
+#include "sample_field.h"
+#include "scene.h"
+#include "scene_setup.h"
+#include "vk_context.h"
+#include "volume.h"
+
+namespace isotouch::run {
+
+struct EngineRun {
+  std::shared_ptr<core::SampleField> published;    ///< what the servo reads (version 1, background set)
+  std::shared_ptr<const core::SampleField> truth;  ///< dense fp32 samples of the same passes
+};
+
+/// Runs the scene's passes (engine.mode dense or sparse, engine.samples) on `vk` and the CPU
+/// reference, fills the engine figures of `m` and logs them.
+/// @throws std::runtime_error (Vulkan, a chain that returned nothing), SceneError (the scene's passes).
+EngineRun run_engine(const io::Scene& scene, const engine::Volume& vol, engine::VulkanContext& vk,
+                     const RunOptions& opt, RunMetrics& m, std::ostream& log);
+
+}  // namespace isotouch::run

@@ -1,0 +1,28 @@
+// run_report.h - a run's summary.json and report.md, from its figures.
+#pragma once
+#include <array>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "run_metrics.h"
+#include "scene.h"
+#include "scene_setup.h"
+#include "volume.h"
+
+namespace isotouch::run {
+
+// "finite values [lo, hi]" plus the NaN/Inf counts; never a range for no finite voxels.
+std::string value_range_text(const engine::Volume& vol, const RunMetrics& m);
+/// The direction matrix as "[[a, b, c], [d, e, f], [g, h, i]]" (4 digits).
+std::string direction_text(const std::array<double, 9>& d);
+
+// The run's summary.json ("status": "complete": written last, once every other output is whole).
+nlohmann::ordered_json summary_json(const io::Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
+                                    long raw_found, bool with_edits);
+
+// The run's report.md.
+std::string report_markdown(const io::Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
+                            long raw_found, bool with_edits);
+
+}  // namespace isotouch::run

@@ -1,0 +1,170 @@
+#include "run_scene.h"
+#include <csignal>
+#include <unistd.h>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+#include "edit_driver.h"
+#include "hri.h"
+#include "live_session.h"
+#include "names.h"
+#include "picture.h"
+#include "run_outputs.h"
+#include "run_report.h"
+#include "stability.h"
+#include "text.h"
+#include "trace_csv.h"
+#include "trace_figures.h"
+#include "triple_buffer.h"
+
+namespace isotouch::run {
+namespace fs = std::filesystem;
+namespace {
+
+std::function<void(long, long)> servo_progress(const RunOptions& opt) {
+  const bool tty = opt.progress && ::isatty(STDERR_FILENO);
+  auto last_quarter = std::make_shared<int>(-1);
+  return [tty, last_quarter, show = opt.progress](long k, long total) {
+    throw_if_stop_requested("servo simulation, tick " + std::to_string(k) + " of " + std::to_string(total));
+    if (!show) return;
+    const int pct = int(100 * k / total);
+    if (tty) {
+      std::cerr << "\rservo    [" << std::string(std::size_t(pct / 4), '#')
+                << std::string(std::size_t(25 - pct / 4), '.') << "] " << std::setw(3) << pct << "%  "
+                << k << "/" << total << " ticks" << (k == total ? "\n" : "") << std::flush;
+    } else if (pct / 25 != *last_quarter) {  // not a terminal: a line per quarter
+      *last_quarter = pct / 25;
+      std::cerr << "servo    " << k << "/" << total << " ticks (" << pct << "%)\n";
+    }
+  };
+}
+
+// The scene in the live session's simulated mode: the servo, the edits and the recorder
+// clocked in simulated time on this thread (what the app and `run --live` run on threads).
+std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const RunOptions& opt,
+                                    servo::TripleBuffer<core::SampleField>& published, std::optional<EditDriver>& edits) {
+  const servo::HriParams& hp = setup.hri;
+  const servo::WorkspaceTransform& xf = setup.world_T_device;
+  const sim::TouchScript& script = setup.script;
+  Vec3 start_w, v0;
+  script.at(0.0, start_w, v0);
+  sim::SimDevice device(scene.device, xf.to_device(start_w));
+  servo::HriRenderer renderer(hp);
+  session::LiveSessionConfig lc;
+  lc.servo.rate_hz = hp.rate_hz;
+  lc.servo.world_T_device = xf;
+  if (edits) {
+    lc.drill = edits->drill();
+    lc.on_applied = [&edits](const EditEvent& e, const EditOutcome& o, session::EditSource src) { edits->on_applied(e, o, src); };
+  }
+  if (!opt.record_path.empty()) {
+    lc.record_path = opt.record_path;
+    lc.record_header = recording_header(scene, setup);
+  }
+  session::LiveSession live(setup.session.get(), published, renderer, std::move(lc));
+  session::SimulatedRun sr;
+  sr.device = &device;
+  sr.script = &script;
+  sr.world_T_device = xf;
+  if (edits) {
+    sr.button_down = scene.edits.button_down;
+    sr.after_tick = [&edits, &live](long k, sim::TraceRow& row) { (*edits)(live, k, row); };
+  }
+  sr.progress = servo_progress(opt);
+  std::vector<sim::TraceRow> trace = live.run_simulated(sr);
+  live.stop();  // the recording: end record, fsync, rename
+  return trace;
+}
+
+RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  throw_if_stop_requested("start");
+  SceneSetup setup = setup_scene(scene, opt, log);
+  throw_if_stop_requested("engine set-up (samples computed, servo not started)");
+  RunMetrics& m = setup.metrics;
+  const engine::Volume& vol = setup.volume;
+  const std::shared_ptr<const core::SampleField> field = setup.first;
+  const servo::HriParams& hp = setup.hri;
+  const sim::TouchScript& script = setup.script;
+  // Colgate and Schenkel's passivity bound for the scene's K, B and rate, with the damping
+  // at the handle b = device + hand damping [N s/m]: a stiffer wall may buzz (K = 1e6 N/m
+  // on the sphere at 1 kHz: 152 on/off flips). Warned in the log and reported.
+  m.k_bound_n_per_m = sim::colgate_k_max(scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+                                           hp.damping_n_s_per_m, 1.0 / hp.rate_hz);
+  m.k_above_bound = !(hp.stiffness_n_per_m <= m.k_bound_n_per_m);
+  if (m.k_above_bound)
+    log << "warning: stiffness " << hp.stiffness_n_per_m << " N/m is above the Colgate-Schenkel bound K_max = "
+        << "2 (b - |B|) / T = " << m.k_bound_n_per_m << " N/m (b = device + hand damping, B = servo damping, "
+        << "T = 1 / rate_hz): the contact may buzz; lower K or B, or raise the rate\n";
+
+  // Publish the samples: the servo reads them through the one publication point.
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(field);
+  std::optional<EditDriver> edits;
+  if (setup.session) edits.emplace(scene, setup);
+  const std::vector<sim::TraceRow> trace = simulate(scene, setup, opt, published, edits);
+  const auto [found, raw_found] = trace_figures(trace, setup, edits ? &*edits : nullptr, m);
+  if (m.contact_ticks == 0)
+    log << "no contact: the probe never touched the isosurface in " << m.ticks
+        << " ticks; the surface error is not known (null in summary.json)\n";
+  log << "steps    |F| between contact ticks " << fmt(m.max_force_step_n, 4) << " N, F vector "
+      << fmt(m.max_force_vector_step_n, 4) << " N (t = " << fmt(m.max_force_vector_step_t_s, 5) << " s), release "
+      << fmt(m.max_release_step_n, 4) << " N (t = " << fmt(m.max_release_step_t_s, 5) << " s), any ticks "
+      << fmt(m.max_any_step_n, 4) << " N (t = " << fmt(m.max_any_step_t_s, 5) << " s)\n";
+
+  // 6. Outputs, each written whole or not at all (RunFolder has made and locked the folder).
+  const std::string dir = opt.out_dir;
+  throw_if_stop_requested("outputs (servo finished, no file written yet)");
+  if (scene.write_trace) write_file_atomic((fs::path(dir) / "trace.csv").string(), trace_csv(trace, vol));
+  if (scene.write_trace && scene.draw_plots) m.plots_drawn = draw_plots(scene, dir, script, m.plot_note);
+  else m.plot_note = "plots turned off in the scene (outputs.plots / outputs.trace_csv)";
+  throw_if_stop_requested("outputs (trace and plots written)");
+  if (scene.draw_plots) {
+    // The run's picture (ray-cast on the same Vulkan device); never throws.
+    // With edits the path is thinned (thin_path): the same picture serves as before.png.
+    const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
+                                              (fs::path(dir) / "surface.png").string(),
+                                              setup.vk.get(), opt.device);
+    m.picture_drawn = pic.error.empty();
+    m.picture_note = m.picture_drawn ? pic.caption : pic.error;
+    if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
+  }
+  throw_if_stop_requested("outputs (trace, plots and picture written)");
+  if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
+  throw_if_stop_requested("outputs (all but summary.json and report.md written)");
+
+  const std::string summary_text = summary_json(scene, setup, m, found, raw_found, edits.has_value()).dump(2) + "\n";
+  write_file_atomic((fs::path(dir) / "report.md").string(), report_markdown(scene, setup, m, found, raw_found, edits.has_value()));
+  // Last: "complete" only once every other output is whole.
+  write_file_atomic((fs::path(dir) / "summary.json").string(), summary_text);
+  return m;
+}
+
+}  // namespace
+
+RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+  RunFolder folder(opt.out_dir, scene.file, scene.name);
+  try {
+    return run_scene_steps(scene, opt, log);
+  } catch (const Interrupted& e) {
+    if (folder.mark_interrupted(e.stage, e.signal))
+      log << "\ninterrupted (" << (e.signal == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << e.stage
+          << ": " << (fs::path(opt.out_dir) / "summary.json").string() << " says \"status\": \"interrupted\"\n";
+    throw;
+  } catch (const std::exception& e) {
+    folder.mark_failed(e.what());
+    throw;
+  }
+}
+
+}  // namespace isotouch::run

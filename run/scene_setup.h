@@ -1,0 +1,93 @@
+// scene_setup.h - a scene made ready to run: volume, engine samples, script, servo
+// parameters and the edit session; the scene's brushes and passes as engine types.
+#pragma once
+#include <iosfwd>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "brick_field.h"
+#include "edit_session.h"
+#include "headless.h"
+#include "hri.h"
+#include "live_field.h"
+#include "passes.h"
+#include "record.h"
+#include "run_metrics.h"
+#include "scene.h"
+#include "vk_context.h"
+#include "workspace.h"
+
+namespace isotouch::run {
+
+struct RunOptions {
+  std::string out_dir;                 ///< where trace.csv, summary.json, report.md go
+  std::string device;                  ///< Vulkan device choice (see ContextOptions)
+  bool progress = true;                ///< progress line on stderr
+  std::uint64_t max_binding_bytes = 0; ///< test hook: smaller storage-binding limit
+  /// `run --record FILE`: also write the recording (io/record.h: every device input,
+  /// button and edit with its tick and time, and the forces) to this file; "" = none.
+  std::string record_path;
+};
+
+/// The scene's pass list as engine passes (engine.passes), checked with
+/// engine::validate_passes. @throws SceneError "FILE: field 'engine.passes': pass 1 (...): ...".
+std::vector<engine::PassDesc> scene_passes(const io::Scene& scene);
+/// The engine brush of a scene brush: centre grid-world [m], application time dt_s [s],
+/// drill force |F| [N]; targets from `defaults` (session::default_targets) unless the scene
+/// sets them.
+session::Brush make_brush(const io::BrushSpec& b, const session::BrushTargets& defaults, const core::Vec3& centre_m,
+                          double dt_s, double force_n);
+/// The drill's rate in value units per (N s): "rate" as given, or "removal_per_n_s" times
+/// the targets' |material - empty|.
+double drill_rate(const io::BrushSpec& b, const session::BrushTargets& t);
+/// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP is
+/// the tool's centre and the brush takes the tool's size, reaching one voxel (the largest
+/// spacing: the surface the burr touches lies within one cell of it) past its surface, so it
+/// removes what the burr's surface touches; a point tool keeps the scene's radius.
+io::BrushSpec brush_at_tool(const io::Scene& scene, const engine::Volume& vol, const io::BrushSpec& b);
+
+/// The scene's engine.samples as a core::SampleFormat.
+core::SampleFormat scene_sample_format(const io::Scene& scene);
+
+/// Everything the servo loop of a scene needs, built the same way for `isotouch run` and
+/// `isotouch replay` (which rebuilds the exact pipeline from a recording's scene file).
+/// Frames: grid-world [m] for every point (core::Grid), device [m] through world_T_device.
+struct SceneSetup {
+  engine::Volume volume;                         ///< as loaded, before any edit
+  session::LiveFieldOptions live;                 ///< passes, isosurface, background, format
+  servo::HriParams hri;                          ///< the renderer's parameters (scene.hri)
+  servo::WorkspaceTransform world_T_device;      ///< world = translation + scale * device
+  sim::TouchScript script;                     ///< the scripted hand (cast on `truth`)
+  /// The first published snapshot (version 1). With edits: the session::EditSession's (LiveField
+  /// version 1 = run_sparse_cpu, bit-identical to the GPU sparse chain); without edits:
+  /// the GPU chain's output, as before edits existed.
+  std::shared_ptr<const core::SampleField> first;
+  /// Dense fp32 samples of the scene's passes on the unedited volume (CPU reference): the
+  /// script is cast on it and the surface error measured against it.
+  std::shared_ptr<const core::SampleField> truth;
+  std::unique_ptr<engine::VulkanContext> vk;     ///< the Vulkan context (engine, brushes, pictures)
+  /// The edit pipeline (brushes on the GPU when there is a device, else the CPU reference)
+  /// when the scene has an "edits" section, else null. Built from a copy of `volume`.
+  std::unique_ptr<session::EditSession> session;
+  RunMetrics metrics;                            ///< the volume and engine figures (what run_scene reports)
+  SceneSetup();
+  SceneSetup(SceneSetup&&) noexcept;
+  SceneSetup& operator=(SceneSetup&&) noexcept;
+  ~SceneSetup();
+};
+
+/// Loads the scene's volume, runs its engine (GPU chain + CPU reference, the report's
+/// figures), builds the script and, with edits, the session::EditSession. run_scene starts with it.
+/// @throws as run_scene.
+SceneSetup setup_scene(const io::Scene& scene, const RunOptions& options, std::ostream& log);
+
+/// The tick after whose render an event at time t_s [s] is applied: the first tick k with
+/// k / rate_hz >= t_s (to 1e-9 tick).
+long edit_tick(double t_s, double rate_hz);
+
+/// The header of a recording of `scene` (format 3 once a LiveSession streams it): the scene
+/// file's path and text, the servo rate and the CRC-32 of the unedited volume.
+io::Recording recording_header(const io::Scene& scene, const SceneSetup& setup);
+
+}  // namespace isotouch::run

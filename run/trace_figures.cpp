@@ -1,0 +1,199 @@
+#include "trace_figures.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "field_view.h"
+#include "names.h"
+#include "pass_desc.h"
+
+namespace isotouch::run {
+namespace {
+
+/// Sums over the contact ticks, turned into RMS figures at the end.
+struct ContactSums {
+  double err2 = 0, fo2 = 0, raw2 = 0, fsum = 0, dir2 = 0;
+  long found = 0, raw_found = 0, dir_pairs = 0;
+};
+
+/// With filters in the pass list: the unfiltered data's samples (gradient only), to see how
+/// far smoothing moved the surface; none without filters (m.has_unfiltered says which).
+std::optional<core::SampleField> unfiltered_field(const SceneSetup& setup, RunMetrics& m) {
+  for (const auto& p : m.passes)
+    if (p.kind == engine::PassKind::Gaussian || p.kind == engine::PassKind::Closing) m.has_unfiltered = true;
+  if (!m.has_unfiltered) return std::nullopt;
+  engine::ChainOutput out = engine::run_chain_cpu(setup.volume, {engine::PassDesc::gradient()});
+  out.samples->background = setup.truth->background;
+  return std::move(out.samples);
+}
+
+/// The stroke phase (t_stroke <= t < t_lift) and the lift-off (t >= t_lift) of one tick.
+void stroke_and_lift(const sim::TraceRow& r, const sim::TouchScript& script, RunMetrics& m) {
+  const bool stroking = r.t_s >= script.t_stroke && r.t_s < script.t_lift;
+  m.stroke_ticks += stroking;
+  m.stroke_contact_ticks += stroking && r.contact;
+  if (r.t_s >= script.t_lift && r.contact) {
+    ++m.lift_contact_ticks;
+    m.lift_max_force_n = std::max(m.lift_max_force_n, core::norm(r.force_n));
+    const double outward = core::dot(r.force_n, script.contact_normal);
+    if (outward < 0) {
+      ++m.lift_inward_ticks;
+      m.lift_max_inward_force_n = std::max(m.lift_max_inward_force_n, -outward);
+    }
+  }
+}
+
+/// Steps of |F| and of the force vector between two consecutive contact ticks.
+void contact_steps(const sim::TraceRow& r, const sim::TraceRow& last, double f, RunMetrics& m) {
+  const double step = std::abs(f - core::norm(last.force_n));
+  if (step > m.max_force_step_n) {
+    m.max_force_step_n = step;
+    m.max_force_step_t_s = r.t_s;
+  }
+  const double vstep = core::norm(r.force_n - last.force_n);
+  if (vstep > m.max_force_vector_step_n) {
+    m.max_force_vector_step_n = vstep;
+    m.max_force_vector_step_t_s = r.t_s;
+  }
+}
+
+/// The angle [deg] between the forces of two consecutive contact ticks (both nonzero).
+void direction_step(const sim::TraceRow& r, const sim::TraceRow& last, double f, RunMetrics& m, ContactSums& s) {
+  if (!(f > 0 && core::norm(last.force_n) > 0)) return;
+  const double c = std::clamp(core::dot(r.force_n, last.force_n) / (f * core::norm(last.force_n)), -1.0, 1.0);
+  const double a = std::acos(c) * 180.0 / M_PI;
+  s.dir2 += a * a;
+  ++s.dir_pairs;
+  if (a > m.force_dir_step_max_deg) {
+    m.force_dir_step_max_deg = a;
+    m.force_dir_step_max_t_s = r.t_s;
+  }
+}
+
+/// The surface error of the tool from a distance d [m] of the VHIP to the isosurface: with a
+/// spherical tool of radius r the VHIP is the tool's centre, r outside the surface when the
+/// tool's surface rests on it, so the error is |d - r|, and d + r with the centre inside the
+/// object. A point tool (r = 0): d.
+double tool_error(double d, bool centre_inside, double r) {
+  if (!(r > 0)) return d;
+  return centre_inside ? d + r : std::abs(d - r);
+}
+
+/// The VHIP inside the isosurface of `field` (the scene's isovalue and inside).
+bool vhip_inside(const core::SampleField& field, const core::Isosurface& iso, const sim::TraceRow& r) {
+  return iso.contains(core::FieldView(field).value(r.vhip_m));
+}
+
+/// One contact tick's surface error (true distance, first-order estimate) into the figures.
+void add_error(SurfaceDistance d, double fo, bool inside, double r, RunMetrics& m, ContactSums& s) {
+  if (d.found) d.distance_m = tool_error(d.distance_m, inside, r);
+  fo = tool_error(fo, inside, r);
+  m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
+  if (d.found) {
+    ++s.found;
+    s.err2 += d.distance_m * d.distance_m;
+    m.surface_err_max_m = std::max(m.surface_err_max_m, d.distance_m);
+  } else {
+    ++m.surface_err_not_found_ticks;
+  }
+  s.fo2 += fo * fo;
+  m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
+}
+
+/// The VHIP's distance from the unfiltered data's isosurface on one contact tick.
+void add_unfiltered_error(const core::SampleField& unfiltered, const core::Isosurface& iso, double tool_r,
+                          const sim::TraceRow& r, RunMetrics& m, ContactSums& s) {
+  const SurfaceDistance du = distance_to_isosurface(unfiltered, iso.tau, r.vhip_m);
+  if (!du.found) return;
+  const double e = tool_error(du.distance_m, tool_r > 0 && vhip_inside(unfiltered, iso, r), tool_r);
+  ++s.raw_found;
+  s.raw2 += e * e;
+  m.unfiltered_err_max_m = std::max(m.unfiltered_err_max_m, e);
+}
+
+/// Steps of |F| that the contact-only figure cannot see: a drop to zero from contact (every
+/// release, inside the object or not), and any step between two consecutive ticks.
+void release_and_any_steps(const std::vector<sim::TraceRow>& trace, RunMetrics& m) {
+  for (std::size_t i = 1; i < trace.size(); ++i) {
+    const double f0 = core::norm(trace[i - 1].force_n), f1 = core::norm(trace[i].force_n);
+    if (std::abs(f1 - f0) > m.max_any_step_n) {
+      m.max_any_step_n = std::abs(f1 - f0);
+      m.max_any_step_t_s = trace[i].t_s;
+    }
+    if (trace[i - 1].contact && !trace[i].contact && f0 > m.max_release_step_n) {
+      m.max_release_step_n = f0;
+      m.max_release_step_t_s = trace[i].t_s;
+    }
+  }
+}
+
+/// Tick wall times: median, p99, max and mean [ns].
+void tick_times(const std::vector<sim::TraceRow>& trace, RunMetrics& m) {
+  std::vector<std::int64_t> ns;
+  ns.reserve(trace.size());
+  double sum_ns = 0;
+  for (const auto& r : trace) {
+    ns.push_back(r.tick_ns);
+    sum_ns += double(r.tick_ns);
+  }
+  const std::vector<double> ns_d(ns.begin(), ns.end());
+  m.tick_ns_median = ns.empty() ? 0 : percentile(ns_d, 0.5);
+  m.tick_ns_p99 = ns.empty() ? 0 : percentile(ns_d, 0.99);
+  m.tick_ns_max = ns.empty() ? 0 : double(*std::max_element(ns.begin(), ns.end()));
+  m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
+}
+
+}  // namespace
+
+std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, const SceneSetup& setup,
+                                    const EditDriver* edits, RunMetrics& m) {
+  const double tau = setup.hri.tau, tool_r = setup.hri.tool_radius_m;
+  const core::Isosurface iso = setup.live.iso;
+  const core::SampleField& truth = *setup.truth;
+  m.ticks = long(trace.size());
+  ContactSums s;
+  const std::optional<core::SampleField> unfiltered = unfiltered_field(setup, m);
+  const sim::TraceRow* prev = nullptr;
+  for (const auto& r : trace) {
+    m.plane_updates += r.plane_update;
+    m.saturated_ticks += r.saturated;
+    m.fault_ticks += r.fault;
+    const sim::TraceRow* last = prev;
+    prev = &r;
+    stroke_and_lift(r, setup.script, m);
+    if (!r.contact) continue;
+    ++m.contact_ticks;
+    const double f = core::norm(r.force_n);
+    if (last && last->contact) contact_steps(r, *last, f, m);
+    s.fsum += f;
+    if (last && last->contact) direction_step(r, *last, f, m, s);
+    m.max_force_n = std::max(m.max_force_n, f);
+    m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
+    if (edits && r.version > 1) {  // the surface moved: measured against the edited volume the tick read
+      ++m.edits.contact_ticks_after_edit;
+      const auto it = edits->edited_distance.find(long(&r - trace.data()));
+      if (it != edits->edited_distance.end())
+        add_error(it->second.d, it->second.first_order_m, it->second.vhip_inside, tool_r, m, s);
+      continue;
+    }
+    if (unfiltered) add_unfiltered_error(*unfiltered, iso, tool_r, r, m, s);
+    // True distance of the VHIP from the isosurface of the trilinear field (bounded search).
+    add_error(distance_to_isosurface(truth, tau, r.vhip_m), first_order_distance(truth, tau, r.vhip_m),
+              tool_r > 0 && vhip_inside(truth, iso, r), tool_r, m, s);
+  }
+  release_and_any_steps(trace, m);
+  tick_times(trace, m);
+  if (m.contact_ticks) {
+    m.mean_contact_force_n = s.fsum / double(m.contact_ticks);
+    m.first_order_err_rms_m = std::sqrt(s.fo2 / double(m.contact_ticks));
+  }
+  if (s.found) m.surface_err_rms_m = std::sqrt(s.err2 / double(s.found));
+  if (s.dir_pairs) m.force_dir_step_rms_deg = std::sqrt(s.dir2 / double(s.dir_pairs));
+  if (s.raw_found) m.unfiltered_err_rms_m = std::sqrt(s.raw2 / double(s.raw_found));
+  return {s.found, s.raw_found};
+}
+
+}  // namespace isotouch::run

@@ -499,6 +499,12 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     const engine::sparse::Selection sel = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2);
     const engine::sparse::Selection one = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 1);
     EXPECT_EQ(sel.candidates, one.candidates) << c.v->path;
+    // The input copy written in the same pass (2 threads, each its own slices): every voxel.
+    std::vector<float> copy(c.v->voxels.size(), 7.0f);
+    const engine::sparse::Selection with_copy =
+        engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2, copy.data());
+    EXPECT_EQ(with_copy.candidates, sel.candidates) << c.v->path;
+    EXPECT_EQ(std::memcmp(copy.data(), c.v->voxels.data(), copy.size() * 4), 0) << c.v->path << ": the input copy";
     std::vector<std::uint8_t> cand(sel.lo.size(), 0);
     for (std::uint32_t id : sel.candidates) cand[id] = 1;
     std::size_t differ = 0;
@@ -530,6 +536,53 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     EXPECT_GT(straddling, 0u) << c.v->path;
     std::printf("  %s tau %g, %zu passes: %zu candidates, %zu straddling (brute force)\n", c.v->path.c_str(), c.tau,
                 p.size(), sel.candidates.size(), straddling);
+  }
+}
+
+// candidate_ranges (the lists strategy's host step) against a brute-force fold over each
+// brick + 1 voxel, every brick a candidate, on odd dims (bricks cut by the grid on every
+// axis, rows of 10 and of fewer voxels), NaN voxels and -0, 1 and 2 threads.
+TEST(SparseChain, CandidateRangesAreTheBruteForceRanges) {
+  core::Grid g;
+  g.dims = {301, 61, 37};  // x bricks of 10 voxels and a last one of 6; 1520 bricks: 2 threads run
+  std::vector<float> f(g.voxel_count());
+  std::uint64_t s = 0x9e3779b97f4a7c15ull;
+  for (float& v : f) {
+    s = s * 6364136223846793005ull + 1442695040888963407ull;
+    v = float(std::int64_t(s >> 40) % 2001 - 1000) * 0.25f;
+  }
+  for (std::size_t i = 3; i < f.size(); i += 1013) f[i] = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 11; i < f.size(); i += 97) f[i] = -0.0f;
+  const auto nb = core::brick_counts(g);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  std::vector<std::uint32_t> all(total);
+  for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  for (unsigned threads : {1u, 2u}) {
+    const auto r = engine::sparse::candidate_ranges(g, f.data(), all, threads);
+    ASSERT_EQ(r.size(), all.size());
+    std::size_t differ = 0, with_nan = 0;
+    for (std::uint32_t id : all) {
+      const auto b = core::brick_coords(id, nb);
+      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+      bool nan = false;
+      for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
+        for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
+          for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
+            const float v = f[g.index(x, y, z)];
+            if (v != v) {
+              nan = true;
+              continue;
+            }
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+          }
+      lo += 0.0f;
+      hi += 0.0f;
+      with_nan += nan;
+      differ += bits(r[id].lo) != bits(lo) || bits(r[id].hi) != bits(hi) || r[id].nan != nan;
+    }
+    EXPECT_EQ(differ, 0u) << threads << " thread(s)";
+    EXPECT_GT(with_nan, 0u);
   }
 }
 

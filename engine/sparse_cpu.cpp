@@ -237,8 +237,8 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
   // Per brick layer, row by row: the row's fold over the layer's z-window (element by
   // element, in one row's accumulators that stay in L1), folded into the y-fold of every
   // brick row whose window holds the row; then per brick over its x-window. Each voxel is
-  // read from memory once per layer window that holds it, and copied (copy_to) while its
-  // row is in cache by the thread that owns its slice. Element-wise selects (a NaN voxel
+  // read from memory once per layer window that holds it, and copied (copy_to) by the
+  // thread whose layer holds its slice. Element-wise selects (a NaN voxel
   // never enters lo / hi, it sets its own flag) that the compiler turns into vector min / max.
   threads = threads_for(grid.voxel_count(), threads);
   parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
@@ -248,7 +248,10 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
       std::fill(yhi.begin(), yhi.end(), -kInf);
       std::fill(ynan.begin(), ynan.end(), 0.0f);
       const auto [za, zb] = window(int(bz), plan.radius[2], nz);
-      const int own0 = 8 * int(bz), own1 = std::min(8 * int(bz) + 8, nz);  // the slices this layer copies
+      // The layer's own slices copied whole (sequential writes; its rows are then in cache
+      // for the folds below).
+      const std::size_t own0 = 8 * bz, own1 = std::min<std::size_t>(8 * bz + 8, std::size_t(nz));
+      if (copy_to) std::memcpy(copy_to + own0 * slice, voxels + own0 * slice, (own1 - own0) * slice * sizeof(float));
       for (int y = 0; y < ny; ++y) {
         float *lo = rlo.data(), *hi = rhi.data(), *nn = rnan.data();
         std::fill(rlo.begin(), rlo.end(), kInf);
@@ -263,7 +266,6 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
             hi[i] = x > hi[i] ? x : hi[i];
             nn[i] = x != x ? 1.0f : nn[i];
           }
-          if (copy_to && z >= own0 && z < own1) std::memcpy(copy_to + at, v, sx * sizeof(float));
         }
         // Brick rows by whose window [8 by - 1 - R, 8 by + 8 + R] holds y.
         const int by0 = std::max(0, (y - 8 - plan.radius[1] + 7) / 8);

@@ -28,6 +28,7 @@
 #include "isotouch/shaders/filter_x4_spv.h"
 #include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch_shared.h"
+#include "parallel.h"
 #include "passes.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
@@ -636,6 +637,55 @@ void bench_case(const Volume& v, double tau, int reps) {
   for (const auto& st : last.passes) std::printf("    %-70s %8.2f ms\n", st.label.c_str(), st.ms);
 }
 }  // namespace
+
+// The lists strategy's host stages alone on the chest at -500, min and median of
+// ISOTOUCH_BENCH_REPS (default 7) runs each, interleaved: the selection with and without the
+// input copy written in the same pass, a plain memcpy of the input, the candidate ranges.
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_HostStagesChest*'
+TEST(SparseChain, DISABLED_HostStagesChest) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 7;
+  const Volume v = io::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const engine::sparse::Plan plan = engine::sparse::make_plan(v.grid, p, "chest");
+  const unsigned th = engine::hardware_threads();
+  std::vector<float> copy(v.voxels.size(), 0.0f);
+  std::vector<double> t_sel, t_sel_copy, t_memcpy, t_ranges;
+  std::vector<std::uint32_t> cands;
+  auto ms = [](auto&& f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  };
+  std::vector<double> t_sel1, t_sel_copy1;
+  for (int r = 0; r < reps; ++r) {
+    t_sel1.push_back(ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), 1); }));
+    t_sel_copy1.push_back(
+        ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), 1, copy.data()); }));
+    t_sel.push_back(ms([&] { cands = engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), th).candidates; }));
+    t_sel_copy.push_back(
+        ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), th, copy.data()); }));
+    t_memcpy.push_back(ms([&] { std::memcpy(copy.data(), v.voxels.data(), copy.size() * 4); }));
+    t_ranges.push_back(ms([&] { (void)engine::sparse::candidate_ranges(v.grid, copy.data(), cands, th); }));
+  }
+  auto row = [&](const char* what, std::vector<double> t) {
+    std::sort(t.begin(), t.end());
+    std::printf("  %-48s min %7.2f ms, median %7.2f ms\n", what, t.front(), t[t.size() / 2]);
+  };
+  double load[3] = {0, 0, 0};
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(f, "%lf %lf %lf", &load[0], &load[1], &load[2]) != 3) load[0] = -1;
+    std::fclose(f);
+  }
+  std::printf("chest -500, %zu candidates, %u threads, %d runs, load %.2f %.2f %.2f\n", cands.size(), th, reps, load[0],
+              load[1], load[2]);
+  row("selection, one thread", t_sel1);
+  row("selection + input copy, one thread", t_sel_copy1);
+  row("selection", t_sel);
+  row("selection + input copy in the same pass", t_sel_copy);
+  row("input memcpy alone (one thread)", t_memcpy);
+  row("candidate ranges", t_ranges);
+}
 
 TEST(SparseChain, DISABLED_BenchChest) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");

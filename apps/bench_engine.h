@@ -228,9 +228,12 @@ struct BigResult {
 };
 /// In this process (the child of run_big): make the n^3 noisy sphere, create the Vulkan
 /// context and the sparse GPU chain, run it once to a published fp32 snapshot; if the GPU
-/// sparse chain is not available, run_sparse_cpu instead. Writes key=value lines to `out`
-/// (engine, make_ms, setup_ms, step_ms, snapshot_bytes, dense_fp32_bytes, bricks_total,
-/// candidates, active, vm_hwm_bytes, device, note). @return 0 if a snapshot was published.
+/// sparse chain is not available, run_sparse_cpu instead; then hand the snapshot to the
+/// servo (servo::TripleBuffer) and time the first HRI ticks on it. Writes key=value lines to
+/// `out` (engine, make_ms, setup_ms, step_ms, stages and stage<i>_ms / stage<i>_label (the
+/// chain's own stages), snapshot_bytes, dense_fp32_bytes, bricks_total, candidates, active,
+/// publish_ms, first_tick_us, ticks_median_us, max_force_n, vm_hwm_bytes, device, note).
+/// @return 0 if a snapshot was published.
 int run_big_child(int n, const std::string& device, std::ostream& out, std::ostream& progress);
 
 struct BenchEngineOptions {

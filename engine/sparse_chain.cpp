@@ -82,8 +82,8 @@ struct Chunk {
 };
 
 /// The host's part after the passes, on hardware_threads() threads: each candidate's
-/// exact range over its brick + 1 voxel of the filtered field `f` (z, y, x ascending, as
-/// CandidateCpu::range) and the 9^3 samples of the active ones written straight into the
+/// exact range over its brick + 1 voxel of the filtered field `f` (sparse::candidate_ranges,
+/// the values of CandidateCpu::range) and the 9^3 samples of the active ones written straight into the
 /// published pool: copied row by row from the dense-addressed samples `s`, or, with `s`
 /// null, computed from `f` (sparse::brick_samples); beyond the grid the background with a
 /// zero gradient. Sets out.publish_ms; `ranges_ms` the time of the ranges.
@@ -96,46 +96,7 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
   const unsigned threads = threads_for(std::uint64_t(nc) * 1000u, hardware_threads());
   auto t0 = std::chrono::steady_clock::now();
   const auto nb = core::brick_counts(vol.grid);
-  std::vector<sparse::CandidateRange> ranges(nc);
-  const float inf = std::numeric_limits<float>::infinity();
-  // Streamed row by row (the field is read in memory order, not 100 scattered rows per
-  // candidate): every row of slice z updates the candidates whose brick + 1 voxel holds it.
-  // Min / max over a set do not depend on the order (NaN skipped, -0 made +0 at the end).
-  // Threads take whole brick layers: each candidate is folded by one thread.
-  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
-  std::vector<std::int32_t> cand_of(total, -1);
-  for (std::size_t c = 0; c < nc; ++c) cand_of[sel.candidates[c]] = std::int32_t(c);
-  for (sparse::CandidateRange& r : ranges) r = {inf, -inf, false};
-  parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
-    for (int bz = int(bz0); bz < int(bz1); ++bz)
-      for (int z = std::max(8 * bz - 1, 0); z <= std::min(8 * bz + 8, nz - 1); ++z)
-        for (int y = 0; y < ny; ++y) {
-          const float* row = f + std::size_t(z) * slice + std::size_t(y) * std::size_t(nx);
-          for (int by = std::max((y - 8 + 7) / 8, 0); by <= std::min((y + 1) / 8, nb[1] - 1); ++by) {
-            const std::int32_t* cands =
-                cand_of.data() + (std::size_t(bz) * std::size_t(nb[1]) + std::size_t(by)) * std::size_t(nb[0]);
-            for (int bx = 0; bx < nb[0]; ++bx) {
-              if (cands[bx] < 0) continue;
-              sparse::CandidateRange& rg = ranges[std::size_t(cands[bx])];
-              float mn = rg.lo, mx = rg.hi;
-              bool n = false;
-              for (int x = std::max(8 * bx - 1, 0); x <= std::min(8 * bx + 8, nx - 1); ++x) {
-                const float v = row[x];
-                n |= v != v;
-                mn = v < mn ? v : mn;
-                mx = v > mx ? v : mx;
-              }
-              rg.lo = mn;
-              rg.hi = mx;
-              rg.nan = rg.nan || n;
-            }
-          }
-        }
-  });
-  for (sparse::CandidateRange& r : ranges) {
-    r.lo = r.lo + 0.0f;  // -0 -> +0, as CandidateCpu::range
-    r.hi = r.hi + 0.0f;
-  }
+  const std::vector<sparse::CandidateRange> ranges = sparse::candidate_ranges(vol.grid, f, sel.candidates, threads);
   ranges_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
@@ -464,23 +425,16 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
 
-  // Host, on hardware_threads() threads: the voxels copied into the input field (or its
-  // staging buffer) where a filter runs; the candidates.
+  // Host, on hardware_threads() threads: the candidates, and the voxels copied into the
+  // input field (or its staging buffer) where a filter runs, in the same pass over them.
   auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t n = vol.grid.voxel_count();
   const bool filters = !plan.ops.empty();
   GpuBuffer* field0 = filters ? &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr;
   GpuBuffer* up =
       filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
-  char* input = !filters ? nullptr : static_cast<char*>(direct ? field0->mapped() : up->mapped());
-  const std::size_t slice = std::size_t(nx) * std::size_t(ny);
-  if (input)
-    parallel_for(std::size_t(nz), threads_for(n, hardware_threads()), 8, [&](std::size_t z0, std::size_t z1) {
-      std::memcpy(input + z0 * slice * 4, vol.voxels.data() + z0 * slice, (z1 - z0) * slice * 4);
-    });
-  const double raw_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads());
+  float* input = !filters ? nullptr : static_cast<float*>(direct ? field0->mapped() : up->mapped());
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads(), input);
   const double select_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
@@ -538,8 +492,9 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   double ranges_ms = 0;
   finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
 
-  out.passes.push_back({"input copy (host)", raw_ms, 0});
-  out.passes.push_back({"candidate selection: raw ranges over the bricks' windows (host)", select_ms, 0});
+  out.passes.push_back({std::string("candidate selection: raw ranges over the bricks' windows") +
+                            (filters ? " + the input copy" : "") + " (host)",
+                        select_ms, 0});
   out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
   std::ostringstream info;
   const auto nb = core::brick_counts(vol.grid);

@@ -104,9 +104,10 @@ struct Selection {
   std::vector<std::uint32_t> candidates;  ///< ascending brick ids
 };
 /// `voxels`: the whole volume of `grid`, x fastest; `threads` > 1 splits the slices (the
-/// same bits for any count).
+/// same bits for any count). `copy_to` (optional, voxel_count() floats): also receives a
+/// copy of the voxels, written while they are read (the GPU chain's input field).
 Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, const core::Isosurface& iso,
-                 unsigned threads = 1);
+                 unsigned threads = 1, float* copy_to = nullptr);
 
 /// select()'s result for one brick (its widened range, NaN flag and whether it is a
 /// candidate), bit for bit the same (min / max over the same window; the order of the folds
@@ -140,6 +141,12 @@ struct CandidateRange {
   float lo, hi;
   bool nan;
 };
+/// Each candidate's exact range over its brick + 1 voxel (voxels 8 b - 1 .. 8 b + 8 per
+/// axis, clipped to the grid) of the field `f` of `grid` (x fastest): CandidateCpu::range's
+/// values bit for bit (min / max of the non-NaN voxels do not depend on the order of the
+/// folds; -0 made +0). `threads` split the candidates (the same bits for any count).
+std::vector<CandidateRange> candidate_ranges(const core::Grid& grid, const float* f,
+                                             const std::vector<std::uint32_t>& candidates, unsigned threads = 1);
 /// The active rule (core::bricked_input_from_dense): not uniform by tile_value, or
 /// uniform inside with a NaN voxel. Writes the tile of a uniform brick.
 bool is_active(const CandidateRange& r, const core::Isosurface& iso, float background, float& tile);

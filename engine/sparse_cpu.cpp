@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <initializer_list>
 #include <limits>
 #include <stdexcept>
 #include <utility>
@@ -221,60 +223,73 @@ std::pair<int, int> window(int b, int r, int n) { return {std::max(8 * b - 1 - r
 }  // namespace
 
 Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, const core::Isosurface& iso,
-                 unsigned threads) {
+                 unsigned threads, float* copy_to) {
   const auto nb = core::brick_counts(grid);
   const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
-  const std::size_t nbx = std::size_t(nb[0]), layer = nbx * std::size_t(nb[1]);
+  const std::size_t nbx = std::size_t(nb[0]), nby = std::size_t(nb[1]), layer = nbx * nby;
   const std::size_t total = layer * std::size_t(nb[2]);
   Selection s;
   s.lo.resize(total);
   s.hi.resize(total);
   s.nan.resize(total);
   std::vector<std::uint8_t> cand(total, 0);
-  // Per brick layer: the folds over its z-window, element by element over whole slices;
-  // then per brick row over its y-window, element by element over x; then per brick over
-  // its x-window. Element-wise selects (a NaN voxel never enters lo / hi, it sets its own
-  // flag) that the compiler turns into vector min / max.
+  // Per brick layer, row by row: the row's fold over the layer's z-window (element by
+  // element, in one row's accumulators that stay in L1), folded into the y-fold of every
+  // brick row whose window holds the row; then per brick over its x-window. Each voxel is
+  // read from memory once per layer window that holds it, and copied (copy_to) by the
+  // thread whose layer holds its slice. Element-wise selects (a NaN voxel
+  // never enters lo / hi, it sets its own flag) that the compiler turns into vector min / max.
   threads = threads_for(grid.voxel_count(), threads);
   parallel_for(std::size_t(nb[2]), threads, 1, [&](std::size_t bz0, std::size_t bz1) {
-    std::vector<float> zlo(slice), zhi(slice), znan(slice), ylo(sx), yhi(sx), ynan(sx);
+    std::vector<float> rlo(sx), rhi(sx), rnan(sx), ylo(nby * sx), yhi(nby * sx), ynan(nby * sx);
     for (std::size_t bz = bz0; bz < bz1; ++bz) {
-      std::fill(zlo.begin(), zlo.end(), kInf);
-      std::fill(zhi.begin(), zhi.end(), -kInf);
-      std::fill(znan.begin(), znan.end(), 0.0f);
+      std::fill(ylo.begin(), ylo.end(), kInf);
+      std::fill(yhi.begin(), yhi.end(), -kInf);
+      std::fill(ynan.begin(), ynan.end(), 0.0f);
       const auto [za, zb] = window(int(bz), plan.radius[2], nz);
-      for (int z = za; z <= zb; ++z) {
-        const float* v = voxels + std::size_t(z) * slice;
-        float *lo = zlo.data(), *hi = zhi.data(), *nn = znan.data();
-        for (std::size_t i = 0; i < slice; ++i) {
-          const float x = v[i];
-          lo[i] = x < lo[i] ? x : lo[i];
-          hi[i] = x > hi[i] ? x : hi[i];
-          nn[i] = x != x ? 1.0f : nn[i];
+      // The layer's own slices copied whole (sequential writes; its rows are then in cache
+      // for the folds below).
+      const std::size_t own0 = 8 * bz, own1 = std::min<std::size_t>(8 * bz + 8, std::size_t(nz));
+      if (copy_to) std::memcpy(copy_to + own0 * slice, voxels + own0 * slice, (own1 - own0) * slice * sizeof(float));
+      for (int y = 0; y < ny; ++y) {
+        float *lo = rlo.data(), *hi = rhi.data(), *nn = rnan.data();
+        std::fill(rlo.begin(), rlo.end(), kInf);
+        std::fill(rhi.begin(), rhi.end(), -kInf);
+        std::fill(rnan.begin(), rnan.end(), 0.0f);
+        for (int z = za; z <= zb; ++z) {
+          const std::size_t at = std::size_t(z) * slice + std::size_t(y) * sx;
+          const float* v = voxels + at;
+          for (std::size_t i = 0; i < sx; ++i) {
+            const float x = v[i];
+            lo[i] = x < lo[i] ? x : lo[i];
+            hi[i] = x > hi[i] ? x : hi[i];
+            nn[i] = x != x ? 1.0f : nn[i];
+          }
+        }
+        // Brick rows by whose window [8 by - 1 - R, 8 by + 8 + R] holds y.
+        const int by0 = std::max(0, (y - 8 - plan.radius[1] + 7) / 8);
+        const int by1 = std::min(nb[1] - 1, (y + 1 + plan.radius[1]) / 8);
+        for (int by = by0; by <= by1; ++by) {
+          float *yl = ylo.data() + std::size_t(by) * sx, *yh = yhi.data() + std::size_t(by) * sx,
+                *yn = ynan.data() + std::size_t(by) * sx;
+          for (std::size_t x = 0; x < sx; ++x) {
+            yl[x] = lo[x] < yl[x] ? lo[x] : yl[x];
+            yh[x] = hi[x] > yh[x] ? hi[x] : yh[x];
+            yn[x] = nn[x] > yn[x] ? nn[x] : yn[x];
+          }
         }
       }
       for (int by = 0; by < nb[1]; ++by) {
-        std::fill(ylo.begin(), ylo.end(), kInf);
-        std::fill(yhi.begin(), yhi.end(), -kInf);
-        std::fill(ynan.begin(), ynan.end(), 0.0f);
-        const auto [ya, yb] = window(by, plan.radius[1], ny);
-        for (int y = ya; y <= yb; ++y) {
-          const std::size_t r = std::size_t(y) * sx;
-          const float *l = zlo.data() + r, *h = zhi.data() + r, *n = znan.data() + r;
-          for (std::size_t x = 0; x < sx; ++x) {
-            ylo[x] = l[x] < ylo[x] ? l[x] : ylo[x];
-            yhi[x] = h[x] > yhi[x] ? h[x] : yhi[x];
-            ynan[x] = n[x] > ynan[x] ? n[x] : ynan[x];
-          }
-        }
+        const float *yl = ylo.data() + std::size_t(by) * sx, *yh = yhi.data() + std::size_t(by) * sx,
+                    *yn = ynan.data() + std::size_t(by) * sx;
         for (int bx = 0; bx < nb[0]; ++bx) {
           const auto [xa, xb] = window(bx, plan.radius[0], nx);
           Fold f;
           for (int x = xa; x <= xb; ++x) {
-            f.lo = ylo[std::size_t(x)] < f.lo ? ylo[std::size_t(x)] : f.lo;
-            f.hi = yhi[std::size_t(x)] > f.hi ? yhi[std::size_t(x)] : f.hi;
-            f.nan = f.nan || ynan[std::size_t(x)] != 0.0f;
+            f.lo = yl[x] < f.lo ? yl[x] : f.lo;
+            f.hi = yh[x] > f.hi ? yh[x] : f.hi;
+            f.nan = f.nan || yn[x] != 0.0f;
           }
           const std::size_t id = bz * layer + std::size_t(by) * nbx + std::size_t(bx);
           s.lo[id] = f.lo + 0.0f;  // -0 -> +0
@@ -288,6 +303,65 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
   for (std::size_t id = 0; id < total; ++id)
     if (cand[id]) s.candidates.push_back(std::uint32_t(id));
   return s;
+}
+
+namespace {
+/// The range of the box [x0, x0 + 10) x [ya, yb] x [za, zb] of `f`: three 4-lane folds per
+/// row (lanes x0 .. x0 + 3, + 4 .. + 7, + 6 .. + 9: lanes read twice change no min or max),
+/// then over the lanes. GCC / Clang vector extensions: vector min / max on any target.
+CandidateRange box_range10(const float* f, std::size_t sx, std::size_t slice, int x0, int ya, int yb, int za,
+                           int zb) {
+  typedef float v4 __attribute__((vector_size(16)));
+  const v4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+  v4 lo = {kInf, kInf, kInf, kInf}, hi = -lo, nn = one - one;
+  for (int z = za; z <= zb; ++z)
+    for (int y = ya; y <= yb; ++y) {
+      const float* row = f + std::size_t(z) * slice + std::size_t(y) * sx + std::size_t(x0);
+      for (const int o : {0, 4, 6}) {
+        v4 v;
+        std::memcpy(&v, row + o, sizeof v);
+        lo = v < lo ? v : lo;
+        hi = v > hi ? v : hi;
+        nn = v != v ? one : nn;
+      }
+    }
+  Fold r;
+  for (int i = 0; i < 4; ++i) {
+    r.lo = lo[i] < r.lo ? lo[i] : r.lo;
+    r.hi = hi[i] > r.hi ? hi[i] : r.hi;
+    r.nan = r.nan || nn[i] != 0.0f;
+  }
+  return {r.lo, r.hi, r.nan};
+}
+}  // namespace
+
+std::vector<CandidateRange> candidate_ranges(const core::Grid& grid, const float* f,
+                                             const std::vector<std::uint32_t>& candidates, unsigned threads) {
+  const auto nb = core::brick_counts(grid);
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+  const std::size_t sx = std::size_t(nx), slice = sx * std::size_t(ny);
+  std::vector<CandidateRange> out(candidates.size());
+  threads = threads_for(std::uint64_t(candidates.size()) * 1000u, threads);
+  parallel_for(candidates.size(), threads, 64, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      const auto b = core::brick_coords(candidates[c], nb);
+      const auto [xa, xb] = window(b[0], 0, nx);
+      const auto [ya, yb] = window(b[1], 0, ny);
+      const auto [za, zb] = window(b[2], 0, nz);
+      CandidateRange r{kInf, -kInf, false};
+      if (xb - xa + 1 == 10) {
+        r = box_range10(f, sx, slice, xa, ya, yb, za, zb);
+      } else {  // a brick at the grid's edge along x: voxel by voxel
+        Fold e;
+        for (int z = za; z <= zb; ++z)
+          for (int y = ya; y <= yb; ++y)
+            for (int x = xa; x <= xb; ++x) e.add(f[std::size_t(z) * slice + std::size_t(y) * sx + std::size_t(x)]);
+        r = {e.lo, e.hi, e.nan};
+      }
+      out[c] = {r.lo + 0.0f, r.hi + 0.0f, r.nan};  // -0 -> +0, as CandidateCpu::range
+    }
+  });
+  return out;
 }
 
 BrickSelection select_brick(const core::Grid& grid, const float* voxels, const Plan& plan,

@@ -221,7 +221,9 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
     EXPECT_TRUE(r.gpu_available) << r.gpu_why;
     EXPECT_TRUE(std::isfinite(r.dense_gpu_wall_ms));
     EXPECT_NEAR(r.dense_gpu_over_cpu_wall, r.dense_gpu_wall_ms / r.dense_cpu_wall_ms, 1e-12);
-    if (std::isfinite(gpu_sum)) EXPECT_NEAR(r.sum.gpu_ms, gpu_sum, 1e-9);
+    if (std::isfinite(gpu_sum)) {
+      EXPECT_NEAR(r.sum.gpu_ms, gpu_sum, 1e-9);
+    }
   }
   // The multi-threaded CPU backend: timed where the machine has several threads, and its
   // output checked bit for bit against the one-thread reference in every repetition.
@@ -377,4 +379,28 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   r.peers[1].itk_gradient_ms = kNaN;
   app::finish_case(r);
   EXPECT_DOUBLE_EQ(r.fastest_peer_chain_ms, 56.0);
+}
+
+// The end-to-end child on a small sphere: the split from the volume to the first servo tick
+// is reported (the chain's stages within its wall time, the hand-over, the first tick), and
+// the ticks after it touch the surface (HRI renders a force: the HIP path meets the sphere).
+TEST(BenchEngineBig, ChildReportsTheSplitToTheFirstTick) {
+  std::ostringstream out, progress;
+  ASSERT_EQ(app::run_big_child(32, "", out, progress), 0) << out.str() << progress.str();
+  auto kv = app::parse_key_values(out.str());
+  for (const char* k : {"make_ms", "setup_ms", "step_ms", "stages", "publish_ms", "first_tick_us", "ticks_median_us",
+                        "max_force_n"})
+    ASSERT_TRUE(kv.count(k)) << k << " missing in\n" << out.str();
+  const int stages = std::stoi(kv["stages"]);
+  ASSERT_GE(stages, 3) << out.str();
+  double staged = 0;
+  for (int i = 0; i < stages; ++i) {
+    const std::string k = "stage" + std::to_string(i);
+    ASSERT_TRUE(kv.count(k + "_ms") && kv.count(k + "_label")) << k;
+    EXPECT_GE(std::stod(kv[k + "_ms"]), 0.0) << k;
+    staged += std::stod(kv[k + "_ms"]);
+  }
+  EXPECT_LE(staged, std::stod(kv["step_ms"]) * 1.001 + 0.01) << "stages beyond the run's wall time";
+  EXPECT_GT(std::stod(kv["first_tick_us"]), 0.0);
+  EXPECT_GT(std::stod(kv["max_force_n"]), 0.05) << "the ticks never touched the sphere";
 }

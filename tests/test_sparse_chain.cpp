@@ -28,6 +28,7 @@
 #include "isotouch/shaders/filter_x4_spv.h"
 #include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch_shared.h"
+#include "parallel.h"
 #include "passes.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
@@ -499,6 +500,12 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     const engine::sparse::Selection sel = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2);
     const engine::sparse::Selection one = engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 1);
     EXPECT_EQ(sel.candidates, one.candidates) << c.v->path;
+    // The input copy written in the same pass (2 threads, each its own slices): every voxel.
+    std::vector<float> copy(c.v->voxels.size(), 7.0f);
+    const engine::sparse::Selection with_copy =
+        engine::sparse::select(c.v->grid, c.v->voxels.data(), plan, above(c.tau), 2, copy.data());
+    EXPECT_EQ(with_copy.candidates, sel.candidates) << c.v->path;
+    EXPECT_EQ(std::memcmp(copy.data(), c.v->voxels.data(), copy.size() * 4), 0) << c.v->path << ": the input copy";
     std::vector<std::uint8_t> cand(sel.lo.size(), 0);
     for (std::uint32_t id : sel.candidates) cand[id] = 1;
     std::size_t differ = 0;
@@ -530,6 +537,53 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
     EXPECT_GT(straddling, 0u) << c.v->path;
     std::printf("  %s tau %g, %zu passes: %zu candidates, %zu straddling (brute force)\n", c.v->path.c_str(), c.tau,
                 p.size(), sel.candidates.size(), straddling);
+  }
+}
+
+// candidate_ranges (the lists strategy's host step) against a brute-force fold over each
+// brick + 1 voxel, every brick a candidate, on odd dims (bricks cut by the grid on every
+// axis, rows of 10 and of fewer voxels), NaN voxels and -0, 1 and 2 threads.
+TEST(SparseChain, CandidateRangesAreTheBruteForceRanges) {
+  core::Grid g;
+  g.dims = {301, 61, 37};  // x bricks of 10 voxels and a last one of 6; 1520 bricks: 2 threads run
+  std::vector<float> f(g.voxel_count());
+  std::uint64_t s = 0x9e3779b97f4a7c15ull;
+  for (float& v : f) {
+    s = s * 6364136223846793005ull + 1442695040888963407ull;
+    v = float(std::int64_t(s >> 40) % 2001 - 1000) * 0.25f;
+  }
+  for (std::size_t i = 3; i < f.size(); i += 1013) f[i] = std::numeric_limits<float>::quiet_NaN();
+  for (std::size_t i = 11; i < f.size(); i += 97) f[i] = -0.0f;
+  const auto nb = core::brick_counts(g);
+  const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
+  std::vector<std::uint32_t> all(total);
+  for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+  for (unsigned threads : {1u, 2u}) {
+    const auto r = engine::sparse::candidate_ranges(g, f.data(), all, threads);
+    ASSERT_EQ(r.size(), all.size());
+    std::size_t differ = 0, with_nan = 0;
+    for (std::uint32_t id : all) {
+      const auto b = core::brick_coords(id, nb);
+      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+      bool nan = false;
+      for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
+        for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
+          for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
+            const float v = f[g.index(x, y, z)];
+            if (v != v) {
+              nan = true;
+              continue;
+            }
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+          }
+      lo += 0.0f;
+      hi += 0.0f;
+      with_nan += nan;
+      differ += bits(r[id].lo) != bits(lo) || bits(r[id].hi) != bits(hi) || r[id].nan != nan;
+    }
+    EXPECT_EQ(differ, 0u) << threads << " thread(s)";
+    EXPECT_GT(with_nan, 0u);
   }
 }
 
@@ -583,6 +637,55 @@ void bench_case(const Volume& v, double tau, int reps) {
   for (const auto& st : last.passes) std::printf("    %-70s %8.2f ms\n", st.label.c_str(), st.ms);
 }
 }  // namespace
+
+// The lists strategy's host stages alone on the chest at -500, min and median of
+// ISOTOUCH_BENCH_REPS (default 7) runs each, interleaved: the selection with and without the
+// input copy written in the same pass, a plain memcpy of the input, the candidate ranges.
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_HostStagesChest*'
+TEST(SparseChain, DISABLED_HostStagesChest) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 7;
+  const Volume v = io::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const engine::sparse::Plan plan = engine::sparse::make_plan(v.grid, p, "chest");
+  const unsigned th = engine::hardware_threads();
+  std::vector<float> copy(v.voxels.size(), 0.0f);
+  std::vector<double> t_sel, t_sel_copy, t_memcpy, t_ranges;
+  std::vector<std::uint32_t> cands;
+  auto ms = [](auto&& f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  };
+  std::vector<double> t_sel1, t_sel_copy1;
+  for (int r = 0; r < reps; ++r) {
+    t_sel1.push_back(ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), 1); }));
+    t_sel_copy1.push_back(
+        ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), 1, copy.data()); }));
+    t_sel.push_back(ms([&] { cands = engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), th).candidates; }));
+    t_sel_copy.push_back(
+        ms([&] { (void)engine::sparse::select(v.grid, v.voxels.data(), plan, above(-500), th, copy.data()); }));
+    t_memcpy.push_back(ms([&] { std::memcpy(copy.data(), v.voxels.data(), copy.size() * 4); }));
+    t_ranges.push_back(ms([&] { (void)engine::sparse::candidate_ranges(v.grid, copy.data(), cands, th); }));
+  }
+  auto row = [&](const char* what, std::vector<double> t) {
+    std::sort(t.begin(), t.end());
+    std::printf("  %-48s min %7.2f ms, median %7.2f ms\n", what, t.front(), t[t.size() / 2]);
+  };
+  double load[3] = {0, 0, 0};
+  if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(f, "%lf %lf %lf", &load[0], &load[1], &load[2]) != 3) load[0] = -1;
+    std::fclose(f);
+  }
+  std::printf("chest -500, %zu candidates, %u threads, %d runs, load %.2f %.2f %.2f\n", cands.size(), th, reps, load[0],
+              load[1], load[2]);
+  row("selection, one thread", t_sel1);
+  row("selection + input copy, one thread", t_sel_copy1);
+  row("selection", t_sel);
+  row("selection + input copy in the same pass", t_sel_copy);
+  row("input memcpy alone (one thread)", t_memcpy);
+  row("candidate ranges", t_ranges);
+}
 
 TEST(SparseChain, DISABLED_BenchChest) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
@@ -747,12 +850,21 @@ TEST(SparseChain, DISABLED_LimitChest) {
     return timer.elapsed_ms(0, 1);
   };
   std::size_t n_active = 0;
-  std::vector<double> t_total, t_dense, t_in, t_filters, t_pub, t_gpu, t_host, t_dense_floor, t_fused;
+  std::vector<double> t_total, t_dense, t_in, t_filters, t_pub, t_gpu, t_host, t_dense_floor, t_fused, t_cpu;
+  // CPU time of the whole process (lavapipe's threads included): the work a run does,
+  // less sensitive than wall time to other processes on a shared machine.
+  const auto process_cpu_ms = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return (double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) / 1e3);
+  };
   engine::SparseOutput last;
   for (int r = -1; r < reps; ++r) {  // r = -1: warm-up
     auto t0 = std::chrono::steady_clock::now();
+    const double cpu0 = process_cpu_ms();
     last = (*chain.value)->run(v, iso, -1024.0f);
     const double total = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    if (r >= 0) t_cpu.push_back(process_cpu_ms() - cpu0);
     n_active = last.stats.active;
     t0 = std::chrono::steady_clock::now();
     (void)engine::run_chain_cpu(v, p);
@@ -813,4 +925,7 @@ TEST(SparseChain, DISABLED_LimitChest) {
       median(t_dense_floor), median(t_pub), n_active, floor_sum,
       floor_sum / median(t_dense));
   for (const auto& st : last.passes) std::printf("    %-66s %8.2f ms\n", st.label.c_str(), st.ms);
+  std::printf("  lists strategy, CPU time of all threads %8.2f ms (median)\n", median(t_cpu));
+  std::printf("    %-66s %8.2f ms\n    %-66s %8.2f ms\n    %-66s %8.2f ms\n", "submit to fence (wall)",
+              last.submit_wall_ms, "buffers + list upload (host)", last.upload_ms, "total (wall)", last.total_ms);
 }

@@ -1,359 +1,223 @@
+// bench_cmd.cpp - `isotouch bench SUBCOMMAND`: the options of each benchmark; the
+// benchmarks themselves are bench/.
 #include "bench_cmd.h"
 
-#include <algorithm>
-#include <atomic>
-#include <chrono>
-#include <cmath>
-#include <iomanip>
 #include <iostream>
-#include <limits>
 #include <memory>
-#include <sstream>
-#include <thread>
 
-#include "cpu_gradient.h"
-#include "files.h"
-#include "gradient_pass.h"
-#include "servo_thread.h"
-#include "sim_device_io.h"
-#include "synthetic.h"
-#include "baselines.h"
-#include "brick_field.h"
-#include "hri.h"
-#include "sweep.h"
-
-#include <fstream>
-#include "vk_context.h"
+#include "bench_device.h"
+#include "bench_edit.h"
+#include "bench_engine.h"
+#include "cli_checks.h"
+#include "render_bench.h"
+#include "servo_bench.h"
 
 namespace isotouch::app {
-using eval::median_ns_per_tick;
-using eval::prepare_sweep_scene;
-using eval::reference_params;
-using io::write_file_atomic;
-using sim::make_touch_script;
-using sim::SimDevice;
-using sim::SimDeviceIO;
-using core::SampleField;
-using core::Vec3;
-using eval::SweepScene;
-using servo::BaselineParams;
-using servo::HriParams;
-using servo::Intersection;
-using servo::NormalSource;
-using servo::Renderer;
-using servo::ServoThread;
-using servo::ServoThreadConfig;
-using servo::TripleBuffer;
-using servo::Variant;
-using sim::ScriptParams;
-using sim::TouchScript;
+namespace {
 
-std::string load_average() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  if (!(f >> a >> b >> c)) return "unknown";
-  std::ostringstream o;
-  o << a << ", " << b << ", " << c;
-  return o.str();
+Subcommand add_bench_servo_rt_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::ServoRtOptions>();
+  auto* rt = bench.add_subcommand(
+      "servo-rt", "Real-time servo thread at 1, 4 and 10 kHz while the engine thread publishes: p50/p99/p99.9 "
+                  "of the period error and missed deadlines");
+  rt->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(positive_number());
+  rt->add_flag("--fifo,!--no-fifo", o->sched_fifo,
+               "SCHED_FIFO for the servo thread (default on; needs CAP_SYS_NICE, refused -> a note)");
+  rt->add_flag("--pin,!--no-pin", o->pin_cpu, "Pin the servo thread (default: the last CPU, only under SCHED_FIFO)");
+  rt->add_flag("--mlock,!--no-mlock", o->lock_memory, "mlockall and prefault before the loop (default on)");
+  rt->add_option("--cpu", o->cpu, "Pin to this CPU (default: the last one)");
+  rt->add_option("--csv", o->out_csv, "Also write the table to this CSV file");
+  return {rt, [o](const std::string& device) {
+            bench::ServoRtOptions opt = *o;
+            opt.device = device;
+            return bench::run_bench_servo_rt(opt, std::cout);
+          }};
 }
 
-int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
-  using namespace servo;
-  engine::ContextOptions co;
-  co.device = o.device;
-  auto ctx = engine::VulkanContext::create(co);
-  std::unique_ptr<engine::GradientPass> pass;
-  std::string engine_name = "CPU reference (no Vulkan device: " + ctx.error + ")";
-  if (ctx) {
-    pass = std::make_unique<engine::GradientPass>(**ctx.value);
-    engine_name = (*ctx.value)->info().name;
-  }
-  log << "bench servo-rt: " << o.seconds << " s per rate; engine thread recomputes a 64^3 sculpted sphere on "
-      << engine_name << " and publishes it; " << std::thread::hardware_concurrency()
-      << " CPUs; load average (1/5/15 min) " << load_average() << "\n";
-
-  std::ostringstream csv;
-  csv << "rate_hz,seconds,scheduling,ticks,missed_deadlines,period_err_p50_us,period_err_p99_us,period_err_p999_us,"
-         "period_err_max_us,publications\n";
-  log << "   rate  scheduling                           ticks  missed  |err| p50 [us]  p99 [us]  p99.9 [us]  max [us]  "
-         "publications\n";
-  std::string last_note;
-  long ticks_10k = 0, missed_10k = 0;
-  double p999_10k = 0;
-  // The last case runs the same loop with the engine idle: what the machine alone allows.
-  const std::pair<double, bool> cases[] = {{1000.0, true}, {4000.0, true}, {10000.0, true}, {10000.0, false}};
-  long ticks_idle = 0, missed_idle = 0;
-  double p999_idle = 0;
-  for (const auto& [rate, engine_on] : cases) {
-    TripleBuffer<SampleField> published;
-    auto first = std::make_shared<SampleField>(engine::compute_samples_cpu(engine::make_sphere({64, 64, 64}, 1e-3, 20)));
-    first->version = 1;
-    published.publish(first);
-
-    HriParams hp;
-    hp.tau = 0;
-    hp.plane_update_period = 5;
-    hp.rate_hz = rate;
-    HriRenderer renderer(hp);
-    ScriptParams sp;
-    sp.ray_origin_frac = {0.5, 0.5, 1.2};
-    sp.press_depth_m = 0.004;
-    sp.stroke_length_m = 0.02;
-    const TouchScript script = make_touch_script(*first, hp, sp);
-    Vec3 p0, v0;
-    script.at(0, p0, v0);
-    SimDevice dev({}, p0);
-    SimDeviceIO io(dev, script, 1.0 / rate);
-    ServoThreadConfig cfg;
-    cfg.rate_hz = rate;
-    cfg.sched_fifo = o.sched_fifo;
-    cfg.pin_cpu = o.pin_cpu;
-    cfg.cpu = o.cpu;
-    cfg.lock_memory = o.lock_memory;
-    cfg.record_ticks = std::size_t(rate * o.seconds * 1.1) + 16;
-    ServoThread servo(published, renderer, io, cfg);
-
-    std::atomic<bool> stop{false};
-    std::atomic<long> publications{0};
-    std::thread engine_thread([&] {
-      std::uint64_t v = 1;
-      while (engine_on && !stop.load()) {
-        const double r = 20.0 + 1.5 * std::sin(double(v) * 0.3);  // the sculpt: radius breathes
-        const engine::Volume vol = engine::make_sphere({64, 64, 64}, 1e-3, r);
-        auto f = std::make_shared<SampleField>(pass ? pass->run(vol) : engine::compute_samples_cpu(vol));
-        f->version = ++v;
-        published.publish(std::move(f));
-        publications.fetch_add(1);
-      }
-    });
-    const std::string note = servo.start();
-    if (!note.empty() && note != last_note) log << note;
-    last_note = note;
-    std::string sched = servo.got_fifo() ? "FIFO" : "default";
-    sched += servo.pinned_cpu() >= 0 ? ", CPU " + std::to_string(servo.pinned_cpu()) : ", unpinned";
-    sched += servo.memory_locked() ? ", mlock" : "";
-    sched += engine_on ? "" : "; engine idle";
-    std::this_thread::sleep_for(std::chrono::duration<double>(o.seconds));
-    servo.stop();
-    stop = true;
-    engine_thread.join();
-
-    std::vector<std::int64_t> e = servo.period_errors_ns();
-    for (auto& x : e) x = x < 0 ? -x : x;
-    std::sort(e.begin(), e.end());
-    auto pct = [&](double q) {
-      if (e.empty()) return 0.0;
-      return double(e[std::min(e.size() - 1, std::size_t(q * double(e.size())))]) * 1e-3;
-    };
-    const double mx = e.empty() ? 0.0 : double(e.back()) * 1e-3;
-    log << std::setw(7) << long(rate) << "  " << std::left << std::setw(32) << sched << std::right << std::setw(10)
-        << servo.ticks() << std::setw(8) << servo.missed_deadlines() << std::fixed << std::setprecision(1)
-        << std::setw(16) << pct(0.5) << std::setw(10) << pct(0.99) << std::setw(12) << pct(0.999) << std::setw(10)
-        << mx << std::setw(14) << publications.load() << "\n"
-        << std::defaultfloat;
-    csv << rate << ',' << o.seconds << ",\"" << sched << "\"," << servo.ticks() << ',' << servo.missed_deadlines()
-        << ',' << pct(0.5) << ',' << pct(0.99) << ',' << pct(0.999) << ',' << mx << ',' << publications.load()
-        << '\n';
-    if (rate == 10000.0) {
-      (engine_on ? ticks_10k : ticks_idle) = servo.ticks();
-      (engine_on ? missed_10k : missed_idle) = servo.missed_deadlines();
-      (engine_on ? p999_10k : p999_idle) = pct(0.999);
-    }
-  }
-  log << "period error = |actual period - nominal|; missed = ticks that started a whole period late. "
-         "Load average after: " << load_average() << "\n";
-  const double miss_per_10k = ticks_10k > 0 ? 1e4 * double(missed_10k) / double(ticks_10k) : 0.0;
-  const bool met = ticks_10k > 0 && p999_10k <= 20.0 && miss_per_10k <= 1.0;
-  log << std::fixed << std::setprecision(1) << "10 kHz target (p99.9 <= 20 us, <= 1 miss per 10,000 ticks): "
-      << (met ? "met" : "NOT met") << ": p99.9 " << p999_10k << " us, " << std::setprecision(2) << miss_per_10k
-      << " misses per 10,000 ticks (" << missed_10k << " in " << ticks_10k << "); with the engine idle: p99.9 "
-      << std::setprecision(1) << p999_idle << " us, " << std::setprecision(2)
-      << (ticks_idle > 0 ? 1e4 * double(missed_idle) / double(ticks_idle) : 0.0) << " misses per 10,000 ticks\n"
-      << std::defaultfloat;
-  if (!o.out_csv.empty()) {
-    write_file_atomic(o.out_csv, csv.str());
-    log << "wrote " << o.out_csv << "\n";
-  }
-  return 0;
+Subcommand add_bench_table1_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::Table1Options>();
+  auto* t1 = bench.add_subcommand(
+      "table1", "The paper's Table 1 again: time per servo loop and servo rate of HRI (n = 5), Avila-Sobierajski "
+                "and Blezek-Robb on sphere, knot, head and lung, next to the paper's figures");
+  t1->add_option("--repetitions", o->repetitions, "Timed replays per stroke (median)")
+      ->capture_default_str()
+      ->check(positive_number());
+  t1->add_option("--csv", o->out_csv, "Also write the table to this CSV file");
+  return {t1, [o](const std::string& device) {
+            bench::Table1Options opt = *o;
+            opt.device = device;
+            return bench::run_bench_table1(opt, std::cout);
+          }};
 }
 
-std::string cpu_model() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown CPU";
-}
+constexpr const char* kColumnsHelp = R"(
+Cases: head CT (headsq 64x64x93) at 1150 and 500, chest CT (lungdx 256x256x64) at -500
+and +250, a 256^3 noisy sphere (signed distance in mm to a sphere of radius 96 voxels,
+1 mm spacing, plus uniform noise in [-1, 1) mm; tau 0), all inside above. Dense list:
+gaussian(1 mm) + gradient + brick_minmax(1); sparse list: gaussian(1 mm) + gradient.
 
-std::string table1_verdict(const std::vector<Table1Row>& rows) {
-  auto ratio = [](double num, double den) {
-    const double r = num / den;
-    return num > 0 && den > 0 && std::isfinite(r) ? r : std::numeric_limits<double>::infinity();
+Dense table, one row per pass, then the sum of the passes and the end-to-end wall time:
+  min bytes      bytes the pass must read + write at least: gaussian/closing 8 B/voxel,
+                 gradient 20 B/voxel (4 in, 16 out), brick_minmax 4 B/voxel + 8 B/brick
+  dense GPU      PassChain (Vulkan) device time per pass [ms], median (timestamps)
+  dense CPU      run_chain_cpu, one thread, wall time per pass [ms], median
+  GPU / CPU      dense GPU ms / dense CPU ms
+  GB/s           min bytes / time;  / memcpy: that over this machine's memcpy GB/s
+                 (std::memcpy of 256 MiB, best of 5, read + write counted)
+Sparse table, one row per isovalue:
+  bricks, candidates, active   8^3 bricks in all, computed, published with samples
+  active %       100 active / bricks
+  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms], default
+                 strategy: x4 passes on work lists of the candidate bricks' quads
+  dense strategy the same chain running the dense x4 passes over the whole volume
+  per-brick      the same chain on the per-brick shared-memory kernel
+  sparse CPU     run_sparse_cpu total_ms, median [ms]
+  dense GPU/CPU  end-to-end wall of the dense chain (same repetitions)
+  ratios         sparse GPU / dense CPU (the must-show), sparse CPU / dense CPU,
+                 sparse GPU / dense GPU
+  GPU vs CPU     whether both sparse engines found the same bricks and bytes
+Stages: the sparse engines' own per-stage times.
+Bytes: published snapshot bytes per sample format (fp32, fp16, unorm16) against the dense
+  fp32 snapshot (16 B per voxel), and the percentage.
+512^3: a 512^3 noisy sphere through the sparse GPU chain (CPU reference if the GPU one is
+  not available) in a child process: step time, setup, peak RSS from wait4 (ru_maxrss),
+  the child's own VmHWM, snapshot bytes; then the split from the volume to the first servo
+  tick: making the volume, context + chain, the chain's stages, the hand-over to the servo
+  (servo::TripleBuffer), the first HRI tick, and the median of the next 999 ticks.
+Verdicts: computed from the measured figures: chest -500 sparse GPU / dense CPU <= 1/3;
+  chest dense GPU chain / fastest peer chain <= 1/3 and / memcpy of its bytes <= 5 (with
+  the device's own copy floor, copy_x4, in the same units beside it);
+  chest -500 sparse GPU / fastest peer chain <= 1/5; head sparse GPU / sparse CPU <= 1 and
+  / dense CPU chain <= 1; chest +250 smallest snapshot / dense fp32 <= 0.15; 512^3 ran,
+  peak RSS <= MemTotal.
+Progress goes to stderr, the report (markdown) to stdout.
+)";
+
+Subcommand add_bench_engine_command(CLI::App& bench) {
+  auto opt = std::make_shared<bench::BenchEngineOptions>();
+  auto big_child = std::make_shared<int>(0);
+  Subcommand s;
+  s.app = bench.add_subcommand("engine",
+                               "Engine passes dense and sparse, GPU and one-thread CPU reference, on the head CT, the "
+                               "chest CT and a 256^3 synthetic volume: times, bricks active, snapshot bytes, bandwidth "
+                               "against memcpy, ratios, verdicts; a 512^3 volume end to end (time, peak memory)");
+  s.app->add_option("--repetitions", opt->repetitions, "Timed repetitions per figure (median)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
+  s.app->add_flag("--quick", opt->quick, "One repetition and no 512^3 step (unless --big): for tests");
+  s.app->add_flag("--big", opt->big, "Run the 512^3 step even with --quick");
+  s.app->add_flag("--closing", opt->with_closing, "Also benchmark the list with closing(radius 1 mm)");
+  s.app->add_flag("--no-peers", [opt](std::int64_t) { opt->peers = false; },
+                  "Do not time the peers (ITK, OpenVDB) beside the engine");
+  s.app->add_option("--big-dim", opt->big_dim, "Edge of the end-to-end volume [voxels]")
+      ->capture_default_str()
+      ->check(CLI::Range(8, 1024));
+  s.app->add_option("--cases", opt->cases, "Only these cases: head chest sphere256 (default: all)")
+      ->check(CLI::IsMember({"head", "chest", "sphere256"}));
+  s.app->add_option("--csv", opt->out_csv, "Also write every figure to this CSV file (long form)");
+  s.app->add_option("--big-child", *big_child, "internal: run the end-to-end step in this process")->group("");
+  s.app->footer(kColumnsHelp);
+  s.run = [opt, big_child](const std::string& device) {
+    if (*big_child > 0) return bench::run_big_child(*big_child, device, std::cout, std::cerr);
+    opt->device = device;
+    return bench::run_bench_engine(*opt, std::cout, std::cerr);
   };
-  int k = 0, k_paper = 0;
-  double worst = -1;
-  std::string worst_scene;
-  for (const Table1Row& r : rows) {
-    const double q = ratio(r.hri_us, r.avila_us);
-    if (q <= 1.0) ++k;
-    if (ratio(r.hri_paper_us, r.avila_us) <= 1.0) ++k_paper;
-    if (q > worst) {
-      worst = q;
-      worst_scene = r.scene;
-    }
-  }
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(2) << "HRI/Avila <= 1 on " << k << " of " << rows.size() << " scenes";
-  if (!rows.empty()) s << " (worst: " << worst_scene << " " << worst << ")";
-  s << "; paper variant (Figure 2 as printed): " << k_paper << " of " << rows.size();
-  return s.str();
+  return s;
 }
 
-std::string table1_bricked_verdict(const std::vector<Table1Row>& rows) {
-  auto ratio = [](double num, double den) {
-    const double r = num / den;
-    return num > 0 && den > 0 && std::isfinite(r) ? r : std::numeric_limits<double>::infinity();
-  };
-  int k = 0;
-  double worst = -1, worst16 = -1;
-  std::string worst_scene, worst16_scene;
-  for (const Table1Row& r : rows) {
-    const double q = ratio(r.hri_bricked_us, r.hri_us), q16 = ratio(r.hri_fp16_us, r.hri_us);
-    if (q <= 1.10) ++k;
-    if (q > worst) {
-      worst = q;
-      worst_scene = r.scene;
-    }
-    if (q16 > worst16) {
-      worst16 = q16;
-      worst16_scene = r.scene;
-    }
-  }
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(2) << "bricked/dense <= 1.10 on " << k << " of " << rows.size() << " scenes";
-  if (!rows.empty()) s << " (worst: " << worst_scene << " " << worst << "); fp16/dense: worst " << worst16_scene << " "
-                       << worst16;
-  return s.str();
+constexpr const char* kEditHelp = R"(
+What it measures, in one process on the scene's volume (default scenes/chest.json: its
+isovalue, inside, passes and sample format):
+  latency     carve and add brushes (radius 2, 5, 10 mm; each point carved, then added back)
+              at isosurface crossings of the first snapshot, one at a time: from the edit
+              submitted (EditSession::apply: Sculptor brush on the GPU when a Vulkan device
+              is there, LiveField update) to the first servo tick that reads the new
+              snapshot (the tick notes the version and a steady_clock time). Median, p99,
+              max, and the parts: brush, update, publish-to-tick.
+  dense       the same edits with the whole volume's passes recomputed densely (GPU
+              PassChain, or run_chain_cpu without a device) and published the same way;
+              dense / incremental = ratio of the medians.
+  sustained   back-to-back 5 mm edits for --seconds while the servo runs, against the servo
+              with the engine idle for as long (idle, editing; --rounds times), both on a
+              live session (its servo thread; its edit thread applies what the bench
+              submits): edits/s, edit-to-haptics (submit to the first tick reading it),
+              voxel changes/s (replayed on the CPU reference), missed deadlines, period errors.
+The servo: HRI at --rate Hz on a simulated device pressed into the surface (the scene's
+script, then resting), SCHED_FIFO + pinning + mlock when the system allows.
+Verdicts against the targets: 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more
+servo misses (per tick) than idle. Exit 0 whether or not a target is met; 1 when something
+failed to run. Report (markdown) on stdout, progress on stderr. Timings on a shared machine
+are noisy: run it when the machine is quiet and repeat.
+)";
+
+Subcommand add_bench_edit_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::BenchEditOptions>();
+  auto* sub = bench.add_subcommand("edit", "Edit-to-haptics latency and edit rate while sculpting the chest CT");
+  sub->add_option("--scene", o->scene, "Scene file (volume, isovalue, passes, samples); default scenes/chest.json");
+  sub->add_flag("--quick", o->quick, "A few seconds (CI): 6 edits per radius, 1 dense edit, one 0.5 s round");
+  sub->add_option("--edits", o->edits_per_radius, "Latency edits per radius (half carve, half add)")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 100000));
+  sub->add_option("--dense-edits", o->dense_edits, "Dense full-recompute edits per radius (0: none)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 10000));
+  sub->add_option("--seconds", o->seconds, "Length of each idle and editing phase [s]")
+      ->capture_default_str()
+      ->check(CLI::Range(0.05, 600.0));
+  sub->add_option("--rounds", o->rounds, "Idle + editing pairs")->capture_default_str()->check(CLI::Range(1, 20));
+  sub->add_option("--rate", o->rate_hz, "Servo rate [Hz]")->capture_default_str()->check(CLI::Range(500.0, 10000.0));
+  sub->add_option("--brushes", o->brushes, "gpu (the CPU reference without a device) or cpu")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"gpu", "cpu"}));
+  sub->add_option("--seed", o->seed, "Seed of the edit points")->capture_default_str();
+  sub->add_option("--csv", o->out_csv, "Also write every figure to this CSV file (long form, atomic)");
+  sub->footer(kEditHelp);
+  return {sub, [o, sub](const std::string& device) {
+            bench::BenchEditOptions opt = *o;
+            opt.device = device;
+            if (opt.quick) {
+              if (sub->count("--edits") == 0) opt.edits_per_radius = 6;
+              if (sub->count("--dense-edits") == 0) opt.dense_edits = 1;
+              if (sub->count("--seconds") == 0) opt.seconds = 0.5;
+              if (sub->count("--rounds") == 0) opt.rounds = 1;
+            }
+            return bench::run_bench_edit(opt, std::cout, std::cerr);
+          }};
 }
 
-int run_bench_table1(const Table1Options& o, std::ostream& log) {
-  using namespace servo;
-  engine::ContextOptions co;
-  co.device = o.device;
-  auto ctx = engine::VulkanContext::create(co);
-  engine::VulkanContext* vk = ctx ? ctx.value->get() : nullptr;
-  log << "bench table1: " << cpu_model() << ", " << std::thread::hardware_concurrency()
-      << " CPUs; one thread; samples from " << (vk ? vk->info().name : "the CPU reference") << "; "
-      << o.warmup << " warm-up + " << o.repetitions
-      << " timed replays of each stroke per algorithm, interleaved round by round, median\n";
-  struct PaperRow {
-    const char* scene;
-    const char* label;
-    double hri, blezek, avila;  // us per loop
-  };
-  const PaperRow paper[] = {{"sphere", "sphere (64x64x64)", 39.00, 47.10, 38.30},
-                            {"knot", "knot (64x64x64)", 42.00, 49.10, 41.20},
-                            {"head", "head (paper 128x128x64; here 64x64x93)", 48.00, 59.70, 47.40},
-                            {"chest", "lung (paper 128x128x64; here chest 256x256x64)", 46.80, 57.60, 46.20}};
-  std::ostringstream csv;
-  csv << "scene,algorithm,us_per_loop,rate_khz,paper_us_per_loop,paper_rate_khz\n";
-  std::ostringstream tab;
-  tab << std::fixed;
-  tab << "\n| scene | HRI n=5 [us] | (paper) | HRI as printed [us] | Blezek-Robb [us] | (paper) | "
-         "Avila-Sobierajski [us] | (paper) | HRI rate [kHz] | HRI/Avila | (paper) | HRI as printed/Avila | "
-         "Blezek/HRI | (paper) | HRI bricked fp32 [us] | bricked/dense | HRI bricked fp16 [us] | fp16/dense |\n"
-      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  std::vector<Table1Row> rows;
-  std::ostringstream bytes, tools;
-  for (const PaperRow& pr : paper) {
-    const SweepScene s = prepare_sweep_scene(pr.scene, vk, log);
-    HriParams hp = reference_params(s);
-    hp.plane_update_period = 5;
-    hp.intersection = Intersection::kLinear;
-    hp.normal = NormalSource::kCentral;
-    HriParams hp_paper = hp;
-    hp_paper.variant = Variant::kPaper;
-    BaselineParams bp;
-    bp.tau = s.tau;
-    bp.inside = s.inside;
-    bp.stiffness_n_per_m = s.stiffness_n_per_m;
-    bp.force_limit_n = 1e3;
-    HriRenderer hri(hp);
-    HriRenderer hri_paper(hp_paper);
-    BlezekRenderer blezek(bp);
-    AvilaRenderer avila(bp);
-    HriRenderer hri_bricked(hp), hri_fp16(hp);
-    // The same stroke with a spherical tool of 2 voxels' radius (HriParams::tool_radius_m).
-    HriParams hp_tool = hp;
-    hp_tool.tool_radius_m = 2.0 * std::min({s.field->grid.spacing_m.x, s.field->grid.spacing_m.y, s.field->grid.spacing_m.z});
-    HriRenderer hri_tool(hp_tool);
-    // The bricked snapshots of the same samples (fp32: bit-identical reads in active bricks).
-    const core::BrickedInput bin = core::bricked_input_from_dense(*s.field, core::Isosurface{s.tau, s.inside});
-    SweepScene s32, s16;
-    s32.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp32));
-    s16.field = std::make_shared<const SampleField>(core::make_bricked_field(bin, core::SampleFormat::kFp16));
-    s32.hip = s16.hip = s.hip;
-    const SweepScene* scenes[] = {&s, &s, &s, &s, &s32, &s16, &s};
-    Renderer* algos[] = {&hri, &hri_paper, &blezek, &avila, &hri_bricked, &hri_fp16, &hri_tool};
-    constexpr int kAlgos = 7;
-    // Interleaved rounds: every algorithm sees the same clock, cache and load state.
-    for (int a = 0; a < kAlgos; ++a) median_ns_per_tick(*algos[a], *scenes[a], o.warmup, 1);
-    std::vector<double> t[kAlgos];
-    for (int rep = 0; rep < o.repetitions; ++rep)
-      for (int a = 0; a < kAlgos; ++a) t[a].push_back(median_ns_per_tick(*algos[a], *scenes[a], 0, 1));
-    double med[kAlgos];
-    for (int a = 0; a < kAlgos; ++a) {
-      std::sort(t[a].begin(), t[a].end());
-      med[a] = t[a][t[a].size() / 2] * 1e-3;
-    }
-    Table1Row row{pr.scene, med[0], med[1], med[2], med[3], med[4], med[5]};
-    {
-      const double dense = double(core::snapshot_bytes(*s.field));
-      const core::BrickUsage use = core::brick_usage(*s32.field);
-      bytes << std::fixed << std::setprecision(1) << "  " << pr.scene << ": " << use.active << " of " << use.total
-            << " bricks active (" << 100.0 * double(use.active) / double(std::max<std::size_t>(use.total, 1))
-            << " %); fp32 " << 100.0 * double(core::snapshot_bytes(*s32.field)) / dense << " %, fp16 "
-            << 100.0 * double(core::snapshot_bytes(*s16.field)) / dense << " %, unorm16 "
-            << 100.0 * double(core::snapshot_bytes(core::make_bricked_field(bin, core::SampleFormat::kUnorm16))) / dense
-            << " % of the dense fp32 " << std::setprecision(2) << dense / (1024.0 * 1024.0) << " MiB\n";
-    }
-    rows.push_back(row);
-    tools << std::fixed << std::setprecision(3) << "  " << pr.scene << ": HRI with a spherical tool of radius "
-          << hp_tool.tool_radius_m * 1e3 << " mm (2 voxels) " << med[6] << " us per tick, " << std::setprecision(2)
-          << med[6] / row.hri_us << " x the point (" << std::setprecision(3) << row.hri_us << " us)\n";
-    tab << std::setprecision(3) << "| " << pr.label << " | " << row.hri_us << " | " << std::setprecision(2) << pr.hri
-        << " | " << std::setprecision(3) << row.hri_paper_us << " | " << row.blezek_us << " | "
-        << std::setprecision(2) << pr.blezek << " | " << std::setprecision(3) << row.avila_us << " | "
-        << std::setprecision(2) << pr.avila << " | " << std::setprecision(0) << 1e3 / row.hri_us << " | "
-        << std::setprecision(2) << row.hri_us / row.avila_us << " | " << pr.hri / pr.avila << " | "
-        << row.hri_paper_us / row.avila_us << " | " << row.blezek_us / row.hri_us << " | " << pr.blezek / pr.hri
-        << " | " << std::setprecision(3) << row.hri_bricked_us << " | " << std::setprecision(2)
-        << row.hri_bricked_us / row.hri_us << " | " << std::setprecision(3) << row.hri_fp16_us << " | "
-        << std::setprecision(2) << row.hri_fp16_us / row.hri_us << " |\n";
-    for (const auto& [name, tt, p] :
-         {std::tuple{"HRI", row.hri_us, pr.hri}, std::tuple{"HRI as printed", row.hri_paper_us, pr.hri},
-          std::tuple{"Blezek-Robb", row.blezek_us, pr.blezek}, std::tuple{"Avila-Sobierajski", row.avila_us, pr.avila},
-          std::tuple{"HRI bricked fp32", row.hri_bricked_us, pr.hri}, std::tuple{"HRI bricked fp16", row.hri_fp16_us, pr.hri}})
-      csv << pr.scene << ',' << name << ',' << tt << ',' << 1e3 / tt << ',' << p << ',' << 1e3 / p << '\n';
-  }
-  log << tab.str() << "\n" << table1_verdict(rows) << " (the paper: HRI/Avila 1.01-1.02)\n"
-      << table1_bricked_verdict(rows) << " (HRI tick on the bricked snapshot at most 10 % above dense)\n"
-      << "The same strokes with a spherical tool (the HIP is the tool's centre; its surface meets the isosurface "
-         "earlier, so contact differs from the point's):\n"
-      << tools.str()
-      << "Snapshot bytes (brick table + tiles + pool [+ unorm16 decode] over voxels * 16):\n"
-      << bytes.str()
-      << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "
-         "contact), on this machine; the paper's are whole GHOST servo loops on a 1999 SGI Octane R10000. "
-         "\"HRI as printed\" is the paper's Figure 2 without the departures listed in servo/hri.h.\n";
-  if (!o.out_csv.empty()) {
-    write_file_atomic(o.out_csv, csv.str());
-    log << "wrote " << o.out_csv << "\n";
-  }
-  return 0;
+Subcommand add_bench_device_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::BenchDeviceOptions>();
+  auto* sub = bench.add_subcommand(
+      "device", "Report-to-force latency (p50/p99/max) and report rate at 1, 4 and 8 kHz against the device "
+                "emulator over its socket, servo misses, and disconnect trials (zero force within one tick)");
+  sub->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(CLI::Range(0.1, 600.0));
+  sub->add_option("--trials", o->disconnect_trials, "Disconnect trials at 1 kHz")->capture_default_str()->check(CLI::Range(1, 1000));
+  sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");
+  sub->add_flag_callback("--quick", [o] { o->seconds = 0.5, o->disconnect_trials = 3; }, "0.5 s per rate and 3 trials (CI)");
+  sub->add_option("--csv", o->out_csv, "Also write the rows to this CSV file");
+  return {sub, [o](const std::string&) { return bench::run_bench_device(*o, std::cout); }};
+}
+
+Subcommand add_bench_render_command(CLI::App& bench) {
+  auto size = std::make_shared<int>(512);
+  auto frames = std::make_shared<int>(9);
+  Subcommand s;
+  s.app = bench.add_subcommand("render",
+                               "ms per frame of the ray caster on the head and chest CTs, with and without "
+                               "empty-space skipping (GPU timestamps)");
+  s.app->add_option("--size", *size, "Frame width and height [pixels]")->capture_default_str()->check(CLI::Range(16, 4096));
+  s.app->add_option("--frames", *frames, "Timed frames per configuration (median)")->capture_default_str()->check(CLI::Range(1, 1000));
+  s.run = [size, frames](const std::string& device) { return bench::run_bench_render(*size, *frames, device); };
+  return s;
+}
+
+}  // namespace
+
+std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
+  CLI::App* bench = cli.add_subcommand("bench", "Benchmarks that print figures");
+  bench->require_subcommand(1);
+  return {add_bench_servo_rt_command(*bench), add_bench_table1_command(*bench), add_bench_engine_command(*bench),
+          add_bench_render_command(*bench),   add_bench_edit_command(*bench),   add_bench_device_command(*bench)};
 }
 
 }  // namespace isotouch::app

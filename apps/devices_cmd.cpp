@@ -1,5 +1,7 @@
 #include "devices_cmd.h"
 
+#include <iostream>
+
 #include <cstdio>
 #include <ostream>
 #include <stdexcept>
@@ -51,6 +53,12 @@ int run_devices(std::ostream& out) {
   const bool vk = print_vulkan(out);
   const bool hid = print_hid(out);
   return vk || hid ? 0 : 1;
+}
+
+Subcommand add_devices_command(CLI::App& cli) {
+  CLI::App* d =
+      cli.add_subcommand("devices", "List the Vulkan devices and the HID devices (VID:PID, serial, path, known protocol)");
+  return {d, [](const std::string&) { return run_devices(std::cout); }};
 }
 
 }  // namespace isotouch::app

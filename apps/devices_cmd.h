@@ -3,10 +3,15 @@
 #pragma once
 #include <iosfwd>
 
+#include "subcommand.h"
+
 namespace isotouch::app {
 
 /// Prints both lists. A Vulkan error is printed and the HID list still follows.
 /// @return 0; 1 if neither list could be read.
 int run_devices(std::ostream& out);
+
+/// Adds `devices` to the top-level command line.
+Subcommand add_devices_command(CLI::App& cli);
 
 }  // namespace isotouch::app

@@ -1,35 +1,10 @@
-// export_cmd.h - `isotouch export`: a volume or a scene's volume to OpenVDB .vdb and its
-// isosurface to STL / OBJ / PLY.
+// export_cmd.h - `isotouch export`: a volume to .vdb and its isosurface to STL / OBJ / PLY.
 #pragma once
-#include <optional>
-#include <ostream>
-#include <string>
-
 #include "subcommand.h"
 
 namespace isotouch::app {
 
-struct ExportOptions {
-  std::string volume;                 ///< volume file (.vdb, .mhd, .nrrd, .nii ...); or scene
-  std::string scene;                  ///< scene JSON: its volume (file or synthetic) and isosurface
-  std::string grid;                   ///< .vdb input: the grid to read ("" = first float grid)
-  std::optional<double> iso;          ///< --iso: isovalue (value units), overrides scene / .vdb
-  std::string inside;                 ///< --inside: "above" / "below" ("" = from scene / .vdb)
-  std::string vdb, stl, obj, ply;     ///< outputs ("" = not written)
-  std::string volume_out;             ///< --volume: .mha / .nrrd / .nii / .nii.gz through ITK ("" = not written)
-  double adaptivity = 0;              ///< volumeToMesh adaptivity in [0, 1]
-};
-
-/// Runs the export: loads the volume, resolves the isosurface (--iso/--inside, else the
-/// scene's, else the .vdb's suggestion: level set -> tau 0 inside below, or save_vdb's
-/// metadata), writes each requested output atomically, prints the mesh figures (triangles,
-/// vertices, area [m^2], enclosed volume [m^3], closedness) on `out` and progress on `err`.
-/// @return 0 on success; 2 on bad usage (no input or both, no output, no isosurface for a
-///         mesh, bad --inside); 3 when a mesh was written but is not closed.
-/// @throws VdbError / VolumeError / SceneError naming the file and the problem.
-int run_export(const ExportOptions& options, std::ostream& out, std::ostream& err);
-
-/// Adds `export` to the top-level command line.
+/// Adds `export` to the top-level command line (the export: run/export.h).
 Subcommand add_export_command(CLI::App& cli);
 
 }  // namespace isotouch::app

@@ -7,7 +7,7 @@
 #include <memory>
 #include <string>
 
-#include "live_cmd.h"
+#include "live_run.h"
 #include "run_job.h"
 #include "scene.h"
 #include "sim_device.h"

@@ -1,6 +1,7 @@
 // run_job.h - the run job's names that the commands (run, replay, run --live, bench edit,
 // the sculpting app) use without a prefix. The job itself is a library: run/.
 #pragma once
+#include "live_run.h"
 #include "run_metrics.h"
 #include "run_scene.h"
 #include "scene_setup.h"
@@ -10,6 +11,9 @@ namespace isotouch::app {
 using run::brush_at_tool;
 using run::drill_rate;
 using run::edit_tick;
+using run::LiveOptions;
+using run::run_live;
+using run::write_hand_path;
 using run::EditFigures;
 using run::make_brush;
 using run::PassFigure;

@@ -134,9 +134,20 @@ bool LiveSession::submit(const EditEvent& e) {
     ++refused_;
     return false;
   }
-  if (api_edits_.push(Request{e, clock_ns()})) return true;
-  dropped_edits_.fetch_add(1, std::memory_order_relaxed);
-  return false;
+  if (!api_edits_.push(Request{e, clock_ns()})) {
+    dropped_edits_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  wake_edit_thread();
+  return true;
+}
+
+void LiveSession::wake_edit_thread() {
+  {
+    std::lock_guard lock(wake_mu_);
+    api_pending_ = true;
+  }
+  wake_cv_.notify_one();
 }
 
 // ---------------------------------------------------------------- servo thread
@@ -246,9 +257,10 @@ void LiveSession::edit_loop() {
         apply_request(q, ring == &api_edits_ ? EditSource::kApi : EditSource::kButton, servo_->ticks(), false);
       }
     }
-    if (!any) {
-      const timespec ts{0, 200000};  // 0.2 ms: the edit thread is not real time
-      nanosleep(&ts, nullptr);
+    if (!any) {  // until submit() wakes it, or 0.2 ms for the servo's ring (not real time)
+      std::unique_lock lock(wake_mu_);
+      wake_cv_.wait_for(lock, std::chrono::microseconds(200), [this] { return api_pending_; });
+      api_pending_ = false;
     }
   }
 }
@@ -408,6 +420,7 @@ void LiveSession::stop() {
   stopped_ = true;
   servo_->stop();  // the device's last force: an exact zero
   stop_edits_.store(true, std::memory_order_release);
+  wake_edit_thread();
   if (edit_thread_.joinable()) edit_thread_.join();
   Request q;
   while (servo_edits_.pop(q) || api_edits_.pop(q)) dropped_edits_.fetch_add(1, std::memory_order_relaxed);

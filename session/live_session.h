@@ -25,6 +25,7 @@
 // FILE.part, readable up to its last chunk (load_recording(..., allow_incomplete)).
 #pragma once
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -203,6 +204,7 @@ class LiveSession final : private servo::TickObserver {
   std::int64_t clock_ns() const;
   void on_tick(const servo::TickRecord& r) noexcept override;
   void edit_loop();
+  void wake_edit_thread();  // API side: submit(), stop()
   void record_loop();
   void record_chunk(bool final);
   void publish_observed(const servo::TickRecord& r) noexcept;
@@ -222,6 +224,11 @@ class LiveSession final : private servo::TickObserver {
   std::unique_ptr<servo::ServoThread> servo_;  // null: simulated only
   servo::SpscRing<servo::TickRecord> ticks_;
   servo::SpscRing<Request> servo_edits_, api_edits_;
+  // submit() wakes the edit thread at once (the servo side cannot: no syscall in a tick, so
+  // the edit thread also looks at the servo's ring every 0.2 ms).
+  std::mutex wake_mu_;
+  std::condition_variable wake_cv_;
+  bool api_pending_ = false;  // guarded by wake_mu_
   std::atomic<bool> running_{false}, stop_edits_{false}, stop_recorder_{false};
   std::thread edit_thread_, record_thread_;
   std::int64_t start_ns_ = 0;

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "raycast.h"
-#include "render_cmd.h"
+#include "picture.h"
 #include "scene.h"
 #include "vk_context.h"
 
@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
     std::filesystem::path p = std::filesystem::path("scenes") / name;
     if (!std::filesystem::exists(p)) p = std::filesystem::path(ISOTOUCH_SOURCE_DIR) / "scenes" / name;
     const io::Scene scene = io::load_scene(p.string());
-    const engine::Volume vol = app::load_scene_volume(scene);
-    const engine::RaycastField field = app::scene_raycast_field(scene, vol);
+    const engine::Volume vol = run::load_scene_volume(scene);
+    const engine::RaycastField field = run::scene_raycast_field(scene, vol);
     auto q = engine::RayCaster::create(vk, field, true), s = engine::RayCaster::create(vk, field, false);
     if (!q || !s) {
       std::fprintf(stderr, "bench_raycast_frames: %s\n", (!q ? q.error : s.error).c_str());
@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
     engine::RayCaster* casters[2] = {q.value->get(), s.value->get()};
     std::vector<double> march[2], shade[2], total[2], hits;
     long differ = 0;
-    engine::OrbitCamera cam = app::default_camera(vol);
+    engine::OrbitCamera cam = run::default_camera(vol);
     for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
       cam.azimuth_deg += 3;
       cam.zoom *= 1.02;

@@ -1,4 +1,4 @@
-// test_bench_edit.cpp - the pure parts of `isotouch bench edit` (apps/bench_edit.h) against
+// test_bench_edit.cpp - the pure parts of `isotouch bench edit` (bench/bench_edit.h) against
 // truths from outside them: the nearest-rank definition checked by brute force, an analytic
 // sphere, edge crossings counted directly on the raw voxels, and a fake renderer.
 #include <gtest/gtest.h>
@@ -60,7 +60,7 @@ TEST(BenchEdit, PercentileDropsNaNAndEmptyIsNaN) {
   EXPECT_TRUE(std::isnan(percentile({kNaN, kNaN}, 0.5)));
   EXPECT_EQ(percentile({kNaN, 3.0, kNaN, 1.0, 2.0}, 1.0), 3.0);
   EXPECT_EQ(percentile({kNaN, 3.0, kNaN, 1.0, 2.0}, 0.0), 1.0);
-  const app::Spread s = app::spread({kNaN, 4.0, 1.0, 3.0, 2.0});
+  const bench::Spread s = bench::spread({kNaN, 4.0, 1.0, 3.0, 2.0});
   EXPECT_EQ(s.n, 4u);
   EXPECT_EQ(s.median, 2.5);  // mean of the middle two
   EXPECT_EQ(s.p99, 4.0);
@@ -68,24 +68,24 @@ TEST(BenchEdit, PercentileDropsNaNAndEmptyIsNaN) {
 }
 
 TEST(BenchEdit, MissesVerdictComparesMissesPerTick) {
-  EXPECT_TRUE(app::misses_verdict(0, 12000, 0, 12000).met);
-  EXPECT_FALSE(app::misses_verdict(1, 12000, 0, 12000).met);
-  EXPECT_TRUE(app::misses_verdict(2, 2000, 1, 1000).met);   // the same rate
-  EXPECT_FALSE(app::misses_verdict(3, 2000, 1, 1000).met);  // 1.5 per 1000 > 1 per 1000
-  EXPECT_TRUE(app::misses_verdict(1, 1000, 3, 2000).met);
-  const app::Verdict v = app::misses_verdict(5, 0, 0, 1000);
+  EXPECT_TRUE(bench::misses_verdict(0, 12000, 0, 12000).met);
+  EXPECT_FALSE(bench::misses_verdict(1, 12000, 0, 12000).met);
+  EXPECT_TRUE(bench::misses_verdict(2, 2000, 1, 1000).met);   // the same rate
+  EXPECT_FALSE(bench::misses_verdict(3, 2000, 1, 1000).met);  // 1.5 per 1000 > 1 per 1000
+  EXPECT_TRUE(bench::misses_verdict(1, 1000, 3, 2000).met);
+  const bench::Verdict v = bench::misses_verdict(5, 0, 0, 1000);
   EXPECT_FALSE(v.measured);
   EXPECT_FALSE(v.met);
   EXPECT_NE(v.text.find("not measured"), std::string::npos);
-  const app::Verdict w = app::misses_verdict(1, 12000, 0, 12000);
+  const bench::Verdict w = bench::misses_verdict(1, 12000, 0, 12000);
   EXPECT_TRUE(w.measured);
   EXPECT_NE(w.text.find("NOT met"), std::string::npos) << w.text;
 }
 
 TEST(BenchEdit, AtLeastVerdict) {
-  EXPECT_TRUE(app::verdict_at_least("rate", 200.0, 200.0).met);
-  EXPECT_FALSE(app::verdict_at_least("rate", 199.9, 200.0).met);
-  const app::Verdict v = app::verdict_at_least("rate", kNaN, 200.0, 1, "no phase");
+  EXPECT_TRUE(bench::verdict_at_least("rate", 200.0, 200.0).met);
+  EXPECT_FALSE(bench::verdict_at_least("rate", 199.9, 200.0).met);
+  const bench::Verdict v = bench::verdict_at_least("rate", kNaN, 200.0, 1, "no phase");
   EXPECT_FALSE(v.measured);
   EXPECT_NE(v.text.find("not measured (no phase)"), std::string::npos) << v.text;
 }
@@ -94,8 +94,8 @@ TEST(BenchEdit, ChangedVoxelsComparesBits) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float a[] = {1.f, nan, 0.f, 2.f, -3.f};
   const float b[] = {1.f, nan, -0.f, 2.5f, -3.f};
-  EXPECT_EQ(app::changed_voxels(a, b, 5), 2u);  // 0 vs -0 and 2 vs 2.5
-  EXPECT_EQ(app::changed_voxels(a, a, 5), 0u);
+  EXPECT_EQ(bench::changed_voxels(a, b, 5), 2u);  // 0 vs -0 and 2 vs 2.5
+  EXPECT_EQ(bench::changed_voxels(a, a, 5), 0u);
 }
 
 namespace {
@@ -124,7 +124,7 @@ TEST(BenchEdit, SurfacePointsLieOnAnAnalyticSphere) {
   const core::Vec3 c = vol.grid.centre_m() + core::Vec3{off[0], off[1], off[2]} * h;
 
   // Every crossing, nothing avoided: as many as the raw voxels have, all on the sphere.
-  const std::vector<core::Vec3> all = app::surface_points(f, iso, 1u << 20, 7, c, 0.0);
+  const std::vector<core::Vec3> all = bench::surface_points(f, iso, 1u << 20, 7, c, 0.0);
   EXPECT_EQ(all.size(), brute_force_crossings(vol, iso));
   ASSERT_GT(all.size(), 500u);
   for (const auto& p : all) EXPECT_LT(std::abs(core::norm(p - c) - r_vox * h), 0.02 * h);
@@ -132,9 +132,9 @@ TEST(BenchEdit, SurfacePointsLieOnAnAnalyticSphere) {
   // A count, an avoided ball around a point on the sphere, a fixed order per seed.
   const core::Vec3 probe = c + core::Vec3{r_vox * h, 0, 0};
   const double avoid = 6 * h;
-  const auto a = app::surface_points(f, iso, 100, 7, probe, avoid);
-  const auto b = app::surface_points(f, iso, 100, 7, probe, avoid);
-  const auto other = app::surface_points(f, iso, 100, 8, probe, avoid);
+  const auto a = bench::surface_points(f, iso, 100, 7, probe, avoid);
+  const auto b = bench::surface_points(f, iso, 100, 7, probe, avoid);
+  const auto other = bench::surface_points(f, iso, 100, 8, probe, avoid);
   ASSERT_EQ(a.size(), 100u);
   for (const auto& p : a) EXPECT_GT(core::norm(p - probe), avoid);
   bool same = true, differs = false;
@@ -177,7 +177,7 @@ std::int64_t steady_ns() {
 
 TEST(BenchEdit, VersionSpyNotesTheFirstTickOfEachVersion) {
   FakeRenderer inner;
-  app::VersionSpy spy(inner, 8);
+  bench::VersionSpy spy(inner, 8);
   core::SampleField f;  // empty: the fake never reads it
   auto tick = [&](std::uint64_t v) {
     f.version = v;

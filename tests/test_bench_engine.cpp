@@ -17,7 +17,7 @@
 #include "synthetic.h"
 
 using namespace isotouch;
-using app::kNaN;
+using bench::kNaN;
 
 namespace {
 constexpr std::uint64_t kMiB = 1024 * 1024;
@@ -36,7 +36,7 @@ int allocate_and_touch(std::size_t bytes) {
 
 TEST(BenchEngineChild, ForkPeakRssCoversWhatTheChildAllocated) {
   const std::size_t bytes = 300 * kMiB;
-  const app::ChildRun r = app::run_child_fork([&] { return allocate_and_touch(bytes); });
+  const bench::ChildRun r = bench::run_child_fork([&] { return allocate_and_touch(bytes); });
   ASSERT_TRUE(r.started) << r.error;
   EXPECT_EQ(r.exit_code, 0);
   EXPECT_GE(r.peak_rss_bytes, bytes);
@@ -45,13 +45,13 @@ TEST(BenchEngineChild, ForkPeakRssCoversWhatTheChildAllocated) {
 }
 
 TEST(BenchEngineChild, ForkPassesExitCodeAndStdout) {
-  const app::ChildRun r = app::run_child_fork([] {
+  const bench::ChildRun r = bench::run_child_fork([] {
     std::printf("alpha=1\nbeta=two words\nnot a pair\n");
     return 7;
   });
   ASSERT_TRUE(r.started) << r.error;
   EXPECT_EQ(r.exit_code, 7);
-  const auto kv = app::parse_key_values(r.out);
+  const auto kv = bench::parse_key_values(r.out);
   ASSERT_EQ(kv.size(), 2u) << r.out;
   EXPECT_EQ(kv.at("alpha"), "1");
   EXPECT_EQ(kv.at("beta"), "two words");
@@ -59,28 +59,28 @@ TEST(BenchEngineChild, ForkPassesExitCodeAndStdout) {
 
 TEST(BenchEngineChild, ExecPeakRssOfDdBuffer) {
   // coreutils dd allocates one buffer of bs bytes and reads /dev/zero into it: resident.
-  const app::ChildRun r =
-      app::run_child_exec({"/bin/dd", "if=/dev/zero", "of=/dev/null", "bs=200M", "count=1", "status=none"});
+  const bench::ChildRun r =
+      bench::run_child_exec({"/bin/dd", "if=/dev/zero", "of=/dev/null", "bs=200M", "count=1", "status=none"});
   ASSERT_TRUE(r.started) << r.error;
   ASSERT_EQ(r.exit_code, 0) << r.error;
   EXPECT_GE(r.peak_rss_bytes, 200 * kMiB);
 }
 
 TEST(BenchEngineChild, ExecReportsExitCodeSignalAndMissingProgram) {
-  const app::ChildRun a = app::run_child_exec({"/bin/sh", "-c", "echo k=v; exit 3"});
+  const bench::ChildRun a = bench::run_child_exec({"/bin/sh", "-c", "echo k=v; exit 3"});
   EXPECT_EQ(a.exit_code, 3);
-  EXPECT_EQ(app::parse_key_values(a.out).at("k"), "v");
-  const app::ChildRun b = app::run_child_exec({"/bin/sh", "-c", "kill -9 $$"});
+  EXPECT_EQ(bench::parse_key_values(a.out).at("k"), "v");
+  const bench::ChildRun b = bench::run_child_exec({"/bin/sh", "-c", "kill -9 $$"});
   EXPECT_EQ(b.signal, 9);
   EXPECT_EQ(b.exit_code, -1);
-  const app::ChildRun c = app::run_child_exec({"/no/such/program"});
+  const bench::ChildRun c = bench::run_child_exec({"/no/such/program"});
   EXPECT_EQ(c.exit_code, 127);
   EXPECT_NE(c.error.find("/no/such/program"), std::string::npos);
 }
 
 TEST(BenchEngineChild, SelfPeakRssAtLeastAnAllocation) {
   allocate_and_touch(64 * kMiB);
-  EXPECT_GE(app::self_peak_rss_bytes(), 64 * kMiB);
+  EXPECT_GE(bench::self_peak_rss_bytes(), 64 * kMiB);
 }
 
 // --- formulas ---------------------------------------------------------------------------
@@ -88,28 +88,28 @@ TEST(BenchEngineChild, SelfPeakRssAtLeastAnAllocation) {
 TEST(BenchEngineFormula, MinimumBytesFromTheSampleLayout) {
   const std::uint64_t n = 1000, b = 7;
   const std::uint64_t f = sizeof(float), sample = 4 * sizeof(float);  // GLSL vec4(value, gx, gy, gz)
-  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Gaussian, n, b), n * f + n * f);
-  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Closing, n, b), n * f + n * f);
-  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::Gradient, n, b), n * f + n * sample);
-  EXPECT_EQ(app::pass_min_bytes(engine::PassKind::BrickMinMax, n, b), n * f + b * 2 * f);
+  EXPECT_EQ(bench::pass_min_bytes(engine::PassKind::Gaussian, n, b), n * f + n * f);
+  EXPECT_EQ(bench::pass_min_bytes(engine::PassKind::Closing, n, b), n * f + n * f);
+  EXPECT_EQ(bench::pass_min_bytes(engine::PassKind::Gradient, n, b), n * f + n * sample);
+  EXPECT_EQ(bench::pass_min_bytes(engine::PassKind::BrickMinMax, n, b), n * f + b * 2 * f);
 }
 
 TEST(BenchEngineFormula, BandwidthMedianRatio) {
-  EXPECT_DOUBLE_EQ(app::gb_per_s(2e9, 1000.0), 2.0);  // 2e9 B in 1 s
-  EXPECT_DOUBLE_EQ(app::gb_per_s(5e6, 1.0), 5.0);     // 5e6 B in 1 ms
-  EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, 0.0)));
-  EXPECT_TRUE(std::isnan(app::gb_per_s(1e9, kNaN)));
+  EXPECT_DOUBLE_EQ(bench::gb_per_s(2e9, 1000.0), 2.0);  // 2e9 B in 1 s
+  EXPECT_DOUBLE_EQ(bench::gb_per_s(5e6, 1.0), 5.0);     // 5e6 B in 1 ms
+  EXPECT_TRUE(std::isnan(bench::gb_per_s(1e9, 0.0)));
+  EXPECT_TRUE(std::isnan(bench::gb_per_s(1e9, kNaN)));
   EXPECT_DOUBLE_EQ(eval::median({3, 1, 2}), 2.0);
   EXPECT_DOUBLE_EQ(eval::median({4, 1, 3, 2}), 2.5);
   EXPECT_DOUBLE_EQ(eval::median({kNaN, 5, kNaN}), 5.0);
   EXPECT_TRUE(std::isnan(eval::median({})));
-  EXPECT_DOUBLE_EQ(app::ratio(1, 4), 0.25);
-  EXPECT_TRUE(std::isnan(app::ratio(1, 0)));
-  EXPECT_TRUE(std::isnan(app::ratio(kNaN, 1)));
+  EXPECT_DOUBLE_EQ(bench::ratio(1, 4), 0.25);
+  EXPECT_TRUE(std::isnan(bench::ratio(1, 0)));
+  EXPECT_TRUE(std::isnan(bench::ratio(kNaN, 1)));
 }
 
 TEST(BenchEngineFormula, MemcpyBandwidthIsPositive) {
-  const double g = app::measure_memcpy_gbps(8 * kMiB, 2);
+  const double g = bench::measure_memcpy_gbps(8 * kMiB, 2);
   EXPECT_TRUE(std::isfinite(g));
   EXPECT_GT(g, 0.0);
 }
@@ -118,19 +118,19 @@ TEST(BenchEngineFormula, MemcpyBandwidthIsPositive) {
 
 TEST(BenchEngineVerdict, FlipsWhereTheFigureCrossesTheTarget) {
   const double t = 1.0 / 3.0;
-  const app::Verdict below = app::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.20, t, 2);
+  const bench::Verdict below = bench::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.20, t, 2);
   EXPECT_TRUE(below.measured);
   EXPECT_TRUE(below.met);
   EXPECT_EQ(below.text, "chest -500 sparse GPU / dense CPU = 0.20: target <= 0.33 met");
-  const app::Verdict above = app::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.40, t, 2);
+  const bench::Verdict above = bench::verdict_at_most("chest -500 sparse GPU / dense CPU", 0.40, t, 2);
   EXPECT_TRUE(above.measured);
   EXPECT_FALSE(above.met);
   EXPECT_EQ(above.text, "chest -500 sparse GPU / dense CPU = 0.40: target <= 0.33 NOT met");
   // Either side of the target by one ULP, and at it.
-  EXPECT_TRUE(app::verdict_at_most("x", t, t).met);
-  EXPECT_FALSE(app::verdict_at_most("x", std::nextafter(t, 1.0), t).met);
-  EXPECT_TRUE(app::verdict_at_most("x", std::nextafter(t, 0.0), t).met);
-  const app::Verdict none = app::verdict_at_most("bytes", kNaN, 0.15, 2, "sparse: not available");
+  EXPECT_TRUE(bench::verdict_at_most("x", t, t).met);
+  EXPECT_FALSE(bench::verdict_at_most("x", std::nextafter(t, 1.0), t).met);
+  EXPECT_TRUE(bench::verdict_at_most("x", std::nextafter(t, 0.0), t).met);
+  const bench::Verdict none = bench::verdict_at_most("bytes", kNaN, 0.15, 2, "sparse: not available");
   EXPECT_FALSE(none.measured);
   EXPECT_FALSE(none.met);
   EXPECT_NE(none.text.find("not measured (sparse: not available)"), std::string::npos) << none.text;
@@ -140,7 +140,7 @@ TEST(BenchEngineVerdict, FlipsWhereTheFigureCrossesTheTarget) {
 
 TEST(BenchEngineVolume, NoisySphereIsTheSphereWithinTheNoise) {
   const int n = 24;
-  const engine::Volume a = app::make_noisy_sphere(n, 1e-3, 1.0, 5);
+  const engine::Volume a = bench::make_noisy_sphere(n, 1e-3, 1.0, 5);
   const engine::Volume b = engine::make_sphere({n, n, n}, 1e-3, 0.375 * n);
   ASSERT_EQ(a.voxels.size(), b.voxels.size());
   double sum = 0, maxabs = 0;
@@ -152,7 +152,7 @@ TEST(BenchEngineVolume, NoisySphereIsTheSphereWithinTheNoise) {
   EXPECT_LE(maxabs, 1.0 + 1e-4);
   EXPECT_GT(maxabs, 0.9);  // noise is there
   EXPECT_LT(std::abs(sum / double(a.voxels.size())), 0.05);  // zero mean (uniform, 13824 draws)
-  const engine::Volume c = app::make_noisy_sphere(n, 1e-3, 1.0, 5);
+  const engine::Volume c = bench::make_noisy_sphere(n, 1e-3, 1.0, 5);
   EXPECT_EQ(a.voxels, c.voxels);  // reproducible
 }
 
@@ -179,16 +179,16 @@ std::uint64_t sample_bytes(core::SampleFormat f) { return f == core::SampleForma
 
 TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
   const int n = 40;  // 5^3 bricks
-  const engine::Volume v = app::make_noisy_sphere(n, 1e-3, 1.0, 3);
+  const engine::Volume v = bench::make_noisy_sphere(n, 1e-3, 1.0, 3);
   const core::Isosurface iso{0.0, core::InsideIs::kAbove};
-  app::BenchCase c{"small", v.path, &v, {iso}};
+  bench::BenchCase c{"small", v.path, &v, {iso}};
   std::string why;
   engine::VulkanContext* ctx = vk(why);
   // Every machine this runs on has a Vulkan device (lavapipe at least): no device is a failure.
   ASSERT_NE(ctx, nullptr) << "no Vulkan device: " << why;
   std::ostringstream progress;
   const double memcpy_gbps = 10.0;
-  const app::CaseResult r = app::run_case(ctx, why, c, false, 2, memcpy_gbps, progress);
+  const bench::CaseResult r = bench::run_case(ctx, why, c, false, 2, memcpy_gbps, progress);
   EXPECT_NE(progress.str().find("repetition 2/2"), std::string::npos);
 
   const std::uint64_t nb = 5 * 5 * 5, nv = std::uint64_t(n) * n * n;
@@ -199,7 +199,7 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
   std::uint64_t bytes_sum = 0;
   double cpu_sum = 0, gpu_sum = 0;
   for (std::size_t i = 0; i < 3; ++i) {
-    const app::PassRow& p = r.passes[i];
+    const bench::PassRow& p = r.passes[i];
     EXPECT_EQ(p.min_bytes, want_bytes[i]) << p.label;
     ASSERT_TRUE(std::isfinite(p.cpu_ms) && p.cpu_ms >= 0) << p.label;
     // derived columns recomputed from the row's own columns
@@ -233,7 +233,7 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
   }
 
   ASSERT_EQ(r.isos.size(), 1u);
-  const app::IsoResult& ir = r.isos[0];
+  const bench::IsoResult& ir = r.isos[0];
   if (ctx) {
     // Every GPU strategy timed beside the default (lists): the dense one and the per-brick kernel.
     EXPECT_TRUE(ir.gpu.available) << ir.gpu.why;
@@ -241,7 +241,7 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
     EXPECT_TRUE(ir.gpu_per_brick.available && std::isfinite(ir.gpu_per_brick.total_ms)) << ir.gpu_per_brick.why;
   }
   ASSERT_EQ(ir.formats.size(), 3u);
-  const app::SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
+  const bench::SparseCell* s = ir.gpu.available ? &ir.gpu : ir.cpu.available ? &ir.cpu : nullptr;
   if (!s) {
     // The sparse engines are not there yet: every sparse cell says why, no figure is made up.
     EXPECT_FALSE(ir.gpu.why.empty());
@@ -257,7 +257,7 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
   // Bricks: total from ceil(dims / 8); active from the dense CPU reference's brick min/max
   // (halo 1) of the Gaussian-smoothed field: the bricks whose range straddles tau.
   EXPECT_EQ(s->stats.bricks_total, nb);
-  const engine::ChainOutput dense = engine::run_chain_cpu(v, app::dense_list(false));
+  const engine::ChainOutput dense = engine::run_chain_cpu(v, bench::dense_list(false));
   ASSERT_TRUE(dense.bricks);
   std::size_t straddle = 0;
   const float bg = float(iso.outside_value(v.min_value, v.max_value));
@@ -283,28 +283,28 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
 
 TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   // A hand-made row: finish_case must recompute every derived column from these.
-  app::CaseResult r;
+  bench::CaseResult r;
   r.memcpy_gbps = 4.0;
-  app::PassRow p;
+  bench::PassRow p;
   p.min_bytes = 8'000'000;
   p.gpu_ms = 2.0;
   p.cpu_ms = 8.0;
   r.passes = {p, p};
   r.dense_gpu_wall_ms = 5.0;
   r.dense_cpu_wall_ms = 20.0;
-  app::IsoResult ir;
+  bench::IsoResult ir;
   ir.gpu.available = true;
   ir.gpu.total_ms = 4.0;
   ir.gpu.stats.bricks_total = 200;
   ir.gpu.stats.active = 30;
   ir.gpu.stats.candidates = 50;
-  app::FormatBytes fb;
+  bench::FormatBytes fb;
   fb.available = true;
   fb.snapshot_bytes = 15;
   fb.dense_fp32_bytes = 100;
   ir.formats = {fb};
   r.isos = {ir};
-  app::finish_case(r);
+  bench::finish_case(r);
   EXPECT_DOUBLE_EQ(r.passes[0].gpu_gbps, 4.0);  // 8e6 B in 2 ms
   EXPECT_DOUBLE_EQ(r.passes[0].cpu_gbps, 1.0);
   EXPECT_DOUBLE_EQ(r.passes[0].gpu_of_memcpy, 1.0);
@@ -322,7 +322,7 @@ TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   EXPECT_TRUE(std::isnan(r.isos[0].sparse_cpu_over_dense_cpu));  // no CPU figure
   // A pass without a GPU time makes the GPU sum unknown, not smaller.
   r.passes[1].gpu_ms = kNaN;
-  app::finish_case(r);
+  bench::finish_case(r);
   EXPECT_TRUE(std::isnan(r.sum.gpu_ms));
   EXPECT_DOUBLE_EQ(r.sum.cpu_ms, 16.0);
 }
@@ -332,15 +332,15 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   // shaders; memcpy 4 GB/s moves 16e6 B in 4 ms. Peers: 1 thread ITK 30 + 40 + 5 = 75 ms,
   // ITK + OpenVDB 30 + 6 + 20 = 56 ms; 2 threads ITK 20 + 25 + 5 = 50 ms, ITK + OpenVDB
   // 20 + 6 + 30 = 56 ms: the fastest chain is ITK at 2 threads, 50 ms.
-  app::CaseResult r;
+  bench::CaseResult r;
   r.memcpy_gbps = 4.0;
-  app::PassRow p;
+  bench::PassRow p;
   p.min_bytes = 8'000'000;
   p.gpu_ms = 2.0;
   p.cpu_ms = 8.0;
   p.legacy_gpu_ms = 5.0;
   r.passes = {p, p};
-  app::PeerRow one, two;
+  bench::PeerRow one, two;
   one.threads = 1;
   one.itk_gaussian_ms = 30;
   one.itk_gradient_ms = 40;
@@ -358,7 +358,7 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   r.passes[1].label = "gradient";
   r.voxels = 1'000'000;
   r.copy_floor_ms = 1.0;
-  app::finish_case(r);
+  bench::finish_case(r);
   EXPECT_DOUBLE_EQ(r.copy_floor_memcpy_ms, 5.0);
   EXPECT_DOUBLE_EQ(r.floor_over_memcpy, 0.2);
   EXPECT_DOUBLE_EQ(r.gradient_over_floor, 2.0);
@@ -377,7 +377,7 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   EXPECT_DOUBLE_EQ(r.chain_over_memcpy, 1.0);
   // A peer that did not run (NaN) is not the fastest.
   r.peers[1].itk_gradient_ms = kNaN;
-  app::finish_case(r);
+  bench::finish_case(r);
   EXPECT_DOUBLE_EQ(r.fastest_peer_chain_ms, 56.0);
 }
 
@@ -386,8 +386,8 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
 // the ticks after it touch the surface (HRI renders a force: the HIP path meets the sphere).
 TEST(BenchEngineBig, ChildReportsTheSplitToTheFirstTick) {
   std::ostringstream out, progress;
-  ASSERT_EQ(app::run_big_child(32, "", out, progress), 0) << out.str() << progress.str();
-  auto kv = app::parse_key_values(out.str());
+  ASSERT_EQ(bench::run_big_child(32, "", out, progress), 0) << out.str() << progress.str();
+  auto kv = bench::parse_key_values(out.str());
   for (const char* k : {"make_ms", "setup_ms", "step_ms", "stages", "publish_ms", "first_tick_us", "ticks_median_us",
                         "max_force_n"})
     ASSERT_TRUE(kv.count(k)) << k << " missing in\n" << out.str();

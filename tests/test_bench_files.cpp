@@ -9,10 +9,10 @@
 #include <fstream>
 #include <sstream>
 
-#include "bench_cmd.h"
+#include "servo_bench.h"
 #include "files.h"
 
-using namespace isotouch::app;
+using namespace isotouch::bench;
 using namespace isotouch::io;
 namespace fs = std::filesystem;
 

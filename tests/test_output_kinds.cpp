@@ -19,7 +19,7 @@
 
 #include "files.h"
 #include "record.h"
-#include "render_cmd.h"
+#include "picture.h"
 #include "synthetic.h"
 #include "vdb_io.h"
 #include "volume_write.h"
@@ -61,7 +61,7 @@ struct Kind {
 
 std::vector<Kind> kinds(const Fixtures& f) {
   return {
-      {"png", [](const std::string& p) { app::write_png(p, 2, 2, {0xff0000ffu, 0xff00ff00u, 0xffff0000u, 0xffffffffu}); }},
+      {"png", [](const std::string& p) { run::write_png(p, 2, 2, {0xff0000ffu, 0xff00ff00u, 0xffff0000u, 0xffffffffu}); }},
       {"csv", [](const std::string& p) { io::write_file_atomic(p, "t_s,f_n\n0,0\n"); }},
       {"json", [](const std::string& p) { io::write_file_atomic(p, "{\"status\": \"complete\"}\n"); }},
       {"vdb", [&f](const std::string& p) { io::save_vdb(f.vol, p); }},

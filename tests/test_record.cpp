@@ -20,8 +20,8 @@
 #include <sstream>
 
 #include "record.h"
-#include "replay_cmd.h"
-#include "run_job.h"
+#include "replay.h"
+#include "run_scene.h"
 #include "scene.h"
 #include "synthetic.h"
 
@@ -542,23 +542,23 @@ const Recorded& recorded_run() {
     x.dir = temp_dir("e2e");
     x.scene = write_edit_scene(x.dir);
     x.rec = x.dir / "run.rec";
-    isotouch::app::RunOptions opt;
+    isotouch::run::RunOptions opt;
     opt.out_dir = (x.dir / "out").string();
     opt.progress = false;
     opt.record_path = x.rec.string();
     std::ostringstream log;
-    (void)isotouch::app::run_scene(isotouch::io::load_scene(x.scene.string()), opt, log);
+    (void)isotouch::run::run_scene(isotouch::io::load_scene(x.scene.string()), opt, log);
     return x;
   }();
   return r;
 }
 
-isotouch::app::ReplayResult replay(const Recording& rec, const std::string& out = "") {
-  isotouch::app::ReplayOptions o;
+isotouch::run::ReplayResult replay(const Recording& rec, const std::string& out = "") {
+  isotouch::run::ReplayOptions o;
   o.progress = false;
   o.out_dir = out;
   std::ostringstream log;
-  return isotouch::app::replay_recording(rec, o, log);
+  return isotouch::run::replay_recording(rec, o, log);
 }
 
 /// Index of the first tick from `from` whose recorded force is non-zero (in contact).
@@ -668,7 +668,7 @@ TEST(Replay, AnotherVolumeIsRefused) {
   try {
     (void)replay(rec);
     ADD_FAILURE() << "replayed against another volume";
-  } catch (const isotouch::app::ReplayInputError& e) {
+  } catch (const isotouch::run::ReplayInputError& e) {
     EXPECT_NE(std::string(e.what()).find("changed since it was recorded (CRC-32"), std::string::npos) << e.what();
   }
 }
@@ -690,7 +690,7 @@ TEST(Replay, AChangedSceneIsRefused) {
   try {
     (void)replay(rec);
     ADD_FAILURE() << "replayed against a changed scene";
-  } catch (const isotouch::app::ReplayInputError& e) {
+  } catch (const isotouch::run::ReplayInputError& e) {
     EXPECT_NE(std::string(e.what()).find("changed since it was recorded"), std::string::npos) << e.what();
   }
 }

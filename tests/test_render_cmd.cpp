@@ -13,8 +13,9 @@
 #include <gtest/gtest.h>
 
 #include "raycast.h"
-#include "render_cmd.h"
-#include "run_job.h"
+#include "picture.h"
+#include "trace_csv.h"
+#include "run_scene.h"
 #include "scene.h"
 #include "synthetic.h"
 
@@ -33,7 +34,7 @@ fs::path temp_dir(const std::string& tag) {
 
 std::string error_of(const std::string& path, const engine::Volume& vol) {
   try {
-    (void)app::read_trace_csv(path, vol);
+    (void)run::read_trace_csv(path, vol);
   } catch (const std::exception& e) {
     return e.what();
   }
@@ -45,19 +46,19 @@ TEST(RenderCmd, TraceOfARunReadsBackTickForTick) {
   const fs::path dir = temp_dir("trace");
   io::Scene sc = io::load_scene(kScenes + "/sphere.json");
   sc.draw_plots = false;
-  app::RunOptions opt;
+  run::RunOptions opt;
   opt.out_dir = dir.string();
   opt.progress = false;
   std::ostringstream log;
-  const app::RunMetrics m = app::run_scene(sc, opt, log);
-  const engine::Volume vol = app::load_scene_volume(sc);
-  const auto rows = app::read_trace_csv((dir / "trace.csv").string(), vol);
+  const run::RunMetrics m = run::run_scene(sc, opt, log);
+  const engine::Volume vol = run::load_scene_volume(sc);
+  const auto rows = run::read_trace_csv((dir / "trace.csv").string(), vol);
   ASSERT_EQ(long(rows.size()), m.ticks);
   long contact = 0;
   double max_f = 0;
   for (const auto& r : rows) {
     contact += r.contact;
-    max_f = std::max(max_f, norm(r.force_n));
+    max_f = std::max(max_f, core::norm(r.force_n));
   }
   EXPECT_EQ(contact, m.contact_ticks);
   EXPECT_NEAR(max_f, m.max_force_n, 1e-9 * std::max(1.0, m.max_force_n));  // the CSV's shortest round trip
@@ -99,7 +100,7 @@ TEST(RenderCmd, RotatedVolumeTraceComesBackInGridWorld) {
   vol.direction_is_identity = false;
   std::ofstream(dir / "t.csv") << "t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact\n"
                                << "0,0,0,0,0,0,0,0,0,1,1\n";
-  const auto rows = app::read_trace_csv((dir / "t.csv").string(), vol);
+  const auto rows = run::read_trace_csv((dir / "t.csv").string(), vol);
   ASSERT_EQ(rows.size(), 1u);
   // D^T (0, 0, 1) = the last row of D = (0, 1, 0).
   EXPECT_DOUBLE_EQ(rows[0].force_n.x, 0.0);
@@ -113,14 +114,14 @@ TEST(RenderCmd, SpherePictureCoversTheProjectedDisc) {
   // cover pi r'^2 of the image, r' the sphere's projected radius.
   const engine::Volume vol = engine::make_sphere({48, 48, 48}, 1e-3, 15);
   io::Scene sc = io::load_scene(kScenes + "/sphere.json");
-  const engine::RaycastField field = app::scene_raycast_field(sc, vol);
-  app::PictureRequest req;
+  const engine::RaycastField field = run::scene_raycast_field(sc, vol);
+  run::PictureRequest req;
   req.width = req.height = 160;
   req.cpu = true;
   const double fov = 20, dist = 0.5;  // m
   const core::Vec3 centre = vol.grid.to_world({23.5, 23.5, 23.5});
   req.view = engine::look_at(centre + core::Vec3{0, -dist, 0}, centre, {0, 0, 1}, fov);
-  const engine::RaycastImage img = app::render_picture(nullptr, field, vol.direction, req, "");
+  const engine::RaycastImage img = run::render_picture(nullptr, field, vol.direction, req, "");
   std::size_t hits = 0;
   for (float d : img.depth) hits += d >= 0;
   const double r_m = 15e-3;  // the isosurface radius of make_sphere (tau at the radius)

@@ -24,14 +24,14 @@
 #include <sstream>
 #include <thread>
 
-#include "export_cmd.h"
+#include "export.h"
 #include "synthetic.h"
 #include "vdb_io.h"
 #include "volume_io.h"
 
 extern char** environ;
 
-namespace isotouch::app {
+namespace isotouch::run {
 using core::dot;
 using io::LoadedVdb;
 using io::Mesh;
@@ -737,4 +737,4 @@ TEST(VdbExportCmd, BadUsageAndBadInput) {
 }
 
 }  // namespace
-}  // namespace isotouch::app
+}  // namespace isotouch::run

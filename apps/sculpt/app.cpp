@@ -30,8 +30,9 @@
 #include "overlay.h"
 #include "raycast.h"
 #include "record.h"
-#include "render_cmd.h"
-#include "run_job.h"
+#include "picture.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 #include "stats.h"
 #include "tools.h"
@@ -313,7 +314,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     scene = input_scene(o);
-    vol = o.carried ? o.carried->volume : app::load_scene_volume(scene);
+    vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
     if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
       throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
                                fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
@@ -330,13 +331,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   xf.scale = scene.workspace_scale;
   xf.translation_m = vol.grid.centre_m();
   CameraControl camera;
-  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : app::default_camera(vol);
+  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : run::default_camera(vol);
   engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
   // The probe starts at rest just outside the volume's box in front of the camera.
   const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
   sim::CoupledHandDevice mouse_device(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
   const bool mouse = o.haptic == "mouse";
-  app::HapticDevice haptic;
+  run::HapticDevice haptic;
   if (o.sim_clock && !mouse) {
     log << "isotouch-sculpt: --sim-clock runs the mouse probe on a simulated clock; --haptic " << o.haptic
         << " is a device in real time (leave out one of them)\n";
@@ -398,10 +399,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
 
   // --- the session: edits (CPU brushes: the GPU queue belongs to the window's thread) ------
   session::LiveFieldOptions live;
-  live.passes = app::scene_passes(scene);
+  live.passes = run::scene_passes(scene);
   live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
   live.background = float(live.iso.outside_value(vol.min_value, vol.max_value));
-  live.format = app::scene_sample_format(scene);
+  live.format = run::scene_sample_format(scene);
   std::unique_ptr<session::EditSession> edits;
   try {
     edits = std::make_unique<session::EditSession>(engine::Volume(vol), nullptr, live, scene.edits.history_limit_mib);
@@ -416,7 +417,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   // The picture: the raw volume at the scene's isovalue (what `isotouch render` draws).
   PictureFeed feed;
   feed.values = vol.voxels;
-  auto rc = engine::RayCaster::create(vk, app::scene_raycast_field(scene, vol));
+  auto rc = engine::RayCaster::create(vk, run::scene_raycast_field(scene, vol));
   if (!rc) {
     log << "isotouch-sculpt: " << rc.error << "\n";
     return 1;
@@ -470,13 +471,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
 
   if (!mouse) {
     try {
-      app::DeviceSetup ds;
+      run::DeviceSetup ds;
       ds.scene = &scene;
       ds.volume = &vol;
       ds.hri = scene.hri;
       ds.world_T_device = xf;
       ds.start_world_m = start_world;
-      haptic = app::open_haptic_device(o.haptic, ds, o.sched_fifo ? 70 : 0);
+      haptic = run::open_haptic_device(o.haptic, ds, o.sched_fifo ? 70 : 0);
     } catch (const std::exception& e) {
       log << "isotouch-sculpt: " << e.what() << " (or mouse, the default)\n";
       return 1;
@@ -533,7 +534,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   bool overlay = true;
   double push_m = 5e-3;       // the hand this far behind the surface under the cursor
   double hand_t = norm(vol.grid.centre_m() - view.eye);  // hand depth along the cursor ray [m]
-  const double unit = app::probe_size_m(vol.grid);
+  const double unit = run::probe_size_m(vol.grid);
   std::vector<double> march_ms, shade_ms, overlay_ms;
   std::vector<double> full_march_ms, full_shade_ms, full_overlay_ms;  // frames drawn whole
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
@@ -609,7 +610,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
       case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
       case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
-      case GLFW_KEY_R: camera.cam = app::default_camera(vol); break;
+      case GLFW_KEY_R: camera.cam = run::default_camera(vol); break;
       case GLFW_KEY_ESCAPE:
       case GLFW_KEY_Q: glfwSetWindowShouldClose(window.handle(), GLFW_TRUE); break;
       case GLFW_KEY_S:
@@ -661,7 +662,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     loading = Loading{path, next, BackgroundLoad([next] {
                         const io::Scene sc = input_scene(next);
                         auto c = std::make_shared<Carried>();
-                        c->volume = app::load_scene_volume(sc);
+                        c->volume = run::load_scene_volume(sc);
                         const engine::Volume& v = c->volume;
                         if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
                           throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
@@ -939,7 +940,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     }
     for (const std::string& s : shots) {
       try {
-        app::write_png(s, fb[0], fb[1], *shown_px);
+        run::write_png(s, fb[0], fb[1], *shown_px);
         log << "sculpt   screenshot " << s << "\n";
       } catch (const std::exception& e) {
         log << "isotouch-sculpt: " << e.what() << "\n";
@@ -994,8 +995,8 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   const session::LiveStats st = session->stats();
   if (!o.screenshot.empty() && !img.rgba.empty()) {
     try {
-      if (upscaled.empty()) app::write_png(o.screenshot, img.width, img.height, img.rgba);
-      else app::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
+      if (upscaled.empty()) run::write_png(o.screenshot, img.width, img.height, img.rgba);
+      else run::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
       log << "sculpt   screenshot " << o.screenshot << "\n";
     } catch (const std::exception& e) {
       log << "isotouch-sculpt: " << e.what() << "\n";

@@ -1,5 +1,5 @@
 // bench_engine.cpp - `isotouch bench engine`. See bench_engine.h.
-#include "bench_cmd.h"
+#include "servo_bench.h"
 #include "bench_engine.h"
 
 #include <fcntl.h>
@@ -37,7 +37,7 @@
 #define ISOTOUCH_SOURCE_DIR "."
 #endif
 
-namespace isotouch::app {
+namespace isotouch::bench {
 using eval::median;
 using io::write_file_atomic;
 namespace fs = std::filesystem;
@@ -1274,81 +1274,5 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   return rc;
 }
 
-namespace {
-constexpr const char* kColumnsHelp = R"(
-Cases: head CT (headsq 64x64x93) at 1150 and 500, chest CT (lungdx 256x256x64) at -500
-and +250, a 256^3 noisy sphere (signed distance in mm to a sphere of radius 96 voxels,
-1 mm spacing, plus uniform noise in [-1, 1) mm; tau 0), all inside above. Dense list:
-gaussian(1 mm) + gradient + brick_minmax(1); sparse list: gaussian(1 mm) + gradient.
 
-Dense table, one row per pass, then the sum of the passes and the end-to-end wall time:
-  min bytes      bytes the pass must read + write at least: gaussian/closing 8 B/voxel,
-                 gradient 20 B/voxel (4 in, 16 out), brick_minmax 4 B/voxel + 8 B/brick
-  dense GPU      PassChain (Vulkan) device time per pass [ms], median (timestamps)
-  dense CPU      run_chain_cpu, one thread, wall time per pass [ms], median
-  GPU / CPU      dense GPU ms / dense CPU ms
-  GB/s           min bytes / time;  / memcpy: that over this machine's memcpy GB/s
-                 (std::memcpy of 256 MiB, best of 5, read + write counted)
-Sparse table, one row per isovalue:
-  bricks, candidates, active   8^3 bricks in all, computed, published with samples
-  active %       100 active / bricks
-  sparse GPU     SparseChain::run total_ms (wall, all host work), median [ms], default
-                 strategy: x4 passes on work lists of the candidate bricks' quads
-  dense strategy the same chain running the dense x4 passes over the whole volume
-  per-brick      the same chain on the per-brick shared-memory kernel
-  sparse CPU     run_sparse_cpu total_ms, median [ms]
-  dense GPU/CPU  end-to-end wall of the dense chain (same repetitions)
-  ratios         sparse GPU / dense CPU (the must-show), sparse CPU / dense CPU,
-                 sparse GPU / dense GPU
-  GPU vs CPU     whether both sparse engines found the same bricks and bytes
-Stages: the sparse engines' own per-stage times.
-Bytes: published snapshot bytes per sample format (fp32, fp16, unorm16) against the dense
-  fp32 snapshot (16 B per voxel), and the percentage.
-512^3: a 512^3 noisy sphere through the sparse GPU chain (CPU reference if the GPU one is
-  not available) in a child process: step time, setup, peak RSS from wait4 (ru_maxrss),
-  the child's own VmHWM, snapshot bytes; then the split from the volume to the first servo
-  tick: making the volume, context + chain, the chain's stages, the hand-over to the servo
-  (servo::TripleBuffer), the first HRI tick, and the median of the next 999 ticks.
-Verdicts: computed from the measured figures: chest -500 sparse GPU / dense CPU <= 1/3;
-  chest dense GPU chain / fastest peer chain <= 1/3 and / memcpy of its bytes <= 5 (with
-  the device's own copy floor, copy_x4, in the same units beside it);
-  chest -500 sparse GPU / fastest peer chain <= 1/5; head sparse GPU / sparse CPU <= 1 and
-  / dense CPU chain <= 1; chest +250 smallest snapshot / dense fp32 <= 0.15; 512^3 ran,
-  peak RSS <= MemTotal.
-Progress goes to stderr, the report (markdown) to stdout.
-)";
-}  // namespace
-
-Subcommand add_bench_engine_command(CLI::App& bench) {
-  auto opt = std::make_shared<BenchEngineOptions>();
-  auto big_child = std::make_shared<int>(0);
-  Subcommand s;
-  s.app = bench.add_subcommand("engine",
-                               "Engine passes dense and sparse, GPU and one-thread CPU reference, on the head CT, the "
-                               "chest CT and a 256^3 synthetic volume: times, bricks active, snapshot bytes, bandwidth "
-                               "against memcpy, ratios, verdicts; a 512^3 volume end to end (time, peak memory)");
-  s.app->add_option("--repetitions", opt->repetitions, "Timed repetitions per figure (median)")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
-  s.app->add_flag("--quick", opt->quick, "One repetition and no 512^3 step (unless --big): for tests");
-  s.app->add_flag("--big", opt->big, "Run the 512^3 step even with --quick");
-  s.app->add_flag("--closing", opt->with_closing, "Also benchmark the list with closing(radius 1 mm)");
-  s.app->add_flag("--no-peers", [opt](std::int64_t) { opt->peers = false; },
-                  "Do not time the peers (ITK, OpenVDB) beside the engine");
-  s.app->add_option("--big-dim", opt->big_dim, "Edge of the end-to-end volume [voxels]")
-      ->capture_default_str()
-      ->check(CLI::Range(8, 1024));
-  s.app->add_option("--cases", opt->cases, "Only these cases: head chest sphere256 (default: all)")
-      ->check(CLI::IsMember({"head", "chest", "sphere256"}));
-  s.app->add_option("--csv", opt->out_csv, "Also write every figure to this CSV file (long form)");
-  s.app->add_option("--big-child", *big_child, "internal: run the end-to-end step in this process")->group("");
-  s.app->footer(kColumnsHelp);
-  s.run = [opt, big_child](const std::string& device) {
-    if (*big_child > 0) return run_big_child(*big_child, device, std::cout, std::cerr);
-    opt->device = device;
-    return run_bench_engine(*opt, std::cout, std::cerr);
-  };
-  return s;
-}
-
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

@@ -1,4 +1,4 @@
-#include "live_cmd.h"
+#include "live_run.h"
 
 #include <unistd.h>
 
@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 
+#include "files.h"
 #include "haptic_device.h"
 #include "hri.h"
 #include "live_session.h"
@@ -21,7 +22,7 @@
 #include "stats.h"
 #include "stop_signal.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 namespace {
 
 std::string ms(double v) {
@@ -177,9 +178,7 @@ int write_hand_path(const io::Scene& scene, const std::string& path, std::ostrea
     const core::Vec3 d = setup.world_T_device.to_device(p);
     csv << double(k) * step << ',' << d.x << ',' << d.y << ',' << d.z << '\n';
   }
-  std::ofstream out(path, std::ios::binary);
-  out << csv.str();
-  if (!out.flush()) throw std::runtime_error(path + ": cannot write the hand path");
+  io::write_file_atomic(path, csv.str());  // whole or not at all
   log << "hand path " << path << ": " << setup.script.duration_s << " s of the scene's scripted hand, device frame "
       << "(isotouch-devemu --path " << path << ")\n";
   return 0;
@@ -242,4 +241,4 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   return device_lost ? 5 : 0;
 }
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

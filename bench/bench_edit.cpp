@@ -1,5 +1,5 @@
 // bench_edit.cpp - `isotouch bench edit`. See bench_edit.h.
-#include "bench_cmd.h"
+#include "servo_bench.h"
 #include "vdb_io.h"
 #include "bench_edit.h"
 
@@ -24,7 +24,8 @@
 #include "hri.h"
 #include "live_session.h"
 #include "passes.h"
-#include "run_job.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "scene.h"
 #include "servo_thread.h"
 #include "sim_device_io.h"
@@ -36,8 +37,12 @@
 #define ISOTOUCH_SOURCE_DIR "."
 #endif
 
-namespace isotouch::app {
+namespace isotouch::bench {
 using eval::median;
+using run::scene_passes;
+using run::scene_sample_format;
+using run::SceneSetup;
+using run::setup_scene;
 using eval::percentile;
 using io::load_any_volume;
 using io::load_scene;
@@ -950,66 +955,5 @@ int run_bench_edit(const BenchEditOptions& options, std::ostream& out, std::ostr
   }
 }
 
-namespace {
-constexpr const char* kHelpFooter = R"(
-What it measures, in one process on the scene's volume (default scenes/chest.json: its
-isovalue, inside, passes and sample format):
-  latency     carve and add brushes (radius 2, 5, 10 mm; each point carved, then added back)
-              at isosurface crossings of the first snapshot, one at a time: from the edit
-              submitted (EditSession::apply: Sculptor brush on the GPU when a Vulkan device
-              is there, LiveField update) to the first servo tick that reads the new
-              snapshot (the tick notes the version and a steady_clock time). Median, p99,
-              max, and the parts: brush, update, publish-to-tick.
-  dense       the same edits with the whole volume's passes recomputed densely (GPU
-              PassChain, or run_chain_cpu without a device) and published the same way;
-              dense / incremental = ratio of the medians.
-  sustained   back-to-back 5 mm edits for --seconds while the servo runs, against the servo
-              with the engine idle for as long (idle, editing; --rounds times), both on a
-              live session (its servo thread; its edit thread applies what the bench
-              submits): edits/s, edit-to-haptics (submit to the first tick reading it),
-              voxel changes/s (replayed on the CPU reference), missed deadlines, period errors.
-The servo: HRI at --rate Hz on a simulated device pressed into the surface (the scene's
-script, then resting), SCHED_FIFO + pinning + mlock when the system allows.
-Verdicts against the targets: 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more
-servo misses (per tick) than idle. Exit 0 whether or not a target is met; 1 when something
-failed to run. Report (markdown) on stdout, progress on stderr. Timings on a shared machine
-are noisy: run it when the machine is quiet and repeat.
-)";
-}  // namespace
 
-Subcommand add_bench_edit_command(CLI::App& bench) {
-  auto o = std::make_shared<BenchEditOptions>();
-  auto* sub = bench.add_subcommand("edit", "Edit-to-haptics latency and edit rate while sculpting the chest CT");
-  sub->add_option("--scene", o->scene, "Scene file (volume, isovalue, passes, samples); default scenes/chest.json");
-  sub->add_flag("--quick", o->quick, "A few seconds (CI): 6 edits per radius, 1 dense edit, one 0.5 s round");
-  sub->add_option("--edits", o->edits_per_radius, "Latency edits per radius (half carve, half add)")
-      ->capture_default_str()
-      ->check(CLI::Range(2, 100000));
-  sub->add_option("--dense-edits", o->dense_edits, "Dense full-recompute edits per radius (0: none)")
-      ->capture_default_str()
-      ->check(CLI::Range(0, 10000));
-  sub->add_option("--seconds", o->seconds, "Length of each idle and editing phase [s]")
-      ->capture_default_str()
-      ->check(CLI::Range(0.05, 600.0));
-  sub->add_option("--rounds", o->rounds, "Idle + editing pairs")->capture_default_str()->check(CLI::Range(1, 20));
-  sub->add_option("--rate", o->rate_hz, "Servo rate [Hz]")->capture_default_str()->check(CLI::Range(500.0, 10000.0));
-  sub->add_option("--brushes", o->brushes, "gpu (the CPU reference without a device) or cpu")
-      ->capture_default_str()
-      ->check(CLI::IsMember({"gpu", "cpu"}));
-  sub->add_option("--seed", o->seed, "Seed of the edit points")->capture_default_str();
-  sub->add_option("--csv", o->out_csv, "Also write every figure to this CSV file (long form, atomic)");
-  sub->footer(kHelpFooter);
-  return {sub, [o, sub](const std::string& device) {
-            BenchEditOptions opt = *o;
-            opt.device = device;
-            if (opt.quick) {
-              if (sub->count("--edits") == 0) opt.edits_per_radius = 6;
-              if (sub->count("--dense-edits") == 0) opt.dense_edits = 1;
-              if (sub->count("--seconds") == 0) opt.seconds = 0.5;
-              if (sub->count("--rounds") == 0) opt.rounds = 1;
-            }
-            return run_bench_edit(opt, std::cout, std::cerr);
-          }};
-}
-
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

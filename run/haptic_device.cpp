@@ -11,7 +11,7 @@
 #include "sim_device_io.h"
 #include "socket_link.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 namespace {
 constexpr const char* kKinds = "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET";
 
@@ -115,4 +115,4 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   return d;
 }
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

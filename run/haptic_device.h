@@ -12,11 +12,13 @@
 #include "device_io.h"
 #include "hri.h"
 #include "report_device.h"
-#include "run_job.h"
+#include "names.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 #include "sim_device.h"
 #include "workspace.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 
 /// An opened device and what it needs to live.
 struct HapticDevice {
@@ -54,4 +56,4 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
 /// capabilities, else one line naming each offending value and the device's limit.
 std::string check_caps(const servo::HriParams& hri, const servo::DeviceCaps& caps);
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

@@ -5,9 +5,8 @@
 #include <string>
 #include <vector>
 
-#include "subcommand.h"
 
-namespace isotouch::app {
+namespace isotouch::bench {
 
 struct BenchDeviceOptions {
   double seconds = 3;          ///< per rate [s]
@@ -42,6 +41,4 @@ std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>
 /// the machine. @return 0; 1 if nothing could be measured.
 int run_bench_device(const BenchDeviceOptions& options, std::ostream& log);
 
-Subcommand add_bench_device_command(CLI::App& bench);
-
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

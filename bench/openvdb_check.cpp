@@ -3,7 +3,7 @@
 // OpenVDB (built with ISOTOUCH_HAVE_OPENVDB when find_package(OpenVDB) succeeds).
 #include <chrono>
 
-#include "check_cmd.h"
+#include "pass_check.h"
 
 #ifdef ISOTOUCH_HAVE_OPENVDB
 #include <openvdb/math/Maps.h>
@@ -11,7 +11,7 @@
 #include <openvdb/openvdb.h>
 #endif
 
-namespace isotouch::app {
+namespace isotouch::bench {
 
 OpenVdbGradient openvdb_gradient(const engine::Volume& vol) {
   OpenVdbGradient r;
@@ -50,4 +50,4 @@ OpenVdbGradient openvdb_gradient(const engine::Volume& vol) {
   return r;
 }
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

@@ -18,14 +18,10 @@
 #include "brick_field.h"
 #include "passes.h"
 #include "sparse_chain.h"
-#include "subcommand.h"
 #include "vk_context.h"
 #include "volume.h"
 
-namespace isotouch::app {
-
-/// Adds `engine` under `bench`.
-Subcommand add_bench_engine_command(CLI::App& bench);
+namespace isotouch::bench {
 
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -253,4 +249,4 @@ struct BenchEngineOptions {
 /// @return 0, or 1 if a volume could not be read.
 int run_bench_engine(const BenchEngineOptions& o, std::ostream& out, std::ostream& progress);
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

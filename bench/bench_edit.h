@@ -30,13 +30,9 @@
 #include "isosurface.h"
 #include "renderer.h"
 #include "sample_field.h"
-#include "subcommand.h"
 #include "vec3.h"
 
-namespace isotouch::app {
-
-/// Adds `edit` under `isotouch bench`.
-Subcommand add_bench_edit_command(CLI::App& bench);
+namespace isotouch::bench {
 
 struct BenchEditOptions {
   std::string scene;          ///< scene file; "" = scenes/chest.json of the source tree
@@ -116,4 +112,4 @@ class VersionSpy final : public servo::Renderer {
   std::atomic<long> ticks_{0}, contact_{0};
 };
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

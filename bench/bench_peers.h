@@ -9,7 +9,7 @@
 
 #include "volume.h"
 
-namespace isotouch::app {
+namespace isotouch::bench {
 
 /// One run of every peer at one thread count; wall times [ms], NaN where not available.
 struct PeerTimes {
@@ -27,4 +27,4 @@ struct PeerTimes {
 /// tbb::global_control). Exceptions are reported in *_why.
 PeerTimes run_peers_once(const engine::Volume& v, double sigma_mm, int threads);
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

@@ -20,7 +20,7 @@
 
 #include "sample_field.h"
 
-namespace isotouch::app {
+namespace isotouch::bench {
 namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
@@ -118,4 +118,4 @@ PeerTimes run_peers_once(const engine::Volume& v, double sigma_mm, int threads) 
   return t;
 }
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

@@ -1,4 +1,4 @@
-// live_cmd.h - `isotouch run SCENE --live`: the scene in real time on the live session's
+// live_run.h - what `isotouch run SCENE --live` runs: the scene in real time on the live session's
 // threads (session/live_session.h): the servo thread drives the simulated device (the
 // scene's scripted hand) at the scene's rate, the edit thread applies the button drill and
 // the timeline, and `--record FILE` streams a format 3 recording that `isotouch replay`
@@ -7,15 +7,17 @@
 #include <iosfwd>
 #include <string>
 
-#include "run_job.h"
+#include "names.h"
+#include "run_scene.h"
+#include "scene_setup.h"
 
-namespace isotouch::app {
+namespace isotouch::run {
 
 struct LiveOptions {
   RunOptions run;                ///< device, progress, record_path (out_dir: unused)
   bool sched_fifo = true;        ///< ask for SCHED_FIFO and pinning (refused: said, not fatal)
   double flush_interval_s = 0.1; ///< the recording's chunk interval [s]
-  std::string haptic = "sim";    ///< the device: `--haptic KIND:ARGS` (apps/haptic_device.h)
+  std::string haptic = "sim";    ///< the device: `--haptic KIND:ARGS` (run/haptic_device.h)
 };
 
 /// Runs `scene` live for its script's duration (or until SIGINT / SIGTERM). Prints the
@@ -33,4 +35,4 @@ int run_live(const io::Scene& scene, const LiveOptions& options, std::ostream& l
 /// @throws as setup_scene; std::runtime_error if FILE cannot be written.
 int write_hand_path(const io::Scene& scene, const std::string& path, std::ostream& log);
 
-}  // namespace isotouch::app
+}  // namespace isotouch::run

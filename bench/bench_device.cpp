@@ -1,4 +1,5 @@
 #include "bench_device.h"
+#include "files.h"
 
 #include <unistd.h>
 
@@ -15,7 +16,7 @@
 #include <thread>
 
 #include "analytic_fields.h"
-#include "bench_cmd.h"
+#include "servo_bench.h"
 #include "device_emulator.h"
 #include "device_protocols.h"
 #include "report_device.h"
@@ -23,7 +24,7 @@
 #include "socket_link.h"
 #include "stats.h"
 
-namespace isotouch::app {
+namespace isotouch::bench {
 namespace {
 using core::Vec3;
 
@@ -192,27 +193,15 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
   log << "\n";
   for (const std::string& v : bench_device_verdicts(rows, trials)) log << "verdict  " << v << "\n";
   if (!o.out_csv.empty()) {
-    std::ofstream csv(o.out_csv);
+    std::ostringstream csv;
     csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";
     for (const BenchDeviceRow& r : rows)
       csv << r.rate_hz << ',' << r.report_rate_hz << ',' << r.answered << ',' << r.p50_us << ',' << r.p99_us << ','
           << r.max_us << ',' << r.ticks << ',' << r.missed << ',' << r.stale << '\n';
-    if (!csv) throw std::runtime_error(o.out_csv + ": cannot write the CSV");
+    io::write_file_atomic(o.out_csv, csv.str());  // whole or not at all
   }
   return std::all_of(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.answered == 0; }) ? 1 : 0;
 }
 
-Subcommand add_bench_device_command(CLI::App& bench) {
-  auto o = std::make_shared<BenchDeviceOptions>();
-  auto* sub = bench.add_subcommand(
-      "device", "Report-to-force latency (p50/p99/max) and report rate at 1, 4 and 8 kHz against the device "
-                "emulator over its socket, servo misses, and disconnect trials (zero force within one tick)");
-  sub->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(CLI::Range(0.1, 600.0));
-  sub->add_option("--trials", o->disconnect_trials, "Disconnect trials at 1 kHz")->capture_default_str()->check(CLI::Range(1, 1000));
-  sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");
-  sub->add_flag_callback("--quick", [o] { o->seconds = 0.5, o->disconnect_trials = 3; }, "0.5 s per rate and 3 trials (CI)");
-  sub->add_option("--csv", o->out_csv, "Also write the rows to this CSV file");
-  return {sub, [o](const std::string&) { return run_bench_device(*o, std::cout); }};
-}
 
-}  // namespace isotouch::app
+}  // namespace isotouch::bench

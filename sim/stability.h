@@ -77,7 +77,7 @@ struct ExtremeCase {
   std::string detail;
 };
 
-/// Every extreme case (issue: K = 1e5, 5 cm jump across a thin shell, start deep inside,
+/// Every extreme case (K = 1e5, 5 cm jump across a thin shell, start deep inside,
 /// leave/re-enter, NaN/Inf/huge device input, zero gradient, HIP outside the volume, NaN
 /// voxels, isovalue at the data min/max, n = 1 and 1000, force above the device limit).
 std::vector<ExtremeCase> run_extreme_cases();

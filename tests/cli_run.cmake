@@ -44,7 +44,7 @@ endif()
 if(dev STREQUAL "")
   message(FATAL_ERROR "gpu.device is empty")
 endif()
-# Issue 7: faults, force steps, the true surface error and the orientation are reported.
+# Faults, force steps, the true surface error and the orientation are reported.
 string(JSON faults GET "${js}" contact fault_ticks)
 string(JSON step GET "${js}" contact max_force_step_n)
 string(JSON err GET "${js}" error surface_distance_m max)

@@ -421,7 +421,7 @@ TEST(HriRecovery, ConcaveCornerHasNoForceJump) {
   EXPECT_NEAR(f_rec, f_plain, 1e-6);  // the same force once the ramp is over
 }
 
-// Issue 7 review, finding 2: the ramp length is recovery_time_s of accumulated time, not
+// The ramp length is recovery_time_s of accumulated time, not
 // a tick count from one measured period. After 50 lost ticks a plane made on the first
 // sane tick (elapsed 51 ms) used to jump 0 -> 1 N in one tick; so did the return of a
 // held contact after lost ticks.

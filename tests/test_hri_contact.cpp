@@ -455,7 +455,7 @@ TEST(HriContact, ConcaveCornerKeepsContactInFrontOfTheHeldPlane) {
   }
 }
 
-// Issue 7 review, finding 1 (fault 3 on the head CT): a plane update left the HIP, 3 mm
+// On the head CT a plane update left the HIP, 3 mm
 // inside bone, in front of the new plane; the search for the surface from the HIP was
 // capped at twice its first-order depth and, on 3.2 mm voxels of a noisy scan, found
 // nothing, so the contact was dropped: |F| 1.74 N -> 0 in one tick. Here: a floor scanned

@@ -200,7 +200,7 @@ TEST(RunJob, HeadStepsMatchTheTrace) {
 }
 
 TEST(RunJob, NoContactGivesNullErrorsNotZero) {
-  // Issue 7: a meaningless run (spacing 1e-12 m, below what scene files accept: set here
+  // A meaningless run (spacing 1e-12 m, below what scene files accept: set here
   // directly) has no contact tick; its error figures are unknown, not 0.
   Scene sc = isotouch::io::load_scene(kScenes + "/sphere.json");
   sc.synthetic.spacing_m = 1e-12;

@@ -130,7 +130,7 @@ TEST(Scene, DeviceTooLightToSimulate) {
 }
 
 TEST(Scene, SyntheticSpacingRange) {
-  // Issue 7: spacing_m 1e-12 gave a run with no contact tick that exited 0 with a zero error.
+  // spacing_m 1e-12 gave a run with no contact tick that exited 0 with a zero error.
   const std::string pre = R"({"volume": {"synthetic": "sphere", "spacing_m": )";
   const std::string post = R"(}, "isovalue": 0})";
   expect_error(pre + "1e-12" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "1e-12"});

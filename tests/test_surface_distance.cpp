@@ -299,7 +299,7 @@ TEST(SurfaceDistance, AgreesWithOpenVdbOnTheHeadCt) {
 }
 #endif
 
-// Issue 7 (review finding 5): anisotropic spacing, checked against a closed form, not only
+// Anisotropic spacing, checked against a closed form, not only
 // against OpenVDB. A linear field f(x) = a . x + b is reproduced exactly by trilinear
 // interpolation on any grid, so the isosurface f = 0 is the plane a . x + b = 0 and the
 // distance is |a . p + b| / |a|. Voxels 0.7 x 0.7 x 3 mm (a CT with thick slices), oblique

@@ -67,9 +67,17 @@ engine::SparseOutput run_gpu(const Volume& v, const std::vector<PassDesc>& passe
   return out;
 }
 
-// Dense CPU truth against one sparse result: samples, active set, tiles.
+// Dense CPU truth against one sparse result: samples, active set, tiles. A GPU result
+// (`from_gpu`) is held to the one rule (tests/gpu_cpu_compare.h): bit for bit on a CPU
+// device; on a GPU the samples of the bricks active on both sides within the ULP bound and
+// at most 1 % of the bricks active on one side only (a range that straddles tau by less than
+// the GPU's rounding).
 void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                          const engine::SparseOutput& s, const std::string& what, bool expect_surface = true) {
+                          const engine::SparseOutput& s, const std::string& what, bool expect_surface = true,
+                          bool from_gpu = true) {
+  const bool exact = !from_gpu || isotouch::test::expects_bit_identity(vk());
+  std::vector<core::Sample> got_both, want_both;  // under the GPU rule: bricks active on both sides
+  std::size_t one_side = 0;
   const engine::ChainOutput dense = engine::run_chain_cpu(v, passes);
   ASSERT_TRUE(dense.samples) << what;
   const auto& d = dense.samples->samples;
@@ -107,7 +115,12 @@ void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, 
         for (int x = lo[0]; x < hi[0]; ++x) (iso.contains(d[g.index(x, y, z)].value) ? any_in : any_out) = true;
     const bool straddles = any_in && any_out;
     brute_active += straddles;
-    EXPECT_EQ(slot[id] >= 0, straddles) << what << ": brick " << id << " range " << mn << ".." << mx;
+    if (exact)
+      EXPECT_EQ(slot[id] >= 0, straddles) << what << ": brick " << id << " range " << mn << ".." << mx;
+    else if ((slot[id] >= 0) != straddles) {
+      ++one_side;
+      continue;
+    }
     if (slot[id] < 0) {
       const bool inside = iso.contains(in.tile[id]);
       for (int z = lo[2]; z < hi[2]; ++z)
@@ -124,6 +137,11 @@ void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, 
           ++compared;
           const core::Sample& got = p[i + 9 * j + 81 * k];
           const core::Sample& want = d[g.index(x, y, z)];
+          if (!exact) {
+            got_both.push_back(got);
+            want_both.push_back(want);
+            continue;
+          }
           if (!same(got, want) && wrong_samples++ < 5)
             ADD_FAILURE() << what << ": voxel " << x << "," << y << "," << z << " sparse {" << got.value << ", "
                           << got.gx << ", " << got.gy << ", " << got.gz << "} dense {" << want.value << ", " << want.gx
@@ -131,6 +149,10 @@ void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, 
         }
   }
   EXPECT_EQ(wrong_samples, 0u) << what;
+  if (!exact) {
+    EXPECT_LE(one_side, std::max<std::size_t>(1, brute_active / 100)) << what << ": bricks active on one side only";
+    EXPECT_TRUE(isotouch::test::gpu_matches_cpu(vk(), got_both, want_both, what + ": samples of bricks active on both sides"));
+  }
   EXPECT_EQ(wrong_side, 0u) << what << ": voxels on the other side of their uniform brick's tile";
   if (expect_surface) {
     EXPECT_GT(brute_active, 0u) << what << ": the case must have a surface";
@@ -245,9 +267,9 @@ TEST(SparseChain, OneWorkgroupLoopsOverManyBricks) {
   const engine::SparseOutput def = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::PerBrick);
   expect_same_output(one, def, "chest -500: 1 workgroup asked for vs default");
   const engine::SparseOutput dense = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::Dense);
-  expect_same_output(dense, def, "chest -500: dense strategy vs per-brick");
+  expect_gpu_sparse_matches_cpu(dense, def, "chest -500: dense strategy vs per-brick");
   const engine::SparseOutput lists = run_gpu(v, p, above(-500), -1024.0f, 0, 0, Strategy::Lists);
-  expect_same_output(lists, def, "chest -500: lists strategy vs per-brick");
+  expect_gpu_sparse_matches_cpu(lists, def, "chest -500: lists strategy vs per-brick");
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
@@ -291,7 +313,7 @@ TEST(SparseChain, RoundingAcrossTauNeedsTheEpsilon) {
   const engine::SparseOutput s = run_gpu(v, p, above(1000), 0.0f);
   expect_matches_dense(v, p, above(1000), s, "constant 1000, tau 1000", false);
   const engine::SparseOutput c = engine::run_sparse_cpu(v, p, above(1000), 0.0f, core::SampleFormat::kFp32, true);
-  expect_matches_dense(v, p, above(1000), c, "constant 1000, tau 1000 (CPU sparse)", false);
+  expect_matches_dense(v, p, above(1000), c, "constant 1000, tau 1000 (CPU sparse)", false, false);
 }
 
 TEST(SparseChain, RejectsListsItCannotRun) {

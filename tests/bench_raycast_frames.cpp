@@ -1,8 +1,11 @@
 // bench_raycast_frames - whole frames of the ray caster (what isotouch-sculpt draws after an
-// orbit, pan or zoom) on the head and chest CTs, with the voxels read 4 per texel (quads,
-// binding 12) and 1 per texel, measured side by side in one run: the same cameras
-// alternating between two casters of the same field, GPU timestamps per pass (median over
-// the frames), and whether every frame's picture and depth are bit-identical between the two.
+// orbit, pan or zoom) on the head and chest CTs, in three configurations measured side by
+// side in one run: the voxels read 4 per texel (quads, binding 12) with tile starts (the
+// cone-stepping pass, RaycastStyle::tile_starts), quads without tile starts, and 1 voxel per
+// texel with tile starts. The same cameras go to every configuration in turn (the order
+// rotating per frame); GPU timestamps per pass and the submit-to-fence wall time (median and
+// p95 over the frames); and whether every frame's picture and depth are bit-identical across
+// the configurations (tile starts and quads only change how fast the same picture is drawn).
 // Usage: bench_raycast_frames [WIDTH HEIGHT FRAMES] (default 1024 768 24)
 #include <algorithm>
 #include <cstdio>
@@ -35,6 +38,15 @@ std::string load_average() {
   in >> a >> b >> c;
   return a + " " + b + " " + c;
 }
+
+/// One configuration's per-frame figures [ms].
+struct Series {
+  std::vector<double> tiles, march, shade, total, wall;
+};
+
+bool same_picture(const engine::RaycastImage& a, const engine::RaycastImage& b) {
+  return a.rgba == b.rgba && std::memcmp(a.depth.data(), b.depth.data(), a.depth.size() * 4) == 0;
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,8 +65,9 @@ int main(int argc, char** argv) {
   std::printf("bench_raycast_frames: %d x %d, %d frames per scene (orbit 3 deg and zoom 1.02 per frame from the default "
               "camera, as the sculpt bench's camera moves), %s, load average %s\n\n",
               width, height, frames, vk.info().name.c_str(), load_average().c_str());
-  std::printf("| scene | voxels read as | march median / p95 [ms] | shade median / p95 [ms] | march + shade median [ms] | "
-              "hit pixels (median) |\n|---|---|---|---|---|---|\n");
+  std::printf("| scene | configuration | tiles [ms] | march incl. tiles median / p95 [ms] | shade median / p95 [ms] | "
+              "march + shade median / p95 [ms] | submit to fence median / p95 [ms] | hit pixels (median) |\n"
+              "|---|---|---|---|---|---|---|---|\n");
   bool all_equal = true;
   for (const char* name : {"head.json", "chest.json"}) {
     std::filesystem::path p = std::filesystem::path("scenes") / name;
@@ -67,39 +80,52 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "bench_raycast_frames: %s\n", (!q ? q.error : s.error).c_str());
       return 1;
     }
-    engine::RayCaster* casters[2] = {q.value->get(), s.value->get()};
-    std::vector<double> march[2], shade[2], total[2], hits;
+    struct Config {
+      std::string name;
+      engine::RayCaster* caster;
+      bool tiles;
+    };
+    const std::string quads = q.value->get()->quads() ? "quads" : "1 per texel (quads did not fit)";
+    const Config cfg[3] = {{quads + ", tile starts", q.value->get(), true},
+                           {quads + ", no tile starts", q.value->get(), false},
+                           {"1 per texel, tile starts", s.value->get(), true}};
+    Series ser[3];
+    std::vector<double> hits;
     long differ = 0;
     engine::OrbitCamera cam = app::default_camera(vol);
     for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
       cam.azimuth_deg += 3;
       cam.zoom *= 1.02;
       const engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, cam);
-      engine::RaycastImage img[2];
-      for (int k = 0; k < 2; ++k) {
-        const int i = (f + k) % 2;  // alternate which goes first
-        img[i] = casters[i]->render(view, engine::RaycastStyle{}, width, height);
+      engine::RaycastImage img[3];
+      for (int k = 0; k < 3; ++k) {
+        const int i = (f + k) % 3;  // rotate which goes first
+        engine::RaycastStyle style;
+        style.tile_starts = cfg[i].tiles;
+        img[i] = cfg[i].caster->render(view, style, width, height);
       }
       if (f == 0) continue;
-      for (int i = 0; i < 2; ++i) {
-        march[i].push_back(img[i].march_ms);
-        shade[i].push_back(img[i].shade_ms);
-        total[i].push_back(img[i].march_ms + img[i].shade_ms);
+      for (int i = 0; i < 3; ++i) {
+        ser[i].tiles.push_back(img[i].tiles_ms);
+        ser[i].march.push_back(img[i].march_ms);
+        ser[i].shade.push_back(img[i].shade_ms);
+        ser[i].total.push_back(img[i].march_ms + img[i].shade_ms);
+        ser[i].wall.push_back(img[i].submit_wall_ms);
       }
       hits.push_back(double(std::count_if(img[0].depth.begin(), img[0].depth.end(), [](float t) { return t >= 0; })));
-      if (img[0].rgba != img[1].rgba || std::memcmp(img[0].depth.data(), img[1].depth.data(), img[0].depth.size() * 4) != 0)
-        ++differ;
+      if (!same_picture(img[0], img[1]) || !same_picture(img[0], img[2])) ++differ;
     }
     all_equal = all_equal && differ == 0;
-    for (int i = 0; i < 2; ++i)
-      std::printf("| %s | %s | %.1f / %.1f | %.1f / %.1f | %.1f | %.0f |\n", scene.name.c_str(),
-                  i == 0 ? (casters[0]->quads() ? "quads (4 per texel)" : "1 per texel (quads did not fit)") : "1 per texel",
-                  median(march[i]), p95(march[i]), median(shade[i]), p95(shade[i]), median(total[i]), median(hits));
-    std::printf("| %s | ratio 1-float / quads | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n", scene.name.c_str(),
-                median(march[1]) / median(march[0]), median(shade[1]) / median(shade[0]),
-                median(total[1]) / median(total[0]), differ);
+    for (int i = 0; i < 3; ++i)
+      std::printf("| %s | %s | %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.0f |\n", scene.name.c_str(),
+                  cfg[i].name.c_str(), median(ser[i].tiles), median(ser[i].march), p95(ser[i].march),
+                  median(ser[i].shade), p95(ser[i].shade), median(ser[i].total), p95(ser[i].total),
+                  median(ser[i].wall), p95(ser[i].wall), median(hits));
+    std::printf("| %s | ratio no tile starts / tile starts (quads) | | %.2fx | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n",
+                scene.name.c_str(), median(ser[1].march) / median(ser[0].march), median(ser[1].shade) / median(ser[0].shade),
+                median(ser[1].total) / median(ser[0].total), median(ser[1].wall) / median(ser[0].wall), differ);
   }
-  std::printf("\nload average after: %s\nverdict: quads and 1-float pictures bit-identical: %s\n", load_average().c_str(),
+  std::printf("\nload average after: %s\nverdict: the three configurations' pictures bit-identical: %s\n", load_average().c_str(),
               all_equal ? "PASS" : "FAIL");
   return all_equal ? 0 : 1;
 }

@@ -533,6 +533,7 @@ struct RayCaster::Impl {
   GpuBuffer tile_t, tile_list;             // per tile of pixels: where its rays' march starts; listed tiles
   GpuBuffer tile_counter;                  // RaycastCounter: listed tiles, the tiled march's dispatch
   std::size_t pixels = 0, tile_count = 0;
+  bool last_tiles = false;                 // the last frame drew with tile starts
   double mag = 0;  // the cell distances' margin scale (value_magnitude) as last computed
   /// Index-space box of the active cells (nullopt: none; skipping then marches nothing).
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
@@ -781,6 +782,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
   vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);       // hit count 0
   vkCmdFillBuffer(cmd, m.tile_counter.handle(), 0, VK_WHOLE_SIZE, 0);  // tile count 0
+  if (push.flags & ISOTOUCH_RAYCAST_TILES)  // tiles the tile pass does not reach: +inf
+    vkCmdFillBuffer(cmd, m.tile_t.handle(), 0, tile_count * 4, std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()));
   const std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b), no_hit = std::bit_cast<std::uint32_t>(-1.0f);
   if (!reuse) {
     vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
@@ -873,6 +876,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.cache_key = key;
   m.cache_flags = push.flags;
   m.cache_orect = orect;
+  m.last_tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u;
   m.dirty_lo = {1, 1, 1};
   m.dirty_hi = {0, 0, 0};
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
@@ -885,6 +889,19 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   std::memcpy(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels * 4);
   std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
   return img;
+}
+
+std::vector<float> RayCaster::last_tile_starts() {
+  Impl& m = *impl_;
+  if (!m.last_tiles) return {};
+  GpuBuffer down = make_buffer_or_throw(m.ctx, m.tile_count * 4, MemoryIntent::Readback, "raycast tile starts readback");
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  record_copy(cmd, m.tile_t, down, m.tile_count * 4);
+  barrier_transfer_to_host(cmd);
+  m.ctx.submit_and_wait(cmd);
+  std::vector<float> out(m.tile_count);
+  std::memcpy(out.data(), down.mapped(), m.tile_count * 4);
+  return out;
 }
 
 RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const std::vector<std::uint32_t>& bricks) {

@@ -216,6 +216,11 @@ class RayCaster {
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});
   const RaycastField& field() const;
+  /// The last render()'s tile starts (tiles of ISOTOUCH_RAYCAST_TILE pixels, x fastest): the
+  /// ray parameter t [m] before which no lattice sample of the tile's rays can be inside;
+  /// +inf for a tile not marched (none can be, or outside the pixels that frame drew).
+  /// Empty if that frame drew without tile starts. Reads the device buffer back (tests).
+  std::vector<float> last_tile_starts();
 
   /// What one update() did.
   struct UpdateStats {

@@ -284,7 +284,8 @@ struct RaycastPush {
                      //   project into (engine/raycast.cpp); tile pass: tile of (0, 0)
 };
 // The hit count of the march pass and, at offset 0, the indirect dispatch of the shade pass
-// (VkDispatchIndirectCommand), written by raycast_args.comp.
+// (VkDispatchIndirectCommand), written by raycast_args.comp; binding 14 is a second one: the
+// tiles raycast_tiles.comp listed and the tiled march's dispatch.
 struct RaycastCounter {
   uint groups_x;
   uint groups_y;

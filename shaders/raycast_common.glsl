@@ -1,7 +1,7 @@
 // raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
 // Included by raycast_tiles.comp, raycast_march.comp, raycast_shade.comp and
-// raycast_overlay.comp; every pass (raycast_args.comp too) binds the same 14 bindings (one descriptor layout, engine/raycast.cpp).
+// raycast_overlay.comp; every pass (raycast_args.comp too) binds the same 16 bindings (one descriptor layout, engine/raycast.cpp).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels

@@ -6,6 +6,8 @@
 // rotating per frame); GPU timestamps per pass and the submit-to-fence wall time (median and
 // p95 over the frames); and whether every frame's picture and depth are bit-identical across
 // the configurations (tile starts and quads only change how fast the same picture is drawn).
+// Also the process's CPU time per frame (lavapipe's threads included: on a CPU device the
+// work a frame costs, less sensitive than wall time to what else runs on the machine).
 // Usage: bench_raycast_frames [WIDTH HEIGHT FRAMES] (default 1024 768 24)
 #include <algorithm>
 #include <cstdio>
@@ -13,8 +15,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
+
+#include <sys/resource.h>
 
 #include "raycast.h"
 #include "render_cmd.h"
@@ -41,8 +46,39 @@ std::string load_average() {
 
 /// One configuration's per-frame figures [ms].
 struct Series {
-  std::vector<double> tiles, march, shade, total, wall;
+  std::vector<double> tiles, march, shade, total, wall, cpu;
 };
+
+/// The process's user + system CPU time [ms].
+double cpu_ms() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-3;
+}
+
+/// How the tile starts did in one frame: the pixels in tiles left out, and the mean distance
+/// [voxels along the ray] from a hit pixel's tile start to its hit.
+struct TileFigures {
+  double left_out = 0, ahead_vox = 0;
+};
+TileFigures tile_figures(const engine::RaycastImage& img, const std::vector<float>& starts, const core::Grid& grid,
+                         const engine::CameraView& view) {
+  const int T = int(ISOTOUCH_RAYCAST_TILE), tiles_x = (img.width + T - 1) / T;
+  TileFigures out;
+  long hit = 0;
+  for (int py = 0; py < img.height; ++py)
+    for (int px = 0; px < img.width; ++px) {
+      const float start = starts[std::size_t(py / T) * std::size_t(tiles_x) + std::size_t(px / T)];
+      const float depth = img.depth[std::size_t(py) * std::size_t(img.width) + std::size_t(px)];
+      out.left_out += start == std::numeric_limits<float>::infinity();
+      if (depth < 0) continue;
+      ++hit;
+      out.ahead_vox += (double(depth) - double(start)) *
+                       engine::voxels_per_metre(grid, engine::pixel_direction(view, img.width, img.height, px, py));
+    }
+  out.ahead_vox /= double(std::max(hit, 1L));
+  return out;
+}
 
 bool same_picture(const engine::RaycastImage& a, const engine::RaycastImage& b) {
   return a.rgba == b.rgba && std::memcmp(a.depth.data(), b.depth.data(), a.depth.size() * 4) == 0;
@@ -66,8 +102,8 @@ int main(int argc, char** argv) {
               "camera, as the sculpt bench's camera moves), %s, load average %s\n\n",
               width, height, frames, vk.info().name.c_str(), load_average().c_str());
   std::printf("| scene | configuration | tiles [ms] | march incl. tiles median / p95 [ms] | shade median / p95 [ms] | "
-              "march + shade median / p95 [ms] | submit to fence median / p95 [ms] | hit pixels (median) |\n"
-              "|---|---|---|---|---|---|---|---|\n");
+              "march + shade median / p95 [ms] | submit to fence median / p95 [ms] | CPU time median [ms] | hit pixels (median) |\n"
+              "|---|---|---|---|---|---|---|---|---|\n");
   bool all_equal = true;
   for (const char* name : {"head.json", "chest.json"}) {
     std::filesystem::path p = std::filesystem::path("scenes") / name;
@@ -90,7 +126,7 @@ int main(int argc, char** argv) {
                            {quads + ", no tile starts", q.value->get(), false},
                            {"1 per texel, tile starts", s.value->get(), true}};
     Series ser[3];
-    std::vector<double> hits;
+    std::vector<double> hits, left_out, ahead;
     long differ = 0;
     engine::OrbitCamera cam = app::default_camera(vol);
     for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
@@ -98,11 +134,19 @@ int main(int argc, char** argv) {
       cam.zoom *= 1.02;
       const engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, cam);
       engine::RaycastImage img[3];
+      double cpu[3] = {0, 0, 0};
       for (int k = 0; k < 3; ++k) {
         const int i = (f + k) % 3;  // rotate which goes first
         engine::RaycastStyle style;
         style.tile_starts = cfg[i].tiles;
+        const double c0 = cpu_ms();
         img[i] = cfg[i].caster->render(view, style, width, height);
+        cpu[i] = cpu_ms() - c0;
+        if (i == 0 && f > 0) {
+          const TileFigures t = tile_figures(img[0], cfg[0].caster->last_tile_starts(), vol.grid, view);
+          left_out.push_back(t.left_out);
+          ahead.push_back(t.ahead_vox);
+        }
       }
       if (f == 0) continue;
       for (int i = 0; i < 3; ++i) {
@@ -111,19 +155,24 @@ int main(int argc, char** argv) {
         ser[i].shade.push_back(img[i].shade_ms);
         ser[i].total.push_back(img[i].march_ms + img[i].shade_ms);
         ser[i].wall.push_back(img[i].submit_wall_ms);
+        ser[i].cpu.push_back(cpu[i]);
       }
       hits.push_back(double(std::count_if(img[0].depth.begin(), img[0].depth.end(), [](float t) { return t >= 0; })));
       if (!same_picture(img[0], img[1]) || !same_picture(img[0], img[2])) ++differ;
     }
     all_equal = all_equal && differ == 0;
+    std::printf("| %s | tile starts: pixels in tiles left out (median) %.0f of %d; a hit's tile start lies %.2f voxels "
+                "before the hit (median of the frames' means) | | | | | | | |\n",
+                scene.name.c_str(), median(left_out), width * height, median(ahead));
     for (int i = 0; i < 3; ++i)
-      std::printf("| %s | %s | %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.0f |\n", scene.name.c_str(),
-                  cfg[i].name.c_str(), median(ser[i].tiles), median(ser[i].march), p95(ser[i].march),
+      std::printf("| %s | %s | %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f | %.0f |\n",
+                  scene.name.c_str(), cfg[i].name.c_str(), median(ser[i].tiles), median(ser[i].march), p95(ser[i].march),
                   median(ser[i].shade), p95(ser[i].shade), median(ser[i].total), p95(ser[i].total),
-                  median(ser[i].wall), p95(ser[i].wall), median(hits));
-    std::printf("| %s | ratio no tile starts / tile starts (quads) | | %.2fx | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n",
+                  median(ser[i].wall), p95(ser[i].wall), median(ser[i].cpu), median(hits));
+    std::printf("| %s | ratio no tile starts / tile starts (quads) | | %.2fx | %.2fx | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n",
                 scene.name.c_str(), median(ser[1].march) / median(ser[0].march), median(ser[1].shade) / median(ser[0].shade),
-                median(ser[1].total) / median(ser[0].total), median(ser[1].wall) / median(ser[0].wall), differ);
+                median(ser[1].total) / median(ser[0].total), median(ser[1].wall) / median(ser[0].wall),
+                median(ser[1].cpu) / median(ser[0].cpu), differ);
   }
   std::printf("\nload average after: %s\nverdict: the three configurations' pictures bit-identical: %s\n", load_average().c_str(),
               all_equal ? "PASS" : "FAIL");

@@ -15,6 +15,7 @@
 #include "isotouch/shaders/raycast_march_spv.h"
 #include "isotouch/shaders/raycast_overlay_spv.h"
 #include "isotouch/shaders/raycast_shade_spv.h"
+#include "isotouch/shaders/raycast_tiles_spv.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
@@ -45,6 +46,9 @@ static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 25
 static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
 static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 8u + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
+static_assert(ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE == ISOTOUCH_RAYCAST_WG_X, "a tiled march workgroup is one tile");
+// The tile pass: its cone march and its cone interval (3 trips).
+static_assert(ISOTOUCH_RAYCAST_TILE_STEPS + 6u < 65535u);
 
 namespace {
 
@@ -321,7 +325,8 @@ Vec3 pixel_direction(const CameraView& view, int width, int height, int px, int 
 }
 
 std::uint32_t style_flags(const RaycastStyle& s) {
-  return (s.skip_empty ? ISOTOUCH_RAYCAST_SKIP : 0u) | (s.clip ? ISOTOUCH_RAYCAST_CLIP : 0u);
+  return (s.skip_empty ? ISOTOUCH_RAYCAST_SKIP : 0u) | (s.clip ? ISOTOUCH_RAYCAST_CLIP : 0u) |
+         (s.skip_empty && s.tile_starts ? ISOTOUCH_RAYCAST_TILES : 0u);
 }
 
 gpu::RaycastParams make_params(const RaycastField& f, const CameraView& v, const RaycastStyle& s, int width,
@@ -511,9 +516,11 @@ struct RayCaster::Impl {
   VulkanContext& ctx;
   RaycastField field;
   bool use_quads = false;  // binding 12 holds the quads (shaders/raycast_common.glsl)
-  // The four passes (shaders/raycast_common.glsl), one descriptor layout.
+  // The five passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
-  ComputePipeline<gpu::RaycastPush> march_skip, march_plain, args, shade_lin, shade, overlay;
+  // tiles and the march from them (march_tiled), with args_tiles for its indirect dispatch.
+  ComputePipeline<gpu::RaycastPush> tiles, args_tiles, march_tiled, march_skip, march_plain, args, shade_lin, shade,
+      overlay;
   GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
@@ -523,7 +530,10 @@ struct RayCaster::Impl {
   // hit list, hit sample.
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
-  std::size_t pixels = 0;
+  GpuBuffer tile_t, tile_list;             // per tile of pixels: where its rays' march starts; listed tiles
+  GpuBuffer tile_counter;                  // RaycastCounter: listed tiles, the tiled march's dispatch
+  std::size_t pixels = 0, tile_count = 0;
+  bool last_tiles = false;                 // the last frame drew with tile starts
   double mag = 0;  // the cell distances' margin scale (value_magnitude) as last computed
   /// Index-space box of the active cells (nullopt: none; skipping then marches nothing).
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
@@ -539,14 +549,19 @@ struct RayCaster::Impl {
   PixelRect cache_orect;
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
-  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant, bool quads) {
+  /// 5: the march's tile starts (one workgroup per listed tile).
+  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant, bool quads, bool tiled = false) {
     return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2]),
-            quads ? 1u : 0u};
+            quads ? 1u : 0u, tiled ? 1u : 0u};
   }
   Impl(VulkanContext& c, RaycastField f, bool q)
       : ctx(c),
         field(std::move(f)),
         use_quads(q),
+        tiles(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast tiles", 1u, spec(field, 0, q), kTexel),
+        args_tiles(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args (tiles)", 1u, {1u}, kTexel),
+        march_tiled(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (tile starts)", 1u,
+                    spec(field, 1, q, true), kTexel),
         march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1, q),
                    kTexel),
         march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0, q), kTexel),
@@ -555,9 +570,9 @@ struct RayCaster::Impl {
                   spec(field, 1, q), kTexel),
         shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0, q), kTexel),
         overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0, q), kTexel),
-        arena(c, 4, 4 * ISOTOUCH_RAYCAST_BINDINGS),
-        timer(c, 4) {
-    for (auto* p : {&march_skip, &march_plain, &args, &shade_lin, &shade, &overlay}) p->set_texel_vec4(kVec4);
+        arena(c, 6, 6 * ISOTOUCH_RAYCAST_BINDINGS),
+        timer(c, 5) {
+    for (auto* p : {&tiles, &args_tiles, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay}) p->set_texel_vec4(kVec4);
   }
 };
 
@@ -668,7 +683,8 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
         std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
         std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"},
-        std::tuple{&impl->counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"}}) {
+        std::tuple{&impl->counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
+        std::tuple{&impl->tile_counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast tile counter"}}) {
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) return R::fail(r.error);
     *buf = std::move(*r.value);
@@ -704,6 +720,14 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     m.pixels = pixels;
     m.cache_valid = false;
   }
+  const std::uint32_t tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
+  const std::uint32_t tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
+  const std::size_t tile_count = std::size_t(tiles_x) * tiles_y;
+  if (tile_count != m.tile_count) {
+    m.tile_t = make_buffer_or_throw(m.ctx, tile_count * 4, MemoryIntent::DeviceLocal, "raycast tile starts");
+    m.tile_list = make_buffer_or_throw(m.ctx, tile_count * 4, MemoryIntent::DeviceLocal, "raycast tile list");
+    m.tile_count = tile_count;
+  }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
   if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
   gpu::RaycastPush push{};
@@ -722,7 +746,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
-      {m.quads.handle(), 0, m.quads.size()}};
+      {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * 4},
+      {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4}};
   // The march covers only where the volume's box (skipping: the active cells' box) projects.
   PixelRect rect;
   if (!style.skip_empty)
@@ -755,7 +780,10 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   march_push.y0 = rect.y0;
   m.timer.mark(cmd, 0);
   // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
-  vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);  // hit count 0
+  vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);       // hit count 0
+  vkCmdFillBuffer(cmd, m.tile_counter.handle(), 0, VK_WHOLE_SIZE, 0);  // tile count 0
+  if (push.flags & ISOTOUCH_RAYCAST_TILES)  // tiles the tile pass does not reach: +inf
+    vkCmdFillBuffer(cmd, m.tile_t.handle(), 0, tile_count * 4, std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()));
   const std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b), no_hit = std::bit_cast<std::uint32_t>(-1.0f);
   if (!reuse) {
     vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
@@ -768,11 +796,33 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     }
   }
   barrier_transfer_to_compute(cmd);
-  // 1. march every pixel; 2. hit count -> dispatch size; 3. shade the hits; 4. overlays.
-  const auto& march = style.skip_empty ? m.march_skip : m.march_plain;
+  // 0. tile starts (skipping); 1. march every pixel; 2. hit count -> dispatch size; 3. shade
+  // the hits; 4. overlays.
+  const bool tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u && rect.x1 > rect.x0;
+  if (tiles) {  // the tiles holding the march's pixels
+    const std::uint32_t T = ISOTOUCH_RAYCAST_TILE;
+    gpu::RaycastPush tile_push = push;
+    tile_push.x0 = rect.x0 / T;
+    tile_push.y0 = rect.y0 / T;
+    const std::uint32_t nx = (rect.x1 + T - 1) / T - tile_push.x0, ny = (rect.y1 + T - 1) / T - tile_push.y0;
+    m.tiles.bind(cmd, m.arena, ranges);
+    m.tiles.push(cmd, tile_push);
+    vkCmdDispatch(cmd, (nx + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X, ny, 1);
+    barrier_compute_to_compute(cmd);
+    m.args_tiles.bind(cmd, m.arena, ranges);
+    m.args_tiles.push(cmd, push);
+    vkCmdDispatch(cmd, 1, 1, 1);
+    barrier_compute_to_indirect(cmd);
+  }
+  m.timer.mark(cmd, 4);
+  // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
+  // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
+  const auto& march = tiles ? m.march_tiled : style.skip_empty ? m.march_skip : m.march_plain;
   march.bind(cmd, m.arena, ranges);
   march.push(cmd, march_push);
-  if (rect.x1 > rect.x0)
+  if (tiles)
+    vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), 0);
+  else if (rect.x1 > rect.x0)
     vkCmdDispatch(cmd, (rect.x1 - rect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
                   (rect.y1 - rect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
   m.timer.mark(cmd, 2);
@@ -826,10 +876,12 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.cache_key = key;
   m.cache_flags = push.flags;
   m.cache_orect = orect;
+  m.last_tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u;
   m.dirty_lo = {1, 1, 1};
   m.dirty_hi = {0, 0, 0};
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);
+  img.tiles_ms = m.timer.elapsed_ms(0, 4);
   img.shade_ms = m.timer.elapsed_ms(2, 3);
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.rgba.resize(pixels);
@@ -837,6 +889,19 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   std::memcpy(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels * 4);
   std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
   return img;
+}
+
+std::vector<float> RayCaster::last_tile_starts() {
+  Impl& m = *impl_;
+  if (!m.last_tiles) return {};
+  GpuBuffer down = make_buffer_or_throw(m.ctx, m.tile_count * 4, MemoryIntent::Readback, "raycast tile starts readback");
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  record_copy(cmd, m.tile_t, down, m.tile_count * 4);
+  barrier_transfer_to_host(cmd);
+  m.ctx.submit_and_wait(cmd);
+  std::vector<float> out(m.tile_count);
+  std::memcpy(out.data(), down.mapped(), m.tile_count * 4);
+  return out;
 }
 
 RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const std::vector<std::uint32_t>& bricks) {

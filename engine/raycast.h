@@ -123,7 +123,11 @@ struct ClipPlane {
 
 /// Drawing options of one frame.
 struct RaycastStyle {
-  bool skip_empty = true;          ///< empty-space skipping over the brick grid
+  bool skip_empty = true;          ///< empty-space skipping over the cell distances
+  /// With skipping: a pass per tile of 8 x 8 pixels finds where its rays can first meet an
+  /// active cell (cone stepping), and each pixel's march starts there. GPU only; the
+  /// picture is the same either way (off: to measure what it saves).
+  bool tile_starts = true;
   std::optional<ClipPlane> clip;   ///< cut away one half-space
   float step_vox = 0.5f;           ///< march step along the ray [voxels of index space]
   std::array<float, 3> surface{0.89f, 0.85f, 0.76f};  ///< albedo (linear)
@@ -150,10 +154,11 @@ struct RaycastImage {
   std::vector<std::uint32_t> rgba;
   std::vector<float> depth;
   double gpu_ms = -1;        ///< GPU timestamps around the passes (-1: none / CPU)
-  /// GPU time of the passes (-1: none / CPU): march (with the background fills before it;
-  /// the pixels the box projects to), shade (hit pixels, with the hit count pass), overlay
+  /// GPU time of the passes (-1: none / CPU): march (with the background fills and the
+  /// tile-start pass before it; the pixels the box projects to), shade (hit pixels, with the hit count pass), overlay
   /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
+  double tiles_ms = -1;      ///< the background fills and the tile-start pass (part of march_ms)
   double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
   /// GPU: the camera, style and size were the last frame's, so only the pixels where the
   /// voxels update() changed can show, and the overlay's old and new rectangles, were drawn
@@ -202,7 +207,8 @@ class RayCaster {
   /// Renders one frame: uploads parameters and primitives, the passes of
   /// shaders/raycast_common.glsl in one submission, reads back. With skipping, the march
   /// covers only the pixels the box of active cells projects to (rays elsewhere meet no
-  /// active cell, so no inside sample); without, the pixels the volume's box projects to.
+  /// active cell, so no inside sample), from each tile's start (RaycastStyle::tile_starts);
+  /// without, the pixels the volume's box projects to.
   /// With the last frame's camera, style and size, only the pixels the voxels changed by
   /// update() since can reach (3 voxels wider), and the overlay's last and new rectangles,
   /// are drawn again (RaycastImage::reused); the picture is the one a full frame gives.
@@ -210,6 +216,11 @@ class RayCaster {
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});
   const RaycastField& field() const;
+  /// The last render()'s tile starts (tiles of ISOTOUCH_RAYCAST_TILE pixels, x fastest): the
+  /// ray parameter t [m] before which no lattice sample of the tile's rays can be inside;
+  /// +inf for a tile not marched (none can be, or outside the pixels that frame drew).
+  /// Empty if that frame drew without tile starts. Reads the device buffer back (tests).
+  std::vector<float> last_tile_starts();
 
   /// What one update() did.
   struct UpdateStats {

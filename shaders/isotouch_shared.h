@@ -147,8 +147,8 @@ struct BrickMinMaxPush {
 };
 
 // ---- raycast -------------------------------------------
-// First-hit isosurface ray caster: four passes (raycast_march, raycast_args, raycast_shade,
-// raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
+// First-hit isosurface ray caster: five passes (raycast_tiles, raycast_march, raycast_args,
+// raycast_shade, raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
 // engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, rows of 64 pixels
 // (long 1-D workgroups run faster on llvmpipe than 8x8 tiles); shade: one
 // per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
@@ -160,14 +160,24 @@ struct BrickMinMaxPush {
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
 // -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
 // RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter, 12 the
-// voxels as quads (uniform texel buffer, R32G32B32A32_SFLOAT; shaders/raycast_common.glsl).
+// voxels as quads (uniform texel buffer, R32G32B32A32_SFLOAT; shaders/raycast_common.glsl),
+// 13 per tile of pixels the ray parameter t [m] before which no sample can be inside,
+// 14 the tiles' RaycastCounter (listed tiles, the march's indirect dispatch), 15 the tiles
+// that may hold a hit (ty << 16 | tx, in no order).
 #define ISOTOUCH_RAYCAST_WG_X 64
 #define ISOTOUCH_RAYCAST_WG_Y 1
 #define ISOTOUCH_RAYCAST_SHADE_WG 64
-#define ISOTOUCH_RAYCAST_BINDINGS 13
+#define ISOTOUCH_RAYCAST_BINDINGS 16
+// Tile starts (raycast_tiles.comp): square tiles of TILE pixels per side, x fastest, the
+// first at pixel (0, 0); the cone march of a tile takes at most TILE_STEPS steps. With tile
+// starts the march runs one workgroup (TILE^2 = WG_X invocations) per listed tile.
+#define ISOTOUCH_RAYCAST_TILE 8u
+#define ISOTOUCH_RAYCAST_TILE_STEPS 128u
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
+#define ISOTOUCH_RAYCAST_TILES 4u     // flags: with SKIP, each pixel's march starts at its tile's
+                                      // start (binding 13; GPU only: the picture is the same)
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,
 // x fastest; one byte per cell on the host, 4 cells per float texel on the device). Cell c (corners c .. c + 1) is active
 // if one of its 8 corner values (background outside the grid) can be inside, with a margin
@@ -270,11 +280,12 @@ struct RaycastPush {
   uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
   uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
   uint x0;           // march pass: pixel of its invocation (0, 0); the dispatch covers only
-  uint y0;           //   the tiles the volume's box (skipping: the active cells' box) can
-                     //   project into (engine/raycast.cpp)
+  uint y0;           //   the pixels the volume's box (skipping: the active cells' box) can
+                     //   project into (engine/raycast.cpp); tile pass: tile of (0, 0)
 };
 // The hit count of the march pass and, at offset 0, the indirect dispatch of the shade pass
-// (VkDispatchIndirectCommand), written by raycast_args.comp.
+// (VkDispatchIndirectCommand), written by raycast_args.comp; binding 14 is a second one: the
+// tiles raycast_tiles.comp listed and the tiled march's dispatch.
 struct RaycastCounter {
   uint groups_x;
   uint groups_y;

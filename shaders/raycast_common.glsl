@@ -1,7 +1,7 @@
 // raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
-// Included by raycast_march.comp, raycast_shade.comp and raycast_overlay.comp; every pass
-// (raycast_args.comp too) binds the same 13 bindings (one descriptor layout, engine/raycast.cpp).
+// Included by raycast_tiles.comp, raycast_march.comp, raycast_shade.comp and
+// raycast_overlay.comp; every pass (raycast_args.comp too) binds the same 16 bindings (one descriptor layout, engine/raycast.cpp).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels
@@ -43,8 +43,13 @@
 // branching, so a pass costs its whole straight-line code for every vector of 8
 // invocations, taken or not. Code only some pixels need therefore runs in its own pass
 // over only those pixels (the host first fills image and depth with the background, -1):
-//   march   (the pixels the box can project to): the ray and its march; appends a hit
-//            pixel to the hit list (nothing else: a store is a per-lane scatter);
+//   tiles   (skipping; the tiles of the march's pixels): per tile of pixels, a ray
+//            parameter before which none of its rays' samples can be inside (cone stepping),
+//            and the list of the tiles where one can be; args turns their count into the
+//            march's indirect dispatch (one workgroup per listed tile);
+//   march   (the pixels the box can project to): the ray and its march (skipping: from its
+//            tile's start); appends a hit pixel to the hit list (nothing else: a store is
+//            a per-lane scatter);
 //   args    (one invocation) : the hit count -> the indirect dispatch size of shade;
 //   shade   (hit pixels)     : refinement, normal, shading; writes colour and depth;
 //   overlay (every pixel, only when there are primitives): HIP, VHIP, disc, arrows.
@@ -75,6 +80,9 @@ layout(std430, set = 0, binding = 8) buffer LinB { float lin_b[]; };      //   i
 layout(std430, set = 0, binding = 9) buffer Hits { uint hits[]; };        // hit pixels, in no order
 layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | redo << 30 | cap << 31
 layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
+layout(std430, set = 0, binding = 13) buffer TileT { float tile_t[]; };  // per tile: raycast_tiles.comp
+layout(std430, set = 0, binding = 14) buffer TileCounter { RaycastCounter tctr; };  // listed tiles
+layout(std430, set = 0, binding = 15) buffer TileList { uint tile_list[]; };      // ty << 16 | tx
 layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)

@@ -1,5 +1,6 @@
 #version 450
-// Ray caster pass 1 of 4 (shaders/raycast_common.glsl): one invocation per pixel.
+// Ray caster march pass (shaders/raycast_common.glsl): one invocation per pixel (with tile
+// starts, per pixel of the tiles raycast_tiles.comp listed).
 // A pixel whose ray reaches an inside lattice sample k (sample 0 included) is appended to
 // the hit list, with k in hit_k, for raycast_shade.comp to refine and shade (and so is a ray
 // whose skipping march llvmpipe's loop budget stopped, marked, for the shade pass to finish); nothing else is
@@ -16,9 +17,24 @@ layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_
 // Specialization constant: one pipeline with skipping (march_skip), one without (march): each
 // carries only its own loop (on llvmpipe a loop not taken still runs once, masked).
 layout(constant_id = 0) const bool SKIP_EMPTY = true;
+// Specialization constant 5 (with SKIP_EMPTY): tile starts. One workgroup per tile listed
+// by raycast_tiles.comp (indirect dispatch; workgroup (x, y) of a grid groups_x wide is
+// list entry y groups_x + x), invocation i at pixel (i % TILE, i / TILE) of its tile: the 8
+// lanes of a vector are one tile row.
+layout(constant_id = 5) const bool TILED = false;
 
 void main() {
-  uvec2 px = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
+  uvec2 px;
+  if (TILED) {
+    uint j = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+    if (j >= tctr.count) return;
+    uint tl = tile_list[j];
+    uint i = gl_LocalInvocationID.x;
+    px = uvec2(tl & 0xffffu, tl >> 16) * ISOTOUCH_RAYCAST_TILE +
+         uvec2(i % ISOTOUCH_RAYCAST_TILE, i / ISOTOUCH_RAYCAST_TILE);
+  } else {
+    px = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
+  }
   if (px.x >= P.width || px.y >= P.height) return;
   uint pix = px.y * P.width + px.x;
   init_globals();
@@ -44,6 +60,13 @@ void main() {
                               vec3(P.act_hi_x, P.act_hi_y, P.act_hi_z));
     // (clamped in float first: a far eye must not overflow the int conversion)
     int k0 = int(clamp(floor((ta.x - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1)));
+    // Tile starts: no sample of this ray before its tile's t_tile can be inside (a finite
+    // t_tile: the tile is listed); start two samples before it (the rounding of the division).
+    if (TILED) {
+      uint tiles_x = (P.width + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
+      float t_tile = tile_t[(px.y / ISOTOUCH_RAYCAST_TILE) * tiles_x + px.x / ISOTOUCH_RAYCAST_TILE];
+      k0 = max(k0, int(clamp(floor((t_tile - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1))));
+    }
     int k1 = int(clamp(ceil((ta.y - r.t0) / r.h) + 1.0, -1.0, float(r.K)));
     k_hit = ta.x <= ta.y ? march_skip(r.e, r.d, r.t0, r.t1, r.h, k0, k1, eps) : -1;
   } else {

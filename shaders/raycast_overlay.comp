@@ -1,5 +1,5 @@
 #version 450
-// Ray caster pass 4 of 4 (shaders/raycast_common.glsl), run only when a frame has
+// Ray caster overlay pass (shaders/raycast_common.glsl), run only when a frame has
 // primitives: one invocation per pixel blends the HIP, VHIP, plane disc and arrows into the
 // linear colour of pass 3 (the background where depth < 0) by depth, and writes the final RGBA8.
 #extension GL_GOOGLE_include_directive : require

@@ -1,5 +1,5 @@
 #version 450
-// Ray caster pass 3 of 4 (shaders/raycast_common.glsl): one invocation per hit
+// Ray caster shade pass (shaders/raycast_common.glsl): one invocation per hit
 // pixel of raycast_march.comp (indirect dispatch). Rebuilds the pixel's ray (the same float
 // operations as the march), refines the hit in the bracket [t_{k-1}, t_k] (sample 0: t0,
 // no refinement), shades it and writes colour and depth.

@@ -1,8 +1,13 @@
 // bench_raycast_frames - whole frames of the ray caster (what isotouch-sculpt draws after an
-// orbit, pan or zoom) on the head and chest CTs, with the voxels read 4 per texel (quads,
-// binding 12) and 1 per texel, measured side by side in one run: the same cameras
-// alternating between two casters of the same field, GPU timestamps per pass (median over
-// the frames), and whether every frame's picture and depth are bit-identical between the two.
+// orbit, pan or zoom) on the head and chest CTs, in three configurations measured side by
+// side in one run: the voxels read 4 per texel (quads, binding 12) with tile starts (the
+// cone-stepping pass, RaycastStyle::tile_starts), quads without tile starts, and 1 voxel per
+// texel with tile starts. The same cameras go to every configuration in turn (the order
+// rotating per frame); GPU timestamps per pass and the submit-to-fence wall time (median and
+// p95 over the frames); and whether every frame's picture and depth are bit-identical across
+// the configurations (tile starts and quads only change how fast the same picture is drawn).
+// Also the process's CPU time per frame (lavapipe's threads included: on a CPU device the
+// work a frame costs, less sensitive than wall time to what else runs on the machine).
 // Usage: bench_raycast_frames [WIDTH HEIGHT FRAMES] (default 1024 768 24)
 #include <algorithm>
 #include <cstdio>
@@ -10,8 +15,11 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
+
+#include <sys/resource.h>
 
 #include "raycast.h"
 #include "picture.h"
@@ -35,6 +43,46 @@ std::string load_average() {
   in >> a >> b >> c;
   return a + " " + b + " " + c;
 }
+
+/// One configuration's per-frame figures [ms].
+struct Series {
+  std::vector<double> tiles, march, shade, total, wall, cpu;
+};
+
+/// The process's user + system CPU time [ms].
+double cpu_ms() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-3;
+}
+
+/// How the tile starts did in one frame: the pixels in tiles left out, and the mean distance
+/// [voxels along the ray] from a hit pixel's tile start to its hit.
+struct TileFigures {
+  double left_out = 0, ahead_vox = 0;
+};
+TileFigures tile_figures(const engine::RaycastImage& img, const std::vector<float>& starts, const core::Grid& grid,
+                         const engine::CameraView& view) {
+  const int T = int(ISOTOUCH_RAYCAST_TILE), tiles_x = (img.width + T - 1) / T;
+  TileFigures out;
+  long hit = 0;
+  for (int py = 0; py < img.height; ++py)
+    for (int px = 0; px < img.width; ++px) {
+      const float start = starts[std::size_t(py / T) * std::size_t(tiles_x) + std::size_t(px / T)];
+      const float depth = img.depth[std::size_t(py) * std::size_t(img.width) + std::size_t(px)];
+      out.left_out += start == std::numeric_limits<float>::infinity();
+      if (depth < 0) continue;
+      ++hit;
+      out.ahead_vox += (double(depth) - double(start)) *
+                       engine::voxels_per_metre(grid, engine::pixel_direction(view, img.width, img.height, px, py));
+    }
+  out.ahead_vox /= double(std::max(hit, 1L));
+  return out;
+}
+
+bool same_picture(const engine::RaycastImage& a, const engine::RaycastImage& b) {
+  return a.rgba == b.rgba && std::memcmp(a.depth.data(), b.depth.data(), a.depth.size() * 4) == 0;
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,8 +101,9 @@ int main(int argc, char** argv) {
   std::printf("bench_raycast_frames: %d x %d, %d frames per scene (orbit 3 deg and zoom 1.02 per frame from the default "
               "camera, as the sculpt bench's camera moves), %s, load average %s\n\n",
               width, height, frames, vk.info().name.c_str(), load_average().c_str());
-  std::printf("| scene | voxels read as | march median / p95 [ms] | shade median / p95 [ms] | march + shade median [ms] | "
-              "hit pixels (median) |\n|---|---|---|---|---|---|\n");
+  std::printf("| scene | configuration | tiles [ms] | march incl. tiles median / p95 [ms] | shade median / p95 [ms] | "
+              "march + shade median / p95 [ms] | submit to fence median / p95 [ms] | CPU time median [ms] | hit pixels (median) |\n"
+              "|---|---|---|---|---|---|---|---|---|\n");
   bool all_equal = true;
   for (const char* name : {"head.json", "chest.json"}) {
     std::filesystem::path p = std::filesystem::path("scenes") / name;
@@ -67,39 +116,65 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "bench_raycast_frames: %s\n", (!q ? q.error : s.error).c_str());
       return 1;
     }
-    engine::RayCaster* casters[2] = {q.value->get(), s.value->get()};
-    std::vector<double> march[2], shade[2], total[2], hits;
+    struct Config {
+      std::string name;
+      engine::RayCaster* caster;
+      bool tiles;
+    };
+    const std::string quads = q.value->get()->quads() ? "quads" : "1 per texel (quads did not fit)";
+    const Config cfg[3] = {{quads + ", tile starts", q.value->get(), true},
+                           {quads + ", no tile starts", q.value->get(), false},
+                           {"1 per texel, tile starts", s.value->get(), true}};
+    Series ser[3];
+    std::vector<double> hits, left_out, ahead;
     long differ = 0;
     engine::OrbitCamera cam = run::default_camera(vol);
     for (int f = 0; f <= frames; ++f) {  // frame 0: warm-up
       cam.azimuth_deg += 3;
       cam.zoom *= 1.02;
       const engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, cam);
-      engine::RaycastImage img[2];
-      for (int k = 0; k < 2; ++k) {
-        const int i = (f + k) % 2;  // alternate which goes first
-        img[i] = casters[i]->render(view, engine::RaycastStyle{}, width, height);
+      engine::RaycastImage img[3];
+      double cpu[3] = {0, 0, 0};
+      for (int k = 0; k < 3; ++k) {
+        const int i = (f + k) % 3;  // rotate which goes first
+        engine::RaycastStyle style;
+        style.tile_starts = cfg[i].tiles;
+        const double c0 = cpu_ms();
+        img[i] = cfg[i].caster->render(view, style, width, height);
+        cpu[i] = cpu_ms() - c0;
+        if (i == 0 && f > 0) {
+          const TileFigures t = tile_figures(img[0], cfg[0].caster->last_tile_starts(), vol.grid, view);
+          left_out.push_back(t.left_out);
+          ahead.push_back(t.ahead_vox);
+        }
       }
       if (f == 0) continue;
-      for (int i = 0; i < 2; ++i) {
-        march[i].push_back(img[i].march_ms);
-        shade[i].push_back(img[i].shade_ms);
-        total[i].push_back(img[i].march_ms + img[i].shade_ms);
+      for (int i = 0; i < 3; ++i) {
+        ser[i].tiles.push_back(img[i].tiles_ms);
+        ser[i].march.push_back(img[i].march_ms);
+        ser[i].shade.push_back(img[i].shade_ms);
+        ser[i].total.push_back(img[i].march_ms + img[i].shade_ms);
+        ser[i].wall.push_back(img[i].submit_wall_ms);
+        ser[i].cpu.push_back(cpu[i]);
       }
       hits.push_back(double(std::count_if(img[0].depth.begin(), img[0].depth.end(), [](float t) { return t >= 0; })));
-      if (img[0].rgba != img[1].rgba || std::memcmp(img[0].depth.data(), img[1].depth.data(), img[0].depth.size() * 4) != 0)
-        ++differ;
+      if (!same_picture(img[0], img[1]) || !same_picture(img[0], img[2])) ++differ;
     }
     all_equal = all_equal && differ == 0;
-    for (int i = 0; i < 2; ++i)
-      std::printf("| %s | %s | %.1f / %.1f | %.1f / %.1f | %.1f | %.0f |\n", scene.name.c_str(),
-                  i == 0 ? (casters[0]->quads() ? "quads (4 per texel)" : "1 per texel (quads did not fit)") : "1 per texel",
-                  median(march[i]), p95(march[i]), median(shade[i]), p95(shade[i]), median(total[i]), median(hits));
-    std::printf("| %s | ratio 1-float / quads | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n", scene.name.c_str(),
-                median(march[1]) / median(march[0]), median(shade[1]) / median(shade[0]),
-                median(total[1]) / median(total[0]), differ);
+    std::printf("| %s | tile starts: pixels in tiles left out (median) %.0f of %d; a hit's tile start lies %.2f voxels "
+                "before the hit (median of the frames' means) | | | | | | | |\n",
+                scene.name.c_str(), median(left_out), width * height, median(ahead));
+    for (int i = 0; i < 3; ++i)
+      std::printf("| %s | %s | %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f / %.1f | %.1f | %.0f |\n",
+                  scene.name.c_str(), cfg[i].name.c_str(), median(ser[i].tiles), median(ser[i].march), p95(ser[i].march),
+                  median(ser[i].shade), p95(ser[i].shade), median(ser[i].total), p95(ser[i].total),
+                  median(ser[i].wall), p95(ser[i].wall), median(ser[i].cpu), median(hits));
+    std::printf("| %s | ratio no tile starts / tile starts (quads) | | %.2fx | %.2fx | %.2fx | %.2fx | %.2fx | frames differing: %ld |\n",
+                scene.name.c_str(), median(ser[1].march) / median(ser[0].march), median(ser[1].shade) / median(ser[0].shade),
+                median(ser[1].total) / median(ser[0].total), median(ser[1].wall) / median(ser[0].wall),
+                median(ser[1].cpu) / median(ser[0].cpu), differ);
   }
-  std::printf("\nload average after: %s\nverdict: quads and 1-float pictures bit-identical: %s\n", load_average().c_str(),
+  std::printf("\nload average after: %s\nverdict: the three configurations' pictures bit-identical: %s\n", load_average().c_str(),
               all_equal ? "PASS" : "FAIL");
   return all_equal ? 0 : 1;
 }

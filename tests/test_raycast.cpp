@@ -435,7 +435,10 @@ TEST(Raycast, AxisParallelAndFarRaysSkippingOnAndOffGiveTheSameImage) {
   core::Grid grid;
   grid.dims = {37, 41, 29};
   const core::Isosurface iso{0.5, core::InsideIs::kAbove};
-  const RaycastField f = engine::make_raycast_field(grid, blobs(grid, 4242u), iso, 0.0f);
+  std::vector<float> vals = blobs(grid, 4242u);  // 3 % of the voxels, and as many again:
+  std::vector<float> more = blobs(grid, 777u);   // more first hits at every depth
+  for (std::size_t i = 0; i < vals.size(); ++i) vals[i] = std::max(vals[i], more[i]);
+  const RaycastField f = engine::make_raycast_field(grid, vals, iso, 0.0f);
   const Vec3 c = grid.centre_m();
   for (const Vec3& dir : {Vec3{0, -1, 0}, Vec3{1, 0, 0}, Vec3{0, 0, 1}}) {
     const Vec3 up = std::fabs(dir.z) > 0.5 ? Vec3{0, 1, 0} : Vec3{0, 0, 1};
@@ -865,5 +868,106 @@ TEST(Raycast, IncrementalUpdateRecomputesCellDistancesLocally) {
   const RaycastImage a = inc.render(view, RaycastStyle{}, 96, 96), b = (*full.value)->render(view, RaycastStyle{}, 96, 96);
   EXPECT_EQ(a.rgba, b.rgba);
   EXPECT_EQ(a.depth, b.depth);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+// Tile starts (shaders/raycast_tiles.comp): a cone march per tile of 8 x 8 pixels decides
+// which tiles are marched at all and where each of their rays' marches starts. A tile left
+// out that holds a hit, or a start past a pixel's first inside sample, changes that pixel.
+// Against the march without tile starts and the CPU reference, bit for bit: one-voxel
+// blobs (a first hit can be a single voxel anywhere in a tile's cone) in a grid of unequal
+// spacings (the cone's width in cells differs per axis); from far (cones many voxels wide;
+// the grid covers part of the image, so tiles along its outline are partly empty) to near,
+// and from inside the grid (the cone starts at t = 0 among active cells); with and without
+// a clip plane; image sizes that are not whole tiles.
+TEST(Raycast, TileStartsKeepEveryFirstHit) {
+  core::Grid grid;
+  grid.dims = {37, 41, 29};
+  grid.spacing_m = {1.0e-3, 1.3e-3, 0.8e-3};
+  const core::Isosurface iso{0.5, core::InsideIs::kAbove};
+  std::vector<float> vals = blobs(grid, 4242u);  // 3 % of the voxels, and as many again:
+  std::vector<float> more = blobs(grid, 777u);   // more first hits at every depth
+  for (std::size_t i = 0; i < vals.size(); ++i) vals[i] = std::max(vals[i], more[i]);
+  // Boxes of ones: flat faces, so a ray's first inside sample can lie half a voxel into the
+  // first active cell (a start past an active cell's edge misses it).
+  core::Grid box_grid = grid;
+  box_grid.dims = {53, 47, 41};
+  std::vector<float> boxes(box_grid.voxel_count(), 0.0f);
+  std::uint32_t lcg = 99u;
+  auto next = [&lcg](int n) {
+    lcg = lcg * 1664525u + 1013904223u;
+    return int((lcg >> 8) % std::uint32_t(n));
+  };
+  for (int b = 0; b < 14; ++b) {
+    const int x0 = next(45), y0 = next(39), z0 = next(33), sx = 2 + next(8), sy = 2 + next(8), sz = 2 + next(8);
+    for (int z = z0; z < std::min(41, z0 + sz); ++z)
+      for (int y = y0; y < std::min(47, y0 + sy); ++y)
+        for (int x = x0; x < std::min(53, x0 + sx); ++x) boxes[box_grid.index(x, y, z)] = 1.0f;
+  }
+  const RaycastField fields[2] = {engine::make_raycast_field(grid, vals, iso, 0.0f),
+                                  engine::make_raycast_field(box_grid, boxes, iso, 0.0f)};
+  for (const RaycastField& f : fields) {
+    auto rc = engine::RayCaster::create(vk(), f);
+    ASSERT_TRUE(rc) << rc.error;
+    const Vec3 c = f.grid.centre_m();
+    struct View {
+      Vec3 dir;
+      double dist_m;
+      int w, h;
+      bool clip;
+      std::size_t min_hits;
+    };
+    const View views[] = {
+        {{0.31, -1, 0.17}, 0.20, 101, 77, false, 100},     // far: the grid in a few tiles
+        {{-1, 0.23, -0.41}, 0.09, 93, 70, false, 600},
+        {{0.2, 0.35, 1}, 0.06, 64, 48, true, 350},         // the near half cut away
+        {{-0.6, -0.7, -0.5}, 0.004, 83, 61, false, 1400},   // the eye inside the grid
+        {{0.5, 0.1, -1}, 0.03, 120, 90, false, 3400},       // close: the blobs many pixels wide
+    };
+    for (const View& v : views) {
+      const Vec3 u = v.dir / norm(v.dir);
+      const CameraView view = engine::look_at(c + u * v.dist_m, c, {0.1, 0.2, 1}, 40);
+      RaycastStyle on;
+      if (v.clip) on.clip = engine::ClipPlane{c, u};
+      RaycastStyle off = on;
+      off.tile_starts = false;
+      const RaycastImage a = (*rc.value)->render(view, on, v.w, v.h);
+      const RaycastImage b = (*rc.value)->render(view, off, v.w, v.h);
+      const RaycastImage cpu = engine::render_cpu(f, view, on, v.w, v.h);
+      // The tile pass's own claim, without the march's margin of two samples: the tile's
+      // rays meet no active cell before its start. In these volumes every surface point lies
+      // at least half a voxel inside the active cells (a one-voxel blob is inside only within
+      // half a voxel of its centre per axis, a box face half a voxel inside its first active
+      // cell), so no hit may lie before its tile's start (0.05 voxel for rounding).
+      (*rc.value)->render(view, on, v.w, v.h);  // the tile starts of that frame (b had none)
+      const std::vector<float> starts = (*rc.value)->last_tile_starts();
+      const int T = int(ISOTOUCH_RAYCAST_TILE), tiles_x = (v.w + T - 1) / T;
+      ASSERT_EQ(starts.size(), std::size_t(tiles_x) * std::size_t((v.h + T - 1) / T));
+      std::size_t late = 0, culled = 0;
+      double ahead_vox = 0;  // how far before the hits the starts are, in voxels (mean)
+      for (int py = 0; py < v.h; ++py)
+        for (int px = 0; px < v.w; ++px) {
+          const float depth = cpu.depth[std::size_t(py) * std::size_t(v.w) + std::size_t(px)];
+          const float start = starts[std::size_t(py / T) * std::size_t(tiles_x) + std::size_t(px / T)];
+          culled += !(start < std::numeric_limits<float>::infinity());
+          if (depth < 0) continue;
+          const double vpm = engine::voxels_per_metre(f.grid, engine::pixel_direction(view, v.w, v.h, px, py));
+          late += double(start) > double(depth) + 0.05 / vpm;
+          ahead_vox += (double(depth) - double(start)) * vpm;
+        }
+      std::printf("%zu of %d pixels in tiles left out; starts %.2f voxels before the hits (mean)\n", culled, v.w * v.h,
+                  ahead_vox / double(std::max<std::size_t>(hits(cpu), 1)));
+      EXPECT_EQ(late, 0u) << "hit pixels whose tile starts past the hit";
+      std::size_t differ = 0;
+      for (std::size_t i = 0; i < a.depth.size(); ++i) differ += a.depth[i] != b.depth[i] || a.rgba[i] != b.rgba[i];
+      const std::string what = std::string(&f == fields ? "blobs" : "boxes") + ", tile starts, eye " +
+                               std::to_string(v.dist_m) + " m from the centre";
+      EXPECT_EQ(differ, 0u) << what << ": pixels that differ with and without tile starts";
+      EXPECT_GE(hits(a), &f == fields ? v.min_hits : v.min_hits / 4) << what;  // (min_hits: for the blobs)
+      std::printf("%s: %zu hits\n", what.c_str(), hits(a));
+      EXPECT_GT(a.tiles_ms, -1.0) << what;  // the pass ran (timestamps where the device has them)
+      expect_gpu_matches_cpu(a, cpu, 1.0 / 0.8e-3, what.c_str());
+    }
+  }
   EXPECT_EQ(vk().validation_messages(), 0u);
 }

@@ -531,12 +531,14 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   auto panel_refreshed = Clock::now();
   Stroke stroke;
   engine::RaycastStyle style;
+  style.tile_starts = o.tile_starts;
   bool overlay = true;
   double push_m = 5e-3;       // the hand this far behind the surface under the cursor
   double hand_t = norm(vol.grid.centre_m() - view.eye);  // hand depth along the cursor ray [m]
   const double unit = run::probe_size_m(vol.grid);
   std::vector<double> march_ms, shade_ms, overlay_ms;
   std::vector<double> full_march_ms, full_shade_ms, full_overlay_ms;  // frames drawn whole
+  std::vector<double> full_render_ms, full_present_ms;
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
   std::vector<double> frame_full_ms, frame_reused_ms;  // frames whose picture was drawn whole / reused
   std::vector<Clock::time_point> brush_submitted;  // per submitted brush
@@ -932,6 +934,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
 #endif
     const bool shown = window.present(*shown_px, fb[0], fb[1]);
     present_ms.push_back(ms_since(p0));
+    if (!img.reused) {
+      full_render_ms.push_back(render_ms.back());
+      full_present_ms.push_back(present_ms.back());
+    }
     if (shown || o.sim_clock) {  // simulated: drawn counts as shown (a recreated swapchain's timing is the X server's)
       std::lock_guard<std::mutex> lock(feed.mu);
       for (; brushes_measured < drawn_brushes; ++brushes_measured)
@@ -1014,12 +1020,15 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
           << fixed(eval::percentile(v, 0.95), 2) << " ms, max " << fixed(*std::max_element(v.begin(), v.end()), 2) << " ms\n";
     };
     log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
-        << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << "\n";
+        << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << ", tile starts "
+        << (style.tile_starts ? "on" : "off") << "\n";
     line("frame time", frame_ms);
     line("  frames drawn whole (first, camera or style changed)", frame_full_ms);
+    line("    render (ray caster, submit to fence and read back)", full_render_ms);
     line("    march pass (GPU timestamps)", full_march_ms);
     line("    shade pass (GPU timestamps)", full_shade_ms);
     line("    overlay pass (GPU timestamps)", full_overlay_ms);
+    line("    present (and the panels)", full_present_ms);
     line("  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
     line("render (ray caster)", render_ms);
     line("  march pass (GPU timestamps)", march_ms);

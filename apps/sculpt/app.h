@@ -41,6 +41,9 @@ struct Options {
   double sim_frame_ms = 1000.0 / 30.0;
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
   bool overlay = true;              ///< the Dear ImGui tool and stats panels (a build with Dear ImGui)
+  /// The ray caster's tile starts (engine::RaycastStyle::tile_starts; off only to measure
+  /// what they save: the picture is the same).
+  bool tile_starts = true;
   std::string device;               ///< Vulkan device choice
   /// The haptic device: "mouse" (a simulated device coupled to the hand the mouse steers) or
   /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET).

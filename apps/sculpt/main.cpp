@@ -49,6 +49,9 @@ int main(int argc, char** argv) {
                "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
   cli.add_flag("--overlay,!--no-overlay", o.overlay,
                "the tool and stats panels (Dear ImGui) over the picture (default on, in a build with Dear ImGui)");
+  cli.add_flag("--tile-starts,!--no-tile-starts", o.tile_starts,
+               "start each pixel's march where its 8x8 tile's rays can first meet the surface (default on; off "
+               "draws the same picture, slower: to measure what they save)");
   cli.add_option("--device", o.device, "Vulkan device: name substring or index");
   cli.add_option("--haptic", o.haptic,
                  "the haptic device: mouse (default: a simulated device coupled to the hand the mouse steers), "

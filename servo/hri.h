@@ -203,15 +203,15 @@ struct ToolPlane {
 ///   through material (7 points of the segment, deeper than 0.05 voxel first order; any
 ///   depth for a plane facing away from the held one) lies on another sheet; the held
 ///   plane stays while the HIP is behind it (not on edit ticks). Then, on every tick that
-///   held a plane before, moves the proxy more than a quarter voxel (an update, a drop, a
-///   slide) and finds the HIP outside the material (it may have come out through a far
-///   face; a HIP inside is held by the rules above, and on a noisy scan the proxy's path
-///   over the surface's bumps dips into it), the proxy's straight path is checked at 64 or
-///   more points
+///   held a plane before and moves the proxy more than a quarter voxel (an update, a drop,
+///   a slide), the proxy's straight path is checked at 64 or more points
 ///   (keep_proxy_outside): one that enters material and comes out again, goes deeper than
-///   an embedded VHIP started, or leaves an embedded VHIP back through the held plane by
-///   more than a quarter voxel passes through a thin wall (a tapering edge on coarse
-///   voxels, where the trilinear inside is a sliver): the proxy stays at the entry (from an
+///   an embedded VHIP started, or (HIP outside only) leaves an embedded VHIP back through
+///   the held plane by more than a quarter voxel passes through a thin wall (a tapering
+///   edge on coarse voxels, where the trilinear inside is a sliver; with the HIP inside a
+///   rib one or two voxels thick, the plane found from the HIP lies on the nearer, far
+///   face; with the HIP inside, a proxy leaving an embedded VHIP deeper follows the
+///   surface the HIP presses under on a noisy scan): the proxy stays at the entry (from an
 ///   embedded VHIP: the surface along the held normal) on the surface's plane there, else
 ///   on the held normal, else on the plane facing the HIP, whichever keeps it out of the
 ///   material. A path that ends inside at its deepest point is a chord under a plane held
@@ -348,10 +348,7 @@ class HriRenderer final : public Renderer {
   /// embedded a, goes deeper than 2 e_a) and comes out again, or ends inside at less than
   /// half its deepest excess (a path that ends inside at its deepest is a chord under a
   /// plane held over a curved surface: not counted); p: the entry point (a for "deeper").
-  /// min_depth_voxels > 0: a path that enters and comes out no deeper than that (first
-  /// order) is a bump, not counted.
-  bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p,
-                    double min_depth_voxels = 0.0) const;
+  bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p) const;
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);

@@ -341,9 +341,10 @@ class HriRenderer final : public Renderer {
   /// God-object guard (point, robust): if this tick's proxy move (onto the plane, or to
   /// the HIP when free) of more than a quarter voxel from an outside VHIP enters material,
   /// the plane is put at the first crossing instead (sets out.plane_update).
-  /// See the class docs, "Proxy path" (the check of every long proxy move).
+  /// See the class docs, "Proxy path" (the check of every long proxy move). f_vhip: the
+  /// value at the VHIP when this tick read it already, else null.
   void keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held, double voxel,
-                          HriTick& out);
+                          const double* f_vhip, HriTick& out);
   /// The segment a -> b (excess e_a at a) passes through material: it enters (or, from an
   /// embedded a, goes deeper than 2 e_a) and comes out again, or ends inside at less than
   /// half its deepest excess (a path that ends inside at its deepest is a chord under a
@@ -354,7 +355,7 @@ class HriRenderer final : public Renderer {
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
-  HriTick finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
+  void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
                      HriTick& out);
@@ -395,7 +396,6 @@ class HriRenderer final : public Renderer {
   double ramp_dt_s_ = 1e-3;      ///< robust: this tick's period for the ramp, <= 2/rate [s]
   bool after_fault_ = false;     ///< robust: the tick before was a fault (force was 0)
   double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
-  double prev_target_n_ = 0;    ///< robust: unramped |F| of the tick before [N]
   bool started_ = false;
   bool resync_ = false;
   bool sliding_ = false;

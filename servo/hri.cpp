@@ -790,7 +790,11 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
           g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
           if (!(g2 > 0)) break;
           const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
-          u = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
+          const Vec3 next = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
+          // A fixed point: every further round would compute the same u (the rounds are a
+          // function of u alone), so stopping here gives the same point in fewer rounds.
+          if (next.x == u.x && next.y == u.y && next.z == u.z) break;
+          u = next;
         }
         {
           const Vec3 y{u.x * sp.x, u.y * sp.y, u.z * sp.z};

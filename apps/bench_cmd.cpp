@@ -273,9 +273,7 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
     HriParams hp = reference_params(s);
     hp.plane_update_period = 5;
     hp.intersection = Intersection::kLinear;
-    // Robust HRI as it ships (every scene's default): normals from the gradient samples, the
-    // same samples Avila-Sobierajski reads. The printed variant uses central differences.
-    hp.normal = NormalSource::kSamples;
+    hp.normal = NormalSource::kCentral;
     HriParams hp_paper = hp;
     hp_paper.variant = Variant::kPaper;
     BaselineParams bp;

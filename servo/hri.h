@@ -203,15 +203,15 @@ struct ToolPlane {
 ///   through material (7 points of the segment, deeper than 0.05 voxel first order; any
 ///   depth for a plane facing away from the held one) lies on another sheet; the held
 ///   plane stays while the HIP is behind it (not on edit ticks). Then, on every tick that
-///   held a plane before, moves the proxy more than a quarter voxel (an update, a drop, a
-///   slide) and finds the HIP outside the material (it may have come out through a far
-///   face; a HIP inside is held by the rules above, and on a noisy scan the proxy's path
-///   over the surface's bumps dips into it), the proxy's straight path is checked at 64 or
-///   more points
+///   held a plane before and moves the proxy more than a quarter voxel (an update, a drop,
+///   a slide), the proxy's straight path is checked at 64 or more points
 ///   (keep_proxy_outside): one that enters material and comes out again, goes deeper than
-///   an embedded VHIP started, or leaves an embedded VHIP back through the held plane by
-///   more than a quarter voxel passes through a thin wall (a tapering edge on coarse
-///   voxels, where the trilinear inside is a sliver): the proxy stays at the entry (from an
+///   an embedded VHIP started, or (HIP outside only) leaves an embedded VHIP back through
+///   the held plane by more than a quarter voxel passes through a thin wall (a tapering
+///   edge on coarse voxels, where the trilinear inside is a sliver; with the HIP inside a
+///   rib one or two voxels thick, the plane found from the HIP lies on the nearer, far
+///   face; with the HIP inside, a proxy leaving an embedded VHIP deeper follows the
+///   surface the HIP presses under on a noisy scan): the proxy stays at the entry (from an
 ///   embedded VHIP: the surface along the held normal) on the surface's plane there, else
 ///   on the held normal, else on the plane facing the HIP, whichever keeps it out of the
 ///   material. A path that ends inside at its deepest point is a chord under a plane held
@@ -341,23 +341,21 @@ class HriRenderer final : public Renderer {
   /// God-object guard (point, robust): if this tick's proxy move (onto the plane, or to
   /// the HIP when free) of more than a quarter voxel from an outside VHIP enters material,
   /// the plane is put at the first crossing instead (sets out.plane_update).
-  /// See the class docs, "Proxy path" (the check of every long proxy move).
+  /// See the class docs, "Proxy path" (the check of every long proxy move). f_vhip: the
+  /// value at the VHIP when this tick read it already, else null.
   void keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held, double voxel,
-                          HriTick& out);
+                          const double* f_vhip, HriTick& out);
   /// The segment a -> b (excess e_a at a) passes through material: it enters (or, from an
   /// embedded a, goes deeper than 2 e_a) and comes out again, or ends inside at less than
   /// half its deepest excess (a path that ends inside at its deepest is a chord under a
   /// plane held over a curved surface: not counted); p: the entry point (a for "deeper").
-  /// min_depth_voxels > 0: a path that enters and comes out no deeper than that (first
-  /// order) is a bump, not counted.
-  bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p,
-                    double min_depth_voxels = 0.0) const;
+  bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p) const;
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
-  HriTick finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
+  void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
                      HriTick& out);
@@ -398,7 +396,6 @@ class HriRenderer final : public Renderer {
   double ramp_dt_s_ = 1e-3;      ///< robust: this tick's period for the ramp, <= 2/rate [s]
   bool after_fault_ = false;     ///< robust: the tick before was a fault (force was 0)
   double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
-  double prev_target_n_ = 0;    ///< robust: unramped |F| of the tick before [N]
   bool started_ = false;
   bool resync_ = false;
   bool sliding_ = false;

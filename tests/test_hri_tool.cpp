@@ -290,7 +290,14 @@ TEST(HriTool, WallForceIsKTimesTheDepthBelowTheOffsetSurface) {
 // strokes (checked), so the test can see one. Without the proxy-path check there were 13
 // pop-throughs in 12 of the 48 strokes; with it made for a HIP outside only, 4 (the HIP
 // inside a rib nearer its far face). HRI_RIB_DEBUG=1 lists the ticks.
-TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
+struct ThinEdgeStrokes {
+  long seeds = 0, contact_ticks = 0, through = 0, strokes_through = 0, far_side = 0;
+};
+
+// The strokes below on the chest CT at `tau` (inside above): `strokes` strokes from seeds of
+// surface voxels whose inside ends within `max_run` half-voxels along the inward gradient.
+ThinEdgeStrokes chest_thin_edge_strokes(double tau, int max_run, std::uint32_t seed, int strokes) {
+  ThinEdgeStrokes res;
   const isotouch::engine::Volume vol =
       isotouch::io::load_volume(std::string(ISOTOUCH_TEST_DATA) + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
   SampleField f;
@@ -309,7 +316,7 @@ TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
         f.samples[f.grid.index(x, y, z)] = {float(v(x, y, z)), float((v(x + 1, y, z) - v(x - 1, y, z)) / (2 * sp.x)),
                                             float((v(x, y + 1, z) - v(x, y - 1, z)) / (2 * sp.y)),
                                             float((v(x, y, z + 1) - v(x, y, z - 1)) / (2 * sp.z))};
-  const double tau = 250.0, voxel = std::min({sp.x, sp.y, sp.z});
+  const double voxel = std::min({sp.x, sp.y, sp.z});
   // Thin rib-surface voxels, away from the borders.
   std::vector<std::array<int, 3>> seeds;
   for (int z = 4; z < d[2] - 4; ++z)
@@ -328,12 +335,15 @@ TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
           const Vec3 q = f.grid.to_world({double(x), double(y), double(z)}) + in * (k * 0.5 * voxel);
           if (sample_value(f, q) > tau) run = k;
         }
-        if (run >= 1 && run <= 6) seeds.push_back({x, y, z});  // bone ends within 3 mm inward
+        if (run >= 1 && run <= max_run) seeds.push_back({x, y, z});  // inside ends within max_run / 2 voxels
       }
-  ASSERT_GT(seeds.size(), 100u);
-  std::mt19937 rng(2021);
-  long contact_ticks = 0, through = 0, strokes_through = 0, far_side = 0;
-  const int strokes = 48;
+  res.seeds = long(seeds.size());
+  if (seeds.size() < 100) return res;
+  std::mt19937 rng(seed);
+  long& contact_ticks = res.contact_ticks;
+  long& through = res.through;
+  long& strokes_through = res.strokes_through;
+  long& far_side = res.far_side;
   for (int run = 0; run < strokes; ++run) {
     const auto& sd = seeds[std::uniform_int_distribution<std::size_t>(0, seeds.size() - 1)(rng)];
     const Vec3 c = f.grid.to_world({double(sd[0]), double(sd[1]), double(sd[2])});
@@ -394,10 +404,30 @@ TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
     strokes_through += this_through;
     far_side += went_far;
   }
-  std::printf("chest ribs at +250 HU, %d strokes along thin edges: %ld contact ticks, HIP past the far side in %ld strokes, "
-              "%ld pop-throughs (%ld strokes)\n",
-              strokes, contact_ticks, far_side, through, strokes_through);
-  EXPECT_GT(far_side, 5);
-  EXPECT_GT(contact_ticks, 10000);
-  EXPECT_EQ(through, 0);
+  return res;
+}
+
+TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
+  const ThinEdgeStrokes r = chest_thin_edge_strokes(250.0, 6, 2021, 48);
+  std::printf("chest ribs at +250 HU, 48 strokes along thin edges (%ld seeds): %ld contact ticks, HIP past the far side "
+              "in %ld strokes, %ld pop-throughs (%ld strokes)\n",
+              r.seeds, r.contact_ticks, r.far_side, r.through, r.strokes_through);
+  ASSERT_GT(r.seeds, 100);
+  EXPECT_GT(r.far_side, 5);
+  EXPECT_GT(r.contact_ticks, 10000);
+  EXPECT_EQ(r.through, 0);
+}
+
+// The same strokes on the chest's lung vessels and airway walls at -500 HU (the chest scene's
+// isovalue): surface voxels whose inside ends within 2.5 voxel-halves along the inward
+// gradient, i.e. structures thinner than about 2 mm across at these voxels.
+TEST(HriShippedData, ChestLungVesselEdgesNeverPopThrough) {
+  const ThinEdgeStrokes r = chest_thin_edge_strokes(-500.0, 5, 500, 48);
+  std::printf("chest lung vessels at -500 HU, 48 strokes along thin edges (%ld seeds): %ld contact ticks, HIP past the "
+              "far side in %ld strokes, %ld pop-throughs (%ld strokes)\n",
+              r.seeds, r.contact_ticks, r.far_side, r.through, r.strokes_through);
+  ASSERT_GT(r.seeds, 100);
+  EXPECT_GT(r.far_side, 5);
+  EXPECT_GT(r.contact_ticks, 10000);
+  EXPECT_EQ(r.through, 0);
 }

@@ -336,16 +336,16 @@ TEST(ServoSafety, AShortStaleBlipZeroesThoseTicksButKeepsTheContact) {
 TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {
   SafetyRig rig;
   rig.servo->start();
-  rig.run_ms(30);
+  rig.run_ticks(30);  // ticks, not milliseconds: a loaded machine gives the servo fewer of them
   rig.dev.z = NAN;
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.dev.z = 0.5;  // outside the +-0.1 m box
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.dev.z = 0.0;
-  rig.run_ms(30);
+  rig.run_ticks(30);
   rig.servo->stop();
   const DeviceCounters c = rig.servo->device_counters();
-  EXPECT_GT(c.refused, 40);
+  EXPECT_GT(c.refused, 50);  // 60 bad ticks, a tick or two at each change may go either way
   long refused_ticks = 0;
   for (std::size_t i = 0; i < rig.log.n.load(); ++i)
     if (rig.log.status[i] == DeviceStatus::kFault) {

@@ -223,7 +223,8 @@ void publish(const core::Grid& grid, const Selection& sel, const std::vector<Can
 void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
                    core::Sample* out);
 /// publish() with the active candidates' samples written straight into the pool:
-/// `fill(c, dst)` writes the 729 samples of candidate index c at dst, called from `threads`
+/// `fill(c, dst)` writes ALL 729 samples of candidate index c at dst (the pool is not
+/// cleared before: core::SamplePool), called from `threads`
 /// threads at once (each on its own candidates; 1: this thread only).
 void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,

@@ -929,3 +929,49 @@ TEST(SparseChain, DISABLED_LimitChest) {
   std::printf("    %-66s %8.2f ms\n    %-66s %8.2f ms\n    %-66s %8.2f ms\n", "submit to fence (wall)",
               last.submit_wall_ms, "buffers + list upload (host)", last.upload_ms, "total (wall)", last.total_ms);
 }
+
+// The lists strategy's run split, on the head CT at +1150 and the chest CT at -500,
+// ISOTOUCH_BENCH_REPS (default 50) runs each: min and median of the wall time, the host
+// stages, the GPU stages (timestamps) and the submit's wall time (what is none of these is
+// set-up: buffers, lists, recording).
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_RunSplit*'
+TEST(SparseChain, DISABLED_RunSplit) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 50;
+  auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
+  ASSERT_TRUE(ctx) << ctx.error;
+  auto chain = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
+  ASSERT_TRUE(chain) << chain.error;
+  const Volume head = io::load_volume(kHead), chest = io::load_volume(kChest);
+  struct Case {
+    const char* name;
+    const Volume* v;
+    double tau;
+  };
+  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"chest -500", &chest, -500.0}}) {
+    std::vector<double> total, stages, gpu, submit;
+    for (int r = -1; r < reps; ++r) {
+      const engine::SparseOutput out = (*chain.value)->run(*c.v, above(c.tau), -1024.0f);
+      if (r < 0) continue;
+      double st = 0, g = 0;
+      for (const auto& p : out.passes) (p.label.find("(GPU)") != std::string::npos ? g : st) += p.ms;
+      total.push_back(out.total_ms);
+      stages.push_back(st);
+      gpu.push_back(g);
+      submit.push_back(out.submit_wall_ms);
+    }
+    auto mm = [](std::vector<double> x) {
+      std::sort(x.begin(), x.end());
+      char b[64];
+      std::snprintf(b, sizeof b, "%.3f / %.3f", x.front(), x[x.size() / 2]);
+      return std::string(b);
+    };
+    double load = -1;
+    if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+      if (std::fscanf(f, "%lf", &load) != 1) load = -1;
+      std::fclose(f);
+    }
+    std::printf("%s, %d runs, load %.2f, min / median [ms]: total %s, host stages %s, GPU stages %s, submit wall %s\n",
+                c.name, reps, load, mm(total).c_str(), mm(stages).c_str(), mm(gpu).c_str(), mm(submit).c_str());
+  }
+}

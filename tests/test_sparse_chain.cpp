@@ -458,6 +458,34 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   }
 }
 
+// GpuBuffer::import_host: the pages holding a host range become a buffer whose bytes at
+// `offset` are the range's own (truth: the host memory itself, read back by a GPU copy),
+// for ranges starting anywhere in a page.
+TEST(SparseChain, ImportedHostMemoryIsTheHostsBytes) {
+  const VkDeviceSize align = vk().host_import_alignment();
+  if (align == 0) GTEST_SKIP() << vk().info().name << " does not import host memory";
+  std::vector<float> host(5000);
+  for (std::size_t i = 0; i < host.size(); ++i) host[i] = float(i) * 0.5f - 7.0f;
+  for (const std::size_t first : {std::size_t(0), std::size_t(1), std::size_t(3), std::size_t(1029)}) {
+    const float* p = host.data() + first;
+    const VkDeviceSize bytes = (host.size() - first) * 4;
+    VkDeviceSize offset = 0;
+    auto imported = engine::GpuBuffer::import_host(vk(), p, bytes, "test range", offset);
+    ASSERT_TRUE(imported) << imported.error;
+    const engine::GpuBuffer& b = *imported.value;
+    EXPECT_EQ(offset, VkDeviceSize(reinterpret_cast<std::uintptr_t>(p) % align)) << "first " << first;
+    EXPECT_EQ(b.size() % align, 0u);
+    ASSERT_GE(b.size(), offset + bytes);
+    engine::GpuBuffer back = engine::make_buffer_or_throw(vk(), b.size(), engine::MemoryIntent::Readback, "back");
+    VkCommandBuffer cmd = vk().begin_commands();
+    engine::record_copy(cmd, b, back, b.size());
+    engine::barrier_transfer_to_host(cmd);
+    vk().submit_and_wait(cmd);
+    EXPECT_EQ(std::memcmp(static_cast<const char*>(back.mapped()) + offset, p, bytes), 0) << "first " << first;
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
 TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
   // The fused one-pass Gaussian (rows of whole quads, radii <= ISOTOUCH_FUSED_MAX_RADIUS)
   // with zero copy and with staging copies, at a border-heavy size (every brick touches a
@@ -465,7 +493,10 @@ TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
   const Volume v = engine::make_sphere({36, 29, 23}, 1e-3, 9.0, {1.3, -0.7, 0.4});
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.2), PassDesc::gradient()};  // radius 4: the widest fused
   struct Restore {
-    ~Restore() { vk().allow_zero_copy(true); }
+    ~Restore() {
+      vk().allow_zero_copy(true);
+      vk().allow_host_import(true);
+    }
   } restore;
   auto chain = engine::SparseChain::create(vk(), p);
   ASSERT_TRUE(chain) << chain.error;
@@ -473,6 +504,16 @@ TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
   const engine::SparseOutput direct = (*chain.value)->run(v, above(0), -1e4f);
   EXPECT_NE((*chain.value)->describe().find("fused"), std::string::npos) << (*chain.value)->describe();
   expect_matches_dense(v, p, above(0), direct, "sphere gauss 1.2 mm, fused, zero copy");
+  // Where the device imports host memory (lavapipe), the pass above read the volume's own
+  // voxels; with import off they are copied into the input field: the same bits.
+  ASSERT_FALSE(direct.passes.empty());
+  EXPECT_EQ(direct.passes[0].label.find("input imported") != std::string::npos, vk().host_import_alignment() > 0)
+      << direct.passes[0].label;
+  vk().allow_host_import(false);
+  const engine::SparseOutput copied = run_gpu(v, p, above(0), -1e4f);
+  EXPECT_NE(copied.passes[0].label.find("input copy"), std::string::npos) << copied.passes[0].label;
+  expect_same_output(direct, copied, "fused: imported voxels vs copied");
+  vk().allow_host_import(true);
   vk().allow_zero_copy(false);
   ASSERT_FALSE(vk().device_local_is_host_visible());
   const engine::SparseOutput staged = run_gpu(v, p, above(0), -1e4f);

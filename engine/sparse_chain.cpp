@@ -299,7 +299,8 @@ ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& 
     const sparse::Op& op = plan.ops[a];
     kernels[a].assign(plan.weights.begin() + op.w_offset, plan.weights.begin() + op.w_offset + 2 * op.radius + 1);
   }
-  const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+  std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+  spec.push_back(sparse::fused_pairs(plan) ? 1u : 0u);  // constant_id 33: PAIRS (the list's form)
   auto& p = fused_pipes[spec];
   if (!p) {
     p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u, spec,
@@ -310,7 +311,7 @@ ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& 
   st.pipe = p.get();
   st.invocations_per_unit = 1;
   st.label = "gaussian x r=" + std::to_string(plan.ops[0].radius) + " + y r=" + std::to_string(plan.ops[1].radius) +
-             " + z r=" + std::to_string(plan.ops[2].radius) + " fused";
+             " + z r=" + std::to_string(plan.ops[2].radius) + " fused" + (sparse::fused_pairs(plan) ? ", slices paired" : "");
   Slab whole;
   whole.nz = std::uint64_t(vol.grid.dims[2]);
   whole.src_z1 = whole.nz;
@@ -470,7 +471,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
   std::uint64_t total_units = 0;
   for (std::size_t k = 0; k < K; ++k) {
-    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path)
+    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path,
+                                                     sparse::fused_pairs(plan))
                           : sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();

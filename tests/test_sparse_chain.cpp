@@ -426,7 +426,8 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
 TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   // Brute force as above for the fused Gaussian's columns: units (q + QX z, y0 * PACK + n)
   // name the quads whose voxels meet some candidate's extent, each exactly once, sorted by z,
-  // 1 <= n < ISOTOUCH_LIST_PACK.
+  // 1 <= n < ISOTOUCH_LIST_PACK; paired, (2 (q + QX z) + pair, ...) where a pair names its
+  // rows in slices z and z + 1, and slices that need the same rows do share units.
   core::Grid g;
   g.dims = {44, 37, 21};
   const auto nb = core::brick_counts(g);
@@ -436,25 +437,33 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   for (const engine::sparse::Extent e :
        {engine::sparse::Extent{{4, 1, 1}, {4, 2, 2}}, engine::sparse::Extent{{8, 3, 0}, {4, 0, 5}},
         engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
-    const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid");
+    for (const bool paired : {false, true}) {
+    const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid", paired);
     const int qx = g.dims[0] / 4;
     const std::vector<int> want = quads_meeting(g, cand, e, qx);
     std::vector<int> got(want.size(), 0);
     ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
-    std::uint64_t quads = 0;
+    std::uint64_t quads = 0, pairs = 0;
     for (std::size_t u = 0; u < w.unit_count(); ++u) {
-      const int a = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int a2 = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int pair = paired ? a2 & 1 : 0, a = paired ? a2 >> 1 : a2;
       const int z = a / qx, q = a % qx;
       const int y0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
-      ASSERT_TRUE(n >= 1 && y0 + n <= g.dims[1]) << "unit " << u;
+      ASSERT_TRUE(n >= 1 && y0 + n <= g.dims[1] && z + pair < g.dims[2]) << "unit " << u;
       EXPECT_TRUE(u >= w.z_first[std::size_t(z)] && u < w.z_first[std::size_t(z) + 1]) << "unit " << u << " z " << z;
-      for (int y = y0; y < y0 + n; ++y) {
-        ++got[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(q)];
-        ++quads;
-      }
+      pairs += std::uint64_t(pair);
+      for (int zz = z; zz <= z + pair; ++zz)
+        for (int y = y0; y < y0 + n; ++y) {
+          ++got[(std::size_t(zz) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(q)];
+          ++quads;
+        }
     }
-    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2];
+    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2] << (paired ? ", paired" : "");
     EXPECT_EQ(quads, w.quads);
+    if (paired) {
+      EXPECT_GT(pairs, 0u) << "no slices share units";
+    }
+    }
   }
 }
 

@@ -102,9 +102,11 @@ bool fusable(const Plan& plan, const core::Grid& grid) {
 }
 
 namespace {
-/// make_column_list without pairs: one unit per slice's column.
-WorkList single_columns(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                        const std::string& what) {
+/// make_column_list without pairs: one unit per slice's column. Not inlined: inlined into
+/// make_column_list, GCC 12 compiles its loops to half the speed (chest at -500: 1.6 ms
+/// against 0.75 ms, measured).
+[[gnu::noinline]] WorkList single_columns(const core::Grid& grid, const std::vector<std::uint32_t>& candidates,
+                                          const Extent& e, const std::string& what) {
   const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const int qx = (nx + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS);
   if (std::uint64_t(qx) * std::uint64_t(nz) >= (1u << 24) || std::uint64_t(ny) * ISOTOUCH_LIST_PACK >= (1u << 24))

@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <map>
 
 #include "vk_test_context.h"
 #include "gpu_cpu_compare.h"
@@ -980,10 +981,11 @@ TEST(SparseChain, DISABLED_LimitChest) {
               last.submit_wall_ms, "buffers + list upload (host)", last.upload_ms, "total (wall)", last.total_ms);
 }
 
-// The lists strategy's run split, on the head CT at +1150 and the chest CT at -500,
-// ISOTOUCH_BENCH_REPS (default 50) runs each: min and median of the wall time, the host
-// stages, the GPU stages (timestamps) and the submit's wall time (what is none of these is
-// set-up: buffers, lists, recording).
+// The lists strategy's run split, on the head CT at +1150 and the chest CT at -500, the
+// input imported (where the device offers it) and copied, ISOTOUCH_BENCH_REPS (default 50)
+// runs each: min and median of the wall time, the host stages, the GPU stages (timestamps),
+// the submit's wall time (what is none of these is set-up: buffers, recording) and of each
+// stage.
 //   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_RunSplit*'
 TEST(SparseChain, DISABLED_RunSplit) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
@@ -998,11 +1000,15 @@ TEST(SparseChain, DISABLED_RunSplit) {
     const Volume* v;
     double tau;
   };
-  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"chest -500", &chest, -500.0}}) {
+  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"chest -500", &chest, -500.0}})
+  for (const bool import : {true, false}) {
+    (*ctx.value)->allow_host_import(import);
     std::vector<double> total, stages, gpu, submit;
+    std::map<std::string, std::vector<double>> by_stage;
     for (int r = -1; r < reps; ++r) {
       const engine::SparseOutput out = (*chain.value)->run(*c.v, above(c.tau), -1024.0f);
       if (r < 0) continue;
+      for (const auto& p : out.passes) by_stage[p.label.substr(0, 40)].push_back(p.ms);
       double st = 0, g = 0;
       for (const auto& p : out.passes) (p.label.find("(GPU)") != std::string::npos ? g : st) += p.ms;
       total.push_back(out.total_ms);
@@ -1021,7 +1027,10 @@ TEST(SparseChain, DISABLED_RunSplit) {
       if (std::fscanf(f, "%lf", &load) != 1) load = -1;
       std::fclose(f);
     }
-    std::printf("%s, %d runs, load %.2f, min / median [ms]: total %s, host stages %s, GPU stages %s, submit wall %s\n",
-                c.name, reps, load, mm(total).c_str(), mm(stages).c_str(), mm(gpu).c_str(), mm(submit).c_str());
+    std::printf("%s, input %s, %d runs, load %.2f, min / median [ms]: total %s, host stages %s, GPU stages %s, "
+                "submit wall %s\n",
+                c.name, import ? "imported where offered" : "copied", reps, load, mm(total).c_str(), mm(stages).c_str(),
+                mm(gpu).c_str(), mm(submit).c_str());
+    for (const auto& [label, ms] : by_stage) std::printf("    %-40s %s\n", label.c_str(), mm(ms).c_str());
   }
 }

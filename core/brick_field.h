@@ -97,7 +97,7 @@ struct BrickedInput {
   Grid grid;
   float background = 0.0f;                  ///< value outside the grid (SampleField::background)
   std::vector<std::uint32_t> active;        ///< linear ids of active bricks, ascending
-  std::vector<Sample> pool;                 ///< active.size() * kBrickSamples fp32 samples
+  SamplePool pool;                          ///< active.size() * kBrickSamples fp32 samples (resize() leaves them unwritten)
   std::vector<float> tile;                  ///< one per brick (all bricks); ignored for active ones
 };
 
@@ -290,7 +290,7 @@ inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
           if (i >= n[0] || j >= n[1] || k >= n[2]) s[i + kBrickStored * (j + kBrickStored * k)] = {in.background, 0, 0, 0};
   }
   if (f == SampleFormat::kFp32) {
-    store->pool = std::make_shared<const std::vector<Sample>>(std::move(in.pool));
+    store->pool = std::make_shared<const SamplePool>(std::move(in.pool));
   } else {
     store->compact = std::make_shared<const std::vector<CompactSample>>(detail::encode_compact(in, f, store->decode));
     store->fp16_unscale = {float(1.0 / in.grid.spacing_m.x), float(1.0 / in.grid.spacing_m.y),

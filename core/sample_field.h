@@ -8,6 +8,9 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "grid.h"
@@ -25,6 +28,33 @@ struct Sample {
   float gz;     ///< d value / dz
 };
 static_assert(sizeof(Sample) == 16, "Sample must match GLSL vec4");
+
+/// std::allocator, except that an element made without a value is default-initialised
+/// (a Sample: left unwritten) where std::allocator value-initialises it (zeroes). A pool
+/// sized by resize(n) and then written whole by the engine is not zero-filled first: tens
+/// of MB and one pass over memory, on one thread, before the threads that write it start.
+/// Elements made from a value (resize(n, s), copies, push_back) are as with std::allocator.
+template <class T>
+struct DefaultInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = DefaultInitAllocator<U>;
+  };
+  DefaultInitAllocator() = default;
+  template <class U>
+  DefaultInitAllocator(const DefaultInitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
+/// The fp32 samples of a brick pool (BrickStore::pool, BrickedInput::pool): resize(n)
+/// leaves the new samples unwritten (DefaultInitAllocator); give a value to have them set.
+using SamplePool = std::vector<Sample, DefaultInitAllocator<Sample>>;
 
 // ---- Bricks (the layout is documented in brick_field.h) ---------------------------------
 inline constexpr int kBrickSize = 8;                      ///< voxels per brick edge
@@ -121,7 +151,7 @@ struct BrickStore {
   /// {tile value, 0, 0, 0} per uniform brick (fp32 in every format: the side of the
   /// isosurface a uniform brick reads is exact).
   std::vector<Sample> tiles;
-  std::shared_ptr<const std::vector<Sample>> pool;            ///< kFp32: slots * 729 samples
+  std::shared_ptr<const SamplePool> pool;                     ///< kFp32: slots * 729 samples
   std::shared_ptr<const std::vector<CompactSample>> compact;  ///< kFp16 / kUnorm16: slots * 729
   std::vector<BrickDecode> decode;                            ///< kUnorm16: one per slot
   /// kFp16: 1 / spacing_m per axis [1/m]: gradient = half_to_float(g[a]) * fp16_unscale[a].

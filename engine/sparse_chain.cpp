@@ -148,6 +148,21 @@ std::vector<sparse::CandidateRange> checked_ranges(const Volume& vol, const spar
 }
 }  // namespace
 
+/// The volume's voxels as the fused pass's input without a copy: their pages imported
+/// (GpuBuffer::import_host) into `buf`, the range where the voxels lie in it. An empty
+/// range (the caller copies) where import is not offered, the driver refuses, or the voxels
+/// do not start on a quad the texel view can address (offset alignment).
+static BufferRange import_voxels(VulkanContext& ctx, const Volume& vol, GpuBuffer& buf) {
+  const VkDeviceSize bytes = VkDeviceSize(vol.grid.voxel_count()) * 4;
+  if (ctx.host_import_alignment() == 0) return {};
+  VkDeviceSize offset = 0;
+  auto r = GpuBuffer::import_host(ctx, vol.voxels.data(), bytes, vol.path + ": voxels", offset);
+  const VkDeviceSize texel_align = std::max<VkDeviceSize>(ctx.properties().limits.minTexelBufferOffsetAlignment, 16);
+  if (!r || offset % texel_align != 0) return {};
+  buf = std::move(*r.value);
+  return {buf.handle(), offset, bytes};
+}
+
 /// One dispatch round of the list strategy: its pipeline, its z-slabs, its label.
 struct ListStage {
   const ComputePipeline<gpu::ListPush>* pipe = nullptr;
@@ -161,6 +176,9 @@ struct ListBuffers {
   GpuBuffer* field[2] = {nullptr, nullptr};
   GpuBuffer *up = nullptr, *list_buf = nullptr, *list_up = nullptr, *field_down = nullptr;
   std::uint64_t list_bytes = 0;
+  /// The fused pass's input where the volume's own voxels are imported (no copy; its
+  /// buffer is null otherwise and field 0 holds the input).
+  BufferRange imported{};
 };
 
 struct SparseChain::Impl {
@@ -281,7 +299,8 @@ ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& 
     const sparse::Op& op = plan.ops[a];
     kernels[a].assign(plan.weights.begin() + op.w_offset, plan.weights.begin() + op.w_offset + 2 * op.radius + 1);
   }
-  const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+  std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, kernels);
+  spec.push_back(sparse::fused_pairs(plan) ? 1u : 0u);  // constant_id 33: PAIRS (the list's form)
   auto& p = fused_pipes[spec];
   if (!p) {
     p = std::make_unique<ComputePipeline<gpu::ListPush>>(ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u, spec,
@@ -292,11 +311,11 @@ ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& 
   st.pipe = p.get();
   st.invocations_per_unit = 1;
   st.label = "gaussian x r=" + std::to_string(plan.ops[0].radius) + " + y r=" + std::to_string(plan.ops[1].radius) +
-             " + z r=" + std::to_string(plan.ops[2].radius) + " fused";
+             " + z r=" + std::to_string(plan.ops[2].radius) + " fused" + (sparse::fused_pairs(plan) ? ", slices paired" : "");
   Slab whole;
   whole.nz = std::uint64_t(vol.grid.dims[2]);
   whole.src_z1 = whole.nz;
-  whole.src = {b.field[0]->handle(), 0, n * 4};
+  whole.src = b.imported.buffer ? b.imported : BufferRange{b.field[0]->handle(), 0, n * 4};
   whole.dst = {b.field[1]->handle(), 0, n * 4};
   st.slabs.push_back(whole);
   return st;
@@ -424,30 +443,36 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   if (max_binding_bytes) limit = std::min<std::uint64_t>(limit, max_binding_bytes);
   const bool direct = ctx.device_local_is_host_visible();
   SparseOutput out;
-
-  // Host, on hardware_threads() threads: the candidates, and the voxels copied into the
-  // input field (or its staging buffer) where a filter runs, in the same pass over them.
-  auto t0 = std::chrono::steady_clock::now();
   const std::uint64_t n = vol.grid.voxel_count();
   const bool filters = !plan.ops.empty();
-  GpuBuffer* field0 = filters ? &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path) : nullptr;
-  GpuBuffer* up =
-      filters && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
-  float* input = !filters ? nullptr : static_cast<float*>(direct ? field0->mapped() : up->mapped());
-  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads(), input);
-  const double select_ms = ms_since(t0);
-  t0 = std::chrono::steady_clock::now();
-  const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
   // One Gaussian whose field fits one binding and one texel view runs as ONE fused pass
   // (gauss_fused_list.comp) over columns of the last extent's quads; other chains run one
   // pass per op over its extent's quads.
   const bool fused = sparse::fusable(plan, vol.grid) && n * 4 <= limit && n / 4 <= lim.maxTexelBufferElements;
   const std::size_t K = fused ? 1 : plan.ops.size();  // stages (dispatch rounds)
+
+  // Host, on hardware_threads() threads: the candidates, and the voxels copied into the
+  // input field (or its staging buffer) where a filter runs, in the same pass over them -
+  // unless the fused pass reads the volume's own voxels, imported (no copy).
+  auto t0 = std::chrono::steady_clock::now();
+  GpuBuffer imported;
+  const BufferRange in_range = fused && direct ? import_voxels(ctx, vol, imported) : BufferRange{};
+  GpuBuffer* field0 = filters && !in_range.buffer
+                          ? &kept_buffer("lists: field 0", n * 4, MemoryIntent::DeviceLocal, vol.path)
+                          : nullptr;
+  GpuBuffer* up =
+      field0 && !direct ? &kept_buffer("lists: voxels staging", n * 4, MemoryIntent::Upload, vol.path) : nullptr;
+  float* input = !field0 ? nullptr : static_cast<float*>(direct ? field0->mapped() : up->mapped());
+  const sparse::Selection sel = sparse::select(vol.grid, vol.voxels.data(), plan, iso, hardware_threads(), input);
+  const double select_ms = ms_since(t0);
+  t0 = std::chrono::steady_clock::now();
+  const std::vector<sparse::Extent> ext = sparse::list_extents(plan);
   std::vector<sparse::WorkList> lists;
   std::vector<std::uint64_t> base;  // first unit of each list in the list buffer
   std::uint64_t total_units = 0;
   for (std::size_t k = 0; k < K; ++k) {
-    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path)
+    lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path,
+                                                     sparse::fused_pairs(plan))
                           : sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();
@@ -477,7 +502,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
 
   // Stages: the fused pass, or one per op (op k reads field k % 2 and writes the other);
   // then one command buffer of their dispatches.
-  const ListBuffers bufs{{field[0], field[1]}, up, list_buf, list_up, field_down, list_bytes};
+  const ListBuffers bufs{{field[0], field[1]}, up, list_buf, list_up, field_down, list_bytes, in_range};
   std::vector<ListStage> stages;
   for (std::size_t k = 0; k < K; ++k)
     stages.push_back(fused ? fused_stage(vol, plan, bufs) : filter_stage(vol, plan, k, bufs, limit));
@@ -493,7 +518,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
 
   out.passes.push_back({std::string("candidate selection: raw ranges over the bricks' windows") +
-                            (filters ? " + the input copy" : "") + " (host)",
+                            (input ? " + the input copy" : in_range.buffer ? " (input imported, no copy)" : "") +
+                            " (host)",
                         select_ms, 0});
   out.passes.push_back({"work lists + their upload (host)", lists_ms + out.upload_ms, 0});
   std::ostringstream info;

@@ -182,9 +182,17 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
 /// one unit per (x-quad q, slice z, rows y0 .. y0 + n - 1), n < ISOTOUCH_LIST_PACK, covering
 /// the union of the candidates' extents `e` (the last filter's, list_extents()), each quad
 /// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z.
+/// `pairs` (the shader's PAIRS): the first float is 2 (q + QX z) + pair, pair 1 meaning the
+/// unit also covers the same rows of slice z + 1 (slices paired two by two, z even, where
+/// both need the rows; z_first counts a pair in its first slice).
 /// @throws VolumeError naming `what` if the grid is too large for exact float texels.
 WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                          const std::string& what);
+                          const std::string& what, bool pairs = false);
+/// Whether the fused Gaussian of `plan` runs on paired slices (make_column_list's pairs):
+/// where the z kernel is at least 2 voxels a side. Measured on llvmpipe: the head CT
+/// (radius 2 along z) runs faster paired, the chest CT (radius 1) slower (the paired
+/// shader's larger ring of registers).
+bool fused_pairs(const Plan& plan);
 /// Whether `plan` is one Gaussian (x, y, z, in that order) that gauss_fused_list.comp can run:
 /// radii <= ISOTOUCH_FUSED_MAX_RADIUS and rows of whole quads (nx a multiple of 4).
 bool fusable(const Plan& plan, const core::Grid& grid);
@@ -223,7 +231,8 @@ void publish(const core::Grid& grid, const Selection& sel, const std::vector<Can
 void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
                    core::Sample* out);
 /// publish() with the active candidates' samples written straight into the pool:
-/// `fill(c, dst)` writes the 729 samples of candidate index c at dst, called from `threads`
+/// `fill(c, dst)` writes ALL 729 samples of candidate index c at dst (the pool is not
+/// cleared before: core::SamplePool), called from `threads`
 /// threads at once (each on its own candidates; 1: this thread only).
 void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,

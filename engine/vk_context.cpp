@@ -286,18 +286,40 @@ Result<std::unique_ptr<VulkanContext>> VulkanContext::create(const ContextOption
   VkDeviceCreateInfo di{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
   di.queueCreateInfoCount = 1;
   di.pQueueCreateInfos = &qi;
-  const char* swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
-  if (opt.swapchain) {
+  std::vector<VkExtensionProperties> offered;
+  {
     std::uint32_t n = 0;
     vkEnumerateDeviceExtensionProperties(chosen, nullptr, &n, nullptr);
-    std::vector<VkExtensionProperties> e(n);
-    vkEnumerateDeviceExtensionProperties(chosen, nullptr, &n, e.data());
-    if (std::none_of(e.begin(), e.end(),
-                     [&](const VkExtensionProperties& x) { return std::strcmp(x.extensionName, swapchain_ext) == 0; }))
-      return R::fail("Vulkan device '" + ctx->info_.name + "' lacks " + swapchain_ext + " (needed to show a window)");
-    di.enabledExtensionCount = 1;
-    di.ppEnabledExtensionNames = &swapchain_ext;
+    offered.resize(n);
+    vkEnumerateDeviceExtensionProperties(chosen, nullptr, &n, offered.data());
+    offered.resize(n);
   }
+  auto has = [&](const char* ext) {
+    return std::any_of(offered.begin(), offered.end(),
+                       [&](const VkExtensionProperties& x) { return std::strcmp(x.extensionName, ext) == 0; });
+  };
+  std::vector<const char*> device_exts;
+  const char* swapchain_ext = VK_KHR_SWAPCHAIN_EXTENSION_NAME;
+  if (opt.swapchain) {
+    if (!has(swapchain_ext))
+      return R::fail("Vulkan device '" + ctx->info_.name + "' lacks " + swapchain_ext + " (needed to show a window)");
+    device_exts.push_back(swapchain_ext);
+  }
+  // Host memory imported as buffers (no copy of an input the host already holds), where
+  // device memory is host memory anyway (unified memory: lavapipe, integrated GPUs).
+  if (ctx->unified_memory_ && has(VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME)) {
+    VkPhysicalDeviceExternalMemoryHostPropertiesEXT h{
+        VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_EXTERNAL_MEMORY_HOST_PROPERTIES_EXT};
+    VkPhysicalDeviceProperties2 p2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
+    p2.pNext = &h;
+    vkGetPhysicalDeviceProperties2(chosen, &p2);
+    if (h.minImportedHostPointerAlignment > 0) {
+      device_exts.push_back(VK_EXT_EXTERNAL_MEMORY_HOST_EXTENSION_NAME);
+      ctx->host_import_alignment_ = h.minImportedHostPointerAlignment;
+    }
+  }
+  di.enabledExtensionCount = std::uint32_t(device_exts.size());
+  di.ppEnabledExtensionNames = device_exts.empty() ? nullptr : device_exts.data();
   const VkResult r = vkCreateDevice(chosen, &di, nullptr, &ctx->device_);
   if (r != VK_SUCCESS)
     return R::fail("vkCreateDevice on '" + ctx->info_.name + "' failed: " + vk_result_name(r));

@@ -92,6 +92,13 @@ class VulkanContext {
   /// for `bench engine`'s comparison. Affects buffers created afterwards.
   void allow_zero_copy(bool allow) { zero_copy_ = allow; }
 
+  /// VK_EXT_external_memory_host is enabled (lavapipe offers it): host memory can be
+  /// imported as a buffer without a copy (GpuBuffer::import_host). Its pointer and size
+  /// must be multiples of host_import_alignment() bytes; 0 where it is not offered.
+  VkDeviceSize host_import_alignment() const { return host_import_ ? host_import_alignment_ : 0; }
+  /// Turns host-memory import off (inputs copied as before), for tests and comparisons.
+  void allow_host_import(bool allow) { host_import_ = allow; }
+
   VkCommandBuffer begin_commands();
   /// Submit, wait on a fence; returns the wall time from submit to signal [ms].
   double submit_and_wait(VkCommandBuffer cmd);
@@ -115,6 +122,8 @@ class VulkanContext {
   VkDeviceSize max_allocation_ = 0;
   bool unified_memory_ = false;
   bool zero_copy_ = true;
+  VkDeviceSize host_import_alignment_ = 0;
+  bool host_import_ = true;
   DeviceInfo info_;
   std::atomic<std::uint32_t> validation_count_{0};
 

@@ -91,6 +91,58 @@ Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, Memo
   return R::ok(std::move(b));
 }
 
+Result<GpuBuffer> GpuBuffer::import_host(VulkanContext& ctx, const void* p, VkDeviceSize bytes,
+                                         const std::string& what, VkDeviceSize& offset) {
+  using R = Result<GpuBuffer>;
+  const std::string name = "imported host memory '" + what + "'";
+  const VkDeviceSize align = ctx.host_import_alignment();
+  if (align == 0) return R::fail(name + ": " + ctx.info().name + " does not import host memory");
+  if (bytes == 0 || p == nullptr) return R::fail(name + ": nothing to import");
+  const std::uintptr_t first = reinterpret_cast<std::uintptr_t>(p) / align * align;
+  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(p) + bytes + align - 1) / align * align;
+  const VkDeviceSize size = VkDeviceSize(end - first);
+  if (size > ctx.max_allocation_bytes())
+    return R::fail(name + ": " + std::to_string(size) + " bytes exceed maxMemoryAllocationSize " +
+                   std::to_string(ctx.max_allocation_bytes()) + " bytes on " + ctx.info().name);
+  void* host = reinterpret_cast<void*>(first);
+  auto props_fn = reinterpret_cast<PFN_vkGetMemoryHostPointerPropertiesEXT>(
+      vkGetDeviceProcAddr(ctx.device(), "vkGetMemoryHostPointerPropertiesEXT"));
+  if (!props_fn) return R::fail(name + ": vkGetMemoryHostPointerPropertiesEXT missing on " + ctx.info().name);
+  VkMemoryHostPointerPropertiesEXT hp{VK_STRUCTURE_TYPE_MEMORY_HOST_POINTER_PROPERTIES_EXT};
+  VkResult r = props_fn(ctx.device(), VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT, host, &hp);
+  if (r != VK_SUCCESS) return R::fail(name + ": the driver refuses the pointer: " + vk_result_name(r));
+  GpuBuffer b;
+  b.device_ = ctx.device();
+  b.size_ = size;
+  b.intent_ = MemoryIntent::DeviceLocal;
+  VkExternalMemoryBufferCreateInfo ext{VK_STRUCTURE_TYPE_EXTERNAL_MEMORY_BUFFER_CREATE_INFO};
+  ext.handleTypes = VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT;
+  VkBufferCreateInfo bi{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+  bi.pNext = &ext;
+  bi.size = size;
+  bi.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT |
+             VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT;
+  bi.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  VK_CHECK(vkCreateBuffer(b.device_, &bi, nullptr, &b.buffer_));
+  VkMemoryRequirements req;
+  vkGetBufferMemoryRequirements(b.device_, b.buffer_, &req);
+  const auto type = find_memory(ctx.memory_properties(), req.memoryTypeBits & hp.memoryTypeBits, 0, 0, size);
+  if (!type || req.size > size)
+    return R::fail(name + ": no memory type for " + std::to_string(size) + " imported bytes on " + ctx.info().name);
+  VkImportMemoryHostPointerInfoEXT imp{VK_STRUCTURE_TYPE_IMPORT_MEMORY_HOST_POINTER_INFO_EXT};
+  imp.handleType = VK_EXTERNAL_MEMORY_HANDLE_TYPE_HOST_ALLOCATION_BIT_EXT;
+  imp.pHostPointer = host;
+  VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  ai.pNext = &imp;
+  ai.allocationSize = size;
+  ai.memoryTypeIndex = *type;
+  r = vkAllocateMemory(b.device_, &ai, nullptr, &b.memory_);
+  if (r != VK_SUCCESS) return R::fail(name + ": import of " + std::to_string(size) + " bytes failed: " + vk_result_name(r));
+  VK_CHECK(vkBindBufferMemory(b.device_, b.buffer_, b.memory_, 0));
+  offset = VkDeviceSize(reinterpret_cast<std::uintptr_t>(p) - first);
+  return R::ok(std::move(b));
+}
+
 GpuBuffer& GpuBuffer::operator=(GpuBuffer&& o) noexcept {
   if (this != &o) {
     reset();

@@ -55,6 +55,15 @@ class GpuBuffer {
   /// fits the intent, or the allocation fails; the error names what, size and limit.
   static Result<GpuBuffer> create(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
                                   const std::string& what);
+  /// The host memory [p, p + bytes) as a buffer the shaders read in place, without a copy
+  /// (VK_EXT_external_memory_host; VulkanContext::host_import_alignment() > 0). The pages
+  /// holding the range are imported: the buffer starts at `p` rounded down to the
+  /// alignment, and `offset` receives where `p` lies in it. The memory must stay allocated,
+  /// and unchanged while work that reads it runs, until the buffer is reset. Storage and
+  /// texel-buffer reads, copy source. Fails (no throw) where import is not offered or the
+  /// driver refuses the pointer; the error names what.
+  static Result<GpuBuffer> import_host(VulkanContext& ctx, const void* p, VkDeviceSize bytes,
+                                       const std::string& what, VkDeviceSize& offset);
   ~GpuBuffer() { reset(); }
   GpuBuffer(GpuBuffer&& o) noexcept { *this = std::move(o); }
   GpuBuffer& operator=(GpuBuffer&& o) noexcept;

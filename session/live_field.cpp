@@ -56,7 +56,7 @@ std::size_t capacity_for(std::size_t active) {
 struct Arena {
   Arena(std::size_t slots, core::SampleFormat f) : capacity(slots), format(f), born(slots, 0) {
     if (f == core::SampleFormat::kFp32) {
-      pool = std::make_shared<std::vector<core::Sample>>(slots * kS);
+      pool = std::make_shared<core::SamplePool>(slots * kS, core::Sample{});
       samples = pool->data();
     } else {
       compact = std::make_shared<std::vector<core::CompactSample>>(slots * kS);
@@ -132,7 +132,7 @@ struct Arena {
 
   const std::size_t capacity;
   const core::SampleFormat format;
-  std::shared_ptr<std::vector<core::Sample>> pool;          ///< kFp32
+  std::shared_ptr<core::SamplePool> pool;                   ///< kFp32
   std::shared_ptr<std::vector<core::CompactSample>> compact;  ///< kFp16 / kUnorm16
   std::shared_ptr<std::vector<core::BrickDecode>> decode;   ///< kUnorm16
   core::Sample* samples = nullptr;                          ///< writable views of the above

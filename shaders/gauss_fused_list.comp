@@ -13,8 +13,9 @@
 //
 // Bindings: 0 the source voxels (R32G32B32A32_SFLOAT texel buffer: quad q of row (y, z) is
 // texel (z NY + y) QX + q; NX a multiple of 4), 1 the destination field (vec4 = one quad,
-// dense-addressed), 2 the work list (R32_SFLOAT texels, two per unit: q + QX z and
-// y0 * ISOTOUCH_LIST_PACK + n, integers below 2^24). One invocation per unit.
+// dense-addressed), 2 the work list (R32_SFLOAT texels, two per unit: q + QX z (PAIRS:
+// 2 (q + QX z) + pair) and y0 * ISOTOUCH_LIST_PACK + n, integers below 2^24). One
+// invocation per unit.
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 
@@ -55,6 +56,9 @@ layout(constant_id = 29) const float WZ5 = 0.0;
 layout(constant_id = 30) const float WZ6 = 0.0;
 layout(constant_id = 31) const float WZ7 = 0.0;
 layout(constant_id = 32) const float WZ8 = 0.0;
+// The work list pairs slices (engine/sparse_lists.cpp make_column_list with pairs): a unit's
+// first texel is 2 (q + QX z) + pair, pair 1 meaning slices z and z + 1.
+layout(constant_id = 33) const bool PAIRS = false;
 const int QX = NX / ISOTOUCH_DENSE_VOXELS;
 const int M = ISOTOUCH_FUSED_MAX_RADIUS;
 
@@ -135,14 +139,8 @@ vec4 x_quad(int q, int y, int z) {
   return acc;
 }
 
-void main() {
-  const uint u = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * pc.groups_x * uint(ISOTOUCH_DENSE_WG);
-  if (u >= pc.units) return;
-  const int i = 2 * int(pc.unit0 + u);
-  const int a = int(texelFetch(work, i).x);
-  const int packed = int(texelFetch(work, i + 1).x);
-  const int z = a / QX, q = a - z * QX;
-  const int y0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
+// One column of slice z (PAIRS false: the list names single slices).
+void column(int q, int z, int y0, int n) {
   // ring[kz][ky]: the x pass at row y - RY + ky of slice clamp(z - RZ + kz), rows clamped.
   vec4 ring[2 * M + 1][2 * M + 1];
   for (int kz = 0; kz <= 2 * RZ; ++kz) {
@@ -161,4 +159,50 @@ void main() {
     }
     dst[(z * NY + y) * QX + q] = acc;
   }
+}
+
+// The columns of slices z and z + 1 at once (PAIRS true, `pair`; otherwise slice z alone):
+// the x and y passes of their 2 RZ common slices computed once. A single unit's output
+// z + 1 is computed and not stored (every lane runs the same code).
+void column_pair(int q, int z, int y0, int n, bool pair) {
+  // ring[kz][ky]: the x pass at row y - RY + ky of slice clamp(z - RZ + kz), rows clamped;
+  // slices z - RZ .. z + 1 + RZ.
+  vec4 ring[2 * M + 2][2 * M + 1];
+  for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
+    const int zz = clamp(z - RZ + kz, 0, NZ - 1);
+    for (int ky = 1; ky <= 2 * RY; ++ky) ring[kz][ky] = x_quad(q, clamp(y0 - 1 - RY + ky, 0, NY - 1), zz);
+  }
+  for (int s = 0; s < n; ++s) {
+    const int y = y0 + s;
+    vec4 yacc[2 * M + 2];  // the y pass of row y in each ring slice
+    for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
+      for (int ky = 0; ky < 2 * RY; ++ky) ring[kz][ky] = ring[kz][ky + 1];
+      ring[kz][2 * RY] = x_quad(q, min(y + RY, NY - 1), clamp(z - RZ + kz, 0, NZ - 1));
+      precise vec4 ya = vec4(0.0);
+      for (int ky = 0; ky <= 2 * RY; ++ky) ya = weighted(ya, wy(ky), ring[kz][ky]);
+      yacc[kz] = ya;
+    }
+    precise vec4 acc = vec4(0.0), acc1 = vec4(0.0);
+    for (int kz = 0; kz <= 2 * RZ; ++kz) {
+      acc = weighted(acc, wz(kz), yacc[kz]);
+      acc1 = weighted(acc1, wz(kz), yacc[kz + 1]);
+    }
+    dst[(z * NY + y) * QX + q] = acc;
+    if (pair) dst[((z + 1) * NY + y) * QX + q] = acc1;
+  }
+}
+
+void main() {
+  const uint u = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * pc.groups_x * uint(ISOTOUCH_DENSE_WG);
+  if (u >= pc.units) return;
+  const int i = 2 * int(pc.unit0 + u);
+  const int a2 = int(texelFetch(work, i).x);
+  const int packed = int(texelFetch(work, i + 1).x);
+  const int a = PAIRS ? a2 >> 1 : a2;
+  const int z = a / QX, q = a - z * QX;
+  const int y0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
+  if (PAIRS)
+    column_pair(q, z, y0, n, (a2 & 1) != 0);
+  else
+    column(q, z, y0, n);
 }

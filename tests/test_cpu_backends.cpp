@@ -21,7 +21,8 @@ bool same_sample(const core::Sample& a, const core::Sample& b) { return std::mem
 
 core::Isosurface above(double tau) { return core::Isosurface{tau, core::InsideIs::kAbove}; }
 
-std::size_t differing_samples(const std::vector<core::Sample>& a, const std::vector<core::Sample>& b) {
+template <class A, class B>  // std::vector<core::Sample> or core::SamplePool
+std::size_t differing_samples(const A& a, const B& b) {
   if (a.size() != b.size()) return std::max(a.size(), b.size());
   std::size_t n = 0;
   for (std::size_t i = 0; i < a.size(); ++i) n += !same_sample(a[i], b[i]);

@@ -20,6 +20,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <map>
 
 #include "vk_test_context.h"
 #include "gpu_cpu_compare.h"
@@ -448,7 +449,8 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
 TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   // Brute force as above for the fused Gaussian's columns: units (q + QX z, y0 * PACK + n)
   // name the quads whose voxels meet some candidate's extent, each exactly once, sorted by z,
-  // 1 <= n < ISOTOUCH_LIST_PACK.
+  // 1 <= n < ISOTOUCH_LIST_PACK; paired, (2 (q + QX z) + pair, ...) where a pair names its
+  // rows in slices z and z + 1, and slices that need the same rows do share units.
   core::Grid g;
   g.dims = {44, 37, 21};
   const auto nb = core::brick_counts(g);
@@ -458,26 +460,62 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   for (const engine::sparse::Extent e :
        {engine::sparse::Extent{{4, 1, 1}, {4, 2, 2}}, engine::sparse::Extent{{8, 3, 0}, {4, 0, 5}},
         engine::sparse::Extent{{0, 0, 0}, {4, 1, 1}}}) {
-    const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid");
+    for (const bool paired : {false, true}) {
+    const engine::sparse::WorkList w = engine::sparse::make_column_list(g, cand, e, "grid", paired);
     const int qx = g.dims[0] / 4;
     const std::vector<int> want = quads_meeting(g, cand, e, qx);
     std::vector<int> got(want.size(), 0);
     ASSERT_EQ(w.z_first.size(), std::size_t(g.dims[2]) + 1);
-    std::uint64_t quads = 0;
+    std::uint64_t quads = 0, pairs = 0;
     for (std::size_t u = 0; u < w.unit_count(); ++u) {
-      const int a = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int a2 = int(w.units[2 * u]), packed = int(w.units[2 * u + 1]);
+      const int pair = paired ? a2 & 1 : 0, a = paired ? a2 >> 1 : a2;
       const int z = a / qx, q = a % qx;
       const int y0 = packed / int(ISOTOUCH_LIST_PACK), n = packed % int(ISOTOUCH_LIST_PACK);
-      ASSERT_TRUE(n >= 1 && y0 + n <= g.dims[1]) << "unit " << u;
+      ASSERT_TRUE(n >= 1 && y0 + n <= g.dims[1] && z + pair < g.dims[2]) << "unit " << u;
       EXPECT_TRUE(u >= w.z_first[std::size_t(z)] && u < w.z_first[std::size_t(z) + 1]) << "unit " << u << " z " << z;
-      for (int y = y0; y < y0 + n; ++y) {
-        ++got[(std::size_t(z) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(q)];
-        ++quads;
-      }
+      pairs += std::uint64_t(pair);
+      for (int zz = z; zz <= z + pair; ++zz)
+        for (int y = y0; y < y0 + n; ++y) {
+          ++got[(std::size_t(zz) * std::size_t(g.dims[1]) + std::size_t(y)) * std::size_t(qx) + std::size_t(q)];
+          ++quads;
+        }
     }
-    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2];
+    EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2] << (paired ? ", paired" : "");
     EXPECT_EQ(quads, w.quads);
+    if (paired) {
+      EXPECT_GT(pairs, 0u) << "no slices share units";
+    }
+    }
   }
+}
+
+// GpuBuffer::import_host: the pages holding a host range become a buffer whose bytes at
+// `offset` are the range's own (truth: the host memory itself, read back by a GPU copy),
+// for ranges starting anywhere in a page.
+TEST(SparseChain, ImportedHostMemoryIsTheHostsBytes) {
+  const VkDeviceSize align = vk().host_import_alignment();
+  if (align == 0) GTEST_SKIP() << vk().info().name << " does not import host memory";
+  std::vector<float> host(5000);
+  for (std::size_t i = 0; i < host.size(); ++i) host[i] = float(i) * 0.5f - 7.0f;
+  for (const std::size_t first : {std::size_t(0), std::size_t(1), std::size_t(3), std::size_t(1029)}) {
+    const float* p = host.data() + first;
+    const VkDeviceSize bytes = (host.size() - first) * 4;
+    VkDeviceSize offset = 0;
+    auto imported = engine::GpuBuffer::import_host(vk(), p, bytes, "test range", offset);
+    ASSERT_TRUE(imported) << imported.error;
+    const engine::GpuBuffer& b = *imported.value;
+    EXPECT_EQ(offset, VkDeviceSize(reinterpret_cast<std::uintptr_t>(p) % align)) << "first " << first;
+    EXPECT_EQ(b.size() % align, 0u);
+    ASSERT_GE(b.size(), offset + bytes);
+    engine::GpuBuffer back = engine::make_buffer_or_throw(vk(), b.size(), engine::MemoryIntent::Readback, "back");
+    VkCommandBuffer cmd = vk().begin_commands();
+    engine::record_copy(cmd, b, back, b.size());
+    engine::barrier_transfer_to_host(cmd);
+    vk().submit_and_wait(cmd);
+    EXPECT_EQ(std::memcmp(static_cast<const char*>(back.mapped()) + offset, p, bytes), 0) << "first " << first;
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
 }
 
 TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
@@ -487,7 +525,10 @@ TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
   const Volume v = engine::make_sphere({36, 29, 23}, 1e-3, 9.0, {1.3, -0.7, 0.4});
   const std::vector<PassDesc> p = {PassDesc::gaussian(1.2), PassDesc::gradient()};  // radius 4: the widest fused
   struct Restore {
-    ~Restore() { vk().allow_zero_copy(true); }
+    ~Restore() {
+      vk().allow_zero_copy(true);
+      vk().allow_host_import(true);
+    }
   } restore;
   auto chain = engine::SparseChain::create(vk(), p);
   ASSERT_TRUE(chain) << chain.error;
@@ -495,6 +536,16 @@ TEST(SparseChain, FusedGaussianWithStagingCopiesGivesTheSameBits) {
   const engine::SparseOutput direct = (*chain.value)->run(v, above(0), -1e4f);
   EXPECT_NE((*chain.value)->describe().find("fused"), std::string::npos) << (*chain.value)->describe();
   expect_matches_dense(v, p, above(0), direct, "sphere gauss 1.2 mm, fused, zero copy");
+  // Where the device imports host memory (lavapipe), the pass above read the volume's own
+  // voxels; with import off they are copied into the input field: the same bits.
+  ASSERT_FALSE(direct.passes.empty());
+  EXPECT_EQ(direct.passes[0].label.find("input imported") != std::string::npos, vk().host_import_alignment() > 0)
+      << direct.passes[0].label;
+  vk().allow_host_import(false);
+  const engine::SparseOutput copied = run_gpu(v, p, above(0), -1e4f);
+  EXPECT_NE(copied.passes[0].label.find("input copy"), std::string::npos) << copied.passes[0].label;
+  expect_same_output(direct, copied, "fused: imported voxels vs copied");
+  vk().allow_host_import(true);
   vk().allow_zero_copy(false);
   ASSERT_FALSE(vk().device_local_is_host_visible());
   const engine::SparseOutput staged = run_gpu(v, p, above(0), -1e4f);
@@ -950,4 +1001,58 @@ TEST(SparseChain, DISABLED_LimitChest) {
   std::printf("  lists strategy, CPU time of all threads %8.2f ms (median)\n", median(t_cpu));
   std::printf("    %-66s %8.2f ms\n    %-66s %8.2f ms\n    %-66s %8.2f ms\n", "submit to fence (wall)",
               last.submit_wall_ms, "buffers + list upload (host)", last.upload_ms, "total (wall)", last.total_ms);
+}
+
+// The lists strategy's run split, on the head CT at +1150 and the chest CT at -500, the
+// input imported (where the device offers it) and copied, ISOTOUCH_BENCH_REPS (default 50)
+// runs each: min and median of the wall time, the host stages, the GPU stages (timestamps),
+// the submit's wall time (what is none of these is set-up: buffers, recording) and of each
+// stage.
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_RunSplit*'
+TEST(SparseChain, DISABLED_RunSplit) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 50;
+  auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
+  ASSERT_TRUE(ctx) << ctx.error;
+  auto chain = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
+  ASSERT_TRUE(chain) << chain.error;
+  const Volume head = io::load_volume(kHead), chest = io::load_volume(kChest);
+  struct Case {
+    const char* name;
+    const Volume* v;
+    double tau;
+  };
+  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"chest -500", &chest, -500.0}})
+  for (const bool import : {true, false}) {
+    (*ctx.value)->allow_host_import(import);
+    std::vector<double> total, stages, gpu, submit;
+    std::map<std::string, std::vector<double>> by_stage;
+    for (int r = -1; r < reps; ++r) {
+      const engine::SparseOutput out = (*chain.value)->run(*c.v, above(c.tau), -1024.0f);
+      if (r < 0) continue;
+      for (const auto& p : out.passes) by_stage[p.label.substr(0, 40)].push_back(p.ms);
+      double st = 0, g = 0;
+      for (const auto& p : out.passes) (p.label.find("(GPU)") != std::string::npos ? g : st) += p.ms;
+      total.push_back(out.total_ms);
+      stages.push_back(st);
+      gpu.push_back(g);
+      submit.push_back(out.submit_wall_ms);
+    }
+    auto mm = [](std::vector<double> x) {
+      std::sort(x.begin(), x.end());
+      char b[64];
+      std::snprintf(b, sizeof b, "%.3f / %.3f", x.front(), x[x.size() / 2]);
+      return std::string(b);
+    };
+    double load = -1;
+    if (FILE* f = std::fopen("/proc/loadavg", "r")) {
+      if (std::fscanf(f, "%lf", &load) != 1) load = -1;
+      std::fclose(f);
+    }
+    std::printf("%s, input %s, %d runs, load %.2f, min / median [ms]: total %s, host stages %s, GPU stages %s, "
+                "submit wall %s\n",
+                c.name, import ? "imported where offered" : "copied", reps, load, mm(total).c_str(), mm(stages).c_str(),
+                mm(gpu).c_str(), mm(submit).c_str());
+    for (const auto& [label, ms] : by_stage) std::printf("    %-40s %s\n", label.c_str(), mm(ms).c_str());
+  }
 }

@@ -1,4 +1,4 @@
-// bench_cmd.h - `isotouch bench servo-rt` (the real-time servo thread under load) and
+// servo_bench.h - `isotouch bench servo-rt` (the real-time servo thread under load) and
 // `isotouch bench table1` (the paper's Table 1 measured again).
 #pragma once
 #include <iosfwd>

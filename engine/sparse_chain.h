@@ -1,7 +1,7 @@
 // sparse_chain.h - the sparse GPU engine: passes computed only on the
 // bricks whose value range can straddle the isovalue, published as a bricked SampleField
 // (core/brick_field.h). This header is the contract that
-// bench engine (apps/bench_engine.cpp) and the scene runner (run/engine_run.cpp) code
+// bench engine (bench/bench_engine.cpp) and the scene runner (run/engine_run.cpp) code
 // against; the owner may add members but keeps these names and meanings.
 #pragma once
 #include "core_names.h"

@@ -101,7 +101,7 @@ class Reader {
 //            "mode": "sparse" | "dense", "samples": "fp32" | "fp16" | "unorm16"}
 // A pass is its name (a string) or an object with one key, the name, holding its parameters.
 // Ranges here name the field; the list's structure is checked again by engine::validate_passes
-// (app::scene_passes) before anything runs.
+// (run::scene_passes) before anything runs.
 PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
   const std::string where = "engine.passes[" + std::to_string(i) + "]";
   static const char* kKinds = "\"gaussian\", \"closing\", \"gradient\", \"brick_minmax\"";

@@ -68,7 +68,7 @@ struct BrushSpec {
 /// One timed entry of edits.timeline.
 struct TimedEdit {
   int index = 0;                  ///< position in the scene file's list (for messages)
-  double t_s = 0;                 ///< applied after the render of tick ceil(t_s * rate) (app::edit_tick)
+  double t_s = 0;                 ///< applied after the render of tick ceil(t_s * rate) (run::edit_tick)
   std::string kind;               ///< a brush kind, or "undo" / "redo"
   bool at_vhip = false;           ///< "at": "vhip": the VHIP of each application's tick
   core::Vec3 at_m;               ///< else "at": [x, y, z] mm in the physical frame (trace.csv's), here in m

@@ -139,7 +139,7 @@ struct RunMetrics {
   bool plots_drawn = false;
   std::string plot_note;
   /// surface.png: the isosurface, the HIP path and the contact points coloured
-  /// by |F| (app::render_run_picture); caption, or why it was not drawn.
+  /// by |F| (run::render_run_picture); caption, or why it was not drawn.
   bool picture_drawn = false;
   std::string picture_note;
 

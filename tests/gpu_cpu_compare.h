@@ -73,16 +73,25 @@ inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& c
   return gpu_matches_cpu(ctx, gpu.data(), cpu.data(), gpu.size(), what, ulp_bound);
 }
 
-/// Samples (value and gradient) compared channel by channel.
+/// Samples compared as two arrays, each under the rule above with its own scale: the values
+/// [value units], and the gradients [value/m] (10^3-10^6 times larger: one scale for both
+/// would let a GPU's values drift by thousands of their own ULPs).
 inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& ctx,
                                                   const std::vector<core::Sample>& gpu,
                                                   const std::vector<core::Sample>& cpu, const std::string& what,
                                                   std::uint64_t ulp_bound = kGpuUlpBound) {
-  static_assert(sizeof(core::Sample) == 4 * sizeof(float));
   if (gpu.size() != cpu.size())
     return ::testing::AssertionFailure() << what << ": " << gpu.size() << " GPU samples, " << cpu.size() << " CPU samples";
-  return gpu_matches_cpu(ctx, reinterpret_cast<const float*>(gpu.data()), reinterpret_cast<const float*>(cpu.data()),
-                         4 * gpu.size(), what, ulp_bound);
+  std::vector<float> gv, cv, gg, cg;
+  gv.reserve(gpu.size()), cv.reserve(cpu.size()), gg.reserve(3 * gpu.size()), cg.reserve(3 * cpu.size());
+  for (std::size_t i = 0; i < gpu.size(); ++i) {
+    gv.push_back(gpu[i].value), cv.push_back(cpu[i].value);
+    for (float x : {gpu[i].gx, gpu[i].gy, gpu[i].gz}) gg.push_back(x);
+    for (float x : {cpu[i].gx, cpu[i].gy, cpu[i].gz}) cg.push_back(x);
+  }
+  ::testing::AssertionResult values = gpu_matches_cpu(ctx, gv, cv, what + " (values)", ulp_bound);
+  if (!values) return values;
+  return gpu_matches_cpu(ctx, gg, cg, what + " (gradients)", ulp_bound);
 }
 
 }  // namespace isotouch::test

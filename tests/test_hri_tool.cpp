@@ -419,8 +419,8 @@ TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
 }
 
 // The same strokes on the chest's lung vessels and airway walls at -500 HU (the chest scene's
-// isovalue): surface voxels whose inside ends within 2.5 voxel-halves along the inward
-// gradient, i.e. structures thinner than about 2 mm across at these voxels.
+// isovalue): surface voxels whose inside ends within 5 half-voxels (2.5 voxels) along the inward
+// gradient (of the smallest spacing, 1.68 mm): structures at most about 4 mm deep along it.
 TEST(HriShippedData, ChestLungVesselEdgesNeverPopThrough) {
   const ThinEdgeStrokes r = chest_thin_edge_strokes(-500.0, 5, 500, 48);
   std::printf("chest lung vessels at -500 HU, 48 strokes along thin edges (%ld seeds): %ld contact ticks, HIP past the "

@@ -965,7 +965,9 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       EXPECT_EQ(differ, 0u) << what << ": pixels that differ with and without tile starts";
       EXPECT_GE(hits(a), &f == fields ? v.min_hits : v.min_hits / 4) << what;  // (min_hits: for the blobs)
       std::printf("%s: %zu hits\n", what.c_str(), hits(a));
-      EXPECT_GT(a.tiles_ms, -1.0) << what;  // the pass ran (timestamps where the device has them)
+      // The pass did its job, not only no harm: seen from far, most of the image's tiles miss
+      // the grid and are left out.
+      if (v.dist_m >= 0.2) EXPECT_GT(culled, std::size_t(v.w * v.h) / 2) << what << ": tiles left out";
       expect_gpu_matches_cpu(a, cpu, 1.0 / 0.8e-3, what.c_str());
     }
   }

@@ -158,8 +158,9 @@ void expect_matches_dense(const Volume& v, const std::vector<PassDesc>& passes, 
   if (expect_surface) {
     EXPECT_GT(brute_active, 0u) << what << ": the case must have a surface";
   }
-  std::printf("  %-40s %zu bricks, %zu candidates, %zu active (brute force %zu), %zu samples bit-identical\n",
-              what.c_str(), total, s.stats.candidates, s.stats.active, brute_active, compared - wrong_samples);
+  std::printf("  %-40s %zu bricks, %zu candidates, %zu active (brute force %zu), %zu samples %s\n", what.c_str(), total,
+              s.stats.candidates, s.stats.active, brute_active, compared - wrong_samples,
+              exact ? "bit-identical" : "compared under the GPU rule");
   EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
 }
 
@@ -385,7 +386,7 @@ TEST(SparseChain, CpuBackendThreadsGiveTheReferenceBitForBit) {
   const std::vector<PassDesc> q = {PassDesc::closing(1.0), PassDesc::gaussian(0.9), PassDesc::gradient()};
   expect_matches_dense(odd, q, above(1000),
                        engine::run_sparse_cpu(odd, q, above(1000), -1000.0f, core::SampleFormat::kFp32, true, 3),
-                       "random odd dims, sparse CPU 3 threads");
+                       "random odd dims, sparse CPU 3 threads", /*expect_surface=*/true, /*from_gpu=*/false);
 }
 
 namespace {

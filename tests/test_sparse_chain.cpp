@@ -202,6 +202,16 @@ void expect_gpu_sparse_matches_cpu(const engine::SparseOutput& gpu, const engine
   }
   EXPECT_LE(one_side, std::max<std::size_t>(1, ca.size() / 100)) << what << ": bricks active on one side only";
   EXPECT_TRUE(isotouch::test::gpu_matches_cpu(vk(), a, b, what + ": samples of the bricks active on both sides"));
+  // The tiles of the bricks uniform on both sides, under the same rule.
+  ASSERT_EQ(gpu.input.tile.size(), cpu.input.tile.size()) << what;
+  std::vector<float> ta, tb;
+  for (std::size_t id = 0; id < cpu.input.tile.size(); ++id)
+    if (!std::binary_search(ga.begin(), ga.end(), std::uint32_t(id)) &&
+        !std::binary_search(ca.begin(), ca.end(), std::uint32_t(id))) {
+      ta.push_back(gpu.input.tile[id]);
+      tb.push_back(cpu.input.tile[id]);
+    }
+  EXPECT_TRUE(isotouch::test::gpu_matches_cpu(vk(), ta, tb, what + ": tiles of the bricks uniform on both sides"));
 }
 
 const char* strategy_name(Strategy s) {

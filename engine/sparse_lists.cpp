@@ -102,54 +102,89 @@ bool fusable(const Plan& plan, const core::Grid& grid) {
 }
 
 namespace {
+/// What both column-list builders read per slice: which rows of each brick column the
+/// candidates' stencil extents cover in slice z, and from that, which rows of a quad column.
+class CandidateRows {
+ public:
+  /// Throws VolumeError when `units_per_slice_column` x columns x slices or the rows do not fit
+  /// the list's 2^24 packing.
+  CandidateRows(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                const std::string& what, std::uint64_t units_per_slice_column)
+      : e_(e), nb_(core::brick_counts(grid)), nx_(grid.dims[0]), ny_(grid.dims[1]),
+        nbx_(std::size_t(nb_[0])), nby_(std::size_t(nb_[1])),
+        mark_(nbx_ * nby_ * std::size_t(nb_[2]), 0), rows_of_bx_(nbx_ * std::size_t(ny_), 0) {
+    const int nz = grid.dims[2], qx = quad_columns();
+    if (units_per_slice_column * std::uint64_t(qx) * std::uint64_t(nz) >= (1u << 24) ||
+        std::uint64_t(ny_) * ISOTOUCH_LIST_PACK >= (1u << 24))
+      throw VolumeError(what + ": sparse chain: " + std::to_string(nx_) + "x" + std::to_string(ny_) + "x" +
+                        std::to_string(nz) + " is too large for the column lists (columns and rows below 2^24)");
+    for (std::uint32_t id : candidates) mark_[id] = 1;
+  }
+  int quad_columns() const { return (nx_ + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS); }
+
+  /// Slice z: the rows each brick column's candidates cover.
+  void mark_slice(int z) {
+    const auto [bz0, bz1] = bricks_at(z, 2);
+    std::fill(rows_of_bx_.begin(), rows_of_bx_.end(), std::uint8_t(0));
+    for (int bz = bz0; bz <= bz1; ++bz)
+      for (std::size_t by = 0; by < nby_; ++by)
+        for (std::size_t bx = 0; bx < nbx_; ++bx) {
+          if (!mark_[(std::size_t(bz) * nby_ + by) * nbx_ + bx]) continue;
+          const int y0 = std::max(8 * int(by) - e_.lo[1], 0), y1 = std::min(8 * int(by) + 7 + e_.hi[1], ny_ - 1);
+          std::fill(rows_of_bx_.begin() + std::ptrdiff_t(bx * std::size_t(ny_) + std::size_t(y0)),
+                    rows_of_bx_.begin() + std::ptrdiff_t(bx * std::size_t(ny_) + std::size_t(y1) + 1), std::uint8_t(1));
+        }
+  }
+
+  /// Of the slice last marked: ORs into out[0..ny) the rows quad column q meets; false if no
+  /// candidate's extent reaches the column (out untouched).
+  bool or_quad_rows(int q, std::uint8_t* out) const {
+    const auto [bx0, bx1] = bricks_at(4 * q + 3, 0);  // quads are whole: any voxel of the quad
+    const auto lo_b = bricks_at(4 * q, 0);
+    // Locals: `out` is bytes and may alias any member, so a member in the loop would be
+    // reloaded after every store (and the loop not vectorised).
+    const int ny = ny_, nx = nx_, elo = e_.lo[0], ehi = e_.hi[0];
+    const std::uint8_t* rows_of_bx = rows_of_bx_.data();
+    bool any = false;
+    for (int bx = std::min(bx0, lo_b.first); bx <= std::max(bx1, lo_b.second); ++bx) {
+      const int q0 = std::max(8 * bx - elo, 0) / 4, q1 = std::min(8 * bx + 7 + ehi, nx - 1) / 4;
+      if (q < q0 || q > q1) continue;
+      const std::uint8_t* r = rows_of_bx + std::size_t(bx) * std::size_t(ny);
+      for (int y = 0; y < ny; ++y) out[y] |= r[y];
+      any = true;
+    }
+    return any;
+  }
+
+ private:
+  std::pair<int, int> bricks_at(int i, int a) const {  // brick layers whose extent covers index i along axis a
+    const int b0 = std::max(floor_div(i - e_.hi[std::size_t(a)], 8), 0);
+    const int b1 = std::min(floor_div(i + e_.lo[std::size_t(a)], 8), nb_[std::size_t(a)] - 1);
+    return {b0, b1};
+  }
+  const Extent& e_;
+  const std::array<int, 3> nb_;
+  const int nx_, ny_;
+  const std::size_t nbx_, nby_;
+  std::vector<std::uint8_t> mark_, rows_of_bx_;
+};
+
 /// make_column_list without pairs: one unit per slice's column. Not inlined: inlined into
 /// make_column_list, GCC 12 compiles its loops to half the speed (chest at -500: 1.6 ms
 /// against 0.75 ms, measured).
 [[gnu::noinline]] WorkList single_columns(const core::Grid& grid, const std::vector<std::uint32_t>& candidates,
                                           const Extent& e, const std::string& what) {
-  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
-  const int qx = (nx + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS);
-  if (std::uint64_t(qx) * std::uint64_t(nz) >= (1u << 24) || std::uint64_t(ny) * ISOTOUCH_LIST_PACK >= (1u << 24))
-    throw VolumeError(what + ": sparse chain: " + std::to_string(nx) + "x" + std::to_string(ny) + "x" +
-                      std::to_string(nz) + " is too large for the column lists (columns and rows below 2^24)");
-  const auto nb = core::brick_counts(grid);
-  const std::size_t nbx = std::size_t(nb[0]), nby = std::size_t(nb[1]);
-  std::vector<std::uint8_t> mark(nbx * nby * std::size_t(nb[2]), 0);
-  for (std::uint32_t id : candidates) mark[id] = 1;
-  auto bricks_at = [&](int i, int a) {  // brick layers whose extent covers index i along axis a
-    const int b0 = std::max(floor_div(i - e.hi[std::size_t(a)], 8), 0);
-    const int b1 = std::min(floor_div(i + e.lo[std::size_t(a)], 8), nb[std::size_t(a)] - 1);
-    return std::pair{b0, b1};
-  };
+  CandidateRows cover(grid, candidates, e, what, 1);
+  const int ny = grid.dims[1], nz = grid.dims[2], qx = cover.quad_columns();
   constexpr int kColumn = int(ISOTOUCH_LIST_PACK) - 1;  // outputs per unit at most
   WorkList w;
   w.z_first.assign(std::size_t(nz) + 1, 0);
-  std::vector<std::uint8_t> rows_of_bx(nbx * std::size_t(ny), 0), rows(std::size_t(ny), 0);
+  std::vector<std::uint8_t> rows(std::size_t(ny), 0);
   for (int z = 0; z < nz; ++z) {
-    // Rows each brick column's candidates cover in this slice.
-    const auto [bz0, bz1] = bricks_at(z, 2);
-    std::fill(rows_of_bx.begin(), rows_of_bx.end(), std::uint8_t(0));
-    for (int bz = bz0; bz <= bz1; ++bz)
-      for (std::size_t by = 0; by < nby; ++by)
-        for (std::size_t bx = 0; bx < nbx; ++bx) {
-          if (!mark[(std::size_t(bz) * nby + by) * nbx + bx]) continue;
-          const int y0 = std::max(8 * int(by) - e.lo[1], 0), y1 = std::min(8 * int(by) + 7 + e.hi[1], ny - 1);
-          std::fill(rows_of_bx.begin() + std::ptrdiff_t(bx * std::size_t(ny) + std::size_t(y0)),
-                    rows_of_bx.begin() + std::ptrdiff_t(bx * std::size_t(ny) + std::size_t(y1) + 1), std::uint8_t(1));
-        }
+    cover.mark_slice(z);
     for (int q = 0; q < qx; ++q) {
-      const auto [bx0, bx1] = bricks_at(4 * q + 3, 0);  // quads are whole: any voxel of the quad
-      const auto lo_b = bricks_at(4 * q, 0);
       std::fill(rows.begin(), rows.end(), std::uint8_t(0));
-      bool any = false;
-      for (int bx = std::min(bx0, lo_b.first); bx <= std::max(bx1, lo_b.second); ++bx) {
-        const int q0 = std::max(8 * bx - e.lo[0], 0) / 4, q1 = std::min(8 * bx + 7 + e.hi[0], nx - 1) / 4;
-        if (q < q0 || q > q1) continue;
-        const std::uint8_t* r = rows_of_bx.data() + std::size_t(bx) * std::size_t(ny);
-        for (int y = 0; y < ny; ++y) rows[std::size_t(y)] |= r[y];
-        any = true;
-      }
-      if (!any) continue;
+      if (!cover.or_quad_rows(q, rows.data())) continue;
       for (int y = 0; y < ny;) {
         if (!rows[std::size_t(y)]) {
           ++y;
@@ -174,49 +209,16 @@ bool fused_pairs(const Plan& plan) { return plan.ops.size() == 3 && plan.ops[2].
 WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
                           const std::string& what, bool pairs) {
   if (!pairs) return single_columns(grid, candidates, e, what);
-  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
-  const int qx = (nx + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS);
-  const std::uint64_t first_texels = 2 * std::uint64_t(qx) * std::uint64_t(nz);
-  if (first_texels >= (1u << 24) || std::uint64_t(ny) * ISOTOUCH_LIST_PACK >= (1u << 24))
-    throw VolumeError(what + ": sparse chain: " + std::to_string(nx) + "x" + std::to_string(ny) + "x" +
-                      std::to_string(nz) + " is too large for the column lists (columns and rows below 2^24)");
-  const auto nb = core::brick_counts(grid);
-  const std::size_t nbx = std::size_t(nb[0]), nby = std::size_t(nb[1]);
-  std::vector<std::uint8_t> mark(nbx * nby * std::size_t(nb[2]), 0);
-  for (std::uint32_t id : candidates) mark[id] = 1;
-  auto bricks_at = [&](int i, int a) {  // brick layers whose extent covers index i along axis a
-    const int b0 = std::max(floor_div(i - e.hi[std::size_t(a)], 8), 0);
-    const int b1 = std::min(floor_div(i + e.lo[std::size_t(a)], 8), nb[std::size_t(a)] - 1);
-    return std::pair{b0, b1};
-  };
+  CandidateRows cover(grid, candidates, e, what, 2);
+  const int ny = grid.dims[1], nz = grid.dims[2], qx = cover.quad_columns();
   // rows[q * ny + y]: 1 where quad q of row y of slice z meets some candidate's extent;
   // any[q]: some row of quad column q does.
-  std::vector<std::uint8_t> rows_of_bx(nbx * std::size_t(ny), 0);
   auto slice_rows = [&](int z, std::vector<std::uint8_t>& rows, std::vector<std::uint8_t>& any) {
     rows.assign(std::size_t(qx) * std::size_t(ny), 0);
     any.assign(std::size_t(qx), 0);
-    const auto [bz0, bz1] = bricks_at(z, 2);
-    std::fill(rows_of_bx.begin(), rows_of_bx.end(), std::uint8_t(0));
-    for (int bz = bz0; bz <= bz1; ++bz)
-      for (std::size_t by = 0; by < nby; ++by)
-        for (std::size_t bx = 0; bx < nbx; ++bx) {
-          if (!mark[(std::size_t(bz) * nby + by) * nbx + bx]) continue;
-          const int y0 = std::max(8 * int(by) - e.lo[1], 0), y1 = std::min(8 * int(by) + 7 + e.hi[1], ny - 1);
-          std::fill(rows_of_bx.begin() + std::ptrdiff_t(bx * std::size_t(ny) + std::size_t(y0)),
-                    rows_of_bx.begin() + std::ptrdiff_t(bx * std::size_t(ny) + std::size_t(y1) + 1), std::uint8_t(1));
-        }
-    for (int q = 0; q < qx; ++q) {
-      const auto [bx0, bx1] = bricks_at(4 * q + 3, 0);  // quads are whole: any voxel of the quad
-      const auto lo_b = bricks_at(4 * q, 0);
-      std::uint8_t* out = rows.data() + std::size_t(q) * std::size_t(ny);
-      for (int bx = std::min(bx0, lo_b.first); bx <= std::max(bx1, lo_b.second); ++bx) {
-        const int q0 = std::max(8 * bx - e.lo[0], 0) / 4, q1 = std::min(8 * bx + 7 + e.hi[0], nx - 1) / 4;
-        if (q < q0 || q > q1) continue;
-        const std::uint8_t* r = rows_of_bx.data() + std::size_t(bx) * std::size_t(ny);
-        for (int y = 0; y < ny; ++y) out[y] |= r[y];
-        any[std::size_t(q)] = 1;
-      }
-    }
+    cover.mark_slice(z);
+    for (int q = 0; q < qx; ++q)
+      any[std::size_t(q)] = cover.or_quad_rows(q, rows.data() + std::size_t(q) * std::size_t(ny)) ? 1 : 0;
   };
   constexpr int kColumn = int(ISOTOUCH_LIST_PACK) - 1;  // outputs per unit (per slice) at most
   WorkList w;

@@ -16,6 +16,7 @@
 #include "run_scene.h"
 #include "scene.h"
 #include "synthetic.h"
+#include "temp_dir.h"
 
 namespace fs = std::filesystem;
 using isotouch::core::Vec3;
@@ -36,12 +37,6 @@ fs::path temp_dir(const std::string& tag) {
 bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
 bool same_bits(const Vec3& a, const Vec3& b) { return same_bits(a.x, b.x) && same_bits(a.y, b.y) && same_bits(a.z, b.z); }
 
-std::string read(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 /// A synthetic sphere scene with a carve timeline (a carve away from the probe, then a
 /// stroke of carves at the VHIP) and the button drill while in contact; written into `dir`.
@@ -117,7 +112,7 @@ TEST(Replay, ARecordedRunWithEditsReplaysToIdenticalForces) {
   EXPECT_GT(brushes, 8);
   EXPECT_EQ(undos, 1);
   EXPECT_GT(button_ticks, 100);
-  EXPECT_EQ(rec.scene_text, read(x.scene));
+  EXPECT_EQ(rec.scene_text, isotouch::test::slurp(x.scene));
 
   const auto r = replay(rec, (x.dir / "replay").string());
   EXPECT_EQ(r.ticks, long(rec.ticks.size()));

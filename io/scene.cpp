@@ -316,10 +316,12 @@ void check_script_length(const Reader& r, const Scene& s) {
   }
 }
 
-Scene parse_scene(const std::string& text, const std::string& path) {
-  // JSON allows a key twice in one object and keeps the last: a scene with two
-  // "stiffness_n_per_m" would silently use one of them. The parser callback sees every
-  // key in order, with the objects and arrays it sits in.
+namespace {
+
+// JSON allows a key twice in one object and keeps the last: a scene with two
+// "stiffness_n_per_m" would silently use one of them. The parser callback sees every key
+// in order, with the objects and arrays it sits in.
+json parse_json_once_each(const std::string& text, const std::string& path) {
   struct Frame {
     bool object;
     std::set<std::string> keys;
@@ -351,24 +353,24 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     }
     return true;
   };
-  json root;
   try {
-    root = json::parse(text, dup_check);
+    return json::parse(text, dup_check);
   } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e999
     throw SceneError(path + ": not valid JSON: " + e.what());
   }
-  const Reader r(path);
-  r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
-                    "script", "outputs", "engine", "edits"});
-  Scene s;
-  s.file = path;
+}
+
+void parse_name(const Reader& r, const json& root, const std::string& path, Scene& s) {
   s.name = r.string(root, "", "name", fs::path(path).stem().string());
   s.description = r.string(root, "", "description", "");
   if (s.name.empty()) r.fail("name", "must not be empty (it names the output folder out/<name>)");
   for (char c : s.name)
     if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_'))
       r.fail("name", "may hold only letters, digits, '-' and '_', got \"" + s.name + "\"");
+}
 
+// "volume": {"path": P} (relative to the scene file) or {"synthetic": KIND, ...}.
+void parse_volume(const Reader& r, const json& root, const std::string& path, Scene& s) {
   if (!root.contains("volume")) r.fail("volume", "is required");
   const json& vol = root.at("volume");
   r.only(vol, "volume", {"path", "synthetic", "dims", "spacing_m", "radius_vox", "attribution"});
@@ -379,50 +381,42 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     if (p.empty()) r.fail("volume.path", "must not be empty");
     const fs::path pp(p);
     s.volume_path = pp.is_absolute() ? p : (fs::path(path).parent_path() / pp).lexically_normal().string();
-  } else {
-    s.synthetic.kind = r.string(vol, "volume", "synthetic", "");
-    if (s.synthetic.kind != "sphere" && s.synthetic.kind != "box" && s.synthetic.kind != "three-spheres" &&
-        s.synthetic.kind != "knot")
-      r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind +
-                                     "\" (known: sphere, box, three-spheres, knot)");
-    if (s.synthetic.kind != "sphere" && (vol.contains("dims") || vol.contains("spacing_m") || vol.contains("radius_vox")))
-      r.fail("volume", "dims, spacing_m and radius_vox apply to the sphere only; \"" + s.synthetic.kind +
-                           "\" is the fixed 64^3 scene of the paper");
-    if (vol.contains("dims")) {
-      const json& d = vol.at("dims");
-      if (!d.is_array() || d.size() != 3) r.fail("volume.dims", "must be [x, y, z], got " + d.dump());
-      for (int a = 0; a < 3; ++a) {
-        if (!d[std::size_t(a)].is_number_integer() || d[std::size_t(a)].get<long long>() < 2 ||
-            d[std::size_t(a)].get<long long>() > 1024)
-          r.fail("volume.dims", "each must be an integer in [2, 1024], got " + d.dump());
-        s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
-      }
-    }
-    // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script.
-    s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
-    s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
+    return;
   }
+  s.synthetic.kind = r.string(vol, "volume", "synthetic", "");
+  if (s.synthetic.kind != "sphere" && s.synthetic.kind != "box" && s.synthetic.kind != "three-spheres" &&
+      s.synthetic.kind != "knot")
+    r.fail("volume.synthetic", "unknown synthetic volume \"" + s.synthetic.kind +
+                                   "\" (known: sphere, box, three-spheres, knot)");
+  if (s.synthetic.kind != "sphere" && (vol.contains("dims") || vol.contains("spacing_m") || vol.contains("radius_vox")))
+    r.fail("volume", "dims, spacing_m and radius_vox apply to the sphere only; \"" + s.synthetic.kind +
+                         "\" is the fixed 64^3 scene of the paper");
+  if (vol.contains("dims")) {
+    const json& d = vol.at("dims");
+    if (!d.is_array() || d.size() != 3) r.fail("volume.dims", "must be [x, y, z], got " + d.dump());
+    for (int a = 0; a < 3; ++a) {
+      if (!d[std::size_t(a)].is_number_integer() || d[std::size_t(a)].get<long long>() < 2 ||
+          d[std::size_t(a)].get<long long>() > 1024)
+        r.fail("volume.dims", "each must be an integer in [2, 1024], got " + d.dump());
+      s.synthetic.dims[std::size_t(a)] = d[std::size_t(a)].get<int>();
+    }
+  }
+  // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script.
+  s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
+  s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
+}
 
+void parse_isosurface(const Reader& r, const json& root, Scene& s) {
   if (!root.contains("isovalue")) r.fail("isovalue", "is required");
   s.hri.tau = r.number(root, "", "isovalue", 0, -1e30, 1e30);
   const std::string inside = r.string(root, "", "inside", "above");
   if (inside == "above") s.hri.inside = core::InsideIs::kAbove;
   else if (inside == "below") s.hri.inside = core::InsideIs::kBelow;
   else r.fail("inside", "must be \"above\" (value > isovalue is inside) or \"below\", got \"" + inside + "\"");
+}
 
-  const json& sv = r.section(root, "servo");
-  r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
-                       "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
-                       "recovery_time_s", "friction", "variant", "tool"});
-  const std::string variant = r.string(sv, "servo", "variant", "robust");
-  if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
-  else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
-  else r.fail("servo.variant", "must be \"robust\" (the default) or \"paper\" (Figure 2 as printed), got \"" + variant + "\"");
-  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
-  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
-  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
-  s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
-  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+// The servo's variant, intersection and normal rules; the paper variant takes no other.
+void parse_servo_rules(const Reader& r, const json& sv, Scene& s) {
   const std::string isect = r.string(sv, "servo", "intersection", "linear");
   if (isect == "linear") s.hri.intersection = servo::Intersection::kLinear;
   else if (isect == "secant") s.hri.intersection = servo::Intersection::kSecant;
@@ -442,36 +436,61 @@ Scene parse_scene(const std::string& text, const std::string& path) {
            "the \"paper\" variant always uses linear intersection and central-difference normals "
            "(Figure 2 as printed); remove the key or use \"variant\": \"robust\", got \"" +
                (isect != "linear" ? isect : normal) + "\"");
+}
+
+void parse_friction(const Reader& r, const json& sv, Scene& s) {
+  if (!sv.contains("friction")) return;
+  const json& fr = sv.at("friction");
+  r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
+  s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s", 0, 0, 10);
+  s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d", 0, 0, 10);
+  s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m", 0, 0, 1e3);
+  if (s.hri.friction.mu_d > s.hri.friction.mu_s)
+    r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
+                                      fr.at("mu_d").dump());
+}
+
+// The spherical tool: its centre is the HIP, its surface is kept outside the isosurface
+// (robust variant only; servo/hri.h, "Spherical tool").
+void parse_tool(const Reader& r, const json& sv, Scene& s) {
+  if (!sv.contains("tool")) return;
+  const json& tl = sv.at("tool");
+  if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r}, got " + tl.dump());
+  r.only(tl, "servo.tool", {"radius_mm"});
+  s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
+  if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
+    r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
+                                   "\"variant\": \"robust\" for a tool of radius " + tl.at("radius_mm").dump() + " mm");
+  if (s.hri.tool_radius_m > 0 && (s.hri.friction.any() || s.hri.force_shading))
+    r.fail("servo.tool.radius_mm", "friction and force shading are not implemented for a spherical tool; "
+                                   "remove them or set radius_mm to 0, got " + tl.at("radius_mm").dump());
+}
+
+void parse_servo(const Reader& r, const json& root, Scene& s) {
+  const json& sv = r.section(root, "servo");
+  r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
+                       "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
+                       "recovery_time_s", "friction", "variant", "tool"});
+  const std::string variant = r.string(sv, "servo", "variant", "robust");
+  if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
+  else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
+  else r.fail("servo.variant", "must be \"robust\" (the default) or \"paper\" (Figure 2 as printed), got \"" + variant + "\"");
+  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
+  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
+  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
+  s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
+  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+  parse_servo_rules(r, sv, s);
   s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
   // Default 20 ms (robust variant): every force step a plane update causes is ramped.
   s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",
                                    s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
-  if (sv.contains("friction")) {
-    const json& fr = sv.at("friction");
-    r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
-    s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s", 0, 0, 10);
-    s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d", 0, 0, 10);
-    s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m", 0, 0, 1e3);
-    if (s.hri.friction.mu_d > s.hri.friction.mu_s)
-      r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
-                                        fr.at("mu_d").dump());
-  }
+  parse_friction(r, sv, s);
+  parse_tool(r, sv, s);
+}
 
-  // The spherical tool: its centre is the HIP, its surface is kept outside the isosurface
-  // (robust variant only; servo/hri.h, "Spherical tool").
-  if (sv.contains("tool")) {
-    const json& tl = sv.at("tool");
-    if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r}, got " + tl.dump());
-    r.only(tl, "servo.tool", {"radius_mm"});
-    s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
-    if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
-      r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
-                                     "\"variant\": \"robust\" for a tool of radius " + tl.at("radius_mm").dump() + " mm");
-    if (s.hri.tool_radius_m > 0 && (s.hri.friction.any() || s.hri.force_shading))
-      r.fail("servo.tool.radius_mm", "friction and force shading are not implemented for a spherical tool; "
-                                     "remove them or set radius_mm to 0, got " + tl.at("radius_mm").dump());
-  }
-
+// After the servo section: the mass check needs the servo rate.
+void parse_device(const Reader& r, const json& root, Scene& s) {
   const json& dv = r.section(root, "device");
   r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "coulomb_friction_n", "encoder_resolution_m",
                         "force_max_n", "hand_stiffness_n_per_m", "hand_damping_n_s_per_m", "substeps",
@@ -484,22 +503,22 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
   s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
   s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);
-  {
-    // The simulated device raises its substeps to integrate stably (sim_device.h); past
-    // 10000 per servo period the device is too light for its hand to simulate.
-    const double dt = 1.0 / s.hri.rate_hz;
-    if (sim::min_stable_substeps(s.device, dt) > 10000) {
-      std::ostringstream e;
-      e << "must be at least " << sim::min_stable_mass_kg(s.device, dt, 10000)
-        << " kg to simulate stably with the hand (" << s.device.hand_stiffness_n_per_m << " N/m, "
-        << s.device.hand_damping_n_s_per_m << " N s/m) in at most 10000 substeps per " << dt * 1e3
-        << " ms servo period, got " << dv.at("mass_kg").dump();
-      r.fail("device.mass_kg", e.str());
-    }
+  // The simulated device raises its substeps to integrate stably (sim_device.h); past
+  // 10000 per servo period the device is too light for its hand to simulate.
+  const double dt = 1.0 / s.hri.rate_hz;
+  if (sim::min_stable_substeps(s.device, dt) > 10000) {
+    std::ostringstream e;
+    e << "must be at least " << sim::min_stable_mass_kg(s.device, dt, 10000)
+      << " kg to simulate stably with the hand (" << s.device.hand_stiffness_n_per_m << " N/m, "
+      << s.device.hand_damping_n_s_per_m << " N s/m) in at most 10000 substeps per " << dt * 1e3
+      << " ms servo period, got " << dv.at("mass_kg").dump();
+    r.fail("device.mass_kg", e.str());
   }
   s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
   s.hri.world_per_device = s.workspace_scale;
+}
 
+void parse_script(const Reader& r, const json& root, Scene& s) {
   const json& sc = r.section(root, "script");
   r.only(sc, "script", {"ray_origin_frac", "ray_direction", "stroke_direction", "approach_distance_m",
                         "approach_speed_m_s", "press_depth_m", "press_speed_m_s", "hold_s",
@@ -524,7 +543,23 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
   p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
   p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+}
 
+}  // namespace
+
+Scene parse_scene(const std::string& text, const std::string& path) {
+  const json root = parse_json_once_each(text, path);
+  const Reader r(path);
+  r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
+                    "script", "outputs", "engine", "edits"});
+  Scene s;
+  s.file = path;
+  parse_name(r, root, path, s);
+  parse_volume(r, root, path, s);
+  parse_isosurface(r, root, s);
+  parse_servo(r, root, s);
+  parse_device(r, root, s);
+  parse_script(r, root, s);
   parse_engine(r, r.section(root, "engine"), s.engine);
   if (root.contains("edits")) {
     parse_edits(r, root.at("edits"), s.edits);
@@ -532,7 +567,6 @@ Scene parse_scene(const std::string& text, const std::string& path) {
       r.fail("edits", "edits publish bricked snapshots brick by brick: they need \"engine\": {\"mode\": \"sparse\"}, got \"" +
                           s.engine.mode + "\"");
   }
-
   const json& out = r.section(root, "outputs");
   r.only(out, "outputs", {"trace_csv", "plots"});
   s.write_trace = r.boolean(out, "outputs", "trace_csv", true);

@@ -271,18 +271,9 @@ std::string formats_markdown(const std::vector<FormatRow>& rows) {
   return md.str();
 }
 
-}  // namespace
-
-int run_report(const ReportOptions& o, std::ostream& log) {
-  fs::create_directories(o.out_dir);
-  engine::ContextOptions co;
-  co.device = o.device;
-  auto ctx = engine::VulkanContext::create(co);
-  engine::VulkanContext* vk = ctx ? ctx.value->get() : nullptr;
-  const std::string device = vk ? vk->info().name : "CPU reference (no Vulkan: " + ctx.error + ")";
-  log << "report: samples from " << device << "; " << o.scenes.size() << " scenes\n";
-
-  const std::vector<Config> cfgs = configs();
+// Everything the report's files are made of.
+struct Measured {
+  std::string device;  // where the samples came from
   std::vector<Row> rows;
   std::vector<std::string> scene_names;
   std::map<std::string, std::string> descriptions;
@@ -290,45 +281,49 @@ int run_report(const ReportOptions& o, std::ostream& log) {
   std::map<std::string, Slide> slides;
   std::map<std::string, HriParams> params;  // the HRI parameters every configuration starts from
   std::vector<FormatRow> formats;
-  for (const std::string& name : o.scenes) {
-    const SweepScene s = prepare_sweep_scene(name, vk, log);
-    {
-      // Compact samples: the same stroke on fp32 dense, fp32 bricked, fp16 and unorm16.
-      std::vector<SnapshotVariant> vs = snapshot_variants(s);
-      HriRenderer r(format_params(s));
-      const Playback dense = playback(r, s, *vs.front().field);
-      for (SnapshotVariant& v : vs) {
-        FormatRow fr;
-        fr.scene = s.name;
-        fr.f = compare_to_dense(s, playback(r, s, *v.field), dense);
-        fr.tick_ns_mean = median_ns_per_tick(r, s, *v.field, 1, 5);
-        fr.voxel_m = s.voxel_m;
-        v.field.reset();
-        fr.v = std::move(v);
-        formats.push_back(std::move(fr));
-      }
-      log << "  " << s.name << ": " << vs.size() << " snapshot formats\n";
-    }
-    scene_names.push_back(s.name);
-    descriptions[s.name] = s.description;
-    voxel[s.name] = s.voxel_m;
-    slides[s.name] = slide_of(s);
-    params[s.name] = hri_base(s, 1);
-    int done = 0;
-    for (const Config& c : cfgs) {
-      auto r = c.make(s);
-      const Playback p = playback(*r, s);
-      ErrorFigures e = measure(s, p);
-      // The per-tick clock reads cost about as much as a tick: the mean comes from whole
-      // replays instead (median of 5 after a warm-up); p99 stays per tick.
-      e.tick_ns_mean = median_ns_per_tick(*r, s, 1, 5);
-      rows.push_back({s.name, c, e});
-      if (++done % 10 == 0 || done == int(cfgs.size()))
-        log << "  " << s.name << ": " << done << "/" << cfgs.size() << " configurations\n";
-    }
-  }
+};
 
-  // CSV
+// Compact samples: the same stroke on fp32 dense, fp32 bricked, fp16 and unorm16.
+void measure_formats(const SweepScene& s, Measured& m, std::ostream& log) {
+  std::vector<SnapshotVariant> vs = snapshot_variants(s);
+  HriRenderer r(format_params(s));
+  const Playback dense = playback(r, s, *vs.front().field);
+  for (SnapshotVariant& v : vs) {
+    FormatRow fr;
+    fr.scene = s.name;
+    fr.f = compare_to_dense(s, playback(r, s, *v.field), dense);
+    fr.tick_ns_mean = median_ns_per_tick(r, s, *v.field, 1, 5);
+    fr.voxel_m = s.voxel_m;
+    v.field.reset();
+    fr.v = std::move(v);
+    m.formats.push_back(std::move(fr));
+  }
+  log << "  " << s.name << ": " << vs.size() << " snapshot formats\n";
+}
+
+// Every configuration on one scene's recorded stroke.
+void measure_scene(const SweepScene& s, const std::vector<Config>& cfgs, Measured& m, std::ostream& log) {
+  measure_formats(s, m, log);
+  m.scene_names.push_back(s.name);
+  m.descriptions[s.name] = s.description;
+  m.voxel[s.name] = s.voxel_m;
+  m.slides[s.name] = slide_of(s);
+  m.params[s.name] = hri_base(s, 1);
+  int done = 0;
+  for (const Config& c : cfgs) {
+    auto r = c.make(s);
+    const Playback p = playback(*r, s);
+    ErrorFigures e = measure(s, p);
+    // The per-tick clock reads cost about as much as a tick: the mean comes from whole
+    // replays instead (median of 5 after a warm-up); p99 stays per tick.
+    e.tick_ns_mean = median_ns_per_tick(*r, s, 1, 5);
+    m.rows.push_back({s.name, c, e});
+    if (++done % 10 == 0 || done == int(cfgs.size()))
+      log << "  " << s.name << ": " << done << "/" << cfgs.size() << " configurations\n";
+  }
+}
+
+std::string rows_csv(const std::vector<Row>& rows) {
   std::ostringstream csv;
   csv << "scene,algorithm,n,options,tick_ns_mean,tick_ns_p99,surface_err_rms_m,angle_err_rms_deg,force_err_rms_n,"
          "max_force_step_n,pop_throughs\n"
@@ -337,11 +332,14 @@ int run_report(const ReportOptions& o, std::ostream& log) {
     csv << r.scene << ',' << r.cfg.algorithm << ',' << r.cfg.n << ',' << r.cfg.options << ',' << r.e.tick_ns_mean << ','
         << r.e.tick_ns_p99 << ',' << r.e.surface_err_rms_m << ',' << r.e.angle_err_rms_deg << ','
         << r.e.force_err_rms_n << ',' << r.e.max_force_step_n << ',' << r.e.pop_throughs << '\n';
-  const std::string csv_path = (fs::path(o.out_dir) / "error_vs_time.csv").string();
-  write_file_atomic(csv_path, csv.str());
+  return csv.str();
+}
 
-  // Plot: one panel per scene, one colour per algorithm, log axes.
-  const std::string png = fs::absolute(fs::path(o.out_dir) / "error_vs_time.png").string();
+// Work-precision plot: one panel per scene, one colour per algorithm, log axes. True when
+// the picture was drawn.
+bool plot_error_vs_time(const std::string& out_dir, const std::string& csv_path,
+                        const std::vector<std::string>& scene_names) {
+  const std::string png = fs::absolute(fs::path(out_dir) / "error_vs_time.png").string();
   const std::string data = fs::absolute(csv_path).string();
   const int cols = scene_names.size() > 3 ? 3 : int(scene_names.size());
   const int lines = int((scene_names.size() + 2) / 3);
@@ -365,48 +363,56 @@ int run_report(const ReportOptions& o, std::ostream& log) {
     gp << "\n";
   }
   gp << "unset multiplot\n";
-  const bool plotted = draw_with_gnuplot((fs::path(o.out_dir) / "error_vs_time.gp").string(), gp.str(), {png}).empty();
+  return draw_with_gnuplot((fs::path(out_dir) / "error_vs_time.gp").string(), gp.str(), {png}).empty();
+}
 
-  // Markdown: Pareto fronts, remedies on the knot, findings.
-  std::ostringstream md;
-  // Servo parameters as used, per scene (grouped when equal).
+// Servo parameters as used, per scene (grouped when equal).
+std::string servo_text(const Measured& m) {
   std::map<std::string, std::vector<std::string>> groups;
-  for (const std::string& sn : scene_names) {
-    const HriParams& p = params[sn];
+  for (const std::string& sn : m.scene_names) {
+    const HriParams& p = m.params.at(sn);
     const std::string key = "K = " + g(p.stiffness_n_per_m) + " N/m, B = " + g(p.damping_n_s_per_m) +
                             " N s/m, force limit " + g(p.force_limit_n) + " N, " + g(p.rate_hz) + " Hz";
     groups[key].push_back(sn);
   }
-  std::string servo_text;
+  std::string text;
   for (const auto& [key, names] : groups) {
-    if (!servo_text.empty()) servo_text += "; ";
-    servo_text += key;
+    if (!text.empty()) text += "; ";
+    text += key;
     if (groups.size() > 1) {
-      servo_text += " (";
-      for (std::size_t i = 0; i < names.size(); ++i) servo_text += (i ? ", " : "") + names[i];
-      servo_text += ")";
+      text += " (";
+      for (std::size_t i = 0; i < names.size(); ++i) text += (i ? ", " : "") + names[i];
+      text += ")";
     }
   }
+  return text;
+}
+
+void md_intro(const Measured& m, bool plotted, std::ostream& md) {
   const double clock_ns = clock_pair_ns();
   md << "# isotouch report: error against run time\n\n"
      << "Every configuration replays the same recorded stroke per scene (approach, press, stroke, lift; "
         "recorded once with the reference renderer on the simulated device). "
-     << servo_text << ". Errors over the ticks in contact: surface distance of the contact point (VHIP), angle of "
+     << servo_text(m) << ". Errors over the ticks in contact: surface distance of the contact point (VHIP), angle of "
         "the force to the true normal, and the force against the exact god-object force on the true surface "
         "(synthetic scenes: exact shapes) or against the offline reference (CTs: HRI with n = 1, exact root along "
         "the segment, exact gradient of the trilinear field; the surface distance is the true distance to the "
         "trilinear isosurface). Tick times are wall times of Renderer::tick on this "
         "machine (CPU): the mean from whole replays (median of 5 after a warm-up), the p99 from per-tick clock "
         "reads (a pair of steady_clock reads costs " << g(clock_ns, 3) << " ns here, measured). Samples from "
-     << device << ".\n\n";
+     << m.device << ".\n\n";
   if (plotted) md << "![work-precision](error_vs_time.png)\n\n";
+}
+
+void md_pareto(const Measured& m, std::ostream& md) {
   md << "## Pareto front per scene (mean tick time against surface error RMS)\n\n";
-  for (const std::string& sn : scene_names) {
+  for (const std::string& sn : m.scene_names) {
     std::vector<const Row*> rs;
-    for (const Row& r : rows)
+    for (const Row& r : m.rows)
       if (r.scene == sn) rs.push_back(&r);
     std::sort(rs.begin(), rs.end(), [](const Row* a, const Row* b) { return a->e.tick_ns_mean < b->e.tick_ns_mean; });
-    md << "### " << sn << "\n\n" << descriptions[sn] << "\n\n"
+    const double vox = m.voxel.at(sn);
+    md << "### " << sn << "\n\n" << m.descriptions.at(sn) << "\n\n"
        << "| algorithm | n | options | mean tick [ns] | surface RMS [voxel] | angle RMS [deg] | force RMS [N] | max force step [N] |\n"
        << "|---|---|---|---|---|---|---|---|\n";
     double best = 1e300;
@@ -414,12 +420,15 @@ int run_report(const ReportOptions& o, std::ostream& log) {
       if (r->e.surface_err_rms_m < best && r->e.contact_ticks > 0) {
         best = r->e.surface_err_rms_m;
         md << "| " << r->cfg.algorithm << " | " << r->cfg.n << " | " << r->cfg.options << " | " << g(r->e.tick_ns_mean)
-           << " | " << g(r->e.surface_err_rms_m / voxel[sn], 3) << " | " << g(r->e.angle_err_rms_deg, 3) << " | "
+           << " | " << g(r->e.surface_err_rms_m / vox, 3) << " | " << g(r->e.angle_err_rms_deg, 3) << " | "
            << g(r->e.force_err_rms_n, 3) << " | " << g(r->e.max_force_step_n, 3) << " |\n";
       }
     md << "\n";
   }
-  // The paper's Figure 2 as printed against the robust default, same n, same options.
+}
+
+// The paper's Figure 2 as printed against the robust default, same n, same options.
+void md_paper_vs_robust(const Measured& m, std::ostream& md) {
   md << "## The paper's Figure 2 as printed against the robust default (both linear/central: the paper's "
         "LinearInterpolation and central-difference SurfaceNormal)\n\n"
      << "Pop-throughs: ticks where the contact was lost while the HIP was more than half a voxel inside the "
@@ -429,70 +438,100 @@ int run_report(const ReportOptions& o, std::ostream& log) {
   long pops_paper = 0, pops_robust = 0;
   double step_paper = 0, step_robust = 0, err_paper = 0, err_robust = 0;
   int pairs = 0;
-  for (const std::string& sn : scene_names)
+  for (const std::string& sn : m.scene_names)
     for (int n : {1, 2, 5, 10, 20, 50}) {
       const Row *pa = nullptr, *ro = nullptr;
-      for (const Row& r : rows)
+      for (const Row& r : m.rows)
         if (r.scene == sn && r.cfg.n == n && r.cfg.options == "linear/central") {
           if (r.cfg.algorithm == "HRI-paper") pa = &r;
           if (r.cfg.algorithm == "HRI") ro = &r;
         }
       if (!pa || !ro) continue;
+      const double vox = m.voxel.at(sn);
       ++pairs;
       pops_paper += pa->e.pop_throughs;
       pops_robust += ro->e.pop_throughs;
       step_paper = std::max(step_paper, pa->e.max_force_step_n);
       step_robust = std::max(step_robust, ro->e.max_force_step_n);
-      err_paper += pa->e.surface_err_rms_m / voxel[sn];
-      err_robust += ro->e.surface_err_rms_m / voxel[sn];
-      md << "| " << sn << " | " << n << " | " << g(pa->e.surface_err_rms_m / voxel[sn], 3) << " / "
-         << g(ro->e.surface_err_rms_m / voxel[sn], 3) << " | " << g(pa->e.max_force_step_n, 3) << " / "
+      err_paper += pa->e.surface_err_rms_m / vox;
+      err_robust += ro->e.surface_err_rms_m / vox;
+      md << "| " << sn << " | " << n << " | " << g(pa->e.surface_err_rms_m / vox, 3) << " / "
+         << g(ro->e.surface_err_rms_m / vox, 3) << " | " << g(pa->e.max_force_step_n, 3) << " / "
          << g(ro->e.max_force_step_n, 3) << " | " << pa->e.pop_throughs << " / " << ro->e.pop_throughs << " |\n";
     }
-  if (pairs) {
-    auto cmp = [](double a, double b, const char* what) {
-      return std::string(a < b ? "fewer " : a > b ? "more " : "as many ") + what;
-    };
-    md << "\nOver these " << pairs << " pairs the robust default had " << pops_robust << " pop-throughs against "
-       << pops_paper << " for the paper's Figure 2 (" << cmp(double(pops_robust), double(pops_paper), "pop-throughs")
-       << "), a largest force step of " << g(step_robust, 3) << " N against " << g(step_paper, 3)
-       << " N, and a mean surface RMS of " << g(err_robust / pairs, 3) << " voxel against " << g(err_paper / pairs, 3)
-       << " voxel.\n\n";
+  if (!pairs) return;
+  auto cmp = [](double a, double b, const char* what) {
+    return std::string(a < b ? "fewer " : a > b ? "more " : "as many ") + what;
+  };
+  md << "\nOver these " << pairs << " pairs the robust default had " << pops_robust << " pop-throughs against "
+     << pops_paper << " for the paper's Figure 2 (" << cmp(double(pops_robust), double(pops_paper), "pop-throughs")
+     << "), a largest force step of " << g(step_robust, 3) << " N against " << g(step_paper, 3)
+     << " N, and a mean surface RMS of " << g(err_robust / pairs, 3) << " voxel against " << g(err_paper / pairs, 3)
+     << " voxel.\n\n";
+}
+
+// Remedies (§3.3) on the knot's concave side.
+void md_knot_remedies(const Measured& m, std::ostream& md) {
+  if (std::find(m.scene_names.begin(), m.scene_names.end(), "knot") == m.scene_names.end()) return;
+  const Slide& sl = m.slides.at("knot");
+  md << "## §3.3 remedies on the knot's concave side: largest force step between two ticks [N]\n\n";
+  if (sl.any)
+    md << "While the HIP slides " << g(sl.mean_depth_m * 1e3, 2) << " mm deep (mean) along the concave side of the tube ("
+       << g(sl.duration_s, 3) << " s, " << g(sl.mean_speed_m_s * 1e3, 3) << " mm/s, measured on the path)";
+  else
+    md << "No sliding part is marked on this path; the largest step over the whole stroke";
+  md << "; in brackets the largest step over the whole stroke, approach and lift-off included.\n\n"
+     << "| n | none | force shading | recovery time 20 ms | both |\n|---|---|---|---|---|\n";
+  for (int n : {10, 50}) {
+    md << "| " << n;
+    for (const char* opt : {"linear/samples", "linear/samples/shading", "linear/samples/recovery20ms",
+                            "linear/samples/shading/recovery20ms"})
+      for (const Row& r : m.rows)
+        if (r.scene == "knot" && r.cfg.algorithm == "HRI" && r.cfg.n == n && r.cfg.options == opt)
+          md << " | " << g(r.e.max_force_step_slide_n, 3) << " (" << g(r.e.max_force_step_n, 3) << ")";
+    md << " |\n";
   }
-  // Remedies (§3.3) on the knot's concave side.
-  if (std::find(scene_names.begin(), scene_names.end(), "knot") != scene_names.end()) {
-    const Slide& sl = slides["knot"];
-    md << "## §3.3 remedies on the knot's concave side: largest force step between two ticks [N]\n\n";
-    if (sl.any)
-      md << "While the HIP slides " << g(sl.mean_depth_m * 1e3, 2) << " mm deep (mean) along the concave side of the tube ("
-         << g(sl.duration_s, 3) << " s, " << g(sl.mean_speed_m_s * 1e3, 3) << " mm/s, measured on the path)";
-    else
-      md << "No sliding part is marked on this path; the largest step over the whole stroke";
-    md << "; in brackets the largest step over the whole stroke, approach and lift-off included.\n\n"
-       << "| n | none | force shading | recovery time 20 ms | both |\n|---|---|---|---|---|\n";
-    for (int n : {10, 50}) {
-      md << "| " << n;
-      for (const char* opt : {"linear/samples", "linear/samples/shading", "linear/samples/recovery20ms",
-                              "linear/samples/shading/recovery20ms"})
-        for (const Row& r : rows)
-          if (r.scene == "knot" && r.cfg.algorithm == "HRI" && r.cfg.n == n && r.cfg.options == opt)
-            md << " | " << g(r.e.max_force_step_slide_n, 3) << " (" << g(r.e.max_force_step_n, 3) << ")";
-      md << " |\n";
-    }
-    md << "\n";
-  }
-  // Sphere requirement: HRI, n = 1, refined intersection.
-  for (const Row& r : rows)
+  md << "\n";
+}
+
+// Sphere requirement: HRI, n = 1, refined intersection.
+void md_sphere(const Measured& m, std::ostream& md) {
+  for (const Row& r : m.rows)
     if (r.scene == "sphere" && r.cfg.algorithm == "HRI" && r.cfg.n == 1 &&
         (r.cfg.options == "secant4/samples" || r.cfg.options == "bisect8/samples"))
-      md << "Sphere, HRI n = 1, " << r.cfg.options << ": surface error RMS " << g(r.e.surface_err_rms_m / voxel["sphere"], 3)
-         << " voxel.\n\n";
-  md << formats_markdown(formats);
-  write_file_atomic((fs::path(o.out_dir) / "sample_formats.csv").string(), formats_csv(formats));
-  md << "Files: `error_vs_time.csv` (all " << rows.size() << " configurations), `error_vs_time.gp`, "
-     << "`sample_formats.csv` (" << formats.size() << " snapshot rows).\n";
+      md << "Sphere, HRI n = 1, " << r.cfg.options << ": surface error RMS "
+         << g(r.e.surface_err_rms_m / m.voxel.at("sphere"), 3) << " voxel.\n\n";
+}
+
+}  // namespace
+
+int run_report(const ReportOptions& o, std::ostream& log) {
+  fs::create_directories(o.out_dir);
+  engine::ContextOptions co;
+  co.device = o.device;
+  auto ctx = engine::VulkanContext::create(co);
+  engine::VulkanContext* vk = ctx ? ctx.value->get() : nullptr;
+  Measured m;
+  m.device = vk ? vk->info().name : "CPU reference (no Vulkan: " + ctx.error + ")";
+  log << "report: samples from " << m.device << "; " << o.scenes.size() << " scenes\n";
+  const std::vector<Config> cfgs = configs();
+  for (const std::string& name : o.scenes) measure_scene(prepare_sweep_scene(name, vk, log), cfgs, m, log);
+
+  const std::string csv_path = (fs::path(o.out_dir) / "error_vs_time.csv").string();
+  write_file_atomic(csv_path, rows_csv(m.rows));
+  const bool plotted = plot_error_vs_time(o.out_dir, csv_path, m.scene_names);
+  std::ostringstream md;
+  md_intro(m, plotted, md);
+  md_pareto(m, md);
+  md_paper_vs_robust(m, md);
+  md_knot_remedies(m, md);
+  md_sphere(m, md);
+  md << formats_markdown(m.formats);
+  write_file_atomic((fs::path(o.out_dir) / "sample_formats.csv").string(), formats_csv(m.formats));
+  md << "Files: `error_vs_time.csv` (all " << m.rows.size() << " configurations), `error_vs_time.gp`, "
+     << "`sample_formats.csv` (" << m.formats.size() << " snapshot rows).\n";
   write_file_atomic((fs::path(o.out_dir) / "error_vs_time.md").string(), md.str());
-  log << "wrote " << o.out_dir << "/error_vs_time.csv (" << rows.size() << " rows), error_vs_time.md"
+  log << "wrote " << o.out_dir << "/error_vs_time.csv (" << m.rows.size() << " rows), error_vs_time.md"
       << (plotted ? ", error_vs_time.png" : "") << "\n";
   return 0;
 }

@@ -69,9 +69,14 @@ LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleFie
   if (cfg_.drill && cfg_.drill->every_ticks < 1)
     throw std::invalid_argument("live session: drill every_ticks must be >= 1");
   if (edits_) edits_->set_log_limit(0);  // the session records its edits itself; memory stays bounded
-  seen_size_ = 1u << 16;
+  if (cfg_.latency_slots < 1) throw std::invalid_argument("live session: latency_slots must be >= 1");
+  seen_size_ = cfg_.latency_slots;
   seen_ns_ = std::make_unique<std::atomic<std::int64_t>[]>(seen_size_);
-  for (std::size_t i = 0; i < seen_size_; ++i) seen_ns_[i].store(-1, std::memory_order_relaxed);
+  seen_version_ = std::make_unique<std::atomic<std::uint64_t>[]>(seen_size_);
+  for (std::size_t i = 0; i < seen_size_; ++i) {
+    seen_ns_[i].store(-1, std::memory_order_relaxed);
+    seen_version_[i].store(0, std::memory_order_relaxed);  // none (published versions are > 0)
+  }
   if (!cfg_.record_path.empty()) open_recording();
 }
 
@@ -169,8 +174,9 @@ Observed LiveSession::observe() const { return observed_.load(); }
 void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
   if (r.version != last_version_) {
     last_version_ = r.version;
-    std::int64_t expected = -1;
-    seen_ns_[r.version % seen_size_].compare_exchange_strong(expected, r.t_ns, std::memory_order_release);
+    const std::size_t slot = r.version % seen_size_;
+    seen_ns_[slot].store(r.t_ns, std::memory_order_relaxed);
+    seen_version_[slot].store(r.version, std::memory_order_release);
   }
   if (fd_ >= 0 && !ticks_.push(r)) dropped_ticks_.fetch_add(1, std::memory_order_relaxed);
   if (r.dt_s > 0) {  // the period error's histogram (no allocation, no lock)
@@ -242,9 +248,35 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
     if (out.published) {
       ++publications_;
       published_.emplace_back(edits_->current()->version, q.asked_ns);
+      resolve_seen_locked();
     }
   }
   if (cfg_.on_applied) cfg_.on_applied(e, out, source);
+}
+
+// Each publication up to the newest one a tick has read: its latency (first reading tick's
+// start - submit) if a tick read it. Older ones no tick read are dropped: the servo reads
+// the newest snapshot only, so it never will. Publications after that stay pending.
+// Holds edits_mu_.
+void LiveSession::resolve_seen_locked() const {
+  auto read_at = [&](std::uint64_t version, std::int64_t& t_ns) {
+    const std::size_t slot = version % seen_size_;
+    if (seen_version_[slot].load(std::memory_order_acquire) != version) return false;
+    t_ns = seen_ns_[slot].load(std::memory_order_relaxed);
+    return true;
+  };
+  std::size_t read = 0;  // publications up to and with the newest one a tick has read
+  std::int64_t t_ns = 0;
+  for (std::size_t i = published_.size(); i-- > 0;)
+    if (read_at(published_[i].first, t_ns)) {
+      read = i + 1;
+      break;
+    }
+  for (std::size_t i = 0; i < read; ++i) {
+    const auto [version, asked] = published_[i];
+    if (read_at(version, t_ns) && t_ns >= asked) edit_to_haptics_ms_.push_back(double(t_ns - asked) * 1e-6);
+  }
+  published_.erase(published_.begin(), published_.begin() + std::ptrdiff_t(read));
 }
 
 void LiveSession::edit_loop() {
@@ -482,10 +514,8 @@ LiveStats LiveSession::stats() const {
   s.edits_applied = applied_;
   s.edits_refused = refused_;
   s.publications = publications_;
-  for (const auto& [version, asked] : published_) {
-    const std::int64_t seen = seen_ns_[version % seen_size_].load(std::memory_order_acquire);
-    if (seen >= 0 && seen >= asked) s.edit_to_haptics_ms.push_back(double(seen - asked) * 1e-6);
-  }
+  resolve_seen_locked();
+  s.edit_to_haptics_ms = edit_to_haptics_ms_;
   s.record_error = record_error_;
   return s;
 }

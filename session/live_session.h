@@ -75,6 +75,10 @@ struct LiveSessionConfig {
   io::Recording record_header;     ///< scene path and text, rate, volume CRC (format set to 3)
   double flush_interval_s = 0.1;   ///< the recorder writes and fdatasyncs a chunk this often
   std::size_t edit_queue = 4096;   ///< requests each edit queue holds
+  /// Slots of the servo's version -> first-tick table, from which each publication's
+  /// edit-to-haptics latency is taken (a publication still unresolved when this many later
+  /// versions have been read loses its latency).
+  std::size_t latency_slots = 65536;
   EditListener on_applied;         ///< optional: sees every applied edit with its outcome
 };
 
@@ -204,6 +208,7 @@ class LiveSession final : private servo::TickObserver {
   std::int64_t clock_ns() const;
   void on_tick(const servo::TickRecord& r) noexcept override;
   void edit_loop();
+  void resolve_seen_locked() const;
   void wake_edit_thread();  // API side: submit(), stop()
   void record_loop();
   void record_chunk(bool final);
@@ -244,9 +249,12 @@ class LiveSession final : private servo::TickObserver {
   bool button_ = false;
   long press_tick_ = 0;
   std::uint64_t last_version_ = 0;
-  // First tick start that read each version, indexed by version % size (servo writes, edit
-  // thread / stop() read after the fact).
+  // The first tick that read each version: its start and the version, in slot version % size.
+  // The servo writes both when the version changes; the edit thread reads them (the version
+  // matches: that version's tick; a later version may have taken the slot only after `size`
+  // more publications read, far beyond any backlog).
   std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
+  std::unique_ptr<std::atomic<std::uint64_t>[]> seen_version_;
   std::size_t seen_size_ = 0;
 
   // |period error| histogram (servo writes with relaxed increments; stats() reads).
@@ -259,7 +267,9 @@ class LiveSession final : private servo::TickObserver {
   // Edit thread -> recorder and stats (not real time: a mutex is fine here).
   mutable std::mutex edits_mu_;
   std::vector<EditEvent> applied_pending_;  // not yet written
-  std::vector<std::pair<std::uint64_t, std::int64_t>> published_;  // (version, asked_ns)
+  // (version, asked_ns) not yet read; latencies of the versions read (stats() resolves too).
+  mutable std::vector<std::pair<std::uint64_t, std::int64_t>> published_;
+  mutable std::vector<double> edit_to_haptics_ms_;
   long applied_ = 0, refused_ = 0, publications_ = 0;
 
   // Recorder thread.

@@ -182,6 +182,34 @@ TEST(LiveSession, SubmittedEditsArePublishedReadAndRecorded) {
   fs::remove_all(dir);
 }
 
+// The servo's version -> first-tick table is reused: with 2 slots, 7 edits each read
+// before the next still give 7 edit-to-haptics latencies, each between 0 and the time
+// the test waited (a slot never freed would hold the first version's tick: later
+// latencies would be lost).
+TEST(LiveSession, EditToHapticsLatenciesOutlastTheSlotTable) {
+  Rig rig;
+  LiveSessionConfig cfg = rig.config("");
+  cfg.latency_slots = 2;
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, cfg);
+  live.start();
+  wait_until([&] { return live.observe().tick > 50; }, 10);
+  const Vec3 c = rig.vol.grid.centre_m();
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 7; ++i) {
+    ASSERT_TRUE(live.submit(carve(c + Vec3{0.002 * (i - 3), -0.008, 0})));
+    wait_until([&] { return live.observe().version >= std::uint64_t(i) + 2; }, 10);
+  }
+  const double waited_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  live.stop();
+  const auto s = live.stats();
+  EXPECT_EQ(s.publications, 7);
+  ASSERT_EQ(s.edit_to_haptics_ms.size(), 7u);
+  for (double ms : s.edit_to_haptics_ms) {
+    EXPECT_GE(ms, 0.0);
+    EXPECT_LE(ms, waited_ms);
+  }
+}
+
 // Pause: the servo keeps ticking and sends exact zeros; resume renders again.
 TEST(LiveSession, PauseSendsZeroForce) {
   Rig rig;

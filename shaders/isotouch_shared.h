@@ -173,6 +173,9 @@ struct BrickMinMaxPush {
 // starts the march runs one workgroup (TILE^2 = WG_X invocations) per listed tile.
 #define ISOTOUCH_RAYCAST_TILE 8u
 #define ISOTOUCH_RAYCAST_TILE_STEPS 128u
+// Block starts: each listed tile's blocks of BLOCK x BLOCK pixels get a start of their own
+// (the same cone march from the tile's start, a narrower cone: closer to the surface).
+#define ISOTOUCH_RAYCAST_BLOCK 4u
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away

@@ -496,6 +496,25 @@ PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::Rayca
   return finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
 }
 
+/// The overlay pass's primitives (binding 3): the ones its opaque loop reads (alpha 1, x-ray
+/// ones too), then the ones its blending loop reads (alpha < 1 or x-ray), each list in the
+/// caller's order, so each loop reads only its own (on llvmpipe a primitive a loop skips with
+/// `continue` costs its whole intersection anyway). An x-ray primitive of alpha 1 is in both.
+struct OverlayLists {
+  std::vector<gpu::RaycastPrim> prims;
+  std::uint32_t opaque = 0;  ///< the first list's length
+};
+OverlayLists overlay_lists(const std::vector<gpu::RaycastPrim>& prims) {
+  OverlayLists l;
+  // The shader's own tests, negated as it skips (a NaN alpha: in both, as it was).
+  for (const gpu::RaycastPrim& q : prims)
+    if (!(q.alpha < 1.0f)) l.prims.push_back(q);
+  l.opaque = std::uint32_t(l.prims.size());
+  for (const gpu::RaycastPrim& q : prims)
+    if (!(q.alpha >= 1.0f && !(q.pad0 > 0.0f))) l.prims.push_back(q);
+  return l;
+}
+
 /// The index-space box covering every active cell (cell_dist 0; cell c spans [c, c + 1]),
 /// or nullopt if there is none. Samples outside it are in inactive cells or outside the
 /// cells, where the field is the background: outside, else the border cells were active.
@@ -699,7 +718,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
     impl->quads = std::move(*qb.value);
   }
   const std::size_t pb = sizeof(gpu::RaycastParams);
-  const std::size_t qb = sizeof(gpu::RaycastPrim) * ISOTOUCH_RAYCAST_MAX_PRIMS;
+  const std::size_t qb = sizeof(gpu::RaycastPrim) * 2 * ISOTOUCH_RAYCAST_MAX_PRIMS;  // the overlay's two lists
   for (auto [buf, bytes, intent, what] :
        {std::tuple{&impl->params, pb, MemoryIntent::DeviceLocal, "raycast params"},
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
@@ -752,7 +771,9 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     m.tile_count = tile_count;
   }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
-  if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
+  const OverlayLists lists = overlay_lists(prims);
+  if (!lists.prims.empty())
+    std::memcpy(m.prims_up.mapped(), lists.prims.data(), lists.prims.size() * sizeof(gpu::RaycastPrim));
   gpu::RaycastPush push{};
   push.flags = style_flags(style);
   push.prim_count = std::uint32_t(prims.size());
@@ -761,7 +782,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   VkCommandBuffer cmd = m.ctx.begin_commands();
   m.timer.record_reset(cmd);
   record_copy(cmd, m.params_up, m.params, sizeof(P));
-  if (!prims.empty()) record_copy(cmd, m.prims_up, m.prims, prims.size() * sizeof(gpu::RaycastPrim));
+  if (!lists.prims.empty()) record_copy(cmd, m.prims_up, m.prims, lists.prims.size() * sizeof(gpu::RaycastPrim));
   const std::initializer_list<BufferRange> ranges = {
       {m.params.handle(), 0, m.params.size()}, {m.values.handle(), 0, m.values.size()},
       {m.cells.handle(), 0, m.cells.size()},   {m.prims.handle(), 0, m.prims.size()},
@@ -875,6 +896,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     gpu::RaycastPush overlay_push = push;
     overlay_push.x0 = od.x0;
     overlay_push.y0 = od.y0;
+    overlay_push.prim_count = lists.opaque << 16 | std::uint32_t(lists.prims.size());
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
     m.overlay.push(cmd, overlay_push);

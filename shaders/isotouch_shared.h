@@ -281,7 +281,8 @@ struct RaycastPrim {
 // Push constants: what changes between frames of the same parameters.
 struct RaycastPush {
   uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
-  uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
+  uint prim_count;   // primitives given (<= ISOTOUCH_RAYCAST_MAX_PRIMS); overlay pass: binding 3's
+                     //   two lists, opaque length << 16 | total (raycast_overlay.comp)
   uint x0;           // march pass: pixel of its invocation (0, 0); the dispatch covers only
   uint y0;           //   the pixels the volume's box (skipping: the active cells' box) can
                      //   project into (engine/raycast.cpp); tile pass: tile of (0, 0)

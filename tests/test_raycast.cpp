@@ -630,6 +630,34 @@ TEST(Raycast, ProbePrimitivesAreDrawn) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
+// X-ray and translucent primitives: an opaque x-ray sphere behind the surface (shown
+// faintly), one in front of it (drawn opaque), a translucent disc across
+// both and a translucent sphere: the overlay pass blends each once, in order, as the CPU
+// reference does (its two loops read two lists of the primitives: engine/raycast.cpp).
+TEST(Raycast, XrayAndTranslucentPrimitivesMatchCpu) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  const Vec3 front = s.centre() + Vec3{0, -s.r_m, 0};  // the surface point facing the eye
+  const std::vector<gpu::RaycastPrim> prims = {
+      engine::prim_sphere(front + Vec3{0.004, 0, 0}, 0.006, {0.9f, 0.2f, 0.2f}, 0.5f, true),   // translucent x-ray
+      engine::prim_sphere(front + Vec3{-0.008, 0.014, 0}, 0.01, {0.95f, 0.8f, 0.1f}, 1.0f, true), // behind
+      engine::prim_disc(front, {0, -1, 0}, 0.012, {0.2f, 0.75f, 0.95f}, 0.4f),
+      engine::prim_sphere(front + Vec3{0.006, -0.004, 0.004}, 0.003, {0.15f, 0.8f, 0.25f}, 1.0f, true),
+      engine::prim_sphere(front + Vec3{0, -0.002, -0.006}, 0.005, {0.3f, 0.9f, 0.4f}, 0.35f)};
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  const RaycastImage plain = (*rc.value)->render(view, RaycastStyle{}, 96, 96);
+  const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, 96, 96, prims);
+  const RaycastImage c = engine::render_cpu(f, view, RaycastStyle{}, 96, 96, prims);
+  std::size_t drawn = 0;
+  for (std::size_t i = 0; i < g.rgba.size(); ++i) drawn += g.rgba[i] != plain.rgba[i];
+  EXPECT_GT(drawn, 200u) << "the primitives are not drawn";
+  EXPECT_EQ(g.depth, plain.depth);
+  expect_gpu_matches_cpu(g, c, 1e3, "sphere with x-ray and translucent primitives");
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 TEST(Raycast, PngIsWrittenWholeAndReadable) {
   const std::string path = (std::filesystem::temp_directory_path() / "isotouch_test_raycast.png").string();
   std::vector<std::uint32_t> px(6 * 4, 0xff00ff00u);

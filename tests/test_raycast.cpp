@@ -998,7 +998,9 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       EXPECT_EQ(before_tile, 0u) << "pixels whose block starts before its tile";
       // The block pass does its job: nearer the hits than the tiles' starts on the whole
       // (with the eye outside the grid; from inside both start at the eye among active cells).
-      if (v.dist_m > 0.01) EXPECT_LT(block_ahead_vox, ahead_vox) << "block starts no nearer than the tiles'";
+      if (v.dist_m > 0.01) {
+        EXPECT_LT(block_ahead_vox, ahead_vox) << "block starts no nearer than the tiles'";
+      }
       std::size_t differ = 0;
       for (std::size_t i = 0; i < a.depth.size(); ++i) differ += a.depth[i] != b.depth[i] || a.rgba[i] != b.rgba[i];
       const std::string what = std::string(&f == fields ? "blobs" : "boxes") + ", tile starts, eye " +
@@ -1008,7 +1010,9 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       std::printf("%s: %zu hits\n", what.c_str(), hits(a));
       // The pass did its job, not only no harm: seen from far, most of the image's tiles miss
       // the grid and are left out.
-      if (v.dist_m >= 0.2) EXPECT_GT(culled, std::size_t(v.w * v.h) / 2) << what << ": tiles left out";
+      if (v.dist_m >= 0.2) {
+        EXPECT_GT(culled, std::size_t(v.w * v.h) / 2) << what << ": tiles left out";
+      }
       expect_gpu_matches_cpu(a, cpu, 1.0 / 0.8e-3, what.c_str());
     }
   }

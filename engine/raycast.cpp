@@ -47,6 +47,14 @@ static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
 static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 8u + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 static_assert(ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE == ISOTOUCH_RAYCAST_WG_X, "a tiled march workgroup is one tile");
+static_assert(ISOTOUCH_RAYCAST_TILE % ISOTOUCH_RAYCAST_BLOCK == 0u, "a tile is whole blocks");
+/// Blocks of pixels per tile (raycast_tiles.comp's block pass: one invocation each).
+constexpr std::uint32_t kBlocksPerTile =
+    (ISOTOUCH_RAYCAST_TILE / ISOTOUCH_RAYCAST_BLOCK) * (ISOTOUCH_RAYCAST_TILE / ISOTOUCH_RAYCAST_BLOCK);
+/// Tiles per workgroup of the block pass (raycast_args.comp sizes its dispatch so): a
+/// workgroup of WG_X invocations (on llvmpipe a small workgroup costs about as much as a full one).
+constexpr std::uint32_t kTilesPerBlockGroup = ISOTOUCH_RAYCAST_WG_X / kBlocksPerTile;
+static_assert(kTilesPerBlockGroup * kBlocksPerTile == ISOTOUCH_RAYCAST_WG_X);
 // The tile pass: its cone march and its cone interval (3 trips).
 static_assert(ISOTOUCH_RAYCAST_TILE_STEPS + 6u < 65535u);
 
@@ -488,6 +496,25 @@ PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::Rayca
   return finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
 }
 
+/// The overlay pass's primitives (binding 3): the ones its opaque loop reads (alpha 1, x-ray
+/// ones too), then the ones its blending loop reads (alpha < 1 or x-ray), each list in the
+/// caller's order, so each loop reads only its own (on llvmpipe a primitive a loop skips with
+/// `continue` costs its whole intersection anyway). An x-ray primitive of alpha 1 is in both.
+struct OverlayLists {
+  std::vector<gpu::RaycastPrim> prims;
+  std::uint32_t opaque = 0;  ///< the first list's length
+};
+OverlayLists overlay_lists(const std::vector<gpu::RaycastPrim>& prims) {
+  OverlayLists l;
+  // The shader's own tests, negated as it skips (a NaN alpha: in both, as it was).
+  for (const gpu::RaycastPrim& q : prims)
+    if (!(q.alpha < 1.0f)) l.prims.push_back(q);
+  l.opaque = std::uint32_t(l.prims.size());
+  for (const gpu::RaycastPrim& q : prims)
+    if (!(q.alpha >= 1.0f && !(q.pad0 > 0.0f))) l.prims.push_back(q);
+  return l;
+}
+
 /// The index-space box covering every active cell (cell_dist 0; cell c spans [c, c + 1]),
 /// or nullopt if there is none. Samples outside it are in inactive cells or outside the
 /// cells, where the field is the background: outside, else the border cells were active.
@@ -519,8 +546,8 @@ struct RayCaster::Impl {
   // The five passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   // tiles and the march from them (march_tiled), with args_tiles for its indirect dispatch.
-  ComputePipeline<gpu::RaycastPush> tiles, args_tiles, march_tiled, march_skip, march_plain, args, shade_lin, shade,
-      overlay;
+  ComputePipeline<gpu::RaycastPush> tiles, args_tiles, blocks, march_tiled, march_skip, march_plain, args, shade_lin,
+      shade, overlay;
   GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
@@ -530,10 +557,15 @@ struct RayCaster::Impl {
   // hit list, hit sample.
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
-  GpuBuffer tile_t, tile_list;             // per tile of pixels: where its rays' march starts; listed tiles
-  GpuBuffer tile_counter;                  // RaycastCounter: listed tiles, the tiled march's dispatch
+  // Binding 13: per tile of pixels where its rays' march can start, then per listed tile
+  // (list order) its blocks' starts; binding 15: the listed tiles.
+  GpuBuffer tile_t, tile_list;
+  // Two RaycastCounters: listed tiles and the tiled march's dispatch; at offset 16 the
+  // block pass's dispatch (raycast_args.comp).
+  GpuBuffer tile_counter;
   std::size_t pixels = 0, tile_count = 0;
   bool last_tiles = false;                 // the last frame drew with tile starts
+  int last_width = 0, last_height = 0;     // the last frame's size
   double mag = 0;  // the cell distances' margin scale (value_magnitude) as last computed
   /// Index-space box of the active cells (nullopt: none; skipping then marches nothing).
   std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active;
@@ -554,12 +586,20 @@ struct RayCaster::Impl {
     return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2]),
             quads ? 1u : 0u, tiled ? 1u : 0u};
   }
+  /// The tile pass's (5: the block pass; 6: its workgroup size, one tile's blocks for the block pass).
+  static std::vector<std::uint32_t> tile_spec(const RaycastField& f, bool quads, bool block_pass) {
+    std::vector<std::uint32_t> s = spec(f, 0, quads, block_pass);
+    s.push_back(block_pass ? kBlocksPerTile * kTilesPerBlockGroup : ISOTOUCH_RAYCAST_WG_X);
+    return s;
+  }
   Impl(VulkanContext& c, RaycastField f, bool q)
       : ctx(c),
         field(std::move(f)),
         use_quads(q),
-        tiles(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast tiles", 1u, spec(field, 0, q), kTexel),
-        args_tiles(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args (tiles)", 1u, {1u}, kTexel),
+        tiles(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast tiles", 1u, tile_spec(field, q, false), kTexel),
+        args_tiles(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args (tiles)", 1u, {1u, kTilesPerBlockGroup},
+                   kTexel),
+        blocks(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast blocks", 1u, tile_spec(field, q, true), kTexel),
         march_tiled(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (tile starts)", 1u,
                     spec(field, 1, q, true), kTexel),
         march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1, q),
@@ -570,9 +610,10 @@ struct RayCaster::Impl {
                   spec(field, 1, q), kTexel),
         shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0, q), kTexel),
         overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0, q), kTexel),
-        arena(c, 6, 6 * ISOTOUCH_RAYCAST_BINDINGS),
+        arena(c, 7, 7 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 5) {
-    for (auto* p : {&tiles, &args_tiles, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay}) p->set_texel_vec4(kVec4);
+    for (auto* p : {&tiles, &args_tiles, &blocks, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay})
+      p->set_texel_vec4(kVec4);
   }
 };
 
@@ -677,14 +718,14 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
     impl->quads = std::move(*qb.value);
   }
   const std::size_t pb = sizeof(gpu::RaycastParams);
-  const std::size_t qb = sizeof(gpu::RaycastPrim) * ISOTOUCH_RAYCAST_MAX_PRIMS;
+  const std::size_t qb = sizeof(gpu::RaycastPrim) * 2 * ISOTOUCH_RAYCAST_MAX_PRIMS;  // the overlay's two lists
   for (auto [buf, bytes, intent, what] :
        {std::tuple{&impl->params, pb, MemoryIntent::DeviceLocal, "raycast params"},
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
         std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
         std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"},
         std::tuple{&impl->counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
-        std::tuple{&impl->tile_counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast tile counter"}}) {
+        std::tuple{&impl->tile_counter, 2 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast tile counter"}}) {
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) return R::fail(r.error);
     *buf = std::move(*r.value);
@@ -724,12 +765,15 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   const std::uint32_t tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
   const std::size_t tile_count = std::size_t(tiles_x) * tiles_y;
   if (tile_count != m.tile_count) {
-    m.tile_t = make_buffer_or_throw(m.ctx, tile_count * 4, MemoryIntent::DeviceLocal, "raycast tile starts");
+    m.tile_t = make_buffer_or_throw(m.ctx, tile_count * (1 + kBlocksPerTile) * 4, MemoryIntent::DeviceLocal,
+                                    "raycast tile and block starts");
     m.tile_list = make_buffer_or_throw(m.ctx, tile_count * 4, MemoryIntent::DeviceLocal, "raycast tile list");
     m.tile_count = tile_count;
   }
   std::memcpy(m.params_up.mapped(), &P, sizeof(P));
-  if (!prims.empty()) std::memcpy(m.prims_up.mapped(), prims.data(), prims.size() * sizeof(gpu::RaycastPrim));
+  const OverlayLists lists = overlay_lists(prims);
+  if (!lists.prims.empty())
+    std::memcpy(m.prims_up.mapped(), lists.prims.data(), lists.prims.size() * sizeof(gpu::RaycastPrim));
   gpu::RaycastPush push{};
   push.flags = style_flags(style);
   push.prim_count = std::uint32_t(prims.size());
@@ -738,7 +782,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   VkCommandBuffer cmd = m.ctx.begin_commands();
   m.timer.record_reset(cmd);
   record_copy(cmd, m.params_up, m.params, sizeof(P));
-  if (!prims.empty()) record_copy(cmd, m.prims_up, m.prims, prims.size() * sizeof(gpu::RaycastPrim));
+  if (!lists.prims.empty()) record_copy(cmd, m.prims_up, m.prims, lists.prims.size() * sizeof(gpu::RaycastPrim));
   const std::initializer_list<BufferRange> ranges = {
       {m.params.handle(), 0, m.params.size()}, {m.values.handle(), 0, m.values.size()},
       {m.cells.handle(), 0, m.cells.size()},   {m.prims.handle(), 0, m.prims.size()},
@@ -746,7 +790,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
-      {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * 4},
+      {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * (1 + kBlocksPerTile) * 4},
       {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4}};
   // The march covers only where the volume's box (skipping: the active cells' box) projects.
   PixelRect rect;
@@ -813,6 +857,10 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     m.args_tiles.push(cmd, push);
     vkCmdDispatch(cmd, 1, 1, 1);
     barrier_compute_to_indirect(cmd);
+    m.blocks.bind(cmd, m.arena, ranges);  // the listed tiles' blocks: kTilesPerBlockGroup tiles per workgroup
+    m.blocks.push(cmd, push);
+    vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), sizeof(gpu::RaycastCounter));
+    barrier_compute_to_compute(cmd);
   }
   m.timer.mark(cmd, 4);
   // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
@@ -848,6 +896,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     gpu::RaycastPush overlay_push = push;
     overlay_push.x0 = od.x0;
     overlay_push.y0 = od.y0;
+    overlay_push.prim_count = lists.opaque << 16 | std::uint32_t(lists.prims.size());
     barrier_compute_to_compute(cmd);
     m.overlay.bind(cmd, m.arena, ranges);
     m.overlay.push(cmd, overlay_push);
@@ -877,6 +926,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.cache_flags = push.flags;
   m.cache_orect = orect;
   m.last_tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u;
+  m.last_width = width;
+  m.last_height = height;
   m.dirty_lo = {1, 1, 1};
   m.dirty_hi = {0, 0, 0};
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
@@ -901,6 +952,41 @@ std::vector<float> RayCaster::last_tile_starts() {
   m.ctx.submit_and_wait(cmd);
   std::vector<float> out(m.tile_count);
   std::memcpy(out.data(), down.mapped(), m.tile_count * 4);
+  return out;
+}
+
+std::vector<float> RayCaster::last_block_starts() {
+  Impl& m = *impl_;
+  if (!m.last_tiles) return {};
+  const std::size_t T = ISOTOUCH_RAYCAST_TILE, B = ISOTOUCH_RAYCAST_BLOCK, side = T / B;
+  const std::size_t tiles_x = (m.last_width + T - 1) / T, blocks_x = (m.last_width + B - 1) / B;
+  const std::size_t blocks_y = (m.last_height + B - 1) / B;
+  const std::size_t t_bytes = m.tile_count * (1 + kBlocksPerTile) * 4, l_bytes = m.tile_count * 4;
+  GpuBuffer down = make_buffer_or_throw(m.ctx, t_bytes + l_bytes + sizeof(gpu::RaycastCounter), MemoryIntent::Readback,
+                                        "raycast block starts readback");
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  const VkBufferCopy regions[3] = {{0, 0, t_bytes}, {0, t_bytes, l_bytes}, {0, t_bytes + l_bytes, sizeof(gpu::RaycastCounter)}};
+  vkCmdCopyBuffer(cmd, m.tile_t.handle(), down.handle(), 1, &regions[0]);
+  vkCmdCopyBuffer(cmd, m.tile_list.handle(), down.handle(), 1, &regions[1]);
+  vkCmdCopyBuffer(cmd, m.tile_counter.handle(), down.handle(), 1, &regions[2]);
+  barrier_transfer_to_host(cmd);
+  m.ctx.submit_and_wait(cmd);
+  const auto* bytes = static_cast<const std::uint8_t*>(down.mapped());
+  gpu::RaycastCounter ctr;
+  std::memcpy(&ctr, bytes + t_bytes + l_bytes, sizeof ctr);
+  std::vector<float> starts(m.tile_count * (1 + kBlocksPerTile));
+  std::vector<std::uint32_t> list(m.tile_count);
+  std::memcpy(starts.data(), bytes, t_bytes);
+  std::memcpy(list.data(), bytes + t_bytes, l_bytes);
+  std::vector<float> out(blocks_x * blocks_y, std::numeric_limits<float>::infinity());
+  for (std::size_t j = 0; j < std::min<std::size_t>(ctr.count, m.tile_count); ++j) {
+    const std::size_t tx = list[j] & 0xffffu, ty = list[j] >> 16;
+    if (ty * tiles_x + tx >= m.tile_count) continue;
+    for (std::size_t i = 0; i < kBlocksPerTile; ++i) {
+      const std::size_t bx = tx * side + i % side, by = ty * side + i / side;
+      if (bx < blocks_x && by < blocks_y) out[by * blocks_x + bx] = starts[m.tile_count + j * kBlocksPerTile + i];
+    }
+  }
   return out;
 }
 

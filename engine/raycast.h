@@ -221,6 +221,10 @@ class RayCaster {
   /// +inf for a tile not marched (none can be, or outside the pixels that frame drew).
   /// Empty if that frame drew without tile starts. Reads the device buffer back (tests).
   std::vector<float> last_tile_starts();
+  /// The last render()'s block starts (blocks of ISOTOUCH_RAYCAST_BLOCK pixels, x fastest):
+  /// the same claim for the block's rays, from the block pass over the listed tiles; +inf
+  /// for a block of a tile not listed. Empty without tile starts. Reads back (tests).
+  std::vector<float> last_block_starts();
 
   /// What one update() did.
   struct UpdateStats {

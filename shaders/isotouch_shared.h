@@ -173,6 +173,9 @@ struct BrickMinMaxPush {
 // starts the march runs one workgroup (TILE^2 = WG_X invocations) per listed tile.
 #define ISOTOUCH_RAYCAST_TILE 8u
 #define ISOTOUCH_RAYCAST_TILE_STEPS 128u
+// Block starts: each listed tile's blocks of BLOCK x BLOCK pixels get a start of their own
+// (the same cone march from the tile's start, a narrower cone: closer to the surface).
+#define ISOTOUCH_RAYCAST_BLOCK 4u
 #define ISOTOUCH_RAYCAST_SKIP 1u      // flags: empty-space skipping (cell distances, binding 2; the
                                       // CPU reference reads it, the GPU picks its march pipeline)
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
@@ -278,7 +281,8 @@ struct RaycastPrim {
 // Push constants: what changes between frames of the same parameters.
 struct RaycastPush {
   uint flags;        // ISOTOUCH_RAYCAST_SKIP | ISOTOUCH_RAYCAST_CLIP
-  uint prim_count;   // primitives in binding 3 (<= ISOTOUCH_RAYCAST_MAX_PRIMS)
+  uint prim_count;   // primitives given (<= ISOTOUCH_RAYCAST_MAX_PRIMS); overlay pass: binding 3's
+                     //   two lists, opaque length << 16 | total (raycast_overlay.comp)
   uint x0;           // march pass: pixel of its invocation (0, 0); the dispatch covers only
   uint y0;           //   the pixels the volume's box (skipping: the active cells' box) can
                      //   project into (engine/raycast.cpp); tile pass: tile of (0, 0)

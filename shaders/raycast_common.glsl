@@ -22,8 +22,9 @@
 // chessboard distance D from the nearest active cell the march jumps to the first sample
 // past the box of cells within D - 1 of it. A skipped sample is outside either way, so
 // skipping on and off give the same image. On a SIMD CPU device every lane of a vector runs
-// each iteration of a loop until all are done; the inner loop of march_skip (byte loads
-// only) runs the jumps, the outer one evaluates the field where a cell is active. llvmpipe
+// each iteration of a loop until all are done; march_skip's first loop (byte loads only)
+// runs every lane's jumps to its first active cell, the second one evaluates the field
+// where a cell is active and jumps where it is not. llvmpipe
 // ends every loop of an invocation after 65535 trips in all (per 8-lane vector): a march
 // stopped that way says so, and the shade pass finishes it (a new dispatch, a new budget).
 //
@@ -294,48 +295,74 @@ uint cell_dist(ivec3 c) {
 }
 
 // The march with empty-space skipping: the same lattice samples k in [0, K] as march(), in
-// order. At sample k the byte D of its cell (floor of the same point field() reads; D = 0
-// outside the cells) decides: D = 0 (active): field() as in march(); D >= 1: no cell within
-// D - 1 cells of it is active, so every sample inside the box of cells [c - D + 1, c + D - 1]
-// is outside; the march goes on at the first sample at or past the box's exit plane on the
-// ray's side, drawn in by `eps` voxels [index space] (the rounding of the lattice, of
-// ray_point and of the exit; the coordinates along the ray only move toward the exit:
+// order. At sample k the byte D of its cell (floor of the same point field() reads)
+// decides: D = 0 (active): field() as in march(); D >= 1: no cell within D - 1 cells of it
+// is active, so every sample inside the box of cells [c - D + 1, c + D - 1] is outside; the
+// march goes on at the first sample at or past the box's exit plane on the ray's side,
+// drawn in by `eps` voxels [index space] (the rounding of the lattice, of ray_point, of the
+// exit and of the step count: the coordinates along the ray only move toward the exit:
 // float + and * are monotonic). Sample k is skipped too (its cell cannot be inside). k
-// grows by at least 1 per iteration: at most K + 1 iterations. Returns as march(): a
-// skipped sample is outside either way. The caller may start at k > 0 and end at K below
+// grows by at least 1 per iteration: at most K + 1 iterations per loop. Returns as march():
+// a skipped sample is outside either way. The caller may start at k > 0 and end at K below
 // march()'s where the samples left out lie outside the active cells' box.
+//
+// Cell index: cell_dist() clamps it into the cells [-1, n]. A sample outside them (only by
+// the rounding of a point on the sampling box's face) is then read as the nearest face
+// cell c': if the background is inside, every face cell is active (D = 0: the field says
+// background, as field() there does); otherwise the cells past the range are inactive
+// background and the box of cells within D - 1 of the sample's own cell lies within the box
+// around c' or past the range: the jump stays safe.
+//
+// Two loops (on llvmpipe a vector of 8 lanes runs each loop trip until all its lanes are
+// done): first the jumps up to each lane's first active cell (every lane approaches at
+// once), then one loop that per trip either jumps or evaluates the field, so a lane that
+// meets inactive cells again (a grazing ray, a speck of noise) no longer holds the others'
+// evaluations up for an inner loop of its own (as a loop nested in the evaluations did).
+
+// The sample after the box of cells within D - 1 (D >= 1) of sample k's cell (lower corner
+// fl): the first at or past its exit plane, at least k + 1; K + 1 past the ray's end.
+int jump_past(vec3 e, vec3 d, float t0, float inv_h, int k, int K, float eps, vec3 fl, uint D) {
+  precise float r = float(D) - eps;
+  precise vec3 hi = fl + r;          // exit plane of a ray going up an axis
+  precise vec3 lo = fl - (r - 1.0);  // and going down
+  vec3 plane = mix(lo, hi, greaterThan(d, vec3(0.0)));
+  precise vec3 tp = (plane - e) * g_inv_d;
+  tp = mix(tp, vec3(kInf), equal(d, vec3(0.0)));
+  float t_exit = min(min(tp.x, tp.y), tp.z);
+  // (times 1 / h: at most an ulp from the quotient, i.e. a sample 1e-7 k h short of the
+  // plane counts as past it; the plane is drawn in by eps >= 1/32 voxel, far more)
+  precise float kr = (t_exit - t0) * inv_h;
+  return max(k + 1, int(min(ceil(kr), float(K + 1))));
+}
+
 int march_skip(vec3 e, vec3 d, float t0, float t1, float h, int k, int K, float eps) {
-  while (k <= K) {
-    vec3 p;
-    // Inactive cells: jump (an inner loop of byte loads only).
-    while (true) {
-      float t = lattice_t(t0, t1, h, k);
-      p = ray_point(e, d, t);
-      vec3 fl = floor(p);
-      ivec3 c = ivec3(fl);
-      bool in_cells = all(greaterThanEqual(c, ivec3(-1))) && c.x <= NX && c.y <= NY && c.z <= NZ;
-      uint D = in_cells ? cell_dist(c) : 0u;
-      if (D == 0u) break;
-      precise float r = float(D) - eps;
-      precise vec3 hi = fl + r;          // exit plane of a ray going up an axis
-      precise vec3 lo = fl - (r - 1.0);  // and going down
-      vec3 plane = mix(lo, hi, greaterThan(d, vec3(0.0)));
-      precise vec3 tp = (plane - e) * g_inv_d;
-      tp = mix(tp, vec3(kInf), equal(d, vec3(0.0)));
-      float t_exit = min(min(tp.x, tp.y), tp.z);
-      precise float kr = (t_exit - t0) / h;
-      k = max(k + 1, int(min(ceil(kr), float(K + 1))));
-      if (k > K) return -1;
-    }
-    // An active cell (or the sample where llvmpipe's loop budget stopped the inner loop: an
-    // inactive cell's sample is outside, so evaluating it is harmless): the field.
-    if (excess(field(p)) > 0.0) return k;
-    ++k;
+  precise float inv_h = 1.0 / h;
+  // Jumps up to the first active cell.
+  while (true) {
+    vec3 p = ray_point(e, d, lattice_t(t0, t1, h, k));
+    vec3 fl = floor(p);
+    uint D = cell_dist(ivec3(fl));
+    if (D == 0u) break;
+    k = jump_past(e, d, t0, inv_h, k, K, eps, fl, D);
+    if (k > K) return -1;
   }
-  // The loops end with k <= K only when llvmpipe's loop budget ran out (65535 trips per
-  // invocation and vector: the inner and outer loops together can take up to about
-  // 2 (K + 1) trips, more with lanes out of step): the samples before k are outside, the
-  // rest unknown. -(k + 2): the caller finishes the ray from k with the plain march.
+  // From there, sample by sample in active cells, jumps across inactive ones. (Where
+  // llvmpipe's loop budget stopped the first loop, this one goes on from that sample.)
+  while (k <= K) {
+    vec3 p = ray_point(e, d, lattice_t(t0, t1, h, k));
+    vec3 fl = floor(p);
+    uint D = cell_dist(ivec3(fl));
+    if (D == 0u) {
+      if (excess(field(p)) > 0.0) return k;
+      ++k;
+    } else {
+      k = jump_past(e, d, t0, inv_h, k, K, eps, fl, D);
+    }
+  }
+  // The loop ends with k <= K only when llvmpipe's loop budget ran out (65535 trips per
+  // invocation and vector; the two loops together can take up to 2 (K + 1) trips): the
+  // samples before k are outside, the rest unknown. -(k + 2): the caller finishes the ray
+  // from k with the plain march.
   return k <= K ? -(k + 2) : -1;
 }
 

@@ -20,18 +20,25 @@ layout(constant_id = 0) const bool SKIP_EMPTY = true;
 // Specialization constant 5 (with SKIP_EMPTY): tile starts. One workgroup per tile listed
 // by raycast_tiles.comp (indirect dispatch; workgroup (x, y) of a grid groups_x wide is
 // list entry y groups_x + x), invocation i at pixel (i % TILE, i / TILE) of its tile: the 8
-// lanes of a vector are one tile row.
+// lanes of a vector are one tile row. Each pixel starts from its block's start (the block
+// pass of raycast_tiles.comp, for the same list entry).
 layout(constant_id = 5) const bool TILED = false;
 
 void main() {
   uvec2 px;
+  uint start_at = 0u;  // TILED: the entry of binding 13 with this pixel's block start
   if (TILED) {
     uint j = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
     if (j >= tctr.count) return;
     uint tl = tile_list[j];
     uint i = gl_LocalInvocationID.x;
-    px = uvec2(tl & 0xffffu, tl >> 16) * ISOTOUCH_RAYCAST_TILE +
-         uvec2(i % ISOTOUCH_RAYCAST_TILE, i / ISOTOUCH_RAYCAST_TILE);
+    uvec2 in_tile = uvec2(i % ISOTOUCH_RAYCAST_TILE, i / ISOTOUCH_RAYCAST_TILE);
+    px = uvec2(tl & 0xffffu, tl >> 16) * ISOTOUCH_RAYCAST_TILE + in_tile;
+    const uint per_side = ISOTOUCH_RAYCAST_TILE / ISOTOUCH_RAYCAST_BLOCK;
+    uint tiles = ((P.width + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE) *
+                 ((P.height + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE);
+    uvec2 block = in_tile / ISOTOUCH_RAYCAST_BLOCK;
+    start_at = tiles + j * per_side * per_side + block.y * per_side + block.x;
   } else {
     px = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
   }
@@ -60,12 +67,12 @@ void main() {
                               vec3(P.act_hi_x, P.act_hi_y, P.act_hi_z));
     // (clamped in float first: a far eye must not overflow the int conversion)
     int k0 = int(clamp(floor((ta.x - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1)));
-    // Tile starts: no sample of this ray before its tile's t_tile can be inside (a finite
-    // t_tile: the tile is listed); start two samples before it (the rounding of the division).
+    // Block starts: no sample of this ray before its block's t_block can be inside
+    // (raycast_tiles.comp; +inf: none can be); start two samples before it (the rounding of
+    // the division).
     if (TILED) {
-      uint tiles_x = (P.width + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
-      float t_tile = tile_t[(px.y / ISOTOUCH_RAYCAST_TILE) * tiles_x + px.x / ISOTOUCH_RAYCAST_TILE];
-      k0 = max(k0, int(clamp(floor((t_tile - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1))));
+      float t_block = tile_t[start_at];
+      k0 = max(k0, int(clamp(floor((t_block - r.t0) / r.h) - 1.0, 0.0, float(r.K + 1))));
     }
     int k1 = int(clamp(ceil((ta.y - r.t0) / r.h) + 1.0, -1.0, float(r.K)));
     k_hit = ta.x <= ta.y ? march_skip(r.e, r.d, r.t0, r.t1, r.h, k0, k1, eps) : -1;

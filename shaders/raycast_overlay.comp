@@ -21,9 +21,12 @@ void main() {
   vec3 colour = t_hit >= 0.0 ? vec3(lin_r[pix], lin_g[pix], lin_b[pix]) : vec3(P.bg_r, P.bg_g, P.bg_b);
   float t_best = t_hit >= 0.0 ? t_hit : kInf;
   // Opaque primitives by depth, then translucent ones (and x-ray: opaque primitives hidden
-  // behind the surface, shown faintly) blended in order.
-  uint np = min(pc.prim_count, ISOTOUCH_RAYCAST_MAX_PRIMS);
-  for (uint i = 0u; i < np; ++i) {
+  // behind the surface, shown faintly) blended in order. Binding 3 holds two lists
+  // (engine/raycast.cpp): the opaque loop's (alpha 1) and then the blending loop's (alpha < 1
+  // or x-ray); prim_count: the first's length << 16 | both lengths.
+  uint np = min(pc.prim_count & 0xffffu, 2u * ISOTOUCH_RAYCAST_MAX_PRIMS);
+  uint n_opaque = min(pc.prim_count >> 16, np);
+  for (uint i = 0u; i < n_opaque; ++i) {
     RaycastPrim q = prims[i];
     if (q.alpha < 1.0) continue;
     vec4 h = intersect_prim(q, eye, dir);
@@ -32,7 +35,7 @@ void main() {
       colour = shade(vec3(q.cr, q.cg, q.cb), h.yzw, dir);
     }
   }
-  for (uint i = 0u; i < np; ++i) {
+  for (uint i = n_opaque; i < np; ++i) {
     RaycastPrim q = prims[i];
     bool xray = q.pad0 > 0.0;
     if (q.alpha >= 1.0 && !xray) continue;

@@ -37,13 +37,15 @@ void main() {
   float ta = k > 0 ? lattice_t(r.t0, r.t1, r.h, k - 1) : r.t0;
   float tb = k > 0 ? lattice_t(r.t0, r.t1, r.h, k) : r.t0;
   float t_hit = refine(r.e, r.d, ta, tb);
-  vec3 colour;
+  // The cut face is flat (the clip plane's normal, cap colour): one shade() of whichever
+  // applies (on llvmpipe both arms of an `if` run, so two calls would cost two).
+  vec3 n = surface_normal_block(ray_point(r.e, r.d, t_hit));  // the block holds the hit's cell
+  vec3 albedo = vec3(P.surf_r, P.surf_g, P.surf_b);
   if (cap) {
-    colour = shade(vec3(P.cap_r, P.cap_g, P.cap_b), vec3(P.clip_nx, P.clip_ny, P.clip_nz), r.dir);
-  } else {
-    vec3 n = surface_normal_block(ray_point(r.e, r.d, t_hit));  // the block holds the hit's cell
-    colour = shade(vec3(P.surf_r, P.surf_g, P.surf_b), n, r.dir);
+    n = vec3(P.clip_nx, P.clip_ny, P.clip_nz);
+    albedo = vec3(P.cap_r, P.cap_g, P.cap_b);
   }
+  vec3 colour = shade(albedo, n, r.dir);
   depth[pix] = t_hit;
   if (WRITE_LINEAR) {
     lin_r[pix] = colour.r;

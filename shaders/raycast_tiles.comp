@@ -7,7 +7,9 @@
 // invocations runs all of a pass's straight-line code, a pixel that returns early too: only
 // a smaller dispatch saves it) and starts each pixel's skipping march two samples before
 // t_tile, so it finds the same first inside sample with fewer distance jumps: the picture
-// is unchanged.
+// is unchanged. A second dispatch of this shader (the block pass, BLOCKS below) refines
+// each listed tile's start per block of ISOTOUCH_RAYCAST_BLOCK^2 pixels, and the march
+// starts from its block's.
 //
 // Cone stepping: every ray of the tile has a unit direction within `chord` (Euclidean
 // distance between unit vectors) of the tile's centre direction c, the largest over the
@@ -30,9 +32,23 @@
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 
-layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = 1, local_size_z = 1) in;
+// The workgroup size: specialization constant 6 (WG_X for tiles, the blocks of one tile for BLOCKS).
+layout(local_size_x_id = 6, local_size_y = 1, local_size_z = 1) in;
 
 #include "raycast_common.glsl"
+
+// Specialization constant 5: the block pass, over the tiles listed by the tile pass (a
+// dispatch of raycast_args.comp: whole tiles per workgroup), one invocation per block of
+// ISOTOUCH_RAYCAST_BLOCK^2 pixels (x fastest): the same cone march for the block's rays, from its tile's start (no
+// sample of the block's rays before it can be inside: they are some of the tile's rays),
+// with a cone about TILE / BLOCK times narrower, so it stops that much nearer the first
+// active cells. Written after the tiles' starts: entry tile_count + BLOCKS_PER_TILE j + i
+// of binding 13 for block i of list entry j (the march's workgroup j reads them).
+layout(constant_id = 5) const bool BLOCKS = false;
+const uint kBlocksPerSide = ISOTOUCH_RAYCAST_TILE / ISOTOUCH_RAYCAST_BLOCK;
+// The block pass's cone march steps at most (it starts from its tile's start: the first
+// steps gain the most).
+const int BLOCK_STEPS = 8;
 
 // The unit direction of the image-plane offset (sx, sy) [pixels], as make_ray computes it.
 vec3 plane_dir(float sx, float sy) {
@@ -65,16 +81,12 @@ vec2 cone_interval(vec3 e, vec3 dc, float w, vec3 lo, vec3 hi) {
   return vec2(tin, tout);
 }
 
-void main() {
-  uvec2 tile = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
-  uint tiles_x = (P.width + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
-  uint tiles_y = (P.height + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
-  if (tile.x >= tiles_x || tile.y >= tiles_y) return;
-  init_globals();
+// The cone march of the pixels [pix0, pix0 + span] per axis from t_from (no sample of
+// their rays before t_from can be inside): the start of those pixels (+inf: none can be inside).
+float cone_start(uvec2 pix0, float span, float t_from, int steps) {
   // The corner pixels' image-plane offsets (make_ray's sx, sy) and the centre between them.
-  float span = float(ISOTOUCH_RAYCAST_TILE - 1u);
-  float sx0 = (float(tile.x * ISOTOUCH_RAYCAST_TILE) + 0.5) - 0.5 * float(P.width);
-  float sy0 = 0.5 * float(P.height) - (float(tile.y * ISOTOUCH_RAYCAST_TILE) + 0.5);
+  float sx0 = (float(pix0.x) + 0.5) - 0.5 * float(P.width);
+  float sy0 = 0.5 * float(P.height) - (float(pix0.y) + 0.5);
   vec3 c = plane_dir(sx0 + 0.5 * span, sy0 - 0.5 * span);
   float ch = max(max(chord(plane_dir(sx0, sy0), c), chord(plane_dir(sx0 + span, sy0), c)),
                  max(chord(plane_dir(sx0, sy0 - span), c), chord(plane_dir(sx0 + span, sy0 - span), c)));
@@ -93,11 +105,11 @@ void main() {
   float mag = max(max(max(abs(e.x), abs(e.y)), abs(e.z)), max(max(float(P.nx), float(P.ny)), float(P.nz)));
   precise float eps = 0.03125 + 4e-6 * (5.0 * mag + 2.0);
   vec2 tc = cone_interval(e, dc, w, lo - eps, hi + eps);
-  float t_tile = kInf;
+  float t_start = kInf;
   if (tc.x <= tc.y) {
-    float t = tc.x;
-    for (int i = 0; i < int(ISOTOUCH_RAYCAST_TILE_STEPS); ++i) {
-      if (t > tc.y) {  // past A: no sample of the tile can be inside
+    float t = max(tc.x, t_from);
+    for (int i = 0; i < steps; ++i) {
+      if (t > tc.y) {  // past A: no sample of these rays can be inside
         t = kInf;
         break;
       }
@@ -109,8 +121,32 @@ void main() {
       precise float dt = s / (dinf + w);
       t = t + dt;
     }
-    t_tile = t;
+    t_start = t;
   }
+  return t_start;
+}
+
+void main() {
+  uint tiles_x = (P.width + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
+  uint tiles_y = (P.height + ISOTOUCH_RAYCAST_TILE - 1u) / ISOTOUCH_RAYCAST_TILE;
+  init_globals();
+  if (BLOCKS) {
+    const uint per_tile = kBlocksPerSide * kBlocksPerSide;
+    uint j = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * (gl_WorkGroupSize.x / per_tile) +
+             gl_LocalInvocationID.x / per_tile;
+    if (j >= tctr.count) return;
+    uint tl = tile_list[j];
+    uvec2 tile = uvec2(tl & 0xffffu, tl >> 16);
+    uint i = gl_LocalInvocationID.x % per_tile;
+    uvec2 pix0 = tile * ISOTOUCH_RAYCAST_TILE + uvec2(i % kBlocksPerSide, i / kBlocksPerSide) * ISOTOUCH_RAYCAST_BLOCK;
+    float t_tile = tile_t[tile.y * tiles_x + tile.x];
+    tile_t[tiles_x * tiles_y + j * kBlocksPerSide * kBlocksPerSide + i] =
+        cone_start(pix0, float(ISOTOUCH_RAYCAST_BLOCK - 1u), t_tile, BLOCK_STEPS);
+    return;
+  }
+  uvec2 tile = gl_GlobalInvocationID.xy + uvec2(pc.x0, pc.y0);
+  if (tile.x >= tiles_x || tile.y >= tiles_y) return;
+  float t_tile = cone_start(tile * ISOTOUCH_RAYCAST_TILE, float(ISOTOUCH_RAYCAST_TILE - 1u), 0.0, int(ISOTOUCH_RAYCAST_TILE_STEPS));
   tile_t[tile.y * tiles_x + tile.x] = t_tile;
   if (t_tile != kInf) tile_list[atomicAdd(tctr.count, 1u)] = (tile.y << 16) | tile.x;
 }

@@ -630,6 +630,34 @@ TEST(Raycast, ProbePrimitivesAreDrawn) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
+// X-ray and translucent primitives: an opaque x-ray sphere behind the surface (shown
+// faintly), one in front of it (drawn opaque), a translucent disc across
+// both and a translucent sphere: the overlay pass blends each once, in order, as the CPU
+// reference does (its two loops read two lists of the primitives: engine/raycast.cpp).
+TEST(Raycast, XrayAndTranslucentPrimitivesMatchCpu) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  const Vec3 front = s.centre() + Vec3{0, -s.r_m, 0};  // the surface point facing the eye
+  const std::vector<gpu::RaycastPrim> prims = {
+      engine::prim_sphere(front + Vec3{0.004, 0, 0}, 0.006, {0.9f, 0.2f, 0.2f}, 0.5f, true),   // translucent x-ray
+      engine::prim_sphere(front + Vec3{-0.008, 0.014, 0}, 0.01, {0.95f, 0.8f, 0.1f}, 1.0f, true), // behind
+      engine::prim_disc(front, {0, -1, 0}, 0.012, {0.2f, 0.75f, 0.95f}, 0.4f),
+      engine::prim_sphere(front + Vec3{0.006, -0.004, 0.004}, 0.003, {0.15f, 0.8f, 0.25f}, 1.0f, true),
+      engine::prim_sphere(front + Vec3{0, -0.002, -0.006}, 0.005, {0.3f, 0.9f, 0.4f}, 0.35f)};
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  const RaycastImage plain = (*rc.value)->render(view, RaycastStyle{}, 96, 96);
+  const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, 96, 96, prims);
+  const RaycastImage c = engine::render_cpu(f, view, RaycastStyle{}, 96, 96, prims);
+  std::size_t drawn = 0;
+  for (std::size_t i = 0; i < g.rgba.size(); ++i) drawn += g.rgba[i] != plain.rgba[i];
+  EXPECT_GT(drawn, 200u) << "the primitives are not drawn";
+  EXPECT_EQ(g.depth, plain.depth);
+  expect_gpu_matches_cpu(g, c, 1e3, "sphere with x-ray and translucent primitives");
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 TEST(Raycast, PngIsWrittenWholeAndReadable) {
   const std::string path = (std::filesystem::temp_directory_path() / "isotouch_test_raycast.png").string();
   std::vector<std::uint32_t> px(6 * 4, 0xff00ff00u);
@@ -941,23 +969,38 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       // cell), so no hit may lie before its tile's start (0.05 voxel for rounding).
       (*rc.value)->render(view, on, v.w, v.h);  // the tile starts of that frame (b had none)
       const std::vector<float> starts = (*rc.value)->last_tile_starts();
+      const std::vector<float> block_starts = (*rc.value)->last_block_starts();
       const int T = int(ISOTOUCH_RAYCAST_TILE), tiles_x = (v.w + T - 1) / T;
+      const int B = int(ISOTOUCH_RAYCAST_BLOCK), blocks_x = (v.w + B - 1) / B;
       ASSERT_EQ(starts.size(), std::size_t(tiles_x) * std::size_t((v.h + T - 1) / T));
-      std::size_t late = 0, culled = 0;
-      double ahead_vox = 0;  // how far before the hits the starts are, in voxels (mean)
+      ASSERT_EQ(block_starts.size(), std::size_t(blocks_x) * std::size_t((v.h + B - 1) / B));
+      std::size_t late = 0, late_block = 0, culled = 0, before_tile = 0;
+      double ahead_vox = 0, block_ahead_vox = 0;  // how far before the hits the starts are, in voxels (mean)
       for (int py = 0; py < v.h; ++py)
         for (int px = 0; px < v.w; ++px) {
           const float depth = cpu.depth[std::size_t(py) * std::size_t(v.w) + std::size_t(px)];
           const float start = starts[std::size_t(py / T) * std::size_t(tiles_x) + std::size_t(px / T)];
+          const float block = block_starts[std::size_t(py / B) * std::size_t(blocks_x) + std::size_t(px / B)];
           culled += !(start < std::numeric_limits<float>::infinity());
+          before_tile += block < start;  // a block's rays are some of its tile's: never earlier
           if (depth < 0) continue;
           const double vpm = engine::voxels_per_metre(f.grid, engine::pixel_direction(view, v.w, v.h, px, py));
           late += double(start) > double(depth) + 0.05 / vpm;
+          late_block += double(block) > double(depth) + 0.05 / vpm;
           ahead_vox += (double(depth) - double(start)) * vpm;
+          block_ahead_vox += (double(depth) - double(block)) * vpm;
         }
-      std::printf("%zu of %d pixels in tiles left out; starts %.2f voxels before the hits (mean)\n", culled, v.w * v.h,
-                  ahead_vox / double(std::max<std::size_t>(hits(cpu), 1)));
+      const double n_hits = double(std::max<std::size_t>(hits(cpu), 1));
+      std::printf("%zu of %d pixels in tiles left out; tile starts %.2f, block starts %.2f voxels before the hits (mean)\n",
+                  culled, v.w * v.h, ahead_vox / n_hits, block_ahead_vox / n_hits);
       EXPECT_EQ(late, 0u) << "hit pixels whose tile starts past the hit";
+      EXPECT_EQ(late_block, 0u) << "hit pixels whose block starts past the hit";
+      EXPECT_EQ(before_tile, 0u) << "pixels whose block starts before its tile";
+      // The block pass does its job: nearer the hits than the tiles' starts on the whole
+      // (with the eye outside the grid; from inside both start at the eye among active cells).
+      if (v.dist_m > 0.01) {
+        EXPECT_LT(block_ahead_vox, ahead_vox) << "block starts no nearer than the tiles'";
+      }
       std::size_t differ = 0;
       for (std::size_t i = 0; i < a.depth.size(); ++i) differ += a.depth[i] != b.depth[i] || a.rgba[i] != b.rgba[i];
       const std::string what = std::string(&f == fields ? "blobs" : "boxes") + ", tile starts, eye " +
@@ -967,7 +1010,9 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       std::printf("%s: %zu hits\n", what.c_str(), hits(a));
       // The pass did its job, not only no harm: seen from far, most of the image's tiles miss
       // the grid and are left out.
-      if (v.dist_m >= 0.2) EXPECT_GT(culled, std::size_t(v.w * v.h) / 2) << what << ": tiles left out";
+      if (v.dist_m >= 0.2) {
+        EXPECT_GT(culled, std::size_t(v.w * v.h) / 2) << what << ": tiles left out";
+      }
       expect_gpu_matches_cpu(a, cpu, 1.0 / 0.8e-3, what.c_str());
     }
   }

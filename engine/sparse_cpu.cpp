@@ -21,6 +21,7 @@
 
 #include "cpu_gradient.h"
 #include "parallel.h"
+#include "pool_recycler.h"
 #include "sparse_chain.h"
 
 namespace isotouch::engine {
@@ -471,23 +472,6 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
 }
 
 namespace {
-/// A fresh pool of tens of MB costs a page fault per 4 KiB page when first written (most of
-/// publication's time on the chest); transparent huge pages, where the kernel offers them
-/// on request, take one fault per 2 MiB. Advice only: nothing changes where they are off.
-void advise_huge_pages(void* p, std::size_t bytes) {
-#ifdef __linux__
-  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
-  const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
-  const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(kHuge - 1);
-  if (e > b) (void)madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
-#else
-  (void)p;
-  (void)bytes;
-#endif
-}
-}  // namespace
-
-namespace {
 #if defined(__SSE2__)
 /// Samples x0 + 0 .. 7 of one row whose x neighbours all lie inside the row (x0 >= 1,
 /// x0 + 8 < nx): the scalar loop's float operations (a subtract, then a multiply, each
@@ -567,20 +551,21 @@ void brick_samples(const core::Grid& grid, const float* f, const std::array<int,
 
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
-             float background, core::SampleFormat format, bool keep_input, SparseOutput& out) {
+             float background, core::SampleFormat format, bool keep_input, SparseOutput& out,
+             const std::shared_ptr<PoolRecycler>& recycler) {
   publish_fill(
       grid, sel, ranges,
       [&](std::size_t c, core::Sample* dst) {
         const core::Sample* s = samples(c);
         std::copy(s, s + core::kBrickSamples, dst);
       },
-      1, iso, background, format, keep_input, out);
+      1, iso, background, format, keep_input, out, recycler);
 }
 
 void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
                   const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
-                  SparseOutput& out) {
+                  SparseOutput& out, const std::shared_ptr<PoolRecycler>& recycler) {
   core::BrickedInput in;
   in.grid = grid;
   in.background = background;
@@ -611,11 +596,12 @@ void publish_fill(const core::Grid& grid, const Selection& sel, const std::vecto
       in.active.push_back(sel.candidates[c]);
       cand_of_slot.push_back(c);
     }
-  in.pool.reserve(n_active * std::size_t(core::kBrickSamples));
-  advise_huge_pages(in.pool.data(), in.pool.capacity() * sizeof(core::Sample));
   // Sized without a write (core::SamplePool): `fill` writes every sample of every slot, so
-  // the pool's pages are first touched by the filling threads, not zeroed on this one first.
-  in.pool.resize(n_active * std::size_t(core::kBrickSamples));
+  // a fresh pool's pages are first touched by the filling threads, not zeroed on this one
+  // first; a recycled one's are resident already.
+  const std::size_t n_samples = n_active * std::size_t(core::kBrickSamples);
+  in.pool = recycler ? recycler->take(n_samples) : fresh_pool(n_samples);
+  in.recycle = recycler;
   parallel_for(n_active, threads, 16, [&](std::size_t b, std::size_t e) {
     for (std::size_t slot = b; slot < e; ++slot) fill(cand_of_slot[slot], in.pool.data() + slot * core::kBrickSamples);
   });

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -310,6 +311,25 @@ void guarded(SparseSamples& s, F&& f) {
 }
 }  // namespace
 
+namespace {
+/// The dense chain's floor: per pass, copy_x4 with the pass's loads and stores (the
+/// gradient's is `gradient_floor_ms`, measured already), device time [ms], summed.
+double chain_floor_ms(engine::GradientPass& floor_pass, const engine::Volume& v,
+                      const std::vector<engine::PassDesc>& passes, double gradient_floor_ms, int runs) {
+  using T = engine::GradientPass::FloorTraffic;
+  std::map<T, double> ms{{T::Samples, gradient_floor_ms}};
+  double sum = 0;
+  for (const engine::PassDesc& p : passes) {
+    const T t = p.kind == engine::PassKind::Gradient      ? T::Samples
+                : p.kind == engine::PassKind::BrickMinMax ? T::ReadOnly
+                                                          : T::Floats;  // Gaussian, closing: one filter pass
+    if (!ms.count(t)) ms[t] = floor_pass.copy_floor_ms(v, runs, t);
+    sum += ms[t];
+  }
+  return sum;
+}
+}  // namespace
+
 CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
                     int repetitions, double memcpy_gbps, std::ostream& progress, bool peers) {
   const engine::Volume& v = *c.volume;
@@ -457,6 +477,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
       engine::GradientPass floor_pass(*ctx);
       r.copy_floor_ms = floor_pass.copy_floor_ms(v, std::max(3, repetitions));
+      r.chain_floor_ms = chain_floor_ms(floor_pass, v, dense, r.copy_floor_ms, std::max(3, repetitions));
     } catch (const std::exception& e) {
       progress << "[bench engine] copy floor: " << e.what() << "\n";
     }
@@ -586,6 +607,8 @@ void finish_case(CaseResult& r) {
   r.copy_floor_memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? grad_bytes / (r.memcpy_gbps * 1e9) * 1e3
                                                                              : kNaN;
   r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
+  r.chain_floor_over_memcpy = ratio(r.chain_floor_ms, r.memcpy_ms);
+  r.chain_over_floor = ratio(r.sum.gpu_ms, r.chain_floor_ms);
   r.gradient_over_floor = kNaN;
   for (const PassRow& p : r.passes)
     if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
@@ -854,6 +877,18 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
     csv.row("floor", r.name, "", "copy_x4", "floor_over_memcpy", csv_num(r.floor_over_memcpy), "", "");
     csv.row("floor", r.name, "", "copy_x4", "gradient_over_floor", csv_num(r.gradient_over_floor), "", "");
   }
+  out << "\nThe device's floor for the whole dense chain's bytes: copy_x4.comp once per pass with that pass's "
+         "loads and stores and no arithmetic (a filter reads 4 B and writes 4 B per voxel, the gradient 4 B and a "
+         "16 B sample, brick min/max reads 4 B), median device times summed; memcpy of the same bytes.\n\n| case "
+         "| chain floor [ms] | memcpy of the chain's bytes [ms] | floor / memcpy | dense chain [ms] | chain / floor "
+         "|\n|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    out << "| " << r.name << " | " << num(r.chain_floor_ms) << " | " << num(r.memcpy_ms) << " | "
+        << num(r.chain_floor_over_memcpy) << " | " << num(r.sum.gpu_ms) << " | " << num(r.chain_over_floor) << " |\n";
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_ms", csv_num(r.chain_floor_ms), "ms", d.gpu);
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_over_memcpy", csv_num(r.chain_floor_over_memcpy), "", "");
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_over_floor", csv_num(r.chain_over_floor), "", "");
+  }
 }
 
 std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
@@ -1094,6 +1129,16 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
     f << std::fixed << std::setprecision(2) << "; the device's copy floor (copy_x4: the gradient's bytes, loads and "
       << "stores without arithmetic) = " << chest->floor_over_memcpy << " x memcpy of the same bytes, the chain = "
       << ratio(chest->chain_over_memcpy, chest->floor_over_memcpy) << " x that floor";
+    vs.back().text += f.str();
+  }
+  // The whole chain's floor: where it is above the target, the target is below what this
+  // device's loads and stores of the chain's bytes cost, whatever the shaders compute.
+  if (chest && std::isfinite(chest->chain_floor_over_memcpy)) {
+    std::ostringstream f;
+    f << std::fixed << std::setprecision(2) << "; the device's floor for the whole chain's bytes (copy_x4 once per "
+      << "pass with its loads and stores) = " << chest->chain_floor_over_memcpy << " x memcpy, the chain = "
+      << chest->chain_over_floor << " x that floor"
+      << (chest->chain_floor_over_memcpy > 5.0 ? ": the target is below this device's floor" : "");
     vs.back().text += f.str();
   }
   vs.push_back(verdict_at_most("chest -500 sparse GPU / fastest peer chain",

@@ -192,6 +192,12 @@ struct CaseResult {
   double copy_floor_memcpy_ms = kNaN;     ///< memcpy time of the same bytes (gradient min bytes)
   double floor_over_memcpy = kNaN;        ///< copy_floor_ms / copy_floor_memcpy_ms
   double gradient_over_floor = kNaN;      ///< the gradient pass (current shaders) / copy_floor_ms
+  /// The device's floor for the whole dense chain's bytes: per pass copy_x4.comp with that
+  /// pass's loads and stores (GradientPass::FloorTraffic: a filter 4 + 4 B, the gradient
+  /// 4 + 16 B, brick min/max 4 B per voxel), no arithmetic, medians summed [ms].
+  double chain_floor_ms = kNaN;
+  double chain_floor_over_memcpy = kNaN;  ///< chain_floor_ms / memcpy_ms (memcpy of sum.min_bytes)
+  double chain_over_floor = kNaN;         ///< sum.gpu_ms / chain_floor_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

@@ -1060,11 +1060,12 @@ TEST(SparseChain, DISABLED_LimitChest) {
 // input imported (where the device offers it) and copied, ISOTOUCH_BENCH_REPS (default 50)
 // runs each: min and median of the wall time, the host stages, the GPU stages (timestamps),
 // the submit's wall time (what is none of these is set-up: buffers, recording) and of each
-// stage.
+// stage. ISOTOUCH_SPLIT_CASE (e.g. "head +500") runs that case alone (perf).
 //   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_RunSplit*'
 TEST(SparseChain, DISABLED_RunSplit) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 50;
+  const char* only = std::getenv("ISOTOUCH_SPLIT_CASE");
   auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
   ASSERT_TRUE(ctx) << ctx.error;
   auto chain = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
@@ -1075,8 +1076,9 @@ TEST(SparseChain, DISABLED_RunSplit) {
     const Volume* v;
     double tau;
   };
-  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"chest -500", &chest, -500.0}})
+  for (const Case& c : {Case{"head +1150", &head, 1150.0}, Case{"head +500", &head, 500.0}, Case{"chest -500", &chest, -500.0}})
   for (const bool import : {true, false}) {
+    if (only && c.name != std::string(only)) continue;
     (*ctx.value)->allow_host_import(import);
     std::vector<double> total, stages, gpu, submit;
     std::map<std::string, std::vector<double>> by_stage;

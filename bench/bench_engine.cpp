@@ -462,6 +462,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
   }
   r.gpu_available = chain != nullptr;
+  if (schain) {
+    r.sparse_recycled_pools = schain->recycled_pools();
+    r.sparse_retained_bytes = schain->retained_pool_bytes();
+    r.sparse_runs = std::uint64_t(ni) * std::uint64_t(repetitions + 1);  // + the warm-up run per isovalue
+  }
   for (std::size_t i = 0; i < np; ++i) {
     PassRow p;
     p.label = dense[i].label();
@@ -967,6 +972,12 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_gpu", csv_num(ir.sparse_gpu_over_dense_gpu), "", "");
     }
+  for (const auto& r : res)
+    if (r.sparse_runs)
+      out << "\n" << r.name << ": the sparse GPU chain (lists) published into the retained pool buffer of a "
+          << "snapshot already destroyed in " << r.sparse_recycled_pools << " of its " << r.sparse_runs
+          << " runs (the rest into fresh pages); after the last run it retains " << mib(r.sparse_retained_bytes)
+          << " MiB for no snapshot (counted in this process's RSS).\n";
   out << "\n### Sparse stages (medians)\n\n| case | tau | engine | stage | ms |\n|---|---:|---|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos)

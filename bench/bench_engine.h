@@ -176,6 +176,10 @@ struct CaseResult {
   unsigned cpu_backend_threads = 0;       ///< threads of the multi-threaded CPU backend (0: not run)
   double dense_cpu_mt_wall_ms = kNaN;     ///< median wall of run_chain_cpu on cpu_backend_threads threads
   bool cpu_backend_same_bits = false;     ///< every repetition's output bit for bit the one-thread reference's
+  /// The sparse GPU chain (lists strategy) over all its runs here: runs whose brick pool was
+  /// the retained buffer of a snapshot already destroyed (engine/pool_recycler.h), runs in
+  /// all, and the bytes it retains after the last one (held for no snapshot: in the RSS).
+  std::uint64_t sparse_recycled_pools = 0, sparse_runs = 0, sparse_retained_bytes = 0;
   double dense_gpu_over_cpu_wall = kNaN;  ///< dense_gpu_wall_ms / dense_cpu_wall_ms
   std::vector<IsoResult> isos;
   double memcpy_gbps = kNaN;

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -310,6 +311,25 @@ void guarded(SparseSamples& s, F&& f) {
 }
 }  // namespace
 
+namespace {
+/// The dense chain's floor: per pass, copy_x4 with the pass's loads and stores (the
+/// gradient's is `gradient_floor_ms`, measured already), device time [ms], summed.
+double chain_floor_ms(engine::GradientPass& floor_pass, const engine::Volume& v,
+                      const std::vector<engine::PassDesc>& passes, double gradient_floor_ms, int runs) {
+  using T = engine::GradientPass::FloorTraffic;
+  std::map<T, double> ms{{T::Samples, gradient_floor_ms}};
+  double sum = 0;
+  for (const engine::PassDesc& p : passes) {
+    const T t = p.kind == engine::PassKind::Gradient      ? T::Samples
+                : p.kind == engine::PassKind::BrickMinMax ? T::ReadOnly
+                                                          : T::Floats;  // Gaussian, closing: one filter pass
+    if (!ms.count(t)) ms[t] = floor_pass.copy_floor_ms(v, runs, t);
+    sum += ms[t];
+  }
+  return sum;
+}
+}  // namespace
+
 CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
                     int repetitions, double memcpy_gbps, std::ostream& progress, bool peers) {
   const engine::Volume& v = *c.volume;
@@ -442,6 +462,11 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     }
   }
   r.gpu_available = chain != nullptr;
+  if (schain) {
+    r.sparse_recycled_pools = schain->recycled_pools();
+    r.sparse_retained_bytes = schain->retained_pool_bytes();
+    r.sparse_runs = std::uint64_t(ni) * std::uint64_t(repetitions + 1);  // + the warm-up run per isovalue
+  }
   for (std::size_t i = 0; i < np; ++i) {
     PassRow p;
     p.label = dense[i].label();
@@ -457,6 +482,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
       engine::GradientPass floor_pass(*ctx);
       r.copy_floor_ms = floor_pass.copy_floor_ms(v, std::max(3, repetitions));
+      r.chain_floor_ms = chain_floor_ms(floor_pass, v, dense, r.copy_floor_ms, std::max(3, repetitions));
     } catch (const std::exception& e) {
       progress << "[bench engine] copy floor: " << e.what() << "\n";
     }
@@ -586,6 +612,8 @@ void finish_case(CaseResult& r) {
   r.copy_floor_memcpy_ms = std::isfinite(r.memcpy_gbps) && r.memcpy_gbps > 0 ? grad_bytes / (r.memcpy_gbps * 1e9) * 1e3
                                                                              : kNaN;
   r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
+  r.chain_floor_over_memcpy = ratio(r.chain_floor_ms, r.memcpy_ms);
+  r.chain_over_floor = ratio(r.sum.gpu_ms, r.chain_floor_ms);
   r.gradient_over_floor = kNaN;
   for (const PassRow& p : r.passes)
     if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
@@ -854,6 +882,18 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
     csv.row("floor", r.name, "", "copy_x4", "floor_over_memcpy", csv_num(r.floor_over_memcpy), "", "");
     csv.row("floor", r.name, "", "copy_x4", "gradient_over_floor", csv_num(r.gradient_over_floor), "", "");
   }
+  out << "\nThe device's floor for the whole dense chain's bytes: copy_x4.comp once per pass with that pass's "
+         "loads and stores and no arithmetic (a filter reads 4 B and writes 4 B per voxel, the gradient 4 B and a "
+         "16 B sample, brick min/max reads 4 B), median device times summed; memcpy of the same bytes.\n\n| case "
+         "| chain floor [ms] | memcpy of the chain's bytes [ms] | floor / memcpy | dense chain [ms] | chain / floor "
+         "|\n|---|---:|---:|---:|---:|---:|\n";
+  for (const auto& r : res) {
+    out << "| " << r.name << " | " << num(r.chain_floor_ms) << " | " << num(r.memcpy_ms) << " | "
+        << num(r.chain_floor_over_memcpy) << " | " << num(r.sum.gpu_ms) << " | " << num(r.chain_over_floor) << " |\n";
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_ms", csv_num(r.chain_floor_ms), "ms", d.gpu);
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_over_memcpy", csv_num(r.chain_floor_over_memcpy), "", "");
+    csv.row("floor", r.name, "", "copy_x4 chain", "chain_over_floor", csv_num(r.chain_over_floor), "", "");
+  }
 }
 
 std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
@@ -932,6 +972,12 @@ void print_sparse(const std::vector<CaseResult>& res, const Devices& d, std::ost
       csv.row(t, r.name, tau, "", "sparse_cpu_over_dense_cpu", csv_num(ir.sparse_cpu_over_dense_cpu), "", "");
       csv.row(t, r.name, tau, "", "sparse_gpu_over_dense_gpu", csv_num(ir.sparse_gpu_over_dense_gpu), "", "");
     }
+  for (const auto& r : res)
+    if (r.sparse_runs)
+      out << "\n" << r.name << ": the sparse GPU chain (lists) published into the retained pool buffer of a "
+          << "snapshot already destroyed in " << r.sparse_recycled_pools << " of its " << r.sparse_runs
+          << " runs (the rest into fresh pages); after the last run it retains " << mib(r.sparse_retained_bytes)
+          << " MiB for no snapshot (counted in this process's RSS).\n";
   out << "\n### Sparse stages (medians)\n\n| case | tau | engine | stage | ms |\n|---|---:|---|---|---:|\n";
   for (const auto& r : res)
     for (const auto& ir : r.isos)
@@ -1094,6 +1140,16 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
     f << std::fixed << std::setprecision(2) << "; the device's copy floor (copy_x4: the gradient's bytes, loads and "
       << "stores without arithmetic) = " << chest->floor_over_memcpy << " x memcpy of the same bytes, the chain = "
       << ratio(chest->chain_over_memcpy, chest->floor_over_memcpy) << " x that floor";
+    vs.back().text += f.str();
+  }
+  // The whole chain's floor: where it is above the target, the target is below what this
+  // device's loads and stores of the chain's bytes cost, whatever the shaders compute.
+  if (chest && std::isfinite(chest->chain_floor_over_memcpy)) {
+    std::ostringstream f;
+    f << std::fixed << std::setprecision(2) << "; the device's floor for the whole chain's bytes (copy_x4 once per "
+      << "pass with its loads and stores) = " << chest->chain_floor_over_memcpy << " x memcpy, the chain = "
+      << chest->chain_over_floor << " x that floor"
+      << (chest->chain_floor_over_memcpy > 5.0 ? ": the target is below this device's floor" : "");
     vs.back().text += f.str();
   }
   vs.push_back(verdict_at_most("chest -500 sparse GPU / fastest peer chain",

@@ -176,6 +176,10 @@ struct CaseResult {
   unsigned cpu_backend_threads = 0;       ///< threads of the multi-threaded CPU backend (0: not run)
   double dense_cpu_mt_wall_ms = kNaN;     ///< median wall of run_chain_cpu on cpu_backend_threads threads
   bool cpu_backend_same_bits = false;     ///< every repetition's output bit for bit the one-thread reference's
+  /// The sparse GPU chain (lists strategy) over all its runs here: runs whose brick pool was
+  /// the retained buffer of a snapshot already destroyed (engine/pool_recycler.h), runs in
+  /// all, and the bytes it retains after the last one (held for no snapshot: in the RSS).
+  std::uint64_t sparse_recycled_pools = 0, sparse_runs = 0, sparse_retained_bytes = 0;
   double dense_gpu_over_cpu_wall = kNaN;  ///< dense_gpu_wall_ms / dense_cpu_wall_ms
   std::vector<IsoResult> isos;
   double memcpy_gbps = kNaN;
@@ -192,6 +196,12 @@ struct CaseResult {
   double copy_floor_memcpy_ms = kNaN;     ///< memcpy time of the same bytes (gradient min bytes)
   double floor_over_memcpy = kNaN;        ///< copy_floor_ms / copy_floor_memcpy_ms
   double gradient_over_floor = kNaN;      ///< the gradient pass (current shaders) / copy_floor_ms
+  /// The device's floor for the whole dense chain's bytes: per pass copy_x4.comp with that
+  /// pass's loads and stores (GradientPass::FloorTraffic: a filter 4 + 4 B, the gradient
+  /// 4 + 16 B, brick min/max 4 B per voxel), no arithmetic, medians summed [ms].
+  double chain_floor_ms = kNaN;
+  double chain_floor_over_memcpy = kNaN;  ///< chain_floor_ms / memcpy_ms (memcpy of sum.min_bytes)
+  double chain_over_floor = kNaN;         ///< sum.gpu_ms / chain_floor_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

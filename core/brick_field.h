@@ -90,6 +90,18 @@ inline bool tile_value(float lo, float hi, const Isosurface& iso, float backgrou
   return false;
 }
 
+/// Where a published field's fp32 pool buffer goes once nothing needs it any more, instead
+/// of back to the system: an engine that publishes again and again (a chain run per
+/// isovalue, a benchmark) takes the buffer for its next pool, whose pages are then already
+/// resident (a fresh pool of tens of MB is a page fault and a page of zeroes per 4 KiB or
+/// 2 MiB written). give_back runs on whichever thread drops the last reference to the
+/// store (servo::TripleBuffer: the publisher's), never while anything reads the buffer.
+struct PoolSink {
+  virtual ~PoolSink() = default;
+  /// Takes `pool` (its contents are dead; its capacity is what counts). Must not throw.
+  virtual void give_back(SamplePool&& pool) noexcept = 0;
+};
+
 /// What an engine (GPU sparse chain, CPU reference, or dense-to-bricks conversion) hands
 /// over to be published as a bricked SampleField: the active bricks' fp32 samples and the
 /// uniform bricks' tile values.
@@ -99,6 +111,10 @@ struct BrickedInput {
   std::vector<std::uint32_t> active;        ///< linear ids of active bricks, ascending
   SamplePool pool;                          ///< active.size() * kBrickSamples fp32 samples (resize() leaves them unwritten)
   std::vector<float> tile;                  ///< one per brick (all bricks); ignored for active ones
+  /// Optional: receives `pool`'s buffer when the published store is destroyed (fp32), or
+  /// once it is encoded (compact formats). Held weakly by the store: a sink destroyed first
+  /// leaves the buffer to be freed.
+  std::shared_ptr<PoolSink> recycle;
 };
 
 /// Stored samples of brick `b` (per-axis brick index) that lie inside the grid, per axis:
@@ -244,6 +260,21 @@ inline std::string compact_refusal(float v, SampleFormat f) {
   return {};
 }
 
+/// The store's shared pool: with a sink, a deleter that hands the buffer to it (if it is
+/// still alive) instead of freeing it.
+inline std::shared_ptr<const SamplePool> share_pool(SamplePool&& pool, const std::shared_ptr<PoolSink>& sink) {
+  if (!sink) return std::make_shared<const SamplePool>(std::move(pool));
+  struct GiveBack {
+    std::weak_ptr<PoolSink> sink;
+    void operator()(const SamplePool* p) const noexcept {
+      if (const std::shared_ptr<PoolSink> s = sink.lock()) s->give_back(std::move(*const_cast<SamplePool*>(p)));
+      delete p;
+    }
+  };
+  // (If the control block cannot be allocated, shared_ptr calls the deleter: no leak.)
+  return std::shared_ptr<const SamplePool>(new SamplePool(std::move(pool)), GiveBack{sink});
+}
+
 }  // namespace detail
 
 /// Publish `in` as a bricked SampleField in format `f`: grid and background from `in`,
@@ -290,11 +321,12 @@ inline SampleField make_bricked_field(BrickedInput in, SampleFormat f) {
           if (i >= n[0] || j >= n[1] || k >= n[2]) s[i + kBrickStored * (j + kBrickStored * k)] = {in.background, 0, 0, 0};
   }
   if (f == SampleFormat::kFp32) {
-    store->pool = std::make_shared<const SamplePool>(std::move(in.pool));
+    store->pool = detail::share_pool(std::move(in.pool), in.recycle);
   } else {
     store->compact = std::make_shared<const std::vector<CompactSample>>(detail::encode_compact(in, f, store->decode));
     store->fp16_unscale = {float(1.0 / in.grid.spacing_m.x), float(1.0 / in.grid.spacing_m.y),
                            float(1.0 / in.grid.spacing_m.z)};
+    if (in.recycle) in.recycle->give_back(std::move(in.pool));
   }
   if (!store->seal(in.grid.dims)) detail::bad_bricked_input("the built store does not seal (internal error)");
   SampleField out;

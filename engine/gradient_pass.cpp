@@ -138,7 +138,7 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const cor
   }
 }
 
-double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
+double GradientPass::copy_floor_ms(const Volume& vol, int runs, FloorTraffic traffic) {
   const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const std::uint64_t n = vol.grid.voxel_count();
   auto buffer = [&](std::uint64_t bytes, const char* what) {
@@ -153,7 +153,9 @@ double GradientPass::copy_floor_ms(const Volume& vol, int runs) {
   const bool quads = slabs_hold_quads(nx, slabs);  // the gradient's own input form
   ComputePipeline<gpu::DensePush> pipe(
       ctx_, copy_x4_spv, 2, "copy_x4", 0u,
-      std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz), quads ? 1u : 0u}, 1u);
+      std::vector<std::uint32_t>{std::uint32_t(nx), std::uint32_t(ny), std::uint32_t(nz), quads ? 1u : 0u,
+                                 std::uint32_t(traffic)},
+      1u);
   if (quads) pipe.set_texel_vec4(1u);
   const std::uint32_t qx = std::uint32_t((nx + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS);
   std::vector<double> ms;

@@ -48,10 +48,15 @@ class GradientPass {
   /// @throws VolumeError naming `what`, the slice size and the limit if a slice does not fit.
   std::vector<Slab> plan(const core::Grid& grid, VkBuffer src, VkBuffer dst, std::uint64_t max_binding_bytes,
                          const std::string& what) const;
+  /// What a floor run moves per voxel (shaders/copy_x4.comp's OUT): the gradient's read of
+  /// 4 B and write of a 16 B sample; a filter's 4 B read and 4 B written (Gaussian,
+  /// closing); brick min/max's 4 B read (its per-brick output is negligible).
+  enum class FloorTraffic { Samples = 0, Floats = 1, ReadOnly = 2 };
   /// The floor of this pass on this device: shaders/copy_x4.comp (the same texel loads and
   /// vec4 stores as gradient_x4, no arithmetic) over `volume`, one untimed run and then the
   /// median device time [ms] of `runs` (wall time without timestamps). Buffers device-local.
-  double copy_floor_ms(const Volume& volume, int runs);
+  /// `traffic`: the loads and stores of another dense pass instead (the chain's floor).
+  double copy_floor_ms(const Volume& volume, int runs, FloorTraffic traffic = FloorTraffic::Samples);
   /// Records the dispatches of `slabs` (from plan()); no barriers.
   void record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
               const std::vector<Slab>& slabs) const;

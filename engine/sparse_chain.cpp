@@ -29,6 +29,7 @@
 #include "isotouch_shared.h"
 #include "parallel.h"
 #include "passes.h"
+#include "pool_recycler.h"
 #include "vk_resources.h"
 
 namespace isotouch::engine {
@@ -89,7 +90,7 @@ struct Chunk {
 /// zero gradient. Sets out.publish_ms; `ranges_ms` the time of the ranges.
 void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float* f, const core::Sample* s,
                     const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
-                    SparseOutput& out, double& ranges_ms) {
+                    SparseOutput& out, double& ranges_ms, const std::shared_ptr<PoolRecycler>& recycler) {
   const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
   const std::size_t slice = std::size_t(nx) * std::size_t(ny);
   const std::size_t nc = sel.candidates.size();
@@ -120,7 +121,7 @@ void finish_on_host(const Volume& vol, const sparse::Selection& sel, const float
         for (; i < 9; ++i) d[i] = outside;
       }
   };
-  sparse::publish_fill(vol.grid, sel, ranges, fill, threads, iso, background, format, keep_input, out);
+  sparse::publish_fill(vol.grid, sel, ranges, fill, threads, iso, background, format, keep_input, out, recycler);
   out.publish_ms = ms_since(t0);
 }
 /// The per-brick kernel's candidate ranges (vec4 records: lo, hi, NaN seen, its active
@@ -190,6 +191,8 @@ struct SparseChain::Impl {
   std::string last_run;
   SparseChain::Strategy strategy = SparseChain::Strategy::Lists;
   std::unique_ptr<PassChain> dense;  ///< the dense strategy's chain (filters + gradient), made on first use
+  /// The published pools' buffers, handed back when their snapshots die, for the next run.
+  std::shared_ptr<PoolRecycler> pools = std::make_shared<PoolRecycler>();
   SparseOutput run_dense(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
                          std::uint64_t max_binding_bytes);
   /// The list strategy's steps: the fused Gaussian's stage, one filter op's stage, and the
@@ -231,6 +234,8 @@ SparseChain::~SparseChain() = default;
 void SparseChain::set_keep_input(bool keep) { impl_->keep_input = keep; }
 void SparseChain::set_max_workgroups(std::uint32_t groups) { impl_->max_groups = groups; }
 void SparseChain::set_strategy(Strategy s) { impl_->strategy = s; }
+std::uint64_t SparseChain::retained_pool_bytes() const { return impl_->pools->retained_bytes(); }
+std::uint64_t SparseChain::recycled_pools() const { return impl_->pools->reuses(); }
 
 SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurface& iso, float background,
                                           core::SampleFormat format, std::uint64_t max_binding_bytes) {
@@ -264,7 +269,7 @@ SparseOutput SparseChain::Impl::run_dense(const Volume& vol, const core::Isosurf
   if (!s) throw std::logic_error(vol.path + ": sparse chain: the dense chain returned no samples");
 
   double ranges_ms = 0;
-  finish_on_host(vol, sel, f, s, iso, background, format, keep_input, out, ranges_ms);
+  finish_on_host(vol, sel, f, s, iso, background, format, keep_input, out, ranges_ms, pools);
   const double gather_ms = ranges_ms;
   out.passes.push_back({"candidate selection (host)", select_ms, 0});
   int dispatches = 0, slabs = 0;
@@ -515,7 +520,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const float* f = !K ? vol.voxels.data()
                       : static_cast<const float*>(direct ? field[K % 2]->mapped() : field_down->mapped());
   double ranges_ms = 0;
-  finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms);
+  finish_on_host(vol, sel, f, nullptr, iso, background, format, keep_input, out, ranges_ms, pools);
 
   out.passes.push_back({std::string("candidate selection: raw ranges over the bricks' windows") +
                             (input ? " + the input copy" : in_range.buffer ? " (input imported, no copy)" : "") +
@@ -915,7 +920,7 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
   out.download_ms = ms_since(t0);
   t0 = std::chrono::steady_clock::now();
   sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return where[c]; }, iso, background, format,
-                  keep_input, out);
+                  keep_input, out, pools);
   out.publish_ms = ms_since(t0);
 
   const double gpu_ms = timer.elapsed_ms(0, 1), copy_ms = timer.elapsed_ms(1, 2);

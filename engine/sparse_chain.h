@@ -19,6 +19,7 @@
 namespace isotouch::engine {
 
 class VulkanContext;
+class PoolRecycler;
 
 /// What a sparse run found and published.
 struct SparseStats {
@@ -221,9 +222,12 @@ class CandidateCpu {
 /// 729 samples `samples(c)` returns for candidate index c, tiles of the others (from the
 /// exact range for candidates, from the widened range otherwise); fills out.stats,
 /// out.field (core::make_bricked_field) and, with keep_input, out.input.
+/// `recycler` (optional): the pool is taken from it and its buffer handed back to it when
+/// the published store dies (pool_recycler.h); null: a fresh pool, freed with the store.
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
-             float background, core::SampleFormat format, bool keep_input, SparseOutput& out);
+             float background, core::SampleFormat format, bool keep_input, SparseOutput& out,
+             const std::shared_ptr<PoolRecycler>& recycler = nullptr);
 /// The 9^3 samples of brick `b` (brick coordinates; i + 9 j + 81 k) from the dense field `f`
 /// of `grid`: value and gradient with the float operations of compute_samples_cpu (central
 /// differences inside, one-sided at the borders), so bit for bit the dense chain's samples;
@@ -233,11 +237,11 @@ void brick_samples(const core::Grid& grid, const float* f, const std::array<int,
 /// publish() with the active candidates' samples written straight into the pool:
 /// `fill(c, dst)` writes ALL 729 samples of candidate index c at dst (the pool is not
 /// cleared before: core::SamplePool), called from `threads`
-/// threads at once (each on its own candidates; 1: this thread only).
+/// threads at once (each on its own candidates; 1: this thread only). `recycler` as publish's.
 void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
                   const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
-                  SparseOutput& out);
+                  SparseOutput& out, const std::shared_ptr<PoolRecycler>& recycler = nullptr);
 
 }  // namespace sparse
 
@@ -280,6 +284,12 @@ class SparseChain {
   /// filter wider than ISOTOUCH_DENSE_MAX_RADIUS runs as Dense.
   enum class Strategy { Lists, Dense, PerBrick };
   void set_strategy(Strategy s);
+  /// Bytes this chain holds for no live snapshot: the brick-pool buffer of a published
+  /// field already destroyed, kept for the next run's pool (engine/pool_recycler.h: at most
+  /// one, the largest). Counted in the process's RSS like any memory.
+  std::uint64_t retained_pool_bytes() const;
+  /// Runs whose pool was a retained buffer (no fresh pages to fault in).
+  std::uint64_t recycled_pools() const;
 
  private:
   struct Impl;

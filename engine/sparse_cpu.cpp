@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <initializer_list>
 #include <limits>
@@ -21,6 +22,7 @@
 
 #include "cpu_gradient.h"
 #include "parallel.h"
+#include "pool_recycler.h"
 #include "sparse_chain.h"
 
 namespace isotouch::engine {
@@ -471,30 +473,13 @@ bool is_active(const CandidateRange& r, const core::Isosurface& iso, float backg
 }
 
 namespace {
-/// A fresh pool of tens of MB costs a page fault per 4 KiB page when first written (most of
-/// publication's time on the chest); transparent huge pages, where the kernel offers them
-/// on request, take one fault per 2 MiB. Advice only: nothing changes where they are off.
-void advise_huge_pages(void* p, std::size_t bytes) {
-#ifdef __linux__
-  constexpr std::uintptr_t kHuge = std::uintptr_t(2) << 20;
-  const std::uintptr_t b = (reinterpret_cast<std::uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
-  const std::uintptr_t e = (reinterpret_cast<std::uintptr_t>(p) + bytes) & ~(kHuge - 1);
-  if (e > b) (void)madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);
-#else
-  (void)p;
-  (void)bytes;
-#endif
-}
-}  // namespace
-
-namespace {
 #if defined(__SSE2__)
 /// Samples x0 + 0 .. 7 of one row whose x neighbours all lie inside the row (x0 >= 1,
 /// x0 + 8 < nx): the scalar loop's float operations (a subtract, then a multiply, each
 /// rounded; no contraction), 4 lanes at a time, transposed into Sample order. `ya`, `yb`,
 /// `za`, `zb`: the rows the y and z differences read (null: flat, gradient 0).
 void interior_samples8(const float* row, int x0, float kx, const float* ya, const float* yb, float ky, const float* za,
-                       const float* zb, float kz, core::Sample* o) {
+                       const float* zb, float kz, core::Sample* o, bool stream) {
   const __m128 vkx = _mm_set1_ps(kx), vky = _mm_set1_ps(ky), vkz = _mm_set1_ps(kz);
   for (int i = 0; i < 8; i += 4) {
     const int x = x0 + i;
@@ -504,13 +489,33 @@ void interior_samples8(const float* row, int x0, float kx, const float* ya, cons
     __m128 gz = za ? _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(za + x), _mm_loadu_ps(zb + x)), vkz) : _mm_setzero_ps();
     _MM_TRANSPOSE4_PS(v, gx, gy, gz);  // rows become samples x, x + 1, x + 2, x + 3
     float* d = &o[i].value;
-    _mm_storeu_ps(d, v);
-    _mm_storeu_ps(d + 4, gx);
-    _mm_storeu_ps(d + 8, gy);
-    _mm_storeu_ps(d + 12, gz);
+    if (stream) {
+      _mm_stream_ps(d, v);
+      _mm_stream_ps(d + 4, gx);
+      _mm_stream_ps(d + 8, gy);
+      _mm_stream_ps(d + 12, gz);
+    } else {
+      _mm_storeu_ps(d, v);
+      _mm_storeu_ps(d + 4, gx);
+      _mm_storeu_ps(d + 8, gy);
+      _mm_storeu_ps(d + 12, gz);
+    }
   }
 }
 #endif
+
+/// Writes one sample; `stream` (16-byte aligned `d`, SSE2): a non-temporal store, which
+/// writes the line without reading it first (a recycled pool's lines are not in cache).
+inline void put_sample(core::Sample* d, const core::Sample& v, bool stream) {
+#if defined(__SSE2__)
+  if (stream) {
+    _mm_stream_ps(&d->value, _mm_set_ps(v.gz, v.gy, v.gx, v.value));
+    return;
+  }
+#endif
+  (void)stream;
+  *d = v;
+}
 }  // namespace
 
 void brick_samples(const core::Grid& grid, const float* f, const std::array<int, 3>& b, float background,
@@ -520,6 +525,13 @@ void brick_samples(const core::Grid& grid, const float* f, const std::array<int,
   const std::size_t sy = std::size_t(nx), sz = std::size_t(nx) * std::size_t(ny);
   const int x0 = 8 * b[0], in_x = std::min(9, nx - x0);
   const core::Sample outside{background, 0.0f, 0.0f, 0.0f};
+  // Every one of the 729 samples is written in order, 16 B each: where `out` is 16-byte
+  // aligned (a pool's slot) the stores stream past the cache (the same bits).
+#if defined(__SSE2__)
+  const bool stream = reinterpret_cast<std::uintptr_t>(out) % 16 == 0;
+#else
+  const bool stream = false;
+#endif
   // One axis' rule for a whole row, as compute_samples_cpu: (a[x] - b[x]) * k, 0 when flat.
   struct Rule {
     const float* a;
@@ -545,7 +557,7 @@ void brick_samples(const core::Grid& grid, const float* f, const std::array<int,
 #if defined(__SSE2__)
         if (x0 >= 1 && x0 + 9 < nx) {  // samples 0 .. 7 and their x neighbours inside the row
           interior_samples8(row, x0, k.inv_2h[0], dy.flat ? nullptr : dy.a, dy.b, dy.k, dz.flat ? nullptr : dz.a, dz.b,
-                            dz.k, o);
+                            dz.k, o, stream);
           i = 8;
         }
 #endif
@@ -558,29 +570,33 @@ void brick_samples(const core::Grid& grid, const float* f, const std::array<int,
                                : (row[x + 1] - row[x - 1]) * k.inv_2h[0];
           const float gy = dy.flat ? 0.0f : (dy.a[x] - dy.b[x]) * dy.k;
           const float gz = dz.flat ? 0.0f : (dz.a[x] - dz.b[x]) * dz.k;
-          o[i] = {row[x], gx, gy, gz};
+          put_sample(o + i, {row[x], gx, gy, gz}, stream);
         }
       }
-      for (; i < 9; ++i) o[i] = outside;
+      for (; i < 9; ++i) put_sample(o + i, outside, stream);
     }
+#if defined(__SSE2__)
+  if (stream) _mm_sfence();  // the streamed stores ordered before whatever publishes the pool
+#endif
 }
 
 void publish(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
              const std::function<const core::Sample*(std::size_t)>& samples, const core::Isosurface& iso,
-             float background, core::SampleFormat format, bool keep_input, SparseOutput& out) {
+             float background, core::SampleFormat format, bool keep_input, SparseOutput& out,
+             const std::shared_ptr<PoolRecycler>& recycler) {
   publish_fill(
       grid, sel, ranges,
       [&](std::size_t c, core::Sample* dst) {
         const core::Sample* s = samples(c);
         std::copy(s, s + core::kBrickSamples, dst);
       },
-      1, iso, background, format, keep_input, out);
+      1, iso, background, format, keep_input, out, recycler);
 }
 
 void publish_fill(const core::Grid& grid, const Selection& sel, const std::vector<CandidateRange>& ranges,
                   const std::function<void(std::size_t, core::Sample*)>& fill, unsigned threads,
                   const core::Isosurface& iso, float background, core::SampleFormat format, bool keep_input,
-                  SparseOutput& out) {
+                  SparseOutput& out, const std::shared_ptr<PoolRecycler>& recycler) {
   core::BrickedInput in;
   in.grid = grid;
   in.background = background;
@@ -611,11 +627,12 @@ void publish_fill(const core::Grid& grid, const Selection& sel, const std::vecto
       in.active.push_back(sel.candidates[c]);
       cand_of_slot.push_back(c);
     }
-  in.pool.reserve(n_active * std::size_t(core::kBrickSamples));
-  advise_huge_pages(in.pool.data(), in.pool.capacity() * sizeof(core::Sample));
   // Sized without a write (core::SamplePool): `fill` writes every sample of every slot, so
-  // the pool's pages are first touched by the filling threads, not zeroed on this one first.
-  in.pool.resize(n_active * std::size_t(core::kBrickSamples));
+  // a fresh pool's pages are first touched by the filling threads, not zeroed on this one
+  // first; a recycled one's are resident already.
+  const std::size_t n_samples = n_active * std::size_t(core::kBrickSamples);
+  in.pool = recycler ? recycler->take(n_samples) : fresh_pool(n_samples);
+  in.recycle = recycler;
   parallel_for(n_active, threads, 16, [&](std::size_t b, std::size_t e) {
     for (std::size_t slot = b; slot < e; ++slot) fill(cand_of_slot[slot], in.pool.data() + slot * core::kBrickSamples);
   });

@@ -1,8 +1,11 @@
 #version 450
-// The gradient pass's memory traffic and nothing else: four voxels of an x-row per
-// invocation read through the texel buffer, one vec4 sample each written, no arithmetic.
-// `bench engine` times it as lavapipe's floor for the dense passes (what the same loads and
-// stores cost on this device), beside memcpy of the same bytes. Layout as gradient_x4.comp.
+// A dense pass's memory traffic and nothing else: four voxels of an x-row per invocation
+// read through the texel buffer, no arithmetic, and per OUT: 0 one vec4 sample per voxel
+// written (the gradient's 4 + 16 B per voxel), 1 the four floats written as one vec4 (a
+// filter's 4 + 4 B, as filter_x4.comp), 2 nothing written (brick min/max's 4 B read; a store
+// no voxel value takes keeps the loads). `bench engine` times it as lavapipe's floor for the
+// dense passes (what the same loads and stores cost on this device), beside memcpy of the
+// same bytes. Layout as gradient_x4.comp.
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 
@@ -11,6 +14,7 @@ layout(constant_id = 0) const int NX = 1;
 layout(constant_id = 1) const int NY = 1;
 layout(constant_id = 2) const int NZ = 1;
 layout(constant_id = 3) const bool VEC4_IN = false;  // as gradient_x4.comp: one fetch per quad
+layout(constant_id = 4) const int OUT = 0;            // 0 samples, 1 floats, 2 no output
 const int QX = (NX + ISOTOUCH_DENSE_VOXELS - 1) / ISOTOUCH_DENSE_VOXELS;
 
 layout(set = 0, binding = 0) uniform samplerBuffer src;
@@ -29,6 +33,20 @@ void main() {
                          : vec4(texelFetch(src, row + xs.x).x, texelFetch(src, row + xs.y).x,
                                 texelFetch(src, row + xs.z).x, texelFetch(src, row + xs.w).x);
   const uint o = pc.dst_offset + uint((zs * NY + y) * NX + x0);
+  if (OUT == 2) {
+    if (c.x + c.y + c.z + c.w == -3.0e38) dst[o / 4u] = c;  // never on finite voxels of a volume
+    return;
+  }
+  if (OUT == 1) {
+    // Whole quads (NX a multiple of 4): one 16 B store; else the row's floats one by one.
+    if (NX % 4 == 0) {
+      dst[o / 4u] = c;
+    } else {
+      for (int j = 0; j < 4; ++j)
+        if (x0 + j < NX) dst[(o + uint(j)) / 4u][(o + uint(j)) % 4u] = c[j];
+    }
+    return;
+  }
   if (x0 + 3 < NX) {
     dst[o] = c.xxxx;
     dst[o + 1u] = c.yyyy;

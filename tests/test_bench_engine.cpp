@@ -358,7 +358,13 @@ TEST(BenchEngineCase, PeerChainsLegacyAndMemcpyColumns) {
   r.passes[1].label = "gradient";
   r.voxels = 1'000'000;
   r.copy_floor_ms = 1.0;
+  // The chain's floor: 8 ms against the 4 ms memcpy of the chain's 16e6 B; the passes'
+  // GPU times sum to 4 ms, half the floor.
+  r.chain_floor_ms = 8.0;
   bench::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.memcpy_ms, 4.0);
+  EXPECT_DOUBLE_EQ(r.chain_floor_over_memcpy, 2.0);
+  EXPECT_DOUBLE_EQ(r.chain_over_floor, 0.5);
   EXPECT_DOUBLE_EQ(r.copy_floor_memcpy_ms, 5.0);
   EXPECT_DOUBLE_EQ(r.floor_over_memcpy, 0.2);
   EXPECT_DOUBLE_EQ(r.gradient_over_floor, 2.0);

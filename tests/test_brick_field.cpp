@@ -481,6 +481,41 @@ TEST(BrickField, TheApronBeyondTheGridIsTheBackground) {
   EXPECT_GT(beyond, 0);
 }
 
+// A PoolSink gets the fp32 pool's buffer (the very memory the store read) only when the
+// last reference to the published field is gone; a compact format's once it is encoded;
+// a sink destroyed first leaves the store to free it.
+TEST(BrickField, ThePoolSinkGetsTheBufferOnlyWhenTheStoreDies) {
+  struct Sink : core::PoolSink {
+    std::vector<const Sample*> got;
+    void give_back(core::SamplePool&& p) noexcept override {
+      got.push_back(p.data());
+      core::SamplePool gone = std::move(p);
+    }
+  };
+  const Case c = cases()[0];
+  auto sink = std::make_shared<Sink>();
+  BrickedInput in = core::bricked_input_from_dense(c.dense, c.iso);
+  ASSERT_FALSE(in.active.empty());
+  in.recycle = sink;
+  auto f = std::make_shared<SampleField>(core::make_bricked_field(in, SampleFormat::kFp32));
+  const Sample* pool = f->bricks->pool->data();
+  std::shared_ptr<const core::BrickStore> held = f->bricks;  // a second holder (the servo's copy)
+  EXPECT_TRUE(sink->got.empty()) << "handed back while the field is alive";
+  f.reset();
+  EXPECT_TRUE(sink->got.empty()) << "handed back while a store reference is held";
+  EXPECT_EQ(held->stored(0, 0).value, in.pool[0].value) << "the held store still reads its samples";
+  held.reset();
+  ASSERT_EQ(sink->got.size(), 1u);
+  EXPECT_EQ(sink->got[0], pool) << "the sink gets the buffer the store read";
+
+  (void)core::make_bricked_field(in, SampleFormat::kFp16);  // encoded: the fp32 pool is not needed
+  EXPECT_EQ(sink->got.size(), 2u) << "a compact format hands the fp32 pool back once encoded";
+
+  SampleField orphan = core::make_bricked_field(in, SampleFormat::kFp32);
+  sink.reset();  // the sink dies first: the store frees its buffer itself
+  orphan = SampleField{};
+}
+
 TEST(BrickField, BadInputIsRefusedNamingTheField) {
   const Case c = cases()[1];
   BrickedInput in = core::bricked_input_from_dense(c.dense, c.iso);

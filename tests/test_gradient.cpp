@@ -148,8 +148,14 @@ TEST(GpuGradient, CopyFloorIsAFinitePositiveDeviceTime) {
   // slabs' worth of dispatches and returns a finite positive time.
   const engine::Volume v = engine::make_random({67, 45, 33}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 9);
   engine::GradientPass pass(vk());
-  const double floor_ms = pass.copy_floor_ms(v, 3);
-  EXPECT_TRUE(std::isfinite(floor_ms));
-  EXPECT_GT(floor_ms, 0.0);
+  using T = engine::GradientPass::FloorTraffic;
+  for (T t : {T::Samples, T::Floats, T::ReadOnly}) {  // the gradient's, a filter's, brick min/max's traffic
+    const double floor_ms = pass.copy_floor_ms(v, 3, t);
+    EXPECT_TRUE(std::isfinite(floor_ms)) << int(t);
+    EXPECT_GT(floor_ms, 0.0) << int(t);
+  }
+  // Rows of whole quads (one 16 B store per quad for a filter's traffic) and not.
+  const engine::Volume q = engine::make_random({68, 45, 33}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 9);
+  EXPECT_GT(pass.copy_floor_ms(q, 3, T::Floats), 0.0);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }

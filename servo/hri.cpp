@@ -1110,6 +1110,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
+  if (!edited && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1264,6 +1265,35 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   }
   finish_robust(hip, force, edited, have_f_hip, f_hip, out);
   return out;  // in place: a copy of the tick just written stalls on store forwarding
+}
+
+bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
+                             double& f_hip, HriTick& out) {
+  // The two common ticks, by the same arithmetic as tick_robust's general path (so the
+  // same bits), each point computed once: behind a held plane with no update due and a
+  // proxy move that keep_proxy_outside does not check (every rule of the general path
+  // that could act needs an update, a sample or a long move); free motion with the HIP
+  // outside on a step too short for a thin wall.
+  if (plane_.valid) {
+    if (!(dot(plane_.n, hip - plane_.p) < 0.0) || !(c_ + 1 < params_.plane_update_period)) return false;
+    const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);  // eq. 2: the proxy this tick
+    const Vec3 slide = to - anchor_, move = to - vhip_;
+    if (dot(slide, slide) > 0.25 * voxel * voxel || !(dot(move, move) <= 0.0625 * voxel * voxel)) return false;
+    ++c_;
+    const Vec3 force = contact_force(field, hip, v_filt_, elapsed, out);
+    finish_robust(hip, force, false, false, 0.0, out);
+    return true;
+  }
+  f_hip = sample_value(field, hip);
+  have_f_hip = true;
+  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) return false;
+  vhip_ = hip;
+  sliding_ = false;
+  recovery_ticks_left_ = 0;
+  ramp_left_s_ = 0;
+  prev_target_f_ = {};
+  finish_robust(hip, Vec3{}, false, true, f_hip, out);
+  return true;
 }
 
 bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel,

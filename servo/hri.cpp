@@ -1037,7 +1037,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return out;
 }
 
-HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
+[[gnu::always_inline]] inline HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
   HriTick out;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
@@ -1267,7 +1267,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
-bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
+[[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
                              double& f_hip, HriTick& out) {
   // The two common ticks, by the same arithmetic as tick_robust's general path (so the
   // same bits), each point computed once: behind a held plane with no update due and a
@@ -1400,7 +1400,7 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   out.plane_update = true;
 }
 
-void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
+[[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
                                    HriTick& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates

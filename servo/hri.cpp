@@ -84,8 +84,12 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
 VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {
   VirtualPlane plane;
   plane.p = p;
-  const Vec3 fallback = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
-  plane.n = outward_normal(field, p, fallback, last_grad_norm_);
+  // The fallback (the unit vector HIP -> VHIP, else the held normal) only where the
+  // gradient gives no normal: outward_normal returns a finite unit vector or the fallback
+  // it was given, so a NaN one marks that case (the same result, no square root otherwise).
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  plane.n = outward_normal(field, p, Vec3{kNaN, kNaN, kNaN}, last_grad_norm_);
+  if (!finite(plane.n)) plane.n = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
   plane.valid = finite(plane.p) && finite(plane.n);
   return plane;
 }

@@ -1041,7 +1041,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return out;
 }
 
-[[gnu::always_inline]] inline HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
+HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
   HriTick out;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]

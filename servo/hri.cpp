@@ -84,8 +84,12 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
 VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {
   VirtualPlane plane;
   plane.p = p;
-  const Vec3 fallback = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
-  plane.n = outward_normal(field, p, fallback, last_grad_norm_);
+  // The fallback (the unit vector HIP -> VHIP, else the held normal) only where the
+  // gradient gives no normal: outward_normal returns a finite unit vector or the fallback
+  // it was given, so a NaN one marks that case (the same result, no square root otherwise).
+  constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+  plane.n = outward_normal(field, p, Vec3{kNaN, kNaN, kNaN}, last_grad_norm_);
+  if (!finite(plane.n)) plane.n = normalized_or(vhip_ - hip, plane_.valid ? plane_.n : Vec3{0.0, 0.0, 1.0});
   plane.valid = finite(plane.p) && finite(plane.n);
   return plane;
 }
@@ -1110,6 +1114,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
+  if (!edited && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1266,6 +1271,35 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
+[[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
+                             double& f_hip, HriTick& out) {
+  // The two common ticks, by the same arithmetic as tick_robust's general path (so the
+  // same bits), each point computed once: behind a held plane with no update due and a
+  // proxy move that keep_proxy_outside does not check (every rule of the general path
+  // that could act needs an update, a sample or a long move); free motion with the HIP
+  // outside on a step too short for a thin wall.
+  if (plane_.valid) {
+    if (!(dot(plane_.n, hip - plane_.p) < 0.0) || !(c_ + 1 < params_.plane_update_period)) return false;
+    const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);  // eq. 2: the proxy this tick
+    const Vec3 slide = to - anchor_, move = to - vhip_;
+    if (dot(slide, slide) > 0.25 * voxel * voxel || !(dot(move, move) <= 0.0625 * voxel * voxel)) return false;
+    ++c_;
+    const Vec3 force = contact_force(field, hip, v_filt_, elapsed, out);
+    finish_robust(hip, force, false, false, 0.0, out);
+    return true;
+  }
+  f_hip = sample_value(field, hip);
+  have_f_hip = true;
+  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) return false;
+  vhip_ = hip;
+  sliding_ = false;
+  recovery_ticks_left_ = 0;
+  ramp_left_s_ = 0;
+  prev_target_f_ = {};
+  finish_robust(hip, Vec3{}, false, true, f_hip, out);
+  return true;
+}
+
 bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel,
                                Vec3& p) const {
   // Steps of a fifth voxel, and at least 64 per segment (a tapered tip's inside is a sliver).
@@ -1370,7 +1404,7 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   out.plane_update = true;
 }
 
-void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
+[[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
                                    HriTick& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates

@@ -354,6 +354,11 @@ class HriRenderer final : public Renderer {
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
+  /// The common robust ticks (contact with no update due, free motion outside), the same
+  /// bits as the general path; false (nothing changed but the HIP's value, read in free
+  /// motion) where the general path must run. Not for edit ticks nor the tool.
+  bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
+                  double& f_hip, HriTick& out);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
   void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).

@@ -23,16 +23,19 @@ rc=$(app_rc "$out/bad.log")
 [ "$rc" = 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
 
 "$iso" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1 || { cat "$out/path.log"; fail "--hand-path failed"; }
-"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 60 > "$out/emu.log" 2>&1 &
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 120 > "$out/emu.log" 2>&1 &
 emu_pid=$!
 for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
-# The hand path takes a few seconds: 20 s of frames at most (a frame is 0.1-0.3 s on lavapipe).
-xvfb-run -a -s "-screen 0 640x480x24" "$bin" "$scene" --haptic "emu:$sock" --frames 80 --size 256 --stats \
-  > "$out/sculpt.log" 2>&1; rc=$?
+# The hand reaches the skull 0.6 s into its path and pushes past 0.5 N 0.1 s later (the
+# simulated run): the window runs until the probe is in contact, then 200 frames more (a
+# frame is 3-300 ms here: 0.6-60 s), not a fixed number of frames from the start.
+xvfb-run -a -s "-screen 0 640x480x24" "$bin" "$scene" --haptic "emu:$sock" --script "$src/tests/sculpt/haptic-emu.json" \
+  --size 256 --stats > "$out/sculpt.log" 2>&1; rc=$?
 kill -TERM "$emu_pid" 2>/dev/null; wait "$emu_pid"
 cat "$out/sculpt.log" "$out/emu.log"
 [ "$rc" -eq 0 ] || fail "isotouch-sculpt --haptic emu exited $rc"
 grep -q "^device   emu:$sock" "$out/sculpt.log" || fail "the window did not report the device"
+grep -q "wait for contact timed out" "$out/sculpt.log" && fail "the probe never touched the skull"
 grep -Eq "^device   .*disconnected 0, fault 0, refused 0" "$out/sculpt.log" || fail "device faults in a clean run"
 grep -Eq "^link     [1-9][0-9]* reports" "$out/sculpt.log" || fail "no input reports read"
 fmax=$(sed -nE 's/.*max \|F\| ([0-9.e+-]+) N.*/\1/p' "$out/emu.log")

@@ -35,13 +35,15 @@ core::SamplePool PoolRecycler::take(std::size_t n) {
   core::SamplePool p, dropped;
   {
     const std::lock_guard<std::mutex> lock(m_);
-    if (kept_.capacity() >= n && kept_.capacity() > 0) {
+    if (n > 0 && kept_.capacity() >= n && kept_.capacity() / 2 <= n) {
       p = std::move(kept_);
       ++reuses_;
-    } else {
+      kept_ = core::SamplePool();
+    } else if (kept_.capacity() < n) {
       dropped = std::move(kept_);  // too small: freed below, before the new one is made
+      kept_ = core::SamplePool();
     }
-    kept_ = core::SamplePool();
+    // More than twice as large: kept for a later large run; a small snapshot never pins it.
   }
   dropped = core::SamplePool();
   if (p.capacity() == 0) return fresh_pool(n);

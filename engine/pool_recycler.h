@@ -21,7 +21,8 @@ namespace isotouch::engine {
 class PoolRecycler final : public core::PoolSink {
  public:
   /// A pool of `n` samples, unwritten (core::SamplePool): the retained buffer where its
-  /// capacity holds `n`, else a new one (transparent huge pages advised).
+  /// capacity holds `n` and is at most twice `n` (a small snapshot never pins a large
+  /// buffer: that one stays retained), else a new one (transparent huge pages advised).
   core::SamplePool take(std::size_t n);
   void give_back(core::SamplePool&& pool) noexcept override;
   /// Bytes of the retained buffer's capacity (0 when none): memory held for no snapshot.

@@ -175,6 +175,9 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
   if (r.version != last_version_) {
     last_version_ = r.version;
     const std::size_t slot = r.version % seen_size_;
+    // A seqlock of one writer: the tag cleared, the time, the tag (resolve_seen_locked).
+    seen_version_[slot].store(0, std::memory_order_relaxed);
+    std::atomic_thread_fence(std::memory_order_release);
     seen_ns_[slot].store(r.t_ns, std::memory_order_relaxed);
     seen_version_[slot].store(r.version, std::memory_order_release);
   }
@@ -263,7 +266,10 @@ void LiveSession::resolve_seen_locked() const {
     const std::size_t slot = version % seen_size_;
     if (seen_version_[slot].load(std::memory_order_acquire) != version) return false;
     t_ns = seen_ns_[slot].load(std::memory_order_relaxed);
-    return true;
+    // The servo clears the tag before it writes a later version's time: a tag still
+    // `version` after the time was read means the time is that version's.
+    std::atomic_thread_fence(std::memory_order_acquire);
+    return seen_version_[slot].load(std::memory_order_relaxed) == version;
   };
   std::size_t read = 0;  // publications up to and with the newest one a tick has read
   std::int64_t t_ns = 0;

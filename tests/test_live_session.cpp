@@ -198,6 +198,7 @@ TEST(LiveSession, EditToHapticsLatenciesOutlastTheSlotTable) {
   for (int i = 0; i < 7; ++i) {
     ASSERT_TRUE(live.submit(carve(c + Vec3{0.002 * (i - 3), -0.008, 0})));
     wait_until([&] { return live.observe().version >= std::uint64_t(i) + 2; }, 10);
+    ASSERT_GE(live.observe().version, std::uint64_t(i) + 2) << "edit " << i << " not read by the servo within 10 s";
   }
   const double waited_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   live.stop();

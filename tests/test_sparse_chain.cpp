@@ -405,19 +405,40 @@ TEST(SparseChain, RepeatedRunsReuseThePoolOfASnapshotNobodyHolds) {
   auto first = std::make_unique<engine::SparseOutput>(c.run(v, above(500), -1024.0f));
   check(*first, 500, "first run, +500");
   EXPECT_EQ(c.retained_pool_bytes(), 0u);
+  // On any device: the held snapshot's bytes do not change while later runs publish.
+  const std::vector<core::Sample> first_bytes(pool_of(*first)->begin(), pool_of(*first)->end());
+  auto held_unchanged = [&](const std::string& when) {
+    ASSERT_EQ(pool_of(*first)->size(), first_bytes.size()) << when;
+    EXPECT_EQ(std::memcmp(pool_of(*first)->data(), first_bytes.data(), first_bytes.size() * sizeof(core::Sample)), 0)
+        << "the held first snapshot changed " << when;
+  };
   {
     const engine::SparseOutput second = c.run(v, above(1150), -1024.0f);  // the first is still held
     EXPECT_EQ(c.recycled_pools(), 0u);
     check(second, 1150, "second run, +1150, the first held");
+    held_unchanged("during the second run");
   }
   check(*first, 500, "the held first snapshot after the second run");
+  held_unchanged("after the second run");
   EXPECT_GT(c.retained_pool_bytes(), 0u) << "the second snapshot died: its buffer is retained";
   first.reset();  // both buffers free now: the larger is kept, the other freed
   EXPECT_GE(c.retained_pool_bytes(), ref[500].input.pool.size() * sizeof(core::Sample));
-  const engine::SparseOutput third = c.run(v, above(500), -1024.0f);
-  EXPECT_EQ(c.recycled_pools(), 1u);
-  EXPECT_EQ(c.retained_pool_bytes(), 0u) << "the retained buffer went into the third snapshot";
-  check(third, 500, "third run, +500, into a recycled pool");
+  std::uint64_t third_bytes = 0;
+  {
+    const engine::SparseOutput third = c.run(v, above(500), -1024.0f);
+    EXPECT_EQ(c.recycled_pools(), 1u);
+    EXPECT_EQ(c.retained_pool_bytes(), 0u) << "the retained buffer went into the third snapshot";
+    check(third, 500, "third run, +500, into a recycled pool");
+    third_bytes = pool_of(third)->capacity() * sizeof(core::Sample);
+  }
+  // A run needing less than half the retained buffer gets fresh memory (a small snapshot
+  // never pins a large buffer); the large one stays retained for a later large run.
+  ASSERT_EQ(c.retained_pool_bytes(), third_bytes);
+  const engine::SparseOutput small = c.run(v, above(2600), -1024.0f);
+  ASSERT_GT(small.stats.active, 0u);
+  ASSERT_LT(2 * pool_of(small)->size() * sizeof(core::Sample), third_bytes) << "+2600 HU is not a small run here";
+  EXPECT_EQ(c.recycled_pools(), 1u) << "a small run took the large retained buffer";
+  EXPECT_EQ(c.retained_pool_bytes(), third_bytes);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 

@@ -1114,7 +1114,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
-  if (!edited && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
+  if (!edited && params_.short_way && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);

@@ -84,6 +84,11 @@ struct HriParams {
   /// Robust variant: radius of a spherical tool [m, world]; 0 = a point (the paper). The
   /// HIP is the tool's centre; see HriRenderer, "Spherical tool".
   double tool_radius_m = 0.0;
+  /// Robust variant: the two common ticks (contact behind a held plane with no update due,
+  /// free motion outside on a short step) take a short way, the general path's arithmetic
+  /// with each point computed once. false: every tick the general path (the same bits;
+  /// tests compare the two).
+  bool short_way = true;
 };
 
 /// One constraint plane of the spherical tool: the tool centre x is held where

@@ -10,13 +10,16 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <functional>
 #include <random>
+#include <sstream>
 
 #include "analytic_fields.h"
 #include "hri.h"
 #include "sampling.h"
 #include "surface_distance.h"
+#include "sweep.h"
 #include "volume_io.h"
 
 using namespace isotouch::core;
@@ -421,6 +424,46 @@ void expect_no_pop_through(const char* what, const ThinEdgeStrokes& r) {
   EXPECT_GT(r.far_side, 5);
   EXPECT_GT(r.contact_ticks, 10000);
   EXPECT_EQ(r.through, 0);
+}
+
+// The robust tick's short way (the two common ticks) is the general path's arithmetic:
+// with HriParams::short_way off, every tick of the recorded strokes of the sphere, knot,
+// head and chest gives the same force, VHIP, plane and flags, bit for bit, at n = 1, 5
+// and 20, with the paper's rules (linear, central: bench table1's) and the scenes' own
+// (samples normals).
+TEST(HriShortWay, EveryTickAsTheGeneralPath) {
+  std::ostringstream log;
+  long short_ticks = 0;
+  for (const char* name : {"sphere", "knot", "head", "chest"}) {
+    const isotouch::eval::SweepScene s = isotouch::eval::prepare_sweep_scene(name, nullptr, log);
+    for (int n : {1, 5, 20})
+      for (bool paper_rules : {true, false}) {
+        HriParams p = isotouch::eval::reference_params(s);
+        p.plane_update_period = n;
+        p.intersection = isotouch::servo::Intersection::kLinear;
+        p.normal = paper_rules ? isotouch::servo::NormalSource::kCentral : isotouch::servo::NormalSource::kSamples;
+        HriParams q = p;
+        q.short_way = false;
+        HriRenderer a(p), b(q);
+        long differ = 0, contact = 0;
+        for (std::size_t k = 0; k < s.hip.size(); ++k) {
+          const HriTick x = a.tick(*s.field, s.hip[k]), y = b.tick(*s.field, s.hip[k]);
+          const bool same = std::memcmp(&x.force_n, &y.force_n, sizeof x.force_n) == 0 &&
+                            std::memcmp(&x.vhip_m, &y.vhip_m, sizeof x.vhip_m) == 0 &&
+                            std::memcmp(&x.plane.n, &y.plane.n, sizeof x.plane.n) == 0 &&
+                            std::memcmp(&x.plane.p, &y.plane.p, sizeof x.plane.p) == 0 && x.plane.valid == y.plane.valid &&
+                            x.contact == y.contact && x.plane_update == y.plane_update && x.saturated == y.saturated &&
+                            x.fault == y.fault && std::memcmp(&x.penetration_m, &y.penetration_m, sizeof(double)) == 0;
+          differ += !same;
+          contact += x.contact;
+          short_ticks += x.contact && !x.plane_update;
+        }
+        EXPECT_EQ(differ, 0) << name << ", n = " << n << (paper_rules ? ", linear/central" : ", linear/samples") << ": "
+                             << differ << " of " << s.hip.size() << " ticks differ";
+        EXPECT_GT(contact, 100) << name;
+      }
+  }
+  EXPECT_GT(short_ticks, 10000);  // contact ticks without an update: the short way's own
 }
 
 TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {

@@ -1271,8 +1271,9 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
-[[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
-                             double& f_hip, HriTick& out) {
+[[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,
+                                                           double elapsed, bool& have_f_hip, double& f_hip,
+                                                           HriTick& out) {
   // The two common ticks, by the same arithmetic as tick_robust's general path (so the
   // same bits), each point computed once: behind a held plane with no update due and a
   // proxy move that keep_proxy_outside does not check (every rule of the general path
@@ -1404,8 +1405,8 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   out.plane_update = true;
 }
 
-[[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip,
-                                   HriTick& out) {
+[[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited,
+                                                              bool have_f_hip, double f_hip, HriTick& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates
   if (!std::isfinite(mag)) {

@@ -463,7 +463,7 @@ TEST(HriShortWay, EveryTickAsTheGeneralPath) {
         EXPECT_GT(contact, 100) << name;
       }
   }
-  EXPECT_GT(short_ticks, 10000);  // contact ticks without an update: the short way's own
+  EXPECT_GT(short_ticks, 10000);  // contact ticks without an update: where the short way can act
 }
 
 TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {

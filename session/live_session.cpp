@@ -490,7 +490,7 @@ void LiveSession::finish_recording() {
   }
 }
 
-LiveStats LiveSession::stats() const {
+LiveStats LiveSession::stats(std::size_t latency_tail) const {
   LiveStats s;
   if (servo_) {
     s.ticks = servo_->ticks();
@@ -521,7 +521,9 @@ LiveStats LiveSession::stats() const {
   s.edits_refused = refused_;
   s.publications = publications_;
   resolve_seen_locked();
-  s.edit_to_haptics_ms = edit_to_haptics_ms_;
+  const std::size_t tail = std::min(latency_tail, edit_to_haptics_ms_.size());
+  s.edit_to_haptics_ms.assign(edit_to_haptics_ms_.end() - std::ptrdiff_t(tail), edit_to_haptics_ms_.end());
+  s.edit_to_haptics_taken = edit_to_haptics_ms_.size();
   s.record_error = record_error_;
   return s;
 }

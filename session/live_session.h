@@ -122,6 +122,9 @@ struct LiveStats {
   /// Per published edit: from the start of the tick that asked for it (servo side) or the
   /// submit() call (API) to the start of the first tick that read its snapshot [ms].
   std::vector<double> edit_to_haptics_ms;
+  /// Latencies taken so far; edit_to_haptics_ms holds the newest of them (all, unless
+  /// stats() was asked for fewer).
+  std::size_t edit_to_haptics_taken = 0;
   /// p99 (nearest rank) of |measured period - nominal period| over the ticks so far [us],
   /// from a histogram of kPeriodBins bins of kPeriodBinUs (a bin's upper edge); -1 before
   /// the second tick. Available while the servo runs. Past the histogram's range (the last
@@ -193,7 +196,10 @@ class LiveSession final : private servo::TickObserver {
   Observed observe() const;
   /// Time since start() on the servo's clock [s].
   double elapsed_s() const;
-  LiveStats stats() const;  ///< after stop(): complete; while running: the counters only
+  /// After stop(): complete; while running: the counters only. `latency_tail` limits
+  /// edit_to_haptics_ms to the newest that many latencies (a frame loop's panel reads the
+  /// recent ones in O(tail), not the whole session's list).
+  LiveStats stats(std::size_t latency_tail = SIZE_MAX) const;
   /// The servo thread (its real-time set-up, period errors after stop()); null in a
   /// session for run_simulated() only.
   const servo::ServoThread* servo_thread() const { return servo_.get(); }

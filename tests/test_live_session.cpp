@@ -209,6 +209,12 @@ TEST(LiveSession, EditToHapticsLatenciesOutlastTheSlotTable) {
     EXPECT_GE(ms, 0.0);
     EXPECT_LE(ms, waited_ms);
   }
+  EXPECT_EQ(s.edit_to_haptics_taken, 7u);
+  // A tail of 3: the newest three of the same list, the count still all seven.
+  const auto tail = live.stats(3);
+  EXPECT_EQ(tail.edit_to_haptics_taken, 7u);
+  ASSERT_EQ(tail.edit_to_haptics_ms.size(), 3u);
+  EXPECT_TRUE(std::equal(tail.edit_to_haptics_ms.begin(), tail.edit_to_haptics_ms.end(), s.edit_to_haptics_ms.end() - 3));
 }
 
 // Pause: the servo keeps ticking and sends exact zeros; resume renders again.

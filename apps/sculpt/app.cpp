@@ -279,6 +279,9 @@ std::string volume_line(const engine::Volume& v) {
          " x " + fixed(s.y * 1e3, 2) + " x " + fixed(s.z * 1e3, 2) + " mm, " + v.orientation();
 }
 
+/// The stats panel's edit-to-haptics median is over the newest this many edits.
+constexpr std::size_t kPanelLatencies = 256;
+
 /// The servo's figures for the stats panel; the tick rate is measured over `seconds` since
 /// the last refresh.
 void refresh_servo(PanelStats& p, const session::LiveStats& st, double seconds) {
@@ -962,7 +965,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     last_frame = end;
     ++frame;
     if (frame % 15 == 0) {
-      const session::LiveStats st = session->stats();
+      const session::LiveStats st = session->stats(kPanelLatencies);
       refresh_servo(panel, st, std::chrono::duration<double>(end - panel_refreshed).count());
       panel_refreshed = end;
       std::ostringstream title;

@@ -85,7 +85,7 @@ void stats_panel(const PanelStats& s) {
   else if (s.tick_p99_us) ImGui::Text("tick p99    %.0f us (|period error|)", *s.tick_p99_us);
   else ImGui::TextDisabled("tick p99    n/a (no ticks yet)");
   if (s.edit_to_haptics_last_ms)
-    ImGui::Text("edit->feel  %.2f ms last, %.2f ms median", *s.edit_to_haptics_last_ms,
+    ImGui::Text("edit->feel  %.2f ms last, %.2f ms median of recent", *s.edit_to_haptics_last_ms,
                 s.edit_to_haptics_median_ms.value_or(0.0));
   else ImGui::TextDisabled("edit->feel  no edit yet");
   ImGui::Text("frame       %.1f ms (%.0f fps)", s.frame_ms, s.frame_ms > 0 ? 1e3 / s.frame_ms : 0.0);

@@ -27,6 +27,11 @@ Subcommand add_bench_servo_rt_command(CLI::App& bench) {
   rt->add_flag("--mlock,!--no-mlock", o->lock_memory, "mlockall and prefault before the loop (default on)");
   rt->add_option("--cpu", o->cpu, "Pin to this CPU (default: the last one)");
   rt->add_option("--csv", o->out_csv, "Also write the table to this CSV file");
+  rt->add_option("--busy", o->busy_threads,
+                 "Threads spinning in user space meanwhile (default scheduling, no syscalls): the servo's floor "
+                 "when every CPU is busy with work that cannot hold a CPU against SCHED_FIFO")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 256));
   return {rt, [o](const std::string& device) {
             bench::ServoRtOptions opt = *o;
             opt.device = device;

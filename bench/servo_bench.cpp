@@ -57,6 +57,32 @@ std::string load_average() {
   return o.str();
 }
 
+/// Threads spinning on a register from construction to destruction: CPU load that makes no
+/// syscall, touches no shared memory and cannot hold a CPU against a SCHED_FIFO thread.
+class BusyThreads {
+ public:
+  explicit BusyThreads(int n) {
+    for (int i = 0; i < n; ++i)
+      threads_.emplace_back([this] {
+        std::uint64_t x = 1;
+        while (!stop_.load(std::memory_order_relaxed))
+          for (int k = 0; k < 4096; ++k) x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+        sink_.fetch_add(x, std::memory_order_relaxed);
+      });
+  }
+  ~BusyThreads() {
+    stop_.store(true);
+    for (auto& t : threads_) t.join();
+  }
+  BusyThreads(const BusyThreads&) = delete;
+  BusyThreads& operator=(const BusyThreads&) = delete;
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> sink_{0};
+  std::vector<std::thread> threads_;
+};
+
 int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
   using namespace servo;
   engine::ContextOptions co;
@@ -71,6 +97,9 @@ int run_bench_servo_rt(const ServoRtOptions& o, std::ostream& log) {
   log << "bench servo-rt: " << o.seconds << " s per rate; engine thread recomputes a 64^3 sculpted sphere on "
       << engine_name << " and publishes it; " << std::thread::hardware_concurrency()
       << " CPUs; load average (1/5/15 min) " << load_average() << "\n";
+  const BusyThreads busy(o.busy_threads);
+  if (o.busy_threads > 0)
+    log << o.busy_threads << " threads spin in user space throughout (default scheduling, no syscalls)\n";
 
   std::ostringstream csv;
   csv << "rate_hz,seconds,scheduling,ticks,missed_deadlines,period_err_p50_us,period_err_p99_us,period_err_p999_us,"

@@ -21,6 +21,10 @@ struct ServoRtOptions {
   bool lock_memory = true; ///< mlockall + prefault before the loop (default)
   std::string device;      ///< Vulkan device for the engine thread
   std::string out_csv;     ///< also write the table here (optional)
+  /// Threads that spin in user space (default scheduling, no syscall, no memory traffic)
+  /// during every case: the floor of a servo whose CPUs are busy with work that cannot
+  /// hold a CPU against SCHED_FIFO (0: none).
+  int busy_threads = 0;
 };
 
 /// For 1, 4 and 10 kHz: run the servo thread for `seconds` while an engine thread keeps

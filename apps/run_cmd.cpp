@@ -136,9 +136,10 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
             << "  volume        " << m.volume_path << "  (" << m.dims[0] << "x" << m.dims[1] << "x" << m.dims[2]
             << (m.orientation.empty() ? std::string() : ", orientation " + m.orientation) << ")\n"
             << "  isovalue      " << hp.tau << "\n"
-            << "  GPU           " << m.gpu_device << ": gradient " << m.gpu_gradient_ms << " ms; CPU reference "
-            << m.cpu_gradient_ms << " ms\n"
-            << "  GPU vs CPU    max abs " << m.max_abs_diff << ", relative " << m.max_rel_diff << "\n"
+            << (m.cpu_backend ? "  engine        " : "  GPU           ") << m.gpu_device << ": gradient "
+            << m.gpu_gradient_ms << " ms; CPU reference " << m.cpu_gradient_ms << " ms\n"
+            << (m.cpu_backend ? "  vs reference  max abs " : "  GPU vs CPU    max abs ") << m.max_abs_diff
+            << ", relative " << m.max_rel_diff << "\n"
             << "  servo         HRI, n = " << hp.plane_update_period << ", " << hp.rate_hz << " Hz, K = "
             << hp.stiffness_n_per_m << " N/m, B = " << hp.damping_n_s_per_m << " N s/m\n"
             << "  ticks         " << m.ticks << "  (tick median " << m.tick_ns_median << " ns, p99 " << m.tick_ns_p99

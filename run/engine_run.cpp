@@ -17,6 +17,7 @@
 #include "cpu_gradient.h"
 #include "field_view.h"
 #include "names.h"
+#include "parallel.h"
 #include "pass_desc.h"
 #include "passes.h"
 #include "sparse_chain.h"
@@ -44,14 +45,27 @@ void compare_into(const core::SampleField& gpu, const core::SampleField& cpu, Ru
   for (int k = 0; k < 3; ++k) m.max_abs_diff_xyz[k] = diff.max_abs[k];
 }
 
-// Dense: PassChain on the GPU (one command buffer), run_chain_cpu as the reference.
-EngineRun run_dense(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
-                    engine::VulkanContext& vk, const RunOptions& opt, float background, RunMetrics& m) {
-  auto chain = engine::PassChain::create(vk, passes);
+// The dense chain on `vk` (PassChain, one command buffer) or, without one, on the CPU backend.
+engine::ChainOutput dense_engine(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                                 engine::VulkanContext* vk, const RunOptions& opt, RunMetrics& m) {
+  if (!vk) {
+    const unsigned threads = engine::hardware_threads();
+    m.engine_describe = "run_chain_cpu on " + std::to_string(threads) + " thread(s)";
+    m.engine_ran = "run_chain_cpu (CPU backend, " + std::to_string(threads) + " thread(s), dense)";
+    return engine::run_chain_cpu(vol, passes, threads);
+  }
+  auto chain = engine::PassChain::create(*vk, passes);
   if (!chain) throw std::runtime_error(vol.path + ": " + chain.error);
   engine::ChainOutput out = (*chain.value)->run(vol, opt.max_binding_bytes);
   m.engine_describe = (*chain.value)->describe();
   m.engine_ran = "PassChain (GPU, dense, one command buffer)";
+  return out;
+}
+
+// Dense: the dense chain (GPU or CPU backend), run_chain_cpu as the reference.
+EngineRun run_dense(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                    engine::VulkanContext* vk, const RunOptions& opt, float background, RunMetrics& m) {
+  engine::ChainOutput out = dense_engine(vol, passes, vk, opt, m);
   if (!out.samples) throw std::runtime_error(vol.path + ": the pass chain returned no samples");
   auto field = std::make_shared<core::SampleField>(std::move(*out.samples));
   field->background = background;
@@ -147,7 +161,7 @@ std::shared_ptr<core::SampleField> sparse_gpu_field(engine::SparseOutput& gpu, R
 // Where the sparse GPU chain cannot run the scene: the dense chain's samples converted to
 // bricks, its figures into m (m.engine_fallback says why).
 std::shared_ptr<core::SampleField> dense_stand_in(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
-                                                  engine::VulkanContext& vk, const RunOptions& opt,
+                                                  engine::VulkanContext* vk, const RunOptions& opt,
                                                   const core::Isosurface& iso, float background,
                                                   core::SampleFormat format, RunMetrics& m) {
   RunMetrics dm;
@@ -163,15 +177,42 @@ std::shared_ptr<core::SampleField> dense_stand_in(const engine::Volume& vol, con
   const auto t0 = std::chrono::steady_clock::now();
   auto field = to_bricks(*d.published, iso, format, m);
   m.publish_ms = ms_since(t0);
-  m.engine_ran = "PassChain (GPU, dense) + " + m.engine_ran;
+  m.engine_ran = (vk ? "PassChain (GPU, dense) + " : "run_chain_cpu (CPU backend, dense) + ") + m.engine_ran;
   return field;
 }
 
-// Sparse: SparseChain on the GPU, run_sparse_cpu as the reference; while either is not
-// implemented yet, the dense chain plus a conversion of its samples to bricks stands in
-// (and the report says so).
+// The sparse chain on `vk` (SparseChain) or, without one, on the CPU backend; nullopt where it
+// cannot run the scene (m.engine_fallback says why).
+std::optional<engine::SparseOutput> sparse_engine(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
+                                                  engine::VulkanContext* vk, const RunOptions& opt,
+                                                  const core::Isosurface& iso, float background,
+                                                  core::SampleFormat format, RunMetrics& m) {
+  try {
+    if (!vk) {
+      const unsigned threads = engine::hardware_threads();
+      m.engine_describe = "run_sparse_cpu on " + std::to_string(threads) + " thread(s)";
+      m.engine_ran = "run_sparse_cpu (CPU backend, " + std::to_string(threads) + " thread(s), candidate bricks only)";
+      return engine::run_sparse_cpu(vol, passes, iso, background, format, false, threads);
+    }
+    auto chain = engine::SparseChain::create(*vk, passes);
+    if (!chain) throw std::runtime_error(vol.path + ": " + chain.error);
+    m.engine_describe = (*chain.value)->describe();
+    auto out = (*chain.value)->run(vol, iso, background, format, opt.max_binding_bytes);
+    m.engine_ran = "SparseChain (GPU, candidate bricks only)";
+    return out;
+  } catch (const engine::VolumeError& e) {
+    // Not implemented yet, or a pass list the sparse chain cannot hold (e.g. a wide
+    // Gaussian): the dense chain stands in, and the report says why.
+    m.engine_fallback = e.what();
+    return std::nullopt;
+  }
+}
+
+// Sparse: the sparse chain (GPU or CPU backend), run_sparse_cpu as the reference; where the
+// chain cannot run the scene, the dense chain plus a conversion of its samples to bricks
+// stands in (and the report says so).
 EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDesc>& passes,
-                     engine::VulkanContext& vk, const RunOptions& opt, const core::Isosurface& iso,
+                     engine::VulkanContext* vk, const RunOptions& opt, const core::Isosurface& iso,
                      float background, core::SampleFormat format, RunMetrics& m) {
   // The dense fp32 samples of the same passes: what the errors are measured against.
   const auto t_truth = std::chrono::steady_clock::now();
@@ -182,18 +223,7 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
   truth->version = 1;
   m.dense_fp32_bytes = vol.grid.voxel_count() * sizeof(core::Sample);
 
-  std::optional<engine::SparseOutput> gpu;
-  auto chain = engine::SparseChain::create(vk, passes);
-  if (!chain) throw std::runtime_error(vol.path + ": " + chain.error);
-  try {
-    gpu = (*chain.value)->run(vol, iso, background, format, opt.max_binding_bytes);
-    m.engine_ran = "SparseChain (GPU, candidate bricks only)";
-  } catch (const engine::VolumeError& e) {
-    // Not implemented yet, or a pass list the sparse shader cannot hold (e.g. a wide
-    // Gaussian): the dense chain stands in, and the report says why.
-    m.engine_fallback = e.what();
-  }
-  m.engine_describe = (*chain.value)->describe();
+  std::optional<engine::SparseOutput> gpu = sparse_engine(vol, passes, vk, opt, iso, background, format, m);
   std::shared_ptr<core::SampleField> field = gpu ? sparse_gpu_field(*gpu, m)
                                                  : dense_stand_in(vol, passes, vk, opt, iso, background, format, m);
   // CPU reference of the published snapshot.
@@ -219,7 +249,7 @@ EngineRun run_sparse(const engine::Volume& vol, const std::vector<engine::PassDe
 
 }  // namespace
 
-EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::VulkanContext& vk,
+EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::VulkanContext* vk,
                      const RunOptions& opt, RunMetrics& m, std::ostream& log) {
   const std::vector<engine::PassDesc> passes = scene_passes(scene);
   const core::SampleFormat format = scene_sample_format(scene);
@@ -234,9 +264,9 @@ EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::Vulk
                           ? run_dense(vol, passes, vk, opt, background, m)
                           : run_sparse(vol, passes, vk, opt, iso, background, format, m);
   log << "engine   " << scene.engine.mode << ", " << m.sample_format << " samples: " << m.engine_ran << "\n";
-  if (!m.engine_fallback.empty()) log << "         (sparse GPU chain not used: " << m.engine_fallback << ")\n";
+  if (!m.engine_fallback.empty()) log << "         (sparse chain not used: " << m.engine_fallback << ")\n";
   for (std::size_t i = 0; i < m.gpu_passes.size(); ++i)
-    log << "         GPU " << m.gpu_passes[i].label << " " << fmt(m.gpu_passes[i].ms, 4) << " ms ("
+    log << "         " << (vk ? "GPU " : "CPU backend ") << m.gpu_passes[i].label << " " << fmt(m.gpu_passes[i].ms, 4) << " ms ("
         << m.gpu_passes[i].dispatches << " dispatch(es))\n";
   for (const auto& p : m.cpu_passes) log << "         CPU " << p.label << " " << fmt(p.ms, 4) << " ms\n";
   if (m.bricks_total)
@@ -244,7 +274,7 @@ EngineRun run_engine(const Scene& scene, const engine::Volume& vol, engine::Vulk
         << " candidates computed); snapshot " << m.snapshot_bytes << " B against " << m.dense_fp32_bytes
         << " B dense fp32 (" << fmt(100.0 * double(m.snapshot_bytes) / double(std::max<std::uint64_t>(1, m.dense_fp32_bytes)), 3)
         << " %)\n";
-  log << "GPU vs CPU max |difference| " << fmt(m.max_abs_diff, 3) << " (relative " << fmt(m.max_rel_diff, 3)
+  log << (vk ? "GPU vs CPU" : "CPU backend vs one-thread reference") << " max |difference| " << fmt(m.max_abs_diff, 3) << " (relative " << fmt(m.max_rel_diff, 3)
       << ")\n";
   return r;
 }

@@ -1,5 +1,5 @@
 // engine_run.h - the scene's engine passes as `isotouch run` runs them: the GPU chain
-// (dense or sparse) that computes the published snapshot, the one-thread CPU reference
+// (dense or sparse; or the CPU backend without Vulkan) that computes the published snapshot, the one-thread CPU reference
 // beside it, and the figures comparing the two.
 #pragma once
 #include <iosfwd>
@@ -19,10 +19,11 @@ struct EngineRun {
   std::shared_ptr<const core::SampleField> truth;  ///< dense fp32 samples of the same passes
 };
 
-/// Runs the scene's passes (engine.mode dense or sparse, engine.samples) on `vk` and the CPU
-/// reference, fills the engine figures of `m` and logs them.
+/// Runs the scene's passes (engine.mode dense or sparse, engine.samples) on `vk`, or on the
+/// CPU backend (every hardware thread) when `vk` is null, and the one-thread CPU reference;
+/// fills the engine figures of `m` (the gpu_* ones hold the engine's, either way) and logs them.
 /// @throws std::runtime_error (Vulkan, a chain that returned nothing), SceneError (the scene's passes).
-EngineRun run_engine(const io::Scene& scene, const engine::Volume& vol, engine::VulkanContext& vk,
+EngineRun run_engine(const io::Scene& scene, const engine::Volume& vol, engine::VulkanContext* vk,
                      const RunOptions& opt, RunMetrics& m, std::ostream& log);
 
 }  // namespace isotouch::run

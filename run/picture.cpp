@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "names.h"
+#include "scene_setup.h"
 #include "synthetic.h"
 #include "shapes.h"
 
@@ -222,7 +223,7 @@ RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, con
     req.view = engine::look_at(target - view_dir * dist, target, picture_up(vol, view_dir), fov);
     req.prims = std::move(prims);
     std::unique_ptr<engine::VulkanContext> own;
-    if (!vk) {
+    if (!vk && !is_cpu_device(device)) {
       engine::ContextOptions co;
       co.device = device;
       auto c = engine::VulkanContext::create(co);

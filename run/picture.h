@@ -75,7 +75,8 @@ struct RunPicture {
 /// @param vol   the run's volume (grid, values, direction D)
 /// @param field the published snapshot (its `background` is used; values from `vol`)
 /// @param trace the run's ticks, grid-world (as run_headless returns them)
-/// @param vk    a Vulkan context to reuse, or null to create one on `device`
+/// @param vk    a Vulkan context to reuse, or null to create one on `device` (kCpuDevice:
+///              none, the CPU ray caster draws it)
 RunPicture render_run_picture(const io::Scene& scene, const engine::Volume& vol, const core::SampleField& field,
                               const std::vector<sim::TraceRow>& trace, const std::string& out_png,
                               engine::VulkanContext* vk = nullptr, const std::string& device = "",

@@ -96,6 +96,8 @@ struct RunMetrics {
   core::Vec3 spacing_m;
   std::string gpu_device;
   std::string gpu_device_type;
+  /// The engine ran on the CPU backend (no Vulkan context): the gpu_* figures are its own.
+  bool cpu_backend = false;
   double gpu_gradient_ms = 0, gpu_upload_ms = 0, gpu_download_ms = 0, gpu_submit_wall_ms = 0;
   int gpu_slabs = 0;
   bool gpu_timestamps = false;

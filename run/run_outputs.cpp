@@ -304,12 +304,11 @@ void edit_pictures(const Scene& scene, const SceneSetup& setup, const std::vecto
   }
   if (!copied)
     before = render_run_picture(scene, setup.volume, *setup.first, path, (fs::path(dir) / "before.png").string(),
-                                setup.vk.get());
+                                setup.vk.get(), setup.device);
   const RunPicture aft = render_run_picture(scene, after, *setup.session->current(), path,
-                                            (fs::path(dir) / "after.png").string(), setup.vk.get());
+                                            (fs::path(dir) / "after.png").string(), setup.vk.get(), setup.device);
   e.before_after_drawn = before.error.empty() && aft.error.empty();
   try {
-    if (!setup.vk) throw std::runtime_error("no Vulkan device");
     render_section(scene, setup, setup.volume, (fs::path(dir) / "section_before.png").string());
     render_section(scene, setup, after, (fs::path(dir) / "section_after.png").string());
     e.sections_drawn = true;

@@ -468,19 +468,19 @@ std::string volume_rows(const RunMetrics& m, const engine::Volume& vol, const se
      << "; reported points and forces are physical (ITK's LPS frame: origin + D (spacing * index)) |\n"
      << "| isovalue | " << fmt(hp.tau) << " (inside: value " << (hp.inside == core::InsideIs::kAbove ? ">" : "<")
      << " isovalue) |\n"
-     << "| Vulkan device | " << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
+     << (m.cpu_backend ? "| engine device | " : "| Vulkan device | ") << m.gpu_device << " (" << m.gpu_device_type << ") |\n"
      << "| engine | " << m.engine_mode << " mode, " << m.sample_format << " samples, passes "
      << pass_list_text(m.passes) << "; snapshot " << m.snapshot_bytes << " B ("
      << fmt(100.0 * double(m.snapshot_bytes) / double(std::max<std::uint64_t>(1, m.dense_fp32_bytes)), 3)
      << " % of the dense fp32 " << m.dense_fp32_bytes << " B)"
      << (m.bricks_total ? ", " + std::to_string(m.bricks_active) + " of " + std::to_string(m.bricks_total) + " bricks active"
                         : std::string())
-     << (m.engine_fallback.empty() ? std::string() : "; **sparse GPU chain not used: " + m.engine_fallback + "**")
+     << (m.engine_fallback.empty() ? std::string() : "; **sparse chain not used: " + m.engine_fallback + "**")
      << " (details below) |\n"
-     << (m.engine_mode == "sparse" ? "| GPU stages (sum) | " : "| gradient pass | ") << "GPU " << fmt(m.gpu_gradient_ms, 4) << " ms ("
+     << (m.engine_mode == "sparse" ? "| GPU stages (sum) | " : "| gradient pass | ") << (m.cpu_backend ? "CPU backend " : "GPU ") << fmt(m.gpu_gradient_ms, 4) << " ms ("
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
-     << "| GPU vs CPU gradient | max abs " << fmt(m.max_abs_diff, 3)
+     << (m.cpu_backend ? "| CPU backend vs CPU reference gradient | max abs " : "| GPU vs CPU gradient | max abs ") << fmt(m.max_abs_diff, 3)
      << "; relative (to the largest gradient magnitude) " << fmt(m.max_rel_diff, 3) << " |\n";
   return md.str();
 }

@@ -134,7 +134,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
     // With edits the path is thinned (thin_path): the same picture serves as before.png.
     const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
                                               (fs::path(dir) / "surface.png").string(),
-                                              setup.vk.get(), opt.device);
+                                              setup.vk.get(), setup.device);
     m.picture_drawn = pic.error.empty();
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";

@@ -1,5 +1,7 @@
 #include "scene_setup.h"
 #include <algorithm>
+#include <cctype>
+#include <cstdlib>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -16,6 +18,7 @@
 #include "brush.h"
 #include "engine_run.h"
 #include "names.h"
+#include "parallel.h"
 #include "run_report.h"
 #include "shapes.h"
 #include "synthetic.h"
@@ -23,6 +26,14 @@
 
 namespace isotouch::run {
 namespace fs = std::filesystem;
+
+bool is_cpu_device(const std::string& device) {
+  if (device.size() != 3) return false;
+  std::string d = device;
+  for (char& c : d) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return d == kCpuDevice;
+}
+
 namespace {
 
 session::BrushKind brush_kind(const std::string& k) {
@@ -160,22 +171,48 @@ void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 }
 
+// The Vulkan context of opt.device into s.vk, or none: the CPU backend when it is asked for,
+// or when no device was asked for and none opens (the reason is logged). A device asked for
+// by name that does not open is an error.
+void open_device(const RunOptions& opt, SceneSetup& s, std::ostream& log) {
+  RunMetrics& m = s.metrics;
+  s.device = opt.device;
+  std::string why;
+  if (is_cpu_device(opt.device)) {
+    why = "--device " + opt.device;
+  } else {
+    engine::ContextOptions co;
+    co.device = opt.device;
+    auto ctx = engine::VulkanContext::create(co);
+    const char* env = std::getenv("ISOTOUCH_DEVICE");
+    const bool asked = !opt.device.empty() || (env && *env);
+    if (!ctx && asked) throw std::runtime_error("Vulkan: " + ctx.error);
+    if (ctx) {
+      s.vk = std::move(*ctx.value);
+      m.gpu_device = s.vk->info().name;
+      m.gpu_device_type = s.vk->info().type;
+      log << "device   " << m.gpu_device << " (" << m.gpu_device_type << ", " << s.vk->info().driver << ")\n";
+      return;
+    }
+    why = "no Vulkan device (" + ctx.error + ")";
+  }
+  s.device = kCpuDevice;
+  m.cpu_backend = true;
+  const unsigned threads = engine::hardware_threads();
+  m.gpu_device = "CPU backend";
+  m.gpu_device_type = std::to_string(threads) + " thread(s)";
+  log << "device   none: " << why << "; the engine, brushes and pictures run on the CPU backend (" << threads
+      << " thread(s), bit for bit the one-thread references)\n";
+}
+
 // 2. Engine: the scene's passes on the GPU (dense or sparse), the CPU reference beside it;
 // the snapshot the servo reads first, the truth the error is measured against, the live
 // field's options.
 void run_engine_step(const Scene& scene, const RunOptions& opt, SceneSetup& s, std::ostream& log) {
   RunMetrics& m = s.metrics;
   const engine::Volume& vol = s.volume;
-  engine::ContextOptions co;
-  co.device = opt.device;
-  auto ctx = engine::VulkanContext::create(co);
-  if (!ctx) throw std::runtime_error("Vulkan: " + ctx.error);
-  s.vk = std::move(*ctx.value);
-  engine::VulkanContext& vk = *s.vk;
-  m.gpu_device = vk.info().name;
-  m.gpu_device_type = vk.info().type;
-  log << "device   " << m.gpu_device << " (" << m.gpu_device_type << ", " << vk.info().driver << ")\n";
-  const EngineRun er = run_engine(scene, vol, vk, opt, m, log);
+  open_device(opt, s, log);
+  const EngineRun er = run_engine(scene, vol, s.vk.get(), opt, m, log);
   s.first = er.published;
   // What the surface error is measured against, and the script is cast on: the dense fp32
   // samples of the same passes (CPU reference). For a dense or bricked fp32 snapshot its

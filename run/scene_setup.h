@@ -20,9 +20,17 @@
 
 namespace isotouch::run {
 
+/// The device choice that runs the engine, the brushes and the pictures on the CPU: the
+/// CPU references' code on every hardware thread (bit for bit the one-thread references),
+/// no Vulkan context. A run whose device choice is empty (no --device, no $ISOTOUCH_DEVICE)
+/// falls back to it when no Vulkan device can be opened, and says so.
+inline constexpr const char* kCpuDevice = "cpu";
+/// True if `device` asks for the CPU backend (kCpuDevice, any case).
+bool is_cpu_device(const std::string& device);
+
 struct RunOptions {
   std::string out_dir;                 ///< where trace.csv, summary.json, report.md go
-  std::string device;                  ///< Vulkan device choice (see ContextOptions)
+  std::string device;                  ///< Vulkan device choice (see ContextOptions), or kCpuDevice
   bool progress = true;                ///< progress line on stderr
   std::uint64_t max_binding_bytes = 0; ///< test hook: smaller storage-binding limit
   /// `run --record FILE`: also write the recording (io/record.h: every device input,
@@ -66,7 +74,10 @@ struct SceneSetup {
   /// Dense fp32 samples of the scene's passes on the unedited volume (CPU reference): the
   /// script is cast on it and the surface error measured against it.
   std::shared_ptr<const core::SampleField> truth;
-  std::unique_ptr<engine::VulkanContext> vk;     ///< the Vulkan context (engine, brushes, pictures)
+  std::unique_ptr<engine::VulkanContext> vk;     ///< the Vulkan context (engine, brushes, pictures); null on the CPU backend
+  /// The device the run's outputs use: RunOptions::device, or kCpuDevice on the CPU backend
+  /// (asked for, or fallen back to).
+  std::string device;
   /// The edit pipeline (brushes on the GPU when there is a device, else the CPU reference)
   /// when the scene has an "edits" section, else null. Built from a copy of `volume`.
   std::unique_ptr<session::EditSession> session;

@@ -73,7 +73,7 @@ layout(constant_id = 3) const int NZ = 1;
 layout(constant_id = 4) const bool QUADS = false;
 layout(set = 0, binding = 12) uniform samplerBuffer quads;  // 4 voxels per texel (see above)
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
-layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 per pixel
+layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 (or BGRA8) per pixel
 layout(std430, set = 0, binding = 5) buffer Depth { float depth[]; };     // t [m] of the hit, -1: none
 layout(std430, set = 0, binding = 6) buffer LinR { float lin_r[]; };      // linear colour per hit pixel
 layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (the overlay pass blends
@@ -497,10 +497,12 @@ vec3 shade(vec3 albedo, vec3 n, vec3 dir) {
   return c;
 }
 
+// R, G, B, A from the low byte; B, G, R, A with the BGRA flag (a swapchain's order).
 uint pack_rgba(vec3 c) {
   vec3 g = sqrt(clamp(c, 0.0, 1.0));
   uvec3 u = uvec3(g * 255.0 + 0.5);
-  return u.r | (u.g << 8) | (u.b << 16) | (255u << 24);
+  bool bgra = (pc.flags & ISOTOUCH_RAYCAST_BGRA) != 0u;
+  return (bgra ? u.b : u.r) | (u.g << 8) | ((bgra ? u.r : u.b) << 16) | (255u << 24);
 }
 
 // Primitive intersection in a local frame: origin moved along the ray to the point

@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <stdexcept>
 #include <algorithm>
 #include <array>
 #include <filesystem>
@@ -15,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "vk_resources.h"
 #include "vk_test_context.h"
 #include "gpu_cpu_compare.h"
 #include "raycast.h"
@@ -1112,5 +1115,69 @@ TEST(Raycast, HitsLieOnTheIsosurfaceOfTheDoubleField) {
                 errs.back(), off);
     EXPECT_EQ(off, 0u) << c.path << ": hits farther than 0.01 voxel from the isosurface along their rays";
   }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+namespace {
+/// The raw 32-bit pixels of a device buffer (copied to a readback buffer here).
+std::vector<std::uint32_t> read_device_pixels(VkBuffer src, std::size_t n) {
+  engine::GpuBuffer down = engine::make_buffer_or_throw(vk(), n * 4, engine::MemoryIntent::Readback, "test readback");
+  VkCommandBuffer cmd = vk().begin_commands();
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &mb, 0, nullptr, 0,
+                       nullptr);
+  const VkBufferCopy region{0, 0, n * 4};
+  vkCmdCopyBuffer(cmd, src, down.handle(), 1, &region);
+  mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  vk().submit_and_wait(cmd);
+  std::vector<std::uint32_t> out(n);
+  std::memcpy(out.data(), down.mapped(), n * 4);
+  return out;
+}
+}  // namespace
+
+// A picture kept on the device (what isotouch-sculpt copies into its swapchain image) is the
+// one render() copies out: in the device buffer byte for byte, or with red and blue swapped
+// (BGRA), the background and the overlay included; last_rgba() gives it back as RGBA and
+// last_depth() every pixel's depth; nothing is copied into the RaycastImage.
+TEST(Raycast, PictureKeptOnTheDeviceIsTheCopiedOne) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  const Vec3 front = s.centre() + Vec3{0, -s.r_m, 0};
+  const std::vector<gpu::RaycastPrim> prims = {
+      engine::prim_sphere(front + Vec3{0.006, -0.004, 0.004}, 0.004, {0.15f, 0.8f, 0.25f}),
+      engine::prim_sphere(front, 0.01, {0.3f, 0.5f, 0.9f}, 0.35f)};
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& caster = **rc.value;
+  const int W = 90, H = 70;
+  const std::size_t n = std::size_t(W) * H;
+  const RaycastImage copied = caster.render(view, RaycastStyle{}, W, H, prims);
+  ASSERT_EQ(copied.rgba.size(), n);
+  auto swap = [](std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); };
+  std::size_t grey = 0;  // pixels whose red and blue differ (the swap shows there)
+  for (std::uint32_t p : copied.rgba) grey += p == swap(p);
+  EXPECT_LT(grey, n / 2) << "too few coloured pixels to tell the orders apart";
+  caster.set_in_place(true);
+  for (bool bgra : {true, false}) {
+    caster.set_bgra(bgra);
+    const RaycastImage kept = caster.render(view, RaycastStyle{}, W, H, prims);
+    EXPECT_TRUE(kept.rgba.empty() && kept.depth.empty());
+    EXPECT_EQ(kept.width, W);
+    const std::vector<std::uint32_t> raw = read_device_pixels(caster.image_buffer(), n);
+    std::size_t wrong = 0, depth_wrong = 0;
+    for (std::size_t i = 0; i < n; ++i) wrong += raw[i] != (bgra ? swap(copied.rgba[i]) : copied.rgba[i]);
+    EXPECT_EQ(wrong, 0u) << (bgra ? "BGRA" : "RGBA") << ": device pixels not the copied picture in that order";
+    EXPECT_EQ(caster.last_rgba(), copied.rgba);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) depth_wrong += caster.last_depth(x, y) != copied.depth[std::size_t(y) * W + std::size_t(x)];
+    EXPECT_EQ(depth_wrong, 0u);
+  }
+  EXPECT_THROW(caster.last_depth(W, 0), std::out_of_range);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }

@@ -41,10 +41,10 @@ static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 25
 // llvmpipe's budget of 65535 loop iterations per shader invocation (counted per vector of 8
 // lanes): the plain march (one flat loop, at most MAX_SAMPLES + 1 trips) and two boxes (3
 // each) in the march pass (the skipping march may run out; it says so and the shade pass
-// finishes the ray); the finishing plain march, the refinement (8) and the box in the shade
-// pass; the box and the two overlay loops in the overlay pass.
+// finishes the ray); the finishing plain march, the refinement (6 bisections) and the box in
+// the shade pass; the box and the two overlay loops in the overlay pass.
 static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 8u + 3u < 65535u);
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 static_assert(ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE == ISOTOUCH_RAYCAST_WG_X, "a tiled march workgroup is one tile");
 static_assert(ISOTOUCH_RAYCAST_TILE % ISOTOUCH_RAYCAST_BLOCK == 0u, "a tile is whole blocks");

@@ -632,7 +632,10 @@ struct RayCaster::Impl {
 };
 
 RayCaster::RayCaster(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-RayCaster::~RayCaster() = default;
+RayCaster::~RayCaster() {
+  // Submissions by others may still read the picture (image_buffer()).
+  if (impl_) vkQueueWaitIdle(impl_->ctx.queue());
+}
 const RaycastField& RayCaster::field() const { return impl_->field; }
 bool RayCaster::quads() const { return impl_->use_quads; }
 

@@ -41,10 +41,10 @@ static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 25
 // llvmpipe's budget of 65535 loop iterations per shader invocation (counted per vector of 8
 // lanes): the plain march (one flat loop, at most MAX_SAMPLES + 1 trips) and two boxes (3
 // each) in the march pass (the skipping march may run out; it says so and the shade pass
-// finishes the ray); the finishing plain march, the refinement (8) and the box in the shade
-// pass; the box and the two overlay loops in the overlay pass.
+// finishes the ray); the finishing plain march, the refinement (6 bisections) and the box in
+// the shade pass; the box and the two overlay loops in the overlay pass.
 static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 8u + 3u < 65535u);
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 static_assert(ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE == ISOTOUCH_RAYCAST_WG_X, "a tiled march workgroup is one tile");
 static_assert(ISOTOUCH_RAYCAST_TILE % ISOTOUCH_RAYCAST_BLOCK == 0u, "a tile is whole blocks");
@@ -434,6 +434,18 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 // ---- GPU ---------------------------------------------------------------------------------
 
 namespace {
+/// A packed pixel with its lowest and third bytes swapped (RGBA <-> BGRA).
+std::uint32_t swap_red_blue(std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); }
+/// n pixels from device memory to RGBA: copied, or with red and blue swapped back.
+void copy_pixels(std::uint32_t* dst, const void* src, std::size_t n, bool bgra) {
+  if (!bgra) {
+    std::memcpy(dst, src, n * 4);
+    return;
+  }
+  const auto* p = static_cast<const std::uint32_t*>(src);
+  for (std::size_t i = 0; i < n; ++i) dst[i] = swap_red_blue(p[i]);
+}
+
 /// The pixels [x0, x1) x [y0, y1) whose rays can meet the index-space box [lo, hi]: the
 /// bounding rectangle of its 8 projected corners, 2 pixels wider for rounding, x0 a multiple
 /// of 8; the whole image if a corner is not in front of the eye.
@@ -557,6 +569,8 @@ struct RayCaster::Impl {
   // hit list, hit sample.
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
   GpuBuffer image_down, depth_down;        // readback
+  bool keep_on_device = false;             // set_in_place(): the picture is not copied out
+  bool bgra = false;                       // set_bgra(): image packed B, G, R, A
   // Binding 13: per tile of pixels where its rays' march can start, then per listed tile
   // (list order) its blocks' starts; binding 15: the listed tiles.
   GpuBuffer tile_t, tile_list;
@@ -618,7 +632,10 @@ struct RayCaster::Impl {
 };
 
 RayCaster::RayCaster(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-RayCaster::~RayCaster() = default;
+RayCaster::~RayCaster() {
+  // Submissions by others may still read the picture (image_buffer()).
+  if (impl_) vkQueueWaitIdle(impl_->ctx.queue());
+}
 const RaycastField& RayCaster::field() const { return impl_->field; }
 bool RayCaster::quads() const { return impl_->use_quads; }
 
@@ -749,6 +766,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   const std::size_t pixels = std::size_t(width) * std::size_t(height);
   if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
   if (pixels != m.pixels) {
+    // Submissions since the last frame may still read the old picture (image_buffer()).
+    VK_CHECK(vkQueueWaitIdle(m.ctx.queue()));
     for (auto [buf, what] : {std::pair{&m.image, "raycast image"}, std::pair{&m.depth, "raycast depth"},
                              std::pair{&m.lin_r, "raycast colour R"}, std::pair{&m.lin_g, "raycast colour G"},
                              std::pair{&m.lin_b, "raycast colour B"}, std::pair{&m.hits, "raycast hit list"},
@@ -775,11 +794,15 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   if (!lists.prims.empty())
     std::memcpy(m.prims_up.mapped(), lists.prims.data(), lists.prims.size() * sizeof(gpu::RaycastPrim));
   gpu::RaycastPush push{};
-  push.flags = style_flags(style);
+  push.flags = style_flags(style) | (m.bgra ? ISOTOUCH_RAYCAST_BGRA : 0u);
   push.prim_count = std::uint32_t(prims.size());
 
   m.arena.reset();  // the previous frame's submission has completed (submit_and_wait)
   VkCommandBuffer cmd = m.ctx.begin_commands();
+  // The last frame's picture may still be read by transfers submitted since (a window's copy
+  // into its swapchain image): nothing here writes before they are done.
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                       0, 0, nullptr, 0, nullptr, 0, nullptr);
   m.timer.record_reset(cmd);
   record_copy(cmd, m.params_up, m.params, sizeof(P));
   if (!lists.prims.empty()) record_copy(cmd, m.prims_up, m.prims, lists.prims.size() * sizeof(gpu::RaycastPrim));
@@ -828,7 +851,9 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   vkCmdFillBuffer(cmd, m.tile_counter.handle(), 0, VK_WHOLE_SIZE, 0);  // tile count 0
   if (push.flags & ISOTOUCH_RAYCAST_TILES)  // tiles the tile pass does not reach: +inf
     vkCmdFillBuffer(cmd, m.tile_t.handle(), 0, tile_count * 4, std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()));
-  const std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b), no_hit = std::bit_cast<std::uint32_t>(-1.0f);
+  std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b);
+  if (m.bgra) bg = swap_red_blue(bg);
+  const std::uint32_t no_hit = std::bit_cast<std::uint32_t>(-1.0f);
   if (!reuse) {
     vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
     vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, no_hit);
@@ -905,12 +930,14 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   }
   m.timer.mark(cmd, 1);
   // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
+  // Kept on the device: the picture for later transfers (a window's copy), the depth for the host.
   const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
   if (in_place) {
     barrier_compute_to_host(cmd);
+    if (m.keep_on_device) barrier_compute_to_transfer(cmd);
   } else {
     barrier_compute_to_transfer(cmd);
-    record_copy(cmd, m.image, m.image_down, pixels * 4);
+    if (!m.keep_on_device) record_copy(cmd, m.image, m.image_down, pixels * 4);
     record_copy(cmd, m.depth, m.depth_down, pixels * 4);
     barrier_transfer_to_host(cmd);
   }
@@ -935,11 +962,44 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.tiles_ms = m.timer.elapsed_ms(0, 4);
   img.shade_ms = m.timer.elapsed_ms(2, 3);
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
+  if (m.keep_on_device) return img;
   img.rgba.resize(pixels);
   img.depth.resize(pixels);
-  std::memcpy(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels * 4);
+  copy_pixels(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels, m.bgra);
   std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
   return img;
+}
+
+void RayCaster::set_in_place(bool on) { impl_->keep_on_device = on; }
+void RayCaster::set_bgra(bool on) { impl_->bgra = on; }
+VkBuffer RayCaster::image_buffer() const { return impl_->image.handle(); }
+
+std::vector<std::uint32_t> RayCaster::last_rgba() {
+  Impl& m = *impl_;
+  const std::size_t pixels = std::size_t(m.last_width) * std::size_t(m.last_height);
+  std::vector<std::uint32_t> out(pixels);
+  if (pixels == 0) return out;
+  if (m.ctx.device_local_is_host_visible() && m.image.mapped()) {
+    copy_pixels(out.data(), m.image.mapped(), pixels, m.bgra);
+    return out;
+  }
+  GpuBuffer down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast picture readback");
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  barrier_compute_to_transfer(cmd);
+  record_copy(cmd, m.image, down, pixels * 4);
+  barrier_transfer_to_host(cmd);
+  m.ctx.submit_and_wait(cmd);
+  copy_pixels(out.data(), down.mapped(), pixels, m.bgra);
+  return out;
+}
+
+float RayCaster::last_depth(int x, int y) {
+  Impl& m = *impl_;
+  if (x < 0 || y < 0 || x >= m.last_width || y >= m.last_height)
+    throw std::out_of_range("raycast: pixel (" + std::to_string(x) + ", " + std::to_string(y) + ") outside the last frame");
+  const bool in_place = m.ctx.device_local_is_host_visible() && m.depth.mapped();
+  const auto* d = static_cast<const float*>(in_place ? m.depth.mapped() : m.depth_down.mapped());
+  return d[std::size_t(y) * std::size_t(m.last_width) + std::size_t(x)];
 }
 
 std::vector<float> RayCaster::last_tile_starts() {

@@ -216,6 +216,27 @@ class RayCaster {
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {});
   const RaycastField& field() const;
+
+  /// Where render() leaves its picture. Off (the default): RaycastImage::rgba and depth hold
+  /// it. On: they stay empty and the picture stays in device memory until the next render()
+  /// (image_buffer(), last_rgba(), last_depth()): a window copies it into its swapchain image
+  /// without the host touching its pixels (on lavapipe a host copy of 4 bytes per pixel
+  /// each, read back and into a staging buffer, is pure overhead).
+  void set_in_place(bool on);
+  /// Pixels packed B, G, R, A from the low byte in image_buffer() (a B8G8R8A8 swapchain's
+  /// order) instead of R, G, B, A; RaycastImage::rgba and last_rgba() stay RGBA.
+  void set_bgra(bool on);
+  /// The device buffer holding the last render()'s pixels (rows top to bottom, one 32-bit
+  /// pixel each, set_bgra()'s order), written by compute shaders: a reader in a later
+  /// submission needs a barrier from the compute stage's writes; the next render() waits
+  /// for the transfers submitted before it (its first command is that barrier).
+  VkBuffer image_buffer() const;
+  /// The last render()'s pixels, RGBA (reads the device buffer back).
+  std::vector<std::uint32_t> last_rgba();
+  /// The last render()'s depth at pixel (x, y): t [m] of the hit, -1 where none.
+  /// @throws std::out_of_range outside the last frame.
+  float last_depth(int x, int y);
+
   /// The last render()'s tile starts (tiles of ISOTOUCH_RAYCAST_TILE pixels, x fastest): the
   /// ray parameter t [m] before which no lattice sample of the tile's rays can be inside;
   /// +inf for a tile not marched (none can be, or outside the pixels that frame drew).

@@ -35,6 +35,8 @@ F3 operator/(F3 a, float s) { return {a.x / s, a.y / s, a.z / s}; }
 float dot3(F3 a, F3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
+/// Bisections of the refinement: the shader's ISOTOUCH_RAYCAST_BISECTIONS (shaders/raycast_common.glsl).
+constexpr int kBisections = 6;
 
 /// One frame's state: the shader's globals (P, pc, the buffers).
 struct Caster {
@@ -68,14 +70,22 @@ struct Caster {
   bool inside_at(F3 e, F3 d, float t) const { return excess(field(ray_point(e, d, t))) > 0.0f; }
   static float lattice_t(float t0, float t1, float h, int k) { return std::min(t0 + float(k) * h, t1); }
 
+  /// The shader's refine(): the excess at both ends, kBisections bisections keeping the
+  /// excess at the bracket's ends, the secant point of the last bracket.
   float refine(F3 e, F3 d, float ta, float tb) const {
-    for (int i = 0; i < 8; ++i) {
+    float ea = excess(field(ray_point(e, d, ta)));
+    float eb = excess(field(ray_point(e, d, tb)));
+    for (int i = 0; i < kBisections; ++i) {
       const float tm = 0.5f * (ta + tb);
-      if (inside_at(e, d, tm)) tb = tm;
-      else ta = tm;
+      const float em = excess(field(ray_point(e, d, tm)));
+      if (em > 0.0f) {
+        tb = tm;
+        eb = em;
+      } else {
+        ta = tm;
+        ea = em;
+      }
     }
-    const float ea = excess(field(ray_point(e, d, ta)));
-    const float eb = excess(field(ray_point(e, d, tb)));
     float t = 0.5f * (ta + tb);
     if (ea <= 0.0f && eb > 0.0f) {
       const float frac = -ea / (eb - ea);

@@ -12,8 +12,8 @@
 // Samples on one lattice t_k = min(t0 + k h, t1), h = step_vox / |d| (index-space step
 // `step_vox` voxels), over [t0, t1] = the ray inside the box [-1, n] (the one-voxel band
 // where the border voxels blend with the background) and, with the clip flag, inside
-// the kept half-space dot(n, p) + d <= 0. The first inside sample t_k is refined by 8
-// bisections of [t_{k-1}, t_k] and one secant step (bracket h / 256: 0.002 voxel at
+// the kept half-space dot(n, p) + d <= 0. The first inside sample t_k is refined by 6
+// bisections of [t_{k-1}, t_k] and one secant step (bracket h / 64: 0.008 voxel at
 // h = 0.5 voxel). A ray that starts inside (at the clip plane) hits there: the cut face.
 //
 // Empty-space skipping (march_skip): the same lattice samples, but a sample whose
@@ -73,7 +73,7 @@ layout(constant_id = 3) const int NZ = 1;
 layout(constant_id = 4) const bool QUADS = false;
 layout(set = 0, binding = 12) uniform samplerBuffer quads;  // 4 voxels per texel (see above)
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
-layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 per pixel
+layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 (or BGRA8) per pixel
 layout(std430, set = 0, binding = 5) buffer Depth { float depth[]; };     // t [m] of the hit, -1: none
 layout(std430, set = 0, binding = 6) buffer LinR { float lin_r[]; };      // linear colour per hit pixel
 layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (the overlay pass blends
@@ -87,6 +87,9 @@ layout(std430, set = 0, binding = 15) buffer TileList { uint tile_list[]; };    
 layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)
+// Bisections of the refinement (refine()); the CPU reference's kBisections
+// (engine/raycast_cpu.cpp) must be the same.
+#define ISOTOUCH_RAYCAST_BISECTIONS 6
 
 // Per-invocation copies of the parameters the inner loops read.
 float g_bg, g_tau, g_sign;
@@ -252,17 +255,25 @@ float field_block(vec3 p) {
   return trilerp(v000, v001, v010, v011, v100, v101, v110, v111, f);
 }
 
-// [ta, tb]: ta outside, tb inside, one lattice step. 8 bisections, then one secant step in
-// the bracket, on the block of 27 voxels around it.
+// [ta, tb]: ta outside, tb inside, one lattice step. The excess at both ends, 6 bisections
+// keeping the excess at the bracket's ends (bracket h / 64: 0.008 voxel at h = 0.5 voxel),
+// then the secant point of the last bracket: 8 evaluations of the field on the block of 27
+// voxels around the bracket.
 float refine(vec3 e, vec3 d, float ta, float tb) {
   load_block(min(ivec3(floor(ray_point(e, d, ta))), ivec3(floor(ray_point(e, d, tb)))));
-  for (int i = 0; i < 8; ++i) {
-    precise float tm = 0.5 * (ta + tb);
-    if (excess(field_block(ray_point(e, d, tm))) > 0.0) tb = tm;
-    else ta = tm;
-  }
   float ea = excess(field_block(ray_point(e, d, ta)));
   float eb = excess(field_block(ray_point(e, d, tb)));
+  for (int i = 0; i < ISOTOUCH_RAYCAST_BISECTIONS; ++i) {
+    precise float tm = 0.5 * (ta + tb);
+    float em = excess(field_block(ray_point(e, d, tm)));
+    if (em > 0.0) {
+      tb = tm;
+      eb = em;
+    } else {
+      ta = tm;
+      ea = em;
+    }
+  }
   precise float t = 0.5 * (ta + tb);
   if (ea <= 0.0 && eb > 0.0) {
     precise float frac = -ea / (eb - ea);
@@ -497,10 +508,12 @@ vec3 shade(vec3 albedo, vec3 n, vec3 dir) {
   return c;
 }
 
+// R, G, B, A from the low byte; B, G, R, A with the BGRA flag (a swapchain's order).
 uint pack_rgba(vec3 c) {
   vec3 g = sqrt(clamp(c, 0.0, 1.0));
   uvec3 u = uvec3(g * 255.0 + 0.5);
-  return u.r | (u.g << 8) | (u.b << 16) | (255u << 24);
+  bool bgra = (pc.flags & ISOTOUCH_RAYCAST_BGRA) != 0u;
+  return (bgra ? u.b : u.r) | (u.g << 8) | ((bgra ? u.r : u.b) << 16) | (255u << 24);
 }
 
 // Primitive intersection in a local frame: origin moved along the ray to the point

@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <stdexcept>
 #include <algorithm>
 #include <array>
 #include <filesystem>
@@ -15,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "vk_resources.h"
 #include "vk_test_context.h"
 #include "gpu_cpu_compare.h"
 #include "raycast.h"
@@ -151,7 +154,8 @@ TEST(Raycast, HeadCtGpuMatchesCpuPerPixel) {
 // Hit distance against the exact ray-sphere intersection. Rays whose impact parameter is
 // at most 0.7 r (incidence under 45 degrees): the trilinear surface lies within 1/(4 r) =
 // 0.0042 voxel of the sphere radially, so within 0.006 voxel along those rays; the
-// refinement adds at most 0.002. Every such ray must be within 0.01 voxel.
+// refinement's secant point lies in a bracket of 0.008 voxel (on a field this smooth far
+// nearer the root than that). Every such ray must be within 0.01 voxel.
 TEST(Raycast, SphereHitDistanceWithinOneHundredthVoxel) {
   const SphereCase s;
   const RaycastField f = s.field();
@@ -1016,5 +1020,165 @@ TEST(Raycast, TileStartsKeepEveryFirstHit) {
       expect_gpu_matches_cpu(a, cpu, 1.0 / 0.8e-3, what.c_str());
     }
   }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+namespace {
+
+/// The trilinear field of `f` in double at a continuous index (voxels outside the grid read
+/// the background), written here from the definition, not from the caster's code.
+double field_double(const RaycastField& f, const Vec3& p) {
+  const double fl[3] = {std::floor(p.x), std::floor(p.y), std::floor(p.z)};
+  const double fr[3] = {p.x - fl[0], p.y - fl[1], p.z - fl[2]};
+  const auto& n = f.grid.dims;
+  double sum = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int i = int(fl[0]) + (c & 1), j = int(fl[1]) + (c >> 1 & 1), k = int(fl[2]) + (c >> 2 & 1);
+    const bool in = i >= 0 && j >= 0 && k >= 0 && i < n[0] && j < n[1] && k < n[2];
+    const double v = in ? double(f.values[f.grid.index(i, j, k)]) : double(f.background);
+    const double w = ((c & 1) ? fr[0] : 1 - fr[0]) * ((c >> 1 & 1) ? fr[1] : 1 - fr[1]) * ((c >> 2 & 1) ? fr[2] : 1 - fr[2]);
+    sum += w * v;
+  }
+  return sum;
+}
+
+/// Distance [voxels along the ray] from depth t to the nearest entering crossing of the
+/// isosurface (outside -> inside) of the double-precision field within `reach` voxels
+/// (sampled every reach / 64, the crossing then bisected in double); +inf if none.
+double distance_to_crossing(const RaycastField& f, const CameraView& view, const Vec3& dir, double t, double reach) {
+  const double vpm = engine::voxels_per_metre(f.grid, dir);
+  auto excess = [&](double s) {
+    return f.iso.excess(field_double(f, f.grid.to_index(view.eye + dir * s)));
+  };
+  const int n = 128;
+  const double step = 2 * reach / n / vpm, s0 = t - reach / vpm;
+  double best = std::numeric_limits<double>::infinity();
+  double prev = excess(s0);
+  for (int i = 1; i <= n; ++i) {
+    double a = s0 + (i - 1) * step, b = s0 + i * step;
+    const double eb = excess(b);
+    if (!(prev > 0) && eb > 0) {
+      for (int k = 0; k < 60; ++k) {
+        const double m = 0.5 * (a + b);
+        (excess(m) > 0 ? b : a) = m;
+      }
+      best = std::min(best, std::fabs(0.5 * (a + b) - t) * vpm);
+    }
+    prev = eb;
+  }
+  return best;
+}
+
+}  // namespace
+
+// The refinement's claim (raycast.h: the hit refined to under 0.01 voxel along the ray),
+// on CT data whose surface curves within a cell: every hit pixel of the head and chest CTs
+// (GPU, several cameras) lies within 0.01 voxel of a point where the ray enters the
+// isosurface of the trilinear field evaluated in double here (truth outside the caster).
+TEST(Raycast, HitsLieOnTheIsosurfaceOfTheDoubleField) {
+  struct Case {
+    std::string path;
+    core::Isosurface iso;
+  };
+  const Case cases[] = {{kHead, {1150, core::InsideIs::kAbove}},
+                        {kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd",
+                         {-500, core::InsideIs::kAbove}}};
+  for (const Case& c : cases) {
+    const engine::Volume vol = io::load_volume(c.path);
+    const RaycastField f = engine::make_raycast_field(vol.grid, vol.voxels, c.iso,
+                                                      float(c.iso.outside_value(vol.min_value, vol.max_value)));
+    auto rc = engine::RayCaster::create(vk(), f);
+    ASSERT_TRUE(rc) << rc.error;
+    std::size_t checked = 0, off = 0;
+    std::vector<double> errs;
+    for (double az : {0.0, 37.0, 121.0, 250.0}) {
+      engine::OrbitCamera cam = run::default_camera(vol);
+      cam.azimuth_deg += az;
+      cam.elevation_deg = az > 100 ? -25 : 20;
+      cam.zoom = 1.6;
+      const CameraView view = engine::orbit_view(f.grid, vol.direction, cam);
+      const int W = 160, H = 120;
+      const RaycastImage g = (*rc.value)->render(view, RaycastStyle{}, W, H);
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          const float t = g.depth[std::size_t(y) * W + std::size_t(x)];
+          if (t < 0) continue;
+          const double e = distance_to_crossing(f, view, engine::pixel_direction(view, W, H, x, y), t, 0.05);
+          errs.push_back(std::min(e, 1.0));
+          off += !(e <= 0.01);
+          ++checked;
+        }
+    }
+    std::sort(errs.begin(), errs.end());
+    ASSERT_GT(checked, 4000u) << c.path;
+    std::printf("%s: %zu hits, distance to the double field's crossing median %.2g, p99.9 %.2g, worst %.2g voxel, "
+                "%zu over 0.01\n", c.path.c_str(), checked, errs[errs.size() / 2], errs[errs.size() * 999 / 1000],
+                errs.back(), off);
+    EXPECT_EQ(off, 0u) << c.path << ": hits farther than 0.01 voxel from the isosurface along their rays";
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+namespace {
+/// The raw 32-bit pixels of a device buffer (copied to a readback buffer here).
+std::vector<std::uint32_t> read_device_pixels(VkBuffer src, std::size_t n) {
+  engine::GpuBuffer down = engine::make_buffer_or_throw(vk(), n * 4, engine::MemoryIntent::Readback, "test readback");
+  VkCommandBuffer cmd = vk().begin_commands();
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &mb, 0, nullptr, 0,
+                       nullptr);
+  const VkBufferCopy region{0, 0, n * 4};
+  vkCmdCopyBuffer(cmd, src, down.handle(), 1, &region);
+  mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+  vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  vk().submit_and_wait(cmd);
+  std::vector<std::uint32_t> out(n);
+  std::memcpy(out.data(), down.mapped(), n * 4);
+  return out;
+}
+}  // namespace
+
+// A picture kept on the device (what isotouch-sculpt copies into its swapchain image) is the
+// one render() copies out: in the device buffer byte for byte, or with red and blue swapped
+// (BGRA), the background and the overlay included; last_rgba() gives it back as RGBA and
+// last_depth() every pixel's depth; nothing is copied into the RaycastImage.
+TEST(Raycast, PictureKeptOnTheDeviceIsTheCopiedOne) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  const Vec3 front = s.centre() + Vec3{0, -s.r_m, 0};
+  const std::vector<gpu::RaycastPrim> prims = {
+      engine::prim_sphere(front + Vec3{0.006, -0.004, 0.004}, 0.004, {0.15f, 0.8f, 0.25f}),
+      engine::prim_sphere(front, 0.01, {0.3f, 0.5f, 0.9f}, 0.35f)};
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& caster = **rc.value;
+  const int W = 90, H = 70;
+  const std::size_t n = std::size_t(W) * H;
+  const RaycastImage copied = caster.render(view, RaycastStyle{}, W, H, prims);
+  ASSERT_EQ(copied.rgba.size(), n);
+  auto swap = [](std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); };
+  std::size_t grey = 0;  // pixels whose red and blue differ (the swap shows there)
+  for (std::uint32_t p : copied.rgba) grey += p == swap(p);
+  EXPECT_LT(grey, n / 2) << "too few coloured pixels to tell the orders apart";
+  caster.set_in_place(true);
+  for (bool bgra : {true, false}) {
+    caster.set_bgra(bgra);
+    const RaycastImage kept = caster.render(view, RaycastStyle{}, W, H, prims);
+    EXPECT_TRUE(kept.rgba.empty() && kept.depth.empty());
+    EXPECT_EQ(kept.width, W);
+    const std::vector<std::uint32_t> raw = read_device_pixels(caster.image_buffer(), n);
+    std::size_t wrong = 0, depth_wrong = 0;
+    for (std::size_t i = 0; i < n; ++i) wrong += raw[i] != (bgra ? swap(copied.rgba[i]) : copied.rgba[i]);
+    EXPECT_EQ(wrong, 0u) << (bgra ? "BGRA" : "RGBA") << ": device pixels not the copied picture in that order";
+    EXPECT_EQ(caster.last_rgba(), copied.rgba);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) depth_wrong += caster.last_depth(x, y) != copied.depth[std::size_t(y) * W + std::size_t(x)];
+    EXPECT_EQ(depth_wrong, 0u);
+  }
+  EXPECT_THROW(caster.last_depth(W, 0), std::out_of_range);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }

@@ -850,10 +850,10 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     // The hand: on the cursor's ray, push_m behind the surface the last frame showed there.
     const Ray ray = cursor_ray(view, fb[0], fb[1], input.px, input.py);
     const int rw = std::max(1, int(std::lround(fb[0] * o.render_scale))), rh = std::max(1, int(std::lround(fb[1] * o.render_scale)));
-    if (!img.depth.empty() && img.width == rw && img.height == rh) {
+    if (img.width == rw && img.height == rh) {
       const int cx = std::clamp(int(std::lround(input.px * rw / fb[0])), 0, rw - 1);
       const int cy = std::clamp(int(std::lround(input.py * rh / fb[1])), 0, rh - 1);
-      const float t = img.depth[std::size_t(cy) * std::size_t(rw) + std::size_t(cx)];
+      const float t = caster.last_depth(cx, cy);
       if (t > 0) hand_t = double(t) + push_m;
     }
     const Vec3 hand_world = ray.origin + ray.dir * hand_t;
@@ -900,6 +900,11 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     const auto r0 = Clock::now();
     const std::vector<gpu::RaycastPrim> prims =
         overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
+    // At the window's size the picture goes from the caster's buffer straight into the
+    // swapchain image, packed in its byte order (no host copy); scaled, through the host.
+    const bool direct = rw == fb[0] && rh == fb[1];
+    caster.set_in_place(direct);
+    caster.set_bgra(direct && window.bgra());
     img = caster.render(view, style, rw, rh, prims);
     render_ms.push_back(ms_since(r0));
     if (img.march_ms >= 0) {
@@ -914,7 +919,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     }
     const auto p0 = Clock::now();
     const std::vector<std::uint32_t>* shown_px = &img.rgba;
-    if (rw != fb[0] || rh != fb[1]) {  // a lower render scale: nearest-neighbour up to the window
+    if (direct && !shots.empty()) {  // a screenshot this frame: the picture to the host
+      img.rgba = caster.last_rgba();
+    } else if (!direct) {  // a lower render scale: nearest-neighbour up to the window
       upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
       for (int y = 0; y < fb[1]; ++y) {
         const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
@@ -935,7 +942,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
       panels->build(tool, iso_ctl, panel, overlay);
     }
 #endif
-    const bool shown = window.present(*shown_px, fb[0], fb[1]);
+    const bool shown = direct ? window.present(caster.image_buffer(), fb[0], fb[1]) : window.present(*shown_px, fb[0], fb[1]);
     present_ms.push_back(ms_since(p0));
     if (!img.reused) {
       full_render_ms.push_back(render_ms.back());
@@ -1012,8 +1019,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     code = 1;
   }
   const session::LiveStats st = session->stats();
-  if (!o.screenshot.empty() && !img.rgba.empty()) {
+  if (!o.screenshot.empty() && img.width > 0) {
     try {
+      if (img.rgba.empty() && upscaled.empty()) img.rgba = caster.last_rgba();  // drawn straight to the window
       if (upscaled.empty()) run::write_png(o.screenshot, img.width, img.height, img.rgba);
       else run::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
       log << "sculpt   screenshot " << o.screenshot << "\n";

@@ -216,7 +216,7 @@ Result<bool> Window::attach(FrameHook* hook) {
   return R::ok(true);
 }
 
-bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
+bool Window::acquire(std::uint32_t& index) {
   VkDevice dev = ctx_.device();
   if (in_flight_) {  // the previous copy has finished: its staging buffer and semaphores are free
     VK_CHECK(vkWaitForFences(dev, 1, &fence_, VK_TRUE, UINT64_MAX));
@@ -231,7 +231,6 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
     ++recreations_;
     if (!swapchain_ || stale_) return false;
   }
-  std::uint32_t index = 0;
   VkResult r = vkAcquireNextImageKHR(dev, swapchain_, UINT64_MAX, acquired_, VK_NULL_HANDLE, &index);
   if (r == VK_ERROR_OUT_OF_DATE_KHR) {
     stale_ = true;
@@ -239,7 +238,12 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
   }
   if (r == VK_SUBOPTIMAL_KHR) stale_ = true;  // present this one, then recreate
   else if (r != VK_SUCCESS) engine::vk_check_failed("vkAcquireNextImageKHR", r, __FILE__, __LINE__);
+  return true;
+}
 
+bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
+  std::uint32_t index = 0;
+  if (!acquire(index)) return false;
   const VkDeviceSize bytes = VkDeviceSize(w) * VkDeviceSize(h) * 4;
   if (!staging_ || staging_.size() < bytes)
     staging_ = engine::make_buffer_or_throw(ctx_, bytes, engine::MemoryIntent::Upload, "window picture staging");
@@ -252,6 +256,18 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
   } else {
     std::memcpy(dst, rgba.data(), bytes);
   }
+  copy_and_present(staging_.handle(), w, h, index);
+  return true;
+}
+
+bool Window::present(VkBuffer pixels, int w, int h) {
+  std::uint32_t index = 0;
+  if (!acquire(index)) return false;
+  copy_and_present(pixels, w, h, index);
+  return true;
+}
+
+void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   VK_CHECK(vkResetCommandBuffer(cmd_, 0));
   VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
   bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
@@ -283,7 +299,7 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
   region.bufferImageHeight = std::uint32_t(h);
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {std::min(std::uint32_t(w), extent_.width), std::min(std::uint32_t(h), extent_.height), 1};
-  vkCmdCopyBufferToImage(cmd_, staging_.handle(), images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+  vkCmdCopyBufferToImage(cmd_, src, images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
   if (hook_) {
     hook_->record(cmd_, index);
   } else {
@@ -312,10 +328,9 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
   pi.swapchainCount = 1;
   pi.pSwapchains = &swapchain_;
   pi.pImageIndices = &index;
-  r = vkQueuePresentKHR(ctx_.queue(), &pi);
+  const VkResult r = vkQueuePresentKHR(ctx_.queue(), &pi);
   if (r == VK_ERROR_OUT_OF_DATE_KHR || r == VK_SUBOPTIMAL_KHR) stale_ = true;
   else if (r != VK_SUCCESS) engine::vk_check_failed("vkQueuePresentKHR", r, __FILE__, __LINE__);
-  return true;
 }
 
 }  // namespace isotouch::sculpt

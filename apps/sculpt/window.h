@@ -58,6 +58,14 @@ class Window {
   /// image; the part outside the swapchain's extent is cut, the rest left as it was.
   /// Returns false when nothing was presented (minimised, swapchain recreated this frame).
   bool present(const std::vector<std::uint32_t>& rgba, int w, int h);
+  /// The same from a device buffer holding the picture (4 bytes per pixel in the
+  /// swapchain's byte order: bgra()), made available to transfer reads by the submission
+  /// that wrote it (engine::RayCaster::image_buffer()): copied straight into the swapchain
+  /// image, the host touches no pixel. The buffer must not change until the next present()
+  /// (its copy is then done) or a later submission that waits for transfers.
+  bool present(VkBuffer pixels, int w, int h);
+  /// The swapchain's images are B8G8R8A8 (else R8G8B8A8).
+  bool bgra() const { return swizzle_; }
   /// Draws `hook` into every presented frame from now on (nullptr: none), remaking the
   /// swapchain so that its images can be colour attachments. Fails naming why (no
   /// COLOR_ATTACHMENT usage, the hook's own set-up); the window then has no hook.
@@ -68,6 +76,10 @@ class Window {
  private:
   Window(engine::VulkanContext& ctx) : ctx_(ctx) {}
   std::string make_swapchain();  // "" or why not
+  /// Waits for the last copy, remakes a stale swapchain, acquires an image: false if none.
+  bool acquire(std::uint32_t& index);
+  /// Copies `w` x `h` pixels of `src` into image `index` (the hook draws over it) and presents it.
+  void copy_and_present(VkBuffer src, int w, int h, std::uint32_t index);
   void destroy_swapchain();
 
   engine::VulkanContext& ctx_;

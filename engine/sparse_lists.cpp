@@ -204,7 +204,7 @@ class CandidateRows {
 }
 }  // namespace
 
-bool fused_pairs(const Plan& plan) { return plan.ops.size() == 3 && plan.ops[2].radius >= 2; }
+bool fused_pairs(const Plan& plan) { return plan.ops.size() == 3 && plan.ops[2].radius >= 1; }
 
 WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
                           const std::string& what, bool pairs) {

@@ -477,7 +477,7 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   std::uint64_t total_units = 0;
   for (std::size_t k = 0; k < K; ++k) {
     lists.push_back(fused ? sparse::make_column_list(vol.grid, sel.candidates, ext.back(), vol.path,
-                                                     sparse::fused_pairs(plan))
+                                                     sparse::fused_pairs(plan), threads_for(n, hardware_threads()))
                           : sparse::make_work_list(vol.grid, sel.candidates, ext[k], vol.path));
     base.push_back(total_units);
     total_units += lists.back().unit_count();

@@ -186,9 +186,11 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
 /// `pairs` (the shader's PAIRS): the first float is 2 (q + QX z) + pair, pair 1 meaning the
 /// unit also covers the same rows of slice z + 1 (slices paired two by two, z even, where
 /// both need the rows; z_first counts a pair in its first slice).
+/// `threads` > 1 (pairs only): the slice pairs split among that many threads, each its
+/// own part (the same list for any count).
 /// @throws VolumeError naming `what` if the grid is too large for exact float texels.
 WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                          const std::string& what, bool pairs = false);
+                          const std::string& what, bool pairs = false, unsigned threads = 1);
 /// Whether the fused Gaussian of `plan` runs on paired slices (make_column_list's pairs):
 /// where the z kernel reaches a neighbouring slice (radius >= 1: the pair shares the x and
 /// y passes of 2 r slices). Measured on llvmpipe with the shader's constant loops unrolled

@@ -559,6 +559,14 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
     EXPECT_EQ(quads, w.quads);
     if (paired) {
       EXPECT_GT(pairs, 0u) << "no slices share units";
+      // The slice pairs split among threads give the same list (parts of 11, 4 and 3
+      // pairs, and more parts than pairs).
+      for (const unsigned threads : {2u, 3u, 7u, 40u}) {
+        const engine::sparse::WorkList t = engine::sparse::make_column_list(g, cand, e, "grid", true, threads);
+        EXPECT_EQ(t.units, w.units) << threads << " threads";
+        EXPECT_EQ(t.z_first, w.z_first) << threads << " threads";
+        EXPECT_EQ(t.quads, w.quads) << threads << " threads";
+      }
     }
     }
   }

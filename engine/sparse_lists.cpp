@@ -1,6 +1,7 @@
 // sparse_lists.cpp - the work lists of the sparse chain's list strategy (engine/sparse_chain.h):
 // which quads each pass computes so that the host reads exact candidate ranges and samples.
 #include <algorithm>
+#include <cstring>
 
 #include "isotouch_shared.h"
 #include "parallel.h"
@@ -216,12 +217,13 @@ void emit_runs(const std::uint8_t* m, int qx, int ny, int z, bool pair, WorkList
   for (int q = 0; q < qx; ++q) {
     const std::uint8_t* r = m + std::size_t(q) * std::size_t(ny);
     for (int y = 0; y < ny;) {
-      if (!r[y]) {
-        ++y;
-        continue;
-      }
-      int end = y;
-      while (end < ny && r[end] && end - y < kColumn) ++end;
+      // The next marked row and the end of its run (memchr: the library's vector scan).
+      const void* first = std::memchr(r + y, 1, std::size_t(ny - y));
+      if (!first) break;
+      y = int(static_cast<const std::uint8_t*>(first) - r);
+      const int span = std::min(ny - y, kColumn);
+      const void* gap = std::memchr(r + y, 0, std::size_t(span));
+      const int end = gap ? int(static_cast<const std::uint8_t*>(gap) - r) : y + span;
       w.units.push_back(float(2 * (q + qx * z) + (pair ? 1 : 0)));
       w.units.push_back(float(y * int(ISOTOUCH_LIST_PACK) + (end - y)));
       w.quads += std::uint64_t(end - y) * (pair ? 2u : 1u);

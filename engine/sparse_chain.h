@@ -182,7 +182,8 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
 /// The fused Gaussian's work list (shaders/gauss_fused_list.comp): columns of output quads,
 /// one unit per (x-quad q, slice z, rows y0 .. y0 + n - 1), n < ISOTOUCH_LIST_PACK, covering
 /// the union of the candidates' extents `e` (the last filter's, list_extents()), each quad
-/// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z.
+/// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z and
+/// within a slice by n, longest first.
 /// `pairs` (the shader's PAIRS): the first float is 2 (q + QX z) + pair, pair 1 meaning the
 /// unit also covers the same rows of slice z + 1 (slices paired two by two, z even, where
 /// both need the rows; z_first counts a pair in its first slice).

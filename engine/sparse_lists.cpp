@@ -1,6 +1,7 @@
 // sparse_lists.cpp - the work lists of the sparse chain's list strategy (engine/sparse_chain.h):
 // which quads each pass computes so that the host reads exact candidate ranges and samples.
 #include <algorithm>
+#include <array>
 #include <cstring>
 
 #include "isotouch_shared.h"
@@ -271,8 +272,10 @@ void emit_runs(const std::uint8_t* m, int qx, int ny, int z, bool pair, WorkList
 }
 }  // namespace
 
-WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                          const std::string& what, bool pairs, unsigned threads) {
+namespace {
+/// make_column_list's units in the order they are built (by z, then q, then y).
+WorkList columns_in_build_order(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                                const std::string& what, bool pairs, unsigned threads) {
   if (!pairs) return single_columns(grid, candidates, e, what);
   // Slice pairs in contiguous parts, one list each, then joined in order: the same units
   // for any thread count.
@@ -293,6 +296,31 @@ WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_
     w.units.insert(w.units.end(), part[p].units.begin(), part[p].units.end());
     w.quads += part[p].quads;
   }
+  return w;
+}
+
+/// Orders each slice's units by their rows, longest first (stable: ties keep their order):
+/// llvmpipe runs 8 invocations as one SIMD loop as long as its longest column, so
+/// neighbouring units of like length waste fewer lanes (lanes doing work: chest at -500 HU
+/// 0.92 -> 0.99, head CT 0.85 -> 0.92). z_first stays valid.
+void longest_first(WorkList& w) {
+  std::vector<std::array<float, 2>> u(w.unit_count());
+  for (std::size_t i = 0; i < u.size(); ++i) u[i] = {w.units[2 * i], w.units[2 * i + 1]};
+  auto rows = [](const std::array<float, 2>& x) { return int(x[1]) % int(ISOTOUCH_LIST_PACK); };
+  for (std::size_t z = 0; z + 1 < w.z_first.size(); ++z)
+    std::stable_sort(u.begin() + std::ptrdiff_t(w.z_first[z]), u.begin() + std::ptrdiff_t(w.z_first[z + 1]),
+                     [&](const auto& x, const auto& y) { return rows(x) > rows(y); });
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    w.units[2 * i] = u[i][0];
+    w.units[2 * i + 1] = u[i][1];
+  }
+}
+}  // namespace
+
+WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                          const std::string& what, bool pairs, unsigned threads) {
+  WorkList w = columns_in_build_order(grid, candidates, e, what, pairs, threads);
+  longest_first(w);
   return w;
 }
 

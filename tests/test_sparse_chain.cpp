@@ -523,7 +523,7 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
 TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   // Brute force as above for the fused Gaussian's columns: units (q + QX z, y0 * PACK + n)
   // name the quads whose voxels meet some candidate's extent, each exactly once, sorted by z,
-  // 1 <= n < ISOTOUCH_LIST_PACK; paired, (2 (q + QX z) + pair, ...) where a pair names its
+  // 1 <= n < ISOTOUCH_LIST_PACK, the longest first within a slice; paired, (2 (q + QX z) + pair, ...) where a pair names its
   // rows in slices z and z + 1, and slices that need the same rows do share units.
   core::Grid g;
   g.dims = {44, 37, 21};
@@ -556,6 +556,11 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
         }
     }
     EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2] << (paired ? ", paired" : "");
+    // Within a slice the longest columns come first (llvmpipe's lanes run alike lengths).
+    for (std::size_t z = 0; z < std::size_t(g.dims[2]); ++z)
+      for (std::size_t u = w.z_first[z] + 1; u < w.z_first[z + 1]; ++u)
+        EXPECT_GE(int(w.units[2 * u - 1]) % int(ISOTOUCH_LIST_PACK), int(w.units[2 * u + 1]) % int(ISOTOUCH_LIST_PACK))
+            << "slice " << z << " unit " << u;
     EXPECT_EQ(quads, w.quads);
     if (paired) {
       EXPECT_GT(pairs, 0u) << "no slices share units";
@@ -1095,6 +1100,8 @@ TEST(SparseChain, DISABLED_RunSplit) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 50;
   const char* only = std::getenv("ISOTOUCH_SPLIT_CASE");
+  const bool between = std::getenv("ISOTOUCH_SPLIT_BETWEEN") != nullptr;
+  const std::vector<PassDesc> dense = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax(1)};
   auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
   ASSERT_TRUE(ctx) << ctx.error;
   auto chain = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
@@ -1112,6 +1119,9 @@ TEST(SparseChain, DISABLED_RunSplit) {
     std::vector<double> total, stages, gpu, submit, cpu;
     std::map<std::string, std::vector<double>> by_stage;
     for (int r = -1; r < reps; ++r) {
+      // ISOTOUCH_SPLIT_BETWEEN=1: the dense one-thread CPU chain between runs, as bench
+      // engine runs it (caches and lavapipe's threads as that run leaves them).
+      if (between) (void)engine::run_chain_cpu(*c.v, dense);
       rusage u0{}, u1{};
       getrusage(RUSAGE_SELF, &u0);
       const engine::SparseOutput out = (*chain.value)->run(*c.v, above(c.tau), -1024.0f);

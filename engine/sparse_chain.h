@@ -307,8 +307,11 @@ class SparseChain {
 /// reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan device
 /// exists): the candidates split among that many threads, the same bits.
 /// @param keep_input also return the BrickedInput in SparseOutput::input.
+/// @param recycler optional: the published pool is taken from it and handed back to it when
+///        the snapshot dies (pool_recycler.h), as SparseChain's; null: a fresh pool.
 SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
                             float background, core::SampleFormat format = core::SampleFormat::kFp32,
-                            bool keep_input = false, unsigned threads = 1);
+                            bool keep_input = false, unsigned threads = 1,
+                            const std::shared_ptr<PoolRecycler>& recycler = nullptr);
 
 }  // namespace isotouch::engine

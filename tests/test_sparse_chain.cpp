@@ -31,6 +31,7 @@
 #include "isotouch_shared.h"
 #include "parallel.h"
 #include "passes.h"
+#include "pool_recycler.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
 #include "volume_io.h"
@@ -575,6 +576,34 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
     }
     }
   }
+}
+
+TEST(SparseChain, CpuReferencePublishesIntoARecycledPoolTheSameBits) {
+  // run_sparse_cpu with a PoolRecycler: a second run publishes into the buffer of the first
+  // snapshot once it is dropped, with the bytes of a run into a fresh pool; a snapshot still
+  // held is never written by a later run.
+  const Volume v = io::load_volume(kHead);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const auto f32 = core::SampleFormat::kFp32;
+  const engine::SparseOutput ref = engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, true);
+  auto pools = std::make_shared<engine::PoolRecycler>();
+  auto bytes_of = [](const engine::SparseOutput& o) {
+    const auto* pool = o.field.bricks->pool.get();
+    return std::vector<core::Sample>(pool->begin(), pool->end());
+  };
+  auto same = [](const std::vector<core::Sample>& a, const auto& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(core::Sample)) == 0;
+  };
+  (void)engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, false, 1, pools);  // dropped at once
+  EXPECT_EQ(pools->reuses(), 0u);
+  const engine::SparseOutput held = engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, false, 2, pools);
+  EXPECT_EQ(pools->reuses(), 1u) << "the second run did not take the first snapshot's buffer";
+  ASSERT_TRUE(held.field.bricked());
+  const std::vector<core::Sample> held_bytes = bytes_of(held);
+  EXPECT_TRUE(same(held_bytes, ref.input.pool)) << "a recycled pool's samples differ from a fresh one's";
+  const engine::SparseOutput other = engine::run_sparse_cpu(v, p, above(1150), -1024.0f, f32, false, 1, pools);
+  EXPECT_EQ(pools->reuses(), 1u) << "a run took the buffer of a snapshot still held";
+  EXPECT_TRUE(same(held_bytes, *held.field.bricks->pool)) << "the held snapshot changed during a later run";
 }
 
 // GpuBuffer::import_host: the pages holding a host range become a buffer whose bytes at
@@ -1158,5 +1187,38 @@ TEST(SparseChain, DISABLED_RunSplit) {
                 c.name, import ? "imported where offered" : "copied", reps, load, mm(total).c_str(), mm(stages).c_str(),
                 mm(gpu).c_str(), mm(submit).c_str(), mm(cpu).c_str());
     for (const auto& [label, ms] : by_stage) std::printf("    %-40s %s\n", label.c_str(), mm(ms).c_str());
+  }
+}
+
+// The one-thread sparse CPU reference on the chest CT at -500 HU, its published pool fresh
+// or recycled (PoolRecycler), alternating, ISOTOUCH_BENCH_REPS (default 8) runs each: min
+// and median of the wall time and of the process's CPU time [ms].
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_CpuReferencePools*'
+TEST(SparseChain, DISABLED_CpuReferencePools) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 8;
+  const Volume chest = io::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  auto recycler = std::make_shared<engine::PoolRecycler>();
+  const auto cpu_ms = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) / 1e3;
+  };
+  std::vector<double> wall[2], cpu[2];
+  for (int r = -1; r < reps; ++r)
+    for (int k = 0; k < 2; ++k) {
+      const double c0 = cpu_ms();
+      const auto t0 = std::chrono::steady_clock::now();
+      (void)engine::run_sparse_cpu(chest, p, above(-500), -1024.0f, core::SampleFormat::kFp32, false, 1,
+                                   k ? recycler : nullptr);
+      if (r < 0) continue;
+      wall[k].push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      cpu[k].push_back(cpu_ms() - c0);
+    }
+  for (int k = 0; k < 2; ++k) {
+    for (auto* v : {&wall[k], &cpu[k]}) std::sort(v->begin(), v->end());
+    std::printf("pool %s: wall min %.2f median %.2f, CPU min %.2f median %.2f [ms]\n", k ? "recycled" : "fresh",
+                wall[k].front(), wall[k][wall[k].size() / 2], cpu[k].front(), cpu[k][cpu[k].size() / 2]);
   }
 }

@@ -304,16 +304,22 @@ WorkList columns_in_build_order(const core::Grid& grid, const std::vector<std::u
 /// neighbouring units of like length waste fewer lanes (lanes doing work: chest at -500 HU
 /// 0.92 -> 0.99, head CT 0.85 -> 0.92). z_first stays valid.
 void longest_first(WorkList& w) {
-  std::vector<std::array<float, 2>> u(w.unit_count());
-  for (std::size_t i = 0; i < u.size(); ++i) u[i] = {w.units[2 * i], w.units[2 * i + 1]};
-  auto rows = [](const std::array<float, 2>& x) { return int(x[1]) % int(ISOTOUCH_LIST_PACK); };
-  for (std::size_t z = 0; z + 1 < w.z_first.size(); ++z)
-    std::stable_sort(u.begin() + std::ptrdiff_t(w.z_first[z]), u.begin() + std::ptrdiff_t(w.z_first[z + 1]),
-                     [&](const auto& x, const auto& y) { return rows(x) > rows(y); });
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    w.units[2 * i] = u[i][0];
-    w.units[2 * i + 1] = u[i][1];
+  // A counting sort per slice (rows 1 .. ISOTOUCH_LIST_PACK - 1): stable, linear.
+  constexpr int kPack = int(ISOTOUCH_LIST_PACK);
+  std::vector<float> sorted(w.units.size());
+  for (std::size_t z = 0; z + 1 < w.z_first.size(); ++z) {
+    const std::size_t u0 = w.z_first[z], u1 = w.z_first[z + 1];
+    std::array<std::size_t, kPack + 1> first{};  // first[kPack - n]: where units of n rows start
+    for (std::size_t u = u0; u < u1; ++u) ++first[std::size_t(kPack - int(w.units[2 * u + 1]) % kPack) + 1];
+    first[0] = u0;
+    for (int k = 1; k <= kPack; ++k) first[std::size_t(k)] += first[std::size_t(k) - 1];
+    for (std::size_t u = u0; u < u1; ++u) {
+      const std::size_t to = first[std::size_t(kPack - int(w.units[2 * u + 1]) % kPack)]++;
+      sorted[2 * to] = w.units[2 * u];
+      sorted[2 * to + 1] = w.units[2 * u + 1];
+    }
   }
+  w.units.swap(sorted);
 }
 }  // namespace
 

@@ -31,6 +31,7 @@
 #include "files.h"
 #include "gradient_pass.h"
 #include "parallel.h"
+#include "pool_recycler.h"
 #include "synthetic.h"
 #include "volume_io.h"
 
@@ -411,6 +412,10 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     guarded(sd[k], [&] { (void)sdense->run(v, c.isos[k], bg[k]); });
   }
 
+  // The sparse CPU engines publish into recycled pools too (as the GPU chain: a run per
+  // isovalue, pages resident), each engine its own recycler.
+  const auto cpu_pools = std::make_shared<engine::PoolRecycler>();
+  const auto cpu_mt_pools = std::make_shared<engine::PoolRecycler>();
   for (int rep = 0; rep < repetitions; ++rep) {
     progress << "[bench engine] " << c.name << " (" << v.grid.dims[0] << "x" << v.grid.dims[1] << "x"
              << v.grid.dims[2] << "): repetition " << rep + 1 << "/" << repetitions << "\n"
@@ -453,11 +458,14 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
       guarded(sb[k], [&] { sb[k].add(sbrick->run(v, c.isos[k], bg[k])); });
       guarded(sd[k], [&] { sd[k].add(sdense->run(v, c.isos[k], bg[k])); });
-      guarded(sc[k], [&] { sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k])); });
+      guarded(sc[k], [&] {
+        sc[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k], core::SampleFormat::kFp32, false, 1,
+                                         cpu_pools));
+      });
       if (r.cpu_backend_threads > 1)
         guarded(smt[k], [&] {
           smt[k].add(engine::run_sparse_cpu(v, sparse, c.isos[k], bg[k], core::SampleFormat::kFp32, false,
-                                            r.cpu_backend_threads));
+                                            r.cpu_backend_threads, cpu_mt_pools));
         });
     }
   }

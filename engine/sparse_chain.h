@@ -182,17 +182,22 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
 /// The fused Gaussian's work list (shaders/gauss_fused_list.comp): columns of output quads,
 /// one unit per (x-quad q, slice z, rows y0 .. y0 + n - 1), n < ISOTOUCH_LIST_PACK, covering
 /// the union of the candidates' extents `e` (the last filter's, list_extents()), each quad
-/// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z.
+/// once; units are two floats, q + QX z and y0 * ISOTOUCH_LIST_PACK + n, sorted by z and
+/// within a slice by n, longest first.
 /// `pairs` (the shader's PAIRS): the first float is 2 (q + QX z) + pair, pair 1 meaning the
 /// unit also covers the same rows of slice z + 1 (slices paired two by two, z even, where
 /// both need the rows; z_first counts a pair in its first slice).
+/// `threads` > 1 (pairs only): the slice pairs split among that many threads, each its
+/// own part (the same list for any count).
 /// @throws VolumeError naming `what` if the grid is too large for exact float texels.
 WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                          const std::string& what, bool pairs = false);
+                          const std::string& what, bool pairs = false, unsigned threads = 1);
 /// Whether the fused Gaussian of `plan` runs on paired slices (make_column_list's pairs):
-/// where the z kernel is at least 2 voxels a side. Measured on llvmpipe: the head CT
-/// (radius 2 along z) runs faster paired, the chest CT (radius 1) slower (the paired
-/// shader's larger ring of registers).
+/// where the z kernel reaches a neighbouring slice (radius >= 1: the pair shares the x and
+/// y passes of 2 r slices). Measured on llvmpipe with the shader's constant loops unrolled
+/// ([[unroll]]): the chest CT at -500 HU (radius 1 along z) takes 18.4-18.6 ms of CPU time
+/// per run paired against 20.2 single (without the unroll hints, 46 against 21.6: its
+/// arrays were not registers); the head CT (radius 2) ran faster paired before too.
 bool fused_pairs(const Plan& plan);
 /// Whether `plan` is one Gaussian (x, y, z, in that order) that gauss_fused_list.comp can run:
 /// radii <= ISOTOUCH_FUSED_MAX_RADIUS and rows of whole quads (nx a multiple of 4).
@@ -302,8 +307,11 @@ class SparseChain {
 /// reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan device
 /// exists): the candidates split among that many threads, the same bits.
 /// @param keep_input also return the BrickedInput in SparseOutput::input.
+/// @param recycler optional: the published pool is taken from it and handed back to it when
+///        the snapshot dies (pool_recycler.h), as SparseChain's; null: a fresh pool.
 SparseOutput run_sparse_cpu(const Volume& volume, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
                             float background, core::SampleFormat format = core::SampleFormat::kFp32,
-                            bool keep_input = false, unsigned threads = 1);
+                            bool keep_input = false, unsigned threads = 1,
+                            const std::shared_ptr<PoolRecycler>& recycler = nullptr);
 
 }  // namespace isotouch::engine

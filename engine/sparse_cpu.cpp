@@ -800,7 +800,8 @@ void CandidateCpu::samples(core::Sample* out, float background) const { impl_->s
 }  // namespace sparse
 
 SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& passes, const core::Isosurface& iso,
-                            float background, core::SampleFormat format, bool keep_input, unsigned threads) {
+                            float background, core::SampleFormat format, bool keep_input, unsigned threads,
+                            const std::shared_ptr<PoolRecycler>& recycler) {
   if (std::string e = sparse::validate(passes); !e.empty()) throw std::invalid_argument("sparse chain: " + e);
   const auto t_total = std::chrono::steady_clock::now();
   SparseOutput out;
@@ -818,14 +819,18 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
   std::vector<sparse::CandidateRange> ranges(nc);
   std::vector<const core::Sample*> where(nc, nullptr);
   const unsigned parts = threads_for(std::uint64_t(nc) * std::uint64_t(plan.region[0] * plan.region[1] * plan.region[2]), threads);
-  std::vector<std::vector<core::Sample>> pools(parts);
+  // A part's pool is reserved for all its candidates (address space; only the pages its
+  // active ones write become resident) and never zeroed (core::SamplePool): no reallocation
+  // copies and no write before the samples'.
+  std::vector<core::SamplePool> pools(parts);
   std::vector<std::pair<std::size_t, std::size_t>> spans;
   const std::size_t per = (nc + parts - 1) / parts;
   for (std::size_t b = 0; b < nc; b += per) spans.push_back({b, std::min(nc, b + per)});
   parallel_for(spans.size(), parts, 1, [&](std::size_t s0, std::size_t s1) {
     for (std::size_t si = s0; si < s1; ++si) {
       sparse::BrickCpu brick(vol, plan);
-      std::vector<core::Sample>& pool = pools[si];
+      core::SamplePool& pool = pools[si];
+      pool.reserve((spans[si].second - spans[si].first) * std::size_t(core::kBrickSamples));
       std::vector<std::size_t> slot;
       for (std::size_t c = spans[si].first; c < spans[si].second; ++c) {
         ranges[c] = brick.range(sel.candidates[c], core::brick_counts(vol.grid));
@@ -842,7 +847,7 @@ SparseOutput run_sparse_cpu(const Volume& vol, const std::vector<PassDesc>& pass
 
   t0 = std::chrono::steady_clock::now();
   sparse::publish(vol.grid, sel, ranges, [&](std::size_t c) { return where[c]; }, iso, background, format,
-                  keep_input, out);
+                  keep_input, out, recycler);
   out.publish_ms = sparse::ms_since(t0);
   out.total_ms = sparse::ms_since(t_total);
   out.submit_wall_ms = out.total_ms;

@@ -1,8 +1,11 @@
 // sparse_lists.cpp - the work lists of the sparse chain's list strategy (engine/sparse_chain.h):
 // which quads each pass computes so that the host reads exact candidate ranges and samples.
 #include <algorithm>
+#include <array>
+#include <cstring>
 
 #include "isotouch_shared.h"
+#include "parallel.h"
 #include "sparse_chain.h"
 
 namespace isotouch::engine::sparse {
@@ -204,64 +207,126 @@ class CandidateRows {
 }
 }  // namespace
 
-bool fused_pairs(const Plan& plan) { return plan.ops.size() == 3 && plan.ops[2].radius >= 2; }
+bool fused_pairs(const Plan& plan) { return plan.ops.size() == 3 && plan.ops[2].radius >= 1; }
 
-WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
-                          const std::string& what, bool pairs) {
-  if (!pairs) return single_columns(grid, candidates, e, what);
+namespace {
+/// Appends to `w` the units of slice z over the rows `m` marks (m[q * ny + y] 1 where quad q
+/// of row y needs an output): runs of at most ISOTOUCH_LIST_PACK - 1 rows per quad column;
+/// pair: the unit also computes slice z + 1 (gauss_fused_list.comp).
+void emit_runs(const std::uint8_t* m, int qx, int ny, int z, bool pair, WorkList& w) {
+  constexpr int kColumn = int(ISOTOUCH_LIST_PACK) - 1;  // outputs per unit (per slice) at most
+  for (int q = 0; q < qx; ++q) {
+    const std::uint8_t* r = m + std::size_t(q) * std::size_t(ny);
+    for (int y = 0; y < ny;) {
+      // The next marked row and the end of its run (memchr: the library's vector scan).
+      const void* first = std::memchr(r + y, 1, std::size_t(ny - y));
+      if (!first) break;
+      y = int(static_cast<const std::uint8_t*>(first) - r);
+      const int span = std::min(ny - y, kColumn);
+      const void* gap = std::memchr(r + y, 0, std::size_t(span));
+      const int end = gap ? int(static_cast<const std::uint8_t*>(gap) - r) : y + span;
+      w.units.push_back(float(2 * (q + qx * z) + (pair ? 1 : 0)));
+      w.units.push_back(float(y * int(ISOTOUCH_LIST_PACK) + (end - y)));
+      w.quads += std::uint64_t(end - y) * (pair ? 2u : 1u);
+      y = end;
+    }
+  }
+}
+
+/// make_column_list's paired units of slices [z0, z1) (z0 even) into `w`, its z_first
+/// entry z - z0 + 1 counting the units of `w` up to slice z. Not inlined (see single_columns).
+[[gnu::noinline]] void paired_columns(const core::Grid& grid, const std::vector<std::uint32_t>& candidates,
+                                      const Extent& e, const std::string& what, int z0, int z1, WorkList& w) {
   CandidateRows cover(grid, candidates, e, what, 2);
   const int ny = grid.dims[1], nz = grid.dims[2], qx = cover.quad_columns();
-  // rows[q * ny + y]: 1 where quad q of row y of slice z meets some candidate's extent;
-  // any[q]: some row of quad column q does.
-  auto slice_rows = [&](int z, std::vector<std::uint8_t>& rows, std::vector<std::uint8_t>& any) {
-    rows.assign(std::size_t(qx) * std::size_t(ny), 0);
-    any.assign(std::size_t(qx), 0);
+  const std::size_t cells = std::size_t(qx) * std::size_t(ny);
+  // rows[q * ny + y]: 1 where quad q of row y of the slice meets some candidate's extent.
+  auto slice_rows = [&](int z, std::vector<std::uint8_t>& rows) {
+    std::fill(rows.begin(), rows.end(), std::uint8_t(0));
     cover.mark_slice(z);
-    for (int q = 0; q < qx; ++q)
-      any[std::size_t(q)] = cover.or_quad_rows(q, rows.data() + std::size_t(q) * std::size_t(ny)) ? 1 : 0;
+    for (int q = 0; q < qx; ++q) (void)cover.or_quad_rows(q, rows.data() + std::size_t(q) * std::size_t(ny));
   };
-  constexpr int kColumn = int(ISOTOUCH_LIST_PACK) - 1;  // outputs per unit (per slice) at most
-  WorkList w;
-  w.z_first.assign(std::size_t(nz) + 1, 0);
-  // Units of slice z over rows where `take(q, y)` (quad columns q where `some(q)`): runs of
-  // at most kColumn rows; pair: the unit also computes slice z + 1 (gauss_fused_list.comp).
-  auto emit = [&](int z, bool pair, const auto& some, const auto& take) {
-    for (int q = 0; q < qx; ++q)
-      for (int y = 0; y < ny && some(q);) {
-        if (!take(q, y)) {
-          ++y;
-          continue;
-        }
-        int end = y;
-        while (end < ny && take(q, end) && end - y < kColumn) ++end;
-        w.units.push_back(float(2 * (q + qx * z) + (pair ? 1 : 0)));
-        w.units.push_back(float(y * int(ISOTOUCH_LIST_PACK) + (end - y)));
-        w.quads += std::uint64_t(end - y) * (pair ? 2u : 1u);
-        y = end;
-      }
-  };
+  w.z_first.assign(std::size_t(z1 - z0) + 1, 0);
+  std::vector<std::uint8_t> a(cells), b(cells), both(cells), only_a(cells), only_b(cells);
   // Slices two at a time: the rows both need as pairs (one column computes both outputs,
   // sharing the x and y passes of their common slices), the rest as single units.
-  std::vector<std::uint8_t> a, b, any_a, any_b;
-  auto at = [&](const std::vector<std::uint8_t>& r, int q, int y) {
-    return r[std::size_t(q) * std::size_t(ny) + std::size_t(y)] != 0;
-  };
-  auto in_a = [&](int q) { return any_a[std::size_t(q)] != 0; };
-  auto in_b = [&](int q) { return any_b[std::size_t(q)] != 0; };
-  for (int z = 0; z < nz; z += 2) {
-    slice_rows(z, a, any_a);
+  for (int z = z0; z < z1; z += 2) {
+    slice_rows(z, a);
     if (z + 1 == nz) {
-      emit(z, false, in_a, [&](int q, int y) { return at(a, q, y); });
-      w.z_first[std::size_t(z) + 1] = std::uint32_t(w.unit_count());
+      emit_runs(a.data(), qx, ny, z, false, w);
+      w.z_first[std::size_t(z - z0) + 1] = std::uint32_t(w.unit_count());
       continue;
     }
-    slice_rows(z + 1, b, any_b);
-    emit(z, true, in_a, [&](int q, int y) { return at(a, q, y) && in_b(q) && at(b, q, y); });
-    emit(z, false, in_a, [&](int q, int y) { return at(a, q, y) && !(in_b(q) && at(b, q, y)); });
-    w.z_first[std::size_t(z) + 1] = std::uint32_t(w.unit_count());
-    emit(z + 1, false, in_b, [&](int q, int y) { return at(b, q, y) && !(in_a(q) && at(a, q, y)); });
-    w.z_first[std::size_t(z) + 2] = std::uint32_t(w.unit_count());
+    slice_rows(z + 1, b);
+    for (std::size_t i = 0; i < cells; ++i) {  // entries are 0 or 1
+      both[i] = a[i] & b[i];
+      only_a[i] = a[i] & (b[i] ^ 1u);
+      only_b[i] = b[i] & (a[i] ^ 1u);
+    }
+    emit_runs(both.data(), qx, ny, z, true, w);
+    emit_runs(only_a.data(), qx, ny, z, false, w);
+    w.z_first[std::size_t(z - z0) + 1] = std::uint32_t(w.unit_count());
+    emit_runs(only_b.data(), qx, ny, z + 1, false, w);
+    w.z_first[std::size_t(z - z0) + 2] = std::uint32_t(w.unit_count());
   }
+}
+}  // namespace
+
+namespace {
+/// make_column_list's units in the order they are built (by z, then q, then y).
+WorkList columns_in_build_order(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                                const std::string& what, bool pairs, unsigned threads) {
+  if (!pairs) return single_columns(grid, candidates, e, what);
+  // Slice pairs in contiguous parts, one list each, then joined in order: the same units
+  // for any thread count.
+  const int nz = grid.dims[2], n_pairs = (nz + 1) / 2;
+  const unsigned parts = std::clamp(threads, 1u, unsigned(std::max(n_pairs, 1)));
+  std::vector<WorkList> part(parts);
+  auto first_slice = [&](std::size_t p) { return std::min(2 * int(p * std::size_t(n_pairs) / parts), nz); };
+  parallel_for(parts, parts, 1, [&](std::size_t p0, std::size_t p1) {
+    for (std::size_t p = p0; p < p1; ++p)
+      paired_columns(grid, candidates, e, what, first_slice(p), first_slice(p + 1), part[p]);
+  });
+  WorkList w;
+  w.z_first.assign(std::size_t(nz) + 1, 0);
+  for (std::size_t p = 0; p < parts; ++p) {
+    const std::uint32_t base = std::uint32_t(w.unit_count());
+    const int z0 = first_slice(p), z1 = first_slice(p + 1);
+    for (int z = z0; z < z1; ++z) w.z_first[std::size_t(z) + 1] = base + part[p].z_first[std::size_t(z - z0) + 1];
+    w.units.insert(w.units.end(), part[p].units.begin(), part[p].units.end());
+    w.quads += part[p].quads;
+  }
+  return w;
+}
+
+/// Orders each slice's units by their rows, longest first (stable: ties keep their order):
+/// llvmpipe runs 8 invocations as one SIMD loop as long as its longest column, so
+/// neighbouring units of like length waste fewer lanes (lanes doing work: chest at -500 HU
+/// 0.92 -> 0.99, head CT 0.85 -> 0.92). z_first stays valid.
+void longest_first(WorkList& w) {
+  // A counting sort per slice (rows 1 .. ISOTOUCH_LIST_PACK - 1): stable, linear.
+  constexpr int kPack = int(ISOTOUCH_LIST_PACK);
+  std::vector<float> sorted(w.units.size());
+  for (std::size_t z = 0; z + 1 < w.z_first.size(); ++z) {
+    const std::size_t u0 = w.z_first[z], u1 = w.z_first[z + 1];
+    std::array<std::size_t, kPack + 1> first{};  // first[kPack - n]: where units of n rows start
+    for (std::size_t u = u0; u < u1; ++u) ++first[std::size_t(kPack - int(w.units[2 * u + 1]) % kPack) + 1];
+    first[0] = u0;
+    for (int k = 1; k <= kPack; ++k) first[std::size_t(k)] += first[std::size_t(k) - 1];
+    for (std::size_t u = u0; u < u1; ++u) {
+      const std::size_t to = first[std::size_t(kPack - int(w.units[2 * u + 1]) % kPack)]++;
+      sorted[2 * to] = w.units[2 * u];
+      sorted[2 * to + 1] = w.units[2 * u + 1];
+    }
+  }
+  w.units.swap(sorted);
+}
+}  // namespace
+
+WorkList make_column_list(const core::Grid& grid, const std::vector<std::uint32_t>& candidates, const Extent& e,
+                          const std::string& what, bool pairs, unsigned threads) {
+  WorkList w = columns_in_build_order(grid, candidates, e, what, pairs, threads);
+  longest_first(w);
   return w;
 }
 

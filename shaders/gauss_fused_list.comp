@@ -16,7 +16,12 @@
 // dense-addressed), 2 the work list (R32_SFLOAT texels, two per unit: q + QX z (PAIRS:
 // 2 (q + QX z) + pair) and y0 * ISOTOUCH_LIST_PACK + n, integers below 2^24). One
 // invocation per unit.
+//
+// Every loop with a constant trip count (radii are specialization constants) carries
+// [[unroll]]: unrolled, the rings are registers; left to the driver, llvmpipe kept the
+// paired shader's loops and arrays and took twice the CPU time.
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_DENSE_WG, local_size_y = 1, local_size_z = 1) in;
@@ -121,7 +126,7 @@ vec4 weighted(vec4 acc, float w, vec4 v) {
 vec4 x_quad(int q, int y, int z) {
   const int row = (z * NY + y) * QX;
   float win[12];
-  for (int j = 0; j < 3; ++j) {
+  [[unroll]] for (int j = 0; j < 3; ++j) {
     const int qj = q + j - 1;
     vec4 v = texelFetch(src, row + clamp(qj, 0, QX - 1));
     if (qj < 0) v = vec4(v.x);
@@ -132,7 +137,7 @@ vec4 x_quad(int q, int y, int z) {
     win[4 * j + 3] = v.w;
   }
   precise vec4 acc = vec4(0.0);
-  for (int k = 0; k <= 2 * RX; ++k) {
+  [[unroll]] for (int k = 0; k <= 2 * RX; ++k) {
     const int s = 4 - RX + k;  // window element of voxel 4 q - RX + k
     acc = weighted(acc, wx(k), vec4(win[s], win[s + 1], win[s + 2], win[s + 3]));
   }
@@ -143,18 +148,18 @@ vec4 x_quad(int q, int y, int z) {
 void column(int q, int z, int y0, int n) {
   // ring[kz][ky]: the x pass at row y - RY + ky of slice clamp(z - RZ + kz), rows clamped.
   vec4 ring[2 * M + 1][2 * M + 1];
-  for (int kz = 0; kz <= 2 * RZ; ++kz) {
+  [[unroll]] for (int kz = 0; kz <= 2 * RZ; ++kz) {
     const int zz = clamp(z - RZ + kz, 0, NZ - 1);
-    for (int ky = 1; ky <= 2 * RY; ++ky) ring[kz][ky] = x_quad(q, clamp(y0 - 1 - RY + ky, 0, NY - 1), zz);
+    [[unroll]] for (int ky = 1; ky <= 2 * RY; ++ky) ring[kz][ky] = x_quad(q, clamp(y0 - 1 - RY + ky, 0, NY - 1), zz);
   }
   for (int s = 0; s < n; ++s) {
     const int y = y0 + s;
     precise vec4 acc = vec4(0.0);
-    for (int kz = 0; kz <= 2 * RZ; ++kz) {
-      for (int ky = 0; ky < 2 * RY; ++ky) ring[kz][ky] = ring[kz][ky + 1];
+    [[unroll]] for (int kz = 0; kz <= 2 * RZ; ++kz) {
+      [[unroll]] for (int ky = 0; ky < 2 * RY; ++ky) ring[kz][ky] = ring[kz][ky + 1];
       ring[kz][2 * RY] = x_quad(q, min(y + RY, NY - 1), clamp(z - RZ + kz, 0, NZ - 1));
       precise vec4 yacc = vec4(0.0);
-      for (int ky = 0; ky <= 2 * RY; ++ky) yacc = weighted(yacc, wy(ky), ring[kz][ky]);
+      [[unroll]] for (int ky = 0; ky <= 2 * RY; ++ky) yacc = weighted(yacc, wy(ky), ring[kz][ky]);
       acc = weighted(acc, wz(kz), yacc);
     }
     dst[(z * NY + y) * QX + q] = acc;
@@ -168,22 +173,22 @@ void column_pair(int q, int z, int y0, int n, bool pair) {
   // ring[kz][ky]: the x pass at row y - RY + ky of slice clamp(z - RZ + kz), rows clamped;
   // slices z - RZ .. z + 1 + RZ.
   vec4 ring[2 * M + 2][2 * M + 1];
-  for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
+  [[unroll]] for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
     const int zz = clamp(z - RZ + kz, 0, NZ - 1);
-    for (int ky = 1; ky <= 2 * RY; ++ky) ring[kz][ky] = x_quad(q, clamp(y0 - 1 - RY + ky, 0, NY - 1), zz);
+    [[unroll]] for (int ky = 1; ky <= 2 * RY; ++ky) ring[kz][ky] = x_quad(q, clamp(y0 - 1 - RY + ky, 0, NY - 1), zz);
   }
   for (int s = 0; s < n; ++s) {
     const int y = y0 + s;
     vec4 yacc[2 * M + 2];  // the y pass of row y in each ring slice
-    for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
-      for (int ky = 0; ky < 2 * RY; ++ky) ring[kz][ky] = ring[kz][ky + 1];
+    [[unroll]] for (int kz = 0; kz <= 2 * RZ + 1; ++kz) {
+      [[unroll]] for (int ky = 0; ky < 2 * RY; ++ky) ring[kz][ky] = ring[kz][ky + 1];
       ring[kz][2 * RY] = x_quad(q, min(y + RY, NY - 1), clamp(z - RZ + kz, 0, NZ - 1));
       precise vec4 ya = vec4(0.0);
-      for (int ky = 0; ky <= 2 * RY; ++ky) ya = weighted(ya, wy(ky), ring[kz][ky]);
+      [[unroll]] for (int ky = 0; ky <= 2 * RY; ++ky) ya = weighted(ya, wy(ky), ring[kz][ky]);
       yacc[kz] = ya;
     }
     precise vec4 acc = vec4(0.0), acc1 = vec4(0.0);
-    for (int kz = 0; kz <= 2 * RZ; ++kz) {
+    [[unroll]] for (int kz = 0; kz <= 2 * RZ; ++kz) {
       acc = weighted(acc, wz(kz), yacc[kz]);
       acc1 = weighted(acc1, wz(kz), yacc[kz + 1]);
     }

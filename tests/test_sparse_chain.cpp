@@ -31,6 +31,7 @@
 #include "isotouch_shared.h"
 #include "parallel.h"
 #include "passes.h"
+#include "pool_recycler.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
 #include "volume_io.h"
@@ -523,7 +524,7 @@ TEST(SparseChain, WorkListsCoverTheCandidatesExtentsOnce) {
 TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
   // Brute force as above for the fused Gaussian's columns: units (q + QX z, y0 * PACK + n)
   // name the quads whose voxels meet some candidate's extent, each exactly once, sorted by z,
-  // 1 <= n < ISOTOUCH_LIST_PACK; paired, (2 (q + QX z) + pair, ...) where a pair names its
+  // 1 <= n < ISOTOUCH_LIST_PACK, the longest first within a slice; paired, (2 (q + QX z) + pair, ...) where a pair names its
   // rows in slices z and z + 1, and slices that need the same rows do share units.
   core::Grid g;
   g.dims = {44, 37, 21};
@@ -556,12 +557,53 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
         }
     }
     EXPECT_EQ(got, want) << "extent lo " << e.lo[0] << "," << e.lo[1] << "," << e.lo[2] << (paired ? ", paired" : "");
+    // Within a slice the longest columns come first (llvmpipe's lanes run alike lengths).
+    for (std::size_t z = 0; z < std::size_t(g.dims[2]); ++z)
+      for (std::size_t u = w.z_first[z] + 1; u < w.z_first[z + 1]; ++u)
+        EXPECT_GE(int(w.units[2 * u - 1]) % int(ISOTOUCH_LIST_PACK), int(w.units[2 * u + 1]) % int(ISOTOUCH_LIST_PACK))
+            << "slice " << z << " unit " << u;
     EXPECT_EQ(quads, w.quads);
     if (paired) {
       EXPECT_GT(pairs, 0u) << "no slices share units";
+      // The slice pairs split among threads give the same list (parts of 11, 4 and 3
+      // pairs, and more parts than pairs).
+      for (const unsigned threads : {2u, 3u, 7u, 40u}) {
+        const engine::sparse::WorkList t = engine::sparse::make_column_list(g, cand, e, "grid", true, threads);
+        EXPECT_EQ(t.units, w.units) << threads << " threads";
+        EXPECT_EQ(t.z_first, w.z_first) << threads << " threads";
+        EXPECT_EQ(t.quads, w.quads) << threads << " threads";
+      }
     }
     }
   }
+}
+
+TEST(SparseChain, CpuReferencePublishesIntoARecycledPoolTheSameBits) {
+  // run_sparse_cpu with a PoolRecycler: a second run publishes into the buffer of the first
+  // snapshot once it is dropped, with the bytes of a run into a fresh pool; a snapshot still
+  // held is never written by a later run.
+  const Volume v = io::load_volume(kHead);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  const auto f32 = core::SampleFormat::kFp32;
+  const engine::SparseOutput ref = engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, true);
+  auto pools = std::make_shared<engine::PoolRecycler>();
+  auto bytes_of = [](const engine::SparseOutput& o) {
+    const auto* pool = o.field.bricks->pool.get();
+    return std::vector<core::Sample>(pool->begin(), pool->end());
+  };
+  auto same = [](const std::vector<core::Sample>& a, const auto& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(core::Sample)) == 0;
+  };
+  (void)engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, false, 1, pools);  // dropped at once
+  EXPECT_EQ(pools->reuses(), 0u);
+  const engine::SparseOutput held = engine::run_sparse_cpu(v, p, above(500), -1024.0f, f32, false, 2, pools);
+  EXPECT_EQ(pools->reuses(), 1u) << "the second run did not take the first snapshot's buffer";
+  ASSERT_TRUE(held.field.bricked());
+  const std::vector<core::Sample> held_bytes = bytes_of(held);
+  EXPECT_TRUE(same(held_bytes, ref.input.pool)) << "a recycled pool's samples differ from a fresh one's";
+  const engine::SparseOutput other = engine::run_sparse_cpu(v, p, above(1150), -1024.0f, f32, false, 1, pools);
+  EXPECT_EQ(pools->reuses(), 1u) << "a run took the buffer of a snapshot still held";
+  EXPECT_TRUE(same(held_bytes, *held.field.bricks->pool)) << "the held snapshot changed during a later run";
 }
 
 // GpuBuffer::import_host: the pages holding a host range become a buffer whose bytes at
@@ -1087,6 +1129,8 @@ TEST(SparseChain, DISABLED_RunSplit) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 50;
   const char* only = std::getenv("ISOTOUCH_SPLIT_CASE");
+  const bool between = std::getenv("ISOTOUCH_SPLIT_BETWEEN") != nullptr;
+  const std::vector<PassDesc> dense = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax(1)};
   auto ctx = engine::VulkanContext::create({});  // no validation layer: timings
   ASSERT_TRUE(ctx) << ctx.error;
   auto chain = engine::SparseChain::create(**ctx.value, {PassDesc::gaussian(1.0), PassDesc::gradient()});
@@ -1101,11 +1145,24 @@ TEST(SparseChain, DISABLED_RunSplit) {
   for (const bool import : {true, false}) {
     if (only && c.name != std::string(only)) continue;
     (*ctx.value)->allow_host_import(import);
-    std::vector<double> total, stages, gpu, submit;
+    std::vector<double> total, stages, gpu, submit, cpu;
     std::map<std::string, std::vector<double>> by_stage;
     for (int r = -1; r < reps; ++r) {
+      // ISOTOUCH_SPLIT_BETWEEN=1: the dense one-thread CPU chain between runs, as bench
+      // engine runs it (caches and lavapipe's threads as that run leaves them).
+      if (between) (void)engine::run_chain_cpu(*c.v, dense);
+      rusage u0{}, u1{};
+      getrusage(RUSAGE_SELF, &u0);
       const engine::SparseOutput out = (*chain.value)->run(*c.v, above(c.tau), -1024.0f);
+      getrusage(RUSAGE_SELF, &u1);
       if (r < 0) continue;
+      // CPU time of the whole process (lavapipe's threads included): the work of a run,
+      // less sensitive than wall time to other processes on a shared machine.
+      const auto ms = [](const rusage& u) {
+        return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 +
+               double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) / 1e3;
+      };
+      cpu.push_back(ms(u1) - ms(u0));
       for (const auto& p : out.passes) by_stage[p.label.substr(0, 40)].push_back(p.ms);
       double st = 0, g = 0;
       for (const auto& p : out.passes) (p.label.find("(GPU)") != std::string::npos ? g : st) += p.ms;
@@ -1126,9 +1183,42 @@ TEST(SparseChain, DISABLED_RunSplit) {
       std::fclose(f);
     }
     std::printf("%s, input %s, %d runs, load %.2f, min / median [ms]: total %s, host stages %s, GPU stages %s, "
-                "submit wall %s\n",
+                "submit wall %s, CPU time of all threads %s\n",
                 c.name, import ? "imported where offered" : "copied", reps, load, mm(total).c_str(), mm(stages).c_str(),
-                mm(gpu).c_str(), mm(submit).c_str());
+                mm(gpu).c_str(), mm(submit).c_str(), mm(cpu).c_str());
     for (const auto& [label, ms] : by_stage) std::printf("    %-40s %s\n", label.c_str(), mm(ms).c_str());
+  }
+}
+
+// The one-thread sparse CPU reference on the chest CT at -500 HU, its published pool fresh
+// or recycled (PoolRecycler), alternating, ISOTOUCH_BENCH_REPS (default 8) runs each: min
+// and median of the wall time and of the process's CPU time [ms].
+//   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_CpuReferencePools*'
+TEST(SparseChain, DISABLED_CpuReferencePools) {
+  const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
+  const int reps = e ? std::max(1, std::atoi(e)) : 8;
+  const Volume chest = io::load_volume(kChest);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::gradient()};
+  auto recycler = std::make_shared<engine::PoolRecycler>();
+  const auto cpu_ms = [] {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) * 1e3 + double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) / 1e3;
+  };
+  std::vector<double> wall[2], cpu[2];
+  for (int r = -1; r < reps; ++r)
+    for (int k = 0; k < 2; ++k) {
+      const double c0 = cpu_ms();
+      const auto t0 = std::chrono::steady_clock::now();
+      (void)engine::run_sparse_cpu(chest, p, above(-500), -1024.0f, core::SampleFormat::kFp32, false, 1,
+                                   k ? recycler : nullptr);
+      if (r < 0) continue;
+      wall[k].push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      cpu[k].push_back(cpu_ms() - c0);
+    }
+  for (int k = 0; k < 2; ++k) {
+    for (auto* v : {&wall[k], &cpu[k]}) std::sort(v->begin(), v->end());
+    std::printf("pool %s: wall min %.2f median %.2f, CPU min %.2f median %.2f [ms]\n", k ? "recycled" : "fresh",
+                wall[k].front(), wall[k][wall[k].size() / 2], cpu[k].front(), cpu[k][cpu[k].size() / 2]);
   }
 }

@@ -168,6 +168,8 @@ class FieldView {
     const Vec3 hi{h_m.x / grid_.spacing_m.x, h_m.y / grid_.spacing_m.y, h_m.z / grid_.spacing_m.z};
     const double x0 = idx.x - hi.x, x1 = idx.x + hi.x, y0 = idx.y - hi.y, y1 = idx.y + hi.y,
                  z0 = idx.z - hi.z, z1 = idx.z + hi.z;
+    Vec3 g;
+    if (mode_ == Mode::kDense && central_dense(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
     return {(value_at_index({x1, idx.y, idx.z}) - value_at_index({x0, idx.y, idx.z})) / (2 * h_m.x),
             (value_at_index({idx.x, y1, idx.z}) - value_at_index({idx.x, y0, idx.z})) / (2 * h_m.y),
             (value_at_index({idx.x, idx.y, z1}) - value_at_index({idx.x, idx.y, z0})) / (2 * h_m.z)};
@@ -258,6 +260,60 @@ class FieldView {
     const double c01 = lerp(v(0, 0, 1), v(1, 0, 1), c[0].f);
     const double c11 = lerp(v(0, 1, 1), v(1, 1, 1), c[0].f);
     return lerp(lerp(c00, c10, c[1].f), lerp(c01, c11, c[1].f), c[2].f);
+  }
+
+  /// central_difference on a dense field where the six points share their cells: the
+  /// points (c.x, lo.y | hi.y, c.z) and (c.x, c.y, lo.z | hi.z) read the same column pair
+  /// with the same x fraction, so their x-lerps over a 3 x 3 block of rows and layers are
+  /// computed once, and every point's value is the lerps value_at_index would take, in its
+  /// order (the same bits). False (nothing written) where a point leaves the box of voxel
+  /// centres or the rows / layers of a pair are not consecutive (the border, steps other
+  /// than half a voxel): the caller reads the six points one by one.
+  bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+    if (!(in_grid(lo) && in_grid(hi) && in_grid(c) && lo.x <= c.x && lo.y <= c.y && lo.z <= c.z && c.x <= hi.x &&
+          c.y <= hi.y && c.z <= hi.z))
+      return false;
+    int cx, cy, cz, lx, ly, lz, hx, hy, hz;
+    double fcx, fcy, fcz, flx, fly, flz, fhx, fhy, fhz;
+    inner(c.x, grid_.dims[0], cx, fcx);
+    inner(c.y, grid_.dims[1], cy, fcy);
+    inner(c.z, grid_.dims[2], cz, fcz);
+    inner(lo.x, grid_.dims[0], lx, flx);
+    inner(lo.y, grid_.dims[1], ly, fly);
+    inner(lo.z, grid_.dims[2], lz, flz);
+    inner(hi.x, grid_.dims[0], hx, fhx);
+    inner(hi.y, grid_.dims[1], hy, fhy);
+    inner(hi.z, grid_.dims[2], hz, fhz);
+    // Rows (y) and layers (z) of the y and z pairs: l, l + 1 = h, l + 2; the centre's pair
+    // (c, c + 1) among them (l <= c <= h, as lo <= c <= hi).
+    if (hy != ly + 1 || hz != lz + 1) return false;
+    const int dj = cy - ly, dk = cz - lz;
+    const std::size_t sy = stride_[1], sz = stride_[2];
+    // x-lerps at column cx (fraction fcx), rows ly + r, layers lz + l.
+    const Sample* b = data_ + std::size_t(cx) + std::size_t(ly) * sy + std::size_t(lz) * sz;
+    double xl[3][3];
+    for (int r = 0; r < 3; ++r)
+      for (int l = 0; l < 3; ++l) {
+        const Sample* s = b + std::size_t(r) * sy + std::size_t(l) * sz;
+        xl[r][l] = lerp(s[0].value, s[1].value, fcx);
+      }
+    const double vy0 = lerp(lerp(xl[0][dk], xl[1][dk], fly), lerp(xl[0][dk + 1], xl[1][dk + 1], fly), fcz);
+    const double vy1 = lerp(lerp(xl[1][dk], xl[2][dk], fhy), lerp(xl[1][dk + 1], xl[2][dk + 1], fhy), fcz);
+    const double mid = lerp(xl[dj][1], xl[dj + 1][1], fcy);
+    const double vz0 = lerp(lerp(xl[dj][0], xl[dj + 1][0], fcy), mid, flz);
+    const double vz1 = lerp(mid, lerp(xl[dj][2], xl[dj + 1][2], fcy), fhz);
+    // The x pair: columns lx and hx with their own fractions, the centre's rows and layers.
+    const Sample* bx = data_ + std::size_t(cy) * sy + std::size_t(cz) * sz;
+    auto x_point = [&](int x, double fx) {
+      const Sample* s = bx + std::size_t(x);
+      const double c00 = lerp(s[0].value, s[1].value, fx);
+      const double c10 = lerp(s[sy].value, s[sy + 1].value, fx);
+      const double c01 = lerp(s[sz].value, s[sz + 1].value, fx);
+      const double c11 = lerp(s[sz + sy].value, s[sz + sy + 1].value, fx);
+      return lerp(lerp(c00, c10, fcy), lerp(c01, c11, fcy), fcz);
+    };
+    g = {(x_point(hx, fhx) - x_point(lx, flx)) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
+    return true;
   }
 
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();

@@ -7,6 +7,31 @@
 #include "sampling.h"
 
 namespace isotouch::servo {
+namespace {
+/// `steps` bisection steps on [lo, hi]: each halves the bracket at mid = (lo + hi) / 2,
+/// keeping the half [mid, hi] where lo_side(mid) holds, else [lo, mid]. Two steps per
+/// round: the midpoint and both possible next midpoints are read at once (independent
+/// reads, no branch on the first outcome), the same midpoints, hence the same bracket
+/// bit for bit as one step at a time, in half the dependent chain.
+template <class LoSide>
+[[gnu::always_inline]] inline void bisect(double& lo, double& hi, int steps, LoSide lo_side) {
+  for (; steps >= 2; steps -= 2) {
+    const double mid = 0.5 * (lo + hi);
+    const double ml = 0.5 * (lo + mid), mh = 0.5 * (mid + hi);
+    const bool pm = lo_side(mid), pl = lo_side(ml), ph = lo_side(mh);
+    const double lo1 = pm ? mid : lo, hi1 = pm ? hi : mid;
+    const double m2 = pm ? mh : ml;
+    const bool p2 = pm ? ph : pl;
+    lo = p2 ? m2 : lo1;
+    hi = p2 ? hi1 : m2;
+  }
+  if (steps > 0) {
+    const double mid = 0.5 * (lo + hi);
+    (lo_side(mid) ? lo : hi) = mid;
+  }
+}
+}  // namespace
+
 
 HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
   if (params_.variant == Variant::kPaper) {
@@ -116,10 +141,7 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
     const double t = double(i) / steps;
     if (excess(sample_value(field, a + (b - a) * t)) > 0.0) {
       double hi = t;
-      for (int k = 0; k < 20; ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (excess(sample_value(field, a + (b - a) * mid)) > 0.0 ? hi : lo) = mid;
-      }
+      bisect(lo, hi, 20, [&](double m) { return !(excess(sample_value(field, a + (b - a) * m)) > 0.0); });
       p = a + (b - a) * lo;  // last point known outside: on the surface to 1e-6 of the step
       return true;
     }
@@ -140,10 +162,7 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
   if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
   double lo = 0.0, hi = reach;
-  for (int k = 0; k < 16; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    (excess(sample_value(field, x + n0 * mid)) > 0.0 ? lo : hi) = mid;
-  }
+  bisect(lo, hi, 16, [&](double t) { return excess(sample_value(field, x + n0 * t)) > 0.0; });
   p = x + n0 * hi;
   return true;
 }
@@ -1310,11 +1329,8 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   auto at = [&](double t) { return a + (b - a) * t; };
   auto e_at = [&](double t) { return excess(sample_value(field, at(t))); };
   // The entry in (lo, hi], lo outside and hi inside: 20 bisection steps.
-  auto bisect = [&](double lo, double hi) {
-    for (int k = 0; k < 20; ++k) {
-      const double mid = 0.5 * (lo + hi);
-      (e_at(mid) > 0.0 ? hi : lo) = mid;
-    }
+  auto entry = [&](double lo, double hi) {
+    bisect(lo, hi, 20, [&](double m) { return !(e_at(m) > 0.0); });
     return lo;
   };
   const double deeper = e_a > 0.0 ? 2.0 * e_a : 0.0;
@@ -1339,7 +1355,7 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
       deepest = std::max(deepest, e_end);
     }
     if (j == steps && !(deepest > 2.0 * e_end)) return false;
-    p = at(out_seen ? bisect(lo, double(i) / steps) : 0.0);
+    p = at(out_seen ? entry(lo, double(i) / steps) : 0.0);
     return true;
   }
   return false;

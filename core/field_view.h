@@ -266,27 +266,22 @@ class FieldView {
   /// points (c.x, lo.y | hi.y, c.z) and (c.x, c.y, lo.z | hi.z) read the same column pair
   /// with the same x fraction, so their x-lerps over a 3 x 3 block of rows and layers are
   /// computed once, and every point's value is the lerps value_at_index would take, in its
-  /// order (the same bits). False (nothing written) where a point leaves the box of voxel
-  /// centres or the rows / layers of a pair are not consecutive (the border, steps other
-  /// than half a voxel): the caller reads the six points one by one.
+  /// order (the same bits). False (nothing written) unless every point lies in the box of
+  /// voxel centres below its upper face (where `inner` would clamp) and the rows / layers of
+  /// each pair are consecutive (steps other than about half a voxel): the caller then reads
+  /// the six points one by one.
   bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
-    if (!(in_grid(lo) && in_grid(hi) && in_grid(c) && lo.x <= c.x && lo.y <= c.y && lo.z <= c.z && c.x <= hi.x &&
-          c.y <= hi.y && c.z <= hi.z))
+    if (!(lo.x >= 0.0 && lo.y >= 0.0 && lo.z >= 0.0 && hi.x < last_[0] && hi.y < last_[1] && hi.z < last_[2] &&
+          lo.x <= c.x && lo.y <= c.y && lo.z <= c.z && c.x <= hi.x && c.y <= hi.y && c.z <= hi.z))
       return false;
-    int cx, cy, cz, lx, ly, lz, hx, hy, hz;
-    double fcx, fcy, fcz, flx, fly, flz, fhx, fhy, fhz;
-    inner(c.x, grid_.dims[0], cx, fcx);
-    inner(c.y, grid_.dims[1], cy, fcy);
-    inner(c.z, grid_.dims[2], cz, fcz);
-    inner(lo.x, grid_.dims[0], lx, flx);
-    inner(lo.y, grid_.dims[1], ly, fly);
-    inner(lo.z, grid_.dims[2], lz, flz);
-    inner(hi.x, grid_.dims[0], hx, fhx);
-    inner(hi.y, grid_.dims[1], hy, fhy);
-    inner(hi.z, grid_.dims[2], hz, fhz);
+    // inner() of a coordinate in [0, n - 1): the lower corner int(v), the fraction v - int(v).
+    const int cx = int(c.x), cy = int(c.y), cz = int(c.z), lx = int(lo.x), ly = int(lo.y), lz = int(lo.z),
+              hx = int(hi.x), hy = int(hi.y), hz = int(hi.z);
     // Rows (y) and layers (z) of the y and z pairs: l, l + 1 = h, l + 2; the centre's pair
     // (c, c + 1) among them (l <= c <= h, as lo <= c <= hi).
     if (hy != ly + 1 || hz != lz + 1) return false;
+    const double fcx = c.x - cx, fcy = c.y - cy, fcz = c.z - cz, flx = lo.x - lx, fly = lo.y - ly, flz = lo.z - lz,
+                 fhx = hi.x - hx, fhy = hi.y - hy, fhz = hi.z - hz;
     const int dj = cy - ly, dk = cz - lz;
     const std::size_t sy = stride_[1], sz = stride_[2];
     // x-lerps at column cx (fraction fcx), rows ly + r, layers lz + l.
@@ -304,15 +299,17 @@ class FieldView {
     const double vz1 = lerp(mid, lerp(xl[dj][2], xl[dj + 1][2], fcy), fhz);
     // The x pair: columns lx and hx with their own fractions, the centre's rows and layers.
     const Sample* bx = data_ + std::size_t(cy) * sy + std::size_t(cz) * sz;
-    auto x_point = [&](int x, double fx) {
-      const Sample* s = bx + std::size_t(x);
-      const double c00 = lerp(s[0].value, s[1].value, fx);
-      const double c10 = lerp(s[sy].value, s[sy + 1].value, fx);
-      const double c01 = lerp(s[sz].value, s[sz + 1].value, fx);
-      const double c11 = lerp(s[sz + sy].value, s[sz + sy + 1].value, fx);
-      return lerp(lerp(c00, c10, fcy), lerp(c01, c11, fcy), fcz);
-    };
-    g = {(x_point(hx, fhx) - x_point(lx, flx)) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
+    const Sample* s0 = bx + std::size_t(lx);
+    const Sample* s1 = bx + std::size_t(hx);
+    const double v0 = lerp(lerp(lerp(s0[0].value, s0[1].value, flx), lerp(s0[sy].value, s0[sy + 1].value, flx), fcy),
+                           lerp(lerp(s0[sz].value, s0[sz + 1].value, flx),
+                                lerp(s0[sz + sy].value, s0[sz + sy + 1].value, flx), fcy),
+                           fcz);
+    const double v1 = lerp(lerp(lerp(s1[0].value, s1[1].value, fhx), lerp(s1[sy].value, s1[sy + 1].value, fhx), fcy),
+                           lerp(lerp(s1[sz].value, s1[sz + 1].value, fhx),
+                                lerp(s1[sz + sy].value, s1[sz + sy + 1].value, fhx), fcy),
+                           fcz);
+    g = {(v1 - v0) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
     return true;
   }
 

@@ -1134,6 +1134,14 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   bool have_f_hip = false;
   double f_hip = 0.0;
   if (!edited && params_.short_way && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
+  tick_general(field, hip, voxel, elapsed, edited, covered_free_vhip, have_f_hip, f_hip, out);
+  return out;  // in place: a copy of the tick just written stalls on store forwarding
+}
+
+// Out of line: the common ticks above (the short way) then compile as a small function.
+[[gnu::noinline]] void HriRenderer::tick_general(const FieldView& field, const Vec3& hip, double voxel,
+                                                 double elapsed, bool edited, bool covered_free_vhip,
+                                                 bool have_f_hip, double f_hip, HriTick& out) {
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1287,7 +1295,6 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     prev_target_f_ = {};
   }
   finish_robust(hip, force, edited, have_f_hip, f_hip, out);
-  return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
 [[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,

@@ -507,11 +507,14 @@ Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
   Vec3 best = hip;
   double best_d2 = std::numeric_limits<double>::infinity();
   for (int mask = 1; mask < (1 << m); ++mask) {
-    if (__builtin_popcount(unsigned(mask)) > 3) continue;  // at most 3 independent constraints in 3-D
     int idx[3];
     int k = 0;
-    for (int i = 0; i < m; ++i)
-      if (mask & (1 << i)) idx[k++] = i;
+    for (int i = 0; i < m && k <= 3; ++i)
+      if (mask & (1 << i)) {
+        if (k < 3) idx[k] = i;
+        ++k;
+      }
+    if (k > 3) continue;  // at most 3 independent constraints in 3-D
     double b[3], l[3] = {0, 0, 0};
     for (int i = 0; i < k; ++i) b[i] = r - dot(pl[idx[i]].n, hip - pl[idx[i]].p);
     auto g = [&](int i, int j) { return dot(pl[idx[i]].n, pl[idx[j]].n); };

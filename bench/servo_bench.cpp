@@ -268,6 +268,68 @@ std::string table1_bricked_verdict(const std::vector<Table1Row>& rows) {
   return s.str();
 }
 
+namespace {
+/// The floor of an HRI tick on a stroke: the least work each kind of tick does, with no
+/// robust rule. An update: the values at the HIP and at the VHIP (here the HIP of the tick
+/// before), p by the linear rule, N by central differences at p (half a voxel), eq. 2 and 3;
+/// a contact tick: eq. 2 and 3 on the held plane (no read); a free tick: one value read.
+/// Each replays the whole stroke through a FieldView made per tick, as Renderer::tick does.
+struct TickFloor {
+  double update_ns = 0, contact_ns = 0, free_ns = 0;
+};
+
+template <class Tick>
+double stroke_ns_per_tick(const std::vector<Vec3>& hips, Tick tick) {
+  const auto t0 = std::chrono::steady_clock::now();
+  for (const Vec3& h : hips) tick(h);
+  return std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+         double(std::max<std::size_t>(hips.size(), 1));
+}
+
+/// Median floor of `reps` replays of each kind, interleaved.
+TickFloor hri_tick_floor(const SweepScene& s, double stiffness, int reps) {
+  const SampleField& f = *s.field;
+  const core::Isosurface iso{s.tau, s.inside};
+  volatile double sink = 0;
+  Vec3 prev = s.hip.empty() ? Vec3{} : s.hip[0], n_held{0, 0, 1}, p_held = prev;
+  auto update = [&](const Vec3& x) {
+    const core::FieldView v(f);
+    const double e1 = iso.excess(v.value(x)), e0 = iso.excess(v.value(prev));
+    double t = -e0 / (e1 - e0);
+    t = std::isfinite(t) ? std::clamp(t, 0.0, 1.0) : 0.0;
+    const Vec3 p = prev + (x - prev) * t;
+    const Vec3 n = core::normalized_or(iso.outward(v.central_difference(p, v.grid().spacing_m * 0.5)), n_held);
+    const Vec3 force = n * (stiffness * core::dot(n, p - x));
+    sink = sink + force.x;
+    prev = x;
+    n_held = n;
+    p_held = p;
+  };
+  auto contact = [&](const Vec3& x) {
+    const core::FieldView v(f);
+    const Vec3 vhip = x + n_held * core::dot(n_held, p_held - x);
+    const Vec3 force = (vhip - x) * stiffness;
+    sink = sink + force.x + core::norm(force) + double(v.version());
+  };
+  auto free_tick = [&](const Vec3& x) {
+    const core::FieldView v(f);
+    sink = sink + iso.excess(v.value(x));
+  };
+  std::vector<double> t[3];
+  for (int r = 0; r < reps; ++r) {
+    t[0].push_back(stroke_ns_per_tick(s.hip, update));
+    t[1].push_back(stroke_ns_per_tick(s.hip, contact));
+    t[2].push_back(stroke_ns_per_tick(s.hip, free_tick));
+  }
+  double med[3];
+  for (int k = 0; k < 3; ++k) {
+    std::sort(t[k].begin(), t[k].end());
+    med[k] = t[k].empty() ? 0.0 : t[k][t[k].size() / 2];
+  }
+  return {med[0], med[1], med[2]};
+}
+}  // namespace
+
 int run_bench_table1(const Table1Options& o, std::ostream& log) {
   using namespace servo;
   engine::ContextOptions co;
@@ -296,7 +358,7 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
          "Blezek/HRI | (paper) | HRI bricked fp32 [us] | bricked/dense | HRI bricked fp16 [us] | fp16/dense |\n"
       << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::vector<Table1Row> rows;
-  std::ostringstream bytes, tools;
+  std::ostringstream bytes, tools, floors;
   for (const PaperRow& pr : paper) {
     const SweepScene s = prepare_sweep_scene(pr.scene, vk, log);
     HriParams hp = reference_params(s);
@@ -350,6 +412,17 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
             << " % of the dense fp32 " << std::setprecision(2) << dense / (1024.0 * 1024.0) << " MiB\n";
     }
     rows.push_back(row);
+    {
+      const TickFloor fl = hri_tick_floor(s, hp.stiffness_n_per_m, o.repetitions);
+      const double n = hp.plane_update_period;
+      const double contact_stroke = ((n - 1) * fl.contact_ns + fl.update_ns) / n;
+      floors << std::fixed << std::setprecision(1) << "  " << pr.scene << ": update " << fl.update_ns << " ns ("
+             << std::setprecision(2) << fl.update_ns / (1e3 * row.avila_us) << " x Avila's tick), contact "
+             << std::setprecision(1) << fl.contact_ns << " ns, free " << fl.free_ns << " ns; contact ticks at n = "
+             << int(n) << ": " << contact_stroke << " ns (" << std::setprecision(2)
+             << contact_stroke / (1e3 * row.avila_us) << " x Avila); HRI as shipped " << std::setprecision(1)
+             << 1e3 * row.hri_us << " ns, Avila " << 1e3 * row.avila_us << " ns\n";
+    }
     tools << std::fixed << std::setprecision(3) << "  " << pr.scene << ": HRI with a spherical tool of radius "
           << hp_tool.tool_radius_m * 1e3 << " mm (2 voxels) " << med[6] << " us per tick, " << std::setprecision(2)
           << med[6] / row.hri_us << " x the point (" << std::setprecision(3) << row.hri_us << " us)\n";
@@ -373,6 +446,10 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
       << "The same strokes with a spherical tool (the HIP is the tool's centre; its surface meets the isosurface "
          "earlier, so contact differs from the point's):\n"
       << tools.str()
+      << "The floor of an HRI tick (no robust rule; median of the same number of replays after the table's): an "
+         "update reads the values at the HIP and the VHIP, p by the linear rule, N by central differences at p, "
+         "eq. 2-3; a contact tick applies eq. 2-3 on the held plane; a free tick reads one value:\n"
+      << floors.str()
       << "Snapshot bytes (brick table + tiles + pool [+ unorm16 decode] over voxels * 16):\n"
       << bytes.str()
       << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "

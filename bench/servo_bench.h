@@ -77,7 +77,9 @@ std::string table1_verdict(const std::vector<Table1Row>& rows);
 /// state; printed next to the paper's figures with the ratios between algorithms and
 /// table1_verdict(). Appended columns: the shipped HRI on the bricked fp32 and fp16
 /// snapshots of the same samples (interleaved in the same rounds), their ratio to the dense
-/// tick and table1_bricked_verdict(); then the snapshot bytes per format.
+/// tick and table1_bricked_verdict(); the spherical tool's tick beside the point's; the floor
+/// of an HRI tick (an update's, a contact tick's and a free tick's least work, no robust
+/// rule) against Avila's tick; then the snapshot bytes per format.
 int run_bench_table1(const Table1Options& options, std::ostream& log);
 
 }  // namespace isotouch::bench

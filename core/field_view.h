@@ -168,6 +168,8 @@ class FieldView {
     const Vec3 hi{h_m.x / grid_.spacing_m.x, h_m.y / grid_.spacing_m.y, h_m.z / grid_.spacing_m.z};
     const double x0 = idx.x - hi.x, x1 = idx.x + hi.x, y0 = idx.y - hi.y, y1 = idx.y + hi.y,
                  z0 = idx.z - hi.z, z1 = idx.z + hi.z;
+    Vec3 g;
+    if (mode_ == Mode::kDense && central_dense(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
     return {(value_at_index({x1, idx.y, idx.z}) - value_at_index({x0, idx.y, idx.z})) / (2 * h_m.x),
             (value_at_index({idx.x, y1, idx.z}) - value_at_index({idx.x, y0, idx.z})) / (2 * h_m.y),
             (value_at_index({idx.x, idx.y, z1}) - value_at_index({idx.x, idx.y, z0})) / (2 * h_m.z)};
@@ -258,6 +260,57 @@ class FieldView {
     const double c01 = lerp(v(0, 0, 1), v(1, 0, 1), c[0].f);
     const double c11 = lerp(v(0, 1, 1), v(1, 1, 1), c[0].f);
     return lerp(lerp(c00, c10, c[1].f), lerp(c01, c11, c[1].f), c[2].f);
+  }
+
+  /// central_difference on a dense field where the six points share their cells: the
+  /// points (c.x, lo.y | hi.y, c.z) and (c.x, c.y, lo.z | hi.z) read the same column pair
+  /// with the same x fraction, so their x-lerps over a 3 x 3 block of rows and layers are
+  /// computed once, and every point's value is the lerps value_at_index would take, in its
+  /// order (the same bits). False (nothing written) unless every point lies in the box of
+  /// voxel centres below its upper face (where `inner` would clamp) and the rows / layers of
+  /// each pair are consecutive (steps other than about half a voxel): the caller then reads
+  /// the six points one by one.
+  bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+    if (!(lo.x >= 0.0 && lo.y >= 0.0 && lo.z >= 0.0 && hi.x < last_[0] && hi.y < last_[1] && hi.z < last_[2] &&
+          lo.x <= c.x && lo.y <= c.y && lo.z <= c.z && c.x <= hi.x && c.y <= hi.y && c.z <= hi.z))
+      return false;
+    // inner() of a coordinate in [0, n - 1): the lower corner int(v), the fraction v - int(v).
+    const int cx = int(c.x), cy = int(c.y), cz = int(c.z), lx = int(lo.x), ly = int(lo.y), lz = int(lo.z),
+              hx = int(hi.x), hy = int(hi.y), hz = int(hi.z);
+    // Rows (y) and layers (z) of the y and z pairs: l, l + 1 = h, l + 2; the centre's pair
+    // (c, c + 1) among them (l <= c <= h, as lo <= c <= hi).
+    if (hy != ly + 1 || hz != lz + 1) return false;
+    const double fcx = c.x - cx, fcy = c.y - cy, fcz = c.z - cz, flx = lo.x - lx, fly = lo.y - ly, flz = lo.z - lz,
+                 fhx = hi.x - hx, fhy = hi.y - hy, fhz = hi.z - hz;
+    const int dj = cy - ly, dk = cz - lz;
+    const std::size_t sy = stride_[1], sz = stride_[2];
+    // x-lerps at column cx (fraction fcx), rows ly + r, layers lz + l.
+    const Sample* b = data_ + std::size_t(cx) + std::size_t(ly) * sy + std::size_t(lz) * sz;
+    double xl[3][3];
+    for (int r = 0; r < 3; ++r)
+      for (int l = 0; l < 3; ++l) {
+        const Sample* s = b + std::size_t(r) * sy + std::size_t(l) * sz;
+        xl[r][l] = lerp(s[0].value, s[1].value, fcx);
+      }
+    const double vy0 = lerp(lerp(xl[0][dk], xl[1][dk], fly), lerp(xl[0][dk + 1], xl[1][dk + 1], fly), fcz);
+    const double vy1 = lerp(lerp(xl[1][dk], xl[2][dk], fhy), lerp(xl[1][dk + 1], xl[2][dk + 1], fhy), fcz);
+    const double mid = lerp(xl[dj][1], xl[dj + 1][1], fcy);
+    const double vz0 = lerp(lerp(xl[dj][0], xl[dj + 1][0], fcy), mid, flz);
+    const double vz1 = lerp(mid, lerp(xl[dj][2], xl[dj + 1][2], fcy), fhz);
+    // The x pair: columns lx and hx with their own fractions, the centre's rows and layers.
+    const Sample* bx = data_ + std::size_t(cy) * sy + std::size_t(cz) * sz;
+    const Sample* s0 = bx + std::size_t(lx);
+    const Sample* s1 = bx + std::size_t(hx);
+    const double v0 = lerp(lerp(lerp(s0[0].value, s0[1].value, flx), lerp(s0[sy].value, s0[sy + 1].value, flx), fcy),
+                           lerp(lerp(s0[sz].value, s0[sz + 1].value, flx),
+                                lerp(s0[sz + sy].value, s0[sz + sy + 1].value, flx), fcy),
+                           fcz);
+    const double v1 = lerp(lerp(lerp(s1[0].value, s1[1].value, fhx), lerp(s1[sy].value, s1[sy + 1].value, fhx), fcy),
+                           lerp(lerp(s1[sz].value, s1[sz + 1].value, fhx),
+                                lerp(s1[sz + sy].value, s1[sz + sy + 1].value, fhx), fcy),
+                           fcz);
+    g = {(v1 - v0) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
+    return true;
   }
 
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();

@@ -7,6 +7,31 @@
 #include "sampling.h"
 
 namespace isotouch::servo {
+namespace {
+/// `steps` bisection steps on [lo, hi]: each halves the bracket at mid = (lo + hi) / 2,
+/// keeping the half [mid, hi] where lo_side(mid) holds, else [lo, mid]. Two steps per
+/// round: the midpoint and both possible next midpoints are read at once (independent
+/// reads, no branch on the first outcome), the same midpoints, hence the same bracket
+/// bit for bit as one step at a time, in half the dependent chain.
+template <class LoSide>
+[[gnu::always_inline]] inline void bisect(double& lo, double& hi, int steps, LoSide lo_side) {
+  for (; steps >= 2; steps -= 2) {
+    const double mid = 0.5 * (lo + hi);
+    const double ml = 0.5 * (lo + mid), mh = 0.5 * (mid + hi);
+    const bool pm = lo_side(mid), pl = lo_side(ml), ph = lo_side(mh);
+    const double lo1 = pm ? mid : lo, hi1 = pm ? hi : mid;
+    const double m2 = pm ? mh : ml;
+    const bool p2 = pm ? ph : pl;
+    lo = p2 ? m2 : lo1;
+    hi = p2 ? hi1 : m2;
+  }
+  if (steps > 0) {
+    const double mid = 0.5 * (lo + hi);
+    (lo_side(mid) ? lo : hi) = mid;
+  }
+}
+}  // namespace
+
 
 HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
   if (params_.variant == Variant::kPaper) {
@@ -116,10 +141,7 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
     const double t = double(i) / steps;
     if (excess(sample_value(field, a + (b - a) * t)) > 0.0) {
       double hi = t;
-      for (int k = 0; k < 20; ++k) {
-        const double mid = 0.5 * (lo + hi);
-        (excess(sample_value(field, a + (b - a) * mid)) > 0.0 ? hi : lo) = mid;
-      }
+      bisect(lo, hi, 20, [&](double m) { return !(excess(sample_value(field, a + (b - a) * m)) > 0.0); });
       p = a + (b - a) * lo;  // last point known outside: on the surface to 1e-6 of the step
       return true;
     }
@@ -140,10 +162,7 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
   if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
   double lo = 0.0, hi = reach;
-  for (int k = 0; k < 16; ++k) {
-    const double mid = 0.5 * (lo + hi);
-    (excess(sample_value(field, x + n0 * mid)) > 0.0 ? lo : hi) = mid;
-  }
+  bisect(lo, hi, 16, [&](double t) { return excess(sample_value(field, x + n0 * t)) > 0.0; });
   p = x + n0 * hi;
   return true;
 }
@@ -488,11 +507,14 @@ Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
   Vec3 best = hip;
   double best_d2 = std::numeric_limits<double>::infinity();
   for (int mask = 1; mask < (1 << m); ++mask) {
-    if (__builtin_popcount(unsigned(mask)) > 3) continue;  // at most 3 independent constraints in 3-D
     int idx[3];
     int k = 0;
-    for (int i = 0; i < m; ++i)
-      if (mask & (1 << i)) idx[k++] = i;
+    for (int i = 0; i < m && k <= 3; ++i)
+      if (mask & (1 << i)) {
+        if (k < 3) idx[k] = i;
+        ++k;
+      }
+    if (k > 3) continue;  // at most 3 independent constraints in 3-D
     double b[3], l[3] = {0, 0, 0};
     for (int i = 0; i < k; ++i) b[i] = r - dot(pl[idx[i]].n, hip - pl[idx[i]].p);
     auto g = [&](int i, int j) { return dot(pl[idx[i]].n, pl[idx[j]].n); };
@@ -1115,6 +1137,14 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   bool have_f_hip = false;
   double f_hip = 0.0;
   if (!edited && params_.short_way && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
+  tick_general(field, hip, voxel, elapsed, edited, covered_free_vhip, have_f_hip, f_hip, out);
+  return out;  // in place: a copy of the tick just written stalls on store forwarding
+}
+
+// Out of line: the common ticks above (the short way) then compile as a small function.
+[[gnu::noinline]] void HriRenderer::tick_general(const FieldView& field, const Vec3& hip, double voxel,
+                                                 double elapsed, bool edited, bool covered_free_vhip,
+                                                 bool have_f_hip, double f_hip, HriTick& out) {
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1268,7 +1298,6 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     prev_target_f_ = {};
   }
   finish_robust(hip, force, edited, have_f_hip, f_hip, out);
-  return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
 [[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,
@@ -1310,11 +1339,8 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   auto at = [&](double t) { return a + (b - a) * t; };
   auto e_at = [&](double t) { return excess(sample_value(field, at(t))); };
   // The entry in (lo, hi], lo outside and hi inside: 20 bisection steps.
-  auto bisect = [&](double lo, double hi) {
-    for (int k = 0; k < 20; ++k) {
-      const double mid = 0.5 * (lo + hi);
-      (e_at(mid) > 0.0 ? hi : lo) = mid;
-    }
+  auto entry = [&](double lo, double hi) {
+    bisect(lo, hi, 20, [&](double m) { return !(e_at(m) > 0.0); });
     return lo;
   };
   const double deeper = e_a > 0.0 ? 2.0 * e_a : 0.0;
@@ -1339,7 +1365,7 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
       deepest = std::max(deepest, e_end);
     }
     if (j == steps && !(deepest > 2.0 * e_end)) return false;
-    p = at(out_seen ? bisect(lo, double(i) / steps) : 0.0);
+    p = at(out_seen ? entry(lo, double(i) / steps) : 0.0);
     return true;
   }
   return false;

@@ -359,6 +359,10 @@ class HriRenderer final : public Renderer {
   void restart_at(const Vec3& hip);
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
+  /// tick_robust after the short way: the general path (updates, entries, the god-object
+  /// rules, the proxy path), from the HIP's value when the short way read it.
+  void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
+                    bool covered_free_vhip, bool have_f_hip, double f_hip, HriTick& out);
   /// The common robust ticks (contact with no update due, free motion outside), the same
   /// bits as the general path; false (nothing changed but the HIP's value, read in free
   /// motion) where the general path must run. Not for edit ticks nor the tool.

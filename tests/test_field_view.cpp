@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 
@@ -91,6 +92,40 @@ TEST(FieldView, ValueAndGradientMatchTheDefinitionInsideAtTheBorderAndOutside) {
   // Far away: exactly the background; not clamp-to-edge.
   EXPECT_EQ(v.value(f.grid.origin_m + Vec3{1, 1, 1}), -250.0);
   EXPECT_EQ(v.value(f.grid.origin_m - Vec3{1e300, 0, 0}), -250.0);
+}
+
+// central_difference is ((f(x + h_x) - f(x - h_x)) / (2 h_x), ...) of the trilinear value at the
+// six points, each read as value_at_index reads one point: bit for bit, whether the points share
+// their cells (a dense field, half-voxel steps: the x-lerps of the y and z pairs are shared) or
+// not (the border, other steps), on cell faces too (where a point's cell is the upper one).
+TEST(FieldView, CentralDifferenceIsTheSixValuesBitForBit) {
+  const SampleField f = random_field({9, 7, 6}, -250.0f, 5);
+  const FieldView v(f);
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<double> u(-0.2, 1.2);
+  const Vec3 ext = f.grid.extent_m();
+  auto bits = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+  long inside = 0;
+  for (int k = 0; k < 20000; ++k) {
+    Vec3 x = f.grid.origin_m + Vec3{ext.x * u(rng), ext.y * u(rng), ext.z * u(rng)};
+    if (k % 4 == 1) {  // on voxel centres or half-voxel faces: the six points on cell faces
+      const Vec3 i = f.grid.to_index(x);
+      x = f.grid.to_world({std::round(2 * i.x) / 2, std::round(2 * i.y) / 2, i.z});
+    }
+    const double hv = k % 3 == 2 ? 0.3 : 0.5;  // the renderers' half voxel, and another step
+    const Vec3 h = f.grid.spacing_m * hv;
+    const Vec3 g = v.central_difference(x, h);
+    const Vec3 i = f.grid.to_index(x);
+    const Vec3 hi{h.x / f.grid.spacing_m.x, h.y / f.grid.spacing_m.y, h.z / f.grid.spacing_m.z};
+    const Vec3 want{(v.value_at_index({i.x + hi.x, i.y, i.z}) - v.value_at_index({i.x - hi.x, i.y, i.z})) / (2 * h.x),
+                    (v.value_at_index({i.x, i.y + hi.y, i.z}) - v.value_at_index({i.x, i.y - hi.y, i.z})) / (2 * h.y),
+                    (v.value_at_index({i.x, i.y, i.z + hi.z}) - v.value_at_index({i.x, i.y, i.z - hi.z})) / (2 * h.z)};
+    ASSERT_TRUE(bits(g.x, want.x) && bits(g.y, want.y) && bits(g.z, want.z))
+        << k << ": (" << g.x << ", " << g.y << ", " << g.z << ") vs (" << want.x << ", " << want.y << ", " << want.z
+        << ")";
+    inside += i.x >= hi.x && i.y >= hi.y && i.z >= hi.z && i.x + hi.x <= 8 && i.y + hi.y <= 6 && i.z + hi.z <= 5;
+  }
+  EXPECT_GT(inside, 4000);  // every point in the grid: the shared reads were exercised
 }
 
 TEST(FieldView, ExactTrilinearGradientIsTheDerivativeOfTheValue) {

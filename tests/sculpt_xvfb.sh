@@ -119,7 +119,7 @@ for clock in --sim-clock --real-time; do
   set -e
   if [ "$rc" -ne 0 ]; then cat "$d/log.txt"; echo "FAIL: isotouch-sculpt (iso-undo $clock) exited $rc"; exit 1; fi
   if grep -q "timed out\|ended before" "$d/log.txt"; then cat "$d/log.txt"; echo "FAIL: the iso-undo script did not run its course ($clock)"; exit 1; fi
-  ! cmp -s "$d/iso-undo-before.png" "$d/iso-undo-carved.png" || { echo "FAIL: the carve changed nothing ($clock): the check says little"; exit 1; }
+  ! cmp -s "$d/iso-undo-before.png" "$d/iso-undo-carved.png" || { cat "$d/log.txt"; echo "FAIL: the carve changed nothing ($clock): the check says little"; exit 1; }
   cmp -s "$d/iso-undo-before.png" "$d/iso-undo-after.png" ||
     { echo "FAIL: the undo in the isovalue's frame was lost in the restart ($clock)"; exit 1; }
 done

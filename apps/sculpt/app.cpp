@@ -553,6 +553,7 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   const Clock::time_point t_wall0 = Clock::now();
   auto script_now_s = [&] { return o.sim_clock ? session->elapsed_s() : std::chrono::duration<double>(Clock::now() - t_wall0).count(); };
   double wait_since = 0;
+  std::size_t shown_at_wait = 0;  // brushes that changed the picture when the wait began
   bool waiting = false;
   int code = 0;
   engine::RaycastImage img;
@@ -770,10 +771,13 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
         if (!waiting) {
           waiting = true;
           wait_since = script_now_s();
+          shown_at_wait = latency_ms.size();
         }
         bool met;
         if (ev.text == "contact") {
           met = session->observe().contact;
+        } else if (ev.text == "change") {
+          met = latency_ms.size() > shown_at_wait;  // a brush that changed voxels, drawn
         } else {
           std::lock_guard<std::mutex> lock(feed.mu);
           met = feed.events_done >= events_submitted && feed.pending.empty() && brushes_measured >= feed.brushes_done;

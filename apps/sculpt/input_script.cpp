@@ -126,7 +126,8 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         } else if (k == "wait") {
           ev.kind = K::kWait;
           ev.text = v.is_string() ? v.get<std::string>() : "";
-          if (ev.text != "contact" && ev.text != "edits") fail("field 'wait' must be \"contact\" or \"edits\", got " + v.dump());
+          if (ev.text != "contact" && ev.text != "edits" && ev.text != "change")
+            fail("field 'wait' must be \"contact\", \"edits\" or \"change\", got " + v.dump());
         } else if (k == "screenshot") {
           ev.kind = K::kScreenshot;
           ev.text = v.is_string() ? v.get<std::string>() : "";

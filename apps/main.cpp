@@ -37,9 +37,9 @@ int main(int argc, char** argv) {
   std::string device;
   cli.add_option("--device", device,
                  "Vulkan device: name substring or index (default: $ISOTOUCH_DEVICE, else the first "
-                 "discrete GPU, else lavapipe); `cpu`: run, replay and report on the CPU backend (engine, "
-                 "brushes and pictures on every hardware thread, bit for bit; also taken when no device was "
-                 "asked for and no Vulkan device opens); before or after the subcommand");
+                 "discrete GPU, else lavapipe); `cpu`: run and replay on the CPU backend (the engine chain on up "
+                 "to 8 threads, brushes and pictures by the CPU references: the same bits as on lavapipe; also "
+                 "taken when no device was asked for and no Vulkan device opens); before or after the subcommand");
 
   std::vector<app::Subcommand> commands = {app::add_run_command(cli), app::add_check_command(cli),
                                            app::add_devices_command(cli), app::add_stability_command(cli),

@@ -62,22 +62,28 @@ std::string load_average() {
 class BusyThreads {
  public:
   explicit BusyThreads(int n) {
-    for (int i = 0; i < n; ++i)
-      threads_.emplace_back([this] {
-        std::uint64_t x = 1;
-        while (!stop_.load(std::memory_order_relaxed))
-          for (int k = 0; k < 4096; ++k) x = x * 6364136223846793005ULL + 1442695040888963407ULL;
-        sink_.fetch_add(x, std::memory_order_relaxed);
-      });
+    try {
+      for (int i = 0; i < n; ++i)
+        threads_.emplace_back([this] {
+          std::uint64_t x = 1;
+          while (!stop_.load(std::memory_order_relaxed))
+            for (int k = 0; k < 4096; ++k) x = x * 6364136223846793005ULL + 1442695040888963407ULL;
+          sink_.fetch_add(x, std::memory_order_relaxed);
+        });
+    } catch (...) {  // a thread that could not start: stop and join the others first
+      join_all();
+      throw;
+    }
   }
-  ~BusyThreads() {
-    stop_.store(true);
-    for (auto& t : threads_) t.join();
-  }
+  ~BusyThreads() { join_all(); }
   BusyThreads(const BusyThreads&) = delete;
   BusyThreads& operator=(const BusyThreads&) = delete;
 
  private:
+  void join_all() {
+    stop_.store(true);
+    for (auto& t : threads_) t.join();
+  }
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> sink_{0};
   std::vector<std::thread> threads_;

@@ -779,6 +779,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     }
     m.pixels = pixels;
     m.cache_valid = false;
+    m.last_width = m.last_height = 0;  // no frame in the new buffers until this one completes
   }
   const std::uint32_t tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
   const std::uint32_t tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
@@ -980,7 +981,7 @@ std::vector<std::uint32_t> RayCaster::last_rgba() {
   std::vector<std::uint32_t> out(pixels);
   if (pixels == 0) return out;
   if (m.ctx.device_local_is_host_visible() && m.image.mapped()) {
-    copy_pixels(out.data(), m.image.mapped(), pixels, m.bgra);
+    copy_pixels(out.data(), m.image.mapped(), pixels, (m.cache_flags & ISOTOUCH_RAYCAST_BGRA) != 0);
     return out;
   }
   GpuBuffer down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast picture readback");
@@ -989,7 +990,7 @@ std::vector<std::uint32_t> RayCaster::last_rgba() {
   record_copy(cmd, m.image, down, pixels * 4);
   barrier_transfer_to_host(cmd);
   m.ctx.submit_and_wait(cmd);
-  copy_pixels(out.data(), down.mapped(), pixels, m.bgra);
+  copy_pixels(out.data(), down.mapped(), pixels, (m.cache_flags & ISOTOUCH_RAYCAST_BGRA) != 0);
   return out;
 }
 

@@ -477,7 +477,7 @@ std::string volume_rows(const RunMetrics& m, const engine::Volume& vol, const se
                         : std::string())
      << (m.engine_fallback.empty() ? std::string() : "; **sparse chain not used: " + m.engine_fallback + "**")
      << " (details below) |\n"
-     << (m.engine_mode == "sparse" ? "| GPU stages (sum) | " : "| gradient pass | ") << (m.cpu_backend ? "CPU backend " : "GPU ") << fmt(m.gpu_gradient_ms, 4) << " ms ("
+     << (m.engine_mode == "sparse" ? (m.cpu_backend ? "| engine stages (sum) | " : "| GPU stages (sum) | ") : "| gradient pass | ") << (m.cpu_backend ? "CPU backend " : "GPU ") << fmt(m.gpu_gradient_ms, 4) << " ms ("
      << (m.gpu_timestamps ? "GPU timestamps" : "wall clock") << ", " << m.gpu_slabs << " slab(s)); CPU reference "
      << fmt(m.cpu_gradient_ms, 4) << " ms (one thread) |\n"
      << (m.cpu_backend ? "| CPU backend vs CPU reference gradient | max abs " : "| GPU vs CPU gradient | max abs ") << fmt(m.max_abs_diff, 3)

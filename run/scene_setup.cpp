@@ -177,16 +177,16 @@ void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
 void open_device(const RunOptions& opt, SceneSetup& s, std::ostream& log) {
   RunMetrics& m = s.metrics;
   s.device = opt.device;
+  const char* env = std::getenv("ISOTOUCH_DEVICE");
+  const std::string asked = !opt.device.empty() ? opt.device : (env ? env : "");
   std::string why;
-  if (is_cpu_device(opt.device)) {
-    why = "--device " + opt.device;
+  if (is_cpu_device(asked)) {
+    why = "device " + asked + " asked for";
   } else {
     engine::ContextOptions co;
     co.device = opt.device;
     auto ctx = engine::VulkanContext::create(co);
-    const char* env = std::getenv("ISOTOUCH_DEVICE");
-    const bool asked = !opt.device.empty() || (env && *env);
-    if (!ctx && asked) throw std::runtime_error("Vulkan: " + ctx.error);
+    if (!ctx && !asked.empty()) throw std::runtime_error("Vulkan: " + ctx.error);
     if (ctx) {
       s.vk = std::move(*ctx.value);
       m.gpu_device = s.vk->info().name;
@@ -201,8 +201,8 @@ void open_device(const RunOptions& opt, SceneSetup& s, std::ostream& log) {
   const unsigned threads = engine::hardware_threads();
   m.gpu_device = "CPU backend";
   m.gpu_device_type = std::to_string(threads) + " thread(s)";
-  log << "device   none: " << why << "; the engine, brushes and pictures run on the CPU backend (" << threads
-      << " thread(s), bit for bit the one-thread references)\n";
+  log << "device   none: " << why << "; the CPU backend: the engine chain on " << threads
+      << " thread(s), the brushes and pictures by the one-thread CPU references (the same bits as on lavapipe)\n";
 }
 
 // 2. Engine: the scene's passes on the GPU (dense or sparse), the CPU reference beside it;

@@ -20,10 +20,11 @@
 
 namespace isotouch::run {
 
-/// The device choice that runs the engine, the brushes and the pictures on the CPU: the
-/// CPU references' code on every hardware thread (bit for bit the one-thread references),
-/// no Vulkan context. A run whose device choice is empty (no --device, no $ISOTOUCH_DEVICE)
-/// falls back to it when no Vulkan device can be opened, and says so.
+/// The device choice (--device or $ISOTOUCH_DEVICE) that runs the engine, the brushes and the
+/// pictures on the CPU, no Vulkan context: the engine chain on up to 8 hardware threads
+/// (engine::hardware_threads; bit for bit the one-thread reference), the brushes and the
+/// pictures by the one-thread CPU references. A run with no device asked for falls back to
+/// it when no Vulkan device can be opened, and says so.
 inline constexpr const char* kCpuDevice = "cpu";
 /// True if `device` asks for the CPU backend (kCpuDevice, any case).
 bool is_cpu_device(const std::string& device);

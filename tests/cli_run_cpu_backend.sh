@@ -13,9 +13,12 @@ no_tick_ns() {
            { line = ""; for (i = 1; i <= NF; ++i) if (i != c) line = line (line == "" ? "" : ",") $i; print line }' "$1"
 }
 rm -rf "$out"; mkdir -p "$out"
-unset ISOTOUCH_DEVICE
-"$exe" run "$scene" --out "$out/vulkan" --quiet > "$out/vulkan.log" 2>&1 || { cat "$out/vulkan.log"; fail "the Vulkan run failed"; }
-VK_ICD_FILENAMES=/nonexistent-icd.json "$exe" run "$scene" --out "$out/cpu" --quiet > "$out/cpu.log" 2>&1; rc=$?
+unset ISOTOUCH_DEVICE VK_DRIVER_FILES VK_ADD_DRIVER_FILES
+# No driver for the loader to find (the older and the newer variable).
+nodriver() { VK_ICD_FILENAMES=/nonexistent-icd.json VK_DRIVER_FILES=/nonexistent-icd.json "$@"; }
+"$exe" run "$scene" --out "$out/vulkan" --quiet --record "$out/vulkan.rec" > "$out/vulkan.log" 2>&1 ||
+  { cat "$out/vulkan.log"; fail "the Vulkan run failed"; }
+nodriver "$exe" run "$scene" --out "$out/cpu" --quiet > "$out/cpu.log" 2>&1; rc=$?
 cat "$out/cpu.log"
 [ "$rc" -eq 0 ] || fail "the run without a Vulkan driver exited $rc"
 grep -q "^device   none: no Vulkan device" "$out/cpu.log" || fail "the log does not say there is no Vulkan device"
@@ -27,7 +30,12 @@ for f in drilled.nrrd surface.png after.png section_after.png drill.png; do
   [ -s "$out/cpu/$f" ] || fail "$f not written"
   cmp -s "$out/vulkan/$f" "$out/cpu/$f" || fail "$f differs from the Vulkan run's"
 done
-VK_ICD_FILENAMES=/nonexistent-icd.json "$exe" run "$scene" --device llvmpipe --out "$out/asked" --quiet > "$out/asked.log" 2>&1; rc=$?
+nodriver "$exe" replay "$out/vulkan.rec" > "$out/replay.log" 2>&1; rc=$?
+cat "$out/replay.log"
+[ "$rc" -eq 0 ] && grep -q "^IDENTICAL" "$out/replay.log" || fail "the replay without a Vulkan driver is not identical (exit $rc)"
+ISOTOUCH_DEVICE=cpu "$exe" run "$scene" --out "$out/env" --quiet > "$out/env.log" 2>&1 || { cat "$out/env.log"; fail "ISOTOUCH_DEVICE=cpu failed"; }
+grep -q "^device   none: device cpu asked for" "$out/env.log" || { cat "$out/env.log"; fail "ISOTOUCH_DEVICE=cpu did not take the CPU backend"; }
+nodriver "$exe" run "$scene" --device llvmpipe --out "$out/asked" --quiet > "$out/asked.log" 2>&1; rc=$?
 cat "$out/asked.log"
 [ "$rc" -ne 0 ] || fail "a device asked for by name that does not open exited 0"
 grep -q "Vulkan: " "$out/asked.log" || fail "no Vulkan error for the device asked for"

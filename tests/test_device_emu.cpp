@@ -117,7 +117,10 @@ TEST(DeviceEmu, TheHandPressesAndTheForceFlowsBothWays) {
   Rig rig;
   rig.run(0.4);
   EXPECT_GT(rig.forced_ticks(), 150);                         // the wall pushed back
-  EXPECT_GT(rig.stats.outputs_received, 300);                 // forces reached the device
+  // Forces reached the device: most ticks' outputs arrived (relative to the ticks the servo
+  // ran, which a loaded machine or a sanitizer build makes fewer than 400 in 0.4 s).
+  EXPECT_GT(rig.stats.outputs_received, 150);
+  EXPECT_GT(double(rig.stats.outputs_received), 0.75 * double(rig.log.n.load()));
   EXPECT_GT(rig.stats.max_force_n, 0.3);
   EXPECT_LT(rig.stats.max_force_n, 1.5);
   EXPECT_GT(rig.link.reports, 300);

@@ -1161,7 +1161,7 @@ TEST(Raycast, PictureKeptOnTheDeviceIsTheCopiedOne) {
   const RaycastImage copied = caster.render(view, RaycastStyle{}, W, H, prims);
   ASSERT_EQ(copied.rgba.size(), n);
   auto swap = [](std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); };
-  std::size_t grey = 0;  // pixels whose red and blue differ (the swap shows there)
+  std::size_t grey = 0;  // pixels whose red and blue are equal (the swap cannot show there)
   for (std::uint32_t p : copied.rgba) grey += p == swap(p);
   EXPECT_LT(grey, n / 2) << "too few coloured pixels to tell the orders apart";
   caster.set_in_place(true);

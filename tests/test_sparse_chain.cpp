@@ -565,8 +565,8 @@ TEST(SparseChain, ColumnListsCoverTheCandidatesExtentsOnce) {
     EXPECT_EQ(quads, w.quads);
     if (paired) {
       EXPECT_GT(pairs, 0u) << "no slices share units";
-      // The slice pairs split among threads give the same list (parts of 11, 4 and 3
-      // pairs, and more parts than pairs).
+      // The slice pairs split among 2, 3, 7 and 40 threads give the same list (40: more
+      // threads than pairs, so at most one pair per part).
       for (const unsigned threads : {2u, 3u, 7u, 40u}) {
         const engine::sparse::WorkList t = engine::sparse::make_column_list(g, cand, e, "grid", true, threads);
         EXPECT_EQ(t.units, w.units) << threads << " threads";

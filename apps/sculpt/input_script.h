@@ -12,7 +12,7 @@
 //   {"orbit": [d_azimuth_deg, d_elevation_deg]}, {"zoom": factor}
 //   {"wait": "contact" | "edits" | "change", "timeout_s": 10}   hold the script until the
 //                                  probe is in contact / every submitted edit is applied and
-//                                  drawn / a brush since the wait began changed voxels and is drawn
+//                                  drawn / a brush that changed voxels was drawn after the wait began
 //   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
 //   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
 //   {"iso": value}                 the isovalue slider let go at `value` (the session restarts

@@ -43,8 +43,8 @@ static_assert(ISOTOUCH_RAYCAST_DIST_MAX >= 1u && ISOTOUCH_RAYCAST_DIST_MAX <= 25
 // each) in the march pass (the skipping march may run out; it says so and the shade pass
 // finishes the ray); the finishing plain march, the refinement (6 bisections) and the box in
 // the shade pass; the box and the two overlay loops in the overlay pass.
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u < 65535u);
-static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + 6u + 3u < 65535u);
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + ISOTOUCH_RAYCAST_BISECTIONS < 65535u);
+static_assert(ISOTOUCH_RAYCAST_MAX_SAMPLES + 1u + ISOTOUCH_RAYCAST_BISECTIONS + 3u < 65535u);
 static_assert(3u + 2u * ISOTOUCH_RAYCAST_MAX_PRIMS < 65535u);
 static_assert(ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE == ISOTOUCH_RAYCAST_WG_X, "a tiled march workgroup is one tile");
 static_assert(ISOTOUCH_RAYCAST_TILE % ISOTOUCH_RAYCAST_BLOCK == 0u, "a tile is whole blocks");

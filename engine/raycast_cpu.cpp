@@ -35,8 +35,8 @@ F3 operator/(F3 a, float s) { return {a.x / s, a.y / s, a.z / s}; }
 float dot3(F3 a, F3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
-/// Bisections of the refinement: the shader's ISOTOUCH_RAYCAST_BISECTIONS (shaders/raycast_common.glsl).
-constexpr int kBisections = 6;
+/// Bisections of the refinement, as the shader's (shaders/isotouch_shared.h).
+constexpr int kBisections = int(ISOTOUCH_RAYCAST_BISECTIONS);
 
 /// One frame's state: the shader's globals (P, pc, the buffers).
 struct Caster {

@@ -181,6 +181,7 @@ struct BrickMinMaxPush {
 #define ISOTOUCH_RAYCAST_CLIP 2u      // flags: clip the half-space dot(n, p) + d > 0 away
 #define ISOTOUCH_RAYCAST_TILES 4u     // flags: with SKIP, each pixel's march starts at its tile's
                                       // start (binding 13; GPU only: the picture is the same)
+#define ISOTOUCH_RAYCAST_BISECTIONS 6  // bisections of a hit's refinement (refine(); the CPU reference the same)
 #define ISOTOUCH_RAYCAST_BGRA 8u      // flags: pixels packed B, G, R, A from the low byte (a
                                       // B8G8R8A8 swapchain's order; GPU only)
 // Empty-space skipping: trilinear cells c in [-1, n] per axis (n + 2 cells, stored at c + 1,

@@ -87,9 +87,6 @@ layout(std430, set = 0, binding = 15) buffer TileList { uint tile_list[]; };    
 layout(push_constant) uniform Push { RaycastPush pc; };
 
 #define kInf uintBitsToFloat(0x7f800000u)
-// Bisections of the refinement (refine()); the CPU reference's kBisections
-// (engine/raycast_cpu.cpp) must be the same.
-#define ISOTOUCH_RAYCAST_BISECTIONS 6
 
 // Per-invocation copies of the parameters the inner loops read.
 float g_bg, g_tau, g_sign;

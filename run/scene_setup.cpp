@@ -1,6 +1,5 @@
 #include "scene_setup.h"
 #include <algorithm>
-#include <cctype>
 #include <cstdlib>
 #include <chrono>
 #include <cmath>
@@ -27,12 +26,7 @@
 namespace isotouch::run {
 namespace fs = std::filesystem;
 
-bool is_cpu_device(const std::string& device) {
-  if (device.size() != 3) return false;
-  std::string d = device;
-  for (char& c : d) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return d == kCpuDevice;
-}
+bool is_cpu_device(const std::string& device) { return device == kCpuDevice; }
 
 namespace {
 

@@ -26,7 +26,7 @@ namespace isotouch::run {
 /// pictures by the one-thread CPU references. A run with no device asked for falls back to
 /// it when no Vulkan device can be opened, and says so.
 inline constexpr const char* kCpuDevice = "cpu";
-/// True if `device` asks for the CPU backend (kCpuDevice, any case).
+/// True if `device` asks for the CPU backend (kCpuDevice).
 bool is_cpu_device(const std::string& device);
 
 struct RunOptions {

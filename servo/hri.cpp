@@ -47,21 +47,25 @@ HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
 }
 
 void HriRenderer::reset() {
+  clear_contact();
+  started_ = false;
+  after_fault_ = false;
+  v_filt_ = {};
+  lost_s_ = 0;
+  version_known_ = false;
+  edit_tick_ = false;
+}
+
+void HriRenderer::clear_contact() {
   plane_ = {};
   c_ = 0;
-  started_ = false;
   resync_ = false;
   sliding_ = false;
   was_contact_ = false;
   recovery_ticks_left_ = 0;
   ramp_left_s_ = 0;
-  after_fault_ = false;
   prev_force_mag_ = 0;
   vel_valid_ = false;
-  v_filt_ = {};
-  lost_s_ = 0;
-  version_known_ = false;
-  edit_tick_ = false;
   edit_slewing_ = false;
   prev_force_ = {};
   tool_plane_count_ = 0;
@@ -385,26 +389,11 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
 void HriRenderer::restart_at(const Vec3& hip) {
   // First tick, or the first sane tick after an absurd HIP: free motion from here, no
   // plane, no ramp, no velocity history (both variants).
+  clear_contact();
   vhip_ = hip;
   prev_hip_ = hip;
-  plane_ = {};
-  c_ = 0;
   started_ = true;
-  resync_ = false;
-  sliding_ = false;
-  was_contact_ = false;
-  recovery_ticks_left_ = 0;
-  ramp_left_s_ = 0;
-  prev_force_mag_ = 0;
-  vel_valid_ = false;
   vhip_value_known_ = false;
-  edit_slewing_ = false;
-  prev_force_ = {};
-  tool_plane_count_ = 0;
-  scan_valid_ = false;
-  release_left_s_ = 0;
-  prev_target_f_ = {};
-  ramp_from_dir_ = {};
 }
 
 bool HriRenderer::note_version(std::uint64_t version) {

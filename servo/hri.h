@@ -357,6 +357,8 @@ class HriRenderer final : public Renderer {
   bool path_through(const FieldView& field, const Vec3& a, const Vec3& b, double e_a, double voxel, Vec3& p) const;
   /// Free motion from `hip` on: no plane, no ramp, no velocity history.
   void restart_at(const Vec3& hip);
+  /// The contact state reset() and restart_at() both clear: plane, ramps, fades, tool planes.
+  void clear_contact();
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_robust after the short way: the general path (updates, entries, the god-object

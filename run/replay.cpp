@@ -39,7 +39,11 @@ std::string num(double v) {
   s << std::setprecision(17) << v;
   return s.str();
 }
-std::string vec(const core::Vec3& v) { return "(" + num(v.x) + ", " + num(v.y) + ", " + num(v.z) + ")"; }
+std::string vec(const core::Vec3& v) {
+  std::ostringstream s;  // one stream (GCC 12 warns falsely on "(" + std::string&&)
+  s << std::setprecision(17) << '(' << v.x << ", " << v.y << ", " << v.z << ')';
+  return s.str();
+}
 
 bool same_bits(const core::Vec3& a, const core::Vec3& b) {
   return std::bit_cast<std::uint64_t>(a.x) == std::bit_cast<std::uint64_t>(b.x) &&

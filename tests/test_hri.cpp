@@ -593,7 +593,9 @@ TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
       const HriTick t = r.tick(b, hip);
       const double m = norm(t.force_n);
       worst = std::max(worst, std::abs(m - prev));
-      if (t.contact) EXPECT_GE(dot(t.force_n, kUp), 0.999 * m);  // along the last direction
+      if (t.contact) {
+        EXPECT_GE(dot(t.force_n, kUp), 0.999 * m);  // along the last direction
+      }
       released = released || !t.contact;
       prev = m;
     }

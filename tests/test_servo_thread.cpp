@@ -68,6 +68,9 @@ struct ApproachingProbe final : HapticDeviceIO {
 };
 }  // namespace
 
+// The replaced operator new / delete pair malloc and free; GCC's -Wmismatched-new-delete
+// sees the inlined malloc behind new and warns at every delete in this file.
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
 void* operator new(std::size_t n) {
   if (t_is_servo) g_servo_allocations.fetch_add(1, std::memory_order_relaxed);
   if (void* p = std::malloc(n ? n : 1)) return p;

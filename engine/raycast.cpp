@@ -547,6 +547,20 @@ std::optional<std::pair<std::array<double, 3>, std::array<double, 3>>> active_bo
 }
 }  // namespace
 
+/// What one frame draws (RayCaster::render): its parameters and push constants, the pixels
+/// the march covers, the primitives' rectangle and the overlay pass's, and whether the frame
+/// reuses the last one (see plan_frame).
+struct FramePlan {
+  gpu::RaycastParams P{};
+  gpu::RaycastParams key{};  // P with the active box zeroed: what reuse compares
+  gpu::RaycastPush push{};
+  PixelRect rect, orect, overlay;
+  bool reuse = false;
+  bool linear = false;  // the shade pass writes the linear colour (bindings 6-8)
+  int width = 0, height = 0;
+  std::size_t pixels = 0, tile_count = 0;
+};
+
 struct RayCaster::Impl {
   /// Bindings 1 (values) and 2 (cell distances) are uniform texel buffers.
   /// Binding 12 (quads) is one too, viewed as R32G32B32A32_SFLOAT.
@@ -606,6 +620,25 @@ struct RayCaster::Impl {
     s.push_back(block_pass ? kBlocksPerTile * kTilesPerBlockGroup : ISOTOUCH_RAYCAST_WG_X);
     return s;
   }
+  /// The per-pixel and per-tile buffers for a frame of width x height (reallocated when the
+  /// size changes; the last frame's picture is waited for first).
+  void size_frame(int width, int height);
+  /// The frame's parameters, rectangles and reuse decision (nothing recorded).
+  FramePlan plan_frame(const CameraView& view, const RaycastStyle& style, int width, int height,
+                       const std::vector<gpu::RaycastPrim>& prims) const;
+  /// Background fills of the pixels drawn again, and the counters zeroed.
+  void record_clear(VkCommandBuffer cmd, const FramePlan& f) const;
+  /// The tile-start passes (skipping with tiles); false when the frame does not use them.
+  bool record_tiles(VkCommandBuffer cmd, const FramePlan& f, std::initializer_list<BufferRange> ranges);
+  void record_march_and_shade(VkCommandBuffer cmd, const FramePlan& f, bool tiles, bool skip_empty,
+                              std::initializer_list<BufferRange> ranges);
+  void record_overlay(VkCommandBuffer cmd, const FramePlan& f, std::uint32_t opaque, std::size_t listed,
+                      std::initializer_list<BufferRange> ranges);
+  /// Barriers (and copies where device memory is not host-visible) for reading the frame
+  /// back; true when image and depth are read in place.
+  bool record_readback(VkCommandBuffer cmd, std::size_t pixels);
+  /// After the frame completed: what the next frame's reuse compares with.
+  void remember_frame(const FramePlan& f);
   Impl(VulkanContext& c, RaycastField f, bool q)
       : ctx(c),
         field(std::move(f)),
@@ -750,53 +783,230 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   return R::ok(std::unique_ptr<RayCaster>(new RayCaster(std::move(impl))));
 }
 
-RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style, int width, int height,
-                               const std::vector<gpu::RaycastPrim>& prims) {
-  Impl& m = *impl_;
-  if (prims.size() > ISOTOUCH_RAYCAST_MAX_PRIMS)
-    throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
-                                std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
-  gpu::RaycastParams P = make_params(m.field, view, style, width, height);
-  if (m.active) {  // the skipping march starts and ends at the active cells' box, widened by
-    // 1/16 voxel: a ray grazing its face must not round to "misses the box"
-    const auto& [lo, hi] = *m.active;
-    set3(P.act_lo_x, P.act_lo_y, P.act_lo_z, {lo[0] - 0.0625, lo[1] - 0.0625, lo[2] - 0.0625});
-    set3(P.act_hi_x, P.act_hi_y, P.act_hi_z, {hi[0] + 0.0625, hi[1] + 0.0625, hi[2] + 0.0625});
-  }
-  const std::size_t pixels = std::size_t(width) * std::size_t(height);
-  if (pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
-  if (pixels != m.pixels) {
+void RayCaster::Impl::size_frame(int width, int height) {
+  Impl& m = *this;
+  const std::size_t n_pixels = std::size_t(width) * std::size_t(height);
+  if (n_pixels * 4 > m.ctx.max_binding_bytes()) throw std::invalid_argument("raycast: image too large for one binding");
+  if (n_pixels != m.pixels) {
     // Submissions since the last frame may still read the old picture (image_buffer()).
     VK_CHECK(vkQueueWaitIdle(m.ctx.queue()));
     for (auto [buf, what] : {std::pair{&m.image, "raycast image"}, std::pair{&m.depth, "raycast depth"},
                              std::pair{&m.lin_r, "raycast colour R"}, std::pair{&m.lin_g, "raycast colour G"},
                              std::pair{&m.lin_b, "raycast colour B"}, std::pair{&m.hits, "raycast hit list"},
                              std::pair{&m.hit_k, "raycast hit samples"}})
-      *buf = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::DeviceLocal, what);
+      *buf = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::DeviceLocal, what);
     if (!(m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped())) {
-      m.image_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast image readback");
-      m.depth_down = make_buffer_or_throw(m.ctx, pixels * 4, MemoryIntent::Readback, "raycast depth readback");
+      m.image_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast image readback");
+      m.depth_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast depth readback");
     }
-    m.pixels = pixels;
+    m.pixels = n_pixels;
     m.cache_valid = false;
     m.last_width = m.last_height = 0;  // no frame in the new buffers until this one completes
   }
   const std::uint32_t tiles_x = (std::uint32_t(width) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
   const std::uint32_t tiles_y = (std::uint32_t(height) + ISOTOUCH_RAYCAST_TILE - 1) / ISOTOUCH_RAYCAST_TILE;
-  const std::size_t tile_count = std::size_t(tiles_x) * tiles_y;
-  if (tile_count != m.tile_count) {
-    m.tile_t = make_buffer_or_throw(m.ctx, tile_count * (1 + kBlocksPerTile) * 4, MemoryIntent::DeviceLocal,
+  const std::size_t n_tiles = std::size_t(tiles_x) * tiles_y;
+  if (n_tiles != m.tile_count) {
+    m.tile_t = make_buffer_or_throw(m.ctx, n_tiles * (1 + kBlocksPerTile) * 4, MemoryIntent::DeviceLocal,
                                     "raycast tile and block starts");
-    m.tile_list = make_buffer_or_throw(m.ctx, tile_count * 4, MemoryIntent::DeviceLocal, "raycast tile list");
-    m.tile_count = tile_count;
+    m.tile_list = make_buffer_or_throw(m.ctx, n_tiles * 4, MemoryIntent::DeviceLocal, "raycast tile list");
+    m.tile_count = n_tiles;
   }
-  std::memcpy(m.params_up.mapped(), &P, sizeof(P));
+}
+
+FramePlan RayCaster::Impl::plan_frame(const CameraView& view, const RaycastStyle& style, int width, int height,
+                                           const std::vector<gpu::RaycastPrim>& frame_prims) const {
+  const Impl& m = *this;
+  FramePlan f;
+  f.width = width;
+  f.height = height;
+  f.pixels = m.pixels;
+  f.tile_count = m.tile_count;
+  gpu::RaycastParams& P = f.P;
+  P = make_params(m.field, view, style, width, height);
+  if (m.active) {  // the skipping march starts and ends at the active cells' box, widened by
+    // 1/16 voxel: a ray grazing its face must not round to "misses the box"
+    const auto& [lo, hi] = *m.active;
+    set3(P.act_lo_x, P.act_lo_y, P.act_lo_z, {lo[0] - 0.0625, lo[1] - 0.0625, lo[2] - 0.0625});
+    set3(P.act_hi_x, P.act_hi_y, P.act_hi_z, {hi[0] + 0.0625, hi[1] + 0.0625, hi[2] + 0.0625});
+  }
+  f.push.flags = style_flags(style) | (m.bgra ? ISOTOUCH_RAYCAST_BGRA : 0u);
+  f.push.prim_count = std::uint32_t(frame_prims.size());
+  // The march covers only where the volume's box (skipping: the active cells' box) projects.
+  if (!style.skip_empty)
+    f.rect = box_rect(P, {-1, -1, -1}, {double(P.nx), double(P.ny), double(P.nz)});
+  else if (m.active)
+    f.rect = box_rect(P, m.active->first, m.active->second);
+  // Reuse: the same camera, style and size as the last frame: only the pixels whose rays
+  // can meet the voxels update() changed are marched and shaded again (within 3 voxels of
+  // them: the trilinear cells, the refinement's block and the normal's neighbours), and the
+  // overlay is redrawn over its old and new rectangles; every other pixel stays as it was,
+  // which is what a full frame would draw there.
+  f.key = P;
+  set3(f.key.act_lo_x, f.key.act_lo_y, f.key.act_lo_z, {0, 0, 0});
+  set3(f.key.act_hi_x, f.key.act_hi_y, f.key.act_hi_z, {0, 0, 0});
+  f.orect = overlay_rect(P, frame_prims, width, height);
+  const bool needs_linear = f.orect.x1 > f.orect.x0 || m.cache_orect.x1 > m.cache_orect.x0;
+  f.reuse = m.cache_valid && m.cache_flags == f.push.flags && std::memcmp(&f.key, &m.cache_key, sizeof f.key) == 0 &&
+            (!needs_linear || m.cache_linear);
+  if (f.reuse) {
+    PixelRect d;
+    if (m.dirty_lo[0] < m.dirty_hi[0])
+      d = box_rect(P, {m.dirty_lo[0] - 3.0, m.dirty_lo[1] - 3.0, m.dirty_lo[2] - 3.0},
+                   {m.dirty_hi[0] + 2.0, m.dirty_hi[1] + 2.0, m.dirty_hi[2] + 2.0});
+    PixelRect& r = f.rect;
+    r = {std::max(r.x0, d.x0), std::max(r.y0, d.y0), std::min(r.x1, d.x1), std::min(r.y1, d.y1)};
+    if (r.x1 <= r.x0 || r.y1 <= r.y0) r = PixelRect{};
+  }
+  f.linear = f.reuse ? m.cache_linear : !frame_prims.empty();  // bindings 6-8 complete after this frame
+  // The overlay over the primitives' rectangle and, reusing, the last frame's (there it
+  // draws the picture without them again, from the linear colour).
+  f.overlay = f.orect;
+  if (f.reuse && m.cache_orect.x1 > m.cache_orect.x0) {
+    const PixelRect& c = m.cache_orect;
+    PixelRect& od = f.overlay;
+    od = od.x1 > od.x0 ? PixelRect{std::min(od.x0, c.x0), std::min(od.y0, c.y0), std::max(od.x1, c.x1), std::max(od.y1, c.y1)} : c;
+  }
+  return f;
+}
+
+void RayCaster::Impl::record_clear(VkCommandBuffer cmd, const FramePlan& f) const {
+  const Impl& m = *this;
+  // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
+  vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);       // hit count 0
+  vkCmdFillBuffer(cmd, m.tile_counter.handle(), 0, VK_WHOLE_SIZE, 0);  // tile count 0
+  if (f.push.flags & ISOTOUCH_RAYCAST_TILES)  // tiles the tile pass does not reach: +inf
+    vkCmdFillBuffer(cmd, m.tile_t.handle(), 0, f.tile_count * 4, std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()));
+  std::uint32_t bg = pack_rgba8(f.P.bg_r, f.P.bg_g, f.P.bg_b);
+  if (m.bgra) bg = swap_red_blue(bg);
+  const std::uint32_t no_hit = std::bit_cast<std::uint32_t>(-1.0f);
+  if (!f.reuse) {
+    vkCmdFillBuffer(cmd, m.image.handle(), 0, f.pixels * 4, bg);
+    vkCmdFillBuffer(cmd, m.depth.handle(), 0, f.pixels * 4, no_hit);
+    return;
+  }
+  const PixelRect& r = f.rect;
+  for (std::uint32_t y = r.y0; y < r.y1; ++y) {  // the rows of the region drawn again
+    const VkDeviceSize at = (VkDeviceSize(y) * std::uint32_t(f.width) + r.x0) * 4, n = VkDeviceSize(r.x1 - r.x0) * 4;
+    vkCmdFillBuffer(cmd, m.image.handle(), at, n, bg);
+    vkCmdFillBuffer(cmd, m.depth.handle(), at, n, no_hit);
+  }
+}
+
+bool RayCaster::Impl::record_tiles(VkCommandBuffer cmd, const FramePlan& f, std::initializer_list<BufferRange> ranges) {
+  Impl& m = *this;
+  const PixelRect& rect = f.rect;
+  if ((f.push.flags & ISOTOUCH_RAYCAST_TILES) == 0u || rect.x1 <= rect.x0) return false;
+  // The tiles holding the march's pixels.
+  const std::uint32_t T = ISOTOUCH_RAYCAST_TILE;
+  gpu::RaycastPush tile_push = f.push;
+  tile_push.x0 = rect.x0 / T;
+  tile_push.y0 = rect.y0 / T;
+  const std::uint32_t nx = (rect.x1 + T - 1) / T - tile_push.x0, ny = (rect.y1 + T - 1) / T - tile_push.y0;
+  m.tiles.bind(cmd, m.arena, ranges);
+  m.tiles.push(cmd, tile_push);
+  vkCmdDispatch(cmd, (nx + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X, ny, 1);
+  barrier_compute_to_compute(cmd);
+  m.args_tiles.bind(cmd, m.arena, ranges);
+  m.args_tiles.push(cmd, f.push);
+  vkCmdDispatch(cmd, 1, 1, 1);
+  barrier_compute_to_indirect(cmd);
+  m.blocks.bind(cmd, m.arena, ranges);  // the listed tiles' blocks: kTilesPerBlockGroup tiles per workgroup
+  m.blocks.push(cmd, f.push);
+  vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), sizeof(gpu::RaycastCounter));
+  barrier_compute_to_compute(cmd);
+  return true;
+}
+
+void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePlan& f, bool tiled, bool skip_empty,
+                                       std::initializer_list<BufferRange> ranges) {
+  Impl& m = *this;
+  const PixelRect& rect = f.rect;
+  gpu::RaycastPush march_push = f.push;
+  march_push.x0 = rect.x0;
+  march_push.y0 = rect.y0;
+  // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
+  // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
+  const auto& march = tiled ? m.march_tiled : skip_empty ? m.march_skip : m.march_plain;
+  march.bind(cmd, m.arena, ranges);
+  march.push(cmd, march_push);
+  if (tiled)
+    vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), 0);
+  else if (rect.x1 > rect.x0)
+    vkCmdDispatch(cmd, (rect.x1 - rect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                  (rect.y1 - rect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+  m.timer.mark(cmd, 2);
+  barrier_compute_to_compute(cmd);
+  m.args.bind(cmd, m.arena, ranges);
+  m.args.push(cmd, f.push);
+  vkCmdDispatch(cmd, 1, 1, 1);
+  barrier_compute_to_indirect(cmd);
+  const auto& shade_pass = f.linear ? m.shade_lin : m.shade;
+  shade_pass.bind(cmd, m.arena, ranges);
+  shade_pass.push(cmd, f.push);
+  vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
+}
+
+void RayCaster::Impl::record_overlay(VkCommandBuffer cmd, const FramePlan& f, std::uint32_t opaque, std::size_t listed,
+                               std::initializer_list<BufferRange> ranges) {
+  Impl& m = *this;
+  const PixelRect& od = f.overlay;
+  if (od.x1 <= od.x0) return;
+  gpu::RaycastPush overlay_push = f.push;
+  overlay_push.x0 = od.x0;
+  overlay_push.y0 = od.y0;
+  overlay_push.prim_count = opaque << 16 | std::uint32_t(listed);
+  barrier_compute_to_compute(cmd);
+  m.overlay.bind(cmd, m.arena, ranges);
+  m.overlay.push(cmd, overlay_push);
+  vkCmdDispatch(cmd, (od.x1 - od.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
+                (od.y1 - od.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+}
+
+bool RayCaster::Impl::record_readback(VkCommandBuffer cmd, std::size_t n_pixels) {
+  Impl& m = *this;
+  // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
+  // Kept on the device: the picture for later transfers (a window's copy), the depth for the host.
+  const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
+  if (in_place) {
+    barrier_compute_to_host(cmd);
+    if (m.keep_on_device) barrier_compute_to_transfer(cmd);
+  } else {
+    barrier_compute_to_transfer(cmd);
+    if (!m.keep_on_device) record_copy(cmd, m.image, m.image_down, n_pixels * 4);
+    record_copy(cmd, m.depth, m.depth_down, n_pixels * 4);
+    barrier_transfer_to_host(cmd);
+  }
+  return in_place;
+}
+
+void RayCaster::Impl::remember_frame(const FramePlan& f) {
+  Impl& m = *this;
+  m.cache_valid = true;
+  m.cache_linear = f.linear;
+  m.cache_key = f.key;
+  m.cache_flags = f.push.flags;
+  m.cache_orect = f.orect;
+  m.last_tiles = (f.push.flags & ISOTOUCH_RAYCAST_TILES) != 0u;
+  m.last_width = f.width;
+  m.last_height = f.height;
+  m.dirty_lo = {1, 1, 1};
+  m.dirty_hi = {0, 0, 0};
+}
+
+RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style, int width, int height,
+                               const std::vector<gpu::RaycastPrim>& prims) {
+  Impl& m = *impl_;
+  if (prims.size() > ISOTOUCH_RAYCAST_MAX_PRIMS)
+    throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
+                                std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
+  m.size_frame(width, height);
+  const FramePlan f = m.plan_frame(view, style, width, height, prims);
+  const std::size_t pixels = f.pixels, tile_count = f.tile_count;
+  std::memcpy(m.params_up.mapped(), &f.P, sizeof(f.P));
   const OverlayLists lists = overlay_lists(prims);
   if (!lists.prims.empty())
     std::memcpy(m.prims_up.mapped(), lists.prims.data(), lists.prims.size() * sizeof(gpu::RaycastPrim));
-  gpu::RaycastPush push{};
-  push.flags = style_flags(style) | (m.bgra ? ISOTOUCH_RAYCAST_BGRA : 0u);
-  push.prim_count = std::uint32_t(prims.size());
 
   m.arena.reset();  // the previous frame's submission has completed (submit_and_wait)
   VkCommandBuffer cmd = m.ctx.begin_commands();
@@ -805,7 +1015,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                        0, 0, nullptr, 0, nullptr, 0, nullptr);
   m.timer.record_reset(cmd);
-  record_copy(cmd, m.params_up, m.params, sizeof(P));
+  record_copy(cmd, m.params_up, m.params, sizeof(f.P));
   if (!lists.prims.empty()) record_copy(cmd, m.prims_up, m.prims, lists.prims.size() * sizeof(gpu::RaycastPrim));
   const std::initializer_list<BufferRange> ranges = {
       {m.params.handle(), 0, m.params.size()}, {m.values.handle(), 0, m.values.size()},
@@ -816,148 +1026,25 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
       {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * (1 + kBlocksPerTile) * 4},
       {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4}};
-  // The march covers only where the volume's box (skipping: the active cells' box) projects.
-  PixelRect rect;
-  if (!style.skip_empty)
-    rect = box_rect(P, {-1, -1, -1}, {double(P.nx), double(P.ny), double(P.nz)});
-  else if (m.active)
-    rect = box_rect(P, m.active->first, m.active->second);
-  // Reuse: the same camera, style and size as the last frame: only the pixels whose rays
-  // can meet the voxels update() changed are marched and shaded again (within 3 voxels of
-  // them: the trilinear cells, the refinement's block and the normal's neighbours), and the
-  // overlay is redrawn over its old and new rectangles; every other pixel stays as it was,
-  // which is what a full frame would draw there.
-  gpu::RaycastParams key = P;
-  set3(key.act_lo_x, key.act_lo_y, key.act_lo_z, {0, 0, 0});
-  set3(key.act_hi_x, key.act_hi_y, key.act_hi_z, {0, 0, 0});
-  const PixelRect orect = overlay_rect(P, prims, width, height);
-  const bool needs_linear = orect.x1 > orect.x0 || m.cache_orect.x1 > m.cache_orect.x0;
-  const bool reuse = m.cache_valid && m.cache_flags == push.flags && std::memcmp(&key, &m.cache_key, sizeof key) == 0 &&
-                     (!needs_linear || m.cache_linear);
-  const bool dirty = m.dirty_lo[0] < m.dirty_hi[0];
-  if (reuse) {
-    PixelRect d;
-    if (dirty)
-      d = box_rect(P, {m.dirty_lo[0] - 3.0, m.dirty_lo[1] - 3.0, m.dirty_lo[2] - 3.0},
-                   {m.dirty_hi[0] + 2.0, m.dirty_hi[1] + 2.0, m.dirty_hi[2] + 2.0});
-    rect = {std::max(rect.x0, d.x0), std::max(rect.y0, d.y0), std::min(rect.x1, d.x1), std::min(rect.y1, d.y1)};
-    if (rect.x1 <= rect.x0 || rect.y1 <= rect.y0) rect = PixelRect{};
-  }
-  gpu::RaycastPush march_push = push;
-  march_push.x0 = rect.x0;
-  march_push.y0 = rect.y0;
   m.timer.mark(cmd, 0);
-  // Every pixel starts as background (colour, depth -1): the march pass writes hits only.
-  vkCmdFillBuffer(cmd, m.counter.handle(), 0, VK_WHOLE_SIZE, 0);       // hit count 0
-  vkCmdFillBuffer(cmd, m.tile_counter.handle(), 0, VK_WHOLE_SIZE, 0);  // tile count 0
-  if (push.flags & ISOTOUCH_RAYCAST_TILES)  // tiles the tile pass does not reach: +inf
-    vkCmdFillBuffer(cmd, m.tile_t.handle(), 0, tile_count * 4, std::bit_cast<std::uint32_t>(std::numeric_limits<float>::infinity()));
-  std::uint32_t bg = pack_rgba8(P.bg_r, P.bg_g, P.bg_b);
-  if (m.bgra) bg = swap_red_blue(bg);
-  const std::uint32_t no_hit = std::bit_cast<std::uint32_t>(-1.0f);
-  if (!reuse) {
-    vkCmdFillBuffer(cmd, m.image.handle(), 0, pixels * 4, bg);
-    vkCmdFillBuffer(cmd, m.depth.handle(), 0, pixels * 4, no_hit);
-  } else {
-    for (std::uint32_t y = rect.y0; y < rect.y1; ++y) {  // the rows of the region drawn again
-      const VkDeviceSize at = (VkDeviceSize(y) * std::uint32_t(width) + rect.x0) * 4, n = VkDeviceSize(rect.x1 - rect.x0) * 4;
-      vkCmdFillBuffer(cmd, m.image.handle(), at, n, bg);
-      vkCmdFillBuffer(cmd, m.depth.handle(), at, n, no_hit);
-    }
-  }
+  m.record_clear(cmd, f);
   barrier_transfer_to_compute(cmd);
   // 0. tile starts (skipping); 1. march every pixel; 2. hit count -> dispatch size; 3. shade
   // the hits; 4. overlays.
-  const bool tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u && rect.x1 > rect.x0;
-  if (tiles) {  // the tiles holding the march's pixels
-    const std::uint32_t T = ISOTOUCH_RAYCAST_TILE;
-    gpu::RaycastPush tile_push = push;
-    tile_push.x0 = rect.x0 / T;
-    tile_push.y0 = rect.y0 / T;
-    const std::uint32_t nx = (rect.x1 + T - 1) / T - tile_push.x0, ny = (rect.y1 + T - 1) / T - tile_push.y0;
-    m.tiles.bind(cmd, m.arena, ranges);
-    m.tiles.push(cmd, tile_push);
-    vkCmdDispatch(cmd, (nx + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X, ny, 1);
-    barrier_compute_to_compute(cmd);
-    m.args_tiles.bind(cmd, m.arena, ranges);
-    m.args_tiles.push(cmd, push);
-    vkCmdDispatch(cmd, 1, 1, 1);
-    barrier_compute_to_indirect(cmd);
-    m.blocks.bind(cmd, m.arena, ranges);  // the listed tiles' blocks: kTilesPerBlockGroup tiles per workgroup
-    m.blocks.push(cmd, push);
-    vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), sizeof(gpu::RaycastCounter));
-    barrier_compute_to_compute(cmd);
-  }
+  const bool tiles = m.record_tiles(cmd, f, ranges);
   m.timer.mark(cmd, 4);
-  // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
-  // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
-  const auto& march = tiles ? m.march_tiled : style.skip_empty ? m.march_skip : m.march_plain;
-  march.bind(cmd, m.arena, ranges);
-  march.push(cmd, march_push);
-  if (tiles)
-    vkCmdDispatchIndirect(cmd, m.tile_counter.handle(), 0);
-  else if (rect.x1 > rect.x0)
-    vkCmdDispatch(cmd, (rect.x1 - rect.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                  (rect.y1 - rect.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
-  m.timer.mark(cmd, 2);
-  barrier_compute_to_compute(cmd);
-  m.args.bind(cmd, m.arena, ranges);
-  m.args.push(cmd, push);
-  vkCmdDispatch(cmd, 1, 1, 1);
-  barrier_compute_to_indirect(cmd);
-  const bool linear = reuse ? m.cache_linear : !prims.empty();  // bindings 6-8 complete after this frame
-  const auto& shade = linear ? m.shade_lin : m.shade;
-  shade.bind(cmd, m.arena, ranges);
-  shade.push(cmd, push);
-  vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
+  m.record_march_and_shade(cmd, f, tiles, style.skip_empty, ranges);
   m.timer.mark(cmd, 3);
-  // The overlay over the primitives' rectangle and, reusing, the last frame's (there it
-  // draws the picture without them again, from the linear colour).
-  PixelRect od = orect;
-  if (reuse && m.cache_orect.x1 > m.cache_orect.x0) {
-    const PixelRect& c = m.cache_orect;
-    od = od.x1 > od.x0 ? PixelRect{std::min(od.x0, c.x0), std::min(od.y0, c.y0), std::max(od.x1, c.x1), std::max(od.y1, c.y1)} : c;
-  }
-  if (od.x1 > od.x0) {
-    gpu::RaycastPush overlay_push = push;
-    overlay_push.x0 = od.x0;
-    overlay_push.y0 = od.y0;
-    overlay_push.prim_count = lists.opaque << 16 | std::uint32_t(lists.prims.size());
-    barrier_compute_to_compute(cmd);
-    m.overlay.bind(cmd, m.arena, ranges);
-    m.overlay.push(cmd, overlay_push);
-    vkCmdDispatch(cmd, (od.x1 - od.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                  (od.y1 - od.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
-  }
+  m.record_overlay(cmd, f, lists.opaque, lists.prims.size(), ranges);
   m.timer.mark(cmd, 1);
-  // Where device-local memory is host-visible (lavapipe), image and depth are read in place.
-  // Kept on the device: the picture for later transfers (a window's copy), the depth for the host.
-  const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
-  if (in_place) {
-    barrier_compute_to_host(cmd);
-    if (m.keep_on_device) barrier_compute_to_transfer(cmd);
-  } else {
-    barrier_compute_to_transfer(cmd);
-    if (!m.keep_on_device) record_copy(cmd, m.image, m.image_down, pixels * 4);
-    record_copy(cmd, m.depth, m.depth_down, pixels * 4);
-    barrier_transfer_to_host(cmd);
-  }
+  const bool in_place = m.record_readback(cmd, pixels);
 
   RaycastImage img;
   img.width = width;
   img.height = height;
-  img.reused = reuse;
+  img.reused = f.reuse;
   img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
-  m.cache_valid = true;
-  m.cache_linear = linear;
-  m.cache_key = key;
-  m.cache_flags = push.flags;
-  m.cache_orect = orect;
-  m.last_tiles = (push.flags & ISOTOUCH_RAYCAST_TILES) != 0u;
-  m.last_width = width;
-  m.last_height = height;
-  m.dirty_lo = {1, 1, 1};
-  m.dirty_hi = {0, 0, 0};
+  m.remember_frame(f);
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);
   img.tiles_ms = m.timer.elapsed_ms(0, 4);

@@ -158,15 +158,37 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
                                Vec3& p, const Vec3* along) const {
   // Along the outward normal at x, no farther than twice the first-order depth
   // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
-  // 8 voxels; 16 bisection steps.
+  // 8 voxels; the crossing to reach / 2^16.
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
   const Vec3 n0 = along ? *along : outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
-  if (!(excess(sample_value(field, x + n0 * reach)) <= 0.0)) return false;
-  double lo = 0.0, hi = reach;
-  bisect(lo, hi, 16, [&](double t) { return excess(sample_value(field, x + n0 * t)) > 0.0; });
+  const double e_reach = excess(sample_value(field, x + n0 * reach));
+  if (!(e_reach <= 0.0)) return false;
+  // The crossing in [0, reach] (x inside, the far end outside) by Illinois regula falsi: to
+  // the width 16 bisection steps leave (reach / 2^16), or until the outside end is that
+  // close to the surface to first order; 3-6 reads where bisection took 24 (this search is
+  // most of a robust plane update's cost). p is the outside end of the bracket.
+  const double width = reach * 0x1p-16;
+  double lo = 0.0, hi = reach, e_lo = e_x, e_hi = e_reach;
+  int side = 0;  // which end the last read replaced: -1 the inside one, 1 the outside one
+  for (int k = 0; k < 24 && hi - lo > width && !(-e_hi <= width * grad_norm); ++k) {
+    double t = lo + (hi - lo) * (e_lo / (e_lo - e_hi));
+    if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
+    const double e = excess(sample_value(field, x + n0 * t));
+    if (e > 0.0) {
+      lo = t;
+      e_lo = e;
+      if (side == -1) e_hi *= 0.5;  // Illinois: the end kept twice counts half
+      side = -1;
+    } else {
+      hi = t;
+      e_hi = e;
+      if (side == 1) e_lo *= 0.5;
+      side = 1;
+    }
+  }
   p = x + n0 * hi;
   return true;
 }

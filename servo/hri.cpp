@@ -699,15 +699,119 @@ void HriRenderer::tool_rebuild_newton(const FieldView& field, const Vec3& hip) {
   }
 }
 
+namespace {
+/// The point of one trilinear cell's surface nearest X (surface_scan): `e` the excess at the
+/// cell's corners (corner c = i + 2 j + 4 k), X and the result relative to the lower corner
+/// [m], `sp` the cell's size [m]. The nearest edge crossing (an exact surface point: the
+/// field is linear along an edge), then projections of X onto the patch linearised at the
+/// current point (y <- X - g (e + g . (X - y)) / |g|^2, clamped to the cell, at most 10
+/// rounds) from the cell point nearest X and from that crossing; a projection that lands
+/// on the patch (|e| < tol |g|) and is nearer replaces the crossing.
+struct CellPoint {
+  Vec3 best;                                              ///< the nearest point found
+  double best_d2 = std::numeric_limits<double>::infinity();  ///< its squared distance (inf: none)
+  bool converged = false;                                 ///< a projection landed on the patch
+  Vec3 gradient;  ///< the excess gradient [1/m] at the best point (clamped to the cell)
+};
+CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec3& sp, double tol) {
+  const Vec3 X{xa[0], xa[1], xa[2]};
+  // Trilinear excess and its gradient [1/m] at u in [0,1]^3 (corner c = i + 2 j + 4 k).
+  auto eval = [&](const Vec3& u, Vec3& g) {
+    const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
+    const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
+    const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
+    const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
+    g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z +
+           (e[7] - e[6]) * u.y * u.z) / sp.x;
+    g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
+    g.z = (e1 - e0) / sp.z;
+    return e0 * z0 + e1 * u.z;
+  };
+  auto clamp_u = [&](const Vec3& y) {
+    return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0),
+                std::clamp(y.z / sp.z, 0.0, 1.0)};
+  };
+  // The nearest edge crossing.
+  Vec3 best;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const int step = 1 << a;
+    for (int c = 0; c < 8; ++c) {
+      if (c & step) continue;
+      const double ea = e[c], eb = e[c + step];
+      if ((ea > 0.0) == (eb > 0.0)) continue;
+      double ya[3] = {double(c & 1) * sp.x, double((c >> 1) & 1) * sp.y, double(c >> 2) * sp.z};
+      ya[a] = sp[a] * (ea / (ea - eb));
+      const Vec3 y{ya[0], ya[1], ya[2]};
+      const Vec3 d = X - y;
+      if (dot(d, d) < best_d2) {
+        best_d2 = dot(d, d);
+        best = y;
+      }
+    }
+  }
+  // Projections onto the linearised patch from the cell point nearest x; a component
+  // held at a face of the cell (the target beyond it) stays there and the others
+  // solve the linearised problem on that face.
+  // Two starts: the cell point nearest x, and the nearest edge crossing (a cell may
+  // hold two sheets of a saddle).
+  bool converged = false;
+  Vec3 g;
+  const Vec3 starts[2] = {clamp_u(X), std::isfinite(best_d2) ? clamp_u(best) : clamp_u(X)};
+  for (int start = 0; start < (std::isfinite(best_d2) ? 2 : 1); ++start) {
+    Vec3 u = starts[start];
+    for (int it = 0; it < 10; ++it) {
+      const double ya[3] = {u.x * sp.x, u.y * sp.y, u.z * sp.z};
+      const double ev = eval(u, g);
+      double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
+      double g2 = dot(g, g);
+      if (!(g2 > 0)) break;
+      const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
+      for (int a = 0; a < 3; ++a) {
+        const double t = xa[a] - ga[a] * lx / g2;
+        const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
+        if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
+          ga[a] = 0;
+          xa2[a] = ya[a];
+        }
+      }
+      g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
+      if (!(g2 > 0)) break;
+      const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
+      const Vec3 next = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
+      // A fixed point: every further round would compute the same u (the rounds are a
+      // function of u alone), so stopping here gives the same point in fewer rounds.
+      if (next.x == u.x && next.y == u.y && next.z == u.z) break;
+      u = next;
+    }
+    {
+      const Vec3 y{u.x * sp.x, u.y * sp.y, u.z * sp.z};
+      const double ev = eval(u, g);
+      const double gn = norm(g);
+      const Vec3 d = X - y;
+      const bool on = gn > 0 && std::abs(ev) < tol * gn;
+      converged = converged || on;
+      if (on && dot(d, d) < best_d2) {
+        best_d2 = dot(d, d);
+        best = y;
+      }
+    }
+  }
+  CellPoint out;
+  out.best = best;
+  out.best_d2 = best_d2;
+  out.converged = converged;
+  if (std::isfinite(best_d2)) eval(clamp_u(best), out.gradient);
+  return out;
+}
+
+}  // namespace
+
 bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double reach) {
   // Every cell whose box lies within `reach` of x: the trilinear field on a cell lies
   // between its corners' extremes, so the cell holds the surface exactly when its corners
   // straddle tau (a NaN corner: no surface, as everywhere in the servo). In such a cell
-  // the point nearest x is sought by projecting x onto the patch linearised at the current
-  // point (y <- x - g (e + g . (x - y)) / |g|^2, clamped to the cell; 6 rounds, then 2
-  // Newton steps onto the patch); where that does not land on the patch, or an edge
-  // crossing (an exact surface point: the field is linear along an edge) is nearer, the
-  // nearest edge crossing. The kMaxScanPoints nearest points are kept.
+  // its point nearest x (nearest_in_cell). The kMaxScanPoints nearest points are kept.
   const Grid& grid = field.grid();
   const Vec3& sp = grid.spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
@@ -728,7 +832,6 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
   scan_count_ = 0;
   scan_clear_m_ = reach;
   const double tol = 1e-3 * voxel;
-  const Isosurface iso{params_.tau, params_.inside};
   const bool x_outside = !(excess(field.value(x)) > 0.0);
   auto keep = [&](const Vec3& q, const Vec3& n_out, double d) {
     if (scan_count_ == kMaxScanPoints) {
@@ -753,7 +856,6 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
           const double out = std::max({0.0, -xa[a], xa[a] - sp[a]});
           box2 += out * out;
         }
-        const Vec3 X{xa[0], xa[1], xa[2]};
         if (box2 > reach * reach) continue;
         double e[8];
         bool in = false, outside = false, nan = false;
@@ -764,103 +866,21 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
           (v > 0.0f ? in : outside) = true;
         }
         if (nan || !in || !outside) continue;
-        // Trilinear excess and its gradient [1/m] at u in [0,1]^3 (corner c = i + 2 j + 4 k).
-        auto eval = [&](const Vec3& u, Vec3& g) {
-          const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
-          const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
-          const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
-          const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
-          g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z +
-                 (e[7] - e[6]) * u.y * u.z) / sp.x;
-          g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
-          g.z = (e1 - e0) / sp.z;
-          return e0 * z0 + e1 * u.z;
-        };
-        auto clamp_u = [&](const Vec3& y) {
-          return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0),
-                      std::clamp(y.z / sp.z, 0.0, 1.0)};
-        };
-        // The nearest edge crossing.
-        Vec3 best;
-        double best_d2 = std::numeric_limits<double>::infinity();
-        for (int a = 0; a < 3; ++a) {
-          const int step = 1 << a;
-          for (int c = 0; c < 8; ++c) {
-            if (c & step) continue;
-            const double ea = e[c], eb = e[c + step];
-            if ((ea > 0.0) == (eb > 0.0)) continue;
-            double ya[3] = {double(c & 1) * sp.x, double((c >> 1) & 1) * sp.y, double(c >> 2) * sp.z};
-            ya[a] = sp[a] * (ea / (ea - eb));
-            const Vec3 y{ya[0], ya[1], ya[2]};
-            const Vec3 d = X - y;
-            if (dot(d, d) < best_d2) {
-              best_d2 = dot(d, d);
-              best = y;
-            }
-          }
-        }
-        // Projections onto the linearised patch from the cell point nearest x; a component
-        // held at a face of the cell (the target beyond it) stays there and the others
-        // solve the linearised problem on that face.
-        // Two starts: the cell point nearest x, and the nearest edge crossing (a cell may
-        // hold two sheets of a saddle).
-        bool converged = false;
-        Vec3 g;
-        const Vec3 starts[2] = {clamp_u(X), std::isfinite(best_d2) ? clamp_u(best) : clamp_u(X)};
-        for (int start = 0; start < (std::isfinite(best_d2) ? 2 : 1); ++start) {
-        Vec3 u = starts[start];
-        for (int it = 0; it < 10; ++it) {
-          const double ya[3] = {u.x * sp.x, u.y * sp.y, u.z * sp.z};
-          const double ev = eval(u, g);
-          double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
-          double g2 = dot(g, g);
-          if (!(g2 > 0)) break;
-          const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
-          for (int a = 0; a < 3; ++a) {
-            const double t = xa[a] - ga[a] * lx / g2;
-            const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
-            if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
-              ga[a] = 0;
-              xa2[a] = ya[a];
-            }
-          }
-          g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
-          if (!(g2 > 0)) break;
-          const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
-          const Vec3 next = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
-          // A fixed point: every further round would compute the same u (the rounds are a
-          // function of u alone), so stopping here gives the same point in fewer rounds.
-          if (next.x == u.x && next.y == u.y && next.z == u.z) break;
-          u = next;
-        }
-        {
-          const Vec3 y{u.x * sp.x, u.y * sp.y, u.z * sp.z};
-          const double ev = eval(u, g);
-          const double gn = norm(g);
-          const Vec3 d = X - y;
-          const bool on = gn > 0 && std::abs(ev) < tol * gn;
-          converged = converged || on;
-          if (on && dot(d, d) < best_d2) {
-            best_d2 = dot(d, d);
-            best = y;
-          }
-        }
-        }
-        if (!std::isfinite(best_d2)) continue;
-        const double dist = std::sqrt(best_d2);
-        Vec3 gq;
-        eval(clamp_u(best), gq);
+        const CellPoint cp = nearest_in_cell(e, xa, sp, tol);
+        if (!std::isfinite(cp.best_d2)) continue;
+        const Vec3& best = cp.best;
+        const double dist = std::sqrt(cp.best_d2);
+        const Vec3& gq = cp.gradient;
         const Vec3 q = grid.to_world(
             {double(lo[0] + ci) + best.x / sp.x, double(lo[1] + cj) + best.y / sp.y, double(lo[2] + ck) + best.z / sp.z});
         // The plane's normal: toward x from an x outside (the nearest point's normal, and
         // defined at creases); the outward gradient where x is inside or on the surface.
         const Vec3 n_grad = normalized_or(gq * -1.0, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
         const Vec3 n_out = x_outside && dist > tol ? (x - q) / dist : n_grad;
-        (void)iso;
         keep(q, n_out, dist);
         // The free-motion clearance: the point found where the projections converged, else
         // the cell's box distance (a proven lower bound).
-        scan_clear_m_ = std::min(scan_clear_m_, converged ? dist : std::sqrt(box2));
+        scan_clear_m_ = std::min(scan_clear_m_, cp.converged ? dist : std::sqrt(box2));
       }
   // Nearest first (insertion sort: at most kMaxScanPoints).
   for (int a = 1; a < scan_count_; ++a)

@@ -1172,6 +1172,54 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   return out;  // in place: a copy of the tick just written stalls on store forwarding
 }
 
+[[gnu::always_inline]] inline void HriRenderer::adopt_plane(const VirtualPlane& pl, const Vec3& hip, HriTick& out) {
+  plane_ = pl;
+  plane_grad_norm_ = last_grad_norm_;
+  anchor_ = hip + pl.n * dot(pl.n, pl.p - hip);  // eq. 2 on the new plane
+  c_ = 0;
+  out.plane_update = true;
+}
+
+[[gnu::always_inline]] inline void HriRenderer::hold_hip_inside(const FieldView& field, const Vec3& hip, double e_hip,
+                                                                const VirtualPlane& held, double held_grad_norm,
+                                                                double voxel, HriTick& out) {
+  auto behind = [&](const VirtualPlane& pl) { return pl.valid && dot(pl.n, hip - pl.p) < 0.0; };
+  Vec3 p;
+  const double gn = norm(sample_trilinear(field, hip).gradient);
+  const Vec3 n_prev = held.valid ? held.n : Vec3{0.0, 0.0, 1.0};
+  if (surface_from(field, hip, e_hip, gn, p)) adopt_plane(plane_at(field, p, hip), hip, out);
+  if (!behind(plane_)) {
+    VirtualPlane pl;
+    pl.n = outward_normal(field, hip, n_prev);
+    if (!(dot(pl.n, n_prev) > 0.0)) pl.n = n_prev;  // never toward a far side
+    pl.p = hip + pl.n * (gn > 0 ? std::clamp(e_hip / gn, 1e-3 * voxel, 4.0 * voxel) : 0.25 * voxel);
+    pl.valid = finite(pl.p) && finite(pl.n);
+    if (behind(pl)) {
+      last_grad_norm_ = gn;
+      adopt_plane(pl, hip, out);
+    }
+  }
+  if (!behind(plane_) && behind(held)) {
+    adopt_plane(held, hip, out);
+    plane_grad_norm_ = held_grad_norm;
+  }
+}
+
+[[gnu::always_inline]] inline bool HriRenderer::reached_through_material(const FieldView& field, const Vec3& hip,
+                                                                         const VirtualPlane& held, double held_grad_norm,
+                                                                         double voxel) const {
+  const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);
+  const double gn = plane_grad_norm_ > 0 ? plane_grad_norm_ : held_grad_norm;
+  // A plane facing away from the held one is reached through any material at all.
+  const double depth = dot(plane_.n, held.n) < 0.0 ? 0.0 : 0.05 * voxel;
+  bool through = false;
+  for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
+    const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
+    through = e > depth * gn;
+  }
+  return through;
+}
+
 // Out of line: the common ticks above (the short way) then compile as a small function.
 [[gnu::noinline]] void HriRenderer::tick_general(const FieldView& field, const Vec3& hip, double voxel,
                                                  double elapsed, bool edited, bool covered_free_vhip,
@@ -1183,13 +1231,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     }
     return excess(f_hip);
   };
-  auto set_plane = [&](const VirtualPlane& pl) {
-    plane_ = pl;
-    plane_grad_norm_ = last_grad_norm_;
-    anchor_ = hip + pl.n * dot(pl.n, pl.p - hip);  // eq. 2 on the new plane
-    c_ = 0;
-    out.plane_update = true;
-  };
+  auto set_plane = [&](const VirtualPlane& pl) { adopt_plane(pl, hip, out); };
   // The VHIP's value: in free motion the VHIP is the HIP of the tick before, whose
   // value that tick read (cached), so free motion costs one sample per tick.
   // The VHIP does not move before the force is computed: one read serves every rule.
@@ -1268,28 +1310,8 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   // plane) at the first-order depth e / |grad| (at most 4 voxels); failing that, on the
   // plane of the tick before if the HIP is behind it.
   auto behind = [&](const VirtualPlane& pl) { return pl.valid && dot(pl.n, hip - pl.p) < 0.0; };
-  if (holding && have_f_hip && excess(f_hip) > 0.0 && !behind(plane_)) {
-    Vec3 p;
-    const double e_hip = excess(f_hip);
-    const double gn = norm(sample_trilinear(field, hip).gradient);
-    const Vec3 n_prev = held.valid ? held.n : Vec3{0.0, 0.0, 1.0};
-    if (surface_from(field, hip, e_hip, gn, p)) set_plane(plane_at(field, p, hip));
-    if (!behind(plane_)) {
-      VirtualPlane pl;
-      pl.n = outward_normal(field, hip, n_prev);
-      if (!(dot(pl.n, n_prev) > 0.0)) pl.n = n_prev;  // never toward a far side
-      pl.p = hip + pl.n * (gn > 0 ? std::clamp(e_hip / gn, 1e-3 * voxel, 4.0 * voxel) : 0.25 * voxel);
-      pl.valid = finite(pl.p) && finite(pl.n);
-      if (behind(pl)) {
-        last_grad_norm_ = gn;
-        set_plane(pl);
-      }
-    }
-    if (!behind(plane_) && behind(held)) {
-      set_plane(held);
-      plane_grad_norm_ = held_grad_norm;
-    }
-  }
+  if (holding && have_f_hip && excess(f_hip) > 0.0 && !behind(plane_))
+    hold_hip_inside(field, hip, excess(f_hip), held, held_grad_norm, voxel, out);
   // God-object: the proxy moves on the surface, never through the object. A new plane
   // whose contact point (eq. 2) is reached from the VHIP of the tick before only through
   // material (a point of the segment more than 0.05 voxel deep, first order, at 7 interior
@@ -1301,16 +1323,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   if (holding && out.plane_update && !edited && plane_.valid && behind(held) &&
       (dot(plane_.n, held.n) < 0.9999 || std::abs(dot(held.n, plane_.p - held.p)) > 1e-3 * voxel) &&
       !(excess(vhip_value()) > 0.0)) {
-    const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);
-    const double gn = plane_grad_norm_ > 0 ? plane_grad_norm_ : held_grad_norm;
-    // A plane facing away from the held one is reached through any material at all.
-    const double depth = dot(plane_.n, held.n) < 0.0 ? 0.0 : 0.05 * voxel;
-    bool through = false;
-    for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
-      const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
-      through = e > depth * gn;
-    }
-    if (through) {
+    if (reached_through_material(field, hip, held, held_grad_norm, voxel)) {
       set_plane(held);
       plane_grad_norm_ = held_grad_norm;
     }

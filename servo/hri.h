@@ -363,6 +363,19 @@ class HriRenderer final : public Renderer {
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_robust after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
+  /// tick_general's plane change: the plane, its |grad| (last_grad_norm_), the anchor
+  /// (eq. 2 from the HIP), the update counter reset, out.plane_update.
+  void adopt_plane(const VirtualPlane& pl, const Vec3& hip, HriTick& out);
+  /// In contact with the HIP inside but in front of the plane: the surface found from the
+  /// HIP; else a plane along the outward normal at the HIP at the first-order depth; else
+  /// the held plane if the HIP is behind it (see tick_general).
+  void hold_hip_inside(const FieldView& field, const Vec3& hip, double e_hip, const VirtualPlane& held,
+                       double held_grad_norm, double voxel, HriTick& out);
+  /// The god-object test: the new plane's contact point (eq. 2) is reached from the VHIP only
+  /// through material (a point of the segment deeper than 0.05 voxel to first order, at 7
+  /// interior points; any material for a plane facing away from the held one).
+  bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
+                                double held_grad_norm, double voxel) const;
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
                     bool covered_free_vhip, bool have_f_hip, double f_hip, HriTick& out);
   /// The common robust ticks (contact with no update due, free motion outside), the same

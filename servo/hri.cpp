@@ -420,6 +420,9 @@ void HriRenderer::restart_at(const Vec3& hip) {
 
 bool HriRenderer::note_version(std::uint64_t version) {
   const bool changed = version_known_ && version != field_version_;
+  // SampleField::changed covers the step from the version just before only: a version this
+  // renderer never read (two publications within one tick) hid its box.
+  version_skipped_ = changed && version != field_version_ + 1;
   field_version_ = version;
   version_known_ = true;
   return changed;
@@ -427,7 +430,7 @@ bool HriRenderer::note_version(std::uint64_t version) {
 
 bool HriRenderer::edit_reaches(const FieldView& field, const Vec3& hip) const {
   const SampleField::ChangedBox& box = field.changed();
-  if (!box.known) return true;
+  if (!box.known || version_skipped_) return true;
   if (box.empty()) return false;
   // What this renderer read from the old snapshot lies within `reach` of the HIP, the VHIP
   // or (free motion after a scan) the scan's centre: the values at the VHIP and the held

@@ -444,6 +444,7 @@ class HriRenderer final : public Renderer {
   // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version
+  bool version_skipped_ = false;     ///< the last new version was not field_version_ + 1 (edit_reaches: reached)
   bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)
   bool edit_slewing_ = false;        ///< |F| is still slewing toward the target after an edit
   Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]

@@ -573,3 +573,31 @@ TEST(HriEdit, AnEditFarFromTheProbeLeavesTheTraceAlone) {
   EXPECT_TRUE(t_near[edit].plane_update) << "an edit over the probe was not seen";
   EXPECT_TRUE(t_unknown[edit].plane_update) << "a snapshot without a changed box was not an edit";
 }
+
+// A snapshot's changed box covers the step from the version just before it only. When two
+// publications land between two ticks, the renderer never reads the first: the floor raised
+// 1.5 mm under the held probe (v4, box over the probe) followed by a version that changed
+// nothing near it (v5, box in a far corner). Read as v3 -> v5, that is still the raise under
+// the probe: an edit, |F| stepping by at most the slew's bound, as when every version is read.
+TEST(HriEdit, ASkippedVersionIsAnEditWhateverTheNewestBox) {
+  const SampleField a = floor_at(0.010, 3);
+  SampleField raised = floor_at(0.0115, 4);
+  raised.changed = {{12, 12, 4}, {20, 20, 16}, true};
+  SampleField after = raised;
+  after.version = 5;
+  after.changed = {{0, 0, 28}, {4, 4, 32}, true};
+  const HipAt hip = press_to(0.0075);
+  const int ticks = 400, edit = 203;
+  const FieldAt each = [&](int k) -> const SampleField& { return k < edit ? a : k == edit ? raised : after; };
+  const FieldAt skipped = switch_at(a, after, edit);
+  HriRenderer r_each(params()), r_skip(params());
+  const auto t_each = drive(r_each, ticks, each, hip);
+  const auto t_skip = drive(r_skip, ticks, skipped, hip);
+  ASSERT_TRUE(t_each[edit].contact) << "the probe must press on the floor when the edit comes";
+  const double step_each = max_step(t_each), step_skip = max_step(t_skip);
+  std::printf("floor raised 1.5 mm under the probe: largest |F| step %.3f N reading every version, %.3f N "
+              "with the raise's version skipped (bound %.3f N)\n", step_each, step_skip, kStep);
+  EXPECT_LE(step_each, kStep + 1e-9);
+  EXPECT_LE(step_skip, kStep + 1e-9);
+  EXPECT_TRUE(t_skip[edit].plane_update) << "the skipped raise was not seen as an edit";
+}

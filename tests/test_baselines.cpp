@@ -58,17 +58,23 @@ TEST(Blezek, ContactPointOnTheSurfaceAndForceAlongTheNormal) {
   BlezekRenderer r(params());
   r.tick(f, c + Vec3{0, 0, 0.016});
   long contact = 0;
-  double max_surface = 0, max_angle = 0;
+  double max_surface = 0, max_angle = 0, max_spring_error = 0;
   for (int k = 0; k < 3000; ++k) {
-    const double a = 0.5 * k / 3000.0;  // slide 7.5 mm over the sphere, 0.5 mm deep
-    const HriTick t = r.tick(f, c + Vec3{std::sin(a), 0, std::cos(a)} * 0.0145);
+    const Vec3 hip = c + Vec3{std::sin(0.5 * k / 3000.0), 0, std::cos(0.5 * k / 3000.0)} * 0.0145;
+    const HriTick t = r.tick(f, hip);  // slide 7.5 mm over the sphere, 0.5 mm deep
     if (!t.contact) continue;
     ++contact;
     max_surface = std::max(max_surface, std::abs(norm(t.vhip_m - c) - 0.015));
     const Vec3 n_true = (t.vhip_m - c) / norm(t.vhip_m - c);
-    max_angle = std::max(max_angle, std::acos(std::min(1.0, dot(t.force_n / norm(t.force_n), n_true))) * 180 / M_PI);
+    const double m = norm(t.force_n);
+    // A zero force has no direction: it counts as 180 deg (and as a spring error of K |d|).
+    max_angle = std::max(max_angle, m > 0 ? std::acos(std::clamp(dot(t.force_n / m, n_true), -1.0, 1.0)) * 180 / M_PI : 180.0);
+    // No damping: |F| = K |HIP - VHIP| (eq. 3 of the contact point the inching found).
+    max_spring_error = std::max(max_spring_error, std::abs(m - 500.0 * norm(hip - t.vhip_m)));
   }
-  std::printf("Blezek-Robb on the sphere: max surface error %.4f mm, max angle %.3f deg\n", max_surface * 1e3, max_angle);
+  std::printf("Blezek-Robb on the sphere: max surface error %.4f mm, max angle %.3f deg, max | |F| - K |d| | %.2e N\n",
+              max_surface * 1e3, max_angle, max_spring_error);
+  EXPECT_LT(max_spring_error, 1e-9);
   EXPECT_EQ(contact, 3000);
   EXPECT_LT(max_surface, 5e-5);   // 0.05 voxel
   EXPECT_LT(max_angle, 1.0);      // HIP - VHIP parallel to the normal: inching converged

@@ -166,6 +166,7 @@ void ServoThread::loop() {
                                      std::int64_t(std::clamp(cfg_.max_spin_fraction, 0.0, 1.0) * double(period)));
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
+  std::int64_t last_render = -1;  // start of the renderer's last tick; -1: none since a reset
   std::uint64_t last_version = 0;
   bool was_paused = false;
   const std::int64_t stale_ns =
@@ -191,8 +192,11 @@ void ServoThread::loop() {
       missed_.fetch_add((t - next) / period, std::memory_order_relaxed);
       next = t;
     }
-    // The measured period: 0 on the first tick (the renderer takes the nominal one).
-    const double dt_s = prev_start >= 0 ? double(t - prev_start) * 1e-9 : 0.0;
+    // The measured period: 0 on the first tick. The renderer is given the time since it last
+    // ran (a stale blip that kept its state is in its velocity's time step), 0 after a reset
+    // (the nominal period).
+    const double period_s = prev_start >= 0 ? double(t - prev_start) * 1e-9 : 0.0;
+    const double dt_s = last_render >= 0 ? double(t - last_render) * 1e-9 : 0.0;
     if (prev_start >= 0 && period_err_.size() < period_err_.capacity())
       period_err_.push_back((t - prev_start) - period);  // capacity reserved: no allocation
     prev_start = t;
@@ -212,6 +216,7 @@ void ServoThread::loop() {
       rec.k = ticks_.load(std::memory_order_relaxed);
       rec.t_ns = t;
       rec.dt_s = dt_s;
+      rec.period_s = period_s;
       rec.version = field->version;
       const DeviceReading d = device_.read();
       if (first || d.connection != connection) ramp_start = -1;  // enabled, or reconnected
@@ -233,10 +238,12 @@ void ServoThread::loop() {
         if (rec.device_status != DeviceStatus::kStale || t - not_ok_since > restart_ns) {
           ramp_start = -1;
           was_paused = true;  // the renderer is reset before the next good tick
+          last_render = -1;
         }
       } else if (paused) {
         device_.write_force_n({});
         was_paused = true;
+        last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
       } else {
         if (was_paused) renderer_.reset();
@@ -247,6 +254,7 @@ void ServoThread::loop() {
           ramps_.fetch_add(1, std::memory_order_relaxed);
         }
         rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
+        last_render = t;
         const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
         bool clamped = false;
         rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);

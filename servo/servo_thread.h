@@ -20,7 +20,9 @@ namespace isotouch::servo {
 struct TickRecord {
   long k = 0;                 ///< tick index (0 = the first tick)
   std::int64_t t_ns = 0;      ///< the tick's start, CLOCK_MONOTONIC [ns]
-  double dt_s = 0;            ///< the measured period passed to the renderer [s] (0 on the first tick)
+  double dt_s = 0;            ///< passed to the renderer: the time since its previous tick [s] (0 on its
+                              ///< first tick and after a reset: the nominal period)
+  double period_s = 0;        ///< the loop's measured period since its previous tick [s] (0 on the first)
   Vec3 hip_m;                 ///< HIP, world [m] (the device reading mapped)
   std::uint32_t buttons = 0;  ///< the device's buttons (bit i: button i down)
   HriTick out;                ///< the renderer's answer (force, VHIP, plane, contact, fault)

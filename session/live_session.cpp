@@ -182,8 +182,8 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
     seen_version_[slot].store(r.version, std::memory_order_release);
   }
   if (fd_ >= 0 && !ticks_.push(r)) dropped_ticks_.fetch_add(1, std::memory_order_relaxed);
-  if (r.dt_s > 0) {  // the period error's histogram (no allocation, no lock)
-    const double err_us = std::fabs(r.dt_s - 1.0 / cfg_.servo.rate_hz) * 1e6;
+  if (r.period_s > 0) {  // the period error's histogram (no allocation, no lock)
+    const double err_us = std::fabs(r.period_s - 1.0 / cfg_.servo.rate_hz) * 1e6;
     const std::size_t bin = std::min(kPeriodBins - 1, std::size_t(err_us / kPeriodBinUs));
     period_hist_[bin].fetch_add(1, std::memory_order_relaxed);
   }

@@ -250,11 +250,13 @@ struct TickLog final : TickObserver {
   std::array<std::int64_t, kMax> t_ns{};
   std::array<DeviceStatus, kMax> status{};
   std::array<double, kMax> force{};
+  std::array<double, kMax> dt_s{};  // what the renderer was given
   std::atomic<std::size_t> n{0};
   void on_tick(const TickRecord& r) noexcept override {
     const std::size_t i = n.load(std::memory_order_relaxed);
     if (i >= kMax) return;
     t_ns[i] = r.t_ns;
+    dt_s[i] = r.dt_s;
     age_ns[i] = r.t_ns - r.report_ns;
     status[i] = r.device_status;
     force[i] = norm(r.force_sent_n);
@@ -334,6 +336,41 @@ TEST(ServoSafety, AShortStaleBlipZeroesThoseTicksButKeepsTheContact) {
   EXPECT_EQ(c.ramps, 1);                     // only the one after enable
   EXPECT_EQ(rig.renderer.resets.load(), 0);  // the contact state was kept
   EXPECT_EQ(rig.log.force[rig.log.n.load() - 1], 1.0);  // straight back to the full force
+}
+
+// Across a stale blip that keeps the contact state the renderer was not ticked: its first
+// tick after the blip is given the time since its last one (its velocity's time step), not
+// the loop's last period.
+TEST(ServoSafety, AfterAStaleBlipTheRendererIsGivenTheTimeSinceItLastRan) {
+  SafetyRig rig(0.0, 0.2);  // blips up to 200 ms keep the contact state
+  rig.servo->start();
+  rig.run_ticks(40);
+  rig.dev.fresh = false;
+  rig.run_ms(12);
+  rig.dev.fresh = true;
+  rig.run_ticks(20);
+  rig.servo->stop();
+  const std::size_t n = rig.log.n.load();
+  std::size_t last_ok = 0, checked = 0;
+  bool in_blip = false;
+  for (std::size_t i = 1; i < n; ++i) {
+    if (rig.log.status[i] != DeviceStatus::kOk) {
+      in_blip = true;
+      continue;
+    }
+    if (in_blip) {  // the first renderer tick after the blip
+      const double since_last = double(rig.log.t_ns[i] - rig.log.t_ns[last_ok]) * 1e-9;
+      std::printf("after a blip of %zu ticks: dt given %.4f ms, since the renderer's last tick %.4f ms\n",
+                  i - last_ok - 1, rig.log.dt_s[i] * 1e3, since_last * 1e3);
+      EXPECT_EQ(rig.log.dt_s[i], since_last) << "tick " << i;
+      EXPECT_GT(i - last_ok, 2u);
+      ++checked;
+      in_blip = false;
+    }
+    last_ok = i;
+  }
+  EXPECT_GE(checked, 1u);
+  EXPECT_EQ(rig.renderer.resets.load(), 0);  // the contact state was kept
 }
 
 TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {

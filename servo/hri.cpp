@@ -359,7 +359,18 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   // Recovery time: ramp the magnitude, keep the new direction.
   const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
   if (ramps && robust) {
-    force = ramp_force(force, out.plane_update, plane_.n);
+    // What the plane of the tick before gives at this HIP (eqs. 2-3): a ramp starts for the
+    // step the plane change causes, never for the hand's own motion since the tick before
+    // (at n = 1 that restarted the ramp every tick and the force lagged the hand: an active
+    // wall). A new contact compares with the target of the tick before (none: zero).
+    Vec3 before = prev_target_f_;
+    if (out.plane_update && ramp_ref_.valid) {
+      const Vec3& n = ramp_ref_.n;
+      const Vec3 d_ref = n * (-dot(n, ramp_ref_.p - hip) * s);  // HIP - its eq. 2 point, device [m]
+      before = d_ref * -params_.stiffness_n_per_m - n * (dot(v, n) * params_.damping_n_s_per_m);
+      if (dot(before, n) < 0.0) before = {};
+    }
+    force = ramp_force(force, out.plane_update, plane_.n, before);
   } else if (ramps) {
     const double mag = norm(force);
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
@@ -379,7 +390,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return force;
 }
 
-Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir) {
+Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before) {
   // Every step of the spring-damper force that a plane creation or update causes (or the
   // first contact tick after a fault) is spread over recovery_time_s: |F| goes linearly
   // from the magnitude sent the tick before to the new target (the offset fades out,
@@ -391,7 +402,7 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
   // this tick's period, clamped), so neither lost ticks nor one jittery period change its
   // length.
   if (params_.recovery_time_s > 0 && (plane_update || after_fault_) && !edit_tick_ &&
-      norm(force - prev_target_f_) > 0.01 * params_.force_limit_n) {
+      norm(force - (after_fault_ ? prev_target_f_ : before)) > 0.01 * params_.force_limit_n) {
     ramp_left_s_ = params_.recovery_time_s;
     recovery_from_n_ = prev_force_mag_ - norm(force);  // offset to fade out [N]
     ramp_from_dir_ = prev_force_mag_ > 0 ? prev_force_ / prev_force_mag_ : Vec3{};
@@ -1021,7 +1032,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   const Vec3 u = push / depth;
   Vec3 force = u * (params_.stiffness_n_per_m * depth - params_.damping_n_s_per_m * dot(v_filt_, u));
   if (dot(force, u) < 0.0) force = {};  // a wall pushes, never pulls
-  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u);
+  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u, prev_target_f_);
   out.contact = true;
   out.penetration_m = norm(hip - x);
   return force;
@@ -1336,6 +1347,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
   Vec3 force;
   if (plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0) {
+    ramp_ref_ = holding ? held : VirtualPlane{};
     force = contact_force(field, hip, v_filt_, elapsed, out);
   } else {
     vhip_ = hip;

@@ -334,7 +334,9 @@ class HriRenderer final : public Renderer {
   bool surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm, Vec3& p,
                     const Vec3* along = nullptr) const;
   /// Robust recovery ramp of the force vector (see "Recovery time"); returns the force to send.
-  Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir);
+  /// `before`: the force the ramp's trigger compares with (the target the plane of the tick
+  /// before gives at this HIP; after a fault the target of the tick before).
+  Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before);
   /// Edit ticks: the surface point p from an embedded x (deeper than surface_from reaches)
   /// marched along the outward normal at x (half-voxel steps, at most march_budget samples,
   /// 20 bisection steps); false if none.
@@ -444,6 +446,7 @@ class HriRenderer final : public Renderer {
   // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version
+  VirtualPlane ramp_ref_;  ///< the plane before this tick's update (tick_general), for the ramp's trigger
   bool version_skipped_ = false;     ///< the last new version was not field_version_ + 1 (edit_reaches: reached)
   bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)
   bool edit_slewing_ = false;        ///< |F| is still slewing toward the target after an edit

@@ -611,3 +611,39 @@ TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
   EXPECT_NEAR(plain, 0.5, 1e-9);
   EXPECT_LE(faded, 0.5 / 20 * (1 + 1e-9));
 }
+
+// The recovery ramp must not make a wall active. A hand pressing a flat wall (no plane ever
+// changes) and moving in and out sinusoidally, 1.5 mm amplitude around 2 mm deep, at 5 and
+// 10 Hz, plane updates every tick (n = 1) and every 10: the work the device's force does on
+// the hand over whole cycles, sum F_k . (x_k+1 - x_k), as an equivalent damping
+// b_eq = -W / sum(v^2 dt) [N s/m]. A passive wall dissipates (b_eq > 0; the sampled spring
+// alone gives B - K T / 2 = 0.6 here). A ramp restarted by the hand's own motion at each
+// update lags the spring force behind the hand, and the lag feeds energy back.
+TEST(HriRecovery, RampedWallStaysPassiveUnderSinusoidalPressing) {
+  const SampleField f = wall_field(kUp, {0.016, 0.016, 0.016});
+  for (const int n : {1, 10})
+    for (const double hz : {5.0, 10.0}) {
+      HriParams p = params(n);
+      p.stiffness_n_per_m = 800;
+      p.damping_n_s_per_m = 1.0;
+      p.force_limit_n = 3.3;
+      p.recovery_time_s = 0.02;
+      HriRenderer r(p);
+      auto z = [&](int k) { return 0.016 - 0.002 - 0.0015 * std::sin(2 * M_PI * hz * k / 1000.0); };
+      for (int k = 0; k < 40; ++k) r.tick(f, {0.016, 0.016, 0.0175 - 3.5e-5 * k});  // come in from above
+      const int start = 40 + int(std::lround(1000.0 / hz)), cycles = 4;
+      double work = 0, v2dt = 0;
+      for (int k = 40; k < start + cycles * int(std::lround(1000.0 / hz)); ++k) {
+        const Vec3 hip{0.016, 0.016, z(k)};
+        const Vec3 next{0.016, 0.016, z(k + 1)};
+        const HriTick t = r.tick(f, hip);
+        if (k >= start) {
+          work += dot(t.force_n, next - hip);
+          v2dt += dot(next - hip, next - hip) * 1000.0;  // (dx / T)^2 T
+        }
+      }
+      const double b_eq = -work / v2dt;
+      std::printf("wall pressed at %.0f Hz, n = %d, recovery 20 ms: b_eq %.3f N s/m\n", hz, n, b_eq);
+      EXPECT_GT(b_eq, 0.3) << hz << " Hz, n = " << n;
+    }
+}

@@ -446,7 +446,8 @@ class FieldView {
     const std::uint32_t e = brick_entry(x, y, z);
     if (e & BrickStore::kUniform) return {tiles_ + (e & ~BrickStore::kUniform), 0, 0, 0};
     const std::size_t i = std::size_t(e) + local_offset(x, y, z);
-    if (mode_ != Mode::kBrickedCompact) return {data_ + i, step_[0], step_[1], step_[2]};
+    if (mode_ == Mode::kBricked) return {data_ + i, 1, kBrickStored, kBrickStored * kBrickStored};
+    if (mode_ == Mode::kBrickedThin) return {data_ + i, step_[0], step_[1], step_[2]};
     return decode_cell(BrickStore::slot_of(e), i, scratch);
   }
   /// Compact formats: the 8 corners of the cell at pool index `i` of slot `slot`, decoded.
@@ -474,20 +475,21 @@ class FieldView {
     const BrickStore::Sealed& s = b.sealed();
     if (s.table == nullptr || s.dims[0] != grid_.dims[0] || s.dims[1] != grid_.dims[1] || s.dims[2] != grid_.dims[2])
       return;
-    const bool thin = grid_.dims[0] == 1 || grid_.dims[1] == 1 || grid_.dims[2] == 1;
-    mode_ = s.pool == nullptr ? Mode::kBrickedCompact : (thin ? Mode::kBrickedThin : Mode::kBricked);
     data_ = s.pool;
-    compact_ = s.compact;
-    store_ = &b;
     table_ = s.table;
     tiles_ = s.tiles;
     nbx_ = s.nbx;
     nbxy_ = s.nbxy;
-    const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
-    for (int a = 0; a < 3; ++a) {
-      last_[a] = double(grid_.dims[a] - 1);
-      step_[a] = grid_.dims[a] > 1 ? st[a] : 0;
+    for (int a = 0; a < 3; ++a) last_[a] = double(grid_.dims[a] - 1);
+    if (s.pool != nullptr && !s.thin) {
+      mode_ = Mode::kBricked;  // the cell strides are constants: step_ is not read
+      return;
     }
+    mode_ = s.pool == nullptr ? Mode::kBrickedCompact : Mode::kBrickedThin;
+    compact_ = s.compact;
+    store_ = &b;
+    const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
+    for (int a = 0; a < 3; ++a) step_[a] = grid_.dims[a] > 1 ? st[a] : 0;
   }
 
   /// kBricked: fp32 bricks, every axis longer than 1 voxel (cell strides 1, 9, 81, known
@@ -500,7 +502,7 @@ class FieldView {
   Mode mode_ = Mode::kEmpty;
   const Sample* data_ = nullptr;       ///< dense: the samples; kBricked, kBrickedThin: the fp32 pool
   std::size_t stride_[3] = {0, 0, 0};  ///< dense: x (always 1), y, z element strides
-  std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; bricked: 1, 9, 81), 0 on a 1-voxel axis
+  std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; kBrickedThin, kBrickedCompact: 1, 9, 81), 0 on a 1-voxel axis
   double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
   std::uint64_t version_ = 0;          ///< SampleField::version of the viewed snapshot

@@ -87,7 +87,7 @@ class FieldView {
   /// What changed since the previous version (SampleField::changed; unknown for a default view).
   const SampleField::ChangedBox& changed() const { return changed_; }
   /// Reads a brick table (bricked field) rather than a dense array.
-  bool bricked() const { return mode_ == Mode::kBricked || mode_ == Mode::kBrickedCompact; }
+  bool bricked() const { return mode_ >= Mode::kBricked; }
 
   /// Trilinear value at `world_m` (grid-world [m]); NaN if not finite or empty.
   /// The servo's hot path (HRI reads values only).
@@ -170,6 +170,7 @@ class FieldView {
                  z0 = idx.z - hi.z, z1 = idx.z + hi.z;
     Vec3 g;
     if (mode_ == Mode::kDense && central_dense(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
+    if (mode_ == Mode::kBricked && central_bricked(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
     return {(value_at_index({x1, idx.y, idx.z}) - value_at_index({x0, idx.y, idx.z})) / (2 * h_m.x),
             (value_at_index({idx.x, y1, idx.z}) - value_at_index({idx.x, y0, idx.z})) / (2 * h_m.y),
             (value_at_index({idx.x, idx.y, z1}) - value_at_index({idx.x, idx.y, z0})) / (2 * h_m.z)};
@@ -222,7 +223,7 @@ class FieldView {
     const std::uint32_t e = brick_entry(x, y, z);
     if (e & BrickStore::kUniform) return tiles_[e & ~BrickStore::kUniform];
     const std::size_t i = std::size_t(e) + local_offset(x, y, z);
-    return mode_ == Mode::kBricked ? data_[i] : store_->decode_compact(compact_[i], BrickStore::slot_of(e));
+    return mode_ != Mode::kBrickedCompact ? data_[i] : store_->decode_compact(compact_[i], BrickStore::slot_of(e));
   }
 
  private:
@@ -235,17 +236,41 @@ class FieldView {
       inner(idx.x, grid_.dims[0], i0[0], f[0]);
       inner(idx.y, grid_.dims[1], i0[1], f[1]);
       inner(idx.z, grid_.dims[2], i0[2], f[2]);
+      if (mode_ == Mode::kDense)
+        return trilinear(data_ + std::size_t(i0[0]) + std::size_t(i0[1]) * stride_[1] + std::size_t(i0[2]) * stride_[2],
+                         step_[0], step_[1], step_[2], f);
+      if (mode_ == Mode::kBricked) return value_bricked(i0[0], i0[1], i0[2], f);
       Sample scratch[8];
       const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
-      const Sample* s = c.base;
-      const std::size_t sx = c.sx, sy = c.sy, sz = c.sz;
-      const double c00 = lerp(s[0].value, s[sx].value, f[0]);
-      const double c10 = lerp(s[sy].value, s[sy + sx].value, f[0]);
-      const double c01 = lerp(s[sz].value, s[sz + sx].value, f[0]);
-      const double c11 = lerp(s[sz + sy].value, s[sz + sy + sx].value, f[0]);
-      return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+      return trilinear(c.base, c.sx, c.sy, c.sz, f);
     }
     return value_border(idx);
+  }
+  /// The trilinear value of the cell whose corner (i, j, k) is s[i sx + j sy + k sz], at
+  /// fractions f: four x-lerps, two y-lerps, one z-lerp (every in-grid read, dense or bricked).
+  [[gnu::always_inline]] static double trilinear(const Sample* s, std::size_t sx, std::size_t sy, std::size_t sz,
+                                                 const double (&f)[3]) {
+    const double c00 = lerp(s[0].value, s[sx].value, f[0]);
+    const double c10 = lerp(s[sy].value, s[sy + sx].value, f[0]);
+    const double c01 = lerp(s[sz].value, s[sz + sx].value, f[0]);
+    const double c11 = lerp(s[sz + sy].value, s[sz + sy + sx].value, f[0]);
+    return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+  }
+  /// value_at_index's in-grid cell (lower corner (x, y, z), fractions f) on an fp32 bricked field
+  /// with no 1-voxel axis: the cell strides are the constants (1, 9, 81), so the corners
+  /// are fixed offsets from one pointer; a uniform brick's cell reads its tile at every
+  /// corner, which is the same seven lerps of one value (not the value itself: the lerps
+  /// turn -0 into +0 and an infinite tile into NaN, as the corner-by-corner reads do).
+  [[gnu::always_inline]] double value_bricked(int x, int y, int z, const double (&f)[3]) const {
+    const std::uint32_t e = brick_entry(x, y, z);
+    if (e & BrickStore::kUniform) {
+      const double t = tiles_[e & ~BrickStore::kUniform].value;
+      const double c = lerp(t, t, f[0]);  // c00 = c10 = c01 = c11
+      const double cy = lerp(c, c, f[1]);
+      return lerp(cy, cy, f[2]);
+    }
+    return trilinear(data_ + std::size_t(e) + local_offset(x, y, z), 1, kBrickStored,
+                     kBrickStored * kBrickStored, f);
   }
   /// The border path of value_at_index: corners outside the grid read the background.
   [[gnu::noinline]] double value_border(const Vec3& idx) const {
@@ -262,15 +287,18 @@ class FieldView {
     return lerp(lerp(c00, c10, c[1].f), lerp(c01, c11, c[1].f), c[2].f);
   }
 
-  /// central_difference on a dense field where the six points share their cells: the
-  /// points (c.x, lo.y | hi.y, c.z) and (c.x, c.y, lo.z | hi.z) read the same column pair
-  /// with the same x fraction, so their x-lerps over a 3 x 3 block of rows and layers are
-  /// computed once, and every point's value is the lerps value_at_index would take, in its
-  /// order (the same bits). False (nothing written) unless every point lies in the box of
-  /// voxel centres below its upper face (where `inner` would clamp) and the rows / layers of
-  /// each pair are consecutive (steps other than about half a voxel): the caller then reads
-  /// the six points one by one.
-  bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+  /// The cells of central_difference's six points when they share them: the points
+  /// (c.x, lo.y | hi.y, c.z) and (c.x, c.y, lo.z | hi.z) read the same column pair with the
+  /// same x fraction, so their x-lerps over a 3 x 3 block of rows and layers can be
+  /// computed once (central_reads). False unless every point lies in the box of voxel
+  /// centres below its upper face (where `inner` would clamp) and the rows / layers of each
+  /// pair are consecutive (steps other than about half a voxel): the caller then reads the
+  /// six points one by one.
+  struct CentralCells {
+    int cx, cy, cz, lx, ly, lz, hx;  ///< lower corners: centre, low point, high x point (hy = ly + 1, hz = lz + 1)
+    double fcx, fcy, fcz, flx, fly, flz, fhx, fhy, fhz;  ///< fractions of the centre, the low and the high points
+  };
+  bool central_cells(const Vec3& c, const Vec3& lo, const Vec3& hi, CentralCells& k) const {
     if (!(lo.x >= 0.0 && lo.y >= 0.0 && lo.z >= 0.0 && hi.x < last_[0] && hi.y < last_[1] && hi.z < last_[2] &&
           lo.x <= c.x && lo.y <= c.y && lo.z <= c.z && c.x <= hi.x && c.y <= hi.y && c.z <= hi.z))
       return false;
@@ -280,37 +308,83 @@ class FieldView {
     // Rows (y) and layers (z) of the y and z pairs: l, l + 1 = h, l + 2; the centre's pair
     // (c, c + 1) among them (l <= c <= h, as lo <= c <= hi).
     if (hy != ly + 1 || hz != lz + 1) return false;
-    const double fcx = c.x - cx, fcy = c.y - cy, fcz = c.z - cz, flx = lo.x - lx, fly = lo.y - ly, flz = lo.z - lz,
-                 fhx = hi.x - hx, fhy = hi.y - hy, fhz = hi.z - hz;
-    const int dj = cy - ly, dk = cz - lz;
-    const std::size_t sy = stride_[1], sz = stride_[2];
+    k = {cx, cy, cz, lx, ly, lz, hx, c.x - cx, c.y - cy, c.z - cz, lo.x - lx, lo.y - ly, lo.z - lz,
+         hi.x - hx, hi.y - hy, hi.z - hz};
+    return true;
+  }
+  /// central_difference from the shared cells `k`: voxel (x, y, z) of the block read is
+  /// at b + (x - cx) sx + (y - ly) sy + (z - lz) sz, and s0 / s1 are the corners (lx | hx,
+  /// cy, cz) of the x pair's cells. Every point's value is the lerps value_at_index would
+  /// take, in its order (the same bits).
+  [[gnu::always_inline]] static Vec3 central_reads(const Sample* b, const Sample* s0, const Sample* s1,
+                                                   std::size_t sx, std::size_t sy, std::size_t sz,
+                                                   const CentralCells& k, const Vec3& h_m) {
+    const int dj = k.cy - k.ly, dk = k.cz - k.lz;
     // x-lerps at column cx (fraction fcx), rows ly + r, layers lz + l.
-    const Sample* b = data_ + std::size_t(cx) + std::size_t(ly) * sy + std::size_t(lz) * sz;
     double xl[3][3];
     for (int r = 0; r < 3; ++r)
       for (int l = 0; l < 3; ++l) {
         const Sample* s = b + std::size_t(r) * sy + std::size_t(l) * sz;
-        xl[r][l] = lerp(s[0].value, s[1].value, fcx);
+        xl[r][l] = lerp(s[0].value, s[sx].value, k.fcx);
       }
-    const double vy0 = lerp(lerp(xl[0][dk], xl[1][dk], fly), lerp(xl[0][dk + 1], xl[1][dk + 1], fly), fcz);
-    const double vy1 = lerp(lerp(xl[1][dk], xl[2][dk], fhy), lerp(xl[1][dk + 1], xl[2][dk + 1], fhy), fcz);
-    const double mid = lerp(xl[dj][1], xl[dj + 1][1], fcy);
-    const double vz0 = lerp(lerp(xl[dj][0], xl[dj + 1][0], fcy), mid, flz);
-    const double vz1 = lerp(mid, lerp(xl[dj][2], xl[dj + 1][2], fcy), fhz);
+    const double vy0 = lerp(lerp(xl[0][dk], xl[1][dk], k.fly), lerp(xl[0][dk + 1], xl[1][dk + 1], k.fly), k.fcz);
+    const double vy1 = lerp(lerp(xl[1][dk], xl[2][dk], k.fhy), lerp(xl[1][dk + 1], xl[2][dk + 1], k.fhy), k.fcz);
+    const double mid = lerp(xl[dj][1], xl[dj + 1][1], k.fcy);
+    const double vz0 = lerp(lerp(xl[dj][0], xl[dj + 1][0], k.fcy), mid, k.flz);
+    const double vz1 = lerp(mid, lerp(xl[dj][2], xl[dj + 1][2], k.fcy), k.fhz);
     // The x pair: columns lx and hx with their own fractions, the centre's rows and layers.
-    const Sample* bx = data_ + std::size_t(cy) * sy + std::size_t(cz) * sz;
-    const Sample* s0 = bx + std::size_t(lx);
-    const Sample* s1 = bx + std::size_t(hx);
-    const double v0 = lerp(lerp(lerp(s0[0].value, s0[1].value, flx), lerp(s0[sy].value, s0[sy + 1].value, flx), fcy),
-                           lerp(lerp(s0[sz].value, s0[sz + 1].value, flx),
-                                lerp(s0[sz + sy].value, s0[sz + sy + 1].value, flx), fcy),
-                           fcz);
-    const double v1 = lerp(lerp(lerp(s1[0].value, s1[1].value, fhx), lerp(s1[sy].value, s1[sy + 1].value, fhx), fcy),
-                           lerp(lerp(s1[sz].value, s1[sz + 1].value, fhx),
-                                lerp(s1[sz + sy].value, s1[sz + sy + 1].value, fhx), fcy),
-                           fcz);
-    g = {(v1 - v0) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
+    const double v0 = trilinear(s0, sx, sy, sz, {k.flx, k.fcy, k.fcz});
+    const double v1 = trilinear(s1, sx, sy, sz, {k.fhx, k.fcy, k.fcz});
+    return {(v1 - v0) / (2 * h_m.x), (vy1 - vy0) / (2 * h_m.y), (vz1 - vz0) / (2 * h_m.z)};
+  }
+  /// central_difference on a dense field where the six points share their cells
+  /// (central_cells); false (nothing written) where they do not.
+  bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+    CentralCells k;
+    if (!central_cells(c, lo, hi, k)) return false;
+    const std::size_t sy = stride_[1], sz = stride_[2];
+    const Sample* b = data_ + std::size_t(k.cx) + std::size_t(k.ly) * sy + std::size_t(k.lz) * sz;
+    const Sample* bx = data_ + std::size_t(k.cy) * sy + std::size_t(k.cz) * sz;
+    g = central_reads(b, bx + std::size_t(k.lx), bx + std::size_t(k.hx), 1, sy, sz, k, h_m);
     return true;
+  }
+  /// The same on an fp32 bricked field with no 1-voxel axis. Where every cell of the six
+  /// points lies in one brick, one table lookup: an active brick's stored samples (strides
+  /// 1, 9, 81), or a uniform brick's tile at every corner (strides 0: the lerps
+  /// value_at_index takes there). Where the cells span two bricks (a pair's lower corners
+  /// on either side of a brick face: about a third of the points at half-voxel steps, and
+  /// every point of a stroke along a brick face), each point's cell is read from its own
+  /// brick (value_bricked), its corners and fractions taken from `k` as value_at_index
+  /// would find them.
+  bool central_bricked(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+    CentralCells k;
+    if (!central_cells(c, lo, hi, k)) return false;
+    // lx <= cx <= hx, ly <= cy <= ly + 1, lz <= cz <= lz + 1: one brick iff each pair's
+    // ends share their brick index (i >> 3).
+    if (((k.lx ^ k.hx) | (k.ly ^ (k.ly + 1)) | (k.lz ^ (k.lz + 1))) >> 3) {
+      g = central_cellwise(k, h_m);
+      return true;
+    }
+    const std::uint32_t e = brick_entry(k.cx, k.cy, k.cz);
+    if (e & BrickStore::kUniform) {
+      const Sample* t = tiles_ + (e & ~BrickStore::kUniform);
+      g = central_reads(t, t, t, 0, 0, 0, k, h_m);
+      return true;
+    }
+    const Sample* p = data_ + std::size_t(e);
+    g = central_reads(p + local_offset(k.cx, k.ly, k.lz), p + local_offset(k.lx, k.cy, k.cz),
+                      p + local_offset(k.hx, k.cy, k.cz), 1, kBrickStored, kBrickStored * kBrickStored, k, h_m);
+    return true;
+  }
+  /// central_bricked's six points, each from its own cell and brick.
+  [[gnu::noinline]] Vec3 central_cellwise(const CentralCells& k, const Vec3& h_m) const {
+    const double x0 = value_bricked(k.lx, k.cy, k.cz, {k.flx, k.fcy, k.fcz});
+    const double x1 = value_bricked(k.hx, k.cy, k.cz, {k.fhx, k.fcy, k.fcz});
+    const double y0 = value_bricked(k.cx, k.ly, k.cz, {k.fcx, k.fly, k.fcz});
+    const double y1 = value_bricked(k.cx, k.ly + 1, k.cz, {k.fcx, k.fhy, k.fcz});
+    const double z0 = value_bricked(k.cx, k.cy, k.lz, {k.fcx, k.fcy, k.flz});
+    const double z1 = value_bricked(k.cx, k.cy, k.lz + 1, {k.fcx, k.fcy, k.fhz});
+    return {(x1 - x0) / (2 * h_m.x), (y1 - y0) / (2 * h_m.y), (z1 - z0) / (2 * h_m.z)};
   }
 
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -372,7 +446,8 @@ class FieldView {
     const std::uint32_t e = brick_entry(x, y, z);
     if (e & BrickStore::kUniform) return {tiles_ + (e & ~BrickStore::kUniform), 0, 0, 0};
     const std::size_t i = std::size_t(e) + local_offset(x, y, z);
-    if (mode_ == Mode::kBricked) return {data_ + i, step_[0], step_[1], step_[2]};
+    if (mode_ == Mode::kBricked) return {data_ + i, 1, kBrickStored, kBrickStored * kBrickStored};
+    if (mode_ == Mode::kBrickedThin) return {data_ + i, step_[0], step_[1], step_[2]};
     return decode_cell(BrickStore::slot_of(e), i, scratch);
   }
   /// Compact formats: the 8 corners of the cell at pool index `i` of slot `slot`, decoded.
@@ -400,28 +475,34 @@ class FieldView {
     const BrickStore::Sealed& s = b.sealed();
     if (s.table == nullptr || s.dims[0] != grid_.dims[0] || s.dims[1] != grid_.dims[1] || s.dims[2] != grid_.dims[2])
       return;
-    mode_ = s.pool != nullptr ? Mode::kBricked : Mode::kBrickedCompact;
     data_ = s.pool;
-    compact_ = s.compact;
-    store_ = &b;
     table_ = s.table;
     tiles_ = s.tiles;
     nbx_ = s.nbx;
     nbxy_ = s.nbxy;
-    const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
-    for (int a = 0; a < 3; ++a) {
-      last_[a] = double(grid_.dims[a] - 1);
-      step_[a] = grid_.dims[a] > 1 ? st[a] : 0;
+    for (int a = 0; a < 3; ++a) last_[a] = double(grid_.dims[a] - 1);
+    if (s.pool != nullptr && !s.thin) {
+      mode_ = Mode::kBricked;  // the cell strides are constants: step_ is not read
+      return;
     }
+    mode_ = s.pool == nullptr ? Mode::kBrickedCompact : Mode::kBrickedThin;
+    compact_ = s.compact;
+    store_ = &b;
+    const std::size_t st[3] = {1, kBrickStored, kBrickStored * kBrickStored};
+    for (int a = 0; a < 3; ++a) step_[a] = grid_.dims[a] > 1 ? st[a] : 0;
   }
 
-  enum class Mode : std::uint8_t { kEmpty, kDense, kBricked, kBrickedCompact };
+  /// kBricked: fp32 bricks, every axis longer than 1 voxel (cell strides 1, 9, 81, known
+  /// at compile time); kBrickedThin: fp32 bricks with a 1-voxel axis (its stride is 0:
+  /// cell strides from step_); kBrickedCompact: kFp16 / kUnorm16 bricks, decoded per cell.
+  /// The bricked modes last (bricked()).
+  enum class Mode : std::uint8_t { kEmpty, kDense, kBricked, kBrickedThin, kBrickedCompact };
 
   Grid grid_;
   Mode mode_ = Mode::kEmpty;
-  const Sample* data_ = nullptr;       ///< dense: the samples; kBricked: the fp32 pool
+  const Sample* data_ = nullptr;       ///< dense: the samples; kBricked, kBrickedThin: the fp32 pool
   std::size_t stride_[3] = {0, 0, 0};  ///< dense: x (always 1), y, z element strides
-  std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; bricked: 1, 9, 81), 0 on a 1-voxel axis
+  std::size_t step_[3] = {0, 0, 0};    ///< cell strides (dense: stride; kBrickedThin, kBrickedCompact: 1, 9, 81), 0 on a 1-voxel axis
   double last_[3] = {-1, -1, -1};      ///< n - 1 per axis (the box of voxel centres)
   float background_ = std::numeric_limits<float>::quiet_NaN();
   std::uint64_t version_ = 0;          ///< SampleField::version of the viewed snapshot

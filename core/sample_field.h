@@ -127,6 +127,7 @@ struct BrickStore {
     const CompactSample* compact = nullptr; ///< kFp16 / kUnorm16
     std::size_t nbx = 0, nbxy = 0;          ///< bricks along x; along x times along y
     const BrickDecode* decode = nullptr;    ///< kUnorm16: one per slot (`decode` or `shared_decode`)
+    bool thin = false;                      ///< an axis of dims is 1 voxel long
   };
 
   BrickStore() = default;
@@ -188,7 +189,7 @@ struct BrickStore {
         return false;
     sealed_ = {dims, table.data(), tiles.data(), format == SampleFormat::kFp32 ? pool->data() : nullptr,
                format == SampleFormat::kFp32 ? nullptr : compact->data(), nx, nx * ny,
-               format == SampleFormat::kUnorm16 ? dec.data() : nullptr};
+               format == SampleFormat::kUnorm16 ? dec.data() : nullptr, dims[0] == 1 || dims[1] == 1 || dims[2] == 1};
     return true;
   }
   const Sealed& sealed() const { return sealed_; }

@@ -288,6 +288,107 @@ TEST(BrickField, Fp32ReadsAreBitIdenticalInActiveCellsAndOnTheSameSideElsewhere)
   }
 }
 
+// The brick of the cell of index coordinate v on an axis of n voxels (in the grid).
+int cell_brick(double v, int n) { return lower_corner(v, n) / 8; }
+
+// central_difference on a bricked fp32 field is, bit for bit, the six values value_at_index
+// reads on the same view (its definition, whatever path computes it: the six cells in one
+// active brick, in one uniform brick, or spread over two bricks), and the dense field's
+// where every cell of the six points lies in an active brick. Points are drawn anywhere in
+// the grid and, half of them, with a pair of points on either side of a brick face.
+TEST(BrickField, Fp32CentralDifferenceIsTheSixBrickedValuesAndDenseInActiveBricks) {
+  long one_active = 0, one_uniform = 0, spread = 0;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.name);
+    const SampleField bricked = core::make_bricked_field(core::bricked_input_from_dense(c.dense, c.iso), SampleFormat::kFp32);
+    const FieldView dv(c.dense), bv(bricked);
+    const std::vector<bool> active = brute_active(c.dense, c.iso);
+    const auto& d = c.dense.grid.dims;
+    const Vec3 sp = c.dense.grid.spacing_m;
+    std::mt19937 rng(21);
+    std::uniform_real_distribution<double> u01(0.0, 1.0);
+    for (int k = 0; k < 20000; ++k) {
+      const double hv = k % 5 == 4 ? 0.3 : 0.5;  // the renderers' half voxel, and another step
+      Vec3 idx;
+      for (int a = 0; a < 3; ++a) {
+        double v = u01(rng) * (d[a] - 1);
+        // Half the points: the lower point of this axis's pair in the last cell of a brick
+        // (voxel 8 m + 7), its upper point in the next brick.
+        if (k % 2 == 0 && d[a] > 17 && u01(rng) < 0.6) v = 8.0 * std::floor(u01(rng) * ((d[a] - 10) / 8)) + 7 + hv + u01(rng);
+        (&idx.x)[a] = v;
+      }
+      const Vec3 w = c.dense.grid.to_world(idx);
+      const Vec3 h = sp * hv;
+      const Vec3 i = c.dense.grid.to_index(w);
+      const Vec3 hi{h.x / sp.x, h.y / sp.y, h.z / sp.z};
+      const Vec3 pts[6] = {{i.x - hi.x, i.y, i.z}, {i.x + hi.x, i.y, i.z}, {i.x, i.y - hi.y, i.z},
+                           {i.x, i.y + hi.y, i.z}, {i.x, i.y, i.z - hi.z}, {i.x, i.y, i.z + hi.z}};
+      const Vec3 g = bv.central_difference(w, h);
+      const Vec3 want{(bv.value_at_index(pts[1]) - bv.value_at_index(pts[0])) / (2 * h.x),
+                      (bv.value_at_index(pts[3]) - bv.value_at_index(pts[2])) / (2 * h.y),
+                      (bv.value_at_index(pts[5]) - bv.value_at_index(pts[4])) / (2 * h.z)};
+      ASSERT_TRUE(same_bits(g.x, want.x) && same_bits(g.y, want.y) && same_bits(g.z, want.z))
+          << k << " at " << i.x << " " << i.y << " " << i.z << ": (" << g.x << ", " << g.y << ", " << g.z << ") vs ("
+          << want.x << ", " << want.y << ", " << want.z << ")";
+      // Which bricks the six points' cells lie in (points in the grid only).
+      bool in_grid = true, all_active = true, one_brick = true;
+      std::size_t first = 0;
+      for (int p = 0; p < 6; ++p) {
+        const Vec3& q = pts[p];
+        if (!(q.x >= 0 && q.y >= 0 && q.z >= 0 && q.x <= d[0] - 1 && q.y <= d[1] - 1 && q.z <= d[2] - 1)) {
+          in_grid = false;
+          break;
+        }
+        const std::size_t b = brick_id(c.dense, 8 * cell_brick(q.x, d[0]), 8 * cell_brick(q.y, d[1]), 8 * cell_brick(q.z, d[2]));
+        all_active = all_active && active[b];
+        if (p == 0) first = b;
+        one_brick = one_brick && b == first;
+      }
+      if (!in_grid) continue;
+      if (all_active) {
+        const Vec3 gd = dv.central_difference(w, h);
+        ASSERT_TRUE(same_bits(g.x, gd.x) && same_bits(g.y, gd.y) && same_bits(g.z, gd.z))
+            << k << " at " << i.x << " " << i.y << " " << i.z;
+      }
+      one_active += one_brick && all_active;
+      one_uniform += one_brick && !all_active;
+      spread += !one_brick;
+    }
+  }
+  // Every way of reading the six cells was exercised.
+  EXPECT_GT(one_active, 2000);
+  EXPECT_GT(one_uniform, 2000);
+  EXPECT_GT(spread, 2000);
+}
+
+// A cell of a uniform brick reads the brick's tile at its 8 corners, so its trilinear
+// value is the tile (the tiles here are finite and not zero: no lerp changes them).
+TEST(BrickField, Fp32UniformCellsReadTheirTile) {
+  long checked = 0;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.name);
+    const SampleField bricked = core::make_bricked_field(core::bricked_input_from_dense(c.dense, c.iso), SampleFormat::kFp32);
+    const FieldView bv(bricked);
+    const core::BrickStore& store = *bricked.bricks;
+    const auto& d = c.dense.grid.dims;
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<double> ux(0, d[0] - 1), uy(0, d[1] - 1), uz(0, d[2] - 1);
+    for (int k = 0; k < 20000; ++k) {
+      const Vec3 w = c.dense.grid.to_world({ux(rng), uy(rng), uz(rng)});
+      const Vec3 i = c.dense.grid.to_index(w);
+      if (!(i.x >= 0 && i.y >= 0 && i.z >= 0 && i.x <= d[0] - 1 && i.y <= d[1] - 1 && i.z <= d[2] - 1)) continue;
+      const std::uint32_t e = store.table[brick_id(c.dense, lower_corner(i.x, d[0]), lower_corner(i.y, d[1]), lower_corner(i.z, d[2]))];
+      if (!(e & core::BrickStore::kUniform)) continue;
+      const float tile = store.tiles[e & ~core::BrickStore::kUniform].value;
+      if (!std::isfinite(tile) || tile == 0.0f) continue;
+      ASSERT_EQ(bv.value(w), double(tile)) << k << " at " << i.x << " " << i.y << " " << i.z;
+      ASSERT_EQ(bv.value_at_index(i), double(tile));
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 10000);
+}
+
 TEST(BrickField, HalfCodecRoundTripsEveryHalfAndRoundsToNearest) {
   for (std::uint32_t h = 0; h < 0x10000u; ++h) {
     const float f = core::half_to_float(std::uint16_t(h));

@@ -31,19 +31,23 @@ TEST(TripleBuffer, ConcurrentReaderNeverSeesATornOrOlderSnapshot) {
   };
   TripleBuffer<Snap> buf;
   buf.publish(std::make_shared<const Snap>(Snap{0, 0}));
-  std::atomic<bool> stop{false};
+  std::atomic<bool> stop{false}, reading{false};
   std::thread writer([&] {
+    // Publishing starts once the reader runs (on a loaded machine the writer could finish
+    // all of it before the reader's first read).
+    while (!reading.load()) std::this_thread::yield();
     for (long i = 1; i <= 200000; ++i) buf.publish(std::make_shared<const Snap>(Snap{i, i}));
     stop = true;
   });
   long last = 0, reads = 0;
-  while (!stop.load()) {
+  reading = true;
+  do {
     const Snap* s = buf.acquire();
     ASSERT_EQ(s->a, s->b);
     ASSERT_GE(s->a, last);  // versions never go back
     last = s->a;
     ++reads;
-  }
+  } while (!stop.load());
   writer.join();
   EXPECT_EQ(buf.acquire()->a, 200000);
   EXPECT_GT(reads, 0);

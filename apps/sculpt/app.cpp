@@ -117,15 +117,17 @@ class BackgroundLoad {
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 /// Waits (at most 2 s) until the window's framebuffer has a size it was asked for in screen
-/// units, so that a scripted resize takes effect on the same frame every run.
+/// units, so that a scripted resize takes effect on the same frame every run: the server's
+/// size first, then its event, which updates the window's framebuffer_size().
 void wait_for_size(Window& window, int w, int h) {
   const auto t0 = Clock::now();
   for (;;) {
     int ww = 0, wh = 0;
     glfwGetWindowSize(window.handle(), &ww, &wh);
-    if ((ww == w && wh == h) || ms_since(t0) > 2000) return;
+    if ((ww == w && wh == h) || ms_since(t0) > 2000) break;
     glfwWaitEventsTimeout(0.01);
   }
+  glfwPollEvents();  // the size event the server sent before its answer
 }
 
 std::string fixed(double v, int p = 1) {

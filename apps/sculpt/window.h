@@ -52,7 +52,9 @@ class Window {
 
   GLFWwindow* handle() const { return win_; }
   bool should_close() const;
-  /// Framebuffer size in pixels ({0, 0} while minimised).
+  /// Framebuffer size in pixels ({0, 0} while minimised), as GLFW's events last reported it
+  /// (glfwPollEvents updates it): asking the X server costs two round trips per call, which
+  /// wait for its CPU while the ray caster's threads hold both cores.
   std::array<int, 2> framebuffer_size() const;
   /// Shows `rgba` (R in the low byte, rows top to bottom, `w` x `h`) in the next swapchain
   /// image; the part outside the swapchain's extent is cut, the rest left as it was.
@@ -101,6 +103,8 @@ class Window {
   bool stale_ = false;  // recreate before the next frame
   int recreations_ = 0;
   std::string present_mode_name_;
+  std::array<int, 2> fb_{0, 0};  // the framebuffer's size, from GLFW's size events
+  bool iconified_ = false;       // from GLFW's iconify events
 };
 
 }  // namespace isotouch::sculpt

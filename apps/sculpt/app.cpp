@@ -184,6 +184,9 @@ void panels_key(GLFWwindow* w, int key, int scancode, int action, int mods) {
 void on_char(GLFWwindow* w, unsigned int c) {
   if (g_panels) g_panels->character(w, c);
 }
+void panels_cursor() {
+  if (g_panels) g_panels->cursor_moved();
+}
 #else
 bool panels_want_mouse() { return false; }
 bool panels_want_keyboard() { return false; }
@@ -191,20 +194,15 @@ void panels_button(GLFWwindow*, int, int, int) {}
 void panels_scroll(GLFWwindow*, double, double) {}
 void panels_key(GLFWwindow*, int, int, int, int) {}
 void on_char(GLFWwindow*, unsigned int) {}
+void panels_cursor() {}
 #endif
 
-double fb_scale(GLFWwindow* w) {  // framebuffer pixels per screen unit
-  int ww = 0, wh = 0, fw = 0, fh = 0;
-  glfwGetWindowSize(w, &ww, &wh);
-  glfwGetFramebufferSize(w, &fw, &fh);
-  return ww > 0 ? double(fw) / ww : 1.0;
-}
-
 void on_cursor(GLFWwindow* w, double x, double y) {
-  const double s = fb_scale(w);
+  const double s = Window::of(w).pixels_per_unit();  // the cached sizes: no X round trip per motion event
   g_input->px = x * s;
   g_input->py = y * s;
   g_input->cursor_seen = true;
+  panels_cursor();
 }
 void on_button(GLFWwindow* w, int b, int action, int mods) {
   panels_button(w, b, action, mods);
@@ -398,9 +396,10 @@ struct Sculpt {
   void apply_tools(const session::Observed& obs);
   long take_edits();
   void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f);
-  void show(const session::Observed& obs, const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes);
+  void show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes);
   const std::vector<std::uint32_t>& host_picture(const FrameSize& f, bool shot);
-  void build_panels(const session::Observed& obs);
+  void build_panels();
+  void refresh_panel(const session::Observed& obs, std::size_t frames);
   void measure_latency(long drawn_brushes);
   void write_shots(const std::vector<std::string>& shots, const std::array<int, 2>& fb, const std::vector<std::uint32_t>& px);
   void end_frame(const session::Observed& obs, const std::array<int, 2>& fb);
@@ -769,7 +768,7 @@ bool Sculpt::frame_step() {
   apply_tools(obs);
   const long drawn_brushes = take_edits();
   render_picture(obs, hand_world, f);
-  show(obs, f, shots, drawn_brushes);
+  show(f, shots, drawn_brushes);
   end_frame(obs, f.fb);
   return true;
 }
@@ -1004,10 +1003,10 @@ void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world
 
 /// The picture into the window with the panels, edit-to-pixels of the brushes it shows for
 /// the first time, and the screenshots the script asked for this frame.
-void Sculpt::show(const session::Observed& obs, const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes) {
+void Sculpt::show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes) {
   const auto p0 = Clock::now();
   const std::vector<std::uint32_t>& shown_px = host_picture(f, !shots.empty());
-  build_panels(obs);
+  build_panels();
   const bool shown = f.direct() ? window->present(caster->image_buffer(), f.fb[0], f.fb[1])
                                 : window->present(shown_px, f.fb[0], f.fb[1]);
   present_ms.push_back(ms_since(p0));
@@ -1036,22 +1035,34 @@ const std::vector<std::uint32_t>& Sculpt::host_picture(const FrameSize& f, bool 
   return upscaled;
 }
 
-/// This frame's Dear ImGui panels (drawn by the window's next present).
-void Sculpt::build_panels(const session::Observed& obs) {
+/// This frame's Dear ImGui panels (drawn by the window's next present). Their figures change
+/// every 15 frames (refresh_panel), so that the panels are built again only then, or when
+/// the user touches them or a message or load changes.
+void Sculpt::build_panels() {
 #if ISOTOUCH_WITH_IMGUI
   if (!panels) return;
-  panel.frame_ms = frame_ms.empty() ? 0 : frame_ms.back();
+  if (panel.status != status) panel.status = status;
+  if (loading) {
+    if (panel.loading != loading->path) panel.loading = loading->path;
+    panel.loading_s = ms_since(loading->since) / 1e3;
+  } else {
+    panel.loading.clear();
+    panel.loading_s = 0;
+  }
+  panels->build(tool, iso_ctl, panel, overlay);
+#endif
+}
+
+/// The panels' frame time (the mean since the last refresh), force and device status.
+void Sculpt::refresh_panel(const session::Observed& obs, std::size_t frames) {
+  const std::size_t n = std::min(frames, frame_ms.size());
+  double sum = 0;
+  for (std::size_t i = frame_ms.size() - n; i < frame_ms.size(); ++i) sum += frame_ms[i];
+  panel.frame_ms = n > 0 ? sum / double(n) : 0;
   panel.force_n = norm(obs.force_n);
   panel.contact = obs.contact;
   panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
                        : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
-  panel.status = status;
-  panel.loading = loading ? loading->path : std::string();
-  panel.loading_s = loading ? ms_since(loading->since) / 1e3 : 0.0;
-  panels->build(tool, iso_ctl, panel, overlay);
-#else
-  (void)obs;
-#endif
 }
 
 /// Edit-to-pixels: from each brush's submission to the first frame that shows it.
@@ -1084,7 +1095,11 @@ void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& f
   }
   last_frame = end;
   ++frame;
-  if (frame % 15 == 0) refresh_title(obs, end);
+  if (frame == 2) refresh_panel(obs, 1);  // the first frame time, until the first refresh
+  if (frame % 15 == 0) {
+    refresh_panel(obs, 15);
+    refresh_title(obs, end);
+  }
 }
 
 void Sculpt::refresh_title(const session::Observed& obs, Clock::time_point now) {
@@ -1357,7 +1372,9 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "edit-to-haptics", st.edit_to_haptics_ms);
   print_servo(st);
 #if ISOTOUCH_WITH_IMGUI
-  if (panels) log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame << " frames\n";
+  if (panels)
+    log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame
+        << " frames, built anew in " << panels->frames_built() << "\n";
 #endif
 }
 

@@ -60,10 +60,14 @@ Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int w
   }
   // The size and the minimised state as the window starts, then as GLFW's events change them.
   glfwGetFramebufferSize(w->win_, &w->fb_[0], &w->fb_[1]);
+  glfwGetWindowSize(w->win_, &w->win_size_[0], &w->win_size_[1]);
   w->iconified_ = glfwGetWindowAttrib(w->win_, GLFW_ICONIFIED) != 0;
   glfwSetWindowUserPointer(w->win_, w.get());
   glfwSetFramebufferSizeCallback(w->win_, [](GLFWwindow* h, int fw, int fh) {
     static_cast<Window*>(glfwGetWindowUserPointer(h))->fb_ = {fw, fh};
+  });
+  glfwSetWindowSizeCallback(w->win_, [](GLFWwindow* h, int ww, int wh) {
+    static_cast<Window*>(glfwGetWindowUserPointer(h))->win_size_ = {ww, wh};
   });
   glfwSetWindowIconifyCallback(w->win_, [](GLFWwindow* h, int iconified) {
     static_cast<Window*>(glfwGetWindowUserPointer(h))->iconified_ = iconified != 0;
@@ -103,6 +107,8 @@ Window::~Window() {
   if (surface_) vkDestroySurfaceKHR(ctx_.instance(), surface_, nullptr);
   if (win_) glfwDestroyWindow(win_);
 }
+
+const Window& Window::of(GLFWwindow* w) { return *static_cast<const Window*>(glfwGetWindowUserPointer(w)); }
 
 bool Window::should_close() const { return glfwWindowShouldClose(win_); }
 

@@ -9,7 +9,8 @@
 # carries (both clocks). A dropped file that never finishes loading (a FIFO) does not keep the
 # window from closing.
 # With SCULPT_EXPECT_OVERLAY=1 (a build with Dear ImGui): the panels were set up and drawn
-# (the screenshots are the ray caster's picture, without them); --no-overlay draws none.
+# (the screenshots are the ray caster's picture, without them), built anew in fewer frames
+# than they were drawn in; --no-overlay draws none.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -47,6 +48,11 @@ if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
   grep -q "^overlay  Dear ImGui [0-9.]*$" "$out/log.txt" || { echo "FAIL: the Dear ImGui overlay was not set up"; exit 1; }
   grep -q "^stats    overlay Dear ImGui [0-9.]* drawn in [1-9][0-9]* of " "$out/log.txt" ||
     { echo "FAIL: the Dear ImGui overlay was not drawn"; exit 1; }
+  # The panels are drawn every frame but built anew only when what they show changes (their
+  # figures every 15 frames, the H key, the resize) and in the two frames after.
+  read -r drawn built < <(sed -n 's/^stats    overlay Dear ImGui [0-9.]* drawn in \([0-9]*\) of [0-9]* frames, built anew in \([0-9]*\)$/\1 \2/p' "$out/log.txt")
+  [ -n "${built:-}" ] && [ "$built" -gt 0 ] && [ "$built" -lt "$drawn" ] ||
+    { echo "FAIL: the panels were built anew in ${built:-?} frames, not fewer than the ${drawn:-?} that drew them (a build every frame)"; exit 1; }
 fi
 # Ctrl+S and Ctrl+E after the carve: the edited volume as .vdb, its isosurface as STL.
 for f in sculpted.vdb sculpted.stl; do

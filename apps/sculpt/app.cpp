@@ -4,6 +4,7 @@
 #include <GLFW/glfw3.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <exception>
 #include <functional>
@@ -116,15 +117,17 @@ class BackgroundLoad {
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 /// Waits (at most 2 s) until the window's framebuffer has a size it was asked for in screen
-/// units, so that a scripted resize takes effect on the same frame every run.
+/// units, so that a scripted resize takes effect on the same frame every run: the server's
+/// size first, then its event, which updates the window's framebuffer_size().
 void wait_for_size(Window& window, int w, int h) {
   const auto t0 = Clock::now();
   for (;;) {
     int ww = 0, wh = 0;
     glfwGetWindowSize(window.handle(), &ww, &wh);
-    if ((ww == w && wh == h) || ms_since(t0) > 2000) return;
+    if ((ww == w && wh == h) || ms_since(t0) > 2000) break;
     glfwWaitEventsTimeout(0.01);
   }
+  glfwPollEvents();  // the size event the server sent before its answer
 }
 
 std::string fixed(double v, int p = 1) {
@@ -181,6 +184,9 @@ void panels_key(GLFWwindow* w, int key, int scancode, int action, int mods) {
 void on_char(GLFWwindow* w, unsigned int c) {
   if (g_panels) g_panels->character(w, c);
 }
+void panels_cursor() {
+  if (g_panels) g_panels->cursor_moved();
+}
 #else
 bool panels_want_mouse() { return false; }
 bool panels_want_keyboard() { return false; }
@@ -188,20 +194,15 @@ void panels_button(GLFWwindow*, int, int, int) {}
 void panels_scroll(GLFWwindow*, double, double) {}
 void panels_key(GLFWwindow*, int, int, int, int) {}
 void on_char(GLFWwindow*, unsigned int) {}
+void panels_cursor() {}
 #endif
 
-double fb_scale(GLFWwindow* w) {  // framebuffer pixels per screen unit
-  int ww = 0, wh = 0, fw = 0, fh = 0;
-  glfwGetWindowSize(w, &ww, &wh);
-  glfwGetFramebufferSize(w, &fw, &fh);
-  return ww > 0 ? double(fw) / ww : 1.0;
-}
-
 void on_cursor(GLFWwindow* w, double x, double y) {
-  const double s = fb_scale(w);
+  const double s = Window::of(w).pixels_per_unit();  // the cached sizes: no X round trip per motion event
   g_input->px = x * s;
   g_input->py = y * s;
   g_input->cursor_seen = true;
+  panels_cursor();
 }
 void on_button(GLFWwindow* w, int b, int action, int mods) {
   panels_button(w, b, action, mods);
@@ -301,151 +302,13 @@ std::string tool_line(const ToolState& t) {
   return std::string(session::to_string(t.kind)) + " r " + fixed(t.radius_m * 1e3) + " mm, strength " + fixed(t.strength, 2);
 }
 
-}  // namespace
 
-int loads_running() { return g_loads_running.load(); }
-
-int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
-  // --- input: the scene, the volume, the script ----------------------------------------
-  io::Scene scene;
-  engine::Volume vol;
-  std::vector<InputEvent> script;
-  try {
-    if (o.carried) script = o.carried->script;
-    else if (!o.script.empty()) script = load_input_script(o.script);
-    else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
-    if (!o.record.empty() && fs::path(o.input).extension() != ".json")
-      throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
-    scene = input_scene(o);
-    vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
-    if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
-      throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
-                               fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
-                               ": there is no isosurface");
-  } catch (const std::exception& e) {
-    log << "isotouch-sculpt: " << e.what() << "\n";
-    return 1;
-  }
-  const fs::path shot_dir = o.screenshot.empty() ? fs::path(".") : fs::path(o.screenshot).parent_path();
-
-  // --- the device: the mouse-coupled simulated probe, or one from --haptic (opened just before
-  // the servo starts: an emulator's hand path and a device's watchdog start with the link) ----
-  servo::WorkspaceTransform xf;  // as `isotouch run`: the device's origin at the grid's centre
-  xf.scale = scene.workspace_scale;
-  xf.translation_m = vol.grid.centre_m();
-  CameraControl camera;
-  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : run::default_camera(vol);
-  engine::CameraView view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
-  // The probe starts at rest just outside the volume's box in front of the camera.
-  const Vec3 start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
-  sim::CoupledHandDevice mouse_device(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
-  const bool mouse = o.haptic == "mouse";
-  run::HapticDevice haptic;
-  if (o.sim_clock && !mouse) {
-    log << "isotouch-sculpt: --sim-clock runs the mouse probe on a simulated clock; --haptic " << o.haptic
-        << " is a device in real time (leave out one of them)\n";
-    return 1;
-  }
-
-  // --- window and Vulkan --------------------------------------------------------------
-  auto exts = init_glfw();
-  if (!exts) {
-    log << "isotouch-sculpt: " << exts.error << "\n";
-    return 1;
-  }
-  struct GlfwGuard {
-    ~GlfwGuard() { shutdown_glfw(); }
-  } glfw_guard;
-  engine::ContextOptions co;
-  co.device = o.device;
-  co.validation = o.validation;
-  co.instance_extensions = *exts.value;
-  co.swapchain = true;
-  auto ctx = engine::VulkanContext::create(co);
-  if (!ctx) {
-    log << "isotouch-sculpt: " << ctx.error << "\n";
-    return 1;
-  }
-  engine::VulkanContext& vk = **ctx.value;
-  auto win = Window::create(vk, o.width, o.height, "isotouch-sculpt: " + scene.name);
-  if (!win) {
-    log << "isotouch-sculpt: " << win.error << "\n";
-    return 1;
-  }
-  Window& window = **win.value;
-  Input input;
-  g_input = &input;
-  if (!o.sim_clock) {  // on the simulated clock the script is the only input
-    glfwSetCursorPosCallback(window.handle(), on_cursor);
-    glfwSetMouseButtonCallback(window.handle(), on_button);
-    glfwSetScrollCallback(window.handle(), on_scroll);
-    glfwSetKeyCallback(window.handle(), on_key);
-    glfwSetDropCallback(window.handle(), on_drop);
-    glfwSetCharCallback(window.handle(), on_char);
-  }
-#if ISOTOUCH_WITH_IMGUI
-  std::unique_ptr<Overlay> panels;  // the tool and stats panels, drawn over the picture
-  if (o.overlay) {
-    auto made = Overlay::create(vk, window);
-    if (made) {
-      panels = std::move(*made.value);
-      log << "overlay  " << Overlay::version() << "\n";
-    } else {
-      log << "overlay  not drawn: " << made.error << "\n";
-    }
-  }
-  g_panels = panels.get();
-  struct PanelsGuard {
-    ~PanelsGuard() { g_panels = nullptr; }
-  } panels_guard;
-#endif
-
-  // --- the session: edits (CPU brushes: the GPU queue belongs to the window's thread) ------
-  session::LiveFieldOptions live;
-  live.passes = run::scene_passes(scene);
-  live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
-  live.background = float(live.iso.outside_value(vol.min_value, vol.max_value));
-  live.format = run::scene_sample_format(scene);
-  std::unique_ptr<session::EditSession> edits;
-  try {
-    edits = std::make_unique<session::EditSession>(engine::Volume(vol), nullptr, live, scene.edits.history_limit_mib);
-  } catch (const std::exception& e) {
-    log << "isotouch-sculpt: " << o.input << ": " << e.what() << "\n";
-    return 1;
-  }
-  servo::TripleBuffer<core::SampleField> buffer;
-  buffer.publish(edits->current());
-  servo::HriRenderer renderer(scene.hri);
-
-  // The picture: the raw volume at the scene's isovalue (what `isotouch render` draws).
-  PictureFeed feed;
-  feed.values = vol.voxels;
-  auto rc = engine::RayCaster::create(vk, run::scene_raycast_field(scene, vol));
-  if (!rc) {
-    log << "isotouch-sculpt: " << rc.error << "\n";
-    return 1;
-  }
-  engine::RayCaster& caster = **rc.value;
-
-  session::LiveSessionConfig cfg;
-  cfg.servo.rate_hz = scene.hri.rate_hz;
-  cfg.servo.sched_fifo = o.sched_fifo;
-  cfg.servo.pin_cpu = o.sched_fifo;
-  cfg.servo.lock_memory = o.sched_fifo;
-  cfg.servo.world_T_device = xf;
-  cfg.record_path = o.record;
-  if (!o.record.empty()) {
-    cfg.record_header.scene_path = fs::absolute(scene.file).string();
-    std::ifstream in(scene.file, std::ios::binary);
-    std::ostringstream text;
-    text << in.rdbuf();
-    cfg.record_header.scene_text = text.str();
-    cfg.record_header.rate_hz = scene.hri.rate_hz;
-    cfg.record_header.volume_crc32 = io::volume_crc32(vol);
-  }
-  session::EditSession* es = edits.get();
-  const auto nbx = std::uint32_t((vol.grid.dims[0] + 7) / 8), nby = std::uint32_t((vol.grid.dims[1] + 7) / 8);
-  cfg.on_applied = [&feed, es, nbx, nby](const session::EditEvent& e, const session::EditOutcome& out, session::EditSource) {
+/// What the edit thread does with each applied or refused edit: copies the voxels of the
+/// bricks it changed from the session's volume into the feed (the picture's copy).
+session::EditListener picture_feeder(PictureFeed& feed, session::EditSession* es) {
+  const auto& dims = es->volume().grid.dims;
+  const auto nbx = std::uint32_t((dims[0] + 7) / 8), nby = std::uint32_t((dims[1] + 7) / 8);
+  return [&feed, es, nbx, nby](const session::EditEvent& e, const session::EditOutcome& out, session::EditSource) {
     using K = session::EditEvent::Kind;
     const std::vector<std::uint32_t>& ids = e.kind == K::kBrush ? out.brush.dirty : out.restored;
     const engine::Volume& v = es->volume();
@@ -471,74 +334,157 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     ++feed.events_done;
     feed.applied.notify_all();
   };
+}
 
-  if (!mouse) {
-    try {
-      run::DeviceSetup ds;
-      ds.scene = &scene;
-      ds.volume = &vol;
-      ds.hri = scene.hri;
-      ds.world_T_device = xf;
-      ds.start_world_m = start_world;
-      haptic = run::open_haptic_device(o.haptic, ds, o.sched_fifo ? 70 : 0);
-    } catch (const std::exception& e) {
-      log << "isotouch-sculpt: " << e.what() << " (or mouse, the default)\n";
-      return 1;
+/// A dropped file loading in the background: the options of the session it opens.
+struct Loading {
+  std::string path;
+  Options next;
+  BackgroundLoad result;
+  Clock::time_point since;
+  int frame = 0;  // frames drawn when it started
+  bool sim_waited = false;  // the simulated clock waited for it once
+};
+
+/// The window's size and the ray caster's picture size this frame.
+struct FrameSize {
+  std::array<int, 2> fb{0, 0};  // framebuffer pixels
+  int rw = 0, rh = 0;           // the picture (fb times --render-scale)
+  /// The picture at the window's size goes from the caster's buffer straight into the
+  /// swapchain image, packed in its byte order (no host copy); scaled, through the host.
+  bool direct() const { return rw == fb[0] && rh == fb[1]; }
+};
+
+/// The servo alone after a --bench sculpt: its ticks and misses.
+struct ServoAlone {
+  long ticks = 0, missed = 0;
+};
+
+/// One session of the window, from its input to its report: run_sculpt's set-up steps, the
+/// frame loop's state and steps, and the figures printed at the end. The members are
+/// destroyed in reverse order: the live session (its threads) before the caster, the picture
+/// feed and the edits it uses; the overlay before the window, the window before Vulkan, GLFW
+/// before the devices the session used.
+struct Sculpt {
+  Sculpt(const Options& opts, std::ostream& out, std::optional<Options>* next) : o(opts), log(out), reopen(next) {}
+  ~Sculpt();
+  Sculpt(const Sculpt&) = delete;
+  Sculpt& operator=(const Sculpt&) = delete;
+
+  // --- set-up, in this order; false: the reason is logged (exit code 1) ---
+  bool load_input();
+  bool place_probe();
+  bool open_window();
+  void open_panels();
+  bool open_edits();
+  session::LiveSessionConfig session_config();
+  bool open_device();
+  bool start_session(const session::LiveSessionConfig& cfg);
+  void init_tools();
+
+  // --- the frame loop ---
+  void frame_loop();
+  bool frame_step();  // false: the loop ends
+  double script_now_s() const;
+  bool run_script(const std::array<int, 2>& fb, std::vector<std::string>& shots);
+  bool script_waits(const InputEvent& ev);
+  void apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std::vector<std::string>& shots, bool& quit);
+  bool take_input(const std::array<int, 2>& fb);
+  void handle_key(const Input::Key& k);
+  void steer_camera(const std::array<int, 2>& fb);
+  Vec3 steer_hand(const FrameSize& f);
+  void apply_tools(const session::Observed& obs);
+  long take_edits();
+  void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f);
+  void show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes);
+  const std::vector<std::uint32_t>& host_picture(const FrameSize& f, bool shot);
+  void build_panels();
+  void refresh_panel(const session::Observed& obs, std::size_t frames);
+  void measure_latency(long drawn_brushes);
+  void write_shots(const std::vector<std::string>& shots, const std::array<int, 2>& fb, const std::vector<std::uint32_t>& px);
+  void end_frame(const session::Observed& obs, const std::array<int, 2>& fb);
+  void refresh_title(const session::Observed& obs, Clock::time_point now);
+
+  // --- tools: save, export, dropped files, the isovalue ---
+  engine::Volume edited_volume();
+  void save(const std::string& path);
+  void export_mesh(const std::string& path);
+  void start_load(const std::string& path);
+  bool poll_load();
+  bool restart_at(double tau);
+  std::shared_ptr<Carried> carry_over(double tau);
+
+  // --- the end: the report ---
+  int finish();
+  void settle_loads();
+  void close_stroke();
+  ServoAlone servo_alone(double seconds, const session::LiveStats& sculpted);
+  void stop_session();
+  void write_last_screenshot();
+  void print_stats(double seconds, const session::LiveStats& st);
+  void print_servo(const session::LiveStats& st);
+  void print_device();
+  void print_verdicts(const session::LiveStats& sculpted, const ServoAlone& alone);
+
+  const Options& o;
+  std::ostream& log;
+  std::optional<Options>* reopen;
+
+  // The input.
+  io::Scene scene;
+  engine::Volume vol;
+  std::vector<InputEvent> script;
+  fs::path shot_dir;
+  // The device: the mouse-coupled simulated probe, or one from --haptic (opened just before
+  // the servo starts: an emulator's hand path and a device's watchdog start with the link).
+  servo::WorkspaceTransform xf;  // as `isotouch run`: the device's origin at the grid's centre
+  CameraControl camera;
+  engine::CameraView view;
+  Vec3 start_world;
+  std::optional<sim::CoupledHandDevice> mouse_device;
+  bool mouse = true;
+  run::HapticDevice haptic;
+  // The window and Vulkan.
+  struct GlfwUp {
+    bool up = false;
+    ~GlfwUp() {
+      if (up) shutdown_glfw();
     }
-    log << "device   " << haptic.description << "\n";
-    if (haptic.report && !haptic.report->realtime_note().empty()) log << "device   " << haptic.report->realtime_note() << "\n";
-  }
-  servo::HapticDeviceIO& device = mouse ? static_cast<servo::HapticDeviceIO&>(mouse_device) : *haptic.io;
+  } glfw;
+  std::unique_ptr<engine::VulkanContext> vk;
+  std::unique_ptr<Window> window;
+  Input input;
+#if ISOTOUCH_WITH_IMGUI
+  std::unique_ptr<Overlay> panels;  // the tool and stats panels, drawn over the picture
+#endif
+  // The session: edits (CPU brushes: the GPU queue belongs to the window's thread), the
+  // picture and the servo.
+  session::LiveFieldOptions live;
+  std::unique_ptr<session::EditSession> edits;
+  servo::TripleBuffer<core::SampleField> buffer;
+  std::optional<servo::HriRenderer> renderer;
+  PictureFeed feed;
+  std::unique_ptr<engine::RayCaster> caster;
   std::unique_ptr<session::LiveSession> session;
-  try {
-    if (o.sim_clock) session = std::make_unique<session::LiveSession>(edits.get(), buffer, renderer, cfg);
-    else session = std::make_unique<session::LiveSession>(*edits, buffer, renderer, device, cfg);
-  } catch (const std::exception& e) {
-    log << "isotouch-sculpt: " << e.what() << "\n";
-    return 1;
-  }
   // The simulated clock: the probe's device, stepped by the frame loop's ticks toward the
   // hand (held still within a frame, as the mouse's coupling holds it within a tick).
-  sim::SimDevice sim_device(scene.device, xf.to_device(start_world));
+  std::optional<sim::SimDevice> sim_device;
   sim::TouchScript sim_hand;
-  sim_hand.waypoints = {{0.0, start_world}};
   session::SimulatedRun sim_run;
-  sim_run.device = &sim_device;
-  sim_run.script = &sim_hand;
-  sim_run.world_T_device = xf;
-  const long sim_ticks_per_frame = std::max(1L, std::lround(o.sim_frame_ms * 1e-3 * scene.hri.rate_hz));
-  const double sim_frame_s = double(sim_ticks_per_frame) / scene.hri.rate_hz;
-  if (!o.sim_clock) {
-    const std::string note = session->start();
-    if (!note.empty()) log << "servo    " << note << "\n";
-  }
-  log << "sculpt   " << scene.name << ": " << vol.grid.dims[0] << "x" << vol.grid.dims[1] << "x" << vol.grid.dims[2]
-      << " voxels, isovalue " << scene.hri.tau << ", servo " << scene.hri.rate_hz << " Hz, device " << vk.info().name
-      << ", present mode " << window.present_mode() << "\n";
-  if (o.sim_clock)
-    log << "sculpt   simulated clock: " << sim_ticks_per_frame << " servo ticks (" << fixed(sim_frame_s * 1e3, 2)
-        << " ms) per frame, on the window's thread\n";
+  long sim_ticks_per_frame = 1;
+  double sim_frame_s = 0;
 
-  // --- the frame loop -----------------------------------------------------------------
+  // The frame loop's state.
   ToolState tool;
-  if (o.carried && o.carried->tool) tool = *o.carried->tool;
-  tool.targets = session::default_targets(vol, live.iso);
-  if (!(o.carried && o.carried->tool)) {
-    const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
-    tool.radius_m = std::max(4e-3, 2.5 * sp);
-  }
-  IsoControl iso_ctl{scene.hri.tau, vol.min_value, vol.max_value, false};
+  IsoControl iso_ctl;
   PanelStats panel;
-  panel.servo_target_hz = scene.hri.rate_hz;
-  panel.volume = volume_line(vol);
-  auto panel_refreshed = Clock::now();
+  Clock::time_point panel_refreshed;
   Stroke stroke;
   engine::RaycastStyle style;
-  style.tile_starts = o.tile_starts;
   bool overlay = true;
-  double push_m = 5e-3;       // the hand this far behind the surface under the cursor
-  double hand_t = norm(vol.grid.centre_m() - view.eye);  // hand depth along the cursor ray [m]
-  const double unit = run::probe_size_m(vol.grid);
+  double push_m = 5e-3;  // the hand this far behind the surface under the cursor
+  double hand_t = 0;     // hand depth along the cursor ray [m]
+  double unit = 0;       // the probe glyphs' size unit
   std::vector<double> march_ms, shade_ms, overlay_ms;
   std::vector<double> full_march_ms, full_shade_ms, full_overlay_ms;  // frames drawn whole
   std::vector<double> full_render_ms, full_present_ms;
@@ -548,10 +494,9 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   long brushes_measured = 0;
   long events_submitted = 0;
   std::size_t next_event = 0;
-  int wait_frames = script.empty() ? 0 : script[0].after_frames;
+  int wait_frames = 0;
   // The script's clock (its waits' timeouts): simulated time on the simulated clock.
-  const Clock::time_point t_wall0 = Clock::now();
-  auto script_now_s = [&] { return o.sim_clock ? session->elapsed_s() : std::chrono::duration<double>(Clock::now() - t_wall0).count(); };
+  Clock::time_point t_wall0;
   double wait_since = 0;
   std::size_t shown_at_wait = 0;  // brushes that changed the picture when the wait began
   bool waiting = false;
@@ -560,461 +505,818 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
   std::vector<std::uint32_t> upscaled;
   std::array<int, 2> last_fb{0, 0};
   int frame = 0;
-  auto last_frame = Clock::now();
+  Clock::time_point last_frame;
   std::string status;
-  auto save = [&](const std::string& path) {
-    engine::Volume out = vol;
-    {
-      std::lock_guard<std::mutex> lock(feed.mu);
-      out.voxels = feed.values;
-    }
-    try {
-      io::save_vdb(out, path, io::SaveVdbOptions{});
-      status = "saved " + path;
-    } catch (const std::exception& e) {
-      status = std::string("save failed: ") + e.what();
-    }
-    log << "sculpt   " << status << "\n";
-  };
-  auto export_mesh = [&](const std::string& path) {
-    engine::Volume out = vol;
-    {
-      std::lock_guard<std::mutex> lock(feed.mu);
-      out.voxels = feed.values;
-    }
-    try {
-      const io::Mesh mesh = io::extract_mesh(out, live.iso);
-      const std::string ext = fs::path(path).extension().string();
-      if (ext == ".obj") io::write_obj(mesh, path);
-      else if (ext == ".ply") io::write_ply(mesh, path);
-      else io::write_stl_binary(mesh, path);
-      status = "exported " + path;
-    } catch (const std::exception& e) {
-      status = std::string("export failed: ") + e.what();
-    }
-    log << "sculpt   " << status << "\n";
-  };
-  const std::string export_path =
-      o.export_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.stl") : o.export_path;
-  const std::string save_path = o.save_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.vdb") : o.save_path;
-  auto handle_key = [&](const Input::Key& k) {
-    using K = session::EditEvent::Kind;
-    session::EditEvent e;
-    switch (k.key) {
-      case GLFW_KEY_1: tool.kind = session::BrushKind::kAdd; break;
-      case GLFW_KEY_2: tool.kind = session::BrushKind::kCarve; break;
-      case GLFW_KEY_3: tool.kind = session::BrushKind::kSmooth; break;
-      case GLFW_KEY_4: tool.kind = session::BrushKind::kDrill; break;
-      case GLFW_KEY_LEFT_BRACKET: step_radius(tool, false); break;
-      case GLFW_KEY_RIGHT_BRACKET: step_radius(tool, true); break;
-      case GLFW_KEY_MINUS: step_strength(tool, false); break;
-      case GLFW_KEY_EQUAL: step_strength(tool, true); break;
-      case GLFW_KEY_H: overlay = !overlay; break;
-      case GLFW_KEY_LEFT: camera.orbit(-5, 0); break;
-      case GLFW_KEY_RIGHT: camera.orbit(5, 0); break;
-      case GLFW_KEY_UP: camera.orbit(0, 5); break;
-      case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
-      case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
-      case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
-      case GLFW_KEY_R: camera.cam = run::default_camera(vol); break;
-      case GLFW_KEY_ESCAPE:
-      case GLFW_KEY_Q: glfwSetWindowShouldClose(window.handle(), GLFW_TRUE); break;
-      case GLFW_KEY_S:
-        if (k.ctrl) save(save_path);
-        break;
-      case GLFW_KEY_E:
-        if (k.ctrl) export_mesh(export_path);
-        break;
-      case GLFW_KEY_C:  // clip: cut away the half toward the eye, through the camera's target
-        if (style.clip) style.clip.reset();
-        else style.clip = engine::ClipPlane{camera.cam.target_m ? *camera.cam.target_m : vol.grid.centre_m(), -view.forward};
-        break;
-      case GLFW_KEY_Z:
-      case GLFW_KEY_Y:
-        if (!k.ctrl || stroke.open()) break;  // not in the middle of a stroke
-        e.kind = (k.key == GLFW_KEY_Y || k.shift) ? K::kRedo : K::kUndo;
-        if (session->submit(e)) ++events_submitted;
-        break;
-      default: break;
-    }
-  };
-
+  std::string export_path, save_path;
   // Dropped files load one at a time on a background thread while this session goes on (the
   // Stats panel shows the progress); one that loads ends this session and the next starts on
   // it; one that cannot be read shows its error and the session keeps its volume.
-  struct Loading {
-    std::string path;
-    Options next;
-    BackgroundLoad result;
-    Clock::time_point since;
-    int frame = 0;  // frames drawn when it started
-    bool sim_waited = false;  // the simulated clock waited for it once
-  };
   std::optional<Loading> loading;
   std::deque<std::string> drop_queue;
-  auto start_load = [&](const std::string& path) {
-    Options next = o;
-    next.input = path;
-    next.script.clear();
-    next.record.clear();
-    next.carried = nullptr;
-    if (fs::path(path).extension() == ".json") {
-      next.iso.reset();
-    } else {
-      next.iso = scene.hri.tau;
-      next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
-    }
-    log << "sculpt   loading " << path << "\n";
-    loading = Loading{path, next, BackgroundLoad([next] {
-                        const io::Scene sc = input_scene(next);
-                        auto c = std::make_shared<Carried>();
-                        c->volume = run::load_scene_volume(sc);
-                        const engine::Volume& v = c->volume;
-                        if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
-                          throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
-                                                   fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
-                        return c;
-                      }),
-                      Clock::now(), frame};
-  };
-  // True when a dropped file has loaded and this session should end for it.
-  auto poll_load = [&]() -> bool {
-    if (!loading && !drop_queue.empty()) {
-      start_load(drop_queue.front());
-      drop_queue.pop_front();
-    }
-    // The simulated clock waits for it (the same frame every run), for a minute at most: a
-    // reader blocked longer goes on in the background, as on the real clock.
-    if (loading && o.sim_clock && !loading->sim_waited) {
-      loading->sim_waited = true;
-      if (!loading->result.wait_for(60))
-        log << "sculpt   " << loading->path << " still loading after 60 s: the simulated clock goes on without it\n";
-    }
-    if (!loading || !loading->result.ready()) return false;
-    Loading done = std::move(*loading);
-    loading.reset();
-    try {
-      done.next.carried = done.result.get();
-    } catch (const std::exception& e) {
-      status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
-      log << "sculpt   " << status << "\n";
-      return false;
-    }
-    if (!reopen) return false;
-    *reopen = done.next;
-    log << "sculpt   opening " << done.path << " (loaded in " << fixed(ms_since(done.since) / 1e3, 2) << " s, "
-        << frame - done.frame << " frames drawn meanwhile)\n";
-    drop_queue.clear();
-    return true;
-  };
-  // The isovalue slider let go at `tau`: this session ends and the next one starts at tau
-  // with the volume as edited, the camera, the tool and the rest of the script.
-  auto restart_at = [&](double tau) -> bool {
-    iso_ctl.committed = false;
-    if (!(tau > vol.min_value && tau < vol.max_value) || tau == scene.hri.tau) {
-      iso_ctl.value = scene.hri.tau;
-      if (tau != scene.hri.tau) {
-        status = "isovalue " + fixed(tau, 1) + " is outside the volume's range (" + fixed(vol.min_value, 1) + ", " +
-                 fixed(vol.max_value, 1) + "): kept " + fixed(scene.hri.tau, 1);
-        log << "sculpt   " << status << "\n";
-      }
-      return false;
-    }
-    if (!reopen) return false;
-    // The volume as the session holds it once every edit asked for is applied: an open
-    // stroke is closed, and the queue drained (simulated: applied now; live: waited for).
-    std::vector<session::EditEvent> end;
-    stroke.frame(false, false, tool, Vec3{}, 0, 0, end);
-    for (const session::EditEvent& e : end)
-      if (session->submit(e)) ++events_submitted;
-    if (o.sim_clock) session->finish_simulated();
-    auto c = std::make_shared<Carried>();
-    c->volume = vol;
-    {
-      std::unique_lock<std::mutex> lock(feed.mu);
-      if (!feed.applied.wait_for(lock, std::chrono::seconds(30), [&] { return feed.events_done >= events_submitted; }))
-        log << "sculpt   isovalue " << tau << ": " << events_submitted - feed.events_done
-            << " edits were still not applied after 30 s: the new session starts without them\n";
-      c->volume.voxels = feed.values;
-    }
-    refresh_range(c->volume);
-    c->camera = camera.cam;
-    c->tool = tool;
-    c->script.assign(script.begin() + long(std::min(next_event, script.size())), script.end());
-    Options next = o;
-    next.iso = tau;
-    next.record.clear();
-    next.carried = std::move(c);
-    *reopen = next;
-    log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
-        << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
-    return true;
-  };
   bool restarting = false;  // the script goes on in the next session
-  const Clock::time_point t_start = Clock::now();
-  while (!window.should_close()) {
-    if (o.frames > 0 && frame >= o.frames) break;
-    glfwPollEvents();
-    const auto fb = window.framebuffer_size();
-    if (fb[0] == 0 || fb[1] == 0) {  // minimised: the session keeps running, nothing is drawn
-      glfwWaitEventsTimeout(0.05);
-      continue;
-    }
-    // The script: events due this frame (a wait holds it).
-    bool quit = false;
-    std::vector<std::string> shots;
-    while (next_event < script.size()) {
-      const InputEvent& ev = script[next_event];
-      if (wait_frames > 0) break;
-      using EK = InputEvent::Kind;
-      if (ev.kind == EK::kWait) {
-        if (!waiting) {
-          waiting = true;
-          wait_since = script_now_s();
-          shown_at_wait = latency_ms.size();
-        }
-        bool met;
-        if (ev.text == "contact") {
-          met = session->observe().contact;
-        } else if (ev.text == "change") {
-          met = latency_ms.size() > shown_at_wait;  // a brush that changed voxels, drawn
-        } else {
-          std::lock_guard<std::mutex> lock(feed.mu);
-          met = feed.events_done >= events_submitted && feed.pending.empty() && brushes_measured >= feed.brushes_done;
-        }
-        if (!met && script_now_s() - wait_since < ev.timeout_s) break;
-        if (!met) log << "script   event " << next_event << ": wait for " << ev.text << " timed out after " << ev.timeout_s << " s\n";
-        waiting = false;
-      }
-      switch (ev.kind) {
-        case EK::kCursor:
-          input.px = ev.xy[0] * (fb[0] - 1);
-          input.py = ev.xy[1] * (fb[1] - 1);
-          input.cursor_seen = true;
-          break;
-        case EK::kPress: input.down[ev.button] = true; break;
-        case EK::kRelease: input.down[ev.button] = false; break;
-        case EK::kScroll:
-          if (ev.ctrl) camera.zoom_by(std::pow(1.1, ev.xy[0]));
-          else input.scroll += ev.xy[0];
-          break;
-        case EK::kKey: input.keys.push_back({ev.key, ev.ctrl, ev.shift}); break;
-        case EK::kTool:
-          tool.kind = *tool_from_name(ev.text);
-          if (ev.radius_mm > 0) tool.radius_m = ev.radius_mm * 1e-3;
-          if (ev.strength >= 0) tool.strength = ev.strength;
-          break;
-        case EK::kOrbit: camera.orbit(ev.xy[0], ev.xy[1]); break;
-        case EK::kZoom: camera.zoom_by(ev.xy[0]); break;
-        case EK::kScreenshot: shots.push_back((shot_dir / ev.text).string()); break;
-        case EK::kResize:
-          glfwSetWindowSize(window.handle(), int(ev.xy[0]), int(ev.xy[1]));
-          if (o.sim_clock) wait_for_size(window, int(ev.xy[0]), int(ev.xy[1]));  // the same frame every run
-          break;
-        case EK::kQuit: quit = true; break;
-        case EK::kDrop: input.drops.push_back(ev.text); break;
-        case EK::kIso:
-          iso_ctl.value = ev.xy[0];
-          iso_ctl.committed = true;
-          break;
-        case EK::kWait: break;
-      }
-      ++next_event;
-      if (next_event < script.size()) wait_frames = script[next_event].after_frames;
-      if (iso_ctl.committed) break;  // the rest of the script runs in the restarted session
-    }
-    if (quit) break;
-    if (wait_frames > 0 && !waiting) --wait_frames;
+  Clock::time_point t_start;
+};
 
-    // Keys (before a restart: an undo in the same frame goes into the volume it carries),
-    // camera drags, the wheel, dropped files.
-    for (const Input::Key& k : input.keys) handle_key(k);
-    input.keys.clear();
-    if (iso_ctl.committed && restart_at(iso_ctl.value)) {
-      restarting = true;
-      break;
-    }
-    for (const std::string& path : input.drops) drop_queue.push_back(path);
-    input.drops.clear();
-    if (poll_load()) break;
-    const bool ctrl = !o.sim_clock && (glfwGetKey(window.handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
-                                       glfwGetKey(window.handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS);
-    const double dx = input.px - input.last_px, dy = input.py - input.last_py;
-    if (input.down[1]) camera.orbit(-0.3 * dx, 0.3 * dy);
-    if (input.down[2]) camera.pan(view, vol.grid, dx / fb[1], dy / fb[1]);
-    input.last_px = input.px;
-    input.last_py = input.py;
-    if (input.scroll != 0) {
-      if (ctrl) camera.zoom_by(std::pow(1.1, input.scroll));
-      else push_m = std::clamp(push_m + 1e-3 * input.scroll, -0.02, 0.05);
-      input.scroll = 0;
-    }
-    view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
-
-    // The hand: on the cursor's ray, push_m behind the surface the last frame showed there.
-    const Ray ray = cursor_ray(view, fb[0], fb[1], input.px, input.py);
-    const int rw = std::max(1, int(std::lround(fb[0] * o.render_scale))), rh = std::max(1, int(std::lround(fb[1] * o.render_scale)));
-    if (img.width == rw && img.height == rh) {
-      const int cx = std::clamp(int(std::lround(input.px * rw / fb[0])), 0, rw - 1);
-      const int cy = std::clamp(int(std::lround(input.py * rh / fb[1])), 0, rh - 1);
-      const float t = caster.last_depth(cx, cy);
-      if (t > 0) hand_t = double(t) + push_m;
-    }
-    const Vec3 hand_world = ray.origin + ray.dir * hand_t;
-    if (input.cursor_seen && mouse) mouse_device.set_hand_target(xf.to_device(hand_world));
-    if (input.cursor_seen && o.sim_clock) sim_hand.waypoints.front().pos_m = hand_world;
-
-    // Tools: one application per frame while the left button is held and the probe touches.
-    const session::Observed obs = session->observe();
-    const auto now = Clock::now();
-    const double dt_s = o.sim_clock ? sim_frame_s : std::chrono::duration<double>(now - last_frame).count();
-    std::vector<session::EditEvent> evs;
-    stroke.frame(input.down[0], obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
-    for (const session::EditEvent& e : evs) {
-      if (!session->submit(e)) continue;
-      ++events_submitted;
-      if (e.kind == session::EditEvent::Kind::kBrush) brush_submitted.push_back(Clock::now());
-    }
-    // The simulated clock: this frame's ticks (the edits submitted so far are applied after
-    // the first of them; on_applied feeds the picture on this thread).
-    if (o.sim_clock) session->step_simulated(sim_run, sim_ticks_per_frame);
-
-    // The picture follows the applied edits: only the changed bricks are uploaded. A brush
-    // submitted this frame is waited for (at most --edit-wait-ms) so that this frame shows it.
-    long drawn_brushes;
-    {
-      std::unique_lock<std::mutex> lock(feed.mu);
-      const long want = long(brush_submitted.size());
-      if (o.edit_wait_ms > 0 && feed.brushes_done < want)
-        feed.applied.wait_for(lock, std::chrono::duration<double, std::milli>(o.edit_wait_ms),
-                              [&] { return feed.brushes_done >= want; });
-      if (!feed.pending.empty()) {
-        const auto t0 = Clock::now();
-        caster.update(feed.values, feed.pending);
-        update_ms.push_back(ms_since(t0));
-        feed.pending.clear();
-      }
-      drawn_brushes = feed.brushes_done;
-      if (!feed.last_error.empty()) {
-        status = "edit refused: " + feed.last_error;
-        log << "sculpt   " << status << "\n";
-        feed.last_error.clear();
-      }
-    }
-    const auto r0 = Clock::now();
-    const std::vector<gpu::RaycastPrim> prims =
-        overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
-    // At the window's size the picture goes from the caster's buffer straight into the
-    // swapchain image, packed in its byte order (no host copy); scaled, through the host.
-    const bool direct = rw == fb[0] && rh == fb[1];
-    caster.set_in_place(direct);
-    caster.set_bgra(direct && window.bgra());
-    img = caster.render(view, style, rw, rh, prims);
-    render_ms.push_back(ms_since(r0));
-    if (img.march_ms >= 0) {
-      march_ms.push_back(img.march_ms);
-      shade_ms.push_back(img.shade_ms);
-      overlay_ms.push_back(img.overlay_ms);
-      if (!img.reused) {
-        full_march_ms.push_back(img.march_ms);
-        full_shade_ms.push_back(img.shade_ms);
-        full_overlay_ms.push_back(img.overlay_ms);
-      }
-    }
-    const auto p0 = Clock::now();
-    const std::vector<std::uint32_t>* shown_px = &img.rgba;
-    if (direct && !shots.empty()) {  // a screenshot this frame: the picture to the host
-      img.rgba = caster.last_rgba();
-    } else if (!direct) {  // a lower render scale: nearest-neighbour up to the window
-      upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
-      for (int y = 0; y < fb[1]; ++y) {
-        const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
-        for (int x = 0; x < fb[0]; ++x) upscaled[std::size_t(y) * std::size_t(fb[0]) + std::size_t(x)] = img.rgba[sy + std::size_t(std::min(rw - 1, x * rw / fb[0]))];
-      }
-      shown_px = &upscaled;
-    }
+Sculpt::~Sculpt() {
 #if ISOTOUCH_WITH_IMGUI
-    if (panels) {
-      panel.frame_ms = frame_ms.empty() ? 0 : frame_ms.back();
-      panel.force_n = norm(obs.force_n);
-      panel.contact = obs.contact;
-      panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
-                           : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
-      panel.status = status;
-      panel.loading = loading ? loading->path : std::string();
-      panel.loading_s = loading ? ms_since(loading->since) / 1e3 : 0.0;
-      panels->build(tool, iso_ctl, panel, overlay);
-    }
+  g_panels = nullptr;
 #endif
-    const bool shown = direct ? window.present(caster.image_buffer(), fb[0], fb[1]) : window.present(*shown_px, fb[0], fb[1]);
-    present_ms.push_back(ms_since(p0));
-    if (!img.reused) {
-      full_render_ms.push_back(render_ms.back());
-      full_present_ms.push_back(present_ms.back());
-    }
-    if (shown || o.sim_clock) {  // simulated: drawn counts as shown (a recreated swapchain's timing is the X server's)
-      std::lock_guard<std::mutex> lock(feed.mu);
-      for (; brushes_measured < drawn_brushes; ++brushes_measured)
-        if (feed.brush_changed[std::size_t(brushes_measured)])
-          latency_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - brush_submitted[std::size_t(brushes_measured)]).count());
-    }
-    for (const std::string& s : shots) {
-      try {
-        run::write_png(s, fb[0], fb[1], *shown_px);
-        log << "sculpt   screenshot " << s << "\n";
-      } catch (const std::exception& e) {
-        log << "isotouch-sculpt: " << e.what() << "\n";
-        code = 1;
-      }
-    }
-    last_fb = fb;
-    const auto end = Clock::now();
-    if (frame > 0) {
-      frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
-      (img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
-    }
-    last_frame = end;
-    ++frame;
-    if (frame % 15 == 0) {
-      const session::LiveStats st = session->stats(kPanelLatencies);
-      refresh_servo(panel, st, std::chrono::duration<double>(end - panel_refreshed).count());
-      panel_refreshed = end;
-      std::ostringstream title;
-      title << "isotouch-sculpt: " << scene.name << " | " << tool_line(tool) << " | |F| " << fixed(norm(obs.force_n), 2)
-            << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
-            << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed"
-            << (mouse ? std::string() : std::string(" | device ") + servo::to_string(session->servo_thread()->device_status()))
-            << (loading ? " | loading " + loading->path : std::string()) << (status.empty() ? "" : " | " + status);
-      glfwSetWindowTitle(window.handle(), title.str().c_str());
+  if (g_input == &input) g_input = nullptr;
+}
+
+// --- set-up ------------------------------------------------------------------------------
+
+/// The scene, the volume and the script.
+bool Sculpt::load_input() {
+  try {
+    if (o.carried) script = o.carried->script;
+    else if (!o.script.empty()) script = load_input_script(o.script);
+    else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
+    if (!o.record.empty() && fs::path(o.input).extension() != ".json")
+      throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
+    scene = input_scene(o);
+    vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
+    if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
+      throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
+                               fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
+                               ": there is no isosurface");
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    return false;
+  }
+  shot_dir = o.screenshot.empty() ? fs::path(".") : fs::path(o.screenshot).parent_path();
+  return true;
+}
+
+/// The camera, and the mouse's probe at rest just outside the volume's box in front of it.
+bool Sculpt::place_probe() {
+  xf.scale = scene.workspace_scale;
+  xf.translation_m = vol.grid.centre_m();
+  camera.cam = o.carried && o.carried->camera ? *o.carried->camera : run::default_camera(vol);
+  view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
+  mouse_device.emplace(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
+  mouse = o.haptic == "mouse";
+  if (o.sim_clock && !mouse) {
+    log << "isotouch-sculpt: --sim-clock runs the mouse probe on a simulated clock; --haptic " << o.haptic
+        << " is a device in real time (leave out one of them)\n";
+    return false;
+  }
+  return true;
+}
+
+/// GLFW, the Vulkan context with a swapchain, the window and its input callbacks.
+bool Sculpt::open_window() {
+  auto exts = init_glfw();
+  if (!exts) {
+    log << "isotouch-sculpt: " << exts.error << "\n";
+    return false;
+  }
+  glfw.up = true;
+  engine::ContextOptions co;
+  co.device = o.device;
+  co.validation = o.validation;
+  co.instance_extensions = *exts.value;
+  co.swapchain = true;
+  auto ctx = engine::VulkanContext::create(co);
+  if (!ctx) {
+    log << "isotouch-sculpt: " << ctx.error << "\n";
+    return false;
+  }
+  vk = std::move(*ctx.value);
+  auto win = Window::create(*vk, o.width, o.height, "isotouch-sculpt: " + scene.name);
+  if (!win) {
+    log << "isotouch-sculpt: " << win.error << "\n";
+    return false;
+  }
+  window = std::move(*win.value);
+  g_input = &input;
+  if (!o.sim_clock) {  // on the simulated clock the script is the only input
+    glfwSetCursorPosCallback(window->handle(), on_cursor);
+    glfwSetMouseButtonCallback(window->handle(), on_button);
+    glfwSetScrollCallback(window->handle(), on_scroll);
+    glfwSetKeyCallback(window->handle(), on_key);
+    glfwSetDropCallback(window->handle(), on_drop);
+    glfwSetCharCallback(window->handle(), on_char);
+  }
+  return true;
+}
+
+/// The Dear ImGui panels (a build with them, unless --no-overlay); one that cannot start is a note.
+void Sculpt::open_panels() {
+#if ISOTOUCH_WITH_IMGUI
+  if (o.overlay) {
+    auto made = Overlay::create(*vk, *window);
+    if (made) {
+      panels = std::move(*made.value);
+      log << "overlay  " << Overlay::version() << "\n";
+    } else {
+      log << "overlay  not drawn: " << made.error << "\n";
     }
   }
-  // --frames reached while a dropped file loads: it opens next, as if it had loaded in time.
+  g_panels = panels.get();
+#endif
+}
+
+/// The edit session on the volume, its first snapshot, the renderer, and the ray caster on the
+/// raw volume at the scene's isovalue (what `isotouch render` draws).
+bool Sculpt::open_edits() {
+  live.passes = run::scene_passes(scene);
+  live.iso = core::Isosurface{scene.hri.tau, scene.hri.inside};
+  live.background = float(live.iso.outside_value(vol.min_value, vol.max_value));
+  live.format = run::scene_sample_format(scene);
+  try {
+    edits = std::make_unique<session::EditSession>(engine::Volume(vol), nullptr, live, scene.edits.history_limit_mib);
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << o.input << ": " << e.what() << "\n";
+    return false;
+  }
+  buffer.publish(edits->current());
+  renderer.emplace(scene.hri);
+  feed.values = vol.voxels;
+  auto rc = engine::RayCaster::create(*vk, run::scene_raycast_field(scene, vol));
+  if (!rc) {
+    log << "isotouch-sculpt: " << rc.error << "\n";
+    return false;
+  }
+  caster = std::move(*rc.value);
+  return true;
+}
+
+/// The live session's configuration: the servo, the recording, the picture's feed.
+session::LiveSessionConfig Sculpt::session_config() {
+  session::LiveSessionConfig cfg;
+  cfg.servo.rate_hz = scene.hri.rate_hz;
+  cfg.servo.sched_fifo = o.sched_fifo;
+  cfg.servo.pin_cpu = o.sched_fifo;
+  cfg.servo.lock_memory = o.sched_fifo;
+  cfg.servo.world_T_device = xf;
+  cfg.record_path = o.record;
+  if (!o.record.empty()) {
+    cfg.record_header.scene_path = fs::absolute(scene.file).string();
+    std::ifstream in(scene.file, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    cfg.record_header.scene_text = text.str();
+    cfg.record_header.rate_hz = scene.hri.rate_hz;
+    cfg.record_header.volume_crc32 = io::volume_crc32(vol);
+  }
+  cfg.on_applied = picture_feeder(feed, edits.get());
+  return cfg;
+}
+
+/// A --haptic device (the mouse's needs nothing more).
+bool Sculpt::open_device() {
+  if (mouse) return true;
+  try {
+    run::DeviceSetup ds;
+    ds.scene = &scene;
+    ds.volume = &vol;
+    ds.hri = scene.hri;
+    ds.world_T_device = xf;
+    ds.start_world_m = start_world;
+    haptic = run::open_haptic_device(o.haptic, ds, o.sched_fifo ? 70 : 0);
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << " (or mouse, the default)\n";
+    return false;
+  }
+  log << "device   " << haptic.description << "\n";
+  if (haptic.report && !haptic.report->realtime_note().empty()) log << "device   " << haptic.report->realtime_note() << "\n";
+  return true;
+}
+
+/// The live session, started on its own threads, or stepped by the frame loop on the simulated clock.
+bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
+  servo::HapticDeviceIO& device = mouse ? static_cast<servo::HapticDeviceIO&>(*mouse_device) : *haptic.io;
+  try {
+    if (o.sim_clock) session = std::make_unique<session::LiveSession>(edits.get(), buffer, *renderer, cfg);
+    else session = std::make_unique<session::LiveSession>(*edits, buffer, *renderer, device, cfg);
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    return false;
+  }
+  sim_device.emplace(scene.device, xf.to_device(start_world));
+  sim_hand.waypoints = {{0.0, start_world}};
+  sim_run.device = &*sim_device;
+  sim_run.script = &sim_hand;
+  sim_run.world_T_device = xf;
+  sim_ticks_per_frame = std::max(1L, std::lround(o.sim_frame_ms * 1e-3 * scene.hri.rate_hz));
+  sim_frame_s = double(sim_ticks_per_frame) / scene.hri.rate_hz;
+  if (!o.sim_clock) {
+    const std::string note = session->start();
+    if (!note.empty()) log << "servo    " << note << "\n";
+  }
+  log << "sculpt   " << scene.name << ": " << vol.grid.dims[0] << "x" << vol.grid.dims[1] << "x" << vol.grid.dims[2]
+      << " voxels, isovalue " << scene.hri.tau << ", servo " << scene.hri.rate_hz << " Hz, device " << vk->info().name
+      << ", present mode " << window->present_mode() << "\n";
+  if (o.sim_clock)
+    log << "sculpt   simulated clock: " << sim_ticks_per_frame << " servo ticks (" << fixed(sim_frame_s * 1e3, 2)
+        << " ms) per frame, on the window's thread\n";
+  return true;
+}
+
+/// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.
+void Sculpt::init_tools() {
+  if (o.carried && o.carried->tool) tool = *o.carried->tool;
+  tool.targets = session::default_targets(vol, live.iso);
+  if (!(o.carried && o.carried->tool)) {
+    const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
+    tool.radius_m = std::max(4e-3, 2.5 * sp);
+  }
+  iso_ctl = IsoControl{scene.hri.tau, vol.min_value, vol.max_value, false};
+  panel.servo_target_hz = scene.hri.rate_hz;
+  panel.volume = volume_line(vol);
+  panel_refreshed = Clock::now();
+  style.tile_starts = o.tile_starts;
+  hand_t = norm(vol.grid.centre_m() - view.eye);
+  unit = run::probe_size_m(vol.grid);
+  wait_frames = script.empty() ? 0 : script[0].after_frames;
+  t_wall0 = Clock::now();
+  last_frame = Clock::now();
+  export_path = o.export_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.stl") : o.export_path;
+  save_path = o.save_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.vdb") : o.save_path;
+}
+
+// --- the frame loop ------------------------------------------------------------------------
+
+void Sculpt::frame_loop() {
+  t_start = Clock::now();
+  while (!window->should_close()) {
+    if (o.frames > 0 && frame >= o.frames) break;
+    if (!frame_step()) break;
+  }
+}
+
+/// One frame: the script, the input, the hand, the tools, the edits, the picture, the window.
+bool Sculpt::frame_step() {
+  glfwPollEvents();
+  FrameSize f;
+  f.fb = window->framebuffer_size();
+  if (f.fb[0] == 0 || f.fb[1] == 0) {  // minimised: the session keeps running, nothing is drawn
+    glfwWaitEventsTimeout(0.05);
+    return true;
+  }
+  std::vector<std::string> shots;
+  if (run_script(f.fb, shots)) return false;
+  if (wait_frames > 0 && !waiting) --wait_frames;
+  if (take_input(f.fb)) return false;
+  view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  f.rw = std::max(1, int(std::lround(f.fb[0] * o.render_scale)));
+  f.rh = std::max(1, int(std::lround(f.fb[1] * o.render_scale)));
+  const Vec3 hand_world = steer_hand(f);
+  const session::Observed obs = session->observe();
+  apply_tools(obs);
+  const long drawn_brushes = take_edits();
+  render_picture(obs, hand_world, f);
+  show(f, shots, drawn_brushes);
+  end_frame(obs, f.fb);
+  return true;
+}
+
+double Sculpt::script_now_s() const {
+  return o.sim_clock ? session->elapsed_s() : std::chrono::duration<double>(Clock::now() - t_wall0).count();
+}
+
+/// The script's events due this frame (a wait holds it). True when the script quits.
+bool Sculpt::run_script(const std::array<int, 2>& fb, std::vector<std::string>& shots) {
+  bool quit = false;
+  while (next_event < script.size()) {
+    const InputEvent& ev = script[next_event];
+    if (wait_frames > 0) break;
+    if (ev.kind == InputEvent::Kind::kWait && script_waits(ev)) break;
+    apply_event(ev, fb, shots, quit);
+    ++next_event;
+    if (next_event < script.size()) wait_frames = script[next_event].after_frames;
+    if (iso_ctl.committed) break;  // the rest of the script runs in the restarted session
+  }
+  return quit;
+}
+
+/// A wait event: true while it holds the script (not met, not timed out).
+bool Sculpt::script_waits(const InputEvent& ev) {
+  if (!waiting) {
+    waiting = true;
+    wait_since = script_now_s();
+    shown_at_wait = latency_ms.size();
+  }
+  bool met;
+  if (ev.text == "contact") {
+    met = session->observe().contact;
+  } else if (ev.text == "change") {
+    met = latency_ms.size() > shown_at_wait;  // a brush that changed voxels, drawn
+  } else {
+    std::lock_guard<std::mutex> lock(feed.mu);
+    met = feed.events_done >= events_submitted && feed.pending.empty() && brushes_measured >= feed.brushes_done;
+  }
+  if (!met && script_now_s() - wait_since < ev.timeout_s) return true;
+  if (!met) log << "script   event " << next_event << ": wait for " << ev.text << " timed out after " << ev.timeout_s << " s\n";
+  waiting = false;
+  return false;
+}
+
+/// One script event: the input it stands for, or what it asks of the camera, tool or window.
+void Sculpt::apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std::vector<std::string>& shots, bool& quit) {
+  using EK = InputEvent::Kind;
+  switch (ev.kind) {
+    case EK::kCursor:
+      input.px = ev.xy[0] * (fb[0] - 1);
+      input.py = ev.xy[1] * (fb[1] - 1);
+      input.cursor_seen = true;
+      break;
+    case EK::kPress: input.down[ev.button] = true; break;
+    case EK::kRelease: input.down[ev.button] = false; break;
+    case EK::kScroll:
+      if (ev.ctrl) camera.zoom_by(std::pow(1.1, ev.xy[0]));
+      else input.scroll += ev.xy[0];
+      break;
+    case EK::kKey: input.keys.push_back({ev.key, ev.ctrl, ev.shift}); break;
+    case EK::kTool:
+      tool.kind = *tool_from_name(ev.text);
+      if (ev.radius_mm > 0) tool.radius_m = ev.radius_mm * 1e-3;
+      if (ev.strength >= 0) tool.strength = ev.strength;
+      break;
+    case EK::kOrbit: camera.orbit(ev.xy[0], ev.xy[1]); break;
+    case EK::kZoom: camera.zoom_by(ev.xy[0]); break;
+    case EK::kScreenshot: shots.push_back((shot_dir / ev.text).string()); break;
+    case EK::kResize:
+      glfwSetWindowSize(window->handle(), int(ev.xy[0]), int(ev.xy[1]));
+      if (o.sim_clock) wait_for_size(*window, int(ev.xy[0]), int(ev.xy[1]));  // the same frame every run
+      break;
+    case EK::kQuit: quit = true; break;
+    case EK::kDrop: input.drops.push_back(ev.text); break;
+    case EK::kIso:
+      iso_ctl.value = ev.xy[0];
+      iso_ctl.committed = true;
+      break;
+    case EK::kWait: break;
+  }
+}
+
+/// Keys (before a restart: an undo in the same frame goes into the volume it carries), the
+/// isovalue, dropped files, camera drags and the wheel. True when this session ends.
+bool Sculpt::take_input(const std::array<int, 2>& fb) {
+  for (const Input::Key& k : input.keys) handle_key(k);
+  input.keys.clear();
+  if (iso_ctl.committed && restart_at(iso_ctl.value)) {
+    restarting = true;
+    return true;
+  }
+  for (const std::string& path : input.drops) drop_queue.push_back(path);
+  input.drops.clear();
+  if (poll_load()) return true;
+  steer_camera(fb);
+  return false;
+}
+
+void Sculpt::handle_key(const Input::Key& k) {
+  using K = session::EditEvent::Kind;
+  session::EditEvent e;
+  switch (k.key) {
+    case GLFW_KEY_1: tool.kind = session::BrushKind::kAdd; break;
+    case GLFW_KEY_2: tool.kind = session::BrushKind::kCarve; break;
+    case GLFW_KEY_3: tool.kind = session::BrushKind::kSmooth; break;
+    case GLFW_KEY_4: tool.kind = session::BrushKind::kDrill; break;
+    case GLFW_KEY_LEFT_BRACKET: step_radius(tool, false); break;
+    case GLFW_KEY_RIGHT_BRACKET: step_radius(tool, true); break;
+    case GLFW_KEY_MINUS: step_strength(tool, false); break;
+    case GLFW_KEY_EQUAL: step_strength(tool, true); break;
+    case GLFW_KEY_H: overlay = !overlay; break;
+    case GLFW_KEY_LEFT: camera.orbit(-5, 0); break;
+    case GLFW_KEY_RIGHT: camera.orbit(5, 0); break;
+    case GLFW_KEY_UP: camera.orbit(0, 5); break;
+    case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
+    case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
+    case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
+    case GLFW_KEY_R: camera.cam = run::default_camera(vol); break;
+    case GLFW_KEY_ESCAPE:
+    case GLFW_KEY_Q: glfwSetWindowShouldClose(window->handle(), GLFW_TRUE); break;
+    case GLFW_KEY_S:
+      if (k.ctrl) save(save_path);
+      break;
+    case GLFW_KEY_E:
+      if (k.ctrl) export_mesh(export_path);
+      break;
+    case GLFW_KEY_C:  // clip: cut away the half toward the eye, through the camera's target
+      if (style.clip) style.clip.reset();
+      else style.clip = engine::ClipPlane{camera.cam.target_m ? *camera.cam.target_m : vol.grid.centre_m(), -view.forward};
+      break;
+    case GLFW_KEY_Z:
+    case GLFW_KEY_Y:
+      if (!k.ctrl || stroke.open()) break;  // not in the middle of a stroke
+      e.kind = (k.key == GLFW_KEY_Y || k.shift) ? K::kRedo : K::kUndo;
+      if (session->submit(e)) ++events_submitted;
+      break;
+    default: break;
+  }
+}
+
+/// Right drag orbits, middle drag pans, the wheel pushes the hand deeper (Ctrl: zooms).
+void Sculpt::steer_camera(const std::array<int, 2>& fb) {
+  const bool ctrl = !o.sim_clock && (glfwGetKey(window->handle(), GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
+                                     glfwGetKey(window->handle(), GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS);
+  const double dx = input.px - input.last_px, dy = input.py - input.last_py;
+  if (input.down[1]) camera.orbit(-0.3 * dx, 0.3 * dy);
+  if (input.down[2]) camera.pan(view, vol.grid, dx / fb[1], dy / fb[1]);
+  input.last_px = input.px;
+  input.last_py = input.py;
+  if (input.scroll != 0) {
+    if (ctrl) camera.zoom_by(std::pow(1.1, input.scroll));
+    else push_m = std::clamp(push_m + 1e-3 * input.scroll, -0.02, 0.05);
+    input.scroll = 0;
+  }
+}
+
+/// The hand: on the cursor's ray, push_m behind the surface the last frame showed there.
+Vec3 Sculpt::steer_hand(const FrameSize& f) {
+  const Ray ray = cursor_ray(view, f.fb[0], f.fb[1], input.px, input.py);
+  if (img.width == f.rw && img.height == f.rh) {
+    const int cx = std::clamp(int(std::lround(input.px * f.rw / f.fb[0])), 0, f.rw - 1);
+    const int cy = std::clamp(int(std::lround(input.py * f.rh / f.fb[1])), 0, f.rh - 1);
+    const float t = caster->last_depth(cx, cy);
+    if (t > 0) hand_t = double(t) + push_m;
+  }
+  const Vec3 hand_world = ray.origin + ray.dir * hand_t;
+  if (input.cursor_seen && mouse) mouse_device->set_hand_target(xf.to_device(hand_world));
+  if (input.cursor_seen && o.sim_clock) sim_hand.waypoints.front().pos_m = hand_world;
+  return hand_world;
+}
+
+/// Tools: one application per frame while the left button is held and the probe touches;
+/// on the simulated clock, this frame's ticks (the edits submitted so far are applied after
+/// the first of them; on_applied feeds the picture on this thread).
+void Sculpt::apply_tools(const session::Observed& obs) {
+  const auto now = Clock::now();
+  const double dt_s = o.sim_clock ? sim_frame_s : std::chrono::duration<double>(now - last_frame).count();
+  std::vector<session::EditEvent> evs;
+  stroke.frame(input.down[0], obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
+  for (const session::EditEvent& e : evs) {
+    if (!session->submit(e)) continue;
+    ++events_submitted;
+    if (e.kind == session::EditEvent::Kind::kBrush) brush_submitted.push_back(Clock::now());
+  }
+  if (o.sim_clock) session->step_simulated(sim_run, sim_ticks_per_frame);
+}
+
+/// The picture follows the applied edits: only the changed bricks are uploaded. A brush
+/// submitted this frame is waited for (at most --edit-wait-ms) so that this frame shows it.
+/// Returns the brushes applied (or refused) so far, which this frame shows.
+long Sculpt::take_edits() {
+  std::unique_lock<std::mutex> lock(feed.mu);
+  const long want = long(brush_submitted.size());
+  if (o.edit_wait_ms > 0 && feed.brushes_done < want)
+    feed.applied.wait_for(lock, std::chrono::duration<double, std::milli>(o.edit_wait_ms),
+                          [&] { return feed.brushes_done >= want; });
+  if (!feed.pending.empty()) {
+    const auto t0 = Clock::now();
+    caster->update(feed.values, feed.pending);
+    update_ms.push_back(ms_since(t0));
+    feed.pending.clear();
+  }
+  if (!feed.last_error.empty()) {
+    status = "edit refused: " + feed.last_error;
+    log << "sculpt   " << status << "\n";
+    feed.last_error.clear();
+  }
+  return feed.brushes_done;
+}
+
+/// The ray caster's picture with the probe glyphs, and its timings.
+void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f) {
+  const auto r0 = Clock::now();
+  const std::vector<gpu::RaycastPrim> prims =
+      overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
+  caster->set_in_place(f.direct());
+  caster->set_bgra(f.direct() && window->bgra());
+  img = caster->render(view, style, f.rw, f.rh, prims);
+  render_ms.push_back(ms_since(r0));
+  if (img.march_ms >= 0) {
+    march_ms.push_back(img.march_ms);
+    shade_ms.push_back(img.shade_ms);
+    overlay_ms.push_back(img.overlay_ms);
+    if (!img.reused) {
+      full_march_ms.push_back(img.march_ms);
+      full_shade_ms.push_back(img.shade_ms);
+      full_overlay_ms.push_back(img.overlay_ms);
+    }
+  }
+}
+
+/// The picture into the window with the panels, edit-to-pixels of the brushes it shows for
+/// the first time, and the screenshots the script asked for this frame.
+void Sculpt::show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes) {
+  const auto p0 = Clock::now();
+  const std::vector<std::uint32_t>& shown_px = host_picture(f, !shots.empty());
+  build_panels();
+  const bool shown = f.direct() ? window->present(caster->image_buffer(), f.fb[0], f.fb[1])
+                                : window->present(shown_px, f.fb[0], f.fb[1]);
+  present_ms.push_back(ms_since(p0));
+  if (!img.reused) {
+    full_render_ms.push_back(render_ms.back());
+    full_present_ms.push_back(present_ms.back());
+  }
+  if (shown || o.sim_clock) measure_latency(drawn_brushes);  // simulated: drawn counts as shown (a recreated swapchain's timing is the X server's)
+  write_shots(shots, f.fb, shown_px);
+}
+
+/// The picture on the host when it is needed there: read back for a screenshot at the
+/// window's size, or scaled up (nearest neighbour) from a lower render scale.
+const std::vector<std::uint32_t>& Sculpt::host_picture(const FrameSize& f, bool shot) {
+  if (f.direct()) {
+    if (shot) img.rgba = caster->last_rgba();
+    return img.rgba;
+  }
+  const auto& fb = f.fb;
+  const int rw = f.rw, rh = f.rh;
+  upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
+  for (int y = 0; y < fb[1]; ++y) {
+    const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
+    for (int x = 0; x < fb[0]; ++x) upscaled[std::size_t(y) * std::size_t(fb[0]) + std::size_t(x)] = img.rgba[sy + std::size_t(std::min(rw - 1, x * rw / fb[0]))];
+  }
+  return upscaled;
+}
+
+/// This frame's Dear ImGui panels (drawn by the window's next present). Their figures change
+/// every 15 frames (refresh_panel), so that the panels are built again only then, or when
+/// the user touches them or a message or load changes.
+void Sculpt::build_panels() {
+#if ISOTOUCH_WITH_IMGUI
+  if (!panels) return;
+  if (panel.status != status) panel.status = status;
+  if (loading) {
+    if (panel.loading != loading->path) panel.loading = loading->path;
+    panel.loading_s = ms_since(loading->since) / 1e3;
+  } else {
+    panel.loading.clear();
+    panel.loading_s = 0;
+  }
+  panels->build(tool, iso_ctl, panel, overlay);
+#endif
+}
+
+/// The panels' frame time (the mean since the last refresh), force and device status.
+void Sculpt::refresh_panel(const session::Observed& obs, std::size_t frames) {
+  const std::size_t n = std::min(frames, frame_ms.size());
+  double sum = 0;
+  for (std::size_t i = frame_ms.size() - n; i < frame_ms.size(); ++i) sum += frame_ms[i];
+  panel.frame_ms = n > 0 ? sum / double(n) : 0;
+  panel.force_n = norm(obs.force_n);
+  panel.contact = obs.contact;
+  panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")
+                       : haptic.description + ": " + servo::to_string(session->servo_thread()->device_status());
+}
+
+/// Edit-to-pixels: from each brush's submission to the first frame that shows it.
+void Sculpt::measure_latency(long drawn_brushes) {
+  std::lock_guard<std::mutex> lock(feed.mu);
+  for (; brushes_measured < drawn_brushes; ++brushes_measured)
+    if (feed.brush_changed[std::size_t(brushes_measured)])
+      latency_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - brush_submitted[std::size_t(brushes_measured)]).count());
+}
+
+void Sculpt::write_shots(const std::vector<std::string>& shots, const std::array<int, 2>& fb, const std::vector<std::uint32_t>& px) {
+  for (const std::string& s : shots) {
+    try {
+      run::write_png(s, fb[0], fb[1], px);
+      log << "sculpt   screenshot " << s << "\n";
+    } catch (const std::exception& e) {
+      log << "isotouch-sculpt: " << e.what() << "\n";
+      code = 1;
+    }
+  }
+}
+
+/// The frame's time; every 15 frames the servo's panel figures and the window's title.
+void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& fb) {
+  last_fb = fb;
+  const auto end = Clock::now();
+  if (frame > 0) {
+    frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
+    (img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
+  }
+  last_frame = end;
+  ++frame;
+  if (frame == 2) refresh_panel(obs, 1);  // the first frame time, until the first refresh
+  if (frame % 15 == 0) {
+    refresh_panel(obs, 15);
+    refresh_title(obs, end);
+  }
+}
+
+void Sculpt::refresh_title(const session::Observed& obs, Clock::time_point now) {
+  const session::LiveStats st = session->stats(kPanelLatencies);
+  refresh_servo(panel, st, std::chrono::duration<double>(now - panel_refreshed).count());
+  panel_refreshed = now;
+  std::ostringstream title;
+  title << "isotouch-sculpt: " << scene.name << " | " << tool_line(tool) << " | |F| " << fixed(norm(obs.force_n), 2)
+        << " N" << (obs.contact ? " contact" : "") << " | frame " << fixed(frame_ms.empty() ? 0 : frame_ms.back())
+        << " ms | servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed"
+        << (mouse ? std::string() : std::string(" | device ") + servo::to_string(session->servo_thread()->device_status()))
+        << (loading ? " | loading " + loading->path : std::string()) << (status.empty() ? "" : " | " + status);
+  glfwSetWindowTitle(window->handle(), title.str().c_str());
+}
+
+// --- save, export, dropped files, the isovalue ---------------------------------------------
+
+/// The volume as the picture shows it (the applied edits).
+engine::Volume Sculpt::edited_volume() {
+  engine::Volume out = vol;
+  std::lock_guard<std::mutex> lock(feed.mu);
+  out.voxels = feed.values;
+  return out;
+}
+
+void Sculpt::save(const std::string& path) {
+  const engine::Volume out = edited_volume();
+  try {
+    io::save_vdb(out, path, io::SaveVdbOptions{});
+    status = "saved " + path;
+  } catch (const std::exception& e) {
+    status = std::string("save failed: ") + e.what();
+  }
+  log << "sculpt   " << status << "\n";
+}
+
+void Sculpt::export_mesh(const std::string& path) {
+  const engine::Volume out = edited_volume();
+  try {
+    const io::Mesh mesh = io::extract_mesh(out, live.iso);
+    const std::string ext = fs::path(path).extension().string();
+    if (ext == ".obj") io::write_obj(mesh, path);
+    else if (ext == ".ply") io::write_ply(mesh, path);
+    else io::write_stl_binary(mesh, path);
+    status = "exported " + path;
+  } catch (const std::exception& e) {
+    status = std::string("export failed: ") + e.what();
+  }
+  log << "sculpt   " << status << "\n";
+}
+
+/// Starts loading a dropped file (a scene, or a volume at this session's isovalue and inside).
+void Sculpt::start_load(const std::string& path) {
+  Options next = o;
+  next.input = path;
+  next.script.clear();
+  next.record.clear();
+  next.carried = nullptr;
+  if (fs::path(path).extension() == ".json") {
+    next.iso.reset();
+  } else {
+    next.iso = scene.hri.tau;
+    next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
+  }
+  log << "sculpt   loading " << path << "\n";
+  loading = Loading{path, next, BackgroundLoad([next] {
+                      const io::Scene sc = input_scene(next);
+                      auto c = std::make_shared<Carried>();
+                      c->volume = run::load_scene_volume(sc);
+                      const engine::Volume& v = c->volume;
+                      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
+                        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
+                                                 fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
+                      return c;
+                    }),
+                    Clock::now(), frame};
+}
+
+/// True when a dropped file has loaded and this session should end for it.
+bool Sculpt::poll_load() {
+  if (!loading && !drop_queue.empty()) {
+    start_load(drop_queue.front());
+    drop_queue.pop_front();
+  }
+  // The simulated clock waits for it (the same frame every run), for a minute at most: a
+  // reader blocked longer goes on in the background, as on the real clock.
+  if (loading && o.sim_clock && !loading->sim_waited) {
+    loading->sim_waited = true;
+    if (!loading->result.wait_for(60))
+      log << "sculpt   " << loading->path << " still loading after 60 s: the simulated clock goes on without it\n";
+  }
+  if (!loading || !loading->result.ready()) return false;
+  Loading done = std::move(*loading);
+  loading.reset();
+  try {
+    done.next.carried = done.result.get();
+  } catch (const std::exception& e) {
+    status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
+    log << "sculpt   " << status << "\n";
+    return false;
+  }
+  if (!reopen) return false;
+  *reopen = done.next;
+  log << "sculpt   opening " << done.path << " (loaded in " << fixed(ms_since(done.since) / 1e3, 2) << " s, "
+      << frame - done.frame << " frames drawn meanwhile)\n";
+  drop_queue.clear();
+  return true;
+}
+
+/// The isovalue slider let go at `tau`: this session ends and the next one starts at tau
+/// with the volume as edited, the camera, the tool and the rest of the script.
+bool Sculpt::restart_at(double tau) {
+  iso_ctl.committed = false;
+  if (!(tau > vol.min_value && tau < vol.max_value) || tau == scene.hri.tau) {
+    iso_ctl.value = scene.hri.tau;
+    if (tau != scene.hri.tau) {
+      status = "isovalue " + fixed(tau, 1) + " is outside the volume's range (" + fixed(vol.min_value, 1) + ", " +
+               fixed(vol.max_value, 1) + "): kept " + fixed(scene.hri.tau, 1);
+      log << "sculpt   " << status << "\n";
+    }
+    return false;
+  }
+  if (!reopen) return false;
+  Options next = o;
+  next.iso = tau;
+  next.record.clear();
+  next.carried = carry_over(tau);
+  *reopen = next;
+  log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
+      << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
+  return true;
+}
+
+/// What the restarted session keeps: the volume as the session holds it once every edit
+/// asked for is applied (an open stroke is closed, and the queue drained: simulated, applied
+/// now; live, waited for), the camera, the tool and the rest of the script.
+std::shared_ptr<Carried> Sculpt::carry_over(double tau) {
+  std::vector<session::EditEvent> end;
+  stroke.frame(false, false, tool, Vec3{}, 0, 0, end);
+  for (const session::EditEvent& e : end)
+    if (session->submit(e)) ++events_submitted;
+  if (o.sim_clock) session->finish_simulated();
+  auto c = std::make_shared<Carried>();
+  c->volume = vol;
+  {
+    std::unique_lock<std::mutex> lock(feed.mu);
+    if (!feed.applied.wait_for(lock, std::chrono::seconds(30), [&] { return feed.events_done >= events_submitted; }))
+      log << "sculpt   isovalue " << tau << ": " << events_submitted - feed.events_done
+          << " edits were still not applied after 30 s: the new session starts without them\n";
+    c->volume.voxels = feed.values;
+  }
+  refresh_range(c->volume);
+  c->camera = camera.cam;
+  c->tool = tool;
+  c->script.assign(script.begin() + long(std::min(next_event, script.size())), script.end());
+  return c;
+}
+
+// --- the end: the report -------------------------------------------------------------------
+
+/// After the loop: the session stopped, the last screenshot, the figures. Returns the exit code.
+int Sculpt::finish() {
+  settle_loads();
+  const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
+  close_stroke();
+  const session::LiveStats sculpted = session->stats();
+  const ServoAlone alone = servo_alone(seconds, sculpted);
+  stop_session();
+  const session::LiveStats st = session->stats();
+  write_last_screenshot();
+  if (next_event < script.size() && !restarting) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
+  if (o.stats || o.bench) print_stats(seconds, st);
+  if (!mouse) print_device();
+  if (o.bench) print_verdicts(sculpted, alone);
+  if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
+  if (vk->validation_messages() > 0) {
+    log << "isotouch-sculpt: " << vk->validation_messages() << " Vulkan validation messages\n";
+    if (code == 0) code = 3;
+  }
+  return code;
+}
+
+/// --frames reached while a dropped file loads: it opens next, as if it had loaded in time.
+/// The window closed (or the script quit, or the isovalue changed) while a file loads: the
+/// load is abandoned, not waited for.
+void Sculpt::settle_loads() {
   if (o.frames > 0 && frame >= o.frames && !restarting)
     while (loading || !drop_queue.empty()) {
       if (loading) loading->result.wait();
       if (poll_load()) break;
     }
-  // The window closed (or the script quit, or the isovalue changed) while a file loads: the
-  // load is abandoned, not waited for.
   if (loading)
     log << "sculpt   abandoned loading " << loading->path << " (still reading after "
         << fixed(ms_since(loading->since) / 1e3, 2) << " s)\n";
-  const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
-  if (stroke.open()) {
-    session::EditEvent e;
-    e.kind = session::EditEvent::Kind::kEndStroke;
-    session->submit(e);
-  }
-  // --bench: the servo alone for as long (at most 5 s: the window is not redrawn meanwhile),
-  // so its misses while sculpting compare with this machine's own, measured in the same run.
-  const session::LiveStats sculpted = session->stats();
-  long idle_ticks = 0, idle_missed = 0;
+}
+
+void Sculpt::close_stroke() {
+  if (!stroke.open()) return;
+  session::EditEvent e;
+  e.kind = session::EditEvent::Kind::kEndStroke;
+  session->submit(e);
+}
+
+/// --bench: the servo alone for as long (at most 5 s: the window is not redrawn meanwhile),
+/// so its misses while sculpting compare with this machine's own, measured in the same run.
+ServoAlone Sculpt::servo_alone(double seconds, const session::LiveStats& sculpted) {
+  ServoAlone alone;
   if (o.bench && !o.sim_clock) {
     std::this_thread::sleep_for(std::chrono::duration<double>(std::min(seconds, 5.0)));
     const session::LiveStats after = session->stats();
-    idle_ticks = after.ticks - sculpted.ticks;
-    idle_missed = after.missed_deadlines - sculpted.missed_deadlines;
+    alone.ticks = after.ticks - sculpted.ticks;
+    alone.missed = after.missed_deadlines - sculpted.missed_deadlines;
   }
+  return alone;
+}
+
+void Sculpt::stop_session() {
   try {
     if (o.sim_clock) session->finish_simulated();  // what was submitted after the last tick
     session->stop();
@@ -1022,102 +1324,127 @@ int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reop
     log << "isotouch-sculpt: " << e.what() << "\n";
     code = 1;
   }
-  const session::LiveStats st = session->stats();
-  if (!o.screenshot.empty() && img.width > 0) {
-    try {
-      if (img.rgba.empty() && upscaled.empty()) img.rgba = caster.last_rgba();  // drawn straight to the window
-      if (upscaled.empty()) run::write_png(o.screenshot, img.width, img.height, img.rgba);
-      else run::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
-      log << "sculpt   screenshot " << o.screenshot << "\n";
-    } catch (const std::exception& e) {
-      log << "isotouch-sculpt: " << e.what() << "\n";
-      code = 1;
-    }
+}
+
+/// --screenshot: the last frame drawn.
+void Sculpt::write_last_screenshot() {
+  if (o.screenshot.empty() || img.width <= 0) return;
+  try {
+    if (img.rgba.empty() && upscaled.empty()) img.rgba = caster->last_rgba();  // drawn straight to the window
+    if (upscaled.empty()) run::write_png(o.screenshot, img.width, img.height, img.rgba);
+    else run::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
+    log << "sculpt   screenshot " << o.screenshot << "\n";
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    code = 1;
   }
-  if (next_event < script.size() && !restarting) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
-  if (o.stats || o.bench) {
-    auto line = [&](const char* what, const std::vector<double>& v) {
-      if (v.empty()) {
-        log << "stats    " << what << ": none\n";
-        return;
-      }
-      log << "stats    " << what << ": n " << v.size() << ", median " << fixed(eval::median(v), 2) << " ms, p95 "
-          << fixed(eval::percentile(v, 0.95), 2) << " ms, max " << fixed(*std::max_element(v.begin(), v.end()), 2) << " ms\n";
-    };
-    log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
-        << ", rendered at " << img.width << "x" << img.height << " on " << vk.info().name << ", tile starts "
-        << (style.tile_starts ? "on" : "off") << "\n";
-    line("frame time", frame_ms);
-    line("  frames drawn whole (first, camera or style changed)", frame_full_ms);
-    line("    render (ray caster, submit to fence and read back)", full_render_ms);
-    line("    march pass (GPU timestamps)", full_march_ms);
-    line("    shade pass (GPU timestamps)", full_shade_ms);
-    line("    overlay pass (GPU timestamps)", full_overlay_ms);
-    line("    present (and the panels)", full_present_ms);
-    line("  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
-    line("render (ray caster)", render_ms);
-    line("  march pass (GPU timestamps)", march_ms);
-    line("  shade pass (GPU timestamps)", shade_ms);
-    line("  overlay pass (GPU timestamps)", overlay_ms);
-    line("present", present_ms);
-    line("picture update (changed bricks)", update_ms);
-    line("edit-to-pixels (submit to the first frame showing it)", latency_ms);
-    line("edit-to-haptics", st.edit_to_haptics_ms);
-    log << "stats    servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed deadlines, period error p99 "
-        << (st.period_error_p99_us < 0 ? std::string("n/a")
-            : st.period_error_p99_beyond ? "> " + fixed(st.period_error_p99_us, 0) + " us (past the histogram)"
-                                         : fixed(st.period_error_p99_us, 0) + " us") << ", " << st.faults
-        << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
-        << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
-        << window.recreations() << " times\n";
+}
+
+/// "stats    WHAT: n N, median M ms, p95 P ms, max X ms" (or none).
+void stats_line(std::ostream& log, const char* what, const std::vector<double>& v) {
+  if (v.empty()) {
+    log << "stats    " << what << ": none\n";
+    return;
+  }
+  log << "stats    " << what << ": n " << v.size() << ", median " << fixed(eval::median(v), 2) << " ms, p95 "
+      << fixed(eval::percentile(v, 0.95), 2) << " ms, max " << fixed(*std::max_element(v.begin(), v.end()), 2) << " ms\n";
+}
+
+void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
+  log << "stats    " << frame << " frames in " << fixed(seconds, 2) << " s, window " << last_fb[0] << "x" << last_fb[1]
+      << ", rendered at " << img.width << "x" << img.height << " on " << vk->info().name << ", tile starts "
+      << (style.tile_starts ? "on" : "off") << "\n";
+  stats_line(log, "frame time", frame_ms);
+  stats_line(log, "  frames drawn whole (first, camera or style changed)", frame_full_ms);
+  stats_line(log, "    render (ray caster, submit to fence and read back)", full_render_ms);
+  stats_line(log, "    march pass (GPU timestamps)", full_march_ms);
+  stats_line(log, "    shade pass (GPU timestamps)", full_shade_ms);
+  stats_line(log, "    overlay pass (GPU timestamps)", full_overlay_ms);
+  stats_line(log, "    present (and the panels)", full_present_ms);
+  stats_line(log, "  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
+  stats_line(log, "render (ray caster)", render_ms);
+  stats_line(log, "  march pass (GPU timestamps)", march_ms);
+  stats_line(log, "  shade pass (GPU timestamps)", shade_ms);
+  stats_line(log, "  overlay pass (GPU timestamps)", overlay_ms);
+  stats_line(log, "present", present_ms);
+  stats_line(log, "picture update (changed bricks)", update_ms);
+  stats_line(log, "edit-to-pixels (submit to the first frame showing it)", latency_ms);
+  stats_line(log, "edit-to-haptics", st.edit_to_haptics_ms);
+  print_servo(st);
 #if ISOTOUCH_WITH_IMGUI
-    if (panels) log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame << " frames\n";
+  if (panels)
+    log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame
+        << " frames, built anew in " << panels->frames_built() << "\n";
 #endif
+}
+
+void Sculpt::print_servo(const session::LiveStats& st) {
+  log << "stats    servo " << st.ticks << " ticks, " << st.missed_deadlines << " missed deadlines, period error p99 "
+      << (st.period_error_p99_us < 0 ? std::string("n/a")
+          : st.period_error_p99_beyond ? "> " + fixed(st.period_error_p99_us, 0) + " us (past the histogram)"
+                                       : fixed(st.period_error_p99_us, 0) + " us") << ", " << st.faults
+      << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
+      << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
+      << window->recreations() << " times\n";
+}
+
+/// A --haptic device's counters and its link's.
+void Sculpt::print_device() {
+  const servo::DeviceCounters c = session->servo_thread()->device_counters();
+  log << "device   " << haptic.description << ": stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
+      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
+  if (haptic.report) {
+    const servo::LinkCounters l = haptic.report->counters();
+    log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
+        << l.disconnects << " disconnects, " << l.reconnects << " reconnects, " << l.writes << " output reports\n";
   }
-  if (!mouse) {
-    const servo::DeviceCounters c = session->servo_thread()->device_counters();
-    log << "device   " << haptic.description << ": stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
-        << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
-    if (haptic.report) {
-      const servo::LinkCounters l = haptic.report->counters();
-      log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
-          << l.disconnects << " disconnects, " << l.reconnects << " reconnects, " << l.writes << " output reports\n";
-    }
+}
+
+/// "verdict: WHAT X ms (needs <= L ms): PASS" (or FAIL with the ratio; no samples: FAIL).
+void verdict_line(std::ostream& log, const std::string& what, const std::vector<double>& v, double q, double limit) {
+  if (v.empty()) {
+    log << "verdict: " << what << ": no samples: FAIL\n";
+    return;
   }
-  if (o.bench) {
-    auto verdict = [&](const std::string& what, const std::vector<double>& v, double q, double limit) {
-      if (v.empty()) {
-        log << "verdict: " << what << ": no samples: FAIL\n";
-        return;
-      }
-      const double x = q == 0.5 ? eval::median(v) : eval::percentile(v, q);
-      log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 0) << " ms): "
-          << (x <= limit ? "PASS" : "FAIL (" + fixed(x / limit, 2) + "x the target)") << "\n";
-    };
-    verdict("frame time median at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]), frame_ms, 0.5, 50);
-    verdict("frame time p95", frame_ms, 0.95, 80);
-    verdict("edit-to-pixels median", latency_ms, 0.5, 100);
-    verdict("frames drawn whole: frame time median", frame_full_ms, 0.5, 50);
-    verdict("frames drawn whole: frame time p95", frame_full_ms, 0.95, 80);
-    if (o.sim_clock || idle_ticks <= 0 || sculpted.ticks <= 0) {
-      log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
-          << " ticks; no idle phase (simulated clock): not measured\n";
-    } else {
-      const double per_sculpt = 1e4 * double(sculpted.missed_deadlines) / double(sculpted.ticks);
-      const double per_idle = 1e4 * double(idle_missed) / double(idle_ticks);
-      log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
-          << " ticks (" << fixed(per_sculpt, 1) << " per 10,000) against the servo alone right after " << idle_missed
-          << " of " << idle_ticks << " (" << fixed(per_idle, 1) << " per 10,000; needs sculpting <= alone): "
-          << (per_sculpt <= per_idle ? "PASS" : "FAIL") << "\n";
-    }
+  const double x = q == 0.5 ? eval::median(v) : eval::percentile(v, q);
+  log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 0) << " ms): "
+      << (x <= limit ? "PASS" : "FAIL (" + fixed(x / limit, 2) + "x the target)") << "\n";
+}
+
+/// --bench: the frame time, edit-to-pixels and servo figures against the targets.
+void Sculpt::print_verdicts(const session::LiveStats& sculpted, const ServoAlone& alone) {
+  verdict_line(log, "frame time median at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]), frame_ms, 0.5, 50);
+  verdict_line(log, "frame time p95", frame_ms, 0.95, 80);
+  verdict_line(log, "edit-to-pixels median", latency_ms, 0.5, 100);
+  verdict_line(log, "frames drawn whole: frame time median", frame_full_ms, 0.5, 50);
+  verdict_line(log, "frames drawn whole: frame time p95", frame_full_ms, 0.95, 80);
+  if (o.sim_clock || alone.ticks <= 0 || sculpted.ticks <= 0) {
+    log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
+        << " ticks; no idle phase (simulated clock): not measured\n";
+    return;
   }
-  if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
-  if (vk.validation_messages() > 0) {
-    log << "isotouch-sculpt: " << vk.validation_messages() << " Vulkan validation messages\n";
-    if (code == 0) code = 3;
-  }
-  g_input = nullptr;
-  return code;
+  const double per_sculpt = 1e4 * double(sculpted.missed_deadlines) / double(sculpted.ticks);
+  const double per_idle = 1e4 * double(alone.missed) / double(alone.ticks);
+  log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
+      << " ticks (" << fixed(per_sculpt, 1) << " per 10,000) against the servo alone right after " << alone.missed
+      << " of " << alone.ticks << " (" << fixed(per_idle, 1) << " per 10,000; needs sculpting <= alone): "
+      << (per_sculpt <= per_idle ? "PASS" : "FAIL") << "\n";
+}
+
+}  // namespace
+
+int loads_running() { return g_loads_running.load(); }
+
+int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
+  Sculpt s(o, log, reopen);
+  if (!s.load_input() || !s.place_probe() || !s.open_window()) return 1;
+  s.open_panels();
+  if (!s.open_edits()) return 1;
+  const session::LiveSessionConfig cfg = s.session_config();
+  if (!s.open_device() || !s.start_session(cfg)) return 1;
+  s.init_tools();
+  s.frame_loop();
+  return s.finish();
 }
 
 }  // namespace isotouch::sculpt

@@ -225,6 +225,7 @@ void Overlay::shutdown_vulkan_backend() {
 
 std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) {
   swapchain_gone();
+  shown_.reset();  // a new size: ImGui's display size and its draw data's projection follow it
   if (format != format_) {  // the first swapchain, or a new format: ImGui's pipeline follows the render pass
     shutdown_vulkan_backend();
     if (std::string e = init_vulkan_backend(format); !e.empty()) return e;
@@ -291,8 +292,21 @@ void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
   vkCmdEndRenderPass(cmd);
 }
 
+bool Overlay::changed(const Shown& now) const {
+  if (touched_ || !shown_ || !(*shown_ == now) || !now.stats.loading.empty()) return true;  // the bar sweeps
+  const ImGuiIO& io = ImGui::GetIO();
+  return ImGui::IsAnyItemActive() || io.WantCaptureMouse || io.WantTextInput;
+}
+
 void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible) {
   if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
+  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, stats, visible};
+  if (changed(now)) settling_ = 3;  // this build and the two after it
+  if (settling_ == 0) return;
+  --settling_;
+  shown_ = now;
+  touched_ = false;
+  ++frames_built_;
   ImGui_ImplVulkan_NewFrame();
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
@@ -307,12 +321,20 @@ bool Overlay::wants_mouse() const { return ImGui::GetIO().WantCaptureMouse; }
 bool Overlay::wants_keyboard() const { return ImGui::GetIO().WantTextInput; }
 
 void Overlay::mouse_button(GLFWwindow* w, int button, int action, int mods) {
+  touched_ = true;
   ImGui_ImplGlfw_MouseButtonCallback(w, button, action, mods);
 }
-void Overlay::scroll(GLFWwindow* w, double dx, double dy) { ImGui_ImplGlfw_ScrollCallback(w, dx, dy); }
+void Overlay::scroll(GLFWwindow* w, double dx, double dy) {
+  touched_ = true;
+  ImGui_ImplGlfw_ScrollCallback(w, dx, dy);
+}
 void Overlay::key(GLFWwindow* w, int k, int scancode, int action, int mods) {
+  touched_ = true;
   ImGui_ImplGlfw_KeyCallback(w, k, scancode, action, mods);
 }
-void Overlay::character(GLFWwindow* w, unsigned int c) { ImGui_ImplGlfw_CharCallback(w, c); }
+void Overlay::character(GLFWwindow* w, unsigned int c) {
+  touched_ = true;
+  ImGui_ImplGlfw_CharCallback(w, c);
+}
 
 }  // namespace isotouch::sculpt

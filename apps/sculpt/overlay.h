@@ -32,14 +32,15 @@ struct PanelStats {
   std::optional<double> tick_p99_us;  ///< p99 |period error| [us] so far (session::LiveStats); none before two ticks
   bool tick_p99_beyond = false;       ///< past the histogram's range: the p99 is at least tick_p99_us
   std::optional<double> edit_to_haptics_last_ms, edit_to_haptics_median_ms;
-  double frame_ms = 0;
-  double force_n = 0;
+  double frame_ms = 0;                ///< the mean over the frames since the last refresh (every 15 frames)
+  double force_n = 0;                 ///< |F| and contact at the last refresh
   bool contact = false;
   std::string volume;                 ///< dims, spacing, orientation
   std::string device;                 ///< the haptic device and the status its last tick judged
   std::string status;                 ///< the last save, export or drop message
   std::string loading;                ///< a dropped file loading in the background ("" = none)
   double loading_s = 0;               ///< for this long [s]
+  bool operator==(const PanelStats&) const = default;
 };
 
 class Overlay final : public FrameHook {
@@ -54,9 +55,16 @@ class Overlay final : public FrameHook {
   /// "Dear ImGui 1.86".
   static std::string version();
   /// This frame's panels (`visible` false: none); the tool widgets change `tool`, the isovalue
-/// slider `iso` (the frame loop restarts the session at a committed value). Drawn by
-  /// the window's next present().
+  /// slider `iso` (the frame loop restarts the session at a committed value). Drawn by
+  /// the window's next present(). Built again only when something they show changed, the
+  /// user touched them (an event forwarded since the last build, a widget active or hovered,
+  /// a text field open) or the swapchain was remade, and in the two frames after that (ImGui
+  /// lays a window out from its previous frame); otherwise the window draws the last
+  /// build again (ImGui keeps its draw data until the next frame starts): a build costs the
+  /// GLFW backend's X server round trips (focus, cursor, window and framebuffer size).
   void build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible);
+  /// The frames whose panels were built anew (the rest drew the last build again).
+  long frames_built() const { return frames_built_; }
   /// The mouse is over a panel or dragging a widget: clicks and the wheel are ImGui's.
   bool wants_mouse() const;
   /// A text field (Ctrl+click on a slider) has the keyboard.
@@ -65,6 +73,7 @@ class Overlay final : public FrameHook {
   long frames_drawn() const { return frames_drawn_; }
 
   // GLFW events the app's callbacks forward.
+  void cursor_moved() { touched_ = true; }  ///< ImGui's backend polls the cursor in the next build
   void mouse_button(GLFWwindow* w, int button, int action, int mods);
   void scroll(GLFWwindow* w, double dx, double dy);
   void key(GLFWwindow* w, int key, int scancode, int action, int mods);
@@ -93,6 +102,21 @@ class Overlay final : public FrameHook {
   std::vector<VkImageView> views_;
   std::vector<VkFramebuffer> framebuffers_;
   long frames_drawn_ = 0;
+  // What the last build showed, and whether the user touched the panels since.
+  struct Shown {
+    session::BrushKind kind{};
+    double radius_m = 0, strength = 0, iso = 0, iso_lo = 0, iso_hi = 0;
+    PanelStats stats;
+    bool visible = false;
+    bool operator==(const Shown&) const = default;
+  };
+  std::optional<Shown> shown_;  // none: build the next frame
+  bool touched_ = false;
+  // Builds still to come after a change: ImGui sizes a new window, and an auto-resized one
+  // to new content, from the frame before (a window is hidden in its first frame).
+  int settling_ = 0;
+  long frames_built_ = 0;
+  bool changed(const Shown& now) const;
 };
 
 }  // namespace isotouch::sculpt

@@ -58,6 +58,20 @@ Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int w
     glfwGetError(&why);
     return R::fail(std::string("cannot create the window: ") + (why ? why : "GLFW gave no reason"));
   }
+  // The size and the minimised state as the window starts, then as GLFW's events change them.
+  glfwGetFramebufferSize(w->win_, &w->fb_[0], &w->fb_[1]);
+  glfwGetWindowSize(w->win_, &w->win_size_[0], &w->win_size_[1]);
+  w->iconified_ = glfwGetWindowAttrib(w->win_, GLFW_ICONIFIED) != 0;
+  glfwSetWindowUserPointer(w->win_, w.get());
+  glfwSetFramebufferSizeCallback(w->win_, [](GLFWwindow* h, int fw, int fh) {
+    static_cast<Window*>(glfwGetWindowUserPointer(h))->fb_ = {fw, fh};
+  });
+  glfwSetWindowSizeCallback(w->win_, [](GLFWwindow* h, int ww, int wh) {
+    static_cast<Window*>(glfwGetWindowUserPointer(h))->win_size_ = {ww, wh};
+  });
+  glfwSetWindowIconifyCallback(w->win_, [](GLFWwindow* h, int iconified) {
+    static_cast<Window*>(glfwGetWindowUserPointer(h))->iconified_ = iconified != 0;
+  });
   if (const VkResult r = glfwCreateWindowSurface(ctx.instance(), w->win_, nullptr, &w->surface_); r != VK_SUCCESS)
     return R::fail(std::string("cannot create a Vulkan surface for the window: ") + engine::vk_result_name(r));
   VkBool32 ok = VK_FALSE;
@@ -94,13 +108,13 @@ Window::~Window() {
   if (win_) glfwDestroyWindow(win_);
 }
 
+const Window& Window::of(GLFWwindow* w) { return *static_cast<const Window*>(glfwGetWindowUserPointer(w)); }
+
 bool Window::should_close() const { return glfwWindowShouldClose(win_); }
 
 std::array<int, 2> Window::framebuffer_size() const {
-  int w = 0, h = 0;
-  glfwGetFramebufferSize(win_, &w, &h);
-  if (glfwGetWindowAttrib(win_, GLFW_ICONIFIED)) return {0, 0};
-  return {w, h};
+  if (iconified_) return {0, 0};
+  return fb_;
 }
 
 void Window::destroy_swapchain() {

@@ -52,8 +52,14 @@ class Window {
 
   GLFWwindow* handle() const { return win_; }
   bool should_close() const;
-  /// Framebuffer size in pixels ({0, 0} while minimised).
+  /// Framebuffer size in pixels ({0, 0} while minimised), as GLFW's events last reported it
+  /// (glfwPollEvents updates it): asking the X server costs two round trips per call, which
+  /// wait for its CPU while the ray caster's threads hold both cores.
   std::array<int, 2> framebuffer_size() const;
+  /// Framebuffer pixels per screen unit (the cursor's units), from the same events.
+  double pixels_per_unit() const { return win_size_[0] > 0 ? double(fb_[0]) / win_size_[0] : 1.0; }
+  /// The Window of a GLFW window this class created.
+  static const Window& of(GLFWwindow* w);
   /// Shows `rgba` (R in the low byte, rows top to bottom, `w` x `h`) in the next swapchain
   /// image; the part outside the swapchain's extent is cut, the rest left as it was.
   /// Returns false when nothing was presented (minimised, swapchain recreated this frame).
@@ -101,6 +107,9 @@ class Window {
   bool stale_ = false;  // recreate before the next frame
   int recreations_ = 0;
   std::string present_mode_name_;
+  std::array<int, 2> fb_{0, 0};  // the framebuffer's size, from GLFW's size events
+  std::array<int, 2> win_size_{0, 0};  // the window's, in screen units
+  bool iconified_ = false;       // from GLFW's iconify events
 };
 
 }  // namespace isotouch::sculpt

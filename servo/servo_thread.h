@@ -120,6 +120,7 @@ struct DeviceCounters {
 /// DeviceCaps::max_force_n.
 class ServoThread {
  public:
+  /// @throws std::invalid_argument naming rate_hz unless it is in (0, 1e6] Hz.
   ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer, HapticDeviceIO& device,
               ServoThreadConfig config);
   ~ServoThread();

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <new>
 #include <thread>
 
@@ -104,10 +105,20 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
   SimDevice dev({}, p0);
   SimDeviceIO io(dev, script, 1.0 / hp.rate_hz);
 
+  // Contact and plane updates counted on the servo thread (atomics: nothing allocated), so
+  // the allocation count below is of ticks that rendered contact, not of free motion alone.
+  struct ContactCount final : TickObserver {
+    std::atomic<long> contact{0}, updates{0};
+    void on_tick(const TickRecord& r) noexcept override {
+      if (r.out.contact) contact.fetch_add(1, std::memory_order_relaxed);
+      if (r.out.plane_update) updates.fetch_add(1, std::memory_order_relaxed);
+    }
+  } count;
   ServoThreadConfig cfg;
   cfg.rate_hz = hp.rate_hz;
   cfg.record_ticks = 10000;
   cfg.on_thread_start = [] { t_is_servo = true; };
+  cfg.observer = &count;
   ServoThread servo(published, renderer, io, cfg);
 
   std::atomic<bool> stop{false};
@@ -132,6 +143,10 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
   publisher.join();
 
   EXPECT_GT(servo.ticks(), 500);                   // ran (2 kHz for 1.5 s = 3000 nominal)
+  std::printf("servo thread: %ld ticks, %ld in contact, %ld plane updates, %ld allocations\n", servo.ticks(),
+              count.contact.load(), count.updates.load(), allocations);
+  EXPECT_GT(count.contact.load(), 100);            // pressed the sphere: the contact path ran
+  EXPECT_GT(count.updates.load(), 10);
   EXPECT_GT(servo.snapshot_changes(), 10);         // and saw the publisher's snapshots
   EXPECT_GT(publications.load(), 10);
   EXPECT_EQ(servo.faults(), 0);
@@ -143,6 +158,24 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
   EXPECT_EQ(note.find("SCHED_FIFO") != std::string::npos, !servo.got_fifo()) << note;
   EXPECT_EQ(note.find("not pinned") != std::string::npos, servo.pinned_cpu() < 0) << note;
   EXPECT_EQ(note.find("mlockall") != std::string::npos, !servo.memory_locked()) << note;
+}
+
+// A rate that gives no period is refused when the thread is made, naming the field.
+TEST(ServoThread, ARateWithoutAPeriodIsRefused) {
+  TripleBuffer<SampleField> published;
+  HriRenderer renderer(HriParams{});
+  SimDevice dev({}, Vec3{});
+  for (const double rate : {0.0, -1000.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    ServoThreadConfig cfg;
+    cfg.rate_hz = rate;
+    SimDeviceIO io(dev, TouchScript{}, 1e-3);
+    try {
+      ServoThread servo(published, renderer, io, cfg);
+      ADD_FAILURE() << "rate " << rate << " Hz was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("rate_hz"), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(ServoThread, RendersContactFromOutsideAndLeavesExactlyZeroForceOnStop) {

@@ -363,8 +363,6 @@ class HriRenderer final : public Renderer {
   void clear_contact();
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
-  /// tick_robust after the short way: the general path (updates, entries, the god-object
-  /// rules, the proxy path), from the HIP's value when the short way read it.
   /// tick_general's plane change: the plane, its |grad| (last_grad_norm_), the anchor
   /// (eq. 2 from the HIP), the update counter reset, out.plane_update.
   void adopt_plane(const VirtualPlane& pl, const Vec3& hip, HriTick& out);
@@ -378,6 +376,8 @@ class HriRenderer final : public Renderer {
   /// interior points; any material for a plane facing away from the held one).
   bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
                                 double held_grad_norm, double voxel) const;
+  /// tick_robust after the short way: the general path (updates, entries, the god-object
+  /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
                     bool covered_free_vhip, bool have_f_hip, double f_hip, HriTick& out);
   /// The common robust ticks (contact with no update due, free motion outside), the same

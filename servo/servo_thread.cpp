@@ -75,7 +75,8 @@ int last_allowed_cpu() {
 ServoThread::ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer,
                          HapticDeviceIO& device, ServoThreadConfig config)
     : samples_(samples), renderer_(renderer), device_(device), cfg_(std::move(config)) {
-  // The period is 1e9 / rate_hz ns: a rate of 0, below 0 or not a number has none.
+  // The period is 1e9 / rate_hz ns: a rate of 0, below 0 or not a number has none, and
+  // above 1 MHz it is under a microsecond.
   if (!(cfg_.rate_hz > 0) || !std::isfinite(cfg_.rate_hz) || cfg_.rate_hz > 1e6)
     throw std::invalid_argument("servo thread: rate_hz must be in (0, 1e6] Hz, got " + std::to_string(cfg_.rate_hz));
   period_err_.reserve(cfg_.record_ticks);

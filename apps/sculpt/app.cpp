@@ -22,6 +22,7 @@
 #include <thread>
 
 #include "coupled_hand_device.h"
+#include "cpu_placement.h"
 #include "edit_session.h"
 #include "frame.h"
 #include "haptic_device.h"
@@ -380,6 +381,7 @@ struct Sculpt {
   session::LiveSessionConfig session_config();
   bool open_device();
   bool start_session(const session::LiveSessionConfig& cfg);
+  void keep_display_off_servo_cpu();
   void init_tools();
 
   // --- the frame loop ---
@@ -453,6 +455,7 @@ struct Sculpt {
   } glfw;
   std::unique_ptr<engine::VulkanContext> vk;
   std::unique_ptr<Window> window;
+  servo::PeerOffCpu display_off;  // the X server's threads kept off the servo's CPU
   Input input;
 #if ISOTOUCH_WITH_IMGUI
   std::unique_ptr<Overlay> panels;  // the tool and stats panels, drawn over the picture
@@ -705,6 +708,7 @@ bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
   if (!o.sim_clock) {
     const std::string note = session->start();
     if (!note.empty()) log << "servo    " << note << "\n";
+    if (o.display_off_servo_cpu) keep_display_off_servo_cpu();
   }
   log << "sculpt   " << scene.name << ": " << vol.grid.dims[0] << "x" << vol.grid.dims[1] << "x" << vol.grid.dims[2]
       << " voxels, isovalue " << scene.hri.tau << ", servo " << scene.hri.rate_hz << " Hz, device " << vk->info().name
@@ -713,6 +717,22 @@ bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
     log << "sculpt   simulated clock: " << sim_ticks_per_frame << " servo ticks (" << fixed(sim_frame_s * 1e3, 2)
         << " ms) per frame, on the window's thread\n";
   return true;
+}
+
+/// The X server off the servo's CPU, and this thread presenting from another one: both copy
+/// a software-presented frame through the X socket in system calls that hold a CPU for
+/// milliseconds, which the servo thread, woken on time, would wait behind.
+void Sculpt::keep_display_off_servo_cpu() {
+  const int cpu = session->servo_thread()->pinned_cpu();
+  if (cpu < 0) return;  // not pinned: nothing to keep off
+  if (const std::string e = window->keep_present_off_cpu(cpu); !e.empty()) log << "servo    " << e << "\n";
+  const int fd = window->display_fd();
+  if (fd < 0) return;
+  if (const std::string e = display_off.keep_peer_off(fd, cpu); !e.empty())
+    log << "servo    display server left on CPU " << cpu << ": " << e << "\n";
+  else if (display_off.threads_moved() > 0)
+    log << "servo    display server " << servo::process_name(display_off.pid()) << " (pid " << display_off.pid()
+        << ", " << display_off.threads_moved() << " threads) kept off CPU " << cpu << ", the servo's\n";
 }
 
 /// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.

@@ -40,6 +40,9 @@ struct Options {
   bool sim_clock = false;
   double sim_frame_ms = 1000.0 / 30.0;
   bool sched_fifo = true;           ///< ask for SCHED_FIFO, pinning and locked memory for the servo thread (refused: a note)
+  /// Keep the display server (the local X server) off the servo thread's CPU while the
+  /// window is open, and present from another CPU (servo/cpu_placement.h says why).
+  bool display_off_servo_cpu = true;
   bool overlay = true;              ///< the Dear ImGui tool and stats panels (a build with Dear ImGui)
   /// The ray caster's tile starts (engine::RaycastStyle::tile_starts; off only to measure
   /// what they save: the picture is the same).

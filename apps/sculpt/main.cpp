@@ -47,6 +47,10 @@ int main(int argc, char** argv) {
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");
   cli.add_flag("--sched-fifo,!--no-sched-fifo", o.sched_fifo,
                "SCHED_FIFO, CPU pinning and locked memory for the servo thread (default on; refused: a note)");
+  cli.add_flag("--display-off-servo-cpu,!--no-display-off-servo-cpu", o.display_off_servo_cpu,
+               "keep the local X server off the servo thread's CPU while the window is open, and present from "
+               "another CPU: a software-presented frame goes through the X socket in system calls that hold a CPU "
+               "for milliseconds (default on, with a pinned servo; refused: a note)");
   cli.add_flag("--overlay,!--no-overlay", o.overlay,
                "the tool and stats panels (Dear ImGui) over the picture (default on, in a build with Dear ImGui)");
   cli.add_flag("--tile-starts,!--no-tile-starts", o.tile_starts,

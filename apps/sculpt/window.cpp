@@ -6,13 +6,47 @@
 #define GLFW_INCLUDE_NONE
 #define GLFW_INCLUDE_VULKAN
 #include <GLFW/glfw3.h>
+#define GLFW_EXPOSE_NATIVE_X11
+#include <GLFW/glfw3native.h>
+
+#include <sched.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 
 namespace isotouch::sculpt {
 
 using engine::Result;
+
+namespace {
+/// vkQueuePresentKHR from the CPUs of `off` (nullptr: where the thread is), then back to `own`.
+VkResult present_from(VkQueue queue, const VkPresentInfoKHR& pi, const cpu_set_t* off, const cpu_set_t& own) {
+  if (!off) return vkQueuePresentKHR(queue, &pi);
+  const bool moved = sched_setaffinity(0, sizeof(cpu_set_t), off) == 0;
+  const VkResult r = vkQueuePresentKHR(queue, &pi);
+  if (moved) sched_setaffinity(0, sizeof(cpu_set_t), &own);
+  return r;
+}
+}  // namespace
+
+int Window::display_fd() const {
+  Display* d = glfwGetX11Display();  // null (and a GLFW error) on another platform
+  return d ? ConnectionNumber(d) : -1;
+}
+
+std::string Window::keep_present_off_cpu(int cpu) {
+  present_off_ = false;
+  if (cpu < 0) return "";
+  if (sched_getaffinity(0, sizeof(cpu_set_t), &own_cpus_) != 0)
+    return std::string("present: this thread's CPUs unknown (") + std::strerror(errno) + "): presents on any CPU";
+  present_cpus_ = own_cpus_;
+  if (cpu < CPU_SETSIZE) CPU_CLR(cpu, &present_cpus_);
+  if (CPU_COUNT(&present_cpus_) == 0)
+    return "present: no CPU but " + std::to_string(cpu) + " in this thread's set: presents there";
+  present_off_ = true;
+  return "";
+}
 
 engine::Result<std::vector<std::string>> init_glfw() {
   using R = Result<std::vector<std::string>>;
@@ -342,7 +376,7 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   pi.swapchainCount = 1;
   pi.pSwapchains = &swapchain_;
   pi.pImageIndices = &index;
-  const VkResult r = vkQueuePresentKHR(ctx_.queue(), &pi);
+  const VkResult r = present_from(ctx_.queue(), pi, present_off_ ? &present_cpus_ : nullptr, own_cpus_);
   if (r == VK_ERROR_OUT_OF_DATE_KHR || r == VK_SUBOPTIMAL_KHR) stale_ = true;
   else if (r != VK_SUCCESS) engine::vk_check_failed("vkQueuePresentKHR", r, __FILE__, __LINE__);
 }

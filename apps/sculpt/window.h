@@ -6,6 +6,8 @@
 // changed; a minimised window (size 0) presents nothing until it is restored. A FrameHook
 // (the Dear ImGui overlay) may draw over the picture before it is presented.
 #pragma once
+#include <sched.h>
+
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -77,6 +79,14 @@ class Window {
   /// COLOR_ATTACHMENT usage, the hook's own set-up); the window then has no hook.
   engine::Result<bool> attach(FrameHook* hook);
   int recreations() const { return recreations_; }
+  /// The socket of the window's X display connection, or -1 (not on X11).
+  int display_fd() const;
+  /// Presents from the other CPUs of this thread's set, never from `cpu` (-1: anywhere).
+  /// On X11 a CPU device's present writes the whole image through the X socket in one
+  /// system call, which a kernel without full preemption does not interrupt for a
+  /// real-time thread woken on that CPU (the servo thread waited 2.4-7.5 ms behind it).
+  /// Returns "" or why not (no other CPU in the set, the affinity refused): then anywhere.
+  std::string keep_present_off_cpu(int cpu);
   const std::string& present_mode() const { return present_mode_name_; }
 
  private:
@@ -110,6 +120,9 @@ class Window {
   std::array<int, 2> fb_{0, 0};  // the framebuffer's size, from GLFW's size events
   std::array<int, 2> win_size_{0, 0};  // the window's, in screen units
   bool iconified_ = false;       // from GLFW's iconify events
+  // The presenting thread's own CPUs, and the same without the CPU to keep off.
+  cpu_set_t own_cpus_{}, present_cpus_{};
+  bool present_off_ = false;  // present from present_cpus_
 };
 
 }  // namespace isotouch::sculpt

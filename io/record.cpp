@@ -278,7 +278,7 @@ void parse_header(const json& h, Recording& r, const Where& w) {
 void parse_tick(const json& j, Recording& r, const Where& w) {
   if (r.format_version == 1) only_keys(j, {"k", "t", "hip", "button", "force"}, "", w);
   else if (r.format_version == 2) only_keys(j, {"k", "t", "hip", "button", "force", "vhip", "version", "fault"}, "", w);
-  else only_keys(j, {"k", "t", "dt", "hip", "button", "force", "vhip", "version", "fault"}, "", w);
+  else only_keys(j, {"k", "t", "dt", "hip", "button", "force", "vhip", "version", "fault", "held", "reset"}, "", w);
   const long k = integer(j, "k", w);
   if (k != long(r.ticks.size()))
     throw RecordingError(w.at("k") + ": expected tick " + std::to_string(r.ticks.size()) + ", got " + std::to_string(k));
@@ -303,6 +303,12 @@ void parse_tick(const json& j, Recording& r, const Where& w) {
     t.dt_s = member_number(j, "dt", w);
     if (!(t.dt_s >= 0) || !(t.dt_s < 3600))
       throw RecordingError(w.at("dt") + ": must be in [0, 3600) s, got " + num(t.dt_s));
+    for (auto [key, flag] : {std::pair{"held", &t.held}, std::pair{"reset", &t.reset}})
+      if (j.contains(key)) {
+        *flag = boolean(j, key, w);
+        if (!*flag) throw RecordingError(w.at(key) + ": written only when true, got false");
+      }
+    if (t.held && t.reset) throw RecordingError(w.at("reset") + ": a held tick is not rendered, so not reset");
   }
   r.ticks.push_back(t);
 }
@@ -399,6 +405,15 @@ std::string recording_tick_line(long k, const RecordedTick& t, int format_versio
     tick["vhip"] = vec_json(t.vhip_m);
     tick["version"] = t.version;
     if (t.fault) tick["fault"] = true;
+  }
+  if (t.held || t.reset) {
+    const char* field = t.held ? "held" : "reset";
+    if (format_version < 3)
+      throw RecordingError(name + ": tick " + std::to_string(k) + ": field '" + field + "': format " +
+                           std::to_string(format_version) + " has no such field (3 has)");
+    if (t.held && t.reset)
+      throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'reset': a held tick is not rendered, so not reset");
+    tick[field] = true;
   }
   return dump_line(tick);
 }

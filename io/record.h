@@ -37,6 +37,12 @@ struct RecordedTick {
   /// Format 3 (a live session): the measured period the renderer was given [s]; 0 on the
   /// first tick (the renderer then takes the nominal one).
   double dt_s = 0;
+  /// Format 3: the renderer was not ticked (paused, or the device not ok): zero force sent,
+  /// no VHIP (0, 0, 0). A replay skips the renderer on this tick. Written only when true.
+  bool held = false;
+  /// Format 3: the renderer was reset before this tick (the first good tick after held
+  /// ones that ended its contact state); its dt is then 0. Written only when true.
+  bool reset = false;
 };
 
 struct Recording {
@@ -71,8 +77,10 @@ struct Recording {
 ///        empty, density_scale}, force_n, force_threshold_n, rate, dt_s); kinds "brush",
 ///        "begin_stroke", "end_stroke", "undo", "redo" (brush optional for the last four)
 ///   {"end":true,"ticks":N,"edits":M}                 last line: a file without it is truncated
-/// format_version 3 (live sessions) differs in two places: each tick line also has
-/// "dt":D (the measured period given to the renderer [s], 0 on the first tick), and an edit
+/// format_version 3 (live sessions) differs in these places: each tick line also has
+/// "dt":D (the measured period given to the renderer [s], 0 on the first tick), "held":true
+/// on a tick where the renderer was not ticked (paused, device not ok) and "reset":true on
+/// one before which it was reset (each written only when true), and an edit
 /// line's "tick" is the number of servo ticks that had run when the edit was applied (edits
 /// in the order applied, ticks ascending; the line may come later than that tick's line:
 /// the streams of ticks and edits are written in chunks). A format 3 file without its end

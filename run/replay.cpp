@@ -108,6 +108,16 @@ std::size_t apply_edits_upto(const Recording& rec, std::size_t e, std::uint64_t 
   return e;
 }
 
+/// The renderer's answer to recorded tick `t`, as the servo gave it: simulated runs at the
+/// nominal period (as run_headless); live ones at the measured dt, reset where the servo
+/// reset it, and not ticked where it held (zero force, no VHIP: what the servo recorded).
+servo::HriTick replay_tick(servo::HriRenderer& renderer, const core::SampleField& field, const RecordedTick& t, bool live) {
+  if (!live) return renderer.tick(field, t.hip_m);
+  if (t.held) return servo::HriTick{};
+  if (t.reset) renderer.reset();
+  return renderer.tick(field, t.hip_m, t.dt_s);
+}
+
 }  // namespace
 
 ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, std::ostream& log) {
@@ -149,8 +159,7 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
     // in the recorded order, up to the version the tick read live.
     if (live && setup.session) e = apply_edits_upto(rec, e, t.version, *setup.session, buf, r, name);
     const core::SampleField* field = buf.acquire();
-    // Simulated runs: the nominal period, as run_headless; live ones: the measured dt.
-    const servo::HriTick out = live ? renderer.tick(*field, t.hip_m, t.dt_s) : renderer.tick(*field, t.hip_m);
+    const servo::HriTick out = replay_tick(renderer, *field, t, live);
     const double df = core::norm(out.force_n - t.force_n);
     const bool same_force = same_bits(out.force_n, t.force_n);
     const bool checked = rec.format_version >= 2;  // format 1 recorded the force only

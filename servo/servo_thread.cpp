@@ -252,7 +252,10 @@ void ServoThread::loop() {
         last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
       } else {
-        if (was_paused) renderer_.reset();
+        if (was_paused) {
+          renderer_.reset();
+          rec.reset = true;
+        }
         was_paused = false;
         not_ok_since = -1;
         if (ramp_start < 0) {

@@ -28,6 +28,9 @@ struct TickRecord {
   HriTick out;                ///< the renderer's answer (force, VHIP, plane, contact, fault)
   std::uint64_t version = 0;  ///< SampleField::version of the snapshot the tick read
   bool paused = false;        ///< paused: zero force sent, the renderer not ticked
+  /// The renderer was reset before this tick (the first good tick after a pause, a device
+  /// outage or a fault): a replay resets it at the same tick.
+  bool reset = false;
   /// The device's status as the servo judged it (stale: no report within the timeout;
   /// fault: the device said so or the report was refused). Not ok: zero force was sent and
   /// the renderer was not ticked.

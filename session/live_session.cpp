@@ -39,6 +39,8 @@ io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
   t.vhip_m = r.out.vhip_m;
   t.version = r.version;
   t.fault = r.out.fault;
+  t.held = r.paused || r.device_status != servo::DeviceStatus::kOk;
+  t.reset = r.reset;
   return t;
 }
 

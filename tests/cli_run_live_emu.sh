@@ -4,6 +4,9 @@
 #     feels the skull (ticks with force, a force of the order of the simulated run's), no
 #     disconnect, fault or refused report, exit 0; the emulator received the forces;
 #  2. the emulator SIGKILLed mid-run: the run reports disconnected ticks and exits 5;
+#     the emulator closing its link and listening again 0.3 s later, with --record: the
+#     recording holds the outage's ticks (held) and the renderer's reset after it, and
+#     replays IDENTICAL (a replay that ticked through the outage or did not reset differs);
 #  3. bad --haptic specs: a clear message and exit 1.
 # usage: cli_run_live_emu.sh ISOTOUCH DEVEMU SCENE OUT
 set -u
@@ -42,6 +45,22 @@ cat "$out/run2.log"
 [ "$rc" -eq 5 ] || fail "a killed emulator: exit $rc, expected 5"
 grep -Eq "disconnected [1-9][0-9]*," "$out/run2.log" || fail "no disconnected ticks counted"
 grep -q "link down" "$out/run2.log" || fail "the log does not say the link went down"
+
+# 2b. An outage and a reconnection, recorded and replayed.
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 --disconnect-at 1.2 --reconnect-after 0.3 > "$out/emu3.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+"$exe" run "$scene" --live --haptic "emu:$sock" --record "$out/outage.rec" --quiet > "$out/run3.log" 2>&1; rc=$?
+kill -TERM "$emu_pid" 2>/dev/null; wait "$emu_pid"
+cat "$out/run3.log"
+grep -q "1 reconnects" "$out/run3.log" || fail "the link did not come back after the emulator's outage"
+[ -f "$out/outage.rec" ] || fail "no recording of the outage run (exit $rc)"
+held=$(grep -c '"held":true' "$out/outage.rec"); resets=$(grep -c '"reset":true' "$out/outage.rec")
+[ "$held" -ge 100 ] || fail "only $held held ticks recorded across a 0.3 s outage"
+[ "$resets" -ge 1 ] || fail "no renderer reset recorded after the outage"
+"$exe" replay "$out/outage.rec" --quiet > "$out/replay3.log" 2>&1; rc=$?
+cat "$out/replay3.log"
+[ "$rc" -eq 0 ] && grep -q "^IDENTICAL" "$out/replay3.log" || fail "the outage recording does not replay identically (exit $rc)"
 
 # 3. Bad specs.
 "$exe" run "$scene" --live --haptic "bogus:1" > "$out/bad.log" 2>&1; rc=$?

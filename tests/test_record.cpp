@@ -5,6 +5,8 @@
 // and garbage (random bytes, truncations and byte flips of a good file) never crashes the
 // loader: it returns a recording or throws RecordingError, nothing else.
 #include <gtest/gtest.h>
+
+#include <algorithm>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -149,7 +151,7 @@ bool identical(const Recording& a, const Recording& b, std::string& why) {
     const auto &x = a.ticks[k], &y = b.ticks[k];
     if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) ||
         x.button != y.button || !same_bits(x.vhip_m, y.vhip_m) || x.version != y.version || x.fault != y.fault ||
-        !same_bits(x.dt_s, y.dt_s))
+        !same_bits(x.dt_s, y.dt_s) || x.held != y.held || x.reset != y.reset)
       return why = "tick " + std::to_string(k), false;
   }
   for (std::size_t i = 0; i < a.edits.size(); ++i) {
@@ -225,8 +227,13 @@ TEST(Record, RandomRecordingsRoundTripBitForBit) {
 Recording live_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t edits) {
   Recording r = random_recording(rng, ticks, edits);
   r.format_version = 3;
-  for (std::size_t k = 0; k < r.ticks.size(); ++k)
+  for (std::size_t k = 0; k < r.ticks.size(); ++k) {
     r.ticks[k].dt_s = k == 0 ? 0.0 : std::ldexp(double(1 + rng() % 100000), -int(17 + rng() % 10));
+    // Held ticks (paused, device not ok) and the reset after them.
+    const unsigned h = unsigned(rng() % 9);
+    r.ticks[k].held = h == 0;
+    r.ticks[k].reset = h == 1;
+  }
   if (!r.edits.empty()) r.edits.back().tick = long(ticks);  // applied after the last tick ran
   return r;
 }
@@ -241,6 +248,10 @@ TEST(Record, LiveRecordingsRoundTripBitForBit) {
     EXPECT_TRUE(identical(r, back, why)) << "trial " << trial << ": " << why;
     EXPECT_TRUE(back.complete);
     EXPECT_NE(text.find("\"dt\":"), std::string::npos);
+    const bool any_held = std::any_of(r.ticks.begin(), r.ticks.end(), [](const RecordedTick& t) { return t.held; });
+    const bool any_reset = std::any_of(r.ticks.begin(), r.ticks.end(), [](const RecordedTick& t) { return t.reset; });
+    EXPECT_EQ(text.find("\"held\":true") != std::string::npos, any_held);
+    EXPECT_EQ(text.find("\"reset\":true") != std::string::npos, any_reset);
   }
 }
 
@@ -287,6 +298,46 @@ TEST(Record, LiveRecordingsRefuseBadDtAndEditsOutOfOrder) {
   }
   r.edits[2].tick = r.edits[1].tick - 1;
   EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
+}
+
+TEST(Record, HeldAndResetFlagsAreFormatThreesAndWrittenOnlyWhenTrue) {
+  std::mt19937_64 rng(7);
+  Recording r = live_recording(rng, 10, 0);
+  for (auto& t : r.ticks) t.held = t.reset = false;
+  const std::string text = recording_text(r, "mem");
+  const std::string tick3 = "{\"k\":3,";
+  const std::size_t at = text.find(tick3);
+  ASSERT_NE(at, std::string::npos);
+  auto with = [&](const std::string& flags) {
+    std::string t = text;
+    t.insert(at + tick3.size(), flags);
+    return t;
+  };
+  const Recording held = parse_recording(with("\"held\":true,"), "mem");
+  EXPECT_TRUE(held.ticks[3].held);
+  EXPECT_FALSE(held.ticks[2].held || held.ticks[4].held || held.ticks[3].reset);
+  EXPECT_TRUE(parse_recording(with("\"reset\":true,"), "mem").ticks[3].reset);
+  const std::pair<std::string, std::string> bad[] = {
+      {"\"held\":false,", "line 5 (tick 3): field 'held': written only when true"},
+      {"\"reset\":1,", "line 5 (tick 3): field 'reset'"},
+      {"\"held\":true,\"reset\":true,", "field 'reset': a held tick is not rendered"},
+  };
+  for (const auto& [flags, expect] : bad) {
+    try {
+      (void)parse_recording(with(flags), "mem");
+      ADD_FAILURE() << flags << " accepted";
+    } catch (const RecordingError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  // Format 2 has no such field: refused on reading and on writing.
+  Recording two = r;
+  two.format_version = 2;
+  std::string t2 = recording_text(two, "mem");
+  t2.insert(t2.find(tick3) + tick3.size(), "\"held\":true,");
+  EXPECT_THROW((void)parse_recording(t2, "mem"), RecordingError);
+  two.ticks[3].reset = true;
+  EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
 }
 
 TEST(Record, SaveLoadThroughTheFileIsExact) {

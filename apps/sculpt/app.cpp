@@ -732,7 +732,8 @@ void Sculpt::keep_display_off_servo_cpu() {
     log << "servo    display server left on CPU " << cpu << ": " << e << "\n";
   else if (display_off.threads_moved() > 0)
     log << "servo    display server " << servo::process_name(display_off.pid()) << " (pid " << display_off.pid()
-        << ", " << display_off.threads_moved() << " threads) kept off CPU " << cpu << ", the servo's\n";
+        << ", " << display_off.threads_moved() << (display_off.threads_moved() == 1 ? " thread" : " threads")
+        << ") kept off CPU " << cpu << ", the servo's\n";
 }
 
 /// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.

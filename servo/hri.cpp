@@ -30,6 +30,26 @@ template <class LoSide>
     (lo_side(mid) ? lo : hi) = mid;
   }
 }
+
+/// The direction from unit `a` to unit `b` with a fraction `s` of the turn still to go
+/// (1: a, 0: b). Within 90 deg a normalized blend of the two (its rate varies at most 2x over
+/// the ramp); beyond, a rotation in the plane of the two at a steady rate: there the blend
+/// swings through the middle in a few ticks (150 deg over 20 ticks: 20 deg in one) and, near
+/// 180 deg, flips. Opposite directions turn about an axis perpendicular to `a`.
+Vec3 turn_toward(const Vec3& a, const Vec3& b, double s) {
+  const double c = dot(a, b);
+  if (c >= 0.0) return normalized_or(b * (1.0 - s) + a * s, b);
+  Vec3 perp = b - a * c;  // toward b, perpendicular to a
+  double pl = norm(perp);
+  const double whole = std::atan2(pl, c);  // the turn's angle, in (90, 180] deg
+  if (!(pl > 1e-9)) {  // opposite: any perpendicular, the same one every time
+    const Vec3 e = std::abs(a.x) < 0.5 ? Vec3{1.0, 0.0, 0.0} : Vec3{0.0, 1.0, 0.0};
+    perp = cross(cross(a, e), a);
+    pl = norm(perp);
+  }
+  const double angle = whole * (1.0 - s);
+  return normalized_or(a * std::cos(angle) + perp * (std::sin(angle) / pl), b);
+}
 }  // namespace
 
 
@@ -396,7 +416,7 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
   // first contact tick after a fault) is spread over recovery_time_s: |F| goes linearly
   // from the magnitude sent the tick before to the new target (the offset fades out,
   // never below zero), and the direction turns from the one sent the tick before to the
-  // new one over the same time (normalized linear blend of the two unit vectors), so a
+  // new one over the same time (turn_toward: a blend within 90 deg, a rotation beyond), so a
   // plane that turns turns the force over the ramp too (a magnitude-only ramp sent the
   // new direction at once: 106 deg in one tick on the head CT). An update that does not
   // move the target lets a ramp go on. The ramp runs on accumulated time (ramp_dt_s_:
@@ -417,7 +437,7 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
   const double m = std::max(0.0, mag + recovery_from_n_ * s);
   const Vec3 to = mag > 0 ? force / mag : fallback_dir;
   const bool turn = dot(ramp_from_dir_, ramp_from_dir_) > 0;
-  return normalized_or(turn ? to * (1.0 - s) + ramp_from_dir_ * s : to, to) * m;
+  return (turn ? turn_toward(ramp_from_dir_, to, s) : to) * m;
 }
 
 void HriRenderer::restart_at(const Vec3& hip) {

@@ -404,6 +404,39 @@ TEST(HriRecovery, PlaneTurnTurnsTheForceOverTheRamp) {
   EXPECT_LT(ramped, 60.0 / 20 * 1.5);  // about 3 deg per tick over 20 ticks
 }
 
+// A plane update that turns the force by more than 90 deg turns it at a steady rate over the
+// ramp (a rotation), not by a normalized blend of the two directions, which swings through
+// the middle in a few ticks (at 150 deg: 67 deg in one tick). Truth: the two analytic
+// normals and the ramp's length.
+TEST(HriRecovery, AWideTurnRotatesAtASteadyRate) {
+  for (const double turn : {150.0, 175.0}) {
+    const Vec3 tilted{std::sin(turn * M_PI / 180), 0.0, std::cos(turn * M_PI / 180)};
+    const SampleField a = wall_field(kUp, kC), b = wall_field(tilted, kC);
+    // 0.5 mm behind both walls, along the bisector of their normals
+    const Vec3 hip = kC - (kUp + tilted) * (0.0005 / (1.0 + dot(kUp, tilted)));
+    HriParams p = params(5);
+    p.recovery_time_s = 0.02;
+    p.edit_max_step_fraction = 0;
+    HriRenderer r(p);
+    for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);  // free ticks above
+    for (int k = 0; k < 60; ++k) r.tick(a, hip);             // pressed, the ramp over
+    Vec3 prev = r.tick(a, hip).force_n;
+    ASSERT_GT(norm(prev), 0.0);
+    double worst = 0;
+    HriTick t;
+    for (int k = 0; k < 60; ++k) {
+      t = r.tick(b, hip);
+      ASSERT_GT(norm(t.force_n), 0.0) << "tick " << k;
+      const double c = dot(t.force_n, prev) / (norm(t.force_n) * norm(prev));
+      worst = std::max(worst, std::acos(std::clamp(c, -1.0, 1.0)) * 180.0 / M_PI);
+      prev = t.force_n;
+    }
+    std::printf("plane turned %.0f deg: largest direction step %.2f deg with 20 ms\n", turn, worst);
+    EXPECT_NEAR(dot(t.force_n / norm(t.force_n), tilted), 1.0, 1e-9) << turn << " deg";  // ends along the new normal
+    EXPECT_LT(worst, turn / 20 * 1.5) << turn << " deg";  // about turn / 20 per tick over 20 ticks
+  }
+}
+
 // Sliding into a concave corner with n = 25: the robust variant's early update (half a
 // voxel of VHIP travel) and recovery keep the force steps near the physical rate K v.
 TEST(HriRecovery, ConcaveCornerHasNoForceJump) {

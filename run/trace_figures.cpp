@@ -15,8 +15,8 @@ namespace {
 
 /// Sums over the contact ticks, turned into RMS figures at the end.
 struct ContactSums {
-  double err2 = 0, fo2 = 0, raw2 = 0, fsum = 0, dir2 = 0;
-  long found = 0, raw_found = 0, dir_pairs = 0;
+  double err2 = 0, fo2 = 0, raw2 = 0, fsum = 0;
+  long found = 0, raw_found = 0;
 };
 
 /// With filters in the pass list: the unfiltered data's samples (gradient only), to see how
@@ -57,19 +57,6 @@ void contact_steps(const sim::TraceRow& r, const sim::TraceRow& last, double f, 
   if (vstep > m.max_force_vector_step_n) {
     m.max_force_vector_step_n = vstep;
     m.max_force_vector_step_t_s = r.t_s;
-  }
-}
-
-/// The angle [deg] between the forces of two consecutive contact ticks (both nonzero).
-void direction_step(const sim::TraceRow& r, const sim::TraceRow& last, double f, RunMetrics& m, ContactSums& s) {
-  if (!(f > 0 && core::norm(last.force_n) > 0)) return;
-  const double c = std::clamp(core::dot(r.force_n, last.force_n) / (f * core::norm(last.force_n)), -1.0, 1.0);
-  const double a = std::acos(c) * 180.0 / M_PI;
-  s.dir2 += a * a;
-  ++s.dir_pairs;
-  if (a > m.force_dir_step_max_deg) {
-    m.force_dir_step_max_deg = a;
-    m.force_dir_step_max_t_s = r.t_s;
   }
 }
 
@@ -148,6 +135,29 @@ void tick_times(const std::vector<sim::TraceRow>& trace, RunMetrics& m) {
 
 }  // namespace
 
+void DirectionSteps::add(double t_s, bool contact, const core::Vec3& force_n) {
+  if (!contact) {
+    have_last_ = false;
+    return;
+  }
+  const double f = core::norm(force_n);
+  if (!(f > 0)) return;
+  if (have_last_) {
+    const double c = std::clamp(core::dot(force_n, last_) / (f * core::norm(last_)), -1.0, 1.0);
+    const double a = std::acos(c) * 180.0 / M_PI;
+    sum2_ += a * a;
+    ++pairs;
+    if (a > max_deg) {
+      max_deg = a;
+      max_t_s = t_s;
+    }
+  }
+  last_ = force_n;
+  have_last_ = true;
+}
+
+double DirectionSteps::rms_deg() const { return pairs ? std::sqrt(sum2_ / double(pairs)) : 0.0; }
+
 std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, const SceneSetup& setup,
                                     const EditDriver* edits, RunMetrics& m) {
   const double tau = setup.hri.tau, tool_r = setup.hri.tool_radius_m;
@@ -155,6 +165,7 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
   const core::SampleField& truth = *setup.truth;
   m.ticks = long(trace.size());
   ContactSums s;
+  DirectionSteps dirs;
   const std::optional<core::SampleField> unfiltered = unfiltered_field(setup, m);
   const sim::TraceRow* prev = nullptr;
   for (const auto& r : trace) {
@@ -164,12 +175,12 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
     const sim::TraceRow* last = prev;
     prev = &r;
     stroke_and_lift(r, setup.script, m);
+    dirs.add(r.t_s, r.contact, r.force_n);
     if (!r.contact) continue;
     ++m.contact_ticks;
     const double f = core::norm(r.force_n);
     if (last && last->contact) contact_steps(r, *last, f, m);
     s.fsum += f;
-    if (last && last->contact) direction_step(r, *last, f, m, s);
     m.max_force_n = std::max(m.max_force_n, f);
     m.max_penetration_m = std::max(m.max_penetration_m, r.penetration_m);
     if (edits && r.version > 1) {  // the surface moved: measured against the edited volume the tick read
@@ -191,7 +202,9 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
     m.first_order_err_rms_m = std::sqrt(s.fo2 / double(m.contact_ticks));
   }
   if (s.found) m.surface_err_rms_m = std::sqrt(s.err2 / double(s.found));
-  if (s.dir_pairs) m.force_dir_step_rms_deg = std::sqrt(s.dir2 / double(s.dir_pairs));
+  m.force_dir_step_rms_deg = dirs.rms_deg();
+  m.force_dir_step_max_deg = dirs.max_deg;
+  m.force_dir_step_max_t_s = dirs.max_t_s;
   if (s.raw_found) m.unfiltered_err_rms_m = std::sqrt(s.raw2 / double(s.raw_found));
   return {s.found, s.raw_found};
 }

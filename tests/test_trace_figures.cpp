@@ -1,0 +1,45 @@
+// The force-direction steps of a run's contact ticks (run/trace_figures.h): angles between
+// analytic force vectors, a flip through a zero force, and a contact that ends.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "trace_figures.h"
+
+using isotouch::core::Vec3;
+using isotouch::run::DirectionSteps;
+
+TEST(DirectionSteps, AnglesBetweenConsecutiveContactForces) {
+  DirectionSteps d;
+  d.add(0.000, true, {0, 0, 1});
+  d.add(0.001, true, {0, 0, 2});        // same direction: 0 deg
+  d.add(0.002, true, {1, 0, 1});        // 45 deg
+  d.add(0.003, true, {0, 3, 0});        // 90 deg from (1, 0, 1)
+  EXPECT_EQ(d.pairs, 3);
+  EXPECT_NEAR(d.max_deg, 90.0, 1e-9);
+  EXPECT_DOUBLE_EQ(d.max_t_s, 0.003);
+  EXPECT_NEAR(d.rms_deg(), std::sqrt((0.0 + 45.0 * 45.0 + 90.0 * 90.0) / 3.0), 1e-9);
+}
+
+// A wall that would pull sends zero: the direction that flips through that tick is a step
+// of 180 deg from the last force sent, not two steps skipped.
+TEST(DirectionSteps, AFlipThroughAZeroForceCounts) {
+  DirectionSteps d;
+  d.add(0.000, true, {0, 0, 1});
+  d.add(0.001, true, {0, 0, 0});
+  d.add(0.002, true, {0, 0, -1});
+  EXPECT_EQ(d.pairs, 1);
+  EXPECT_NEAR(d.max_deg, 180.0, 1e-9);
+  EXPECT_DOUBLE_EQ(d.max_t_s, 0.002);
+}
+
+// Out of contact in between: two contacts, no step between them.
+TEST(DirectionSteps, AContactThatEndsStartsAfresh) {
+  DirectionSteps d;
+  d.add(0.000, true, {0, 0, 1});
+  d.add(0.001, false, {0, 0, 0});
+  d.add(0.002, true, {0, 0, -1});
+  EXPECT_EQ(d.pairs, 0);
+  EXPECT_EQ(d.max_deg, 0.0);
+  EXPECT_EQ(d.rms_deg(), 0.0);
+}

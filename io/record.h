@@ -26,7 +26,7 @@ struct RecordedTick {
   double t_s = 0;         ///< simulated time of the tick [s]
   core::Vec3 hip_m;       ///< HIP the renderer was given, world [m] (device reading mapped)
   bool button = false;    ///< the device's button
-  core::Vec3 force_n;     ///< force sent to the device [N] (checked on replay)
+  core::Vec3 force_n;     ///< the renderer's force [N] (before a live session's ramp-in and clamp; 0 on a held tick; checked on replay)
   /// Format 2: the VHIP after the tick, world [m], and the SampleField::version of the
   /// snapshot the tick read (both checked on replay; version 0 = not recorded, format 1).
   core::Vec3 vhip_m;

@@ -1,6 +1,7 @@
 #include "cpu_placement.h"
 
 #include <sys/socket.h>
+#include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
@@ -8,16 +9,6 @@
 #include <fstream>
 
 namespace isotouch::servo {
-
-PeerOffCpu& PeerOffCpu::operator=(PeerOffCpu&& o) noexcept {
-  if (this != &o) {
-    release();
-    pid_ = o.pid_;
-    saved_ = std::move(o.saved_);
-    o.saved_.clear();
-  }
-  return *this;
-}
 
 std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   release();
@@ -48,19 +39,30 @@ std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   return "";
 }
 
-std::string PeerOffCpu::keep_peer_off(int fd, int cpu) {
-  ucred cred{};
-  socklen_t len = sizeof(cred);
-  if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0 || cred.pid <= 0)
-    return std::string("no local process at the other end of the socket (") +
-           (errno ? std::strerror(errno) : "no peer") + ")";
-  return keep_off(cred.pid, cpu);
-}
-
 void PeerOffCpu::release() {
-  for (const Saved& s : saved_) sched_setaffinity(s.tid, sizeof(cpu_set_t), &s.set);  // gone: nothing to do
+  // A thread that has exited is skipped (its ID may since name another process's thread).
+  const std::string tasks = "/proc/" + std::to_string(pid_) + "/task/";
+  for (const Saved& s : saved_)
+    if (access((tasks + std::to_string(s.tid)).c_str(), F_OK) == 0)
+      sched_setaffinity(s.tid, sizeof(cpu_set_t), &s.set);
   saved_.clear();
 }
+
+pid_t peer_pid(int fd, std::string& why) {
+  ucred cred{};
+  socklen_t len = sizeof(cred);
+  if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0) {
+    why = std::string("no local process at the other end of the socket (") + std::strerror(errno) + ")";
+    return -1;
+  }
+  if (cred.pid <= 0) {
+    why = "no local process at the other end of the socket (not a Unix socket: a remote display?)";
+    return -1;
+  }
+  return cred.pid;
+}
+
+bool is_x_server(const std::string& name) { return !name.empty() && name[0] == 'X'; }
 
 std::string process_name(pid_t pid) {
   std::ifstream f("/proc/" + std::to_string(pid) + "/comm");

@@ -4,7 +4,7 @@
 // setting) lets a system call run to its end before a real-time thread woken on the same
 // CPU gets it. A window on a CPU Vulkan device shows each frame through the X socket
 // (Mesa's software presentation without DRI3 sends the whole image as one PutImage): the
-// app's write and the X server's read of 3 MB each held the servo's CPU for 1.3-7.5 ms
+// app's write and the X server's read of 3 MB each held the servo's CPU for 1.4-7.5 ms
 // (ftrace: the servo woken on time, switched in only when the copy ended). Keeping the X
 // server off the servo's CPU, and the app presenting from another CPU, removes both.
 #pragma once
@@ -16,14 +16,13 @@
 
 namespace isotouch::servo {
 
-/// The threads of one process kept off one CPU for this object's lifetime; their own CPU
-/// sets are given back when it is destroyed (threads started meanwhile keep theirs).
+/// The threads of one process kept off one CPU for this object's lifetime; the threads it
+/// moved get their own CPU sets back when it is destroyed (threads the process started
+/// meanwhile inherited the reduced set and keep it).
 class PeerOffCpu {
  public:
   PeerOffCpu() = default;
   ~PeerOffCpu() { release(); }
-  PeerOffCpu(PeerOffCpu&& o) noexcept : pid_(o.pid_), saved_(std::move(o.saved_)) { o.saved_.clear(); }
-  PeerOffCpu& operator=(PeerOffCpu&& o) noexcept;
   PeerOffCpu(const PeerOffCpu&) = delete;
   PeerOffCpu& operator=(const PeerOffCpu&) = delete;
 
@@ -31,11 +30,8 @@ class PeerOffCpu {
   /// whose set is only `cpu` is left where it is. Returns "" or why nothing was moved
   /// (no such process, permission: needs the same user or CAP_SYS_NICE).
   std::string keep_off(pid_t pid, int cpu);
-  /// The same for the process at the other end of the connected Unix socket `fd`
-  /// (SO_PEERCRED): the X server of a window's display connection. A TCP display has no
-  /// local peer: refused, with the reason.
-  std::string keep_peer_off(int fd, int cpu);
-  /// Gives the threads their CPU sets back (also done by the destructor).
+  /// Gives the threads that still belong to the process their CPU sets back (also done by
+  /// the destructor).
   void release();
   int threads_moved() const { return int(saved_.size()); }
   pid_t pid() const { return pid_; }
@@ -49,7 +45,16 @@ class PeerOffCpu {
   std::vector<Saved> saved_;
 };
 
+/// The process at the other end of the connected Unix socket `fd` (SO_PEERCRED: the one
+/// that listened), or -1 with the reason in `why` (not a socket, a TCP connection).
+pid_t peer_pid(int fd, std::string& why);
+
 /// The process name of `pid` (/proc/PID/comm), or "" if unknown.
 std::string process_name(pid_t pid);
+
+/// Whether a process of this name is an X server (Xorg, Xvfb, Xwayland, Xephyr, Xvnc...:
+/// the name starts with 'X'). Under Xwayland the display socket may have been opened by the
+/// Wayland compositor (mutter, kwin), which must not be moved.
+bool is_x_server(const std::string& name);
 
 }  // namespace isotouch::servo

@@ -89,7 +89,10 @@ TEST(CpuPlacement, ThePeerOfASocketLeavesTheCpuAndGetsItsSetsBack) {
   for (pid_t t : tids) ASSERT_TRUE(on_cpu(t, cpu));
   {
     PeerOffCpu off;
-    ASSERT_EQ(off.keep_peer_off(child.fd, cpu), "");
+    std::string why;
+    const pid_t peer = isotouch::servo::peer_pid(child.fd, why);
+    EXPECT_EQ(peer, child.pid) << why;
+    ASSERT_EQ(off.keep_off(peer, cpu), "");
     EXPECT_EQ(off.pid(), child.pid);
     EXPECT_GE(off.threads_moved(), 2);
     for (pid_t t : tids) EXPECT_FALSE(on_cpu(t, cpu)) << "thread " << t;
@@ -118,5 +121,15 @@ TEST(CpuPlacement, NoSuchProcessOrCpuIsNamed) {
   const std::string e = off.keep_off(999999999, 0);
   EXPECT_NE(e.find("process 999999999"), std::string::npos) << e;
   EXPECT_NE(off.keep_off(getpid(), -1).find("CPU -1"), std::string::npos);
-  EXPECT_NE(off.keep_peer_off(-1, 0).find("no local process"), std::string::npos);
+  std::string why;
+  EXPECT_EQ(isotouch::servo::peer_pid(-1, why), -1);
+  EXPECT_NE(why.find("no local process"), std::string::npos) << why;
+}
+
+// Only an X server is moved: under Xwayland the display socket's owner may be the Wayland
+// compositor itself.
+TEST(CpuPlacement, OnlyAnXServerIsNamedOne) {
+  for (const char* x : {"Xorg", "Xvfb", "Xwayland", "Xephyr", "Xvnc"}) EXPECT_TRUE(isotouch::servo::is_x_server(x)) << x;
+  for (const char* other : {"gnome-shell", "kwin_wayland", "mutter", "xfwm4", ""})
+    EXPECT_FALSE(isotouch::servo::is_x_server(other)) << other;
 }

@@ -36,6 +36,7 @@
 #include "run_scene.h"
 #include "scene_setup.h"
 #include "scene.h"
+#include "stop_signal.h"
 #include "stats.h"
 #include "tools.h"
 #include "vdb_io.h"
@@ -728,11 +729,19 @@ void Sculpt::keep_display_off_servo_cpu() {
   if (const std::string e = window->keep_present_off_cpu(cpu); !e.empty()) log << "servo    " << e << "\n";
   const int fd = window->display_fd();
   if (fd < 0) return;
-  if (const std::string e = display_off.keep_peer_off(fd, cpu); !e.empty())
-    log << "servo    display server left on CPU " << cpu << ": " << e << "\n";
-  else if (display_off.threads_moved() > 0)
-    log << "servo    display server " << servo::process_name(display_off.pid()) << " (pid " << display_off.pid()
-        << ", " << display_off.threads_moved() << (display_off.threads_moved() == 1 ? " thread" : " threads")
+  std::string why;
+  const pid_t pid = servo::peer_pid(fd, why);
+  const std::string name = pid > 0 ? servo::process_name(pid) : "";
+  if (pid > 0 && !servo::is_x_server(name))
+    why = "the display socket's owner " + name + " (pid " + std::to_string(pid) + ") is not an X server";
+  if (why.empty()) why = display_off.keep_off(pid, cpu);
+  if (!why.empty())
+    log << "servo    display server left on CPU " << cpu << ": " << why << "\n";
+  else if (display_off.threads_moved() == 0)
+    log << "servo    display server " << name << " (pid " << pid << ") has no thread on CPU " << cpu
+        << " that could move\n";
+  else
+    log << "servo    display server " << name << " (pid " << pid << ", " << display_off.threads_moved() << (display_off.threads_moved() == 1 ? " thread" : " threads")
         << ") kept off CPU " << cpu << ", the servo's\n";
 }
 
@@ -762,7 +771,7 @@ void Sculpt::init_tools() {
 
 void Sculpt::frame_loop() {
   t_start = Clock::now();
-  while (!window->should_close()) {
+  while (!window->should_close() && session::stop_signal() == 0) {
     if (o.frames > 0 && frame >= o.frames) break;
     if (!frame_step()) break;
   }

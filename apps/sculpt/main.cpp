@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "app.h"
+#include "stop_signal.h"
 
 int main(int argc, char** argv) {
   isotouch::sculpt::Options o;
@@ -64,11 +65,19 @@ int main(int argc, char** argv) {
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;
   int rc = 1;
+  // SIGINT / SIGTERM end the frame loop, so that the session stops, the recording is
+  // completed and the X server gets its CPUs back (exit 128 + the signal).
+  isotouch::session::install_stop_handlers();
   try {
     // A file dropped on the window that can be read opens in a new session.
     for (;;) {
       std::optional<isotouch::sculpt::Options> next;
       rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
+      if (const int sig = isotouch::session::stop_signal(); sig != 0) {
+        std::cerr << "sculpt   stopped by signal " << sig << "\n";
+        rc = 128 + sig;
+        break;
+      }
       if (rc != 0 || !next) break;
       o = *next;
     }

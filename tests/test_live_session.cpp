@@ -267,7 +267,9 @@ TEST(LiveSession, APauseIsRecordedSoThatItReplays) {
   for (const auto& t : rec.ticks) {
     held += t.held;
     resets += t.reset;
-    if (t.held) EXPECT_EQ(norm(t.force_n), 0.0);
+    if (t.held) {
+      EXPECT_EQ(norm(t.force_n), 0.0);
+    }
   }
   EXPECT_GE(held, 30);
   EXPECT_EQ(resets, 1);

@@ -18,7 +18,7 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libpng-dev libassimp-dev
   libhidapi-dev
-  libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth python3
+  libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
 )
 # `./run.sh test` also builds the libFuzzer targets with clang.
 if [[ "${1:-}" == "test" ]]; then PACKAGES+=(clang-14 libclang-rt-14-dev); fi

@@ -1,0 +1,88 @@
+// bench_hri_tick - HRI's tick against Avila and Sobierajski's on bench table1's strokes, one
+// renderer at a time (a micro-benchmark, not a test): the table1 configuration (n = 5, linear
+// p, central-difference N), alternated rounds, median ns per tick, and the stroke's mix of
+// ticks (free, contact, plane updates), and the harness's own cost per tick (a renderer that
+// reads nothing: the FieldView made per tick and the virtual call, paid by both).
+// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila]
+// (--n: HRI's plane update period; --only: one renderer, for callgrind).
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <iostream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "baselines.h"
+#include "hri.h"
+#include "sweep.h"
+
+using namespace isotouch;
+
+namespace {
+/// The harness's own cost: a renderer that reads nothing and returns zero force.
+class NullRenderer final : public servo::Renderer {
+ public:
+  const char* name() const override { return "null"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView&, const core::Vec3& hip, double) override {
+    servo::HriTick t;
+    t.vhip_m = hip;
+    return t;
+  }
+};
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> scenes;
+  int reps = 21;
+  std::string only;
+  int n = 5;
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--n") && i + 1 < argc) n = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    else scenes.push_back(argv[i]);
+  }
+  if (scenes.empty()) scenes = {"sphere", "knot", "head", "chest"};
+  for (const std::string& name : scenes) {
+    std::ostringstream quiet;
+    const eval::SweepScene s = eval::prepare_sweep_scene(name, nullptr, quiet);
+    servo::HriParams hp = eval::reference_params(s);
+    hp.plane_update_period = n;
+    hp.intersection = servo::Intersection::kLinear;
+    hp.normal = servo::NormalSource::kCentral;
+    servo::BaselineParams bp;
+    bp.tau = s.tau;
+    bp.inside = s.inside;
+    bp.stiffness_n_per_m = s.stiffness_n_per_m;
+    bp.force_limit_n = 1e3;
+    servo::HriRenderer hri(hp);
+    servo::AvilaRenderer avila(bp);
+    std::size_t contact = 0, updates = 0;
+    hri.reset();
+    for (const core::Vec3& h : s.hip) {
+      const servo::HriTick t = hri.tick(*s.field, h, 0.0);
+      contact += t.contact;
+      updates += t.plane_update;
+    }
+    NullRenderer null_r;
+    std::vector<double> th, ta, tn;
+    for (int r = 0; r < reps; ++r) {
+      if (only != "avila") th.push_back(eval::median_ns_per_tick(hri, s, r == 0 ? 2 : 0, 1));
+      if (only != "hri") ta.push_back(eval::median_ns_per_tick(avila, s, r == 0 ? 2 : 0, 1));
+      if (only.empty()) tn.push_back(eval::median_ns_per_tick(null_r, s, r == 0 ? 2 : 0, 1));
+    }
+    auto med = [](std::vector<double> v) {
+      if (v.empty()) return 0.0;
+      std::sort(v.begin(), v.end());
+      return v[v.size() / 2];
+    };
+    const double h = med(th), a = med(ta), z = med(tn);
+    std::printf("%-7s %5zu ticks (contact %5zu, updates %4zu): HRI %6.1f ns, Avila %6.1f ns, HRI/Avila %.3f; "
+                "harness alone %.1f ns\n",
+                s.name.c_str(), s.hip.size(), contact, updates, h, a, a > 0 ? h / a : 0.0, z);
+  }
+  return 0;
+}

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -207,7 +208,8 @@ struct SparseChain::Impl {
   std::vector<double> record_lists(const Volume& vol, const std::vector<ListStage>& stages,
                                    const std::vector<sparse::WorkList>& lists, const std::vector<std::uint64_t>& base,
                                    const ListBuffers& b, bool direct, SparseOutput& out, int& dispatches,
-                                   const RecordFn& before = {}, const RecordFn& after = {});
+                                   const RecordFn& before = {}, const RecordFn& after = {},
+                                   DescriptorArena* keep_arena = nullptr, GpuTimer* keep_timer = nullptr);
   SparseOutput run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
                              core::SampleFormat format, std::uint64_t max_binding_bytes);
   SparseOutput run_lists(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
@@ -370,15 +372,23 @@ std::vector<double> SparseChain::Impl::record_lists(const Volume& vol, const std
                                                     const std::vector<sparse::WorkList>& lists,
                                                     const std::vector<std::uint64_t>& base, const ListBuffers& b,
                                                     bool direct, SparseOutput& out, int& dispatches,
-                                                    const RecordFn& before, const RecordFn& after) {
+                                                    const RecordFn& before, const RecordFn& after,
+                                                    DescriptorArena* keep_arena, GpuTimer* keep_timer) {
   const auto& lim = ctx.properties().limits;
   const std::size_t K = stages.size();
   const std::uint64_t n = vol.grid.voxel_count();
   const int nx = vol.grid.dims[0];
   std::uint32_t sets = 0;
   for (const ListStage& st : stages) sets += std::uint32_t(st.slabs.size());
-  DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
-  GpuTimer timer(ctx, std::uint32_t(K + 1));
+  // The caller's arena and timer where given (reset here: the previous submission has
+  // completed), else this recording's own.
+  std::optional<DescriptorArena> own_arena;
+  std::optional<GpuTimer> own_timer;
+  if (keep_arena) keep_arena->reset();
+  else own_arena.emplace(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
+  if (!keep_timer) own_timer.emplace(ctx, std::uint32_t(K + 1));
+  DescriptorArena& arena = keep_arena ? *keep_arena : *own_arena;
+  GpuTimer& timer = keep_timer ? *keep_timer : *own_timer;
   VkCommandBuffer cmd = ctx.begin_commands();
   timer.record_reset(cmd);
   if (before) {
@@ -964,6 +974,10 @@ struct SparseFilter::Impl {
   GpuBuffer staging, readback;    ///< where device memory is not host-visible
   int up_z0 = 0, up_z1 = 0;       ///< staging slices [up_z0, up_z1) not yet uploaded
   std::string last;
+  /// Kept from run to run (their creation cost about 0.1 ms a run on lavapipe): made by the
+  /// first run, sized for its stages' slabs (the same every run: they depend on the grid).
+  std::unique_ptr<DescriptorArena> arena;
+  std::unique_ptr<GpuTimer> timer;
 
   std::size_t stages() const { return fused ? 1 : plan.ops.size(); }
   std::uint64_t slice_floats() const { return std::uint64_t(meta.grid.dims[0]) * std::uint64_t(meta.grid.dims[1]); }
@@ -1119,9 +1133,17 @@ SparseFilter::Output SparseFilter::filter(const std::vector<std::uint32_t>& cand
     }
     barrier_transfer_to_host(cmd);
   };
+  if (!m.arena) {
+    std::uint32_t sets = 0;
+    for (const ListStage& st : stages) sets += std::uint32_t(st.slabs.size());
+    sets = std::max<std::uint32_t>(sets, 1);
+    m.arena = std::make_unique<DescriptorArena>(c.ctx, sets, 3 * sets);
+    m.timer = std::make_unique<GpuTimer>(c.ctx, std::uint32_t(K + 1));
+  }
   SparseOutput timing;
   int dispatches = 0;
-  (void)c.record_lists(vol, stages, lists, base, b, m.direct, timing, dispatches, before, after);
+  (void)c.record_lists(vol, stages, lists, base, b, m.direct, timing, dispatches, before, after, m.arena.get(),
+                       m.timer.get());
   m.up_z0 = m.up_z1 = 0;
   o.submit_wall_ms = timing.submit_wall_ms;
   o.dispatches = std::size_t(dispatches);

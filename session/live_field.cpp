@@ -32,7 +32,7 @@ constexpr std::size_t kS = core::kBrickSamples;  // 729 samples per slot
 
 /// Recomputed bricks from which update() runs the filters on the GPU by default (see
 /// live_field.h; measured in tests/test_live_field.cpp's DISABLED_BenchChestGpuCpu).
-constexpr std::size_t kDefaultGpuMinBricks = 16;
+constexpr std::size_t kDefaultGpuMinBricks = 24;
 
 double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();

@@ -929,4 +929,79 @@ TEST(LiveField, DISABLED_BenchChestCarve) {
     }
 }
 
+// The GPU path against the CPU path on the same edits: two live fields of the chest CT with
+// a Gaussian of 1 mm, one recomputing on the GPU for every update (threshold 0), one on the
+// CPU; each carve applied once to the volume and given to both, in alternating order.
+// Prints update() medians per brush radius and per band of recomputed bricks (from which the
+// default threshold, kDefaultGpuMinBricks in live_field.cpp, was chosen).
+TEST(LiveField, DISABLED_BenchChestGpuCpu) {
+  std::string why;
+  engine::VulkanContext* vk = gpu_or_skip_reason(why);
+  if (!vk) GTEST_SKIP() << "no Vulkan device: " << why;
+  Case c = cached("chest");
+  const LiveFieldOptions o = options(c, "gauss", SampleFormat::kFp32);
+  auto gpu = LiveField::create(c.vol, o, vk);
+  ASSERT_TRUE(gpu->gpu_enabled()) << gpu->gpu_reason();
+  gpu->set_gpu_min_bricks(0);
+  auto cpu = LiveField::create(c.vol, o);
+  std::printf("  %s\n", gpu->describe().c_str());
+  const core::Grid& g = c.vol.grid;
+  std::vector<core::Vec3> surface;
+  for (int z = 0; z < g.dims[2]; ++z)
+    for (int y = 0; y + 1 < g.dims[1]; ++y)
+      for (int x = 0; x + 1 < g.dims[0]; ++x) {
+        const bool in = c.iso.contains(c.vol.voxels[g.index(x, y, z)]);
+        if (in && (!c.iso.contains(c.vol.voxels[g.index(x + 1, y, z)]) || !c.iso.contains(c.vol.voxels[g.index(x, y + 1, z)])))
+          surface.push_back(g.to_world({double(x), double(y), double(z)}));
+      }
+  ASSERT_GT(surface.size(), 1000u);
+  std::mt19937 rng(5);
+  auto median = [](std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const int n = std::getenv("ISOTOUCH_BENCH_EDITS") ? std::atoi(std::getenv("ISOTOUCH_BENCH_EDITS")) : 100;
+  std::map<int, std::pair<std::vector<double>, std::vector<double>>> band;  // recomputed band -> (gpu, cpu) ms
+  for (int rep = 0; rep < 2; ++rep)
+    for (double r_mm : {1.0, 2.0, 5.0, 10.0, 20.0}) {
+      std::vector<double> tg, tc, rg, rc, sub, nrec;
+      for (int k = 0; k < n; ++k) {
+        const core::Vec3 centre = surface[std::uniform_int_distribution<std::size_t>(0, surface.size() - 1)(rng)];
+        const session::BrushResult r =
+            session::apply_brush_cpu(c.vol, brush(c, BrushKind::kCarve, centre, r_mm * 1e-3, 600));
+        session::LiveUpdateStats a, b;
+        if (k % 2) {
+          (void)gpu->update(c.vol, r.dirty, &a);
+          (void)cpu->update(c.vol, r.dirty, &b);
+        } else {
+          (void)cpu->update(c.vol, r.dirty, &b);
+          (void)gpu->update(c.vol, r.dirty, &a);
+        }
+        ASSERT_EQ(a.recomputed, b.recomputed);
+        ASSERT_FALSE(b.gpu);
+        if (a.recomputed == 0) continue;
+        ASSERT_TRUE(a.gpu);
+        tg.push_back(a.total_ms);
+        tc.push_back(b.total_ms);
+        rg.push_back(a.recompute_ms);
+        rc.push_back(b.recompute_ms);
+        sub.push_back(a.gpu_submit_ms);
+        nrec.push_back(double(a.recomputed));
+        const int lo = a.recomputed < 4 ? 1 : a.recomputed < 8 ? 4 : a.recomputed < 12 ? 8 : a.recomputed < 16 ? 12
+                       : a.recomputed < 24 ? 16 : a.recomputed < 32 ? 24 : a.recomputed < 64 ? 32
+                       : a.recomputed < 128 ? 64 : 128;
+        band[lo].first.push_back(a.total_ms);
+        band[lo].second.push_back(b.total_ms);
+      }
+      std::printf("  chest gauss 1 mm, carve %4.1f mm (run %d, %zu updates): update() median GPU %.3f ms (recompute "
+                  "%.3f, submit-to-fence %.3f) vs CPU %.3f ms (recompute %.3f); median %.0f recomputed bricks\n",
+                  r_mm, rep, tg.size(), median(tg), median(rg), median(sub), median(tc), median(rc), median(nrec));
+    }
+  for (const auto& [lo, v] : band)
+    std::printf("  recomputed >= %3d: %4zu updates, update() median GPU %.3f ms vs CPU %.3f ms\n", lo, v.first.size(),
+                median(v.first), median(v.second));
+  expect_full_run(*gpu->current(), c.vol, o, "chest after the GPU bench");
+}
+
 }  // namespace

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <limits>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -164,6 +165,9 @@ static BufferRange import_voxels(VulkanContext& ctx, const Volume& vol, GpuBuffe
   return {buf.handle(), offset, bytes};
 }
 
+/// Commands recorded around the list strategy's dispatches (copies and barriers).
+using RecordFn = std::function<void(VkCommandBuffer)>;
+
 /// One dispatch round of the list strategy: its pipeline, its z-slabs, its label.
 struct ListStage {
   const ComputePipeline<gpu::ListPush>* pipe = nullptr;
@@ -185,7 +189,8 @@ struct ListBuffers {
 struct SparseChain::Impl {
   VulkanContext& ctx;
   std::vector<PassDesc> passes;
-  ComputePipeline<gpu::SparseBrickPush> pipe;
+  /// sparse_brick.comp (the per-brick strategy), made on first use.
+  std::unique_ptr<ComputePipeline<gpu::SparseBrickPush>> pipe;
   bool keep_input = false;
   std::uint32_t max_groups = 0;  ///< 0: kDefaultGroups
   std::string last_run;
@@ -198,11 +203,13 @@ struct SparseChain::Impl {
   /// The list strategy's steps: the fused Gaussian's stage, one filter op's stage, and the
   /// command buffer of all stages (device time per stage).
   ListStage fused_stage(const Volume& vol, const sparse::Plan& plan, const ListBuffers& b);
-  ListStage filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k, const ListBuffers& b,
+  ListStage filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k, VkBuffer src, VkBuffer dst,
                          std::uint64_t limit);
   std::vector<double> record_lists(const Volume& vol, const std::vector<ListStage>& stages,
                                    const std::vector<sparse::WorkList>& lists, const std::vector<std::uint64_t>& base,
-                                   const ListBuffers& b, bool direct, SparseOutput& out, int& dispatches);
+                                   const ListBuffers& b, bool direct, SparseOutput& out, int& dispatches,
+                                   const RecordFn& before = {}, const RecordFn& after = {},
+                                   DescriptorArena* keep_arena = nullptr, GpuTimer* keep_timer = nullptr);
   SparseOutput run_per_brick(const Volume& vol, const core::Isosurface& iso, float background,
                              core::SampleFormat format, std::uint64_t max_binding_bytes);
   SparseOutput run_lists(const Volume& vol, const core::Isosurface& iso, float background, core::SampleFormat format,
@@ -226,7 +233,7 @@ struct SparseChain::Impl {
     return b;
   }
   Impl(VulkanContext& c, std::vector<PassDesc> p)
-      : ctx(c), passes(std::move(p)), pipe(c, sparse_brick_spv, 5, "sparse_brick") {}
+      : ctx(c), passes(std::move(p)) {}
 };
 
 SparseChain::SparseChain(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -326,8 +333,8 @@ ListStage SparseChain::Impl::fused_stage(const Volume& vol, const sparse::Plan& 
   return st;
 }
 
-ListStage SparseChain::Impl::filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k,
-                                          const ListBuffers& b, std::uint64_t limit) {
+ListStage SparseChain::Impl::filter_stage(const Volume& vol, const sparse::Plan& plan, std::size_t k, VkBuffer src,
+                                          VkBuffer dst, std::uint64_t limit) {
   const sparse::Op& op = plan.ops[k];
   ListStage st;
   st.label = std::string(op.kind == sparse::OpKind::kGauss ? "gaussian" : op.kind == sparse::OpKind::kMax ? "max" : "min") +
@@ -339,7 +346,7 @@ ListStage SparseChain::Impl::filter_stage(const Volume& vol, const sparse::Plan&
   g.dst_bytes_before = +[](std::uint64_t z, const void* u) { return z * *static_cast<const std::uint64_t*>(u); };
   g.halo = op.axis == 2 ? std::uint64_t(op.radius) : 0;
   g.user = &slice_bytes;
-  auto sl = plan_slabs(ctx, g, b.field[k % 2]->handle(), b.field[1 - k % 2]->handle(), limit, vol.path + ": " + st.label);
+  auto sl = plan_slabs(ctx, g, src, dst, limit, vol.path + ": " + st.label);
   if (!sl) throw VolumeError(sl.error);
   st.slabs = std::move(*sl.value);
   std::vector<std::uint32_t> spec(6 + 2 * ISOTOUCH_DENSE_MAX_RADIUS + 2, 0u);
@@ -364,18 +371,29 @@ ListStage SparseChain::Impl::filter_stage(const Volume& vol, const sparse::Plan&
 std::vector<double> SparseChain::Impl::record_lists(const Volume& vol, const std::vector<ListStage>& stages,
                                                     const std::vector<sparse::WorkList>& lists,
                                                     const std::vector<std::uint64_t>& base, const ListBuffers& b,
-                                                    bool direct, SparseOutput& out, int& dispatches) {
+                                                    bool direct, SparseOutput& out, int& dispatches,
+                                                    const RecordFn& before, const RecordFn& after,
+                                                    DescriptorArena* keep_arena, GpuTimer* keep_timer) {
   const auto& lim = ctx.properties().limits;
   const std::size_t K = stages.size();
   const std::uint64_t n = vol.grid.voxel_count();
   const int nx = vol.grid.dims[0];
   std::uint32_t sets = 0;
   for (const ListStage& st : stages) sets += std::uint32_t(st.slabs.size());
-  DescriptorArena arena(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
-  GpuTimer timer(ctx, std::uint32_t(K + 1));
+  // The caller's arena and timer where given (reset here: the previous submission has
+  // completed), else this recording's own.
+  std::optional<DescriptorArena> own_arena;
+  std::optional<GpuTimer> own_timer;
+  if (keep_arena) keep_arena->reset();
+  else own_arena.emplace(ctx, std::max<std::uint32_t>(sets, 1), 3 * std::max<std::uint32_t>(sets, 1));
+  if (!keep_timer) own_timer.emplace(ctx, std::uint32_t(K + 1));
+  DescriptorArena& arena = keep_arena ? *keep_arena : *own_arena;
+  GpuTimer& timer = keep_timer ? *keep_timer : *own_timer;
   VkCommandBuffer cmd = ctx.begin_commands();
   timer.record_reset(cmd);
-  if (!direct) {
+  if (before) {
+    before(cmd);
+  } else if (!direct) {
     record_copy(cmd, *b.up, *b.field[0], n * 4);
     record_copy(cmd, *b.list_up, *b.list_buf, b.list_bytes);
     barrier_transfer_to_compute(cmd);
@@ -413,7 +431,9 @@ std::vector<double> SparseChain::Impl::record_lists(const Volume& vol, const std
     barrier_compute_to_compute(cmd);
     timer.mark(cmd, std::uint32_t(k + 1));
   }
-  if (direct) {
+  if (after) {
+    after(cmd);
+  } else if (direct) {
     barrier_compute_to_host(cmd);
   } else {
     barrier_compute_to_transfer(cmd);
@@ -513,7 +533,8 @@ SparseOutput SparseChain::Impl::run_lists(const Volume& vol, const core::Isosurf
   const ListBuffers bufs{{field[0], field[1]}, up, list_buf, list_up, field_down, list_bytes, in_range};
   std::vector<ListStage> stages;
   for (std::size_t k = 0; k < K; ++k)
-    stages.push_back(fused ? fused_stage(vol, plan, bufs) : filter_stage(vol, plan, k, bufs, limit));
+    stages.push_back(fused ? fused_stage(vol, plan, bufs)
+                           : filter_stage(vol, plan, k, field[k % 2]->handle(), field[1 - k % 2]->handle(), limit));
   int dispatches = 0;
   const std::vector<double> stage_ms =
       K ? record_lists(vol, stages, lists, base, bufs, direct, out, dispatches) : std::vector<double>{};
@@ -909,7 +930,8 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
     return std::min<std::uint64_t>(std::max(preferred, needed), n);
   };
   GpuTimer timer(ctx, 3);
-  record_per_brick(ctx, pipe, slabs, chunks, io, nc, per_brick_push(vol, plan, iso, background), workgroups, timer,
+  if (!pipe) pipe = std::make_unique<ComputePipeline<gpu::SparseBrickPush>>(ctx, sparse_brick_spv, 5, "sparse_brick");
+  record_per_brick(ctx, *pipe, slabs, chunks, io, nc, per_brick_push(vol, plan, iso, background), workgroups, timer,
                    out);
 
   // Host: ranges, the shader's decision checked against the host's, publication.
@@ -936,6 +958,212 @@ SparseOutput SparseChain::Impl::run_per_brick(const Volume& vol, const core::Iso
   out.total_ms = ms_since(t_total);
   last_run = per_brick_info(vol, plan, slabs.size(), chunks.size(), per_group, out);
   return out;
+}
+
+// ---- SparseFilter: the list strategy's filter stage on chosen candidates -----------------
+
+struct SparseFilter::Impl {
+  std::unique_ptr<SparseChain::Impl> chain;  ///< the list strategy's pipelines and kept buffers
+  Volume meta;                               ///< grid and path (no voxels)
+  sparse::Plan plan;
+  std::vector<sparse::Extent> ext;
+  bool fused = false, direct = false;
+  std::uint64_t limit = 0;
+  GpuBuffer input;                ///< the resident copy of the volume (op 0's source)
+  GpuBuffer out[2];               ///< op k writes out[k % 2] (the fused pass: out[0])
+  GpuBuffer staging, readback;    ///< where device memory is not host-visible
+  int up_z0 = 0, up_z1 = 0;       ///< staging slices [up_z0, up_z1) not yet uploaded
+  std::string last;
+  /// Kept from run to run (their creation cost about 0.1 ms a run on lavapipe): made by the
+  /// first run, sized for its stages' slabs (the same every run: they depend on the grid).
+  std::unique_ptr<DescriptorArena> arena;
+  std::unique_ptr<GpuTimer> timer;
+
+  std::size_t stages() const { return fused ? 1 : plan.ops.size(); }
+  std::uint64_t slice_floats() const { return std::uint64_t(meta.grid.dims[0]) * std::uint64_t(meta.grid.dims[1]); }
+};
+
+SparseFilter::SparseFilter(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+SparseFilter::~SparseFilter() = default;
+
+Result<std::unique_ptr<SparseFilter>> SparseFilter::create(VulkanContext& ctx, const Volume& vol,
+                                                           const std::vector<PassDesc>& passes, bool staging) {
+  using R = Result<std::unique_ptr<SparseFilter>>;
+  if (std::string e = sparse::validate(passes); !e.empty()) return R::fail("sparse filter: " + e);
+  if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
+    return R::fail(vol.path + ": sparse filter: " + std::to_string(vol.voxels.size()) + " voxels for the grid");
+  auto m = std::make_unique<Impl>();
+  m->meta.grid = vol.grid;
+  m->meta.path = vol.path;
+  try {
+    m->plan = sparse::make_plan(vol.grid, passes, vol.path);
+  } catch (const std::exception& e) {
+    return R::fail(e.what());
+  }
+  if (m->plan.ops.empty()) return R::fail("sparse filter: no filter in the pass list (the gradient needs no GPU pass)");
+  for (const sparse::Op& op : m->plan.ops)
+    if (op.radius > int(ISOTOUCH_DENSE_MAX_RADIUS))
+      return R::fail("sparse filter: a filter of radius " + std::to_string(op.radius) + " > " +
+                     std::to_string(ISOTOUCH_DENSE_MAX_RADIUS) + " (the list kernels' widest)");
+  const auto& lim = ctx.properties().limits;
+  const std::uint64_t n = vol.grid.voxel_count();
+  m->limit = ctx.max_binding_bytes();
+  m->direct = ctx.device_local_is_host_visible() && !staging;
+  m->fused = sparse::fusable(m->plan, vol.grid) && n * 4 <= m->limit && n / 4 <= lim.maxTexelBufferElements;
+  m->ext = sparse::list_extents(m->plan);
+  m->chain = std::make_unique<SparseChain::Impl>(ctx, passes);
+  auto make = [&](GpuBuffer& b, MemoryIntent intent, const char* what) {
+    auto r = GpuBuffer::create(ctx, n * 4, intent, vol.path + ": sparse filter: " + what);
+    if (!r) return r.error;
+    b = std::move(*r.value);
+    return std::string();
+  };
+  std::string err = make(m->input, MemoryIntent::DeviceLocal, "input");
+  if (err.empty()) err = make(m->out[0], MemoryIntent::DeviceLocal, "output A");
+  if (err.empty() && m->stages() > 1) err = make(m->out[1], MemoryIntent::DeviceLocal, "output B");
+  if (err.empty() && !m->direct) err = make(m->staging, MemoryIntent::Upload, "input staging");
+  if (err.empty() && !m->direct) err = make(m->readback, MemoryIntent::Readback, "output readback");
+  if (!err.empty()) return R::fail(err);
+  std::memcpy(m->direct ? m->input.mapped() : m->staging.mapped(), vol.voxels.data(), std::size_t(n) * 4);
+  m->up_z1 = m->direct ? 0 : vol.grid.dims[2];
+  std::unique_ptr<SparseFilter> f(new SparseFilter(std::move(m)));
+  try {
+    (void)f->filter({});  // the pipelines, and the first upload
+  } catch (const std::exception& e) {
+    return R::fail(e.what());
+  }
+  return R::ok(std::move(f));
+}
+
+void SparseFilter::set_bricks(const float* voxels, const std::vector<std::uint32_t>& bricks) noexcept {
+  Impl& m = *impl_;
+  const core::Grid& g = m.meta.grid;
+  const auto nb = core::brick_counts(g);
+  const int nx = g.dims[0], ny = g.dims[1], nz = g.dims[2];
+  float* dst = static_cast<float*>(m.direct ? m.input.mapped() : m.staging.mapped());
+  for (std::uint32_t id : bricks) {
+    const auto b = core::brick_coords(id, nb);
+    const int x0 = 8 * b[0], w = std::min(x0 + 8, nx) - x0, z0 = 8 * b[2], z1 = std::min(z0 + 8, nz);
+    for (int z = z0; z < z1; ++z)
+      for (int y = 8 * b[1]; y < std::min(8 * b[1] + 8, ny); ++y) {
+        const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + std::size_t(x0);
+        std::memcpy(dst + row, voxels + row, std::size_t(w) * 4);
+      }
+    if (!m.direct) {
+      m.up_z0 = m.up_z1 > m.up_z0 ? std::min(m.up_z0, z0) : z0;
+      m.up_z1 = std::max(m.up_z1, z1);
+    }
+  }
+}
+
+SparseFilter::Output SparseFilter::filter(const std::vector<std::uint32_t>& candidates) {
+  Impl& m = *impl_;
+  SparseChain::Impl& c = *m.chain;
+  const Volume& vol = m.meta;
+  const std::size_t K = m.stages();
+  const std::uint64_t n = vol.grid.voxel_count();
+  Output o;
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<sparse::WorkList> lists;
+  std::vector<std::uint64_t> base;
+  std::uint64_t total_units = 0;
+  for (std::size_t k = 0; k < K; ++k) {
+    lists.push_back(m.fused ? sparse::make_column_list(vol.grid, candidates, m.ext.back(), vol.path,
+                                                       sparse::fused_pairs(m.plan), 1)
+                            : sparse::make_work_list(vol.grid, candidates, m.ext[k], vol.path));
+    base.push_back(total_units);
+    total_units += lists.back().unit_count();
+    o.quads += lists.back().quads;
+  }
+  const std::uint64_t list_bytes = std::max<std::uint64_t>(total_units, 1) * 8;
+  if (list_bytes / 4 > c.ctx.properties().limits.maxTexelBufferElements)
+    throw VolumeError(vol.path + ": sparse filter: " + std::to_string(list_bytes / 4) +
+                      " work-list texels exceed maxTexelBufferElements on " + c.ctx.info().name);
+  GpuBuffer* list_buf = &c.kept_buffer("filter: work lists", list_bytes, MemoryIntent::DeviceLocal, vol.path);
+  GpuBuffer* list_up =
+      m.direct ? nullptr : &c.kept_buffer("filter: work lists staging", list_bytes, MemoryIntent::Upload, vol.path);
+  char* dst = static_cast<char*>(m.direct ? list_buf->mapped() : list_up->mapped());
+  for (std::size_t k = 0; k < K; ++k) std::memcpy(dst + base[k] * 8, lists[k].units.data(), lists[k].units.size() * 4);
+  o.lists_ms = ms_since(t0);
+
+  // Stages: the fused pass reads the resident input and writes out[0]; else op k reads the
+  // input (k = 0) or out[(k - 1) % 2] and writes out[k % 2].
+  ListBuffers b;
+  b.field[1] = &m.out[0];
+  b.list_buf = list_buf;
+  b.list_bytes = list_bytes;
+  b.imported = {m.input.handle(), 0, n * 4};
+  std::vector<ListStage> stages;
+  for (std::size_t k = 0; k < K; ++k)
+    stages.push_back(m.fused ? c.fused_stage(vol, m.plan, b)
+                             : c.filter_stage(vol, m.plan, k, k == 0 ? m.input.handle() : m.out[(k - 1) % 2].handle(),
+                                              m.out[k % 2].handle(), m.limit));
+  GpuBuffer& result = m.out[m.fused ? 0 : (K - 1) % 2];
+
+  // Copies where device memory is not host-visible: the staged slices up, the lists up, and
+  // back the slices the host reads (8 b - 1 .. 8 b + 9 of every candidate).
+  const std::uint64_t slice_bytes = m.slice_floats() * 4;
+  int read_z0 = vol.grid.dims[2], read_z1 = 0;
+  const auto nb = core::brick_counts(vol.grid);
+  for (std::uint32_t id : candidates) {
+    const int bz = int(core::brick_coords(id, nb)[2]);
+    read_z0 = std::min(read_z0, std::max(8 * bz - 1, 0));
+    read_z1 = std::max(read_z1, std::min(8 * bz + 10, vol.grid.dims[2]));
+  }
+  const RecordFn before = [&](VkCommandBuffer cmd) {
+    if (m.direct) return;
+    if (m.up_z1 > m.up_z0) {
+      const VkBufferCopy r{std::uint64_t(m.up_z0) * slice_bytes, std::uint64_t(m.up_z0) * slice_bytes,
+                           std::uint64_t(m.up_z1 - m.up_z0) * slice_bytes};
+      vkCmdCopyBuffer(cmd, m.staging.handle(), m.input.handle(), 1, &r);
+    }
+    record_copy(cmd, *list_up, *list_buf, list_bytes);
+    barrier_transfer_to_compute(cmd);
+  };
+  const RecordFn after = [&](VkCommandBuffer cmd) {
+    if (m.direct) {
+      barrier_compute_to_host(cmd);
+      return;
+    }
+    barrier_compute_to_transfer(cmd);
+    if (read_z1 > read_z0) {
+      const VkBufferCopy r{std::uint64_t(read_z0) * slice_bytes, std::uint64_t(read_z0) * slice_bytes,
+                           std::uint64_t(read_z1 - read_z0) * slice_bytes};
+      vkCmdCopyBuffer(cmd, result.handle(), m.readback.handle(), 1, &r);
+    }
+    barrier_transfer_to_host(cmd);
+  };
+  if (!m.arena) {
+    std::uint32_t sets = 0;
+    for (const ListStage& st : stages) sets += std::uint32_t(st.slabs.size());
+    sets = std::max<std::uint32_t>(sets, 1);
+    m.arena = std::make_unique<DescriptorArena>(c.ctx, sets, 3 * sets);
+    m.timer = std::make_unique<GpuTimer>(c.ctx, std::uint32_t(K + 1));
+  }
+  SparseOutput timing;
+  int dispatches = 0;
+  (void)c.record_lists(vol, stages, lists, base, b, m.direct, timing, dispatches, before, after, m.arena.get(),
+                       m.timer.get());
+  m.up_z0 = m.up_z1 = 0;
+  o.submit_wall_ms = timing.submit_wall_ms;
+  o.dispatches = std::size_t(dispatches);
+  o.field = static_cast<const float*>(m.direct ? result.mapped() : m.readback.mapped());
+  std::ostringstream info;
+  info << candidates.size() << " candidates, " << o.quads << " quads, " << dispatches << " dispatch(es)";
+  m.last = info.str();
+  return o;
+}
+
+std::string SparseFilter::describe() const {
+  const Impl& m = *impl_;
+  std::ostringstream s;
+  s << "sparse filter (the list strategy's filter stage on chosen candidates): " << m.plan.text << "; "
+    << (m.fused ? "gauss_fused_list (x, y, z fused)" : "filter_list_x4, one pass per op")
+    << " on the quads of the candidates' extents; the volume resident on the device, patched brick by brick"
+    << (m.direct ? " (host-visible device memory: written in place, output read in place)"
+                 : " (through a staging copy; the slices read back)");
+  if (!m.last.empty()) s << "; last run: " << m.last;
+  return s.str();
 }
 
 }  // namespace isotouch::engine

@@ -297,8 +297,57 @@ class SparseChain {
   std::uint64_t recycled_pools() const;
 
  private:
+  friend class SparseFilter;  // runs the list strategy's filter stage on chosen candidates
   struct Impl;
   explicit SparseChain(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+/// The list strategy's filter stage alone, on chosen candidate bricks of a volume kept on the
+/// device and patched brick by brick: the live field's GPU recompute (session/live_field.h).
+/// The same kernels and the same work lists as SparseChain::Strategy::Lists: one Gaussian as
+/// the fused gauss_fused_list pass, other chains one filter_list_x4 pass per op, each over
+/// the quads of the candidates' extents (sparse::list_extents: the candidate bricks dilated
+/// by the rest of the stencil, halos shared between neighbouring candidates and computed
+/// once). The host then computes ranges and samples from the output exactly as the chain
+/// does (sparse::candidate_ranges, sparse::brick_samples): bit for bit run_sparse_cpu.
+class SparseFilter {
+ public:
+  /// Copies `vol` to the device (its grid and path are kept; its voxels are not referenced
+  /// afterwards) and makes the pipelines (one empty run).
+  /// @return error (no throw) if the pass list does not suit the sparse chain, has no filter
+  ///         (a gradient alone needs no GPU pass), a filter wider than
+  ///         ISOTOUCH_DENSE_MAX_RADIUS, or a buffer or pipeline cannot be made.
+  static Result<std::unique_ptr<SparseFilter>> create(VulkanContext& ctx, const Volume& vol,
+                                                      const std::vector<PassDesc>& passes, bool staging = false);
+  ~SparseFilter();
+  SparseFilter(const SparseFilter&) = delete;
+  SparseFilter& operator=(const SparseFilter&) = delete;
+
+  /// Copies bricks `bricks` (ids as in core/brick_field.h) of `voxels` (a whole volume of the
+  /// grid given to create(), x fastest) into the device's copy (where device memory is not
+  /// host-visible: into a staging copy, uploaded by the next filter()).
+  void set_bricks(const float* voxels, const std::vector<std::uint32_t>& bricks) noexcept;
+
+  struct Output {
+    const float* field = nullptr;  ///< the last filter's output, dense-addressed (x fastest)
+    std::uint64_t quads = 0;       ///< quads computed over all passes
+    std::size_t dispatches = 0;
+    double lists_ms = 0;           ///< work lists (host)
+    double submit_wall_ms = 0;     ///< submit to fence
+  };
+  /// Runs the filters on the quads of the extents of `candidates` (ascending brick ids).
+  /// Output::field is exact at voxels 8 b - 1 .. 8 b + 9 (clipped to the grid) of every
+  /// candidate b, what the host reads for its range and samples; elsewhere it holds anything.
+  /// Valid until the next call of filter() or set_bricks().
+  /// @throws VolumeError naming the volume on a resource or size problem.
+  Output filter(const std::vector<std::uint32_t>& candidates);
+  /// Kernels and buffers, and where the voxels are copied.
+  std::string describe() const;
+
+ private:
+  struct Impl;
+  explicit SparseFilter(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
 

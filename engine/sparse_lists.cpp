@@ -45,8 +45,11 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
                       std::to_string(nz) + " is too large for the work lists (rows and quads below 2^24)");
   const auto nb = core::brick_counts(grid);
   const std::size_t nbx = std::size_t(nb[0]), nby = std::size_t(nb[1]), nbz = std::size_t(nb[2]);
-  std::vector<std::uint8_t> mark(nbx * nby * nbz, 0);
-  for (std::uint32_t id : candidates) mark[id] = 1;
+  std::vector<std::uint8_t> mark(nbx * nby * nbz, 0), layer(nbz, 0);
+  for (std::uint32_t id : candidates) {
+    mark[id] = 1;
+    layer[id / (nbx * nby)] = 1;
+  }
   // Brick layers whose extent covers index i along axis a: 8 b - lo <= i <= 8 b + 7 + hi.
   auto bricks_at = [&](int i, int a) {
     const int b0 = std::max(floor_div(i - 7 - e.hi[std::size_t(a)] + 7, 8), 0);
@@ -59,6 +62,12 @@ WorkList make_work_list(const core::Grid& grid, const std::vector<std::uint32_t>
   std::vector<std::pair<int, int>> runs;  // quads [first, last] of the current row class
   for (int z = 0; z < nz; ++z) {
     const auto [bz0, bz1] = bricks_at(z, 2);
+    bool any = false;  // a slice no candidate's extent reaches has no units (few candidates: most)
+    for (int bz = bz0; bz <= bz1; ++bz) any = any || layer[std::size_t(bz)];
+    if (!any) {
+      w.z_first[std::size_t(z) + 1] = std::uint32_t(w.unit_count());
+      continue;
+    }
     std::pair<int, int> prev{-1, -2};
     for (int y = 0; y < ny; ++y) {
       const auto by = bricks_at(y, 1);
@@ -121,7 +130,27 @@ class CandidateRows {
         std::uint64_t(ny_) * ISOTOUCH_LIST_PACK >= (1u << 24))
       throw VolumeError(what + ": sparse chain: " + std::to_string(nx_) + "x" + std::to_string(ny_) + "x" +
                         std::to_string(nz) + " is too large for the column lists (columns and rows below 2^24)");
-    for (std::uint32_t id : candidates) mark_[id] = 1;
+    layer_.assign(std::size_t(nb_[2]), 0);
+    int bx_lo = nb_[0], bx_hi = -1;
+    for (std::uint32_t id : candidates) {
+      mark_[id] = 1;
+      layer_[id / (nbx_ * nby_)] = 1;
+      bx_lo = std::min(bx_lo, int(id % nbx_));
+      bx_hi = std::max(bx_hi, int(id % nbx_));
+    }
+    // The quad columns any candidate's extent reaches: [q_lo, q_hi) (empty without one).
+    q_lo_ = bx_hi < 0 ? 0 : std::max(8 * bx_lo - e.lo[0], 0) / 4;
+    q_hi_ = bx_hi < 0 ? 0 : std::min(8 * bx_hi + 7 + e.hi[0], nx_ - 1) / 4 + 1;
+  }
+  /// Quad columns [q_lo, q_hi): outside them no candidate's extent reaches.
+  int q_lo() const { return q_lo_; }
+  int q_hi() const { return q_hi_; }
+  /// Whether some candidate's extent reaches slice z (else its rows are all 0).
+  bool reaches(int z) const {
+    const auto [bz0, bz1] = bricks_at(z, 2);
+    for (int bz = bz0; bz <= bz1; ++bz)
+      if (layer_[std::size_t(bz)]) return true;
+    return false;
   }
   int quad_columns() const { return (nx_ + int(ISOTOUCH_DENSE_VOXELS) - 1) / int(ISOTOUCH_DENSE_VOXELS); }
 
@@ -169,7 +198,8 @@ class CandidateRows {
   const std::array<int, 3> nb_;
   const int nx_, ny_;
   const std::size_t nbx_, nby_;
-  std::vector<std::uint8_t> mark_, rows_of_bx_;
+  std::vector<std::uint8_t> mark_, rows_of_bx_, layer_;
+  int q_lo_ = 0, q_hi_ = 0;
 };
 
 /// make_column_list without pairs: one unit per slice's column. Not inlined: inlined into
@@ -184,8 +214,12 @@ class CandidateRows {
   w.z_first.assign(std::size_t(nz) + 1, 0);
   std::vector<std::uint8_t> rows(std::size_t(ny), 0);
   for (int z = 0; z < nz; ++z) {
+    if (!cover.reaches(z)) {
+      w.z_first[std::size_t(z) + 1] = std::uint32_t(w.unit_count());
+      continue;
+    }
     cover.mark_slice(z);
-    for (int q = 0; q < qx; ++q) {
+    for (int q = cover.q_lo(); q < cover.q_hi(); ++q) {
       std::fill(rows.begin(), rows.end(), std::uint8_t(0));
       if (!cover.or_quad_rows(q, rows.data())) continue;
       for (int y = 0; y < ny;) {
@@ -213,9 +247,9 @@ namespace {
 /// Appends to `w` the units of slice z over the rows `m` marks (m[q * ny + y] 1 where quad q
 /// of row y needs an output): runs of at most ISOTOUCH_LIST_PACK - 1 rows per quad column;
 /// pair: the unit also computes slice z + 1 (gauss_fused_list.comp).
-void emit_runs(const std::uint8_t* m, int qx, int ny, int z, bool pair, WorkList& w) {
+void emit_runs(const std::uint8_t* m, int qx, int q0, int q1, int ny, int z, bool pair, WorkList& w) {
   constexpr int kColumn = int(ISOTOUCH_LIST_PACK) - 1;  // outputs per unit (per slice) at most
-  for (int q = 0; q < qx; ++q) {
+  for (int q = q0; q < q1; ++q) {
     const std::uint8_t* r = m + std::size_t(q) * std::size_t(ny);
     for (int y = 0; y < ny;) {
       // The next marked row and the end of its run (memchr: the library's vector scan).
@@ -241,32 +275,41 @@ void emit_runs(const std::uint8_t* m, int qx, int ny, int z, bool pair, WorkList
   const int ny = grid.dims[1], nz = grid.dims[2], qx = cover.quad_columns();
   const std::size_t cells = std::size_t(qx) * std::size_t(ny);
   // rows[q * ny + y]: 1 where quad q of row y of the slice meets some candidate's extent.
+  // Only quad columns [q0, q1) can hold a marked row: the loops stay there (same units).
+  const int q0 = cover.q_lo(), q1 = cover.q_hi();
+  const std::size_t c0 = std::size_t(q0) * std::size_t(ny), c1 = std::size_t(q1) * std::size_t(ny);
   auto slice_rows = [&](int z, std::vector<std::uint8_t>& rows) {
-    std::fill(rows.begin(), rows.end(), std::uint8_t(0));
+    std::fill(rows.begin() + std::ptrdiff_t(c0), rows.begin() + std::ptrdiff_t(c1), std::uint8_t(0));
+    if (!cover.reaches(z)) return;
     cover.mark_slice(z);
-    for (int q = 0; q < qx; ++q) (void)cover.or_quad_rows(q, rows.data() + std::size_t(q) * std::size_t(ny));
+    for (int q = q0; q < q1; ++q) (void)cover.or_quad_rows(q, rows.data() + std::size_t(q) * std::size_t(ny));
   };
   w.z_first.assign(std::size_t(z1 - z0) + 1, 0);
   std::vector<std::uint8_t> a(cells), b(cells), both(cells), only_a(cells), only_b(cells);
   // Slices two at a time: the rows both need as pairs (one column computes both outputs,
   // sharing the x and y passes of their common slices), the rest as single units.
   for (int z = z0; z < z1; z += 2) {
+    if (!cover.reaches(z) && (z + 1 == nz || !cover.reaches(z + 1))) {  // no units
+      w.z_first[std::size_t(z - z0) + 1] = std::uint32_t(w.unit_count());
+      if (z + 1 < nz) w.z_first[std::size_t(z - z0) + 2] = std::uint32_t(w.unit_count());
+      continue;
+    }
     slice_rows(z, a);
     if (z + 1 == nz) {
-      emit_runs(a.data(), qx, ny, z, false, w);
+      emit_runs(a.data(), qx, q0, q1, ny, z, false, w);
       w.z_first[std::size_t(z - z0) + 1] = std::uint32_t(w.unit_count());
       continue;
     }
     slice_rows(z + 1, b);
-    for (std::size_t i = 0; i < cells; ++i) {  // entries are 0 or 1
+    for (std::size_t i = c0; i < c1; ++i) {  // entries are 0 or 1
       both[i] = a[i] & b[i];
       only_a[i] = a[i] & (b[i] ^ 1u);
       only_b[i] = b[i] & (a[i] ^ 1u);
     }
-    emit_runs(both.data(), qx, ny, z, true, w);
-    emit_runs(only_a.data(), qx, ny, z, false, w);
+    emit_runs(both.data(), qx, q0, q1, ny, z, true, w);
+    emit_runs(only_a.data(), qx, q0, q1, ny, z, false, w);
     w.z_first[std::size_t(z - z0) + 1] = std::uint32_t(w.unit_count());
-    emit_runs(only_b.data(), qx, ny, z + 1, false, w);
+    emit_runs(only_b.data(), qx, q0, q1, ny, z + 1, false, w);
     w.z_first[std::size_t(z - z0) + 2] = std::uint32_t(w.unit_count());
   }
 }

@@ -40,6 +40,7 @@ struct EditFigures {
   std::uint64_t last_version = 1;  ///< SampleField::version of the last snapshot
   long dirty_bricks = 0;           ///< sum over applications of the bricks whose voxels changed
   long recomputed_bricks = 0;      ///< sum over updates of LiveUpdateStats::recomputed
+  long gpu_updates = 0;            ///< updates whose filters ran on the GPU (LiveUpdateStats::gpu)
   double update_ms_median = 0, update_ms_max = 0;  ///< session::EditSession::apply wall time, publishing events [ms]
   double brush_ms_median = 0;      ///< BrushResult::wall_ms median [ms]
   bool brushes_on_gpu = false;     ///< Sculptor::on_gpu()

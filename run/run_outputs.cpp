@@ -199,6 +199,7 @@ void edit_figures(const SceneSetup& setup, const EditDriver& d, const std::vecto
       upd.push_back(r.outcome.wall_ms);
       e.update_ms_max = std::max(e.update_ms_max, r.outcome.wall_ms);
       e.recomputed_bricks += long(r.outcome.update.recomputed);
+      e.gpu_updates += r.outcome.update.gpu ? 1 : 0;
     }
     if (r.event.kind == EditEvent::Kind::kBrush) {
       e.dirty_bricks += long(r.outcome.brush.dirty.size());
@@ -229,7 +230,7 @@ void log_edits(const EditFigures& e, std::ostream& log) {
   log << "edits    " << e.brushes << " brush applications (" << e.timeline_brushes << " timeline, " << e.button_brushes
       << " button), " << e.undos << " undo, " << e.redos << " redo; " << e.publications << " snapshots published (last version "
       << e.last_version << "); update median " << fmt(e.update_ms_median, 4) << " ms, max " << fmt(e.update_ms_max, 4)
-      << " ms\n         " << (e.removed_mm3 < 0 ? "added " : "removed ") << fmt(std::abs(e.removed_mm3), 5) << " mm^3 ("
+      << " ms; " << e.gpu_updates << " of " << e.publications << " updates filtered on the GPU\n         " << (e.removed_mm3 < 0 ? "added " : "removed ") << fmt(std::abs(e.removed_mm3), 5) << " mm^3 ("
       << std::abs(e.inside_voxels_before - e.inside_voxels_after) << " voxels); deepest HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP " << fmt(e.max_vhip_depth_m * 1e3, 4)
       << " mm below the initial contact point; undo history " << e.history_bytes << " B of " << e.history_limit_bytes
       << " B\n";

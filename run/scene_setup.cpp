@@ -229,6 +229,7 @@ void make_edit_session(const Scene& scene, SceneSetup& s, std::ostream& log) {
       << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")
       << ", undo limit " << fmt(scene.edits.history_limit_mib) << " MiB; first snapshot version "
       << s.first->version << " (LiveField, " << s.live.passes.size() << " pass(es))\n";
+  log << "live     " << s.session->live().describe() << "\n";
 }
 
 }  // namespace

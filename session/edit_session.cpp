@@ -48,7 +48,7 @@ struct EditSession::Impl {
 EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
                          double history_limit_mib)
     : impl_(std::make_unique<Impl>()) {
-  impl_->live = session::LiveField::create(vol, options);
+  impl_->live = session::LiveField::create(vol, options, ctx);
   impl_->sculptor = std::make_unique<session::Sculptor>(std::move(vol), ctx, history_limit_mib);
 }
 EditSession::~EditSession() = default;

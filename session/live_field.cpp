@@ -15,6 +15,7 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include "live_gpu.h"
 #include "sparse_chain.h"
 
 namespace isotouch::session {
@@ -28,6 +29,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 using core::BrickStore;
 constexpr std::size_t kS = core::kBrickSamples;  // 729 samples per slot
+
+/// Recomputed bricks from which update() runs the filters on the GPU by default (see
+/// live_field.h; measured in tests/test_live_field.cpp's DISABLED_BenchChestGpuCpu).
+constexpr std::size_t kDefaultGpuMinBricks = 24;
 
 double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
@@ -233,6 +238,10 @@ struct LiveField::Impl {
   // Per-update scratch, by generation (no clearing).
   std::vector<std::uint32_t> work_mark, content_mark, dirty_mark;
   std::uint32_t gen = 0;
+  // The GPU recompute (live_gpu.h), null where not used (gpu_reason says why).
+  std::unique_ptr<LiveGpuFilter> gpu;
+  std::string gpu_reason = "no Vulkan context given";
+  std::size_t gpu_min_bricks = kDefaultGpuMinBricks;
 
   void next_gen() {
     if (++gen == 0) {
@@ -462,6 +471,11 @@ LiveField::LiveField(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 LiveField::~LiveField() = default;
 
 std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldOptions& options) {
+  return create(vol, options, nullptr);
+}
+
+std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldOptions& options,
+                                             engine::VulkanContext* ctx) {
   const std::string why = sparse::validate(options.passes);
   if (!why.empty()) throw std::invalid_argument("live field: " + why);
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
@@ -480,6 +494,19 @@ std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldO
   impl->content_mark.assign(impl->total, 0);
   impl->dirty_mark.assign(impl->total, 0);
   impl->build(vol);
+  if (ctx) {
+    if (impl->plan.ops.empty()) {
+      impl->gpu_reason = "no filter in the pass list (" + impl->plan.text + "): the gradient needs no GPU pass";
+    } else {
+      auto g = make_live_gpu_filter(*ctx, vol, options.passes);
+      if (g) {
+        impl->gpu = std::move(*g.value);
+        impl->gpu_reason.clear();
+      } else {
+        impl->gpu_reason = g.error;
+      }
+    }
+  }
   return std::unique_ptr<LiveField>(new LiveField(std::move(impl)));
 }
 
@@ -511,31 +538,75 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     // 1. What the edit can change, then the new state of those bricks.
     m.find_work(vol, dirty, work, changed, raw_undo);
     std::sort(work.begin(), work.end());
+    if (m.gpu) m.gpu->set_bricks(vol.voxels.data(), changed);  // the device's copy follows the volume
     std::vector<Change> changes;
     std::vector<std::pair<std::uint32_t, std::uint8_t>> cand_changes;
     std::vector<core::Sample> scratch;
-    std::unique_ptr<sparse::CandidateCpu> cpu;
-    for (std::uint32_t id : work) {
+    // 1a. The selection of every brick the edit reaches; which ones to recompute.
+    enum class Todo : std::uint8_t { kKeep, kTile, kRecompute };
+    std::vector<Todo> todo(work.size(), Todo::kKeep);
+    std::vector<float> tile_of(work.size(), 0.f);
+    std::vector<std::uint32_t> recompute;  // ascending (work is sorted)
+    for (std::size_t w = 0; w < work.size(); ++w) {
+      const std::uint32_t id = work[w];
       const sparse::BrickSelection sel = sparse::select_brick(m.grid, vol.voxels.data(), m.plan, m.opt.iso, id);
       if (std::uint8_t(sel.candidate) != m.candidate[id]) cand_changes.push_back({id, std::uint8_t(sel.candidate)});
-      Change c;
-      c.id = id;
       if (!sel.candidate) {
-        if (!core::tile_value(sel.lo, sel.hi, m.opt.iso, m.opt.background, c.tile))
+        if (!core::tile_value(sel.lo, sel.hi, m.opt.iso, m.opt.background, tile_of[w]))
           throw std::logic_error("live field: brick " + std::to_string(id) + " straddles but is no candidate");
+        todo[w] = Todo::kTile;
       } else if (m.content_mark[id] != m.gen && m.candidate[id]) {
         continue;  // still a candidate, nothing it reads changed: as before
       } else {
-        if (!cpu) cpu = std::make_unique<sparse::CandidateCpu>(vol, m.plan);
-        const sparse::CandidateRange r = cpu->range(id);
-        ++st.recomputed;
-        if (sparse::is_active(r, m.opt.iso, m.opt.background, c.tile)) {
+        todo[w] = Todo::kRecompute;
+        recompute.push_back(id);
+      }
+    }
+    // 1b. Their exact ranges and the active ones' samples: the filters on the GPU (the list
+    // kernels over the recomputed bricks' extents), ranges and samples from that output on
+    // the host as the sparse chain does; or each brick on the CPU (run_sparse_cpu's code).
+    st.recomputed = recompute.size();
+    std::vector<sparse::CandidateRange> ranges;
+    std::vector<std::size_t> sample_at(recompute.size(), SIZE_MAX);
+    st.gpu = m.gpu && !recompute.empty() && recompute.size() >= m.gpu_min_bricks;
+    if (st.gpu) {
+      const float* f = m.gpu->filter(recompute, st.gpu_submit_ms);
+      ranges = sparse::candidate_ranges(m.grid, f, recompute);
+      for (std::size_t r = 0; r < recompute.size(); ++r) {
+        float tile = 0;
+        if (!sparse::is_active(ranges[r], m.opt.iso, m.opt.background, tile)) continue;
+        sample_at[r] = scratch.size();
+        scratch.resize(scratch.size() + kS);
+        sparse::brick_samples(m.grid, f, core::brick_coords(recompute[r], m.nb), m.opt.background,
+                              scratch.data() + sample_at[r]);
+      }
+    } else if (!recompute.empty()) {
+      sparse::CandidateCpu cpu(vol, m.plan);
+      ranges.resize(recompute.size());
+      for (std::size_t r = 0; r < recompute.size(); ++r) {
+        ranges[r] = cpu.range(recompute[r]);
+        float tile = 0;
+        if (!sparse::is_active(ranges[r], m.opt.iso, m.opt.background, tile)) continue;
+        sample_at[r] = scratch.size();
+        scratch.resize(scratch.size() + kS);
+        cpu.samples(scratch.data() + sample_at[r], m.opt.background);
+      }
+    }
+    // 1c. The new state of those bricks, in brick order.
+    for (std::size_t w = 0, r = 0; w < work.size(); ++w) {
+      if (todo[w] == Todo::kKeep) continue;
+      const std::uint32_t id = work[w];
+      Change c;
+      c.id = id;
+      if (todo[w] == Todo::kTile) {
+        c.tile = tile_of[w];
+      } else {
+        if (sparse::is_active(ranges[r], m.opt.iso, m.opt.background, c.tile)) {
           c.active = true;
-          c.scratch = scratch.size();
-          scratch.resize(scratch.size() + kS);
-          cpu->samples(scratch.data() + c.scratch, m.opt.background);
+          c.scratch = sample_at[r];
           m.check_storable(scratch.data() + c.scratch, id);
         }
+        ++r;
       }
       // Keep what did not change: the same tile bits, or the same stored samples.
       const std::uint32_t e = old.table[id];
@@ -668,7 +739,9 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     st.publish_ms = ms_between(t1, t2);
     st.total_ms = ms_between(t0, t2);
   } catch (...) {
-    // Nothing was published: the raw ranges and the slots go back as they were.
+    // Nothing was published: the raw ranges, the slots and the device's copy of the volume
+    // (the shadow: the volume as of the current snapshot) go back as they were.
+    if (m.gpu) m.gpu->set_bricks(m.shadow.data(), changed);
     for (auto it = raw_undo.rbegin(); it != raw_undo.rend(); ++it) {
       m.raw.lo[it->first] = it->second[0];
       m.raw.hi[it->first] = it->second[1];
@@ -689,6 +762,20 @@ std::uint64_t LiveField::pool_bytes() const {
   for (const auto& w : impl_->old_arenas)
     if (auto a = w.lock()) slots += a->used();
   return slots * slot_bytes(impl_->opt.format);
+}
+
+bool LiveField::gpu_enabled() const { return impl_->gpu != nullptr; }
+const std::string& LiveField::gpu_reason() const { return impl_->gpu_reason; }
+std::size_t LiveField::gpu_min_bricks() const { return impl_->gpu_min_bricks; }
+void LiveField::set_gpu_min_bricks(std::size_t bricks) { impl_->gpu_min_bricks = bricks; }
+
+std::string LiveField::describe() const {
+  const Impl& m = *impl_;
+  std::string s = "live field: " + m.plan.text + "; recompute: ";
+  if (!m.gpu)
+    return s + "CPU per brick (sparse::CandidateCpu, run_sparse_cpu's code); GPU not used: " + m.gpu_reason;
+  return s + "GPU for updates of >= " + std::to_string(m.gpu_min_bricks) +
+         " recomputed bricks (ranges and samples then on the host), CPU per brick below; " + m.gpu->describe();
 }
 
 std::uint64_t LiveField::arena_bytes() const {

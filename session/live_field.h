@@ -29,6 +29,16 @@
 //   re-selected, and recomputed only if they turn candidate. Every other brick keeps its
 //   table entry. Recomputed bricks run run_sparse_cpu's own per-brick code
 //   (sparse::CandidateCpu, sparse::select_brick): bit for bit the full run (and the GPU).
+// - On the GPU (a LiveField created with a Vulkan context, a filter in the pass list): the
+//   recomputed bricks' filters run with the sparse chain's list kernels
+//   (engine::SparseFilter: the fused Gaussian or filter_list_x4 per op, on the quads of the
+//   recomputed bricks dilated by the stencil, halos shared between neighbours and computed
+//   once) on a device copy of the volume patched with the changed bricks; ranges and samples
+//   are then computed on the host from that output as the sparse chain does
+//   (sparse::candidate_ranges, sparse::brick_samples): the same bits. Below
+//   gpu_min_bricks() recomputed bricks (small edits, where one submit costs more than the
+//   CPU's per-brick work) the CPU path runs; LiveUpdateStats::gpu says which ran. A gradient
+//   alone has no filter: no GPU pass, the CPU computes it (describe() says so).
 // - Sharing. All snapshots of a LiveField keep their active bricks in one fixed-capacity
 //   arena (BrickStore::slot_capacity; never reallocated, so table entries and the servo's
 //   pool pointer stay valid); a snapshot has its own table and tiles (4 B per brick + 16 B
@@ -77,6 +87,8 @@ struct LiveUpdateStats {
   std::size_t shared = 0;       ///< active bricks whose samples are shared with the previous snapshot
   std::uint64_t new_bytes = 0;  ///< sample bytes written for this snapshot (the rest is shared)
   double recompute_ms = 0;      ///< passes on the recomputed bricks [ms]
+  bool gpu = false;             ///< the filters ran on the GPU (else all on the CPU)
+  double gpu_submit_ms = 0;     ///< with gpu: submit to fence [ms] (inside recompute_ms)
   double publish_ms = 0;        ///< building the new snapshot (table, tiles, pool slots) [ms]
   double total_ms = 0;          ///< update(), everything included [ms]
   std::uint64_t version = 0;    ///< the new snapshot's SampleField::version
@@ -92,6 +104,13 @@ class LiveField {
   /// @throws VolumeError naming the volume, or std::invalid_argument naming the pass, if
   ///         the pass list does not suit the sparse chain.
   static std::unique_ptr<LiveField> create(const engine::Volume& vol, const LiveFieldOptions& options);
+  /// The same, recomputing the filters on the GPU of `ctx` (null: CPU only) for updates of
+  /// at least gpu_min_bricks() recomputed bricks. Where the GPU cannot be used (no filter in
+  /// the pass list, this build has no Vulkan, the device refuses a buffer or pipeline) the
+  /// field recomputes on the CPU and gpu_reason() says why: set-up never fails for it.
+  /// `ctx` must outlive the LiveField and be used from the updating thread only meanwhile.
+  static std::unique_ptr<LiveField> create(const engine::Volume& vol, const LiveFieldOptions& options,
+                                           engine::VulkanContext* ctx);
   ~LiveField();
   LiveField(const LiveField&) = delete;
   LiveField& operator=(const LiveField&) = delete;
@@ -110,6 +129,15 @@ class LiveField {
   std::uint64_t pool_bytes() const;
   /// Bytes of the arenas alive now (every slot, used or free), same units as pool_bytes().
   std::uint64_t arena_bytes() const;
+  /// Whether update() may run the filters on the GPU.
+  bool gpu_enabled() const;
+  /// Why the GPU is not used (empty when it is).
+  const std::string& gpu_reason() const;
+  /// Recomputed bricks from which update() runs the filters on the GPU (below: the CPU).
+  std::size_t gpu_min_bricks() const;
+  void set_gpu_min_bricks(std::size_t bricks);
+  /// How update() recomputes: CPU per brick, or the GPU kernels above the threshold.
+  std::string describe() const;
 
  private:
   struct Impl;

@@ -243,6 +243,23 @@ struct LiveField::Impl {
   std::string gpu_reason = "no Vulkan context given";
   std::size_t gpu_min_bricks = kDefaultGpuMinBricks;
 
+  /// The GPU filters on `recompute` (LiveGpuFilter::filter), or null where the GPU failed: the
+  /// GPU is then dropped for good (a lost device, no memory, a work list past the device's
+  /// texel limit), gpu_reason says why, st says the CPU ran, and this update goes on there.
+  const float* gpu_filter_or_drop(const std::vector<std::uint32_t>& recompute, LiveUpdateStats& st) {
+    try {
+      return gpu->filter(recompute, st.gpu_submit_ms);
+    } catch (const std::exception& e) {
+      gpu_reason = std::string("the GPU failed on an update of ") + std::to_string(recompute.size()) +
+                   " bricks (" + e.what() + "): the CPU recomputes from then on";
+      gpu.reset();
+      st.gpu = false;
+      st.gpu_submit_ms = 0;
+      st.gpu_failed = true;
+      return nullptr;
+    }
+  }
+
   void next_gen() {
     if (++gen == 0) {
       std::fill(work_mark.begin(), work_mark.end(), 0u);
@@ -569,18 +586,18 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     std::vector<sparse::CandidateRange> ranges;
     std::vector<std::size_t> sample_at(recompute.size(), SIZE_MAX);
     st.gpu = m.gpu && !recompute.empty() && recompute.size() >= m.gpu_min_bricks;
-    if (st.gpu) {
-      const float* f = m.gpu->filter(recompute, st.gpu_submit_ms);
-      ranges = sparse::candidate_ranges(m.grid, f, recompute);
+    const float* filtered = st.gpu ? m.gpu_filter_or_drop(recompute, st) : nullptr;
+    if (filtered) {
+      ranges = sparse::candidate_ranges(m.grid, filtered, recompute);
       for (std::size_t r = 0; r < recompute.size(); ++r) {
         float tile = 0;
         if (!sparse::is_active(ranges[r], m.opt.iso, m.opt.background, tile)) continue;
         sample_at[r] = scratch.size();
         scratch.resize(scratch.size() + kS);
-        sparse::brick_samples(m.grid, f, core::brick_coords(recompute[r], m.nb), m.opt.background,
+        sparse::brick_samples(m.grid, filtered, core::brick_coords(recompute[r], m.nb), m.opt.background,
                               scratch.data() + sample_at[r]);
       }
-    } else if (!recompute.empty()) {
+    } else if (!recompute.empty()) {  // (also where the GPU just failed: this edit is not lost)
       sparse::CandidateCpu cpu(vol, m.plan);
       ranges.resize(recompute.size());
       for (std::size_t r = 0; r < recompute.size(); ++r) {
@@ -768,6 +785,10 @@ bool LiveField::gpu_enabled() const { return impl_->gpu != nullptr; }
 const std::string& LiveField::gpu_reason() const { return impl_->gpu_reason; }
 std::size_t LiveField::gpu_min_bricks() const { return impl_->gpu_min_bricks; }
 void LiveField::set_gpu_min_bricks(std::size_t bricks) { impl_->gpu_min_bricks = bricks; }
+void LiveField::set_gpu_filter(std::unique_ptr<LiveGpuFilter> filter, const std::string& reason_if_none) {
+  impl_->gpu = std::move(filter);
+  impl_->gpu_reason = impl_->gpu ? std::string() : reason_if_none;
+}
 
 std::string LiveField::describe() const {
   const Impl& m = *impl_;

@@ -70,6 +70,8 @@ class VulkanContext;
 
 namespace isotouch::session {
 
+class LiveGpuFilter;  // live_gpu.h
+
 struct LiveFieldOptions {
   std::vector<engine::PassDesc> passes{engine::PassDesc{}};  ///< filters then gradient (sparse_chain.h's rule); default: gradient
   core::Isosurface iso;                      ///< selects the active bricks
@@ -88,6 +90,7 @@ struct LiveUpdateStats {
   std::uint64_t new_bytes = 0;  ///< sample bytes written for this snapshot (the rest is shared)
   double recompute_ms = 0;      ///< passes on the recomputed bricks [ms]
   bool gpu = false;             ///< the filters ran on the GPU (else all on the CPU)
+  bool gpu_failed = false;      ///< the GPU failed on this update: the CPU ran it, and runs every later one
   double gpu_submit_ms = 0;     ///< with gpu: submit to fence [ms] (inside recompute_ms)
   double publish_ms = 0;        ///< building the new snapshot (table, tiles, pool slots) [ms]
   double total_ms = 0;          ///< update(), everything included [ms]
@@ -136,6 +139,9 @@ class LiveField {
   /// Recomputed bricks from which update() runs the filters on the GPU (below: the CPU).
   std::size_t gpu_min_bricks() const;
   void set_gpu_min_bricks(std::size_t bricks);
+  /// Replaces the GPU filter create() made (null: none, with `reason_if_none` as gpu_reason);
+  /// for tests (a filter that fails, one that counts its calls).
+  void set_gpu_filter(std::unique_ptr<LiveGpuFilter> filter, const std::string& reason_if_none = "none given");
   /// How update() recomputes: CPU per brick, or the GPU kernels above the threshold.
   std::string describe() const;
 

@@ -43,6 +43,7 @@
 #include "brush.h"
 #include "field_view.h"
 #include "live_field.h"
+#include "live_gpu.h"
 #include "sparse_chain.h"
 #include "synthetic.h"
 #include "vk_test_context.h"
@@ -876,6 +877,46 @@ TEST(LiveField, AGradientAloneRunsNoGpuPass) {
   EXPECT_FALSE(st.gpu);
   EXPECT_GT(st.recomputed, 0u);
   expect_full_run(*snap, c.vol, o, "sphere gradient with a context");
+}
+
+/// A GPU filter that fails: a lost device, no memory, a work list past the texel limit.
+class FailingGpuFilter final : public session::LiveGpuFilter {
+ public:
+  explicit FailingGpuFilter(int* calls) : calls_(calls) {}
+  void set_bricks(const float*, const std::vector<std::uint32_t>&) noexcept override {}
+  const float* filter(const std::vector<std::uint32_t>&, double&) override {
+    ++*calls_;
+    throw engine::VolumeError("test: the device was lost");
+  }
+  std::string describe() const override { return "fails"; }
+
+ private:
+  int* calls_;
+};
+
+TEST(LiveField, AFailingGpuLosesNoEditAndTheCpuTakesOver) {
+  // No Vulkan needed: the failing filter stands in for the device.
+  Case c = cached("sphere");
+  const LiveFieldOptions o = options(c, "gauss", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  int calls = 0;
+  lf->set_gpu_filter(std::make_unique<FailingGpuFilter>(&calls));
+  lf->set_gpu_min_bricks(0);
+  ASSERT_TRUE(lf->gpu_enabled());
+  for (int k = 0; k < 3; ++k) {
+    const session::BrushResult r = session::apply_brush_cpu(
+        c.vol, brush(c, BrushKind::kCarve, at(c.vol.grid, 0.5, 0.5 - 0.05 * k, 0.8), 3e-3, 3000));
+    session::LiveUpdateStats st;
+    const auto snap = lf->update(c.vol, r.dirty, &st);  // must not throw: the edit goes on on the CPU
+    ASSERT_TRUE(snap);
+    EXPECT_GT(st.recomputed, 0u);
+    EXPECT_FALSE(st.gpu);
+    EXPECT_EQ(st.gpu_failed, k == 0) << "edit " << k;
+    expect_full_run(*snap, c.vol, o, "sphere after a GPU failure, edit " + std::to_string(k));
+  }
+  EXPECT_EQ(calls, 1) << "the GPU is dropped after its failure";
+  EXPECT_FALSE(lf->gpu_enabled());
+  EXPECT_NE(lf->gpu_reason().find("the device was lost"), std::string::npos) << lf->gpu_reason();
 }
 
 // ---- benchmark (disabled: speed figures are printed, never asserted) --------------------

@@ -20,6 +20,7 @@
 #include <limits>
 #include <map>
 #include <optional>
+#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
@@ -1162,6 +1163,9 @@ std::string SparseFilter::describe() const {
     << " on the quads of the candidates' extents; the volume resident on the device, patched brick by brick"
     << (m.direct ? " (host-visible device memory: written in place, output read in place)"
                  : " (through a staging copy; the slices read back)");
+  const std::uint64_t bytes = m.input.size() + m.out[0].size() + m.out[1].size() + m.staging.size() + m.readback.size();
+  s << "; " << std::fixed << std::setprecision(1) << double(bytes) / (1024.0 * 1024.0)
+    << " MiB of buffers held for it (volume copy, outputs" << (m.direct ? ")" : ", staging, readback)");
   if (!m.last.empty()) s << "; last run: " << m.last;
   return s.str();
 }

@@ -737,6 +737,7 @@ TEST_P(LiveFieldMatchesOnGpu, AFullRunAfterEveryEdit) {
   ASSERT_TRUE(lf->gpu_enabled()) << lf->gpu_reason();
   lf->set_gpu_min_bricks(0);
   EXPECT_NE(lf->describe().find("GPU"), std::string::npos) << lf->describe();
+  EXPECT_NE(lf->describe().find("MiB of buffers held for it"), std::string::npos) << lf->describe();
   expect_full_run(*lf->current(), c.vol, o, p.volume + " first snapshot");
   int k = 0, on_gpu = 0;
   for (const Brush& b : sequence(c, p.edits)) {

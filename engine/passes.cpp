@@ -16,6 +16,8 @@
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
 #include "isotouch/shaders/gauss_fused_list_spv.h"
+#include "isotouch/shaders/gradient_minmax_x8_spv.h"
+#include "isotouch/shaders/minmax_slices_spv.h"
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
@@ -65,7 +67,9 @@ namespace {
 struct ChainStep {
   std::size_t pass;
   const ComputePipelineBase* pipe = nullptr;
-  enum { Filter, Fused, Gradient, MinMax } type = Filter;
+  /// GradMinMax: the gradient with the brick min/max's slice segments (gradient_minmax_x8);
+  /// MinMaxSlices: the segments into the bricks (minmax_slices), the brick min/max's rest.
+  enum { Filter, Fused, Gradient, MinMax, GradMinMax, MinMaxSlices } type = Filter;
   const ComputePipeline<gpu::ListPush>* fused = nullptr;       // gauss_fused_list over every column
   gpu::Filter1dPush f{};
   const ComputePipeline<gpu::DensePush>* x4 = nullptr;         // filter_x4 variant, else the 1-D filter
@@ -74,7 +78,7 @@ struct ChainStep {
 };
 /// Every buffer of one run (absent ones empty), kept by name for the next run.
 struct ChainBuffers {
-  GpuBuffer field[2], up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down, rows, columns;
+  GpuBuffer field[2], up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down, rows, columns, segments;
 };
 /// What the dispatches of one slab need besides the step: sizes, the brick min/max pair,
 /// the buffers they bind.
@@ -83,15 +87,47 @@ struct SlabArgs {
   std::uint32_t bx, by;
   std::uint64_t column_units;
   const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows, *mm_bricks, *minmax_legacy;
+  const ComputePipeline<gpu::DensePush>* grad_mm;           // gradient_minmax_x8, if fused
+  const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices;  // minmax_slices, if fused
   const ChainBuffers* b;
   const VkPhysicalDeviceLimits* lim;
   int halo;
+  core::Grid grid;
 };
 
 /// Records the dispatches of one slab of step `s` (no barrier after the last).
 void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s, const Slab& sl, const SlabArgs& a) {
   const int nx = a.nx, ny = a.ny, nz = a.nz;
-  if (s.type == ChainStep::Fused) {
+  if (s.type == ChainStep::GradMinMax) {
+    const GradientConstants k = gradient_constants(a.grid);
+    gpu::DensePush pc{};
+    pc.nx = gpu::uint(nx);
+    pc.ny = gpu::uint(ny);
+    pc.nz = gpu::uint(nz);
+    pc.slab_nz = gpu::uint(nz);
+    pc.qx = gpu::uint(nx / int(ISOTOUCH_DENSE_VOXELS));
+    pc.inv_2h_x = k.inv_2h[0];
+    pc.inv_2h_y = k.inv_2h[1];
+    pc.inv_2h_z = k.inv_2h[2];
+    pc.inv_h_x = k.inv_h[0];
+    pc.inv_h_y = k.inv_h[1];
+    pc.inv_h_z = k.inv_h[2];
+    a.grad_mm->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}});
+    a.grad_mm->push(cmd, pc);
+    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t(nz));
+  } else if (s.type == ChainStep::MinMaxSlices) {
+    gpu::BrickMinMaxPush pc{};
+    pc.nx = gpu::uint(nx);
+    pc.ny = gpu::uint(ny);
+    pc.nz = gpu::uint(nz);
+    pc.bx = a.bx;
+    pc.by = a.by;
+    pc.slab_bz = gpu::uint((nz + int(ISOTOUCH_BRICK) - 1) / int(ISOTOUCH_BRICK));
+    pc.halo = gpu::uint(a.halo);
+    a.mm_slices->bind(cmd, arena, {BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}, sl.dst});
+    a.mm_slices->push(cmd, pc);
+    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
+  } else if (s.type == ChainStep::Fused) {
     gpu::ListPush pc{};
     pc.units = gpu::uint(a.column_units);
     const std::uint64_t g = groups(a.column_units, ISOTOUCH_DENSE_WG);
@@ -220,6 +256,7 @@ void keep_buffers(ChainBuffers& b, std::map<std::string, GpuBuffer>& kept) {
   keep(b.field_down, "field readback");
   keep(b.rows, "brick row ranges");
   keep(b.columns, "fused gaussian columns");
+  keep(b.segments, "brick slice segments");
 }
 }  // namespace
 
@@ -256,6 +293,10 @@ struct PassChain::Impl {
   std::map<std::uint32_t, std::pair<std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>,
                                     std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>>> minmax_x4;
   std::unique_ptr<GradientPass> gradient;
+  /// The gradient with the brick min/max fused (gradient_minmax_x8 by volume size, then
+  /// minmax_slices), made on first use.
+  std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> grad_mm;
+  std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> mm_slices;
   std::string last_run;
   /// The last run's buffers by name, reused by the next run of the same sizes: no new
   /// allocation, and no first-touch page faults inside the timed dispatches.
@@ -302,7 +343,8 @@ std::string PassChain::describe() const {
   s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
     << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
     << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
-    << (minmax ? (legacy ? " brick_minmax" : " brick_minmax (minmax_rows + minmax_bricks)") : "");
+    << (minmax ? (legacy ? " brick_minmax" : " brick_minmax (minmax_rows + minmax_bricks)") : "")
+    << (impl_->grad_mm.empty() ? "" : " gradient_minmax_x8 + minmax_slices (gradient and brick min/max fused)");
   const bool all = gauss && closing && impl_->gradient && minmax;
   s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (closing ? "" : (legacy ? " morph1d" : " morph_x4 morph1d"))
     << (impl_->gradient ? "" : " gradient") << (minmax ? "" : " brick_minmax") << (all ? " none" : "");
@@ -442,10 +484,14 @@ void make_buffers(const BufferSource& buffer, const std::vector<PassDesc>& passe
 struct ChainPlan {
   std::vector<ChainStep> steps;
   sparse::WorkList columns;       ///< every column of quads, made for the first fused Gaussian
+  bool columns_paired = false;    ///< the list pairs slices (gauss_fused_list.comp PAIRS)
   std::uint64_t rows_slices = 0;  ///< most source slices of a brick min/max slab
   std::uint32_t extra_sets = 0;   ///< the current brick min/max binds twice per slab
   int cur = 0;                    ///< the field buffer the next pass reads
   std::size_t gi = 0, ci = 0;     ///< the next Gaussian's and closing's parameters
+  std::uint64_t segments_bytes = 0;  ///< the fused gradient + brick min/max's slice segments
+  const ComputePipeline<gpu::DensePush>* grad_mm = nullptr;
+  const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices = nullptr;
   std::ostringstream info;        ///< describe()'s "last run" lines
 };
 
@@ -470,9 +516,14 @@ void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, C
     const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
     std::vector<std::uint32_t> all(total);
     for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
-    plan.columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path);
+    // Slices in pairs wherever the z kernel has a radius (as the sparse chain): the x and y
+    // passes of the two slices' common source slices computed once.
+    plan.columns_paired = gauss.kernel[2].size() >= 3;
+    plan.columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path, plan.columns_paired,
+                                            hardware_threads());
   }
-  const std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gauss.kernel);
+  std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gauss.kernel);
+  spec.push_back(plan.columns_paired ? 1u : 0u);  // constant_id 33: PAIRS (the list's form)
   auto& pipe = impl.fused[spec];
   if (!pipe) {
     pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(in.ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
@@ -491,9 +542,67 @@ void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, C
   s.slabs.push_back(whole);
   plan.steps.push_back(std::move(s));
   plan.cur = 1 - plan.cur;
-  plan.info << ": x, y, z fused in one pass (" << plan.columns.unit_count() << " columns; sigma " << gauss.sigma_vox[0]
+  plan.info << ": x, y, z fused in one pass (" << plan.columns.unit_count() << " columns"
+            << (plan.columns_paired ? ", slices paired" : "") << "; sigma " << gauss.sigma_vox[0]
             << ", " << gauss.sigma_vox[1] << ", " << gauss.sigma_vox[2] << " voxels)";
   ++plan.gi;
+}
+
+/// A gradient followed by a brick min/max with a 1-voxel halo on the same field runs as one
+/// pass (gradient_minmax_x8: the samples and each slice's brick segment ranges) and a small
+/// one (minmax_slices: the segments into the bricks), where the field, the samples and the
+/// segments each fit one binding and rows hold whole quads.
+bool fusable_gradient_minmax(const ChainInput& in, const std::vector<PassDesc>& passes, std::size_t i) {
+  if (in.legacy || i + 1 >= passes.size() || passes[i].kind != PassKind::Gradient ||
+      passes[i + 1].kind != PassKind::BrickMinMax || passes[i + 1].halo != 1)
+    return false;
+  const auto& lim = in.ctx.properties().limits;
+  const int nx = in.vol.grid.dims[0], nz = in.vol.grid.dims[2];
+  const std::uint64_t segments = std::uint64_t(in.bx) * in.by * std::uint64_t(nz) * 8;
+  return nx % int(ISOTOUCH_DENSE_VOXELS) == 0 && in.n * sizeof(core::Sample) <= in.limit && segments <= in.limit &&
+         in.n / 4 <= lim.maxTexelBufferElements && std::uint64_t(nz) <= lim.maxComputeWorkGroupCount[2] &&
+         groups(std::uint64_t(in.bx) * in.by, ISOTOUCH_DENSE_WG) <= lim.maxComputeWorkGroupCount[0];
+}
+
+/// The fused gradient + brick min/max of passes i (gradient) and i + 1 (brick min/max): one
+/// step each, so that each pass's timestamps enclose its own dispatch (the gradient's also
+/// computes the brick segment ranges).
+template <class ChainImpl>
+void plan_gradient_minmax(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
+  const core::Grid& grid = in.vol.grid;
+  const std::array<int, 3> dims = grid.dims;
+  auto& pipe = impl.grad_mm[dims];
+  if (!pipe) {
+    pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(
+        in.ctx, gradient_minmax_x8_spv, 3, "gradient_minmax_x8", 0u,
+        std::vector<std::uint32_t>{std::uint32_t(dims[0]), std::uint32_t(dims[1]), std::uint32_t(dims[2])}, 1u);
+    pipe->set_texel_vec4(1u);
+  }
+  if (!impl.mm_slices)
+    impl.mm_slices =
+        std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(in.ctx, minmax_slices_spv, 2, "minmax_slices");
+  plan.grad_mm = pipe.get();
+  plan.mm_slices = impl.mm_slices.get();
+  plan.segments_bytes = std::uint64_t(in.bx) * in.by * std::uint64_t(dims[2]) * 8;
+  Slab whole;
+  whole.nz = std::uint64_t(dims[2]);
+  whole.src_z1 = whole.nz;
+  whole.src = {in.bufs.field[plan.cur].handle(), 0, in.n * 4};
+  whole.dst = {in.bufs.samples.handle(), 0, in.n * sizeof(core::Sample)};
+  ChainStep g;
+  g.pass = i;
+  g.type = ChainStep::GradMinMax;
+  g.pipe = pipe.get();
+  g.slabs.push_back(whole);
+  plan.steps.push_back(std::move(g));
+  ChainStep m;
+  m.pass = i + 1;
+  m.type = ChainStep::MinMaxSlices;
+  m.pipe = impl.mm_slices.get();
+  whole.src = {};
+  whole.dst = {in.bufs.bricks.handle(), 0, std::uint64_t(in.bx) * in.by * in.bz * 8};
+  m.slabs.push_back(whole);
+  plan.steps.push_back(std::move(m));
 }
 
 /// One axis (k < 3) of a Gaussian, or of a closing (k < 3 the max, then the min).
@@ -603,6 +712,13 @@ void plan_chain(ChainImpl& impl, const std::vector<PassDesc>& passes, const Chai
       plan_fused_gaussian(impl, in, i, plan);
     } else if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
       plan_separable(impl, in, p, i, plan);
+    } else if (fusable_gradient_minmax(in, passes, i)) {
+      plan_gradient_minmax(impl, in, i, plan);
+      plan.info << ": fused with the brick min/max (gradient_minmax_x8: samples and the bricks' slice segments), "
+                   "1 dispatch\n  "
+                << passes[i + 1].label() << ": " << in.bx << "x" << in.by << "x" << in.bz
+                << " bricks from the gradient pass's segments (minmax_slices)";
+      ++i;
     } else if (p.kind == PassKind::Gradient) {
       ChainStep s;
       s.pass = i;
@@ -627,7 +743,8 @@ template <class ChainImpl>
 std::pair<const ComputePipeline<gpu::BrickMinMaxPush>*, const ComputePipeline<gpu::BrickMinMaxPush>*> minmax_rows(
     ChainImpl& impl, const std::vector<PassDesc>& passes, const BufferSource& buffer, const ChainInput& in,
     const ChainPlan& plan) {
-  if (!has(passes, PassKind::BrickMinMax) || in.legacy) return {nullptr, nullptr};
+  if (!has(passes, PassKind::BrickMinMax) || in.legacy || plan.rows_slices == 0)  // none, legacy or fused
+    return {nullptr, nullptr};
   const auto& lim = in.ctx.properties().limits;
   if (plan.rows_slices > lim.maxComputeWorkGroupCount[2])
     throw VolumeError(in.vol.path + ": " + std::to_string(plan.rows_slices) + " slices in one brick min/max slab exceed " +
@@ -718,6 +835,8 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
     bufs.columns = buffer(plan.columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
     std::memcpy(bufs.columns.mapped(), plan.columns.units.data(), plan.columns.units.size() * 4);
   }
+  if (plan.segments_bytes)
+    bufs.segments = buffer(plan.segments_bytes, MemoryIntent::DeviceLocal, "brick slice segments");
   std::uint32_t sets = plan.extra_sets;
   for (const ChainStep& s : plan.steps) sets += std::uint32_t(s.slabs.size());
   const auto [mm_rows, mm_bricks] = minmax_rows(*impl_, passes_, buffer, in, plan);
@@ -729,8 +848,8 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   std::memcpy(in.direct ? bufs.field[0].mapped() : bufs.up.mapped(), vol.voxels.data(), in.n * 4);
   if (bufs.w_dev) std::memcpy(in.direct ? bufs.w_dev.mapped() : bufs.w_up.mapped(), fp.weights.data(), fp.weights.size() * 4);
   out.upload_ms = ms_since(t0);
-  const SlabArgs proto{nx, ny, nz, bx, by, plan.columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(), &bufs,
-                       &ctx.properties().limits, 0};
+  const SlabArgs proto{nx, ny, nz, bx, by, plan.columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(),
+                       plan.grad_mm, plan.mm_slices, &bufs, &ctx.properties().limits, 0, vol.grid};
   const std::vector<int> dispatches = record_and_submit(*impl_, passes_, in, proto, arena, timer, plan, out);
 
   for (std::size_t i = 0; i < passes_.size(); ++i) {

@@ -71,6 +71,7 @@ struct ChainStep {
   /// MinMaxSlices: the segments into the bricks (minmax_slices), the brick min/max's rest.
   enum { Filter, Fused, Gradient, MinMax, GradMinMax, MinMaxSlices } type = Filter;
   const ComputePipeline<gpu::ListPush>* fused = nullptr;       // gauss_fused_list over every column
+  std::uint64_t units = 0;                                     // the fused Gaussian's columns
   gpu::Filter1dPush f{};
   const ComputePipeline<gpu::DensePush>* x4 = nullptr;         // filter_x4 variant, else the 1-D filter
   const ComputePipeline<gpu::Filter1dPush>* f1d = nullptr;     // gaussian1d (reads the weights) or morph1d
@@ -78,14 +79,13 @@ struct ChainStep {
 };
 /// Every buffer of one run (absent ones empty), kept by name for the next run.
 struct ChainBuffers {
-  GpuBuffer field[2], up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down, rows, columns, segments;
+  GpuBuffer field[2], up, w_dev, w_up, samples, samples_down, bricks, bricks_down, field_down, rows, segments;
 };
 /// What the dispatches of one slab need besides the step: sizes, the brick min/max pair,
 /// the buffers they bind.
 struct SlabArgs {
   int nx, ny, nz;
   std::uint32_t bx, by;
-  std::uint64_t column_units;
   const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows, *mm_bricks, *minmax_legacy;
   const ComputePipeline<gpu::DensePush>* grad_mm;           // gradient_minmax_x8, if fused
   const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices;  // minmax_slices, if fused
@@ -129,11 +129,12 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
   } else if (s.type == ChainStep::Fused) {
     gpu::ListPush pc{};
-    pc.units = gpu::uint(a.column_units);
-    const std::uint64_t g = groups(a.column_units, ISOTOUCH_DENSE_WG);
+    pc.units = gpu::uint(s.units);
+    const std::uint64_t g = groups(s.units, ISOTOUCH_DENSE_WG);
     const std::uint64_t gx = std::min<std::uint64_t>(g, a.lim->maxComputeWorkGroupCount[0]);
     pc.groups_x = gpu::uint(gx);
-    s.fused->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->columns.handle(), 0, a.b->columns.size()}});
+    // Binding 2 (the list) is not read in the dense form: one texel of the source stands in.
+    s.fused->bind(cmd, arena, {sl.src, sl.dst, BufferRange{sl.src.buffer, sl.src.offset, 16}});
     s.fused->push(cmd, pc);
     vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t((g + gx - 1) / gx), 1);
   } else if (s.type == ChainStep::Filter && s.x4) {
@@ -255,7 +256,6 @@ void keep_buffers(ChainBuffers& b, std::map<std::string, GpuBuffer>& kept) {
   keep(b.bricks_down, "brick ranges readback");
   keep(b.field_down, "field readback");
   keep(b.rows, "brick row ranges");
-  keep(b.columns, "fused gaussian columns");
   keep(b.segments, "brick slice segments");
 }
 }  // namespace
@@ -483,8 +483,8 @@ void make_buffers(const BufferSource& buffer, const std::vector<PassDesc>& passe
 /// The planned dispatches of a run, and what recording them needs.
 struct ChainPlan {
   std::vector<ChainStep> steps;
-  sparse::WorkList columns;       ///< every column of quads, made for the first fused Gaussian
-  bool columns_paired = false;    ///< the list pairs slices (gauss_fused_list.comp PAIRS)
+  std::uint64_t column_units = 0;  ///< the fused Gaussian's columns (every DENSE_ROWS rows of every slice (pair))
+  bool columns_paired = false;     ///< slices in pairs (gauss_fused_list.comp PAIRS)
   std::uint64_t rows_slices = 0;  ///< most source slices of a brick min/max slab
   std::uint32_t extra_sets = 0;   ///< the current brick min/max binds twice per slab
   int cur = 0;                    ///< the field buffer the next pass reads
@@ -494,6 +494,11 @@ struct ChainPlan {
   const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices = nullptr;
   std::ostringstream info;        ///< describe()'s "last run" lines
 };
+
+/// Rows per column of the dense fused Gaussian (gauss_fused_list.comp DENSE_ROWS). Chest,
+/// device time of the pass at load 7.3-7.8 (2 cores): the list of 15-row columns 49-51 ms;
+/// 15 rows 37-38, 32 rows 32-35, 64 rows 35-37, 128 rows 37-39, 256 rows 39-40 ms.
+constexpr int kDenseRows = 32;
 
 /// A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
 /// list of every column of quads, where the field is one binding and read in place.
@@ -511,19 +516,18 @@ void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, C
   const Volume& vol = in.vol;
   const std::uint64_t n = in.n;
   const auto& gauss = in.fp.gaussians[plan.gi];
-  if (plan.columns.units.empty()) {
-    const auto nb = core::brick_counts(vol.grid);
-    const std::size_t total = std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]);
-    std::vector<std::uint32_t> all(total);
-    for (std::size_t id = 0; id < all.size(); ++id) all[id] = std::uint32_t(id);
-    // Slices in pairs wherever the z kernel has a radius (as the sparse chain): the x and y
-    // passes of the two slices' common source slices computed once.
-    plan.columns_paired = gauss.kernel[2].size() >= 3;
-    plan.columns = sparse::make_column_list(vol.grid, all, sparse::Extent{}, vol.path, plan.columns_paired,
-                                            hardware_threads());
-  }
+  // No list: every column of kDenseRows rows of every slice, in pairs of slices wherever
+  // the z kernel has a radius (as the sparse chain: the x and y passes of the two slices'
+  // common source slices computed once). Long columns: each one's first 2 RY rows of x
+  // passes are the warm-up of its ring.
+  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
+  plan.columns_paired = gauss.kernel[2].size() >= 3;
+  const std::uint64_t segs = std::uint64_t((ny + kDenseRows - 1) / kDenseRows);
+  plan.column_units = std::uint64_t(nx / int(ISOTOUCH_DENSE_VOXELS)) * segs *
+                      std::uint64_t(plan.columns_paired ? (nz + 1) / 2 : nz);
   std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gauss.kernel);
-  spec.push_back(plan.columns_paired ? 1u : 0u);  // constant_id 33: PAIRS (the list's form)
+  spec.push_back(plan.columns_paired ? 1u : 0u);  // constant_id 33: PAIRS
+  spec.push_back(std::uint32_t(kDenseRows));      // constant_id 34: DENSE_ROWS (no list)
   auto& pipe = impl.fused[spec];
   if (!pipe) {
     pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(in.ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
@@ -534,6 +538,7 @@ void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, C
   s.pass = i;
   s.type = ChainStep::Fused;
   s.fused = pipe.get();
+  s.units = plan.column_units;
   Slab whole;
   whole.nz = std::uint64_t(vol.grid.dims[2]);
   whole.src_z1 = std::uint64_t(vol.grid.dims[2]);
@@ -542,7 +547,7 @@ void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, C
   s.slabs.push_back(whole);
   plan.steps.push_back(std::move(s));
   plan.cur = 1 - plan.cur;
-  plan.info << ": x, y, z fused in one pass (" << plan.columns.unit_count() << " columns"
+  plan.info << ": x, y, z fused in one pass (" << plan.column_units << " columns of " << kDenseRows << " rows"
             << (plan.columns_paired ? ", slices paired" : "") << "; sigma " << gauss.sigma_vox[0]
             << ", " << gauss.sigma_vox[1] << ", " << gauss.sigma_vox[2] << " voxels)";
   ++plan.gi;
@@ -831,10 +836,6 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
 
   ChainPlan plan;
   plan_chain(*impl_, passes_, in, plan);
-  if (!plan.columns.units.empty()) {  // the fused Gaussian's column list, written in place
-    bufs.columns = buffer(plan.columns.units.size() * 4, MemoryIntent::DeviceLocal, "fused gaussian columns");
-    std::memcpy(bufs.columns.mapped(), plan.columns.units.data(), plan.columns.units.size() * 4);
-  }
   if (plan.segments_bytes)
     bufs.segments = buffer(plan.segments_bytes, MemoryIntent::DeviceLocal, "brick slice segments");
   std::uint32_t sets = plan.extra_sets;
@@ -848,7 +849,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   std::memcpy(in.direct ? bufs.field[0].mapped() : bufs.up.mapped(), vol.voxels.data(), in.n * 4);
   if (bufs.w_dev) std::memcpy(in.direct ? bufs.w_dev.mapped() : bufs.w_up.mapped(), fp.weights.data(), fp.weights.size() * 4);
   out.upload_ms = ms_since(t0);
-  const SlabArgs proto{nx, ny, nz, bx, by, plan.columns.unit_count(), mm_rows, mm_bricks, impl_->minmax.get(),
+  const SlabArgs proto{nx, ny, nz, bx, by, mm_rows, mm_bricks, impl_->minmax.get(),
                        plan.grad_mm, plan.mm_slices, &bufs, &ctx.properties().limits, 0, vol.grid};
   const std::vector<int> dispatches = record_and_submit(*impl_, passes_, in, proto, arena, timer, plan, out);
 

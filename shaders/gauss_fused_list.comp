@@ -1,5 +1,6 @@
 #version 450
-// The sparse chain's Gaussian in ONE pass (x, y and z fused), on a work list of columns:
+// The sparse chain's Gaussian in ONE pass (x, y and z fused), on a work list of columns (the
+// dense chain's: every column, DENSE_ROWS below):
 // each invocation walks one column of output quads (x-quad q, slice z, rows y0 .. y0 + n - 1)
 // and keeps the x-filtered quads of the rows it still needs in registers, so every source
 // quad is fetched once per column step and every output is stored once - no intermediate
@@ -64,6 +65,10 @@ layout(constant_id = 32) const float WZ8 = 0.0;
 // The work list pairs slices (engine/sparse_lists.cpp make_column_list with pairs): a unit's
 // first texel is 2 (q + QX z) + pair, pair 1 meaning slices z and z + 1.
 layout(constant_id = 33) const bool PAIRS = false;
+// The dense chain's form (engine/passes.cpp): no list, the units are every column of
+// DENSE_ROWS rows (the last one shorter) of every slice (PAIRS: slice pair) of the volume,
+// in order q, row segment, slice (pair); binding 2 is bound and not read. 0: the list.
+layout(constant_id = 34) const int DENSE_ROWS = 0;
 const int QX = NX / ISOTOUCH_DENSE_VOXELS;
 const int M = ISOTOUCH_FUSED_MAX_RADIUS;
 
@@ -200,6 +205,17 @@ void column_pair(int q, int z, int y0, int n, bool pair) {
 void main() {
   const uint u = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * pc.groups_x * uint(ISOTOUCH_DENSE_WG);
   if (u >= pc.units) return;
+  if (DENSE_ROWS > 0) {
+    const int segs = (NY + DENSE_ROWS - 1) / DENSE_ROWS;
+    const int r = int(u) / QX, q = int(u) - r * QX;
+    const int zz = r / segs, seg = r - zz * segs;
+    const int y0 = seg * DENSE_ROWS, n = min(DENSE_ROWS, NY - y0);
+    if (PAIRS)
+      column_pair(q, 2 * zz, y0, n, 2 * zz + 1 < NZ);
+    else
+      column(q, zz, y0, n);
+    return;
+  }
   const int i = 2 * int(pc.unit0 + u);
   const int a2 = int(texelFetch(work, i).x);
   const int packed = int(texelFetch(work, i + 1).x);

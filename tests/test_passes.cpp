@@ -571,3 +571,29 @@ TEST(PassesTiming, GpuVsOneThreadCpuOnHeadAndChest) {
   }
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
+
+TEST(PassesTiming, DISABLED_ChestSceneMedians) {
+  // The chest scene's dense chain (sigma 1 mm + gradient + brick min/max), 15 runs after a
+  // warm-up, median device time per pass and of the sum: for comparing builds quickly.
+  auto plain = engine::VulkanContext::create();
+  ASSERT_TRUE(plain) << plain.error;
+  const std::vector<PassDesc> scene = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
+  const Volume v = io::load_volume(kChest);
+  const auto chain = engine::PassChain::create(**plain.value, scene);
+  ASSERT_TRUE(chain);
+  (*chain.value)->run(v);
+  std::vector<std::vector<double>> ms(scene.size() + 1);
+  for (int r = 0; r < 15; ++r) {
+    const auto g = (*chain.value)->run(v);
+    double sum = 0;
+    for (std::size_t i = 0; i < g.passes.size(); ++i) {
+      ms[i].push_back(g.passes[i].ms);
+      sum += g.passes[i].ms;
+    }
+    ms.back().push_back(sum);
+  }
+  for (std::size_t i = 0; i < ms.size(); ++i) {
+    std::sort(ms[i].begin(), ms[i].end());
+    std::printf("%s %.2f ms\n", i < scene.size() ? scene[i].label().c_str() : "sum", ms[i][ms[i].size() / 2]);
+  }
+}

@@ -133,8 +133,8 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     const std::uint64_t g = groups(s.units, ISOTOUCH_DENSE_WG);
     const std::uint64_t gx = std::min<std::uint64_t>(g, a.lim->maxComputeWorkGroupCount[0]);
     pc.groups_x = gpu::uint(gx);
-    // Binding 2 (the list) is not read in the dense form: one texel of the source stands in.
-    s.fused->bind(cmd, arena, {sl.src, sl.dst, BufferRange{sl.src.buffer, sl.src.offset, 16}});
+    // Binding 2 in the dense form: the source again, viewed as single floats (no list).
+    s.fused->bind(cmd, arena, {sl.src, sl.dst, sl.src});
     s.fused->push(cmd, pc);
     vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t((g + gx - 1) / gx), 1);
   } else if (s.type == ChainStep::Filter && s.x4) {
@@ -505,7 +505,7 @@ constexpr int kDenseRows = 32;
 bool fusable(const ChainInput& in, const PassDesc& p, std::size_t gi) {
   const int nx = in.vol.grid.dims[0];
   bool fuse = p.kind == PassKind::Gaussian && !in.legacy && in.direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
-              in.n * 4 <= in.limit && in.n / 4 <= in.ctx.properties().limits.maxTexelBufferElements;
+              in.n * 4 <= in.limit && in.n <= in.ctx.properties().limits.maxTexelBufferElements;
   for (int a = 0; a < 3 && fuse; ++a)
     fuse = in.fp.gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
   return fuse;

@@ -67,7 +67,8 @@ layout(constant_id = 32) const float WZ8 = 0.0;
 layout(constant_id = 33) const bool PAIRS = false;
 // The dense chain's form (engine/passes.cpp): no list, the units are every column of
 // DENSE_ROWS rows (the last one shorter) of every slice (PAIRS: slice pair) of the volume,
-// in order q, row segment, slice (pair); binding 2 is bound and not read. 0: the list.
+// in order q, row segment, slice (pair); binding 2 is the source again, as R32_SFLOAT
+// texels (x_quad's edge voxels where RX <= 2). 0: the list.
 layout(constant_id = 34) const int DENSE_ROWS = 0;
 const int QX = NX / ISOTOUCH_DENSE_VOXELS;
 const int M = ISOTOUCH_FUSED_MAX_RADIUS;
@@ -131,6 +132,20 @@ vec4 weighted(vec4 acc, float w, vec4 v) {
 vec4 x_quad(int q, int y, int z) {
   const int row = (z * NY + y) * QX;
   float win[12];
+  if (DENSE_ROWS > 0 && RX <= 2) {
+    // The dense form: binding 2 is the source as R32_SFLOAT; the RX voxels on each side
+    // fetched one by one (clamped into the row) instead of their whole quads (a quad's
+    // fetch gathers four floats per lane).
+    const vec4 v = texelFetch(src, row + q);
+    win[4] = v.x;
+    win[5] = v.y;
+    win[6] = v.z;
+    win[7] = v.w;
+    [[unroll]] for (int j = 0; j < RX; ++j) {
+      win[4 - RX + j] = texelFetch(work, 4 * row + max(4 * q - RX + j, 0)).x;
+      win[8 + j] = texelFetch(work, 4 * row + min(4 * q + 4 + j, NX - 1)).x;
+    }
+  } else {
   [[unroll]] for (int j = 0; j < 3; ++j) {
     const int qj = q + j - 1;
     vec4 v = texelFetch(src, row + clamp(qj, 0, QX - 1));
@@ -140,6 +155,7 @@ vec4 x_quad(int q, int y, int z) {
     win[4 * j + 1] = v.y;
     win[4 * j + 2] = v.z;
     win[4 * j + 3] = v.w;
+  }
   }
   precise vec4 acc = vec4(0.0);
   [[unroll]] for (int k = 0; k <= 2 * RX; ++k) {

@@ -114,7 +114,7 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     pc.inv_h_z = k.inv_h[2];
     a.grad_mm->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}});
     a.grad_mm->push(cmd, pc);
-    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t(nz));
+    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t((nz + 1) / 2));
   } else if (s.type == ChainStep::MinMaxSlices) {
     gpu::BrickMinMaxPush pc{};
     pc.nx = gpu::uint(nx);

@@ -10,8 +10,6 @@
 
 #include "cpu_gradient.h"
 #include "gradient_pass.h"
-#include "parallel.h"
-#include "sparse_chain.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"

@@ -335,14 +335,19 @@ std::string PassChain::describe() const {
   // gaussian1d / morph1d with the legacy set.
   const bool closing = has(passes_, PassKind::Closing);
   const bool minmax = has(passes_, PassKind::BrickMinMax);
+  // The gradient and brick min/max fused (made on the first run that could fuse them; a run
+  // that could not - the binding limit - takes the separate passes).
+  const bool fused_mm = !impl_->grad_mm.empty() && impl_->minmax_x4.empty();
   const char* gname = legacy ? " gaussian1d" : " gaussian_x4";
   const char* mname = legacy ? " morph1d" : " morph_x4";
   s << "\nshaders: " << shader_set_name(impl_->shaders) << (legacy ? "" : " (texel-buffer input, 4 voxels per invocation)");
   s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
     << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
     << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
-    << (minmax ? (legacy ? " brick_minmax" : " brick_minmax (minmax_rows + minmax_bricks)") : "")
-    << (impl_->grad_mm.empty() ? "" : " gradient_minmax_x8 + minmax_slices (gradient and brick min/max fused)");
+    << (minmax ? (legacy ? " brick_minmax"
+                         : fused_mm ? " brick_minmax (fused: gradient_minmax_x8 + minmax_slices)"
+                                    : " brick_minmax (minmax_rows + minmax_bricks)")
+               : "");
   const bool all = gauss && closing && impl_->gradient && minmax;
   s << "\nleft out (not created, not run):" << (gauss ? "" : gname) << (closing ? "" : (legacy ? " morph1d" : " morph_x4 morph1d"))
     << (impl_->gradient ? "" : " gradient") << (minmax ? "" : " brick_minmax") << (all ? " none" : "");
@@ -352,7 +357,8 @@ std::string PassChain::describe() const {
     << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
     << (impl_->gradient ? (direct ? ", samples (vec4, read in place)" : ", samples (vec4) + readback") : "")
     << (minmax ? (direct ? ", brick ranges (read in place)" : ", brick ranges + readback") : "")
-    << (minmax && !legacy ? ", brick row ranges (8 B per brick column and row of a slab)" : "");
+    << (minmax && !legacy && !fused_mm ? ", brick row ranges (8 B per brick column and row of a slab)" : "")
+    << (fused_mm ? ", brick slice segments (8 B per brick segment of a slice)" : "");
   s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
     << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
     << (minmax ? "" : " brick ranges") << (direct ? " staging and readback copies" : "") << (all ? " none" : "");

@@ -482,6 +482,14 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     p.gpu_ms = median(gpu_ms[i]);
     p.cpu_ms = median(cpu_ms[i]);
     p.legacy_gpu_ms = median(legacy_ms[i]);
+    // Fused passes: the gradient's time includes the brick min/max's slice segments, the
+    // brick min/max's only their reduction into bricks; the sum is the whole chain either way.
+    if (chain && chain->describe().find("fused with the brick min/max") != std::string::npos) {
+      if (dense[i].kind == engine::PassKind::Gradient)
+        p.gpu_note = "GPU: one pass with the brick min/max's slice segments";
+      else if (dense[i].kind == engine::PassKind::BrickMinMax)
+        p.gpu_note = "GPU: the segments into bricks only, the rest fused into the gradient";
+    }
     r.passes.push_back(p);
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
@@ -818,7 +826,8 @@ void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   for (const auto& r : res) {
     auto line = [&](const PassRow& p) {
       const std::string g = r.gpu_available ? num(p.gpu_ms) : "n/a (" + r.gpu_why + ")";
-      out << "| " << r.name << " | " << p.label << " | " << mib(p.min_bytes) << " | " << g << " | "
+      out << "| " << r.name << " | " << p.label << (p.gpu_note.empty() ? "" : " (" + p.gpu_note + ")") << " | "
+          << mib(p.min_bytes) << " | " << g << " | "
           << num(p.legacy_gpu_ms) << " | " << num(p.legacy_over_gpu) << " | " << num(p.cpu_ms)
           << " | " << num(p.gpu_over_cpu, 3) << " | " << num(p.gpu_gbps) << " | " << num(p.gpu_of_memcpy, 3) << " | "
           << num(p.cpu_gbps) << " | " << num(p.cpu_of_memcpy, 3) << " |\n";

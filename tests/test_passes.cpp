@@ -143,6 +143,74 @@ TEST(PassesGpuVsCpu, FusedGaussianRunsAsOnePassWithTheSameBits) {
   }
 }
 
+TEST(PassesGpuVsCpu, FusedGradientAndBrickMinMaxGiveTheSameBits) {
+  // A gradient followed by a brick min/max (halo 1) on rows of whole quads runs as one pass
+  // (gradient_minmax_x8) and a small reduction (minmax_slices). Sizes with a last brick of
+  // one quad (nx % 8 == 4), partial bricks in y and z, one-brick and one-slice volumes; the
+  // voxels hold +0 and -0 (the first of equal values wins in z, y, x order), NaN (skipped)
+  // and ties, and the list without a Gaussian keeps them in the field. Truth: the CPU chain.
+  // Also ramps along each axis both ways (every brick's extremes in its halo) and a field of
+  // +0 / -0 only (the sign of the first zero in z, y, x order, the halo corner first).
+  const std::vector<std::array<int, 3>> dims = {{44, 37, 29}, {16, 16, 16}, {4, 9, 3}, {8, 1, 1}, {12, 8, 2}};
+  std::vector<Volume> volumes;
+  std::uint32_t seed = 3;
+  for (const auto& d : dims) {
+    Volume v = engine::make_random(d, {0.8e-3, 1.1e-3, 2.0e-3}, -3.0f, 3.0f, seed++);
+    std::uint32_t r = seed * 2654435761u;
+    for (float& x : v.voxels) {
+      r = r * 1664525u + 1013904223u;
+      const std::uint32_t k = r >> 28;  // 16 cases
+      if (k < 4) x = 0.0f;
+      else if (k < 8) x = -0.0f;
+      else if (k == 8) x = std::numeric_limits<float>::quiet_NaN();
+      else if (k < 11) x = std::round(x);  // ties among the extremes
+    }
+    v.update_stats();
+    volumes.push_back(std::move(v));
+  }
+  for (int axis = 0; axis < 6; ++axis) {
+    Volume v = engine::make_random({28, 21, 19}, {1e-3, 1e-3, 1e-3}, 0.0f, 0.5f, 20u + std::uint32_t(axis));
+    for (int z = 0; z < 19; ++z)
+      for (int y = 0; y < 21; ++y)
+        for (int x = 0; x < 28; ++x) {
+          const int c[3] = {x, y, z};
+          v.voxels[v.grid.index(x, y, z)] += float(axis % 2 ? -c[axis / 2] : c[axis / 2]);
+        }
+    v.update_stats();
+    volumes.push_back(std::move(v));
+  }
+  {
+    Volume v = engine::make_random({20, 19, 17}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 31);
+    for (float& x : v.voxels) x = x < 0 ? -0.0f : 0.0f;
+    v.update_stats();
+    volumes.push_back(std::move(v));
+  }
+  for (const Volume& v : volumes) {
+    for (const auto& p : {std::vector<PassDesc>{PassDesc::gradient(), PassDesc::brick_minmax(1)},
+                          std::vector<PassDesc>{PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax(1)}}) {
+      auto chain = engine::PassChain::create(vk(), p);
+      ASSERT_TRUE(chain) << chain.error;
+      (void)(*chain.value)->run(v);
+      const std::string desc = (*chain.value)->describe();
+      EXPECT_NE(desc.find("fused with the brick min/max"), std::string::npos) << desc;
+      expect_chain_matches_cpu_with(engine::ShaderSet::Current, v, p, 0, 0);
+    }
+  }
+  // Halo 0, a brick min/max before the gradient, or rows not of whole quads: the separate passes.
+  const Volume odd = engine::make_random({37, 29, 23}, {0.7e-3, 1.1e-3, 2.3e-3}, -10.0f, 10.0f, 5);
+  for (const auto& p : {std::vector<PassDesc>{PassDesc::gradient(), PassDesc::brick_minmax(0)},
+                        std::vector<PassDesc>{PassDesc::brick_minmax(1), PassDesc::gradient()}}) {
+    auto chain = engine::PassChain::create(vk(), p);
+    ASSERT_TRUE(chain) << chain.error;
+    (void)(*chain.value)->run(engine::make_random({40, 16, 8}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 9));
+    EXPECT_EQ((*chain.value)->describe().find("fused with the brick min/max"), std::string::npos);
+  }
+  auto chain = engine::PassChain::create(vk(), {PassDesc::gradient(), PassDesc::brick_minmax(1)});
+  ASSERT_TRUE(chain) << chain.error;
+  (void)(*chain.value)->run(odd);
+  EXPECT_EQ((*chain.value)->describe().find("fused with the brick min/max"), std::string::npos);
+}
+
 TEST(PassesGpuVsCpu, ToothInManySlabs) {
   // 4 MiB bindings: 103 x 94 x 161 floats are 6.2 MB, so every pass needs z-slabs, with
   // halos (z axis of the Gaussian, gradient, bricks) across the slab boundaries.
@@ -502,4 +570,30 @@ TEST(PassesTiming, GpuVsOneThreadCpuOnHeadAndChest) {
     std::printf("%s\n", (*chain.value)->describe().c_str());
   }
   EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+TEST(PassesTiming, DISABLED_ChestSceneMedians) {
+  // The chest scene's dense chain (sigma 1 mm + gradient + brick min/max), 15 runs after a
+  // warm-up, median device time per pass and of the sum: for comparing builds quickly.
+  auto plain = engine::VulkanContext::create();
+  ASSERT_TRUE(plain) << plain.error;
+  const std::vector<PassDesc> scene = {PassDesc::gaussian(1.0), PassDesc::gradient(), PassDesc::brick_minmax()};
+  const Volume v = io::load_volume(kChest);
+  const auto chain = engine::PassChain::create(**plain.value, scene);
+  ASSERT_TRUE(chain);
+  (*chain.value)->run(v);
+  std::vector<std::vector<double>> ms(scene.size() + 1);
+  for (int r = 0; r < 15; ++r) {
+    const auto g = (*chain.value)->run(v);
+    double sum = 0;
+    for (std::size_t i = 0; i < g.passes.size(); ++i) {
+      ms[i].push_back(g.passes[i].ms);
+      sum += g.passes[i].ms;
+    }
+    ms.back().push_back(sum);
+  }
+  for (std::size_t i = 0; i < ms.size(); ++i) {
+    std::sort(ms[i].begin(), ms[i].end());
+    std::printf("%s %.2f ms\n", i < scene.size() ? scene[i].label().c_str() : "sum", ms[i][ms[i].size() / 2]);
+  }
 }

@@ -12,7 +12,8 @@ fail() { echo "FAIL: $*"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 rec=$out/live.rec
 
-"$exe" run "$scene" --live --record "$rec" --quiet > "$out/run.log" 2>&1 || { cat "$out/run.log"; fail "run --live exited $?"; }
+"$exe" run "$scene" --live --record "$rec" --quiet > "$out/run.log" 2>&1; rc=$?
+[ "$rc" -eq 0 ] || { cat "$out/run.log"; fail "run --live exited $rc"; }
 cat "$out/run.log"
 [ -f "$rec" ] || fail "no recording"
 [ ! -e "$rec.part" ] || fail "$rec.part left after a clean stop"

@@ -15,7 +15,8 @@ fail() { echo "FAIL: $*"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 sock=$out/dev.sock
 
-"$exe" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1 || { cat "$out/path.log"; fail "--hand-path exited $?"; }
+"$exe" run "$scene" --hand-path "$out/hand.csv" > "$out/path.log" 2>&1; rc=$?
+[ "$rc" -eq 0 ] || { cat "$out/path.log"; fail "--hand-path exited $rc"; }
 "$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 > "$out/emu.log" 2>&1 &
 emu_pid=$!
 for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done

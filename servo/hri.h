@@ -391,9 +391,10 @@ class HriRenderer final : public Renderer {
                        double held_grad_norm, double voxel, TickOut& out);
   /// The god-object test: the new plane's contact point (eq. 2) is reached from the VHIP only
   /// through material (a point of the segment deeper than 0.05 voxel to first order, at 7
-  /// interior points; any material for a plane facing away from the held one).
+  /// interior points; any material for a plane facing away from the held one). f_vhip: the
+  /// value at the VHIP in this snapshot, if known (then a bound may answer without reads).
   bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
-                                double held_grad_norm, double voxel) const;
+                                double held_grad_norm, double voxel, const double* f_vhip) const;
   /// tick_robust after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,

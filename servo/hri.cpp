@@ -126,8 +126,11 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
       g = trilinear_field_gradient(field, x);
       break;
   }
+  // normalized_or(outward(g), fallback) with |outward(g)| = |g| (a negation, exact) taken
+  // from grad_norm: the same bits, one square root (on the update's dependent chain) less.
   grad_norm = norm(g);
-  return normalized_or(Isosurface{params_.tau, params_.inside}.outward(g), fallback);
+  const Vec3 out = Isosurface{params_.tau, params_.inside}.outward(g);
+  return (grad_norm > 0.0 && std::isfinite(grad_norm)) ? out / grad_norm : fallback;
 }
 
 VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {

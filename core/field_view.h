@@ -205,6 +205,50 @@ class FieldView {
     return {d[0] / grid_.spacing_m.x, d[1] / grid_.spacing_m.y, d[2] / grid_.spacing_m.z};
   }
 
+  /// A bound on |value(p) - value(q)| for any two points p, q of the segment a -> b
+  /// (grid-world [m]) that lies strictly inside one in-grid cell (1e-9 voxel from its faces),
+  /// rounding of the reads included: inside a cell the trilinear value's slope along an
+  /// axis is a blend of the cell's four edge differences along it, so it changes by at most
+  /// the largest of them times the segment's extent along that axis [voxels] (plus 1e-9
+  /// voxel for the rounding of the points' positions); the rounding of two reads adds less
+  /// than 1e-12 of the largest corner. +inf where the segment leaves the cell or the grid's
+  /// box of voxel centres, or a corner is not finite. Lets a caller skip reads whose outcome
+  /// the bound decides (HRI's god-object test).
+  double change_bound_in_cell(const Vec3& a_m, const Vec3& b_m) const {
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    constexpr double kPos = 1e-9;  // [voxels]
+    if (empty()) return kInf;
+    const Vec3 ia = grid_.to_index(a_m), ib = grid_.to_index(b_m);
+    int i0[3];
+    double ext[3];
+    for (int a = 0; a < 3; ++a) {
+      const double lo = std::min(ia[a], ib[a]), hi = std::max(ia[a], ib[a]);
+      if (!(lo >= kPos && hi <= last_[a] - kPos)) return kInf;  // also NaN
+      i0[a] = int(lo);
+      if (!(lo - kPos >= double(i0[a]) && hi + kPos <= double(i0[a] + 1))) return kInf;
+      ext[a] = hi - lo + kPos;
+    }
+    Sample scratch[8];
+    const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
+    double v[8];
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) v[i + 2 * j + 4 * k] = c.base[(i ? c.sx : 0) + (j ? c.sy : 0) + (k ? c.sz : 0)].value;
+    double sum = 0, big = 0, slope[3] = {0, 0, 0};
+    for (int l = 0; l < 8; ++l) {
+      sum += v[l];
+      big = std::max(big, std::abs(v[l]));
+    }
+    if (!std::isfinite(sum)) return kInf;  // a NaN or infinite corner (or an overflow: no bound)
+    for (int e = 0; e < 4; ++e) {  // the e-th edge along each axis: its lower corner's index
+      const int x0 = 2 * e, y0 = (e & 1) + 4 * (e >> 1), z0 = e;
+      slope[0] = std::max(slope[0], std::abs(v[x0 + 1] - v[x0]));
+      slope[1] = std::max(slope[1], std::abs(v[y0 + 2] - v[y0]));
+      slope[2] = std::max(slope[2], std::abs(v[z0 + 4] - v[z0]));
+    }
+    return slope[0] * ext[0] + slope[1] * ext[1] + slope[2] * ext[2] + 1e-12 * big;
+  }
+
   /// Trilinear value at a continuous index (voxel centres at integers); NaN if not
   /// finite or empty.
   double value_at_index(const Vec3& idx) const {

@@ -126,8 +126,11 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
       g = trilinear_field_gradient(field, x);
       break;
   }
+  // normalized_or(outward(g), fallback) with |outward(g)| = |g| (a negation, exact) taken
+  // from grad_norm: the same bits, one square root (on the update's dependent chain) less.
   grad_norm = norm(g);
-  return normalized_or(Isosurface{params_.tau, params_.inside}.outward(g), fallback);
+  const Vec3 out = Isosurface{params_.tau, params_.inside}.outward(g);
+  return (grad_norm > 0.0 && std::isfinite(grad_norm)) ? out / grad_norm : fallback;
 }
 
 VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {
@@ -350,7 +353,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
 }
 
 [[gnu::always_inline]] inline Vec3 HriRenderer::contact_force(const FieldView& field, const Vec3& hip, const Vec3& v, double dt,
-                                HriTick& out) {
+                                TickOut& out) {
   const bool robust = params_.variant == Variant::kRobust;
   // Optional force shading: the plane through the previous VHIP first gives a
   // temporary HIP, which the true plane then constrains.
@@ -490,7 +493,7 @@ bool HriRenderer::edit_reaches(const FieldView& field, const Vec3& hip) const {
   return true;
 }
 
-double HriRenderer::edit_slew(Vec3& force, double mag, HriTick& out) {
+double HriRenderer::edit_slew(Vec3& force, double mag, TickOut& out) {
   // The force VECTOR moves from the one sent the tick before toward the target by at most
   // one step (so neither |F| nor its direction can jump: a carve that tilts the surface
   // 45 degrees under a held HIP turns the force over several ticks); the slew ends on the
@@ -969,7 +972,7 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   }
 }
 
-Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out) {
+Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, TickOut& out) {
   const double r = params_.tool_radius_m;
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
@@ -1035,11 +1038,6 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     if (!scan_valid_) anchor_ = tool_solve(hip);
     out.plane_update = true;
   }
-  if (tool_plane_count_ > 0) {
-    out.plane.n = tool_planes_[0].n;
-    out.plane.p = tool_planes_[0].p;
-    out.plane.valid = true;
-  }
   const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
   vhip_ = x;
   const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
@@ -1064,15 +1062,13 @@ HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) 
 }
 
 HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
-  HriTick out;
+  TickOut out;
   const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > params_.max_reach_m;
   if (!finite(hip) || absurd) {  // a device fault: send nothing
     out.fault = true;
     resync_ = resync_ || absurd;
-    out.vhip_m = vhip_;
-    out.plane = plane_;
     prev_force_mag_ = 0;
-    return out;
+    return result(out, plane_);
   }
   if (!started_ || resync_) restart_at(hip);
   const double f_hip = sample_value(field, hip);
@@ -1124,13 +1120,11 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   prev_force_mag_ = norm(force);
   was_contact_ = out.contact;
   out.force_n = force;
-  out.vhip_m = vhip_;
-  out.plane = plane_;
-  return out;
+  return result(out, plane_);
 }
 
 HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
-  HriTick out;
+  TickOut out;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);
@@ -1149,8 +1143,6 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     vel_valid_ = false;  // the velocity estimate restarts at the next sane HIP
     lost_s_ = elapsed;
     vhip_value_known_ = false;
-    out.vhip_m = vhip_;
-    out.plane = plane_;
     prev_force_mag_ = 0;
     prev_target_f_ = {};
     recovery_ticks_left_ = 0;
@@ -1159,7 +1151,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     edit_slewing_ = false;  // zero force was sent: an edit slew ends here
     release_left_s_ = 0;    // and a release fade
     prev_force_ = {};
-    return out;
+    return result(out, plane_);
   }
   lost_s_ = 0;
   ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);  // recovery ramp: this tick's period [s]
@@ -1197,17 +1189,24 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   if (params_.tool_radius_m > 0.0) {
     const Vec3 force = tool_tick(field, hip, edited, out);
     finish_robust(hip, force, edited, false, 0.0, out);
-    return out;
+    return result(out, reported_plane());
   }
   // The HIP's value is read only when the method needs it.
   bool have_f_hip = false;
   double f_hip = 0.0;
-  if (!edited && params_.short_way && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out)) return out;
+  if (!edited && params_.short_way && short_tick(field, hip, voxel, elapsed, have_f_hip, f_hip, out))
+    return result(out, plane_);
   tick_general(field, hip, voxel, elapsed, edited, covered_free_vhip, have_f_hip, f_hip, out);
-  return out;  // in place: a copy of the tick just written stalls on store forwarding
+  return result(out, plane_);
 }
 
-[[gnu::always_inline]] inline void HriRenderer::adopt_plane(const VirtualPlane& pl, const Vec3& hip, HriTick& out) {
+VirtualPlane HriRenderer::reported_plane() const {
+  if (!(params_.tool_radius_m > 0.0)) return plane_;
+  if (tool_plane_count_ == 0) return {};
+  return {tool_planes_[0].n, tool_planes_[0].p, true};
+}
+
+[[gnu::always_inline]] inline void HriRenderer::adopt_plane(const VirtualPlane& pl, const Vec3& hip, TickOut& out) {
   plane_ = pl;
   plane_grad_norm_ = last_grad_norm_;
   anchor_ = hip + pl.n * dot(pl.n, pl.p - hip);  // eq. 2 on the new plane
@@ -1217,7 +1216,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
 [[gnu::always_inline]] inline void HriRenderer::hold_hip_inside(const FieldView& field, const Vec3& hip, double e_hip,
                                                                 const VirtualPlane& held, double held_grad_norm,
-                                                                double voxel, HriTick& out) {
+                                                                double voxel, TickOut& out) {
   auto behind = [&](const VirtualPlane& pl) { return pl.valid && dot(pl.n, hip - pl.p) < 0.0; };
   Vec3 p;
   const double gn = norm(sample_trilinear(field, hip).gradient);
@@ -1242,11 +1241,18 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
 [[gnu::always_inline]] inline bool HriRenderer::reached_through_material(const FieldView& field, const Vec3& hip,
                                                                          const VirtualPlane& held, double held_grad_norm,
-                                                                         double voxel) const {
+                                                                         double voxel, const double* f_vhip) const {
   const Vec3 to = hip + plane_.n * dot(plane_.n, plane_.p - hip);
   const double gn = plane_grad_norm_ > 0 ? plane_grad_norm_ : held_grad_norm;
   // A plane facing away from the held one is reached through any material at all.
   const double depth = dot(plane_.n, held.n) < 0.0 ? 0.0 : 0.05 * voxel;
+  // The same answer without the 7 reads where the segment lies in one cell (its median
+  // length is 0.04 voxel on the head CT): no point of it can be deeper than the VHIP's
+  // excess plus the most the value changes along it (FieldView::change_bound_in_cell; 1e-12
+  // of tau for the rounding of the excess).
+  if (f_vhip && gn > 0 &&
+      excess(*f_vhip) + field.change_bound_in_cell(vhip_, to) + 1e-12 * std::abs(params_.tau) <= depth * gn)
+    return false;
   bool through = false;
   for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
     const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
@@ -1258,7 +1264,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 // Out of line: the common ticks above (the short way) then compile as a small function.
 [[gnu::noinline]] void HriRenderer::tick_general(const FieldView& field, const Vec3& hip, double voxel,
                                                  double elapsed, bool edited, bool covered_free_vhip,
-                                                 bool have_f_hip, double f_hip, HriTick& out) {
+                                                 bool have_f_hip, double f_hip, TickOut& out) {
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1358,7 +1364,10 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   if (holding && out.plane_update && !edited && plane_.valid && behind(held) &&
       (dot(plane_.n, held.n) < 0.9999 || std::abs(dot(held.n, plane_.p - held.p)) > 1e-3 * voxel) &&
       !(excess(vhip_value()) > 0.0)) {
-    if (reached_through_material(field, hip, held, held_grad_norm, voxel)) {
+    // The VHIP's value for the bound: read from this snapshot, or cached from the tick
+    // before where edits are tracked (an edit that reaches the VHIP makes this an edit tick).
+    const bool fresh = !vhip_value_known_ || params_.edit_max_step_fraction > 0;
+    if (reached_through_material(field, hip, held, held_grad_norm, voxel, fresh ? &f_vhip_now : nullptr)) {
       set_plane(held);
       plane_grad_norm_ = held_grad_norm;
     }
@@ -1382,7 +1391,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 
 [[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,
                                                            double elapsed, bool& have_f_hip, double& f_hip,
-                                                           HriTick& out) {
+                                                           TickOut& out) {
   // The two common ticks, by the same arithmetic as tick_robust's general path (so the
   // same bits), each point computed once: behind a held plane with no update due and a
   // proxy move that keep_proxy_outside does not check (every rule of the general path
@@ -1452,7 +1461,7 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
 }
 
 void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
-                                     double voxel, const double* f_vhip, HriTick& out) {
+                                     double voxel, const double* f_vhip, TickOut& out) {
   // Where the proxy goes this tick: onto the plane (eq. 2, frictionless) or to the HIP.
   const bool behind = plane_.valid && dot(plane_.n, hip - plane_.p) < 0.0;
   const Vec3 to = behind ? hip + plane_.n * dot(plane_.n, plane_.p - hip) : hip;
@@ -1512,7 +1521,7 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
 }
 
 [[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited,
-                                                              bool have_f_hip, double f_hip, HriTick& out) {
+                                                              bool have_f_hip, double f_hip, TickOut& out) {
   after_fault_ = false;
   double mag = norm(force);  // one square root unless |F| saturates
   if (!std::isfinite(mag)) {
@@ -1555,8 +1564,6 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   vhip_value_known_ = !in_contact && have_f_hip;  // then VHIP = HIP, whose value was read
   vhip_value_ = f_hip;
   out.force_n = force;
-  out.vhip_m = vhip_;
-  if (!(params_.tool_radius_m > 0.0)) out.plane = plane_;
 }
 
 }  // namespace isotouch::servo

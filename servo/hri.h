@@ -325,6 +325,24 @@ class HriRenderer final : public Renderer {
 
  private:
   Vec3 outward_normal(const FieldView& field, const Vec3& x, const Vec3& fallback, double& grad_norm) const;
+  /// What a tick writes as it goes: the force and the flags of HriTick. The tick's HriTick is
+  /// built from it and the state (VHIP, plane) once, at the return (result()): a
+  /// default-constructed HriTick (120 bytes) is zero-filled first, by a `rep stos` that
+  /// cost a few ns of every tick.
+  struct TickOut {
+    Vec3 force_n;               ///< HriTick::force_n
+    double penetration_m = 0;   ///< HriTick::penetration_m
+    bool contact = false;       ///< HriTick::contact
+    bool plane_update = false;  ///< HriTick::plane_update
+    bool saturated = false;     ///< HriTick::saturated
+    bool fault = false;         ///< HriTick::fault
+  };
+  /// The HriTick of `t` with the VHIP after this tick and `plane`.
+  HriTick result(const TickOut& t, const VirtualPlane& plane) const {
+    return HriTick{t.force_n, vhip_, plane, t.penetration_m, t.contact, t.plane_update, t.saturated, t.fault};
+  }
+  /// The plane a robust tick reports: the held one; for the tool the first tool plane, if any.
+  VirtualPlane reported_plane() const;
   VirtualPlane compute_plane(const FieldView& field, double f_vhip, double f_hip,
                              const Vec3& hip) const;
   VirtualPlane plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const;
@@ -351,7 +369,7 @@ class HriRenderer final : public Renderer {
   /// See the class docs, "Proxy path" (the check of every long proxy move). f_vhip: the
   /// value at the VHIP when this tick read it already, else null.
   void keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held, double voxel,
-                          const double* f_vhip, HriTick& out);
+                          const double* f_vhip, TickOut& out);
   /// The segment a -> b (excess e_a at a) passes through material: it enters (or, from an
   /// embedded a, goes deeper than 2 e_a) and comes out again, or ends inside at less than
   /// half its deepest excess (a path that ends inside at its deepest is a chord under a
@@ -365,31 +383,32 @@ class HriRenderer final : public Renderer {
   HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_general's plane change: the plane, its |grad| (last_grad_norm_), the anchor
   /// (eq. 2 from the HIP), the update counter reset, out.plane_update.
-  void adopt_plane(const VirtualPlane& pl, const Vec3& hip, HriTick& out);
+  void adopt_plane(const VirtualPlane& pl, const Vec3& hip, TickOut& out);
   /// In contact with the HIP inside but in front of the plane: the surface found from the
   /// HIP; else a plane along the outward normal at the HIP at the first-order depth; else
   /// the held plane if the HIP is behind it (see tick_general).
   void hold_hip_inside(const FieldView& field, const Vec3& hip, double e_hip, const VirtualPlane& held,
-                       double held_grad_norm, double voxel, HriTick& out);
+                       double held_grad_norm, double voxel, TickOut& out);
   /// The god-object test: the new plane's contact point (eq. 2) is reached from the VHIP only
   /// through material (a point of the segment deeper than 0.05 voxel to first order, at 7
-  /// interior points; any material for a plane facing away from the held one).
+  /// interior points; any material for a plane facing away from the held one). f_vhip: the
+  /// value at the VHIP in this snapshot, if known (then a bound may answer without reads).
   bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
-                                double held_grad_norm, double voxel) const;
+                                double held_grad_norm, double voxel, const double* f_vhip) const;
   /// tick_robust after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
-                    bool covered_free_vhip, bool have_f_hip, double f_hip, HriTick& out);
+                    bool covered_free_vhip, bool have_f_hip, double f_hip, TickOut& out);
   /// The common robust ticks (contact with no update due, free motion outside), the same
   /// bits as the general path; false (nothing changed but the HIP's value, read in free
   /// motion) where the general path must run. Not for edit ticks nor the tool.
   bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
-                  double& f_hip, HriTick& out);
+                  double& f_hip, TickOut& out);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
-  void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, HriTick& out);
+  void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, TickOut& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
-                     HriTick& out);
+                     TickOut& out);
   /// Edits: record the snapshot version of a sane tick; true if it differs from the last.
   bool note_version(std::uint64_t version);
   /// A new snapshot changed samples this renderer reads (its FieldView::changed box within
@@ -398,7 +417,7 @@ class HriRenderer final : public Renderer {
   /// Edits: limit the change of |F| from the tick before to one step, applied to `force`
   /// (its |F| = mag [N], after saturation); returns the |F| sent [N] and ends the slew when
   /// it reaches mag. Sets out.contact for a fade-out without a plane.
-  double edit_slew(Vec3& force, double mag, HriTick& out);
+  double edit_slew(Vec3& force, double mag, TickOut& out);
   /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
   void tool_rebuild(const FieldView& field, const Vec3& hip);
   /// Spherical tool: the planes from Newton searches (tools too large for surface_scan).
@@ -411,7 +430,7 @@ class HriRenderer final : public Renderer {
   /// every held plane (nearest first); returns the number added.
   int tool_add_uncovered(const Vec3& x, double reach, double voxel);
   /// Spherical tool: this tick's force (before saturation); sets out.contact, vhip_.
-  Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, HriTick& out);
+  Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, TickOut& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).
   static bool long_step(const FieldView& field, const Vec3& a, const Vec3& b);
 

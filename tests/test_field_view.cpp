@@ -128,6 +128,38 @@ TEST(FieldView, CentralDifferenceIsTheSixValuesBitForBit) {
   EXPECT_GT(inside, 4000);  // every point in the grid: the shared reads were exercised
 }
 
+// change_bound_in_cell bounds the change of the value between any points of a segment in
+// one cell (the reads at 7 interior points and both ends, as HRI's god-object test reads),
+// and answers +inf for a segment that leaves its cell or has a NaN corner.
+TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
+  SampleField f = random_field({9, 7, 6}, -250.0f, 7);
+  const FieldView v(f);
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  long bounded = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const Vec3 cell{double(int(7 * u(rng))), double(int(5 * u(rng))), double(int(4 * u(rng)))};
+    const double len = k % 2 ? 0.05 : 1.2;  // short: mostly in one cell; long: mostly not
+    const Vec3 ia = cell + Vec3{u(rng), u(rng), u(rng)};
+    const Vec3 ib = ia + Vec3{len * (u(rng) - 0.5), len * (u(rng) - 0.5), len * (u(rng) - 0.5)};
+    const Vec3 a = f.grid.to_world(ia), b = f.grid.to_world(ib);
+    const double bound = v.change_bound_in_cell(a, b);
+    const bool same = std::floor(ia.x) == std::floor(ib.x) && std::floor(ia.y) == std::floor(ib.y) &&
+                      std::floor(ia.z) == std::floor(ib.z);
+    if (!same) {
+      EXPECT_TRUE(std::isinf(bound)) << k;
+    }
+    if (std::isinf(bound)) continue;
+    ++bounded;
+    const double va = v.value(a);
+    for (int i = 1; i <= 8; ++i) ASSERT_LE(std::abs(v.value(a + (b - a) * (i / 8.0)) - va), bound) << k << " " << i;
+  }
+  EXPECT_GT(bounded, 8000);
+  f.samples[f.grid.index(2, 2, 2)].value = std::numeric_limits<float>::quiet_NaN();
+  const FieldView w(f);
+  EXPECT_TRUE(std::isinf(w.change_bound_in_cell(f.grid.to_world({2.5, 2.5, 2.5}), f.grid.to_world({2.6, 2.5, 2.5}))));
+}
+
 TEST(FieldView, ExactTrilinearGradientIsTheDerivativeOfTheValue) {
   const SampleField f = random_field({6, 1, 3}, 40.0f, 3);  // a 1-voxel axis too
   const FieldView v(f);

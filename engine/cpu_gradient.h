@@ -13,6 +13,17 @@ struct GradientConstants {
   float inv_h[3];   ///< 1 / spacing [1/m]
 };
 GradientConstants gradient_constants(const core::Grid& grid);
+/// Copies k's inverse spacings into a push-constant block with fields inv_2h_x .. inv_h_z
+/// (DensePush, SparsePush: shaders/isotouch_shared.h).
+template <class Push>
+void set_inverse_spacings(Push& pc, const GradientConstants& k) {
+  pc.inv_2h_x = k.inv_2h[0];
+  pc.inv_2h_y = k.inv_2h[1];
+  pc.inv_2h_z = k.inv_2h[2];
+  pc.inv_h_x = k.inv_h[0];
+  pc.inv_h_y = k.inv_h[1];
+  pc.inv_h_z = k.inv_h[2];
+}
 
 /// Value and gradient per voxel: central differences in world units [value/m] inside,
 /// one-sided differences at the borders, 0 along an axis of one voxel.

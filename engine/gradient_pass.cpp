@@ -102,12 +102,7 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const cor
       pc.src_offset = gpu::uint(s.src_offset_elems);
       pc.dst_offset = gpu::uint(s.dst_offset_elems);
       pc.qx = qx;
-      pc.inv_2h_x = k.inv_2h[0];
-      pc.inv_2h_y = k.inv_2h[1];
-      pc.inv_2h_z = k.inv_2h[2];
-      pc.inv_h_x = k.inv_h[0];
-      pc.inv_h_y = k.inv_h[1];
-      pc.inv_h_z = k.inv_h[2];
+      set_inverse_spacings(pc, k);
       pipe->push(cmd, pc);
       vkCmdDispatch(cmd, group_count(std::uint64_t(qx) * std::uint64_t(ny), ISOTOUCH_DENSE_WG), 1,
                     std::uint32_t(s.nz));
@@ -125,12 +120,7 @@ void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const cor
     pc.src_z0 = gpu::uint(s.src_z0);
     pc.src_offset = gpu::uint(s.src_offset_elems);
     pc.dst_offset = gpu::uint(s.dst_offset_elems);
-    pc.inv_2h_x = k.inv_2h[0];
-    pc.inv_2h_y = k.inv_2h[1];
-    pc.inv_2h_z = k.inv_2h[2];
-    pc.inv_h_x = k.inv_h[0];
-    pc.inv_h_y = k.inv_h[1];
-    pc.inv_h_z = k.inv_h[2];
+    set_inverse_spacings(pc, k);
     legacy_->push(cmd, pc);
     vkCmdDispatch(cmd, group_count(std::uint64_t(nx), ISOTOUCH_GRADIENT_WG_X),
                   group_count(std::uint64_t(ny), ISOTOUCH_GRADIENT_WG_Y),

@@ -104,12 +104,7 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     pc.nz = gpu::uint(nz);
     pc.slab_nz = gpu::uint(nz);
     pc.qx = gpu::uint(nx / int(ISOTOUCH_DENSE_VOXELS));
-    pc.inv_2h_x = k.inv_2h[0];
-    pc.inv_2h_y = k.inv_2h[1];
-    pc.inv_2h_z = k.inv_2h[2];
-    pc.inv_h_x = k.inv_h[0];
-    pc.inv_h_y = k.inv_h[1];
-    pc.inv_h_z = k.inv_h[2];
+    set_inverse_spacings(pc, k);
     a.grad_mm->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}});
     a.grad_mm->push(cmd, pc);
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t((nz + 1) / 2));

@@ -802,12 +802,7 @@ gpu::SparseBrickPush per_brick_push(const Volume& vol, const sparse::Plan& plan,
   pc.threshold = sparse::threshold(iso);
   pc.background = background;
   pc.buf_b = gpu::uint(shared_sizes(plan).first);
-  pc.inv_2h_x = k.inv_2h[0];
-  pc.inv_2h_y = k.inv_2h[1];
-  pc.inv_2h_z = k.inv_2h[2];
-  pc.inv_h_x = k.inv_h[0];
-  pc.inv_h_y = k.inv_h[1];
-  pc.inv_h_z = k.inv_h[2];
+  set_inverse_spacings(pc, k);
   return pc;
 }
 

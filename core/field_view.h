@@ -222,8 +222,10 @@ class FieldView {
     int i0[3];
     double ext[3];
     for (int a = 0; a < 3; ++a) {
-      const double lo = std::min(ia[a], ib[a]), hi = std::max(ia[a], ib[a]);
-      if (!(lo >= kPos && hi <= last_[a] - kPos)) return kInf;  // also NaN
+      // (std::min / std::max would drop a NaN second argument: compare explicitly)
+      if (!(std::isfinite(ia[a]) && std::isfinite(ib[a]))) return kInf;
+      const double lo = ia[a] < ib[a] ? ia[a] : ib[a], hi = ia[a] < ib[a] ? ib[a] : ia[a];
+      if (!(lo >= kPos && hi <= last_[a] - kPos)) return kInf;
       i0[a] = int(lo);
       if (!(lo - kPos >= double(i0[a]) && hi + kPos <= double(i0[a] + 1))) return kInf;
       ext[a] = hi - lo + kPos;

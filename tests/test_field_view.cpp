@@ -158,6 +158,11 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
   f.samples[f.grid.index(2, 2, 2)].value = std::numeric_limits<float>::quiet_NaN();
   const FieldView w(f);
   EXPECT_TRUE(std::isinf(w.change_bound_in_cell(f.grid.to_world({2.5, 2.5, 2.5}), f.grid.to_world({2.6, 2.5, 2.5}))));
+  // A NaN end, either one: no bound (std::min / std::max would have dropped it).
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const Vec3 in_cell = f.grid.to_world({3.5, 3.5, 3.5});
+  EXPECT_TRUE(std::isinf(v.change_bound_in_cell(in_cell, {nan, nan, nan})));
+  EXPECT_TRUE(std::isinf(v.change_bound_in_cell({nan, nan, nan}, in_cell)));
 }
 
 TEST(FieldView, ExactTrilinearGradientIsTheDerivativeOfTheValue) {

@@ -93,6 +93,24 @@ struct SlabArgs {
   core::Grid grid;
 };
 
+/// The brick min/max's push constants for slab `sl` (brick_minmax, minmax_rows/_bricks,
+/// minmax_slices).
+gpu::BrickMinMaxPush brick_minmax_push(const Slab& sl, const SlabArgs& a) {
+  gpu::BrickMinMaxPush pc{};
+  pc.nx = gpu::uint(a.nx);
+  pc.ny = gpu::uint(a.ny);
+  pc.nz = gpu::uint(a.nz);
+  pc.bx = a.bx;
+  pc.by = a.by;
+  pc.bz0 = gpu::uint(sl.z0 / ISOTOUCH_BRICK);
+  pc.slab_bz = gpu::uint((sl.nz + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK);
+  pc.src_z0 = gpu::uint(sl.src_z0);
+  pc.src_offset = gpu::uint(sl.src_offset_elems);
+  pc.dst_offset = gpu::uint(sl.dst_offset_elems);
+  pc.halo = gpu::uint(a.halo);
+  return pc;
+}
+
 /// Records the dispatches of one slab of step `s` (no barrier after the last).
 void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s, const Slab& sl, const SlabArgs& a) {
   const int nx = a.nx, ny = a.ny, nz = a.nz;
@@ -109,14 +127,7 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     a.grad_mm->push(cmd, pc);
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t((nz + 1) / 2));
   } else if (s.type == ChainStep::MinMaxSlices) {
-    gpu::BrickMinMaxPush pc{};
-    pc.nx = gpu::uint(nx);
-    pc.ny = gpu::uint(ny);
-    pc.nz = gpu::uint(nz);
-    pc.bx = a.bx;
-    pc.by = a.by;
-    pc.slab_bz = gpu::uint((nz + int(ISOTOUCH_BRICK) - 1) / int(ISOTOUCH_BRICK));
-    pc.halo = gpu::uint(a.halo);
+    const gpu::BrickMinMaxPush pc = brick_minmax_push(sl, a);  // the whole volume: bz0 = 0
     a.mm_slices->bind(cmd, arena, {BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}, sl.dst});
     a.mm_slices->push(cmd, pc);
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
@@ -161,18 +172,7 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     vkCmdDispatch(cmd, groups(std::uint64_t(nx), ISOTOUCH_FILTER_WG_X), groups(std::uint64_t(ny), ISOTOUCH_FILTER_WG_Y),
                   groups(sl.nz, ISOTOUCH_FILTER_WG_Z));
   } else if (s.type == ChainStep::MinMax) {
-    gpu::BrickMinMaxPush pc{};
-    pc.nx = gpu::uint(nx);
-    pc.ny = gpu::uint(ny);
-    pc.nz = gpu::uint(nz);
-    pc.bx = a.bx;
-    pc.by = a.by;
-    pc.bz0 = gpu::uint(sl.z0 / ISOTOUCH_BRICK);
-    pc.slab_bz = gpu::uint((sl.nz + ISOTOUCH_BRICK - 1) / ISOTOUCH_BRICK);
-    pc.src_z0 = gpu::uint(sl.src_z0);
-    pc.src_offset = gpu::uint(sl.src_offset_elems);
-    pc.dst_offset = gpu::uint(sl.dst_offset_elems);
-    pc.halo = gpu::uint(a.halo);
+    gpu::BrickMinMaxPush pc = brick_minmax_push(sl, a);
     if (a.mm_rows) {
       const std::uint64_t src_nz = sl.src_z1 - sl.src_z0;
       const BufferRange rr{a.b->rows.handle(), 0, src_nz * std::uint64_t(ny) * a.bx * 8};

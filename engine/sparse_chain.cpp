@@ -17,10 +17,11 @@
 #include <chrono>
 #include <cstdint>
 #include <cstring>
+#include <functional>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <optional>
-#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 

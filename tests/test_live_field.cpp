@@ -922,12 +922,9 @@ TEST(LiveField, AFailingGpuLosesNoEditAndTheCpuTakesOver) {
 
 // ---- benchmark (disabled: speed figures are printed, never asserted) --------------------
 
-TEST(LiveField, DISABLED_BenchChestCarve) {
-  Case c = cached("chest");
-  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
-  auto lf = LiveField::create(c.vol, o);
+// Brush centres on the isosurface: voxels inside whose +x or +y neighbour is outside.
+std::vector<core::Vec3> surface_points(const Case& c) {
   const core::Grid& g = c.vol.grid;
-  // Brush centres on the isosurface: voxels inside whose +x or +y neighbour is outside.
   std::vector<core::Vec3> surface;
   for (int z = 0; z < g.dims[2]; ++z)
     for (int y = 0; y + 1 < g.dims[1]; ++y)
@@ -936,12 +933,22 @@ TEST(LiveField, DISABLED_BenchChestCarve) {
         if (in && (!c.iso.contains(c.vol.voxels[g.index(x + 1, y, z)]) || !c.iso.contains(c.vol.voxels[g.index(x, y + 1, z)])))
           surface.push_back(g.to_world({double(x), double(y), double(z)}));
       }
+  return surface;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+TEST(LiveField, DISABLED_BenchChestCarve) {
+  Case c = cached("chest");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  const std::vector<core::Vec3> surface = surface_points(c);
   ASSERT_GT(surface.size(), 1000u);
   std::mt19937 rng(3);
-  auto median = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
   auto p99 = [](std::vector<double> v) {
     std::sort(v.begin(), v.end());
     return v[v.size() * 99 / 100];
@@ -987,22 +994,9 @@ TEST(LiveField, DISABLED_BenchChestGpuCpu) {
   gpu->set_gpu_min_bricks(0);
   auto cpu = LiveField::create(c.vol, o);
   std::printf("  %s\n", gpu->describe().c_str());
-  const core::Grid& g = c.vol.grid;
-  std::vector<core::Vec3> surface;
-  for (int z = 0; z < g.dims[2]; ++z)
-    for (int y = 0; y + 1 < g.dims[1]; ++y)
-      for (int x = 0; x + 1 < g.dims[0]; ++x) {
-        const bool in = c.iso.contains(c.vol.voxels[g.index(x, y, z)]);
-        if (in && (!c.iso.contains(c.vol.voxels[g.index(x + 1, y, z)]) || !c.iso.contains(c.vol.voxels[g.index(x, y + 1, z)])))
-          surface.push_back(g.to_world({double(x), double(y), double(z)}));
-      }
+  const std::vector<core::Vec3> surface = surface_points(c);
   ASSERT_GT(surface.size(), 1000u);
   std::mt19937 rng(5);
-  auto median = [](std::vector<double> v) {
-    if (v.empty()) return 0.0;
-    std::sort(v.begin(), v.end());
-    return v[v.size() / 2];
-  };
   const int n = std::getenv("ISOTOUCH_BENCH_EDITS") ? std::atoi(std::getenv("ISOTOUCH_BENCH_EDITS")) : 100;
   std::map<int, std::pair<std::vector<double>, std::vector<double>>> band;  // recomputed band -> (gpu, cpu) ms
   for (int rep = 0; rep < 2; ++rep)

@@ -251,6 +251,48 @@ class FieldView {
     return slope[0] * ext[0] + slope[1] * ext[1] + slope[2] * ext[2] + 1e-12 * big;
   }
 
+  /// Values along one segment a -> b (grid-world [m]) at parameters t: the trilinear value
+  /// at the continuous index ia + (ib - ia) t, with ia, ib the ends' indices (one to_index
+  /// each, not one per read), exactly value_at_index of that index. The corners of the last
+  /// in-grid cell read are kept, so reads that stay in it (a march of fifth-voxel steps
+  /// reads each cell about five times, a root search more) cost the lerps alone. Points
+  /// off the box of voxel centres, and non-finite ones, take value_at_index's border path.
+  /// The index of a point differs from to_index(a + (b - a) t) by rounding only (about
+  /// 1e-16 of the index). Must not outlive the view.
+  class Segment {
+   public:
+    Segment(const FieldView& v, const Vec3& a_m, const Vec3& b_m)
+        : v_(v), ia_(v.grid_.to_index(a_m)), d_(v.grid_.to_index(b_m) - ia_) {}
+    /// The value at parameter t (t = 0: a, t = 1: b, to rounding); NaN where value() is.
+    double value(double t) {
+      const Vec3 idx{ia_.x + d_.x * t, ia_.y + d_.y * t, ia_.z + d_.z * t};
+      if (v_.empty() || !v_.in_grid(idx)) return v_.value_at_index(idx);
+      int i0[3];
+      double f[3];
+      inner(idx.x, v_.grid_.dims[0], i0[0], f[0]);
+      inner(idx.y, v_.grid_.dims[1], i0[1], f[1]);
+      inner(idx.z, v_.grid_.dims[2], i0[2], f[2]);
+      if (i0[0] != cell_[0] || i0[1] != cell_[1] || i0[2] != cell_[2]) load(i0);
+      const double c00 = lerp(c_[0], c_[1], f[0]), c10 = lerp(c_[2], c_[3], f[0]);
+      const double c01 = lerp(c_[4], c_[5], f[0]), c11 = lerp(c_[6], c_[7], f[0]);
+      return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
+    }
+
+   private:
+    void load(const int (&i0)[3]) {
+      Sample scratch[8];
+      const CellRef c = v_.cell(i0[0], i0[1], i0[2], scratch);
+      for (int k = 0; k < 2; ++k)
+        for (int j = 0; j < 2; ++j)
+          for (int i = 0; i < 2; ++i) c_[i + 2 * j + 4 * k] = c.base[(i ? c.sx : 0) + (j ? c.sy : 0) + (k ? c.sz : 0)].value;
+      for (int a = 0; a < 3; ++a) cell_[a] = i0[a];
+    }
+    const FieldView& v_;
+    Vec3 ia_, d_;
+    int cell_[3] = {-1, -1, -1};  ///< lower corner of the cell in c_ (-1: none)
+    double c_[8] = {};            ///< its corners' values, corner (i, j, k) at i + 2 j + 4 k
+  };
+
   /// Trilinear value at a continuous index (voxel centres at integers); NaN if not
   /// finite or empty.
   double value_at_index(const Vec3& idx) const {

@@ -163,12 +163,13 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
   // in between), at most march_budget samples (longer steps beyond that).
   const int budget = std::max(2, params_.march_budget);
   const int steps = int(std::clamp(std::ceil(len / h), 2.0, double(budget)));
+  FieldView::Segment seg(field, a, b);  // the march's reads keep their cell
   double lo = 0.0;
   for (int i = 1; i <= steps; ++i) {
     const double t = double(i) / steps;
-    if (excess(sample_value(field, a + (b - a) * t)) > 0.0) {
+    if (excess(seg.value(t)) > 0.0) {
       double hi = t;
-      bisect(lo, hi, 20, [&](double m) { return !(excess(sample_value(field, a + (b - a) * m)) > 0.0); });
+      bisect(lo, hi, 20, [&](double m) { return !(excess(seg.value(m)) > 0.0); });
       p = a + (b - a) * lo;  // last point known outside: on the surface to 1e-6 of the step
       return true;
     }
@@ -187,7 +188,10 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
   const Vec3 n0 = along ? *along : outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
-  const double e_reach = excess(sample_value(field, x + n0 * reach));
+  // Reads at x + n0 t as the segment's parameter t / reach: the search's reads keep their cell.
+  FieldView::Segment seg(field, x, x + n0 * reach);
+  const double inv_reach = 1.0 / reach;
+  const double e_reach = excess(seg.value(1.0));
   if (!(e_reach <= 0.0)) return false;
   // The crossing in [0, reach] (x inside, the far end outside) by Illinois regula falsi: to
   // the width 16 bisection steps leave (reach / 2^16), or until the outside end is that
@@ -200,7 +204,7 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   for (int k = 0; k < 24 && hi - lo > width && !(-e_hi <= width * grad_norm); ++k) {
     double t = lo + (hi - lo) * (e_lo / (e_lo - e_hi));
     if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
-    const double e = excess(sample_value(field, x + n0 * t));
+    const double e = excess(seg.value(t * inv_reach));
     if (e > 0.0) {
       lo = t;
       e_lo = e;
@@ -224,14 +228,15 @@ bool HriRenderer::march_out(const FieldView& field, const Vec3& x, Vec3& p) cons
   const double h = 0.5 * std::min({sp.x, sp.y, sp.z});
   const Vec3 n0 = outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const int budget = std::max(2, params_.march_budget);
+  FieldView::Segment seg(field, x, x + n0 * h);  // parameter: t / h
   double lo = 0.0;
   for (int i = 1; i <= budget; ++i) {
     const double t = h * i;
-    if (!(excess(sample_value(field, x + n0 * t)) > 0.0)) {
+    if (!(excess(seg.value(double(i))) > 0.0)) {
       double hi = t;
       for (int k = 0; k < 20; ++k) {
         const double mid = 0.5 * (lo + hi);
-        (excess(sample_value(field, x + n0 * mid)) > 0.0 ? lo : hi) = mid;
+        (excess(seg.value(mid / h)) > 0.0 ? lo : hi) = mid;
       }
       p = x + n0 * hi;
       return true;
@@ -1254,8 +1259,9 @@ VirtualPlane HriRenderer::reported_plane() const {
       excess(*f_vhip) + field.change_bound_in_cell(vhip_, to) + 1e-12 * std::abs(params_.tau) <= depth * gn)
     return false;
   bool through = false;
+  FieldView::Segment seg(field, vhip_, to);
   for (int i = 1; i <= 7 && !through && gn > 0; ++i) {
-    const double e = excess(sample_value(field, vhip_ + (to - vhip_) * (i / 8.0)));
+    const double e = excess(seg.value(i / 8.0));
     through = e > depth * gn;
   }
   return through;
@@ -1426,7 +1432,10 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   if (!std::isfinite(len) || !(len > 0.0)) return false;
   const int steps = int(std::clamp(std::ceil(len / (0.2 * voxel)), 64.0, 256.0));
   auto at = [&](double t) { return a + (b - a) * t; };
-  auto e_at = [&](double t) { return excess(sample_value(field, at(t))); };
+  // Reads along the segment keep their cell's corners (FieldView::Segment): the march reads
+  // each cell about five times.
+  FieldView::Segment seg(field, a, b);
+  auto e_at = [&](double t) { return excess(seg.value(t)); };
   // The entry in (lo, hi], lo outside and hi inside: 20 bisection steps.
   auto entry = [&](double lo, double hi) {
     bisect(lo, hi, 20, [&](double m) { return !(e_at(m) > 0.0); });

@@ -3,7 +3,10 @@
 // p, central-difference N), alternated rounds, median ns per tick, and the stroke's mix of
 // ticks (free, contact, plane updates), and the harness's own cost per tick (a renderer that
 // reads nothing: the FieldView made per tick and the virtual call, paid by both).
-// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila]
+// With --by-kind: HRI's ticks timed one by one (rdtsc, the null renderer's cycles
+// subtracted; latency, not throughput), mean cycles per kind of tick: free, contact with
+// no update, plane update, and Avila's tick on the same HIPs.
+// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind]
 // (--n: HRI's plane update period; --only: one renderer, for callgrind).
 #include <algorithm>
 #include <cstdio>
@@ -13,6 +16,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <x86intrin.h>
 
 #include "baselines.h"
 #include "hri.h"
@@ -39,10 +44,12 @@ int main(int argc, char** argv) {
   int reps = 21;
   std::string only;
   int n = 5;
+  bool by_kind = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--n") && i + 1 < argc) n = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    else if (!std::strcmp(argv[i], "--by-kind")) by_kind = true;
     else scenes.push_back(argv[i]);
   }
   if (scenes.empty()) scenes = {"sphere", "knot", "head", "chest"};
@@ -79,6 +86,41 @@ int main(int argc, char** argv) {
       std::sort(v.begin(), v.end());
       return v[v.size() / 2];
     };
+    if (by_kind) {
+      // Cycles per tick by kind, the median over reps of each kind's mean.
+      NullRenderer nr;
+      std::vector<double> kc[4];
+      const char* kinds[4] = {"free", "contact", "update", "avila"};
+      for (int r = 0; r < reps; ++r) {
+        double sum[4] = {0, 0, 0, 0}, cnt[4] = {0, 0, 0, 0}, null_sum = 0;
+        for (const core::Vec3& h : s.hip) {
+          const core::FieldView v(*s.field);
+          const unsigned long long t0 = __rdtsc();
+          const servo::HriTick t = nr.tick(v, h, 0.0);
+          null_sum += double(__rdtsc() - t0) + 0 * t.force_n.x;
+        }
+        const double null_c = null_sum / double(s.hip.size());
+        hri.reset();
+        avila.reset();
+        for (const core::Vec3& h : s.hip) {
+          const core::FieldView v(*s.field);
+          unsigned long long t0 = __rdtsc();
+          const servo::HriTick t = hri.tick(v, h, 0.0);
+          const double c = double(__rdtsc() - t0) - null_c;
+          const int k = t.plane_update ? 2 : t.contact ? 1 : 0;
+          sum[k] += c;
+          cnt[k] += 1;
+          t0 = __rdtsc();
+          const servo::HriTick ta2 = avila.tick(v, h, 0.0);
+          sum[3] += double(__rdtsc() - t0) - null_c + 0 * ta2.force_n.x;
+          cnt[3] += 1;
+        }
+        for (int k = 0; k < 4; ++k) kc[k].push_back(cnt[k] > 0 ? sum[k] / cnt[k] : 0.0);
+      }
+      std::printf("%-7s by kind [TSC cycles per tick, harness subtracted]:", s.name.c_str());
+      for (int k = 0; k < 4; ++k) std::printf(" %s %.0f", kinds[k], med(kc[k]));
+      std::printf("\n");
+    }
     const double h = med(th), a = med(ta), z = med(tn);
     std::printf("%-7s %5zu ticks (contact %5zu, updates %4zu): HRI %6.1f ns, Avila %6.1f ns, HRI/Avila %.3f; "
                 "harness alone %.1f ns\n",

@@ -8,6 +8,7 @@
 #include <limits>
 #include <random>
 
+#include "brick_field.h"
 #include "field_view.h"
 #include "hri.h"
 #include "isosurface.h"
@@ -163,6 +164,58 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
   const Vec3 in_cell = f.grid.to_world({3.5, 3.5, 3.5});
   EXPECT_TRUE(std::isinf(v.change_bound_in_cell(in_cell, {nan, nan, nan})));
   EXPECT_TRUE(std::isinf(v.change_bound_in_cell({nan, nan, nan}, in_cell)));
+}
+
+// FieldView::Segment reads the value at ia + (ib - ia) t exactly as value_at_index reads that
+// index, bit for bit, whether consecutive reads stay in one cell (its corners kept) or move
+// (back and forth, as a root search does), on dense, bricked fp32 and fp16 fields, in the
+// border band, outside and for NaN; within rounding of value() at a + (b - a) t.
+TEST(FieldView, SegmentReadsAreValueAtIndexBitForBit) {
+  SampleField dense = random_field({19, 11, 10}, -250.0f, 9);
+  dense.samples[dense.grid.index(4, 4, 4)].value = std::numeric_limits<float>::quiet_NaN();
+  const core::BrickedInput in = core::bricked_input_from_dense(dense, Isosurface{0.0, InsideIs::kAbove});
+  const SampleField b32 = core::make_bricked_field(in, core::SampleFormat::kFp32);
+  const SampleField b16 = core::make_bricked_field(in, core::SampleFormat::kFp16);
+  auto bits = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; };
+  std::mt19937 rng(10);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  long reused = 0, moved = 0;
+  const SampleField* fields[] = {&dense, &b32, &b16};
+  for (const SampleField* f : fields) {
+    const FieldView v(*f);
+    for (int k = 0; k < 3000; ++k) {
+      // Segments from a fraction of a voxel to several voxels long, a few off the grid.
+      const Vec3 ia{-1.5 + 21 * u(rng), -1.5 + 13 * u(rng), -1.5 + 12 * u(rng)};
+      const double len = k % 3 == 0 ? 0.3 : (k % 3 == 1 ? 2.0 : 6.0);
+      const Vec3 ib = ia + Vec3{len * (u(rng) - 0.5), len * (u(rng) - 0.5), len * (u(rng) - 0.5)};
+      const Vec3 a = f->grid.to_world(ia), b = f->grid.to_world(ib);
+      const Vec3 ja = f->grid.to_index(a), d = f->grid.to_index(b) - ja;
+      FieldView::Segment seg(v, a, b);
+      int last[3] = {-9, -9, -9};
+      for (int i = 0; i < 24; ++i) {
+        // A march (i / 16), then jumps back and forth (a bracket's reads).
+        const double t = i < 17 ? i / 16.0 : u(rng) * 1.2 - 0.1;
+        const Vec3 idx{ja.x + d.x * t, ja.y + d.y * t, ja.z + d.z * t};
+        const double got = seg.value(t), want = v.value_at_index(idx);
+        ASSERT_TRUE(bits(got, want)) << k << " " << i << ": " << got << " vs " << want;
+        const double world = v.value(a + (b - a) * t);
+        if (!std::isnan(want) && !std::isnan(world)) {
+          ASSERT_NEAR(got, world, 1e-9 * (1 + std::abs(want))) << k << " " << i;
+        }
+        const int c[3] = {int(std::floor(idx.x)), int(std::floor(idx.y)), int(std::floor(idx.z))};
+        const bool same = c[0] == last[0] && c[1] == last[1] && c[2] == last[2];
+        reused += same;
+        moved += !same;
+        for (int a2 = 0; a2 < 3; ++a2) last[a2] = c[a2];
+      }
+    }
+  }
+  EXPECT_GT(reused, 20000);  // reads in the kept cell were exercised
+  EXPECT_GT(moved, 20000);   // and reads that load another one
+  // An empty view reads NaN.
+  const FieldView empty;
+  FieldView::Segment none(empty, Vec3{}, Vec3{1, 1, 1});
+  EXPECT_TRUE(std::isnan(none.value(0.5)));
 }
 
 TEST(FieldView, ExactTrilinearGradientIsTheDerivativeOfTheValue) {

@@ -363,10 +363,14 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   // Optional force shading: the plane through the previous VHIP first gives a
   // temporary HIP, which the true plane then constrains.
   Vec3 goal = hip;
+  bool goal_is_hip = true;
   if (params_.force_shading && was_contact_) {
     const Vec3 ns = outward_normal(field, vhip_, plane_.n);
     const double behind = dot(ns, vhip_ - hip);
-    if (behind > 0) goal = hip + ns * behind;
+    if (behind > 0) {
+      goal = hip + ns * behind;
+      goal_is_hip = false;
+    }
   }
   // eq. 2: VHIP = HIP + ((p - HIP) . N) N   (for the goal point)
   const double g = dot(plane_.n, plane_.p - goal);
@@ -379,27 +383,31 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   if (!friction) sliding_ = false;
 
   const double s = inv_wpd_;
+  // Recovery time: ramp the magnitude, keep the new direction.
+  const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
+  if (robust && !friction && goal_is_hip) {
+    // The robust frictionless tick: HIP - VHIP = -g N (eq. 2), so eq. 3 is N times the
+    // scalar K s g - B (v . N), clipped at zero; |F| and the penetration without a square
+    // root (|N| = 1 to rounding: within 1e-15 of the vector form's norms).
+    const double m = params_.stiffness_n_per_m * (g * s) - params_.damping_n_s_per_m * dot(v, plane_.n);
+    const bool push = !(m <= 0.0);  // a wall pushes, never pulls (NaN kept: finish_robust's fault)
+    const Vec3 force = push ? plane_.n * m : Vec3{};
+    out.contact = true;
+    out.penetration_m = std::abs(g);
+    if (!ramps) {
+      out.force_mag = push ? m : 0.0;
+      return force;
+    }
+    return robust_ramp(force, hip, v, out);
+  }
   const Vec3 d = (hip - vhip_) * s;  // device [m]
   const Vec3 v_d = plane_.n * dot(v, plane_.n);
   // eq. 3 with the physical sign: push the HIP back toward the VHIP.
   Vec3 force = d * -params_.stiffness_n_per_m - v_d * params_.damping_n_s_per_m;
   if (dot(force, plane_.n) < 0.0) force = {};  // a wall pushes, never pulls
 
-  // Recovery time: ramp the magnitude, keep the new direction.
-  const bool ramps = params_.recovery_time_s > 0 || recovery_ticks_left_ > 0;
   if (ramps && robust) {
-    // What the plane of the tick before gives at this HIP (eqs. 2-3): a ramp starts for the
-    // step the plane change causes, never for the hand's own motion since the tick before
-    // (at n = 1 that restarted the ramp every tick and the force lagged the hand: an active
-    // wall). A new contact compares with the target of the tick before (none: zero).
-    Vec3 before = prev_target_f_;
-    if (out.plane_update && ramp_ref_.valid) {
-      const Vec3& n = ramp_ref_.n;
-      const Vec3 d_ref = n * (-dot(n, ramp_ref_.p - hip) * s);  // HIP - its eq. 2 point, device [m]
-      before = d_ref * -params_.stiffness_n_per_m - n * (dot(v, n) * params_.damping_n_s_per_m);
-      if (dot(before, n) < 0.0) before = {};
-    }
-    force = ramp_force(force, out.plane_update, plane_.n, before);
+    force = robust_ramp(force, hip, v, out);
   } else if (ramps) {
     const double mag = norm(force);
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
@@ -417,6 +425,21 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   out.contact = true;
   out.penetration_m = norm(hip - vhip_);
   return force;
+}
+
+Vec3 HriRenderer::robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out) {
+  // What the plane of the tick before gives at this HIP (eqs. 2-3): a ramp starts for the
+  // step the plane change causes, never for the hand's own motion since the tick before
+  // (at n = 1 that restarted the ramp every tick and the force lagged the hand: an active
+  // wall). A new contact compares with the target of the tick before (none: zero).
+  Vec3 before = prev_target_f_;
+  if (out.plane_update && ramp_ref_.valid) {
+    const Vec3& n = ramp_ref_.n;
+    const Vec3 d_ref = n * (-dot(n, ramp_ref_.p - hip) * inv_wpd_);  // HIP - its eq. 2 point, device [m]
+    before = d_ref * -params_.stiffness_n_per_m - n * (dot(v, n) * params_.damping_n_s_per_m);
+    if (dot(before, n) < 0.0) before = {};
+  }
+  return ramp_force(force, out.plane_update, plane_.n, before);
 }
 
 Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before) {
@@ -1532,7 +1555,8 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
 [[gnu::always_inline]] inline void HriRenderer::finish_robust(const Vec3& hip, Vec3 force, bool edited,
                                                               bool have_f_hip, double f_hip, TickOut& out) {
   after_fault_ = false;
-  double mag = norm(force);  // one square root unless |F| saturates
+  // |F|: known where contact_force took the scalar form, else one square root.
+  double mag = out.force_mag >= 0.0 ? out.force_mag : norm(force);
   if (!std::isfinite(mag)) {
     force = {};
     mag = 0;

@@ -336,6 +336,7 @@ class HriRenderer final : public Renderer {
     bool plane_update = false;  ///< HriTick::plane_update
     bool saturated = false;     ///< HriTick::saturated
     bool fault = false;         ///< HriTick::fault
+    double force_mag = -1;      ///< |force| where contact_force knows it without a square root; < 0: not known
   };
   /// The HriTick of `t` with the VHIP after this tick and `plane`.
   HriTick result(const TickOut& t, const VirtualPlane& plane) const {
@@ -355,6 +356,9 @@ class HriRenderer final : public Renderer {
   /// `before`: the force the ramp's trigger compares with (the target the plane of the tick
   /// before gives at this HIP; after a fault the target of the tick before).
   Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before);
+  /// ramp_force for a robust contact tick: `before` from the plane of the tick before
+  /// (ramp_ref_) at this HIP, or the target of the tick before.
+  Vec3 robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out);
   /// Edit ticks: the surface point p from an embedded x (deeper than surface_from reaches)
   /// marched along the outward normal at x (half-voxel steps, at most march_budget samples,
   /// 20 bisection steps); false if none.

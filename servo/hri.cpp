@@ -127,10 +127,11 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
       break;
   }
   // normalized_or(outward(g), fallback) with |outward(g)| = |g| (a negation, exact) taken
-  // from grad_norm: the same bits, one square root (on the update's dependent chain) less.
+  // from grad_norm: one square root (on the update's dependent chain) less.
   grad_norm = norm(g);
   const Vec3 out = Isosurface{params_.tau, params_.inside}.outward(g);
-  return (grad_norm > 0.0 && std::isfinite(grad_norm)) ? out / grad_norm : fallback;
+  // One division, three products (a unit vector to an ulp, as out / grad_norm's three divisions).
+  return (grad_norm > 0.0 && std::isfinite(grad_norm)) ? out * (1.0 / grad_norm) : fallback;
 }
 
 VirtualPlane HriRenderer::plane_at(const FieldView& field, const Vec3& p, const Vec3& hip) const {
@@ -1414,6 +1415,7 @@ VirtualPlane HriRenderer::reported_plane() const {
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     prev_target_f_ = {};
+    out.force_mag = 0.0;  // no force: no square root
   }
   finish_robust(hip, force, edited, have_f_hip, f_hip, out);
 }
@@ -1444,6 +1446,7 @@ VirtualPlane HriRenderer::reported_plane() const {
   recovery_ticks_left_ = 0;
   ramp_left_s_ = 0;
   prev_target_f_ = {};
+  out.force_mag = 0.0;  // no force: no square root
   finish_robust(hip, Vec3{}, false, true, f_hip, out);
   return true;
 }

@@ -253,44 +253,83 @@ class FieldView {
 
   /// Values along one segment a -> b (grid-world [m]) at parameters t: the trilinear value
   /// at the continuous index ia + (ib - ia) t, with ia, ib the ends' indices (one to_index
-  /// each, not one per read), exactly value_at_index of that index. The corners of the last
-  /// in-grid cell read are kept, so reads that stay in it (a march of fifth-voxel steps
-  /// reads each cell about five times, a root search more) cost the lerps alone. Points
-  /// off the box of voxel centres, and non-finite ones, take value_at_index's border path.
-  /// The index of a point differs from to_index(a + (b - a) t) by rounding only (about
-  /// 1e-16 of the index). Must not outlive the view.
+  /// each, not one per read). Along a line the trilinear interpolant of one cell is a cubic
+  /// in t: a read in a new in-grid cell loads its corners and the cubic's coefficients, about
+  /// the read's place (with the t interval the line spends in the cell), and every later read
+  /// in that interval is three multiply-adds (a march of fifth-voxel steps reads each cell
+  /// about five times, a root search more). Within rounding of value_at_index of that index:
+  /// the cubic's terms are bounded by the corners (each fraction moves at most 1 within the
+  /// cell), so the two differ by a few ulps of the largest corner. Points off the box of voxel
+  /// centres, and non-finite ones, read value_at_index (the border path). The index of a
+  /// point differs from to_index(a + (b - a) t) by rounding only. Must not outlive the view.
   class Segment {
    public:
     Segment(const FieldView& v, const Vec3& a_m, const Vec3& b_m)
         : v_(v), ia_(v.grid_.to_index(a_m)), d_(v.grid_.to_index(b_m) - ia_) {}
-    /// The value at parameter t (t = 0: a, t = 1: b, to rounding); NaN where value() is.
-    double value(double t) {
+    /// The value at parameter t (t = 0: a, t = 1: b, to rounding); NaN where value() is
+    /// (a NaN corner, a non-finite point, an empty view).
+    [[gnu::always_inline]] double value(double t) {
+      if (t >= t_lo_ && t <= t_hi_) {
+        const double s = t - t0_;
+        return ((p_[3] * s + p_[2]) * s + p_[1]) * s + p_[0];
+      }
+      return load(t);
+    }
+
+   private:
+    /// The cell of the point at t: its cubic about t and its t interval; the value at t.
+    [[gnu::noinline]] double load(double t) {
       const Vec3 idx{ia_.x + d_.x * t, ia_.y + d_.y * t, ia_.z + d_.z * t};
+      t_lo_ = 1.0;
+      t_hi_ = 0.0;  // no interval until a cell is loaded
       if (v_.empty() || !v_.in_grid(idx)) return v_.value_at_index(idx);
       int i0[3];
       double f[3];
       inner(idx.x, v_.grid_.dims[0], i0[0], f[0]);
       inner(idx.y, v_.grid_.dims[1], i0[1], f[1]);
       inner(idx.z, v_.grid_.dims[2], i0[2], f[2]);
-      if (i0[0] != cell_[0] || i0[1] != cell_[1] || i0[2] != cell_[2]) load(i0);
-      const double c00 = lerp(c_[0], c_[1], f[0]), c10 = lerp(c_[2], c_[3], f[0]);
-      const double c01 = lerp(c_[4], c_[5], f[0]), c11 = lerp(c_[6], c_[7], f[0]);
-      return lerp(lerp(c00, c10, f[1]), lerp(c01, c11, f[1]), f[2]);
-    }
-
-   private:
-    void load(const int (&i0)[3]) {
       Sample scratch[8];
       const CellRef c = v_.cell(i0[0], i0[1], i0[2], scratch);
-      for (int k = 0; k < 2; ++k)
-        for (int j = 0; j < 2; ++j)
-          for (int i = 0; i < 2; ++i) c_[i + 2 * j + 4 * k] = c.base[(i ? c.sx : 0) + (j ? c.sy : 0) + (k ? c.sz : 0)].value;
-      for (int a = 0; a < 3; ++a) cell_[a] = i0[a];
+      double k[8];  // corner (i, j, k) at i + 2 j + 4 k
+      for (int z = 0; z < 2; ++z)
+        for (int y = 0; y < 2; ++y)
+          for (int x = 0; x < 2; ++x) k[x + 2 * y + 4 * z] = c.base[(x ? c.sx : 0) + (y ? c.sy : 0) + (z ? c.sz : 0)].value;
+      // v = k0 + kx X + ky Y + kz Z + kxy XY + kxz XZ + kyz YZ + kxyz XYZ with the fractions
+      // X = f.x + d.x s (s = t - t0) on a 1-voxel axis: its fraction stays 0.
+      const double kx = k[1] - k[0], ky = k[2] - k[0], kz = k[4] - k[0];
+      const double kxy = k[3] - k[1] - k[2] + k[0], kxz = k[5] - k[1] - k[4] + k[0], kyz = k[6] - k[2] - k[4] + k[0];
+      const double kxyz = k[7] - k[6] - k[5] - k[3] + k[1] + k[2] + k[4] - k[0];
+      double b[3];
+      for (int a = 0; a < 3; ++a) b[a] = v_.grid_.dims[a] > 1 ? d_[a] : 0.0;
+      const double xy[3] = {f[0] * f[1], f[0] * b[1] + b[0] * f[1], b[0] * b[1]};
+      const double xz[3] = {f[0] * f[2], f[0] * b[2] + b[0] * f[2], b[0] * b[2]};
+      const double yz[3] = {f[1] * f[2], f[1] * b[2] + b[1] * f[2], b[1] * b[2]};
+      const double xyz[4] = {xy[0] * f[2], xy[0] * b[2] + xy[1] * f[2], xy[1] * b[2] + xy[2] * f[2], xy[2] * b[2]};
+      p_[0] = k[0] + kx * f[0] + ky * f[1] + kz * f[2] + kxy * xy[0] + kxz * xz[0] + kyz * yz[0] + kxyz * xyz[0];
+      p_[1] = kx * b[0] + ky * b[1] + kz * b[2] + kxy * xy[1] + kxz * xz[1] + kyz * yz[1] + kxyz * xyz[1];
+      p_[2] = kxy * xy[2] + kxz * xz[2] + kyz * yz[2] + kxyz * xyz[2];
+      p_[3] = kxyz * xyz[3];
+      // The t interval in the cell: each fraction in [0, 1] (a 1-voxel axis: any t).
+      double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+      for (int a = 0; a < 3; ++a) {
+        if (b[a] == 0.0) continue;
+        const double t_at0 = t - f[a] / b[a], t_at1 = t + (1.0 - f[a]) / b[a];
+        lo = std::max(lo, std::min(t_at0, t_at1));
+        hi = std::min(hi, std::max(t_at0, t_at1));
+      }
+      t0_ = t;
+      if (lo <= t && t <= hi) {  // (NaN: no interval, every read loads)
+        t_lo_ = lo;
+        t_hi_ = hi;
+      }
+      return p_[0];
     }
+
     const FieldView& v_;
     Vec3 ia_, d_;
-    int cell_[3] = {-1, -1, -1};  ///< lower corner of the cell in c_ (-1: none)
-    double c_[8] = {};            ///< its corners' values, corner (i, j, k) at i + 2 j + 4 k
+    double t_lo_ = 1.0, t_hi_ = 0.0;  ///< the loaded cell's t interval (empty: none loaded)
+    double t0_ = 0.0;                 ///< the t the cubic is about
+    double p_[4] = {};                ///< the cubic in t - t0_, constant term first
   };
 
   /// Trilinear value at a continuous index (voxel centres at integers); NaN if not

@@ -1457,6 +1457,7 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   const double len = norm(b - a);
   if (!std::isfinite(len) || !(len > 0.0)) return false;
   const int steps = int(std::clamp(std::ceil(len / (0.2 * voxel)), 64.0, 256.0));
+  const double dt = 1.0 / steps;  // the march's t = i dt (a product, not a division, per sample)
   auto at = [&](double t) { return a + (b - a) * t; };
   // Reads along the segment keep their cell's corners (FieldView::Segment): the march reads
   // each cell about five times.
@@ -1471,10 +1472,10 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   bool out_seen = !(e_a > 0.0);
   double lo = 0.0;
   for (int i = 1; i <= steps; ++i) {
-    const double e = e_at(double(i) / steps);
+    const double e = e_at(i * dt);
     if (!(e > 0.0)) {
       out_seen = true;
-      lo = double(i) / steps;
+      lo = i * dt;
       continue;
     }
     if (!out_seen && !(e > deeper)) continue;  // still leaving an embedded start
@@ -1484,12 +1485,12 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
     // was deeper than twice its end's excess went through a plate to the far face.
     int j = i;
     double deepest = e, e_end = e;
-    while (j < steps && (e_end = e_at(double(j + 1) / steps)) > 0.0) {
+    while (j < steps && (e_end = e_at((j + 1) * dt)) > 0.0) {
       ++j;
       deepest = std::max(deepest, e_end);
     }
     if (j == steps && !(deepest > 2.0 * e_end)) return false;
-    p = at(out_seen ? entry(lo, double(i) / steps) : 0.0);
+    p = at(out_seen ? entry(lo, i * dt) : 0.0);
     return true;
   }
   return false;

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <random>
@@ -166,20 +167,26 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
   EXPECT_TRUE(std::isinf(v.change_bound_in_cell({nan, nan, nan}, in_cell)));
 }
 
-// FieldView::Segment reads the value at ia + (ib - ia) t exactly as value_at_index reads that
-// index, bit for bit, whether consecutive reads stay in one cell (its corners kept) or move
-// (back and forth, as a root search does), on dense, bricked fp32 and fp16 fields, in the
-// border band, outside and for NaN; within rounding of value() at a + (b - a) t.
-TEST(FieldView, SegmentReadsAreValueAtIndexBitForBit) {
+// FieldView::Segment reads the value at ia + (ib - ia) t as value_at_index reads that index,
+// to rounding (its cubic per cell against the lerps), whether consecutive reads stay in one
+// cell or move (back and forth, as a root search does), on dense, bricked fp32 and fp16
+// fields, in the border band, outside and for NaN; and within rounding of value() at
+// a + (b - a) t.
+TEST(FieldView, SegmentReadsAreValueAtIndexToRounding) {
   SampleField dense = random_field({19, 11, 10}, -250.0f, 9);
   dense.samples[dense.grid.index(4, 4, 4)].value = std::numeric_limits<float>::quiet_NaN();
   const core::BrickedInput in = core::bricked_input_from_dense(dense, Isosurface{0.0, InsideIs::kAbove});
   const SampleField b32 = core::make_bricked_field(in, core::SampleFormat::kFp32);
   const SampleField b16 = core::make_bricked_field(in, core::SampleFormat::kFp16);
-  auto bits = [](double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; };
   std::mt19937 rng(10);
   std::uniform_real_distribution<double> u(0.0, 1.0);
-  long reused = 0, moved = 0;
+  long reused = 0, moved = 0, nan_reads = 0;
+  double worst = 0;
+  auto on_face = [](const Vec3& i) {
+    for (int a = 0; a < 3; ++a)
+      if (std::abs(i[a] - std::round(i[a])) < 1e-9) return true;
+    return false;
+  };
   const SampleField* fields[] = {&dense, &b32, &b16};
   for (const SampleField* f : fields) {
     const FieldView v(*f);
@@ -192,15 +199,22 @@ TEST(FieldView, SegmentReadsAreValueAtIndexBitForBit) {
       const Vec3 ja = f->grid.to_index(a), d = f->grid.to_index(b) - ja;
       FieldView::Segment seg(v, a, b);
       int last[3] = {-9, -9, -9};
-      for (int i = 0; i < 24; ++i) {
-        // A march (i / 16), then jumps back and forth (a bracket's reads).
-        const double t = i < 17 ? i / 16.0 : u(rng) * 1.2 - 0.1;
+      for (int i = 0; i < 40; ++i) {
+        // A march (i / 32), then jumps back and forth (a bracket's reads).
+        const double t = i < 33 ? i / 32.0 : u(rng) * 1.2 - 0.1;
         const Vec3 idx{ja.x + d.x * t, ja.y + d.y * t, ja.z + d.z * t};
         const double got = seg.value(t), want = v.value_at_index(idx);
-        ASSERT_TRUE(bits(got, want)) << k << " " << i << ": " << got << " vs " << want;
-        const double world = v.value(a + (b - a) * t);
-        if (!std::isnan(want) && !std::isnan(world)) {
-          ASSERT_NEAR(got, world, 1e-9 * (1 + std::abs(want))) << k << " " << i;
+        if (std::isnan(want) || std::isnan(got)) {
+          // A NaN corner's cell reads NaN; on a face the neighbour's cubic may answer.
+          ASSERT_TRUE((std::isnan(want) && std::isnan(got)) || on_face(idx)) << k << " " << i << ": " << got << " vs " << want;
+          ++nan_reads;
+        } else {
+          ASSERT_NEAR(got, want, 1e-10) << k << " " << i;
+          worst = std::max(worst, std::abs(got - want));
+          const double world = v.value(a + (b - a) * t);
+          if (!std::isnan(world)) {
+            ASSERT_NEAR(got, world, 1e-9) << k << " " << i;
+          }
         }
         const int c[3] = {int(std::floor(idx.x)), int(std::floor(idx.y)), int(std::floor(idx.z))};
         const bool same = c[0] == last[0] && c[1] == last[1] && c[2] == last[2];
@@ -210,8 +224,10 @@ TEST(FieldView, SegmentReadsAreValueAtIndexBitForBit) {
       }
     }
   }
-  EXPECT_GT(reused, 20000);  // reads in the kept cell were exercised
-  EXPECT_GT(moved, 20000);   // and reads that load another one
+  EXPECT_GT(reused, 50000);  // reads in the loaded cell were exercised
+  EXPECT_GT(moved, 50000);   // and reads that load another one
+  EXPECT_GT(nan_reads, 10);  // the NaN corner's cell was read
+  std::printf("largest |Segment - value_at_index|: %.3g (corners up to 500)\n", worst);
   // An empty view reads NaN.
   const FieldView empty;
   FieldView::Segment none(empty, Vec3{}, Vec3{1, 1, 1});

@@ -71,6 +71,9 @@ Subcommand add_replay_command(CLI::App& cli) {
             }
             std::cout << "replayed " << r.ticks << " ticks, " << r.edits << " edits (" << r.publications
                       << " snapshots published); max |dF| " << std::setprecision(6) << r.max_df_n << " N\n";
+            if (r.cut_ticks > 0)
+              std::cout << "isotouch replay: the last " << r.cut_ticks << " ticks read a snapshot whose edit was "
+                        << "written after the cut: not compared\n";
             if (!a->out.empty()) std::cout << "trace    " << (fs::path(a->out) / "trace.csv").string() << "\n";
             std::cout << run::replay_verdict(r, rec_format);
             return r.identical() ? 0 : 1;

@@ -157,7 +157,18 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
     const RecordedTick& t = rec.ticks[std::size_t(k)];
     // A live recording (format 3): the edits applied before this tick read its snapshot,
     // in the recorded order, up to the version the tick read live.
-    if (live && setup.session) e = apply_edits_upto(rec, e, t.version, *setup.session, buf, r, name);
+    if (live && setup.session) {
+      e = apply_edits_upto(rec, e, t.version, *setup.session, buf, r, name);
+      // A cut recording (a killed session's FILE.part): the recorder writes an edit after the
+      // ticks it took with it, and the edit thread logs an edit just after publishing it, so
+      // the last chunk's ticks may read a snapshot whose edit was written after the cut. With
+      // every recorded edit applied and the snapshot still older, the rest is not compared
+      // (in a complete recording it is: a difference).
+      if (!rec.complete && e == rec.edits.size() && setup.session->current()->version < t.version) {
+        r.cut_ticks = n - k;
+        break;
+      }
+    }
     const core::SampleField* field = buf.acquire();
     const servo::HriTick out = replay_tick(renderer, *field, t, live);
     const double df = core::norm(out.force_n - t.force_n);

@@ -47,6 +47,9 @@ struct ReplayResult {
   std::string first_diff_what;      ///< what differed there: "force", "VHIP", "snapshot version" (joined by ", ")
   core::Vec3 first_recorded_vhip_m, first_replayed_vhip_m;
   std::uint64_t first_recorded_version = 0, first_replayed_version = 0;
+  /// A cut recording (no end record): trailing ticks not compared, from the first one that
+  /// read a snapshot no recorded edit reaches (its edit was written after the cut).
+  long cut_ticks = 0;
   bool identical() const { return differing_ticks == 0; }
 };
 

@@ -28,7 +28,9 @@ grep -q "^IDENTICAL" "$out/replay.log" || fail "replay not identical"
 # Waits (at most 30 s) until FILE has at least 1000 tick lines.
 wait_ticks() {
   for _ in $(seq 1 600); do
-    [ "$(grep -c '"k":' "$1" 2>/dev/null || echo 0)" -ge 1000 ] && return 0
+    local n
+    n=$(grep -c '"k":' "$1" 2>/dev/null)  # (no file: empty; no line: 0 and exit 1)
+    [ "${n:-0}" -ge 1000 ] && return 0
     sleep 0.05
   done
   return 1

@@ -189,6 +189,36 @@ TEST(Replay, ARecordedSnapshotVersionThatDiffersIsNotIdentical) {
   EXPECT_TRUE(r.first_diff_what == "snapshot version" || r.first_diff_what.find("force") == 0) << r.first_diff_what;
 }
 
+// A killed live session's FILE.part may end with ticks that read a snapshot whose edit was
+// written after the cut: those are left out of the comparison (and counted), only in a cut
+// recording; the same file with its end record is a difference.
+TEST(Replay, ACutRecordingLeavesOutTheTicksThatReadAnEditWrittenAfterTheCut) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  ASSERT_EQ(rec.format_version, 3);
+  // k_new: the first tick reading the last version; k_prev: the first reading the one before.
+  const std::uint64_t last_v = rec.ticks.back().version;
+  std::size_t k_new = 0;
+  while (rec.ticks[k_new].version != last_v) ++k_new;
+  ASSERT_GT(k_new, 0u);
+  std::size_t k_prev = 0;
+  while (rec.ticks[k_prev].version != rec.ticks[k_new - 1].version) ++k_prev;
+  // The cut: the edits applied after tick k_prev are missing, 10 ticks after k_new remain.
+  while (!rec.edits.empty() && rec.edits.back().tick > long(k_prev)) rec.edits.pop_back();
+  ASSERT_LT(k_new + 10, rec.ticks.size());
+  rec.ticks.resize(k_new + 10);
+  rec.complete = false;
+  const auto cut = replay(rec);
+  EXPECT_TRUE(cut.identical()) << cut.differing_ticks << " ticks differ, first " << cut.first_diff_tick;
+  EXPECT_EQ(cut.ticks, long(k_new));
+  EXPECT_EQ(cut.cut_ticks, 10);
+  rec.complete = true;  // the same ticks and edits with an end record: a difference
+  const auto whole = replay(rec);
+  EXPECT_FALSE(whole.identical());
+  EXPECT_EQ(whole.first_diff_tick, long(k_new));
+  EXPECT_EQ(whole.cut_ticks, 0);
+}
+
 TEST(Replay, AnotherVolumeIsRefused) {
   const Recorded& x = recorded_run();
   Recording rec = load_recording(x.rec.string());

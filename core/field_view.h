@@ -312,7 +312,14 @@ class FieldView {
       // The t interval in the cell: each fraction in [0, 1] (a 1-voxel axis: any t).
       double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
       for (int a = 0; a < 3; ++a) {
-        if (b[a] == 0.0) continue;
+        if (b[a] == 0.0) {
+          // A 1-voxel axis the line crosses: in the grid only where its index is 0 (this t).
+          if (d_[a] != 0.0) {
+            lo = hi = t;
+            break;
+          }
+          continue;
+        }
         const double t_at0 = t - f[a] / b[a], t_at1 = t + (1.0 - f[a]) / b[a];
         lo = std::max(lo, std::min(t_at0, t_at1));
         hi = std::min(hi, std::max(t_at0, t_at1));

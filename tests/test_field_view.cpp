@@ -228,6 +228,22 @@ TEST(FieldView, SegmentReadsAreValueAtIndexToRounding) {
   EXPECT_GT(moved, 50000);   // and reads that load another one
   EXPECT_GT(nan_reads, 10);  // the NaN corner's cell was read
   std::printf("largest |Segment - value_at_index|: %.3g (corners up to 500)\n", worst);
+  // A 1-voxel axis: a line along it is in the grid only where its index is 0, elsewhere
+  // it reads the border (a blend with the background), and a line in its plane is a cubic.
+  const SampleField thin = random_field({6, 1, 3}, 40.0f, 11);
+  const FieldView tv(thin);
+  for (int k = 0; k < 200; ++k) {
+    const Vec3 ia{0.5 + 4 * u(rng), k % 2 ? -0.5 : 0.0, 0.5 + u(rng)};
+    const Vec3 ib = ia + Vec3{u(rng) - 0.5, k % 2 ? 1.0 : 0.0, u(rng) - 0.5};
+    const Vec3 a = thin.grid.to_world(ia), b = thin.grid.to_world(ib);
+    const Vec3 ja = thin.grid.to_index(a), d = thin.grid.to_index(b) - ja;
+    FieldView::Segment seg(tv, a, b);
+    for (int i = 0; i <= 8; ++i) {
+      const double t = i / 8.0;
+      const Vec3 idx{ja.x + d.x * t, ja.y + d.y * t, ja.z + d.z * t};
+      ASSERT_NEAR(seg.value(t), tv.value_at_index(idx), 1e-10) << k << " " << i;
+    }
+  }
   // An empty view reads NaN.
   const FieldView empty;
   FieldView::Segment none(empty, Vec3{}, Vec3{1, 1, 1});

@@ -164,7 +164,7 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
   // in between), at most march_budget samples (longer steps beyond that).
   const int budget = std::max(2, params_.march_budget);
   const int steps = int(std::clamp(std::ceil(len / h), 2.0, double(budget)));
-  FieldView::Segment seg(field, a, b);  // the march's reads keep their cell
+  FieldView::Segment seg(field, a, b);  // one cubic per cell for the march's reads
   double lo = 0.0;
   for (int i = 1; i <= steps; ++i) {
     const double t = double(i) / steps;
@@ -189,7 +189,7 @@ bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;
   const Vec3 n0 = along ? *along : outward_normal(field, x, plane_.valid ? plane_.n : Vec3{0, 0, 1});
   const double reach = std::min(8.0 * voxel, 2.0 * d_est + 0.25 * voxel);
-  // Reads at x + n0 t as the segment's parameter t / reach: the search's reads keep their cell.
+  // Reads at x + n0 t as the segment's parameter t / reach (a cell's cubic loaded once).
   FieldView::Segment seg(field, x, x + n0 * reach);
   const double inv_reach = 1.0 / reach;
   const double e_reach = excess(seg.value(1.0));
@@ -389,7 +389,7 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   if (robust && !friction && goal_is_hip) {
     // The robust frictionless tick: HIP - VHIP = -g N (eq. 2), so eq. 3 is N times the
     // scalar K s g - B (v . N), clipped at zero; |F| and the penetration without a square
-    // root (|N| = 1 to rounding: within 1e-15 of the vector form's norms).
+    // root (|N| = 1 to rounding, so they differ from the vector form's norms in the last bits).
     const double m = params_.stiffness_n_per_m * (g * s) - params_.damping_n_s_per_m * dot(v, plane_.n);
     const bool push = !(m <= 0.0);  // a wall pushes, never pulls (NaN kept: finish_robust's fault)
     const Vec3 force = push ? plane_.n * m : Vec3{};
@@ -1459,8 +1459,8 @@ bool HriRenderer::path_through(const FieldView& field, const Vec3& a, const Vec3
   const int steps = int(std::clamp(std::ceil(len / (0.2 * voxel)), 64.0, 256.0));
   const double dt = 1.0 / steps;  // the march's t = i dt (a product, not a division, per sample)
   auto at = [&](double t) { return a + (b - a) * t; };
-  // Reads along the segment keep their cell's corners (FieldView::Segment): the march reads
-  // each cell about five times.
+  // Reads along the segment (FieldView::Segment): each cell's cubic along the line is loaded
+  // once, and the march reads each cell about five times.
   FieldView::Segment seg(field, a, b);
   auto e_at = [&](double t) { return excess(seg.value(t)); };
   // The entry in (lo, hi], lo outside and hi inside: 20 bisection steps.

@@ -64,6 +64,8 @@ HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
   inv_wpd_ = 1.0 / params_.world_per_device;
   const double fc = params_.velocity_cutoff_hz;
   alpha_nominal_ = fc > 0 ? dt_nominal_s_ / (dt_nominal_s_ + 1.0 / (2.0 * M_PI * fc)) : 1.0;
+  quick_ok_ = params_.variant == Variant::kRobust && params_.short_way && !(params_.tool_radius_m > 0.0) &&
+              !params_.force_shading && !params_.friction.any();
 }
 
 void HriRenderer::reset() {
@@ -1152,8 +1154,118 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return result(out, plane_);
 }
 
+[[gnu::always_inline]] inline bool HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s,
+                                                           TickOut& out) {
+  // The plain state: tick_robust's fault, restart, edit, ramp, release and slew branches
+  // cannot act (each of those ticks takes the full path).
+  if (!(started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
+        !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0))
+    return false;
+  const bool tracked = params_.edit_max_step_fraction > 0;  // note_version runs
+  if (tracked && !(version_known_ && field.version() == field_version_)) return false;
+  const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
+  const double elapsed = dt + lost_s_;
+  if (!finite(hip)) return false;
+  const Vec3 from_centre = hip - field.grid().centre_m();
+  if (dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m) return false;
+  const bool holding = plane_.valid;
+  if (holding) {
+    const Vec3 moved = hip - prev_hip_;
+    const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
+    if (dot(moved, moved) > max_move * max_move) return false;  // a jump
+  } else if (was_contact_ && params_.recovery_time_s > 0 && prev_force_mag_ > 0.01 * params_.force_limit_n) {
+    return false;  // a release fade would start
+  }
+  // tick_robust's prologue for this state.
+  ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
+  if (tracked) version_skipped_ = false;
+  edit_tick_ = false;
+  const double s = inv_wpd_;
+  {
+    const bool nominal = elapsed == dt_nominal_s_;
+    const Vec3 raw = (hip - prev_hip_) * (nominal ? s * params_.rate_hz : s / elapsed);
+    const double fc = params_.velocity_cutoff_hz;
+    if (fc > 0) {
+      const double a = nominal ? alpha_nominal_ : elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
+      v_filt_ = v_filt_ + (raw - v_filt_) * a;
+    } else {
+      v_filt_ = raw;
+    }
+  }
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  if (holding) {
+    // short_tick's contact tick and contact_force's robust frictionless force: g = N . (p - HIP)
+    // > 0 is the HIP behind the plane (N . (HIP - p) = -g exactly), the proxy HIP + g N (eq. 2).
+    const Vec3& n = plane_.n;
+    const double g = dot(n, plane_.p - hip);
+    const Vec3 to = hip + n * g;
+    const Vec3 slide = to - anchor_, move = to - vhip_;
+    if (!(g > 0.0) || !(c_ + 1 < params_.plane_update_period) || dot(slide, slide) > 0.25 * voxel * voxel ||
+        !(dot(move, move) <= 0.0625 * voxel * voxel)) {
+      tick_general(field, hip, voxel, elapsed, false, false, false, 0.0, out);
+      return true;
+    }
+    ++c_;
+    vhip_ = to;
+    sliding_ = false;
+    const double m = params_.stiffness_n_per_m * (g * s) - params_.damping_n_s_per_m * dot(v_filt_, n);
+    const bool push = !(m <= 0.0);
+    Vec3 force = push ? n * m : Vec3{};
+    double mag = push ? m : 0.0;
+    if (params_.recovery_time_s > 0) {  // ramp_force with no trigger and no ramp running
+      prev_target_f_ = force;
+      mag = norm(force);
+    }
+    out.contact = true;
+    out.penetration_m = std::abs(g);
+    // finish_robust for a contact tick with no edit.
+    after_fault_ = false;
+    if (!std::isfinite(mag)) {
+      force = {};
+      mag = 0;
+      out.fault = true;
+    } else if (mag > params_.force_limit_n) {
+      out.saturated = saturate(force, params_.force_limit_n);
+      mag = norm(force);
+    }
+    release_left_s_ = 0;
+    prev_hip_ = hip;
+    prev_force_mag_ = mag;
+    prev_force_ = force;
+    was_contact_ = true;
+    vhip_value_known_ = false;
+    vhip_value_ = 0.0;
+    out.force_n = force;
+    return true;
+  }
+  // Free motion: short_tick's free tick (the HIP's value read once), else tick_general from it.
+  const double f_hip = sample_value(field, hip);
+  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) {
+    tick_general(field, hip, voxel, elapsed, false, false, true, f_hip, out);
+    return true;
+  }
+  vhip_ = hip;
+  sliding_ = false;
+  recovery_ticks_left_ = 0;
+  ramp_left_s_ = 0;
+  prev_target_f_ = {};
+  // finish_robust for a free tick with no edit and no release starting.
+  after_fault_ = false;
+  if (!(params_.recovery_time_s > 0)) release_left_s_ = 0;
+  prev_hip_ = hip;
+  prev_force_mag_ = 0;
+  prev_force_ = {};
+  was_contact_ = false;
+  vhip_value_known_ = true;
+  vhip_value_ = f_hip;
+  out.force_n = {};
+  return true;
+}
+
 HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
   TickOut out;
+  if (quick_ok_ && quick_tick(field, hip, dt_s, out)) return result(out, plane_);
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);

@@ -408,6 +408,13 @@ class HriRenderer final : public Renderer {
   /// motion) where the general path must run. Not for edit ticks nor the tool.
   bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
                   double& f_hip, TickOut& out);
+  /// tick_robust from the plain state (started, no fault, restart, edit, ramp, release nor
+  /// slew running, a point tool, the short way on): its prologue's arithmetic for that
+  /// state, then the contact tick with no update due or the free tick outside on a short
+  /// step, each point computed once, else tick_general. False, with nothing changed, where
+  /// tick_robust's full path must run (another state, a fault, an absurd HIP, a jump, a
+  /// new snapshot version).
+  bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
   void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, TickOut& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
@@ -451,6 +458,7 @@ class HriRenderer final : public Renderer {
   bool after_fault_ = false;     ///< robust: the tick before was a fault (force was 0)
   double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
   bool started_ = false;
+  bool quick_ok_ = false;  ///< the configuration quick_tick covers (set in the constructor)
   bool resync_ = false;
   bool sliding_ = false;
   bool was_contact_ = false;

@@ -466,6 +466,89 @@ TEST(HriShortWay, EveryTickAsTheGeneralPath) {
   EXPECT_GT(short_ticks, 10000);  // contact ticks without an update: where the short way can act
 }
 
+// The same with what a live session adds, where the short way's quick tick must hand over to
+// the full path: damping and the velocity filter, recovery ramps and release fades, measured
+// periods that jitter, faults (a NaN HIP, a jump), and new snapshot versions (one that
+// changed nothing, one that changed everything: an edit tick and its slew).
+TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
+  std::ostringstream log;
+  for (const char* name : {"sphere", "head"}) {
+    const isotouch::eval::SweepScene s = isotouch::eval::prepare_sweep_scene(name, nullptr, log);
+    SampleField untouched = *s.field, corner = *s.field, edited = *s.field;
+    untouched.version = s.field->version + 1;
+    untouched.changed.known = true;  // an empty box: nothing changed
+    corner.version = s.field->version + 2;
+    corner.changed = {{0, 0, 0}, {2, 2, 2}, true};  // far from the stroke: no edit tick
+    edited.version = s.field->version + 3;
+    edited.changed = {{0, 0, 0}, {edited.grid.dims[0], edited.grid.dims[1], edited.grid.dims[2]}, true};
+    ASSERT_FALSE(s.field->bricked());
+    for (std::size_t i = 0; i + 1 < edited.samples.size(); ++i)  // every surface moved by about half a voxel along -x
+      edited.samples[i].value = 0.5f * s.field->samples[i].value + 0.5f * s.field->samples[i + 1].value;
+    for (int z = 0; z < 2; ++z)  // the corner's samples changed too
+      for (int y = 0; y < 2; ++y)
+        for (int x = 0; x < 2; ++x)
+          corner.samples[std::size_t(x) + std::size_t(corner.grid.dims[0]) * (std::size_t(y) + std::size_t(corner.grid.dims[1]) * std::size_t(z))].value += 1.0f;
+    for (int n : {1, 5}) {
+      HriParams p = isotouch::eval::reference_params(s);
+      p.plane_update_period = n;
+      p.intersection = isotouch::servo::Intersection::kLinear;
+      p.normal = isotouch::servo::NormalSource::kSamples;
+      p.damping_n_s_per_m = 1.0;
+      p.recovery_time_s = 0.01;
+      p.force_limit_n = 0.3;  // saturated at times; ramps and release fades start at 1 % of it
+      HriParams q = p;
+      q.short_way = false;
+      HriRenderer a(p), b(q);
+      const std::size_t m = s.hip.size();
+      // The events at fractions of the stroke's contact span (a dry run on the first snapshot).
+      std::size_t c0 = m, c1 = 0;
+      HriRenderer dry(p);
+      for (std::size_t k = 0; k < m; ++k)
+        if (dry.tick(*s.field, s.hip[k]).contact) {
+          c0 = std::min(c0, k);
+          c1 = k;
+        }
+      ASSERT_LT(c0 + 100, c1) << name;
+      const std::size_t span = c1 - c0;
+      long differ = 0, faults = 0, ramps_seen = 0, saturated = 0, slewed = 0;
+      bool in_contact = false, holding = false;
+      std::size_t jumped = 0;
+      std::size_t edit_at = 0;
+      for (std::size_t k = 0; k < m; ++k) {
+        if (edit_at == 0 && k >= c0 + 3 * span / 5 && in_contact) edit_at = k;  // the edit lands in contact
+        const SampleField& f = k < c0 + span / 5 ? *s.field : k < c0 + 2 * span / 5 ? untouched
+                               : edit_at == 0 ? corner : edited;
+        Vec3 hip = s.hip[k];
+        if (!jumped && edit_at > 0 && k > edit_at + 5 && holding) {  // a jump of 50 cm in one tick, a plane held
+          hip = hip + Vec3{0.5, 0.0, 0.0};
+          jumped = k;
+        }
+        if (jumped > 0 && k == jumped + 10) hip.x = std::nan("");
+        const double dt = (k % 7 == 3) ? 1.3e-3 : (k % 11 == 5) ? 0.7e-3 : 0.0;  // 0: the nominal period
+        const HriTick x = a.tick(f, hip, dt), y = b.tick(f, hip, dt);
+        const bool same = std::memcmp(&x.force_n, &y.force_n, sizeof x.force_n) == 0 &&
+                          std::memcmp(&x.vhip_m, &y.vhip_m, sizeof x.vhip_m) == 0 &&
+                          std::memcmp(&x.plane.n, &y.plane.n, sizeof x.plane.n) == 0 &&
+                          std::memcmp(&x.plane.p, &y.plane.p, sizeof x.plane.p) == 0 && x.plane.valid == y.plane.valid &&
+                          x.contact == y.contact && x.plane_update == y.plane_update && x.saturated == y.saturated &&
+                          x.fault == y.fault && std::memcmp(&x.penetration_m, &y.penetration_m, sizeof(double)) == 0;
+        differ += !same;
+        faults += x.fault;
+        in_contact = x.contact;
+        holding = x.plane.valid;
+        ramps_seen += x.plane_update && x.contact;
+        saturated += x.saturated;
+        slewed += (edit_at > 0 && k < edit_at + 20 && x.contact);
+      }
+      EXPECT_EQ(differ, 0) << name << ", n = " << n << ": " << differ << " of " << m << " ticks differ";
+      EXPECT_GE(faults, 2) << name;  // the jump and the NaN HIP were faults
+      EXPECT_GT(ramps_seen, 10) << name;
+      EXPECT_GT(saturated, 0) << name;
+      EXPECT_GT(slewed, 0) << name;  // in contact after the edit
+    }
+  }
+}
+
 TEST(HriShippedData, ChestRibEdgesNeverPopThrough) {
   expect_no_pop_through("chest ribs at +250 HU", chest_thin_edge_strokes(250.0, 6, 2021, 48));
 }

@@ -339,8 +339,12 @@ class HriRenderer final : public Renderer {
     double force_mag = -1;      ///< |force| where contact_force knows it without a square root; < 0: not known
   };
   /// The HriTick of `t` with the VHIP after this tick and `plane`.
+  /// (The plane from its components: copied as one struct GCC used `rep movsl`, a microcoded
+  /// string copy on every tick.)
   HriTick result(const TickOut& t, const VirtualPlane& plane) const {
-    return HriTick{t.force_n, vhip_, plane, t.penetration_m, t.contact, t.plane_update, t.saturated, t.fault};
+    const Vec3 n{plane.n.x, plane.n.y, plane.n.z}, p{plane.p.x, plane.p.y, plane.p.z};
+    return HriTick{t.force_n, vhip_, VirtualPlane{n, p, plane.valid}, t.penetration_m, t.contact, t.plane_update,
+                   t.saturated, t.fault};
   }
   /// The plane a robust tick reports: the held one; for the tool the first tool plane, if any.
   VirtualPlane reported_plane() const;

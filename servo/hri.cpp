@@ -1264,8 +1264,16 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
 }
 
 HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
+  if (quick_ok_) {
+    TickOut out;
+    if (quick_tick(field, hip, dt_s, out)) return result(out, plane_);
+  }
+  return tick_robust_full(field, hip, dt_s);
+}
+
+// Out of line: the quick tick above then compiles as a small function.
+[[gnu::noinline]] HriTick HriRenderer::tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s) {
   TickOut out;
-  if (quick_ok_ && quick_tick(field, hip, dt_s, out)) return result(out, plane_);
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);

@@ -419,6 +419,8 @@ class HriRenderer final : public Renderer {
   /// tick_robust's full path must run (another state, a fault, an absurd HIP, a jump, a
   /// new snapshot version).
   bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
+  /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general.
+  HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
   void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, TickOut& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).

@@ -1154,6 +1154,21 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return result(out, plane_);
 }
 
+// Velocity: backward difference over the measured time `elapsed` [s] from the HIP of the
+// last sane tick, first-order low-pass (v_filt_, device [m/s]).
+[[gnu::always_inline]] inline void HriRenderer::filter_velocity(const Vec3& hip, double elapsed) {
+  const double s = inv_wpd_;
+  const bool nominal = elapsed == dt_nominal_s_;  // the common case: no division
+  const Vec3 raw = (hip - prev_hip_) * (nominal ? s * params_.rate_hz : s / elapsed);
+  const double fc = params_.velocity_cutoff_hz;
+  if (fc > 0) {
+    const double a = nominal ? alpha_nominal_ : elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
+    v_filt_ = v_filt_ + (raw - v_filt_) * a;
+  } else {
+    v_filt_ = raw;
+  }
+}
+
 [[gnu::always_inline]] inline bool HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s,
                                                            TickOut& out) {
   // The plain state: tick_robust's fault, restart, edit, ramp, release and slew branches
@@ -1181,17 +1196,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   if (tracked) version_skipped_ = false;
   edit_tick_ = false;
   const double s = inv_wpd_;
-  {
-    const bool nominal = elapsed == dt_nominal_s_;
-    const Vec3 raw = (hip - prev_hip_) * (nominal ? s * params_.rate_hz : s / elapsed);
-    const double fc = params_.velocity_cutoff_hz;
-    if (fc > 0) {
-      const double a = nominal ? alpha_nominal_ : elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
-      v_filt_ = v_filt_ + (raw - v_filt_) * a;
-    } else {
-      v_filt_ = raw;
-    }
-  }
+  filter_velocity(hip, elapsed);
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   if (holding) {
@@ -1316,18 +1321,8 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     ramp_left_s_ = 0;  // the edit slew takes a running recovery ramp over
   }
   edit_tick_ = edited;
-  // Velocity: backward difference over the measured time, first-order low-pass.
-  const double s = inv_wpd_;
   if (vel_valid_) {
-    const bool nominal = elapsed == dt_nominal_s_;  // the common case: no division
-    const Vec3 raw = (hip - prev_hip_) * (nominal ? s * params_.rate_hz : s / elapsed);
-    const double fc = params_.velocity_cutoff_hz;
-    if (fc > 0) {
-      const double a = nominal ? alpha_nominal_ : elapsed / (elapsed + 1.0 / (2.0 * M_PI * fc));
-      v_filt_ = v_filt_ + (raw - v_filt_) * a;
-    } else {
-      v_filt_ = raw;
-    }
+    filter_velocity(hip, elapsed);
   } else {
     v_filt_ = {};
   }

@@ -419,6 +419,8 @@ class HriRenderer final : public Renderer {
   /// tick_robust's full path must run (another state, a fault, an absurd HIP, a jump, a
   /// new snapshot version).
   bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
+  /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
+  void filter_velocity(const Vec3& hip, double elapsed);
   /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general.
   HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.

@@ -426,6 +426,18 @@ void expect_no_pop_through(const char* what, const ThinEdgeStrokes& r) {
   EXPECT_EQ(r.through, 0);
 }
 
+namespace {
+// Two ticks with the same force, VHIP, plane, penetration and flags, bit for bit.
+bool same_bits(const HriTick& x, const HriTick& y) {
+  return std::memcmp(&x.force_n, &y.force_n, sizeof x.force_n) == 0 &&
+         std::memcmp(&x.vhip_m, &y.vhip_m, sizeof x.vhip_m) == 0 &&
+         std::memcmp(&x.plane.n, &y.plane.n, sizeof x.plane.n) == 0 &&
+         std::memcmp(&x.plane.p, &y.plane.p, sizeof x.plane.p) == 0 && x.plane.valid == y.plane.valid &&
+         x.contact == y.contact && x.plane_update == y.plane_update && x.saturated == y.saturated &&
+         x.fault == y.fault && std::memcmp(&x.penetration_m, &y.penetration_m, sizeof(double)) == 0;
+}
+}  // namespace
+
 // The robust tick's short way (the two common ticks) is the general path's arithmetic:
 // with HriParams::short_way off, every tick of the recorded strokes of the sphere, knot,
 // head and chest gives the same force, VHIP, plane and flags, bit for bit, at n = 1, 5
@@ -448,13 +460,7 @@ TEST(HriShortWay, EveryTickAsTheGeneralPath) {
         long differ = 0, contact = 0;
         for (std::size_t k = 0; k < s.hip.size(); ++k) {
           const HriTick x = a.tick(*s.field, s.hip[k]), y = b.tick(*s.field, s.hip[k]);
-          const bool same = std::memcmp(&x.force_n, &y.force_n, sizeof x.force_n) == 0 &&
-                            std::memcmp(&x.vhip_m, &y.vhip_m, sizeof x.vhip_m) == 0 &&
-                            std::memcmp(&x.plane.n, &y.plane.n, sizeof x.plane.n) == 0 &&
-                            std::memcmp(&x.plane.p, &y.plane.p, sizeof x.plane.p) == 0 && x.plane.valid == y.plane.valid &&
-                            x.contact == y.contact && x.plane_update == y.plane_update && x.saturated == y.saturated &&
-                            x.fault == y.fault && std::memcmp(&x.penetration_m, &y.penetration_m, sizeof(double)) == 0;
-          differ += !same;
+          differ += !same_bits(x, y);
           contact += x.contact;
           short_ticks += x.contact && !x.plane_update;
         }
@@ -488,14 +494,18 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
       for (int y = 0; y < 2; ++y)
         for (int x = 0; x < 2; ++x)
           corner.samples[std::size_t(x) + std::size_t(corner.grid.dims[0]) * (std::size_t(y) + std::size_t(corner.grid.dims[1]) * std::size_t(z))].value += 1.0f;
-    for (int n : {1, 5}) {
+    for (const auto& [n, plain] : {std::pair{1, false}, std::pair{5, false}, std::pair{1, true}, std::pair{5, true}}) {
       HriParams p = isotouch::eval::reference_params(s);
       p.plane_update_period = n;
       p.intersection = isotouch::servo::Intersection::kLinear;
       p.normal = isotouch::servo::NormalSource::kSamples;
       p.damping_n_s_per_m = 1.0;
-      p.recovery_time_s = 0.01;
+      p.recovery_time_s = plain ? 0.0 : 0.01;
       p.force_limit_n = 0.3;  // saturated at times; ramps and release fades start at 1 % of it
+      if (plain) {  // no velocity filter, edits not tracked
+        p.velocity_cutoff_hz = 0.0;
+        p.edit_max_step_fraction = 0.0;
+      }
       HriParams q = p;
       q.short_way = false;
       HriRenderer a(p), b(q);
@@ -524,15 +534,11 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
           jumped = k;
         }
         if (jumped > 0 && k == jumped + 10) hip.x = std::nan("");
-        const double dt = (k % 7 == 3) ? 1.3e-3 : (k % 11 == 5) ? 0.7e-3 : 0.0;  // 0: the nominal period
+        // 0 (and NaN, < 0): the nominal period; 5 ms: a late tick (the ramp's period is clamped)
+        const double dt = (k % 7 == 3) ? 1.3e-3 : (k % 11 == 5) ? 0.7e-3 : (k % 13 == 7) ? std::nan("")
+                          : (k % 17 == 9) ? -1.0 : (k % 19 == 11) ? 5e-3 : 0.0;
         const HriTick x = a.tick(f, hip, dt), y = b.tick(f, hip, dt);
-        const bool same = std::memcmp(&x.force_n, &y.force_n, sizeof x.force_n) == 0 &&
-                          std::memcmp(&x.vhip_m, &y.vhip_m, sizeof x.vhip_m) == 0 &&
-                          std::memcmp(&x.plane.n, &y.plane.n, sizeof x.plane.n) == 0 &&
-                          std::memcmp(&x.plane.p, &y.plane.p, sizeof x.plane.p) == 0 && x.plane.valid == y.plane.valid &&
-                          x.contact == y.contact && x.plane_update == y.plane_update && x.saturated == y.saturated &&
-                          x.fault == y.fault && std::memcmp(&x.penetration_m, &y.penetration_m, sizeof(double)) == 0;
-        differ += !same;
+        differ += !same_bits(x, y);
         faults += x.fault;
         in_contact = x.contact;
         holding = x.plane.valid;
@@ -540,7 +546,8 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
         saturated += x.saturated;
         slewed += (edit_at > 0 && k < edit_at + 20 && x.contact);
       }
-      EXPECT_EQ(differ, 0) << name << ", n = " << n << ": " << differ << " of " << m << " ticks differ";
+      EXPECT_EQ(differ, 0) << name << ", n = " << n << (plain ? ", plain" : "") << ": " << differ << " of " << m
+                           << " ticks differ";
       EXPECT_GE(faults, 2) << name;  // the jump and the NaN HIP were faults
       EXPECT_GT(ramps_seen, 10) << name;
       EXPECT_GT(saturated, 0) << name;

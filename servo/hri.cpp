@@ -1154,6 +1154,19 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return result(out, plane_);
 }
 
+// A non-finite |F| is a fault (zero force); above the limit the force is saturated, its
+// direction kept. mag: |force| on entry, the |F| sent on return.
+[[gnu::always_inline]] inline void HriRenderer::limit_force(Vec3& force, double& mag, TickOut& out) const {
+  if (!std::isfinite(mag)) {
+    force = {};
+    mag = 0;
+    out.fault = true;
+  } else if (mag > params_.force_limit_n) {
+    out.saturated = saturate(force, params_.force_limit_n);
+    mag = norm(force);
+  }
+}
+
 // Velocity: backward difference over the measured time `elapsed` [s] from the HIP of the
 // last sane tick, first-order low-pass (v_filt_, device [m/s]).
 [[gnu::always_inline]] inline void HriRenderer::filter_velocity(const Vec3& hip, double elapsed) {
@@ -1226,14 +1239,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     out.penetration_m = std::abs(g);
     // finish_robust for a contact tick with no edit.
     after_fault_ = false;
-    if (!std::isfinite(mag)) {
-      force = {};
-      mag = 0;
-      out.fault = true;
-    } else if (mag > params_.force_limit_n) {
-      out.saturated = saturate(force, params_.force_limit_n);
-      mag = norm(force);
-    }
+    limit_force(force, mag, out);
     release_left_s_ = 0;
     prev_hip_ = hip;
     prev_force_mag_ = mag;
@@ -1676,14 +1682,7 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   after_fault_ = false;
   // |F|: known where contact_force took the scalar form, else one square root.
   double mag = out.force_mag >= 0.0 ? out.force_mag : norm(force);
-  if (!std::isfinite(mag)) {
-    force = {};
-    mag = 0;
-    out.fault = true;
-  } else if (mag > params_.force_limit_n) {
-    out.saturated = saturate(force, params_.force_limit_n);
-    mag = norm(force);
-  }
+  limit_force(force, mag, out);
   const bool in_contact = out.contact;  // a plane held the HIP (not an edit's fade-out)
   // Release fade: contact ends with force on (a plane update found the surface curved away
   // under a HIP still behind the held plane, a drilled-away wall): the force sent the tick

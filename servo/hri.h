@@ -421,6 +421,8 @@ class HriRenderer final : public Renderer {
   bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
   /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
   void filter_velocity(const Vec3& hip, double elapsed);
+  /// The fault (non-finite |F|) and saturation rules of a robust tick's force.
+  void limit_force(Vec3& force, double& mag, TickOut& out) const;
   /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general.
   HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.

@@ -520,7 +520,7 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
         }
       ASSERT_LT(c0 + 100, c1) << name;
       const std::size_t span = c1 - c0;
-      long differ = 0, faults = 0, ramps_seen = 0, saturated = 0, slewed = 0;
+      long differ = 0, faults = 0, contact_updates = 0, saturated = 0, slewed = 0;
       bool in_contact = false, holding = false;
       std::size_t jumped = 0;
       std::size_t edit_at = 0;
@@ -542,14 +542,14 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
         faults += x.fault;
         in_contact = x.contact;
         holding = x.plane.valid;
-        ramps_seen += x.plane_update && x.contact;
+        contact_updates += x.plane_update && x.contact;
         saturated += x.saturated;
         slewed += (edit_at > 0 && k < edit_at + 20 && x.contact);
       }
       EXPECT_EQ(differ, 0) << name << ", n = " << n << (plain ? ", plain" : "") << ": " << differ << " of " << m
                            << " ticks differ";
       EXPECT_GE(faults, 2) << name;  // the jump and the NaN HIP were faults
-      EXPECT_GT(ramps_seen, 10) << name;
+      EXPECT_GT(contact_updates, 10) << name;
       EXPECT_GT(saturated, 0) << name;
       EXPECT_GT(slewed, 0) << name;  // in contact after the edit
     }

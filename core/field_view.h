@@ -205,6 +205,47 @@ class FieldView {
     return {d[0] / grid_.spacing_m.x, d[1] / grid_.spacing_m.y, d[2] / grid_.spacing_m.z};
   }
 
+  /// The in-grid cell whose trilinear interpolant value() reads at `world_m`, for a point
+  /// at least 1e-9 voxel inside the cell on every axis: its box shrunk by that margin
+  /// (grid-world [m]; every point of the box reads this cell) and the least and largest of
+  /// its 8 corner values, so that value() anywhere in the box lies in [lo_value, hi_value]
+  /// to rounding (a convex blend of the corners). False for a point off the box of voxel
+  /// centres or within the margin of a cell face, a non-finite point or corner, a 1-voxel
+  /// axis, an empty view. Lets the servo skip reads that cannot find the isosurface.
+  bool cell_range(const Vec3& world_m, Vec3& lo_m, Vec3& hi_m, double& lo_value, double& hi_value) const {
+    constexpr double kPos = 1e-9;  // [voxels]
+    if (empty()) return false;
+    const Vec3 idx = grid_.to_index(world_m);
+    int i0[3];
+    for (int a = 0; a < 3; ++a) {
+      if (grid_.dims[a] < 2 || !(idx[a] >= kPos && idx[a] <= last_[a] - kPos)) return false;
+      i0[a] = int(idx[a]);
+      if (!(idx[a] - kPos >= double(i0[a]) && idx[a] + kPos <= double(i0[a] + 1))) return false;
+    }
+    Sample scratch[8];
+    const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int k = 0; k < 2; ++k)
+      for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+          const double v = c.base[(i ? c.sx : 0) + (j ? c.sy : 0) + (k ? c.sz : 0)].value;
+          if (!std::isfinite(v)) return false;
+          lo = std::min(lo, v);
+          hi = std::max(hi, v);
+        }
+    const Vec3 a = grid_.to_world({double(i0[0]), double(i0[1]), double(i0[2])});
+    const Vec3 b = grid_.to_world({double(i0[0] + 1), double(i0[1] + 1), double(i0[2] + 1)});
+    const Vec3 m = grid_.spacing_m * (2 * kPos);  // the margin, doubled for the rounding of a, b
+    lo_m = a + m;
+    hi_m = b - m;
+    lo_value = lo;
+    hi_value = hi;
+    return true;
+  }
+  /// The storage the view reads (dense samples or brick table): two views of one snapshot
+  /// version read the same values iff they share it.
+  const void* storage() const { return mode_ == Mode::kDense ? static_cast<const void*>(data_) : static_cast<const void*>(table_); }
+
   /// A bound on |value(p) - value(q)| for any two points p, q of the segment a -> b
   /// (grid-world [m]) that lies strictly inside one in-grid cell (1e-9 voxel from its faces),
   /// rounding of the reads included: inside a cell the trilinear value's slope along an

@@ -71,6 +71,7 @@ HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
 void HriRenderer::reset() {
   clear_contact();
   started_ = false;
+  plain_ = false;
   after_fault_ = false;
   v_filt_ = {};
   lost_s_ = 0;
@@ -482,6 +483,7 @@ void HriRenderer::restart_at(const Vec3& hip) {
   prev_hip_ = hip;
   started_ = true;
   vhip_value_known_ = false;
+  vhip_outside_ = false;
 }
 
 bool HriRenderer::note_version(std::uint64_t version) {
@@ -1186,9 +1188,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
                                                            TickOut& out) {
   // The plain state: tick_robust's fault, restart, edit, ramp, release and slew branches
   // cannot act (each of those ticks takes the full path).
-  if (!(started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
-        !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0))
-    return false;
+  if (!plain_) return false;
   const bool tracked = params_.edit_max_step_fraction > 0;  // note_version runs
   if (tracked && !(version_known_ && field.version() == field_version_)) return false;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
@@ -1211,7 +1211,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   const double s = inv_wpd_;
   filter_velocity(hip, elapsed);
   const Vec3& sp = field.grid().spacing_m;
-  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double voxel = std::min(sp.x, std::min(sp.y, sp.z));  // (std::min({...}) went through the stack)
   // The two ticks written out, not short_tick + finish_robust: calling those here measured
   // HRI/Avila 0.09-0.11 higher on the four table1 strokes (bench_hri_tick, 6 alternated
   // rounds), higher than with no quick tick at all.
@@ -1249,14 +1249,17 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     prev_force_ = force;
     was_contact_ = true;
     vhip_value_known_ = false;
+    vhip_outside_ = false;
     vhip_value_ = 0.0;
     out.force_n = force;
     return true;
   }
-  // Free motion: short_tick's free tick (the HIP's value read once), else tick_general from it.
-  const double f_hip = sample_value(field, hip);
-  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) {
-    tick_general(field, hip, voxel, elapsed, false, false, true, f_hip, out);
+  // Free motion: short_tick's free tick (the HIP's value read once, or not at all in an
+  // outside cell), else tick_general from it.
+  bool have_f_hip = false;
+  double f_hip = 0.0;
+  if (!free_tick(field, hip, have_f_hip, f_hip)) {
+    tick_general(field, hip, voxel, elapsed, false, false, have_f_hip, f_hip, out);
     return true;
   }
   vhip_ = hip;
@@ -1271,10 +1274,47 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   prev_force_mag_ = 0;
   prev_force_ = {};
   was_contact_ = false;
-  vhip_value_known_ = true;
+  vhip_value_known_ = have_f_hip;
   vhip_value_ = f_hip;
+  vhip_outside_ = !have_f_hip;
   out.force_n = {};
   return true;
+}
+
+[[gnu::always_inline]] inline bool HriRenderer::free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip,
+                                                          double& f_hip) {
+  const bool in_cell = cell_valid_ && field.storage() == cell_storage_ && hip.x >= cell_lo_m_.x &&
+                       hip.y >= cell_lo_m_.y && hip.z >= cell_lo_m_.z && hip.x <= cell_hi_m_.x &&
+                       hip.y <= cell_hi_m_.y && hip.z <= cell_hi_m_.z;
+  if (in_cell && cell_outside_) {
+    // No point of the cell is inside: the read would say outside. Nor can a long step cross
+    // the surface: the VHIP is the HIP of the tick before, in the cell too (every tick since
+    // the cell was read was a free tick in it), and so is the segment between them.
+    ++reads_skipped_;
+    return true;
+  }
+  f_hip = sample_value(field, hip);
+  have_f_hip = true;
+  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) return false;
+  if (!in_cell && params_.edit_max_step_fraction > 0) {
+    // A new cell: outside if its largest corner excess is below zero by more than the
+    // rounding of the blend (1e-9 of the largest corner or tau).
+    double lo = 0, hi = 0;
+    cell_valid_ = field.cell_range(hip, cell_lo_m_, cell_hi_m_, lo, hi);
+    const double e_max = std::max(excess(lo), excess(hi));
+    const double scale = std::max({std::abs(lo), std::abs(hi), std::abs(params_.tau)});
+    cell_outside_ = e_max + 1e-9 * scale < 0.0;
+    cell_storage_ = field.storage();
+  }
+  return true;
+}
+
+// The state in which quick_tick's ticks are tick_robust's: started, no fault, restart, edit,
+// ramp, release nor slew running. The quick ticks keep it; the paths that can change it
+// (tick_general, tick_robust_full) set plain_ from it when they end.
+bool HriRenderer::plain_state() const {
+  return started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
+         !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0;
 }
 
 HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
@@ -1282,12 +1322,15 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     TickOut out;
     if (quick_tick(field, hip, dt_s, out)) return result(out, plane_);
   }
-  return tick_robust_full(field, hip, dt_s);
+  const HriTick t = tick_robust_full(field, hip, dt_s);
+  plain_ = plain_state();
+  return t;
 }
 
 // Out of line: the quick tick above then compiles as a small function.
 [[gnu::noinline]] HriTick HriRenderer::tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s) {
   TickOut out;
+  cell_valid_ = false;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);
@@ -1306,6 +1349,7 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
     vel_valid_ = false;  // the velocity estimate restarts at the next sane HIP
     lost_s_ = elapsed;
     vhip_value_known_ = false;
+    vhip_outside_ = false;
     prev_force_mag_ = 0;
     prev_target_f_ = {};
     recovery_ticks_left_ = 0;
@@ -1324,8 +1368,9 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
   const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version()) && edit_reaches(field, hip);
   bool covered_free_vhip = false;  // a free VHIP outside in the old snapshot: a contact point now
   if (edited) {
-    covered_free_vhip = !plane_.valid && vhip_value_known_ && !(excess(vhip_value_) > 0.0);
+    covered_free_vhip = !plane_.valid && ((vhip_value_known_ && !(excess(vhip_value_) > 0.0)) || vhip_outside_);
     vhip_value_known_ = false;
+    vhip_outside_ = false;
     plane_grad_norm_ = 0;
     ramp_left_s_ = 0;  // the edit slew takes a running recovery ramp over
   }
@@ -1419,6 +1464,7 @@ VirtualPlane HriRenderer::reported_plane() const {
 [[gnu::noinline]] void HriRenderer::tick_general(const FieldView& field, const Vec3& hip, double voxel,
                                                  double elapsed, bool edited, bool covered_free_vhip,
                                                  bool have_f_hip, double f_hip, TickOut& out) {
+  cell_valid_ = false;
   auto hip_excess = [&]() {
     if (!have_f_hip) {
       f_hip = sample_value(field, hip);
@@ -1542,6 +1588,7 @@ VirtualPlane HriRenderer::reported_plane() const {
     out.force_mag = 0.0;  // no force: no square root
   }
   finish_robust(hip, force, edited, have_f_hip, f_hip, out);
+  plain_ = plain_state();
 }
 
 [[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,
@@ -1716,6 +1763,7 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   prev_force_ = force;
   was_contact_ = in_contact;
   vhip_value_known_ = !in_contact && have_f_hip;  // then VHIP = HIP, whose value was read
+  vhip_outside_ = false;
   vhip_value_ = f_hip;
   out.force_n = force;
 }

@@ -314,6 +314,9 @@ class HriRenderer final : public Renderer {
   /// normal there; false if none was found.
   bool nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q, Vec3& n) const;
   bool sliding() const { return sliding_; }
+  /// Free ticks since construction that read no sample: the HIP stayed in a cell whose
+  /// corners are all outside (robust point, quick_tick).
+  std::uint64_t reads_skipped() const { return reads_skipped_; }
 
   /// Signed excess over the isovalue: > 0 inside, <= 0 outside; NaN counts as outside.
   double excess(double value) const {
@@ -412,6 +415,10 @@ class HriRenderer final : public Renderer {
   /// motion) where the general path must run. Not for edit ticks nor the tool.
   bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
                   double& f_hip, TickOut& out);
+  /// quick_tick's free tick: the HIP's value, read unless the HIP stays in the outside cell
+  /// of the last read; false (the HIP's value in f_hip if it was read) where the general
+  /// path must run (an entry, a long step).
+  bool free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip, double& f_hip);
   /// tick_robust from the plain state (started, no fault, restart, edit, ramp, release nor
   /// slew running, a point tool, the short way on): its prologue's arithmetic for that
   /// state, then the contact tick with no update due or the free tick outside on a short
@@ -419,6 +426,8 @@ class HriRenderer final : public Renderer {
   /// tick_robust's full path must run (another state, a fault, an absurd HIP, a jump, a
   /// new snapshot version).
   bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
+  /// The state quick_tick covers: started, no fault, restart, edit, ramp, release nor slew running.
+  bool plain_state() const;
   /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
   void filter_velocity(const Vec3& hip, double elapsed);
   /// The fault (non-finite |F|) and saturation rules of a robust tick's force.
@@ -469,6 +478,7 @@ class HriRenderer final : public Renderer {
   double recovery_from_n_ = 0;  ///< paper: ramp start [N]; robust: offset to fade out [N]
   bool started_ = false;
   bool quick_ok_ = false;  ///< the configuration quick_tick covers (set in the constructor)
+  bool plain_ = false;     ///< plain_state() after the last tick of a path that can change it
   bool resync_ = false;
   bool sliding_ = false;
   bool was_contact_ = false;
@@ -484,6 +494,18 @@ class HriRenderer final : public Renderer {
   double lost_s_ = 0;      ///< time spent in faults since the last sane tick [s]
   double vhip_value_ = 0;  ///< field value at vhip_ when vhip_value_known_
   bool vhip_value_known_ = false;
+  bool vhip_outside_ = false;  ///< free VHIP in an outside cell of this snapshot (its value not read)
+  // Robust variant, free motion (quick_tick): the cell of the last free tick's read. Every
+  // corner of an outside cell is outside, so no point in it is inside (the trilinear value
+  // is a blend of the corners): a free HIP that stays in it needs no read. Cleared by the
+  // general path (an entry, a long step, every update and the end of every contact) and the
+  // full path (a new version, a fault, a restart), so while it is set every tick since its
+  // read was a free tick in it: the VHIP is in it too.
+  bool cell_valid_ = false;
+  bool cell_outside_ = false;
+  const void* cell_storage_ = nullptr;  ///< FieldView::storage of the cell's snapshot
+  Vec3 cell_lo_m_, cell_hi_m_;          ///< the cell's box (FieldView::cell_range) [m]
+  std::uint64_t reads_skipped_ = 0;     ///< free ticks that read no sample (an outside cell)
   // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version

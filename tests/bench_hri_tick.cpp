@@ -1,13 +1,16 @@
 // bench_hri_tick - HRI's tick against Avila and Sobierajski's on bench table1's strokes, one
 // renderer at a time (a micro-benchmark, not a test): the table1 configuration (n = 5, linear
 // p, central-difference N), alternated rounds, median ns per tick, and the stroke's mix of
-// ticks (free, contact, plane updates), and the harness's own cost per tick (a renderer that
-// reads nothing: the FieldView made per tick and the virtual call, paid by both).
+// ticks (free, contact, plane updates, free ticks that read no sample), and the harness's own
+// cost per tick (a renderer that reads nothing: the FieldView made per tick and the virtual
+// call, paid by both).
 // With --by-kind: HRI's ticks timed one by one (rdtsc, the null renderer's cycles
 // subtracted; latency, not throughput), mean cycles per kind of tick: free, contact with
-// no update, plane update, and Avila's tick on the same HIPs.
-// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind]
-// (--n: HRI's plane update period; --only: one renderer, for callgrind).
+// no update, plane update, and Avila's tick on the same HIPs (a pass of its own: ticks of
+// the two interleaved one by one shared the branch predictor and L1 and each paid for the other).
+// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind] [--vk]
+// (--n: HRI's plane update period; --only: one renderer, for callgrind; --vk: the samples
+// from the Vulkan device, as bench table1 takes them, instead of the CPU reference).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -22,6 +25,7 @@
 #include "baselines.h"
 #include "hri.h"
 #include "sweep.h"
+#include "vk_context.h"
 
 using namespace isotouch;
 
@@ -45,17 +49,28 @@ int main(int argc, char** argv) {
   std::string only;
   int n = 5;
   bool by_kind = false;
+  bool use_vk = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--n") && i + 1 < argc) n = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
     else if (!std::strcmp(argv[i], "--by-kind")) by_kind = true;
+    else if (!std::strcmp(argv[i], "--vk")) use_vk = true;
     else scenes.push_back(argv[i]);
   }
   if (scenes.empty()) scenes = {"sphere", "knot", "head", "chest"};
+  std::unique_ptr<engine::VulkanContext> ctx;
+  if (use_vk) {
+    auto c = engine::VulkanContext::create();
+    if (!c) {
+      std::fprintf(stderr, "bench_hri_tick: --vk: no Vulkan device\n");
+      return 1;
+    }
+    ctx = std::move(*c.value);
+  }
   for (const std::string& name : scenes) {
     std::ostringstream quiet;
-    const eval::SweepScene s = eval::prepare_sweep_scene(name, nullptr, quiet);
+    const eval::SweepScene s = eval::prepare_sweep_scene(name, ctx.get(), quiet);
     servo::HriParams hp = eval::reference_params(s);
     hp.plane_update_period = n;
     hp.intersection = servo::Intersection::kLinear;
@@ -69,11 +84,13 @@ int main(int argc, char** argv) {
     servo::AvilaRenderer avila(bp);
     std::size_t contact = 0, updates = 0;
     hri.reset();
+    const std::uint64_t skipped0 = hri.reads_skipped();
     for (const core::Vec3& h : s.hip) {
       const servo::HriTick t = hri.tick(*s.field, h, 0.0);
       contact += t.contact;
       updates += t.plane_update;
     }
+    const std::uint64_t skipped = hri.reads_skipped() - skipped0;
     NullRenderer null_r;
     std::vector<double> th, ta, tn;
     for (int r = 0; r < reps; ++r) {
@@ -110,7 +127,12 @@ int main(int argc, char** argv) {
           const int k = t.plane_update ? 2 : t.contact ? 1 : 0;
           sum[k] += c;
           cnt[k] += 1;
-          t0 = __rdtsc();
+        }
+        // Avila in a loop of its own: interleaved tick by tick, the two renderers would
+        // share one branch predictor and one L1 and each would pay for the other.
+        for (const core::Vec3& h : s.hip) {
+          const core::FieldView v(*s.field);
+          const unsigned long long t0 = __rdtsc();
           const servo::HriTick ta2 = avila.tick(v, h, 0.0);
           sum[3] += double(__rdtsc() - t0) - null_c + 0 * ta2.force_n.x;
           cnt[3] += 1;
@@ -122,9 +144,10 @@ int main(int argc, char** argv) {
       std::printf("\n");
     }
     const double h = med(th), a = med(ta), z = med(tn);
-    std::printf("%-7s %5zu ticks (contact %5zu, updates %4zu): HRI %6.1f ns, Avila %6.1f ns, HRI/Avila %.3f; "
-                "harness alone %.1f ns\n",
-                s.name.c_str(), s.hip.size(), contact, updates, h, a, a > 0 ? h / a : 0.0, z);
+    std::printf("%-7s %5zu ticks (contact %5zu, updates %4zu, free ticks with no read %4llu): HRI %6.1f ns, Avila "
+                "%6.1f ns, HRI/Avila %.3f; harness alone %.1f ns\n",
+                s.name.c_str(), s.hip.size(), contact, updates, (unsigned long long)skipped, h, a, a > 0 ? h / a : 0.0,
+                z);
   }
   return 0;
 }

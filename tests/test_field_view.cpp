@@ -3,6 +3,7 @@
 // outside the grid = {background, 0, 0, 0}, the excess sign rule.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -165,6 +166,75 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
   const Vec3 in_cell = f.grid.to_world({3.5, 3.5, 3.5});
   EXPECT_TRUE(std::isinf(v.change_bound_in_cell(in_cell, {nan, nan, nan})));
   EXPECT_TRUE(std::isinf(v.change_bound_in_cell({nan, nan, nan}, in_cell)));
+}
+
+// FieldView::cell_range: the cell that value() interpolates at the point (floor of its
+// index), its 8 corners' least and largest values from the definition, a box that holds the
+// point and only points of that cell, and every value read in the box within the corners'
+// range to rounding; the same on an fp32 bricked field. No cell for a point within the
+// margin of a face, off the box of voxel centres, not finite, or with a NaN corner, nor on a
+// 1-voxel axis or an empty view.
+TEST(FieldView, CellRangeHoldsEveryReadInItsBox) {
+  SampleField f = random_field({9, 7, 6}, -250.0f, 11);
+  const core::BrickedInput in = core::bricked_input_from_dense(f, Isosurface{0.0, InsideIs::kAbove});
+  const SampleField b32 = core::make_bricked_field(in, core::SampleFormat::kFp32);
+  const FieldView v(f), vb(b32);
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  auto brute_floor = [&](const Vec3& w) {
+    const Vec3 i = f.grid.to_index(w);
+    return std::array<long, 3>{long(std::floor(i.x)), long(std::floor(i.y)), long(std::floor(i.z))};
+  };
+  long found = 0;
+  for (int k = 0; k < 5000; ++k) {
+    const Vec3 idx{8.0 * u(rng), 6.0 * u(rng), 5.0 * u(rng)};
+    const Vec3 w = f.grid.to_world(idx);
+    Vec3 lo, hi, lo_b, hi_b;
+    double vlo = 0, vhi = 0, vlo_b = 0, vhi_b = 0;
+    const bool ok = v.cell_range(w, lo, hi, vlo, vhi);
+    ASSERT_EQ(ok, vb.cell_range(w, lo_b, hi_b, vlo_b, vhi_b)) << k;
+    if (!ok) continue;
+    ++found;
+    EXPECT_TRUE(lo.x == lo_b.x && lo.y == lo_b.y && lo.z == lo_b.z && hi.x == hi_b.x && hi.y == hi_b.y && hi.z == hi_b.z);
+    EXPECT_EQ(vlo, vlo_b);
+    EXPECT_EQ(vhi, vhi_b);
+    const std::array<long, 3> c = brute_floor(w);
+    double mn = INFINITY, mx = -INFINITY;
+    for (int dz = 0; dz < 2; ++dz)
+      for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+          const double s = brute_voxel(f, c[0] + dx, c[1] + dy, c[2] + dz).value;
+          mn = std::min(mn, s);
+          mx = std::max(mx, s);
+        }
+    ASSERT_EQ(vlo, mn) << k;
+    ASSERT_EQ(vhi, mx) << k;
+    ASSERT_TRUE(w.x >= lo.x && w.y >= lo.y && w.z >= lo.z && w.x <= hi.x && w.y <= hi.y && w.z <= hi.z) << k;
+    const double tol = 1e-12 * std::max(std::abs(mn), std::abs(mx));
+    for (int j = 0; j < 20; ++j) {
+      // Random points of the box, its corners among them: in the same cell, read in range.
+      const Vec3 t = j < 8 ? Vec3{double(j & 1), double((j >> 1) & 1), double(j >> 2)} : Vec3{u(rng), u(rng), u(rng)};
+      const Vec3 q{lo.x + (hi.x - lo.x) * t.x, lo.y + (hi.y - lo.y) * t.y, lo.z + (hi.z - lo.z) * t.z};
+      ASSERT_EQ(brute_floor(q), c) << k << " " << j;
+      const double val = v.value(q);
+      ASSERT_GE(val, mn - tol) << k << " " << j;
+      ASSERT_LE(val, mx + tol) << k << " " << j;
+    }
+  }
+  EXPECT_GT(found, 4900);
+  Vec3 lo, hi;
+  double vlo = 0, vhi = 0;
+  for (const Vec3& idx : {Vec3{2.0, 3.5, 2.5}, Vec3{2.5, 3.0 + 1e-10, 2.5}, Vec3{2.5, 3.5, 3.0 - 1e-10},
+                          Vec3{-0.1, 3.5, 2.5}, Vec3{8.0, 3.5, 2.5}, Vec3{2.5, 6.5, 2.5}})
+    EXPECT_FALSE(v.cell_range(f.grid.to_world(idx), lo, hi, vlo, vhi)) << idx.x << " " << idx.y << " " << idx.z;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(v.cell_range({nan, 0.0, 0.0}, lo, hi, vlo, vhi));
+  f.samples[f.grid.index(3, 3, 3)].value = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_FALSE(FieldView(f).cell_range(f.grid.to_world({2.5, 2.5, 2.5}), lo, hi, vlo, vhi));  // corner (3, 3, 3)
+  EXPECT_TRUE(FieldView(f).cell_range(f.grid.to_world({1.5, 1.5, 1.5}), lo, hi, vlo, vhi));
+  const SampleField flat = random_field({9, 7, 1}, 0.0f, 13);
+  EXPECT_FALSE(FieldView(flat).cell_range(flat.grid.to_world({2.5, 2.5, 0.0}), lo, hi, vlo, vhi));
+  EXPECT_FALSE(FieldView(SampleField{}).cell_range({0.0, 0.0, 0.0}, lo, hi, vlo, vhi));
 }
 
 // FieldView::Segment reads the value at ia + (ib - ia) t as value_at_index reads that index,

@@ -467,6 +467,7 @@ TEST(HriShortWay, EveryTickAsTheGeneralPath) {
         EXPECT_EQ(differ, 0) << name << ", n = " << n << (paper_rules ? ", linear/central" : ", linear/samples") << ": "
                              << differ << " of " << s.hip.size() << " ticks differ";
         EXPECT_GT(contact, 100) << name;
+        EXPECT_GT(a.reads_skipped(), 100u) << name;  // free ticks in outside cells read nothing
       }
   }
   EXPECT_GT(short_ticks, 10000);  // contact ticks without an update: where the short way can act
@@ -546,13 +547,119 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
         saturated += x.saturated;
         slewed += (edit_at > 0 && k < edit_at + 20 && x.contact);
       }
+      // reset(): the next tick starts as the first of a session, on both paths.
+      a.reset();
+      b.reset();
+      for (std::size_t k = m / 2; k < m; ++k) differ += !same_bits(a.tick(*s.field, s.hip[k]), b.tick(*s.field, s.hip[k]));
       EXPECT_EQ(differ, 0) << name << ", n = " << n << (plain ? ", plain" : "") << ": " << differ << " of " << m
                            << " ticks differ";
       EXPECT_GE(faults, 2) << name;  // the jump and the NaN HIP were faults
       EXPECT_GT(contact_updates, 10) << name;
       EXPECT_GT(saturated, 0) << name;
       EXPECT_GT(slewed, 0) << name;  // in contact after the edit
+      if (!plain) {
+        EXPECT_GT(a.reads_skipped(), 100u) << name;  // (edits tracked: free reads skipped)
+      }
     }
+  }
+}
+
+// Free motion reads no sample while the HIP stays in a cell whose corners are all outside
+// (no point of it can be inside): the same ticks, bit for bit, as the general path, which
+// reads every free tick. A HIP crosses a cell slowly toward its far corner, free in it for
+// 10 ticks; then one corner sample rises above tau:
+// - by an edit in place (the same samples array, the next version) that covers the HIP at
+//   once (a VHIP known outside without its value read: the covered free VHIP becomes the
+//   contact point), or leaves it outside until it moves on into the inside corner;
+// - by a snapshot with other samples under the same version (a caller's mistake, not an edit).
+// None may leave the cell's old verdict standing: the HIP comes into contact.
+TEST(HriShortWay, FreeTicksReadNothingOnlyInOutsideCells) {
+  SampleField empty;
+  empty.grid.dims = {8, 8, 8};
+  empty.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  empty.samples.assign(empty.grid.voxel_count(), Sample{0.0f, 0.0f, 0.0f, 0.0f});
+  empty.version = 1;
+  struct Case {
+    const char* what;
+    float corner;  // at (3 + t)^3 voxels the value is corner t^3 (tau 0.5)
+    bool edit;
+  };
+  for (const Case& c : {Case{"an edit over the HIP", 100.0f, true}, Case{"an edit ahead of the HIP", 8.0f, true},
+                        Case{"a swapped snapshot", 8.0f, false}}) {
+    SampleField field = empty, swapped = empty;
+    swapped.samples[swapped.grid.index(4, 4, 4)].value = c.corner;
+    HriParams p;
+    p.tau = 0.5;
+    p.plane_update_period = 5;
+    p.intersection = isotouch::servo::Intersection::kLinear;
+    p.normal = isotouch::servo::NormalSource::kCentral;
+    HriParams q = p;
+    q.short_way = false;
+    HriRenderer a(p), b(q);
+    long differ = 0, contact = 0;
+    std::uint64_t skipped_before = 0;
+    for (int k = 0; k <= 60; ++k) {
+      const double t = 0.1 + 0.8 * k / 60.0;  // 0.013 voxel per tick along the cell's diagonal
+      const Vec3 hip = Vec3{3.0 + t, 3.0 + t, 3.0 + t} * 1e-3;
+      if (k == 10) {
+        skipped_before = a.reads_skipped();
+        if (c.edit) {
+          field.samples[field.grid.index(4, 4, 4)].value = c.corner;
+          field.version = 2;
+          field.changed = {{4, 4, 4}, {5, 5, 5}, true};
+        }
+      }
+      const SampleField& f = c.edit || k < 10 ? field : swapped;
+      const HriTick x = a.tick(f, hip), y = b.tick(f, hip);
+      differ += !same_bits(x, y);
+      contact += x.contact;
+    }
+    EXPECT_EQ(differ, 0) << c.what;
+    EXPECT_GT(contact, 20) << c.what;  // (8 t^3 > 0.5 from t = 0.4 on)
+    EXPECT_GE(skipped_before, 8u) << c.what;  // the empty cell: only its first tick read
+    EXPECT_EQ(a.reads_skipped(), skipped_before) << c.what;  // an inside corner: every free tick read
+    EXPECT_EQ(b.reads_skipped(), 0u) << c.what;
+  }
+}
+
+// The cell of a free tick's read vouches for the segment VHIP -> HIP only while both lie in
+// it. A HIP free in an outside cell leaves it and comes back in one long step through a
+// block of material (3 x 3 voxels wide, half a voxel beyond the cell): after a detour of
+// long steps around the block, and after a fault (a HIP 50 cm away) with the restart
+// behind the block. The return step must find the block (contact), as the general path
+// does, bit for bit.
+TEST(HriShortWay, FreeTicksReadNothingOnlyWhileTheVhipIsInTheCell) {
+  SampleField f;
+  f.grid.dims = {12, 12, 12};
+  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.samples.assign(f.grid.voxel_count(), Sample{0.0f, 0.0f, 0.0f, 0.0f});
+  for (int z = 3; z <= 5; ++z)
+    for (int y = 3; y <= 5; ++y) f.samples[f.grid.index(5, y, z)].value = 8.0f;  // inside for x in (4.06, 5.94)
+  f.version = 1;
+  const Vec3 in_cell{2.5, 4.5, 4.5}, back{2.6, 4.4, 4.4}, behind{7.0, 4.5, 4.5};  // [voxels]
+  const std::vector<std::vector<Vec3>> paths = {
+      {in_cell, in_cell, in_cell, in_cell, {4.0, 4.5, 9.5}, {7.0, 4.5, 9.5}, behind, back, back},
+      {in_cell, in_cell, in_cell, in_cell, {500.0, 4.5, 4.5}, behind, back, back}};
+  for (std::size_t i = 0; i < paths.size(); ++i) {
+    HriParams p;
+    p.tau = 0.5;
+    p.plane_update_period = 5;
+    p.intersection = isotouch::servo::Intersection::kLinear;
+    p.normal = isotouch::servo::NormalSource::kCentral;
+    p.max_reach_m = 0.1;  // (500 voxels away: a fault)
+    HriParams q = p;
+    q.short_way = false;
+    HriRenderer a(p), b(q);
+    long differ = 0;
+    HriTick last;
+    for (const Vec3& idx : paths[i]) {
+      const HriTick x = a.tick(f, idx * 1e-3), y = b.tick(f, idx * 1e-3);
+      differ += !same_bits(x, y);
+      last = x;
+    }
+    EXPECT_EQ(differ, 0) << i;
+    EXPECT_TRUE(last.contact) << i;  // held at the block's far face
+    EXPECT_GE(a.reads_skipped(), 2u) << i;
   }
 }
 

@@ -506,6 +506,10 @@ class HriRenderer final : public Renderer {
   const void* cell_storage_ = nullptr;  ///< FieldView::storage of the cell's snapshot
   Vec3 cell_lo_m_, cell_hi_m_;          ///< the cell's box (FieldView::cell_range) [m]
   std::uint64_t reads_skipped_ = 0;     ///< free ticks that read no sample (an outside cell)
+  // quick_tick's reach test: how far the HIP of the tick before (prev_hip_) may move and stay
+  // within max_reach_m of the centre of the snapshot read (< 0: test again) [m].
+  double reach_left_m_ = -1.0;
+  const void* reach_storage_ = nullptr;  ///< FieldView::storage of that snapshot
   // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version

@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <functional>
+#include <limits>
 #include <random>
 #include <sstream>
 
@@ -660,6 +661,49 @@ TEST(HriShortWay, FreeTicksReadNothingOnlyWhileTheVhipIsInTheCell) {
     EXPECT_EQ(differ, 0) << i;
     EXPECT_TRUE(last.contact) << i;  // held at the block's far face
     EXPECT_GE(a.reads_skipped(), 2u) << i;
+  }
+}
+
+// The quick tick's reach test (a HIP farther than max_reach_m from the volume centre is a
+// fault) runs from a budget of the distance left to that sphere: the same faults, bit for
+// bit, as the full path's test on every tick. A free HIP drifts out across the sphere; comes
+// back inside after a fault (NaN) next to it and steps out again; and, with edits not
+// tracked, stays put while the next snapshot's grid moves its centre 6 mm away.
+TEST(HriShortWay, ReachTestAsTheFullPathAtTheSphere) {
+  SampleField f;
+  f.grid.dims = {8, 8, 8};
+  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.samples.assign(f.grid.voxel_count(), Sample{0.0f, 0.0f, 0.0f, 0.0f});  // no surface: free motion
+  f.version = 1;
+  SampleField moved = f;
+  moved.grid.origin_m = {6e-3, 0.0, 0.0};
+  moved.version = 2;
+  const Vec3 c = f.grid.centre_m();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const bool tracked : {true, false}) {
+    HriParams p;
+    p.tau = 0.5;
+    p.max_reach_m = 5e-3;
+    if (!tracked) p.edit_max_step_fraction = 0.0;
+    HriParams q = p;
+    q.short_way = false;
+    HriRenderer a(p), b(q);
+    std::vector<std::pair<Vec3, const SampleField*>> path;
+    for (int k = 0; k <= 60; ++k) path.push_back({c + Vec3{1e-4 * k, 0.0, 0.0}, &f});  // out at k = 50
+    for (int k = 0; k < 6; ++k) path.push_back({c + Vec3{1e-4 * (k % 2), 0.0, 0.0}, &f});  // back (a restart): a budget of 5 mm
+    path.push_back({{nan, 0.0, 0.0}, &f});
+    for (const double x : {4.9e-3, 4.95e-3, 5.05e-3, 5.1e-3, 4.0e-3}) path.push_back({c + Vec3{x, 0.0, 0.0}, &f});
+    for (int k = 0; k < 10; ++k) path.push_back({c, &f});
+    if (!tracked)
+      for (int k = 0; k < 5; ++k) path.push_back({c, &moved});  // 6 mm from the new centre
+    long differ = 0, faults = 0;
+    for (const auto& [hip, field] : path) {
+      const HriTick x = a.tick(*field, hip), y = b.tick(*field, hip);
+      differ += !same_bits(x, y);
+      faults += x.fault;
+    }
+    EXPECT_EQ(differ, 0) << tracked;
+    EXPECT_EQ(faults, 11 + 1 + 2 + (tracked ? 0 : 5)) << tracked;  // beyond 5 mm, the NaN, 5.05 and 5.1 mm, the moved grid
   }
 }
 

@@ -164,17 +164,34 @@ class FieldView {
   /// components if not finite or empty.
   Vec3 central_difference(const Vec3& world_m, const Vec3& h_m) const {
     if (empty()) return {kNaN, kNaN, kNaN};
-    const Vec3 idx = grid_.to_index(world_m);
     const Vec3 hi{h_m.x / grid_.spacing_m.x, h_m.y / grid_.spacing_m.y, h_m.z / grid_.spacing_m.z};
+    return central_difference_at(grid_.to_index(world_m), hi, h_m);
+  }
+  /// central_difference with half-voxel steps (h = spacing / 2, the paper's SurfaceNormal),
+  /// bit for bit: the index steps h / spacing are 0.5 exactly, so they are not divided out.
+  [[gnu::always_inline]] Vec3 central_difference_half_voxel(const Vec3& world_m) const {
+    if (empty()) return {kNaN, kNaN, kNaN};
+    return central_difference_at(grid_.to_index(world_m), {0.5, 0.5, 0.5}, grid_.spacing_m * 0.5);
+  }
+
+ private:
+  /// central_difference at index idx with index steps hi (= h_m / spacing).
+  [[gnu::always_inline]] Vec3 central_difference_at(const Vec3& idx, const Vec3& hi, const Vec3& h_m) const {
     const double x0 = idx.x - hi.x, x1 = idx.x + hi.x, y0 = idx.y - hi.y, y1 = idx.y + hi.y,
                  z0 = idx.z - hi.z, z1 = idx.z + hi.z;
     Vec3 g;
     if (mode_ == Mode::kDense && central_dense(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
     if (mode_ == Mode::kBricked && central_bricked(idx, {x0, y0, z0}, {x1, y1, z1}, h_m, g)) return g;
-    return {(value_at_index({x1, idx.y, idx.z}) - value_at_index({x0, idx.y, idx.z})) / (2 * h_m.x),
-            (value_at_index({idx.x, y1, idx.z}) - value_at_index({idx.x, y0, idx.z})) / (2 * h_m.y),
-            (value_at_index({idx.x, idx.y, z1}) - value_at_index({idx.x, idx.y, z0})) / (2 * h_m.z)};
+    return central_point_by_point(idx, {x0, y0, z0}, {x1, y1, z1}, h_m);
   }
+  /// central_difference's six points read one by one (the border, cells not shared).
+  [[gnu::noinline]] Vec3 central_point_by_point(const Vec3& idx, const Vec3& lo, const Vec3& hi, const Vec3& h_m) const {
+    return {(value_at_index({hi.x, idx.y, idx.z}) - value_at_index({lo.x, idx.y, idx.z})) / (2 * h_m.x),
+            (value_at_index({idx.x, hi.y, idx.z}) - value_at_index({idx.x, lo.y, idx.z})) / (2 * h_m.y),
+            (value_at_index({idx.x, idx.y, hi.z}) - value_at_index({idx.x, idx.y, lo.z})) / (2 * h_m.z)};
+  }
+
+ public:
 
   /// Exact gradient of the trilinear value field at `world_m` (derivative of the
   /// interpolant, piecewise bilinear) [units/m], background included. Zero if the point
@@ -514,7 +531,7 @@ class FieldView {
   }
   /// central_difference on a dense field where the six points share their cells
   /// (central_cells); false (nothing written) where they do not.
-  bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
+  [[gnu::always_inline]] bool central_dense(const Vec3& c, const Vec3& lo, const Vec3& hi, const Vec3& h_m, Vec3& g) const {
     CentralCells k;
     if (!central_cells(c, lo, hi, k)) return false;
     const std::size_t sy = stride_[1], sz = stride_[2];

@@ -123,7 +123,7 @@ Vec3 HriRenderer::outward_normal(const FieldView& field, const Vec3& x, const Ve
       break;
     }
     case NormalSource::kCentral:
-      g = central_difference_gradient(field, x, field.grid().spacing_m * 0.5);
+      g = field.central_difference_half_voxel(x);  // (central_difference with h = spacing / 2)
       break;
     case NormalSource::kTrilinearExact:
       g = trilinear_field_gradient(field, x);

@@ -86,8 +86,10 @@ struct HriParams {
   double tool_radius_m = 0.0;
   /// Robust variant: the two common ticks (contact behind a held plane with no update due,
   /// free motion outside on a short step) take a short way, the general path's arithmetic
-  /// with each point computed once. false: every tick the general path (the same bits;
-  /// tests compare the two).
+  /// with each point computed once; with edits tracked, a free HIP that stays in a cell
+  /// whose 8 corners are all outside reads no sample (no point of the cell is inside: the
+  /// trilinear value is a blend of its corners). false: every tick the general path (the
+  /// same bits; tests compare the two).
   bool short_way = true;
 };
 

@@ -224,7 +224,8 @@ class FieldView {
 
   /// The in-grid cell whose trilinear interpolant value() reads at `world_m`, for a point
   /// at least 1e-9 voxel inside the cell on every axis: its box shrunk by that margin
-  /// (grid-world [m]; every point of the box reads this cell) and the least and largest of
+  /// (grid-world [m]; every point of the box reads this cell while to_index rounds to well
+  /// below the margin: indices and origin / spacing under about 1e6) and the least and largest of
   /// its 8 corner values, so that value() anywhere in the box lies in [lo_value, hi_value]
   /// to rounding (a convex blend of the corners). False for a point off the box of voxel
   /// centres or within the margin of a cell face, a non-finite point or corner, a 1-voxel

@@ -1194,22 +1194,11 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;
   if (!finite(hip)) return false;
-  // The full path's reach test (a HIP farther than max_reach_m from the volume centre is a
-  // fault) from a budget: reach_left_m_ is at most the distance from the HIP of the tick
-  // before (prev_hip_) to that sphere, so a HIP that moved less (|moved|_1 >= |moved|) is
-  // inside it; else, or on another snapshot, the test itself, which renews the budget.
-  const Vec3 moved = hip - prev_hip_;
-  double reach_left = reach_left_m_ - (std::abs(moved.x) + std::abs(moved.y) + std::abs(moved.z));
-  if (!(reach_left >= 0.0) || field.storage() != reach_storage_) {
-    const Vec3 from_centre = hip - field.grid().centre_m();
-    const double d2 = dot(from_centre, from_centre), r = params_.max_reach_m;
-    if (d2 > r * r) return false;
-    reach_left = (r - std::sqrt(d2)) * (1.0 - 1e-6) - 1e-9 * r;  // (below the rounding of both)
-    reach_storage_ = field.storage();
-  }
-  reach_left_m_ = reach_left;
+  const Vec3 from_centre = hip - field.grid().centre_m();
+  if (dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m) return false;
   const bool holding = plane_.valid;
   if (holding) {
+    const Vec3 moved = hip - prev_hip_;
     const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
     if (dot(moved, moved) > max_move * max_move) return false;  // a jump
   } else if (was_contact_ && params_.recovery_time_s > 0 && prev_force_mag_ > 0.01 * params_.force_limit_n) {
@@ -1342,7 +1331,6 @@ HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double
 [[gnu::noinline]] HriTick HriRenderer::tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s) {
   TickOut out;
   cell_valid_ = false;
-  reach_left_m_ = -1.0;  // (the quick tick's budget holds from a HIP it tested)
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt + lost_s_;  // since the last sane tick [s]
   const bool sane = finite(hip);

@@ -502,16 +502,14 @@ class HriRenderer final : public Renderer {
   // is a blend of the corners): a free HIP that stays in it needs no read. Cleared by the
   // general path (an entry, a long step, every update and the end of every contact) and the
   // full path (a new version, a fault, a restart), so while it is set every tick since its
-  // read was a free tick in it: the VHIP is in it too.
+  // read was a free tick in it: the VHIP is in it too. It holds for one snapshot (storage and
+  // version): a snapshot's samples and grid never change under its version (an edit
+  // publishes the next one), which the VHIP's cached value relies on as well.
   bool cell_valid_ = false;
   bool cell_outside_ = false;
   const void* cell_storage_ = nullptr;  ///< FieldView::storage of the cell's snapshot
   Vec3 cell_lo_m_, cell_hi_m_;          ///< the cell's box (FieldView::cell_range) [m]
   std::uint64_t reads_skipped_ = 0;     ///< free ticks that read no sample (an outside cell)
-  // quick_tick's reach test: how far the HIP of the tick before (prev_hip_) may move and stay
-  // within max_reach_m of the centre of the snapshot read (< 0: test again) [m].
-  double reach_left_m_ = -1.0;
-  const void* reach_storage_ = nullptr;  ///< FieldView::storage of that snapshot
   // Robust variant, edits (see the class docs, "Edits"):
   std::uint64_t field_version_ = 0;  ///< FieldView::version read by the last sane tick
   bool version_known_ = false;       ///< field_version_ holds a version

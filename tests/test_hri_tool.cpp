@@ -665,10 +665,10 @@ TEST(HriShortWay, FreeTicksReadNothingOnlyWhileTheVhipIsInTheCell) {
 }
 
 // The quick tick's reach test (a HIP farther than max_reach_m from the volume centre is a
-// fault) runs from a budget of the distance left to that sphere: the same faults, bit for
-// bit, as the full path's test on every tick. A free HIP drifts out across the sphere; comes
-// back inside after a fault (NaN) next to it and steps out again; and, with edits not
-// tracked, stays put while the next snapshot's grid moves its centre 6 mm away.
+// fault): the same faults, bit for bit, as the full path's on every tick. A free HIP drifts
+// out across the sphere; comes back inside after a fault (NaN) next to it and steps out
+// again; and, with edits not tracked, stays put while the next snapshot's grid moves its
+// centre 6 mm away, and while a grid is moved in place (the same samples array).
 TEST(HriShortWay, ReachTestAsTheFullPathAtTheSphere) {
   SampleField f;
   f.grid.dims = {8, 8, 8};
@@ -694,16 +694,23 @@ TEST(HriShortWay, ReachTestAsTheFullPathAtTheSphere) {
     path.push_back({{nan, 0.0, 0.0}, &f});
     for (const double x : {4.9e-3, 4.95e-3, 5.05e-3, 5.1e-3, 4.0e-3}) path.push_back({c + Vec3{x, 0.0, 0.0}, &f});
     for (int k = 0; k < 10; ++k) path.push_back({c, &f});
-    if (!tracked)
+    SampleField in_place = f;
+    if (!tracked) {
       for (int k = 0; k < 5; ++k) path.push_back({c, &moved});  // 6 mm from the new centre
+      for (int k = 0; k < 5; ++k) path.push_back({c, &in_place});  // (its grid moved below, at the 3rd tick)
+    }
     long differ = 0, faults = 0;
-    for (const auto& [hip, field] : path) {
+    for (std::size_t k = 0; k < path.size(); ++k) {
+      const auto& [hip, field] = path[k];
+      if (field == &in_place && path[k - 1].second == &in_place && path[k - 2].second == &in_place)
+        in_place.grid.origin_m = {6e-3, 0.0, 0.0};
       const HriTick x = a.tick(*field, hip), y = b.tick(*field, hip);
       differ += !same_bits(x, y);
       faults += x.fault;
     }
     EXPECT_EQ(differ, 0) << tracked;
-    EXPECT_EQ(faults, 11 + 1 + 2 + (tracked ? 0 : 5)) << tracked;  // beyond 5 mm, the NaN, 5.05 and 5.1 mm, the moved grid
+    // beyond 5 mm, the NaN, 5.05 and 5.1 mm; the moved grids
+    EXPECT_EQ(faults, 11 + 1 + 2 + (tracked ? 0 : 5 + 3)) << tracked;
   }
 }
 

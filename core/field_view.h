@@ -236,7 +236,7 @@ class FieldView {
     const Vec3 idx = grid_.to_index(world_m);
     int i0[3];
     for (int a = 0; a < 3; ++a) {
-      if (grid_.dims[a] < 2 || !(idx[a] >= kPos && idx[a] <= last_[a] - kPos)) return false;
+      if (!(idx[a] >= kPos && idx[a] <= last_[a] - kPos)) return false;  // (a 1-voxel axis: last_ = 0)
       i0[a] = int(idx[a]);
       if (!(idx[a] - kPos >= double(i0[a]) && idx[a] + kPos <= double(i0[a] + 1))) return false;
     }

@@ -8,9 +8,7 @@
 // subtracted; latency, not throughput), mean cycles per kind of tick: free, contact with
 // no update, plane update, and Avila's tick on the same HIPs (a pass of its own: ticks of
 // the two interleaved one by one shared the branch predictor and L1 and each paid for the other).
-// Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind] [--vk]
-// (--n: HRI's plane update period; --only: one renderer, for callgrind; --vk: the samples
-// from the Vulkan device, as bench table1 takes them, instead of the CPU reference).
+// Options: kUsage below (--help).
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -43,7 +41,18 @@ class NullRenderer final : public servo::Renderer {
 };
 }  // namespace
 
-int main(int argc, char** argv) {
+namespace {
+const char* kUsage =
+    "Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind] [--vk]\n"
+    "  SCENE: sphere, knot, head, chest (default: all four)\n"
+    "  --reps N     alternated rounds (median; default 21)\n"
+    "  --n N        HRI's plane update period (default 5, as bench table1)\n"
+    "  --only R     time one renderer only (for callgrind)\n"
+    "  --by-kind    HRI's ticks timed one by one: TSC cycles per kind of tick\n"
+    "  --vk         samples from the Vulkan device, as bench table1 takes them\n";
+}  // namespace
+
+int main(int argc, char** argv) try {
   std::vector<std::string> scenes;
   int reps = 21;
   std::string only;
@@ -56,7 +65,15 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
     else if (!std::strcmp(argv[i], "--by-kind")) by_kind = true;
     else if (!std::strcmp(argv[i], "--vk")) use_vk = true;
-    else scenes.push_back(argv[i]);
+    else if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    } else if (argv[i][0] == '-') {
+      std::fprintf(stderr, "bench_hri_tick: unknown option or missing value: %s\n%s", argv[i], kUsage);
+      return 2;
+    } else {
+      scenes.push_back(argv[i]);
+    }
   }
   if (scenes.empty()) scenes = {"sphere", "knot", "head", "chest"};
   std::unique_ptr<engine::VulkanContext> ctx;
@@ -150,4 +167,7 @@ int main(int argc, char** argv) {
                 z);
   }
   return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "bench_hri_tick: %s\n", e.what());
+  return 1;
 }

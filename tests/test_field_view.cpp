@@ -158,6 +158,21 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
     for (int i = 1; i <= 8; ++i) ASSERT_LE(std::abs(v.value(a + (b - a) * (i / 8.0)) - va), bound) << k << " " << i;
   }
   EXPECT_GT(bounded, 8000);
+  // An end within the 1e-9 voxel margin of a face, either side (the indices are taken by
+  // products with the reciprocal spacing, not to_index's divisions): no bound; just outside
+  // the margin: a bound.
+  for (int k = 0; k < 2000; ++k) {
+    const Vec3 ia{1.0 + 5 * u(rng), 1.0 + 3 * u(rng), 1.0 + 2 * u(rng)};
+    Vec3 face = ia;
+    const int axis = k % 3;
+    double& c = axis == 0 ? face.x : axis == 1 ? face.y : face.z;
+    c = std::floor(ia[axis]) + (k % 2 ? 1.0 : 0.0);
+    const double off = (k / 3) % 2 ? 1e-11 : -1e-11;
+    c += off;
+    EXPECT_TRUE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(face)))) << k;
+    c += (k % 2 ? -1.0 : 1.0) * 1e-7 - off;
+    EXPECT_FALSE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(face)))) << k;
+  }
   f.samples[f.grid.index(2, 2, 2)].value = std::numeric_limits<float>::quiet_NaN();
   const FieldView w(f);
   EXPECT_TRUE(std::isinf(w.change_bound_in_cell(f.grid.to_world({2.5, 2.5, 2.5}), f.grid.to_world({2.6, 2.5, 2.5}))));

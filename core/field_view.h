@@ -278,7 +278,8 @@ class FieldView {
     constexpr double kPos = 1e-9;  // [voxels]
     if (empty()) return kInf;
     // Indices by products with the reciprocal spacing (no division on the caller's chain):
-    // they differ from to_index's by a few ulps, far inside the 1e-9 voxel margin.
+    // they differ from to_index's (and Segment's reads') by a few ulps of the index, inside
+    // the 1e-9 voxel margin while indices are below about 1e6 (as cell_range's margin).
     const Vec3& sp = grid_.spacing_m;
     const Vec3 inv{1.0 / sp.x, 1.0 / sp.y, 1.0 / sp.z};
     const Vec3 da = a_m - grid_.origin_m, db = b_m - grid_.origin_m;

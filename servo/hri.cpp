@@ -267,13 +267,15 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
       params_.variant == Variant::kRobust) {
     // Shallow embedding (a chord or a plane held over a curved surface): one step out along
     // the held plane's normal, if that reaches the outside (one sample), of 1.5 times the
-    // first-order depth, at most 0.05 voxel: the crossing lies between the VHIP and that
-    // point, so p is outside the surface by at most 0.05 voxel, as with a step of the depth
-    // itself. That step fell short in 2 of 3 updates on the head CT (111 of 164 per table1
-    // replay; 63 of 172 with 1.5 times), and the search below costs about as much again as
-    // the update. Where |grad| overstates the slope of the trilinear values (a plate one
-    // voxel thick on coarse voxels) the step falls short, and the VHIP sank by 0.2 voxel a
-    // few hundredths of a mm per tick: then the search below.
+    // first-order depth, at most 0.05 voxel. The VHIP is inside and that point outside, so
+    // a crossing lies between them: p is outside the surface by at most 0.05 voxel (the
+    // worst case a step of the depth alone allowed too; typically about half the depth,
+    // where that step landed near the surface). A step of the depth alone fell short in 111
+    // of 164 such updates per table1 replay of the head CT (63 of 172 at 1.5 times), each
+    // then paying the search below, about as much again as the update. Where |grad|
+    // overstates the slope of the trilinear values (a plate one voxel thick on coarse
+    // voxels) the step falls short, and the VHIP sank by 0.2 voxel a few hundredths of a mm
+    // per tick: then the search below.
     const Vec3 out_p = vhip_ + plane_.n * std::min(1.5 * d_est, 0.05 * voxel);
     if (!(excess(sample_value(field, out_p)) > 0.0)) return plane_at(field, out_p, hip);
   }

@@ -177,7 +177,8 @@ struct ToolPlane {
 ///   outward normal, no farther than twice the first-order depth plus a quarter voxel
 ///   (16 bisection steps), else the VHIP (the linear rule would extrapolate). A shallow
 ///   embedding (at most 0.05 voxel: a chord, or a plane held over a curved surface) is
-///   stepped out along the held normal by the first-order depth instead (no search).
+///   stepped out along the held normal by 1.5 times the first-order depth, at most 0.05
+///   voxel, instead (no search; p is then outside by at most 0.05 voxel).
 /// - Thin walls on long steps: when both ends are outside and the segment is longer than
 ///   half a voxel, it is marched (half-voxel steps, at most march_budget samples, longer
 ///   steps beyond that; then 20 bisection steps) for a first crossing.
@@ -203,8 +204,8 @@ struct ToolPlane {
 /// - Normals on thin structures (NormalSource::kSamples): where the blend of the gradient
 ///   samples turns more than 30 deg from the gradient of the trilinear values (the two
 ///   faces of a plate one or two voxels thick cancel in the blend), the latter is the
-///   normal. A shallow embedding's first-order step out is taken only if it reaches the
-///   outside (else the embedded search). The "surface curved away" test marches fifth-voxel
+///   normal. A shallow embedding's step out is taken only if it reaches the outside
+///   (else the embedded search). The "surface curved away" test marches fifth-voxel
 ///   steps (a coarse plate's trilinear inside can be thinner than half a voxel).
 /// - Proxy path: a new plane whose contact point is reached from an outside VHIP only
 ///   through material (7 points of the segment, deeper than 0.05 voxel first order; any

@@ -50,6 +50,19 @@ const char* kUsage =
     "  --only R     time one renderer only (for callgrind)\n"
     "  --by-kind    HRI's ticks timed one by one: TSC cycles per kind of tick\n"
     "  --vk         samples from the Vulkan device, as bench table1 takes them\n";
+
+/// A positive count from argv[i + 1]; exits with the usage on a missing or bad value.
+int count_arg(int argc, char** argv, int& i) {
+  char* end = nullptr;
+  const long v = i + 1 < argc ? std::strtol(argv[i + 1], &end, 10) : 0;
+  if (i + 1 >= argc || end == argv[i + 1] || *end != '\0' || v < 1 || v > 1000000) {
+    std::fprintf(stderr, "bench_hri_tick: %s needs a count from 1 to 1000000, got '%s'\n%s", argv[i],
+                 i + 1 < argc ? argv[i + 1] : "", kUsage);
+    std::exit(2);
+  }
+  ++i;
+  return int(v);
+}
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -60,16 +73,18 @@ int main(int argc, char** argv) try {
   bool by_kind = false;
   bool use_vk = false;
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--reps") && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--n") && i + 1 < argc) n = std::max(1, std::atoi(argv[++i]));
-    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    if (!std::strcmp(argv[i], "--reps")) reps = count_arg(argc, argv, i);
+    else if (!std::strcmp(argv[i], "--n")) n = count_arg(argc, argv, i);
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc &&
+             (!std::strcmp(argv[i + 1], "hri") || !std::strcmp(argv[i + 1], "avila")))
+      only = argv[++i];
     else if (!std::strcmp(argv[i], "--by-kind")) by_kind = true;
     else if (!std::strcmp(argv[i], "--vk")) use_vk = true;
     else if (!std::strcmp(argv[i], "--help") || !std::strcmp(argv[i], "-h")) {
       std::fputs(kUsage, stdout);
       return 0;
     } else if (argv[i][0] == '-') {
-      std::fprintf(stderr, "bench_hri_tick: unknown option or missing value: %s\n%s", argv[i], kUsage);
+      std::fprintf(stderr, "bench_hri_tick: unknown option, or a missing or bad value: %s\n%s", argv[i], kUsage);
       return 2;
     } else {
       scenes.push_back(argv[i]);

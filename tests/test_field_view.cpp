@@ -156,22 +156,25 @@ TEST(FieldView, ChangeBoundInCellBoundsEveryReadOnTheSegment) {
     ++bounded;
     const double va = v.value(a);
     for (int i = 1; i <= 8; ++i) ASSERT_LE(std::abs(v.value(a + (b - a) * (i / 8.0)) - va), bound) << k << " " << i;
+    // and the reads HRI's god-object test makes when the bound does not decide (FieldView::Segment)
+    FieldView::Segment seg(v, a, b);
+    for (int i = 1; i <= 7; ++i) ASSERT_LE(std::abs(seg.value(i / 8.0) - va), bound) << k << " " << i;
   }
   EXPECT_GT(bounded, 8000);
-  // An end within the 1e-9 voxel margin of a face, either side (the indices are taken by
-  // products with the reciprocal spacing, not to_index's divisions): no bound; just outside
-  // the margin: a bound.
-  for (int k = 0; k < 2000; ++k) {
+  // An end within the 1e-9 voxel margin of a cell face, on either side of it: no bound; an
+  // end 2e-9 voxel inside the face: a bound. Every axis, lower and upper face, both sides.
+  for (int k = 0; k < 2400; ++k) {
     const Vec3 ia{1.0 + 5 * u(rng), 1.0 + 3 * u(rng), 1.0 + 2 * u(rng)};
-    Vec3 face = ia;
-    const int axis = k % 3;
-    double& c = axis == 0 ? face.x : axis == 1 ? face.y : face.z;
-    c = std::floor(ia[axis]) + (k % 2 ? 1.0 : 0.0);
-    const double off = (k / 3) % 2 ? 1e-11 : -1e-11;
-    c += off;
-    EXPECT_TRUE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(face)))) << k;
-    c += (k % 2 ? -1.0 : 1.0) * 1e-7 - off;
-    EXPECT_FALSE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(face)))) << k;
+    const int axis = k % 3, upper = (k / 3) % 2;
+    const double beyond = (k / 6) % 2 ? 0.5e-9 : -0.5e-9;  // > 0: past the face, out of the cell
+    Vec3 end = ia;
+    double& c = axis == 0 ? end.x : axis == 1 ? end.y : end.z;
+    const double face = std::floor(ia[axis]) + upper;
+    const double out = upper ? 1.0 : -1.0;  // the direction out of the cell across that face
+    c = face + out * beyond;
+    EXPECT_TRUE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(end)))) << k;
+    c = face - out * 2e-9;
+    EXPECT_FALSE(std::isinf(v.change_bound_in_cell(f.grid.to_world(ia), f.grid.to_world(end)))) << k;
   }
   f.samples[f.grid.index(2, 2, 2)].value = std::numeric_limits<float>::quiet_NaN();
   const FieldView w(f);

@@ -632,3 +632,61 @@ TEST(HriContact, TaperingPlateEdgeOnCoarseVoxelsNeverPopsThrough) {
   EXPECT_EQ(through, 0);
   EXPECT_LT(worst, 0.25);
 }
+
+// A shallow embedding's step out (a tangent plane held over the wall of a spherical cavity,
+// 3 voxels in radius: the VHIP sinks by up to ~0.04 voxel between updates) puts the contact
+// point at most 0.05 voxel out along the held normal from the VHIP it starts from, whatever
+// the first-order depth; or, where the embedded search ran instead, on the surface (the
+// outside end of its bracket, within 2e-4 voxel); never inside. Strokes at several speeds
+// make every embedding depth up to the slid-far update (half a voxel of slide). Two walls:
+// a distance field (the first-order depth is right: the steps reach the cap), and one whose
+// slope along the normal ripples 0.15-1.85 times along the wall (2 mm period), so that the
+// |grad| measured where the plane was made overstates the slope where the VHIP sank: some
+// steps fall short and must not be taken.
+TEST(HriContact, ShallowStepOutLandsWithinFiveHundredthsOfAVoxel) {
+  const Vec3 c{0.016, 0.016, 0.016};
+  const double radius = 3e-3, voxel = 1e-3;
+  for (const double ripple : {0.0, 0.85}) {
+    // the slope along the normal: 1 +- ripple, a period of 2 mm of arc along the wall
+    auto slope = [=](const Vec3& x) { return 1.0 + ripple * std::cos(M_PI * radius * std::atan2(x.y - c.y, x.x - c.x) / 1e-3); };
+    const SampleField f = make_field(
+        32, [=](const Vec3& x) { return 1000.0 * (norm(x - c) - radius) * slope(x); },
+        [=](const Vec3& x) { return unit(x - c) * (1000.0 * slope(x)); });
+    auto excess_at = [&](const Vec3& x) { return sample_value(f, x); };  // tau = 0, inside above
+    long embedded_updates = 0, long_steps = 0, searched = 0;
+    for (const double mm_per_tick : {0.02, 0.05, 0.08, 0.1, 0.12}) {
+      HriParams p = robust(5);
+      p.normal = NormalSource::kCentral;
+      HriRenderer r(p);
+      const double press = 0.4e-3;  // the HIP this far inside the wall [m]
+      for (int k = 0; k < 1200; ++k) {
+        // In from the middle of the cavity for 100 ticks, then around the wall.
+        const double rad = k < 100 ? 1e-3 + (radius + press - 1e-3) * k / 100.0 : radius + press;
+        const double angle = k < 100 ? 0.0 : (k - 100) * mm_per_tick * 1e-3 / (radius + press);
+        const Vec3 hip = c + Vec3{std::cos(angle), std::sin(angle), 0.0} * rad;
+        const VirtualPlane held = r.plane();
+        const Vec3 vhip_before = r.vhip();
+        const HriTick t = r.tick(f, hip);
+        if (!t.plane_update || !held.valid || !(excess_at(vhip_before) > 0.0)) continue;
+        ++embedded_updates;
+        const double out = dot(t.plane.p - vhip_before, held.n);
+        if (out > 0.033 * voxel) ++long_steps;
+        const bool within = out <= 0.05 * voxel * (1 + 1e-9);
+        const bool on_surface = excess_at(t.plane.p - held.n * (2e-4 * voxel)) > 0.0;
+        searched += on_surface;
+        EXPECT_TRUE(within || on_surface) << "tick " << k << " at " << mm_per_tick << " mm/tick: p "
+                                          << out / voxel << " voxel out along the held normal";
+        // never inside, unless left at the VHIP (an embedding below 1e-4 voxel is rounding):
+        // the step and the search both return a point outside (1e-6 of a unit: the rounding
+        // of the search's reads along its segment against value()'s)
+        if (norm(t.plane.p - vhip_before) > 0)
+          EXPECT_LE(excess_at(t.plane.p), 1e-6) << "tick " << k << " at " << mm_per_tick << " mm/tick";
+      }
+    }
+    std::printf("cavity wall, ripple %.2f: %ld updates from an embedded VHIP, %ld with p more than 0.033 "
+                "voxel out, %ld on the surface\n",
+                ripple, embedded_updates, long_steps, searched);
+    EXPECT_GT(embedded_updates, 200);
+    EXPECT_GT(long_steps, 10);  // steps near the cap were taken: the 0.05 voxel bound was exercised
+  }
+}

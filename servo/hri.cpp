@@ -185,8 +185,9 @@ bool HriRenderer::first_crossing(const FieldView& field, const Vec3& a, const Ve
 bool HriRenderer::surface_from(const FieldView& field, const Vec3& x, double e_x, double grad_norm,
                                Vec3& p, const Vec3* along) const {
   // Along the outward normal at x, no farther than twice the first-order depth
-  // e_x / |grad| plus a quarter voxel (so it cannot jump through a thin feature), at most
-  // 8 voxels; the crossing to reach / 2^16.
+  // e_x / |grad| plus a quarter voxel (which bounds how far past the surface it looks; a
+  // feature thinner than that reach can still lie inside it, and the search then settles on
+  // whichever crossing its bracket holds), at most 8 voxels; the crossing to reach / 2^16.
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const double d_est = grad_norm > 0 ? e_x / grad_norm : voxel;

@@ -231,15 +231,11 @@ class FieldView {
   /// centres or within the margin of a cell face, a non-finite point or corner, a 1-voxel
   /// axis, an empty view. Lets the servo skip reads that cannot find the isosurface.
   bool cell_range(const Vec3& world_m, Vec3& lo_m, Vec3& hi_m, double& lo_value, double& hi_value) const {
-    constexpr double kPos = 1e-9;  // [voxels]
     if (empty()) return false;
     const Vec3 idx = grid_.to_index(world_m);
     int i0[3];
-    for (int a = 0; a < 3; ++a) {
-      if (!(idx[a] >= kPos && idx[a] <= last_[a] - kPos)) return false;  // (a 1-voxel axis: last_ = 0)
-      i0[a] = int(idx[a]);
-      if (!(idx[a] - kPos >= double(i0[a]) && idx[a] + kPos <= double(i0[a] + 1))) return false;
-    }
+    for (int a = 0; a < 3; ++a)
+      if (!in_one_cell(idx[a], idx[a], a, i0[a])) return false;
     Sample scratch[8];
     const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -253,7 +249,7 @@ class FieldView {
         }
     const Vec3 a = grid_.to_world({double(i0[0]), double(i0[1]), double(i0[2])});
     const Vec3 b = grid_.to_world({double(i0[0] + 1), double(i0[1] + 1), double(i0[2] + 1)});
-    const Vec3 m = grid_.spacing_m * (2 * kPos);  // the margin, doubled for the rounding of a, b
+    const Vec3 m = grid_.spacing_m * (2 * kCellMargin);  // the margin, doubled for the rounding of a, b
     lo_m = a + m;
     hi_m = b - m;
     lo_value = lo;
@@ -275,7 +271,6 @@ class FieldView {
   /// the bound decides (HRI's god-object test).
   double change_bound_in_cell(const Vec3& a_m, const Vec3& b_m) const {
     constexpr double kInf = std::numeric_limits<double>::infinity();
-    constexpr double kPos = 1e-9;  // [voxels]
     if (empty()) return kInf;
     // Indices by products with the reciprocal spacing (no division on the caller's chain):
     // they differ from to_index's (and Segment's reads') by a few ulps of the index, inside
@@ -290,10 +285,8 @@ class FieldView {
       // (std::min / std::max would drop a NaN second argument: compare explicitly)
       if (!(std::isfinite(ia[a]) && std::isfinite(ib[a]))) return kInf;
       const double lo = ia[a] < ib[a] ? ia[a] : ib[a], hi = ia[a] < ib[a] ? ib[a] : ia[a];
-      if (!(lo >= kPos && hi <= last_[a] - kPos)) return kInf;
-      i0[a] = int(lo);
-      if (!(lo - kPos >= double(i0[a]) && hi + kPos <= double(i0[a] + 1))) return kInf;
-      ext[a] = hi - lo + kPos;
+      if (!in_one_cell(lo, hi, a, i0[a])) return kInf;
+      ext[a] = hi - lo + kCellMargin;
     }
     Sample scratch[8];
     const CellRef c = cell(i0[0], i0[1], i0[2], scratch);
@@ -600,6 +593,16 @@ class FieldView {
   };
 
   static double lerp(double a, double b, double t) { return a + t * (b - a); }
+  /// How far inside its cell (cell_range, change_bound_in_cell) a point must lie [voxels].
+  static constexpr double kCellMargin = 1e-9;
+  /// Indices [lo, hi] on axis a lie in one in-grid cell, at least kCellMargin inside it on
+  /// that axis: its lower corner in i0. False off the box of voxel centres (a 1-voxel axis:
+  /// last_ = 0), within the margin of a face, or NaN.
+  bool in_one_cell(double lo, double hi, int a, int& i0) const {
+    if (!(lo >= kCellMargin && hi <= last_[a] - kCellMargin)) return false;
+    i0 = int(lo);
+    return lo - kCellMargin >= double(i0) && hi + kCellMargin <= double(i0 + 1);
+  }
   /// v within the box of voxel centres [0, n-1] (false for NaN).
   static bool in_range(double v, int n) { return v >= 0.0 && v <= double(n - 1); }
   /// The index lies in the box of voxel centres on every axis (false for NaN).

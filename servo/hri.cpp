@@ -270,10 +270,11 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     // the held plane's normal, if that reaches the outside (one sample), of 1.5 times the
     // first-order depth, at most 0.05 voxel. The VHIP is inside and that point outside, so
     // a crossing lies between them: p is outside the surface by at most 0.05 voxel (the
-    // worst case a step of the depth alone allowed too; typically about half the depth,
-    // where that step landed near the surface). A step of the depth alone fell short in 111
-    // of 164 such updates per table1 replay of the head CT (63 of 172 at 1.5 times), each
-    // then paying the search below, about as much again as the update. Where |grad|
+    // worst case a step of the depth alone allowed too; about half the depth where the
+    // first-order depth is exact, where that step landed on the surface). A step of the
+    // depth alone fell short in 111 of 164 such updates per table1 replay of the head CT
+    // (63 of 172 at 1.5 times), each then paying the search below, about as much again as
+    // the update. Where |grad|
     // overstates the slope of the trilinear values (a plate one voxel thick on coarse
     // voxels) the step falls short, and the VHIP sank by 0.2 voxel a few hundredths of a mm
     // per tick: then the search below.

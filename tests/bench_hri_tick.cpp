@@ -39,9 +39,7 @@ class NullRenderer final : public servo::Renderer {
     return t;
   }
 };
-}  // namespace
 
-namespace {
 const char* kUsage =
     "Usage: bench_hri_tick [SCENE...] [--reps N] [--n N] [--only hri|avila] [--by-kind] [--vk]\n"
     "  SCENE: sphere, knot, head, chest (default: all four)\n"

@@ -679,8 +679,9 @@ TEST(HriContact, ShallowStepOutLandsWithinFiveHundredthsOfAVoxel) {
         // never inside, unless left at the VHIP (an embedding below 1e-4 voxel is rounding):
         // the step and the search both return a point outside (1e-6 of a unit: the rounding
         // of the search's reads along its segment against value()'s)
-        if (norm(t.plane.p - vhip_before) > 0)
+        if (norm(t.plane.p - vhip_before) > 0) {
           EXPECT_LE(excess_at(t.plane.p), 1e-6) << "tick " << k << " at " << mm_per_tick << " mm/tick";
+        }
       }
     }
     std::printf("cavity wall, ripple %.2f: %ld updates from an embedded VHIP, %ld with p more than 0.033 "

@@ -690,7 +690,7 @@ TEST(HriShortWay, ReachTestAsTheFullPathAtTheSphere) {
     HriRenderer a(p), b(q);
     std::vector<std::pair<Vec3, const SampleField*>> path;
     for (int k = 0; k <= 60; ++k) path.push_back({c + Vec3{1e-4 * k, 0.0, 0.0}, &f});  // out at k = 50
-    for (int k = 0; k < 6; ++k) path.push_back({c + Vec3{1e-4 * (k % 2), 0.0, 0.0}, &f});  // back (a restart): a budget of 5 mm
+    for (int k = 0; k < 6; ++k) path.push_back({c + Vec3{1e-4 * (k % 2), 0.0, 0.0}, &f});  // back inside (a restart)
     path.push_back({{nan, 0.0, 0.0}, &f});
     for (const double x : {4.9e-3, 4.95e-3, 5.05e-3, 5.1e-3, 4.0e-3}) path.push_back({c + Vec3{x, 0.0, 0.0}, &f});
     for (int k = 0; k < 10; ++k) path.push_back({c, &f});

@@ -48,6 +48,9 @@ Subcommand add_bench_table1_command(CLI::App& bench) {
       ->capture_default_str()
       ->check(positive_number());
   t1->add_option("--csv", o->out_csv, "Also write the table to this CSV file");
+  t1->add_flag("!--no-realtime", o->realtime,
+               "Time the replays under the default scheduler, unpinned (default: SCHED_FIFO on one CPU, as the "
+               "servo thread runs, where the system allows it)");
   return {t1, [o](const std::string& device) {
             bench::Table1Options opt = *o;
             opt.device = device;

@@ -8,6 +8,7 @@
 #include <iostream>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -19,6 +20,7 @@
 #include "synthetic.h"
 #include "baselines.h"
 #include "brick_field.h"
+#include "cpu_placement.h"
 #include "hri.h"
 #include "sweep.h"
 
@@ -345,7 +347,10 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
   log << "bench table1: " << cpu_model() << ", " << std::thread::hardware_concurrency()
       << " CPUs; one thread; samples from " << (vk ? vk->info().name : "the CPU reference") << "; "
       << o.warmup << " warm-up + " << o.repetitions
-      << " timed replays of each stroke per algorithm, interleaved round by round, median\n";
+      << " timed replays of each stroke per algorithm, interleaved round by round, median; "
+      << (o.realtime ? "timed under SCHED_FIFO on one CPU, as the servo thread runs" : "timed under the default scheduler")
+      << "\n";
+  std::string rt_used;  // the scheduling the replays got (the first scene's)
   struct PaperRow {
     const char* scene;
     const char* label;
@@ -412,6 +417,14 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
           t[a].push_back(median_ns_per_tick(*algos[a], *scenes[a], 0, 1));
         }
     };
+    // The timing as the servo thread runs (Table1Options::realtime), for this scene's replays
+    // only: the preparation's worker threads must not inherit it.
+    std::optional<servo::ScopedRealtime> rt;
+    if (o.realtime) rt.emplace("bench table1");
+    if (rt_used.empty())
+      rt_used = !rt ? "default scheduler, unpinned (--no-realtime)"
+                    : rt->setup().fifo ? "SCHED_FIFO, CPU " + std::to_string(rt->setup().cpu)
+                                       : "default scheduler: " + rt->setup().note;
     rounds(0, kTable);
     rounds(kTable, kAlgos);
     double med[kAlgos];
@@ -473,7 +486,8 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
       << bytes.str()
       << "\nTimes are Renderer::tick only (no device I/O), averaged over the whole stroke (free motion and "
          "contact), on this machine; the paper's are whole GHOST servo loops on a 1999 SGI Octane R10000. "
-         "\"HRI as printed\" is the paper's Figure 2 without the departures listed in servo/hri.h.\n";
+         "\"HRI as printed\" is the paper's Figure 2 without the departures listed in servo/hri.h.\n"
+      << "Scheduling of the timed replays: " << rt_used << (rt_used.back() == '\n' ? "" : "\n");
   if (!o.out_csv.empty()) {
     write_file_atomic(o.out_csv, csv.str());
     log << "wrote " << o.out_csv << "\n";

@@ -42,6 +42,10 @@ struct Table1Options {
   /// the worst HRI/Avila ratio varied 1.10-1.41 over three runs with 21, 1.07-1.10 with 101
   /// (about 4 s in all).
   int repetitions = 101;
+  /// Time the replays as the servo thread runs: SCHED_FIFO, pinned to one CPU (where the
+  /// system allows it; what it refused is printed). Without it a process woken on the same
+  /// CPU (every 20 us, in a test) raised the head's HRI/Avila from 0.96 to 0.98-0.99.
+  bool realtime = true;
   std::string device;      ///< Vulkan device for the gradient pass
   std::string out_csv;     ///< also write the table here (optional)
 };

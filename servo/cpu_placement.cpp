@@ -1,14 +1,74 @@
 #include "cpu_placement.h"
 
+#include <pthread.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 
 namespace isotouch::servo {
+
+namespace {
+/// The last CPU in the calling thread's allowed set, or -1.
+int last_allowed_cpu() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (pthread_getaffinity_np(pthread_self(), sizeof(set), &set) != 0) return -1;
+  for (int c = CPU_SETSIZE - 1; c >= 0; --c)
+    if (CPU_ISSET(c, &set)) return c;
+  return -1;
+}
+}  // namespace
+
+RealtimeSetup make_thread_realtime(const std::string& who, bool fifo, int priority, bool pin, int cpu) {
+  RealtimeSetup r;
+  if (fifo) {
+    sched_param sp{};
+    sp.sched_priority = std::clamp(priority, sched_get_priority_min(SCHED_FIFO), sched_get_priority_max(SCHED_FIFO));
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    if (rc == 0) r.fifo = true;
+    else
+      r.note += who + ": SCHED_FIFO priority " + std::to_string(sp.sched_priority) + " refused (" +
+                std::strerror(rc) + "; needs root, CAP_SYS_NICE or an rtprio limit): running with the default "
+                "scheduler, expect missed deadlines under load.\n";
+  }
+  if (pin && cpu < 0 && !r.fifo) {
+    r.note += who + ": not pinned (no SCHED_FIFO; an explicit CPU is pinned anyway).\n";
+  } else if (pin) {
+    const int c = cpu >= 0 ? cpu : last_allowed_cpu();
+    cpu_set_t set;
+    CPU_ZERO(&set);
+    int rc = EINVAL;
+    if (c >= 0 && c < CPU_SETSIZE) {
+      CPU_SET(c, &set);
+      rc = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
+    }
+    if (rc == 0) r.cpu = c;
+    else
+      r.note += who + ": pinning to CPU " + std::to_string(c) + " refused (" + std::strerror(rc) + "): not pinned.\n";
+  }
+  return r;
+}
+
+ScopedRealtime::ScopedRealtime(const std::string& who, int priority, int cpu) {
+  saved_ = pthread_getschedparam(pthread_self(), &policy_, &param_) == 0 &&
+           pthread_getaffinity_np(pthread_self(), sizeof(set_), &set_) == 0;
+  if (!saved_) {
+    setup_.note = who + ": the thread's scheduling could not be read: left as it is.\n";
+    return;
+  }
+  setup_ = make_thread_realtime(who, true, priority, true, cpu);
+}
+
+ScopedRealtime::~ScopedRealtime() {
+  if (!saved_) return;
+  pthread_setschedparam(pthread_self(), policy_, &param_);
+  pthread_setaffinity_np(pthread_self(), sizeof(set_), &set_);
+}
 
 std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   release();

@@ -7,6 +7,8 @@
 // app's write and the X server's read of 3 MB each held the servo's CPU for 1.4-7.5 ms
 // (ftrace: the servo woken on time, switched in only when the copy ended). Keeping the X
 // server off the servo's CPU, and the app presenting from another CPU, removes both.
+// And the calling thread's own placement: SCHED_FIFO and one CPU, for the servo thread and
+// for benchmarks that time servo ticks under the servo's scheduling.
 #pragma once
 #include <sched.h>
 #include <sys/types.h>
@@ -43,6 +45,40 @@ class PeerOffCpu {
   };
   pid_t pid_ = -1;
   std::vector<Saved> saved_;
+};
+
+/// What make_thread_realtime got.
+struct RealtimeSetup {
+  bool fifo = false;  ///< SCHED_FIFO granted
+  int cpu = -1;       ///< the CPU the thread is pinned to; -1: not pinned
+  std::string note;   ///< "" or one line per thing the system did not allow, each naming `who`
+};
+
+/// Makes the calling thread real-time: SCHED_FIFO at `priority` (clamped to 1-99) if `fifo`,
+/// then, if `pin`, pinned to `cpu`; `cpu` -1 is the last CPU the thread may run on (CPU 0
+/// takes most interrupts and housekeeping), pinned only if SCHED_FIFO was granted (a normal
+/// thread pinned to a busy CPU cannot move to an idle one). Refusals (no root,
+/// CAP_SYS_NICE nor rtprio limit; a CPU not allowed) leave that part as it was and are
+/// described in the note, which names the thread as `who`. Never throws.
+RealtimeSetup make_thread_realtime(const std::string& who, bool fifo, int priority, bool pin, int cpu);
+
+/// The calling thread made real-time (make_thread_realtime with SCHED_FIFO and pinning) for
+/// this object's lifetime; the destructor gives the thread back its scheduling policy,
+/// priority and CPU set. Construct and destroy it on the same thread.
+class ScopedRealtime {
+ public:
+  explicit ScopedRealtime(const std::string& who, int priority = 80, int cpu = -1);
+  ~ScopedRealtime();
+  ScopedRealtime(const ScopedRealtime&) = delete;
+  ScopedRealtime& operator=(const ScopedRealtime&) = delete;
+  const RealtimeSetup& setup() const { return setup_; }
+
+ private:
+  RealtimeSetup setup_;
+  int policy_ = SCHED_OTHER;
+  sched_param param_{};
+  cpu_set_t set_{};
+  bool saved_ = false;
 };
 
 /// The process at the other end of the connected Unix socket `fd` (SO_PEERCRED: the one

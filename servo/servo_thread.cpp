@@ -1,5 +1,7 @@
 #include "servo_thread.h"
 
+#include "cpu_placement.h"
+
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
@@ -61,15 +63,6 @@ Vec3 ramp_and_clamp(const Vec3& f, double ramp, double max_n, bool& clamped) {
   return out;
 }
 
-/// The last CPU in this thread's allowed set, or -1.
-int last_allowed_cpu() {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (pthread_getaffinity_np(pthread_self(), sizeof(set), &set) != 0) return -1;
-  for (int c = CPU_SETSIZE - 1; c >= 0; --c)
-    if (CPU_ISSET(c, &set)) return c;
-  return -1;
-}
 }  // namespace
 
 ServoThread::ServoThread(TripleBuffer<SampleField>& samples, Renderer& renderer,
@@ -110,40 +103,14 @@ void ServoThread::stop() {
 
 std::string ServoThread::setup_realtime() {
   std::string note;
-  got_fifo_ = false;
   got_lock_ = locked_;
-  pinned_cpu_ = -1;
   // Sleep wake-ups exactly on time (the default slack of a normal thread is 50 us).
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
-  if (cfg_.sched_fifo) {
-    sched_param sp{};
-    sp.sched_priority = std::clamp(cfg_.fifo_priority, sched_get_priority_min(SCHED_FIFO),
-                                   sched_get_priority_max(SCHED_FIFO));
-    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
-    if (rc == 0) got_fifo_ = true;
-    else
-      note += "servo thread: SCHED_FIFO priority " + std::to_string(sp.sched_priority) + " refused (" +
-              std::strerror(rc) + "; needs root, CAP_SYS_NICE or an rtprio limit): running with the default "
-              "scheduler, expect missed deadlines under load.\n";
-  }
-  // Automatic pinning only with SCHED_FIFO: a normal thread pinned to a busy CPU cannot
-  // move to an idle one, which costs more than the cache it keeps.
-  if (cfg_.pin_cpu && cfg_.cpu < 0 && !got_fifo_)
-    note += "servo thread: not pinned (no SCHED_FIFO; an explicit CPU is pinned anyway).\n";
-  else if (cfg_.pin_cpu) {
-    const int cpu = cfg_.cpu >= 0 ? cfg_.cpu : last_allowed_cpu();
-    cpu_set_t set;
-    CPU_ZERO(&set);
-    int rc = EINVAL;
-    if (cpu >= 0 && cpu < CPU_SETSIZE) {
-      CPU_SET(cpu, &set);
-      rc = pthread_setaffinity_np(pthread_self(), sizeof(set), &set);
-    }
-    if (rc == 0) pinned_cpu_ = cpu;
-    else
-      note += "servo thread: pinning to CPU " + std::to_string(cpu) + " refused (" + std::strerror(rc) +
-              "): not pinned.\n";
-  }
+  // Automatic pinning only with SCHED_FIFO (make_thread_realtime).
+  const RealtimeSetup rt = make_thread_realtime("servo thread", cfg_.sched_fifo, cfg_.fifo_priority, cfg_.pin_cpu, cfg_.cpu);
+  got_fifo_ = rt.fifo;
+  pinned_cpu_ = rt.cpu;
+  note += rt.note;
   if (cfg_.lock_memory && !locked_) {
     int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);
     if (rc != 0 && errno == EINVAL) rc = mlockall(MCL_CURRENT | MCL_FUTURE);  // kernel < 4.4

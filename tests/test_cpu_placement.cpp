@@ -2,6 +2,8 @@
 // Unix socket, is moved off one CPU and given its own sets back; the truth is the kernel's
 // own view of each thread's CPU set (sched_getaffinity), read by the test.
 #include <gtest/gtest.h>
+#include <sched.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <sys/wait.h>
@@ -132,4 +134,76 @@ TEST(CpuPlacement, OnlyAnXServerIsNamedOne) {
   for (const char* x : {"Xorg", "Xvfb", "Xwayland", "Xephyr", "Xvnc"}) EXPECT_TRUE(isotouch::servo::is_x_server(x)) << x;
   for (const char* other : {"gnome-shell", "kwin_wayland", "mutter", "xfwm4", ""})
     EXPECT_FALSE(isotouch::servo::is_x_server(other)) << other;
+}
+
+// The calling thread's own placement: the kernel's view of the thread (sched_getscheduler,
+// sched_getaffinity on tid 0) inside and after a ScopedRealtime.
+namespace {
+struct ThreadSched {
+  int policy = -1;
+  cpu_set_t set{};
+};
+ThreadSched thread_sched() {
+  ThreadSched t;
+  t.policy = sched_getscheduler(0);
+  CPU_ZERO(&t.set);
+  sched_getaffinity(0, sizeof(t.set), &t.set);
+  return t;
+}
+}  // namespace
+
+TEST(CpuPlacement, ScopedRealtimeGivesTheThreadItsSchedulingBack) {
+  std::thread([] {
+    const ThreadSched before = thread_sched();
+    {
+      const isotouch::servo::ScopedRealtime rt("test thread");
+      const ThreadSched in = thread_sched();
+      if (geteuid() == 0) {
+        EXPECT_TRUE(rt.setup().fifo) << rt.setup().note;  // CI runs as root
+      }
+      if (rt.setup().fifo) {
+        EXPECT_EQ(in.policy, SCHED_FIFO);
+        ASSERT_GE(rt.setup().cpu, 0);
+        EXPECT_EQ(CPU_COUNT(&in.set), 1);
+        EXPECT_TRUE(CPU_ISSET(rt.setup().cpu, &in.set));
+        EXPECT_TRUE(CPU_ISSET(rt.setup().cpu, &before.set));  // one the thread was allowed
+      } else {
+        EXPECT_EQ(in.policy, before.policy);
+        EXPECT_NE(rt.setup().note.find("test thread: SCHED_FIFO priority 80 refused"), std::string::npos)
+            << rt.setup().note;
+      }
+    }
+    const ThreadSched after = thread_sched();
+    EXPECT_EQ(after.policy, before.policy);
+    EXPECT_TRUE(CPU_EQUAL(&after.set, &before.set));
+  }).join();
+}
+
+TEST(CpuPlacement, ARefusedSchedFifoIsNamedAndNothingIsPinned) {
+  if (geteuid() != 0) GTEST_SKIP() << "needs root to drop to an unprivileged user";
+  // A child that gives up root (and with it CAP_SYS_NICE) asks for SCHED_FIFO: refused,
+  // named in the note, not pinned, its scheduling as it was. Exit code: the first failed check.
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    struct rlimit no_rt{0, 0};
+    if (setrlimit(RLIMIT_RTPRIO, &no_rt) != 0 || setgid(65534) != 0 || setuid(65534) != 0) _exit(10);
+    const ThreadSched before = thread_sched();
+    int code = 0;
+    {
+      const isotouch::servo::ScopedRealtime rt("bench");
+      const ThreadSched in = thread_sched();
+      const std::string& note = rt.setup().note;
+      if (rt.setup().fifo) code = 1;
+      else if (rt.setup().cpu != -1) code = 2;
+      else if (note.find("bench: SCHED_FIFO priority 80 refused") == std::string::npos) code = 3;
+      else if (note.find("bench: not pinned") == std::string::npos) code = 4;
+      else if (in.policy != before.policy || !CPU_EQUAL(&in.set, &before.set)) code = 5;
+    }
+    _exit(code);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: FIFO granted, 2: pinned, 3/4: the note, 5: scheduling changed, 10: setuid";
 }

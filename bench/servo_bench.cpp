@@ -348,7 +348,8 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
       << " CPUs; one thread; samples from " << (vk ? vk->info().name : "the CPU reference") << "; "
       << o.warmup << " warm-up + " << o.repetitions
       << " timed replays of each stroke per algorithm, interleaved round by round, median; "
-      << (o.realtime ? "timed under SCHED_FIFO on one CPU, as the servo thread runs" : "timed under the default scheduler")
+      << (o.realtime ? "timed as the servo thread runs (SCHED_FIFO on one CPU, where allowed: see the last line)"
+                     : "timed under the default scheduler, unpinned")
       << "\n";
   std::string rt_used;  // the scheduling the replays got (the first scene's)
   struct PaperRow {
@@ -417,14 +418,21 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
           t[a].push_back(median_ns_per_tick(*algos[a], *scenes[a], 0, 1));
         }
     };
-    // The timing as the servo thread runs (Table1Options::realtime), for this scene's replays
-    // only: the preparation's worker threads must not inherit it.
+    // The timing as the servo thread runs (Table1Options::realtime) for the rest of this
+    // scene: its rounds and the floor (the snapshot byte counts in between are
+    // single-threaded). Not the preparation: its worker threads must not inherit it.
     std::optional<servo::ScopedRealtime> rt;
     if (o.realtime) rt.emplace("bench table1");
-    if (rt_used.empty())
-      rt_used = !rt ? "default scheduler, unpinned (--no-realtime)"
-                    : rt->setup().fifo ? "SCHED_FIFO, CPU " + std::to_string(rt->setup().cpu)
-                                       : "default scheduler: " + rt->setup().note;
+    if (rt_used.empty()) {
+      if (!rt) {
+        rt_used = "default scheduler, unpinned (--no-realtime)";
+      } else {
+        const servo::RealtimeSetup& g = rt->setup();
+        rt_used = std::string(g.fifo ? "SCHED_FIFO" : "default scheduler") + ", " +
+                  (g.cpu >= 0 ? "CPU " + std::to_string(g.cpu) : std::string("unpinned"));
+        if (!g.note.empty()) rt_used += "; " + g.note;
+      }
+    }
     rounds(0, kTable);
     rounds(kTable, kAlgos);
     double med[kAlgos];

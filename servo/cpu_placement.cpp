@@ -55,10 +55,17 @@ RealtimeSetup make_thread_realtime(const std::string& who, bool fifo, int priori
 }
 
 ScopedRealtime::ScopedRealtime(const std::string& who, int priority, int cpu) {
-  saved_ = pthread_getschedparam(pthread_self(), &policy_, &param_) == 0 &&
-           pthread_getaffinity_np(pthread_self(), sizeof(set_), &set_) == 0;
+  // The kernel's view of this thread (tid 0), not glibc's cached policy.
+  policy_ = sched_getscheduler(0);
+  saved_ = policy_ >= 0 && sched_getparam(0, &param_) == 0 && sched_getaffinity(0, sizeof(set_), &set_) == 0;
   if (!saved_) {
-    setup_.note = who + ": the thread's scheduling could not be read: left as it is.\n";
+    setup_.note = who + ": the thread's scheduling could not be read (" + std::strerror(errno) + "): left as it is.\n";
+    return;
+  }
+  if (policy_ != SCHED_OTHER && policy_ != SCHED_BATCH && policy_ != SCHED_IDLE && policy_ != SCHED_FIFO &&
+      policy_ != SCHED_RR) {
+    saved_ = false;  // (SCHED_DEADLINE: not restorable by sched_setscheduler)
+    setup_.note = who + ": scheduling policy " + std::to_string(policy_) + " left as it is.\n";
     return;
   }
   setup_ = make_thread_realtime(who, true, priority, true, cpu);
@@ -66,8 +73,12 @@ ScopedRealtime::ScopedRealtime(const std::string& who, int priority, int cpu) {
 
 ScopedRealtime::~ScopedRealtime() {
   if (!saved_) return;
-  pthread_setschedparam(pthread_self(), policy_, &param_);
-  pthread_setaffinity_np(pthread_self(), sizeof(set_), &set_);
+  sched_setaffinity(0, sizeof(set_), &set_);
+  if (sched_setscheduler(0, policy_, &param_) != 0) {
+    // Never left at FIFO: the default policy is always allowed.
+    const sched_param other{};
+    sched_setscheduler(0, SCHED_OTHER, &other);
+  }
 }
 
 std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {

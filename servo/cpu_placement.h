@@ -59,12 +59,14 @@ struct RealtimeSetup {
 /// takes most interrupts and housekeeping), pinned only if SCHED_FIFO was granted (a normal
 /// thread pinned to a busy CPU cannot move to an idle one). Refusals (no root,
 /// CAP_SYS_NICE nor rtprio limit; a CPU not allowed) leave that part as it was and are
-/// described in the note, which names the thread as `who`. Never throws.
+/// described in the note, which names the thread as `who`: they are not errors.
 RealtimeSetup make_thread_realtime(const std::string& who, bool fifo, int priority, bool pin, int cpu);
 
 /// The calling thread made real-time (make_thread_realtime with SCHED_FIFO and pinning) for
 /// this object's lifetime; the destructor gives the thread back its scheduling policy,
-/// priority and CPU set. Construct and destroy it on the same thread.
+/// priority and CPU set (as the kernel had them; if the policy cannot be set back, the
+/// default one: never left at FIFO). Construct and destroy it on the same thread. A thread
+/// under SCHED_DEADLINE is left as it is (said in the note).
 class ScopedRealtime {
  public:
   explicit ScopedRealtime(const std::string& who, int priority = 80, int cpu = -1);

@@ -1,7 +1,5 @@
 #include "servo_thread.h"
 
-#include "cpu_placement.h"
-
 #include <pthread.h>
 #include <sched.h>
 #include <sys/mman.h>
@@ -14,6 +12,8 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
+
+#include "cpu_placement.h"
 
 namespace isotouch::servo {
 namespace {
@@ -107,7 +107,8 @@ std::string ServoThread::setup_realtime() {
   // Sleep wake-ups exactly on time (the default slack of a normal thread is 50 us).
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
   // Automatic pinning only with SCHED_FIFO (make_thread_realtime).
-  const RealtimeSetup rt = make_thread_realtime("servo thread", cfg_.sched_fifo, cfg_.fifo_priority, cfg_.pin_cpu, cfg_.cpu);
+  const RealtimeSetup rt =
+      make_thread_realtime("servo thread", cfg_.sched_fifo, cfg_.fifo_priority, cfg_.pin_cpu, cfg_.cpu);
   got_fifo_ = rt.fifo;
   pinned_cpu_ = rt.cpu;
   note += rt.note;

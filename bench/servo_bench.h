@@ -44,7 +44,7 @@ struct Table1Options {
   int repetitions = 101;
   /// Time the replays as the servo thread runs: SCHED_FIFO, pinned to one CPU (where the
   /// system allows it; what it refused is printed). Without it a process woken on the same
-  /// CPU (every 20 us, in a test) raised the head's HRI/Avila from 0.96 to 0.98-0.99.
+  /// CPU (every 20 us, in a test) raised the head's HRI/Avila from 0.96-0.98 to 0.98-0.99.
   bool realtime = true;
   std::string device;      ///< Vulkan device for the gradient pass
   std::string out_csv;     ///< also write the table here (optional)

@@ -274,10 +274,9 @@ VirtualPlane HriRenderer::compute_plane(const FieldView& field, double f_vhip, d
     // first-order depth is exact, where that step landed on the surface). A step of the
     // depth alone fell short in 111 of 164 such updates per table1 replay of the head CT
     // (63 of 172 at 1.5 times), each then paying the search below, about as much again as
-    // the update. Where |grad|
-    // overstates the slope of the trilinear values (a plate one voxel thick on coarse
-    // voxels) the step falls short, and the VHIP sank by 0.2 voxel a few hundredths of a mm
-    // per tick: then the search below.
+    // the update. Where |grad| overstates the slope of the trilinear values (a plate one
+    // voxel thick on coarse voxels) the step falls short, and the VHIP sank by 0.2 voxel a
+    // few hundredths of a mm per tick: then the search below.
     const Vec3 out_p = vhip_ + plane_.n * std::min(1.5 * d_est, 0.05 * voxel);
     if (!(excess(sample_value(field, out_p)) > 0.0)) return plane_at(field, out_p, hip);
   }

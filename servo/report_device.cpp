@@ -1,14 +1,13 @@
 #include "report_device.h"
 
-#include <pthread.h>
-#include <sched.h>
 #include <sys/prctl.h>
 #include <time.h>
 
 #include <array>
 #include <chrono>
-#include <cstring>
 #include <stdexcept>
+
+#include "cpu_placement.h"
 
 namespace isotouch::servo {
 namespace {
@@ -150,12 +149,12 @@ void ReportDevice::accept(const DeviceReading& in) {
 
 void ReportDevice::ask_fifo() {
   if (opt_.fifo_priority <= 0) return;
-  sched_param sp{};
-  sp.sched_priority = opt_.fifo_priority;
-  if (const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp); rc != 0) {
-    std::lock_guard lock(note_mu_);
-    realtime_note_ = link_->name() + ": SCHED_FIFO for the device threads refused (" + std::strerror(rc) + ")";
-  }
+  // SCHED_FIFO only: the device threads are not pinned (the servo thread owns its CPU).
+  std::string note = make_thread_realtime(link_->name() + " device threads", true, opt_.fifo_priority, false, -1).note;
+  if (note.empty()) return;
+  if (note.back() == '\n') note.pop_back();
+  std::lock_guard lock(note_mu_);
+  realtime_note_ = note;
 }
 
 std::string ReportDevice::realtime_note() const {

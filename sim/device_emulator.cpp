@@ -2,8 +2,6 @@
 
 #include <fcntl.h>
 #include <poll.h>
-#include <pthread.h>
-#include <sched.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -18,6 +16,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "cpu_placement.h"
 #include "hid_report.h"
 #include "playback_device_io.h"
 
@@ -253,11 +252,8 @@ void DeviceEmulator::wait_until(std::int64_t t) {
 EmuStats DeviceEmulator::run() {
   listen();
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
-  if (cfg_.fifo_priority > 0) {
-    sched_param sp{};
-    sp.sched_priority = cfg_.fifo_priority;
-    pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);  // refused: runs anyway
-  }
+  // SCHED_FIFO where allowed, not pinned; refused: runs anyway at the default scheduler.
+  if (cfg_.fifo_priority > 0) servo::make_thread_realtime("device emulator", true, cfg_.fifo_priority, false, -1);
   const auto period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
   const std::int64_t start = now_ns();
   std::int64_t next = start;

@@ -1,8 +1,13 @@
 // ReportDevice over a scripted link (no I/O, deterministic): the newest accepted report is
 // what the servo reads; duplicates and reordered reports are dropped, gaps, garbage counted;
 // the force written reaches the link as an output report answering the report it used; a
-// closed device's last output is a disabled zero force; no first report -> a clear error.
+// closed device's last output is a disabled zero force; no first report -> a clear error;
+// the I/O threads ask for SCHED_FIFO and a refusal is named in realtime_note().
 #include <gtest/gtest.h>
+#include <sched.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -21,6 +26,7 @@ using namespace isotouch::servo;
 namespace {
 struct Script {
   std::mutex mu;
+  int reader_policy = -1, reader_priority = -1;  // the reader thread's scheduling, as the kernel has it
   std::deque<std::vector<std::uint8_t>> in;   // reports the "device" sends
   std::vector<std::vector<std::uint8_t>> out; // reports the host wrote
 };
@@ -34,6 +40,9 @@ class ScriptedLink final : public ReportLink {
   int read(std::span<std::uint8_t> buf, int) override {
     {
       std::lock_guard lock(s_.mu);
+      sched_param sp{};
+      s_.reader_policy = sched_getscheduler(0);
+      s_.reader_priority = sched_getparam(0, &sp) == 0 ? sp.sched_priority : -1;
       if (!s_.in.empty()) {
         const auto r = s_.in.front();
         s_.in.pop_front();
@@ -141,4 +150,46 @@ TEST(ReportDevice, NoFirstReportIsAClearError) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("scripted: no input report within 1 s"), std::string::npos) << e.what();
   }
+}
+
+TEST(ReportDevice, TheIoThreadsAskForSchedFifoAndARefusalIsNamed) {
+  if (geteuid() != 0) GTEST_SKIP() << "needs root: FIFO granted here, refused in a child that gives it up";
+  ReportDeviceOptions opt;
+  opt.fifo_priority = 60;
+  {
+    Script s;
+    s.in = {input(1, 0.001)};
+    ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>(), opt);
+    dev.open();
+    EXPECT_EQ(dev.realtime_note(), "");
+    std::lock_guard lock(s.mu);
+    EXPECT_EQ(s.reader_policy, SCHED_FIFO);
+    EXPECT_EQ(s.reader_priority, 60);
+  }
+  // A child without root (and so without CAP_SYS_NICE): refused, named, the default policy.
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    struct rlimit no_rt{0, 0};
+    if (setrlimit(RLIMIT_RTPRIO, &no_rt) != 0 || setgid(65534) != 0 || setuid(65534) != 0) _exit(10);
+    Script s;
+    s.in = {input(1, 0.001)};
+    ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>(), opt);
+    dev.open();
+    const std::string note = dev.realtime_note();
+    int code = 0;
+    if (note.find("scripted device threads: SCHED_FIFO priority 60 refused") == std::string::npos) code = 1;
+    else if (note.find('\n') != std::string::npos) code = 2;  // one line for the log
+    {
+      std::lock_guard lock(s.mu);
+      if (s.reader_policy == SCHED_FIFO) code = 3;
+    }
+    dev.close();
+    _exit(code);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status));
+  if (WEXITSTATUS(status) == 10) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: the note does not name the link and the refusal, 2: not one line, 3: FIFO";
 }

@@ -3,7 +3,6 @@
 // own view of each thread's CPU set (sched_getaffinity), read by the test.
 #include <gtest/gtest.h>
 #include <sched.h>
-#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <sys/wait.h>
@@ -18,6 +17,7 @@
 #include <vector>
 
 #include "cpu_placement.h"
+#include "unprivileged_child.h"
 
 using isotouch::servo::PeerOffCpu;
 
@@ -205,28 +205,21 @@ TEST(CpuPlacement, ARefusedSchedFifoIsNamedAndNothingIsPinned) {
   if (geteuid() != 0) GTEST_SKIP() << "needs root to drop to an unprivileged user";
   // A child that gives up root (and with it CAP_SYS_NICE) asks for SCHED_FIFO: refused,
   // named in the note, not pinned, its scheduling as it was. Exit code: the first failed check.
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    struct rlimit no_rt{0, 0};
-    if (setrlimit(RLIMIT_RTPRIO, &no_rt) != 0 || setgid(65534) != 0 || setuid(65534) != 0) _exit(10);
+  const int code = isotouch::test::run_unprivileged([] {
     const ThreadSched before = thread_sched();
-    int code = 0;
+    int fail = 0;
     {
       const isotouch::servo::ScopedRealtime rt("bench");
       const ThreadSched in = thread_sched();
       const std::string& note = rt.setup().note;
-      if (rt.setup().fifo) code = 1;
-      else if (rt.setup().cpu != -1) code = 2;
-      else if (note.find("bench: SCHED_FIFO priority 80 refused") == std::string::npos) code = 3;
-      else if (note.find("bench: not pinned") == std::string::npos) code = 4;
-      else if (in.policy != before.policy || !CPU_EQUAL(&in.set, &before.set)) code = 5;
+      if (rt.setup().fifo) fail = 1;
+      else if (rt.setup().cpu != -1) fail = 2;
+      else if (note.find("bench: SCHED_FIFO priority 80 refused") == std::string::npos) fail = 3;
+      else if (note.find("bench: not pinned") == std::string::npos) fail = 4;
+      else if (in.policy != before.policy || !CPU_EQUAL(&in.set, &before.set)) fail = 5;
     }
-    _exit(code);
-  }
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  if (WEXITSTATUS(status) == 10) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
-  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: FIFO granted, 2: pinned, 3/4: the note, 5: scheduling changed";
+    return fail;
+  });
+  if (code == isotouch::test::kCouldNotDrop) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
+  EXPECT_EQ(code, 0) << "1: FIFO granted, 2: pinned, 3/4: the note, 5: scheduling changed, 11: threw, -1: crashed";
 }

@@ -5,8 +5,6 @@
 // the I/O threads ask for SCHED_FIFO and a refusal is named in realtime_note().
 #include <gtest/gtest.h>
 #include <sched.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -19,6 +17,7 @@
 #include "device_protocols.h"
 #include "hid_report.h"
 #include "report_device.h"
+#include "unprivileged_child.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -167,29 +166,22 @@ TEST(ReportDevice, TheIoThreadsAskForSchedFifoAndARefusalIsNamed) {
     EXPECT_EQ(s.reader_priority, 60);
   }
   // A child without root (and so without CAP_SYS_NICE): refused, named, the default policy.
-  const pid_t pid = fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    struct rlimit no_rt{0, 0};
-    if (setrlimit(RLIMIT_RTPRIO, &no_rt) != 0 || setgid(65534) != 0 || setuid(65534) != 0) _exit(10);
+  const int code = isotouch::test::run_unprivileged([&] {
     Script s;
     s.in = {input(1, 0.001)};
     ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>(), opt);
     dev.open();
     const std::string note = dev.realtime_note();
-    int code = 0;
-    if (note.find("scripted device threads: SCHED_FIFO priority 60 refused") == std::string::npos) code = 1;
-    else if (note.find('\n') != std::string::npos) code = 2;  // one line for the log
+    int fail = 0;
+    if (note.find("scripted device threads: SCHED_FIFO priority 60 refused") == std::string::npos) fail = 1;
+    else if (note.find('\n') != std::string::npos) fail = 2;  // one line for the log
     {
       std::lock_guard lock(s.mu);
-      if (s.reader_policy == SCHED_FIFO) code = 3;
+      if (s.reader_policy == SCHED_FIFO) fail = 3;
     }
     dev.close();
-    _exit(code);
-  }
-  int status = 0;
-  ASSERT_EQ(waitpid(pid, &status, 0), pid);
-  ASSERT_TRUE(WIFEXITED(status));
-  if (WEXITSTATUS(status) == 10) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
-  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: the note does not name the link and the refusal, 2: not one line, 3: FIFO";
+    return fail;
+  });
+  if (code == isotouch::test::kCouldNotDrop) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
+  EXPECT_EQ(code, 0) << "1: the note does not name the link and the refusal, 2: not one line, 3: FIFO, 11: threw, -1: crashed";
 }

@@ -37,8 +37,8 @@ RealtimeSetup make_thread_realtime(const std::string& who, bool fifo, int priori
                 "scheduler, expect missed deadlines under load.\n";
   }
   if (pin && cpu < 0 && !r.fifo) {
-    r.note += who + 
-              ": not pinned (without SCHED_FIFO a thread pinned to a busy CPU could not move to an idle one).\n";
+    r.note += who + ": not pinned (without SCHED_FIFO a thread pinned to a busy CPU could not move to an idle "
+                    "one).\n";
   } else if (pin) {
     const int c = cpu >= 0 ? cpu : last_allowed_cpu();
     cpu_set_t set;

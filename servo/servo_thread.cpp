@@ -1,7 +1,5 @@
 #include "servo_thread.h"
 
-#include <pthread.h>
-#include <sched.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
 #include <time.h>

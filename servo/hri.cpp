@@ -65,7 +65,8 @@ HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
   const double fc = params_.velocity_cutoff_hz;
   alpha_nominal_ = fc > 0 ? dt_nominal_s_ / (dt_nominal_s_ + 1.0 / (2.0 * M_PI * fc)) : 1.0;
   quick_ok_ = params_.variant == Variant::kRobust && params_.short_way && !(params_.tool_radius_m > 0.0) &&
-              !params_.force_shading && !params_.friction.any();
+              !params_.force_shading && !params_.friction.any() &&
+              std::isfinite(params_.max_reach_m * params_.max_reach_m);
 }
 
 void HriRenderer::reset() {
@@ -409,7 +410,11 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
       out.force_mag = push ? m : 0.0;
       return force;
     }
-    return robust_ramp(force, hip, v, out);
+    // With no ramp running the ramp returns `force` itself: its magnitude is m.
+    bool ramped = false;
+    const Vec3 sent = robust_ramp(force, hip, v, out, ramped);
+    if (!ramped) out.force_mag = push ? m : 0.0;
+    return sent;
   }
   const Vec3 d = (hip - vhip_) * s;  // device [m]
   const Vec3 v_d = plane_.n * dot(v, plane_.n);
@@ -418,7 +423,8 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   if (dot(force, plane_.n) < 0.0) force = {};  // a wall pushes, never pulls
 
   if (ramps && robust) {
-    force = robust_ramp(force, hip, v, out);
+    bool ramped = false;
+    force = robust_ramp(force, hip, v, out, ramped);
   } else if (ramps) {
     const double mag = norm(force);
     if (embedded && mag > prev_force_mag_ && params_.recovery_time_s > 0) {
@@ -438,7 +444,8 @@ Vec3 HriRenderer::constrain(const Vec3& hip, const Vec3& free_vhip, double dt) {
   return force;
 }
 
-Vec3 HriRenderer::robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out) {
+Vec3 HriRenderer::robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out,
+                              bool& ramped) {
   // What the plane of the tick before gives at this HIP (eqs. 2-3): a ramp starts for the
   // step the plane change causes, never for the hand's own motion since the tick before
   // (at n = 1 that restarted the ramp every tick and the force lagged the hand: an active
@@ -450,10 +457,11 @@ Vec3 HriRenderer::robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v,
     before = d_ref * -params_.stiffness_n_per_m - n * (dot(v, n) * params_.damping_n_s_per_m);
     if (dot(before, n) < 0.0) before = {};
   }
-  return ramp_force(force, out.plane_update, plane_.n, before);
+  return ramp_force(force, out.plane_update, plane_.n, before, ramped);
 }
 
-Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before) {
+Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before,
+                             bool& ramped) {
   // Every step of the spring-damper force that a plane creation or update causes (or the
   // first contact tick after a fault) is spread over recovery_time_s: |F| goes linearly
   // from the magnitude sent the tick before to the new target (the offset fades out,
@@ -471,7 +479,8 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
     ramp_from_dir_ = prev_force_mag_ > 0 ? prev_force_ / prev_force_mag_ : Vec3{};
   }
   prev_target_f_ = force;
-  if (!(ramp_left_s_ > 0)) return force;  // the common tick: no square root
+  ramped = ramp_left_s_ > 0;
+  if (!ramped) return force;  // the common tick: no square root
   const double mag = norm(force);
   ramp_left_s_ -= ramp_dt_s_;
   if (ramp_left_s_ < 1e-9 * params_.recovery_time_s) ramp_left_s_ = 0;  // rounding
@@ -1091,17 +1100,14 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   const Vec3 u = push / depth;
   Vec3 force = u * (params_.stiffness_n_per_m * depth - params_.damping_n_s_per_m * dot(v_filt_, u));
   if (dot(force, u) < 0.0) force = {};  // a wall pushes, never pulls
-  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u, prev_target_f_);
+  bool ramped = false;
+  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u, prev_target_f_, ramped);
   out.contact = true;
   out.penetration_m = norm(hip - x);
   return force;
 }
 
-HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
-  return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
-}
-
-HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
+[[gnu::noinline]] HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   TickOut out;
   const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > params_.max_reach_m;
   if (!finite(hip) || absurd) {  // a device fault: send nothing
@@ -1191,29 +1197,32 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   }
 }
 
-[[gnu::always_inline]] inline bool HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s,
-                                                           TickOut& out) {
+[[gnu::always_inline]] inline HriRenderer::Quick HriRenderer::quick_tick(const FieldView& field, const Vec3& hip,
+                                                                          double dt_s, TickOut& out,
+                                                                          GeneralArgs& general) {
   // The plain state: tick_robust's fault, restart, edit, ramp, release and slew branches
-  // cannot act (each of those ticks takes the full path).
-  if (!plain_) return false;
-  const bool tracked = params_.edit_max_step_fraction > 0;  // note_version runs
-  if (tracked && !(version_known_ && field.version() == field_version_)) return false;
+  // cannot act (each of those ticks takes the full path). In it after_fault_ is false,
+  // lost_s_, ramp_left_s_, release_left_s_ and recovery_ticks_left_ are 0 (each is set to 0
+  // where it ends), and version_known_ is true where edits are tracked: what the full
+  // path's prologue and finish_robust would set them to.
+  if (!plain_) return Quick::kFull;
+  if (params_.edit_max_step_fraction > 0 && field.version() != field_version_) return Quick::kFull;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
-  const double elapsed = dt + lost_s_;
-  if (!finite(hip)) return false;
+  const double elapsed = dt;  // + lost_s_ (0)
+  // Sane and within reach (tick_robust_full's fault test): a non-finite HIP fails the
+  // comparison, as does one so far out that the squares overflow (quick_ok_: a finite reach^2).
   const Vec3 from_centre = hip - field.grid().centre_m();
-  if (dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m) return false;
+  if (!(dot(from_centre, from_centre) <= params_.max_reach_m * params_.max_reach_m)) return Quick::kFull;
   const bool holding = plane_.valid;
   if (holding) {
     const Vec3 moved = hip - prev_hip_;
     const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
-    if (dot(moved, moved) > max_move * max_move) return false;  // a jump
+    if (dot(moved, moved) > max_move * max_move) return Quick::kFull;  // a jump
   } else if (was_contact_ && params_.recovery_time_s > 0 && prev_force_mag_ > 0.01 * params_.force_limit_n) {
-    return false;  // a release fade would start
+    return Quick::kFull;  // a release fade would start
   }
-  // tick_robust's prologue for this state.
-  ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
-  if (tracked) version_skipped_ = false;
+  // tick_robust's prologue for this state (version_skipped_ is read on an edit tick only,
+  // after note_version sets it; ramp_dt_s_ where a ramp can start: tick_general).
   edit_tick_ = false;
   const double s = inv_wpd_;
   filter_velocity(hip, elapsed);
@@ -1231,8 +1240,9 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     const Vec3 slide = to - anchor_, move = to - vhip_;
     if (!(g > 0.0) || !(c_ + 1 < params_.plane_update_period) || dot(slide, slide) > 0.25 * voxel * voxel ||
         !(dot(move, move) <= 0.0625 * voxel * voxel)) {
-      tick_general(field, hip, voxel, elapsed, false, false, false, 0.0, out);
-      return true;
+      ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
+      general = {voxel, elapsed, 0.0, false};
+      return Quick::kGeneral;
     }
     ++c_;
     vhip_ = to;
@@ -1241,16 +1251,11 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     const bool push = !(m <= 0.0);
     Vec3 force = push ? n * m : Vec3{};
     double mag = push ? m : 0.0;
-    if (params_.recovery_time_s > 0) {  // ramp_force with no trigger and no ramp running
-      prev_target_f_ = force;
-      mag = norm(force);
-    }
+    if (params_.recovery_time_s > 0) prev_target_f_ = force;  // ramp_force with no trigger and no ramp running
     out.contact = true;
     out.penetration_m = std::abs(g);
     // finish_robust for a contact tick with no edit.
-    after_fault_ = false;
     limit_force(force, mag, out);
-    release_left_s_ = 0;
     prev_hip_ = hip;
     prev_force_mag_ = mag;
     prev_force_ = force;
@@ -1259,24 +1264,21 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
     vhip_outside_ = false;
     vhip_value_ = 0.0;
     out.force_n = force;
-    return true;
+    return Quick::kDone;
   }
   // Free motion: short_tick's free tick (the HIP's value read once, or not at all in an
   // outside cell), else tick_general from it.
   bool have_f_hip = false;
   double f_hip = 0.0;
   if (!free_tick(field, hip, have_f_hip, f_hip)) {
-    tick_general(field, hip, voxel, elapsed, false, false, have_f_hip, f_hip, out);
-    return true;
+    ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
+    general = {voxel, elapsed, f_hip, have_f_hip};
+    return Quick::kGeneral;
   }
   vhip_ = hip;
   sliding_ = false;
-  recovery_ticks_left_ = 0;
-  ramp_left_s_ = 0;
   prev_target_f_ = {};
   // finish_robust for a free tick with no edit and no release starting.
-  after_fault_ = false;
-  if (!(params_.recovery_time_s > 0)) release_left_s_ = 0;
   prev_hip_ = hip;
   prev_force_mag_ = 0;
   prev_force_ = {};
@@ -1285,7 +1287,7 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   vhip_value_ = f_hip;
   vhip_outside_ = !have_f_hip;
   out.force_n = {};
-  return true;
+  return Quick::kDone;
 }
 
 [[gnu::always_inline]] inline bool HriRenderer::free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip,
@@ -1316,26 +1318,53 @@ HriTick HriRenderer::tick_paper(const FieldView& field, const Vec3& hip) {
   return true;
 }
 
-// The state in which quick_tick's ticks are tick_robust's: started, no fault, restart, edit,
-// ramp, release nor slew running. The quick ticks keep it; the paths that can change it
-// (tick_general, tick_robust_full) set plain_ from it when they end.
+// The state in which quick_tick's ticks are tick_robust's: a configuration it covers
+// (quick_ok_), started, no fault, restart, edit, ramp, release nor slew running. The quick
+// ticks keep it; the paths that can change it (tick_general, tick_robust_full) set plain_
+// from it when they end.
 bool HriRenderer::plain_state() const {
-  return started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
-         !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0;
+  return quick_ok_ && started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
+         !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0 &&
+         (version_known_ || !(params_.edit_max_step_fraction > 0));
 }
 
-HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
-  if (quick_ok_) {
-    TickOut out;
-    if (quick_tick(field, hip, dt_s, out)) return result(out, plane_);
+// Inlined into tick(): the virtual call is the only call of a quick tick (tick() calling it
+// added a call, a return and a copy of the HriTick to every tick).
+// `out` stays in this function (tick_general gets its own): the quick tick's HriTick is then
+// built from registers.
+[[gnu::always_inline]] inline HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
+  TickOut out;
+  GeneralArgs g;
+  switch (quick_tick(field, hip, dt_s, out, g)) {
+    case Quick::kDone:
+      return result(out, plane_);
+    case Quick::kGeneral:
+      return general_tick(field, hip, g.voxel, g.elapsed, g.have_f_hip, g.f_hip);
+    case Quick::kFull:
+      break;
   }
-  const HriTick t = tick_robust_full(field, hip, dt_s);
-  plain_ = plain_state();
-  return t;
+  return tick_robust_full(field, hip, dt_s);
+}
+
+[[gnu::noinline]] HriTick HriRenderer::general_tick(const FieldView& field, const Vec3& hip, double voxel,
+                                                    double elapsed, bool have_f_hip, double f_hip) {
+  TickOut out;
+  tick_general(field, hip, voxel, elapsed, false, false, have_f_hip, f_hip, out);
+  return result(out, plane_);
+}
+
+HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
+  return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
 }
 
 // Out of line: the quick tick above then compiles as a small function.
 [[gnu::noinline]] HriTick HriRenderer::tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s) {
+  const HriTick t = tick_robust_full_body(field, hip, dt_s);
+  plain_ = plain_state();
+  return t;
+}
+
+HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& hip, double dt_s) {
   TickOut out;
   cell_valid_ = false;
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;

@@ -364,11 +364,13 @@ class HriRenderer final : public Renderer {
                     const Vec3* along = nullptr) const;
   /// Robust recovery ramp of the force vector (see "Recovery time"); returns the force to send.
   /// `before`: the force the ramp's trigger compares with (the target the plane of the tick
-  /// before gives at this HIP; after a fault the target of the tick before).
-  Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before);
+  /// before gives at this HIP; after a fault the target of the tick before). `ramped`: false
+  /// where no ramp runs and `force` itself is returned.
+  Vec3 ramp_force(const Vec3& force, bool plane_update, const Vec3& fallback_dir, const Vec3& before,
+                  bool& ramped);
   /// ramp_force for a robust contact tick: `before` from the plane of the tick before
   /// (ramp_ref_) at this HIP, or the target of the tick before.
-  Vec3 robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out);
+  Vec3 robust_ramp(const Vec3& force, const Vec3& hip, const Vec3& v, const TickOut& out, bool& ramped);
   /// Edit ticks: the surface point p from an embedded x (deeper than surface_from reaches)
   /// marched along the outward normal at x (half-voxel steps, at most march_budget samples,
   /// 20 bisection steps); false if none.
@@ -422,21 +424,38 @@ class HriRenderer final : public Renderer {
   /// of the last read; false (the HIP's value in f_hip if it was read) where the general
   /// path must run (an entry, a long step).
   bool free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip, double& f_hip);
+  /// What quick_tick did.
+  enum class Quick : std::uint8_t {
+    kDone,     ///< the tick is done: `out` and the state are the full path's
+    kGeneral,  ///< tick_general must run, with `general`'s arguments (nothing of `out` written)
+    kFull,     ///< tick_robust_full must run (nothing changed)
+  };
+  /// tick_general's arguments from a quick tick.
+  struct GeneralArgs {
+    double voxel = 0, elapsed = 0, f_hip = 0;
+    bool have_f_hip = false;
+  };
   /// tick_robust from the plain state (started, no fault, restart, edit, ramp, release nor
   /// slew running, a point tool, the short way on): its prologue's arithmetic for that
   /// state, then the contact tick with no update due or the free tick outside on a short
-  /// step, each point computed once, else tick_general. False, with nothing changed, where
-  /// tick_robust's full path must run (another state, a fault, an absurd HIP, a jump, a
-  /// new snapshot version).
-  bool quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out);
+  /// step, each point computed once (kDone), else the arguments of the tick_general that
+  /// must run (kGeneral). kFull, with nothing changed, where tick_robust's full path must
+  /// run (another state, a fault, an absurd HIP, a jump, a new snapshot version).
+  Quick quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out, GeneralArgs& general);
+  /// tick_general after a quick tick handed over, and its HriTick.
+  HriTick general_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool have_f_hip,
+                       double f_hip);
   /// The state quick_tick covers: started, no fault, restart, edit, ramp, release nor slew running.
   bool plain_state() const;
   /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
   void filter_velocity(const Vec3& hip, double elapsed);
   /// The fault (non-finite |F|) and saturation rules of a robust tick's force.
   void limit_force(Vec3& force, double& mag, TickOut& out) const;
-  /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general.
+  /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general;
+  /// plain_ set for the next tick.
   HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
+  /// tick_robust_full's tick.
+  HriTick tick_robust_full_body(const FieldView& field, const Vec3& hip, double dt_s);
   /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
   void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, TickOut& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).

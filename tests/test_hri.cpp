@@ -188,6 +188,28 @@ TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
   EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
 }
 
+// With no reach limit (max_reach_m = inf) a non-finite HIP is still a fault, from free
+// motion and from contact alike: the common tick's reach test cannot catch an infinite HIP
+// there (inf <= inf), so that tick must not run.
+TEST(Hri, NonFiniteHipIsAFaultWithAnUnboundedReach) {
+  const SampleField f = wall_field(kUp, kC);
+  HriParams p = params();
+  p.max_reach_m = std::numeric_limits<double>::infinity();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const bool contact : {false, true}) {
+    HriRenderer r(p);
+    r.tick(f, {0.016, 0.016, 0.011});
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(r.tick(f, {0.016, 0.016, contact ? 0.009 : 0.011}).contact, contact);
+    for (const Vec3 bad : {Vec3{inf, 0.016, 0.016}, Vec3{0.016, -inf, 0.016}}) {
+      const HriTick t = r.tick(f, bad);
+      EXPECT_TRUE(t.fault) << (contact ? "from contact" : "from free motion");
+      EXPECT_EQ(norm(t.force_n), 0.0);
+      r.tick(f, {0.016, 0.016, 0.011});
+      r.tick(f, {0.016, 0.016, contact ? 0.009 : 0.011});
+    }
+  }
+}
+
 TEST(Hri, InsideBelowConventionForSignedDistance) {
   // value = signed distance (negative inside): same wall, opposite convention.
   const SampleField f = wall_field(kUp, kC, /*negate=*/true);

@@ -1197,34 +1197,36 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   }
 }
 
-[[gnu::always_inline]] inline HriRenderer::Quick HriRenderer::quick_tick(const FieldView& field, const Vec3& hip,
-                                                                          double dt_s, TickOut& out,
-                                                                          GeneralArgs& general) {
-  // The plain state: tick_robust's fault, restart, edit, ramp, release and slew branches
+// The robust tick from the plain state. Every way out that is not a common tick is a call in
+// tail position (tick_robust_full, general_tick, the free tick's read, the force limit), so
+// the common ticks keep their values in registers the calls may clobber: tick() saves one
+// register where it saved six, and builds the HriTick from registers.
+[[gnu::always_inline]] inline HriTick HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s) {
+  // The plain state: the robust tick's fault, restart, edit, ramp, release and slew branches
   // cannot act (each of those ticks takes the full path). In it after_fault_ is false,
   // lost_s_, ramp_left_s_, release_left_s_ and recovery_ticks_left_ are 0 (each is set to 0
-  // where it ends), and version_known_ is true where edits are tracked: what the full
-  // path's prologue and finish_robust would set them to.
-  if (!plain_) return Quick::kFull;
-  if (params_.edit_max_step_fraction > 0 && field.version() != field_version_) return Quick::kFull;
+  // where it ends), version_known_ is true where edits are tracked, and sliding_ is false
+  // (no friction): what the full path's prologue and finish_robust would set them to.
+  if (!plain_) return tick_robust_full(field, hip, dt_s);
+  if (params_.edit_max_step_fraction > 0 && field.version() != field_version_) return tick_robust_full(field, hip, dt_s);
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt;  // + lost_s_ (0)
   // Sane and within reach (tick_robust_full's fault test): a non-finite HIP fails the
   // comparison, as does one so far out that the squares overflow (quick_ok_: a finite reach^2).
   const Vec3 from_centre = hip - field.grid().centre_m();
-  if (!(dot(from_centre, from_centre) <= params_.max_reach_m * params_.max_reach_m)) return Quick::kFull;
+  if (!(dot(from_centre, from_centre) <= params_.max_reach_m * params_.max_reach_m))
+    return tick_robust_full(field, hip, dt_s);
   const bool holding = plane_.valid;
   if (holding) {
     const Vec3 moved = hip - prev_hip_;
     const double max_move = params_.max_speed_m_s * params_.world_per_device * elapsed;
-    if (dot(moved, moved) > max_move * max_move) return Quick::kFull;  // a jump
+    if (dot(moved, moved) > max_move * max_move) return tick_robust_full(field, hip, dt_s);  // a jump
   } else if (was_contact_ && params_.recovery_time_s > 0 && prev_force_mag_ > 0.01 * params_.force_limit_n) {
-    return Quick::kFull;  // a release fade would start
+    return tick_robust_full(field, hip, dt_s);  // a release fade would start
   }
-  // tick_robust's prologue for this state (version_skipped_ is read on an edit tick only,
+  // tick_robust_full's prologue for this state (version_skipped_ is read on an edit tick only,
   // after note_version sets it; ramp_dt_s_ where a ramp can start: tick_general).
   edit_tick_ = false;
-  const double s = inv_wpd_;
   filter_velocity(hip, elapsed);
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min(sp.x, std::min(sp.y, sp.z));  // (std::min({...}) went through the stack)
@@ -1241,44 +1243,54 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     if (!(g > 0.0) || !(c_ + 1 < params_.plane_update_period) || dot(slide, slide) > 0.25 * voxel * voxel ||
         !(dot(move, move) <= 0.0625 * voxel * voxel)) {
       ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
-      general = {voxel, elapsed, 0.0, false};
-      return Quick::kGeneral;
+      return general_tick(field, hip, voxel, elapsed, false, 0.0);
     }
-    ++c_;
-    vhip_ = to;
-    sliding_ = false;
-    const double m = params_.stiffness_n_per_m * (g * s) - params_.damping_n_s_per_m * dot(v_filt_, n);
+    const double m = params_.stiffness_n_per_m * (g * inv_wpd_) - params_.damping_n_s_per_m * dot(v_filt_, n);
     const bool push = !(m <= 0.0);
-    Vec3 force = push ? n * m : Vec3{};
-    double mag = push ? m : 0.0;
-    if (params_.recovery_time_s > 0) prev_target_f_ = force;  // ramp_force with no trigger and no ramp running
+    const Vec3 force = push ? n * m : Vec3{};
+    const double mag = push ? m : 0.0;
+    // limit_force acts (a fault, saturation): out of line.
+    if (!(mag <= params_.force_limit_n)) return quick_contact_limited(hip, to, g, force, mag);
+    quick_contact_state(hip, to, force, force, mag);
+    TickOut out;
     out.contact = true;
     out.penetration_m = std::abs(g);
-    // finish_robust for a contact tick with no edit.
-    limit_force(force, mag, out);
-    prev_hip_ = hip;
-    prev_force_mag_ = mag;
-    prev_force_ = force;
-    was_contact_ = true;
-    vhip_value_known_ = false;
-    vhip_outside_ = false;
-    vhip_value_ = 0.0;
     out.force_n = force;
-    return Quick::kDone;
+    return result(out, plane_);
   }
-  // Free motion: short_tick's free tick (the HIP's value read once, or not at all in an
-  // outside cell), else tick_general from it.
-  bool have_f_hip = false;
-  double f_hip = 0.0;
-  if (!free_tick(field, hip, have_f_hip, f_hip)) {
-    ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
-    general = {voxel, elapsed, f_hip, have_f_hip};
-    return Quick::kGeneral;
-  }
+  // Free motion: short_tick's free tick. In the outside cell of the last read nothing is
+  // read: no point of the cell is inside, so the read would say outside; nor can a long step
+  // cross the surface: the VHIP is the HIP of the tick before, in the cell too (every tick
+  // since the cell was read was a free tick in it), and so is the segment between them.
+  const bool in_cell = cell_valid_ && field.storage() == cell_storage_ && hip.x >= cell_lo_m_.x &&
+                       hip.y >= cell_lo_m_.y && hip.z >= cell_lo_m_.z && hip.x <= cell_hi_m_.x &&
+                       hip.y <= cell_hi_m_.y && hip.z <= cell_hi_m_.z;
+  if (!(in_cell && cell_outside_)) return free_read_tick(field, hip, voxel, dt, in_cell);
+  ++reads_skipped_;
+  quick_free_state(hip, false, 0.0);
+  return result(TickOut{}, plane_);
+}
+
+// finish_robust's state for a quick contact tick: the proxy `to`, the target and the force
+// sent (limited), |F| sent.
+[[gnu::always_inline]] inline void HriRenderer::quick_contact_state(const Vec3& hip, const Vec3& to, const Vec3& target,
+                                                                    const Vec3& sent, double mag) {
+  ++c_;
+  vhip_ = to;
+  if (params_.recovery_time_s > 0) prev_target_f_ = target;  // ramp_force with no trigger and no ramp running
+  prev_hip_ = hip;
+  prev_force_mag_ = mag;
+  prev_force_ = sent;
+  was_contact_ = true;
+  vhip_value_known_ = false;
+  vhip_outside_ = false;
+  vhip_value_ = 0.0;
+}
+
+// finish_robust's state for a quick free tick (no edit, no release starting).
+[[gnu::always_inline]] inline void HriRenderer::quick_free_state(const Vec3& hip, bool have_f_hip, double f_hip) {
   vhip_ = hip;
-  sliding_ = false;
   prev_target_f_ = {};
-  // finish_robust for a free tick with no edit and no release starting.
   prev_hip_ = hip;
   prev_force_mag_ = 0;
   prev_force_ = {};
@@ -1286,25 +1298,27 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   vhip_value_known_ = have_f_hip;
   vhip_value_ = f_hip;
   vhip_outside_ = !have_f_hip;
-  out.force_n = {};
-  return Quick::kDone;
 }
 
-[[gnu::always_inline]] inline bool HriRenderer::free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip,
-                                                          double& f_hip) {
-  const bool in_cell = cell_valid_ && field.storage() == cell_storage_ && hip.x >= cell_lo_m_.x &&
-                       hip.y >= cell_lo_m_.y && hip.z >= cell_lo_m_.z && hip.x <= cell_hi_m_.x &&
-                       hip.y <= cell_hi_m_.y && hip.z <= cell_hi_m_.z;
-  if (in_cell && cell_outside_) {
-    // No point of the cell is inside: the read would say outside. Nor can a long step cross
-    // the surface: the VHIP is the HIP of the tick before, in the cell too (every tick since
-    // the cell was read was a free tick in it), and so is the segment between them.
-    ++reads_skipped_;
-    return true;
+[[gnu::noinline]] HriTick HriRenderer::quick_contact_limited(const Vec3& hip, const Vec3& to, double g, Vec3 force,
+                                                             double mag) {
+  TickOut out;
+  out.contact = true;
+  out.penetration_m = std::abs(g);
+  const Vec3 target = force;
+  limit_force(force, mag, out);
+  quick_contact_state(hip, to, target, force, mag);
+  out.force_n = force;
+  return result(out, plane_);
+}
+
+[[gnu::noinline]] HriTick HriRenderer::free_read_tick(const FieldView& field, const Vec3& hip, double voxel, double dt,
+                                                      bool in_cell) {
+  const double f_hip = sample_value(field, hip);
+  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) {
+    ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
+    return general_tick(field, hip, voxel, dt, true, f_hip);
   }
-  f_hip = sample_value(field, hip);
-  have_f_hip = true;
-  if (excess(f_hip) > 0.0 || long_step(field, vhip_, hip)) return false;
   if (!in_cell && params_.edit_max_step_fraction > 0) {
     // A new cell: outside if its largest corner excess is below zero by more than the
     // rounding of the blend (1e-9 of the largest corner or tau).
@@ -1315,10 +1329,11 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     cell_outside_ = e_max + 1e-9 * scale < 0.0;
     cell_storage_ = field.storage();
   }
-  return true;
+  quick_free_state(hip, true, f_hip);
+  return result(TickOut{}, plane_);
 }
 
-// The state in which quick_tick's ticks are tick_robust's: a configuration it covers
+// The state in which quick_tick's ticks are tick_robust_full's: a configuration it covers
 // (quick_ok_), started, no fault, restart, edit, ramp, release nor slew running. The quick
 // ticks keep it; the paths that can change it (tick_general, tick_robust_full) set plain_
 // from it when they end.
@@ -1328,24 +1343,6 @@ bool HriRenderer::plain_state() const {
          (version_known_ || !(params_.edit_max_step_fraction > 0));
 }
 
-// Inlined into tick(): the virtual call is the only call of a quick tick (tick() calling it
-// added a call, a return and a copy of the HriTick to every tick).
-// `out` stays in this function (tick_general gets its own): the quick tick's HriTick is then
-// built from registers.
-[[gnu::always_inline]] inline HriTick HriRenderer::tick_robust(const FieldView& field, const Vec3& hip, double dt_s) {
-  TickOut out;
-  GeneralArgs g;
-  switch (quick_tick(field, hip, dt_s, out, g)) {
-    case Quick::kDone:
-      return result(out, plane_);
-    case Quick::kGeneral:
-      return general_tick(field, hip, g.voxel, g.elapsed, g.have_f_hip, g.f_hip);
-    case Quick::kFull:
-      break;
-  }
-  return tick_robust_full(field, hip, dt_s);
-}
-
 [[gnu::noinline]] HriTick HriRenderer::general_tick(const FieldView& field, const Vec3& hip, double voxel,
                                                     double elapsed, bool have_f_hip, double f_hip) {
   TickOut out;
@@ -1353,8 +1350,10 @@ bool HriRenderer::plain_state() const {
   return result(out, plane_);
 }
 
+// The robust tick is quick_tick, inlined: the virtual call is then the only call of a
+// common tick (a call to it added a call, a return and a copy of the HriTick to every tick).
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
-  return params_.variant == Variant::kPaper ? tick_paper(field, hip) : tick_robust(field, hip, dt_s);
+  return params_.variant == Variant::kPaper ? tick_paper(field, hip) : quick_tick(field, hip, dt_s);
 }
 
 // Out of line: the quick tick above then compiles as a small function.
@@ -1630,7 +1629,7 @@ VirtualPlane HriRenderer::reported_plane() const {
 [[gnu::always_inline]] inline bool HriRenderer::short_tick(const FieldView& field, const Vec3& hip, double voxel,
                                                            double elapsed, bool& have_f_hip, double& f_hip,
                                                            TickOut& out) {
-  // The two common ticks, by the same arithmetic as tick_robust's general path (so the
+  // The two common ticks, by the same arithmetic as the robust tick's general path (so the
   // same bits), each point computed once: behind a held plane with no update due and a
   // proxy move that keep_proxy_outside does not check (every rule of the general path
   // that could act needs an update, a sample or a long move); free motion with the HIP

@@ -396,7 +396,6 @@ class HriRenderer final : public Renderer {
   /// The contact state reset() and restart_at() both clear: plane, ramps, fades, tool planes.
   void clear_contact();
   HriTick tick_paper(const FieldView& field, const Vec3& hip);
-  HriTick tick_robust(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_general's plane change: the plane, its |grad| (last_grad_norm_), the anchor
   /// (eq. 2 from the HIP), the update counter reset, out.plane_update.
   void adopt_plane(const VirtualPlane& pl, const Vec3& hip, TickOut& out);
@@ -411,7 +410,7 @@ class HriRenderer final : public Renderer {
   /// value at the VHIP in this snapshot, if known (then a bound may answer without reads).
   bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
                                 double held_grad_norm, double voxel, const double* f_vhip) const;
-  /// tick_robust after the short way: the general path (updates, entries, the god-object
+  /// The robust tick after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
                     bool covered_free_vhip, bool have_f_hip, double f_hip, TickOut& out);
@@ -420,28 +419,23 @@ class HriRenderer final : public Renderer {
   /// motion) where the general path must run. Not for edit ticks nor the tool.
   bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
                   double& f_hip, TickOut& out);
-  /// quick_tick's free tick: the HIP's value, read unless the HIP stays in the outside cell
-  /// of the last read; false (the HIP's value in f_hip if it was read) where the general
-  /// path must run (an entry, a long step).
-  bool free_tick(const FieldView& field, const Vec3& hip, bool& have_f_hip, double& f_hip);
-  /// What quick_tick did.
-  enum class Quick : std::uint8_t {
-    kDone,     ///< the tick is done: `out` and the state are the full path's
-    kGeneral,  ///< tick_general must run, with `general`'s arguments (nothing of `out` written)
-    kFull,     ///< tick_robust_full must run (nothing changed)
-  };
-  /// tick_general's arguments from a quick tick.
-  struct GeneralArgs {
-    double voxel = 0, elapsed = 0, f_hip = 0;
-    bool have_f_hip = false;
-  };
-  /// tick_robust from the plain state (started, no fault, restart, edit, ramp, release nor
-  /// slew running, a point tool, the short way on): its prologue's arithmetic for that
+  /// The robust tick: from the plain state (started, no fault, restart, edit, ramp, release
+  /// nor slew running, a point tool, the short way on) its prologue's arithmetic for that
   /// state, then the contact tick with no update due or the free tick outside on a short
-  /// step, each point computed once (kDone), else the arguments of the tick_general that
-  /// must run (kGeneral). kFull, with nothing changed, where tick_robust's full path must
-  /// run (another state, a fault, an absurd HIP, a jump, a new snapshot version).
-  Quick quick_tick(const FieldView& field, const Vec3& hip, double dt_s, TickOut& out, GeneralArgs& general);
+  /// step, each point computed once; else the tick_general that must run (general_tick), and
+  /// where the full path must run (another state, a fault, an absurd HIP, a jump,
+  /// a new snapshot version) tick_robust_full, nothing changed before.
+  HriTick quick_tick(const FieldView& field, const Vec3& hip, double dt_s);
+  /// finish_robust's state after a quick contact tick: proxy `to`, ramp target `target`,
+  /// force sent `sent`, |F| sent `mag`.
+  void quick_contact_state(const Vec3& hip, const Vec3& to, const Vec3& target, const Vec3& sent, double mag);
+  /// finish_robust's state after a quick free tick (the HIP's value if it was read).
+  void quick_free_state(const Vec3& hip, bool have_f_hip, double f_hip);
+  /// quick_tick's contact tick where the force limit acts (a fault, saturation).
+  HriTick quick_contact_limited(const Vec3& hip, const Vec3& to, double g, Vec3 force, double mag);
+  /// quick_tick's free tick that reads the HIP's value (not in the outside cell of the last
+  /// read); tick_general where the general path must run (an entry, a long step).
+  HriTick free_read_tick(const FieldView& field, const Vec3& hip, double voxel, double dt, bool in_cell);
   /// tick_general after a quick tick handed over, and its HriTick.
   HriTick general_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool have_f_hip,
                        double f_hip);
@@ -451,7 +445,7 @@ class HriRenderer final : public Renderer {
   void filter_velocity(const Vec3& hip, double elapsed);
   /// The fault (non-finite |F|) and saturation rules of a robust tick's force.
   void limit_force(Vec3& force, double& mag, TickOut& out) const;
-  /// tick_robust's every tick: faults, restarts, edits, the tool, the short way, tick_general;
+  /// The robust tick's every tick: faults, restarts, edits, the tool, the short way, tick_general;
   /// plain_ set for the next tick.
   HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_robust_full's tick.

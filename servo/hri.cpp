@@ -1204,9 +1204,9 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
 [[gnu::always_inline]] inline HriTick HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s) {
   // The plain state: the robust tick's fault, restart, edit, ramp, release and slew branches
   // cannot act (each of those ticks takes the full path). In it after_fault_ is false,
-  // lost_s_, ramp_left_s_, release_left_s_ and recovery_ticks_left_ are 0 (each is set to 0
-  // where it ends), version_known_ is true where edits are tracked, and sliding_ is false
-  // (no friction): what the full path's prologue and finish_robust would set them to.
+  // lost_s_ is 0, none of ramp_left_s_, release_left_s_ and recovery_ticks_left_ is above 0
+  // (every reader tests that), version_known_ is true where edits are tracked, and sliding_
+  // is false (no friction): the full path's stores of them would change nothing.
   if (!plain_) return tick_robust_full(field, hip, dt_s);
   if (params_.edit_max_step_fraction > 0 && field.version() != field_version_) return tick_robust_full(field, hip, dt_s);
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
@@ -1225,7 +1225,8 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     return tick_robust_full(field, hip, dt_s);  // a release fade would start
   }
   // tick_robust_full's prologue for this state (version_skipped_ is read on an edit tick only,
-  // after note_version sets it; ramp_dt_s_ where a ramp can start: tick_general).
+  // after note_version sets it; ramp_dt_s_ where a ramp or a release fade can start:
+  // tick_general).
   edit_tick_ = false;
   filter_velocity(hip, elapsed);
   const Vec3& sp = field.grid().spacing_m;
@@ -1249,8 +1250,9 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     const bool push = !(m <= 0.0);
     const Vec3 force = push ? n * m : Vec3{};
     const double mag = push ? m : 0.0;
-    // limit_force acts (a fault, saturation): out of line.
-    if (!(mag <= params_.force_limit_n)) return quick_contact_limited(hip, to, g, force, mag);
+    // Out of line wherever limit_force could act: |F| at or above the limit, or not a
+    // number (an infinite |F| under an infinite limit is a fault too: not inf < inf).
+    if (!(mag < params_.force_limit_n)) return quick_contact_limited(hip, to, g, force, mag);
     quick_contact_state(hip, to, force, force, mag);
     TickOut out;
     out.contact = true;
@@ -1350,8 +1352,9 @@ bool HriRenderer::plain_state() const {
   return result(out, plane_);
 }
 
-// The robust tick is quick_tick, inlined: the virtual call is then the only call of a
-// common tick (a call to it added a call, a return and a copy of the HriTick to every tick).
+// The robust tick is quick_tick, inlined: a contact tick with no update due and a free
+// tick that reads nothing then make no call (a call to it added a call, a return and a copy
+// of the HriTick to every tick).
 HriTick HriRenderer::tick(const FieldView& field, const Vec3& hip, double dt_s) {
   return params_.variant == Variant::kPaper ? tick_paper(field, hip) : quick_tick(field, hip, dt_s);
 }

@@ -419,19 +419,20 @@ class HriRenderer final : public Renderer {
   /// motion) where the general path must run. Not for edit ticks nor the tool.
   bool short_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool& have_f_hip,
                   double& f_hip, TickOut& out);
-  /// The robust tick: from the plain state (started, no fault, restart, edit, ramp, release
-  /// nor slew running, a point tool, the short way on) its prologue's arithmetic for that
-  /// state, then the contact tick with no update due or the free tick outside on a short
-  /// step, each point computed once; else the tick_general that must run (general_tick), and
-  /// where the full path must run (another state, a fault, an absurd HIP, a jump,
-  /// a new snapshot version) tick_robust_full, nothing changed before.
+  /// The robust tick: from the plain state (plain_state()) its prologue's arithmetic for
+  /// that state, then the contact tick with no update due or the free tick outside on a
+  /// short step, each point computed once (the free tick's read and the force limit out of
+  /// line: free_read_tick, quick_contact_limited); else the tick_general that must run
+  /// (general_tick), and where the full path must run (another state, a fault, an absurd
+  /// HIP, a jump, a new snapshot version) tick_robust_full, nothing changed before.
   HriTick quick_tick(const FieldView& field, const Vec3& hip, double dt_s);
   /// finish_robust's state after a quick contact tick: proxy `to`, ramp target `target`,
   /// force sent `sent`, |F| sent `mag`.
   void quick_contact_state(const Vec3& hip, const Vec3& to, const Vec3& target, const Vec3& sent, double mag);
   /// finish_robust's state after a quick free tick (the HIP's value if it was read).
   void quick_free_state(const Vec3& hip, bool have_f_hip, double f_hip);
-  /// quick_tick's contact tick where the force limit acts (a fault, saturation).
+  /// quick_tick's contact tick where the force limit could act: |F| (mag) at or above
+  /// force_limit_n, or not a number (limit_force: a fault, saturation).
   HriTick quick_contact_limited(const Vec3& hip, const Vec3& to, double g, Vec3 force, double mag);
   /// quick_tick's free tick that reads the HIP's value (not in the outside cell of the last
   /// read); tick_general where the general path must run (an entry, a long step).
@@ -439,7 +440,10 @@ class HriRenderer final : public Renderer {
   /// tick_general after a quick tick handed over, and its HriTick.
   HriTick general_tick(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool have_f_hip,
                        double f_hip);
-  /// The state quick_tick covers: started, no fault, restart, edit, ramp, release nor slew running.
+  /// The state quick_tick covers: a configuration it covers (quick_ok_: the robust variant,
+  /// the short way, a point tool, no force shading nor friction, a finite reach^2), started,
+  /// no fault, restart, edit, ramp, release nor slew running, the snapshot version known
+  /// where edits are tracked.
   bool plain_state() const;
   /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
   void filter_velocity(const Vec3& hip, double elapsed);

@@ -190,11 +190,13 @@ TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
 
 // With no reach limit (max_reach_m = inf) a non-finite HIP is still a fault, from free
 // motion and from contact alike: the common tick's reach test cannot catch an infinite HIP
-// there (inf <= inf), so that tick must not run.
+// there (inf <= inf), so that tick must not run. No speed limit either (a jump would
+// catch it in contact) and an update every 5 ticks (the common contact tick can run).
 TEST(Hri, NonFiniteHipIsAFaultWithAnUnboundedReach) {
   const SampleField f = wall_field(kUp, kC);
-  HriParams p = params();
+  HriParams p = params(5);
   p.max_reach_m = std::numeric_limits<double>::infinity();
+  p.max_speed_m_s = std::numeric_limits<double>::infinity();
   const double inf = std::numeric_limits<double>::infinity();
   for (const bool contact : {false, true}) {
     HriRenderer r(p);
@@ -208,6 +210,29 @@ TEST(Hri, NonFiniteHipIsAFaultWithAnUnboundedReach) {
       r.tick(f, {0.016, 0.016, contact ? 0.009 : 0.011});
     }
   }
+}
+
+// A force that overflows to infinity is a fault (zero force sent) even with no force limit
+// (force_limit_n = inf, where inf <= inf): on a contact tick with no update due as on any
+// other. Stiffness 1e308 N/m and 1e6 device m per world m: 1e-7 m deep the force is
+// 1e307 N, 1e-4 m deep it overflows.
+TEST(Hri, AnInfiniteForceIsAFaultWithNoForceLimit) {
+  const SampleField f = wall_field(kUp, kC);
+  HriParams p = params(5);
+  p.stiffness_n_per_m = 1e308;
+  p.world_per_device = 1e-6;
+  p.force_limit_n = std::numeric_limits<double>::infinity();
+  p.max_speed_m_s = std::numeric_limits<double>::infinity();
+  p.recovery_time_s = 0;
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.011});
+  const HriTick first = r.tick(f, {0.016, 0.016, 0.0099999});
+  ASSERT_TRUE(first.contact && first.plane_update && !first.fault);
+  ASSERT_TRUE(std::isfinite(first.force_n.z) && first.force_n.z > 1e306);
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.0099});  // no update due (n = 5)
+  EXPECT_FALSE(t.plane_update);
+  EXPECT_TRUE(t.fault);
+  EXPECT_EQ(norm(t.force_n), 0.0);
 }
 
 TEST(Hri, InsideBelowConventionForSignedDistance) {

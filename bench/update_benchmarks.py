@@ -19,6 +19,7 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DEFAULT_BIN = os.path.join(ROOT, "build", "bin")
 
 # name -> (program in --bin, arguments, needs a display, lines kept (None: all)).
 BENCHES = {
@@ -142,9 +143,11 @@ def run_bench(name, bindir):
     if p.returncode != 0:
         tail = "\n".join(p.stderr.splitlines()[-5:])
         raise RuntimeError("%s: %s exited %d\n%s" % (name, " ".join(argv), p.returncode, tail))
-    head = ("%s to %s UTC; %s; load average before %s, after %s; commit %s;\n`%s`"
-            % (t0.strftime("%Y-%m-%d %H:%M"), t1.strftime("%H:%M"), machine(), load0, load1, commit(),
-               " ".join([prog] + args)))
+    span = t0.strftime("%Y-%m-%d %H:%M") + ("" if t1.strftime("%H:%M") == t0.strftime("%H:%M") else
+                                              t1.strftime("-%H:%M"))
+    built = "commit %s" % commit() if os.path.abspath(bindir) == DEFAULT_BIN else "programs from %s" % bindir
+    head = ("%s UTC; %s; load average before %s, after %s; %s;\n`%s`"
+            % (span, machine(), load0, load1, built, " ".join([prog] + args)))
     return "\n" + head + "\n\n" + to_markdown(p.stdout, keep) + "\n"
 
 
@@ -165,7 +168,7 @@ def write_atomic(path, text):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("names", nargs="*", help="blocks to refresh (default: all): " + ", ".join(BENCHES))
-    ap.add_argument("--bin", default=os.path.join(ROOT, "build", "bin"), help="folder of the built programs")
+    ap.add_argument("--bin", default=DEFAULT_BIN, help="folder of the built programs")
     ap.add_argument("--doc", default=os.path.join(ROOT, "docs", "benchmarks.md"), help="the file to rewrite")
     ap.add_argument("--list", action="store_true", help="print the names and their commands, run nothing")
     a = ap.parse_args()

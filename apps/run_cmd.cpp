@@ -21,7 +21,7 @@ namespace isotouch::app {
 namespace fs = std::filesystem;
 namespace {
 
-// `isotouch run --help` footer: the scene format in short (README, "Scenes", says more).
+// `isotouch run --help` footer: the scene format in short (docs/user-guide.md, "Scenes", gives every field).
 constexpr const char* kSceneHelp = R"(
 Scene file (JSON; unknown or repeated keys are errors; units are in the key names):
   {
@@ -35,7 +35,7 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "inside": "above",                          "above": value > isovalue is inside; "below"
     "servo":  {"stiffness_n_per_m": 800, "damping_n_s_per_m": 1.0, "plane_update_period": 5,
                "rate_hz": 1000, "force_limit_n": 3.3, "variant": "robust" | "paper", ...},
-                                                optional, like every section below; see README, Scenes
+                                                optional, like every section below; see docs/user-guide.md, Scenes
     "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
     "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
                "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},

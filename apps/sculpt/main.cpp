@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
   cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's");
   cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
       ->check(CLI::IsMember({"above", "below"}));
-  cli.add_option("--script", o.script, "input events to run (JSON, see apps/sculpt/input_script.h)")->check(CLI::ExistingFile);
+  cli.add_option("--script", o.script, "input events to run (JSON; docs/user-guide.md, Input scripts)")->check(CLI::ExistingFile);
   cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
   cli.add_option("--frames", o.frames, "exit 0 after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");

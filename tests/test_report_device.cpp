@@ -187,6 +187,21 @@ TEST(ReportDevice, TheIoThreadsAskForSchedFifoAndARefusalIsNamed) {
 }
 
 namespace {
+/// A device's input reports at about 1 kHz: the next one into `buf` (its size) once a
+/// millisecond has passed since the last, else 0.
+struct ReportClock {
+  std::uint32_t seq = 0;
+  std::chrono::steady_clock::time_point last{};
+  int report(std::span<std::uint8_t> buf) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last < std::chrono::milliseconds(1)) return 0;
+    last = now;
+    const auto b = input(++seq, 0.001);
+    std::copy(b.begin(), b.end(), buf.begin());
+    return int(b.size());
+  }
+};
+
 /// A link double with hidapi's hazard: every call frees and replaces one per-handle error
 /// string (a plain pointer, as in hidapi 0.13) and takes a while; a call that starts while
 /// another is in progress is counted (and ThreadSanitizer reports the string's race).
@@ -197,14 +212,7 @@ class OverlapLink final : public ReportLink {
   std::string open() override { return call([] { return std::string(); }); }
   void close() override {}
   int read(std::span<std::uint8_t> buf, int) override {
-    return call([&] {
-      const auto now = std::chrono::steady_clock::now();
-      if (now - last_report_ < std::chrono::milliseconds(1)) return 0;
-      last_report_ = now;
-      const auto b = input(++seq_, 0.001);
-      std::copy(b.begin(), b.end(), buf.begin());
-      return int(b.size());
-    });
+    return call([&] { return clock_.report(buf); });
   }
   bool write(std::span<const std::uint8_t>) override {
     return call([&] {
@@ -239,8 +247,7 @@ class OverlapLink final : public ReportLink {
   }
   std::atomic<bool> busy_{false};
   std::string* error_ = nullptr;
-  std::uint32_t seq_ = 0;
-  std::chrono::steady_clock::time_point last_report_{};
+  ReportClock clock_;
 };
 }  // namespace
 
@@ -250,9 +257,15 @@ TEST(ReportDevice, NoLinkCallOverlapsAnotherWhileReportsAndForcesFlow) {
   ReportDevice dev(std::move(owned), std::make_unique<V1Protocol>());
   dev.open();
   dev.enable_force(true);
-  // A servo's worth of forces for 300 ms: the writer sends while the reader reads.
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(300);
-  for (int k = 0; std::chrono::steady_clock::now() < end; ++k) {
+  // A servo's forces for 300 ms, and on until 300 went out and 100 reports came in (a
+  // loaded machine takes longer; 10 s at most): the writer sends while the reader reads.
+  const auto start = std::chrono::steady_clock::now();
+  auto more = [&] {
+    const auto t = std::chrono::steady_clock::now() - start;
+    if (t > std::chrono::seconds(10)) return false;
+    return t < std::chrono::milliseconds(300) || link.writes.load() <= 300 || dev.counters().reports <= 100;
+  };
+  for (int k = 0; more(); ++k) {
     dev.write_force_n(Vec3{0, 0, 0.001 * (k % 100)});
     std::this_thread::sleep_for(std::chrono::microseconds(100));
   }
@@ -272,12 +285,7 @@ class ReplugLink final : public ReportLink {
   void close() override {}
   int read(std::span<std::uint8_t> buf, int) override {
     if (unplug.exchange(false)) return -1;
-    const auto now = std::chrono::steady_clock::now();
-    if (now - last_ < std::chrono::milliseconds(1)) return 0;
-    last_ = now;
-    const auto b = input(++seq_, 0.001);
-    std::copy(b.begin(), b.end(), buf.begin());
-    return int(b.size());
+    return clock_.report(buf);
   }
   bool write(std::span<const std::uint8_t>) override { return true; }
   int get_feature(std::uint8_t, std::span<std::uint8_t> buf) override {
@@ -291,8 +299,7 @@ class ReplugLink final : public ReportLink {
   std::atomic<bool> unplug{false};
 
  private:
-  std::uint32_t seq_ = 0;
-  std::chrono::steady_clock::time_point last_{};
+  ReportClock clock_;
 };
 
 DeviceCaps known_caps() {

@@ -51,6 +51,7 @@ HapticDevice open_report(const std::string& kind, const std::string& arg, int fi
   }
   const servo::DeviceCaps c = dev->caps();
   d.description = dev->name() + " (" + c.name + ", " + num(c.native_rate_hz) + " Hz, max " + num(c.max_force_n) + " N)";
+  if (!dev->warning().empty()) d.description += "; warning: " + dev->warning();
   d.report = dev.get();
   d.io = std::move(dev);
   return d;

@@ -64,6 +64,12 @@ struct DeviceReading {
   std::uint32_t device_time_us = 0; ///< the device's clock when it sent the report [us] (wraps)
   /// Incremented when the link came back after a disconnect (the servo ramps the force in).
   std::uint32_t connection = 0;
+  /// The device says its force output is off (v1: force-enabled flag clear): what the host
+  /// sends now is not rendered and would step in when it is back on (the servo holds its
+  /// ramp at 0 meanwhile).
+  bool force_off = false;
+  /// The device's watchdog zeroed its force (no output report within DeviceCaps::watchdog_s).
+  bool watchdog_tripped = false;
 };
 
 /// A haptic device as the servo thread sees it. read(), read_position_m(), buttons() and

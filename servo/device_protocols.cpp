@@ -23,6 +23,8 @@ std::string V1Protocol::decode_input(std::span<const std::uint8_t> bytes, Device
   r.sequence = in.sequence;
   r.device_time_us = in.device_time_us;
   r.status = (in.flags & (hid::kFault | hid::kNotHomed)) ? DeviceStatus::kFault : DeviceStatus::kOk;
+  r.force_off = !(in.flags & hid::kForceEnabled);
+  r.watchdog_tripped = (in.flags & hid::kWatchdog) != 0;
   return {};
 }
 

@@ -14,7 +14,8 @@
 namespace isotouch::servo {
 
 /// isotouch protocol v1: capabilities from feature report 3, input report 1, output report 2.
-/// Input status flags: fault or not-homed -> DeviceStatus::kFault.
+/// Input status flags: fault or not-homed -> DeviceStatus::kFault; force enabled clear ->
+/// DeviceReading::force_off; watchdog -> DeviceReading::watchdog_tripped.
 class V1Protocol final : public DeviceProtocol {
  public:
   const char* name() const override { return "isotouch-v1"; }

@@ -22,7 +22,9 @@ struct HidInfo {
 /// if hidapi cannot start.
 std::vector<HidInfo> list_hid_devices();
 
-/// "hid:VID:PID[:SERIAL]" (hex IDs) or "hid:PATH" (/dev/hidrawN) as a link.
+/// "hid:VID:PID[:SERIAL]" (hex IDs) or "hid:PATH" (/dev/hidrawN) as a link. hidapi cannot
+/// wait for a report apart from reading it: ReportDevice polls (the default
+/// wait_readable(), kPollUs) and reads without waiting, so no call overlaps another.
 class HidLink final : public ReportLink {
  public:
   /// `path` non-empty: open by path; else by vid:pid and serial ("" = the first).

@@ -3,8 +3,10 @@
 #include <sys/prctl.h>
 #include <time.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
+#include <sstream>
 #include <stdexcept>
 
 #include "cpu_placement.h"
@@ -21,7 +23,45 @@ void sleep_ns(std::int64_t ns) {
   nanosleep(&ts, nullptr);
 }
 constexpr std::size_t kMaxReport = 256;
+
+std::string text(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+std::string text(const Vec3& v) {
+  std::ostringstream o;
+  o << '(' << v.x << ", " << v.y << ", " << v.z << ')';
+  return o.str();
+}
+bool same(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+/// "" if `now` is the device `then` described, else the first field that differs with both
+/// values (what the scene was checked against: name, force, workspace, stiffness, damping).
+std::string caps_difference(const DeviceCaps& then, const DeviceCaps& now) {
+  auto differs = [](const std::string& field, const std::string& a, const std::string& b) {
+    return field + " " + b + " differs from " + a + " at open";
+  };
+  if (now.name != then.name) return differs("name", "'" + then.name + "'", "'" + now.name + "'");
+  if (now.dof != then.dof) return differs("degrees of freedom", text(then.dof), text(now.dof));
+  if (now.max_force_n != then.max_force_n)
+    return differs("maximum force [N]", text(then.max_force_n), text(now.max_force_n));
+  if (!same(now.workspace_min_m, then.workspace_min_m))
+    return differs("workspace minimum [m]", text(then.workspace_min_m), text(now.workspace_min_m));
+  if (!same(now.workspace_max_m, then.workspace_max_m))
+    return differs("workspace maximum [m]", text(then.workspace_max_m), text(now.workspace_max_m));
+  if (now.max_stiffness_n_per_m != then.max_stiffness_n_per_m)
+    return differs("maximum stiffness [N/m]", text(then.max_stiffness_n_per_m), text(now.max_stiffness_n_per_m));
+  if (now.max_damping_n_s_per_m != then.max_damping_n_s_per_m)
+    return differs("maximum damping [N s/m]", text(then.max_damping_n_s_per_m), text(now.max_damping_n_s_per_m));
+  return {};
+}
 }  // namespace
+
+bool ReportLink::wait_readable(int timeout_ms) {
+  sleep_ns(std::min<std::int64_t>(std::int64_t(timeout_ms) * 1'000'000, kPollUs * 1'000LL));
+  return true;
+}
 
 ReportDevice::ReportDevice(std::unique_ptr<ReportLink> link, std::unique_ptr<DeviceProtocol> protocol,
                            ReportDeviceOptions options)
@@ -29,6 +69,7 @@ ReportDevice::ReportDevice(std::unique_ptr<ReportLink> link, std::unique_ptr<Dev
   DeviceReading r;
   r.status = DeviceStatus::kDisconnected;
   reading_.store(r);
+  last_read_ = r;
 }
 
 ReportDevice::~ReportDevice() { close(); }
@@ -40,6 +81,9 @@ void ReportDevice::open() {
     link_->close();
     throw std::runtime_error(link_->name() + ": " + e);
   }
+  if (!(caps_.watchdog_s > 0))
+    warning_ = link_->name() + ": " + caps_.name +
+               " has no watchdog (0 ms in its capabilities): if the host stops sending, its last force stays on";
   up_ = true;
   stop_ = false;
   reader_ = std::thread([this] { reader_loop(); });
@@ -77,6 +121,7 @@ LinkCounters ReportDevice::counters() const {
   c.reports = reports_.load(), c.garbage = garbage_.load(), c.gaps = gaps_.load();
   c.duplicates = duplicates_.load(), c.reordered = reordered_.load(), c.disconnects = disconnects_.load();
   c.reconnects = reconnects_.load(), c.writes = sent_.load(), c.write_errors = write_errors_.load();
+  c.watchdog_trips = watchdog_trips_.load(), c.busy_reads = long(reading_.misses());
   return c;
 }
 
@@ -112,9 +157,13 @@ void ReportDevice::link_down(const std::string& why) {
 bool ReportDevice::reconnect() {
   std::lock_guard lock(link_mu_);
   if (!link_->open().empty()) return false;
+  // The scene was checked against the capabilities read at open: another device is refused.
   DeviceCaps c;
-  if (!protocol_->handshake(*link_, c).empty()) {
+  std::string e = protocol_->handshake(*link_, c);
+  if (e.empty()) e = caps_difference(caps_, c);
+  if (!e.empty()) {
     link_->close();
+    note(link_->name() + ": the reconnected device is refused, the link stays down: " + e);
     return false;
   }
   up_ = true;
@@ -140,6 +189,12 @@ void ReportDevice::accept(const DeviceReading& in) {
     last_sequence_ = seq;
     have_sequence_ = true;
   }
+  if (in.watchdog_tripped && !tripped_) {
+    watchdog_trips_.fetch_add(1);
+    note(link_->name() + ": the device's watchdog zeroed its force (no output report within " +
+         text(caps_.watchdog_s * 1e3) + " ms)");
+  }
+  tripped_ = in.watchdog_tripped;
   DeviceReading r = in;
   r.received_ns = now_ns();
   r.connection = connection_;
@@ -163,6 +218,7 @@ std::string ReportDevice::realtime_note() const {
 }
 
 void ReportDevice::reader_loop() {
+  prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // a link without its own wait sleeps kPollUs
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   std::array<std::uint8_t, kMaxReport> cmd{};
@@ -172,7 +228,14 @@ void ReportDevice::reader_loop() {
       if (!reconnect()) sleep_ns(retry_ns);
       continue;
     }
-    const int n = link_->read(buf, 20);
+    // Wait outside the lock, read without waiting inside it: every link call is serialized
+    // and the writer waits for a read of what is already there, never for a timeout.
+    if (!link_->wait_readable(20)) continue;  // the servo judges staleness from received_ns
+    int n = 0;
+    {
+      std::lock_guard lock(link_mu_);
+      n = link_->read(buf, 0);
+    }
     if (n < 0) {
       link_down("read failed or end of stream");
       continue;

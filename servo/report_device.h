@@ -19,6 +19,9 @@ namespace isotouch::servo {
 
 /// A byte link to a device: one whole report per read or write. Used by the device's
 /// reader and writer threads (never the servo's). Only the reader thread opens and closes.
+/// ReportDevice never runs two of open, close, read, write and get_feature at once (hidapi
+/// keeps state per handle, its error string, that both hid_read and hid_write free and
+/// replace); only wait_readable() runs beside them.
 class ReportLink {
  public:
   virtual ~ReportLink() = default;
@@ -30,6 +33,12 @@ class ReportLink {
   /// One report into `buf`, waiting at most `timeout_ms`: its size; 0 on timeout; -1 if
   /// the link is down (EOF, unplugged).
   virtual int read(std::span<std::uint8_t> buf, int timeout_ms) = 0;
+  /// Waits at most `timeout_ms` for a report to read without reading it, touching nothing
+  /// the other calls use (it runs beside write()): false on timeout; true if one may be
+  /// there or the link is down (read() then says which). Default, for links that cannot
+  /// wait apart from a read (hidapi): sleeps kPollUs and returns true.
+  virtual bool wait_readable(int timeout_ms);
+  static constexpr int kPollUs = 50;  ///< the default wait [us]: a report waits this long at most
   /// Sends one report (byte 0: the report ID, 0 for devices without IDs). False if down.
   virtual bool write(std::span<const std::uint8_t> report) = 0;
   /// Reads feature report `id` into `buf` (byte 0 = id): its size, or -1.
@@ -72,6 +81,8 @@ struct LinkCounters {
   long reconnects = 0;  ///< times it came back
   long writes = 0;      ///< output reports sent
   long write_errors = 0;
+  long watchdog_trips = 0;  ///< input reports that raised the device's watchdog flag (its force was zeroed)
+  long busy_reads = 0;   ///< read()s that found a store in progress too long and kept the last reading
 };
 
 struct ReportDeviceOptions {
@@ -107,7 +118,12 @@ class ReportDevice final : public HapticDeviceIO {
   // HapticDeviceIO (servo thread: loads and stores of latest-value cells only).
   Vec3 read_position_m() override { return read().position_m; }
   std::uint32_t buttons() override { return read().buttons; }
-  DeviceReading read() override { return reading_.load(); }
+  /// The newest reading, or the last one this thread read if the reader thread was
+  /// preempted inside a store (counted: LinkCounters::busy_reads). One thread (the servo).
+  DeviceReading read() override {
+    reading_.load(last_read_);
+    return last_read_;
+  }
   void write_force_n(const Vec3& force_n) override;
   void answer(std::uint64_t sequence) override { answers_ = sequence; }
   DeviceCaps caps() const override;
@@ -117,6 +133,8 @@ class ReportDevice final : public HapticDeviceIO {
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
   std::string last_refusal() const;  ///< why the last refused report was refused ("" none)
   std::string name() const { return link_->name(); }
+  /// "" or a warning about the device's capabilities (no watchdog), valid after open().
+  std::string warning() const { return warning_; }
   /// "" or why the I/O threads did not get SCHED_FIFO (valid after open()).
   std::string realtime_note() const;
 
@@ -142,15 +160,18 @@ class ReportDevice final : public HapticDeviceIO {
   LatestValue<DeviceReading> reading_;
   LatestValue<Output> output_;
   std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
+  DeviceReading last_read_;                 // servo thread only: read()'s fallback
   std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
-  mutable std::mutex link_mu_;              // open/close vs write (not the servo)
+  bool tripped_ = false;                    // reader thread: the last report had the watchdog flag
+  mutable std::mutex link_mu_;              // every link call but wait_readable (not the servo)
   mutable std::mutex note_mu_;
   std::string last_error_, last_refusal_, realtime_note_;
+  std::string warning_;  // set by open() before the threads start
   std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
-      reconnects_{0}, sent_{0}, write_errors_{0};
+      reconnects_{0}, sent_{0}, write_errors_{0}, watchdog_trips_{0};
   std::thread reader_, writer_;
 };
 

@@ -192,6 +192,8 @@ void ServoThread::loop() {
       rec.version = field->version;
       const DeviceReading d = device_.read();
       if (first || d.connection != connection) ramp_start = -1;  // enabled, or reconnected
+      // The device's force is off (its watchdog tripped): ramp in from 0 when it is back on.
+      if ((d.force_off || d.watchdog_tripped) && ramp_start >= 0) ramp_start = t;
       first = false;
       connection = d.connection;
       rec.buttons = d.buttons;

@@ -43,6 +43,12 @@ int SocketLink::read(std::span<std::uint8_t> buf, int timeout_ms) {
   return -1;  // 0 bytes: the emulator closed the connection
 }
 
+bool SocketLink::wait_readable(int timeout_ms) {
+  if (fd_ < 0) return true;  // down: read() says so
+  pollfd p{fd_, POLLIN, 0};
+  return ::poll(&p, 1, timeout_ms) != 0;  // ready, hung up or an error: read() tells
+}
+
 bool SocketLink::write(std::span<const std::uint8_t> report) {
   if (fd_ < 0) return false;
   return ::send(fd_, report.data(), report.size(), MSG_NOSIGNAL | MSG_DONTWAIT) == ssize_t(report.size());

@@ -19,6 +19,8 @@ class SocketLink final : public ReportLink {
   std::string open() override;
   void close() override;
   int read(std::span<std::uint8_t> buf, int timeout_ms) override;
+  /// poll() on the socket: the kernel's, safe beside a send().
+  bool wait_readable(int timeout_ms) override;
   bool write(std::span<const std::uint8_t> report) override;
   int get_feature(std::uint8_t id, std::span<std::uint8_t> buf) override;
 

@@ -4,6 +4,7 @@
 #include <poll.h>
 #include <sys/prctl.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
@@ -56,7 +57,14 @@ void DeviceEmulator::listen() {
                              std::to_string(sizeof(addr.sun_path) - 1) + " bytes");
   addr.sun_family = AF_UNIX;
   std::memcpy(addr.sun_path, cfg_.socket_path.c_str(), cfg_.socket_path.size() + 1);
-  ::unlink(cfg_.socket_path.c_str());
+  // A stale socket (an emulator that was killed) is replaced; anything else is kept.
+  struct stat st {};
+  if (::lstat(cfg_.socket_path.c_str(), &st) == 0) {
+    if (!S_ISSOCK(st.st_mode))
+      throw std::runtime_error("device emulator: " + cfg_.socket_path +
+                               " exists and is not a socket: not replaced (choose another socket path)");
+    ::unlink(cfg_.socket_path.c_str());
+  }
   listen_fd_ = ::socket(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
   if (listen_fd_ < 0 || ::bind(listen_fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0 ||
       ::listen(listen_fd_, 1) != 0) {

@@ -39,7 +39,7 @@ struct PathPoint {
 };
 
 struct EmuConfig {
-  std::string socket_path;        ///< created (an old socket file there is replaced)
+  std::string socket_path;        ///< created (a stale socket there is replaced; anything else is refused)
   double rate_hz = 1000;          ///< the device's report rate, 1 to 8 kHz [Hz]
   double seconds = 0;             ///< run this long; 0: until stop()
   SimDeviceParams device;         ///< mass, damping, hand spring (force_max_n: the actuator)

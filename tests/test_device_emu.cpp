@@ -5,11 +5,16 @@
 // reconnect -> the force ramps in again; sequence faults counted.
 #include <gtest/gtest.h>
 
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cstring>
+#include <fstream>
 #include <memory>
 #include <thread>
 
@@ -195,4 +200,98 @@ TEST(DeviceEmu, SequenceFaultsAreCounted) {
   EXPECT_GT(rig.link.duplicates, 5);
   EXPECT_GT(rig.link.reordered, 5);
   EXPECT_GT(rig.forced_ticks(), 200);
+}
+
+TEST(DeviceEmu, ListenRefusesAnythingButASocketAtItsPathAndReplacesAStaleSocket) {
+  const std::string path = "/tmp/isotouch-test-emu-precious-" + std::to_string(::getpid()) + ".txt";
+  {
+    std::ofstream f(path);
+    f << "precious\n";
+  }
+  EmuConfig cfg;
+  cfg.socket_path = path;
+  try {
+    DeviceEmulator(cfg).listen();
+    FAIL() << "listened over a regular file";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(path + " exists and is not a socket"), std::string::npos) << e.what();
+  }
+  std::ifstream in(path);
+  std::string line;
+  EXPECT_TRUE(std::getline(in, line) && line == "precious") << "the file was removed or changed";
+  ::unlink(path.c_str());
+
+  // A socket left behind by a killed emulator is replaced: a host connects to the new one.
+  const std::string sock = "/tmp/isotouch-test-emu-stale-" + std::to_string(::getpid()) + ".sock";
+  {  // bound, then closed: the socket file stays, as a killed emulator leaves it
+    sockaddr_un addr{};
+    addr.sun_family = AF_UNIX;
+    std::memcpy(addr.sun_path, sock.c_str(), sock.size() + 1);
+    ::unlink(sock.c_str());
+    const int fd = ::socket(AF_UNIX, SOCK_SEQPACKET, 0);
+    ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)), 0);
+    ::close(fd);
+    struct stat st {};
+    ASSERT_EQ(::lstat(sock.c_str(), &st), 0);
+    ASSERT_TRUE(S_ISSOCK(st.st_mode));
+  }
+  cfg.socket_path = sock;
+  DeviceEmulator emu(cfg);
+  EXPECT_NO_THROW(emu.listen());
+  SocketLink link(sock);
+  EXPECT_EQ(link.open(), "");
+}
+
+TEST(DeviceEmu, AnEmulatorRestartedWithOtherCapabilitiesIsRefusedUntilTheKnownOneIsBack) {
+  EmuConfig cfg;
+  cfg.socket_path = "/tmp/isotouch-test-emu-caps-" + std::to_string(::getpid()) + ".sock";
+  cfg.caps.name = "test-emu";
+  cfg.caps.max_force_n = 10;
+  cfg.caps.watchdog_s = 0.05;
+  struct Running {  // an emulator on its own thread until stop()
+    std::unique_ptr<DeviceEmulator> emu;
+    std::thread thread;
+    EmuStats stats;
+    explicit Running(const EmuConfig& c) : emu(std::make_unique<DeviceEmulator>(c)) {
+      emu->listen();
+      thread = std::thread([this] { stats = emu->run(); });
+    }
+    EmuStats stop() {
+      emu->stop();
+      thread.join();
+      emu.reset();  // the socket is gone
+      return stats;
+    }
+  };
+  auto wait_for = [](auto done) {
+    for (int i = 0; i < 2000 && !done(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  };
+  ReportDeviceOptions opt;
+  opt.reconnect_interval_s = 0.01;
+  ReportDevice dev(std::make_unique<SocketLink>(cfg.socket_path), std::make_unique<V1Protocol>(), opt);
+  {
+    Running first(cfg);
+    dev.open();
+    dev.enable_force(true);
+    first.stop();
+  }
+  wait_for([&] { return dev.counters().disconnects == 1; });
+  EmuConfig other = cfg;
+  other.caps.max_force_n = 40;  // a stronger device on the same socket
+  Running second(other);
+  wait_for([&] { return dev.last_error().find("refused") != std::string::npos; });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const EmuStats refused = second.stop();
+  EXPECT_NE(dev.last_error().find("the reconnected device is refused, the link stays down: maximum force [N] 40 differs from 10"),
+            std::string::npos)
+      << dev.last_error();
+  EXPECT_EQ(dev.counters().reconnects, 0);
+  EXPECT_GE(refused.connections, 1);          // it was asked for its capabilities ...
+  EXPECT_EQ(refused.outputs_received, 0);     // ... and never sent a force
+  EXPECT_EQ(dev.read().status, DeviceStatus::kDisconnected);
+  Running known(cfg);  // the device the scene was checked against
+  wait_for([&] { return dev.counters().reconnects == 1; });
+  EXPECT_EQ(dev.counters().reconnects, 1);
+  dev.close();
+  EXPECT_GT(known.stop().outputs_received, 0);
 }

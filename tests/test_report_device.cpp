@@ -185,3 +185,224 @@ TEST(ReportDevice, TheIoThreadsAskForSchedFifoAndARefusalIsNamed) {
   if (code == isotouch::test::kCouldNotDrop) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
   EXPECT_EQ(code, 0) << "1: the note does not name the link and the refusal, 2: not one line, 3: FIFO, 11: threw, -1: crashed";
 }
+
+namespace {
+/// A device's input reports at about 1 kHz: the next one into `buf` (its size) once a
+/// millisecond has passed since the last, else 0.
+struct ReportClock {
+  std::uint32_t seq = 0;
+  std::chrono::steady_clock::time_point last{};
+  int report(std::span<std::uint8_t> buf) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last < std::chrono::milliseconds(1)) return 0;
+    last = now;
+    const auto b = input(++seq, 0.001);
+    std::copy(b.begin(), b.end(), buf.begin());
+    return int(b.size());
+  }
+};
+
+/// A link double with hidapi's hazard: every call frees and replaces one per-handle error
+/// string (a plain pointer, as in hidapi 0.13) and takes a while; a call that starts while
+/// another is in progress is counted (and ThreadSanitizer reports the string's race).
+/// Reports arrive at about 1 kHz; wait_readable() is the default (it may overlap).
+class OverlapLink final : public ReportLink {
+ public:
+  std::string name() const override { return "overlap"; }
+  std::string open() override { return call([] { return std::string(); }); }
+  void close() override {}
+  int read(std::span<std::uint8_t> buf, int) override {
+    return call([&] { return clock_.report(buf); });
+  }
+  bool write(std::span<const std::uint8_t>) override {
+    return call([&] {
+      writes.fetch_add(1);
+      return true;
+    });
+  }
+  int get_feature(std::uint8_t, std::span<std::uint8_t> buf) override {
+    return call([&] {
+      DeviceCaps c;
+      c.watchdog_s = 0.05;
+      const auto b = hid::encode_caps(c);
+      std::copy(b.begin(), b.end(), buf.begin());
+      return int(b.size());
+    });
+  }
+  ~OverlapLink() override { delete error_; }
+  std::atomic<long> overlaps{0}, writes{0};
+
+ private:
+  template <class F>
+  auto call(F f) -> decltype(f()) {
+    if (busy_.exchange(true)) overlaps.fetch_add(1);
+    delete error_;  // hid_read_timeout and hid_write both start so
+    error_ = new std::string("no error");
+    const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(30);
+    while (std::chrono::steady_clock::now() < until) {
+    }
+    auto r = f();
+    busy_.store(false);
+    return r;
+  }
+  std::atomic<bool> busy_{false};
+  std::string* error_ = nullptr;
+  ReportClock clock_;
+};
+}  // namespace
+
+TEST(ReportDevice, NoLinkCallOverlapsAnotherWhileReportsAndForcesFlow) {
+  auto owned = std::make_unique<OverlapLink>();
+  OverlapLink& link = *owned;
+  ReportDevice dev(std::move(owned), std::make_unique<V1Protocol>());
+  dev.open();
+  dev.enable_force(true);
+  // A servo's forces for 300 ms, and on until 300 went out and 100 reports came in (a
+  // loaded machine takes longer; 10 s at most): the writer sends while the reader reads.
+  const auto start = std::chrono::steady_clock::now();
+  auto more = [&] {
+    const auto t = std::chrono::steady_clock::now() - start;
+    if (t > std::chrono::seconds(10)) return false;
+    return t < std::chrono::milliseconds(300) || link.writes.load() <= 300 || dev.counters().reports <= 100;
+  };
+  for (int k = 0; more(); ++k) {
+    dev.write_force_n(Vec3{0, 0, 0.001 * (k % 100)});
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  }
+  dev.close();
+  EXPECT_GT(dev.counters().reports, 100);
+  EXPECT_GT(link.writes.load(), 300);
+  EXPECT_EQ(link.overlaps.load(), 0) << "a read and a write (or open, close) ran at once";
+}
+
+namespace {
+/// A device that reports at about 1 kHz, drops its link when told and comes back with the
+/// capabilities the test set (another device plugged in).
+class ReplugLink final : public ReportLink {
+ public:
+  std::string name() const override { return "replug"; }
+  std::string open() override { return {}; }
+  void close() override {}
+  int read(std::span<std::uint8_t> buf, int) override {
+    if (unplug.exchange(false)) return -1;
+    return clock_.report(buf);
+  }
+  bool write(std::span<const std::uint8_t>) override { return true; }
+  int get_feature(std::uint8_t, std::span<std::uint8_t> buf) override {
+    std::lock_guard lock(mu);
+    const auto b = hid::encode_caps(caps);
+    std::copy(b.begin(), b.end(), buf.begin());
+    return int(b.size());
+  }
+  std::mutex mu;
+  DeviceCaps caps;
+  std::atomic<bool> unplug{false};
+
+ private:
+  ReportClock clock_;
+};
+
+DeviceCaps known_caps() {
+  DeviceCaps c;
+  c.name = "known";
+  c.max_force_n = 4;
+  c.max_stiffness_n_per_m = 2000;
+  c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
+  c.workspace_max_m = Vec3{0.1, 0.1, 0.1};
+  c.watchdog_s = 0.05;
+  return c;
+}
+}  // namespace
+
+TEST(ReportDevice, AReconnectedDeviceWithOtherCapabilitiesIsRefusedNamingTheField) {
+  struct Case {
+    const char* field;  // what last_error must say
+    void (*change)(DeviceCaps&);
+  };
+  const Case cases[] = {
+      {"name 'other' differs from 'known' at open", [](DeviceCaps& c) { c.name = "other"; }},
+      {"maximum force [N] 8 differs from 4 at open", [](DeviceCaps& c) { c.max_force_n = 8; }},
+      {"workspace maximum [m] (0.1, 0.2, 0.1) differs from (0.1, 0.1, 0.1) at open",
+       [](DeviceCaps& c) { c.workspace_max_m.y = 0.2; }},
+      {"maximum stiffness [N/m] 5000 differs from 2000 at open", [](DeviceCaps& c) { c.max_stiffness_n_per_m = 5000; }},
+  };
+  ReportDeviceOptions opt;
+  opt.reconnect_interval_s = 0.002;
+  for (const Case& k : cases) {
+    auto owned = std::make_unique<ReplugLink>();
+    ReplugLink& link = *owned;
+    link.caps = known_caps();
+    ReportDevice dev(std::move(owned), std::make_unique<V1Protocol>(), opt);
+    dev.open();
+    {
+      std::lock_guard lock(link.mu);
+      k.change(link.caps);  // another device on the same port
+    }
+    link.unplug = true;
+    wait_for([&] { return dev.last_error().find("refused") != std::string::npos; });
+    EXPECT_NE(dev.last_error().find("replug: the reconnected device is refused, the link stays down: " + std::string(k.field)),
+              std::string::npos)
+        << dev.last_error();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // several more attempts
+    EXPECT_EQ(dev.counters().reconnects, 0) << k.field;
+    EXPECT_EQ(dev.read().status, DeviceStatus::kDisconnected) << k.field;
+    {
+      std::lock_guard lock(link.mu);
+      link.caps = known_caps();  // the device the scene was checked against is back
+    }
+    wait_for([&] { return dev.counters().reconnects == 1; });
+    EXPECT_EQ(dev.counters().reconnects, 1) << k.field;
+    dev.close();
+  }
+}
+
+namespace {
+std::vector<std::uint8_t> input_flags(std::uint32_t seq, std::uint16_t flags) {
+  hid::InputReport r;
+  r.sequence = seq;
+  r.flags = flags;
+  const auto b = hid::encode(r);
+  return {b.begin(), b.end()};
+}
+}  // namespace
+
+TEST(ReportDevice, TheDeviceForceFlagsReachTheServoAndWatchdogTripsAreCounted) {
+  Script s;
+  s.in = {input_flags(1, hid::kForceEnabled), input_flags(2, hid::kWatchdog), input_flags(3, hid::kWatchdog),
+          input_flags(4, hid::kForceEnabled)};
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
+  dev.open();
+  wait_for([&] { return dev.counters().reports >= 4; });
+  EXPECT_EQ(dev.counters().watchdog_trips, 1);  // reports 2 and 3: one trip
+  EXPECT_NE(dev.last_error().find("scripted: the device's watchdog zeroed its force (no output report within 0 ms)"),
+            std::string::npos)
+      << dev.last_error();
+  DeviceReading r = dev.read();
+  EXPECT_FALSE(r.force_off);
+  EXPECT_FALSE(r.watchdog_tripped);
+  {
+    std::lock_guard lock(s.mu);
+    s.in = {input_flags(5, hid::kWatchdog)};
+  }
+  wait_for([&] { return dev.counters().reports >= 5; });
+  r = dev.read();
+  EXPECT_TRUE(r.force_off);  // the enabled flag is clear
+  EXPECT_TRUE(r.watchdog_tripped);
+  EXPECT_EQ(dev.counters().watchdog_trips, 2);
+  dev.close();
+}
+
+TEST(ReportDevice, ADeviceWithoutAWatchdogIsWarnedAbout) {
+  Script s;
+  s.in = {input(1, 0.001)};
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());  // watchdog 0 ms
+  dev.open();
+  EXPECT_NE(dev.warning().find("scripted: scripted has no watchdog (0 ms in its capabilities)"), std::string::npos)
+      << dev.warning();
+  dev.close();
+  auto link = std::make_unique<ReplugLink>();
+  link->caps = known_caps();  // a 50 ms watchdog
+  ReportDevice with(std::move(link), std::make_unique<V1Protocol>());
+  with.open();
+  EXPECT_EQ(with.warning(), "");
+}

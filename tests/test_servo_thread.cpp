@@ -259,6 +259,7 @@ struct SteeredDevice final : HapticDeviceIO {
   std::atomic<int> status{int(DeviceStatus::kOk)};
   std::atomic<double> z{0.0};
   std::atomic<std::uint32_t> connection{0};
+  std::atomic<bool> watchdog_tripped{false};
   std::atomic<std::int64_t> last_ns{0};
   DeviceCaps c;
   Vec3 read_position_m() override { return read().position_m; }
@@ -272,6 +273,7 @@ struct SteeredDevice final : HapticDeviceIO {
     r.status = DeviceStatus(status.load());
     r.position_m = Vec3{0, 0, z.load()};
     r.connection = connection.load();
+    r.watchdog_tripped = r.force_off = watchdog_tripped.load();
     return r;
   }
 };
@@ -487,4 +489,28 @@ TEST(ServoSafety, ForceIsClampedToTheDeviceMaximum) {
   for (std::size_t i = 0; i < clamped.log.n.load(); ++i) EXPECT_LE(clamped.log.force[i], 0.25 + 1e-12);
   EXPECT_NEAR(clamped.log.force[clamped.log.n.load() - 1], 0.25, 1e-12);
   EXPECT_GT(clamped.servo->device_counters().clamped, 20);
+}
+
+TEST(ServoSafety, AfterTheDeviceWatchdogTrippedTheForceRampsInFromZero) {
+  SafetyRig rig(0.05);
+  rig.servo->start();
+  const auto full = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (rig.log.n.load() < 2 || (rig.log.force[rig.log.n.load() - 1] < 1.0 && std::chrono::steady_clock::now() < full))
+    rig.run_ticks(1);
+  rig.dev.watchdog_tripped = true;  // the device zeroed its force and says so
+  rig.run_ticks(30);
+  const std::size_t tripped = rig.log.n.load();
+  rig.dev.watchdog_tripped = false;  // the host's reports reached it again: force back on
+  rig.run_ticks(100);
+  rig.servo->stop();
+  const std::size_t n = rig.log.n.load();
+  ASSERT_GT(n, tripped + 80);
+  // The ticks that read the tripped flag sent nothing (one tick may straddle the change).
+  for (std::size_t i = tripped - 25; i < tripped; ++i) EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
+  // Back on: the force starts near 0 and grows over the 50 ms ramp to the full 1 N.
+  EXPECT_LT(rig.log.force[tripped + 1], 0.1);
+  std::size_t between = 0;
+  for (std::size_t i = tripped + 1; i < n; ++i) between += rig.log.force[i] > 0.0 && rig.log.force[i] < 1.0;
+  EXPECT_GT(between, 5u);
+  EXPECT_EQ(rig.log.force[n - 1], 1.0);
 }

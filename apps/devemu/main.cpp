@@ -37,7 +37,7 @@ int main(int argc, char** argv) {
   double half_mm = 150, max_force = 10, watchdog_ms = 50;
   std::vector<double> hold{0, 0, 0};
   std::string path_csv;
-  cli.add_option("--socket", c.socket_path, "Unix-domain socket to listen on (replaced if it exists)")->required();
+  cli.add_option("--socket", c.socket_path, "Unix-domain socket to listen on (a stale socket there is replaced; any other file is refused)")->required();
   cli.add_option("--rate", c.rate_hz, "Report rate [Hz]")->capture_default_str()->check(CLI::Range(1.0, 8000.0));
   cli.add_option("--seconds", c.seconds, "Run this long, 0 = until SIGINT/SIGTERM")->capture_default_str()->check(CLI::NonNegativeNumber);
   cli.add_option("--path", path_csv, "Hand path CSV: header, then t_s,x_m,y_m,z_m rows (device frame), from each connection, looped (isotouch run SCENE --hand-path FILE writes one)");

@@ -171,6 +171,49 @@ TEST(Hri, ForceAboveTheLimitSaturatesKeepingItsDirection) {
   EXPECT_NEAR(dot(t.force_n / norm(t.force_n), m), 1.0, 1e-9);
 }
 
+// Every path that limits |F| (the general tick, the common contact tick with no update due,
+// the paper's Figure 2) saturates a force 1 % above the limit to the limit, its direction
+// kept, and passes one 1 % below it unchanged: a limit acting only at twice its value
+// passes a test that presses far past it.
+TEST(Hri, ForceJustAboveTheLimitSaturatesJustBelowPasses) {
+  const Vec3 m = Vec3{1, 1, 1} / std::sqrt(3.0);
+  const SampleField f = wall_field(m, kC);
+  struct Path {
+    const char* name;
+    Variant variant;
+    int n;           // plane update period
+    double depth_m;  // the tick under test; deeper than the 1 mm entry: a tick with no update due
+  };
+  for (const Path path : {Path{"general tick", Variant::kRobust, 1, 0.001},
+                          Path{"common contact tick", Variant::kRobust, 5, 0.0011},
+                          Path{"paper", Variant::kPaper, 1, 0.001}})
+    for (const double over : {1.01, 1 / 1.01}) {
+      HriParams p = params(path.n);  // no damping: |F| = K d
+      p.variant = path.variant;
+      const double k_d = p.stiffness_n_per_m * path.depth_m;
+      p.force_limit_n = k_d / over;
+      HriRenderer r(p);
+      r.tick(f, kC + m * 0.001);
+      HriTick t = r.tick(f, kC - m * 0.001);
+      ASSERT_TRUE(t.contact && t.plane_update) << path.name;
+      if (path.depth_m != 0.001) {
+        t = r.tick(f, kC - m * path.depth_m);
+        ASSERT_TRUE(t.contact) << path.name;
+        ASSERT_FALSE(t.plane_update) << path.name;
+      }
+      const double mag = norm(t.force_n);
+      if (over > 1) {
+        EXPECT_TRUE(t.saturated) << path.name;
+        EXPECT_NEAR(mag, p.force_limit_n, 1e-12) << path.name << ": K d = " << k_d << " N";
+        EXPECT_LE(mag, p.force_limit_n) << path.name;
+      } else {
+        EXPECT_FALSE(t.saturated) << path.name;
+        EXPECT_NEAR(mag, k_d, 1e-5) << path.name;
+      }
+      EXPECT_NEAR(dot(t.force_n / mag, m), 1.0, 1e-9) << path.name;
+    }
+}
+
 TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
   const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());
@@ -231,6 +274,23 @@ TEST(Hri, AnInfiniteForceIsAFaultWithNoForceLimit) {
   ASSERT_TRUE(std::isfinite(first.force_n.z) && first.force_n.z > 1e306);
   const HriTick t = r.tick(f, {0.016, 0.016, 0.0099});  // no update due (n = 5)
   EXPECT_FALSE(t.plane_update);
+  EXPECT_TRUE(t.fault);
+  EXPECT_EQ(norm(t.force_n), 0.0);
+}
+
+// The same in the paper's Figure 2: a force that overflows to infinity (1e308 N/m, 1e6
+// device m per world m, 0.1 mm deep) is a fault, zero force sent.
+TEST(Hri, AnInfiniteForceIsAFaultInThePaperVariant) {
+  const SampleField f = wall_field(kUp, kC);
+  HriParams p = params(5);
+  p.variant = Variant::kPaper;
+  p.stiffness_n_per_m = 1e308;
+  p.world_per_device = 1e-6;
+  p.force_limit_n = std::numeric_limits<double>::infinity();
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.011});
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.0099});
+  EXPECT_TRUE(t.contact);
   EXPECT_TRUE(t.fault);
   EXPECT_EQ(norm(t.force_n), 0.0);
 }

@@ -57,6 +57,15 @@ m hri-limit-paper-at-2x     $H $'} else {\n    out.saturated = saturate(force, p
                                $'} else {\n    out.saturated = saturate(force, 2 * params_.force_limit_n);' $T "$F"
 m hri-nonfinite-robust      $H $'if (!std::isfinite(mag)) {\n    force = {};' $'if (false) {\n    force = {};' $T "$F"
 m hri-nonfinite-paper       $H 'if (!std::isfinite(norm(force))) {' 'if (false) {' $T "$F"
+m hri-reach-robust-at-2x    $H 'const bool absurd = sane && dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m;' \
+                               'const bool absurd = sane && dot(from_centre, from_centre) > 4 * params_.max_reach_m * params_.max_reach_m;' $T "$F"
+m hri-reach-quick-at-2x     $H 'if (!(dot(from_centre, from_centre) <= params_.max_reach_m * params_.max_reach_m))' \
+                               'if (!(dot(from_centre, from_centre) <= 4 * params_.max_reach_m * params_.max_reach_m))' $T "$F"
+m hri-reach-paper-at-2x     $H 'const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > params_.max_reach_m;' \
+                               'const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > 2 * params_.max_reach_m;' $T "$F"
+m hri-speed-robust-at-2x    $H 'return dot(moved, moved) > max_move * max_move;' 'return dot(moved, moved) > 4 * max_move * max_move;' $T "$F"
+m hri-speed-quick-at-2x     $H 'if (dot(moved, moved) > max_move * max_move) return tick_robust_full(' \
+                               'if (dot(moved, moved) > 4 * max_move * max_move) return tick_robust_full(' $T "$F"
 m core-saturate-at-2x       core/vec3.h 'if (!(m > limit)) return false;' 'if (!(m > 2 * limit)) return false;' $T "$F"
 m hri-edit-step-2x          $H 'const double step = params_.edit_max_step_fraction * params_.force_limit_n;' \
                                'const double step = 2 * params_.edit_max_step_fraction * params_.force_limit_n;' test_hri_edit 'HriEdit.*'

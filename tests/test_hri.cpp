@@ -214,6 +214,55 @@ TEST(Hri, ForceJustAboveTheLimitSaturatesJustBelowPasses) {
     }
 }
 
+// A HIP 1 % farther from the volume centre than max_reach_m is a fault (zero force), one
+// 1 % nearer is not: from free motion and from a held contact (the common contact tick's
+// own test), robust and paper. The HIPs lie on the vertical through the centre, the floor
+// 5.5 mm below it; every tick before the one under test is within reach.
+TEST(Hri, AHipJustBeyondTheReachIsAFault) {
+  const SampleField f = wall_field(kUp, kC);
+  const Vec3 c = f.grid.centre_m();
+  const Vec3 outside{c.x, c.y, 0.011}, in{c.x, c.y, 0.009};
+  for (const Variant variant : {Variant::kRobust, Variant::kPaper})
+    for (const bool contact : {false, true})
+      for (const double over : {1.01, 1 / 1.01}) {
+        // The tick under test: 0.1 mm deeper, or free above the centre as far from it.
+        const Vec3 far = contact ? Vec3{c.x, c.y, 0.0089} : Vec3{c.x, c.y, c.z + (c.z - 0.0089)};
+        HriParams p = params(5);
+        p.variant = variant;
+        p.max_reach_m = norm(far - c) / over;
+        ASSERT_GT(p.max_reach_m, norm(in - c));
+        HriRenderer r(p);
+        const char* what = contact ? "in contact" : "in free motion";
+        r.tick(f, outside);
+        if (contact) ASSERT_TRUE(r.tick(f, in).contact) << what;
+        else r.tick(f, outside);
+        const HriTick t = r.tick(f, far);
+        EXPECT_EQ(t.fault, over > 1) << what << ", reach x " << 1 / over << ", paper " << (variant == Variant::kPaper);
+        if (over > 1) EXPECT_EQ(norm(t.force_n), 0.0) << what;
+        else EXPECT_EQ(t.contact, contact) << what;
+      }
+}
+
+// While a plane is held, a HIP that moved 1 % faster than max_speed_m_s in one tick is a
+// fault (zero force); 1 % slower is not. Robust variant only (the paper has no speed test);
+// on an update tick and on a common contact tick (n = 5). 1 m/s at 1 kHz: 1 mm per tick,
+// along the floor.
+TEST(Hri, AMoveJustFasterThanTheSpeedLimitIsAFault) {
+  const SampleField f = wall_field(kUp, kC);
+  for (const int n : {1, 5})
+    for (const double over : {1.01, 1 / 1.01}) {
+      HriParams p = params(n);
+      p.max_speed_m_s = 1.0;
+      HriRenderer r(p);
+      r.tick(f, {0.016, 0.016, 0.011});
+      ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
+      const HriTick t = r.tick(f, {0.016 + 0.001 * over, 0.016, 0.009});
+      EXPECT_EQ(t.fault, over > 1) << "n = " << n << ", speed x " << over;
+      if (over > 1) EXPECT_EQ(norm(t.force_n), 0.0);
+      else EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
+    }
+}
+
 TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
   const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());

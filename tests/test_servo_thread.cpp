@@ -2,6 +2,8 @@
 // allocates nothing on the servo thread (counted by a replaced operator new), renders real
 // contact forces, passes the measured period to the renderer, leaves the device with an
 // exact zero force, and stays quiet under ThreadSanitizer (the tsan preset runs this file).
+// The safety tests (ServoSafety) judge what a logging device received, write by write;
+// tests/mutants.sh breaks each guarded line and shows them fail.
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -171,6 +171,98 @@ TEST(Hri, ForceAboveTheLimitSaturatesKeepingItsDirection) {
   EXPECT_NEAR(dot(t.force_n / norm(t.force_n), m), 1.0, 1e-9);
 }
 
+// Every path that limits |F| (the general tick, the common contact tick with no update due,
+// the paper's Figure 2) saturates a force 1 % above the limit to the limit, its direction
+// kept, and passes one 1 % below it unchanged: a limit acting only at twice its value
+// passes a test that presses far past it.
+TEST(Hri, ForceJustAboveTheLimitSaturatesJustBelowPasses) {
+  const Vec3 m = Vec3{1, 1, 1} / std::sqrt(3.0);
+  const SampleField f = wall_field(m, kC);
+  struct Path {
+    const char* name;
+    Variant variant;
+    int n;           // plane update period
+    double depth_m;  // the tick under test; deeper than the 1 mm entry: a tick with no update due
+  };
+  for (const Path path : {Path{"general tick", Variant::kRobust, 1, 0.001},
+                          Path{"common contact tick", Variant::kRobust, 5, 0.0011},
+                          Path{"paper", Variant::kPaper, 1, 0.001}})
+    for (const double over : {1.01, 1 / 1.01}) {
+      HriParams p = params(path.n);  // no damping: |F| = K d
+      p.variant = path.variant;
+      const double k_d = p.stiffness_n_per_m * path.depth_m;
+      p.force_limit_n = k_d / over;
+      HriRenderer r(p);
+      r.tick(f, kC + m * 0.001);
+      HriTick t = r.tick(f, kC - m * 0.001);
+      ASSERT_TRUE(t.contact && t.plane_update) << path.name;
+      if (path.depth_m != 0.001) {
+        t = r.tick(f, kC - m * path.depth_m);
+        ASSERT_TRUE(t.contact) << path.name;
+        ASSERT_FALSE(t.plane_update) << path.name;
+      }
+      const double mag = norm(t.force_n);
+      if (over > 1) {
+        EXPECT_TRUE(t.saturated) << path.name;
+        EXPECT_NEAR(mag, p.force_limit_n, 1e-12) << path.name << ": K d = " << k_d << " N";
+        EXPECT_LE(mag, p.force_limit_n) << path.name;
+      } else {
+        EXPECT_FALSE(t.saturated) << path.name;
+        EXPECT_NEAR(mag, k_d, 1e-5) << path.name;
+      }
+      EXPECT_NEAR(dot(t.force_n / mag, m), 1.0, 1e-9) << path.name;
+    }
+}
+
+// A HIP 1 % farther from the volume centre than max_reach_m is a fault (zero force), one
+// 1 % nearer is not: from free motion and from a held contact (the common contact tick's
+// own test), robust and paper. The HIPs lie on the vertical through the centre, the floor
+// 5.5 mm below it; every tick before the one under test is within reach.
+TEST(Hri, AHipJustBeyondTheReachIsAFault) {
+  const SampleField f = wall_field(kUp, kC);
+  const Vec3 c = f.grid.centre_m();
+  const Vec3 outside{c.x, c.y, 0.011}, in{c.x, c.y, 0.009};
+  for (const Variant variant : {Variant::kRobust, Variant::kPaper})
+    for (const bool contact : {false, true})
+      for (const double over : {1.01, 1 / 1.01}) {
+        // The tick under test: 0.1 mm deeper, or free above the centre as far from it.
+        const Vec3 far = contact ? Vec3{c.x, c.y, 0.0089} : Vec3{c.x, c.y, c.z + (c.z - 0.0089)};
+        HriParams p = params(5);
+        p.variant = variant;
+        p.max_reach_m = norm(far - c) / over;
+        ASSERT_GT(p.max_reach_m, norm(in - c));
+        HriRenderer r(p);
+        const char* what = contact ? "in contact" : "in free motion";
+        r.tick(f, outside);
+        if (contact) ASSERT_TRUE(r.tick(f, in).contact) << what;
+        else r.tick(f, outside);
+        const HriTick t = r.tick(f, far);
+        EXPECT_EQ(t.fault, over > 1) << what << ", reach x " << 1 / over << ", paper " << (variant == Variant::kPaper);
+        if (over > 1) EXPECT_EQ(norm(t.force_n), 0.0) << what;
+        else EXPECT_EQ(t.contact, contact) << what;
+      }
+}
+
+// While a plane is held, a HIP that moved 1 % faster than max_speed_m_s in one tick is a
+// fault (zero force); 1 % slower is not. Robust variant only (the paper has no speed test);
+// on an update tick and on a common contact tick (n = 5). 1 m/s at 1 kHz: 1 mm per tick,
+// along the floor.
+TEST(Hri, AMoveJustFasterThanTheSpeedLimitIsAFault) {
+  const SampleField f = wall_field(kUp, kC);
+  for (const int n : {1, 5})
+    for (const double over : {1.01, 1 / 1.01}) {
+      HriParams p = params(n);
+      p.max_speed_m_s = 1.0;
+      HriRenderer r(p);
+      r.tick(f, {0.016, 0.016, 0.011});
+      ASSERT_TRUE(r.tick(f, {0.016, 0.016, 0.009}).contact);
+      const HriTick t = r.tick(f, {0.016 + 0.001 * over, 0.016, 0.009});
+      EXPECT_EQ(t.fault, over > 1) << "n = " << n << ", speed x " << over;
+      if (over > 1) EXPECT_EQ(norm(t.force_n), 0.0);
+      else EXPECT_NEAR(t.force_n.z, 0.5, 1e-6);
+    }
+}
+
 TEST(Hri, NonFiniteHipGivesZeroForceAndRecovers) {
   const SampleField f = wall_field(kUp, kC);
   HriRenderer r(params());
@@ -231,6 +323,23 @@ TEST(Hri, AnInfiniteForceIsAFaultWithNoForceLimit) {
   ASSERT_TRUE(std::isfinite(first.force_n.z) && first.force_n.z > 1e306);
   const HriTick t = r.tick(f, {0.016, 0.016, 0.0099});  // no update due (n = 5)
   EXPECT_FALSE(t.plane_update);
+  EXPECT_TRUE(t.fault);
+  EXPECT_EQ(norm(t.force_n), 0.0);
+}
+
+// The same in the paper's Figure 2: a force that overflows to infinity (1e308 N/m, 1e6
+// device m per world m, 0.1 mm deep) is a fault, zero force sent.
+TEST(Hri, AnInfiniteForceIsAFaultInThePaperVariant) {
+  const SampleField f = wall_field(kUp, kC);
+  HriParams p = params(5);
+  p.variant = Variant::kPaper;
+  p.stiffness_n_per_m = 1e308;
+  p.world_per_device = 1e-6;
+  p.force_limit_n = std::numeric_limits<double>::infinity();
+  HriRenderer r(p);
+  r.tick(f, {0.016, 0.016, 0.011});
+  const HriTick t = r.tick(f, {0.016, 0.016, 0.0099});
+  EXPECT_TRUE(t.contact);
   EXPECT_TRUE(t.fault);
   EXPECT_EQ(norm(t.force_n), 0.0);
 }

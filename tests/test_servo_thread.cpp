@@ -2,16 +2,25 @@
 // allocates nothing on the servo thread (counted by a replaced operator new), renders real
 // contact forces, passes the measured period to the renderer, leaves the device with an
 // exact zero force, and stays quiet under ThreadSanitizer (the tsan preset runs this file).
+// The safety tests (ServoSafety) judge what a logging device received, write by write;
+// tests/mutants.sh breaks each guarded line and shows them fail.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <memory>
 #include <new>
+#include <string>
 #include <thread>
+#include <vector>
+
+#include <time.h>
 
 #include "analytic_fields.h"
 #include "hri.h"
@@ -237,80 +246,180 @@ TEST(ServoThread, PassesTheMeasuredPeriodToTheRenderer) {
   EXPECT_GT(differs_from_nominal, 0) << "every dt was the nominal period: not measured";
 }
 
-// ---- Device safety: stale, refused, faults, ramp-in, clamp ----
+// ---- Device safety: stale, lost, faulty and refused reports, a renderer's NaN or infinite
+// force, ramp-in, clamp, pause, stop. Every check reads what the device received (each
+// write_force_n, with its time), not what the servo says it sent. ----
 namespace {
-/// Pushes a constant force (0, 0, 1) N wherever the HIP is.
-class ConstantForce final : public Renderer {
- public:
-  const char* name() const override { return "constant"; }
-  void reset() override { resets.fetch_add(1); }
-  HriTick tick(const FieldView&, const Vec3&, double) override {
-    HriTick t;
-    t.force_n = {0, 0, 1};
-    return t;
-  }
-  std::atomic<long> resets{0};
+/// CLOCK_MONOTONIC [ns], the servo's clock.
+std::int64_t mono_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+bool exact_zero(const Vec3& f) { return f.x == 0.0 && f.y == 0.0 && f.z == 0.0; }
+
+std::string str(const Vec3& f) {
+  char b[96];
+  std::snprintf(b, sizeof b, "(%.17g, %.17g, %.17g) N", f.x, f.y, f.z);
+  return b;
+}
+
+/// One servo tick as the device saw it: the report it handed out at read() and the force
+/// it renders after that tick (its first write_force_n before the next read(); without one,
+/// the force of the tick before goes on).
+struct WireTick {
+  std::int64_t read_ns = 0;         ///< when the servo read the report [ns]
+  std::int64_t received_ns = 0;     ///< the report's receive time as handed out [ns]
+  std::int64_t prev_write_ns = -1;  ///< the last write before this read (-1: none): the tick started after it [ns]
+  DeviceStatus status = DeviceStatus::kOk;
+  Vec3 position_m;                  ///< the report's position, device [m]
+  std::uint32_t connection = 0;
+  bool ticked = false;              ///< the renderer ran in this tick ...
+  Vec3 rendered;                    ///< ... and answered this force [N]
+  bool wrote = false;               ///< a write_force_n came in this tick
+  Vec3 force;                       ///< the force the device renders after this tick [N]
+  std::int64_t write_ns = 0;        ///< when that write came [ns]
 };
 
-/// An asynchronous device the test steers: `fresh` reports arrive now, otherwise the last
-/// one ages; `status` and `position` are what the next report says.
+/// One write_force_n as the device received it.
+struct WireWrite {
+  std::int64_t t_ns = 0;  ///< [ns]
+  Vec3 force_n;           ///< [N]
+  std::size_t reads = 0;  ///< reads before it
+};
+
+/// An asynchronous device the test steers (`fresh` reports arrive now, otherwise the last
+/// one ages; `status`, `z` and `connection` are what the next report says) and that logs
+/// every read and every write (preallocated; the log is read after stop()).
 struct SteeredDevice final : HapticDeviceIO {
+  static constexpr std::size_t kMax = 16384;
   std::atomic<bool> fresh{true};
   std::atomic<int> status{int(DeviceStatus::kOk)};
   std::atomic<double> z{0.0};
   std::atomic<std::uint32_t> connection{0};
   std::atomic<bool> watchdog_tripped{false};
-  std::atomic<std::int64_t> last_ns{0};
   DeviceCaps c;
-  Vec3 read_position_m() override { return read().position_m; }
-  void write_force_n(const Vec3&) override {}
+  std::vector<WireTick> ticks = std::vector<WireTick>(kMax);
+  std::vector<WireWrite> writes = std::vector<WireWrite>(kMax);
+  std::atomic<std::size_t> n_ticks{0}, n_writes{0};
+  std::int64_t enabled_ns = -1;            ///< enable_force(true) [ns]
+  long enabled_after = -1, disabled_after = -1;  ///< writes received before enable_force(true / false)
+  WireTick* current = nullptr;             ///< the tick in progress (servo thread)
+
+  Vec3 read_position_m() override { return Vec3{0, 0, z.load()}; }
   DeviceCaps caps() const override { return c; }
+  void enable_force(bool on) override {
+    (on ? enabled_after : disabled_after) = long(n_writes.load());
+    if (on) enabled_ns = mono_ns();
+  }
   DeviceReading read() override {
+    const std::int64_t now = mono_ns();
+    if (fresh.load()) last_ns_ = now;
     DeviceReading r;
-    if (fresh.load()) last_ns.store(std::chrono::duration_cast<std::chrono::nanoseconds>(
-                                         std::chrono::steady_clock::now().time_since_epoch()).count());
-    r.received_ns = last_ns.load();
+    r.received_ns = last_ns_;
     r.status = DeviceStatus(status.load());
     r.position_m = Vec3{0, 0, z.load()};
     r.connection = connection.load();
     r.watchdog_tripped = r.force_off = watchdog_tripped.load();
+    const std::size_t i = n_ticks.load(std::memory_order_relaxed);
+    current = nullptr;
+    if (i < kMax) {
+      WireTick& w = ticks[i];
+      w = WireTick{now, r.received_ns, last_write_ns_, r.status, r.position_m, r.connection};
+      w.force = held_;
+      current = &w;
+      n_ticks.store(i + 1, std::memory_order_release);
+    }
     return r;
   }
+  void write_force_n(const Vec3& f) override {
+    const std::int64_t now = mono_ns();
+    held_ = f;
+    last_write_ns_ = now;
+    const std::size_t i = n_writes.load(std::memory_order_relaxed);
+    if (i < kMax) writes[i] = WireWrite{now, f, n_ticks.load(std::memory_order_relaxed)};
+    n_writes.store(i + 1, std::memory_order_release);
+    if (current && !current->wrote) {
+      current->wrote = true;
+      current->force = f;
+      current->write_ns = now;
+    }
+  }
+  /// The renderer's answer in the tick in progress.
+  void note_rendered(const Vec3& f) {
+    if (!current) return;
+    current->ticked = true;
+    current->rendered = f;
+  }
+  std::size_t logged() const { return std::min(n_ticks.load(), kMax); }
+
+ private:
+  std::int64_t last_ns_ = 0;
+  std::int64_t last_write_ns_ = -1;
+  Vec3 held_;
 };
 
-/// Keeps every tick's report age, status and sent force (preallocated; read after stop()).
+/// Pushes the force the test sets (default (0, 0, 1) N) wherever the HIP is; tells the
+/// device what it answered.
+class SteeredForce final : public Renderer {
+ public:
+  explicit SteeredForce(SteeredDevice& dev) : dev_(dev) {}
+  const char* name() const override { return "steered"; }
+  void reset() override { resets.fetch_add(1); }
+  HriTick tick(const FieldView&, const Vec3&, double) override {
+    HriTick t;
+    t.force_n = {fx.load(), fy.load(), fz.load()};
+    dev_.note_rendered(t.force_n);
+    return t;
+  }
+  void set(const Vec3& f) {
+    fx = f.x;
+    fy = f.y;
+    fz = f.z;
+  }
+  std::atomic<double> fx{0}, fy{0}, fz{1};
+  std::atomic<long> resets{0};
+
+ private:
+  SteeredDevice& dev_;
+};
+
+/// Keeps every tick's start and the dt the renderer was given (preallocated; read after stop()).
 struct TickLog final : TickObserver {
   static constexpr std::size_t kMax = 8192;
-  std::array<std::int64_t, kMax> age_ns{};
   std::array<std::int64_t, kMax> t_ns{};
   std::array<DeviceStatus, kMax> status{};
-  std::array<double, kMax> force{};
-  std::array<double, kMax> dt_s{};  // what the renderer was given
+  std::array<double, kMax> dt_s{};
   std::atomic<std::size_t> n{0};
   void on_tick(const TickRecord& r) noexcept override {
     const std::size_t i = n.load(std::memory_order_relaxed);
     if (i >= kMax) return;
     t_ns[i] = r.t_ns;
     dt_s[i] = r.dt_s;
-    age_ns[i] = r.t_ns - r.report_ns;
     status[i] = r.device_status;
-    force[i] = norm(r.force_sent_n);
     n.store(i + 1, std::memory_order_release);
   }
 };
 
+constexpr double kRateHz = 1000;
+constexpr std::int64_t kStaleNs = 2'000'000;  // the default stale timeout: two periods at 1 kHz
+
 struct SafetyRig {
   TripleBuffer<SampleField> published;
-  ConstantForce renderer;
   SteeredDevice dev;
+  SteeredForce renderer{dev};
   TickLog log;
   std::unique_ptr<ServoThread> servo;
-  explicit SafetyRig(double ramp_in_s = 0.0, double stale_restart_s = 0.02) {
+  double ramp_in_s;
+  explicit SafetyRig(double ramp_in_s_ = 0.0, double stale_restart_s = 0.02, double max_force_n = INFINITY)
+      : ramp_in_s(ramp_in_s_) {
     published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
     dev.c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
     dev.c.workspace_max_m = Vec3{0.1, 0.1, 0.1};
+    dev.c.max_force_n = max_force_n;  // caps are read at start()
     ServoThreadConfig cfg;
-    cfg.rate_hz = 1000;
+    cfg.rate_hz = kRateHz;
     cfg.sched_fifo = cfg.pin_cpu = cfg.lock_memory = false;
     cfg.observer = &log;
     cfg.ramp_in_s = ramp_in_s;
@@ -318,70 +427,135 @@ struct SafetyRig {
     servo = std::make_unique<ServoThread>(published, renderer, dev, cfg);
   }
   void run_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
-  /// Waits until the servo ran `k` more ticks (10 s at most): counts that do not depend on
-  /// how much CPU a loaded machine leaves the servo thread.
+  /// Waits until the servo read the device `k` more times (10 s at most): counts that do
+  /// not depend on how much CPU a loaded machine leaves the servo thread.
   void run_ticks(std::size_t k) {
-    const std::size_t target = log.n.load() + k;
+    const std::size_t target = dev.n_ticks.load() + k;
     const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (log.n.load() < target && std::chrono::steady_clock::now() < give_up)
+    while (dev.n_ticks.load() < target && std::chrono::steady_clock::now() < give_up)
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
 };
+
+/// What the device received, tick by tick, against the safety rules.
+struct WireCheck {
+  long zeroed = 0;     ///< ticks that had to give an exact zero force in that tick (and did)
+  long stale = 0;      ///< of those: the report was surely older than the timeout
+  long lost = 0;       ///< the device said disconnected or fault
+  long refused = 0;    ///< the position was non-finite or outside the workspace
+  long nonfinite = 0;  ///< the renderer answered a non-finite force
+  long forced = 0;     ///< fresh good ticks that got exactly `full`
+  long failures = 0;
+};
+
+/// Checks every logged tick: a tick whose report the device knows to be bad (status not ok,
+/// a position outside its workspace, older than the stale timeout at the tick's start, which
+/// is after the write before it) or whose renderer answered a non-finite force got an exact
+/// zero force written within that tick; every write is finite and within the device's
+/// maximum; with `full` given, every fresh good tick got exactly that force.
+WireCheck check_wire(const SteeredDevice& d, const Vec3* full = nullptr) {
+  WireCheck w;
+  auto fail = [&](std::size_t i, const char* what) {
+    if (++w.failures <= 10) ADD_FAILURE() << "tick " << i << ": " << what << "; the device got " << str(d.ticks[i].force);
+  };
+  for (std::size_t i = 0; i < d.logged(); ++i) {
+    const WireTick& t = d.ticks[i];
+    const bool stale = t.prev_write_ns >= 0 && t.prev_write_ns - t.received_ns > kStaleNs;
+    const bool lost = t.status != DeviceStatus::kOk;
+    const bool refused = !d.c.contains(t.position_m);
+    const bool nonfinite = t.ticked && !finite(t.rendered);
+    if (stale || lost || refused || nonfinite) {
+      if (!t.wrote) fail(i, "a bad tick wrote no force (the one before goes on)");
+      else if (!exact_zero(t.force)) fail(i, "a bad tick's force is not an exact zero");
+      else ++w.zeroed;
+      w.stale += stale;
+      w.lost += lost;
+      w.refused += refused && !lost;
+      w.nonfinite += nonfinite;
+    } else if (full && t.received_ns == t.read_ns && t.ticked) {
+      if (!t.wrote || t.force.x != full->x || t.force.y != full->y || t.force.z != full->z)
+        fail(i, "a good tick did not get the renderer's force");
+      else ++w.forced;
+    }
+  }
+  for (std::size_t i = 0; i < std::min(d.n_writes.load(), SteeredDevice::kMax); ++i) {
+    const Vec3& f = d.writes[i].force_n;
+    if (!finite(f) || !(norm(f) <= d.c.max_force_n + 1e-12)) {
+      if (++w.failures <= 20) ADD_FAILURE() << "write " << i << ": " << str(f) << " (limit " << d.c.max_force_n << " N)";
+    }
+  }
+  return w;
+}
+
+/// Checks a ramp-in of the renderer's 1 N over ramp_s that starts at tick `from` (its first
+/// good tick): the device got an exact zero there, then |F| = (t - t_from) / ramp_s up to 1 N,
+/// where the tick starts t lie between the write before each read and the read itself;
+/// `start_ns` is the latest time known before t_from. Up to the next outage or reconnection.
+/// Returns the ticks inside the ramp (a starved servo thread may have none: the exact zero at
+/// the start and the bounds are the test).
+long check_ramp(const SteeredDevice& d, std::size_t from, double ramp_s, std::int64_t start_ns) {
+  const WireTick& first = d.ticks[from];
+  EXPECT_TRUE(first.wrote && exact_zero(first.force)) << "tick " << from << ": the ramp starts at " << str(first.force);
+  long inside = 0;
+  for (std::size_t i = from + 1; i < d.logged(); ++i) {
+    if (d.ticks[i].status != DeviceStatus::kOk || d.ticks[i].connection != first.connection) break;  // the next outage
+    const WireTick& t = d.ticks[i];
+    const double f = norm(t.force);
+    const double hi = std::min(1.0, double(t.read_ns - start_ns) * 1e-9 / ramp_s);
+    const double lo = std::min(1.0, double(t.prev_write_ns - first.read_ns) * 1e-9 / ramp_s);
+    EXPECT_LE(f, hi + 1e-9) << "tick " << i << " (" << i - from << " into the ramp)";
+    EXPECT_GE(f, lo - 1e-9) << "tick " << i << " (" << i - from << " into the ramp)";
+    inside += f > 0 && f < 1;
+  }
+  return inside;
+}
 }  // namespace
 
 TEST(ServoSafety, AStaleReportGivesZeroForceInTheSameTick) {
   SafetyRig rig;
   rig.servo->start();
-  rig.run_ms(60);
+  rig.run_ticks(60);
   rig.dev.fresh = false;  // the device stops reporting
-  rig.run_ms(60);
+  rig.run_ticks(60);
   rig.dev.fresh = true;
-  rig.run_ms(60);
+  rig.run_ticks(60);
   rig.servo->stop();
-  const std::size_t n = rig.log.n.load();
-  ASSERT_GT(n, 100u);
-  const std::int64_t timeout = 2'000'000;  // two periods at 1 kHz
-  long stale = 0, forced = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (rig.log.age_ns[i] > timeout) {
-      ++stale;
-      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i << ": a report " << rig.log.age_ns[i] << " ns old still forced";
-      EXPECT_EQ(rig.log.status[i], DeviceStatus::kStale) << "tick " << i;
-    } else if (rig.log.force[i] > 0) {
-      ++forced;
-    }
-  }
-  EXPECT_GT(stale, 30);   // the 60 ms without reports, less the timeout
-  EXPECT_GT(forced, 60);  // before and after
-  EXPECT_EQ(rig.servo->device_counters().stale, stale);
+  const Vec3 full{0, 0, 1};
+  const WireCheck w = check_wire(rig.dev, &full);
+  EXPECT_GT(w.stale, 50);   // the 60 ticks without reports, less the timeout
+  EXPECT_GT(w.forced, 100);  // before and after
+  EXPECT_GE(rig.servo->device_counters().stale, w.stale);
   EXPECT_GE(rig.renderer.resets.load(), 1);  // contact state forgotten before force came back
 }
 
 TEST(ServoSafety, AShortStaleBlipZeroesThoseTicksButKeepsTheContact) {
-  SafetyRig rig(0.05, 0.2);  // blips up to 200 ms keep the contact state
+  SafetyRig rig(0.05, 2.0);  // blips up to 2 s (a loaded machine stretches 10 ticks) keep the contact state
   rig.servo->start();
   rig.run_ms(80);
   rig.dev.fresh = false;
-  rig.run_ms(10);
+  rig.run_ticks(10);
   rig.dev.fresh = true;
-  rig.run_ms(20);
+  rig.run_ticks(20);
   rig.servo->stop();
+  const WireCheck w = check_wire(rig.dev);
+  EXPECT_GT(w.stale, 0);
   const DeviceCounters c = rig.servo->device_counters();
-  EXPECT_GT(c.stale, 0);
   EXPECT_EQ(c.ramps, 1);                     // only the one after enable
   EXPECT_EQ(rig.renderer.resets.load(), 0);  // the contact state was kept
-  EXPECT_EQ(rig.log.force[rig.log.n.load() - 1], 1.0);  // straight back to the full force
+  const WireTick& last = rig.dev.ticks[rig.dev.logged() - 1];
+  EXPECT_TRUE(last.wrote);
+  EXPECT_EQ(last.force.z, 1.0);  // straight back to the full force
 }
 
 // Across a stale blip that keeps the contact state the renderer was not ticked: its first
 // tick after the blip is given the time since its last one (its velocity's time step), not
 // the loop's last period.
 TEST(ServoSafety, AfterAStaleBlipTheRendererIsGivenTheTimeSinceItLastRan) {
-  SafetyRig rig(0.0, 0.2);  // blips up to 200 ms keep the contact state
+  SafetyRig rig(0.0, 2.0);  // blips up to 2 s (a loaded machine stretches 10 ticks) keep the contact state
   rig.servo->start();
   rig.run_ticks(40);
   rig.dev.fresh = false;
-  rig.run_ms(12);
+  rig.run_ticks(10);
   rig.dev.fresh = true;
   rig.run_ticks(20);
   rig.servo->stop();
@@ -406,6 +580,8 @@ TEST(ServoSafety, AfterAStaleBlipTheRendererIsGivenTheTimeSinceItLastRan) {
   }
   EXPECT_GE(checked, 1u);
   EXPECT_EQ(rig.renderer.resets.load(), 0);  // the contact state was kept
+  const Vec3 full{0, 0, 1};
+  EXPECT_GT(check_wire(rig.dev, &full).stale, 0);
 }
 
 TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {
@@ -414,103 +590,182 @@ TEST(ServoSafety, NonFiniteOrOutOfWorkspaceReportsAreRefusedAndCounted) {
   rig.run_ticks(30);  // ticks, not milliseconds: a loaded machine gives the servo fewer of them
   rig.dev.z = NAN;
   rig.run_ticks(30);
-  rig.dev.z = 0.5;  // outside the +-0.1 m box
+  rig.dev.z = 0.1000001;  // just outside the +-0.1 m box
   rig.run_ticks(30);
-  rig.dev.z = 0.0;
+  rig.dev.z = -0.1000001;
+  rig.run_ticks(30);
+  rig.dev.z = 0.1;  // on its face: inside
   rig.run_ticks(30);
   rig.servo->stop();
-  const DeviceCounters c = rig.servo->device_counters();
-  EXPECT_GT(c.refused, 50);  // 60 bad ticks, a tick or two at each change may go either way
-  long refused_ticks = 0;
-  for (std::size_t i = 0; i < rig.log.n.load(); ++i)
-    if (rig.log.status[i] == DeviceStatus::kFault) {
-      ++refused_ticks;
-      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
-    }
-  EXPECT_EQ(refused_ticks, c.refused);
+  const Vec3 full{0, 0, 1};
+  const WireCheck w = check_wire(rig.dev, &full);
+  EXPECT_GE(w.refused, 90);
+  EXPECT_GE(w.forced, 50);
+  EXPECT_EQ(rig.servo->device_counters().refused, w.refused);
 }
 
-TEST(ServoSafety, DisconnectedOrFaultyDeviceGetsZeroForce) {
-  SafetyRig rig;
+// Each outage gives an exact zero in its own ticks; when the device is good again the
+// force ramps in afresh from an exact zero.
+TEST(ServoSafety, DisconnectedOrFaultyDeviceGetsZeroForceThenRampsIn) {
+  const double ramp_s = 0.05;
+  SafetyRig rig(ramp_s);
   rig.servo->start();
-  rig.run_ticks(30);
-  rig.dev.status = int(DeviceStatus::kDisconnected);
-  rig.run_ticks(30);
-  rig.dev.status = int(DeviceStatus::kFault);
-  rig.run_ticks(30);
+  rig.run_ticks(80);
+  for (const DeviceStatus bad : {DeviceStatus::kDisconnected, DeviceStatus::kFault}) {
+    rig.dev.status = int(bad);
+    rig.run_ticks(30);
+    rig.dev.status = int(DeviceStatus::kOk);
+    rig.run_ticks(80);
+  }
   rig.servo->stop();
+  const WireCheck w = check_wire(rig.dev);
+  EXPECT_GE(w.lost, 58);
   const DeviceCounters c = rig.servo->device_counters();
-  EXPECT_GT(c.disconnected, 15);
-  EXPECT_GT(c.fault, 15);
-  for (std::size_t i = 0; i < rig.log.n.load(); ++i)
-    if (rig.log.status[i] != DeviceStatus::kOk) {
-      EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
+  EXPECT_EQ(c.disconnected + c.fault, w.lost);
+  long recoveries = 0;
+  for (std::size_t i = 1; i < rig.dev.logged(); ++i)
+    if (rig.dev.ticks[i - 1].status != DeviceStatus::kOk && rig.dev.ticks[i].status == DeviceStatus::kOk) {
+      ++recoveries;
+      std::printf("recovery at tick %zu: %ld ticks inside the ramp\n", i, check_ramp(rig.dev, i, ramp_s, rig.dev.ticks[i].prev_write_ns));
     }
+  EXPECT_EQ(recoveries, 2);
 }
 
 TEST(ServoSafety, ForceRampsInAfterEnableAndReconnection) {
-  SafetyRig rig(0.05);
+  const double ramp_s = 0.05;
+  SafetyRig rig(ramp_s);
   rig.servo->start();
-  rig.run_ticks(100);
-  // The link comes back once the first ramp (50 ms) is over and the full force was sent.
-  const auto full = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (rig.log.t_ns[rig.log.n.load() - 1] - rig.log.t_ns[0] < 60'000'000 && std::chrono::steady_clock::now() < full)
-    rig.run_ticks(1);
-  const std::size_t before = rig.log.n.load();
-  rig.dev.connection = 1;
+  rig.run_ms(70);  // the first ramp (50 ms) is over
+  rig.run_ticks(20);
+  rig.dev.connection = 1;  // the link came back
   rig.run_ticks(100);
   rig.servo->stop();
-  const std::size_t n = rig.log.n.load();
-  ASSERT_GT(n, before + 50);
-  // The force is the renderer's 1 N times the ramp factor (tick time since enable) / 50 ms.
-  const std::int64_t t0 = rig.log.t_ns[0];
-  std::size_t ramped = 0;
-  for (std::size_t i = 0; i < before; ++i) {
-    const double expect = std::min(1.0, double(rig.log.t_ns[i] - t0) / 50e6);
-    EXPECT_NEAR(rig.log.force[i], expect, 1e-9) << "tick " << i;
-    if (expect > 0.0 && expect < 1.0) ++ramped;
-  }
-  EXPECT_GT(ramped, 5u);                              // the ramp spanned several ticks
-  EXPECT_EQ(rig.log.force[before - 1], 1.0);          // ramped in: the full force
+  const SteeredDevice& d = rig.dev;
+  EXPECT_EQ(d.enabled_after, 0);  // force enabled before the first write
+  std::printf("enable: %ld ticks inside the ramp\n", check_ramp(d, 0, ramp_s, d.enabled_ns));
+  std::size_t back = 0;
+  while (back < d.logged() && d.ticks[back].connection == 0) ++back;
+  ASSERT_LT(back + 50, d.logged());
+  EXPECT_EQ(d.ticks[back - 1].force.z, 1.0);  // ramped in: the full force before the link came back
+  std::printf("reconnection: %ld ticks inside the ramp\n", check_ramp(d, back, ramp_s, d.ticks[back].prev_write_ns));
   EXPECT_EQ(rig.servo->device_counters().ramps, 2);
-  // After the reconnection the force dropped and rose again.
-  double lowest_after = 1.0;
-  for (std::size_t i = before; i < n; ++i) lowest_after = std::min(lowest_after, rig.log.force[i]);
-  EXPECT_LT(lowest_after, 0.1);
 }
 
+// |F| just above the device's maximum is clamped to it, its direction kept; just below
+// it passes unchanged.
 TEST(ServoSafety, ForceIsClampedToTheDeviceMaximum) {
-  SafetyRig clamped;  // the limit set before start (caps are read at start)
-  clamped.dev.c.max_force_n = 0.25;
-  clamped.servo->start();
-  clamped.run_ms(40);
-  clamped.servo->stop();
-  ASSERT_GT(clamped.log.n.load(), 20u);
-  for (std::size_t i = 0; i < clamped.log.n.load(); ++i) EXPECT_LE(clamped.log.force[i], 0.25 + 1e-12);
-  EXPECT_NEAR(clamped.log.force[clamped.log.n.load() - 1], 0.25, 1e-12);
-  EXPECT_GT(clamped.servo->device_counters().clamped, 20);
+  const Vec3 f{0.6, 0, 0.8};  // |F| = 1 N
+  for (const double max_n : {0.99, 1.01}) {
+    SafetyRig rig(0.0, 0.02, max_n);
+    rig.renderer.set(f);
+    rig.servo->start();
+    rig.run_ticks(40);
+    rig.servo->stop();
+    const WireCheck w = check_wire(rig.dev);  // every write within max_n
+    EXPECT_EQ(w.failures, 0);
+    long good = 0;
+    for (std::size_t i = 0; i < rig.dev.logged(); ++i) {
+      const WireTick& t = rig.dev.ticks[i];
+      if (!t.ticked) continue;
+      ++good;
+      ASSERT_TRUE(t.wrote) << "tick " << i;
+      if (max_n < 1) {
+        EXPECT_NEAR(norm(t.force), max_n, 1e-12) << "tick " << i;
+        EXPECT_NEAR(norm(cross(t.force, f)), 0.0, 1e-12) << "tick " << i << ": turned";
+        EXPECT_GT(dot(t.force, f), 0.0) << "tick " << i;
+      } else {
+        EXPECT_TRUE(t.force.x == f.x && t.force.y == f.y && t.force.z == f.z) << "tick " << i << ": " << str(t.force);
+      }
+    }
+    EXPECT_GT(good, 30) << max_n;
+    const long clamped = rig.servo->device_counters().clamped;
+    if (max_n < 1) EXPECT_EQ(clamped, good);
+    else EXPECT_EQ(clamped, 0);
+  }
+}
+
+// A renderer that answers NaN or an infinite force: the device gets an exact zero in those
+// ticks (with and without a finite force limit), and the renderer's force again after.
+TEST(ServoSafety, ANonFiniteForceFromTheRendererSendsZero) {
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const double max_n : {inf, 10.0}) {
+    SafetyRig rig(0.0, 0.02, max_n);
+    rig.servo->start();
+    rig.run_ticks(20);
+    for (const Vec3 bad : {Vec3{NAN, 0, 1}, Vec3{0, 0, inf}, Vec3{-inf, 0, 0}, Vec3{0, NAN, -inf}}) {
+      rig.renderer.set(bad);
+      rig.run_ticks(20);
+      rig.renderer.set({0, 0, 1});
+      rig.run_ticks(20);
+    }
+    rig.servo->stop();
+    const Vec3 full{0, 0, 1};
+    const WireCheck w = check_wire(rig.dev, &full);
+    EXPECT_GE(w.nonfinite, 70) << "limit " << max_n;
+    EXPECT_GE(w.forced, 70) << "limit " << max_n;
+  }
+}
+
+// Paused: every tick writes an exact zero; resumed: the renderer's force again.
+TEST(ServoSafety, PausedTicksGetZeroForce) {
+  SafetyRig rig;
+  rig.servo->start();
+  rig.run_ticks(30);
+  rig.servo->pause(true);
+  const std::size_t a = rig.dev.n_ticks.load();
+  rig.run_ticks(30);
+  const std::size_t b = rig.dev.n_ticks.load();
+  rig.servo->pause(false);
+  rig.run_ticks(30);
+  rig.servo->stop();
+  const Vec3 full{0, 0, 1};
+  check_wire(rig.dev, &full);
+  ASSERT_GT(b, a + 20);
+  for (std::size_t i = a + 1; i < b; ++i) {
+    const WireTick& t = rig.dev.ticks[i];
+    EXPECT_TRUE(t.wrote && exact_zero(t.force)) << "paused tick " << i << ": the device got " << str(t.force);
+  }
+  EXPECT_EQ(rig.dev.ticks[rig.dev.logged() - 1].force.z, 1.0);
+}
+
+// After the last tick the device is sent an exact zero, and only then is its force disabled.
+TEST(ServoSafety, StopLeavesTheDeviceWithAnExactZeroThenDisablesIt) {
+  SafetyRig rig;
+  rig.servo->start();
+  rig.run_ticks(50);
+  rig.servo->stop();
+  const SteeredDevice& d = rig.dev;
+  const std::size_t n = d.n_writes.load();
+  ASSERT_GT(n, 40u);
+  ASSERT_LT(n, SteeredDevice::kMax);
+  EXPECT_EQ(d.writes[n - 2].force_n.z, 1.0);     // the last tick's force ...
+  EXPECT_TRUE(exact_zero(d.writes[n - 1].force_n)) << "the device was left with " << str(d.writes[n - 1].force_n);
+  EXPECT_EQ(d.writes[n - 1].reads, d.n_ticks.load());  // ... then, after the last read, zero
+  EXPECT_EQ(d.disabled_after, long(n));          // disabled after that zero
 }
 
 TEST(ServoSafety, AfterTheDeviceWatchdogTrippedTheForceRampsInFromZero) {
   SafetyRig rig(0.05);
   rig.servo->start();
   const auto full = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (rig.log.n.load() < 2 || (rig.log.force[rig.log.n.load() - 1] < 1.0 && std::chrono::steady_clock::now() < full))
-    rig.run_ticks(1);
+  const auto last_force = [&] { return rig.dev.ticks[rig.dev.logged() - 1].force.z; };
+  while (rig.dev.logged() < 2 || (last_force() < 1.0 && std::chrono::steady_clock::now() < full)) rig.run_ticks(1);
   rig.dev.watchdog_tripped = true;  // the device zeroed its force and says so
   rig.run_ticks(30);
-  const std::size_t tripped = rig.log.n.load();
+  const std::size_t tripped = rig.dev.logged();
   rig.dev.watchdog_tripped = false;  // the host's reports reached it again: force back on
   rig.run_ticks(100);
   rig.servo->stop();
-  const std::size_t n = rig.log.n.load();
+  const std::size_t n = rig.dev.logged();
   ASSERT_GT(n, tripped + 80);
-  // The ticks that read the tripped flag sent nothing (one tick may straddle the change).
-  for (std::size_t i = tripped - 25; i < tripped; ++i) EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i;
+  // What the device received in the ticks that read the tripped flag: nothing but zero
+  // (one tick may straddle the change).
+  for (std::size_t i = tripped - 25; i < tripped; ++i)
+    EXPECT_EQ(rig.dev.ticks[i].force.z, 0.0) << "tick " << i;
   // Back on: the force starts near 0 and grows over the 50 ms ramp to the full 1 N.
-  EXPECT_LT(rig.log.force[tripped + 1], 0.1);
+  EXPECT_LT(rig.dev.ticks[tripped + 1].force.z, 0.1);
   std::size_t between = 0;
-  for (std::size_t i = tripped + 1; i < n; ++i) between += rig.log.force[i] > 0.0 && rig.log.force[i] < 1.0;
+  for (std::size_t i = tripped + 1; i < n; ++i) between += rig.dev.ticks[i].force.z > 0.0 && rig.dev.ticks[i].force.z < 1.0;
   EXPECT_GT(between, 5u);
-  EXPECT_EQ(rig.log.force[n - 1], 1.0);
+  EXPECT_EQ(rig.dev.ticks[n - 1].force.z, 1.0);
 }

@@ -1,0 +1,169 @@
+#!/usr/bin/env bash
+# tests/mutants.sh - breaks each safety-guarding source line once and shows that the tests
+# guarding it fail. Not run by ctest or CI: it rebuilds a copy of the tree per mutation.
+#
+# usage: tests/mutants.sh [-k] [NAME_REGEX]
+#   NAME_REGEX  run only the mutations whose name matches (grep -E)
+#   -k          keep the copy (build-mutants/) afterwards, for a faster next run
+#
+# The working tree (tracked and untracked, not ignored files) is copied to build-mutants/src
+# (ignored by git; under the same ccache base_dir as the tree, so unchanged files come from
+# the cache). The tree itself is never modified, also not on Ctrl-C. The copy is built once
+# and every test named below is run unmutated first: if one fails there, nothing is judged.
+# Then per mutation: the text is replaced in the copy, only the named target is rebuilt,
+# its test run with the named filter, the file restored. Prints one line per mutation:
+#   KILLED    the test failed (the failing tests are named)
+#   SURVIVED  the test passed with the line broken: the line is not guarded
+#   ERROR     the text was not found exactly once, or the mutant did not build
+# Exit status: 0 all killed; 1 some survived; 2 some errors (or the unmutated run failed).
+set -u
+root=$(cd "$(dirname "$0")/.." && pwd)
+keep=0
+if [ "${1:-}" = -k ]; then keep=1; shift; fi
+only=${1:-}
+
+# ---- The mutations ----
+# m NAME WHERE OLD NEW TARGET FILTER
+#   WHERE   a file, or a folder whose one file (*.cpp, *.h) holding OLD is meant: lines that
+#           move between files (a split) are still found by their content
+#   OLD     the exact text to replace; it must occur exactly once (use $'...\n...' to take in
+#           a neighbouring line where the text alone occurs twice)
+#   NEW     its replacement ("" deletes it)
+#   TARGET  the build target whose test must fail; FILTER its --gtest_filter
+names=() wheres=() olds=() news=() targets=() filters=()
+m() { names+=("$1"); wheres+=("$2"); olds+=("$3"); news+=("$4"); targets+=("$5"); filters+=("$6"); }
+
+S=servo/servo_thread.cpp T=test_servo_thread F='ServoSafety.*'
+m servo-bad-tick-zero       $S 'device_.write_force_n({});  // within this tick' '' $T "$F"
+m servo-stale-judged        $S 'if (d.received_ns != 0 && t - d.received_ns > stale_ns) return DeviceStatus::kStale;' '' $T "$F"
+m servo-refused-position    $S 'if (!caps.contains(d.position_m)) {' 'if (false) {' $T "$F"
+m servo-nonfinite-zero      $S 'if (!std::isfinite(out.x) || !std::isfinite(out.y) || !std::isfinite(out.z)) return {};' '' $T "$F"
+m servo-clamp-at-2x         $S 'clamped = m > max_n;' 'clamped = m > 2 * max_n;' $T "$F"
+m servo-clamp-scale         $S 'if (clamped) out = out * (max_n / m);' '' $T "$F"
+m servo-ramp-factor         $S 'const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;' \
+                               'const double ramp = 1.0;' $T "$F"
+m servo-ramp-reconnect      $S 'if (first || d.connection != connection) ramp_start = -1;' '' $T "$F"
+m servo-ramp-after-outage   $S $'restart_ns) {\n          ramp_start = -1;' 'restart_ns) {' $T "$F"
+m servo-paused-zero         $S $'} else if (paused) {\n        device_.write_force_n({});' '} else if (paused) {' $T "$F"
+m servo-stop-zero           $S 'device_.write_force_n({});  // leave the device with no force' '' $T "$F"
+m servo-stop-disable        $S $'thread_.join();\n    device_.enable_force(false);' 'thread_.join();' $T "$F"
+
+# HRI's own limits, wherever in servo/ the line now lives.
+H=servo T=test_hri F='Hri.*'
+m hri-limit-robust-at-2x    $H '} else if (mag > params_.force_limit_n) {' '} else if (mag > 2 * params_.force_limit_n) {' $T "$F"
+m hri-limit-quick-at-2x     $H 'if (!(mag < params_.force_limit_n)) return quick_contact_limited(' \
+                               'if (!(mag < 2 * params_.force_limit_n)) return quick_contact_limited(' $T "$F"
+m hri-limit-paper-at-2x     $H $'} else {\n    out.saturated = saturate(force, params_.force_limit_n);' \
+                               $'} else {\n    out.saturated = saturate(force, 2 * params_.force_limit_n);' $T "$F"
+m hri-nonfinite-robust      $H $'if (!std::isfinite(mag)) {\n    force = {};' $'if (false) {\n    force = {};' $T "$F"
+m hri-nonfinite-paper       $H 'if (!std::isfinite(norm(force))) {' 'if (false) {' $T "$F"
+m hri-reach-robust-at-2x    $H 'const bool absurd = sane && dot(from_centre, from_centre) > params_.max_reach_m * params_.max_reach_m;' \
+                               'const bool absurd = sane && dot(from_centre, from_centre) > 4 * params_.max_reach_m * params_.max_reach_m;' $T "$F"
+m hri-reach-quick-at-2x     $H 'if (!(dot(from_centre, from_centre) <= params_.max_reach_m * params_.max_reach_m))' \
+                               'if (!(dot(from_centre, from_centre) <= 4 * params_.max_reach_m * params_.max_reach_m))' $T "$F"
+m hri-reach-paper-at-2x     $H 'const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > params_.max_reach_m;' \
+                               'const bool absurd = finite(hip) && norm(hip - field.grid().centre_m()) > 2 * params_.max_reach_m;' $T "$F"
+m hri-speed-robust-at-2x    $H 'return dot(moved, moved) > max_move * max_move;' 'return dot(moved, moved) > 4 * max_move * max_move;' $T "$F"
+m hri-speed-quick-at-2x     $H 'if (dot(moved, moved) > max_move * max_move) return tick_robust_full(' \
+                               'if (dot(moved, moved) > 4 * max_move * max_move) return tick_robust_full(' $T "$F"
+m core-saturate-at-2x       core/vec3.h 'if (!(m > limit)) return false;' 'if (!(m > 2 * limit)) return false;' $T "$F"
+m hri-edit-step-2x          $H 'const double step = params_.edit_max_step_fraction * params_.force_limit_n;' \
+                               'const double step = 2 * params_.edit_max_step_fraction * params_.force_limit_n;' test_hri_edit 'HriEdit.*'
+m hri-edit-turn-2x          $H 'const double max_turn = params_.edit_max_turn_deg * M_PI / 180.0;' \
+                               'const double max_turn = 2 * params_.edit_max_turn_deg * M_PI / 180.0;' test_hri_edit 'HriEdit.*'
+
+# ---- The run ----
+work=$root/build-mutants
+copy=$work/src
+cleanup() { [ "$keep" = 1 ] || rm -rf "$work"; }
+trap cleanup EXIT
+trap 'echo "interrupted"; exit 130' INT TERM HUP
+mkdir -p "$copy"
+# The working tree as it is (deleted files left out), over whatever an older kept copy held.
+git -C "$root" ls-files -z -co --exclude-standard |
+  (cd "$root" && while IFS= read -r -d '' f; do [ -e "$f" ] && printf '%s\0' "$f"; done) |
+  tar -C "$root" --null -T - -cf - | tar -C "$copy" -xf - || { echo "ERROR: cannot copy the tree"; exit 2; }
+
+export CMAKE_CXX_COMPILER_LAUNCHER=${CMAKE_CXX_COMPILER_LAUNCHER:-ccache}
+export CMAKE_C_COMPILER_LAUNCHER=${CMAKE_C_COMPILER_LAUNCHER:-ccache}
+jobs=${MUTANTS_JOBS:-2}
+(cd "$copy" && cmake --preset release > "$work/configure.log" 2>&1) ||
+  { tail -20 "$work/configure.log"; echo "ERROR: configure failed"; exit 2; }
+
+selected=()
+for i in "${!names[@]}"; do
+  [ -z "$only" ] || echo "${names[$i]}" | grep -qE "$only" && selected+=("$i")
+done
+[ "${#selected[@]}" -gt 0 ] || { echo "no mutation matches '$only'"; exit 2; }
+
+# apply WHERE OLD [NEW]: the one file under WHERE holding OLD exactly once, relative to the
+# copy, on stdout (else the reason on stderr, exit 1); with NEW, OLD replaced by NEW there.
+apply() {
+  python3 - "$copy" "$@" <<'EOF'
+import os, sys
+copy, where, old = sys.argv[1:4]
+new = sys.argv[4] if len(sys.argv) > 4 else None
+base = os.path.join(copy, where)
+files = [base] if os.path.isfile(base) else [
+    os.path.join(d, f) for d, _, fs in os.walk(base) for f in sorted(fs) if f.endswith((".cpp", ".h"))]
+hits = [(f, open(f).read()) for f in files]
+hits = [(f, s) for f, s in hits if old in s]
+if len(hits) != 1 or hits[0][1].count(old) != 1:
+    where_found = ", ".join(f"{os.path.relpath(f, copy)} x{s.count(old)}" for f, s in hits) or "nowhere"
+    sys.exit(f"the text occurs in {where_found} under {where}, not exactly once")
+f, s = hits[0]
+if new is not None:
+    open(f, "w").write(s.replace(old, new))
+print(os.path.relpath(f, copy))
+EOF
+}
+
+build() { (cd "$copy" && cmake --build --preset release -j"$jobs" --target "$1") > "$work/build.log" 2>&1; }
+# Runs TARGET's tests with FILTER (5 minutes at most); the failing tests' names on stdout.
+run_test() {
+  timeout 300 "$copy/build/bin/$1" --gtest_filter="$2" > "$work/test.log" 2>&1
+  local rc=$?
+  sed -n 's/^\[  FAILED  \] \([A-Za-z0-9_]*\.[A-Za-z0-9_./]*\).*/\1/p' "$work/test.log" | sort -u | tr '\n' ' '
+  [ "$rc" = 124 ] && echo "(timed out)"
+  return $rc
+}
+
+# The unmutated copy: every target builds and every test passes.
+declare -A seen=()
+for i in "${selected[@]}"; do
+  key="${targets[$i]} ${filters[$i]}"
+  [ -n "${seen[$key]:-}" ] && continue
+  seen[$key]=1
+  build "${targets[$i]}" || { tail -30 "$work/build.log"; echo "ERROR: ${targets[$i]} does not build unmutated"; exit 2; }
+  failed=$(run_test "${targets[$i]}" "${filters[$i]}") ||
+    { tail -30 "$work/test.log"; echo "ERROR: ${targets[$i]} --gtest_filter='${filters[$i]}' fails unmutated: $failed"; exit 2; }
+done
+echo "unmutated: ${#seen[@]} test runs pass; ${#selected[@]} mutations"
+
+killed=0 survived=0 errors=0
+for i in "${selected[@]}"; do
+  name=${names[$i]} target=${targets[$i]} filter=${filters[$i]}
+  tmp=$work/pristine
+  # Where the text is, before touching it (the copy's file is restored from this).
+  if ! file=$(apply "${wheres[$i]}" "${olds[$i]}" 2> "$work/apply.log"); then
+    printf '%-9s %-26s %s\n' ERROR "$name" "$(cat "$work/apply.log")"; errors=$((errors + 1)); continue
+  fi
+  cp -p "$copy/$file" "$tmp"
+  apply "${wheres[$i]}" "${olds[$i]}" "${news[$i]}" > /dev/null 2>&1
+  if ! build "$target"; then
+    printf '%-9s %-26s %s\n' ERROR "$name" "$file: the mutant does not build (see $work/build.log)"
+    errors=$((errors + 1))
+  elif failed=$(run_test "$target" "$filter"); then
+    printf '%-9s %-26s %s\n' SURVIVED "$name" "$file: $target --gtest_filter='$filter' passes"
+    survived=$((survived + 1))
+  else
+    printf '%-9s %-26s %s\n' KILLED "$name" "$file: $target: $failed"
+    killed=$((killed + 1))
+  fi
+  cp -p "$tmp" "$copy/$file"
+  touch "$copy/$file"  # rebuilt unmutated next time (ccache: from the cache)
+done
+echo "$((killed + survived + errors)) mutations: $killed killed, $survived survived, $errors errors"
+[ "$errors" = 0 ] || exit 2
+[ "$survived" = 0 ] || exit 1
+exit 0

@@ -1,11 +1,15 @@
 #include "cpu_placement.h"
 
+#include <fcntl.h>
 #include <pthread.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -92,7 +96,8 @@ std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   std::string why;
   for (const auto& e : it) {
     const pid_t tid = pid_t(std::strtol(e.path().filename().c_str(), nullptr, 10));
-    Saved s{tid, {}};
+    Saved s{tid, {}, {}};
+    std::snprintf(s.task, sizeof(s.task), "/proc/%d/task/%d", int(pid), int(tid));
     if (sched_getaffinity(tid, sizeof(cpu_set_t), &s.set) != 0) {
       why = std::strerror(errno);
       continue;
@@ -107,17 +112,79 @@ std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
     saved_.push_back(s);
   }
   pid_ = pid;
-  if (saved_.empty() && !why.empty()) return "process " + std::to_string(pid) + ": " + why;
+  if (!saved_.empty()) return start_guard();
+  if (!why.empty()) return "process " + std::to_string(pid) + ": " + why;
+  return "";
+}
+
+// Async-signal-safe (the guard runs it in a child forked from a threaded process): system
+// calls on data built before the fork. A thread that has exited is skipped (its ID may since
+// name another process's thread).
+void PeerOffCpu::restore() const {
+  for (const Saved& s : saved_)
+    if (access(s.task, F_OK) == 0) sched_setaffinity(s.tid, sizeof(cpu_set_t), &s.set);
+}
+
+namespace {
+/// The guard's life: out of the terminal's process group and deaf to the signals that end
+/// the app (a Ctrl+C or a hangup reaches the whole foreground group), every inherited
+/// descriptor but the pipe's read end and stderr closed (a socket or device held open would
+/// outlive the app), then blocked on the pipe until its end of file: the app is gone (a
+/// clean release() restores the sets itself and ends the guard with SIGKILL).
+void guard_wait(int rd) {
+  setpgid(0, 0);
+  struct sigaction ign {};
+  ign.sa_handler = SIG_IGN;
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, SIGTSTP, SIGTTIN, SIGTTOU}) sigaction(sig, &ign, nullptr);
+  for (int fd = 0; fd < 4096; ++fd)
+    if (fd != rd && fd != STDERR_FILENO) close(fd);
+  char c;
+  while (read(rd, &c, 1) < 0 && errno == EINTR) {
+  }
+}
+}  // namespace
+
+std::string PeerOffCpu::start_guard() {
+  int fds[2];
+  if (pipe2(fds, O_CLOEXEC) != 0) {
+    const std::string e = std::strerror(errno);
+    release();
+    return "process " + std::to_string(pid_) + ": no guard to restore its CPUs if this process dies (pipe: " + e +
+           "): left where it was";
+  }
+  static constexpr char kNote[] = "isotouch: the display server's CPU sets given back (the app ended without doing so)\n";
+  const pid_t child = fork();
+  if (child == 0) {
+    guard_wait(fds[0]);
+    restore();
+    if (write(STDERR_FILENO, kNote, sizeof(kNote) - 1) < 0) {
+    }
+    _exit(0);
+  }
+  const int fork_errno = errno;
+  close(fds[0]);
+  if (child < 0) {
+    close(fds[1]);
+    release();
+    return "process " + std::to_string(pid_) + ": no guard to restore its CPUs if this process dies (fork: " +
+           std::strerror(fork_errno) + "): left where it was";
+  }
+  guard_fd_ = fds[1];
+  guard_pid_ = child;
   return "";
 }
 
 void PeerOffCpu::release() {
-  // A thread that has exited is skipped (its ID may since name another process's thread).
-  const std::string tasks = "/proc/" + std::to_string(pid_) + "/task/";
-  for (const Saved& s : saved_)
-    if (access((tasks + std::to_string(s.tid)).c_str(), F_OK) == 0)
-      sched_setaffinity(s.tid, sizeof(cpu_set_t), &s.set);
+  restore();
   saved_.clear();
+  if (guard_pid_ > 0) {
+    kill(guard_pid_, SIGKILL);  // restored above: the guard has nothing left to do
+    while (waitpid(guard_pid_, nullptr, 0) < 0 && errno == EINTR) {
+    }
+    guard_pid_ = -1;
+  }
+  if (guard_fd_ >= 0) close(guard_fd_);
+  guard_fd_ = -1;
 }
 
 pid_t peer_pid(int fd, std::string& why) {

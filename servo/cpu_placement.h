@@ -20,7 +20,11 @@ namespace isotouch::servo {
 
 /// The threads of one process kept off one CPU for this object's lifetime; the threads it
 /// moved get their own CPU sets back when it is destroyed (threads the process started
-/// meanwhile inherited the reduced set and keep it).
+/// meanwhile inherited the reduced set and keep it), and also when this process ends without
+/// destroying it (a crash, SIGKILL, a second Ctrl+C): keep_off() forks a guard, a small child
+/// process blocked on a pipe whose only writer is this process. The kernel closes the pipe
+/// whatever way this process ends; the guard then gives the threads their sets back and
+/// exits. release() restores them itself and tells the guard to exit without doing so.
 class PeerOffCpu {
  public:
   PeerOffCpu() = default;
@@ -30,21 +34,30 @@ class PeerOffCpu {
 
   /// Moves every thread of process `pid` (its /proc/PID/task entries) off `cpu`. A thread
   /// whose set is only `cpu` is left where it is. Returns "" or why nothing was moved
-  /// (no such process, permission: needs the same user or CAP_SYS_NICE).
+  /// (no such process, permission: needs the same user or CAP_SYS_NICE). Threads moved: the
+  /// guard is started (guarded(); if fork fails, the threads are given back at once and
+  /// the reason returned: nothing stays moved without a guard).
   std::string keep_off(pid_t pid, int cpu);
   /// Gives the threads that still belong to the process their CPU sets back (also done by
   /// the destructor).
   void release();
   int threads_moved() const { return int(saved_.size()); }
   pid_t pid() const { return pid_; }
+  /// The guard's process ID while one runs (threads moved), else -1.
+  pid_t guard_pid() const { return guard_pid_; }
 
  private:
   struct Saved {
     pid_t tid;
     cpu_set_t set;
+    char task[48];  // /proc/PID/task/TID, built before the fork (the guard only makes syscalls)
   };
+  std::string start_guard();
+  void restore() const;
   pid_t pid_ = -1;
   std::vector<Saved> saved_;
+  pid_t guard_pid_ = -1;
+  int guard_fd_ = -1;  // the pipe's write end: closed (by exit or release()) wakes the guard
 };
 
 /// What make_thread_realtime got.

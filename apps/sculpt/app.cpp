@@ -742,7 +742,8 @@ void Sculpt::keep_display_off_servo_cpu() {
         << " that could move\n";
   else
     log << "servo    display server " << name << " (pid " << pid << ", " << display_off.threads_moved() << (display_off.threads_moved() == 1 ? " thread" : " threads")
-        << ") kept off CPU " << cpu << ", the servo's\n";
+        << ") kept off CPU " << cpu << ", the servo's; given back at exit, or by guard process "
+        << display_off.guard_pid() << " if this one dies\n";
 }
 
 /// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.

@@ -135,9 +135,11 @@ TEST(CpuPlacement, TheThreadsGetTheirSetsBackWhenTheMoverIsKilled) {
   int ready[2];
   ASSERT_EQ(pipe(ready), 0);
   const pid_t mover = fork();
-  if (mover == 0) {  // the app's side: moves the stand-in's threads, then waits to be killed
+  if (mover == 0) {  // the app's side: its guard first (as before a servo starts), then the move
     PeerOffCpu off;
-    const pid_t guard = off.keep_off(standin.pid, cpu).empty() && off.threads_moved() > 0 ? off.guard_pid() : -1;
+    const pid_t early = off.start_guard().empty() ? off.guard_pid() : -1;
+    const bool moved = off.keep_off(standin.pid, cpu).empty() && off.threads_moved() > 0;
+    const pid_t guard = moved && off.guard_pid() == early ? early : -1;
     if (write(ready[1], &guard, sizeof(guard)) != sizeof(guard)) _exit(2);
     for (;;) pause();
   }
@@ -163,8 +165,8 @@ TEST(CpuPlacement, TheThreadsGetTheirSetsBackWhenTheMoverIsKilled) {
   EXPECT_TRUE(ended(guard)) << "the guard " << guard << " outlived its work";
 }
 
-// A clean release gives the sets back itself and ends the guard (no process left behind).
-TEST(CpuPlacement, ReleaseEndsTheGuard) {
+// A clean end gives the sets back itself and ends the guard (no process left behind).
+TEST(CpuPlacement, TheGuardEndsWithTheObject) {
   cpu_set_t mine;
   ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
   if (CPU_COUNT(&mine) < 2) GTEST_SKIP() << "needs two CPUs";

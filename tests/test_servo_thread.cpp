@@ -165,6 +165,13 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
 }
 
 namespace {
+// The sanitizers' runtimes make mlock a no-op that succeeds (VmLck stays 0).
+#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
+constexpr bool kMlockIsReal = false;
+#else
+constexpr bool kMlockIsReal = true;
+#endif
+
 /// A field of /proc/self/status [kB] (VmLck, VmRSS): the kernel's count, not the servo's.
 long status_kb(const std::string& key) {
   std::ifstream f("/proc/self/status");
@@ -208,8 +215,10 @@ TEST(ServoThread, LocksWhatTheServoTouchesNotTheProcess) {
            1024) + 3 * 4;
   std::printf("VmLck %ld kB (servo's working set at most %ld kB), RSS %ld kB -> %ld kB after the drop\n", locked_kb,
               working_kb, rss_loaded_kb, rss_dropped_kb);
-  EXPECT_GT(locked_kb, 0);
-  EXPECT_LE(locked_kb, working_kb) << "more than the servo's memory is locked";
+  if (kMlockIsReal) {
+    EXPECT_GT(locked_kb, 0);
+    EXPECT_LE(locked_kb, working_kb) << "more than the servo's memory is locked";
+  }
   EXPECT_EQ(dropped, 0) << "MADV_DONTNEED refused: " << std::strerror(dropped_errno);
   EXPECT_LT(rss_dropped_kb, rss_loaded_kb - long(big / 1024 / 2)) << "the dropped volume's pages stayed";
   EXPECT_EQ(status_kb("VmLck"), before_kb) << "stop() left memory locked";

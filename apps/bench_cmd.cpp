@@ -24,7 +24,7 @@ Subcommand add_bench_servo_rt_command(CLI::App& bench) {
   rt->add_flag("--fifo,!--no-fifo", o->sched_fifo,
                "SCHED_FIFO for the servo thread (default on; needs CAP_SYS_NICE, refused -> a note)");
   rt->add_flag("--pin,!--no-pin", o->pin_cpu, "Pin the servo thread (default: the last CPU, only under SCHED_FIFO)");
-  rt->add_flag("--mlock,!--no-mlock", o->lock_memory, "mlockall and prefault before the loop (default on)");
+  rt->add_flag("--mlock,!--no-mlock", o->lock_memory, "lock the servo thread's memory (stack, buffers) and prefault it before the loop (default on)");
   rt->add_option("--cpu", o->cpu, "Pin to this CPU (default: the last one)");
   rt->add_option("--csv", o->out_csv, "Also write the table to this CSV file");
   rt->add_option("--busy", o->busy_threads,

@@ -18,7 +18,7 @@ struct ServoRtOptions {
   bool sched_fifo = true;  ///< ask for SCHED_FIFO (default; refused -> a note, runs anyway)
   bool pin_cpu = true;     ///< pin the servo thread (default)
   int cpu = -1;            ///< the CPU to pin to; -1: the last CPU the process may use
-  bool lock_memory = true; ///< mlockall + prefault before the loop (default)
+  bool lock_memory = true; ///< lock the servo thread's memory + prefault before the loop (default)
   std::string device;      ///< Vulkan device for the engine thread
   std::string out_csv;     ///< also write the table here (optional)
   /// Threads that spin in user space (default scheduling, no syscall, no memory traffic)

@@ -1,11 +1,15 @@
 #include "cpu_placement.h"
 
+#include <fcntl.h>
 #include <pthread.h>
+#include <signal.h>
+#include <sys/wait.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -82,6 +86,81 @@ ScopedRealtime::~ScopedRealtime() {
   }
 }
 
+namespace {
+using Saved = PeerOffCpu::Saved;
+
+// Async-signal-safe (the guard runs it in a child forked from a threaded process): system
+// calls only. A thread that has exited is skipped (its ID may since name another process's
+// thread).
+void restore(const Saved* s, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (access(s[i].task, F_OK) == 0) sched_setaffinity(s[i].tid, sizeof(cpu_set_t), &s[i].set);
+}
+
+constexpr std::size_t kGuardedMax = 1024;  // threads one guard keeps (an X server has a few)
+
+/// The guard's life: out of the terminal's process group and deaf to the signals that end
+/// the app (a Ctrl+C or a hangup reaches the whole foreground group), every inherited
+/// descriptor but its end of the socket pair and stderr closed (a socket or device held open
+/// would outlive the app); then it reads the threads' sets, one record per packet, until
+/// the end of file (the app's end closed: the app is gone), gives back those it holds and
+/// exits.
+[[noreturn]] void guard_main(int rd) {
+  setpgid(0, 0);
+  struct sigaction ign {};
+  ign.sa_handler = SIG_IGN;
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE, SIGTSTP, SIGTTIN, SIGTTOU}) sigaction(sig, &ign, nullptr);
+  for (int fd = 0; fd < 4096; ++fd)
+    if (fd != rd && fd != STDERR_FILENO) close(fd);
+  static Saved held[kGuardedMax];  // (the child's own copy: written by the guard only)
+  std::size_t n = 0;
+  Saved s;
+  for (;;) {
+    const ssize_t got = read(rd, &s, sizeof(s));
+    if (got < 0 && errno == EINTR) continue;
+    if (got != ssize_t(sizeof(s))) break;  // end of file: the app is gone
+    if (s.tid == 0) n = 0;
+    else if (n < kGuardedMax) held[n++] = s;
+  }
+  if (n > 0) {
+    restore(held, n);
+    static constexpr char kNote[] = "isotouch: the display server's CPU sets given back (the app ended without doing so)\n";
+    if (write(STDERR_FILENO, kNote, sizeof(kNote) - 1) < 0) {
+    }
+  }
+  _exit(0);
+}
+}  // namespace
+
+std::string PeerOffCpu::start_guard() {
+  if (guard_pid_ > 0) return "";
+  // A socket pair, not a pipe: a send to a guard that was killed fails (MSG_NOSIGNAL)
+  // instead of raising SIGPIPE, and each record arrives whole (SEQPACKET).
+  int fds[2];
+  if (socketpair(AF_UNIX, SOCK_SEQPACKET | SOCK_CLOEXEC, 0, fds) != 0)
+    return std::string("no guard process (socketpair: ") + std::strerror(errno) + ")";
+  const pid_t child = fork();
+  if (child == 0) guard_main(fds[0]);
+  const int fork_errno = errno;
+  close(fds[0]);
+  if (child < 0) {
+    close(fds[1]);
+    return std::string("no guard process (fork: ") + std::strerror(fork_errno) + ")";
+  }
+  guard_fd_ = fds[1];
+  guard_pid_ = child;
+  return "";
+}
+
+std::string PeerOffCpu::tell_guard(const Saved& s) {
+  ssize_t n;
+  while ((n = send(guard_fd_, &s, sizeof(s), MSG_NOSIGNAL)) < 0 && errno == EINTR) {
+  }
+  if (n == ssize_t(sizeof(s))) return "";
+  return std::string("the guard process ") + std::to_string(guard_pid_) + " cannot be told (" +
+         (n < 0 ? std::strerror(errno) : "a short write") + ")";
+}
+
 std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   release();
   if (cpu < 0 || cpu >= CPU_SETSIZE) return "CPU " + std::to_string(cpu) + " is not a CPU";
@@ -89,10 +168,13 @@ std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
   const std::filesystem::path tasks = "/proc/" + std::to_string(pid) + "/task";
   std::filesystem::directory_iterator it(tasks, ec);
   if (ec) return "process " + std::to_string(pid) + ": " + ec.message();
+  if (std::string e = start_guard(); !e.empty()) return "process " + std::to_string(pid) + " left where it is: " + e;
+  pid_ = pid;
   std::string why;
   for (const auto& e : it) {
     const pid_t tid = pid_t(std::strtol(e.path().filename().c_str(), nullptr, 10));
-    Saved s{tid, {}};
+    Saved s{tid, {}, {}};
+    std::snprintf(s.task, sizeof(s.task), "/proc/%d/task/%d", int(pid), int(tid));
     if (sched_getaffinity(tid, sizeof(cpu_set_t), &s.set) != 0) {
       why = std::strerror(errno);
       continue;
@@ -100,24 +182,36 @@ std::string PeerOffCpu::keep_off(pid_t pid, int cpu) {
     cpu_set_t off = s.set;
     CPU_CLR(cpu, &off);
     if (CPU_COUNT(&off) == 0 || CPU_EQUAL(&off, &s.set)) continue;  // nowhere else / not on it
+    if (saved_.size() >= kGuardedMax) break;
+    // The guard knows the set before the thread leaves it.
+    if (std::string told = tell_guard(s); !told.empty()) {
+      release();
+      return "process " + std::to_string(pid) + " left where it is: " + told;
+    }
     if (sched_setaffinity(tid, sizeof(cpu_set_t), &off) != 0) {
       why = std::strerror(errno);
       continue;
     }
     saved_.push_back(s);
   }
-  pid_ = pid;
   if (saved_.empty() && !why.empty()) return "process " + std::to_string(pid) + ": " + why;
   return "";
 }
 
 void PeerOffCpu::release() {
-  // A thread that has exited is skipped (its ID may since name another process's thread).
-  const std::string tasks = "/proc/" + std::to_string(pid_) + "/task/";
-  for (const Saved& s : saved_)
-    if (access((tasks + std::to_string(s.tid)).c_str(), F_OK) == 0)
-      sched_setaffinity(s.tid, sizeof(cpu_set_t), &s.set);
+  restore(saved_.data(), saved_.size());
   saved_.clear();
+  if (guard_fd_ >= 0) (void)tell_guard(Saved{0, {}, {}});  // nothing left to give back
+}
+
+PeerOffCpu::~PeerOffCpu() {
+  release();
+  if (guard_pid_ > 0) {
+    kill(guard_pid_, SIGKILL);  // restored above: the guard has nothing left to do
+    while (waitpid(guard_pid_, nullptr, 0) < 0 && errno == EINTR) {
+    }
+  }
+  if (guard_fd_ >= 0) close(guard_fd_);
 }
 
 pid_t peer_pid(int fd, std::string& why) {

@@ -20,31 +20,50 @@ namespace isotouch::servo {
 
 /// The threads of one process kept off one CPU for this object's lifetime; the threads it
 /// moved get their own CPU sets back when it is destroyed (threads the process started
-/// meanwhile inherited the reduced set and keep it).
+/// meanwhile inherited the reduced set and keep it), and also when this process ends without
+/// destroying it (a crash, SIGKILL, a second Ctrl+C): a guard, a small child process, is
+/// told each thread's set through a socket whose other end only this process holds, and
+/// blocks on it. The kernel closes that end whatever way this process ends; the guard then
+/// gives the threads their sets back and exits.
 class PeerOffCpu {
  public:
   PeerOffCpu() = default;
-  ~PeerOffCpu() { release(); }
+  ~PeerOffCpu();
   PeerOffCpu(const PeerOffCpu&) = delete;
   PeerOffCpu& operator=(const PeerOffCpu&) = delete;
 
+  /// Forks the guard now (keep_off() does if none runs). Call it before a real-time thread
+  /// starts: a fork write-protects the parent's pages, and that thread's next write to each
+  /// would take a page fault (behind the fork's hold on the address space). Returns "" or
+  /// why not (socketpair, fork).
+  std::string start_guard();
   /// Moves every thread of process `pid` (its /proc/PID/task entries) off `cpu`. A thread
   /// whose set is only `cpu` is left where it is. Returns "" or why nothing was moved
-  /// (no such process, permission: needs the same user or CAP_SYS_NICE).
+  /// (no such process, permission: needs the same user or CAP_SYS_NICE). Nothing stays moved
+  /// without the guard: if it cannot be started or told, the threads are given back at once
+  /// and the reason returned.
   std::string keep_off(pid_t pid, int cpu);
   /// Gives the threads that still belong to the process their CPU sets back (also done by
-  /// the destructor).
+  /// the destructor, which also ends the guard).
   void release();
   int threads_moved() const { return int(saved_.size()); }
   pid_t pid() const { return pid_; }
+  /// The guard's process ID while one runs, else -1.
+  pid_t guard_pid() const { return guard_pid_; }
+
+  /// One thread's own CPU set, as the guard is told it.
+  struct Saved {
+    pid_t tid;      ///< 0: forget the threads told so far (they were given back)
+    cpu_set_t set;
+    char task[48];  ///< /proc/PID/task/TID (built here: the guard makes only system calls)
+  };
 
  private:
-  struct Saved {
-    pid_t tid;
-    cpu_set_t set;
-  };
+  std::string tell_guard(const Saved& s);
   pid_t pid_ = -1;
   std::vector<Saved> saved_;
+  pid_t guard_pid_ = -1;
+  int guard_fd_ = -1;  // this process's end of the socket pair: closed when it ends, it wakes the guard
 };
 
 /// What make_thread_realtime got.

@@ -1,8 +1,10 @@
 #include "servo_thread.h"
 
+#include <pthread.h>
 #include <sys/mman.h>
 #include <sys/prctl.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -28,9 +30,8 @@ inline void cpu_relax() {
 
 /// Touch kBytes of this thread's stack below the caller's frame so the loop never takes a
 /// page fault growing it (with memory locked, the pages stay).
-constexpr std::size_t kStackPrefaultBytes = 256 * 1024;
 __attribute__((noinline)) void prefault_stack() {
-  volatile unsigned char buf[kStackPrefaultBytes];
+  volatile unsigned char buf[kServoStackBytes];
   for (std::size_t i = 0; i < sizeof(buf); i += 4096) buf[i] = 0;
   buf[sizeof(buf) - 1] = 0;
 }
@@ -93,15 +94,12 @@ void ServoThread::stop() {
     thread_.join();
     device_.enable_force(false);
   }
-  if (locked_) {
-    munlockall();
-    locked_ = false;
-  }
+  unlock_servo_memory();
 }
 
 std::string ServoThread::setup_realtime() {
   std::string note;
-  got_lock_ = locked_;
+  got_lock_ = !locked_.empty();
   // Sleep wake-ups exactly on time (the default slack of a normal thread is 50 us).
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
   // Automatic pinning only with SCHED_FIFO (make_thread_realtime).
@@ -110,21 +108,73 @@ std::string ServoThread::setup_realtime() {
   got_fifo_ = rt.fifo;
   pinned_cpu_ = rt.cpu;
   note += rt.note;
-  if (cfg_.lock_memory && !locked_) {
-    int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);
-    if (rc != 0 && errno == EINVAL) rc = mlockall(MCL_CURRENT | MCL_FUTURE);  // kernel < 4.4
-    if (rc == 0) locked_ = got_lock_ = true;
-    else
-      note += std::string("servo thread: mlockall refused (") + std::strerror(errno) +
-              "; needs root, CAP_IPC_LOCK or a memlock limit): memory not locked.\n";
-  }
   // Prefault what the loop touches: its stack and the record buffer (written once, so the
-  // pages exist and, with memory locked, stay). The field is written by the engine before
-  // it is published, so its pages already exist.
+  // pages exist and, locked, stay). The field is written by the engine before it is
+  // published, so its pages already exist.
   prefault_stack();
   period_err_.assign(period_err_.capacity(), 0);
   period_err_.clear();  // keeps the capacity and the touched pages
+  if (cfg_.lock_memory && locked_.empty()) note += lock_servo_memory();
   return note;
+}
+
+namespace {
+/// [data, data + bytes) widened to whole pages.
+MemoryRange whole_pages(const void* data, std::size_t bytes) {
+  const auto page = std::uintptr_t(sysconf(_SC_PAGESIZE));
+  const auto lo = std::uintptr_t(data) & ~(page - 1);
+  const auto hi = (std::uintptr_t(data) + bytes + page - 1) & ~(page - 1);
+  return {reinterpret_cast<const void*>(lo), hi - lo};
+}
+
+/// The calling thread's stack from `bytes` below the caller's frame to its top (the frames
+/// above the loop's). Empty if the stack cannot be found.
+__attribute__((noinline)) MemoryRange own_stack(std::size_t bytes) {
+  pthread_attr_t attr;
+  if (pthread_getattr_np(pthread_self(), &attr) != 0) return {};
+  void* base = nullptr;
+  std::size_t size = 0;
+  const int rc = pthread_attr_getstack(&attr, &base, &size);
+  pthread_attr_destroy(&attr);
+  if (rc != 0) return {};
+  const auto lo = std::uintptr_t(base), top = lo + size;
+  const auto here = std::uintptr_t(__builtin_frame_address(0));
+  const std::uintptr_t from = here - lo > bytes ? here - bytes : lo;
+  return {reinterpret_cast<const void*>(from), top - from};
+}
+}  // namespace
+
+// What each tick touches, and nothing else of the process: mlockall would lock every load,
+// undo step and heap for the whole session (MADV_DONTNEED then fails: freed memory stays).
+// Snapshots are not locked: they are replaced at the edit rate and share bricks between
+// versions, and mlock is not counted, so unlocking an old one could unlock a page the new
+// one still uses; the engine writes each just before publishing it (resident when read).
+std::string ServoThread::lock_servo_memory() {
+  std::vector<MemoryRange> want = {own_stack(kServoStackBytes + 16 * 1024),
+                                   {period_err_.data(), period_err_.capacity() * sizeof(std::int64_t)},
+                                   {this, sizeof(*this)}};
+  want.insert(want.end(), cfg_.lock_ranges.begin(), cfg_.lock_ranges.end());
+  locked_bytes_ = 0;
+  for (const MemoryRange& r : want) {
+    if (r.data == nullptr || r.bytes == 0) continue;
+    const MemoryRange p = whole_pages(r.data, r.bytes);
+    if (mlock(p.data, p.bytes) != 0) {
+      const std::string e = std::strerror(errno);
+      unlock_servo_memory();
+      locked_bytes_ = 0;
+      return "servo thread: mlock of " + std::to_string(p.bytes / 1024) + " KiB refused (" + e +
+             "; needs root, CAP_IPC_LOCK or a memlock limit): memory not locked.\n";
+    }
+    locked_.push_back(p);
+    locked_bytes_ += p.bytes;
+  }
+  got_lock_ = !locked_.empty();
+  return "";
+}
+
+void ServoThread::unlock_servo_memory() {
+  for (const MemoryRange& r : locked_) munlock(r.data, r.bytes);  // (a stack since unmapped: ENOMEM, nothing to do)
+  locked_.clear();
 }
 
 void ServoThread::loop() {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "device_io.h"
+#include "memory_range.h"
 #include "renderer.h"
 #include "triple_buffer.h"
 #include "workspace.h"
@@ -48,6 +49,10 @@ class TickObserver {
   virtual void on_tick(const TickRecord& tick) noexcept = 0;
 };
 
+/// The part of the servo thread's stack that is prefaulted and locked before the first
+/// tick, below the loop's frame [bytes].
+inline constexpr std::size_t kServoStackBytes = 256 * 1024;
+
 struct ServoThreadConfig {
   double rate_hz = 1000;          ///< servo rate, 1 to 10 kHz [Hz]
   /// Ask for SCHED_FIFO at fifo_priority before the first tick (needs root, CAP_SYS_NICE or
@@ -60,12 +65,16 @@ struct ServoThreadConfig {
   /// interrupts and housekeeping), and only if SCHED_FIFO was granted (a normal thread
   /// pinned to a busy CPU cannot move to an idle one).
   int cpu = -1;
-  /// mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) before the first tick, so that no page
-  /// the loop touches is paged out (needs root, CAP_IPC_LOCK or a memlock limit). ONFAULT
-  /// locks pages as they are touched instead of committing every reserved mapping of the
-  /// process (thread stacks, Vulkan heaps); what the loop touches is prefaulted explicitly.
-  /// Released (munlockall) by stop() if start() locked it.
+  /// Lock in memory what the loop touches, before the first tick, so that none of it is
+  /// paged out (needs root, CAP_IPC_LOCK or a memlock limit that holds it): the servo
+  /// thread's stack (kServoStackBytes of it, prefaulted), its record buffer (record_ticks),
+  /// the ServoThread object and lock_ranges. The rest of the process is not locked (no
+  /// mlockall): loads dropped since, the undo history and the GPU heaps stay pageable and
+  /// freed memory returns to the system (MADV_DONTNEED keeps working). Released by stop().
   bool lock_memory = true;
+  /// More that each tick touches, locked with the rest by lock_memory (the observer's
+  /// queues, a renderer's state): [data, data + bytes). Must stay mapped until stop().
+  std::vector<MemoryRange> lock_ranges;
   /// The last part of each wait is spun, not slept [us]; at most max_spin_fraction of T.
   double spin_us = 150;
   /// A thread that never sleeps is throttled under SCHED_FIFO (sched_rt_runtime_us) and
@@ -155,6 +164,8 @@ class ServoThread {
   bool got_fifo() const { return got_fifo_; }
   int pinned_cpu() const { return pinned_cpu_; }  ///< -1: not pinned
   bool memory_locked() const { return got_lock_; }  ///< the last start() locked memory
+  /// What the last start() locked, whole pages [bytes] (0: nothing).
+  std::size_t locked_bytes() const { return locked_bytes_; }
   /// Actual period minus nominal period [ns], one per tick after the first (up to
   /// record_ticks). Read after stop().
   const std::vector<std::int64_t>& period_errors_ns() const { return period_err_; }
@@ -162,6 +173,8 @@ class ServoThread {
  private:
   void loop();
   std::string setup_realtime();
+  std::string lock_servo_memory();
+  void unlock_servo_memory();
   void count_not_ok(DeviceStatus s, bool refused);
   TripleBuffer<SampleField>& samples_;
   Renderer& renderer_;
@@ -173,7 +186,8 @@ class ServoThread {
   std::atomic<bool> paused_{false};
   std::string setup_note_;  // written by the servo thread before ready_, read after
   bool got_fifo_ = false, got_lock_ = false;
-  bool locked_ = false;  // memory locked now (released by stop())
+  std::vector<MemoryRange> locked_;  // page-aligned ranges locked now (released by stop())
+  std::size_t locked_bytes_ = 0;
   int pinned_cpu_ = -1;
   std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
   std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0};

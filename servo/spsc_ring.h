@@ -12,6 +12,8 @@
 #include <stdexcept>
 #include <type_traits>
 
+#include "memory_range.h"
+
 namespace isotouch::servo {
 
 template <class T>
@@ -33,6 +35,8 @@ class SpscRing {
   SpscRing& operator=(const SpscRing&) = delete;
 
   std::size_t capacity() const { return mask_ + 1; }
+  /// The items' storage, capacity() items (to lock it in memory with the servo's).
+  MemoryRange storage() const { return {items_.get(), capacity() * sizeof(T)}; }
 
   /// Producer: false (and nothing stored) when the ring is full.
   bool push(const T& item) noexcept {

@@ -140,27 +140,53 @@ void EditHistory::enforce_limit() {
   }
 }
 
+// All or nothing: the volume's content of the stroke's bricks is read before any is written
+// (the only allocations), so a failure leaves volume and stroke as they were; a hook that
+// throws has the swap taken back (the copy it mirrors is given the old content again, if it
+// can take it) before its exception goes on.
 std::vector<std::uint32_t> EditHistory::swap_in(Stroke& s, Volume& vol) {
   std::vector<std::uint32_t> ids;
   ids.reserve(s.bricks.size());
-  for (auto& [id, data] : s.bricks) {
-    std::vector<float> now = read_brick(vol, id);
-    write_brick(vol, id, data.data());
-    data = std::move(now);
+  std::vector<std::vector<float>> now;
+  now.reserve(s.bricks.size());
+  for (const auto& [id, data] : s.bricks) {
+    now.push_back(read_brick(vol, id));
     ids.push_back(id);
   }
-  if (on_restore_ && !ids.empty()) on_restore_(ids);
+  auto swap_all = [&] {
+    std::size_t k = 0;
+    for (auto& [id, data] : s.bricks) {
+      write_brick(vol, id, data.data());
+      data.swap(now[k++]);
+    }
+  };
+  swap_all();
+  if (on_restore_ && !ids.empty()) {
+    try {
+      on_restore_(ids);
+    } catch (...) {
+      swap_all();  // back as it was
+      try {
+        on_restore_(ids);
+      } catch (...) {
+      }
+      throw;
+    }
+  }
   return ids;
 }
 
+// Undo and redo move a stroke between the stacks only once its swap succeeded (the target
+// stack's room reserved first): a swap that throws leaves both stacks and the volume as
+// they were.
 std::vector<std::uint32_t> EditHistory::undo(Volume& vol) {
   end_stroke(vol);
   dropped_redo_.clear();
   if (undo_.empty()) return {};
-  Stroke s = std::move(undo_.back());
+  redo_.reserve(redo_.size() + 1);
+  std::vector<std::uint32_t> ids = swap_in(undo_.back(), vol);
+  redo_.push_back(std::move(undo_.back()));
   undo_.pop_back();
-  std::vector<std::uint32_t> ids = swap_in(s, vol);
-  redo_.push_back(std::move(s));
   return ids;
 }
 
@@ -180,10 +206,16 @@ std::vector<std::uint32_t> EditHistory::redo(Volume& vol) {
   end_stroke(vol);
   dropped_redo_.clear();
   if (redo_.empty()) return {};
-  Stroke s = std::move(redo_.back());
+  undo_.emplace_back();  // (a deque cannot reserve: the slot is made first, dropped on failure)
+  std::vector<std::uint32_t> ids;
+  try {
+    ids = swap_in(redo_.back(), vol);
+  } catch (...) {
+    undo_.pop_back();
+    throw;
+  }
+  undo_.back() = std::move(redo_.back());
   redo_.pop_back();
-  std::vector<std::uint32_t> ids = swap_in(s, vol);
-  undo_.push_back(std::move(s));
   return ids;
 }
 

@@ -64,8 +64,10 @@ class EditHistory {
 
   /// Undoes the newest stroke (ends an open stroke first). Returns the restored brick ids
   /// (ascending; empty if there was nothing to undo) and calls the on_restore hook with them.
+  /// @throws what the hook throws (or std::bad_alloc): then the volume and both stacks are
+  ///         as they were (the hook is called again with the restored content).
   std::vector<std::uint32_t> undo(engine::Volume& vol);
-  /// Redoes the newest undone stroke; same return and hook as undo().
+  /// Redoes the newest undone stroke; same return, hook and failure as undo().
   std::vector<std::uint32_t> redo(engine::Volume& vol);
   /// Forgets the newest undo stroke without restoring it (its edit was rolled back by the
   /// caller, so undoing it would change nothing) and gives back the redo branch that

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <stdexcept>
 
 #include "output_file.h"
@@ -24,6 +25,17 @@ std::int64_t now_ns() {
 
 // observe() reads Observed through servo::LatestValue, which holds trivially copyable values.
 static_assert(std::is_trivially_copyable_v<Observed>);
+
+/// What an exception says (one that is not a std::exception: that it is not).
+std::string what_of(const std::exception_ptr& p) {
+  try {
+    std::rethrow_exception(p);
+  } catch (const std::exception& e) {
+    return e.what();
+  } catch (...) {
+    return "an exception that is not a std::exception";
+  }
+}
 
 std::string os_error(const std::string& path, const char* what) {
   return path + ": " + what + ": " + std::strerror(errno);
@@ -51,6 +63,12 @@ LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleFie
     : LiveSession(&edits, buffer, renderer, std::move(config)) {
   servo::ServoThreadConfig c = cfg_.servo;
   c.observer = this;
+  // What on_tick touches, locked with the servo's own memory (ServoThreadConfig::lock_memory).
+  c.lock_ranges.push_back({this, sizeof(*this)});
+  if (fd_ >= 0) c.lock_ranges.push_back(ticks_.storage());
+  if (cfg_.drill) c.lock_ranges.push_back(servo_edits_.storage());
+  c.lock_ranges.push_back({seen_ns_.get(), seen_size_ * sizeof(seen_ns_[0])});
+  c.lock_ranges.push_back({seen_version_.get(), seen_size_ * sizeof(seen_version_[0])});
   servo_ = std::make_unique<servo::ServoThread>(buffer, renderer, device, std::move(c));
 }
 
@@ -93,7 +111,13 @@ void LiveSession::open_recording() {
   } catch (const io::OutputError& e) {
     throw io::RecordingError(e.what());
   }
-  fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  // A new file only (O_EXCL, which also never follows a symbolic link): FILE.part left by a
+  // run that was killed is that run's recording, readable by isotouch replay.
+  fd_ = ::open(part_path_.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd_ < 0 && errno == EEXIST)
+    throw io::RecordingError(part_path_ +
+                             ": exists: the recording of a session that did not finish (isotouch replay reads it); "
+                             "move or delete it, or record to another name");
   if (fd_ < 0) throw io::RecordingError(os_error(part_path_, "cannot create the recording"));
   try {
     const std::string header = io::recording_header_line(cfg_.record_header, cfg_.record_path);
@@ -226,6 +250,8 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
   // The tick after which it is applied: ticks from ticks_done on may read it.
   e.tick = ticks_done;
   if (source == EditSource::kApi && !simulated_) e.t_s = double(q.asked_ns - start_ns_) * 1e-9;
+  if (source == EditSource::kButton && e.kind == Kind::kBeginStroke) button_stroke_ = true;
+  if (source == EditSource::kButton && e.kind == Kind::kEndStroke) button_stroke_ = false;
   // Strokes nest: a stroke opened by one source while the other's is open joins it; only
   // the outermost begin and end reach the history (one undo step).
   if (e.kind == Kind::kBeginStroke && stroke_depth_++ > 0) return;
@@ -233,19 +259,18 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
   EditOutcome out;
   try {
     out = edits_->apply(e, &buffer_);
-  } catch (const std::exception& ex) {
+  } catch (...) {
     {
       std::lock_guard lock(edits_mu_);
       ++refused_;
     }
     if (rethrow) throw;
-    if (cfg_.on_applied) {
-      out.error = ex.what();
-      cfg_.on_applied(e, out, source);
-    }
+    out.error = what_of(std::current_exception());
+    notify(e, out, source, rethrow);
     return;
   }
-  if (e.kind == Kind::kUndo || e.kind == Kind::kRedo) stroke_depth_ = 0;  // they end an open stroke
+  const bool undo_or_redo = e.kind == Kind::kUndo || e.kind == Kind::kRedo;
+  if (undo_or_redo) stroke_depth_ = 0;  // they end an open stroke
   {
     std::lock_guard lock(edits_mu_);
     ++applied_;
@@ -256,7 +281,28 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
       resolve_seen_locked();
     }
   }
-  if (cfg_.on_applied) cfg_.on_applied(e, out, source);
+  notify(e, out, source, rethrow);
+  // A press still held goes on in a stroke of its own (one undo step), as a new press would.
+  if (undo_or_redo && button_stroke_) {
+    Request begin;
+    begin.event.kind = Kind::kBeginStroke;
+    begin.event.t_s = e.t_s;
+    begin.asked_ns = q.asked_ns;
+    apply_request(begin, EditSource::kButton, ticks_done, rethrow);
+  }
+}
+
+// The listener sees the edit; what it throws is counted, not let through to the edit
+// thread (where it would end the process); simulated mode (`rethrow`) lets it through.
+void LiveSession::notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow) {
+  if (!cfg_.on_applied) return;
+  try {
+    cfg_.on_applied(e, out, source);
+  } catch (...) {
+    if (rethrow) throw;
+    std::lock_guard lock(edits_mu_);
+    if (listener_errors_++ == 0) listener_error_ = what_of(std::current_exception());
+  }
 }
 
 // Each publication up to the newest one a tick has read: its latency (first reading tick's
@@ -290,12 +336,20 @@ void LiveSession::resolve_seen_locked() const {
 void LiveSession::edit_loop() {
   Request q;
   while (!stop_edits_.load(std::memory_order_acquire)) {
+    // One request from each queue in turn: an undo from the UI waits for at most one brush
+    // of a long drill, not for the drill to end.
     bool any = false;
-    for (servo::SpscRing<Request>* ring : {&servo_edits_, &api_edits_}) {
-      while (!stop_edits_.load(std::memory_order_relaxed) && ring->pop(q)) {
-        any = true;
-        apply_request(q, ring == &api_edits_ ? EditSource::kApi : EditSource::kButton, servo_->ticks(), false);
+    for (bool more = true; more && !stop_edits_.load(std::memory_order_relaxed);) {
+      more = false;
+      if (api_edits_.pop(q)) {
+        apply_request(q, EditSource::kApi, servo_->ticks(), false);
+        more = true;
       }
+      if (!stop_edits_.load(std::memory_order_relaxed) && servo_edits_.pop(q)) {
+        apply_request(q, EditSource::kButton, servo_->ticks(), false);
+        more = true;
+      }
+      any = any || more;
     }
     if (!any) {  // until submit() wakes it, or 0.2 ms for the servo's ring (not real time)
       std::unique_lock lock(wake_mu_);
@@ -434,6 +488,7 @@ void LiveSession::record_loop() {
     try {
       record_chunk(false);
     } catch (const std::exception& e) {
+      std::lock_guard lock(edits_mu_);  // stats() reads it meanwhile
       record_error_ = e.what();
     }
   }
@@ -478,6 +533,7 @@ void LiveSession::finish_recording() {
                                  " ticks were not recorded (the recorder fell behind): the recording is incomplete");
       record_chunk(true);
     } catch (const std::exception& e) {
+      std::lock_guard lock(edits_mu_);
       record_error_ = e.what();
     }
   }
@@ -487,6 +543,7 @@ void LiveSession::finish_recording() {
   try {
     io::place_output(part_path_, cfg_.record_path);
   } catch (const io::OutputError& e) {
+    std::lock_guard lock(edits_mu_);
     record_error_ = e.what();
     throw io::RecordingError(record_error_);
   }
@@ -527,6 +584,8 @@ LiveStats LiveSession::stats(std::size_t latency_tail) const {
   s.edit_to_haptics_ms.assign(edit_to_haptics_ms_.end() - std::ptrdiff_t(tail), edit_to_haptics_ms_.end());
   s.edit_to_haptics_taken = edit_to_haptics_ms_.size();
   s.record_error = record_error_;
+  s.listener_errors = listener_errors_;
+  s.listener_error = listener_error_;
   return s;
 }
 

@@ -79,7 +79,9 @@ struct LiveSessionConfig {
   /// edit-to-haptics latency is taken (a publication still unresolved when this many later
   /// versions have been read loses its latency).
   std::size_t latency_slots = 65536;
-  EditListener on_applied;         ///< optional: sees every applied edit with its outcome
+  /// Optional: sees every applied edit with its outcome. What it throws is counted
+  /// (LiveStats::listener_errors; the edit stands); run_simulated() lets it through.
+  EditListener on_applied;
 };
 
 /// What run_simulated() clocks: a simulated device pulled by a scripted hand, at the
@@ -134,6 +136,8 @@ struct LiveStats {
   bool period_error_p99_beyond = false;
   std::string setup_note;     ///< what the system refused at start (SCHED_FIFO, pinning, locking)
   std::string record_error;   ///< "" or why the recording failed
+  long listener_errors = 0;   ///< calls of LiveSessionConfig::on_applied that threw (the edit stands)
+  std::string listener_error; ///< what the first of them said
 };
 
 class LiveSession final : private servo::TickObserver {
@@ -211,6 +215,7 @@ class LiveSession final : private servo::TickObserver {
   };
   // Applies one request (stroke nesting, listener, counters); `rethrow`: simulated mode.
   void apply_request(Request& q, EditSource source, long ticks_done, bool rethrow);
+  void notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow);
   std::int64_t clock_ns() const;
   void on_tick(const servo::TickRecord& r) noexcept override;
   void edit_loop();
@@ -250,6 +255,7 @@ class LiveSession final : private servo::TickObserver {
   std::atomic<std::int64_t> sim_now_ns_{0};
   long sim_ticks_ = 0;
   int stroke_depth_ = 0;  // strokes opened by either source and not closed (edit thread only)
+  bool button_stroke_ = false;  // the button's press is held: its begin seen, its end not (edit thread)
 
   // Servo-thread state (on_tick only).
   bool button_ = false;
@@ -277,13 +283,15 @@ class LiveSession final : private servo::TickObserver {
   mutable std::vector<std::pair<std::uint64_t, std::int64_t>> published_;
   mutable std::vector<double> edit_to_haptics_ms_;
   long applied_ = 0, refused_ = 0, publications_ = 0;
+  long listener_errors_ = 0;
+  std::string listener_error_;
 
   // Recorder thread.
   int fd_ = -1;
   std::string part_path_;
   long recorded_ticks_ = 0, recorded_edits_ = 0;
   double last_t_ = 0;
-  std::string record_error_;
+  std::string record_error_;  // written by the recorder (or stop()) under edits_mu_: stats() reads it
   bool stopped_ = false;
 };
 

@@ -18,10 +18,19 @@ extern "C" void on_stop_signal(int sig) {
   }
 }
 
+std::string signal_name(int sig) {
+  switch (sig) {
+    case SIGTERM: return "SIGTERM";
+    case SIGHUP: return "SIGHUP";
+    case SIGQUIT: return "SIGQUIT";
+    default: return "SIGINT";
+  }
+}
+
 }  // namespace
 
 Interrupted::Interrupted(int sig, std::string where)
-    : std::runtime_error("interrupted by " + std::string(sig == SIGTERM ? "SIGTERM" : "SIGINT") + " during " + where),
+    : std::runtime_error("interrupted by " + signal_name(sig) + " during " + where),
       signal(sig),
       stage(std::move(where)) {}
 
@@ -32,8 +41,9 @@ void install_stop_handlers() {
   // No SA_RESTART: a call blocked on a FIFO without a reader (or the like) returns EINTR
   // and the command stops with a named error instead of swallowing the first Ctrl+C.
   sa.sa_flags = 0;
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
+  // A closed terminal (SIGHUP) and Ctrl+\ (SIGQUIT) stop as cleanly as Ctrl+C: whatever
+  // the command changed outside itself (a recording, the display server's CPUs) is put right.
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaction(sig, &sa, nullptr);
   // A stream output whose reader went away (| head) fails with EPIPE, named, instead of
   // ending the process silently.
   std::signal(SIGPIPE, SIG_IGN);

@@ -1,19 +1,20 @@
-// stop_signal.h - SIGINT / SIGTERM ask a long command to stop at its next safe point.
+// stop_signal.h - SIGINT / SIGTERM / SIGHUP / SIGQUIT ask a long command to stop at its next safe point.
 #pragma once
 #include <stdexcept>
 #include <string>
 
 namespace isotouch::session {
 
-/// Thrown at a safe point after SIGINT or SIGTERM: `stage` says where the work stopped.
+/// Thrown at a safe point after a stop signal: `stage` says where the work stopped.
 struct Interrupted : std::runtime_error {
   Interrupted(int signal, std::string stage);
-  int signal;         ///< SIGINT or SIGTERM
+  int signal;         ///< SIGINT, SIGTERM, SIGHUP or SIGQUIT
   std::string stage;  ///< e.g. "servo simulation, tick 1250 of 5001"
 };
 
-/// Installs handlers for SIGINT and SIGTERM that only raise a flag (async-signal-safe); a
-/// second signal of either kind ends the process at once (the default action). Idempotent.
+/// Installs handlers for SIGINT, SIGTERM, SIGHUP and SIGQUIT that only raise a flag
+/// (async-signal-safe); a second signal of any of them ends the process at once (the
+/// default action). Idempotent.
 void install_stop_handlers();
 
 /// The signal that asked to stop, 0 when none did.

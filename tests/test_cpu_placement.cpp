@@ -8,6 +8,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
+#include <csignal>
 #include <cstddef>
 #include <cstring>
 #include <filesystem>
@@ -101,6 +103,83 @@ TEST(CpuPlacement, ThePeerOfASocketLeavesTheCpuAndGetsItsSetsBack) {
     for (pid_t t : tids) EXPECT_FALSE(on_cpu(t, cpu)) << "thread " << t;
   }
   for (pid_t t : tids) EXPECT_TRUE(on_cpu(t, cpu)) << "thread " << t << " not given its set back";
+}
+
+namespace {
+int last_cpu_of(const cpu_set_t& set) {
+  int cpu = CPU_SETSIZE - 1;
+  while (cpu > 0 && !CPU_ISSET(cpu, &set)) --cpu;
+  return cpu;
+}
+
+/// Whether process `pid` is gone or a zombie (an orphan waits for its reaper).
+bool ended(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat;
+  if (!std::getline(f, stat)) return true;
+  const auto close = stat.rfind(')');
+  return close != std::string::npos && close + 2 < stat.size() && stat[close + 2] == 'Z';
+}
+}  // namespace
+
+// The process that moved the threads is killed with SIGKILL (nothing of it runs): the guard
+// it started gives the stand-in's threads their sets back; the truth is the kernel's view
+// of each thread's set, read by this test.
+TEST(CpuPlacement, TheThreadsGetTheirSetsBackWhenTheMoverIsKilled) {
+  cpu_set_t mine;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  if (CPU_COUNT(&mine) < 2) GTEST_SKIP() << "needs two CPUs";
+  const int cpu = last_cpu_of(mine);
+  Child standin;
+  const std::vector<pid_t> tids = threads_of(standin.pid);
+  int ready[2];
+  ASSERT_EQ(pipe(ready), 0);
+  const pid_t mover = fork();
+  if (mover == 0) {  // the app's side: its guard first (as before a servo starts), then the move
+    PeerOffCpu off;
+    const pid_t early = off.start_guard().empty() ? off.guard_pid() : -1;
+    const bool moved = off.keep_off(standin.pid, cpu).empty() && off.threads_moved() > 0;
+    const pid_t guard = moved && off.guard_pid() == early ? early : -1;
+    if (write(ready[1], &guard, sizeof(guard)) != sizeof(guard)) _exit(2);
+    for (;;) pause();
+  }
+  close(ready[1]);
+  pid_t guard = -1;
+  ASSERT_EQ(read(ready[0], &guard, sizeof(guard)), ssize_t(sizeof(guard)));
+  close(ready[0]);
+  for (pid_t t : tids) EXPECT_FALSE(on_cpu(t, cpu)) << "thread " << t << " not moved";
+  ASSERT_EQ(kill(mover, SIGKILL), 0);
+  int st = 0;
+  ASSERT_EQ(waitpid(mover, &st, 0), mover);
+  ASSERT_TRUE(WIFSIGNALED(st));
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  auto all_back = [&] {
+    for (pid_t t : tids)
+      if (!on_cpu(t, cpu)) return false;
+    return true;
+  };
+  while (!all_back() && std::chrono::steady_clock::now() < until) usleep(2000);
+  for (pid_t t : tids) EXPECT_TRUE(on_cpu(t, cpu)) << "thread " << t << " still kept off CPU " << cpu;
+  ASSERT_GT(guard, 0);
+  while (!ended(guard) && std::chrono::steady_clock::now() < until) usleep(2000);
+  EXPECT_TRUE(ended(guard)) << "the guard " << guard << " outlived its work";
+}
+
+// A clean end gives the sets back itself and ends the guard (no process left behind).
+TEST(CpuPlacement, TheGuardEndsWithTheObject) {
+  cpu_set_t mine;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  if (CPU_COUNT(&mine) < 2) GTEST_SKIP() << "needs two CPUs";
+  Child standin;
+  pid_t guard = -1;
+  {
+    PeerOffCpu off;
+    ASSERT_EQ(off.keep_off(standin.pid, last_cpu_of(mine)), "");
+    guard = off.guard_pid();
+    ASSERT_GT(guard, 0);
+    EXPECT_FALSE(ended(guard));
+  }
+  EXPECT_EQ(kill(guard, 0), -1) << "guard " << guard << " left running or unreaped";
 }
 
 TEST(CpuPlacement, AThreadWithNoOtherCpuStaysWhereItIs) {

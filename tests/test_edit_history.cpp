@@ -7,6 +7,8 @@
 #include <bit>
 #include <cstdint>
 #include <cstring>
+#include <stdexcept>
+#include <tuple>
 
 #include "vk_test_context.h"
 #include "brush.h"
@@ -127,6 +129,37 @@ TEST(EditHistory, BrickTouchedTwiceKeepsItsFirstBackup) {
   EXPECT_TRUE(same_bits(v.voxels, v0.voxels)) << "undo must restore the pre-stroke content";
   EXPECT_EQ(hooked, ids);
   EXPECT_FALSE(ids.empty());
+}
+
+// A hook that throws (a GPU copy that cannot take the bricks) fails the undo or redo as a
+// whole: the volume, the undo and the redo stacks are as they were, and the next try works.
+TEST(EditHistory, AnUndoOrRedoWhoseHookThrowsChangesNothing) {
+  const Volume v0 = engine::make_random({24, 24, 24}, {1e-3, 1e-3, 1e-3}, 0.0f, 100.0f, 9);
+  session::EditHistory h(16.0);
+  Volume v = v0;
+  Brush b = brush(BrushKind::kAdd, v.grid.centre_m(), 5e-3, {1000.0f, 0.0f, 1000.0f});
+  h.begin_stroke();
+  h.record(v, session::touched_bricks(v.grid, b));
+  session::apply_brush_cpu(v, b);
+  h.end_stroke(v);
+  const Volume v1 = v;
+  int fail = 0;  // calls of the hook that throw
+  h.set_on_restore([&](const std::vector<std::uint32_t>&) {
+    if (fail-- > 0) throw std::runtime_error("device lost");
+  });
+  // Each step fails once (nothing changes), then works: (undo, before, after, depths).
+  const bool undo = true, redo = false;
+  for (const auto& [step, before, after] : {std::tuple{undo, &v1, &v0}, std::tuple{redo, &v0, &v1}}) {
+    const auto run = [&, step = step] { return step ? h.undo(v) : h.redo(v); };
+    const std::size_t undo_depth = h.undo_depth(), redo_depth = h.redo_depth();
+    fail = 1;
+    EXPECT_THROW(run(), std::runtime_error);
+    EXPECT_TRUE(same_bits(v.voxels, before->voxels)) << (step ? "undo" : "redo") << " that failed changed the volume";
+    EXPECT_EQ(h.undo_depth(), undo_depth);
+    EXPECT_EQ(h.redo_depth(), redo_depth);
+    EXPECT_FALSE(run().empty());
+    EXPECT_TRUE(same_bits(v.voxels, after->voxels));
+  }
 }
 
 TEST(EditHistory, UnchangedBricksAreNotKept) {

@@ -15,6 +15,10 @@
 #include <thread>
 
 #include <unistd.h>
+#include <csignal>
+#include <iterator>
+#include <mutex>
+#include <sys/resource.h>
 
 #include "edit_session.h"
 #include "field_view.h"
@@ -383,6 +387,200 @@ TEST(LiveSession, AnUnwritableRecordingIsRefusedUpFront) {
   } catch (const isotouch::io::RecordingError& e) {
     EXPECT_NE(std::string(e.what()).find("directory"), std::string::npos) << e.what();
   }
+  fs::remove_all(dir);
+}
+
+namespace {
+/// A drill that asks every tick with a brush too weak to end the contact it needs.
+isotouch::session::ButtonDrill weak_drill() {
+  isotouch::session::ButtonDrill d;
+  d.brush = carve({}).brush;
+  d.brush.strength = 1e-3;
+  d.every_ticks = 1;
+  return d;
+}
+
+/// The edits a session applied, in order, with their sources (the listener's view).
+struct AppliedLog {
+  std::mutex mu;
+  std::vector<std::pair<isotouch::session::EditSource, EditEvent::Kind>> order;
+  std::size_t size() {
+    std::lock_guard lock(mu);
+    return order.size();
+  }
+  std::size_t brushes_from(isotouch::session::EditSource s, std::size_t from = 0) {
+    std::lock_guard lock(mu);
+    return std::size_t(std::count_if(order.begin() + std::ptrdiff_t(from), order.end(), [&](const auto& o) {
+      return o.first == s && o.second == EditEvent::Kind::kBrush;
+    }));
+  }
+  /// The index of the first `kind` at or after `from`, or -1.
+  long find(EditEvent::Kind kind, std::size_t from) {
+    std::lock_guard lock(mu);
+    for (std::size_t i = from; i < order.size(); ++i)
+      if (order[i].second == kind) return long(i);
+    return -1;
+  }
+};
+
+EditEvent undo_event() {
+  EditEvent e;
+  e.kind = EditEvent::Kind::kUndo;
+  return e;
+}
+}  // namespace
+
+// A held drill asks for a brush every tick, each slower to apply than a tick (the listener
+// sleeps): the drill's queue backs up. An undo submitted meanwhile is applied after at most
+// one more drill brush, not after the backlog.
+TEST(LiveSession, AnUndoWaitsForOneDrillBrushNotForTheDrill) {
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  c.drill = weak_drill();
+  AppliedLog log;
+  std::atomic<bool> slow{false};
+  c.on_applied = [&](const EditEvent& e, const isotouch::session::EditOutcome&, isotouch::session::EditSource s) {
+    {
+      std::lock_guard lock(log.mu);
+      log.order.emplace_back(s, e.kind);
+    }
+    if (slow.load() && s == isotouch::session::EditSource::kButton)
+      std::this_thread::sleep_for(std::chrono::milliseconds(3));
+  };
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+  live.start();
+  wait_until([&] { return rig.io->nonzero.load() > 50; }, 10);
+  slow = true;
+  rig.io->button = true;
+  wait_until([&] { return live.stats().edits_requested - log.size() > 100; }, 10);  // a backlog
+  const std::size_t mark = log.size();
+  ASSERT_TRUE(live.submit(undo_event()));
+  wait_until([&] { return log.find(EditEvent::Kind::kUndo, mark) >= 0; }, 10);
+  const long at = log.find(EditEvent::Kind::kUndo, mark);
+  const auto s = live.stats();
+  rig.io->button = false;
+  slow = false;
+  live.stop();
+  ASSERT_GT(s.edits_requested - long(mark), 100) << "the drill's queue did not back up: nothing to test";
+  ASSERT_GE(at, 0) << "the undo was not applied while the drill held";
+  const std::size_t between = log.brushes_from(isotouch::session::EditSource::kButton, mark) -
+                              log.brushes_from(isotouch::session::EditSource::kButton, std::size_t(at));
+  EXPECT_LE(between, 1u) << "the undo waited for " << between << " drill brushes";
+}
+
+// An undo while the button is still held: the rest of the press is one undo step (as a new
+// press would be), not one per drill brush.
+TEST(LiveSession, AnUndoDuringAHeldPressLeavesTheRestOneUndoStep) {
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  c.drill = weak_drill();
+  c.drill->every_ticks = 5;
+  AppliedLog log;
+  c.on_applied = [&](const EditEvent& e, const isotouch::session::EditOutcome&, isotouch::session::EditSource s) {
+    std::lock_guard lock(log.mu);
+    log.order.emplace_back(s, e.kind);
+  };
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+  live.start();
+  wait_until([&] { return rig.io->nonzero.load() > 50; }, 10);
+  const std::size_t depth0 = rig.edits.sculptor().history().undo_depth();
+  const auto button = isotouch::session::EditSource::kButton;
+  rig.io->button = true;
+  wait_until([&] { return log.brushes_from(button) >= 5; }, 10);
+  const std::size_t mark = log.size();
+  ASSERT_TRUE(live.submit(undo_event()));
+  wait_until([&] { return log.find(EditEvent::Kind::kUndo, mark) >= 0; }, 10);
+  const auto at = std::size_t(std::max(0L, log.find(EditEvent::Kind::kUndo, mark)));
+  wait_until([&] { return log.brushes_from(button, at) >= 5; }, 10);
+  rig.io->button = false;
+  wait_until([&] { return log.find(EditEvent::Kind::kEndStroke, at) >= 0; }, 10);
+  live.stop();
+  ASSERT_GE(log.brushes_from(button, at), 5u) << "too few drill brushes after the undo to test";
+  EXPECT_EQ(rig.edits.sculptor().history().undo_depth(), depth0 + 1)
+      << "the press's brushes after the undo are not one undo step";
+}
+
+// A listener that throws (a std::exception or anything else) does not end the edit thread
+// or the process: the edits stand and the throws are counted.
+TEST(LiveSession, AListenerThatThrowsIsCountedNotFatal) {
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  std::atomic<int> calls{0};
+  c.on_applied = [&](const EditEvent&, const isotouch::session::EditOutcome&, isotouch::session::EditSource) {
+    if (calls.fetch_add(1) == 0) throw std::runtime_error("listener full");
+    throw 42;
+  };
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+  live.start();
+  const Vec3 centre = rig.vol.grid.centre_m();
+  ASSERT_TRUE(live.submit(carve(centre)));
+  ASSERT_TRUE(live.submit(undo_event()));
+  wait_until([&] { return calls.load() >= 2; }, 10);
+  live.stop();
+  const auto s = live.stats();
+  EXPECT_EQ(s.edits_applied, 2);
+  EXPECT_EQ(s.listener_errors, 2);
+  EXPECT_EQ(s.listener_error, "listener full");
+  EXPECT_TRUE(rig.io->last_zero.load());
+}
+
+// FILE.part of a run that was killed is that run's recording: a second run recording to
+// the same FILE refuses, naming it, and leaves it as it was; a FILE.part that is a symbolic
+// link is not followed (the file it points at is not truncated).
+TEST(LiveSession, ACrashedRunsPartFileIsKept) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live-part");
+  const std::string crashed = "the crashed run's ticks\n";
+  const auto content = [](const fs::path& p) {
+    std::ifstream f(p);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  {
+    std::ofstream(dir / "a.rec.part") << crashed;
+    std::ofstream(dir / "precious.txt") << crashed;
+    fs::create_symlink(dir / "precious.txt", dir / "b.rec.part");
+  }
+  for (const char* name : {"a.rec", "b.rec"}) {
+    try {
+      LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config((dir / name).string()));
+      ADD_FAILURE() << name << ".part was taken over";
+    } catch (const isotouch::io::RecordingError& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string(name) + ".part: exists"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(content(dir / "a.rec.part"), crashed);
+  EXPECT_EQ(content(dir / "precious.txt"), crashed);
+  EXPECT_TRUE(fs::is_symlink(dir / "b.rec.part"));
+  fs::remove_all(dir);
+}
+
+// A recording that fails while the session runs (here the file size limit) is said by
+// stats(), read meanwhile from another thread (ThreadSanitizer watches the handover).
+TEST(LiveSession, ARecordingErrorReachesStatsWhileRunning) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live-rec-error");
+  rlimit old{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+  struct sigaction ign {}, prev {};
+  ign.sa_handler = SIG_IGN;
+  sigaction(SIGXFSZ, &ign, &prev);  // a write past the limit then fails with EFBIG
+  std::string error;
+  {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, rig.config((dir / "s.rec").string()));
+    rlimit small = old;
+    small.rlim_cur = 4096;  // the header fits; a few chunks of ticks do not
+    setrlimit(RLIMIT_FSIZE, &small);
+    live.start();
+    wait_until([&] { return !live.stats().record_error.empty(); }, 10);
+    error = live.stats().record_error;
+    try {
+      live.stop();
+    } catch (const isotouch::io::RecordingError&) {
+    }
+  }
+  setrlimit(RLIMIT_FSIZE, &old);
+  sigaction(SIGXFSZ, &prev, nullptr);
+  EXPECT_NE(error.find("s.rec.part"), std::string::npos) << "no recording error while running: " << error;
   fs::remove_all(dir);
 }
 

@@ -5,6 +5,7 @@
 // The safety tests (ServoSafety) judge what a logging device received, write by write;
 // tests/mutants.sh breaks each guarded line and shows them fail.
 #include <gtest/gtest.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <array>
@@ -13,6 +14,9 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <string>
 #include <limits>
 #include <memory>
 #include <new>
@@ -166,7 +170,67 @@ TEST(ServoThread, RunsWithAPublisherSwappingSnapshotsAndAllocatesNothing) {
   // The real-time setup is asked for by default; whatever was refused is said, nothing else.
   EXPECT_EQ(note.find("SCHED_FIFO") != std::string::npos, !servo.got_fifo()) << note;
   EXPECT_EQ(note.find("not pinned") != std::string::npos, servo.pinned_cpu() < 0) << note;
-  EXPECT_EQ(note.find("mlockall") != std::string::npos, !servo.memory_locked()) << note;
+  EXPECT_EQ(note.find("mlock") != std::string::npos, !servo.memory_locked()) << note;
+}
+
+namespace {
+// The sanitizers' runtimes make mlock a no-op that succeeds (VmLck stays 0).
+#if defined(__SANITIZE_THREAD__) || defined(__SANITIZE_ADDRESS__)
+constexpr bool kMlockIsReal = false;
+#else
+constexpr bool kMlockIsReal = true;
+#endif
+
+/// A field of /proc/self/status [kB] (VmLck, VmRSS): the kernel's count, not the servo's.
+long status_kb(const std::string& key) {
+  std::ifstream f("/proc/self/status");
+  for (std::string line; std::getline(f, line);)
+    if (line.rfind(key + ":", 0) == 0) return std::stol(line.substr(key.size() + 1));
+  return -1;
+}
+}  // namespace
+
+// The servo locks what its ticks touch (its stack, record buffer and object), not the
+// process: a 64 MiB "volume" loaded while it runs is not locked, and dropping it
+// (MADV_DONTNEED, as an allocator returns freed memory) gives its pages back.
+TEST(ServoThread, LocksWhatTheServoTouchesNotTheProcess) {
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+  HriRenderer renderer(HriParams{});
+  ApproachingProbe dev;
+  ServoThreadConfig cfg;
+  cfg.rate_hz = 1000;
+  cfg.sched_fifo = cfg.pin_cpu = false;
+  cfg.record_ticks = 4096;
+  const long before_kb = status_kb("VmLck");
+  ServoThread servo(published, renderer, dev, cfg);
+  const std::string note = servo.start();
+  if (!servo.memory_locked()) GTEST_SKIP() << "memory locking refused here: " << note;
+  const std::size_t big = std::size_t(64) << 20;
+  void* volume = mmap(nullptr, big, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  ASSERT_NE(volume, MAP_FAILED);
+  std::memset(volume, 1, big);
+  const long locked_kb = status_kb("VmLck") - before_kb;
+  const long rss_loaded_kb = status_kb("VmRSS");
+  const int dropped = madvise(volume, big, MADV_DONTNEED);
+  const int dropped_errno = errno;
+  const long rss_dropped_kb = status_kb("VmRSS");
+  munmap(volume, big);
+  servo.stop();
+  // The servo's working set: the prefaulted stack and the frames above the loop (well under
+  // 64 KiB), the record buffer, the ServoThread object, each rounded to pages.
+  const long working_kb =
+      long((kServoStackBytes + 16 * 1024 + 64 * 1024 + cfg.record_ticks * sizeof(std::int64_t) + sizeof(ServoThread)) /
+           1024) + 3 * 4;
+  std::printf("VmLck %ld kB (servo's working set at most %ld kB), RSS %ld kB -> %ld kB after the drop\n", locked_kb,
+              working_kb, rss_loaded_kb, rss_dropped_kb);
+  if (kMlockIsReal) {
+    EXPECT_GT(locked_kb, 0);
+    EXPECT_LE(locked_kb, working_kb) << "more than the servo's memory is locked";
+  }
+  EXPECT_EQ(dropped, 0) << "MADV_DONTNEED refused: " << std::strerror(dropped_errno);
+  EXPECT_LT(rss_dropped_kb, rss_loaded_kb - long(big / 1024 / 2)) << "the dropped volume's pages stayed";
+  EXPECT_EQ(status_kb("VmLck"), before_kb) << "stop() left memory locked";
 }
 
 // A rate that gives no period is refused when the thread is made, naming the field.

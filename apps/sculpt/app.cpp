@@ -707,6 +707,8 @@ bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
   sim_ticks_per_frame = std::max(1L, std::lround(o.sim_frame_ms * 1e-3 * scene.hri.rate_hz));
   sim_frame_s = double(sim_ticks_per_frame) / scene.hri.rate_hz;
   if (!o.sim_clock) {
+    // The X server's guard forked before the servo runs (keep_display_off_servo_cpu).
+    if (o.display_off_servo_cpu && o.sched_fifo) (void)display_off.start_guard();
     const std::string note = session->start();
     if (!note.empty()) log << "servo    " << note << "\n";
     if (o.display_off_servo_cpu) keep_display_off_servo_cpu();
@@ -742,7 +744,8 @@ void Sculpt::keep_display_off_servo_cpu() {
         << " that could move\n";
   else
     log << "servo    display server " << name << " (pid " << pid << ", " << display_off.threads_moved() << (display_off.threads_moved() == 1 ? " thread" : " threads")
-        << ") kept off CPU " << cpu << ", the servo's\n";
+        << ") kept off CPU " << cpu << ", the servo's; given back at exit, or by guard process "
+        << display_off.guard_pid() << " if this one dies\n";
 }
 
 /// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.

@@ -51,7 +51,10 @@ int main(int argc, char** argv) {
   cli.add_flag("--display-off-servo-cpu,!--no-display-off-servo-cpu", o.display_off_servo_cpu,
                "keep the local X server off the servo thread's CPU while the window is open, and present from "
                "another CPU: a software-presented frame goes through the X socket in system calls that hold a CPU "
-               "for milliseconds (default on, with a pinned servo; refused: a note)");
+               "for milliseconds (default on, with a pinned servo; refused: a note). This changes the CPU sets "
+               "(sched_setaffinity) of the X server's threads, outside this process: they are given back at exit, "
+               "on a signal, and, if this process is killed or crashes, by a guard process it starts (named in the "
+               "log); a thread the server started meanwhile keeps the reduced set until the server restarts");
   cli.add_flag("--overlay,!--no-overlay", o.overlay,
                "the tool and stats panels (Dear ImGui) over the picture (default on, in a build with Dear ImGui)");
   cli.add_flag("--tile-starts,!--no-tile-starts", o.tile_starts,
@@ -65,7 +68,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(cli, argc, argv);
   o.height = o.width * 3 / 4;
   int rc = 1;
-  // SIGINT / SIGTERM end the frame loop, so that the session stops, the recording is
+  // SIGINT / SIGTERM / SIGHUP / SIGQUIT end the frame loop, so that the session stops, the recording is
   // completed and the X server gets its CPUs back (exit 128 + the signal).
   isotouch::session::install_stop_handlers();
   try {

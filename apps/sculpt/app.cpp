@@ -1312,9 +1312,12 @@ int Sculpt::finish() {
   if (o.stats || o.bench) print_stats(seconds, st);
   if (!mouse) print_device();
   if (o.bench) print_verdicts(sculpted, alone);
-  // A device that was lost, faulty or refused during the session: as `run --live`.
-  const servo::DeviceCounters dc = session->servo_thread()->device_counters();
-  if (code == 0 && (dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0)) code = exit_code::kDeviceLost;
+  // A device that was lost, faulty or refused during the session: as `run --live` (a
+  // simulated clock has no servo thread and no device to lose).
+  if (const servo::ServoThread* servo = session->servo_thread(); servo != nullptr && code == 0) {
+    const servo::DeviceCounters dc = servo->device_counters();
+    if (dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0) code = exit_code::kDeviceLost;
+  }
   if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
   if (vk->validation_messages() > 0) {
     log << "isotouch-sculpt: " << vk->validation_messages() << " Vulkan validation messages\n";

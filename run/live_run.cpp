@@ -174,18 +174,7 @@ class TracingRenderer final : public servo::Renderer {
       ++lost_;
       return out;
     }
-    sim::TraceRow& r = rows_[kept_++];
-    r.t_s = t_s_;
-    r.hip_m = hip_m;
-    r.vhip_m = out.vhip_m;
-    r.force_n = out.force_n;
-    r.penetration_m = out.penetration_m;
-    r.tick_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
-    r.contact = out.contact;
-    r.plane_update = out.plane_update;
-    r.saturated = out.saturated;
-    r.fault = out.fault;
-    r.plane = out.plane;
+    rows_[kept_++] = sim::trace_row(t_s_, hip_m, out, std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count());
     return out;
   }
   /// After the session stopped: the rows, with the script's hand target at each tick's time.

@@ -13,13 +13,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 
 # Waits (at most 120 s) until the regex matches a line of FILE.
-wait_for() {
-  for _ in $(seq 1 2400); do
-    grep -Eq "$2" "$1" 2>/dev/null && return 0
-    sleep 0.05
-  done
-  return 1
-}
+wait_for() { timeout 120 bash -c 'until grep -Eq "$2" "$1" 2>/dev/null; do sleep 0.05; done' _ "$1" "$2"; }
 
 # 1. Twice, as soon as the folder says "running".
 "$exe" run "$scene" --out "$out/twice" --quiet > "$out/twice.log" 2>&1 &

@@ -11,7 +11,6 @@
 #include <iomanip>
 #include <iostream>
 #include <sstream>
-#include <optional>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -271,11 +270,10 @@ int write_hand_path(const io::Scene& scene, const std::string& path, std::ostrea
   return 0;
 }
 
-int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
+namespace {
+
+int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* folder, std::ostream& log) {
   RunOptions ropt = o.run;
-  // --out: the folder is made and locked first (a second run into it is refused at once).
-  std::optional<io::RunFolder> folder;
-  if (!o.run.out_dir.empty()) folder.emplace(o.run.out_dir, scene.file, scene.name);
   SceneSetup setup = setup_scene(scene, ropt, log);
   // Every live session edits through an EditSession (one without an "edits" section too:
   // the API may edit); its first snapshot is what the servo reads first.
@@ -328,11 +326,30 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   const bool device_lost = dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0;
   if (device.report || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
-  if (folder) write_live_outputs(scene, setup, tracer, s, seconds, device.description, *folder, log);
+  if (folder) {
+    session::clear_last_words();  // the folder's final status follows
+    write_live_outputs(scene, setup, tracer, s, seconds, device.description, *folder, log);
+  }
   // Stopped by a signal: the recording is complete, but the run did not run its course.
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
   if (s.faults > 0) return exit_code::kServoFaults;
   return device_lost ? exit_code::kDeviceLost : exit_code::kOk;
+}
+
+}  // namespace
+
+int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
+  if (o.run.out_dir.empty()) return run_live_in(scene, o, nullptr, log);
+  // --out: the folder is made and locked first (a second run into it is refused at once);
+  // it ends "complete", "interrupted" or "failed", never "running".
+  io::RunFolder folder(o.run.out_dir, scene.file, scene.name);
+  const LastWordsWhileRunning last_words(scene, o.run.out_dir);
+  try {
+    return run_live_in(scene, o, &folder, log);
+  } catch (const std::exception& e) {
+    folder.mark_failed(e.what());
+    throw;
+  }
 }
 
 }  // namespace isotouch::run

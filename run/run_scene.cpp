@@ -186,6 +186,9 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, const RunF
   return m;
 }
 
+}  // namespace
+
+namespace {
 // summary.json as a second SIGINT / SIGTERM leaves it when it ends the process at once.
 std::string killed_summary(const Scene& scene, const char* signal) {
   nlohmann::ordered_json j;
@@ -197,19 +200,14 @@ std::string killed_summary(const Scene& scene, const char* signal) {
               "not at all) but the figures of a complete run (report.md, the rest of summary.json) were not written";
   return j.dump(2) + "\n";
 }
-
-/// While a run writes its folder, a second signal leaves summary.json "interrupted".
-struct LastWordsWhileRunning {
-  LastWordsWhileRunning(const Scene& scene, const std::string& dir) {
-    session::set_last_words((fs::path(dir) / "summary.json").string(), killed_summary(scene, "SIGINT"),
-                            killed_summary(scene, "SIGTERM"));
-  }
-  ~LastWordsWhileRunning() { session::clear_last_words(); }
-  LastWordsWhileRunning(const LastWordsWhileRunning&) = delete;
-  LastWordsWhileRunning& operator=(const LastWordsWhileRunning&) = delete;
-};
-
 }  // namespace
+
+LastWordsWhileRunning::LastWordsWhileRunning(const Scene& scene, const std::string& dir) {
+  session::set_last_words((fs::path(dir) / "summary.json").string(), killed_summary(scene, "SIGINT"),
+                          killed_summary(scene, "SIGTERM"));
+}
+
+LastWordsWhileRunning::~LastWordsWhileRunning() { session::clear_last_words(); }
 
 RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
   RunFolder folder(opt.out_dir, scene.file, scene.name);

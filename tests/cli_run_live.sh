@@ -6,7 +6,8 @@
 #     and says the file has no end record; replay F names F.part;
 #  3. SIGINT mid-way: exit 130, the recording complete and replayable, no F.part.
 #  --out DIR (runs 1 and 3): trace.csv with a row per tick, report.md, summary.json
-#     "complete" with its "live" section (run 1), "interrupted" (run 3).
+#     "complete" with its "live" section (run 1), "interrupted" (run 3), "failed" (a
+#     device that cannot be opened).
 # usage: cli_run_live.sh ISOTOUCH SCENE OUT
 set -u
 exe=$1 scene=$2 out=$3
@@ -73,4 +74,8 @@ grep -q '"status": "interrupted"' "$out/int-folder/summary.json" || fail "--out:
 tail -n 1 "$rec" | grep -q '"end":true' || fail "the recording after SIGINT has no end record"
 "$exe" replay "$rec" --quiet > "$out/replay-int.log" 2>&1 || { cat "$out/replay-int.log"; fail "replay after SIGINT failed"; }
 grep -q "^IDENTICAL" "$out/replay-int.log" || fail "replay after SIGINT not identical"
+# --out with a device that cannot be opened: summary.json says "failed" with the error.
+"$exe" run "$scene" --live --haptic "emu:$out/none.sock" --out "$out/failed" --quiet > "$out/failed.log" 2>&1 &&
+  fail "a missing device exited 0"
+grep -q '"status": "failed"' "$out/failed/summary.json" || { cat "$out/failed.log"; fail "--out: summary.json after a failed start is not \"failed\""; }
 echo "PASS run --live"

@@ -31,4 +31,17 @@ inline CLI::Validator non_negative_number() {
       "NONNEGATIVE");
 }
 
+/// Any finite number. Message: "must be a finite number, got nan" (also for inf and for
+/// 1e400, past the largest double), with `what` after it when given.
+inline CLI::Validator finite_number(const std::string& what = "") {
+  return CLI::Validator(
+      [what](std::string& s) -> std::string {
+        double v = 0;
+        if (!CLI::detail::lexical_cast(s, v) || !std::isfinite(v))
+          return "must be a finite number" + (what.empty() ? std::string() : " (" + what + ")") + ", got " + s;
+        return "";
+      },
+      "NUMBER");
+}
+
 }  // namespace isotouch::app

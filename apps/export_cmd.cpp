@@ -1,6 +1,8 @@
 // export_cmd.cpp - `isotouch export`: options only; the export is run/export.h.
 #include "export_cmd.h"
 
+#include "exit_codes.h"
+
 #include <iostream>
 #include <memory>
 
@@ -46,7 +48,7 @@ Subcommand add_export_command(CLI::App& cli) {
       return run::run_export(*o, std::cout, std::cerr);
     } catch (const std::exception& e) {
       std::cerr << "isotouch export: error: " << e.what() << "\n";
-      return 1;
+      return exit_code::kError;
     }
   };
   return s;

@@ -8,6 +8,7 @@
 
 #include "bench_cmd.h"
 #include "check_cmd.h"
+#include "cli_common.h"
 #include "devices_cmd.h"
 #include "export_cmd.h"
 #include "render_cmd.h"
@@ -29,7 +30,11 @@ int main(int argc, char** argv) {
       "  isotouch run scenes/chest.json --out /tmp/chest\n"
       "  isotouch check data/ct-tooth/tooth.nhdr\n"
       "  isotouch check data/ct-chest-lungdx-a0001/dicom-5mm   # a DICOM series folder\n"
-      "  ISOTOUCH_DEVICE=llvmpipe isotouch run # choose the Vulkan device"};
+      "  ISOTOUCH_DEVICE=llvmpipe isotouch run # choose the Vulkan device\n\n"
+      "Exit status: 0 ok, 1 bad input or error, 2 usage error, 3 a check failed, 4 servo faults,\n"
+      "5 haptic device lost, 128 + N stopped by signal N; each command's --help says which it uses\n"
+      "(docs/exit-codes.md has the table)."};
+  app::common_options(cli);
   cli.require_subcommand(1);
   // Options of the main command (--device) are accepted after the subcommand too:
   // `isotouch run scenes/x.json --device llvmpipe`. Inherited by every subcommand.
@@ -51,15 +56,15 @@ int main(int argc, char** argv) {
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return cli.exit(e);
+    return app::parse_exit(cli, e);
   }
   try {
     for (const app::Subcommand& c : commands)
       if (c.app->parsed()) return c.run(device);
     std::cerr << "isotouch: no command given (see --help)\n";
-    return 2;
+    return exit_code::kUsage;
   } catch (const std::exception& e) {
     std::cerr << "\nisotouch: error: " << e.what() << "\n";
-    return 1;
+    return exit_code::kError;
   }
 }

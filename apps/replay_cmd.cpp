@@ -1,6 +1,8 @@
 // replay_cmd.cpp - `isotouch replay FILE`: options and exit codes; the replay is run/replay.h.
 #include "replay_cmd.h"
 
+#include "exit_codes.h"
+
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
@@ -26,7 +28,7 @@ Subcommand add_replay_command(CLI::App& cli) {
       "Play a recording (run --record) back through the same renderer and edits and check every force, VHIP\n"
       "and snapshot version bit for bit (format 1 recordings: forces only).\n"
       "Exit 0: identical; 1: something differs (the first differing tick is printed); 2: bad input (unreadable\n"
-      "recording, the scene file or the volume changed); 3: the pipeline could not run.");
+      "recording, the scene file or the volume changed) or a usage error; 3: the pipeline could not run.");
   sub->add_option("file", a->file, "Recording file (isotouch run SCENE --record FILE)")->required();
   sub->add_option("--out", a->out, "Also write the replay's trace.csv (recorded and replayed forces) into DIR");
   sub->add_flag("--quiet", a->quiet, "No progress lines");
@@ -58,16 +60,16 @@ Subcommand add_replay_command(CLI::App& cli) {
               if (!fs::exists(a->file, ec) && fs::is_regular_file(a->file + ".part", ec))
                 std::cerr << "isotouch replay: " << a->file << ".part exists: the live session that wrote it did not "
                           << "stop cleanly; replay that file (up to its last chunk)\n";
-              return 2;
+              return exit_code::kReplayBadInput;
             } catch (const run::ReplayInputError& e) {
               std::cerr << "isotouch replay: " << e.what() << "\n";
-              return 2;
+              return exit_code::kReplayBadInput;
             } catch (const io::SceneError& e) {
               std::cerr << "isotouch replay: the recorded scene: " << e.what() << "\n";
-              return 2;
+              return exit_code::kReplayBadInput;
             } catch (const std::exception& e) {
               std::cerr << "isotouch replay: " << a->file << ": could not run the pipeline: " << e.what() << "\n";
-              return 3;
+              return exit_code::kReplayCannotRun;
             }
             std::cout << "replayed " << r.ticks << " ticks, " << r.edits << " edits (" << r.publications
                       << " snapshots published); max |dF| " << std::setprecision(6) << r.max_df_n << " N\n";
@@ -76,7 +78,7 @@ Subcommand add_replay_command(CLI::App& cli) {
                         << "written after the cut: not compared\n";
             if (!a->out.empty()) std::cout << "trace    " << (fs::path(a->out) / "trace.csv").string() << "\n";
             std::cout << run::replay_verdict(r, rec_format);
-            return r.identical() ? 0 : 1;
+            return r.identical() ? exit_code::kOk : exit_code::kReplayDiffers;
           }};
 }
 

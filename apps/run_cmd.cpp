@@ -7,6 +7,7 @@
 #include <memory>
 #include <string>
 
+#include "exit_codes.h"
 #include "live_run.h"
 #include "run_job.h"
 #include "scene.h"
@@ -35,8 +36,12 @@ Scene file (JSON; unknown or repeated keys are errors; units are in the key name
     "inside": "above",                          "above": value > isovalue is inside; "below"
     "servo":  {"stiffness_n_per_m": 800, "damping_n_s_per_m": 1.0, "plane_update_period": 5,
                "rate_hz": 1000, "force_limit_n": 3.3, "variant": "robust" | "paper", ...},
-                                                optional, like every section below; see docs/user-guide.md, Scenes
-    "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5, ...},
+                                                optional, like every section below; see docs/user-guide.md, Scenes.
+                                                A stiffness above the stability bound 2 (b - |B|) / T
+                                                (b: device + hand damping) is refused unless
+                                                "allow_unstable_stiffness": true
+    "device": {"mass_kg": 0.08, "hand_stiffness_n_per_m": 300, "hand_damping_n_s_per_m": 5,
+               "workspace_scale": 1, ...}          world m per device m, in [0.0001, 10]
     "script": {"ray_origin_frac": [0.5, 0.5, 1.2], "ray_direction": [0, 0, -1],
                "stroke_direction": [1, 0, 0], "press_depth_m": 0.008, "stroke_length_m": 0.04, ...},
     "outputs": {"trace_csv": true, "plots": true},
@@ -74,9 +79,11 @@ drill-skull.json. `run --record FILE` also writes a recording that
 
 Outputs in --out: trace.csv (one row per tick), summary.json, report.md, plots (gnuplot).
 Points are reported in the volume's physical frame (origin + direction x spacing x index).
-Exit status: 0 ok; 1 bad input (the message names the file, field and value);
-4 the run had servo fault ticks; 5 (--live) the haptic device was disconnected, faulty or sent
-refused reports.
+Exit status (docs/exit-codes.md): 0 ok; 1 bad input (the message names the file, field and
+value); 2 usage error (an unknown option, a bad value); 4 the run had servo fault ticks;
+5 (--live) the haptic device was disconnected, faulty or sent refused reports; 130 / 143
+stopped by SIGINT / SIGTERM (summary.json says "interrupted"; a second signal stops at once,
+summary.json still says "interrupted").
 
 The Vulkan device: --device NAME|INDEX, before or after `run`, or ISOTOUCH_DEVICE.
 
@@ -89,11 +96,12 @@ std::string default_scene() {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
 }
 
-int cmd_run_live(const std::string& scene_path, const std::string& device, bool quiet, const std::string& record_path,
-                 const std::string& haptic) {
+int cmd_run_live(const std::string& scene_path, const std::string& out_dir, const std::string& device, bool quiet,
+                 const std::string& record_path, const std::string& haptic) {
   const io::Scene scene = io::load_scene(scene_path);
   LiveOptions opt;
   opt.haptic = haptic;
+  opt.run.out_dir = out_dir;
   opt.run.device = device;
   opt.run.progress = !quiet;
   opt.run.record_path = record_path;
@@ -127,7 +135,7 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
   } catch (const session::Interrupted& e) {
     std::cerr << "\nisotouch run: " << e.what() << "; " << (fs::path(out_dir) / "summary.json").string()
               << " says \"status\": \"interrupted\" and lists the files that were finished\n";
-    return 128 + e.signal;
+    return exit_code::signalled(e.signal);
   }
   const auto& hp = scene.hri;
   const double limit = hp.force_limit_n;
@@ -158,9 +166,9 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
               << " servo ticks were faults (non-finite input or state; zero force sent): the run is not "
                  "trustworthy. See "
               << (fs::path(out_dir) / "trace.csv").string() << " (column fault).\n";
-    return 4;
+    return exit_code::kServoFaults;
   }
-  return 0;
+  return exit_code::kOk;
 }
 
 }  // namespace
@@ -175,7 +183,9 @@ Subcommand add_run_command(CLI::App& cli) {
                                         "write trace.csv, summary.json, report.md and plots");
   a->scene_path = default_scene();
   run->add_option("scene", a->scene_path, "Scene JSON file")->capture_default_str();
-  run->add_option("--out,-o", a->out_dir, "Output folder (default: out/<scene name>)");
+  run->add_option("--out,-o", a->out_dir,
+                  "Output folder (default: out/<scene name>; with --live: none unless given, then trace.csv of the "
+                  "renderer's ticks, report.md and summary.json)");
   run->add_flag("--quiet,-q", a->quiet, "No progress line");
   run->add_option("--record", a->record_path,
                   "Also write every device input, button and edit with its time to FILE (replay it with "
@@ -200,7 +210,7 @@ Subcommand add_run_command(CLI::App& cli) {
   });
   return {run, [a](const std::string& device) {
             if (!a->hand_path.empty()) return write_hand_path(io::load_scene(a->scene_path), a->hand_path, std::cout);
-            if (a->live) return cmd_run_live(a->scene_path, device, a->quiet, a->record_path, a->haptic);
+            if (a->live) return cmd_run_live(a->scene_path, a->out_dir, device, a->quiet, a->record_path, a->haptic);
             return cmd_run(a->scene_path, a->out_dir, device, a->quiet, a->record_path);
           }};
 }

@@ -10,6 +10,8 @@
 #include <sstream>
 #include <vector>
 
+#include "stability.h"
+
 namespace isotouch::io {
 namespace {
 
@@ -318,6 +320,12 @@ void check_script_length(const Reader& r, const Scene& s) {
 
 namespace {
 
+// nlohmann's message without its "[json.exception.parse_error.101] " id.
+std::string without_json_id(const std::string& what) {
+  const std::size_t end = what.rfind("] ", what.find(' '));
+  return what.rfind("[json.exception.", 0) == 0 && end != std::string::npos ? what.substr(end + 2) : what;
+}
+
 // JSON allows a key twice in one object and keeps the last: a scene with two
 // "stiffness_n_per_m" would silently use one of them. The parser callback sees every key
 // in order, with the objects and arrays it sits in.
@@ -355,8 +363,12 @@ json parse_json_once_each(const std::string& text, const std::string& path) {
   };
   try {
     return json::parse(text, dup_check);
-  } catch (const json::exception& e) {  // parse_error, and out_of_range for 1e999
-    throw SceneError(path + ": not valid JSON: " + e.what());
+  } catch (const json::out_of_range& e) {  // 1e999: past the largest double
+    throw SceneError(path + ": not valid JSON: " + without_json_id(e.what()) +
+                     ": a number must be finite, at most about 1.8e308 in size");
+  } catch (const json::exception& e) {
+    throw SceneError(path + ": not valid JSON: " + without_json_id(e.what()) +
+                     " (look for a missing comma, quote or bracket there)");
   }
 }
 
@@ -470,7 +482,7 @@ void parse_servo(const Reader& r, const json& root, Scene& s) {
   const json& sv = r.section(root, "servo");
   r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
                        "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
-                       "recovery_time_s", "friction", "variant", "tool"});
+                       "recovery_time_s", "friction", "variant", "tool", "allow_unstable_stiffness"});
   const std::string variant = r.string(sv, "servo", "variant", "robust");
   if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
   else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
@@ -487,6 +499,43 @@ void parse_servo(const Reader& r, const json& root, Scene& s) {
                                    s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
   parse_friction(r, sv, s);
   parse_tool(r, sv, s);
+  s.allow_unstable_stiffness = r.boolean(sv, "servo", "allow_unstable_stiffness", false);
+}
+
+// The force is stiffness x the hand's travel past the surface [N], the travel being the
+// probe's depth in the volume / workspace_scale: at 1e-9 a touch asks for the force limit
+// at once (forces jump between 0 and the limit), at 1000 the whole volume lies within a
+// fraction of a millimetre of hand travel (no force to feel). Outside [1e-4, 10] no scene
+// can be felt on a desk-sized device.
+void check_workspace_scale(const Reader& r, const json& dv, const Scene& s) {
+  const double scale = s.workspace_scale;
+  if (scale >= kMinWorkspaceScale && scale <= kMaxWorkspaceScale) return;
+  const double press_n = s.hri.stiffness_n_per_m * 1e-3 / scale;  // a 1 mm press in the volume
+  std::ostringstream e;
+  e << "must be in [" << kMinWorkspaceScale << ", " << kMaxWorkspaceScale << "] (world [m] per device [m]), got "
+    << dv.at("workspace_scale").dump() << ": 1 mm of hand motion would move the probe " << scale
+    << " mm in the volume, and a press 1 mm into its surface would take " << 1.0 / scale
+    << " mm of hand travel and ask for " << press_n << " N (stiffness " << s.hri.stiffness_n_per_m
+    << " N/m x that travel; force limit " << s.hri.force_limit_n << " N)"
+    << (scale < kMinWorkspaceScale ? ": every touch jumps to the force limit" : ": too little force to feel");
+  r.fail("device.workspace_scale", e.str());
+}
+
+// Colgate and Schenkel's passivity bound K_max = 2 (b - |B|) / T, with b the damping at
+// the handle (device + hand), B the servo's damping, T the servo period: a stiffer wall
+// may buzz or push the hand away. Refused unless servo.allow_unstable_stiffness says the
+// scene means it (stability experiments); the run then warns and reports it.
+void check_stiffness(const Reader& r, const Scene& s) {
+  const double b = s.device.damping_n_s_per_m + s.device.hand_damping_n_s_per_m;
+  const double bound = sim::colgate_k_max(b, s.hri.damping_n_s_per_m, 1.0 / s.hri.rate_hz);
+  if (s.hri.stiffness_n_per_m <= bound || s.allow_unstable_stiffness) return;
+  std::ostringstream e;
+  e << "is above the stability bound K_max = 2 (b - |B|) / T = " << bound << " N/m (b = device + hand damping "
+    << b << " N s/m, B = servo.damping_n_s_per_m " << s.hri.damping_n_s_per_m << ", T = 1 / rate_hz " << 1e3 / s.hri.rate_hz
+    << " ms), got " << s.hri.stiffness_n_per_m
+    << ": the contact may buzz; lower it or the servo damping, raise servo.rate_hz, or set "
+       "\"servo\": {\"allow_unstable_stiffness\": true} to run it anyway";
+  r.fail("servo.stiffness_n_per_m", e.str());
 }
 
 // After the servo section: the mass check needs the servo rate.
@@ -515,6 +564,7 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
     r.fail("device.mass_kg", e.str());
   }
   s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
+  check_workspace_scale(r, dv, s);
   s.hri.world_per_device = s.workspace_scale;
 }
 
@@ -559,6 +609,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
   parse_isosurface(r, root, s);
   parse_servo(r, root, s);
   parse_device(r, root, s);
+  check_stiffness(r, s);
   parse_script(r, root, s);
   parse_engine(r, r.section(root, "engine"), s.engine);
   if (root.contains("edits")) {

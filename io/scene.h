@@ -92,6 +92,11 @@ struct EditsSpec {
   bool write_stl = true;              ///< write its isosurface as drilled.stl
 };
 
+/// device.workspace_scale's range [world m per device m]: below it a touch asks for the
+/// force limit at once, above it the volume fits in a fraction of a millimetre of hand travel.
+inline constexpr double kMinWorkspaceScale = 1e-4;
+inline constexpr double kMaxWorkspaceScale = 10.0;
+
 struct Scene {
   std::string file;          ///< the scene file as given
   std::string name;
@@ -100,7 +105,15 @@ struct Scene {
   SyntheticSpec synthetic;   ///< used when volume_path is empty
   servo::HriParams hri;      ///< tau, inside, K, B, n, rate, force limit
   sim::SimDeviceParams device;
-  double workspace_scale = 1.0;  ///< world [m] per device [m]
+  /// device.workspace_scale: world [m] per device [m], in [kMinWorkspaceScale,
+  /// kMaxWorkspaceScale]. The force is stiffness x the hand's travel, the probe's depth in
+  /// the volume / workspace_scale.
+  double workspace_scale = 1.0;
+  /// servo.allow_unstable_stiffness (default false): run a servo.stiffness_n_per_m above
+  /// the Colgate-Schenkel bound 2 (b - |B|) / T (b: device + hand damping [N s/m], B: servo
+  /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the
+  /// run warns and reports the bound (stability experiments).
+  bool allow_unstable_stiffness = false;
   sim::ScriptParams script;
   bool write_trace = true;
   bool draw_plots = true;

@@ -13,16 +13,24 @@
 #include <sstream>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
+#include "exit_codes.h"
 #include "files.h"
 #include "haptic_device.h"
 #include "hri.h"
 #include "live_session.h"
 #include "record.h"
+#include "run_folder.h"
+#include "run_report.h"
 #include "sim_device_io.h"
 #include "stats.h"
 #include "stop_signal.h"
+#include "trace_csv.h"
+#include "trace_figures.h"
 
 namespace isotouch::run {
+namespace fs = std::filesystem;
 namespace {
 
 std::string ms(double v) {
@@ -146,6 +154,84 @@ class ForceMeter final : public servo::HapticDeviceIO {
   std::atomic<double> max_{0};
 };
 
+/// Keeps the renderer's ticks for trace.csv (`--out`): one preallocated row per tick,
+/// filled on the servo thread (no allocation, lock or syscall: steady_clock is the vDSO),
+/// read after the session stopped. Ticks past the capacity are counted, not kept; ticks the
+/// servo held (device not ok, paused) did not reach the renderer and have no row.
+class TracingRenderer final : public servo::Renderer {
+ public:
+  TracingRenderer(servo::Renderer& inner, std::size_t capacity, double rate_hz)
+      : inner_(inner), rows_(capacity), period_s_(1.0 / rate_hz) {}
+  const char* name() const override { return inner_.name(); }
+  void reset() override { inner_.reset(); }
+  servo::HriTick tick(const core::FieldView& field, const core::Vec3& hip_m, double dt_s) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const servo::HriTick out = inner_.tick(field, hip_m, dt_s);
+    const auto t1 = std::chrono::steady_clock::now();
+    t_s_ += dt_s > 0 && std::isfinite(dt_s) ? dt_s : period_s_;
+    if (kept_ >= rows_.size()) {
+      ++lost_;
+      return out;
+    }
+    rows_[kept_++] = sim::trace_row(t_s_, hip_m, out, std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count());
+    return out;
+  }
+  /// After the session stopped: the rows, with the script's hand target at each tick's time.
+  std::vector<sim::TraceRow> trace(const sim::TouchScript& script) const {
+    std::vector<sim::TraceRow> t(rows_.begin(), rows_.begin() + std::ptrdiff_t(kept_));
+    for (sim::TraceRow& r : t) {
+      core::Vec3 v;
+      script.at(r.t_s, r.hand_target_m, v);
+    }
+    return t;
+  }
+  long lost() const { return lost_; }
+
+ private:
+  servo::Renderer& inner_;
+  std::vector<sim::TraceRow> rows_;
+  std::size_t kept_ = 0;
+  long lost_ = 0;
+  double t_s_ = 0, period_s_;
+};
+
+/// `run --live --out DIR`: trace.csv, report.md and summary.json ("complete", with a "live"
+/// section; "interrupted" when a signal stopped the session) from the renderer's ticks.
+void write_live_outputs(const io::Scene& scene, SceneSetup& setup, const TracingRenderer& tracer,
+                        const session::LiveStats& s, double seconds, const std::string& device, io::RunFolder& folder,
+                        std::ostream& log) {
+  const std::vector<sim::TraceRow> trace = tracer.trace(setup.script);
+  RunMetrics& m = setup.metrics;
+  const auto [found, raw_found] = trace_figures(trace, setup, nullptr, m);
+  const fs::path dir(folder.dir());
+  if (scene.write_trace) io::write_file_atomic((dir / "trace.csv").string(), trace_csv(trace, setup.volume));
+  if (const int sig = session::stop_signal(); sig != 0) {
+    folder.mark_interrupted("live session, after " + ms(seconds) + " s (trace.csv holds its ticks)", sig);
+    log << "outputs  " << dir.string() << "/: summary.json says \"status\": \"interrupted\"\n";
+    return;
+  }
+  nlohmann::ordered_json j = summary_json(scene, setup, m, found, raw_found, false);
+  j["live"] = {{"seconds", seconds},
+               {"device", device},
+               {"ticks", s.ticks},
+               {"ticks_traced", trace.size()},
+               {"ticks_not_traced", tracer.lost()},
+               {"missed_deadlines", s.missed_deadlines},
+               {"faults", s.faults},
+               {"edits_applied", s.edits_applied},
+               {"note", "trace.csv holds the renderer's ticks (its force before the servo's ramp-in and clamp); "
+                        "ticks the servo held (device not ok) are not in it; the surface error is measured against "
+                        "the volume before any edit"}};
+  io::write_file_atomic((dir / "report.md").string(),
+                        report_markdown(scene, setup, m, found, raw_found, false) +
+                            "\n## Live session\n\n" + std::to_string(s.ticks) + " servo ticks in " + ms(seconds) +
+                            " s on " + device + ", " + std::to_string(s.missed_deadlines) +
+                            " missed deadlines; trace.csv holds the renderer's " + std::to_string(trace.size()) +
+                            " ticks.\n");
+  io::write_file_atomic((dir / "summary.json").string(), j.dump(2) + "\n");  // last: "complete"
+  log << "outputs  " << dir.string() << "/: trace.csv, report.md, summary.json (" << trace.size() << " ticks)\n";
+}
+
 /// The device's figures after the run.
 void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::ServoThread& servo, std::ostream& log) {
   const servo::DeviceCounters c = servo.device_counters();
@@ -184,7 +270,9 @@ int write_hand_path(const io::Scene& scene, const std::string& path, std::ostrea
   return 0;
 }
 
-int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
+namespace {
+
+int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* folder, std::ostream& log) {
   RunOptions ropt = o.run;
   SceneSetup setup = setup_scene(scene, ropt, log);
   // Every live session edits through an EditSession (one without an "edits" section too:
@@ -197,7 +285,10 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   }
   servo::TripleBuffer<core::SampleField> buffer;
   buffer.publish(edits->current());
-  servo::HriRenderer renderer(setup.hri);
+  servo::HriRenderer hri(setup.hri);
+  const std::size_t trace_rows = std::size_t(std::ceil(setup.script.duration_s * scene.hri.rate_hz)) + 16;
+  TracingRenderer tracer(hri, folder ? trace_rows : 0, scene.hri.rate_hz);
+  servo::Renderer& renderer = folder ? static_cast<servo::Renderer&>(tracer) : hri;
   HapticDevice device = open_haptic_device(o.haptic, device_setup(scene, setup), o.sched_fifo ? 70 : 0);
   ForceMeter meter(*device.io);
   session::install_stop_handlers();
@@ -235,10 +326,30 @@ int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
   const bool device_lost = dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0;
   if (device.report || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
+  if (folder) {
+    session::clear_last_words();  // the folder's final status follows
+    write_live_outputs(scene, setup, tracer, s, seconds, device.description, *folder, log);
+  }
   // Stopped by a signal: the recording is complete, but the run did not run its course.
-  if (session::stop_signal() != 0) return 128 + session::stop_signal();
-  if (s.faults > 0) return 4;
-  return device_lost ? 5 : 0;
+  if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
+  if (s.faults > 0) return exit_code::kServoFaults;
+  return device_lost ? exit_code::kDeviceLost : exit_code::kOk;
+}
+
+}  // namespace
+
+int run_live(const io::Scene& scene, const LiveOptions& o, std::ostream& log) {
+  if (o.run.out_dir.empty()) return run_live_in(scene, o, nullptr, log);
+  // --out: the folder is made and locked first (a second run into it is refused at once);
+  // it ends "complete", "interrupted" or "failed", never "running".
+  io::RunFolder folder(o.run.out_dir, scene.file, scene.name);
+  const LastWordsWhileRunning last_words(scene, o.run.out_dir);
+  try {
+    return run_live_in(scene, o, &folder, log);
+  } catch (const std::exception& e) {
+    folder.mark_failed(e.what());
+    throw;
+  }
 }
 
 }  // namespace isotouch::run

@@ -14,7 +14,7 @@
 namespace isotouch::run {
 
 struct LiveOptions {
-  RunOptions run;                ///< device, progress, record_path (out_dir: unused)
+  RunOptions run;                ///< device, progress, record_path; out_dir: "" or where trace.csv, report.md, summary.json go
   bool sched_fifo = true;        ///< ask for SCHED_FIFO and pinning (refused: said, not fatal)
   double flush_interval_s = 0.1; ///< the recording's chunk interval [s]
   std::string haptic = "sim";    ///< the device: `--haptic KIND:ARGS` (run/haptic_device.h)
@@ -24,7 +24,9 @@ struct LiveOptions {
 /// servo's ticks, missed deadlines and faults, the edits and their edit-to-haptics latency.
 /// With a hid or emu device (or any device whose reports the servo zeroed), also prints the
 /// device's counters (reports, refused, gaps, stale / disconnected / fault ticks, ramps,
-/// clamps) and the force it rendered.
+/// clamps) and the force it rendered. With options.run.out_dir, writes trace.csv (the
+/// renderer's ticks), report.md and summary.json there (the folder locked and marked as
+/// `isotouch run` does; "interrupted" after a signal).
 /// @return 0; 4 when servo ticks were faults; 5 when the device was disconnected, faulty or
 /// sent refused reports during the run; 128 + the signal when SIGINT / SIGTERM stopped
 /// it (the servo stopped with zero force, the recording closed and complete). @throws as run_scene, io::RecordingError.

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <future>
 #include <iomanip>
 #include <iostream>
 #include <limits>
@@ -14,6 +16,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 #include "edit_driver.h"
 #include "hri.h"
@@ -22,6 +25,7 @@
 #include "picture.h"
 #include "run_outputs.h"
 #include "run_report.h"
+#include "stop_signal.h"
 #include "stability.h"
 #include "text.h"
 #include "trace_csv.h"
@@ -87,7 +91,31 @@ std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const
   return trace;
 }
 
-RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostream& log) {
+// The run's picture is one GPU submission that cannot be cut short (seconds to tens of
+// seconds on a CPU device such as lavapipe): it is drawn on its own thread while this one
+// watches for a stop. Asked to stop, the run marks its folder "interrupted" and ends the
+// process at once (as a second Ctrl+C would) instead of waiting for the picture.
+RunPicture picture_or_stop(const std::function<RunPicture()>& draw, const RunFolder& folder, std::ostream& log) {
+  std::packaged_task<RunPicture()> task(draw);
+  std::future<RunPicture> done = task.get_future();
+  std::thread drawer(std::move(task));
+  while (done.wait_for(std::chrono::milliseconds(20)) != std::future_status::ready) {
+    if (const int sig = session::stop_signal(); sig != 0) {
+      const std::string stage = "outputs (trace and plots written; the picture abandoned)";
+      if (folder.mark_interrupted(stage, sig))
+        log << "\ninterrupted (" << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << stage << ": "
+            << (fs::path(folder.dir()) / "summary.json").string() << " says \"status\": \"interrupted\"\n";
+      log.flush();
+      std::cerr.flush();
+      session::clear_last_words();  // the folder's status is the one just written
+      session::end_process_now(sig);
+    }
+  }
+  drawer.join();
+  return done.get();
+}
+
+RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, const RunFolder& folder, std::ostream& log) {
   throw_if_stop_requested("start");
   SceneSetup setup = setup_scene(scene, opt, log);
   throw_if_stop_requested("engine set-up (samples computed, servo not started)");
@@ -132,9 +160,15 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
   if (scene.draw_plots) {
     // The run's picture (ray-cast on the same Vulkan device); never throws.
     // With edits the path is thinned (thin_path): the same picture serves as before.png.
-    const RunPicture pic = render_run_picture(scene, vol, *field, edits ? thin_path(trace) : trace,
-                                              (fs::path(dir) / "surface.png").string(),
-                                              setup.vk.get(), setup.device);
+    std::vector<sim::TraceRow> thinned;
+    if (edits) thinned = thin_path(trace);
+    const std::vector<sim::TraceRow>& path = edits ? thinned : trace;
+    const RunPicture pic = picture_or_stop(
+        [&] {
+          return render_run_picture(scene, vol, *field, path, (fs::path(dir) / "surface.png").string(),
+                                    setup.vk.get(), setup.device);
+        },
+        folder, log);
     m.picture_drawn = pic.error.empty();
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
@@ -145,17 +179,41 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, std::ostre
 
   const std::string summary_text = summary_json(scene, setup, m, found, raw_found, edits.has_value()).dump(2) + "\n";
   write_file_atomic((fs::path(dir) / "report.md").string(), report_markdown(scene, setup, m, found, raw_found, edits.has_value()));
-  // Last: "complete" only once every other output is whole.
+  // Last: "complete" only once every other output is whole (a second signal no longer
+  // overwrites it).
+  session::clear_last_words();
   write_file_atomic((fs::path(dir) / "summary.json").string(), summary_text);
   return m;
 }
 
 }  // namespace
 
+namespace {
+// summary.json as a second SIGINT / SIGTERM leaves it when it ends the process at once.
+std::string killed_summary(const Scene& scene, const char* signal) {
+  nlohmann::ordered_json j;
+  j["status"] = "interrupted";
+  j["scene"] = {{"file", scene.file}, {"name", scene.name}};
+  j["signal"] = signal;
+  j["stage"] = std::string("not known: a second ") + signal + " ended the process at once";
+  j["note"] = "the run was stopped before it finished: the files in the folder are whole (each is written whole or "
+              "not at all) but the figures of a complete run (report.md, the rest of summary.json) were not written";
+  return j.dump(2) + "\n";
+}
+}  // namespace
+
+LastWordsWhileRunning::LastWordsWhileRunning(const Scene& scene, const std::string& dir) {
+  session::set_last_words((fs::path(dir) / "summary.json").string(), killed_summary(scene, "SIGINT"),
+                          killed_summary(scene, "SIGTERM"));
+}
+
+LastWordsWhileRunning::~LastWordsWhileRunning() { session::clear_last_words(); }
+
 RunMetrics run_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
   RunFolder folder(opt.out_dir, scene.file, scene.name);
+  const LastWordsWhileRunning last_words(scene, opt.out_dir);
   try {
-    return run_scene_steps(scene, opt, log);
+    return run_scene_steps(scene, opt, folder, log);
   } catch (const Interrupted& e) {
     if (folder.mark_interrupted(e.stage, e.signal))
       log << "\ninterrupted (" << (e.signal == SIGTERM ? "SIGTERM" : "SIGINT") << ") during " << e.stage

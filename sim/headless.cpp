@@ -6,6 +6,22 @@
 
 namespace isotouch::sim {
 
+TraceRow trace_row(double t_s, const Vec3& hip_m, const servo::HriTick& out, std::int64_t tick_ns) {
+  TraceRow r;
+  r.t_s = t_s;
+  r.hip_m = hip_m;
+  r.vhip_m = out.vhip_m;
+  r.force_n = out.force_n;
+  r.penetration_m = out.penetration_m;
+  r.plane = out.plane;
+  r.tick_ns = tick_ns;
+  r.contact = out.contact;
+  r.plane_update = out.plane_update;
+  r.saturated = out.saturated;
+  r.fault = out.fault;
+  return r;
+}
+
 TraceRow headless_tick(TripleBuffer<SampleField>& samples, servo::Renderer& renderer, SimDevice& device,
                        const WorkspaceTransform& xf, const TouchScript& script, double rate_hz, long k) {
   using clock = std::chrono::steady_clock;
@@ -24,19 +40,8 @@ TraceRow headless_tick(TripleBuffer<SampleField>& samples, servo::Renderer& rend
   script.at(t + period, tgt_w, tgt_v);
   device.step(period, xf.to_device(tgt_w), tgt_v / xf.scale);
 
-  TraceRow r;
-  r.t_s = t;
-  r.hip_m = hip;
-  r.vhip_m = out.vhip_m;
-  r.force_n = out.force_n;
+  TraceRow r = trace_row(t, hip, out, std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count());
   r.hand_target_m = tgt_w;
-  r.penetration_m = out.penetration_m;
-  r.plane = out.plane;
-  r.tick_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count();
-  r.contact = out.contact;
-  r.plane_update = out.plane_update;
-  r.saturated = out.saturated;
-  r.fault = out.fault;
   r.version = field->version;
   return r;
 }

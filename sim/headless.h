@@ -32,6 +32,10 @@ struct TraceRow {
   servo::VirtualPlane plane;  ///< the plane in use after this tick (HRI; invalid for the baselines)
 };
 
+/// The row of a tick at `t_s` [s] whose renderer answered `out` for `hip_m` (world [m]) in
+/// `tick_ns` [ns]; the hand target, button and version are the caller's to set.
+TraceRow trace_row(double t_s, const Vec3& hip_m, const servo::HriTick& out, std::int64_t tick_ns);
+
 /// Called after tick k's render (and the device step) with that tick's row, before tick
 /// k + 1 acquires its samples: what it publishes, tick k + 1 reads (the edit pipeline's
 /// determinism rule, session/edit_session.h). It may set row.button. Outside the timed section.

@@ -5,6 +5,9 @@
 #  2. SIGKILL mid-way: F.part remains, replay of F.part is identical up to its last chunk
 #     and says the file has no end record; replay F names F.part;
 #  3. SIGINT mid-way: exit 130, the recording complete and replayable, no F.part.
+#  --out DIR (runs 1 and 3): trace.csv with a row per tick, report.md, summary.json
+#     "complete" with its "live" section (run 1), "interrupted" (run 3), "failed" (a
+#     device that cannot be opened).
 # usage: cli_run_live.sh ISOTOUCH SCENE OUT
 set -u
 exe=$1 scene=$2 out=$3
@@ -12,9 +15,17 @@ fail() { echo "FAIL: $*"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 rec=$out/live.rec
 
-"$exe" run "$scene" --live --record "$rec" --quiet > "$out/run.log" 2>&1; rc=$?
+"$exe" run "$scene" --live --record "$rec" --out "$out/folder" --quiet > "$out/run.log" 2>&1; rc=$?
 [ "$rc" -eq 0 ] || { cat "$out/run.log"; fail "run --live exited $rc"; }
 cat "$out/run.log"
+# --out: what the live session ran, in the folder (the servo's tick count against the rows).
+ticks=$(sed -n 's/^live     \([0-9]*\) ticks in.*/\1/p' "$out/run.log")
+rows=$(( $(wc -l < "$out/folder/trace.csv") - 1 ))
+[ "${ticks:-0}" -gt 1000 ] && [ "$rows" -gt $(( ticks - 50 )) ] && [ "$rows" -le "$ticks" ] ||
+  fail "--out: trace.csv has $rows rows for ${ticks:-?} servo ticks"
+grep -q '"status": "complete"' "$out/folder/summary.json" || fail "--out: summary.json not complete"
+grep -q '"live": {' "$out/folder/summary.json" || fail "--out: summary.json has no live section"
+[ -s "$out/folder/report.md" ] || fail "--out: no report.md"
 [ -f "$rec" ] || fail "no recording"
 [ ! -e "$rec.part" ] || fail "$rec.part left after a clean stop"
 tail -n 1 "$rec" | grep -q '"end":true' || fail "the recording has no end record"
@@ -51,14 +62,20 @@ grep -q "^IDENTICAL" "$out/replay-part.log" || fail "replay of $rec.part not ide
 grep -q "live.rec.part exists" "$out/replay-missing.log" || { cat "$out/replay-missing.log"; fail "replay of F did not point at F.part"; }
 
 rm -f "$rec" "$rec.part"
-"$exe" run "$scene" --live --record "$rec" --quiet > "$out/int.log" 2>&1 &
+"$exe" run "$scene" --live --record "$rec" --out "$out/int-folder" --quiet > "$out/int.log" 2>&1 &
 pid=$!
 wait_ticks "$rec.part" || fail "no ticks streamed before SIGINT"
 kill -INT "$pid"; wait "$pid"; rc=$?
 cat "$out/int.log"
 [ "$rc" -eq 130 ] || fail "exit $rc after SIGINT, expected 130"
+grep -q '"status": "interrupted"' "$out/int-folder/summary.json" || fail "--out: summary.json after SIGINT not interrupted"
+[ "$(wc -l < "$out/int-folder/trace.csv")" -gt 1000 ] || fail "--out: no trace.csv after SIGINT"
 [ ! -e "$rec.part" ] || fail "$rec.part left after SIGINT"
 tail -n 1 "$rec" | grep -q '"end":true' || fail "the recording after SIGINT has no end record"
 "$exe" replay "$rec" --quiet > "$out/replay-int.log" 2>&1 || { cat "$out/replay-int.log"; fail "replay after SIGINT failed"; }
 grep -q "^IDENTICAL" "$out/replay-int.log" || fail "replay after SIGINT not identical"
+# --out with a device that cannot be opened: summary.json says "failed" with the error.
+"$exe" run "$scene" --live --haptic "emu:$out/none.sock" --out "$out/failed" --quiet > "$out/failed.log" 2>&1 &&
+  fail "a missing device exited 0"
+grep -q '"status": "failed"' "$out/failed/summary.json" || { cat "$out/failed.log"; fail "--out: summary.json after a failed start is not \"failed\""; }
 echo "PASS run --live"

@@ -112,7 +112,44 @@ TEST(Scene, DuplicateKeyIsAnError) {
 }
 
 TEST(Scene, NumberOverflowNamesTheFile) {
-  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1e999})", {"not valid JSON", "1e999"});
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1e999})", {"not valid JSON", "1e999", "must be finite"});
+}
+
+TEST(Scene, JsonErrorsSayWhatToDoWithoutTheParsersId) {
+  for (const char* text : {"{", R"({"volume": {"path": "v.mhd"} "isovalue": 1})", R"({"isovalue": 1e400})"}) {
+    try {
+      parse_scene(text, "bad.json");
+      FAIL() << "accepted: " << text;
+    } catch (const SceneError& e) {
+      const std::string m = e.what();
+      EXPECT_EQ(m.find("[json.exception"), std::string::npos) << m;
+      EXPECT_TRUE(m.find("line 1, column") != std::string::npos || m.find("must be finite") != std::string::npos) << m;
+    }
+  }
+}
+
+// The force is stiffness x the hand's travel, the probe's depth / workspace_scale: 1e-9
+// turns every touch into the force limit, 1000 leaves no force to feel. Refused, saying so.
+TEST(Scene, WorkspaceScaleOutsideWhatAHandCanFeelIsRefused) {
+  const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "device": {"workspace_scale": )";
+  expect_error(base + "1e-9}}", {"'device.workspace_scale'", "[0.0001, 10]", "1e-09", "force limit"});
+  expect_error(base + "1000}}", {"'device.workspace_scale'", "[0.0001, 10]", "1000", "too little force"});
+  EXPECT_EQ(parse_scene(base + "0.0001}}", "ok.json").workspace_scale, 1e-4);
+  EXPECT_EQ(parse_scene(base + "10}}", "ok.json").workspace_scale, 10.0);
+}
+
+// Above Colgate and Schenkel's bound 2 (b - |B|) / T the wall may buzz: refused unless the
+// scene opts in with servo.allow_unstable_stiffness.
+TEST(Scene, StiffnessAboveTheStabilityBoundNeedsTheSceneToSaySo) {
+  // b = 0.01 + 5 N s/m (the device defaults), B = 1 N s/m, T = 1 ms: K_max = 8020 N/m.
+  const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stiffness_n_per_m": )";
+  expect_error(base + "8021}}", {"'servo.stiffness_n_per_m'", "8020", "8021", "allow_unstable_stiffness"});
+  EXPECT_EQ(parse_scene(base + "8019}}", "ok.json").hri.stiffness_n_per_m, 8019.0);
+  const auto s = parse_scene(base + R"(1e6, "allow_unstable_stiffness": true}})", "ok.json");
+  EXPECT_EQ(s.hri.stiffness_n_per_m, 1e6);
+  EXPECT_TRUE(s.allow_unstable_stiffness);
+  // The bound follows the rate: 800 N/m at 10 Hz (K_max = 80.2 N/m) is refused too.
+  expect_error(base + R"(800, "rate_hz": 10}})", {"'servo.stiffness_n_per_m'", "80.2"});
 }
 
 TEST(Scene, RayOriginFracRange) {

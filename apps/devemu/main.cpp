@@ -8,6 +8,7 @@
 #include <csignal>
 #include <iostream>
 
+#include "../cli_common.h"
 #include "device_emulator.h"
 
 namespace {
@@ -29,7 +30,10 @@ int main(int argc, char** argv) {
       "isotouch-devemu: a simulated haptic device speaking isotouch protocol v1 (docs/hid-protocol.md) over a\n"
       "Unix-domain socket, for `isotouch run SCENE --live --haptic emu:SOCKET` and tests without hardware.\n\n"
       "Example:\n"
-      "  isotouch-devemu --socket /tmp/dev.sock --rate 1000 --path hand.csv --drop 0.01\n"};
+      "  isotouch-devemu --socket /tmp/dev.sock --rate 1000 --path hand.csv --drop 0.01\n\n"
+      "Exit status (docs/exit-codes.md): 0 stopped (--seconds or SIGINT / SIGTERM); 1 error (the socket, the\n"
+      "path file); 2 usage error.\n"};
+  app::common_options(cli);
   sim::EmuConfig c;
   c.caps.name = "devemu";
   c.caps.buttons = 1;
@@ -65,7 +69,11 @@ int main(int argc, char** argv) {
   faults->add_option("--disconnect-at", f.disconnect_at_s, "Close the connection and the socket at this time [s]");
   faults->add_option("--reconnect-after", f.reconnect_after_s, "... and listen again this much later [s]");
   faults->add_option("--seed", f.seed, "Random seed of the faults")->capture_default_str();
-  CLI11_PARSE(cli, argc, argv);
+  try {
+    cli.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app::parse_exit(cli, e);
+  }
 
   c.caps.workspace_min_m = core::Vec3{-half_mm, -half_mm, -half_mm} * 1e-3;
   c.caps.workspace_max_m = core::Vec3{half_mm, half_mm, half_mm} * 1e-3;
@@ -93,9 +101,9 @@ int main(int argc, char** argv) {
     if (!s.latency_us.empty())
       std::cout << "devemu   report-to-force [us]: p50 " << percentile(s.latency_us, 0.5) << ", p99 "
                 << percentile(s.latency_us, 0.99) << ", max " << percentile(s.latency_us, 1.0) << "\n";
-    return 0;
+    return exit_code::kOk;
   } catch (const std::exception& e) {
     std::cerr << "isotouch-devemu: error: " << e.what() << "\n";
-    return 1;
+    return exit_code::kError;
   }
 }

@@ -24,6 +24,7 @@
 #include "coupled_hand_device.h"
 #include "cpu_placement.h"
 #include "edit_session.h"
+#include "exit_codes.h"
 #include "frame.h"
 #include "haptic_device.h"
 #include "hri.h"
@@ -794,8 +795,13 @@ bool Sculpt::frame_step() {
   if (wait_frames > 0 && !waiting) --wait_frames;
   if (take_input(f.fb)) return false;
   view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
-  f.rw = std::max(1, int(std::lround(f.fb[0] * o.render_scale)));
-  f.rh = std::max(1, int(std::lround(f.fb[1] * o.render_scale)));
+  // At most one storage binding of 4-byte pixels: a larger window is drawn at a lower scale.
+  const double fit = std::sqrt(double(vk->max_binding_bytes() / 4) / (double(f.fb[0]) * double(f.fb[1])));
+  const auto pixels = [&](int n) {
+    return std::max(1, int(fit < o.render_scale ? std::floor(n * fit) : std::lround(n * o.render_scale)));
+  };
+  f.rw = pixels(f.fb[0]);
+  f.rh = pixels(f.fb[1]);
   const Vec3 hand_world = steer_hand(f);
   const session::Observed obs = session->observe();
   apply_tools(obs);
@@ -1165,6 +1171,7 @@ void Sculpt::save(const std::string& path) {
     status = "saved " + path;
   } catch (const std::exception& e) {
     status = std::string("save failed: ") + e.what();
+    if (code == 0) code = exit_code::kSaveFailed;  // the session goes on; its exit says so
   }
   log << "sculpt   " << status << "\n";
 }
@@ -1180,6 +1187,7 @@ void Sculpt::export_mesh(const std::string& path) {
     status = "exported " + path;
   } catch (const std::exception& e) {
     status = std::string("export failed: ") + e.what();
+    if (code == 0) code = exit_code::kSaveFailed;
   }
   log << "sculpt   " << status << "\n";
 }
@@ -1307,10 +1315,16 @@ int Sculpt::finish() {
   if (o.stats || o.bench) print_stats(seconds, st);
   if (!mouse) print_device();
   if (o.bench) print_verdicts(sculpted, alone);
+  // A device that was lost, faulty or refused during the session: as `run --live` (a
+  // simulated clock has no servo thread and no device to lose).
+  if (const servo::ServoThread* servo = session->servo_thread(); servo != nullptr && code == 0) {
+    const servo::DeviceCounters dc = servo->device_counters();
+    if (dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0) code = exit_code::kDeviceLost;
+  }
   if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
   if (vk->validation_messages() > 0) {
     log << "isotouch-sculpt: " << vk->validation_messages() << " Vulkan validation messages\n";
-    if (code == 0) code = 3;
+    if (code == 0) code = exit_code::kCheckFailed;
   }
   return code;
 }

@@ -7,6 +7,8 @@
 #include <optional>
 
 #include "app.h"
+#include "cli_checks.h"
+#include "cli_common.h"
 #include "stop_signal.h"
 
 int main(int argc, char** argv) {
@@ -17,19 +19,26 @@ int main(int argc, char** argv) {
       "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
       "right drag = orbit, middle drag = pan.\n"
       "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
-      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay (probe glyphs and panels), Esc/Q quit.",
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay (probe glyphs and panels), Esc/Q quit.\n"
+      "Exit status (docs/exit-codes.md): 0 ok; 1 bad input or error; 2 usage error; 3 Vulkan validation messages "
+      "(--validation); 5 the haptic device was disconnected, faulty or sent refused reports; 6 a save or export "
+      "failed; 130 / 143 stopped by SIGINT / SIGTERM.",
       "isotouch-sculpt"};
+  isotouch::app::common_options(cli);
   cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
-  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's");
+  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's")
+      ->check(isotouch::app::finite_number("the isovalue in the volume's units, e.g. --iso 300 for bone in HU"));
   cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
       ->check(CLI::IsMember({"above", "below"}));
   cli.add_option("--script", o.script, "input events to run (JSON; docs/user-guide.md, Input scripts)")->check(CLI::ExistingFile);
   cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
-  cli.add_option("--frames", o.frames, "exit 0 after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
+  cli.add_option("--frames", o.frames, "stop after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
   cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
-  cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
+  // 4096 x 3072 pixels of 4 bytes fit the 128 MiB storage binding every Vulkan device
+  // offers (a larger framebuffer, a resized window, is drawn at a lower scale to fit).
+  cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 4096));
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
       ->check(CLI::Range(0.1, 1.0));
   cli.add_option("--edit-wait-ms", o.edit_wait_ms,
@@ -65,9 +74,13 @@ int main(int argc, char** argv) {
                  "the haptic device: mouse (default: a simulated device coupled to the hand the mouse steers), "
                  "null, playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
                  "(isotouch-devemu); a device's caps must fit the scene's stiffness, damping and force limit");
-  CLI11_PARSE(cli, argc, argv);
+  try {
+    cli.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return isotouch::app::parse_exit(cli, e);
+  }
   o.height = o.width * 3 / 4;
-  int rc = 1;
+  int rc = isotouch::exit_code::kError;
   // SIGINT / SIGTERM / SIGHUP / SIGQUIT end the frame loop, so that the session stops, the recording is
   // completed and the X server gets its CPUs back (exit 128 + the signal).
   isotouch::session::install_stop_handlers();
@@ -78,7 +91,7 @@ int main(int argc, char** argv) {
       rc = isotouch::sculpt::run_sculpt(o, std::cerr, &next);
       if (const int sig = isotouch::session::stop_signal(); sig != 0) {
         std::cerr << "sculpt   stopped by signal " << sig << "\n";
-        rc = 128 + sig;
+        rc = isotouch::exit_code::signalled(sig);
         break;
       }
       if (rc != 0 || !next) break;
@@ -86,7 +99,7 @@ int main(int argc, char** argv) {
     }
   } catch (const std::exception& e) {
     std::cerr << "isotouch-sculpt: " << e.what() << "\n";
-    rc = 1;
+    rc = isotouch::exit_code::kError;
   }
   // A dropped file still loading (a reader blocked on its file system): everything is written
   // and closed; exit without waiting for it or running static destructors under it.

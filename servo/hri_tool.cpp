@@ -1,0 +1,537 @@
+// hri_tool.cpp - the spherical tool, not in the paper (which renders a point): the HIP is
+// the centre of a sphere of radius r, and the proxy is kept outside several intermediate
+// planes at once (god-object with several active constraints), HRI's one virtual plane
+// generalised. The planes come from a scan of the trilinear cells near the proxy
+// (surface_scan) or, for a tool of many voxels, from Newton searches (nearest_surface).
+// hri.h, "Spherical tool".
+
+#include "hri.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "sampling.h"
+
+namespace isotouch::servo {
+
+Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
+  // min |x - hip| subject to n_i . (x - p_i) >= r: the optimum is the projection of the HIP
+  // onto the intersection of some active subset (KKT: x = hip + sum l_j n_j, l_j >= 0);
+  // every subset's projection that is feasible is a candidate, the nearest wins.
+  const double r = params_.tool_radius_m;
+  const int m = tool_plane_count_;
+  const ToolPlane* pl = tool_planes_;
+  const double tol = 1e-9;
+  auto feasible = [&](const Vec3& x) {
+    for (int i = 0; i < m; ++i)
+      if (dot(pl[i].n, x - pl[i].p) < r - tol) return false;
+    return true;
+  };
+  if (feasible(hip)) return hip;
+  Vec3 best = hip;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int mask = 1; mask < (1 << m); ++mask) {
+    int idx[3];
+    int k = 0;
+    for (int i = 0; i < m && k <= 3; ++i)
+      if (mask & (1 << i)) {
+        if (k < 3) idx[k] = i;
+        ++k;
+      }
+    if (k > 3) continue;  // at most 3 independent constraints in 3-D
+    double b[3], l[3] = {0, 0, 0};
+    for (int i = 0; i < k; ++i) b[i] = r - dot(pl[idx[i]].n, hip - pl[idx[i]].p);
+    auto g = [&](int i, int j) { return dot(pl[idx[i]].n, pl[idx[j]].n); };
+    if (k == 1) {
+      l[0] = b[0];
+    } else if (k == 2) {
+      const double a = g(0, 0), c = g(0, 1), d = g(1, 1);
+      const double det = a * d - c * c;
+      if (!(std::abs(det) > 1e-9)) continue;
+      l[0] = (b[0] * d - c * b[1]) / det;
+      l[1] = (a * b[1] - c * b[0]) / det;
+    } else {
+      const double a00 = g(0, 0), a01 = g(0, 1), a02 = g(0, 2), a11 = g(1, 1), a12 = g(1, 2), a22 = g(2, 2);
+      const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+      const double det = a00 * c00 + a01 * c01 + a02 * c02;
+      if (!(std::abs(det) > 1e-9)) continue;
+      const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+      l[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det;
+      l[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) / det;
+      l[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) / det;
+    }
+    bool ok = true;
+    Vec3 x = hip;
+    for (int i = 0; i < k; ++i) {
+      if (!(l[i] >= -tol)) ok = false;
+      x = x + pl[idx[i]].n * l[i];
+    }
+    if (!ok || !feasible(x)) continue;
+    const Vec3 dx = x - hip;
+    const double d2 = dot(dx, dx);
+    if (d2 < best_d2) {
+      best_d2 = d2;
+      best = x;
+    }
+  }
+  if (std::isfinite(best_d2)) return best;
+  // No feasible subset (planes that no sphere of radius r fits between): project onto
+  // the violated planes in turn, a few rounds.
+  Vec3 x = hip;
+  for (int round = 0; round < 8; ++round)
+    for (int i = 0; i < m; ++i) {
+      const double v = r - dot(pl[i].n, x - pl[i].p);
+      if (v > 0) x = x + pl[i].n * v;
+    }
+  return x;
+}
+
+bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q,
+                                  Vec3& n) const {
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const Isosurface iso{params_.tau, params_.inside};
+  // Newton steps along the gradient from `from`: y <- y + N e / |grad| (e the excess, N
+  // outward), each at most one voxel long, at most `steps` reads; true when on the surface.
+  auto newton = [&](Vec3 from, int steps, Vec3& y) {
+    y = from;
+    for (int k = 0; k < steps; ++k) {
+      const FieldValue s = sample_trilinear(field, y);
+      const double e = excess(s.value);
+      const Vec3 go = iso.outward(s.gradient);
+      const double gn = norm(go);
+      if (!std::isfinite(s.value) || !(gn > 0) || !std::isfinite(gn)) return false;
+      const double step = std::clamp(e / gn, -voxel, voxel);
+      y = y + go * (step / gn);
+      const Vec3 moved = y - x;
+      if (dot(moved, moved) > reach * reach) return false;
+      if (std::abs(step) < 1e-3 * voxel) return true;
+    }
+    return false;
+  };
+  Vec3 y;
+  bool found = newton(x, 8, y);
+  if (!found) {
+    // March along the normal at x (inward when x is outside, outward when inside),
+    // half-voxel steps within reach, then 20 bisection steps.
+    const bool in = excess(sample_value(field, x)) > 0.0;
+    const Vec3 n0 = outward_normal(field, x, Vec3{0.0, 0.0, 1.0});
+    const Vec3 dir = in ? n0 : n0 * -1.0;
+    const double h = 0.5 * voxel;
+    const int steps = std::max(1, int(std::ceil(reach / h)));
+    double lo = 0.0;
+    for (int i = 1; i <= steps && !found; ++i) {
+      const double t = std::min(reach, h * i);
+      const bool inside = excess(sample_value(field, x + dir * t)) > 0.0;
+      if (inside != in) {
+        double hi = t;
+        for (int k = 0; k < 20; ++k) {
+          const double mid = 0.5 * (lo + hi);
+          ((excess(sample_value(field, x + dir * mid)) > 0.0) == in ? lo : hi) = mid;
+        }
+        y = x + dir * (in ? hi : lo);  // the outside end of the bracket
+        found = true;
+      }
+      lo = t;
+    }
+    if (!found) return false;
+  }
+  n = outward_normal(field, y, normalized_or(x - y, Vec3{0.0, 0.0, 1.0}));
+  // A gradient path ends near, not at, the nearest point of a curved surface: twice, slide
+  // to the foot of x on the tangent plane and come back to the surface (Newton again).
+  for (int round = 0; round < 2; ++round) {
+    const Vec3 off = x - y;
+    const Vec3 tangential = off - n * dot(n, off);
+    if (!(dot(tangential, tangential) > 1e-6 * voxel * voxel)) break;
+    Vec3 y2;
+    if (!newton(y + tangential, 4, y2)) break;
+    y = y2;
+    n = outward_normal(field, y, n);
+  }
+  q = y;
+  return finite(q) && finite(n);
+}
+
+void HriRenderer::tool_rebuild_newton(const FieldView& field, const Vec3& hip) {
+  // 1. The surface point nearest the proxy of the tick before gives the first plane.
+  // 2. A held plane that proxy still touches (within a quarter voxel), that faces another
+  //    way than every new plane (more than 15 deg) and whose wall is still there (inside a
+  //    quarter voxel behind its point) is another wall of a groove or a corner: it stays
+  //    (else the proxy, moved toward the HIP under the new plane alone, could cross into it).
+  // 3. While the proxy moved toward the HIP under the planes so far is still closer than r
+  //    to the surface, the point nearest it gives the next plane. At most three.
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double tol = 1e-3 * voxel;
+  const double reach = 1.8 * r + voxel;
+  ToolPlane held[kMaxToolPlanes];
+  const int held_count = tool_plane_count_;
+  std::copy(tool_planes_, tool_planes_ + held_count, held);
+  tool_plane_count_ = 0;
+  auto add = [&](const Vec3& n, const Vec3& q) {
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, n) > 0.9999 && std::abs(dot(tool_planes_[j].n, q - tool_planes_[j].p)) < tol)
+        return false;  // the same plane
+    tool_planes_[tool_plane_count_++] = {n, q};
+    return true;
+  };
+  // A point farther than r + 1 voxel from where it was searched is not the wall in
+  // contact (a gradient path through a drilled cavity can end anywhere within reach).
+  auto near = [&](const Vec3& from, const Vec3& q) {
+    const Vec3 d = q - from;
+    return dot(d, d) <= (r + voxel) * (r + voxel);
+  };
+  Vec3 q, n;
+  if (nearest_surface(field, vhip_, reach, q, n) && near(vhip_, q)) add(n, q);
+  const double cos15 = 0.9659;
+  for (int i = 0; i < held_count && tool_plane_count_ < 3; ++i) {
+    if (!(dot(held[i].n, vhip_ - held[i].p) < r + 0.25 * voxel)) continue;
+    // ... and only where the wall is still there (an edit may have removed it).
+    if (!(excess(sample_value(field, held[i].p - held[i].n * (0.25 * voxel))) > 0.0)) continue;
+    bool other = true;
+    for (int j = 0; j < tool_plane_count_; ++j)
+      if (dot(tool_planes_[j].n, held[i].n) > cos15) other = false;
+    if (other) add(held[i].n, held[i].p);
+  }
+  while (tool_plane_count_ > 0 && tool_plane_count_ < 3) {
+    const Vec3 x = tool_solve(hip);
+    bool added = false;
+    if (nearest_surface(field, x, reach, q, n) && near(x, q) && dot(n, x - q) < r - tol) added = add(n, q);
+    if (!added) {
+      // A gradient path from x can end on a farther sheet (a crease, a thin wall): also
+      // from the point of the sphere that leads toward the HIP, if it is inside.
+      const Vec3 to_hip = hip - x;
+      const double l = norm(to_hip);
+      const Vec3 lead = l > 0 ? x + to_hip * (r / l) : x;
+      if (l > 0 && excess(sample_value(field, lead)) > 0.0 && nearest_surface(field, lead, reach, q, n) &&
+          near(x, q) && dot(n, x - q) < r - tol)
+        added = add(n, q);
+    }
+    if (!added) break;  // the proxy is clear of the surface
+  }
+}
+
+namespace {
+/// The point of one trilinear cell's surface nearest X (surface_scan): `e` the excess at the
+/// cell's corners (corner c = i + 2 j + 4 k), X and the result relative to the lower corner
+/// [m], `sp` the cell's size [m]. The nearest edge crossing (an exact surface point: the
+/// field is linear along an edge), then projections of X onto the patch linearised at the
+/// current point (y <- X - g (e + g . (X - y)) / |g|^2, clamped to the cell, at most 10
+/// rounds) from the cell point nearest X and from that crossing; a projection that lands
+/// on the patch (|e| < tol |g|) and is nearer replaces the crossing.
+struct CellPoint {
+  Vec3 best;                                              ///< the nearest point found
+  double best_d2 = std::numeric_limits<double>::infinity();  ///< its squared distance (inf: none)
+  bool converged = false;                                 ///< a projection landed on the patch
+  Vec3 gradient;  ///< the excess gradient [1/m] at the best point (clamped to the cell)
+};
+CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec3& sp, double tol) {
+  const Vec3 X{xa[0], xa[1], xa[2]};
+  // Trilinear excess and its gradient [1/m] at u in [0,1]^3 (corner c = i + 2 j + 4 k).
+  auto eval = [&](const Vec3& u, Vec3& g) {
+    const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
+    const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
+    const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
+    const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
+    g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z +
+           (e[7] - e[6]) * u.y * u.z) / sp.x;
+    g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
+    g.z = (e1 - e0) / sp.z;
+    return e0 * z0 + e1 * u.z;
+  };
+  auto clamp_u = [&](const Vec3& y) {
+    return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0),
+                std::clamp(y.z / sp.z, 0.0, 1.0)};
+  };
+  // The nearest edge crossing.
+  Vec3 best;
+  double best_d2 = std::numeric_limits<double>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    const int step = 1 << a;
+    for (int c = 0; c < 8; ++c) {
+      if (c & step) continue;
+      const double ea = e[c], eb = e[c + step];
+      if ((ea > 0.0) == (eb > 0.0)) continue;
+      double ya[3] = {double(c & 1) * sp.x, double((c >> 1) & 1) * sp.y, double(c >> 2) * sp.z};
+      ya[a] = sp[a] * (ea / (ea - eb));
+      const Vec3 y{ya[0], ya[1], ya[2]};
+      const Vec3 d = X - y;
+      if (dot(d, d) < best_d2) {
+        best_d2 = dot(d, d);
+        best = y;
+      }
+    }
+  }
+  // Projections onto the linearised patch from the cell point nearest x; a component
+  // held at a face of the cell (the target beyond it) stays there and the others
+  // solve the linearised problem on that face.
+  // Two starts: the cell point nearest x, and the nearest edge crossing (a cell may
+  // hold two sheets of a saddle).
+  bool converged = false;
+  Vec3 g;
+  const Vec3 starts[2] = {clamp_u(X), std::isfinite(best_d2) ? clamp_u(best) : clamp_u(X)};
+  for (int start = 0; start < (std::isfinite(best_d2) ? 2 : 1); ++start) {
+    Vec3 u = starts[start];
+    for (int it = 0; it < 10; ++it) {
+      const double ya[3] = {u.x * sp.x, u.y * sp.y, u.z * sp.z};
+      const double ev = eval(u, g);
+      double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
+      double g2 = dot(g, g);
+      if (!(g2 > 0)) break;
+      const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
+      for (int a = 0; a < 3; ++a) {
+        const double t = xa[a] - ga[a] * lx / g2;
+        const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
+        if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
+          ga[a] = 0;
+          xa2[a] = ya[a];
+        }
+      }
+      g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
+      if (!(g2 > 0)) break;
+      const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
+      const Vec3 next = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
+      // A fixed point: every further round would compute the same u (the rounds are a
+      // function of u alone), so stopping here gives the same point in fewer rounds.
+      if (next.x == u.x && next.y == u.y && next.z == u.z) break;
+      u = next;
+    }
+    {
+      const Vec3 y{u.x * sp.x, u.y * sp.y, u.z * sp.z};
+      const double ev = eval(u, g);
+      const double gn = norm(g);
+      const Vec3 d = X - y;
+      const bool on = gn > 0 && std::abs(ev) < tol * gn;
+      converged = converged || on;
+      if (on && dot(d, d) < best_d2) {
+        best_d2 = dot(d, d);
+        best = y;
+      }
+    }
+  }
+  CellPoint out;
+  out.best = best;
+  out.best_d2 = best_d2;
+  out.converged = converged;
+  if (std::isfinite(best_d2)) eval(clamp_u(best), out.gradient);
+  return out;
+}
+
+}  // namespace
+
+bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double reach) {
+  // Every cell whose box lies within `reach` of x: the trilinear field on a cell lies
+  // between its corners' extremes, so the cell holds the surface exactly when its corners
+  // straddle tau (a NaN corner: no surface, as everywhere in the servo). In such a cell
+  // its point nearest x (nearest_in_cell). The kMaxScanPoints nearest points are kept.
+  const Grid& grid = field.grid();
+  const Vec3& sp = grid.spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const Vec3 ix = grid.to_index(x);
+  if (!finite(ix) || !(reach > 0)) return false;
+  int lo[3], n[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = int(std::floor(ix[a] - reach / sp[a]));
+    n[a] = int(std::ceil(ix[a] + reach / sp[a])) - lo[a] + 1;  // samples on this axis
+    if (n[a] > kScanSide || n[a] < 2) return false;
+  }
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      for (int i = 0; i < n[0]; ++i) {
+        const double v = field.value_at_index({double(lo[0] + i), double(lo[1] + j), double(lo[2] + k)});
+        scan_excess_[(k * n[1] + j) * n[0] + i] = std::isfinite(v) ? float(excess(v)) : std::nanf("");
+      }
+  scan_count_ = 0;
+  scan_clear_m_ = reach;
+  const double tol = 1e-3 * voxel;
+  const bool x_outside = !(excess(field.value(x)) > 0.0);
+  auto keep = [&](const Vec3& q, const Vec3& n_out, double d) {
+    if (scan_count_ == kMaxScanPoints) {
+      int far = 0;
+      for (int c = 1; c < scan_count_; ++c)
+        if (scan_[c].d > scan_[far].d) far = c;
+      if (!(d < scan_[far].d)) return;
+      scan_[far] = {q, n_out, d};
+    } else {
+      scan_[scan_count_++] = {q, n_out, d};
+    }
+  };
+  for (int ck = 0; ck + 1 < n[2]; ++ck)
+    for (int cj = 0; cj + 1 < n[1]; ++cj)
+      for (int ci = 0; ci + 1 < n[0]; ++ci) {
+        const int c0[3] = {ci, cj, ck};
+        // x relative to the cell's lower corner [m], and the cell's box distance.
+        double xa[3];
+        double box2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          xa[a] = (ix[a] - double(lo[a] + c0[a])) * sp[a];
+          const double out = std::max({0.0, -xa[a], xa[a] - sp[a]});
+          box2 += out * out;
+        }
+        if (box2 > reach * reach) continue;
+        double e[8];
+        bool in = false, outside = false, nan = false;
+        for (int c = 0; c < 8; ++c) {
+          const float v = scan_excess_[((ck + (c >> 2)) * n[1] + cj + ((c >> 1) & 1)) * n[0] + ci + (c & 1)];
+          nan = nan || !std::isfinite(v);
+          e[c] = v;
+          (v > 0.0f ? in : outside) = true;
+        }
+        if (nan || !in || !outside) continue;
+        const CellPoint cp = nearest_in_cell(e, xa, sp, tol);
+        if (!std::isfinite(cp.best_d2)) continue;
+        const Vec3& best = cp.best;
+        const double dist = std::sqrt(cp.best_d2);
+        const Vec3& gq = cp.gradient;
+        const Vec3 q = grid.to_world(
+            {double(lo[0] + ci) + best.x / sp.x, double(lo[1] + cj) + best.y / sp.y, double(lo[2] + ck) + best.z / sp.z});
+        // The plane's normal: toward x from an x outside (the nearest point's normal, and
+        // defined at creases); the outward gradient where x is inside or on the surface.
+        const Vec3 n_grad = normalized_or(gq * -1.0, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
+        const Vec3 n_out = x_outside && dist > tol ? (x - q) / dist : n_grad;
+        keep(q, n_out, dist);
+        // The free-motion clearance: the point found where the projections converged, else
+        // the cell's box distance (a proven lower bound).
+        scan_clear_m_ = std::min(scan_clear_m_, cp.converged ? dist : std::sqrt(box2));
+      }
+  // Nearest first (insertion sort: at most kMaxScanPoints).
+  for (int a = 1; a < scan_count_; ++a)
+    for (int b = a; b > 0 && scan_[b].d < scan_[b - 1].d; --b) std::swap(scan_[b], scan_[b - 1]);
+  return true;
+}
+
+int HriRenderer::tool_add_uncovered(const Vec3& x, double reach, double voxel) {
+  // A scanned point behind a held plane, or on it to 0.01 voxel, cannot come nearer than
+  // r (less that) to a proxy the plane holds; every other point within reach adds a plane
+  // through it facing x (nearest first).
+  const double cover = 0.01 * voxel;
+  int added = 0;
+  for (int c = 0; c < scan_count_ && tool_plane_count_ < kMaxToolPlanes; ++c) {
+    const ScanPoint& s = scan_[c];
+    if (s.d > reach) break;
+    bool covered = false;
+    for (int i = 0; i < tool_plane_count_ && !covered; ++i)
+      covered = dot(tool_planes_[i].n, s.q - tool_planes_[i].p) < cover;
+    if (covered) continue;
+    const double d = norm(x - s.q);
+    const Vec3 n = d > 1e-3 * voxel && dot(x - s.q, s.n) > 0 ? (x - s.q) / d : s.n;
+    tool_planes_[tool_plane_count_++] = {n, s.q};
+    ++added;
+  }
+  return added;
+}
+
+void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
+  // The planes from scans of the cells around the proxy (see the class docs); a tool too
+  // large for the scan box: Newton searches (tool_rebuild_newton).
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  const double reach = r + voxel;
+  Vec3 centre = vhip_;
+  scan_valid_ = false;
+  for (int pass = 0; pass < 3; ++pass) {
+    if (!surface_scan(field, centre, reach)) {
+      if (pass == 0) tool_rebuild_newton(field, hip);
+      return;
+    }
+    if (pass == 0) tool_plane_count_ = 0;
+    tool_add_uncovered(centre, reach, voxel);
+    anchor_ = centre;
+    scan_valid_ = true;
+    const Vec3 y = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+    const Vec3 moved = y - centre;
+    if (dot(moved, moved) <= 0.0625 * voxel * voxel) break;
+    centre = y;
+  }
+}
+
+Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, TickOut& out) {
+  const double r = params_.tool_radius_m;
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  bool update = edited && (tool_plane_count_ > 0 || was_contact_);
+  if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
+  if (tool_plane_count_ > 0 && !update) {
+    bool held = false;  // does any plane hold the HIP?
+    for (int i = 0; i < tool_plane_count_; ++i)
+      if (dot(tool_planes_[i].n, hip - tool_planes_[i].p) < r) held = true;
+    if (!held) {
+      tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
+    } else {
+      const Vec3 slide = tool_solve(hip) - anchor_;
+      // Early when the proxy is 0.2 voxel from the scan's centre: the scan covered the
+      // surface within r + 1 voxel of it, and a tangent plane held over a curved (or,
+      // between voxels, wavy trilinear) surface lets the sphere sink by about
+      // slide^2 * curvature / 2.
+      if (++c_ >= params_.plane_update_period || dot(slide, slide) > 0.04 * voxel * voxel) update = true;
+    }
+  }
+  if (tool_plane_count_ == 0 && !update && scan_valid_) {
+    // Free motion after a scan: no surface is nearer to its centre than scan_clear_m_, so
+    // none is within r of a HIP that moved less than that less r (0.01 voxel to spare).
+    const Vec3 moved = hip - anchor_;
+    const double room = scan_clear_m_ - r - 0.01 * voxel;
+    update = !(room > 0) || dot(moved, moved) > room * room;
+  } else if (tool_plane_count_ == 0 && !update) {
+    // Free motion: one value + gradient read at the HIP. Search only when a surface may
+    // be within reach (first-order distance), or the HIP entered the object.
+    const FieldValue s = sample_trilinear(field, hip);
+    const double e = excess(s.value);
+    const double gn = norm(s.gradient);
+    if (e > 0.0) update = !(excess(sample_value(field, vhip_)) > 0.0);  // starting inside: no force
+    // Where the field is flat (|e| / |grad| beyond 8 voxels: a drilled cavity, uniform
+    // empty value, air) the first-order distance says nothing: search there every n ticks.
+    else {
+      const bool flat = !(gn > 0) ? std::isfinite(s.value) : -e > 8.0 * voxel * gn;
+      update = (gn > 0 && -e < (r + voxel) * gn) || (flat && ++c_ >= params_.plane_update_period);
+    }
+  }
+  if (update) {
+    ToolPlane kept[kMaxToolPlanes];
+    const int kept_count = tool_plane_count_;
+    std::copy(tool_planes_, tool_planes_ + kept_count, kept);
+    tool_rebuild(field, hip);
+    if (tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
+      // No surface within reach of the proxy while the HIP is inside: material removed
+      // around the tool (a drill), or a noisy scan. The proxy goes toward the HIP up to the
+      // surface on the way (first crossing of the segment; the plane there, the centre r
+      // before it); failing that, the planes of the tick before still hold the HIP.
+      Vec3 q;
+      scan_valid_ = false;  // these planes are not the scan's
+      if (!(excess(sample_value(field, vhip_)) > 0.0) && first_crossing(field, vhip_, hip, q)) {
+        const Vec3 n = outward_normal(field, q, normalized_or(vhip_ - hip, kept[0].n));
+        tool_planes_[0] = {n, q};
+        tool_plane_count_ = 1;
+      } else {
+        std::copy(kept, kept + kept_count, tool_planes_);
+        tool_plane_count_ = kept_count;
+      }
+    }
+    c_ = 0;
+    if (!scan_valid_) anchor_ = tool_solve(hip);
+    out.plane_update = true;
+  }
+  const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+  vhip_ = x;
+  const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
+  const double depth = norm(push);
+  if (!(depth > 0.0)) {
+    prev_target_f_ = {};
+    ramp_from_dir_ = {};
+    ramp_left_s_ = 0;
+    return {};
+  }
+  const Vec3 u = push / depth;
+  Vec3 force = u * (params_.stiffness_n_per_m * depth - params_.damping_n_s_per_m * dot(v_filt_, u));
+  if (dot(force, u) < 0.0) force = {};  // a wall pushes, never pulls
+  bool ramped = false;
+  if (params_.recovery_time_s > 0) force = ramp_force(force, out.plane_update, u, prev_target_f_, ramped);
+  out.contact = true;
+  out.penetration_m = norm(hip - x);
+  return force;
+}
+
+}  // namespace isotouch::servo

@@ -129,7 +129,7 @@ class ForceMeter final : public servo::HapticDeviceIO {
   std::uint32_t buttons() override { return d_.buttons(); }
   servo::DeviceReading read() override { return d_.read(); }
   servo::DeviceCaps caps() const override { return d_.caps(); }
-  void enable_force(bool on) override { d_.enable_force(on); }
+  bool enable_force(bool on, double stall_s) override { return d_.enable_force(on, stall_s); }
   void answer(std::uint64_t s) override { d_.answer(s); }
   void write_force_n(const core::Vec3& f) override {
     const double m = core::norm(f);

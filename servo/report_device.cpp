@@ -70,6 +70,13 @@ void ReportDevice::write_force_n(const Vec3& force_n) {
   output_.store(Output{ok ? force_n : Vec3{}, answers_, ++writes_});
 }
 
+bool ReportDevice::enable_force(bool on, double stall_s) {
+  if (!(stall_s > 0) || !std::isfinite(stall_s)) stall_s = opt_.default_stall_s;
+  stall_ns_.store(std::int64_t(stall_s * 1e9), std::memory_order_relaxed);
+  enabled_.store(on, std::memory_order_release);
+  return true;
+}
+
 DeviceCaps ReportDevice::caps() const { return caps_; }
 
 LinkCounters ReportDevice::counters() const {
@@ -77,6 +84,7 @@ LinkCounters ReportDevice::counters() const {
   c.reports = reports_.load(), c.garbage = garbage_.load(), c.gaps = gaps_.load();
   c.duplicates = duplicates_.load(), c.reordered = reordered_.load(), c.disconnects = disconnects_.load();
   c.reconnects = reconnects_.load(), c.writes = sent_.load(), c.write_errors = write_errors_.load();
+  c.stalls = stalls_.load();
   return c;
 }
 
@@ -206,18 +214,29 @@ void ReportDevice::writer_loop() {
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
   const auto keepalive_ns = std::int64_t(opt_.keepalive_s * 1e9);
-  std::uint64_t sent_count = 0;
+  std::uint64_t seen_count = output_.load().count;  // the servo's last write seen ...
+  std::int64_t seen_at = now_ns();                   // ... and when
   std::int64_t last_send = 0;
+  bool was_on = false;
   while (!stop_.load()) {
     const Output o = output_.load();
-    const bool enable = enabled_.load(std::memory_order_relaxed);
     const std::int64_t t = now_ns();
-    if (o.count != sent_count || t - last_send >= keepalive_ns) {
-      // Disabled: a zero force with enable cleared (the device keeps reporting).
-      const std::size_t n = protocol_->encode_output(enable ? o.force_n : Vec3{}, enable, o.answers, buf);
+    const bool fresh = o.count != seen_count;
+    if (fresh) seen_count = o.count, seen_at = t;
+    // Force only while enabled and the servo writes: after the stall time without a write
+    // (a slow renderer, a starved or stopped servo thread) zero with enable cleared, until
+    // the servo writes again (its late tick ramps the force in from 0).
+    const bool enabled = enabled_.load(std::memory_order_acquire);
+    const bool stalled = t - seen_at > stall_ns_.load(std::memory_order_relaxed);
+    bool on = enabled;
+    if (stalled) on = false;  // the servo stopped writing: force off
+    if (fresh || on != was_on || t - last_send >= keepalive_ns) {
+      if (was_on && enabled && stalled) stalls_.fetch_add(1);
+      // Disabled or stalled: a zero force with enable cleared (the device keeps reporting).
+      const std::size_t n = protocol_->encode_output(on ? o.force_n : Vec3{}, on, o.answers, buf);
       send(std::span(buf.data(), n));
-      sent_count = o.count;
       last_send = t;
+      was_on = on;
     }
     sleep_ns(poll_ns);
   }

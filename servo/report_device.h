@@ -72,12 +72,17 @@ struct LinkCounters {
   long reconnects = 0;  ///< times it came back
   long writes = 0;      ///< output reports sent
   long write_errors = 0;
+  long stalls = 0;      ///< times the writer took the force off because the servo stopped writing
 };
 
 struct ReportDeviceOptions {
   double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
   double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
-  double keepalive_s = 0.01;           ///< with nothing new to send, resend the last output this often [s]
+  /// With nothing new to send, resend the current output this often [s]: the servo's last
+  /// force while it writes, zero with enable cleared once it stalled.
+  double keepalive_s = 0.01;
+  /// The stall time when enable_force() is given none [s].
+  double default_stall_s = 0.01;
   /// > 0: the reader and writer threads ask for SCHED_FIFO at this priority (below the
   /// servo's 80: they feed it). Refused (no CAP_SYS_NICE): they run under the default
   /// scheduler, said by realtime_note().
@@ -88,7 +93,9 @@ struct ReportDeviceOptions {
 /// capabilities (failure: std::runtime_error naming the link and the reason); then a reader
 /// thread publishes each accepted input report (DeviceReading, received_ns = arrival) into a
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
-/// wrote (polled every write_poll_us; the servo makes no syscall). A link that goes down
+/// wrote (polled every write_poll_us; the servo makes no syscall). Once the servo has not
+/// written for the stall time enable_force() was given, the writer sends zero force with
+/// enable cleared (counted: LinkCounters::stalls) until the servo writes again. A link that goes down
 /// publishes kDisconnected at once and is reopened every reconnect_interval_s; a reopened
 /// link increments DeviceReading::connection (the servo ramps the force in). Refused
 /// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
@@ -111,7 +118,7 @@ class ReportDevice final : public HapticDeviceIO {
   void write_force_n(const Vec3& force_n) override;
   void answer(std::uint64_t sequence) override { answers_ = sequence; }
   DeviceCaps caps() const override;
-  void enable_force(bool on) override { enabled_.store(on, std::memory_order_relaxed); }
+  bool enable_force(bool on, double stall_s) override;  ///< true: the writer has the stall rule
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
@@ -143,6 +150,7 @@ class ReportDevice final : public HapticDeviceIO {
   LatestValue<Output> output_;
   std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
   std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
+  std::atomic<std::int64_t> stall_ns_{0};   // enable_force()'s stall time [ns]
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
@@ -150,7 +158,7 @@ class ReportDevice final : public HapticDeviceIO {
   mutable std::mutex note_mu_;
   std::string last_error_, last_refusal_, realtime_note_;
   std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
-      reconnects_{0}, sent_{0}, write_errors_{0};
+      reconnects_{0}, sent_{0}, write_errors_{0}, stalls_{0};
   std::thread reader_, writer_;
 };
 

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -50,6 +51,14 @@ DeviceStatus judge(const DeviceReading& d, std::int64_t t, std::int64_t stale_ns
   return DeviceStatus::kOk;
 }
 
+// A write more than kLatePeriods after the previous one is a restart; the device takes the
+// force off after kStallPeriods without a write (later, so that it never cuts a write the
+// servo counts as on time).
+constexpr std::int64_t kLatePeriods = 2;
+constexpr double kStallPeriods = 2.5;
+// Handoff::state: where the servo thread is, and whether stop() gave up on it.
+constexpr int kOutside = 0, kInRenderer = 1, kAbandoned = 2;
+
 /// `f` [N] scaled by the ramp factor in [0, 1] and clamped to |F| <= max_n (direction
 /// kept); a non-finite result is an exact zero.
 Vec3 ramp_and_clamp(const Vec3& f, double ramp, double max_n, bool& clamped) {
@@ -77,26 +86,52 @@ ServoThread::~ServoThread() { stop(); }
 
 std::string ServoThread::start() {
   stop();
+  if (abandoned_)
+    throw std::logic_error("servo thread: start() after stop() abandoned a thread stuck in the renderer");
   stop_.store(false);
   ready_.store(false);
   period_err_.clear();
   caps_ = device_.caps();
-  device_.enable_force(true);
-  thread_ = std::thread([this] { loop(); });
+  device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
+  handoff_ = std::make_shared<Handoff>();
+  thread_ = std::thread([this, h = handoff_] {
+    loop(*h);
+    h->done.store(true, std::memory_order_release);
+  });
   ready_.wait(false, std::memory_order_acquire);  // the real-time setup is done
   return setup_note_;
 }
 
-void ServoThread::stop() {
+std::string ServoThread::stop() {
   stop_.store(true, std::memory_order_relaxed);
+  std::string error;
   if (thread_.joinable()) {
-    thread_.join();
-    device_.enable_force(false);
+    // Abandoned only while inside the renderer: anywhere else the loop ends on its own.
+    int in = kInRenderer;
+    if (!wait_done(*handoff_) && handoff_->state.compare_exchange_strong(in, kAbandoned, std::memory_order_acq_rel)) {
+      thread_.detach();
+      abandoned_ = true;
+      error = "servo thread: the renderer has not returned for " + std::to_string(cfg_.stop_timeout_s) +
+              " s: force turned off, the thread abandoned";
+    } else {
+      thread_.join();
+    }
+    device_.enable_force(false, 0);
   }
   if (locked_) {
     munlockall();
     locked_ = false;
   }
+  return error;
+}
+
+bool ServoThread::wait_done(const Handoff& h) const {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(cfg_.stop_timeout_s);
+  while (!h.done.load(std::memory_order_acquire)) {
+    if (std::chrono::steady_clock::now() >= give_up) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
 }
 
 std::string ServoThread::setup_realtime() {
@@ -127,7 +162,7 @@ std::string ServoThread::setup_realtime() {
   return note;
 }
 
-void ServoThread::loop() {
+void ServoThread::loop(Handoff& h) {
   setup_note_ = setup_realtime();
   ready_.store(true, std::memory_order_release);
   ready_.notify_all();
@@ -149,6 +184,21 @@ void ServoThread::loop() {
   const auto restart_ns = std::int64_t(std::max(cfg_.stale_restart_s, 0.0) * 1e9);
   std::uint32_t connection = 0;
   bool first = true;
+  std::int64_t last_write = -1;  // clock at the previous write; -1: none yet
+  // Writes `f` [N], or zero when this write comes more than kLatePeriods after the previous
+  // one (the device has taken the force off by then): the force ramps in from 0 again.
+  // False for such a late write.
+  auto write = [&](const Vec3& f) {
+    const std::int64_t w = now_ns();  // vDSO: no syscall
+    const bool late = device_stalls_ && last_write >= 0 && w - last_write > kLatePeriods * period;
+    last_write = w;
+    if (late) late_.fetch_add(1, std::memory_order_relaxed);
+    if (late) ramp_start = w;  // the next ticks ramp in from 0
+    Vec3 out = f;
+    if (late) out = Vec3{};  // the device has taken the force off: no jump back to f
+    device_.write_force_n(out);
+    return !late;
+  };
   while (!stop_.load(std::memory_order_relaxed)) {
     next += period;
     // Wait: sleep to just before the deadline, then spin (outside the tick).
@@ -177,7 +227,7 @@ void ServoThread::loop() {
     const SampleField* field = samples_.acquire();
     const bool paused = paused_.load(std::memory_order_relaxed);
     if (!field) {
-      device_.write_force_n({});
+      write({});
       empty_.fetch_add(1, std::memory_order_relaxed);
     } else {
       if (field->version != last_version) {
@@ -202,7 +252,7 @@ void ServoThread::loop() {
       rec.device_status = judge(d, t, stale_ns, caps_, refused);
       status_.store(std::uint8_t(rec.device_status), std::memory_order_relaxed);
       if (rec.device_status != DeviceStatus::kOk) {
-        device_.write_force_n({});  // within this tick
+        write({});  // within this tick
         count_not_ok(rec.device_status, refused);
         if (not_ok_since < 0) not_ok_since = t;
         // A blip of stale ticks keeps the contact state and the force level; anything
@@ -213,7 +263,7 @@ void ServoThread::loop() {
           last_render = -1;
         }
       } else if (paused) {
-        device_.write_force_n({});
+        write({});
         was_paused = true;
         last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
@@ -228,14 +278,17 @@ void ServoThread::loop() {
           ramp_start = t;
           ramps_.fetch_add(1, std::memory_order_relaxed);
         }
+        h.state.store(kInRenderer, std::memory_order_release);
         rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
+        if (int in = kInRenderer; !h.state.compare_exchange_strong(in, kOutside, std::memory_order_acq_rel))
+          return;  // abandoned by stop(): touch nothing (this object may be gone)
         last_render = t;
         const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
         bool clamped = false;
         rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);
         if (clamped) clamped_.fetch_add(1, std::memory_order_relaxed);
         device_.answer(d.sequence);
-        device_.write_force_n(rec.force_sent_n);
+        if (!write(rec.force_sent_n)) rec.force_sent_n = {};
         if (rec.out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
       }
       if (cfg_.observer) cfg_.observer->on_tick(rec);
@@ -260,6 +313,7 @@ DeviceCounters ServoThread::device_counters() const {
   c.refused = refused_.load(std::memory_order_relaxed);
   c.ramps = ramps_.load(std::memory_order_relaxed);
   c.clamped = clamped_.load(std::memory_order_relaxed);
+  c.late_restarts = late_.load(std::memory_order_relaxed);
   return c;
 }
 

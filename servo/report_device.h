@@ -95,9 +95,9 @@ struct ReportDeviceOptions {
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
 /// wrote (polled every write_poll_us; the servo makes no syscall). Once the servo has not
 /// written for the stall time enable_force() was given, the writer sends zero force with
-/// enable cleared (counted: LinkCounters::stalls) until the servo writes again. A link that goes down
-/// publishes kDisconnected at once and is reopened every reconnect_interval_s; a reopened
-/// link increments DeviceReading::connection (the servo ramps the force in). Refused
+/// enable cleared (counted: LinkCounters::stalls) until the servo writes again. A link that
+/// goes down publishes kDisconnected at once and is reopened every reconnect_interval_s; a
+/// reopened link increments DeviceReading::connection (the servo ramps the force in). Refused
 /// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
 /// reason is kept (last_error()).
 class ReportDevice final : public HapticDeviceIO {

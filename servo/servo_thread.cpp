@@ -278,8 +278,11 @@ void ServoThread::loop(Handoff& h) {
           ramp_start = t;
           ramps_.fetch_add(1, std::memory_order_relaxed);
         }
+        // Everything the call needs is read before the handoff: stop() may abandon the thread
+        // and this object may be gone while the renderer runs.
+        Renderer& renderer = renderer_;
         h.state.store(kInRenderer, std::memory_order_release);
-        rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
+        rec.out = renderer.tick(*field, rec.hip_m, dt_s);
         if (int in = kInRenderer; !h.state.compare_exchange_strong(in, kOutside, std::memory_order_acq_rel))
           return;  // abandoned by stop(): touch nothing (this object may be gone)
         last_render = t;

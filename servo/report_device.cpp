@@ -67,14 +67,19 @@ void ReportDevice::close() {
 void ReportDevice::write_force_n(const Vec3& force_n) {
   // Servo thread: one store into the latest-value cell, no syscall. Non-finite: zero.
   const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
-  output_.store(Output{ok ? force_n : Vec3{}, answers_, ++writes_});
+  Vec3 f = ok ? force_n : Vec3{};
+  const std::uint64_t stalls = stalls_.load(std::memory_order_acquire);
+  if (stalls != stalls_seen_) f = Vec3{};  // the first write after the writer took the force off: no jump back
+  stalls_seen_ = stalls;
+  output_.store(Output{f, answers_, ++writes_, stalls});
 }
 
-bool ReportDevice::enable_force(bool on, double stall_s) {
+const std::atomic<std::uint64_t>* ReportDevice::enable_force(bool on, double stall_s) {
   if (!(stall_s > 0) || !std::isfinite(stall_s)) stall_s = opt_.default_stall_s;
   stall_ns_.store(std::int64_t(stall_s * 1e9), std::memory_order_relaxed);
+  enabled_ns_.store(now_ns(), std::memory_order_relaxed);
   enabled_.store(on, std::memory_order_release);
-  return true;
+  return &stalls_;
 }
 
 DeviceCaps ReportDevice::caps() const { return caps_; }
@@ -219,19 +224,24 @@ void ReportDevice::writer_loop() {
   std::int64_t last_send = 0;
   bool was_on = false;
   while (!stop_.load()) {
-    const Output o = output_.load();
+    // The clock first: a count unchanged after it means no write up to t (read the other way
+    // round, a preempted writer could call a write it has not loaded yet a stall).
     const std::int64_t t = now_ns();
+    const Output o = output_.load();
     const bool fresh = o.count != seen_count;
     if (fresh) seen_count = o.count, seen_at = t;
     // Force only while enabled and the servo writes: after the stall time without a write
     // (a slow renderer, a starved or stopped servo thread) zero with enable cleared, until
     // the servo writes again (its late tick ramps the force in from 0).
+    // Before the first write since enable_force() the force is off too (not a stall).
     const bool enabled = enabled_.load(std::memory_order_acquire);
     const bool stalled = t - seen_at > stall_ns_.load(std::memory_order_relaxed);
-    bool on = enabled;
+    bool on = enabled && seen_at >= enabled_ns_.load(std::memory_order_relaxed);
     if (stalled) on = false;  // the servo stopped writing: force off
+    if (was_on && enabled && stalled) stalls_.fetch_add(1, std::memory_order_release);
+    // Back on only with a write made after the servo could see the stall (it ramps in).
+    if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
     if (fresh || on != was_on || t - last_send >= keepalive_ns) {
-      if (was_on && enabled && stalled) stalls_.fetch_add(1);
       // Disabled or stalled: a zero force with enable cleared (the device keeps reporting).
       const std::size_t n = protocol_->encode_output(on ? o.force_n : Vec3{}, on, o.answers, buf);
       send(std::span(buf.data(), n));

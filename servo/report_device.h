@@ -95,7 +95,8 @@ struct ReportDeviceOptions {
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
 /// wrote (polled every write_poll_us; the servo makes no syscall). Once the servo has not
 /// written for the stall time enable_force() was given, the writer sends zero force with
-/// enable cleared (counted: LinkCounters::stalls) until the servo writes again. A link that
+/// enable cleared (counted: LinkCounters::stalls) until a write made after the servo could
+/// see that count; the first such write is sent as zero (the servo ramps in from 0). A link that
 /// goes down publishes kDisconnected at once and is reopened every reconnect_interval_s; a
 /// reopened link increments DeviceReading::connection (the servo ramps the force in). Refused
 /// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
@@ -118,7 +119,8 @@ class ReportDevice final : public HapticDeviceIO {
   void write_force_n(const Vec3& force_n) override;
   void answer(std::uint64_t sequence) override { answers_ = sequence; }
   DeviceCaps caps() const override;
-  bool enable_force(bool on, double stall_s) override;  ///< true: the writer has the stall rule
+  /// Returns the writer's stall count (LinkCounters::stalls).
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
@@ -132,6 +134,7 @@ class ReportDevice final : public HapticDeviceIO {
     Vec3 force_n;
     std::uint64_t answers = 0;
     std::uint64_t count = 0;  // +1 per write_force_n()
+    std::uint64_t stalls = 0; // the writer's stall count this write was made after
   };
   void reader_loop();
   void ask_fifo();
@@ -149,8 +152,11 @@ class ReportDevice final : public HapticDeviceIO {
   LatestValue<DeviceReading> reading_;
   LatestValue<Output> output_;
   std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
+  std::uint64_t stalls_seen_ = 0;            // servo thread: stalls_ at its last write
   std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
   std::atomic<std::int64_t> stall_ns_{0};   // enable_force()'s stall time [ns]
+  std::atomic<std::int64_t> enabled_ns_{0}; // when enable_force() was last called
+  std::atomic<std::uint64_t> stalls_{0};    // the writer took the force off (servo reads it)
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
@@ -158,7 +164,7 @@ class ReportDevice final : public HapticDeviceIO {
   mutable std::mutex note_mu_;
   std::string last_error_, last_refusal_, realtime_note_;
   std::atomic<long> reports_{0}, garbage_{0}, gaps_{0}, duplicates_{0}, reordered_{0}, disconnects_{0},
-      reconnects_{0}, sent_{0}, write_errors_{0}, stalls_{0};
+      reconnects_{0}, sent_{0}, write_errors_{0};
   std::thread reader_, writer_;
 };
 

@@ -51,10 +51,7 @@ DeviceStatus judge(const DeviceReading& d, std::int64_t t, std::int64_t stale_ns
   return DeviceStatus::kOk;
 }
 
-// A write more than kLatePeriods after the previous one is a restart; the device takes the
-// force off after kStallPeriods without a write (later, so that it never cuts a write the
-// servo counts as on time).
-constexpr std::int64_t kLatePeriods = 2;
+// A device with its own writer takes the force off after this many periods without a write.
 constexpr double kStallPeriods = 2.5;
 // Handoff::state: where the servo thread is, and whether stop() gave up on it.
 constexpr int kOutside = 0, kInRenderer = 1, kAbandoned = 2;
@@ -93,6 +90,7 @@ std::string ServoThread::start() {
   period_err_.clear();
   caps_ = device_.caps();
   device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
+  seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();
   thread_ = std::thread([this, h = handoff_] {
     loop(*h);
@@ -184,21 +182,6 @@ void ServoThread::loop(Handoff& h) {
   const auto restart_ns = std::int64_t(std::max(cfg_.stale_restart_s, 0.0) * 1e9);
   std::uint32_t connection = 0;
   bool first = true;
-  std::int64_t last_write = -1;  // clock at the previous write; -1: none yet
-  // Writes `f` [N], or zero when this write comes more than kLatePeriods after the previous
-  // one (the device has taken the force off by then): the force ramps in from 0 again.
-  // False for such a late write.
-  auto write = [&](const Vec3& f) {
-    const std::int64_t w = now_ns();  // vDSO: no syscall
-    const bool late = device_stalls_ && last_write >= 0 && w - last_write > kLatePeriods * period;
-    last_write = w;
-    if (late) late_.fetch_add(1, std::memory_order_relaxed);
-    if (late) ramp_start = w;  // the next ticks ramp in from 0
-    Vec3 out = f;
-    if (late) out = Vec3{};  // the device has taken the force off: no jump back to f
-    device_.write_force_n(out);
-    return !late;
-  };
   while (!stop_.load(std::memory_order_relaxed)) {
     next += period;
     // Wait: sleep to just before the deadline, then spin (outside the tick).
@@ -227,7 +210,7 @@ void ServoThread::loop(Handoff& h) {
     const SampleField* field = samples_.acquire();
     const bool paused = paused_.load(std::memory_order_relaxed);
     if (!field) {
-      write({});
+      device_.write_force_n({});
       empty_.fetch_add(1, std::memory_order_relaxed);
     } else {
       if (field->version != last_version) {
@@ -252,7 +235,7 @@ void ServoThread::loop(Handoff& h) {
       rec.device_status = judge(d, t, stale_ns, caps_, refused);
       status_.store(std::uint8_t(rec.device_status), std::memory_order_relaxed);
       if (rec.device_status != DeviceStatus::kOk) {
-        write({});  // within this tick
+        device_.write_force_n({});  // within this tick
         count_not_ok(rec.device_status, refused);
         if (not_ok_since < 0) not_ok_since = t;
         // A blip of stale ticks keeps the contact state and the force level; anything
@@ -263,7 +246,7 @@ void ServoThread::loop(Handoff& h) {
           last_render = -1;
         }
       } else if (paused) {
-        write({});
+        device_.write_force_n({});
         was_paused = true;
         last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
@@ -286,12 +269,19 @@ void ServoThread::loop(Handoff& h) {
         if (int in = kInRenderer; !h.state.compare_exchange_strong(in, kOutside, std::memory_order_acq_rel))
           return;  // abandoned by stop(): touch nothing (this object may be gone)
         last_render = t;
-        const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
+        // The device took the force off (the servo did not write for 2.5 periods: a late
+        // tick, a slow renderer): ramp in from 0 again, this tick's force being zero.
+        const std::uint64_t stalls = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
+        if (stalls != seen_stalls_) late_.fetch_add(1, std::memory_order_relaxed);
+        if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp
+        seen_stalls_ = stalls;
+        double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
+        if (ramp_start < 0) ramp = 0;
         bool clamped = false;
         rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);
         if (clamped) clamped_.fetch_add(1, std::memory_order_relaxed);
         device_.answer(d.sequence);
-        if (!write(rec.force_sent_n)) rec.force_sent_n = {};
+        device_.write_force_n(rec.force_sent_n);
         if (rec.out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
       }
       if (cfg_.observer) cfg_.observer->on_tick(rec);
@@ -299,6 +289,7 @@ void ServoThread::loop(Handoff& h) {
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }
   device_.write_force_n({});  // leave the device with no force
+  device_.enable_force(false, 0);  // at once: the writes end here, which is no stall
 }
 
 void ServoThread::count_not_ok(DeviceStatus s, bool refused) {

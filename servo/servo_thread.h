@@ -105,9 +105,8 @@ struct DeviceCounters {
   long refused = 0;       ///< ticks whose report was refused (non-finite or outside the workspace)
   long ramps = 0;         ///< force ramp-ins started (enable, recovery, reconnection)
   long clamped = 0;       ///< ticks whose force was clamped to the device's maximum
-  /// Writes more than two periods after the previous one (a late tick, a slow renderer):
-  /// the device had taken the force off by then (enable_force's stall time, 2.5 periods), so
-  /// that write was a zero and the force ramped in from 0 again.
+  /// Times the device had taken the force off because the servo did not write for its
+  /// stall time (2.5 periods: a late tick, a slow renderer): the force ramped in from 0.
   long late_restarts = 0;
 };
 
@@ -131,10 +130,10 @@ struct DeviceCounters {
 /// DeviceCaps::max_force_n.
 ///
 /// Stalls: start() tells the device to take the force off by itself after 2.5 periods
-/// without a write (HapticDeviceIO::enable_force). With a device that does (one with its
-/// own writer thread), a write that comes more than 2 periods after the previous one
-/// (measured on the clock, vDSO) is therefore a restart: it writes zero and the force ramps
-/// in from 0 over ramp_in_s (counted: late_restarts).
+/// without a write (HapticDeviceIO::enable_force). A device that does (one with its own
+/// writer thread) counts it; each tick the servo reads that count (an atomic load), and a
+/// change (a late tick, a slow renderer) is a restart: that tick's force is zero and the
+/// force ramps in from 0 over ramp_in_s (counted: late_restarts).
 class ServoThread {
  public:
   /// @throws std::invalid_argument naming rate_hz unless it is in (0, 1e6] Hz.
@@ -209,7 +208,10 @@ class ServoThread {
   DeviceCaps caps_;  // read once at start()
   std::shared_ptr<Handoff> handoff_;
   bool abandoned_ = false;  // a thread was left stuck in the renderer
-  bool device_stalls_ = false;  // the device takes the force off when writes stop (start())
+  // The device's count of times it took the force off because writes stopped (null: it
+  // keeps the last force), and its value the servo last acted on.
+  const std::atomic<std::uint64_t>* device_stalls_ = nullptr;
+  std::uint64_t seen_stalls_ = 0;  // servo thread (set by start() before it)
   std::thread thread_;
 };
 

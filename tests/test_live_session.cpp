@@ -54,7 +54,7 @@ class WatchedIO final : public isotouch::servo::HapticDeviceIO {
     if (std::isfinite(f.x + f.y + f.z) && f.x * f.x + f.y * f.y + f.z * f.z > 0) nonzero.fetch_add(1);
     inner_.write_force_n(f);
   }
-  bool enable_force(bool on, double stall_s) override {
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
     enabled.store(on ? 1 : 0);
     return inner_.enable_force(on, stall_s);
   }

@@ -173,7 +173,11 @@ TEST(ReportDevice, AServoThatStopsWritingGetsADisabledZeroAfterTheStallTime) {
   const std::int64_t t1 = steady_ns();
   dev.write_force_n(Vec3{0, 0, 0.25});  // the servo is back
   wait_for([&] { return !sent_since(s, t1).empty(); });
+  const std::int64_t t2 = steady_ns();
+  dev.write_force_n(Vec3{0, 0, 0.25});  // and ramping
+  wait_for([&] { return !sent_since(s, t2).empty(); });
   const auto back = sent_since(s, t1);
+  const auto ramped = sent_since(s, t2);
   const LinkCounters c = dev.counters();
   dev.close();
 
@@ -192,9 +196,14 @@ TEST(ReportDevice, AServoThatStopsWritingGetsADisabledZeroAfterTheStallTime) {
     EXPECT_EQ(stalled[i].second.force_n.z, 0.0) << "report " << i;
   }
   EXPECT_GE(stalled.size() - off, 3u) << "the disabled zero is kept alive (every 10 ms)";
+  // Back: the first write after the stall goes out as an enabled zero (the servo ramps in
+  // from there), the next as written.
   ASSERT_FALSE(back.empty());
   EXPECT_TRUE(back.front().second.enable);
-  EXPECT_NEAR(back.front().second.force_n.z, 0.25, 1e-9);
+  EXPECT_EQ(back.front().second.force_n.z, 0.0) << "the first write after the stall jumped back to force";
+  ASSERT_FALSE(ramped.empty());
+  EXPECT_TRUE(ramped.front().second.enable);
+  EXPECT_NEAR(ramped.front().second.force_n.z, 0.25, 1e-9);
   EXPECT_EQ(c.stalls, 1);
 }
 

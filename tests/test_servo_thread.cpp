@@ -497,7 +497,8 @@ std::int64_t mono_ns() {
 }
 
 /// (0, 0, 1) N every tick; tick `slow_tick` takes `slow_ms`, or never returns until
-/// `release` (slow_ms < 0). Records when it stalled and when it went on.
+/// `release` (slow_ms < 0). Records when it stalled and when it went on; bumps `stalls`
+/// (if set) meanwhile, as a device's writer does when the servo stops writing.
 class StallingForce final : public Renderer {
  public:
   const char* name() const override { return "stalling"; }
@@ -505,6 +506,7 @@ class StallingForce final : public Renderer {
   HriTick tick(const FieldView&, const Vec3&, double) override {
     if (++ticks_ == slow_tick) {
       start_ns.store(mono_ns());
+      if (stalls) stalls->fetch_add(1);
       if (slow_ms >= 0) std::this_thread::sleep_for(std::chrono::milliseconds(slow_ms));
       while (slow_ms < 0 && !release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
       end_ns.store(mono_ns());
@@ -517,13 +519,15 @@ class StallingForce final : public Renderer {
   int slow_ms = 10;
   std::atomic<bool> release{false};
   std::atomic<std::int64_t> start_ns{0}, end_ns{0};
+  std::atomic<std::uint64_t>* stalls = nullptr;
 
  private:
   long ticks_ = 0;
 };
 
-/// A synchronous device that keeps every force it receives with its arrival time, and
-/// what enable_force() last said (preallocated; read after stop()).
+/// A device that keeps every force it receives with its arrival time, and what
+/// enable_force() last said (preallocated; read after stop()); its stall count is the
+/// test's to bump.
 struct ReceivingDevice final : HapticDeviceIO {
   static constexpr std::size_t kMax = 8192;
   std::array<std::int64_t, kMax> t_ns{};
@@ -537,10 +541,11 @@ struct ReceivingDevice final : HapticDeviceIO {
     t_ns[i] = mono_ns(), force[i] = norm(f);
     n.store(i + 1, std::memory_order_release);
   }
-  bool enable_force(bool on, double) override {
+  const std::atomic<std::uint64_t>* enable_force(bool on, double) override {
     enabled.store(on ? 1 : 0);
-    return true;  // as a device with its own writer: it takes the force off when writes stop
+    return &stalls;  // as a device with its own writer: it takes the force off when writes stop
   }
+  std::atomic<std::uint64_t> stalls{0};
 };
 
 ServoThreadConfig stall_config() {
@@ -556,24 +561,25 @@ StallingForce g_never;  // outlives the abandoned thread (inside tick() until re
 ReceivingDevice g_never_device;
 }  // namespace
 
-TEST(ServoThread, AWriteMoreThanTwoPeriodsLateIsARestartFromZero) {
+TEST(ServoThread, ADeviceThatTookTheForceOffGetsARampFromZero) {
   TripleBuffer<SampleField> published;
   published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
-  StallingForce slow;  // tick 100 takes 10 ms (the device stalls after 2.5 ms)
+  StallingForce slow;  // tick 100 takes 10 ms; the device counts a stall meanwhile
   ReceivingDevice dev;
+  slow.stalls = &dev.stalls;
   ServoThread servo(published, slow, dev, stall_config());
   servo.start();
   while (slow.end_ns.load() == 0 || dev.n.load() < 250) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   EXPECT_EQ(servo.stop(), "");
-  // What the device received: the full force before, then the late write is an exact
-  // zero and the force ramps in again from there (50 ms), back to full later.
+  // What the device received: the force before, then the write after the stall is an
+  // exact zero and the force ramps in again from there (50 ms), back to full later.
   std::size_t late = 0;
   while (late < dev.n.load() && dev.t_ns[late] < slow.end_ns.load()) ++late;
   ASSERT_GT(late, 50u);
   ASSERT_LT(late + 100, dev.n.load());
   EXPECT_GT(dev.force[late - 1], 0.0);  // pushing when it stalled
-  EXPECT_EQ(dev.force[late], 0.0) << "the late write jumped back to full force";
-  EXPECT_LT(dev.force[late + 1], 0.2) << "no ramp after the late write";
+  EXPECT_EQ(dev.force[late], 0.0) << "the write after the stall jumped back to full force";
+  EXPECT_LT(dev.force[late + 1], 0.2) << "no ramp after the stall";
   EXPECT_LT(dev.force[late + 2], 0.2);
   EXPECT_EQ(*std::max_element(&dev.force[late + 60], &dev.force[dev.n.load() - 1]), 1.0);  // ramped in again
   EXPECT_GE(servo.device_counters().late_restarts, 1);

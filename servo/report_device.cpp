@@ -230,16 +230,13 @@ void ReportDevice::writer_loop() {
     const Output o = output_.load();
     const bool fresh = o.count != seen_count;
     if (fresh) seen_count = o.count, seen_at = t;
-    // Force only while enabled and the servo writes: after the stall time without a write
-    // (a slow renderer, a starved or stopped servo thread) zero with enable cleared, until
-    // the servo writes again (its late tick ramps the force in from 0).
-    // Before the first write since enable_force() the force is off too (not a stall).
-    const bool enabled = enabled_.load(std::memory_order_acquire);
+    // Force only while enabled and the servo writes (none yet since enable_force(): off, not
+    // a stall). After the stall time without a write (a slow renderer, a starved or stopped
+    // servo thread) a stall is counted: zero with enable cleared until a write made after
+    // the servo could see it (the first such is a zero; the servo ramps in from 0).
+    bool on = enabled_.load(std::memory_order_acquire) && seen_at >= enabled_ns_.load(std::memory_order_relaxed);
     const bool stalled = t - seen_at > stall_ns_.load(std::memory_order_relaxed);
-    bool on = enabled && seen_at >= enabled_ns_.load(std::memory_order_relaxed);
-    if (stalled) on = false;  // the servo stopped writing: force off
-    if (was_on && enabled && stalled) stalls_.fetch_add(1, std::memory_order_release);
-    // Back on only with a write made after the servo could see the stall (it ramps in).
+    if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);
     if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
     if (fresh || on != was_on || t - last_send >= keepalive_ns) {
       // Disabled or stalled: a zero force with enable cleared (the device keeps reporting).

@@ -197,9 +197,13 @@ Subcommand add_bench_device_command(CLI::App& bench) {
   auto o = std::make_shared<bench::BenchDeviceOptions>();
   auto* sub = bench.add_subcommand(
       "device", "Report-to-force latency (p50/p99/max) and report rate at 1, 4 and 8 kHz against the device "
-                "emulator over its socket, servo misses, and disconnect trials (zero force within one tick)");
+                "emulator over its socket, servo misses, disconnect trials (zero force within one tick) and servo stall trials (zero force "
+                "with enable cleared within 3 periods)");
   sub->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(CLI::Range(0.1, 600.0));
   sub->add_option("--trials", o->disconnect_trials, "Disconnect trials at 1 kHz")->capture_default_str()->check(CLI::Range(1, 1000));
+  sub->add_option("--stall-trials", o->stall_trials, "Servo stall trials at 1 kHz (the renderer takes 100 ms once)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000));
   sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");
   sub->add_flag_callback("--quick", [o] { o->seconds = 0.5, o->disconnect_trials = 3; }, "0.5 s per rate and 3 trials (CI)");
   sub->add_option("--csv", o->out_csv, "Also write the rows to this CSV file");

@@ -41,6 +41,34 @@ class Wall final : public servo::Renderer {
   }
 };
 
+/// The wall, except that one tick in contact after `after_ticks` ticks takes `stall_ms`
+/// (a slow renderer). Records when it stalled and went on (CLOCK_MONOTONIC [ns]).
+class StallingWall final : public servo::Renderer {
+ public:
+  explicit StallingWall(int stall_ms) : stall_ms_(stall_ms) {}
+  const char* name() const override { return "stalling wall"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView& f, const Vec3& hip, double dt) override {
+    if (++ticks_ > kAfterTicks && hip.z < -0.0005 && start_ns == 0) {
+      start_ns = steady_ns();
+      std::this_thread::sleep_for(std::chrono::milliseconds(stall_ms_));
+      end_ns = steady_ns();
+    }
+    return wall_.tick(f, hip, dt);
+  }
+  std::atomic<std::int64_t> start_ns{0}, end_ns{0};
+
+ private:
+  static std::int64_t steady_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  }
+  static constexpr long kAfterTicks = 150;
+  int stall_ms_;
+  long ticks_ = 0;
+  Wall wall_;
+};
+
 /// Each tick's start and sent |F| (preallocated; read after the servo stopped).
 struct TickLog final : servo::TickObserver {
   std::vector<std::int64_t> t_ns;
@@ -57,6 +85,7 @@ struct TickLog final : servo::TickObserver {
 
 struct EmuRun {
   sim::EmuStats emu;
+  std::vector<sim::ReceivedOutput> wire;  // what the emulator received
   servo::LinkCounters link;
   servo::DeviceCounters dev;
   long ticks = 0, missed = 0;
@@ -64,8 +93,10 @@ struct EmuRun {
   std::string setup_note;
 };
 
-/// The emulator at `rate_hz` for `seconds` (faults as given) against a servo at the same rate.
-EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults& faults, bool fifo, TickLog* log) {
+/// The emulator at `rate_hz` for `seconds` (faults as given) against a servo at the same
+/// rate rendering `renderer` (null: the wall).
+EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults& faults, bool fifo, TickLog* log,
+                            servo::Renderer* renderer = nullptr) {
   sim::EmuConfig c;
   c.socket_path = "/tmp/isotouch-bench-device-" + std::to_string(::getpid()) + ".sock";
   c.rate_hz = rate_hz;
@@ -76,6 +107,7 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   c.caps.native_rate_hz = rate_hz;
   c.caps.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
   c.caps.workspace_max_m = Vec3{0.1, 0.1, 0.1};
+  c.caps.watchdog_s = 0.05;
   c.faults = faults;
   c.fifo_priority = fifo ? 75 : 0;
   sim::DeviceEmulator emu(c);
@@ -99,7 +131,7 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   sc.rate_hz = rate_hz;
   sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
   sc.observer = log;
-  servo::ServoThread servo(published, wall, dev, sc);
+  servo::ServoThread servo(published, renderer ? *renderer : wall, dev, sc);
   const auto t0 = std::chrono::steady_clock::now();
   out.setup_note = servo.start() + dev.realtime_note();
   emu_thread.join();
@@ -108,6 +140,7 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   out.ticks = servo.ticks();
   out.missed = servo.missed_deadlines();
   out.dev = servo.device_counters();
+  out.wire = emu.output_log();
   dev.close();
   out.link = dev.counters();
   return out;
@@ -147,6 +180,30 @@ DisconnectTrial disconnect_trial(bool fifo, std::uint32_t seed) {
   return t;
 }
 
+StallTrial stall_trial(bool fifo) {
+  StallingWall slow(100);
+  const EmuRun r = run_against_emulator(1000, 0.5, {}, fifo, nullptr, &slow);
+  StallTrial t;
+  t.zero_after_us = t.resumed_n = NAN;
+  t.watchdog_trips = r.emu.watchdog_trips;
+  const std::int64_t from = slow.start_ns.load(), to = slow.end_ns.load();
+  if (from == 0) return t;  // never stalled: the trial failed
+  std::int64_t last_force = 0, zero = 0;  // the last force before the host's zero, and that zero
+  for (const sim::ReceivedOutput& o : r.wire) {
+    const bool forced = o.enable && core::norm(o.force_n) > 0;
+    if (zero == 0) {
+      if (forced) last_force = o.t_ns;
+      else if (!o.enable && o.t_ns >= from) zero = o.t_ns;
+    } else if (o.t_ns < to) {
+      t.forced_during += forced;
+    } else if (o.enable && std::isnan(t.resumed_n)) {
+      t.resumed_n = core::norm(o.force_n);
+    }
+  }
+  if (zero > 0) t.zero_after_us = double(zero - last_force) * 1e-3;
+  return t;
+}
+
 std::string fixed(double v, int digits = 1) {
   std::ostringstream s;
   s << std::fixed << std::setprecision(digits) << v;
@@ -155,7 +212,8 @@ std::string fixed(double v, int digits = 1) {
 }  // namespace
 
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
-                                               const std::vector<DisconnectTrial>& trials) {
+                                               const std::vector<DisconnectTrial>& trials,
+                                               const std::vector<StallTrial>& stalls) {
   std::vector<std::string> v;
   const auto one = std::find_if(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.rate_hz == 1000; });
   if (one == rows.end() || one->answered == 0 || !std::isfinite(one->p99_us))
@@ -168,6 +226,17 @@ std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>
   v.push_back("zero force within one tick of a disconnect in " + std::to_string(good) + " of " +
               std::to_string(trials.size()) + " trials: " +
               (!trials.empty() && good == long(trials.size()) ? "met" : "NOT met"));
+  // A stall at 1 kHz: zero with enable cleared within 3 periods (3000 us) of the last force,
+  // no force during it, the force back from 0 (the ramp), the device's watchdog untouched.
+  long ok = 0;
+  double worst = 0;
+  for (const StallTrial& t : stalls) {
+    ok += t.zero_after_us <= 3000 && t.forced_during == 0 && t.resumed_n == 0 && t.watchdog_trips == 0;
+    worst = std::isnan(t.zero_after_us) ? INFINITY : std::max(worst, t.zero_after_us);
+  }
+  v.push_back("zero force with enable cleared within 3 periods of a servo stall (none during it, back through the "
+              "ramp) in " + std::to_string(ok) + " of " + std::to_string(stalls.size()) + " trials, worst " +
+              fixed(worst) + " us: " + (!stalls.empty() && ok == long(stalls.size()) ? "met" : "NOT met"));
   return v;
 }
 
@@ -190,8 +259,15 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
   for (std::size_t i = 0; i < trials.size(); ++i)
     log << "  trial " << i + 1 << ": " << trials[i].forced_ticks_after << " ticks forced after it, first zero-force tick "
         << fixed(trials[i].zero_after_us) << " us after it\n";
+  std::vector<StallTrial> stalls;
+  for (int i = 0; i < o.stall_trials; ++i) stalls.push_back(stall_trial(o.sched_fifo));
+  log << "\nstall trials at 1 kHz (the renderer takes 100 ms once while the device is pushed, ~0.56 N):\n";
+  for (std::size_t i = 0; i < stalls.size(); ++i)
+    log << "  trial " << i + 1 << ": zero with enable cleared " << fixed(stalls[i].zero_after_us)
+        << " us after the last force, " << stalls[i].forced_during << " forced outputs during the stall, first force after it "
+        << fixed(stalls[i].resumed_n, 3) << " N, " << stalls[i].watchdog_trips << " watchdog trips\n";
   log << "\n";
-  for (const std::string& v : bench_device_verdicts(rows, trials)) log << "verdict  " << v << "\n";
+  for (const std::string& v : bench_device_verdicts(rows, trials, stalls)) log << "verdict  " << v << "\n";
   if (!o.out_csv.empty()) {
     std::ostringstream csv;
     csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";

@@ -11,6 +11,7 @@ namespace isotouch::bench {
 struct BenchDeviceOptions {
   double seconds = 3;          ///< per rate [s]
   int disconnect_trials = 10;  ///< at 1 kHz
+  int stall_trials = 3;        ///< at 1 kHz
   bool sched_fifo = true;      ///< SCHED_FIFO for the servo thread (refused: a note)
   std::string out_csv;         ///< also write the rows here (optional)
 };
@@ -32,10 +33,22 @@ struct DisconnectTrial {
   double zero_after_us = 0;      ///< from the disconnect to the start of the first zero-force tick [us]
 };
 
-/// "p99 report-to-force at 1 kHz = X us: target <= 1000 us met|NOT met" and "zero force
-/// within one tick of a disconnect in k of N trials: met|NOT met", from the data.
+/// One stall trial: the servo's renderer takes 100 ms once while the device is pushed,
+/// measured on the wire (what the emulator received).
+struct StallTrial {
+  double zero_after_us = 0;      ///< from the last force received to the first zero with enable cleared [us] (NaN: none)
+  long forced_during = 0;        ///< outputs with force and enable set received during the stall
+  double resumed_n = 0;          ///< |F| of the first enabled output after the stall [N] (NaN: none)
+  long watchdog_trips = 0;       ///< the device's own watchdog (the host's zero should come first)
+};
+
+/// "p99 report-to-force at 1 kHz = X us: target <= 1000 us met|NOT met", "zero force
+/// within one tick of a disconnect in k of N trials: met|NOT met" and "zero force with
+/// enable cleared within 3 periods of a servo stall ... in k of N trials: met|NOT met",
+/// from the data.
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
-                                               const std::vector<DisconnectTrial>& trials);
+                                               const std::vector<DisconnectTrial>& trials,
+                                               const std::vector<StallTrial>& stalls);
 
 /// Measures 1, 4 and 8 kHz and the disconnect trials; prints a table, the verdicts and
 /// the machine. @return 0; 1 if nothing could be measured.

@@ -137,7 +137,9 @@ class ForceMeter final : public servo::HapticDeviceIO {
   std::uint32_t buttons() override { return d_.buttons(); }
   servo::DeviceReading read() override { return d_.read(); }
   servo::DeviceCaps caps() const override { return d_.caps(); }
-  void enable_force(bool on) override { d_.enable_force(on); }
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
+    return d_.enable_force(on, stall_s);
+  }
   void answer(std::uint64_t s) override { d_.answer(s); }
   void write_force_n(const core::Vec3& f) override {
     const double m = core::norm(f);
@@ -237,12 +239,13 @@ void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
   const servo::DeviceCounters c = servo.device_counters();
   log << "device   " << d.description << ": " << meter.forced_ticks() << " ticks with force, max |F| "
       << ms(meter.max_force_n()) << " N; stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
-      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
+      << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped, "
+      << c.late_restarts << " late restarts\n";
   if (d.report) {
     const servo::LinkCounters l = d.report->counters();
     log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
         << l.duplicates << " duplicates, " << l.reordered << " reordered, " << l.disconnects << " disconnects, "
-        << l.reconnects << " reconnects, " << l.writes << " output reports\n";
+        << l.reconnects << " reconnects, " << l.writes << " output reports, " << l.stalls << " stalls\n";
     if (!d.report->last_refusal().empty()) log << "link     last refused: " << d.report->last_refusal() << "\n";
     if (!d.report->last_error().empty() && d.report->last_error() != d.report->last_refusal())
       log << "link     last error: " << d.report->last_error() << "\n";

@@ -2,6 +2,7 @@
 // the device model (capabilities, status, one reading per tick) and its interface.
 #pragma once
 #include "core_names.h"
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -95,8 +96,17 @@ class HapticDeviceIO {
   /// What the device can do (any thread; fixed once the device is open).
   virtual DeviceCaps caps() const { return {}; }
   /// Force output on or off (off: the device is sent zero force with its enable flag
-  /// cleared). Any thread.
-  virtual void enable_force(bool on) { (void)on; }
+  /// cleared). While on, a device with its own output thread takes the force off by itself
+  /// (zero, enable cleared) once write_force_n() has not been called for `stall_s` [s]: the
+  /// caller that writes says how long a silence means it stalled (ServoThread: 2.5 of its
+  /// periods); <= 0 or not finite: the device's default. Returns the device's count of
+  /// such stalls, which the caller reads every tick: a change means the force is off and
+  /// must ramp in from 0 (the device also sends the first write after a stall as zero);
+  /// null for a device written to directly, which keeps the last force. Any thread.
+  virtual const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) {
+    (void)on, (void)stall_s;
+    return nullptr;
+  }
   /// The sequence number of the report the next write_force_n() answers (echoed in the
   /// output report, so the device can measure report-to-force latency). Servo thread.
   virtual void answer(std::uint64_t sequence) { (void)sequence; }

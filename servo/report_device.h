@@ -83,12 +83,17 @@ struct LinkCounters {
   long write_errors = 0;
   long watchdog_trips = 0;  ///< input reports that raised the device's watchdog flag (its force was zeroed)
   long busy_reads = 0;   ///< read()s that found a store in progress too long and kept the last reading
+  long stalls = 0;      ///< times the writer took the force off because the servo stopped writing
 };
 
 struct ReportDeviceOptions {
   double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
   double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
-  double keepalive_s = 0.01;           ///< with nothing new to send, resend the last output this often [s]
+  /// With nothing new to send, resend the current output this often [s]: the servo's last
+  /// force while it writes, zero with enable cleared once it stalled.
+  double keepalive_s = 0.01;
+  /// The stall time when enable_force() is given none [s].
+  double default_stall_s = 0.01;
   /// > 0: the reader and writer threads ask for SCHED_FIFO at this priority (below the
   /// servo's 80: they feed it). Refused (no CAP_SYS_NICE): they run under the default
   /// scheduler, said by realtime_note().
@@ -99,9 +104,12 @@ struct ReportDeviceOptions {
 /// capabilities (failure: std::runtime_error naming the link and the reason); then a reader
 /// thread publishes each accepted input report (DeviceReading, received_ns = arrival) into a
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
-/// wrote (polled every write_poll_us; the servo makes no syscall). A link that goes down
-/// publishes kDisconnected at once and is reopened every reconnect_interval_s; a reopened
-/// link increments DeviceReading::connection (the servo ramps the force in). Refused
+/// wrote (polled every write_poll_us; the servo makes no syscall). Once the servo has not
+/// written for the stall time enable_force() was given, the writer sends zero force with
+/// enable cleared (counted: LinkCounters::stalls) until a write made after the servo could
+/// see that count; the first such write is sent as zero (the servo ramps in from 0). A link that
+/// goes down publishes kDisconnected at once and is reopened every reconnect_interval_s; a
+/// reopened link increments DeviceReading::connection (the servo ramps the force in). Refused
 /// reports, sequence gaps, duplicates and reordering are counted; the last refusal's
 /// reason is kept (last_error()).
 class ReportDevice final : public HapticDeviceIO {
@@ -127,7 +135,8 @@ class ReportDevice final : public HapticDeviceIO {
   void write_force_n(const Vec3& force_n) override;
   void answer(std::uint64_t sequence) override { answers_ = sequence; }
   DeviceCaps caps() const override;
-  void enable_force(bool on) override { enabled_.store(on, std::memory_order_relaxed); }
+  /// Returns the writer's stall count (LinkCounters::stalls).
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
@@ -143,6 +152,7 @@ class ReportDevice final : public HapticDeviceIO {
     Vec3 force_n;
     std::uint64_t answers = 0;
     std::uint64_t count = 0;  // +1 per write_force_n()
+    std::uint64_t stalls = 0; // the writer's stall count this write was made after
   };
   void reader_loop();
   void ask_fifo();
@@ -161,7 +171,11 @@ class ReportDevice final : public HapticDeviceIO {
   LatestValue<Output> output_;
   std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
   DeviceReading last_read_;                 // servo thread only: read()'s fallback
+  std::uint64_t stalls_seen_ = 0;            // servo thread: stalls_ at its last write
   std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
+  std::atomic<std::int64_t> stall_ns_{0};   // enable_force()'s stall time [ns]
+  std::atomic<std::int64_t> enabled_ns_{0}; // when enable_force() was last called
+  std::atomic<std::uint64_t> stalls_{0};    // the writer took the force off (servo reads it)
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -51,6 +52,11 @@ DeviceStatus judge(const DeviceReading& d, std::int64_t t, std::int64_t stale_ns
   return DeviceStatus::kOk;
 }
 
+// A device with its own writer takes the force off after this many periods without a write.
+constexpr double kStallPeriods = 2.5;
+// Handoff::state: where the servo thread is, and whether stop() gave up on it.
+constexpr int kOutside = 0, kInRenderer = 1, kAbandoned = 2;
+
 /// `f` [N] scaled by the ramp factor in [0, 1] and clamped to |F| <= max_n (direction
 /// kept); a non-finite result is an exact zero.
 Vec3 ramp_and_clamp(const Vec3& f, double ramp, double max_n, bool& clamped) {
@@ -78,23 +84,50 @@ ServoThread::~ServoThread() { stop(); }
 
 std::string ServoThread::start() {
   stop();
+  if (abandoned_)
+    throw std::logic_error("servo thread: start() after stop() abandoned a thread stuck in the renderer");
   stop_.store(false);
   ready_.store(false);
   period_err_.clear();
   caps_ = device_.caps();
-  device_.enable_force(true);
-  thread_ = std::thread([this] { loop(); });
+  device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
+  seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
+  handoff_ = std::make_shared<Handoff>();
+  thread_ = std::thread([this, h = handoff_] {
+    loop(*h);
+    h->done.store(true, std::memory_order_release);
+  });
   ready_.wait(false, std::memory_order_acquire);  // the real-time setup is done
   return setup_note_;
 }
 
-void ServoThread::stop() {
+std::string ServoThread::stop() {
   stop_.store(true, std::memory_order_relaxed);
+  std::string error;
   if (thread_.joinable()) {
-    thread_.join();
-    device_.enable_force(false);
+    // Abandoned only while inside the renderer: anywhere else the loop ends on its own.
+    int in = kInRenderer;
+    if (!wait_done(*handoff_) && handoff_->state.compare_exchange_strong(in, kAbandoned, std::memory_order_acq_rel)) {
+      thread_.detach();
+      abandoned_ = true;
+      error = "servo thread: the renderer has not returned for " + std::to_string(cfg_.stop_timeout_s) +
+              " s: force turned off, the thread abandoned";
+    } else {
+      thread_.join();
+    }
+    device_.enable_force(false, 0);
   }
   unlock_servo_memory();
+  return error;
+}
+
+bool ServoThread::wait_done(const Handoff& h) const {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::duration<double>(cfg_.stop_timeout_s);
+  while (!h.done.load(std::memory_order_acquire)) {
+    if (std::chrono::steady_clock::now() >= give_up) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
 }
 
 std::string ServoThread::setup_realtime() {
@@ -177,7 +210,7 @@ void ServoThread::unlock_servo_memory() {
   locked_.clear();
 }
 
-void ServoThread::loop() {
+void ServoThread::loop(Handoff& h) {
   setup_note_ = setup_realtime();
   ready_.store(true, std::memory_order_release);
   ready_.notify_all();
@@ -280,9 +313,22 @@ void ServoThread::loop() {
           ramp_start = t;
           ramps_.fetch_add(1, std::memory_order_relaxed);
         }
-        rec.out = renderer_.tick(*field, rec.hip_m, dt_s);
+        // Everything the call needs is read before the handoff: stop() may abandon the thread
+        // and this object may be gone while the renderer runs.
+        Renderer& renderer = renderer_;
+        h.state.store(kInRenderer, std::memory_order_release);
+        rec.out = renderer.tick(*field, rec.hip_m, dt_s);
+        if (int in = kInRenderer; !h.state.compare_exchange_strong(in, kOutside, std::memory_order_acq_rel))
+          return;  // abandoned by stop(): touch nothing (this object may be gone)
         last_render = t;
-        const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
+        // The device took the force off (the servo did not write for 2.5 periods: a late
+        // tick, a slow renderer): ramp in from 0 again, this tick's force being zero.
+        const std::uint64_t stalls = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
+        if (stalls != seen_stalls_) late_.fetch_add(1, std::memory_order_relaxed);
+        if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp
+        seen_stalls_ = stalls;
+        double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
+        if (ramp_start < 0) ramp = 0;
         bool clamped = false;
         rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);
         if (clamped) clamped_.fetch_add(1, std::memory_order_relaxed);
@@ -295,6 +341,7 @@ void ServoThread::loop() {
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }
   device_.write_force_n({});  // leave the device with no force
+  device_.enable_force(false, 0);  // at once: the writes end here, which is no stall
 }
 
 void ServoThread::count_not_ok(DeviceStatus s, bool refused) {
@@ -312,6 +359,7 @@ DeviceCounters ServoThread::device_counters() const {
   c.refused = refused_.load(std::memory_order_relaxed);
   c.ramps = ramps_.load(std::memory_order_relaxed);
   c.clamped = clamped_.load(std::memory_order_relaxed);
+  c.late_restarts = late_.load(std::memory_order_relaxed);
   return c;
 }
 

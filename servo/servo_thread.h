@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -100,6 +101,9 @@ struct ServoThreadConfig {
   /// Stale ticks for up to this long (a late report or two) give zero force on those ticks
   /// but keep the renderer's contact state and the force level when reports resume [s].
   double stale_restart_s = 0.02;
+  /// stop() waits this long for a renderer that does not return, then abandons the thread
+  /// with the force off and returns an error [s].
+  double stop_timeout_s = 0.5;
 };
 
 /// Counters of the device side of the servo (ticks unless said otherwise).
@@ -110,6 +114,9 @@ struct DeviceCounters {
   long refused = 0;       ///< ticks whose report was refused (non-finite or outside the workspace)
   long ramps = 0;         ///< force ramp-ins started (enable, recovery, reconnection)
   long clamped = 0;       ///< ticks whose force was clamped to the device's maximum
+  /// Times the device had taken the force off because the servo did not write for its
+  /// stall time (2.5 periods: a late tick, a slow renderer): the force ramped in from 0.
+  long late_restarts = 0;
 };
 
 /// Fixed-rate loop on CLOCK_MONOTONIC: sleep (clock_nanosleep, absolute, timer slack 1 ns)
@@ -130,6 +137,12 @@ struct DeviceCounters {
 /// renderer is not ticked; unless it was a short run of stale ticks (stale_restart_s) it is
 /// reset before the next good tick and the force ramps in over ramp_in_s. |F| is clamped to
 /// DeviceCaps::max_force_n.
+///
+/// Stalls: start() tells the device to take the force off by itself after 2.5 periods
+/// without a write (HapticDeviceIO::enable_force). A device that does (one with its own
+/// writer thread) counts it; each tick the servo reads that count (an atomic load), and a
+/// change (a late tick, a slow renderer) is a restart: that tick's force is zero and the
+/// force ramps in from 0 over ramp_in_s (counted: late_restarts).
 class ServoThread {
  public:
   /// @throws std::invalid_argument naming rate_hz unless it is in (0, 1e6] Hz.
@@ -143,8 +156,15 @@ class ServoThread {
   /// return "" or one line per thing the system did not allow (SCHED_FIFO, pinning, memory
   /// locking), each with the reason; those are not fatal, the loop runs anyway.
   std::string start();
-  /// Ask the loop to stop and join it. The device's last force is an exact zero.
-  void stop();
+  /// Ask the loop to stop and join it: "", and the device's last force is an exact zero.
+  /// A thread still inside Renderer::tick after stop_timeout_s is abandoned instead: the
+  /// force is turned off (enable_force(false); a device with its own writer had taken it
+  /// off 2.5 periods after the last write), the thread is detached, and the error is
+  /// returned. If that renderer ever returns, the thread ends at once without touching this
+  /// object, the device, the observer or the renderer again; the renderer, its field and
+  /// the device must then still exist (the caller keeps them or ends the process).
+  /// @throws nothing; start() after an abandoned thread throws std::logic_error.
+  std::string stop();
   /// Paused: every tick sends an exact zero force and the renderer is not ticked (its
   /// contact state is reset on resume, so a resumed probe inside the object is not pulled
   /// out through the plane it held before). Any thread.
@@ -171,7 +191,14 @@ class ServoThread {
   const std::vector<std::int64_t>& period_errors_ns() const { return period_err_; }
 
  private:
-  void loop();
+  /// What the servo thread and stop() share; owned by both, so an abandoned thread never
+  /// touches this object.
+  struct Handoff {
+    std::atomic<int> state{0};  // kOutside, kInRenderer, kAbandoned
+    std::atomic<bool> done{false};
+  };
+  void loop(Handoff& h);
+  bool wait_done(const Handoff& h) const;
   std::string setup_realtime();
   std::string lock_servo_memory();
   void unlock_servo_memory();
@@ -190,9 +217,15 @@ class ServoThread {
   std::size_t locked_bytes_ = 0;
   int pinned_cpu_ = -1;
   std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
-  std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0};
+  std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0}, late_{0};
   std::atomic<std::uint8_t> status_{0};
   DeviceCaps caps_;  // read once at start()
+  std::shared_ptr<Handoff> handoff_;
+  bool abandoned_ = false;  // a thread was left stuck in the renderer
+  // The device's count of times it took the force off because writes stopped (null: it
+  // keeps the last force), and its value the servo last acted on.
+  const std::atomic<std::uint64_t>* device_stalls_ = nullptr;
+  std::uint64_t seen_stalls_ = 0;  // servo thread (set by start() before it)
   std::thread thread_;
 };
 

@@ -513,7 +513,8 @@ void LiveSession::stop() {
   }
   if (!running_.load() || stopped_) return;
   stopped_ = true;
-  servo_->stop();  // the device's last force: an exact zero
+  // The device's last force: an exact zero; a renderer stuck past the timeout: force off, an error.
+  const std::string servo_error = servo_->stop();
   stop_edits_.store(true, std::memory_order_release);
   wake_edit_thread();
   if (edit_thread_.joinable()) edit_thread_.join();
@@ -521,7 +522,13 @@ void LiveSession::stop() {
   while (servo_edits_.pop(q) || api_edits_.pop(q)) dropped_edits_.fetch_add(1, std::memory_order_relaxed);
   stop_recorder_.store(true, std::memory_order_release);
   if (record_thread_.joinable()) record_thread_.join();
-  finish_recording();
+  if (servo_error.empty()) return finish_recording();
+  try {
+    finish_recording();
+  } catch (const std::exception& e) {
+    throw std::runtime_error("live session: " + servo_error + "; " + e.what());
+  }
+  throw std::runtime_error("live session: " + servo_error);
 }
 
 void LiveSession::finish_recording() {

@@ -165,7 +165,10 @@ class LiveSession final : private servo::TickObserver {
   }
   /// Stops the servo (its last force an exact zero), then the edit thread (requests still
   /// queued are dropped and counted), then the recorder (end record, fsync, rename).
-  /// Idempotent. @throws io::RecordingError if the recording could not be completed.
+  /// Idempotent. @throws io::RecordingError if the recording could not be completed;
+  ///         std::runtime_error (after the rest has stopped, within about 1 s) if the
+  ///         renderer did not return: the force is off and the servo thread abandoned
+  ///         (ServoThread::stop); the renderer and device must outlive any return of it.
   void stop();
 
   /// Simulated mode: runs every tick of `run` on this thread (see the file comment), closes a

@@ -42,6 +42,7 @@ DeviceEmulator::DeviceEmulator(EmuConfig config)
   if (!(cfg_.rate_hz >= 1 && cfg_.rate_hz <= 8000))
     throw std::invalid_argument("device emulator: rate " + std::to_string(cfg_.rate_hz) + " Hz is not in [1, 8000]");
   stats_.latency_us.reserve(std::size_t(std::max(1.0, cfg_.seconds) * cfg_.rate_hz) + 16);
+  log_.resize(cfg_.output_log_size);
 }
 
 DeviceEmulator::~DeviceEmulator() {
@@ -145,6 +146,10 @@ void DeviceEmulator::serve_host(std::int64_t now) {
       continue;
     }
     ++stats_.outputs_received;
+    if (!log_.empty()) {
+      log_[logged_ % log_.size()] = ReceivedOutput{now, o.force_n, o.enable, o.answers};
+      if (++logged_ > log_.size()) ++stats_.outputs_unlogged;
+    }
     last_output_ns_ = now;
     watchdog_tripped_ = false;
     enabled_ = o.enable;
@@ -223,6 +228,7 @@ void DeviceEmulator::tick(std::int64_t now, double t_s) {
     enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;
     std::lock_guard lock(stats_mu_);
     ++stats_.watchdog_trips;
+    if (stats_.first_watchdog_ns == 0) stats_.first_watchdog_ns = now;
   }
   const double T = 1.0 / cfg_.rate_hz;
   dev_.command_force(force_n_);
@@ -264,6 +270,10 @@ EmuStats DeviceEmulator::run() {
   if (cfg_.fifo_priority > 0) servo::make_thread_realtime("device emulator", true, cfg_.fifo_priority, false, -1);
   const auto period = std::int64_t(1e9 / cfg_.rate_hz + 0.5);
   const std::int64_t start = now_ns();
+  {
+    std::lock_guard lock(stats_mu_);
+    stats_.start_ns = start;
+  }
   std::int64_t next = start;
   for (long k = 0; !stop_.load(); ++k) {
     const double t_s = double(k) / cfg_.rate_hz;
@@ -282,6 +292,15 @@ EmuStats DeviceEmulator::run() {
 EmuStats DeviceEmulator::stats() const {
   std::lock_guard lock(stats_mu_);
   return stats_;
+}
+
+std::vector<ReceivedOutput> DeviceEmulator::output_log() const {
+  std::lock_guard lock(stats_mu_);
+  const std::size_t n = std::min(logged_, log_.size());
+  std::vector<ReceivedOutput> out;
+  out.reserve(n);
+  for (std::size_t i = logged_ - n; i < logged_; ++i) out.push_back(log_[i % log_.size()]);
+  return out;
 }
 
 std::vector<PathPoint> load_path_csv(const std::string& path) {

@@ -51,6 +51,15 @@ struct EmuConfig {
   servo::DeviceCaps caps;         ///< sent in the feature report (workspace, limits, rate)
   EmuFaults faults;
   int fifo_priority = 0;          ///< > 0: run() asks for SCHED_FIFO (firmware-like timing); refused: ignored
+  std::size_t output_log_size = 1 << 16;  ///< output reports kept in the log (the newest; preallocated)
+};
+
+/// One output report as the emulator received it.
+struct ReceivedOutput {
+  std::int64_t t_ns = 0;      ///< CLOCK_MONOTONIC on arrival [ns]
+  Vec3 force_n;               ///< the commanded force, device [N] (as sent, also when disabled)
+  bool enable = false;        ///< the enable flag
+  std::uint64_t answers = 0;  ///< the input sequence it answers
 };
 
 /// What the emulator measured (after run() returned, or a copy while it runs).
@@ -63,6 +72,9 @@ struct EmuStats {
   std::vector<double> latency_us;
   double max_force_n = 0;          ///< largest |F| received with enable set [N]
   std::int64_t disconnect_ns = 0;  ///< CLOCK_MONOTONIC when the timed disconnect closed the link (0: none)
+  std::int64_t start_ns = 0;       ///< CLOCK_MONOTONIC when run() began (its clock's 0 s)
+  std::int64_t first_watchdog_ns = 0;  ///< CLOCK_MONOTONIC of the first watchdog trip (0: none)
+  long outputs_unlogged = 0;       ///< output reports pushed out of the full log (the oldest)
 };
 
 /// The emulated device. run() blocks until `seconds` passed or stop() was called.
@@ -78,6 +90,8 @@ class DeviceEmulator {
   void stop() { stop_.store(true); }
   /// Connection closed and the socket removed now (from another thread: a "kill").
   EmuStats stats() const;
+  /// The output reports received, oldest first (the newest output_log_size of them).
+  std::vector<ReceivedOutput> output_log() const;
 
  private:
   struct Pending {
@@ -112,6 +126,8 @@ class DeviceEmulator {
   Pending held_{};
   mutable std::mutex stats_mu_;
   EmuStats stats_;
+  std::vector<ReceivedOutput> log_;  // a ring of output_log_size (stats_mu_)
+  std::size_t logged_ = 0;           // reports logged in all (stats_mu_)
 };
 
 /// Reads a hand path CSV: a header line, then t_s,x_m,y_m,z_m rows (device frame), times

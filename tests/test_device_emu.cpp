@@ -2,12 +2,16 @@
 // ReportDevice over the socket link to a DeviceEmulator (protocol v1) whose simulated hand
 // presses into a penalty wall. Disconnect (the emulator gone) -> zero force within one tick;
 // freeze -> zero force after the stale timeout; garbage -> counted and named, no crash;
-// reconnect -> the force ramps in again; sequence faults counted.
+// reconnect -> the force ramps in again; sequence faults counted; a servo that stalls ->
+// zero force with enable cleared within 3 periods, then a ramp; a frozen writer -> the
+// device's watchdog; a renderer that never returns -> force off and stop() gives up.
+// The forces are asserted as the emulator received them on the wire (its output log).
 #include <gtest/gtest.h>
 
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <array>
@@ -15,6 +19,7 @@
 #include <chrono>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <thread>
 
@@ -42,6 +47,57 @@ class Wall final : public Renderer {
   }
 };
 
+/// A socket link whose writes block while `frozen` is set: the device's writer thread
+/// stops there, as a starved or stopped thread would.
+class FreezableLink final : public ReportLink {
+ public:
+  FreezableLink(const std::string& path, std::atomic<bool>& frozen) : link_(path), frozen_(frozen) {}
+  std::string name() const override { return link_.name(); }
+  std::string open() override { return link_.open(); }
+  void close() override { link_.close(); }
+  int read(std::span<std::uint8_t> buf, int timeout_ms) override { return link_.read(buf, timeout_ms); }
+  bool write(std::span<const std::uint8_t> report) override {
+    while (frozen_.load()) std::this_thread::sleep_for(std::chrono::microseconds(200));
+    return link_.write(report);
+  }
+  int get_feature(std::uint8_t id, std::span<std::uint8_t> buf) override { return link_.get_feature(id, buf); }
+
+ private:
+  SocketLink link_;
+  std::atomic<bool>& frozen_;
+};
+
+std::int64_t mono_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+/// The wall, except that one tick in contact after `after_ticks` ticks takes `stall_ms`
+/// (a slow renderer), or never returns until `release` (stall_ms < 0). Records when.
+class StallingWall final : public Renderer {
+ public:
+  const char* name() const override { return "stalling wall"; }
+  void reset() override {}
+  HriTick tick(const FieldView& f, const Vec3& hip, double dt) override {
+    if (++ticks_ > after_ticks && hip.z < -0.0005 && start_ns.load() == 0) {
+      start_ns.store(mono_ns());
+      if (stall_ms >= 0) std::this_thread::sleep_for(std::chrono::milliseconds(stall_ms));
+      while (stall_ms < 0 && !release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      end_ns.store(mono_ns());
+    }
+    return wall_.tick(f, hip, dt);
+  }
+  long after_ticks = 150;
+  int stall_ms = 300;
+  std::atomic<bool> release{false};
+  std::atomic<std::int64_t> start_ns{0}, end_ns{0};
+
+ private:
+  Wall wall_;
+  long ticks_ = 0;
+};
+
 struct TickLog final : TickObserver {
   static constexpr std::size_t kMax = 4096;
   std::array<std::int64_t, kMax> t_ns{};
@@ -63,11 +119,20 @@ struct Rig {
   std::unique_ptr<ReportDevice> dev;
   TripleBuffer<SampleField> published;
   Wall wall;
+  Renderer* renderer = &wall;
+  std::atomic<bool> freeze_writes{false};
+  std::function<void()> while_running;  // on the test thread while the servo runs
+  /// SCHED_FIFO for the emulator, the device's threads and the servo (where allowed): the
+  /// tests time in servo periods, and a servo more than 2 periods late restarts its ramp
+  /// (a loaded machine's scheduler is not the code under test).
+  bool fifo = true;
   TickLog log;
   EmuStats stats;
+  std::vector<ReceivedOutput> wire;     // what the emulator received, with times
   DeviceCounters servo_counters;
   LinkCounters link;
-  std::string last_error, last_refusal;
+  std::string last_error, last_refusal, stop_error;
+  double stop_s = 0;                    // how long servo.stop() took [s]
 
   Rig() {
     cfg.socket_path = "/tmp/isotouch-test-emu-" + std::to_string(::getpid()) + ".sock";
@@ -82,22 +147,29 @@ struct Rig {
   }
   void run(double seconds) {
     cfg.seconds = seconds;
+    cfg.fifo_priority = fifo ? 75 : 0;
     emu = std::make_unique<DeviceEmulator>(cfg);
     emu->listen();
     std::thread emu_thread([this] { stats = emu->run(); });
-    dev = std::make_unique<ReportDevice>(std::make_unique<SocketLink>(cfg.socket_path), std::make_unique<V1Protocol>());
+    dev = std::make_unique<ReportDevice>(std::make_unique<FreezableLink>(cfg.socket_path, freeze_writes),
+                                         std::make_unique<V1Protocol>(), ReportDeviceOptions{.fifo_priority = fifo ? 70 : 0});
     dev->open();
     ServoThreadConfig sc;
     sc.rate_hz = 1000;
-    sc.sched_fifo = sc.pin_cpu = sc.lock_memory = false;
+    sc.sched_fifo = fifo;
+    sc.pin_cpu = sc.lock_memory = false;
     sc.observer = &log;
     {
-      ServoThread servo(published, wall, *dev, sc);
+      ServoThread servo(published, *renderer, *dev, sc);
       servo.start();
+      if (while_running) while_running();
       emu_thread.join();
-      servo.stop();
+      const auto t0 = std::chrono::steady_clock::now();
+      stop_error = servo.stop();
+      stop_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       servo_counters = servo.device_counters();
     }
+    wire = emu->output_log();
     link = dev->counters();
     last_error = dev->last_error();
     last_refusal = dev->last_refusal();
@@ -115,6 +187,23 @@ struct Rig {
     for (std::size_t i = 0; i < log.n.load(); ++i) k += log.force[i] > 0.3;
     return k;
   }
+  /// The first report on the wire at or after `t_ns` with enable cleared (wire.size(): none).
+  std::size_t first_disabled_from(std::int64_t t_ns) const {
+    std::size_t i = 0;
+    while (i < wire.size() && (wire[i].t_ns < t_ns || wire[i].enable)) ++i;
+    return i;
+  }
+  /// The last report before `i` that carried force with enable set.
+  std::size_t last_forced_before(std::size_t i) const {
+    while (i > 0 && !(wire[i - 1].enable && norm(wire[i - 1].force_n) > 0)) --i;
+    return i - 1;  // wraps when there is none: callers check < i
+  }
+  /// Reports with force and enable set received in [from_ns, to_ns).
+  long forced_on_wire(std::int64_t from_ns, std::int64_t to_ns) const {
+    long k = 0;
+    for (const ReceivedOutput& o : wire) k += o.t_ns >= from_ns && o.t_ns < to_ns && o.enable && norm(o.force_n) > 0;
+    return k;
+  }
 };
 }  // namespace
 
@@ -128,6 +217,7 @@ TEST(DeviceEmu, TheHandPressesAndTheForceFlowsBothWays) {
   EXPECT_GT(double(rig.stats.outputs_received), 0.75 * double(rig.log.n.load()));
   EXPECT_GT(rig.stats.max_force_n, 0.3);
   EXPECT_LT(rig.stats.max_force_n, 1.5);
+  EXPECT_GT(rig.forced_on_wire(0, INT64_MAX), 150);
   EXPECT_GT(rig.link.reports, 300);
   EXPECT_EQ(rig.link.garbage, 0);
   ASSERT_GT(rig.stats.latency_us.size(), 100u);
@@ -139,6 +229,7 @@ TEST(DeviceEmu, KilledEmulatorGivesZeroForceWithinOneTick) {
   rig.run(0.5);
   ASSERT_GT(rig.stats.disconnect_ns, 0);
   EXPECT_GT(rig.forced_after(rig.stats.disconnect_ns - 100'000'000), 50);  // forcing before it
+  EXPECT_GT(rig.forced_on_wire(rig.stats.disconnect_ns - 100'000'000, rig.stats.disconnect_ns), 50);
   EXPECT_LE(rig.forced_after(rig.stats.disconnect_ns), 1) << "ticks after the disconnect still forced";
   EXPECT_GT(rig.servo_counters.disconnected, 100);
   EXPECT_EQ(rig.link.disconnects, 1);
@@ -159,6 +250,23 @@ TEST(DeviceEmu, FrozenDeviceGivesZeroForceAfterTheTimeout) {
   EXPECT_GE(rig.servo_counters.ramps, 2);   // enabled, then back after the freeze
   // Forces came back after the freeze.
   EXPECT_GT(rig.forced_after(rig.log.t_ns[0] + 350'000'000), 50);
+  // On the wire: the freeze is the longest run of outputs answering one input report (no
+  // new ones came). From the stale timeout and a period after its start, every output is
+  // a zero the servo wrote itself in its tick (enable set), not the writer's stall zero.
+  std::size_t begin = 0, len = 0;
+  for (std::size_t i = 0, j = 0; i < rig.wire.size(); i = j) {
+    for (j = i; j < rig.wire.size() && rig.wire[j].answers == rig.wire[i].answers;) ++j;
+    if (j - i > len) begin = i, len = j - i;
+  }
+  ASSERT_GT(len, 60u) << "outputs during the 100 ms freeze (one per servo tick)";
+  long zero_enabled = 0, checked = 0;
+  for (std::size_t i = begin; i < begin + len; ++i) {
+    if (rig.wire[i].t_ns - rig.wire[begin].t_ns < 3'000'000) continue;
+    ++checked;
+    ASSERT_EQ(norm(rig.wire[i].force_n), 0.0) << "output " << i - begin << " of the freeze";
+    zero_enabled += rig.wire[i].enable;
+  }
+  EXPECT_GT(zero_enabled, 9 * checked / 10);
 }
 
 TEST(DeviceEmu, GarbageIsCountedAndNamedWithoutACrash) {
@@ -187,6 +295,15 @@ TEST(DeviceEmu, ReconnectionRampsTheForceIn) {
   for (std::size_t i = back + 60; i < back + 200 && i < rig.log.n.load(); ++i) steady = std::max(steady, rig.log.force[i]);
   EXPECT_GT(steady, 0.3);
   EXPECT_LT(rig.log.force[back], 0.5 * steady);
+  // On the wire: the first enabled output after the outage is below half the force the
+  // device felt later.
+  std::size_t first = 0;
+  while (first < rig.wire.size() && (rig.wire[first].t_ns <= rig.stats.disconnect_ns || !rig.wire[first].enable)) ++first;
+  ASSERT_LT(first, rig.wire.size()) << "nothing enabled reached the device after the outage";
+  double felt = 0;
+  for (std::size_t i = first; i < rig.wire.size(); ++i) felt = std::max(felt, norm(rig.wire[i].force_n));
+  EXPECT_GT(felt, 0.3);
+  EXPECT_LT(norm(rig.wire[first].force_n), 0.5 * felt);
 }
 
 TEST(DeviceEmu, SequenceFaultsAreCounted) {
@@ -272,7 +389,7 @@ TEST(DeviceEmu, AnEmulatorRestartedWithOtherCapabilitiesIsRefusedUntilTheKnownOn
   {
     Running first(cfg);
     dev.open();
-    dev.enable_force(true);
+    dev.enable_force(true, 0);
     first.stop();
   }
   wait_for([&] { return dev.counters().disconnects == 1; });
@@ -294,4 +411,83 @@ TEST(DeviceEmu, AnEmulatorRestartedWithOtherCapabilitiesIsRefusedUntilTheKnownOn
   EXPECT_EQ(dev.counters().reconnects, 1);
   dev.close();
   EXPECT_GT(known.stop().outputs_received, 0);
+}
+
+TEST(DeviceEmu, AStalledServoGetsZeroForceWithEnableClearedWithinThreePeriods) {
+  Rig rig;
+  StallingWall slow;  // one tick in contact takes 300 ms
+  rig.renderer = &slow;
+  rig.run(0.8);
+  ASSERT_GT(slow.start_ns.load(), 0) << "the renderer never stalled";
+  const std::int64_t T = 1'000'000;  // the servo's period [ns]
+  // On the wire: the last force before the stall, then zero with enable cleared within
+  // 3 periods of it, the host's zero first (the device's watchdog never tripped).
+  const std::size_t off = rig.first_disabled_from(slow.start_ns.load());
+  ASSERT_LT(off, rig.wire.size()) << "no disabled output after the renderer stalled";
+  const std::size_t on = rig.last_forced_before(off);
+  ASSERT_LT(on, off) << "no force before the stall";
+  EXPECT_GT(norm(rig.wire[on].force_n), 0.3);
+  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3 * T) << "zero force came late";
+  EXPECT_EQ(norm(rig.wire[off].force_n), 0.0);
+  EXPECT_EQ(rig.forced_on_wire(rig.wire[off].t_ns, slow.end_ns.load()), 0) << "force during the stall";
+  EXPECT_EQ(rig.stats.watchdog_trips, 0);
+  EXPECT_GE(rig.link.stalls, 1);
+  // Back: the first outputs after the stall start from zero and ramp in (50 ms).
+  std::size_t back = off;
+  while (back < rig.wire.size() && !(rig.wire[back].enable && rig.wire[back].t_ns > slow.end_ns.load())) ++back;
+  ASSERT_LT(back + 5, rig.wire.size()) << "nothing enabled after the stall";
+  EXPECT_EQ(norm(rig.wire[back].force_n), 0.0) << "the late write jumped back to force";
+  // The ramp: at most the wall's force with the HIP at the hand (pushed there while the
+  // force was off; 10 % for overshoot) times the time since the restart (1 ms for the
+  // link) over 50 ms.
+  const double deepest = 500.0 * -rig.cfg.hold_m.z * 1.1;
+  for (std::size_t i = back; i < back + 5; ++i)
+    EXPECT_LE(norm(rig.wire[i].force_n), deepest * (double(rig.wire[i].t_ns - rig.wire[back].t_ns + 1'000'000) / 50e6))
+        << "output " << i - back << " after";
+  EXPECT_GT(rig.forced_on_wire(slow.end_ns.load() + 100 * T, INT64_MAX), 100) << "the force came back";
+  EXPECT_GE(rig.servo_counters.late_restarts, 1);
+}
+
+TEST(DeviceEmu, AFrozenWriterTripsTheDevicesWatchdog) {
+  Rig rig;
+  rig.while_running = [&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+    rig.freeze_writes.store(true);  // the writer thread stops in its next write
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    rig.freeze_writes.store(false);
+  };
+  rig.run(0.6);
+  // Nothing the host does reaches the device now: its own watchdog takes the force off
+  // within watchdog_s (checked every device period) of the last output it received.
+  ASSERT_EQ(rig.stats.watchdog_trips, 1);
+  std::size_t last = 0;
+  while (last + 1 < rig.wire.size() && rig.wire[last + 1].t_ns < rig.stats.first_watchdog_ns) ++last;
+  const std::int64_t silence = rig.stats.first_watchdog_ns - rig.wire[last].t_ns;
+  EXPECT_GE(silence, std::int64_t(rig.cfg.caps.watchdog_s * 1e9));
+  EXPECT_LE(silence, std::int64_t(rig.cfg.caps.watchdog_s * 1e9) + 3'000'000);
+  EXPECT_TRUE(rig.wire[last].enable);  // it was pushing when the writer froze
+}
+
+namespace {
+StallingWall g_stuck;  // outlives the abandoned servo thread (it is inside tick() until released)
+}
+
+TEST(DeviceEmu, ARendererThatNeverReturnsIsAbandonedWithTheForceOff) {
+  Rig rig;
+  g_stuck.stall_ms = -1;
+  g_stuck.after_ticks = 50;
+  rig.renderer = &g_stuck;
+  rig.run(0.5);
+  ASSERT_GT(g_stuck.start_ns.load(), 0) << "the renderer never stuck";
+  EXPECT_LT(rig.stop_s, 1.0);
+  EXPECT_NE(rig.stop_error.find("the renderer has not returned"), std::string::npos) << rig.stop_error;
+  const std::size_t off = rig.first_disabled_from(g_stuck.start_ns.load());
+  ASSERT_LT(off, rig.wire.size()) << "no disabled output after the renderer stuck";
+  const std::size_t on = rig.last_forced_before(off);
+  ASSERT_LT(on, off);
+  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3'000'000);
+  EXPECT_EQ(rig.forced_on_wire(rig.wire[off].t_ns, INT64_MAX), 0) << "force after the renderer stuck";
+  // The abandoned thread, released, leaves without touching the (destroyed) servo or device.
+  g_stuck.release.store(true);
+  while (g_stuck.end_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
 }

@@ -58,7 +58,12 @@ class WatchedIO final : public isotouch::servo::HapticDeviceIO {
     if (std::isfinite(f.x + f.y + f.z) && f.x * f.x + f.y * f.y + f.z * f.z > 0) nonzero.fetch_add(1);
     inner_.write_force_n(f);
   }
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
+    enabled.store(on ? 1 : 0);
+    return inner_.enable_force(on, stall_s);
+  }
   std::atomic<long> writes{0}, nonzero{0}, nonzero_while_paused{0};
+  std::atomic<int> enabled{-1};  // what enable_force() last said; -1: never called
   std::atomic<bool> last_zero{false}, watch_pause{false}, button{false};
 
  private:
@@ -131,7 +136,63 @@ fs::path temp_dir(const std::string& name) {
   return d;
 }
 
+/// HRI until tick `stuck_at`, which does not return until `release` (a renderer that hangs).
+class StuckRenderer final : public isotouch::servo::Renderer {
+ public:
+  const char* name() const override { return "stuck"; }
+  void reset() override { inner->reset(); }
+  isotouch::servo::HriTick tick(const isotouch::core::FieldView& f, const Vec3& hip, double dt) override {
+    if (++ticks_ == stuck_at) {
+      stuck.store(true);
+      while (!release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      returned.store(true);
+      return {};  // touches nothing the test has destroyed meanwhile
+    }
+    return inner->tick(f, hip, dt);
+  }
+  isotouch::servo::Renderer* inner = nullptr;
+  long stuck_at = 300;
+  std::atomic<bool> stuck{false}, release{false}, returned{false};
+
+ private:
+  long ticks_ = 0;
+};
+StuckRenderer g_stuck;  // outlives the servo thread that stop() abandons inside it
+
 }  // namespace
+
+// A renderer that never returns: stop() turns the force off, stops the rest (the recording
+// is completed) and throws a clear error within 1 s; the abandoned thread, released after
+// the session is gone, writes nothing more to the device.
+TEST(LiveSession, StopGivesUpOnARendererThatNeverReturns) {
+  Rig rig;
+  g_stuck.inner = rig.renderer.get();
+  const fs::path dir = temp_dir("live-stuck");
+  const std::string rec = (dir / "stuck.rec").string();
+  {
+    LiveSession live(rig.edits, rig.buffer, g_stuck, *rig.io, rig.config(rec));
+    live.start();
+    wait_until([&] { return g_stuck.stuck.load(); }, 10);
+    ASSERT_TRUE(g_stuck.stuck.load());
+    EXPECT_EQ(rig.io->enabled.load(), 1);
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      live.stop();
+      ADD_FAILURE() << "stop() returned without an error";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find("the renderer has not returned"), std::string::npos) << e.what();
+    }
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
+    EXPECT_EQ(rig.io->enabled.load(), 0) << "the force was not turned off";
+  }
+  EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
+  const long writes = rig.io->writes.load();
+  g_stuck.release.store(true);
+  wait_until([&] { return g_stuck.returned.load(); }, 10);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_EQ(rig.io->writes.load(), writes);
+  fs::remove_all(dir);
+}
 
 // The API's edits reach the servo: every submitted carve is applied and published, the
 // servo reads each new version, and the recording replays: an EditSession of the test's

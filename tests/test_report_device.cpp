@@ -1,7 +1,8 @@
 // ReportDevice over a scripted link (no I/O, deterministic): the newest accepted report is
 // what the servo reads; duplicates and reordered reports are dropped, gaps, garbage counted;
 // the force written reaches the link as an output report answering the report it used; a
-// closed device's last output is a disabled zero force; no first report -> a clear error;
+// closed device's last output is a disabled zero force; a servo that stops writing gets a
+// disabled zero on the link after the stall time; no first report -> a clear error;
 // the I/O threads ask for SCHED_FIFO and a refusal is named in realtime_note().
 #include <gtest/gtest.h>
 #include <sched.h>
@@ -28,7 +29,13 @@ struct Script {
   int reader_policy = -1, reader_priority = -1;  // the reader thread's scheduling, as the kernel has it
   std::deque<std::vector<std::uint8_t>> in;   // reports the "device" sends
   std::vector<std::vector<std::uint8_t>> out; // reports the host wrote
+  std::vector<std::int64_t> out_ns;            // when each was written (steady clock) [ns]
 };
+
+std::int64_t steady_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
 
 class ScriptedLink final : public ReportLink {
  public:
@@ -55,6 +62,7 @@ class ScriptedLink final : public ReportLink {
   bool write(std::span<const std::uint8_t> r) override {
     std::lock_guard lock(s_.mu);
     s_.out.emplace_back(r.begin(), r.end());
+    s_.out_ns.push_back(steady_ns());
     return true;
   }
   int get_feature(std::uint8_t, std::span<std::uint8_t> buf) override {
@@ -111,7 +119,7 @@ TEST(ReportDevice, TheForceGoesOutAnsweringItsReportAndEndsAsADisabledZero) {
   s.in = {input(7, 0.001)};
   ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
   dev.open();
-  dev.enable_force(true);
+  dev.enable_force(true, 0.5);
   dev.answer(dev.read().sequence);
   dev.write_force_n(Vec3{0, 0, 1.5});
   auto find = [&](hid::OutputReport& o) {
@@ -138,6 +146,65 @@ TEST(ReportDevice, TheForceGoesOutAnsweringItsReportAndEndsAsADisabledZero) {
     ASSERT_TRUE(hid::decode(b, any));
     EXPECT_TRUE(std::isfinite(any.force_n.x));
   }
+}
+
+// What the link carried from `from_ns` on: (time, decoded report), in order.
+std::vector<std::pair<std::int64_t, hid::OutputReport>> sent_since(Script& s, std::int64_t from_ns) {
+  std::lock_guard lock(s.mu);
+  std::vector<std::pair<std::int64_t, hid::OutputReport>> out;
+  for (std::size_t i = 0; i < s.out.size(); ++i) {
+    hid::OutputReport o;
+    if (s.out_ns[i] >= from_ns && hid::decode(s.out[i], o)) out.emplace_back(s.out_ns[i], o);
+  }
+  return out;
+}
+
+TEST(ReportDevice, AServoThatStopsWritingGetsADisabledZeroAfterTheStallTime) {
+  Script s;
+  s.in = {input(7, 0.001)};
+  ReportDevice dev(std::make_unique<ScriptedLink>(s), std::make_unique<V1Protocol>());
+  dev.open();
+  const double stall_s = 0.004;
+  dev.enable_force(true, stall_s);
+  const std::int64_t t0 = steady_ns();
+  dev.write_force_n(Vec3{0, 0, 1.5});  // then nothing: a stalled servo
+  std::this_thread::sleep_for(std::chrono::milliseconds(40));
+  const auto stalled = sent_since(s, t0);
+  const std::int64_t t1 = steady_ns();
+  dev.write_force_n(Vec3{0, 0, 0.25});  // the servo is back
+  wait_for([&] { return !sent_since(s, t1).empty(); });
+  const std::int64_t t2 = steady_ns();
+  dev.write_force_n(Vec3{0, 0, 0.25});  // and ramping
+  wait_for([&] { return !sent_since(s, t2).empty(); });
+  const auto back = sent_since(s, t1);
+  const auto ramped = sent_since(s, t2);
+  const LinkCounters c = dev.counters();
+  dev.close();
+
+  // On the link: the force, then (no earlier than the stall time after the write, and
+  // soon after it) a zero with enable cleared, and nothing enabled until the next write.
+  ASSERT_FALSE(stalled.empty());
+  EXPECT_TRUE(stalled.front().second.enable);
+  EXPECT_NEAR(stalled.front().second.force_n.z, 1.5, 1e-9);
+  std::size_t off = 0;
+  while (off < stalled.size() && stalled[off].second.enable) ++off;
+  ASSERT_LT(off, stalled.size()) << "the force stayed enabled for 40 ms without a write";
+  EXPECT_GE(stalled[off].first - t0, std::int64_t(stall_s * 1e9));
+  EXPECT_LE(stalled[off].first - t0, std::int64_t((stall_s + 0.005) * 1e9));
+  for (std::size_t i = off; i < stalled.size(); ++i) {
+    EXPECT_FALSE(stalled[i].second.enable) << "report " << i;
+    EXPECT_EQ(stalled[i].second.force_n.z, 0.0) << "report " << i;
+  }
+  EXPECT_GE(stalled.size() - off, 3u) << "the disabled zero is kept alive (every 10 ms)";
+  // Back: the first write after the stall goes out as an enabled zero (the servo ramps in
+  // from there), the next as written.
+  ASSERT_FALSE(back.empty());
+  EXPECT_TRUE(back.front().second.enable);
+  EXPECT_EQ(back.front().second.force_n.z, 0.0) << "the first write after the stall jumped back to force";
+  ASSERT_FALSE(ramped.empty());
+  EXPECT_TRUE(ramped.front().second.enable);
+  EXPECT_NEAR(ramped.front().second.force_n.z, 0.25, 1e-9);
+  EXPECT_EQ(c.stalls, 1);
 }
 
 TEST(ReportDevice, NoFirstReportIsAClearError) {
@@ -256,7 +323,7 @@ TEST(ReportDevice, NoLinkCallOverlapsAnotherWhileReportsAndForcesFlow) {
   OverlapLink& link = *owned;
   ReportDevice dev(std::move(owned), std::make_unique<V1Protocol>());
   dev.open();
-  dev.enable_force(true);
+  dev.enable_force(true, 0);
   // A servo's forces for 300 ms, and on until 300 went out and 100 reports came in (a
   // loaded machine takes longer; 10 s at most): the writer sends while the reader reads.
   const auto start = std::chrono::steady_clock::now();

@@ -373,9 +373,10 @@ struct SteeredDevice final : HapticDeviceIO {
 
   Vec3 read_position_m() override { return Vec3{0, 0, z.load()}; }
   DeviceCaps caps() const override { return c; }
-  void enable_force(bool on) override {
+  const std::atomic<std::uint64_t>* enable_force(bool on, double) override {
     (on ? enabled_after : disabled_after) = long(n_writes.load());
     if (on) enabled_ns = mono_ns();
+    return nullptr;  // keeps the last force: no writer of its own to stall
   }
   DeviceReading read() override {
     const std::int64_t now = mono_ns();
@@ -832,4 +833,135 @@ TEST(ServoSafety, AfterTheDeviceWatchdogTrippedTheForceRampsInFromZero) {
   for (std::size_t i = tripped + 1; i < n; ++i) between += rig.dev.ticks[i].force.z > 0.0 && rig.dev.ticks[i].force.z < 1.0;
   EXPECT_GT(between, 5u);
   EXPECT_EQ(rig.dev.ticks[n - 1].force.z, 1.0);
+}
+
+// ---- Stalls: a late write restarts from zero; stop() gives up on a renderer that never returns ----
+namespace {
+std::int64_t mono_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+/// (0, 0, 1) N every tick; tick `slow_tick` takes `slow_ms`, or never returns until
+/// `release` (slow_ms < 0). Records when it stalled and when it went on; bumps `stalls`
+/// (if set) meanwhile, as a device's writer does when the servo stops writing.
+class StallingForce final : public Renderer {
+ public:
+  const char* name() const override { return "stalling"; }
+  void reset() override {}
+  HriTick tick(const FieldView&, const Vec3&, double) override {
+    if (++ticks_ == slow_tick) {
+      start_ns.store(mono_ns());
+      if (stalls) stalls->fetch_add(1);
+      if (slow_ms >= 0) std::this_thread::sleep_for(std::chrono::milliseconds(slow_ms));
+      while (slow_ms < 0 && !release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      end_ns.store(mono_ns());
+    }
+    HriTick t;
+    t.force_n = {0, 0, 1};
+    return t;
+  }
+  long slow_tick = 100;
+  int slow_ms = 10;
+  std::atomic<bool> release{false};
+  std::atomic<std::int64_t> start_ns{0}, end_ns{0};
+  std::atomic<std::uint64_t>* stalls = nullptr;
+
+ private:
+  long ticks_ = 0;
+};
+
+/// A device that keeps every force it receives with its arrival time, and what
+/// enable_force() last said (preallocated; read after stop()); its stall count is the
+/// test's to bump.
+struct ReceivingDevice final : HapticDeviceIO {
+  static constexpr std::size_t kMax = 8192;
+  std::array<std::int64_t, kMax> t_ns{};
+  std::array<double, kMax> force{};
+  std::atomic<std::size_t> n{0};
+  std::atomic<int> enabled{-1};  // -1: never told
+  Vec3 read_position_m() override { return {0.016, 0.016, 0.009}; }
+  void write_force_n(const Vec3& f) override {
+    const std::size_t i = n.load(std::memory_order_relaxed);
+    if (i >= kMax) return;
+    t_ns[i] = mono_ns(), force[i] = norm(f);
+    n.store(i + 1, std::memory_order_release);
+  }
+  const std::atomic<std::uint64_t>* enable_force(bool on, double) override {
+    enabled.store(on ? 1 : 0);
+    return &stalls;  // as a device with its own writer: it takes the force off when writes stop
+  }
+  std::atomic<std::uint64_t> stalls{0};
+};
+
+ServoThreadConfig stall_config() {
+  ServoThreadConfig cfg;
+  cfg.rate_hz = 1000;
+  cfg.sched_fifo = true;  // where allowed: late ticks of a loaded machine restart the ramp too
+  cfg.pin_cpu = cfg.lock_memory = false;
+  cfg.ramp_in_s = 0.05;
+  return cfg;
+}
+
+StallingForce g_never;  // outlives the abandoned thread (inside tick() until released)
+ReceivingDevice g_never_device;
+}  // namespace
+
+TEST(ServoThread, ADeviceThatTookTheForceOffGetsARampFromZero) {
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+  StallingForce slow;  // tick 100 takes 10 ms; the device counts a stall meanwhile
+  ReceivingDevice dev;
+  slow.stalls = &dev.stalls;
+  ServoThread servo(published, slow, dev, stall_config());
+  servo.start();
+  while (slow.end_ns.load() == 0 || dev.n.load() < 250) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(servo.stop(), "");
+  // What the device received: the force before, then the write after the stall is an
+  // exact zero and the force ramps in again from there (50 ms), back to full later.
+  std::size_t late = 0;
+  while (late < dev.n.load() && dev.t_ns[late] < slow.end_ns.load()) ++late;
+  ASSERT_GT(late, 50u);
+  ASSERT_LT(late + 100, dev.n.load());
+  EXPECT_GT(dev.force[late - 1], 0.0);  // pushing when it stalled
+  EXPECT_EQ(dev.force[late], 0.0) << "the write after the stall jumped back to full force";
+  EXPECT_LT(dev.force[late + 1], 0.2) << "no ramp after the stall";
+  EXPECT_LT(dev.force[late + 2], 0.2);
+  EXPECT_EQ(*std::max_element(&dev.force[late + 60], &dev.force[dev.n.load() - 1]), 1.0);  // ramped in again
+  EXPECT_GE(servo.device_counters().late_restarts, 1);
+  EXPECT_EQ(dev.enabled.load(), 0);
+}
+
+TEST(ServoThread, StopGivesUpOnARendererThatNeverReturnsWithTheForceOff) {
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+  g_never.slow_tick = 20;
+  g_never.slow_ms = -1;
+  auto servo = std::make_unique<ServoThread>(published, g_never, g_never_device, stall_config());
+  servo->start();
+  while (g_never.start_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(g_never_device.enabled.load(), 1);
+  std::string error;
+  std::atomic<bool> stopped{false};
+  const auto t0 = std::chrono::steady_clock::now();
+  std::thread stopper([&] {
+    error = servo->stop();
+    stopped.store(true);
+  });
+  while (!stopped.load() && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(3))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!stopped.load()) g_never.release.store(true);  // stop() blocked: let it end, then fail
+  stopper.join();
+  ASSERT_LT(took, 1.0) << "stop() blocked on the stuck renderer";
+  EXPECT_NE(error.find("the renderer has not returned"), std::string::npos) << error;
+  EXPECT_EQ(g_never_device.enabled.load(), 0) << "the force was not turned off";
+  EXPECT_THROW(servo->start(), std::logic_error);
+  // Released after its servo is gone, the thread leaves without writing to the device.
+  const std::size_t writes = g_never_device.n.load();
+  servo.reset();
+  g_never.release.store(true);
+  while (g_never.end_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  EXPECT_EQ(g_never_device.n.load(), writes);
 }

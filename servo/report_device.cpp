@@ -172,9 +172,11 @@ bool ReportDevice::reconnect() {
   if (!link_->open().empty()) return false;
   // The scene was checked against the capabilities read at open: another device is refused.
   DeviceCaps c;
-  std::string e = protocol_->handshake(*link_, c);
-  if (e.empty()) e = caps_difference(caps_, c);
-  if (!e.empty()) {
+  if (!protocol_->handshake(*link_, c).empty()) {
+    link_->close();  // not answering yet (an emulator going away or starting): try again
+    return false;
+  }
+  if (const std::string e = caps_difference(caps_, c); !e.empty()) {
     link_->close();
     note(link_->name() + ": the reconnected device is refused, the link stays down: " + e);
     return false;

@@ -46,7 +46,26 @@ m servo-ramp-reconnect      $S 'if (first || d.connection != connection) ramp_st
 m servo-ramp-after-outage   $S $'restart_ns) {\n          ramp_start = -1;' 'restart_ns) {' $T "$F"
 m servo-paused-zero         $S $'} else if (paused) {\n        device_.write_force_n({});' '} else if (paused) {' $T "$F"
 m servo-stop-zero           $S 'device_.write_force_n({});  // leave the device with no force' '' $T "$F"
-m servo-stop-disable        $S $'thread_.join();\n    device_.enable_force(false);' 'thread_.join();' $T "$F"
+m servo-stop-disable        $S $'    device_.enable_force(false, 0);\n  }\n  unlock_servo_memory();' $'  }\n  unlock_servo_memory();' $T "$F"
+m servo-stuck-renderer-off  $S 'device_.enable_force(false, 0);  // at once: the writes end here, which is no stall' '' \
+  $T 'ServoThread.StopGivesUp*:ServoSafety.*'
+m servo-late-restart        $S 'if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp' '' \
+  $T 'ServoThread.ADeviceThatTookTheForceOff*'
+
+# The device writer's stall rule and the emulator that checks it on the wire.
+R=servo/report_device.cpp E=sim/device_emulator.cpp
+m writer-stall-counted      $R 'if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);' '' \
+  test_report_device 'ReportDevice.AServoThatStops*'
+m writer-stall-off          $R 'if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;' '' \
+  test_report_device 'ReportDevice.AServoThatStops*'
+m writer-no-jump-back       $R 'if (stalls != stalls_seen_) f = Vec3{};  // the first write after the writer took the force off: no jump back' '' \
+  test_report_device 'ReportDevice.AServoThatStops*'
+m writer-stall-on-the-wire  $R 'if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);' '' \
+  test_device_emu 'DeviceEmu.AStalledServo*:DeviceEmu.ARendererThatNeverReturns*'
+m emu-watchdog              $E 'enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;' '' \
+  test_device_emu 'DeviceEmu.AFrozenWriterTripsTheDevicesWatchdog'
+m emu-output-log            $E 'log_[logged_ % log_.size()] = ReceivedOutput{now, o.force_n, o.enable, o.answers};' '' \
+  test_device_emu 'DeviceEmu.*'
 
 # HRI's own limits, wherever in servo/ the line now lives.
 H=servo T=test_hri F='Hri.*'

@@ -63,7 +63,13 @@ TEST(LatestValue, ConcurrentLoadsSeeWholeValuesOnly) {
   LatestValue<Words> cell(all(0));
   std::atomic<bool> stop{false};
   std::thread writer([&] {
-    for (std::uint64_t k = 1; !stop.load(std::memory_order_relaxed); ++k) cell.store(all(k));
+    // A store, then a short gap, as a device's reports come (back-to-back stores would leave
+    // a bounded reader nothing but stores in progress on two busy cores).
+    for (std::uint64_t k = 1; !stop.load(std::memory_order_relaxed); ++k) {
+      cell.store(all(k));
+      for (volatile int gap = 0; gap < 200; gap = gap + 1) {
+      }
+    }
   });
   Words v = all(0);
   long ok = 0, torn = 0;

@@ -27,7 +27,8 @@ int main(int argc, char** argv) {
   cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
   cli.add_option("--frames", o.frames, "exit 0 after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
-  cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
+  cli.add_option("--save", o.save_path, "where Ctrl+S saves, in the format the name asks for: .vdb, or .nrrd, .mha, .nii, .nii.gz "
+                 "(3D Slicer; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 8192));
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")

@@ -4,7 +4,6 @@
 // a child process killed with SIGKILL while it saves. OpenVDB only through io/vdb_io.h.
 #include <fcntl.h>
 #include <poll.h>
-#include <sys/resource.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
@@ -26,6 +25,7 @@
 #include <thread>
 
 #include "export.h"
+#include "memory_limited_child.h"
 #include "synthetic.h"
 #include "vdb_io.h"
 #include "volume_io.h"
@@ -694,34 +694,8 @@ TEST(VdbIo, TileBoxBeyondTheMemoryIsRefusedBeforeAllocating) {
   TempDir tmp;
   write_test_vdb(tmp / "tiles.vdb", TestVdb::kTileBox);
   EXPECT_LT(fs::file_size(tmp / "tiles.vdb"), 64u << 10);
-  int fds[2];
-  ASSERT_EQ(::pipe(fds), 0);
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    ::close(fds[0]);
-    std::uint64_t pages = 0;
-    std::ifstream("/proc/self/statm") >> pages;
-    const rlim_t limit = rlim_t(pages * std::uint64_t(::sysconf(_SC_PAGE_SIZE)) + (4ull << 30));
-    const rlimit as{limit, limit};
-    ::setrlimit(RLIMIT_AS, &as);
-    std::string m = "loaded";
-    try {
-      load_vdb(tmp / "tiles.vdb");
-    } catch (const std::exception& e) {
-      m = e.what();
-    }
-    [[maybe_unused]] const ssize_t n = ::write(fds[1], m.data(), m.size());
-    ::_exit(0);
-  }
-  ::close(fds[1]);
-  std::string m;
-  char buf[512];
-  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) m.append(buf, std::size_t(n));
-  ::close(fds[0]);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  EXPECT_TRUE(WIFEXITED(status)) << "the child died: " << m;
+  const std::string m = test::message_under_memory_limit(test::address_space_bytes() + (4ull << 30),
+                                                        [&] { (void)load_vdb(tmp / "tiles.vdb"); });
   for (const char* part : {"tiles.vdb", "grid 'tiles'", "1936 x 1040 x 1040 voxels of float need 7987 MiB",
                            "MiB of memory this process may use"})
     EXPECT_NE(m.find(part), std::string::npos) << "message '" << m << "' lacks '" << part << "'";

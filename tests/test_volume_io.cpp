@@ -16,6 +16,7 @@
 #include <fstream>
 #include <limits>
 
+#include "memory_limited_child.h"
 #include "volume_io.h"
 
 using isotouch::io::load_volume;
@@ -354,35 +355,10 @@ TEST(VolumeIo, NrrdNanSpacing) {
 
 namespace {
 /// load_volume(path) in a child process whose address space is capped at `limit` bytes: the
-/// VolumeError message, or "CRASH"/"std::bad_alloc ..." when the load tried to allocate what
-/// the header promised.
+/// VolumeError message, or "std::bad_alloc" when the load tried to allocate what the header
+/// promised.
 std::string error_under_memory_limit(const std::string& path, std::uint64_t limit) {
-  int fds[2];
-  if (::pipe(fds) != 0) return "pipe failed";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::close(fds[0]);
-    rlimit r{limit, limit};
-    ::setrlimit(RLIMIT_AS, &r);
-    std::string msg = "loaded";
-    try {
-      (void)load_volume(path);
-    } catch (const VolumeError& e) {
-      msg = e.what();
-    } catch (const std::exception& e) {
-      msg = std::string("std exception: ") + e.what();
-    }
-    (void)!::write(fds[1], msg.data(), msg.size());
-    ::_exit(0);
-  }
-  ::close(fds[1]);
-  std::string out;
-  char buf[4096];
-  for (ssize_t n; (n = ::read(fds[0], buf, sizeof buf)) > 0;) out.append(buf, std::size_t(n));
-  ::close(fds[0]);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  return out.empty() ? "CRASH (status " + std::to_string(status) + ")" : out;
+  return isotouch::test::message_under_memory_limit(limit, [&] { (void)load_volume(path); });
 }
 
 /// A NIfTI-1 header (348 bytes + 4 of extension flag) for dims^3 float32 voxels, no data.

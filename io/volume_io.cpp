@@ -232,6 +232,8 @@ class QuietCerr {
     if (old_) std::cerr.rdbuf(old_);
     old_ = nullptr;
   }
+  /// What was written to std::cerr meanwhile.
+  std::string text() const { return sink_.str(); }
   QuietCerr(const QuietCerr&) = delete;
   QuietCerr& operator=(const QuietCerr&) = delete;
 
@@ -242,9 +244,15 @@ class QuietCerr {
 
 void check_metaimage(const std::string& path) {
   MetaImage mi;
-  if (!mi.Read(path.c_str(), false)) {
+  QuietCerr metaio;
+  const bool read = mi.Read(path.c_str(), false);
+  const std::string said = metaio.text();
+  metaio.release();
+  if (!read) {
     explain_metaimage_failure(path);
-    return;  // else let ITK's reader say what is wrong
+    // MetaIO's first complaint is the cause ("DimSize defined prior to defining NDims"); ITK's
+    // own reader would only add a stale errno ("No such file or directory").
+    fail(path, "MetaIO cannot read the header: " + said.substr(0, said.find('\n')));
   }
   const int nd = mi.NDims();
   if (nd < 1 || nd > 4) return;

@@ -73,6 +73,12 @@ mhd(hugesp "ElementSpacing = 1e300 1 1\nDimSize = 4 4 4\nElementType = MET_SHORT
 expect(mhd_huge_spacing 1 "hugesp.mhd: field 'ElementSpacing' along axis 0 is 1e\\+300 mm: the volume's extent" check ${OUT}/hugesp.mhd)
 mhd(negdim "ElementSpacing = 1 1 1\nDimSize = -64 4 4\nElementType = MET_SHORT\n" "${raw128}")
 expect(mhd_negative_dims 1 "negdim.mhd: field 'DimSize' = -64 4 4: axis 0 is -64" check ${OUT}/negdim.mhd)
+# A header MetaIO cannot read (here a 2-D one with DimSize before NDims): MetaIO's own reason,
+# once, not ITK's stale "No such file or directory".
+file(WRITE ${OUT}/order.raw "${raw128}")
+file(WRITE ${OUT}/order.mhd "ObjectType = Image\nDimSize = 8 8\nNDims = 2\nElementType = MET_SHORT\nElementDataFile = order.raw\n")
+expect(mhd_2d_field_order 1 "^\n?[^\n]*order.mhd: MetaIO cannot read the header: DimSize defined prior to defining NDims\n$"
+       check ${OUT}/order.mhd)
 file(WRITE ${OUT}/nodata.mhd "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\nElementType = MET_SHORT\nElementDataFile = gone.raw\n")
 expect(mhd_missing_data_file 1 "nodata.mhd: field 'ElementDataFile' = 'gone.raw': no such file" check ${OUT}/nodata.mhd)
 

@@ -418,37 +418,19 @@ double stack_spacing(const std::string& folder, const std::string& where, const 
   return dz;
 }
 
-// Dimensions, extent, voxel count, origin and memory within the limits load_volume
-// applies to every volume.
+// Dimensions, extent, voxel count, origin and memory within the limits of every volume
+// (io::check_volume_limits); the memory: ITK's float image and the float copy.
 void check_limits(const std::string& folder, const std::string& where, const std::array<std::uint64_t, 3>& dims,
                   const double (&sp_mm)[3], const Slice& first) {
-  std::uint64_t total = 1;
-  for (int a = 0; a < 3; ++a) {
-    if (dims[std::size_t(a)] == 0 || dims[std::size_t(a)] > (std::uint64_t(1) << 20))
-      fail(folder, where + ": " + std::to_string(dims[std::size_t(a)]) + " voxels along axis " + std::to_string(a) +
-                       " (must be in [1, 1048576])");
-    total *= dims[std::size_t(a)];
-    const double extent_m = double(dims[std::size_t(a)] > 1 ? dims[std::size_t(a)] - 1 : 1) * sp_mm[a] * 1e-3;
-    if (extent_m > kMaxExtentM)
-      fail(folder, where + ": the volume's extent along axis " + std::to_string(a) + " would be " + num(extent_m) +
-                       " m (the limit is " + num(kMaxExtentM) + " m)");
+  const VolumeFields fields{"Columns (0028,0011), Rows (0028,0010) and the slice count",
+                            "PixelSpacing (0028,0030) and the slice gap",
+                            "ImagePositionPatient (0020,0032) of " + name_of(first.file), "ImageOrientationPatient"};
+  try {
+    check_volume_limits(folder, dims, {sp_mm[0], sp_mm[1], sp_mm[2]},
+                        {first.position[0], first.position[1], first.position[2]}, sizeof(float), "float", fields);
+  } catch (const VolumeError& e) {
+    fail(folder, where + ": " + std::string(e.what()).substr(folder.size() + 2));
   }
-  const std::string size_text =
-      std::to_string(dims[0]) + " x " + std::to_string(dims[1]) + " x " + std::to_string(dims[2]) + " voxels";
-  if (total > kMaxVoxels)
-    fail(folder, where + ": " + size_text + " (the limit is " + std::to_string(kMaxVoxels) + ")");
-  for (int a = 0; a < 3; ++a)
-    if (std::abs(first.position[std::size_t(a)]) * 1e-3 > kMaxOriginM)
-      fail(folder, where + ": ImagePositionPatient (0020,0032) of " + name_of(first.file) + " is " +
-                       num(first.position[std::size_t(a)]) + " mm along axis " + std::to_string(a) +
-                       " (must be within " + num(kMaxOriginM) + " m)");
-  // ITK's image and the float copy.
-  const std::uint64_t need = total * 2 * sizeof(float);
-  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
-  const std::uint64_t have = pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : 0;
-  if (have > 0 && need > have / 4 * 3)
-    fail(folder, where + ": " + size_text + " need " + std::to_string(need >> 20) + " MiB to load, more than 3/4 of " +
-                     "this machine's " + std::to_string(have >> 20) + " MiB");
 }
 
 using Image = itk::Image<float, 3>;

@@ -3,6 +3,7 @@
 #include "output_file.h"
 
 #include <spawn.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -25,6 +26,19 @@ void write_file_atomic(const std::string& path, const std::string& content) {
   if (!parent.empty() && path != "-") std::filesystem::create_directories(parent, ec);
   if (ec) throw io::OutputError(path + ": cannot create the folder '" + parent.string() + "': " + ec.message());
   io::write_output(path, content);
+}
+
+std::string not_a_regular_file(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return std::strerror(errno);
+  if (S_ISREG(st.st_mode)) return "";
+  const char* kind = S_ISFIFO(st.st_mode)  ? "a FIFO"
+                     : S_ISSOCK(st.st_mode) ? "a socket"
+                     : S_ISCHR(st.st_mode)  ? "a character device"
+                     : S_ISBLK(st.st_mode)  ? "a block device"
+                     : S_ISDIR(st.st_mode)  ? "a folder"
+                                            : "of an unknown kind";
+  return std::string("not a regular file (") + kind + ")";
 }
 
 int run_program(const std::string& program, const std::string& arg) {

@@ -11,6 +11,11 @@ namespace isotouch::io {
 /// the path and the OS error.
 void write_file_atomic(const std::string& path, const std::string& content);
 
+/// Why `path` is not a regular file to read: "not a regular file (a FIFO)" (or a socket, a
+/// device, a folder), or the OS error of stat ("No such file or directory"); "" for a regular
+/// file (symlinks followed). Asked before open(): a FIFO's open() blocks until a writer comes.
+std::string not_a_regular_file(const std::string& path);
+
 /// Run a program (PATH lookup) with arguments, wait for it; returns its exit status,
 /// or -1 if it could not be started.
 int run_program(const std::string& program, const std::string& arg);

@@ -2,6 +2,8 @@
 // bit for bit with every problem named (file, line, record, field, value). See record.h.
 #include "record.h"
 
+#include "files.h"
+
 #include "output_file.h"
 
 #include <fcntl.h>
@@ -253,6 +255,20 @@ json parse_line(const std::string& line, const std::string& name, std::size_t n)
   }
 }
 
+RecordedEditSession parse_edit_session(const json& h, const Where& w) {
+  const json& e = h.at("edit_session");
+  if (!e.is_object()) throw RecordingError(w.at("edit_session") + ": must be an object, got " + shown(e));
+  only_keys(e, {"gpu_brushes", "history_limit_mib"}, "edit_session.", w);
+  RecordedEditSession s;
+  const json& gpu = member(e, "gpu_brushes", w);
+  if (!gpu.is_boolean()) throw RecordingError(w.at("edit_session.gpu_brushes") + ": must be true or false, got " + shown(gpu));
+  s.gpu_brushes = gpu.get<bool>();
+  s.history_limit_mib = finite_number(member(e, "history_limit_mib", w), "edit_session.history_limit_mib", w);
+  if (!(s.history_limit_mib > 0))
+    throw RecordingError(w.at("edit_session.history_limit_mib") + ": must be > 0, got " + num(s.history_limit_mib));
+  return s;
+}
+
 void parse_header(const json& h, Recording& r, const Where& w) {
   const std::string format = text(h, "format", w);
   if (format != kRecordingFormat)
@@ -262,7 +278,11 @@ void parse_header(const json& h, Recording& r, const Where& w) {
     throw RecordingError(w.at("format_version") + ": " + std::to_string(v) + " is not supported (this isotouch reads 1, 2 and 3)");
   r.format_version = int(v);
   if (v == 1) only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz"}, "", w);
-  else only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32"}, "", w);
+  else if (v == 2) only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32"}, "", w);
+  else
+    only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32", "edit_session"}, "",
+              w);
+  if (h.contains("edit_session")) r.edit_session = parse_edit_session(h, w);
   if (v >= 2) {
     const long crc = integer(h, "volume_crc32", w);
     if (crc < 0 || crc > long(UINT32_MAX))
@@ -385,6 +405,13 @@ std::string recording_header_line(const Recording& r, const std::string& name) {
                {"scene_text", r.scene_text},
                {"rate_hz", r.rate_hz}};
   if (r.format_version >= 2) header["volume_crc32"] = *r.volume_crc32;
+  if (r.edit_session) {
+    if (r.format_version < 3 || !(r.edit_session->history_limit_mib > 0) || !std::isfinite(r.edit_session->history_limit_mib))
+      throw RecordingError(name + ": field 'edit_session': needs format 3 and a finite history_limit_mib > 0, got format " +
+                           std::to_string(r.format_version) + ", " + num(r.edit_session->history_limit_mib) + " MiB");
+    header["edit_session"] = {{"gpu_brushes", r.edit_session->gpu_brushes},
+                              {"history_limit_mib", r.edit_session->history_limit_mib}};
+  }
   return dump_line(header);
 }
 
@@ -492,6 +519,12 @@ Recording parse_recording(const std::string& content, const std::string& name, b
   return r;
 }
 
+std::string recorded_scene_path(const Recording& r, const std::string& recording_dir) {
+  const std::filesystem::path p(r.scene_path);
+  if (p.is_relative() && !recording_dir.empty()) return (std::filesystem::path(recording_dir) / p).string();
+  return r.scene_path;
+}
+
 std::uint32_t volume_crc32(const engine::Volume& v) {
   uLong crc = ::crc32(0L, Z_NULL, 0);
   for (const int d : v.grid.dims) {
@@ -520,8 +553,9 @@ void save_recording(const std::string& path, const Recording& r) {
 
 Recording load_recording(const std::string& path, bool allow_incomplete) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw RecordingError(path + ": no such recording (not a regular file)");
+  if (!std::filesystem::exists(path, ec)) throw RecordingError(path + ": no such recording");
+  if (const std::string no = not_a_regular_file(path); !no.empty())
+    throw RecordingError(path + ": " + no + ": a recording is read from a regular file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw RecordingError(os_error(path, "cannot open"));
   std::ostringstream s;

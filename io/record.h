@@ -45,6 +45,13 @@ struct RecordedTick {
   bool reset = false;
 };
 
+/// The edit session a recording's edits were applied through, where it is not the scene's
+/// "edits" section (the sculpting app's brushes): replay builds the same one.
+struct RecordedEditSession {
+  bool gpu_brushes = false;         ///< brushes on the GPU (else the CPU reference)
+  double history_limit_mib = 256;   ///< the undo memory limit [MiB], > 0
+};
+
 struct Recording {
   /// 3: a session::LiveSession's (`isotouch run --record`, simulated time, and `run --live
   /// --record`), streamed while it runs: ticks carry their measured dt (0: the nominal
@@ -56,10 +63,12 @@ struct Recording {
   /// whole line before the cut was read. Only format 3 files may be incomplete.
   bool complete = true;
   std::string scene_path;  ///< the scene file, absolute
-  std::string scene_text;  ///< the scene file's bytes at record time (replay refuses a changed file)
+  std::string scene_text;  ///< the scene file's bytes at record time: what replay runs (the file may change or move)
   double rate_hz = 0;      ///< servo rate [Hz]
   /// Format 2: volume_crc32() of the volume the run loaded (replay refuses another volume).
   std::optional<std::uint32_t> volume_crc32;
+  /// Format 3: the edit session of the sculpting app (absent: the scene's "edits" section).
+  std::optional<RecordedEditSession> edit_session;
   std::vector<RecordedTick> ticks;  ///< one per tick, tick k at index k
   std::vector<session::EditEvent> edits;     ///< in the order applied (session::EditEvent::tick ascending)
 };
@@ -70,6 +79,8 @@ struct Recording {
 ///   {"k":0,"t":D,"hip":[D,D,D],"button":B,"force":[D,D,D],"vhip":[D,D,D],"version":U}
 ///                                                    one per tick, k = 0, 1, ...; a fault
 ///                                                    tick also has "fault":true
+///   (format 3 may add "edit_session":{"gpu_brushes":B,"history_limit_mib":D} to the
+///    header: the edit session the edits went through, where the scene has no "edits")
 ///   (format_version 1, still read: no volume_crc32, no vhip, no version)
 ///   {"edit":"brush","tick":K,"t":D,"brush":{...}}   after tick K's line (K ascending): the
 ///        edits applied after tick K's render; "brush" holds every session::Brush field
@@ -90,6 +101,12 @@ struct Recording {
 /// (subnormals and -0.0 included); the brush's float targets are checked to be floats.
 /// Every number must be finite (times, HIP, forces, brush fields); t strictly ascending.
 inline constexpr const char* kRecordingFormat = "isotouch-recording";
+
+/// The scene file a recording names: scene_path, a relative one against `recording_dir`
+/// (committed recordings name their scene relative to themselves). Replay parses the
+/// recorded scene_text as if it were there, so a relative volume path resolves against the
+/// folder the scene was in when recorded, wherever the scene file is now.
+std::string recorded_scene_path(const Recording& r, const std::string& recording_dir);
 
 /// CRC-32 (zlib) of a volume's dims, spacing, origin, direction and voxel bytes: what replay
 /// checks the volume by.

@@ -4,6 +4,7 @@
 #include "vdb_io.h"
 
 #include "output_file.h"
+#include "volume_write.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -112,6 +113,16 @@ constexpr const char* kMetaSpacing = "isotouch_spacing_m";
 constexpr const char* kMetaOrigin = "isotouch_origin_m";
 constexpr const char* kMetaReader = "isotouch_reader";
 constexpr const char* kMetaComponent = "isotouch_component_type";
+constexpr const char* kVdbReader = "openvdb:FloatGrid";
+constexpr const char* kConvertedFrom = " (converted from ";
+
+/// The reader a volume was first read with: `reader`, or the one in brackets of a .vdb's.
+std::string first_reader(const std::string& reader) {
+  const std::string prefix = std::string(kVdbReader) + kConvertedFrom;
+  if (reader.rfind(prefix, 0) == 0 && reader.back() == ')')
+    return reader.substr(prefix.size(), reader.size() - prefix.size() - 1);
+  return reader;
+}
 
 /// Dense volume -> FloatGrid in index space: voxel (i, j, k) active at Coord(i, j, k) with
 /// value `map(v)`. With `shell_tau`, also a 1-voxel layer around it (active), each shell
@@ -176,6 +187,22 @@ std::string list_grids(const openvdb::GridPtrVec& grids) {
 }
 
 
+/// The limits every volume meets (io::check_volume_limits, io::check_direction), checked on
+/// the box, transform and direction before the dense voxels are allocated.
+void check_limits(const std::string& path, const std::string& grid, const engine::Volume& v) {
+  const auto& g = v.grid;
+  const VolumeFields fields{"active bounding box (isotouch_dims)", "transform scale (voxel size)",
+                            "transform translation (origin)", "isotouch_direction"};
+  try {
+    io::check_volume_limits(path, {std::uint64_t(g.dims[0]), std::uint64_t(g.dims[1]), std::uint64_t(g.dims[2])},
+                            {g.spacing_m.x * 1e3, g.spacing_m.y * 1e3, g.spacing_m.z * 1e3},
+                            {g.origin_m.x * 1e3, g.origin_m.y * 1e3, g.origin_m.z * 1e3}, 0, "float", fields);
+    io::check_direction(path, v.direction, fields.direction);
+  } catch (const engine::VolumeError& e) {
+    throw VdbError(path + ": grid '" + grid + "': " + std::string(e.what()).substr(path.size() + 2));
+  }
+}
+
 template <typename MetaT>
 typename MetaT::ConstPtr meta(const openvdb::GridBase& g, const char* key) {
   return g.getMetadata<MetaT>(key);
@@ -191,7 +218,11 @@ LoadedVdb load_vdb(const std::string& path, const std::string& grid_name, std::u
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(path, ec)) throw VdbError(path + ": no such file");
-  if (!fs::is_regular_file(path, ec)) throw VdbError(path + ": not a regular file");
+  try {
+    require_regular_file(path, "a .vdb volume is read from a regular file");
+  } catch (const engine::VolumeError& e) {
+    throw VdbError(e.what());
+  }
   require_openvdb(path);
   LoadedVdb out;
 #ifdef ISOTOUCH_HAVE_OPENVDB
@@ -287,21 +318,24 @@ LoadedVdb load_vdb(const std::string& path, const std::string& grid_name, std::u
       v.grid.origin_m = {eo[0], eo[1], eo[2]};
     }
   }
+  if (const auto d = meta<openvdb::Mat4DMetadata>(*grid, kMetaDirection)) {
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) v.direction[std::size_t(3 * r + c)] = d->value()(r, c);
+    v.direction_is_identity = v.direction == std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  }
+  check_limits(path, out.grid_name, v);
   v.voxels.assign(n, 0.0f);
   {
     openvdb::tools::Dense<float, openvdb::tools::LayoutXYZ> dense(box, v.voxels.data());
     openvdb::tools::copyToDense(*grid, dense);
   }
   v.path = path;
-  v.reader = "openvdb:FloatGrid";
+  // The reader is OpenVDB's; the one the volume was first read with (save_vdb's metadata) in brackets.
+  v.reader = kVdbReader;
   v.component_type = "float";
-  if (const auto r = meta<openvdb::StringMetadata>(*grid, kMetaReader)) v.reader = r->value();
+  if (const auto r = meta<openvdb::StringMetadata>(*grid, kMetaReader); r && r->value() != kVdbReader)
+    v.reader += kConvertedFrom + r->value() + ")";
   if (const auto c = meta<openvdb::StringMetadata>(*grid, kMetaComponent)) v.component_type = c->value();
-  if (const auto d = meta<openvdb::Mat4DMetadata>(*grid, kMetaDirection)) {
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) v.direction[std::size_t(3 * r + c)] = d->value()(r, c);
-    v.direction_is_identity = v.direction == std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, 1};
-  }
   v.update_stats();
 
   if (const auto s = meta<openvdb::StringMetadata>(*grid, kMetaSource)) out.source_path = s->value();
@@ -360,7 +394,7 @@ void save_vdb(const engine::Volume& vol, const std::string& path, const SaveVdbO
   grid->insertMeta(kMetaUnits, openvdb::StringMetadata("m"));
   grid->insertMeta(kMetaSpacing, openvdb::Vec3DMetadata(openvdb::Vec3d(g.spacing_m.x, g.spacing_m.y, g.spacing_m.z)));
   grid->insertMeta(kMetaOrigin, openvdb::Vec3DMetadata(openvdb::Vec3d(g.origin_m.x, g.origin_m.y, g.origin_m.z)));
-  grid->insertMeta(kMetaReader, openvdb::StringMetadata(vol.reader));
+  grid->insertMeta(kMetaReader, openvdb::StringMetadata(first_reader(vol.reader)));
   grid->insertMeta(kMetaComponent, openvdb::StringMetadata(vol.component_type));
   write_atomically(path, [&](const std::string& tmp) {
     try {
@@ -559,6 +593,44 @@ void write_stl_binary(const Mesh& mesh, const std::string& path) { export_mesh(m
 void write_obj(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "objnomtl", false); }
 void write_ply(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "plyb", false); }
 
+namespace {
+std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+}  // namespace
+
+std::string mesh_format(const std::string& path) {
+  const std::string ext = lower_extension(path);
+  return ext == ".stl" || ext == ".obj" || ext == ".ply" ? ext.substr(1) : "";
+}
+
+void write_mesh(const Mesh& mesh, const std::string& path) {
+  const std::string f = mesh_format(path);
+  if (f == "stl") write_stl_binary(mesh, path);
+  else if (f == "obj") write_obj(mesh, path);
+  else if (f == "ply") write_ply(mesh, path);
+  else throw VdbError(path + ": unknown mesh format: the name must end in .stl (binary STL), .obj or .ply");
+}
+
+bool volume_writable(const std::string& path) { return lower_extension(path) == ".vdb" || itk_writable(path); }
+
+void save_any_volume(const engine::Volume& volume, const std::string& path, const SaveVdbOptions& options) {
+  if (lower_extension(path) == ".vdb") return save_vdb(volume, path, options);
+  if (!itk_writable(path))
+    throw VdbError(path + ": unknown volume format: the name must end in .vdb (OpenVDB), .mha (MetaImage), .nrrd "
+                          "(NRRD), .nii or .nii.gz (NIfTI)" +
+                   (lower_extension(path) == ".mhd" ? std::string(" (.mhd writes a second .raw file that cannot be "
+                                                                  "replaced atomically: use .mha)")
+                                                    : std::string()));
+  try {
+    save_volume_itk(volume, path);
+  } catch (const engine::VolumeError& e) {
+    throw VdbError(e.what());
+  }
+}
+
 // ---------------------------------------------------------------------------------------
 // Test files
 
@@ -608,6 +680,14 @@ void write_test_vdb(const std::string& path, TestVdb kind) {
       grids.push_back(g);
       break;
     }
+    case TestVdb::kTileBox: {
+      auto g = FloatGrid::create(0.0f);
+      g->setName("tiles");
+      g->fill(openvdb::CoordBBox(Coord(0, 0, 0), Coord(1919, 1023, 1023)), 1.0f, /*active=*/true);
+      g->setTransform(openvdb::math::Transform::createLinearTransform(1e-3));
+      grids.push_back(g);
+      break;
+    }
     case TestVdb::kRotated: {
       auto g = FloatGrid::create(0.0f);
       g->setName("rotated");
@@ -626,9 +706,7 @@ void write_test_vdb(const std::string& path, TestVdb kind) {
 }
 
 engine::Volume load_any_volume(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".vdb") return load_vdb(path).volume;
+  if (lower_extension(path) == ".vdb") return load_vdb(path).volume;
   return io::load_volume(path);
 }
 

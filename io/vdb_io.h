@@ -99,6 +99,16 @@ struct SaveVdbOptions {
 /// @throws VdbError naming the path and the OS error (folder missing, no permission, disk full).
 void save_vdb(const engine::Volume& volume, const std::string& path, const SaveVdbOptions& options = {});
 
+/// True for the names save_any_volume writes (any case): .vdb, and what
+/// io::save_volume_itk writes (.mha, .nrrd, .nii, .nii.gz).
+bool volume_writable(const std::string& path);
+
+/// Writes `volume` in the format its name asks for: .vdb through save_vdb (with `options`),
+/// .mha / .nrrd / .nii / .nii.gz through io::save_volume_itk (3D Slicer opens them). Any
+/// other name is refused before anything is written.
+/// @throws VdbError naming the path (and the names taken) or the write's error.
+void save_any_volume(const engine::Volume& volume, const std::string& path, const SaveVdbOptions& options = {});
+
 /// A triangle mesh, vertices in the physical frame [m], triangles counter-clockwise seen
 /// from outside the object (right-hand normals point out of the object).
 struct Mesh {
@@ -148,6 +158,13 @@ void write_stl_binary(const Mesh& mesh, const std::string& path);
 void write_obj(const Mesh& mesh, const std::string& path);
 void write_ply(const Mesh& mesh, const std::string& path);
 
+/// The mesh format a name asks for: "stl", "obj" or "ply" (its extension, any case), else "".
+std::string mesh_format(const std::string& path);
+
+/// Writes `mesh` in the format its name asks for (mesh_format): binary STL, OBJ or PLY.
+/// @throws VdbError naming the path and the names taken for any other name, before writing.
+void write_mesh(const Mesh& mesh, const std::string& path);
+
 /// Test helpers: .vdb files made with OpenVDB itself, so tests need not include OpenVDB.
 enum class TestVdb {
   kLevelSetSphere,  ///< tools::createLevelSetSphere: radius 20 voxels, voxel 1 mm, centre (0,0,0), half-width 3
@@ -156,6 +173,9 @@ enum class TestVdb {
   kHugeBox,         ///< a FloatGrid with two active voxels 100000 voxels apart on each axis
   kWrappingBox,     ///< two active voxels whose box is 2^31 x 2^17 x 2^16 (int32 extents wrap)
   kRotated,         ///< a FloatGrid with a 30-degree rotation about z in its transform
+  /// A FloatGrid whose active tiles fill 1920 x 1024 x 1024 voxels of 1 mm, in a file of a few
+  /// kB: loaded with its margin, 1936 x 1040 x 1040 (just below the voxel limit; 8 GB dense).
+  kTileBox,
 };
 /// Write one of the TestVdb files (not atomic; tests only).
 void write_test_vdb(const std::string& path, TestVdb kind);

@@ -3,6 +3,7 @@
 #include "itk_reason.h"
 
 #include "dicom_series.h"
+#include "files.h"
 
 #include <itkImageIOBase.h>
 #include <itkImageIORegion.h>
@@ -12,8 +13,12 @@
 #include <metaImage.h>
 #include <metaUtils.h>
 
+#include <sys/resource.h>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <cmath>
@@ -67,15 +72,11 @@ void convert(const char* src, std::size_t n, std::vector<float>& out) {
 }
 
 // Header field names per format, for messages.
-struct Fields {
-  const char* dims;
-  const char* spacing;
-  const char* origin;
-};
-Fields fields_of(const std::string& reader_class) {
-  if (reader_class == "MetaImageIO") return {"DimSize", "ElementSpacing", "Offset"};
-  if (reader_class == "NiftiImageIO") return {"dim", "pixdim", "qoffset/srow"};
-  return {"sizes", "spacings/space directions", "space origin"};  // NRRD (ITK or teem)
+VolumeFields fields_of(const std::string& reader_class) {
+  if (reader_class == "MetaImageIO") return {"DimSize", "ElementSpacing", "Offset", "TransformMatrix"};
+  if (reader_class == "NiftiImageIO")
+    return {"dim", "pixdim", "qoffset/srow", "sform (srow_x/y/z) or qform (quatern_b/c/d)"};
+  return {"sizes", "spacings/space directions", "space origin", "space directions"};  // NRRD (ITK or teem)
 }
 
 // A size that came from a negative number in the file wraps to a huge unsigned one:
@@ -87,7 +88,7 @@ std::string as_written(std::uint64_t d) {
   return std::to_string(d);
 }
 
-void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d, const char* field) {
+void check_dims(const std::string& path, const std::array<std::uint64_t, 3>& d, const std::string& field) {
   std::uint64_t total = 1;
   for (int a = 0; a < 3; ++a) {
     if (d[a] == 0 || d[a] > (std::uint64_t(1) << 20))
@@ -109,21 +110,20 @@ void check_memory(const std::string& path, const std::array<std::uint64_t, 3>& d
                   const std::string& type) {
   const std::uint64_t n = d[0] * d[1] * d[2];
   const std::uint64_t need = n * (bytes_per_voxel + sizeof(float));
-  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
-  const std::uint64_t have = pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : 0;
+  const std::uint64_t have = memory_budget_bytes();
   if (have > 0 && need > have / 4 * 3) {
     std::ostringstream s;
     s << d[0] << " x " << d[1] << " x " << d[2] << " voxels of " << type << " need " << (need >> 20)
-      << " MiB to load (the voxels as stored plus a float copy), more than 3/4 of this machine's " << (have >> 20)
-      << " MiB of memory";
+      << " MiB to load (the voxels as stored plus a float copy), more than 3/4 of the " << (have >> 20)
+      << " MiB of memory this process may use";
     fail(path, s.str());
   }
 }
 
 // Spacing and origin in mm as the file gives them; the extent bound keeps every march
 // over the volume (script, servo) finite and the coordinates meaningful.
-void set_spacing_origin(const std::string& path, Volume& v, const std::array<std::uint64_t, 3>& d,
-                        const double sp_mm[3], const double org_mm[3], const Fields& f) {
+void check_spacing_origin(const std::string& path, const std::array<std::uint64_t, 3>& d, const double sp_mm[3],
+                          const double org_mm[3], const VolumeFields& f) {
   for (int a = 0; a < 3; ++a) {
     std::ostringstream s;
     s << "field '" << f.spacing << "' along axis " << a << " is " << sp_mm[a] << " mm";
@@ -140,8 +140,48 @@ void set_spacing_origin(const std::string& path, Volume& v, const std::array<std
       fail(path, o.str());
     }
   }
+}
+
+void set_spacing_origin(const std::string& path, Volume& v, const std::array<std::uint64_t, 3>& d,
+                        const double sp_mm[3], const double org_mm[3], const VolumeFields& f) {
+  check_spacing_origin(path, d, sp_mm, org_mm, f);
   v.grid.spacing_m = {sp_mm[0] * 1e-3, sp_mm[1] * 1e-3, sp_mm[2] * 1e-3};
   v.grid.origin_m = {org_mm[0] * 1e-3, org_mm[1] * 1e-3, org_mm[2] * 1e-3};
+}
+
+// The bytes a zlib or gzip stream from byte `offset` of `path` inflates to, counted up to
+// `limit` (it stops there), through 64 kB buffers.
+std::uint64_t inflated_bytes(const std::string& path, std::uint64_t offset, std::uint64_t limit) {
+  std::ifstream in(path, std::ios::binary);
+  in.seekg(std::streamoff(offset));
+  z_stream zs{};
+  if (inflateInit2(&zs, 15 + 32) != Z_OK) return 0;  // 15 + 32: zlib or gzip header
+  std::vector<unsigned char> src(1 << 16), dst(1 << 16);
+  std::uint64_t total = 0;
+  for (int rc = Z_OK; rc == Z_OK && total < limit;) {
+    if (zs.avail_in == 0) {
+      in.read(reinterpret_cast<char*>(src.data()), std::streamsize(src.size()));
+      zs.next_in = src.data();
+      zs.avail_in = unsigned(in.gcount());
+      if (zs.avail_in == 0) break;
+    }
+    zs.next_out = dst.data();
+    zs.avail_out = unsigned(dst.size());
+    rc = inflate(&zs, Z_NO_FLUSH);
+    total += dst.size() - zs.avail_out;
+  }
+  inflateEnd(&zs);
+  return total;
+}
+
+// Compressed voxel data must inflate to the bytes the header promises: checked before the
+// voxels are allocated (a few-kB file may promise gigabytes).
+void check_inflated(const std::string& path, const std::string& field, const std::string& data_path,
+                    std::uint64_t offset, std::uint64_t need) {
+  const std::uint64_t have = inflated_bytes(data_path, offset, need);
+  if (have < need)
+    fail(path, "voxel data truncated: the compressed data of " + field + " inflate to " + std::to_string(have) +
+                   " bytes, the header promises " + std::to_string(need));
 }
 
 // MetaImage: read the header with MetaIO (ITK's own parser) and check what ITK's reader
@@ -181,11 +221,38 @@ void explain_metaimage_failure(const std::string& path) {
   }
 }
 
+/// std::cerr swallowed while it lives: MetaIO prints its parse errors there ("MetaImage:
+/// M_Read: Error parsing file"), ahead of the one clear line the loader throws.
+class QuietCerr {
+ public:
+  QuietCerr() : old_(std::cerr.rdbuf(sink_.rdbuf())) {}
+  ~QuietCerr() { release(); }
+  /// std::cerr back, now.
+  void release() {
+    if (old_) std::cerr.rdbuf(old_);
+    old_ = nullptr;
+  }
+  /// What was written to std::cerr meanwhile.
+  std::string text() const { return sink_.str(); }
+  QuietCerr(const QuietCerr&) = delete;
+  QuietCerr& operator=(const QuietCerr&) = delete;
+
+ private:
+  std::ostringstream sink_;
+  std::streambuf* old_;
+};
+
 void check_metaimage(const std::string& path) {
   MetaImage mi;
-  if (!mi.Read(path.c_str(), false)) {
+  QuietCerr metaio;
+  const bool read = mi.Read(path.c_str(), false);
+  const std::string said = metaio.text();
+  metaio.release();
+  if (!read) {
     explain_metaimage_failure(path);
-    return;  // else let ITK's reader say what is wrong
+    // MetaIO's first complaint is the cause ("DimSize defined prior to defining NDims"); ITK's
+    // own reader would only add a stale errno ("No such file or directory").
+    fail(path, "MetaIO cannot read the header: " + said.substr(0, said.find('\n')));
   }
   const int nd = mi.NDims();
   if (nd < 1 || nd > 4) return;
@@ -218,9 +285,9 @@ void check_metaimage(const std::string& path) {
   if (local) data = path;
   else if (data.is_relative()) data = fs::path(path).parent_path() / data;
   std::error_code ec;
-  if (!fs::is_regular_file(data, ec))
+  if (!fs::exists(data, ec))
     fail(path, "field 'ElementDataFile' = '" + name + "': no such file (looked for " + data.string() + ")");
-  if (mi.CompressedData()) return;  // size unknown until inflated; the sentinel check covers it
+  require_regular_file(data.string(), "the voxel data of " + path + " (field 'ElementDataFile') must be a regular file");
   std::uint64_t data_start = 0;
   if (local) {
     std::ifstream in(path, std::ios::binary);
@@ -239,6 +306,10 @@ void check_metaimage(const std::string& path) {
   const int channels = std::max(1, mi.ElementNumberOfChannels());
   if (type_bytes <= 0) return;  // unknown type: ITK names it
   const std::uint64_t need = count * std::uint64_t(type_bytes) * std::uint64_t(channels);
+  if (mi.CompressedData()) {
+    check_inflated(path, "field 'ElementDataFile' = '" + name + "'", data.string(), data_start, need);
+    return;
+  }
   const std::uint64_t file_bytes = fs::file_size(data, ec);
   if (ec) fail(path, "field 'ElementDataFile' = '" + name + "': cannot read its size (" + ec.message() + ")");
   const std::uint64_t have = file_bytes >= data_start ? file_bytes - data_start : 0;
@@ -267,33 +338,14 @@ void check_metaimage(const std::string& path) {
 
 // The header field that gave the direction matrix, for messages.
 std::string direction_field(const std::string& reader) {
-  if (reader == "itk:MetaImageIO") return "TransformMatrix";
-  if (reader == "itk:NiftiImageIO") return "sform (srow_x/y/z) or qform (quatern_b/c/d)";
-  return "space directions";  // NRRD, ITK or teem
+  if (reader == "itk:MetaImageIO") return fields_of("MetaImageIO").direction;
+  if (reader == "itk:NiftiImageIO") return fields_of("NiftiImageIO").direction;
+  return fields_of("teem").direction;  // NRRD, ITK or teem
 }
 
-// D must be orthonormal (|D^T D - I| <= 1e-3 per entry): world = origin + D (spacing *
-// index) and Volume::to_grid use D^T as the inverse. A singular D (TransformMatrix all
-// zeros) would put every point at the origin, a scaling one would rescale the volume
-// behind the spacing's back; both are errors naming the field and the values.
+// D must be orthonormal (check_direction); also notes whether it is the identity.
 void finish_direction(Volume& v) {
-  const auto& D = v.direction;
-  double worst = 0;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      double dot = 0;
-      for (int k = 0; k < 3; ++k) dot += D[std::size_t(k * 3 + i)] * D[std::size_t(k * 3 + j)];
-      const double e = std::abs(dot - (i == j ? 1.0 : 0.0));
-      worst = e == e ? std::max(worst, e) : std::numeric_limits<double>::infinity();
-    }
-  if (!(worst <= 1e-3)) {
-    std::ostringstream s;
-    s << "field '" << direction_field(v.reader) << "' gives the direction matrix (columns: index axes) [[" << D[0]
-      << ", " << D[1] << ", " << D[2] << "], [" << D[3] << ", " << D[4] << ", " << D[5] << "], [" << D[6] << ", "
-      << D[7] << ", " << D[8] << "]], which is not orthonormal (max |D^T D - I| = " << worst
-      << ", the limit is 0.001): the direction cosines must be unit and perpendicular (voxel size goes in the spacing)";
-    fail(v.path, s.str());
-  }
+  check_direction(v.path, v.direction, direction_field(v.reader));
   const double id[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
   v.direction_is_identity = true;
   for (int i = 0; i < 9; ++i)
@@ -407,6 +459,9 @@ Volume load_itk(const std::string& path) {
   // Before any ITK reader looks at it (NiftiImageIO::CanReadFile already builds the matrices):
   // a file with a NIfTI header size must have finite orientation fields.
   check_nifti_header(path);
+  // MetaIO prints its parse errors on std::cerr (from CanReadFile on): the header's one clear
+  // line is the message, thrown below.
+  QuietCerr quiet;
   itk::ImageIOBase::Pointer io;
   const itk::ImageIOBase::Pointer candidates[] = {
       itk::MetaImageIO::New().GetPointer(), itk::NrrdImageIO::New().GetPointer(),
@@ -419,10 +474,11 @@ Volume load_itk(const std::string& path) {
   if (!io)
     fail(path, "not a readable MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr) or NIfTI (.nii/.nii.gz) file");
   const std::string cls = io->GetNameOfClass();
-  const Fields fields = fields_of(cls);
+  const VolumeFields fields = fields_of(cls);
   if (cls == "MetaImageIO") check_metaimage(path);
   io->SetFileName(path);
   io->ReadImageInformation();
+  quiet.release();
 
   const unsigned nd = io->GetNumberOfDimensions();
   if (nd < 2 || nd > 4) fail(path, "has " + std::to_string(nd) + " dimensions (need 3; 2 is read as one slice)");
@@ -543,6 +599,7 @@ Volume load_teem(const std::string& path) {
     for (unsigned a = 0; a < nin->dim; ++a) hd[a] = nin->axis[a].size;
     check_dims(path, hd, fields_of("teem").dims);
     if (nin->type == nrrdTypeBlock) fail(path, "unknown or unsupported voxel type 'block'");
+    check_nrrd_length(path, hd[0] * hd[1] * hd[2] * nrrdTypeSize[nin->type]);
     check_memory(path, hd, nrrdTypeSize[nin->type], airEnumStr(nrrdType, nin->type));
   }
   if (nrrdLoad(nin.get(), path.c_str(), nullptr)) fail(path, "teem: " + biff_error());
@@ -566,7 +623,7 @@ Volume load_teem(const std::string& path) {
   if (nin->spaceDim > 0)
     for (unsigned r = 0; r < std::min(nin->spaceDim, 3u); ++r)
       if (AIR_EXISTS(nin->spaceOrigin[r])) org[r] = nin->spaceOrigin[r];
-  const Fields fields = fields_of("teem");
+  const VolumeFields fields = fields_of("teem");
   check_dims(path, d, fields.dims);
   set_spacing_origin(path, v, d, sp, org, fields);
   v.grid.dims = {int(d[0]), int(d[1]), int(d[2])};
@@ -605,25 +662,23 @@ void check_nrrd_length(const std::string& path, std::uint64_t need) {
     if (line.rfind("data file:", 0) == 0 || line.rfind("datafile:", 0) == 0)
       data_file = value(line[4] == ' ' ? "data file:" : "datafile:");
   }
-  if (encoding != "raw") return;
+  const bool gzip = encoding == "gzip" || encoding == "gz";
+  if (encoding != "raw" && !gzip) return;
   std::error_code ec;
-  std::uint64_t have = 0;
-  std::string where;
-  if (data_file.empty()) {
-    if (!ended) return;  // a detached header without a data file line: teem / ITK name it
-    have = fs::file_size(path, ec) - std::min<std::uint64_t>(header_bytes, fs::file_size(path, ec));
-    where = "the data after the header hold ";
-  } else {
-    if (data_file.find(' ') != std::string::npos || data_file == "LIST") return;  // several files
-    fs::path df(data_file);
-    if (df.is_relative()) df = fs::path(path).parent_path() / df;
-    have = fs::file_size(df, ec);
-    where = "field 'data file' = '" + data_file + "' holds ";
-  }
-  if (ec) return;  // missing data file: the reader names it
+  if (data_file.empty() && !ended) return;  // a detached header without a data file line: teem / ITK name it
+  if (data_file.find(' ') != std::string::npos || data_file == "LIST") return;  // several files
+  fs::path df(data_file.empty() ? path : data_file);
+  if (df.is_relative() && !data_file.empty()) df = fs::path(path).parent_path() / df;
+  const std::uint64_t offset = data_file.empty() ? header_bytes : 0;
+  const std::string field = data_file.empty() ? "the data after the header" : "field 'data file' = '" + data_file + "'";
+  if (!fs::exists(df, ec)) return;  // missing data file: the reader names it
+  if (gzip) return check_inflated(path, field, df.string(), offset, need);
+  const std::uint64_t size = fs::file_size(df, ec);
+  if (ec) return;
+  const std::uint64_t have = size - std::min(offset, size);
   if (have < need)
-    fail(path, "voxel data truncated: " + where + std::to_string(have) + " bytes, the header (field 'sizes', 'type') promises " +
-                   std::to_string(need));
+    fail(path, "voxel data truncated: " + field + (data_file.empty() ? " hold " : " holds ") + std::to_string(have) +
+                   " bytes, the header (field 'sizes', 'type') promises " + std::to_string(need));
 }
 
 // NRRD "spacings:" as the header writes it: ITK and teem both put 1 mm in place of a
@@ -636,6 +691,16 @@ void check_nrrd_spacings(const std::string& path) {
   for (int n = 0; n < 4096 && std::getline(in, line); ++n) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty()) break;  // end of the header of a .nrrd
+    if (line.rfind("data file:", 0) == 0 || line.rfind("datafile:", 0) == 0) {
+      std::string df = line.substr(line.find(':') + 1);
+      while (!df.empty() && df.front() == ' ') df.erase(df.begin());
+      fs::path p(df);
+      if (p.is_relative()) p = fs::path(path).parent_path() / p;
+      std::error_code ec;
+      if (df.find(' ') == std::string::npos && df != "LIST" && fs::exists(p, ec))
+        require_regular_file(p.string(), "the voxel data of " + path + " (field 'data file') must be a regular file");
+      continue;
+    }
     if (line.rfind("spacings:", 0) != 0) continue;
     std::istringstream t(line.substr(9));
     std::string tok;
@@ -668,6 +733,57 @@ std::string itk_reason(std::string msg) {
   return msg;
 }
 
+// D must be orthonormal (|D^T D - I| <= 1e-3 per entry): world = origin + D (spacing *
+// index) and Volume::to_grid use D^T as the inverse. A singular D (TransformMatrix all
+// zeros) would put every point at the origin, a scaling one would rescale the volume
+// behind the spacing's back, a NaN one would put every point nowhere: all errors naming
+// the field and the values.
+void check_direction(const std::string& path, const std::array<double, 9>& D, const std::string& field) {
+  double worst = 0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double dot = 0;
+      for (int k = 0; k < 3; ++k) dot += D[std::size_t(k * 3 + i)] * D[std::size_t(k * 3 + j)];
+      const double e = std::abs(dot - (i == j ? 1.0 : 0.0));
+      worst = e == e ? std::max(worst, e) : std::numeric_limits<double>::infinity();
+    }
+  if (worst <= 1e-3) return;
+  std::ostringstream s;
+  s << "field '" << field << "' gives the direction matrix (columns: index axes) [[" << D[0] << ", " << D[1] << ", "
+    << D[2] << "], [" << D[3] << ", " << D[4] << ", " << D[5] << "], [" << D[6] << ", " << D[7] << ", " << D[8]
+    << "]], which is not orthonormal (max |D^T D - I| = " << worst
+    << ", the limit is 0.001): the direction cosines must be finite, unit and perpendicular (voxel size goes in the "
+       "spacing)";
+  fail(path, s.str());
+}
+
+void check_volume_limits(const std::string& path, const std::array<std::uint64_t, 3>& dims,
+                         const std::array<double, 3>& spacing_mm, const std::array<double, 3>& origin_mm,
+                         std::uint64_t stored_bytes_per_voxel, const std::string& type, const VolumeFields& fields) {
+  check_dims(path, dims, fields.dims);
+  check_spacing_origin(path, dims, spacing_mm.data(), origin_mm.data(), fields);
+  check_memory(path, dims, stored_bytes_per_voxel, type);
+}
+
+std::uint64_t memory_budget_bytes() {
+  std::uint64_t have = 0;
+  const auto take = [&have](std::uint64_t b) {
+    if (b > 0 && (have == 0 || b < have)) have = b;
+  };
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGE_SIZE);
+  if (pages > 0 && page > 0) take(std::uint64_t(pages) * std::uint64_t(page));
+  rlimit as{};
+  if (::getrlimit(RLIMIT_AS, &as) == 0 && as.rlim_cur != RLIM_INFINITY) take(std::uint64_t(as.rlim_cur));
+  std::ifstream cg("/sys/fs/cgroup/memory.max");  // cgroup v2; "max" = no limit
+  std::uint64_t limit = 0;
+  if (cg >> limit) take(limit);
+  return have;
+}
+
+void require_regular_file(const std::string& path, const std::string& why) {
+  const std::string no = not_a_regular_file(path);
+  if (!no.empty()) fail(path, no + ": " + why);
+}
 
 Volume load_volume(const std::string& path) {
   std::error_code ec;
@@ -679,6 +795,7 @@ Volume load_volume(const std::string& path) {
     for (const auto& note : info.notes) std::cerr << "isotouch: note: " << path << ": " << note << "\n";
     return v;
   }
+  require_regular_file(path, "a volume is read from a regular file or a DICOM series folder");
   if (is_nrrd(path)) check_nrrd_spacings(path);
   Volume v;
   try {

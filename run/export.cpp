@@ -2,6 +2,7 @@
 #include "export.h"
 #include "volume_write.h"
 
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -102,6 +103,33 @@ std::string written_text(const std::string& path, double seconds) {
   return s.str();
 }
 
+/// True for an output written as a stream whatever its name: "-", or an existing FIFO or device.
+bool stream_output(const std::string& path) {
+  std::error_code ec;
+  const auto st = std::filesystem::status(path, ec);
+  return path == "-" || (!ec && std::filesystem::exists(st) && !std::filesystem::is_regular_file(st) &&
+                         !std::filesystem::is_directory(st));
+}
+
+/// Each output's name must ask for the format its option writes (a stream excepted): "" or
+/// the line saying which does not.
+std::string misnamed_output(const ExportOptions& o) {
+  const std::pair<const char*, const std::string*> outputs[] = {
+      {"vdb", &o.vdb}, {"stl", &o.stl}, {"obj", &o.obj}, {"ply", &o.ply}};
+  for (const auto& [format, path] : outputs) {
+    if (path->empty() || stream_output(*path)) continue;
+    std::string ext = std::filesystem::path(*path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    const std::string asked = std::string(format) == "vdb" ? (ext == ".vdb" ? "vdb" : "") : io::mesh_format(*path);
+    if (asked == format) continue;
+    std::string m = std::string("--") + format + " " + *path + ": the name must end in ." + format;
+    if (!io::mesh_format(*path).empty()) m += " (--" + io::mesh_format(*path) + " writes ." + io::mesh_format(*path) + ")";
+    else if (io::itk_writable(*path)) m += " (--volume writes it)";
+    return m + "; nothing was written";
+  }
+  return "";
+}
+
 }  // namespace
 
 int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& err) {
@@ -134,6 +162,10 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
                 ? " (.mhd writes a second .raw file that cannot be replaced atomically: use .mha)"
                 : "")
         << "\n";
+    return 2;
+  }
+  if (const std::string m = misnamed_output(o); !m.empty()) {
+    err << "isotouch export: " << m << "\n";
     return 2;
   }
   if (!o.inside.empty() && o.inside != "above" && o.inside != "below") {

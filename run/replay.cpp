@@ -20,7 +20,6 @@
 namespace isotouch::run {
 using core::to_string;
 using io::load_recording;
-using io::load_scene;
 using io::volume_crc32;
 using io::write_file_atomic;
 using session::to_string;
@@ -51,22 +50,28 @@ bool same_bits(const core::Vec3& a, const core::Vec3& b) {
          std::bit_cast<std::uint64_t>(a.z) == std::bit_cast<std::uint64_t>(b.z);
 }
 
-/// The scene the recording names (a relative path against `dir`), checked to still hold
-/// the recorded text.
+/// The recorded scene: the text the recording carries, parsed as if it were still at the
+/// recorded path (io::recorded_scene_path), so that a relative volume path resolves against
+/// the scene's folder at record time; the file itself may have changed, moved or gone. The
+/// volume is checked by its CRC-32 once loaded.
 Scene recorded_scene(const Recording& rec, const std::string& name, const std::string& dir) {
-  const fs::path p(rec.scene_path);
-  const std::string path = p.is_relative() && !dir.empty() ? (fs::path(dir) / p).string() : rec.scene_path;
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
-    throw ReplayInputError(name + ": the recorded scene " + path + " cannot be read (moved or deleted?)");
-  std::ostringstream s;
-  s << in.rdbuf();
-  if (s.str() != rec.scene_text)
-    throw ReplayInputError(name + ": the scene file " + path +
-                           " changed since it was recorded (its text differs from the recorded one, " +
-                           std::to_string(s.str().size()) + " bytes now, " + std::to_string(rec.scene_text.size()) +
-                           " recorded): a replay would not be of the same run");
-  return load_scene(path);
+  const std::string path = io::recorded_scene_path(rec, dir);
+  try {
+    return io::parse_scene(rec.scene_text, path);
+  } catch (const SceneError& e) {
+    throw ReplayInputError(name + ": the scene it carries (recorded from " + path + ") is refused: " + e.what());
+  }
+}
+
+/// The sculpting app's edit session (the recording's edit_session), in place of the scene's:
+/// the same brushes (GPU or CPU reference), undo limit and live field, its first snapshot
+/// the one the servo read first.
+void use_recorded_edit_session(const Recording& rec, SceneSetup& setup) {
+  if (!rec.edit_session) return;
+  engine::VulkanContext* vk = rec.edit_session->gpu_brushes ? setup.vk.get() : nullptr;
+  setup.session = std::make_unique<EditSession>(engine::Volume(setup.volume), vk, setup.live,
+                                                rec.edit_session->history_limit_mib);
+  setup.first = setup.session->current();
 }
 
 /// One row of the replay's trace.csv (grid-world frame, as the renderer sees it).
@@ -127,6 +132,7 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
   ropt.device = opt.device;
   ropt.progress = false;
   SceneSetup setup = setup_scene(scene, ropt, log);
+  use_recorded_edit_session(rec, setup);
   if (std::bit_cast<std::uint64_t>(setup.hri.rate_hz) != std::bit_cast<std::uint64_t>(rec.rate_hz))
     throw ReplayInputError(name + ": recorded at " + num(rec.rate_hz) + " Hz, the scene's servo runs at " +
                            num(setup.hri.rate_hz) + " Hz");
@@ -136,7 +142,8 @@ ReplayResult replay_recording(const Recording& rec, const ReplayOptions& opt, st
                            " recorded): a replay would not be of the same run");
   if (!rec.edits.empty() && !setup.session)
     throw ReplayInputError(name + ": the recording has " + std::to_string(rec.edits.size()) +
-                           " edits but the scene " + rec.scene_path + " has no \"edits\" section");
+                           " edits but the scene " + rec.scene_path +
+                           " has no \"edits\" section and the recording no edit_session");
 
   servo::TripleBuffer<core::SampleField> buf;
   buf.publish(setup.first);

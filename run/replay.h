@@ -1,8 +1,9 @@
 // replay.h - what `isotouch replay FILE` runs: plays a recording back (io/record.h) and checks
 // the forces, the VHIPs and the snapshot versions each tick read.
 //
-// The replay rebuilds the recorded scene's pipeline with run::setup_scene (volume, engine,
-// HriParams, the EditSession and its first snapshot), then for each recorded tick k, in
+// The replay rebuilds the recorded scene's pipeline with run::setup_scene from the scene text
+// the recording carries (volume, engine, HriParams, the EditSession and its first snapshot;
+// the recording's edit_session where it has one), then for each recorded tick k, in
 // the headless run's order (sim/headless.cpp, session/edit_session.h's determinism rule):
 // acquire the newest snapshot, HriRenderer::tick(field, recorded HIP) at the nominal
 // period, compare the force, the VHIP and the snapshot's version with the recorded ones bit
@@ -18,7 +19,7 @@
 
 namespace isotouch::run {
 
-/// A recording that cannot be replayed as recorded: the scene file changed or is gone, the
+/// A recording that cannot be replayed as recorded: the scene text it carries is refused, the
 /// volume's voxels differ from the recorded checksum, the rate differs, edits without an edit pipeline, an edit the pipeline refuses. what()
 /// names the file and the reason. (`replay` exits 2.)
 struct ReplayInputError : std::runtime_error {
@@ -54,7 +55,7 @@ struct ReplayResult {
 };
 
 /// Replays `rec` (see the file comment). Log lines go to `log`.
-/// @throws ReplayInputError (changed scene, ...), SceneError, engine errors, std::runtime_error.
+/// @throws ReplayInputError (refused scene text, another volume, ...), engine errors, std::runtime_error.
 ReplayResult replay_recording(const io::Recording& rec, const ReplayOptions& options, std::ostream& log);
 
 /// The verdict line of a replay: "IDENTICAL: ..." or "DIFFERENT: k of n ticks differ; first at

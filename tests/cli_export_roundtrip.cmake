@@ -27,3 +27,9 @@ file(WRITE ${OUT}/vdb-scene.json "{\"name\": \"vdb-scene\", \"volume\": {\"path\
   \"outputs\": {\"plots\": false}}")
 expect(render_vdb 0 "render: wrote ${OUT}/vdb.png" render ${OUT}/vdb-scene.json --out ${OUT}/vdb.png --width 64 --height 64)
 expect(run_vdb 0 "contact +[1-9][0-9]* ticks" run ${OUT}/vdb-scene.json --out ${OUT}/run --quiet)
+# summary.json names the reader that read the file (OpenVDB), the first one in brackets.
+file(GLOB_RECURSE summary ${OUT}/run/summary.json)
+file(READ "${summary}" text)
+if(NOT text MATCHES "\"reader\": \"openvdb:FloatGrid \\(converted from itk:MetaImageIO\\)\"")
+  message(FATAL_ERROR "run_vdb: ${summary} does not name the OpenVDB reader:\n${text}")
+endif()

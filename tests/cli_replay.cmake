@@ -1,6 +1,6 @@
 # isotouch replay on the committed regression recording (tests/data/recordings/sphere-edits.rec:
 # the sphere with a carve timeline, a stroke at the VHIP, an undo and the button drill) and on
-# copies of it broken on purpose. Each case checks the exit code and the message.
+# copies of it broken on purpose, and on copies whose scene file changed or is gone. Each case checks the exit code and the message.
 #   -DEXE=isotouch -DREC=sphere-edits.rec -DSCENE=sphere-edits.json -DOUT=work folder
 file(REMOVE_RECURSE ${OUT})
 file(MAKE_DIRECTORY ${OUT})
@@ -52,11 +52,14 @@ file(WRITE ${OUT}/absurd/sphere-edits.rec "${absurd}")
 file(WRITE ${OUT}/absurd/sphere-edits.json "${scene}")
 expect(absurd_hip 1 "DIFFERENT: [0-9]+ of 2403 ticks differ; first at tick 20 \\(t = 0.02 s\\) in the fault" ${OUT}/absurd/sphere-edits.rec)
 
-# 3. The scene changed since the recording: exit 2, said.
-file(MAKE_DIRECTORY ${OUT}/changed)
+# 3. The scene file changed since the recording, or is gone: the recording carries the scene's
+# text and runs it, identical (exit 0).
+file(MAKE_DIRECTORY ${OUT}/changed ${OUT}/alone)
 file(WRITE ${OUT}/changed/sphere-edits.rec "${rec}")
-file(WRITE ${OUT}/changed/sphere-edits.json "${scene} ")
-expect(changed_scene 2 "sphere-edits.json changed since it was recorded" ${OUT}/changed/sphere-edits.rec)
+file(WRITE ${OUT}/changed/sphere-edits.json "{\"isovalue\": 7}")
+expect(changed_scene 0 "replayed 2403 ticks, ${edits} edits.*IDENTICAL" ${OUT}/changed/sphere-edits.rec)
+file(WRITE ${OUT}/alone/sphere-edits.rec "${rec}")
+expect(scene_gone 0 "replayed 2403 ticks, ${edits} edits.*IDENTICAL" ${OUT}/alone/sphere-edits.rec)
 
 # 4. Truncated (the end record cut off): exit 2, said.
 string(FIND "${rec}" "{\"end\"" at)

@@ -135,11 +135,14 @@ for clock in --sim-clock --real-time; do
     { echo "FAIL: the undo in the isovalue's frame was lost in the restart ($clock)"; exit 1; }
 done
 echo "iso-undo: the undo in the isovalue's frame is in the restarted volume (both clocks)"
-# A dropped file whose reader blocks (a FIFO named .mhd: open() waits for a writer that
-# never comes): quitting abandons the load instead of waiting for it, and exits 0.
-rm -f "$out/slow.mhd"
-mkfifo "$out/slow.mhd"
-printf '{"events": [{"drop": "%s"}, {"after_frames": 3, "quit": true}]}\n' "$out/slow.mhd" > "$out/drop-slow.json"
+# A dropped FIFO named as a volume (.mhd) is refused at once, before open(), naming it; the
+# head stays. A dropped file whose reader blocks (a FIFO named as a scene, .json: open() waits
+# for a writer that never comes): quitting abandons the load instead of waiting for it, and
+# exits 0.
+rm -f "$out/slow.json" "$out/fifo.mhd"
+mkfifo "$out/slow.json" "$out/fifo.mhd"
+printf '{"events": [{"drop": "%s"}, {"after_frames": 3, "drop": "%s"}, {"after_frames": 3, "quit": true}]}\n' \
+  "$out/fifo.mhd" "$out/slow.json" > "$out/drop-slow.json"
 set +e
 timeout 120 xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$out/drop-slow.json" \
   --size 320 --no-overlay > "$out/drop-slow.txt" 2>&1
@@ -147,10 +150,12 @@ rc=$?
 set -e
 cat "$out/drop-slow.txt"
 # A reader still blocked (the app waited and was killed): a writer releases it.
-[ "$rc" -eq 124 ] && timeout 5 bash -c ": > '$out/slow.mhd'"
-rm -f "$out/slow.mhd"
+[ "$rc" -eq 124 ] && timeout 5 bash -c ": > '$out/slow.json'; : > '$out/fifo.mhd'"
+rm -f "$out/slow.json" "$out/fifo.mhd"
 if [ "$rc" -ne 0 ]; then echo "FAIL: quitting while a file loads exited $rc (124: it waited for the load)"; exit 1; fi
-grep -q "^sculpt   abandoned loading .*slow.mhd (still reading after" "$out/drop-slow.txt" ||
+grep -q "cannot open .*fifo.mhd: not a regular file (a FIFO): a volume is read from a regular file.*(keeping head)" "$out/drop-slow.txt" ||
+  { echo "FAIL: the dropped FIFO was not refused, named, at once"; exit 1; }
+grep -q "^sculpt   abandoned loading .*slow.json (still reading after" "$out/drop-slow.txt" ||
   { echo "FAIL: the blocked load was not abandoned"; exit 1; }
 set +e
 "$iso" replay "$out/session.rec" --quiet > "$out/replay.log" 2>&1

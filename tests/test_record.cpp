@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -499,6 +500,52 @@ TEST(Record, BadFilesNameTheLineTheFieldAndTheValue) {
     const std::string msg = error_of(c.text);
     EXPECT_FALSE(msg.empty()) << c.what << ": accepted";
     for (const std::string& s : c.expect) EXPECT_NE(msg.find(s), std::string::npos) << c.what << ": \"" << s << "\" not in: " << msg;
+  }
+}
+
+// The sculpting app's edit session travels in a format 3 header: written, read back, checked.
+TEST(Record, EditSessionRoundTripsAndBadOnesAreNamed) {
+  std::mt19937_64 rng(8);
+  Recording r = live_recording(rng, 20, 3);
+  r.edit_session = isotouch::io::RecordedEditSession{true, 64.5};
+  const std::string text = recording_text(r, "mem");
+  EXPECT_NE(text.find("\"edit_session\":{\"gpu_brushes\":true,\"history_limit_mib\":64.5}"), std::string::npos) << text.substr(0, 300);
+  const Recording back = parse_recording(text, "mem");
+  ASSERT_TRUE(back.edit_session.has_value());
+  EXPECT_TRUE(back.edit_session->gpu_brushes);
+  EXPECT_EQ(back.edit_session->history_limit_mib, 64.5);
+  EXPECT_EQ(recording_text(back, "mem"), text);
+  const auto refused = [&](const std::string& from, const std::string& to, const std::string& says) {
+    std::string bad = text;
+    bad.replace(bad.find(from), from.size(), to);
+    try {
+      (void)parse_recording(bad, "bad.rec");
+      ADD_FAILURE() << "accepted " << to;
+    } catch (const RecordingError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  refused("\"history_limit_mib\":64.5", "\"history_limit_mib\":-1",
+          "bad.rec: line 1 (header): field 'edit_session.history_limit_mib': must be > 0, got -1");
+  refused("\"gpu_brushes\":true", "\"gpu_brushes\":1", "field 'edit_session.gpu_brushes': must be true or false, got 1");
+  refused("\"gpu_brushes\":true", "\"gpu_brushes\":true,\"brush\":2", "field 'edit_session.brush': unknown field");
+  refused("\"format_version\":3", "\"format_version\":2", "field 'edit_session': unknown field");
+  // A writer never puts one in a format 2 file.
+  Recording two = random_recording(rng, 5, 0);
+  two.edit_session = isotouch::io::RecordedEditSession{};
+  EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
+}
+
+// A FIFO named as a recording is refused before open() (which would wait for a writer).
+TEST(Record, AFifoIsRefusedBeforeItIsOpened) {
+  const fs::path d = temp_dir("fifo");
+  const std::string f = (d / "f.rec").string();
+  ASSERT_EQ(::mkfifo(f.c_str(), 0600), 0);
+  try {
+    (void)load_recording(f);
+    ADD_FAILURE();
+  } catch (const RecordingError& e) {
+    EXPECT_EQ(std::string(e.what()), f + ": not a regular file (a FIFO): a recording is read from a regular file");
   }
 }
 

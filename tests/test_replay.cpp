@@ -1,6 +1,7 @@
 // Replay (run/replay.h): a scene run with --record replays to identical forces, VHIPs and
 // snapshot versions; one HIP moved by one ULP, one edit's radius changed, an absurd HIP or
-// another snapshot version differ at that tick; another volume or a changed scene is refused.
+// another snapshot version differ at that tick; another volume is refused; the scene text the
+// recording carries runs wherever the scene file is now.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -17,6 +18,9 @@
 #include "scene.h"
 #include "synthetic.h"
 #include "temp_dir.h"
+#include "volume_write.h"
+
+#include <nlohmann/json.hpp>
 
 namespace fs = std::filesystem;
 using isotouch::core::Vec3;
@@ -242,14 +246,80 @@ TEST(Replay, VolumeChecksumSeesOneVoxel) {
   EXPECT_NE(isotouch::io::volume_crc32(w), before);
 }
 
-TEST(Replay, AChangedSceneIsRefused) {
+// The recording carries the scene's text: replay runs it, wherever the scene file is now and
+// whatever it holds; the text, not the file, is what it runs.
+TEST(Replay, TheRecordedSceneTextRunsWhereverTheFileIsNow) {
   const Recorded& x = recorded_run();
   Recording rec = load_recording(x.rec.string());
-  rec.scene_text += " ";  // as if the file had been edited since
+  rec.scene_path = (temp_dir("gone") / "moved-away.json").string();  // no file there
+  const auto r = replay(rec);
+  EXPECT_TRUE(r.identical()) << r.differing_ticks << " ticks differ, first " << r.first_diff_tick;
+  EXPECT_EQ(r.edits, long(rec.edits.size()));
+  // Another stiffness in the recorded text (the file unchanged): other forces.
+  const std::string k = "\"script\"";
+  ASSERT_NE(rec.scene_text.find(k), std::string::npos);
+  rec.scene_text.replace(rec.scene_text.find(k), k.size(), "\"servo\": {\"stiffness_n_per_m\": 900}, " + k);
+  EXPECT_FALSE(replay(rec).identical());
+  // Text that is not a scene is refused, naming the recording and the field.
+  rec.scene_text = "{\"volume\": 3}";
   try {
     (void)replay(rec);
-    ADD_FAILURE() << "replayed against a changed scene";
+    ADD_FAILURE() << "replayed a scene text that is not a scene";
   } catch (const isotouch::run::ReplayInputError& e) {
-    EXPECT_NE(std::string(e.what()).find("changed since it was recorded"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("recording: the scene it carries (recorded from "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("volume"), std::string::npos) << e.what();
   }
+}
+
+// A volume file named relative to the scene: found in the folder the scene was in when
+// recorded, from a recording elsewhere, with the scene file since changed; checked by CRC.
+TEST(Replay, ARelativeVolumeIsFoundBesideTheRecordedSceneAndCheckedByCrc) {
+  const fs::path dir = temp_dir("relvol");
+  isotouch::io::save_volume_itk(isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 10), (dir / "ball.nrrd").string());
+  const std::string scene = (dir / "ball.json").string();
+  std::ofstream(scene) << R"({"name": "ball", "volume": {"path": "ball.nrrd"}, "isovalue": 0, "inside": "above",
+                              "script": {"hold_s": 0.05, "stroke_length_m": 0.002}, "outputs": {"plots": false}})";
+  isotouch::run::RunOptions opt;
+  opt.out_dir = (dir / "out").string();
+  opt.progress = false;
+  opt.record_path = (dir / "ball.rec").string();
+  std::ostringstream log;
+  (void)isotouch::run::run_scene(isotouch::io::load_scene(scene), opt, log);
+  const Recording rec = load_recording(opt.record_path);
+  std::ofstream(scene) << "{}";  // the scene file changed since
+  isotouch::run::ReplayOptions o;
+  o.progress = false;
+  o.recording_dir = temp_dir("relvol-elsewhere").string();
+  const auto r = isotouch::run::replay_recording(rec, o, log);
+  EXPECT_TRUE(r.identical()) << r.differing_ticks << " ticks differ";
+  EXPECT_GT(r.ticks, 100);
+  isotouch::io::save_volume_itk(isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 9), (dir / "ball.nrrd").string());
+  try {
+    (void)isotouch::run::replay_recording(rec, o, log);
+    ADD_FAILURE() << "replayed against another volume";
+  } catch (const isotouch::run::ReplayInputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ball.nrrd changed since it was recorded (CRC-32"), std::string::npos) << e.what();
+  }
+}
+
+// Edits through an edit session the scene does not describe (the sculpting app's brushes on a
+// scene without "edits"): the recording's edit_session builds it, and the run replays.
+TEST(Replay, TheRecordedEditSessionReplaysEditsOfASceneWithoutEdits) {
+  const Recorded& x = recorded_run();
+  Recording rec = load_recording(x.rec.string());
+  nlohmann::json scene = nlohmann::json::parse(rec.scene_text);
+  scene.erase("edits");
+  rec.scene_text = scene.dump();
+  try {
+    (void)replay(rec);
+    ADD_FAILURE() << "replayed edits without an edit session";
+  } catch (const isotouch::run::ReplayInputError& e) {
+    EXPECT_NE(std::string(e.what()).find("has no \"edits\" section and the recording no edit_session"), std::string::npos)
+        << e.what();
+  }
+  rec.edit_session = isotouch::io::RecordedEditSession{true, 256};
+  const auto r = replay(rec);
+  EXPECT_TRUE(r.identical()) << r.differing_ticks << " ticks differ, first " << r.first_diff_tick;
+  EXPECT_EQ(r.edits, long(rec.edits.size()));
+  EXPECT_GT(r.publications, 3);
 }

@@ -25,6 +25,7 @@
 #include <thread>
 
 #include "export.h"
+#include "memory_limited_child.h"
 #include "synthetic.h"
 #include "vdb_io.h"
 #include "volume_io.h"
@@ -157,7 +158,11 @@ TEST(VdbIo, HeadCtRoundTripIsBitIdentical) {
   ASSERT_TRUE(l.suggested.has_value());
   EXPECT_EQ(l.suggested->tau, 1150.0);
   EXPECT_EQ(l.suggested->inside, InsideIs::kAbove);
-  EXPECT_EQ(l.volume.reader, v.reader);
+  // The reader is OpenVDB's (what summary.json says), the first one in brackets, once.
+  EXPECT_EQ(l.volume.reader, "openvdb:FloatGrid (converted from itk:MetaImageIO)");
+  save_vdb(l.volume, tmp / "again.vdb");
+  EXPECT_EQ(load_vdb(tmp / "again.vdb").volume.reader, "openvdb:FloatGrid (converted from itk:MetaImageIO)");
+  fs::remove(tmp / "again.vdb");
   EXPECT_EQ(l.volume.component_type, v.component_type);
   EXPECT_EQ(l.volume.min_value, v.min_value);
   EXPECT_EQ(l.volume.max_value, v.max_value);
@@ -651,6 +656,49 @@ TEST(VdbIo, BadInputGivesClearErrors) {
   const engine::Volume v = sdf_sphere(8, 1e-3, 2.0, InsideIs::kBelow);
   expect_error([&] { save_vdb(v, tmp / "no/such/folder/x.vdb"); }, {"x.vdb", "does not exist"});
   expect_error([&] { extract_mesh(v, {0.0, InsideIs::kBelow}, 2.0); }, {"adaptivity", "[0, 1]"});
+}
+
+// The limits every volume format meets (io::check_volume_limits), on a .vdb written by
+// save_vdb: its metadata carry the exact spacing, origin and direction.
+TEST(VdbIo, LimitsOfEveryVolumeApply) {
+  TempDir tmp;
+  engine::Volume v = sdf_sphere(16, 1e-3, 5.0, InsideIs::kBelow);
+  engine::Volume wide = v;
+  wide.grid.spacing_m = {1.0, 1e-3, 1e-3};  // 15 m along x
+  save_vdb(wide, tmp / "wide.vdb");
+  expect_error([&] { load_vdb(tmp / "wide.vdb"); },
+               {"wide.vdb", "grid 'volume'", "field 'transform scale (voxel size)' along axis 0 is 1000 mm", "15 m",
+                "the limit is 10 m"});
+  engine::Volume far = v;
+  far.grid.origin_m = {0, 2000.0, 0};
+  save_vdb(far, tmp / "far.vdb");
+  expect_error([&] { load_vdb(tmp / "far.vdb"); },
+               {"far.vdb", "field 'transform translation (origin)' along axis 1 is 2e+06 mm", "within 1000 m"});
+  engine::Volume nan_dir = v;
+  nan_dir.direction[4] = std::nan("");
+  save_vdb(nan_dir, tmp / "nandir.vdb");
+  expect_error([&] { load_vdb(tmp / "nandir.vdb"); },
+               {"nandir.vdb", "field 'isotouch_direction'", "nan", "not orthonormal"});
+  engine::Volume scaled = v;
+  scaled.direction = {2, 0, 0, 0, 1, 0, 0, 0, 1};
+  save_vdb(scaled, tmp / "scaled.vdb");
+  expect_error([&] { load_vdb(tmp / "scaled.vdb"); }, {"scaled.vdb", "isotouch_direction", "not orthonormal"});
+  // What passes them still loads, bit for bit.
+  save_vdb(v, tmp / "ok.vdb");
+  expect_identical(load_vdb(tmp / "ok.vdb").volume, v);
+}
+
+// A file of a few kB whose tiles make an 8 GiB dense volume: refused by the memory check
+// before anything is allocated, in a child whose address space may grow by 4 GiB only.
+TEST(VdbIo, TileBoxBeyondTheMemoryIsRefusedBeforeAllocating) {
+  TempDir tmp;
+  write_test_vdb(tmp / "tiles.vdb", TestVdb::kTileBox);
+  EXPECT_LT(fs::file_size(tmp / "tiles.vdb"), 64u << 10);
+  const std::string m = test::message_under_memory_limit(test::address_space_bytes() + (4ull << 30),
+                                                        [&] { (void)load_vdb(tmp / "tiles.vdb"); });
+  for (const char* part : {"tiles.vdb", "grid 'tiles'", "1936 x 1040 x 1040 voxels of float need 7987 MiB",
+                           "MiB of memory this process may use"})
+    EXPECT_NE(m.find(part), std::string::npos) << "message '" << m << "' lacks '" << part << "'";
 }
 
 // ------------------------------------------------------------------------ isotouch export

@@ -531,6 +531,17 @@ Sculpt::~Sculpt() {
 
 // --- set-up ------------------------------------------------------------------------------
 
+/// --save and --export must name a format they write (the format is taken from the name).
+/// @throws std::runtime_error naming the option and the path.
+void check_output_names(const Options& o) {
+  if (!o.save_path.empty() && !io::volume_writable(o.save_path))
+    throw std::runtime_error("--save " + o.save_path +
+                             ": the name must end in .vdb, .mha, .nrrd, .nii or .nii.gz (the format is taken from it)");
+  if (!o.export_path.empty() && io::mesh_format(o.export_path).empty())
+    throw std::runtime_error("--export " + o.export_path +
+                             ": the name must end in .stl, .obj or .ply (the format is taken from it)");
+}
+
 /// The scene, the volume and the script.
 bool Sculpt::load_input() {
   try {
@@ -539,6 +550,7 @@ bool Sculpt::load_input() {
     else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
+    check_output_names(o);
     scene = input_scene(o);
     vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
     if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
@@ -665,6 +677,8 @@ session::LiveSessionConfig Sculpt::session_config() {
     cfg.record_header.scene_text = text.str();
     cfg.record_header.rate_hz = scene.hri.rate_hz;
     cfg.record_header.volume_crc32 = io::volume_crc32(vol);
+    // This app's edit session, whatever the scene's "edits" say: replay builds the same one.
+    cfg.record_header.edit_session = io::RecordedEditSession{edits->sculptor().on_gpu(), scene.edits.history_limit_mib};
   }
   cfg.on_applied = picture_feeder(feed, edits.get());
   return cfg;
@@ -1167,7 +1181,7 @@ engine::Volume Sculpt::edited_volume() {
 void Sculpt::save(const std::string& path) {
   const engine::Volume out = edited_volume();
   try {
-    io::save_vdb(out, path, io::SaveVdbOptions{});
+    io::save_any_volume(out, path, io::SaveVdbOptions{});  // the format the name asks for
     status = "saved " + path;
   } catch (const std::exception& e) {
     status = std::string("save failed: ") + e.what();
@@ -1180,10 +1194,7 @@ void Sculpt::export_mesh(const std::string& path) {
   const engine::Volume out = edited_volume();
   try {
     const io::Mesh mesh = io::extract_mesh(out, live.iso);
-    const std::string ext = fs::path(path).extension().string();
-    if (ext == ".obj") io::write_obj(mesh, path);
-    else if (ext == ".ply") io::write_ply(mesh, path);
-    else io::write_stl_binary(mesh, path);
+    io::write_mesh(mesh, path);  // the format the name asks for
     status = "exported " + path;
   } catch (const std::exception& e) {
     status = std::string("export failed: ") + e.what();

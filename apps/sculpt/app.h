@@ -24,7 +24,7 @@ struct Options {
   std::string script;               ///< input script (JSON), "" = none
   std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
   std::string record;               ///< the session's recording (scenes only)
-  std::string save_path;            ///< Ctrl+S target (.vdb); default: OUT/sculpted.vdb next to the input name
+  std::string save_path;            ///< Ctrl+S target (.vdb, .nrrd, .mha, .nii, .nii.gz); default INPUT-sculpted.vdb
   std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl
   int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
   int width = 1024, height = 768;

@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
   cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
   cli.add_option("--frames", o.frames, "stop after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
-  cli.add_option("--save", o.save_path, "where Ctrl+S saves (.vdb; default INPUT-sculpted.vdb in the working folder)");
+  cli.add_option("--save", o.save_path, "where Ctrl+S saves, in the format the name asks for: .vdb, or .nrrd, .mha, .nii, .nii.gz "
+                 "(3D Slicer; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
   // 4096 x 3072 pixels of 4 bytes fit the 128 MiB storage binding every Vulkan device
   // offers (a larger framebuffer, a resized window, is drawn at a lower scale to fit).

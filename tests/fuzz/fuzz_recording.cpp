@@ -1,10 +1,12 @@
 // libFuzzer target for the recording parser: any input either parses or throws
-// RecordingError; what parses can be written back and parses to the same text.
+// RecordingError; what parses can be written back and parses to the same text, and the scene
+// text it carries (what replay runs) either parses or throws SceneError.
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
 #include "record.h"
+#include "scene.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
@@ -18,6 +20,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       const std::string again = isotouch::io::recording_text(r, "fuzz.rec");
       if (isotouch::io::recording_text(isotouch::io::parse_recording(again, "again.rec"), "again.rec") != again)
         __builtin_trap();
+    }
+    try {
+      (void)isotouch::io::parse_scene(r.scene_text, isotouch::io::recorded_scene_path(r, "/fuzz"));
+    } catch (const isotouch::io::SceneError&) {
     }
   } catch (const isotouch::io::RecordingError&) {
   }

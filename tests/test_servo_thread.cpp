@@ -837,11 +837,6 @@ TEST(ServoSafety, AfterTheDeviceWatchdogTrippedTheForceRampsInFromZero) {
 
 // ---- Stalls: a late write restarts from zero; stop() gives up on a renderer that never returns ----
 namespace {
-std::int64_t mono_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
-
 /// (0, 0, 1) N every tick; tick `slow_tick` takes `slow_ms`, or never returns until
 /// `release` (slow_ms < 0). Records when it stalled and when it went on; bumps `stalls`
 /// (if set) meanwhile, as a device's writer does when the servo stops writing.

@@ -18,6 +18,7 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libpng-dev libassimp-dev
   libhidapi-dev
+  libopenigtlink-dev openigtlink-examples
   libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
 )
 # `./run.sh test` also builds the libFuzzer targets with clang.

@@ -1,0 +1,283 @@
+// The OpenIGTLink service's message layer: messages built by the OpenIGTLink library (the
+// sender's side, as Slicer or PLUS would build them) read back through read_message, the
+// IMAGE -> volume conversion against loading the file, refusals, deadlines, dead peers.
+#include <gtest/gtest.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+
+#include <igtlImageMessage.h>
+#include <igtlStatusMessage.h>
+#include <igtlStringMessage.h>
+#include <igtlTransformMessage.h>
+
+#include "image_volume.h"
+#include "igtl_message.h"
+#include "igtl_socket.h"
+#include "temp_dir.h"
+#include "volume_io.h"
+
+namespace isotouch::service {
+namespace {
+
+const std::string kHead = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+
+/// Bytes from a buffer (what a client sent), one read at a time.
+class MemorySource final : public ByteSource {
+ public:
+  explicit MemorySource(std::vector<std::uint8_t> b) : b_(std::move(b)) {}
+  std::size_t read(void* dst, std::size_t n, bool) override {
+    const std::size_t k = std::min(n, b_.size() - at_);
+    std::memcpy(dst, b_.data() + at_, k);
+    at_ += k;
+    return k;
+  }
+  std::string why() const override { return "end of buffer"; }
+
+ private:
+  std::vector<std::uint8_t> b_;
+  std::size_t at_ = 0;
+};
+
+std::vector<std::uint8_t> bytes_of(igtl::MessageBase* m) {
+  m->Pack();
+  const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
+  return {p, p + m->GetPackSize()};
+}
+
+/// An IMAGE as a sender builds it from a loaded file: RAS, its centre as the position,
+/// int16 voxels in the library's default (big-endian) or little-endian byte order.
+std::vector<std::uint8_t> image_of(const engine::Volume& v, int endian, const char* name = "Head") {
+  igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+  int dims[3] = {v.grid.dims[0], v.grid.dims[1], v.grid.dims[2]};
+  float sp[3] = {float(v.grid.spacing_m.x * 1e3), float(v.grid.spacing_m.y * 1e3), float(v.grid.spacing_m.z * 1e3)};
+  m->SetDimensions(dims);
+  m->SetSpacing(sp);
+  m->SetScalarType(igtl::ImageMessage::TYPE_INT16);
+  m->SetEndian(endian);
+  m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+  m->SetDeviceName(name);
+  m->AllocateScalars();
+  // The centre, LPS -> RAS: the middle between the first and last voxel centres.
+  const core::Vec3 c = v.index_to_physical({(dims[0] - 1) / 2.0, (dims[1] - 1) / 2.0, (dims[2] - 1) / 2.0});
+  igtl::Matrix4x4 mat;
+  igtl::IdentityMatrix(mat);
+  for (int r = 0; r < 3; ++r) {
+    const double f = r < 2 ? -1.0 : 1.0;
+    for (int a = 0; a < 3; ++a) mat[r][a] = float(f * v.direction[std::size_t(3 * r + a)]);
+  }
+  mat[0][3] = float(-c.x * 1e3);
+  mat[1][3] = float(-c.y * 1e3);
+  mat[2][3] = float(c.z * 1e3);
+  m->SetMatrix(mat);
+  auto* out = static_cast<std::uint8_t*>(m->GetScalarPointer());
+  for (std::size_t i = 0; i < v.voxels.size(); ++i) {
+    const auto s = std::uint16_t(std::int16_t(v.voxels[i]));
+    const bool big = endian == igtl::ImageMessage::ENDIAN_BIG;
+    out[2 * i] = std::uint8_t(big ? s >> 8 : s & 0xff);
+    out[2 * i + 1] = std::uint8_t(big ? s & 0xff : s >> 8);
+  }
+  return bytes_of(m);
+}
+
+engine::Volume received_volume(std::vector<std::uint8_t> bytes) {
+  MemorySource src(std::move(bytes));
+  Incoming in = read_message(src, MessageLimits{});
+  EXPECT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  if (in.kind != Incoming::Kind::kImage) return {};
+  return volume_from_image(*in.image);
+}
+
+/// Same voxels, and the 8 corner voxel centres in the same physical place within 1e-6 m.
+void expect_same_place(const engine::Volume& file, const engine::Volume& got) {
+  ASSERT_EQ(got.grid.dims, file.grid.dims);
+  ASSERT_EQ(got.voxels.size(), file.voxels.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < file.voxels.size(); ++i) differ += got.voxels[i] != file.voxels[i];
+  EXPECT_EQ(differ, 0u);
+  for (int k = 0; k < 8; ++k) {
+    const core::Vec3 idx{k & 1 ? file.grid.dims[0] - 1.0 : 0.0, k & 2 ? file.grid.dims[1] - 1.0 : 0.0,
+                         k & 4 ? file.grid.dims[2] - 1.0 : 0.0};
+    const core::Vec3 a = file.index_to_physical(idx), b = got.index_to_physical(idx);
+    EXPECT_LE(core::norm(a - b), 1e-6) << "corner " << k << ": file (" << a.x << ", " << a.y << ", " << a.z
+                                       << ") received (" << b.x << ", " << b.y << ", " << b.z << ")";
+  }
+}
+
+TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
+  const engine::Volume file = io::load_volume(kHead);
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_BIG)));
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
+}
+
+TEST(ServiceImage, RotatedAndShiftedHeadLandsWhereTheFileDoes) {
+  // The same voxels under a rotated direction and an offset: the centre, the RAS flip and
+  // the direction all show in the corners.
+  test::TempDir dir("isotouch-igtl");
+  const auto mhd = dir.path / "rotated.mhd";
+  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
+                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
+                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
+                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
+  const engine::Volume file = io::load_volume(mhd.string());
+  ASSERT_FALSE(file.direction_is_identity);
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
+}
+
+TEST(ServiceImage, SingleSliceIsRefusedSayingWhy) {
+  // What the upstream Imager examples send: 256 x 256 x 1 uint8.
+  igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+  int dims[3] = {256, 256, 1};
+  m->SetDimensions(dims);
+  m->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+  m->SetDeviceName("ImagerClient");
+  m->AllocateScalars();
+  MemorySource src(bytes_of(m));
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  try {
+    volume_from_image(*in.image);
+    FAIL() << "a single slice was taken as a volume";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find("single slice"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("256 x 256 x 1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ServiceImage, LabelMapIsRefused) {
+  const engine::Volume file = io::load_volume(kHead);
+  MemorySource src(image_of(file, igtl::ImageMessage::ENDIAN_BIG, "HeadLabelMap"));
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage);
+  EXPECT_THROW(volume_from_image(*in.image), engine::VolumeError);
+}
+
+std::vector<std::uint8_t> transform_bytes(const char* name, float x, float y, float z) {
+  igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+  t->SetDeviceName(name);
+  igtl::Matrix4x4 m;
+  igtl::IdentityMatrix(m);
+  m[0][3] = x;
+  m[1][3] = y;
+  m[2][3] = z;
+  t->SetMatrix(m);
+  return bytes_of(t);
+}
+
+TEST(ServiceMessages, TransformStringAndUnknownTypes) {
+  std::vector<std::uint8_t> all = transform_bytes("StylusToTracker", 1.5f, -2, 30);
+  igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();  // not a kept type: skipped
+  s->SetDeviceName("X");
+  s->SetStatusString("hello");
+  const auto sb = bytes_of(s);
+  all.insert(all.end(), sb.begin(), sb.end());
+  igtl::StringMessage::Pointer str = igtl::StringMessage::New();
+  str->SetDeviceName("CMD");
+  str->SetString("isovalue 500");
+  const auto tb = bytes_of(str);
+  all.insert(all.end(), tb.begin(), tb.end());
+  MemorySource src(all);
+  Incoming a = read_message(src, MessageLimits{});
+  ASSERT_EQ(a.kind, Incoming::Kind::kTransform) << a.why;
+  EXPECT_EQ(a.device, "StylusToTracker");
+  EXPECT_DOUBLE_EQ(a.matrix[0][3], 1.5);
+  EXPECT_DOUBLE_EQ(a.matrix[1][3], -2);
+  EXPECT_DOUBLE_EQ(a.matrix[2][3], 30);
+  Incoming b = read_message(src, MessageLimits{});
+  EXPECT_EQ(b.kind, Incoming::Kind::kSkipped);
+  EXPECT_EQ(b.type, "STATUS");
+  Incoming c = read_message(src, MessageLimits{});
+  ASSERT_EQ(c.kind, Incoming::Kind::kString) << c.why;
+  EXPECT_EQ(c.text, "isovalue 500");
+  EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kClosed);
+}
+
+TEST(ServiceMessages, WrongCrcIsRefusedAndTheStreamGoesOn) {
+  std::vector<std::uint8_t> all = transform_bytes("T", 1, 2, 3);
+  all[58 + 5] ^= 0x40;  // a body byte: the CRC no longer matches
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  Incoming a = read_message(src, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(a.why.find("CRC"), std::string::npos) << a.why;
+  Incoming b = read_message(src, MessageLimits{});
+  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
+  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+}
+
+TEST(ServiceMessages, TruncatedAndOversizedBodiesAreRefused) {
+  std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
+  t.resize(t.size() - 10);
+  MemorySource cut(t);
+  Incoming a = read_message(cut, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(a.why.find("truncated"), std::string::npos) << a.why;
+
+  const engine::Volume file = io::load_volume(kHead);
+  MessageLimits small;
+  small.max_body_bytes = 1000;
+  MemorySource big(image_of(file, igtl::ImageMessage::ENDIAN_BIG));
+  Incoming b = read_message(big, small);
+  EXPECT_EQ(b.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(b.why.find("past the limit of 1000"), std::string::npos) << b.why;
+
+  // An IMAGE whose own header announces more voxels than its body holds (the body size and
+  // CRC consistent): the library would read past the body.
+  std::vector<std::uint8_t> img = image_of(file, igtl::ImageMessage::ENDIAN_BIG);
+  img[58 + 6 + 1] = 65;  // size along x: 64 -> 65
+  img[58 + 66 + 1] = 65;  // and the sub-volume with it
+  MemorySource lie(img);
+  Incoming c = read_message(lie, MessageLimits{});
+  EXPECT_EQ(c.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(c.why.find("announces"), std::string::npos) << c.why;
+}
+
+TEST(ServiceMessages, StatusCarriesTheReason) {
+  const auto b = pack_status(igtl::StatusMessage::STATUS_CONFIG_ERROR, "ImagerClient", "a single slice");
+  igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();
+  s->AllocatePack();
+  std::memcpy(s->GetPackPointer(), b.data(), 58);
+  s->Unpack();
+  s->AllocatePack();
+  std::memcpy(s->GetPackBodyPointer(), b.data() + 58, b.size() - 58);
+  ASSERT_TRUE(s->Unpack(1) & igtl::MessageHeader::UNPACK_BODY);
+  EXPECT_EQ(s->GetCode(), igtl::StatusMessage::STATUS_CONFIG_ERROR);
+  EXPECT_STREQ(s->GetStatusString(), "a single slice");
+  EXPECT_STREQ(s->GetDeviceName(), "ImagerClient");
+}
+
+TEST(ServiceSocket, TruncatedBodyEndsAtTheReceiveTimeout) {
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
+  ASSERT_EQ(::write(sv[1], t.data(), t.size() - 20), ssize_t(t.size() - 20));  // and then nothing
+  std::atomic<bool> stop{false};
+  Connection c(sv[0], 300, &stop);
+  const auto t0 = std::chrono::steady_clock::now();
+  Incoming in = read_message(c, MessageLimits{});
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(in.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(in.why.find("nothing for 300 ms"), std::string::npos) << in.why;
+  EXPECT_LT(s, 2.0);
+  ::close(sv[1]);
+}
+
+TEST(ServiceSocket, SendToADeadPeerFailsWithoutSigpipe) {
+  // SIGPIPE's default action would end this test process.
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  ::close(sv[1]);
+  Connection c(sv[0], 300, nullptr);
+  const auto b = transform_bytes("T", 1, 2, 3);
+  EXPECT_FALSE(c.send(b));
+  EXPECT_FALSE(c.alive());
+}
+
+}  // namespace
+}  // namespace isotouch::service

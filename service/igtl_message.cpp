@@ -185,6 +185,9 @@ std::vector<std::uint8_t> pack_translation(const std::string& device, const doub
   igtl::IdentityMatrix(x);
   for (int r = 0; r < 3; ++r) x[r][3] = float(t[r]);
   m->SetMatrix(x);
+  igtl::TimeStamp::Pointer now = igtl::TimeStamp::New();
+  now->GetTime();  // the receiver can measure the rate
+  m->SetTimeStamp(now);
   m->Pack();
   const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
   return {p, p + m->GetPackSize()};

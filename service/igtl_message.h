@@ -63,7 +63,7 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits);
 /// packed for sending.
 std::vector<std::uint8_t> pack_status(int code, const std::string& device, const std::string& why);
 
-/// A TRANSFORM message named `device`: rotation identity, translation `t`, packed.
+/// A TRANSFORM message named `device`: rotation identity, translation `t`, time stamped now, packed.
 std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3]);
 
 /// Printable form of a fixed-width header field (up to the first NUL, other bytes as '?').

@@ -110,10 +110,16 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
   return got;
 }
 
-bool Connection::send(const void* data, std::size_t n) {
+bool Connection::send(const void* data, std::size_t n, bool droppable) {
   std::lock_guard<std::mutex> lock(send_mu_);
   const auto* p = static_cast<const std::uint8_t*>(data);
   std::size_t sent = 0;
+  if (droppable && alive_) {
+    const ssize_t k = ::send(fd_, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (k < 0 && errno == EAGAIN) return false;  // not reading: dropped, the connection kept
+    if (k > 0) sent = std::size_t(k);
+    if (k < 0 && errno != EINTR) alive_ = false;
+  }
   while (alive_ && sent < n) {
     if (wait_for(fd_, POLLOUT, timeout_ms_) <= 0) break;
     const ssize_t k = ::send(fd_, p + sent, n - sent, MSG_NOSIGNAL | MSG_DONTWAIT);

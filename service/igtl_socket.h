@@ -46,8 +46,11 @@ class Connection final : public ByteSource {
   std::string why() const override { return why_; }
   /// Sends all `n` bytes within the receive timeout (any thread; sends are serialised).
   /// False, and the connection marked dead, when the peer is gone or does not read.
-  bool send(const void* data, std::size_t n);
-  bool send(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size()); }
+  bool send(const void* data, std::size_t n, bool droppable);
+  bool send(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), false); }
+  /// As send(), but when the peer's receive buffer is full (a client that never reads, like
+  /// a tracker) the bytes are dropped and false returned, the connection kept.
+  bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
   bool alive() const { return alive_.load(); }
   /// Shuts the socket down (a blocked read returns).
   void shutdown();

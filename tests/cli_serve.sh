@@ -5,10 +5,13 @@
 #      lies in the head; ReceiveClient gets HIP / proxy / force TRANSFORMs at the display rate,
 #      each HIP one of the positions the tracker printed plus the offset, forces non-zero;
 #   3. the tracker is killed (SIGKILL): a new ReceiveClient is served, the force is zero (stale);
-#   4. serve ends by itself (--seconds) with exit 0 and no servo faults.
-# Usage: cli_serve.sh ISOTOUCH SCENE BIN_DIR EXAMPLES_DIR OUT_DIR
+#   4. igtl_send_image (built on igtl::ImageMessage): a single slice answered by a STATUS naming
+#      why; the shipped head as a 3-D IMAGE answered "volume taken" and swapped in;
+#   5. serve ends by itself (--seconds) with exit 0 and no servo faults.
+# Usage: cli_serve.sh ISOTOUCH SCENE BIN_DIR EXAMPLES_DIR OUT_DIR HEAD_MHD
 set -u
-exe=$1; scene=$2; bin=$3; examples=$4; out=$5
+exe=$1; scene=$2; bin=$3; examples=$4; out=$5; head=$6
+[[ $out == */cli_serve ]] || { echo "FAIL serve: OUT_DIR must end in /cli_serve (it is emptied): $out"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 fail() { echo "FAIL serve: $*"; echo "--- serve.log"; tail -n 20 "$out/serve.log"; exit 1; }
 offset="-100.8,-100.8,69"
@@ -28,6 +31,14 @@ done
 timeout 20 "$bin/igtl_ImagerClient" 127.0.0.1 "$port" 50 "$examples/Imager/img" >"$out/imager.log" 2>&1
 refused=$(grep -c "ImagerClient'.*single slice" "$out/serve.log")
 ((refused >= 50)) || fail "only $refused of the Imager's 100 slices refused as single slices"
+
+# The STATUS reaches the sender; a 3-D image becomes the session's volume.
+timeout 20 "$bin/igtl_send_image" 127.0.0.1 "$port" slice >"$out/slice.log" 2>&1 || fail "no STATUS for a slice"
+grep -q "STATUS code 10: .*256 x 256 x 1 voxels: a single slice" "$out/slice.log" || fail "slice STATUS: $(cat "$out/slice.log")"
+timeout 20 "$bin/igtl_send_image" 127.0.0.1 "$port" "$head" >"$out/head.log" 2>&1 || fail "no STATUS for the head"
+grep -q "STATUS code 1: volume taken: 64 x 64 x 93" "$out/head.log" || fail "head STATUS: $(cat "$out/head.log")"
+for _ in $(seq 50); do grep -q "now the session's volume" "$out/serve.log" && break; sleep 0.1; done
+grep -q "now the session's volume" "$out/serve.log" || fail "the head never became the session's volume"
 
 # 2. Tracker at 100 Hz, a receiver for 3 s while it streams.
 "$bin/igtl_TrackerClient" 127.0.0.1 "$port" 100 >"$out/tracker.log" 2>&1 &

@@ -105,12 +105,19 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   if (in.type == "IMAGE") msg = image = igtl::ImageMessage::New();
   if (in.type == "TRANSFORM") msg = transform = igtl::TransformMessage::New();
   if (in.type == "STRING") msg = text = igtl::StringMessage::New();
+  // The body is read into a buffer of its announced size and checked before the library
+  // sees it (its AllocatePack() sizes an IMAGE by what the message itself holds, not by
+  // the header's body size).
+  std::vector<std::uint8_t> body(static_cast<std::size_t>(body_bytes));
+  if (src.read(body.data(), body.size(), false) != body_bytes)
+    return broken(in, in.type + " body truncated: " + src.why());
+  if (std::string why = check_body(in.type, body.data(), body_bytes); !why.empty()) return refused(in, why);
   msg->SetMessageHeader(header);
   msg->AllocatePack();
-  auto* body = static_cast<std::uint8_t*>(msg->GetPackBodyPointer());
-  if (src.read(body, std::size_t(body_bytes), false) != body_bytes)
-    return broken(in, in.type + " body truncated: " + src.why());
-  if (std::string why = check_body(in.type, body, body_bytes); !why.empty()) return refused(in, why);
+  if (std::uint64_t(msg->GetPackBodySize()) != body_bytes)
+    return refused(in, in.type + " body of " + std::to_string(body_bytes) + " bytes: the library allocated " +
+                           std::to_string(msg->GetPackBodySize()));
+  std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());
   if (!(msg->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) return refused(in, in.type + " body fails its CRC-64");
   if (image) {
     in.kind = Incoming::Kind::kImage;

@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iostream>
+#include <iterator>
 
 #include <igtlImageMessage.h>
 #include <igtlStatusMessage.h>
@@ -233,6 +235,25 @@ TEST(ServiceSocket, SendToADeadPeerFailsWithoutSigpipe) {
   const auto b = transform_bytes("T", 1, 2, 3);
   EXPECT_FALSE(c.send(b));
   EXPECT_FALSE(c.alive());
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceMessages, ImageBodyPastTheLibrarysBufferIsRefused) {
+  // Found by fuzz_igtl: an IMAGE whose image header the library sizes differently from the
+  // message header's body size; reading the body into the library's buffer overflowed it.
+  std::ifstream f(std::string(ISOTOUCH_TEST_SOURCE) + "/fuzz/corpus_igtl/image_body_past_library_buffer", std::ios::binary);
+  std::vector<std::uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  ASSERT_GT(b.size(), 58u);
+  MemorySource src(b);
+  Incoming in = read_message(src, MessageLimits{});
+  EXPECT_EQ(in.kind, Incoming::Kind::kRefused) << in.why;
+  EXPECT_FALSE(in.why.empty());
+  std::cout << "refused: " << in.why << "\n";
 }
 
 }  // namespace

@@ -11,16 +11,8 @@
 
 namespace isotouch::app {
 
-Subcommand add_serve_command(CLI::App& cli) {
-  struct Args {
-    std::string scene;
-    service::ServeOptions o;
-    std::vector<double> offset;
-    double stale_ms = 100;
-  };
-  auto a = std::make_shared<Args>();
-  auto* sub = cli.add_subcommand(
-      "serve",
+namespace {
+constexpr const char* kHelp =
       "Serve SCENE over OpenIGTLink (3D Slicer's OpenIGTLinkIF, PLUS, any OpenIGTLink client), several clients\n"
       "at once. The session starts on the scene's volume, isovalue, passes and HRI parameters.\n"
       "In:  IMAGE (3-D, one scalar: int8..float64, any spacing and orientation, RAS or LPS): the session's new\n"
@@ -30,7 +22,18 @@ Subcommand add_serve_command(CLI::App& cli) {
       "     wrong CRC, truncated or oversized bodies and unknown types never stop the server.\n"
       "Out: TRANSFORMs 'HIP' and 'Proxy' (translation in mm, RAS) and 'Force' (translation = force in N, RAS:\n"
       "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client.\n"
-      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 128 + N on signal N.");
+      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 128 + N on signal N.";
+}  // namespace
+
+Subcommand add_serve_command(CLI::App& cli) {
+  struct Args {
+    std::string scene;
+    service::ServeOptions o;
+    std::vector<double> offset;
+    double stale_ms = 100;
+  };
+  auto a = std::make_shared<Args>();
+  auto* sub = cli.add_subcommand("serve", kHelp);
   sub->add_option("scene", a->scene, "Scene JSON (its volume, isovalue, passes, HRI parameters)")->required();
   sub->add_option("--port", a->o.port, "TCP port (default 18944, Slicer's; 0: any free port, printed)")
       ->check(CLI::Range(0, 65535));

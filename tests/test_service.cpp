@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iostream>
 #include <iterator>
+#include <thread>
 
 #include <igtlImageMessage.h>
 #include <igtlStatusMessage.h>
@@ -20,6 +21,7 @@
 #include "image_volume.h"
 #include "igtl_message.h"
 #include "igtl_socket.h"
+#include "transform_device.h"
 #include "igtl_test_sender.h"
 #include "temp_dir.h"
 #include "volume_io.h"
@@ -254,6 +256,45 @@ TEST(ServiceMessages, ImageBodyPastTheLibrarysBufferIsRefused) {
   EXPECT_EQ(in.kind, Incoming::Kind::kRefused) << in.why;
   EXPECT_FALSE(in.why.empty());
   std::cout << "refused: " << in.why << "\n";
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
+  // A rotated volume: RAS mm + offset -> LPS m -> grid frame, and the force back to RAS.
+  engine::Volume v;
+  v.grid.dims = {4, 4, 4};
+  v.grid.spacing_m = {1e-3, 2e-3, 3e-3};
+  v.grid.origin_m = {0.01, -0.02, 0.03};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};  // row-major: index x -> LPS +y (posterior), index y -> LPS -x
+  v.direction_is_identity = false;
+  TransformDevice d;
+  d.set_frame(v, {5, 6, 7});
+  EXPECT_EQ(d.read().received_ns, 1) << "before any TRANSFORM the reading must be old (stale)";
+  const double t[3] = {10, 20, 30};  // RAS mm
+  d.push_mm(t);
+  const servo::DeviceReading r = d.read();
+  EXPECT_GT(r.received_ns, 1);
+  const core::Vec3 lps{-(10 + 5) * 1e-3, -(20 + 6) * 1e-3, (30 + 7) * 1e-3};
+  EXPECT_LE(core::norm(v.to_physical(r.position_m) - lps), 1e-12);
+  // A force along grid +x is LPS (0, +2, 0) = RAS (0, -2, 0).
+  d.write_force_n({2, 0, 0});
+  const core::Vec3 f = d.force_ras_n(0.5);
+  EXPECT_NEAR(f.x, 0, 1e-12);
+  EXPECT_NEAR(f.y, -2, 1e-12);
+  EXPECT_NEAR(f.z, 0, 1e-12);
+  // The servo stopped writing: after the stall time the force sent is zero.
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  EXPECT_EQ(core::norm(d.force_ras_n(0.02)), 0.0);
+  // The HIP sent out: grid -> RAS mm, the inverse of the stream's mapping (offset aside).
+  const core::Vec3 ras = d.grid_to_ras_mm(r.position_m);
+  EXPECT_NEAR(ras.x, 15, 1e-9);
+  EXPECT_NEAR(ras.y, 26, 1e-9);
+  EXPECT_NEAR(ras.z, 37, 1e-9);
 }
 
 }  // namespace

@@ -18,6 +18,7 @@ PACKAGES=(
   libopenvdb-dev libboost-iostreams-dev libtbb-dev
   libpng-dev libassimp-dev
   libhidapi-dev
+  libopenigtlink-dev openigtlink-examples
   libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
 )
 # `./run.sh test` also builds the libFuzzer targets with clang.
@@ -56,9 +57,9 @@ if [[ "${1:-}" == "test" ]]; then
   cmake --preset fuzz >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
   rm -f build-configure.log
   cmake --build --preset fuzz -j"$(nproc)"
-  # scene, recording and hid_report: libFuzzer (clang); volume and vdb: a mutation loop built by GCC in
+  # scene, recording, hid_report and igtl: libFuzzer (clang); volume and vdb: a mutation loop built by GCC in
   # build/ (Debian's ITK headers refuse clang).
-  for t in scene recording hid_report volume vdb; do
+  for t in scene recording hid_report igtl volume vdb; do
     bin=build-fuzz/bin/fuzz_$t
     [[ $t == volume || $t == vdb ]] && bin=build/bin/fuzz_$t
     mkdir -p "build-fuzz/corpus_$t"

@@ -1,0 +1,64 @@
+// serve_cmd.cpp - `isotouch serve SCENE`: options and exit codes; the server is service/serve.h.
+#include "serve_cmd.h"
+
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "exit_codes.h"
+#include "scene.h"
+#include "serve.h"
+
+namespace isotouch::app {
+
+namespace {
+constexpr const char* kHelp =
+      "Serve SCENE over OpenIGTLink (3D Slicer's OpenIGTLinkIF, PLUS, any OpenIGTLink client), several clients\n"
+      "at once. The session starts on the scene's volume, isovalue, passes and HRI parameters.\n"
+      "In:  IMAGE (3-D, one scalar: int8..float64, any spacing and orientation, RAS or LPS): the session's new\n"
+      "     volume, in the same physical place as the file it came from (single slices, sub-volumes, label\n"
+      "     maps refused); TRANSFORM named --stream: the device (translation in mm, RAS, plus --offset-mm);\n"
+      "     no TRANSFORM for --stale-ms: zero force. What is refused is answered with a STATUS saying why;\n"
+      "     wrong CRC, truncated or oversized bodies and unknown types never stop the server.\n"
+      "Out: TRANSFORMs 'HIP' and 'Proxy' (translation in mm, RAS) and 'Force' (translation = force in N, RAS:\n"
+      "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client.\n"
+      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 128 + N on signal N.";
+}  // namespace
+
+Subcommand add_serve_command(CLI::App& cli) {
+  struct Args {
+    std::string scene;
+    service::ServeOptions o;
+    std::vector<double> offset;
+    double stale_ms = 100;
+  };
+  auto a = std::make_shared<Args>();
+  auto* sub = cli.add_subcommand("serve", kHelp);
+  sub->add_option("scene", a->scene, "Scene JSON (its volume, isovalue, passes, HRI parameters)")->required();
+  sub->add_option("--port", a->o.port, "TCP port (default 18944, Slicer's; 0: any free port, printed)")
+      ->check(CLI::Range(0, 65535));
+  sub->add_option("--host", a->o.host, "Address to listen on (default 0.0.0.0; 127.0.0.1: this machine only)");
+  sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
+  sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
+  sub->add_option("--display-hz", a->o.display_hz, "HIP / proxy / force TRANSFORMs per second (default 60)")
+      ->check(CLI::Range(1.0, 1000.0));
+  sub->add_option("--stale-ms", a->stale_ms, "No TRANSFORM on the stream for this long: zero force (default 100)")
+      ->check(CLI::Range(1.0, 10000.0));
+  sub->add_option("--receive-timeout-ms", a->o.receive_timeout_ms,
+                  "Longest silence inside a message before the client is dropped (default 2000)")
+      ->check(CLI::Range(10, 600000));
+  sub->add_option("--seconds", a->o.seconds, "Stop after this long (default: on SIGINT / SIGTERM only)")
+      ->check(CLI::Range(0.0, 1e7));
+  sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
+  return {sub, [a](const std::string& device) {
+            service::ServeOptions o = a->o;
+            if (a->offset.size() == 3) o.offset_mm = {a->offset[0], a->offset[1], a->offset[2]};
+            o.stale_s = a->stale_ms * 1e-3;
+            o.run.device = device;
+            o.run.progress = false;
+            const io::Scene scene = io::load_scene(a->scene);
+            return service::serve(scene, o, std::cout);
+          }};
+}
+
+}  // namespace isotouch::app

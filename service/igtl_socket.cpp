@@ -1,0 +1,134 @@
+#include "igtl_socket.h"
+
+#include <arpa/inet.h>
+#include <cerrno>
+#include <cstring>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <stdexcept>
+#include <sys/socket.h>
+#include <unistd.h>
+
+namespace isotouch::service {
+namespace {
+
+/// Waits up to `ms` for `events` on `fd`: >0 ready, 0 timed out, <0 error.
+int wait_for(int fd, short events, int ms) {
+  pollfd p{fd, events, 0};
+  for (;;) {
+    const int r = ::poll(&p, 1, ms);
+    if (r < 0 && errno == EINTR) continue;
+    return r;
+  }
+}
+
+}  // namespace
+
+Listener::Listener(const std::string& host, int port) {
+  fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd_ < 0) throw std::runtime_error(std::string("socket: ") + std::strerror(errno));
+  const int one = 1;
+  ::setsockopt(fd_, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(std::uint16_t(port));
+  const std::string where = host + ":" + std::to_string(port);
+  if (port < 0 || port > 65535 || ::inet_pton(AF_INET, host.c_str(), &a.sin_addr) != 1) {
+    ::close(fd_);
+    throw std::runtime_error("listen on " + where + ": not an IPv4 address and port");
+  }
+  if (::bind(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 || ::listen(fd_, 16) != 0) {
+    const std::string e = std::strerror(errno);
+    ::close(fd_);
+    throw std::runtime_error("listen on " + where + ": " + e);
+  }
+  socklen_t len = sizeof a;
+  ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &len);
+  port_ = ntohs(a.sin_port);
+}
+
+Listener::~Listener() { ::close(fd_); }
+
+int Listener::accept(int timeout_ms) {
+  if (wait_for(fd_, POLLIN, timeout_ms) <= 0) return -1;
+  const int c = ::accept4(fd_, nullptr, nullptr, SOCK_CLOEXEC);
+  if (c >= 0) {
+    const int one = 1;
+    ::setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  }
+  return c;
+}
+
+Connection::Connection(int fd, int receive_timeout_ms, const std::atomic<bool>* stop)
+    : fd_(fd), timeout_ms_(receive_timeout_ms), stop_(stop) {}
+
+Connection::~Connection() { ::close(fd_); }
+
+void Connection::shutdown() {
+  alive_ = false;
+  ::shutdown(fd_, SHUT_RDWR);
+}
+
+std::size_t Connection::read(void* dst, std::size_t n, bool first) {
+  auto* p = static_cast<std::uint8_t*>(dst);
+  std::size_t got = 0;
+  int waited_ms = 0;
+  while (got < n) {
+    const int slice = 100;
+    const int r = wait_for(fd_, POLLIN, slice);
+    if (r < 0) {
+      why_ = std::string("poll: ") + std::strerror(errno);
+      break;
+    }
+    if (r == 0) {
+      if (stop_ && stop_->load()) {
+        why_ = "the server is stopping";
+        return first && got == 0 ? 0 : got;
+      }
+      waited_ms += slice;
+      if (!(first && got == 0) && waited_ms >= timeout_ms_) {
+        why_ = std::to_string(got) + " of " + std::to_string(n) + " bytes arrived, then nothing for " +
+               std::to_string(timeout_ms_) + " ms";
+        break;
+      }
+      continue;
+    }
+    const ssize_t k = ::recv(fd_, p + got, n - got, 0);
+    if (k == 0) {
+      why_ = "the connection closed after " + std::to_string(got) + " of " + std::to_string(n) + " bytes";
+      break;
+    }
+    if (k < 0) {
+      if (errno == EINTR || errno == EAGAIN) continue;
+      why_ = std::string("recv: ") + std::strerror(errno);
+      break;
+    }
+    got += std::size_t(k);
+    waited_ms = 0;
+  }
+  return got;
+}
+
+bool Connection::send(const void* data, std::size_t n, bool droppable) {
+  std::lock_guard<std::mutex> lock(send_mu_);
+  const auto* p = static_cast<const std::uint8_t*>(data);
+  std::size_t sent = 0;
+  if (droppable && alive_) {
+    const ssize_t k = ::send(fd_, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (k < 0 && errno == EAGAIN) return false;  // not reading: dropped, the connection kept
+    if (k > 0) sent = std::size_t(k);
+    if (k < 0 && errno != EINTR) alive_ = false;
+  }
+  while (alive_ && sent < n) {
+    if (wait_for(fd_, POLLOUT, timeout_ms_) <= 0) break;
+    const ssize_t k = ::send(fd_, p + sent, n - sent, MSG_NOSIGNAL | MSG_DONTWAIT);
+    if (k < 0 && (errno == EINTR || errno == EAGAIN)) continue;
+    if (k <= 0) break;
+    sent += std::size_t(k);
+  }
+  if (sent < n) alive_ = false;
+  return sent == n;
+}
+
+}  // namespace isotouch::service

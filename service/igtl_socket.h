@@ -1,0 +1,67 @@
+// igtl_socket.h - TCP connections for OpenIGTLink, owned here rather than by the library's
+// igtl::Socket for its two traps: its Send raises SIGPIPE on a dead peer (which kills the
+// process), and its blocking Receive of a truncated body waits forever. Here every send uses
+// MSG_NOSIGNAL and a send deadline, and every read inside a message has a deadline.
+// Part of isotouch::service.
+#pragma once
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <string>
+
+#include "igtl_message.h"
+
+namespace isotouch::service {
+
+/// A listening TCP socket.
+class Listener {
+ public:
+  /// Binds `host` ("127.0.0.1", "0.0.0.0") and `port` (0: any free port) and listens.
+  /// @throws std::runtime_error naming the address and the system's reason.
+  Listener(const std::string& host, int port);
+  ~Listener();
+  Listener(const Listener&) = delete;
+  Listener& operator=(const Listener&) = delete;
+  int port() const { return port_; }
+  /// A connected socket, or -1 when none arrived within `timeout_ms`.
+  int accept(int timeout_ms);
+
+ private:
+  int fd_ = -1;
+  int port_ = 0;
+};
+
+/// One connected client: reads with deadlines, sends that never raise SIGPIPE.
+class Connection final : public ByteSource {
+ public:
+  /// Owns `fd`. `receive_timeout_ms`: the longest wait for the next byte inside a message;
+  /// `stop`: ends the wait for a new message (read() then returns 0).
+  Connection(int fd, int receive_timeout_ms, const std::atomic<bool>* stop);
+  ~Connection() override;
+  Connection(const Connection&) = delete;
+  Connection& operator=(const Connection&) = delete;
+
+  std::size_t read(void* dst, std::size_t n, bool first) override;
+  std::string why() const override { return why_; }
+  /// Sends all `n` bytes within the receive timeout (any thread; sends are serialised).
+  /// False, and the connection marked dead, when the peer is gone or does not read.
+  bool send(const void* data, std::size_t n, bool droppable);
+  bool send(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), false); }
+  /// As send(), but when the peer's receive buffer is full (a client that never reads, like
+  /// a tracker) the bytes are dropped and false returned, the connection kept.
+  bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
+  bool alive() const { return alive_.load(); }
+  /// Shuts the socket down (a blocked read returns).
+  void shutdown();
+
+ private:
+  int fd_;
+  int timeout_ms_;
+  const std::atomic<bool>* stop_;
+  std::string why_;
+  std::mutex send_mu_;
+  std::atomic<bool> alive_{true};
+};
+
+}  // namespace isotouch::service

@@ -1,0 +1,143 @@
+#include "image_volume.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstring>
+#include <sstream>
+
+#include "volume_io.h"
+
+namespace isotouch::service {
+namespace {
+
+[[noreturn]] void refuse(const std::string& device, const std::string& why) {
+  throw engine::VolumeError("igtl:" + device + ": " + why);
+}
+
+template <class T>
+T take(const unsigned char* p, bool swap) {
+  unsigned char b[sizeof(T)];
+  std::memcpy(b, p, sizeof(T));
+  if (swap) std::reverse(b, b + sizeof(T));
+  T v;
+  std::memcpy(&v, b, sizeof(T));
+  return v;
+}
+
+/// The voxels as float, x fastest (the wire's order), in the image's own byte order.
+void copy_voxels(igtl::ImageMessage& image, engine::Volume& v) {
+  const auto* p = static_cast<const unsigned char*>(image.GetScalarPointer());
+  const bool little_host = [] { const std::uint16_t one = 1; unsigned char c; std::memcpy(&c, &one, 1); return c == 1; }();
+  const bool swap = (image.GetEndian() == igtl::ImageMessage::ENDIAN_LITTLE) != little_host;
+  const std::size_t n = v.grid.voxel_count();
+  v.voxels.resize(n);
+  using I = igtl::ImageMessage;
+  for (std::size_t i = 0; i < n; ++i) {
+    switch (image.GetScalarType()) {
+      case I::TYPE_INT8: v.voxels[i] = float(take<std::int8_t>(p + i, swap)); break;
+      case I::TYPE_UINT8: v.voxels[i] = float(take<std::uint8_t>(p + i, swap)); break;
+      case I::TYPE_INT16: v.voxels[i] = float(take<std::int16_t>(p + 2 * i, swap)); break;
+      case I::TYPE_UINT16: v.voxels[i] = float(take<std::uint16_t>(p + 2 * i, swap)); break;
+      case I::TYPE_INT32: v.voxels[i] = float(take<std::int32_t>(p + 4 * i, swap)); break;
+      case I::TYPE_UINT32: v.voxels[i] = float(take<std::uint32_t>(p + 4 * i, swap)); break;
+      case I::TYPE_FLOAT32: v.voxels[i] = take<float>(p + 4 * i, swap); break;
+      default: v.voxels[i] = float(take<double>(p + 8 * i, swap)); break;
+    }
+  }
+}
+
+const char* type_name(int t) {
+  using I = igtl::ImageMessage;
+  switch (t) {
+    case I::TYPE_INT8: return "char";
+    case I::TYPE_UINT8: return "unsigned_char";
+    case I::TYPE_INT16: return "short";
+    case I::TYPE_UINT16: return "unsigned_short";
+    case I::TYPE_INT32: return "int";
+    case I::TYPE_UINT32: return "unsigned_int";
+    case I::TYPE_FLOAT32: return "float";
+    default: return "double";
+  }
+}
+
+/// Dimensions: whole 3-D images only, within io's limits.
+void check_size(igtl::ImageMessage& image, const std::string& dev, engine::Volume& v) {
+  int size[3], sub[3], off[3];
+  image.GetDimensions(size);
+  image.GetSubVolume(sub, off);
+  std::ostringstream d;
+  d << size[0] << " x " << size[1] << " x " << size[2];
+  for (int a = 0; a < 3; ++a)
+    if (size[a] < 2)
+      refuse(dev, "image is " + d.str() + " voxels: a single slice (or line) is not a volume; send a 3-D image of "
+                  "at least 2 voxels along each axis");
+  if (sub[0] != size[0] || sub[1] != size[1] || sub[2] != size[2])
+    refuse(dev, "image is a sub-volume of a " + d.str() + " image; only whole images are taken");
+  if (image.GetNumComponents() != 1)
+    refuse(dev, "image has " + std::to_string(image.GetNumComponents()) + " components per voxel; only scalar images are taken");
+  const std::uint64_t total = std::uint64_t(size[0]) * std::uint64_t(size[1]) * std::uint64_t(size[2]);
+  if (total > io::kMaxVoxels) refuse(dev, "image is " + d.str() + " voxels, past the limit of " + std::to_string(io::kMaxVoxels));
+  v.grid.dims = {size[0], size[1], size[2]};
+}
+
+/// Spacing, direction and origin (LPS, m) from the header's spacing, normals and centre.
+void place(igtl::ImageMessage& image, const std::string& dev, engine::Volume& v) {
+  float sp[3];
+  image.GetSpacing(sp);
+  igtl::Matrix4x4 m;
+  image.GetMatrix(m);
+  const double flip[3] = {image.GetCoordinateSystem() == igtl::ImageMessage::COORDINATE_LPS ? 1.0 : -1.0,
+                          image.GetCoordinateSystem() == igtl::ImageMessage::COORDINATE_LPS ? 1.0 : -1.0, 1.0};
+  double half_mm[3] = {0, 0, 0};  // D (spacing * (dims - 1) / 2), the header's frame
+  for (int a = 0; a < 3; ++a) {
+    if (!(std::isfinite(sp[a]) && sp[a] > 0))
+      refuse(dev, "spacing along axis " + std::to_string(a) + " is " + std::to_string(sp[a]) + " mm (must be positive)");
+    if (double(v.grid.dims[a] - 1) * sp[a] * 1e-3 > io::kMaxExtentM)
+      refuse(dev, "extent along axis " + std::to_string(a) + " is past the limit of " + std::to_string(io::kMaxExtentM) + " m");
+    for (int r = 0; r < 3; ++r) half_mm[r] += double(m[r][a]) * double(sp[a]) * double(v.grid.dims[a] - 1) / 2.0;
+  }
+  double worst = 0;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) {
+      double dot = 0;
+      for (int r = 0; r < 3; ++r) dot += double(m[r][a]) * double(m[r][b]);
+      worst = std::max(worst, std::abs(dot - (a == b ? 1.0 : 0.0)));
+    }
+  if (!(worst <= 1e-3))
+    refuse(dev, "direction columns are not unit and perpendicular (max |D^T D - I| = " + std::to_string(worst) + ")");
+  double origin_mm[3];
+  for (int r = 0; r < 3; ++r) {
+    origin_mm[r] = flip[r] * (double(m[r][3]) - half_mm[r]);
+    if (!(std::isfinite(origin_mm[r]) && std::abs(origin_mm[r]) * 1e-3 <= io::kMaxOriginM))
+      refuse(dev, "image centre along axis " + std::to_string(r) + " is " + std::to_string(m[r][3]) +
+                      " mm (must be finite, within " + std::to_string(io::kMaxOriginM) + " m)");
+    for (int a = 0; a < 3; ++a) v.direction[std::size_t(3 * r + a)] = flip[r] * double(m[r][a]);
+  }
+  v.grid.spacing_m = {sp[0] * 1e-3, sp[1] * 1e-3, sp[2] * 1e-3};
+  v.grid.origin_m = {origin_mm[0] * 1e-3, origin_mm[1] * 1e-3, origin_mm[2] * 1e-3};
+  v.direction_is_identity = true;
+  for (int i = 0; i < 9; ++i)
+    if (std::abs(v.direction[std::size_t(i)] - (i % 4 == 0 ? 1.0 : 0.0)) > 1e-6) v.direction_is_identity = false;
+}
+
+}  // namespace
+
+engine::Volume volume_from_image(igtl::ImageMessage& image) {
+  const std::string dev = image.GetDeviceName();
+  std::string lower = dev;
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (lower.find("label") != std::string::npos)
+    refuse(dev, "the device name says label map; label maps are not supported yet (send a scalar image)");
+  engine::Volume v;
+  check_size(image, dev, v);
+  place(image, dev, v);
+  v.path = "igtl:" + dev;
+  v.reader = "igtl:IMAGE";
+  v.component_type = type_name(image.GetScalarType());
+  copy_voxels(image, v);
+  v.update_stats();
+  return v;
+}
+
+}  // namespace isotouch::service

@@ -1,0 +1,46 @@
+// serve.h - `isotouch serve`: an OpenIGTLink server (3D Slicer's OpenIGTLinkIF, PLUS, the
+// OpenIGTLink examples) hosting one live session (session/live_session.h).
+//
+//   client threads (one per connection): read_message ->
+//     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
+//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force)
+//     anything refused             -> a STATUS back naming why; the connection goes on when it can
+//   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
+//     (translation in mm, RAS) and "Force" (translation = force in N, RAS; PLUS's convention)
+//   main thread: accepts connections, starts and swaps the session, stops on a signal or
+//     after `seconds`.
+// Part of isotouch::serve.
+#pragma once
+#include <functional>
+#include <iosfwd>
+#include <string>
+
+#include "igtl_message.h"
+#include "run_scene.h"
+#include "scene.h"
+#include "vec3.h"
+
+namespace isotouch::service {
+
+struct ServeOptions {
+  std::string host = "0.0.0.0";       ///< address to listen on
+  int port = 18944;                   ///< 0: any free port (printed)
+  std::string stream = "StylusToTracker";  ///< device name of the TRANSFORMs that move the HIP
+  core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS]
+  double display_hz = 60;             ///< HIP / proxy / force TRANSFORMs sent per second
+  double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s]
+  int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped
+  double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
+  bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
+  MessageLimits limits;
+  run::RunOptions run;                ///< the Vulkan device (scene setup)
+};
+
+/// Serves `scene` (its volume first, its isovalue, passes and HRI parameters throughout).
+/// Prints "serve    listening on HOST:PORT" once listening, a line per client, volume and
+/// refusal, and the counters at the end.
+/// @return 0; 4 when servo ticks were faults; 128 + the signal when a signal stopped it.
+/// @throws std::runtime_error if the port cannot be opened; as setup_scene.
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log);
+
+}  // namespace isotouch::service

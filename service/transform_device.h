@@ -1,0 +1,64 @@
+// transform_device.h - a tracked tool's TRANSFORM stream as a haptic device, and the force
+// the servo renders for it, for `isotouch serve`. Part of isotouch::serve.
+//
+// Frames: the stream's translation is in mm in RAS (Slicer's and PLUS's frame); `offset_mm`
+// (RAS) is added to it (the workspace transform that maps a tracker's workspace into the
+// volume); the result is the point in the volume's physical frame, converted here to the
+// grid frame [m] the servo works in (engine/volume.h), so the servo's world_T_device is the
+// identity. The force goes the other way: grid axes -> LPS -> RAS [N].
+#pragma once
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <mutex>
+
+#include "device_io.h"
+#include "latest_value.h"
+#include "volume.h"
+
+namespace isotouch::service {
+
+class TransformDevice final : public servo::HapticDeviceIO {
+ public:
+  /// The volume whose physical frame the stream's points are in. Only while no servo runs.
+  void set_frame(const engine::Volume& v, const core::Vec3& offset_mm);
+  /// A TRANSFORM's translation [mm, RAS] arrived now (network thread).
+  void push_mm(const double t_mm[3]);
+  /// Messages pushed so far.
+  long pushed() const { return pushed_.load(); }
+
+  // Servo thread: no allocation, lock or syscall (the clock is the vDSO's).
+  core::Vec3 read_position_m() override { return read().position_m; }
+  servo::DeviceReading read() override;
+  void write_force_n(const core::Vec3& f) override;
+
+  /// The force to send now [N, RAS]: the servo's newest, or zero when the servo has not
+  /// written one for `stall_s` (stopped or stalled: no force left on). Any thread.
+  core::Vec3 force_ras_n(double stall_s) const;
+  /// Grid frame point [m] -> RAS [mm] (for the HIP and proxy sent out).
+  core::Vec3 grid_to_ras_mm(const core::Vec3& g) const;
+
+  static std::int64_t now_ns() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  }
+
+ private:
+  struct Pose {
+    double mm[3] = {0, 0, 0};
+    std::int64_t received_ns = 0;  // 0: nothing yet
+    std::uint64_t sequence = 0;
+  };
+  struct Force {
+    core::Vec3 f;
+    std::int64_t written_ns = 0;
+  };
+  servo::LatestValue<Pose> pose_;
+  Pose last_;  // servo thread
+  std::mutex push_mu_;
+  servo::LatestValue<Force> force_;
+  std::atomic<long> pushed_{0};
+  engine::Volume frame_;  // grid, direction (voxels left empty)
+  core::Vec3 offset_mm_;
+};
+
+}  // namespace isotouch::service

@@ -1,0 +1,58 @@
+// libFuzzer target for the OpenIGTLink message handling of `isotouch serve`: any bytes, read
+// as a client's stream, give messages that are kept, skipped or refused with a reason, never
+// a crash, a read past a body or an exception; a kept IMAGE converts to a volume with finite
+// placement and the voxel count its grid says, or is refused with a VolumeError.
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#include "image_volume.h"
+#include "igtl_message.h"
+
+using namespace isotouch;
+
+namespace {
+
+class Bytes final : public service::ByteSource {
+ public:
+  Bytes(const std::uint8_t* d, std::size_t n) : d_(d), n_(n) {}
+  std::size_t read(void* dst, std::size_t n, bool) override {
+    const std::size_t k = n < n_ - at_ ? n : n_ - at_;
+    if (k > 0) std::memcpy(dst, d_ + at_, k);
+    at_ += k;
+    return k;
+  }
+  std::string why() const override { return "end of input"; }
+
+ private:
+  const std::uint8_t* d_;
+  std::size_t n_, at_ = 0;
+};
+
+void check_image(igtl::ImageMessage& image) {
+  try {
+    const engine::Volume v = service::volume_from_image(image);
+    if (v.voxels.size() != v.grid.voxel_count()) __builtin_trap();
+    const core::Vec3 o = v.grid.origin_m;
+    if (!(std::isfinite(o.x) && std::isfinite(o.y) && std::isfinite(o.z))) __builtin_trap();
+  } catch (const engine::VolumeError& e) {
+    if (std::strlen(e.what()) == 0) __builtin_trap();
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  Bytes src(data, size);
+  service::MessageLimits limits;
+  limits.max_body_bytes = 1 << 20;
+  for (int i = 0; i < 64; ++i) {  // each message takes at least its 58-byte header
+    service::Incoming in = service::read_message(src, limits);
+    using K = service::Incoming::Kind;
+    if (in.kind == K::kClosed || in.kind == K::kBroken) break;
+    if (in.kind == K::kRefused && in.why.empty()) __builtin_trap();
+    if (in.kind == K::kImage) check_image(*in.image);
+  }
+  return 0;
+}

@@ -1,0 +1,301 @@
+// The OpenIGTLink service's message layer: messages built by the OpenIGTLink library (the
+// sender's side, as Slicer or PLUS would build them) read back through read_message, the
+// IMAGE -> volume conversion against loading the file, refusals, deadlines, dead peers.
+#include <gtest/gtest.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iostream>
+#include <iterator>
+#include <thread>
+
+#include <igtlImageMessage.h>
+#include <igtlStatusMessage.h>
+#include <igtlStringMessage.h>
+#include <igtlTransformMessage.h>
+
+#include "image_volume.h"
+#include "igtl_message.h"
+#include "igtl_socket.h"
+#include "transform_device.h"
+#include "igtl_test_sender.h"
+#include "temp_dir.h"
+#include "volume_io.h"
+
+namespace isotouch::service {
+namespace {
+using test::bytes_of;
+using test::image_of;
+
+const std::string kHead = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
+
+/// Bytes from a buffer (what a client sent), one read at a time.
+class MemorySource final : public ByteSource {
+ public:
+  explicit MemorySource(std::vector<std::uint8_t> b) : b_(std::move(b)) {}
+  std::size_t read(void* dst, std::size_t n, bool) override {
+    const std::size_t k = std::min(n, b_.size() - at_);
+    std::memcpy(dst, b_.data() + at_, k);
+    at_ += k;
+    return k;
+  }
+  std::string why() const override { return "end of buffer"; }
+
+ private:
+  std::vector<std::uint8_t> b_;
+  std::size_t at_ = 0;
+};
+
+engine::Volume received_volume(std::vector<std::uint8_t> bytes) {
+  MemorySource src(std::move(bytes));
+  Incoming in = read_message(src, MessageLimits{});
+  EXPECT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  if (in.kind != Incoming::Kind::kImage) return {};
+  return volume_from_image(*in.image);
+}
+
+/// Same voxels, and the 8 corner voxel centres in the same physical place within 1e-6 m.
+void expect_same_place(const engine::Volume& file, const engine::Volume& got) {
+  ASSERT_EQ(got.grid.dims, file.grid.dims);
+  ASSERT_EQ(got.voxels.size(), file.voxels.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < file.voxels.size(); ++i) differ += got.voxels[i] != file.voxels[i];
+  EXPECT_EQ(differ, 0u);
+  for (int k = 0; k < 8; ++k) {
+    const core::Vec3 idx{k & 1 ? file.grid.dims[0] - 1.0 : 0.0, k & 2 ? file.grid.dims[1] - 1.0 : 0.0,
+                         k & 4 ? file.grid.dims[2] - 1.0 : 0.0};
+    const core::Vec3 a = file.index_to_physical(idx), b = got.index_to_physical(idx);
+    EXPECT_LE(core::norm(a - b), 1e-6) << "corner " << k << ": file (" << a.x << ", " << a.y << ", " << a.z
+                                       << ") received (" << b.x << ", " << b.y << ", " << b.z << ")";
+  }
+}
+
+TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
+  const engine::Volume file = io::load_volume(kHead);
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_BIG)));
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
+}
+
+TEST(ServiceImage, RotatedAndShiftedHeadLandsWhereTheFileDoes) {
+  // The same voxels under a rotated direction and an offset: the centre, the RAS flip and
+  // the direction all show in the corners.
+  test::TempDir dir("isotouch-igtl");
+  const auto mhd = dir.path / "rotated.mhd";
+  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
+                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
+                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
+                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
+  const engine::Volume file = io::load_volume(mhd.string());
+  ASSERT_FALSE(file.direction_is_identity);
+  expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
+}
+
+TEST(ServiceImage, SingleSliceIsRefusedSayingWhy) {
+  // What the upstream Imager examples send: 256 x 256 x 1 uint8.
+  MemorySource src(test::single_slice());
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  try {
+    volume_from_image(*in.image);
+    FAIL() << "a single slice was taken as a volume";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find("single slice"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("256 x 256 x 1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ServiceImage, LabelMapIsRefused) {
+  const engine::Volume file = io::load_volume(kHead);
+  MemorySource src(image_of(file, igtl::ImageMessage::ENDIAN_BIG, "HeadLabelMap"));
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage);
+  EXPECT_THROW(volume_from_image(*in.image), engine::VolumeError);
+}
+
+std::vector<std::uint8_t> transform_bytes(const char* name, float x, float y, float z) {
+  igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+  t->SetDeviceName(name);
+  igtl::Matrix4x4 m;
+  igtl::IdentityMatrix(m);
+  m[0][3] = x;
+  m[1][3] = y;
+  m[2][3] = z;
+  t->SetMatrix(m);
+  return bytes_of(t);
+}
+
+TEST(ServiceMessages, TransformStringAndUnknownTypes) {
+  std::vector<std::uint8_t> all = transform_bytes("StylusToTracker", 1.5f, -2, 30);
+  igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();  // not a kept type: skipped
+  s->SetDeviceName("X");
+  s->SetStatusString("hello");
+  const auto sb = bytes_of(s);
+  all.insert(all.end(), sb.begin(), sb.end());
+  igtl::StringMessage::Pointer str = igtl::StringMessage::New();
+  str->SetDeviceName("CMD");
+  str->SetString("isovalue 500");
+  const auto tb = bytes_of(str);
+  all.insert(all.end(), tb.begin(), tb.end());
+  MemorySource src(all);
+  Incoming a = read_message(src, MessageLimits{});
+  ASSERT_EQ(a.kind, Incoming::Kind::kTransform) << a.why;
+  EXPECT_EQ(a.device, "StylusToTracker");
+  EXPECT_DOUBLE_EQ(a.matrix[0][3], 1.5);
+  EXPECT_DOUBLE_EQ(a.matrix[1][3], -2);
+  EXPECT_DOUBLE_EQ(a.matrix[2][3], 30);
+  Incoming b = read_message(src, MessageLimits{});
+  EXPECT_EQ(b.kind, Incoming::Kind::kSkipped);
+  EXPECT_EQ(b.type, "STATUS");
+  Incoming c = read_message(src, MessageLimits{});
+  ASSERT_EQ(c.kind, Incoming::Kind::kString) << c.why;
+  EXPECT_EQ(c.text, "isovalue 500");
+  EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kClosed);
+}
+
+TEST(ServiceMessages, WrongCrcIsRefusedAndTheStreamGoesOn) {
+  std::vector<std::uint8_t> all = transform_bytes("T", 1, 2, 3);
+  all[58 + 5] ^= 0x40;  // a body byte: the CRC no longer matches
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  Incoming a = read_message(src, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(a.why.find("CRC"), std::string::npos) << a.why;
+  Incoming b = read_message(src, MessageLimits{});
+  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
+  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+}
+
+TEST(ServiceMessages, TruncatedAndOversizedBodiesAreRefused) {
+  std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
+  t.resize(t.size() - 10);
+  MemorySource cut(t);
+  Incoming a = read_message(cut, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(a.why.find("truncated"), std::string::npos) << a.why;
+
+  const engine::Volume file = io::load_volume(kHead);
+  MessageLimits small;
+  small.max_body_bytes = 1000;
+  MemorySource big(image_of(file, igtl::ImageMessage::ENDIAN_BIG));
+  Incoming b = read_message(big, small);
+  EXPECT_EQ(b.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(b.why.find("past the limit of 1000"), std::string::npos) << b.why;
+
+  // An IMAGE whose own header announces more voxels than its body holds (the body size and
+  // CRC consistent): the library would read past the body.
+  std::vector<std::uint8_t> img = image_of(file, igtl::ImageMessage::ENDIAN_BIG);
+  img[58 + 6 + 1] = 65;  // size along x: 64 -> 65
+  img[58 + 66 + 1] = 65;  // and the sub-volume with it
+  MemorySource lie(img);
+  Incoming c = read_message(lie, MessageLimits{});
+  EXPECT_EQ(c.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(c.why.find("announces"), std::string::npos) << c.why;
+}
+
+TEST(ServiceMessages, StatusCarriesTheReason) {
+  const auto b = pack_status(igtl::StatusMessage::STATUS_CONFIG_ERROR, "ImagerClient", "a single slice");
+  igtl::StatusMessage::Pointer s = igtl::StatusMessage::New();
+  s->AllocatePack();
+  std::memcpy(s->GetPackPointer(), b.data(), 58);
+  s->Unpack();
+  s->AllocatePack();
+  std::memcpy(s->GetPackBodyPointer(), b.data() + 58, b.size() - 58);
+  ASSERT_TRUE(s->Unpack(1) & igtl::MessageHeader::UNPACK_BODY);
+  EXPECT_EQ(s->GetCode(), igtl::StatusMessage::STATUS_CONFIG_ERROR);
+  EXPECT_STREQ(s->GetStatusString(), "a single slice");
+  EXPECT_STREQ(s->GetDeviceName(), "ImagerClient");
+}
+
+TEST(ServiceSocket, TruncatedBodyEndsAtTheReceiveTimeout) {
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
+  ASSERT_EQ(::write(sv[1], t.data(), t.size() - 20), ssize_t(t.size() - 20));  // and then nothing
+  std::atomic<bool> stop{false};
+  Connection c(sv[0], 300, &stop);
+  const auto t0 = std::chrono::steady_clock::now();
+  Incoming in = read_message(c, MessageLimits{});
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(in.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(in.why.find("nothing for 300 ms"), std::string::npos) << in.why;
+  EXPECT_LT(s, 2.0);
+  ::close(sv[1]);
+}
+
+TEST(ServiceSocket, SendToADeadPeerFailsWithoutSigpipe) {
+  // SIGPIPE's default action would end this test process.
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  ::close(sv[1]);
+  Connection c(sv[0], 300, nullptr);
+  const auto b = transform_bytes("T", 1, 2, 3);
+  EXPECT_FALSE(c.send(b));
+  EXPECT_FALSE(c.alive());
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceMessages, ImageBodyPastTheLibrarysBufferIsRefused) {
+  // Found by fuzz_igtl: an IMAGE whose image header the library sizes differently from the
+  // message header's body size; reading the body into the library's buffer overflowed it.
+  std::ifstream f(std::string(ISOTOUCH_TEST_SOURCE) + "/fuzz/corpus_igtl/image_body_past_library_buffer", std::ios::binary);
+  std::vector<std::uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  ASSERT_GT(b.size(), 58u);
+  MemorySource src(b);
+  Incoming in = read_message(src, MessageLimits{});
+  EXPECT_EQ(in.kind, Incoming::Kind::kRefused) << in.why;
+  EXPECT_FALSE(in.why.empty());
+  std::cout << "refused: " << in.why << "\n";
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
+  // A rotated volume: RAS mm + offset -> LPS m -> grid frame, and the force back to RAS.
+  engine::Volume v;
+  v.grid.dims = {4, 4, 4};
+  v.grid.spacing_m = {1e-3, 2e-3, 3e-3};
+  v.grid.origin_m = {0.01, -0.02, 0.03};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};  // row-major: index x -> LPS +y (posterior), index y -> LPS -x
+  v.direction_is_identity = false;
+  TransformDevice d;
+  d.set_frame(v, {5, 6, 7});
+  EXPECT_EQ(d.read().received_ns, 1) << "before any TRANSFORM the reading must be old (stale)";
+  const double t[3] = {10, 20, 30};  // RAS mm
+  d.push_mm(t);
+  const servo::DeviceReading r = d.read();
+  EXPECT_GT(r.received_ns, 1);
+  const core::Vec3 lps{-(10 + 5) * 1e-3, -(20 + 6) * 1e-3, (30 + 7) * 1e-3};
+  EXPECT_LE(core::norm(v.to_physical(r.position_m) - lps), 1e-12);
+  // A force along grid +x is LPS (0, +2, 0) = RAS (0, -2, 0).
+  d.write_force_n({2, 0, 0});
+  const core::Vec3 f = d.force_ras_n(0.5);
+  EXPECT_NEAR(f.x, 0, 1e-12);
+  EXPECT_NEAR(f.y, -2, 1e-12);
+  EXPECT_NEAR(f.z, 0, 1e-12);
+  // The servo stopped writing: after the stall time the force sent is zero.
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  EXPECT_EQ(core::norm(d.force_ras_n(0.02)), 0.0);
+  // The HIP sent out: grid -> RAS mm, the inverse of the stream's mapping (offset aside).
+  const core::Vec3 ras = d.grid_to_ras_mm(r.position_m);
+  EXPECT_NEAR(ras.x, 15, 1e-9);
+  EXPECT_NEAR(ras.y, 26, 1e-9);
+  EXPECT_NEAR(ras.z, 37, 1e-9);
+}
+
+}  // namespace
+}  // namespace isotouch::service

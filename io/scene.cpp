@@ -467,8 +467,11 @@ void parse_friction(const Reader& r, const json& sv, Scene& s) {
 void parse_tool(const Reader& r, const json& sv, Scene& s) {
   if (!sv.contains("tool")) return;
   const json& tl = sv.at("tool");
-  if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r}, got " + tl.dump());
-  r.only(tl, "servo.tool", {"radius_mm"});
+  if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r} or {\"point\": true}, got " + tl.dump());
+  r.only(tl, "servo.tool", {"radius_mm", "point"});
+  s.point_probe = r.boolean(tl, "servo.tool", "point", false);
+  if (s.point_probe && tl.contains("radius_mm"))
+    r.fail("servo.tool.point", "a point has no radius: give \"point\": true or \"radius_mm\", not both");
   s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
   if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
     r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
@@ -476,6 +479,21 @@ void parse_tool(const Reader& r, const json& sv, Scene& s) {
   if (s.hri.tool_radius_m > 0 && (s.hri.friction.any() || s.hri.force_shading))
     r.fail("servo.tool.radius_mm", "friction and force shading are not implemented for a spherical tool; "
                                    "remove them or set radius_mm to 0, got " + tl.at("radius_mm").dump());
+}
+
+// The button's carve or drill brush (the one the probe carries, edits.button) is felt as the
+// spherical tool of its radius unless the scene gives the tool (servo.tool.radius_mm) or
+// keeps the point (servo.tool.point). Without a button the brush never cuts at the probe.
+void tool_from_brush(const Reader& r, Scene& s) {
+  const std::string& kind = s.edits.brush.kind;
+  if (!s.edits.present || s.edits.button_down.empty() || (kind != "carve" && kind != "drill")) return;
+  if (s.point_probe || s.hri.tool_radius_m > 0) return;
+  if (s.hri.variant == servo::Variant::kPaper || s.hri.friction.any() || s.hri.force_shading)
+    r.fail("edits.brush", "a " + kind + " brush is felt as the spherical tool of its radius, which the \"paper\" "
+                          "variant, friction and force shading do not render; add \"servo\": {\"tool\": {\"point\": true}} "
+                          "to keep the point");
+  s.hri.tool_radius_m = 1e-3 * s.edits.brush.radius_mm;
+  s.tool_from_brush = true;
 }
 
 void parse_servo(const Reader& r, const json& root, Scene& s) {
@@ -617,6 +635,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     if (s.engine.mode != "sparse")
       r.fail("edits", "edits publish bricked snapshots brick by brick: they need \"engine\": {\"mode\": \"sparse\"}, got \"" +
                           s.engine.mode + "\"");
+    tool_from_brush(r, s);
   }
   const json& out = r.section(root, "outputs");
   r.only(out, "outputs", {"trace_csv", "plots"});

@@ -114,6 +114,12 @@ struct Scene {
   /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the
   /// run warns and reports the bound (stability experiments).
   bool allow_unstable_stiffness = false;
+  /// servo.tool.point (default false): the button's carve or drill brush is felt as a
+  /// point, not as the spherical tool of the brush's radius (for comparison with the burr).
+  bool point_probe = false;
+  /// The tool's radius came from the button's carve or drill brush (edits.brush with
+  /// edits.button intervals, servo.tool.radius_mm not given): what touches is what cuts.
+  bool tool_from_brush = false;
   sim::ScriptParams script;
   bool write_trace = true;
   bool draw_plots = true;

@@ -67,6 +67,9 @@ struct EditFigures {
   double breakthrough_t_s = 0, breakthrough_from_n = 0, breakthrough_to_n = 0, breakthrough_fall_s = 0;
   bool channel_measured = false;
   int channel_slices = 0;
+  /// The brush that cut at the VHIP: its radius and how far it reaches past the burr's
+  /// surface [m] (run::tool_brush_margin_m; 0 with a point tool).
+  double cut_radius_m = 0, cut_margin_m = 0;
   double burr_radius_m = 0, channel_min_open_radius_m = 0, channel_min_at_depth_m = 0, channel_min_fraction = 0;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written

@@ -102,6 +102,8 @@ void drill_figures(const Scene& scene, const SceneSetup& setup, const std::vecto
   e.drill = true;
   const double tool = setup.hri.tool_radius_m;
   e.burr_radius_m = tool > 0 ? tool : scene.edits.brush.radius_mm * 1e-3;
+  e.cut_radius_m = 1e-3 * run::brush_at_tool(scene, setup.volume, scene.edits.brush).radius_mm;
+  e.cut_margin_m = e.cut_radius_m - e.burr_radius_m;
   std::vector<double> t, f;
   std::vector<char> down;
   std::vector<Vec3> centres;

@@ -138,6 +138,11 @@ std::string drill_rows(const EditFigures& e, const Scene& scene) {
   else
     md << "none: |F| never fell to a tenth of the " << fmt(scene.edits.brush.force_threshold_n, 4)
        << " N drill threshold for good while the button was down |\n";
+  md << "| cutting brush | radius " << fmt(e.cut_radius_m * 1e3, 4) << " mm: "
+     << (scene.hri.tool_radius_m > 0 ? "the spherical tool's " + fmt(e.burr_radius_m * 1e3, 4) + " mm plus " +
+                                            fmt(e.cut_margin_m * 1e3, 4) + " mm (half the largest voxel spacing)"
+                                      : std::string("felt as a point (servo.tool.point)"))
+     << " |\n";
   md << "| channel | ";
   if (e.channel_measured)
     md << "narrowest open radius **" << fmt(e.channel_min_open_radius_m * 1e3, 4) << " mm = "
@@ -154,6 +159,9 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
       !e.drill ? nlohmann::ordered_json(nullptr)
                : nlohmann::ordered_json{
                      {"burr_radius_mm", e.burr_radius_m * 1e3},
+                     {"probe", scene.hri.tool_radius_m > 0 ? "sphere" : "point"},
+                     {"cut_radius_mm", e.cut_radius_m * 1e3},
+                     {"cut_margin_mm", e.cut_margin_m * 1e3},
                      {"breakthrough", !e.breakthrough ? nlohmann::ordered_json(nullptr)
                                                       : nlohmann::ordered_json{{"t_s", e.breakthrough_t_s},
                                                                                {"from_n", e.breakthrough_from_n},

@@ -90,11 +90,15 @@ io::Recording recording_header(const Scene& scene, const SceneSetup& setup) {
   return rec;
 }
 
+double tool_brush_margin_m(const engine::Volume& vol) {
+  const auto& sp = vol.grid.spacing_m;
+  return 0.5 * std::max({sp.x, sp.y, sp.z});
+}
+
 io::BrushSpec brush_at_tool(const Scene& scene, const engine::Volume& vol, const io::BrushSpec& b) {
   if (!(scene.hri.tool_radius_m > 0)) return b;
-  const auto& sp = vol.grid.spacing_m;
   io::BrushSpec t = b;
-  t.radius_mm = 1e3 * (scene.hri.tool_radius_m + std::max({sp.x, sp.y, sp.z}));
+  t.radius_mm = 1e3 * (scene.hri.tool_radius_m + tool_brush_margin_m(vol));
   return t;
 }
 

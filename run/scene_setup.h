@@ -50,10 +50,14 @@ session::Brush make_brush(const io::BrushSpec& b, const session::BrushTargets& d
 /// The drill's rate in value units per (N s): "rate" as given, or "removal_per_n_s" times
 /// the targets' |material - empty|.
 double drill_rate(const io::BrushSpec& b, const session::BrushTargets& t);
-/// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0) the VHIP is
-/// the tool's centre and the brush takes the tool's size, reaching one voxel (the largest
-/// spacing: the surface the burr touches lies within one cell of it) past its surface, so it
-/// removes what the burr's surface touches; a point tool keeps the scene's radius.
+/// How far past the spherical tool's surface a brush at the VHIP reaches [m]: half the
+/// largest voxel spacing, so the brush's full-strength core covers the surface the burr
+/// touches (which lies within a cell of it) and the channel stays the burr's width.
+double tool_brush_margin_m(const engine::Volume& vol);
+/// A brush applied at the VHIP: with a spherical tool (servo.tool.radius_mm > 0, or the
+/// carve or drill brush's radius by default) the VHIP is the tool's centre and the brush
+/// takes the tool's radius plus tool_brush_margin_m, so it removes what the burr's surface
+/// touches; a point tool keeps the scene's radius.
 io::BrushSpec brush_at_tool(const io::Scene& scene, const engine::Volume& vol, const io::BrushSpec& b);
 
 /// The scene's engine.samples as a core::SampleFormat.

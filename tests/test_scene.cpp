@@ -100,6 +100,45 @@ TEST(Scene, SphericalTool) {
   EXPECT_EQ(parse_scene(base + R"({"variant": "paper", "tool": {"radius_mm": 0}}})", "s.json").hri.tool_radius_m, 0.0);
 }
 
+// The button's carve or drill brush is felt as the spherical tool of its radius unless the
+// scene gives the tool or keeps the point; an add brush, or no button, leaves the point.
+TEST(Scene, BurrIsTheTool) {
+  auto scene = [](const std::string& servo, const std::string& kind, const std::string& button = "[[0.5, 1]]") {
+    return R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "engine": {"mode": "sparse"}, "servo": )" + servo +
+           R"(, "edits": {"brush": {"kind": ")" + kind + R"(", "radius_mm": 3}, "button": )" + button + "}}";
+  };
+  const auto drill = parse_scene(scene("{}", "drill"), "s.json");
+  EXPECT_DOUBLE_EQ(drill.hri.tool_radius_m, 0.003);
+  EXPECT_TRUE(drill.tool_from_brush);
+  EXPECT_DOUBLE_EQ(parse_scene(scene("{}", "carve"), "s.json").hri.tool_radius_m, 0.003);
+  EXPECT_EQ(parse_scene(scene("{}", "add"), "s.json").hri.tool_radius_m, 0.0);
+  EXPECT_EQ(parse_scene(scene("{}", "drill", "[]"), "s.json").hri.tool_radius_m, 0.0);
+  const auto point = parse_scene(scene(R"({"tool": {"point": true}})", "drill"), "s.json");
+  EXPECT_EQ(point.hri.tool_radius_m, 0.0);
+  EXPECT_TRUE(point.point_probe);
+  const auto given = parse_scene(scene(R"({"tool": {"radius_mm": 2}})", "drill"), "s.json");
+  EXPECT_DOUBLE_EQ(given.hri.tool_radius_m, 0.002);
+  EXPECT_FALSE(given.tool_from_brush);
+  expect_error(scene(R"({"tool": {"point": true, "radius_mm": 2}})", "drill"), {"'servo.tool.point'", "both"});
+  expect_error(scene(R"({"tool": {"point": 1}})", "drill"), {"'servo.tool.point'", "true or false"});
+  expect_error(scene(R"({"variant": "paper"})", "drill"), {"'edits.brush'", "point"});
+  EXPECT_EQ(parse_scene(scene(R"({"variant": "paper", "tool": {"point": true}})", "drill"), "s.json").hri.tool_radius_m, 0.0);
+}
+
+// The brush that cuts at the VHIP: the tool's radius plus half the largest voxel spacing
+// (the head CT's 3.2 x 3.2 x 1.5 mm: 4.5 + 1.6 mm); a point keeps the brush's radius.
+TEST(Scene, CuttingBrushIsTheToolsRadius) {
+  isotouch::engine::Volume vol;
+  vol.grid.spacing_m = {3.2e-3, 3.2e-3, 1.5e-3};
+  isotouch::io::Scene s;
+  isotouch::io::BrushSpec b;
+  b.radius_mm = 4.5;
+  EXPECT_DOUBLE_EQ(isotouch::run::brush_at_tool(s, vol, b).radius_mm, 4.5);
+  s.hri.tool_radius_m = 4.5e-3;
+  EXPECT_NEAR(isotouch::run::tool_brush_margin_m(vol), 1.6e-3, 1e-12);
+  EXPECT_NEAR(isotouch::run::brush_at_tool(s, vol, b).radius_mm, 6.1, 1e-9);
+}
+
 TEST(Scene, DuplicateKeyIsAnError) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "servo": {"stiffness_n_per_m": 800,
                    "stiffness_n_per_m": 80000}})",

@@ -308,6 +308,10 @@ TEST(Replay, TheRecordedEditSessionReplaysEditsOfASceneWithoutEdits) {
   const Recorded& x = recorded_run();
   Recording rec = load_recording(x.rec.string());
   nlohmann::json scene = nlohmann::json::parse(rec.scene_text);
+  // The recorded run felt its button brush as the tool of the brush's radius; without the
+  // "edits" section the scene says so itself, as the app's scenes do.
+  const isotouch::io::Scene parsed = isotouch::io::parse_scene(rec.scene_text, rec.scene_path);
+  if (parsed.hri.tool_radius_m > 0) scene["servo"]["tool"] = {{"radius_mm", parsed.hri.tool_radius_m * 1e3}};
   scene.erase("edits");
   rec.scene_text = scene.dump();
   try {

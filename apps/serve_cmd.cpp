@@ -37,7 +37,8 @@ Subcommand add_serve_command(CLI::App& cli) {
   sub->add_option("scene", a->scene, "Scene JSON (its volume, isovalue, passes, HRI parameters)")->required();
   sub->add_option("--port", a->o.port, "TCP port (default 18944, Slicer's; 0: any free port, printed)")
       ->check(CLI::Range(0, 65535));
-  sub->add_option("--host", a->o.host, "Address to listen on (default 0.0.0.0; 127.0.0.1: this machine only)");
+  sub->add_option("--host", a->o.host, "Address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every interface,\n"
+                  "with no authentication: any host that reaches the port can replace the volume and move the HIP)");
   sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
   sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
   sub->add_option("--display-hz", a->o.display_hz, "HIP / proxy / force TRANSFORMs per second (default 60)")
@@ -47,6 +48,12 @@ Subcommand add_serve_command(CLI::App& cli) {
   sub->add_option("--receive-timeout-ms", a->o.receive_timeout_ms,
                   "Longest silence inside a message before the client is dropped (default 2000)")
       ->check(CLI::Range(10, 600000));
+  sub->add_option("--message-timeout-ms", a->o.message_timeout_ms,
+                  "Longest a whole message may take from its first byte before the client is dropped (default 60000)")
+      ->check(CLI::Range(10, 3600000));
+  sub->add_option("--max-clients", a->o.max_clients,
+                  "Clients connected at once (default 8); one more is answered with a STATUS and closed")
+      ->check(CLI::Range(1, 1000));
   sub->add_option("--seconds", a->o.seconds, "Stop after this long (default: on SIGINT / SIGTERM only)")
       ->check(CLI::Range(0.0, 1e7));
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");

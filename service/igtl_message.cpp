@@ -96,6 +96,50 @@ bool skip(ByteSource& src, std::uint64_t n) {
   return true;
 }
 
+/// "" when a kept type's body of `n` bytes can be read at all, judged from the message
+/// header alone (TRANSFORM's size is fixed, STRING's text is at most 65535 bytes).
+std::string check_size(const std::string& type, std::uint64_t n) {
+  if (type == "TRANSFORM" && n != IGTL_TRANSFORM_SIZE)
+    return "TRANSFORM body is " + std::to_string(n) + " bytes, not " + std::to_string(IGTL_TRANSFORM_SIZE);
+  if (type == "STRING" && (n < 4 || n > 4 + 0xFFFF))
+    return "STRING body of " + std::to_string(n) + " bytes cannot hold a 16-bit length and its text";
+  return "";
+}
+
+/// Reads a body of `n` bytes into `body` (which may already hold its first bytes), growing
+/// the buffer as bytes arrive so that a body announced but not sent costs no memory.
+bool read_growing(ByteSource& src, std::vector<std::uint8_t>& body, std::uint64_t n) {
+  constexpr std::size_t kChunk = std::size_t(1) << 20;
+  while (body.size() < n) {
+    const std::size_t k = std::size_t(std::min<std::uint64_t>(kChunk, n - body.size()));
+    const std::size_t at = body.size();
+    body.resize(at + k);
+    if (src.read(body.data() + at, k, false) != k) return false;
+  }
+  return true;
+}
+
+/// Reads the body of a kept message into `body`, checked before the whole of it is
+/// allocated: sizes from the message header, an IMAGE's voxel count from its 72-byte image
+/// header. "" when read and acceptable; else why not (`truncated`: the stream cannot go on).
+std::string read_body(ByteSource& src, const std::string& type, std::uint64_t n, std::vector<std::uint8_t>& body,
+                      bool& truncated) {
+  truncated = false;
+  const std::uint64_t first = type == "IMAGE" ? std::min<std::uint64_t>(n, IGTL_IMAGE_HEADER_SIZE) : 0;
+  std::string why = check_size(type, n);
+  if (why.empty() && first > 0) {
+    body.resize(std::size_t(first));
+    if (src.read(body.data(), body.size(), false) != body.size()) return truncated = true, type + " body truncated: " + src.why();
+    if (first == IGTL_IMAGE_HEADER_SIZE) why = check_image_body(body.data(), n);  // only the header is read
+  }
+  if (!why.empty()) {  // refused: the rest is read and dropped so that the stream goes on
+    if (!skip(src, n - body.size())) return truncated = true, type + " body truncated: " + src.why();
+    return why;
+  }
+  if (!read_growing(src, body, n)) return truncated = true, type + " body truncated: " + src.why();
+  return check_body(type, body.data(), n);
+}
+
 /// The kept message of `header`'s type, its body read from `src` and checked; unpacked.
 Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, std::uint64_t body_bytes) {
   igtl::MessageBase::Pointer msg;
@@ -105,19 +149,20 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   if (in.type == "IMAGE") msg = image = igtl::ImageMessage::New();
   if (in.type == "TRANSFORM") msg = transform = igtl::TransformMessage::New();
   if (in.type == "STRING") msg = text = igtl::StringMessage::New();
-  // The body is read into a buffer of its announced size and checked before the library
-  // sees it (its AllocatePack() sizes an IMAGE by what the message itself holds, not by
-  // the header's body size).
-  std::vector<std::uint8_t> body(static_cast<std::size_t>(body_bytes));
-  if (src.read(body.data(), body.size(), false) != body_bytes)
-    return broken(in, in.type + " body truncated: " + src.why());
-  if (std::string why = check_body(in.type, body.data(), body_bytes); !why.empty()) return refused(in, why);
+  // The body is read into a buffer and checked before the library sees it (its
+  // AllocatePack() sizes an IMAGE by what the message itself holds, not by the header's
+  // body size).
+  std::vector<std::uint8_t> body;
+  bool truncated = false;
+  if (std::string why = read_body(src, in.type, body_bytes, body, truncated); !why.empty())
+    return truncated ? broken(in, why) : refused(in, why);
   msg->SetMessageHeader(header);
   msg->AllocatePack();
   if (std::uint64_t(msg->GetPackBodySize()) != body_bytes)
     return refused(in, in.type + " body of " + std::to_string(body_bytes) + " bytes: the library allocated " +
                            std::to_string(msg->GetPackBodySize()));
   std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());
+  std::vector<std::uint8_t>().swap(body);  // one copy held, the library's
   if (!(msg->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) return refused(in, in.type + " body fails its CRC-64");
   if (image) {
     in.kind = Incoming::Kind::kImage;

@@ -1,6 +1,7 @@
 #include "igtl_socket.h"
 
 #include <arpa/inet.h>
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <netinet/in.h>
@@ -60,8 +61,8 @@ int Listener::accept(int timeout_ms) {
   return c;
 }
 
-Connection::Connection(int fd, int receive_timeout_ms, const std::atomic<bool>* stop)
-    : fd_(fd), timeout_ms_(receive_timeout_ms), stop_(stop) {}
+Connection::Connection(int fd, int receive_timeout_ms, int message_timeout_ms, const std::atomic<bool>* stop)
+    : fd_(fd), timeout_ms_(receive_timeout_ms), message_timeout_ms_(message_timeout_ms), stop_(stop) {}
 
 Connection::~Connection() { ::close(fd_); }
 
@@ -71,11 +72,21 @@ void Connection::shutdown() {
 }
 
 std::size_t Connection::read(void* dst, std::size_t n, bool first) {
+  using Clock = std::chrono::steady_clock;
   auto* p = static_cast<std::uint8_t*>(dst);
   std::size_t got = 0;
   int waited_ms = 0;
+  auto message_ms_left = [&] {
+    return message_timeout_ms_ - int(std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - message_start_).count());
+  };
   while (got < n) {
-    const int slice = 100;
+    const bool between = first && got == 0;  // waiting for a new message: no deadline
+    if (!between && message_ms_left() <= 0) {
+      why_ = std::to_string(got) + " of " + std::to_string(n) + " bytes arrived, the message not whole after " +
+             std::to_string(message_timeout_ms_) + " ms";
+      break;
+    }
+    const int slice = between ? 100 : std::max(1, std::min(100, message_ms_left()));
     const int r = wait_for(fd_, POLLIN, slice);
     if (r < 0) {
       why_ = std::string("poll: ") + std::strerror(errno);
@@ -84,10 +95,10 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
     if (r == 0) {
       if (stop_ && stop_->load()) {
         why_ = "the server is stopping";
-        return first && got == 0 ? 0 : got;
+        return between ? 0 : got;
       }
       waited_ms += slice;
-      if (!(first && got == 0) && waited_ms >= timeout_ms_) {
+      if (!between && waited_ms >= timeout_ms_) {
         why_ = std::to_string(got) + " of " + std::to_string(n) + " bytes arrived, then nothing for " +
                std::to_string(timeout_ms_) + " ms";
         break;
@@ -104,6 +115,7 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
       why_ = std::string("recv: ") + std::strerror(errno);
       break;
     }
+    if (between) message_start_ = Clock::now();  // the message's clock starts at its first byte
     got += std::size_t(k);
     waited_ms = 0;
   }
@@ -111,14 +123,18 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
 }
 
 bool Connection::send(const void* data, std::size_t n, bool droppable) {
-  std::lock_guard<std::mutex> lock(send_mu_);
+  std::unique_lock<std::mutex> lock(send_mu_, std::defer_lock);
+  if (!droppable) lock.lock();
+  else if (!lock.try_lock()) return false;  // another send is under way: dropped, never waited for
   const auto* p = static_cast<const std::uint8_t*>(data);
   std::size_t sent = 0;
   if (droppable && alive_) {
     const ssize_t k = ::send(fd_, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
-    if (k < 0 && errno == EAGAIN) return false;  // not reading: dropped, the connection kept
-    if (k > 0) sent = std::size_t(k);
-    if (k < 0 && errno != EINTR) alive_ = false;
+    if (k < 0 && (errno == EAGAIN || errno == EINTR)) return false;  // not reading: dropped, the connection kept
+    if (k == ssize_t(n)) return true;
+    alive_ = false;  // gone, or cut mid-message: the stream cannot go on
+    ::shutdown(fd_, SHUT_RDWR);
+    return false;
   }
   while (alive_ && sent < n) {
     if (wait_for(fd_, POLLOUT, timeout_ms_) <= 0) break;

@@ -5,6 +5,7 @@
 // Part of isotouch::service.
 #pragma once
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <mutex>
@@ -36,8 +37,10 @@ class Listener {
 class Connection final : public ByteSource {
  public:
   /// Owns `fd`. `receive_timeout_ms`: the longest wait for the next byte inside a message;
-  /// `stop`: ends the wait for a new message (read() then returns 0).
-  Connection(int fd, int receive_timeout_ms, const std::atomic<bool>* stop);
+  /// `message_timeout_ms`: the longest a whole message may take from its first byte (a
+  /// client dripping bytes is dropped there); `stop`: ends the wait for a new message
+  /// (read() then returns 0).
+  Connection(int fd, int receive_timeout_ms, int message_timeout_ms, const std::atomic<bool>* stop);
   ~Connection() override;
   Connection(const Connection&) = delete;
   Connection& operator=(const Connection&) = delete;
@@ -48,8 +51,10 @@ class Connection final : public ByteSource {
   /// False, and the connection marked dead, when the peer is gone or does not read.
   bool send(const void* data, std::size_t n, bool droppable);
   bool send(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), false); }
-  /// As send(), but when the peer's receive buffer is full (a client that never reads, like
-  /// a tracker) the bytes are dropped and false returned, the connection kept.
+  /// As send(), but never waits: when the peer's receive buffer is full (a client that never
+  /// reads, like a tracker) or another send is under way, the bytes are dropped and false
+  /// returned, the connection kept; when only part of them fit, the stream is cut mid-message
+  /// and the connection is marked dead.
   bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
   bool alive() const { return alive_.load(); }
   /// Shuts the socket down (a blocked read returns).
@@ -58,6 +63,8 @@ class Connection final : public ByteSource {
  private:
   int fd_;
   int timeout_ms_;
+  int message_timeout_ms_;
+  std::chrono::steady_clock::time_point message_start_;
   const std::atomic<bool>* stop_;
   std::string why_;
   std::mutex send_mu_;

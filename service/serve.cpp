@@ -73,6 +73,8 @@ class Server {
 
  private:
   void client_loop(Client& c);
+  void read_messages(Client& c);
+  void refuse_connection(int fd);
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   void display_loop();
@@ -150,6 +152,19 @@ void Server::handle(Client& c, Incoming& in) {
 }
 
 void Server::client_loop(Client& c) {
+  try {
+    read_messages(c);
+  } catch (const std::exception& e) {  // e.g. bad_alloc: this client is dropped, the server goes on
+    log_.line("client   " + std::to_string(c.id) + " dropped: " + e.what());
+  } catch (...) {
+    log_.line("client   " + std::to_string(c.id) + " dropped: an unknown exception");
+  }
+  log_.line("client   " + std::to_string(c.id) + " gone");
+  c.conn->shutdown();
+  c.done = true;
+}
+
+void Server::read_messages(Client& c) {
   for (;;) {
     Incoming in = read_message(*c.conn, o_.limits);
     if (in.kind == Incoming::Kind::kClosed) break;
@@ -160,9 +175,6 @@ void Server::client_loop(Client& c) {
     }
     handle(c, in);
   }
-  log_.line("client   " + std::to_string(c.id) + " gone");
-  c.conn->shutdown();
-  c.done = true;
 }
 
 void Server::accept_clients() {
@@ -177,12 +189,22 @@ void Server::accept_clients() {
     }
   }
   if (fd < 0) return;
+  if (int(clients_.size()) >= o_.max_clients) return refuse_connection(fd);
   Client& c = clients_.emplace_back();
   c.id = next_id_++;
-  c.conn = std::make_unique<Connection>(fd, o_.receive_timeout_ms, &stop_);
+  c.conn = std::make_unique<Connection>(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
   n_.clients.fetch_add(1);
   log_.line("client   " + std::to_string(c.id) + " connected");
   c.thread = std::thread([this, &c] { client_loop(c); });
+}
+
+/// One connection past max_clients: a STATUS saying so (never waited for), then closed.
+void Server::refuse_connection(int fd) {
+  Connection extra(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
+  const std::string why = "the server has its " + std::to_string(o_.max_clients) + " clients; connection refused";
+  extra.send_droppable(pack_status(igtl::StatusMessage::STATUS_NOT_READY, "", why));
+  n_.refused.fetch_add(1);
+  log_.line("refused  a connection: " + why);
 }
 
 void Server::display_loop() {

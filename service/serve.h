@@ -23,13 +23,15 @@
 namespace isotouch::service {
 
 struct ServeOptions {
-  std::string host = "0.0.0.0";       ///< address to listen on
+  std::string host = "127.0.0.1";     ///< address to listen on ("0.0.0.0": every interface; no authentication)
   int port = 18944;                   ///< 0: any free port (printed)
   std::string stream = "StylusToTracker";  ///< device name of the TRANSFORMs that move the HIP
   core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS]
   double display_hz = 60;             ///< HIP / proxy / force TRANSFORMs sent per second
   double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s]
   int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped
+  int message_timeout_ms = 60000;     ///< longest a whole message may take from its first byte [ms]
+  int max_clients = 8;                ///< more connected at once: refused with a STATUS
   double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   MessageLimits limits;

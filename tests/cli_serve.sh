@@ -7,7 +7,11 @@
 #   3. the tracker is killed (SIGKILL): a new ReceiveClient is served, the force is zero (stale);
 #   4. igtl_send_image (built on igtl::ImageMessage): a single slice answered by a STATUS naming
 #      why; the shipped head as a 3-D IMAGE answered "volume taken" and swapped in;
-#   5. serve ends by itself (--seconds) with exit 0 and no servo faults.
+#   5. serve ends by itself (--seconds) with exit 0 and no servo faults;
+#   6. a second serve with --max-clients 2: a third connection gets a STATUS and is closed; a
+#      client whose IMAGE body exhausts the server's address space (prlimit --as) is dropped
+#      with a log line and the server goes on serving, exit 0.
+# "PASS serve" is printed once, last, after every check.
 # Usage: cli_serve.sh ISOTOUCH SCENE BIN_DIR EXAMPLES_DIR OUT_DIR HEAD_MHD
 set -u
 exe=$1; scene=$2; bin=$3; examples=$4; out=$5; head=$6
@@ -94,7 +98,67 @@ r2 = received(f"{out}/recv2.log")
 if len(r2) < 30: fail(f"after the tracker was killed a new receiver got only {len(r2)} transforms")
 late = [f for _, f in r2[2::3] if any(c != 0 for c in f)]
 if late: fail(f"{len(late)} force transforms non-zero after the tracker's stream was lost")
-print(f"PASS serve: {len(r1)} transforms at {rate:.1f} Hz, {len(moving)} HIPs on the tracker's circle, "
+print(f"streams ok: {len(r1)} transforms at {rate:.1f} Hz, {len(moving)} HIPs on the tracker's circle, "
       f"{len(pushing)} forces non-zero; after the kill {len(r2)} transforms, forces zero")
 PY
-echo "PASS serve: $refused single slices refused; $(grep '^served' "$out/serve.log")"
+
+# 6. The client cap, and a client thread's exception (bad_alloc) dropping only that client.
+"$exe" serve "$scene" --port 0 --max-clients 2 --seconds 8 >"$out/serve2.log" 2>&1 &
+serve2_pid=$!
+port2=""
+for _ in $(seq 300); do
+  port2=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$out/serve2.log")
+  [[ -n $port2 ]] && break
+  sleep 0.1
+done
+[[ -n $port2 ]] || { echo "FAIL serve: the second serve (default host 127.0.0.1) never said it listened"; cat "$out/serve2.log"; exit 1; }
+python3 - "$port2" "$serve2_pid" "$out/serve2.log" <<'PY' || { echo "--- serve2.log"; tail -n 20 "$out/serve2.log"; exit 1; }
+import socket, struct, subprocess, sys, time
+port, pid, log = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+def fail(msg):
+    print("FAIL serve:", msg); sys.exit(1)
+def connect():
+    s = socket.create_connection(("127.0.0.1", port), timeout=5)
+    return s
+held = [connect(), connect()]
+time.sleep(0.3)
+extra = connect()
+got = b""
+while True:
+    try: b = extra.recv(4096)
+    except socket.timeout: fail("the connection past --max-clients 2 was never closed")
+    if not b: break
+    got += b
+if got[2:8] != b"STATUS" or b"2 clients" not in got: fail(f"the third connection got {got[:120]!r}, not a STATUS naming the cap")
+for s in held: s.close()
+time.sleep(0.3)
+# An IMAGE announcing 512^3 float32 voxels (a valid image header), its body streamed while
+# the server's address space is capped 200 MiB above what it maps.
+vm = int(open(f"/proc/{pid}/statm").read().split()[0]) * 4096
+subprocess.run(["prlimit", f"--pid={pid}", f"--as={vm + (200 << 20)}:"], check=True)
+body = 512 * 512 * 512 * 4 + 72
+hdr = struct.pack(">H12s20sQQ", 1, b"IMAGE", b"Big", 0, body) + bytes(8)
+ih = struct.pack(">HBBBB3H12f3H3H", 1, 1, 10, 2, 1, 512, 512, 512, *([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]), 0, 0, 0, 512, 512, 512)
+c = connect()
+c.sendall(hdr + ih)
+chunk = bytes(1 << 20)
+try:
+    for _ in range(400): c.sendall(chunk)
+except OSError: pass
+c.close()
+for _ in range(50):
+    if "dropped: std::bad_alloc" in open(log).read(): break
+    time.sleep(0.1)
+else: fail("no 'dropped: std::bad_alloc' line for the client past the address-space cap")
+subprocess.run(["prlimit", f"--pid={pid}", "--as=unlimited:"], check=True)
+# The server goes on: a new client is served the display TRANSFORMs.
+c = connect()
+b = c.recv(4096)
+if b[2:11] != b"TRANSFORM": fail(f"after the dropped client a new one got {b[:40]!r}")
+c.close()
+print("cap and bad_alloc: ok")
+PY
+wait $serve2_pid
+rc2=$?
+[[ $rc2 == 0 ]] || { echo "FAIL serve: the second serve exited $rc2"; tail -n 20 "$out/serve2.log"; exit 1; }
+echo "PASS serve: $refused single slices refused; $(grep '^served' "$out/serve.log"); cap and a client's bad_alloc survived"

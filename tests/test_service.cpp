@@ -2,7 +2,11 @@
 // sender's side, as Slicer or PLUS would build them) read back through read_message, the
 // IMAGE -> volume conversion against loading the file, refusals, deadlines, dead peers.
 #include <gtest/gtest.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -218,7 +222,7 @@ TEST(ServiceSocket, TruncatedBodyEndsAtTheReceiveTimeout) {
   std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
   ASSERT_EQ(::write(sv[1], t.data(), t.size() - 20), ssize_t(t.size() - 20));  // and then nothing
   std::atomic<bool> stop{false};
-  Connection c(sv[0], 300, &stop);
+  Connection c(sv[0], 300, 60000, &stop);
   const auto t0 = std::chrono::steady_clock::now();
   Incoming in = read_message(c, MessageLimits{});
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -233,7 +237,7 @@ TEST(ServiceSocket, SendToADeadPeerFailsWithoutSigpipe) {
   int sv[2];
   ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
   ::close(sv[1]);
-  Connection c(sv[0], 300, nullptr);
+  Connection c(sv[0], 300, 60000, nullptr);
   const auto b = transform_bytes("T", 1, 2, 3);
   EXPECT_FALSE(c.send(b));
   EXPECT_FALSE(c.alive());
@@ -295,6 +299,128 @@ TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
   EXPECT_NEAR(ras.x, 15, 1e-9);
   EXPECT_NEAR(ras.y, 26, 1e-9);
   EXPECT_NEAR(ras.z, 37, 1e-9);
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+/// A message header of `type` announcing `body_bytes`, followed by `body` (maybe short of it).
+std::vector<std::uint8_t> announced(const char* type, std::uint64_t body_bytes, std::vector<std::uint8_t> body = {}) {
+  std::vector<std::uint8_t> b(58 + body.size(), 0);
+  std::copy(body.begin(), body.end(), b.begin() + 58);
+  b[1] = 1;  // version 1
+  std::memcpy(b.data() + 2, type, std::strlen(type));
+  std::memcpy(b.data() + 14, "Big", 3);
+  for (int i = 0; i < 8; ++i) b[42 + i] = std::uint8_t(body_bytes >> (8 * (7 - i)));
+  return b;
+}
+
+/// What read_message made of `bytes` in a child process whose address space is capped at
+/// `cap_mib` above what it already maps: the kind (as an int), or -1 when the child died.
+int kind_under_address_cap(const std::vector<std::uint8_t>& bytes, std::uint64_t cap_mib) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    std::ifstream st("/proc/self/statm");
+    std::uint64_t pages = 0;
+    st >> pages;
+    const rlimit lim{pages * std::uint64_t(::sysconf(_SC_PAGESIZE)) + (cap_mib << 20), RLIM_INFINITY};
+    ::setrlimit(RLIMIT_AS, &lim);
+    try {
+      MemorySource src(bytes);
+      _exit(int(read_message(src, MessageLimits{}).kind));
+    } catch (...) {
+      _exit(100);
+    }
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(ServiceMemory, AnnouncedBodiesAreNotAllocatedBeforeTheyArrive) {
+  // 512 MiB announced, nothing (or only a valid image header) sent: with 64 MiB of address
+  // space to spare, a reader that allocates the announced body up front throws bad_alloc.
+  const std::uint64_t big = MessageLimits{}.max_body_bytes;
+  EXPECT_EQ(kind_under_address_cap(announced("TRANSFORM", big), 64), int(Incoming::Kind::kBroken))
+      << "TRANSFORM of 512 MiB: the child did not end with the stream broken (100: threw, -1: died)";
+  EXPECT_EQ(kind_under_address_cap(announced("STRING", big), 64), int(Incoming::Kind::kBroken));
+  // An IMAGE header announcing 512^3 float32 voxels, its body never sent.
+  std::vector<std::uint8_t> ih(72, 0);
+  ih[1] = 1;  // image header version
+  ih[2] = 1;  // components
+  ih[3] = igtl::ImageMessage::TYPE_FLOAT32;
+  ih[4] = 2;
+  ih[5] = 1;
+  for (int a = 0; a < 3; ++a) ih[6 + 2 * a] = ih[66 + 2 * a] = 2;  // 512 = 0x0200
+  EXPECT_EQ(kind_under_address_cap(announced("IMAGE", big, ih), 64), int(Incoming::Kind::kBroken))
+      << "IMAGE of 512 MiB announced, only its header sent";
+  // The same cap still takes a real head (64 x 64 x 93 int16).
+  const engine::Volume file = io::load_volume(kHead);
+  EXPECT_EQ(kind_under_address_cap(image_of(file, igtl::ImageMessage::ENDIAN_BIG), 64), int(Incoming::Kind::kImage));
+}
+
+TEST(ServiceMemory, WrongSizesAreRefusedFromTheHeaderAndTheStreamGoesOn) {
+  std::vector<std::uint8_t> all = announced("TRANSFORM", 10, std::vector<std::uint8_t>(10, 7));
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  Incoming a = read_message(src, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(a.why.find("TRANSFORM body is 10 bytes"), std::string::npos) << a.why;
+  Incoming b = read_message(src, MessageLimits{});
+  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
+  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+}
+
+TEST(ServiceSocket, SlowDripIsDroppedAtTheMessageDeadline) {
+  // One byte every 50 ms never trips the 300 ms silence timeout; the 600 ms message deadline ends it.
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  const std::vector<std::uint8_t> t = transform_bytes("T", 1, 2, 3);
+  std::atomic<bool> done{false};
+  std::thread drip([&] {
+    for (std::size_t i = 0; i < t.size() && !done; ++i) {
+      if (::write(sv[1], &t[i], 1) != 1) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  });
+  Connection c(sv[0], 300, 600, nullptr);
+  const auto t0 = std::chrono::steady_clock::now();
+  Incoming in = read_message(c, MessageLimits{});
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  done = true;
+  drip.join();
+  ::close(sv[1]);
+  EXPECT_EQ(in.kind, Incoming::Kind::kBroken);
+  EXPECT_NE(in.why.find("not whole after 600 ms"), std::string::npos) << in.why;
+  EXPECT_LT(s, 1.5);  // 166 bytes at 50 ms would take 8 s
+}
+
+TEST(ServiceSocket, DroppableSendToAPeerNotReadingNeverWaits) {
+  // A TCP peer on loopback that never reads: its buffers fill, a send then fits only in part
+  // (cut mid-message: the connection is dropped) or not at all (dropped); never waited for.
+  Listener l("127.0.0.1", 0);
+  const int peer = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(std::uint16_t(l.port()));
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::connect(peer, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  const int fd = l.accept(1000);
+  ASSERT_GE(fd, 0);
+  Connection c(fd, 2000, 60000, nullptr);
+  const std::vector<std::uint8_t> chunk(100000, 1);
+  const auto t0 = std::chrono::steady_clock::now();
+  int ok = 0, dropped = 0;
+  for (int i = 0; i < 2000 && c.alive(); ++i) (c.send_droppable(chunk) ? ok : dropped) += 1;
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_GT(dropped, 0) << ok << " sends all fitted: the buffer never filled";
+  EXPECT_LT(s, 1.0) << ok << " sends, " << dropped << " dropped in " << s << " s (a send waited for the peer)";
+  std::cout << ok << " sends fitted, " << dropped << " dropped, alive " << c.alive() << ", " << s << " s\n";
+  ::close(peer);
 }
 
 }  // namespace

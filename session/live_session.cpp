@@ -138,6 +138,10 @@ void LiveSession::open_recording() {
 LiveSession::~LiveSession() {
   try {
     stop();
+  } catch (const ServoAbandoned& e) {
+    // Destroyed without stop() (unwinding from another error): the caller frees the
+    // renderer, the field and the device next, while the stuck thread may read them.
+    end_process_servo_stuck("live session (destroyed while running)", e.what());
   } catch (...) {
     // The destructor cannot report; stop() called explicitly does.
   }

@@ -175,7 +175,9 @@ class LiveSession final : private servo::TickObserver {
   /// null: a session that only feels its published snapshot (submit() then refuses).
   LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
               LiveSessionConfig config);
-  ~LiveSession();  ///< stop()s if running
+  /// stop()s if running; a servo thread abandoned there ends the process
+  /// (end_process_servo_stuck): the caller would free what that thread reads next.
+  ~LiveSession();
   LiveSession(const LiveSession&) = delete;
   LiveSession& operator=(const LiveSession&) = delete;
 

@@ -18,6 +18,7 @@
 #include <csignal>
 #include <iterator>
 #include <mutex>
+#include <optional>
 #include <sys/resource.h>
 
 #include "edit_session.h"
@@ -198,15 +199,18 @@ TEST(LiveSession, StopGivesUpOnARendererThatNeverReturns) {
 namespace {
 /// In a forked child: a session whose renderer never returns, stopped with
 /// stop_or_end_process(), whose callback writes `marker` (as `run --live` marks its folder).
-/// Returns only if the process was not ended.
-void stop_a_stuck_session(const std::string& rec, const std::string& marker) {
+/// Returns only if the process was not ended. `destroy`: the session is destroyed while
+/// running instead (as when an error unwinds past it).
+void stop_a_stuck_session(const std::string& rec, const std::string& marker, bool destroy = false) {
   Rig rig;
   StuckRenderer stuck;  // the process ends with the thread inside it: never destroyed
   stuck.inner = rig.renderer.get();
-  LiveSession live(rig.edits, rig.buffer, stuck, *rig.io, rig.config(rec));
-  live.start();
+  std::optional<LiveSession> live;
+  live.emplace(rig.edits, rig.buffer, stuck, *rig.io, rig.config(rec));
+  live->start();
   wait_until([&] { return stuck.stuck.load(); }, 10);
-  isotouch::session::stop_or_end_process(live, "test_live_session", [&](const std::string& what) {
+  if (destroy) return live.reset();
+  isotouch::session::stop_or_end_process(*live, "test_live_session", [&](const std::string& what) {
     std::ofstream(marker) << "failed: " << what << (rig.io->enabled.load() == 0 ? " (force off)" : " (force ON)");
   });
 }
@@ -225,6 +229,18 @@ TEST(LiveSession, StopOrEndProcessEndsTheProcessWhenTheServoIsAbandoned) {
   EXPECT_NE(written.find("failed: live session: servo thread: the renderer has not returned"), std::string::npos)
       << written;
   EXPECT_NE(written.find("(force off)"), std::string::npos) << written;
+  EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
+  fs::remove_all(dir);
+}
+
+// A running session destroyed with its servo stuck in the renderer (an error unwinding past
+// it) ends the process too, after completing the recording: its caller would free the
+// renderer and the field next.
+TEST(LiveSession, DestroyedWithTheServoStuckEndsTheProcess) {
+  const fs::path dir = temp_dir("live-stuck-destroyed");
+  const std::string rec = (dir / "stuck.rec").string();
+  EXPECT_EXIT(stop_a_stuck_session(rec, "", true), testing::ExitedWithCode(isotouch::exit_code::kServoStuck),
+              "live session \\(destroyed while running\\): .*the renderer has not returned");
   EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
   fs::remove_all(dir);
 }

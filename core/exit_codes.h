@@ -22,6 +22,11 @@ inline constexpr int kServoFaults = 4;
 inline constexpr int kDeviceLost = 5;
 /// isotouch-sculpt: a scripted save or export (Ctrl+S / Ctrl+E in --script) failed.
 inline constexpr int kSaveFailed = 6;
+/// The servo thread was abandoned inside a renderer that did not return within the stop
+/// timeout (`run --live`, `serve`, isotouch-sculpt): the force was turned off, what had to
+/// be written was written (the recording completed, a run folder marked failed), and the
+/// process ended at once without freeing what that thread may still touch.
+inline constexpr int kServoStuck = 7;
 /// `replay`: the replay differs from the recording (the first differing tick is printed).
 inline constexpr int kReplayDiffers = 1;
 /// `replay`: the recording, its scene or its volume cannot be used.

@@ -319,7 +319,13 @@ int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* fol
   }
   if (tty) std::cerr << "\n";
   const double seconds = live.elapsed_s();
-  live.stop();
+  // A servo thread abandoned in the renderer (force off, recording completed) ends the
+  // process there, the folder marked failed first: unwinding would free the renderer, the
+  // field and the device that thread may still read.
+  session::stop_or_end_process(live, "isotouch run --live", [folder](const std::string& what) {
+    session::clear_last_words();
+    if (folder) folder->mark_failed(what);
+  });
   const session::LiveStats s = live.stats();
   if (session::stop_signal() != 0) log << "live     stopped by signal " << session::stop_signal() << " after " << ms(seconds) << " s\n";
   print_stats(s, seconds, log);

@@ -81,6 +81,14 @@ class Server {
   void start_session(engine::Volume v);
   void stop_session();
   void accept_clients();
+  /// Sets stop_, joins `display` and every client thread (after shutting their
+  /// connections); idempotent.
+  void join_threads(std::thread& display) noexcept;
+  struct ThreadsJoiner {
+    Server& server;
+    std::thread& display;
+    ~ThreadsJoiner() { server.join_threads(display); }
+  };
 
   const io::Scene& scene_;
   ServeOptions o_;
@@ -263,11 +271,24 @@ void Server::stop_session() {
     s = std::move(session_);
   }
   if (!s) return;
-  s->live->stop();
+  // Abandoned in the renderer: the process ends there (the session and device_ outlive
+  // the stuck thread).
+  session::stop_or_end_process(*s->live, "isotouch serve");
   const session::LiveStats st = s->live->stats();
   ticks_ += st.ticks;
   faults_ += st.faults;
   stale_ += s->live->servo_thread()->device_counters().stale;  // zero force on each
+}
+
+void Server::join_threads(std::thread& display) noexcept {
+  stop_ = true;
+  if (display.joinable()) display.join();
+  {
+    std::lock_guard<std::mutex> lock(clients_mu_);
+    for (Client& c : clients_) c.conn->shutdown();
+  }
+  for (Client& c : clients_)
+    if (c.thread.joinable()) c.thread.join();
 }
 
 int Server::run() {
@@ -279,6 +300,9 @@ int Server::run() {
   start_session(setup_.volume);
   session::install_stop_handlers();
   std::thread display([this] { display_loop(); });
+  // Every way out of run() (an exception from start_session or stop_session too) stops and
+  // joins the display and client threads first: a joinable std::thread destroyed is std::terminate.
+  const ThreadsJoiner joiner(*this, display);
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   while (session::stop_signal() == 0 && (o_.seconds <= 0 || elapsed() < o_.seconds)) {
@@ -294,13 +318,7 @@ int Server::run() {
       log_.line("volume   now the session's volume (isovalue and tool kept)");
     }
   }
-  stop_ = true;
-  display.join();
-  {
-    std::lock_guard<std::mutex> lock(clients_mu_);
-    for (Client& c : clients_) c.conn->shutdown();
-  }
-  for (Client& c : clients_) c.thread.join();
+  join_threads(display);
   stop_session();
   std::ostringstream s;
   s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused

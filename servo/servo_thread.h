@@ -165,6 +165,8 @@ class ServoThread {
   /// the device must then still exist (the caller keeps them or ends the process).
   /// @throws nothing; start() after an abandoned thread throws std::logic_error.
   std::string stop();
+  /// A stop() abandoned a thread stuck in the renderer (see stop()).
+  bool abandoned() const { return abandoned_; }
   /// Paused: every tick sends an exact zero force and the renderer is not ticked (its
   /// contact state is reset on resume, so a resumed probe inside the object is not pulled
   /// out through the plane it held before). Any thread.

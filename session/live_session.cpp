@@ -1,5 +1,7 @@
 #include "live_session.h"
 
+#include "exit_codes.h"
+
 #include <fcntl.h>
 #include <time.h>
 #include <unistd.h>
@@ -9,6 +11,8 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <exception>
 #include <stdexcept>
@@ -134,6 +138,10 @@ void LiveSession::open_recording() {
 LiveSession::~LiveSession() {
   try {
     stop();
+  } catch (const ServoAbandoned& e) {
+    // Destroyed without stop() (unwinding from another error): the caller frees the
+    // renderer, the field and the device next, while the stuck thread may read them.
+    end_process_servo_stuck("live session (destroyed while running)", e.what());
   } catch (...) {
     // The destructor cannot report; stop() called explicitly does.
   }
@@ -526,9 +534,31 @@ void LiveSession::stop() {
   try {
     finish_recording();
   } catch (const std::exception& e) {
-    throw std::runtime_error("live session: " + servo_error + "; " + e.what());
+    throw ServoAbandoned("live session: " + servo_error + "; " + e.what());
   }
-  throw std::runtime_error("live session: " + servo_error);
+  throw ServoAbandoned("live session: " + servo_error);
+}
+
+void stop_or_end_process(LiveSession& live, const std::string& program,
+                         const std::function<void(const std::string& what)>& on_abandoned) {
+  try {
+    live.stop();
+  } catch (const ServoAbandoned& e) {
+    try {
+      if (on_abandoned) on_abandoned(e.what());
+    } catch (...) {
+      // Ending the process matters more than what the callback could not write.
+    }
+    end_process_servo_stuck(program, e.what());
+  }
+}
+
+void end_process_servo_stuck(const std::string& program, const std::string& what) noexcept {
+  std::fflush(stdout);
+  std::fprintf(stderr, "%s: %s; ending the process (exit %d) without freeing what the stuck servo thread may read\n",
+               program.c_str(), what.c_str(), exit_code::kServoStuck);
+  std::fflush(stderr);
+  std::_Exit(exit_code::kServoStuck);
 }
 
 void LiveSession::finish_recording() {

@@ -30,6 +30,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -99,6 +100,28 @@ struct SimulatedRun {
   long progress_every = 250;
 };
 
+/// Thrown by LiveSession::stop() when the servo thread was abandoned inside a renderer that
+/// did not return (ServoThread::stop): the force is off and the recording was completed (or
+/// its error is in what()), but the renderer, its field, the snapshots and the device may
+/// still be read by that thread. The caller must not destroy them: it writes what it must
+/// and calls end_process_servo_stuck().
+class ServoAbandoned : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Ends the process after a ServoAbandoned: prints "PROGRAM: WHAT; ..." on stderr, flushes
+/// stdout and stderr, and calls std::_Exit(exit_code::kServoStuck) (no destructors, no atexit
+/// handlers: nothing the stuck thread may touch is freed).
+[[noreturn]] void end_process_servo_stuck(const std::string& program, const std::string& what) noexcept;
+
+class LiveSession;
+/// live.stop(); if it throws ServoAbandoned: on_abandoned(what) (write what must be written:
+/// a run folder marked failed; its exceptions are ignored), then
+/// end_process_servo_stuck(program, what). Other exceptions from stop() propagate.
+void stop_or_end_process(LiveSession& live, const std::string& program,
+                         const std::function<void(const std::string& what)>& on_abandoned = {});
+
 /// What a frame loop reads without locks (a consistent copy of one tick).
 struct Observed {
   long tick = -1;             ///< -1: no tick yet
@@ -152,7 +175,9 @@ class LiveSession final : private servo::TickObserver {
   /// null: a session that only feels its published snapshot (submit() then refuses).
   LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
               LiveSessionConfig config);
-  ~LiveSession();  ///< stop()s if running
+  /// stop()s if running; a servo thread abandoned there ends the process
+  /// (end_process_servo_stuck): the caller would free what that thread reads next.
+  ~LiveSession();
   LiveSession(const LiveSession&) = delete;
   LiveSession& operator=(const LiveSession&) = delete;
 
@@ -166,9 +191,10 @@ class LiveSession final : private servo::TickObserver {
   /// Stops the servo (its last force an exact zero), then the edit thread (requests still
   /// queued are dropped and counted), then the recorder (end record, fsync, rename).
   /// Idempotent. @throws io::RecordingError if the recording could not be completed;
-  ///         std::runtime_error (after the rest has stopped, within about 1 s) if the
-  ///         renderer did not return: the force is off and the servo thread abandoned
-  ///         (ServoThread::stop); the renderer and device must outlive any return of it.
+  ///         ServoAbandoned (after the rest has stopped and the recording was completed,
+  ///         within about 1 s) if the renderer did not return: the force is off and the
+  ///         servo thread abandoned (ServoThread::stop); the renderer and device must
+  ///         outlive any return of it (end_process_servo_stuck()).
   void stop();
 
   /// Simulated mode: runs every tick of `run` on this thread (see the file comment), closes a

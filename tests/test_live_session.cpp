@@ -18,9 +18,11 @@
 #include <csignal>
 #include <iterator>
 #include <mutex>
+#include <optional>
 #include <sys/resource.h>
 
 #include "edit_session.h"
+#include "exit_codes.h"
 #include "field_view.h"
 #include "hri.h"
 #include "live_session.h"
@@ -179,7 +181,7 @@ TEST(LiveSession, StopGivesUpOnARendererThatNeverReturns) {
     try {
       live.stop();
       ADD_FAILURE() << "stop() returned without an error";
-    } catch (const std::runtime_error& e) {
+    } catch (const isotouch::session::ServoAbandoned& e) {
       EXPECT_NE(std::string(e.what()).find("the renderer has not returned"), std::string::npos) << e.what();
     }
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
@@ -191,6 +193,55 @@ TEST(LiveSession, StopGivesUpOnARendererThatNeverReturns) {
   wait_until([&] { return g_stuck.returned.load(); }, 10);
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   EXPECT_EQ(rig.io->writes.load(), writes);
+  fs::remove_all(dir);
+}
+
+namespace {
+/// In a forked child: a session whose renderer never returns, stopped with
+/// stop_or_end_process(), whose callback writes `marker` (as `run --live` marks its folder).
+/// Returns only if the process was not ended. `destroy`: the session is destroyed while
+/// running instead (as when an error unwinds past it).
+void stop_a_stuck_session(const std::string& rec, const std::string& marker, bool destroy = false) {
+  Rig rig;
+  StuckRenderer stuck;  // the process ends with the thread inside it: never destroyed
+  stuck.inner = rig.renderer.get();
+  std::optional<LiveSession> live;
+  live.emplace(rig.edits, rig.buffer, stuck, *rig.io, rig.config(rec));
+  live->start();
+  wait_until([&] { return stuck.stuck.load(); }, 10);
+  if (destroy) return live.reset();
+  isotouch::session::stop_or_end_process(*live, "test_live_session", [&](const std::string& what) {
+    std::ofstream(marker) << "failed: " << what << (rig.io->enabled.load() == 0 ? " (force off)" : " (force ON)");
+  });
+}
+}  // namespace
+
+// A caller of stop() whose renderer never returns ends the process (exit kServoStuck, a line
+// on stderr) after its callback wrote what it must, with the force off and the recording
+// completed; it does not unwind into the objects the stuck thread still reads.
+TEST(LiveSession, StopOrEndProcessEndsTheProcessWhenTheServoIsAbandoned) {
+  const fs::path dir = temp_dir("live-stuck-exit");
+  const std::string rec = (dir / "stuck.rec").string(), marker = (dir / "marker.txt").string();
+  EXPECT_EXIT(stop_a_stuck_session(rec, marker), testing::ExitedWithCode(isotouch::exit_code::kServoStuck),
+              "test_live_session: live session: servo thread: the renderer has not returned.*ending the process");
+  std::ifstream in(marker);
+  const std::string written((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(written.find("failed: live session: servo thread: the renderer has not returned"), std::string::npos)
+      << written;
+  EXPECT_NE(written.find("(force off)"), std::string::npos) << written;
+  EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
+  fs::remove_all(dir);
+}
+
+// A running session destroyed with its servo stuck in the renderer (an error unwinding past
+// it) ends the process too, after completing the recording: its caller would free the
+// renderer and the field next.
+TEST(LiveSession, DestroyedWithTheServoStuckEndsTheProcess) {
+  const fs::path dir = temp_dir("live-stuck-destroyed");
+  const std::string rec = (dir / "stuck.rec").string();
+  EXPECT_EXIT(stop_a_stuck_session(rec, "", true), testing::ExitedWithCode(isotouch::exit_code::kServoStuck),
+              "live session \\(destroyed while running\\): .*the renderer has not returned");
+  EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
   fs::remove_all(dir);
 }
 

@@ -937,6 +937,7 @@ TEST(ServoThread, StopGivesUpOnARendererThatNeverReturnsWithTheForceOff) {
   servo->start();
   while (g_never.start_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   EXPECT_EQ(g_never_device.enabled.load(), 1);
+  EXPECT_FALSE(servo->abandoned());
   std::string error;
   std::atomic<bool> stopped{false};
   const auto t0 = std::chrono::steady_clock::now();
@@ -951,6 +952,7 @@ TEST(ServoThread, StopGivesUpOnARendererThatNeverReturnsWithTheForceOff) {
   stopper.join();
   ASSERT_LT(took, 1.0) << "stop() blocked on the stuck renderer";
   EXPECT_NE(error.find("the renderer has not returned"), std::string::npos) << error;
+  EXPECT_TRUE(servo->abandoned());
   EXPECT_EQ(g_never_device.enabled.load(), 0) << "the force was not turned off";
   EXPECT_THROW(servo->start(), std::logic_error);
   // Released after its servo is gone, the thread leaves without writing to the device.

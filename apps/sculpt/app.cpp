@@ -1377,7 +1377,9 @@ ServoAlone Sculpt::servo_alone(double seconds, const session::LiveStats& sculpte
 void Sculpt::stop_session() {
   try {
     if (o.sim_clock) session->finish_simulated();  // what was submitted after the last tick
-    session->stop();
+    // Abandoned in the renderer: the process ends there (no screenshot, no stats, no
+    // destructors: the renderer, its field and the device outlive the stuck thread).
+    session::stop_or_end_process(*session, "isotouch-sculpt");
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << e.what() << "\n";
     code = 1;

@@ -40,15 +40,18 @@ m servo-refused-position    $S 'if (!caps.contains(d.position_m)) {' 'if (false)
 m servo-nonfinite-zero      $S 'if (!std::isfinite(out.x) || !std::isfinite(out.y) || !std::isfinite(out.z)) return {};' '' $T "$F"
 m servo-clamp-at-2x         $S 'clamped = m > max_n;' 'clamped = m > 2 * max_n;' $T "$F"
 m servo-clamp-scale         $S 'if (clamped) out = out * (max_n / m);' '' $T "$F"
-m servo-ramp-factor         $S 'const double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;' \
-                               'const double ramp = 1.0;' $T "$F"
+m servo-ramp-factor         $S 'double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;' \
+                               'double ramp = 1.0;' $T "$F"
 m servo-ramp-reconnect      $S 'if (first || d.connection != connection) ramp_start = -1;' '' $T "$F"
 m servo-ramp-after-outage   $S $'restart_ns) {\n          ramp_start = -1;' 'restart_ns) {' $T "$F"
 m servo-paused-zero         $S $'} else if (paused) {\n        device_.write_force_n({});' '} else if (paused) {' $T "$F"
 m servo-stop-zero           $S 'device_.write_force_n({});  // leave the device with no force' '' $T "$F"
-m servo-stop-disable        $S $'    device_.enable_force(false, 0);\n  }\n  unlock_servo_memory();' $'  }\n  unlock_servo_memory();' $T "$F"
-m servo-stuck-renderer-off  $S 'device_.enable_force(false, 0);  // at once: the writes end here, which is no stall' '' \
-  $T 'ServoThread.StopGivesUp*:ServoSafety.*'
+# stop() turns the force off itself: on its own it matters where the loop never reaches its
+# end (a renderer that never returns); in a normal stop the loop's last lines do it first.
+m servo-stop-disable        $S $'    device_.enable_force(false, 0);\n  }\n  unlock_servo_memory();' $'  }\n  unlock_servo_memory();' \
+  $T 'ServoThread.StopGivesUp*'
+m servo-device-force-off    $S 'if ((d.force_off || d.watchdog_tripped) && ramp_start >= 0) ramp_start = t;' '' \
+  $T 'ServoSafety.AfterTheDeviceWatchdogTripped*'
 m servo-late-restart        $S 'if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp' '' \
   $T 'ServoThread.ADeviceThatTookTheForceOff*'
 

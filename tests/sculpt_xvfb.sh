@@ -119,18 +119,27 @@ PY
 # Ctrl+Z in the frame the isovalue changes (tests/sculpt/iso-undo.json): the undo is applied
 # before the new session takes the volume, so after going back to 1150 the picture is the one
 # before the carve, exactly (simulated clock: always; real time: the restart waits for it).
+# In real time a run was seen (once, in a full suite at -j2) whose carved screenshot equalled
+# the one before, its script waits all met: the cause was not found. Such a run says nothing
+# about the undo, so it is tried again (at most 3 runs), and said so.
 for clock in --sim-clock --real-time; do
   d="$out/iso-undo$clock"
   mkdir -p "$d"
-  rm -f "$d"/*.png
-  set +e
-  xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/iso-undo.json" \
-    --screenshot "$d/last.png" --size 320 --validation --no-overlay $([ "$clock" = --sim-clock ] && echo --sim-clock) > "$d/log.txt" 2>&1
-  rc=$?
-  set -e
-  if [ "$rc" -ne 0 ]; then cat "$d/log.txt"; echo "FAIL: isotouch-sculpt (iso-undo $clock) exited $rc"; exit 1; fi
-  if grep -q "timed out\|ended before" "$d/log.txt"; then cat "$d/log.txt"; echo "FAIL: the iso-undo script did not run its course ($clock)"; exit 1; fi
-  ! cmp -s "$d/iso-undo-before.png" "$d/iso-undo-carved.png" || { cat "$d/log.txt"; echo "FAIL: the carve changed nothing ($clock): the check says little"; exit 1; }
+  tries=1; [ "$clock" = --real-time ] && tries=3
+  for try in $(seq 1 "$tries"); do
+    rm -f "$d"/*.png
+    set +e
+    xvfb-run -a -s "-screen 0 1280x1024x24" "$bin" "$src/scenes/head.json" --script "$src/tests/sculpt/iso-undo.json" \
+      --screenshot "$d/last.png" --size 320 --validation --no-overlay $([ "$clock" = --sim-clock ] && echo --sim-clock) > "$d/log.txt" 2>&1
+    rc=$?
+    set -e
+    if [ "$rc" -ne 0 ]; then cat "$d/log.txt"; echo "FAIL: isotouch-sculpt (iso-undo $clock) exited $rc"; exit 1; fi
+    if grep -q "timed out\|ended before" "$d/log.txt"; then cat "$d/log.txt"; echo "FAIL: the iso-undo script did not run its course ($clock)"; exit 1; fi
+    ! cmp -s "$d/iso-undo-before.png" "$d/iso-undo-carved.png" && break
+    cat "$d/log.txt"
+    [ "$try" -lt "$tries" ] || { echo "FAIL: the carve changed nothing ($clock, $tries runs): the check says little"; exit 1; }
+    echo "note: the carve changed nothing in run $try ($clock): run again"
+  done
   cmp -s "$d/iso-undo-before.png" "$d/iso-undo-after.png" ||
     { echo "FAIL: the undo in the isovalue's frame was lost in the restart ($clock)"; exit 1; }
 done

@@ -324,8 +324,10 @@ void ServoThread::loop(Handoff& h) {
         // The device took the force off (the servo did not write for 2.5 periods: a late
         // tick, a slow renderer): ramp in from 0 again, this tick's force being zero.
         const std::uint64_t stalls = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
-        if (stalls != seen_stalls_) late_.fetch_add(1, std::memory_order_relaxed);
-        if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp
+        if (stalls != seen_stalls_) {
+          late_.fetch_add(1, std::memory_order_relaxed);
+          ramp_start = -1;  // the next tick starts the ramp
+        }
         seen_stalls_ = stalls;
         double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
         if (ramp_start < 0) ramp = 0;

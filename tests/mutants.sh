@@ -52,7 +52,7 @@ m servo-stop-disable        $S $'    device_.enable_force(false, 0);\n  }\n  unl
   $T 'ServoThread.StopGivesUp*'
 m servo-device-force-off    $S 'if ((d.force_off || d.watchdog_tripped) && ramp_start >= 0) ramp_start = t;' '' \
   $T 'ServoSafety.AfterTheDeviceWatchdogTripped*'
-m servo-late-restart        $S 'if (stalls != seen_stalls_) ramp_start = -1;  // the next tick starts the ramp' '' \
+m servo-late-restart        $S 'ramp_start = -1;  // the next tick starts the ramp' '' \
   $T 'ServoThread.ADeviceThatTookTheForceOff*'
 
 # The device writer's stall rule and the emulator that checks it on the wire.

@@ -161,18 +161,24 @@ TEST(ServiceMessages, TransformStringAndUnknownTypes) {
   EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kClosed);
 }
 
+/// `bytes` hold a message to refuse (its reason containing `why`) followed by
+/// transform_bytes("T", 4, 5, 6): the refusal does not lose the stream.
+void expect_refused_then_the_next(const std::vector<std::uint8_t>& bytes, const std::string& why) {
+  MemorySource src(bytes);
+  Incoming a = read_message(src, MessageLimits{});
+  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
+  EXPECT_NE(a.why.find(why), std::string::npos) << a.why;
+  Incoming b = read_message(src, MessageLimits{});
+  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
+  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+}
+
 TEST(ServiceMessages, WrongCrcIsRefusedAndTheStreamGoesOn) {
   std::vector<std::uint8_t> all = transform_bytes("T", 1, 2, 3);
   all[58 + 5] ^= 0x40;  // a body byte: the CRC no longer matches
   const auto next = transform_bytes("T", 4, 5, 6);
   all.insert(all.end(), next.begin(), next.end());
-  MemorySource src(all);
-  Incoming a = read_message(src, MessageLimits{});
-  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
-  EXPECT_NE(a.why.find("CRC"), std::string::npos) << a.why;
-  Incoming b = read_message(src, MessageLimits{});
-  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
-  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+  expect_refused_then_the_next(all, "CRC");
 }
 
 TEST(ServiceMessages, TruncatedAndOversizedBodiesAreRefused) {
@@ -366,13 +372,7 @@ TEST(ServiceMemory, WrongSizesAreRefusedFromTheHeaderAndTheStreamGoesOn) {
   std::vector<std::uint8_t> all = announced("TRANSFORM", 10, std::vector<std::uint8_t>(10, 7));
   const auto next = transform_bytes("T", 4, 5, 6);
   all.insert(all.end(), next.begin(), next.end());
-  MemorySource src(all);
-  Incoming a = read_message(src, MessageLimits{});
-  EXPECT_EQ(a.kind, Incoming::Kind::kRefused);
-  EXPECT_NE(a.why.find("TRANSFORM body is 10 bytes"), std::string::npos) << a.why;
-  Incoming b = read_message(src, MessageLimits{});
-  ASSERT_EQ(b.kind, Incoming::Kind::kTransform) << b.why;
-  EXPECT_DOUBLE_EQ(b.matrix[2][3], 6);
+  expect_refused_then_the_next(all, "TRANSFORM body is 10 bytes");
 }
 
 TEST(ServiceSocket, SlowDripIsDroppedAtTheMessageDeadline) {

@@ -409,6 +409,9 @@ TEST(DeviceEmu, AnEmulatorRestartedWithOtherCapabilitiesIsRefusedUntilTheKnownOn
   Running known(cfg);  // the device the scene was checked against
   wait_for([&] { return dev.counters().reconnects == 1; });
   EXPECT_EQ(dev.counters().reconnects, 1);
+  // The host's outputs reach it again (a keep-alive every 10 ms; the emulator may stop
+  // before it reads the zero that close() sends, so that one is not counted on).
+  wait_for([&] { return known.emu->stats().outputs_received > 0; });
   dev.close();
   EXPECT_GT(known.stop().outputs_received, 0);
 }

@@ -1,16 +1,16 @@
 // bench_cmd.cpp - `isotouch bench SUBCOMMAND`: the options of each benchmark; the
 // benchmarks themselves are bench/.
-#include "bench_cmd.h"
+#include "isotouch/apps/bench_cmd.h"
 
 #include <iostream>
 #include <memory>
 
-#include "bench_device.h"
-#include "bench_edit.h"
-#include "bench_engine.h"
-#include "cli_checks.h"
-#include "render_bench.h"
-#include "servo_bench.h"
+#include "isotouch/bench/bench_device.h"
+#include "isotouch/bench/bench_edit.h"
+#include "isotouch/bench/bench_engine.h"
+#include "isotouch/apps/cli_checks.h"
+#include "isotouch/bench/render_bench.h"
+#include "isotouch/bench/servo_bench.h"
 
 namespace isotouch::app {
 namespace {

@@ -2,7 +2,7 @@
 #pragma once
 #include <vector>
 
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

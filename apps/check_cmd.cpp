@@ -1,12 +1,12 @@
 // check_cmd.cpp - `isotouch check VOLUME` and `isotouch check --all`: options only; the
 // checks are bench/pass_check.
-#include "check_cmd.h"
+#include "isotouch/apps/check_cmd.h"
 
 #include <iostream>
 #include <memory>
 #include <string>
 
-#include "pass_check.h"
+#include "isotouch/bench/pass_check.h"
 
 namespace isotouch::app {
 namespace {

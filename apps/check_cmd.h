@@ -1,6 +1,6 @@
 // check_cmd.h - `isotouch check`: the engine's passes against their CPU references.
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

@@ -6,8 +6,8 @@
 
 #include <CLI/CLI.hpp>
 
-#include "exit_codes.h"
-#include "isotouch_version.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/version.h"
 
 namespace isotouch::app {
 

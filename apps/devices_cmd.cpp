@@ -1,4 +1,4 @@
-#include "devices_cmd.h"
+#include "isotouch/apps/devices_cmd.h"
 
 #include <iostream>
 
@@ -6,8 +6,8 @@
 #include <ostream>
 #include <stdexcept>
 
-#include "hid_device.h"
-#include "vk_context.h"
+#include "isotouch/servo/hid_device.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::app {
 namespace {

@@ -3,7 +3,7 @@
 #pragma once
 #include <iosfwd>
 
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

@@ -1,12 +1,12 @@
 // export_cmd.cpp - `isotouch export`: options only; the export is run/export.h.
-#include "export_cmd.h"
+#include "isotouch/apps/export_cmd.h"
 
-#include "exit_codes.h"
+#include "isotouch/core/exit_codes.h"
 
 #include <iostream>
 #include <memory>
 
-#include "export.h"
+#include "isotouch/run/export.h"
 
 namespace isotouch::app {
 

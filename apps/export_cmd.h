@@ -1,6 +1,6 @@
 // export_cmd.h - `isotouch export`: a volume to .vdb and its isosurface to STL / OBJ / PLY.
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

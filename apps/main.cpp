@@ -6,18 +6,18 @@
 #include <iostream>
 #include <vector>
 
-#include "bench_cmd.h"
-#include "check_cmd.h"
-#include "cli_common.h"
-#include "devices_cmd.h"
-#include "export_cmd.h"
-#include "render_cmd.h"
-#include "replay_cmd.h"
-#include "report_cmd.h"
-#include "run_cmd.h"
-#include "serve_cmd.h"
-#include "stability_cmd.h"
-#include "subcommand.h"
+#include "isotouch/apps/bench_cmd.h"
+#include "isotouch/apps/check_cmd.h"
+#include "isotouch/apps/cli_common.h"
+#include "isotouch/apps/devices_cmd.h"
+#include "isotouch/apps/export_cmd.h"
+#include "isotouch/apps/render_cmd.h"
+#include "isotouch/apps/replay_cmd.h"
+#include "isotouch/apps/report_cmd.h"
+#include "isotouch/apps/run_cmd.h"
+#include "isotouch/apps/serve_cmd.h"
+#include "isotouch/apps/stability_cmd.h"
+#include "isotouch/apps/subcommand.h"
 
 using namespace isotouch;
 

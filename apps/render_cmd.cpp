@@ -1,13 +1,13 @@
 // render_cmd.cpp - `isotouch render`: options only; the rendering is run/render_job.h.
-#include "render_cmd.h"
+#include "isotouch/apps/render_cmd.h"
 
 #include <filesystem>
 #include <memory>
 #include <stdexcept>
 #include <string>
 
-#include "cli_checks.h"
-#include "render_job.h"
+#include "isotouch/apps/cli_checks.h"
+#include "isotouch/run/render_job.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #define ISOTOUCH_SOURCE_DIR "."

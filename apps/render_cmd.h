@@ -1,6 +1,6 @@
 // render_cmd.h - `isotouch render`: a scene's isosurface to a PNG (run/render_job.h).
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

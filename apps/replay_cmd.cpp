@@ -1,7 +1,7 @@
 // replay_cmd.cpp - `isotouch replay FILE`: options and exit codes; the replay is run/replay.h.
-#include "replay_cmd.h"
+#include "isotouch/apps/replay_cmd.h"
 
-#include "exit_codes.h"
+#include "isotouch/core/exit_codes.h"
 
 #include <filesystem>
 #include <iomanip>
@@ -10,9 +10,9 @@
 #include <sstream>
 #include <string>
 
-#include "record.h"
-#include "replay.h"
-#include "scene.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/replay.h"
+#include "isotouch/io/scene.h"
 
 namespace isotouch::app {
 namespace fs = std::filesystem;

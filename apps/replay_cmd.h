@@ -1,6 +1,6 @@
 // replay_cmd.h - `isotouch replay FILE`: a recording played back and checked (run/replay.h).
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

@@ -1,10 +1,10 @@
 // report_cmd.cpp - `isotouch report`: options only; see bench/error_report.h.
-#include "report_cmd.h"
+#include "isotouch/apps/report_cmd.h"
 
 #include <iostream>
 #include <memory>
 
-#include "error_report.h"
+#include "isotouch/bench/error_report.h"
 
 namespace isotouch::app {
 

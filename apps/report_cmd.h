@@ -1,6 +1,6 @@
 // report_cmd.h - `isotouch report`: error against run time, every algorithm and option.
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

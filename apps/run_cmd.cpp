@@ -1,5 +1,5 @@
 // run_cmd.cpp - `isotouch run`. See run_cmd.h.
-#include "run_cmd.h"
+#include "isotouch/apps/run_cmd.h"
 
 #include <filesystem>
 #include <iomanip>
@@ -7,12 +7,12 @@
 #include <memory>
 #include <string>
 
-#include "exit_codes.h"
-#include "live_run.h"
-#include "run_job.h"
-#include "scene.h"
-#include "sim_device.h"
-#include "stop_signal.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/run/live_run.h"
+#include "isotouch/apps/run_job.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/session/stop_signal.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #define ISOTOUCH_SOURCE_DIR "."

@@ -1,7 +1,7 @@
 // run_cmd.h - `isotouch run`: a scene simulated end to end (the run job, run/run_scene.h),
 // or in real time with --live (live_cmd.h).
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

@@ -1,10 +1,10 @@
 // run_job.h - the run job's names that the commands (run, replay, run --live, bench edit,
 // the sculpting app) use without a prefix. The job itself is a library: run/.
 #pragma once
-#include "live_run.h"
-#include "run_metrics.h"
-#include "run_scene.h"
-#include "scene_setup.h"
+#include "isotouch/run/live_run.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
 
 namespace isotouch::app {
 

@@ -1,13 +1,13 @@
 // serve_cmd.cpp - `isotouch serve SCENE`: options and exit codes; the server is service/serve.h.
-#include "serve_cmd.h"
+#include "isotouch/apps/serve_cmd.h"
 
 #include <iostream>
 #include <memory>
 #include <string>
 
-#include "exit_codes.h"
-#include "scene.h"
-#include "serve.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/service/serve.h"
 
 namespace isotouch::app {
 

@@ -1,6 +1,6 @@
 // serve_cmd.h - `isotouch serve SCENE`: the OpenIGTLink server (service/serve.h).
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

@@ -1,11 +1,11 @@
 // stability_cmd.cpp - `isotouch stability`: options only; see bench/stability_report.h.
-#include "stability_cmd.h"
+#include "isotouch/apps/stability_cmd.h"
 
 #include <iostream>
 #include <memory>
 #include <string>
 
-#include "stability_report.h"
+#include "isotouch/bench/stability_report.h"
 
 namespace isotouch::app {
 

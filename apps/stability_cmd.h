@@ -1,6 +1,6 @@
 // stability_cmd.h - `isotouch stability`: measured K_max against the passivity bound.
 #pragma once
-#include "subcommand.h"
+#include "isotouch/apps/subcommand.h"
 
 namespace isotouch::app {
 

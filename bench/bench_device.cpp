@@ -1,5 +1,5 @@
-#include "bench_device.h"
-#include "files.h"
+#include "isotouch/bench/bench_device.h"
+#include "isotouch/io/files.h"
 
 #include <unistd.h>
 
@@ -15,14 +15,14 @@
 #include <sstream>
 #include <thread>
 
-#include "analytic_fields.h"
-#include "servo_bench.h"
-#include "device_emulator.h"
-#include "device_protocols.h"
-#include "report_device.h"
-#include "servo_thread.h"
-#include "socket_link.h"
-#include "stats.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/bench/servo_bench.h"
+#include "isotouch/sim/device_emulator.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/socket_link.h"
+#include "isotouch/eval/stats.h"
 
 namespace isotouch::bench {
 namespace {

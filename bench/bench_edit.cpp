@@ -1,7 +1,7 @@
 // bench_edit.cpp - `isotouch bench edit`. See bench_edit.h.
-#include "servo_bench.h"
-#include "vdb_io.h"
-#include "bench_edit.h"
+#include "isotouch/bench/servo_bench.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/bench/bench_edit.h"
 
 #include <algorithm>
 #include <atomic>
@@ -17,21 +17,21 @@
 #include <stdexcept>
 #include <thread>
 
-#include "brush.h"
-#include "edit_session.h"
-#include "field_view.h"
-#include "files.h"
-#include "hri.h"
-#include "live_session.h"
-#include "passes.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
-#include "servo_thread.h"
-#include "sim_device_io.h"
-#include "triple_buffer.h"
-#include "vk_context.h"
-#include "volume_io.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/io/files.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/sim/sim_device_io.h"
+#include "isotouch/servo/triple_buffer.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/io/volume_io.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #define ISOTOUCH_SOURCE_DIR "."

@@ -25,12 +25,12 @@
 #include <string>
 #include <vector>
 
-#include "stats.h"
-#include "bench_engine.h"
-#include "isosurface.h"
-#include "renderer.h"
-#include "sample_field.h"
-#include "vec3.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/bench/bench_engine.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::bench {
 

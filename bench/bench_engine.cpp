@@ -1,6 +1,6 @@
 // bench_engine.cpp - `isotouch bench engine`. See bench_engine.h.
-#include "servo_bench.h"
-#include "bench_engine.h"
+#include "isotouch/bench/servo_bench.h"
+#include "isotouch/bench/bench_engine.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -24,16 +24,16 @@
 #include <stdexcept>
 #include <thread>
 
-#include "bench_peers.h"
-#include "field_view.h"
-#include "hri.h"
-#include "triple_buffer.h"
-#include "files.h"
-#include "gradient_pass.h"
-#include "parallel.h"
-#include "pool_recycler.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/bench/bench_peers.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/triple_buffer.h"
+#include "isotouch/io/files.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/pool_recycler.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #define ISOTOUCH_SOURCE_DIR "."

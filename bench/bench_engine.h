@@ -14,12 +14,12 @@
 #include <string>
 #include <vector>
 
-#include "stats.h"
-#include "brick_field.h"
-#include "passes.h"
-#include "sparse_chain.h"
-#include "vk_context.h"
-#include "volume.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::bench {
 

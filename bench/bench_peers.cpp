@@ -1,6 +1,6 @@
 // bench_peers.cpp - see bench_peers.h. The only translation unit of `bench engine` that
 // includes ITK's filters and OpenVDB's tools.
-#include "bench_peers.h"
+#include "isotouch/bench/bench_peers.h"
 
 #include <chrono>
 #include <cstring>
@@ -18,7 +18,7 @@
 #include <tbb/global_control.h>
 #endif
 
-#include "sample_field.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch::bench {
 namespace {

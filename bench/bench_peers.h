@@ -7,7 +7,7 @@
 #include <limits>
 #include <string>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::bench {
 

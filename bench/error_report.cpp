@@ -1,4 +1,4 @@
-#include "error_report.h"
+#include "isotouch/bench/error_report.h"
 
 
 #include <algorithm>
@@ -13,11 +13,11 @@
 #include <memory>
 #include <sstream>
 
-#include "baselines.h"
-#include "files.h"
-#include "hri.h"
-#include "sweep.h"
-#include "vk_context.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/io/files.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/eval/sweep.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::bench {
 using core::norm;

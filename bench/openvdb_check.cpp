@@ -3,7 +3,7 @@
 // OpenVDB (built with ISOTOUCH_HAVE_OPENVDB when find_package(OpenVDB) succeeds).
 #include <chrono>
 
-#include "pass_check.h"
+#include "isotouch/bench/pass_check.h"
 
 #ifdef ISOTOUCH_HAVE_OPENVDB
 #include <openvdb/math/Maps.h>

@@ -1,6 +1,6 @@
 // pass_check.cpp - `isotouch check` and `check --all`. See pass_check.h.
-#include "pass_check.h"
-#include "vdb_io.h"
+#include "isotouch/bench/pass_check.h"
+#include "isotouch/io/vdb_io.h"
 
 #include <algorithm>
 #include <iostream>
@@ -15,16 +15,16 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_filters.h"
-#include "gradient_pass.h"
-#include "cpu_gradient.h"
-#include "passes.h"
-#include "scene.h"
-#include "shapes.h"
-#include "synthetic.h"
-#include "ulp.h"
-#include "vk_context.h"
-#include "volume_io.h"
+#include "isotouch/engine/cpu_filters.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/eval/shapes.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/engine/ulp.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::bench {
 using io::load_any_volume;

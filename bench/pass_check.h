@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::bench {
 

@@ -1,4 +1,4 @@
-#include "render_bench.h"
+#include "isotouch/bench/render_bench.h"
 
 #include <array>
 #include <chrono>
@@ -9,12 +9,12 @@
 #include <string>
 #include <vector>
 
-#include "picture.h"
-#include "raycast.h"
-#include "scene.h"
-#include "servo_bench.h"
-#include "stats.h"
-#include "vk_context.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/bench/servo_bench.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/engine/vk_context.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #define ISOTOUCH_SOURCE_DIR "."

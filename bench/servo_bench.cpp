@@ -1,4 +1,4 @@
-#include "servo_bench.h"
+#include "isotouch/bench/servo_bench.h"
 
 #include <algorithm>
 #include <atomic>
@@ -12,20 +12,20 @@
 #include <sstream>
 #include <thread>
 
-#include "cpu_gradient.h"
-#include "files.h"
-#include "gradient_pass.h"
-#include "servo_thread.h"
-#include "sim_device_io.h"
-#include "synthetic.h"
-#include "baselines.h"
-#include "brick_field.h"
-#include "cpu_placement.h"
-#include "hri.h"
-#include "sweep.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/io/files.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/sim/sim_device_io.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/servo/cpu_placement.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/eval/sweep.h"
 
 #include <fstream>
-#include "vk_context.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::bench {
 using eval::median_ns_per_tick;

@@ -1,4 +1,4 @@
-#include "stability_report.h"
+#include "isotouch/bench/stability_report.h"
 
 
 #include <algorithm>
@@ -8,9 +8,9 @@
 #include <map>
 #include <sstream>
 
-#include "analytic_fields.h"
-#include "files.h"
-#include "stability.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/io/files.h"
+#include "isotouch/sim/stability.h"
 
 namespace isotouch::bench {
 using io::draw_with_gnuplot;

@@ -53,9 +53,9 @@
 #include <string>
 #include <vector>
 
-#include "grid.h"
-#include "isosurface.h"
-#include "sample_field.h"
+#include "isotouch/core/grid.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch::core {
 

@@ -9,9 +9,9 @@
 #include <cstdint>
 #include <limits>
 
-#include "grid.h"
-#include "sample_field.h"
-#include "vec3.h"
+#include "isotouch/core/grid.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::core {
 

@@ -3,7 +3,7 @@
 #include <array>
 #include <cstddef>
 
-#include "vec3.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::core {
 

@@ -3,7 +3,7 @@
 #pragma once
 #include <cstdint>
 
-#include "vec3.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::core {
 

@@ -13,9 +13,9 @@
 #include <utility>
 #include <vector>
 
-#include "grid.h"
-#include "isosurface.h"
-#include "vec3.h"
+#include "isotouch/core/grid.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::core {
 

@@ -2,11 +2,11 @@
 // The core types and helpers that other folders may name without the core:: prefix, in one
 // list. Nothing is put into another namespace here: a folder opts in with
 // `using namespace core::vocabulary;` in its own *_names.h, so the choice stays with it.
-#include "brick_field.h"
-#include "field_view.h"
-#include "isosurface.h"
-#include "sample_field.h"
-#include "vec3.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::core::vocabulary {
 using core::Vec3;

@@ -1,14 +1,14 @@
 // chain_cpu.cpp - the pass list (pass_desc.h): names, labels, its check, and the chain's
 // CPU reference run_chain_cpu. No Vulkan (target isotouch::engine_cpu).
-#include "pass_desc.h"
+#include "isotouch/engine/pass_desc.h"
 
 #include <chrono>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_gradient.h"
-#include "parallel.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/parallel.h"
 
 namespace isotouch::engine {
 

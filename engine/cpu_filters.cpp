@@ -1,5 +1,5 @@
 // Compiled with -ffp-contract=off (engine/CMakeLists.txt): see cpu_filters.h.
-#include "cpu_filters.h"
+#include "isotouch/engine/cpu_filters.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "parallel.h"
+#include "isotouch/engine/parallel.h"
 
 namespace isotouch::engine {
 

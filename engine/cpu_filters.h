@@ -4,12 +4,12 @@
 // GPU and CPU agree bit for bit on an IEEE device (this file is compiled
 // with -ffp-contract=off: no FMA contraction).
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <array>
 #include <cstdint>
 #include <vector>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

@@ -1,7 +1,7 @@
 #include <algorithm>
 #include <limits>
-#include "cpu_gradient.h"
-#include "parallel.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/parallel.h"
 
 namespace isotouch::engine {
 

@@ -1,8 +1,8 @@
 // cpu_gradient.h - CPU reference of the gradient pass (shaders/gradient.comp).
 #pragma once
-#include "core_names.h"
-#include "sample_field.h"
-#include "volume.h"
+#include "isotouch/engine/core_names.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

@@ -1,15 +1,15 @@
-#include "gradient_pass.h"
+#include "isotouch/engine/gradient_pass.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cstddef>
 #include <cstring>
 
-#include "cpu_gradient.h"
+#include "isotouch/engine/cpu_gradient.h"
 #include "isotouch/shaders/gradient_spv.h"
 #include "isotouch/shaders/copy_x4_spv.h"
 #include "isotouch/shaders/gradient_x4_spv.h"
-#include "isotouch_shared.h"
+#include "isotouch/shaders/isotouch_shared.h"
 
 namespace isotouch::engine {
 

@@ -1,6 +1,6 @@
 // gradient_pass.h - the "gradient" compute pass: value + gradient per voxel on the GPU.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <cstdint>
 
 #include <array>
@@ -8,11 +8,11 @@
 #include <memory>
 #include <vector>
 
-#include "isotouch_shared.h"
-#include "sample_field.h"
-#include "vk_context.h"
-#include "vk_resources.h"
-#include "volume.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/vk_resources.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

@@ -1,4 +1,4 @@
-#include "parallel.h"
+#include "isotouch/engine/parallel.h"
 
 #include <algorithm>
 #include <exception>

@@ -3,15 +3,15 @@
 // the CPU references, the live field and the ThreadSanitizer build use this alone; the GPU
 // chain that runs the same list is PassChain (passes.h).
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "cpu_filters.h"
-#include "sample_field.h"
-#include "volume.h"
+#include "isotouch/engine/cpu_filters.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

@@ -1,4 +1,4 @@
-#include "passes.h"
+#include "isotouch/engine/passes.h"
 
 #include <algorithm>
 #include <chrono>
@@ -8,8 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_gradient.h"
-#include "gradient_pass.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/gradient_pass.h"
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
@@ -19,8 +19,8 @@
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/morph1d_spv.h"
-#include "isotouch_shared.h"
-#include "vk_resources.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/vk_resources.h"
 
 namespace isotouch::engine {
 

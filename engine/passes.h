@@ -29,17 +29,17 @@
 // GPU and CPU do the same float operations in the same order (precise accumulation,
 // -ffp-contract=off): on lavapipe every output agrees bit for bit (tests/test_passes.cpp).
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "pass_desc.h"
-#include "vk_context.h"
-#include "vk_resources.h"
-#include "volume.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/vk_resources.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

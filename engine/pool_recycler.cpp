@@ -1,5 +1,5 @@
 // pool_recycler.cpp - see pool_recycler.h.
-#include "pool_recycler.h"
+#include "isotouch/engine/pool_recycler.h"
 
 #include <utility>
 

@@ -6,12 +6,12 @@
 // A chain that publishes again (a run per isovalue, a benchmark's repetitions) takes the
 // buffer of a snapshot nobody holds any more instead: same capacity, pages resident.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <cstddef>
 #include <cstdint>
 #include <mutex>
 
-#include "brick_field.h"
+#include "isotouch/core/brick_field.h"
 
 namespace isotouch::engine {
 

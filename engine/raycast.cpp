@@ -1,5 +1,5 @@
 // raycast.cpp - the GPU ray caster (shaders/raycast_*.comp: march, args, shade, overlay), cameras, overlay primitives.
-#include "raycast.h"
+#include "isotouch/engine/raycast.h"
 
 #include <algorithm>
 #include <bit>
@@ -16,7 +16,7 @@
 #include "isotouch/shaders/raycast_overlay_spv.h"
 #include "isotouch/shaders/raycast_shade_spv.h"
 #include "isotouch/shaders/raycast_tiles_spv.h"
-#include "vk_resources.h"
+#include "isotouch/engine/vk_resources.h"
 
 namespace isotouch::engine {
 

@@ -24,7 +24,7 @@
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
 // and the cell bytes of a uniform brick follow from its tile value.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -32,11 +32,11 @@
 #include <string>
 #include <vector>
 
-#include "cpu_filters.h"
-#include "isosurface.h"
-#include "isotouch_shared.h"
-#include "vk_context.h"
-#include "volume.h"
+#include "isotouch/engine/cpu_filters.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

@@ -16,7 +16,7 @@
 #include <limits>
 #include <stdexcept>
 
-#include "raycast.h"
+#include "isotouch/engine/raycast.h"
 
 namespace isotouch::engine {
 namespace {

@@ -11,7 +11,7 @@
 // PerBrick: (host) the voxels copied into per-slab staging buffers with the raw ranges;
 // (GPU) staging -> device copies, one sparse_brick.comp dispatch per (slab, pool chunk),
 // readback copies; (host) publish the active bricks. Every host step is timed in SparseOutput.
-#include "sparse_chain.h"
+#include "isotouch/engine/sparse_chain.h"
 
 #include <algorithm>
 #include <chrono>
@@ -25,15 +25,15 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_gradient.h"
+#include "isotouch/engine/cpu_gradient.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
 #include "isotouch/shaders/gauss_fused_list_spv.h"
 #include "isotouch/shaders/sparse_brick_spv.h"
-#include "isotouch_shared.h"
-#include "parallel.h"
-#include "passes.h"
-#include "pool_recycler.h"
-#include "vk_resources.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/pool_recycler.h"
+#include "isotouch/engine/vk_resources.h"
 
 namespace isotouch::engine {
 

@@ -4,7 +4,7 @@
 // bench engine (bench/bench_engine.cpp) and the scene runner (run/engine_run.cpp) code
 // against; the owner may add members but keeps these names and meanings.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
-#include "brick_field.h"
-#include "pass_desc.h"
-#include "result.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/engine/result.h"
 
 namespace isotouch::engine {
 

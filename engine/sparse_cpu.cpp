@@ -20,10 +20,10 @@
 #include <xmmintrin.h>
 #endif
 
-#include "cpu_gradient.h"
-#include "parallel.h"
-#include "pool_recycler.h"
-#include "sparse_chain.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/pool_recycler.h"
+#include "isotouch/engine/sparse_chain.h"
 
 namespace isotouch::engine {
 namespace sparse {

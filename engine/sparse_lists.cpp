@@ -4,9 +4,9 @@
 #include <array>
 #include <cstring>
 
-#include "isotouch_shared.h"
-#include "parallel.h"
-#include "sparse_chain.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/sparse_chain.h"
 
 namespace isotouch::engine::sparse {
 

@@ -1,4 +1,4 @@
-#include "synthetic.h"
+#include "isotouch/engine/synthetic.h"
 
 #include <cmath>
 #include <random>

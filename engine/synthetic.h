@@ -1,10 +1,10 @@
 // synthetic.h - analytic test volumes with known truth.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <array>
 #include <cstdint>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 

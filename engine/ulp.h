@@ -2,7 +2,7 @@
 // two arrays: how far a GPU pass is from its CPU reference (tests/test_passes.cpp,
 // `isotouch check --all`). Header only; no state.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <algorithm>
 #include <bit>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "vk_context.h"
+#include "isotouch/engine/vk_context.h"
 
 #include <algorithm>
 #include <chrono>

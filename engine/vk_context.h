@@ -2,7 +2,7 @@
 // Resources (buffers, pipelines, barriers) live in vk_resources.h: the context owns
 // no memory of its own beyond its command pool and fence.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <vulkan/vulkan.h>
 
 #include <atomic>
@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "result.h"
+#include "isotouch/engine/result.h"
 
 namespace isotouch::engine {
 

@@ -1,4 +1,4 @@
-#include "vk_resources.h"
+#include "isotouch/engine/vk_resources.h"
 
 #include <algorithm>
 #include <optional>

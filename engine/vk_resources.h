@@ -13,7 +13,7 @@
 // maxMemoryAllocationSize, no memory type of the intent, out of memory) returns a Result
 // whose error names what, the size and the limit; calls that cannot fail use VK_CHECK.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <vulkan/vulkan.h>
 
 #include <cstddef>
@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "vk_context.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::engine {
 

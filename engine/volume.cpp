@@ -1,4 +1,4 @@
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 #include <cmath>
 #include <limits>

@@ -1,12 +1,12 @@
 // volume.h - a scalar volume as loaded from disk or made synthetically.
 #pragma once
-#include "core_names.h"
+#include "isotouch/engine/core_names.h"
 #include <array>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "sample_field.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch::engine {
 

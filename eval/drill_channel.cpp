@@ -1,4 +1,4 @@
-#include "drill_channel.h"
+#include "isotouch/eval/drill_channel.h"
 
 #include <algorithm>
 #include <cmath>

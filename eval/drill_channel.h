@@ -4,9 +4,9 @@
 #pragma once
 #include <vector>
 
-#include "isosurface.h"
-#include "vec3.h"
-#include "volume.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/vec3.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::eval {
 

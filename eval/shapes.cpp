@@ -1,4 +1,4 @@
-#include "shapes.h"
+#include "isotouch/eval/shapes.h"
 
 #include <algorithm>
 #include <cmath>

@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
-#include "script.h"
-#include "volume.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::eval {
 

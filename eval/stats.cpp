@@ -1,5 +1,5 @@
 // stats.cpp - see stats.h.
-#include "stats.h"
+#include "isotouch/eval/stats.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,11 +1,11 @@
-#include "surface_distance.h"
+#include "isotouch/eval/surface_distance.h"
 
 #include <algorithm>
 #include <cmath>
 #include <queue>
 #include <vector>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::eval {
 using core::Vec3;

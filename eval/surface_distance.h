@@ -7,8 +7,8 @@
 #include <cstddef>
 #include <limits>
 
-#include "sample_field.h"
-#include "vec3.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::eval {
 

@@ -1,5 +1,5 @@
-#include "sweep.h"
-#include "vdb_io.h"
+#include "isotouch/eval/sweep.h"
+#include "isotouch/io/vdb_io.h"
 
 #include <algorithm>
 #include <chrono>
@@ -7,17 +7,17 @@
 #include <filesystem>
 #include <iostream>
 
-#include "brick_field.h"
-#include "cpu_gradient.h"
-#include "gradient_pass.h"
-#include "headless.h"
-#include "hri.h"
-#include "sampling.h"
-#include "surface_distance.h"
-#include "synthetic.h"
-#include "scene.h"
-#include "volume_io.h"
-#include "vk_context.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/eval/surface_distance.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/engine/vk_context.h"
 
 #ifndef ISOTOUCH_SOURCE_DIR
 #error "ISOTOUCH_SOURCE_DIR must name the source tree (eval/CMakeLists.txt): the sweeps read its scenes"

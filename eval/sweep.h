@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "renderer.h"
-#include "shapes.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/eval/shapes.h"
 
 namespace isotouch::engine {
 class VulkanContext;

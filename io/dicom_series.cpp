@@ -1,5 +1,5 @@
 // The only translation unit that includes ITK's GDCM IO and GDCM headers.
-#include "dicom_series.h"
+#include "isotouch/io/dicom_series.h"
 
 #include <gdcmScanner.h>
 #include <gdcmTag.h>
@@ -24,8 +24,8 @@
 #include <set>
 #include <sstream>
 
-#include "itk_reason.h"
-#include "volume_io.h"
+#include "isotouch/io/itk_reason.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::io {
 using engine::Volume;

@@ -1,6 +1,6 @@
-#include "files.h"
+#include "isotouch/io/files.h"
 
-#include "output_file.h"
+#include "isotouch/io/output_file.h"
 
 #include <spawn.h>
 #include <sys/stat.h>

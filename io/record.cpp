@@ -1,10 +1,10 @@
 // record.cpp - recordings as JSON lines (nlohmann-json), written atomically, read back
 // bit for bit with every problem named (file, line, record, field, value). See record.h.
-#include "record.h"
+#include "isotouch/io/record.h"
 
-#include "files.h"
+#include "isotouch/io/files.h"
 
-#include "output_file.h"
+#include "isotouch/io/output_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>

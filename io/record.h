@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "edit_session.h"
-#include "vec3.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::io {
 

@@ -1,4 +1,4 @@
-#include "run_folder.h"
+#include "isotouch/io/run_folder.h"
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -13,7 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "files.h"
+#include "isotouch/io/files.h"
 
 namespace isotouch::io {
 namespace fs = std::filesystem;

@@ -1,4 +1,4 @@
-#include "scene.h"
+#include "isotouch/io/scene.h"
 
 #include <nlohmann/json.hpp>
 
@@ -10,7 +10,7 @@
 #include <sstream>
 #include <vector>
 
-#include "stability.h"
+#include "isotouch/sim/stability.h"
 
 namespace isotouch::io {
 namespace {

@@ -5,9 +5,9 @@
 #include <string>
 #include <vector>
 
-#include "hri.h"
-#include "script.h"
-#include "sim_device.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
 
 namespace isotouch::io {
 

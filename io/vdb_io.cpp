@@ -1,10 +1,10 @@
 // vdb_io.cpp - OpenVDB in and out, and the isosurface as STL / OBJ / PLY.
 // The only translation unit besides openvdb_check.cpp that includes OpenVDB, and the only
 // one that includes Assimp (mesh file writers). See vdb_io.h for the frames and contracts.
-#include "vdb_io.h"
+#include "isotouch/io/vdb_io.h"
 
-#include "output_file.h"
-#include "volume_write.h"
+#include "isotouch/io/output_file.h"
+#include "isotouch/io/volume_write.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>

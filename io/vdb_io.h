@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "isosurface.h"
-#include "volume.h"
-#include "volume_io.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/engine/volume.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::io {
 

@@ -1,9 +1,9 @@
 // With dicom_series.cpp, the only translation units that include ITK and teem headers (slow to compile).
-#include "volume_io.h"
-#include "itk_reason.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/io/itk_reason.h"
 
-#include "dicom_series.h"
-#include "files.h"
+#include "isotouch/io/dicom_series.h"
+#include "isotouch/io/files.h"
 
 #include <itkImageIOBase.h>
 #include <itkImageIORegion.h>

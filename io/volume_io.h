@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::io {
 

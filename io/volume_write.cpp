@@ -1,6 +1,6 @@
 // volume_write.cpp - ITK's image writers (ImageIOBase, as volume_io.cpp reads), in a
 // translation unit of their own.
-#include "volume_write.h"
+#include "isotouch/io/volume_write.h"
 
 #include <itkImageIOBase.h>
 #include <itkImageIORegion.h>
@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "output_file.h"
+#include "isotouch/io/output_file.h"
 
 namespace isotouch::io {
 using engine::Volume;

@@ -3,7 +3,7 @@
 #pragma once
 #include <string>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::io {
 

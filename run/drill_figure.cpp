@@ -1,11 +1,11 @@
-#include "drill_figure.h"
+#include "isotouch/run/drill_figure.h"
 
 #include <algorithm>
 #include <cmath>
 #include <vector>
 
-#include "raycast.h"
-#include "picture.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/run/picture.h"
 
 namespace isotouch::run {
 using core::Vec3;

@@ -2,10 +2,10 @@
 #pragma once
 #include <string>
 
-#include "isosurface.h"
-#include "vec3.h"
-#include "volume.h"
-#include "vk_context.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/vec3.h"
+#include "isotouch/engine/volume.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::run {
 

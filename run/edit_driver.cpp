@@ -1,4 +1,4 @@
-#include "edit_driver.h"
+#include "isotouch/run/edit_driver.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,9 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "field_view.h"
-#include "pass_desc.h"
-#include "text.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/run/text.h"
 
 namespace isotouch::run {
 

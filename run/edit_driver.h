@@ -9,13 +9,13 @@
 #include <string>
 #include <vector>
 
-#include "edit_session.h"
-#include "live_session.h"
-#include "names.h"
-#include "run_metrics.h"
-#include "scene.h"
-#include "scene_setup.h"
-#include "surface_distance.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/eval/surface_distance.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "engine_run.h"
+#include "isotouch/run/engine_run.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,15 +13,15 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include "brick_field.h"
-#include "cpu_gradient.h"
-#include "field_view.h"
-#include "names.h"
-#include "parallel.h"
-#include "pass_desc.h"
-#include "passes.h"
-#include "sparse_chain.h"
-#include "text.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/run/names.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/run/text.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

@@ -5,12 +5,12 @@
 #include <iosfwd>
 #include <memory>
 
-#include "run_metrics.h"
-#include "sample_field.h"
-#include "scene.h"
-#include "scene_setup.h"
-#include "vk_context.h"
-#include "volume.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::run {
 

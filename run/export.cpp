@@ -1,6 +1,6 @@
 // export.cpp - what `isotouch export` runs; see export.h.
-#include "export.h"
-#include "volume_write.h"
+#include "isotouch/run/export.h"
+#include "isotouch/io/volume_write.h"
 
 #include <cctype>
 #include <chrono>
@@ -10,11 +10,11 @@
 #include <iostream>
 #include <memory>
 
-#include "scene.h"
-#include "shapes.h"
-#include "synthetic.h"
-#include "vdb_io.h"
-#include "volume_io.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/eval/shapes.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::run {
 using io::extract_mesh;

@@ -1,15 +1,15 @@
-#include "haptic_device.h"
+#include "isotouch/run/haptic_device.h"
 
 #include <sstream>
 #include <stdexcept>
 
-#include "device_protocols.h"
-#include "hid_device.h"
-#include "null_device_io.h"
-#include "playback_device_io.h"
-#include "record.h"
-#include "sim_device_io.h"
-#include "socket_link.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/hid_device.h"
+#include "isotouch/sim/null_device_io.h"
+#include "isotouch/sim/playback_device_io.h"
+#include "isotouch/io/record.h"
+#include "isotouch/sim/sim_device_io.h"
+#include "isotouch/servo/socket_link.h"
 
 namespace isotouch::run {
 namespace {

@@ -9,14 +9,14 @@
 #include <memory>
 #include <string>
 
-#include "device_io.h"
-#include "hri.h"
-#include "report_device.h"
-#include "names.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "sim_device.h"
-#include "workspace.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/servo/workspace.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "live_run.h"
+#include "isotouch/run/live_run.h"
 
 #include <unistd.h>
 
@@ -15,19 +15,19 @@
 
 #include <nlohmann/json.hpp>
 
-#include "exit_codes.h"
-#include "files.h"
-#include "haptic_device.h"
-#include "hri.h"
-#include "live_session.h"
-#include "record.h"
-#include "run_folder.h"
-#include "run_report.h"
-#include "sim_device_io.h"
-#include "stats.h"
-#include "stop_signal.h"
-#include "trace_csv.h"
-#include "trace_figures.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/io/files.h"
+#include "isotouch/run/haptic_device.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/io/record.h"
+#include "isotouch/io/run_folder.h"
+#include "isotouch/run/run_report.h"
+#include "isotouch/sim/sim_device_io.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/session/stop_signal.h"
+#include "isotouch/run/trace_csv.h"
+#include "isotouch/run/trace_figures.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

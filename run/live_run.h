@@ -7,9 +7,9 @@
 #include <iosfwd>
 #include <string>
 
-#include "names.h"
-#include "run_scene.h"
-#include "scene_setup.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
 
 namespace isotouch::run {
 

@@ -1,17 +1,17 @@
 // names.h - the names run/ takes from other folders without a prefix (one place, as
 // servo/core_names.h does for servo/).
 #pragma once
-#include "edit_session.h"
-#include "files.h"
-#include "output_file.h"
-#include "record.h"
-#include "run_folder.h"
-#include "scene.h"
-#include "stats.h"
-#include "stop_signal.h"
-#include "surface_distance.h"
-#include "vdb_io.h"
-#include "volume_write.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/io/files.h"
+#include "isotouch/io/output_file.h"
+#include "isotouch/io/record.h"
+#include "isotouch/io/run_folder.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/session/stop_signal.h"
+#include "isotouch/eval/surface_distance.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_write.h"
 
 namespace isotouch::run {
 using core::cross;

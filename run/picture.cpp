@@ -1,4 +1,4 @@
-#include "picture.h"
+#include "isotouch/run/picture.h"
 
 #include <png.h>
 
@@ -12,10 +12,10 @@
 #include <iomanip>
 #include <sstream>
 
-#include "names.h"
-#include "scene_setup.h"
-#include "synthetic.h"
-#include "shapes.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/eval/shapes.h"
 
 namespace isotouch::run {
 using core::cross;

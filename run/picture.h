@@ -12,10 +12,10 @@
 #include <string>
 #include <vector>
 
-#include "headless.h"
-#include "raycast.h"
-#include "scene.h"
-#include "volume.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::run {
 

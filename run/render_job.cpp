@@ -1,5 +1,5 @@
 // render_job.cpp - what `isotouch render` runs; see render_job.h.
-#include "render_job.h"
+#include "isotouch/run/render_job.h"
 
 #include <unistd.h>
 
@@ -10,11 +10,11 @@
 #include <iostream>
 #include <sstream>
 
-#include "names.h"
-#include "picture.h"
-#include "run_scene.h"
-#include "trace_csv.h"
-#include "volume_io.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/trace_csv.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::run {
 using core::Vec3;

@@ -4,7 +4,7 @@
 #include <optional>
 #include <string>
 
-#include "raycast.h"
+#include "isotouch/engine/raycast.h"
 
 namespace isotouch::run {
 

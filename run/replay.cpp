@@ -1,6 +1,6 @@
 // replay.cpp - a recording played back through the same renderer and edit pipeline, every
 // force compared bit for bit (see replay.h).
-#include "replay.h"
+#include "isotouch/run/replay.h"
 
 #include <bit>
 #include <cmath>
@@ -10,12 +10,12 @@
 #include <iostream>
 #include <sstream>
 
-#include "brush.h"
-#include "files.h"
-#include "names.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/io/files.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
 
 namespace isotouch::run {
 using core::to_string;

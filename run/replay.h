@@ -15,7 +15,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "record.h"
+#include "isotouch/io/record.h"
 
 namespace isotouch::run {
 

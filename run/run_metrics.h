@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "pass_desc.h"
-#include "vec3.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "run_outputs.h"
+#include "isotouch/run/run_outputs.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,12 +13,12 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include "drill_channel.h"
-#include "drill_figure.h"
-#include "names.h"
-#include "picture.h"
-#include "raycast.h"
-#include "text.h"
+#include "isotouch/eval/drill_channel.h"
+#include "isotouch/run/drill_figure.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/run/text.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

@@ -5,12 +5,12 @@
 #include <string>
 #include <vector>
 
-#include "edit_driver.h"
-#include "headless.h"
-#include "run_metrics.h"
-#include "scene.h"
-#include "scene_setup.h"
-#include "script.h"
+#include "isotouch/run/edit_driver.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/sim/script.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "run_report.h"
+#include "isotouch/run/run_report.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,8 +13,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include "names.h"
-#include "text.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/text.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

@@ -5,10 +5,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "run_metrics.h"
-#include "scene.h"
-#include "scene_setup.h"
-#include "volume.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "run_scene.h"
+#include "isotouch/run/run_scene.h"
 #include <csignal>
 #include <unistd.h>
 #include <algorithm>
@@ -18,19 +18,19 @@
 #include <string>
 #include <thread>
 #include <vector>
-#include "edit_driver.h"
-#include "hri.h"
-#include "live_session.h"
-#include "names.h"
-#include "picture.h"
-#include "run_outputs.h"
-#include "run_report.h"
-#include "stop_signal.h"
-#include "stability.h"
-#include "text.h"
-#include "trace_csv.h"
-#include "trace_figures.h"
-#include "triple_buffer.h"
+#include "isotouch/run/edit_driver.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/run/run_outputs.h"
+#include "isotouch/run/run_report.h"
+#include "isotouch/session/stop_signal.h"
+#include "isotouch/sim/stability.h"
+#include "isotouch/run/text.h"
+#include "isotouch/run/trace_csv.h"
+#include "isotouch/run/trace_figures.h"
+#include "isotouch/servo/triple_buffer.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

@@ -4,9 +4,9 @@
 #include <iosfwd>
 #include <string>
 
-#include "run_metrics.h"
-#include "scene.h"
-#include "scene_setup.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
 
 namespace isotouch::run {
 

@@ -1,4 +1,4 @@
-#include "scene_setup.h"
+#include "isotouch/run/scene_setup.h"
 #include <algorithm>
 #include <cstdlib>
 #include <chrono>
@@ -14,14 +14,14 @@
 #include <sstream>
 #include <string>
 #include <vector>
-#include "brush.h"
-#include "engine_run.h"
-#include "names.h"
-#include "parallel.h"
-#include "run_report.h"
-#include "shapes.h"
-#include "synthetic.h"
-#include "text.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/run/engine_run.h"
+#include "isotouch/run/names.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/run/run_report.h"
+#include "isotouch/eval/shapes.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/run/text.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

@@ -6,17 +6,17 @@
 #include <string>
 #include <vector>
 
-#include "brick_field.h"
-#include "edit_session.h"
-#include "headless.h"
-#include "hri.h"
-#include "live_field.h"
-#include "passes.h"
-#include "record.h"
-#include "run_metrics.h"
-#include "scene.h"
-#include "vk_context.h"
-#include "workspace.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_field.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/servo/workspace.h"
 
 namespace isotouch::run {
 

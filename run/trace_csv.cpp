@@ -1,11 +1,11 @@
-#include "trace_csv.h"
+#include "isotouch/run/trace_csv.h"
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <iomanip>
 #include <sstream>
 #include <stdexcept>
-#include "vec3.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::run {
 namespace fs = std::filesystem;

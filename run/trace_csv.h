@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
-#include "headless.h"
-#include "volume.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::run {
 

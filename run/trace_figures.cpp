@@ -1,4 +1,4 @@
-#include "trace_figures.h"
+#include "isotouch/run/trace_figures.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,9 @@
 #include <optional>
 #include <vector>
 
-#include "field_view.h"
-#include "names.h"
-#include "pass_desc.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/run/names.h"
+#include "isotouch/engine/pass_desc.h"
 
 namespace isotouch::run {
 namespace {

@@ -4,10 +4,10 @@
 #include <utility>
 #include <vector>
 
-#include "edit_driver.h"
-#include "headless.h"
-#include "run_metrics.h"
-#include "scene_setup.h"
+#include "isotouch/run/edit_driver.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/run/run_metrics.h"
+#include "isotouch/run/scene_setup.h"
 
 namespace isotouch::run {
 

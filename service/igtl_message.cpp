@@ -1,4 +1,4 @@
-#include "igtl_message.h"
+#include "isotouch/service/igtl_message.h"
 
 #include <algorithm>
 #include <cmath>

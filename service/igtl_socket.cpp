@@ -1,4 +1,4 @@
-#include "igtl_socket.h"
+#include "isotouch/service/igtl_socket.h"
 
 #include <arpa/inet.h>
 #include <algorithm>

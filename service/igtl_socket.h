@@ -11,7 +11,7 @@
 #include <mutex>
 #include <string>
 
-#include "igtl_message.h"
+#include "isotouch/service/igtl_message.h"
 
 namespace isotouch::service {
 

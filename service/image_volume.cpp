@@ -1,4 +1,4 @@
-#include "image_volume.h"
+#include "isotouch/service/image_volume.h"
 
 #include <algorithm>
 #include <cctype>
@@ -6,7 +6,7 @@
 #include <cstring>
 #include <sstream>
 
-#include "volume_io.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::service {
 namespace {

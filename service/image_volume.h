@@ -12,7 +12,7 @@
 
 #include <igtlImageMessage.h>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::service {
 

@@ -1,4 +1,4 @@
-#include "serve.h"
+#include "isotouch/service/serve.h"
 
 #include <atomic>
 #include <chrono>
@@ -14,16 +14,16 @@
 
 #include <igtlStatusMessage.h>
 
-#include "edit_session.h"
-#include "exit_codes.h"
-#include "hri.h"
-#include "igtl_socket.h"
-#include "image_volume.h"
-#include "live_session.h"
-#include "scene_setup.h"
-#include "stop_signal.h"
-#include "transform_device.h"
-#include "triple_buffer.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/service/igtl_socket.h"
+#include "isotouch/service/image_volume.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/session/stop_signal.h"
+#include "isotouch/service/transform_device.h"
+#include "isotouch/servo/triple_buffer.h"
 
 namespace isotouch::service {
 namespace {

@@ -15,10 +15,10 @@
 #include <iosfwd>
 #include <string>
 
-#include "igtl_message.h"
-#include "run_scene.h"
-#include "scene.h"
-#include "vec3.h"
+#include "isotouch/service/igtl_message.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::service {
 

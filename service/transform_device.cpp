@@ -1,4 +1,4 @@
-#include "transform_device.h"
+#include "isotouch/service/transform_device.h"
 
 namespace isotouch::service {
 

@@ -12,9 +12,9 @@
 #include <cstdint>
 #include <mutex>
 
-#include "device_io.h"
-#include "latest_value.h"
-#include "volume.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/latest_value.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::service {
 

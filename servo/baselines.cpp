@@ -1,9 +1,9 @@
-#include "baselines.h"
+#include "isotouch/servo/baselines.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 namespace {

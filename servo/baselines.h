@@ -1,8 +1,8 @@
 // baselines.h - the two methods the HRI paper compares against (its Table 1), under the
 // same Renderer interface and the same force conventions as HriRenderer.
 #pragma once
-#include "core_names.h"
-#include "renderer.h"
+#include "isotouch/servo/core_names.h"
+#include "isotouch/servo/renderer.h"
 
 namespace isotouch::servo {
 

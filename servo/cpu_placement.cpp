@@ -1,4 +1,4 @@
-#include "cpu_placement.h"
+#include "isotouch/servo/cpu_placement.h"
 
 #include <fcntl.h>
 #include <pthread.h>

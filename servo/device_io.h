@@ -1,14 +1,14 @@
 // device_io.h - the device side of the servo loop (HAPI: updateDeviceValues / sendOutput):
 // the device model (capabilities, status, one reading per tick) and its interface.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
 
-#include "vec3.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::servo {
 

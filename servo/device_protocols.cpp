@@ -1,9 +1,9 @@
-#include "device_protocols.h"
+#include "isotouch/servo/device_protocols.h"
 
 #include <algorithm>
 #include <cstring>
 
-#include "hid_report.h"
+#include "isotouch/servo/hid_report.h"
 
 namespace isotouch::servo {
 

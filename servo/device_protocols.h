@@ -1,15 +1,15 @@
 // device_protocols.h - the report protocols a ReportDevice speaks: isotouch protocol v1
 // (docs/hid-protocol.md) and the Polhem's USB HID reports (servo/hid_report.h).
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <array>
 #include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
 
-#include "latest_value.h"
-#include "report_device.h"
+#include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/report_device.h"
 
 namespace isotouch::servo {
 

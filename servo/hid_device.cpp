@@ -1,4 +1,4 @@
-#include "hid_device.h"
+#include "isotouch/servo/hid_device.h"
 
 #include <hidapi.h>
 
@@ -6,7 +6,7 @@
 #include <cwchar>
 #include <stdexcept>
 
-#include "device_protocols.h"
+#include "isotouch/servo/device_protocols.h"
 
 namespace isotouch::servo {
 namespace {

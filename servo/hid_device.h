@@ -1,13 +1,13 @@
 // hid_device.h - haptic devices on USB HID through hidapi (hidraw backend): the link, the
 // device list, and opening a device by VID:PID[:serial] or by path.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include "report_device.h"
+#include "isotouch/servo/report_device.h"
 
 namespace isotouch::servo {
 

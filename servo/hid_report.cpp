@@ -1,4 +1,4 @@
-#include "hid_report.h"
+#include "isotouch/servo/hid_report.h"
 
 #include <algorithm>
 #include <cmath>

@@ -2,15 +2,15 @@
 // I/O). Our own protocol v1 (docs/hid-protocol.md) and the Polhem (WoodenHaptics /
 // haptikfabriken) USB HID reports.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
 
-#include "device_io.h"
-#include "vec3.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::servo::hid {
 

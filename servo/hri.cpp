@@ -14,7 +14,7 @@
 //   hri_tool.cpp    the spherical tool (not in the paper): several planes at once
 //   hri_fast.cpp    tick(), and the robust common ticks written out for speed (same bits)
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <cmath>
 

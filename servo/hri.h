@@ -6,10 +6,10 @@
 // reads the published field through core::FieldView only; tick() allocates nothing, takes no lock and makes
 // no syscall.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <cstdint>
 
-#include "renderer.h"
+#include "isotouch/servo/renderer.h"
 
 namespace isotouch::servo {
 

@@ -5,12 +5,12 @@
 // edit_max_step_fraction of the limit and edit_max_turn_deg per tick), and material added
 // deeper than the embedded-VHIP search reaches is marched out of (march_out). hri.h, "Edits".
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 

@@ -7,13 +7,13 @@
 // tick_robust_full and, through general_tick, tick_general in hri_robust.cpp). The same bits
 // as the general path (the HriShortWay tests).
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "hri_inline.h"
-#include "sampling.h"
+#include "isotouch/servo/hri_inline.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 

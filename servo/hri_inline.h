@@ -14,12 +14,12 @@
 //   segment is worth marching for a thin wall).
 #pragma once
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 

@@ -10,13 +10,13 @@
 // friction, after Salisbury et al.), which both variants use.
 // The robust variant's departures from this figure: hri_robust.cpp, hri_plane.cpp.
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "hri_inline.h"
-#include "sampling.h"
+#include "isotouch/servo/hri_inline.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 

@@ -9,13 +9,13 @@
 // structures (the blended gradient samples of a plate's two faces cancel); a proxy path
 // through material (path_through, for keep_proxy_outside in hri_robust.cpp).
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 namespace {

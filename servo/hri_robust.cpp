@@ -11,13 +11,13 @@
 // The common ticks written out for speed: hri_fast.cpp (the same bits as short_tick and
 // tick_general here).
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "hri_inline.h"
-#include "sampling.h"
+#include "isotouch/servo/hri_inline.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 namespace {

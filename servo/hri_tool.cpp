@@ -5,13 +5,13 @@
 // (surface_scan) or, for a tool of many voxels, from Newton searches (nearest_surface).
 // hri.h, "Spherical tool".
 
-#include "hri.h"
+#include "isotouch/servo/hri.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::servo {
 

@@ -1,4 +1,4 @@
-#include "passivity.h"
+#include "isotouch/servo/passivity.h"
 
 #include <algorithm>
 #include <cmath>

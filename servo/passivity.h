@@ -7,8 +7,8 @@
 // this tick would be negative, so the environment never hands out more than it took in.
 // Allocation-free, lock-free: safe in the servo tick.
 #pragma once
-#include "core_names.h"
-#include "vec3.h"
+#include "isotouch/servo/core_names.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::servo {
 

@@ -1,10 +1,10 @@
 // renderer.h - the interface every haptic renderer of an isosurface implements.
 #pragma once
-#include "core_names.h"
-#include "field_view.h"
-#include "isosurface.h"
-#include "sample_field.h"
-#include "vec3.h"
+#include "isotouch/servo/core_names.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::servo {
 

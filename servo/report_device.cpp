@@ -1,4 +1,4 @@
-#include "report_device.h"
+#include "isotouch/servo/report_device.h"
 
 #include <sys/prctl.h>
 #include <time.h>
@@ -9,7 +9,7 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_placement.h"
+#include "isotouch/servo/cpu_placement.h"
 
 namespace isotouch::servo {
 namespace {

@@ -2,7 +2,7 @@
 // Unix-domain socket to isotouch-devemu): the link and protocol interfaces, and the device
 // with its reader and writer threads. The servo thread only touches two latest-value cells.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -12,8 +12,8 @@
 #include <string>
 #include <thread>
 
-#include "device_io.h"
-#include "latest_value.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/latest_value.h"
 
 namespace isotouch::servo {
 

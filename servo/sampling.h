@@ -1,8 +1,8 @@
 // sampling.h - free-function spellings of core::FieldView's reads (tests, apps, scripts).
 // The renderers call FieldView directly; these forward to it, so both give the same numbers.
 #pragma once
-#include "core_names.h"
-#include "field_view.h"
+#include "isotouch/servo/core_names.h"
+#include "isotouch/core/field_view.h"
 
 namespace isotouch::servo {
 

@@ -1,4 +1,4 @@
-#include "servo_thread.h"
+#include "isotouch/servo/servo_thread.h"
 
 #include <pthread.h>
 #include <sys/mman.h>
@@ -14,7 +14,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "cpu_placement.h"
+#include "isotouch/servo/cpu_placement.h"
 
 namespace isotouch::servo {
 namespace {

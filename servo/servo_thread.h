@@ -1,6 +1,6 @@
 // servo_thread.h - the fixed-rate real-time servo thread.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -9,11 +9,11 @@
 #include <thread>
 #include <vector>
 
-#include "device_io.h"
-#include "memory_range.h"
-#include "renderer.h"
-#include "triple_buffer.h"
-#include "workspace.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/memory_range.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/servo/triple_buffer.h"
+#include "isotouch/servo/workspace.h"
 
 namespace isotouch::servo {
 

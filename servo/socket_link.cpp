@@ -1,4 +1,4 @@
-#include "socket_link.h"
+#include "isotouch/servo/socket_link.h"
 
 #include <poll.h>
 #include <sys/socket.h>

@@ -1,10 +1,10 @@
 // socket_link.h - a ReportLink over a Unix-domain SOCK_SEQPACKET socket: the same report
 // bytes as over USB, to isotouch-devemu (one message = one report).
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <string>
 
-#include "report_device.h"
+#include "isotouch/servo/report_device.h"
 
 namespace isotouch::servo {
 

@@ -12,7 +12,7 @@
 #include <stdexcept>
 #include <type_traits>
 
-#include "memory_range.h"
+#include "isotouch/servo/memory_range.h"
 
 namespace isotouch::servo {
 

@@ -1,6 +1,6 @@
 // triple_buffer.h - the one lock-free publication point between engine and servo.
 #pragma once
-#include "core_names.h"
+#include "isotouch/servo/core_names.h"
 #include <atomic>
 #include <cstdint>
 #include <memory>

@@ -1,7 +1,7 @@
 // workspace.h - the map from device space to the volume's world space.
 #pragma once
-#include "core_names.h"
-#include "vec3.h"
+#include "isotouch/servo/core_names.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::servo {
 

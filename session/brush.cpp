@@ -6,7 +6,7 @@
 // slices that fits a storage binding); the flags and (with a host mirror) the box of
 // touched voxels copied to readback buffers. The host then reads the dirty flags and copies
 // the dirty bricks into the mirror.
-#include "brush.h"
+#include "isotouch/session/brush.h"
 
 #include <algorithm>
 #include <chrono>
@@ -14,9 +14,9 @@
 #include <cstring>
 #include <utility>
 
-#include "brick_field.h"
+#include "isotouch/core/brick_field.h"
 #include "isotouch/shaders/brush_spv.h"
-#include "vk_resources.h"
+#include "isotouch/engine/vk_resources.h"
 
 namespace isotouch::session {
 using engine::make_buffer_or_throw;

@@ -52,11 +52,11 @@
 #include <string>
 #include <vector>
 
-#include "edit_history.h"
-#include "isosurface.h"
-#include "isotouch_shared.h"
-#include "result.h"
-#include "volume.h"
+#include "isotouch/session/edit_history.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/result.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 class VulkanContext;

@@ -9,8 +9,8 @@
 #include <cstring>
 #include <sstream>
 
-#include "brick_field.h"
-#include "brush.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/session/brush.h"
 
 namespace isotouch::session {
 using engine::Volume;

@@ -2,7 +2,7 @@
 // it cannot be created, so a Sculptor runs every brush on the CPU reference.
 #include <stdexcept>
 
-#include "brush.h"
+#include "isotouch/session/brush.h"
 
 namespace isotouch::session {
 

@@ -1,6 +1,6 @@
 // edit_history.cpp - per-stroke undo / redo as brick backups (see edit_history.h).
 #include <algorithm>
-#include "edit_history.h"
+#include "isotouch/session/edit_history.h"
 
 #include <cmath>
 #include <cstring>
@@ -8,7 +8,7 @@
 #include <string>
 #include <utility>
 
-#include "brick_field.h"
+#include "isotouch/core/brick_field.h"
 
 namespace isotouch::session {
 using engine::Volume;

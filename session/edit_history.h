@@ -24,7 +24,7 @@
 #include <optional>
 #include <vector>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::session {
 

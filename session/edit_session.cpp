@@ -1,5 +1,5 @@
 // edit_session.cpp - EditSession: Sculptor + LiveField + publication (session/edit_session.h).
-#include "edit_session.h"
+#include "isotouch/session/edit_session.h"
 
 #include <chrono>
 #include <cmath>

@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
-#include "brush.h"
-#include "live_field.h"
-#include "triple_buffer.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/session/live_field.h"
+#include "isotouch/servo/triple_buffer.h"
 
 namespace isotouch::session {
 

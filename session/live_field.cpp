@@ -1,7 +1,7 @@
 // live_field.cpp - the edited volume's published snapshot, updated brick by brick. The design is in live_field.h. Compiled with -ffp-contract=off like the CPU
 // reference it calls (engine/sparse_cpu.cpp), although every float operation on samples
 // happens there: this file selects bricks, compares bits and moves samples.
-#include "live_field.h"
+#include "isotouch/session/live_field.h"
 
 #include <algorithm>
 #include <bit>
@@ -15,8 +15,8 @@
 #include <sys/mman.h>
 #include <unistd.h>
 
-#include "live_gpu.h"
-#include "sparse_chain.h"
+#include "isotouch/session/live_gpu.h"
+#include "isotouch/engine/sparse_chain.h"
 
 namespace isotouch::session {
 using core::BrickStore;

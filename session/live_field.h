@@ -59,10 +59,10 @@
 #include <string>
 #include <vector>
 
-#include "isosurface.h"
-#include "pass_desc.h"
-#include "sample_field.h"
-#include "volume.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 class VulkanContext;

@@ -1,7 +1,7 @@
 // live_gpu.cpp - the live field's GPU recompute on engine::SparseFilter (session/live_gpu.h).
-#include "live_gpu.h"
+#include "isotouch/session/live_gpu.h"
 
-#include "sparse_chain.h"
+#include "isotouch/engine/sparse_chain.h"
 
 namespace isotouch::session {
 

@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "pass_desc.h"
-#include "result.h"
-#include "volume.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/engine/result.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::engine {
 class VulkanContext;

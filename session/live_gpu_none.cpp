@@ -1,6 +1,6 @@
 // live_gpu_none.cpp - the live field's GPU recompute in a build without Vulkan (the
 // ThreadSanitizer preset): it cannot be made, so the live field recomputes on the CPU.
-#include "live_gpu.h"
+#include "isotouch/session/live_gpu.h"
 
 namespace isotouch::session {
 

@@ -1,6 +1,6 @@
-#include "live_session.h"
+#include "isotouch/session/live_session.h"
 
-#include "exit_codes.h"
+#include "isotouch/core/exit_codes.h"
 
 #include <fcntl.h>
 #include <time.h>
@@ -17,7 +17,7 @@
 #include <exception>
 #include <stdexcept>
 
-#include "output_file.h"
+#include "isotouch/io/output_file.h"
 
 namespace isotouch::session {
 namespace {

@@ -38,13 +38,13 @@
 #include <array>
 #include <functional>
 
-#include "edit_session.h"
-#include "headless.h"
-#include "latest_value.h"
-#include "record.h"
-#include "renderer.h"
-#include "servo_thread.h"
-#include "spsc_ring.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/servo/latest_value.h"
+#include "isotouch/io/record.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/spsc_ring.h"
 
 namespace isotouch::session {
 

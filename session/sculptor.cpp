@@ -3,7 +3,7 @@
 // engine cannot be created (brush_engine_none.cpp) and every brush runs on the CPU reference.
 #include <string>
 
-#include "brush.h"
+#include "isotouch/session/brush.h"
 
 namespace isotouch::session {
 using engine::Volume;

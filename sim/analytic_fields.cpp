@@ -1,4 +1,4 @@
-#include "analytic_fields.h"
+#include "isotouch/sim/analytic_fields.h"
 
 #include <cmath>
 

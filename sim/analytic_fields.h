@@ -1,8 +1,8 @@
 // analytic_fields.h - sample fields with exact values and gradients (known truth).
 // For servo-side experiments and tests that must not depend on the engine or Vulkan.
 #pragma once
-#include "servo_names.h"
-#include "sample_field.h"
+#include "isotouch/sim/servo_names.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch::sim {
 

@@ -1,4 +1,4 @@
-#include "coupled_hand_device.h"
+#include "isotouch/sim/coupled_hand_device.h"
 
 #include <cmath>
 

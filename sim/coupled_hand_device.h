@@ -10,14 +10,14 @@
 // syscall: the target is three relaxed atomics, a torn read between them is one tick of a
 // hand that moved slightly).
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 
 #include <atomic>
 #include <cstdint>
 
-#include "device_io.h"
-#include "sim_device.h"
-#include "vec3.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::sim {
 

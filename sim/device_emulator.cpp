@@ -1,4 +1,4 @@
-#include "device_emulator.h"
+#include "isotouch/sim/device_emulator.h"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -17,9 +17,9 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "cpu_placement.h"
-#include "hid_report.h"
-#include "playback_device_io.h"
+#include "isotouch/servo/cpu_placement.h"
+#include "isotouch/servo/hid_report.h"
+#include "isotouch/sim/playback_device_io.h"
 
 namespace isotouch::sim {
 namespace {

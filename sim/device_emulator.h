@@ -3,7 +3,7 @@
 // time over a Unix-domain SOCK_SEQPACKET socket, with injectable faults. isotouch-devemu is
 // this class behind a command line; tests and `bench device` run it on a thread.
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "device_io.h"
-#include "sim_device.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/sim/sim_device.h"
 
 namespace isotouch::sim {
 

@@ -1,4 +1,4 @@
-#include "headless.h"
+#include "isotouch/sim/headless.h"
 
 #include <chrono>
 #include <cmath>

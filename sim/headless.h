@@ -1,16 +1,16 @@
 // headless.h - step the servo at a fixed rate in simulated time (deterministic).
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 #include <cstdint>
 #include <functional>
 #include <vector>
 
-#include "hri.h"
-#include "renderer.h"
-#include "script.h"
-#include "sim_device.h"
-#include "triple_buffer.h"
-#include "workspace.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/servo/triple_buffer.h"
+#include "isotouch/servo/workspace.h"
 
 namespace isotouch::sim {
 

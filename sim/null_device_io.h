@@ -1,9 +1,9 @@
 // null_device_io.h - a device that stays put and renders nothing: for runs without hardware
 // that only need the servo (and for checking the pipeline without motion).
 #pragma once
-#include "servo_names.h"
-#include "device_io.h"
-#include "vec3.h"
+#include "isotouch/sim/servo_names.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::sim {
 

@@ -1,4 +1,4 @@
-#include "playback_device_io.h"
+#include "isotouch/sim/playback_device_io.h"
 
 #include <cmath>
 #include <fstream>

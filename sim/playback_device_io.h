@@ -2,13 +2,13 @@
 // times (a trace.csv of `isotouch run`, or a recording), so recorded motions drive
 // regression tests and live sessions.
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 #include <cstdint>
 #include <string>
 #include <vector>
 
-#include "device_io.h"
-#include "vec3.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::sim {
 

@@ -1,4 +1,4 @@
-#include "script.h"
+#include "isotouch/sim/script.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <utility>
 
-#include "sampling.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::sim {
 

@@ -1,11 +1,11 @@
 // script.h - scripted operator motion: approach, press, stroke along the surface, lift.
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 #include <string>
 #include <vector>
 
-#include "hri.h"
-#include "sample_field.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch::sim {
 

@@ -1,15 +1,15 @@
 #pragma once
 // The core vocabulary (core/vocabulary.h) and the servo names that sim/ uses without a
 // prefix, declared by sim/ for itself.
-#include "baselines.h"
-#include "device_io.h"
-#include "hri.h"
-#include "passivity.h"
-#include "renderer.h"
-#include "sampling.h"
-#include "servo_thread.h"
-#include "triple_buffer.h"
-#include "workspace.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/passivity.h"
+#include "isotouch/servo/renderer.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/triple_buffer.h"
+#include "isotouch/servo/workspace.h"
 
 namespace isotouch::sim {
 using namespace core::vocabulary;

@@ -1,4 +1,4 @@
-#include "sim_device.h"
+#include "isotouch/sim/sim_device.h"
 
 #include <algorithm>
 #include <cmath>

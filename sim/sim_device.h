@@ -9,8 +9,8 @@
 // fewest that integrate stably (min_stable_substeps): a light mass on a stiff, damped
 // hand otherwise diverges to NaN.
 #pragma once
-#include "servo_names.h"
-#include "vec3.h"
+#include "isotouch/sim/servo_names.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::sim {
 

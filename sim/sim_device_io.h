@@ -1,11 +1,11 @@
 // sim_device_io.h - the simulated device behind the servo thread's device interface.
 #pragma once
-#include "servo_names.h"
-#include "device_io.h"
-#include "script.h"
-#include "sim_device.h"
-#include "vec3.h"
-#include "workspace.h"
+#include "isotouch/sim/servo_names.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/core/vec3.h"
+#include "isotouch/servo/workspace.h"
 
 #include <array>
 #include <cstdint>

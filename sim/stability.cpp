@@ -1,4 +1,4 @@
-#include "stability.h"
+#include "isotouch/sim/stability.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,9 +6,9 @@
 #include <random>
 #include <sstream>
 
-#include "analytic_fields.h"
-#include "passivity.h"
-#include "sampling.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/passivity.h"
+#include "isotouch/servo/sampling.h"
 
 namespace isotouch::sim {
 

@@ -1,12 +1,12 @@
 // stability.h - stiff walls, passivity and extreme inputs: measured, not assumed.
 #pragma once
-#include "servo_names.h"
+#include "isotouch/sim/servo_names.h"
 #include <string>
 #include <vector>
 
-#include "hri.h"
-#include "sample_field.h"
-#include "sim_device.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/sim/sim_device.h"
 
 namespace isotouch::sim {
 

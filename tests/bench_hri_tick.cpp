@@ -20,10 +20,10 @@
 
 #include <x86intrin.h>
 
-#include "baselines.h"
-#include "hri.h"
-#include "sweep.h"
-#include "vk_context.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/eval/sweep.h"
+#include "isotouch/engine/vk_context.h"
 
 using namespace isotouch;
 

@@ -12,9 +12,9 @@
 #include <vector>
 
 #include "isotouch/shaders/raycast_floor_spv.h"
-#include "isotouch_shared.h"
-#include "vk_context.h"
-#include "vk_resources.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/vk_resources.h"
 
 using namespace isotouch;
 

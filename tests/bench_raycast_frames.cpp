@@ -21,10 +21,10 @@
 
 #include <sys/resource.h>
 
-#include "raycast.h"
-#include "picture.h"
-#include "scene.h"
-#include "vk_context.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/vk_context.h"
 
 using namespace isotouch;
 

@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
-#include "sample_field.h"
-#include "ulp.h"
-#include "vk_context.h"
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/ulp.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::test {
 

@@ -10,8 +10,8 @@
 #include <igtlMessageHeader.h>
 #include <igtlStatusMessage.h>
 
-#include "igtl_test_sender.h"
-#include "volume_io.h"
+#include "isotouch/tests/igtl_test_sender.h"
+#include "isotouch/io/volume_io.h"
 
 int main(int argc, char** argv) {
   if (argc != 4) {

@@ -7,7 +7,7 @@
 
 #include <igtlImageMessage.h>
 
-#include "volume.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::test {
 

@@ -3,8 +3,8 @@
 
 #include <cmath>
 
-#include "analytic_fields.h"
-#include "baselines.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/baselines.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -9,9 +9,9 @@
 #include <random>
 #include <thread>
 
-#include "bench_edit.h"
-#include "cpu_gradient.h"
-#include "synthetic.h"
+#include "isotouch/bench/bench_edit.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/synthetic.h"
 
 using namespace isotouch;
 using eval::percentile;

@@ -12,9 +12,9 @@
 #include <sstream>
 #include <vector>
 
-#include "bench_engine.h"
-#include "cpu_filters.h"
-#include "synthetic.h"
+#include "isotouch/bench/bench_engine.h"
+#include "isotouch/engine/cpu_filters.h"
+#include "isotouch/engine/synthetic.h"
 
 using namespace isotouch;
 using bench::kNaN;

@@ -9,8 +9,8 @@
 #include <fstream>
 #include <sstream>
 
-#include "servo_bench.h"
-#include "files.h"
+#include "isotouch/bench/servo_bench.h"
+#include "isotouch/io/files.h"
 
 using namespace isotouch::bench;
 using namespace isotouch::io;

@@ -19,9 +19,9 @@
 #include <random>
 #include <stdexcept>
 
-#include "brick_field.h"
-#include "field_view.h"
-#include "hri.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/servo/hri.h"
 
 namespace isotouch {
 namespace {

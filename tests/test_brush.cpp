@@ -14,12 +14,12 @@
 #include <cstring>
 #include <set>
 
-#include "vk_test_context.h"
-#include "gpu_cpu_compare.h"
-#include "brick_field.h"
-#include "brush.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/gpu_cpu_compare.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using session::Brush;

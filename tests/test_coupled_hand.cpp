@@ -6,7 +6,7 @@
 #include <cmath>
 #include <limits>
 
-#include "coupled_hand_device.h"
+#include "isotouch/sim/coupled_hand_device.h"
 
 using isotouch::core::Vec3;
 using isotouch::sim::CoupledHandDevice;

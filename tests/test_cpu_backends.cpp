@@ -7,10 +7,10 @@
 
 #include <cstring>
 
-#include "parallel.h"
-#include "pass_desc.h"
-#include "sparse_chain.h"
-#include "synthetic.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/pass_desc.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/engine/synthetic.h"
 
 namespace engine = isotouch::engine;
 namespace core = isotouch::core;

@@ -18,8 +18,8 @@
 #include <thread>
 #include <vector>
 
-#include "cpu_placement.h"
-#include "unprivileged_child.h"
+#include "isotouch/servo/cpu_placement.h"
+#include "isotouch/tests/unprivileged_child.h"
 
 using isotouch::servo::PeerOffCpu;
 

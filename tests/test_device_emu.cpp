@@ -23,12 +23,12 @@
 #include <memory>
 #include <thread>
 
-#include "analytic_fields.h"
-#include "device_emulator.h"
-#include "device_protocols.h"
-#include "report_device.h"
-#include "servo_thread.h"
-#include "socket_link.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/sim/device_emulator.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/socket_link.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -7,13 +7,13 @@
 #include <fstream>
 #include <iomanip>
 
-#include "analytic_fields.h"
-#include "headless.h"
-#include "hri.h"
-#include "null_device_io.h"
-#include "playback_device_io.h"
-#include "script.h"
-#include "temp_dir.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/sim/null_device_io.h"
+#include "isotouch/sim/playback_device_io.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/tests/temp_dir.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

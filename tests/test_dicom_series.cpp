@@ -13,9 +13,9 @@
 #include <iostream>
 #include <string>
 
-#include "dicom_series.h"
-#include "temp_dir.h"
-#include "volume_io.h"
+#include "isotouch/io/dicom_series.h"
+#include "isotouch/tests/temp_dir.h"
+#include "isotouch/io/volume_io.h"
 
 using isotouch::engine::Volume;
 using isotouch::engine::VolumeError;

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <vector>
 
-#include "drill_channel.h"
+#include "isotouch/eval/drill_channel.h"
 
 using isotouch::core::Isosurface;
 using isotouch::core::Vec3;

@@ -10,11 +10,11 @@
 #include <stdexcept>
 #include <tuple>
 
-#include "vk_test_context.h"
-#include "brush.h"
-#include "edit_history.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/session/edit_history.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using session::Brush;

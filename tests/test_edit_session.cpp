@@ -15,18 +15,18 @@
 #include <map>
 #include <sstream>
 
-#include "edit_session.h"
-#include "field_view.h"
-#include "headless.h"
-#include "record.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
-#include "sparse_chain.h"
-#include "synthetic.h"
-#include "vdb_io.h"
-#include "vk_test_context.h"
-#include "voxel_probe.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/voxel_probe.h"
 
 namespace fs = std::filesystem;
 using isotouch::session::EditEvent;

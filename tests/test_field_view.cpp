@@ -10,11 +10,11 @@
 #include <limits>
 #include <random>
 
-#include "brick_field.h"
-#include "field_view.h"
-#include "hri.h"
-#include "isosurface.h"
-#include "sample_field.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/core/isosurface.h"
+#include "isotouch/core/sample_field.h"
 
 namespace isotouch {
 namespace {

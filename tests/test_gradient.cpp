@@ -5,13 +5,13 @@
 #include <cmath>
 #include <cstdint>
 
-#include "vk_test_context.h"
-#include "gpu_cpu_compare.h"
-#include "cpu_gradient.h"
-#include "gradient_pass.h"
-#include "synthetic.h"
-#include "volume_io.h"
-#include "vk_context.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/gpu_cpu_compare.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/engine/vk_context.h"
 
 using namespace isotouch;
 using engine::Volume;

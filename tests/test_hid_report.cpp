@@ -6,8 +6,8 @@
 #include <cmath>
 #include <vector>
 
-#include "device_protocols.h"
-#include "hid_report.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/hid_report.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -6,9 +6,9 @@
 #include <cstdio>
 #include <limits>
 
-#include "hri.h"
-#include "analytic_fields.h"
-#include "sampling.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/sampling.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -14,10 +14,10 @@
 #include <limits>
 #include <random>
 
-#include "analytic_fields.h"
-#include "hri.h"
-#include "passivity.h"
-#include "sampling.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/passivity.h"
+#include "isotouch/servo/sampling.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -17,9 +17,9 @@
 #include <limits>
 #include <vector>
 
-#include "analytic_fields.h"
-#include "brick_field.h"
-#include "hri.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/servo/hri.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -16,12 +16,12 @@
 #include <random>
 #include <sstream>
 
-#include "analytic_fields.h"
-#include "hri.h"
-#include "sampling.h"
-#include "surface_distance.h"
-#include "sweep.h"
-#include "volume_io.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/eval/surface_distance.h"
+#include "isotouch/eval/sweep.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -5,10 +5,10 @@
 
 #include <cmath>
 
-#include "gradient_pass.h"
-#include "headless.h"
-#include "synthetic.h"
-#include "vk_context.h"
+#include "isotouch/engine/gradient_pass.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/engine/vk_context.h"
 
 using namespace isotouch;
 using core::Vec3;

@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <thread>
 
-#include "latest_value.h"
+#include "isotouch/servo/latest_value.h"
 
 namespace isotouch::servo {
 /// Holds a store in progress, as a writer preempted between its first and last word would.

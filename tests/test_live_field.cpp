@@ -40,14 +40,14 @@
 #include <random>
 #include <thread>
 
-#include "brush.h"
-#include "field_view.h"
-#include "live_field.h"
-#include "live_gpu.h"
-#include "sparse_chain.h"
-#include "synthetic.h"
-#include "vk_test_context.h"
-#include "volume_io.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/session/live_field.h"
+#include "isotouch/session/live_gpu.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using core::BrickStore;

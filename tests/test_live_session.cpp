@@ -21,14 +21,14 @@
 #include <optional>
 #include <sys/resource.h>
 
-#include "edit_session.h"
-#include "exit_codes.h"
-#include "field_view.h"
-#include "hri.h"
-#include "live_session.h"
-#include "record.h"
-#include "sim_device_io.h"
-#include "synthetic.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/core/field_view.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/io/record.h"
+#include "isotouch/sim/sim_device_io.h"
+#include "isotouch/engine/synthetic.h"
 
 namespace fs = std::filesystem;
 using isotouch::core::Vec3;

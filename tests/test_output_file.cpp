@@ -15,9 +15,9 @@
 
 #include <gtest/gtest.h>
 
-#include "temp_dir.h"
+#include "isotouch/tests/temp_dir.h"
 
-#include "output_file.h"
+#include "isotouch/io/output_file.h"
 
 namespace fs = std::filesystem;
 using isotouch::test::slurp;

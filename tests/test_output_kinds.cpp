@@ -15,14 +15,14 @@
 
 #include <gtest/gtest.h>
 
-#include "temp_dir.h"
+#include "isotouch/tests/temp_dir.h"
 
-#include "files.h"
-#include "record.h"
-#include "picture.h"
-#include "synthetic.h"
-#include "vdb_io.h"
-#include "volume_write.h"
+#include "isotouch/io/files.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_write.h"
 
 namespace fs = std::filesystem;
 using isotouch::test::slurp;

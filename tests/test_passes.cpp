@@ -14,16 +14,16 @@
 #include <limits>
 #include <utility>
 
-#include "vk_test_context.h"
-#include "gpu_cpu_compare.h"
-#include "cpu_filters.h"
-#include "cpu_gradient.h"
-#include "parallel.h"
-#include "passes.h"
-#include "synthetic.h"
-#include "ulp.h"
-#include "vk_resources.h"
-#include "volume_io.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/gpu_cpu_compare.h"
+#include "isotouch/engine/cpu_filters.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/engine/ulp.h"
+#include "isotouch/engine/vk_resources.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using engine::PassDesc;

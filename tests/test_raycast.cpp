@@ -17,14 +17,14 @@
 #include <string>
 #include <vector>
 
-#include "vk_resources.h"
-#include "vk_test_context.h"
-#include "gpu_cpu_compare.h"
-#include "raycast.h"
-#include "picture.h"
-#include "scene.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/engine/vk_resources.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/gpu_cpu_compare.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using engine::CameraView;

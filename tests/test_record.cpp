@@ -22,7 +22,7 @@
 #include <random>
 #include <sstream>
 
-#include "record.h"
+#include "isotouch/io/record.h"
 
 namespace fs = std::filesystem;
 using isotouch::session::EditEvent;

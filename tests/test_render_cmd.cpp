@@ -12,12 +12,12 @@
 
 #include <gtest/gtest.h>
 
-#include "raycast.h"
-#include "picture.h"
-#include "trace_csv.h"
-#include "run_scene.h"
-#include "scene.h"
-#include "synthetic.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/run/trace_csv.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/synthetic.h"
 
 namespace fs = std::filesystem;
 using namespace isotouch;

@@ -12,13 +12,13 @@
 #include <sstream>
 #include <string>
 
-#include "record.h"
-#include "replay.h"
-#include "run_scene.h"
-#include "scene.h"
-#include "synthetic.h"
-#include "temp_dir.h"
-#include "volume_write.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/replay.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/tests/temp_dir.h"
+#include "isotouch/io/volume_write.h"
 
 #include <nlohmann/json.hpp>
 

@@ -15,10 +15,10 @@
 #include <mutex>
 #include <thread>
 
-#include "device_protocols.h"
-#include "hid_report.h"
-#include "report_device.h"
-#include "unprivileged_child.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/hid_report.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/tests/unprivileged_child.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -21,12 +21,12 @@
 #include <iterator>
 #include <sstream>
 
-#include "voxel_probe.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/tests/voxel_probe.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 namespace fs = std::filesystem;
 using isotouch::run::RunMetrics;

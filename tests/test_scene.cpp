@@ -1,9 +1,9 @@
 // Scene files: the shipped scenes load; bad ones name the file, the field and the value.
 #include <gtest/gtest.h>
 
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
 
 using isotouch::io::load_scene;
 using isotouch::io::parse_scene;

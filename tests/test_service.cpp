@@ -22,13 +22,13 @@
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
 
-#include "image_volume.h"
-#include "igtl_message.h"
-#include "igtl_socket.h"
-#include "transform_device.h"
-#include "igtl_test_sender.h"
-#include "temp_dir.h"
-#include "volume_io.h"
+#include "isotouch/service/image_volume.h"
+#include "isotouch/service/igtl_message.h"
+#include "isotouch/service/igtl_socket.h"
+#include "isotouch/service/transform_device.h"
+#include "isotouch/tests/igtl_test_sender.h"
+#include "isotouch/tests/temp_dir.h"
+#include "isotouch/io/volume_io.h"
 
 namespace isotouch::service {
 namespace {

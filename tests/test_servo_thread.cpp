@@ -26,10 +26,10 @@
 
 #include <time.h>
 
-#include "analytic_fields.h"
-#include "hri.h"
-#include "servo_thread.h"
-#include "sim_device_io.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/sim/sim_device_io.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

@@ -4,9 +4,9 @@
 #include <cmath>
 #include <random>
 
-#include "cpu_gradient.h"
-#include "sampling.h"
-#include "shapes.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/eval/shapes.h"
 
 using namespace isotouch;
 using core::Vec3;

@@ -5,10 +5,10 @@
 #include <cmath>
 #include <memory>
 
-#include "headless.h"
-#include "sampling.h"
-#include "script.h"
-#include "sim_device.h"
+#include "isotouch/sim/headless.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

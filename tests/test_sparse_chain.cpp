@@ -22,19 +22,19 @@
 #include <limits>
 #include <map>
 
-#include "vk_test_context.h"
-#include "gpu_cpu_compare.h"
-#include "cpu_filters.h"
+#include "isotouch/tests/vk_test_context.h"
+#include "isotouch/tests/gpu_cpu_compare.h"
+#include "isotouch/engine/cpu_filters.h"
 #include "isotouch/shaders/filter_list_x4_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
 #include "isotouch/shaders/gauss_fused_list_spv.h"
-#include "isotouch_shared.h"
-#include "parallel.h"
-#include "passes.h"
-#include "pool_recycler.h"
-#include "sparse_chain.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/engine/parallel.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/pool_recycler.h"
+#include "isotouch/engine/sparse_chain.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch;
 using engine::PassDesc;

@@ -8,7 +8,7 @@
 #include <thread>
 #include <vector>
 
-#include "spsc_ring.h"
+#include "isotouch/servo/spsc_ring.h"
 
 using isotouch::servo::SpscRing;
 

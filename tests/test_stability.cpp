@@ -1,8 +1,8 @@
 // Stability against Colgate-Schenkel, time-domain passivity, extreme cases, random ticks.
 #include <gtest/gtest.h>
 
-#include "analytic_fields.h"
-#include "stability.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/sim/stability.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;

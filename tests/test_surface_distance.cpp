@@ -10,12 +10,12 @@
 #include <cstdio>
 #include <random>
 
-#include "analytic_fields.h"
-#include "cpu_gradient.h"
-#include "sampling.h"
-#include "surface_distance.h"
-#include "synthetic.h"
-#include "volume_io.h"
+#include "isotouch/sim/analytic_fields.h"
+#include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/eval/surface_distance.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
 
 #ifdef ISOTOUCH_HAVE_OPENVDB
 #include <openvdb/openvdb.h>

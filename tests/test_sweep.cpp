@@ -3,9 +3,9 @@
 
 #include <sstream>
 
-#include "baselines.h"
-#include "hri.h"
-#include "sweep.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/eval/sweep.h"
 
 using namespace isotouch;
 

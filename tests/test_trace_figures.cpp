@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "trace_figures.h"
+#include "isotouch/run/trace_figures.h"
 
 using isotouch::core::Vec3;
 using isotouch::run::DirectionSteps;

@@ -4,7 +4,7 @@
 #include <atomic>
 #include <thread>
 
-#include "triple_buffer.h"
+#include "isotouch/servo/triple_buffer.h"
 
 using isotouch::servo::TripleBuffer;
 

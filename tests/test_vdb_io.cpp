@@ -24,11 +24,11 @@
 #include <sstream>
 #include <thread>
 
-#include "export.h"
-#include "memory_limited_child.h"
-#include "synthetic.h"
-#include "vdb_io.h"
-#include "volume_io.h"
+#include "isotouch/run/export.h"
+#include "isotouch/tests/memory_limited_child.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_io.h"
 
 extern char** environ;
 

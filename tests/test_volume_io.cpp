@@ -16,8 +16,8 @@
 #include <fstream>
 #include <limits>
 
-#include "memory_limited_child.h"
-#include "volume_io.h"
+#include "isotouch/tests/memory_limited_child.h"
+#include "isotouch/io/volume_io.h"
 
 using isotouch::io::load_volume;
 using isotouch::engine::Volume;

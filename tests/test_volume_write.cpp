@@ -11,9 +11,9 @@
 
 #include <gtest/gtest.h>
 
-#include "synthetic.h"
-#include "volume_io.h"
-#include "volume_write.h"
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/io/volume_write.h"
 
 namespace fs = std::filesystem;
 using namespace isotouch;

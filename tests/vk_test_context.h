@@ -6,7 +6,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "vk_context.h"
+#include "isotouch/engine/vk_context.h"
 
 namespace isotouch::test {
 

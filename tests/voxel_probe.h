@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
-#include "vec3.h"
-#include "volume.h"
+#include "isotouch/core/vec3.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::test {
 

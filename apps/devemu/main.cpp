@@ -8,8 +8,8 @@
 #include <csignal>
 #include <iostream>
 
-#include "../cli_common.h"
-#include "device_emulator.h"
+#include "isotouch/apps/cli_common.h"
+#include "isotouch/sim/device_emulator.h"
 
 namespace {
 isotouch::sim::DeviceEmulator* g_emu = nullptr;

@@ -1,4 +1,4 @@
-#include "app.h"
+#include "isotouch/apps/sculpt/app.h"
 
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
@@ -21,28 +21,28 @@
 #include <sstream>
 #include <thread>
 
-#include "coupled_hand_device.h"
-#include "cpu_placement.h"
-#include "edit_session.h"
-#include "exit_codes.h"
-#include "frame.h"
-#include "haptic_device.h"
-#include "hri.h"
-#include "input_script.h"
-#include "live_session.h"
-#include "overlay.h"
-#include "raycast.h"
-#include "record.h"
-#include "picture.h"
-#include "run_scene.h"
-#include "scene_setup.h"
-#include "scene.h"
-#include "stop_signal.h"
-#include "stats.h"
-#include "tools.h"
-#include "vdb_io.h"
-#include "volume_io.h"
-#include "window.h"
+#include "isotouch/sim/coupled_hand_device.h"
+#include "isotouch/servo/cpu_placement.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/exit_codes.h"
+#include "isotouch/apps/sculpt/frame.h"
+#include "isotouch/run/haptic_device.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/apps/sculpt/input_script.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/apps/sculpt/overlay.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/io/record.h"
+#include "isotouch/run/picture.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/session/stop_signal.h"
+#include "isotouch/eval/stats.h"
+#include "isotouch/apps/sculpt/tools.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/apps/sculpt/window.h"
 
 namespace isotouch::sculpt {
 

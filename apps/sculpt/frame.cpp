@@ -1,4 +1,4 @@
-#include "frame.h"
+#include "isotouch/apps/sculpt/frame.h"
 
 #include <algorithm>
 #include <cmath>

@@ -5,10 +5,10 @@
 #include <array>
 #include <vector>
 
-#include "live_session.h"
-#include "raycast.h"
-#include "tools.h"
-#include "volume.h"
+#include "isotouch/session/live_session.h"
+#include "isotouch/engine/raycast.h"
+#include "isotouch/apps/sculpt/tools.h"
+#include "isotouch/engine/volume.h"
 
 namespace isotouch::sculpt {
 

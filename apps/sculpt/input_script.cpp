@@ -1,4 +1,4 @@
-#include "input_script.h"
+#include "isotouch/apps/sculpt/input_script.h"
 
 #include <GLFW/glfw3.h>
 

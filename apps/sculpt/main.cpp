@@ -6,10 +6,10 @@
 #include <iostream>
 #include <optional>
 
-#include "app.h"
-#include "cli_checks.h"
-#include "cli_common.h"
-#include "stop_signal.h"
+#include "isotouch/apps/sculpt/app.h"
+#include "isotouch/apps/cli_checks.h"
+#include "isotouch/apps/cli_common.h"
+#include "isotouch/session/stop_signal.h"
 
 int main(int argc, char** argv) {
   isotouch::sculpt::Options o;

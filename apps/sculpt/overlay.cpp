@@ -1,4 +1,4 @@
-#include "overlay.h"
+#include "isotouch/apps/sculpt/overlay.h"
 
 #define GLFW_INCLUDE_NONE
 #define GLFW_INCLUDE_VULKAN

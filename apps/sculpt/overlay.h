@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "tools.h"
-#include "window.h"
+#include "isotouch/apps/sculpt/tools.h"
+#include "isotouch/apps/sculpt/window.h"
 
 namespace isotouch::sculpt {
 

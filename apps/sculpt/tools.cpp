@@ -1,4 +1,4 @@
-#include "tools.h"
+#include "isotouch/apps/sculpt/tools.h"
 
 #include <algorithm>
 #include <cmath>

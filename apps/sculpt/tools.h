@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
-#include "brush.h"
-#include "edit_session.h"
-#include "vec3.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/session/edit_session.h"
+#include "isotouch/core/vec3.h"
 
 namespace isotouch::sculpt {
 

@@ -1,4 +1,4 @@
-#include "window.h"
+#include "isotouch/apps/sculpt/window.h"
 
 #include <chrono>
 #include <thread>

@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "vk_context.h"
-#include "vk_resources.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/engine/vk_resources.h"
 
 struct GLFWwindow;
 

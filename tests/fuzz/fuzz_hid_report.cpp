@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <span>
 
-#include "device_protocols.h"
-#include "hid_report.h"
+#include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/hid_report.h"
 
 using namespace isotouch::servo;
 

@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <cstring>
 
-#include "image_volume.h"
-#include "igtl_message.h"
+#include "isotouch/service/image_volume.h"
+#include "isotouch/service/igtl_message.h"
 
 using namespace isotouch;
 

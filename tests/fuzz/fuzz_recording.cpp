@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <string>
 
-#include "record.h"
-#include "scene.h"
+#include "isotouch/io/record.h"
+#include "isotouch/io/scene.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

@@ -9,7 +9,7 @@
 #include <cstdio>
 #include <string>
 
-#include "vdb_io.h"
+#include "isotouch/io/vdb_io.h"
 
 namespace {
 /// What loaded meets the limits: spacing finite, positive, extent and origin bounded, D orthonormal.

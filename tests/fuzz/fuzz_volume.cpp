@@ -9,8 +9,8 @@
 #include <cstdio>
 #include <string>
 
-#include "volume.h"
-#include "volume_io.h"
+#include "isotouch/engine/volume.h"
+#include "isotouch/io/volume_io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

@@ -1,0 +1,86 @@
+# Install rules and the CMake package (cmake --install BUILD --prefix P):
+#   P/lib/libisotouch_*.a                 the libraries (position-independent: a Python
+#                                         module or another shared object may link them)
+#   P/include/isotouch/<folder>/*.h       the library folders' headers, in the form the
+#                                         sources include them ("isotouch/<folder>/<file>.h")
+#   P/include/isotouch/isotouch.h         the public API (api/), isotouch/version.h
+#   P/bin/isotouch, isotouch-sculpt, isotouch-devemu
+#   P/lib/cmake/isotouch/                 find_package(isotouch CONFIG): isotouch::<name>
+#   P/lib/pkgconfig/isotouch.pc           for builds without CMake
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+# Library targets, installed and exported as isotouch::<EXPORT_NAME> (the names the build
+# tree's aliases use). tests/ and apps/ internals are not installed.
+set(_isotouch_libs isotouch_warnings isotouch_sanitizers isotouch_version isotouch_shared_header isotouch_core
+  isotouch_servo isotouch_hid isotouch_sim isotouch_engine_cpu isotouch_io isotouch_scene isotouch_record
+  isotouch_session isotouch_live)
+if(ISOTOUCH_BUILD_ENGINE)
+  list(APPEND _isotouch_libs isotouch_shaders isotouch_engine isotouch_volume_io isotouch_vdb_io isotouch_eval
+    isotouch_run isotouch_service isotouch_serve isotouch_bench isotouch_api)
+endif()
+foreach(t IN LISTS _isotouch_libs)
+  string(REGEX REPLACE "^isotouch_" "" _name ${t})
+  get_target_property(_export_name ${t} EXPORT_NAME)
+  if(NOT _export_name)
+    set_target_properties(${t} PROPERTIES EXPORT_NAME ${_name})
+  endif()
+  # Installed, the headers' root is PREFIX/include (in the build tree: ISOTOUCH_INCLUDE_ROOT).
+  target_include_directories(${t} INTERFACE $<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>)
+  get_target_property(_type ${t} TYPE)
+  if(_type STREQUAL "STATIC_LIBRARY")
+    set_target_properties(${t} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+  endif()
+endforeach()
+
+install(TARGETS ${_isotouch_libs} EXPORT isotouchTargets
+  ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+  LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR})
+foreach(p isotouch isotouch-sculpt isotouch-devemu)
+  if(TARGET ${p})
+    install(TARGETS ${p} RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+  endif()
+endforeach()
+
+# Headers: every *.h of each library folder, under include/isotouch/<folder>/.
+foreach(folder core servo sim engine io session eval run service bench shaders)
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/${folder}/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/isotouch/${folder}
+    FILES_MATCHING PATTERN "*.h")
+endforeach()
+install(FILES ${PROJECT_SOURCE_DIR}/api/isotouch.h ${CMAKE_BINARY_DIR}/generated/isotouch/version.h
+  DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/isotouch)
+
+# The CMake package: targets, their dependencies found again for the consumer, the version.
+set(_cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/isotouch)
+install(EXPORT isotouchTargets NAMESPACE isotouch:: DESTINATION ${_cmake_dir})
+# The optional packages the build linked (io/, bench/ find them QUIET): found again only then.
+set(ISOTOUCH_OPENVDB_MODULE_PATH /usr/lib/x86_64-linux-gnu/cmake/OpenVDB)
+set(ISOTOUCH_USES_OpenVDB OFF)
+set(ISOTOUCH_USES_assimp OFF)
+if(TARGET isotouch_vdb_io)
+  get_target_property(_vdb_links isotouch_vdb_io LINK_LIBRARIES)
+  if("OpenVDB::openvdb" IN_LIST _vdb_links)
+    set(ISOTOUCH_USES_OpenVDB ON)
+  endif()
+  if("assimp::assimp" IN_LIST _vdb_links)
+    set(ISOTOUCH_USES_assimp ON)
+  endif()
+endif()
+configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/isotouchConfig.cmake.in
+  ${CMAKE_BINARY_DIR}/isotouchConfig.cmake INSTALL_DESTINATION ${_cmake_dir})
+write_basic_package_version_file(${CMAKE_BINARY_DIR}/isotouchConfigVersion.cmake
+  VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
+install(FILES ${CMAKE_BINARY_DIR}/isotouchConfig.cmake ${CMAKE_BINARY_DIR}/isotouchConfigVersion.cmake
+  DESTINATION ${_cmake_dir})
+
+# pkg-config: the libraries in link order (each before what it needs).
+set(ISOTOUCH_PC_LIBS "")
+foreach(l api bench serve service run eval vdb_io volume_io live record session scene io engine engine_cpu sim hid servo)
+  if(TARGET isotouch_${l} AND NOT l STREQUAL "api")
+    string(APPEND ISOTOUCH_PC_LIBS " -lisotouch_${l}")
+  endif()
+endforeach()
+# Relocatable: the prefix is found from where the .pc file lies (${pcfiledir}).
+file(RELATIVE_PATH ISOTOUCH_PC_UP /p/${CMAKE_INSTALL_LIBDIR}/pkgconfig /p)
+configure_file(${PROJECT_SOURCE_DIR}/cmake/isotouch.pc.in ${CMAKE_BINARY_DIR}/isotouch.pc @ONLY)
+install(FILES ${CMAKE_BINARY_DIR}/isotouch.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)

@@ -1,0 +1,103 @@
+# The installed package, as a consumer sees it: `cmake --install` of the build tree into a
+# fresh prefix, then examples/embed configured against that prefix alone (its own build
+# folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT.
+# Also: every installed header's "isotouch/..." includes resolve inside the prefix, and the
+# pkg-config file's flags compile the example.
+#   cmake -DBUILD=DIR -DSOURCE=DIR -DWORK=DIR -DVOLUME=FILE -P install_embed.cmake
+foreach(v BUILD SOURCE WORK VOLUME)
+  if(NOT DEFINED ${v})
+    message(FATAL_ERROR "install_embed: -D${v}= is required")
+  endif()
+endforeach()
+set(prefix ${WORK}/prefix)
+set(embed ${WORK}/embed-build)
+file(REMOVE_RECURSE ${WORK})
+file(MAKE_DIRECTORY ${WORK})
+
+function(run_step name)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "install_embed: ${name} failed (exit ${rc}):\n${out}\n${err}")
+  endif()
+  set(step_out "${out}" PARENT_SCOPE)
+  set(step_err "${err}" PARENT_SCOPE)
+endfunction()
+
+# 1. Install (the build tree's artifacts; nothing is compiled).
+run_step("cmake --install" ${CMAKE_COMMAND} --install ${BUILD} --prefix ${prefix})
+foreach(f include/isotouch/isotouch.h include/isotouch/version.h lib/cmake/isotouch/isotouchConfig.cmake
+          lib/cmake/isotouch/isotouchConfigVersion.cmake bin/isotouch bin/isotouch-devemu)
+  if(NOT EXISTS ${prefix}/${f})
+    message(FATAL_ERROR "install_embed: ${prefix}/${f} was not installed")
+  endif()
+endforeach()
+
+# 2. Every quoted include of an installed header is an installed "isotouch/..." header.
+file(GLOB_RECURSE headers RELATIVE ${prefix}/include ${prefix}/include/*.h)
+list(LENGTH headers n_headers)
+set(n_includes 0)
+foreach(h IN LISTS headers)
+  file(STRINGS ${prefix}/include/${h} lines REGEX "^[ \t]*#[ \t]*include[ \t]*\"")
+  foreach(line IN LISTS lines)
+    string(REGEX REPLACE "^[ \t]*#[ \t]*include[ \t]*\"([^\"]+)\".*" "\\1" inc "${line}")
+    math(EXPR n_includes "${n_includes} + 1")
+    if(NOT inc MATCHES "^isotouch/")
+      message(FATAL_ERROR "install_embed: ${h} includes \"${inc}\": a bare name on the consumer's include path")
+    endif()
+    if(NOT EXISTS ${prefix}/include/${inc})
+      message(FATAL_ERROR "install_embed: ${h} includes \"${inc}\", which is not installed")
+    endif()
+  endforeach()
+endforeach()
+message(STATUS "install_embed: ${n_headers} headers installed, their ${n_includes} project includes all resolve")
+
+# 3. The example against the prefix alone.
+set(launcher)
+find_program(CCACHE ccache)
+if(CCACHE)
+  set(launcher -DCMAKE_CXX_COMPILER_LAUNCHER=${CCACHE})
+endif()
+run_step("configuring examples/embed" ${CMAKE_COMMAND} -S ${SOURCE}/examples/embed -B ${embed} -G Ninja
+  -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
+file(STRINGS ${embed}/CMakeCache.txt found_dir REGEX "^isotouch_DIR:")
+if(NOT found_dir STREQUAL "isotouch_DIR:PATH=${prefix}/lib/cmake/isotouch")
+  message(FATAL_ERROR "install_embed: the example found isotouch elsewhere: ${found_dir}")
+endif()
+run_step("building examples/embed" ${CMAKE_COMMAND} --build ${embed})
+execute_process(COMMAND ${embed}/isotouch-embed ${VOLUME} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+message(STATUS "isotouch-embed (exit ${rc}):\n${out}${err}")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "install_embed: isotouch-embed exited ${rc}")
+endif()
+# Contact: a force of at least 0.1 N; the carve read by a later tick.
+if(NOT out MATCHES "contact +at tick [0-9]+: \\|F\\| = ([0-9]+\\.[0-9]+) N")
+  message(FATAL_ERROR "install_embed: no contact line in the output")
+endif()
+if(CMAKE_MATCH_1 LESS 0.1)
+  message(FATAL_ERROR "install_embed: |F| = ${CMAKE_MATCH_1} N at contact, expected > 0.1 N")
+endif()
+if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapshot [2-9]" OR
+   NOT out MATCHES "1 edits applied")
+  message(FATAL_ERROR "install_embed: the carve was not applied and read")
+endif()
+
+# 4. pkg-config: the flags find the headers (compile only: ITK and OpenVDB have no .pc file).
+find_program(PKG_CONFIG pkg-config)
+if(PKG_CONFIG)
+  set(ENV{PKG_CONFIG_PATH} ${prefix}/lib/pkgconfig)
+  run_step("pkg-config --cflags isotouch" ${PKG_CONFIG} --cflags isotouch)
+  separate_arguments(cflags UNIX_COMMAND "${step_out}")
+  run_step("pkg-config --libs --static isotouch" ${PKG_CONFIG} --libs --static isotouch)
+  string(REGEX MATCHALL "-lisotouch_[a-z_]+" libs "${step_out}")
+  foreach(l IN LISTS libs)
+    string(REPLACE "-l" "lib" a "${l}.a")
+    if(NOT EXISTS ${prefix}/lib/${a})
+      message(FATAL_ERROR "install_embed: isotouch.pc names ${l}, but ${prefix}/lib/${a} is not installed")
+    endif()
+  endforeach()
+  find_program(CXX NAMES c++ g++ REQUIRED)
+  run_step("compiling examples/embed with pkg-config's flags" ${CXX} -std=c++20 -fsyntax-only ${cflags}
+    ${SOURCE}/examples/embed/main.cpp)
+  message(STATUS "install_embed: pkg-config: ${cflags}; the example compiles")
+endif()
+message(STATUS "PASS install_embed")

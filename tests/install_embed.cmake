@@ -1,8 +1,9 @@
 # The installed package, as a consumer sees it: `cmake --install` of the build tree into a
 # fresh prefix, then examples/embed configured against that prefix alone (its own build
 # folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT.
-# Also: every installed header's "isotouch/..." includes resolve inside the prefix, and the
-# pkg-config file's flags compile the example.
+# Also: every installed header's "isotouch/..." includes resolve inside the prefix; a consumer
+# of one component finds only that component's packages; the pkg-config file's flags compile
+# the example.
 #   cmake -DBUILD=DIR -DSOURCE=DIR -DWORK=DIR -DVOLUME=FILE -P install_embed.cmake
 foreach(v BUILD SOURCE WORK VOLUME)
   if(NOT DEFINED ${v})
@@ -81,7 +82,39 @@ if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapsho
   message(FATAL_ERROR "install_embed: the carve was not applied and read")
 endif()
 
-# 4. pkg-config: the flags find the headers (compile only: ITK and OpenVDB have no .pc file).
+# 4. A component alone: find_package(isotouch COMPONENTS servo) finds Threads only (no Vulkan,
+# ITK or OpenVDB in the consumer's cache), and a renderer links with isotouch::servo alone.
+set(servo_src ${WORK}/servo-only)
+file(WRITE ${servo_src}/CMakeLists.txt [=[
+cmake_minimum_required(VERSION 3.22)
+project(servo_only LANGUAGES C CXX)
+find_package(isotouch CONFIG REQUIRED COMPONENTS servo)
+add_executable(servo-only main.cpp)
+target_compile_features(servo-only PRIVATE cxx_std_20)
+target_link_libraries(servo-only PRIVATE isotouch::servo)
+]=])
+file(WRITE ${servo_src}/main.cpp [=[
+#include <cstdio>
+#include "isotouch/servo/hri.h"
+int main() {
+  isotouch::servo::HriRenderer hri(isotouch::servo::HriParams{});
+  std::printf("renderer %s\n", hri.name());
+}
+]=])
+run_step("configuring a servo-only consumer" ${CMAKE_COMMAND} -S ${servo_src} -B ${WORK}/servo-only-build -G Ninja
+  -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
+file(STRINGS ${WORK}/servo-only-build/CMakeCache.txt heavy REGEX "^(ITK_DIR|Vulkan_LIBRARY|OpenVDB_[A-Za-z_]*|assimp_DIR):")
+if(heavy)
+  message(FATAL_ERROR "install_embed: COMPONENTS servo found more than it needs: ${heavy}")
+endif()
+run_step("building a servo-only consumer" ${CMAKE_COMMAND} --build ${WORK}/servo-only-build)
+run_step("running the servo-only consumer" ${WORK}/servo-only-build/servo-only)
+if(NOT step_out MATCHES "^renderer [A-Za-z]")
+  message(FATAL_ERROR "install_embed: the servo-only consumer printed: ${step_out}")
+endif()
+message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
+
+# 5. pkg-config: the flags find the headers (compile only: ITK and OpenVDB have no .pc file).
 find_program(PKG_CONFIG pkg-config)
 if(PKG_CONFIG)
   set(ENV{PKG_CONFIG_PATH} ${prefix}/lib/pkgconfig)

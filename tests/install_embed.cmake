@@ -1,6 +1,7 @@
 # The installed package, as a consumer sees it: `cmake --install` of the build tree into a
 # fresh prefix, then examples/embed configured against that prefix alone (its own build
-# folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT.
+# folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT
+# (contact force, one carve read by the servo, the session's recording).
 # Also: every installed header's "isotouch/..." includes resolve inside the prefix; a consumer
 # of one component finds only that component's packages; the pkg-config file's flags compile
 # the example.
@@ -65,7 +66,9 @@ if(NOT found_dir STREQUAL "isotouch_DIR:PATH=${prefix}/lib/cmake/isotouch")
   message(FATAL_ERROR "install_embed: the example found isotouch elsewhere: ${found_dir}")
 endif()
 run_step("building examples/embed" ${CMAKE_COMMAND} --build ${embed})
-execute_process(COMMAND ${embed}/isotouch-embed ${VOLUME} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+set(recording ${WORK}/embed.rec)
+execute_process(COMMAND ${embed}/isotouch-embed ${VOLUME} 1150 ${recording} RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                ERROR_VARIABLE err)
 message(STATUS "isotouch-embed (exit ${rc}):\n${out}${err}")
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "install_embed: isotouch-embed exited ${rc}")
@@ -81,6 +84,23 @@ if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapsho
    NOT out MATCHES "1 edits applied")
   message(FATAL_ERROR "install_embed: the carve was not applied and read")
 endif()
+# The recording, read as a file: one line per tick the session counted, one carve.
+if(NOT out MATCHES "session +([0-9]+) ticks")
+  message(FATAL_ERROR "install_embed: no session line in the output")
+endif()
+set(ticks ${CMAKE_MATCH_1})
+if(NOT EXISTS ${recording})
+  message(FATAL_ERROR "install_embed: ${recording} was not written")
+endif()
+file(STRINGS ${recording} tick_lines REGEX "^{\"k\":")
+file(STRINGS ${recording} carve_lines REGEX "^{\"edit\":\"brush\".*\"kind\":\"carve\"")
+list(LENGTH tick_lines n_tick_lines)
+list(LENGTH carve_lines n_carve_lines)
+if(NOT n_tick_lines EQUAL ticks OR NOT n_carve_lines EQUAL 1)
+  message(FATAL_ERROR "install_embed: ${recording} holds ${n_tick_lines} ticks and ${n_carve_lines} carves; "
+                      "the session ran ${ticks} ticks and one carve")
+endif()
+message(STATUS "install_embed: ${recording}: ${n_tick_lines} ticks, 1 carve")
 
 # 4. A component alone: find_package(isotouch COMPONENTS servo) finds Threads only (no Vulkan,
 # ITK or OpenVDB in the consumer's cache), and a renderer links with isotouch::servo alone.

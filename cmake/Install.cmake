@@ -11,14 +11,24 @@ include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
 # Library targets, installed and exported as isotouch::<EXPORT_NAME> (the names the build
-# tree's aliases use). tests/ and apps/ internals are not installed.
-set(_isotouch_libs isotouch_warnings isotouch_sanitizers isotouch_version isotouch_shared_header isotouch_core
-  isotouch_servo isotouch_hid isotouch_sim isotouch_engine_cpu isotouch_io isotouch_scene isotouch_record
-  isotouch_session isotouch_live)
-if(ISOTOUCH_BUILD_ENGINE)
-  list(APPEND _isotouch_libs isotouch_shaders isotouch_engine isotouch_volume_io isotouch_vdb_io isotouch_eval
-    isotouch_run isotouch_service isotouch_serve isotouch_bench isotouch_api)
-endif()
+# tree's aliases use): every static or interface isotouch_* library of the top directory and
+# of the folders added (a new library in a folder is exported with no change here); apps/
+# and tests/ are not installed.
+set(_isotouch_libs "")
+get_property(_dirs DIRECTORY ${PROJECT_SOURCE_DIR} PROPERTY SUBDIRECTORIES)
+foreach(dir ${PROJECT_SOURCE_DIR} ${_dirs})
+  get_filename_component(_folder ${dir} NAME)
+  if(_folder STREQUAL "apps" OR _folder STREQUAL "tests")
+    continue()
+  endif()
+  get_property(_targets DIRECTORY ${dir} PROPERTY BUILDSYSTEM_TARGETS)
+  foreach(t IN LISTS _targets)
+    get_target_property(_type ${t} TYPE)
+    if(t MATCHES "^isotouch_" AND _type MATCHES "^(STATIC|INTERFACE)_LIBRARY$")
+      list(APPEND _isotouch_libs ${t})
+    endif()
+  endforeach()
+endforeach()
 foreach(t IN LISTS _isotouch_libs)
   string(REGEX REPLACE "^isotouch_" "" _name ${t})
   get_target_property(_export_name ${t} EXPORT_NAME)

@@ -4,7 +4,7 @@
 # (contact force, one carve read by the servo, the session's recording).
 # Also: every installed header's "isotouch/..." includes resolve inside the prefix; a consumer
 # of one component finds only that component's packages; the pkg-config file's flags compile
-# the example.
+# the example; the archives are position-independent.
 #   cmake -DBUILD=DIR -DSOURCE=DIR -DWORK=DIR -DVOLUME=FILE -P install_embed.cmake
 foreach(v BUILD SOURCE WORK VOLUME)
   if(NOT DEFINED ${v})
@@ -153,4 +153,12 @@ if(PKG_CONFIG)
     ${SOURCE}/examples/embed/main.cpp)
   message(STATUS "install_embed: pkg-config: ${cflags}; the example compiles")
 endif()
+# 6. Position-independent archives (a Python module links them): every installed one, whole,
+# into one shared object (an object built without -fPIC refuses: "recompile with -fPIC").
+file(GLOB archives ${prefix}/lib/libisotouch_*.a)
+find_program(CXX NAMES c++ g++ REQUIRED)
+run_step("linking the installed archives into a shared object" ${CXX} -shared -o ${WORK}/all.so
+  -Wl,--whole-archive ${archives} -Wl,--no-whole-archive)
+list(LENGTH archives n_archives)
+message(STATUS "install_embed: ${n_archives} archives link into a shared object")
 message(STATUS "PASS install_embed")

@@ -34,7 +34,8 @@
 //
 // Internal (installed because the headers below include them, but not an API to code
 // against; they change without notice): the engine's Vulkan passes and resources
-// (engine/vk_*.h, passes.h, sparse_*.h, gradient_pass.h, raycast.h), the sparse and brick
+// (engine/vk_resources.h, passes.h, sparse_*.h, gradient_pass.h, raycast.h; of
+// engine/vk_context.h only VulkanContext::create and ContextOptions), the sparse and brick
 // internals (core/brick_field.h, session/live_gpu.h, engine/pool_recycler.h), the servo's
 // codecs and threads (servo/hid_report.h, report_device.h, socket_link.h, spsc_ring.h,
 // latest_value.h), the run job's pieces (run/*.h other than scene_setup.h, haptic_device.h,

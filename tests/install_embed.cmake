@@ -134,13 +134,15 @@ if(NOT step_out MATCHES "^renderer [A-Za-z]")
 endif()
 message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
 
-# 5. pkg-config: the flags find the headers (compile only: ITK and OpenVDB have no .pc file).
+# 5. pkg-config: the flags compile the example (which is not linked this way: ITK and OpenVDB
+# have no .pc file), and build and link the servo-only program.
 find_program(PKG_CONFIG pkg-config)
 if(PKG_CONFIG)
   set(ENV{PKG_CONFIG_PATH} ${prefix}/lib/pkgconfig)
   run_step("pkg-config --cflags isotouch" ${PKG_CONFIG} --cflags isotouch)
   separate_arguments(cflags UNIX_COMMAND "${step_out}")
   run_step("pkg-config --libs --static isotouch" ${PKG_CONFIG} --libs --static isotouch)
+  separate_arguments(ldflags UNIX_COMMAND "${step_out}")
   string(REGEX MATCHALL "-lisotouch_[a-z_]+" libs "${step_out}")
   foreach(l IN LISTS libs)
     string(REPLACE "-l" "lib" a "${l}.a")
@@ -151,7 +153,13 @@ if(PKG_CONFIG)
   find_program(CXX NAMES c++ g++ REQUIRED)
   run_step("compiling examples/embed with pkg-config's flags" ${CXX} -std=c++20 -fsyntax-only ${cflags}
     ${SOURCE}/examples/embed/main.cpp)
-  message(STATUS "install_embed: pkg-config: ${cflags}; the example compiles")
+  run_step("building the servo-only program with pkg-config's flags" ${CXX} -std=c++20 ${cflags}
+    ${servo_src}/main.cpp -o ${WORK}/servo-only-pc ${ldflags})
+  run_step("running the servo-only program built with pkg-config" ${WORK}/servo-only-pc)
+  if(NOT step_out MATCHES "^renderer [A-Za-z]")
+    message(FATAL_ERROR "install_embed: the servo-only program (pkg-config) printed: ${step_out}")
+  endif()
+  message(STATUS "install_embed: pkg-config: ${cflags}; the example compiles, the servo-only program links and runs")
 endif()
 # 6. Position-independent archives (a Python module links them): every installed one, whole,
 # into one shared object (an object built without -fPIC refuses: "recompile with -fPIC").

@@ -84,6 +84,14 @@ if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapsho
    NOT out MATCHES "1 edits applied")
   message(FATAL_ERROR "install_embed: the carve was not applied and read")
 endif()
+# The installed program's version is the one the example's headers carry.
+string(REGEX MATCH "\\(isotouch ([0-9]+\\.[0-9]+\\.[0-9]+)\\)" _ "${out}")
+set(header_version ${CMAKE_MATCH_1})
+run_step("isotouch --version" ${prefix}/bin/isotouch --version)
+if(header_version STREQUAL "" OR NOT step_out STREQUAL "isotouch ${header_version}\n")
+  message(FATAL_ERROR "install_embed: the installed isotouch says \"${step_out}\", the installed headers \"${header_version}\"")
+endif()
+
 # The recording, read as a file: one line per tick the session counted, one carve.
 if(NOT out MATCHES "session +([0-9]+) ticks")
   message(FATAL_ERROR "install_embed: no session line in the output")

@@ -30,7 +30,8 @@
 // Errors: bad input throws an exception whose what() names the file, the field and the value
 // (engine::VolumeError, io::SceneError, io::RecordingError, session::BrushError,
 // std::invalid_argument for a bad config); set-up that may legitimately fail (no Vulkan
-// device) returns engine::Result with the reason. Nothing is printed by the library.
+// device) returns engine::Result with the reason. The library writes nothing to stdout; a
+// few notes go to stderr (which series of a DICOM folder was taken).
 //
 // Internal (installed because the headers below include them, but not an API to code
 // against; they change without notice): the engine's Vulkan passes and resources
@@ -80,7 +81,7 @@ namespace isotouch {
 /// Loads a volume: MetaImage (.mhd/.mha), NRRD (.nrrd/.nhdr), NIfTI (.nii, .nii.gz), a DICOM
 /// series folder, or OpenVDB (.vdb). Voxels float32 (index frame, x fastest) in the file's
 /// units; `grid` gives the spacing and origin [m], `direction` the physical frame.
-/// @throws engine::VolumeError naming the file and what is wrong with it.
+/// @throws engine::VolumeError (io::VdbError for a .vdb) naming the file and what is wrong with it.
 inline engine::Volume load_volume(const std::string& path) { return io::load_any_volume(path); }
 
 // ---- 2. The engine: samples (value + gradient) the servo reads -----------------------------

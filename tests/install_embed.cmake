@@ -84,6 +84,13 @@ if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapsho
    NOT out MATCHES "1 edits applied")
   message(FATAL_ERROR "install_embed: the carve was not applied and read")
 endif()
+# A volume that is not there: exit 1, one message naming the file.
+execute_process(COMMAND ${embed}/isotouch-embed ${WORK}/no-such-volume.mhd RESULT_VARIABLE bad_rc
+                OUTPUT_VARIABLE bad_out ERROR_VARIABLE bad_err)
+if(NOT bad_rc EQUAL 1 OR NOT bad_err MATCHES "^isotouch-embed: [^\n]*no-such-volume\\.mhd")
+  message(FATAL_ERROR "install_embed: a missing volume gave exit ${bad_rc}, stderr: ${bad_err}")
+endif()
+
 # The installed program's version is the one the example's headers carry.
 string(REGEX MATCH "\\(isotouch ([0-9]+\\.[0-9]+\\.[0-9]+)\\)" _ "${out}")
 set(header_version ${CMAKE_MATCH_1})

@@ -2,12 +2,12 @@
 // experiment driver, a Python module) includes. One header, read in one sitting; it names the
 // library headers an embedding program uses and adds a few small conveniences on top of them.
 // Installed as <PREFIX>/include/isotouch/isotouch.h; link isotouch::isotouch
-// (find_package(isotouch CONFIG REQUIRED)) or `pkg-config --libs --static isotouch`. Tour: docs/library.md.
+// (find_package(isotouch CONFIG REQUIRED); pkg-config: docs/library.md). Tour: docs/library.md.
 //
 // The steps of an embedding program, in order, and who does each:
 //   1. load a volume          isotouch::load_volume(path) -> engine::Volume          (io/vdb_io.h)
 //   2. build the engine       a scene file: io::load_scene + run::setup_scene        (run/scene_setup.h)
-//                             or a volume alone: make_edit_session(volume, field_options(iso))
+//                             or a volume alone: make_edit_session(volume, field_options(volume, iso))
 //   3. a renderer             servo::HriRenderer(hri_params(iso))                   (servo/hri.h)
 //   4. a device               SimulatedHand (simulated), or run::open_haptic_device  (run/haptic_device.h:
 //                             "sim", "null", "playback:FILE", "hid:VID:PID", "emu:SOCKET")
@@ -25,7 +25,8 @@
 //     direction matrix; engine::Volume::to_physical / to_grid convert; report points to a user
 //     in it;
 //   - device [m]: world = translation + scale * device (servo::WorkspaceTransform).
-//   Forces are in newtons, in world axes (= device axes: the map has no rotation); times in s.
+//   Forces are in newtons, in grid-world axes (= device axes: the map has no rotation;
+//   engine::Volume::direction_apply turns them physical); times in s.
 //
 // Errors: bad input throws an exception whose what() names the file, the field and the value
 // (engine::VolumeError, io::SceneError, io::RecordingError, session::BrushError,

@@ -1,0 +1,187 @@
+# The installed package, as a consumer sees it: `cmake --install` of the build tree into a
+# fresh prefix, then examples/embed configured against that prefix alone (its own build
+# folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT
+# (contact force, one carve read by the servo, the session's recording).
+# Also: every installed header's "isotouch/..." includes resolve inside the prefix; a consumer
+# of one component finds only that component's packages; the pkg-config file's flags compile
+# the example; the archives are position-independent.
+#   cmake -DBUILD=DIR -DSOURCE=DIR -DWORK=DIR -DVOLUME=FILE -P install_embed.cmake
+foreach(v BUILD SOURCE WORK VOLUME)
+  if(NOT DEFINED ${v})
+    message(FATAL_ERROR "install_embed: -D${v}= is required")
+  endif()
+endforeach()
+set(prefix ${WORK}/prefix)
+set(embed ${WORK}/embed-build)
+file(REMOVE_RECURSE ${WORK})
+file(MAKE_DIRECTORY ${WORK})
+
+function(run_step name)
+  execute_process(COMMAND ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "install_embed: ${name} failed (exit ${rc}):\n${out}\n${err}")
+  endif()
+  set(step_out "${out}" PARENT_SCOPE)
+  set(step_err "${err}" PARENT_SCOPE)
+endfunction()
+
+# 1. Install (the build tree's artifacts; nothing is compiled).
+run_step("cmake --install" ${CMAKE_COMMAND} --install ${BUILD} --prefix ${prefix})
+foreach(f include/isotouch/isotouch.h include/isotouch/version.h lib/cmake/isotouch/isotouchConfig.cmake
+          lib/cmake/isotouch/isotouchConfigVersion.cmake bin/isotouch bin/isotouch-devemu)
+  if(NOT EXISTS ${prefix}/${f})
+    message(FATAL_ERROR "install_embed: ${prefix}/${f} was not installed")
+  endif()
+endforeach()
+
+# 2. Every quoted include of an installed header is an installed "isotouch/..." header.
+file(GLOB_RECURSE headers RELATIVE ${prefix}/include ${prefix}/include/*.h)
+list(LENGTH headers n_headers)
+set(n_includes 0)
+foreach(h IN LISTS headers)
+  file(STRINGS ${prefix}/include/${h} lines REGEX "^[ \t]*#[ \t]*include[ \t]*\"")
+  foreach(line IN LISTS lines)
+    string(REGEX REPLACE "^[ \t]*#[ \t]*include[ \t]*\"([^\"]+)\".*" "\\1" inc "${line}")
+    math(EXPR n_includes "${n_includes} + 1")
+    if(NOT inc MATCHES "^isotouch/")
+      message(FATAL_ERROR "install_embed: ${h} includes \"${inc}\": a bare name on the consumer's include path")
+    endif()
+    if(NOT EXISTS ${prefix}/include/${inc})
+      message(FATAL_ERROR "install_embed: ${h} includes \"${inc}\", which is not installed")
+    endif()
+  endforeach()
+endforeach()
+message(STATUS "install_embed: ${n_headers} headers installed, their ${n_includes} project includes all resolve")
+
+# 3. The example against the prefix alone.
+set(launcher)
+find_program(CCACHE ccache)
+if(CCACHE)
+  set(launcher -DCMAKE_CXX_COMPILER_LAUNCHER=${CCACHE})
+endif()
+run_step("configuring examples/embed" ${CMAKE_COMMAND} -S ${SOURCE}/examples/embed -B ${embed} -G Ninja
+  -DCMAKE_BUILD_TYPE=Release -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
+file(STRINGS ${embed}/CMakeCache.txt found_dir REGEX "^isotouch_DIR:")
+if(NOT found_dir STREQUAL "isotouch_DIR:PATH=${prefix}/lib/cmake/isotouch")
+  message(FATAL_ERROR "install_embed: the example found isotouch elsewhere: ${found_dir}")
+endif()
+run_step("building examples/embed" ${CMAKE_COMMAND} --build ${embed})
+set(recording ${WORK}/embed.rec)
+execute_process(COMMAND ${embed}/isotouch-embed ${VOLUME} 1150 ${recording} RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                ERROR_VARIABLE err)
+message(STATUS "isotouch-embed (exit ${rc}):\n${out}${err}")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "install_embed: isotouch-embed exited ${rc}")
+endif()
+# Contact: a force of at least 0.1 N; the carve read by a later tick.
+if(NOT out MATCHES "contact +at tick [0-9]+: \\|F\\| = ([0-9]+\\.[0-9]+) N")
+  message(FATAL_ERROR "install_embed: no contact line in the output")
+endif()
+if(CMAKE_MATCH_1 LESS 0.1)
+  message(FATAL_ERROR "install_embed: |F| = ${CMAKE_MATCH_1} N at contact, expected > 0.1 N")
+endif()
+if(NOT out MATCHES "carved +at tick [0-9]+: \\|F\\| = [0-9]+\\.[0-9]+ N.*snapshot [2-9]" OR
+   NOT out MATCHES "1 edits applied")
+  message(FATAL_ERROR "install_embed: the carve was not applied and read")
+endif()
+# A volume that is not there: exit 1, one message naming the file.
+execute_process(COMMAND ${embed}/isotouch-embed ${WORK}/no-such-volume.mhd RESULT_VARIABLE bad_rc
+                OUTPUT_VARIABLE bad_out ERROR_VARIABLE bad_err)
+if(NOT bad_rc EQUAL 1 OR NOT bad_err MATCHES "^isotouch-embed: [^\n]*no-such-volume\\.mhd")
+  message(FATAL_ERROR "install_embed: a missing volume gave exit ${bad_rc}, stderr: ${bad_err}")
+endif()
+
+# The installed program's version is the one the example's headers carry.
+string(REGEX MATCH "\\(isotouch ([0-9]+\\.[0-9]+\\.[0-9]+)\\)" _ "${out}")
+set(header_version ${CMAKE_MATCH_1})
+run_step("isotouch --version" ${prefix}/bin/isotouch --version)
+if(header_version STREQUAL "" OR NOT step_out STREQUAL "isotouch ${header_version}\n")
+  message(FATAL_ERROR "install_embed: the installed isotouch says \"${step_out}\", the installed headers \"${header_version}\"")
+endif()
+
+# The recording, read as a file: one line per tick the session counted, one carve.
+if(NOT out MATCHES "session +([0-9]+) ticks")
+  message(FATAL_ERROR "install_embed: no session line in the output")
+endif()
+set(ticks ${CMAKE_MATCH_1})
+if(NOT EXISTS ${recording})
+  message(FATAL_ERROR "install_embed: ${recording} was not written")
+endif()
+file(STRINGS ${recording} tick_lines REGEX "^{\"k\":")
+file(STRINGS ${recording} carve_lines REGEX "^{\"edit\":\"brush\".*\"kind\":\"carve\"")
+list(LENGTH tick_lines n_tick_lines)
+list(LENGTH carve_lines n_carve_lines)
+if(NOT n_tick_lines EQUAL ticks OR NOT n_carve_lines EQUAL 1)
+  message(FATAL_ERROR "install_embed: ${recording} holds ${n_tick_lines} ticks and ${n_carve_lines} carves; "
+                      "the session ran ${ticks} ticks and one carve")
+endif()
+message(STATUS "install_embed: ${recording}: ${n_tick_lines} ticks, 1 carve")
+
+# 4. A component alone: find_package(isotouch COMPONENTS servo) finds Threads only (no Vulkan,
+# ITK or OpenVDB in the consumer's cache), and a renderer links with isotouch::servo alone.
+set(servo_src ${WORK}/servo-only)
+file(WRITE ${servo_src}/CMakeLists.txt [=[
+cmake_minimum_required(VERSION 3.22)
+project(servo_only LANGUAGES C CXX)
+find_package(isotouch CONFIG REQUIRED COMPONENTS servo)
+add_executable(servo-only main.cpp)
+target_compile_features(servo-only PRIVATE cxx_std_20)
+target_link_libraries(servo-only PRIVATE isotouch::servo)
+]=])
+file(WRITE ${servo_src}/main.cpp [=[
+#include <cstdio>
+#include "isotouch/servo/hri.h"
+int main() {
+  isotouch::servo::HriRenderer hri(isotouch::servo::HriParams{});
+  std::printf("renderer %s\n", hri.name());
+}
+]=])
+run_step("configuring a servo-only consumer" ${CMAKE_COMMAND} -S ${servo_src} -B ${WORK}/servo-only-build -G Ninja
+  -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
+file(STRINGS ${WORK}/servo-only-build/CMakeCache.txt heavy REGEX "^(ITK_DIR|Vulkan_LIBRARY|OpenVDB_[A-Za-z_]*|assimp_DIR):")
+if(heavy)
+  message(FATAL_ERROR "install_embed: COMPONENTS servo found more than it needs: ${heavy}")
+endif()
+run_step("building a servo-only consumer" ${CMAKE_COMMAND} --build ${WORK}/servo-only-build)
+run_step("running the servo-only consumer" ${WORK}/servo-only-build/servo-only)
+if(NOT step_out MATCHES "^renderer [A-Za-z]")
+  message(FATAL_ERROR "install_embed: the servo-only consumer printed: ${step_out}")
+endif()
+message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
+
+# 5. pkg-config: the flags compile the example (which is not linked this way: ITK and OpenVDB
+# have no .pc file), and build and link the servo-only program.
+find_program(PKG_CONFIG pkg-config)
+if(PKG_CONFIG)
+  set(ENV{PKG_CONFIG_PATH} ${prefix}/lib/pkgconfig)
+  run_step("pkg-config --cflags isotouch" ${PKG_CONFIG} --cflags isotouch)
+  separate_arguments(cflags UNIX_COMMAND "${step_out}")
+  run_step("pkg-config --libs --static isotouch" ${PKG_CONFIG} --libs --static isotouch)
+  separate_arguments(ldflags UNIX_COMMAND "${step_out}")
+  string(REGEX MATCHALL "-lisotouch_[a-z_]+" libs "${step_out}")
+  foreach(l IN LISTS libs)
+    string(REPLACE "-l" "lib" a "${l}.a")
+    if(NOT EXISTS ${prefix}/lib/${a})
+      message(FATAL_ERROR "install_embed: isotouch.pc names ${l}, but ${prefix}/lib/${a} is not installed")
+    endif()
+  endforeach()
+  find_program(CXX NAMES c++ g++ REQUIRED)
+  run_step("compiling examples/embed with pkg-config's flags" ${CXX} -std=c++20 -fsyntax-only ${cflags}
+    ${SOURCE}/examples/embed/main.cpp)
+  run_step("building the servo-only program with pkg-config's flags" ${CXX} -std=c++20 ${cflags}
+    ${servo_src}/main.cpp -o ${WORK}/servo-only-pc ${ldflags})
+  run_step("running the servo-only program built with pkg-config" ${WORK}/servo-only-pc)
+  if(NOT step_out MATCHES "^renderer [A-Za-z]")
+    message(FATAL_ERROR "install_embed: the servo-only program (pkg-config) printed: ${step_out}")
+  endif()
+  message(STATUS "install_embed: pkg-config: ${cflags}; the example compiles, the servo-only program links and runs")
+endif()
+# 6. Position-independent archives (a Python module links them): every installed one, whole,
+# into one shared object (an object built without -fPIC refuses: "recompile with -fPIC").
+file(GLOB archives ${prefix}/lib/libisotouch_*.a)
+find_program(CXX NAMES c++ g++ REQUIRED)
+run_step("linking the installed archives into a shared object" ${CXX} -shared -o ${WORK}/all.so
+  -Wl,--whole-archive ${archives} -Wl,--no-whole-archive)
+list(LENGTH archives n_archives)
+message(STATUS "install_embed: ${n_archives} archives link into a shared object")
+message(STATUS "PASS install_embed")

@@ -1,0 +1,91 @@
+#include "isotouch/servo/sdk_device.h"
+
+#include <dlfcn.h>
+#include <time.h>
+
+#include <cmath>
+#include <cstdlib>
+
+namespace isotouch::servo {
+
+std::int64_t sdk_now_ns() {
+  timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return std::int64_t(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+SdkLibrary load_sdk(const char* env_var, const std::vector<std::string>& names) {
+  SdkLibrary lib;
+  const char* over = std::getenv(env_var);
+  std::vector<std::string> tries;
+  if (over && *over) {
+    tries.push_back(over);
+    lib.searched = std::string("$") + env_var + "=" + over;
+  } else {
+    tries = names;
+    lib.searched = std::string("$") + env_var + " unset";
+  }
+  for (const std::string& name : tries) {
+    dlerror();
+    lib.handle = dlopen(name.c_str(), RTLD_NOW | RTLD_GLOBAL);
+    if (lib.handle) {
+      lib.path = name;
+      return lib;
+    }
+    const char* why = dlerror();
+    lib.searched += "; " + name + ": " + (why ? why : "not found");
+  }
+  return lib;
+}
+
+SdkDevice::SdkDevice() {
+  DeviceReading r;
+  r.status = DeviceStatus::kDisconnected;
+  reading_.store(r);
+  last_read_ = r;
+}
+
+void SdkDevice::write_force_n(const Vec3& force_n) {
+  const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
+  Vec3 f = ok ? force_n : Vec3{};
+  const std::uint64_t stalls = stalls_.load(std::memory_order_acquire);
+  if (stalls != stalls_seen_) f = Vec3{};  // no jump back to the force before the stall
+  stalls_seen_ = stalls;
+  output_.store(Output{f, ++writes_, stalls});
+}
+
+const std::atomic<std::uint64_t>* SdkDevice::enable_force(bool on, double stall_s) {
+  if (!(stall_s > 0) || !std::isfinite(stall_s)) stall_s = default_stall_s_;
+  stall_ns_.store(std::int64_t(stall_s * 1e9), std::memory_order_relaxed);
+  enabled_ns_.store(sdk_now_ns(), std::memory_order_relaxed);
+  enabled_.store(on, std::memory_order_release);
+  return &stalls_;
+}
+
+void SdkDevice::publish(DeviceReading r, std::int64_t now_ns) {
+  if (r.status == DeviceStatus::kDisconnected) was_down_ = true;
+  if (r.status == DeviceStatus::kOk && was_down_) ++connection_, was_down_ = false;
+  r.received_ns = now_ns;
+  r.connection = connection_;  // a new one: the servo ramps the force in
+  reading_.store(r);
+}
+
+void SdkDevice::reset_device_thread(std::int64_t now_ns) {
+  seen_count_ = output_.load().count;
+  seen_at_ = now_ns;
+  was_on_ = false;
+}
+
+Vec3 SdkDevice::force_now(std::int64_t now_ns, bool& on) {
+  // The clock was read before the cell: a count unchanged after it means no write up to now.
+  const Output o = output_.load();
+  if (o.count != seen_count_) seen_count_ = o.count, seen_at_ = now_ns;
+  on = enabled_.load(std::memory_order_acquire) && seen_at_ >= enabled_ns_.load(std::memory_order_relaxed);
+  const bool stalled = now_ns - seen_at_ > stall_ns_.load(std::memory_order_relaxed);
+  if (on && was_on_ && stalled) stalls_.fetch_add(1, std::memory_order_release);
+  if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
+  was_on_ = on;
+  return on ? o.force_n : Vec3{};
+}
+
+}  // namespace isotouch::servo

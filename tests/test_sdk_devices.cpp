@@ -1,0 +1,179 @@
+// Vendor SDK backends against the test doubles of their libraries (tests/sdk_doubles):
+// what the double RECEIVED (its SDK's units and frame) is the truth, not what the backend
+// says it sent.
+#include <dlfcn.h>
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "isotouch/servo/openhaptics_device.h"
+
+using namespace isotouch;
+using servo::DeviceStatus;
+using Vec3 = core::Vec3;
+
+namespace {
+void sleep_ms(double ms) { std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(ms)); }
+
+/// The double's test controls, from the library the backend loaded.
+struct HdControls {
+  void (*vanish)(int);
+  void (*set_target)(const double*);
+  int (*log)(double*, int);
+  void (*clear_log)();
+  long (*illegal)();
+  HdControls() {
+    void* h = dlopen(HD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
+    if (!h) throw std::runtime_error(dlerror());
+    vanish = reinterpret_cast<void (*)(int)>(dlsym(h, "hdDoubleVanish"));
+    set_target = reinterpret_cast<void (*)(const double*)>(dlsym(h, "hdDoubleSetTarget"));
+    log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "hdDoubleLog"));
+    clear_log = reinterpret_cast<void (*)()>(dlsym(h, "hdDoubleClearLog"));
+    illegal = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleIllegalCalls"));
+  }
+  /// Rows of (t_s, fx, fy, fz [N, HD frame], flags).
+  std::vector<std::array<double, 5>> received() const {
+    std::vector<std::array<double, 5>> rows(1 << 16);
+    const int n = log(rows.front().data(), int(rows.size()));
+    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
+    return rows;
+  }
+};
+
+struct OpenHaptics : ::testing::Test {
+  void SetUp() override { setenv("ISOTOUCH_HD_LIBRARY", HD_DOUBLE, 1); }
+  HdControls ctl;
+};
+
+/// Writes `f` every ms for `ms` milliseconds, as the servo thread would.
+void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms) {
+  for (int i = 0; i < ms; ++i) {
+    d.read();
+    d.write_force_n(f);
+    sleep_ms(1);
+  }
+}
+}  // namespace
+
+TEST(OpenHapticsLoad, MissingLibraryNamesWhatWasSearched) {
+  setenv("ISOTOUCH_HD_LIBRARY", "/nonexistent/libHD.so", 1);
+  servo::OpenHapticsDevice d;
+  try {
+    d.open();
+    FAIL() << "opened without the library";
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("OpenHaptics HD library not found"), std::string::npos) << m;
+    EXPECT_NE(m.find("searched: $ISOTOUCH_HD_LIBRARY=/nonexistent/libHD.so"), std::string::npos) << m;
+  }
+  unsetenv("ISOTOUCH_HD_LIBRARY");
+  servo::HdApi api;
+  const std::string e = servo::load_hd_api(api);
+  if (!api.lib) {
+    EXPECT_NE(e.find("ISOTOUCH_HD_LIBRARY unset; libHD.so: "), std::string::npos) << e;
+  }
+}
+
+TEST_F(OpenHaptics, UnknownDeviceNameGivesTheHdError) {
+  servo::OpenHapticsDevice d("no such arm");
+  try {
+    d.open();
+    FAIL() << "opened a device that does not exist";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("hdInitDevice: HD_COMM_CONFIG_ERROR (0x303"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(OpenHaptics, CapabilitiesAndPoseInIsotouchFrame) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  const servo::DeviceCaps c = d.caps();
+  EXPECT_DOUBLE_EQ(c.max_force_n, 3.3);
+  EXPECT_DOUBLE_EQ(c.max_stiffness_n_per_m, 1000.0);  // 1.0 N/mm
+  EXPECT_DOUBLE_EQ(c.max_damping_n_s_per_m, 5.0);     // 0.005 N s/mm
+  EXPECT_DOUBLE_EQ(c.native_rate_hz, 1000);
+  // HD box x +-190, y +-130, z +-95 mm -> x +-0.19, y (= -z) +-0.095, z (= y) +-0.13 m.
+  EXPECT_NEAR(c.workspace_min_m.y, -0.095, 1e-12);
+  EXPECT_NEAR(c.workspace_max_m.z, 0.13, 1e-12);
+  EXPECT_NE(d.description().find("calibration ok"), std::string::npos) << d.description();
+  const double target_mm[3] = {10, 20, 30};  // HD: right, up, toward the user
+  ctl.set_target(target_mm);
+  sleep_ms(600);
+  const servo::DeviceReading r = d.read();
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  EXPECT_NEAR(r.position_m.x, 0.010, 2e-4);   // right
+  EXPECT_NEAR(r.position_m.y, -0.030, 2e-4);  // toward the user = -y
+  EXPECT_NEAR(r.position_m.z, 0.020, 2e-4);   // up
+  EXPECT_GT(r.received_ns, 0);
+  d.close();
+  EXPECT_EQ(ctl.illegal(), 0) << "HD calls outside the scheduler's frames";
+}
+
+TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  const auto* stalls = d.enable_force(true, 0.0025);
+  ctl.clear_log();
+  write_for(d, {1.0, 2.0, -0.5}, 50);  // isotouch: right, away from the user, down
+  auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 30u);
+  const auto& last = rows.back();
+  EXPECT_EQ(int(last[4]) & 1, 1) << "force output not enabled";
+  EXPECT_DOUBLE_EQ(last[1], 1.0);   // HD x: right
+  EXPECT_DOUBLE_EQ(last[2], -0.5);  // HD y: up
+  EXPECT_DOUBLE_EQ(last[3], -2.0);  // HD z: toward the user
+  // The servo stops writing: an exact zero within the stall time (2.5 ms) and a period.
+  const std::uint64_t s0 = stalls->load();
+  ctl.clear_log();
+  sleep_ms(10);
+  rows = ctl.received();
+  ASSERT_GT(rows.size(), 5u);
+  int nonzero = 0;
+  for (const auto& r : rows) nonzero += (r[1] != 0 || r[2] != 0 || r[3] != 0);
+  EXPECT_LE(nonzero, 4) << "force kept after the servo stopped writing";
+  EXPECT_EQ(rows.back()[1], 0.0);
+  EXPECT_EQ(stalls->load(), s0 + 1);
+  d.close();
+  rows = ctl.received();
+  EXPECT_EQ(rows.back()[1], 0.0);
+  EXPECT_EQ(rows.back()[2], 0.0);
+  EXPECT_EQ(rows.back()[3], 0.0);
+  EXPECT_EQ(ctl.illegal(), 0);
+}
+
+TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  d.enable_force(true, 0.0025);
+  write_for(d, {0.5, 0, 0}, 20);
+  ctl.clear_log();
+  ctl.vanish(1);
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 30); });
+  sleep_ms(3);
+  EXPECT_EQ(d.read().status, DeviceStatus::kDisconnected);
+  servo.join();
+  EXPECT_NE(d.last_error().find("HD_COMM_ERROR"), std::string::npos) << d.last_error();
+  // After the first frame that found the device gone, every force is an exact zero.
+  const auto rows = ctl.received();
+  bool seen_gone = false;
+  int after = 0;
+  for (const auto& r : rows) {
+    if (seen_gone) {
+      ++after;
+      EXPECT_EQ(r[1], 0.0) << "force after the device vanished, t " << r[0];
+    }
+    if (int(r[4]) & 2) seen_gone = true;
+  }
+  EXPECT_GT(after, 10);
+  const std::uint32_t conn = d.read().connection;
+  ctl.vanish(0);
+  sleep_ms(5);
+  EXPECT_EQ(d.read().status, DeviceStatus::kOk);
+  EXPECT_EQ(d.read().connection, conn + 1) << "a device back is a new connection (the servo ramps in)";
+  d.close();
+}

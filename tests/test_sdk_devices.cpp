@@ -2,6 +2,7 @@
 // what the double RECEIVED (its SDK's units and frame) is the truth, not what the backend
 // says it sent.
 #include <dlfcn.h>
+#include <pthread.h>
 #include <gtest/gtest.h>
 #include <stdlib.h>
 
@@ -11,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "isotouch/servo/forcedimension_device.h"
 #include "isotouch/servo/openhaptics_device.h"
 
 using namespace isotouch;
@@ -49,6 +51,30 @@ struct OpenHaptics : ::testing::Test {
   void SetUp() override { setenv("ISOTOUCH_HD_LIBRARY", HD_DOUBLE, 1); }
   HdControls ctl;
 };
+
+/// Polls `done` every ms for at most `ms` milliseconds (a loaded machine is slow, not wrong).
+template <class F>
+bool wait_for(F done, int ms = 2000) {
+  for (int i = 0; i < ms; ++i, sleep_ms(1))
+    if (done()) return true;
+  return done();
+}
+
+/// The stall time the tests give while they check that forces pass: long enough for a test
+/// thread starved on a loaded machine; the stall tests then wait past it.
+constexpr double kTestStallS = 0.2;
+
+using Rows = std::vector<std::array<double, 5>>;
+/// The forces received after the first one received while the device had vanished.
+Rows forces_after_vanish(const Rows& rows) {
+  Rows out;
+  bool gone = false;
+  for (const auto& r : rows) {
+    if (gone) out.push_back(r);
+    if (int(r[4]) & 2) gone = true;
+  }
+  return out;
+}
 
 /// Writes `f` every ms for `ms` milliseconds, as the servo thread would.
 void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms) {
@@ -117,7 +143,7 @@ TEST_F(OpenHaptics, CapabilitiesAndPoseInIsotouchFrame) {
 TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
   servo::OpenHapticsDevice d;
   d.open();
-  const auto* stalls = d.enable_force(true, 0.0025);
+  const auto* stalls = d.enable_force(true, kTestStallS);
   ctl.clear_log();
   write_for(d, {1.0, 2.0, -0.5}, 50);  // isotouch: right, away from the user, down
   auto rows = ctl.received();
@@ -127,17 +153,17 @@ TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
   EXPECT_DOUBLE_EQ(last[1], 1.0);   // HD x: right
   EXPECT_DOUBLE_EQ(last[2], -0.5);  // HD y: up
   EXPECT_DOUBLE_EQ(last[3], -2.0);  // HD z: toward the user
-  // The servo stops writing: an exact zero within the stall time (2.5 ms) and a period.
+  // The servo stops writing: an exact zero after the stall time, counted once.
   const std::uint64_t s0 = stalls->load();
   ctl.clear_log();
-  sleep_ms(10);
+  ASSERT_TRUE(wait_for([&] { return stalls->load() == s0 + 1; }));
+  sleep_ms(20);
   rows = ctl.received();
-  ASSERT_GT(rows.size(), 5u);
-  int nonzero = 0;
-  for (const auto& r : rows) nonzero += (r[1] != 0 || r[2] != 0 || r[3] != 0);
-  EXPECT_LE(nonzero, 4) << "force kept after the servo stopped writing";
   EXPECT_EQ(rows.back()[1], 0.0);
+  EXPECT_EQ(rows.back()[3], 0.0);
   EXPECT_EQ(stalls->load(), s0 + 1);
+  // Closed while the servo writes: an exact zero is the last force.
+  write_for(d, {1.0, 2.0, -0.5}, 20);
   d.close();
   rows = ctl.received();
   EXPECT_EQ(rows.back()[1], 0.0);
@@ -149,31 +175,140 @@ TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
   servo::OpenHapticsDevice d;
   d.open();
-  d.enable_force(true, 0.0025);
+  d.enable_force(true, kTestStallS);
   write_for(d, {0.5, 0, 0}, 20);
   ctl.clear_log();
   ctl.vanish(1);
-  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 30); });
-  sleep_ms(3);
-  EXPECT_EQ(d.read().status, DeviceStatus::kDisconnected);
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40); });
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
   servo.join();
   EXPECT_NE(d.last_error().find("HD_COMM_ERROR"), std::string::npos) << d.last_error();
-  // After the first frame that found the device gone, every force is an exact zero.
-  const auto rows = ctl.received();
-  bool seen_gone = false;
-  int after = 0;
-  for (const auto& r : rows) {
-    if (seen_gone) {
-      ++after;
-      EXPECT_EQ(r[1], 0.0) << "force after the device vanished, t " << r[0];
-    }
-    if (int(r[4]) & 2) seen_gone = true;
-  }
-  EXPECT_GT(after, 10);
+  // After the first force sent to the vanished device, every one is an exact zero.
+  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
+  for (const auto& r : forces_after_vanish(ctl.received()))
+    EXPECT_EQ(r[1], 0.0) << "force after the device vanished, t " << r[0];
   const std::uint32_t conn = d.read().connection;
   ctl.vanish(0);
-  sleep_ms(5);
-  EXPECT_EQ(d.read().status, DeviceStatus::kOk);
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
   EXPECT_EQ(d.read().connection, conn + 1) << "a device back is a new connection (the servo ramps in)";
+  d.close();
+}
+
+namespace {
+struct DhdControls {
+  void (*vanish)(int);
+  void (*set_target)(const double*);
+  int (*log)(double*, int);
+  void (*clear_log)();
+  long (*calls_on)(unsigned long);
+  int (*force_on)();
+  DhdControls() {
+    void* h = dlopen(DHD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
+    if (!h) throw std::runtime_error(dlerror());
+    vanish = reinterpret_cast<void (*)(int)>(dlsym(h, "dhdDoubleVanish"));
+    set_target = reinterpret_cast<void (*)(const double*)>(dlsym(h, "dhdDoubleSetTarget"));
+    log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "dhdDoubleLog"));
+    clear_log = reinterpret_cast<void (*)()>(dlsym(h, "dhdDoubleClearLog"));
+    calls_on = reinterpret_cast<long (*)(unsigned long)>(dlsym(h, "dhdDoubleCallsOn"));
+    force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
+  }
+  std::vector<std::array<double, 5>> received() const {
+    std::vector<std::array<double, 5>> rows(1 << 16);
+    const int n = log(rows.front().data(), int(rows.size()));
+    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
+    return rows;
+  }
+};
+
+struct ForceDimension : ::testing::Test {
+  void SetUp() override { setenv("ISOTOUCH_DHD_LIBRARY", DHD_DOUBLE, 1); }
+  DhdControls ctl;
+};
+}  // namespace
+
+TEST(ForceDimensionLoad, MissingLibraryNamesWhatWasSearched) {
+  setenv("ISOTOUCH_DHD_LIBRARY", "/nonexistent/libdhd.so", 1);
+  servo::ForceDimensionDevice d;
+  try {
+    d.open();
+    FAIL() << "opened without the library";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("Force Dimension SDK library not found (searched: $ISOTOUCH_DHD_LIBRARY=/nonexistent/libdhd.so"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+TEST_F(ForceDimension, IndexBeyondTheDevicesIsRefused) {
+  servo::ForceDimensionDevice d(3);
+  try {
+    d.open();
+    FAIL() << "opened device 3 of 1";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("forcedimension:3: no such device (1 found"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(ForceDimension, PoseAndForcesInFdFrameFromADeviceThread) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  const servo::DeviceCaps c = d.caps();
+  EXPECT_EQ(c.name, "omega.3");
+  EXPECT_DOUBLE_EQ(c.max_force_n, 12.0);
+  EXPECT_DOUBLE_EQ(c.max_stiffness_n_per_m, 5000.0);
+  const double target[3] = {0.01, 0.02, 0.03};  // FD: toward the user, right, up [m]
+  ctl.set_target(target);
+  sleep_ms(600);
+  const servo::DeviceReading r = d.read();
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  EXPECT_NEAR(r.position_m.x, 0.02, 2e-4);   // right
+  EXPECT_NEAR(r.position_m.y, -0.01, 2e-4);  // toward the user = -y
+  EXPECT_NEAR(r.position_m.z, 0.03, 2e-4);   // up
+  const auto* stalls = d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  write_for(d, {1.0, 2.0, -0.5}, 50);
+  auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 30u);
+  EXPECT_EQ(int(rows.back()[4]) & 1, 1) << "force not enabled";
+  EXPECT_DOUBLE_EQ(rows.back()[1], -2.0);  // FD x: toward the user = -y
+  EXPECT_DOUBLE_EQ(rows.back()[2], 1.0);   // FD y: right
+  EXPECT_DOUBLE_EQ(rows.back()[3], -0.5);  // FD z: up
+  EXPECT_EQ(ctl.calls_on(static_cast<unsigned long>(pthread_self())), 0) << "a dhd call on the servo's thread";
+  // The servo stops writing: an exact zero after the stall time, counted once.
+  const std::uint64_t s0 = stalls->load();
+  ASSERT_TRUE(wait_for([&] { return stalls->load() == s0 + 1; }));
+  sleep_ms(20);
+  rows = ctl.received();
+  EXPECT_EQ(rows.back()[1], 0.0);
+  EXPECT_EQ(rows.back()[2], 0.0);
+  EXPECT_EQ(stalls->load(), s0 + 1);
+  // Closed while the servo writes: an exact zero, then force output off.
+  write_for(d, {1.0, 2.0, -0.5}, 20);
+  d.close();
+  rows = ctl.received();
+  EXPECT_EQ(rows.back()[1], 0.0);
+  EXPECT_EQ(rows.back()[2], 0.0);
+  EXPECT_EQ(ctl.force_on(), 0) << "force left enabled at close";
+}
+
+TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  d.enable_force(true, kTestStallS);
+  write_for(d, {0.5, 0, 0}, 20);
+  ctl.clear_log();
+  ctl.vanish(1);
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40); });
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
+  servo.join();
+  EXPECT_NE(d.last_error().find("dhdGetPosition failed: communication error"), std::string::npos) << d.last_error();
+  // After the first force sent to the vanished device, every one is an exact zero.
+  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
+  for (const auto& r : forces_after_vanish(ctl.received()))
+    EXPECT_EQ(r[2], 0.0) << "force after the device vanished, t " << r[0];
+  const std::uint32_t conn = d.read().connection;
+  ctl.vanish(0);
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
+  EXPECT_EQ(d.read().connection, conn + 1);
   d.close();
 }

@@ -8,6 +8,7 @@
 
 #include "isotouch/servo/hid_device.h"
 #include "isotouch/engine/vk_context.h"
+#include "isotouch/run/sdk_haptic_device.h"
 
 namespace isotouch::app {
 namespace {
@@ -52,12 +53,13 @@ bool print_hid(std::ostream& out) {
 int run_devices(std::ostream& out) {
   const bool vk = print_vulkan(out);
   const bool hid = print_hid(out);
-  return vk || hid ? 0 : 1;
+  const bool sdk = run::print_sdk_devices(out);
+  return vk || hid || sdk ? 0 : 1;
 }
 
 Subcommand add_devices_command(CLI::App& cli) {
   CLI::App* d =
-      cli.add_subcommand("devices", "List the Vulkan devices and the HID devices (VID:PID, serial, path, known protocol)");
+      cli.add_subcommand("devices", "List the Vulkan devices, the HID devices (VID:PID, serial, path, known protocol) and the vendor SDKs found (OpenHaptics, Force Dimension) with their devices");
   return {d, [](const std::string&) { return run_devices(std::cout); }};
 }
 

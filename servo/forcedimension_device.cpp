@@ -82,6 +82,12 @@ std::string ForceDimensionDevice::last_error() const {
   return last_error_;
 }
 
+std::string ForceDimensionDevice::sdk_status() const {
+  const std::string last = last_error();
+  return std::to_string(periods()) + " device periods, " + std::to_string(errors()) + " dhd errors" +
+         (last.empty() ? "" : " (last: " + last + ")");
+}
+
 void ForceDimensionDevice::open() {
   if (thread_.joinable()) return;
   const std::string who = "forcedimension:" + std::to_string(index_);
@@ -152,4 +158,24 @@ void ForceDimensionDevice::loop() {
   api_.dhdClose(id_);
 }
 
+}  // namespace isotouch::servo
+
+namespace isotouch::servo {
+std::vector<std::string> list_forcedimension(const DhdApi& a) {
+  const int n = a.dhdGetDeviceCount();
+  std::vector<std::string> out;
+  if (n <= 0) out.push_back("no device (dhdGetDeviceCount: " + std::to_string(n) + ")");
+  for (int i = 0; i < n; ++i) {
+    const int id = a.dhdOpenID(char(i));
+    if (id < 0) {
+      out.push_back(std::to_string(i) + ": cannot open (" +
+                    (a.dhdErrorGetLastStr ? a.dhdErrorGetLastStr() : "dhdOpenID -1") + ")");
+      continue;
+    }
+    const int type = a.dhdGetSystemType(char(id));
+    out.push_back(std::to_string(i) + ": " + dhd_system_caps(type).name + " (system type " + std::to_string(type) + ")");
+    a.dhdClose(char(id));
+  }
+  return out;
+}
 }  // namespace isotouch::servo

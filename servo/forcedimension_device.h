@@ -11,6 +11,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "isotouch/servo/dhd_api.h"
 #include "isotouch/servo/sdk_device.h"
@@ -39,6 +40,9 @@ std::string load_dhd_api(DhdApi& api);
 /// types: CHAI3D's default, an omega.3's).
 DeviceCaps dhd_system_caps(int system_type);
 
+/// `isotouch devices`: one line per device the SDK counts (index, model, system type).
+std::vector<std::string> list_forcedimension(const DhdApi& api);
+
 /// FD position [m, FD frame] -> isotouch device frame [m].
 inline Vec3 dhd_to_device_m(double x, double y, double z) { return {y, -x, z}; }
 /// isotouch device-frame force [N] -> FD frame [N].
@@ -58,6 +62,7 @@ class ForceDimensionDevice final : public SdkDevice {
   std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
   long errors() const { return errors_.load(); }
   long periods() const { return periods_.load(); }
+  std::string sdk_status() const override;
 
  private:
   void loop();

@@ -160,6 +160,12 @@ std::string OpenHapticsDevice::last_error() const {
   return e == hd::kSuccess ? std::string() : error_text(e, 0);
 }
 
+std::string OpenHapticsDevice::sdk_status() const {
+  const std::string last = last_error();
+  return std::to_string(frames()) + " HD scheduler frames, " + std::to_string(errors()) + " HD errors" +
+         (last.empty() ? "" : " (last: " + last + ")");
+}
+
 HDCallbackCode OpenHapticsDevice::callback(void* self) { return static_cast<OpenHapticsDevice*>(self)->tick(); }
 
 HDCallbackCode OpenHapticsDevice::tick() {
@@ -195,4 +201,21 @@ HDCallbackCode OpenHapticsDevice::tick() {
   return hd::kCallbackContinue;
 }
 
+}  // namespace isotouch::servo
+
+namespace isotouch::servo {
+std::string list_openhaptics(const HdApi& a) {
+  const HHD h = a.hdInitDevice(hd::kDefaultDevice);
+  const HDErrorInfo e = a.hdGetError();
+  if (e.errorCode != hd::kSuccess || h == hd::kInvalidHandle)
+    return "default device: none (hdInitDevice: " + error_text(e.errorCode, e.internalErrorCode) + ")";
+  a.hdMakeCurrentDevice(h);
+  const char* model = a.hdGetString(hd::kDeviceModelType);
+  const char* serial = a.hdGetString(hd::kDeviceSerialNumber);
+  const HDenum cal = a.hdCheckCalibration();
+  std::string line = std::string("default device: ") + (model ? model : "?") + ", serial " + (serial ? serial : "?") +
+                     ", calibration " + (cal == hd::kCalibrationOk ? "ok" : "not ok");
+  a.hdDisableDevice(h);
+  return line;
+}
 }  // namespace isotouch::servo

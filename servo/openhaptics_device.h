@@ -41,6 +41,10 @@ struct HdApi {
 /// `api.lib` says what was searched; "" or what is missing (no library, absent functions).
 std::string load_hd_api(HdApi& api);
 
+/// `isotouch devices`: the default device's model, serial and calibration, or why none
+/// (hdInitDevice's error); the device is released again.
+std::string list_openhaptics(const HdApi& api);
+
 /// HD position [mm, HD frame] -> isotouch device frame [m].
 inline Vec3 hd_to_device_m(const double mm[3]) { return Vec3{mm[0], -mm[2], mm[1]} * 1e-3; }
 /// isotouch device-frame force [N] -> HD frame [N].
@@ -65,6 +69,7 @@ class OpenHapticsDevice final : public SdkDevice {
   std::string last_error() const;
   long errors() const { return errors_.load(); }   ///< HD errors seen by the callback
   long frames() const { return frames_.load(); }   ///< callback runs
+  std::string sdk_status() const override;
 
  private:
   static HDCallbackCode callback(void* self);

@@ -32,8 +32,10 @@ SdkLibrary load_sdk(const char* env_var, const std::vector<std::string>& names) 
       lib.path = name;
       return lib;
     }
-    const char* why = dlerror();
-    lib.searched += "; " + name + ": " + (why ? why : "not found");
+    const char* err = dlerror();
+    std::string why = err ? err : "not found";
+    if (why.rfind(name + ": ", 0) == 0) why.erase(0, name.size() + 2);  // dlerror() names the file too
+    lib.searched += "; " + name + ": " + why;
   }
   return lib;
 }

@@ -61,6 +61,8 @@ class SdkDevice : public HapticDeviceIO {
   const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
   /// Times the device thread took the force off because the servo stopped writing.
   std::uint64_t stalls() const { return stalls_.load(); }
+  /// One line for the run's summary: the device thread's periods and SDK errors, the last one.
+  virtual std::string sdk_status() const = 0;
 
  protected:
   /// Device thread: the newest reading (received_ns: now, connection: bumped on a

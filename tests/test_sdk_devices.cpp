@@ -76,10 +76,11 @@ Rows forces_after_vanish(const Rows& rows) {
   return out;
 }
 
-/// Writes `f` every ms for `ms` milliseconds, as the servo thread would.
-void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms) {
+/// Writes `f` every ms for `ms` milliseconds, as the servo thread would (reading first unless
+/// another thread reads: read() and write_force_n() are each one thread's).
+void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms, bool read = true) {
   for (int i = 0; i < ms; ++i) {
-    d.read();
+    if (read) d.read();
     d.write_force_n(f);
     sleep_ms(1);
   }
@@ -179,7 +180,7 @@ TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
   write_for(d, {0.5, 0, 0}, 20);
   ctl.clear_log();
   ctl.vanish(1);
-  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40); });
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
   EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
   servo.join();
   EXPECT_NE(d.last_error().find("HD_COMM_ERROR"), std::string::npos) << d.last_error();
@@ -253,9 +254,10 @@ TEST_F(ForceDimension, PoseAndForcesInFdFrameFromADeviceThread) {
   servo::ForceDimensionDevice d(0, 2000);
   d.open();
   const servo::DeviceCaps c = d.caps();
-  EXPECT_EQ(c.name, "omega.3");
-  EXPECT_DOUBLE_EQ(c.max_force_n, 12.0);
+  EXPECT_EQ(c.name, "delta.3");  // system type 63, CHAI3D's limits
+  EXPECT_DOUBLE_EQ(c.max_force_n, 20.0);
   EXPECT_DOUBLE_EQ(c.max_stiffness_n_per_m, 5000.0);
+  EXPECT_DOUBLE_EQ(c.workspace_max_m.x, 0.15);
   const double target[3] = {0.01, 0.02, 0.03};  // FD: toward the user, right, up [m]
   ctl.set_target(target);
   sleep_ms(600);
@@ -298,7 +300,7 @@ TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
   write_for(d, {0.5, 0, 0}, 20);
   ctl.clear_log();
   ctl.vanish(1);
-  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40); });
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
   EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
   servo.join();
   EXPECT_NE(d.last_error().find("dhdGetPosition failed: communication error"), std::string::npos) << d.last_error();

@@ -1,7 +1,7 @@
 // dhd_double.cpp - a test double of the Force Dimension DHD library (built as libdhd.so):
 // the dhd functions isotouch calls, with the SDK's units and conventions (m, N; x toward
-// the user, y right, z up; -1 on error, the device ID last), one omega.3 (system type 33)
-// whose physics runs on the double's own 4 kHz clock (the device's), calls that take USB
+// the user, y right, z up; -1 on error, the device ID last), one delta.3 (system type 63)
+// whose physics runs on the double's own 1 kHz clock (the device's; kept light: the host's CPUs are the servo's), calls that take USB
 // time (50 us), and a device that vanishes (every call fails, the count drops to 0).
 // Declarations from isotouch/servo/dhd_api.h (from CHAI3D's CDeltaDevices.cpp, cited there).
 // Test controls: dhdDouble* below. Environment: DHD_DOUBLE_PATH, DHD_DOUBLE_LOG (double_device.h).
@@ -47,8 +47,8 @@ bool usable(char id) {
 void clock_loop() {
   double next = isotouch_double::now_s();
   while (g_running.load()) {
-    g_dev.step(0.00025);
-    next += 0.00025;
+    g_dev.step(0.001);
+    next += 0.001;
     const double wait = next - isotouch_double::now_s();
     if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
   }
@@ -75,7 +75,7 @@ int dhdClose(char id) {
   g_dev.write_log();
   return 0;
 }
-int dhdGetSystemType(char id) { return usable(id) ? 33 : -1; }  // DHD_DEVICE_OMEGA3
+int dhdGetSystemType(char id) { return usable(id) ? 63 : -1; }  // DHD_DEVICE_DELTA3
 int dhdGetPosition(double* px, double* py, double* pz, char id) {
   usb_time();
   if (!usable(id)) return -1;

@@ -34,8 +34,8 @@ class DoubleDevice {
  public:
   using Map = std::function<std::array<double, 3>(double, double, double)>;
   /// `env`: the prefix of the variables PREFIX_PATH (a hand path, t_s,x_m,y_m,z_m in
-  /// isotouch's device frame, mapped into the SDK's by `to_sdk`) and PREFIX_LOG (the
-  /// received forces written there when the device closes).
+  /// isotouch's device frame, mapped into the SDK's by `to_sdk`), PREFIX_LOG (the
+  /// received forces written there when the device closes) and PREFIX_VANISH_AT (seconds).
   DoubleDevice(const char* env, Map to_sdk) : env_(env), to_sdk_(std::move(to_sdk)) { log_.reserve(1 << 16); }
 
   void start() {
@@ -43,11 +43,15 @@ class DoubleDevice {
     t0_ = now_s();
     x_ = v_ = f_ = {};
     load_path();
+    const char* at = std::getenv((env_ + "_VANISH_AT").c_str());
+    vanish_at_ = at && *at ? std::atof(at) : -1;
     if (!path_.empty()) x_ = {path_[0][1], path_[0][2], path_[0][3]};
   }
   void step(double dt) {
     std::lock_guard l(mu_);
-    if (!path_.empty()) target_ = path_at(now_s() - t0_);
+    const double t = now_s() - t0_;
+    if (!path_.empty()) target_ = path_at(t);
+    if (vanish_at_ >= 0 && t >= vanish_at_) vanished_ = true, vanish_at_ = -1;
     for (int i = 0; i < 3; ++i) {
       const double a = (300.0 * (target_[i] - x_[i]) - 5.0 * v_[i] + f_[i]) / 0.08;
       v_[i] += a * dt;
@@ -118,6 +122,7 @@ class DoubleDevice {
   std::vector<std::array<double, 4>> path_;
   std::vector<Received> log_;
   bool vanished_ = false;
+  double vanish_at_ = -1;  // PREFIX_VANISH_AT [s since start]: the device vanishes then
 };
 
 }  // namespace isotouch_double

@@ -57,7 +57,7 @@ class ForceDimensionDevice final : public SdkDevice {
   /// first reading. @throws std::runtime_error naming the library searched or the SDK's error.
   void open();
   /// The device thread's last act: an exact zero force, force disabled, the device closed.
-  void close();
+  void close() override;
   std::string description() const { return description_; }
   std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
   long errors() const { return errors_.load(); }

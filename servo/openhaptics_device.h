@@ -60,7 +60,7 @@ class OpenHapticsDevice final : public SdkDevice {
   /// @throws std::runtime_error naming the library searched or the HD error (hdGetError).
   void open();
   /// Applies an exact zero force, stops the scheduler, disables the device. Idempotent.
-  void close();
+  void close() override;
   /// "openhaptics:NAME (MODEL, serial S, calibration ok)" for the log.
   std::string description() const { return description_; }
   /// "" or a note about the calibration (needs update / manual input).

@@ -41,6 +41,7 @@ SdkLibrary load_sdk(const char* env_var, const std::vector<std::string>& names) 
 }
 
 SdkDevice::SdkDevice() {
+  latency_us_.reserve(1 << 20);  // 17 min at 1 kHz; later answers are not measured
   DeviceReading r;
   r.status = DeviceStatus::kDisconnected;
   reading_.store(r);
@@ -53,7 +54,7 @@ void SdkDevice::write_force_n(const Vec3& force_n) {
   const std::uint64_t stalls = stalls_.load(std::memory_order_acquire);
   if (stalls != stalls_seen_) f = Vec3{};  // no jump back to the force before the stall
   stalls_seen_ = stalls;
-  output_.store(Output{f, ++writes_, stalls});
+  output_.store(Output{f, ++writes_, stalls, answers_});
 }
 
 const std::atomic<std::uint64_t>* SdkDevice::enable_force(bool on, double stall_s) {
@@ -68,7 +69,9 @@ void SdkDevice::publish(DeviceReading r, std::int64_t now_ns) {
   if (r.status == DeviceStatus::kDisconnected) was_down_ = true;
   if (r.status == DeviceStatus::kOk && was_down_) ++connection_, was_down_ = false;
   r.received_ns = now_ns;
-  r.connection = connection_;  // a new one: the servo ramps the force in
+  r.connection = connection_;
+  r.sequence = ++sequence_;
+  published_ns_[sequence_ % kPublishRing] = now_ns;  // a new one: the servo ramps the force in
   reading_.store(r);
 }
 
@@ -87,6 +90,10 @@ Vec3 SdkDevice::force_now(std::int64_t now_ns, bool& on) {
   if (on && was_on_ && stalled) stalls_.fetch_add(1, std::memory_order_release);
   if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
   was_on_ = on;
+  const bool recent = o.answers + kPublishRing > sequence_;
+  if (o.answers != answered_ && o.answers != 0 && recent && latency_us_.size() < latency_us_.capacity())
+    latency_us_.push_back(double(now_ns - published_ns_[o.answers % kPublishRing]) * 1e-3);
+  answered_ = o.answers;
   return on ? o.force_n : Vec3{};
 }
 

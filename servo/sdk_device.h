@@ -7,6 +7,7 @@
 #include "isotouch/servo/core_names.h"
 #include <dlfcn.h>
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <string>
@@ -59,8 +60,15 @@ class SdkDevice : public HapticDeviceIO {
   DeviceCaps caps() const override { return caps_; }
   /// Returns the device thread's stall count.
   const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
+  /// Servo thread: the reading the next write answers (DeviceReading::sequence).
+  void answer(std::uint64_t sequence) override { answers_ = sequence; }
+  /// Report-to-force latency [us]: from publishing a reading to applying the first force
+  /// that answers it (handed to the SDK), one per answered reading. Read after close().
+  const std::vector<double>& latencies_us() const { return latency_us_; }
   /// Times the device thread took the force off because the servo stopped writing.
   std::uint64_t stalls() const { return stalls_.load(); }
+  /// Exact zero force, the device thread stopped, the device released. Idempotent.
+  virtual void close() = 0;
   /// One line for the run's summary: the device thread's periods and SDK errors, the last one.
   virtual std::string sdk_status() const = 0;
 
@@ -83,11 +91,13 @@ class SdkDevice : public HapticDeviceIO {
     Vec3 force_n;
     std::uint64_t count = 0;   // +1 per write_force_n()
     std::uint64_t stalls = 0;  // the stall count the write was made after
+    std::uint64_t answers = 0; // the reading's sequence it answers
   };
+  static constexpr std::size_t kPublishRing = 64;  // readings whose publish time is kept
   LatestValue<DeviceReading> reading_;
   LatestValue<Output> output_;
   DeviceReading last_read_;           // servo thread: read()'s fallback
-  std::uint64_t writes_ = 0, stalls_seen_ = 0;  // servo thread
+  std::uint64_t writes_ = 0, stalls_seen_ = 0, answers_ = 0;  // servo thread
   std::atomic<bool> enabled_{false};
   std::atomic<std::int64_t> stall_ns_{2'500'000}, enabled_ns_{0};
   std::atomic<std::uint64_t> stalls_{0};
@@ -96,6 +106,9 @@ class SdkDevice : public HapticDeviceIO {
   std::int64_t seen_at_ = 0;
   bool was_on_ = false, was_down_ = false;
   std::uint32_t connection_ = 0;
+  std::uint64_t sequence_ = 0, answered_ = 0;
+  std::array<std::int64_t, kPublishRing> published_ns_{};
+  std::vector<double> latency_us_;  // capacity reserved at construction: no allocation
 };
 
 }  // namespace isotouch::servo

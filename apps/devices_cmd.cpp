@@ -1,6 +1,7 @@
 #include "isotouch/apps/devices_cmd.h"
 
 #include <iostream>
+#include <memory>
 
 #include <cstdio>
 #include <ostream>
@@ -8,6 +9,7 @@
 
 #include "isotouch/servo/hid_device.h"
 #include "isotouch/engine/vk_context.h"
+#include "isotouch/run/device_check.h"
 #include "isotouch/run/sdk_haptic_device.h"
 
 namespace isotouch::app {
@@ -60,7 +62,16 @@ int run_devices(std::ostream& out) {
 Subcommand add_devices_command(CLI::App& cli) {
   CLI::App* d =
       cli.add_subcommand("devices", "List the Vulkan devices, the HID devices (VID:PID, serial, path, known protocol) and the vendor SDKs found (OpenHaptics, Force Dimension) with their devices");
-  return {d, [](const std::string&) { return run_devices(std::cout); }};
+  auto check = std::make_shared<run::DeviceCheckOptions>();
+  d->add_option("--check", check->spec,
+                "Check one device (openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:...): read its pose "
+                "with force off, then ask before rendering a soft wall");
+  d->add_option("--seconds", check->read_seconds, "--check: how long the pose is read [s] (default 5)")->check(CLI::PositiveNumber);
+  d->add_option("--wall-seconds", check->wall_seconds, "--check: how long the wall is rendered [s] (default 10)")
+      ->check(CLI::PositiveNumber);
+  return {d, [check](const std::string&) {
+            return check->spec.empty() ? run_devices(std::cout) : run::check_device(*check, std::cin, std::cout);
+          }};
 }
 
 }  // namespace isotouch::app

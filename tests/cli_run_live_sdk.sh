@@ -6,6 +6,9 @@
 #     RECEIVED, in its SDK's units and frame, are the servo's (compare_forces.py);
 #  2. the double's device vanishes at 1.5 s: every force after the first frame that found it
 #     gone is an exact zero, the run counts disconnected ticks, names the SDK's error, exits 5;
+#  4. `isotouch devices --check openhaptics` (below 3): "n" renders nothing (every force the
+#     double received is zero); "y" renders the soft wall: the double, pushed down by its
+#     hand, receives forces up (HD +y) of at most 1 N, then an exact zero;
 #  3. without the SDK: one clear message naming what was searched, exit 1; `isotouch devices`
 #     says found / not found with the override variable, and the devices the doubles show.
 # usage: cli_run_live_sdk.sh ISOTOUCH SCENE HD_DOUBLE DHD_DOUBLE COMPARE_PY OUT
@@ -63,4 +66,19 @@ cat "$out/devices2.log"
 grep -q "override: ISOTOUCH_HD_LIBRARY" "$out/devices2.log" && grep -q "override: ISOTOUCH_DHD_LIBRARY" "$out/devices2.log" || fail "devices: override variables not named"
 grep -q "default device: PHANToM (test double), serial DOUBLE-1" "$out/devices2.log" || fail "devices: the HD double's device not listed"
 grep -q "0: delta.3 (system type 63)" "$out/devices2.log" || fail "devices: the dhd double's device not listed"
+# 4. devices --check: a hand that rests 1.2 s, then goes 40 mm down over 1.5 s (device frame).
+awk 'BEGIN { print "t_s,x_m,y_m,z_m"; for (k = 0; k <= 4000; k++) { t = k / 1000; z = t < 1.2 ? 0 : (t < 2.7 ? -0.04 * (t - 1.2) / 1.5 : -0.04); printf "%.3f,0,0,%.6f\n", t, z } }' > "$out/down.csv"
+echo n | ISOTOUCH_HD_LIBRARY=$hd HD_DOUBLE_PATH=$out/down.csv HD_DOUBLE_LOG=$out/check_n.csv \
+  "$exe" devices --check openhaptics --seconds 1 > "$out/check_n.log" 2>&1; rc=$?
+cat "$out/check_n.log"
+[ "$rc" -eq 0 ] && grep -q "no force rendered" "$out/check_n.log" || fail "check, answered n: exit $rc"
+grep -q "pose (0.0, 0.0, 0.0) mm" "$out/check_n.log" || fail "check: the resting pose is not printed"
+awk -F, 'NR > 1 && ($2 != 0 || $3 != 0 || $4 != 0) { bad++ } END { exit bad > 0 }' "$out/check_n.csv" || fail "check, answered n: a force was sent"
+echo y | ISOTOUCH_HD_LIBRARY=$hd HD_DOUBLE_PATH=$out/down.csv HD_DOUBLE_LOG=$out/check_y.csv \
+  "$exe" devices --check openhaptics --seconds 1 --wall-seconds 2.5 > "$out/check_y.log" 2>&1; rc=$?
+cat "$out/check_y.log"
+[ "$rc" -eq 0 ] && grep -q "^wall " "$out/check_y.log" || fail "check, answered y: exit $rc"
+awk -F, 'NR > 1 { if ($2 != 0 || $4 != 0 || $3 < 0 || $3 > 1.0 + 1e-9) bad++; if ($3 > max) max = $3; if ($1 < 1.0 && $3 != 0) early++; last = $3 }
+         END { print "wall: max", max, "N up, bad", bad + 0, "early", early + 0, "last", last; exit !(bad == 0 && early == 0 && max > 0.5 && last == 0) }' \
+  "$out/check_y.csv" || fail "check, answered y: the wall's forces (up only, <= 1 N, none while reading, zero at the end)"
 echo "PASS run --live --haptic openhaptics, forcedimension"

@@ -86,6 +86,7 @@ class DoubleDevice {
     if (!file || !*file) return;
     std::lock_guard l(mu_);
     std::ofstream o(file);
+    o.precision(17);  // the forces as received, to the last bit
     o << "t_s,fx_n,fy_n,fz_n,enabled,vanished\n";
     for (const Received& r : log_)
       o << r.t_s << ',' << r.f[0] << ',' << r.f[1] << ',' << r.f[2] << ',' << (r.flags & 1) << ',' << (r.flags >> 1 & 1) << '\n';

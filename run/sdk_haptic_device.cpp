@@ -1,5 +1,6 @@
 #include "isotouch/run/sdk_haptic_device.h"
 
+#include <ostream>
 #include <stdexcept>
 
 #include "isotouch/servo/forcedimension_device.h"
@@ -21,6 +22,13 @@ int parse_index(const std::string& arg) {
                                 "' is not a device number (0 = the first)");
   return i;
 }
+/// Found, found but unusable, or not found (searched: ...); true if its devices can be listed.
+bool print_sdk(const servo::SdkLibrary& lib, const std::string& error, std::ostream& out) {
+  if (!lib) out << "  SDK not found (searched: " << lib.searched << ")\n";
+  else if (!error.empty()) out << "  SDK found at " << lib.path << " but unusable: " << error << "\n";
+  else out << "  SDK found: " << lib.path << "\n";
+  return lib && error.empty();
+}
 }  // namespace
 
 std::unique_ptr<servo::SdkDevice> open_sdk_device(const std::string& kind, const std::string& arg,
@@ -41,24 +49,12 @@ bool print_sdk_devices(std::ostream& out) {
   servo::HdApi hd;
   const std::string hd_error = servo::load_hd_api(hd);
   out << "OpenHaptics HD (--haptic openhaptics[:NAME]; override: ISOTOUCH_HD_LIBRARY):\n";
-  if (!hd.lib) {
-    out << "  SDK not found (searched: " << hd.lib.searched << ")\n";
-  } else if (!hd_error.empty()) {
-    out << "  SDK found at " << hd.lib.path << " but unusable: " << hd_error << "\n";
-  } else {
-    out << "  SDK found: " << hd.lib.path << "\n  " << servo::list_openhaptics(hd) << "\n";
-  }
+  if (print_sdk(hd.lib, hd_error, out)) out << "  " << servo::list_openhaptics(hd) << "\n";
   servo::DhdApi dhd;
   const std::string dhd_error = servo::load_dhd_api(dhd);
   out << "Force Dimension (--haptic forcedimension[:INDEX]; override: ISOTOUCH_DHD_LIBRARY):\n";
-  if (!dhd.lib) {
-    out << "  SDK not found (searched: " << dhd.lib.searched << ")\n";
-  } else if (!dhd_error.empty()) {
-    out << "  SDK found at " << dhd.lib.path << " but unusable: " << dhd_error << "\n";
-  } else {
-    out << "  SDK found: " << dhd.lib.path << "\n";
+  if (print_sdk(dhd.lib, dhd_error, out))
     for (const std::string& line : servo::list_forcedimension(dhd)) out << "  " << line << "\n";
-  }
   return hd.lib || dhd.lib;
 }
 

@@ -22,11 +22,24 @@ using Vec3 = core::Vec3;
 namespace {
 void sleep_ms(double ms) { std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(ms)); }
 
+using Rows = std::vector<std::array<double, 5>>;
+
+/// What both doubles export for tests: their log of received forces.
+struct DoubleLog {
+  int (*log)(double*, int) = nullptr;
+  /// Rows of (t_s, fx, fy, fz [N, the SDK's frame], flags).
+  Rows received() const {
+    Rows rows(1 << 16);
+    const int n = log(rows.front().data(), int(rows.size()));
+    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
+    return rows;
+  }
+};
+
 /// The double's test controls, from the library the backend loaded.
-struct HdControls {
+struct HdControls : DoubleLog {
   void (*vanish)(int);
   void (*set_target)(const double*);
-  int (*log)(double*, int);
   void (*clear_log)();
   long (*illegal)();
   HdControls() {
@@ -37,13 +50,6 @@ struct HdControls {
     log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "hdDoubleLog"));
     clear_log = reinterpret_cast<void (*)()>(dlsym(h, "hdDoubleClearLog"));
     illegal = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleIllegalCalls"));
-  }
-  /// Rows of (t_s, fx, fy, fz [N, HD frame], flags).
-  std::vector<std::array<double, 5>> received() const {
-    std::vector<std::array<double, 5>> rows(1 << 16);
-    const int n = log(rows.front().data(), int(rows.size()));
-    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
-    return rows;
   }
 };
 
@@ -64,7 +70,6 @@ bool wait_for(F done, int ms = 2000) {
 /// thread starved on a loaded machine; the stall tests then wait past it.
 constexpr double kTestStallS = 0.2;
 
-using Rows = std::vector<std::array<double, 5>>;
 /// The forces received after the first one received while the device had vanished.
 Rows forces_after_vanish(const Rows& rows) {
   Rows out;
@@ -84,6 +89,48 @@ void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms, bool read = true
     d.write_force_n(f);
     sleep_ms(1);
   }
+}
+/// The servo stops writing: an exact zero once the stall time passed, counted once; then,
+/// closed while the servo writes, an exact zero is the last force the double received.
+template <class Device, class Controls>
+void check_stall_then_close(Device& d, Controls& ctl, const std::atomic<std::uint64_t>& stalls) {
+  const std::uint64_t s0 = stalls.load();
+  ctl.clear_log();
+  ASSERT_TRUE(wait_for([&] { return stalls.load() == s0 + 1; }));
+  sleep_ms(20);
+  const auto zero = [&](const char* when) {
+    const auto r = ctl.received().back();
+    EXPECT_TRUE(r[1] == 0.0 && r[2] == 0.0 && r[3] == 0.0) << when << ": " << r[1] << ", " << r[2] << ", " << r[3];
+  };
+  zero("after the stall");
+  EXPECT_EQ(stalls.load(), s0 + 1);
+  write_for(d, {1.0, 2.0, -0.5}, 20);
+  d.close();
+  zero("after close");
+}
+
+/// The device vanishes while the servo pushes along isotouch x (0.5 N): the reading says
+/// disconnected, the SDK's error is named, every force the double received after the first
+/// one sent to the vanished device is an exact zero (`column`: the SDK axis x maps to), and
+/// the device back is a new connection (the servo ramps in). Closes the device.
+template <class Device, class Controls>
+void check_vanish(Device& d, Controls& ctl, int column, const std::string& error) {
+  d.enable_force(true, kTestStallS);
+  write_for(d, {0.5, 0, 0}, 20);
+  ctl.clear_log();
+  ctl.vanish(1);
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
+  servo.join();
+  EXPECT_NE(d.last_error().find(error), std::string::npos) << d.last_error();
+  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
+  for (const auto& r : forces_after_vanish(ctl.received()))
+    EXPECT_EQ(r[std::size_t(column)], 0.0) << "force after the device vanished, t " << r[0];
+  const std::uint32_t conn = d.read().connection;
+  ctl.vanish(0);
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
+  EXPECT_EQ(d.read().connection, conn + 1) << "a device back is a new connection (the servo ramps in)";
+  d.close();
 }
 }  // namespace
 
@@ -154,52 +201,20 @@ TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
   EXPECT_DOUBLE_EQ(last[1], 1.0);   // HD x: right
   EXPECT_DOUBLE_EQ(last[2], -0.5);  // HD y: up
   EXPECT_DOUBLE_EQ(last[3], -2.0);  // HD z: toward the user
-  // The servo stops writing: an exact zero after the stall time, counted once.
-  const std::uint64_t s0 = stalls->load();
-  ctl.clear_log();
-  ASSERT_TRUE(wait_for([&] { return stalls->load() == s0 + 1; }));
-  sleep_ms(20);
-  rows = ctl.received();
-  EXPECT_EQ(rows.back()[1], 0.0);
-  EXPECT_EQ(rows.back()[3], 0.0);
-  EXPECT_EQ(stalls->load(), s0 + 1);
-  // Closed while the servo writes: an exact zero is the last force.
-  write_for(d, {1.0, 2.0, -0.5}, 20);
-  d.close();
-  rows = ctl.received();
-  EXPECT_EQ(rows.back()[1], 0.0);
-  EXPECT_EQ(rows.back()[2], 0.0);
-  EXPECT_EQ(rows.back()[3], 0.0);
+  check_stall_then_close(d, ctl, *stalls);
   EXPECT_EQ(ctl.illegal(), 0);
 }
 
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
   servo::OpenHapticsDevice d;
   d.open();
-  d.enable_force(true, kTestStallS);
-  write_for(d, {0.5, 0, 0}, 20);
-  ctl.clear_log();
-  ctl.vanish(1);
-  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
-  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
-  servo.join();
-  EXPECT_NE(d.last_error().find("HD_COMM_ERROR"), std::string::npos) << d.last_error();
-  // After the first force sent to the vanished device, every one is an exact zero.
-  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
-  for (const auto& r : forces_after_vanish(ctl.received()))
-    EXPECT_EQ(r[1], 0.0) << "force after the device vanished, t " << r[0];
-  const std::uint32_t conn = d.read().connection;
-  ctl.vanish(0);
-  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
-  EXPECT_EQ(d.read().connection, conn + 1) << "a device back is a new connection (the servo ramps in)";
-  d.close();
+  check_vanish(d, ctl, 1, "HD_COMM_ERROR");  // a force along isotouch x is HD x
 }
 
 namespace {
-struct DhdControls {
+struct DhdControls : DoubleLog {
   void (*vanish)(int);
   void (*set_target)(const double*);
-  int (*log)(double*, int);
   void (*clear_log)();
   long (*calls_on)(unsigned long);
   int (*force_on)();
@@ -212,12 +227,6 @@ struct DhdControls {
     clear_log = reinterpret_cast<void (*)()>(dlsym(h, "dhdDoubleClearLog"));
     calls_on = reinterpret_cast<long (*)(unsigned long)>(dlsym(h, "dhdDoubleCallsOn"));
     force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
-  }
-  std::vector<std::array<double, 5>> received() const {
-    std::vector<std::array<double, 5>> rows(1 << 16);
-    const int n = log(rows.front().data(), int(rows.size()));
-    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
-    return rows;
   }
 };
 
@@ -276,41 +285,12 @@ TEST_F(ForceDimension, PoseAndForcesInFdFrameFromADeviceThread) {
   EXPECT_DOUBLE_EQ(rows.back()[2], 1.0);   // FD y: right
   EXPECT_DOUBLE_EQ(rows.back()[3], -0.5);  // FD z: up
   EXPECT_EQ(ctl.calls_on(static_cast<unsigned long>(pthread_self())), 0) << "a dhd call on the servo's thread";
-  // The servo stops writing: an exact zero after the stall time, counted once.
-  const std::uint64_t s0 = stalls->load();
-  ASSERT_TRUE(wait_for([&] { return stalls->load() == s0 + 1; }));
-  sleep_ms(20);
-  rows = ctl.received();
-  EXPECT_EQ(rows.back()[1], 0.0);
-  EXPECT_EQ(rows.back()[2], 0.0);
-  EXPECT_EQ(stalls->load(), s0 + 1);
-  // Closed while the servo writes: an exact zero, then force output off.
-  write_for(d, {1.0, 2.0, -0.5}, 20);
-  d.close();
-  rows = ctl.received();
-  EXPECT_EQ(rows.back()[1], 0.0);
-  EXPECT_EQ(rows.back()[2], 0.0);
+  check_stall_then_close(d, ctl, *stalls);
   EXPECT_EQ(ctl.force_on(), 0) << "force left enabled at close";
 }
 
 TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
   servo::ForceDimensionDevice d(0, 2000);
   d.open();
-  d.enable_force(true, kTestStallS);
-  write_for(d, {0.5, 0, 0}, 20);
-  ctl.clear_log();
-  ctl.vanish(1);
-  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
-  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
-  servo.join();
-  EXPECT_NE(d.last_error().find("dhdGetPosition failed: communication error"), std::string::npos) << d.last_error();
-  // After the first force sent to the vanished device, every one is an exact zero.
-  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
-  for (const auto& r : forces_after_vanish(ctl.received()))
-    EXPECT_EQ(r[2], 0.0) << "force after the device vanished, t " << r[0];
-  const std::uint32_t conn = d.read().connection;
-  ctl.vanish(0);
-  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
-  EXPECT_EQ(d.read().connection, conn + 1);
-  d.close();
+  check_vanish(d, ctl, 2, "dhdGetPosition failed: communication error");  // isotouch x is FD y
 }

@@ -170,7 +170,7 @@ TEST(Polhem, JacobianTransposeMatchesVirtualWork) {
   }
 }
 
-TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
+TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsReportIdZero) {
   PolhemProtocol p;
   polhem::Input in;
   in.encoder = {10, 20, 30, 6000, 0, 0};
@@ -182,7 +182,14 @@ TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
   ASSERT_EQ(p.pending_command(buf), 15u);
   EXPECT_EQ(buf[0], 0);
   EXPECT_EQ(buf[1 + 6], 1);  // command 1
-  EXPECT_EQ(p.pending_command(buf), 0u);  // once
+  EXPECT_EQ(p.pending_command(buf), 0u);  // once per report that asks
+  // The command was lost (the firmware keeps only its last queued report): it asks again.
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  ASSERT_EQ(p.pending_command(buf), 15u);
+  EXPECT_EQ(buf[1 + 6], 1);
+  in.info = 0;  // calibrated: it stops asking
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  EXPECT_EQ(p.pending_command(buf), 0u);
   ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, true, 0, buf), 15u);
   EXPECT_EQ(buf[0], 0);
   Vec3 amps;

@@ -15,8 +15,8 @@
 namespace isotouch::run {
 namespace {
 constexpr const char* kKinds =
-    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET, openhaptics[:NAME], "
-    "forcedimension[:INDEX]";
+    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:VID:PID[:SERIAL], polhem:/dev/hidrawN, "
+    "emu:SOCKET, openhaptics[:NAME], forcedimension[:INDEX]";
 
 std::string num(double v) {
   std::ostringstream s;
@@ -43,8 +43,8 @@ HapticDevice open_report(const std::string& kind, const std::string& arg, int fi
   HapticDevice d;
   d.kind = kind;
   std::unique_ptr<servo::ReportDevice> dev;
-  if (kind == "hid") {
-    dev = servo::open_hid_device(arg, fifo);
+  if (kind == "hid" || kind == "polhem") {
+    dev = servo::open_hid_device(arg, fifo, kind == "polhem" ? "polhem" : "");
   } else {
     servo::ReportDeviceOptions o;
     o.fifo_priority = fifo;
@@ -87,9 +87,9 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
   const bool sdk = kind == "openhaptics" || kind == "forcedimension";  // optional argument
-  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "emu" && !sdk)
+  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "polhem" && kind != "emu" && !sdk)
     throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
-  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu";
+  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "polhem" || kind == "emu";
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
   if (!needs_arg && !sdk && colon != std::string::npos)
     throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");

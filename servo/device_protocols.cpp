@@ -85,6 +85,8 @@ std::unique_ptr<DeviceProtocol> protocol_for(std::uint16_t vid, std::uint16_t pi
 }
 
 std::string protocol_name(std::uint16_t vid, std::uint16_t pid) {
+  if (vid == hid::polhem::kVid && pid == hid::polhem::kPid)
+    return "polhem, if it is one (mbed's default ID: --haptic polhem:VID:PID)";
   const auto p = protocol_for(vid, pid);
   return p ? p->name() : "";
 }

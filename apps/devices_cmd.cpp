@@ -64,7 +64,7 @@ Subcommand add_devices_command(CLI::App& cli) {
       cli.add_subcommand("devices", "List the Vulkan devices, the HID devices (VID:PID, serial, path, known protocol) and the vendor SDKs found (OpenHaptics, Force Dimension) with their devices");
   auto check = std::make_shared<run::DeviceCheckOptions>();
   d->add_option("--check", check->spec,
-                "Check one device (openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:...): read its pose "
+                "Check one device (openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:...): read its pose "
                 "with force off, then ask before rendering a soft wall");
   d->add_option("--seconds", check->read_seconds, "--check: how long the pose is read [s] (default 5)")->check(CLI::PositiveNumber);
   d->add_option("--wall-seconds", check->wall_seconds, "--check: how long the wall is rendered [s] (default 10)")

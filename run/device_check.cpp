@@ -25,14 +25,14 @@ std::unique_ptr<servo::HapticDeviceIO> open_for_check(const std::string& spec, s
   const std::string kind = spec.substr(0, colon), arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
   if (kind == "openhaptics" || kind == "forcedimension") return open_sdk_device(kind, arg, what);
   std::unique_ptr<servo::ReportDevice> d;
-  if (kind == "hid") {
-    d = servo::open_hid_device(arg);
+  if (kind == "hid" || kind == "polhem") {
+    d = servo::open_hid_device(arg, 0, kind == "polhem" ? "polhem" : "");
   } else if (kind == "emu") {
     d = std::make_unique<servo::ReportDevice>(std::make_unique<servo::SocketLink>(arg),
                                               std::make_unique<servo::V1Protocol>());
     d->open();
   } else {
-    throw std::invalid_argument("--check " + spec + ": kinds: openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:...");
+    throw std::invalid_argument("--check " + spec + ": kinds: openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:...");
   }
   what = d->name() + " (" + d->caps().name + ")";
   return d;

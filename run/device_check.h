@@ -8,7 +8,7 @@
 namespace isotouch::run {
 
 struct DeviceCheckOptions {
-  std::string spec;            ///< openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:...
+  std::string spec;            ///< openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:...
   double read_seconds = 5;     ///< how long the pose is read with force off [s]
   double wall_seconds = 10;    ///< how long the wall is rendered after a "y" [s]
   double wall_stiffness_n_per_m = 100;  ///< soft: a tenth of a Touch's (capped at 0.1 of the device's maximum)

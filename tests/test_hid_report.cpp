@@ -199,3 +199,14 @@ TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsRepor
   ASSERT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, 14), amps));
   EXPECT_EQ(norm(amps), 0.0);
 }
+
+TEST(Polhem, EmulatorSideInvertsTheHostsKinematics) {
+  // encoders_for and force_from_currents (the emulator's side) against position_m and
+  // motor_currents_a (the host's): a pose round-trips to within a count, a force exactly.
+  for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.03, -0.02, 0.01}, Vec3{-0.04, 0.05, -0.03}}) {
+    const auto e = polhem::encoders_for(p);
+    EXPECT_LT(norm(polhem::position_m(e) - p), 2 * polhem::caps().position_resolution_m) << p.x << " " << p.y << " " << p.z;
+    const Vec3 f{1.0, -2.0, 0.5};
+    EXPECT_LT(norm(polhem::force_from_currents(polhem::motor_currents_a(f, e), e) - f), 1e-9);
+  }
+}

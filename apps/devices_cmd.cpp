@@ -1,6 +1,7 @@
 #include "isotouch/apps/devices_cmd.h"
 
 #include <iostream>
+#include <memory>
 
 #include <cstdio>
 #include <ostream>
@@ -8,6 +9,8 @@
 
 #include "isotouch/servo/hid_device.h"
 #include "isotouch/engine/vk_context.h"
+#include "isotouch/run/device_check.h"
+#include "isotouch/run/sdk_haptic_device.h"
 
 namespace isotouch::app {
 namespace {
@@ -52,13 +55,23 @@ bool print_hid(std::ostream& out) {
 int run_devices(std::ostream& out) {
   const bool vk = print_vulkan(out);
   const bool hid = print_hid(out);
-  return vk || hid ? 0 : 1;
+  const bool sdk = run::print_sdk_devices(out);
+  return vk || hid || sdk ? 0 : 1;
 }
 
 Subcommand add_devices_command(CLI::App& cli) {
   CLI::App* d =
-      cli.add_subcommand("devices", "List the Vulkan devices and the HID devices (VID:PID, serial, path, known protocol)");
-  return {d, [](const std::string&) { return run_devices(std::cout); }};
+      cli.add_subcommand("devices", "List the Vulkan devices, the HID devices (VID:PID, serial, path, known protocol) and the vendor SDKs found (OpenHaptics, Force Dimension) with their devices");
+  auto check = std::make_shared<run::DeviceCheckOptions>();
+  d->add_option("--check", check->spec,
+                "Check one device (openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:...): read its pose "
+                "with force off, then ask before rendering a soft wall");
+  d->add_option("--seconds", check->read_seconds, "--check: how long the pose is read [s] (default 5)")->check(CLI::PositiveNumber);
+  d->add_option("--wall-seconds", check->wall_seconds, "--check: how long the wall is rendered [s] (default 10)")
+      ->check(CLI::PositiveNumber);
+  return {d, [check](const std::string&) {
+            return check->spec.empty() ? run_devices(std::cout) : run::check_device(*check, std::cin, std::cout);
+          }};
 }
 
 }  // namespace isotouch::app

@@ -19,6 +19,8 @@
 #include "isotouch/bench/servo_bench.h"
 #include "isotouch/sim/device_emulator.h"
 #include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/forcedimension_device.h"
+#include "isotouch/servo/openhaptics_device.h"
 #include "isotouch/servo/report_device.h"
 #include "isotouch/servo/servo_thread.h"
 #include "isotouch/servo/socket_link.h"
@@ -209,6 +211,64 @@ std::string fixed(double v, int digits = 1) {
   s << std::fixed << std::setprecision(digits) << v;
   return s.str();
 }
+
+/// The servo at 1 kHz on the wall against a vendor SDK device (open) for `seconds`; the
+/// latency is the device's own (SdkDevice::latencies_us(): from publishing a pose on the SDK's
+/// thread to handing the force that answers it to the SDK), read after close.
+BenchDeviceRow measure_sdk(servo::SdkDevice& dev, double seconds, bool fifo) {
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+  Wall wall;
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = 1000;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
+  servo::ServoThread servo(published, wall, dev, sc);
+  const auto t0 = std::chrono::steady_clock::now();
+  servo.start();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  servo.stop();
+  BenchDeviceRow row;
+  row.rate_hz = 1000;
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  row.ticks = servo.ticks(), row.missed = servo.missed_deadlines(), row.stale = servo.device_counters().stale;
+  row.report_rate_hz = double(dev.read().sequence) / row.seconds;
+  return row;
+}
+
+void latency_figures(const std::vector<double>& us, BenchDeviceRow& row) {
+  row.answered = long(us.size());
+  if (us.empty()) return;
+  row.p50_us = eval::percentile(us, 0.5);
+  row.p99_us = eval::percentile(us, 0.99);
+  row.max_us = *std::max_element(us.begin(), us.end());
+}
+
+/// One vendor SDK's row: "| openhaptics ... |", or why it was not measured.
+std::string sdk_row(const char* kind, double seconds, bool fifo) {
+  std::unique_ptr<servo::SdkDevice> dev;
+  std::string what;
+  try {
+    if (std::string(kind) == "openhaptics") {
+      auto d = std::make_unique<servo::OpenHapticsDevice>();
+      d->open();
+      what = d->description();
+      dev = std::move(d);
+    } else {
+      auto d = std::make_unique<servo::ForceDimensionDevice>(0);
+      d->open();
+      what = d->description();
+      dev = std::move(d);
+    }
+  } catch (const std::exception& e) {
+    return std::string("| ") + kind + " | not measured: " + e.what() + " |\n";
+  }
+  BenchDeviceRow r = measure_sdk(*dev, seconds, fifo);
+  dev->close();  // its device thread is done: the latencies may be read
+  latency_figures(dev->latencies_us(), r);
+  return "| " + what + " | " + fixed(r.report_rate_hz) + " | " + std::to_string(r.answered) + " | " + fixed(r.p50_us) +
+         " | " + fixed(r.p99_us) + " | " + fixed(r.max_us) + " | " + std::to_string(r.ticks) + " | " +
+         std::to_string(r.missed) + " | " + std::to_string(r.stale) + " |\n";
+}
 }  // namespace
 
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
@@ -253,6 +313,12 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
     log << "| " << r.rate_hz << " | " << fixed(r.report_rate_hz) << " | " << r.answered << " | " << fixed(r.p50_us)
         << " | " << fixed(r.p99_us) << " | " << fixed(r.max_us) << " | " << r.ticks << " | " << r.missed << " | "
         << r.stale << " |\n";
+  log << "\nvendor SDKs at 1 kHz (ISOTOUCH_HD_LIBRARY, ISOTOUCH_DHD_LIBRARY: the test doubles in "
+         "build/tests/sdk_doubles or the SDKs; latency from the pose published on the SDK's thread to the force "
+         "handed to the SDK):\n"
+         "| device | poses/s | answered | p50 [us] | p99 [us] | max [us] | servo ticks | missed | stale ticks |\n"
+         "|---|---|---|---|---|---|---|---|---|\n"
+      << sdk_row("openhaptics", o.seconds, o.sched_fifo) << sdk_row("forcedimension", o.seconds, o.sched_fifo);
   std::vector<DisconnectTrial> trials;
   for (int i = 0; i < o.disconnect_trials; ++i) trials.push_back(disconnect_trial(o.sched_fifo, std::uint32_t(i + 1)));
   log << "\ndisconnect trials at 1 kHz (the emulator closes the link while the servo renders ~0.56 N):\n";

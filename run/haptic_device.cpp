@@ -10,10 +10,13 @@
 #include "isotouch/io/record.h"
 #include "isotouch/sim/sim_device_io.h"
 #include "isotouch/servo/socket_link.h"
+#include "isotouch/run/sdk_haptic_device.h"
 
 namespace isotouch::run {
 namespace {
-constexpr const char* kKinds = "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET";
+constexpr const char* kKinds =
+    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:VID:PID[:SERIAL], polhem:/dev/hidrawN, "
+    "emu:SOCKET, openhaptics[:NAME], forcedimension[:INDEX]";
 
 std::string num(double v) {
   std::ostringstream s;
@@ -40,8 +43,8 @@ HapticDevice open_report(const std::string& kind, const std::string& arg, int fi
   HapticDevice d;
   d.kind = kind;
   std::unique_ptr<servo::ReportDevice> dev;
-  if (kind == "hid") {
-    dev = servo::open_hid_device(arg, fifo);
+  if (kind == "hid" || kind == "polhem") {
+    dev = servo::open_hid_device(arg, fifo, kind == "polhem" ? "polhem" : "");
   } else {
     servo::ReportDeviceOptions o;
     o.fifo_priority = fifo;
@@ -83,11 +86,12 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
-  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "emu")
+  const bool sdk = kind == "openhaptics" || kind == "forcedimension";  // optional argument
+  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "polhem" && kind != "emu" && !sdk)
     throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
-  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu";
+  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "polhem" || kind == "emu";
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
-  if (!needs_arg && colon != std::string::npos)
+  if (!needs_arg && !sdk && colon != std::string::npos)
     throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");
   if (kind == "sim" && !ds.script)
     throw std::invalid_argument("--haptic " + spec + ": sim needs the scene's scripted hand, which this front end has not");
@@ -108,6 +112,10 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
     auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, ds), T);
     d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
     d.io = std::move(p);
+  } else if (sdk) {
+    auto dev = open_sdk_device(kind, arg, d.description);
+    d.sdk = dev.get();
+    d.io = std::move(dev);
   } else {
     d = open_report(kind, arg, io_fifo_priority);
   }

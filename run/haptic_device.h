@@ -5,6 +5,7 @@
 //   playback:FILE    replays the HIP of a trace.csv (`isotouch run`) or a recording (.rec)
 //   hid:VID:PID[:SERIAL] | hid:/dev/hidrawN   a USB HID device (isotouch protocol v1, Polhem)
 //   emu:SOCKET       isotouch-devemu on a Unix-domain socket (protocol v1)
+//   openhaptics[:NAME], forcedimension[:INDEX]   vendor SDKs loaded at run time (sdk_haptic_device.h)
 #pragma once
 #include <memory>
 #include <string>
@@ -12,6 +13,7 @@
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/report_device.h"
+#include "isotouch/servo/sdk_device.h"
 #include "isotouch/run/names.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
@@ -26,6 +28,7 @@ struct HapticDevice {
   std::string description;                  ///< for the log ("emu:/tmp/d.sock (isotouch-devemu, 1000 Hz)")
   std::unique_ptr<servo::HapticDeviceIO> io;
   servo::ReportDevice* report = nullptr;    ///< io as a report device (hid, emu), else null
+  servo::SdkDevice* sdk = nullptr;          ///< io as a vendor SDK device (openhaptics, forcedimension), else null
   std::unique_ptr<sim::SimDevice> sim;      ///< the simulated device behind io (sim only)
 };
 

@@ -250,6 +250,7 @@ void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
     if (!d.report->last_error().empty() && d.report->last_error() != d.report->last_refusal())
       log << "link     last error: " << d.report->last_error() << "\n";
   }
+  if (d.sdk) log << "sdk      " << d.sdk->stalls() << " stalls; " << d.sdk->sdk_status() << "\n";
 }
 
 }  // namespace
@@ -333,7 +334,7 @@ int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* fol
   // only when the servo refused or zeroed something (a non-finite simulated HIP).
   const servo::DeviceCounters dc = live.servo_thread()->device_counters();
   const bool device_lost = dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0;
-  if (device.report || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
+  if (device.report || device.sdk || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
   if (folder) {
     session::clear_last_words();  // the folder's final status follows

@@ -53,8 +53,9 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
   r.position_m = hid::polhem::position_m(in.encoder);
   r.buttons = in.encoder[3] > 5000 ? 1u : 0u;
   r.status = DeviceStatus::kOk;
-  if (in.info == 1 && !calibrated_) calibrate_ = true;
-  if (in.info == 0) calibrated_ = false;
+  // Asked again after a command was sent: it was lost (the firmware keeps only the last
+  // queued report), so it is sent again, once per report that asks, until it stops asking.
+  calibrate_ = in.info == 1;
   return {};
 }
 
@@ -70,8 +71,7 @@ std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std:
 
 std::size_t PolhemProtocol::pending_command(std::span<std::uint8_t> buf) {
   if (!calibrate_) return 0;
-  calibrate_ = false;
-  calibrated_ = true;
+  calibrate_ = false;  // once per report that asks
   const auto b = hid::polhem::encode_calibrate();
   buf[0] = 0;
   std::copy(b.begin(), b.end(), buf.begin() + 1);
@@ -85,6 +85,8 @@ std::unique_ptr<DeviceProtocol> protocol_for(std::uint16_t vid, std::uint16_t pi
 }
 
 std::string protocol_name(std::uint16_t vid, std::uint16_t pid) {
+  if (vid == hid::polhem::kVid && pid == hid::polhem::kPid)
+    return "polhem, if it is one (mbed's default ID: --haptic polhem:VID:PID)";
   const auto p = protocol_for(vid, pid);
   return p ? p->name() : "";
 }

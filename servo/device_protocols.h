@@ -30,8 +30,10 @@ class V1Protocol final : public DeviceProtocol {
 
 /// The Polhem v1 (haptikfabriken): 14-byte reports without ID, encoder counts in, motor
 /// currents out, the polhem_v1 kinematics on the host. No sequence numbers or timestamps.
-/// Button 0: encoder d above 5000 (haptikfabrikenapi's convention). When the device flags
-/// its calibration switch (info 1), the calibration command is sent once.
+/// Button 0: encoder d above 5000 (haptikfabrikenapi's convention). While the device flags
+/// its calibration switch (info 1), the calibration command follows each of its reports (the
+/// firmware keeps only its last queued report, so a command can be lost; upstream sends it in
+/// place of a current command until the device stops asking).
 class PolhemProtocol final : public DeviceProtocol {
  public:
   const char* name() const override { return "polhem"; }
@@ -44,7 +46,7 @@ class PolhemProtocol final : public DeviceProtocol {
 
  private:
   LatestValue<std::array<std::int16_t, 6>> encoders_;  // reader -> writer (the Jacobian's pose)
-  bool calibrate_ = false, calibrated_ = false;        // reader thread
+  bool calibrate_ = false;                              // reader thread: the last report asked
 };
 
 /// The protocol for a USB VID:PID, or null if none is known.

@@ -1,4 +1,5 @@
 #include "isotouch/servo/hid_device.h"
+#include "isotouch/servo/hid_report.h"
 
 #include <hidapi.h>
 
@@ -98,7 +99,7 @@ int HidLink::get_feature(std::uint8_t id, std::span<std::uint8_t> buf) {
   return hid_get_feature_report(static_cast<hid_device*>(dev_), buf.data(), buf.size());
 }
 
-std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority) {
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority, const std::string& protocol) {
   std::uint16_t vid = 0, pid = 0;
   std::string serial, path;
   if (!spec.empty() && spec[0] == '/') {
@@ -106,7 +107,7 @@ std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_
     bool found = false;
     for (const HidInfo& i : list_hid_devices())
       if (i.path == path) vid = i.vid, pid = i.pid, found = true;
-    if (!found) throw std::runtime_error("--haptic hid:" + spec + ": no HID device at this path (isotouch devices lists them)");
+    if (!found) throw std::runtime_error("--haptic " + std::string(protocol.empty() ? "hid" : protocol) + ":" + spec + ": no HID device at this path (isotouch devices lists them)");
   } else {
     const std::size_t a = spec.find(':');
     if (a == std::string::npos) throw std::invalid_argument("--haptic hid:" + spec + ": expected VID:PID[:SERIAL] or a /dev/hidraw path");
@@ -115,13 +116,22 @@ std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_
     pid = parse_id(spec.substr(a + 1, b == std::string::npos ? std::string::npos : b - a - 1), "product ID", spec);
     if (b != std::string::npos) serial = spec.substr(b + 1);
   }
-  std::unique_ptr<DeviceProtocol> protocol = protocol_for(vid, pid);
-  if (!protocol)
+  const std::string kind = protocol == "polhem" ? "polhem" : "hid";
+  // 1234:0006 is the mbed HID library's default ID: any mbed gadget with 14-byte reports has
+  // it, and driving one as a Polhem would put currents on its pins. The user names it.
+  if (protocol.empty() && vid == hid::polhem::kVid && pid == hid::polhem::kPid)
+    throw std::invalid_argument("--haptic hid:" + spec + ": " + hex4(vid) + ":" + hex4(pid) +
+                                " is the mbed HID library's default USB ID, not only the Polhem's: if this is a Polhem, "
+                                "say so: --haptic polhem:" + spec);
+  std::unique_ptr<DeviceProtocol> p =
+      kind == "polhem" ? std::make_unique<PolhemProtocol>() : protocol_for(vid, pid);
+  if (!p)
     throw std::invalid_argument("--haptic hid:" + spec + ": no known protocol for " + hex4(vid) + ":" + hex4(pid) +
-                                " (known: isotouch protocol v1 " + hex4(kV1Vid) + ":" + hex4(kV1Pid) + ", Polhem 1234:0006)");
+                                " (known: isotouch protocol v1 " + hex4(kV1Vid) + ":" + hex4(kV1Pid) +
+                                "; a Polhem: --haptic polhem:VID:PID)");
   ReportDeviceOptions o;
   o.fifo_priority = fifo_priority;
-  auto dev = std::make_unique<ReportDevice>(std::make_unique<HidLink>(vid, pid, serial, path), std::move(protocol), o);
+  auto dev = std::make_unique<ReportDevice>(std::make_unique<HidLink>(vid, pid, serial, path), std::move(p), o);
   dev->open();
   return dev;
 }

@@ -44,9 +44,12 @@ class HidLink final : public ReportLink {
 };
 
 /// Parses "VID:PID[:SERIAL]" or "PATH" (starts with '/') and opens the device with the
-/// protocol its VID:PID names (by path: looked up in the device list). @throws
+/// protocol its VID:PID names (by path: looked up in the device list), or with `protocol`
+/// ("polhem": `--haptic polhem:...`) whatever its ID. The Polhem's 1234:0006 is the mbed HID
+/// library's default ID, shared by other mbed gadgets: it is refused unless named. @throws
 /// std::invalid_argument on a bad spec or an unknown protocol, std::runtime_error if it
 /// cannot be opened (the message names it and says why: permissions, not present).
-std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority = 0);
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority = 0,
+                                              const std::string& protocol = "");
 
 }  // namespace isotouch::servo

@@ -199,9 +199,22 @@ constexpr double kPi = 3.14159265358979323846;
 struct Angles {
   double a, b, c;  ///< body angles theta_A, theta_B, theta_C [rad]
 };
-Angles angles(const std::array<std::int16_t, 6>& e) {
-  auto body = [](int counts, double body_d) { return kDir * (2 * kPi * counts / kCpr) * kCapstan / body_d; };
-  return {body(e[0], kBodyA), body(e[1], kBodyBC), body(e[2], kBodyBC)};
+Angles angles(double a, double b, double c) {
+  auto body = [](double counts, double body_d) { return kDir * (2 * kPi * counts / kCpr) * kCapstan / body_d; };
+  return {body(a, kBodyA), body(b, kBodyBC), body(c, kBodyBC)};
+}
+Angles angles(const std::array<std::int16_t, 6>& e) { return angles(e[0], e[1], e[2]); }
+Vec3 position_of(const Angles& t) {
+  const double r = kLb * std::sin(t.b) + kLc * std::sin(t.c);
+  return Vec3{std::cos(t.a) * r - kOrigin[0], std::sin(t.a) * r - kOrigin[1],
+              kLn + kLb * std::cos(t.b) - kLc * std::cos(t.c) - kOrigin[2]};
+}
+/// Solves the 3x3 system with columns `c0, c1, c2` for `rhs` (Cramer); false if singular.
+bool solve3(const Vec3& c0, const Vec3& c1, const Vec3& c2, const Vec3& rhs, Vec3& x) {
+  const double det = dot(c0, cross(c1, c2));
+  if (!(std::abs(det) > 1e-18)) return false;
+  x = Vec3{dot(rhs, cross(c1, c2)), dot(c0, cross(rhs, c2)), dot(c0, cross(c1, rhs))} / det;
+  return true;
 }
 std::int16_t le16(std::span<const std::uint8_t> b, std::size_t i) { return std::int16_t(b[i] | (b[i + 1] << 8)); }
 void put16(std::array<std::uint8_t, kReportSize>& b, std::size_t i, std::int16_t v) {
@@ -253,11 +266,28 @@ Decoded decode_currents(std::span<const std::uint8_t> b, Vec3& amps) {
   return {};
 }
 
-Vec3 position_m(const std::array<std::int16_t, 6>& e) {
-  const Angles t = angles(e);
-  const double r = kLb * std::sin(t.b) + kLc * std::sin(t.c);
-  return Vec3{std::cos(t.a) * r - kOrigin[0], std::sin(t.a) * r - kOrigin[1],
-              kLn + kLb * std::cos(t.b) - kLc * std::cos(t.c) - kOrigin[2]};
+Vec3 position_m(const std::array<std::int16_t, 6>& e) { return position_of(angles(e)); }
+
+std::array<std::int16_t, 6> encoders_for(const Vec3& p) {
+  Vec3 q{0, 0, -5000};  // counts a, b, c: the calibration pose
+  auto pos = [](const Vec3& c) { return position_of(angles(c.x, c.y, c.z)); };
+  for (int i = 0; i < 100; ++i) {
+    const Vec3 e = pos(q) - p, h{1, 0, 0}, k{0, 1, 0}, l{0, 0, 1};
+    Vec3 step;
+    if (norm(e) < 1e-9 || !solve3(pos(q + h) - pos(q - h), pos(q + k) - pos(q - k), pos(q + l) - pos(q - l), e * 2.0, step))
+      break;
+    const double big = norm(step);
+    q -= big > 300 ? step * (300 / big) : step;  // damped: at most 300 counts a step
+  }
+  auto count = [](double v) { return std::int16_t(std::clamp(std::lround(v), -32768L, 32767L)); };
+  return {count(q.x), count(q.y), count(q.z), 0, 0, 0};
+}
+
+Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& e) {
+  Vec3 f;
+  if (!solve3(motor_currents_a({1, 0, 0}, e), motor_currents_a({0, 1, 0}, e), motor_currents_a({0, 0, 1}, e), amps, f))
+    return {};
+  return f;
 }
 
 Vec3 motor_currents_a(const Vec3& f, const std::array<std::int16_t, 6>& e) {

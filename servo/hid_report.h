@@ -102,6 +102,12 @@ Decoded decode_currents(std::span<const std::uint8_t> bytes, Vec3& amps);
 Vec3 position_m(const std::array<std::int16_t, 6>& encoder);
 /// Jacobian transpose: force [N] at the end effector -> motor currents [A].
 Vec3 motor_currents_a(const Vec3& force_n, const std::array<std::int16_t, 6>& encoder);
+/// The device side, for the emulator: the encoder counts (a, b, c; d-f 0) whose forward
+/// kinematics give `p` [m, device] (Newton from the calibration pose; rounded to counts).
+std::array<std::int16_t, 6> encoders_for(const Vec3& p);
+/// The force [N, device] that motor currents `amps` [A] produce at `encoder` (the inverse
+/// of motor_currents_a: its 3x3 map solved).
+Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& encoder);
 /// The Polhem v1's capabilities (workspace: a 0.2 m cube around its origin).
 DeviceCaps caps();
 }  // namespace polhem

@@ -43,6 +43,7 @@ DeviceEmulator::DeviceEmulator(EmuConfig config)
     throw std::invalid_argument("device emulator: rate " + std::to_string(cfg_.rate_hz) + " Hz is not in [1, 8000]");
   stats_.latency_us.reserve(std::size_t(std::max(1.0, cfg_.seconds) * cfg_.rate_hz) + 16);
   log_.resize(cfg_.output_log_size);
+  if (cfg_.polhem) cfg_.caps = servo::hid::polhem::caps();  // its firmware's: 0.5 s watchdog, limits
 }
 
 DeviceEmulator::~DeviceEmulator() {
@@ -139,17 +140,17 @@ void DeviceEmulator::serve_host(std::int64_t now) {
       transmit(caps.data(), caps.size());
       continue;
     }
+    if (cfg_.polhem) {
+      polhem_output(now, std::span(b.data(), std::size_t(n)));
+      continue;
+    }
     servo::hid::OutputReport o;
     std::lock_guard lock(stats_mu_);
     if (!servo::hid::decode(std::span(b.data(), std::size_t(n)), o)) {
       ++stats_.outputs_refused;
       continue;
     }
-    ++stats_.outputs_received;
-    if (!log_.empty()) {
-      log_[logged_ % log_.size()] = ReceivedOutput{now, o.force_n, o.enable, o.answers};
-      if (++logged_ > log_.size()) ++stats_.outputs_unlogged;
-    }
+    log_output(now, o.force_n, o.enable, o.answers);
     last_output_ns_ = now;
     watchdog_tripped_ = false;
     enabled_ = o.enable;
@@ -163,7 +164,71 @@ void DeviceEmulator::serve_host(std::int64_t now) {
   }
 }
 
+void DeviceEmulator::log_output(std::int64_t now, const Vec3& force_n, bool enable, std::uint64_t answers) {
+  ++stats_.outputs_received;  // stats_mu_ held
+  if (log_.empty()) return;
+  log_[logged_ % log_.size()] = ReceivedOutput{now, force_n, enable, answers};
+  if (++logged_ > log_.size()) ++stats_.outputs_unlogged;
+}
+
+std::array<std::int16_t, 6> DeviceEmulator::polhem_counts() const {
+  std::array<std::int16_t, 6> e = servo::hid::polhem::encoders_for(dev_.position());
+  if (!polhem_calibrated_)
+    for (std::size_t i = 0; i < 3; ++i) e[i] = std::int16_t(e[i] + cfg_.polhem_offset_counts);
+  return e;
+}
+
+void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_t> b) {
+  namespace ph = servo::hid::polhem;
+  if (b.size() == ph::kReportSize + 1 && b[0] == 0) b = b.subspan(1);  // hidapi's leading report ID 0
+  std::lock_guard lock(stats_mu_);
+  if (b.size() != ph::kReportSize) {
+    ++stats_.outputs_refused;
+    return;
+  }
+  const int command = std::int16_t(b[6] | (b[7] << 8));
+  if (command == 1) {  // set the encoder counters: calibration
+    ++stats_.calibrations;
+    if (stats_.calibrations <= cfg_.polhem_lose_calibrations) {
+      ++stats_.calibrations_lost;  // overwritten before the firmware read it: no answer either
+      return;
+    }
+    if (!polhem_calibrated_) stats_.calibrated_ns = now;
+    polhem_calibrated_ = true;
+    polhem_owed_ = true;
+    return;
+  }
+  Vec3 amps;
+  if (!ph::decode_currents(b, amps)) {
+    ++stats_.outputs_refused;
+    return;
+  }
+  // The firmware applies the currents; the force they make at the true pose.
+  const Vec3 f = ph::force_from_currents(amps, servo::hid::polhem::encoders_for(dev_.position()));
+  const bool on = norm(amps) > 0;
+  log_output(now, f, on, 0);
+  last_output_ns_ = now;
+  watchdog_tripped_ = false;
+  enabled_ = on;
+  force_n_ = f;
+  if (on) stats_.max_force_n = std::max(stats_.max_force_n, norm(f));
+  polhem_owed_ = true;  // lock-step: this command is answered by one report
+}
+
+void DeviceEmulator::polhem_report() {
+  if (!polhem_owed_) return;
+  polhem_owed_ = false;
+  servo::hid::polhem::Input in;
+  in.encoder = polhem_counts();
+  in.info = polhem_calibrated_ ? 0 : 1;
+  const auto bytes = servo::hid::polhem::encode(in);
+  transmit(bytes.data(), bytes.size());
+  std::lock_guard lock(stats_mu_);
+  ++stats_.reports_sent;
+}
+
 void DeviceEmulator::send_report(std::int64_t now, double t_s) {
+  if (cfg_.polhem) return polhem_report();
   servo::hid::InputReport r;
   r.sequence = ++seq_;
   r.device_time_us = std::uint32_t(std::int64_t(t_s * 1e6));

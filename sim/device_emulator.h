@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <mutex>
 #include <random>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -52,6 +53,14 @@ struct EmuConfig {
   EmuFaults faults;
   int fifo_priority = 0;          ///< > 0: run() asks for SCHED_FIFO (firmware-like timing); refused: ignored
   std::size_t output_log_size = 1 << 16;  ///< output reports kept in the log (the newest; preallocated)
+  /// Speak the Polhem v1's USB reports instead of protocol v1 (servo/hid_report.h): lock-step
+  /// (one 14-byte input report answers each output report, none unasked), encoder counts by
+  /// the polhem_v1 kinematics, currents in, the firmware's 0.5 s watchdog; until a
+  /// calibration command arrives the counts are off by polhem_offset_counts and info asks
+  /// for calibration (the command is taken as made in the calibration pose).
+  bool polhem = false;
+  int polhem_lose_calibrations = 0;  ///< the first N calibration commands are lost (overwritten in the firmware's one-report queue)
+  int polhem_offset_counts = 400;    ///< the uncalibrated counters' error on a, b, c
 };
 
 /// One output report as the emulator received it.
@@ -75,6 +84,9 @@ struct EmuStats {
   std::int64_t start_ns = 0;       ///< CLOCK_MONOTONIC when run() began (its clock's 0 s)
   std::int64_t first_watchdog_ns = 0;  ///< CLOCK_MONOTONIC of the first watchdog trip (0: none)
   long outputs_unlogged = 0;       ///< output reports pushed out of the full log (the oldest)
+  long calibrations = 0;           ///< Polhem: calibration commands received (lost ones included)
+  long calibrations_lost = 0;      ///< Polhem: of those, lost (polhem_lose_calibrations)
+  std::int64_t calibrated_ns = 0;  ///< Polhem: CLOCK_MONOTONIC when a calibration took (0: never)
 };
 
 /// The emulated device. run() blocks until `seconds` passed or stop() was called.
@@ -102,6 +114,10 @@ class DeviceEmulator {
   void serve_host(std::int64_t now);
   void wait_until(std::int64_t t);
   void send_report(std::int64_t now, double t_s);
+  void polhem_output(std::int64_t now, std::span<const std::uint8_t> bytes);
+  void polhem_report();
+  std::array<std::int16_t, 6> polhem_counts() const;
+  void log_output(std::int64_t now, const Vec3& force_n, bool enable, std::uint64_t answers);
   void transmit(const std::uint8_t* b, std::size_t n);
   void accept_host();
   void close_host();
@@ -123,6 +139,7 @@ class DeviceEmulator {
   std::vector<Pending> pending_;       // delayed or held back reports
   double clock_s_ = 0, connected_at_s_ = 0;  // the emulator's time, and when the host connected [s]
   bool hold_next_ = false;
+  bool polhem_owed_ = false, polhem_calibrated_ = false;  // Polhem: a report is owed; calibrated
   Pending held_{};
   mutable std::mutex stats_mu_;
   EmuStats stats_;

@@ -7,7 +7,8 @@
 #     the emulator closing its link and listening again 0.3 s later, with --record: the
 #     recording holds the outage's ticks (held) and the renderer's reset after it, and
 #     replays IDENTICAL (a replay that ticked through the outage or did not reset differs);
-#  3. bad --haptic specs: a clear message and exit 1.
+#  3. bad --haptic specs: a clear message and exit 1; the Polhem's ID (mbed's default) is
+#     refused unless the user names it (--haptic polhem:...).
 # usage: cli_run_live_emu.sh ISOTOUCH DEVEMU SCENE OUT
 set -u
 exe=$1 emu=$2 scene=$3 out=$4
@@ -70,4 +71,11 @@ cat "$out/replay3.log"
 [ "$rc" -eq 1 ] && grep -q "none.sock: cannot connect" "$out/bad.log" || { cat "$out/bad.log"; fail "missing socket: exit $rc"; }
 "$exe" run "$scene" --live --haptic "hid:zz:1" > "$out/bad.log" 2>&1; rc=$?
 [ "$rc" -eq 1 ] && grep -q "vendor ID 'zz' is not a hex USB ID" "$out/bad.log" || { cat "$out/bad.log"; fail "bad hid spec: exit $rc"; }
+# The Polhem's ID is mbed's default: refused unless named; named, it is opened as a Polhem.
+"$exe" run "$scene" --live --haptic "hid:1234:0006" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "1234:0006 is the mbed HID library's default USB ID.*--haptic polhem:1234:0006" "$out/bad.log" ||
+  { cat "$out/bad.log"; fail "hid:1234:0006 not refused: exit $rc"; }
+"$exe" run "$scene" --live --haptic "polhem:1234:0006" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "hid:1234:0006: cannot open the HID device" "$out/bad.log" ||
+  { cat "$out/bad.log"; fail "polhem:1234:0006 without a device: exit $rc"; }
 echo "PASS run --live --haptic emu"

@@ -151,8 +151,11 @@ struct Rig {
     emu = std::make_unique<DeviceEmulator>(cfg);
     emu->listen();
     std::thread emu_thread([this] { stats = emu->run(); });
+    std::unique_ptr<DeviceProtocol> protocol;
+    if (cfg.polhem) protocol = std::make_unique<PolhemProtocol>();
+    else protocol = std::make_unique<V1Protocol>();
     dev = std::make_unique<ReportDevice>(std::make_unique<FreezableLink>(cfg.socket_path, freeze_writes),
-                                         std::make_unique<V1Protocol>(), ReportDeviceOptions{.fifo_priority = fifo ? 70 : 0});
+                                         std::move(protocol), ReportDeviceOptions{.fifo_priority = fifo ? 70 : 0});
     dev->open();
     ServoThreadConfig sc;
     sc.rate_hz = 1000;
@@ -416,8 +419,11 @@ TEST(DeviceEmu, AnEmulatorRestartedWithOtherCapabilitiesIsRefusedUntilTheKnownOn
   EXPECT_GT(known.stop().outputs_received, 0);
 }
 
-TEST(DeviceEmu, AStalledServoGetsZeroForceWithEnableClearedWithinThreePeriods) {
+/// The stall test's body, for the device speaking protocol v1 or the Polhem's reports (whose
+/// "enable cleared" is zero currents).
+void stalled_servo_gets_zero_within_three_periods(bool polhem) {
   Rig rig;
+  rig.cfg.polhem = polhem;
   StallingWall slow;  // one tick in contact takes 300 ms
   rig.renderer = &slow;
   rig.run(0.8);
@@ -437,7 +443,8 @@ TEST(DeviceEmu, AStalledServoGetsZeroForceWithEnableClearedWithinThreePeriods) {
   EXPECT_GE(rig.link.stalls, 1);
   // Back: the first outputs after the stall start from zero and ramp in (50 ms).
   std::size_t back = off;
-  while (back < rig.wire.size() && !(rig.wire[back].enable && rig.wire[back].t_ns > slow.end_ns.load())) ++back;
+  // (The Polhem has no enable flag: its first output after the stall, whatever it is.)
+  while (back < rig.wire.size() && !((polhem || rig.wire[back].enable) && rig.wire[back].t_ns > slow.end_ns.load())) ++back;
   ASSERT_LT(back + 5, rig.wire.size()) << "nothing enabled after the stall";
   EXPECT_EQ(norm(rig.wire[back].force_n), 0.0) << "the late write jumped back to force";
   // The ramp: at most the wall's force with the HIP at the hand (pushed there while the
@@ -449,6 +456,44 @@ TEST(DeviceEmu, AStalledServoGetsZeroForceWithEnableClearedWithinThreePeriods) {
         << "output " << i - back << " after";
   EXPECT_GT(rig.forced_on_wire(slow.end_ns.load() + 100 * T, INT64_MAX), 100) << "the force came back";
   EXPECT_GE(rig.servo_counters.late_restarts, 1);
+}
+
+TEST(DeviceEmu, AStalledServoGetsZeroForceWithEnableClearedWithinThreePeriods) {
+  stalled_servo_gets_zero_within_three_periods(false);
+}
+
+TEST(DeviceEmuPolhem, AStalledServoGetsZeroCurrentsWithinThreePeriods) {
+  stalled_servo_gets_zero_within_three_periods(true);
+}
+
+TEST(DeviceEmuPolhem, CalibratedLockStepForcesFlowThroughThePolhemKinematics) {
+  Rig rig;
+  rig.cfg.polhem = true;
+  rig.run(0.5);
+  // Calibrated at once (the host answered the device's request), so the HIP is where the
+  // hand holds it (3 mm into the wall): the force the emulator made of the currents it
+  // received is the wall's, ~0.5 N; uncalibrated counts (400 off) would put it elsewhere.
+  EXPECT_EQ(rig.stats.calibrations_lost, 0);
+  EXPECT_GE(rig.stats.calibrations, 1);
+  EXPECT_GT(rig.stats.calibrated_ns, 0);
+  EXPECT_GT(rig.forced_ticks(), 150);
+  EXPECT_GT(rig.stats.max_force_n, 0.3);
+  EXPECT_LT(rig.stats.max_force_n, 1.5);
+  // Lock-step: one input report per command, none unasked.
+  EXPECT_LE(rig.stats.reports_sent, rig.stats.outputs_received + rig.stats.calibrations);
+  EXPECT_GT(rig.link.reports, 300);
+  EXPECT_EQ(rig.link.garbage, 0);
+}
+
+TEST(DeviceEmuPolhem, ALostCalibrationCommandIsSentAgainUntilTheDeviceStopsAsking) {
+  Rig rig;
+  rig.cfg.polhem = true;
+  rig.cfg.polhem_lose_calibrations = 3;  // overwritten in the firmware's one-report queue
+  rig.run(0.5);
+  EXPECT_EQ(rig.stats.calibrations_lost, 3);
+  EXPECT_GE(rig.stats.calibrations, 4) << "the command was not sent again after it was lost";
+  EXPECT_GT(rig.stats.calibrated_ns, 0) << "never calibrated";
+  EXPECT_GT(rig.forced_ticks(), 100);
 }
 
 TEST(DeviceEmu, AFrozenWriterTripsTheDevicesWatchdog) {

@@ -170,7 +170,7 @@ TEST(Polhem, JacobianTransposeMatchesVirtualWork) {
   }
 }
 
-TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
+TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsReportIdZero) {
   PolhemProtocol p;
   polhem::Input in;
   in.encoder = {10, 20, 30, 6000, 0, 0};
@@ -182,7 +182,14 @@ TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
   ASSERT_EQ(p.pending_command(buf), 15u);
   EXPECT_EQ(buf[0], 0);
   EXPECT_EQ(buf[1 + 6], 1);  // command 1
-  EXPECT_EQ(p.pending_command(buf), 0u);  // once
+  EXPECT_EQ(p.pending_command(buf), 0u);  // once per report that asks
+  // The command was lost (the firmware keeps only its last queued report): it asks again.
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  ASSERT_EQ(p.pending_command(buf), 15u);
+  EXPECT_EQ(buf[1 + 6], 1);
+  in.info = 0;  // calibrated: it stops asking
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  EXPECT_EQ(p.pending_command(buf), 0u);
   ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, true, 0, buf), 15u);
   EXPECT_EQ(buf[0], 0);
   Vec3 amps;
@@ -191,4 +198,15 @@ TEST(Polhem, ProtocolAsksForCalibrationOnceAndPrependsReportIdZero) {
   ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, false, 0, buf), 15u);  // disabled: no current
   ASSERT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, 14), amps));
   EXPECT_EQ(norm(amps), 0.0);
+}
+
+TEST(Polhem, EmulatorSideInvertsTheHostsKinematics) {
+  // encoders_for and force_from_currents (the emulator's side) against position_m and
+  // motor_currents_a (the host's): a pose round-trips to within a count, a force exactly.
+  for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.03, -0.02, 0.01}, Vec3{-0.04, 0.05, -0.03}}) {
+    const auto e = polhem::encoders_for(p);
+    EXPECT_LT(norm(polhem::position_m(e) - p), 2 * polhem::caps().position_resolution_m) << p.x << " " << p.y << " " << p.z;
+    const Vec3 f{1.0, -2.0, 0.5};
+    EXPECT_LT(norm(polhem::force_from_currents(polhem::motor_currents_a(f, e), e) - f), 1e-9);
+  }
 }

@@ -1,0 +1,181 @@
+#include "isotouch/servo/forcedimension_device.h"
+
+#include <time.h>
+
+#include <stdexcept>
+
+namespace isotouch::servo {
+namespace {
+void sleep_until_ns(std::int64_t t) {
+  const timespec ts{time_t(t / 1000000000LL), long(t % 1000000000LL)};
+  clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr);
+}
+
+struct SystemSpec {
+  const char* name;
+  double force_n, stiffness_n_per_m, damping_n_s_per_m, radius_m;
+  int buttons;
+};
+
+/// CHAI3D's cDeltaDevice::open() table (CDeltaDevices.cpp at 7c76b1f2).
+SystemSpec spec_of(int type) {
+  switch (type) {
+    case dhd::kDelta3: case 111: return {"delta.3", 20, 5000, 30, 0.15, 1};
+    case dhd::kOmega3: case 110: return {"omega.3", 12, 5000, 30, 0.075, 1};
+    case dhd::kOmega6Right: return {"omega.6R", 12, 5000, 30, 0.075, 1};
+    case dhd::kOmega6Left: return {"omega.6L", 12, 5000, 30, 0.075, 1};
+    case dhd::kOmega7Right: return {"omega.7R", 12, 5000, 30, 0.075, 1};
+    case dhd::kOmega7Left: return {"omega.7L", 12, 5000, 30, 0.075, 1};
+    case dhd::kSigma7Right: case 102: case 209: return {"sigma.7R", 12, 4000, 30, 0.075, 1};
+    case dhd::kSigma7Left: case 103: return {"sigma.7L", 12, 4000, 30, 0.075, 1};
+    case dhd::kLambda7Right: return {"lambda.7R", 12, 8000, 30, 0.1125, 1};
+    case dhd::kLambda7Left: return {"lambda.7L", 12, 8000, 30, 0.1125, 1};
+    case dhd::kFalcon: return {"Novint Falcon", 8, 3000, 20, 0.04, 4};
+  }
+  return {"Force Dimension device (unknown type: omega.3 limits)", 12, 5000, 30, 0.075, 1};
+}
+}  // namespace
+
+std::string load_dhd_api(DhdApi& a) {
+  a.lib = load_sdk("ISOTOUCH_DHD_LIBRARY", {"libdhd.so", "libdhd.so.3"});
+  if (!a.lib) return "Force Dimension SDK library not found (searched: " + a.lib.searched + ")";
+  std::string missing, optional;
+  sdk_symbol(a.lib, "dhdGetDeviceCount", a.dhdGetDeviceCount, missing);
+  sdk_symbol(a.lib, "dhdOpenID", a.dhdOpenID, missing);
+  sdk_symbol(a.lib, "dhdClose", a.dhdClose, missing);
+  sdk_symbol(a.lib, "dhdGetSystemType", a.dhdGetSystemType, missing);
+  sdk_symbol(a.lib, "dhdGetPosition", a.dhdGetPosition, missing);
+  sdk_symbol(a.lib, "dhdGetButtonMask", a.dhdGetButtonMask, missing);
+  sdk_symbol(a.lib, "dhdSetForce", a.dhdSetForce, missing);
+  sdk_symbol(a.lib, "dhdEnableForce", a.dhdEnableForce, missing);
+  sdk_symbol(a.lib, "dhdErrorGetLastStr", a.dhdErrorGetLastStr, optional);
+  if (!missing.empty()) return a.lib.path + " lacks " + missing + " (not the Force Dimension DHD library?)";
+  return {};
+}
+
+DeviceCaps dhd_system_caps(int type) {
+  const SystemSpec s = spec_of(type);
+  DeviceCaps c;
+  c.name = s.name;
+  c.max_force_n = s.force_n;
+  c.max_stiffness_n_per_m = s.stiffness_n_per_m;
+  c.max_damping_n_s_per_m = s.damping_n_s_per_m;
+  c.workspace_min_m = Vec3{-s.radius_m, -s.radius_m, -s.radius_m};  // the box around CHAI3D's sphere
+  c.workspace_max_m = Vec3{s.radius_m, s.radius_m, s.radius_m};
+  c.buttons = s.buttons;
+  return c;
+}
+
+ForceDimensionDevice::ForceDimensionDevice(int index, double rate_hz) : index_(index), rate_hz_(rate_hz) {}
+
+ForceDimensionDevice::~ForceDimensionDevice() { close(); }
+
+void ForceDimensionDevice::note_error(const char* call) {
+  errors_.fetch_add(1);
+  const char* why = api_.dhdErrorGetLastStr ? api_.dhdErrorGetLastStr() : nullptr;
+  std::lock_guard lock(note_mu_);
+  last_error_ = std::string(call) + " failed" + (why ? std::string(": ") + why : std::string(" (-1)"));
+}
+
+std::string ForceDimensionDevice::last_error() const {
+  std::lock_guard lock(note_mu_);
+  return last_error_;
+}
+
+std::string ForceDimensionDevice::sdk_status() const {
+  const std::string last = last_error();
+  return std::to_string(periods()) + " device periods, " + std::to_string(errors()) + " dhd errors" +
+         (last.empty() ? "" : " (last: " + last + ")");
+}
+
+void ForceDimensionDevice::open() {
+  if (thread_.joinable()) return;
+  const std::string who = "forcedimension:" + std::to_string(index_);
+  if (!api_.lib)
+    if (const std::string e = load_dhd_api(api_); !e.empty()) throw std::runtime_error("--haptic forcedimension: " + e);
+  const int count = api_.dhdGetDeviceCount();
+  if (index_ < 0 || index_ >= count)
+    throw std::runtime_error(who + ": no such device (" + std::to_string(count < 0 ? 0 : count) + " found by " +
+                             api_.lib.path + ")");
+  const int id = api_.dhdOpenID(char(index_));
+  if (id < 0) {
+    note_error("dhdOpenID");
+    throw std::runtime_error(who + ": " + last_error());
+  }
+  id_ = char(id);
+  const int type = api_.dhdGetSystemType(id_);
+  caps_ = dhd_system_caps(type);
+  caps_.native_rate_hz = rate_hz_;
+  description_ = who + " (" + caps_.name + ", system type " + std::to_string(type) + ", " + api_.lib.path + ")";
+  stop_ = false;
+  thread_ = std::thread([this] { loop(); });
+  for (int i = 0; i < 1000 && periods_.load() == 0; ++i) sleep_until_ns(sdk_now_ns() + 1'000'000);
+}
+
+void ForceDimensionDevice::close() {
+  if (!thread_.joinable()) return;
+  stop_ = true;
+  thread_.join();
+}
+
+void ForceDimensionDevice::period(std::int64_t now, bool& force_on) {
+  double x = 0, y = 0, z = 0;
+  DeviceReading r;
+  if (api_.dhdGetPosition(&x, &y, &z, id_) < 0) {
+    if (!down_) note_error("dhdGetPosition");
+    down_ = true;
+    r.status = DeviceStatus::kDisconnected;  // the servo holds; we send zero below
+    r.position_m = last_position_;
+  } else {
+    down_ = false;
+    r.position_m = last_position_ = dhd_to_device_m(x, y, z);
+    r.buttons = api_.dhdGetButtonMask(id_);
+  }
+  r.force_off = !force_on;
+  publish(r, now);
+  bool on = false;
+  Vec3 f = force_now(now, on);
+  if (down_) on = false;
+  if (on != force_on && api_.dhdEnableForce(on ? dhd::kOn : dhd::kOff, id_) >= 0) force_on = on;
+  if (!on) f = Vec3{};
+  const Vec3 fd = device_to_dhd_force(f);
+  if (api_.dhdSetForce(fd.x, fd.y, fd.z, id_) < 0 && !down_) note_error("dhdSetForce");
+}
+
+void ForceDimensionDevice::loop() {
+  const auto step = std::int64_t(1e9 / rate_hz_);
+  std::int64_t next = sdk_now_ns();
+  reset_device_thread(next);
+  bool force_on = false;
+  while (!stop_.load()) {
+    period(sdk_now_ns(), force_on);
+    periods_.fetch_add(1);
+    next += step;
+    sleep_until_ns(next);
+  }
+  api_.dhdSetForce(0.0, 0.0, 0.0, id_);  // exact zero, then off
+  api_.dhdEnableForce(dhd::kOff, id_);
+  api_.dhdClose(id_);
+}
+
+}  // namespace isotouch::servo
+
+namespace isotouch::servo {
+std::vector<std::string> list_forcedimension(const DhdApi& a) {
+  const int n = a.dhdGetDeviceCount();
+  std::vector<std::string> out;
+  if (n <= 0) out.push_back("no device (dhdGetDeviceCount: " + std::to_string(n) + ")");
+  for (int i = 0; i < n; ++i) {
+    const int id = a.dhdOpenID(char(i));
+    if (id < 0) {
+      out.push_back(std::to_string(i) + ": cannot open (" +
+                    (a.dhdErrorGetLastStr ? a.dhdErrorGetLastStr() : "dhdOpenID -1") + ")");
+      continue;
+    }
+    const int type = a.dhdGetSystemType(char(id));
+    out.push_back(std::to_string(i) + ": " + dhd_system_caps(type).name + " (system type " + std::to_string(type) + ")");
+    a.dhdClose(char(id));
+  }
+  return out;
+}
+}  // namespace isotouch::servo

@@ -1,0 +1,86 @@
+// forcedimension_device.h - Force Dimension omega, sigma, delta, lambda and the Novint Falcon
+// through the Force Dimension SDK (libdhd.so, loaded with dlopen: no SDK at build time).
+// The dhd calls are USB transfers: they run on a device thread of this class, never in the
+// servo tick, which only touches two latest-value cells.
+//
+// Frames. Force Dimension: x toward the user, y right, z up, m. isotouch's device frame for
+// desk devices: x right, y away from the user, z up. So device = (y, -x, z) and
+// force_FD = (-Fy, Fx, Fz) (a rotation about z).
+#pragma once
+#include "isotouch/servo/core_names.h"
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "isotouch/servo/dhd_api.h"
+#include "isotouch/servo/sdk_device.h"
+
+namespace isotouch::servo {
+
+/// libdhd.so's functions isotouch calls (null until loaded; dhdErrorGetLastStr optional).
+struct DhdApi {
+  DhdGetDeviceCount dhdGetDeviceCount = nullptr;
+  DhdOpenID dhdOpenID = nullptr;
+  DhdClose dhdClose = nullptr;
+  DhdGetSystemType dhdGetSystemType = nullptr;
+  DhdGetPosition dhdGetPosition = nullptr;
+  DhdGetButtonMask dhdGetButtonMask = nullptr;
+  DhdSetForce dhdSetForce = nullptr;
+  DhdEnableForce dhdEnableForce = nullptr;
+  DhdErrorGetLastStr dhdErrorGetLastStr = nullptr;
+  SdkLibrary lib;
+};
+
+/// Loads libdhd.so: $ISOTOUCH_DHD_LIBRARY if set, else libdhd.so, libdhd.so.3. "" or what is
+/// missing; `api.lib.searched` says what was tried.
+std::string load_dhd_api(DhdApi& api);
+
+/// A Force Dimension system type -> its model name and limits (CHAI3D's table; unknown
+/// types: CHAI3D's default, an omega.3's).
+DeviceCaps dhd_system_caps(int system_type);
+
+/// `isotouch devices`: one line per device the SDK counts (index, model, system type).
+std::vector<std::string> list_forcedimension(const DhdApi& api);
+
+/// FD position [m, FD frame] -> isotouch device frame [m].
+inline Vec3 dhd_to_device_m(double x, double y, double z) { return {y, -x, z}; }
+/// isotouch device-frame force [N] -> FD frame [N].
+inline Vec3 device_to_dhd_force(const Vec3& f) { return {-f.y, f.x, f.z}; }
+
+/// One Force Dimension device, by index (0 = the first).
+class ForceDimensionDevice final : public SdkDevice {
+ public:
+  explicit ForceDimensionDevice(int index = 0, double rate_hz = 2000);
+  ~ForceDimensionDevice() override;  ///< close()
+  /// Opens the device, reads its type and limits, starts the device thread and waits for its
+  /// first reading. @throws std::runtime_error naming the library searched or the SDK's error.
+  void open();
+  /// The device thread's last act: an exact zero force, force disabled, the device closed.
+  void close() override;
+  std::string description() const { return description_; }
+  std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
+  long errors() const { return errors_.load(); }
+  long periods() const { return periods_.load(); }
+  std::string sdk_status() const override;
+
+ private:
+  void loop();
+  void period(std::int64_t now, bool& force_on);
+  void note_error(const char* call);
+
+  int index_;
+  double rate_hz_;
+  DhdApi api_;
+  char id_ = 0;
+  std::string description_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::atomic<long> errors_{0}, periods_{0};
+  mutable std::mutex note_mu_;
+  std::string last_error_;  // note_mu_
+  Vec3 last_position_;  // device thread
+  bool down_ = false;   // device thread: the last read failed
+};
+
+}  // namespace isotouch::servo

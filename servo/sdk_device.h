@@ -1,0 +1,114 @@
+// sdk_device.h - what the devices driven through a vendor SDK loaded at run time share: the
+// library search (dlopen, an environment override), and the device base whose own device
+// thread (the SDK's scheduler callback, or a thread of ours) publishes readings and applies
+// the servo's latest force, with the stall rule. The servo thread only touches two
+// latest-value cells.
+#pragma once
+#include "isotouch/servo/core_names.h"
+#include <dlfcn.h>
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/latest_value.h"
+
+namespace isotouch::servo {
+
+/// A vendor library opened with dlopen, or why not. Never closed (OpenHaptics' driver does
+/// not survive being loaded a second time in one process, as CHAI3D's CPhantomDevices.cpp
+/// notes), so its functions stay valid for the process's life.
+struct SdkLibrary {
+  void* handle = nullptr;
+  std::string path;      ///< the name or path that loaded ("" if none)
+  std::string searched;  ///< what was tried, in order, with dlerror()'s reason for each
+  explicit operator bool() const { return handle != nullptr; }
+};
+
+/// Opens the SDK: only `$env_var` when it is set and non-empty, else each of `names` in
+/// order (dlopen's search: LD_LIBRARY_PATH, the cache, /usr/lib, ...).
+SdkLibrary load_sdk(const char* env_var, const std::vector<std::string>& names);
+
+/// Looks up `name` in `lib` into `fn`; appends the name to `missing` if absent.
+template <class Fn>
+void sdk_symbol(const SdkLibrary& lib, const char* name, Fn& fn, std::string& missing) {
+  fn = reinterpret_cast<Fn>(dlsym(lib.handle, name));
+  if (!fn) missing += std::string(missing.empty() ? "" : ", ") + name;
+}
+
+/// CLOCK_MONOTONIC [ns].
+std::int64_t sdk_now_ns();
+
+/// The stall rule and the two cells between the servo thread and a device thread. The device
+/// thread calls publish() with each reading and force_now() once per device period; the
+/// servo thread calls read() and write_force_n() (loads and stores only).
+class SdkDevice : public HapticDeviceIO {
+ public:
+  SdkDevice();
+  DeviceReading read() override {
+    reading_.load(last_read_);
+    return last_read_;
+  }
+  Vec3 read_position_m() override { return read().position_m; }
+  std::uint32_t buttons() override { return read().buttons; }
+  /// Servo thread: one store. A non-finite force is stored as zero; the first write after a
+  /// stall is stored as zero (the servo ramps in from 0).
+  void write_force_n(const Vec3& force_n) override;
+  DeviceCaps caps() const override { return caps_; }
+  /// Returns the device thread's stall count.
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
+  /// Servo thread: the reading the next write answers (DeviceReading::sequence).
+  void answer(std::uint64_t sequence) override { answers_ = sequence; }
+  /// Report-to-force latency [us]: from publishing a reading to applying the first force
+  /// that answers it (handed to the SDK), one per answered reading. Read after close().
+  const std::vector<double>& latencies_us() const { return latency_us_; }
+  /// Times the device thread took the force off because the servo stopped writing.
+  std::uint64_t stalls() const { return stalls_.load(); }
+  /// Exact zero force, the device thread stopped, the device released. Idempotent.
+  virtual void close() = 0;
+  /// One line for the run's summary: the device thread's periods and SDK errors, the last one.
+  virtual std::string sdk_status() const = 0;
+
+ protected:
+  /// Device thread: the newest reading (received_ns: now, connection: bumped on a
+  /// disconnected -> ok change).
+  void publish(DeviceReading r, std::int64_t now_ns);
+  /// Device thread, once per period: the force to apply now [N, isotouch device frame].
+  /// Zero unless enabled and the servo wrote since enable_force(); zero once the servo has
+  /// not written for the stall time (counted) until a write made after it saw the count.
+  /// `on`: whether force output should be on.
+  Vec3 force_now(std::int64_t now_ns, bool& on);
+  /// Device thread: after open, before the first force_now().
+  void reset_device_thread(std::int64_t now_ns);
+  DeviceCaps caps_;
+  double default_stall_s_ = 0.0025;  ///< when enable_force() is given none [s]
+
+ private:
+  struct Output {
+    Vec3 force_n;
+    std::uint64_t count = 0;   // +1 per write_force_n()
+    std::uint64_t stalls = 0;  // the stall count the write was made after
+    std::uint64_t answers = 0; // the reading's sequence it answers
+  };
+  static constexpr std::size_t kPublishRing = 64;  // readings whose publish time is kept
+  LatestValue<DeviceReading> reading_;
+  LatestValue<Output> output_;
+  DeviceReading last_read_;           // servo thread: read()'s fallback
+  std::uint64_t writes_ = 0, stalls_seen_ = 0, answers_ = 0;  // servo thread
+  std::atomic<bool> enabled_{false};
+  std::atomic<std::int64_t> stall_ns_{2'500'000}, enabled_ns_{0};
+  std::atomic<std::uint64_t> stalls_{0};
+  // device thread
+  std::uint64_t seen_count_ = 0;
+  std::int64_t seen_at_ = 0;
+  bool was_on_ = false, was_down_ = false;
+  std::uint32_t connection_ = 0;
+  std::uint64_t sequence_ = 0, answered_ = 0;
+  std::array<std::int64_t, kPublishRing> published_ns_{};
+  std::vector<double> latency_us_;  // capacity reserved at construction: no allocation
+};
+
+}  // namespace isotouch::servo

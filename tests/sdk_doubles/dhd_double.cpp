@@ -1,0 +1,116 @@
+// dhd_double.cpp - a test double of the Force Dimension DHD library (built as libdhd.so):
+// the dhd functions isotouch calls, with the SDK's units and conventions (m, N; x toward
+// the user, y right, z up; -1 on error, the device ID last), one delta.3 (system type 63)
+// whose physics runs on the double's own 1 kHz clock (the device's; kept light: the host's CPUs are the servo's), calls that take USB
+// time (50 us), and a device that vanishes (every call fails, the count drops to 0).
+// Declarations from isotouch/servo/dhd_api.h (from CHAI3D's CDeltaDevices.cpp, cited there).
+// Test controls: dhdDouble* below. Environment: DHD_DOUBLE_PATH, DHD_DOUBLE_LOG (double_device.h).
+#include <pthread.h>
+
+#include <atomic>
+#include <map>
+#include <thread>
+
+#include "isotouch/servo/dhd_api.h"
+#include "double_device.h"
+
+using isotouch_double::DoubleDevice;
+
+namespace {
+// Isotouch's device frame (x right, y away from the user, z up) -> Force Dimension's [m].
+DoubleDevice g_dev("DHD_DOUBLE", [](double x, double y, double z) { return std::array<double, 3>{-y, x, z}; });
+std::atomic<bool> g_open{false}, g_force_on{false}, g_running{false};
+std::atomic<long> g_bad_ids{0};
+std::thread g_clock;
+std::atomic<const char*> g_error{"no error"};
+std::mutex g_callers_mu;
+std::map<unsigned long, long> g_callers;  // pthread_self() -> dhd calls made on it
+
+void usb_time() {
+  {
+    std::lock_guard l(g_callers_mu);
+    ++g_callers[static_cast<unsigned long>(pthread_self())];
+  }
+  std::this_thread::sleep_for(std::chrono::microseconds(50));
+}
+bool usable(char id) {
+  if (id != 0) {
+    g_bad_ids.fetch_add(1);
+    g_error = "invalid device ID";
+    return false;
+  }
+  if (!g_open.load()) g_error = "device not open";
+  else if (g_dev.vanished()) g_error = "communication error (device unplugged)";
+  else return true;
+  return false;
+}
+void clock_loop() {
+  double next = isotouch_double::now_s();
+  while (g_running.load()) {
+    g_dev.step(0.001);
+    next += 0.001;
+    const double wait = next - isotouch_double::now_s();
+    if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+  }
+}
+}  // namespace
+
+extern "C" {
+int dhdGetDeviceCount(void) { return g_dev.vanished() ? 0 : 1; }
+int dhdOpenID(char id) {
+  if (id != 0 || g_dev.vanished() || g_open.load()) {
+    g_error = "no such device, or already open";
+    return -1;
+  }
+  g_dev.start();
+  g_open = true;
+  g_running = true;
+  g_clock = std::thread(clock_loop);
+  return 0;
+}
+int dhdClose(char id) {
+  if (id != 0 || !g_open.exchange(false)) return -1;
+  g_running = false;
+  g_clock.join();
+  g_dev.write_log();
+  return 0;
+}
+int dhdGetSystemType(char id) { return usable(id) ? 63 : -1; }  // DHD_DEVICE_DELTA3
+int dhdGetPosition(double* px, double* py, double* pz, char id) {
+  usb_time();
+  if (!usable(id)) return -1;
+  const auto p = g_dev.position();
+  *px = p[0], *py = p[1], *pz = p[2];
+  return 0;
+}
+unsigned int dhdGetButtonMask(char id) { return usable(id) ? 0u : 0u; }
+int dhdSetForce(double fx, double fy, double fz, char id) {
+  usb_time();
+  if (id != 0 || !g_open.load()) return -1;
+  const double f[3] = {fx, fy, fz};
+  g_dev.receive(f, g_force_on.load());  // logged also when vanished (flagged): what the host sent
+  return g_dev.vanished() ? -1 : 0;
+}
+int dhdEnableForce(unsigned char val, char id) {
+  if (!usable(id)) return -1;
+  g_force_on = val != 0;
+  return 0;
+}
+const char* dhdErrorGetLastStr(void) { return g_error; }
+
+// Test controls.
+void dhdDoubleVanish(int on) { g_dev.vanish(on != 0); }
+void dhdDoubleSetTarget(const double m[3]) { g_dev.set_target(m); }
+/// As hdDoubleLog (hd_double.cpp), forces in the FD frame [N].
+int dhdDoubleLog(double* out, int max) { return g_dev.copy_log(out, max); }
+void dhdDoubleClearLog() { g_dev.clear_log(); }
+/// 1 while force output is enabled (dhdEnableForce(DHD_ON)).
+int dhdDoubleForceOn() { return g_force_on.load() ? 1 : 0; }
+long dhdDoubleBadIds() { return g_bad_ids.load(); }
+/// dhdGetPosition and dhdSetForce calls made on the thread whose pthread_self() is `thread`.
+long dhdDoubleCallsOn(unsigned long thread) {
+  std::lock_guard l(g_callers_mu);
+  const auto it = g_callers.find(thread);
+  return it == g_callers.end() ? 0 : it->second;
+}
+}

@@ -1,0 +1,296 @@
+// Vendor SDK backends against the test doubles of their libraries (tests/sdk_doubles):
+// what the double RECEIVED (its SDK's units and frame) is the truth, not what the backend
+// says it sent.
+#include <dlfcn.h>
+#include <pthread.h>
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "isotouch/servo/forcedimension_device.h"
+#include "isotouch/servo/openhaptics_device.h"
+
+using namespace isotouch;
+using servo::DeviceStatus;
+using Vec3 = core::Vec3;
+
+namespace {
+void sleep_ms(double ms) { std::this_thread::sleep_for(std::chrono::duration<double, std::milli>(ms)); }
+
+using Rows = std::vector<std::array<double, 5>>;
+
+/// What both doubles export for tests: their log of received forces.
+struct DoubleLog {
+  int (*log)(double*, int) = nullptr;
+  /// Rows of (t_s, fx, fy, fz [N, the SDK's frame], flags).
+  Rows received() const {
+    Rows rows(1 << 16);
+    const int n = log(rows.front().data(), int(rows.size()));
+    rows.resize(std::size_t(std::min<int>(n, int(rows.size()))));
+    return rows;
+  }
+};
+
+/// The double's test controls, from the library the backend loaded.
+struct HdControls : DoubleLog {
+  void (*vanish)(int);
+  void (*set_target)(const double*);
+  void (*clear_log)();
+  long (*illegal)();
+  HdControls() {
+    void* h = dlopen(HD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
+    if (!h) throw std::runtime_error(dlerror());
+    vanish = reinterpret_cast<void (*)(int)>(dlsym(h, "hdDoubleVanish"));
+    set_target = reinterpret_cast<void (*)(const double*)>(dlsym(h, "hdDoubleSetTarget"));
+    log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "hdDoubleLog"));
+    clear_log = reinterpret_cast<void (*)()>(dlsym(h, "hdDoubleClearLog"));
+    illegal = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleIllegalCalls"));
+  }
+};
+
+struct OpenHaptics : ::testing::Test {
+  void SetUp() override { setenv("ISOTOUCH_HD_LIBRARY", HD_DOUBLE, 1); }
+  HdControls ctl;
+};
+
+/// Polls `done` every ms for at most `ms` milliseconds (a loaded machine is slow, not wrong).
+template <class F>
+bool wait_for(F done, int ms = 2000) {
+  for (int i = 0; i < ms; ++i, sleep_ms(1))
+    if (done()) return true;
+  return done();
+}
+
+/// The stall time the tests give while they check that forces pass: long enough for a test
+/// thread starved on a loaded machine; the stall tests then wait past it.
+constexpr double kTestStallS = 0.2;
+
+/// The forces received after the first one received while the device had vanished.
+Rows forces_after_vanish(const Rows& rows) {
+  Rows out;
+  bool gone = false;
+  for (const auto& r : rows) {
+    if (gone) out.push_back(r);
+    if (int(r[4]) & 2) gone = true;
+  }
+  return out;
+}
+
+/// Writes `f` every ms for `ms` milliseconds, as the servo thread would (reading first unless
+/// another thread reads: read() and write_force_n() are each one thread's).
+void write_for(servo::HapticDeviceIO& d, const Vec3& f, int ms, bool read = true) {
+  for (int i = 0; i < ms; ++i) {
+    if (read) d.read();
+    d.write_force_n(f);
+    sleep_ms(1);
+  }
+}
+/// The servo stops writing: an exact zero once the stall time passed, counted once; then,
+/// closed while the servo writes, an exact zero is the last force the double received.
+template <class Device, class Controls>
+void check_stall_then_close(Device& d, Controls& ctl, const std::atomic<std::uint64_t>& stalls) {
+  const std::uint64_t s0 = stalls.load();
+  ctl.clear_log();
+  ASSERT_TRUE(wait_for([&] { return stalls.load() == s0 + 1; }));
+  sleep_ms(20);
+  const auto zero = [&](const char* when) {
+    const auto r = ctl.received().back();
+    EXPECT_TRUE(r[1] == 0.0 && r[2] == 0.0 && r[3] == 0.0) << when << ": " << r[1] << ", " << r[2] << ", " << r[3];
+  };
+  zero("after the stall");
+  EXPECT_EQ(stalls.load(), s0 + 1);
+  write_for(d, {1.0, 2.0, -0.5}, 20);
+  d.close();
+  zero("after close");
+}
+
+/// The device vanishes while the servo pushes along isotouch x (0.5 N): the reading says
+/// disconnected, the SDK's error is named, every force the double received after the first
+/// one sent to the vanished device is an exact zero (`column`: the SDK axis x maps to), and
+/// the device back is a new connection (the servo ramps in). Closes the device.
+template <class Device, class Controls>
+void check_vanish(Device& d, Controls& ctl, int column, const std::string& error) {
+  d.enable_force(true, kTestStallS);
+  write_for(d, {0.5, 0, 0}, 20);
+  ctl.clear_log();
+  ctl.vanish(1);
+  std::thread servo([&] { write_for(d, {0.5, 0, 0}, 40, false); });
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kDisconnected; }));
+  servo.join();
+  EXPECT_NE(d.last_error().find(error), std::string::npos) << d.last_error();
+  EXPECT_TRUE(wait_for([&] { return forces_after_vanish(ctl.received()).size() > 10; }));
+  for (const auto& r : forces_after_vanish(ctl.received()))
+    EXPECT_EQ(r[std::size_t(column)], 0.0) << "force after the device vanished, t " << r[0];
+  const std::uint32_t conn = d.read().connection;
+  ctl.vanish(0);
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
+  EXPECT_EQ(d.read().connection, conn + 1) << "a device back is a new connection (the servo ramps in)";
+  d.close();
+}
+}  // namespace
+
+TEST(OpenHapticsLoad, MissingLibraryNamesWhatWasSearched) {
+  setenv("ISOTOUCH_HD_LIBRARY", "/nonexistent/libHD.so", 1);
+  servo::OpenHapticsDevice d;
+  try {
+    d.open();
+    FAIL() << "opened without the library";
+  } catch (const std::runtime_error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("OpenHaptics HD library not found"), std::string::npos) << m;
+    EXPECT_NE(m.find("searched: $ISOTOUCH_HD_LIBRARY=/nonexistent/libHD.so"), std::string::npos) << m;
+  }
+  unsetenv("ISOTOUCH_HD_LIBRARY");
+  servo::HdApi api;
+  const std::string e = servo::load_hd_api(api);
+  if (!api.lib) {
+    EXPECT_NE(e.find("ISOTOUCH_HD_LIBRARY unset; libHD.so: "), std::string::npos) << e;
+  }
+}
+
+TEST_F(OpenHaptics, UnknownDeviceNameGivesTheHdError) {
+  servo::OpenHapticsDevice d("no such arm");
+  try {
+    d.open();
+    FAIL() << "opened a device that does not exist";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("hdInitDevice: HD_COMM_CONFIG_ERROR (0x303"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(OpenHaptics, CapabilitiesAndPoseInIsotouchFrame) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  const servo::DeviceCaps c = d.caps();
+  EXPECT_DOUBLE_EQ(c.max_force_n, 3.3);
+  EXPECT_DOUBLE_EQ(c.max_stiffness_n_per_m, 1000.0);  // 1.0 N/mm
+  EXPECT_DOUBLE_EQ(c.max_damping_n_s_per_m, 5.0);     // 0.005 N s/mm
+  EXPECT_DOUBLE_EQ(c.native_rate_hz, 1000);
+  // HD box x +-190, y +-130, z +-95 mm -> x +-0.19, y (= -z) +-0.095, z (= y) +-0.13 m.
+  EXPECT_NEAR(c.workspace_min_m.y, -0.095, 1e-12);
+  EXPECT_NEAR(c.workspace_max_m.z, 0.13, 1e-12);
+  EXPECT_NE(d.description().find("calibration ok"), std::string::npos) << d.description();
+  const double target_mm[3] = {10, 20, 30};  // HD: right, up, toward the user
+  ctl.set_target(target_mm);
+  sleep_ms(600);
+  const servo::DeviceReading r = d.read();
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  EXPECT_NEAR(r.position_m.x, 0.010, 2e-4);   // right
+  EXPECT_NEAR(r.position_m.y, -0.030, 2e-4);  // toward the user = -y
+  EXPECT_NEAR(r.position_m.z, 0.020, 2e-4);   // up
+  EXPECT_GT(r.received_ns, 0);
+  d.close();
+  EXPECT_EQ(ctl.illegal(), 0) << "HD calls outside the scheduler's frames";
+}
+
+TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  const auto* stalls = d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  write_for(d, {1.0, 2.0, -0.5}, 50);  // isotouch: right, away from the user, down
+  auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 30u);
+  const auto& last = rows.back();
+  EXPECT_EQ(int(last[4]) & 1, 1) << "force output not enabled";
+  EXPECT_DOUBLE_EQ(last[1], 1.0);   // HD x: right
+  EXPECT_DOUBLE_EQ(last[2], -0.5);  // HD y: up
+  EXPECT_DOUBLE_EQ(last[3], -2.0);  // HD z: toward the user
+  check_stall_then_close(d, ctl, *stalls);
+  EXPECT_EQ(ctl.illegal(), 0);
+}
+
+TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  check_vanish(d, ctl, 1, "HD_COMM_ERROR");  // a force along isotouch x is HD x
+}
+
+namespace {
+struct DhdControls : DoubleLog {
+  void (*vanish)(int);
+  void (*set_target)(const double*);
+  void (*clear_log)();
+  long (*calls_on)(unsigned long);
+  int (*force_on)();
+  DhdControls() {
+    void* h = dlopen(DHD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
+    if (!h) throw std::runtime_error(dlerror());
+    vanish = reinterpret_cast<void (*)(int)>(dlsym(h, "dhdDoubleVanish"));
+    set_target = reinterpret_cast<void (*)(const double*)>(dlsym(h, "dhdDoubleSetTarget"));
+    log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "dhdDoubleLog"));
+    clear_log = reinterpret_cast<void (*)()>(dlsym(h, "dhdDoubleClearLog"));
+    calls_on = reinterpret_cast<long (*)(unsigned long)>(dlsym(h, "dhdDoubleCallsOn"));
+    force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
+  }
+};
+
+struct ForceDimension : ::testing::Test {
+  void SetUp() override { setenv("ISOTOUCH_DHD_LIBRARY", DHD_DOUBLE, 1); }
+  DhdControls ctl;
+};
+}  // namespace
+
+TEST(ForceDimensionLoad, MissingLibraryNamesWhatWasSearched) {
+  setenv("ISOTOUCH_DHD_LIBRARY", "/nonexistent/libdhd.so", 1);
+  servo::ForceDimensionDevice d;
+  try {
+    d.open();
+    FAIL() << "opened without the library";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("Force Dimension SDK library not found (searched: $ISOTOUCH_DHD_LIBRARY=/nonexistent/libdhd.so"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+TEST_F(ForceDimension, IndexBeyondTheDevicesIsRefused) {
+  servo::ForceDimensionDevice d(3);
+  try {
+    d.open();
+    FAIL() << "opened device 3 of 1";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("forcedimension:3: no such device (1 found"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(ForceDimension, PoseAndForcesInFdFrameFromADeviceThread) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  const servo::DeviceCaps c = d.caps();
+  EXPECT_EQ(c.name, "delta.3");  // system type 63, CHAI3D's limits
+  EXPECT_DOUBLE_EQ(c.max_force_n, 20.0);
+  EXPECT_DOUBLE_EQ(c.max_stiffness_n_per_m, 5000.0);
+  EXPECT_DOUBLE_EQ(c.workspace_max_m.x, 0.15);
+  const double target[3] = {0.01, 0.02, 0.03};  // FD: toward the user, right, up [m]
+  ctl.set_target(target);
+  sleep_ms(600);
+  const servo::DeviceReading r = d.read();
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
+  EXPECT_NEAR(r.position_m.x, 0.02, 2e-4);   // right
+  EXPECT_NEAR(r.position_m.y, -0.01, 2e-4);  // toward the user = -y
+  EXPECT_NEAR(r.position_m.z, 0.03, 2e-4);   // up
+  const auto* stalls = d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  write_for(d, {1.0, 2.0, -0.5}, 50);
+  auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 30u);
+  EXPECT_EQ(int(rows.back()[4]) & 1, 1) << "force not enabled";
+  EXPECT_DOUBLE_EQ(rows.back()[1], -2.0);  // FD x: toward the user = -y
+  EXPECT_DOUBLE_EQ(rows.back()[2], 1.0);   // FD y: right
+  EXPECT_DOUBLE_EQ(rows.back()[3], -0.5);  // FD z: up
+  EXPECT_EQ(ctl.calls_on(static_cast<unsigned long>(pthread_self())), 0) << "a dhd call on the servo's thread";
+  check_stall_then_close(d, ctl, *stalls);
+  EXPECT_EQ(ctl.force_on(), 0) << "force left enabled at close";
+}
+
+TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  check_vanish(d, ctl, 2, "dhdGetPosition failed: communication error");  // isotouch x is FD y
+}

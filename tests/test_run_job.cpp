@@ -21,6 +21,7 @@
 #include <iterator>
 #include <sstream>
 
+#include "isotouch/tests/drilled_slab.h"
 #include "isotouch/tests/voxel_probe.h"
 #include "isotouch/run/channel_section.h"
 #include "isotouch/run/run_scene.h"
@@ -649,20 +650,9 @@ TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
 // plane points are known (0.1 mm per pixel); the file holds a PNG of the panels' size.
 TEST(RunPictures, ChannelSectionShowsTheHoleTheBurrAndTheNarrowestRadius) {
   using isotouch::run::ChannelCut;
-  auto slab = [](bool hole) {
-    isotouch::engine::Volume v;
-    v.grid.dims = {41, 41, 61};
-    v.grid.spacing_m = {0.5e-3, 0.5e-3, 0.5e-3};
-    v.voxels.resize(v.grid.voxel_count());
-    for (int z = 0; z < 61; ++z)
-      for (int y = 0; y < 41; ++y)
-        for (int x = 0; x < 41; ++x) {
-          const bool in_slab = z * 0.5 >= 10 && z * 0.5 <= 20, in_hole = std::hypot(x * 0.5 - 10, y * 0.5 - 10) < 4;
-          v.voxels[v.grid.index(x, y, z)] = in_slab && !(hole && in_hole) ? 1000.0f : 0.0f;
-        }
-    return v;
-  };
-  const isotouch::engine::Volume before = slab(false), after = slab(true);
+  auto four = +[](double) { return 4.0; };
+  const isotouch::engine::Volume before = isotouch::test::drilled_slab(four, false),
+                                 after = isotouch::test::drilled_slab(four, true);
   const isotouch::core::Isosurface iso{500, isotouch::core::InsideIs::kAbove};
   const ChannelCut cut{{0.010, 0.010, 0.015}, {0, 0, 1}, 4e-3, 3.5e-3};
   const int n = 200;  // 20 mm per panel: 0.1 mm per pixel, pixel i at (i - 99.5) x 0.1 mm

@@ -486,6 +486,10 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   bool update = tool_reseat_ || (edited && (tool_plane_count_ > 0 || was_contact_));
   tool_reseat_ = false;
   if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
+  // The proxy for the planes held now (tool_solve, a few dozen small solves), computed once
+  // a tick: the planes change only at an update.
+  Vec3 solved;
+  bool have_solved = false;
   if (tool_plane_count_ > 0 && !update) {
     bool held = false;  // does any plane hold the HIP?
     for (int i = 0; i < tool_plane_count_; ++i)
@@ -493,7 +497,9 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     if (!held) {
       tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
     } else {
-      const Vec3 slide = tool_solve(hip) - anchor_;
+      solved = tool_solve(hip);
+      have_solved = true;
+      const Vec3 slide = solved - anchor_;
       // Early when the proxy is 0.2 voxel from the scan's centre: the scan covered the
       // surface within r + 1 voxel of it, and a tangent plane held over a curved (or,
       // between voxels, wavy trilinear) surface lets the sphere sink by about
@@ -543,10 +549,12 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       }
     }
     c_ = 0;
-    if (!scan_valid_) anchor_ = tool_solve(hip);
+    solved = tool_solve(hip);  // the HIP itself without a plane
+    have_solved = true;
+    if (!scan_valid_) anchor_ = solved;
     out.plane_update = true;
   }
-  const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+  const Vec3 x = tool_plane_count_ == 0 ? hip : have_solved ? solved : tool_solve(hip);
   vhip_ = x;
   const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
   const double depth = norm(push);

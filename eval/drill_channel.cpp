@@ -4,13 +4,10 @@
 #include <cmath>
 
 namespace isotouch::eval {
-namespace {
-
 using core::Vec3;
 
-// Trilinear value of `v` at grid-world x (indices clamped to the grid).
-double trilinear(const engine::Volume& v, const Vec3& x) {
-  const Vec3 i = v.grid.to_index(x);
+double volume_trilinear(const engine::Volume& v, const Vec3& x_m) {
+  const Vec3 i = v.grid.to_index(x_m);
   const auto& d = v.grid.dims;
   auto at = [&](int a, int b, int c) {
     a = std::clamp(a, 0, d[0] - 1), b = std::clamp(b, 0, d[1] - 1), c = std::clamp(c, 0, d[2] - 1);
@@ -25,8 +22,6 @@ double trilinear(const engine::Volume& v, const Vec3& x) {
         r += (a ? fx : 1 - fx) * (b ? fy : 1 - fy) * (c ? fz : 1 - fz) * at(x0 + a, y0 + b, z0 + c);
   return r;
 }
-
-}  // namespace
 
 ChannelFigures measure_channel(const engine::Volume& before, const engine::Volume& after, const core::Isosurface& iso,
                                const std::vector<Vec3>& centres, const Vec3& axis, double burr_radius_m) {
@@ -58,14 +53,14 @@ ChannelFigures measure_channel(const engine::Volume& before, const engine::Volum
   double first = 0;  // depth of the first slice measured
   for (double depth = d0; depth <= d1; depth += step) {
     const Vec3 c = centre_at(depth);
-    if (!iso.contains(trilinear(before, c))) continue;  // no material here before: not the channel
+    if (!iso.contains(volume_trilinear(before, c))) continue;  // no material here before: not the channel
     if (f.slices == 0) first = depth;
     double open = 0;
     for (double rho = 0; rho <= rmax; rho += dr) {
       bool clear = true;
       for (int k = 0; k < 24 && clear; ++k) {
         const double ang = k * (2 * M_PI / 24);
-        clear = !iso.contains(trilinear(after, c + (u * std::cos(ang) + w * std::sin(ang)) * rho));
+        clear = !iso.contains(volume_trilinear(after, c + (u * std::cos(ang) + w * std::sin(ang)) * rho));
       }
       if (!clear) break;
       open = rho;
@@ -74,6 +69,7 @@ ChannelFigures measure_channel(const engine::Volume& before, const engine::Volum
     if (open < f.min_open_radius_m) {
       f.min_open_radius_m = open;
       f.min_at_depth_m = depth - first;
+      f.min_centre_m = c;
     }
   }
   f.measured = f.slices > 0;

@@ -17,7 +17,11 @@ struct ChannelFigures {
   double min_open_radius_m = 0;  ///< the narrowest slice's open radius [m]
   double min_at_depth_m = 0;     ///< its depth along the axis from the first slice [m]
   double min_fraction = 0;       ///< min_open_radius_m / burr radius
+  core::Vec3 min_centre_m;       ///< the path's centre on the narrowest slice (grid-world [m])
 };
+
+/// The trilinear value of `v` at grid-world `x_m` [m] (indices clamped to the grid).
+double volume_trilinear(const engine::Volume& v, const core::Vec3& x_m);
 
 /// The channel the burr left: at each slice perpendicular to `axis` (unit, the drilling
 /// direction), a quarter voxel apart along the burr centres' path `centres` (grid-world [m],

@@ -71,6 +71,10 @@ struct EditFigures {
   /// surface [m] (run::tool_brush_margin_m; 0 with a point tool).
   double cut_radius_m = 0, cut_margin_m = 0;
   double burr_radius_m = 0, channel_min_open_radius_m = 0, channel_min_at_depth_m = 0, channel_min_fraction = 0;
+  /// channel_section.png (run/channel_section.h: the narrowest slice across and the channel
+  /// along, from the voxels after drilling): drawn, or why not.
+  bool channel_section_drawn = false;
+  std::string channel_section_note;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
   std::string files_note;          ///< why a file was not written
   /// drilled.stl's mesh (io::extract_mesh: coincident vertices welded, zero-area triangles

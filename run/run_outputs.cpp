@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 #include "isotouch/eval/drill_channel.h"
+#include "isotouch/run/channel_section.h"
 #include "isotouch/run/drill_figure.h"
 #include "isotouch/run/names.h"
 #include "isotouch/run/picture.h"
@@ -96,9 +97,10 @@ engine::RaycastImage render_section(const Scene& scene, const SceneSetup& setup,
   return render_picture(setup.vk.get(), rf, vol.direction, req, out_png);
 }
 
-// Drill scenes: the breakthrough and the channel's open radius (EditFigures).
+// Drill scenes: the breakthrough and the channel's open radius (EditFigures), and the
+// channel's section drawn from the voxels (channel_section.png in `dir`).
 void drill_figures(const Scene& scene, const SceneSetup& setup, const std::vector<sim::TraceRow>& trace,
-                   const engine::Volume& after, EditFigures& e, std::ostream& log) {
+                   const engine::Volume& after, const std::string& dir, EditFigures& e, std::ostream& log) {
   e.drill = true;
   const double tool = setup.hri.tool_radius_m;
   e.burr_radius_m = tool > 0 ? tool : scene.edits.brush.radius_mm * 1e-3;
@@ -128,6 +130,13 @@ void drill_figures(const Scene& scene, const SceneSetup& setup, const std::vecto
         << fmt(b.to_n, 4) << " N in " << fmt(b.fall_s * 1e3, 4) << " ms\n";
   else
     log << "drill    no breakthrough (|F| never fell to a tenth of the drill threshold for good while drilling)\n";
+  if (c.measured) {
+    const ChannelCut cut{c.min_centre_m, setup.script.contact_normal * -1.0, e.burr_radius_m, c.min_open_radius_m};
+    e.channel_section_note =
+        draw_channel_section(setup.volume, after, setup.live.iso, cut, (fs::path(dir) / "channel_section.png").string());
+    e.channel_section_drawn = e.channel_section_note.empty();
+    if (!e.channel_section_drawn) log << "drill    channel_section.png not drawn: " << e.channel_section_note << "\n";
+  }
   if (c.measured)
     log << "drill    channel: narrowest open radius " << fmt(c.min_open_radius_m * 1e3, 4) << " mm ("
         << fmt(100 * c.min_fraction, 3) << " % of the burr's " << fmt(e.burr_radius_m * 1e3, 4) << " mm) at "
@@ -340,7 +349,7 @@ void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, co
                   const std::string& dir, RunMetrics& m, std::ostream& log) {
   EditFigures& e = m.edits;
   edit_figures(setup, d, trace, e);
-  if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, setup.session->volume(), e, log);
+  if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, setup.session->volume(), dir, e, log);
   log_edits(e, log);
   write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
   write_edited_files(scene, setup, dir, e, log);

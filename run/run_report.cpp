@@ -231,6 +231,7 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
              if (e.site_figure_drawn) a.push_back("drill.png");
              if (e.before_after_drawn) a.insert(a.end(), {"before.png", "after.png"});
              if (e.sections_drawn) a.insert(a.end(), {"section_before.png", "section_after.png"});
+             if (e.channel_section_drawn) a.push_back("channel_section.png");
              return a;
            }()},
           {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
@@ -277,6 +278,14 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
           "it up close.\n\n";
   else if (!e.site_figure_note.empty())
     md << "drill.png: not drawn (" << e.site_figure_note << ").\n\n";
+  if (e.channel_section_drawn)
+    md << "![the channel cut open at its narrowest slice: across (left) and along (right)](channel_section.png)\n\n"
+          "The channel cut open at its narrowest slice, from the voxels after drilling: across it (left) and along it "
+          "(right, the drilling direction down), 5 burr radii wide. Bone-white: material after drilling; orange: "
+          "removed by the drill; dark: empty before. Green: the burr's radius; red: the narrowest open radius "
+          "measured.\n\n";
+  else if (!e.channel_section_note.empty())
+    md << "channel_section.png: not drawn (" << e.channel_section_note << ").\n\n";
   if (e.plot_drawn) md << "![force, depth and removed volume against time](edits.png)\n\n";
   if (e.before_after_drawn)
     md << "| before | after |\n|---|---|\n| ![before](before.png) | ![after](after.png) |\n\n";

@@ -31,9 +31,12 @@ HriRenderer::HriRenderer(const HriParams& params) : params_(params) {
   inv_wpd_ = 1.0 / params_.world_per_device;
   const double fc = params_.velocity_cutoff_hz;
   alpha_nominal_ = fc > 0 ? dt_nominal_s_ / (dt_nominal_s_ + 1.0 / (2.0 * M_PI * fc)) : 1.0;
-  quick_ok_ = params_.variant == Variant::kRobust && params_.short_way && !(params_.tool_radius_m > 0.0) &&
-              !params_.force_shading && !params_.friction.any() &&
-              std::isfinite(params_.max_reach_m * params_.max_reach_m);
+  quick_ok_ = quick_covered();
+}
+
+bool HriRenderer::quick_covered() const {
+  return params_.variant == Variant::kRobust && params_.short_way && !(params_.tool_radius_m > 0.0) &&
+         !params_.force_shading && !params_.friction.any() && std::isfinite(params_.max_reach_m * params_.max_reach_m);
 }
 
 void HriRenderer::reset() {

@@ -308,6 +308,16 @@ class HriRenderer final : public Renderer {
   const VirtualPlane& plane() const { return plane_; }
   const Vec3& vhip() const { return vhip_; }
   int counter() const { return c_; }
+  /// A new tool radius r [m, world] (0: the point) from the next tick on; call between ticks,
+  /// on the thread that ticks (no allocation, no lock). The contact is re-seated, not
+  /// carried over: the planes are dropped and found again at the next tick around the
+  /// proxy (moved along the held plane's normal by the radius change, so that the same
+  /// surface point is touched), while the force sent last is kept as the start of the
+  /// recovery ramp (a new contact eases from it to K times the new depth over
+  /// recovery_time_s) or of the release fade (no contact any more): no force step. A
+  /// radius equal to the current one changes nothing. The robust variant only (the paper
+  /// variant renders a point: ignored there); r not finite or < 0: ignored.
+  void set_tool_radius(double r);
   /// Spherical tool: planes held after the last tick (0 = free motion).
   int tool_plane_count() const { return tool_plane_count_; }
   const ToolPlane& tool_plane(int i) const { return tool_planes_[i]; }
@@ -445,6 +455,8 @@ class HriRenderer final : public Renderer {
   /// no fault, restart, edit, ramp, release nor slew running, the snapshot version known
   /// where edits are tracked.
   bool plain_state() const;
+  /// The configuration quick_tick covers, from params_ (quick_ok_).
+  bool quick_covered() const;
   /// v_filt_ from the HIP and the time since the last sane tick [s] (prev_hip_ valid).
   void filter_velocity(const Vec3& hip, double elapsed);
   /// The fault (non-finite |F|) and saturation rules of a robust tick's force.
@@ -557,6 +569,7 @@ class HriRenderer final : public Renderer {
   ScanPoint scan_[kMaxScanPoints];
   int scan_count_ = 0;
   double scan_clear_m_ = 0;     ///< distance of the nearest surface point of the last scan [m]
+  bool tool_reseat_ = false;    ///< set_tool_radius(): the next tool tick rebuilds its planes
   bool scan_valid_ = false;     ///< anchor_ is the centre of a complete scan of the field version
   float scan_excess_[kScanSide * kScanSide * kScanSide];
 };

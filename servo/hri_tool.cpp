@@ -87,6 +87,37 @@ Vec3 HriRenderer::tool_solve(const Vec3& hip) const {
   return x;
 }
 
+void HriRenderer::set_tool_radius(double r) {
+  const double old = params_.tool_radius_m;
+  if (params_.variant != Variant::kRobust || !std::isfinite(r) || r < 0.0 || r == old) return;
+  // The proxy that touches the same surface point with the new radius: a sphere's centre
+  // moves along its first plane's normal by the change; a point's proxy (on its plane)
+  // moves out by r; a sphere becoming a point keeps its centre outside, so that the point's
+  // next tick finds its contact on the way to the HIP, as a first contact does.
+  Vec3 proxy = vhip_;
+  if (old > 0.0 && r > 0.0 && tool_plane_count_ > 0) proxy = vhip_ + tool_planes_[0].n * (r - old);
+  else if (!(old > 0.0) && plane_.valid) proxy = vhip_ + plane_.n * r;
+  // What was sent, and the hand's velocity, outlive the contact state.
+  const Vec3 sent = prev_force_, v = v_filt_;
+  const double sent_mag = prev_force_mag_;
+  const bool contact = was_contact_, vel = vel_valid_;
+  clear_contact();
+  prev_force_ = sent;
+  prev_force_mag_ = sent_mag;
+  prev_target_f_ = sent;  // the next update's step is measured from the force sent
+  was_contact_ = contact;  // no contact at the next tick: the release fade from `sent`
+  v_filt_ = v;
+  vel_valid_ = vel;
+  ramp_ref_ = {};
+  vhip_ = proxy;
+  vhip_value_known_ = false;
+  vhip_outside_ = false;
+  params_.tool_radius_m = r;
+  quick_ok_ = quick_covered();
+  plain_ = false;
+  tool_reseat_ = r > 0.0;
+}
+
 bool HriRenderer::nearest_surface(const FieldView& field, const Vec3& x, double reach, Vec3& q,
                                   Vec3& n) const {
   const Vec3& sp = field.grid().spacing_m;
@@ -452,8 +483,13 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   const double r = params_.tool_radius_m;
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
-  bool update = edited && (tool_plane_count_ > 0 || was_contact_);
+  bool update = tool_reseat_ || (edited && (tool_plane_count_ > 0 || was_contact_));
+  tool_reseat_ = false;
   if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
+  // The proxy for the planes held now (tool_solve, a few dozen small solves), computed once
+  // a tick: the planes change only at an update.
+  Vec3 solved;
+  bool have_solved = false;
   if (tool_plane_count_ > 0 && !update) {
     bool held = false;  // does any plane hold the HIP?
     for (int i = 0; i < tool_plane_count_; ++i)
@@ -461,7 +497,9 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     if (!held) {
       tool_plane_count_ = 0;  // clear of every plane: free motion (tested below)
     } else {
-      const Vec3 slide = tool_solve(hip) - anchor_;
+      solved = tool_solve(hip);
+      have_solved = true;
+      const Vec3 slide = solved - anchor_;
       // Early when the proxy is 0.2 voxel from the scan's centre: the scan covered the
       // surface within r + 1 voxel of it, and a tangent plane held over a curved (or,
       // between voxels, wavy trilinear) surface lets the sphere sink by about
@@ -511,10 +549,12 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
       }
     }
     c_ = 0;
-    if (!scan_valid_) anchor_ = tool_solve(hip);
+    solved = tool_solve(hip);  // the HIP itself without a plane
+    have_solved = true;
+    if (!scan_valid_) anchor_ = solved;
     out.plane_update = true;
   }
-  const Vec3 x = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+  const Vec3 x = tool_plane_count_ == 0 ? hip : have_solved ? solved : tool_solve(hip);
   vhip_ = x;
   const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
   const double depth = norm(push);

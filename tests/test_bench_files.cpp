@@ -1,4 +1,5 @@
-// The conclusion line of `bench table1` is computed from the measured rows, and the
+// The conclusion lines of `bench table1` (HRI/Avila, the tool ticks) are computed from the
+// measured rows, and the
 // gnuplot helper keeps a plots script that can be re-run (final PNG names, no enhanced
 // text), writing the plots whole or not at all.
 #include <gtest/gtest.h>
@@ -10,6 +11,7 @@
 #include <sstream>
 
 #include "isotouch/bench/servo_bench.h"
+#include "isotouch/bench/tool_bench.h"
 #include "isotouch/io/files.h"
 
 using namespace isotouch::bench;
@@ -29,6 +31,42 @@ TEST(Table1Verdict, CountsTheScenesWhereHriIsNoSlowerThanAvila) {
   rows[0].avila_us = 0;  // a failed measurement never counts as met
   rows[1].hri_us = std::nan("");
   EXPECT_EQ(table1_verdict(rows).rfind("HRI/Avila <= 1 on 2 of 4 scenes", 0), 0u) << table1_verdict(rows);
+}
+
+// The tool lines' verdict: every tool of every scene must have p99 <= 50 us and a median
+// within 20 x its scene's point; the worst of each is named; a missing or failed
+// measurement never counts as met.
+TEST(Table1Verdict, ToolTicksMeetP99AndMedianRatioOrFail) {
+  auto tool = [](double rv, double median, double p99) {
+    TickSpread t;
+    t.radius_voxels = rv;
+    t.median_us = median;
+    t.p99_us = p99;
+    t.ticks = 1000;
+    return t;
+  };
+  ToolTickRow a{"head", tool(0, 0.02, 0.2), {tool(1, 0.1, 10), tool(3, 0.3, 49.9), tool(10, 0.4, 3)}, 20};
+  ToolTickRow b{"chest", tool(0, 0.02, 0.2), {tool(1, 0.1, 12), tool(3, 0.4, 20)}, 20};
+  std::vector<ToolTickRow> rows = {a, b};
+  EXPECT_EQ(tool_tick_verdict(rows),
+            "tool ticks: p99 <= 50 us on 5 of 5, median <= 20 x the point's on 5 of 5 (worst p99: head r = 3 voxels "
+            "49.90 us; worst median ratio: head r = 10 voxels 20.0 x): PASS");
+  rows[1].tools[1].p99_us = 50.5;  // one p99 over the target
+  EXPECT_EQ(tool_tick_verdict(rows).rfind("tool ticks: p99 <= 50 us on 4 of 5, median <= 20 x the point's on 5 of 5 "
+                                          "(worst p99: chest r = 3 voxels 50.50 us",
+                                          0),
+            0u)
+      << tool_tick_verdict(rows);
+  EXPECT_NE(tool_tick_verdict(rows).find(": FAIL"), std::string::npos);
+  rows[1].tools[1].p99_us = 20;
+  rows[0].tools[2].median_us = 0.41;  // 20.5 x the point
+  EXPECT_NE(tool_tick_verdict(rows).find("median <= 20 x the point's on 4 of 5"), std::string::npos) << tool_tick_verdict(rows);
+  EXPECT_NE(tool_tick_verdict(rows).find(": FAIL"), std::string::npos);
+  rows[0].tools[2].median_us = 0.4;
+  rows[1].point.median_us = std::nan("");  // a failed measurement: its tools fail both
+  EXPECT_NE(tool_tick_verdict(rows).find("p99 <= 50 us on 3 of 5, median <= 20 x the point's on 3 of 5"), std::string::npos)
+      << tool_tick_verdict(rows);
+  EXPECT_EQ(tool_tick_verdict({}), "tool ticks: p99 <= 50 us on 0 of 0, median <= 20 x the point's on 0 of 0: FAIL");
 }
 
 namespace {

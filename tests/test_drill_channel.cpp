@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "isotouch/eval/drill_channel.h"
+#include "isotouch/tests/drilled_slab.h"
 
 using isotouch::core::Isosurface;
 using isotouch::core::Vec3;
@@ -13,22 +14,8 @@ using namespace isotouch::eval;
 
 namespace {
 
-// A slab of material (1000, inside above tau 500) for z in [10, 20] mm on 0.5 mm voxels,
-// with a hole along the z axis through (10, 10) mm whose radius at height z is radius(z) [mm].
-Volume slab(double (*radius)(double), bool hole) {
-  Volume v;
-  v.grid.dims = {41, 41, 61};
-  v.grid.spacing_m = {0.5e-3, 0.5e-3, 0.5e-3};
-  v.voxels.resize(v.grid.voxel_count());
-  for (int z = 0; z < 61; ++z)
-    for (int y = 0; y < 41; ++y)
-      for (int x = 0; x < 41; ++x) {
-        const double zm = z * 0.5, rho = std::hypot(x * 0.5 - 10, y * 0.5 - 10);
-        const bool in_slab = zm >= 10 && zm <= 20;
-        v.voxels[v.grid.index(x, y, z)] = in_slab && !(hole && rho < radius(zm)) ? 1000.0f : 0.0f;
-      }
-  return v;
-}
+// The slab and its hole (tests/drilled_slab.h).
+Volume slab(double (*radius)(double), bool hole) { return isotouch::test::drilled_slab(radius, hole); }
 
 std::vector<Vec3> axis_path() {
   std::vector<Vec3> c;

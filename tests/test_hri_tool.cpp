@@ -280,6 +280,45 @@ TEST(HriTool, WallForceIsKTimesTheDepthBelowTheOffsetSurface) {
   EXPECT_EQ(norm(out.force_n), 0.0);
 }
 
+// A new radius in contact (the sculpting app's brush radius, the tool's): pressed 0.5 mm
+// into a wall, the point becomes spheres of 1.5, 2.5 and 1.0 mm and then the point again.
+// Each change eases the force over the recovery time (no tick steps it by more than the
+// change over the ramp's ticks, with 10 % to spare) to K times the new depth below the
+// offset surface, the proxy r from the wall: the truth is the wall's own geometry.
+TEST(HriTool, RadiusChangeInContactEasesTheForceToTheNewDepth) {
+  const Vec3 m = unit(Vec3{0.2, -0.3, 1.0});
+  const SampleField f = half_spaces({m}, kCentre);
+  HriParams p = tool_params(0.0, 5);
+  p.stiffness_n_per_m = 800;
+  p.damping_n_s_per_m = 0;
+  p.recovery_time_s = 0.02;
+  HriRenderer r(p);
+  const double depth = 0.0005;
+  HriTick out;
+  for (int k = 0; k <= 800; ++k) out = r.tick(f, kCentre + m * std::max(-depth, 0.006 - 1e-5 * k));
+  const Vec3 hip = kCentre - m * depth;
+  ASSERT_TRUE(out.contact);
+  ASSERT_NEAR(norm(out.force_n), p.stiffness_n_per_m * depth, 1e-3);
+  const int ramp_ticks = int(std::lround(p.recovery_time_s * p.rate_hz));
+  for (const double rad : {0.0015, 0.0025, 0.0010, 0.0}) {
+    const double before = norm(out.force_n), target = p.stiffness_n_per_m * (rad + depth);
+    r.set_tool_radius(rad);
+    EXPECT_EQ(r.params().tool_radius_m, rad);
+    double worst_step = 0;
+    Vec3 last = out.force_n;
+    for (int k = 0; k < 200; ++k) {
+      out = r.tick(f, hip);
+      worst_step = std::max(worst_step, norm(out.force_n - last));
+      last = out.force_n;
+    }
+    EXPECT_LE(worst_step, 1.1 * std::abs(target - before) / ramp_ticks + 1e-4) << "radius " << rad;
+    EXPECT_TRUE(out.contact) << "radius " << rad;
+    EXPECT_NEAR(norm(out.force_n), target, 2e-3) << "radius " << rad;
+    EXPECT_GT(dot(out.force_n, m), 0.999 * norm(out.force_n)) << "radius " << rad;
+    EXPECT_NEAR(dot(m, out.vhip_m - kCentre), rad, 1e-3 * kVoxel) << "radius " << rad;
+  }
+}
+
 // Thin bone on shipped data: the chest CT's ribs at +250 HU (2 x 2 x 5 mm voxels: a rib is
 // one to three voxels thick, its edges taper), the robust point servo (n = 1, 5 and 10,
 // K = 200 N/m so that pressing 8 mm past the surface stays below the limit). Strokes start

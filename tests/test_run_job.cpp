@@ -21,7 +21,9 @@
 #include <iterator>
 #include <sstream>
 
+#include "isotouch/tests/drilled_slab.h"
 #include "isotouch/tests/voxel_probe.h"
+#include "isotouch/run/channel_section.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
@@ -640,4 +642,53 @@ TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
   EXPECT_NEAR(v_mm3, double(m.edits.inside_voxels_after), 0.1 * double(m.edits.inside_voxels_after))
       << "the mesh encloses about the inside voxels' volume (1 mm^3 voxels)";
   fs::remove_all(dir);
+}
+
+// channel_section.png against a hole made by hand: a slab of material (z in [10, 20] mm,
+// 0.5 mm voxels) with a 4 mm hole along z through (10, 10) mm, cut at (10, 10, 15) mm with a
+// 4 mm burr and a 3.5 mm open radius (two rings apart). Truth: the geometry, at pixels whose
+// plane points are known (0.1 mm per pixel); the file holds a PNG of the panels' size.
+TEST(RunPictures, ChannelSectionShowsTheHoleTheBurrAndTheNarrowestRadius) {
+  using isotouch::run::ChannelCut;
+  auto four = +[](double) { return 4.0; };
+  const isotouch::engine::Volume before = isotouch::test::drilled_slab(four, false),
+                                 after = isotouch::test::drilled_slab(four, true);
+  const isotouch::core::Isosurface iso{500, isotouch::core::InsideIs::kAbove};
+  const ChannelCut cut{{0.010, 0.010, 0.015}, {0, 0, 1}, 4e-3, 3.5e-3};
+  const int n = 200;  // 20 mm per panel: 0.1 mm per pixel, pixel i at (i - 99.5) x 0.1 mm
+  const auto img = isotouch::run::channel_section_image(before, after, iso, cut, n);
+  ASSERT_EQ(img.width, 2 * n + 8);
+  ASSERT_EQ(img.height, n);
+  auto at = [&](int i, int j) { return img.rgba[std::size_t(j) * std::size_t(img.width) + std::size_t(i)]; };
+  // Across (left panel): the hole's middle was removed, bone beyond it, the rings at 3.45 and 3.95 mm.
+  EXPECT_EQ(at(100, 100), isotouch::run::kSectionRemoved);
+  EXPECT_EQ(at(160, 100), isotouch::run::kSectionMaterial);  // 6.05 mm out
+  EXPECT_EQ(at(40, 100), isotouch::run::kSectionMaterial);   // 5.95 mm out the other way
+  EXPECT_EQ(at(134, 100), isotouch::run::kSectionOpen);      // 3.45 mm: the open radius
+  EXPECT_EQ(at(139, 100), isotouch::run::kSectionBurr);      // 3.95 mm: the burr
+  EXPECT_EQ(at(100, 139), isotouch::run::kSectionBurr);      // the same circle across the other way
+  // Along (right panel, the axis down): above the slab empty, in it bone beyond the hole, the
+  // narrowest slice a red bar of the open diameter, the burr's width two green lines.
+  const int x0 = n + 8;
+  EXPECT_EQ(at(x0 + 100, 20), isotouch::run::kSectionEmpty);     // z = 7 mm: above the slab
+  EXPECT_EQ(at(x0 + 100, 60), isotouch::run::kSectionRemoved);   // z = 11 mm, on the axis
+  EXPECT_EQ(at(x0 + 160, 60), isotouch::run::kSectionMaterial);  // z = 11 mm, 6 mm out
+  EXPECT_EQ(at(x0 + 120, 100), isotouch::run::kSectionOpen);     // on the narrowest slice, 2 mm out
+  EXPECT_EQ(at(x0 + 139, 60), isotouch::run::kSectionBurr);
+  const std::filesystem::path png = std::filesystem::temp_directory_path() /
+                                    ("isotouch_channel_section_" + std::to_string(::getpid()) + ".png");
+  ASSERT_EQ(isotouch::run::draw_channel_section(before, after, iso, cut, png.string(), n), "");
+  std::ifstream in(png, std::ios::binary);
+  std::string head(24, '\0');
+  in.read(head.data(), 24);
+  std::filesystem::remove(png);
+  ASSERT_EQ(head.substr(0, 8), std::string("\x89PNG\r\n\x1a\n"));
+  auto be32 = [&](int k) {
+    return (unsigned(std::uint8_t(head[k])) << 24) | (unsigned(std::uint8_t(head[k + 1])) << 16) |
+           (unsigned(std::uint8_t(head[k + 2])) << 8) | unsigned(std::uint8_t(head[k + 3]));
+  };
+  EXPECT_EQ(be32(16), unsigned(2 * n + 8));  // IHDR width, height
+  EXPECT_EQ(be32(20), unsigned(n));
+  EXPECT_NE(isotouch::run::draw_channel_section(before, after, iso, ChannelCut{}, png.string(), n), "");
+  EXPECT_FALSE(std::filesystem::exists(png));
 }

@@ -25,6 +25,7 @@
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/session/edit_session.h"
 #include "isotouch/core/exit_codes.h"
+#include "isotouch/apps/sculpt/burr.h"
 #include "isotouch/apps/sculpt/frame.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/servo/hri.h"
@@ -385,6 +386,12 @@ struct Sculpt {
   bool start_session(const session::LiveSessionConfig& cfg);
   void keep_display_off_servo_cpu();
   void init_tools();
+  // --- the felt tool (burr.h) ---
+  void choose_tool();
+  servo::HriParams felt_params();
+  void fit_felt_tool();
+  void watch_drill(const std::vector<sim::TraceRow>& rows, const session::Observed& obs);
+  void print_felt_tool();
 
   // --- the frame loop ---
   void frame_loop();
@@ -468,6 +475,10 @@ struct Sculpt {
   std::unique_ptr<session::EditSession> edits;
   servo::TripleBuffer<core::SampleField> buffer;
   std::optional<servo::HriRenderer> renderer;
+  std::optional<FeltTool> felt;  // what the servo ticks: the renderer with the tool's radius
+  DrillWatch drill;
+  double felt_m = 0;            // the radius the servo is asked to feel [m] (0: the point)
+  long last_watched_tick = -1;  // real time: the last tick DrillWatch saw
   PictureFeed feed;
   std::unique_ptr<engine::RayCaster> caster;
   std::unique_ptr<session::LiveSession> session;
@@ -649,7 +660,10 @@ bool Sculpt::open_edits() {
     return false;
   }
   buffer.publish(edits->current());
-  renderer.emplace(scene.hri);
+  choose_tool();
+  renderer.emplace(felt_params());
+  felt.emplace(*renderer);
+  if (!o.record.empty()) felt->fix();  // the recording replays with one tool (felt_params)
   feed.values = vol.voxels;
   auto rc = engine::RayCaster::create(*vk, run::scene_raycast_field(scene, vol));
   if (!rc) {
@@ -674,7 +688,7 @@ session::LiveSessionConfig Sculpt::session_config() {
     std::ifstream in(scene.file, std::ios::binary);
     std::ostringstream text;
     text << in.rdbuf();
-    cfg.record_header.scene_text = text.str();
+    cfg.record_header.scene_text = scene_text_with_tool(text.str(), renderer->params().tool_radius_m, scene.file);
     cfg.record_header.rate_hz = scene.hri.rate_hz;
     cfg.record_header.volume_crc32 = io::volume_crc32(vol);
     // This app's edit session, whatever the scene's "edits" say: replay builds the same one.
@@ -708,8 +722,8 @@ bool Sculpt::open_device() {
 bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
   servo::HapticDeviceIO& device = mouse ? static_cast<servo::HapticDeviceIO&>(*mouse_device) : *haptic.io;
   try {
-    if (o.sim_clock) session = std::make_unique<session::LiveSession>(edits.get(), buffer, *renderer, cfg);
-    else session = std::make_unique<session::LiveSession>(*edits, buffer, *renderer, device, cfg);
+    if (o.sim_clock) session = std::make_unique<session::LiveSession>(edits.get(), buffer, *felt, cfg);
+    else session = std::make_unique<session::LiveSession>(*edits, buffer, *felt, device, cfg);
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << e.what() << "\n";
     return false;
@@ -765,12 +779,7 @@ void Sculpt::keep_display_off_servo_cpu() {
 
 /// The tool (carried over or sized to the voxels), the panels' fixed lines, the loop's clocks.
 void Sculpt::init_tools() {
-  if (o.carried && o.carried->tool) tool = *o.carried->tool;
-  tool.targets = session::default_targets(vol, live.iso);
-  if (!(o.carried && o.carried->tool)) {
-    const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
-    tool.radius_m = std::max(4e-3, 2.5 * sp);
-  }
+  print_felt_tool();
   iso_ctl = IsoControl{scene.hri.tau, vol.min_value, vol.max_value, false};
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
@@ -783,6 +792,70 @@ void Sculpt::init_tools() {
   last_frame = Clock::now();
   export_path = o.export_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.stl") : o.export_path;
   save_path = o.save_path.empty() ? (fs::path(o.input).stem().string() + "-sculpted.vdb") : o.save_path;
+}
+
+// --- the felt tool: the carve or drill brush is felt as a sphere of its radius (burr.h) ----
+
+/// A radius as a recording's scene text gives it back to replay (radius_mm, parsed): the
+/// same bits, so that a recorded session replays identically.
+double as_recorded(double radius_m) { return 1e-3 * (1e3 * radius_m); }
+
+/// The tool: carried over, or the scene's tool radius where it gives one, else sized to
+/// the voxels.
+void Sculpt::choose_tool() {
+  if (o.carried && o.carried->tool) tool = *o.carried->tool;
+  tool.targets = session::default_targets(vol, live.iso);
+  if (o.carried && o.carried->tool) return;
+  const double sp = std::max({vol.grid.spacing_m.x, vol.grid.spacing_m.y, vol.grid.spacing_m.z});
+  tool.radius_m = scene.hri.tool_radius_m > 0 ? scene.hri.tool_radius_m : std::max(4e-3, 2.5 * sp);
+}
+
+/// The scene's servo with the tool's felt radius; the point where the scene keeps it or
+/// renders what the sphere does not (the paper variant, friction, force shading).
+servo::HriParams Sculpt::felt_params() {
+  servo::HriParams p = scene.hri;
+  const bool sphere_ok = p.variant == servo::Variant::kRobust && !p.friction.any() && !p.force_shading && !scene.point_probe;
+  felt_m = sphere_ok ? as_recorded(felt_radius_m(tool, o.point_probe)) : 0.0;
+  p.tool_radius_m = felt_m;
+  if (!sphere_ok) felt_m = -1;  // never a sphere in this session
+  return p;
+}
+
+/// Each frame: the servo feels the tool's radius (a recorded session the one it began
+/// with) and the brush fits what is felt.
+void Sculpt::fit_felt_tool() {
+  if (felt_m >= 0 && !felt->fixed()) {
+    felt_m = as_recorded(felt_radius_m(tool, o.point_probe));
+    felt->want(felt_m);
+  }
+  fit_brush_to_felt_tool(tool, std::max(0.0, felt_m), cut_margin_m(vol));
+}
+
+/// The ticks since the last frame for the drill's figures: every tick on the simulated
+/// clock, else the frame's observed one.
+void Sculpt::watch_drill(const std::vector<sim::TraceRow>& rows, const session::Observed& obs) {
+  std::vector<TickSample> ticks;
+  for (const sim::TraceRow& r : rows) ticks.push_back({r.t_s, r.force_n, r.vhip_m, r.contact});
+  if (!o.sim_clock && obs.tick > last_watched_tick) {
+    ticks.push_back({double(obs.tick) / scene.hri.rate_hz, obs.force_n, obs.vhip_m, obs.contact});
+    last_watched_tick = obs.tick;
+  }
+  drill.ticks(ticks);
+}
+
+void Sculpt::print_felt_tool() {
+  const double margin = cut_margin_m(vol);
+  if (felt_m < 0)
+    log << "sculpt   tool felt as the point: the scene keeps it (servo.tool.point, the paper variant, friction or force shading)\n";
+  else if (o.point_probe)
+    log << "sculpt   tool felt as the point (--point-probe); the brush cuts its own radius around it\n";
+  else
+    log << "sculpt   tool felt as a sphere of the carve or drill brush's radius (" << fixed(felt_m * 1e3, 2)
+        << " mm now; add and smooth: the point); the brush cuts to its surface and fades over "
+        << fixed(margin * 1e3, 2) << " mm (half a voxel) beyond it\n";
+  if (felt->fixed() && felt_m >= 0)
+    log << "sculpt   --record: the tool stays as felt now for the whole session (the recording replays with one "
+           "tool); the brush follows radius changes\n";
 }
 
 // --- the frame loop ------------------------------------------------------------------------
@@ -1000,6 +1073,9 @@ Vec3 Sculpt::steer_hand(const FrameSize& f) {
 void Sculpt::apply_tools(const session::Observed& obs) {
   const auto now = Clock::now();
   const double dt_s = o.sim_clock ? sim_frame_s : std::chrono::duration<double>(now - last_frame).count();
+  fit_felt_tool();
+  drill.press(input.down[0] && tool.kind == session::BrushKind::kDrill, felt->applied_m() > 0 ? felt->applied_m() : tool.radius_m,
+              tool.radius_m + tool.cut_margin_m, [this] { return edited_volume(); });
   std::vector<session::EditEvent> evs;
   stroke.frame(input.down[0], obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
   for (const session::EditEvent& e : evs) {
@@ -1007,7 +1083,9 @@ void Sculpt::apply_tools(const session::Observed& obs) {
     ++events_submitted;
     if (e.kind == session::EditEvent::Kind::kBrush) brush_submitted.push_back(Clock::now());
   }
-  if (o.sim_clock) session->step_simulated(sim_run, sim_ticks_per_frame);
+  std::vector<sim::TraceRow> rows;
+  if (o.sim_clock) rows = session->step_simulated(sim_run, sim_ticks_per_frame);
+  watch_drill(rows, obs);
 }
 
 /// The picture follows the applied edits: only the changed bricks are uploaded. A brush
@@ -1324,6 +1402,8 @@ int Sculpt::finish() {
   write_last_screenshot();
   if (next_event < script.size() && !restarting) log << "script   ended before its event " << next_event << " (--frames or the window closed)\n";
   if (o.stats || o.bench) print_stats(seconds, st);
+  drill.report(log, edited_volume(), live.iso, scene.hri.force_limit_n);
+  if (o.stats || o.bench) log << "stats    felt tool: " << felt->changes() << " radius changes applied on the servo thread\n";
   if (!mouse) print_device();
   if (o.bench) print_verdicts(sculpted, alone);
   // A device that was lost, faulty or refused during the session: as `run --live` (a

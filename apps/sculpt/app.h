@@ -31,6 +31,9 @@ struct Options {
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
   double edit_wait_ms = 50;         ///< a frame waits this long at most for the brush it submitted (0: never)
   bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets
+  /// Feel every tool as the point (the probe of old, for comparison); by default a carve or
+  /// drill brush is felt as the spherical tool of its radius, the brush cutting to its surface.
+  bool point_probe = false;
   bool stats = false;               ///< print frame time, edit-to-pixels and servo figures at exit
   bool validation = false;          ///< Vulkan validation layer; any message makes the exit code 3
   /// The session's simulated mode on the frame's clock: each frame advances the servo by

@@ -48,6 +48,10 @@ int main(int argc, char** argv) {
   cli.add_flag("--bench", o.bench,
                "run a scripted sculpt (probe onto the surface, a carve stroke, undo; or --script) and print frame "
                "time, edit-to-pixels and servo figures with verdicts against the targets (50 / 80 / 100 ms)");
+  cli.add_flag("--point-probe", o.point_probe,
+               "feel every tool as a point (for comparison); by default a carve or drill brush of radius r is felt "
+               "as a sphere of radius r (what touches is what cuts; the brush cuts to its surface and at most half "
+               "a voxel beyond), and [ ] change both");
   cli.add_flag("--stats", o.stats, "print frame time, edit-to-pixels latency and servo figures at exit");
   cli.add_flag("--sim-clock", o.sim_clock,
                "run the servo and the edits on a simulated clock, one frame's worth of ticks per frame, on the "

@@ -26,8 +26,8 @@ session::Brush make_tool_brush(const ToolState& t, const core::Vec3& centre_m, d
   session::Brush b;
   b.kind = t.kind;
   b.centre_m = centre_m;
-  b.radius_m = t.radius_m;
-  b.falloff = 0.5;
+  b.radius_m = t.radius_m + t.cut_margin_m;
+  b.falloff = t.falloff;
   b.targets = t.targets;
   const double span = std::max(1e-6, std::fabs(double(t.targets.material) - double(t.targets.empty)));
   switch (t.kind) {

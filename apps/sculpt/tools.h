@@ -18,6 +18,11 @@ struct ToolState {
   double strength = 0.25;  ///< add / carve: fraction of |material - empty| per application;
                            ///< smooth: the brush's strength in [0, 1]; drill: its rate scale
   session::BrushTargets targets;
+  /// The brush's reach beyond radius_m [m] and its soft edge (session::Brush::falloff): a
+  /// tool felt as a sphere cuts out to its surface and fades over a margin beyond it
+  /// (fit_brush_to_felt_tool, burr.h); the point's brush is radius_m with falloff 0.5.
+  double cut_margin_m = 0;
+  double falloff = 0.5;
 };
 
 /// The radius and strength limits; the keys ([ ] - =) and the overlay's widgets keep to them.
@@ -30,8 +35,8 @@ void step_strength(ToolState& t, bool up);
 /// "add", "carve", "smooth", "drill" -> kind; nullopt otherwise.
 std::optional<session::BrushKind> tool_from_name(const std::string& name);
 
-/// The brush one application of the tool makes at `centre_m` (grid-world), the user pushing
-/// with |F| = `force_n` for `dt_s` seconds.
+/// The brush one application of the tool makes at `centre_m` (grid-world; the felt tool's
+/// centre), radius radius_m + cut_margin_m, the user pushing with |F| = `force_n` for `dt_s` seconds.
 session::Brush make_tool_brush(const ToolState& t, const core::Vec3& centre_m, double force_n, double dt_s);
 
 /// The stroke of one button press: begin on the first application, end on release.

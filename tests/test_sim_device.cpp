@@ -1,6 +1,7 @@
 // Simulated device, touch script and the headless loop.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -121,6 +122,33 @@ TEST(Headless, DeterministicAndTouches) {
     EXPECT_LE(norm(a[i].force_n), h.force_limit_n + 1e-12);
   }
   EXPECT_GT(contact, 500);
+}
+
+// The trace's force is the one the device took (after its own clip at force_max_n), not the
+// renderer's: a device that takes at most 0.5 N under a renderer allowed 3.3 N.
+TEST(Headless, TheTraceHoldsTheForceTheDeviceTook) {
+  const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
+  HriParams h;
+  h.tau = 0;
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  TripleBuffer<SampleField> tb;
+  tb.publish(field);
+  const TouchScript s = make_touch_script(*field, h, sp);
+  WorkspaceTransform xf;
+  xf.translation_m = field->grid.centre_m();
+  Vec3 p0, v0;
+  s.at(0, p0, v0);
+  SimDeviceParams dp;
+  dp.force_max_n = 0.5;
+  SimDevice d(dp, xf.to_device(p0));
+  HriRenderer r(h);
+  const auto trace = run_headless(tb, r, d, xf, s, 1000.0);
+  double worst = 0;
+  for (const auto& row : trace) worst = std::max(worst, norm(row.force_n));
+  EXPECT_GT(d.saturated_commands(), 10);  // the renderer asked for more
+  EXPECT_LE(worst, 0.5 + 1e-12);
+  EXPECT_GT(worst, 0.5 - 1e-9);
 }
 
 TEST(SimDevice, SaturatesAndRefusesNonFiniteCommands) {

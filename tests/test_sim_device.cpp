@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "isotouch/sim/headless.h"
 #include "isotouch/servo/sampling.h"
@@ -32,6 +33,24 @@ SampleField sphere_field(double R) {
                                             float(-u.y * 1000), float(-u.z * 1000)};
       }
   return f;
+}
+
+/// The headless loop on `field` from the script's start: returns the trace; `saturated`, if
+/// given, gets the device's count of clipped commands.
+std::vector<TraceRow> headless_run(const std::shared_ptr<const SampleField>& field, const HriParams& h,
+                                   const ScriptParams& sp, const SimDeviceParams& dp = {}, long* saturated = nullptr) {
+  TripleBuffer<SampleField> tb;
+  tb.publish(field);
+  const TouchScript s = make_touch_script(*field, h, sp);
+  WorkspaceTransform xf;
+  xf.translation_m = field->grid.centre_m();
+  Vec3 p0, v0;
+  s.at(0, p0, v0);
+  SimDevice d(dp, xf.to_device(p0));
+  HriRenderer r(h);
+  std::vector<TraceRow> trace = run_headless(tb, r, d, xf, s, 1000.0);
+  if (saturated) *saturated = d.saturated_commands();
+  return trace;
 }
 }  // namespace
 
@@ -100,19 +119,7 @@ TEST(Headless, DeterministicAndTouches) {
   ScriptParams sp;
   sp.ray_origin_frac = {0.5, 0.5, 1.3};
   sp.stroke_length_m = 0.015;
-  auto run = [&] {
-    TripleBuffer<SampleField> tb;
-    tb.publish(field);
-    const TouchScript s = make_touch_script(*field, h, sp);
-    WorkspaceTransform xf;
-    xf.translation_m = field->grid.centre_m();
-    Vec3 p0, v0;
-    s.at(0, p0, v0);
-    SimDevice d({}, xf.to_device(p0));
-    HriRenderer r(h);
-    return run_headless(tb, r, d, xf, s, 1000.0);
-  };
-  const auto a = run(), b = run();
+  const auto a = headless_run(field, h, sp), b = headless_run(field, h, sp);
   ASSERT_EQ(a.size(), b.size());
   long contact = 0;
   for (std::size_t i = 0; i < a.size(); ++i) {
@@ -132,21 +139,13 @@ TEST(Headless, TheTraceHoldsTheForceTheDeviceTook) {
   h.tau = 0;
   ScriptParams sp;
   sp.ray_origin_frac = {0.5, 0.5, 1.3};
-  TripleBuffer<SampleField> tb;
-  tb.publish(field);
-  const TouchScript s = make_touch_script(*field, h, sp);
-  WorkspaceTransform xf;
-  xf.translation_m = field->grid.centre_m();
-  Vec3 p0, v0;
-  s.at(0, p0, v0);
   SimDeviceParams dp;
   dp.force_max_n = 0.5;
-  SimDevice d(dp, xf.to_device(p0));
-  HriRenderer r(h);
-  const auto trace = run_headless(tb, r, d, xf, s, 1000.0);
+  long clipped = 0;
+  const auto trace = headless_run(field, h, sp, dp, &clipped);
   double worst = 0;
   for (const auto& row : trace) worst = std::max(worst, norm(row.force_n));
-  EXPECT_GT(d.saturated_commands(), 10);  // the renderer asked for more
+  EXPECT_GT(clipped, 10);  // the renderer asked for more
   EXPECT_LE(worst, 0.5 + 1e-12);
   EXPECT_GT(worst, 0.5 - 1e-9);
 }

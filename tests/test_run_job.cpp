@@ -495,6 +495,13 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
 }
 
 namespace {
+/// The start of a scene's JSON text: `name`, the synthetic sphere of radius 12 voxels in a
+/// 40^3 grid of 1 mm voxels, isovalue 0, inside above; the caller adds the rest.
+std::string sphere40(const std::string& name) {
+  return R"({"name": ")" + name + R"(", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
+    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",)";
+}
+
 /// Runs a scene given as JSON text (written to DIR/scene.json) into DIR/out.
 RunMetrics run_text(const fs::path& dir, const std::string& json) {
   fs::remove_all(dir);
@@ -617,8 +624,7 @@ TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
   // A carve into the sphere with drilled.stl written: summary.json says whether the mesh is
   // closed and what volume it encloses; both recomputed here from the STL file itself.
   const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_" + std::to_string(::getpid()));
-  const RunMetrics m = run_text(dir, R"({"name": "mesh", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
-    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",
+  const RunMetrics m = run_text(dir, sphere40("mesh") + R"(
     "script": {"hold_s": 0.05, "stroke_length_m": 0.002}, "outputs": {"plots": false},
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": true,
       "timeline": [{"t_s": 0.05, "kind": "carve", "at": [19.5, 19.5, 31.5], "radius_mm": 5, "strength": 1000}]}})");
@@ -672,8 +678,7 @@ TEST(RunJob, EditRippleMatchesTheTrace) {
   // edits 10 ticks apart ([first, last + 10)), |F| minus the median of a 10-tick window
   // (starting 5 before, kept inside the run), and 2/N |sum r_k exp(-2 pi i k / 10)|.
   const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_ripple_" + std::to_string(::getpid()));
-  const RunMetrics m = run_text(dir, R"({"name": "ripple", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
-    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",
+  const RunMetrics m = run_text(dir, sphere40("ripple") + R"(
     "script": {"hold_s": 0.4, "stroke_length_m": 0.0, "press_depth_m": 0.004}, "outputs": {"plots": false},
     "edits": {"brush": {"kind": "drill", "radius_mm": 2, "force_threshold_n": 0.1, "removal_per_n_s": 2},
       "button": [[0.0, 10.0]], "write_vdb": false, "write_nrrd": false, "write_stl": false}})");

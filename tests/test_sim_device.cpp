@@ -35,6 +35,19 @@ SampleField sphere_field(double R) {
   return f;
 }
 
+/// HRI at isovalue 0 (sphere_field's surface) and a script from above the sphere.
+HriParams iso0() {
+  HriParams h;
+  h.tau = 0;
+  return h;
+}
+ScriptParams from_above(double stroke_m) {
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.stroke_length_m = stroke_m;
+  return sp;
+}
+
 /// The headless loop on `field` from the script's start: returns the trace; `saturated`, if
 /// given, gets the device's count of clipped commands.
 std::vector<TraceRow> headless_run(const std::shared_ptr<const SampleField>& field, const HriParams& h,
@@ -135,10 +148,8 @@ TEST(Headless, DeterministicAndTouches) {
 // renderer's: a device that takes at most 0.5 N under a renderer allowed 3.3 N.
 TEST(Headless, TheTraceHoldsTheForceTheDeviceTook) {
   const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
-  HriParams h;
-  h.tau = 0;
-  ScriptParams sp;
-  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  const HriParams h = iso0();
+  const ScriptParams sp = from_above(ScriptParams{}.stroke_length_m);
   SimDeviceParams dp;
   dp.force_max_n = 0.5;
   long clipped = 0;
@@ -233,22 +244,11 @@ TEST(SimDevice, LightDeviceStaysFinite) {
 TEST(Headless, LightDeviceHasNoFaults) {
   // The run: mass 1e-4 kg, 3311 of 3411 ticks were faults. Same loop on a sphere.
   const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
-  HriParams h;
-  h.tau = 0;
-  ScriptParams sp;
-  sp.ray_origin_frac = {0.5, 0.5, 1.3};
-  sp.stroke_length_m = 0.010;
-  TripleBuffer<SampleField> tb;
-  tb.publish(field);
-  const TouchScript s = make_touch_script(*field, h, sp);
-  WorkspaceTransform xf;
-  Vec3 p0, v0;
-  s.at(0, p0, v0);
+  const HriParams h = iso0();
+  const ScriptParams sp = from_above(0.010);
   SimDeviceParams dp;
   dp.mass_kg = 1e-4;
-  SimDevice d(dp, xf.to_device(p0));
-  HriRenderer r(h);
-  const auto trace = run_headless(tb, r, d, xf, s, 1000.0);
+  const auto trace = headless_run(field, h, sp, dp);
   long faults = 0, contact = 0;
   for (const auto& row : trace) {
     faults += row.fault;

@@ -151,11 +151,12 @@ std::vector<std::pair<long, long>> drilling_runs(const EditDriver& edits, long p
 }
 
 /// The ripple (RunMetrics::ripple_n): |F| sent minus its moving median over one edit
-/// period (within each drilling run), and the amplitude of that at 1 / period: 2 / N times
-/// the modulus of its discrete Fourier sum at that frequency over the N drilling ticks (the
-/// runs are whole periods long, so no other harmonic leaks in).
-void edit_ripple(const std::vector<sim::TraceRow>& trace, const EditDriver& edits, double rate_hz, RunMetrics& m) {
-  const long period = std::lround(m.edit_period_s * rate_hz);
+/// period (the scene's every_ticks, whatever the servo does with edits), within each
+/// drilling run, and the amplitude of that at 1 / period: 2 / N times the modulus of its
+/// discrete Fourier sum at that frequency over the N drilling ticks (the runs are whole
+/// periods long, so no other harmonic leaks in).
+void edit_ripple(const std::vector<sim::TraceRow>& trace, const EditDriver& edits, RunMetrics& m) {
+  const long period = edits.every_ticks();
   if (period < 2) return;
   double re = 0, im = 0;
   long n = 0;
@@ -244,7 +245,7 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
               tool_r > 0 && vhip_inside(truth, iso, r), tool_r, m, s);
   }
   release_and_any_steps(trace, m);
-  if (edits) edit_ripple(trace, *edits, setup.hri.rate_hz, m);
+  if (edits) edit_ripple(trace, *edits, m);
   tick_times(trace, m);
   if (m.contact_ticks) {
     m.mean_contact_force_n = s.fsum / double(m.contact_ticks);

@@ -39,6 +39,8 @@ class EditDriver {
   EditDriver(const io::Scene& scene, SceneSetup& setup);
 
   /// The session's button drill: the scene's brush at the tool, every every_ticks ticks.
+  /// Ticks between two applications of a stroke or the button (the scene's every_ticks).
+  long every_ticks() const { return scene_.edits.every_ticks; }
   session::ButtonDrill drill() const {
     return {make_brush(at_tool(scene_.edits.brush), targets_, {}, dt_, 0), scene_.edits.every_ticks};
   }

@@ -189,6 +189,21 @@ struct RunMetrics {
   double unfiltered_err_rms_m = 0, unfiltered_err_max_m = 0;
   /// The scene's edits (present = false without an "edits" section).
   EditFigures edits;
+  /// The force's rate limits in the servo and the device, with how many ticks each bound:
+  /// the edit ease (the force step of an edit eased out over edit_period_s: its largest
+  /// rate |step| / period [N/s], and the lag it adds, a breakthrough included: the period),
+  /// the release fade (recovery_time_s > 0: a contact ended with force on fades over it),
+  /// the device's own clip at its maximum force. No direction limit exists (0 deg/s cap).
+  long edit_ease_ticks = 0;
+  double edit_ease_max_rate_n_s = 0, edit_period_s = 0;
+  long release_fade_ticks = 0;
+  long device_clipped_ticks = 0;
+  /// The drilling ripple: amplitude [N] of the sent |F| at the edit frequency (1 / edit
+  /// period) over the drilling phase (runs of at least 3 published brush edits one edit
+  /// period apart), after removing a moving median one edit period long; < 0: no drilling
+  /// phase. ripple_ticks: the ticks it was measured over.
+  double ripple_n = -1;
+  long ripple_ticks = 0;
 };
 
 }  // namespace isotouch::run

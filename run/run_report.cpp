@@ -366,7 +366,21 @@ nlohmann::ordered_json servo_json(const servo::HriParams& hp, const RunMetrics& 
 }
 
 // summary.json "contact": forces, their steps, saturation, the stiffness bound, faults.
-nlohmann::ordered_json contact_json(const RunMetrics& m) {
+// summary.json "contact.rate_limits": every limit on the force's rate of change, its rate
+// and how many ticks it bound (the step figures above are those of the force the device took).
+nlohmann::ordered_json rate_limits_json(const RunMetrics& m, const servo::HriParams& hp) {
+  const double fade_rate = hp.recovery_time_s > 0 ? hp.force_limit_n / hp.recovery_time_s : 0.0;
+  return {{"edit_ease", {{"period_s", m.edit_period_s},
+                         {"max_rate_n_per_s", m.edit_ease_max_rate_n_s},
+                         {"ticks", m.edit_ease_ticks},
+                         {"breakthrough_lag_s", m.edit_period_s},
+                         {"why", "an edit's force step eased out over the time its material took to remove"}}},
+          {"release_fade", {{"time_s", hp.recovery_time_s}, {"max_rate_n_per_s", fade_rate}, {"ticks", m.release_fade_ticks}}},
+          {"device_clip", {{"ticks", m.device_clipped_ticks}}},
+          {"direction_limit_deg_per_s", nullptr}};
+}
+
+nlohmann::ordered_json contact_json(const RunMetrics& m, const servo::HriParams& hp) {
   return {{"ticks", m.contact_ticks},
           {"max_force_n", m.max_force_n},
           {"mean_force_n", m.mean_contact_force_n},
@@ -385,7 +399,12 @@ nlohmann::ordered_json contact_json(const RunMetrics& m) {
           {"saturated_ticks", m.saturated_ticks},
           {"stiffness_bound_n_per_m", m.k_bound_n_per_m},
           {"stiffness_above_bound", m.k_above_bound},
-          {"fault_ticks", m.fault_ticks}};
+          {"fault_ticks", m.fault_ticks},
+          {"rate_limits", rate_limits_json(m, hp)},
+          {"edit_ripple_n", m.ripple_n >= 0 ? nlohmann::ordered_json(m.ripple_n) : nlohmann::ordered_json(nullptr)},
+          {"edit_ripple_fraction_of_limit",
+           m.ripple_n >= 0 ? nlohmann::ordered_json(m.ripple_n / hp.force_limit_n) : nlohmann::ordered_json(nullptr)},
+          {"edit_ripple_ticks", m.ripple_ticks}};
 }
 
 // summary.json "error": the VHIP's true distance from the isosurface (and from the unfiltered
@@ -463,7 +482,7 @@ nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup,
                      {"gradient_max_abs_diff_xyz", m.max_abs_diff_xyz},
                      {"gradient_max_rel_diff", m.max_rel_diff}};
   j["servo"] = servo_json(hp, m);
-  j["contact"] = contact_json(m);
+  j["contact"] = contact_json(m, hp);
   j["error"] = error_json(m, hp, found, raw_found);
   j["script"] = script_json(vol, setup.script, m);
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
@@ -547,6 +566,15 @@ std::string contact_rows(const RunMetrics& m, const servo::HriParams& hp, long f
      << " % of the force limit; |F_k - F_k-1| between contact ticks) |\n"
      << "| largest force step, any ticks | " << fmt(m.max_any_step_n, 4) << " N at t = " << fmt(m.max_any_step_t_s, 5)
      << " s (" << fmt(100 * m.max_any_step_n / hp.force_limit_n, 3) << " % of the force limit) |\n"
+     << "| force rate limits | edit ease over " << fmt(m.edit_period_s * 1e3, 4) << " ms (the time an edit's material took to remove; largest rate "
+     << fmt(m.edit_ease_max_rate_n_s, 4) << " N/s, " << m.edit_ease_ticks << " ticks eased, a breakthrough felt at most "
+     << fmt(m.edit_period_s * 1e3, 4) << " ms late); release fade " << m.release_fade_ticks << " ticks"
+     << (hp.recovery_time_s > 0 ? " (over " + fmt(hp.recovery_time_s * 1e3, 4) + " ms)" : std::string(" (off)"))
+     << "; device clip " << m.device_clipped_ticks << " ticks; no direction limit. Steps are those of the force the device took |\n"
+     << (m.ripple_n >= 0 ? "| edit ripple | " + fmt(m.ripple_n, 4) + " N (" + fmt(100 * m.ripple_n / hp.force_limit_n, 3) +
+                               " % of the force limit): the sent |F| at the edit frequency over " + std::to_string(m.ripple_ticks) +
+                               " drilling ticks, after a moving median one edit period long |\n"
+                         : std::string())
      << "| largest force direction step | " << fmt(m.force_dir_step_max_deg, 3) << " deg at t = "
      << fmt(m.force_dir_step_max_t_s, 5) << " s (RMS " << fmt(m.force_dir_step_rms_deg, 3)
      << " deg; angle between the forces of consecutive contact ticks) |\n"

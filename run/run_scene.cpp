@@ -88,6 +88,12 @@ std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const
   sr.progress = servo_progress(opt);
   std::vector<sim::TraceRow> trace = live.run_simulated(sr);
   live.stop();  // the recording: end record, fsync, rename
+  RunMetrics& m = setup.metrics;
+  m.edit_period_s = hp.edit_period_s;
+  m.edit_ease_ticks = long(renderer.edit_eased_ticks());
+  m.edit_ease_max_rate_n_s = renderer.edit_ease_max_rate();
+  m.release_fade_ticks = long(renderer.release_fade_ticks());
+  m.device_clipped_ticks = device.saturated_commands();
   return trace;
 }
 

@@ -246,6 +246,8 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   run_engine_step(scene, opt, s, log);
   // 3. Script, servo parameters, workspace.
   s.hri = scene.hri;
+  // An edit stands for every_ticks of cutting: its force step is eased over that time.
+  s.hri.edit_period_s = scene.edits.every_ticks / scene.hri.rate_hz;
   s.script = sim::make_touch_script(*s.truth, s.hri, scene.script);
   s.world_T_device.scale = scene.workspace_scale;
   s.world_T_device.translation_m = s.volume.grid.centre_m();

@@ -133,6 +133,55 @@ void tick_times(const std::vector<sim::TraceRow>& trace, RunMetrics& m) {
   m.tick_ns_mean = ns.empty() ? 0 : sum_ns / double(ns.size());
 }
 
+/// The ticks of the drilling phase: each run of at least 3 published brush edits whose
+/// ticks are `period` apart, from its first edit to one period after its last, as [from, to).
+std::vector<std::pair<long, long>> drilling_runs(const EditDriver& edits, long period) {
+  std::vector<long> ticks;
+  for (const EditRow& r : edits.rows)
+    if (r.event.kind == EditEvent::Kind::kBrush && r.outcome.published) ticks.push_back(r.event.tick);
+  std::sort(ticks.begin(), ticks.end());
+  std::vector<std::pair<long, long>> runs;
+  for (std::size_t i = 0; i < ticks.size();) {
+    std::size_t j = i;
+    while (j + 1 < ticks.size() && ticks[j + 1] - ticks[j] == period) ++j;
+    if (j - i + 1 >= 3) runs.push_back({ticks[i], ticks[j] + period});
+    i = j + 1;
+  }
+  return runs;
+}
+
+/// The ripple (RunMetrics::ripple_n): |F| sent minus its moving median over one edit
+/// period (the scene's every_ticks, whatever the servo does with edits), within each
+/// drilling run, and the amplitude of that at 1 / period: 2 / N times the modulus of its
+/// discrete Fourier sum at that frequency over the N drilling ticks (the runs are whole
+/// periods long, so no other harmonic leaks in).
+void edit_ripple(const std::vector<sim::TraceRow>& trace, const EditDriver& edits, RunMetrics& m) {
+  const long period = edits.every_ticks();
+  if (period < 2) return;
+  double re = 0, im = 0;
+  long n = 0;
+  std::vector<double> f, window;
+  for (const auto& [from, to] : drilling_runs(edits, period)) {
+    if (from < 0 || to > long(trace.size())) continue;
+    f.clear();
+    for (long k = from; k < to; ++k) f.push_back(core::norm(trace[std::size_t(k)].force_n));
+    for (long i = 0; i < long(f.size()); ++i) {
+      const long lo = std::clamp(i - period / 2, 0L, long(f.size()) - period);
+      window.assign(f.begin() + lo, f.begin() + lo + period);
+      std::nth_element(window.begin(), window.begin() + period / 2, window.end());
+      double med = window[std::size_t(period / 2)];
+      if (period % 2 == 0) med = 0.5 * (med + *std::max_element(window.begin(), window.begin() + period / 2));
+      const double phase = 2.0 * M_PI * double((from + i) % period) / double(period);
+      re += (f[std::size_t(i)] - med) * std::cos(phase);
+      im -= (f[std::size_t(i)] - med) * std::sin(phase);
+    }
+    n += long(f.size());
+  }
+  if (n == 0) return;
+  m.ripple_n = 2.0 / double(n) * std::hypot(re, im);
+  m.ripple_ticks = n;
+}
+
 }  // namespace
 
 void DirectionSteps::add(double t_s, bool contact, const core::Vec3& force_n) {
@@ -196,6 +245,7 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
               tool_r > 0 && vhip_inside(truth, iso, r), tool_r, m, s);
   }
   release_and_any_steps(trace, m);
+  if (edits) edit_ripple(trace, *edits, m);
   tick_times(trace, m);
   if (m.contact_ticks) {
     m.mean_contact_force_n = s.fsum / double(m.contact_ticks);

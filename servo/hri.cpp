@@ -10,7 +10,7 @@
 //   hri_plane.cpp   eq. 1's plane: p on the segment VHIP -> HIP, N = SurfaceNormal(p), and
 //                   beside them the robust ways of finding p (embedded VHIP, thin walls)
 //   hri_robust.cpp  the robust tick (Variant::kRobust): the rest of the departures
-//   hri_edit.cpp    edits (not in the paper): a new snapshot version, the force slew
+//   hri_edit.cpp    edits (not in the paper): a new snapshot version, the edit ease
 //   hri_tool.cpp    the spherical tool (not in the paper): several planes at once
 //   hri_fast.cpp    tick(), and the robust common ticks written out for speed (same bits)
 
@@ -60,7 +60,9 @@ void HriRenderer::clear_contact() {
   ramp_left_s_ = 0;
   prev_force_mag_ = 0;
   vel_valid_ = false;
-  edit_slewing_ = false;
+  edit_easing_ = false;
+  edit_ease_left_s_ = 0;
+  show_eased_vhip_ = false;
   prev_force_ = {};
   tool_plane_count_ = 0;
   scan_valid_ = false;

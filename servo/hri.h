@@ -69,18 +69,18 @@ struct HriParams {
   double max_speed_m_s = 100.0;
   /// Robust variant: most field samples one march along a segment may take (then bisection).
   int march_budget = 128;
-  /// Robust variant, edits: the largest change of the force vector F (hence of |F|) an
-  /// edit may cause per tick, as a fraction of force_limit_n (0.04: 0.132 N per tick at
-  /// 3.3 N, below the 5 % a shipped scene may step; a full-range change takes 25 ticks,
-  /// 25 ms at 1 kHz). The direction of F turns by at most edit_max_turn_deg per tick too. An edit is a new snapshot version
-  /// (FieldView::version); see HriRenderer, "Edits". 0 (any value not > 0, NaN included)
-  /// turns the edit handling off: a new snapshot is then read at the next plane update
-  /// like any other, and the force steps. [1 / tick]
-  double edit_max_step_fraction = 0.04;
-  /// Robust variant, edits: the largest turn of the force direction an edit may cause per
-  /// tick [deg] (a small force can turn far within one vector step: 20 deg at 0.26 N
-  /// while drilling through the skull). Applies while edit_max_step_fraction > 0.
-  double edit_max_turn_deg = 10.0;
+  /// Robust variant, edits: the time one edit's material took to remove [s]. A brush applied
+  /// every T seconds removes what the tool cut in those T seconds at once (the scenes' drill:
+  /// every_ticks / rate_hz; the app's button drill likewise); the force step the edit causes
+  /// (the force sent the tick before minus this tick's target) is eased out linearly over T,
+  /// added to the target, so the force follows the material as it was removed, not one step
+  /// per edit (no dip and recovery at the edit rate). The ease's rate is the edit's own
+  /// |step| / T [N/s] (no fixed per-tick cap); a breakthrough is felt at most T late. An edit
+  /// is a new snapshot version (FieldView::version); see HriRenderer, "Edits". 0 (any value
+  /// not > 0, NaN included) turns the edit handling off: a new snapshot is then read at the
+  /// next plane update like any other, and the force steps. 0.01 s: the shipped scenes' 10
+  /// ticks at 1 kHz.
+  double edit_period_s = 0.01;
   /// Robust variant: radius of a spherical tool [m, world]; 0 = a point (the paper). The
   /// HIP is the tool's centre; see HriRenderer, "Spherical tool".
   double tool_radius_m = 0.0;
@@ -227,12 +227,14 @@ struct ToolPlane {
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
 ///   behind it, a wall drilled away) fades that force out along its direction over
-///   recovery_time_s (contact = true, penetration 0); new contact or a fault ends it.
+///   recovery_time_s; new contact or a fault ends it. The proxy is on no surface while it
+///   fades: contact = false, penetration 0 (a run's figures count the release at the tick
+///   contact ended, with the force sent then, whatever the fade does after it).
 /// - Force shading (§3.3, after Ruspini et al. 1997): a constraint plane through the
 ///   previous VHIP with the normal there first projects the HIP to a temporary HIP; the
 ///   true plane then projects that onto itself, always: the final VHIP lies on the true
 ///   plane (the paper's version leaves it at the temporary HIP when that is in front).
-/// - Edits, when edit_max_step_fraction > 0: a tick whose snapshot has
+/// - Edits, when edit_period_s > 0: a tick whose snapshot has
 ///   another FieldView::version than the last sane tick's is an edit tick. On it the plane
 ///   is re-evaluated at once (not at the next n-tick update) with the update rules above,
 ///   reading the VHIP's value and |grad| from the new snapshot (nothing cached from the old
@@ -243,25 +245,31 @@ struct ToolPlane {
 ///   old snapshot and is inside the new one (material added over a hovering probe) counts
 ///   as an embedded contact point: the proxy is brought out to the new surface (before, the
 ///   VHIP's value cached from the old snapshot put a plane between VHIP and HIP at once, a
-///   step). From the edit tick on, the force vector is slewed: it moves from the F sent the
-///   tick before toward this tick's target (the spring-damper force, saturated) by at most
-///   edit_max_step_fraction * force_limit_n per tick (|F_sent - F_prev| <= step, so a carve
-///   that tilts the surface under the HIP turns the force over several ticks instead of
-///   flipping it), and its direction turns by at most edit_max_turn_deg per tick, until
-///   the tick it reaches the target.
-///   A running recovery ramp is folded into the slew and none starts on an edit tick; the
-///   user's own motion is slewed too while it lasts, so no tick changes |F| by more than
-///   the step. A later edit during the slew continues it from the |F| sent. Carved under
+///   step). The edit's force step is eased (edit ease): the offset E = F sent the tick
+///   before - this tick's target (the spring-damper force, saturated) is added to the
+///   target and fades linearly to 0 over edit_period_s, the time the edit's material took
+///   to remove: F_sent = target + E s, s = the ease's time left / edit_period_s. The
+///   removal is spread over the period it happened in (a brush applied every T seconds
+///   moves the surface by what T seconds of cutting removed), so under a steady drill
+///   the surface's advance and the hand's push cancel and |F| stays level; the user's own
+///   motion is felt at once through the target. The ease's rate is |E| / edit_period_s
+///   (edit_ease_max_rate(): the largest of a run), and the surface is felt at most
+///   edit_period_s late (a breakthrough too). While the offset pushes, the proxy shown
+///   (HriTick::vhip_m) is the eased one, VHIP + E s * world_per_device / K, on the surface
+///   as it recedes, and contact = true with the depth the force stands for: the material
+///   is still going.
+///   A running recovery ramp is folded into the ease and none starts on an edit tick. A
+///   later edit during the ease starts a new one from the force sent. Carved under
 ///   the VHIP: the VHIP goes to the new surface at once and |F| eases down to K times the
-///   new depth. Carved deeper than the HIP: the plane is dropped and |F| fades out along
-///   the last force direction (contact = true while it fades, penetration 0). Added over
+///   new depth. Carved deeper than the HIP: the plane is dropped and |F| eases out along
+///   the last force direction (the shown proxy on the receding surface). Added over
 ///   the VHIP: the VHIP comes out to the new surface (the embedded-VHIP search above; where
 ///   the addition is deeper than its reach, 8 voxels at most, a march out along the outward
 ///   normal at the VHIP, half-voxel steps, at most march_budget samples, then 20 bisection
 ///   steps) and |F| rises toward K times the new depth (saturated at the limit). With the
 ///   parameter 0 the version is never read (a run is bit for bit the run without the
 ///   feature), and without a version change nothing differs either. Fault ticks (zero
-///   force) end the slew. The paper variant ignores versions (Figure 2 as printed).
+///   force) end the ease. The paper variant ignores versions (Figure 2 as printed).
 ///
 /// Spherical tool (robust variant, tool_radius_m = r > 0). The HIP is the tool's centre,
 /// the VHIP (proxy) the centre of a sphere of radius r kept outside the isosurface, the
@@ -287,7 +295,7 @@ struct ToolPlane {
 /// gradient instead (nearest_surface), as before. Force: F = K (proxy - HIP) - B v_u u,
 /// u the unit push direction, no pull; an update that steps the force vector by more than
 /// 1 % of the limit fades the step out over recovery_time_s (direction and magnitude);
-/// edits slew as for the point. Friction and force shading do not apply to the tool (the
+/// edits ease as for the point. Friction and force shading do not apply to the tool (the
 /// scene refuses them).
 class HriRenderer final : public Renderer {
  public:
@@ -330,6 +338,12 @@ class HriRenderer final : public Renderer {
   /// Free ticks since construction that read no sample: the HIP stayed in a cell whose
   /// corners are all outside (robust point, quick_tick).
   std::uint64_t reads_skipped() const { return reads_skipped_; }
+  /// The rate limits this renderer applied so far (a run's figures report them): ticks whose
+  /// force the edit ease changed, the largest ease rate |E| / edit_period_s [N/s], and the
+  /// ticks of release fades (recovery_time_s > 0). reset() keeps them.
+  std::uint64_t edit_eased_ticks() const { return edit_eased_ticks_; }
+  double edit_ease_max_rate() const { return edit_ease_max_rate_; }
+  std::uint64_t release_fade_ticks() const { return release_fade_ticks_; }
 
   /// Signed excess over the isovalue: > 0 inside, <= 0 outside; NaN counts as outside.
   double excess(double value) const {
@@ -452,7 +466,7 @@ class HriRenderer final : public Renderer {
                        double f_hip);
   /// The state quick_tick covers: a configuration it covers (quick_ok_: the robust variant,
   /// the short way, a point tool, no force shading nor friction, a finite reach^2), started,
-  /// no fault, restart, edit, ramp, release nor slew running, the snapshot version known
+  /// no fault, restart, edit, ramp, release nor ease running, the snapshot version known
   /// where edits are tracked.
   bool plain_state() const;
   /// The configuration quick_tick covers, from params_ (quick_ok_).
@@ -466,7 +480,7 @@ class HriRenderer final : public Renderer {
   HriTick tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s);
   /// tick_robust_full's tick.
   HriTick tick_robust_full_body(const FieldView& field, const Vec3& hip, double dt_s);
-  /// The end of a robust tick: saturation, the edit slew, the state for the next tick.
+  /// The end of a robust tick: saturation, the edit ease, the state for the next tick.
   void finish_robust(const Vec3& hip, Vec3 force, bool edited, bool have_f_hip, double f_hip, TickOut& out);
   /// Contact force and VHIP for a HIP behind the plane (shared by both variants).
   Vec3 contact_force(const FieldView& field, const Vec3& hip, const Vec3& v_device, double dt,
@@ -476,10 +490,10 @@ class HriRenderer final : public Renderer {
   /// A new snapshot changed samples this renderer reads (its FieldView::changed box within
   /// reach of the HIP, the VHIP or the tool's scan); unknown boxes always reach.
   bool edit_reaches(const FieldView& field, const Vec3& hip) const;
-  /// Edits: limit the change of |F| from the tick before to one step, applied to `force`
-  /// (its |F| = mag [N], after saturation); returns the |F| sent [N] and ends the slew when
-  /// it reaches mag. Sets out.contact for a fade-out without a plane.
-  double edit_slew(Vec3& force, double mag, TickOut& out);
+  /// Edits: adds the edit ease's offset (what is left of it after this tick) to `force`, the
+  /// target (|F| = mag [N], after saturation), saturated again; returns the |F| sent [N]. Sets
+  /// out.contact, out.penetration_m and eased_vhip_ while the offset pushes.
+  double edit_ease(const Vec3& hip, Vec3& force, double mag, TickOut& out);
   /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
   void tool_rebuild(const FieldView& field, const Vec3& hip);
   /// Spherical tool: the planes from Newton searches (tools too large for surface_scan).
@@ -546,7 +560,14 @@ class HriRenderer final : public Renderer {
   VirtualPlane ramp_ref_;  ///< the plane before this tick's update (tick_general), for the ramp's trigger
   bool version_skipped_ = false;     ///< the last new version was not field_version_ + 1 (edit_reaches: reached)
   bool edit_tick_ = false;           ///< this tick reads a new version (no recovery ramp starts)
-  bool edit_slewing_ = false;        ///< |F| is still slewing toward the target after an edit
+  bool edit_easing_ = false;         ///< an edit ease runs (edit_ease_left_s_ > 0)
+  double edit_ease_left_s_ = 0;      ///< time left in the edit ease [s]
+  Vec3 edit_ease_from_;              ///< the ease's offset E at its start [N]
+  Vec3 eased_vhip_;                  ///< the proxy shown on an eased tick (world [m])
+  bool show_eased_vhip_ = false;     ///< this tick shows eased_vhip_
+  double edit_ease_max_rate_ = 0;    ///< largest |E| / edit_period_s of an ease so far [N/s]
+  std::uint64_t edit_eased_ticks_ = 0;    ///< ticks whose force the edit ease changed
+  std::uint64_t release_fade_ticks_ = 0;  ///< ticks of a release fade (recovery_time_s)
   Vec3 prev_force_;                  ///< force sent the tick before, device axes [N]
   Vec3 prev_target_f_;               ///< robust: unramped force of the tick before [N]
   Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)

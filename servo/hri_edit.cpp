@@ -1,8 +1,8 @@
 // hri_edit.cpp - edits, not in the paper (its volumes do not change while touched): a tick
 // that reads another snapshot version is an edit tick when the changed box reaches what the
-// renderer read (note_version, edit_reaches); the plane is then re-evaluated at once and
-// the force vector slewed from the one sent toward the new target (edit_slew:
-// edit_max_step_fraction of the limit and edit_max_turn_deg per tick), and material added
+// renderer read (note_version, edit_reaches); the plane is then re-evaluated at once, the
+// force step the edit causes is eased out over the time its material took to remove
+// (edit_ease: edit_period_s, the force follows the material removed), and material added
 // deeper than the embedded-VHIP search reaches is marched out of (march_out). hri.h, "Edits".
 
 #include "isotouch/servo/hri.h"
@@ -79,48 +79,37 @@ bool HriRenderer::edit_reaches(const FieldView& field, const Vec3& hip) const {
   return true;
 }
 
-double HriRenderer::edit_slew(Vec3& force, double mag, TickOut& out) {
-  // The force VECTOR moves from the one sent the tick before toward the target by at most
-  // one step (so neither |F| nor its direction can jump: a carve that tilts the surface
-  // 45 degrees under a held HIP turns the force over several ticks); the slew ends on the
-  // tick that reaches the target. A zero target fades the last force out along its own
-  // direction (a fading contact, penetration 0).
-  const double step = params_.edit_max_step_fraction * params_.force_limit_n;
-  if (!(step > 0.0)) {  // a force limit <= 0 or NaN: nothing to slew toward
-    edit_slewing_ = false;
+double HriRenderer::edit_ease(const Vec3& hip, Vec3& force, double mag, TickOut& out) {
+  // What the edit removed (or added) was cut over edit_period_s, not in the tick it was
+  // published: the offset between the force sent before it and the new target fades out
+  // linearly over that time, added to the target (so the user's own motion passes at once).
+  edit_ease_left_s_ -= ramp_dt_s_;
+  if (!(edit_ease_left_s_ > 1e-9 * params_.edit_period_s)) {  // done (or a NaN period)
+    edit_ease_left_s_ = 0;
+    edit_easing_ = false;
     return mag;
   }
-  // The direction first: at most edit_max_turn_deg from the one sent (rotated in the plane
-  // of the two, the target's magnitude kept); then the vector step. Both forces lie in the
-  // cone of that half-angle around the direction sent, so the step stays inside it.
-  Vec3 goal = force;
-  const double prev_mag = norm(prev_force_);
-  bool turned = false;
-  if (prev_mag > 0.0 && mag > 0.0 && params_.edit_max_turn_deg > 0.0) {
-    const Vec3 a = prev_force_ / prev_mag, b = force / mag;
-    const double c = std::clamp(dot(a, b), -1.0, 1.0);
-    const double max_turn = params_.edit_max_turn_deg * M_PI / 180.0;
-    if (std::acos(c) > max_turn) {
-      const Vec3 perp = normalized_or(b - a * c, Vec3{});
-      if (dot(perp, perp) > 0.0) {
-        goal = (a * std::cos(max_turn) + perp * std::sin(max_turn)) * mag;
-        turned = true;
-      }
-    }
+  const Vec3 offset = edit_ease_from_ * (edit_ease_left_s_ / params_.edit_period_s);
+  const Vec3 target = force;
+  force = target + offset;
+  double sent = norm(force);
+  // Between two forces within the limit the blend is within it; the target may have grown
+  // since the edit tick (the user pressing on): saturate again.
+  if (sent > params_.force_limit_n) {
+    out.saturated = saturate(force, params_.force_limit_n);
+    sent = norm(force);
   }
-  const Vec3 gap = goal - prev_force_;
-  const double g = norm(gap);
-  if (!(g > step)) {
-    if (!turned) {
-      edit_slewing_ = false;
-      return mag;
-    }
-    force = goal;
-    return norm(force);
+  ++edit_eased_ticks_;
+  if (sent > 0.0) {
+    // The proxy the force stands for, on the surface as the material recedes: F = K (proxy -
+    // HIP) / world_per_device, so the offset moves it by E s * world_per_device / K.
+    const double k = params_.stiffness_n_per_m;
+    eased_vhip_ = vhip_ + (force - target) * (params_.world_per_device / k);
+    show_eased_vhip_ = k > 0.0;
+    out.contact = true;
+    out.penetration_m = norm(eased_vhip_ - hip);
   }
-  force = prev_force_ + gap * (step / g);  // between two forces within the limit: within it too
-  if (!(mag > 0.0)) out.contact = true;    // a fading contact force, penetration 0
-  return norm(force);
+  return sent;
 }
 
 }  // namespace isotouch::servo

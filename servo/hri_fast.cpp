@@ -22,13 +22,13 @@ namespace isotouch::servo {
 // the common ticks keep their values in registers the calls may clobber: tick() saves one
 // register where it saved six, and builds the HriTick from registers.
 [[gnu::always_inline]] inline HriTick HriRenderer::quick_tick(const FieldView& field, const Vec3& hip, double dt_s) {
-  // The plain state: the robust tick's fault, restart, edit, ramp, release and slew branches
+  // The plain state: the robust tick's fault, restart, edit, ramp, release and ease branches
   // cannot act (each of those ticks takes the full path). In it after_fault_ is false,
   // lost_s_ is 0, none of ramp_left_s_, release_left_s_ and recovery_ticks_left_ is above 0
   // (every reader tests that), version_known_ is true where edits are tracked, and sliding_
   // is false (no friction): the full path's stores of them would change nothing.
   if (!plain_) return tick_robust_full(field, hip, dt_s);
-  if (params_.edit_max_step_fraction > 0 && field.version() != field_version_) return tick_robust_full(field, hip, dt_s);
+  if (params_.edit_period_s > 0 && field.version() != field_version_) return tick_robust_full(field, hip, dt_s);
   const double dt = (dt_s > 0 && std::isfinite(dt_s)) ? dt_s : dt_nominal_s_;
   const double elapsed = dt;  // + lost_s_ (0)
   // Sane and within reach (tick_robust_full's fault test): a non-finite HIP fails the
@@ -141,7 +141,7 @@ namespace isotouch::servo {
     ramp_dt_s_ = std::min(dt, 2.0 * dt_nominal_s_);
     return general_tick(field, hip, voxel, dt, true, f_hip);
   }
-  if (!in_cell && params_.edit_max_step_fraction > 0) {
+  if (!in_cell && params_.edit_period_s > 0) {
     // A new cell: outside if its largest corner excess is below zero by more than the
     // rounding of the blend (1e-9 of the largest corner or tau).
     double lo = 0, hi = 0;

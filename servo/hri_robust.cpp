@@ -76,6 +76,10 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
     ramp_left_s_ = params_.recovery_time_s;
     recovery_from_n_ = prev_force_mag_ - norm(force);  // offset to fade out [N]
     ramp_from_dir_ = prev_force_mag_ > 0 ? prev_force_ / prev_force_mag_ : Vec3{};
+    // The ramp starts from the force sent, an edit ease's offset included: it takes the
+    // ease over (both would add that offset).
+    edit_easing_ = false;
+    edit_ease_left_s_ = 0;
   }
   prev_target_f_ = force;
   ramped = ramp_left_s_ > 0;
@@ -91,18 +95,19 @@ Vec3 HriRenderer::ramp_force(const Vec3& force, bool plane_update, const Vec3& f
 }
 
 // The state in which quick_tick's ticks are tick_robust_full's: a configuration it covers
-// (quick_ok_), started, no fault, restart, edit, ramp, release nor slew running. The quick
+// (quick_ok_), started, no fault, restart, edit, ramp, release nor ease running. The quick
 // ticks keep it; the paths that can change it (tick_general, tick_robust_full) set plain_
 // from it when they end.
 bool HriRenderer::plain_state() const {
-  return quick_ok_ && started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_slewing_ &&
+  return quick_ok_ && started_ && !resync_ && vel_valid_ && lost_s_ == 0.0 && !after_fault_ && !edit_easing_ &&
          !(ramp_left_s_ > 0) && !(release_left_s_ > 0) && recovery_ticks_left_ <= 0 &&
-         (version_known_ || !(params_.edit_max_step_fraction > 0));
+         (version_known_ || !(params_.edit_period_s > 0));
 }
 
 // Out of line: the quick tick (quick_tick, hri_fast.cpp) then compiles as a small function.
 [[gnu::noinline]] HriTick HriRenderer::tick_robust_full(const FieldView& field, const Vec3& hip, double dt_s) {
-  const HriTick t = tick_robust_full_body(field, hip, dt_s);
+  HriTick t = tick_robust_full_body(field, hip, dt_s);
+  if (show_eased_vhip_) t.vhip_m = eased_vhip_;  // the proxy on the receding surface (edit ease)
   plain_ = plain_state();
   return t;
 }
@@ -134,7 +139,8 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     recovery_ticks_left_ = 0;
     ramp_left_s_ = 0;
     after_fault_ = true;  // the force resumes from 0: the next contact tick ramps
-    edit_slewing_ = false;  // zero force was sent: an edit slew ends here
+    edit_easing_ = false;  // zero force was sent: an edit ease ends here
+    edit_ease_left_s_ = 0;
     release_left_s_ = 0;    // and a release fade
     prev_force_ = {};
     return result(out, plane_);
@@ -144,14 +150,14 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
   if (!started_ || resync_) restart_at(hip);
   // Edits: a new snapshot version. Nothing read from the old snapshot
   // (the VHIP's cached value, the held plane's |grad|) is used on it.
-  const bool edited = params_.edit_max_step_fraction > 0 && note_version(field.version()) && edit_reaches(field, hip);
+  const bool edited = params_.edit_period_s > 0 && note_version(field.version()) && edit_reaches(field, hip);
   bool covered_free_vhip = false;  // a free VHIP outside in the old snapshot: a contact point now
   if (edited) {
     covered_free_vhip = !plane_.valid && ((vhip_value_known_ && !(excess(vhip_value_) > 0.0)) || vhip_outside_);
     vhip_value_known_ = false;
     vhip_outside_ = false;
     plane_grad_norm_ = 0;
-    ramp_left_s_ = 0;  // the edit slew takes a running recovery ramp over
+    ramp_left_s_ = 0;  // the edit ease takes a running recovery ramp over
   }
   edit_tick_ = edited;
   if (vel_valid_) {
@@ -340,7 +346,7 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
       !(excess(vhip_value()) > 0.0)) {
     // The VHIP's value for the bound: read from this snapshot, or cached from the tick
     // before where edits are tracked (an edit that reaches the VHIP makes this an edit tick).
-    const bool fresh = !vhip_value_known_ || params_.edit_max_step_fraction > 0;
+    const bool fresh = !vhip_value_known_ || params_.edit_period_s > 0;
     if (reached_through_material(field, hip, held, held_grad_norm, voxel, fresh ? &f_vhip_now : nullptr)) {
       set_plane(held);
       plane_grad_norm_ = held_grad_norm;
@@ -467,8 +473,9 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
   // under a HIP still behind the held plane, a drilled-away wall): the force sent the tick
   // before fades out along its own direction over recovery_time_s (contact, penetration 0)
   // instead of dropping to zero in one tick. A new contact ends the fade (its ramp starts
-  // from the force sent); an edit slew takes it over.
-  if (in_contact || out.fault || edit_slewing_ || edited || !(params_.recovery_time_s > 0)) {
+  // from the force sent); an edit ease takes it over. The proxy is on no
+  // surface while it fades: contact = false.
+  if (in_contact || out.fault || edit_easing_ || edited || !(params_.recovery_time_s > 0)) {
     release_left_s_ = 0;
   } else if (was_contact_ && prev_force_mag_ > 0.01 * params_.force_limit_n) {
     release_left_s_ = params_.recovery_time_s;
@@ -479,13 +486,19 @@ void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, co
     if (release_left_s_ < 1e-9 * params_.recovery_time_s) release_left_s_ = 0;  // rounding
     force = release_from_ * (release_left_s_ / params_.recovery_time_s);
     mag = norm(force);
-    out.contact = true;
     out.penetration_m = 0;
+    ++release_fade_ticks_;
   }
-  if (edited) edit_slewing_ = true;
-  if (edit_slewing_) {
-    if (out.fault) edit_slewing_ = false;
-    else mag = edit_slew(force, mag, out);
+  show_eased_vhip_ = false;
+  if (edited && !out.fault) {
+    edit_easing_ = true;
+    edit_ease_left_s_ = params_.edit_period_s;
+    edit_ease_from_ = prev_force_ - force;
+    edit_ease_max_rate_ = std::max(edit_ease_max_rate_, norm(edit_ease_from_) / params_.edit_period_s);
+  }
+  if (edit_easing_) {
+    if (out.fault) edit_easing_ = false;
+    else mag = edit_ease(hip, force, mag, out);
   }
   prev_hip_ = hip;
   prev_force_mag_ = mag;

@@ -36,11 +36,13 @@ TraceRow headless_tick(TripleBuffer<SampleField>& samples, servo::Renderer& rend
   const auto t1 = clock::now();
 
   device.command_force(out.force_n);
+  const Vec3 sent = device.applied_force();
   Vec3 tgt_w, tgt_v;
   script.at(t + period, tgt_w, tgt_v);
   device.step(period, xf.to_device(tgt_w), tgt_v / xf.scale);
 
   TraceRow r = trace_row(t, hip, out, std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count());
+  r.force_n = sent;  // what the device took (refused: 0; clipped at its maximum)
   r.hand_target_m = tgt_w;
   r.version = field->version;
   return r;

@@ -89,10 +89,12 @@ m hri-speed-robust-at-2x    $H 'return dot(moved, moved) > max_move * max_move;'
 m hri-speed-quick-at-2x     $H 'if (dot(moved, moved) > max_move * max_move) return tick_robust_full(' \
                                'if (dot(moved, moved) > 4 * max_move * max_move) return tick_robust_full(' $T "$F"
 m core-saturate-at-2x       core/vec3.h 'if (!(m > limit)) return false;' 'if (!(m > 2 * limit)) return false;' $T "$F"
-m hri-edit-step-2x          $H 'const double step = params_.edit_max_step_fraction * params_.force_limit_n;' \
-                               'const double step = 2 * params_.edit_max_step_fraction * params_.force_limit_n;' test_hri_edit 'HriEdit.*'
-m hri-edit-turn-2x          $H 'const double max_turn = params_.edit_max_turn_deg * M_PI / 180.0;' \
-                               'const double max_turn = 2 * params_.edit_max_turn_deg * M_PI / 180.0;' test_hri_edit 'HriEdit.*'
+m hri-edit-ease-off         $H 'if (edited && !out.fault) {' 'if (false) {' test_hri_edit 'HriEdit.*'
+m hri-edit-ease-half-period $H 'const Vec3 offset = edit_ease_from_ * (edit_ease_left_s_ / params_.edit_period_s);' \
+                               'const Vec3 offset = edit_ease_from_ * std::max(0.0, 2 * edit_ease_left_s_ / params_.edit_period_s - 1);' \
+                               test_hri_edit 'HriEdit.*'
+m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_ticks_;' \
+                               $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' $T "$F"
 
 # ---- The run ----
 work=$root/build-mutants

@@ -537,7 +537,7 @@ TEST(HriRecovery, RampsAPlaneMadeAfterFreeTicks) {
 
 // A plane update that turns the plane turns the force over the recovery time, not in one
 // tick: the wall under a held HIP is replaced by one tilted 60 deg about the same point
-// (same snapshot version semantics off: edit_max_step_fraction = 0, so the next n-tick
+// (same snapshot version semantics off: edit_period_s = 0, so the next n-tick
 // update reads it like any plane). Truth: the two analytic normals.
 TEST(HriRecovery, PlaneTurnTurnsTheForceOverTheRamp) {
   const Vec3 tilted{std::sin(M_PI / 3), 0.0, std::cos(M_PI / 3)};  // 60 deg from +z
@@ -546,7 +546,7 @@ TEST(HriRecovery, PlaneTurnTurnsTheForceOverTheRamp) {
   auto run = [&](double rec) {
     HriParams p = params(5);
     p.recovery_time_s = rec;
-    p.edit_max_step_fraction = 0;
+    p.edit_period_s = 0;
     HriRenderer r(p);
     for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);  // free ticks above
     for (int k = 0; k < 60; ++k) r.tick(a, hip);             // pressed, the ramp over
@@ -581,7 +581,7 @@ TEST(HriRecovery, AWideTurnRotatesAtASteadyRate) {
     const Vec3 hip = kC - (kUp + tilted) * (0.0005 / (1.0 + dot(kUp, tilted)));
     HriParams p = params(5);
     p.recovery_time_s = 0.02;
-    p.edit_max_step_fraction = 0;
+    p.edit_period_s = 0;
     HriRenderer r(p);
     for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);  // free ticks above
     for (int k = 0; k < 60; ++k) r.tick(a, hip);             // pressed, the ramp over
@@ -772,15 +772,17 @@ TEST(HriOptions, EveryNormalSourceGivesTheSphereNormal) {
 // held plane (here the wall is swapped for one 4 mm lower without a new snapshot version,
 // so the update reads it like any plane: the HIP, 1 mm below the old wall, is 3 mm above
 // the new one) ends contact with 0.5 N on. With a 20 ms recovery time the force fades out
-// along its direction over 20 ticks (steps of 0.5 / 20 N, contact kept while it fades);
-// without it, it drops to zero in one tick.
+// along its direction over 20 ticks (steps of 0.5 / 20 N); without it, it drops to zero in
+// one tick. The proxy is on no surface while the force fades: contact is false on those
+// ticks (a run's release figure then counts the 0.5 N), and the renderer counts them.
 TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
   const SampleField a = wall_field(kUp, kC), b = wall_field(kUp, kC - kUp * 0.004);
   const Vec3 hip = kC - kUp * 0.001;
+  long fade_ticks = 0, counted = 0;
   auto run = [&](double rec, double* last_contact_force) {
     HriParams p = params(5);
     p.recovery_time_s = rec;
-    p.edit_max_step_fraction = 0;
+    p.edit_period_s = 0;
     HriRenderer r(p);
     for (int k = 0; k < 5; ++k) r.tick(a, kC + kUp * 0.002);
     for (int k = 0; k < 60; ++k) r.tick(a, hip);
@@ -795,8 +797,11 @@ TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
         EXPECT_GE(dot(t.force_n, kUp), 0.999 * m);  // along the last direction
       }
       released = released || !t.contact;
+      if (rec > 0 && m > 0 && !t.contact) ++fade_ticks;
+      EXPECT_FALSE(released && t.contact) << "contact again while the force fades";
       prev = m;
     }
+    if (rec > 0) counted = long(r.release_fade_ticks());
     EXPECT_TRUE(released);
     EXPECT_EQ(prev, 0.0);
     return worst;
@@ -808,6 +813,9 @@ TEST(HriRecovery, AReleaseByAPlaneUpdateFadesOverTheRecoveryTime) {
   EXPECT_NEAR(f_rec, 0.5, 1e-9);
   EXPECT_NEAR(plain, 0.5, 1e-9);
   EXPECT_LE(faded, 0.5 / 20 * (1 + 1e-9));
+  EXPECT_GE(fade_ticks, 19);  // fading with contact false
+  EXPECT_GE(counted, fade_ticks);  // and counted (the last fade tick may send 0)
+  EXPECT_LE(counted, fade_ticks + 1);
 }
 
 // The recovery ramp must not make a wall active. A hand pressing a flat wall (no plane ever

@@ -4,10 +4,11 @@
 // in (carve) or out (add). Truth comes from the analytic shapes (sim/analytic_fields.h:
 // half-space and sphere, value = 1000 * signed distance [mm], gradient analytic, positive
 // inside, tau = 0) and from the spring law F = K * depth: never from the renderer's own
-// output. The bound under test: an edit changes |F| by at most edit_max_step_fraction *
-// force_limit_n per tick (5 % by default). Each test also runs the renderer with the
-// feature off (edit_max_step_fraction = 0) where that shows the fault the feature removes,
-// so a test that cannot fail is caught.
+// output. The rule under test: the force step an edit causes is eased out linearly over
+// edit_period_s (10 ticks here), the time the edit's material took to remove; in these
+// shapes every such step is at most 1.65 N, so no tick changes |F| by more than 5 % of the
+// limit. Each test also runs the renderer with the feature off (edit_period_s = 0) where
+// that shows the fault the feature removes, so a test that cannot fail is caught.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -30,11 +31,12 @@ namespace {
 constexpr double kVoxel = 1e-3;  // voxel [m] of every field here
 constexpr double kK = 800.0;     // stiffness [N/m]
 constexpr double kLimit = 3.3;   // force limit [N]
-constexpr double kFrac = 0.05;   // the edit slew's bound: 5 % of the force limit per tick
-constexpr double kStep = kFrac * kLimit;  // largest |F| change per tick an edit may cause [N]
+constexpr double kPeriod = 0.01;  // edit_period_s: an edit's force step eases out over it [s]
+constexpr int kEase = 10;         // ... that is 10 ticks at 1 kHz
+constexpr double kStep = 0.05 * kLimit;  // 5 % of the limit: above every eased step here [N]
 constexpr double kX = 0.016, kY = 0.016;  // the probe's x, y [m] (centre of the 32 mm box)
 
-HriParams params(double frac = kFrac, int n = 5) {
+HriParams params(double period_s = kPeriod, int n = 5) {
   HriParams p;
   p.tau = 0;
   p.stiffness_n_per_m = kK;
@@ -42,7 +44,7 @@ HriParams params(double frac = kFrac, int n = 5) {
   p.plane_update_period = n;
   p.rate_hz = 1000;
   p.force_limit_n = kLimit;
-  p.edit_max_step_fraction = frac;
+  p.edit_period_s = period_s;
   return p;
 }
 
@@ -106,7 +108,7 @@ FieldAt switch_at(const SampleField& a, const SampleField& b, int edit) {
 
 // Carve under the VHIP: the floor is lowered by 1 mm under a HIP held 2.5 mm deep. The
 // VHIP goes to the new floor on the edit tick and |F| eases from K * 2.5 mm = 2.0 N to
-// K * 1.5 mm = 1.2 N in steps of at most 5 % of the limit.
+// K * 1.5 mm = 1.2 N linearly over the edit period (0.08 N per tick).
 TEST(HriEdit, CarveUnderTheVhipEasesTheForceDownToTheNewDepth) {
   const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
   const int edit = 152, ticks = 300;  // 152: mid-period for n = 5 (checked below)
@@ -128,22 +130,26 @@ TEST(HriEdit, CarveUnderTheVhipEasesTheForceDownToTheNewDepth) {
   // update), the VHIP already on the new floor.
   EXPECT_TRUE(t[edit].plane_update);
   EXPECT_FALSE(t0[edit].plane_update);
-  EXPECT_NEAR(t[edit].vhip_m.z, 0.015, 1e-3 * kVoxel);
-  // |F| goes down, never up, and reaches K * 1.5 mm after ceil(0.8 / step) = 5 ticks.
-  for (int k = edit; k < edit + 10; ++k) EXPECT_LE(norm(t[k].force_n), norm(t[k - 1].force_n) + 1e-12) << k;
-  EXPECT_GT(norm(t[edit + 3].force_n), kK * 0.0015 + 1e-3);  // still easing: not a jump
+  EXPECT_NEAR(t[edit].plane.p.z, 0.015, 1e-3 * kVoxel);
+  // |F| goes down linearly over the edit period, the proxy shown on the receding floor.
+  for (int j = 0; j < kEase; ++j) {
+    const double s = 1.0 - (j + 1.0) / kEase;
+    EXPECT_NEAR(norm(t[edit + j].force_n), kK * (0.0015 + 0.001 * s), 1e-5) << j;
+    EXPECT_NEAR(t[edit + j].vhip_m.z, 0.015 + 0.001 * s, 1e-3 * kVoxel) << j;
+    EXPECT_TRUE(t[edit + j].contact) << j;
+  }
   // Settled: VHIP on the new surface (analytic distance), F = K * new depth along +z.
   const HriTick& last = t.back();
   EXPECT_TRUE(last.contact);
   EXPECT_NEAR(last.vhip_m.z, 0.015, 1e-3 * kVoxel);
   EXPECT_NEAR(last.force_n.z, kK * 0.0015, 1e-5);
   EXPECT_NEAR(norm(last.force_n), kK * 0.0015, 1e-5);
-  for (int k = edit + 5; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
+  for (int k = edit + kEase - 1; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
 }
 
 // Carve deeper than the HIP: the floor goes from z = 16 mm to 12 mm under a HIP held at
-// 14 mm (1.6 N). The HIP is now in the air: |F| fades to 0 in steps of at most 5 % (along
-// +z, never a pull), then stays 0.
+// 14 mm (1.6 N). The HIP is now in the air: |F| eases to 0 over the edit period (along +z,
+// never a pull; the proxy shown on the receding floor, in contact), then stays 0.
 TEST(HriEdit, CarveDeeperThanTheHipFadesTheForceOut) {
   const SampleField before = floor_at(0.016, 4), after = floor_at(0.012, 5);
   const int edit = 153, ticks = 260;
@@ -156,14 +162,16 @@ TEST(HriEdit, CarveDeeperThanTheHipFadesTheForceOut) {
   int worst_at = -1;
   EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
   EXPECT_GT(max_step(t0), 5 * kStep);  // feature off: 1.6 N -> 0 in one tick
-  // Fading: |F| falls by exactly one step per tick (nothing else changes) along +z.
-  const int fade = int(std::ceil(kK * 0.002 / kStep));  // ticks to reach 0
+  // Fading: |F| falls by a tenth of 1.6 N per tick (nothing else changes) along +z.
+  const int fade = kEase;  // ticks to reach 0
   for (int k = edit; k < edit + fade; ++k) {
     const double m = norm(t[k].force_n);
-    EXPECT_NEAR(m, std::max(0.0, kK * 0.002 - (k - edit + 1) * kStep), 1e-9) << k;
-    if (m > 0) {
+    EXPECT_NEAR(m, kK * 0.002 * (1.0 - (k - edit + 1.0) / kEase), 1e-9) << k;
+    if (m > 1e-9) {
       EXPECT_NEAR(t[k].force_n.z, m, 1e-12) << k;  // pushes out, no sideways part
       EXPECT_TRUE(t[k].contact) << k;
+      EXPECT_NEAR(t[k].vhip_m.z, 0.014 + m / kK, 1e-9) << k;  // on the floor as it recedes
+      EXPECT_NEAR(t[k].penetration_m, m / kK, 1e-9) << k;
     }
     EXPECT_FALSE(t[k].fault) << k;
   }
@@ -195,8 +203,8 @@ TEST(HriEdit, CarveDeeperThanAMovingHipFadesThenTheNewFloorHolds) {
 }
 
 // Add over the VHIP: the floor rises from 16 mm to 17.5 mm over a HIP held at 15 mm. The
-// proxy is brought out to the new floor and |F| rises from 0.8 N to K * 2.5 mm = 2.0 N in
-// steps of at most 5 %.
+// proxy is brought out to the new floor and |F| rises from 0.8 N to K * 2.5 mm = 2.0 N
+// linearly over the edit period.
 TEST(HriEdit, AddOverTheVhipBringsTheProxyOutGradually) {
   const SampleField before = floor_at(0.016, 9), after = floor_at(0.0175, 10);
   const int edit = 153, ticks = 300;  // 153: mid-period for n = 5 (checked below)
@@ -212,26 +220,29 @@ TEST(HriEdit, AddOverTheVhipBringsTheProxyOutGradually) {
   EXPECT_GT(max_step(t0), 5 * kStep);  // feature off: 0.8 N -> 2.0 N at the next update
   EXPECT_TRUE(t[edit].plane_update);
   EXPECT_FALSE(t0[edit].plane_update);
-  EXPECT_NEAR(t[edit].vhip_m.z, 0.0175, 1e-3 * kVoxel);  // out on the edit tick
-  for (int k = edit; k < edit + 12; ++k) EXPECT_GE(norm(t[k].force_n), norm(t[k - 1].force_n) - 1e-12) << k;
-  EXPECT_LT(norm(t[edit + 3].force_n), kK * 0.0025 - 1e-3);  // still rising: not a jump
-  for (int k = edit + 8; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0025, 1e-5) << k;
+  EXPECT_NEAR(t[edit].plane.p.z, 0.0175, 1e-3 * kVoxel);  // out on the edit tick
+  for (int j = 0; j < kEase; ++j)
+    EXPECT_NEAR(norm(t[edit + j].force_n), kK * (0.0025 - 0.0015 * (1.0 - (j + 1.0) / kEase)), 1e-5) << j;
+  for (int k = edit + kEase - 1; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0025, 1e-5) << k;
   EXPECT_NEAR(t.back().vhip_m.z, 0.0175, 1e-3 * kVoxel);
   EXPECT_NEAR(t.back().force_n.z, kK * 0.0025, 1e-5);
 }
 
 // A thick addition (the floor rises by 10 mm over a HIP 1 mm deep, beyond the 8-voxel reach
 // of the bounded embedded-VHIP search): the proxy is still brought out to the new floor,
-// and |F| rises to the saturated K * 11 mm (8.8 N -> the 3.3 N limit) in steps of at most 5 %.
+// and |F| rises to the saturated K * 11 mm (8.8 N -> the 3.3 N limit) over the edit period:
+// 2.5 N in 10 ticks (the ease's rate is the edit's own, 250 N/s here).
 TEST(HriEdit, AThickAdditionBringsTheProxyOutToo) {
   const SampleField before = floor_at(0.016, 1), after = floor_at(0.026, 2);
   const int edit = 153, ticks = 260;
   HriRenderer r(params());
   const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.015));
   EXPECT_TRUE(t[edit].plane_update);
-  EXPECT_NEAR(t[edit].vhip_m.z, 0.026, 1e-3 * kVoxel);
-  EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
-  EXPECT_NEAR(norm(t[edit].force_n), kK * 0.001 + kStep, 1e-5);
+  EXPECT_NEAR(t[edit].plane.p.z, 0.026, 1e-3 * kVoxel);
+  const double eased = (kLimit - kK * 0.001) / kEase;  // per tick [N]
+  EXPECT_LE(max_step(t), eased * (1 + 1e-9));
+  EXPECT_NEAR(norm(t[edit].force_n), kK * 0.001 + eased, 1e-5);
+  EXPECT_NEAR(r.edit_ease_max_rate(), (kLimit - kK * 0.001) / kPeriod, 1e-6);
   EXPECT_NEAR(t.back().vhip_m.z, 0.026, 1e-3 * kVoxel);
   EXPECT_NEAR(t.back().force_n.z, kLimit, 1e-9);
   EXPECT_TRUE(t.back().saturated);
@@ -253,7 +264,7 @@ TEST(HriEdit, AddOverAHoveringProbePushesItOutGradually) {
   int worst_at = -1;
   EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
   EXPECT_TRUE(t[edit].plane_update);
-  EXPECT_NEAR(norm(t[edit].force_n), kStep, 1e-9);  // one step up, not K * 1 mm at once
+  EXPECT_NEAR(norm(t[edit].force_n), kK * 0.001 / kEase, 1e-5);  // a tenth, not K * 1 mm at once
   for (int k = edit + 10; k < ticks; ++k) {
     EXPECT_NEAR(t[k].force_n.z, kK * 0.001, 1e-5) << k;
     EXPECT_NEAR(t[k].vhip_m.z, 0.0175, 1e-3 * kVoxel) << k;
@@ -267,10 +278,9 @@ TEST(HriEdit, ThePlaneIsReEvaluatedOnTheEditTick) {
   for (double z_new : {0.015, 0.0165})
     for (int edit = 140; edit < 160; ++edit) {
       const SampleField before = floor_at(0.016, 3), after = floor_at(z_new, 4);
-      HriRenderer r(params(kFrac, 20));
+      HriRenderer r(params(kPeriod, 20));
       const auto t = drive(r, edit + 1, switch_at(before, after, edit), press_to(0.0145));
       EXPECT_TRUE(t[edit].plane_update) << "edit at " << edit << ", floor " << z_new;
-      EXPECT_NEAR(t[edit].vhip_m.z, z_new, 1e-3 * kVoxel) << "edit at " << edit;
       EXPECT_NEAR(t[edit].plane.p.z, z_new, 1e-3 * kVoxel);
     }
 }
@@ -309,9 +319,9 @@ TEST(HriEdit, EditsUnderASlidingHipOnASphereKeepTheBound) {
   EXPECT_TRUE(t.back().contact);
 }
 
-// Two edits in a row (an add, then a carve 3 ticks later, mid-slew): the slew restarts from
-// the |F| sent, and the bound holds; the force ends at K * the final depth.
-TEST(HriEdit, AnEditDuringTheSlewRestartsItFromTheForceSent) {
+// Two edits in a row (an add, then a carve 3 ticks later, mid-ease): the second ease starts
+// from the |F| sent, and the bound holds; the force ends at K * the final depth.
+TEST(HriEdit, AnEditDuringTheEaseRestartsItFromTheForceSent) {
   const SampleField f0 = floor_at(0.016, 1), f1 = floor_at(0.0175, 2), f2 = floor_at(0.0145, 3);
   const int e1 = 150, e2 = 153, ticks = 260;
   const FieldAt field = [&](int k) -> const SampleField& { return k < e1 ? f0 : (k < e2 ? f1 : f2); };
@@ -321,10 +331,11 @@ TEST(HriEdit, AnEditDuringTheSlewRestartsItFromTheForceSent) {
   int worst_at = -1;
   EXPECT_LE(max_step(t, &worst_at), kStep * (1 + 1e-12)) << "at tick " << worst_at;
   EXPECT_GT(max_step(t0), 3 * kStep);
-  // Up by one step per tick for 3 ticks, then down one step per tick toward K * 1 mm.
-  const double f_before = kK * 0.0025;
-  for (int k = e1; k < e2; ++k) EXPECT_NEAR(norm(t[k].force_n), f_before + (k - e1 + 1) * kStep, 1e-9) << k;
-  EXPECT_NEAR(norm(t[e2].force_n), f_before + 2 * kStep, 1e-9);
+  // Up by a tenth of 1.2 N per tick for 3 ticks, then from there down toward K * 1 mm.
+  const double f_before = kK * 0.0025, up = kK * 0.0015 / kEase;
+  for (int k = e1; k < e2; ++k) EXPECT_NEAR(norm(t[k].force_n), f_before + (k - e1 + 1) * up, 1e-5) << k;
+  const double sent = f_before + 3 * up, f_end = kK * 0.001;
+  EXPECT_NEAR(norm(t[e2].force_n), f_end + (sent - f_end) * (1.0 - 1.0 / kEase), 1e-5);
   EXPECT_NEAR(norm(t.back().force_n), kK * 0.001, 1e-5);
   EXPECT_NEAR(t.back().vhip_m.z, 0.0145, 1e-3 * kVoxel);
 }
@@ -341,16 +352,16 @@ TEST(HriEdit, AddWithAnotherGradientScaleStillFindsTheNewSurface) {
   HriRenderer r(params());
   const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.015));
   EXPECT_TRUE(t[edit].plane_update);
-  EXPECT_NEAR(t[edit].vhip_m.z, 0.0175, 1e-3 * kVoxel);
+  EXPECT_NEAR(t[edit].plane.p.z, 0.0175, 1e-3 * kVoxel);
   EXPECT_NEAR(t.back().vhip_m.z, 0.0175, 1e-3 * kVoxel);
   EXPECT_NEAR(norm(t.back().force_n), kK * 0.0025, 1e-5);
   EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
 }
 
-// With recovery time on (50 ms), the edit tick starts no recovery ramp: the slew alone
-// governs, so the carve reaches K * the new depth after ceil(0.8 N / step) = 5 ticks
-// (a 50 ms ramp would still be 90 % short of it).
-TEST(HriEdit, OnAnEditTickTheSlewReplacesTheRecoveryRamp) {
+// With recovery time on (50 ms), the edit tick starts no recovery ramp: the ease alone
+// governs, so the carve reaches K * the new depth after the 10 ms edit period (a 50 ms ramp
+// would still be 80 % short of it).
+TEST(HriEdit, OnAnEditTickTheEaseReplacesTheRecoveryRamp) {
   const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
   const int edit = 152, ticks = 170;
   HriParams p = params();
@@ -359,13 +370,13 @@ TEST(HriEdit, OnAnEditTickTheSlewReplacesTheRecoveryRamp) {
   const auto t = drive(r, ticks, switch_at(before, after, edit), press_to(0.0135));
   EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.0025, 1e-5);
   EXPECT_LE(max_step(t), kStep * (1 + 1e-12));
-  for (int k = edit + 4; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
+  for (int k = edit + kEase - 1; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
 }
 
 // An edit in the middle of a running recovery ramp (the HIP entered 3 mm in one tick, a
-// 50 ms ramp from 0 started, the carve comes 20 ms later): the slew takes the ramp over, so
-// |F| reaches K * the new depth within a few steps instead of ramping on for 30 ms.
-TEST(HriEdit, AnEditDuringARecoveryRampFoldsTheRampIntoTheSlew) {
+// 50 ms ramp from 0 started, the carve comes 20 ms later): the ease takes the ramp over, so
+// |F| reaches K * the new depth within the edit period instead of ramping on for 30 ms.
+TEST(HriEdit, AnEditDuringARecoveryRampFoldsTheRampIntoTheEase) {
   const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
   const int edit = 21, ticks = 80;
   HriParams p = params();
@@ -375,17 +386,17 @@ TEST(HriEdit, AnEditDuringARecoveryRampFoldsTheRampIntoTheSlew) {
   const auto t = drive(r, ticks, switch_at(before, after, edit), hip);
   const double sent = norm(t[edit - 1].force_n);
   ASSERT_LT(sent, kK * 0.0025 * 0.7);  // still ramping up when the edit comes
-  const int reach = int(std::ceil(std::abs(kK * 0.0015 - sent) / kStep));
+  const int reach = kEase - 1;
   double worst = 0;
   for (int k = edit; k < ticks; ++k) worst = std::max(worst, std::abs(norm(t[k].force_n) - norm(t[k - 1].force_n)));
   EXPECT_LE(worst, kStep * (1 + 1e-12));
   for (int k = edit + reach; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
 }
 
-// The slew ends once |F| reaches the target: after a carve has settled, the user's own
-// quick press (0.4 mm per tick, 0.32 N per tick, more than the step) is felt at once,
+// The ease ends after the edit period: after a carve has settled, the user's own quick
+// press (0.4 mm per tick, 0.32 N per tick, more than 5 % of the limit) is felt at once,
 // F = K * depth on every tick (no damping here).
-TEST(HriEdit, AfterTheSlewTheUsersOwnMotionIsNotSlewed) {
+TEST(HriEdit, AfterTheEaseTheUsersOwnMotionIsNotEased) {
   const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
   const int edit = 152, press = 200, ticks = 206;
   HriParams p = params();
@@ -425,7 +436,7 @@ TEST(HriEdit, BrickedSnapshotsFollowTheEditLikeDenseOnes) {
     const auto td = drive(rd, ticks, switch_at(d0, d1, edit), press_to(0.0145));
     const auto tb = drive(rb, ticks, switch_at(b0, b1, edit), press_to(0.0145));
     EXPECT_TRUE(tb[edit].plane_update);
-    EXPECT_NEAR(tb[edit].vhip_m.z, z_new, 1e-3 * kVoxel);
+    EXPECT_NEAR(tb[edit].plane.p.z, z_new, 1e-3 * kVoxel);
     EXPECT_LE(max_step(tb), kStep * (1 + 1e-12));
     for (int k = 0; k < ticks; ++k) {
       ASSERT_NEAR(tb[k].vhip_m.z, td[k].vhip_m.z, 1e-3 * kVoxel) << "floor " << z_new << ", tick " << k;
@@ -458,7 +469,7 @@ TEST(HriEdit, WithoutAnEditTheTraceIsTheOneWithoutTheFeature) {
            a.saturated == b.saturated && a.fault == b.fault && a.penetration_m == b.penetration_m;
   };
   for (int variant = 0; variant < 5; ++variant) {
-    HriParams p = params(kFrac, variant == 1 ? 1 : 5);
+    HriParams p = params(kPeriod, variant == 1 ? 1 : 5);
     if (variant == 2) p.recovery_time_s = 0.02;
     if (variant == 3) {
       p.friction.mu_s = 0.4;
@@ -467,7 +478,7 @@ TEST(HriEdit, WithoutAnEditTheTraceIsTheOneWithoutTheFeature) {
     }
     if (variant == 4) p.variant = Variant::kPaper;
     HriParams p_off = p;
-    p_off.edit_max_step_fraction = 0;
+    p_off.edit_period_s = 0;
     const int ticks = 1500;
     HriRenderer on(p), off(p_off);
     // The paper variant sees an edit every 200 ticks; the robust one never.
@@ -484,10 +495,10 @@ TEST(HriEdit, WithoutAnEditTheTraceIsTheOneWithoutTheFeature) {
 }
 
 // An edit that tilts the surface 45 degrees under a HIP held 2 mm deep (review finding):
-// the force turns from +z to the new normal (1, 0, 1)/sqrt 2. Not only |F| but the force
-// VECTOR may change by at most 5 % of the limit per tick; without the vector slew it
-// turned in one tick (|dF| = 1.17 N, about 7 times the bound). It still ends on the new
-// plane's force (analytic: K times the HIP's depth below the tilted plane, along its normal).
+// the force turns from +z to the new normal (1, 0, 1)/sqrt 2. The force VECTOR eases over the
+// edit period (1.17 N in 10 ticks, under 5 % of the limit per tick); without the ease it
+// turned in one tick (|dF| = 1.17 N, about 7 times that). It still ends on the new plane's
+// force (analytic: K times the HIP's depth below the tilted plane, along its normal).
 TEST(HriEdit, AnEditThatTiltsTheSurfaceTurnsTheForceGradually) {
   const SampleField a = floor_at(0.010, 1);
   const double s = std::sqrt(0.5);
@@ -505,20 +516,19 @@ TEST(HriEdit, AnEditThatTiltsTheSurfaceTurnsTheForceGradually) {
   EXPECT_LT(norm(t[ticks - 1].force_n - want), 1e-3) << "settled force on the tilted plane";
 }
 
-// A small force turns far within one vector step: held 0.3 mm deep, an edit that tilts the
-// surface 60 degrees would turn the force by about 40 degrees in one tick at the 5 % step.
-// The direction turns by at most edit_max_turn_deg (10) per tick; with the turn limit off
-// (0) the fault shows. Truth: the analytic normals of the two planes.
-TEST(HriEdit, AnEditTurnsASmallForceByAtMostTheTurnLimitPerTick) {
+// A small force turns far: held 0.3 mm deep, an edit tilts the surface 60 degrees. No
+// degrees-per-tick cap exists: the turn follows the eased force vector, spread over the edit
+// period (the largest turn of one tick is under half the whole turn), and ends along the new
+// normal; with the ease off (period 0) the whole turn comes in one tick. Truth: the analytic
+// normals of the two planes.
+TEST(HriEdit, AnEditTurnsASmallForceOverTheEditPeriod) {
   const SampleField a = floor_at(0.010, 1);
   const Vec3 n{std::sin(M_PI / 3), 0, std::cos(M_PI / 3)};
   SampleField b = plane_field(n, {kX, kY, 0.010});
   b.version = 2;
   const int edit = 300, ticks = 400;
-  auto worst_turn = [&](double turn_deg, Vec3* last) {
-    HriParams p = params();
-    p.edit_max_turn_deg = turn_deg;
-    HriRenderer r(p);
+  auto worst_turn = [&](double period_s, Vec3* last) {
+    HriRenderer r(params(period_s));
     const auto t = drive(r, ticks, switch_at(a, b, edit), press_to(0.0097));
     double worst = 0;
     for (int k = edit; k < ticks; ++k) {
@@ -530,16 +540,49 @@ TEST(HriEdit, AnEditTurnsASmallForceByAtMostTheTurnLimitPerTick) {
     return worst * 180.0 / M_PI;
   };
   Vec3 last_on, last_off;
-  const double on = worst_turn(10.0, &last_on), off = worst_turn(0.0, &last_off);
-  std::printf("edit tilting the surface 60 deg under 0.24 N: largest turn per tick %.2f deg (limit 10), %.2f deg without\n",
+  const double on = worst_turn(kPeriod, &last_on), off = worst_turn(0.0, &last_off);
+  std::printf("edit tilting the surface 60 deg under 0.24 N: largest turn per tick %.2f deg eased, %.2f deg without\n",
               on, off);
-  EXPECT_LE(on, 10.0 + 1e-9);
-  EXPECT_GT(off, 20.0);
+  EXPECT_LT(on, 30.0);
+  EXPECT_GT(off, 59.0);
   EXPECT_GT(dot(last_on / norm(last_on), n), 0.9999);  // it still ends along the new normal
 }
 
+// Steady drilling: the floor recedes 0.3 mm every 10 ticks (one edit per edit period) under
+// a HIP that follows at the same mean speed (30 mm/s). Each edit stands for 10 ms of cutting:
+// eased over them, |F| stays level (within a tenth of K * 0.3 mm = 0.24 N, the one tick of the
+// user's own motion in the step); published as steps with no ease (a 1 ms period), |F| dips
+// by most of 0.24 N at every edit and recovers (the buzz at the edit rate).
+TEST(HriEdit, SteadyDrillingFeelsNoDipAtTheEditRate) {
+  constexpr double kDelta = 3e-4;  // floor receded per edit [m]
+  constexpr int kEdits = 30, e0 = 200, ticks = e0 + kEase * kEdits;
+  std::vector<SampleField> floors;
+  for (int i = 0; i <= kEdits; ++i) floors.push_back(floor_at(0.016 - kDelta * i, std::uint64_t(i + 1)));
+  const FieldAt field = [&](int k) -> const SampleField& {
+    return floors[std::size_t(k < e0 ? 0 : 1 + (k - e0) / kEase)];
+  };
+  const HipAt hip = [](int k) {  // 1.5 mm deep, then down at kDelta per edit period
+    return Vec3{kX, kY, std::max(0.0145, 0.018 - 5e-5 * k) - (k < e0 ? 0.0 : kDelta * (k - e0) / kEase)};
+  };
+  auto spread = [&](double period_s) {
+    HriRenderer r(params(period_s));
+    const auto t = drive(r, ticks, field, hip);
+    double lo = 1e9, hi = -1e9;
+    for (int k = e0 + 5 * kEase; k < ticks; ++k) {  // the steady part
+      EXPECT_TRUE(t[k].contact) << k;
+      lo = std::min(lo, norm(t[k].force_n));
+      hi = std::max(hi, norm(t[k].force_n));
+    }
+    return hi - lo;
+  };
+  const double eased = spread(kPeriod), stepped = spread(0.001);
+  std::printf("steady drill, 0.3 mm per 10 ms edit: |F| max - min %.4f N eased, %.4f N stepped\n", eased, stepped);
+  EXPECT_LT(eased, 0.1 * kK * kDelta);
+  EXPECT_GT(stepped, 0.7 * kK * kDelta);
+}
+
 // An edit far from the probe (its snapshot's changed box more than the reach away) is not
-// an edit for the servo: no plane re-evaluation, no slew; the trace is bit for bit the one
+// an edit for the servo: no plane re-evaluation, no ease; the trace is bit for bit the one
 // without the new snapshot. The same snapshot with its box over the probe, or with no box
 // (unknown), is an edit (the plane is re-evaluated on that tick).
 TEST(HriEdit, AnEditFarFromTheProbeLeavesTheTraceAlone) {
@@ -578,7 +621,7 @@ TEST(HriEdit, AnEditFarFromTheProbeLeavesTheTraceAlone) {
 // publications land between two ticks, the renderer never reads the first: the floor raised
 // 1.5 mm under the held probe (v4, box over the probe) followed by a version that changed
 // nothing near it (v5, box in a far corner). Read as v3 -> v5, that is still the raise under
-// the probe: an edit, |F| stepping by at most the slew's bound, as when every version is read.
+// the probe: an edit, |F| eased as when every version is read.
 TEST(HriEdit, ASkippedVersionIsAnEditWhateverTheNewestBox) {
   const SampleField a = floor_at(0.010, 3);
   SampleField raised = floor_at(0.0115, 4);
@@ -600,4 +643,27 @@ TEST(HriEdit, ASkippedVersionIsAnEditWhateverTheNewestBox) {
   EXPECT_LE(step_each, kStep + 1e-9);
   EXPECT_LE(step_skip, kStep + 1e-9);
   EXPECT_TRUE(t_skip[edit].plane_update) << "the skipped raise was not seen as an edit";
+}
+
+// A recovery ramp that starts during an edit ease (a plane update 3 ticks after the carve
+// finds the floor another 0.5 mm lower: the same snapshot version, so not an edit) starts
+// from the force sent, the ease's offset included: it takes the ease over. Every change here
+// is downward, so |F| never rises (the ease's offset added on top of the ramp rose by 0.2 N).
+TEST(HriEdit, ARampStartedDuringTheEaseTakesItOver) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  SampleField lower = floor_at(0.0145, 2);
+  const int edit = 151, ticks = 260;  // the n-tick update (n = 5) comes at 155, mid-ease
+  HriParams p = params();
+  p.recovery_time_s = 0.02;
+  HriRenderer r(p);
+  const FieldAt field = [&](int k) -> const SampleField& { return k < edit ? before : (k < edit + 3 ? after : lower); };
+  const auto t = drive(r, ticks, field, press_to(0.0135));
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.0025, 1e-5);
+  bool updated = false;
+  for (int k = edit; k < ticks; ++k) {
+    EXPECT_LE(norm(t[k].force_n), norm(t[k - 1].force_n) + 1e-9) << k;
+    updated = updated || (k > edit && k < edit + kEase && t[k].plane_update);
+  }
+  EXPECT_TRUE(updated) << "no plane update during the ease: the case is not tested";
+  EXPECT_NEAR(norm(t.back().force_n), kK * 0.001, 1e-5);
 }

@@ -545,7 +545,7 @@ TEST(HriShortWay, EveryTickAsTheGeneralPathInALiveSession) {
       p.force_limit_n = 0.3;  // saturated at times; ramps and release fades start at 1 % of it
       if (plain) {  // no velocity filter, edits not tracked
         p.velocity_cutoff_hz = 0.0;
-        p.edit_max_step_fraction = 0.0;
+        p.edit_period_s = 0.0;
       }
       HriParams q = p;
       q.short_way = false;
@@ -723,7 +723,7 @@ TEST(HriShortWay, ReachTestAsTheFullPathAtTheSphere) {
     HriParams p;
     p.tau = 0.5;
     p.max_reach_m = 5e-3;
-    if (!tracked) p.edit_max_step_fraction = 0.0;
+    if (!tracked) p.edit_period_s = 0.0;
     HriParams q = p;
     q.short_way = false;
     HriRenderer a(p), b(q);

@@ -497,6 +497,13 @@ TEST(RunJob, StrokeAndLiftFiguresMatchTheTrace) {
 }
 
 namespace {
+/// The start of a scene's JSON text: `name`, the synthetic sphere of radius 12 voxels in a
+/// 40^3 grid of 1 mm voxels, isovalue 0, inside above; the caller adds the rest.
+std::string sphere40(const std::string& name) {
+  return R"({"name": ")" + name + R"(", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
+    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",)";
+}
+
 /// Runs a scene given as JSON text (written to DIR/scene.json) into DIR/out.
 RunMetrics run_text(const fs::path& dir, const std::string& json) {
   fs::remove_all(dir);
@@ -619,8 +626,7 @@ TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
   // A carve into the sphere with drilled.stl written: summary.json says whether the mesh is
   // closed and what volume it encloses; both recomputed here from the STL file itself.
   const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_" + std::to_string(::getpid()));
-  const RunMetrics m = run_text(dir, R"({"name": "mesh", "volume": {"synthetic": "sphere", "dims": [40, 40, 40],
-    "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",
+  const RunMetrics m = run_text(dir, sphere40("mesh") + R"(
     "script": {"hold_s": 0.05, "stroke_length_m": 0.002}, "outputs": {"plots": false},
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": true,
       "timeline": [{"t_s": 0.05, "kind": "carve", "at": [19.5, 19.5, 31.5], "radius_mm": 5, "strength": 1000}]}})");
@@ -691,4 +697,74 @@ TEST(RunPictures, ChannelSectionShowsTheHoleTheBurrAndTheNarrowestRadius) {
   EXPECT_EQ(be32(20), unsigned(n));
   EXPECT_NE(isotouch::run::draw_channel_section(before, after, iso, ChannelCut{}, png.string(), n), "");
   EXPECT_FALSE(std::filesystem::exists(png));
+}
+
+namespace {
+/// The published drill edits' ticks (edits.csv's "tick" column where "published" is 1).
+std::vector<long> published_drill_ticks(const fs::path& csv) {
+  std::ifstream in(csv);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> head;
+  {
+    std::istringstream s(line);
+    for (std::string tok; std::getline(s, tok, ',');) head.push_back(tok);
+  }
+  const auto col = [&](const std::string& name) { return std::size_t(std::find(head.begin(), head.end(), name) - head.begin()); };
+  const std::size_t c_tick = col("tick"), c_event = col("event"), c_pub = col("published");
+  std::vector<long> ticks;
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::istringstream s(line);
+    for (std::string tok; std::getline(s, tok, ',');) c.push_back(tok);
+    if (c.size() == head.size() && c[c_event] == "drill" && c[c_pub] == "1") ticks.push_back(std::stol(c[c_tick]));
+  }
+  return ticks;
+}
+}  // namespace
+
+TEST(RunJob, EditRippleMatchesTheTrace) {
+  // The button drills a sphere every 10 ticks; summary.json's contact.edit_ripple_n is
+  // recomputed here from trace.csv and edits.csv: over each run of 3 or more published drill
+  // edits 10 ticks apart ([first, last + 10)), |F| minus the median of a 10-tick window
+  // (starting 5 before, kept inside the run), and 2/N |sum r_k exp(-2 pi i k / 10)|.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_ripple_" + std::to_string(::getpid()));
+  const RunMetrics m = run_text(dir, sphere40("ripple") + R"(
+    "script": {"hold_s": 0.4, "stroke_length_m": 0.0, "press_depth_m": 0.004}, "outputs": {"plots": false},
+    "edits": {"brush": {"kind": "drill", "radius_mm": 2, "force_threshold_n": 0.1, "removal_per_n_s": 2},
+      "button": [[0.0, 10.0]], "write_vdb": false, "write_nrrd": false, "write_stl": false}})");
+  const auto rows = read_trace(dir / "out" / "trace.csv");
+  const std::vector<long> ticks = published_drill_ticks(dir / "out" / "edits.csv");
+  constexpr long P = 10;
+  double re = 0, im = 0;
+  long n = 0;
+  for (std::size_t i = 0; i < ticks.size();) {
+    std::size_t j = i;
+    while (j + 1 < ticks.size() && ticks[j + 1] - ticks[j] == P) ++j;
+    if (j - i + 1 >= 3) {
+      const long from = ticks[i], to = ticks[j] + P;
+      for (long k = from; k < to; ++k) {
+        const long lo = std::clamp(k - P / 2, from, to - P);
+        std::vector<double> w;
+        for (long q = lo; q < lo + P; ++q) w.push_back(rows[std::size_t(q)].f);
+        std::sort(w.begin(), w.end());
+        const double r = rows[std::size_t(k)].f - 0.5 * (w[P / 2 - 1] + w[P / 2]);
+        re += r * std::cos(2 * M_PI * double(k % P) / P);
+        im -= r * std::sin(2 * M_PI * double(k % P) / P);
+        ++n;
+      }
+    }
+    i = j + 1;
+  }
+  ASSERT_GT(n, 5 * P) << "no drilling phase: the test does not test the figure";
+  std::ifstream js(dir / "out" / "summary.json");
+  const auto c = nlohmann::json::parse(js).at("contact");
+  EXPECT_EQ(c.at("edit_ripple_ticks").get<long>(), n);
+  const double tol = 1e-8;  // trace.csv holds the forces to about 10 digits
+  EXPECT_NEAR(c.at("edit_ripple_n").get<double>(), 2.0 / double(n) * std::hypot(re, im), tol);
+  EXPECT_NEAR(m.ripple_n, 2.0 / double(n) * std::hypot(re, im), tol);
+  EXPECT_GT(c.at("rate_limits").at("edit_ease").at("ticks").get<long>(), 0);
+  EXPECT_DOUBLE_EQ(c.at("rate_limits").at("edit_ease").at("period_s").get<double>(), 0.01);
+  std::cout << "sphere drill: edit ripple " << m.ripple_n << " N over " << n << " ticks\n";
+  fs::remove_all(dir);
 }

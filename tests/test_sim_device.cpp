@@ -1,9 +1,11 @@
 // Simulated device, touch script and the headless loop.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <vector>
 
 #include "isotouch/sim/headless.h"
 #include "isotouch/servo/sampling.h"
@@ -31,6 +33,37 @@ SampleField sphere_field(double R) {
                                             float(-u.y * 1000), float(-u.z * 1000)};
       }
   return f;
+}
+
+/// HRI at isovalue 0 (sphere_field's surface) and a script from above the sphere.
+HriParams iso0() {
+  HriParams h;
+  h.tau = 0;
+  return h;
+}
+ScriptParams from_above(double stroke_m) {
+  ScriptParams sp;
+  sp.ray_origin_frac = {0.5, 0.5, 1.3};
+  sp.stroke_length_m = stroke_m;
+  return sp;
+}
+
+/// The headless loop on `field` from the script's start: returns the trace; `saturated`, if
+/// given, gets the device's count of clipped commands.
+std::vector<TraceRow> headless_run(const std::shared_ptr<const SampleField>& field, const HriParams& h,
+                                   const ScriptParams& sp, const SimDeviceParams& dp = {}, long* saturated = nullptr) {
+  TripleBuffer<SampleField> tb;
+  tb.publish(field);
+  const TouchScript s = make_touch_script(*field, h, sp);
+  WorkspaceTransform xf;
+  xf.translation_m = field->grid.centre_m();
+  Vec3 p0, v0;
+  s.at(0, p0, v0);
+  SimDevice d(dp, xf.to_device(p0));
+  HriRenderer r(h);
+  std::vector<TraceRow> trace = run_headless(tb, r, d, xf, s, 1000.0);
+  if (saturated) *saturated = d.saturated_commands();
+  return trace;
 }
 }  // namespace
 
@@ -99,19 +132,7 @@ TEST(Headless, DeterministicAndTouches) {
   ScriptParams sp;
   sp.ray_origin_frac = {0.5, 0.5, 1.3};
   sp.stroke_length_m = 0.015;
-  auto run = [&] {
-    TripleBuffer<SampleField> tb;
-    tb.publish(field);
-    const TouchScript s = make_touch_script(*field, h, sp);
-    WorkspaceTransform xf;
-    xf.translation_m = field->grid.centre_m();
-    Vec3 p0, v0;
-    s.at(0, p0, v0);
-    SimDevice d({}, xf.to_device(p0));
-    HriRenderer r(h);
-    return run_headless(tb, r, d, xf, s, 1000.0);
-  };
-  const auto a = run(), b = run();
+  const auto a = headless_run(field, h, sp), b = headless_run(field, h, sp);
   ASSERT_EQ(a.size(), b.size());
   long contact = 0;
   for (std::size_t i = 0; i < a.size(); ++i) {
@@ -121,6 +142,23 @@ TEST(Headless, DeterministicAndTouches) {
     EXPECT_LE(norm(a[i].force_n), h.force_limit_n + 1e-12);
   }
   EXPECT_GT(contact, 500);
+}
+
+// The trace's force is the one the device took (after its own clip at force_max_n), not the
+// renderer's: a device that takes at most 0.5 N under a renderer allowed 3.3 N.
+TEST(Headless, TheTraceHoldsTheForceTheDeviceTook) {
+  const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
+  const HriParams h = iso0();
+  const ScriptParams sp = from_above(ScriptParams{}.stroke_length_m);
+  SimDeviceParams dp;
+  dp.force_max_n = 0.5;
+  long clipped = 0;
+  const auto trace = headless_run(field, h, sp, dp, &clipped);
+  double worst = 0;
+  for (const auto& row : trace) worst = std::max(worst, norm(row.force_n));
+  EXPECT_GT(clipped, 10);  // the renderer asked for more
+  EXPECT_LE(worst, 0.5 + 1e-12);
+  EXPECT_GT(worst, 0.5 - 1e-9);
 }
 
 TEST(SimDevice, SaturatesAndRefusesNonFiniteCommands) {
@@ -206,22 +244,11 @@ TEST(SimDevice, LightDeviceStaysFinite) {
 TEST(Headless, LightDeviceHasNoFaults) {
   // The run: mass 1e-4 kg, 3311 of 3411 ticks were faults. Same loop on a sphere.
   const auto field = std::make_shared<const SampleField>(sphere_field(0.015));
-  HriParams h;
-  h.tau = 0;
-  ScriptParams sp;
-  sp.ray_origin_frac = {0.5, 0.5, 1.3};
-  sp.stroke_length_m = 0.010;
-  TripleBuffer<SampleField> tb;
-  tb.publish(field);
-  const TouchScript s = make_touch_script(*field, h, sp);
-  WorkspaceTransform xf;
-  Vec3 p0, v0;
-  s.at(0, p0, v0);
+  const HriParams h = iso0();
+  const ScriptParams sp = from_above(0.010);
   SimDeviceParams dp;
   dp.mass_kg = 1e-4;
-  SimDevice d(dp, xf.to_device(p0));
-  HriRenderer r(h);
-  const auto trace = run_headless(tb, r, d, xf, s, 1000.0);
+  const auto trace = headless_run(field, h, sp, dp);
   long faults = 0, contact = 0;
   for (const auto& row : trace) {
     faults += row.fault;

@@ -5,8 +5,8 @@
 // header, then the body it announces. Every size is checked against MessageLimits before a
 // byte of body is allocated, the CRC-64 is checked by the library, and each kept type's body
 // is checked against what its type needs before the library unpacks it (the library reads an
-// IMAGE's voxels and a STRING's text past a short body). Kept: IMAGE, TRANSFORM, STRING;
-// other types are read and skipped. A refusal says why, for the STATUS sent back.
+// IMAGE's voxels and a STRING's text past a short body). Kept: IMAGE, TRANSFORM, STRING,
+// LBMETA (LABELMETA: which images are label maps); other types are read and skipped. A refusal says why, for the STATUS sent back.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -41,6 +41,7 @@ struct Incoming {
     kImage,      ///< `image` holds it, unpacked (not yet converted: igtl_image.h)
     kTransform,  ///< `matrix` holds it (translation in mm, the sender's frame)
     kString,     ///< `text` holds it
+    kLabelMeta,  ///< `labels` holds the device names of the images it describes as label maps
     kSkipped,    ///< a well-formed message of a type not handled here (`type` names it)
     kRefused,    ///< read whole but refused (bad CRC, bad body): `why`; the stream goes on
     kBroken,     ///< the stream cannot go on (closed, timed out, a size past the limits): `why`
@@ -53,6 +54,7 @@ struct Incoming {
   igtl::ImageMessage::Pointer image;
   double matrix[4][4] = {};
   std::string text;
+  std::vector<std::string> labels;
 };
 
 /// Reads and validates the next message from `src`. Never throws for what the bytes say.

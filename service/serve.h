@@ -4,11 +4,17 @@
 //   client threads (one per connection): read_message ->
 //     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
 //     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force)
+//     STRING                       -> parse_command (commands.h) -> the command thread
+//     LBMETA                       -> the images it names are label maps: refused when they come
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
 //   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
 //     (translation in mm, RAS) and "Force" (translation = force in N, RAS; PLUS's convention)
-//   main thread: accepts connections, starts and swaps the session, stops on a signal or
-//     after `seconds`.
+//   command thread: every 1 / display_hz, runs the commands in the order they came (a
+//     STATUS back for each), submits the tool's brush at the proxy while applying and in
+//     contact, and at most image_hz times a second sends the edited voxels as an IMAGE to
+//     the clients that sent an IMAGE or a command (edit_mirror.h)
+//   main thread: accepts connections, starts and swaps the session (a new volume, a new
+//     isovalue), stops on a signal or after `seconds`.
 // Part of isotouch::serve.
 #pragma once
 #include <functional>
@@ -33,6 +39,9 @@ struct ServeOptions {
   int message_timeout_ms = 60000;     ///< longest a whole message may take from its first byte [ms]
   int max_clients = 8;                ///< more connected at once: refused with a STATUS
   double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
+  std::string save_dir = ".";         ///< the folder `save NAME` writes into
+  double image_hz = 2;                ///< edited-volume IMAGEs sent per second at most (0: none)
+  bool image_whole = false;           ///< send the whole image, not the changed sub-volume
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   MessageLimits limits;
   run::RunOptions run;                ///< the Vulkan device (scene setup)

@@ -18,10 +18,12 @@
 #include <thread>
 
 #include <igtlImageMessage.h>
+#include <igtlLabelMetaMessage.h>
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
 
+#include "isotouch/service/commands.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
@@ -421,6 +423,95 @@ TEST(ServiceSocket, DroppableSendToAPeerNotReadingNeverWaits) {
   EXPECT_LT(s, 1.0) << ok << " sends, " << dropped << " dropped in " << s << " s (a send waited for the peer)";
   std::cout << ok << " sends fitted, " << dropped << " dropped, alive " << c.alive() << ", " << s << " s\n";
   ::close(peer);
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceCommands, GrammarAndRefusalsNameTheCommandAndValue) {
+  auto ok = [](const std::string& t) {
+    auto r = parse_command(t);
+    EXPECT_TRUE(std::holds_alternative<Command>(r)) << t << ": " << (std::holds_alternative<std::string>(r) ? std::get<std::string>(r) : "");
+    return std::holds_alternative<Command>(r) ? std::get<Command>(r) : Command{};
+  };
+  EXPECT_EQ(ok("isovalue 500.5").value, 500.5);
+  const Command t = ok("  tool smooth 3.5 0.4 ");
+  EXPECT_EQ(t.tool, "smooth");
+  EXPECT_EQ(t.radius_mm, 3.5);
+  EXPECT_EQ(t.strength, 0.4);
+  EXPECT_EQ(ok("tool drill").radius_mm, -1);
+  EXPECT_EQ(ok("save out.nii.gz").file, "out.nii.gz");
+  for (const char* bare : {"apply", "stop", "undo", "redo"}) EXPECT_EQ(to_string(ok(bare)), bare);
+  const std::pair<const char*, const char*> bad[] = {
+      {"isovalue", "isovalue: expected"},          {"isovalue 5x", "isovalue '5x': not a number"},
+      {"isovalue nan", "isovalue 'nan': not finite"}, {"tool", "tool: expected"},
+      {"tool saw 2", "tool kind 'saw'"},           {"tool carve -1", "tool radius '-1'"},
+      {"tool smooth 2 1.5", "tool strength '1.5'"}, {"save /etc/x.mha", "save name '/etc/x.mha'"},
+      {"save x.txt", "save name 'x.txt': not a format"}, {"undo 2", "undo: takes no value, got '2'"},
+      {"", "empty command"},                       {"Isovalue 3", "unknown command 'Isovalue'"}};
+  for (const auto& [text, why] : bad) {
+    auto r = parse_command(text);
+    ASSERT_TRUE(std::holds_alternative<std::string>(r)) << "'" << text << "' was taken";
+    EXPECT_NE(std::get<std::string>(r).find(why), std::string::npos) << std::get<std::string>(r);
+  }
+}
+
+TEST(ServiceImage, EditedVolumeGoesBackWhereItCameFrom) {
+  // Whole: read back by the same path as any client's IMAGE, voxels and corners equal.
+  test::TempDir dir("isotouch-igtl");
+  const auto mhd = dir.path / "rotated.mhd";
+  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
+                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
+                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
+                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
+  const engine::Volume file = io::load_volume(mhd.string());
+  expect_same_place(file, received_volume(pack_image(file, "Head", VoxelBox{})));
+  // A sub-volume: the library reads its offset and size, and exactly its voxels.
+  VoxelBox box;
+  box.lo = {3, 10, 20};
+  box.hi = {11, 12, 29};
+  MemorySource src(pack_image(file, "Head", box));
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  int size[3], off[3], dims[3];
+  in.image->GetSubVolume(size, off);
+  in.image->GetDimensions(dims);
+  EXPECT_EQ(dims[0] * dims[1] * dims[2], 64 * 64 * 93);
+  EXPECT_EQ(std::vector<int>(off, off + 3), (std::vector<int>{3, 10, 20}));
+  EXPECT_EQ(std::vector<int>(size, size + 3), (std::vector<int>{8, 2, 9}));
+  const auto* p = static_cast<const float*>(in.image->GetScalarPointer());
+  std::size_t differ = 0;
+  for (int z = 20; z < 29; ++z)
+    for (int y = 10; y < 12; ++y)
+      for (int x = 3; x < 11; ++x) differ += *p++ != file.voxels[std::size_t((z * 64 + y) * 64 + x)];
+  EXPECT_EQ(differ, 0u);
+}
+
+TEST(ServiceMessages, LabelMetaNamesItsImages) {
+  igtl::LabelMetaMessage::Pointer m = igtl::LabelMetaMessage::New();
+  m->SetDeviceName("Labels");
+  for (const char* image : {"Seg", "Organs"}) {
+    igtl::LabelMetaElement::Pointer e = igtl::LabelMetaElement::New();
+    e->SetName("label");
+    e->SetDeviceName(image);
+    m->AddLabelMetaElement(e);
+  }
+  std::vector<std::uint8_t> all = bytes_of(m);
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kLabelMeta) << in.why;
+  EXPECT_EQ(in.labels, (std::vector<std::string>{"Seg", "Organs"}));
+  EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kTransform);
+  // A body that is not whole labels: refused, the stream goes on.
+  std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
+  odd.insert(odd.end(), next.begin(), next.end());
+  expect_refused_then_the_next(odd, "LBMETA body of 100 bytes");
 }
 
 }  // namespace

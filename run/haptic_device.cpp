@@ -10,10 +10,12 @@
 #include "isotouch/io/record.h"
 #include "isotouch/sim/sim_device_io.h"
 #include "isotouch/servo/socket_link.h"
+#include "isotouch/service/igtl_device.h"
 
 namespace isotouch::run {
 namespace {
-constexpr const char* kKinds = "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET";
+constexpr const char* kKinds =
+    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET, igtl:HOST:PORT[:STREAM]";
 
 std::string num(double v) {
   std::ostringstream s;
@@ -83,9 +85,9 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
-  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "emu")
+  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "emu" && kind != "igtl")
     throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
-  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu";
+  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "emu" || kind == "igtl";
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
   if (!needs_arg && colon != std::string::npos)
     throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");
@@ -108,6 +110,10 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
     auto p = std::make_unique<sim::PlaybackDeviceIO>(playback_samples(arg, ds), T);
     d.description = "playback:" + arg + " (" + num(p->duration_s()) + " s)";
     d.io = std::move(p);
+  } else if (kind == "igtl") {  // the loop closes at the stream's rate: its stiffness bound is checked there
+    const service::IgtlLoop loop{scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+                                 scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness};
+    d.io = service::open_igtl_device(arg, loop, d.description);
   } else {
     d = open_report(kind, arg, io_fifo_priority);
   }

@@ -5,6 +5,7 @@
 //   playback:FILE    replays the HIP of a trace.csv (`isotouch run`) or a recording (.rec)
 //   hid:VID:PID[:SERIAL] | hid:/dev/hidrawN   a USB HID device (isotouch protocol v1, Polhem)
 //   emu:SOCKET       isotouch-devemu on a Unix-domain socket (protocol v1)
+//   igtl:HOST:PORT[:STREAM]  an OpenIGTLink source (a PlusServer): service/igtl_device.h
 #pragma once
 #include <memory>
 #include <string>

@@ -5,8 +5,6 @@
 #include <sstream>
 #include <vector>
 
-#include "isotouch/io/vdb_io.h"
-
 namespace isotouch::service {
 namespace {
 
@@ -66,7 +64,6 @@ std::variant<Command, std::string> parse_save(const std::vector<std::string>& w)
   bool plain = !f.empty() && f[0] != '.' && f.size() <= 200;
   for (char ch : f) plain = plain && (std::isalnum(static_cast<unsigned char>(ch)) || ch == '.' || ch == '_' || ch == '-');
   if (!plain) return "save name '" + shown(f) + "': a file name of letters, digits, '.', '_', '-' (no folder, not starting with '.')";
-  if (!io::volume_writable(f)) return "save name '" + shown(f) + "': not a format written (.vdb, .mha, .nrrd, .nii, .nii.gz)";
   Command c;
   c.kind = Command::Kind::kSave;
   c.file = f;

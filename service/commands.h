@@ -6,7 +6,8 @@
 //                                    [value units / (N s)])
 //   apply | stop                     start / stop applying the tool at the proxy while in contact
 //   undo | redo                      one stroke back / forward
-//   save NAME                        the edited volume to NAME in the server's save folder
+//   save NAME                        the edited volume to NAME in the server's save folder (a
+//                                    plain file name; its format is checked where it is written)
 // Words are separated by spaces; case matters. Parsing needs no session: the values that
 // depend on one (the isovalue's range) are checked where the command runs.
 // Part of isotouch::service.

@@ -377,6 +377,9 @@ void Server::save(const Pending& p) {
     if (session_) mirror = session_->mirror;
   }
   const std::string path = (std::filesystem::path(o_.save_dir) / p.cmd.file).string();
+  if (!io::volume_writable(p.cmd.file))
+    return answer(p, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "save name '" + p.cmd.file + "': not a format written (.vdb, .mha, .nrrd, .nii, .nii.gz)");
   if (!mirror || !wait_edits_applied(5.0))
     return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "save " + p.cmd.file + ": the session's edits did not settle");
   try {

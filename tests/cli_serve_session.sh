@@ -4,7 +4,7 @@
 #   1. the force follows the STRING isovalue: about 1.5 N at 1150 (bone), zero at 1900 (only
 #      the densest voxel, deeper than the tool, is inside), the force limit 3.3 N at 500;
 #   2. bad commands (not a number, an unknown tool, an isovalue outside the volume's range,
-#      an unknown command, a save name with a folder) each answered with a STATUS naming the
+#      an unknown command, a save name with a folder or of no volume format) each answered with a STATUS naming the
 #      command and value; the next command is served;
 #   3. carve (tool, apply, stop): the edited IMAGEs the client received, applied to the head,
 #      equal the file `save` wrote, and differ from the head; undo gives the head back voxel
@@ -35,7 +35,7 @@ press="move $out_p 0.3 move $in_p 0.5 force"
 # shellcheck disable=SC2086
 timeout 90 "$client" 127.0.0.1 "$port" "$head" \
   $press cmd "isovalue 1900" $press cmd "isovalue 500" $press cmd "isovalue 1150" $press \
-  cmd "isovalue abc" cmd "tool hammer 3" cmd "isovalue 99999" cmd "sculpt 3" cmd "save ../x.mha" cmd "tool carve 0" \
+  cmd "isovalue abc" cmd "tool hammer 3" cmd "isovalue 99999" cmd "sculpt 3" cmd "save ../x.mha" cmd "save x.txt" cmd "tool carve 0" \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save carved.mha" images 1 \
   compare "$out/carved.mha" compare "$head" \
   cmd undo images 1 compare "$head" cmd redo images 1 compare "$out/carved.mha" \
@@ -61,7 +61,7 @@ status = [l for l in log if l.startswith("STATUS")]
 want = [("code 1: isovalue 1900: done",), ("code 1: isovalue 500: done",), ("code 1: isovalue 1150: done",),
         ("code 10: isovalue 'abc': not a number",), ("code 10: tool kind 'hammer'",),
         ("code 10: isovalue 99999: outside the volume's value range",), ("code 12: unknown command 'sculpt'",),
-        ("code 10: save name '../x.mha'",), ("code 10: tool radius '0'",),
+        ("code 10: save name '../x.mha'",), ("code 10: save name 'x.txt': not a format",), ("code 10: tool radius '0'",),
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",), ("code 1: undo: done",), ("code 1: redo: done",),
         ("code 10: ", "a LABELMETA describes 'Seg' as a label map"), ("code 10: ", "label map"),

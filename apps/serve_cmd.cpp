@@ -65,6 +65,9 @@ Subcommand add_serve_command(CLI::App& cli) {
       ->check(CLI::Range(0.0, 100.0));
   sub->add_flag("--image-whole", a->o.image_whole,
                 "Send the whole edited image, not the changed sub-volume (receivers that ignore sub-volumes)");
+  sub->add_flag("--reply-force", a->o.reply_force,
+                "Answer each TRANSFORM of --stream with a TRANSFORM 'Force' to its sender once the servo rendered it "
+                "(lock-step, its header stamp echoed; never waited for)");
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
   return {sub, [a](const std::string& device) {
             service::ServeOptions o = a->o;

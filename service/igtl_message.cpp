@@ -220,6 +220,7 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits) {
   in.type = printable(reinterpret_cast<const char*>(h + 2), IGTL_HEADER_TYPE_SIZE);
   in.device = printable(reinterpret_cast<const char*>(h + 14), IGTL_HEADER_NAME_SIZE);
   const std::uint64_t version = be(h, 2), body_bytes = be(h + 42, 8);
+  in.stamp = be(h + 34, 8);
   if (body_bytes > limits.max_body_bytes)
     return broken(in, in.type + " body of " + std::to_string(body_bytes) + " bytes is past the limit of " +
                           std::to_string(limits.max_body_bytes) + " bytes");
@@ -247,7 +248,7 @@ std::vector<std::uint8_t> pack_status(int code, const std::string& device, const
   return {p, p + s->GetPackSize()};
 }
 
-std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3]) {
+std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3], std::uint64_t echo) {
   igtl::TransformMessage::Pointer m = igtl::TransformMessage::New();
   m->SetDeviceName(device.substr(0, IGTL_HEADER_NAME_SIZE).c_str());
   igtl::Matrix4x4 x;
@@ -259,7 +260,9 @@ std::vector<std::uint8_t> pack_translation(const std::string& device, const doub
   m->SetTimeStamp(now);
   m->Pack();
   const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
-  return {p, p + m->GetPackSize()};
+  std::vector<std::uint8_t> out(p, p + m->GetPackSize());
+  for (int i = 0; echo != 0 && i < 8; ++i) out[std::size_t(34 + i)] = std::uint8_t(echo >> (8 * (7 - i)));  // not in the CRC
+  return out;
 }
 
 }  // namespace isotouch::service

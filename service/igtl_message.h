@@ -50,6 +50,7 @@ struct Incoming {
   Kind kind = Kind::kClosed;
   std::string type;    ///< the header's type ("IMAGE", ...), printable
   std::string device;  ///< the header's device name, printable
+  std::uint64_t stamp = 0;  ///< the header's time stamp, raw (32.32 fixed-point seconds, the sender's clock)
   std::string why;     ///< kRefused, kBroken: what was wrong, naming the field and value
   igtl::ImageMessage::Pointer image;
   double matrix[4][4] = {};
@@ -65,8 +66,9 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits);
 /// packed for sending.
 std::vector<std::uint8_t> pack_status(int code, const std::string& device, const std::string& why);
 
-/// A TRANSFORM message named `device`: rotation identity, translation `t`, time stamped now, packed.
-std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3]);
+/// A TRANSFORM message named `device`: rotation identity, translation `t`, time stamped now
+/// (or with the raw header stamp `echo` when not 0: the stamp of the message it answers), packed.
+std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3], std::uint64_t echo = 0);
 
 /// Printable form of a fixed-width header field (up to the first NUL, other bytes as '?').
 std::string printable(const char* field, std::size_t width);

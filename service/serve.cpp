@@ -30,6 +30,7 @@
 #include "isotouch/session/stop_signal.h"
 #include "isotouch/service/transform_device.h"
 #include "isotouch/servo/triple_buffer.h"
+#include "isotouch/servo/cpu_placement.h"
 
 namespace isotouch::service {
 namespace {
@@ -98,7 +99,11 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   void display_loop();
-  void start_session(engine::Volume v);
+  void reply_loop();
+  std::unique_ptr<Session> prepare_session(engine::Volume v);
+  void start_session(std::unique_ptr<Session> s);
+  void start_session(engine::Volume v) { start_session(prepare_session(std::move(v))); }
+  void swap_volume(engine::Volume v);
   void stop_session();
   void take_command(Client& c, const Incoming& in);
   void command_loop();
@@ -137,7 +142,17 @@ class Server {
   int next_id_ = 1;
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
   std::unique_ptr<Session> session_;
-  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0;
+  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
+  std::mutex stream_mu_;
+  std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
+  std::atomic<long> replies_{0}, stall_replies_{0};
+
+ public:
+  ServeStats stats() const {
+    return {ticks_, missed_, faults_, stale_, sessions_, n_.images.load(), replies_.load(), stall_replies_.load()};
+  }
+
+ private:
   std::mutex volume_mu_;
   std::optional<engine::Volume> next_volume_;  // a received IMAGE waiting for the main thread
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
@@ -149,6 +164,7 @@ class Server {
   io::BrushSpec tool_;
   bool applying_ = false;
   std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
+  bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
 };
 
 std::string mm3(const core::Vec3& v) {
@@ -193,7 +209,11 @@ void Server::handle(Client& c, Incoming& in) {
       n_.transforms.fetch_add(1);
       if (in.device == o_.stream) {
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
-        device_.push_mm(t);
+        if (o_.reply_force) {
+          std::lock_guard<std::mutex> lock(stream_mu_);
+          stream_from_ = c.conn;
+        }
+        device_.push_mm(t, in.stamp);
       }
       break;
     case K::kString:
@@ -299,6 +319,7 @@ bool Server::submit(session::EditEvent::Kind kind, const session::Brush* brush) 
   session::EditEvent e;
   e.kind = kind;
   if (brush) e.brush = *brush;
+  if (preparing_) return false;  // a new volume is being built: no GPU work beside it
   if (kind == session::EditEvent::Kind::kBeginStroke) stroke_generation_ = session_->generation;
   if (kind == session::EditEvent::Kind::kEndStroke && stroke_generation_ != session_->generation) return false;
   if (kind == session::EditEvent::Kind::kEndStroke) stroke_generation_ = 0;
@@ -464,6 +485,36 @@ void Server::command_loop() {
   }
 }
 
+/// reply_force: polls every 0.1 ms; a new pose on the stream, once the servo has written a
+/// force after it arrived (or 2 ms later: no session runs, the stall rule gives zero), is
+/// answered with that force, the pose's stamp echoed.
+void Server::reply_loop() {
+  if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
+    if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note; !note.empty())
+      log_.line("reply    " + note);
+  std::uint64_t answered = 0;
+  const double stall_s = std::max(0.05, 4.0 / scene_.hri.rate_hz);
+  while (!stop_) {
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+    const TransformDevice::PoseId p = device_.newest_pose();
+    if (p.sequence == answered) continue;
+    const bool rendered = device_.force_written_ns() >= p.received_ns;
+    if (!rendered && TransformDevice::now_ns() - p.received_ns < 2'000'000) continue;
+    answered = p.sequence;
+    const core::Vec3 f = device_.force_ras_n(stall_s);
+    const double t[3] = {f.x, f.y, f.z};
+    std::shared_ptr<Connection> to;
+    {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      to = stream_from_;
+    }
+    if (to && to->send_droppable(pack_translation("Force", t, p.stamp))) {
+      replies_.fetch_add(1);
+      stall_replies_.fetch_add(!rendered);
+    }
+  }
+}
+
 void Server::display_loop() {
   const auto period = std::chrono::duration<double>(1.0 / o_.display_hz);
   auto next = std::chrono::steady_clock::now();
@@ -494,7 +545,9 @@ void Server::display_loop() {
   }
 }
 
-void Server::start_session(engine::Volume v) {
+/// A session on `v`, built (its snapshot, field, renderer) but not started: the running
+/// one goes on meanwhile.
+std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
   auto s = std::make_unique<Session>();
   s->mirror = std::make_shared<EditMirror>(v);
   s->frame.grid = v.grid;
@@ -507,6 +560,10 @@ void Server::start_session(engine::Volume v) {
   s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), setup_.live, scene_.edits.history_limit_mib);
   s->buffer.publish(s->edits->current());
   s->hri = std::make_unique<servo::HriRenderer>(setup_.hri);
+  return s;
+}
+
+void Server::start_session(std::unique_ptr<Session> s) {
   device_.set_frame(s->frame, o_.offset_mm);  // no servo runs now
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene_.hri.rate_hz;
@@ -546,6 +603,35 @@ void Server::restart_at_isovalue(const Pending& p) {
   answer(p, igtl::StatusMessage::STATUS_OK, to_string(p.cmd) + ": done (the session restarted on the edited volume)");
 }
 
+/// A received volume becomes the session's: the new session is built while the old one goes
+/// on serving (its edits held and drained first: the two must not use the GPU at once), then
+/// the servo moves over; the force stops only for that stop and start.
+void Server::swap_volume(engine::Volume v) {
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    preparing_ = true;
+  }
+  struct Release {
+    Server& s;
+    ~Release() {
+      std::lock_guard<std::mutex> lock(s.session_mu_);
+      s.preparing_ = false;
+    }
+  } release{*this};
+  if (!wait_edits_applied(5.0)) log_.line("volume   the old session's edits did not settle in 5 s; swapping anyway");
+  const auto t0 = std::chrono::steady_clock::now();
+  std::unique_ptr<Session> next = prepare_session(std::move(v));
+  const auto t1 = std::chrono::steady_clock::now();
+  stop_session();
+  start_session(std::move(next));
+  const auto t2 = std::chrono::steady_clock::now();
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1) << "volume   now the session's volume (isovalue and tool kept; built in "
+    << std::chrono::duration<double, std::milli>(t1 - t0).count() << " ms while the old one served, servo off for "
+    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms)";
+  log_.line(s.str());
+}
+
 void Server::stop_session() {
   std::unique_ptr<Session> s;
   {
@@ -559,6 +645,7 @@ void Server::stop_session() {
   const session::LiveStats st = s->live->stats();
   ticks_ += st.ticks;
   faults_ += st.faults;
+  missed_ += st.missed_deadlines;
   stale_ += s->live->servo_thread()->device_counters().stale;  // zero force on each
 }
 
@@ -582,9 +669,18 @@ int Server::run() {
             " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
   start_session(setup_.volume);
   session::install_stop_handlers();
+  if (o_.on_listening) o_.on_listening(listener_.port());
   tool_ = scene_.edits.brush;
   std::thread display([this] { display_loop(); });
   std::thread commands([this] { command_loop(); });
+  std::thread replies;
+  if (o_.reply_force) replies = std::thread([this] { reply_loop(); });
+  struct Join {
+    std::thread& t;
+    ~Join() {
+      if (t.joinable()) t.join();
+    }
+  } join_replies{replies};  // after the joiner below has set stop_
   // Every way out of run() (an exception from start_session or stop_session too) stops and
   // joins the display, command and client threads first: a joinable std::thread destroyed is std::terminate.
   const ThreadsJoiner joiner(*this, display, commands);
@@ -597,11 +693,7 @@ int Server::run() {
       std::lock_guard<std::mutex> lock(volume_mu_);
       v.swap(next_volume_);
     }
-    if (v) {
-      stop_session();
-      start_session(std::move(*v));
-      log_.line("volume   now the session's volume (isovalue and tool kept)");
-    }
+    if (v) swap_volume(std::move(*v));
     std::optional<Pending> iso;
     {
       std::lock_guard<std::mutex> lock(volume_mu_);
@@ -617,7 +709,7 @@ int Server::run() {
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
     << " transforms (" << n_.dropped_sends << " dropped: a client not reading), " << n_.images_sent
     << " edited images; " << n_.commands << " commands; " << sessions_ << " sessions, "
-    << ticks_ << " servo ticks, " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
+    << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
   log_.line(s.str());
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
   return faults_ > 0 ? exit_code::kServoFaults : exit_code::kOk;
@@ -625,9 +717,16 @@ int Server::run() {
 
 }  // namespace
 
-int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log) {
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats) {
   Server s(scene, options, log);
-  return s.run();
+  const int rc = s.run();
+  stats = s.stats();
+  return rc;
+}
+
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log) {
+  ServeStats ignored;
+  return serve(scene, options, log, ignored);
 }
 
 }  // namespace isotouch::service

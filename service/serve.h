@@ -19,6 +19,7 @@
 #pragma once
 #include <functional>
 #include <iosfwd>
+#include <memory>
 #include <string>
 
 #include "isotouch/service/igtl_message.h"
@@ -42,6 +43,12 @@ struct ServeOptions {
   std::string save_dir = ".";         ///< the folder `save NAME` writes into
   double image_hz = 2;                ///< edited-volume IMAGEs sent per second at most (0: none)
   bool image_whole = false;           ///< send the whole image, not the changed sub-volume
+  /// Answer each TRANSFORM of the stream with a TRANSFORM "Force" (translation = force in N,
+  /// RAS) to the client that sent it, as soon as the servo has rendered that pose (lock-step,
+  /// as a PLUS device loop), its header stamp the pose's; never waited for (a client that
+  /// does not read loses them).
+  bool reply_force = false;
+  std::function<void(int port)> on_listening;  ///< called once listening (benches, tests)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   MessageLimits limits;
   run::RunOptions run;                ///< the Vulkan device (scene setup)
@@ -53,5 +60,14 @@ struct ServeOptions {
 /// @return 0; 4 when servo ticks were faults; 128 + the signal when a signal stopped it.
 /// @throws std::runtime_error if the port cannot be opened; as setup_scene.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log);
+
+/// What a serve() did, for a caller that measures it (`isotouch bench serve`).
+struct ServeStats {
+  long ticks = 0, missed_deadlines = 0, faults = 0, stale = 0, sessions = 0, images = 0;
+  long replies = 0;        ///< Force replies sent (reply_force)
+  long stall_replies = 0;  ///< of those: a pose the servo did not render within 2 ms (no session running: zero)
+};
+/// As serve(), filling `stats` at the end.
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);
 
 }  // namespace isotouch::service

@@ -15,19 +15,14 @@
 # "PASS serve session" is printed once, last, after every check.
 # Usage: cli_serve_session.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
+source "$(dirname "$0")/serve_port.sh"
 exe=$1; scene=$2; client=$3; out=$4; head=$5
 [[ $out == */cli_serve_session ]] || { echo "FAIL serve session: OUT_DIR must end in /cli_serve_session: $out"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 fail() { echo "FAIL serve session: $*"; echo "--- client.log"; cat "$out/client.log"; echo "--- serve.log"; tail -n 30 "$out/serve.log"; exit 1; }
 "$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 --seconds 16 >"$out/serve.log" 2>&1 &
 serve_pid=$!
-port=""
-for _ in $(seq 300); do
-  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$out/serve.log")
-  [[ -n $port ]] && break
-  kill -0 $serve_pid 2>/dev/null || fail "serve exited before listening"
-  sleep 0.1
-done
+port=$(wait_port "$out/serve.log" $serve_pid)
 [[ -n $port ]] || fail "serve never said it was listening"
 # RAS [mm]: outside the skull (voxel x 3) and 2.6 voxels into it (x 11.6), row y 32, slice z 11.
 out_p="-9.6 -102.4 16.5"; in_p="-37.12 -102.4 16.5"

@@ -80,6 +80,19 @@ void expect_same_place(const engine::Volume& file, const engine::Volume& got) {
   }
 }
 
+/// The shipped head's voxels under a rotated direction and an offset (a .mhd written beside
+/// them): the centre, the RAS flip and the direction all show in the corners.
+engine::Volume rotated_head() {
+  test::TempDir dir("isotouch-igtl");
+  const auto mhd = dir.path / "rotated.mhd";
+  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
+                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
+                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
+                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
+  return io::load_volume(mhd.string());
+}
+
 TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
   const engine::Volume file = io::load_volume(kHead);
   expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_BIG)));
@@ -89,14 +102,7 @@ TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
 TEST(ServiceImage, RotatedAndShiftedHeadLandsWhereTheFileDoes) {
   // The same voxels under a rotated direction and an offset: the centre, the RAS flip and
   // the direction all show in the corners.
-  test::TempDir dir("isotouch-igtl");
-  const auto mhd = dir.path / "rotated.mhd";
-  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
-                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
-                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
-                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
-                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
-  const engine::Volume file = io::load_volume(mhd.string());
+  const engine::Volume file = rotated_head();
   ASSERT_FALSE(file.direction_is_identity);
   expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
 }
@@ -461,14 +467,7 @@ TEST(ServiceCommands, GrammarAndRefusalsNameTheCommandAndValue) {
 
 TEST(ServiceImage, EditedVolumeGoesBackWhereItCameFrom) {
   // Whole: read back by the same path as any client's IMAGE, voxels and corners equal.
-  test::TempDir dir("isotouch-igtl");
-  const auto mhd = dir.path / "rotated.mhd";
-  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
-                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
-                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
-                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
-                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
-  const engine::Volume file = io::load_volume(mhd.string());
+  const engine::Volume file = rotated_head();
   expect_same_place(file, received_volume(pack_image(file, "Head", VoxelBox{})));
   // A sub-volume: the library reads its offset and size, and exactly its voxels.
   VoxelBox box;

@@ -170,7 +170,7 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   if (std::uint64_t(msg->GetPackBodySize()) != body_bytes)
     return refused(in, in.type + " body of " + std::to_string(body_bytes) + " bytes: the library allocated " +
                            std::to_string(msg->GetPackBodySize()));
-  std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());
+  if (!body.empty()) std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());  // an empty LBMETA: no pointer
   std::vector<std::uint8_t>().swap(body);  // one copy held, the library's
   if (!(msg->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) return refused(in, in.type + " body fails its CRC-64");
   if (image) {

@@ -507,6 +507,15 @@ TEST(ServiceMessages, LabelMetaNamesItsImages) {
   ASSERT_EQ(in.kind, Incoming::Kind::kLabelMeta) << in.why;
   EXPECT_EQ(in.labels, (std::vector<std::string>{"Seg", "Organs"}));
   EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kTransform);
+  // No labels at all (found by fuzz_igtl: an empty body copied from a null pointer): read
+  // (or refused by its CRC), never a crash, and the stream goes on.
+  std::vector<std::uint8_t> empty = announced("LBMETA", 0);
+  empty.insert(empty.end(), next.begin(), next.end());
+  MemorySource none(empty);
+  Incoming e = read_message(none, MessageLimits{});
+  EXPECT_TRUE(e.kind == Incoming::Kind::kLabelMeta || e.kind == Incoming::Kind::kRefused) << e.why;
+  EXPECT_TRUE(e.labels.empty());
+  EXPECT_EQ(read_message(none, MessageLimits{}).kind, Incoming::Kind::kTransform);
   // A body that is not whole labels: refused, the stream goes on.
   std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
   odd.insert(odd.end(), next.begin(), next.end());

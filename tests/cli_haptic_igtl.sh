@@ -6,7 +6,7 @@
 #      the stylus moved 2.6 voxels into the skull gets forces back (|F| about 1.5 N, pushing
 #      the stylus back out, -x in the device frame); when the stream stops while the run goes
 #      on, the next force the peer gets is an exact zero, within the stale timeout (3 stream
-#      periods) and a margin, and no non-zero force after it;
+#      periods) and 100 ms for a loaded machine, and no non-zero force after it;
 #   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
 #      exit 1, the message naming the bound and the way to allow it; with
 #      --allow-unstable-stiffness it runs, warning.
@@ -53,7 +53,7 @@ log = open(f"{out}/fast.log").read()
 m = re.search(r"at ([0-9.]+) Hz measured.*?K <= 2 \(b - \|B\|\) / T = ([0-9.]+) N/m", log)
 if not m: fail("no rate and bound in the run's output")
 rate, bound = float(m.group(1)), float(m.group(2))
-if not 450 <= rate <= 550: fail(f"measured {rate} Hz for a 500 Hz stream")
+if not 400 <= rate <= 600: fail(f"measured {rate} Hz for a 500 Hz stream")
 if abs(bound - 2 * (5.01 - 1.0) * rate) > 0.01 * bound: fail(f"bound {bound} N/m is not 2 (b - |B|) rate at {rate} Hz")
 peer = open(f"{out}/fast.peer.log").read().splitlines()
 stopped = float(next(l.split()[1] for l in peer if l.startswith("stopped ")))
@@ -70,7 +70,8 @@ if not after: fail("no force came after the stream stopped: the peer is left hol
 t_zero, f_zero = after[0]
 if f_zero != [0.0, 0.0, 0.0]: fail(f"the first force after the stream stopped is {f_zero}, not zero")
 late = t_zero - stopped
-if late > 3.0 / rate + 0.03: fail(f"the zero force came {late * 1e3:.1f} ms after the stream stopped (stale timeout {3e3 / rate:.1f} ms)")
+# a loaded machine may delay the writer thread; without the stale zero it is the close, a second later
+if late > 3.0 / rate + 0.1: fail(f"the zero force came {late * 1e3:.1f} ms after the stream stopped (stale timeout {3e3 / rate:.1f} ms)")
 if any(f != [0.0, 0.0, 0.0] for _, f in after): fail("a non-zero force after the stream was lost")
 print(f"igtl ok: {rate:.0f} Hz measured, bound {bound:.0f} N/m; {len(during)} forces, {len(pushing)} above 0.8 N "
       f"(max {max(norms):.2f} N); zero {late * 1e3:.1f} ms after the stream stopped")

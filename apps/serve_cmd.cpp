@@ -26,7 +26,8 @@ constexpr const char* kHelp =
       "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client; the edited\n"
       "     voxels as an IMAGE (the changed sub-volume, or --image-whole) at most --image-hz times a second\n"
       "     to the clients that sent an IMAGE or a command.\n"
-      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 128 + N on signal N.";
+      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 6 a save command could not\n"
+      "write (the session went on); 128 + N on signal N.";
 }  // namespace
 
 Subcommand add_serve_command(CLI::App& cli) {

@@ -165,6 +165,7 @@ class Server {
   bool applying_ = false;
   std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
   bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
+  std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
 
 std::string mm3(const core::Vec3& v) {
@@ -407,6 +408,7 @@ void Server::save(const Pending& p) {
     io::save_any_volume(mirror->volume(), path, io::SaveVdbOptions{});
     answer(p, igtl::StatusMessage::STATUS_OK, "save " + p.cmd.file + ": wrote " + path);
   } catch (const std::exception& e) {
+    save_failed_ = true;
     answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR, "save " + p.cmd.file + ": " + e.what());
   }
 }
@@ -712,7 +714,8 @@ int Server::run() {
     << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
   log_.line(s.str());
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
-  return faults_ > 0 ? exit_code::kServoFaults : exit_code::kOk;
+  if (faults_ > 0) return exit_code::kServoFaults;
+  return save_failed_ ? exit_code::kSaveFailed : exit_code::kOk;
 }
 
 }  // namespace

@@ -57,7 +57,8 @@ struct ServeOptions {
 /// Serves `scene` (its volume first, its isovalue, passes and HRI parameters throughout).
 /// Prints "serve    listening on HOST:PORT" once listening, a line per client, volume and
 /// refusal, and the counters at the end.
-/// @return 0; 4 when servo ticks were faults; 128 + the signal when a signal stopped it.
+/// @return 0; 4 when servo ticks were faults; 6 when a save command could not write (the
+/// session went on); 128 + the signal when a signal stopped it.
 /// @throws std::runtime_error if the port cannot be opened; as setup_scene.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log);
 

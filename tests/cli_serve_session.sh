@@ -11,14 +11,15 @@
 #      for voxel; redo the carved file again; every IMAGE in the head's place;
 #   4. an IMAGE named by a LABELMETA, or with "label" in its name, refused with a STATUS; a
 #      scalar image taken;
-#   5. serve ends by itself with exit 0 and no servo faults.
+#   5. a save that cannot write (its name is a folder) answered with STATUS 11; serve ends by
+#      itself with exit 6 (a save failed, the session went on) and no servo faults.
 # "PASS serve session" is printed once, last, after every check.
 # Usage: cli_serve_session.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
 source "$(dirname "$0")/serve_port.sh"
 exe=$1; scene=$2; client=$3; out=$4; head=$5
 [[ $out == */cli_serve_session ]] || { echo "FAIL serve session: OUT_DIR must end in /cli_serve_session: $out"; exit 1; }
-rm -rf "$out"; mkdir -p "$out"
+rm -rf "$out"; mkdir -p "$out/blocked.mha"  # a folder where `save blocked.mha` would write: it cannot
 fail() { echo "FAIL serve session: $*"; echo "--- client.log"; cat "$out/client.log"; echo "--- serve.log"; tail -n 30 "$out/serve.log"; exit 1; }
 "$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 --seconds 16 >"$out/serve.log" 2>&1 &
 serve_pid=$!
@@ -34,10 +35,11 @@ timeout 90 "$client" 127.0.0.1 "$port" "$head" \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save carved.mha" images 1 \
   compare "$out/carved.mha" compare "$head" \
   cmd undo images 1 compare "$head" cmd redo images 1 compare "$out/carved.mha" \
-  labelmeta Seg image Seg image HeadLabelMap image Head2 >"$out/client.log" 2>&1 || fail "the client failed (exit $?)"
+  labelmeta Seg image Seg image HeadLabelMap image Head2 cmd "save blocked.mha" >"$out/client.log" 2>&1 ||
+  fail "the client failed (exit $?)"
 wait $serve_pid
 rc=$?
-[[ $rc == 0 ]] || fail "serve exited $rc"
+[[ $rc == 6 ]] || fail "serve exited $rc, not 6 (a save command could not write)"
 grep -q " 0 faults" "$out/serve.log" || fail "servo faults"
 python3 - "$out" <<'PY' || exit 1
 import re, sys
@@ -60,7 +62,7 @@ want = [("code 1: isovalue 1900: done",), ("code 1: isovalue 500: done",), ("cod
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",), ("code 1: undo: done",), ("code 1: redo: done",),
         ("code 10: ", "a LABELMETA describes 'Seg' as a label map"), ("code 10: ", "label map"),
-        ("code 1: volume taken: 64 x 64 x 93",)]
+        ("code 1: volume taken: 64 x 64 x 93",), ("code 11: save blocked.mha: ",)]
 if len(status) != len(want): fail(f"{len(status)} STATUS answers, not {len(want)}")
 for got, w in zip(status, want):
     if not all(p in got for p in w): fail(f"STATUS '{got}' does not say {w}")

@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "isotouch/bench/bench_device.h"
+#include "isotouch/bench/bench_serve.h"
 #include "isotouch/bench/bench_edit.h"
 #include "isotouch/bench/bench_engine.h"
 #include "isotouch/apps/cli_checks.h"
@@ -210,6 +211,23 @@ Subcommand add_bench_device_command(CLI::App& bench) {
   return {sub, [o](const std::string&) { return bench::run_bench_device(*o, std::cout); }};
 }
 
+Subcommand add_bench_serve_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::BenchServeOptions>();
+  auto* sub = bench.add_subcommand(
+      "serve", "isotouch serve on loopback: round trip from a tracker's TRANSFORM to the force TRANSFORM answering it "
+               "(p50/p99/max) at 1 kHz, alone and with a large IMAGE every few seconds, and the servo's misses in both");
+  sub->add_option("scene", o->scene, "Scene served (default scenes/head.json)");
+  sub->add_option("--seconds", o->seconds, "Seconds per phase")->capture_default_str()->check(CLI::Range(1.0, 600.0));
+  sub->add_option("--rate", o->rate_hz, "Tracker TRANSFORMs per second")->capture_default_str()->check(CLI::Range(1.0, 10000.0));
+  sub->add_option("--image-size", o->image_size, "IMAGE voxels per axis")->capture_default_str()->check(CLI::Range(8, 512));
+  sub->add_option("--image-every", o->image_every_s, "Seconds between IMAGEs")->capture_default_str()->check(CLI::Range(0.5, 600.0));
+  sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");
+  return {sub, [o](const std::string& device) {
+            o->device = device;
+            return bench::run_bench_serve(*o, std::cout);
+          }};
+}
+
 Subcommand add_bench_render_command(CLI::App& bench) {
   auto size = std::make_shared<int>(512);
   auto frames = std::make_shared<int>(9);
@@ -229,7 +247,8 @@ std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
   CLI::App* bench = cli.add_subcommand("bench", "Benchmarks that print figures");
   bench->require_subcommand(1);
   return {add_bench_servo_rt_command(*bench), add_bench_table1_command(*bench), add_bench_engine_command(*bench),
-          add_bench_render_command(*bench),   add_bench_edit_command(*bench),   add_bench_device_command(*bench)};
+          add_bench_render_command(*bench),   add_bench_edit_command(*bench),   add_bench_device_command(*bench),
+          add_bench_serve_command(*bench)};
 }
 
 }  // namespace isotouch::app

@@ -97,8 +97,9 @@ std::string default_scene() {
 }
 
 int cmd_run_live(const std::string& scene_path, const std::string& out_dir, const std::string& device, bool quiet,
-                 const std::string& record_path, const std::string& haptic) {
-  const io::Scene scene = io::load_scene(scene_path);
+                 const std::string& record_path, const std::string& haptic, bool allow_unstable) {
+  io::Scene scene = io::load_scene(scene_path);
+  scene.allow_unstable_stiffness = scene.allow_unstable_stiffness || allow_unstable;
   LiveOptions opt;
   opt.haptic = haptic;
   opt.run.out_dir = out_dir;
@@ -176,7 +177,7 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
 Subcommand add_run_command(CLI::App& cli) {
   struct Args {
     std::string scene_path, out_dir, record_path, haptic = "sim", hand_path;
-    bool quiet = false, live = false;
+    bool quiet = false, live = false, allow_unstable = false;
   };
   auto a = std::make_shared<Args>();
   auto* run = cli.add_subcommand("run", "Simulate a probe touching and stroking the isosurface of a scene; "
@@ -198,8 +199,13 @@ Subcommand add_run_command(CLI::App& cli) {
   run->add_option("--haptic", a->haptic,
                   "With --live: the haptic device, KIND[:ARGS]: sim (the scene's simulated device, default), null, "
                   "playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
-                  "(isotouch-devemu); `isotouch devices` lists the HID devices")
+                  "(isotouch-devemu), igtl:HOST:PORT[:STREAM] (an OpenIGTLink source such as a PlusServer: the "
+                  "stream's TRANSFORM is the device, the force goes back as a TRANSFORM 'Force'); `isotouch devices` "
+                  "lists the HID devices")
       ->capture_default_str();
+  run->add_flag("--allow-unstable-stiffness", a->allow_unstable,
+                "With --live: run a stiffness above the Colgate-Schenkel bound of the device's loop (an igtl "
+                "stream's measured rate), as the scene's servo.allow_unstable_stiffness");
   run->add_option("--hand-path", a->hand_path,
                   "Write the scene's scripted hand (device frame, t_s,x_m,y_m,z_m every ms) to FILE for "
                   "isotouch-devemu --path, and exit");
@@ -210,7 +216,8 @@ Subcommand add_run_command(CLI::App& cli) {
   });
   return {run, [a](const std::string& device) {
             if (!a->hand_path.empty()) return write_hand_path(io::load_scene(a->scene_path), a->hand_path, std::cout);
-            if (a->live) return cmd_run_live(a->scene_path, a->out_dir, device, a->quiet, a->record_path, a->haptic);
+            if (a->live)
+              return cmd_run_live(a->scene_path, a->out_dir, device, a->quiet, a->record_path, a->haptic, a->allow_unstable);
             return cmd_run(a->scene_path, a->out_dir, device, a->quiet, a->record_path);
           }};
 }

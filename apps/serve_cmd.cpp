@@ -18,11 +18,16 @@ constexpr const char* kHelp =
       "In:  IMAGE (3-D, one scalar: int8..float64, any spacing and orientation, RAS or LPS): the session's new\n"
       "     volume, in the same physical place as the file it came from (single slices, sub-volumes, label\n"
       "     maps refused); TRANSFORM named --stream: the device (translation in mm, RAS, plus --offset-mm);\n"
-      "     no TRANSFORM for --stale-ms: zero force. What is refused is answered with a STATUS saying why;\n"
-      "     wrong CRC, truncated or oversized bodies and unknown types never stop the server.\n"
+      "     no TRANSFORM for --stale-ms: zero force; STRING commands: isovalue V | tool KIND [RADIUS_MM\n"
+      "     [STRENGTH]] | apply | stop | undo | redo | save NAME (into --save-dir), each answered with a STATUS;\n"
+      "     LBMETA: the images it names are label maps (refused). What is refused is answered with a STATUS\n"
+      "     saying why; wrong CRC, truncated or oversized bodies and unknown types never stop the server.\n"
       "Out: TRANSFORMs 'HIP' and 'Proxy' (translation in mm, RAS) and 'Force' (translation = force in N, RAS:\n"
-      "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client.\n"
-      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 128 + N on signal N.";
+      "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client; the edited\n"
+      "     voxels as an IMAGE (the changed sub-volume, or --image-whole) at most --image-hz times a second\n"
+      "     to the clients that sent an IMAGE or a command.\n"
+      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 6 a save command could not\n"
+      "write (the session went on); 128 + N on signal N.";
 }  // namespace
 
 Subcommand add_serve_command(CLI::App& cli) {
@@ -56,6 +61,14 @@ Subcommand add_serve_command(CLI::App& cli) {
       ->check(CLI::Range(1, 1000));
   sub->add_option("--seconds", a->o.seconds, "Stop after this long (default: on SIGINT / SIGTERM only)")
       ->check(CLI::Range(0.0, 1e7));
+  sub->add_option("--save-dir", a->o.save_dir, "Folder the 'save NAME' command writes into (default: the current one)");
+  sub->add_option("--image-hz", a->o.image_hz, "Edited-volume IMAGEs sent per second at most (default 2; 0: none)")
+      ->check(CLI::Range(0.0, 100.0));
+  sub->add_flag("--image-whole", a->o.image_whole,
+                "Send the whole edited image, not the changed sub-volume (receivers that ignore sub-volumes)");
+  sub->add_flag("--reply-force", a->o.reply_force,
+                "Answer each TRANSFORM of --stream with a TRANSFORM 'Force' to its sender once the servo rendered it "
+                "(lock-step, its header stamp echoed; never waited for)");
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
   return {sub, [a](const std::string& device) {
             service::ServeOptions o = a->o;

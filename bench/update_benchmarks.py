@@ -29,6 +29,7 @@ BENCHES = {
     "edit": ("isotouch", ["bench", "edit"], False, None),
     "render": ("isotouch", ["bench", "render"], False, None),
     "device": ("isotouch", ["bench", "device"], False, None),
+    "serve": ("isotouch", ["bench", "serve"], False, None),
     "sculpt-head": ("isotouch-sculpt", ["scenes/head.json", "--bench"], True, r"^(stats|verdict|device|link)"),
     "sculpt-chest": ("isotouch-sculpt", ["scenes/chest.json", "--bench"], True, r"^(stats|verdict|device|link)"),
 }

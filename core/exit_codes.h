@@ -20,7 +20,8 @@ inline constexpr int kServoFaults = 4;
 /// The haptic device was disconnected, faulty or sent refused reports (`run --live`,
 /// isotouch-sculpt).
 inline constexpr int kDeviceLost = 5;
-/// isotouch-sculpt: a scripted save or export (Ctrl+S / Ctrl+E in --script) failed.
+/// isotouch-sculpt: a scripted save or export (Ctrl+S / Ctrl+E in --script) failed;
+/// `isotouch serve`: a `save` command could not write (answered with a STATUS, the session went on).
 inline constexpr int kSaveFailed = 6;
 /// The servo thread was abandoned inside a renderer that did not return within the stop
 /// timeout (`run --live`, `serve`, isotouch-sculpt): the force was turned off, what had to

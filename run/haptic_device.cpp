@@ -11,12 +11,13 @@
 #include "isotouch/sim/sim_device_io.h"
 #include "isotouch/servo/socket_link.h"
 #include "isotouch/run/sdk_haptic_device.h"
+#include "isotouch/service/igtl_device.h"
 
 namespace isotouch::run {
 namespace {
 constexpr const char* kKinds =
     "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:VID:PID[:SERIAL], polhem:/dev/hidrawN, "
-    "emu:SOCKET, openhaptics[:NAME], forcedimension[:INDEX]";
+    "emu:SOCKET, openhaptics[:NAME], forcedimension[:INDEX], igtl:HOST:PORT[:STREAM]";
 
 std::string num(double v) {
   std::ostringstream s;
@@ -87,9 +88,9 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   const std::string kind = spec.substr(0, colon);
   const std::string arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
   const bool sdk = kind == "openhaptics" || kind == "forcedimension";  // optional argument
-  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "polhem" && kind != "emu" && !sdk)
+  if (kind != "sim" && kind != "null" && kind != "playback" && kind != "hid" && kind != "polhem" && kind != "emu" && kind != "igtl" && !sdk)
     throw std::invalid_argument("--haptic " + spec + ": unknown kind '" + kind + "' (kinds: " + kKinds + ")");
-  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "polhem" || kind == "emu";
+  const bool needs_arg = kind == "playback" || kind == "hid" || kind == "polhem" || kind == "emu" || kind == "igtl";
   if (needs_arg && arg.empty()) throw std::invalid_argument("--haptic " + spec + ": " + kind + " needs an argument (" + kKinds + ")");
   if (!needs_arg && !sdk && colon != std::string::npos)
     throw std::invalid_argument("--haptic " + spec + ": " + kind + " takes no argument");
@@ -116,6 +117,10 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
     auto dev = open_sdk_device(kind, arg, d.description);
     d.sdk = dev.get();
     d.io = std::move(dev);
+  } else if (kind == "igtl") {  // the loop closes at the stream's rate: its stiffness bound is checked there
+    const service::IgtlLoop loop{scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+                                 scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness};
+    d.io = service::open_igtl_device(arg, loop, d.description);
   } else {
     d = open_report(kind, arg, io_fifo_priority);
   }

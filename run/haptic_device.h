@@ -6,6 +6,7 @@
 //   hid:VID:PID[:SERIAL] | hid:/dev/hidrawN   a USB HID device (isotouch protocol v1, Polhem)
 //   emu:SOCKET       isotouch-devemu on a Unix-domain socket (protocol v1)
 //   openhaptics[:NAME], forcedimension[:INDEX]   vendor SDKs loaded at run time (sdk_haptic_device.h)
+//   igtl:HOST:PORT[:STREAM]  an OpenIGTLink source (a PlusServer): service/igtl_device.h
 #pragma once
 #include <memory>
 #include <string>

@@ -5,12 +5,14 @@
 #include <cstring>
 #include <sstream>
 
+#include <igtlLabelMetaMessage.h>
 #include <igtlMessageHeader.h>
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
 #include <igtl_header.h>
 #include <igtl_image.h>
+#include <igtl_lbmeta.h>
 #include <igtl_transform.h>
 
 namespace isotouch::service {
@@ -96,6 +98,8 @@ bool skip(ByteSource& src, std::uint64_t n) {
   return true;
 }
 
+constexpr std::uint64_t kMaxLabelBytes = std::uint64_t(IGTL_LBMETA_ELEMENT_SIZE) * 4096;
+
 /// "" when a kept type's body of `n` bytes can be read at all, judged from the message
 /// header alone (TRANSFORM's size is fixed, STRING's text is at most 65535 bytes).
 std::string check_size(const std::string& type, std::uint64_t n) {
@@ -103,6 +107,9 @@ std::string check_size(const std::string& type, std::uint64_t n) {
     return "TRANSFORM body is " + std::to_string(n) + " bytes, not " + std::to_string(IGTL_TRANSFORM_SIZE);
   if (type == "STRING" && (n < 4 || n > 4 + 0xFFFF))
     return "STRING body of " + std::to_string(n) + " bytes cannot hold a 16-bit length and its text";
+  if (type == "LBMETA" && (n % IGTL_LBMETA_ELEMENT_SIZE != 0 || n > kMaxLabelBytes))
+    return "LBMETA body of " + std::to_string(n) + " bytes is not a whole number of " +
+           std::to_string(IGTL_LBMETA_ELEMENT_SIZE) + "-byte labels (at most " + std::to_string(kMaxLabelBytes) + " bytes)";
   return "";
 }
 
@@ -146,6 +153,8 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   igtl::ImageMessage::Pointer image;
   igtl::TransformMessage::Pointer transform;
   igtl::StringMessage::Pointer text;
+  igtl::LabelMetaMessage::Pointer labels;
+  if (in.type == "LBMETA") msg = labels = igtl::LabelMetaMessage::New();
   if (in.type == "IMAGE") msg = image = igtl::ImageMessage::New();
   if (in.type == "TRANSFORM") msg = transform = igtl::TransformMessage::New();
   if (in.type == "STRING") msg = text = igtl::StringMessage::New();
@@ -161,7 +170,7 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   if (std::uint64_t(msg->GetPackBodySize()) != body_bytes)
     return refused(in, in.type + " body of " + std::to_string(body_bytes) + " bytes: the library allocated " +
                            std::to_string(msg->GetPackBodySize()));
-  std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());
+  if (!body.empty()) std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());  // an empty LBMETA: no pointer
   std::vector<std::uint8_t>().swap(body);  // one copy held, the library's
   if (!(msg->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) return refused(in, in.type + " body fails its CRC-64");
   if (image) {
@@ -176,6 +185,14 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
       for (int c = 0; c < 4; ++c)
         if (!std::isfinite(in.matrix[r][c])) return refused(in, "TRANSFORM holds a value that is not finite");
     in.kind = Incoming::Kind::kTransform;
+  } else if (labels) {
+    in.kind = Incoming::Kind::kLabelMeta;
+    for (int i = 0; i < labels->GetNumberOfLabelMetaElement(); ++i) {
+      igtl::LabelMetaElement::Pointer e;
+      labels->GetLabelMetaElement(i, e);
+      const std::string name = e->GetDeviceName();
+      in.labels.push_back(printable(name.c_str(), std::min<std::size_t>(name.size(), IGTL_LBMETA_LEN_DEVICE_NAME)));
+    }
   } else {
     in.kind = Incoming::Kind::kString;
     in.text = text->GetString();
@@ -203,10 +220,11 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits) {
   in.type = printable(reinterpret_cast<const char*>(h + 2), IGTL_HEADER_TYPE_SIZE);
   in.device = printable(reinterpret_cast<const char*>(h + 14), IGTL_HEADER_NAME_SIZE);
   const std::uint64_t version = be(h, 2), body_bytes = be(h + 42, 8);
+  in.stamp = be(h + 34, 8);
   if (body_bytes > limits.max_body_bytes)
     return broken(in, in.type + " body of " + std::to_string(body_bytes) + " bytes is past the limit of " +
                           std::to_string(limits.max_body_bytes) + " bytes");
-  const bool kept = in.type == "IMAGE" || in.type == "TRANSFORM" || in.type == "STRING";
+  const bool kept = in.type == "IMAGE" || in.type == "TRANSFORM" || in.type == "STRING" || in.type == "LBMETA";
   if (!kept || version < 1 || version > 2) {
     if (!skip(src, body_bytes)) return broken(in, in.type + " body truncated: " + src.why());
     if (version < 1 || version > 2)
@@ -230,7 +248,7 @@ std::vector<std::uint8_t> pack_status(int code, const std::string& device, const
   return {p, p + s->GetPackSize()};
 }
 
-std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3]) {
+std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3], std::uint64_t echo) {
   igtl::TransformMessage::Pointer m = igtl::TransformMessage::New();
   m->SetDeviceName(device.substr(0, IGTL_HEADER_NAME_SIZE).c_str());
   igtl::Matrix4x4 x;
@@ -242,7 +260,9 @@ std::vector<std::uint8_t> pack_translation(const std::string& device, const doub
   m->SetTimeStamp(now);
   m->Pack();
   const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
-  return {p, p + m->GetPackSize()};
+  std::vector<std::uint8_t> out(p, p + m->GetPackSize());
+  for (int i = 0; echo != 0 && i < 8; ++i) out[std::size_t(34 + i)] = std::uint8_t(echo >> (8 * (7 - i)));  // not in the CRC
+  return out;
 }
 
 }  // namespace isotouch::service

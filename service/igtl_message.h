@@ -5,8 +5,8 @@
 // header, then the body it announces. Every size is checked against MessageLimits before a
 // byte of body is allocated, the CRC-64 is checked by the library, and each kept type's body
 // is checked against what its type needs before the library unpacks it (the library reads an
-// IMAGE's voxels and a STRING's text past a short body). Kept: IMAGE, TRANSFORM, STRING;
-// other types are read and skipped. A refusal says why, for the STATUS sent back.
+// IMAGE's voxels and a STRING's text past a short body). Kept: IMAGE, TRANSFORM, STRING,
+// LBMETA (LABELMETA: which images are label maps); other types are read and skipped. A refusal says why, for the STATUS sent back.
 #pragma once
 #include <cstddef>
 #include <cstdint>
@@ -41,6 +41,7 @@ struct Incoming {
     kImage,      ///< `image` holds it, unpacked (not yet converted: igtl_image.h)
     kTransform,  ///< `matrix` holds it (translation in mm, the sender's frame)
     kString,     ///< `text` holds it
+    kLabelMeta,  ///< `labels` holds the device names of the images it describes as label maps
     kSkipped,    ///< a well-formed message of a type not handled here (`type` names it)
     kRefused,    ///< read whole but refused (bad CRC, bad body): `why`; the stream goes on
     kBroken,     ///< the stream cannot go on (closed, timed out, a size past the limits): `why`
@@ -49,10 +50,12 @@ struct Incoming {
   Kind kind = Kind::kClosed;
   std::string type;    ///< the header's type ("IMAGE", ...), printable
   std::string device;  ///< the header's device name, printable
+  std::uint64_t stamp = 0;  ///< the header's time stamp, raw (32.32 fixed-point seconds, the sender's clock)
   std::string why;     ///< kRefused, kBroken: what was wrong, naming the field and value
   igtl::ImageMessage::Pointer image;
   double matrix[4][4] = {};
   std::string text;
+  std::vector<std::string> labels;
 };
 
 /// Reads and validates the next message from `src`. Never throws for what the bytes say.
@@ -63,8 +66,9 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits);
 /// packed for sending.
 std::vector<std::uint8_t> pack_status(int code, const std::string& device, const std::string& why);
 
-/// A TRANSFORM message named `device`: rotation identity, translation `t`, time stamped now, packed.
-std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3]);
+/// A TRANSFORM message named `device`: rotation identity, translation `t`, time stamped now
+/// (or with the raw header stamp `echo` when not 0: the stamp of the message it answers), packed.
+std::vector<std::uint8_t> pack_translation(const std::string& device, const double t[3], std::uint64_t echo = 0);
 
 /// Printable form of a fixed-width header field (up to the first NUL, other bytes as '?').
 std::string printable(const char* field, std::size_t width);

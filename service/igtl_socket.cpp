@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <fcntl.h>
+#include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
@@ -59,6 +61,33 @@ int Listener::accept(int timeout_ms) {
     ::setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
   }
   return c;
+}
+
+int connect_tcp(const std::string& host, int port, int timeout_ms) {
+  const std::string where = host + ":" + std::to_string(port);
+  addrinfo hints{};
+  hints.ai_family = AF_INET;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  if (port < 1 || port > 65535 || ::getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &found) != 0 || !found)
+    throw std::runtime_error("connect to " + where + ": not a host and port");
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+  const int r = fd < 0 ? -1 : ::connect(fd, found->ai_addr, found->ai_addrlen);
+  ::freeaddrinfo(found);
+  int err = r == 0 ? 0 : errno;
+  if (r != 0 && err == EINPROGRESS) {
+    err = wait_for(fd, POLLOUT, timeout_ms) > 0 ? 0 : ETIMEDOUT;
+    socklen_t len = sizeof err;
+    if (err == 0) ::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &len);
+  }
+  if (err != 0) {
+    if (fd >= 0) ::close(fd);
+    throw std::runtime_error("connect to " + where + ": " + std::strerror(err));
+  }
+  ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);  // reads poll with deadlines; sends use MSG_DONTWAIT
+  const int one = 1;
+  ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  return fd;
 }
 
 Connection::Connection(int fd, int receive_timeout_ms, int message_timeout_ms, const std::atomic<bool>* stop)

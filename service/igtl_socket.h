@@ -33,6 +33,10 @@ class Listener {
   int port_ = 0;
 };
 
+/// A TCP connection to `host` (an IPv4 address or a name) and `port`, TCP_NODELAY set,
+/// within `timeout_ms`. @throws std::runtime_error naming the address and the reason.
+int connect_tcp(const std::string& host, int port, int timeout_ms);
+
 /// One connected client: reads with deadlines, sends that never raise SIGPIPE.
 class Connection final : public ByteSource {
  public:

@@ -1,6 +1,7 @@
 #include "isotouch/service/image_volume.h"
 
 #include <algorithm>
+#include <bit>
 #include <cctype>
 #include <cmath>
 #include <cstring>
@@ -138,6 +139,59 @@ engine::Volume volume_from_image(igtl::ImageMessage& image) {
   copy_voxels(image, v);
   v.update_stats();
   return v;
+}
+
+void VoxelBox::add(const VoxelBox& o) {
+  if (o.empty()) return;
+  if (empty()) {
+    *this = o;
+    return;
+  }
+  for (int a = 0; a < 3; ++a) {
+    lo[std::size_t(a)] = std::min(lo[std::size_t(a)], o.lo[std::size_t(a)]);
+    hi[std::size_t(a)] = std::max(hi[std::size_t(a)], o.hi[std::size_t(a)]);
+  }
+}
+
+std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string& device, const VoxelBox& box) {
+  igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+  int dims[3] = {v.grid.dims[0], v.grid.dims[1], v.grid.dims[2]};
+  VoxelBox b = box;
+  if (b.empty()) b.hi = {dims[0], dims[1], dims[2]};
+  int size[3] = {b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]}, off[3] = {b.lo[0], b.lo[1], b.lo[2]};
+  float sp[3] = {float(v.grid.spacing_m.x * 1e3), float(v.grid.spacing_m.y * 1e3), float(v.grid.spacing_m.z * 1e3)};
+  m->SetDimensions(dims);
+  m->SetSubVolume(size, off);
+  m->SetSpacing(sp);
+  m->SetScalarType(igtl::ImageMessage::TYPE_FLOAT32);
+  m->SetEndian(igtl::ImageMessage::ENDIAN_LITTLE);
+  m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+  m->SetDeviceName(device.substr(0, 20).c_str());
+  // Directions and centre, LPS [m] -> RAS [mm]: rows 0 and 1 change sign.
+  const core::Vec3 c = v.index_to_physical({(dims[0] - 1) / 2.0, (dims[1] - 1) / 2.0, (dims[2] - 1) / 2.0});
+  const double centre[3] = {-c.x * 1e3, -c.y * 1e3, c.z * 1e3};
+  igtl::Matrix4x4 mat;
+  igtl::IdentityMatrix(mat);
+  for (int r = 0; r < 3; ++r) {
+    for (int a = 0; a < 3; ++a) mat[r][a] = float((r < 2 ? -1.0 : 1.0) * v.direction[std::size_t(3 * r + a)]);
+    mat[r][3] = float(centre[r]);
+  }
+  m->SetMatrix(mat);
+  m->AllocateScalars();
+  static_assert(std::endian::native == std::endian::little, "the IMAGE is announced little-endian");
+  auto* out = static_cast<float*>(m->GetScalarPointer());
+  const std::size_t nx = std::size_t(dims[0]), ny = std::size_t(dims[1]);
+  for (int z = b.lo[2]; z < b.hi[2]; ++z)
+    for (int y = b.lo[1]; y < b.hi[1]; ++y) {
+      const std::size_t at = (std::size_t(z) * ny + std::size_t(y)) * nx + std::size_t(b.lo[0]);
+      out = std::copy_n(v.voxels.begin() + long(at), size[0], out);
+    }
+  igtl::TimeStamp::Pointer now = igtl::TimeStamp::New();
+  now->GetTime();
+  m->SetTimeStamp(now);
+  m->Pack();
+  const auto* p = static_cast<const std::uint8_t*>(m->GetPackPointer());
+  return {p, p + m->GetPackSize()};
 }
 
 }  // namespace isotouch::service

@@ -8,7 +8,10 @@
 //   origin_LPS [m] = F (centre - D (spacing * (dims - 1) / 2)) * 1e-3,
 //   direction_LPS  = F D,   F = diag(-1, -1, 1) for RAS, identity for LPS.
 #pragma once
+#include <array>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include <igtlImageMessage.h>
 
@@ -23,5 +26,20 @@ namespace isotouch::service {
 /// (io/volume_io.h), a spacing that is not finite and positive, direction columns that are
 /// not unit and perpendicular within 1e-3, a centre that is not finite.
 engine::Volume volume_from_image(igtl::ImageMessage& image);
+
+/// A box of voxels [lo, hi) in index space.
+struct VoxelBox {
+  std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};
+  bool empty() const { return hi[0] <= lo[0] || hi[1] <= lo[1] || hi[2] <= lo[2]; }
+  /// Grows to hold `o`.
+  void add(const VoxelBox& o);
+};
+
+/// The IMAGE named `device` that volume_from_image reads back as `v`: float32 voxels, RAS,
+/// the position the image's centre [mm]. With `box` not empty, only the voxels of `box`
+/// (the IMAGE's sub-volume fields: offset box.lo, size box.hi - box.lo; the dimensions,
+/// spacing, directions and centre still the whole image's); else the whole image. Time
+/// stamped now, packed for sending. `box` must lie inside the volume.
+std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string& device, const VoxelBox& box);
 
 }  // namespace isotouch::service

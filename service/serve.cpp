@@ -3,6 +3,9 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <deque>
+#include <filesystem>
+#include <set>
 #include <iomanip>
 #include <list>
 #include <memory>
@@ -15,6 +18,9 @@
 #include <igtlStatusMessage.h>
 
 #include "isotouch/session/edit_session.h"
+#include "isotouch/io/vdb_io.h"
+#include "isotouch/service/commands.h"
+#include "isotouch/service/edit_mirror.h"
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
@@ -24,6 +30,7 @@
 #include "isotouch/session/stop_signal.h"
 #include "isotouch/service/transform_device.h"
 #include "isotouch/servo/triple_buffer.h"
+#include "isotouch/servo/cpu_placement.h"
 
 namespace isotouch::service {
 namespace {
@@ -44,14 +51,24 @@ class Log {
 
 struct Counters {
   std::atomic<long> clients{0}, images{0}, refused{0}, transforms{0}, strings{0}, skipped{0}, broken{0};
-  std::atomic<long> sent{0}, dropped_sends{0};
+  std::atomic<long> sent{0}, dropped_sends{0}, commands{0}, images_sent{0};
 };
 
 struct Client {
-  std::unique_ptr<Connection> conn;
+  std::shared_ptr<Connection> conn;
   std::thread thread;
   std::atomic<bool> done{false};
+  /// Sent an IMAGE or a command: gets the edited volume back.
+  std::atomic<bool> subscribed{false};
   int id = 0;
+};
+
+/// A command on its way to the command thread, and whom to answer.
+struct Pending {
+  Command cmd;
+  std::shared_ptr<Connection> from;
+  std::string device;  // the STRING's device name, the STATUS's
+  int client = 0;
 };
 
 /// One session on one volume: the edits, the buffer the servo reads, the renderer, the
@@ -60,8 +77,12 @@ struct Session {
   std::unique_ptr<session::EditSession> edits;
   servo::TripleBuffer<core::SampleField> buffer;
   std::unique_ptr<servo::HriRenderer> hri;
+  std::shared_ptr<EditMirror> mirror;  // before live: the session's listener writes it
   std::unique_ptr<session::LiveSession> live;
-  engine::Volume frame;  // the volume's grid and direction (voxels dropped)
+  engine::Volume frame;  // the volume's grid, direction and value range (voxels dropped)
+  session::BrushTargets targets;  // the tool's material and empty values at this isovalue
+  std::string image_name;  // the device name the edited volume goes back under
+  std::uint64_t generation = 0;  // a new one per start_session
 };
 
 class Server {
@@ -78,16 +99,34 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   void display_loop();
-  void start_session(engine::Volume v);
+  void reply_loop();
+  std::unique_ptr<Session> prepare_session(engine::Volume v);
+  void start_session(std::unique_ptr<Session> s);
+  void start_session(engine::Volume v) { start_session(prepare_session(std::move(v))); }
+  void swap_volume(engine::Volume v);
   void stop_session();
+  void take_command(Client& c, const Incoming& in);
+  void command_loop();
+  void run_command(const Pending& p);
+  void answer(const Pending& p, int code, const std::string& text);
+  bool submit(session::EditEvent::Kind kind, const session::Brush* brush = nullptr);
+  void end_stroke();
+  void feed_tool(double dt_s);
+  void set_tool(const Command& c);
+  void ask_isovalue(const Pending& p);
+  void restart_at_isovalue(const Pending& p);
+  void save(const Pending& p);
+  bool wait_edits_applied(double timeout_s);
+  void send_edited();
   void accept_clients();
   /// Sets stop_, joins `display` and every client thread (after shutting their
   /// connections); idempotent.
-  void join_threads(std::thread& display) noexcept;
+  void join_threads(std::thread& display, std::thread& commands) noexcept;
   struct ThreadsJoiner {
     Server& server;
     std::thread& display;
-    ~ThreadsJoiner() { server.join_threads(display); }
+    std::thread& commands;
+    ~ThreadsJoiner() { server.join_threads(display, commands); }
   };
 
   const io::Scene& scene_;
@@ -103,9 +142,30 @@ class Server {
   int next_id_ = 1;
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
   std::unique_ptr<Session> session_;
-  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0;
+  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
+  std::mutex stream_mu_;
+  std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
+  std::atomic<long> replies_{0}, stall_replies_{0};
+
+ public:
+  ServeStats stats() const {
+    return {ticks_, missed_, faults_, stale_, sessions_, n_.images.load(), replies_.load(), stall_replies_.load()};
+  }
+
+ private:
   std::mutex volume_mu_;
   std::optional<engine::Volume> next_volume_;  // a received IMAGE waiting for the main thread
+  std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
+  std::mutex labels_mu_;
+  std::set<std::string> label_images_;  // device names a LBMETA described as label maps
+  std::mutex cmd_mu_;
+  std::deque<Pending> commands_;  // parsed, in arrival order, for the command thread
+  // Command thread only: the tool, whether it is applied, the stroke it has open.
+  io::BrushSpec tool_;
+  bool applying_ = false;
+  std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
+  bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
+  std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
 
 std::string mm3(const core::Vec3& v) {
@@ -124,7 +184,14 @@ void Server::handle(Client& c, Incoming& in) {
   using K = Incoming::Kind;
   switch (in.kind) {
     case K::kImage:
+      c.subscribed = true;
       try {
+        {
+          std::lock_guard<std::mutex> lock(labels_mu_);
+          if (label_images_.count(in.device))
+            throw engine::VolumeError("igtl:" + in.device + ": a LABELMETA describes '" + in.device +
+                                      "' as a label map; label maps are not supported yet (send a scalar image)");
+        }
         engine::Volume v = volume_from_image(*in.image);
         const std::string dims = std::to_string(v.grid.dims[0]) + " x " + std::to_string(v.grid.dims[1]) + " x " +
                                  std::to_string(v.grid.dims[2]);
@@ -143,13 +210,24 @@ void Server::handle(Client& c, Incoming& in) {
       n_.transforms.fetch_add(1);
       if (in.device == o_.stream) {
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
-        device_.push_mm(t);
+        if (o_.reply_force) {
+          std::lock_guard<std::mutex> lock(stream_mu_);
+          stream_from_ = c.conn;
+        }
+        device_.push_mm(t, in.stamp);
       }
       break;
     case K::kString:
       n_.strings.fetch_add(1);
-      refuse(c, in, igtl::StatusMessage::STATUS_UNKNOWN_INSTRUCTION, "STRING commands are not supported yet");
+      take_command(c, in);
       break;
+    case K::kLabelMeta: {
+      std::lock_guard<std::mutex> lock(labels_mu_);
+      std::string names;
+      for (const std::string& l : in.labels) label_images_.insert(l), names += " '" + l + "'";
+      log_.line("labels   client " + std::to_string(c.id) + ": label maps" + names + " (their IMAGEs are refused)");
+      break;
+    }
     case K::kSkipped: n_.skipped.fetch_add(1); break;
     case K::kRefused:
       refuse(c, in, in.why.find("CRC") != std::string::npos ? igtl::StatusMessage::STATUS_CHECKSUM_ERROR
@@ -200,7 +278,7 @@ void Server::accept_clients() {
   if (int(clients_.size()) >= o_.max_clients) return refuse_connection(fd);
   Client& c = clients_.emplace_back();
   c.id = next_id_++;
-  c.conn = std::make_unique<Connection>(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
+  c.conn = std::make_shared<Connection>(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
   n_.clients.fetch_add(1);
   log_.line("client   " + std::to_string(c.id) + " connected");
   c.thread = std::thread([this, &c] { client_loop(c); });
@@ -213,6 +291,230 @@ void Server::refuse_connection(int fd) {
   extra.send_droppable(pack_status(igtl::StatusMessage::STATUS_NOT_READY, "", why));
   n_.refused.fetch_add(1);
   log_.line("refused  a connection: " + why);
+}
+
+void Server::take_command(Client& c, const Incoming& in) {
+  c.subscribed = true;
+  auto parsed = parse_command(in.text);
+  if (auto* why = std::get_if<std::string>(&parsed)) {
+    const bool unknown = why->rfind("unknown command", 0) == 0 || why->rfind("empty command", 0) == 0;
+    return refuse(c, in, unknown ? igtl::StatusMessage::STATUS_UNKNOWN_INSTRUCTION : igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  *why);
+  }
+  std::lock_guard<std::mutex> lock(cmd_mu_);
+  commands_.push_back({std::get<Command>(parsed), c.conn, in.device, c.id});
+}
+
+void Server::answer(const Pending& p, int code, const std::string& text) {
+  n_.commands.fetch_add(1);
+  if (code != igtl::StatusMessage::STATUS_OK) n_.refused.fetch_add(1);
+  log_.line(std::string(code == igtl::StatusMessage::STATUS_OK ? "command  " : "refused  ") + "client " +
+            std::to_string(p.client) + ", " + text);
+  p.from->send(pack_status(code, p.device, text));
+}
+
+/// Submits one edit to the running session (command thread: the session's one API producer).
+bool Server::submit(session::EditEvent::Kind kind, const session::Brush* brush) {
+  std::lock_guard<std::mutex> lock(session_mu_);
+  if (!session_) return false;
+  session::EditEvent e;
+  e.kind = kind;
+  if (brush) e.brush = *brush;
+  if (preparing_) return false;  // a new volume is being built: no GPU work beside it
+  if (kind == session::EditEvent::Kind::kBeginStroke) stroke_generation_ = session_->generation;
+  if (kind == session::EditEvent::Kind::kEndStroke && stroke_generation_ != session_->generation) return false;
+  if (kind == session::EditEvent::Kind::kEndStroke) stroke_generation_ = 0;
+  return session_->live->submit(e);
+}
+
+void Server::end_stroke() {
+  if (stroke_generation_ != 0) submit(session::EditEvent::Kind::kEndStroke);
+  stroke_generation_ = 0;
+}
+
+/// While applying: one brush of the tool at the proxy per command tick in contact (a press
+/// opens a stroke, one undo step; leaving contact closes it).
+void Server::feed_tool(double dt_s) {
+  if (!applying_) return;
+  std::optional<session::Brush> brush;
+  std::uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (!session_) return;
+    const session::Observed ob = session_->live->observe();
+    generation = session_->generation;
+    if (ob.tick >= 0 && ob.contact)
+      brush = run::make_brush(run::brush_at_tool(scene_, session_->frame, tool_), session_->targets, ob.vhip_m, dt_s,
+                              core::norm(ob.force_n));
+  }
+  if (!brush) return end_stroke();
+  if (stroke_generation_ != generation) submit(session::EditEvent::Kind::kBeginStroke);
+  submit(session::EditEvent::Kind::kBrush, &*brush);
+}
+
+void Server::set_tool(const Command& c) {
+  tool_.kind = c.tool;
+  if (c.radius_mm > 0) tool_.radius_mm = c.radius_mm;
+  if (c.strength > 0) (c.tool == "drill" ? tool_.rate : tool_.strength) = c.strength;
+  if (c.tool == "smooth") tool_.strength = std::min(tool_.strength, 1.0);
+}
+
+/// Checks the isovalue against the volume's range; the main thread restarts the session.
+void Server::ask_isovalue(const Pending& p) {
+  float lo = 0, hi = 0;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_) lo = session_->frame.min_value, hi = session_->frame.max_value;
+  }
+  if (!(p.cmd.value > lo && p.cmd.value < hi)) {
+    std::ostringstream s;
+    s << "isovalue " << p.cmd.value << ": outside the volume's value range (" << lo << ", " << hi << ")";
+    return answer(p, igtl::StatusMessage::STATUS_CONFIG_ERROR, s.str());
+  }
+  end_stroke();
+  std::lock_guard<std::mutex> lock(volume_mu_);
+  next_iso_ = p;
+}
+
+/// True once every edit submitted so far was applied or refused (save sees them all).
+bool Server::wait_edits_applied(double timeout_s) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  for (;;) {
+    {
+      std::lock_guard<std::mutex> lock(session_mu_);
+      if (!session_) return true;
+      const session::LiveStats st = session_->live->stats(0);
+      if (st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested) return true;
+    }
+    if (std::chrono::steady_clock::now() > until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
+void Server::save(const Pending& p) {
+  end_stroke();
+  std::shared_ptr<EditMirror> mirror;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_) mirror = session_->mirror;
+  }
+  const std::string path = (std::filesystem::path(o_.save_dir) / p.cmd.file).string();
+  if (!io::volume_writable(p.cmd.file))
+    return answer(p, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "save name '" + p.cmd.file + "': not a format written (.vdb, .mha, .nrrd, .nii, .nii.gz)");
+  if (!mirror || !wait_edits_applied(5.0))
+    return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "save " + p.cmd.file + ": the session's edits did not settle");
+  try {
+    io::save_any_volume(mirror->volume(), path, io::SaveVdbOptions{});
+    answer(p, igtl::StatusMessage::STATUS_OK, "save " + p.cmd.file + ": wrote " + path);
+  } catch (const std::exception& e) {
+    save_failed_ = true;
+    answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR, "save " + p.cmd.file + ": " + e.what());
+  }
+}
+
+void Server::run_command(const Pending& p) {
+  using K = Command::Kind;
+  const std::string what = to_string(p.cmd);
+  switch (p.cmd.kind) {
+    case K::kIsovalue: return ask_isovalue(p);
+    case K::kSave: return save(p);
+    case K::kTool: set_tool(p.cmd); break;
+    case K::kApply: applying_ = true; break;
+    case K::kStop:
+      applying_ = false;
+      end_stroke();
+      break;
+    case K::kUndo:
+    case K::kRedo:
+      end_stroke();
+      if (!submit(p.cmd.kind == K::kUndo ? session::EditEvent::Kind::kUndo : session::EditEvent::Kind::kRedo))
+        return answer(p, igtl::StatusMessage::STATUS_BUSY, what + ": the session's edit queue is full");
+      break;
+  }
+  answer(p, igtl::StatusMessage::STATUS_OK, what + ": done");
+}
+
+/// The voxels changed since the last call, as an IMAGE to every subscribed client.
+void Server::send_edited() {
+  std::shared_ptr<EditMirror> mirror;
+  std::string name;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (!session_) return;
+    mirror = session_->mirror;
+    name = session_->image_name;
+  }
+  engine::Volume v;
+  const VoxelBox box = mirror->take_changed(v);
+  if (box.empty()) return;
+  const std::vector<std::uint8_t> bytes = pack_image(v, name, o_.image_whole ? VoxelBox{} : box);
+  std::vector<std::shared_ptr<Connection>> to;
+  {
+    std::lock_guard<std::mutex> lock(clients_mu_);
+    for (Client& c : clients_)
+      if (c.subscribed && !c.done && c.conn->alive()) to.push_back(c.conn);
+  }
+  int sent = 0;
+  for (auto& c : to) sent += c->send(bytes);
+  n_.images_sent.fetch_add(sent);
+  std::ostringstream s;
+  s << "edited   '" << name << "' voxels [" << box.lo[0] << ", " << box.hi[0] << ") x [" << box.lo[1] << ", " << box.hi[1]
+    << ") x [" << box.lo[2] << ", " << box.hi[2] << ") sent as " << (o_.image_whole ? "the whole image" : "a sub-volume")
+    << " (" << bytes.size() << " bytes) to " << sent << " of " << to.size() << " clients";
+  log_.line(s.str());
+}
+
+void Server::command_loop() {
+  const double period_s = 1.0 / o_.display_hz;
+  auto next = std::chrono::steady_clock::now();
+  auto next_image = next;
+  while (!stop_) {
+    next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period_s));
+    std::this_thread::sleep_until(next);
+    std::deque<Pending> todo;
+    {
+      std::lock_guard<std::mutex> lock(cmd_mu_);
+      todo.swap(commands_);
+    }
+    for (const Pending& p : todo) run_command(p);
+    feed_tool(period_s);
+    if (o_.image_hz > 0 && std::chrono::steady_clock::now() >= next_image) {
+      send_edited();
+      next_image = std::chrono::steady_clock::now() +
+                   std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / o_.image_hz));
+    }
+  }
+}
+
+/// reply_force: polls every 0.1 ms; a new pose on the stream, once the servo has written a
+/// force after it arrived (or 2 ms later: no session runs, the stall rule gives zero), is
+/// answered with that force, the pose's stamp echoed.
+void Server::reply_loop() {
+  if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
+    if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note; !note.empty())
+      log_.line("reply    " + note);
+  std::uint64_t answered = 0;
+  const double stall_s = std::max(0.05, 4.0 / scene_.hri.rate_hz);
+  while (!stop_) {
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+    const TransformDevice::PoseId p = device_.newest_pose();
+    if (p.sequence == answered) continue;
+    const bool rendered = device_.force_written_ns() >= p.received_ns;
+    if (!rendered && TransformDevice::now_ns() - p.received_ns < 2'000'000) continue;
+    answered = p.sequence;
+    const core::Vec3 f = device_.force_ras_n(stall_s);
+    const double t[3] = {f.x, f.y, f.z};
+    std::shared_ptr<Connection> to;
+    {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      to = stream_from_;
+    }
+    if (to && to->send_droppable(pack_translation("Force", t, p.stamp))) {
+      replies_.fetch_add(1);
+      stall_replies_.fetch_add(!rendered);
+    }
+  }
 }
 
 void Server::display_loop() {
@@ -245,23 +547,91 @@ void Server::display_loop() {
   }
 }
 
-void Server::start_session(engine::Volume v) {
+/// A session on `v`, built (its snapshot, field, renderer) but not started: the running
+/// one goes on meanwhile.
+std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
   auto s = std::make_unique<Session>();
-  s->edits = std::make_unique<session::EditSession>(v, setup_.vk.get(), setup_.live, scene_.edits.history_limit_mib);
-  s->buffer.publish(s->edits->current());
-  s->hri = std::make_unique<servo::HriRenderer>(setup_.hri);
+  s->mirror = std::make_shared<EditMirror>(v);
   s->frame.grid = v.grid;
   s->frame.direction = v.direction;
-  device_.set_frame(v, o_.offset_mm);  // no servo runs now
+  s->frame.direction_is_identity = v.direction_is_identity;
+  s->frame.min_value = v.min_value;
+  s->frame.max_value = v.max_value;
+  s->targets = session::default_targets(v, setup_.live.iso);
+  s->image_name = v.path.rfind("igtl:", 0) == 0 ? v.path.substr(5) : "isotouch";
+  s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), setup_.live, scene_.edits.history_limit_mib);
+  s->buffer.publish(s->edits->current());
+  s->hri = std::make_unique<servo::HriRenderer>(setup_.hri);
+  return s;
+}
+
+void Server::start_session(std::unique_ptr<Session> s) {
+  device_.set_frame(s->frame, o_.offset_mm);  // no servo runs now
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene_.hri.rate_hz;
   c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = o_.sched_fifo;
   c.servo.stale_timeout_s = o_.stale_s;
+  c.on_applied = s->mirror->listener(*s->edits);
   s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device_, c);
   if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
   ++sessions_;
   std::lock_guard<std::mutex> lock(session_mu_);
+  s->generation = std::uint64_t(sessions_);
   session_ = std::move(s);
+}
+
+/// `isovalue V` (checked by the command thread): the session restarts on its edited volume
+/// at V (the renderer, the live field's active bricks and the tool's targets follow it; the
+/// undo history starts afresh).
+void Server::restart_at_isovalue(const Pending& p) {
+  std::shared_ptr<EditMirror> mirror;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_) mirror = session_->mirror;
+  }
+  if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
+  std::string name;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    name = session_->image_name;
+  }
+  stop_session();  // its edits all applied: the mirror is the edited volume
+  engine::Volume v = mirror->volume();
+  v.path = name == "isotouch" ? v.path : "igtl:" + name;
+  setup_.live.iso.tau = p.cmd.value;
+  setup_.live.background = float(setup_.live.iso.outside_value(v.min_value, v.max_value));
+  setup_.hri.tau = p.cmd.value;
+  start_session(std::move(v));
+  answer(p, igtl::StatusMessage::STATUS_OK, to_string(p.cmd) + ": done (the session restarted on the edited volume)");
+}
+
+/// A received volume becomes the session's: the new session is built while the old one goes
+/// on serving (its edits held and drained first: the two must not use the GPU at once), then
+/// the servo moves over; the force stops only for that stop and start.
+void Server::swap_volume(engine::Volume v) {
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    preparing_ = true;
+  }
+  struct Release {
+    Server& s;
+    ~Release() {
+      std::lock_guard<std::mutex> lock(s.session_mu_);
+      s.preparing_ = false;
+    }
+  } release{*this};
+  if (!wait_edits_applied(5.0)) log_.line("volume   the old session's edits did not settle in 5 s; swapping anyway");
+  const auto t0 = std::chrono::steady_clock::now();
+  std::unique_ptr<Session> next = prepare_session(std::move(v));
+  const auto t1 = std::chrono::steady_clock::now();
+  stop_session();
+  start_session(std::move(next));
+  const auto t2 = std::chrono::steady_clock::now();
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(1) << "volume   now the session's volume (isovalue and tool kept; built in "
+    << std::chrono::duration<double, std::milli>(t1 - t0).count() << " ms while the old one served, servo off for "
+    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms)";
+  log_.line(s.str());
 }
 
 void Server::stop_session() {
@@ -277,12 +647,14 @@ void Server::stop_session() {
   const session::LiveStats st = s->live->stats();
   ticks_ += st.ticks;
   faults_ += st.faults;
+  missed_ += st.missed_deadlines;
   stale_ += s->live->servo_thread()->device_counters().stale;  // zero force on each
 }
 
-void Server::join_threads(std::thread& display) noexcept {
+void Server::join_threads(std::thread& display, std::thread& commands) noexcept {
   stop_ = true;
   if (display.joinable()) display.join();
+  if (commands.joinable()) commands.join();
   {
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (Client& c : clients_) c.conn->shutdown();
@@ -299,10 +671,21 @@ int Server::run() {
             " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
   start_session(setup_.volume);
   session::install_stop_handlers();
+  if (o_.on_listening) o_.on_listening(listener_.port());
+  tool_ = scene_.edits.brush;
   std::thread display([this] { display_loop(); });
+  std::thread commands([this] { command_loop(); });
+  std::thread replies;
+  if (o_.reply_force) replies = std::thread([this] { reply_loop(); });
+  struct Join {
+    std::thread& t;
+    ~Join() {
+      if (t.joinable()) t.join();
+    }
+  } join_replies{replies};  // after the joiner below has set stop_
   // Every way out of run() (an exception from start_session or stop_session too) stops and
-  // joins the display and client threads first: a joinable std::thread destroyed is std::terminate.
-  const ThreadsJoiner joiner(*this, display);
+  // joins the display, command and client threads first: a joinable std::thread destroyed is std::terminate.
+  const ThreadsJoiner joiner(*this, display, commands);
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   while (session::stop_signal() == 0 && (o_.seconds <= 0 || elapsed() < o_.seconds)) {
@@ -312,30 +695,41 @@ int Server::run() {
       std::lock_guard<std::mutex> lock(volume_mu_);
       v.swap(next_volume_);
     }
-    if (v) {
-      stop_session();
-      start_session(std::move(*v));
-      log_.line("volume   now the session's volume (isovalue and tool kept)");
+    if (v) swap_volume(std::move(*v));
+    std::optional<Pending> iso;
+    {
+      std::lock_guard<std::mutex> lock(volume_mu_);
+      iso.swap(next_iso_);
     }
+    if (iso) restart_at_isovalue(*iso);
   }
-  join_threads(display);
+  join_threads(display, commands);
   stop_session();
   std::ostringstream s;
   s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
-    << " transforms (" << n_.dropped_sends << " dropped: a client not reading); " << sessions_ << " sessions, "
-    << ticks_ << " servo ticks, " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
+    << " transforms (" << n_.dropped_sends << " dropped: a client not reading), " << n_.images_sent
+    << " edited images; " << n_.commands << " commands; " << sessions_ << " sessions, "
+    << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
   log_.line(s.str());
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
-  return faults_ > 0 ? exit_code::kServoFaults : exit_code::kOk;
+  if (faults_ > 0) return exit_code::kServoFaults;
+  return save_failed_ ? exit_code::kSaveFailed : exit_code::kOk;
 }
 
 }  // namespace
 
-int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log) {
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats) {
   Server s(scene, options, log);
-  return s.run();
+  const int rc = s.run();
+  stats = s.stats();
+  return rc;
+}
+
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log) {
+  ServeStats ignored;
+  return serve(scene, options, log, ignored);
 }
 
 }  // namespace isotouch::service

@@ -4,15 +4,22 @@
 //   client threads (one per connection): read_message ->
 //     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
 //     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force)
+//     STRING                       -> parse_command (commands.h) -> the command thread
+//     LBMETA                       -> the images it names are label maps: refused when they come
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
 //   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
 //     (translation in mm, RAS) and "Force" (translation = force in N, RAS; PLUS's convention)
-//   main thread: accepts connections, starts and swaps the session, stops on a signal or
-//     after `seconds`.
+//   command thread: every 1 / display_hz, runs the commands in the order they came (a
+//     STATUS back for each), submits the tool's brush at the proxy while applying and in
+//     contact, and at most image_hz times a second sends the edited voxels as an IMAGE to
+//     the clients that sent an IMAGE or a command (edit_mirror.h)
+//   main thread: accepts connections, starts and swaps the session (a new volume, a new
+//     isovalue), stops on a signal or after `seconds`.
 // Part of isotouch::serve.
 #pragma once
 #include <functional>
 #include <iosfwd>
+#include <memory>
 #include <string>
 
 #include "isotouch/service/igtl_message.h"
@@ -33,6 +40,15 @@ struct ServeOptions {
   int message_timeout_ms = 60000;     ///< longest a whole message may take from its first byte [ms]
   int max_clients = 8;                ///< more connected at once: refused with a STATUS
   double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
+  std::string save_dir = ".";         ///< the folder `save NAME` writes into
+  double image_hz = 2;                ///< edited-volume IMAGEs sent per second at most (0: none)
+  bool image_whole = false;           ///< send the whole image, not the changed sub-volume
+  /// Answer each TRANSFORM of the stream with a TRANSFORM "Force" (translation = force in N,
+  /// RAS) to the client that sent it, as soon as the servo has rendered that pose (lock-step,
+  /// as a PLUS device loop), its header stamp the pose's; never waited for (a client that
+  /// does not read loses them).
+  bool reply_force = false;
+  std::function<void(int port)> on_listening;  ///< called once listening (benches, tests)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   MessageLimits limits;
   run::RunOptions run;                ///< the Vulkan device (scene setup)
@@ -41,8 +57,18 @@ struct ServeOptions {
 /// Serves `scene` (its volume first, its isovalue, passes and HRI parameters throughout).
 /// Prints "serve    listening on HOST:PORT" once listening, a line per client, volume and
 /// refusal, and the counters at the end.
-/// @return 0; 4 when servo ticks were faults; 128 + the signal when a signal stopped it.
+/// @return 0; 4 when servo ticks were faults; 6 when a save command could not write (the
+/// session went on); 128 + the signal when a signal stopped it.
 /// @throws std::runtime_error if the port cannot be opened; as setup_scene.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log);
+
+/// What a serve() did, for a caller that measures it (`isotouch bench serve`).
+struct ServeStats {
+  long ticks = 0, missed_deadlines = 0, faults = 0, stale = 0, sessions = 0, images = 0;
+  long replies = 0;        ///< Force replies sent (reply_force)
+  long stall_replies = 0;  ///< of those: a pose the servo did not render within 2 ms (no session running: zero)
+};
+/// As serve(), filling `stats` at the end.
+int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);
 
 }  // namespace isotouch::service

@@ -9,14 +9,20 @@ void TransformDevice::set_frame(const engine::Volume& v, const core::Vec3& offse
   offset_mm_ = offset_mm;
 }
 
-void TransformDevice::push_mm(const double t_mm[3]) {
+void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   std::lock_guard<std::mutex> lock(push_mu_);  // one writer at a time (any client's thread)
   Pose p = pose_.load();
   for (int a = 0; a < 3; ++a) p.mm[a] = t_mm[a];
   p.received_ns = now_ns();  // steady_clock is CLOCK_MONOTONIC, the servo's clock
+  p.stamp = stamp;
   ++p.sequence;
   pose_.store(p);
   pushed_.fetch_add(1);
+}
+
+TransformDevice::PoseId TransformDevice::newest_pose() const {
+  const Pose p = pose_.load();
+  return {p.sequence, p.received_ns, p.stamp};
 }
 
 servo::DeviceReading TransformDevice::read() {

@@ -22,8 +22,18 @@ class TransformDevice final : public servo::HapticDeviceIO {
  public:
   /// The volume whose physical frame the stream's points are in. Only while no servo runs.
   void set_frame(const engine::Volume& v, const core::Vec3& offset_mm);
-  /// A TRANSFORM's translation [mm, RAS] arrived now (network thread).
-  void push_mm(const double t_mm[3]);
+  /// A TRANSFORM's translation [mm, RAS] arrived now (network thread); `stamp`: its header's
+  /// raw time stamp, echoed in the force that answers it.
+  void push_mm(const double t_mm[3], std::uint64_t stamp = 0);
+  /// The newest pose: its sequence number (0: none yet), when it arrived [ns, steady], its stamp.
+  struct PoseId {
+    std::uint64_t sequence = 0;
+    std::int64_t received_ns = 0;
+    std::uint64_t stamp = 0;
+  };
+  PoseId newest_pose() const;
+  /// When the servo last wrote a force [ns, steady] (0: never).
+  std::int64_t force_written_ns() const { return force_.load().written_ns; }
   /// Messages pushed so far.
   long pushed() const { return pushed_.load(); }
 
@@ -47,6 +57,7 @@ class TransformDevice final : public servo::HapticDeviceIO {
     double mm[3] = {0, 0, 0};
     std::int64_t received_ns = 0;  // 0: nothing yet
     std::uint64_t sequence = 0;
+    std::uint64_t stamp = 0;
   };
   struct Force {
     core::Vec3 f;

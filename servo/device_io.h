@@ -26,6 +26,12 @@ struct DeviceCaps {
   int buttons = 0;                            ///< number of buttons
   double position_resolution_m = 0;           ///< smallest position step [m] (0: continuous)
   double watchdog_s = 0;                      ///< the device zeroes its force after this long without output [s] (0: none)
+  /// A reading older than this at a tick is stale: zero force that tick [s]. 0: the servo's
+  /// default, two of its periods. A device whose readings come slower than the servo ticks
+  /// (over a network, or in lock-step with a remote loop) sets a few of its own periods, else
+  /// every tick between two readings would be stale (docs/devices.md). The servo's own
+  /// ServoThreadConfig::stale_timeout_s, when set, overrides it.
+  double stale_timeout_s = 0;
 
   /// True if `p` [m, device] is finite and inside the workspace box.
   bool contains(const Vec3& p) const {

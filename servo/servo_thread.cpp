@@ -225,7 +225,9 @@ void ServoThread::loop(Handoff& h) {
   std::uint64_t last_version = 0;
   bool was_paused = false;
   const std::int64_t stale_ns =
-      cfg_.stale_timeout_s > 0 ? std::int64_t(cfg_.stale_timeout_s * 1e9) : 2 * period;
+      cfg_.stale_timeout_s > 0   ? std::int64_t(cfg_.stale_timeout_s * 1e9)
+      : caps_.stale_timeout_s > 0 ? std::int64_t(caps_.stale_timeout_s * 1e9)
+                                  : 2 * period;
   const double ramp_ns = std::max(cfg_.ramp_in_s, 0.0) * 1e9;
   std::int64_t ramp_start = -1;  // tick start of the ramp in progress; -1: (re)start it
   std::int64_t not_ok_since = -1;  // start of the current run of not-ok ticks; -1: none

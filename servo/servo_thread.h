@@ -91,7 +91,8 @@ struct ServoThreadConfig {
   /// Sees every tick with a published snapshot (null: none). Not owned; must outlive the thread.
   TickObserver* observer = nullptr;
   /// A report older than this at the start of a tick is stale: zero force that tick [s].
-  /// 0: two servo periods. Synchronous devices (DeviceReading::received_ns == 0) are never stale.
+  /// 0: the device's DeviceCaps::stale_timeout_s, or two servo periods where that is 0.
+  /// Synchronous devices (DeviceReading::received_ns == 0) are never stale.
   double stale_timeout_s = 0;
   /// After the force is enabled (start()) and whenever the device comes back (ok again after
   /// a disconnect, a fault, a refused report, stale reports for longer than stale_restart_s,

@@ -14,6 +14,7 @@
 # "PASS serve" is printed once, last, after every check.
 # Usage: cli_serve.sh ISOTOUCH SCENE BIN_DIR EXAMPLES_DIR OUT_DIR HEAD_MHD
 set -u
+source "$(dirname "$0")/serve_port.sh"
 exe=$1; scene=$2; bin=$3; examples=$4; out=$5; head=$6
 [[ $out == */cli_serve ]] || { echo "FAIL serve: OUT_DIR must end in /cli_serve (it is emptied): $out"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
@@ -22,13 +23,7 @@ offset="-100.8,-100.8,69"
 "$exe" serve "$scene" --host 127.0.0.1 --port 0 --stream Tracker --offset-mm "$offset" --display-hz 60 \
   --stale-ms 100 --seconds 14 >"$out/serve.log" 2>&1 &
 serve_pid=$!
-port=""
-for _ in $(seq 300); do
-  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$out/serve.log")
-  [[ -n $port ]] && break
-  kill -0 $serve_pid 2>/dev/null || fail "serve exited before listening"
-  sleep 0.1
-done
+port=$(wait_port "$out/serve.log" $serve_pid)
 [[ -n $port ]] || fail "serve never said it was listening"
 
 # 1. Single slices: 100 images at 50 fps, the client ends by itself.
@@ -105,12 +100,7 @@ PY
 # 6. The client cap, and a client thread's exception (bad_alloc) dropping only that client.
 "$exe" serve "$scene" --port 0 --max-clients 2 --seconds 8 >"$out/serve2.log" 2>&1 &
 serve2_pid=$!
-port2=""
-for _ in $(seq 300); do
-  port2=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$out/serve2.log")
-  [[ -n $port2 ]] && break
-  sleep 0.1
-done
+port2=$(wait_port "$out/serve2.log" $serve2_pid)
 [[ -n $port2 ]] || { echo "FAIL serve: the second serve (default host 127.0.0.1) never said it listened"; cat "$out/serve2.log"; exit 1; }
 python3 - "$port2" "$serve2_pid" "$out/serve2.log" <<'PY' || { echo "--- serve2.log"; tail -n 20 "$out/serve2.log"; exit 1; }
 import socket, struct, subprocess, sys, time

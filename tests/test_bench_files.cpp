@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "isotouch/bench/bench_serve.h"
 #include "isotouch/bench/servo_bench.h"
 #include "isotouch/bench/tool_bench.h"
 #include "isotouch/io/files.h"
@@ -117,4 +118,25 @@ TEST(Gnuplot, SavedScriptNamesTheFinalPngsAndCanBeRunAgain) {
   EXPECT_FALSE(fs::exists(png));
   EXPECT_FALSE(fs::exists(temp_name(png)));
   fs::remove_all(dir);
+}
+
+TEST(BenchServe, VerdictsFollowTheFiguresAtTheirBounds) {
+  BenchServePhase alone, traffic;
+  alone.ticks = traffic.ticks = 10000;
+  alone.missed = 4;  // limit 4 + 3 sqrt(4) = 10
+  traffic.answered = 100;
+  traffic.p99_us = 1000;
+  traffic.missed = 10;
+  auto v = bench_serve_verdicts(alone, traffic);
+  ASSERT_EQ(v.size(), 2u);
+  EXPECT_NE(v[0].find("= 1000.0 us: target <= 1000 us met"), std::string::npos) << v[0];
+  EXPECT_NE(v[1].find("10 <= 4 without + 3 sqrt(4) = 10.0: met"), std::string::npos) << v[1];
+  traffic.p99_us = 1000.5;
+  traffic.missed = 11;
+  v = bench_serve_verdicts(alone, traffic);
+  EXPECT_NE(v[0].find("NOT met"), std::string::npos) << v[0];
+  EXPECT_NE(v[1].find("NOT met"), std::string::npos) << v[1];
+  traffic.answered = 0;  // nothing measured is never met
+  traffic.p99_us = 0;
+  EXPECT_NE(bench_serve_verdicts(alone, traffic)[0].find("none answered"), std::string::npos);
 }

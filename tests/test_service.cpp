@@ -18,10 +18,13 @@
 #include <thread>
 
 #include <igtlImageMessage.h>
+#include <igtlLabelMetaMessage.h>
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
 
+#include "isotouch/service/commands.h"
+#include "isotouch/service/igtl_device.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
@@ -78,6 +81,19 @@ void expect_same_place(const engine::Volume& file, const engine::Volume& got) {
   }
 }
 
+/// The shipped head's voxels under a rotated direction and an offset (a .mhd written beside
+/// them): the centre, the RAS flip and the direction all show in the corners.
+engine::Volume rotated_head() {
+  test::TempDir dir("isotouch-igtl");
+  const auto mhd = dir.path / "rotated.mhd";
+  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
+                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
+                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
+                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
+                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
+  return io::load_volume(mhd.string());
+}
+
 TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
   const engine::Volume file = io::load_volume(kHead);
   expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_BIG)));
@@ -87,14 +103,7 @@ TEST(ServiceImage, ShippedHeadLandsWhereTheFileDoes) {
 TEST(ServiceImage, RotatedAndShiftedHeadLandsWhereTheFileDoes) {
   // The same voxels under a rotated direction and an offset: the centre, the RAS flip and
   // the direction all show in the corners.
-  test::TempDir dir("isotouch-igtl");
-  const auto mhd = dir.path / "rotated.mhd";
-  std::ofstream(mhd) << "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n"
-                     << "TransformMatrix = 0 1 0 -0.6 0 0.8 0.8 0 0.6\nOffset = 12.5 -40 7\n"
-                     << "ElementSpacing = 3.2 3.2 1.5\nDimSize = 64 64 93\nElementType = MET_SHORT\n"
-                     << "ElementDataFile = " << std::string(ISOTOUCH_TEST_DATA)
-                     << "/ct-head-headsq/headsq_64x64x93_int16.raw\n";
-  const engine::Volume file = io::load_volume(mhd.string());
+  const engine::Volume file = rotated_head();
   ASSERT_FALSE(file.direction_is_identity);
   expect_same_place(file, received_volume(image_of(file, igtl::ImageMessage::ENDIAN_LITTLE)));
 }
@@ -421,6 +430,141 @@ TEST(ServiceSocket, DroppableSendToAPeerNotReadingNeverWaits) {
   EXPECT_LT(s, 1.0) << ok << " sends, " << dropped << " dropped in " << s << " s (a send waited for the peer)";
   std::cout << ok << " sends fitted, " << dropped << " dropped, alive " << c.alive() << ", " << s << " s\n";
   ::close(peer);
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceCommands, GrammarAndRefusalsNameTheCommandAndValue) {
+  auto ok = [](const std::string& t) {
+    auto r = parse_command(t);
+    EXPECT_TRUE(std::holds_alternative<Command>(r)) << t << ": " << (std::holds_alternative<std::string>(r) ? std::get<std::string>(r) : "");
+    return std::holds_alternative<Command>(r) ? std::get<Command>(r) : Command{};
+  };
+  EXPECT_EQ(ok("isovalue 500.5").value, 500.5);
+  const Command t = ok("  tool smooth 3.5 0.4 ");
+  EXPECT_EQ(t.tool, "smooth");
+  EXPECT_EQ(t.radius_mm, 3.5);
+  EXPECT_EQ(t.strength, 0.4);
+  EXPECT_EQ(ok("tool drill").radius_mm, -1);
+  EXPECT_EQ(ok("save out.nii.gz").file, "out.nii.gz");
+  for (const char* bare : {"apply", "stop", "undo", "redo"}) EXPECT_EQ(to_string(ok(bare)), bare);
+  const std::pair<const char*, const char*> bad[] = {
+      {"isovalue", "isovalue: expected"},          {"isovalue 5x", "isovalue '5x': not a number"},
+      {"isovalue nan", "isovalue 'nan': not finite"}, {"tool", "tool: expected"},
+      {"tool saw 2", "tool kind 'saw'"},           {"tool carve -1", "tool radius '-1'"},
+      {"tool smooth 2 1.5", "tool strength '1.5'"}, {"save /etc/x.mha", "save name '/etc/x.mha'"},
+      {"save a b", "save: expected"},              {"undo 2", "undo: takes no value, got '2'"},
+      {"", "empty command"},                       {"Isovalue 3", "unknown command 'Isovalue'"}};
+  for (const auto& [text, why] : bad) {
+    auto r = parse_command(text);
+    ASSERT_TRUE(std::holds_alternative<std::string>(r)) << "'" << text << "' was taken";
+    EXPECT_NE(std::get<std::string>(r).find(why), std::string::npos) << std::get<std::string>(r);
+  }
+}
+
+TEST(ServiceImage, EditedVolumeGoesBackWhereItCameFrom) {
+  // Whole: read back by the same path as any client's IMAGE, voxels and corners equal.
+  const engine::Volume file = rotated_head();
+  expect_same_place(file, received_volume(pack_image(file, "Head", VoxelBox{})));
+  // A sub-volume: the library reads its offset and size, and exactly its voxels.
+  VoxelBox box;
+  box.lo = {3, 10, 20};
+  box.hi = {11, 12, 29};
+  MemorySource src(pack_image(file, "Head", box));
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+  int size[3], off[3], dims[3];
+  in.image->GetSubVolume(size, off);
+  in.image->GetDimensions(dims);
+  EXPECT_EQ(dims[0] * dims[1] * dims[2], 64 * 64 * 93);
+  EXPECT_EQ(std::vector<int>(off, off + 3), (std::vector<int>{3, 10, 20}));
+  EXPECT_EQ(std::vector<int>(size, size + 3), (std::vector<int>{8, 2, 9}));
+  const auto* p = static_cast<const float*>(in.image->GetScalarPointer());
+  std::size_t differ = 0;
+  for (int z = 20; z < 29; ++z)
+    for (int y = 10; y < 12; ++y)
+      for (int x = 3; x < 11; ++x) differ += *p++ != file.voxels[std::size_t((z * 64 + y) * 64 + x)];
+  EXPECT_EQ(differ, 0u);
+}
+
+TEST(ServiceMessages, LabelMetaNamesItsImages) {
+  igtl::LabelMetaMessage::Pointer m = igtl::LabelMetaMessage::New();
+  m->SetDeviceName("Labels");
+  for (const char* image : {"Seg", "Organs"}) {
+    igtl::LabelMetaElement::Pointer e = igtl::LabelMetaElement::New();
+    e->SetName("label");
+    e->SetDeviceName(image);
+    m->AddLabelMetaElement(e);
+  }
+  std::vector<std::uint8_t> all = bytes_of(m);
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  Incoming in = read_message(src, MessageLimits{});
+  ASSERT_EQ(in.kind, Incoming::Kind::kLabelMeta) << in.why;
+  EXPECT_EQ(in.labels, (std::vector<std::string>{"Seg", "Organs"}));
+  EXPECT_EQ(read_message(src, MessageLimits{}).kind, Incoming::Kind::kTransform);
+  // No labels at all (found by fuzz_igtl: an empty body copied from a null pointer): read
+  // (or refused by its CRC), never a crash, and the stream goes on.
+  std::vector<std::uint8_t> empty = announced("LBMETA", 0);
+  empty.insert(empty.end(), next.begin(), next.end());
+  MemorySource none(empty);
+  Incoming e = read_message(none, MessageLimits{});
+  EXPECT_TRUE(e.kind == Incoming::Kind::kLabelMeta || e.kind == Incoming::Kind::kRefused) << e.why;
+  EXPECT_TRUE(e.labels.empty());
+  EXPECT_EQ(read_message(none, MessageLimits{}).kind, Incoming::Kind::kTransform);
+  // A body that is not whole labels: refused, the stream goes on.
+  std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
+  odd.insert(odd.end(), next.begin(), next.end());
+  expect_refused_then_the_next(odd, "LBMETA body of 100 bytes");
+}
+
+}  // namespace
+}  // namespace isotouch::service
+
+namespace isotouch::service {
+namespace {
+
+TEST(ServiceIgtlDevice, SpecAndConnectionErrorsNameThePart) {
+  const IgtlDeviceOptions o = parse_igtl_spec("plus.local:18944:StylusToReference");
+  EXPECT_EQ(o.host, "plus.local");
+  EXPECT_EQ(o.port, 18944);
+  EXPECT_EQ(o.stream, "StylusToReference");
+  EXPECT_EQ(parse_igtl_spec("127.0.0.1:7").stream, "StylusToTracker");
+  const std::pair<const char*, const char*> bad[] = {{"127.0.0.1", "port ''"},
+                                                     {"127.0.0.1:0", "port '0'"},
+                                                     {"127.0.0.1:80x", "port '80x'"},
+                                                     {":18944", "no host"},
+                                                     {"h:1:", "stream ''"},
+                                                     {"h:1:ABCDEFGHIJKLMNOPQRSTU", "stream 'ABCDEFGHIJKLMNOPQRSTU'"}};
+  for (const auto& [spec, why] : bad) {
+    try {
+      parse_igtl_spec(spec);
+      ADD_FAILURE() << spec << " was taken";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
+  // Nothing listens there: refused at once, naming the address.
+  int port = 0;
+  {
+    Listener l("127.0.0.1", 0);
+    port = l.port();
+  }  // closed: nobody listens there now
+  try {
+    IgtlDeviceOptions none;
+    none.host = "127.0.0.1";
+    none.port = port;
+    none.measure_s = 0.1;
+    IgtlDevice d(none);
+    ADD_FAILURE() << "connected to a port nobody listens on";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("127.0.0.1:" + std::to_string(port)), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

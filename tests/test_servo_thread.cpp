@@ -593,6 +593,33 @@ TEST(ServoSafety, AStaleReportGivesZeroForceInTheSameTick) {
   EXPECT_GE(rig.renderer.resets.load(), 1);  // contact state forgotten before force came back
 }
 
+TEST(ServoSafety, TheDevicesOwnStaleTimeoutHolds) {
+  // A device whose readings come every few servo periods (a network stream) says how old a
+  // reading may get (DeviceCaps::stale_timeout_s, here 200 ms): readings older than the
+  // default two periods still give force; older than 200 ms, an exact zero.
+  SafetyRig rig;
+  rig.dev.c.stale_timeout_s = 0.2;  // caps are read at start()
+  rig.servo->start();
+  rig.run_ticks(60);
+  rig.dev.fresh = false;
+  rig.run_ms(400);
+  rig.dev.fresh = true;
+  rig.run_ticks(30);
+  rig.servo->stop();
+  long aged_forced = 0, past_zero = 0, past = 0;
+  for (std::size_t i = 0; i < rig.dev.logged(); ++i) {
+    const WireTick& t = rig.dev.ticks[i];
+    if (t.prev_write_ns < 0 || !t.wrote) continue;
+    const std::int64_t age = t.prev_write_ns - t.received_ns;  // the tick started after this
+    if (age > 3 * kStaleNs && t.read_ns - t.received_ns < 190'000'000) aged_forced += !exact_zero(t.force);
+    if (age > 201'000'000) past += 1, past_zero += exact_zero(t.force);
+  }
+  EXPECT_GT(aged_forced, 50) << "readings 6 to 190 ms old must still give force with the device's 200 ms timeout";
+  EXPECT_GT(past, 50);
+  EXPECT_EQ(past_zero, past) << "a reading older than the device's timeout gave force";
+  EXPECT_GT(rig.servo->device_counters().stale, 50);
+}
+
 TEST(ServoSafety, AShortStaleBlipZeroesThoseTicksButKeepsTheContact) {
   SafetyRig rig(0.05, 2.0);  // blips up to 2 s (a loaded machine stretches 10 ticks) keep the contact state
   rig.servo->start();

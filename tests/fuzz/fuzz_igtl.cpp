@@ -1,12 +1,14 @@
 // libFuzzer target for the OpenIGTLink message handling of `isotouch serve`: any bytes, read
 // as a client's stream, give messages that are kept, skipped or refused with a reason, never
 // a crash, a read past a body or an exception; a kept IMAGE converts to a volume with finite
-// placement and the voxel count its grid says, or is refused with a VolumeError.
+// placement and the voxel count its grid says, or is refused with a VolumeError; a kept
+// STRING parses to a command or a non-empty reason (commands.h).
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 
+#include "isotouch/service/commands.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/igtl_message.h"
 
@@ -53,6 +55,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (in.kind == K::kClosed || in.kind == K::kBroken) break;
     if (in.kind == K::kRefused && in.why.empty()) __builtin_trap();
     if (in.kind == K::kImage) check_image(*in.image);
+    if (in.kind == K::kString) {
+      const auto c = service::parse_command(in.text);
+      if (const auto* why = std::get_if<std::string>(&c); why && why->empty()) __builtin_trap();
+    }
   }
   return 0;
 }

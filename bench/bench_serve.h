@@ -1,0 +1,41 @@
+// bench_serve.h - `isotouch bench serve`: the round trip of `isotouch serve` on loopback, from
+// a tracker's TRANSFORM in to the force TRANSFORM that answers it (--reply-force), with and
+// without Slicer-like traffic in the same run (a large IMAGE every few seconds, each one
+// becoming the session's volume), and the servo's missed deadlines in both.
+#pragma once
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace isotouch::bench {
+
+struct BenchServeOptions {
+  std::string scene;           ///< the scene served ("" = scenes/head.json)
+  double seconds = 8;          ///< per phase [s]
+  double rate_hz = 1000;       ///< the tracker's TRANSFORMs per second
+  int image_size = 256;        ///< the IMAGE's voxels per axis (float32)
+  double image_every_s = 3;    ///< one IMAGE this often [s]
+  bool sched_fifo = true;      ///< SCHED_FIFO for the servo thread (refused: a note)
+  std::string device;          ///< Vulkan device
+};
+
+/// One phase's figures.
+struct BenchServePhase {
+  std::string name;
+  long poses = 0;              ///< TRANSFORMs sent
+  long answered = 0;           ///< force TRANSFORMs received that answer one of them
+  long stall_answers = 0;      ///< of those, the server's: no servo rendered the pose within 2 ms (a session swap)
+  double p50_us = 0, p99_us = 0, max_us = 0;  ///< round trip, pose sent to its force received [us]
+  long images = 0;             ///< IMAGEs taken as the session's volume
+  long ticks = 0, missed = 0;  ///< servo ticks and missed deadlines
+};
+
+/// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met" and "servo misses
+/// with traffic M <= R + 3 sqrt(R) = L (R without): met|NOT met", from the figures.
+std::vector<std::string> bench_serve_verdicts(const BenchServePhase& alone, const BenchServePhase& traffic);
+
+/// Runs both phases and prints a table, the verdicts and the machine. @return 0; 1 if
+/// nothing could be measured.
+int run_bench_serve(const BenchServeOptions& options, std::ostream& log);
+
+}  // namespace isotouch::bench

@@ -1,0 +1,188 @@
+#include "isotouch/service/igtl_device.h"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "isotouch/sim/stability.h"
+
+namespace isotouch::service {
+namespace {
+
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+std::string num(double v, int precision = 4) {
+  std::ostringstream s;
+  s.precision(precision);
+  s << v;
+  return s.str();
+}
+
+}  // namespace
+
+IgtlDeviceOptions parse_igtl_spec(const std::string& arg) {
+  IgtlDeviceOptions o;
+  const std::size_t a = arg.find(':');
+  const std::size_t b = a == std::string::npos ? a : arg.find(':', a + 1);
+  o.host = arg.substr(0, a);
+  const std::string port = a == std::string::npos ? "" : arg.substr(a + 1, b == std::string::npos ? b : b - a - 1);
+  if (b != std::string::npos) o.stream = arg.substr(b + 1);
+  std::size_t used = 0;
+  int p = -1;
+  try {
+    p = std::stoi(port, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (o.host.empty()) throw std::invalid_argument("igtl:" + arg + ": no host (igtl:HOST:PORT[:STREAM])");
+  if (used == 0 || used != port.size() || p < 1 || p > 65535)
+    throw std::invalid_argument("igtl:" + arg + ": port '" + port + "' is not 1 to 65535 (igtl:HOST:PORT[:STREAM])");
+  if (o.stream.empty() || o.stream.size() > 20)
+    throw std::invalid_argument("igtl:" + arg + ": stream '" + o.stream + "' is not 1 to 20 characters (a device name)");
+  o.port = p;
+  return o;
+}
+
+IgtlDevice::IgtlDevice(const IgtlDeviceOptions& o) : o_(o) {
+  conn_ = std::make_shared<Connection>(connect_tcp(o.host, o.port, o.connect_timeout_ms), o.receive_timeout_ms,
+                                       o.receive_timeout_ms, &stop_);
+  reader_ = std::thread([this] { read_loop(); });
+  try {
+    measure(o.measure_s);
+  } catch (...) {
+    stop_ = true;
+    conn_->shutdown();
+    reader_.join();
+    throw;
+  }
+  writer_ = std::thread([this] { write_loop(); });
+}
+
+IgtlDevice::~IgtlDevice() {
+  stop_ = true;
+  if (writer_.joinable()) writer_.join();  // its last act: a zero force
+  conn_->shutdown();
+  if (reader_.joinable()) reader_.join();
+}
+
+/// Waits `seconds` and takes the stream's rate from the poses that arrived.
+void IgtlDevice::measure(double seconds) {
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  const long n = poses_.load();
+  const double span_s = double(last_ns_.load() - first_ns_.load()) * 1e-9;
+  if (n < 10 || !(span_s > 0)) {
+    throw std::runtime_error("igtl:" + o_.host + ":" + std::to_string(o_.port) + ": " + std::to_string(n) +
+                             " TRANSFORMs named '" + o_.stream + "' in " + num(seconds) + " s (" +
+                             std::to_string(others_.load()) + " other messages" +
+                             (closed_ ? ", then the connection closed" : "") + "); at least 10 are needed to measure the rate");
+  }
+  rate_hz_ = double(n - 1) / span_s;
+}
+
+void IgtlDevice::read_loop() {
+  for (;;) {
+    Incoming in = read_message(*conn_, MessageLimits{});
+    if (in.kind == Incoming::Kind::kClosed || in.kind == Incoming::Kind::kBroken) break;
+    if (in.kind != Incoming::Kind::kTransform || in.device != o_.stream) {
+      others_.fetch_add(1);
+      continue;
+    }
+    Pose p = pose_.load();
+    p.m = {in.matrix[0][3] * 1e-3, in.matrix[1][3] * 1e-3, in.matrix[2][3] * 1e-3};
+    p.received_ns = now_ns();
+    ++p.sequence;
+    pose_.store(p);
+    if (poses_.fetch_add(1) == 0) first_ns_ = p.received_ns;
+    last_ns_ = p.received_ns;
+  }
+  closed_ = true;
+}
+
+servo::DeviceReading IgtlDevice::read() {
+  pose_.load(last_);
+  servo::DeviceReading r;
+  r.position_m = last_.m;
+  r.received_ns = last_.received_ns > 0 ? last_.received_ns : 1;  // nothing yet: stale
+  r.sequence = last_.sequence;
+  if (closed_.load(std::memory_order_relaxed)) r.status = servo::DeviceStatus::kDisconnected;
+  return r;
+}
+
+void IgtlDevice::write_force_n(const core::Vec3& f) {
+  if (!(std::isfinite(f.x) && std::isfinite(f.y) && std::isfinite(f.z))) return;  // never sent
+  force_.store({f, now_ns()});
+}
+
+servo::DeviceCaps IgtlDevice::caps() const {
+  servo::DeviceCaps c;
+  c.name = "OpenIGTLink '" + o_.stream + "'";
+  c.native_rate_hz = rate_hz_;
+  c.stale_timeout_s = 3.0 / rate_hz_;
+  return c;
+}
+
+const std::atomic<std::uint64_t>* IgtlDevice::enable_force(bool on, double stall_s) {
+  if (std::isfinite(stall_s) && stall_s > 0) stall_s_ = stall_s;
+  on_ = on;
+  return &stalls_;
+}
+
+void IgtlDevice::send_force(const core::Vec3& f) {
+  const double t[3] = {f.x, f.y, f.z};
+  if (conn_->send(pack_translation("Force", t))) sent_.fetch_add(1);
+}
+
+/// Polls every 0.2 ms: a new pose the servo has answered (or 2 ms old) gets the newest force;
+/// a stalled servo or force off gives zero; a stale stream gets one zero.
+void IgtlDevice::write_loop() {
+  std::uint64_t answered = 0;
+  bool zero_sent = true, was_stalled = true;
+  const std::int64_t stale_ns = std::int64_t(3e9 / rate_hz_);
+  while (!stop_) {
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    const Pose p = pose_.load();
+    const Force f = force_.load();
+    const std::int64_t t = now_ns();
+    const bool stalled = !on_ || f.written_ns == 0 || double(t - f.written_ns) * 1e-9 > stall_s_.load();
+    if (stalled && !was_stalled && on_) stalls_.fetch_add(1);
+    was_stalled = stalled;
+    if (t - p.received_ns > stale_ns) {
+      if (!zero_sent) send_force({0, 0, 0});
+      zero_sent = true;
+      continue;
+    }
+    if (p.sequence == answered || (!stalled && f.written_ns < p.received_ns && t - p.received_ns < 2'000'000)) continue;
+    const core::Vec3 out = stalled ? core::Vec3{0, 0, 0} : f.f;
+    send_force(out);
+    answered = p.sequence;
+    zero_sent = out.x == 0 && out.y == 0 && out.z == 0;
+  }
+  send_force({0, 0, 0});
+}
+
+std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description) {
+  auto d = std::make_unique<IgtlDevice>(parse_igtl_spec(arg));
+  const double rate = d->measured_rate_hz();
+  const double loop_hz = std::min(rate, loop.servo_rate_hz);
+  const double bound = sim::colgate_k_max(loop.handle_damping_n_s_per_m, loop.servo_damping_n_s_per_m, 1.0 / loop_hz);
+  std::ostringstream s;
+  s << "igtl:" << arg << " (" << d->caps().name << " at " << num(rate) << " Hz measured; the force loop closes at "
+    << num(loop_hz) << " Hz: Colgate-Schenkel K <= 2 (b - |B|) / T = " << num(bound) << " N/m with b "
+    << loop.handle_damping_n_s_per_m << " N s/m, B " << loop.servo_damping_n_s_per_m << " N s/m; the scene's K "
+    << loop.stiffness_n_per_m << " N/m)";
+  description = s.str();
+  if (loop.stiffness_n_per_m > bound) {
+    if (!loop.allow_unstable_stiffness)
+      throw std::runtime_error(description + ": servo.stiffness_n_per_m " + num(loop.stiffness_n_per_m) +
+                               " is above the bound " + num(bound) +
+                               " N/m at this rate; the contact may buzz: lower the stiffness, raise the stream's rate, or "
+                               "allow it (--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)");
+    description += "; warning: K is above the bound (allowed)";
+  }
+  return d;
+}
+
+}  // namespace isotouch::service

@@ -1,0 +1,111 @@
+// igtl_device.h - an OpenIGTLink source as the haptic device, `--haptic igtl:HOST:PORT[:STREAM]`:
+// a client of a PlusServer (its OpenHaptics device) or of any OpenIGTLink server that streams
+// a tool's TRANSFORM.
+//
+//   reader thread: read_message -> TRANSFORM named STREAM -> the reading: its translation
+//     [mm] -> device [m], in the stream's own frame (PLUS: RAS); the world map is the scene's
+//   writer thread: once the servo has read a new pose, the servo's newest force goes back as
+//     a TRANSFORM "Force" whose translation is the force [N] in the same frame (PLUS's
+//     convention); zero once the servo stopped writing (its stall time) and, once, as soon as
+//     the stream is stale, so that the peer never holds a contact force; zero at close.
+//
+// The force loop closes over the network at the stream's rate, not the servo's: the device
+// measures it when it opens and reports it as DeviceCaps::native_rate_hz, with a stale
+// timeout of 3 stream periods (DeviceCaps::stale_timeout_s: at 1 kHz servo ticks between
+// poses are not stale; a lost stream is stale, zero force, 3 periods after its last pose).
+// Part of isotouch::igtl_device.
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "isotouch/service/igtl_socket.h"
+#include "isotouch/servo/device_io.h"
+#include "isotouch/servo/latest_value.h"
+
+namespace isotouch::service {
+
+struct IgtlDeviceOptions {
+  std::string host;
+  int port = 18944;
+  std::string stream = "StylusToTracker";  ///< device name of the tool's TRANSFORMs
+  double measure_s = 1.0;                   ///< how long opening listens to measure the stream's rate [s]
+  int connect_timeout_ms = 3000;
+  int receive_timeout_ms = 2000;            ///< longest silence inside a message [ms]
+};
+
+/// "HOST:PORT[:STREAM]" -> options. @throws std::invalid_argument naming the part and value.
+IgtlDeviceOptions parse_igtl_spec(const std::string& arg);
+
+/// What the stream's rate must allow: the scene's stiffness against the Colgate-Schenkel
+/// bound K_max = 2 (b - |B|) / T with T the loop's period (the stream's, or the servo's
+/// when that is slower).
+struct IgtlLoop {
+  double servo_rate_hz = 1000;
+  double handle_damping_n_s_per_m = 0;  ///< b: device + hand [N s/m]
+  double servo_damping_n_s_per_m = 0;   ///< B [N s/m]
+  double stiffness_n_per_m = 0;         ///< K [N/m]
+  bool allow_unstable_stiffness = false;
+};
+
+class IgtlDevice final : public servo::HapticDeviceIO {
+ public:
+  /// Connects and listens for measure_s: the stream's rate.
+  /// @throws std::runtime_error: no connection; fewer than 10 TRANSFORMs named STREAM
+  ///         within measure_s (names what did arrive).
+  explicit IgtlDevice(const IgtlDeviceOptions& o);
+  ~IgtlDevice() override;  // a zero force sent, the threads joined
+  IgtlDevice(const IgtlDevice&) = delete;
+  IgtlDevice& operator=(const IgtlDevice&) = delete;
+
+  /// The stream's rate measured while opening [Hz].
+  double measured_rate_hz() const { return rate_hz_; }
+  /// Force TRANSFORMs sent so far.
+  long forces_sent() const { return sent_.load(); }
+
+  // Servo thread: no allocation, lock or syscall.
+  core::Vec3 read_position_m() override { return read().position_m; }
+  servo::DeviceReading read() override;
+  void write_force_n(const core::Vec3& f) override;
+  servo::DeviceCaps caps() const override;
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
+
+ private:
+  struct Pose {
+    core::Vec3 m;
+    std::int64_t received_ns = 0;  // 0: none yet
+    std::uint64_t sequence = 0;
+  };
+  struct Force {
+    core::Vec3 f;
+    std::int64_t written_ns = 0;
+  };
+  void read_loop();
+  void write_loop();
+  void send_force(const core::Vec3& f);
+  void measure(double seconds);
+
+  IgtlDeviceOptions o_;
+  std::shared_ptr<Connection> conn_;
+  servo::LatestValue<Pose> pose_;
+  Pose last_;  // servo thread
+  servo::LatestValue<Force> force_;
+  std::atomic<bool> stop_{false}, on_{false}, closed_{false};
+  std::atomic<double> stall_s_{0.05};
+  std::atomic<std::uint64_t> stalls_{0};
+  std::atomic<long> poses_{0}, sent_{0};
+  std::atomic<std::int64_t> first_ns_{0}, last_ns_{0};
+  std::atomic<long> others_{0};  // messages that were not the stream
+  double rate_hz_ = 0;
+  std::thread reader_, writer_;
+};
+
+/// Opens `arg` ("HOST:PORT[:STREAM]") and checks the loop it closes: `description` gets the
+/// measured rate and the stiffness bound it implies. @throws std::invalid_argument on a bad
+/// spec; std::runtime_error if it cannot be opened, or if loop.stiffness_n_per_m is above
+/// the bound and loop.allow_unstable_stiffness is not set (the message says how to allow it).
+std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description);
+
+}  // namespace isotouch::service

@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# `isotouch run --live --haptic igtl:HOST:PORT` against igtl_plus_peer, a PLUS-like OpenIGTLink
+# server built on the library (its stylus TRANSFORM streamed, the Force TRANSFORMs it gets back
+# printed):
+#   1. at 500 Hz: the run says the measured rate and the Colgate-Schenkel bound it implies;
+#      the stylus moved 2.6 voxels into the skull gets forces back (|F| about 1.5 N, pushing
+#      the stylus back out, -x in the device frame); when the stream stops while the run goes
+#      on, the next force the peer gets is an exact zero, within the stale timeout (3 stream
+#      periods) and 100 ms for a loaded machine, and no non-zero force after it;
+#   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
+#      exit 1, the message naming the bound and the way to allow it; with
+#      --allow-unstable-stiffness it runs, warning.
+# "PASS haptic igtl" is printed once, last, after every check.
+# Usage: cli_haptic_igtl.sh ISOTOUCH SCENE PEER OUT_DIR
+set -u
+exe=$1; scene=$2; peer=$3; out=$4
+[[ $out == */cli_haptic_igtl ]] || { echo "FAIL haptic igtl: OUT_DIR must end in /cli_haptic_igtl: $out"; exit 1; }
+rm -rf "$out"; mkdir -p "$out"
+fail() { echo "FAIL haptic igtl: $*"; for f in "$out"/*.log; do echo "--- $f"; tail -n 15 "$f"; done; exit 1; }
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
+# Device frame [mm] (the scene maps device [m] + the volume's centre onto the grid): voxel x 3
+# (outside the skull) and x 11.6 (2.6 voxels into it), row y 32, slice z 11 of the head.
+path="-91.2 1.6 -52.5 -63.68 1.6 -52.5"
+# run NAME RATE STREAM_S [isotouch options]: the peer and a live run against it. The stylus
+# waits outside while the device measures the rate (1 s), then goes in at 1.6 s (a HIP that
+# starts inside the object has no surface to be held on).
+run() {
+  local name=$1 rate=$2 stream_s=$3; shift 3
+  local port; port=$(free_port)
+  # shellcheck disable=SC2086
+  "$peer" "$port" "$rate" "$stream_s" 1.6 0.5 2 $path >"$out/$name.peer.log" 2>&1 &
+  local peer_pid=$!
+  for _ in $(seq 100); do grep -q listening "$out/$name.peer.log" && break; sleep 0.05; done
+  timeout 60 "$exe" run "$scene" --live -q --haptic "igtl:127.0.0.1:$port" "$@" >"$out/$name.log" 2>&1
+  echo $? >"$out/$name.rc"
+  for _ in $(seq 150); do kill -0 $peer_pid 2>/dev/null || break; sleep 0.1; done  # it ends by itself
+  kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
+}
+run fast 500 3.2
+run slow 50 3
+run allowed 50 5 --allow-unstable-stiffness
+grep -q "Hz measured" "$out/fast.log" || fail "the run did not say the stream's measured rate"
+[[ $(cat "$out/slow.rc") == 1 ]] || fail "the 50 Hz stream against K 800 N/m exited $(cat "$out/slow.rc"), not 1"
+grep -qE "servo.stiffness_n_per_m 800 is above the bound (39[0-9]|40[0-9])" "$out/slow.log" || fail "the refusal does not name the bound"
+grep -q -- "--allow-unstable-stiffness" "$out/slow.log" || fail "the refusal does not say how to allow it"
+grep -q "K is above the bound (allowed)" "$out/allowed.log" || fail "--allow-unstable-stiffness did not run with a warning"
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+def fail(msg):
+    print("FAIL haptic igtl:", msg); sys.exit(1)
+log = open(f"{out}/fast.log").read()
+m = re.search(r"at ([0-9.]+) Hz measured.*?K <= 2 \(b - \|B\|\) / T = ([0-9.]+) N/m", log)
+if not m: fail("no rate and bound in the run's output")
+rate, bound = float(m.group(1)), float(m.group(2))
+if not 400 <= rate <= 600: fail(f"measured {rate} Hz for a 500 Hz stream")
+if abs(bound - 2 * (5.01 - 1.0) * rate) > 0.01 * bound: fail(f"bound {bound} N/m is not 2 (b - |B|) rate at {rate} Hz")
+peer = open(f"{out}/fast.peer.log").read().splitlines()
+stopped = float(next(l.split()[1] for l in peer if l.startswith("stopped ")))
+forces = [(float(l.split()[1]), [float(v) for v in l.split()[2:5]]) for l in peer if l.startswith("force ")]
+during = [f for t, f in forces if t < stopped]
+after = [(t, f) for t, f in forces if t >= stopped]
+norms = [sum(c * c for c in f) ** 0.5 for f in during]
+if len(during) < 300: fail(f"only {len(during)} forces came back while the stream ran")
+pushing = [f for f in during if sum(c * c for c in f) ** 0.5 > 0.8]
+if len(pushing) < 100: fail(f"only {len(pushing)} forces above 0.8 N with the stylus 2.6 voxels into bone (max {max(norms):.2f} N)")
+if max(norms) > 3.3 + 1e-6: fail(f"a force of {max(norms)} N, past the scene's 3.3 N limit")
+if any(f[0] >= 0 for f in pushing): fail("a contact force that does not push the stylus back out (-x)")
+if not after: fail("no force came after the stream stopped: the peer is left holding the last contact force")
+t_zero, f_zero = after[0]
+if f_zero != [0.0, 0.0, 0.0]: fail(f"the first force after the stream stopped is {f_zero}, not zero")
+late = t_zero - stopped
+# a loaded machine may delay the writer thread; without the stale zero it is the close, a second later
+if late > 3.0 / rate + 0.1: fail(f"the zero force came {late * 1e3:.1f} ms after the stream stopped (stale timeout {3e3 / rate:.1f} ms)")
+if any(f != [0.0, 0.0, 0.0] for _, f in after): fail("a non-zero force after the stream was lost")
+print(f"igtl ok: {rate:.0f} Hz measured, bound {bound:.0f} N/m; {len(during)} forces, {len(pushing)} above 0.8 N "
+      f"(max {max(norms):.2f} N); zero {late * 1e3:.1f} ms after the stream stopped")
+PY
+echo "PASS haptic igtl"

@@ -1,0 +1,306 @@
+// igtl_session_client - a small OpenIGTLink client built on the library's messages (the way
+// Slicer drives a session): streams a tracked tool, sends STRING commands, LABELMETA and
+// IMAGE messages, and keeps what the server sends back: the STATUS answers, the Force
+// transforms, and the edited IMAGEs, applied (their sub-volume) to a copy of BASE.
+// Usage: igtl_session_client HOST PORT BASE ACTION...
+//   move X Y Z SECS   the tool "Stylus" moves in a line to X Y Z [mm, RAS] over SECS, then
+//                     stays (streamed at 500 Hz from the first move on)
+//   wait SECS
+//   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
+//   force             prints the mean of the newest 10 Force transforms "force X Y Z |F| N"
+//   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
+//   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
+//                     with every IMAGE received applied against FILE; G: "ok" when every
+//                     IMAGE's dimensions, spacing, directions and centre were BASE's within 1e-3)
+//   labelmeta NAME    a LBMETA describing the image NAME as a label map
+//   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
+// Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
+#include <igtlClientSocket.h>
+#include <igtlImageMessage.h>
+#include <igtlLabelMetaMessage.h>
+#include <igtlMessageHeader.h>
+#include <igtlStatusMessage.h>
+#include <igtlStringMessage.h>
+#include <igtlTransformMessage.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <iostream>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "isotouch/io/volume_io.h"
+#include "isotouch/tests/igtl_test_sender.h"
+
+namespace {
+using Clock = std::chrono::steady_clock;
+
+struct Shared {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<std::string> statuses;
+  std::deque<std::array<double, 3>> forces;
+  isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
+  int images = 0;
+  bool geometry_ok = true;
+  bool closed = false;
+};
+
+/// The header of `m` matches BASE's as the server must send it (RAS, centre).
+bool same_geometry(igtl::ImageMessage& m, const isotouch::engine::Volume& v) {
+  int dims[3];
+  float sp[3];
+  m.GetDimensions(dims);
+  m.GetSpacing(sp);
+  igtl::Matrix4x4 mat;
+  m.GetMatrix(mat);
+  const isotouch::core::Vec3 c = v.index_to_physical({(dims[0] - 1) / 2.0, (dims[1] - 1) / 2.0, (dims[2] - 1) / 2.0});
+  const double centre[3] = {-c.x * 1e3, -c.y * 1e3, c.z * 1e3};
+  bool ok = m.GetCoordinateSystem() == igtl::ImageMessage::COORDINATE_RAS;
+  for (int a = 0; a < 3; ++a) {
+    ok = ok && dims[a] == v.grid.dims[std::size_t(a)];
+    ok = ok && std::abs(sp[a] - (a == 0 ? v.grid.spacing_m.x : a == 1 ? v.grid.spacing_m.y : v.grid.spacing_m.z) * 1e3) < 1e-3;
+    ok = ok && std::abs(mat[a][3] - centre[a]) < 1e-3;
+    for (int b = 0; b < 3; ++b)
+      ok = ok && std::abs(mat[a][b] - (a < 2 ? -1 : 1) * v.direction[std::size_t(3 * a + b)]) < 1e-3;
+  }
+  return ok;
+}
+
+/// The sub-volume of an IMAGE (float32, little-endian) written into `s.copy`.
+void apply_image(igtl::ImageMessage& m, Shared& s) {
+  int size[3], off[3];
+  m.GetSubVolume(size, off);
+  const bool ok = same_geometry(m, s.copy) && m.GetScalarType() == igtl::ImageMessage::TYPE_FLOAT32 &&
+                  m.GetEndian() == igtl::ImageMessage::ENDIAN_LITTLE;
+  s.geometry_ok = s.geometry_ok && ok;
+  if (!ok) return;
+  const auto* p = static_cast<const float*>(m.GetScalarPointer());
+  const auto& n = s.copy.grid.dims;
+  for (int z = off[2]; z < off[2] + size[2]; ++z)
+    for (int y = off[1]; y < off[1] + size[1]; ++y)
+      for (int x = off[0]; x < off[0] + size[0]; ++x)
+        s.copy.voxels[(std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(x)] = *p++;
+  ++s.images;
+}
+
+template <class M>
+typename M::Pointer body_of(igtl::ClientSocket* sock, igtl::MessageHeader* h) {
+  typename M::Pointer m = M::New();
+  m->SetMessageHeader(h);
+  m->AllocatePack();
+  sock->Receive(m->GetPackBodyPointer(), m->GetPackBodySize());
+  if (!(m->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) return nullptr;
+  return m;
+}
+
+void read_loop(igtl::ClientSocket* sock, Shared& s) {
+  for (;;) {
+    igtl::MessageHeader::Pointer h = igtl::MessageHeader::New();
+    h->InitPack();
+    if (sock->Receive(h->GetPackPointer(), h->GetPackSize()) != h->GetPackSize()) break;
+    h->Unpack();
+    const std::string type = h->GetDeviceType(), name = h->GetDeviceName();
+    std::lock_guard<std::mutex> lock(s.mu);
+    if (type == "STATUS") {
+      if (auto st = body_of<igtl::StatusMessage>(sock, h))
+        s.statuses.push_back("STATUS code " + std::to_string(st->GetCode()) + ": " + st->GetStatusString());
+    } else if (type == "TRANSFORM" && name == "Force") {
+      if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
+        igtl::Matrix4x4 m;
+        t->GetMatrix(m);
+        s.forces.push_back({m[0][3], m[1][3], m[2][3]});
+        if (s.forces.size() > 10) s.forces.pop_front();
+      }
+    } else if (type == "IMAGE") {
+      if (auto im = body_of<igtl::ImageMessage>(sock, h)) apply_image(*im, s);
+    } else {
+      sock->Skip(h->GetBodySizeToRead(), 0);
+    }
+    s.cv.notify_all();
+  }
+  std::lock_guard<std::mutex> lock(s.mu);
+  s.closed = true;
+  s.cv.notify_all();
+}
+
+/// The tool's path: a line from `from` to `to` over [t0, t1], then `to`.
+struct Path {
+  std::mutex mu;
+  double from[3] = {0, 0, 0}, to[3] = {0, 0, 0};
+  Clock::time_point t0, t1;
+  bool started = false;
+  void at(Clock::time_point t, double out[3]) {
+    std::lock_guard<std::mutex> lock(mu);
+    const double span = std::chrono::duration<double>(t1 - t0).count();
+    const double u = span <= 0 ? 1.0 : std::clamp(std::chrono::duration<double>(t - t0).count() / span, 0.0, 1.0);
+    for (int a = 0; a < 3; ++a) out[a] = from[a] + u * (to[a] - from[a]);
+  }
+};
+
+std::mutex send_mu;
+void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
+  m->Pack();
+  std::lock_guard<std::mutex> lock(send_mu);
+  sock->Send(m->GetPackPointer(), m->GetPackSize());
+}
+
+void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& done) {
+  igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+  t->SetDeviceName("Stylus");
+  while (!done) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    {
+      std::lock_guard<std::mutex> lock(path.mu);
+      if (!path.started) continue;
+    }
+    double p[3];
+    path.at(Clock::now(), p);
+    igtl::Matrix4x4 m;
+    igtl::IdentityMatrix(m);
+    for (int a = 0; a < 3; ++a) m[a][3] = float(p[a]);
+    t->SetMatrix(m);
+    send(sock, t);
+  }
+}
+
+bool wait_status(Shared& s) {
+  std::unique_lock<std::mutex> lock(s.mu);
+  if (!s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return !s.statuses.empty() || s.closed; }) || s.statuses.empty()) {
+    std::cout << "no STATUS came back\n";
+    return false;
+  }
+  std::cout << s.statuses.front() << "\n";
+  s.statuses.pop_front();
+  return true;
+}
+
+struct Client {
+  igtl::ClientSocket* sock;
+  Shared& s;
+  Path& path;
+  const isotouch::engine::Volume& base;
+  char** argv;
+  int argc;
+  int i;
+  std::string arg() { return i < argc ? argv[i++] : ""; }
+  double num() { return std::atof(arg().c_str()); }
+  bool action(const std::string& a);
+};
+
+bool Client::action(const std::string& a) {
+  if (a == "move") {
+    double to[3] = {num(), num(), num()};
+    const double secs = num();
+    const auto now = Clock::now();
+    double here[3];
+    path.at(now, here);
+    {
+      std::lock_guard<std::mutex> lock(path.mu);
+      for (int k = 0; k < 3; ++k) path.from[k] = path.started ? here[k] : to[k], path.to[k] = to[k];
+      path.t0 = now;
+      path.t1 = now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(secs));
+      path.started = true;
+    }
+    std::this_thread::sleep_for(std::chrono::duration<double>(secs));
+    return true;
+  }
+  if (a == "wait") return std::this_thread::sleep_for(std::chrono::duration<double>(num())), true;
+  if (a == "cmd") {
+    igtl::StringMessage::Pointer m = igtl::StringMessage::New();
+    m->SetDeviceName("CMD");
+    m->SetString(arg().c_str());
+    send(sock, m);
+    return wait_status(s);
+  }
+  if (a == "force") {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    std::lock_guard<std::mutex> lock(s.mu);
+    double f[3] = {0, 0, 0};
+    for (const auto& v : s.forces)
+      for (int k = 0; k < 3; ++k) f[k] += v[std::size_t(k)] / double(s.forces.size());
+    std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << std::hypot(f[0], f[1], f[2]) << " N\n";
+    return !s.forces.empty();
+  }
+  if (a == "images") {
+    const double quiet = num();
+    std::unique_lock<std::mutex> lock(s.mu);
+    for (int seen = -1; seen != s.images && !s.closed;) {
+      seen = s.images;
+      s.cv.wait_for(lock, std::chrono::duration<double>(quiet), [&] { return s.images != seen || s.closed; });
+    }
+    std::cout << "images " << s.images << "\n";
+    return true;
+  }
+  if (a == "compare") {
+    const std::string file = arg();
+    const isotouch::engine::Volume f = isotouch::io::load_volume(file);
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::size_t count = 0;
+    if (f.voxels.size() == s.copy.voxels.size())
+      for (std::size_t k = 0; k < f.voxels.size(); ++k) count += f.voxels[k] != s.copy.voxels[k];
+    else
+      count = f.voxels.size();
+    std::cout << "compare " << file << ": " << count << " voxels differ, geometry " << (s.geometry_ok ? "ok" : "off") << "\n";
+    return true;
+  }
+  if (a == "labelmeta") {
+    igtl::LabelMetaMessage::Pointer m = igtl::LabelMetaMessage::New();
+    m->SetDeviceName("Labels");
+    igtl::LabelMetaElement::Pointer e = igtl::LabelMetaElement::New();
+    e->SetName("skull");
+    e->SetDeviceName(arg().c_str());
+    e->SetLabel(1);
+    m->AddLabelMetaElement(e);
+    send(sock, m);
+    return true;
+  }
+  if (a == "image") {
+    const std::string name = arg();
+    const std::vector<std::uint8_t> b = isotouch::test::image_of(base, igtl::ImageMessage::ENDIAN_LITTLE, name.c_str());
+    {
+      std::lock_guard<std::mutex> lock(send_mu);
+      sock->Send(b.data(), int(b.size()));
+    }
+    return wait_status(s);
+  }
+  std::cout << "unknown action '" << a << "'\n";
+  return false;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 4) {
+    std::cerr << "usage: igtl_session_client HOST PORT BASE ACTION...\n";
+    return 2;
+  }
+  Shared s;
+  const isotouch::engine::Volume base = isotouch::io::load_volume(argv[3]);
+  s.copy = base;
+  igtl::ClientSocket::Pointer sock = igtl::ClientSocket::New();
+  if (sock->ConnectToServer(argv[1], std::atoi(argv[2])) != 0) {
+    std::cerr << "igtl_session_client: cannot connect to " << argv[1] << ":" << argv[2] << "\n";
+    return 1;
+  }
+  Path path;
+  std::atomic<bool> done{false};
+  std::thread reader([&] { read_loop(sock, s); });
+  std::thread streamer([&] { stream_loop(sock, path, done); });
+  Client c{sock, s, path, base, argv, argc, 4};
+  bool ok = true;
+  while (ok && c.i < argc) ok = c.action(c.arg());
+  done = true;
+  streamer.join();
+  sock->CloseSocket();
+  reader.join();
+  return ok ? 0 : 1;
+}

@@ -317,6 +317,11 @@ DeviceCaps caps() {
   c.buttons = 1;
   c.position_resolution_m = kLb * 2 * kPi / kCpr * kCapstan / kBodyBC;  // one count of encoder b at the tip
   c.watchdog_s = 0.5;
+  // Lock-step: the firmware answers one report per command, so the newest pose is one USB
+  // round trip old (1-2 ms at full speed, more when the host is busy); the servo's default of
+  // two periods would call a healthy Polhem stale. 8 ms is four round trips, under the
+  // firmware's own 0.5 s watchdog by far.
+  c.stale_timeout_s = 0.008;
   return c;
 }
 }  // namespace polhem

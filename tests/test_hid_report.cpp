@@ -210,3 +210,11 @@ TEST(Polhem, EmulatorSideInvertsTheHostsKinematics) {
     EXPECT_LT(norm(polhem::force_from_currents(polhem::motor_currents_a(f, e), e) - f), 1e-9);
   }
 }
+
+// Lock-step (one report per command): the newest pose is a USB round trip old, so the
+// Polhem's own stale timeout (5-10 ms) replaces the servo's two periods.
+TEST(Polhem, CapsCarryALockStepStaleTimeout) {
+  const DeviceCaps c = polhem::caps();
+  EXPECT_GE(c.stale_timeout_s, 0.005);
+  EXPECT_LE(c.stale_timeout_s, 0.010);
+}

@@ -1,0 +1,43 @@
+// common.h - what the Python module's binding files share: numpy conversions of points and
+// the registration functions each file defines.
+#pragma once
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+
+#include <array>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "isotouch/core/vec3.h"
+
+namespace isotouch::python {
+namespace py = pybind11;
+
+/// A length-3 sequence of finite numbers as a Vec3. @throws ValueError naming `what`.
+core::Vec3 vec3_arg(const py::handle& seq, const char* what);
+
+/// An (N, 3) float64 C-contiguous array of finite points (any array convertible to it: lists,
+/// float32). @throws ValueError naming `what`, the shape or the first non-finite row.
+std::vector<core::Vec3> points_arg(const py::handle& a, const char* what);
+
+/// (N, 3) points read where they lie: the caller's float64 C-contiguous buffer (no copy), or
+/// a converted copy that `keep` holds. Checked finite row by row like points_arg.
+struct PointsIn {
+  py::array_t<double> keep;
+  const double* p = nullptr;
+  std::size_t n = 0;
+  core::Vec3 at(std::size_t k) const { return {p[3 * k], p[3 * k + 1], p[3 * k + 2]}; }
+};
+PointsIn points_in(const py::handle& a, const char* what);
+
+/// Points as an (N, 3) float64 array.
+py::array_t<double> points_array(const std::vector<core::Vec3>& p);
+
+void bind_volume(py::module_& m);
+void bind_render(py::module_& m);
+void bind_engine(py::module_& m);
+void bind_scene(py::module_& m);
+void bind_live(py::module_& m);
+
+}  // namespace isotouch::python

@@ -34,6 +34,22 @@ PointsIn points_in(const py::handle& a, const char* what);
 /// Points as an (N, 3) float64 array.
 py::array_t<double> points_array(const std::vector<core::Vec3>& p);
 
+/// dims (nx, ny, nz), spacing [m] and origin [m] of a bound class with a core::Grid `grid`.
+template <class Class>
+Class& def_grid_properties(Class& c, const char* origin_doc) {
+  using T = typename Class::type;
+  c.def_property_readonly("dims", [](const T& x) {
+    return py::make_tuple(x.grid.dims[0], x.grid.dims[1], x.grid.dims[2]);
+  }, "(nx, ny, nz) voxels");
+  c.def_property_readonly("spacing", [](const T& x) {
+    return py::make_tuple(x.grid.spacing_m.x, x.grid.spacing_m.y, x.grid.spacing_m.z);
+  }, "(sx, sy, sz) [m]");
+  c.def_property_readonly("origin", [](const T& x) {
+    return py::make_tuple(x.grid.origin_m.x, x.grid.origin_m.y, x.grid.origin_m.z);
+  }, origin_doc);
+  return c;
+}
+
 void bind_volume(py::module_& m);
 void bind_render(py::module_& m);
 void bind_engine(py::module_& m);

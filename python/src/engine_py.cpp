@@ -69,11 +69,8 @@ py::dict run_passes(const std::shared_ptr<engine::Volume>& volume, const py::obj
 
 py::tuple check_all(const std::string& volume_path, const std::string& scene_path, const std::string& device,
                     double max_binding_mib) {
-  bench::CheckAllOptions o;
-  o.volume_path = volume_path;
-  o.scene_path = scene_path;
-  o.device = device;
-  o.max_binding_mib = max_binding_mib;
+  const bench::CheckAllOptions o{
+      .volume_path = volume_path, .scene_path = scene_path, .device = device, .max_binding_mib = max_binding_mib};
   std::ostringstream text;
   int rc = 0;
   {

@@ -217,17 +217,9 @@ void bind_params(py::module_& m) {
 }
 
 void bind_field(py::module_& m) {
-  py::class_<core::SampleField, FieldPtr>(m, "Field", R"(A published snapshot: per voxel the value and its
-gradient (grid-world frame, value units per m), as the renderers read it.)")
-      .def_property_readonly("dims", [](const core::SampleField& f) {
-        return py::make_tuple(f.grid.dims[0], f.grid.dims[1], f.grid.dims[2]);
-      }, "(nx, ny, nz)")
-      .def_property_readonly("spacing", [](const core::SampleField& f) {
-        return py::make_tuple(f.grid.spacing_m.x, f.grid.spacing_m.y, f.grid.spacing_m.z);
-      }, "[m]")
-      .def_property_readonly("origin", [](const core::SampleField& f) {
-        return py::make_tuple(f.grid.origin_m.x, f.grid.origin_m.y, f.grid.origin_m.z);
-      }, "grid-world position of voxel (0, 0, 0) [m]")
+  py::class_<core::SampleField, FieldPtr> field(m, "Field", R"(A published snapshot: per voxel the value and its
+gradient (grid-world frame, value units per m), as the renderers read it.)");
+  def_grid_properties(field, "grid-world position of voxel (0, 0, 0) [m]")
       .def_readonly("version", &core::SampleField::version)
       .def_readonly("background", &core::SampleField::background, "value outside the grid (NaN: none)")
       .def_property_readonly("bricked", &core::SampleField::bricked)

@@ -90,7 +90,7 @@ py::array_t<double> map_points(const py::handle& pts, core::Vec3 (*f)(const engi
 }  // namespace
 
 void bind_volume(py::module_& m) {
-  py::class_<engine::Volume, VolumePtr>(m, "Volume", R"(A scalar volume on a regular grid (float voxels, x fastest).
+  py::class_<engine::Volume, VolumePtr> volume(m, "Volume", R"(A scalar volume on a regular grid (float voxels, x fastest).
 
 Volume(array, spacing, origin=(0, 0, 0), direction=None): from a float32, C-contiguous
 (nz, ny, nx) numpy array (copied once); spacing (sx, sy, sz) [m], finite and > 0; origin
@@ -99,7 +99,8 @@ unit direction of index axis a (identity if None). A bad array, spacing, origin 
 raises ValueError naming it.
 
 Frames: index (x, y, z) continuous voxel coordinates; grid-world [m] = origin + spacing *
-index (what renderers and strokes use); physical [m] = origin + D (spacing * index).)")
+index (what renderers and strokes use); physical [m] = origin + D (spacing * index).)");
+  def_grid_properties(volume, "(x, y, z) of voxel (0, 0, 0) [m], physical and grid-world")
       .def(py::init(&volume_from_numpy), py::arg("array"), py::arg("spacing"),
            py::arg("origin") = py::make_tuple(0.0, 0.0, 0.0), py::arg("direction") = py::none())
       .def_property_readonly(
@@ -109,15 +110,6 @@ index (what renderers and strokes use); physical [m] = origin + D (spacing * ind
       .def_property_readonly("shape", [](const engine::Volume& v) {
         return py::make_tuple(v.grid.dims[2], v.grid.dims[1], v.grid.dims[0]);
       }, "(nz, ny, nx)")
-      .def_property_readonly("dims", [](const engine::Volume& v) {
-        return py::make_tuple(v.grid.dims[0], v.grid.dims[1], v.grid.dims[2]);
-      }, "(nx, ny, nz) voxels")
-      .def_property_readonly("spacing", [](const engine::Volume& v) {
-        return py::make_tuple(v.grid.spacing_m.x, v.grid.spacing_m.y, v.grid.spacing_m.z);
-      }, "(sx, sy, sz) [m]")
-      .def_property_readonly("origin", [](const engine::Volume& v) {
-        return py::make_tuple(v.grid.origin_m.x, v.grid.origin_m.y, v.grid.origin_m.z);
-      }, "(x, y, z) of voxel (0, 0, 0) [m]")
       .def_property_readonly("direction", [](const engine::Volume& v) {
         py::array_t<double> d({3, 3});
         std::copy(v.direction.begin(), v.direction.end(), d.mutable_data());

@@ -257,6 +257,12 @@ def test_live_session_edits_undo_and_recording(root, tmp_path):
     np.testing.assert_allclose(r["edits"]["centre"][1], centre)
     with pytest.raises(ValueError, match="kind"):
         live.brush("paint", centre)
+    # The recording as a playback device: the HIPs the session is given are the recorded ones.
+    with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="playback:" + rec) as pb:
+        pb.wait(0.3)
+        seen = pb.observe()
+    assert seen["tick"] > 100
+    assert np.min(np.linalg.norm(r["ticks"]["hip"] - np.array(seen["hip"]), axis=1)) < 1e-9
 
 
 def test_ctrl_c_stops_a_live_session_cleanly(root, tmp_path):

@@ -44,6 +44,7 @@ from ._isotouch import (  # noqa: F401
     render,
     run_passes,
     run_scene,
+    scene_passes,
     scene_setup,
     stroke_scene,
 )

@@ -8,6 +8,8 @@
 #include "isotouch/engine/pass_desc.h"
 #include "isotouch/engine/passes.h"
 #include "isotouch/engine/vk_context.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/scene_setup.h"
 #include "isotouch/python/common.h"
 #include <pybind11/stl.h>
 
@@ -97,6 +99,8 @@ void bind_engine(py::module_& m) {
 index; '' the default). GIL released. Returns a dict: 'samples' (a Field, with a gradient pass;
 its background set for the isosurface when tau is given), 'field' ((nz, ny, nx) float32 after the
 last filter, if any), 'timings_ms' [(label, ms)], 'device'.)");
+  m.def("scene_passes", [](const std::string& scene_path) { return run::scene_passes(io::load_scene(scene_path)); },
+        py::arg("scene"), "a scene file's engine.passes as a list of Pass (raises SceneError naming the field)");
   m.def("check_all", &check_all, py::arg("volume_path") = "", py::arg("scene_path") = "", py::arg("device") = "",
         py::arg("max_binding_mib") = 0.0,
         "`isotouch check --all`: every pass on the GPU against its CPU reference; returns (exit code, report text)");

@@ -1,5 +1,6 @@
 """The isotouch Python module against what lies outside it: the files' headers, the command
 line's own outputs and messages, the recordings the CLI writes, a second Python thread."""
+import json
 import os
 import re
 import signal
@@ -227,6 +228,20 @@ def test_check_gpu_against_cpu(head_path):
         assert r["identical"], r["outputs"]  # a CPU Vulkan device: the same float operations
     else:
         assert r["outputs"]["samples"]["max_ulp"] <= 64
+
+
+def test_a_scenes_passes_on_gpu_and_cpu(root, tmp_path):
+    d = json.loads((root / "scenes/sphere.json").read_text())
+    d.setdefault("engine", {})["passes"] = [{"gaussian": {"sigma_mm": 1.5}}, {"closing": {"radius_mm": 1}}, "gradient"]
+    scene = tmp_path / "sphere.json"
+    scene.write_text(json.dumps(d))
+    passes = isotouch.scene_passes(str(scene))
+    assert [p.label for p in passes] == ["gaussian(sigma 1.5 mm)", "closing(radius 1 mm)", "gradient"]
+    vol = isotouch.scene_setup(str(scene))["volume"]
+    r = isotouch.check(vol, passes, device="")
+    assert r["outputs"]["samples"]["nonfinite"] == 0 and r["outputs"]["field"]["nonfinite"] == 0
+    # the filtered field is not the raw volume: the passes ran
+    assert not np.array_equal(r["cpu"]["field"], vol.array)
 
 
 def test_check_all_is_the_cli_report(head_path):

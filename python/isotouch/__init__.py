@@ -29,6 +29,7 @@ from ._isotouch import (  # noqa: F401
     LiveSession,
     NormalSource,
     Pass,
+    Realtime,
     RecordingError,
     SceneError,
     StrokeScene,

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "isotouch/core/sample_field.h"
@@ -11,6 +12,7 @@
 #include "isotouch/eval/sweep.h"
 #include "isotouch/python/common.h"
 #include "isotouch/servo/baselines.h"
+#include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/hri.h"
 
 namespace isotouch::python {
@@ -169,6 +171,32 @@ std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const st
   return std::make_shared<eval::SweepScene>(eval::prepare_sweep_scene(name, vk.get(), log));
 }
 
+/// `with isotouch.Realtime("bench"):` the calling thread as `bench table1` times its replays:
+/// SCHED_FIFO, pinned to one CPU where the system allows (servo::ScopedRealtime); restored at exit.
+struct Realtime {
+  explicit Realtime(std::string w) : who(std::move(w)) {}
+  std::string who;
+  std::optional<servo::ScopedRealtime> scope;
+};
+
+void bind_realtime(py::module_& m) {
+  py::class_<Realtime>(m, "Realtime", R"(Context manager: the calling thread SCHED_FIFO and pinned to
+one CPU (as `bench table1` times its replays) where the system allows; 'granted' says what it got.)")
+      .def(py::init<std::string>(), py::arg("who") = "python")
+      .def("__enter__", [](Realtime& r) -> Realtime& {
+        r.scope.emplace(r.who);
+        return r;
+      }, py::return_value_policy::reference)
+      .def("__exit__", [](Realtime& r, py::args) { r.scope.reset(); })
+      .def_property_readonly("granted", [](const Realtime& r) {
+        if (!r.scope) return std::string("not entered");
+        const servo::RealtimeSetup& g = r.scope->setup();
+        std::string s = std::string(g.fifo ? "SCHED_FIFO" : "default scheduler") + ", " +
+                        (g.cpu >= 0 ? "CPU " + std::to_string(g.cpu) : std::string("unpinned"));
+        return g.note.empty() ? s : s + "; " + g.note;
+      });
+}
+
 void bind_params(py::module_& m) {
   py::enum_<core::InsideIs>(m, "InsideIs", "which side of tau is inside the object")
       .value("above", core::InsideIs::kAbove)
@@ -254,6 +282,7 @@ stroke, as `bench table1` and the sweeps replay it: samples, and the HIP per tic
 
 void bind_render(py::module_& m) {
   bind_params(m);
+  bind_realtime(m);
   bind_field(m);
   bind_strokes(m);
   m.def("render", &render, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",

@@ -317,6 +317,7 @@ def test_bench_offline_prints_both_figures_and_a_verdict(root):
     assert ticks >= 10000 and cpp > 0 and py > 0
     assert ratio == pytest.approx(py / cpp, rel=0.01)  # the printed verdict follows from the figures
     assert re.search(r"verdict: Python within 10 % of C\+\+ on \d+ of 1", p.stdout)
+    assert "scheduling of the timed calls: " in p.stdout
 
 
 # ---- installed ----

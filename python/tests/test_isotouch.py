@@ -272,12 +272,48 @@ def test_live_session_edits_undo_and_recording(root, tmp_path):
     np.testing.assert_allclose(r["edits"]["centre"][1], centre)
     with pytest.raises(ValueError, match="kind"):
         live.brush("paint", centre)
-    # The recording as a playback device: the HIPs the session is given are the recorded ones.
-    with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="playback:" + rec) as pb:
+
+def test_live_session_on_a_playback_device(root, tmp_path):
+    """A trace.csv whose HIPs no scripted hand would reach: the session is given those."""
+    k = np.arange(3000)
+    hip = np.stack([0.005 + 1e-5 * k, np.full(k.shape, 0.007), np.full(k.shape, 0.011)], axis=1)
+    rows = np.column_stack([k * 1e-3, hip, hip, np.zeros((len(k), 6))])
+    trace = tmp_path / "trace.csv"
+    np.savetxt(trace, rows, delimiter=",", fmt="%.9g", comments="",
+               header="t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,"
+                      "plane_update,tick_ns")
+    with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic=f"playback:{trace}") as pb:
         pb.wait(0.3)
         seen = pb.observe()
     assert seen["tick"] > 100
-    assert np.min(np.linalg.norm(r["ticks"]["hip"] - np.array(seen["hip"]), axis=1)) < 1e-9
+    assert np.min(np.linalg.norm(hip - np.array(seen["hip"]), axis=1)) < 1e-9
+
+
+def test_live_session_on_the_device_emulator(cli, root, tmp_path):
+    """The head scene's hand played by isotouch-devemu; what the emulator received is the truth."""
+    emu = os.environ.get("ISOTOUCH_DEVEMU")
+    assert emu, "ISOTOUCH_DEVEMU is not set (ctest sets it)"
+    scene, hand, sock = str(root / "scenes/head.json"), str(tmp_path / "hand.csv"), str(tmp_path / "dev.sock")
+    subprocess.run([cli, "run", scene, "--hand-path", hand], check=True, capture_output=True, timeout=300)
+    dev = subprocess.Popen([emu, "--socket", sock, "--path", hand, "--seconds", "30"], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        for _ in range(200):
+            if os.path.exists(sock):
+                break
+            time.sleep(0.05)
+        with isotouch.LiveSession(scene, haptic="emu:" + sock) as live:
+            live.wait(live.duration_s)
+        stats = live.stats()
+    finally:
+        dev.send_signal(signal.SIGTERM)
+        log = dev.communicate(timeout=60)[0]
+    m = re.search(r"(\d+) outputs received \((\d+) refused\).*max \|F\| ([\d.]+) N", log)
+    assert m, log
+    received, refused, fmax = int(m.group(1)), int(m.group(2)), float(m.group(3))
+    assert stats["ticks"] > 1000 and stats["faults"] == 0
+    assert received > 1000 and refused == 0
+    assert 0.5 < fmax <= 3.3, f"max |F| the emulator received: {fmax} N"
 
 
 def test_ctrl_c_stops_a_live_session_cleanly(root, tmp_path):

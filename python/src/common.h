@@ -22,14 +22,14 @@ core::Vec3 vec3_arg(const py::handle& seq, const char* what);
 std::vector<core::Vec3> points_arg(const py::handle& a, const char* what);
 
 /// (N, 3) points read where they lie: the caller's float64 C-contiguous buffer (no copy), or
-/// a converted copy that `keep` holds. Checked finite row by row like points_arg.
+/// a converted copy that `keep` holds. With `finite`, checked finite like points_arg.
 struct PointsIn {
   py::array_t<double> keep;
   const double* p = nullptr;
   std::size_t n = 0;
   core::Vec3 at(std::size_t k) const { return {p[3 * k], p[3 * k + 1], p[3 * k + 2]}; }
 };
-PointsIn points_in(const py::handle& a, const char* what);
+PointsIn points_in(const py::handle& a, const char* what, bool finite = true);
 
 /// Points as an (N, 3) float64 array.
 py::array_t<double> points_array(const std::vector<core::Vec3>& p);

@@ -29,13 +29,14 @@ core::Vec3 vec3_arg(const py::handle& seq, const char* what) {
 /// The exponent bits of a double: all set for an infinity or a NaN.
 constexpr std::uint64_t kExponent = 0x7ff0000000000000ull;
 
-PointsIn points_in(const py::handle& in, const char* what) {
+PointsIn points_in(const py::handle& in, const char* what, bool finite) {
   PointsIn pts;
   pts.keep = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(in);
   if (!pts.keep || pts.keep.ndim() != 2 || pts.keep.shape(1) != 3)
     throw py::value_error(std::string(what) + ": must be an (N, 3) array of points [m]");
   pts.p = pts.keep.data();
   pts.n = std::size_t(pts.keep.shape(0));
+  if (!finite) return pts;
   // All finite? One pass over the exponent bits (branch-free, vectorised), then the row at fault.
   std::uint64_t nonfinite = 0;
   for (std::size_t i = 0; i < 3 * pts.n; ++i) {

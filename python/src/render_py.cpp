@@ -106,7 +106,9 @@ bool* flags_out(py::dict& d, py::ssize_t n) {
 
 py::dict render(const FieldPtr& field, const py::handle& hip, const std::string& algorithm, const py::object& params,
                 double dt_s, bool planes) {
-  const PointsIn hips = points_in(hip, "hip");  // the caller's buffer when it is float64 (N, 3) C-contiguous
+  // The caller's buffer when it is float64 (N, 3) C-contiguous. Not checked finite: a
+  // non-finite HIP is the renderer's to refuse (zero force, fault), as on a device.
+  const PointsIn hips = points_in(hip, "hip", false);
   std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
   const auto n = py::ssize_t(hips.n);
   py::dict d;
@@ -289,7 +291,8 @@ void bind_render(py::module_& m) {
         py::arg("params") = py::none(), py::arg("dt") = 0.0, py::arg("planes") = false,
         R"(Run one renderer over a HIP trajectory.
 
-field: an isotouch.Field; hip: (N, 3) HIP per tick, grid-world [m]; algorithm 'hri' (params:
+field: an isotouch.Field; hip: (N, 3) HIP per tick, grid-world [m] (a non-finite row is a
+fault tick: zero force, as the servo answers a device's NaN); algorithm 'hri' (params:
 HriParams), 'avila' or 'blezek' (params: BaselineParams); dt: the period given each tick [s]
 (0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released throughout.
 Returns a dict of arrays: force (N, 3) [N] device axes, vhip (N, 3) [m], contact, plane_update,

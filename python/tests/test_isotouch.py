@@ -183,10 +183,24 @@ def test_render_argument_errors(sphere_stroke):
         isotouch.render(s.field, s.hip, "nope")
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         isotouch.render(s.field, np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="hip"):
+        isotouch.render(s.field, np.zeros((5, 3, 1)))
+    with pytest.raises(ValueError, match=r"points: row 2 is not finite"):
+        isotouch.Volume(np.zeros((2, 2, 2), np.float32), (1e-3,) * 3).to_physical([[0, 0, 0]] * 2 + [[0, np.inf, 0]])
+
+
+def test_render_answers_a_nan_hip_as_the_servo_does(sphere_stroke):
+    """A non-finite HIP is a fault tick (zero force), never a NaN force."""
+    s = sphere_stroke
+    out0 = isotouch.render(s.field, s.hip, "hri", s.table1_hri_params())
+    k = int(np.flatnonzero(out0["contact"])[50])  # a tick in contact
     bad = s.hip.copy()
-    bad[7, 1] = np.nan
-    with pytest.raises(ValueError, match="row 7"):
-        isotouch.render(s.field, bad)
+    bad[k, 1] = np.nan
+    for algo, params in (("hri", s.table1_hri_params()), ("avila", s.table1_baseline_params()),
+                         ("blezek", s.table1_baseline_params())):
+        out = isotouch.render(s.field, bad, algo, params)
+        assert out["fault"][k] and not out["fault"][:k].any(), algo
+        assert np.array_equal(out["force"][k], [0.0, 0.0, 0.0]) and np.isfinite(out["force"]).all(), algo
 
 
 def test_render_releases_the_gil(sphere_stroke):

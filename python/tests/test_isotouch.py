@@ -108,6 +108,9 @@ def test_scene_and_recording_errors(cli, tmp_path):
         isotouch.run_scene(str(scene), str(tmp_path / "out"))
     assert str(e.value) == cli_error(cli, "run", str(scene), "--out", str(tmp_path / "out2"))
     assert "stiffness_n_per_m" in str(e.value)
+    with pytest.raises(isotouch.SceneError) as e:
+        isotouch.LiveSession(str(scene))
+    assert "stiffness_n_per_m" in str(e.value) and str(scene) in str(e.value)
     rec = tmp_path / "garbage.rec"
     rec.write_text("not json\n")
     with pytest.raises(isotouch.RecordingError, match="garbage.rec"):

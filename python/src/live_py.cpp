@@ -1,0 +1,203 @@
+// live_py.cpp - isotouch.LiveSession: a scene's live session (session::LiveSession) on the
+// simulated, null, playback, emulated or USB device, driven from Python.
+#include <algorithm>
+#include <chrono>
+#include <sstream>
+#include <cmath>
+#include <memory>
+#include <thread>
+
+#include "isotouch/io/scene.h"
+#include "isotouch/python/common.h"
+#include "isotouch/run/haptic_device.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/servo/hri.h"
+#include "isotouch/session/live_session.h"
+
+namespace isotouch::python {
+namespace {
+
+session::BrushKind brush_kind(const std::string& name) {
+  for (const auto k : {session::BrushKind::kAdd, session::BrushKind::kCarve, session::BrushKind::kSmooth,
+                       session::BrushKind::kDrill})
+    if (name == session::to_string(k)) return k;
+  throw py::value_error("kind: '" + name + "', must be 'add', 'carve', 'smooth' or 'drill'");
+}
+
+/// Everything one live session needs, owned together and torn down in order (session first).
+class Live {
+ public:
+  Live(const std::string& scene_path, const std::string& haptic, const std::string& record, const std::string& device,
+       bool realtime, double flush_interval_s)
+      : scene_(io::load_scene(scene_path)) {
+    run::RunOptions ro;
+    ro.device = device;
+    ro.progress = false;
+    std::ostringstream log;
+    setup_ = run::setup_scene(scene_, ro, log);
+    edits_ = setup_.session.get();
+    if (!edits_) {
+      own_ = std::make_unique<session::EditSession>(setup_.volume, setup_.vk.get(), setup_.live,
+                                                    scene_.edits.history_limit_mib);
+      edits_ = own_.get();
+    }
+    buffer_.publish(edits_->current());
+    hri_ = std::make_unique<servo::HriRenderer>(setup_.hri);
+    device_ = run::open_haptic_device(haptic, run::device_setup(scene_, setup_), realtime ? 70 : 0);
+    live_ = std::make_unique<session::LiveSession>(*edits_, buffer_, *hri_, *device_.io,
+                                                   config(record, realtime, flush_interval_s));
+  }
+  ~Live() {
+    try {
+      stop();
+    } catch (const std::exception&) {  // a recording that could not be completed: said by stop() if called
+    }
+  }
+
+  std::string start() { return live_->start(); }
+  void stop() {
+    if (live_) live_->stop();
+  }
+  void pause(bool p) { live_->pause(p); }
+  double elapsed_s() const { return live_->elapsed_s(); }
+  double duration_s() const { return setup_.script.duration_s; }
+  session::LiveSession& session() { return *live_; }
+  const run::SceneSetup& setup() const { return setup_; }
+
+  bool brush(const std::string& kind, const py::handle& centre, double radius_m, double strength, double falloff,
+             double force_n) {
+    session::EditEvent e;
+    e.brush.kind = brush_kind(kind);
+    e.brush.centre_m = vec3_arg(centre, "centre");
+    e.brush.radius_m = radius_m;
+    e.brush.strength = strength;
+    e.brush.falloff = falloff;
+    e.brush.force_n = force_n;
+    e.brush.targets = session::default_targets(setup_.volume, setup_.live.iso);
+    e.brush.dt_s = 1.0 / scene_.hri.rate_hz;
+    if (const std::string why = session::validate(e.brush); !why.empty()) throw py::value_error("brush: " + why);
+    return live_->submit(e);
+  }
+  bool event(session::EditEvent::Kind k) {
+    session::EditEvent e;
+    e.kind = k;
+    return live_->submit(e);
+  }
+
+ private:
+  session::LiveSessionConfig config(const std::string& record, bool realtime, double flush_interval_s) const {
+    session::LiveSessionConfig c;
+    c.servo.rate_hz = scene_.hri.rate_hz;
+    c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = realtime;
+    c.servo.world_T_device = setup_.world_T_device;
+    // Period errors kept: the script's length, at least a minute.
+    c.servo.record_ticks = std::size_t(std::ceil(std::max(setup_.script.duration_s, 60.0) * scene_.hri.rate_hz)) + 16;
+    if (scene_.edits.present && !scene_.edits.button_down.empty()) {
+      session::ButtonDrill d;
+      d.brush = run::make_brush(run::brush_at_tool(scene_, setup_.volume, scene_.edits.brush),
+                                session::default_targets(setup_.volume, setup_.live.iso), {},
+                                scene_.edits.every_ticks / scene_.hri.rate_hz, 0.0);
+      d.every_ticks = scene_.edits.every_ticks;
+      c.drill = d;
+    }
+    c.flush_interval_s = flush_interval_s;
+    c.record_path = record;
+    if (!record.empty()) c.record_header = run::recording_header(scene_, setup_);
+    return c;
+  }
+
+  io::Scene scene_;
+  run::SceneSetup setup_;
+  std::unique_ptr<session::EditSession> own_;
+  session::EditSession* edits_ = nullptr;
+  servo::TripleBuffer<core::SampleField> buffer_;
+  std::unique_ptr<servo::HriRenderer> hri_;
+  run::HapticDevice device_;
+  std::unique_ptr<session::LiveSession> live_;
+};
+
+py::dict observed(const session::Observed& o) {
+  py::dict d;
+  d["tick"] = o.tick;
+  d["hip"] = py::make_tuple(o.hip_m.x, o.hip_m.y, o.hip_m.z);
+  d["vhip"] = py::make_tuple(o.vhip_m.x, o.vhip_m.y, o.vhip_m.z);
+  d["force"] = py::make_tuple(o.force_n.x, o.force_n.y, o.force_n.z);
+  d["contact"] = o.contact;
+  d["version"] = o.version;
+  return d;
+}
+
+py::dict stats(const session::LiveStats& s) {
+  py::dict d;
+  d["ticks"] = s.ticks, d["missed_deadlines"] = s.missed_deadlines, d["faults"] = s.faults;
+  d["edits_requested"] = s.edits_requested, d["edits_applied"] = s.edits_applied;
+  d["edits_refused"] = s.edits_refused, d["edits_dropped"] = s.edits_dropped;
+  d["ticks_not_recorded"] = s.ticks_not_recorded, d["publications"] = s.publications;
+  d["edit_to_haptics_ms"] = py::array_t<double>(py::ssize_t(s.edit_to_haptics_ms.size()), s.edit_to_haptics_ms.data());
+  d["period_error_p99_us"] = s.period_error_p99_us;
+  d["setup_note"] = s.setup_note, d["record_error"] = s.record_error;
+  return d;
+}
+
+/// Sleeps `seconds` with the GIL released, looking for signals every 20 ms: Ctrl-C stops the
+/// session (zero force, recording completed) and raises KeyboardInterrupt.
+void wait_session(Live& l, double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < end) {
+    {
+      py::gil_scoped_release nogil;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    if (PyErr_CheckSignals() != 0) {
+      {
+        py::gil_scoped_release nogil;
+        l.stop();
+      }
+      throw py::error_already_set();
+    }
+  }
+}
+
+}  // namespace
+
+void bind_live(py::module_& m) {
+  using K = session::EditEvent::Kind;
+  py::class_<Live>(m, "LiveSession", R"(A scene live: the servo thread at the scene's rate on a device,
+an edit thread applying brushes, a streaming recorder (session/live_session.h).
+
+LiveSession(scene, haptic='sim', record='', device='cpu', realtime=False, flush_interval_s=0.1):
+haptic as `run --live --haptic` (sim, null, playback:FILE, emu:SOCKET, hid:VID:PID); record a
+recording file ('' none); device 'cpu' (CPU brushes) or a Vulkan device. Use as a context
+manager: leaving it stops the session (servo first, its last force an exact zero).)")
+      .def(py::init<const std::string&, const std::string&, const std::string&, const std::string&, bool, double>(),
+           py::arg("scene"), py::arg("haptic") = "sim", py::arg("record") = "", py::arg("device") = "cpu",
+           py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1, py::call_guard<py::gil_scoped_release>())
+      .def("start", &Live::start, "start the recorder, edit and servo threads; returns what the system refused")
+      .def("stop", &Live::stop, py::call_guard<py::gil_scoped_release>(), "stop (idempotent)")
+      .def("pause", &Live::pause, py::arg("paused") = true, "zero force every tick while paused")
+      .def("wait", &wait_session, py::arg("seconds"), "sleep, GIL released; Ctrl-C stops the session and raises")
+      .def_property_readonly("elapsed_s", &Live::elapsed_s, "[s] since start")
+      .def_property_readonly("duration_s", &Live::duration_s, "the scene script's length [s]")
+      .def_property_readonly("volume", [](const Live& l) { return std::make_shared<engine::Volume>(l.setup().volume); },
+                             "a copy of the unedited volume")
+      .def("brush", &Live::brush, py::arg("kind"), py::arg("centre"), py::arg("radius_m") = 2e-3,
+           py::arg("strength") = 100.0, py::arg("falloff") = 0.5, py::arg("force_n") = 0.0,
+           "submit a brush ('add', 'carve', 'smooth', 'drill'), centre grid-world [m]; False if the queue is full")
+      .def("begin_stroke", [](Live& l) { return l.event(K::kBeginStroke); })
+      .def("end_stroke", [](Live& l) { return l.event(K::kEndStroke); })
+      .def("undo", [](Live& l) { return l.event(K::kUndo); })
+      .def("redo", [](Live& l) { return l.event(K::kRedo); })
+      .def("observe", [](Live& l) { return observed(l.session().observe()); },
+           "the latest tick: hip, vhip [m, grid-world], force [N], contact, version")
+      .def("stats", [](Live& l) { return stats(l.session().stats()); }, "counters (complete after stop())")
+      .def("__enter__", [](Live& l) -> Live& {
+        l.start();
+        return l;
+      }, py::return_value_policy::reference)
+      .def("__exit__", [](Live& l, py::args) {
+        py::gil_scoped_release nogil;
+        l.stop();
+      });
+}
+
+}  // namespace isotouch::python

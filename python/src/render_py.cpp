@@ -1,0 +1,307 @@
+// render_py.cpp - offline rendering from Python: the published samples (isotouch.Field), the
+// renderers' parameters, HRI and the two baselines over an (N, 3) HIP trajectory in one call
+// (GIL released), and the strokes `bench table1` replays.
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+#include "isotouch/core/sample_field.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/eval/sweep.h"
+#include "isotouch/python/common.h"
+#include "isotouch/servo/baselines.h"
+#include "isotouch/servo/cpu_placement.h"
+#include "isotouch/servo/hri.h"
+
+namespace isotouch::python {
+namespace {
+
+using FieldPtr = std::shared_ptr<core::SampleField>;
+
+/// A view of the dense samples: `comps` floats of each Sample from `first`, shape (nz, ny, nx[, comps]).
+py::array sample_view(py::object self, int first, int comps) {
+  const auto& f = self.cast<const core::SampleField&>();
+  if (f.bricked() || f.samples.size() != f.grid.voxel_count())
+    throw py::value_error("field: bricked; the sample arrays exist for dense fields only");
+  const auto& d = f.grid.dims;
+  const py::ssize_t s = sizeof(core::Sample);
+  std::vector<py::ssize_t> shape{d[2], d[1], d[0]}, strides{s * d[1] * d[0], s * d[0], s};
+  if (comps > 1) {
+    shape.push_back(comps);
+    strides.push_back(sizeof(float));
+  }
+  const float* base = &f.samples.data()->value + first;
+  py::array a(py::dtype::of<float>(), shape, strides, base, self);
+  py::detail::array_proxy(a.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;  // published: read only
+  return a;
+}
+
+/// One renderer for `algorithm` ("hri", "avila", "blezek") with `params` (HriParams for HRI,
+/// BaselineParams for the baselines; None: the defaults).
+std::unique_ptr<servo::Renderer> make_renderer(const std::string& algorithm, const py::object& params) {
+  if (algorithm == "hri") {
+    const servo::HriParams p = params.is_none() ? servo::HriParams{} : params.cast<servo::HriParams>();
+    return std::make_unique<servo::HriRenderer>(p);
+  }
+  if (algorithm == "avila" || algorithm == "blezek") {
+    const servo::BaselineParams p = params.is_none() ? servo::BaselineParams{} : params.cast<servo::BaselineParams>();
+    if (algorithm == "avila") return std::make_unique<servo::AvilaRenderer>(p);
+    return std::make_unique<servo::BlezekRenderer>(p);
+  }
+  throw py::value_error("algorithm: '" + algorithm + "', must be 'hri', 'avila' or 'blezek'");
+}
+
+/// Where render() writes tick k: rows of the output arrays; the plane arrays only when asked.
+/// The four flags of a tick lie side by side (one (N, 4) bool array, returned as its columns).
+struct Outputs {
+  double *force, *vhip;
+  bool* flags;  // contact, plane_update, saturated, fault
+  double *plane_n = nullptr, *plane_p = nullptr, *penetration = nullptr;
+  bool* plane_valid = nullptr;
+  static void put3(double* a, std::size_t k, const core::Vec3& v) {
+    a[3 * k] = v.x;
+    a[3 * k + 1] = v.y;
+    a[3 * k + 2] = v.z;
+  }
+  void put(std::size_t k, const servo::HriTick& t) const {
+    put3(force, k, t.force_n);
+    put3(vhip, k, t.vhip_m);
+    flags[4 * k] = t.contact;
+    flags[4 * k + 1] = t.plane_update;
+    flags[4 * k + 2] = t.saturated;
+    flags[4 * k + 3] = t.fault;
+    if (plane_n) {
+      put3(plane_n, k, t.plane.n);
+      put3(plane_p, k, t.plane.p);
+      penetration[k] = t.penetration_m;
+      plane_valid[k] = t.plane.valid;
+    }
+  }
+};
+
+/// An (N, 3) float64 array of `name` in the output dict, and where its data is.
+double* points_out(py::dict& d, const char* name, py::ssize_t n) {
+  py::array_t<double> a({n, py::ssize_t(3)});
+  d[name] = a;
+  return a.mutable_data();
+}
+
+template <class T>
+T* column_out(py::dict& d, const char* name, py::ssize_t n) {
+  py::array_t<T> a(n);
+  d[name] = a;
+  return a.mutable_data();
+}
+
+/// The (N, 4) flags array, each column in the dict under its name (views, no copy).
+bool* flags_out(py::dict& d, py::ssize_t n) {
+  py::array_t<bool> all({n, py::ssize_t(4)});
+  bool* p = all.mutable_data();
+  const char* names[] = {"contact", "plane_update", "saturated", "fault"};
+  for (int j = 0; j < 4; ++j) d[names[j]] = py::array_t<bool>({n}, {py::ssize_t(4)}, p + j, all);
+  return p;
+}
+
+py::dict render(const FieldPtr& field, const py::handle& hip, const std::string& algorithm, const py::object& params,
+                double dt_s, bool planes) {
+  // The caller's buffer when it is float64 (N, 3) C-contiguous. Not checked finite: a
+  // non-finite HIP is the renderer's to refuse (zero force, fault), as on a device.
+  const PointsIn hips = points_in(hip, "hip", false);
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  const auto n = py::ssize_t(hips.n);
+  py::dict d;
+  Outputs out{points_out(d, "force", n), points_out(d, "vhip", n), flags_out(d, n)};
+  if (planes) {
+    out.plane_n = points_out(d, "plane_n", n);
+    out.plane_p = points_out(d, "plane_p", n);
+    out.penetration = column_out<double>(d, "penetration", n);
+    out.plane_valid = column_out<bool>(d, "plane_valid", n);
+  }
+  py::gil_scoped_release nogil;
+  const core::SampleField& f = *field;
+  for (std::size_t k = 0; k < hips.n; ++k) out.put(k, r->tick(f, hips.at(k), dt_s));
+  return d;
+}
+
+/// The C++ figure beside a Python timing: eval::median_ns_per_tick (what `bench table1` times)
+/// over the same field and trajectory [ns per tick].
+double cpp_ns_per_tick(const FieldPtr& field, const py::handle& hip, const std::string& algorithm,
+                       const py::object& params, int warmup, int repetitions) {
+  if (repetitions < 1 || warmup < 0) throw py::value_error("repetitions must be >= 1 and warmup >= 0");
+  eval::SweepScene s;
+  s.field = field;
+  s.hip = points_arg(hip, "hip");
+  if (s.hip.empty()) throw py::value_error("hip: no points");
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  py::gil_scoped_release nogil;
+  return eval::median_ns_per_tick(*r, s, warmup, repetitions);
+}
+
+/// The HRI parameters `bench table1` times on a stroke scene (reference_params with n = 5,
+/// linear intersection, central-difference normal), in `variant`.
+servo::HriParams table1_hri(const eval::SweepScene& s, servo::Variant variant) {
+  servo::HriParams hp = eval::reference_params(s);
+  hp.plane_update_period = 5;
+  hp.intersection = servo::Intersection::kLinear;
+  hp.normal = servo::NormalSource::kCentral;
+  hp.variant = variant;
+  return hp;
+}
+
+servo::BaselineParams table1_baseline(const eval::SweepScene& s) {
+  servo::BaselineParams bp;
+  bp.tau = s.tau;
+  bp.inside = s.inside;
+  bp.stiffness_n_per_m = s.stiffness_n_per_m;
+  bp.force_limit_n = 1e3;
+  return bp;
+}
+
+std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const std::string& device) {
+  py::gil_scoped_release nogil;
+  std::unique_ptr<engine::VulkanContext> vk;
+  if (device != "cpu") {
+    engine::ContextOptions co;
+    co.device = device;
+    auto ctx = engine::VulkanContext::create(co);
+    if (!ctx) throw std::runtime_error("stroke_scene: no Vulkan device (" + ctx.error + "); device='cpu' runs the CPU reference");
+    vk = std::move(*ctx.value);
+  }
+  std::ostringstream log;
+  return std::make_shared<eval::SweepScene>(eval::prepare_sweep_scene(name, vk.get(), log));
+}
+
+/// `with isotouch.Realtime("bench"):` the calling thread as `bench table1` times its replays:
+/// SCHED_FIFO, pinned to one CPU where the system allows (servo::ScopedRealtime); restored at exit.
+struct Realtime {
+  explicit Realtime(std::string w) : who(std::move(w)) {}
+  std::string who;
+  std::optional<servo::ScopedRealtime> scope;
+};
+
+void bind_realtime(py::module_& m) {
+  py::class_<Realtime>(m, "Realtime", R"(Context manager: the calling thread SCHED_FIFO and pinned to
+one CPU (as `bench table1` times its replays) where the system allows; 'granted' says what it got.)")
+      .def(py::init<std::string>(), py::arg("who") = "python")
+      .def("__enter__", [](Realtime& r) -> Realtime& {
+        r.scope.emplace(r.who);
+        return r;
+      }, py::return_value_policy::reference)
+      .def("__exit__", [](Realtime& r, py::args) { r.scope.reset(); })
+      .def_property_readonly("granted", [](const Realtime& r) {
+        if (!r.scope) return std::string("not entered");
+        const servo::RealtimeSetup& g = r.scope->setup();
+        std::string s = std::string(g.fifo ? "SCHED_FIFO" : "default scheduler") + ", " +
+                        (g.cpu >= 0 ? "CPU " + std::to_string(g.cpu) : std::string("unpinned"));
+        return g.note.empty() ? s : s + "; " + g.note;
+      });
+}
+
+void bind_params(py::module_& m) {
+  py::enum_<core::InsideIs>(m, "InsideIs", "which side of tau is inside the object")
+      .value("above", core::InsideIs::kAbove)
+      .value("below", core::InsideIs::kBelow);
+  py::enum_<servo::Variant>(m, "Variant").value("robust", servo::Variant::kRobust).value("paper", servo::Variant::kPaper);
+  py::enum_<servo::Intersection>(m, "Intersection")
+      .value("linear", servo::Intersection::kLinear)
+      .value("secant", servo::Intersection::kSecant)
+      .value("bisection", servo::Intersection::kBisection);
+  py::enum_<servo::NormalSource>(m, "NormalSource")
+      .value("samples", servo::NormalSource::kSamples)
+      .value("central", servo::NormalSource::kCentral)
+      .value("trilinear_exact", servo::NormalSource::kTrilinearExact);
+  py::class_<servo::SurfaceFriction>(m, "SurfaceFriction", "§3.1 surface effects (coefficients; viscous [N s/m])")
+      .def(py::init<>())
+      .def_readwrite("mu_s", &servo::SurfaceFriction::mu_s)
+      .def_readwrite("mu_d", &servo::SurfaceFriction::mu_d)
+      .def_readwrite("viscous_n_s_per_m", &servo::SurfaceFriction::viscous_n_s_per_m);
+  using H = servo::HriParams;
+  py::class_<H>(m, "HriParams", "HRI parameters (servo/hri.h); K and B in device space [N/m], [N s/m]")
+      .def(py::init<>())
+      .def_readwrite("variant", &H::variant).def_readwrite("tau", &H::tau).def_readwrite("inside", &H::inside)
+      .def_readwrite("stiffness_n_per_m", &H::stiffness_n_per_m)
+      .def_readwrite("damping_n_s_per_m", &H::damping_n_s_per_m)
+      .def_readwrite("plane_update_period", &H::plane_update_period).def_readwrite("rate_hz", &H::rate_hz)
+      .def_readwrite("force_limit_n", &H::force_limit_n).def_readwrite("world_per_device", &H::world_per_device)
+      .def_readwrite("max_reach_m", &H::max_reach_m).def_readwrite("intersection", &H::intersection)
+      .def_readwrite("intersection_steps", &H::intersection_steps).def_readwrite("normal", &H::normal)
+      .def_readwrite("friction", &H::friction).def_readwrite("force_shading", &H::force_shading)
+      .def_readwrite("recovery_time_s", &H::recovery_time_s)
+      .def_readwrite("velocity_cutoff_hz", &H::velocity_cutoff_hz).def_readwrite("max_speed_m_s", &H::max_speed_m_s)
+      .def_readwrite("march_budget", &H::march_budget)
+      .def_readwrite("edit_max_step_fraction", &H::edit_max_step_fraction)
+      .def_readwrite("edit_max_turn_deg", &H::edit_max_turn_deg).def_readwrite("tool_radius_m", &H::tool_radius_m)
+      .def_readwrite("short_way", &H::short_way);
+  using B = servo::BaselineParams;
+  py::class_<B>(m, "BaselineParams", "Avila-Sobierajski and Blezek-Robb parameters (servo/baselines.h)")
+      .def(py::init<>())
+      .def_readwrite("tau", &B::tau).def_readwrite("inside", &B::inside)
+      .def_readwrite("stiffness_n_per_m", &B::stiffness_n_per_m)
+      .def_readwrite("damping_n_s_per_m", &B::damping_n_s_per_m).def_readwrite("rate_hz", &B::rate_hz)
+      .def_readwrite("force_limit_n", &B::force_limit_n).def_readwrite("world_per_device", &B::world_per_device)
+      .def_readwrite("max_reach_m", &B::max_reach_m).def_readwrite("inch_iterations", &B::inch_iterations)
+      .def_readwrite("inch_step_voxels", &B::inch_step_voxels)
+      .def_readwrite("central_h_voxels", &B::central_h_voxels);
+}
+
+void bind_field(py::module_& m) {
+  py::class_<core::SampleField, FieldPtr> field(m, "Field", R"(A published snapshot: per voxel the value and its
+gradient (grid-world frame, value units per m), as the renderers read it.)");
+  def_grid_properties(field, "grid-world position of voxel (0, 0, 0) [m]")
+      .def_readonly("version", &core::SampleField::version)
+      .def_readonly("background", &core::SampleField::background, "value outside the grid (NaN: none)")
+      .def_property_readonly("bricked", &core::SampleField::bricked)
+      .def_property_readonly("samples", [](py::object self) { return sample_view(self, 0, 4); },
+                             "(nz, ny, nx, 4) float32 (value, gx, gy, gz), read-only, no copy")
+      .def_property_readonly("value", [](py::object self) { return sample_view(self, 0, 1); },
+                             "(nz, ny, nx) float32 view of the values")
+      .def_property_readonly("gradient", [](py::object self) { return sample_view(self, 1, 3); },
+                             "(nz, ny, nx, 3) float32 view of the gradients [value / m]");
+}
+
+void bind_strokes(py::module_& m) {
+  py::class_<eval::SweepScene, std::shared_ptr<eval::SweepScene>>(m, "StrokeScene", R"(A scene with one recorded
+stroke, as `bench table1` and the sweeps replay it: samples, and the HIP per tick (grid-world [m]).)")
+      .def_readonly("name", &eval::SweepScene::name)
+      .def_readonly("description", &eval::SweepScene::description)
+      .def_property_readonly("field", [](const eval::SweepScene& s) { return std::const_pointer_cast<core::SampleField>(s.field); })
+      .def_property_readonly("hip", [](const eval::SweepScene& s) { return points_array(s.hip); }, "(N, 3) [m]")
+      .def_readonly("tau", &eval::SweepScene::tau)
+      .def_readonly("inside", &eval::SweepScene::inside)
+      .def_readonly("rate_hz", &eval::SweepScene::rate_hz)
+      .def_readonly("stiffness_n_per_m", &eval::SweepScene::stiffness_n_per_m)
+      .def("table1_hri_params", [](const eval::SweepScene& s, servo::Variant v) { return table1_hri(s, v); },
+           py::arg("variant") = servo::Variant::kRobust, "HRI as `bench table1` times it on this scene")
+      .def("table1_baseline_params", &table1_baseline, "the baselines as `bench table1` times them");
+  m.def("stroke_scene", &stroke_scene, py::arg("name"), py::arg("device") = "cpu",
+        "sphere, box, three-spheres, knot, head, chest or a scene JSON path; samples on the CPU reference "
+        "(device='cpu') or a Vulkan device ('' = default)");
+}
+
+}  // namespace
+
+void bind_render(py::module_& m) {
+  bind_params(m);
+  bind_realtime(m);
+  bind_field(m);
+  bind_strokes(m);
+  m.def("render", &render, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
+        py::arg("params") = py::none(), py::arg("dt") = 0.0, py::arg("planes") = false,
+        R"(Run one renderer over a HIP trajectory.
+
+field: an isotouch.Field; hip: (N, 3) HIP per tick, grid-world [m] (a non-finite row is a
+fault tick: zero force, as the servo answers a device's NaN); algorithm 'hri' (params:
+HriParams), 'avila' or 'blezek' (params: BaselineParams); dt: the period given each tick [s]
+(0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released throughout.
+Returns a dict of arrays: force (N, 3) [N] device axes, vhip (N, 3) [m], contact, plane_update,
+saturated, fault (N,) bool; with planes=True also the plane after each tick, plane_n (N, 3) unit
+outward normal and plane_p (N, 3) [m] (HRI; zero for the baselines), plane_valid (N,) bool, and
+penetration (N,) [m].)");
+  m.def("cpp_ns_per_tick", &cpp_ns_per_tick, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
+        py::arg("params") = py::none(), py::arg("warmup") = 3, py::arg("repetitions") = 21,
+        "median C++ time per Renderer::tick over the trajectory [ns] (eval::median_ns_per_tick, as bench table1)");
+}
+
+}  // namespace isotouch::python

@@ -27,22 +27,28 @@ using namespace isotouch::sim;
 
 namespace {
 
-// Field of `dims`^3 voxels of 1 mm from an analytic value [mm] and gradient [mm/m]
-// (positive inside, InsideIs::kAbove, tau = 0).
-SampleField make_field(int dims, const std::function<double(const Vec3&)>& value,
-                       const std::function<Vec3(const Vec3&)>& grad) {
+// A field of `dims` voxels with spacing `sp` [m] from an analytic value [mm] and gradient
+// [mm/m] (positive inside, InsideIs::kAbove, tau = 0).
+SampleField make_spaced_field(std::array<int, 3> dims, Vec3 sp, const std::function<double(const Vec3&)>& value,
+                              const std::function<Vec3(const Vec3&)>& grad) {
   SampleField f;
-  f.grid.dims = {dims, dims, dims};
-  f.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  f.grid.dims = dims;
+  f.grid.spacing_m = sp;
   f.samples.resize(f.grid.voxel_count());
-  for (int z = 0; z < dims; ++z)
-    for (int y = 0; y < dims; ++y)
-      for (int x = 0; x < dims; ++x) {
+  for (int z = 0; z < dims[2]; ++z)
+    for (int y = 0; y < dims[1]; ++y)
+      for (int x = 0; x < dims[0]; ++x) {
         const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
         const Vec3 g = grad(p);
         f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
       }
   return f;
+}
+
+// Field of `dims`^3 voxels of 1 mm (make_spaced_field).
+SampleField make_field(int dims, const std::function<double(const Vec3&)>& value,
+                       const std::function<Vec3(const Vec3&)>& grad) {
+  return make_spaced_field({dims, dims, dims}, {1e-3, 1e-3, 1e-3}, value, grad);
 }
 
 // A plate of thickness w [m] through c with unit normal m: inside where |m.(x-c)| < w/2.
@@ -695,24 +701,6 @@ TEST(HriContact, ShallowStepOutLandsWithinFiveHundredthsOfAVoxel) {
 }
 
 namespace {
-
-// A field of `dims` voxels with spacing `sp` [m] from an analytic value [mm] and gradient
-// [mm/m] (positive inside, InsideIs::kAbove, tau = 0).
-SampleField make_spaced_field(std::array<int, 3> dims, Vec3 sp, const std::function<double(const Vec3&)>& value,
-                              const std::function<Vec3(const Vec3&)>& grad) {
-  SampleField f;
-  f.grid.dims = dims;
-  f.grid.spacing_m = sp;
-  f.samples.resize(f.grid.voxel_count());
-  for (int z = 0; z < dims[2]; ++z)
-    for (int y = 0; y < dims[1]; ++y)
-      for (int x = 0; x < dims[0]; ++x) {
-        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
-        const Vec3 g = grad(p);
-        f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
-      }
-  return f;
-}
 
 // One thin feature: its field, the outward normal of the face pressed (n_entry), a point of
 // its mid-plane (a fin) or axis (a cylinder) `mid`, and where and along what it is stroked.

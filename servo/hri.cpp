@@ -69,6 +69,8 @@ void HriRenderer::clear_contact() {
   release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};
+  entry_n_ = {};
+  entry_held_ = false;
 }
 
 void HriRenderer::restart_at(const Vec3& hip) {

@@ -224,6 +224,19 @@ struct ToolPlane {
 ///   on the held normal, else on the plane facing the HIP, whichever keeps it out of the
 ///   material. A path that ends inside at its deepest point is a chord under a plane held
 ///   over a curved surface and is let through (the embedded search brings it out).
+/// - Thin features (the side the contact entered from): with the HIP inside past the middle
+///   of the feature under the held plane (the material behind the HIP, along the held
+///   normal, ends within the HIP's depth behind that plane: a fin, a branch, a rib pressed
+///   beyond half its thickness), the plane iteration is unstable: each update's plane,
+///   tilted over the feature's rounded edge, projects the HIP farther round it, and within
+///   tens of milliseconds the proxy wraps to the far side and the force falls to zero well
+///   below the limit (a god-object does the same: past the middle the far face is the
+///   nearer). So, while the HIP is inside, an update whose plane turns more than
+///   kEntryConeDeg from the normal the contact entered with (entry_n_: the normal of the
+///   new contact, refreshed at every update that turns that far with the HIP not past the
+///   middle) keeps the held plane if the HIP is past the middle and behind it: the proxy
+///   stays on the entry side and the force grows with the press up to the limit. Not on
+///   edit ticks. In bulk material (no far side within the depth) nothing changes.
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
 ///   behind it, a wall drilled away) fades that force out along its direction over
@@ -434,6 +447,15 @@ class HriRenderer final : public Renderer {
   /// value at the VHIP in this snapshot, if known (then a bound may answer without reads).
   bool reached_through_material(const FieldView& field, const Vec3& hip, const VirtualPlane& held,
                                 double held_grad_norm, double voxel, const double* f_vhip) const;
+  /// Thin features (see the class docs): after an update of tick_general that turned the
+  /// plane more than kEntryConeDeg from entry_n_ with the HIP inside (hip_inside), keeps
+  /// `held` where the HIP is past the feature's middle and behind it; else entry_n_ follows.
+  void hold_entry_side(const FieldView& field, const Vec3& hip, bool hip_inside, const VirtualPlane& held,
+                       double held_grad_norm, double voxel, TickOut& out);
+  /// From the inside `hip`, the material ends both ways along n within `depth` plus a voxel
+  /// [m], along -n no later than a quarter voxel after along n (fifth-voxel steps, at most
+  /// march_budget samples in all): the HIP is past the middle of a thin feature.
+  bool past_middle(const FieldView& field, const Vec3& hip, const Vec3& n, double depth, double voxel) const;
   /// The robust tick after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,
@@ -573,8 +595,11 @@ class HriRenderer final : public Renderer {
   Vec3 ramp_from_dir_;               ///< robust: unit direction sent when the ramp started (0: none)
   double release_left_s_ = 0;        ///< robust: time left in a release fade [s]
   Vec3 release_from_;                ///< robust: force sent on the last contact tick [N]
+  Vec3 entry_n_;                     ///< robust: the normal the contact entered with (hold_entry_side)
+  bool entry_held_ = false;          ///< robust: the HIP was found past a thin feature's middle (hold_entry_side)
   // Spherical tool:
  public:
+  static constexpr double kEntryConeDeg = 20.0;  ///< thin features: the turn from entry_n_ checked [deg]
   static constexpr int kMaxToolPlanes = 6;  ///< planes held at once (a bed of blobs needs more than 3)
   static constexpr int kScanSide = 20;      ///< samples per axis surface_scan reads at most
   static constexpr int kMaxScanPoints = 96; ///< surface points surface_scan keeps (the nearest)

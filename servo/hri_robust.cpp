@@ -353,6 +353,12 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     }
   }
 
+  if (!holding || edited) {  // a new contact (or new material): its side
+    entry_n_ = plane_.n;
+    entry_held_ = false;
+  }
+  else if (out.plane_update) hold_entry_side(field, hip, have_f_hip && excess(f_hip) > 0.0, held, held_grad_norm, voxel, out);
+
   if (holding && !edited) keep_proxy_outside(field, hip, held, voxel, have_f_vhip ? &f_vhip_now : nullptr, out);
 
   Vec3 force;
@@ -400,6 +406,48 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
   out.force_mag = 0.0;  // no force: no square root
   finish_robust(hip, Vec3{}, false, true, f_hip, out);
   return true;
+}
+
+bool HriRenderer::past_middle(const FieldView& field, const Vec3& hip, const Vec3& n, double depth,
+                              double voxel) const {
+  // Fifth-voxel steps both ways from the HIP, up to the depth plus a voxel: the material
+  // ends both ways (a feature, whose entry side is still there: not a half-space), and along
+  // -n no later than a quarter voxel after it does along n. The quarter voxel: at the middle
+  // itself the two are as near, and a HIP just short of it on the trilinear field's blocky
+  // section of a coarse feature would let the proxy turn there and the side follow it (a
+  // rod two voxels of 3 mm thick wrapped at 0.8 of the limit).
+  if (!(depth > 0.0)) return false;
+  const double h = 0.2 * voxel, reach = depth + voxel;
+  const int steps = int(std::clamp(std::ceil(reach / h), 2.0, double(std::max(2, params_.march_budget / 2))));
+  const int slack = int(std::ceil(0.25 * voxel / (reach / steps)));  // a quarter voxel, in steps
+  FieldView::Segment far(field, hip, hip - n * reach), near(field, hip, hip + n * reach);
+  int far_out = 0, near_out = 0;  // the steps where the material ends (0: not within reach)
+  for (int i = 1; i <= steps && (far_out == 0 || near_out == 0); ++i) {
+    const double t = double(i) / steps;
+    if (far_out == 0 && !(excess(far.value(t)) > 0.0)) far_out = i;
+    if (near_out == 0 && !(excess(near.value(t)) > 0.0)) near_out = i;
+  }
+  return far_out > 0 && near_out > 0 && far_out <= near_out + slack;
+}
+
+void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool hip_inside, const VirtualPlane& held,
+                                  double held_grad_norm, double voxel, TickOut& out) {
+  static const double kCos = std::cos(kEntryConeDeg * M_PI / 180.0);
+  if (!hip_inside) entry_held_ = false;  // the HIP left the material: the side is free again
+  if (!plane_.valid || !hip_inside || dot(plane_.n, entry_n_) >= kCos) return;
+  // The plane turned beyond the cone: over a thin feature's edge with the HIP past its
+  // middle (the wrap-around), or sliding over a curved surface (the side follows). Once
+  // past the middle the side is held until the HIP leaves the material: near the middle
+  // the test can go either way from one update to the next, and a side that followed one
+  // turn let the next one go on round.
+  const double depth = held.valid ? dot(held.n, held.p - hip) : 0.0;  // the HIP behind the held plane [m]
+  if (depth > 0.0 && (entry_held_ || past_middle(field, hip, entry_n_, depth, voxel))) {
+    entry_held_ = true;
+    adopt_plane(held, hip, out);
+    plane_grad_norm_ = held_grad_norm;
+  } else {
+    entry_n_ = plane_.n;
+  }
 }
 
 void HriRenderer::keep_proxy_outside(const FieldView& field, const Vec3& hip, const VirtualPlane& held,

@@ -335,6 +335,7 @@ TEST(HriTool, RadiusChangeInContactEasesTheForceToTheNewDepth) {
 // inside a rib nearer its far face). HRI_RIB_DEBUG=1 lists the ticks.
 struct ThinEdgeStrokes {
   long strokes = 0, seeds = 0, contact_ticks = 0, through = 0, strokes_through = 0, far_side = 0;
+  long wraps = 0, strokes_wrapped = 0;  // below the limit, HIP inside since contact, force toward the far side
 };
 
 // The strokes below on the chest CT at `tau` (inside above): `strokes` strokes from seeds of
@@ -419,7 +420,7 @@ ThinEdgeStrokes chest_thin_edge_strokes(double tau, int max_run, std::uint32_t s
     HriRenderer r(p);
     const Vec3 start = c + out * 0.003;
     Vec3 prev_vhip = start;
-    bool this_through = false, went_far = false;
+    bool this_through = false, went_far = false, touched = false, inside_since = true, this_wrap = false;
     for (int k = 0; k < 1200; ++k) {
       const double t = k * 1e-3;
       const double down = std::min(0.04 * t, 0.011);
@@ -428,6 +429,15 @@ ThinEdgeStrokes chest_thin_edge_strokes(double tau, int max_run, std::uint32_t s
       const HriTick o = r.tick(f, hip);
       contact_ticks += o.contact;
       if (!(sample_value(f, hip) > tau) && dot(out, hip - c) < -voxel) went_far = true;
+      // The entry side: while the HIP has stayed inside since contact began, the force never
+      // pushes it toward the far side (against the entry normal) below the limit.
+      touched = touched || o.contact;
+      inside_since = inside_since && (!touched || sample_value(f, hip) > tau);
+      if (touched && inside_since && o.contact && dot(o.force_n, out) < 0.0 &&
+          norm(o.force_n) < 0.9 * p.force_limit_n) {
+        ++res.wraps;
+        this_wrap = true;
+      }
       if (norm(o.force_n) < 0.999 * p.force_limit_n) {
         bool in = false, out_again = false;
         for (int i = 1; i < 64 && !out_again; ++i) {
@@ -449,21 +459,28 @@ ThinEdgeStrokes chest_thin_edge_strokes(double tau, int max_run, std::uint32_t s
     }
     strokes_through += this_through;
     far_side += went_far;
+    res.strokes_wrapped += this_wrap;
   }
   return res;
 }
 
 // The strokes' figures printed, and what every run of them must show: enough thin seeds,
 // the HIP past the far side in some strokes (so a pop-through could be seen), contact, and
-// no pop-through.
-void expect_no_pop_through(const char* what, const ThinEdgeStrokes& r) {
+// no pop-through; with `hold_side`, no tick pushed toward the far side from inside either
+// (the ribs: 289 such ticks in 3 of 48 strokes before the entry side was held; the lung
+// vessels, many a voxel thick, keep 44 ticks in 1 stroke, down from 56 in 2: printed only).
+void expect_no_pop_through(const char* what, const ThinEdgeStrokes& r, bool hold_side = true) {
   std::printf("%s, %ld strokes along thin edges (%ld seeds): %ld contact ticks, HIP past the far side in %ld strokes, "
-              "%ld pop-throughs (%ld strokes)\n",
-              what, r.strokes, r.seeds, r.contact_ticks, r.far_side, r.through, r.strokes_through);
+              "%ld pop-throughs (%ld strokes), %ld ticks pushed toward the far side from inside (%ld strokes)\n",
+              what, r.strokes, r.seeds, r.contact_ticks, r.far_side, r.through, r.strokes_through, r.wraps,
+              r.strokes_wrapped);
   ASSERT_GT(r.seeds, 100);
   EXPECT_GT(r.far_side, 5);
   EXPECT_GT(r.contact_ticks, 10000);
   EXPECT_EQ(r.through, 0);
+  if (hold_side) {
+    EXPECT_EQ(r.wraps, 0);
+  }
 }
 
 namespace {
@@ -767,5 +784,5 @@ TEST(HriShippedData, FastStrokesAlongChestRibEdgesNeverPopThrough) {
 // isovalue): surface voxels whose inside ends within 5 half-voxels (2.5 voxels) along the inward
 // gradient (of the smallest spacing, 1.68 mm): structures at most about 4 mm deep along it.
 TEST(HriShippedData, ChestLungVesselEdgesNeverPopThrough) {
-  expect_no_pop_through("chest lung vessels at -500 HU", chest_thin_edge_strokes(-500.0, 5, 500, 48));
+  expect_no_pop_through("chest lung vessels at -500 HU", chest_thin_edge_strokes(-500.0, 5, 500, 48), false);
 }

@@ -43,6 +43,7 @@
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/volume_io.h"
 #include "isotouch/apps/sculpt/window.h"
+#include "isotouch/apps/sculpt/scan_input.h"
 
 namespace isotouch::sculpt {
 
@@ -51,6 +52,7 @@ struct Carried {
   std::optional<engine::OrbitCamera> camera;  ///< none: the volume's default
   std::optional<ToolState> tool;     ///< none: the default tool
   std::vector<InputEvent> script;    ///< the script's events after the one that restarted
+  std::optional<engine::IsoChoice> choice;  ///< a dropped volume: the isovalue its file chose
 };
 
 namespace fs = std::filesystem;
@@ -416,6 +418,8 @@ struct Sculpt {
   void start_load(const std::string& path);
   bool poll_load();
   bool restart_at(double tau);
+  void open_at_chosen_isovalue();
+  void say_isovalue(const engine::IsoChoice& c);
   std::shared_ptr<Carried> carry_over(double tau);
 
   // --- the end: the report ---
@@ -551,8 +555,13 @@ bool Sculpt::load_input() {
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     check_output_names(o);
-    scene = input_scene(o);
-    vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
+    if (o.iso || o.carried || is_scene_path(o.input)) {
+      scene = input_scene(o);
+      vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
+    } else {
+      open_at_chosen_isovalue();
+    }
+    if (o.carried && o.carried->choice) say_isovalue(*o.carried->choice);
     if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
       throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
                                fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
@@ -1210,20 +1219,24 @@ void Sculpt::start_load(const std::string& path) {
   next.script.clear();
   next.record.clear();
   next.carried = nullptr;
-  if (fs::path(path).extension() == ".json") {
-    next.iso.reset();
-  } else {
-    next.iso = scene.hri.tau;
-    next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
-  }
+  next.iso.reset();
   log << "sculpt   loading " << path << "\n";
   loading = Loading{path, next, BackgroundLoad([next] {
-                      const io::Scene sc = input_scene(next);
                       auto c = std::make_shared<Carried>();
-                      c->volume = run::load_scene_volume(sc);
+                      double tau = 0;
+                      if (is_scene_path(next.input)) {
+                        const io::Scene sc = input_scene(next);
+                        c->volume = run::load_scene_volume(sc);
+                        tau = sc.hri.tau;
+                      } else {
+                        ScanInput s = open_scan(next.input);
+                        c->volume = std::move(s.volume);
+                        c->choice = s.choice;
+                        tau = s.choice.iso.tau;
+                      }
                       const engine::Volume& v = c->volume;
-                      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
-                        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
+                      if (!(tau > v.min_value && tau < v.max_value))
+                        throw std::runtime_error("isovalue " + fixed(tau, 3) + " is outside its range [" +
                                                  fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
                       return c;
                     }),
@@ -1248,6 +1261,10 @@ bool Sculpt::poll_load() {
   loading.reset();
   try {
     done.next.carried = done.result.get();
+    if (const auto& c = done.next.carried->choice) {
+      done.next.iso = c->iso.tau;
+      done.next.inside = core::to_string(c->iso.inside);
+    }
   } catch (const std::exception& e) {
     status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
     log << "sculpt   " << status << "\n";
@@ -1283,6 +1300,23 @@ bool Sculpt::restart_at(double tau) {
   log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
       << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
   return true;
+}
+
+/// A volume given without --iso: loaded once, opened at the isovalue its file and histogram choose.
+void Sculpt::open_at_chosen_isovalue() {
+  ScanInput s = open_scan(o.input);
+  Options at = o;
+  at.iso = s.choice.iso.tau;
+  at.inside = core::to_string(s.choice.iso.inside);
+  scene = input_scene(at);
+  vol = std::move(s.volume);
+  say_isovalue(s.choice);
+}
+
+/// The chosen isovalue and its rule: printed, and shown in the stats panel.
+void Sculpt::say_isovalue(const engine::IsoChoice& c) {
+  panel.isovalue = engine::iso_line(c);
+  log << "sculpt   " << panel.isovalue << "\n";
 }
 
 /// What the restarted session keeps: the volume as the session holds it once every edit

@@ -25,8 +25,11 @@ int main(int argc, char** argv) {
       "failed; 130 / 143 stopped by SIGINT / SIGTERM.",
       "isotouch-sculpt"};
   isotouch::app::common_options(cli);
-  cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
-  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's")
+  cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json), a volume file or a DICOM folder")->required();
+  cli.add_option("--iso", o.iso,
+                 "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's. Without it a "
+                 "volume opens at the isovalue its file stores (.vdb), at bone for CT in HU, else at the upper "
+                 "threshold of a three-class Otsu on its histogram (the rule is printed)")
       ->check(isotouch::app::finite_number("the isovalue in the volume's units, e.g. --iso 300 for bone in HU"));
   cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
       ->check(CLI::IsMember({"above", "below"}));

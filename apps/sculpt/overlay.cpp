@@ -92,6 +92,7 @@ void stats_panel(const PanelStats& s) {
   ImGui::Text("|F|         %.2f N%s", s.force_n, s.contact ? ", contact" : "");
   ImGui::Separator();
   ImGui::TextUnformatted(("volume      " + s.volume).c_str());
+  if (!s.isovalue.empty()) ImGui::TextWrapped("%s", s.isovalue.c_str());
   ImGui::TextUnformatted(("device      " + s.device).c_str());
   if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
   if (!s.loading.empty()) {

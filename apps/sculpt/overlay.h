@@ -36,6 +36,7 @@ struct PanelStats {
   double force_n = 0;                 ///< |F| and contact at the last refresh
   bool contact = false;
   std::string volume;                 ///< dims, spacing, orientation
+  std::string isovalue;               ///< the chosen isovalue and its rule ("" = given by the user or scene)
   std::string device;                 ///< the haptic device and the status its last tick judged
   std::string status;                 ///< the last save, export or drop message
   std::string loading;                ///< a dropped file loading in the background ("" = none)

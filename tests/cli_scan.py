@@ -1,0 +1,142 @@
+#!/usr/bin/env python3
+"""A scan opened without --iso: the isovalue isotouch-sculpt prints for each shipped volume is
+checked against this file's own reading of the voxels (plain Python: the raw files parsed
+here, the histogram and Otsu's thresholds computed here), and the rule it names.
+
+Usage: cli_scan.py ISOTOUCH_SCULPT ISOTOUCH SOURCE_DIR OUT_DIR
+Exit 0 and "PASS cli_scan" when every check holds; 77 (skipped) without xvfb-run.
+"""
+import array, gzip, os, re, shutil, struct, subprocess, sys
+
+sculpt, isotouch, src, out = sys.argv[1:5]
+data = os.path.join(src, "data")
+os.makedirs(out, exist_ok=True)
+failures = []
+
+
+def check(ok, what):
+    print(("ok   " if ok else "FAIL ") + what)
+    if not ok:
+        failures.append(what)
+
+
+# ---- the voxels, read here ----------------------------------------------------------------
+
+def raw_values(path, typecode, big_endian):
+    a = array.array(typecode)
+    with open(path, "rb") as f:
+        a.frombytes(f.read())
+    if big_endian != (sys.byteorder == "big"):
+        a.byteswap()
+    return a
+
+
+def head():
+    return raw_values(os.path.join(data, "ct-head-headsq/headsq_64x64x93_int16.raw"), "h", False)
+
+
+def tooth():  # tooth.nhdr: unsigned short, endian big
+    return raw_values(os.path.join(data, "ct-tooth/tooth.raw"), "H", True)
+
+
+def engine():  # NIfTI-1: datatype at byte 70, vox_offset at 108; uint8 (datatype 2)
+    d = gzip.open(os.path.join(data, "ct-engine/engine.nii.gz")).read()
+    assert struct.unpack("<h", d[70:72])[0] == 2, "engine.nii.gz is not uint8"
+    return array.array("B", d[int(struct.unpack("<f", d[108:112])[0]):])
+
+
+def chest():
+    return raw_values(os.path.join(data, "ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.raw"), "h", False)
+
+
+# ---- histogram and Otsu, written here -----------------------------------------------------
+
+def histogram(values, bins=256):
+    lo, hi = min(values), max(values)
+    counts = [0] * bins
+    scale = bins / (hi - lo)
+    for v in values:
+        counts[min(int((v - lo) * scale), bins - 1)] += 1
+    return lo, hi, counts
+
+
+def otsu(lo, hi, counts, classes):
+    """Bin edges maximising sum_k n_k mu_k^2 over every split into `classes` runs of bins."""
+    w = (hi - lo) / len(counts)
+    n = [0.0]
+    s = [0.0]
+    for i, c in enumerate(counts):
+        n.append(n[-1] + c)
+        s.append(s[-1] + c * (lo + (i + 0.5) * w))
+
+    def term(a, b):
+        m = n[b] - n[a]
+        return (s[b] - s[a]) ** 2 / m if m > 0 else 0.0
+
+    L = len(counts)
+    if classes == 2:
+        best = max(range(1, L), key=lambda t: (term(0, t) + term(t, L), -t))
+        return [lo + best * w]
+    best, b1, b2 = -1.0, 0, 0
+    for t1 in range(1, L - 1):
+        for t2 in range(t1 + 1, L):
+            v = term(0, t1) + term(t1, t2) + term(t2, L)
+            if v > best:
+                best, b1, b2 = v, t1, t2
+    return [lo + b1 * w, lo + b2 * w]
+
+
+# ---- what the programs print ------------------------------------------------------------
+
+def sculpt_isovalue(volume, tag):
+    """Runs isotouch-sculpt on `volume` for 2 frames under Xvfb: (isovalue, rule line)."""
+    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", sculpt, volume, "--frames", "2",
+                        "--size", "256", "--no-overlay"], capture_output=True, text=True, timeout=300)
+    with open(os.path.join(out, tag + ".txt"), "w") as f:
+        f.write(r.stdout + r.stderr)
+    m = re.search(r"^sculpt   isovalue (\S+) \(inside (above|below)\), chosen by (.*)$", r.stderr, re.M)
+    check(r.returncode == 0, f"{tag}: isotouch-sculpt exits 0 (got {r.returncode})")
+    check(m is not None, f"{tag}: isotouch-sculpt prints the isovalue and its rule")
+    return (float(m.group(1)), m.group(3)) if m else (float("nan"), "")
+
+
+def expect_otsu(tag, volume, values):
+    lo, hi, counts = histogram(values)
+    upper = otsu(lo, hi, counts, 3)[1]
+    skin = otsu(lo, hi, counts, 2)[0]
+    iso, rule = sculpt_isovalue(volume, tag)
+    print(f"     {tag}: printed {iso}, three-class Otsu here {upper:.6g}, two-class {skin:.6g}, range {lo}..{hi}")
+    check(abs(iso - upper) <= 1e-3 * max(1.0, abs(upper)), f"{tag}: isovalue {iso} is the upper three-class Otsu threshold {upper:.6g}")
+    check("three-class Otsu" in rule, f"{tag}: the rule names the three-class Otsu: {rule}")
+    return iso, skin
+
+
+if shutil.which("xvfb-run") is None:
+    print("SKIP: no xvfb-run")
+    sys.exit(77)
+
+head_mhd = os.path.join(data, "ct-head-headsq/headsq_64x64x93_int16.mhd")
+iso, skin = expect_otsu("head", head_mhd, head())
+check(iso > skin + 300, f"head: bone ({iso}) well above the two-class threshold on skin ({skin:.6g})")
+expect_otsu("tooth", os.path.join(data, "ct-tooth/tooth.nhdr"), tooth())
+expect_otsu("engine", os.path.join(data, "ct-engine/engine.nii.gz"), engine())
+
+# CT in HU: the chest's air is -1024; it opens in the bone band 150..500 HU.
+c = chest()
+check(min(c) == -1024, "chest: its minimum, read here, is -1024 (air in HU)")
+for tag, vol in (("chest", os.path.join(data, "ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd")),
+                 ("chest-dicom", os.path.join(data, "ct-chest-lungdx-a0001/dicom-5mm"))):
+    iso, rule = sculpt_isovalue(vol, tag)
+    check(150 <= iso <= 500, f"{tag}: isovalue {iso} in the bone band 150..500 HU")
+    check(rule.startswith("CT in HU"), f"{tag}: the rule says CT in HU: {rule}")
+check("modality CT" in rule, f"chest-dicom: recognised by its DICOM modality ({rule})")
+
+# A .vdb opens at the isovalue it stores (export --iso writes it), one without at the histogram's.
+vdb = os.path.join(out, "head-1150.vdb")
+r = subprocess.run([isotouch, "export", head_mhd, "--iso", "1150", "--inside", "above", "--vdb", vdb], capture_output=True, text=True)
+check(r.returncode == 0, f"export --vdb exits 0 ({r.stderr.strip()[-200:]})")
+iso, rule = sculpt_isovalue(vdb, "head-vdb")
+check(iso == 1150 and "stored in the file" in rule, f"head .vdb: opens at its stored 1150 ({iso}, {rule})")
+
+print("FAIL cli_scan: " + "; ".join(failures) if failures else "PASS cli_scan")
+sys.exit(1 if failures else 0)

@@ -2,6 +2,10 @@
 """A scan opened without --iso: the isovalue isotouch-sculpt prints for each shipped volume is
 checked against this file's own reading of the voxels (plain Python: the raw files parsed
 here, the histogram and Otsu's thresholds computed here), and the rule it names.
+`isotouch run VOLUME` makes a default touch scene: it prints the same isovalue, writes
+OUT/scene.json (which runs again as a scene), and touches the surface (the contact point it
+reports straddles the isovalue in the voxels read here); a file that is neither a scene nor a
+volume is refused naming it.
 
 Usage: cli_scan.py ISOTOUCH_SCULPT ISOTOUCH SOURCE_DIR OUT_DIR
 Exit 0 and "PASS cli_scan" when every check holds; 77 (skipped) without xvfb-run.
@@ -137,6 +141,80 @@ r = subprocess.run([isotouch, "export", head_mhd, "--iso", "1150", "--inside", "
 check(r.returncode == 0, f"export --vdb exits 0 ({r.stderr.strip()[-200:]})")
 iso, rule = sculpt_isovalue(vdb, "head-vdb")
 check(iso == 1150 and "stored in the file" in rule, f"head .vdb: opens at its stored 1150 ({iso}, {rule})")
+
+
+# ---- isotouch run VOLUME -------------------------------------------------------------------
+
+def mhd_header(path):
+    h = {}
+    for line in open(path):
+        k, _, v = line.partition("=")
+        h[k.strip()] = v.strip()
+    return h
+
+
+def straddles(values, dims, mhd, point_m, iso):
+    """The 2x2x2 voxels around a physical point [m] hold values on both sides of iso."""
+    h = mhd_header(mhd)
+    D = [float(x) for x in h["TransformMatrix"].split()]  # row-major; column a = index axis a
+    o = [float(x) for x in h["Offset"].split()]
+    sp = [float(x) for x in h["ElementSpacing"].split()]
+    r = [point_m[i] * 1e3 - o[i] for i in range(3)]
+    idx = [sum(D[row * 3 + a] * r[row] for row in range(3)) / sp[a] for a in range(3)]  # D^T r / spacing
+    base = [int(idx[a]) for a in range(3)]
+    vals = []
+    for dz in (0, 1):
+        for dy in (0, 1):
+            for dx in (0, 1):
+                x, y, z = base[0] + dx, base[1] + dy, base[2] + dz
+                if 0 <= x < dims[0] and 0 <= y < dims[1] and 0 <= z < dims[2]:
+                    vals.append(values[(z * dims[1] + y) * dims[0] + x])
+    return bool(vals) and min(vals) <= iso <= max(vals), idx
+
+
+def run_volume(tag, volume, expect_iso):
+    """isotouch run VOLUME: (summary, scene) after checking what it printed and wrote."""
+    folder = os.path.join(out, "run-" + tag)
+    shutil.rmtree(folder, ignore_errors=True)
+    r = subprocess.run([isotouch, "run", volume, "--quiet", "--out", folder], capture_output=True, text=True, timeout=600)
+    with open(folder + ".txt", "w") as f:
+        f.write(r.stdout + r.stderr)
+    check(r.returncode == 0, f"run {tag}: exits 0 (got {r.returncode}; {r.stderr.strip()[-300:]})")
+    m = re.search(r"^scene    isovalue (\S+) \(inside above\), chosen by (.*)$", r.stdout, re.M)
+    check(m is not None and abs(float(m.group(1)) - expect_iso) <= 1e-3 * max(1, abs(expect_iso)),
+          f"run {tag}: prints the isovalue {expect_iso:.6g} and its rule ({m.group(0) if m else 'no line'})")
+    check(re.search(r"^scene    the probe approaches along [+-][xyz] \(index\) from the [LRAPSI] side", r.stdout, re.M)
+          is not None, f"run {tag}: says where the probe comes from")
+    scene_file = os.path.join(folder, "scene.json")
+    check(f"written to {scene_file}" in r.stdout, f"run {tag}: says it wrote {scene_file}")
+    try:
+        scene = json.load(open(scene_file))
+        summary = json.load(open(os.path.join(folder, "summary.json")))
+    except (OSError, ValueError) as e:
+        check(False, f"run {tag}: scene.json and summary.json read back ({e})")
+        return None, None
+    check(abs(scene["isovalue"] - expect_iso) <= 1e-3 * max(1, abs(expect_iso)), f"run {tag}: scene.json holds the isovalue")
+    check(summary["status"] == "complete" and summary["contact"]["ticks"] > 100 and summary["contact"]["max_force_n"] > 0.1,
+          f"run {tag}: the probe touched ({summary['contact']['ticks']} contact ticks, max {summary['contact']['max_force_n']:.3g} N)")
+    return summary, scene_file
+
+
+import json
+head_iso = otsu(*histogram(head()), 3)[1]
+summary, scene_file = run_volume("head", head_mhd, head_iso)
+if summary:
+    ok, idx = straddles(head(), (64, 64, 93), head_mhd, summary["script"]["contact_point_m"], head_iso)
+    check(ok, f"run head: its contact point (index {[round(i, 1) for i in idx]}) is on the bone isosurface of the voxels read here")
+    r = subprocess.run([isotouch, "run", scene_file, "--quiet", "--out", os.path.join(out, "run-head-again")],
+                       capture_output=True, text=True, timeout=600)
+    check(r.returncode == 0, f"run head: the scene.json it wrote runs as a scene (exit {r.returncode})")
+run_volume("chest-dicom", os.path.join(data, "ct-chest-lungdx-a0001/dicom-5mm"), 300)
+
+# Neither a scene nor a volume: one line naming the file, exit 1, no raw JSON parser text.
+bad = os.path.join(src, "tests", "CMakeLists.txt")
+r = subprocess.run([isotouch, "run", bad, "--out", os.path.join(out, "run-bad")], capture_output=True, text=True)
+check(r.returncode == 1 and f"{bad}: neither a scene (JSON) nor a volume" in r.stderr and "parse error" not in r.stderr,
+      f"run on a text file: exit 1 and names it ({r.returncode}: {r.stderr.strip()[-200:]})")
 
 print("FAIL cli_scan: " + "; ".join(failures) if failures else "PASS cli_scan")
 sys.exit(1 if failures else 0)

@@ -101,6 +101,7 @@ def sculpt_isovalue(volume, tag):
     m = re.search(r"^sculpt   isovalue (\S+) \(inside (above|below)\), chosen by (.*)$", r.stderr, re.M)
     check(r.returncode == 0, f"{tag}: isotouch-sculpt exits 0 (got {r.returncode})")
     check(m is not None, f"{tag}: isotouch-sculpt prints the isovalue and its rule")
+    check("sculpt   camera up: superior, front: anterior" in r.stderr, f"{tag}: the window opens upright (camera up: superior)")
     return (float(m.group(1)), m.group(3)) if m else (float("nan"), "")
 
 
@@ -187,6 +188,8 @@ def run_volume(tag, volume, expect_iso):
           is not None, f"run {tag}: says where the probe comes from")
     scene_file = os.path.join(folder, "scene.json")
     check(f"written to {scene_file}" in r.stdout, f"run {tag}: says it wrote {scene_file}")
+    check(re.search(r"^picture  surface.png, up: (superior|anterior)$", r.stdout, re.M) is not None,
+          f"run {tag}: says the picture's up in patient axes")
     try:
         scene = json.load(open(scene_file))
         summary = json.load(open(os.path.join(folder, "summary.json")))

@@ -419,6 +419,8 @@ struct Sculpt {
   bool poll_load();
   bool restart_at(double tau);
   void open_at_chosen_isovalue();
+  void say_camera();
+  void roll(int quarter_turns);
   void say_isovalue(const engine::IsoChoice& c);
   std::shared_ptr<Carried> carry_over(double tau);
 
@@ -580,6 +582,7 @@ bool Sculpt::place_probe() {
   xf.translation_m = vol.grid.centre_m();
   camera.cam = o.carried && o.carried->camera ? *o.carried->camera : run::default_camera(vol);
   view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  say_camera();
   start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
   mouse_device.emplace(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
   mouse = o.haptic == "mouse";
@@ -949,7 +952,9 @@ void Sculpt::handle_key(const Input::Key& k) {
     case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
     case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
     case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
-    case GLFW_KEY_R: camera.cam = run::default_camera(vol); break;
+    case GLFW_KEY_R: camera.cam = run::default_camera(vol); say_camera(); break;
+    case GLFW_KEY_COMMA: roll(-1); break;
+    case GLFW_KEY_PERIOD: roll(1); break;
     case GLFW_KEY_ESCAPE:
     case GLFW_KEY_Q: glfwSetWindowShouldClose(window->handle(), GLFW_TRUE); break;
     case GLFW_KEY_S:
@@ -1311,6 +1316,18 @@ void Sculpt::open_at_chosen_isovalue() {
   scene = input_scene(at);
   vol = std::move(s.volume);
   say_isovalue(s.choice);
+}
+
+/// The camera's up and front in patient axes (the volume's physical frame): printed.
+void Sculpt::say_camera() {
+  log << "sculpt   camera up: " << run::patient_axis(camera.cam.up_phys)
+      << ", front: " << run::patient_axis(camera.cam.front_phys) << " (orientation " << vol.orientation() << ")\n";
+}
+
+/// The roll control (, and .): the picture turns a quarter about the camera's front axis.
+void Sculpt::roll(int quarter_turns) {
+  run::roll_camera(camera.cam, quarter_turns);
+  say_camera();
 }
 
 /// The chosen isovalue and its rule: printed, and shown in the stats panel.

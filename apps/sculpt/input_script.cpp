@@ -24,6 +24,8 @@ int key_code(const std::string& k) {
     if (c == ']') return GLFW_KEY_RIGHT_BRACKET;
     if (c == '-') return GLFW_KEY_MINUS;
     if (c == '=') return GLFW_KEY_EQUAL;
+    if (c == ',') return GLFW_KEY_COMMA;
+    if (c == '.') return GLFW_KEY_PERIOD;
   }
   if (k == "left") return GLFW_KEY_LEFT;
   if (k == "right") return GLFW_KEY_RIGHT;

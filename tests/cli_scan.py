@@ -136,6 +136,20 @@ for tag, vol in (("chest", os.path.join(data, "ct-chest-lungdx-a0001/chest_ct_lu
     check(rule.startswith("CT in HU"), f"{tag}: the rule says CT in HU: {rule}")
 check("modality CT" in rule, f"chest-dicom: recognised by its DICOM modality ({rule})")
 
+# The panel's presets (CT in HU), from a script: soft tissue / skin restarts the session in the
+# skin band -500..-100 HU; a name that is no preset is said and changes nothing.
+preset_script = os.path.join(out, "preset.json")
+with open(preset_script, "w") as f:
+    f.write('{"events": [{"after_frames": 2, "preset": "soft tissue / skin"}, {"after_frames": 2, "preset": "marrow"}, '
+            '{"after_frames": 1, "quit": true}]}\n')
+r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", sculpt,
+                    os.path.join(data, "ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd"),
+                    "--size", "256", "--script", preset_script], capture_output=True, text=True, timeout=300)
+m = re.search(r"^sculpt   isovalue (\S+): the session restarts", r.stderr, re.M)
+check(r.returncode == 0 and m is not None and -500 <= float(m.group(1)) <= -100,
+      f"chest: the soft tissue / skin preset restarts at an isovalue in -500..-100 HU ({m.group(0) if m else r.stderr[-300:]})")
+check('sculpt   no preset "marrow" for this volume' in r.stderr, "chest: an unknown preset is said")
+
 # A .vdb opens at the isovalue it stores (export --iso writes it), one without at the histogram's.
 vdb = os.path.join(out, "head-1150.vdb")
 r = subprocess.run([isotouch, "export", head_mhd, "--iso", "1150", "--inside", "above", "--vdb", vdb], capture_output=True, text=True)

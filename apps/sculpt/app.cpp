@@ -44,6 +44,7 @@
 #include "isotouch/io/volume_io.h"
 #include "isotouch/apps/sculpt/window.h"
 #include "isotouch/apps/sculpt/scan_input.h"
+#include "isotouch/apps/sculpt/iso_panel.h"
 
 namespace isotouch::sculpt {
 
@@ -488,6 +489,7 @@ struct Sculpt {
   // The frame loop's state.
   ToolState tool;
   IsoControl iso_ctl;
+  std::optional<engine::IsoChoice> chosen;  // the isovalue chosen for a volume without --iso
   PanelStats panel;
   Clock::time_point panel_refreshed;
   Stroke stroke;
@@ -784,6 +786,7 @@ void Sculpt::init_tools() {
     tool.radius_m = std::max(4e-3, 2.5 * sp);
   }
   iso_ctl = IsoControl{scene.hri.tau, vol.min_value, vol.max_value, false};
+  fill_iso_panel(iso_ctl, vol, chosen);
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
   panel_refreshed = Clock::now();
@@ -912,6 +915,15 @@ void Sculpt::apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std
     case EK::kIso:
       iso_ctl.value = ev.xy[0];
       iso_ctl.committed = true;
+      break;
+    case EK::kPreset:
+      if (const auto v = preset_value(iso_ctl, ev.text)) {
+        iso_ctl.value = *v;
+        iso_ctl.committed = true;
+      } else {
+        status = "no preset \"" + ev.text + "\" for this volume";
+        log << "sculpt   " << status << "\n";
+      }
       break;
     case EK::kWait: break;
   }
@@ -1332,6 +1344,7 @@ void Sculpt::roll(int quarter_turns) {
 
 /// The chosen isovalue and its rule: printed, and shown in the stats panel.
 void Sculpt::say_isovalue(const engine::IsoChoice& c) {
+  chosen = c;
   panel.isovalue = engine::iso_line(c);
   log << "sculpt   " << panel.isovalue << "\n";
 }

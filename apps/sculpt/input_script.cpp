@@ -143,6 +143,10 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
           ev.kind = K::kDrop;
           ev.text = v.is_string() ? v.get<std::string>() : "";
           if (ev.text.empty()) fail("field 'drop' must be a file name, got " + v.dump());
+        } else if (k == "preset") {
+          ev.kind = K::kPreset;
+          ev.text = v.is_string() ? v.get<std::string>() : "";
+          if (ev.text.empty()) fail("field 'preset' must be a preset's name, got " + v.dump());
         } else if (k == "iso") {
           ev.kind = K::kIso;
           ev.xy[0] = num(v, "iso");

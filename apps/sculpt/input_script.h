@@ -15,6 +15,8 @@
 //                                  drawn / a brush that changed voxels was drawn after the wait began
 //   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
 //   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
+//   {"preset": "bone"}             the isovalue preset button of that name (CT in HU: bone,
+//                                  soft tissue / skin, lung): as "iso" at its value
 //   {"iso": value}                 the isovalue slider let go at `value` (the session restarts
 //                                  at it with the edited volume; the script goes on there)
 //   {"resize": [w, h]}, {"quit": true}
@@ -31,7 +33,7 @@ struct ScriptError : std::runtime_error {
 };
 
 struct InputEvent {
-  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop, kIso };
+  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop, kIso, kPreset };
   Kind kind = Kind::kQuit;
   int after_frames = 1;
   std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy), isovalue (x)

@@ -1,4 +1,5 @@
 #include "isotouch/apps/sculpt/overlay.h"
+#include "isotouch/apps/sculpt/iso_panel.h"
 
 #define GLFW_INCLUDE_NONE
 #define GLFW_INCLUDE_VULKAN
@@ -71,6 +72,7 @@ void tool_panel(ToolState& tool, IsoControl& iso) {
   ImGui::SliderFloat("isovalue", &v, float(iso.lo), float(iso.hi), "%.1f");
   if (ImGui::IsItemActive() || ImGui::IsItemEdited()) iso.value = std::clamp(double(v), iso.lo, iso.hi);
   if (ImGui::IsItemDeactivatedAfterEdit()) iso.committed = true;
+  iso_histogram_widgets(iso);
   ImGui::End();
 }
 

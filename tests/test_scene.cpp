@@ -5,6 +5,7 @@
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/scene_fields.h"
+#include "doc_tables.h"
 
 #include <fstream>
 #include <map>
@@ -394,75 +395,26 @@ TEST(Scene, EditsErrorsNameTheField) {
 
 // ---- the docs' field tables against the parser's table ----------------------------------
 
-namespace {
-/// The rows of the first Markdown table after the first line of `doc` that starts with
-/// `anchor`: each row's cells, trimmed.
-std::vector<std::vector<std::string>> table_after(const std::string& doc, const std::string& anchor) {
-  std::istringstream in(doc);
-  std::string line;
-  bool found = false, in_table = false;
-  std::vector<std::vector<std::string>> rows;
-  while (std::getline(in, line)) {
-    if (!found) {
-      found = line.rfind(anchor, 0) == 0;
-      continue;
-    }
-    if (line.rfind("|", 0) != 0) {
-      if (in_table) break;
-      continue;
-    }
-    in_table = true;
-    std::vector<std::string> cells;
-    std::string cell;
-    for (std::size_t i = 1; i < line.size(); ++i) {
-      if (line[i] == '|' && line[i - 1] != '\\') {
-        const auto b = cell.find_first_not_of(' '), e = cell.find_last_not_of(' ');
-        cells.push_back(b == std::string::npos ? "" : cell.substr(b, e - b + 1));
-        cell.clear();
-      } else {
-        cell += line[i];
-      }
-    }
-    if (cells.empty() || cells[0].rfind("---", 0) == 0) continue;
-    rows.push_back(cells);
-  }
-  return rows;
-}
-
-/// The `name`s written in a cell ("`a`, `b`" -> a, b).
-std::vector<std::string> code_names(const std::string& cell) {
-  std::vector<std::string> names;
-  for (std::size_t i = cell.find('`'); i != std::string::npos; i = cell.find('`', i + 1)) {
-    const std::size_t j = cell.find('`', i + 1);
-    if (j == std::string::npos) break;
-    names.push_back(cell.substr(i + 1, j - i - 1));
-    i = j;
-  }
-  return names;
-}
-}  // namespace
 
 // Every section's table in docs/user-guide.md lists exactly the keys the parser accepts
 // (io::kSceneFields, which io/scene.cpp's checks read), each with the table's unit.
 TEST(SceneDocs, FieldTablesListExactlyTheParsersKeys) {
-  std::ifstream f(std::string(ISOTOUCH_TEST_DATA) + "/../docs/user-guide.md");
-  ASSERT_TRUE(f) << "docs/user-guide.md not found";
-  std::stringstream doc;
-  doc << f.rdbuf();
+  const std::string doc = isotouch::test::user_guide();
+  ASSERT_FALSE(doc.empty()) << "docs/user-guide.md not found";
   const std::map<std::string, std::string> anchors{
       {"", "### Top level"},       {"volume", "### `volume`"},   {"servo", "### `servo`"},
       {"device", "### `device`"},  {"script", "### `script`"},   {"engine", "### `engine`"},
       {"edits", "### `edits`"},    {"edits.brush", "A brush (in `edits.brush`"},
       {"edits.timeline", "A timeline entry is"}, {"outputs", "### `outputs`"}};
   for (const auto& [section, anchor] : anchors) {
-    const auto rows = table_after(doc.str(), anchor);
+    const auto rows = isotouch::test::table_after(doc, anchor);
     ASSERT_GE(rows.size(), 2u) << "no table after '" << anchor << "'";
     const std::vector<std::string>& head = rows[0];
     ASSERT_EQ(head[0], "field") << anchor;
     const bool has_unit = head.size() > 1 && head[1] == "unit";
     std::map<std::string, std::string> documented;  // key -> unit
     for (std::size_t i = 1; i < rows.size(); ++i)
-      for (const std::string& key : code_names(rows[i][0])) documented[key] = has_unit ? rows[i][1] : "";
+      for (const std::string& key : isotouch::test::code_names(rows[i][0])) documented[key] = has_unit ? rows[i][1] : "";
     std::set<std::string> doc_keys;
     for (const auto& [k, u] : documented) doc_keys.insert(k);
     EXPECT_EQ(doc_keys, isotouch::io::scene_keys(section)) << "section '" << section << "': the docs' table after '"

@@ -24,9 +24,26 @@
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace isotouch::sculpt {
+
+/// An event's keys, in one table: the parser accepts exactly these (an action is the one thing
+/// an event does; the rest qualify it), and docs/user-guide.md's two Input scripts tables list
+/// exactly these (tests/test_input_script.cpp reads both). `unit` is the fields table's.
+struct ScriptKey {
+  std::string_view name;
+  bool action;
+  std::string_view unit;
+};
+inline constexpr ScriptKey kScriptKeys[] = {
+    {"after_frames", false, "frames"}, {"mods", false, ""}, {"radius_mm", false, "mm"},
+    {"strength", false, "as the Tool panel's"}, {"timeout_s", false, "s"},
+    {"cursor", true, ""}, {"press", true, ""}, {"release", true, ""}, {"scroll", true, ""}, {"key", true, ""},
+    {"tool", true, ""}, {"orbit", true, ""}, {"zoom", true, ""}, {"wait", true, ""}, {"screenshot", true, ""},
+    {"drop", true, ""}, {"iso", true, ""}, {"preset", true, ""}, {"resize", true, ""}, {"quit", true, ""},
+};
 
 struct ScriptError : std::runtime_error {
   using std::runtime_error::runtime_error;

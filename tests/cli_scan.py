@@ -12,16 +12,13 @@ Exit 0 and "PASS cli_scan" when every check holds; 77 (skipped) without xvfb-run
 """
 import array, gzip, os, re, shutil, struct, subprocess, sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cli_checks import Checks  # noqa: E402
+
 sculpt, isotouch, src, out = sys.argv[1:5]
 data = os.path.join(src, "data")
 os.makedirs(out, exist_ok=True)
-failures = []
-
-
-def check(ok, what):
-    print(("ok   " if ok else "FAIL ") + what)
-    if not ok:
-        failures.append(what)
+check = Checks()
 
 
 # ---- the voxels, read here ----------------------------------------------------------------
@@ -233,5 +230,4 @@ r = subprocess.run([isotouch, "run", bad, "--out", os.path.join(out, "run-bad")]
 check(r.returncode == 1 and f"{bad}: neither a scene (JSON) nor a volume" in r.stderr and "parse error" not in r.stderr,
       f"run on a text file: exit 1 and names it ({r.returncode}: {r.stderr.strip()[-200:]})")
 
-print("FAIL cli_scan: " + "; ".join(failures) if failures else "PASS cli_scan")
-sys.exit(1 if failures else 0)
+check.finish("cli_scan")

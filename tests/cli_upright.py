@@ -16,16 +16,13 @@ Usage: cli_upright.py ISOTOUCH SOURCE_DIR OUT_DIR; exit 0 and "PASS cli_upright"
 """
 import array, os, re, struct, subprocess, sys, zlib
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from cli_checks import Checks  # noqa: E402
+
 isotouch, src, out = (os.path.abspath(a) for a in sys.argv[1:4])
 head_dir = os.path.join(src, "data", "ct-head-headsq")
 os.makedirs(out, exist_ok=True)
-failures = []
-
-
-def check(ok, what):
-    print(("ok   " if ok else "FAIL ") + what)
-    if not ok:
-        failures.append(what)
+check = Checks()
 
 
 def read_png(path):
@@ -149,5 +146,4 @@ check(t and b and max(t) < min(b),
       f"upright: slices 0-9 (top of the head) drawn in rows {min(t or [0])}-{max(t or [0])}, above slices 70-92 "
       f"(the jaw) in rows {min(b or [0])}-{max(b or [0])} of 160")
 
-print("FAIL cli_upright: " + "; ".join(failures) if failures else "PASS cli_upright")
-sys.exit(1 if failures else 0)
+check.finish("cli_upright")

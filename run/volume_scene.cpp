@@ -78,13 +78,18 @@ Approach choose_approach(const engine::Volume& vol, const core::Isosurface& iso)
     return iso.inside == core::InsideIs::kAbove ? v < t[0] : v > t[1];
   };
   Approach best;
-  for (int axis = 0; axis < 3; ++axis)
-    for (int sign : {+1, -1}) {
-      const int k = first_inside(vol, iso, axis, sign);
-      if (k < 2 || !background(face_value(vol, axis, sign))) continue;  // the crop, not the object
-      const double air = k * spacing(vol.grid, axis);
-      if (!best.found || air < best.air_m) best = Approach{axis, sign, air, true};
-    }
+  // First the lines entering through background; if none does (a smooth field such as a
+  // signed distance has no background class at its faces), any with room before the surface.
+  for (bool need_background : {true, false}) {
+    for (int axis = 0; axis < 3; ++axis)
+      for (int sign : {+1, -1}) {
+        const int k = first_inside(vol, iso, axis, sign);
+        if (k < 2 || (need_background && !background(face_value(vol, axis, sign)))) continue;  // the crop
+        const double air = k * spacing(vol.grid, axis);
+        if (!best.found || air < best.air_m) best = Approach{axis, sign, air, true};
+      }
+    if (best.found) break;
+  }
   return best;
 }
 

@@ -30,6 +30,8 @@ struct Approach {
 /// through tissue enters where the scan was cropped) and has at least 2 voxels outside before
 /// the surface. Takes the one with the least room in front (the surface nearest the box,
 /// reached first), ties in the order low x face, high x face, low y, high y, low z, high z.
+/// When no line enters through background (a smooth field, a signed distance), the same
+/// among all lines with 2 voxels outside before the surface.
 Approach choose_approach(const engine::Volume& vol, const core::Isosurface& iso);
 
 /// The approach in words: "along +x (index) from the R side (the volume's RAS... letters)".

@@ -55,8 +55,8 @@ Subcommand add_render_command(CLI::App& cli) {
       ->capture_default_str()
       ->check(non_negative_number());
   s.app->add_option("--fov", o->cam.fov_y_deg, "Vertical field of view [deg]")->capture_default_str()->check(CLI::Range(1.0, 120.0));
-  s.app->add_option("--up", o->up, "Physical axis shown up: x, -x, y, -y, z, -z (default z; -z for the headsq CT, "
-                    "which is stored upside down)");
+  s.app->add_option("--up", o->up, "Physical axis shown up: x, -x, y, -y, z, -z (default z: superior for a medical "
+                    "image, whose direction matrix says where that is)");
   s.app->add_option("--front", o->front, "Physical axis the eye is on at azimuth 0 (default -y: anterior)");
   s.app->add_option("--time", o->time_s, "Draw the probe at this time of the scene's run [s]")->check(non_negative_number());
   s.app->add_option("--trace", o->trace, "With --time: the run's trace.csv (default: run the scene now)")

@@ -1,7 +1,10 @@
 // run_cmd.cpp - `isotouch run`. See run_cmd.h.
 #include "isotouch/apps/run_cmd.h"
 
+#include <cctype>
 #include <filesystem>
+#include <fstream>
+#include <optional>
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -10,7 +13,10 @@
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/run/live_run.h"
 #include "isotouch/apps/run_job.h"
+#include "isotouch/apps/cli_checks.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/io/files.h"
+#include "isotouch/run/volume_scene.h"
 #include "isotouch/sim/sim_device.h"
 #include "isotouch/session/stop_signal.h"
 
@@ -96,10 +102,53 @@ std::string default_scene() {
   return (fs::path(ISOTOUCH_SOURCE_DIR) / "scenes" / "head.json").string();
 }
 
-int cmd_run_live(const std::string& scene_path, const std::string& out_dir, const std::string& device, bool quiet,
+/// What `run` was given besides its options: a scene file, or a volume with its --iso.
+struct RunInput {
+  std::string path;
+  std::optional<double> iso;
+  std::string inside = "above";
+};
+
+/// True when `path` is a file whose first non-blank byte is '{' (a scene with another name).
+bool looks_like_json(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char c = 0;
+  while (in.get(c))
+    if (!std::isspace(static_cast<unsigned char>(c))) return c == '{';
+  return false;
+}
+
+/// The scene to run: the scene file, or the default scene made for a volume (said on `out`
+/// and written as OUT_DIR/scene.json when `out_dir` is given: "" keeps it unwritten).
+/// @throws io::SceneError for a file that is neither, or --iso with a scene.
+io::Scene run_input_scene(const RunInput& in, std::string* out_dir, std::ostream& out) {
+  std::error_code ec;
+  const bool volume = run::is_volume_path(in.path);
+  if (!volume && in.iso) throw io::SceneError(in.path + ": --iso is for a volume; a scene gives its own isovalue");
+  if (!volume) {
+    if (fs::path(in.path).extension() != ".json" && fs::is_regular_file(in.path, ec) && !looks_like_json(in.path))
+      throw io::SceneError(in.path + ": neither a scene (JSON) nor a volume (.mhd .mha .nrrd .nhdr .nii .nii.gz "
+                                     ".vdb, or a DICOM series folder)");
+    return io::load_scene(in.path);
+  }
+  run::VolumeScene vs = run::make_volume_scene(in.path, in.iso, in.inside);
+  out << "isotouch run: volume " << in.path << ": a default touch scene\n"
+      << "scene    " << engine::iso_line(vs.choice) << "\n"
+      << "scene    the probe approaches " << vs.approach_text << "\n";
+  if (out_dir) {
+    if (out_dir->empty()) *out_dir = (fs::path("out") / vs.scene.name).string();
+    const std::string file = (fs::path(*out_dir) / "scene.json").string();
+    io::write_file_atomic(file, vs.json);
+    out << "scene    written to " << file << " (edit it and run it: isotouch run " << file << ")\n";
+  }
+  return std::move(vs.scene);
+}
+
+int cmd_run_live(const RunInput& in, std::string out_dir, const std::string& device, bool quiet,
                  const std::string& record_path, const std::string& haptic, bool allow_unstable) {
-  io::Scene scene = io::load_scene(scene_path);
+  io::Scene scene = run_input_scene(in, out_dir.empty() ? nullptr : &out_dir, std::cout);
   scene.allow_unstable_stiffness = scene.allow_unstable_stiffness || allow_unstable;
+  const std::string& scene_path = in.path;
   LiveOptions opt;
   opt.haptic = haptic;
   opt.run.out_dir = out_dir;
@@ -110,9 +159,10 @@ int cmd_run_live(const std::string& scene_path, const std::string& out_dir, cons
   return run_live(scene, opt, std::cout);
 }
 
-int cmd_run(const std::string& scene_path, std::string out_dir, const std::string& device, bool quiet,
+int cmd_run(const RunInput& in, std::string out_dir, const std::string& device, bool quiet,
             const std::string& record_path) {
-  const io::Scene scene = io::load_scene(scene_path);
+  const io::Scene scene = run_input_scene(in, &out_dir, std::cout);
+  const std::string& scene_path = in.path;
   if (out_dir.empty()) out_dir = (fs::path("out") / scene.name).string();
   RunOptions opt;
   opt.out_dir = out_dir;
@@ -176,14 +226,22 @@ int cmd_run(const std::string& scene_path, std::string out_dir, const std::strin
 
 Subcommand add_run_command(CLI::App& cli) {
   struct Args {
-    std::string scene_path, out_dir, record_path, haptic = "sim", hand_path;
+    RunInput in;
+    std::string out_dir, record_path, haptic = "sim", hand_path;
     bool quiet = false, live = false, allow_unstable = false;
   };
   auto a = std::make_shared<Args>();
   auto* run = cli.add_subcommand("run", "Simulate a probe touching and stroking the isosurface of a scene; "
                                         "write trace.csv, summary.json, report.md and plots");
-  a->scene_path = default_scene();
-  run->add_option("scene", a->scene_path, "Scene JSON file")->capture_default_str();
+  a->in.path = default_scene();
+  run->add_option("scene", a->in.path,
+                  "Scene JSON file, or a volume file or DICOM folder: a default touch scene is made for it "
+                  "(written as OUT/scene.json)")
+      ->capture_default_str();
+  run->add_option("--iso", a->in.iso, "With a volume: its isovalue (default: the one its file and histogram choose)")
+      ->check(finite_number("the isovalue in the volume's units, e.g. --iso 300 for bone in HU"));
+  run->add_option("--inside", a->in.inside, "With --iso: above (CT density) or below (signed distance)")
+      ->check(CLI::IsMember({"above", "below"}));
   run->add_option("--out,-o", a->out_dir,
                   "Output folder (default: out/<scene name>; with --live: none unless given, then trace.csv of the "
                   "renderer's ticks, report.md and summary.json)");
@@ -215,10 +273,10 @@ Subcommand add_run_command(CLI::App& cli) {
       throw CLI::ValidationError("--haptic needs --live (a simulated run drives the scene's simulated device)");
   });
   return {run, [a](const std::string& device) {
-            if (!a->hand_path.empty()) return write_hand_path(io::load_scene(a->scene_path), a->hand_path, std::cout);
-            if (a->live)
-              return cmd_run_live(a->scene_path, a->out_dir, device, a->quiet, a->record_path, a->haptic, a->allow_unstable);
-            return cmd_run(a->scene_path, a->out_dir, device, a->quiet, a->record_path);
+            if (!a->hand_path.empty())
+              return write_hand_path(run_input_scene(a->in, nullptr, std::cout), a->hand_path, std::cout);
+            if (a->live) return cmd_run_live(a->in, a->out_dir, device, a->quiet, a->record_path, a->haptic, a->allow_unstable);
+            return cmd_run(a->in, a->out_dir, device, a->quiet, a->record_path);
           }};
 }
 

@@ -292,6 +292,12 @@ CameraView look_at(const Vec3& eye, const Vec3& target, const Vec3& up, double f
   return v;
 }
 
+namespace {
+double determinant(const std::array<double, 9>& D) {
+  return D[0] * (D[4] * D[8] - D[5] * D[7]) - D[1] * (D[3] * D[8] - D[5] * D[6]) + D[2] * (D[3] * D[7] - D[4] * D[6]);
+}
+}  // namespace
+
 CameraView orbit_view(const core::Grid& grid, const std::array<double, 9>& D, const OrbitCamera& cam) {
   if (!(cam.elevation_deg > -90 && cam.elevation_deg < 90))
     throw std::invalid_argument("camera: elevation must be in (-90, 90) degrees, got " + std::to_string(cam.elevation_deg));
@@ -319,7 +325,12 @@ CameraView orbit_view(const core::Grid& grid, const std::array<double, 9>& D, co
       (front * std::cos(az) + side * std::sin(az)) * std::cos(el) + upp * std::sin(el);
   const Vec3 eye_dir = physical_to_grid(D, eye_dir_phys);
   const Vec3 up = physical_to_grid(D, upp);
-  return look_at(target + eye_dir * dist, target, up, cam.fov_y_deg);
+  CameraView v = look_at(target + eye_dir * dist, target, up, cam.fov_y_deg);
+  // look_at's right (forward x up) is taken in the grid frame, which a reflection D (det < 0:
+  // a scan whose slices run inferior, a radiological NIfTI) mirrors: reversed, the picture
+  // shows the physical volume, not its mirror image.
+  if (determinant(D) < 0) v.right = v.right * -1.0;
+  return v;
 }
 
 double voxels_per_metre(const core::Grid& g, const Vec3& dir) {

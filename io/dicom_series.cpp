@@ -500,6 +500,7 @@ Volume load_dicom_series(const std::string& folder, const std::string& series_ui
   {
     const std::string mod = h.text(f0, kModality), desc = h.text(f0, kSeriesDescription);
     info.description = mod + (mod.empty() || desc.empty() ? "" : " ") + desc;
+    info.modality = mod;
   }
   const SliceFrame fr = slice_frame(folder, where, h, files);
   const std::vector<Slice> slices = sorted_slices(folder, where, h, files, fr.normal);

@@ -23,6 +23,7 @@ inline constexpr double kDicomGapTolMm = 0.02;
 struct DicomSeriesInfo {
   std::string series_uid;            ///< SeriesInstanceUID (0020,000E) of the series read
   std::string description;           ///< Modality and SeriesDescription, e.g. "CT 5mm"
+  std::string modality;              ///< Modality (0008,0060) of its first slice, e.g. "CT"; "" if absent
   std::vector<std::string> files;    ///< the slice files, in index z order (along the normal)
   std::size_t series_in_folder = 0;  ///< series found in the folder
   /// What the reader chose or ignored, one sentence each (several series: which one was

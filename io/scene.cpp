@@ -10,6 +10,7 @@
 #include <sstream>
 #include <vector>
 
+#include "isotouch/io/scene_fields.h"
 #include "isotouch/sim/stability.h"
 
 namespace isotouch::io {
@@ -139,7 +140,7 @@ PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
 }
 
 void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
-  r.only(e, "engine", {"passes", "mode", "samples"});
+  r.only(e, "engine", scene_keys("engine"));
   if (e.contains("passes")) {
     const json& list = e.at("passes");
     if (!list.is_array() || list.empty())
@@ -173,8 +174,7 @@ void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
 // A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate"
 // or "removal_per_n_s", "density_scale", "material", "empty" (+ "force_n" on the timeline),
 // each over `base`.
-const std::set<std::string> kBrushKeys{"kind", "radius_mm", "strength", "falloff", "force_threshold_n",
-                                       "rate", "removal_per_n_s", "density_scale", "material", "empty"};
+const std::set<std::string> kBrushKeys = scene_keys("edits.brush");
 
 BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, BrushSpec base, bool timed) {
   BrushSpec s = base;
@@ -208,16 +208,10 @@ BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, 
   return s;
 }
 
-std::set<std::string> with(std::set<std::string> a, std::initializer_list<const char*> more) {
-  for (const char* m : more) a.insert(m);
-  return a;
-}
-
 // "edits": {"brush": {...}, "every_ticks": 10, "button": [[t0, t1], ...], "timeline": [...],
 //           "history_limit_mib": 256, "write_vdb": true, "write_nrrd": true, "write_stl": true}
 void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
-  r.only(e, "edits",
-         {"brush", "every_ticks", "button", "timeline", "history_limit_mib", "write_vdb", "write_nrrd", "write_stl"});
+  r.only(e, "edits", scene_keys("edits"));
   spec.present = true;
   if (e.contains("brush")) {
     r.only(e.at("brush"), "edits.brush", kBrushKeys);
@@ -261,7 +255,9 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
       if (te.kind == "undo" || te.kind == "redo") {
         r.only(it, f, {"t_s", "kind"});
       } else {
-        r.only(it, f, with(kBrushKeys, {"t_s", "at", "duration_s", "force_n"}));
+        std::set<std::string> keys = kBrushKeys;
+        keys.merge(scene_keys("edits.timeline"));
+        r.only(it, f, keys);
         te.brush = parse_brush(r, it, f, spec.brush, true);
         if (!it.contains("at")) r.fail(f + ".at", "is required: [x, y, z] in mm (physical frame, as trace.csv) or \"vhip\"");
         const json& at = it.at("at");
@@ -385,7 +381,7 @@ void parse_name(const Reader& r, const json& root, const std::string& path, Scen
 void parse_volume(const Reader& r, const json& root, const std::string& path, Scene& s) {
   if (!root.contains("volume")) r.fail("volume", "is required");
   const json& vol = root.at("volume");
-  r.only(vol, "volume", {"path", "synthetic", "dims", "spacing_m", "radius_vox", "attribution"});
+  r.only(vol, "volume", scene_keys("volume"));
   if (vol.contains("path") == vol.contains("synthetic"))
     r.fail("volume", "needs exactly one of 'path' or 'synthetic'");
   if (vol.contains("path")) {
@@ -498,9 +494,7 @@ void tool_from_brush(const Reader& r, Scene& s) {
 
 void parse_servo(const Reader& r, const json& root, Scene& s) {
   const json& sv = r.section(root, "servo");
-  r.only(sv, "servo", {"stiffness_n_per_m", "damping_n_s_per_m", "plane_update_period", "rate_hz",
-                       "force_limit_n", "intersection", "intersection_steps", "normal", "force_shading",
-                       "recovery_time_s", "friction", "variant", "tool", "allow_unstable_stiffness"});
+  r.only(sv, "servo", scene_keys("servo"));
   const std::string variant = r.string(sv, "servo", "variant", "robust");
   if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
   else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
@@ -559,9 +553,7 @@ void check_stiffness(const Reader& r, const Scene& s) {
 // After the servo section: the mass check needs the servo rate.
 void parse_device(const Reader& r, const json& root, Scene& s) {
   const json& dv = r.section(root, "device");
-  r.only(dv, "device", {"mass_kg", "damping_n_s_per_m", "coulomb_friction_n", "encoder_resolution_m",
-                        "force_max_n", "hand_stiffness_n_per_m", "hand_damping_n_s_per_m", "substeps",
-                        "workspace_scale"});
+  r.only(dv, "device", scene_keys("device"));
   s.device.mass_kg = r.number(dv, "device", "mass_kg", 0.08, 0, 100, true);
   s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m", 0.01, 0, 1e3);
   s.device.coulomb_friction_n = r.number(dv, "device", "coulomb_friction_n", 0.0, 0, 100);
@@ -588,9 +580,7 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
 
 void parse_script(const Reader& r, const json& root, Scene& s) {
   const json& sc = r.section(root, "script");
-  r.only(sc, "script", {"ray_origin_frac", "ray_direction", "stroke_direction", "approach_distance_m",
-                        "approach_speed_m_s", "press_depth_m", "press_speed_m_s", "hold_s",
-                        "stroke_length_m", "stroke_speed_m_s", "rest_s"});
+  r.only(sc, "script", scene_keys("script"));
   auto& p = s.script;
   p.ray_origin_frac = r.vec3(sc, "script", "ray_origin_frac", p.ray_origin_frac);
   for (int a = 0; a < 3; ++a)
@@ -618,8 +608,7 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
 Scene parse_scene(const std::string& text, const std::string& path) {
   const json root = parse_json_once_each(text, path);
   const Reader r(path);
-  r.only(root, "", {"name", "description", "volume", "isovalue", "inside", "servo", "device",
-                    "script", "outputs", "engine", "edits"});
+  r.only(root, "", scene_keys(""));
   Scene s;
   s.file = path;
   parse_name(r, root, path, s);
@@ -638,7 +627,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
     tool_from_brush(r, s);
   }
   const json& out = r.section(root, "outputs");
-  r.only(out, "outputs", {"trace_csv", "plots"});
+  r.only(out, "outputs", scene_keys("outputs"));
   s.write_trace = r.boolean(out, "outputs", "trace_csv", true);
   s.draw_plots = r.boolean(out, "outputs", "plots", true);
   check_script_length(r, s);

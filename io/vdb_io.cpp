@@ -2,6 +2,7 @@
 // The only translation unit besides openvdb_check.cpp that includes OpenVDB, and the only
 // one that includes Assimp (mesh file writers). See vdb_io.h for the frames and contracts.
 #include "isotouch/io/vdb_io.h"
+#include "isotouch/io/scan.h"
 
 #include "isotouch/io/output_file.h"
 #include "isotouch/io/volume_write.h"
@@ -592,14 +593,6 @@ void export_mesh(const Mesh&, const std::string& path, const char*, bool) {
 void write_stl_binary(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "stlb", true); }
 void write_obj(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "objnomtl", false); }
 void write_ply(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "plyb", false); }
-
-namespace {
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
-  return ext;
-}
-}  // namespace
 
 std::string mesh_format(const std::string& path) {
   const std::string ext = lower_extension(path);

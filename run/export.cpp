@@ -14,6 +14,7 @@
 #include "isotouch/eval/shapes.h"
 #include "isotouch/engine/synthetic.h"
 #include "isotouch/io/vdb_io.h"
+#include "isotouch/io/scan.h"
 #include "isotouch/io/volume_io.h"
 
 namespace isotouch::run {
@@ -69,7 +70,7 @@ Input load_input(const ExportOptions& o, std::ostream& err) {
     err << "export: grid '" << l.grid_name << "' (" << l.grid_class << "), background " << l.background << "\n";
     in.volume = std::move(l.volume);
     in.iso = l.suggested;
-    in.iso_source = l.grid_class == "level set" && !l.written_by_isotouch ? "level set" : ".vdb metadata";
+    in.iso_source = io::suggested_source(l);
   } else {
     in.volume = io::load_volume(o.volume);
   }

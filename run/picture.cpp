@@ -109,12 +109,25 @@ engine::RaycastImage render_picture(engine::VulkanContext* vk, const engine::Ray
   return img;
 }
 
-engine::OrbitCamera default_camera(const engine::Volume& vol) {
-  engine::OrbitCamera c;
-  // VTK's headsq (the head scene) has an identity direction, but its slice 0 is the top of
-  // the head (VTK's own Medical examples view it with view-up (0, 0, -1)): superior is -z.
-  if (fs::path(vol.path).filename() == "headsq_64x64x93_int16.mhd") c.up_phys = {0, 0, -1};
-  return c;
+engine::OrbitCamera default_camera(const engine::Volume&) {
+  // The orbit camera's angles are physical (the direction matrix turns them into the grid
+  // frame): superior up and the eye anterior for every volume, whatever its file is called.
+  return engine::OrbitCamera{};
+}
+
+std::string patient_axis(const Vec3& phys) {
+  static const char* kNames[3][2] = {{"left", "right"}, {"posterior", "anterior"}, {"superior", "inferior"}};
+  const double c[3] = {phys.x, phys.y, phys.z};
+  for (int a = 0; a < 3; ++a)
+    if (std::abs(c[a]) > 0.999 * norm(phys)) return kNames[a][c[a] > 0 ? 0 : 1];
+  std::ostringstream s;
+  s << std::setprecision(3) << "(" << phys.x << ", " << phys.y << ", " << phys.z << ") LPS";
+  return s.str();
+}
+
+void roll_camera(engine::OrbitCamera& cam, int quarter_turns) {
+  const int n = ((quarter_turns % 4) + 4) % 4;
+  for (int i = 0; i < n; ++i) cam.up_phys = cross(cam.front_phys, cam.up_phys);
 }
 
 double probe_size_m(const core::Grid& g) {
@@ -147,16 +160,17 @@ std::array<float, 3> force_colour(double s) {
   return {float(r), float(g), float(b)};
 }
 
-/// The default camera's physical up in grid-world, or the front axis if up is along `view_dir`.
-Vec3 picture_up(const engine::Volume& vol, const Vec3& view_dir) {
+/// The default camera's physical up, or the front axis if up is along `view_dir` (grid-world):
+/// that physical axis and its grid-world direction.
+std::pair<Vec3, Vec3> picture_up(const engine::Volume& vol, const Vec3& view_dir) {
   const auto& D = vol.direction;
   const engine::OrbitCamera cam = default_camera(vol);
   for (Vec3 p : {cam.up_phys, -cam.front_phys}) {
     const Vec3 g{D[0] * p.x + D[3] * p.y + D[6] * p.z, D[1] * p.x + D[4] * p.y + D[7] * p.z,
                  D[2] * p.x + D[5] * p.y + D[8] * p.z};
-    if (norm(cross(g, view_dir)) > 0.3) return g;
+    if (norm(cross(g, view_dir)) > 0.3) return {p, g};
   }
-  return {1, 0, 0};
+  return {vol.direction_apply({1, 0, 0}), {1, 0, 0}};
 }
 
 }  // namespace
@@ -220,7 +234,14 @@ RunPicture render_run_picture(const Scene& scene, const engine::Volume& vol, con
     PictureRequest req;
     req.width = width;
     req.height = height;
-    req.view = engine::look_at(target - view_dir * dist, target, picture_up(vol, view_dir), fov);
+    const auto [up_phys, up_grid] = picture_up(vol, view_dir);
+    req.view = engine::look_at(target - view_dir * dist, target, up_grid, fov);
+    // With a reflection D (det < 0) the grid frame's right is the physical left (orbit_view
+    // does the same): the picture shows the volume, not its mirror image.
+    const auto& D = vol.direction;
+    if (D[0] * (D[4] * D[8] - D[5] * D[7]) - D[1] * (D[3] * D[8] - D[5] * D[6]) + D[2] * (D[3] * D[7] - D[4] * D[6]) < 0)
+      req.view->right = req.view->right * -1.0;
+    out.up = patient_axis(up_phys);
     req.prims = std::move(prims);
     std::unique_ptr<engine::VulkanContext> own;
     if (!vk && !is_cpu_device(device)) {

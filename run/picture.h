@@ -30,9 +30,18 @@ engine::Volume load_scene_volume(const io::Scene& scene);
 /// `isotouch run` publishes outside the grid (core::Isosurface::outside_value of the range).
 engine::RaycastField scene_raycast_field(const io::Scene& scene, const engine::Volume& vol);
 
-/// The orbit camera that shows `vol` the right way up (physical +z up, anterior front,
-/// except for volumes known to be stored otherwise: the headsq CT is upside down).
+/// The orbit camera that shows `vol` the right way up: physical +z (superior) up, the eye
+/// anterior (-y), turned into the grid frame by the volume's direction matrix. A volume stored
+/// upside down shows upright when its header's direction says so; no file is special.
 engine::OrbitCamera default_camera(const engine::Volume& vol);
+
+/// A physical (LPS) direction in patient words: "superior", "inferior", "left", "right",
+/// "anterior", "posterior" along an axis; "(x, y, z) LPS" otherwise.
+std::string patient_axis(const core::Vec3& phys);
+
+/// Turns the picture by quarter turns about the camera's front axis: up' = front x up per
+/// turn (superior up with the eye anterior: the patient's right comes up).
+void roll_camera(engine::OrbitCamera& cam, int quarter_turns);
 
 /// What one picture shows and how.
 struct PictureRequest {
@@ -63,6 +72,7 @@ double probe_size_m(const core::Grid& grid);
 struct RunPicture {
   std::string error;    ///< why no picture was written ("" if written)
   std::string caption;  ///< e.g. "contact points coloured by |F| from 0 N (blue) to 3.3 N (red) ..."
+  std::string up;       ///< the picture's up in patient axes (patient_axis), e.g. "superior"
   double gpu_ms = -1;
 };
 
@@ -70,7 +80,7 @@ struct RunPicture {
 /// seen through the surface), the contact points (VHIP at contact ticks) coloured by |F|
 /// (blue 0 -> green -> yellow -> red at the run's max |F|), and the probe at the tick of
 /// the largest force. Camera: looking against the mean contact force (from outside the
-/// surface) at the contact points' centroid, physical +z up. Never throws: a failure
+/// surface) at the contact points' centroid, physical +z up (anterior up when looking along z). Never throws: a failure
 /// (no Vulkan device, unwritable path) comes back in RunPicture::error.
 /// @param vol   the run's volume (grid, values, direction D)
 /// @param field the published snapshot (its `background` is used; values from `vol`)

@@ -118,7 +118,7 @@ int run_render(const RenderOptions& o, const std::string& device) {
     const std::string out = o.out.empty() ? scene.name + "_path.png" : o.out;
     const RunPicture pic = render_run_picture(scene, vol, sf, rows, out, nullptr, device, o.width, o.height);
     if (!pic.error.empty()) throw std::runtime_error("render --path: " + pic.error);
-    say(o) << "render: wrote " << out << ": " << pic.caption << "\n";
+    say(o) << "render: wrote " << out << ": " << pic.caption << "\n" << "render: up: " << pic.up << "\n";
     return 0;
   }
   std::string probe_note;
@@ -159,6 +159,8 @@ int run_render(const RenderOptions& o, const std::string& device) {
             << std::setprecision(3) << (img.gpu_ms >= 0 ? img.gpu_ms : img.submit_wall_ms) << " ms"
             << (img.gpu_ms >= 0 ? " GPU" : " wall") << ", " << hits << " surface pixels"
             << (probe_note.empty() ? "" : "; " + probe_note) << ")\n";
+  say(o) << "render: up: " << patient_axis(req.camera.up_phys) << ", eye at azimuth 0: "
+         << patient_axis(req.camera.front_phys) << "\n";
   return 0;
 }
 

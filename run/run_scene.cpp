@@ -178,6 +178,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, const RunF
     m.picture_drawn = pic.error.empty();
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
+    else log << "picture  surface.png, up: " << pic.up << "\n";
   }
   throw_if_stop_requested("outputs (trace, plots and picture written)");
   if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);

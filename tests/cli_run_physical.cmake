@@ -1,14 +1,15 @@
-# `isotouch run` on the head CT with a flipped direction matrix (D = diag(-1, -1, 1), the
-# RAS orientation of a standard NIfTI read by ITK): the orientation is reported, and every
+# `isotouch run` on the head CT with its direction matrix (diag(1, 1, -1): slice 0 is the top
+# of the head) turned about z (D = diag(-1, -1, -1), as a NIfTI in RAS read by ITK flips x
+# and y): the orientation RAI is reported, and every
 # reported point is physical (origin + D (spacing * index)), so the contact point lies in
 # the volume's physical box, here x and y in [-201.6, 0] mm, not at +x as in the grid frame.
 file(REMOVE_RECURSE ${OUT})
 file(MAKE_DIRECTORY ${OUT})
 file(READ ${DATA}/ct-head-headsq/headsq_64x64x93_int16.mhd mhd)
-string(REPLACE "TransformMatrix = 1 0 0 0 1 0 0 0 1" "TransformMatrix = -1 0 0 0 -1 0 0 0 1" mhd "${mhd}")
+string(REPLACE "TransformMatrix = 1 0 0 0 1 0 0 0 -1" "TransformMatrix = -1 0 0 0 -1 0 0 0 -1" mhd "${mhd}")
 string(REPLACE "ElementDataFile = headsq_64x64x93_int16.raw"
                "ElementDataFile = ${DATA}/ct-head-headsq/headsq_64x64x93_int16.raw" mhd "${mhd}")
-if(NOT mhd MATCHES "TransformMatrix = -1 0 0 0 -1 0 0 0 1")
+if(NOT mhd MATCHES "TransformMatrix = -1 0 0 0 -1 0 0 0 -1")
   message(FATAL_ERROR "could not flip the header")
 endif()
 file(WRITE ${OUT}/flipped.mhd "${mhd}")
@@ -24,8 +25,8 @@ string(JSON orient GET "${js}" volume orientation)
 string(JSON d0 GET "${js}" volume direction 0)
 string(JSON cx GET "${js}" script contact_point_m 0)
 string(JSON cy GET "${js}" script contact_point_m 1)
-if(NOT orient STREQUAL "RAS" OR NOT d0 EQUAL -1)
-  message(FATAL_ERROR "volume.orientation = ${orient}, direction[0] = ${d0}: expected RAS, -1")
+if(NOT orient STREQUAL "RAI" OR NOT d0 EQUAL -1)
+  message(FATAL_ERROR "volume.orientation = ${orient}, direction[0] = ${d0}: expected RAI, -1")
 endif()
 if(cx GREATER 0 OR cx LESS -0.2016 OR cy GREATER 0 OR cy LESS -0.2016)
   message(FATAL_ERROR "contact point (${cx}, ${cy}) m is outside the physical box of the volume")
@@ -37,7 +38,7 @@ list(GET first 1 hx)
 if(hx GREATER 0)
   message(FATAL_ERROR "trace.csv hip_x_m = ${hx}: the trace is not in the physical frame")
 endif()
-if(NOT out MATCHES "orientation RAS")
+if(NOT out MATCHES "orientation RAI")
   message(FATAL_ERROR "orientation not printed:\n${out}")
 endif()
 message(STATUS "ok: orientation ${orient}, contact (${cx}, ${cy}) m")

@@ -4,6 +4,13 @@
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/io/scene_fields.h"
+#include "doc_tables.h"
+
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
 
 using isotouch::io::load_scene;
 using isotouch::io::parse_scene;
@@ -384,4 +391,43 @@ TEST(Scene, EditsErrorsNameTheField) {
   expect_error(head + R"({"brush": {}, "undo": 3}})", {"'edits.undo'", "unknown field"});
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "engine": {"mode": "dense"}, "edits": {}})",
                {"'edits'", "sparse", "dense"});
+}
+
+// ---- the docs' field tables against the parser's table ----------------------------------
+
+
+// Every section's table in docs/user-guide.md lists exactly the keys the parser accepts
+// (io::kSceneFields, which io/scene.cpp's checks read), each with the table's unit.
+TEST(SceneDocs, FieldTablesListExactlyTheParsersKeys) {
+  const std::string doc = isotouch::test::user_guide();
+  ASSERT_FALSE(doc.empty()) << "docs/user-guide.md not found";
+  const std::map<std::string, std::string> anchors{
+      {"", "### Top level"},       {"volume", "### `volume`"},   {"servo", "### `servo`"},
+      {"device", "### `device`"},  {"script", "### `script`"},   {"engine", "### `engine`"},
+      {"edits", "### `edits`"},    {"edits.brush", "A brush (in `edits.brush`"},
+      {"edits.timeline", "A timeline entry is"}, {"outputs", "### `outputs`"}};
+  for (const auto& [section, anchor] : anchors) {
+    const auto rows = isotouch::test::table_after(doc, anchor);
+    ASSERT_GE(rows.size(), 2u) << "no table after '" << anchor << "'";
+    const std::vector<std::string>& head = rows[0];
+    ASSERT_EQ(head[0], "field") << anchor;
+    const bool has_unit = head.size() > 1 && head[1] == "unit";
+    std::map<std::string, std::string> documented;  // key -> unit
+    for (std::size_t i = 1; i < rows.size(); ++i)
+      for (const std::string& key : isotouch::test::code_names(rows[i][0])) documented[key] = has_unit ? rows[i][1] : "";
+    std::set<std::string> doc_keys;
+    for (const auto& [k, u] : documented) doc_keys.insert(k);
+    EXPECT_EQ(doc_keys, isotouch::io::scene_keys(section)) << "section '" << section << "': the docs' table after '"
+                                                           << anchor << "' and the parser's keys differ";
+    for (const isotouch::io::SceneField& fld : isotouch::io::kSceneFields)
+      if (fld.section == section && documented.count(std::string(fld.key)) && has_unit)
+        EXPECT_EQ(documented[std::string(fld.key)], fld.unit) << section << "." << fld.key << ": unit";
+  }
+}
+
+// The parser reads the same table: a key outside it is refused, one in it accepted.
+TEST(SceneDocs, ParserAcceptsExactlyTheTablesKeys) {
+  const std::string base = R"({"volume": {"synthetic": "sphere"}, "isovalue": 0, "inside": "below", )";
+  EXPECT_NO_THROW(parse_scene(base + R"("outputs": {"plots": false}})", "ok.json"));
+  expect_error(base + R"("outputs": {"pictures": false}})", {"outputs.pictures", "unknown field"});
 }

@@ -58,7 +58,13 @@ TEST(VolumeIo, HeadMetaImage) {
   EXPECT_EQ(v.component_type, "short");
   EXPECT_EQ(v.min_value, 0.f);
   EXPECT_EQ(v.max_value, 3926.f);  // the README: values 0-3926
-  EXPECT_TRUE(v.direction_is_identity);
+  // Slice 0 is the top of the head: the header's direction says z runs inferior, and the
+  // offset keeps the physical box [0, 138] mm along z.
+  EXPECT_FALSE(v.direction_is_identity);
+  EXPECT_EQ(v.direction, (std::array<double, 9>{1, 0, 0, 0, 1, 0, 0, 0, -1}));
+  EXPECT_EQ(v.orientation(), "LPI");
+  EXPECT_NEAR(v.index_to_physical({0, 0, 0}).z, 0.138, 1e-12);
+  EXPECT_NEAR(v.index_to_physical({0, 0, 92}).z, 0.0, 1e-12);
 }
 
 TEST(VolumeIo, HeadMultiFileNrrdMatchesMetaImage) {
@@ -267,10 +273,10 @@ TEST(VolumeIo, MetaImagePermutedDirection) {
 }
 
 TEST(VolumeIo, IdentityIsLps) {
-  const Volume v = load_volume(kHead);
+  const Volume v = load_volume(kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd");
   EXPECT_EQ(v.orientation(), "LPS");
   const isotouch::core::Vec3 p = v.index_to_physical({1, 1, 1});
-  EXPECT_NEAR(p.x, 3.2e-3, 1e-12);
+  EXPECT_NEAR(p.x, -227.616e-3 + 1.6835938e-3, 1e-12);
 }
 
 TEST(VolumeIo, NonFiniteVoxelsCounted) {

@@ -44,6 +44,8 @@
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/volume_io.h"
 #include "isotouch/apps/sculpt/window.h"
+#include "isotouch/apps/sculpt/scan_input.h"
+#include "isotouch/apps/sculpt/iso_panel.h"
 
 namespace isotouch::sculpt {
 
@@ -52,6 +54,7 @@ struct Carried {
   std::optional<engine::OrbitCamera> camera;  ///< none: the volume's default
   std::optional<ToolState> tool;     ///< none: the default tool
   std::vector<InputEvent> script;    ///< the script's events after the one that restarted
+  std::optional<engine::IsoChoice> choice;  ///< a dropped volume: the isovalue its file chose
 };
 
 namespace fs = std::filesystem;
@@ -423,6 +426,10 @@ struct Sculpt {
   void start_load(const std::string& path);
   bool poll_load();
   bool restart_at(double tau);
+  void open_at_chosen_isovalue();
+  void say_camera();
+  void roll(int quarter_turns);
+  void say_isovalue(const engine::IsoChoice& c);
   std::shared_ptr<Carried> carry_over(double tau);
 
   // --- the end: the report ---
@@ -493,6 +500,7 @@ struct Sculpt {
   // The frame loop's state.
   ToolState tool;
   IsoControl iso_ctl;
+  std::optional<engine::IsoChoice> chosen;  // the isovalue chosen for a volume without --iso
   PanelStats panel;
   Clock::time_point panel_refreshed;
   Stroke stroke;
@@ -562,8 +570,13 @@ bool Sculpt::load_input() {
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     check_output_names(o);
-    scene = input_scene(o);
-    vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
+    if (o.iso || o.carried || is_scene_path(o.input)) {
+      scene = input_scene(o);
+      vol = o.carried ? o.carried->volume : run::load_scene_volume(scene);
+    } else {
+      open_at_chosen_isovalue();
+    }
+    if (o.carried && o.carried->choice) say_isovalue(*o.carried->choice);
     if (!(scene.hri.tau > vol.min_value && scene.hri.tau < vol.max_value))
       throw std::runtime_error(o.input + ": isovalue " + fixed(scene.hri.tau, 3) + " is outside the range [" +
                                fixed(vol.min_value, 3) + ", " + fixed(vol.max_value, 3) + "] of " + vol.path +
@@ -582,6 +595,7 @@ bool Sculpt::place_probe() {
   xf.translation_m = vol.grid.centre_m();
   camera.cam = o.carried && o.carried->camera ? *o.carried->camera : run::default_camera(vol);
   view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
+  say_camera();
   start_world = vol.grid.centre_m() - view.forward * (0.6 * norm(vol.grid.extent_m()));
   mouse_device.emplace(scene.device, xf.to_device(start_world), 1.0 / scene.hri.rate_hz);
   mouse = o.haptic == "mouse";
@@ -781,6 +795,7 @@ void Sculpt::keep_display_off_servo_cpu() {
 void Sculpt::init_tools() {
   print_felt_tool();
   iso_ctl = IsoControl{scene.hri.tau, vol.min_value, vol.max_value, false};
+  fill_iso_panel(iso_ctl, vol, chosen);
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
   panel_refreshed = Clock::now();
@@ -974,6 +989,15 @@ void Sculpt::apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std
       iso_ctl.value = ev.xy[0];
       iso_ctl.committed = true;
       break;
+    case EK::kPreset:
+      if (const auto v = preset_value(iso_ctl, ev.text)) {
+        iso_ctl.value = *v;
+        iso_ctl.committed = true;
+      } else {
+        status = "no preset \"" + ev.text + "\" for this volume";
+        log << "sculpt   " << status << "\n";
+      }
+      break;
     case EK::kWait: break;
   }
 }
@@ -1013,7 +1037,9 @@ void Sculpt::handle_key(const Input::Key& k) {
     case GLFW_KEY_DOWN: camera.orbit(0, -5); break;
     case GLFW_KEY_PAGE_UP: camera.zoom_by(1.2); break;
     case GLFW_KEY_PAGE_DOWN: camera.zoom_by(1 / 1.2); break;
-    case GLFW_KEY_R: camera.cam = run::default_camera(vol); break;
+    case GLFW_KEY_R: camera.cam = run::default_camera(vol); say_camera(); break;
+    case GLFW_KEY_COMMA: roll(-1); break;
+    case GLFW_KEY_PERIOD: roll(1); break;
     case GLFW_KEY_ESCAPE:
     case GLFW_KEY_Q: glfwSetWindowShouldClose(window->handle(), GLFW_TRUE); break;
     case GLFW_KEY_S:
@@ -1288,20 +1314,24 @@ void Sculpt::start_load(const std::string& path) {
   next.script.clear();
   next.record.clear();
   next.carried = nullptr;
-  if (fs::path(path).extension() == ".json") {
-    next.iso.reset();
-  } else {
-    next.iso = scene.hri.tau;
-    next.inside = scene.hri.inside == core::InsideIs::kAbove ? "above" : "below";
-  }
+  next.iso.reset();
   log << "sculpt   loading " << path << "\n";
   loading = Loading{path, next, BackgroundLoad([next] {
-                      const io::Scene sc = input_scene(next);
                       auto c = std::make_shared<Carried>();
-                      c->volume = run::load_scene_volume(sc);
+                      double tau = 0;
+                      if (is_scene_path(next.input)) {
+                        const io::Scene sc = input_scene(next);
+                        c->volume = run::load_scene_volume(sc);
+                        tau = sc.hri.tau;
+                      } else {
+                        ScanInput s = open_scan(next.input);
+                        c->volume = std::move(s.volume);
+                        c->choice = s.choice;
+                        tau = s.choice.iso.tau;
+                      }
                       const engine::Volume& v = c->volume;
-                      if (!(sc.hri.tau > v.min_value && sc.hri.tau < v.max_value))
-                        throw std::runtime_error("isovalue " + fixed(sc.hri.tau, 3) + " is outside its range [" +
+                      if (!(tau > v.min_value && tau < v.max_value))
+                        throw std::runtime_error("isovalue " + fixed(tau, 3) + " is outside its range [" +
                                                  fixed(v.min_value, 3) + ", " + fixed(v.max_value, 3) + "]");
                       return c;
                     }),
@@ -1326,6 +1356,10 @@ bool Sculpt::poll_load() {
   loading.reset();
   try {
     done.next.carried = done.result.get();
+    if (const auto& c = done.next.carried->choice) {
+      done.next.iso = c->iso.tau;
+      done.next.inside = core::to_string(c->iso.inside);
+    }
   } catch (const std::exception& e) {
     status = "cannot open " + done.path + ": " + e.what() + " (keeping " + scene.name + ")";
     log << "sculpt   " << status << "\n";
@@ -1361,6 +1395,36 @@ bool Sculpt::restart_at(double tau) {
   log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
       << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
   return true;
+}
+
+/// A volume given without --iso: loaded once, opened at the isovalue its file and histogram choose.
+void Sculpt::open_at_chosen_isovalue() {
+  ScanInput s = open_scan(o.input);
+  Options at = o;
+  at.iso = s.choice.iso.tau;
+  at.inside = core::to_string(s.choice.iso.inside);
+  scene = input_scene(at);
+  vol = std::move(s.volume);
+  say_isovalue(s.choice);
+}
+
+/// The camera's up and front in patient axes (the volume's physical frame): printed.
+void Sculpt::say_camera() {
+  log << "sculpt   camera up: " << run::patient_axis(camera.cam.up_phys)
+      << ", front: " << run::patient_axis(camera.cam.front_phys) << " (orientation " << vol.orientation() << ")\n";
+}
+
+/// The roll control (, and .): the picture turns a quarter about the camera's front axis.
+void Sculpt::roll(int quarter_turns) {
+  run::roll_camera(camera.cam, quarter_turns);
+  say_camera();
+}
+
+/// The chosen isovalue and its rule: printed, and shown in the stats panel.
+void Sculpt::say_isovalue(const engine::IsoChoice& c) {
+  chosen = c;
+  panel.isovalue = engine::iso_line(c);
+  log << "sculpt   " << panel.isovalue << "\n";
 }
 
 /// What the restarted session keeps: the volume as the session holds it once every edit

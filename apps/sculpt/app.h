@@ -19,7 +19,7 @@ struct Carried;
 
 struct Options {
   std::string input;                ///< a scene (.json) or a volume file
-  std::optional<double> iso;        ///< a volume's isovalue (required for a volume); a scene's, overriding its own
+  std::optional<double> iso;        ///< a volume's isovalue (none: engine::choose_isovalue's); a scene's, overriding its own
   std::string inside = "above";     ///< a volume's inside: "above" or "below"
   std::string script;               ///< input script (JSON), "" = none
   std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
@@ -63,7 +63,7 @@ struct Options {
 /// Returns the exit code: 0, 1 on bad input or set-up failure (reason on `log`), 3 if
 /// validation reported messages.
 /// A volume file or scene dropped on the window (or a script's "drop") that could be read
-/// sets `*reopen` to the options for it (a volume: the current isovalue and inside) and ends
+/// sets `*reopen` to the options for it (a volume: the isovalue its file chooses) and ends
 /// this session; the caller runs it next. One that cannot be read shows its error (log and
 /// window title) and the session goes on with the old volume. The isovalue slider (or a
 /// script's "iso") ends the session the same way, with the edited volume carried over (the

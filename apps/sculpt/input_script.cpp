@@ -24,6 +24,8 @@ int key_code(const std::string& k) {
     if (c == ']') return GLFW_KEY_RIGHT_BRACKET;
     if (c == '-') return GLFW_KEY_MINUS;
     if (c == '=') return GLFW_KEY_EQUAL;
+    if (c == ',') return GLFW_KEY_COMMA;
+    if (c == '.') return GLFW_KEY_PERIOD;
   }
   if (k == "left") return GLFW_KEY_LEFT;
   if (k == "right") return GLFW_KEY_RIGHT;
@@ -33,6 +35,20 @@ int key_code(const std::string& k) {
   if (k == "pagedown") return GLFW_KEY_PAGE_DOWN;
   if (k == "escape") return GLFW_KEY_ESCAPE;
   return -1;
+}
+
+const ScriptKey* script_key(const std::string& k) {
+  for (const ScriptKey& s : kScriptKeys)
+    if (s.name == k) return &s;
+  return nullptr;
+}
+
+/// "cursor, press, ...": the actions, for messages.
+std::string action_names() {
+  std::string list;
+  for (const ScriptKey& s : kScriptKeys)
+    if (s.action) list += (list.empty() ? "" : ", ") + std::string(s.name);
+  return list;
 }
 
 }  // namespace
@@ -75,6 +91,9 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
     int actions = 0;
     using K = InputEvent::Kind;
     for (const auto& [k, v] : e.items()) {
+      const ScriptKey* key = script_key(k);
+      if (!key) fail("unknown field '" + k + "'");
+      actions += key->action;
       if (k == "after_frames") {
         const double f = num(v, "after_frames");
         if (f < 0 || f > 1e7 || f != std::floor(f)) fail("field 'after_frames' must be a whole number >= 0, got " + v.dump());
@@ -96,7 +115,6 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         ev.timeout_s = num(v, "timeout_s");
         if (!(ev.timeout_s > 0)) fail("field 'timeout_s' must be > 0, got " + v.dump());
       } else {
-        ++actions;
         if (k == "cursor") {
           ev.kind = K::kCursor;
           ev.xy = pair(v, "cursor");
@@ -141,6 +159,10 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
           ev.kind = K::kDrop;
           ev.text = v.is_string() ? v.get<std::string>() : "";
           if (ev.text.empty()) fail("field 'drop' must be a file name, got " + v.dump());
+        } else if (k == "preset") {
+          ev.kind = K::kPreset;
+          ev.text = v.is_string() ? v.get<std::string>() : "";
+          if (ev.text.empty()) fail("field 'preset' must be a preset's name, got " + v.dump());
         } else if (k == "iso") {
           ev.kind = K::kIso;
           ev.xy[0] = num(v, "iso");
@@ -151,7 +173,7 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         }
       }
     }
-    if (actions != 1) fail("needs exactly one action (cursor, press, release, scroll, key, tool, orbit, zoom, wait, screenshot, drop, iso, resize, quit), got " + std::to_string(actions));
+    if (actions != 1) fail("needs exactly one action (" + action_names() + "), got " + std::to_string(actions));
     out.push_back(ev);
   }
   return out;

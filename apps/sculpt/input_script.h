@@ -15,6 +15,8 @@
 //                                  drawn / a brush that changed voxels was drawn after the wait began
 //   {"screenshot": "NAME.png"}     the frame as drawn, into the --screenshot folder (or ".")
 //   {"drop": "FILE"}               a file dropped on the window (relative to the script's folder)
+//   {"preset": "bone"}             the isovalue preset button of that name (CT in HU: bone,
+//                                  soft tissue / skin, lung): as "iso" at its value
 //   {"iso": value}                 the isovalue slider let go at `value` (the session restarts
 //                                  at it with the edited volume; the script goes on there)
 //   {"resize": [w, h]}, {"quit": true}
@@ -22,16 +24,33 @@
 #include <array>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace isotouch::sculpt {
+
+/// An event's keys, in one table: the parser accepts exactly these (an action is the one thing
+/// an event does; the rest qualify it), and docs/user-guide.md's two Input scripts tables list
+/// exactly these (tests/test_input_script.cpp reads both). `unit` is the fields table's.
+struct ScriptKey {
+  std::string_view name;
+  bool action;
+  std::string_view unit;
+};
+inline constexpr ScriptKey kScriptKeys[] = {
+    {"after_frames", false, "frames"}, {"mods", false, ""}, {"radius_mm", false, "mm"},
+    {"strength", false, "as the Tool panel's"}, {"timeout_s", false, "s"},
+    {"cursor", true, ""}, {"press", true, ""}, {"release", true, ""}, {"scroll", true, ""}, {"key", true, ""},
+    {"tool", true, ""}, {"orbit", true, ""}, {"zoom", true, ""}, {"wait", true, ""}, {"screenshot", true, ""},
+    {"drop", true, ""}, {"iso", true, ""}, {"preset", true, ""}, {"resize", true, ""}, {"quit", true, ""},
+};
 
 struct ScriptError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
 struct InputEvent {
-  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop, kIso };
+  enum class Kind { kCursor, kPress, kRelease, kScroll, kKey, kTool, kOrbit, kZoom, kWait, kScreenshot, kResize, kQuit, kDrop, kIso, kPreset };
   Kind kind = Kind::kQuit;
   int after_frames = 1;
   std::array<double, 2> xy{0, 0};  ///< cursor fractions, orbit degrees, resize pixels, scroll (x: dy), isovalue (x)

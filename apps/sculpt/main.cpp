@@ -19,14 +19,17 @@ int main(int argc, char** argv) {
       "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
       "right drag = orbit, middle drag = pan.\n"
       "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
-      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, H hide the overlay (probe glyphs and panels), Esc/Q quit.\n"
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, , and . roll the picture a quarter turn, H hide the overlay (probe glyphs and panels), Esc/Q quit.\n"
       "Exit status (docs/exit-codes.md): 0 ok; 1 bad input or error; 2 usage error; 3 Vulkan validation messages "
       "(--validation); 5 the haptic device was disconnected, faulty or sent refused reports; 6 a save or export "
       "failed; 130 / 143 stopped by SIGINT / SIGTERM.",
       "isotouch-sculpt"};
   isotouch::app::common_options(cli);
-  cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json) or a volume file (then --iso)")->required();
-  cli.add_option("--iso", o.iso, "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's")
+  cli.add_option("input", o.input, "a scene (.json, e.g. scenes/head.json), a volume file or a DICOM folder")->required();
+  cli.add_option("--iso", o.iso,
+                 "a volume's isovalue, in its units (HU for CT); with a scene, overrides the scene's. Without it a "
+                 "volume opens at the isovalue its file stores (.vdb), at bone for CT in HU, else at the upper "
+                 "threshold of a three-class Otsu on its histogram (the rule is printed)")
       ->check(isotouch::app::finite_number("the isovalue in the volume's units, e.g. --iso 300 for bone in HU"));
   cli.add_option("--inside", o.inside, "a volume's inside: above (CT) or below (signed distance)")
       ->check(CLI::IsMember({"above", "below"}));

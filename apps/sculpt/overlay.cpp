@@ -1,4 +1,5 @@
 #include "isotouch/apps/sculpt/overlay.h"
+#include "isotouch/apps/sculpt/iso_panel.h"
 
 #define GLFW_INCLUDE_NONE
 #define GLFW_INCLUDE_VULKAN
@@ -71,6 +72,7 @@ void tool_panel(ToolState& tool, IsoControl& iso) {
   ImGui::SliderFloat("isovalue", &v, float(iso.lo), float(iso.hi), "%.1f");
   if (ImGui::IsItemActive() || ImGui::IsItemEdited()) iso.value = std::clamp(double(v), iso.lo, iso.hi);
   if (ImGui::IsItemDeactivatedAfterEdit()) iso.committed = true;
+  iso_histogram_widgets(iso);
   ImGui::End();
 }
 
@@ -92,6 +94,7 @@ void stats_panel(const PanelStats& s) {
   ImGui::Text("|F|         %.2f N%s", s.force_n, s.contact ? ", contact" : "");
   ImGui::Separator();
   ImGui::TextUnformatted(("volume      " + s.volume).c_str());
+  if (!s.isovalue.empty()) ImGui::TextWrapped("%s", s.isovalue.c_str());
   ImGui::TextUnformatted(("device      " + s.device).c_str());
   if (!s.status.empty()) ImGui::TextWrapped("%s", s.status.c_str());
   if (!s.loading.empty()) {

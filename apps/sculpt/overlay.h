@@ -22,6 +22,10 @@ namespace isotouch::sculpt {
 struct IsoControl {
   double value = 0, lo = 0, hi = 1;  ///< value units (HU for CT)
   bool committed = false;
+  /// The volume's histogram for the panel: log(1 + count) of equal bins over [lo, hi]; the
+  /// isovalue is marked on it and dragging on it moves the isovalue (iso_panel.h).
+  std::vector<float> histogram;
+  std::vector<std::pair<std::string, double>> presets;  ///< name, isovalue (CT in HU: bone, soft tissue / skin, lung)
 };
 
 /// What the stats panel shows, filled by the frame loop.
@@ -36,6 +40,7 @@ struct PanelStats {
   double force_n = 0;                 ///< |F| and contact at the last refresh
   bool contact = false;
   std::string volume;                 ///< dims, spacing, orientation
+  std::string isovalue;               ///< the chosen isovalue and its rule ("" = given by the user or scene)
   std::string device;                 ///< the haptic device and the status its last tick judged
   std::string status;                 ///< the last save, export or drop message
   std::string loading;                ///< a dropped file loading in the background ("" = none)

@@ -231,8 +231,8 @@ void bind_params(py::module_& m) {
       .def_readwrite("recovery_time_s", &H::recovery_time_s)
       .def_readwrite("velocity_cutoff_hz", &H::velocity_cutoff_hz).def_readwrite("max_speed_m_s", &H::max_speed_m_s)
       .def_readwrite("march_budget", &H::march_budget)
-      .def_readwrite("edit_max_step_fraction", &H::edit_max_step_fraction)
-      .def_readwrite("edit_max_turn_deg", &H::edit_max_turn_deg).def_readwrite("tool_radius_m", &H::tool_radius_m)
+      .def_readwrite("edit_period_s", &H::edit_period_s)
+      .def_readwrite("tool_radius_m", &H::tool_radius_m)
       .def_readwrite("short_way", &H::short_way);
   using B = servo::BaselineParams;
   py::class_<B>(m, "BaselineParams", "Avila-Sobierajski and Blezek-Robb parameters (servo/baselines.h)")

@@ -6,7 +6,7 @@
 #include <map>
 #include <set>
 
-#include "doc_tables.h"
+#include "isotouch/tests/doc_tables.h"
 #include "isotouch/apps/sculpt/input_script.h"
 
 namespace isotouch::sculpt {

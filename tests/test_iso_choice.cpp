@@ -11,7 +11,7 @@
 #include "isotouch/engine/iso_choice.h"
 #include "isotouch/io/scan.h"
 #include "isotouch/io/vdb_io.h"
-#include "temp_dir.h"
+#include "isotouch/tests/temp_dir.h"
 
 namespace isotouch {
 namespace {

@@ -5,7 +5,7 @@
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/scene_fields.h"
-#include "doc_tables.h"
+#include "isotouch/tests/doc_tables.h"
 
 #include <fstream>
 #include <map>

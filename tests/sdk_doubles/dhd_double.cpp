@@ -12,7 +12,7 @@
 #include <thread>
 
 #include "isotouch/servo/dhd_api.h"
-#include "double_device.h"
+#include "isotouch/tests/sdk_doubles/double_device.h"
 
 using isotouch_double::DoubleDevice;
 

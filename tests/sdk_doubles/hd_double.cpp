@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "isotouch/servo/hd_api.h"
-#include "double_device.h"
+#include "isotouch/tests/sdk_doubles/double_device.h"
 
 namespace hd = isotouch::servo::hd;
 using isotouch_double::DoubleDevice;

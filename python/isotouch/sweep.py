@@ -152,6 +152,12 @@ def load_sweep(path):
         raise SweepError(f"{path}: cannot read: {e.strerror}") from None
     except json.JSONDecodeError as e:
         raise SweepError(f"{path}: not JSON: line {e.lineno} column {e.colno}: {e.msg}") from None
+    return check_sweep(spec, path, pathlib.Path(path).resolve().parent)
+
+
+def check_sweep(spec, path="(sweep)", base="."):
+    """A sweep given as a dict, checked as load_sweep checks a file (`path` names it in errors;
+    scene JSON paths are relative to `base`)."""
     if not isinstance(spec, dict):
         _fail(path, "(top level)", spec, "must be an object with scenes and methods")
     for k in spec:
@@ -165,7 +171,7 @@ def load_sweep(path):
     methods = spec.get("methods")
     if not isinstance(methods, list) or not methods:
         _fail(path, "methods", methods, "must be a non-empty list of methods")
-    base = pathlib.Path(path).resolve().parent
+    base = pathlib.Path(base)
     return {
         "scenes": scenes,
         "scene_paths": {s: (str(base / s) if s.endswith(".json") else s) for s in scenes},

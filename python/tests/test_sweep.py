@@ -53,6 +53,13 @@ def serial(tmp_path_factory):
     return figures(rows_of(tmp / "out"))
 
 
+def test_a_process_prepares_a_scene_once():
+    tasks = sw.make_tasks(sw.check_sweep(dict(SPEC, scenes=["three-spheres"], timing_replays=1)))
+    first, second = (sw.run_task(t) for t in tasks)
+    assert first["prepare_s"] > 0 and second["prepare_s"] == 0
+    assert first["surface_err_rms_m"] != second["surface_err_rms_m"]  # two methods, one scene
+
+
 def test_two_local_workers_give_the_serial_figures(tmp_path, serial):
     r = run_cli(write_spec(tmp_path), "--local-workers", "2", "--out", tmp_path / "out")
     assert r.returncode == 0, r.stderr
@@ -64,6 +71,7 @@ def test_two_local_workers_give_the_serial_figures(tmp_path, serial):
     for pid, scene in {(r["worker_pid"], r["scene"]) for r in rows}:
         prepared = [r for r in rows if (r["worker_pid"], r["scene"]) == (pid, scene) and float(r["prepare_s"]) > 0]
         assert len(prepared) == 1
+    assert len({r["worker_pid"] for r in rows}) == 2
     assert {r["host"] for r in rows} and all(r["cpu"] for r in rows)
     table = (tmp_path / "out/summary.md").read_text().splitlines()
     assert [ln.split(" | ")[0] for ln in table[2:]] == ["| Avila-Sobierajski", "| HRI n=5 linear/samples"]
@@ -163,3 +171,17 @@ def test_a_broken_sweep_file_names_line_and_column(tmp_path):
     path.write_text('{"scenes": ["sphere"],\n "methods": [}')
     r = run_cli(path, "--serial", timeout=60)
     assert r.returncode == 2 and r.stderr.startswith(f"sweep: {path}: not JSON: line 2 column"), r.stderr
+
+
+def test_a_line_cut_short_is_dropped_and_its_task_run_again(tmp_path, serial):
+    spec = write_spec(tmp_path)
+    out = tmp_path / "out"
+    sw.run_sweep(sw.load_sweep(spec), out, client=None, log=lambda *a, **k: None)
+    data = (out / "results.csv").read_bytes()
+    cut = data[: data.rstrip(b"\n").rfind(b"\n") + 40]  # the last row cut 39 bytes in, as a crash leaves it
+    (out / "results.csv").write_bytes(cut)
+    r = run_cli(spec, "--serial", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert "4 tasks; 3 already in" in r.stdout
+    rows = rows_of(out)
+    assert len(rows) == 4 and figures(rows) == serial

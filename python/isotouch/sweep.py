@@ -37,7 +37,7 @@ GRID_KEYS = {
 }
 HRI_GRID_KEYS = dict(GRID_KEYS, tool_radius_m="spherical tool radius [m] (0: a point)",
                      friction_mu_s="static friction coefficient", friction_mu_d="dynamic friction coefficient")
-METHOD_KEYS = {"algorithm", "n", "options", "grid"}
+METHOD_KEYS = {"algorithm", "n", "options", "grid", "timing_replays"}
 TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays"}
 
 # What a task measured (equal between runs of the same task) and what it took (not).
@@ -138,7 +138,9 @@ def _method(path, i, m):
     ns = _int_list(path, f"{field}.n", m.get("n", 1), 1)
     opts = _options(path, f"{field}.options", m.get("options", "linear/samples" if alg == "hri" else "linear/central"))
     grid = _grid(path, f"{field}.grid", m.get("grid", {}), alg)
-    return {"algorithm": alg, "n": ns if hri else [1], "options": opts if hri else [""], "grid": grid}
+    replays = _positive_int(path, f"{field}.timing_replays", m["timing_replays"]) if "timing_replays" in m else None
+    return {"algorithm": alg, "n": ns if hri else [1], "options": opts if hri else [""], "grid": grid,
+            "timing_replays": replays}
 
 
 def load_sweep(path):
@@ -198,7 +200,7 @@ def make_tasks(sweep):
                 for rep in range(sweep["repetitions"]):
                     t = {"scene": scene, "scene_path": sweep["scene_paths"][scene], "algorithm": m["algorithm"],
                          "n": n, "options": opt, "params": dict(zip(grid_keys, values)), "rep": rep,
-                         "timing_replays": sweep["timing_replays"]}
+                         "timing_replays": m["timing_replays"] or sweep["timing_replays"]}
                     t["key"] = task_key(t)
                     tasks.append(t)
     return tasks

@@ -185,3 +185,46 @@ def test_a_line_cut_short_is_dropped_and_its_task_run_again(tmp_path, serial):
     assert "4 tasks; 3 already in" in r.stdout
     rows = rows_of(out)
     assert len(rows) == 4 and figures(rows) == serial
+
+
+def slurm_script(root):
+    return root / "python/slurm_sweep.sh"
+
+
+def test_the_slurm_script_parses_and_its_dry_run_prints_what_it_starts(root, tmp_path):
+    script = slurm_script(root)
+    assert subprocess.run(["bash", "-n", str(script)]).returncode == 0
+    env = dict(os.environ, SLURM_NTASKS="5")
+    r = subprocess.run([str(script), "--dry-run", "s.json", "/shared/out"], capture_output=True, text=True, env=env,
+                       timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [
+        "mkdir -p /shared/out",
+        "rm -f /shared/out/scheduler.json",
+        "srun --ntasks=1 --nodes=1 --cpus-per-task=1 dask-scheduler --scheduler-file /shared/out/scheduler.json "
+        "--no-dashboard &",
+        "srun --ntasks=4 --cpus-per-task=1 dask-worker --scheduler-file /shared/out/scheduler.json --nworkers 1 "
+        "--nthreads 1 --no-dashboard &",
+        "python3 -m isotouch.sweep s.json --scheduler-file /shared/out/scheduler.json --out /shared/out",
+    ]
+    assert not (tmp_path / "out").exists()
+    bad = subprocess.run([str(script), "--dry-run"], capture_output=True, text=True, timeout=30)
+    assert bad.returncode == 2 and "usage" in bad.stderr
+
+
+def test_the_slurm_script_runs_a_sweep_through_srun(root, tmp_path, serial):
+    """A stand-in srun (runs its command once, here) and this interpreter as python3: the
+    script's scheduler, worker and sweep for real."""
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    (bin_dir / "srun").write_text('#!/bin/bash\nwhile [[ "$1" == --* ]]; do shift; done\nexec "$@"\n')
+    (bin_dir / "srun").chmod(0o755)
+    (bin_dir / "python3").symlink_to(sys.executable)
+    env = dict(os.environ, SLURM_NTASKS="2", PATH=f"{bin_dir}:/usr/bin:{os.environ['PATH']}",
+               ISOTOUCH_PYTHONPATH=os.environ["PYTHONPATH"])
+    out = tmp_path / "out"
+    r = subprocess.run([str(slurm_script(root)), str(write_spec(tmp_path)), str(out)], capture_output=True, text=True,
+                       env=env, timeout=180)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "4 tasks; 0 already in" in r.stdout
+    assert figures(rows_of(out)) == serial

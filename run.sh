@@ -21,6 +21,7 @@ PACKAGES=(
   libopenigtlink-dev openigtlink-examples
   libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
   pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
+  python3-dask python3-distributed
 )
 # `./run.sh test` also builds the libFuzzer targets with clang.
 if [[ "${1:-}" == "test" ]]; then PACKAGES+=(clang-14 libclang-rt-14-dev); fi

@@ -42,6 +42,7 @@ from ._isotouch import (  # noqa: F401
     cpp_ns_per_tick,
     load_recording,
     load_volume,
+    measure_stroke,
     render,
     run_passes,
     run_scene,

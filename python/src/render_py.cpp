@@ -173,6 +173,34 @@ std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const st
   return std::make_shared<eval::SweepScene>(eval::prepare_sweep_scene(name, vk.get(), log));
 }
 
+/// One task of the error-against-time sweep, as `isotouch report` measures it: the scene's
+/// recorded stroke replayed through a fresh renderer, the error figures against the scene's
+/// truth (eval::measure), and the mean tick from whole replays (median of `repetitions`
+/// after one warm-up) [ns]. Every figure but the two tick times is a pure function of the inputs.
+py::dict measure_stroke(const std::shared_ptr<eval::SweepScene>& s, const std::string& algorithm,
+                        const py::object& params, int repetitions) {
+  if (repetitions < 1) throw py::value_error("repetitions: " + std::to_string(repetitions) + ", must be >= 1");
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  eval::ErrorFigures e;
+  {
+    py::gil_scoped_release nogil;
+    e = eval::measure(*s, eval::playback(*r, *s));
+    e.tick_ns_mean = eval::median_ns_per_tick(*r, *s, 1, repetitions);
+  }
+  py::dict d;
+  d["tick_ns_mean"] = e.tick_ns_mean;
+  d["tick_ns_p99"] = e.tick_ns_p99;
+  d["surface_err_rms_m"] = e.surface_err_rms_m;
+  d["angle_err_rms_deg"] = e.angle_err_rms_deg;
+  d["force_err_rms_n"] = e.force_err_rms_n;
+  d["max_force_step_n"] = e.max_force_step_n;
+  d["max_force_step_slide_n"] = e.max_force_step_slide_n;
+  d["contact_ticks"] = e.contact_ticks;
+  d["pop_throughs"] = e.pop_throughs;
+  d["ticks"] = s->hip.size();
+  return d;
+}
+
 /// `with isotouch.Realtime("bench"):` the calling thread as `bench table1` times its replays:
 /// SCHED_FIFO, pinned to one CPU where the system allows (servo::ScopedRealtime); restored at exit.
 struct Realtime {
@@ -231,8 +259,7 @@ void bind_params(py::module_& m) {
       .def_readwrite("recovery_time_s", &H::recovery_time_s)
       .def_readwrite("velocity_cutoff_hz", &H::velocity_cutoff_hz).def_readwrite("max_speed_m_s", &H::max_speed_m_s)
       .def_readwrite("march_budget", &H::march_budget)
-      .def_readwrite("edit_period_s", &H::edit_period_s)
-      .def_readwrite("tool_radius_m", &H::tool_radius_m)
+      .def_readwrite("edit_period_s", &H::edit_period_s).def_readwrite("tool_radius_m", &H::tool_radius_m)
       .def_readwrite("short_way", &H::short_way);
   using B = servo::BaselineParams;
   py::class_<B>(m, "BaselineParams", "Avila-Sobierajski and Blezek-Robb parameters (servo/baselines.h)")
@@ -274,7 +301,10 @@ stroke, as `bench table1` and the sweeps replay it: samples, and the HIP per tic
       .def_readonly("stiffness_n_per_m", &eval::SweepScene::stiffness_n_per_m)
       .def("table1_hri_params", [](const eval::SweepScene& s, servo::Variant v) { return table1_hri(s, v); },
            py::arg("variant") = servo::Variant::kRobust, "HRI as `bench table1` times it on this scene")
-      .def("table1_baseline_params", &table1_baseline, "the baselines as `bench table1` times them");
+      .def("table1_baseline_params", &table1_baseline, "the baselines as `bench table1` times them")
+      .def_readonly("voxel_m", &eval::SweepScene::voxel_m, "smallest spacing [m]")
+      .def("reference_params", &eval::reference_params,
+           "the reference renderer's HRI parameters on this scene (n = 1, exact root and gradient)");
   m.def("stroke_scene", &stroke_scene, py::arg("name"), py::arg("device") = "cpu",
         "sphere, box, three-spheres, knot, head, chest or a scene JSON path; samples on the CPU reference "
         "(device='cpu') or a Vulkan device ('' = default)");
@@ -299,6 +329,14 @@ Returns a dict of arrays: force (N, 3) [N] device axes, vhip (N, 3) [m], contact
 saturated, fault (N,) bool; with planes=True also the plane after each tick, plane_n (N, 3) unit
 outward normal and plane_p (N, 3) [m] (HRI; zero for the baselines), plane_valid (N,) bool, and
 penetration (N,) [m].)");
+  m.def("measure_stroke", &measure_stroke, py::arg("scene"), py::arg("algorithm") = "hri",
+        py::arg("params") = py::none(), py::arg("repetitions") = 5,
+        R"(One configuration on a StrokeScene's recorded stroke, as `isotouch report` measures it.
+
+Returns a dict: tick_ns_mean (median of `repetitions` whole replays) and tick_ns_p99 [ns],
+surface_err_rms_m [m], angle_err_rms_deg, force_err_rms_n [N], max_force_step_n and
+max_force_step_slide_n [N], contact_ticks, pop_throughs, ticks. All but the tick times depend
+on the inputs only. The GIL is released while it runs.)");
   m.def("cpp_ns_per_tick", &cpp_ns_per_tick, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
         py::arg("params") = py::none(), py::arg("warmup") = 3, py::arg("repetitions") = 21,
         "median C++ time per Renderer::tick over the trajectory [ns] (eval::median_ns_per_tick, as bench table1)");

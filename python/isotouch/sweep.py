@@ -1,0 +1,533 @@
+"""Error-against-time sweeps on a Dask cluster: `python3 -m isotouch.sweep SWEEP.json`.
+
+A sweep file names stroke scenes (those of `isotouch report`: sphere, box, three-spheres, knot,
+head, chest, or scene JSON paths), methods (HRI with plane-update periods n and options, the
+paper's HRI, Avila-Sobierajski, Blezek-Robb) with parameter grids, and repetitions. Each
+(scene, configuration, repetition) is one task: the scene's recorded stroke replayed through
+the renderer and measured exactly as `isotouch report` does (isotouch.measure_stroke), a pure
+function of its inputs but for the time columns. Tasks run on a Dask client (a LocalCluster of
+single-threaded worker processes, a scheduler address, or a scheduler file) or serially in this
+process; each worker prepares a scene once and keeps it.
+
+Results: OUT/results.csv, one row per task keyed by a hash of the task, appended one whole line
+at a time as tasks finish, so a sweep stopped (Ctrl-C, a lost machine) and started again skips
+what is written; OUT/summary.md, a table per method and configuration; OUT/error_vs_time.png,
+surface error against mean tick time per scene, every method (as `isotouch report` draws it).
+"""
+import argparse
+import csv
+import hashlib
+import io
+import itertools
+import json
+import os
+import pathlib
+import socket
+import sys
+import time
+
+FORMAT = "isotouch-sweep-1"  # part of every task's key: a change to what a task measures changes it
+ALGORITHMS = {"hri": "HRI", "hri-paper": "HRI-paper", "avila": "Avila-Sobierajski", "blezek": "Blezek-Robb"}
+HRI_ALGORITHMS = ("hri", "hri-paper")
+# Grid parameters per algorithm family, each with its meaning (the renderers' fields).
+GRID_KEYS = {
+    "stiffness_n_per_m": "K, device space [N/m]",
+    "damping_n_s_per_m": "B, device space [N s/m]",
+    "force_limit_n": "force clamp [N]",
+}
+HRI_GRID_KEYS = dict(GRID_KEYS, tool_radius_m="spherical tool radius [m] (0: a point)",
+                     friction_mu_s="static friction coefficient", friction_mu_d="dynamic friction coefficient")
+METHOD_KEYS = {"algorithm", "n", "options", "grid", "timing_replays"}
+TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays"}
+
+# What a task measured (equal between runs of the same task) and what it took (not).
+FIGURES = ["ticks", "contact_ticks", "surface_err_rms_m", "angle_err_rms_deg", "force_err_rms_n",
+           "max_force_step_n", "max_force_step_slide_n", "pop_throughs", "voxel_m"]
+TIMES = ["tick_ns_mean", "tick_ns_p99", "task_s", "prepare_s", "host", "cpu", "worker_pid"]
+IDENTITY = ["key", "scene", "algorithm", "n", "options", "params", "rep"]
+COLUMNS = IDENTITY + FIGURES + TIMES
+
+
+class SweepError(ValueError):
+    """A bad sweep file or results file: the message names the file, the field and the value."""
+
+
+# ---------------------------------------------------------------------------------------------
+# The sweep file
+
+
+def _fail(path, field, value, why):
+    raise SweepError(f"{path}: {field}: {json.dumps(value)}: {why}")
+
+
+def _int_list(path, field, value, least):
+    vals = value if isinstance(value, list) else [value]
+    if not vals or any(isinstance(v, bool) or not isinstance(v, int) or v < least for v in vals):
+        _fail(path, field, value, f"must be an integer >= {least} or a non-empty list of them")
+    return vals
+
+
+def _positive_int(path, field, value):
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        _fail(path, field, value, "must be an integer >= 1")
+    return value
+
+
+def _number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and v == v and abs(v) != float("inf")
+
+
+def _options(path, field, value):
+    """HRI options as `isotouch report` names them: INTERSECTION/NORMAL[/shading][/recoveryNms]."""
+    vals = value if isinstance(value, list) else [value]
+    if not vals:
+        _fail(path, field, value, "must be a non-empty list")
+    for o in vals:
+        if not isinstance(o, str) or _hri_option_error(o):
+            _fail(path, field, o, _hri_option_error(o) if isinstance(o, str) else "must be a string")
+    return vals
+
+
+def _hri_option_error(option):
+    parts = option.split("/")
+    if len(parts) < 2:
+        return "must be INTERSECTION/NORMAL[/shading][/recoveryNms], e.g. linear/samples or secant4/central"
+    inter, normal, extras = parts[0], parts[1], parts[2:]
+    if not (inter == "linear" or _counted(inter, "secant") or _counted(inter, "bisect")):
+        return f"intersection '{inter}': linear, secantK or bisectK (K steps >= 1)"
+    if normal not in ("samples", "central", "exact"):
+        return f"normal '{normal}': samples, central or exact"
+    for e in extras:
+        if e != "shading" and not (e.startswith("recovery") and e.endswith("ms") and _counted(e[:-2], "recovery")):
+            return f"'{e}': shading or recoveryNms (N milliseconds)"
+    return None
+
+
+def _counted(token, prefix):
+    rest = token[len(prefix):]
+    return token.startswith(prefix) and rest.isdigit() and int(rest) >= 1
+
+
+def _grid(path, field, value, algorithm):
+    allowed = HRI_GRID_KEYS if algorithm in HRI_ALGORITHMS else GRID_KEYS
+    if not isinstance(value, dict):
+        _fail(path, field, value, "must be an object of parameter: [values]")
+    for k, vals in value.items():
+        if k not in allowed:
+            _fail(path, f"{field}.{k}", vals, f"not a parameter of {algorithm}; one of {', '.join(sorted(allowed))}")
+        vals = vals if isinstance(vals, list) else [vals]
+        if not vals or not all(_number(v) and v >= 0 for v in vals):
+            _fail(path, f"{field}.{k}", value[k], "must be a finite number >= 0 or a non-empty list of them")
+    return {k: (v if isinstance(v, list) else [v]) for k, v in sorted(value.items())}
+
+
+def _method(path, i, m):
+    field = f"methods[{i}]"
+    if not isinstance(m, dict):
+        _fail(path, field, m, "must be an object with 'algorithm'")
+    for k in m:
+        if k not in METHOD_KEYS:
+            _fail(path, f"{field}.{k}", m[k], f"unknown field; one of {', '.join(sorted(METHOD_KEYS))}")
+    alg = m.get("algorithm")
+    if alg not in ALGORITHMS:
+        _fail(path, f"{field}.algorithm", alg, f"must be one of {', '.join(ALGORITHMS)}")
+    hri = alg in HRI_ALGORITHMS
+    for k in ("n", "options"):
+        if k in m and not hri:
+            _fail(path, f"{field}.{k}", m[k], f"HRI only; {alg} has no {k}")
+    ns = _int_list(path, f"{field}.n", m.get("n", 1), 1)
+    opts = _options(path, f"{field}.options", m.get("options", "linear/samples" if alg == "hri" else "linear/central"))
+    grid = _grid(path, f"{field}.grid", m.get("grid", {}), alg)
+    replays = _positive_int(path, f"{field}.timing_replays", m["timing_replays"]) if "timing_replays" in m else None
+    return {"algorithm": alg, "n": ns if hri else [1], "options": opts if hri else [""], "grid": grid,
+            "timing_replays": replays}
+
+
+def load_sweep(path):
+    """The sweep file at `path`, checked: a dict of scenes, methods, repetitions, timing_replays.
+    Scene paths ending in .json are taken relative to the sweep file. Raises SweepError."""
+    path = str(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            spec = json.load(f)
+    except OSError as e:
+        raise SweepError(f"{path}: cannot read: {e.strerror}") from None
+    except json.JSONDecodeError as e:
+        raise SweepError(f"{path}: not JSON: line {e.lineno} column {e.colno}: {e.msg}") from None
+    return check_sweep(spec, path, pathlib.Path(path).resolve().parent)
+
+
+def check_sweep(spec, path="(sweep)", base="."):
+    """A sweep given as a dict, checked as load_sweep checks a file (`path` names it in errors;
+    scene JSON paths are relative to `base`)."""
+    if not isinstance(spec, dict):
+        _fail(path, "(top level)", spec, "must be an object with scenes and methods")
+    for k in spec:
+        if k not in TOP_KEYS:
+            _fail(path, k, spec[k], f"unknown field; one of {', '.join(sorted(TOP_KEYS))}")
+    scenes = spec.get("scenes")
+    if not isinstance(scenes, list) or not scenes or not all(isinstance(s, str) and s for s in scenes):
+        _fail(path, "scenes", scenes, "must be a non-empty list of scene names or scene JSON paths")
+    if len(set(scenes)) != len(scenes):
+        _fail(path, "scenes", scenes, "names a scene twice")
+    methods = spec.get("methods")
+    if not isinstance(methods, list) or not methods:
+        _fail(path, "methods", methods, "must be a non-empty list of methods")
+    base = pathlib.Path(base)
+    return {
+        "scenes": scenes,
+        "scene_paths": {s: (str(base / s) if s.endswith(".json") else s) for s in scenes},
+        "methods": [_method(path, i, m) for i, m in enumerate(methods)],
+        "repetitions": _positive_int(path, "repetitions", spec.get("repetitions", 1)),
+        "timing_replays": _positive_int(path, "timing_replays", spec.get("timing_replays", 5)),
+    }
+
+
+def task_key(task):
+    """A hash of what a task computes (scene, algorithm, n, options, params, rep, replays)."""
+    ident = {k: task[k] for k in ("scene", "algorithm", "n", "options", "params", "rep", "timing_replays")}
+    blob = json.dumps([FORMAT, ident], sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+def make_tasks(sweep):
+    """One task per (scene, configuration, repetition), in a fixed order."""
+    tasks = []
+    for scene in sweep["scenes"]:
+        for m in sweep["methods"]:
+            grid_keys = list(m["grid"])
+            for n, opt, values in itertools.product(m["n"], m["options"], itertools.product(*m["grid"].values())):
+                for rep in range(sweep["repetitions"]):
+                    t = {"scene": scene, "scene_path": sweep["scene_paths"][scene], "algorithm": m["algorithm"],
+                         "n": n, "options": opt, "params": dict(zip(grid_keys, values)), "rep": rep,
+                         "timing_replays": m["timing_replays"] or sweep["timing_replays"]}
+                    t["key"] = task_key(t)
+                    tasks.append(t)
+    return tasks
+
+
+def config_label(row):
+    """The configuration a row belongs to, scene and repetition aside."""
+    label = ALGORITHMS[row["algorithm"]]
+    if row["algorithm"] in HRI_ALGORITHMS:
+        label += f" n={row['n']} {row['options']}"
+    params = row["params"] if isinstance(row["params"], dict) else json.loads(row["params"] or "{}")
+    return label + "".join(f" {k}={v}" for k, v in sorted(params.items()))
+
+
+# ---------------------------------------------------------------------------------------------
+# One task (runs on a worker)
+
+_SCENES = {}  # scene path -> StrokeScene, kept for the life of the worker process
+_HOST = {}
+
+
+def _host():
+    if not _HOST:
+        cpu = "unknown"
+        try:
+            with open("/proc/cpuinfo", encoding="utf-8") as f:
+                cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
+        except OSError:
+            pass
+        _HOST.update(host=socket.gethostname(), cpu=cpu)
+    return _HOST
+
+
+def _scene(path):
+    """The prepared scene and the seconds this call spent preparing it (0 when cached)."""
+    import isotouch
+
+    if path in _SCENES:
+        return _SCENES[path], 0.0
+    t0 = time.perf_counter()
+    _SCENES[path] = isotouch.stroke_scene(path)
+    return _SCENES[path], time.perf_counter() - t0
+
+
+def _apply_option(p, option):
+    import isotouch
+
+    inter, normal, *extras = option.split("/")
+    if inter.startswith("secant"):
+        p.intersection, p.intersection_steps = isotouch.Intersection.secant, int(inter[6:])
+    elif inter.startswith("bisect"):
+        p.intersection, p.intersection_steps = isotouch.Intersection.bisection, int(inter[6:])
+    else:
+        p.intersection = isotouch.Intersection.linear
+    p.normal = {"samples": isotouch.NormalSource.samples, "central": isotouch.NormalSource.central,
+                "exact": isotouch.NormalSource.trilinear_exact}[normal]
+    for e in extras:
+        if e == "shading":
+            p.force_shading = True
+        else:
+            p.recovery_time_s = int(e[len("recovery"):-2]) / 1000.0
+
+
+def renderer_params(scene, task):
+    """The renderer parameters of a task, as `isotouch report` builds them: HRI from the scene's
+    reference parameters at period n with the task's options; the baselines from the scene's tau,
+    inside and K, no damping, a 1 kN clamp; then the task's grid values."""
+    import isotouch
+
+    if task["algorithm"] in HRI_ALGORITHMS:
+        p = scene.reference_params()
+        p.plane_update_period = task["n"]
+        _apply_option(p, task["options"])
+        if task["algorithm"] == "hri-paper":
+            p.variant = isotouch.Variant.paper
+    else:
+        p = isotouch.BaselineParams()
+        p.tau, p.inside, p.stiffness_n_per_m = scene.tau, scene.inside, scene.stiffness_n_per_m
+        p.damping_n_s_per_m, p.rate_hz, p.force_limit_n = 0.0, scene.rate_hz, 1e3
+    for k, v in task["params"].items():
+        if k.startswith("friction_"):
+            fr = p.friction
+            setattr(fr, k[len("friction_"):], float(v))
+            p.friction = fr
+        else:
+            setattr(p, k, float(v))
+    return p
+
+
+def run_task(task):
+    """One task: the row it writes (IDENTITY + FIGURES + TIMES). The same function runs serially
+    and on Dask workers; every column but TIMES depends on the task alone."""
+    import isotouch
+
+    t0 = time.perf_counter()
+    scene, prepare_s = _scene(task["scene_path"])
+    algorithm = "hri" if task["algorithm"] in HRI_ALGORITHMS else task["algorithm"]
+    figures = isotouch.measure_stroke(scene, algorithm, renderer_params(scene, task), task["timing_replays"])
+    row = {k: task[k] for k in IDENTITY}
+    row["params"] = json.dumps(task["params"], sort_keys=True)
+    row.update({k: figures[k] for k in FIGURES if k in figures})
+    row["voxel_m"] = scene.voxel_m
+    row.update(tick_ns_mean=figures["tick_ns_mean"], tick_ns_p99=figures["tick_ns_p99"],
+               task_s=time.perf_counter() - t0, prepare_s=prepare_s, worker_pid=os.getpid(), **_host())
+    return row
+
+
+# ---------------------------------------------------------------------------------------------
+# The results file
+
+
+def _csv_line(values):
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow(values)
+    return buf.getvalue()
+
+
+def _format(v):
+    return repr(v) if isinstance(v, float) else v  # repr: every digit, so a re-read row is equal
+
+
+class Results:
+    """OUT/results.csv: the header written once (temporary file, then rename), then one
+    os.write of a whole line per row on an O_APPEND descriptor, fsync'd. A line cut short by a
+    crash (no newline) is dropped when the file is opened again."""
+
+    def __init__(self, path):
+        self.path = pathlib.Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not self.path.exists():
+            tmp = self.path.with_name(self.path.name + ".tmp")
+            tmp.write_text(_csv_line(COLUMNS), encoding="utf-8")
+            os.replace(tmp, self.path)
+        self._drop_partial_line()
+        self.rows = read_results(self.path)
+        self.fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+
+    def _drop_partial_line(self):
+        data = self.path.read_bytes()
+        if data and not data.endswith(b"\n"):
+            with open(self.path, "r+b") as f:
+                f.truncate(data.rfind(b"\n") + 1)
+
+    def keys(self):
+        return {r["key"] for r in self.rows}
+
+    def append(self, row):
+        line = _csv_line([_format(row[c]) for c in COLUMNS]).encode()
+        os.write(self.fd, line)
+        os.fsync(self.fd)
+        self.rows.append({c: str(_format(row[c])) for c in COLUMNS})
+
+    def close(self):
+        os.close(self.fd)
+
+
+def read_results(path):
+    """The rows of a results file as dicts of strings; SweepError if its header is not ours."""
+    with open(path, encoding="utf-8", newline="") as f:
+        reader = csv.reader(f)
+        header = next(reader, None)
+        if header != COLUMNS:
+            raise SweepError(f"{path}: header: {json.dumps(header)}: not an isotouch sweep results file "
+                             f"of this version (expected {','.join(COLUMNS)})")
+        return [dict(zip(COLUMNS, r)) for r in reader if r]
+
+
+# ---------------------------------------------------------------------------------------------
+# Summary and plot
+
+
+def _f(row, k):
+    return float(row[k])
+
+
+def summary_markdown(rows):
+    """One line per method and configuration over its scenes and repetitions."""
+    groups = {}
+    for r in rows:
+        groups.setdefault(config_label(r), []).append(r)
+    out = ["| configuration | tasks | scenes | surface RMS [voxel] mean / max | force err RMS [N] mean | "
+           "max force step [N] | pop-throughs | mean tick [ns] median | task [s] mean |",
+           "|---|---|---|---|---|---|---|---|---|"]
+    for label in sorted(groups):
+        rs = groups[label]
+        surf = [_f(r, "surface_err_rms_m") / _f(r, "voxel_m") for r in rs]
+        ticks = sorted(_f(r, "tick_ns_mean") for r in rs)
+        out.append(f"| {label} | {len(rs)} | {len({r['scene'] for r in rs})} | {sum(surf) / len(surf):.3g} / "
+                   f"{max(surf):.3g} | {sum(_f(r, 'force_err_rms_n') for r in rs) / len(rs):.3g} | "
+                   f"{max(_f(r, 'max_force_step_n') for r in rs):.3g} | {sum(int(r['pop_throughs']) for r in rs)} | "
+                   f"{ticks[len(ticks) // 2]:.4g} | {sum(_f(r, 'task_s') for r in rs) / len(rs):.3g} |")
+    return "\n".join(out) + "\n"
+
+
+def plot_error_vs_time(rows, path):
+    """Surface error RMS [voxel] against mean tick [ns], log axes, a panel per scene, a colour
+    per algorithm (as `isotouch report` plots it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+    cols = min(3, len(scenes))
+    lines = (len(scenes) + cols - 1) // cols
+    fig, axes = plt.subplots(lines, cols, figsize=(4.2 * cols, 3.4 * lines), squeeze=False)
+    colours = dict(zip(ALGORITHMS, ("tab:blue", "tab:purple", "tab:red", "tab:green")))
+    for ax, scene in zip(axes.flat, scenes):
+        for alg in ALGORITHMS:
+            pts = [(_f(r, "tick_ns_mean"), _f(r, "surface_err_rms_m") / _f(r, "voxel_m"))
+                   for r in rows if r["scene"] == scene and r["algorithm"] == alg]
+            pts = [(x, y) for x, y in pts if x > 0 and y > 0]  # log axes
+            if pts:
+                ax.scatter(*zip(*pts), s=14, color=colours[alg], label=ALGORITHMS[alg])
+        ax.set(xscale="log", yscale="log", title=scene, xlabel="mean tick [ns]", ylabel="surface error RMS [voxel]")
+        ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def run_sweep(sweep, out_dir, client=None, log=print):
+    """Runs the tasks of `sweep` (load_sweep's dict) not yet in OUT/results.csv, on `client`
+    (a dask.distributed Client) or, when None, serially in this process; then writes the summary
+    and the plot. Returns the results' rows (dicts of strings). A task's exception propagates
+    after the rows finished before it are written."""
+    out = pathlib.Path(out_dir)
+    tasks = make_tasks(sweep)
+    results = Results(out / "results.csv")
+    try:
+        done = results.keys()
+        todo = [t for t in tasks if t["key"] not in done]
+        log(f"sweep: {len(tasks)} tasks; {len(tasks) - len(todo)} already in {results.path}: skipped; "
+            f"{len(todo)} to run on {'this process' if client is None else _describe(client)}", flush=True)
+        for row in _rows(todo, client):
+            results.append(row)
+    finally:
+        results.close()
+    rows = [r for r in results.rows if r["key"] in {t["key"] for t in tasks}]
+    (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
+    plot_error_vs_time(rows, out / "error_vs_time.png")
+    log(f"sweep: {len(rows)} rows in {results.path}; summary.md, error_vs_time.png in {out}", flush=True)
+    return rows
+
+
+def _rows(todo, client):
+    """Rows of `todo` as they finish (serially, or through Dask: a task lost with its worker is
+    rescheduled on another by the scheduler, so each key yields exactly one row)."""
+    if client is None:
+        for t in todo:
+            yield run_task(t)
+        return
+    from dask.distributed import as_completed
+
+    futures = client.map(run_task, todo, key=[f"isotouch-sweep-{t['key']}" for t in todo], pure=True)
+    try:
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.cancel(futures)
+
+
+def _describe(client):
+    workers = client.scheduler_info().get("workers", {})
+    return f"{len(workers)} Dask workers ({client.scheduler.address})"
+
+
+def connect(local_workers=None, scheduler=None, scheduler_file=None):
+    """A Dask client, and the LocalCluster it owns (None when it joins a running scheduler)."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler, timeout="30s"), None
+    if scheduler_file:
+        return Client(scheduler_file=scheduler_file, timeout="30s"), None
+    n = local_workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python3 -m isotouch.sweep", description=__doc__.split("\n\n")[0])
+    ap.add_argument("sweep", help="the sweep file (JSON)")
+    ap.add_argument("--out", default="sweep-out", help="results folder (default: sweep-out)")
+    where = ap.add_mutually_exclusive_group()
+    where.add_argument("--local-workers", type=int, metavar="N",
+                       help="a LocalCluster of N single-threaded worker processes (default: the machine's cores)")
+    where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    where.add_argument("--scheduler-file", metavar="FILE", help="the scheduler's address from its scheduler file")
+    where.add_argument("--serial", action="store_true", help="every task in this process (the serial reference)")
+    args = ap.parse_args(argv)
+    if args.local_workers is not None and args.local_workers < 1:
+        ap.error(f"--local-workers: {args.local_workers}: must be >= 1")
+    try:
+        sweep = load_sweep(args.sweep)
+    except SweepError as e:
+        print(f"sweep: {e}", file=sys.stderr)
+        return 2
+    client = cluster = None
+    try:
+        if not args.serial:
+            client, cluster = connect(args.local_workers, args.scheduler, args.scheduler_file)
+        run_sweep(sweep, args.out, client)
+        return 0
+    except KeyboardInterrupt:
+        rows = read_results(pathlib.Path(args.out) / "results.csv")
+        print(f"sweep: interrupted; {len(rows)} of {len(make_tasks(sweep))} tasks written in "
+              f"{pathlib.Path(args.out) / 'results.csv'}; run again to finish", file=sys.stderr, flush=True)
+        return 130
+    except SweepError as e:
+        print(f"sweep: {e}", file=sys.stderr)
+        return 2
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+if __name__ == "__main__":
+    # Through the imported module, so Dask pickles isotouch.sweep.run_task by reference.
+    import importlib
+
+    sys.exit(importlib.import_module("isotouch.sweep").main())

@@ -492,14 +492,17 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   const Volume before = isotouch::io::load_volume(scene.volume_path);
   const auto trace = read_trace(out / "trace.csv");
   ASSERT_FALSE(trace.empty());
-  // The press ray: from the contact point along the inward normal (summary.json, physical
-  // = grid-world here: identity direction, zero origin offset).
+  // The press ray: from the contact point along the inward normal (summary.json and
+  // trace.csv are in the file's physical frame; the volume's own to_grid takes them to the
+  // grid frame the trilinear samples and the recording use).
   std::ifstream js(out / "summary.json");
   const auto j = nlohmann::json::parse(js);
   const auto& cpj = j.at("script").at("contact_point_m");
   const auto& nj = j.at("script").at("contact_normal");
-  const Vec3 cp{cpj[0].get<double>(), cpj[1].get<double>(), cpj[2].get<double>()};
-  const Vec3 dir = Vec3{nj[0].get<double>(), nj[1].get<double>(), nj[2].get<double>()} * -1.0;
+  const Vec3 cp_phys{cpj[0].get<double>(), cpj[1].get<double>(), cpj[2].get<double>()};
+  const Vec3 n_phys{nj[0].get<double>(), nj[1].get<double>(), nj[2].get<double>()};
+  const Vec3 cp = before.to_grid(cp_phys);
+  const Vec3 dir = (before.to_grid(cp_phys + n_phys) - cp) * -1.0;
   const Vec3 p = cp - dir * 0.005;  // 5 mm outside
   const double step = 0.05e-3;
   double entry = -1, exit = -1;
@@ -516,7 +519,8 @@ TEST(RunEdits, DrillSkullGoesThroughTheBone) {
   const double thickness = exit - entry;
   const Vec3 outer = p + dir * entry;
   double deepest = -1e9;
-  for (const auto& r : trace) deepest = std::max(deepest, isotouch::core::dot(Vec3{r.hip[0], r.hip[1], r.hip[2]} - outer, dir));
+  for (const auto& r : trace)
+    deepest = std::max(deepest, isotouch::core::dot(before.to_grid(Vec3{r.hip[0], r.hip[1], r.hip[2]}) - outer, dir));
   EXPECT_GT(deepest, thickness) << "bone " << thickness * 1e3 << " mm thick, HIP at most " << deepest * 1e3
                                 << " mm past its outer surface";
   // Each contact tick's VHIP against the volume of the snapshot THAT tick read (not the

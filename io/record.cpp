@@ -258,7 +258,7 @@ json parse_line(const std::string& line, const std::string& name, std::size_t n)
 RecordedEditSession parse_edit_session(const json& h, const Where& w) {
   const json& e = h.at("edit_session");
   if (!e.is_object()) throw RecordingError(w.at("edit_session") + ": must be an object, got " + shown(e));
-  only_keys(e, {"gpu_brushes", "history_limit_mib"}, "edit_session.", w);
+  only_keys(e, {"gpu_brushes", "history_limit_mib", "edit_period_s"}, "edit_session.", w);
   RecordedEditSession s;
   const json& gpu = member(e, "gpu_brushes", w);
   if (!gpu.is_boolean()) throw RecordingError(w.at("edit_session.gpu_brushes") + ": must be true or false, got " + shown(gpu));
@@ -266,6 +266,11 @@ RecordedEditSession parse_edit_session(const json& h, const Where& w) {
   s.history_limit_mib = finite_number(member(e, "history_limit_mib", w), "edit_session.history_limit_mib", w);
   if (!(s.history_limit_mib > 0))
     throw RecordingError(w.at("edit_session.history_limit_mib") + ": must be > 0, got " + num(s.history_limit_mib));
+  if (e.contains("edit_period_s")) {
+    s.edit_period_s = finite_number(member(e, "edit_period_s", w), "edit_session.edit_period_s", w);
+    if (!(s.edit_period_s >= 0))
+      throw RecordingError(w.at("edit_session.edit_period_s") + ": must be >= 0, got " + num(s.edit_period_s));
+  }
   return s;
 }
 
@@ -411,6 +416,7 @@ std::string recording_header_line(const Recording& r, const std::string& name) {
                            std::to_string(r.format_version) + ", " + num(r.edit_session->history_limit_mib) + " MiB");
     header["edit_session"] = {{"gpu_brushes", r.edit_session->gpu_brushes},
                               {"history_limit_mib", r.edit_session->history_limit_mib}};
+    if (r.edit_session->edit_period_s > 0) header["edit_session"]["edit_period_s"] = r.edit_session->edit_period_s;
   }
   return dump_line(header);
 }

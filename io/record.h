@@ -50,6 +50,10 @@ struct RecordedTick {
 struct RecordedEditSession {
   bool gpu_brushes = false;         ///< brushes on the GPU (else the CPU reference)
   double history_limit_mib = 256;   ///< the undo memory limit [MiB], > 0
+  /// The servo's edit ease period (HriParams::edit_period_s) [s] the session ran with; 0: not
+  /// recorded (replay then takes the scene's). An edit session the scene does not describe
+  /// sets its own period, and the forces depend on it.
+  double edit_period_s = 0;
 };
 
 struct Recording {

@@ -64,14 +64,15 @@ Scene recorded_scene(const Recording& rec, const std::string& name, const std::s
 }
 
 /// The sculpting app's edit session (the recording's edit_session), in place of the scene's:
-/// the same brushes (GPU or CPU reference), undo limit and live field, its first snapshot
-/// the one the servo read first.
+/// the same brushes (GPU or CPU reference), undo limit, live field and edit ease period, its
+/// first snapshot the one the servo read first.
 void use_recorded_edit_session(const Recording& rec, SceneSetup& setup) {
   if (!rec.edit_session) return;
   engine::VulkanContext* vk = rec.edit_session->gpu_brushes ? setup.vk.get() : nullptr;
   setup.session = std::make_unique<EditSession>(engine::Volume(setup.volume), vk, setup.live,
                                                 rec.edit_session->history_limit_mib);
   setup.first = setup.session->current();
+  if (rec.edit_session->edit_period_s > 0) setup.hri.edit_period_s = rec.edit_session->edit_period_s;
 }
 
 /// One row of the replay's trace.csv (grid-world frame, as the renderer sees it).

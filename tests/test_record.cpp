@@ -507,13 +507,15 @@ TEST(Record, BadFilesNameTheLineTheFieldAndTheValue) {
 TEST(Record, EditSessionRoundTripsAndBadOnesAreNamed) {
   std::mt19937_64 rng(8);
   Recording r = live_recording(rng, 20, 3);
-  r.edit_session = isotouch::io::RecordedEditSession{true, 64.5};
+  r.edit_session = isotouch::io::RecordedEditSession{true, 64.5, 0.007};
   const std::string text = recording_text(r, "mem");
-  EXPECT_NE(text.find("\"edit_session\":{\"gpu_brushes\":true,\"history_limit_mib\":64.5}"), std::string::npos) << text.substr(0, 300);
+  EXPECT_NE(text.find("\"edit_session\":{\"gpu_brushes\":true,\"history_limit_mib\":64.5,\"edit_period_s\":0.007}"), std::string::npos)
+      << text.substr(0, 300);
   const Recording back = parse_recording(text, "mem");
   ASSERT_TRUE(back.edit_session.has_value());
   EXPECT_TRUE(back.edit_session->gpu_brushes);
   EXPECT_EQ(back.edit_session->history_limit_mib, 64.5);
+  EXPECT_EQ(back.edit_session->edit_period_s, 0.007);
   EXPECT_EQ(recording_text(back, "mem"), text);
   const auto refused = [&](const std::string& from, const std::string& to, const std::string& says) {
     std::string bad = text;

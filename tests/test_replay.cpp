@@ -321,7 +321,12 @@ TEST(Replay, TheRecordedEditSessionReplaysEditsOfASceneWithoutEdits) {
     EXPECT_NE(std::string(e.what()).find("has no \"edits\" section and the recording no edit_session"), std::string::npos)
         << e.what();
   }
-  rec.edit_session = isotouch::io::RecordedEditSession{true, 256};
+  // The session's edit ease period is the recorded run's (its scene's every_ticks / rate):
+  // without it the scene stripped of "edits" would ease over another period.
+  const double period = 7.0 / 1000.0;
+  rec.edit_session = isotouch::io::RecordedEditSession{true, 256, 0};
+  EXPECT_FALSE(replay(rec).identical()) << "the edit period is not the recorded one, yet the forces are the same";
+  rec.edit_session = isotouch::io::RecordedEditSession{true, 256, period};
   const auto r = replay(rec);
   EXPECT_TRUE(r.identical()) << r.differing_ticks << " ticks differ, first " << r.first_diff_tick;
   EXPECT_EQ(r.edits, long(rec.edits.size()));

@@ -706,7 +706,8 @@ session::LiveSessionConfig Sculpt::session_config() {
     cfg.record_header.rate_hz = scene.hri.rate_hz;
     cfg.record_header.volume_crc32 = io::volume_crc32(vol);
     // This app's edit session, whatever the scene's "edits" say: replay builds the same one.
-    cfg.record_header.edit_session = io::RecordedEditSession{edits->sculptor().on_gpu(), scene.edits.history_limit_mib};
+    cfg.record_header.edit_session =
+        io::RecordedEditSession{edits->sculptor().on_gpu(), scene.edits.history_limit_mib, renderer->params().edit_period_s};
   }
   cfg.on_applied = picture_feeder(feed, edits.get());
   return cfg;

@@ -97,6 +97,7 @@ void DeviceEmulator::accept_host() {
   host_fd_ = fd;
   last_output_ns_ = now_ns();
   connected_at_s_ = clock_s_;  // the hand's path starts with each connection
+  if (first_connected_at_s_ < 0) first_connected_at_s_ = clock_s_;
   std::lock_guard lock(stats_mu_);
   ++stats_.connections;
 }
@@ -273,16 +274,22 @@ void DeviceEmulator::send_report(std::int64_t now, double t_s) {
   }
 }
 
+double DeviceEmulator::fault_time_s(double t_s) const {
+  if (!cfg_.faults.from_first_connection) return t_s;
+  return first_connected_at_s_ < 0 ? -1.0 : t_s - first_connected_at_s_;  // -1: before every fault
+}
+
 void DeviceEmulator::tick(std::int64_t now, double t_s) {
   const EmuFaults& f = cfg_.faults;
-  if (f.disconnect_at_s >= 0 && t_s >= f.disconnect_at_s && !disconnected_) {
+  const double ft = fault_time_s(t_s);
+  if (f.disconnect_at_s >= 0 && ft >= f.disconnect_at_s && !disconnected_) {
     disconnected_ = true;
     close_host();
     close_listener();
     std::lock_guard lock(stats_mu_);
     stats_.disconnect_ns = now_ns();
   }
-  if (disconnected_ && !relistened_ && f.reconnect_after_s >= 0 && t_s >= f.disconnect_at_s + f.reconnect_after_s) {
+  if (disconnected_ && !relistened_ && f.reconnect_after_s >= 0 && ft >= f.disconnect_at_s + f.reconnect_after_s) {
     relistened_ = true;
     listen();
   }
@@ -301,7 +308,7 @@ void DeviceEmulator::tick(std::int64_t now, double t_s) {
   const double tp = t_s - connected_at_s_;
   const Vec3 a = hand_target(tp + T), b = hand_target(tp);
   dev_.step(T, a, (a - b) / T);
-  const bool frozen = f.freeze_at_s >= 0 && t_s >= f.freeze_at_s && t_s < f.freeze_at_s + f.freeze_for_s;
+  const bool frozen = f.freeze_at_s >= 0 && ft >= f.freeze_at_s && ft < f.freeze_at_s + f.freeze_for_s;
   if (host_fd_ >= 0 && !frozen) send_report(now, t_s);
   for (auto it = pending_.begin(); it != pending_.end();) {  // delayed reports that are due
     if (it->due_ns <= now) {

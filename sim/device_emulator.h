@@ -30,6 +30,9 @@ struct EmuFaults {
   double freeze_at_s = -1, freeze_for_s = 0;  ///< no reports at all in [at, at + for) (the link stays up)
   double disconnect_at_s = -1;                ///< the connection and the socket close here
   double reconnect_after_s = -1;              ///< ... and the socket listens again this much later (< 0: never)
+  /// The times above [s] count from the host's first connection (none before it) rather
+  /// than from the emulator's start: a host that starts slowly still meets them connected.
+  bool from_first_connection = false;
   std::uint32_t seed = 1;
 };
 
@@ -111,6 +114,9 @@ class DeviceEmulator {
     std::array<std::uint8_t, 32> bytes;
   };
   void tick(std::int64_t now, double t_s);
+  /// The time the fault times are compared with [s]: `t_s`, or the time since the first
+  /// connection (from_first_connection; -1 before it).
+  double fault_time_s(double t_s) const;
   void serve_host(std::int64_t now);
   void wait_until(std::int64_t t);
   void send_report(std::int64_t now, double t_s);
@@ -138,6 +144,7 @@ class DeviceEmulator {
   std::vector<std::int64_t> sent_ns_;  // by sequence % size
   std::vector<Pending> pending_;       // delayed or held back reports
   double clock_s_ = 0, connected_at_s_ = 0;  // the emulator's time, and when the host connected [s]
+  double first_connected_at_s_ = -1;         // when the first host connected [s]; -1: none yet
   bool hold_next_ = false;
   bool polhem_owed_ = false, polhem_calibrated_ = false;  // Polhem: a report is owed; calibrated
   Pending held_{};

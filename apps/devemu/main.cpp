@@ -68,6 +68,8 @@ int main(int argc, char** argv) {
   faults->add_option("--freeze-for", f.freeze_for_s, "... for this long [s]")->check(CLI::NonNegativeNumber);
   faults->add_option("--disconnect-at", f.disconnect_at_s, "Close the connection and the socket at this time [s]");
   faults->add_option("--reconnect-after", f.reconnect_after_s, "... and listen again this much later [s]");
+  faults->add_flag("--faults-from-connection", f.from_first_connection,
+                   "Fault times count from the host's first connection, not from the start");
   faults->add_option("--seed", f.seed, "Random seed of the faults")->capture_default_str();
   try {
     cli.parse(argc, argv);

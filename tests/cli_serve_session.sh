@@ -25,8 +25,9 @@ fail() { echo "FAIL serve session: $*"; echo "--- client.log"; cat "$out/client.
 serve_pid=$!
 port=$(wait_port "$out/serve.log" $serve_pid)
 [[ -n $port ]] || fail "serve never said it was listening"
-# RAS [mm]: outside the skull (voxel x 3) and 2.6 voxels into it (x 11.6), row y 32, slice z 11.
-out_p="-9.6 -102.4 16.5"; in_p="-37.12 -102.4 16.5"
+# RAS [mm]: outside the skull (voxel x 3) and 2.6 voxels into it (x 11.6), row y 32, slice z 11
+# (the head's header: LPS = (0, 0, 138) mm + (3.2 x, 3.2 y, -1.5 z) mm).
+out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"
 press="move $out_p 0.3 move $in_p 0.5 force"
 # shellcheck disable=SC2086
 timeout 90 "$client" 127.0.0.1 "$port" "$head" \

@@ -834,6 +834,8 @@ servo::HriParams Sculpt::felt_params() {
   felt_m = sphere_ok ? as_recorded(felt_radius_m(tool, o.point_probe)) : 0.0;
   p.tool_radius_m = felt_m;
   if (!sphere_ok) felt_m = -1;  // never a sphere in this session
+  // The app's brushes come once a frame: an edit's material took a frame to cut.
+  if (o.sim_clock) p.edit_period_s = double(std::max(1L, std::lround(o.sim_frame_ms * 1e-3 * p.rate_hz))) / p.rate_hz;
   return p;
 }
 

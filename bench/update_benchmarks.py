@@ -21,7 +21,9 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_BIN = os.path.join(ROOT, "build", "bin")
 
-# name -> (program in --bin, arguments, needs a display, lines kept (None: all)).
+# name -> (program in --bin, arguments, needs a display, lines kept (None: all)). A program
+# ending in .py is a script of this repository run by this interpreter, with the module built
+# beside --bin (BIN/../python) on PYTHONPATH.
 BENCHES = {
     "table1": ("isotouch", ["bench", "table1"], False, None),
     "servo-rt": ("isotouch", ["bench", "servo-rt"], False, None),
@@ -32,6 +34,7 @@ BENCHES = {
     "serve": ("isotouch", ["bench", "serve"], False, None),
     "sculpt-head": ("isotouch-sculpt", ["scenes/head.json", "--bench"], True, r"^(stats|verdict|device|link)"),
     "sculpt-chest": ("isotouch-sculpt", ["scenes/chest.json", "--bench"], True, r"^(stats|verdict|device|link)"),
+    "sweep": ("python/bench_sweep.py", [], False, None),
 }
 
 
@@ -120,7 +123,10 @@ def to_markdown(report, keep):
 
 def command(name, bindir):
     prog, args, display, _ = BENCHES[name]
-    argv = [os.path.join(bindir, prog)] + args
+    if prog.endswith(".py"):
+        argv = [sys.executable, os.path.join(ROOT, prog)] + args
+    else:
+        argv = [os.path.join(bindir, prog)] + args
     if display and not os.environ.get("DISPLAY"):
         if not shutil.which("xvfb-run"):
             return None, "needs a display: set DISPLAY or install xvfb-run"
@@ -137,7 +143,11 @@ def run_bench(name, bindir):
     t0, load0 = datetime.datetime.now(datetime.timezone.utc), loadavg()
     print("update_benchmarks: running %s: %s" % (name, " ".join(argv)), file=sys.stderr, flush=True)
     try:
-        p = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True)
+        env = dict(os.environ)
+        if prog.endswith(".py"):
+            pp = os.path.join(os.path.dirname(os.path.abspath(bindir)), "python")
+            env["PYTHONPATH"] = pp + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        p = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, env=env)
     except OSError as e:
         raise RuntimeError("%s: cannot run %s: %s" % (name, argv[0], e))
     t1, load1 = datetime.datetime.now(datetime.timezone.utc), loadavg()

@@ -11,6 +11,9 @@ on the 1-worker cluster. Load averages before and after are printed: other work 
 takes cores from the workers. Wall times exclude starting the cluster (the workers are
 started and have imported isotouch before the clock starts); scene preparation is included.
 
+Then a model of a 1,000-scan study on N workers, from the measured task times of the shipped
+CTs (--model-scans) under the report's configurations and the scheduler overheads above.
+
     PYTHONPATH=build/python python3 python/bench_sweep.py [--scenes sphere box knot three-spheres]
 """
 import argparse
@@ -37,17 +40,25 @@ def load():
 
 def calibrate(scenes, min_task_s):
     """The methods with timing replays per method such that its cheapest task (over the scenes)
-    lasts min_task_s: one task of each with 50 replays, serially; a replay costs its mean tick
-    x the stroke's ticks, the rest of the task (playback, error figures) is its time less the
-    replays'."""
-    probe = sw.check_sweep({"scenes": scenes, "methods": METHODS, "timing_replays": 50})
+    lasts min_task_s. Each task runs serially twice, with 20 and with 200 replays: the
+    difference is the cost of 180 replays, the rest of the task (scene preparation, playback,
+    error figures) is what the shorter run took beyond its replays. A 10 % margin covers the
+    drift between this probe and the timed runs."""
+    lo, hi = 20, 200
+    rows = {}
+    for replays in (lo, hi):
+        probe = sw.check_sweep({"scenes": scenes, "methods": METHODS, "timing_replays": replays})
+        for t in sw.make_tasks(probe):
+            sw.run_task(t)  # warm: the scene's preparation and caches are not the replays' cost
+            rows[(t["scene"], t["algorithm"], t["n"], replays)] = sw.run_task(t)["task_s"]
     need = {}
-    for t in sw.make_tasks(probe):
-        row = sw.run_task(t)
-        per_replay = row["tick_ns_mean"] * row["ticks"] * 1e-9
-        fixed = max(row["task_s"] - 50 * per_replay, 0.0)
-        m = (t["algorithm"], t["n"])
-        need[m] = max(need.get(m, 1), math.ceil(max(min_task_s - fixed, 0.0) / per_replay))
+    for (scene, alg, n, replays), task_s in rows.items():
+        if replays != lo:
+            continue
+        per_replay = max((rows[(scene, alg, n, hi)] - task_s) / (hi - lo), 1e-9)
+        fixed = max(task_s - lo * per_replay, 0.0)
+        m = (alg, n)
+        need[m] = max(need.get(m, 1), math.ceil(1.1 * max(min_task_s - fixed, 0.0) / per_replay))
     methods = []
     for m in METHODS:
         for n in m.get("n", [1]):
@@ -92,6 +103,8 @@ def main():
     ap.add_argument("--scenes", nargs="+", default=["sphere", "box", "knot", "three-spheres"])
     ap.add_argument("--min-task-s", type=float, default=0.5)
     ap.add_argument("--noop-tasks", type=int, default=500)
+    ap.add_argument("--model-scans", nargs="*", default=["head", "chest"],
+                    help="scans whose measured tasks model a 1,000-scan study (none: no model)")
     a = ap.parse_args()
     print(f"bench sweep: load average before: {load()}; {os.cpu_count()} cores; LP_NUM_THREADS=1", flush=True)
     methods = calibrate(a.scenes, a.min_task_s)
@@ -111,17 +124,55 @@ def main():
     same = sw_figures(serial_rows) == sw_figures(one_rows) == sw_figures(two_rows)
     print(f"task time (serial): min {min(task_s):.3f} s ({'at least' if min(task_s) >= a.min_task_s else 'below'} "
           f"{a.min_task_s} s), mean {sum(task_s) / n:.3f} s, max {max(task_s):.3f} s")
-    print(f"{'run':<12} {'wall [s]':>9} {'tasks/s':>9} {'vs serial':>10}")
+    print("\n| run | wall [s] | tasks/s | vs serial |\n|---|---|---|---|")
     for name, wall in (("serial", serial_s), ("1 worker", one_s), ("2 workers", two_s)):
-        print(f"{name:<12} {wall:>9.2f} {n / wall:>9.3f} {serial_s / wall:>10.3f}")
+        print(f"| {name} | {wall:.2f} | {n / wall:.3f} | {serial_s / wall:.3f} |")
     eff = (n / two_s) / (2 * n / serial_s)
-    print(f"scheduler overhead per task: {(one_s - one_busy) / n * 1e3:.1f} ms (1-worker wall less its tasks' "
+    per_task = (one_s - one_busy) / n
+    print(f"\nscheduler overhead per task: {per_task * 1e3:.1f} ms (1-worker wall less its tasks' "
           f"time), {noop * 1e3:.2f} ms round trip of an empty task ({a.noop_tasks} of them)")
     print(f"figures equal in the three runs (time columns aside): {same}")
-    print(f"load average after: {load()}")
+    print(f"load average after the sweeps: {load()}")
     print(f"verdict: 2-worker efficiency {eff:.3f} against serial: "
-          f"{'meets' if eff >= TARGET else 'below'} the target {TARGET}")
+          f"{'meets' if eff >= TARGET else 'below'} the target {TARGET}", flush=True)
+    if a.model_scans:
+        study_model(a.model_scans, noop, max(per_task, 0.0))
+    print(f"load average after: {load()}")
     return 0 if same else 1
+
+
+def hms(s):
+    return f"{int(s // 3600)} h {int(s % 3600 // 60):02d} min" if s >= 3600 else (
+        f"{s / 60:.1f} min" if s >= 60 else f"{s:.0f} s")
+
+
+def study_model(scans, o_empty, o_task, study=1000, workers=(1, 2, 32, 128)):
+    """Serially, each scan under the report's configurations (python/sweeps/report.json's
+    methods and timing replays): t = the scan's tasks' time less its preparation p. A study of
+    `study` such scans on N workers then takes about study x (t + k o) / N for k tasks per scan
+    at a scheduler overhead o per task, plus between study x p / N (a worker runs all of a
+    scan's tasks) and study x p (every worker prepares every scan)."""
+    spec = {"scenes": scans, "methods": METHODS, "timing_replays": 5}
+    per_scan = {}
+    for t in sw.make_tasks(sw.check_sweep(spec)):
+        row = sw.run_task(t)
+        d = per_scan.setdefault(t["scene"], {"tasks": 0, "s": 0.0, "p": 0.0})
+        d["tasks"] += 1
+        d["s"] += row["task_s"] - row["prepare_s"]
+        d["p"] += row["prepare_s"]
+    print(f"\nA {study:,}-scan study, modelled from these scans' tasks (the report's configurations, "
+          "measured serially in this run):\n\n| scan | tasks | tasks' time t [s] | preparation p [s] |\n|---|---|---|---|")
+    for scan, d in per_scan.items():
+        print(f"| {scan} | {d['tasks']} | {d['s']:.2f} | {d['p']:.2f} |")
+    k = max(d["tasks"] for d in per_scan.values())
+    t = sum(d["s"] for d in per_scan.values()) / len(per_scan)
+    p = max(d["p"] for d in per_scan.values())
+    print(f"\nT(N) = {study} x (t + {k} o) / N with the mean t = {t:.2f} s; preparation adds between "
+          f"{study} p / N and {study} p (largest p = {p:.2f} s).\n")
+    print(f"| workers N | T(N), o = {o_empty * 1e3:.1f} ms (empty task) | T(N), o = {o_task * 1e3:.1f} ms "
+          "(per task, 1 worker) | preparation added, at most |\n|---|---|---|---|")
+    for nw in workers:
+        print(f"| {nw} | {hms(study * (t + k * o_empty) / nw)} | {hms(study * (t + k * o_task) / nw)} | {hms(study * p)} |")
 
 
 def sw_figures(rows):

@@ -38,13 +38,30 @@ GRID_KEYS = {
 HRI_GRID_KEYS = dict(GRID_KEYS, tool_radius_m="spherical tool radius [m] (0: a point)",
                      friction_mu_s="static friction coefficient", friction_mu_d="dynamic friction coefficient")
 METHOD_KEYS = {"algorithm", "n", "options", "grid", "timing_replays"}
-TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays"}
+TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays", "figures"}
 
 # What a task measured (equal between runs of the same task) and what it took (not).
 FIGURES = ["ticks", "contact_ticks", "surface_err_rms_m", "angle_err_rms_deg", "force_err_rms_n",
            "max_force_step_n", "max_force_step_slide_n", "pop_throughs", "voxel_m"]
 TIMES = ["tick_ns_mean", "tick_ns_p99", "task_s", "prepare_s", "host", "cpu", "worker_pid"]
 IDENTITY = ["key", "scene", "algorithm", "n", "options", "params", "rep"]
+# The figures a sweep file can ask for (`figures`): the summary's columns for each, as
+# (header, cell(rows)). results.csv always holds every figure: one task computes them all at
+# once, and one file layout keeps a restarted sweep's rows comparable.
+SUMMARY_FIGURES = {
+    "surface_error": [("surface RMS [voxel] mean / max",
+                       lambda rs: f"{_mean(_surface_voxels(rs)):.3g} / {max(_surface_voxels(rs)):.3g}")],
+    "angle_error": [("normal angle RMS [deg] mean", lambda rs: f"{_mean([_f(r, 'angle_err_rms_deg') for r in rs]):.3g}")],
+    "force_error": [("force err RMS [N] mean", lambda rs: f"{_mean([_f(r, 'force_err_rms_n') for r in rs]):.3g}")],
+    "force_steps": [("max force step [N]", lambda rs: f"{max(_f(r, 'max_force_step_n') for r in rs):.3g}"),
+                    ("max step sliding [N]", lambda rs: f"{max(_f(r, 'max_force_step_slide_n') for r in rs):.3g}")],
+    "pop_throughs": [("pop-throughs", lambda rs: f"{sum(int(r['pop_throughs']) for r in rs)}")],
+    "contact_fraction": [("contact fraction mean",
+                          lambda rs: f"{_mean([_f(r, 'contact_ticks') / max(_f(r, 'ticks'), 1) for r in rs]):.3g}")],
+    "tick_time": [("mean tick [ns] median", lambda rs: f"{_median([_f(r, 'tick_ns_mean') for r in rs]):.4g}"),
+                  ("tick p99 [ns] median", lambda rs: f"{_median([_f(r, 'tick_ns_p99') for r in rs]):.4g}")],
+}
+DEFAULT_FIGURES = ["surface_error", "force_error", "force_steps", "pop_throughs", "tick_time"]
 COLUMNS = IDENTITY + FIGURES + TIMES
 
 
@@ -174,12 +191,17 @@ def check_sweep(spec, path="(sweep)", base="."):
     if not isinstance(methods, list) or not methods:
         _fail(path, "methods", methods, "must be a non-empty list of methods")
     base = pathlib.Path(base)
+    figures = spec.get("figures", DEFAULT_FIGURES)
+    if (not isinstance(figures, list) or not figures or len(set(map(str, figures))) != len(figures)
+            or not all(f in SUMMARY_FIGURES for f in figures)):
+        _fail(path, "figures", figures, f"must be a non-empty list of distinct names from {', '.join(SUMMARY_FIGURES)}")
     return {
         "scenes": scenes,
         "scene_paths": {s: (str(base / s) if s.endswith(".json") else s) for s in scenes},
         "methods": [_method(path, i, m) for i, m in enumerate(methods)],
         "repetitions": _positive_int(path, "repetitions", spec.get("repetitions", 1)),
         "timing_replays": _positive_int(path, "timing_replays", spec.get("timing_replays", 5)),
+        "figures": figures,
     }
 
 
@@ -376,22 +398,31 @@ def _f(row, k):
     return float(row[k])
 
 
-def summary_markdown(rows):
-    """One line per method and configuration over its scenes and repetitions."""
+def _mean(xs):
+    return sum(xs) / len(xs)
+
+
+def _median(xs):
+    xs = sorted(xs)
+    return xs[len(xs) // 2]
+
+
+def _surface_voxels(rs):
+    return [_f(r, "surface_err_rms_m") / _f(r, "voxel_m") for r in rs]
+
+
+def summary_markdown(rows, figures=DEFAULT_FIGURES):
+    """One line per method and configuration over its scenes and repetitions: the columns of
+    `figures` (SUMMARY_FIGURES' names), then the mean task time."""
     groups = {}
     for r in rows:
         groups.setdefault(config_label(r), []).append(r)
-    out = ["| configuration | tasks | scenes | surface RMS [voxel] mean / max | force err RMS [N] mean | "
-           "max force step [N] | pop-throughs | mean tick [ns] median | task [s] mean |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    cols = [c for f in figures for c in SUMMARY_FIGURES[f]] + [("task [s] mean", lambda rs: f"{_mean([_f(r, 'task_s') for r in rs]):.3g}")]
+    out = ["| configuration | tasks | scenes | " + " | ".join(h for h, _ in cols) + " |",
+           "|---|---|---|" + "---|" * len(cols)]
     for label in sorted(groups):
         rs = groups[label]
-        surf = [_f(r, "surface_err_rms_m") / _f(r, "voxel_m") for r in rs]
-        ticks = sorted(_f(r, "tick_ns_mean") for r in rs)
-        out.append(f"| {label} | {len(rs)} | {len({r['scene'] for r in rs})} | {sum(surf) / len(surf):.3g} / "
-                   f"{max(surf):.3g} | {sum(_f(r, 'force_err_rms_n') for r in rs) / len(rs):.3g} | "
-                   f"{max(_f(r, 'max_force_step_n') for r in rs):.3g} | {sum(int(r['pop_throughs']) for r in rs)} | "
-                   f"{ticks[len(ticks) // 2]:.4g} | {sum(_f(r, 'task_s') for r in rs) / len(rs):.3g} |")
+        out.append(f"| {label} | {len(rs)} | {len({r['scene'] for r in rs})} | " + " | ".join(c(rs) for _, c in cols) + " |")
     return "\n".join(out) + "\n"
 
 
@@ -446,9 +477,15 @@ def run_sweep(sweep, out_dir, client=None, log=print):
     finally:
         results.close()
     rows = [r for r in results.rows if r["key"] in {t["key"] for t in tasks}]
-    (out / "summary.md").write_text(summary_markdown(rows), encoding="utf-8")
-    plot_error_vs_time(rows, out / "error_vs_time.png")
-    log(f"sweep: {len(rows)} rows in {results.path}; summary.md, error_vs_time.png in {out}", flush=True)
+    figures = sweep.get("figures", DEFAULT_FIGURES)
+    (out / "summary.md").write_text(summary_markdown(rows, figures), encoding="utf-8")
+    wrote = "summary.md"
+    if "surface_error" in figures and "tick_time" in figures:
+        plot_error_vs_time(rows, out / "error_vs_time.png")
+        wrote += ", error_vs_time.png"
+    else:
+        (out / "error_vs_time.png").unlink(missing_ok=True)
+    log(f"sweep: {len(rows)} rows in {results.path}; {wrote} in {out}", flush=True)
     return rows
 
 

@@ -156,6 +156,8 @@ def test_interrupt_and_restart_skips_the_written_tasks(tmp_path, serial):
     ({"scenes": ["sphere"], "methods": [{"algorithm": "cheese"}]}, "methods[0].algorithm", '"cheese"'),
     ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "repetitions": 0}, "repetitions", "0"),
     ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "colour": 1}, "colour", "1"),
+    ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "figures": ["smell"]}, "figures", '["smell"]'),
+    ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "figures": []}, "figures", "[]"),
 ])
 def test_a_bad_sweep_file_is_one_clear_error(tmp_path, spec, field, value):
     path = write_spec(tmp_path, spec)
@@ -164,6 +166,24 @@ def test_a_bad_sweep_file_is_one_clear_error(tmp_path, spec, field, value):
     assert r.stderr.startswith(f"sweep: {path}: {field}: {value}: "), r.stderr
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_the_figures_asked_for_are_the_summarys_columns(tmp_path):
+    """The summary holds the figures the file names, in its order, each computed here again
+    from results.csv; without the error or the time there is no error-against-time plot."""
+    spec = {"scenes": ["sphere"], "methods": [{"algorithm": "blezek"}], "timing_replays": 1,
+            "figures": ["contact_fraction", "pop_throughs"]}
+    r = run_cli(write_spec(tmp_path, spec), "--serial", "--out", tmp_path / "out", timeout=120)
+    assert r.returncode == 0, r.stderr
+    table = (tmp_path / "out/summary.md").read_text().splitlines()
+    assert table[0] == "| configuration | tasks | scenes | contact fraction mean | pop-throughs | task [s] mean |"
+    (row,) = rows_of(tmp_path / "out")
+    cells = [c.strip() for c in table[2].strip("|").split("|")]
+    assert cells[:3] == ["Blezek-Robb", "1", "1"]
+    assert float(cells[3]) == pytest.approx(int(row["contact_ticks"]) / int(row["ticks"]), rel=2e-3)
+    assert 0 < float(cells[3]) < 1 and cells[4] == row["pop_throughs"]
+    assert not (tmp_path / "out/error_vs_time.png").exists()
+    assert "surface_err_rms_m" in row and "tick_ns_mean" in row  # the file keeps every figure
 
 
 def test_a_broken_sweep_file_names_line_and_column(tmp_path):

@@ -18,6 +18,7 @@
 #include "isotouch/apps/serve_cmd.h"
 #include "isotouch/apps/stability_cmd.h"
 #include "isotouch/apps/subcommand.h"
+#include "isotouch/apps/sweep_cmd.h"
 
 using namespace isotouch;
 
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
       "  isotouch check data/ct-tooth/tooth.nhdr\n"
       "  isotouch check data/ct-chest-lungdx-a0001/dicom-5mm   # a DICOM series folder\n"
       "  isotouch serve scenes/head.json       # OpenIGTLink server for 3D Slicer / PLUS (port 18944)\n"
+      "  isotouch sweep python/sweeps/report.json --local-workers 2   # Dask sweep -> sweep-out/\n"
       "  ISOTOUCH_DEVICE=llvmpipe isotouch run # choose the Vulkan device\n\n"
       "Exit status: 0 ok, 1 bad input or error, 2 usage error, 3 a check failed, 4 servo faults,\n"
       "5 haptic device lost, 128 + N stopped by signal N; each command's --help says which it uses\n"
@@ -53,7 +55,7 @@ int main(int argc, char** argv) {
                                            app::add_report_command(cli)};
   for (app::Subcommand& b : app::add_bench_commands(cli)) commands.push_back(std::move(b));
   for (app::Subcommand c : {app::add_render_command(cli), app::add_export_command(cli), app::add_replay_command(cli),
-                            app::add_serve_command(cli)})
+                            app::add_serve_command(cli), app::add_sweep_command(cli)})
     commands.push_back(std::move(c));
 
   try {

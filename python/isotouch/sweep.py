@@ -525,7 +525,8 @@ def connect(local_workers=None, scheduler=None, scheduler_file=None):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python3 -m isotouch.sweep", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog=os.environ.get("ISOTOUCH_SWEEP_PROG", "python3 -m isotouch.sweep"),
+                                 description=__doc__.split("\n\n")[0])
     ap.add_argument("sweep", help="the sweep file (JSON)")
     ap.add_argument("--out", default="sweep-out", help="results folder (default: sweep-out)")
     where = ap.add_mutually_exclusive_group()

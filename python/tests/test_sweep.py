@@ -186,6 +186,22 @@ def test_the_figures_asked_for_are_the_summarys_columns(tmp_path):
     assert "surface_err_rms_m" in row and "tick_ns_mean" in row  # the file keeps every figure
 
 
+def test_the_isotouch_command_runs_the_same_sweep(tmp_path, serial):
+    """`isotouch sweep` finds the module beside its own build (no PYTHONPATH) and hands every
+    argument on: the serial reference's figures; a bad file is the same one-line error."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    r = subprocess.run([os.environ["ISOTOUCH_BIN"], "sweep", str(write_spec(tmp_path)), "--serial", "--out",
+                        str(tmp_path / "out")], capture_output=True, text=True, env=env, timeout=240)
+    assert r.returncode == 0, r.stderr
+    assert figures(rows_of(tmp_path / "out")) == serial
+    bad = write_spec(tmp_path, {"scenes": []}, "bad.json")
+    r = subprocess.run([os.environ["ISOTOUCH_BIN"], "sweep", str(bad), "--serial"], capture_output=True, text=True,
+                       env=env, timeout=60)
+    assert r.returncode == 2 and r.stderr == f"sweep: {bad}: scenes: []: must be a non-empty list of scene names or scene JSON paths\n"
+    r = subprocess.run([os.environ["ISOTOUCH_BIN"], "sweep", "--help"], capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 0 and r.stdout.startswith("usage: isotouch sweep")
+
+
 def test_a_broken_sweep_file_names_line_and_column(tmp_path):
     path = tmp_path / "bad.json"
     path.write_text('{"scenes": ["sphere"],\n "methods": [}')

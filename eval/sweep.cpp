@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <iostream>
+#include <stdexcept>
 
 #include "isotouch/core/brick_field.h"
 #include "isotouch/engine/cpu_gradient.h"
@@ -71,13 +72,18 @@ servo::HriParams reference_params(const SweepScene& s) {
   return p;
 }
 
-SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log) {
+SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log,
+                               std::optional<double> tau) {
   SweepScene s;
   s.name = name;
   sim::ScriptParams script;
   sim::SimDeviceParams dev;
   const auto names = eval::synthetic_scene_names();
   if (std::find(names.begin(), names.end(), name) != names.end()) {
+    if (tau)
+      throw std::invalid_argument("isovalue " + std::to_string(*tau) + " for " + name +
+                                  ": an exact shape's truth is its own isovalue; only scene files (head, chest, "
+                                  "a scene JSON) take another");
     eval::SyntheticScene syn = eval::make_synthetic_scene(name);
     s.description = syn.description;
     s.field = samples(syn.volume, vk, {syn.tau, s.inside});
@@ -88,7 +94,11 @@ SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* v
     s.slide_begin = syn.slide_begin;
     s.slide_end = syn.slide_end;
   } else {
-    const Scene sc = load_scene(scene_file(name));
+    Scene sc = load_scene(scene_file(name));
+    if (tau) {
+      if (!std::isfinite(*tau)) throw std::invalid_argument("isovalue for " + name + ": not a finite number");
+      sc.hri.tau = *tau;
+    }
     s.name = sc.name;
     s.description = sc.description;
     engine::Volume v;

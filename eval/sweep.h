@@ -4,6 +4,7 @@
 #include <functional>
 #include <iosfwd>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,7 +41,11 @@ struct SweepScene {
 /// exact trilinear gradient) driving the simulated device; for CTs the same reference,
 /// replayed on the recorded path, is the truth. Samples come from the Vulkan gradient
 /// pass when `vk` is given, else from the CPU reference (bit-identical).
-SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log);
+/// `tau`, when given, replaces a scene file's isovalue (volume units) before anything is
+/// sampled or recorded: the stroke and the offline reference are those of that isosurface.
+/// The exact shapes' truth belongs to their own isovalue: std::invalid_argument for them.
+SweepScene prepare_sweep_scene(const std::string& name, engine::VulkanContext* vk, std::ostream& log,
+                               std::optional<double> tau = std::nullopt);
 
 /// The reference renderer parameters for a scene (see prepare_sweep_scene).
 servo::HriParams reference_params(const SweepScene& s);

@@ -26,7 +26,7 @@ import socket
 import sys
 import time
 
-FORMAT = "isotouch-sweep-1"  # part of every task's key: a change to what a task measures changes it
+FORMAT = "isotouch-sweep-2"  # part of every task's key: a change to what a task measures changes it
 ALGORITHMS = {"hri": "HRI", "hri-paper": "HRI-paper", "avila": "Avila-Sobierajski", "blezek": "Blezek-Robb"}
 HRI_ALGORITHMS = ("hri", "hri-paper")
 # Grid parameters per algorithm family, each with its meaning (the renderers' fields).
@@ -38,13 +38,14 @@ GRID_KEYS = {
 HRI_GRID_KEYS = dict(GRID_KEYS, tool_radius_m="spherical tool radius [m] (0: a point)",
                      friction_mu_s="static friction coefficient", friction_mu_d="dynamic friction coefficient")
 METHOD_KEYS = {"algorithm", "n", "options", "grid", "timing_replays"}
-TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays", "figures"}
+TOP_KEYS = {"scenes", "methods", "repetitions", "timing_replays", "figures", "isovalues"}
+EXACT_SHAPES = ("sphere", "box", "three-spheres", "knot")  # truth fixed to their own isovalue
 
 # What a task measured (equal between runs of the same task) and what it took (not).
 FIGURES = ["ticks", "contact_ticks", "surface_err_rms_m", "angle_err_rms_deg", "force_err_rms_n",
            "max_force_step_n", "max_force_step_slide_n", "pop_throughs", "voxel_m"]
 TIMES = ["tick_ns_mean", "tick_ns_p99", "task_s", "prepare_s", "host", "cpu", "worker_pid"]
-IDENTITY = ["key", "scene", "algorithm", "n", "options", "params", "rep"]
+IDENTITY = ["key", "scene", "isovalue", "algorithm", "n", "options", "params", "rep"]
 # The figures a sweep file can ask for (`figures`): the summary's columns for each, as
 # (header, cell(rows)). results.csv always holds every figure: one task computes them all at
 # once, and one file layout keeps a restarted sweep's rows comparable.
@@ -196,6 +197,7 @@ def check_sweep(spec, path="(sweep)", base="."):
             or not all(f in SUMMARY_FIGURES for f in figures)):
         _fail(path, "figures", figures, f"must be a non-empty list of distinct names from {', '.join(SUMMARY_FIGURES)}")
     return {
+        "isovalues": _isovalues(path, spec.get("isovalues", {}), scenes),
         "scenes": scenes,
         "scene_paths": {s: (str(base / s) if s.endswith(".json") else s) for s in scenes},
         "methods": [_method(path, i, m) for i, m in enumerate(methods)],
@@ -205,9 +207,29 @@ def check_sweep(spec, path="(sweep)", base="."):
     }
 
 
+def _isovalues(path, value, scenes):
+    """{scene: [isovalue, ...]} for scene files measured at other isovalues than their own."""
+    if not isinstance(value, dict):
+        _fail(path, "isovalues", value, "must be an object: scene -> list of isovalues")
+    for scene, taus in value.items():
+        field = f"isovalues.{scene}"
+        if scene not in scenes:
+            _fail(path, field, taus, "not one of the sweep's scenes")
+        if scene in EXACT_SHAPES:
+            _fail(path, field, taus, "an exact shape's truth is its own isovalue; only scene files (head, chest, "
+                                     "a scene JSON) take others")
+        if (not isinstance(taus, list) or not taus or not all(_number(t) for t in taus)
+                or len(set(taus)) != len(taus)):
+            _fail(path, field, taus, "must be a non-empty list of distinct finite numbers (volume units)")
+    return {k: [float(t) for t in v] for k, v in value.items()}
+
+
 def task_key(task):
-    """A hash of what a task computes (scene, algorithm, n, options, params, rep, replays)."""
+    """A hash of what a task computes (scene, isovalue when not the scene's own, algorithm, n,
+    options, params, rep, replays)."""
     ident = {k: task[k] for k in ("scene", "algorithm", "n", "options", "params", "rep", "timing_replays")}
+    if task["isovalue"] != "":
+        ident["isovalue"] = task["isovalue"]
     blob = json.dumps([FORMAT, ident], sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
@@ -215,12 +237,13 @@ def task_key(task):
 def make_tasks(sweep):
     """One task per (scene, configuration, repetition), in a fixed order."""
     tasks = []
-    for scene in sweep["scenes"]:
+    for scene, iso in ((sc, t) for sc in sweep["scenes"] for t in sweep["isovalues"].get(sc, [""])):
         for m in sweep["methods"]:
             grid_keys = list(m["grid"])
             for n, opt, values in itertools.product(m["n"], m["options"], itertools.product(*m["grid"].values())):
                 for rep in range(sweep["repetitions"]):
-                    t = {"scene": scene, "scene_path": sweep["scene_paths"][scene], "algorithm": m["algorithm"],
+                    t = {"scene": scene, "isovalue": iso, "scene_path": sweep["scene_paths"][scene],
+                         "algorithm": m["algorithm"],
                          "n": n, "options": opt, "params": dict(zip(grid_keys, values)), "rep": rep,
                          "timing_replays": m["timing_replays"] or sweep["timing_replays"]}
                     t["key"] = task_key(t)
@@ -234,7 +257,8 @@ def config_label(row):
     if row["algorithm"] in HRI_ALGORITHMS:
         label += f" n={row['n']} {row['options']}"
     params = row["params"] if isinstance(row["params"], dict) else json.loads(row["params"] or "{}")
-    return label + "".join(f" {k}={v}" for k, v in sorted(params.items()))
+    iso = f" isovalue={row['isovalue']}" if row.get("isovalue", "") != "" else ""
+    return label + "".join(f" {k}={v}" for k, v in sorted(params.items())) + iso
 
 
 # ---------------------------------------------------------------------------------------------
@@ -256,15 +280,16 @@ def _host():
     return _HOST
 
 
-def _scene(path):
-    """The prepared scene and the seconds this call spent preparing it (0 when cached)."""
+def _scene(path, isovalue=""):
+    """The prepared scene (at `isovalue` unless "": the scene's own) and the seconds this call
+    spent preparing it (0 when cached)."""
     import isotouch
 
-    if path in _SCENES:
-        return _SCENES[path], 0.0
+    if (path, isovalue) in _SCENES:
+        return _SCENES[(path, isovalue)], 0.0
     t0 = time.perf_counter()
-    _SCENES[path] = isotouch.stroke_scene(path)
-    return _SCENES[path], time.perf_counter() - t0
+    _SCENES[(path, isovalue)] = isotouch.stroke_scene(path, tau=None if isovalue == "" else isovalue)
+    return _SCENES[(path, isovalue)], time.perf_counter() - t0
 
 
 def _apply_option(p, option):
@@ -318,7 +343,7 @@ def run_task(task):
     import isotouch
 
     t0 = time.perf_counter()
-    scene, prepare_s = _scene(task["scene_path"])
+    scene, prepare_s = _scene(task["scene_path"], task["isovalue"])
     algorithm = "hri" if task["algorithm"] in HRI_ALGORITHMS else task["algorithm"]
     figures = isotouch.measure_stroke(scene, algorithm, renderer_params(scene, task), task["timing_replays"])
     row = {k: task[k] for k in IDENTITY}
@@ -434,19 +459,20 @@ def plot_error_vs_time(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+    scenes = list(dict.fromkeys((r["scene"], r["isovalue"]) for r in rows))
     cols = min(3, len(scenes))
     lines = (len(scenes) + cols - 1) // cols
     fig, axes = plt.subplots(lines, cols, figsize=(4.2 * cols, 3.4 * lines), squeeze=False)
     colours = dict(zip(ALGORITHMS, ("tab:blue", "tab:purple", "tab:red", "tab:green")))
-    for ax, scene in zip(axes.flat, scenes):
+    for ax, (scene, iso) in zip(axes.flat, scenes):
         for alg in ALGORITHMS:
             pts = [(_f(r, "tick_ns_mean"), _f(r, "surface_err_rms_m") / _f(r, "voxel_m"))
-                   for r in rows if r["scene"] == scene and r["algorithm"] == alg]
+                   for r in rows if (r["scene"], r["isovalue"]) == (scene, iso) and r["algorithm"] == alg]
             pts = [(x, y) for x, y in pts if x > 0 and y > 0]  # log axes
             if pts:
                 ax.scatter(*zip(*pts), s=14, color=colours[alg], label=ALGORITHMS[alg])
-        ax.set(xscale="log", yscale="log", title=scene, xlabel="mean tick [ns]", ylabel="surface error RMS [voxel]")
+        title = scene + (f" at isovalue {iso}" if iso != "" else "")
+        ax.set(xscale="log", yscale="log", title=title, xlabel="mean tick [ns]", ylabel="surface error RMS [voxel]")
         ax.legend(fontsize=7)
     for ax in list(axes.flat)[len(scenes):]:
         ax.set_visible(False)

@@ -15,6 +15,8 @@
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/hri.h"
 
+#include <pybind11/stl.h>
+
 namespace isotouch::python {
 namespace {
 
@@ -159,7 +161,8 @@ servo::BaselineParams table1_baseline(const eval::SweepScene& s) {
   return bp;
 }
 
-std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const std::string& device) {
+std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const std::string& device,
+                                               std::optional<double> tau) {
   py::gil_scoped_release nogil;
   std::unique_ptr<engine::VulkanContext> vk;
   if (device != "cpu") {
@@ -170,7 +173,7 @@ std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const st
     vk = std::move(*ctx.value);
   }
   std::ostringstream log;
-  return std::make_shared<eval::SweepScene>(eval::prepare_sweep_scene(name, vk.get(), log));
+  return std::make_shared<eval::SweepScene>(eval::prepare_sweep_scene(name, vk.get(), log, tau));
 }
 
 /// One task of the error-against-time sweep, as `isotouch report` measures it: the scene's
@@ -305,9 +308,10 @@ stroke, as `bench table1` and the sweeps replay it: samples, and the HIP per tic
       .def_readonly("voxel_m", &eval::SweepScene::voxel_m, "smallest spacing [m]")
       .def("reference_params", &eval::reference_params,
            "the reference renderer's HRI parameters on this scene (n = 1, exact root and gradient)");
-  m.def("stroke_scene", &stroke_scene, py::arg("name"), py::arg("device") = "cpu",
+  m.def("stroke_scene", &stroke_scene, py::arg("name"), py::arg("device") = "cpu", py::arg("tau") = py::none(),
         "sphere, box, three-spheres, knot, head, chest or a scene JSON path; samples on the CPU reference "
-        "(device='cpu') or a Vulkan device ('' = default)");
+        "(device='cpu') or a Vulkan device ('' = default); tau: another isovalue for a scene file (volume "
+        "units; ValueError for the exact shapes)");
 }
 
 }  // namespace

@@ -158,6 +158,12 @@ def test_interrupt_and_restart_skips_the_written_tasks(tmp_path, serial):
     ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "colour": 1}, "colour", "1"),
     ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "figures": ["smell"]}, "figures", '["smell"]'),
     ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "figures": []}, "figures", "[]"),
+    ({"scenes": ["sphere"], "methods": [{"algorithm": "hri"}], "isovalues": {"sphere": [0.4]}}, "isovalues.sphere",
+     "[0.4]"),
+    ({"scenes": ["head"], "methods": [{"algorithm": "hri"}], "isovalues": {"chest": [300]}}, "isovalues.chest", "[300]"),
+    ({"scenes": ["head"], "methods": [{"algorithm": "hri"}], "isovalues": {"head": ["bone"]}}, "isovalues.head",
+     '["bone"]'),
+    ({"scenes": ["head"], "methods": [{"algorithm": "hri"}], "isovalues": [1150]}, "isovalues", "[1150]"),
 ])
 def test_a_bad_sweep_file_is_one_clear_error(tmp_path, spec, field, value):
     path = write_spec(tmp_path, spec)
@@ -184,6 +190,29 @@ def test_the_figures_asked_for_are_the_summarys_columns(tmp_path):
     assert 0 < float(cells[3]) < 1 and cells[4] == row["pop_throughs"]
     assert not (tmp_path / "out/error_vs_time.png").exists()
     assert "surface_err_rms_m" in row and "tick_ns_mean" in row  # the file keeps every figure
+
+
+def test_a_scene_file_measured_at_other_isovalues(tmp_path):
+    """The head at its own isovalue named explicitly gives the figures of the head as it is
+    (stroke and reference re-made at that isovalue: the same ones); at another isovalue the
+    stroke and its truth are those of another surface; each isovalue its own row and key."""
+    spec = {"scenes": ["head"], "methods": [{"algorithm": "blezek"}], "timing_replays": 1,
+            "isovalues": {"head": [1150, 1600]}}
+    r = run_cli(write_spec(tmp_path, spec), "--serial", "--out", tmp_path / "iso", timeout=120)
+    assert r.returncode == 0, r.stderr
+    base = dict(spec)
+    del base["isovalues"]
+    r = run_cli(write_spec(tmp_path, base, "own.json"), "--serial", "--out", tmp_path / "own", timeout=120)
+    assert r.returncode == 0, r.stderr
+    (own,) = rows_of(tmp_path / "own")
+    at = {float(r["isovalue"]): r for r in rows_of(tmp_path / "iso")}
+    assert set(at) == {1150.0, 1600.0} and own["isovalue"] == ""
+    assert len({own["key"], at[1150.0]["key"], at[1600.0]["key"]}) == 3
+    same = [c for c in sw.FIGURES]
+    assert {c: at[1150.0][c] for c in same} == {c: own[c] for c in same}
+    assert at[1600.0]["contact_ticks"] != own["contact_ticks"] or at[1600.0]["surface_err_rms_m"] != own["surface_err_rms_m"]
+    table = (tmp_path / "iso/summary.md").read_text()
+    assert "Blezek-Robb isovalue=1150.0" in table and "Blezek-Robb isovalue=1600.0" in table
 
 
 def test_the_isotouch_command_runs_the_same_sweep(tmp_path, serial):

@@ -108,7 +108,7 @@ PolhemSpec parse_polhem_spec(const std::string& arg) {
 std::string polhem_config_note(const PolhemSpec& s) {
   const bool dflt = s.config == hid::polhem::kDefaultConfig;
   return std::string("kinematics ") + hid::polhem::config_name(s.config) +
-         (dflt ? " (the default: upstream's USB example opens it; config=v1 for a polhem_v1)" : " (config=)") +
+         (dflt ? " (the default: upstream's USB example opens it; config=v1 for a polhem_v1)" : " (config=v1)") +
          ", from " + hid::polhem::kConfigSource;
 }
 

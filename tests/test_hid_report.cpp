@@ -289,8 +289,8 @@ TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
       ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
       EXPECT_EQ(r.status, DeviceStatus::kFault);
     }
-    // Every pose of a v3 unit reads beyond the v1's reach; a v1 unit is caught where the
-    // v3 linkage cannot close (toward +x), not at its centre.
+    // These four poses of a v3 unit read beyond the v1's reach; a v1 unit is caught where
+    // the v3 linkage cannot close (toward +x), not at its centre.
     EXPECT_EQ(caught, host == polhem::Config::kV1 ? 4 : 2) << polhem::config_name(host);
   }
 }

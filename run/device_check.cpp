@@ -106,6 +106,8 @@ int check_device(const DeviceCheckOptions& o, std::istream& in, std::ostream& ou
   Vec3 rest;
   if (!read_pose(*dev, o.read_seconds, rest, out)) {
     out << "check: the pose was not finite or not fresh (status above): no force will be rendered\n";
+    if (const auto* r = dynamic_cast<const servo::ReportDevice*>(dev.get()); r && !r->last_refusal().empty())
+      out << "check: " << r->last_refusal() << "\n";  // the reason the device gave or its protocol found
     return 1;
   }
   const double k = std::min(o.wall_stiffness_n_per_m, 0.1 * c.max_stiffness_n_per_m);

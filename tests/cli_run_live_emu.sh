@@ -125,4 +125,13 @@ for unit in v3 v1; do
     fail "a polhem_$unit unit driven as polhem_$host: the mismatch is not named"
   grep -q "max |F| 0 N$" "$out/emu_mismatch_$unit.log" || fail "a polhem_$unit unit driven as polhem_$host received current"
 done
+# `isotouch devices --check` of a v3 unit as polhem_v1: the pose is refused and the check says why.
+"$emu" --socket "$sock" --polhem --hold 0,0,0 --seconds 20 > "$out/emu_check.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+echo n | "$exe" devices --check "polhem:emu:$sock,config=v1" --seconds 0.5 > "$out/check.log" 2>&1; rc=$?
+kill -TERM "$emu_pid"; wait "$emu_pid"
+cat "$out/check.log"
+[ "$rc" -eq 1 ] && grep -q "^check: .*the unit is not a polhem_v1 (a polhem_v3? --haptic polhem:...,config=v3)" "$out/check.log" ||
+  fail "devices --check of a v3 unit as polhem_v1: exit $rc, or the reason is not given"
 echo "PASS run --live --haptic emu"

@@ -25,8 +25,13 @@ std::unique_ptr<servo::HapticDeviceIO> open_for_check(const std::string& spec, s
   const std::string kind = spec.substr(0, colon), arg = colon == std::string::npos ? "" : spec.substr(colon + 1);
   if (kind == "openhaptics" || kind == "forcedimension") return open_sdk_device(kind, arg, what);
   std::unique_ptr<servo::ReportDevice> d;
-  if (kind == "hid" || kind == "polhem") {
-    d = servo::open_hid_device(arg, 0, kind == "polhem" ? "polhem" : "");
+  std::string note;
+  if (kind == "polhem") {
+    const servo::PolhemSpec ps = servo::parse_polhem_spec(arg);
+    d = servo::open_polhem(ps);
+    note = "; " + servo::polhem_config_note(ps);
+  } else if (kind == "hid") {
+    d = servo::open_hid_device(arg);
   } else if (kind == "emu") {
     d = std::make_unique<servo::ReportDevice>(std::make_unique<servo::SocketLink>(arg),
                                               std::make_unique<servo::V1Protocol>());
@@ -34,7 +39,7 @@ std::unique_ptr<servo::HapticDeviceIO> open_for_check(const std::string& spec, s
   } else {
     throw std::invalid_argument("--check " + spec + ": kinds: openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:...");
   }
-  what = d->name() + " (" + d->caps().name + ")";
+  what = d->name() + " (" + d->caps().name + ")" + note;
   return d;
 }
 
@@ -101,6 +106,8 @@ int check_device(const DeviceCheckOptions& o, std::istream& in, std::ostream& ou
   Vec3 rest;
   if (!read_pose(*dev, o.read_seconds, rest, out)) {
     out << "check: the pose was not finite or not fresh (status above): no force will be rendered\n";
+    if (const auto* r = dynamic_cast<const servo::ReportDevice*>(dev.get()); r && !r->last_refusal().empty())
+      out << "check: " << r->last_refusal() << "\n";  // the reason the device gave or its protocol found
     return 1;
   }
   const double k = std::min(o.wall_stiffness_n_per_m, 0.1 * c.max_stiffness_n_per_m);

@@ -16,7 +16,7 @@
 namespace isotouch::run {
 namespace {
 constexpr const char* kKinds =
-    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:VID:PID[:SERIAL], polhem:/dev/hidrawN, "
+    "sim, null, playback:FILE, hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:VID:PID[:SERIAL]|/dev/hidrawN|emu:SOCKET[,config=v1|v3], "
     "emu:SOCKET, openhaptics[:NAME], forcedimension[:INDEX], igtl:HOST:PORT[:STREAM]";
 
 std::string num(double v) {
@@ -44,8 +44,13 @@ HapticDevice open_report(const std::string& kind, const std::string& arg, int fi
   HapticDevice d;
   d.kind = kind;
   std::unique_ptr<servo::ReportDevice> dev;
-  if (kind == "hid" || kind == "polhem") {
-    dev = servo::open_hid_device(arg, fifo, kind == "polhem" ? "polhem" : "");
+  std::string note;
+  if (kind == "polhem") {
+    const servo::PolhemSpec ps = servo::parse_polhem_spec(arg);
+    dev = servo::open_polhem(ps, fifo);
+    note = "; " + servo::polhem_config_note(ps);
+  } else if (kind == "hid") {
+    dev = servo::open_hid_device(arg, fifo);
   } else {
     servo::ReportDeviceOptions o;
     o.fifo_priority = fifo;
@@ -54,7 +59,7 @@ HapticDevice open_report(const std::string& kind, const std::string& arg, int fi
     dev->open();
   }
   const servo::DeviceCaps c = dev->caps();
-  d.description = dev->name() + " (" + c.name + ", " + num(c.native_rate_hz) + " Hz, max " + num(c.max_force_n) + " N)";
+  d.description = dev->name() + " (" + c.name + ", " + num(c.native_rate_hz) + " Hz, max " + num(c.max_force_n) + " N)" + note;
   if (!dev->warning().empty()) d.description += "; warning: " + dev->warning();
   d.report = dev.get();
   d.io = std::move(dev);

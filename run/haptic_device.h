@@ -3,7 +3,9 @@
 //   sim              the scene's simulated device pulled by its scripted hand (default)
 //   null             zero force, the HIP fixed where the scene's script starts
 //   playback:FILE    replays the HIP of a trace.csv (`isotouch run`) or a recording (.rec)
-//   hid:VID:PID[:SERIAL] | hid:/dev/hidrawN   a USB HID device (isotouch protocol v1, Polhem)
+//   hid:VID:PID[:SERIAL] | hid:/dev/hidrawN   a USB HID device (isotouch protocol v1)
+//   polhem:VID:PID[:SERIAL] | polhem:/dev/hidrawN | polhem:emu:SOCKET [,config=v1|v3]   a Polhem
+//                    with that configuration's kinematics (default v3; the description names its source)
 //   emu:SOCKET       isotouch-devemu on a Unix-domain socket (protocol v1)
 //   openhaptics[:NAME], forcedimension[:INDEX]   vendor SDKs loaded at run time (sdk_haptic_device.h)
 //   igtl:HOST:PORT[:STREAM]  an OpenIGTLink source (a PlusServer): service/igtl_device.h

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <stdexcept>
 
 #include "isotouch/servo/hid_report.h"
 
@@ -41,8 +42,10 @@ std::size_t V1Protocol::encode_output(const Vec3& force_n, bool enable, std::uin
 }
 
 std::string PolhemProtocol::handshake(ReportLink& link, DeviceCaps& caps) {
-  (void)link;  // the Polhem has no feature report: its capabilities are polhem_v1's
-  caps = hid::polhem::caps();
+  (void)link;  // the Polhem has no feature report: its capabilities are its configuration's
+  caps = hid::polhem::caps(config_);
+  mismatch_.clear();  // opened again: judged anew
+  faulted_.store(false);
   return {};
 }
 
@@ -50,9 +53,13 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
   hid::polhem::Input in;
   if (hid::Decoded d = hid::polhem::decode(bytes, in); !d) return d.error;
   encoders_.store(in.encoder);
-  r.position_m = hid::polhem::position_m(in.encoder);
+  r.position_m = hid::polhem::position_m(in.encoder, config_);
   r.buttons = in.encoder[3] > 5000 ? 1u : 0u;
-  r.status = DeviceStatus::kOk;
+  // Calibrated (it does not ask), a pose the configuration cannot give: the unit is of the
+  // other one. Latched: its positions are wrong and its motors would push the wrong way.
+  if (in.info == 0 && mismatch_.empty()) mismatch_ = hid::polhem::check_pose(r.position_m, config_);
+  if (!mismatch_.empty()) faulted_.store(true);
+  r.status = mismatch_.empty() ? DeviceStatus::kOk : DeviceStatus::kFault;
   // Asked again after a command was sent: it was lost (the firmware keeps only the last
   // queued report), so it is sent again, once per report that asks, until it stops asking.
   calibrate_ = in.info == 1;
@@ -62,7 +69,8 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
 std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
                                           std::span<std::uint8_t> buf) {
   (void)answers;  // the Polhem's reports carry no sequence
-  const Vec3 amps = enable ? hid::polhem::motor_currents_a(force_n, encoders_.load()) : Vec3{};
+  const bool on = enable && !faulted_.load();
+  const Vec3 amps = on ? hid::polhem::motor_currents_a(force_n, encoders_.load(), config_) : Vec3{};
   const auto b = hid::polhem::encode_currents(amps);
   buf[0] = 0;  // no report IDs: hidapi wants a leading 0
   std::copy(b.begin(), b.end(), buf.begin() + 1);
@@ -72,10 +80,36 @@ std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std:
 std::size_t PolhemProtocol::pending_command(std::span<std::uint8_t> buf) {
   if (!calibrate_) return 0;
   calibrate_ = false;  // once per report that asks
-  const auto b = hid::polhem::encode_calibrate();
+  const auto b = hid::polhem::encode_calibrate(config_);
   buf[0] = 0;
   std::copy(b.begin(), b.end(), buf.begin() + 1);
   return b.size() + 1;
+}
+
+PolhemSpec parse_polhem_spec(const std::string& arg) {
+  PolhemSpec s;
+  const std::size_t comma = arg.find(',');
+  s.link = arg.substr(0, comma);
+  if (s.link.empty()) throw std::invalid_argument("--haptic polhem:" + arg + ": no device before the options");
+  for (std::size_t at = comma; at != std::string::npos;) {
+    const std::size_t next = arg.find(',', at + 1);
+    const std::string opt = arg.substr(at + 1, next == std::string::npos ? std::string::npos : next - at - 1);
+    const std::size_t eq = opt.find('=');
+    const std::string key = opt.substr(0, eq), value = eq == std::string::npos ? "" : opt.substr(eq + 1);
+    if (key != "config")
+      throw std::invalid_argument("--haptic polhem:" + arg + ": unknown option '" + opt + "' (options: config=v1|v3)");
+    if (!hid::polhem::parse_config(value, s.config))
+      throw std::invalid_argument("--haptic polhem:" + arg + ": config '" + value + "' is neither v1 nor v3");
+    at = next;
+  }
+  return s;
+}
+
+std::string polhem_config_note(const PolhemSpec& s) {
+  const bool dflt = s.config == hid::polhem::kDefaultConfig;
+  return std::string("kinematics ") + hid::polhem::config_name(s.config) +
+         (dflt ? " (the default: upstream's USB example opens it; config=v1 for a polhem_v1)" : " (config=v1)") +
+         ", from " + hid::polhem::kConfigSource;
 }
 
 std::unique_ptr<DeviceProtocol> protocol_for(std::uint16_t vid, std::uint16_t pid) {

@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include "isotouch/servo/hid_report.h"
 #include "isotouch/servo/latest_value.h"
 #include "isotouch/servo/report_device.h"
 
@@ -28,14 +29,18 @@ class V1Protocol final : public DeviceProtocol {
   std::uint32_t sequence_ = 0;  // writer thread
 };
 
-/// The Polhem v1 (haptikfabriken): 14-byte reports without ID, encoder counts in, motor
-/// currents out, the polhem_v1 kinematics on the host. No sequence numbers or timestamps.
-/// Button 0: encoder d above 5000 (haptikfabrikenapi's convention). While the device flags
-/// its calibration switch (info 1), the calibration command follows each of its reports (the
-/// firmware keeps only its last queued report, so a command can be lost; upstream sends it in
-/// place of a current command until the device stops asking).
+/// The Polhem (haptikfabriken): 14-byte reports without ID, encoder counts in, motor
+/// currents out, the kinematics of its configuration (polhem_v1 or polhem_v3) on the host.
+/// No sequence numbers or timestamps. Button 0: encoder d above 5000 (haptikfabrikenapi's
+/// convention). While the device flags its calibration switch (info 1), the calibration
+/// command (the configuration's counts) follows each of its reports (the firmware keeps only
+/// its last queued report, so a command can be lost; upstream sends it in place of a current
+/// command until the device stops asking). Once calibrated, a position the configuration
+/// cannot give (hid::polhem::check_pose: the unit is of the other configuration) faults the
+/// device until it is opened again: zero current, and fault() says why.
 class PolhemProtocol final : public DeviceProtocol {
  public:
+  explicit PolhemProtocol(hid::polhem::Config config = hid::polhem::kDefaultConfig) : config_(config) {}
   const char* name() const override { return "polhem"; }
   bool sequenced() const override { return false; }
   std::string handshake(ReportLink& link, DeviceCaps& caps) override;
@@ -43,11 +48,28 @@ class PolhemProtocol final : public DeviceProtocol {
   std::size_t encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
                             std::span<std::uint8_t> buf) override;
   std::size_t pending_command(std::span<std::uint8_t> buf) override;
+  std::string fault() const override { return mismatch_; }
+  hid::polhem::Config config() const { return config_; }
 
  private:
+  hid::polhem::Config config_;
   LatestValue<std::array<std::int16_t, 6>> encoders_;  // reader -> writer (the Jacobian's pose)
+  std::atomic<bool> faulted_{false};                    // reader -> writer: no current
   bool calibrate_ = false;                              // reader thread: the last report asked
+  std::string mismatch_;                                // reader thread: why it faulted
 };
+
+/// `--haptic polhem:` parsed: "LINK[,config=v1|v3]", LINK a USB VID:PID[:SERIAL], a
+/// /dev/hidrawN path or emu:SOCKET (isotouch-devemu --polhem).
+struct PolhemSpec {
+  std::string link;
+  hid::polhem::Config config = hid::polhem::kDefaultConfig;
+};
+/// @throws std::invalid_argument naming the option and its value.
+PolhemSpec parse_polhem_spec(const std::string& arg);
+/// "kinematics polhem_v3 (default; from forsslund/hfabapi ...)": which configuration is
+/// active and where it comes from, for the device's description.
+std::string polhem_config_note(const PolhemSpec& s);
 
 /// The protocol for a USB VID:PID, or null if none is known.
 std::unique_ptr<DeviceProtocol> protocol_for(std::uint16_t vid, std::uint16_t pid);

@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "isotouch/servo/device_protocols.h"
+#include "isotouch/servo/socket_link.h"
 
 namespace isotouch::servo {
 namespace {
@@ -99,7 +100,8 @@ int HidLink::get_feature(std::uint8_t id, std::span<std::uint8_t> buf) {
   return hid_get_feature_report(static_cast<hid_device*>(dev_), buf.data(), buf.size());
 }
 
-std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority, const std::string& protocol) {
+std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority, const std::string& protocol,
+                                              hid::polhem::Config polhem_config) {
   std::uint16_t vid = 0, pid = 0;
   std::string serial, path;
   if (!spec.empty() && spec[0] == '/') {
@@ -124,7 +126,7 @@ std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_
                                 " is the mbed HID library's default USB ID, not only the Polhem's: if this is a Polhem, "
                                 "say so: --haptic polhem:" + spec);
   std::unique_ptr<DeviceProtocol> p =
-      kind == "polhem" ? std::make_unique<PolhemProtocol>() : protocol_for(vid, pid);
+      kind == "polhem" ? std::make_unique<PolhemProtocol>(polhem_config) : protocol_for(vid, pid);
   if (!p)
     throw std::invalid_argument("--haptic hid:" + spec + ": no known protocol for " + hex4(vid) + ":" + hex4(pid) +
                                 " (known: isotouch protocol v1 " + hex4(kV1Vid) + ":" + hex4(kV1Pid) +
@@ -132,6 +134,16 @@ std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_
   ReportDeviceOptions o;
   o.fifo_priority = fifo_priority;
   auto dev = std::make_unique<ReportDevice>(std::make_unique<HidLink>(vid, pid, serial, path), std::move(p), o);
+  dev->open();
+  return dev;
+}
+
+std::unique_ptr<ReportDevice> open_polhem(const PolhemSpec& spec, int fifo_priority) {
+  if (spec.link.rfind("emu:", 0) != 0) return open_hid_device(spec.link, fifo_priority, "polhem", spec.config);
+  ReportDeviceOptions o;
+  o.fifo_priority = fifo_priority;
+  auto dev = std::make_unique<ReportDevice>(std::make_unique<SocketLink>(spec.link.substr(4)),
+                                            std::make_unique<PolhemProtocol>(spec.config), o);
   dev->open();
   return dev;
 }

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/servo/device_protocols.h"
 #include "isotouch/servo/report_device.h"
 
 namespace isotouch::servo {
@@ -50,6 +51,11 @@ class HidLink final : public ReportLink {
 /// std::invalid_argument on a bad spec or an unknown protocol, std::runtime_error if it
 /// cannot be opened (the message names it and says why: permissions, not present).
 std::unique_ptr<ReportDevice> open_hid_device(const std::string& spec, int fifo_priority = 0,
-                                              const std::string& protocol = "");
+                                              const std::string& protocol = "",
+                                              hid::polhem::Config polhem_config = hid::polhem::kDefaultConfig);
+/// `--haptic polhem:LINK[,config=v1|v3]` (parse_polhem_spec): a Polhem over USB HID, or
+/// over isotouch-devemu's socket (LINK emu:SOCKET), with that configuration's kinematics.
+/// @throws as open_hid_device.
+std::unique_ptr<ReportDevice> open_polhem(const PolhemSpec& spec, int fifo_priority = 0);
 
 }  // namespace isotouch::servo

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 namespace isotouch::servo::hid {
@@ -187,27 +188,91 @@ Decoded decode_caps(std::span<const std::uint8_t> b, DeviceCaps& out) {
 
 // ---------------------------------------------------------------------------------------
 namespace polhem {
+const char* const kConfigSource =
+    "forsslund/hfabapi @aadabaa82ce9 (2023-04-05): hfab_math.h Kinematics::configuration::polhem_v1/polhem_v3, "
+    "hfab_kinematics.cpp calculate_pose/computePosition/computeMotorAmps, hfab_polhem.h polhemKinematics";
+
 namespace {
-// haptikfabrikenapi's Kinematics::configuration::polhem_v1 (lengths [m], counts per rev).
-constexpr double kCapstan = 0.010, kBodyA = 0.180, kBodyBC = 0.100;
-constexpr double kLn = 0.058, kLb = 0.174, kLc = 0.133;
-constexpr double kOrigin[3] = {0.140, 0.0, 0.100};
-constexpr double kCpr = 2000, kTorqueConstant = 0.0538;  // [N m / A]
-constexpr double kDir = -1.0;  // motor_and_body_aligned a, b, c = true
 constexpr double kPi = 3.14159265358979323846;
+
+/// One of haptikfabriken's Kinematics::configuration, the fields the maths use.
+struct Params {
+  double capstan[3], body[3];  ///< diameter_capstan_a-c, diameter_body_a-c [m]
+  double length[3];            ///< length_body_a-c [m] (the serial chain; polhem_v3 uses its linkage's)
+  double origin[3];            ///< workspace_origin_x-z [m]
+  double radius;               ///< workspace_radius [m]
+  double torque_constant[3];   ///< torque_constant_motor_a-c [N m / A]
+  double cpr[3];               ///< cpr_encoder_a-c [counts per motor turn]
+  double max_force, max_stiffness, max_damping;  ///< [N], [N/m], [N s/m]
+  std::int16_t calibrate[6];   ///< calibrate_enc_a-f [counts]
+  bool aligned[3];             ///< motor_and_body_aligned_a-c
+};
+// hfab_math.h: polhem_v1() (variant 2) and polhem_v3() (variant 3, "2020-12-21").
+constexpr Params kV1{{0.010, 0.010, 0.010}, {0.180, 0.100, 0.100}, {0.058, 0.174, 0.133}, {0.140, 0.0, 0.100},
+                     0.100, {0.0538, 0.0538, 0.0538}, {2000, 2000, 2000}, 5.0, 800.0, 8.0,
+                     {0, 0, -5000, 0, 0, 0}, {true, true, true}};
+constexpr Params kV3{{0.0288534, 0.0136981, 0.0137281}, {0.175, 0.100, 0.100}, {0.1, 0.165, 0.1308},
+                     {0.2045, 0.0, 0.0325}, 0.150, {0.0603, 0.0538, 0.0538}, {4096, 4096, 4096}, 5.0, 2000.0, 1.0,
+                     {8312, -10366, 19764, 0, 30, 0}, {false, true, false}};
+const Params& params(Config c) { return c == Config::kV3 ? kV3 : kV1; }
+
+// hfab_polhem.h: the Polhem's five-bar linkage [m].
+constexpr double kL0 = 34e-3, kL1 = 165e-3, kL2 = 25e-3, kL3 = 190e-3, kL4 = 34e-3, kL5 = 130.8e-3;
 
 struct Angles {
   double a, b, c;  ///< body angles theta_A, theta_B, theta_C [rad]
 };
-Angles angles(double a, double b, double c) {
-  auto body = [](double counts, double body_d) { return kDir * (2 * kPi * counts / kCpr) * kCapstan / body_d; };
-  return {body(a, kBodyA), body(b, kBodyBC), body(c, kBodyBC)};
+/// calculate_pose: motor angle through the capstan ratio, the motor's direction by
+/// motor_and_body_aligned (aligned: -1).
+Angles angles(const Params& k, double a, double b, double c) {
+  auto body = [&](int i, double counts) {
+    return (k.aligned[i] ? -1.0 : 1.0) * (2 * kPi * counts / k.cpr[i]) * k.capstan[i] / k.body[i];
+  };
+  return {body(0, a), body(1, b), body(2, c)};
 }
-Angles angles(const std::array<std::int16_t, 6>& e) { return angles(e[0], e[1], e[2]); }
-Vec3 position_of(const Angles& t) {
-  const double r = kLb * std::sin(t.b) + kLc * std::sin(t.c);
-  return Vec3{std::cos(t.a) * r - kOrigin[0], std::sin(t.a) * r - kOrigin[1],
-              kLn + kLb * std::cos(t.b) - kLc * std::cos(t.c) - kOrigin[2]};
+/// polhemKinematics: the handle of the linkage driven by theta_B and theta_C, turned by
+/// theta_A (NaN where the linkage cannot close).
+Vec3 linkage(const Angles& t) {
+  const double l1c = kL1 * std::cos(t.b), l1s = kL1 * std::sin(t.b);
+  const double a = kL0 + l1c;
+  const double sq1 = (a - kL2 * std::cos(t.c)) * (a - kL2 * std::cos(t.c));
+  const double sq2 = (l1s - kL2 * std::sin(t.c)) * (l1s - kL2 * std::sin(t.c));
+  const double sq3 = a * a, sq4 = l1s * l1s;
+  const double r1 = std::sqrt(sq1 + sq2), r2 = std::sqrt(sq3 + sq4);
+  const double x1 = 2 * r2 * r1, x2 = -kL3 * kL3 + kL4 * kL4 + sq1 + sq2, x3 = 2 * kL1 * r2, x4 = 2 * kL4 * r1;
+  const double x5 = -kL0 * kL0 + kL1 * kL1 + sq3 + sq4, x6 = -kL2 * kL2 + sq1 + sq2 + sq3 + sq4;
+  const double lambda = t.b - std::acos(x5 / x3) - std::acos(x2 / x4) - std::acos(x6 / x1);
+  const double reach = kL0 / 2 + l1c + kL5 * std::cos(lambda);
+  return Vec3{reach * std::cos(t.a), reach * std::sin(t.a), l1s + kL5 * std::sin(lambda)};
+}
+/// computePosition: the serial chain (polhem_v1) or the linkage (polhem_v3), less the origin.
+Vec3 position_of(Config c, const Angles& t) {
+  const Params& k = params(c);
+  const Vec3 origin{k.origin[0], k.origin[1], k.origin[2]};
+  if (c == Config::kV3) return linkage(t) - origin;
+  const double r = k.length[1] * std::sin(t.b) + k.length[2] * std::sin(t.c);
+  return Vec3{std::cos(t.a) * r, std::sin(t.a) * r, k.length[0] + k.length[1] * std::cos(t.b) - k.length[2] * std::cos(t.c)} -
+         origin;
+}
+Vec3 position_of(Config c, const Vec3& counts) { return position_of(c, angles(params(c), counts.x, counts.y, counts.z)); }
+/// Joint torques tau = J^T F: the chain's analytic Jacobian (polhem_v1, gravity constant 0),
+/// or polhemComputeMotorAmps' central differences of the linkage (step 1e-5 rad; its
+/// gravity compensation left out).
+Vec3 joint_torques(Config c, const Angles& t, const Vec3& f) {
+  if (c == Config::kV3) {
+    constexpr double h = 1e-5;
+    auto column = [&](Angles p, Angles m) { return (linkage(p) - linkage(m)) / h; };
+    const Vec3 ja = column({t.a + h / 2, t.b, t.c}, {t.a - h / 2, t.b, t.c});
+    const Vec3 jb = column({t.a, t.b + h / 2, t.c}, {t.a, t.b - h / 2, t.c});
+    const Vec3 jc = column({t.a, t.b, t.c + h / 2}, {t.a, t.b, t.c - h / 2});
+    return Vec3{dot(ja, f), dot(jb, f), dot(jc, f)};
+  }
+  const Params& k = kV1;
+  const double lb = k.length[1], lc = k.length[2];
+  const double r = lb * std::sin(t.b) + lc * std::sin(t.c);
+  return Vec3{-std::sin(t.a) * r * f.x + std::cos(t.a) * r * f.y,
+              lb * std::cos(t.a) * std::cos(t.b) * f.x + lb * std::sin(t.a) * std::cos(t.b) * f.y - lb * std::sin(t.b) * f.z,
+              lc * std::cos(t.a) * std::cos(t.c) * f.x + lc * std::sin(t.a) * std::cos(t.c) * f.y + lc * std::sin(t.c) * f.z};
 }
 /// Solves the 3x3 system with columns `c0, c1, c2` for `rhs` (Cramer); false if singular.
 bool solve3(const Vec3& c0, const Vec3& c1, const Vec3& c2, const Vec3& rhs, Vec3& x) {
@@ -221,7 +286,25 @@ void put16(std::array<std::uint8_t, kReportSize>& b, std::size_t i, std::int16_t
   b[i] = std::uint8_t(std::uint16_t(v));
   b[i + 1] = std::uint8_t(std::uint16_t(v) >> 8);
 }
+std::string mm3(const Vec3& p) {
+  char s[96];
+  std::snprintf(s, sizeof s, "(%.1f, %.1f, %.1f) mm", p.x * 1e3, p.y * 1e3, p.z * 1e3);
+  return s;
+}
 }  // namespace
+
+const char* config_name(Config c) { return c == Config::kV3 ? "polhem_v3" : "polhem_v1"; }
+
+bool parse_config(const std::string& s, Config& c) {
+  if (s == "v1" || s == "polhem_v1") return c = Config::kV1, true;
+  if (s == "v3" || s == "polhem_v3") return c = Config::kV3, true;
+  return false;
+}
+
+std::array<std::int16_t, 6> calibration_counts(Config c) {
+  const Params& k = params(c);
+  return {k.calibrate[0], k.calibrate[1], k.calibrate[2], k.calibrate[3], k.calibrate[4], k.calibrate[5]};
+}
 
 Decoded decode(std::span<const std::uint8_t> b, Input& out) {
   if (b.size() != kReportSize)
@@ -251,10 +334,14 @@ std::array<std::uint8_t, kReportSize> encode_currents(const Vec3& amps) {
   return b;  // command 0: currents
 }
 
-std::array<std::uint8_t, kReportSize> encode_calibrate() {
+std::array<std::uint8_t, kReportSize> encode_calibrate(Config c) {
+  const auto counts = calibration_counts(c);
   std::array<std::uint8_t, kReportSize> b{};
-  put16(b, 6, 1);       // command 1: set the encoder counters
-  put16(b, 12, -5000);  // attr2: encoder c (calibrate_enc_c of polhem_v1); a, b, d-f: 0
+  for (std::size_t i = 0; i < 3; ++i) {
+    put16(b, 8 + 2 * i, counts[i]);  // attr 0-2: encoders a-c
+    put16(b, 2 * i, counts[3 + i]);  // the current fields: encoders d-f
+  }
+  put16(b, 6, 1);  // command 1: set the encoder counters
   return b;
 }
 
@@ -266,11 +353,18 @@ Decoded decode_currents(std::span<const std::uint8_t> b, Vec3& amps) {
   return {};
 }
 
-Vec3 position_m(const std::array<std::int16_t, 6>& e) { return position_of(angles(e)); }
+bool decode_calibrate(std::span<const std::uint8_t> b, std::array<std::int16_t, 6>& counts) {
+  if (b.size() != kReportSize || le16(b, 6) != 1) return false;
+  for (std::size_t i = 0; i < 3; ++i) counts[i] = le16(b, 8 + 2 * i), counts[3 + i] = le16(b, 2 * i);
+  return true;
+}
 
-std::array<std::int16_t, 6> encoders_for(const Vec3& p) {
-  Vec3 q{0, 0, -5000};  // counts a, b, c: the calibration pose
-  auto pos = [](const Vec3& c) { return position_of(angles(c.x, c.y, c.z)); };
+Vec3 position_m(const std::array<std::int16_t, 6>& e, Config c) { return position_of(c, Vec3{double(e[0]), double(e[1]), double(e[2])}); }
+
+std::array<std::int16_t, 6> encoders_for(const Vec3& p, Config c) {
+  const auto home = calibration_counts(c);
+  Vec3 q{double(home[0]), double(home[1]), double(home[2])};
+  auto pos = [c](const Vec3& counts) { return position_of(c, counts); };
   for (int i = 0; i < 100; ++i) {
     const Vec3 e = pos(q) - p, h{1, 0, 0}, k{0, 1, 0}, l{0, 0, 1};
     Vec3 step;
@@ -283,46 +377,70 @@ std::array<std::int16_t, 6> encoders_for(const Vec3& p) {
   return {count(q.x), count(q.y), count(q.z), 0, 0, 0};
 }
 
-Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& e) {
+Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& e, Config c) {
   Vec3 f;
-  if (!solve3(motor_currents_a({1, 0, 0}, e), motor_currents_a({0, 1, 0}, e), motor_currents_a({0, 0, 1}, e), amps, f))
+  if (!solve3(motor_currents_a({1, 0, 0}, e, c), motor_currents_a({0, 1, 0}, e, c), motor_currents_a({0, 0, 1}, e, c),
+              amps, f))
     return {};
   return f;
 }
 
-Vec3 motor_currents_a(const Vec3& f, const std::array<std::int16_t, 6>& e) {
-  const Angles t = angles(e);
-  const double r = kLb * std::sin(t.b) + kLc * std::sin(t.c);
-  // Joint torques tau = J^T F (the gravity constant of polhem_v1 is 0).
-  const double ta = -std::sin(t.a) * r * f.x + std::cos(t.a) * r * f.y;
-  const double tb = kLb * std::cos(t.a) * std::cos(t.b) * f.x + kLb * std::sin(t.a) * std::cos(t.b) * f.y -
-                    kLb * std::sin(t.b) * f.z;
-  const double tc = kLc * std::cos(t.a) * std::cos(t.c) * f.x + kLc * std::sin(t.a) * std::cos(t.c) * f.y +
-                    kLc * std::sin(t.c) * f.z;
-  // Body torque -> motor torque through the capstan ratio -> current.
-  return Vec3{ta * kDir * kCapstan / kBodyA, tb * kDir * kCapstan / kBodyBC, tc * kDir * kCapstan / kBodyBC} /
-         kTorqueConstant;
+Vec3 motor_currents_a(const Vec3& f, const std::array<std::int16_t, 6>& e, Config c) {
+  const Params& k = params(c);
+  const Vec3 tau = joint_torques(c, angles(k, e[0], e[1], e[2]), f);
+  // Body torque -> motor torque through the capstan ratio and the motor's direction -> current.
+  auto amps = [&](int i, double t) {
+    return t * (k.aligned[i] ? -1.0 : 1.0) * k.capstan[i] / k.body[i] / k.torque_constant[i];
+  };
+  return Vec3{amps(0, tau.x), amps(1, tau.y), amps(2, tau.z)};
 }
 
-DeviceCaps caps() {
-  DeviceCaps c;
-  c.name = "Polhem v1";
-  c.dof = 3;
-  c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
-  c.workspace_max_m = Vec3{0.1, 0.1, 0.1};
-  c.max_force_n = 5.0;               // max_linear_force
-  c.max_stiffness_n_per_m = 800.0;   // max_linear_stiffness
-  c.max_damping_n_s_per_m = 8.0;     // max_linear_damping
-  c.native_rate_hz = 1000;
-  c.buttons = 1;
-  c.position_resolution_m = kLb * 2 * kPi / kCpr * kCapstan / kBodyBC;  // one count of encoder b at the tip
-  c.watchdog_s = 0.5;
+double reach_m(Config c) { return norm(position_m(calibration_counts(c), c)) + 0.05; }
+
+std::string check_pose(const Vec3& p, Config c) {
+  const Config other = c == Config::kV3 ? Config::kV1 : Config::kV3;
+  const std::string is_it = std::string(": the unit is not a ") + config_name(c) + " (a " + config_name(other) +
+                            "? --haptic polhem:...,config=" + (other == Config::kV3 ? "v3" : "v1") + ")";
+  if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+    return std::string("Polhem: its encoder counts give no pose under ") + config_name(c) +
+           " (the linkage cannot close there)" + is_it;
+  if (norm(p) > reach_m(c)) {
+    char d[64];
+    std::snprintf(d, sizeof d, "%.0f mm from its workspace origin, beyond its reach (%.0f mm)", norm(p) * 1e3,
+                  reach_m(c) * 1e3);
+    return std::string("Polhem: position ") + mm3(p) + " under " + config_name(c) + " is " + d + is_it;
+  }
+  return {};
+}
+
+DeviceCaps caps(Config c) {
+  const Params& k = params(c);
+  DeviceCaps d;
+  d.name = c == Config::kV3 ? "Polhem v3" : "Polhem v1";
+  d.dof = 3;
+  d.workspace_min_m = Vec3{-k.radius, -k.radius, -k.radius};
+  d.workspace_max_m = Vec3{k.radius, k.radius, k.radius};
+  d.max_force_n = k.max_force;           // max_linear_force
+  d.max_stiffness_n_per_m = k.max_stiffness;  // max_linear_stiffness
+  d.max_damping_n_s_per_m = k.max_damping;    // max_linear_damping
+  d.native_rate_hz = 1000;
+  d.buttons = 1;
+  // The tip's largest move for one count of any motor, at the workspace centre.
+  const auto e = encoders_for(Vec3{}, c);
+  double step = 0;
+  for (std::size_t i = 0; i < 3; ++i) {
+    auto ep = e, em = e;
+    ++ep[i], --em[i];
+    step = std::max(step, norm(position_m(ep, c) - position_m(em, c)) / 2);
+  }
+  d.position_resolution_m = step;
+  d.watchdog_s = 0.5;
   // Lock-step: the firmware answers one report per command, so the newest pose is one USB
   // round trip old (1-2 ms at full speed, more when the host is busy); the servo's default of
   // two periods would call a healthy Polhem stale. 8 ms is four round trips, under the
   // firmware's own 0.5 s watchdog by far.
-  c.stale_timeout_s = 0.008;
-  return c;
+  d.stale_timeout_s = 0.008;
+  return d;
 }
 }  // namespace polhem
 

@@ -75,14 +75,29 @@ std::uint16_t crc16(std::span<const std::uint8_t> bytes);
 // VID 0x1234 PID 0x0006, reports without ID, 14 bytes each way, little-endian int16:
 //   in:  encoder a, b, c, d, e, f [counts], info (1: calibration requested)
 //   out: motor current a, b, c [mA], command (0: currents, 1: set encoders), attr 0..2
-// The host computes position and motor currents with the "polhem_v1" kinematics of
-// haptikfabrikenapi (the WoodenHaptics serial chain, gravity constant 0). The firmware turns
-// the motors off 0.5 s after the last output report.
+// The host computes position and motor currents with one of two kinematic configurations,
+// polhem_v1 (the WoodenHaptics serial chain) or polhem_v3 (the Polhem's five-bar linkage),
+// both taken from one upstream commit (kConfigSource). The firmware turns the motors off
+// 0.5 s after the last output report.
 // ---------------------------------------------------------------------------------------
 namespace polhem {
 constexpr std::uint16_t kVid = 0x1234, kPid = 0x0006;
 constexpr std::size_t kReportSize = 14;
 constexpr double kMaxCurrentA = 2.0;  ///< the host caps each motor here (ESCON 24/4)
+
+/// The kinematic configuration of the unit (haptikfabriken's Kinematics::configuration).
+enum class Config { kV1, kV3 };
+/// What the source commit's USB example opens (hfab_api.cpp: polhem_v3()).
+constexpr Config kDefaultConfig = Config::kV3;
+/// Where both configurations and their maths come from: repository, commit, date, files.
+extern const char* const kConfigSource;
+/// "polhem_v1" or "polhem_v3".
+const char* config_name(Config c);
+/// "v1", "v3", "polhem_v1" or "polhem_v3" -> `c`; false for anything else.
+bool parse_config(const std::string& s, Config& c);
+/// The counts a, b, c, d, e, f the calibration command sets (calibrate_enc_a..f): the
+/// unit's calibration pose in its configuration's counts.
+std::array<std::int16_t, 6> calibration_counts(Config c);
 
 struct Input {
   std::array<std::int16_t, 6> encoder{};
@@ -92,24 +107,34 @@ Decoded decode(std::span<const std::uint8_t> bytes, Input& out);
 std::array<std::uint8_t, kReportSize> encode(const Input& in);
 /// The 14 bytes of a current command (each clamped to +-kMaxCurrentA; non-finite: 0).
 std::array<std::uint8_t, kReportSize> encode_currents(const Vec3& amps);
-/// The calibration command: sets the encoder counters to the polhem_v1 calibration pose
-/// (sent when the device's info says its calibration switch was pressed).
-std::array<std::uint8_t, kReportSize> encode_calibrate();
+/// The calibration command: sets the encoder counters to calibration_counts(c) (a-c in
+/// attr 0-2, d-f in the current fields, as upstream sends it).
+std::array<std::uint8_t, kReportSize> encode_calibrate(Config c);
 /// Decodes an output report's currents [A] (command 0 only).
 Decoded decode_currents(std::span<const std::uint8_t> bytes, Vec3& amps);
+/// Decodes a calibration command's counts a-f; false if the report is not one.
+bool decode_calibrate(std::span<const std::uint8_t> bytes, std::array<std::int16_t, 6>& counts);
 
-/// Forward kinematics: encoder counts (a, b, c) -> position, device frame [m].
-Vec3 position_m(const std::array<std::int16_t, 6>& encoder);
-/// Jacobian transpose: force [N] at the end effector -> motor currents [A].
-Vec3 motor_currents_a(const Vec3& force_n, const std::array<std::int16_t, 6>& encoder);
+/// Forward kinematics: encoder counts (a, b, c) -> position, device frame [m] (non-finite
+/// where polhem_v3's linkage cannot close).
+Vec3 position_m(const std::array<std::int16_t, 6>& encoder, Config c);
+/// Jacobian transpose: force [N] at the end effector -> motor currents [A] (no gravity
+/// compensation: zero force is zero current).
+Vec3 motor_currents_a(const Vec3& force_n, const std::array<std::int16_t, 6>& encoder, Config c);
 /// The device side, for the emulator: the encoder counts (a, b, c; d-f 0) whose forward
 /// kinematics give `p` [m, device] (Newton from the calibration pose; rounded to counts).
-std::array<std::int16_t, 6> encoders_for(const Vec3& p);
+std::array<std::int16_t, 6> encoders_for(const Vec3& p, Config c);
 /// The force [N, device] that motor currents `amps` [A] produce at `encoder` (the inverse
 /// of motor_currents_a: its 3x3 map solved).
-Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& encoder);
-/// The Polhem v1's capabilities (workspace: a 0.2 m cube around its origin).
-DeviceCaps caps();
+Vec3 force_from_currents(const Vec3& amps, const std::array<std::int16_t, 6>& encoder, Config c);
+/// The farthest a calibrated unit's handle is from its workspace origin [m]: its calibration
+/// pose (the farthest place upstream puts it) plus 5 cm.
+double reach_m(Config c);
+/// "" if `p` [m, device] (a calibrated unit's position under `c`) can be one, else why not:
+/// no pose (the linkage cannot close) or beyond reach_m: the unit is of the other configuration.
+std::string check_pose(const Vec3& p, Config c);
+/// The capabilities under `c` (workspace: a cube of +-workspace_radius around its origin).
+DeviceCaps caps(Config c);
 }  // namespace polhem
 
 }  // namespace isotouch::servo::hid

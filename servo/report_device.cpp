@@ -263,6 +263,9 @@ void ReportDevice::reader_loop() {
       continue;
     }
     accept(r);
+    if (r.status == DeviceStatus::kFault && !fault_noted_) {  // once: the reader allocates no more
+      if (const std::string why = protocol_->fault(); !why.empty()) note(link_->name() + ": " + why, true), fault_noted_ = true;
+    }
     if (const std::size_t m = protocol_->pending_command(cmd)) send(std::span(cmd.data(), m));
   }
 }

@@ -68,6 +68,10 @@ class DeviceProtocol {
     (void)buf;
     return 0;
   }
+  /// Why decode_input() set DeviceStatus::kFault, when the protocol itself found the fault
+  /// (Polhem: the unit is not of the configured kinematics); "" otherwise. Reader thread;
+  /// noted once as the device's last refusal (the host refuses to drive it).
+  virtual std::string fault() const { return {}; }
 };
 
 /// Counters of the link (reader and writer threads; any thread may read).
@@ -140,7 +144,7 @@ class ReportDevice final : public HapticDeviceIO {
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
-  std::string last_refusal() const;  ///< why the last refused report was refused ("" none)
+  std::string last_refusal() const;  ///< why the last refused report (or the device, by its protocol's fault()) was refused ("" none)
   std::string name() const { return link_->name(); }
   /// "" or a warning about the device's capabilities (no watchdog), valid after open().
   std::string warning() const { return warning_; }
@@ -179,6 +183,7 @@ class ReportDevice final : public HapticDeviceIO {
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
+  bool fault_noted_ = false;                // reader thread: the protocol's fault() was noted
   bool tripped_ = false;                    // reader thread: the last report had the watchdog flag
   mutable std::mutex link_mu_;              // every link call but wait_readable (not the servo)
   mutable std::mutex note_mu_;

@@ -43,7 +43,7 @@ DeviceEmulator::DeviceEmulator(EmuConfig config)
     throw std::invalid_argument("device emulator: rate " + std::to_string(cfg_.rate_hz) + " Hz is not in [1, 8000]");
   stats_.latency_us.reserve(std::size_t(std::max(1.0, cfg_.seconds) * cfg_.rate_hz) + 16);
   log_.resize(cfg_.output_log_size);
-  if (cfg_.polhem) cfg_.caps = servo::hid::polhem::caps();  // its firmware's: 0.5 s watchdog, limits
+  if (cfg_.polhem) cfg_.caps = servo::hid::polhem::caps(cfg_.polhem_config);  // its firmware's: 0.5 s watchdog, limits
 }
 
 DeviceEmulator::~DeviceEmulator() {
@@ -173,9 +173,17 @@ void DeviceEmulator::log_output(std::int64_t now, const Vec3& force_n, bool enab
 }
 
 std::array<std::int16_t, 6> DeviceEmulator::polhem_counts() const {
-  std::array<std::int16_t, 6> e = servo::hid::polhem::encoders_for(dev_.position());
-  if (!polhem_calibrated_)
-    for (std::size_t i = 0; i < 3; ++i) e[i] = std::int16_t(e[i] + cfg_.polhem_offset_counts);
+  namespace ph = servo::hid::polhem;
+  // The counts the unit's own kinematics give here, relative to its calibration pose, plus
+  // what the counters read there: the calibration's counts, or the power-up error.
+  const auto here = ph::encoders_for(dev_.position(), cfg_.polhem_config);
+  const auto home = ph::calibration_counts(cfg_.polhem_config);
+  std::array<std::int16_t, 6> e{};
+  for (std::size_t i = 0; i < 6; ++i) {
+    const long moved = i < 3 ? long(here[i]) - home[i] : 0;  // d-f: no gimbal, it stays where calibrated
+    const long at_home = polhem_calibrated_ ? polhem_set_[i] : i < 3 ? long(home[i]) + cfg_.polhem_offset_counts : 0;
+    e[i] = std::int16_t(std::clamp(moved + at_home, -32768L, 32767L));
+  }
   return e;
 }
 
@@ -187,8 +195,8 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
     ++stats_.outputs_refused;
     return;
   }
-  const int command = std::int16_t(b[6] | (b[7] << 8));
-  if (command == 1) {  // set the encoder counters: calibration
+  std::array<std::int16_t, 6> set{};
+  if (ph::decode_calibrate(b, set)) {  // command 1, set the encoder counters: calibration
     ++stats_.calibrations;
     if (stats_.calibrations <= cfg_.polhem_lose_calibrations) {
       ++stats_.calibrations_lost;  // overwritten before the firmware read it: no answer either
@@ -196,6 +204,7 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
     }
     if (!polhem_calibrated_) stats_.calibrated_ns = now;
     polhem_calibrated_ = true;
+    polhem_set_ = set;
     polhem_owed_ = true;
     return;
   }
@@ -205,7 +214,7 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
     return;
   }
   // The firmware applies the currents; the force they make at the true pose.
-  const Vec3 f = ph::force_from_currents(amps, servo::hid::polhem::encoders_for(dev_.position()));
+  const Vec3 f = ph::force_from_currents(amps, ph::encoders_for(dev_.position(), cfg_.polhem_config), cfg_.polhem_config);
   const bool on = norm(amps) > 0;
   log_output(now, f, on, 0);
   last_output_ns_ = now;

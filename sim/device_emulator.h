@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "isotouch/servo/device_io.h"
+#include "isotouch/servo/hid_report.h"
 #include "isotouch/sim/sim_device.h"
 
 namespace isotouch::sim {
@@ -56,12 +57,14 @@ struct EmuConfig {
   EmuFaults faults;
   int fifo_priority = 0;          ///< > 0: run() asks for SCHED_FIFO (firmware-like timing); refused: ignored
   std::size_t output_log_size = 1 << 16;  ///< output reports kept in the log (the newest; preallocated)
-  /// Speak the Polhem v1's USB reports instead of protocol v1 (servo/hid_report.h): lock-step
+  /// Speak the Polhem's USB reports instead of protocol v1 (servo/hid_report.h): lock-step
   /// (one 14-byte input report answers each output report, none unasked), encoder counts by
-  /// the polhem_v1 kinematics, currents in, the firmware's 0.5 s watchdog; until a
+  /// the kinematics of polhem_config, currents in, the firmware's 0.5 s watchdog; until a
   /// calibration command arrives the counts are off by polhem_offset_counts and info asks
-  /// for calibration (the command is taken as made in the calibration pose).
+  /// for calibration. The command is taken as made in the unit's calibration pose: the
+  /// counters read what it sets there (a host of the other configuration sets its own).
   bool polhem = false;
+  servo::hid::polhem::Config polhem_config = servo::hid::polhem::kDefaultConfig;  ///< the unit's kinematics
   int polhem_lose_calibrations = 0;  ///< the first N calibration commands are lost (overwritten in the firmware's one-report queue)
   int polhem_offset_counts = 400;    ///< the uncalibrated counters' error on a, b, c
 };
@@ -147,6 +150,7 @@ class DeviceEmulator {
   double first_connected_at_s_ = -1;         // when the first host connected [s]; -1: none yet
   bool hold_next_ = false;
   bool polhem_owed_ = false, polhem_calibrated_ = false;  // Polhem: a report is owed; calibrated
+  std::array<std::int16_t, 6> polhem_set_{};              // Polhem: the counts the calibration set
   Pending held_{};
   mutable std::mutex stats_mu_;
   EmuStats stats_;

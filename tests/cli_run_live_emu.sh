@@ -8,7 +8,11 @@
 #     recording holds the outage's ticks (held) and the renderer's reset after it, and
 #     replays IDENTICAL (a replay that ticked through the outage or did not reset differs);
 #  3. bad --haptic specs: a clear message and exit 1; the Polhem's ID (mbed's default) is
-#     refused unless the user names it (--haptic polhem:...).
+#     refused unless the user names it (--haptic polhem:...);
+#  4. isotouch-devemu --polhem (a polhem_v3 or polhem_v1 unit) driven by --haptic
+#     polhem:emu:SOCKET[,config=v1|v3]: its own configuration (v3 by default, as upstream's
+#     USB example) feels the skull, says which kinematics and their source; the other one
+#     is faulted (exit 5) with no current reaching the unit and names the right config.
 # usage: cli_run_live_emu.sh ISOTOUCH DEVEMU SCENE OUT
 set -u
 exe=$1 emu=$2 scene=$3 out=$4
@@ -80,4 +84,54 @@ cat "$out/replay3.log"
 "$exe" run "$scene" --live --haptic "polhem:1234:0006" > "$out/bad.log" 2>&1; rc=$?
 [ "$rc" -eq 1 ] && grep -q "hid:1234:0006: cannot open the HID device" "$out/bad.log" ||
   { cat "$out/bad.log"; fail "polhem:1234:0006 without a device: exit $rc"; }
+"$exe" run "$scene" --live --haptic "polhem:emu:$sock,config=v2" > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 1 ] && grep -q "config 'v2' is neither v1 nor v3" "$out/bad.log" || { cat "$out/bad.log"; fail "config=v2: exit $rc"; }
+"$emu" --socket "$sock" --polhem --polhem-config v2 > "$out/bad.log" 2>&1; rc=$?
+[ "$rc" -eq 2 ] || { cat "$out/bad.log"; fail "isotouch-devemu --polhem-config v2: exit $rc, expected 2"; }
+
+# 4. The Polhem over the emulator. polhem_run UNIT SPEC_OPTIONS NAME: the emulator's unit
+# of configuration UNIT (v1, v3) plays the scene's hand; the run's exit status is echoed.
+polhem_run() {
+  "$emu" --socket "$sock" --polhem --polhem-config "$1" --path "$out/hand.csv" --seconds 20 > "$out/emu_$3.log" 2>&1 &
+  local pid=$!
+  for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+  "$exe" run "$scene" --live --haptic "polhem:emu:$sock$2" --quiet > "$out/run_$3.log" 2>&1; local rc=$?
+  kill -TERM "$pid"; wait "$pid"
+  cat "$out/run_$3.log" "$out/emu_$3.log" >&2
+  echo "$rc"
+}
+source_line="forsslund/hfabapi @aadabaa82ce9 (2023-04-05)"
+for unit in v3 v1; do
+  spec=""; [ "$unit" = v1 ] && spec=",config=v1"
+  rc=$(polhem_run "$unit" "$spec" "$unit")
+  [ "$rc" -eq 0 ] || fail "a polhem_$unit unit driven as one: exit $rc"
+  log=$out/run_$unit.log
+  grep -q "kinematics polhem_$unit.*from $source_line" "$log" || fail "polhem_$unit: the active kinematics and their source are not printed"
+  [ "$unit" = v1 ] || grep -q "kinematics polhem_v3 (the default" "$log" || fail "v3 is not the default"
+  line=$(grep '^device .*ticks with force' "$log") || fail "polhem_$unit: no device summary"
+  forced=$(echo "$line" | sed -E 's/.*: ([0-9]+) ticks with force.*/\1/')
+  [ "$forced" -ge 300 ] || fail "polhem_$unit: only $forced ticks with force: the skull was not felt"
+  echo "$line" | grep -q "disconnected 0, fault 0, refused 0" || fail "polhem_$unit: device faults in a clean run"
+  grep -q "Polhem: [1-9][0-9]* calibration commands (0 lost), calibrated" "$out/emu_$unit.log" || fail "polhem_$unit: not calibrated"
+  fmax=$(sed -nE 's/.*max \|F\| ([0-9.e+-]+) N$/\1/p' "$out/emu_$unit.log")
+  awk -v f="$fmax" 'BEGIN { exit !(f > 0.5) }' || fail "polhem_$unit: the unit made $fmax N of the currents it received"
+done
+for unit in v3 v1; do
+  host=v1; [ "$unit" = v1 ] && host=v3
+  rc=$(polhem_run "$unit" ",config=$host" "mismatch_$unit")
+  log=$out/run_mismatch_$unit.log
+  [ "$rc" -eq 5 ] || fail "a polhem_$unit unit driven as polhem_$host: exit $rc, expected 5"
+  grep -q "the unit is not a polhem_$host (a polhem_$unit? --haptic polhem:...,config=$unit)" "$log" ||
+    fail "a polhem_$unit unit driven as polhem_$host: the mismatch is not named"
+  grep -q "max |F| 0 N$" "$out/emu_mismatch_$unit.log" || fail "a polhem_$unit unit driven as polhem_$host received current"
+done
+# `isotouch devices --check` of a v3 unit as polhem_v1: the pose is refused and the check says why.
+"$emu" --socket "$sock" --polhem --hold 0,0,0 --seconds 20 > "$out/emu_check.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+echo n | "$exe" devices --check "polhem:emu:$sock,config=v1" --seconds 0.5 > "$out/check.log" 2>&1; rc=$?
+kill -TERM "$emu_pid"; wait "$emu_pid"
+cat "$out/check.log"
+[ "$rc" -eq 1 ] && grep -q "^check: .*the unit is not a polhem_v1 (a polhem_v3? --haptic polhem:...,config=v3)" "$out/check.log" ||
+  fail "devices --check of a v3 unit as polhem_v1: exit $rc, or the reason is not given"
 echo "PASS run --live --haptic emu"

@@ -132,6 +132,7 @@ struct Rig {
   DeviceCounters servo_counters;
   LinkCounters link;
   std::string last_error, last_refusal, stop_error;
+  hid::polhem::Config host_config = hid::polhem::kDefaultConfig;  // the host's, for a Polhem
   double stop_s = 0;                    // how long servo.stop() took [s]
 
   Rig() {
@@ -152,7 +153,7 @@ struct Rig {
     emu->listen();
     std::thread emu_thread([this] { stats = emu->run(); });
     std::unique_ptr<DeviceProtocol> protocol;
-    if (cfg.polhem) protocol = std::make_unique<PolhemProtocol>();
+    if (cfg.polhem) protocol = std::make_unique<PolhemProtocol>(host_config);
     else protocol = std::make_unique<V1Protocol>();
     dev = std::make_unique<ReportDevice>(std::make_unique<FreezableLink>(cfg.socket_path, freeze_writes),
                                          std::move(protocol), ReportDeviceOptions{.fifo_priority = fifo ? 70 : 0});
@@ -469,9 +470,11 @@ TEST(DeviceEmuPolhem, AStalledServoGetsZeroCurrentsWithinThreePeriods) {
   stalled_servo_gets_zero_within_three_periods(true);
 }
 
-TEST(DeviceEmuPolhem, CalibratedLockStepForcesFlowThroughThePolhemKinematics) {
+namespace {
+void calibrated_lock_step_forces_flow(hid::polhem::Config config) {
   Rig rig;
   rig.cfg.polhem = true;
+  rig.cfg.polhem_config = rig.host_config = config;
   rig.run(0.5);
   // Calibrated at once (the host answered the device's request), so the HIP is where the
   // hand holds it (3 mm into the wall): the force the emulator made of the currents it
@@ -486,6 +489,48 @@ TEST(DeviceEmuPolhem, CalibratedLockStepForcesFlowThroughThePolhemKinematics) {
   EXPECT_LE(rig.stats.reports_sent, rig.stats.outputs_received + rig.stats.calibrations);
   EXPECT_GT(rig.link.reports, 300);
   EXPECT_EQ(rig.link.garbage, 0);
+  EXPECT_EQ(rig.servo_counters.fault, 0);
+}
+
+/// A unit of one configuration driven with the other's kinematics, held at `hold` [m]:
+/// once calibrated, the host faults the device (no current reaches it) and says why.
+void mismatch_is_faulted(hid::polhem::Config unit, hid::polhem::Config host, const Vec3& hold,
+                         const std::string& why) {
+  Rig rig;
+  rig.cfg.polhem = true;
+  rig.cfg.polhem_config = unit;
+  rig.host_config = host;
+  rig.cfg.hold_m = hold;
+  rig.run(0.5);
+  EXPECT_GT(rig.stats.calibrated_ns, 0) << "never calibrated";
+  EXPECT_GT(rig.servo_counters.fault, 300) << "the servo did not see the device faulted";
+  long with_current = 0;
+  for (const ReceivedOutput& o : rig.wire) with_current += o.t_ns > rig.stats.calibrated_ns && o.enable;
+  EXPECT_EQ(with_current, 0) << "currents reached the unit after calibration";
+  const std::string other = host == hid::polhem::Config::kV3 ? "config=v1" : "config=v3";
+  const std::string& said = rig.last_refusal;
+  EXPECT_NE(said.find(std::string("the unit is not a ") + hid::polhem::config_name(host)), std::string::npos) << said;
+  EXPECT_NE(said.find(other), std::string::npos) << said;
+  EXPECT_NE(said.find(why), std::string::npos) << said;
+}
+}  // namespace
+
+TEST(DeviceEmuPolhem, CalibratedLockStepForcesFlowThroughThePolhemKinematics) {
+  calibrated_lock_step_forces_flow(hid::polhem::Config::kV3);
+  calibrated_lock_step_forces_flow(hid::polhem::Config::kV1);
+}
+
+// The v3 unit at its workspace centre reads, under polhem_v1's kinematics, about 0.33 m
+// from the v1 origin (beyond the v1's reach, 0.18 m); a v1 unit 5 cm along +x is a pose the
+// v3 linkage cannot close on.
+TEST(DeviceEmuPolhem, AV3UnitDrivenAsAV1IsFaultedWithNoCurrent) {
+  mismatch_is_faulted(hid::polhem::Config::kV3, hid::polhem::Config::kV1, Vec3{0, 0, -0.003},
+                      "beyond its reach");
+}
+
+TEST(DeviceEmuPolhem, AV1UnitDrivenAsAV3IsFaultedWithNoCurrent) {
+  mismatch_is_faulted(hid::polhem::Config::kV1, hid::polhem::Config::kV3, Vec3{0.05, 0, -0.003},
+                      "linkage cannot close");
 }
 
 TEST(DeviceEmuPolhem, ALostCalibrationCommandIsSentAgainUntilTheDeviceStopsAsking) {

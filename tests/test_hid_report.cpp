@@ -133,6 +133,10 @@ TEST(HidReport, V1ProtocolMapsFlagsToStatus) {
   EXPECT_NEAR(o.force_n.z, 3.0, 1e-9);
 }
 
+namespace {
+constexpr polhem::Config kConfigs[] = {polhem::Config::kV1, polhem::Config::kV3};
+}  // namespace
+
 TEST(Polhem, ReportsRoundTripAndCurrentsAreCapped) {
   polhem::Input in;
   in.encoder = {100, -200, 300, 5001, -5, 6};
@@ -150,28 +154,76 @@ TEST(Polhem, ReportsRoundTripAndCurrentsAreCapped) {
   EXPECT_DOUBLE_EQ(amps.x, 0.5);
   EXPECT_DOUBLE_EQ(amps.y, -polhem::kMaxCurrentA);  // capped
   EXPECT_DOUBLE_EQ(amps.z, 0.0);                    // non-finite: no current
-  EXPECT_FALSE(polhem::decode_currents(polhem::encode_calibrate(), amps));  // a command, not currents
+  EXPECT_FALSE(polhem::decode_currents(polhem::encode_calibrate(polhem::Config::kV1), amps));  // a command
+}
+
+// The calibration command as upstream's USB thread fills pc_to_hid_message (int16 LE after
+// no report ID: currents a-c = calibrate_enc_d-f, command 1, attr 0-2 = calibrate_enc_a-c),
+// with hfab_math.h's counts written out here.
+TEST(Polhem, CalibrationCommandCarriesTheConfigurationsCounts) {
+  auto le = [](const std::array<std::uint8_t, 14>& b, int i) { return std::int16_t(b[2 * i] | (b[2 * i + 1] << 8)); };
+  const auto v1 = polhem::encode_calibrate(polhem::Config::kV1);
+  EXPECT_EQ((std::array<int, 7>{le(v1, 0), le(v1, 1), le(v1, 2), le(v1, 3), le(v1, 4), le(v1, 5), le(v1, 6)}),
+            (std::array<int, 7>{0, 0, 0, 1, 0, 0, -5000}));
+  const auto v3 = polhem::encode_calibrate(polhem::Config::kV3);
+  EXPECT_EQ((std::array<int, 7>{le(v3, 0), le(v3, 1), le(v3, 2), le(v3, 3), le(v3, 4), le(v3, 5), le(v3, 6)}),
+            (std::array<int, 7>{0, 30, 0, 1, 8312, -10366, 19764}));
+  std::array<std::int16_t, 6> counts{};
+  ASSERT_TRUE(polhem::decode_calibrate(v3, counts));
+  EXPECT_EQ(counts, polhem::calibration_counts(polhem::Config::kV3));
+  EXPECT_FALSE(polhem::decode_calibrate(polhem::encode_currents(Vec3{}), counts));
 }
 
 TEST(Polhem, JacobianTransposeMatchesVirtualWork) {
   // tau . dq = F . dx: the currents times the torque constant, mapped back through the
-  // capstan ratios, are the work per count of each motor.
-  const std::array<std::int16_t, 6> e{150, -400, 900, 0, 0, 0};
+  // capstan ratios, are the work per count of each motor. Torque constants and counts per
+  // turn as hfab_math.h gives them.
   const Vec3 f{1.0, -0.5, 2.0};
-  const Vec3 amps = polhem::motor_currents_a(f, e);
-  const double kt = 0.0538, step = 2 * M_PI / 2000;  // [N m / A], motor radians per count
-  for (int j = 0; j < 3; ++j) {
-    auto ep = e, em = e;
-    ep[std::size_t(j)] += 1, em[std::size_t(j)] -= 1;
-    const Vec3 dx = (polhem::position_m(ep) - polhem::position_m(em)) / 2.0;  // per count
-    const double work = dot(f, dx);
-    const double a = j == 0 ? amps.x : j == 1 ? amps.y : amps.z;
-    EXPECT_NEAR(a * kt * step, work, 1e-3 * std::abs(work) + 1e-9) << "motor " << j;
+  for (const polhem::Config c : kConfigs) {
+    const bool v3 = c == polhem::Config::kV3;
+    const auto e = v3 ? polhem::encoders_for(Vec3{0.01, -0.02, 0.015}, c) : std::array<std::int16_t, 6>{150, -400, 900, 0, 0, 0};
+    const Vec3 amps = polhem::motor_currents_a(f, e, c);
+    const double kt[3] = {v3 ? 0.0603 : 0.0538, 0.0538, 0.0538};  // [N m / A]
+    const double step = 2 * M_PI / (v3 ? 4096 : 2000);               // motor radians per count
+    for (int j = 0; j < 3; ++j) {
+      auto ep = e, em = e;
+      ep[std::size_t(j)] += 1, em[std::size_t(j)] -= 1;
+      const Vec3 dx = (polhem::position_m(ep, c) - polhem::position_m(em, c)) / 2.0;  // per count
+      const double work = dot(f, dx);
+      const double a = j == 0 ? amps.x : j == 1 ? amps.y : amps.z;
+      EXPECT_NEAR(a * kt[j] * step, work, 1e-3 * std::abs(work) + 1e-9) << polhem::config_name(c) << " motor " << j;
+    }
+  }
+}
+
+// polhem_v3's position is hfab_polhem.h's closed form of the five-bar linkage: checked here
+// against the linkage itself. Motor b turns the arm L1 about (L0/2, 0), motor c the crank L2
+// about (-L0/2, 0); the coupler L3 joins the crank's end to a point L4 back along the handle
+// link from the arm's end, and the handle is L5 forward along it; all turned by theta_A.
+TEST(Polhem, V3PositionClosesTheFiveBarLinkage) {
+  constexpr double L0 = 0.034, L1 = 0.165, L2 = 0.025, L3 = 0.190, L4 = 0.034, L5 = 0.1308;
+  const double origin[3] = {0.2045, 0.0, 0.0325};
+  for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.04, -0.03, 0.02}, Vec3{-0.05, 0.05, -0.04}}) {
+    const auto e = polhem::encoders_for(p, polhem::Config::kV3);
+    const Vec3 h = polhem::position_m(e, polhem::Config::kV3);
+    // Body angles from the counts: capstan ratios and directions of hfab_math.h's polhem_v3.
+    const double ta = 2 * M_PI * e[0] / 4096 * 0.0288534 / 0.175;
+    const double tb = -2 * M_PI * e[1] / 4096 * 0.0136981 / 0.100;
+    const double tc = 2 * M_PI * e[2] / 4096 * 0.0137281 / 0.100;
+    const double hx = h.x + origin[0], hy = h.y + origin[1], hz = h.z + origin[2];
+    EXPECT_NEAR(std::atan2(hy, hx), ta, 1e-9);
+    const double r = std::hypot(hx, hy);  // the handle in the linkage's plane: (r, z)
+    const double bx = L0 / 2 + L1 * std::cos(tb), bz = L1 * std::sin(tb);
+    const double lambda = std::atan2(hz - bz, r - bx);
+    EXPECT_NEAR(std::hypot(r - bx, hz - bz), L5, 1e-9);
+    const double dx = bx - L4 * std::cos(lambda), dz = bz - L4 * std::sin(lambda);
+    const double cx = -L0 / 2 + L2 * std::cos(tc), cz = L2 * std::sin(tc);
+    EXPECT_NEAR(std::hypot(dx - cx, dz - cz), L3, 1e-9) << p.x << " " << p.y << " " << p.z;
   }
 }
 
 TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsReportIdZero) {
-  PolhemProtocol p;
+  PolhemProtocol p(polhem::Config::kV1);
   polhem::Input in;
   in.encoder = {10, 20, 30, 6000, 0, 0};
   in.info = 1;
@@ -190,6 +242,7 @@ TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsRepor
   in.info = 0;  // calibrated: it stops asking
   ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
   EXPECT_EQ(p.pending_command(buf), 0u);
+  EXPECT_EQ(r.status, DeviceStatus::kOk);
   ASSERT_EQ(p.encode_output(Vec3{0, 0, 1}, true, 0, buf), 15u);
   EXPECT_EQ(buf[0], 0);
   Vec3 amps;
@@ -200,21 +253,90 @@ TEST(Polhem, ProtocolResendsCalibrationUntilTheDeviceStopsAskingAndPrependsRepor
   EXPECT_EQ(norm(amps), 0.0);
 }
 
+namespace {
+// Counts a calibrated unit of `unit` reports at `p`, as a host of `host` calibrated it:
+// its own motion from its calibration pose, added to the host's calibration counts.
+std::array<std::int16_t, 6> counts_seen(polhem::Config unit, polhem::Config host, const Vec3& p) {
+  const auto here = polhem::encoders_for(p, unit), home = polhem::calibration_counts(unit);
+  auto e = polhem::calibration_counts(host);
+  for (std::size_t i = 0; i < 3; ++i) e[i] = std::int16_t(e[i] + here[i] - home[i]);
+  return e;
+}
+}  // namespace
+
+TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
+  const Vec3 poses[] = {Vec3{0, 0, 0}, Vec3{0.05, 0, 0}, Vec3{-0.05, 0.05, 0.05}, Vec3{0.05, -0.05, -0.05}};
+  for (const polhem::Config host : kConfigs) {
+    const polhem::Config unit = host == polhem::Config::kV3 ? polhem::Config::kV1 : polhem::Config::kV3;
+    // Its own configuration: every pose (and the calibration pose itself) is fine.
+    for (const Vec3& q : poses) EXPECT_EQ(polhem::check_pose(polhem::position_m(polhem::encoders_for(q, host), host), host), "");
+    EXPECT_EQ(polhem::check_pose(polhem::position_m(polhem::calibration_counts(host), host), host), "");
+    int caught = 0;
+    for (const Vec3& q : poses) {
+      PolhemProtocol p(host);
+      polhem::Input in;
+      in.encoder = counts_seen(unit, host, q);
+      DeviceReading r;
+      ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+      if (r.status != DeviceStatus::kFault) continue;  // a pose the other configuration could give
+      ++caught;
+      EXPECT_NE(p.fault().find(std::string("not a ") + polhem::config_name(host)), std::string::npos) << p.fault();
+      std::array<std::uint8_t, 64> buf{};
+      Vec3 amps;
+      ASSERT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, p.encode_output(Vec3{1, 1, 1}, true, 0, buf) - 1), amps));
+      EXPECT_EQ(norm(amps), 0.0) << "current sent to a unit of the other configuration";
+      in.encoder = polhem::encoders_for(Vec3{}, host);  // latched, even at a pose it could give
+      ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+      EXPECT_EQ(r.status, DeviceStatus::kFault);
+    }
+    // These four poses of a v3 unit read beyond the v1's reach; a v1 unit is caught where
+    // the v3 linkage cannot close (toward +x), not at its centre.
+    EXPECT_EQ(caught, host == polhem::Config::kV1 ? 4 : 2) << polhem::config_name(host);
+  }
+}
+
 TEST(Polhem, EmulatorSideInvertsTheHostsKinematics) {
   // encoders_for and force_from_currents (the emulator's side) against position_m and
   // motor_currents_a (the host's): a pose round-trips to within a count, a force exactly.
-  for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.03, -0.02, 0.01}, Vec3{-0.04, 0.05, -0.03}}) {
-    const auto e = polhem::encoders_for(p);
-    EXPECT_LT(norm(polhem::position_m(e) - p), 2 * polhem::caps().position_resolution_m) << p.x << " " << p.y << " " << p.z;
-    const Vec3 f{1.0, -2.0, 0.5};
-    EXPECT_LT(norm(polhem::force_from_currents(polhem::motor_currents_a(f, e), e) - f), 1e-9);
-  }
+  for (const polhem::Config c : kConfigs)
+    for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.03, -0.02, 0.01}, Vec3{-0.04, 0.05, -0.03}}) {
+      const auto e = polhem::encoders_for(p, c);
+      EXPECT_LT(norm(polhem::position_m(e, c) - p), 2 * polhem::caps(c).position_resolution_m) << p.x << " " << p.y << " " << p.z;
+      const Vec3 f{1.0, -2.0, 0.5};
+      EXPECT_LT(norm(polhem::force_from_currents(polhem::motor_currents_a(f, e, c), e, c) - f), 1e-9);
+    }
+}
+
+TEST(Polhem, SpecNamesTheConfigurationDefaultingToUpstreamsUsbExample) {
+  PolhemSpec s = parse_polhem_spec("1234:0006");
+  EXPECT_EQ(s.link, "1234:0006");
+  EXPECT_EQ(s.config, polhem::Config::kV3);
+  EXPECT_NE(polhem_config_note(s).find("polhem_v3 (the default"), std::string::npos);
+  EXPECT_NE(polhem_config_note(s).find("forsslund/hfabapi @aadabaa82ce9 (2023-04-05)"), std::string::npos);
+  s = parse_polhem_spec("emu:/tmp/x.sock,config=v1");
+  EXPECT_EQ(s.link, "emu:/tmp/x.sock");
+  EXPECT_EQ(s.config, polhem::Config::kV1);
+  auto error = [](const std::string& arg) {
+    try {
+      parse_polhem_spec(arg);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("1234:0006,config=v2").find("config 'v2' is neither v1 nor v3"), std::string::npos);
+  EXPECT_NE(error("1234:0006,kin=v1").find("unknown option 'kin=v1'"), std::string::npos);
+  EXPECT_NE(error(",config=v1").find("no device"), std::string::npos);
 }
 
 // Lock-step (one report per command): the newest pose is a USB round trip old, so the
 // Polhem's own stale timeout (5-10 ms) replaces the servo's two periods.
 TEST(Polhem, CapsCarryALockStepStaleTimeout) {
-  const DeviceCaps c = polhem::caps();
-  EXPECT_GE(c.stale_timeout_s, 0.005);
-  EXPECT_LE(c.stale_timeout_s, 0.010);
+  for (const polhem::Config c : kConfigs) {
+    const DeviceCaps d = polhem::caps(c);
+    EXPECT_GE(d.stale_timeout_s, 0.005);
+    EXPECT_LE(d.stale_timeout_s, 0.010);
+  }
+  EXPECT_EQ(polhem::caps(polhem::Config::kV3).max_stiffness_n_per_m, 2000.0);  // hfab_math.h polhem_v3
+  EXPECT_EQ(polhem::caps(polhem::Config::kV1).max_stiffness_n_per_m, 800.0);
 }

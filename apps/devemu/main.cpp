@@ -1,6 +1,7 @@
-// isotouch-devemu - the firmware side of isotouch protocol v1 as a separate process: a point
-// mass pulled by a simulated hand (or a scripted path) on its own clock at 1 to 8 kHz,
-// serving `isotouch ... --haptic emu:SOCKET` over a Unix-domain socket, with injectable
+// isotouch-devemu - the firmware side of isotouch protocol v1 (or, with --polhem, of the
+// Polhem's USB reports) as a separate process: a point mass pulled by a simulated hand (or a
+// scripted path) on its own clock at 1 to 8 kHz, serving `isotouch ... --haptic emu:SOCKET`
+// (--polhem: `--haptic polhem:emu:SOCKET`) over a Unix-domain socket, with injectable
 // faults. Prints what it sent, received and measured when it stops.
 #include <CLI/CLI.hpp>
 
@@ -27,10 +28,12 @@ double percentile(std::vector<double> v, double q) {
 int main(int argc, char** argv) {
   using namespace isotouch;
   CLI::App cli{
-      "isotouch-devemu: a simulated haptic device speaking isotouch protocol v1 (docs/hid-protocol.md) over a\n"
-      "Unix-domain socket, for `isotouch run SCENE --live --haptic emu:SOCKET` and tests without hardware.\n\n"
+      "isotouch-devemu: a simulated haptic device speaking isotouch protocol v1 (docs/hid-protocol.md), or with\n"
+      "--polhem the Polhem's USB reports, over a Unix-domain socket, for `isotouch run SCENE --live --haptic\n"
+      "emu:SOCKET` (--polhem: `--haptic polhem:emu:SOCKET[,config=v1|v3]`) and tests without hardware.\n\n"
       "Example:\n"
-      "  isotouch-devemu --socket /tmp/dev.sock --rate 1000 --path hand.csv --drop 0.01\n\n"
+      "  isotouch-devemu --socket /tmp/dev.sock --rate 1000 --path hand.csv --drop 0.01\n"
+      "  isotouch-devemu --socket /tmp/dev.sock --polhem --polhem-config v1   (--haptic polhem:emu:/tmp/dev.sock,config=v1)\n\n"
       "Exit status (docs/exit-codes.md): 0 stopped (--seconds or SIGINT / SIGTERM); 1 error (the socket, the\n"
       "path file); 2 usage error.\n"};
   app::common_options(cli);
@@ -54,6 +57,16 @@ int main(int argc, char** argv) {
   cli.add_option("--max-force", max_force, "Maximum force, also the actuator's saturation [N]")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--workspace-mm", half_mm, "Workspace: a cube of +-this many mm")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--watchdog-ms", watchdog_ms, "No output report this long: the force is zeroed (0: off)")->capture_default_str()->check(CLI::NonNegativeNumber);
+  bool polhem = false;
+  std::string polhem_config = "v3";
+  cli.add_flag("--polhem", polhem,
+               "Speak the Polhem's 14-byte USB reports instead (lock-step, calibration request, 0.5 s firmware watchdog; "
+               "for --haptic polhem:emu:SOCKET); its limits replace --max-force, --workspace-mm and --watchdog-ms");
+  cli.add_option("--polhem-config", polhem_config, "With --polhem: the unit's kinematics, v1 or v3")
+      ->capture_default_str()->check(CLI::IsMember({"v1", "v3"}));
+  cli.add_option("--polhem-lose-calibrations", c.polhem_lose_calibrations,
+                 "With --polhem: the first N calibration commands are lost (the firmware keeps only its last queued report)")
+      ->check(CLI::NonNegativeNumber);
   bool fifo = true;
   cli.add_flag("--fifo,!--no-fifo", fifo, "Run the device clock under SCHED_FIFO priority 75 when allowed (default on)");
   auto* faults = cli.add_option_group("Faults", "Probabilities are per input report; times are [s] since start");
@@ -85,6 +98,8 @@ int main(int argc, char** argv) {
   c.caps.watchdog_s = watchdog_ms * 1e-3;
   c.hold_m = core::Vec3{hold[0], hold[1], hold[2]};
   c.fifo_priority = fifo ? 75 : 0;
+  c.polhem = polhem;
+  servo::hid::polhem::parse_config(polhem_config, c.polhem_config);  // checked by the option
   try {
     if (!path_csv.empty()) c.path = sim::load_path_csv(path_csv);
     sim::DeviceEmulator emu(c);
@@ -92,7 +107,11 @@ int main(int argc, char** argv) {
     g_emu = &emu;
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
-    std::cout << "devemu   listening on " << c.socket_path << " at " << c.rate_hz << " Hz" << std::endl;
+    std::cout << "devemu   listening on " << c.socket_path << " at " << c.rate_hz << " Hz";
+    if (polhem)
+      std::cout << " as a Polhem, kinematics " << servo::hid::polhem::config_name(c.polhem_config) << " (from "
+                << servo::hid::polhem::kConfigSource << ")";
+    std::cout << std::endl;
     const sim::EmuStats s = emu.run();
     g_emu = nullptr;
     std::cout << "devemu   " << s.connections << " connections, " << s.reports_sent << " reports sent, "
@@ -100,6 +119,9 @@ int main(int argc, char** argv) {
               << s.dropped << ", duplicated " << s.duplicated << ", reordered " << s.reordered << ", garbled "
               << s.garbled << ", delayed " << s.delayed << ", watchdog trips " << s.watchdog_trips
               << ", max |F| " << s.max_force_n << " N\n";
+    if (polhem)
+      std::cout << "devemu   Polhem: " << s.calibrations << " calibration commands (" << s.calibrations_lost
+                << " lost), " << (s.calibrated_ns ? "calibrated" : "never calibrated") << "\n";
     if (!s.latency_us.empty())
       std::cout << "devemu   report-to-force [us]: p50 " << percentile(s.latency_us, 0.5) << ", p99 "
                 << percentile(s.latency_us, 0.99) << ", max " << percentile(s.latency_us, 1.0) << "\n";

@@ -26,8 +26,16 @@ constexpr const char* kHelp =
       "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client; the edited\n"
       "     voxels as an IMAGE (the changed sub-volume, or --image-whole) at most --image-hz times a second\n"
       "     to the clients that sent an IMAGE or a command.\n"
-      "Exit 0 after --seconds; 1 bad input (scene, port); 2 usage error; 4 servo faults; 6 a save command could not\n"
-      "write (the session went on); 128 + N on signal N.";
+      "Device: the TRANSFORM stream (above), or with --haptic SPEC a device of `isotouch run --live`'s factory\n"
+      "     (igtl:HOST:PORT[:STREAM] a PlusServer's stylus, openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET,\n"
+      "     hid:..., polhem:..., null, playback:FILE; docs/devices.md): the HIP is the device's (device [m] times the\n"
+      "     scene's workspace_scale, at the volume's centre, as `run --live` maps it), the force goes to it through\n"
+      "     the servo's safety gate and the device's stall rule, its stale timeout is its own; clients still get\n"
+      "     the HIP, Proxy and Force TRANSFORMs and send IMAGEs and commands. An igtl: device's rate is measured\n"
+      "     (1 s) and a scene stiffer than its Colgate-Schenkel bound refused unless --allow-unstable-stiffness.\n"
+      "Exit 0 after --seconds; 1 bad input (scene, port, a device that cannot be opened or refuses the scene);\n"
+      "2 usage error; 4 servo faults; 5 the --haptic device was disconnected, faulty or sent refused reports (the\n"
+      "server went on serving); 6 a save command could not write (the session went on); 128 + N on signal N.";
 }  // namespace
 
 Subcommand add_serve_command(CLI::App& cli) {
@@ -36,6 +44,7 @@ Subcommand add_serve_command(CLI::App& cli) {
     service::ServeOptions o;
     std::vector<double> offset;
     double stale_ms = 100;
+    bool allow_unstable = false;
   };
   auto a = std::make_shared<Args>();
   auto* sub = cli.add_subcommand("serve", kHelp);
@@ -44,11 +53,18 @@ Subcommand add_serve_command(CLI::App& cli) {
       ->check(CLI::Range(0, 65535));
   sub->add_option("--host", a->o.host, "Address to listen on (default 127.0.0.1: this machine only; 0.0.0.0: every interface,\n"
                   "with no authentication: any host that reaches the port can replace the volume and move the HIP)");
-  sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
-  sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
+  auto* haptic = sub->add_option("--haptic", a->o.haptic,
+                                 "The haptic device instead of the TRANSFORM stream: igtl:HOST:PORT[:STREAM], "
+                                 "openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:..., null, "
+                                 "playback:FILE (docs/devices.md)");
+  sub->add_flag("--allow-unstable-stiffness", a->allow_unstable,
+                "Run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured "
+                "rate), as the scene's servo.allow_unstable_stiffness");
+  auto* stream = sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
+  auto* offset = sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
   sub->add_option("--display-hz", a->o.display_hz, "HIP / proxy / force TRANSFORMs per second (default 60)")
       ->check(CLI::Range(1.0, 1000.0));
-  sub->add_option("--stale-ms", a->stale_ms, "No TRANSFORM on the stream for this long: zero force (default 100)")
+  auto* stale = sub->add_option("--stale-ms", a->stale_ms, "No TRANSFORM on the stream for this long: zero force (default 100)")
       ->check(CLI::Range(1.0, 10000.0));
   sub->add_option("--receive-timeout-ms", a->o.receive_timeout_ms,
                   "Longest silence inside a message before the client is dropped (default 2000)")
@@ -66,17 +82,19 @@ Subcommand add_serve_command(CLI::App& cli) {
       ->check(CLI::Range(0.0, 100.0));
   sub->add_flag("--image-whole", a->o.image_whole,
                 "Send the whole edited image, not the changed sub-volume (receivers that ignore sub-volumes)");
-  sub->add_flag("--reply-force", a->o.reply_force,
+  auto* reply = sub->add_flag("--reply-force", a->o.reply_force,
                 "Answer each TRANSFORM of --stream with a TRANSFORM 'Force' to its sender once the servo rendered it "
                 "(lock-step, its header stamp echoed; never waited for)");
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
+  haptic->excludes(stream)->excludes(offset)->excludes(stale)->excludes(reply);  // the stream's, not a device's
   return {sub, [a](const std::string& device) {
             service::ServeOptions o = a->o;
             if (a->offset.size() == 3) o.offset_mm = {a->offset[0], a->offset[1], a->offset[2]};
             o.stale_s = a->stale_ms * 1e-3;
             o.run.device = device;
             o.run.progress = false;
-            const io::Scene scene = io::load_scene(a->scene);
+            io::Scene scene = io::load_scene(a->scene);
+            scene.allow_unstable_stiffness = scene.allow_unstable_stiffness || a->allow_unstable;
             return service::serve(scene, o, std::cout);
           }};
 }

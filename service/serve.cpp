@@ -11,6 +11,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <stdexcept>
 #include <ostream>
 #include <sstream>
 #include <thread>
@@ -20,12 +21,14 @@
 #include "isotouch/session/edit_session.h"
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/service/commands.h"
+#include "isotouch/service/device_echo.h"
 #include "isotouch/service/edit_mirror.h"
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/session/live_session.h"
+#include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/session/stop_signal.h"
 #include "isotouch/service/transform_device.h"
@@ -88,7 +91,11 @@ struct Session {
 class Server {
  public:
   Server(const io::Scene& scene, const ServeOptions& o, std::ostream& out)
-      : scene_(scene), o_(o), log_(out), listener_(o.host, o.port) {}
+      : scene_(scene), o_(o), log_(out), listener_(o.host, o.port) {
+    if (!o.haptic.empty() && o.reply_force)
+      throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
+                                  " the stream is not the device");
+  }
 
   int run();
 
@@ -119,6 +126,9 @@ class Server {
   bool wait_edits_applied(double timeout_s);
   void send_edited();
   void accept_clients();
+  void open_haptic();
+  /// What the clients are sent about the device: the servo's force and the volume's frame.
+  const RasEcho& echo() const { return echo_device_ ? echo_device_->echo() : device_.echo(); }
   /// Sets stop_, joins `display` and every client thread (after shutting their
   /// connections); idempotent.
   void join_threads(std::thread& display, std::thread& commands) noexcept;
@@ -135,6 +145,8 @@ class Server {
   Listener listener_;
   run::SceneSetup setup_;
   TransformDevice device_;
+  std::unique_ptr<run::HapticDevice> haptic_;  // --haptic: the servo's device (else device_)
+  std::unique_ptr<EchoDevice> echo_device_;    // haptic_'s, forwarded, its force kept for the clients
   Counters n_;
   std::atomic<bool> stop_{false};
   std::mutex clients_mu_;
@@ -143,6 +155,7 @@ class Server {
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
   std::unique_ptr<Session> session_;
   long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
+  long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
   std::mutex stream_mu_;
   std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
   std::atomic<long> replies_{0}, stall_replies_{0};
@@ -208,7 +221,7 @@ void Server::handle(Client& c, Incoming& in) {
       break;
     case K::kTransform:
       n_.transforms.fetch_add(1);
-      if (in.device == o_.stream) {
+      if (in.device == o_.stream && !haptic_) {
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
         if (o_.reply_force) {
           std::lock_guard<std::mutex> lock(stream_mu_);
@@ -530,8 +543,8 @@ void Server::display_loop() {
       if (!session_) continue;
       const session::Observed ob = session_->live->observe();
       if (ob.tick < 0) continue;
-      const core::Vec3 hip = device_.grid_to_ras_mm(ob.hip_m), vhip = device_.grid_to_ras_mm(ob.vhip_m);
-      const core::Vec3 f = device_.force_ras_n(stall_s);
+      const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
+      const core::Vec3 f = echo().force_ras_n(stall_s);
       for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
         const double t[3] = {v.x, v.y, v.z};
         const auto b = pack_translation(name, t);
@@ -566,13 +579,19 @@ std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
 }
 
 void Server::start_session(std::unique_ptr<Session> s) {
-  device_.set_frame(s->frame, o_.offset_mm);  // no servo runs now
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene_.hri.rate_hz;
   c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = o_.sched_fifo;
-  c.servo.stale_timeout_s = o_.stale_s;
+  if (echo_device_) {  // no servo runs now
+    echo_device_->echo().set_frame(s->frame);
+    c.servo.world_T_device = {scene_.workspace_scale, s->frame.grid.centre_m()};  // as setup_scene's
+  } else {
+    device_.set_frame(s->frame, o_.offset_mm);
+    c.servo.stale_timeout_s = o_.stale_s;
+  }
   c.on_applied = s->mirror->listener(*s->edits);
-  s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device_, c);
+  servo::HapticDeviceIO& device = echo_device_ ? static_cast<servo::HapticDeviceIO&>(*echo_device_) : device_;
+  s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device, c);
   if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
   ++sessions_;
   std::lock_guard<std::mutex> lock(session_mu_);
@@ -648,7 +667,11 @@ void Server::stop_session() {
   ticks_ += st.ticks;
   faults_ += st.faults;
   missed_ += st.missed_deadlines;
-  stale_ += s->live->servo_thread()->device_counters().stale;  // zero force on each
+  const servo::DeviceCounters dc = s->live->servo_thread()->device_counters();
+  stale_ += dc.stale;  // zero force on each
+  disconnected_ += dc.disconnected;
+  device_faults_ += dc.fault;
+  refused_reports_ += dc.refused;
 }
 
 void Server::join_threads(std::thread& display, std::thread& commands) noexcept {
@@ -663,12 +686,25 @@ void Server::join_threads(std::thread& display, std::thread& commands) noexcept 
     if (c.thread.joinable()) c.thread.join();
 }
 
+/// --haptic: the factory's device, as `isotouch run --live` opens it (no scripted hand:
+/// `sim` is refused; `null` holds the HIP at the volume's centre).
+void Server::open_haptic() {
+  run::DeviceSetup ds = run::device_setup(scene_, setup_);
+  ds.script = nullptr;
+  ds.start_world_m = setup_.volume.grid.centre_m();
+  haptic_ = std::make_unique<run::HapticDevice>(run::open_haptic_device(o_.haptic, ds, o_.sched_fifo ? 70 : 0));
+  echo_device_ = std::make_unique<EchoDevice>(*haptic_->io);
+  log_.line("device   " + haptic_->description);
+}
+
 int Server::run() {
   std::ostringstream setup_log;
   setup_ = run::setup_scene(scene_, o_.run, setup_log);
-  log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", stream '" + o_.stream +
-            "' + offset " + mm3(o_.offset_mm) + " mm (RAS), display " + std::to_string(int(o_.display_hz)) +
-            " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
+  if (!o_.haptic.empty()) open_haptic();
+  const std::string device = haptic_ ? "device --haptic " + o_.haptic
+                                     : "stream '" + o_.stream + "' + offset " + mm3(o_.offset_mm) + " mm (RAS)";
+  log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
+            std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
   start_session(setup_.volume);
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());
@@ -711,10 +747,16 @@ int Server::run() {
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
     << " transforms (" << n_.dropped_sends << " dropped: a client not reading), " << n_.images_sent
     << " edited images; " << n_.commands << " commands; " << sessions_ << " sessions, "
-    << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh TRANSFORM: zero force), " << faults_ << " faults";
+    << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh "
+    << (haptic_ ? "reading" : "TRANSFORM") << ": zero force), " << faults_ << " faults";
   log_.line(s.str());
+  const bool device_lost = disconnected_ + device_faults_ + refused_reports_ > 0;
+  if (haptic_)
+    log_.line("device   " + haptic_->description + ": disconnected " + std::to_string(disconnected_) + ", fault " +
+              std::to_string(device_faults_) + ", refused " + std::to_string(refused_reports_) + " ticks (zero force on each)");
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
   if (faults_ > 0) return exit_code::kServoFaults;
+  if (device_lost) return exit_code::kDeviceLost;
   return save_failed_ ? exit_code::kSaveFailed : exit_code::kOk;
 }
 

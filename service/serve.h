@@ -3,7 +3,8 @@
 //
 //   client threads (one per connection): read_message ->
 //     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
-//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force)
+//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force),
+//                                     unless `haptic` names the device (then ignored)
 //     STRING                       -> parse_command (commands.h) -> the command thread
 //     LBMETA                       -> the images it names are label maps: refused when they come
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
@@ -13,6 +14,9 @@
 //     STATUS back for each), submits the tool's brush at the proxy while applying and in
 //     contact, and at most image_hz times a second sends the edited voxels as an IMAGE to
 //     the clients that sent an IMAGE or a command (edit_mirror.h)
+//   haptic device (`haptic`, the `--haptic` factory's: openhaptics, forcedimension, igtl, emu,
+//     hid, ...): its own threads hand the servo the pose and take the force, through the
+//     servo's safety gate and the device's stall rule, as in `isotouch run --live`
 //   main thread: accepts connections, starts and swaps the session (a new volume, a new
 //     isovalue), stops on a signal or after `seconds`.
 // Part of isotouch::serve.
@@ -33,9 +37,16 @@ struct ServeOptions {
   std::string host = "127.0.0.1";     ///< address to listen on ("0.0.0.0": every interface; no authentication)
   int port = 18944;                   ///< 0: any free port (printed)
   std::string stream = "StylusToTracker";  ///< device name of the TRANSFORMs that move the HIP
+  /// The haptic device, a `--haptic KIND:ARGS` spec (run/haptic_device.h; not `sim`, which
+  /// needs a scripted hand); "": the TRANSFORM stream is the device. With one, the HIP is the
+  /// device's, mapped as `isotouch run` maps it (grid [m] = scene's workspace_scale * device
+  /// [m] + the session volume's centre), its stale timeout is the device's own, the servo's
+  /// force goes to it, and TRANSFORMs named `stream` move nothing; an `igtl:` device's rate
+  /// is measured and the scene's stiffness checked against it (Scene::allow_unstable_stiffness).
+  std::string haptic;
   core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS]
   double display_hz = 60;             ///< HIP / proxy / force TRANSFORMs sent per second
-  double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s]
+  double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s] (not with `haptic`)
   int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped
   int message_timeout_ms = 60000;     ///< longest a whole message may take from its first byte [ms]
   int max_clients = 8;                ///< more connected at once: refused with a STATUS
@@ -47,7 +58,7 @@ struct ServeOptions {
   /// RAS) to the client that sent it, as soon as the servo has rendered that pose (lock-step,
   /// as a PLUS device loop), its header stamp the pose's; never waited for (a client that
   /// does not read loses them).
-  bool reply_force = false;
+  bool reply_force = false;  ///< not with `haptic`
   std::function<void(int port)> on_listening;  ///< called once listening (benches, tests)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   MessageLimits limits;
@@ -57,9 +68,11 @@ struct ServeOptions {
 /// Serves `scene` (its volume first, its isovalue, passes and HRI parameters throughout).
 /// Prints "serve    listening on HOST:PORT" once listening, a line per client, volume and
 /// refusal, and the counters at the end.
-/// @return 0; 4 when servo ticks were faults; 6 when a save command could not write (the
-/// session went on); 128 + the signal when a signal stopped it.
-/// @throws std::runtime_error if the port cannot be opened; as setup_scene.
+/// @return 0; 4 when servo ticks were faults; 5 when the `haptic` device was disconnected,
+/// faulty or sent refused reports (the server went on serving); 6 when a save command could
+/// not write (the session went on); 128 + the signal when a signal stopped it.
+/// @throws std::runtime_error if the port cannot be opened; as setup_scene; as
+/// run::open_haptic_device (std::invalid_argument also for `haptic` with `reply_force`).
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log);
 
 /// What a serve() did, for a caller that measures it (`isotouch bench serve`).

@@ -12,9 +12,9 @@
 #include <cstdint>
 #include <mutex>
 
+#include "isotouch/service/device_echo.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/latest_value.h"
-#include "isotouch/engine/volume.h"
 
 namespace isotouch::service {
 
@@ -33,24 +33,21 @@ class TransformDevice final : public servo::HapticDeviceIO {
   };
   PoseId newest_pose() const;
   /// When the servo last wrote a force [ns, steady] (0: never).
-  std::int64_t force_written_ns() const { return force_.load().written_ns; }
+  std::int64_t force_written_ns() const { return echo_.written_ns(); }
   /// Messages pushed so far.
   long pushed() const { return pushed_.load(); }
 
   // Servo thread: no allocation, lock or syscall (the clock is the vDSO's).
   core::Vec3 read_position_m() override { return read().position_m; }
   servo::DeviceReading read() override;
-  void write_force_n(const core::Vec3& f) override;
+  void write_force_n(const core::Vec3& f) override { echo_.store(f); }
 
-  /// The force to send now [N, RAS]: the servo's newest, or zero when the servo has not
-  /// written one for `stall_s` (stopped or stalled: no force left on). Any thread.
-  core::Vec3 force_ras_n(double stall_s) const;
-  /// Grid frame point [m] -> RAS [mm] (for the HIP and proxy sent out).
-  core::Vec3 grid_to_ras_mm(const core::Vec3& g) const;
+  /// The servo's force and the volume's frame, for the TRANSFORMs sent out (device_echo.h).
+  const RasEcho& echo() const { return echo_; }
+  core::Vec3 force_ras_n(double stall_s) const { return echo_.force_ras_n(stall_s); }
+  core::Vec3 grid_to_ras_mm(const core::Vec3& g) const { return echo_.grid_to_ras_mm(g); }
 
-  static std::int64_t now_ns() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
-  }
+  static std::int64_t now_ns() { return RasEcho::now_ns(); }
 
  private:
   struct Pose {
@@ -59,16 +56,11 @@ class TransformDevice final : public servo::HapticDeviceIO {
     std::uint64_t sequence = 0;
     std::uint64_t stamp = 0;
   };
-  struct Force {
-    core::Vec3 f;
-    std::int64_t written_ns = 0;
-  };
   servo::LatestValue<Pose> pose_;
   Pose last_;  // servo thread
   std::mutex push_mu_;
-  servo::LatestValue<Force> force_;
   std::atomic<long> pushed_{0};
-  engine::Volume frame_;  // grid, direction (voxels left empty)
+  RasEcho echo_;
   core::Vec3 offset_mm_;
 };
 

@@ -73,9 +73,9 @@ int main(int argc, char** argv) {
   }
   std::printf("listening\n");
   std::fflush(stdout);
-  igtl::ClientSocket::Pointer sock = server->WaitForConnection(20000);
+  igtl::ClientSocket::Pointer sock = server->WaitForConnection(60000);
   if (!sock) {
-    std::fprintf(stderr, "igtl_plus_peer: no client within 20 s\n");
+    std::fprintf(stderr, "igtl_plus_peer: no client within 60 s\n");
     return 1;
   }
   t0 = Clock::now();

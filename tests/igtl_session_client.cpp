@@ -7,7 +7,10 @@
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
-//   force             prints the mean of the newest 10 Force transforms "force X Y Z |F| N"
+//   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
+//                     when that time has passed (the actions before it were too slow)
+//   force             prints the mean of the newest 10 Force transforms and how many came so far
+//                     "force X Y Z |F| N, K received"
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -48,6 +51,7 @@ struct Shared {
   std::condition_variable cv;
   std::deque<std::string> statuses;
   std::deque<std::array<double, 3>> forces;
+  long forces_received = 0;
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
   int images = 0;
   bool geometry_ok = true;
@@ -118,6 +122,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         igtl::Matrix4x4 m;
         t->GetMatrix(m);
         s.forces.push_back({m[0][3], m[1][3], m[2][3]});
+        ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
       }
     } else if (type == "IMAGE") {
@@ -191,6 +196,7 @@ struct Client {
   char** argv;
   int argc;
   int i;
+  Clock::time_point started = Clock::now();  // what `at` counts from
   std::string arg() { return i < argc ? argv[i++] : ""; }
   double num() { return std::atof(arg().c_str()); }
   bool action(const std::string& a);
@@ -213,6 +219,11 @@ bool Client::action(const std::string& a) {
     std::this_thread::sleep_for(std::chrono::duration<double>(secs));
     return true;
   }
+  if (a == "at") {
+    const double at = num(), now = std::chrono::duration<double>(Clock::now() - started).count();
+    if (now > at) return std::cout << "at " << at << ": already " << now << " s\n", false;
+    return std::this_thread::sleep_for(std::chrono::duration<double>(at - now)), true;
+  }
   if (a == "wait") return std::this_thread::sleep_for(std::chrono::duration<double>(num())), true;
   if (a == "cmd") {
     igtl::StringMessage::Pointer m = igtl::StringMessage::New();
@@ -227,7 +238,8 @@ bool Client::action(const std::string& a) {
     double f[3] = {0, 0, 0};
     for (const auto& v : s.forces)
       for (int k = 0; k < 3; ++k) f[k] += v[std::size_t(k)] / double(s.forces.size());
-    std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << std::hypot(f[0], f[1], f[2]) << " N\n";
+    std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << std::hypot(f[0], f[1], f[2]) << " N, "
+              << s.forces_received << " received\n";
     return !s.forces.empty();
   }
   if (a == "images") {

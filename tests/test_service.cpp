@@ -24,7 +24,6 @@
 #include <igtlTransformMessage.h>
 
 #include "isotouch/service/commands.h"
-#include "isotouch/service/igtl_device.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
@@ -521,50 +520,6 @@ TEST(ServiceMessages, LabelMetaNamesItsImages) {
   std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
   odd.insert(odd.end(), next.begin(), next.end());
   expect_refused_then_the_next(odd, "LBMETA body of 100 bytes");
-}
-
-}  // namespace
-}  // namespace isotouch::service
-
-namespace isotouch::service {
-namespace {
-
-TEST(ServiceIgtlDevice, SpecAndConnectionErrorsNameThePart) {
-  const IgtlDeviceOptions o = parse_igtl_spec("plus.local:18944:StylusToReference");
-  EXPECT_EQ(o.host, "plus.local");
-  EXPECT_EQ(o.port, 18944);
-  EXPECT_EQ(o.stream, "StylusToReference");
-  EXPECT_EQ(parse_igtl_spec("127.0.0.1:7").stream, "StylusToTracker");
-  const std::pair<const char*, const char*> bad[] = {{"127.0.0.1", "port ''"},
-                                                     {"127.0.0.1:0", "port '0'"},
-                                                     {"127.0.0.1:80x", "port '80x'"},
-                                                     {":18944", "no host"},
-                                                     {"h:1:", "stream ''"},
-                                                     {"h:1:ABCDEFGHIJKLMNOPQRSTU", "stream 'ABCDEFGHIJKLMNOPQRSTU'"}};
-  for (const auto& [spec, why] : bad) {
-    try {
-      parse_igtl_spec(spec);
-      ADD_FAILURE() << spec << " was taken";
-    } catch (const std::invalid_argument& e) {
-      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
-    }
-  }
-  // Nothing listens there: refused at once, naming the address.
-  int port = 0;
-  {
-    Listener l("127.0.0.1", 0);
-    port = l.port();
-  }  // closed: nobody listens there now
-  try {
-    IgtlDeviceOptions none;
-    none.host = "127.0.0.1";
-    none.port = port;
-    none.measure_s = 0.1;
-    IgtlDevice d(none);
-    ADD_FAILURE() << "connected to a port nobody listens on";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("127.0.0.1:" + std::to_string(port)), std::string::npos) << e.what();
-  }
 }
 
 }  // namespace

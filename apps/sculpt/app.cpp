@@ -254,6 +254,7 @@ io::Scene input_scene(const Options& o) {
   if (p.extension() == ".json") {
     io::Scene sc = io::load_scene(o.input);
     if (o.iso) sc.hri.tau = *o.iso;
+    sc.allow_unstable_stiffness = sc.allow_unstable_stiffness || o.allow_unstable_stiffness;
     return sc;
   }
   if (!o.iso) throw std::runtime_error(o.input + ": a volume needs --iso VALUE (the isovalue in the volume's units)");
@@ -262,7 +263,9 @@ io::Scene input_scene(const Options& o) {
   std::ostringstream t;
   t << std::setprecision(17) << "{\"name\": \"sculpt\", \"volume\": {\"path\": \"" << fs::absolute(p).string()
     << "\"}, \"isovalue\": " << *o.iso << ", \"inside\": \"" << o.inside << "\"}";
-  return io::parse_scene(t.str(), o.input);
+  io::Scene sc = io::parse_scene(t.str(), o.input);
+  sc.allow_unstable_stiffness = o.allow_unstable_stiffness;
+  return sc;
 }
 
 /// The range of a volume's finite voxels, after edits.

@@ -52,8 +52,12 @@ struct Options {
   bool tile_starts = true;
   std::string device;               ///< Vulkan device choice
   /// The haptic device: "mouse" (a simulated device coupled to the hand the mouse steers) or
-  /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET).
+  /// a `--haptic` spec of `isotouch run --live` other than sim (null, playback:FILE, hid:..., emu:SOCKET,
+  /// openhaptics[:NAME], forcedimension[:INDEX], igtl:HOST:PORT[:STREAM]).
   std::string haptic = "mouse";
+  /// Run a stiffness above the stability bound (an igtl: device's, at its measured rate), as
+  /// the scene's servo.allow_unstable_stiffness.
+  bool allow_unstable_stiffness = false;
   /// Set by the isovalue slider's restart: the volume as edited (not re-read from `input`),
   /// the camera and the tool.
   std::shared_ptr<const Carried> carried;

@@ -80,8 +80,12 @@ int main(int argc, char** argv) {
   cli.add_option("--device", o.device, "Vulkan device: name substring or index");
   cli.add_option("--haptic", o.haptic,
                  "the haptic device: mouse (default: a simulated device coupled to the hand the mouse steers), "
-                 "null, playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, emu:SOCKET "
-                 "(isotouch-devemu); a device's caps must fit the scene's stiffness, damping and force limit");
+                 "null, playback:FILE (trace.csv or .rec), hid:VID:PID[:SERIAL], hid:/dev/hidrawN, polhem:..., emu:SOCKET "
+                 "(isotouch-devemu), openhaptics[:NAME], forcedimension[:INDEX], igtl:HOST:PORT[:STREAM] (a PlusServer's "
+                 "stylus; docs/devices.md); a device's caps must fit the scene's stiffness, damping and force limit");
+  cli.add_flag("--allow-unstable-stiffness", o.allow_unstable_stiffness,
+               "run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured rate), "
+               "as the scene's servo.allow_unstable_stiffness");
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

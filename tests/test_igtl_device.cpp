@@ -1,0 +1,215 @@
+// The OpenIGTLink device (`--haptic igtl:`, service/igtl_device.h): its spec, its connection
+// errors, and its reader and writer threads against a PLUS-like peer in this process, with
+// this test's thread as the servo (read, write the force, every millisecond). The truth is
+// what the peer RECEIVED. Built without Vulkan, so it also runs under ThreadSanitizer.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "isotouch/service/igtl_device.h"
+#include "isotouch/service/igtl_message.h"
+#include "isotouch/service/igtl_socket.h"
+
+namespace isotouch::service {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+TEST(ServiceIgtlDevice, SpecAndConnectionErrorsNameThePart) {
+  const IgtlDeviceOptions o = parse_igtl_spec("plus.local:18944:StylusToReference");
+  EXPECT_EQ(o.host, "plus.local");
+  EXPECT_EQ(o.port, 18944);
+  EXPECT_EQ(o.stream, "StylusToReference");
+  EXPECT_EQ(parse_igtl_spec("127.0.0.1:7").stream, "StylusToTracker");
+  const std::pair<const char*, const char*> bad[] = {{"127.0.0.1", "port ''"},
+                                                     {"127.0.0.1:0", "port '0'"},
+                                                     {"127.0.0.1:80x", "port '80x'"},
+                                                     {":18944", "no host"},
+                                                     {"h:1:", "stream ''"},
+                                                     {"h:1:ABCDEFGHIJKLMNOPQRSTU", "stream 'ABCDEFGHIJKLMNOPQRSTU'"}};
+  for (const auto& [spec, why] : bad) {
+    try {
+      parse_igtl_spec(spec);
+      ADD_FAILURE() << spec << " was taken";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  }
+  // Nothing listens there: refused at once, naming the address.
+  int port = 0;
+  {
+    Listener l("127.0.0.1", 0);
+    port = l.port();
+  }  // closed: nobody listens there now
+  try {
+    IgtlDeviceOptions none;
+    none.host = "127.0.0.1";
+    none.port = port;
+    none.measure_s = 0.1;
+    IgtlDevice d(none);
+    ADD_FAILURE() << "connected to a port nobody listens on";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("127.0.0.1:" + std::to_string(port)), std::string::npos) << e.what();
+  }
+}
+
+/// A PLUS-like peer: accepts one client, streams "StylusToTracker" at `rate_hz` for
+/// `stream_s`, then stays silent, or closes the connection at `close_s` (> 0); keeps every
+/// "Force" it receives with its time.
+class Peer {
+ public:
+  Peer(double rate_hz, double stream_s, double close_s = -1)
+      : listener_("127.0.0.1", 0), rate_hz_(rate_hz), stream_s_(stream_s), close_s_(close_s) {
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~Peer() {
+    stop_ = true;
+    thread_.join();
+  }
+  int port() const { return listener_.port(); }
+  struct Got {
+    double t_s;  // since the stream began
+    core::Vec3 f;
+  };
+  std::vector<Got> forces() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return forces_;
+  }
+  double stopped_s() const { return stopped_s_.load(); }
+  /// When the peer closed the connection [s, steady clock's epoch] (0: not yet).
+  double closed_at_s() const { return closed_at_s_.load(); }
+
+ private:
+  void serve() {
+    int fd = -1;
+    while (fd < 0 && !stop_) fd = listener_.accept(50);
+    if (fd < 0) return;
+    Connection conn(fd, 2000, 2000, &stop_);
+    const Clock::time_point t0 = Clock::now();
+    std::thread reader([&] {
+      for (;;) {
+        Incoming in = read_message(conn, MessageLimits{});
+        if (in.kind == Incoming::Kind::kClosed || in.kind == Incoming::Kind::kBroken) break;
+        if (in.kind != Incoming::Kind::kTransform || in.device != "Force") continue;
+        std::lock_guard<std::mutex> lock(mu_);
+        forces_.push_back({since(t0), {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]}});
+      }
+    });
+    const double pose[3] = {10, 20, 30};
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate_hz_));
+    for (Clock::time_point next = t0; !stop_;) {  // a late thread skips poses, never bursts them
+      std::this_thread::sleep_until(next);
+      if (since(t0) >= stream_s_) break;  // stopped: one period after the last pose
+      conn.send(pack_translation("StylusToTracker", pose));
+      next = std::max(next + period, Clock::now());
+    }
+    stopped_s_ = since(t0);
+    while (!stop_ && !(close_s_ > 0 && since(t0) >= close_s_)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    conn.shutdown();
+    closed_at_s_ = std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+    reader.join();
+  }
+
+  Listener listener_;
+  double rate_hz_, stream_s_, close_s_;
+  std::atomic<bool> stop_{false};
+  std::atomic<double> stopped_s_{1e9}, closed_at_s_{0};
+  std::mutex mu_;
+  std::vector<Got> forces_;
+  std::thread thread_;
+};
+
+// The servo's force answers the stream's poses; when the stream stops (the servo still
+// writing, as a servo that has not yet judged it stale), the peer gets an exact zero within
+// the stale timeout (3 stream periods) and nothing else after; closing sends zero.
+TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
+  Peer peer(500, 0.8);
+  IgtlDeviceOptions o;
+  o.host = "127.0.0.1";
+  o.port = peer.port();
+  o.measure_s = 0.3;
+  const core::Vec3 f{-1.0, 0.5, 0.25};  // exact in the TRANSFORM's float32
+  std::size_t until_close = 0;  // forces the peer had before the device closed
+  {
+    IgtlDevice d(o);
+    EXPECT_GT(d.measured_rate_hz(), 200.0) << "a 500 Hz stream";
+    EXPECT_LT(d.measured_rate_hz(), 520.0) << "the peer never sends faster than 500 Hz";
+    EXPECT_NEAR(d.caps().stale_timeout_s, 3.0 / d.measured_rate_hz(), 1e-12);
+    d.enable_force(true, 0.0025);
+    const Clock::time_point t0 = Clock::now();
+    for (long k = 0; since(t0) < 0.9; ++k) {  // the stream stops 0.5 s in (0.3 s went to measuring)
+      const servo::DeviceReading r = d.read();
+      EXPECT_NE(r.status, servo::DeviceStatus::kDisconnected) << "the peer stays connected";
+      EXPECT_NEAR(r.position_m.x, 0.010, 1e-9);  // mm -> m, the stream's frame
+      d.write_force_n(f);
+      std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + 1)));
+    }
+    until_close = peer.forces().size();
+  }  // the destructor sends zero
+  for (int i = 0; i < 200 && peer.forces().size() <= until_close; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const std::vector<Peer::Got> got = peer.forces();
+  const double stopped = peer.stopped_s();
+  std::size_t exact = 0;
+  for (const Peer::Got& g : got) {
+    if (g.t_s >= stopped) break;
+    const bool is_f = g.f.x == f.x && g.f.y == f.y && g.f.z == f.z;
+    exact += is_f;
+    // Zero before the servo's first write, or after a stall of this thread (> 2.5 ms).
+    EXPECT_TRUE(is_f || core::norm(g.f) == 0.0) << "a force neither the servo's nor zero at " << g.t_s << " s";
+  }
+  EXPECT_GT(exact, 100u) << "the servo's force answering the stream's poses";
+  // After the stream stopped: late answers to its last poses (the servo's force), then a zero
+  // and nothing but zeros.
+  const Peer::Got* first_zero = nullptr;
+  int late_answers = 0;
+  for (const Peer::Got& g : got) {
+    if (g.t_s < stopped) continue;
+    if (!first_zero && core::norm(g.f) == 0.0) first_zero = &g;
+    if (!first_zero) {
+      ++late_answers;
+      EXPECT_TRUE(g.f.x == f.x && g.f.y == f.y && g.f.z == f.z) << "a late answer not the servo's force, at " << g.t_s << " s";
+    } else {
+      EXPECT_EQ(core::norm(g.f), 0.0) << "a force after the stale zero, at " << g.t_s << " s";
+    }
+  }
+  ASSERT_NE(first_zero, nullptr) << "no zero after the stream stopped: the peer holds the last force";
+  EXPECT_LE(late_answers, 3) << "answers long after the stream stopped";
+  EXPECT_LT(first_zero->t_s - stopped, 3.0 / 500 + 0.1) << "the stale zero came late";
+  EXPECT_GT(got.size(), until_close) << "no zero at close";
+}
+
+// The peer closes the connection while the servo reads: the reading says disconnected (the
+// servo's zero force and exit 5 follow from it) within a few milliseconds, not before.
+TEST(ServiceIgtlDevice, APeerThatClosesReadsAsDisconnected) {
+  Peer peer(500, 0.5, 0.6);
+  IgtlDeviceOptions o;
+  o.host = "127.0.0.1";
+  o.port = peer.port();
+  o.measure_s = 0.3;
+  IgtlDevice d(o);
+  d.enable_force(true, 0.0025);
+  double first_disconnected = 0;
+  const Clock::time_point t0 = Clock::now();
+  for (long k = 0; since(t0) < 0.6 && first_disconnected == 0; ++k) {
+    if (d.read().status == servo::DeviceStatus::kDisconnected)
+      first_disconnected = std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+    d.write_force_n({0.5, 0, 0});
+    std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + 1)));
+  }
+  const double closed = peer.closed_at_s();
+  ASSERT_GT(closed, 0) << "the peer did not close";
+  ASSERT_GT(first_disconnected, 0) << "the device never read as disconnected";
+  EXPECT_GE(first_disconnected, closed) << "disconnected before the peer closed";
+  EXPECT_LT(first_disconnected - closed, 0.1) << "the close was seen late";
+}
+
+}  // namespace
+}  // namespace isotouch::service

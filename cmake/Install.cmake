@@ -119,11 +119,21 @@ write_basic_package_version_file(${CMAKE_BINARY_DIR}/isotouchConfigVersion.cmake
 install(FILES ${CMAKE_BINARY_DIR}/isotouchConfig.cmake ${CMAKE_BINARY_DIR}/isotouchConfigVersion.cmake
   DESTINATION ${_cmake_dir})
 
-# pkg-config: the libraries in link order (each before what it needs).
+# pkg-config: the libraries in link order (each before what it needs). A static library
+# exported above but missing here stops the configuration, so the .pc cannot fall behind.
 set(ISOTOUCH_PC_LIBS "")
-foreach(l api bench serve service run eval vdb_io volume_io live record session scene io engine engine_cpu sim hid servo)
-  if(TARGET isotouch_${l} AND NOT l STREQUAL "api")
+set(_pc_order bench serve run igtl_device service eval vdb_io volume_io live record session scene io engine
+    engine_cpu sim hid servo)
+foreach(l ${_pc_order})
+  if(TARGET isotouch_${l})
     string(APPEND ISOTOUCH_PC_LIBS " -lisotouch_${l}")
+  endif()
+endforeach()
+foreach(t IN LISTS _isotouch_libs)
+  get_target_property(_type ${t} TYPE)
+  string(REGEX REPLACE "^isotouch_" "" _name ${t})
+  if(_type STREQUAL "STATIC_LIBRARY" AND NOT _name IN_LIST _pc_order)
+    message(FATAL_ERROR "cmake/Install.cmake: ${t} is exported but not in isotouch.pc's link order (_pc_order)")
   endif()
 endforeach()
 # Relocatable: the prefix is found from where the .pc file lies (${pcfiledir}).

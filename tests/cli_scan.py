@@ -146,6 +146,10 @@ m = re.search(r"^sculpt   isovalue (\S+): the session restarts", r.stderr, re.M)
 check(r.returncode == 0 and m is not None and -500 <= float(m.group(1)) <= -100,
       f"chest: the soft tissue / skin preset restarts at an isovalue in -500..-100 HU ({m.group(0) if m else r.stderr[-300:]})")
 check('sculpt   no preset "marrow" for this volume' in r.stderr, "chest: an unknown preset is said")
+# The restarted session says (and its stats panel shows) how the isovalue was set.
+m2 = re.search(r"^sculpt   isovalue (\S+) \(inside above\), chosen by the preset soft tissue / skin$", r.stderr, re.M)
+check(m is not None and m2 is not None and float(m2.group(1)) == float(m.group(1)),
+      f"chest: after the preset, the rule line says so ({m2.group(0) if m2 else 'no line'})")
 
 # A .vdb opens at the isovalue it stores (export --iso writes it), one without at the histogram's.
 vdb = os.path.join(out, "head-1150.vdb")

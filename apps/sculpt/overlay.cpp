@@ -44,7 +44,7 @@ void step_buttons(const char* id, ToolState& tool, Step step) {
   ImGui::PopID();
 }
 
-void tool_panel(ToolState& tool, IsoControl& iso) {
+void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices) {
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Tool", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
@@ -71,8 +71,12 @@ void tool_panel(ToolState& tool, IsoControl& iso) {
   float v = float(iso.value);
   ImGui::SliderFloat("isovalue", &v, float(iso.lo), float(iso.hi), "%.1f");
   if (ImGui::IsItemActive() || ImGui::IsItemEdited()) iso.value = std::clamp(double(v), iso.lo, iso.hi);
-  if (ImGui::IsItemDeactivatedAfterEdit()) iso.committed = true;
+  if (ImGui::IsItemDeactivatedAfterEdit()) {
+    iso.committed = true;
+    iso.how = "hand (the slider)";
+  }
   iso_histogram_widgets(iso);
+  slice_widgets(slices);
   ImGui::End();
 }
 
@@ -301,9 +305,9 @@ bool Overlay::changed(const Shown& now) const {
   return ImGui::IsAnyItemActive() || io.WantCaptureMouse || io.WantTextInput;
 }
 
-void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible) {
+void Overlay::build(ToolState& tool, IsoControl& iso, SliceControl& slices, const PanelStats& stats, bool visible) {
   if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
-  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, stats, visible};
+  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, slices.wl, slices.shown, stats, visible};
   if (changed(now)) settling_ = 3;  // this build and the two after it
   if (settling_ == 0) return;
   --settling_;
@@ -314,7 +318,7 @@ void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, b
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
   if (visible) {
-    tool_panel(tool, iso);
+    tool_panel(tool, iso, slices);
     stats_panel(stats);
   }
   ImGui::Render();

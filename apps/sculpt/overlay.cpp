@@ -82,9 +82,18 @@ void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices) {
 
 void stats_panel(const PanelStats& s) {
   // Bottom left, out of the way of the volume, which the camera centres.
-  ImGui::SetNextWindowPos(ImVec2(8, ImGui::GetIO().DisplaySize.y - 8), ImGuiCond_FirstUseEver, ImVec2(0, 1));
+  // Placed again whenever the display's height or the panel's changed in the last two builds:
+  // an auto-resized panel with wrapped text is tall in its first frames, and placed once it
+  // stayed at the top, over the Tool panel. A panel the user moved stays until then.
+  static float display_h = -1, panel_h[2] = {-1, -2};  // the last two builds' panel heights
+  const float h = ImGui::GetIO().DisplaySize.y;
+  const bool again = h != display_h || panel_h[0] != panel_h[1];
+  ImGui::SetNextWindowPos(ImVec2(8, h - 8), again ? ImGuiCond_Always : ImGuiCond_FirstUseEver, ImVec2(0, 1));
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  display_h = h;
+  panel_h[1] = panel_h[0];
+  panel_h[0] = ImGui::GetWindowSize().y;
   ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
   ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
   if (s.tick_p99_us && s.tick_p99_beyond) ImGui::Text("tick p99    > %.1f ms (|period error|, past the histogram)", *s.tick_p99_us * 1e-3);

@@ -214,6 +214,14 @@ SlicePane make_pane(const SliceImage& s, const Vec3& spacing_m, int size) {
         const int c = std::clamp(int(std::lround((*cr)[0])), 0, s.width - 1), r = std::clamp(int(std::lround((*cr)[1])), 0, s.height - 1);
         p.rgba[std::size_t(y) * std::size_t(size) + std::size_t(x)] = s.rgba[std::size_t(r) * std::size_t(s.width) + std::size_t(c)];
       }
+  // The marks again at the pane's resolution (a voxel may be less than a pixel there).
+  for (const auto& [at, rgba] : {std::pair{s.proxy, kProxyRgba}, std::pair{s.hip, kHipRgba}}) {
+    if (at[0] < 0 || at[1] < 0 || at[0] >= s.width || at[1] >= s.height) continue;
+    const int cx = int(p.x0 + (at[0] + 0.5) * p.px_per_col), cy = int(p.y0 + (at[1] + 0.5) * p.px_per_row);
+    for (int d = -6; d <= 6; ++d)
+      for (const auto& [x, y] : {std::array<int, 2>{cx + d, cy}, std::array<int, 2>{cx, cy + d}})
+        if (x >= 0 && y >= 0 && x < size && y < size) p.rgba[std::size_t(y) * std::size_t(size) + std::size_t(x)] = rgba;
+  }
   const int ts = size >= 192 ? 2 : 1;  // font pixels
   const auto& e = s.axes.edges;
   draw_text(p, std::string(1, e[0]), (size - text_width("A", ts)) / 2, 2, ts);

@@ -77,7 +77,7 @@ def voxel_of(plane, k, c, r, hdr, voxels, dims):
     return voxels[(i[2] * dims[1] + i[1]) * dims[0] + i[0]]
 
 
-def sculpt_run(tag, mhd, events):
+def sculpt_run(tag, mhd, events, *extra):
     """isotouch-sculpt on `mhd` (no --iso) with `events` on the simulated clock: (stderr, dump dir)."""
     script = os.path.join(out, tag + "-script.json")
     json.dump({"events": events}, open(script, "w"))
@@ -85,7 +85,7 @@ def sculpt_run(tag, mhd, events):
     shutil.rmtree(d, ignore_errors=True)
     r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", sculpt, mhd, "--size", "640", "--sim-clock",
                         "--no-overlay", "--script", script, "--screenshot", os.path.join(d, "window.png"),
-                        "--slices-png", os.path.join(d, "slices")], capture_output=True, text=True, timeout=300)
+                        "--slices-png", os.path.join(d, "slices"), *extra], capture_output=True, text=True, timeout=300)
     open(os.path.join(out, tag + ".txt"), "w").write(r.stdout + r.stderr)
     check(r.returncode == 0, f"{tag}: isotouch-sculpt exits 0 (got {r.returncode}: {r.stderr.strip()[-300:]})")
     return r.stderr, os.path.join(d, "slices")
@@ -96,7 +96,8 @@ def near_mark(s, c, r):
     return any((c == x and abs(r - y) <= 2) or (r == y and abs(c - x) <= 2) for x, y in (s["hip_pixel"], s["proxy_pixel"]))
 
 
-def check_slice(tag, plane, meta, dump, hdr, voxels, dims):
+def check_slice(tag, plane, meta, dump, hdr, voxels, dims, window_of=None):
+    """The slice `plane` of the dump against `voxels`; the window is the range of `window_of` (default `voxels`)."""
     s = meta[plane]
     w, h, px = read_png(os.path.join(dump, plane + ".png"))
     normal = PLANES[plane][0]
@@ -104,7 +105,7 @@ def check_slice(tag, plane, meta, dump, hdr, voxels, dims):
     k = min(max(rnd(hip[normal], s["index"]), 0), dims[normal] - 1)
     check(s["index"] == k, f"{tag} {plane}: the plane through the HIP (index {k} along axis {normal}; the app's {s['index']})")
     check((w, h) == (dims[PLANES[plane][1][0]], dims[PLANES[plane][2][0]]), f"{tag} {plane}: {w}x{h} pixels, one per voxel")
-    lo, hi = min(voxels), max(voxels)
+    lo, hi = min(window_of or voxels), max(window_of or voxels)
     L, W, iso = (lo + hi) / 2, hi - lo, meta["isovalue"]
     grey = lambda v: round(255 * min(max((v - (L - W / 2)) / W, 0.0), 1.0))
     inside = [[voxel_of(plane, k, c, r, hdr, voxels, dims) > iso for c in range(w)] for r in range(h)]
@@ -158,9 +159,16 @@ col, row = 32, 2
 target_idx = [col, row, ax["index"]]  # the shipped head's x and y run right and down in the axial view
 air = all(vox[(ax["index"] * NY + y) * NX + x] < meta["isovalue"] for x in range(col - 4, col + 5) for y in range(0, row + 5))
 check(air, "the pressed voxel and its surroundings are air")
-px_x = meta["column_x"] + ax["pane"]["x0"] + (col + 0.5) * ax["pane"]["px_per_col"]
-px_y = ax["pane"]["y"] + ax["pane"]["y0"] + (row + 0.5) * ax["pane"]["px_per_row"]
-events = [{"after_frames": 3, "cursor": [px_x / 639, px_y / 479]}, {"press": "left"},
+
+
+def pane_cursor(s, col, row):
+    """The script's cursor (fractions of the 640x480 framebuffer) over pixel (col, row) of slice `s`'s pane."""
+    x = meta["column_x"] + s["pane"]["x0"] + (col + 0.5) * s["pane"]["px_per_col"]
+    y = s["pane"]["y"] + s["pane"]["y0"] + (row + 0.5) * s["pane"]["px_per_row"]
+    return [x / 639, y / 479]
+
+
+events = [{"after_frames": 3, "cursor": pane_cursor(ax, col, row)}, {"press": "left"},
           {"after_frames": 60, "release": "left"}, {"after_frames": 2, "quit": True}]
 text, dump = sculpt_run("pressed", shipped_mhd, events)
 m = re.search(r"^slices   target from the axial view: index \((\S+), (\S+), (\S+)\)", text, re.M)
@@ -194,5 +202,56 @@ wb = read_png(os.path.join(out, "flipped", "window.png"))
 col_x = meta["column_x"]
 n_panes = sum(wa[2][y * wa[0] + x] != wb[2][y * wb[0] + x] for y in range(wa[1]) for x in range(col_x, wa[0]))
 check(wa[:2] == wb[:2] and n_panes == 0, f"flipped: the slice views in the window's screenshot are the same ({n_panes} pixels differ)")
+
+
+# The edited volume shows in the slices: a carve where the probe touches the left mandible,
+# the edited volume saved (Ctrl+S, .mha, read here); the slices through the probe afterwards
+# (a script screenshot's dump) are those of the edited voxels (the window still the range the
+# session opened with), and their planes hold carved voxels. The probe then pressed away into
+# air and the carve undone (Ctrl+Z) there: the slices at exit are the shipped voxels again.
+def read_mha(path):
+    """(header text, float32 voxels) of an uncompressed MetaImage .mha."""
+    data = open(path, "rb").read()
+    end = data.index(b"ElementDataFile = LOCAL\n") + len(b"ElementDataFile = LOCAL\n")
+    text = data[:end].decode()
+    assert "MET_FLOAT" in text and "CompressedData = True" not in text, text
+    return text, array.array("f", data[end:])
+
+
+edited_mha = os.path.join(out, "edited.mha")
+if os.path.exists(edited_mha):
+    os.remove(edited_mha)
+carve = [{"after_frames": 2, "cursor": [0.56, 0.6]}, {"tool": "carve", "radius_mm": 8, "strength": 1.0},
+         {"wait": "contact", "timeout_s": 30}, {"scroll": 2}, {"after_frames": 2, "press": "left"},
+         {"after_frames": 12, "release": "left"}, {"wait": "edits", "timeout_s": 30},
+         {"after_frames": 2, "screenshot": "carved.png"}, {"key": "s", "mods": ["ctrl"]},
+         {"after_frames": 20, "cursor": pane_cursor(meta["axial"], 60, 29)}, {"press": "left"},
+         {"after_frames": 60, "release": "left"}, {"after_frames": 2, "screenshot": "away.png"},
+         {"key": "z", "mods": ["ctrl"]}, {"wait": "edits", "timeout_s": 30}, {"after_frames": 3, "quit": True}]
+_, cdump = sculpt_run("carved", shipped_mhd, carve, "--save", edited_mha)
+if os.path.exists(edited_mha):
+    etext, edited = read_mha(edited_mha)
+    carved_dump = os.path.join(cdump, "carved")
+    cmeta = json.load(open(os.path.join(carved_dump, "slices.json")))
+    umeta = json.load(open(os.path.join(cdump, "slices.json")))
+    for plane in PLANES:
+        check_slice("carved", plane, cmeta, carved_dump, header(etext), edited, dims, window_of=vox)
+        check_slice("undone", plane, umeta, cdump, hdr, vox, dims)
+        s = cmeta[plane]
+        changed = sum(1 for r in range(s["height"]) for c in range(s["width"])
+                      if voxel_of(plane, s["index"], c, r, hdr, vox, dims) != voxel_of(plane, s["index"], c, r, hdr, edited, dims))
+        check(changed > 0, f"carved {plane}: the plane through the probe holds {changed} carved voxels")
+    # Pressed away into air (lateral, in the axial plane), then undone there: the probe stays,
+    # the axial slice changes back with the voxels alone.
+    away_dump = os.path.join(cdump, "away")
+    ameta = json.load(open(os.path.join(away_dump, "slices.json")))
+    a = ameta["axial"]
+    changed = sum(1 for r in range(a["height"]) for c in range(a["width"])
+                  if voxel_of("axial", a["index"], c, r, hdr, vox, dims) != voxel_of("axial", a["index"], c, r, hdr, edited, dims))
+    check(changed > 0 and ameta["axial"]["hip_pixel"] == umeta["axial"]["hip_pixel"] and a["index"] == umeta["axial"]["index"],
+          f"away: the probe rests in air in the axial plane holding {changed} carved voxels, and stays there for the undo")
+    check_slice("away", "axial", ameta, away_dump, header(etext), edited, dims, window_of=vox)
+else:
+    check(False, "carved: Ctrl+S saved the edited volume")
 
 check.finish("cli_slices")

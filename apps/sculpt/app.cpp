@@ -513,6 +513,7 @@ struct Sculpt {
   bool slice_drag = false;
   bool inset_on = false;
   Vec3 slice_hip_m;
+  std::vector<double> slice_ms;  // each time the slice views were computed again
   Vec3 last_hand_world;  // the hand's target last frame
   std::optional<std::pair<int, double>> press_normal;  // a press on a pane: its normal axis and plane index, kept while held
   std::optional<engine::IsoChoice> chosen;  // the isovalue chosen for a volume without --iso
@@ -1162,10 +1163,12 @@ void Sculpt::update_slices(const session::Observed& obs, const std::array<int, 2
   slice_hip_m = obs.tick >= 0 ? obs.hip_m : start_world;
   const Vec3 proxy = obs.tick >= 0 ? obs.vhip_m : start_world;
   bool changed = false;
+  const auto t0 = Clock::now();
   {
     std::lock_guard<std::mutex> lock(feed.mu);
     changed = slices.update(feed.values, vol.grid.to_index(slice_hip_m), vol.grid.to_index(proxy), slice_edits, fb);
   }
+  if (changed) slice_ms.push_back(ms_since(t0));
   if (changed || !inset_on) window->set_inset(slices.column(), slices.column_x(), 0, slices.size(), 3 * slices.size());
   inset_on = true;
 }
@@ -1685,6 +1688,7 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "  overlay pass (GPU timestamps)", overlay_ms);
   stats_line(log, "present", present_ms);
   stats_line(log, "picture update (changed bricks)", update_ms);
+  stats_line(log, "slice views computed again (the HIP or proxy changed voxel, an edit, the window/level)", slice_ms);
   stats_line(log, "edit-to-pixels (submit to the first frame showing it)", latency_ms);
   stats_line(log, "edit-to-haptics", st.edit_to_haptics_ms);
   print_servo(st);

@@ -14,7 +14,10 @@ voxel, and slices.json).
    plane outside, computed here from the raw voxels.
 3. A press on the axial view at a voxel chosen here (in air) moves the probe there: the HIP
    printed in slices.json lies within a voxel of it, and the yellow HIP mark sits at its index.
-4. The head stored the other way (slices reversed along z, identity direction: the same
+4. With a device (a playback of a trace.csv written here) the slices go through its HIP.
+5. A carve shows in the slices (against the edited volume saved as .mha), and its undo too,
+   with the probe at rest in air.
+6. The head stored the other way (slices reversed along z, identity direction: the same
    physical volume) gives the same three slice pictures and the same window picture.
 
 Usage: cli_slices.py ISOTOUCH_SCULPT SOURCE_DIR OUT_DIR; exit 0 and "PASS cli_slices" (77: no xvfb-run).
@@ -78,13 +81,17 @@ def voxel_of(plane, k, c, r, hdr, voxels, dims):
 
 
 def sculpt_run(tag, mhd, events, *extra):
-    """isotouch-sculpt on `mhd` (no --iso) with `events` on the simulated clock: (stderr, dump dir)."""
-    script = os.path.join(out, tag + "-script.json")
-    json.dump({"events": events}, open(script, "w"))
+    """isotouch-sculpt on `mhd` (no --iso) with `events` on the simulated clock (none: `extra`
+    says how it runs): (stderr, dump dir)."""
+    args = []
+    if events is not None:
+        script = os.path.join(out, tag + "-script.json")
+        json.dump({"events": events}, open(script, "w"))
+        args = ["--sim-clock", "--script", script]
     d = os.path.join(out, tag)
     shutil.rmtree(d, ignore_errors=True)
-    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", sculpt, mhd, "--size", "640", "--sim-clock",
-                        "--no-overlay", "--script", script, "--screenshot", os.path.join(d, "window.png"),
+    r = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", sculpt, mhd, "--size", "640", *args,
+                        "--no-overlay", "--screenshot", os.path.join(d, "window.png"),
                         "--slices-png", os.path.join(d, "slices"), *extra], capture_output=True, text=True, timeout=300)
     open(os.path.join(out, tag + ".txt"), "w").write(r.stdout + r.stderr)
     check(r.returncode == 0, f"{tag}: isotouch-sculpt exits 0 (got {r.returncode}: {r.stderr.strip()[-300:]})")
@@ -203,6 +210,21 @@ col_x = meta["column_x"]
 n_panes = sum(wa[2][y * wa[0] + x] != wb[2][y * wb[0] + x] for y in range(wa[1]) for x in range(col_x, wa[0]))
 check(wa[:2] == wb[:2] and n_panes == 0, f"flipped: the slice views in the window's screenshot are the same ({n_panes} pixels differ)")
 
+
+# With a device the slices follow it: a playback device holding the HIP at a physical point
+# in air written here (trace.csv, physical frame); the planes and the HIP mark at its index.
+point_mm = [54.4, 6.4, 60.0]  # index (17, 2, 52) of the shipped head
+with open(os.path.join(out, "trace.csv"), "w") as f:
+    f.write("t_s,hip_x_m,hip_y_m,hip_z_m\n" + "".join(f"{t},{point_mm[0] / 1e3},{point_mm[1] / 1e3},{point_mm[2] / 1e3}\n"
+                                                     for t in (0, 1)))
+_, ddump = sculpt_run("device", shipped_mhd, None, "--haptic", "playback:" + os.path.join(out, "trace.csv"),
+                      "--frames", "30", "--no-sched-fifo")
+dmeta = json.load(open(os.path.join(ddump, "slices.json")))
+check(all(abs(dmeta["hip_phys_mm"][a] - point_mm[a]) < 0.01 for a in range(3)),
+      f"device: the slices go through the device's HIP {dmeta['hip_phys_mm']} (played back at {point_mm})")
+dmeta["hip_phys_mm"] = point_mm  # the truth: the checks below place the planes and marks from the file
+for plane in PLANES:
+    check_slice("device", plane, dmeta, ddump, hdr, vox, dims)
 
 # The edited volume shows in the slices: a carve where the probe touches the left mandible,
 # the edited volume saved (Ctrl+S, .mha, read here); the slices through the probe afterwards

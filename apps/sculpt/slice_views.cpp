@@ -75,7 +75,11 @@ void SliceViews::compose(std::vector<std::uint32_t>& picture, int w, int h) cons
 
 namespace {
 
-std::string json_pair(const std::array<int, 2>& p) { return "[" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + "]"; }
+std::string json_pair(const std::array<int, 2>& p) {
+  std::ostringstream s;
+  s << "[" << p[0] << ", " << p[1] << "]";
+  return s.str();
+}
 
 /// One slice's entry in slices.json.
 std::string slice_json(const SliceImage& s, const SlicePane& p, int pane_y) {

@@ -31,7 +31,10 @@ Subcommand add_export_command(CLI::App& cli) {
   s.app->add_option("volume", o->volume, "Volume file (.mhd .nrrd .nii .vdb ...) or DICOM series folder");
   s.app->add_option("--scene", o->scene, "Scene file: its volume and its isosurface (tau, inside)");
   s.app->add_option("--grid", o->grid, ".vdb input: the grid to read (default: the first float grid)");
-  s.app->add_option("--iso", o->iso, "Isovalue tau (value units); overrides the scene's or the .vdb's");
+  s.app->add_option("--iso", o->iso,
+                    "Isovalue tau (value units); overrides the scene's or the .vdb's. Without it (and without one "
+                    "in the scene or the .vdb) the volume's own: bone for CT in HU, else the upper three-class Otsu "
+                    "threshold (the rule is printed)");
   s.app->add_option("--inside", o->inside, "Which side of tau is the object: above (CT density) or below (signed distance)");
   s.app->add_option("--vdb", o->vdb, "Write the volume as OpenVDB .vdb (FloatGrid 'volume')");
   s.app->add_option("--volume", o->volume_out,

@@ -47,6 +47,12 @@ struct Input {
   std::string iso_source;               ///< where iso came from
 };
 
+/// A volume that gives no isosurface of its own: the one it opens at (engine::choose_isovalue), with its rule.
+void choose_isosurface(Input& in, const engine::IsoChoice& c) {
+  in.iso = c.iso;
+  in.iso_source = "chosen by " + c.rule;
+}
+
 Input load_input(const ExportOptions& o, std::ostream& err) {
   Input in;
   if (!o.scene.empty()) {
@@ -71,8 +77,12 @@ Input load_input(const ExportOptions& o, std::ostream& err) {
     in.volume = std::move(l.volume);
     in.iso = l.suggested;
     in.iso_source = io::suggested_source(l);
+    if (!in.iso) choose_isosurface(in, engine::choose_isovalue(in.volume, engine::VolumeHints{}));
   } else {
-    in.volume = io::load_volume(o.volume);
+    io::Scan scan = io::load_scan(o.volume);
+    const engine::IsoChoice c = io::choose_isovalue(scan);
+    in.volume = std::move(scan.volume);
+    choose_isosurface(in, c);
   }
   return in;
 }

@@ -21,10 +21,11 @@ struct ExportOptions {
 
 /// Runs the export: loads the volume, resolves the isosurface (--iso/--inside, else the
 /// scene's, else the .vdb's suggestion: level set -> tau 0 inside below, or save_vdb's
-/// metadata), writes each requested output atomically, prints the mesh figures (triangles,
+/// metadata, else the isovalue the volume opens at: engine::choose_isovalue, its rule printed
+/// on the isosurface line), writes each requested output atomically, prints the mesh figures (triangles,
 /// vertices, area [m^2], enclosed volume [m^3], closedness) on `out` and progress on `err`.
 /// @return 0 on success; 2 on bad usage (no input or both, no output, no isosurface for a
-///         mesh, bad --inside); 3 when a mesh was written but is not closed.
+///         mesh with --iso or --inside alone and nothing to complete it, bad --inside); 3 when a mesh was written but is not closed.
 /// @throws VdbError / VolumeError / SceneError naming the file and the problem.
 int run_export(const ExportOptions& options, std::ostream& out, std::ostream& err);
 

@@ -119,6 +119,7 @@ if shutil.which("xvfb-run") is None:
 
 head_mhd = os.path.join(data, "ct-head-headsq/headsq_64x64x93_int16.mhd")
 iso, skin = expect_otsu("head", head_mhd, head())
+head_iso = iso
 check(iso > skin + 300, f"head: bone ({iso}) well above the two-class threshold on skin ({skin:.6g})")
 expect_otsu("tooth", os.path.join(data, "ct-tooth/tooth.nhdr"), tooth())
 expect_otsu("engine", os.path.join(data, "ct-engine/engine.nii.gz"), engine())
@@ -146,6 +147,10 @@ m = re.search(r"^sculpt   isovalue (\S+): the session restarts", r.stderr, re.M)
 check(r.returncode == 0 and m is not None and -500 <= float(m.group(1)) <= -100,
       f"chest: the soft tissue / skin preset restarts at an isovalue in -500..-100 HU ({m.group(0) if m else r.stderr[-300:]})")
 check('sculpt   no preset "marrow" for this volume' in r.stderr, "chest: an unknown preset is said")
+# The restarted session says (and its stats panel shows) how the isovalue was set.
+m2 = re.search(r"^sculpt   isovalue (\S+) \(inside above\), chosen by the preset soft tissue / skin$", r.stderr, re.M)
+check(m is not None and m2 is not None and float(m2.group(1)) == float(m.group(1)),
+      f"chest: after the preset, the rule line says so ({m2.group(0) if m2 else 'no line'})")
 
 # A .vdb opens at the isovalue it stores (export --iso writes it), one without at the histogram's.
 vdb = os.path.join(out, "head-1150.vdb")
@@ -153,6 +158,16 @@ r = subprocess.run([isotouch, "export", head_mhd, "--iso", "1150", "--inside", "
 check(r.returncode == 0, f"export --vdb exits 0 ({r.stderr.strip()[-200:]})")
 iso, rule = sculpt_isovalue(vdb, "head-vdb")
 check(iso == 1150 and "stored in the file" in rule, f"head .vdb: opens at its stored 1150 ({iso}, {rule})")
+# export --vdb without --iso: the head's own isovalue (the upper three-class Otsu, computed
+# here), its rule printed, and stored in the .vdb, which opens at it.
+vdb = os.path.join(out, "head-auto.vdb")
+r = subprocess.run([isotouch, "export", head_mhd, "--vdb", vdb], capture_output=True, text=True)
+m = re.search(r"^isosurface  tau (\S+), inside above \(chosen by (.*)\)$", r.stdout, re.M)
+check(r.returncode == 0 and m is not None and abs(float(m.group(1)) - head_iso) <= 1e-3 * head_iso
+      and "three-class Otsu" in m.group(2),
+      f"export --vdb without --iso: the head's Otsu isovalue {head_iso:.6g} and its rule ({m.group(0) if m else r.stderr.strip()[-200:]})")
+iso, rule = sculpt_isovalue(vdb, "head-auto-vdb")
+check(abs(iso - head_iso) <= 1e-3 * head_iso and "stored in the file" in rule, f"that .vdb opens at the value it stores ({iso}, {rule})")
 
 
 # ---- isotouch run VOLUME -------------------------------------------------------------------

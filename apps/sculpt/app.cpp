@@ -46,6 +46,7 @@
 #include "isotouch/apps/sculpt/window.h"
 #include "isotouch/apps/sculpt/scan_input.h"
 #include "isotouch/apps/sculpt/iso_panel.h"
+#include "isotouch/apps/sculpt/slice_views.h"
 
 namespace isotouch::sculpt {
 
@@ -410,6 +411,11 @@ struct Sculpt {
   void handle_key(const Input::Key& k);
   void steer_camera(const std::array<int, 2>& fb);
   Vec3 steer_hand(const FrameSize& f);
+  std::optional<Vec3> slice_target();
+  bool slices_shown() const;
+  void update_slices(const session::Observed& obs, const std::array<int, 2>& fb);
+  void compose_slices(std::vector<std::uint32_t>& px, int w, int h);
+  void dump_slices(const std::string& dir);
   void apply_tools(const session::Observed& obs);
   long take_edits();
   void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f);
@@ -503,6 +509,16 @@ struct Sculpt {
   // The frame loop's state.
   ToolState tool;
   IsoControl iso_ctl;
+  // The slice views (slice_views.h): the edits they show so far, whether the left button is
+  // on a pane (moving the probe's target, not the tool), the HIP they go through.
+  SliceViews slices;
+  long slice_edits = 0;
+  bool slice_drag = false;
+  bool inset_on = false;
+  Vec3 slice_hip_m;
+  std::vector<double> slice_ms;  // each time the slice views were computed again
+  Vec3 last_hand_world;  // the hand's target last frame
+  std::optional<std::pair<int, double>> press_normal;  // a press on a pane: its normal axis and plane index, kept while held
   std::optional<engine::IsoChoice> chosen;  // the isovalue chosen for a volume without --iso
   PanelStats panel;
   Clock::time_point panel_refreshed;
@@ -800,11 +816,14 @@ void Sculpt::init_tools() {
   print_felt_tool();
   iso_ctl = IsoControl{scene.hri.tau, vol.min_value, vol.max_value, false};
   fill_iso_panel(iso_ctl, vol, chosen);
+  slices.open(vol, live.iso, chosen ? chosen->hounsfield : engine::is_ct_hounsfield(vol, ""));
+  slices.control().shown = o.slices;
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
   panel_refreshed = Clock::now();
   style.tile_starts = o.tile_starts;
   hand_t = norm(vol.grid.centre_m() - view.eye);
+  last_hand_world = start_world;
   unit = run::probe_size_m(vol.grid);
   wait_frames = script.empty() ? 0 : script[0].after_frames;
   t_wall0 = Clock::now();
@@ -914,6 +933,7 @@ bool Sculpt::frame_step() {
   const session::Observed obs = session->observe();
   apply_tools(obs);
   const long drawn_brushes = take_edits();
+  update_slices(obs, f.fb);
   render_picture(obs, hand_world, f);
   show(f, shots, drawn_brushes);
   end_frame(obs, f.fb);
@@ -994,11 +1014,13 @@ void Sculpt::apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std
     case EK::kIso:
       iso_ctl.value = ev.xy[0];
       iso_ctl.committed = true;
+      iso_ctl.how = "hand (the script's iso)";
       break;
     case EK::kPreset:
       if (const auto v = preset_value(iso_ctl, ev.text)) {
         iso_ctl.value = *v;
         iso_ctl.committed = true;
+        iso_ctl.how = "the preset " + ev.text;
       } else {
         status = "no preset \"" + ev.text + "\" for this volume";
         log << "sculpt   " << status << "\n";
@@ -1093,10 +1115,75 @@ Vec3 Sculpt::steer_hand(const FrameSize& f) {
     const float t = caster->last_depth(cx, cy);
     if (t > 0) hand_t = double(t) + push_m;
   }
-  const Vec3 hand_world = ray.origin + ray.dir * hand_t;
+  Vec3 hand_world = ray.origin + ray.dir * hand_t;
+  // Over the slice views the 3-D view is hidden: a press there moves the target into the
+  // pane's plane, and the target stays where it was while the cursor is over them.
+  if (const auto t = slice_target()) hand_world = *t;
+  else if (slices_shown() && slices.over(input.px, input.py)) hand_world = last_hand_world;
+  last_hand_world = hand_world;
   if (input.cursor_seen && mouse) mouse_device->set_hand_target(xf.to_device(hand_world));
   if (input.cursor_seen && o.sim_clock) sim_hand.waypoints.front().pos_m = hand_world;
   return hand_world;
+}
+
+/// With the mouse probe and the slice views shown, the left button on a pane moves the
+/// probe's target to the voxel under the cursor in that pane's plane (said once a press).
+std::optional<Vec3> Sculpt::slice_target() {
+  const bool was = slice_drag;
+  slice_drag = false;
+  if (!input.down[0]) press_normal.reset();
+  if (!slices_shown() || !input.down[0] || !input.cursor_seen || !(mouse || o.sim_clock)) return std::nullopt;
+  auto h = slices.hit(input.px, input.py);
+  if (!h) return std::nullopt;
+  slice_drag = true;
+  // The pane's plane as pressed: the slices follow the probe, which must not move the plane
+  // it is dragged in.
+  const int normal = slices.normal_axis(h->first);
+  if (!was || !press_normal || press_normal->first != normal) press_normal = std::make_pair(normal, h->second[normal]);
+  double idx[3] = {h->second.x, h->second.y, h->second.z};
+  idx[normal] = press_normal->second;
+  h->second = Vec3{idx[0], idx[1], idx[2]};
+  const Vec3 target = vol.grid.to_world(h->second);
+  if (!was) {
+    const Vec3 p = vol.to_physical(target) * 1e3;
+    log << "slices   target from the " << to_string(h->first) << " view: index (" << fixed(h->second.x, 2) << ", "
+        << fixed(h->second.y, 2) << ", " << fixed(h->second.z, 2) << "), physical (" << fixed(p.x, 2) << ", "
+        << fixed(p.y, 2) << ", " << fixed(p.z, 2) << ") mm\n";
+  }
+  return target;
+}
+
+bool Sculpt::slices_shown() const { return o.slices && overlay && slices.control().shown; }
+
+/// The slice views through the HIP (computed again only when what they show changed), into
+/// the window's inset; hidden with the overlay (H).
+void Sculpt::update_slices(const session::Observed& obs, const std::array<int, 2>& fb) {
+  if (!slices_shown()) {
+    if (inset_on) window->set_inset({}, 0, 0, 0, 0);
+    inset_on = false;
+    return;
+  }
+  slice_hip_m = obs.tick >= 0 ? obs.hip_m : start_world;
+  const Vec3 proxy = obs.tick >= 0 ? obs.vhip_m : start_world;
+  bool changed = false;
+  const auto t0 = Clock::now();
+  {
+    std::lock_guard<std::mutex> lock(feed.mu);
+    changed = slices.update(feed.values, vol.grid.to_index(slice_hip_m), vol.grid.to_index(proxy), slice_edits, fb);
+  }
+  if (changed) slice_ms.push_back(ms_since(t0));
+  if (changed || !inset_on) window->set_inset(slices.column(), slices.column_x(), 0, slices.size(), 3 * slices.size());
+  inset_on = true;
+}
+
+void Sculpt::compose_slices(std::vector<std::uint32_t>& px, int w, int h) {
+  if (w == slices.column_x() + slices.size()) slices.compose(px, w, h);
+}
+
+/// --slices-png: the three slices (one pixel per voxel) and slices.json into `dir`.
+void Sculpt::dump_slices(const std::string& dir) {
+  slices.dump(dir, vol.to_physical(slice_hip_m) * 1e3);
+  log << "sculpt   slices " << dir << "\n";
 }
 
 /// Tools: one application per frame while the left button is held and the probe touches;
@@ -1106,10 +1193,11 @@ void Sculpt::apply_tools(const session::Observed& obs) {
   const auto now = Clock::now();
   const double dt_s = o.sim_clock ? sim_frame_s : std::chrono::duration<double>(now - last_frame).count();
   fit_felt_tool();
-  drill.press(input.down[0] && tool.kind == session::BrushKind::kDrill, felt->applied_m() > 0 ? felt->applied_m() : tool.radius_m,
+  const bool tool_down = input.down[0] && !slice_drag;
+  drill.press(tool_down && tool.kind == session::BrushKind::kDrill, felt->applied_m() > 0 ? felt->applied_m() : tool.radius_m,
               tool.radius_m + tool.cut_margin_m, [this] { return edited_volume(); });
   std::vector<session::EditEvent> evs;
-  stroke.frame(input.down[0], obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
+  stroke.frame(tool_down, obs.contact, tool, obs.vhip_m, norm(obs.force_n), dt_s, evs);
   for (const session::EditEvent& e : evs) {
     if (!session->submit(e)) continue;
     ++events_submitted;
@@ -1132,6 +1220,7 @@ long Sculpt::take_edits() {
   if (!feed.pending.empty()) {
     const auto t0 = Clock::now();
     caster->update(feed.values, feed.pending);
+    ++slice_edits;
     update_ms.push_back(ms_since(t0));
     feed.pending.clear();
   }
@@ -1212,7 +1301,7 @@ void Sculpt::build_panels() {
     panel.loading.clear();
     panel.loading_s = 0;
   }
-  panels->build(tool, iso_ctl, panel, overlay);
+  panels->build(tool, iso_ctl, slices.control(), panel, overlay);
 #endif
 }
 
@@ -1237,9 +1326,15 @@ void Sculpt::measure_latency(long drawn_brushes) {
 }
 
 void Sculpt::write_shots(const std::vector<std::string>& shots, const std::array<int, 2>& fb, const std::vector<std::uint32_t>& px) {
+  std::vector<std::uint32_t> with_slices;
+  if (!shots.empty() && slices_shown()) {
+    with_slices = px;
+    compose_slices(with_slices, fb[0], fb[1]);
+  }
   for (const std::string& s : shots) {
     try {
-      run::write_png(s, fb[0], fb[1], px);
+      run::write_png(s, fb[0], fb[1], with_slices.empty() ? px : with_slices);
+      if (!o.slices_png.empty()) dump_slices((fs::path(o.slices_png) / fs::path(s).stem()).string());
       log << "sculpt   screenshot " << s << "\n";
     } catch (const std::exception& e) {
       log << "isotouch-sculpt: " << e.what() << "\n";
@@ -1396,7 +1491,15 @@ bool Sculpt::restart_at(double tau) {
   Options next = o;
   next.iso = tau;
   next.record.clear();
-  next.carried = carry_over(tau);
+  auto carried = carry_over(tau);
+  // The rule line the next session prints and shows: how this value was set; the presets stay.
+  engine::IsoChoice how{core::Isosurface{tau, scene.hri.inside}, iso_ctl.how.empty() ? "hand" : iso_ctl.how, false, {}};
+  if (chosen) {
+    how.hounsfield = chosen->hounsfield;
+    how.presets = chosen->presets;
+  }
+  carried->choice = how;
+  next.carried = carried;
   *reopen = next;
   log << "sculpt   isovalue " << tau << ": the session restarts with the edited volume (undo history starts afresh"
       << (o.record.empty() ? "" : ", the recording ends here") << ")\n";
@@ -1538,11 +1641,21 @@ void Sculpt::stop_session() {
 
 /// --screenshot: the last frame drawn.
 void Sculpt::write_last_screenshot() {
+  if (!o.slices_png.empty()) {
+    try {
+      dump_slices(o.slices_png);
+    } catch (const std::exception& e) {
+      log << "isotouch-sculpt: " << e.what() << "\n";
+      code = 1;
+    }
+  }
   if (o.screenshot.empty() || img.width <= 0) return;
   try {
     if (img.rgba.empty() && upscaled.empty()) img.rgba = caster->last_rgba();  // drawn straight to the window
-    if (upscaled.empty()) run::write_png(o.screenshot, img.width, img.height, img.rgba);
-    else run::write_png(o.screenshot, last_fb[0], last_fb[1], upscaled);
+    std::vector<std::uint32_t> px = upscaled.empty() ? img.rgba : upscaled;
+    const int w = upscaled.empty() ? img.width : last_fb[0], h = upscaled.empty() ? img.height : last_fb[1];
+    if (slices_shown()) compose_slices(px, w, h);
+    run::write_png(o.screenshot, w, h, px);
     log << "sculpt   screenshot " << o.screenshot << "\n";
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << e.what() << "\n";
@@ -1578,6 +1691,7 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "  overlay pass (GPU timestamps)", overlay_ms);
   stats_line(log, "present", present_ms);
   stats_line(log, "picture update (changed bricks)", update_ms);
+  stats_line(log, "slice views computed again (the HIP or proxy changed voxel, an edit, the window/level)", slice_ms);
   stats_line(log, "edit-to-pixels (submit to the first frame showing it)", latency_ms);
   stats_line(log, "edit-to-haptics", st.edit_to_haptics_ms);
   print_servo(st);

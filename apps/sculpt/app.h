@@ -47,6 +47,12 @@ struct Options {
   /// window is open, and present from another CPU (servo/cpu_placement.h says why).
   bool display_off_servo_cpu = true;
   bool overlay = true;              ///< the Dear ImGui tool and stats panels (a build with Dear ImGui)
+  /// The slice views (axial, coronal, sagittal through the HIP) at the window's right edge,
+  /// in the screenshots too; H hides them with the overlay.
+  bool slices = true;
+  /// Writes the slices (one pixel per voxel) and slices.json here at exit, and into
+  /// DIR/NAME/ with each script screenshot NAME.png ("" = never).
+  std::string slices_png;
   /// The ray caster's tile starts (engine::RaycastStyle::tile_starts; off only to measure
   /// what they save: the picture is the same).
   bool tile_starts = true;

@@ -40,7 +40,10 @@ void iso_histogram_widgets(IsoControl& iso) {
       const double f = std::clamp((ImGui::GetIO().MousePos.x - at.x) / size.x, 0.0f, 1.0f);
       iso.value = iso.lo + f * (iso.hi - iso.lo);
     }
-    if (ImGui::IsItemDeactivated()) iso.committed = true;
+    if (ImGui::IsItemDeactivated()) {
+      iso.committed = true;
+      iso.how = "hand (the histogram)";
+    }
     const float x = at.x + float((iso.value - iso.lo) / (iso.hi - iso.lo)) * size.x;
     ImGui::GetWindowDrawList()->AddLine(ImVec2(x, at.y), ImVec2(x, at.y + size.y), IM_COL32(255, 80, 60, 255), 2.0f);
     ImGui::SameLine();
@@ -51,6 +54,7 @@ void iso_histogram_widgets(IsoControl& iso) {
     if (ImGui::Button(iso.presets[i].first.c_str())) {
       iso.value = iso.presets[i].second;
       iso.committed = true;
+      iso.how = "the preset " + iso.presets[i].first;
     }
   }
 }

@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
       "Mouse: move = probe on the surface under the cursor, wheel = push deeper / pull back, Ctrl+wheel = zoom, "
       "right drag = orbit, middle drag = pan.\n"
       "Keys: 1 add, 2 carve, 3 smooth, 4 drill, [ ] radius, - = strength, Ctrl+Z undo, Ctrl+Y / Ctrl+Shift+Z redo, "
-      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, arrows orbit, PageUp/PageDown zoom, R reset camera, , and . roll the picture a quarter turn, H hide the overlay (probe glyphs and panels), Esc/Q quit.\n"
+      "Ctrl+S save (.vdb, atomic), Ctrl+E export the isosurface (STL/OBJ/PLY), C clip plane, left press on a slice view moves the probe there, arrows orbit, PageUp/PageDown zoom, R reset camera, , and . roll the picture a quarter turn, H hide the overlay (probe glyphs and panels), Esc/Q quit.\n"
       "Exit status (docs/exit-codes.md): 0 ok; 1 bad input or error; 2 usage error; 3 Vulkan validation messages "
       "(--validation); 5 the haptic device was disconnected, faulty or sent refused reports; 6 a save or export "
       "failed; 130 / 143 stopped by SIGINT / SIGTERM.",
@@ -74,6 +74,13 @@ int main(int argc, char** argv) {
                "log); a thread the server started meanwhile keeps the reduced set until the server restarts");
   cli.add_flag("--overlay,!--no-overlay", o.overlay,
                "the tool and stats panels (Dear ImGui) over the picture (default on, in a build with Dear ImGui)");
+  cli.add_flag("--slices,!--no-slices", o.slices,
+               "the slice views: axial, coronal and sagittal planes through the probe (HIP) at the window's right "
+               "edge, with a window/level, the isocontour and the HIP (yellow) and proxy (green) marks; a press on one "
+               "moves the mouse probe's target there (default on; in the screenshots too; H hides them)");
+  cli.add_option("--slices-png", o.slices_png,
+                 "write the three slices (one pixel per voxel) and slices.json into DIR at exit, and into DIR/NAME/ "
+                 "with each script screenshot NAME.png");
   cli.add_flag("--tile-starts,!--no-tile-starts", o.tile_starts,
                "start each pixel's march where its 8x8 tile's rays can first meet the surface (default on; off "
                "draws the same picture, slower: to measure what they save)");

@@ -44,7 +44,7 @@ void step_buttons(const char* id, ToolState& tool, Step step) {
   ImGui::PopID();
 }
 
-void tool_panel(ToolState& tool, IsoControl& iso) {
+void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices) {
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Tool", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
@@ -71,16 +71,29 @@ void tool_panel(ToolState& tool, IsoControl& iso) {
   float v = float(iso.value);
   ImGui::SliderFloat("isovalue", &v, float(iso.lo), float(iso.hi), "%.1f");
   if (ImGui::IsItemActive() || ImGui::IsItemEdited()) iso.value = std::clamp(double(v), iso.lo, iso.hi);
-  if (ImGui::IsItemDeactivatedAfterEdit()) iso.committed = true;
+  if (ImGui::IsItemDeactivatedAfterEdit()) {
+    iso.committed = true;
+    iso.how = "hand (the slider)";
+  }
   iso_histogram_widgets(iso);
+  slice_widgets(slices);
   ImGui::End();
 }
 
 void stats_panel(const PanelStats& s) {
   // Bottom left, out of the way of the volume, which the camera centres.
-  ImGui::SetNextWindowPos(ImVec2(8, ImGui::GetIO().DisplaySize.y - 8), ImGuiCond_FirstUseEver, ImVec2(0, 1));
+  // Placed again whenever the display's height or the panel's changed in the last two builds:
+  // an auto-resized panel with wrapped text is tall in its first frames, and placed once it
+  // stayed at the top, over the Tool panel. A panel the user moved stays until then.
+  static float display_h = -1, panel_h[2] = {-1, -2};  // the last two builds' panel heights
+  const float h = ImGui::GetIO().DisplaySize.y;
+  const bool again = h != display_h || panel_h[0] != panel_h[1];
+  ImGui::SetNextWindowPos(ImVec2(8, h - 8), again ? ImGuiCond_Always : ImGuiCond_FirstUseEver, ImVec2(0, 1));
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Stats", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  display_h = h;
+  panel_h[1] = panel_h[0];
+  panel_h[0] = ImGui::GetWindowSize().y;
   ImGui::Text("servo       %.0f Hz (target %.0f Hz)", s.servo_rate_hz, s.servo_target_hz);
   ImGui::Text("ticks       %ld, missed deadlines %ld, faults %ld", s.ticks, s.missed_deadlines, s.faults);
   if (s.tick_p99_us && s.tick_p99_beyond) ImGui::Text("tick p99    > %.1f ms (|period error|, past the histogram)", *s.tick_p99_us * 1e-3);
@@ -301,9 +314,9 @@ bool Overlay::changed(const Shown& now) const {
   return ImGui::IsAnyItemActive() || io.WantCaptureMouse || io.WantTextInput;
 }
 
-void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible) {
+void Overlay::build(ToolState& tool, IsoControl& iso, SliceControl& slices, const PanelStats& stats, bool visible) {
   if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
-  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, stats, visible};
+  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, slices.wl, slices.shown, stats, visible};
   if (changed(now)) settling_ = 3;  // this build and the two after it
   if (settling_ == 0) return;
   --settling_;
@@ -314,7 +327,7 @@ void Overlay::build(ToolState& tool, IsoControl& iso, const PanelStats& stats, b
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
   if (visible) {
-    tool_panel(tool, iso);
+    tool_panel(tool, iso, slices);
     stats_panel(stats);
   }
   ImGui::Render();

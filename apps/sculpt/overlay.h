@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/apps/sculpt/slice_views.h"
 #include "isotouch/apps/sculpt/tools.h"
 #include "isotouch/apps/sculpt/window.h"
 
@@ -22,6 +23,9 @@ namespace isotouch::sculpt {
 struct IsoControl {
   double value = 0, lo = 0, hi = 1;  ///< value units (HU for CT)
   bool committed = false;
+  /// How the committed value was set, for the stats panel's rule line after the restart:
+  /// "hand (the slider)", "the preset bone", ...
+  std::string how;
   /// The volume's histogram for the panel: log(1 + count) of equal bins over [lo, hi]; the
   /// isovalue is marked on it and dragging on it moves the isovalue (iso_panel.h).
   std::vector<float> histogram;
@@ -60,14 +64,15 @@ class Overlay final : public FrameHook {
   /// "Dear ImGui 1.86".
   static std::string version();
   /// This frame's panels (`visible` false: none); the tool widgets change `tool`, the isovalue
-  /// slider `iso` (the frame loop restarts the session at a committed value). Drawn by
+  /// slider `iso` (the frame loop restarts the session at a committed value), the slice views'
+  /// window/level `slices`. Drawn by
   /// the window's next present(). Built again only when something they show changed, the
   /// user touched them (an event forwarded since the last build, a widget active or hovered,
   /// a text field open) or the swapchain was remade, and in the two frames after that (ImGui
   /// lays a window out from its previous frame); otherwise the window draws the last
   /// build again (ImGui keeps its draw data until the next frame starts): a build costs the
   /// GLFW backend's X server round trips (focus, cursor, window and framebuffer size).
-  void build(ToolState& tool, IsoControl& iso, const PanelStats& stats, bool visible);
+  void build(ToolState& tool, IsoControl& iso, SliceControl& slices, const PanelStats& stats, bool visible);
   /// The frames whose panels were built anew (the rest drew the last build again).
   long frames_built() const { return frames_built_; }
   /// The mouse is over a panel or dragging a widget: clicks and the wheel are ImGui's.
@@ -111,6 +116,8 @@ class Overlay final : public FrameHook {
   struct Shown {
     session::BrushKind kind{};
     double radius_m = 0, strength = 0, iso = 0, iso_lo = 0, iso_hi = 0;
+    WindowLevel wl;
+    bool slices = false;
     PanelStats stats;
     bool visible = false;
     bool operator==(const Shown&) const = default;

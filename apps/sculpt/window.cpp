@@ -315,6 +315,50 @@ bool Window::present(VkBuffer pixels, int w, int h) {
   return true;
 }
 
+void Window::set_inset(const std::vector<std::uint32_t>& rgba, int x, int y, int w, int h) {
+  inset_ = rgba;
+  inset_x_ = x;
+  inset_y_ = y;
+  inset_w_ = inset_.empty() ? 0 : w;
+  inset_h_ = inset_.empty() ? 0 : h;
+  inset_dirty_ = true;
+}
+
+/// The inset's pixels into its staging buffer, in the swapchain's byte order: after acquire()
+/// (the last copy, which read the buffer, is done), only when they changed.
+void Window::upload_inset() {
+  if (!inset_dirty_ || inset_.empty()) return;
+  const VkDeviceSize bytes = VkDeviceSize(inset_.size()) * 4;
+  if (!inset_staging_ || inset_staging_.size() < bytes)
+    inset_staging_ = engine::make_buffer_or_throw(ctx_, bytes, engine::MemoryIntent::Upload, "window inset staging");
+  auto* dst = static_cast<std::uint32_t*>(inset_staging_.mapped());
+  for (std::size_t i = 0; i < inset_.size(); ++i) {
+    const std::uint32_t p = inset_[i];
+    dst[i] = swizzle_ ? (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu) : p;
+  }
+  inset_dirty_ = false;
+}
+
+/// The inset over the picture just copied into `image` (TRANSFER_DST_OPTIMAL), cut to the extent.
+void Window::copy_inset_into(VkImage image) {
+  upload_inset();
+  if (inset_.empty() || inset_x_ < 0 || inset_y_ < 0 || std::uint32_t(inset_x_) >= extent_.width ||
+      std::uint32_t(inset_y_) >= extent_.height)
+    return;
+  VkMemoryBarrier mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER};
+  mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  mb.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+  vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  VkBufferImageCopy region{};
+  region.bufferRowLength = std::uint32_t(inset_w_);
+  region.bufferImageHeight = std::uint32_t(inset_h_);
+  region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+  region.imageOffset = {inset_x_, inset_y_, 0};
+  region.imageExtent = {std::min(std::uint32_t(inset_w_), extent_.width - std::uint32_t(inset_x_)),
+                        std::min(std::uint32_t(inset_h_), extent_.height - std::uint32_t(inset_y_)), 1};
+  vkCmdCopyBufferToImage(cmd_, inset_staging_.handle(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+}
+
 void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   VK_CHECK(vkResetCommandBuffer(cmd_, 0));
   VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
@@ -348,6 +392,7 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
   region.imageExtent = {std::min(std::uint32_t(w), extent_.width), std::min(std::uint32_t(h), extent_.height), 1};
   vkCmdCopyBufferToImage(cmd_, src, images_[index], VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+  copy_inset_into(images_[index]);
   if (hook_) {
     hook_->record(cmd_, index);
   } else {

@@ -72,6 +72,10 @@ class Window {
   /// image, the host touches no pixel. The buffer must not change until the next present()
   /// (its copy is then done) or a later submission that waits for transfers.
   bool present(VkBuffer pixels, int w, int h);
+  /// A picture (RGBA as present()'s, `w` x `h`) copied over every presented one at pixel
+  /// (x, y) from the next present() on, until set again (the slice views); an empty one:
+  /// none. The part outside the swapchain's extent is cut.
+  void set_inset(const std::vector<std::uint32_t>& rgba, int x, int y, int w, int h);
   /// The swapchain's images are B8G8R8A8 (else R8G8B8A8).
   bool bgra() const { return swizzle_; }
   /// Draws `hook` into every presented frame from now on (nullptr: none), remaking the
@@ -113,6 +117,13 @@ class Window {
   VkCommandBuffer cmd_ = VK_NULL_HANDLE;
   FrameHook* hook_ = nullptr;
   engine::GpuBuffer staging_;  // the picture, host-written, copied into the image
+  // The inset: its pixels, where it goes, its staging copy (written after the last copy's fence).
+  std::vector<std::uint32_t> inset_;
+  int inset_x_ = 0, inset_y_ = 0, inset_w_ = 0, inset_h_ = 0;
+  bool inset_dirty_ = false;
+  engine::GpuBuffer inset_staging_;
+  void upload_inset();
+  void copy_inset_into(VkImage image);
   bool in_flight_ = false;
   bool stale_ = false;  // recreate before the next frame
   int recreations_ = 0;

@@ -1,0 +1,113 @@
+// The slice views' planes (apps/sculpt/slices.h) on volumes whose index axes are permuted
+// and flipped against the patient axes (a sagittal or coronal acquisition, a RAS header):
+// checked through the volume's own physical mapping (engine::Volume::index_to_physical), not
+// the slice code's axis choice. tests/cli_slices.py checks the shipped head end to end.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+
+#include "isotouch/apps/sculpt/slices.h"
+#include "isotouch/engine/volume.h"
+
+namespace isotouch::sculpt {
+namespace {
+
+using core::Vec3;
+
+/// A 6x5x4 volume whose voxel value is its linear offset, under direction `D` (row-major).
+engine::Volume volume_with(const std::array<double, 9>& D) {
+  engine::Volume v;
+  v.grid.dims = {6, 5, 4};
+  v.grid.spacing_m = {1e-3, 2e-3, 3e-3};
+  v.direction = D;
+  v.direction_is_identity = false;
+  v.voxels.resize(v.grid.voxel_count());
+  for (std::size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(i);
+  v.update_stats();
+  return v;
+}
+
+/// Each plane's screen directions (LPS): right and down; the normal is the third axis.
+constexpr std::array<std::array<std::array<int, 2>, 2>, 3> kScreen{{
+    {{{0, 1}, {1, 1}}},    // axial: right = left (+x), down = posterior (+y)
+    {{{0, 1}, {2, -1}}},   // coronal: right = left, down = inferior (-z)
+    {{{1, 1}, {2, -1}}}}};  // sagittal: right = posterior, down = inferior
+
+void expect_planes(const std::array<double, 9>& D, const std::string& what) {
+  const engine::Volume v = volume_with(D);
+  SliceStyle style;
+  style.wl = {0.5 * double(v.voxels.size() - 1), double(v.voxels.size() - 1)};  // grey = value * 255 / (n - 1)
+  style.iso = core::Isosurface{1e9, core::InsideIs::kAbove};  // nothing inside: no contour
+  style.marks = false;
+  for (SliceKind k : kSliceKinds) {
+    SCOPED_TRACE(what + ", " + to_string(k));
+    const SliceAxes ax = slice_axes(v.direction, k);
+    const SliceImage s = make_slice(v.grid, v.voxels, k, ax, Vec3{2, 2, 1}, Vec3{2, 2, 1}, style);
+    // Neighbouring pixels' voxels, compared by their physical positions: one column right
+    // moves along the plane's right direction, one row down along its down direction, and
+    // every pixel lies in one physical plane across the third axis.
+    const auto phys = [&](int c, int r) { return slice_pixel_index(s, c, r); };
+    const auto [right, down] = kScreen[std::size_t(k)];
+    const int normal = 3 - right[0] - down[0];
+    const double plane = v.index_to_physical(phys(0, 0))[normal];
+    for (int r = 0; r < s.height; ++r)
+      for (int c = 0; c < s.width; ++c) {
+        const Vec3 p = v.index_to_physical(phys(c, r));
+        EXPECT_NEAR(p[normal], plane, 1e-12);
+        if (c + 1 < s.width) {
+          EXPECT_GT((v.index_to_physical(phys(c + 1, r))[right[0]] - p[right[0]]) * right[1], 0);
+        }
+        if (r + 1 < s.height) {
+          EXPECT_GT((v.index_to_physical(phys(c, r + 1))[down[0]] - p[down[0]]) * down[1], 0);
+        }
+        // The pixel shows that voxel: its grey is the voxel's value (its offset, every grey
+        // distinct) through the window.
+        const Vec3 i = phys(c, r);
+        const double value = v.voxels[v.grid.index(int(i.x), int(i.y), int(i.z))];
+        EXPECT_EQ(s.rgba[std::size_t(r) * std::size_t(s.width) + std::size_t(c)] & 0xFFu, window_grey(value, style.wl));
+      }
+  }
+}
+
+TEST(Slices, PlanesFollowTheDirectionMatrix) {
+  expect_planes({1, 0, 0, 0, 1, 0, 0, 0, 1}, "identity (LPS)");
+  expect_planes({-1, 0, 0, 0, -1, 0, 0, 0, 1}, "RAS");
+  expect_planes({1, 0, 0, 0, 1, 0, 0, 0, -1}, "z inferior (the shipped head)");
+  // A sagittal acquisition: index x runs posterior, y inferior, z left.
+  expect_planes({0, 0, 1, 1, 0, 0, 0, -1, 0}, "sagittal");
+  // A coronal acquisition: index x runs right, y inferior, z anterior.
+  expect_planes({-1, 0, 0, 0, 0, -1, 0, -1, 0}, "coronal");
+}
+
+TEST(Slices, EdgeLettersSayWhereEachViewPoints) {
+  const engine::Volume head = volume_with({1, 0, 0, 0, 1, 0, 0, 0, -1});
+  const engine::Volume sag = volume_with({0, 0, 1, 1, 0, 0, 0, -1, 0});
+  const auto letters = [](const engine::Volume& v, SliceKind k) {
+    const auto e = slice_axes(v.direction, k).edges;
+    return std::string(e.begin(), e.end());
+  };
+  for (const engine::Volume* v : {&head, &sag}) {
+    EXPECT_EQ(letters(*v, SliceKind::kAxial), "APRL");  // top, bottom, left, right
+    EXPECT_EQ(letters(*v, SliceKind::kCoronal), "SIRL");
+    EXPECT_EQ(letters(*v, SliceKind::kSagittal), "SIAP");
+  }
+}
+
+TEST(Slices, ContourIsTheInsideVoxelsWithAnOutsideNeighbour) {
+  engine::Volume v = volume_with({1, 0, 0, 0, 1, 0, 0, 0, 1});
+  for (float& x : v.voxels) x = 0;
+  for (int y = 1; y <= 3; ++y)
+    for (int x = 1; x <= 4; ++x) v.voxels[v.grid.index(x, y, 2)] = 10;  // a 4x3 block in slice z = 2
+  SliceStyle style{{5, 10}, core::Isosurface{5, core::InsideIs::kAbove}, false};
+  const SliceImage s = make_slice(v.grid, v.voxels, SliceKind::kAxial, slice_axes(v.direction, SliceKind::kAxial),
+                                  Vec3{0, 0, 2}, Vec3{0, 0, 2}, style);
+  for (int r = 0; r < s.height; ++r)
+    for (int c = 0; c < s.width; ++c) {
+      const bool inside = c >= 1 && c <= 4 && r >= 1 && r <= 3, interior = c >= 2 && c <= 3 && r == 2;
+      EXPECT_EQ(s.rgba[std::size_t(r * s.width + c)] == kContourRgba, inside && !interior) << c << "," << r;
+    }
+}
+
+}  // namespace
+}  // namespace isotouch::sculpt

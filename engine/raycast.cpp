@@ -728,11 +728,16 @@ std::size_t quad_index(const std::array<int, 3>& n, int x, int y, int z) {
 }
 
 /// Uploads `bytes` into a new device-local buffer of `bytes` (or `dst_bytes`, if larger;
-/// the rest unwritten) through a staging buffer (one submit).
+/// the rest unwritten): copied into it where the host can write it (lavapipe: no second
+/// copy of a 600 MiB volume in a staging buffer), else through a staging buffer (one submit).
 Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what,
                          std::size_t dst_bytes = 0) {
   auto dst = GpuBuffer::create(ctx, std::max(bytes, dst_bytes), MemoryIntent::DeviceLocal, what);
   if (!dst) return dst;
+  if (dst.value->mapped() != nullptr) {  // host-coherent: the next submission sees the writes
+    std::memcpy(dst.value->mapped(), data, bytes);
+    return dst;
+  }
   auto up = GpuBuffer::create(ctx, bytes, MemoryIntent::Upload, what + " staging");
   if (!up) return Result<GpuBuffer>::fail(up.error);
   std::memcpy(up.value->mapped(), data, bytes);
@@ -753,11 +758,11 @@ std::string volume_size_text(const RaycastField& f) {
 }
 }  // namespace
 
-Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field, bool quads,
+Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, RaycastField field, bool quads,
                                                      std::uint64_t max_texels) {
   using R = Result<std::unique_ptr<RayCaster>>;
   const std::size_t vbytes = field.values.size() * sizeof(float);
-  const auto& n = field.grid.dims;
+  const std::array<int, 3> n = field.grid.dims;  // field is moved into the caster below
   const std::size_t cells = std::size_t(n[0] + 2) * std::size_t(n[1] + 2) * std::size_t(n[2] + 2);
   if (vbytes == 0 || vbytes != field.grid.voxel_count() * sizeof(float)) return R::fail("raycast: empty field");
   if (field.cell_dist.size() != cells)
@@ -781,7 +786,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const R
   const std::uint64_t quad_bytes = std::uint64_t(cells) * 16;
   const bool use_quads = quads && cells <= max_texels && quad_bytes <= kQuadBudgetBytes &&
                          (max_alloc == 0 || quad_bytes <= max_alloc);
-  auto impl = std::make_unique<Impl>(ctx, field, use_quads, vals4);
+  auto impl = std::make_unique<Impl>(ctx, std::move(field), use_quads, vals4);
   impl->active = active_box(impl->field);
   impl->mag = value_magnitude(impl->field.values, impl->field.background);
   auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values", std::size_t(vbuf_bytes));

@@ -203,7 +203,8 @@ class RayCaster {
   /// `max_texels` (0: the device's maxTexelBufferElements; larger: the device's): the texels
   /// one binding may hold; voxels past it are read 4 per texel (four_voxels_per_texel()).
   /// A smaller one takes the large-volume path on a small volume (tests).
-  static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, const RaycastField& field, bool quads = true,
+  /// The caster keeps `field` (pass a temporary or std::move it: no copy of the voxels).
+  static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, RaycastField field, bool quads = true,
                                                    std::uint64_t max_texels = 0);
   /// Binding 12 holds the quads (create()).
   bool quads() const;

@@ -249,7 +249,8 @@ Subcommand add_bench_sculpt_big_command(CLI::App& bench) {
       "sculpt-big", "isotouch-sculpt --bench on a full-resolution CT made here (the chest resampled to 512 x 512 x 600 "
                     "int16, past one single-float texel binding; and 512 x 512 x 480, within it): frames drawn whole, "
                     "sculpting frames, edit-to-pixels, memory, verdicts (33 / 50 / 100 ms)");
-  s.app->add_option("--source", o->source, "Scan to resample (default: the chest's DICOM series, data/ct-chest-lungdx-a0001/dicom-5mm)");
+  s.app->add_option("--source", o->source, "Scan to resample")->capture_default_str();
+  s.app->add_option("--reference", o->reference, "Also run on this scene, in the same run (\"\": not)")->capture_default_str();
   s.app->add_option("--slices", o->slices, "Slice counts, one run each")->capture_default_str()->check(CLI::Range(1, 4096));
   s.app->add_option("--iso", o->iso, "Isovalue (inside above)")->capture_default_str();
   s.app->add_option("--size", o->width, "Window width [pixels] (height 3/4 of it)")->capture_default_str()->check(CLI::Range(64, 4096));

@@ -124,10 +124,14 @@ std::string load_average() {
   return a + " " + b + " " + c + " (1, 5, 15 min) on " + std::to_string(::sysconf(_SC_NPROCESSORS_ONLN)) + " CPUs";
 }
 
-std::string resolve_source(const std::string& given) {
-  const std::string rel = given.empty() ? "data/ct-chest-lungdx-a0001/dicom-5mm" : given;
-  if (fs::exists(rel) || !given.empty()) return rel;
+/// A path as given, or under the source folder where it is not found from here.
+std::string resolve_data(const std::string& rel) {
+  if (fs::exists(rel)) return rel;
   return (fs::path(ISOTOUCH_SOURCE_DIR) / rel).string();
+}
+
+std::string window_text(const SculptBigOptions& o) {
+  return std::to_string(o.width) + "x" + std::to_string(o.width * 3 / 4) + ", render scale 1";
 }
 
 std::string sculpt_exe(const SculptBigOptions& o) {
@@ -152,17 +156,15 @@ std::string make_volume(const engine::Volume& src, const SculptBigOptions& o, in
   return mhd.string();
 }
 
-/// isotouch-sculpt --bench on `volume` (its figures go to stderr: read with stdout), under
-/// xvfb-run when there is no display.
-ChildRun run_sculpt(const SculptBigOptions& o, const std::string& volume) {
+/// isotouch-sculpt INPUT --bench (its figures go to stderr: read with stdout), under
+/// xvfb-run when there is no display. `input`: a scene, or a volume and its isovalue options.
+ChildRun run_sculpt(const SculptBigOptions& o, const std::vector<std::string>& input) {
   std::vector<std::string> argv = {"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1"};
   if (std::getenv("DISPLAY") == nullptr || *std::getenv("DISPLAY") == 0)
     argv.insert(argv.end(), {"xvfb-run", "-a", "-s", "-screen 0 1280x1024x24"});
-  std::ostringstream iso;
-  iso << std::setprecision(17) << o.iso;
-  const std::vector<std::string> args = {sculpt_exe(o), volume, "--iso", iso.str(), "--inside", "above", "--bench",
-                                         "--size", std::to_string(o.width), "--render-scale", "1"};
-  argv.insert(argv.end(), args.begin(), args.end());
+  argv.push_back(sculpt_exe(o));
+  argv.insert(argv.end(), input.begin(), input.end());
+  argv.insert(argv.end(), {"--bench", "--size", std::to_string(o.width), "--render-scale", "1"});
   if (!o.device.empty()) argv.insert(argv.end(), {"--device", o.device});
   return run_child_exec(argv);
 }
@@ -206,7 +208,7 @@ bool report_run(const std::string& name, const ChildRun& r, std::ostream& out) {
 }  // namespace
 
 int run_bench_sculpt_big(const SculptBigOptions& o, std::ostream& out, std::ostream& progress) {
-  const std::string src_path = resolve_source(o.source);
+  const std::string src_path = resolve_data(o.source);
   out << "# bench sculpt-big\n\nload average before: " << load_average() << "\nsource: " << src_path << "\n";
   fs::path dir = o.keep_dir;
   bool remove_dir = false;
@@ -228,14 +230,22 @@ int run_bench_sculpt_big(const SculptBigOptions& o, std::ostream& out, std::ostr
       const std::string vol = make_volume(src, o, nz, dir, progress);
       const std::uint64_t voxels = std::uint64_t(o.xy[0]) * std::uint64_t(o.xy[1]) * std::uint64_t(nz);
       progress << "[bench sculpt-big] isotouch-sculpt --bench on " << vol << "\n" << std::flush;
-      const ChildRun r = run_sculpt(o, vol);
+      std::ostringstream iso;
+      iso << std::setprecision(17) << o.iso;
+      const ChildRun r = run_sculpt(o, {vol, "--iso", iso.str(), "--inside", "above"});
       progress << r.out;
       ok = report_run(std::to_string(o.xy[0]) + " x " + std::to_string(o.xy[1]) + " x " + std::to_string(nz) +
-                          " int16 (" + std::to_string(voxels) + " voxels, " +
+                          " int16 (" + std::to_string(voxels) + " voxels: " +
                           (voxels > (std::uint64_t(1) << 27) ? "past" : "within") +
-                          " 2^27 single-float texels) at " + std::to_string(o.width) + "x" +
-                          std::to_string(o.width * 3 / 4) + ", render scale 1",
+                          " 2^27, one single-float texel binding on lavapipe) at " + window_text(o),
                       r, out) && ok;
+    }
+    if (!o.reference.empty()) {  // the shipped scene, in the same run: what the load does to it
+      const std::string scene = resolve_data(o.reference);
+      progress << "[bench sculpt-big] isotouch-sculpt --bench on " << scene << "\n" << std::flush;
+      const ChildRun r = run_sculpt(o, {scene});
+      progress << r.out;
+      ok = report_run("reference: " + scene + " at " + window_text(o), r, out) && ok;
     }
   } catch (const std::exception& e) {
     out << "bench sculpt-big: " << e.what() << "\n";

@@ -3,8 +3,9 @@
 // single-float texel binding, 2^27 on lavapipe) in a temporary folder, never committed;
 // `isotouch-sculpt VOLUME --bench` runs on it at 1024 x 768 and render scale 1 (under
 // xvfb-run without a display), and again on the same scan at 512 x 512 x 480 (1.26e8 voxels:
-// one binding of single floats) for comparison. Printed: frames drawn whole, sculpting
-// frames, edit-to-pixels, memory, with verdicts; the machine's load before and after.
+// one binding of single floats) and on the shipped chest scene, for comparison in the same
+// run. Printed: frames drawn whole, sculpting frames, edit-to-pixels, memory, with verdicts;
+// the machine's load before and after.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -18,7 +19,8 @@
 namespace isotouch::bench {
 
 struct SculptBigOptions {
-  std::string source;               ///< the scan resampled (default: the chest's DICOM series, 512 x 512 x 64)
+  std::string source = "data/ct-chest-lungdx-a0001/dicom-5mm";  ///< the scan resampled (512 x 512 x 64)
+  std::string reference = "scenes/chest.json";  ///< also run on this scene, for the load's effect (empty: not)
   std::array<int, 2> xy{512, 512};  ///< voxels along x and y
   std::vector<int> slices{600, 480};///< one run per slice count, in this order
   double iso = -500;                ///< isovalue [HU], inside above

@@ -11,6 +11,7 @@
 #include "isotouch/bench/bench_engine.h"
 #include "isotouch/apps/cli_checks.h"
 #include "isotouch/bench/render_bench.h"
+#include "isotouch/bench/sculpt_big_bench.h"
 #include "isotouch/bench/servo_bench.h"
 
 namespace isotouch::app {
@@ -241,6 +242,27 @@ Subcommand add_bench_render_command(CLI::App& bench) {
   return s;
 }
 
+Subcommand add_bench_sculpt_big_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::SculptBigOptions>();
+  Subcommand s;
+  s.app = bench.add_subcommand(
+      "sculpt-big", "isotouch-sculpt --bench on a full-resolution CT made here (the chest resampled to 512 x 512 x 600 "
+                    "int16, past one single-float texel binding; and 512 x 512 x 480, within it): frames drawn whole, "
+                    "sculpting frames, edit-to-pixels, memory, verdicts (33 / 50 / 100 ms)");
+  s.app->add_option("--source", o->source, "Scan to resample")->capture_default_str();
+  s.app->add_option("--reference", o->reference, "Also run on this scene, in the same run (\"\": not)")->capture_default_str();
+  s.app->add_option("--slices", o->slices, "Slice counts, one run each")->capture_default_str()->check(CLI::Range(1, 4096));
+  s.app->add_option("--iso", o->iso, "Isovalue (inside above)")->capture_default_str();
+  s.app->add_option("--size", o->width, "Window width [pixels] (height 3/4 of it)")->capture_default_str()->check(CLI::Range(64, 4096));
+  s.app->add_option("--sculpt", o->sculpt_exe, "isotouch-sculpt to run (default: beside this program)");
+  s.app->add_option("--keep", o->keep_dir, "Keep the made volumes in this folder (default: a temporary one, removed)");
+  s.run = [o](const std::string& device) {
+    o->device = device;
+    return bench::run_bench_sculpt_big(*o, std::cout, std::cerr);
+  };
+  return s;
+}
+
 }  // namespace
 
 std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
@@ -248,7 +270,7 @@ std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
   bench->require_subcommand(1);
   return {add_bench_servo_rt_command(*bench), add_bench_table1_command(*bench), add_bench_engine_command(*bench),
           add_bench_render_command(*bench),   add_bench_edit_command(*bench),   add_bench_device_command(*bench),
-          add_bench_serve_command(*bench)};
+          add_bench_serve_command(*bench),    add_bench_sculpt_big_command(*bench)};
 }
 
 }  // namespace isotouch::app

@@ -580,6 +580,7 @@ struct RayCaster::Impl {
   VulkanContext& ctx;
   RaycastField field;
   bool use_quads = false;  // binding 12 holds the quads (shaders/raycast_common.glsl)
+  bool vals4 = false;      // binding 1 holds 4 voxels per texel (VALS4 in shaders/raycast_common.glsl)
   // The five passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   // tiles and the march from them (march_tiled), with args_tiles for its indirect dispatch.
@@ -620,15 +621,17 @@ struct RayCaster::Impl {
   PixelRect cache_orect;
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
-  /// 5: the march's tile starts (one workgroup per listed tile).
-  static std::vector<std::uint32_t> spec(const RaycastField& f, std::uint32_t variant, bool quads, bool tiled = false) {
-    return {variant, std::uint32_t(f.grid.dims[0]), std::uint32_t(f.grid.dims[1]), std::uint32_t(f.grid.dims[2]),
-            quads ? 1u : 0u, tiled ? 1u : 0u};
+  /// 5: the march's tile starts (one workgroup per listed tile); 6 the tile pass's
+  /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4.
+  std::vector<std::uint32_t> spec(std::uint32_t variant, bool tiled = false) const {
+    return {variant, std::uint32_t(field.grid.dims[0]), std::uint32_t(field.grid.dims[1]),
+            std::uint32_t(field.grid.dims[2]), use_quads ? 1u : 0u, tiled ? 1u : 0u, ISOTOUCH_RAYCAST_WG_X,
+            vals4 ? 1u : 0u};
   }
   /// The tile pass's (5: the block pass; 6: its workgroup size, one tile's blocks for the block pass).
-  static std::vector<std::uint32_t> tile_spec(const RaycastField& f, bool quads, bool block_pass) {
-    std::vector<std::uint32_t> s = spec(f, 0, quads, block_pass);
-    s.push_back(block_pass ? kBlocksPerTile * kTilesPerBlockGroup : ISOTOUCH_RAYCAST_WG_X);
+  std::vector<std::uint32_t> tile_spec(bool block_pass) const {
+    std::vector<std::uint32_t> s = spec(0, block_pass);
+    s[6] = block_pass ? kBlocksPerTile * kTilesPerBlockGroup : ISOTOUCH_RAYCAST_WG_X;
     return s;
   }
   /// The per-pixel and per-tile buffers for a frame of width x height (reallocated when the
@@ -650,28 +653,29 @@ struct RayCaster::Impl {
   bool record_readback(VkCommandBuffer cmd, std::size_t pixels);
   /// After the frame completed: what the next frame's reuse compares with.
   void remember_frame(const FramePlan& f);
-  Impl(VulkanContext& c, RaycastField f, bool q)
+  Impl(VulkanContext& c, RaycastField f, bool q, bool v4)
       : ctx(c),
         field(std::move(f)),
         use_quads(q),
-        tiles(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast tiles", 1u, tile_spec(field, q, false), kTexel),
+        vals4(v4),
+        tiles(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast tiles", 1u, tile_spec(false), kTexel),
         args_tiles(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args (tiles)", 1u, {1u, kTilesPerBlockGroup},
                    kTexel),
-        blocks(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast blocks", 1u, tile_spec(field, q, true), kTexel),
+        blocks(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast blocks", 1u, tile_spec(true), kTexel),
         march_tiled(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (tile starts)", 1u,
-                    spec(field, 1, q, true), kTexel),
-        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(field, 1, q),
+                    spec(1, true), kTexel),
+        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(1),
                    kTexel),
-        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(field, 0, q), kTexel),
+        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(0), kTexel),
         args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u, {}, kTexel),
         shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u,
-                  spec(field, 1, q), kTexel),
-        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(field, 0, q), kTexel),
-        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(field, 0, q), kTexel),
+                  spec(1), kTexel),
+        shade(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade", 1u, spec(0), kTexel),
+        overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(0), kTexel),
         arena(c, 7, 7 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 5) {
     for (auto* p : {&tiles, &args_tiles, &blocks, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay})
-      p->set_texel_vec4(kVec4);
+      p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
   }
 };
 
@@ -682,6 +686,7 @@ RayCaster::~RayCaster() {
 }
 const RaycastField& RayCaster::field() const { return impl_->field; }
 bool RayCaster::quads() const { return impl_->use_quads; }
+bool RayCaster::four_voxels_per_texel() const { return impl_->vals4; }
 
 namespace {
 /// Binding 2's texels [t0, t1): texel t holds the distances of cells 4t .. 4t + 3 (0 past
@@ -722,10 +727,17 @@ std::size_t quad_index(const std::array<int, 3>& n, int x, int y, int z) {
   return (std::size_t(z + 1) * std::size_t(n[1] + 2) + std::size_t(y + 1)) * std::size_t(n[0] + 2) + std::size_t(x + 1);
 }
 
-/// Uploads `bytes` into a new device-local buffer through a staging buffer (one submit).
-Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what) {
-  auto dst = GpuBuffer::create(ctx, bytes, MemoryIntent::DeviceLocal, what);
+/// Uploads `bytes` into a new device-local buffer of `bytes` (or `dst_bytes`, if larger;
+/// the rest unwritten): copied into it where the host can write it (lavapipe: no second
+/// copy of a 600 MiB volume in a staging buffer), else through a staging buffer (one submit).
+Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes, const std::string& what,
+                         std::size_t dst_bytes = 0) {
+  auto dst = GpuBuffer::create(ctx, std::max(bytes, dst_bytes), MemoryIntent::DeviceLocal, what);
   if (!dst) return dst;
+  if (dst.value->mapped() != nullptr) {  // host-coherent: the next submission sees the writes
+    std::memcpy(dst.value->mapped(), data, bytes);
+    return dst;
+  }
   auto up = GpuBuffer::create(ctx, bytes, MemoryIntent::Upload, what + " staging");
   if (!up) return Result<GpuBuffer>::fail(up.error);
   std::memcpy(up.value->mapped(), data, bytes);
@@ -737,28 +749,47 @@ Result<GpuBuffer> upload(VulkanContext& ctx, const void* data, std::size_t bytes
 }
 }  // namespace
 
-Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, const RaycastField& field, bool quads) {
+namespace {
+/// The volume's size, "NX x NY x NZ (N voxels, B MiB of floats)", for messages.
+std::string volume_size_text(const RaycastField& f) {
+  const auto& n = f.grid.dims;
+  return std::to_string(n[0]) + " x " + std::to_string(n[1]) + " x " + std::to_string(n[2]) + " (" +
+         std::to_string(f.values.size()) + " voxels, " + std::to_string(f.values.size() * 4 >> 20) + " MiB of floats)";
+}
+}  // namespace
+
+Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, RaycastField field, bool quads,
+                                                     std::uint64_t max_texels) {
   using R = Result<std::unique_ptr<RayCaster>>;
   const std::size_t vbytes = field.values.size() * sizeof(float);
-  const auto& n = field.grid.dims;
+  const std::array<int, 3> n = field.grid.dims;  // field is moved into the caster below
   const std::size_t cells = std::size_t(n[0] + 2) * std::size_t(n[1] + 2) * std::size_t(n[2] + 2);
   if (vbytes == 0 || vbytes != field.grid.voxel_count() * sizeof(float)) return R::fail("raycast: empty field");
   if (field.cell_dist.size() != cells)
     return R::fail("raycast: " + std::to_string(field.cell_dist.size()) + " cell distances for a grid needing " +
                    std::to_string(cells) + " (build the field with make_raycast_field)");
-  const std::uint64_t max_texels = ctx.properties().limits.maxTexelBufferElements;
-  if (std::max<std::uint64_t>(field.values.size(), (cells + 3) / 4) > max_texels)
-    return R::fail("raycast: the volume's " + std::to_string(field.values.size()) + " voxels (" + std::to_string(cells) +
-                   " cells) exceed maxTexelBufferElements " + std::to_string(max_texels) + " on " + ctx.info().name +
-                   " (one texel binding each)");
+  const std::uint64_t device_texels = ctx.properties().limits.maxTexelBufferElements;
+  if (max_texels == 0 || max_texels > device_texels) max_texels = device_texels;
+  // One float per texel where the voxels fit one texel binding, else 4 (VALS4): up to
+  // 4 maxTexelBufferElements voxels, in one allocation of at most maxMemoryAllocationSize.
+  const bool vals4 = field.values.size() > max_texels;
+  const std::uint64_t vbuf_bytes = vals4 ? (std::uint64_t(vbytes) + 15) / 16 * 16 : vbytes;
+  const std::uint64_t max_alloc = ctx.max_allocation_bytes();
+  if ((vals4 && vbuf_bytes / 16 > max_texels) || (cells + 3) / 4 > max_texels)
+    return R::fail("raycast: the volume " + volume_size_text(field) + " exceeds one texel binding of " +
+                   std::to_string(max_texels) + " texels (maxTexelBufferElements on " + ctx.info().name +
+                   "): at most " + std::to_string(4 * max_texels) + " voxels, 4 per texel");
+  if (max_alloc != 0 && vbuf_bytes > max_alloc)
+    return R::fail("raycast: the volume " + volume_size_text(field) + " exceeds maxMemoryAllocationSize " +
+                   std::to_string(max_alloc) + " bytes on " + ctx.info().name);
   // Quads where they fit one texel binding, one allocation and the budget.
   const std::uint64_t quad_bytes = std::uint64_t(cells) * 16;
   const bool use_quads = quads && cells <= max_texels && quad_bytes <= kQuadBudgetBytes &&
-                         (ctx.max_allocation_bytes() == 0 || quad_bytes <= ctx.max_allocation_bytes());
-  auto impl = std::make_unique<Impl>(ctx, field, use_quads);
+                         (max_alloc == 0 || quad_bytes <= max_alloc);
+  auto impl = std::make_unique<Impl>(ctx, std::move(field), use_quads, vals4);
   impl->active = active_box(impl->field);
   impl->mag = value_magnitude(impl->field.values, impl->field.background);
-  auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values");
+  auto v = upload(ctx, impl->field.values.data(), vbytes, "raycast values", std::size_t(vbuf_bytes));
   if (!v) return R::fail(v.error);
   impl->values = std::move(*v.value);
   // Binding 2: the cell distances as floats (a texel buffer of R32_SFLOAT).

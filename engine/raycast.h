@@ -18,7 +18,9 @@
 // values + the distance of each trilinear cell (chessboard distance to the nearest cell that can
 // hold an inside value; cell_distances(), rebuilt from the values whenever they change; one
 // byte per cell on the host, 4 cells per float texel on the device), both uniform texel
-// buffers: a volume up to maxTexelBufferElements voxels (2^27 on lavapipe: 512^3) renders.
+// buffers: a volume up to maxTexelBufferElements voxels (2^27 on lavapipe: 512^3) renders
+// one voxel per texel, a larger one 4 per texel (up to 2^29 voxels on lavapipe: a 512 x 512
+// x 600 CT; the same floats, the same picture).
 // Swapping in a bricked snapshot (core/brick_field.h) changes only the shader's voxel()
 // (one brick-table lookup, then the 9^3 pool brick: a trilinear cell never straddles two
 // bricks) and its bindings; the march and the CPU reference's voxel() change the same way,
@@ -192,14 +194,22 @@ RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const
 /// owns one descriptor arena and one timer).
 class RayCaster {
  public:
-  /// Fails (no throw) if a buffer exceeds maxMemoryAllocationSize or the voxels or cells
+  /// Fails (no throw), naming the volume's size and the device's limit, if a buffer
+  /// exceeds maxMemoryAllocationSize or the voxels (4 per texel) or cells (4 per texel)
   /// exceed maxTexelBufferElements (one texel binding each).
   /// `quads`: also keep the voxels 4 per texel (binding 12), where they fit one texel
   /// binding, one allocation and 1 GiB: a trilinear sample then reads 2 texels instead of 8
   /// (the same floats in the same order: the same picture).
-  static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, const RaycastField& field, bool quads = true);
+  /// `max_texels` (0: the device's maxTexelBufferElements; larger: the device's): the texels
+  /// one binding may hold; voxels past it are read 4 per texel (four_voxels_per_texel()).
+  /// A smaller one takes the large-volume path on a small volume (tests).
+  /// The caster keeps `field` (pass a temporary or std::move it: no copy of the voxels).
+  static Result<std::unique_ptr<RayCaster>> create(VulkanContext& ctx, RaycastField field, bool quads = true,
+                                                   std::uint64_t max_texels = 0);
   /// Binding 12 holds the quads (create()).
   bool quads() const;
+  /// Binding 1 holds the voxels 4 per texel: they exceed one binding of single floats (create()).
+  bool four_voxels_per_texel() const;
   ~RayCaster();
   RayCaster(const RayCaster&) = delete;
   RayCaster& operator=(const RayCaster&) = delete;

@@ -1,4 +1,5 @@
 #include "isotouch/engine/vk_resources.h"
+#include "isotouch/engine/device_memory.h"
 
 #include <algorithm>
 #include <optional>
@@ -85,6 +86,7 @@ Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, Memo
   if (r != VK_SUCCESS)
     return R::fail(name + ": vkAllocateMemory of " + std::to_string(req.size) + " bytes failed: " +
                    vk_result_name(r));
+  count_allocation(b.memory_, req.size);
   VK_CHECK(vkBindBufferMemory(b.device_, b.buffer_, b.memory_, 0));
   if (intent != MemoryIntent::DeviceLocal || ctx.device_local_is_host_visible())
     VK_CHECK(vkMapMemory(b.device_, b.memory_, 0, VK_WHOLE_SIZE, 0, &b.mapped_));
@@ -165,6 +167,7 @@ void GpuBuffer::reset() {
   if (buffer_) vkDestroyBuffer(device_, buffer_, nullptr);
   if (memory_) {
     if (mapped_) vkUnmapMemory(device_, memory_);
+    count_free(memory_);
     vkFreeMemory(device_, memory_, nullptr);
   }
   buffer_ = VK_NULL_HANDLE;

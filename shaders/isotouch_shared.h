@@ -153,7 +153,8 @@ struct BrickMinMaxPush {
 // (long 1-D workgroups run faster on llvmpipe than 8x8 tiles); shade: one
 // per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
 // RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
-// (uniform texel buffer, R32_SFLOAT per voxel, x fastest), 2 cell distances (uniform texel
+// (uniform texel buffer, R32_SFLOAT per voxel, x fastest; R32G32B32A32_SFLOAT, 4 voxels per
+// texel, where they exceed maxTexelBufferElements: VALS4), 2 cell distances (uniform texel
 // buffer, R32_SFLOAT: 4 trilinear cells per texel, 6 bits each from the low end, as an exact
 // integer; see ISOTOUCH_RAYCAST_DIST_MAX),
 // 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R

@@ -60,7 +60,7 @@
 layout(std140, set = 0, binding = 0) uniform ParamsBuf { RaycastParams P; };
 // Bindings 1 and 2 are uniform texel buffers (R32_SFLOAT, texelFetch): on llvmpipe a texel
 // fetch is one vector gather, a storage-buffer load a per-lane loop with a bounds check.
-layout(set = 0, binding = 1) uniform samplerBuffer vals;    // voxel values, x fastest
+layout(set = 0, binding = 1) uniform samplerBuffer vals;    // voxel values, x fastest (VALS4: 4 per texel)
 layout(set = 0, binding = 2) uniform samplerBuffer cdist;   // 4 trilinear cells per float, 6 bits each
 // The grid's size as specialization constants (one pipeline per field): the voxel and cell
 // index arithmetic folds to constant multiplies. Scalars only: glslang turns a float() of a
@@ -71,6 +71,12 @@ layout(constant_id = 1) const int NX = 1;
 layout(constant_id = 2) const int NY = 1;
 layout(constant_id = 3) const int NZ = 1;
 layout(constant_id = 4) const bool QUADS = false;
+// VALS4: binding 1 is viewed as R32G32B32A32_SFLOAT, voxels 4k .. 4k + 3 in texel k, so one
+// texel binding holds 4 maxTexelBufferElements voxels (2^29 on lavapipe: a 512 x 512 x 600
+// CT's 1.6e8 voxels do not fit 2^27 single-float texels). The same floats: the same picture;
+// on llvmpipe a fetch of 4 floats costs about what a fetch of one does. Set by the host only
+// where the voxels do not fit one single-float binding (engine/raycast.cpp).
+layout(constant_id = 7) const bool VALS4 = false;
 layout(set = 0, binding = 12) uniform samplerBuffer quads;  // 4 voxels per texel (see above)
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
 layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 (or BGRA8) per pixel
@@ -98,7 +104,15 @@ vec3 g_inv_d;     // 1 / d per axis (exit planes: (plane - e) * inv)
 float voxel(ivec3 i) {
   bool outside = any(lessThan(i, ivec3(0))) || i.x >= NX || i.y >= NY || i.z >= NZ;
   int cx = clamp(i.x, 0, NX - 1), cy = clamp(i.y, 0, NY - 1), cz = clamp(i.z, 0, NZ - 1);
-  float v = texelFetch(vals, (cz * NY + cy) * NX + cx).x;
+  int k = (cz * NY + cy) * NX + cx;
+  float v;
+  if (VALS4) {
+    vec4 t = texelFetch(vals, k >> 2);
+    int c = k & 3;
+    v = c == 0 ? t.x : c == 1 ? t.y : c == 2 ? t.z : t.w;
+  } else {
+    v = texelFetch(vals, k).x;
+  }
   return outside ? g_bg : v;
 }
 

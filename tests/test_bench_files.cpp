@@ -11,9 +11,11 @@
 #include <sstream>
 
 #include "isotouch/bench/bench_serve.h"
+#include "isotouch/bench/sculpt_big_bench.h"
 #include "isotouch/bench/servo_bench.h"
 #include "isotouch/bench/tool_bench.h"
 #include "isotouch/io/files.h"
+#include "isotouch/io/volume_io.h"
 
 using namespace isotouch::bench;
 using namespace isotouch::io;
@@ -139,4 +141,69 @@ TEST(BenchServe, VerdictsFollowTheFiguresAtTheirBounds) {
   traffic.answered = 0;  // nothing measured is never met
   traffic.p99_us = 0;
   EXPECT_NE(bench_serve_verdicts(alone, traffic)[0].find("none answered"), std::string::npos);
+}
+
+// `bench sculpt-big`'s volume: a linear field (which trilinear resampling reproduces
+// exactly) resampled onto more voxels over the same box, written as int16 MetaImage and
+// read back by the loader the app uses: dims, spacing, origin, a rotated direction and every
+// voxel as the field at its new place, rounded; values past int16 clamped.
+TEST(SculptBig, ResampledVolumeReadsBackAsTheFieldOverTheSameBox) {
+  isotouch::engine::Volume v;
+  v.grid.dims = {5, 4, 3};
+  v.grid.spacing_m = {2e-3, 3e-3, 5e-3};
+  v.grid.origin_m = {0.01, -0.02, 0.03};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};  // x index runs along physical +y, y along -x
+  auto field = [](double x, double y, double z) { return 100.0 + 30.0 * x - 20.0 * y + 7.0 * z; };  // index units
+  for (int z = 0; z < 3; ++z)
+    for (int y = 0; y < 4; ++y)
+      for (int x = 0; x < 5; ++x) v.voxels.push_back(float(field(x, y, z)));
+  v.voxels.back() = 1e6f;  // past int16: clamped to 32767 (only the corner voxel itself)
+  const std::array<int, 3> dims{9, 7, 11};
+  const std::vector<std::int16_t> out = resample_int16(v, dims);
+  ASSERT_EQ(out.size(), 9u * 7u * 11u);
+  const fs::path dir = fs::temp_directory_path() / ("isotouch-sculpt-big-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::array<double, 3> sp{2e-3 * 4 / 8, 3e-3 * 3 / 6, 5e-3 * 2 / 10};
+  write_mhd_int16((dir / "v.mhd").string(), out, dims, sp, {0.01, -0.02, 0.03}, v.direction);
+  const isotouch::engine::Volume back = load_volume((dir / "v.mhd").string());
+  fs::remove_all(dir);
+  EXPECT_EQ(back.grid.dims, dims);
+  EXPECT_NEAR(back.grid.spacing_m.z, 1e-3, 1e-12);
+  EXPECT_NEAR(back.grid.origin_m.y, -0.02, 1e-12);
+  for (std::size_t i = 0; i < 9; ++i) EXPECT_NEAR(back.direction[i], v.direction[i], 1e-12) << "direction entry " << i;
+  std::size_t k = 0, wrong = 0;
+  for (int z = 0; z < 11; ++z)
+    for (int y = 0; y < 7; ++y)
+      for (int x = 0; x < 9; ++x, ++k) {
+        const bool corner = x == 8 && y == 6 && z == 10;
+        const double want = corner ? 32767.0 : std::nearbyint(field(x * 4.0 / 8, y * 3.0 / 6, z * 2.0 / 10));
+        // Voxels whose trilinear weights reach the clamped corner are not the linear field.
+        const bool near_corner = x > 6 && y > 4 && z > 5;
+        if (!near_corner && std::fabs(double(back.voxels[k]) - want) > 0) ++wrong;
+        if (corner) {
+          EXPECT_EQ(back.voxels[k], 32767.f);
+        }
+      }
+  EXPECT_EQ(wrong, 0u);
+  EXPECT_THROW(resample_int16(v, {0, 4, 4}), std::invalid_argument);
+}
+
+// The figures `bench sculpt-big` reads from isotouch-sculpt's --bench lines.
+TEST(SculptBig, StatLinesAreReadByTheirName) {
+  const std::string text =
+      "sculpt   sculpt: 512x512x600 voxels\n"
+      "stats    frame time: n 86, median 153.14 ms, p95 604.38 ms, max 1035.99 ms\n"
+      "stats      frames drawn whole (first, camera or style changed): n 31, median 195.19 ms, p95 745.26 ms, max 1035.99 ms\n"
+      "stats    edit-to-pixels (submit to the first frame showing it): none\n"
+      "stats    memory: peak resident set 6244 MiB (now 5137 MiB); device memory 773 MiB now\n";
+  std::string memory;
+  const auto st = parse_sculpt_stats(text, &memory);
+  ASSERT_EQ(st.count("frame time"), 1u);
+  EXPECT_EQ(st.at("frame time").n, 86);
+  EXPECT_DOUBLE_EQ(st.at("frames drawn whole (first, camera or style changed)").median, 195.19);
+  EXPECT_DOUBLE_EQ(st.at("frames drawn whole (first, camera or style changed)").p95, 745.26);
+  ASSERT_EQ(st.count("edit-to-pixels (submit to the first frame showing it)"), 1u);
+  EXPECT_TRUE(std::isnan(st.at("edit-to-pixels (submit to the first frame showing it)").median));
+  EXPECT_EQ(memory, "peak resident set 6244 MiB (now 5137 MiB); device memory 773 MiB now");
+  EXPECT_EQ(st.size(), 3u);
 }

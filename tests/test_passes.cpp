@@ -18,6 +18,7 @@
 #include "isotouch/tests/gpu_cpu_compare.h"
 #include "isotouch/engine/cpu_filters.h"
 #include "isotouch/engine/cpu_gradient.h"
+#include "isotouch/engine/device_memory.h"
 #include "isotouch/engine/parallel.h"
 #include "isotouch/engine/passes.h"
 #include "isotouch/engine/synthetic.h"
@@ -596,4 +597,26 @@ TEST(PassesTiming, DISABLED_ChestSceneMedians) {
     std::sort(ms[i].begin(), ms[i].end());
     std::printf("%s %.2f ms\n", i < scene.size() ? scene[i].label().c_str() : "sum", ms[i][ms[i].size() / 2]);
   }
+}
+
+// The device memory a process prints (isotouch-sculpt --stats): what its buffers hold while
+// they live, back to where it was once they are freed; the peak keeps the most.
+TEST(DeviceMemory, CountsWhatGpuBuffersHoldWhileTheyLive) {
+  const engine::DeviceMemoryUse before = engine::device_memory_use();
+  {
+    auto a = engine::GpuBuffer::create(vk(), 3u << 20, engine::MemoryIntent::DeviceLocal, "counted 3 MiB");
+    auto b = engine::GpuBuffer::create(vk(), 1u << 20, engine::MemoryIntent::Upload, "counted 1 MiB");
+    ASSERT_TRUE(a && b);
+    const engine::DeviceMemoryUse during = engine::device_memory_use();
+    EXPECT_GE(during.live_bytes, before.live_bytes + (4u << 20));
+    EXPECT_LE(during.live_bytes, before.live_bytes + (4u << 20) + (1u << 16)) << "more than the buffers and their alignment";
+    EXPECT_EQ(during.allocations, before.allocations + 2);
+    EXPECT_GE(during.peak_bytes, during.live_bytes);
+    EXPECT_NE(engine::memory_report().find("device memory " + std::to_string(std::lround(double(during.live_bytes) / (1 << 20))) + " MiB now"), std::string::npos)
+        << engine::memory_report();
+  }
+  const engine::DeviceMemoryUse after = engine::device_memory_use();
+  EXPECT_EQ(after.live_bytes, before.live_bytes);
+  EXPECT_EQ(after.allocations, before.allocations);
+  EXPECT_GE(after.peak_bytes, before.live_bytes + (4u << 20));
 }

@@ -800,6 +800,63 @@ TEST(Raycast, VolumeLargerThanOneStorageBindingRenders) {
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 
+// A volume past one texel binding of single floats (a 512 x 512 x 600 CT on lavapipe: 1.6e8
+// voxels against 2^27 texels) is read 4 voxels per texel. Forced here on the head CT by a
+// binding limit of 200,000 texels (380,928 voxels, 103,455 cell texels): every picture, with
+// skipping and tile starts, without, clipped, and after an edit at the volume's last
+// slices, equals bit for bit the one-float-per-texel caster's. A limit the voxels exceed even
+// 4 per texel is refused with the volume's size and the limit.
+TEST(Raycast, FourVoxelsPerTexelPastOneBindingDrawTheSamePicture) {
+  const engine::Volume vol = io::load_volume(kHead);
+  const core::Isosurface iso{1150, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  const RaycastField f = engine::make_raycast_field(vol.grid, vol.voxels, iso, bg);
+  constexpr std::uint64_t kLimit = 200000;
+  ASSERT_GT(f.values.size(), kLimit);
+  auto four = engine::RayCaster::create(vk(), f, true, kLimit);
+  ASSERT_TRUE(four) << four.error;
+  auto one = engine::RayCaster::create(vk(), f, false);
+  ASSERT_TRUE(one) << one.error;
+  EXPECT_TRUE((*four.value)->four_voxels_per_texel());
+  EXPECT_FALSE((*four.value)->quads()) << "the cells exceed the forced limit: no quads";
+  EXPECT_FALSE((*one.value)->four_voxels_per_texel());
+  RaycastStyle plain, clipped;
+  plain.skip_empty = false;
+  clipped.clip = engine::ClipPlane{vol.grid.centre_m(), {0, -1, 0}};
+  std::vector<CameraView> views;
+  for (double az : {0.0, 90.0, 200.0}) {
+    engine::OrbitCamera cam = run::default_camera(vol);
+    cam.azimuth_deg = az;
+    views.push_back(engine::orbit_view(f.grid, vol.direction, cam));
+  }
+  auto expect_same = [&](const char* what) {
+    std::size_t hit = 0;
+    for (const RaycastStyle& st : {RaycastStyle{}, plain, clipped})
+      for (std::size_t v = 0; v < views.size(); ++v) {
+        const RaycastImage a = (*four.value)->render(views[v], st, 96, 96), b = (*one.value)->render(views[v], st, 96, 96);
+        EXPECT_EQ(a.rgba, b.rgba) << what << ", view " << v << ": 4 voxels per texel draw another picture";
+        EXPECT_EQ(a.depth, b.depth) << what << ", view " << v;
+        hit += hits(b);
+      }
+    EXPECT_GT(hit, 5000u) << what << ": the pictures show little of the head";
+  };
+  expect_same("as loaded");
+  // Bone added on the last slices (the last texels) and a carve in front: both casters
+  // draw the same again.
+  std::vector<float> edited = vol.voxels;
+  std::vector<std::uint32_t> dirty;
+  set_box(edited, dirty, vol.grid.dims, {10, 10, 84}, {54, 54, 93}, 2000.f);
+  set_box(edited, dirty, vol.grid.dims, {20, 0, 30}, {44, 30, 60}, -1000.f);
+  (*four.value)->update(edited, dirty);
+  (*one.value)->update(edited, dirty);
+  expect_same("edited");
+  auto refused = engine::RayCaster::create(vk(), f, true, 50000);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error.find("64 x 64 x 93 (380928 voxels"), std::string::npos) << refused.error;
+  EXPECT_NE(refused.error.find("50000 texels"), std::string::npos) << refused.error;
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 // Frames with the last frame's camera draw again only where the probe or an edit can show
 // (RaycastImage::reused), and each equals, bit for bit, a full frame of a new ray caster on
 // the same values (the truth): the probe moved, the probe gone, an edit (carve in front of

@@ -32,6 +32,7 @@
 #include "isotouch/apps/sculpt/input_script.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/apps/sculpt/overlay.h"
+#include "isotouch/engine/device_memory.h"
 #include "isotouch/engine/raycast.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/picture.h"
@@ -1694,6 +1695,8 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "slice views computed again (the HIP or proxy changed voxel, an edit, the window/level)", slice_ms);
   stats_line(log, "edit-to-pixels (submit to the first frame showing it)", latency_ms);
   stats_line(log, "edit-to-haptics", st.edit_to_haptics_ms);
+  log << "stats    memory: " << engine::memory_report() << "; the volume " << volume_line(vol) << ", "
+      << vol.voxels.size() * sizeof(float) / (1024 * 1024) << " MiB of floats\n";
   print_servo(st);
 #if ISOTOUCH_WITH_IMGUI
   if (panels)

@@ -145,17 +145,17 @@ PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
   }
   const std::string at = where + "." + ps.kind;
   if (ps.kind == "gaussian") {
-    r.only(params, at, {"sigma_mm"});
+    r.only(params, at, scene_keys("engine.passes.gaussian"));
     if (!params.contains("sigma_mm")) r.fail(at + ".sigma_mm", "is required (the Gaussian's standard deviation in mm)");
     ps.sigma_mm = r.number(params, at, "sigma_mm", {}, "engine.passes.gaussian");
   } else if (ps.kind == "closing") {
-    r.only(params, at, {"radius_mm"});
+    r.only(params, at, scene_keys("engine.passes.closing"));
     if (!params.contains("radius_mm")) r.fail(at + ".radius_mm", "is required (the box half-width in mm)");
     ps.radius_mm = r.number(params, at, "radius_mm", {}, "engine.passes.closing");
   } else if (ps.kind == "gradient") {
     if (!params.is_object() || !params.empty()) r.fail(at, "takes no parameters, got " + params.dump());
   } else if (ps.kind == "brick_minmax") {
-    r.only(params, at, {"halo"});
+    r.only(params, at, scene_keys("engine.passes.brick_minmax"));
     ps.halo = r.integer(params, at, "halo", {}, "engine.passes.brick_minmax");
   } else {
     r.fail(where, "unknown pass \"" + ps.kind + "\" (known: " + kKinds + ")");
@@ -476,7 +476,7 @@ void parse_servo_rules(const Reader& r, const json& sv, Scene& s) {
 void parse_friction(const Reader& r, const json& sv, Scene& s) {
   if (!sv.contains("friction")) return;
   const json& fr = sv.at("friction");
-  r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
+  r.only(fr, "servo.friction", scene_keys("servo.friction"));
   s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s");
   s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d");
   s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m");
@@ -491,7 +491,7 @@ void parse_tool(const Reader& r, const json& sv, Scene& s) {
   if (!sv.contains("tool")) return;
   const json& tl = sv.at("tool");
   if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r} or {\"point\": true}, got " + tl.dump());
-  r.only(tl, "servo.tool", {"radius_mm", "point"});
+  r.only(tl, "servo.tool", scene_keys("servo.tool"));
   s.point_probe = r.boolean(tl, "servo.tool", "point", false);
   if (s.point_probe && tl.contains("radius_mm"))
     r.fail("servo.tool.point", "a point has no radius: give \"point\": true or \"radius_mm\", not both");

@@ -23,8 +23,10 @@ struct FieldRange {
     return std::isfinite(d) && (lo_open ? d > lo : d >= lo) && (hi_open ? d < hi : d <= hi) &&
            (!integer || d == std::floor(d));
   }
-  /// "in (0, 1e6]" or "> 0", for "must be ...".
-  std::string phrase() const { return (text[0] == '>' ? "" : "in ") + std::string(text); }
+  /// "in (0, 1e6]", "> 0" or "an integer in [1, 64]", for "must be ...".
+  std::string phrase() const {
+    return (integer ? "an integer " : "") + std::string(text[0] == '>' ? "" : "in ") + std::string(text);
+  }
 };
 
 /// `text` when the whole of it is a finite number ("1e6", "-0.5"); nullopt otherwise.

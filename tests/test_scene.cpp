@@ -8,6 +8,7 @@
 #include "isotouch/tests/doc_tables.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -400,14 +401,8 @@ TEST(Scene, EditsErrorsNameTheField) {
 
 namespace {
 
-// A documented field: its unit, range and default cells.
-struct DocRow {
-  std::string unit, range, default_text;
-  bool operator==(const DocRow&) const = default;
-};
-std::ostream& operator<<(std::ostream& o, const DocRow& r) {
-  return o << "unit '" << r.unit << "', range '" << r.range << "', default '" << r.default_text << "'";
-}
+// A documented field's unit, range and default cells ("" where the table has no such column).
+using DocRow = std::array<std::string, 3>;
 using DocRows = std::map<std::string, DocRow>;  // "section.key" -> its cells
 
 // kSceneFields as the docs should show them.

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 #include "isotouch/io/scene_fields.h"
@@ -37,31 +39,25 @@ class Reader {
       }
   }
 
-  double number(const json& obj, const std::string& where, const std::string& key, double def,
-                double lo, double hi, bool lo_open = false) const {
-    const std::string f = where.empty() ? key : where + "." + key;
-    if (!obj.contains(key)) return def;
+  // A number at obj[key], checked against the range kSceneFields gives `section`.`key`
+  // (`section` "" = `where`); absent, `fallback` when given, else the table's default.
+  double number(const json& obj, const std::string& where, const std::string& key,
+                std::optional<double> fallback = {}, std::string_view section = {}) const {
+    const SceneField& fld = table_field(section.empty() ? where : section, key);
+    if (!obj.contains(key)) return absent(fld, fallback);
     const json& v = obj.at(key);
-    if (!v.is_number()) fail(f, "must be a number, got " + v.dump());
-    const double d = v.get<double>();
-    if (!std::isfinite(d) || d < lo || d > hi || (lo_open && d == lo)) {
-      std::ostringstream s;
-      s << "must be in " << (lo_open ? "(" : "[") << lo << ", " << hi << "], got " << v.dump();
-      fail(f, s.str());
-    }
-    return d;
+    if (!v.is_number()) fail(name(where, key), "must be a number, got " + v.dump());
+    return in_range(fld, v, where);
   }
 
-  int integer(const json& obj, const std::string& where, const std::string& key, int def, int lo,
-              int hi) const {
-    const std::string f = where.empty() ? key : where + "." + key;
-    if (!obj.contains(key)) return def;
+  // As number(), for a field whose range says "integer".
+  int integer(const json& obj, const std::string& where, const std::string& key,
+              std::optional<double> fallback = {}, std::string_view section = {}) const {
+    const SceneField& fld = table_field(section.empty() ? where : section, key);
+    if (!obj.contains(key)) return int(absent(fld, fallback));
     const json& v = obj.at(key);
-    if (!v.is_number_integer()) fail(f, "must be an integer, got " + v.dump());
-    const auto i = v.get<long long>();
-    if (i < lo || i > hi)
-      fail(f, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " + v.dump());
-    return int(i);
+    if (!v.is_number_integer()) fail(name(where, key), "must be an integer, got " + v.dump());
+    return int(in_range(fld, v, where));
   }
 
   core::Vec3 vec3(const json& obj, const std::string& where, const std::string& key,
@@ -97,6 +93,34 @@ class Reader {
   }
 
  private:
+  static std::string name(const std::string& where, const std::string& key) {
+    return where.empty() ? key : where + "." + key;
+  }
+
+  // Every number the parser reads has a row with a numeric range: a missing one is a bug here.
+  static const SceneField& table_field(std::string_view section, const std::string& key) {
+    const SceneField* f = scene_field(section, key);
+    if (!f || !field_range(f->range))
+      throw std::logic_error("io/scene_fields.h: no numeric field '" + key + "' in section '" + std::string(section) + "'");
+    return *f;
+  }
+
+  // The caller's fallback (a default that depends on other fields) or the table's.
+  static double absent(const SceneField& f, std::optional<double> fallback) {
+    if (fallback) return *fallback;
+    if (const auto d = plain_number(f.default_text)) return *d;
+    throw std::logic_error("io/scene_fields.h: '" + std::string(f.key) + "' has no numeric default");
+  }
+
+  // The value `v` (a JSON number) if it lies in the table's range for `f`; else the error
+  // naming the file, the field and the value.
+  double in_range(const SceneField& f, const json& v, const std::string& where) const {
+    const FieldRange range = *field_range(f.range);
+    const double d = v.get<double>();
+    if (!range.contains(d)) fail(name(where, std::string(f.key)), "must be " + range.phrase() + ", got " + v.dump());
+    return d;
+  }
+
   std::string file_;
 };
 
@@ -121,18 +145,18 @@ PassSpec parse_pass(const Reader& r, const json& p, std::size_t i) {
   }
   const std::string at = where + "." + ps.kind;
   if (ps.kind == "gaussian") {
-    r.only(params, at, {"sigma_mm"});
+    r.only(params, at, scene_keys("engine.passes.gaussian"));
     if (!params.contains("sigma_mm")) r.fail(at + ".sigma_mm", "is required (the Gaussian's standard deviation in mm)");
-    ps.sigma_mm = r.number(params, at, "sigma_mm", 0, 0, 1000, true);
+    ps.sigma_mm = r.number(params, at, "sigma_mm", {}, "engine.passes.gaussian");
   } else if (ps.kind == "closing") {
-    r.only(params, at, {"radius_mm"});
+    r.only(params, at, scene_keys("engine.passes.closing"));
     if (!params.contains("radius_mm")) r.fail(at + ".radius_mm", "is required (the box half-width in mm)");
-    ps.radius_mm = r.number(params, at, "radius_mm", 0, 0, 1000);
+    ps.radius_mm = r.number(params, at, "radius_mm", {}, "engine.passes.closing");
   } else if (ps.kind == "gradient") {
     if (!params.is_object() || !params.empty()) r.fail(at, "takes no parameters, got " + params.dump());
   } else if (ps.kind == "brick_minmax") {
-    r.only(params, at, {"halo"});
-    ps.halo = r.integer(params, at, "halo", 1, 0, 8);
+    r.only(params, at, scene_keys("engine.passes.brick_minmax"));
+    ps.halo = r.integer(params, at, "halo", {}, "engine.passes.brick_minmax");
   } else {
     r.fail(where, "unknown pass \"" + ps.kind + "\" (known: " + kKinds + ")");
   }
@@ -174,37 +198,40 @@ void parse_engine(const Reader& r, const json& e, EngineSpec& spec) {
 // A brush object: "kind", "radius_mm", "strength", "falloff", "force_threshold_n", "rate"
 // or "removal_per_n_s", "density_scale", "material", "empty" (+ "force_n" on the timeline),
 // each over `base`.
-const std::set<std::string> kBrushKeys = scene_keys("edits.brush");
+constexpr std::string_view kBrush = "edits.brush";
+const std::set<std::string> kBrushKeys = scene_keys(kBrush);
 
 BrushSpec parse_brush(const Reader& r, const json& b, const std::string& where, BrushSpec base, bool timed) {
   BrushSpec s = base;
+  // A timed brush inherits edits.brush's values; edits.brush itself takes the table's defaults.
+  const auto inherited = [timed](double v) { return timed ? std::optional<double>(v) : std::nullopt; };
   s.kind = r.string(b, where, "kind", s.kind);
   if (s.kind != "add" && s.kind != "carve" && s.kind != "smooth" && s.kind != "drill")
     r.fail(where + ".kind", "must be \"add\", \"carve\", \"smooth\" or \"drill\"" +
                                 std::string(timed ? " (or \"undo\", \"redo\")" : "") + ", got \"" + s.kind + "\"");
-  s.radius_mm = r.number(b, where, "radius_mm", s.radius_mm, 0, 1000, true);
-  s.strength = r.number(b, where, "strength", s.strength, 0, 1e30);
+  s.radius_mm = r.number(b, where, "radius_mm", inherited(s.radius_mm), kBrush);
+  s.strength = r.number(b, where, "strength", inherited(s.strength), kBrush);
   if (s.kind == "smooth" && s.strength > 1)
     r.fail(where + ".strength", "a smooth brush's strength is a fraction in [0, 1], got " +
                                     (b.contains("strength") ? b.at("strength").dump() : std::to_string(s.strength)));
-  s.falloff = r.number(b, where, "falloff", s.falloff, 0, 1, true);
-  s.force_threshold_n = r.number(b, where, "force_threshold_n", s.force_threshold_n, 0, 1000);
+  s.falloff = r.number(b, where, "falloff", inherited(s.falloff), kBrush);
+  s.force_threshold_n = r.number(b, where, "force_threshold_n", inherited(s.force_threshold_n), kBrush);
   if (b.contains("rate") && b.contains("removal_per_n_s"))
     r.fail(where + ".removal_per_n_s", "give the drill's rate once: \"rate\" (value units per N s) or "
                                        "\"removal_per_n_s\" (fraction of |material - empty| per N s), not both");
-  s.rate = r.number(b, where, "rate", s.rate, 0, 1e12);
+  s.rate = r.number(b, where, "rate", inherited(s.rate), kBrush);
   if (b.contains("rate")) s.removal_per_n_s = -1;
-  if (b.contains("removal_per_n_s")) s.removal_per_n_s = r.number(b, where, "removal_per_n_s", 0, 0, 1e6);
-  if (b.contains("density_scale")) s.density_scale = r.number(b, where, "density_scale", 0, 0, 1e30, true);
+  if (b.contains("removal_per_n_s")) s.removal_per_n_s = r.number(b, where, "removal_per_n_s", {}, kBrush);
+  if (b.contains("density_scale")) s.density_scale = r.number(b, where, "density_scale", {}, kBrush);
   if (b.contains("material")) {
     s.has_material = true;
-    s.material = r.number(b, where, "material", 0, -1e30, 1e30);
+    s.material = r.number(b, where, "material", {}, kBrush);
   }
   if (b.contains("empty")) {
     s.has_empty = true;
-    s.empty = r.number(b, where, "empty", 0, -1e30, 1e30);
+    s.empty = r.number(b, where, "empty", {}, kBrush);
   }
-  if (timed) s.force_n = r.number(b, where, "force_n", s.force_n, 0, 1000);
+  if (timed) s.force_n = r.number(b, where, "force_n", s.force_n, "edits.timeline");
   return s;
 }
 
@@ -217,8 +244,8 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
     r.only(e.at("brush"), "edits.brush", kBrushKeys);
     spec.brush = parse_brush(r, e.at("brush"), "edits.brush", spec.brush, false);
   }
-  spec.every_ticks = r.integer(e, "edits", "every_ticks", spec.every_ticks, 1, 1000000);
-  spec.history_limit_mib = r.number(e, "edits", "history_limit_mib", spec.history_limit_mib, 0, 1 << 20);
+  spec.every_ticks = r.integer(e, "edits", "every_ticks");
+  spec.history_limit_mib = r.number(e, "edits", "history_limit_mib");
   spec.write_vdb = r.boolean(e, "edits", "write_vdb", spec.write_vdb);
   spec.write_nrrd = r.boolean(e, "edits", "write_nrrd", spec.write_nrrd);
   spec.write_stl = r.boolean(e, "edits", "write_stl", spec.write_stl);
@@ -249,7 +276,7 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
       TimedEdit te;
       te.index = int(i);
       if (!it.contains("t_s")) r.fail(f + ".t_s", "is required (when the edit is applied, in seconds)");
-      te.t_s = r.number(it, f, "t_s", 0, 0, 1e6);
+      te.t_s = r.number(it, f, "t_s", {}, "edits.timeline");
       if (!it.contains("kind")) r.fail(f + ".kind", "is required (\"add\", \"carve\", \"smooth\", \"drill\", \"undo\", \"redo\")");
       te.kind = r.string(it, f, "kind", "");
       if (te.kind == "undo" || te.kind == "redo") {
@@ -268,7 +295,7 @@ void parse_edits(const Reader& r, const json& e, EditsSpec& spec) {
         } else {
           te.at_m = r.vec3(it, f, "at", {}) * 1e-3;
         }
-        te.duration_s = r.number(it, f, "duration_s", 0, 0, 3600);
+        te.duration_s = r.number(it, f, "duration_s", {}, "edits.timeline");
       }
       spec.timeline.push_back(te);
     }
@@ -410,13 +437,13 @@ void parse_volume(const Reader& r, const json& root, const std::string& path, Sc
     }
   }
   // [1 um, 0.1 m]: beyond it the sphere is too small to touch or too large to script.
-  s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m", 1e-3, 1e-6, 0.1);
-  s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox", 20, 0, 1e4, true);
+  s.synthetic.spacing_m = r.number(vol, "volume", "spacing_m");
+  s.synthetic.radius_vox = r.number(vol, "volume", "radius_vox");
 }
 
 void parse_isosurface(const Reader& r, const json& root, Scene& s) {
   if (!root.contains("isovalue")) r.fail("isovalue", "is required");
-  s.hri.tau = r.number(root, "", "isovalue", 0, -1e30, 1e30);
+  s.hri.tau = r.number(root, "", "isovalue");
   const std::string inside = r.string(root, "", "inside", "above");
   if (inside == "above") s.hri.inside = core::InsideIs::kAbove;
   else if (inside == "below") s.hri.inside = core::InsideIs::kBelow;
@@ -430,7 +457,7 @@ void parse_servo_rules(const Reader& r, const json& sv, Scene& s) {
   else if (isect == "secant") s.hri.intersection = servo::Intersection::kSecant;
   else if (isect == "bisection") s.hri.intersection = servo::Intersection::kBisection;
   else r.fail("servo.intersection", "must be \"linear\" (the paper), \"secant\" or \"bisection\", got \"" + isect + "\"");
-  s.hri.intersection_steps = r.integer(sv, "servo", "intersection_steps", 4, 1, 64);
+  s.hri.intersection_steps = r.integer(sv, "servo", "intersection_steps");
   const std::string normal = r.string(sv, "servo", "normal", "samples");
   if (normal == "samples") s.hri.normal = servo::NormalSource::kSamples;
   else if (normal == "central") s.hri.normal = servo::NormalSource::kCentral;
@@ -449,10 +476,10 @@ void parse_servo_rules(const Reader& r, const json& sv, Scene& s) {
 void parse_friction(const Reader& r, const json& sv, Scene& s) {
   if (!sv.contains("friction")) return;
   const json& fr = sv.at("friction");
-  r.only(fr, "servo.friction", {"mu_s", "mu_d", "viscous_n_s_per_m"});
-  s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s", 0, 0, 10);
-  s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d", 0, 0, 10);
-  s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m", 0, 0, 1e3);
+  r.only(fr, "servo.friction", scene_keys("servo.friction"));
+  s.hri.friction.mu_s = r.number(fr, "servo.friction", "mu_s");
+  s.hri.friction.mu_d = r.number(fr, "servo.friction", "mu_d");
+  s.hri.friction.viscous_n_s_per_m = r.number(fr, "servo.friction", "viscous_n_s_per_m");
   if (s.hri.friction.mu_d > s.hri.friction.mu_s)
     r.fail("servo.friction.mu_d", "must not exceed mu_s (" + std::to_string(s.hri.friction.mu_s) + "), got " +
                                       fr.at("mu_d").dump());
@@ -464,11 +491,11 @@ void parse_tool(const Reader& r, const json& sv, Scene& s) {
   if (!sv.contains("tool")) return;
   const json& tl = sv.at("tool");
   if (!tl.is_object()) r.fail("servo.tool", "must be an object {\"radius_mm\": r} or {\"point\": true}, got " + tl.dump());
-  r.only(tl, "servo.tool", {"radius_mm", "point"});
+  r.only(tl, "servo.tool", scene_keys("servo.tool"));
   s.point_probe = r.boolean(tl, "servo.tool", "point", false);
   if (s.point_probe && tl.contains("radius_mm"))
     r.fail("servo.tool.point", "a point has no radius: give \"point\": true or \"radius_mm\", not both");
-  s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm", 0.0, 0.0, 100.0);
+  s.hri.tool_radius_m = 1e-3 * r.number(tl, "servo.tool", "radius_mm");
   if (s.hri.tool_radius_m > 0 && s.hri.variant == servo::Variant::kPaper)
     r.fail("servo.tool.radius_mm", "the \"paper\" variant renders a point (Figure 2 as printed); use "
                                    "\"variant\": \"robust\" for a tool of radius " + tl.at("radius_mm").dump() + " mm");
@@ -499,16 +526,16 @@ void parse_servo(const Reader& r, const json& root, Scene& s) {
   if (variant == "robust") s.hri.variant = servo::Variant::kRobust;
   else if (variant == "paper") s.hri.variant = servo::Variant::kPaper;
   else r.fail("servo.variant", "must be \"robust\" (the default) or \"paper\" (Figure 2 as printed), got \"" + variant + "\"");
-  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m", 800, 0, 1e6, true);
-  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m", 1.0, 0, 1e3);
-  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period", 5, 1, 100000);
-  s.hri.rate_hz = r.number(sv, "servo", "rate_hz", 1000, 10, 100000);
-  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n", 3.3, 0, 1000, true);
+  s.hri.stiffness_n_per_m = r.number(sv, "servo", "stiffness_n_per_m");
+  s.hri.damping_n_s_per_m = r.number(sv, "servo", "damping_n_s_per_m");
+  s.hri.plane_update_period = r.integer(sv, "servo", "plane_update_period");
+  s.hri.rate_hz = r.number(sv, "servo", "rate_hz");
+  s.hri.force_limit_n = r.number(sv, "servo", "force_limit_n");
   parse_servo_rules(r, sv, s);
   s.hri.force_shading = r.boolean(sv, "servo", "force_shading", false);
   // Default 20 ms (robust variant): every force step a plane update causes is ramped.
   s.hri.recovery_time_s = r.number(sv, "servo", "recovery_time_s",
-                                   s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02, 0, 10);
+                                   s.hri.variant == servo::Variant::kPaper ? 0.0 : 0.02);
   parse_friction(r, sv, s);
   parse_tool(r, sv, s);
   s.allow_unstable_stiffness = r.boolean(sv, "servo", "allow_unstable_stiffness", false);
@@ -554,14 +581,14 @@ void check_stiffness(const Reader& r, const Scene& s) {
 void parse_device(const Reader& r, const json& root, Scene& s) {
   const json& dv = r.section(root, "device");
   r.only(dv, "device", scene_keys("device"));
-  s.device.mass_kg = r.number(dv, "device", "mass_kg", 0.08, 0, 100, true);
-  s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m", 0.01, 0, 1e3);
-  s.device.coulomb_friction_n = r.number(dv, "device", "coulomb_friction_n", 0.0, 0, 100);
-  s.device.encoder_resolution_m = r.number(dv, "device", "encoder_resolution_m", 0.0, 0, 0.01);
-  s.device.force_max_n = r.number(dv, "device", "force_max_n", 10.0, 0, 1000, true);
-  s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m", 300, 0, 1e5, true);
-  s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m", 5, 0, 1e3);
-  s.device.substeps = r.integer(dv, "device", "substeps", 20, 1, 10000);
+  s.device.mass_kg = r.number(dv, "device", "mass_kg");
+  s.device.damping_n_s_per_m = r.number(dv, "device", "damping_n_s_per_m");
+  s.device.coulomb_friction_n = r.number(dv, "device", "coulomb_friction_n");
+  s.device.encoder_resolution_m = r.number(dv, "device", "encoder_resolution_m");
+  s.device.force_max_n = r.number(dv, "device", "force_max_n");
+  s.device.hand_stiffness_n_per_m = r.number(dv, "device", "hand_stiffness_n_per_m");
+  s.device.hand_damping_n_s_per_m = r.number(dv, "device", "hand_damping_n_s_per_m");
+  s.device.substeps = r.integer(dv, "device", "substeps");
   // The simulated device raises its substeps to integrate stably (sim_device.h); past
   // 10000 per servo period the device is too light for its hand to simulate.
   const double dt = 1.0 / s.hri.rate_hz;
@@ -573,7 +600,7 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
       << " ms servo period, got " << dv.at("mass_kg").dump();
     r.fail("device.mass_kg", e.str());
   }
-  s.workspace_scale = r.number(dv, "device", "workspace_scale", 1.0, 0, 1e3, true);
+  s.workspace_scale = r.number(dv, "device", "workspace_scale");
   check_workspace_scale(r, dv, s);
   s.hri.world_per_device = s.workspace_scale;
 }
@@ -593,14 +620,14 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
   p.ray_direction = r.vec3(sc, "script", "ray_direction", p.ray_direction);
   if (core::norm(p.ray_direction) == 0.0) r.fail("script.ray_direction", "must not be [0, 0, 0]");
   p.stroke_direction = r.vec3(sc, "script", "stroke_direction", p.stroke_direction);
-  p.approach_distance_m = r.number(sc, "script", "approach_distance_m", p.approach_distance_m, 0, 1, true);
-  p.approach_speed_m_s = r.number(sc, "script", "approach_speed_m_s", p.approach_speed_m_s, 0, 10, true);
-  p.press_depth_m = r.number(sc, "script", "press_depth_m", p.press_depth_m, 0, 1);
-  p.press_speed_m_s = r.number(sc, "script", "press_speed_m_s", p.press_speed_m_s, 0, 10, true);
-  p.hold_s = r.number(sc, "script", "hold_s", p.hold_s, 0, 3600);
-  p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
-  p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
-  p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+  p.approach_distance_m = r.number(sc, "script", "approach_distance_m");
+  p.approach_speed_m_s = r.number(sc, "script", "approach_speed_m_s");
+  p.press_depth_m = r.number(sc, "script", "press_depth_m");
+  p.press_speed_m_s = r.number(sc, "script", "press_speed_m_s");
+  p.hold_s = r.number(sc, "script", "hold_s");
+  p.stroke_length_m = r.number(sc, "script", "stroke_length_m");
+  p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s");
+  p.rest_s = r.number(sc, "script", "rest_s");
 }
 
 }  // namespace

@@ -1,54 +1,113 @@
 // scene_fields.h - the scene file's fields, in one table: the parser accepts exactly these
-// keys in each section (io/scene.cpp asks scene_keys), and docs/user-guide.md's field tables
-// list exactly these, with these units (tests/test_scene.cpp reads both), so neither drifts.
-// The sub-objects described in prose (servo.friction, servo.tool, an engine pass's
-// parameters) keep their lists in the parser.
+// keys in each section and checks each number against its range and takes its default from
+// here (io/scene.cpp), and docs/user-guide.md's field tables list exactly these, with these
+// units, ranges and defaults (tests/test_scene.cpp reads both), so neither drifts.
 #pragma once
 #include <set>
 #include <string>
 #include <string_view>
 
+#include "isotouch/io/scene_field_range.h"
+
 namespace isotouch::io {
 
-/// One field: its section ("" top level, "volume", ..., "edits.brush", "edits.timeline" for the
-/// fields a timed brush adds to a brush's), its key and its unit as the docs' table gives it
-/// ("" when the table has none or the field has no unit).
+/// One field: its section ("" top level, "volume", ..., "servo.friction", "edits.brush",
+/// "edits.timeline" for the fields a timed brush adds to a brush's, "engine.passes.NAME" for
+/// a pass's parameters), its key, and its unit, range and default as the docs' table writes
+/// them (Markdown: `\|` is a '|'). A numeric range ("(0, 1e6]", "integer [1, 64]", a note
+/// after ',' or ';') is what the parser accepts (io/scene_field_range.h); a default that is
+/// a plain number is what the parser uses when the key is absent.
 struct SceneField {
-  std::string_view section, key, unit;
+  std::string_view section, key, unit, range, default_text;
 };
 
 inline constexpr SceneField kSceneFields[] = {
-    {"", "name", ""}, {"", "description", ""}, {"", "volume", ""}, {"", "isovalue", "the volume's units"},
-    {"", "inside", ""}, {"", "servo", ""}, {"", "device", ""}, {"", "script", ""}, {"", "engine", ""},
-    {"", "edits", ""}, {"", "outputs", ""},
-    {"volume", "path", ""}, {"volume", "synthetic", ""}, {"volume", "dims", "voxels"}, {"volume", "spacing_m", "m"},
-    {"volume", "radius_vox", "voxels"}, {"volume", "attribution", ""},
-    {"servo", "stiffness_n_per_m", "N/m"}, {"servo", "damping_n_s_per_m", "N s/m"},
-    {"servo", "plane_update_period", "ticks"}, {"servo", "rate_hz", "Hz"}, {"servo", "force_limit_n", "N"},
-    {"servo", "variant", ""}, {"servo", "intersection", ""}, {"servo", "intersection_steps", ""},
-    {"servo", "normal", ""}, {"servo", "force_shading", ""}, {"servo", "recovery_time_s", "s"},
-    {"servo", "friction", ""}, {"servo", "tool", ""}, {"servo", "allow_unstable_stiffness", ""},
-    {"device", "mass_kg", "kg"}, {"device", "damping_n_s_per_m", "N s/m"}, {"device", "coulomb_friction_n", "N"},
-    {"device", "encoder_resolution_m", "m"}, {"device", "force_max_n", "N"}, {"device", "hand_stiffness_n_per_m", "N/m"},
-    {"device", "hand_damping_n_s_per_m", "N s/m"}, {"device", "substeps", ""},
-    {"device", "workspace_scale", "world m per device m"},
-    {"script", "ray_origin_frac", "fractions of the volume box"}, {"script", "ray_direction", ""},
-    {"script", "stroke_direction", ""}, {"script", "approach_distance_m", "m"}, {"script", "approach_speed_m_s", "m/s"},
-    {"script", "press_depth_m", "m"}, {"script", "press_speed_m_s", "m/s"}, {"script", "hold_s", "s"},
-    {"script", "stroke_length_m", "m"}, {"script", "stroke_speed_m_s", "m/s"}, {"script", "rest_s", "s"},
-    {"engine", "passes", ""}, {"engine", "mode", ""}, {"engine", "samples", ""},
-    {"edits", "brush", ""}, {"edits", "every_ticks", "ticks"}, {"edits", "button", "s"}, {"edits", "timeline", ""},
-    {"edits", "history_limit_mib", "MiB"}, {"edits", "write_vdb", ""}, {"edits", "write_nrrd", ""},
-    {"edits", "write_stl", ""},
-    {"edits.brush", "kind", ""}, {"edits.brush", "radius_mm", "mm"},
-    {"edits.brush", "strength", "value units per application; smooth: a fraction"},
-    {"edits.brush", "falloff", "fraction of the radius"}, {"edits.brush", "force_threshold_n", "N"},
-    {"edits.brush", "rate", "value units per N s"}, {"edits.brush", "removal_per_n_s", "fraction of \\|material - empty\\| per N s"},
-    {"edits.brush", "density_scale", "value units"}, {"edits.brush", "material", "value units"},
-    {"edits.brush", "empty", "value units"},
-    {"edits.timeline", "t_s", "s"}, {"edits.timeline", "at", "mm, physical frame"}, {"edits.timeline", "duration_s", "s"},
-    {"edits.timeline", "force_n", "N"},
-    {"outputs", "trace_csv", ""}, {"outputs", "plots", ""},
+    {"", "name", "", "letters, digits, `-`, `_`; not empty", "the file's stem"},
+    {"", "description", "", "any string", "`\"\"`"},
+    {"", "volume", "", "object, see below", "required"},
+    {"", "isovalue", "the volume's units", "[-1e30, 1e30]", "required"},
+    {"", "inside", "", "`\"above\"`, `\"below\"`", "`\"above\"`"},
+    {"", "servo", "", "objects", "see below"},
+    {"", "device", "", "objects", "see below"},
+    {"", "script", "", "objects", "see below"},
+    {"", "engine", "", "objects", "see below"},
+    {"", "edits", "", "objects", "see below"},
+    {"", "outputs", "", "objects", "see below"},
+    {"volume", "path", "", "a file or DICOM folder, not empty", "-"},
+    {"volume", "synthetic", "", "`\"sphere\"`, `\"box\"`, `\"three-spheres\"`, `\"knot\"`", "-"},
+    {"volume", "dims", "voxels", "3 integers, each in [2, 1024]", "[64, 64, 64]"},
+    {"volume", "spacing_m", "m", "[1e-6, 0.1]", "0.001"},
+    {"volume", "radius_vox", "voxels", "(0, 1e4]", "20"},
+    {"volume", "attribution", "", "any", "-"},
+    {"servo", "stiffness_n_per_m", "N/m", "(0, 1e6]", "800"},
+    {"servo", "damping_n_s_per_m", "N s/m", "[0, 1e3]", "1.0"},
+    {"servo", "plane_update_period", "ticks", "integer [1, 100000]", "5"},
+    {"servo", "rate_hz", "Hz", "[10, 100000]", "1000"},
+    {"servo", "force_limit_n", "N", "(0, 1000]", "3.3"},
+    {"servo", "variant", "", "`\"robust\"`, `\"paper\"`", "`\"robust\"`"},
+    {"servo", "intersection", "", "`\"linear\"`, `\"secant\"`, `\"bisection\"`", "`\"linear\"`"},
+    {"servo", "intersection_steps", "", "integer [1, 64]", "4"},
+    {"servo", "normal", "", "`\"samples\"`, `\"central\"`, `\"exact\"`", "`\"samples\"`"},
+    {"servo", "force_shading", "", "true, false", "false"},
+    {"servo", "recovery_time_s", "s", "[0, 10]", "0.02 (robust), 0 (paper)"},
+    {"servo", "friction", "", "object, below", "none"},
+    {"servo", "tool", "", "object, below", "see below"},
+    {"servo", "allow_unstable_stiffness", "", "true, false", "false"},
+    {"servo.friction", "mu_s", "", "[0, 10]", "0"},
+    {"servo.friction", "mu_d", "", "[0, 10]; at most `mu_s`", "0"},
+    {"servo.friction", "viscous_n_s_per_m", "N s/m", "[0, 1e3]", "0"},
+    {"servo.tool", "radius_mm", "mm", "[0, 100]", "0"},
+    {"servo.tool", "point", "", "true, false", "false"},
+    {"device", "mass_kg", "kg", "(0, 100]", "0.08"},
+    {"device", "damping_n_s_per_m", "N s/m", "[0, 1e3]", "0.01"},
+    {"device", "coulomb_friction_n", "N", "[0, 100]", "0"},
+    {"device", "encoder_resolution_m", "m", "[0, 0.01]", "0"},
+    {"device", "force_max_n", "N", "(0, 1000]", "10"},
+    {"device", "hand_stiffness_n_per_m", "N/m", "(0, 1e5]", "300"},
+    {"device", "hand_damping_n_s_per_m", "N s/m", "[0, 1e3]", "5"},
+    {"device", "substeps", "", "integer [1, 10000]", "20"},
+    {"device", "workspace_scale", "world m per device m", "(0, 1e3]", "1.0"},
+    {"script", "ray_origin_frac", "fractions of the volume box", "vector, each in [-2, 3]", "[0.5, 0.5, 1.2]"},
+    {"script", "ray_direction", "", "vector, not zero", "[0, 0, -1]"},
+    {"script", "stroke_direction", "", "vector; not zero when `stroke_length_m` > 0", "[1, 0, 0]"},
+    {"script", "approach_distance_m", "m", "(0, 1]", "0.010"},
+    {"script", "approach_speed_m_s", "m/s", "(0, 10]", "0.020"},
+    {"script", "press_depth_m", "m", "[0, 1]", "0.008"},
+    {"script", "press_speed_m_s", "m/s", "(0, 10]", "0.020"},
+    {"script", "hold_s", "s", "[0, 3600]", "0.2"},
+    {"script", "stroke_length_m", "m", "[0, 10]", "0.040"},
+    {"script", "stroke_speed_m_s", "m/s", "(0, 10]", "0.040"},
+    {"script", "rest_s", "s", "[0, 3600]", "0.1"},
+    {"engine", "passes", "", "non-empty array", "`[\"gradient\"]`"},
+    {"engine", "mode", "", "`\"sparse\"`, `\"dense\"`", "`\"sparse\"`"},
+    {"engine", "samples", "", "`\"fp32\"`, `\"fp16\"`, `\"unorm16\"`", "`\"fp32\"`"},
+    {"edits", "brush", "", "a brush, below", "the brush defaults"},
+    {"edits", "every_ticks", "ticks", "integer [1, 1e6]", "10"},
+    {"edits", "button", "s", "array of `[t0, t1]`, 0 <= t0 < t1 <= 1e6, in order, not overlapping", "none"},
+    {"edits", "timeline", "", "array of timed edits, below", "none"},
+    {"edits", "history_limit_mib", "MiB", "[0, 1048576]", "256"},
+    {"edits", "write_vdb", "", "true, false", "true"},
+    {"edits", "write_nrrd", "", "true, false", "true"},
+    {"edits", "write_stl", "", "true, false", "true"},
+    {"edits.brush", "kind", "", "`\"add\"`, `\"carve\"`, `\"smooth\"`, `\"drill\"`", "`\"carve\"`"},
+    {"edits.brush", "radius_mm", "mm", "(0, 1000]", "2"},
+    {"edits.brush", "strength", "value units per application; smooth: a fraction", "[0, 1e30]; smooth: [0, 1]", "100"},
+    {"edits.brush", "falloff", "fraction of the radius", "(0, 1]", "0.5"},
+    {"edits.brush", "force_threshold_n", "N", "[0, 1000]", "1.0"},
+    {"edits.brush", "rate", "value units per N s", "[0, 1e12]", "1000"},
+    {"edits.brush", "removal_per_n_s", "fraction of \\|material - empty\\| per N s", "[0, 1e6]", "not set"},
+    {"edits.brush", "density_scale", "value units", "(0, 1e30]", "\\|material - empty\\|"},
+    {"edits.brush", "material", "value units", "[-1e30, 1e30]", "max(max value, tau) (inside above)"},
+    {"edits.brush", "empty", "value units", "[-1e30, 1e30]", "the far outside end of the value range"},
+    {"edits.timeline", "t_s", "s", "[0, 1e6]", "required"},
+    {"edits.timeline", "at", "mm, physical frame", "vector, or `\"vhip\"`", "required"},
+    {"edits.timeline", "duration_s", "s", "[0, 3600]", "0"},
+    {"edits.timeline", "force_n", "N", "[0, 1000]", "the \\|F\\| rendered that tick"},
+    {"outputs", "trace_csv", "", "true, false", "true"},
+    {"outputs", "plots", "", "true, false", "true"},
+    {"engine.passes.gaussian", "sigma_mm", "mm", "(0, 1000]", "required"},
+    {"engine.passes.closing", "radius_mm", "mm", "[0, 1000]", "required"},
+    {"engine.passes.brick_minmax", "halo", "voxels", "integer [0, 8]", "1"},
 };
 
 /// The keys of `section` in kSceneFields.
@@ -57,6 +116,13 @@ inline std::set<std::string> scene_keys(std::string_view section) {
   for (const SceneField& f : kSceneFields)
     if (f.section == section) keys.emplace(f.key);
   return keys;
+}
+
+/// The field `key` of `section`, or nullptr.
+inline const SceneField* scene_field(std::string_view section, std::string_view key) {
+  for (const SceneField& f : kSceneFields)
+    if (f.section == section && f.key == key) return &f;
+  return nullptr;
 }
 
 }  // namespace isotouch::io

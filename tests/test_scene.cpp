@@ -7,6 +7,9 @@
 #include "isotouch/io/scene_fields.h"
 #include "isotouch/tests/doc_tables.h"
 
+#include <algorithm>
+#include <array>
+#include <cmath>
 #include <fstream>
 #include <map>
 #include <set>
@@ -216,8 +219,8 @@ TEST(Scene, SyntheticSpacingRange) {
   // spacing_m 1e-12 gave a run with no contact tick that exited 0 with a zero error.
   const std::string pre = R"({"volume": {"synthetic": "sphere", "spacing_m": )";
   const std::string post = R"(}, "isovalue": 0})";
-  expect_error(pre + "1e-12" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "1e-12"});
-  expect_error(pre + "0.5" + post, {"'volume.spacing_m'", "[1e-06, 0.1]", "0.5"});
+  expect_error(pre + "1e-12" + post, {"'volume.spacing_m'", "[1e-6, 0.1]", "1e-12"});
+  expect_error(pre + "0.5" + post, {"'volume.spacing_m'", "[1e-6, 0.1]", "0.5"});
   EXPECT_NO_THROW(parse_scene(pre + "1e-6" + post, "ok.json"));
   EXPECT_NO_THROW(parse_scene(pre + "0.1" + post, "ok.json"));
 }
@@ -396,34 +399,187 @@ TEST(Scene, EditsErrorsNameTheField) {
 // ---- the docs' field tables against the parser's table ----------------------------------
 
 
-// Every section's table in docs/user-guide.md lists exactly the keys the parser accepts
-// (io::kSceneFields, which io/scene.cpp's checks read), each with the table's unit.
-TEST(SceneDocs, FieldTablesListExactlyTheParsersKeys) {
+namespace {
+
+// A documented field's unit, range and default cells ("" where the table has no such column).
+using DocRow = std::array<std::string, 3>;
+using DocRows = std::map<std::string, DocRow>;  // "section.key" -> its cells
+
+// kSceneFields as the docs should show them.
+DocRows table_rows() {
+  DocRows rows;
+  for (const isotouch::io::SceneField& f : isotouch::io::kSceneFields)
+    rows[std::string(f.section) + "." + std::string(f.key)] = {std::string(f.unit), std::string(f.range),
+                                                                std::string(f.default_text)};
+  return rows;
+}
+
+// The cell of `row` under the header `name` ("" when the table has no such column).
+std::string cell(const std::vector<std::string>& head, const std::vector<std::string>& row, const std::string& name) {
+  for (std::size_t c = 0; c < head.size() && c < row.size(); ++c)
+    if (head[c] == name) return row[c];
+  return "";
+}
+
+// Every field table of the scene format in docs/user-guide.md, and the passes' parameters.
+DocRows documented_rows(const std::string& doc) {
+  const std::map<std::string, std::string> anchors{
+      {"", "### Top level"}, {"volume", "### `volume`"}, {"servo", "### `servo`"},
+      {"servo.friction", "`servo.friction` ("}, {"servo.tool", "`servo.tool` ("}, {"device", "### `device`"},
+      {"script", "### `script`"}, {"engine", "### `engine`"}, {"edits", "### `edits`"},
+      {"edits.brush", "A brush (in `edits.brush`"}, {"edits.timeline", "A timeline entry is"},
+      {"outputs", "### `outputs`"}};
+  DocRows rows;
+  for (const auto& [section, anchor] : anchors) {
+    const auto table = isotouch::test::table_after(doc, anchor);
+    EXPECT_GE(table.size(), 2u) << "no table after '" << anchor << "'";
+    if (table.size() < 2) continue;
+    EXPECT_EQ(table[0][0], "field") << anchor;
+    for (std::size_t i = 1; i < table.size(); ++i)
+      for (const std::string& key : isotouch::test::code_names(table[i][0]))
+        rows[section + "." + key] = {cell(table[0], table[i], "unit"), cell(table[0], table[i], "range"),
+                                     cell(table[0], table[i], "default")};
+  }
+  // | pass | parameter | unit | range | default |: a pass's parameters are section
+  // "engine.passes.NAME" ("none": it takes none).
+  const auto passes = isotouch::test::table_after(doc, "A pass is its name");
+  EXPECT_GE(passes.size(), 2u) << "no passes table";
+  for (std::size_t i = 1; i < passes.size(); ++i)
+    for (const std::string& pass : isotouch::test::code_names(passes[i][0]))
+      for (const std::string& key : isotouch::test::code_names(passes[i][1]))
+        rows["engine.passes." + pass + "." + key] = {cell(passes[0], passes[i], "unit"),
+                                                     cell(passes[0], passes[i], "range"),
+                                                     cell(passes[0], passes[i], "default")};
+  return rows;
+}
+
+// Every table of the scene format in docs/user-guide.md lists exactly the fields of
+// io::kSceneFields (which io/scene.cpp reads for its keys, ranges and defaults), each with
+// the table's unit, range and default: a field added to either, or a range or default
+// changed in either, fails here until the other says the same.
+TEST(SceneDocs, FieldTablesListExactlyTheParsersFields) {
   const std::string doc = isotouch::test::user_guide();
   ASSERT_FALSE(doc.empty()) << "docs/user-guide.md not found";
-  const std::map<std::string, std::string> anchors{
-      {"", "### Top level"},       {"volume", "### `volume`"},   {"servo", "### `servo`"},
-      {"device", "### `device`"},  {"script", "### `script`"},   {"engine", "### `engine`"},
-      {"edits", "### `edits`"},    {"edits.brush", "A brush (in `edits.brush`"},
-      {"edits.timeline", "A timeline entry is"}, {"outputs", "### `outputs`"}};
-  for (const auto& [section, anchor] : anchors) {
-    const auto rows = isotouch::test::table_after(doc, anchor);
-    ASSERT_GE(rows.size(), 2u) << "no table after '" << anchor << "'";
-    const std::vector<std::string>& head = rows[0];
-    ASSERT_EQ(head[0], "field") << anchor;
-    const bool has_unit = head.size() > 1 && head[1] == "unit";
-    std::map<std::string, std::string> documented;  // key -> unit
-    for (std::size_t i = 1; i < rows.size(); ++i)
-      for (const std::string& key : isotouch::test::code_names(rows[i][0])) documented[key] = has_unit ? rows[i][1] : "";
-    std::set<std::string> doc_keys;
-    for (const auto& [k, u] : documented) doc_keys.insert(k);
-    EXPECT_EQ(doc_keys, isotouch::io::scene_keys(section)) << "section '" << section << "': the docs' table after '"
-                                                           << anchor << "' and the parser's keys differ";
-    for (const isotouch::io::SceneField& fld : isotouch::io::kSceneFields)
-      if (fld.section == section && documented.count(std::string(fld.key)) && has_unit)
-        EXPECT_EQ(documented[std::string(fld.key)], fld.unit) << section << "." << fld.key << ": unit";
+  const DocRows documented = documented_rows(doc), table = table_rows();
+  for (const auto& [field, row] : table) {
+    const auto d = documented.find(field);
+    if (d == documented.end()) ADD_FAILURE() << field << ": in io/scene_fields.h but not in docs/user-guide.md";
+    else EXPECT_EQ(d->second, row) << field << ": docs/user-guide.md against io/scene_fields.h";
+  }
+  for (const auto& [field, row] : documented)
+    EXPECT_TRUE(table.count(field)) << field << ": in docs/user-guide.md but not in io/scene_fields.h";
+}
+
+// A table's numeric ranges are all readable as numbers, so the parser can check them.
+TEST(SceneDocs, NumericRangesParse) {
+  int numeric = 0;
+  for (const isotouch::io::SceneField& f : isotouch::io::kSceneFields) {
+    const std::string_view r = f.range;
+    const bool looks_numeric = !r.empty() && (r[0] == '[' || r[0] == '(' || r.rfind("integer [", 0) == 0);
+    if (!looks_numeric) continue;
+    ++numeric;
+    EXPECT_TRUE(isotouch::io::field_range(r)) << f.section << "." << f.key << ": '" << r << "'";
+  }
+  EXPECT_GE(numeric, 40);
+}
+
+// The scene text with `section_json` (e.g. "\"servo\": {...}") added to a minimal sphere scene.
+std::string sphere_with(const std::string& section_json) {
+  return R"({"volume": {"synthetic": "sphere"}, "isovalue": 0, "inside": "below", )" + section_json + "}";
+}
+
+// The parser refuses and accepts at the table's range, whatever the range is: each field's
+// ends (open or closed) and just beyond them, read from kSceneFields.
+TEST(SceneDocs, ParserChecksTheTablesRanges) {
+  struct Case {
+    std::string_view section, key;
+    std::string json;  // the scene's section with "V" where the value goes
+  };
+  const Case cases[] = {
+      {"script", "hold_s", R"("script": {"hold_s": V})"},
+      {"servo", "force_limit_n", R"("servo": {"force_limit_n": V})"},
+      {"servo", "intersection_steps", R"("servo": {"intersection_steps": V})"},
+      {"servo.friction", "mu_s", R"("servo": {"friction": {"mu_s": V}})"},
+      {"servo.tool", "radius_mm", R"("servo": {"tool": {"radius_mm": V}})"},
+      {"device", "coulomb_friction_n", R"("device": {"coulomb_friction_n": V})"},
+      {"edits.brush", "falloff", R"("edits": {"brush": {"falloff": V}})"},
+      {"edits.timeline", "t_s", R"("edits": {"timeline": [{"t_s": V, "kind": "carve", "at": [0, 0, 0]}]})"},
+      {"engine.passes.brick_minmax", "halo", R"("engine": {"passes": [{"brick_minmax": {"halo": V}}, "gradient"]})"},
+  };
+  for (const Case& c : cases) {
+    const isotouch::io::SceneField* f = isotouch::io::scene_field(c.section, c.key);
+    ASSERT_TRUE(f) << c.section << "." << c.key;
+    const auto range = isotouch::io::field_range(f->range);
+    ASSERT_TRUE(range) << f->range;
+    const double step = range->integer ? 1 : std::max(std::abs(range->hi), 1.0) * 1e-6;
+    const auto scene = [&](double v) {
+      std::ostringstream num;
+      num.precision(17);
+      num << v;
+      std::string j = c.json;
+      j.replace(j.find('V'), 1, num.str());
+      return sphere_with(j);
+    };
+    const auto accepts = [&](double v) {
+      try {
+        parse_scene(scene(v), "bad.json");
+        return true;
+      } catch (const SceneError& e) {
+        EXPECT_NE(std::string(e.what()).find("must be " + range->phrase()), std::string::npos) << e.what();
+        return false;
+      }
+    };
+    EXPECT_EQ(accepts(range->lo), !range->lo_open) << f->key << " = " << range->lo;
+    EXPECT_FALSE(accepts(range->lo - step)) << f->key << " = " << range->lo - step;
+    EXPECT_TRUE(accepts(range->lo + step)) << f->key << " = " << range->lo + step;
+    EXPECT_EQ(accepts(range->hi), !range->hi_open) << f->key << " = " << range->hi;
+    EXPECT_FALSE(accepts(range->hi + step)) << f->key << " = " << range->hi + step;
   }
 }
+
+// A field left out takes the table's default (as the docs show it): every field whose
+// default is a number, read back from the parsed scene.
+TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
+  const auto s = parse_scene(
+      sphere_with(R"("servo": {"friction": {}, "tool": {}}, "engine": {"passes": [{"brick_minmax": {}}, "gradient"]},)"
+                  R"( "edits": {"timeline": [{"t_s": 1, "kind": "carve", "at": "vhip"}]})"),
+      "ok.json");
+  const std::map<std::string, double> parsed{
+      {"volume.spacing_m", s.synthetic.spacing_m}, {"volume.radius_vox", s.synthetic.radius_vox},
+      {"servo.stiffness_n_per_m", s.hri.stiffness_n_per_m}, {"servo.damping_n_s_per_m", s.hri.damping_n_s_per_m},
+      {"servo.plane_update_period", s.hri.plane_update_period}, {"servo.rate_hz", s.hri.rate_hz},
+      {"servo.force_limit_n", s.hri.force_limit_n}, {"servo.intersection_steps", s.hri.intersection_steps},
+      {"servo.friction.mu_s", s.hri.friction.mu_s}, {"servo.friction.mu_d", s.hri.friction.mu_d},
+      {"servo.friction.viscous_n_s_per_m", s.hri.friction.viscous_n_s_per_m},
+      {"servo.tool.radius_mm", s.hri.tool_radius_m * 1e3},
+      {"device.mass_kg", s.device.mass_kg}, {"device.damping_n_s_per_m", s.device.damping_n_s_per_m},
+      {"device.coulomb_friction_n", s.device.coulomb_friction_n},
+      {"device.encoder_resolution_m", s.device.encoder_resolution_m}, {"device.force_max_n", s.device.force_max_n},
+      {"device.hand_stiffness_n_per_m", s.device.hand_stiffness_n_per_m},
+      {"device.hand_damping_n_s_per_m", s.device.hand_damping_n_s_per_m}, {"device.substeps", s.device.substeps},
+      {"device.workspace_scale", s.workspace_scale},
+      {"script.approach_distance_m", s.script.approach_distance_m},
+      {"script.approach_speed_m_s", s.script.approach_speed_m_s}, {"script.press_depth_m", s.script.press_depth_m},
+      {"script.press_speed_m_s", s.script.press_speed_m_s}, {"script.hold_s", s.script.hold_s},
+      {"script.stroke_length_m", s.script.stroke_length_m}, {"script.stroke_speed_m_s", s.script.stroke_speed_m_s},
+      {"script.rest_s", s.script.rest_s},
+      {"engine.passes.brick_minmax.halo", s.engine.passes.at(0).halo},
+      {"edits.every_ticks", s.edits.every_ticks}, {"edits.history_limit_mib", s.edits.history_limit_mib},
+      {"edits.brush.radius_mm", s.edits.brush.radius_mm}, {"edits.brush.strength", s.edits.brush.strength},
+      {"edits.brush.falloff", s.edits.brush.falloff}, {"edits.brush.force_threshold_n", s.edits.brush.force_threshold_n},
+      {"edits.brush.rate", s.edits.brush.rate}, {"edits.timeline.duration_s", s.edits.timeline.at(0).duration_s},
+  };
+  for (const isotouch::io::SceneField& f : isotouch::io::kSceneFields) {
+    const auto def = isotouch::io::plain_number(f.default_text);
+    if (!def) continue;
+    const std::string name = std::string(f.section) + "." + std::string(f.key);
+    const auto it = parsed.find(name);
+    if (it == parsed.end()) ADD_FAILURE() << name << ": a numeric default this test does not read back";
+    else EXPECT_DOUBLE_EQ(it->second, *def) << name;
+  }
+}
+
+}  // namespace
 
 // The parser reads the same table: a key outside it is refused, one in it accepted.
 TEST(SceneDocs, ParserAcceptsExactlyTheTablesKeys) {

@@ -8,6 +8,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "isotouch/io/scene_field_range.h"
+
 namespace isotouch::sculpt {
 
 namespace {
@@ -43,6 +45,13 @@ const ScriptKey* script_key(const std::string& k) {
   return nullptr;
 }
 
+/// The numeric default of `key` in kScriptKeys.
+double script_default(std::string_view key) {
+  for (const ScriptKey& s : kScriptKeys)
+    if (s.name == key) return io::plain_number(s.default_text).value();
+  return 0;
+}
+
 /// "cursor, press, ...": the actions, for messages.
 std::string action_names() {
   std::string list;
@@ -70,10 +79,14 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
     auto fail = [&](const std::string& why) { throw ScriptError(at + ": " + why); };
     if (!e.is_object()) fail("not an object");
     InputEvent ev;
+    ev.after_frames = int(script_default("after_frames"));
+    ev.timeout_s = script_default("timeout_s");
     auto num = [&](const json& v, const char* field) {
       if (!v.is_number()) fail(std::string("field '") + field + "' must be a number, got " + v.dump());
       const double d = v.get<double>();
       if (!std::isfinite(d)) fail(std::string("field '") + field + "' is not finite");
+      const auto range = io::field_range(script_key(field)->range);
+      if (range && !range->contains(d)) fail(std::string("field '") + field + "' must be " + range->phrase() + ", got " + v.dump());
       return d;
     };
     auto pair = [&](const json& v, const char* field) {
@@ -95,9 +108,7 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
       if (!key) fail("unknown field '" + k + "'");
       actions += key->action;
       if (k == "after_frames") {
-        const double f = num(v, "after_frames");
-        if (f < 0 || f > 1e7 || f != std::floor(f)) fail("field 'after_frames' must be a whole number >= 0, got " + v.dump());
-        ev.after_frames = int(f);
+        ev.after_frames = int(num(v, "after_frames"));
       } else if (k == "mods") {
         if (!v.is_array()) fail("field 'mods' must be a list of \"ctrl\" / \"shift\"");
         for (const json& m : v) {
@@ -107,18 +118,14 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         }
       } else if (k == "radius_mm") {
         ev.radius_mm = num(v, "radius_mm");
-        if (!(ev.radius_mm > 0)) fail("field 'radius_mm' must be > 0, got " + v.dump());
       } else if (k == "strength") {
         ev.strength = num(v, "strength");
-        if (!(ev.strength >= 0)) fail("field 'strength' must be >= 0, got " + v.dump());
       } else if (k == "timeout_s") {
         ev.timeout_s = num(v, "timeout_s");
-        if (!(ev.timeout_s > 0)) fail("field 'timeout_s' must be > 0, got " + v.dump());
       } else {
         if (k == "cursor") {
           ev.kind = K::kCursor;
           ev.xy = pair(v, "cursor");
-          if (ev.xy[0] < 0 || ev.xy[0] > 1 || ev.xy[1] < 0 || ev.xy[1] > 1) fail("field 'cursor' must be fractions in [0, 1], got " + v.dump());
         } else if (k == "press" || k == "release") {
           ev.kind = k == "press" ? K::kPress : K::kRelease;
           ev.button = button(v, k.c_str());
@@ -140,7 +147,6 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         } else if (k == "zoom") {
           ev.kind = K::kZoom;
           ev.xy[0] = num(v, "zoom");
-          if (!(ev.xy[0] > 0)) fail("field 'zoom' must be > 0, got " + v.dump());
         } else if (k == "wait") {
           ev.kind = K::kWait;
           ev.text = v.is_string() ? v.get<std::string>() : "";
@@ -154,7 +160,6 @@ std::vector<InputEvent> parse_input_script(const std::string& text, const std::s
         } else if (k == "resize") {
           ev.kind = K::kResize;
           ev.xy = pair(v, "resize");
-          if (ev.xy[0] < 1 || ev.xy[1] < 1 || ev.xy[0] > 8192 || ev.xy[1] > 8192) fail("field 'resize' must be in [1, 8192], got " + v.dump());
         } else if (k == "drop") {
           ev.kind = K::kDrop;
           ev.text = v.is_string() ? v.get<std::string>() : "";

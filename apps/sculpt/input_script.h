@@ -30,19 +30,28 @@
 namespace isotouch::sculpt {
 
 /// An event's keys, in one table: the parser accepts exactly these (an action is the one thing
-/// an event does; the rest qualify it), and docs/user-guide.md's two Input scripts tables list
-/// exactly these (tests/test_input_script.cpp reads both). `unit` is the fields table's.
+/// an event does; the rest qualify it), checks each number against `range` and takes a
+/// plain-number `default_text` as the default; docs/user-guide.md's two Input scripts tables
+/// list exactly these with the same unit, range and default (the fields table) and range
+/// (the actions table, each number of the value; tests/test_input_script.cpp reads both).
+/// A range is written as io/scene_field_range.h reads it ("> 0", "integer [0, 1e7]"); "any"
+/// and "-" check nothing.
 struct ScriptKey {
   std::string_view name;
   bool action;
-  std::string_view unit;
+  std::string_view unit, range, default_text;
 };
 inline constexpr ScriptKey kScriptKeys[] = {
-    {"after_frames", false, "frames"}, {"mods", false, ""}, {"radius_mm", false, "mm"},
-    {"strength", false, "as the Tool panel's"}, {"timeout_s", false, "s"},
-    {"cursor", true, ""}, {"press", true, ""}, {"release", true, ""}, {"scroll", true, ""}, {"key", true, ""},
-    {"tool", true, ""}, {"orbit", true, ""}, {"zoom", true, ""}, {"wait", true, ""}, {"screenshot", true, ""},
-    {"drop", true, ""}, {"iso", true, ""}, {"preset", true, ""}, {"resize", true, ""}, {"quit", true, ""},
+    {"after_frames", false, "frames", "integer [0, 1e7]", "1"},
+    {"mods", false, "", "list of `\"ctrl\"`, `\"shift\"`", "none"},
+    {"radius_mm", false, "mm", "> 0", "unchanged"},
+    {"strength", false, "as the Tool panel's", ">= 0", "unchanged"},
+    {"timeout_s", false, "s", "> 0", "10"},
+    {"cursor", true, "", "[0, 1]", ""}, {"press", true, "", "-", ""}, {"release", true, "", "-", ""},
+    {"scroll", true, "", "any", ""}, {"key", true, "", "-", ""}, {"tool", true, "", "-", ""},
+    {"orbit", true, "", "any", ""}, {"zoom", true, "", "> 0", ""}, {"wait", true, "", "-", ""},
+    {"screenshot", true, "", "-", ""}, {"drop", true, "", "-", ""}, {"iso", true, "", "any", ""},
+    {"preset", true, "", "-", ""}, {"resize", true, "", "[1, 8192]", ""}, {"quit", true, "", "-", ""},
 };
 
 struct ScriptError : std::runtime_error {
@@ -58,7 +67,8 @@ struct InputEvent {
   int key = 0;                     ///< GLFW key code
   bool ctrl = false, shift = false;
   std::string text;                ///< tool name, wait condition, screenshot name, dropped file
-  double radius_mm = -1, strength = -1, timeout_s = 10;
+  double radius_mm = -1, strength = -1;  ///< -1: unchanged
+  double timeout_s = 10;                 ///< kScriptKeys' default (the parser sets it)
 };
 
 /// Parses a script's text; `name` is used in messages. @throws ScriptError naming the file,

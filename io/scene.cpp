@@ -601,6 +601,7 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
   p.stroke_length_m = r.number(sc, "script", "stroke_length_m", p.stroke_length_m, 0, 10);
   p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s", p.stroke_speed_m_s, 0, 10, true);
   p.rest_s = r.number(sc, "script", "rest_s", p.rest_s, 0, 3600);
+  p.lift_retrace = r.boolean(sc, "script", "lift_retrace", p.lift_retrace);
 }
 
 }  // namespace

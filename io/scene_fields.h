@@ -36,6 +36,7 @@ inline constexpr SceneField kSceneFields[] = {
     {"script", "stroke_direction", ""}, {"script", "approach_distance_m", "m"}, {"script", "approach_speed_m_s", "m/s"},
     {"script", "press_depth_m", "m"}, {"script", "press_speed_m_s", "m/s"}, {"script", "hold_s", "s"},
     {"script", "stroke_length_m", "m"}, {"script", "stroke_speed_m_s", "m/s"}, {"script", "rest_s", "s"},
+    {"script", "lift_retrace", ""},
     {"engine", "passes", ""}, {"engine", "mode", ""}, {"engine", "samples", ""},
     {"edits", "brush", ""}, {"edits", "every_ticks", "ticks"}, {"edits", "button", "s"}, {"edits", "timeline", ""},
     {"edits", "history_limit_mib", "MiB"}, {"edits", "write_vdb", ""}, {"edits", "write_nrrd", ""},

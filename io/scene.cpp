@@ -628,6 +628,7 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
   p.stroke_length_m = r.number(sc, "script", "stroke_length_m");
   p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s");
   p.rest_s = r.number(sc, "script", "rest_s");
+  p.lift_retrace = r.boolean(sc, "script", "lift_retrace", p.lift_retrace);
 }
 
 }  // namespace

@@ -78,6 +78,7 @@ inline constexpr SceneField kSceneFields[] = {
     {"script", "stroke_length_m", "m", "[0, 10]", "0.040"},
     {"script", "stroke_speed_m_s", "m/s", "(0, 10]", "0.040"},
     {"script", "rest_s", "s", "[0, 3600]", "0.1"},
+    {"script", "lift_retrace", "", "true, false", "false"},
     {"engine", "passes", "", "non-empty array", "`[\"gradient\"]`"},
     {"engine", "mode", "", "`\"sparse\"`, `\"dense\"`", "`\"sparse\"`"},
     {"engine", "samples", "", "`\"fp32\"`, `\"fp16\"`, `\"unorm16\"`", "`\"fp32\"`"},

@@ -303,6 +303,8 @@ int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* fol
   log << "live     " << scene.name << ": " << ms(duration) << " s at " << scene.hri.rate_hz << " Hz"
       << (o.run.record_path.empty() ? std::string() : ", recording to " + o.run.record_path) << "\n";
   if (device.kind != "sim") log << "device   " << device.description << "\n";
+  if (device.kind == "sim" && setup.script.lift_retrace)
+    log << "script   lift_retrace is for simulated runs: this live run's hand lifts straight along the contact normal\n";
   if (device.report && !device.report->realtime_note().empty()) log << "device   " << device.report->realtime_note() << "\n";
   if (const std::string note = live.start(); !note.empty()) log << "servo    " << note << "\n";
   int last_second = 0;

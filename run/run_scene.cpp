@@ -54,6 +54,22 @@ std::function<void(long, long)> servo_progress(const RunOptions& opt) {
   };
 }
 
+// script.lift_retrace: the tool's path while pressed (the proxy from t_press on, a point each
+// time it moved 0.05 mm from the last one kept), handed to the script before the first tick
+// reads a lift target (a tick reads the hand's target one period ahead).
+std::function<void(sim::TraceRow&)> lift_retracer(sim::TouchScript& script, double rate_hz) {
+  auto path = std::make_shared<std::vector<Vec3>>();
+  auto done = std::make_shared<bool>(false);
+  return [&script, path, done, period = 1.0 / rate_hz](sim::TraceRow& row) {
+    if (*done || row.t_s < script.t_press) return;
+    if (path->empty() || core::norm(row.vhip_m - path->back()) >= 5e-5) path->push_back(row.vhip_m);
+    if (row.t_s + 2.0 * period >= script.t_lift) {
+      script.retrace_lift(*path);
+      *done = true;
+    }
+  };
+}
+
 // The scene in the live session's simulated mode: the servo, the edits and the recorder
 // clocked in simulated time on this thread (what the app and `run --live` run on threads).
 std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const RunOptions& opt,
@@ -81,10 +97,14 @@ std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const
   sr.device = &device;
   sr.script = &script;
   sr.world_T_device = xf;
-  if (edits) {
-    sr.button_down = scene.edits.button_down;
-    sr.after_tick = [&edits, &live](long k, sim::TraceRow& row) { (*edits)(live, k, row); };
-  }
+  std::function<void(sim::TraceRow&)> retrace;
+  if (setup.script.lift_retrace) retrace = lift_retracer(setup.script, hp.rate_hz);
+  if (edits) sr.button_down = scene.edits.button_down;
+  if (edits || retrace)
+    sr.after_tick = [&edits, &live, &retrace](long k, sim::TraceRow& row) {
+      if (edits) (*edits)(live, k, row);
+      if (retrace) retrace(row);
+    };
   sr.progress = servo_progress(opt);
   std::vector<sim::TraceRow> trace = live.run_simulated(sr);
   live.stop();  // the recording: end record, fsync, rename

@@ -34,6 +34,27 @@ void TouchScript::at(double t, Vec3& pos, Vec3& vel) const {
   vel = dt > 0 ? (b.pos_m - a.pos_m) / dt : Vec3{};
 }
 
+void TouchScript::retrace_lift(const std::vector<Vec3>& tool_path) {
+  // The waypoint the lift starts from, and the lift's end (the next waypoint).
+  std::size_t i = 0;
+  while (i + 1 < waypoints.size() && waypoints[i + 1].t_s <= t_lift) ++i;
+  if (tool_path.empty() || i + 1 >= waypoints.size()) return;
+  const Waypoint from = waypoints[i], up = waypoints[i + 1];
+  std::vector<Vec3> pts{from.pos_m};
+  pts.insert(pts.end(), tool_path.rbegin(), tool_path.rend());
+  pts.push_back(up.pos_m);
+  double length = 0;
+  for (std::size_t k = 1; k < pts.size(); ++k) length += norm(pts[k] - pts[k - 1]);
+  std::vector<Waypoint> out(waypoints.begin(), waypoints.begin() + std::ptrdiff_t(i) + 1);
+  double s = 0;
+  for (std::size_t k = 1; k + 1 < pts.size(); ++k) {
+    s += norm(pts[k] - pts[k - 1]);
+    out.push_back({from.t_s + (up.t_s - from.t_s) * (length > 0 ? s / length : 1.0), pts[k]});
+  }
+  out.insert(out.end(), waypoints.begin() + std::ptrdiff_t(i) + 1, waypoints.end());
+  waypoints = std::move(out);
+}
+
 namespace {
 
 // Most stroke points; ds grows for long strokes on fine grids. Each point marches at most
@@ -128,6 +149,7 @@ TouchScript make_touch_script(const SampleField& field, const HriParams& hri,
   const Vec3 g_out = Isosurface{hri.tau, hri.inside}.outward(fv.gradient);
   const Vec3 n = normalized_or(g_out, -dir);
   s.contact_normal = n;
+  s.lift_retrace = p.lift_retrace;
 
   Vec3 tangent = p.stroke_direction - n * dot(p.stroke_direction, n);
   tangent = normalized_or(tangent, normalized_or(cross(n, {0, 0, 1}), {1, 0, 0}));

@@ -26,6 +26,10 @@ struct ScriptParams {
   double stroke_length_m = 0.040;       ///< length of the stroke along the surface
   double stroke_speed_m_s = 0.040;
   double rest_s = 0.1;                  ///< still time at start and end
+  /// The lift retraces the tool's path (TouchScript::retrace_lift, which the run calls with
+  /// the path): an operator withdraws a burr along the channel it drilled, not along the
+  /// straight line the hand aimed at when the hand drifted while drilling.
+  bool lift_retrace = false;
 };
 
 /// A piecewise-linear hand-target trajectory in world [m].
@@ -41,8 +45,17 @@ struct TouchScript {
   /// Phase boundaries [s]: approach start, press start, stroke start, lift start, end.
   double t_press = 0, t_stroke = 0, t_lift = 0;
 
+  /// ScriptParams::lift_retrace: the run calls retrace_lift() before the lift begins.
+  bool lift_retrace = false;
+
   /// Hand target position and velocity at time t (clamped to the ends).
   void at(double t_s, Vec3& pos_m, Vec3& vel_m_s) const;
+  /// Replaces the straight lift by one through `tool_path` backwards (world [m], in the
+  /// order the tool took it): from the hand's target at t_lift to the path's last point,
+  /// along the path to its first, then to the lift's end point, at a steady speed over the
+  /// time the straight lift took; the rest after it and every earlier waypoint are kept
+  /// (duration_s unchanged). An empty path leaves the script as it is.
+  void retrace_lift(const std::vector<Vec3>& tool_path);
 };
 
 /// First crossing of the isosurface along a ray (march + bisection on the trilinear

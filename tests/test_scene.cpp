@@ -83,6 +83,15 @@ TEST(Scene, Errors) {
                {"'servo.friction.mu_d'", "0.5"});
 }
 
+// The burr scenes withdraw the burr along the channel it drilled; the others lift straight.
+TEST(Scene, LiftRetraceIsAFlagOfTheScript) {
+  EXPECT_TRUE(load_scene(kScenes + "/drill-burr.json").script.lift_retrace);
+  EXPECT_TRUE(load_scene(kScenes + "/drill-vault.json").script.lift_retrace);
+  EXPECT_FALSE(load_scene(kScenes + "/drill-skull.json").script.lift_retrace);
+  expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"lift_retrace": 1}})",
+               {"'script.lift_retrace'", "true or false", "1"});
+}
+
 TEST(Scene, ServoOptions) {
   const auto s = parse_scene(R"({"volume": {"synthetic": "knot"}, "isovalue": 0,
     "servo": {"intersection": "secant", "intersection_steps": 6, "normal": "central", "force_shading": true,

@@ -113,6 +113,46 @@ TEST(Script, PhasesAndContactPointOnTheSphere) {
   EXPECT_NEAR(norm(v), sp.stroke_speed_m_s, 0.3 * sp.stroke_speed_m_s);
 }
 
+// The lift retraced along a tool path that wanders off the straight line: the hand's target
+// goes from where the lift began through the path's points, last first, to the straight
+// lift's end, at one steady speed over the straight lift's time; nothing else changes.
+TEST(Script, RetraceLiftGoesBackAlongTheToolsPath) {
+  const SampleField f = sphere_field(0.015);
+  const TouchScript s = make_touch_script(f, iso0(), from_above(0.0));
+  const Vec3 c = s.contact_point_m, n = s.contact_normal;
+  const std::vector<Vec3> path = {c + n * 4e-3, c + Vec3{2e-3, 0, 0}, c + Vec3{1e-3, 3e-3, 0} - n * 5e-3};
+  TouchScript r = s;
+  r.retrace_lift({});
+  ASSERT_EQ(r.waypoints.size(), s.waypoints.size());  // an empty path changes nothing
+  r.retrace_lift(path);
+  EXPECT_EQ(r.duration_s, s.duration_s);
+  ASSERT_EQ(r.waypoints.size(), s.waypoints.size() + path.size());
+  Vec3 p, v, q, w;
+  for (double t = 0; t <= s.t_lift; t += 0.01) {  // the press and hold as they were
+    s.at(t, p, v);
+    r.at(t, q, w);
+    EXPECT_EQ(norm(p - q), 0.0) << t;
+  }
+  s.at(s.duration_s, p, v);
+  r.at(r.duration_s, q, w);
+  EXPECT_EQ(norm(p - q), 0.0);  // the same end
+  // Find the lift's waypoints: the one at t_lift, the path backwards, the straight lift's end.
+  std::size_t i = 0;
+  while (r.waypoints[i + 1].t_s <= r.t_lift) ++i;
+  const double speed = norm(r.waypoints[i + 1].pos_m - r.waypoints[i].pos_m) /
+                       (r.waypoints[i + 1].t_s - r.waypoints[i].t_s);
+  for (std::size_t k = 0; k < path.size(); ++k) {
+    EXPECT_EQ(norm(r.waypoints[i + 1 + k].pos_m - path[path.size() - 1 - k]), 0.0) << k;
+    const auto& a = r.waypoints[i + k];
+    const auto& b = r.waypoints[i + 1 + k];
+    EXPECT_NEAR(norm(b.pos_m - a.pos_m) / (b.t_s - a.t_s), speed, 1e-9 * speed) << k;
+  }
+  const auto& end = r.waypoints[i + 1 + path.size()];
+  const auto& straight_end = s.waypoints[i + 1];  // the waypoints up to i are s's
+  EXPECT_EQ(norm(end.pos_m - straight_end.pos_m), 0.0);
+  EXPECT_NEAR(end.t_s, straight_end.t_s, 1e-12);
+}
+
 TEST(Script, RayThatMissesIsAClearError) {
   const SampleField f = sphere_field(0.015);
   HriParams h;

@@ -390,16 +390,22 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
   // The samples of the cells within reach (a sample whose every cell is farther is left
   // NaN: no cell reads it). The sums are rounded as the cells' box distances are, and
   // each term is at most the cell's, so no sample a cell within reach needs is skipped.
+  // Each sample's class: 1 inside, 2 outside, 4 not finite (or not read); a cell holds
+  // the surface exactly when its corners' classes together are 3.
+  std::uint8_t cls[kScanSide * kScanSide * kScanSide];
   for (int k = 0; k < n[2]; ++k)
     for (int j = 0; j < n[1]; ++j)
       for (int i = 0; i < n[0]; ++i) {
-        float& to = scan_excess_[(k * n[1] + j) * n[0] + i];
+        const int at = (k * n[1] + j) * n[0] + i;
+        float& to = scan_excess_[at];
         if (near2[0][i] + near2[1][j] + near2[2][k] > reach2) {
           to = std::nanf("");
+          cls[at] = 4;
           continue;
         }
         const double v = field.value_at_index({double(lo[0] + i), double(lo[1] + j), double(lo[2] + k)});
         to = std::isfinite(v) ? float(excess(v)) : std::nanf("");
+        cls[at] = !std::isfinite(to) ? 4 : to > 0.0f ? 1 : 2;
       }
   scan_count_ = 0;
   scan_clear_m_ = reach;
@@ -422,15 +428,12 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
         // The cell's box distance (squared).
         const double box2 = out2[0][ci] + out2[1][cj] + out2[2][ck];
         if (box2 > reach2) continue;
+        const int c0 = (ck * n[1] + cj) * n[0] + ci, sy = n[0], sz = n[0] * n[1];
+        if ((cls[c0] | cls[c0 + 1] | cls[c0 + sy] | cls[c0 + sy + 1] | cls[c0 + sz] | cls[c0 + sz + 1] |
+             cls[c0 + sz + sy] | cls[c0 + sz + sy + 1]) != 3)
+          continue;
         double e[8];
-        bool in = false, outside = false, nan = false;
-        for (int c = 0; c < 8; ++c) {
-          const float v = scan_excess_[((ck + (c >> 2)) * n[1] + cj + ((c >> 1) & 1)) * n[0] + ci + (c & 1)];
-          nan = nan || !std::isfinite(v);
-          e[c] = v;
-          (v > 0.0f ? in : outside) = true;
-        }
-        if (nan || !in || !outside) continue;
+        for (int c = 0; c < 8; ++c) e[c] = scan_excess_[c0 + (c >> 2) * sz + ((c >> 1) & 1) * sy + (c & 1)];
         const double xa[3] = {xa_of[0][ci], xa_of[1][cj], xa_of[2][ck]};
         const CellPoint cp = nearest_in_cell(e, xa, sp, tol);
         if (!std::isfinite(cp.best_d2)) continue;

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
 #include "isotouch/servo/sampling.h"
@@ -245,6 +246,24 @@ void HriRenderer::tool_rebuild_newton(const FieldView& field, const Vec3& hip) {
 }
 
 namespace {
+/// Trilinear excess and its gradient [1/m] at u in [0,1]^3 (cell fractions) of a cell of
+/// size `sp` [m] whose corners hold the excess `e` (corner c = i + 2 j + 4 k).
+[[gnu::always_inline]] inline double cell_excess(const double (&e)[8], const Vec3& sp, const Vec3& u, Vec3& g) {
+  const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
+  const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
+  const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
+  const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
+  g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z + (e[7] - e[6]) * u.y * u.z) /
+        sp.x;
+  g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
+  g.z = (e1 - e0) / sp.z;
+  return e0 * z0 + e1 * u.z;
+}
+/// A point y [m] relative to the cell's lower corner as cell fractions, clamped to the cell.
+[[gnu::always_inline]] inline Vec3 cell_fractions(const Vec3& y, const Vec3& sp) {
+  return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0), std::clamp(y.z / sp.z, 0.0, 1.0)};
+}
+
 /// The point of one trilinear cell's surface nearest X (surface_scan): `e` the excess at the
 /// cell's corners (corner c = i + 2 j + 4 k), X and the result relative to the lower corner
 /// [m], `sp` the cell's size [m]. The nearest edge crossing (an exact surface point: the
@@ -256,26 +275,11 @@ struct CellPoint {
   Vec3 best;                                              ///< the nearest point found
   double best_d2 = std::numeric_limits<double>::infinity();  ///< its squared distance (inf: none)
   bool converged = false;                                 ///< a projection landed on the patch
-  Vec3 gradient;  ///< the excess gradient [1/m] at the best point (clamped to the cell)
 };
 CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec3& sp, double tol) {
   const Vec3 X{xa[0], xa[1], xa[2]};
-  // Trilinear excess and its gradient [1/m] at u in [0,1]^3 (corner c = i + 2 j + 4 k).
-  auto eval = [&](const Vec3& u, Vec3& g) {
-    const double x0 = 1 - u.x, y0 = 1 - u.y, z0 = 1 - u.z;
-    const double e00 = e[0] * x0 + e[1] * u.x, e10 = e[2] * x0 + e[3] * u.x;
-    const double e01 = e[4] * x0 + e[5] * u.x, e11 = e[6] * x0 + e[7] * u.x;
-    const double e0 = e00 * y0 + e10 * u.y, e1 = e01 * y0 + e11 * u.y;
-    g.x = ((e[1] - e[0]) * y0 * z0 + (e[3] - e[2]) * u.y * z0 + (e[5] - e[4]) * y0 * u.z +
-           (e[7] - e[6]) * u.y * u.z) / sp.x;
-    g.y = ((e10 - e00) * z0 + (e11 - e01) * u.z) / sp.y;
-    g.z = (e1 - e0) / sp.z;
-    return e0 * z0 + e1 * u.z;
-  };
-  auto clamp_u = [&](const Vec3& y) {
-    return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0),
-                std::clamp(y.z / sp.z, 0.0, 1.0)};
-  };
+  auto eval = [&](const Vec3& u, Vec3& g) { return cell_excess(e, sp, u, g); };
+  auto clamp_u = [&](const Vec3& y) { return cell_fractions(y, sp); };
   // The nearest edge crossing.
   Vec3 best;
   double best_d2 = std::numeric_limits<double>::infinity();
@@ -313,8 +317,9 @@ CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec
       if (!(g2 > 0)) break;
       const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
       for (int a = 0; a < 3; ++a) {
-        const double t = xa[a] - ga[a] * lx / g2;
         const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
+        if (!(ua <= 0.0 || ua >= 1.0)) continue;  // not at a face of the cell on this axis: free
+        const double t = xa[a] - ga[a] * lx / g2;
         if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
           ga[a] = 0;
           xa2[a] = ya[a];
@@ -346,7 +351,6 @@ CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec
   out.best = best;
   out.best_d2 = best_d2;
   out.converged = converged;
-  if (std::isfinite(best_d2)) eval(clamp_u(best), out.gradient);
   return out;
 }
 
@@ -368,11 +372,40 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
     n[a] = int(std::ceil(ix[a] + reach / sp[a])) - lo[a] + 1;  // samples on this axis
     if (n[a] > kScanSide || n[a] < 2) return false;
   }
+  // Per axis and cell c along it: x relative to the cell's lower corner [m] (xa) and the
+  // square of its distance outside the cell's extent (out2), so that a cell's squared box
+  // distance is out2 x + out2 y + out2 z; per sample, the least out2 of its two cells (near2).
+  double xa_of[3][kScanSide], out2[3][kScanSide], near2[3][kScanSide];
+  for (int a = 0; a < 3; ++a) {
+    for (int c = 0; c + 1 < n[a]; ++c) {
+      xa_of[a][c] = (ix[a] - double(lo[a] + c)) * sp[a];
+      const double out = std::max({0.0, -xa_of[a][c], xa_of[a][c] - sp[a]});
+      out2[a][c] = out * out;
+    }
+    near2[a][0] = out2[a][0];
+    for (int c = 1; c + 1 < n[a]; ++c) near2[a][c] = std::min(out2[a][c - 1], out2[a][c]);
+    near2[a][n[a] - 1] = out2[a][n[a] - 2];
+  }
+  const double reach2 = reach * reach;
+  // The samples of the cells within reach (a sample whose every cell is farther is left
+  // NaN: no cell reads it). The sums are rounded as the cells' box distances are, and
+  // each term is at most the cell's, so no sample a cell within reach needs is skipped.
+  // Each sample's class: 1 inside, 2 outside, 4 not finite (or not read); a cell holds
+  // the surface exactly when its corners' classes together are 3.
+  std::uint8_t cls[kScanSide * kScanSide * kScanSide];
   for (int k = 0; k < n[2]; ++k)
     for (int j = 0; j < n[1]; ++j)
       for (int i = 0; i < n[0]; ++i) {
+        const int at = (k * n[1] + j) * n[0] + i;
+        float& to = scan_excess_[at];
+        if (near2[0][i] + near2[1][j] + near2[2][k] > reach2) {
+          to = std::nanf("");
+          cls[at] = 4;
+          continue;
+        }
         const double v = field.value_at_index({double(lo[0] + i), double(lo[1] + j), double(lo[2] + k)});
-        scan_excess_[(k * n[1] + j) * n[0] + i] = std::isfinite(v) ? float(excess(v)) : std::nanf("");
+        to = std::isfinite(v) ? float(excess(v)) : std::nanf("");
+        cls[at] = !std::isfinite(to) ? 4 : to > 0.0f ? 1 : 2;
       }
   scan_count_ = 0;
   scan_clear_m_ = reach;
@@ -392,44 +425,48 @@ bool HriRenderer::surface_scan(const FieldView& field, const Vec3& x, double rea
   for (int ck = 0; ck + 1 < n[2]; ++ck)
     for (int cj = 0; cj + 1 < n[1]; ++cj)
       for (int ci = 0; ci + 1 < n[0]; ++ci) {
-        const int c0[3] = {ci, cj, ck};
-        // x relative to the cell's lower corner [m], and the cell's box distance.
-        double xa[3];
-        double box2 = 0;
-        for (int a = 0; a < 3; ++a) {
-          xa[a] = (ix[a] - double(lo[a] + c0[a])) * sp[a];
-          const double out = std::max({0.0, -xa[a], xa[a] - sp[a]});
-          box2 += out * out;
-        }
-        if (box2 > reach * reach) continue;
+        // The cell's box distance (squared).
+        const double box2 = out2[0][ci] + out2[1][cj] + out2[2][ck];
+        if (box2 > reach2) continue;
+        const int c0 = (ck * n[1] + cj) * n[0] + ci, sy = n[0], sz = n[0] * n[1];
+        if ((cls[c0] | cls[c0 + 1] | cls[c0 + sy] | cls[c0 + sy + 1] | cls[c0 + sz] | cls[c0 + sz + 1] |
+             cls[c0 + sz + sy] | cls[c0 + sz + sy + 1]) != 3)
+          continue;
         double e[8];
-        bool in = false, outside = false, nan = false;
-        for (int c = 0; c < 8; ++c) {
-          const float v = scan_excess_[((ck + (c >> 2)) * n[1] + cj + ((c >> 1) & 1)) * n[0] + ci + (c & 1)];
-          nan = nan || !std::isfinite(v);
-          e[c] = v;
-          (v > 0.0f ? in : outside) = true;
-        }
-        if (nan || !in || !outside) continue;
+        for (int c = 0; c < 8; ++c) e[c] = scan_excess_[c0 + (c >> 2) * sz + ((c >> 1) & 1) * sy + (c & 1)];
+        const double xa[3] = {xa_of[0][ci], xa_of[1][cj], xa_of[2][ck]};
         const CellPoint cp = nearest_in_cell(e, xa, sp, tol);
         if (!std::isfinite(cp.best_d2)) continue;
         const Vec3& best = cp.best;
         const double dist = std::sqrt(cp.best_d2);
-        const Vec3& gq = cp.gradient;
         const Vec3 q = grid.to_world(
             {double(lo[0] + ci) + best.x / sp.x, double(lo[1] + cj) + best.y / sp.y, double(lo[2] + ck) + best.z / sp.z});
         // The plane's normal: toward x from an x outside (the nearest point's normal, and
         // defined at creases); the outward gradient where x is inside or on the surface.
-        const Vec3 n_grad = normalized_or(gq * -1.0, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
-        const Vec3 n_out = x_outside && dist > tol ? (x - q) / dist : n_grad;
+        Vec3 n_out;
+        if (x_outside && dist > tol) {
+          n_out = (x - q) / dist;
+        } else {
+          Vec3 gq;  // the excess gradient at the point (clamped to the cell)
+          cell_excess(e, sp, cell_fractions(best, sp), gq);
+          n_out = normalized_or(gq * -1.0, normalized_or(x - q, Vec3{0.0, 0.0, 1.0}));
+        }
         keep(q, n_out, dist);
         // The free-motion clearance: the point found where the projections converged, else
         // the cell's box distance (a proven lower bound).
         scan_clear_m_ = std::min(scan_clear_m_, cp.converged ? dist : std::sqrt(box2));
       }
-  // Nearest first (insertion sort: at most kMaxScanPoints).
-  for (int a = 1; a < scan_count_; ++a)
-    for (int b = a; b > 0 && scan_[b].d < scan_[b - 1].d; --b) std::swap(scan_[b], scan_[b - 1]);
+  // Nearest first: a stable insertion sort of the kept points' order (at most
+  // kMaxScanPoints), then the points moved once into that order.
+  std::uint8_t order[kMaxScanPoints];
+  for (int a = 0; a < scan_count_; ++a) {
+    int b = a;
+    for (; b > 0 && scan_[a].d < scan_[order[b - 1]].d; --b) order[b] = order[b - 1];
+    order[b] = std::uint8_t(a);
+  }
+  ScanPoint sorted[kMaxScanPoints];
+  for (int a = 0; a < scan_count_; ++a) sorted[a] = scan_[order[a]];
+  std::copy(sorted, sorted + scan_count_, scan_);
   return true;
 }
 

@@ -331,6 +331,29 @@ double chain_floor_ms(engine::GradientPass& floor_pass, const engine::Volume& v,
 }
 }  // namespace
 
+namespace {
+/// The standalone pass set of a case (the list without closing: the same work as the dense
+/// chain), or null with r.standalone.why saying why not.
+std::unique_ptr<StandaloneSet> make_standalone(engine::VulkanContext* ctx, bool chain, const engine::Volume& v,
+                                               const std::vector<engine::PassDesc>& dense, bool with_closing,
+                                               CaseResult& r) {
+  if (!ctx || !chain) {
+    r.standalone.why = "no GPU chain";
+    return nullptr;
+  }
+  if (with_closing) {
+    r.standalone.why = "not run with the closing (the set is the list without it)";
+    return nullptr;
+  }
+  try {
+    return std::make_unique<StandaloneSet>(*ctx, v, dense.front().sigma_mm);
+  } catch (const std::exception& e) {
+    r.standalone.why = e.what();
+    return nullptr;
+  }
+}
+}  // namespace
+
 CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, const BenchCase& c, bool with_closing,
                     int repetitions, double memcpy_gbps, std::ostream& progress, bool peers) {
   const engine::Volume& v = *c.volume;
@@ -377,6 +400,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       sparse_why = e.what();
     }
   }
+  std::unique_ptr<StandaloneSet> standalone = make_standalone(ctx, chain != nullptr, v, dense, with_closing, r);
   const std::size_t np = dense.size(), ni = c.isos.size();
   std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np), legacy_ms(np);
   std::vector<double> gpu_wall, cpu_wall, legacy_wall, cpu_mt_wall;
@@ -400,6 +424,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     try {
       (void)chain->run(v);
       if (legacy) (void)legacy->run(v);
+      if (standalone) standalone->run(false);
     } catch (const std::exception& e) {
       r.gpu_why = e.what();
       chain.reset();
@@ -453,6 +478,10 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
                           h.bricks->min == m.bricks->min && h.bricks->max == m.bricks->max;
         r.cpu_backend_same_bits = (rep == 0 || r.cpu_backend_same_bits) && same;
       }
+      if (standalone) {
+        standalone->run();
+        if (rep == 0) standalone->check(h);
+      }
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
@@ -493,6 +522,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     r.passes.push_back(p);
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
+  if (standalone) r.standalone = standalone->figures();
   if (chain) {
     try {
       progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
@@ -630,6 +660,7 @@ void finish_case(CaseResult& r) {
   r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
   r.chain_floor_over_memcpy = ratio(r.chain_floor_ms, r.memcpy_ms);
   r.chain_over_floor = ratio(r.sum.gpu_ms, r.chain_floor_ms);
+  r.chain_over_standalone = r.standalone.why.empty() ? ratio(r.sum.gpu_ms, r.standalone.best_set_ms) : kNaN;
   r.gradient_over_floor = kNaN;
   for (const PassRow& p : r.passes)
     if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
@@ -913,6 +944,40 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   }
 }
 
+/// The dense chain's passes beside the standalone set's (bench_reference.h), and the chain
+/// against the set and against the device's copy floor for its bytes.
+void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## The dense chain beside the standalone pass set (same run, device time, medians)\n\n"
+      << "The same work as standalone passes in the fastest forms measured on lavapipe (the study's "
+         "vec4-per-invocation, texel-fetch shaders ported as shaders/ref_*.comp; brick min/max: the faster "
+         "of two standalone forms), each output compared bit for bit with the CPU chain's. CPU: "
+      << d.cpu << ".\n\n| case | standalone pass | standalone [ms] | bits vs CPU | dense chain's pass | chain [ms] "
+         "|\n|---|---|---:|---|---|---:|\n";
+  for (const auto& r : res) {
+    if (!r.standalone.why.empty()) {
+      out << "| " << r.name << " | not run: " << r.standalone.why << " | | | | |\n";
+      continue;
+    }
+    for (std::size_t i = 0; i < r.standalone.rows.size(); ++i) {
+      const StandaloneRow& s = r.standalone.rows[i];
+      const PassRow* p = &r.passes[std::min<std::size_t>(i, r.passes.size() - 1)];  // both brick min/max forms: the last
+      out << "| " << r.name << " | " << s.label << " | " << num(s.ms >= 0 ? s.ms : kNaN) << " | "
+          << (s.same_bits ? "same" : "DIFFER") << " | " << p->label << " | " << num(p->gpu_ms) << " |\n";
+      csv.row("standalone", r.name, "", s.label, "ms", csv_num(s.ms >= 0 ? s.ms : kNaN), "ms", d.gpu);
+      csv.row("standalone", r.name, "", s.label, "same_bits", s.same_bits ? "1" : "0", "", "");
+    }
+  }
+  out << "\n| case | dense chain [ms] | best standalone set [ms] | chain / set | chain floor [ms] | chain / floor | "
+         "CPU |\n|---|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res) {
+    const double set = r.standalone.why.empty() ? r.standalone.best_set_ms : kNaN;
+    out << "| " << r.name << " | " << num(r.sum.gpu_ms) << " | " << num(set) << " | " << num(r.chain_over_standalone, 3)
+        << " | " << num(r.chain_floor_ms) << " | " << num(r.chain_over_floor, 3) << " | " << d.cpu << " |\n";
+    csv.row("standalone", r.name, "", "best set", "ms", csv_num(set), "ms", d.gpu);
+    csv.row("standalone", r.name, "", "best set", "chain_over_standalone", csv_num(r.chain_over_standalone), "", "");
+  }
+}
+
 std::string sparse_cell(const SparseCell& c, double v, int prec = 2) {
   return c.available ? num(v, prec) : "sparse: not available (" + c.why + ")";
 }
@@ -1169,6 +1234,15 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
       << (chest->chain_floor_over_memcpy > 5.0 ? ": the target is below this device's floor" : "");
     vs.back().text += f.str();
   }
+  // The two targets for the dense chain on this run's CPU (its model in the text).
+  const std::string cpu = "CPU " + cpu_model();
+  vs.push_back(verdict_at_most("chest dense GPU chain / the device's copy floor for its bytes (" + cpu + ")",
+                               chest ? chest->chain_over_floor : kNaN, 2.0, 3, chest ? "no GPU time or floor" : no_chest));
+  vs.push_back(verdict_at_most("chest dense GPU chain / best standalone pass set, same run (" + cpu + ")",
+                               chest ? chest->chain_over_standalone : kNaN, 1.0, 3,
+                               chest ? "standalone set: " + chest->standalone.why : no_chest));
+  if (chest && chest->standalone.why.empty() && !chest->standalone.all_same_bits)
+    vs.back().text += "; a standalone pass's output DIFFERS from the CPU chain's";
   vs.push_back(verdict_at_most("chest -500 sparse GPU / fastest peer chain",
                                a && chest ? ratio(a->gpu.total_ms, chest->fastest_peer_chain_ms) : kNaN, 1.0 / 5.0, 3,
                                a ? "sparse GPU: " + a->gpu.why + " or no peer" : no_chest));
@@ -1315,6 +1389,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
   print_dense(res, dev, out, csv);
   print_peers(res, dev, out, csv);
+  print_standalone(res, dev, out, csv);
   print_cpu_backend(res, dev, out, csv);
   print_sparse(res, dev, out, csv);
   print_bytes(res, out, csv);

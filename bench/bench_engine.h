@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "isotouch/eval/stats.h"
+#include "isotouch/bench/bench_reference.h"
 #include "isotouch/core/brick_field.h"
 #include "isotouch/engine/passes.h"
 #include "isotouch/engine/sparse_chain.h"
@@ -204,6 +205,10 @@ struct CaseResult {
   double chain_floor_ms = kNaN;
   double chain_floor_over_memcpy = kNaN;  ///< chain_floor_ms / memcpy_ms (memcpy of sum.min_bytes)
   double chain_over_floor = kNaN;         ///< sum.gpu_ms / chain_floor_ms
+  /// The same work as standalone passes in the fastest forms measured on lavapipe
+  /// (bench_reference.h), timed in the same repetitions; `standalone.why` says why not.
+  StandaloneFigures standalone;
+  double chain_over_standalone = kNaN;    ///< sum.gpu_ms / standalone.best_set_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

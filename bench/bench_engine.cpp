@@ -511,14 +511,6 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     p.gpu_ms = median(gpu_ms[i]);
     p.cpu_ms = median(cpu_ms[i]);
     p.legacy_gpu_ms = median(legacy_ms[i]);
-    // Fused passes: the gradient's time includes the brick min/max's slice segments, the
-    // brick min/max's only their reduction into bricks; the sum is the whole chain either way.
-    if (chain && chain->describe().find("fused with the brick min/max") != std::string::npos) {
-      if (dense[i].kind == engine::PassKind::Gradient)
-        p.gpu_note = "GPU: one pass with the brick min/max's slice segments";
-      else if (dense[i].kind == engine::PassKind::BrickMinMax)
-        p.gpu_note = "GPU: the segments into bricks only, the rest fused into the gradient";
-    }
     r.passes.push_back(p);
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
@@ -857,7 +849,7 @@ void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   for (const auto& r : res) {
     auto line = [&](const PassRow& p) {
       const std::string g = r.gpu_available ? num(p.gpu_ms) : "n/a (" + r.gpu_why + ")";
-      out << "| " << r.name << " | " << p.label << (p.gpu_note.empty() ? "" : " (" + p.gpu_note + ")") << " | "
+      out << "| " << r.name << " | " << p.label << " | "
           << mib(p.min_bytes) << " | " << g << " | "
           << num(p.legacy_gpu_ms) << " | " << num(p.legacy_over_gpu) << " | " << num(p.cpu_ms)
           << " | " << num(p.gpu_over_cpu, 3) << " | " << num(p.gpu_gbps) << " | " << num(p.gpu_of_memcpy, 3) << " | "
@@ -949,7 +941,8 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
 void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
   out << "\n## The dense chain beside the standalone pass set (same run, device time, medians)\n\n"
       << "The same work as standalone passes in the fastest forms measured on lavapipe (the study's "
-         "vec4-per-invocation, texel-fetch shaders ported as shaders/ref_*.comp; brick min/max: the faster "
+         "vec4-per-invocation, texel-fetch shaders ported into shaders/: gauss_axis_x4 with the quads either side in x, "
+         "gradient_whole_x4; brick min/max: the faster "
          "of two standalone forms), each output compared bit for bit with the CPU chain's. CPU: "
       << d.cpu << ".\n\n| case | standalone pass | standalone [ms] | bits vs CPU | dense chain's pass | chain [ms] "
          "|\n|---|---|---:|---|---|---:|\n";

@@ -145,8 +145,6 @@ struct IsoResult {
 /// One dense pass (or the total) of one case.
 struct PassRow {
   std::string label;
-  /// How the GPU chain ran this pass where not on its own (a fused pass), else empty.
-  std::string gpu_note;
   std::uint64_t min_bytes = 0;            ///< pass_min_bytes (total: the sum)
   double gpu_ms = kNaN, cpu_ms = kNaN;    ///< medians; GPU: device timestamps
   double gpu_gbps = kNaN, cpu_gbps = kNaN;  ///< min_bytes / time

@@ -10,12 +10,12 @@
 #include "isotouch/engine/vk_resources.h"
 #include "isotouch/eval/stats.h"
 #include "isotouch/shaders/isotouch_shared.h"
+#include "isotouch/shaders/gauss_axis_x4_spv.h"
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
 #include "isotouch/shaders/minmax_segments_spv.h"
 #include "isotouch/shaders/minmax_slices_spv.h"
-#include "isotouch/shaders/ref_gauss_x4_spv.h"
-#include "isotouch/shaders/ref_gradient_x4_spv.h"
+#include "isotouch/shaders/gradient_whole_x4_spv.h"
 
 namespace isotouch::bench {
 using engine::BufferRange;
@@ -33,8 +33,8 @@ std::uint32_t groups(std::uint64_t n, std::uint32_t wg) { return std::uint32_t((
 // The rows of the set, in the order of the timestamps after them.
 enum Row { kGauss, kGradient, kMinMaxRows, kMinMaxSegments, kRows };
 const char* const kLabels[kRows] = {
-    "gaussian: ref_gauss_x4 x, y, z (quads by texel fetch, vec4 store, 64x1x1)",
-    "gradient: ref_gradient_x4 (quads + x neighbours by texel fetch, 64x1x1)",
+    "gaussian: gauss_axis_x4 x, y, z, quads either side in x (texel fetch, vec4 store, 64x1x1)",
+    "gradient: gradient_whole_x4 (quads + x neighbours by texel fetch, 64x1x1)",
     "brick_minmax: minmax_rows + minmax_bricks",
     "brick_minmax: minmax_segments + minmax_slices"};
 
@@ -105,13 +105,14 @@ StandaloneSet::StandaloneSet(engine::VulkanContext& ctx, const engine::Volume& v
                                        std::uint32_t(axis), std::uint32_t(k.size() / 2)};
     for (float w : k) spec.push_back(bits(w));
     spec.resize(5 + 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1, 0u);
-    m.gauss.push_back(std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, ref_gauss_x4_spv, 2, "ref_gauss_x4", 0u,
-                                                                        spec, 1u));
+    spec.push_back(0u);  // X_FLOATS off: the study's form, the quads either side in x
+    m.gauss.push_back(std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, gauss_axis_x4_spv, 3, "gauss_axis_x4",
+                                                                        0u, spec, 0b101u));
     m.gauss.back()->set_texel_vec4(1u);
   }
   const engine::GradientConstants k = engine::gradient_constants(v.grid);
   m.gradient = std::make_unique<ComputePipeline<gpu::DensePush>>(
-      ctx, ref_gradient_x4_spv, 3, "ref_gradient_x4", 0u,
+      ctx, gradient_whole_x4_spv, 3, "gradient_whole_x4", 0u,
       std::vector<std::uint32_t>{std::uint32_t(m.nx), std::uint32_t(m.ny), std::uint32_t(m.nz), bits(k.inv_2h[0]),
                                  bits(k.inv_2h[1]), bits(k.inv_2h[2]), bits(k.inv_h[0]), bits(k.inv_h[1]),
                                  bits(k.inv_h[2])},
@@ -147,7 +148,7 @@ BufferRange whole(const GpuBuffer& b) { return {b.handle(), 0, b.size()}; }
 void StandaloneSet::run(bool timed) {
   Impl& m = *impl_;
   engine::VulkanContext& ctx = m.ctx;
-  engine::DescriptorArena arena(ctx, 8, 16);
+  engine::DescriptorArena arena(ctx, 8, 24);
   engine::GpuTimer timer(ctx, kRows + 1);
   const std::uint32_t qx = std::uint32_t(m.nx / 4);
   const std::uint32_t gx = groups(qx, ISOTOUCH_DENSE_WG);
@@ -157,7 +158,7 @@ void StandaloneSet::run(bool timed) {
   // Gaussian: in -> a (x), a -> b (y), b -> a (z).
   const GpuBuffer* io[3][2] = {{&m.in, &m.a}, {&m.a, &m.b}, {&m.b, &m.a}};
   for (int axis = 0; axis < 3; ++axis) {
-    m.gauss[std::size_t(axis)]->bind(cmd, arena, {whole(*io[axis][0]), whole(*io[axis][1])});
+    m.gauss[std::size_t(axis)]->bind(cmd, arena, {whole(*io[axis][0]), whole(*io[axis][1]), whole(*io[axis][0])});
     vkCmdDispatch(cmd, gx, std::uint32_t(m.ny), std::uint32_t(m.nz));
     engine::barrier_compute_to_compute(cmd);
   }

@@ -1,14 +1,14 @@
 #version 450
-// Reference pass for `bench engine` (not used by the engine): the gradient in the fastest
-// standalone form measured on lavapipe - four voxels of an x-row per invocation, the field
-// read through two texel-buffer views of one buffer (binding 0 as RGBA32F quads: the quad
-// and its y and z neighbours; binding 2 as R32F: the one voxel on each side in x), four
-// vec4 sample stores, 64x1x1 workgroups over a (ceil(QX / 64), NY, NZ) grid, the size and
-// the inverse spacings specialization constants.
+// The gradient over the whole field (engine/gradient_pass.cpp, where the field is one binding
+// and one texel view, rows hold whole quads of at least 8 voxels and ny, nz >= 2; else
+// gradient_x4.comp by z-slab), the fastest form the lavapipe study measured: four voxels of an
+// x-row per invocation, the field read through two texel-buffer views of one buffer (binding 0
+// as RGBA32F quads: the quad and its y and z neighbours; binding 2 as R32F: the one voxel on
+// each side in x), four vec4 sample stores, 64x1x1 workgroups over a (ceil(QX / 64), NY, NZ)
+// grid, the size and the inverse spacings specialization constants.
 // Per voxel (value, d/dx, d/dy, d/dz): central differences inside, one-sided at the borders,
-// the float operations of engine/cpu_gradient.cpp (bit for bit). Limits: NX a multiple of 4
-// and at least 8; NY, NZ at least 2. Bindings: 0 the field (vec4 view), 1 the samples,
-// 2 the field (float view).
+// the float operations of engine/cpu_gradient.cpp (bit for bit). Bindings: 0 the field (vec4
+// view), 1 the samples, 2 the field (float view).
 #extension GL_GOOGLE_include_directive : require
 #include "isotouch_shared.h"
 

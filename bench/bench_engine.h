@@ -203,6 +203,10 @@ struct CaseResult {
   double chain_floor_ms = kNaN;
   double chain_floor_over_memcpy = kNaN;  ///< chain_floor_ms / memcpy_ms (memcpy of sum.min_bytes)
   double chain_over_floor = kNaN;         ///< sum.gpu_ms / chain_floor_ms
+  /// The floor of the passes over the field as the chain runs them: as chain_floor_ms with a
+  /// Gaussian's three axis passes (a closing's six) each a filter pass [ms].
+  double chain_passes_floor_ms = kNaN;
+  double chain_over_passes_floor = kNaN;  ///< sum.gpu_ms / chain_passes_floor_ms
   /// The same work as standalone passes in the fastest forms measured on lavapipe
   /// (bench_reference.h), timed in the same repetitions; `standalone.why` says why not.
   StandaloneFigures standalone;

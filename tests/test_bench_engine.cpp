@@ -374,6 +374,11 @@ TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   r.standalone.best_set_ms = 8.0;
   bench::finish_case(r);
   EXPECT_DOUBLE_EQ(r.chain_over_standalone, 0.5);
+  r.chain_floor_ms = 2.0;
+  r.chain_passes_floor_ms = 3.2;
+  bench::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.chain_over_floor, 2.0);
+  EXPECT_DOUBLE_EQ(r.chain_over_passes_floor, 1.25);
   r.standalone.why = "not run";
   // A pass without a GPU time makes the GPU sum unknown, not smaller.
   r.passes[1].gpu_ms = kNaN;

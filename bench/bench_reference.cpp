@@ -33,7 +33,7 @@ std::uint32_t groups(std::uint64_t n, std::uint32_t wg) { return std::uint32_t((
 // The rows of the set, in the order of the timestamps after them.
 enum Row { kGauss, kGradient, kMinMaxRows, kMinMaxSegments, kRows };
 const char* const kLabels[kRows] = {
-    "gaussian: gauss_axis_x4 x, y, z, quads either side in x (texel fetch, vec4 store, 64x1x1)",
+    "gaussian: gauss_axis_x4 x, y, z (quads by texel fetch, vec4 store, 64x1x1)",
     "gradient: gradient_whole_x4 (quads + x neighbours by texel fetch, 64x1x1)",
     "brick_minmax: minmax_rows + minmax_bricks",
     "brick_minmax: minmax_segments + minmax_slices"};
@@ -105,9 +105,8 @@ StandaloneSet::StandaloneSet(engine::VulkanContext& ctx, const engine::Volume& v
                                        std::uint32_t(axis), std::uint32_t(k.size() / 2)};
     for (float w : k) spec.push_back(bits(w));
     spec.resize(5 + 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1, 0u);
-    spec.push_back(0u);  // X_FLOATS off: the study's form, the quads either side in x
-    m.gauss.push_back(std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, gauss_axis_x4_spv, 3, "gauss_axis_x4",
-                                                                        0u, spec, 0b101u));
+    m.gauss.push_back(std::make_unique<ComputePipeline<gpu::DensePush>>(ctx, gauss_axis_x4_spv, 2, "gauss_axis_x4",
+                                                                        0u, spec, 1u));
     m.gauss.back()->set_texel_vec4(1u);
   }
   const engine::GradientConstants k = engine::gradient_constants(v.grid);
@@ -158,7 +157,7 @@ void StandaloneSet::run(bool timed) {
   // Gaussian: in -> a (x), a -> b (y), b -> a (z).
   const GpuBuffer* io[3][2] = {{&m.in, &m.a}, {&m.a, &m.b}, {&m.b, &m.a}};
   for (int axis = 0; axis < 3; ++axis) {
-    m.gauss[std::size_t(axis)]->bind(cmd, arena, {whole(*io[axis][0]), whole(*io[axis][1]), whole(*io[axis][0])});
+    m.gauss[std::size_t(axis)]->bind(cmd, arena, {whole(*io[axis][0]), whole(*io[axis][1])});
     vkCmdDispatch(cmd, gx, std::uint32_t(m.ny), std::uint32_t(m.nz));
     engine::barrier_compute_to_compute(cmd);
   }

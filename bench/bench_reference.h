@@ -2,10 +2,9 @@
 // the same work as the chain (Gaussian, gradient, brick min/max) in the fastest standalone
 // forms measured on lavapipe, each pass its own dispatches, timed in the same run.
 //
-// - Gaussian: shaders/gauss_axis_x4.comp in the study's form (X_FLOATS off: the x axis reads
-//   the quads either side), three passes (x, y, z): four voxels per invocation, quads through
-//   an RGBA32F texel buffer, one vec4 store, 64x1x1 workgroups, the weights specialization
-//   constants.
+// - Gaussian: shaders/gauss_axis_x4.comp, three passes (x, y, z): four voxels per invocation,
+//   quads through an RGBA32F texel buffer, one vec4 store, 64x1x1 workgroups, the weights
+//   specialization constants.
 // - gradient: shaders/gradient_whole_x4.comp: the same layout, the x neighbours through an
 //   R32F view of the same buffer, four vec4 sample stores.
 // - brick min/max (halo 1), two standalone forms, the faster one counted: row ranges then

@@ -123,7 +123,7 @@ void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s
     a.mm_slices->push(cmd, pc);
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
   } else if (s.type == ChainStep::GaussAxis) {
-    s.pipe->bind(cmd, arena, {sl.src, sl.dst, sl.src});  // the source as quads and as floats
+    s.pipe->bind(cmd, arena, {sl.src, sl.dst});
     vkCmdDispatch(cmd, groups(std::uint64_t(nx) / ISOTOUCH_DENSE_VOXELS, ISOTOUCH_DENSE_WG), std::uint32_t(ny),
                   std::uint32_t(nz));
   } else if (s.type == ChainStep::Filter && s.x4) {
@@ -505,11 +505,10 @@ void plan_gauss_axes(ChainImpl& impl, const ChainInput& in, std::size_t i, Chain
                                        std::uint32_t(k.size() / 2)};
     spec.resize(5 + 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1, 0u);
     std::memcpy(&spec[5], k.data(), k.size() * 4);
-    spec.push_back(1u);  // constant_id 14: X_FLOATS, the x neighbours one float fetch each
     auto& pipe = impl.gauss_axis[spec];
     if (!pipe) {
-      pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(in.ctx, gauss_axis_x4_spv, 3, "gauss_axis_x4", 0u, spec,
-                                                               0b101u);
+      pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(in.ctx, gauss_axis_x4_spv, 2, "gauss_axis_x4", 0u, spec,
+                                                               1u);
       pipe->set_texel_vec4(1u);
     }
     ChainStep s;

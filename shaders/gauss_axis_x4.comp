@@ -5,13 +5,12 @@
 // the source read as quads (RGBA32F texel buffer: one fetch per quad), one vec4 store, 64x1x1
 // workgroups over a (ceil(QX / 64), NY, NZ) grid, the size, axis, radius and weights
 // specialization constants (no push constants, no buffer of weights).
-// The x axis reads the R voxels either side of its quad: with X_FLOATS one float fetch each
-// through binding 2 (the source as R32F), else the whole quads either side (the standalone
-// study's form, which `bench engine` times as its reference row).
+// The x axis reads the whole quads either side of its own (one fetch each; process CPU time
+// on the chest, loaded 2-core EPYC: 19.3-20.3 ms for the three passes against 20.2-21.8 ms
+// with the 2R neighbours fetched as single floats through an R32F view).
 // The float operations are engine/cpu_filters.cpp's in its order: taps k = -R .. R summed
 // from 0 upward, each product and sum `precise` (bit for bit). Border: clamp to edge.
-// Bindings: 0 the source (vec4 view), 1 the destination (vec4 per quad), 2 the source (float
-// view; bound, unread without X_FLOATS).
+// Bindings: 0 the source (vec4 view), 1 the destination (vec4 per quad).
 #extension GL_GOOGLE_include_directive : require
 #extension GL_EXT_control_flow_attributes : require
 #include "isotouch_shared.h"
@@ -31,7 +30,6 @@ layout(constant_id = 10) const float W5 = 0.0;
 layout(constant_id = 11) const float W6 = 0.0;
 layout(constant_id = 12) const float W7 = 0.0;
 layout(constant_id = 13) const float W8 = 0.0;
-layout(constant_id = 14) const bool X_FLOATS = false;
 const int QX = NX / 4;
 const int N = AXIS == 0 ? NX : (AXIS == 1 ? NY : NZ);
 const int STRIDE = AXIS == 1 ? QX : QX * NY;  // quads between neighbours along y or z
@@ -52,30 +50,15 @@ float w(int k) {
 
 layout(set = 0, binding = 0) uniform samplerBuffer src;
 layout(std430, set = 0, binding = 1) writeonly buffer Dst { vec4 dst[]; };
-layout(set = 0, binding = 2) uniform samplerBuffer src_f;
 
-// The x axis: a[4 + j] is voxel 4 q + j for j = -4 .. 7 (those the taps read), clamped into the row.
+// The x axis: a[4 + j] is voxel 4 q + j for j = -4 .. 7 (those the taps read), clamped into
+// the row (past the row's ends the quad either side stands for voxel 0 or NX - 1 in every lane).
 vec4 filter_x(int idx, int q) {
   const vec4 cur = texelFetch(src, idx);
-  float a[12] = float[12](0.0, 0.0, 0.0, 0.0, cur.x, cur.y, cur.z, cur.w, 0.0, 0.0, 0.0, 0.0);
-  if (X_FLOATS) {
-    const int row = 4 * (idx - q);  // the float of voxel 0 of this row
-    [[unroll]] for (int j = 1; j <= R; ++j) {
-      a[4 - j] = texelFetch(src_f, row + max(4 * q - j, 0)).x;
-      a[7 + j] = texelFetch(src_f, row + min(4 * q + 3 + j, NX - 1)).x;
-    }
-  } else {
-    const vec4 prev = q > 0 ? texelFetch(src, idx - 1) : vec4(cur.x);
-    const vec4 next = q + 1 < QX ? texelFetch(src, idx + 1) : vec4(cur.w);
-    a[0] = prev.x;
-    a[1] = prev.y;
-    a[2] = prev.z;
-    a[3] = prev.w;
-    a[8] = next.x;
-    a[9] = next.y;
-    a[10] = next.z;
-    a[11] = next.w;
-  }
+  const vec4 prev = q > 0 ? texelFetch(src, idx - 1) : vec4(cur.x);
+  const vec4 next = q + 1 < QX ? texelFetch(src, idx + 1) : vec4(cur.w);
+  const float a[12] = float[12](prev.x, prev.y, prev.z, prev.w, cur.x, cur.y, cur.z, cur.w, next.x, next.y,
+                                next.z, next.w);
   vec4 o;
   [[unroll]] for (int j = 0; j < 4; ++j) {
     precise float acc = 0.0;

@@ -128,9 +128,9 @@ TEST(PassesGpuVsCpu, ChestCt) {
 
 TEST(PassesGpuVsCpu, WholeFieldGaussianAndGradientGiveTheSameBits) {
   // Rows of whole quads, radii <= ISOTOUCH_FUSED_MAX_RADIUS and the field in one binding: the
-  // Gaussian runs as three whole-field passes (gauss_axis_x4, the x neighbours by float fetch)
-  // and the gradient as one (gradient_whole_x4); radius 4 (sigma 1.2 voxels) is the widest
-  // they take, and a Gaussian after a closing reads the closing's output. Truth: the CPU chain.
+  // Gaussian runs as three whole-field passes (gauss_axis_x4) and the gradient as one
+  // (gradient_whole_x4); radius 4 (sigma 1.2 voxels) is the widest they take, and a Gaussian
+  // after a closing reads the closing's output. Truth: the CPU chain.
   const Volume v = engine::make_random({44, 37, 29}, {1e-3, 1e-3, 1e-3}, -50.0f, 50.0f, 7);
   for (const auto& p : {std::vector<PassDesc>{PassDesc::gaussian(1.2), PassDesc::gradient()},
                         std::vector<PassDesc>{PassDesc::closing(1.0), PassDesc::gaussian(0.6), PassDesc::gradient(),

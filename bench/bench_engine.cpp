@@ -23,6 +23,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <tuple>
 
 #include "isotouch/bench/bench_peers.h"
 #include "isotouch/core/field_view.h"
@@ -313,21 +314,59 @@ void guarded(SparseSamples& s, F&& f) {
 }  // namespace
 
 namespace {
-/// The dense chain's floor: per pass, copy_x4 with the pass's loads and stores (the
-/// gradient's is `gradient_floor_ms`, measured already), device time [ms], summed.
-double chain_floor_ms(engine::GradientPass& floor_pass, const engine::Volume& v,
-                      const std::vector<engine::PassDesc>& passes, double gradient_floor_ms, int runs) {
-  using T = engine::GradientPass::FloorTraffic;
-  std::map<T, double> ms{{T::Samples, gradient_floor_ms}};
-  double sum = 0;
-  for (const engine::PassDesc& p : passes) {
-    const T t = p.kind == engine::PassKind::Gradient      ? T::Samples
-                : p.kind == engine::PassKind::BrickMinMax ? T::ReadOnly
-                                                          : T::Floats;  // Gaussian, closing: one filter pass
-    if (!ms.count(t)) ms[t] = floor_pass.copy_floor_ms(v, runs, t);
-    sum += ms[t];
+using FloorTraffic = engine::GradientPass::FloorTraffic;
+
+/// The copy floors (copy_x4.comp) of each traffic a dense pass has, sampled once per
+/// repetition beside the chain (the same load on the machine), device time [ms].
+struct FloorSamples {
+  engine::GradientPass pass;
+  std::map<FloorTraffic, std::vector<double>> ms;
+  explicit FloorSamples(engine::VulkanContext& ctx) : pass(ctx) {}
+  void sample(const engine::Volume& v) {
+    for (FloorTraffic t : {FloorTraffic::Samples, FloorTraffic::Floats, FloorTraffic::ReadOnly})
+      ms[t].push_back(pass.copy_floor_ms(v, 1, t));
   }
-  return sum;
+  double median_of(FloorTraffic t) const { return ms.count(t) ? median(ms.at(t)) : kNaN; }
+};
+
+/// The dense chain's floors from the copy floors' medians: per pass the floor of its loads
+/// and stores, summed - once per pass (the chain's bytes: `first`) and once per pass over
+/// the field as the chain runs them (`second`: a Gaussian's x, y and z passes, a closing's six).
+std::pair<double, double> chain_floor_ms(const FloorSamples& floors, const std::vector<engine::PassDesc>& passes) {
+  double bytes = 0, as_run = 0;
+  for (const engine::PassDesc& p : passes) {
+    const FloorTraffic t = p.kind == engine::PassKind::Gradient      ? FloorTraffic::Samples
+                           : p.kind == engine::PassKind::BrickMinMax ? FloorTraffic::ReadOnly
+                                                                     : FloorTraffic::Floats;  // one filter pass
+    const double ms = floors.median_of(t);
+    bytes += ms;
+    const int field_passes = p.kind == engine::PassKind::Gaussian ? 3 : p.kind == engine::PassKind::Closing ? 6 : 1;
+    as_run += field_passes * ms;
+  }
+  return {bytes, as_run};
+}
+}  // namespace
+
+namespace {
+/// The standalone pass set of a case (the list without closing: the same work as the dense
+/// chain), or null with r.standalone.why saying why not.
+std::unique_ptr<StandaloneSet> make_standalone(engine::VulkanContext* ctx, bool chain, const engine::Volume& v,
+                                               const std::vector<engine::PassDesc>& dense, bool with_closing,
+                                               CaseResult& r) {
+  if (!ctx || !chain) {
+    r.standalone.why = "no GPU chain";
+    return nullptr;
+  }
+  if (with_closing) {
+    r.standalone.why = "not run with the closing (the set is the list without it)";
+    return nullptr;
+  }
+  try {
+    return std::make_unique<StandaloneSet>(*ctx, v, dense.front().sigma_mm);
+  } catch (const std::exception& e) {
+    r.standalone.why = e.what();
+    return nullptr;
+  }
 }
 }  // namespace
 
@@ -377,6 +416,9 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       sparse_why = e.what();
     }
   }
+  std::unique_ptr<StandaloneSet> standalone = make_standalone(ctx, chain != nullptr, v, dense, with_closing, r);
+  // The device's copy floors, sampled in each repetition beside the chain.
+  std::unique_ptr<FloorSamples> floors = chain ? std::make_unique<FloorSamples>(*ctx) : nullptr;
   const std::size_t np = dense.size(), ni = c.isos.size();
   std::vector<std::vector<double>> gpu_ms(np), cpu_ms(np), legacy_ms(np);
   std::vector<double> gpu_wall, cpu_wall, legacy_wall, cpu_mt_wall;
@@ -400,6 +442,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     try {
       (void)chain->run(v);
       if (legacy) (void)legacy->run(v);
+      if (standalone) standalone->run(false);
     } catch (const std::exception& e) {
       r.gpu_why = e.what();
       chain.reset();
@@ -421,11 +464,21 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
              << v.grid.dims[2] << "): repetition " << rep + 1 << "/" << repetitions << "\n"
              << std::flush;
     if (chain) {
+      // The standalone set right beside the chain (the same moment's load), before it in odd
+      // repetitions and after it in even ones (neither order favoured).
+      if (standalone && rep % 2) standalone->run();
       const auto t0 = Clock::now();
       const engine::ChainOutput g = chain->run(v);
       gpu_wall.push_back(ms_since(t0));
       for (std::size_t i = 0; i < np && i < g.passes.size(); ++i)
         gpu_ms[i].push_back(g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN);
+      if (standalone && rep % 2 == 0) standalone->run();
+      if (floors) try {
+          floors->sample(v);
+        } catch (const std::exception& e) {
+          progress << "[bench engine] copy floor: " << e.what() << "\n";
+          floors.reset();
+        }
     }
     if (legacy) {
       const auto t0 = Clock::now();
@@ -453,6 +506,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
                           h.bricks->min == m.bricks->min && h.bricks->max == m.bricks->max;
         r.cpu_backend_same_bits = (rep == 0 || r.cpu_backend_same_bits) && same;
       }
+      if (standalone && rep == 0) standalone->check(h);  // the outputs of its run beside the chain's
     }
     for (std::size_t k = 0; k < ni; ++k) {
       guarded(sg[k], [&] { sg[k].add(schain->run(v, c.isos[k], bg[k])); });
@@ -482,26 +536,13 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
     p.gpu_ms = median(gpu_ms[i]);
     p.cpu_ms = median(cpu_ms[i]);
     p.legacy_gpu_ms = median(legacy_ms[i]);
-    // Fused passes: the gradient's time includes the brick min/max's slice segments, the
-    // brick min/max's only their reduction into bricks; the sum is the whole chain either way.
-    if (chain && chain->describe().find("fused with the brick min/max") != std::string::npos) {
-      if (dense[i].kind == engine::PassKind::Gradient)
-        p.gpu_note = "GPU: one pass with the brick min/max's slice segments";
-      else if (dense[i].kind == engine::PassKind::BrickMinMax)
-        p.gpu_note = "GPU: the segments into bricks only, the rest fused into the gradient";
-    }
     r.passes.push_back(p);
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
-  if (chain) {
-    try {
-      progress << "[bench engine] " << c.name << ": copy floor (copy_x4)\n" << std::flush;
-      engine::GradientPass floor_pass(*ctx);
-      r.copy_floor_ms = floor_pass.copy_floor_ms(v, std::max(3, repetitions));
-      r.chain_floor_ms = chain_floor_ms(floor_pass, v, dense, r.copy_floor_ms, std::max(3, repetitions));
-    } catch (const std::exception& e) {
-      progress << "[bench engine] copy floor: " << e.what() << "\n";
-    }
+  if (standalone) r.standalone = standalone->figures();
+  if (floors) {
+    r.copy_floor_ms = floors->median_of(FloorTraffic::Samples);
+    std::tie(r.chain_floor_ms, r.chain_passes_floor_ms) = chain_floor_ms(*floors, dense);
   }
   if (run_peers)
     for (int t = 0; t < 2; ++t) {
@@ -630,6 +671,8 @@ void finish_case(CaseResult& r) {
   r.floor_over_memcpy = ratio(r.copy_floor_ms, r.copy_floor_memcpy_ms);
   r.chain_floor_over_memcpy = ratio(r.chain_floor_ms, r.memcpy_ms);
   r.chain_over_floor = ratio(r.sum.gpu_ms, r.chain_floor_ms);
+  r.chain_over_passes_floor = ratio(r.sum.gpu_ms, r.chain_passes_floor_ms);
+  r.chain_over_standalone = r.standalone.why.empty() ? ratio(r.sum.gpu_ms, r.standalone.best_set_ms) : kNaN;
   r.gradient_over_floor = kNaN;
   for (const PassRow& p : r.passes)
     if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
@@ -826,7 +869,7 @@ void print_dense(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   for (const auto& r : res) {
     auto line = [&](const PassRow& p) {
       const std::string g = r.gpu_available ? num(p.gpu_ms) : "n/a (" + r.gpu_why + ")";
-      out << "| " << r.name << " | " << p.label << (p.gpu_note.empty() ? "" : " (" + p.gpu_note + ")") << " | "
+      out << "| " << r.name << " | " << p.label << " | "
           << mib(p.min_bytes) << " | " << g << " | "
           << num(p.legacy_gpu_ms) << " | " << num(p.legacy_over_gpu) << " | " << num(p.cpu_ms)
           << " | " << num(p.gpu_over_cpu, 3) << " | " << num(p.gpu_gbps) << " | " << num(p.gpu_of_memcpy, 3) << " | "
@@ -910,6 +953,45 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
     csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_ms", csv_num(r.chain_floor_ms), "ms", d.gpu);
     csv.row("floor", r.name, "", "copy_x4 chain", "chain_floor_over_memcpy", csv_num(r.chain_floor_over_memcpy), "", "");
     csv.row("floor", r.name, "", "copy_x4 chain", "chain_over_floor", csv_num(r.chain_over_floor), "", "");
+  }
+}
+
+/// The dense chain's passes beside the standalone set's (bench_reference.h), and the chain
+/// against the set and against the device's copy floor for its bytes.
+void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
+  out << "\n## The dense chain beside the standalone pass set (same run, device time, medians)\n\n"
+      << "The same work as standalone passes in the fastest forms measured on lavapipe (the study's "
+         "vec4-per-invocation, texel-fetch shaders ported into shaders/: gauss_axis_x4, "
+         "gradient_whole_x4; brick min/max: the faster "
+         "of two standalone forms), each output compared bit for bit with the CPU chain's. CPU: "
+      << d.cpu << ".\n\n| case | standalone pass | standalone [ms] | bits vs CPU | dense chain's pass | chain [ms] "
+         "|\n|---|---|---:|---|---|---:|\n";
+  for (const auto& r : res) {
+    if (!r.standalone.why.empty()) {
+      out << "| " << r.name << " | not run: " << r.standalone.why << " | | | | |\n";
+      continue;
+    }
+    for (std::size_t i = 0; i < r.standalone.rows.size(); ++i) {
+      const StandaloneRow& s = r.standalone.rows[i];
+      const PassRow* p = &r.passes[std::min<std::size_t>(i, r.passes.size() - 1)];  // both brick min/max forms: the last
+      out << "| " << r.name << " | " << s.label << " | " << num(s.ms >= 0 ? s.ms : kNaN) << " | "
+          << (s.same_bits ? "same" : "DIFFER") << " | " << p->label << " | " << num(p->gpu_ms) << " |\n";
+      csv.row("standalone", r.name, "", s.label, "ms", csv_num(s.ms >= 0 ? s.ms : kNaN), "ms", d.gpu);
+      csv.row("standalone", r.name, "", s.label, "same_bits", s.same_bits ? "1" : "0", "", "");
+    }
+  }
+  out << "\nchain floor: copy_x4 once per pass with its loads and stores (the chain's bytes); passes floor: "
+         "copy_x4 once per pass over the field as the chain runs them (a Gaussian's x, y and z).\n\n"
+         "| case | dense chain [ms] | best standalone set [ms] | chain / set | chain floor [ms] | chain / floor | "
+         "passes floor [ms] | chain / passes floor | CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n";
+  for (const auto& r : res) {
+    const double set = r.standalone.why.empty() ? r.standalone.best_set_ms : kNaN;
+    out << "| " << r.name << " | " << num(r.sum.gpu_ms) << " | " << num(set) << " | " << num(r.chain_over_standalone, 3)
+        << " | " << num(r.chain_floor_ms) << " | " << num(r.chain_over_floor, 3) << " | "
+        << num(r.chain_passes_floor_ms) << " | " << num(r.chain_over_passes_floor, 3) << " | " << d.cpu << " |\n";
+    csv.row("standalone", r.name, "", "passes floor", "ms", csv_num(r.chain_passes_floor_ms), "ms", d.gpu);
+    csv.row("standalone", r.name, "", "best set", "ms", csv_num(set), "ms", d.gpu);
+    csv.row("standalone", r.name, "", "best set", "chain_over_standalone", csv_num(r.chain_over_standalone), "", "");
   }
 }
 
@@ -1169,6 +1251,21 @@ void print_verdicts(const std::vector<CaseResult>& res, const BigResult* big, st
       << (chest->chain_floor_over_memcpy > 5.0 ? ": the target is below this device's floor" : "");
     vs.back().text += f.str();
   }
+  // The two targets for the dense chain on this run's CPU (its model in the text).
+  const std::string cpu = "CPU " + cpu_model();
+  vs.push_back(verdict_at_most("chest dense GPU chain / the device's copy floor for its bytes (" + cpu + ")",
+                               chest ? chest->chain_over_floor : kNaN, 2.0, 3, chest ? "no GPU time or floor" : no_chest));
+  if (chest && std::isfinite(chest->chain_over_passes_floor)) {
+    std::ostringstream f;
+    f << std::fixed << std::setprecision(3) << "; against the floor of its passes as run (the Gaussian's x, y "
+      << "and z each a filter pass's loads and stores) = " << chest->chain_over_passes_floor;
+    vs.back().text += f.str();
+  }
+  vs.push_back(verdict_at_most("chest dense GPU chain / best standalone pass set, same run (" + cpu + ")",
+                               chest ? chest->chain_over_standalone : kNaN, 1.0, 3,
+                               chest ? "standalone set: " + chest->standalone.why : no_chest));
+  if (chest && chest->standalone.why.empty() && !chest->standalone.all_same_bits)
+    vs.back().text += "; a standalone pass's output DIFFERS from the CPU chain's";
   vs.push_back(verdict_at_most("chest -500 sparse GPU / fastest peer chain",
                                a && chest ? ratio(a->gpu.total_ms, chest->fastest_peer_chain_ms) : kNaN, 1.0 / 5.0, 3,
                                a ? "sparse GPU: " + a->gpu.why + " or no peer" : no_chest));
@@ -1315,6 +1412,7 @@ int run_bench_engine(const BenchEngineOptions& o_in, std::ostream& out, std::ost
   csv.row("memcpy", "", "", "", "memcpy_gbps", csv_num(memcpy_gbps), "GB/s", dev.cpu);
   print_dense(res, dev, out, csv);
   print_peers(res, dev, out, csv);
+  print_standalone(res, dev, out, csv);
   print_cpu_backend(res, dev, out, csv);
   print_sparse(res, dev, out, csv);
   print_bytes(res, out, csv);

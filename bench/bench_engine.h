@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "isotouch/eval/stats.h"
+#include "isotouch/bench/bench_reference.h"
 #include "isotouch/core/brick_field.h"
 #include "isotouch/engine/passes.h"
 #include "isotouch/engine/sparse_chain.h"
@@ -144,8 +145,6 @@ struct IsoResult {
 /// One dense pass (or the total) of one case.
 struct PassRow {
   std::string label;
-  /// How the GPU chain ran this pass where not on its own (a fused pass), else empty.
-  std::string gpu_note;
   std::uint64_t min_bytes = 0;            ///< pass_min_bytes (total: the sum)
   double gpu_ms = kNaN, cpu_ms = kNaN;    ///< medians; GPU: device timestamps
   double gpu_gbps = kNaN, cpu_gbps = kNaN;  ///< min_bytes / time
@@ -204,6 +203,14 @@ struct CaseResult {
   double chain_floor_ms = kNaN;
   double chain_floor_over_memcpy = kNaN;  ///< chain_floor_ms / memcpy_ms (memcpy of sum.min_bytes)
   double chain_over_floor = kNaN;         ///< sum.gpu_ms / chain_floor_ms
+  /// The floor of the passes over the field as the chain runs them: as chain_floor_ms with a
+  /// Gaussian's three axis passes (a closing's six) each a filter pass [ms].
+  double chain_passes_floor_ms = kNaN;
+  double chain_over_passes_floor = kNaN;  ///< sum.gpu_ms / chain_passes_floor_ms
+  /// The same work as standalone passes in the fastest forms measured on lavapipe
+  /// (bench_reference.h), timed in the same repetitions; `standalone.why` says why not.
+  StandaloneFigures standalone;
+  double chain_over_standalone = kNaN;    ///< sum.gpu_ms / standalone.best_set_ms
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

@@ -8,6 +8,7 @@
 #include "isotouch/engine/cpu_gradient.h"
 #include "isotouch/shaders/gradient_spv.h"
 #include "isotouch/shaders/copy_x4_spv.h"
+#include "isotouch/shaders/gradient_whole_x4_spv.h"
 #include "isotouch/shaders/gradient_x4_spv.h"
 #include "isotouch/shaders/isotouch_shared.h"
 
@@ -76,10 +77,47 @@ std::vector<Slab> GradientPass::plan(const core::Grid& grid, VkBuffer src, VkBuf
   return std::move(*slabs.value);
 }
 
+bool GradientPass::whole_field(const core::Grid& grid, const std::vector<Slab>& slabs) const {
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+  const auto& lim = ctx_.properties().limits;
+  return shaders_ == ShaderSet::Current && slabs.size() == 1 && slabs_hold_quads(nx, slabs) && nx >= 8 && ny >= 2 &&
+         nz >= 2 && slabs[0].src_offset_elems == 0 && slabs[0].dst_offset_elems == 0 &&
+         grid.voxel_count() <= lim.maxTexelBufferElements &&
+         group_count(std::uint64_t(nx) / ISOTOUCH_DENSE_VOXELS, ISOTOUCH_DENSE_WG) <= lim.maxComputeWorkGroupCount[0] &&
+         std::uint64_t(ny) <= lim.maxComputeWorkGroupCount[1] && std::uint64_t(nz) <= lim.maxComputeWorkGroupCount[2];
+}
+
+void GradientPass::record_whole(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
+                                const Slab& s) const {
+  const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
+  const GradientConstants k = gradient_constants(grid);
+  auto bits = [](float f) {
+    std::uint32_t u;
+    std::memcpy(&u, &f, 4);
+    return u;
+  };
+  const std::vector<std::uint32_t> spec = {std::uint32_t(nx),  std::uint32_t(ny),  std::uint32_t(nz),
+                                           bits(k.inv_2h[0]), bits(k.inv_2h[1]), bits(k.inv_2h[2]),
+                                           bits(k.inv_h[0]),  bits(k.inv_h[1]),  bits(k.inv_h[2])};
+  if (!whole_ || spec != whole_spec_) {
+    whole_ = std::make_unique<ComputePipeline<gpu::DensePush>>(ctx_, gradient_whole_x4_spv, 3, "gradient_whole_x4", 0u,
+                                                               spec, 0b101u);
+    whole_->set_texel_vec4(1u);
+    whole_spec_ = spec;
+  }
+  whole_->bind(cmd, arena, {s.src, s.dst, s.src});  // the field as quads, the samples, the field as floats
+  vkCmdDispatch(cmd, group_count(std::uint64_t(nx) / ISOTOUCH_DENSE_VOXELS, ISOTOUCH_DENSE_WG), std::uint32_t(ny),
+                std::uint32_t(nz));
+}
+
 void GradientPass::record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
                           const std::vector<Slab>& slabs) const {
   const int nx = grid.dims[0], ny = grid.dims[1], nz = grid.dims[2];
   const GradientConstants k = gradient_constants(grid);
+  if (whole_field(grid, slabs)) {
+    record_whole(cmd, arena, grid, slabs[0]);
+    return;
+  }
   if (shaders_ == ShaderSet::Current) {
     const bool quads = slabs_hold_quads(nx, slabs);
     auto& pipe = x4_[{nx, ny, nz, quads ? 1 : 0}];
@@ -199,7 +237,7 @@ core::SampleField GradientPass::run(const Volume& vol, GradientTimings* timings,
     up = buffer(n * sizeof(float), MemoryIntent::Upload, "voxels staging");
     down = buffer(n * sizeof(core::Sample), MemoryIntent::Readback, "samples readback");
   }
-  DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 2 * std::uint32_t(slabs.size()));
+  DescriptorArena arena(ctx_, std::uint32_t(slabs.size()), 3 * std::uint32_t(slabs.size()));
   GpuTimer timer(ctx_, 2);
 
   auto t0 = clock::now();

@@ -57,9 +57,15 @@ class GradientPass {
   /// median device time [ms] of `runs` (wall time without timestamps). Buffers device-local.
   /// `traffic`: the loads and stores of another dense pass instead (the chain's floor).
   double copy_floor_ms(const Volume& volume, int runs, FloorTraffic traffic = FloorTraffic::Samples);
-  /// Records the dispatches of `slabs` (from plan()); no barriers.
+  /// Records the dispatches of `slabs` (from plan()); no barriers. One slab of the whole
+  /// field (whole_field()) runs shaders/gradient_whole_x4.comp (three descriptors), others
+  /// gradient_x4.comp (two per slab).
   void record(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid,
               const std::vector<Slab>& slabs) const;
+  /// Whether record() runs these slabs as one whole-field dispatch: the current shaders, one
+  /// slab from offset 0 holding whole quads, nx >= 8, ny and nz >= 2, the field within one
+  /// texel view.
+  bool whole_field(const core::Grid& grid, const std::vector<Slab>& slabs) const;
 
  private:
   VulkanContext& ctx_;
@@ -68,6 +74,11 @@ class GradientPass {
   /// gradient_x4 variants by volume size and quad input (specialization constants: nx, ny,
   /// nz, VEC4_IN), made on first use.
   mutable std::map<std::array<int, 4>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> x4_;
+  /// gradient_whole_x4 with its specialization (size, inverse spacings), remade when another
+  /// grid comes.
+  mutable std::unique_ptr<ComputePipeline<gpu::DensePush>> whole_;
+  mutable std::vector<std::uint32_t> whole_spec_;
+  void record_whole(VkCommandBuffer cmd, DescriptorArena& arena, const core::Grid& grid, const Slab& s) const;
 };
 
 }  // namespace isotouch::engine

@@ -13,8 +13,8 @@
 #include "isotouch/shaders/brick_minmax_spv.h"
 #include "isotouch/shaders/gaussian1d_spv.h"
 #include "isotouch/shaders/filter_x4_spv.h"
-#include "isotouch/shaders/gauss_fused_list_spv.h"
-#include "isotouch/shaders/gradient_minmax_x8_spv.h"
+#include "isotouch/shaders/gauss_axis_x4_spv.h"
+#include "isotouch/shaders/minmax_segments_spv.h"
 #include "isotouch/shaders/minmax_slices_spv.h"
 #include "isotouch/shaders/minmax_bricks_spv.h"
 #include "isotouch/shaders/minmax_rows_spv.h"
@@ -60,16 +60,15 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }  // namespace
 
 namespace {
-/// One step of a chain's recording: a filter axis, the fused Gaussian, the gradient or the
+/// One step of a chain's recording: a filter axis, a whole-field Gaussian axis, the gradient or the
 /// brick min/max, with its z-slabs.
 struct ChainStep {
   std::size_t pass;
   const ComputePipelineBase* pipe = nullptr;
-  /// GradMinMax: the gradient with the brick min/max's slice segments (gradient_minmax_x8);
-  /// MinMaxSlices: the segments into the bricks (minmax_slices), the brick min/max's rest.
-  enum { Filter, Fused, Gradient, MinMax, GradMinMax, MinMaxSlices } type = Filter;
-  const ComputePipeline<gpu::ListPush>* fused = nullptr;       // gauss_fused_list over every column
-  std::uint64_t units = 0;                                     // the fused Gaussian's columns
+  /// MinMaxSegments: the brick min/max over the whole field in two dispatches, each slice's
+  /// brick row segments (minmax_segments) and then the bricks (minmax_slices).
+  /// GaussAxis: one axis of a Gaussian over the whole field (gauss_axis_x4).
+  enum { Filter, GaussAxis, Gradient, MinMax, MinMaxSegments } type = Filter;
   gpu::Filter1dPush f{};
   const ComputePipeline<gpu::DensePush>* x4 = nullptr;         // filter_x4 variant, else the 1-D filter
   const ComputePipeline<gpu::Filter1dPush>* f1d = nullptr;     // gaussian1d (reads the weights) or morph1d
@@ -85,8 +84,8 @@ struct SlabArgs {
   int nx, ny, nz;
   std::uint32_t bx, by;
   const ComputePipeline<gpu::BrickMinMaxPush>*mm_rows, *mm_bricks, *minmax_legacy;
-  const ComputePipeline<gpu::DensePush>* grad_mm;           // gradient_minmax_x8, if fused
-  const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices;  // minmax_slices, if fused
+  const ComputePipeline<gpu::DensePush>* mm_segments;      // minmax_segments, if that form runs
+  const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices;  // minmax_slices, with it
   const ChainBuffers* b;
   const VkPhysicalDeviceLimits* lim;
   int halo;
@@ -114,33 +113,19 @@ gpu::BrickMinMaxPush brick_minmax_push(const Slab& sl, const SlabArgs& a) {
 /// Records the dispatches of one slab of step `s` (no barrier after the last).
 void record_slab(VkCommandBuffer cmd, DescriptorArena& arena, const ChainStep& s, const Slab& sl, const SlabArgs& a) {
   const int nx = a.nx, ny = a.ny, nz = a.nz;
-  if (s.type == ChainStep::GradMinMax) {
-    const GradientConstants k = gradient_constants(a.grid);
-    gpu::DensePush pc{};
-    pc.nx = gpu::uint(nx);
-    pc.ny = gpu::uint(ny);
-    pc.nz = gpu::uint(nz);
-    pc.slab_nz = gpu::uint(nz);
-    pc.qx = gpu::uint(nx / int(ISOTOUCH_DENSE_VOXELS));
-    set_inverse_spacings(pc, k);
-    a.grad_mm->bind(cmd, arena, {sl.src, sl.dst, BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}});
-    a.grad_mm->push(cmd, pc);
-    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t((nz + 1) / 2));
-  } else if (s.type == ChainStep::MinMaxSlices) {
+  if (s.type == ChainStep::MinMaxSegments) {
+    const BufferRange seg{a.b->segments.handle(), 0, a.b->segments.size()};
+    a.mm_segments->bind(cmd, arena, {sl.src, seg, sl.src});  // the field as quads and as floats
+    vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t(nz));
+    barrier_compute_to_compute(cmd);
     const gpu::BrickMinMaxPush pc = brick_minmax_push(sl, a);  // the whole volume: bz0 = 0
-    a.mm_slices->bind(cmd, arena, {BufferRange{a.b->segments.handle(), 0, a.b->segments.size()}, sl.dst});
+    a.mm_slices->bind(cmd, arena, {seg, sl.dst});
     a.mm_slices->push(cmd, pc);
     vkCmdDispatch(cmd, groups(std::uint64_t(a.bx) * a.by, ISOTOUCH_DENSE_WG), 1, pc.slab_bz);
-  } else if (s.type == ChainStep::Fused) {
-    gpu::ListPush pc{};
-    pc.units = gpu::uint(s.units);
-    const std::uint64_t g = groups(s.units, ISOTOUCH_DENSE_WG);
-    const std::uint64_t gx = std::min<std::uint64_t>(g, a.lim->maxComputeWorkGroupCount[0]);
-    pc.groups_x = gpu::uint(gx);
-    // Binding 2 in the dense form: the source again, viewed as single floats (no list).
-    s.fused->bind(cmd, arena, {sl.src, sl.dst, sl.src});
-    s.fused->push(cmd, pc);
-    vkCmdDispatch(cmd, std::uint32_t(gx), std::uint32_t((g + gx - 1) / gx), 1);
+  } else if (s.type == ChainStep::GaussAxis) {
+    s.pipe->bind(cmd, arena, {sl.src, sl.dst});
+    vkCmdDispatch(cmd, groups(std::uint64_t(nx) / ISOTOUCH_DENSE_VOXELS, ISOTOUCH_DENSE_WG), std::uint32_t(ny),
+                  std::uint32_t(nz));
   } else if (s.type == ChainStep::Filter && s.x4) {
     gpu::DensePush pc{};
     pc.nx = s.f.nx;
@@ -278,17 +263,17 @@ struct PassChain::Impl {
     }
     return p.get();
   }
-  /// gauss_fused_list variants by specialization (fused_gaussian_spec), made on first use.
-  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::ListPush>>> fused;
+  /// gauss_axis_x4 variants by specialization (size, axis, radius, weights), made on first use.
+  std::map<std::vector<std::uint32_t>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss_axis;
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> minmax;
   /// Current set's brick min/max in two steps (minmax_rows, minmax_bricks), specialised on
   /// the bricks along x; made on first use.
   std::map<std::uint32_t, std::pair<std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>,
                                     std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>>>> minmax_x4;
   std::unique_ptr<GradientPass> gradient;
-  /// The gradient with the brick min/max fused (gradient_minmax_x8 by volume size, then
+  /// The brick min/max over the whole field (minmax_segments by volume size, then
   /// minmax_slices), made on first use.
-  std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> grad_mm;
+  std::map<std::array<int, 3>, std::unique_ptr<ComputePipeline<gpu::DensePush>>> mm_segments;
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> mm_slices;
   std::string last_run;
   /// The last run's buffers by name, reused by the next run of the same sizes: no new
@@ -330,17 +315,18 @@ std::string PassChain::describe() const {
   // gaussian1d / morph1d with the legacy set.
   const bool closing = has(passes_, PassKind::Closing);
   const bool minmax = has(passes_, PassKind::BrickMinMax);
-  // The gradient and brick min/max fused (made on the first run that could fuse them; a run
-  // that could not - the binding limit - takes the separate passes).
-  const bool fused_mm = !impl_->grad_mm.empty() && impl_->minmax_x4.empty();
+  // The brick min/max over the whole field (made on the first run it fits; a run where it
+  // does not - the binding limit, rows not of whole quads - takes row ranges by slab).
+  const bool seg_mm = !impl_->mm_segments.empty() && impl_->minmax_x4.empty();
   const char* gname = legacy ? " gaussian1d" : " gaussian_x4";
   const char* mname = legacy ? " morph1d" : " morph_x4";
   s << "\nshaders: " << shader_set_name(impl_->shaders) << (legacy ? "" : " (texel-buffer input, 4 voxels per invocation)");
-  s << "\npipelines created:" << (gauss ? gname : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
+  s << "\npipelines created:" << (gauss ? (impl_->gauss_axis.empty() ? gname : " gauss_axis_x4") : "")
+    << (gauss && !impl_->gauss_axis.empty() && !impl_->gauss_x4.empty() ? " gaussian_x4" : "") << (!legacy && impl_->gauss ? " gaussian1d" : "")
     << (closing ? mname : "") << (!legacy && impl_->morph ? " morph1d" : "")
     << (impl_->gradient ? (legacy ? " gradient" : " gradient_x4") : "")
     << (minmax ? (legacy ? " brick_minmax"
-                         : fused_mm ? " brick_minmax (fused: gradient_minmax_x8 + minmax_slices)"
+                         : seg_mm ? " brick_minmax (minmax_segments + minmax_slices)"
                                     : " brick_minmax (minmax_rows + minmax_bricks)")
                : "");
   const bool all = gauss && closing && impl_->gradient && minmax;
@@ -352,8 +338,8 @@ std::string PassChain::describe() const {
     << (impl_->gauss ? ", gaussian weights (+ staging)" : "")
     << (impl_->gradient ? (direct ? ", samples (vec4, read in place)" : ", samples (vec4) + readback") : "")
     << (minmax ? (direct ? ", brick ranges (read in place)" : ", brick ranges + readback") : "")
-    << (minmax && !legacy && !fused_mm ? ", brick row ranges (8 B per brick column and row of a slab)" : "")
-    << (fused_mm ? ", brick slice segments (8 B per brick segment of a slice)" : "");
+    << (minmax && !legacy && !seg_mm ? ", brick row ranges (8 B per brick column and row of a slab)" : "")
+    << (seg_mm ? ", brick slice segments (8 B per brick segment of a slice)" : "");
   s << "\nleft out buffers:" << (filters ? "" : " ping-pong field, field readback")
     << (impl_->gauss ? "" : " gaussian weights") << (impl_->gradient ? "" : " samples (16 B/voxel)")
     << (minmax ? "" : " brick ranges") << (direct ? " staging and readback copies" : "") << (all ? " none" : "");
@@ -482,131 +468,113 @@ void make_buffers(const BufferSource& buffer, const std::vector<PassDesc>& passe
 /// The planned dispatches of a run, and what recording them needs.
 struct ChainPlan {
   std::vector<ChainStep> steps;
-  std::uint64_t column_units = 0;  ///< the fused Gaussian's columns (every DENSE_ROWS rows of every slice (pair))
-  bool columns_paired = false;     ///< slices in pairs (gauss_fused_list.comp PAIRS)
   std::uint64_t rows_slices = 0;  ///< most source slices of a brick min/max slab
   std::uint32_t extra_sets = 0;   ///< the current brick min/max binds twice per slab
   int cur = 0;                    ///< the field buffer the next pass reads
   std::size_t gi = 0, ci = 0;     ///< the next Gaussian's and closing's parameters
-  std::uint64_t segments_bytes = 0;  ///< the fused gradient + brick min/max's slice segments
-  const ComputePipeline<gpu::DensePush>* grad_mm = nullptr;
+  std::uint64_t segments_bytes = 0;  ///< the brick min/max's slice segments (minmax_segments)
+  const ComputePipeline<gpu::DensePush>* mm_segments = nullptr;
   const ComputePipeline<gpu::BrickMinMaxPush>* mm_slices = nullptr;
   std::ostringstream info;        ///< describe()'s "last run" lines
 };
 
-/// Rows per column of the dense fused Gaussian (gauss_fused_list.comp DENSE_ROWS). Chest,
-/// device time of the pass at load 7.3-7.8 (2 cores): the list of 15-row columns 49-51 ms;
-/// 15 rows 37-38, 32 rows 32-35, 64 rows 35-37, 128 rows 37-39, 256 rows 39-40 ms.
-constexpr int kDenseRows = 32;
-
-/// A Gaussian whose kernels fit the fused shader runs as ONE pass (x, y, z fused) over a
-/// list of every column of quads, where the field is one binding and read in place.
-bool fusable(const ChainInput& in, const PassDesc& p, std::size_t gi) {
-  const int nx = in.vol.grid.dims[0];
-  bool fuse = p.kind == PassKind::Gaussian && !in.legacy && in.direct && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
-              in.n * 4 <= in.limit && in.n <= in.ctx.properties().limits.maxTexelBufferElements;
-  for (int a = 0; a < 3 && fuse; ++a)
-    fuse = in.fp.gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
-  return fuse;
+/// A Gaussian whose radii are <= ISOTOUCH_FUSED_MAX_RADIUS runs as three whole-field passes
+/// (gauss_axis_x4) where rows hold whole quads and the field is one binding and one texel view.
+/// On lavapipe these separate passes beat the x, y, z fused pass (gauss_fused_list's dense
+/// form): chest, device time, `bench engine`.
+bool whole_field_gaussian(const ChainInput& in, const PassDesc& p, std::size_t gi) {
+  const auto& lim = in.ctx.properties().limits;
+  const int nx = in.vol.grid.dims[0], ny = in.vol.grid.dims[1], nz = in.vol.grid.dims[2];
+  bool whole = p.kind == PassKind::Gaussian && !in.legacy && nx % int(ISOTOUCH_DENSE_VOXELS) == 0 &&
+               in.n * 4 <= in.limit && in.n <= lim.maxTexelBufferElements &&
+               groups(std::uint64_t(nx) / ISOTOUCH_DENSE_VOXELS, ISOTOUCH_DENSE_WG) <= lim.maxComputeWorkGroupCount[0] &&
+               std::uint64_t(ny) <= lim.maxComputeWorkGroupCount[1] && std::uint64_t(nz) <= lim.maxComputeWorkGroupCount[2];
+  for (int a = 0; a < 3 && whole; ++a)
+    whole = in.fp.gaussians[gi].kernel[std::size_t(a)].size() <= 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1;
+  return whole;
 }
 
+/// The three axes of Gaussian pass i over the whole field (whole_field_gaussian), one step each.
 template <class ChainImpl>
-void plan_fused_gaussian(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
-  const Volume& vol = in.vol;
-  const std::uint64_t n = in.n;
+void plan_gauss_axes(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
   const auto& gauss = in.fp.gaussians[plan.gi];
-  // No list: every column of kDenseRows rows of every slice, in pairs of slices wherever
-  // the z kernel has a radius (as the sparse chain: the x and y passes of the two slices'
-  // common source slices computed once). Long columns: each one's first 2 RY rows of x
-  // passes are the warm-up of its ring.
-  const int nx = vol.grid.dims[0], ny = vol.grid.dims[1], nz = vol.grid.dims[2];
-  plan.columns_paired = gauss.kernel[2].size() >= 3;
-  const std::uint64_t segs = std::uint64_t((ny + kDenseRows - 1) / kDenseRows);
-  plan.column_units = std::uint64_t(nx / int(ISOTOUCH_DENSE_VOXELS)) * segs *
-                      std::uint64_t(plan.columns_paired ? (nz + 1) / 2 : nz);
-  std::vector<std::uint32_t> spec = fused_gaussian_spec(vol.grid.dims, gauss.kernel);
-  spec.push_back(plan.columns_paired ? 1u : 0u);  // constant_id 33: PAIRS
-  spec.push_back(std::uint32_t(kDenseRows));      // constant_id 34: DENSE_ROWS (no list)
-  auto& pipe = impl.fused[spec];
-  if (!pipe) {
-    pipe = std::make_unique<ComputePipeline<gpu::ListPush>>(in.ctx, gauss_fused_list_spv, 3, "gauss_fused_list", 0u,
-                                                            spec, 0b101u);
-    pipe->set_texel_vec4(1u);
+  for (int axis = 0; axis < 3; ++axis) {
+    const std::vector<float>& k = gauss.kernel[std::size_t(axis)];
+    std::vector<std::uint32_t> spec = {std::uint32_t(in.vol.grid.dims[0]), std::uint32_t(in.vol.grid.dims[1]),
+                                       std::uint32_t(in.vol.grid.dims[2]), std::uint32_t(axis),
+                                       std::uint32_t(k.size() / 2)};
+    spec.resize(5 + 2 * ISOTOUCH_FUSED_MAX_RADIUS + 1, 0u);
+    std::memcpy(&spec[5], k.data(), k.size() * 4);
+    auto& pipe = impl.gauss_axis[spec];
+    if (!pipe) {
+      pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(in.ctx, gauss_axis_x4_spv, 2, "gauss_axis_x4", 0u, spec,
+                                                               1u);
+      pipe->set_texel_vec4(1u);
+    }
+    ChainStep s;
+    s.pass = i;
+    s.type = ChainStep::GaussAxis;
+    s.pipe = pipe.get();
+    Slab whole;
+    whole.nz = std::uint64_t(in.vol.grid.dims[2]);
+    whole.src_z1 = whole.nz;
+    whole.src = {in.bufs.field[plan.cur].handle(), 0, in.n * 4};
+    whole.dst = {in.bufs.field[1 - plan.cur].handle(), 0, in.n * 4};
+    s.slabs.push_back(whole);
+    plan.steps.push_back(std::move(s));
+    plan.cur = 1 - plan.cur;
+    plan.info << (axis ? ", " : ": ") << "xyz"[axis] << " r=" << k.size() / 2;
   }
-  ChainStep s;
-  s.pass = i;
-  s.type = ChainStep::Fused;
-  s.fused = pipe.get();
-  s.units = plan.column_units;
-  Slab whole;
-  whole.nz = std::uint64_t(vol.grid.dims[2]);
-  whole.src_z1 = std::uint64_t(vol.grid.dims[2]);
-  whole.src = {in.bufs.field[plan.cur].handle(), 0, n * 4};
-  whole.dst = {in.bufs.field[1 - plan.cur].handle(), 0, n * 4};
-  s.slabs.push_back(whole);
-  plan.steps.push_back(std::move(s));
-  plan.cur = 1 - plan.cur;
-  plan.info << ": x, y, z fused in one pass (" << plan.column_units << " columns of " << kDenseRows << " rows"
-            << (plan.columns_paired ? ", slices paired" : "") << "; sigma " << gauss.sigma_vox[0]
-            << ", " << gauss.sigma_vox[1] << ", " << gauss.sigma_vox[2] << " voxels)";
+  plan.info << " over the whole field (gauss_axis_x4; sigma " << gauss.sigma_vox[0] << ", " << gauss.sigma_vox[1]
+            << ", " << gauss.sigma_vox[2] << " voxels)";
   ++plan.gi;
 }
 
-/// A gradient followed by a brick min/max with a 1-voxel halo on the same field runs as one
-/// pass (gradient_minmax_x8: the samples and each slice's brick segment ranges) and a small
-/// one (minmax_slices: the segments into the bricks), where the field, the samples and the
-/// segments each fit one binding and rows hold whole quads.
-bool fusable_gradient_minmax(const ChainInput& in, const std::vector<PassDesc>& passes, std::size_t i) {
-  if (in.legacy || i + 1 >= passes.size() || passes[i].kind != PassKind::Gradient ||
-      passes[i + 1].kind != PassKind::BrickMinMax || passes[i + 1].halo != 1)
-    return false;
+/// A brick min/max with a 1-voxel halo runs over the whole field in two dispatches
+/// (minmax_segments: each slice's brick row segments; minmax_slices: the bricks) where rows
+/// hold whole quads and the field and the segments each fit one binding and one texel view.
+bool whole_field_minmax(const ChainInput& in, const PassDesc& p) {
+  if (in.legacy || p.kind != PassKind::BrickMinMax || p.halo != 1) return false;
   const auto& lim = in.ctx.properties().limits;
   const int nx = in.vol.grid.dims[0], nz = in.vol.grid.dims[2];
   const std::uint64_t segments = std::uint64_t(in.bx) * in.by * std::uint64_t(nz) * 8;
-  return nx % int(ISOTOUCH_DENSE_VOXELS) == 0 && in.n * sizeof(core::Sample) <= in.limit && segments <= in.limit &&
-         in.n / 4 <= lim.maxTexelBufferElements && std::uint64_t(nz) <= lim.maxComputeWorkGroupCount[2] &&
+  return nx % int(ISOTOUCH_DENSE_VOXELS) == 0 && in.n * 4 <= in.limit && segments <= in.limit &&
+         in.n <= lim.maxTexelBufferElements && std::uint64_t(nz) <= lim.maxComputeWorkGroupCount[2] &&
          groups(std::uint64_t(in.bx) * in.by, ISOTOUCH_DENSE_WG) <= lim.maxComputeWorkGroupCount[0];
 }
 
-/// The fused gradient + brick min/max of passes i (gradient) and i + 1 (brick min/max): one
-/// step each, so that each pass's timestamps enclose its own dispatch (the gradient's also
-/// computes the brick segment ranges).
+/// The brick min/max of pass i over the whole field (whole_field_minmax): one step, two
+/// dispatches.
 template <class ChainImpl>
-void plan_gradient_minmax(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
-  const core::Grid& grid = in.vol.grid;
-  const std::array<int, 3> dims = grid.dims;
-  auto& pipe = impl.grad_mm[dims];
+void plan_whole_field_minmax(ChainImpl& impl, const ChainInput& in, std::size_t i, ChainPlan& plan) {
+  const std::array<int, 3> dims = in.vol.grid.dims;
+  auto& pipe = impl.mm_segments[dims];
   if (!pipe) {
     pipe = std::make_unique<ComputePipeline<gpu::DensePush>>(
-        in.ctx, gradient_minmax_x8_spv, 3, "gradient_minmax_x8", 0u,
-        std::vector<std::uint32_t>{std::uint32_t(dims[0]), std::uint32_t(dims[1]), std::uint32_t(dims[2])}, 1u);
+        in.ctx, minmax_segments_spv, 3, "minmax_segments", 0u,
+        std::vector<std::uint32_t>{std::uint32_t(dims[0]), std::uint32_t(dims[1]), std::uint32_t(dims[2])}, 0b101u);
     pipe->set_texel_vec4(1u);
   }
   if (!impl.mm_slices)
     impl.mm_slices =
         std::make_unique<ComputePipeline<gpu::BrickMinMaxPush>>(in.ctx, minmax_slices_spv, 2, "minmax_slices");
-  plan.grad_mm = pipe.get();
+  plan.mm_segments = pipe.get();
   plan.mm_slices = impl.mm_slices.get();
   plan.segments_bytes = std::uint64_t(in.bx) * in.by * std::uint64_t(dims[2]) * 8;
   Slab whole;
   whole.nz = std::uint64_t(dims[2]);
   whole.src_z1 = whole.nz;
   whole.src = {in.bufs.field[plan.cur].handle(), 0, in.n * 4};
-  whole.dst = {in.bufs.samples.handle(), 0, in.n * sizeof(core::Sample)};
-  ChainStep g;
-  g.pass = i;
-  g.type = ChainStep::GradMinMax;
-  g.pipe = pipe.get();
-  g.slabs.push_back(whole);
-  plan.steps.push_back(std::move(g));
-  ChainStep m;
-  m.pass = i + 1;
-  m.type = ChainStep::MinMaxSlices;
-  m.pipe = impl.mm_slices.get();
-  whole.src = {};
   whole.dst = {in.bufs.bricks.handle(), 0, std::uint64_t(in.bx) * in.by * in.bz * 8};
+  ChainStep m;
+  m.pass = i;
+  m.type = ChainStep::MinMaxSegments;
+  m.pipe = pipe.get();
   m.slabs.push_back(whole);
   plan.steps.push_back(std::move(m));
+  plan.extra_sets += 1;  // two descriptor sets for the one slab
+  plan.info << ": " << in.bx << "x" << in.by << "x" << in.bz
+            << " bricks over the whole field (minmax_segments: each slice's brick row segments; minmax_slices)";
 }
 
 /// One axis (k < 3) of a Gaussian, or of a closing (k < 3 the max, then the min).
@@ -712,17 +680,12 @@ void plan_chain(ChainImpl& impl, const std::vector<PassDesc>& passes, const Chai
   for (std::size_t i = 0; i < passes.size(); ++i) {
     const PassDesc& p = passes[i];
     plan.info << "  " << p.label();
-    if (fusable(in, p, plan.gi)) {
-      plan_fused_gaussian(impl, in, i, plan);
+    if (whole_field_gaussian(in, p, plan.gi)) {
+      plan_gauss_axes(impl, in, i, plan);
     } else if (p.kind == PassKind::Gaussian || p.kind == PassKind::Closing) {
       plan_separable(impl, in, p, i, plan);
-    } else if (fusable_gradient_minmax(in, passes, i)) {
-      plan_gradient_minmax(impl, in, i, plan);
-      plan.info << ": fused with the brick min/max (gradient_minmax_x8: samples and the bricks' slice segments), "
-                   "1 dispatch\n  "
-                << passes[i + 1].label() << ": " << in.bx << "x" << in.by << "x" << in.bz
-                << " bricks from the gradient pass's segments (minmax_slices)";
-      ++i;
+    } else if (whole_field_minmax(in, p)) {
+      plan_whole_field_minmax(impl, in, i, plan);
     } else if (p.kind == PassKind::Gradient) {
       ChainStep s;
       s.pass = i;
@@ -747,7 +710,7 @@ template <class ChainImpl>
 std::pair<const ComputePipeline<gpu::BrickMinMaxPush>*, const ComputePipeline<gpu::BrickMinMaxPush>*> minmax_rows(
     ChainImpl& impl, const std::vector<PassDesc>& passes, const BufferSource& buffer, const ChainInput& in,
     const ChainPlan& plan) {
-  if (!has(passes, PassKind::BrickMinMax) || in.legacy || plan.rows_slices == 0)  // none, legacy or fused
+  if (!has(passes, PassKind::BrickMinMax) || in.legacy || plan.rows_slices == 0)  // none, legacy or whole field
     return {nullptr, nullptr};
   const auto& lim = in.ctx.properties().limits;
   if (plan.rows_slices > lim.maxComputeWorkGroupCount[2])
@@ -793,7 +756,7 @@ std::vector<int> record_and_submit(ChainImpl& impl, const std::vector<PassDesc>&
     for (const Slab& sl : s.slabs) record_slab(cmd, arena, s, sl, args);
     if (s.type == ChainStep::Gradient) impl.gradient->record(cmd, arena, in.vol.grid, s.slabs);
     dispatches[s.pass] += int(s.slabs.size());
-    if (s.type == ChainStep::Filter || s.type == ChainStep::Fused) plan.cur = 1 - plan.cur;
+    if (s.type == ChainStep::Filter || s.type == ChainStep::GaussAxis) plan.cur = 1 - plan.cur;
     // The next step reads what this one wrote (and a filter overwrites what the previous
     // filter read): make this step's writes visible before any later dispatch.
     barrier_compute_to_compute(cmd);
@@ -849,7 +812,7 @@ ChainOutput PassChain::run_impl(const Volume& vol, std::uint64_t max_binding_byt
   if (bufs.w_dev) std::memcpy(in.direct ? bufs.w_dev.mapped() : bufs.w_up.mapped(), fp.weights.data(), fp.weights.size() * 4);
   out.upload_ms = ms_since(t0);
   const SlabArgs proto{nx, ny, nz, bx, by, mm_rows, mm_bricks, impl_->minmax.get(),
-                       plan.grad_mm, plan.mm_slices, &bufs, &ctx.properties().limits, 0, vol.grid};
+                       plan.mm_segments, plan.mm_slices, &bufs, &ctx.properties().limits, 0, vol.grid};
   const std::vector<int> dispatches = record_and_submit(*impl_, passes_, in, proto, arena, timer, plan, out);
 
   for (std::size_t i = 0; i < passes_.size(); ++i) {

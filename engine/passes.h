@@ -20,11 +20,14 @@
 //   the one-voxel stencil of the gradient, so the range covers every voxel a trilinear
 //   sample or a gradient at a voxel in the brick reads).
 // Filters replace the current field; gradient and brick_minmax read it. Each of gradient
-// and brick_minmax may appear once. A gradient directly followed by brick_minmax(1) runs as
-// one pass (shaders/gradient_minmax_x8.comp: the samples and each slice's brick segment
-// ranges) and a small one (minmax_slices.comp) where rows hold whole quads and the field, the
-// samples and the segments each fit one binding; else as separate passes. A Gaussian the
-// fused shader takes runs as one pass over every column of 32 rows of every slice pair.
+// and brick_minmax may appear once. Where rows hold whole quads and the field is one binding
+// and one texel view, each pass runs over the whole field in the forms lavapipe runs fastest
+// (four voxels per invocation, texel fetches, vec4 stores; `bench engine` times them beside
+// the same forms as standalone passes): a Gaussian with radii <= ISOTOUCH_FUSED_MAX_RADIUS as
+// three passes (shaders/gauss_axis_x4.comp), the gradient as one (gradient_whole_x4.comp),
+// brick_minmax(1) as each slice's brick row segments (minmax_segments.comp) reduced into the
+// bricks (minmax_slices.comp). Otherwise by z-slabs (filter_x4, gradient_x4, minmax_rows +
+// minmax_bricks).
 //
 // GPU and CPU do the same float operations in the same order (precise accumulation,
 // -ffp-contract=off): on lavapipe every output agrees bit for bit (tests/test_passes.cpp).

@@ -1,6 +1,5 @@
 #version 450
-// The sparse chain's Gaussian in ONE pass (x, y and z fused), on a work list of columns (the
-// dense chain's: every column, DENSE_ROWS below):
+// The sparse chain's Gaussian in ONE pass (x, y and z fused), on a work list of columns:
 // each invocation walks one column of output quads (x-quad q, slice z, rows y0 .. y0 + n - 1)
 // and keeps the x-filtered quads of the rows it still needs in registers, so every source
 // quad is fetched once per column step and every output is stored once - no intermediate
@@ -65,11 +64,6 @@ layout(constant_id = 32) const float WZ8 = 0.0;
 // The work list pairs slices (engine/sparse_lists.cpp make_column_list with pairs): a unit's
 // first texel is 2 (q + QX z) + pair, pair 1 meaning slices z and z + 1.
 layout(constant_id = 33) const bool PAIRS = false;
-// The dense chain's form (engine/passes.cpp): no list, the units are every column of
-// DENSE_ROWS rows (the last one shorter) of every slice (PAIRS: slice pair) of the volume,
-// in order q, row segment, slice (pair); binding 2 is the source again, as R32_SFLOAT
-// texels (x_quad's edge voxels where RX <= 2). 0: the list.
-layout(constant_id = 34) const int DENSE_ROWS = 0;
 const int QX = NX / ISOTOUCH_DENSE_VOXELS;
 const int M = ISOTOUCH_FUSED_MAX_RADIUS;
 
@@ -132,20 +126,6 @@ vec4 weighted(vec4 acc, float w, vec4 v) {
 vec4 x_quad(int q, int y, int z) {
   const int row = (z * NY + y) * QX;
   float win[12];
-  if (DENSE_ROWS > 0 && RX <= 2) {
-    // The dense form: binding 2 is the source as R32_SFLOAT; the RX voxels on each side
-    // fetched one by one (clamped into the row) instead of their whole quads (a quad's
-    // fetch gathers four floats per lane).
-    const vec4 v = texelFetch(src, row + q);
-    win[4] = v.x;
-    win[5] = v.y;
-    win[6] = v.z;
-    win[7] = v.w;
-    [[unroll]] for (int j = 0; j < RX; ++j) {
-      win[4 - RX + j] = texelFetch(work, 4 * row + max(4 * q - RX + j, 0)).x;
-      win[8 + j] = texelFetch(work, 4 * row + min(4 * q + 4 + j, NX - 1)).x;
-    }
-  } else {
   [[unroll]] for (int j = 0; j < 3; ++j) {
     const int qj = q + j - 1;
     vec4 v = texelFetch(src, row + clamp(qj, 0, QX - 1));
@@ -155,7 +135,6 @@ vec4 x_quad(int q, int y, int z) {
     win[4 * j + 1] = v.y;
     win[4 * j + 2] = v.z;
     win[4 * j + 3] = v.w;
-  }
   }
   precise vec4 acc = vec4(0.0);
   [[unroll]] for (int k = 0; k <= 2 * RX; ++k) {
@@ -221,17 +200,6 @@ void column_pair(int q, int z, int y0, int n, bool pair) {
 void main() {
   const uint u = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * pc.groups_x * uint(ISOTOUCH_DENSE_WG);
   if (u >= pc.units) return;
-  if (DENSE_ROWS > 0) {
-    const int segs = (NY + DENSE_ROWS - 1) / DENSE_ROWS;
-    const int r = int(u) / QX, q = int(u) - r * QX;
-    const int zz = r / segs, seg = r - zz * segs;
-    const int y0 = seg * DENSE_ROWS, n = min(DENSE_ROWS, NY - y0);
-    if (PAIRS)
-      column_pair(q, 2 * zz, y0, n, 2 * zz + 1 < NZ);
-    else
-      column(q, zz, y0, n);
-    return;
-  }
   const int i = 2 * int(pc.unit0 + u);
   const int a2 = int(texelFetch(work, i).x);
   const int packed = int(texelFetch(work, i + 1).x);

@@ -1,5 +1,5 @@
 #version 450
-// Brick min/max, second step of the fused pass (gradient_minmax_x8.comp): per 8^3 brick,
+// Brick min/max, second step of the whole-field form (minmax_segments.comp): per 8^3 brick,
 // (min, max) over its segments of slices z = 8 bz - halo .. 8 bz + 7 + halo (clamped), z
 // increasing - with each segment reduced in y, x order this is the CPU's z, y, x order, so
 // the result is engine/cpu_filters.cpp's bit for bit (first of equal values kept, NaN

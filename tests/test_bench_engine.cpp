@@ -225,6 +225,17 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
       EXPECT_NEAR(r.sum.gpu_ms, gpu_sum, 1e-9);
     }
   }
+  // The standalone pass set, timed in the same repetitions: every output the CPU chain's bits,
+  // the best set the Gaussian + gradient + the faster brick min/max, the chain's ratio to it.
+  if (ctx) {
+    const bench::StandaloneFigures& sf = r.standalone;
+    ASSERT_TRUE(sf.why.empty()) << sf.why;
+    ASSERT_EQ(sf.rows.size(), 4u);
+    EXPECT_TRUE(sf.all_same_bits);
+    for (const auto& row : sf.rows) EXPECT_TRUE(row.same_bits && row.ms > 0) << row.label;
+    EXPECT_DOUBLE_EQ(sf.best_set_ms, sf.rows[0].ms + sf.rows[1].ms + std::min(sf.rows[2].ms, sf.rows[3].ms));
+    EXPECT_NEAR(r.chain_over_standalone, r.sum.gpu_ms / sf.best_set_ms, 1e-12);
+  }
   // The multi-threaded CPU backend: timed where the machine has several threads, and its
   // output checked bit for bit against the one-thread reference in every repetition.
   if (r.cpu_backend_threads > 1) {
@@ -281,6 +292,44 @@ TEST(BenchEngineCase, RowOnASmallSphereAgainstIndependentFigures) {
   }
 }
 
+TEST(BenchEngineStandalone, EveryPassGivesTheCpuChainsBitsOnOddSizes) {
+  // Partial bricks in every axis, a last brick of one quad (nx % 8 == 4), ramps that put each
+  // brick's extremes in its halo, and ties (+0 and -0 after rounding). Truth: the CPU chain.
+  std::string why;
+  engine::VulkanContext* ctx = vk(why);
+  ASSERT_NE(ctx, nullptr) << "no Vulkan device: " << why;
+  std::vector<engine::Volume> volumes;
+  volumes.push_back(engine::make_random({44, 37, 29}, {0.8e-3, 1.1e-3, 2.0e-3}, -3.0f, 3.0f, 5));
+  for (int axis = 0; axis < 3; ++axis) {
+    engine::Volume v = engine::make_random({28, 21, 19}, {1e-3, 1e-3, 1e-3}, 0.0f, 0.5f, 20u + std::uint32_t(axis));
+    for (int z = 0; z < 19; ++z)
+      for (int y = 0; y < 21; ++y)
+        for (int x = 0; x < 28; ++x) {
+          const int c[3] = {x, y, z};
+          float& f = v.voxels[v.grid.index(x, y, z)];
+          f = std::round(f + float(axis == 1 ? -c[axis] : c[axis]));
+        }
+    v.update_stats();
+    volumes.push_back(std::move(v));
+  }
+  for (const engine::Volume& v : volumes) {
+    bench::StandaloneSet set(*ctx, v, 1.0);
+    set.run();
+    set.check(engine::run_chain_cpu(v, bench::dense_list(false)));
+    const bench::StandaloneFigures f = set.figures();
+    EXPECT_TRUE(f.why.empty()) << f.why;
+    for (const auto& row : f.rows) EXPECT_TRUE(row.same_bits) << row.label << " on " << v.grid.dims[0];
+  }
+  // A volume whose rows are not whole quads is refused with the reason, not run.
+  const engine::Volume odd = engine::make_random({37, 9, 9}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 3);
+  try {
+    bench::StandaloneSet set(*ctx, odd, 1.0);
+    FAIL() << "a 37-voxel row ran";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find("whole quads"), std::string::npos) << e.what();
+  }
+}
+
 TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   // A hand-made row: finish_case must recompute every derived column from these.
   bench::CaseResult r;
@@ -320,6 +369,17 @@ TEST(BenchEngineCase, DerivedColumnsFollowTheMeasuredOnes) {
   EXPECT_DOUBLE_EQ(r.isos[0].candidate_percent, 25.0);
   EXPECT_DOUBLE_EQ(r.isos[0].formats[0].percent, 15.0);
   EXPECT_TRUE(std::isnan(r.isos[0].sparse_cpu_over_dense_cpu));  // no CPU figure
+  EXPECT_TRUE(std::isnan(r.chain_over_standalone));  // no standalone set: no ratio
+  r.standalone.why.clear();
+  r.standalone.best_set_ms = 8.0;
+  bench::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.chain_over_standalone, 0.5);
+  r.chain_floor_ms = 2.0;
+  r.chain_passes_floor_ms = 3.2;
+  bench::finish_case(r);
+  EXPECT_DOUBLE_EQ(r.chain_over_floor, 2.0);
+  EXPECT_DOUBLE_EQ(r.chain_over_passes_floor, 1.25);
+  r.standalone.why = "not run";
   // A pass without a GPU time makes the GPU sum unknown, not smaller.
   r.passes[1].gpu_ms = kNaN;
   bench::finish_case(r);

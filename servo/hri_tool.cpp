@@ -487,7 +487,6 @@ bool HriRenderer::tool_near_material(const FieldView& field, const Vec3& hip, do
   // converge). Each misses what the other finds: beside a fin's trilinear edge the gradient
   // path ends on the face's far part (the blended gradient samples turn there), and a
   // projection on the long cells of 1 x 1 x 3 mm voxels stops short of the nearest point.
-  // The scan replaces the last one (no free motion from it).
   have_m = excess(sample_value(field, hip)) > 0.0;
   if (have_m) {
     m = hip;
@@ -495,14 +494,20 @@ bool HriRenderer::tool_near_material(const FieldView& field, const Vec3& hip, do
   }
   const double r = params_.tool_radius_m;
   Vec3 q, n;
-  scan_valid_ = false;
+  // The scan's points are scratch; the clearance and its validity (free motion, edits) stay
+  // the last update's.
+  const bool valid = scan_valid_;
+  const double clear = scan_clear_m_;
   const bool scanned = surface_scan(field, hip, r);
   const bool found = nearest_surface(field, hip, r + voxel, q, n) && dot(q - hip, q - hip) < r * r;
-  if (!found) {
-    if (!scanned || scan_count_ == 0 || !(scan_clear_m_ < r)) return false;
+  const bool near = found || (scanned && scan_count_ > 0 && scan_clear_m_ < r);
+  if (!found && near) {
     q = scan_[0].q;
     n = scan_[0].n;
   }
+  scan_valid_ = valid;
+  scan_clear_m_ = clear;
+  if (!near) return false;
   // Just behind q, away from the HIP, else against the outward normal at q (a thin
   // feature's trilinear inside can be a sliver, and at a tip the two differ); none on a
   // speck of material.

@@ -308,7 +308,18 @@ struct ToolPlane {
 /// gradient instead (nearest_surface), as before. Force: F = K (proxy - HIP) - B v_u u,
 /// u the unit push direction, no pull; an update that steps the force vector by more than
 /// 1 % of the limit fades the step out over recovery_time_s (direction and magnitude);
-/// edits ease as for the point. Friction and force shading do not apply to the tool (the
+/// edits ease as for the point. Thin features, as for the point (the side the contact
+/// entered from; tool_hold_entry_side): at an update that turns the push direction (proxy -
+/// HIP) more than kEntryConeDeg from the one the contact entered with (entry_n_), or leaves
+/// the HIP clear of every new plane, while the sphere at the HIP overlaps the material (the
+/// HIP inside, or a surface point within r: Newton search from the HIP, else a scan of the
+/// cells within r), the planes of the tick before that face the entry side (within
+/// kEntryConeDeg), with the new ones that do not face away from it, replace the new set if
+/// they hold the HIP and the HIP is past the middle of the chord of material along entry_n_
+/// through the point just behind the nearest surface point (the HIP itself when inside),
+/// or was found past it since; else entry_n_ follows the turn. The hold ends when the
+/// sphere leaves the material, the contact ends, an edit or a new radius comes. Other
+/// updates read nothing for it. Friction and force shading do not apply to the tool (the
 /// scene refuses them).
 class HriRenderer final : public Renderer {
  public:
@@ -527,6 +538,29 @@ class HriRenderer final : public Renderer {
   /// Spherical tool: adds a plane for every scanned point within `reach` of x in front of
   /// every held plane (nearest first); returns the number added.
   int tool_add_uncovered(const Vec3& x, double reach, double voxel);
+  /// Spherical tool, thin features (see the class docs): at an update whose proxy `solved`
+  /// turned more than kEntryConeDeg from entry_n_ (or is the HIP) while the sphere at the HIP
+  /// overlaps the material, holds the entry side (the planes of the tick before, `kept`, that
+  /// face it, and the new ones that do not face away; `solved` their proxy) where the HIP is
+  /// past the middle of the feature, or was found past it since; else entry_n_ follows.
+  /// holding: a contact went on from the tick before (else entry_n_ is the new contact's).
+  void tool_hold_entry_side(const FieldView& field, const Vec3& hip, bool holding, const ToolPlane* kept,
+                            int kept_count, Vec3& solved);
+  /// Spherical tool: the sphere at `hip` overlaps the material (the HIP inside, or the
+  /// nearest surface point within r); m: a point inside (have_m), the HIP or just behind that
+  /// point. Scans the cells within r of the HIP (surface_scan), else searches (nearest_surface).
+  bool tool_near_material(const FieldView& field, const Vec3& hip, double voxel, Vec3& m, bool& have_m);
+  /// Spherical tool: from m (inside), the material ends both ways along n within `reach` [m]
+  /// and the HIP's level along n is at or past the middle of that chord (less half of a
+  /// quarter voxel): the tool is past the middle of a thin feature.
+  bool tool_past_middle(const FieldView& field, const Vec3& m, const Vec3& hip, const Vec3& n, double reach,
+                        double voxel) const;
+  /// The thin-feature marches (past_middle, tool_past_middle): fifth-voxel steps over
+  /// `reach` [m], at least 2 and at most march_budget / 2.
+  int chord_steps(double reach, double voxel) const;
+  /// Along segments a and b at once, `steps` equal steps: the first step on each where the
+  /// material ends (a_out, b_out; left 0 where it does not, so pass them as 0).
+  void material_ends(FieldView::Segment& a, FieldView::Segment& b, int steps, int& a_out, int& b_out) const;
   /// Spherical tool: this tick's force (before saturation); sets out.contact, vhip_.
   Vec3 tool_tick(const FieldView& field, const Vec3& hip, bool edited, TickOut& out);
   /// The segment a -> b is longer than half a voxel (worth searching for a crossing).

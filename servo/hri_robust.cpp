@@ -417,17 +417,26 @@ bool HriRenderer::past_middle(const FieldView& field, const Vec3& hip, const Vec
   // section of a coarse feature would let the proxy turn there and the side follow it (a
   // rod two voxels of 3 mm thick wrapped at 0.8 of the limit).
   if (!(depth > 0.0)) return false;
-  const double h = 0.2 * voxel, reach = depth + voxel;
-  const int steps = int(std::clamp(std::ceil(reach / h), 2.0, double(std::max(2, params_.march_budget / 2))));
+  const double reach = depth + voxel;
+  const int steps = chord_steps(reach, voxel);
   const int slack = int(std::ceil(0.25 * voxel / (reach / steps)));  // a quarter voxel, in steps
   FieldView::Segment far(field, hip, hip - n * reach), near(field, hip, hip + n * reach);
   int far_out = 0, near_out = 0;  // the steps where the material ends (0: not within reach)
-  for (int i = 1; i <= steps && (far_out == 0 || near_out == 0); ++i) {
-    const double t = double(i) / steps;
-    if (far_out == 0 && !(excess(far.value(t)) > 0.0)) far_out = i;
-    if (near_out == 0 && !(excess(near.value(t)) > 0.0)) near_out = i;
-  }
+  material_ends(far, near, steps, far_out, near_out);
   return far_out > 0 && near_out > 0 && far_out <= near_out + slack;
+}
+
+int HriRenderer::chord_steps(double reach, double voxel) const {
+  return int(std::clamp(std::ceil(reach / (0.2 * voxel)), 2.0, double(std::max(2, params_.march_budget / 2))));
+}
+
+void HriRenderer::material_ends(FieldView::Segment& a, FieldView::Segment& b, int steps, int& a_out,
+                                int& b_out) const {
+  for (int i = 1; i <= steps && (a_out == 0 || b_out == 0); ++i) {
+    const double t = double(i) / steps;
+    if (a_out == 0 && !(excess(a.value(t)) > 0.0)) a_out = i;
+    if (b_out == 0 && !(excess(b.value(t)) > 0.0)) b_out = i;
+  }
 }
 
 void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool hip_inside, const VirtualPlane& held,

@@ -516,11 +516,124 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   }
 }
 
+bool HriRenderer::tool_near_material(const FieldView& field, const Vec3& hip, double voxel, Vec3& m, bool& have_m) {
+  // The sphere at the HIP overlaps the material: the HIP is inside (m = the HIP), or a
+  // surface point nearer than r is found (m: a point inside just behind it): by the Newton
+  // search from the HIP (nearest_surface), else by the scan of the cells within r of it
+  // (surface_scan, its clearance: a lower bound where a cell's projections did not
+  // converge). Each misses what the other finds: beside a fin's trilinear edge the gradient
+  // path ends on the face's far part (the blended gradient samples turn there), and a
+  // projection on the long cells of 1 x 1 x 3 mm voxels stops short of the nearest point.
+  have_m = excess(sample_value(field, hip)) > 0.0;
+  if (have_m) {
+    m = hip;
+    return true;
+  }
+  const double r = params_.tool_radius_m;
+  Vec3 q, n;
+  // The scan's points are scratch; the clearance and its validity (free motion, edits) stay
+  // the last update's.
+  const bool valid = scan_valid_;
+  const double clear = scan_clear_m_;
+  const bool scanned = surface_scan(field, hip, r);
+  const bool found = nearest_surface(field, hip, r + voxel, q, n) && dot(q - hip, q - hip) < r * r;
+  const bool near = found || (scanned && scan_count_ > 0 && scan_clear_m_ < r);
+  if (!found && near) {
+    q = scan_[0].q;
+    n = scan_[0].n;
+  }
+  scan_valid_ = valid;
+  scan_clear_m_ = clear;
+  if (!near) return false;
+  // Just behind q, away from the HIP, else against the outward normal at q (a thin
+  // feature's trilinear inside can be a sliver, and at a tip the two differ); none on a
+  // speck of material.
+  const Vec3 dirs[2] = {n, outward_normal(field, q, n)};
+  for (const Vec3& d : dirs)
+    for (const double behind : {0.02, 0.05, 0.1, 0.2}) {
+      m = q - d * (behind * voxel);
+      have_m = excess(sample_value(field, m)) > 0.0;
+      if (have_m) return true;
+    }
+  return true;
+}
+
+bool HriRenderer::tool_past_middle(const FieldView& field, const Vec3& m, const Vec3& hip, const Vec3& n,
+                                   double reach, double voxel) const {
+  // The chord of material through m along n (fifth-voxel steps both ways, at most
+  // march_budget samples in all; both ends within reach: a feature, not a half-space), and
+  // the HIP's level along n against its middle: past it, or short of it by no more than
+  // half the point's quarter voxel of slack (past_middle: the same test from the HIP).
+  const int steps = chord_steps(reach, voxel);
+  const double step = reach / steps;
+  const int slack = int(std::ceil(0.25 * voxel / step));
+  FieldView::Segment down(field, m, m - n * reach), up(field, m, m + n * reach);
+  int down_out = 0, up_out = 0;  // the steps where the material ends (0: not within reach)
+  material_ends(down, up, steps, down_out, up_out);
+  return down_out > 0 && up_out > 0 && 2.0 * dot(n, hip - m) <= double(up_out - down_out + slack) * step;
+}
+
+void HriRenderer::tool_hold_entry_side(const FieldView& field, const Vec3& hip, bool holding, const ToolPlane* kept,
+                                       int kept_count, Vec3& solved) {
+  // The point's hold_entry_side for the sphere (see the class docs, "Spherical tool"): the
+  // push direction stands for the plane's normal, the sphere overlapping the material for
+  // the HIP inside, and the chord through the material nearest the HIP for the line
+  // through the HIP.
+  static const double kCos = std::cos(kEntryConeDeg * M_PI / 180.0);
+  const Vec3 push = solved - hip;
+  const double pen = norm(push);
+  if (!holding) {  // a new contact (or new material, a new radius): its side
+    entry_n_ = pen > 0.0 ? push / pen : (tool_plane_count_ > 0 ? tool_planes_[0].n : Vec3{});
+    entry_held_ = false;
+    return;
+  }
+  // Clear of every new plane (the sphere slipped off an edge toward the far side) counts as
+  // a turn: held as one where the sphere still overlaps the material.
+  const Vec3 u = pen > 0.0 ? push / pen : entry_n_;
+  const bool turned = !(pen > 0.0) || dot(u, entry_n_) < kCos;
+  if (!turned && !entry_held_) return;  // the common update: no read
+  const Vec3& sp = field.grid().spacing_m;
+  const double voxel = std::min({sp.x, sp.y, sp.z});
+  Vec3 m;
+  bool have_m = false;
+  if (!tool_near_material(field, hip, voxel, m, have_m)) {
+    entry_held_ = false;  // the sphere left the material: the side is free again
+    if (turned) entry_n_ = u;
+    return;
+  }
+  if (!turned) return;
+  // The planes of the tick before that face the entry side (a plane across the stroke, a
+  // tip's, would drag), with the new ones that do not face away from it (the near surface
+  // the proxy slides onto: a one-voxel plate's next blob), and the proxy they give this HIP.
+  ToolPlane fresh[kMaxToolPlanes];
+  const int fresh_count = tool_plane_count_;
+  std::copy(tool_planes_, tool_planes_ + fresh_count, fresh);
+  tool_plane_count_ = 0;
+  for (int i = 0; i < kept_count; ++i)
+    if (dot(kept[i].n, entry_n_) >= kCos) tool_planes_[tool_plane_count_++] = kept[i];
+  const int entry_side = tool_plane_count_;
+  for (int i = 0; i < fresh_count && tool_plane_count_ < kMaxToolPlanes; ++i)
+    if (dot(fresh[i].n, entry_n_) > 0.0) tool_planes_[tool_plane_count_++] = fresh[i];
+  const Vec3 held = entry_side > 0 ? tool_solve(hip) : hip;
+  const double held_pen = norm(held - hip);
+  const double reach = 2.0 * std::max(0.0, held_pen - params_.tool_radius_m) + voxel;
+  if (held_pen > 0.0 && (entry_held_ || (have_m && tool_past_middle(field, m, hip, entry_n_, reach, voxel)))) {
+    entry_held_ = true;  // the held planes stay: the proxy on the entry side
+    scan_valid_ = false;
+    solved = held;
+    return;
+  }
+  std::copy(fresh, fresh + fresh_count, tool_planes_);
+  tool_plane_count_ = fresh_count;
+  entry_n_ = u;
+}
+
 Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited, TickOut& out) {
   const double r = params_.tool_radius_m;
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
-  bool update = tool_reseat_ || (edited && (tool_plane_count_ > 0 || was_contact_));
+  const bool reseat = tool_reseat_;
+  bool update = reseat || (edited && (tool_plane_count_ > 0 || was_contact_));
   tool_reseat_ = false;
   if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
   // The proxy for the planes held now (tool_solve, a few dozen small solves), computed once
@@ -588,6 +701,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     c_ = 0;
     solved = tool_solve(hip);  // the HIP itself without a plane
     have_solved = true;
+    tool_hold_entry_side(field, hip, !reseat && !edited && was_contact_ && kept_count > 0, kept, kept_count, solved);
     if (!scan_valid_) anchor_ = solved;
     out.plane_update = true;
   }

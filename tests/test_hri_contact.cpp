@@ -20,30 +20,18 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/passivity.h"
 #include "isotouch/servo/sampling.h"
+#include "isotouch/tests/thin_features.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
 using namespace isotouch::sim;
+using isotouch::test::make_spaced_field;
+using isotouch::test::ThinCase;
+using isotouch::test::thin_cases;
+using isotouch::test::lowest_wrapping_press;
+using isotouch::test::press_text;
 
 namespace {
-
-// A field of `dims` voxels with spacing `sp` [m] from an analytic value [mm] and gradient
-// [mm/m] (positive inside, InsideIs::kAbove, tau = 0).
-SampleField make_spaced_field(std::array<int, 3> dims, Vec3 sp, const std::function<double(const Vec3&)>& value,
-                              const std::function<Vec3(const Vec3&)>& grad) {
-  SampleField f;
-  f.grid.dims = dims;
-  f.grid.spacing_m = sp;
-  f.samples.resize(f.grid.voxel_count());
-  for (int z = 0; z < dims[2]; ++z)
-    for (int y = 0; y < dims[1]; ++y)
-      for (int x = 0; x < dims[0]; ++x) {
-        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
-        const Vec3 g = grad(p);
-        f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
-      }
-  return f;
-}
 
 // Field of `dims`^3 voxels of 1 mm (make_spaced_field).
 SampleField make_field(int dims, const std::function<double(const Vec3&)>& value,
@@ -700,145 +688,6 @@ TEST(HriContact, ShallowStepOutLandsWithinFiveHundredthsOfAVoxel) {
   }
 }
 
-namespace {
-
-// One thin feature: its field, the outward normal of the face pressed (n_entry), a point of
-// its mid-plane (a fin) or axis (a cylinder) `mid`, and where and along what it is stroked.
-struct ThinFeature {
-  SampleField field;
-  Vec3 mid;            // on the fin's mid-plane / the cylinder's axis, under the press point [m]
-  Vec3 n_entry;        // outward normal of the side pressed (unit)
-  double half = 0;     // half the thickness (fin) / the radius (cylinder) under the press point [m]
-  Vec3 along, across;  // stroke directions (unit, perpendicular to n_entry)
-  double along_len = 0, across_len = 0;  // stroke lengths [m]
-};
-
-// A fin: the plate |m.(x - c)| < w/2 on the side t.(x - c) < 0 of its straight free edge
-// (t perpendicular to m), pressed on its face 1.5 voxels in from the edge; stroked along
-// the edge and across it (toward the edge and past it).
-ThinFeature fin(Vec3 m, Vec3 t, double w, Vec3 sp) {
-  const Vec3 c{0.024, 0.024, 0.036};
-  const std::array<int, 3> dims{int(0.048 / sp.x) + 1, int(0.048 / sp.y) + 1, int(0.072 / sp.z) + 1};
-  const double edge_in = 1.5 * std::abs(dot(t, sp));  // the press point's distance from the edge [m]
-  ThinFeature tf;
-  tf.field = make_spaced_field(
-      dims, sp, [=](const Vec3& x) { return 1000.0 * std::min(0.5 * w - std::abs(dot(m, x - c)), -dot(t, x - c)); },
-      [=](const Vec3& x) {
-        const double a = 0.5 * w - std::abs(dot(m, x - c)), b = -dot(t, x - c);
-        return a < b ? m * (dot(m, x - c) >= 0 ? -1000.0 : 1000.0) : t * -1000.0;
-      });
-  tf.mid = c - t * edge_in;
-  tf.n_entry = m;
-  tf.half = 0.5 * w;
-  tf.along = Vec3{m.y * t.z - m.z * t.y, m.z * t.x - m.x * t.z, m.x * t.y - m.y * t.x};
-  tf.across = t;
-  tf.along_len = 0.016;
-  tf.across_len = edge_in + 0.004;
-  return tf;
-}
-
-// A tapering cylinder along unit a: radius R(s) = R0 (-s / L) for s = a.(x - c) in [-L, 0]
-// (the tip at c), R0 beyond; pressed from n (perpendicular to a) where the diameter is
-// `diam`, stroked along the axis toward the tip and across it.
-ThinFeature taper(Vec3 a, Vec3 n, double r0, double diam, Vec3 sp) {
-  const Vec3 c{0.024, 0.024, 0.036};
-  const double len = 0.024;  // taper length [m]
-  const std::array<int, 3> dims{int(0.048 / sp.x) + 1, int(0.048 / sp.y) + 1, int(0.072 / sp.z) + 1};
-  auto radius = [=](double s) { return r0 * std::clamp(-s / len, 0.0, 1.0); };
-  ThinFeature tf;
-  tf.field = make_spaced_field(
-      dims, sp,
-      [=](const Vec3& x) {
-        const double s = dot(a, x - c);
-        return 1000.0 * (radius(s) - norm((x - c) - a * s));
-      },
-      [=](const Vec3& x) {
-        const double s = dot(a, x - c);
-        const Vec3 rv = (x - c) - a * s;
-        const double rl = norm(rv);
-        const double dr = (s > -len && s < 0) ? -r0 / len : 0.0;
-        return (rl > 0 ? rv / rl * -1000.0 : Vec3{}) + a * (1000.0 * dr);
-      });
-  const double s0 = -len * (0.5 * diam / r0);  // where the radius is diam / 2
-  tf.mid = c + a * s0;
-  tf.n_entry = n;
-  tf.half = 0.5 * diam;
-  tf.along = a;
-  tf.across = Vec3{n.y * a.z - n.z * a.y, n.z * a.x - n.x * a.z, n.x * a.y - n.y * a.x};
-  tf.along_len = -s0 + 0.004;
-  tf.across_len = 0.5 * diam + 0.004;
-  return tf;
-}
-
-// One press-and-stroke at `level` of the force limit (the HIP pressed level * limit / K past
-// the entry surface, then stroked `dir` * len at 40 mm/s): true if the proxy crossed to the
-// far side of the feature's middle (by 0.1 voxel; or the force turned against the entry normal) on a
-// tick whose HIP has stayed inside the material (the trilinear field the servo reads)
-// since contact began. The sent force at that tick in `wrap_force`.
-bool wraps(const ThinFeature& tf, const HriParams& p, double level, const Vec3& dir, double len, double& wrap_force,
-           bool debug) {
-  HriRenderer r(p);
-  const Vec3 top = tf.mid + tf.n_entry * tf.half;
-  const double depth = level * p.force_limit_n / p.stiffness_n_per_m;
-  const Vec3 start = top + tf.n_entry * 0.003;
-  bool touched = false, inside_since = true;
-  for (int k = 0; k < 2000; ++k) {
-    const double t = k * 1e-3;
-    const double down = std::min(0.02 * t, 0.003 + depth);  // 20 mm/s in
-    const double tau_stroke = 0.003 / 0.02 + (0.003 + depth) / 0.02 + 0.1;
-    const double along = std::clamp(0.04 * (t - tau_stroke), 0.0, len);
-    const Vec3 hip = start - tf.n_entry * down + dir * along;
-    const HriTick out = r.tick(tf.field, hip);
-    const bool hip_in = sample_value(tf.field, hip) > 0.0;
-    if (!touched && out.contact) touched = true;
-    if (!touched) continue;
-    inside_since = inside_since && hip_in;
-    if (!inside_since) break;
-    const double side = dot(out.vhip_m - tf.mid - dir * dot(out.vhip_m - tf.mid, dir), tf.n_entry);
-    if (debug && std::getenv("HRI_THIN_TICKS"))
-      std::printf("      k %d c %d u %d plane n.n %.3f valid %d side %.3f hip side %.3f |F| %.3f\n", k, int(out.contact),
-                  int(out.plane_update), dot(out.plane.n, tf.n_entry), int(out.plane.valid), side * 1e3,
-                  1e3 * dot(hip - tf.mid, tf.n_entry), norm(out.force_n));
-    // Past the middle by more than a tenth of a voxel (at the middle itself, with the HIP
-    // there, either side is as near), or a force toward the far side.
-    const Vec3& sp = tf.field.grid.spacing_m;
-    const bool far = side < -0.1 * std::min({sp.x, sp.y, sp.z}) || dot(out.force_n, tf.n_entry) < 0.0;
-    if (far && norm(out.force_n) < 0.999 * p.force_limit_n) {
-      if (debug)
-        std::printf("    wrap at k %d: vhip side %.3f mm, |F| %.3f N, F.n %.3f N, hip depth %.3f mm\n", k, side * 1e3,
-                    norm(out.force_n), dot(out.force_n, tf.n_entry), 1e3 * dot(top - hip, tf.n_entry));
-      wrap_force = norm(out.force_n);
-      return true;
-    }
-  }
-  return false;
-}
-
-struct ThinCase {
-  const char* name;
-  int voxels;  // thickness in voxels along the press direction
-  ThinFeature feature;
-};
-
-// The fins and tapering cylinders 1-4 voxels thick, on 1 mm voxels and on 1 x 1 x 3 mm
-// voxels (pressed across the fine axes and across the coarse one).
-std::vector<ThinCase> thin_cases() {
-  std::vector<ThinCase> cases;
-  const Vec3 iso{1e-3, 1e-3, 1e-3}, aniso{1e-3, 1e-3, 3e-3};
-  const Vec3 X{1, 0, 0}, Y{0, 1, 0}, Z{0, 0, 1};
-  for (int k = 1; k <= 4; ++k) {
-    cases.push_back({"fin, 1 mm voxels", k, fin(unit(Vec3{1, 0.2, 0.1}), unit(Vec3{-0.2, 1, 0}), k * 1e-3, iso)});
-    cases.push_back({"fin across x, 1x1x3 mm", k, fin(X, Z, k * 1e-3, aniso)});
-    cases.push_back({"fin across z, 1x1x3 mm", k, fin(Z, X, k * 3e-3, aniso)});
-    cases.push_back({"tapering cylinder, 1 mm voxels", k, taper(unit(Vec3{0.1, 1, 0.2}), unit(Vec3{1, -0.1, 0}), 3e-3, k * 1e-3, iso)});
-    cases.push_back({"tapering cylinder along z, 1x1x3 mm", k, taper(Z, X, 3e-3, k * 1e-3, aniso)});
-    cases.push_back({"tapering cylinder along x, 1x1x3 mm", k, taper(X, Z, 9e-3, k * 3e-3, aniso)});
-  }
-  return cases;
-}
-
-}  // namespace
-
 // Thin features hold up to the force limit: pressing into a fin or a tapering cylinder 1-4
 // voxels thick and stroking along or across it, while the HIP stays inside the material the
 // contact began on the proxy stays on the side it entered from (never past the feature's
@@ -848,36 +697,17 @@ std::vector<ThinCase> thin_cases() {
 // the lowest level that wraps per case (docs/haptics.md's table). HRI_THIN_DEBUG=1 lists
 // the wrap ticks, HRI_THIN_TICKS=1 too every tick before them.
 TEST(HriContact, ThinFeaturesHoldUpToTheForceLimit) {
-  const bool debug = std::getenv("HRI_THIN_DEBUG") != nullptr;
   std::array<double, 5> lowest_by_voxels{2, 2, 2, 2, 2};  // lowest wrapping level per thickness (2: none)
   long runs = 0;
   for (const ThinCase& tc : thin_cases()) {
-    double lowest = 2;
-    for (const int n : {1, 10}) {
-      HriParams p = robust(n, 800);
-      p.damping_n_s_per_m = 1.0;
-      p.intersection = Intersection::kSecant;
-      p.recovery_time_s = 0.02;
-      for (int s = 0; s < 2; ++s) {
-        const Vec3 dir = s == 0 ? tc.feature.along : tc.feature.across;
-        const double len = s == 0 ? tc.feature.along_len : tc.feature.across_len;
-        for (int l = 1; l <= 10; ++l) {
-          double f = 0;
-          ++runs;
-          if (wraps(tc.feature, p, 0.1 * l, dir, len, f, false)) {
-            if (debug) {
-              std::printf("  %s, %d voxels, n %d, %s, level %.1f:\n", tc.name, tc.voxels, n, s ? "across" : "along", 0.1 * l);
-              wraps(tc.feature, p, 0.1 * l, dir, len, f, true);
-            }
-            lowest = std::min(lowest, 0.1 * l);
-            break;
-          }
-        }
-      }
-    }
+    HriParams p = robust(1, 800);
+    p.damping_n_s_per_m = 1.0;
+    p.intersection = Intersection::kSecant;
+    p.recovery_time_s = 0.02;
+    const SampleField& f = tc.feature.field;
+    const double lowest = lowest_wrapping_press(tc, p, [&](const Vec3& hip) { return sample_value(f, hip) > 0.0; }, runs);
     lowest_by_voxels[std::size_t(tc.voxels)] = std::min(lowest_by_voxels[std::size_t(tc.voxels)], lowest);
-    std::printf("%-38s %d voxel(s): lowest press that wraps %s\n", tc.name, tc.voxels,
-                lowest > 1.5 ? "none up to 1.0 of the limit" : (std::to_string(lowest).substr(0, 3) + " of the limit").c_str());
+    std::printf("%-38s %d voxel(s): lowest press that wraps %s\n", tc.name, tc.voxels, press_text(lowest).c_str());
     if (tc.voxels >= 2) {
       EXPECT_GE(lowest, 0.9 - 1e-9) << tc.name << ", " << tc.voxels << " voxels";
     }

@@ -22,6 +22,7 @@
 #include "isotouch/eval/surface_distance.h"
 #include "isotouch/eval/sweep.h"
 #include "isotouch/io/volume_io.h"
+#include "isotouch/tests/thin_features.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -297,6 +298,144 @@ TEST(HriTool, WallForceIsKTimesTheDepthBelowTheOffsetSurface) {
   out = r.tick(f, kCentre + m * (rad + 0.0002));
   EXPECT_FALSE(out.contact);
   EXPECT_EQ(norm(out.force_n), 0.0);
+}
+
+namespace {
+
+// Whether the sphere of radius r at a HIP overlaps the material of `f` (the tool's "inside"):
+// the HIP inside, or the true distance from it to the trilinear isosurface
+// (eval::distance_to_isosurface) below r less 0.05 voxel (the tool's accuracy, as in
+// `stroke`: its scan's points are within that of the nearest). The distance is
+// 1-Lipschitz: a search at x bounds it at y within |y - x|, so only a HIP whose bounds
+// straddle that are searched again.
+class SphereOverlaps {
+ public:
+  SphereOverlaps(const SampleField& f, double r)
+      : f_(&f), r_(r - 0.05 * std::min({f.grid.spacing_m.x, f.grid.spacing_m.y, f.grid.spacing_m.z})) {}
+  bool operator()(const Vec3& hip) {
+    if (sample_value(*f_, hip) > 0.0) return true;
+    const double moved = have_ ? norm(hip - at_) : 0.0;
+    if (have_ && lo_ - moved >= r_) return false;
+    if (have_ && hi_ + moved < r_) return true;
+    const Vec3& sp = f_->grid.spacing_m;
+    isotouch::eval::SurfaceDistanceOptions o;
+    o.max_radius_m = r_ + 2 * std::min({sp.x, sp.y, sp.z});
+    o.tolerance_m = 0.01 * std::min({sp.x, sp.y, sp.z});
+    const auto d = isotouch::eval::distance_to_isosurface(*f_, 0.0, hip, o);
+    at_ = hip;
+    have_ = !d.budget_exceeded;
+    lo_ = d.found ? d.lower_bound_m : d.searched_radius_m;
+    hi_ = d.found ? d.distance_m : std::numeric_limits<double>::infinity();
+    return d.found && d.distance_m < r_;
+  }
+
+ private:
+  const SampleField* f_;
+  double r_;  // the distance below which the sphere overlaps [m]
+  bool have_ = false;
+  Vec3 at_;
+  double lo_ = 0, hi_ = 0;  // the true distance at at_ lies in [lo_, hi_] [m]
+};
+
+}  // namespace
+
+// Thin features hold up to the force limit for the spherical tool too: the fins and tapering
+// cylinders 1-4 voxels thick of HriContact.ThinFeaturesHoldUpToTheForceLimit (1 mm and
+// 1 x 1 x 3 mm voxels), tools of 1, 2 and 3 voxels (of the finest spacing), pressed at 0.1
+// ... 1.0 of the limit (K = 800 N/m: the HIP 3.7 mm behind the proxy at 0.9), n = 1 and 10,
+// stroked along and across. While the HIP's sphere has overlapped the material since contact
+// began, the tool's centre stays on the side it entered from (never more than 0.1 voxel past
+// the feature's middle, the force never against the entry normal) below the limit: at least
+// 0.9 of it for features 2 voxels thick or more. Prints the lowest press that wraps per case
+// and per thickness and radius (docs/haptics.md's table). HRI_THIN_DEBUG=1 lists the wraps.
+TEST(HriTool, ThinFeaturesHoldUpToTheForceLimit) {
+  double lowest_by[5][4];  // [thickness in voxels][radius in voxels]: lowest wrapping press (2: none)
+  for (auto& row : lowest_by) std::fill(std::begin(row), std::end(row), 2.0);
+  long runs = 0;
+  for (const isotouch::test::ThinCase& tc : isotouch::test::thin_cases()) {
+    const Vec3& sp = tc.feature.field.grid.spacing_m;
+    for (int rv = 1; rv <= 3; ++rv) {
+      HriParams p = tool_params(rv * std::min({sp.x, sp.y, sp.z}), 1);
+      p.stiffness_n_per_m = 800;
+      p.damping_n_s_per_m = 1.0;
+      p.recovery_time_s = 0.02;
+      const double lowest =
+          isotouch::test::lowest_wrapping_press(tc, p, SphereOverlaps(tc.feature.field, p.tool_radius_m), runs);
+      double& cell = lowest_by[tc.voxels][rv];
+      cell = std::min(cell, lowest);
+      std::printf("%-38s %d voxel(s), tool %d voxel(s): lowest press that wraps %s\n", tc.name, tc.voxels, rv,
+                  isotouch::test::press_text(lowest).c_str());
+      // Not met (docs/haptics.md, printed and not asserted): the cylinder along the 3 mm axis,
+      // whose trilinear surface steps every 3 mm along the stroke: the entry side's plane,
+      // tilted by the steps, lets the held proxy sink onto the HIP as it strokes.
+      const bool known_short = std::string(tc.name) == "tapering cylinder along z, 1x1x3 mm";
+      if (tc.voxels >= 2 && !known_short) {
+        EXPECT_GE(lowest, 0.9 - 1e-9) << tc.name << ", " << tc.voxels << " voxels, tool " << rv << " voxels";
+      }
+    }
+  }
+  for (int k = 1; k <= 4; ++k)
+    std::printf("thickness %d voxel(s): lowest press that wraps, tool 1 / 2 / 3 voxels: %.1f / %.1f / %.1f of the "
+                "limit (2.0: none)\n",
+                k, lowest_by[k][1], lowest_by[k][2], lowest_by[k][3]);
+  EXPECT_GT(runs, 1000);
+}
+
+// A burr lifting out of an open channel is not held back by the thin-feature hold: a plate
+// 2 voxels thick with a hole of r + 1 voxel through it, a burr of 2 voxels pressed on the
+// plate beside the hole at 0.9 of the limit (its centre 0.7 mm past the plate's middle),
+// slid over the rim into the hole (where the hold keeps it on the entry side while its
+// sphere overlaps the rim) and lifted straight out, on the hole's axis (clear of the walls)
+// and against a wall. Truth from the trilinear field: the true distance from the HIP to the
+// isosurface. The hold ends when the sphere leaves the material: once the HIP has been
+// clear of the surface by r + 0.5 voxel for 25 ticks (the release fade, 20 ticks, and an
+// update), no force and no contact; during the lift no inward pull (down the hole) beyond
+// 5 % of the limit.
+TEST(HriTool, ABurrLiftingOutOfAnOpenChannelIsNotHeldBack) {
+  const double w = 2 * kVoxel, rad = 2 * kVoxel, hole = rad + kVoxel;
+  const SampleField f = make_field(40, [=](const Vec3& x, Vec3& g) {
+    const Vec3 d = x - kCentre;
+    const double rho = std::hypot(d.x, d.y), slab = 0.5 * w - std::abs(d.z), wall = rho - hole;
+    g = slab < wall ? Vec3{0, 0, d.z >= 0 ? -1000.0 : 1000.0}
+                    : (rho > 0 ? Vec3{d.x / rho, d.y / rho, 0} * 1000.0 : Vec3{});
+    return 1000.0 * std::min(slab, wall);
+  });
+  long clear_ticks = 0;
+  for (const int n : {1, 10})
+    for (const double rho_lift : {0.0, hole - rad + 0.7 * kVoxel}) {
+      HriParams p = tool_params(rad, n);
+      p.stiffness_n_per_m = 800;
+      p.damping_n_s_per_m = 1.0;
+      p.recovery_time_s = 0.02;
+      HriRenderer r(p);
+      const double depth = 0.9 * p.force_limit_n / p.stiffness_n_per_m, top = kCentre.z + 0.5 * w;
+      const double x0 = hole + rad + 4 * kVoxel, z_press = top + rad - depth;
+      long clear_for = 0;
+      double worst_pull = 0;
+      for (int k = 0; k < 1400; ++k) {
+        const double t = k * 1e-3;
+        const double down = std::min(0.02 * t, 0.003 + depth);                   // 20 mm/s down
+        const double t_in = (0.003 + depth) / 0.02 + 0.05;
+        const double slide = std::clamp(0.04 * (t - t_in), 0.0, x0 - rho_lift);  // 40 mm/s in
+        const double t_up = t_in + (x0 - rho_lift) / 0.04 + 0.05;
+        const double up = std::clamp(0.04 * (t - t_up), 0.0, 0.012);            // 40 mm/s out
+        const Vec3 hip{kCentre.x + x0 - slide, kCentre.y, z_press + depth + 0.003 - down + up};
+        const HriTick out = r.tick(f, hip);
+        bool exact = false;
+        const double dist = signed_distance(f, hip, rad + 3 * kVoxel, exact);
+        clear_for = dist >= rad + 0.5 * kVoxel ? clear_for + 1 : 0;
+        if (clear_for > 25) {
+          ++clear_ticks;
+          EXPECT_FALSE(out.contact) << "n " << n << " rho " << rho_lift << " k " << k;
+          EXPECT_EQ(norm(out.force_n), 0.0) << "n " << n << " rho " << rho_lift << " k " << k;
+        }
+        if (up > 0) worst_pull = std::min(worst_pull, out.force_n.z);
+      }
+      std::printf("n %d, lift at %.1f mm from the axis: largest inward force %.4f N\n", n, rho_lift * 1e3, -worst_pull);
+      EXPECT_GE(worst_pull, -0.05 * p.force_limit_n) << "n " << n << " rho " << rho_lift;
+    }
+  std::printf("ticks clear of the plate checked free: %ld\n", clear_ticks);
+  EXPECT_GT(clear_ticks, 400);
 }
 
 // A new radius in contact (the sculpting app's brush radius, the tool's): pressed 0.5 mm

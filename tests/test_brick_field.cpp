@@ -22,6 +22,7 @@
 #include "isotouch/core/brick_field.h"
 #include "isotouch/core/field_view.h"
 #include "isotouch/servo/hri.h"
+#include "field_builders.h"
 
 namespace isotouch {
 namespace {
@@ -39,19 +40,8 @@ constexpr float kNaNf = std::numeric_limits<float>::quiet_NaN();
 // A dense field from value(p) and gradient(p) at the voxel centres (grid-world [m]).
 SampleField analytic(std::array<int, 3> dims, Vec3 spacing, Vec3 origin, float background,
                      const std::function<double(const Vec3&)>& value, const std::function<Vec3(const Vec3&)>& grad) {
-  SampleField f;
-  f.grid.dims = dims;
-  f.grid.spacing_m = spacing;
-  f.grid.origin_m = origin;
+  SampleField f = test::sample_analytic(dims, spacing, origin, value, grad);
   f.background = background;
-  f.samples.resize(f.grid.voxel_count());
-  for (int z = 0; z < dims[2]; ++z)
-    for (int y = 0; y < dims[1]; ++y)
-      for (int x = 0; x < dims[0]; ++x) {
-        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
-        const Vec3 g = grad(p);
-        f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
-      }
   return f;
 }
 

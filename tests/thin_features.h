@@ -15,6 +15,7 @@
 
 #include "isotouch/core/sample_field.h"
 #include "isotouch/servo/hri.h"
+#include "field_builders.h"
 
 namespace isotouch::test {
 
@@ -25,18 +26,7 @@ using core::Vec3;
 /// [mm/m] (positive inside, InsideIs::kAbove, tau = 0).
 inline SampleField make_spaced_field(std::array<int, 3> dims, Vec3 sp, const std::function<double(const Vec3&)>& value,
                                      const std::function<Vec3(const Vec3&)>& grad) {
-  SampleField f;
-  f.grid.dims = dims;
-  f.grid.spacing_m = sp;
-  f.samples.resize(f.grid.voxel_count());
-  for (int z = 0; z < dims[2]; ++z)
-    for (int y = 0; y < dims[1]; ++y)
-      for (int x = 0; x < dims[0]; ++x) {
-        const Vec3 p = f.grid.to_world({double(x), double(y), double(z)});
-        const Vec3 g = grad(p);
-        f.samples[f.grid.index(x, y, z)] = {float(value(p)), float(g.x), float(g.y), float(g.z)};
-      }
-  return f;
+  return sample_analytic(dims, sp, {0, 0, 0}, value, grad);
 }
 
 /// One thin feature: its field, the outward normal of the face pressed (n_entry), a point of

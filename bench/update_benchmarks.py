@@ -121,10 +121,23 @@ def to_markdown(report, keep):
     return "\n".join(out).lstrip("\n")
 
 
+def module_python(bindir):
+    """The interpreter the isotouch module beside BIN was built for (BIN/../python/isotouch/
+    _build.py), else this one."""
+    try:
+        with open(os.path.join(os.path.dirname(os.path.abspath(bindir)), "python", "isotouch", "_build.py")) as f:
+            m = re.search(r"^PYTHON = '(.*)'$", f.read(), re.M)
+        if m and os.access(m.group(1), os.X_OK):
+            return m.group(1)
+    except OSError:
+        pass
+    return sys.executable
+
+
 def command(name, bindir):
     prog, args, display, _ = BENCHES[name]
     if prog.endswith(".py"):
-        argv = [sys.executable, os.path.join(ROOT, prog)] + args
+        argv = [module_python(bindir), os.path.join(ROOT, prog)] + args
     else:
         argv = [os.path.join(bindir, prog)] + args
     if display and not os.environ.get("DISPLAY"):

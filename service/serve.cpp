@@ -124,6 +124,7 @@ class Server {
   void restart_at_isovalue(const Pending& p);
   void save(const Pending& p);
   bool wait_edits_applied(double timeout_s);
+  std::shared_ptr<EditMirror> settled_mirror(double timeout_s);
   void send_edited();
   void accept_clients();
   void open_haptic();
@@ -169,6 +170,7 @@ class Server {
   std::mutex volume_mu_;
   std::optional<engine::Volume> next_volume_;  // a received IMAGE waiting for the main thread
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
+  bool changing_ = false;  // guarded by volume_mu_: the main thread took one of the two and is applying it
   std::mutex labels_mu_;
   std::set<std::string> label_images_;  // device names a LBMETA described as label maps
   std::mutex cmd_mu_;
@@ -404,19 +406,40 @@ bool Server::wait_edits_applied(double timeout_s) {
   }
 }
 
+/// The session's edited volume once nothing is in flight: no received IMAGE or isovalue
+/// waiting for or being applied by the main thread (a save after them saves their result, and
+/// never meets the moment between the old session's stop and the new one's start), and every
+/// edit submitted applied or refused. Null if that does not happen within `timeout_s`.
+std::shared_ptr<EditMirror> Server::settled_mirror(double timeout_s) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  for (;;) {
+    bool changing;
+    {
+      std::lock_guard<std::mutex> lock(volume_mu_);
+      changing = changing_ || next_volume_ || next_iso_;
+    }
+    if (!changing) {
+      std::lock_guard<std::mutex> lock(session_mu_);
+      if (session_ && !preparing_) {
+        const session::LiveStats st = session_->live->stats(0);
+        if (st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested) return session_->mirror;
+      }
+    }
+    if (std::chrono::steady_clock::now() > until) return nullptr;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+}
+
 void Server::save(const Pending& p) {
   end_stroke();
-  std::shared_ptr<EditMirror> mirror;
-  {
-    std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) mirror = session_->mirror;
-  }
   const std::string path = (std::filesystem::path(o_.save_dir) / p.cmd.file).string();
   if (!io::volume_writable(p.cmd.file))
     return answer(p, igtl::StatusMessage::STATUS_CONFIG_ERROR,
                   "save name '" + p.cmd.file + "': not a format written (.vdb, .mha, .nrrd, .nii, .nii.gz)");
-  if (!mirror || !wait_edits_applied(5.0))
-    return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "save " + p.cmd.file + ": the session's edits did not settle");
+  const std::shared_ptr<EditMirror> mirror = settled_mirror(30.0);
+  if (!mirror)
+    return answer(p, igtl::StatusMessage::STATUS_NOT_READY,
+                  "save " + p.cmd.file + ": the session's edits did not settle in 30 s");
   try {
     io::save_any_volume(mirror->volume(), path, io::SaveVdbOptions{});
     answer(p, igtl::StatusMessage::STATUS_OK, "save " + p.cmd.file + ": wrote " + path);
@@ -727,16 +750,21 @@ int Server::run() {
   while (session::stop_signal() == 0 && (o_.seconds <= 0 || elapsed() < o_.seconds)) {
     accept_clients();
     std::optional<engine::Volume> v;
-    {
-      std::lock_guard<std::mutex> lock(volume_mu_);
-      v.swap(next_volume_);
-    }
-    if (v) swap_volume(std::move(*v));
     std::optional<Pending> iso;
     {
       std::lock_guard<std::mutex> lock(volume_mu_);
-      iso.swap(next_iso_);
+      v.swap(next_volume_);
+      if (!v) iso.swap(next_iso_);
+      changing_ = v || iso;
     }
+    struct Changed {
+      Server& s;
+      ~Changed() {
+        std::lock_guard<std::mutex> lock(s.volume_mu_);
+        s.changing_ = false;
+      }
+    } changed{*this};
+    if (v) swap_volume(std::move(*v));
     if (iso) restart_at_isovalue(*iso);
   }
   join_threads(display, commands);

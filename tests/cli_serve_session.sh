@@ -10,7 +10,8 @@
 #      equal the file `save` wrote, and differ from the head; undo gives the head back voxel
 #      for voxel; redo the carved file again; every IMAGE in the head's place;
 #   4. an IMAGE named by a LABELMETA, or with "label" in its name, refused with a STATUS; a
-#      scalar image taken;
+#      scalar image taken, and a save right after it writes that image (not the session it
+#      replaces, and not refused while the sessions change over);
 #   5. a save that cannot write (its name is a folder) answered with STATUS 11; serve ends by
 #      itself with exit 6 (a save failed, the session went on) and no servo faults.
 # "PASS serve session" is printed once, last, after every check.
@@ -36,7 +37,8 @@ timeout 90 "$client" 127.0.0.1 "$port" "$head" \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save carved.mha" images 1 \
   compare "$out/carved.mha" compare "$head" \
   cmd undo images 1 compare "$head" cmd redo images 1 compare "$out/carved.mha" \
-  labelmeta Seg image Seg image HeadLabelMap image Head2 cmd "save blocked.mha" >"$out/client.log" 2>&1 ||
+  labelmeta Seg image Seg image HeadLabelMap image Head2 cmd "save taken.mha" rebase compare "$out/taken.mha" \
+  cmd "save blocked.mha" >"$out/client.log" 2>&1 ||
   fail "the client failed (exit $?)"
 wait $serve_pid
 rc=$?
@@ -63,17 +65,18 @@ want = [("code 1: isovalue 1900: done",), ("code 1: isovalue 500: done",), ("cod
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",), ("code 1: undo: done",), ("code 1: redo: done",),
         ("code 10: ", "a LABELMETA describes 'Seg' as a label map"), ("code 10: ", "label map"),
-        ("code 1: volume taken: 64 x 64 x 93",), ("code 11: save blocked.mha: ",)]
+        ("code 1: volume taken: 64 x 64 x 93",), ("code 1: save taken.mha: wrote",), ("code 11: save blocked.mha: ",)]
 if len(status) != len(want): fail(f"{len(status)} STATUS answers, not {len(want)}")
 for got, w in zip(status, want):
     if not all(p in got for p in w): fail(f"STATUS '{got}' does not say {w}")
 cmp = [l for l in log if l.startswith("compare ")]
 def differ(i): return int(re.search(r": (\d+) voxels differ", cmp[i]).group(1))
-if len(cmp) != 4: fail(f"{len(cmp)} comparisons, not 4")
+if len(cmp) != 5: fail(f"{len(cmp)} comparisons, not 5")
 if differ(0) != 0: fail("the received edits differ from the saved file: " + cmp[0])
 if differ(1) < 10: fail("carving changed fewer than 10 voxels: " + cmp[1])
 if differ(2) != 0: fail("after undo the received volume is not the head: " + cmp[2])
 if differ(3) != 0: fail("after redo the received volume is not the saved file: " + cmp[3])
+if differ(4) != 0: fail("a save after an IMAGE did not write that IMAGE: " + cmp[4])
 if any("geometry ok" not in l for l in cmp): fail("an edited IMAGE not in the head's place: " + "; ".join(cmp))
 images = [int(l.split()[1]) for l in log if l.startswith("images ")]
 if not (images[0] >= 1 and images[1] > images[0] and images[2] > images[1]): fail(f"edited IMAGEs received: {images}")

@@ -17,6 +17,8 @@
 //                     IMAGE's dimensions, spacing, directions and centre were BASE's within 1e-3)
 //   labelmeta NAME    a LBMETA describing the image NAME as a label map
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
+//   rebase            the copy starts again from BASE (what the server holds once it took
+//                     an `image`); IMAGEs received later apply to it
 // Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
 #include <igtlClientSocket.h>
 #include <igtlImageMessage.h>
@@ -273,6 +275,11 @@ bool Client::action(const std::string& a) {
     e->SetLabel(1);
     m->AddLabelMetaElement(e);
     send(sock, m);
+    return true;
+  }
+  if (a == "rebase") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    s.copy = base;
     return true;
   }
   if (a == "image") {

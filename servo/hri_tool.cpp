@@ -264,6 +264,42 @@ namespace {
   return Vec3{std::clamp(y.x / sp.x, 0.0, 1.0), std::clamp(y.y / sp.y, 0.0, 1.0), std::clamp(y.z / sp.z, 0.0, 1.0)};
 }
 
+/// One round of nearest_in_cell's projection from u (cell fractions; `ya` the point [m],
+/// `ev` and `g` the excess and its gradient there): X - lambda g on the patch linearised at
+/// u, a component at a face of the cell whose target lies beyond it held there (lambda
+/// solving the patch over the free ones). `passes` > 1 re-tests the face components against
+/// the last pass's lambda, holding or freeing them. The next point (fractions, clamped) in
+/// `next`; false where no free gradient is left.
+bool project_on_patch(const double (&xa)[3], const double (&ya)[3], const Vec3& u, double ev, const Vec3& g,
+                      const Vec3& sp, int passes, Vec3& next) {
+  const double gv[3] = {g.x, g.y, g.z}, uv[3] = {u.x, u.y, u.z};
+  double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
+  double g2 = dot(g, g);
+  if (!(g2 > 0)) return false;
+  double l2 = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);  // lambda = l2 / g2
+  bool held[3] = {false, false, false};
+  for (int pass = 0; pass < passes; ++pass) {
+    bool changed = false;
+    for (int a = 0; a < 3; ++a) {
+      if (!(uv[a] <= 0.0 || uv[a] >= 1.0)) continue;  // not at a face of the cell on this axis: free
+      const double t = xa[a] - gv[a] * l2 / g2;
+      const bool beyond = (uv[a] <= 0.0 && t < 0.0) || (uv[a] >= 1.0 && t > sp[a]);
+      changed = changed || beyond != held[a];
+      held[a] = beyond;
+    }
+    if (pass > 0 && !changed) break;
+    for (int a = 0; a < 3; ++a) {
+      ga[a] = held[a] ? 0.0 : gv[a];
+      xa2[a] = held[a] ? ya[a] : xa[a];
+    }
+    g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
+    if (!(g2 > 0)) return false;
+    l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
+  }
+  next = cell_fractions({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2}, sp);
+  return true;
+}
+
 /// The point of one trilinear cell's surface nearest X (surface_scan): `e` the excess at the
 /// cell's corners (corner c = i + 2 j + 4 k), X and the result relative to the lower corner
 /// [m], `sp` the cell's size [m]. The nearest edge crossing (an exact surface point: the
@@ -312,23 +348,18 @@ CellPoint nearest_in_cell(const double (&e)[8], const double (&xa)[3], const Vec
     for (int it = 0; it < 10; ++it) {
       const double ya[3] = {u.x * sp.x, u.y * sp.y, u.z * sp.z};
       const double ev = eval(u, g);
-      double ga[3] = {g.x, g.y, g.z}, xa2[3] = {xa[0], xa[1], xa[2]};
-      double g2 = dot(g, g);
-      if (!(g2 > 0)) break;
-      const double lx = ev + g.x * (xa[0] - ya[0]) + g.y * (xa[1] - ya[1]) + g.z * (xa[2] - ya[2]);
-      for (int a = 0; a < 3; ++a) {
-        const double ua = a == 0 ? u.x : (a == 1 ? u.y : u.z);
-        if (!(ua <= 0.0 || ua >= 1.0)) continue;  // not at a face of the cell on this axis: free
-        const double t = xa[a] - ga[a] * lx / g2;
-        if ((ua <= 0.0 && t < 0.0) || (ua >= 1.0 && t > sp[a])) {
-          ga[a] = 0;
-          xa2[a] = ya[a];
-        }
+      Vec3 next;
+      if (!project_on_patch(xa, ya, u, ev, g, sp, 1, next)) break;
+      // Stalled at a cell face: the faces re-tested against the projection of the free
+      // axes alone (on a long cell's edge a short axis's gradient, held, no longer pushes the
+      // long axis beyond its face: the nearest point inside the cell, not its edge crossing),
+      // taken where it moves the point by more than the tolerance.
+      if (next.x == u.x && next.y == u.y && next.z == u.z) {
+        Vec3 freed;
+        if (!project_on_patch(xa, ya, u, ev, g, sp, 4, freed)) break;
+        const Vec3 step{(freed.x - u.x) * sp.x, (freed.y - u.y) * sp.y, (freed.z - u.z) * sp.z};
+        if (dot(step, step) > tol * tol) next = freed;
       }
-      g2 = ga[0] * ga[0] + ga[1] * ga[1] + ga[2] * ga[2];
-      if (!(g2 > 0)) break;
-      const double l2 = ev + ga[0] * (xa2[0] - ya[0]) + ga[1] * (xa2[1] - ya[1]) + ga[2] * (xa2[2] - ya[2]);
-      const Vec3 next = clamp_u({xa2[0] - ga[0] * l2 / g2, xa2[1] - ga[1] * l2 / g2, xa2[2] - ga[2] * l2 / g2});
       // A fixed point: every further round would compute the same u (the rounds are a
       // function of u alone), so stopping here gives the same point in fewer rounds.
       if (next.x == u.x && next.y == u.y && next.z == u.z) break;

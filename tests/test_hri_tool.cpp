@@ -339,6 +339,38 @@ class SphereOverlaps {
 
 }  // namespace
 
+// The tapering cylinder along the 3 mm axis of 1 x 1 x 3 mm voxels, 2-4 voxels thick, stroked
+// along its axis up to its tip (the HIP no further: past the tip the sphere rolls over the
+// tip's point, see ThinFeaturesHoldUpToTheForceLimit) by tools of 1, 2 and 3 voxels pressed
+// at 0.1 ... 0.9 of the limit, n = 1 and 10: the tool's centre stays on the entry side.
+// The cone's trilinear surface is flat along each 3 mm cell, so this holds only if the scan
+// finds the nearest point inside a long cell: a projection held at a cell face by a short
+// axis's gradient stopped at the cell's edge crossing, and the plane through that point
+// (its normal toward the proxy) let the sphere roll round it and sink onto the HIP.
+TEST(HriTool, ThinCylinderAlongTheCoarseAxisHoldsUpToItsTip) {
+  int strokes = 0;
+  for (const isotouch::test::ThinCase& tc : isotouch::test::thin_cases()) {
+    if (std::string(tc.name) != "tapering cylinder along z, 1x1x3 mm" || tc.voxels < 2) continue;
+    const isotouch::test::ThinFeature& tf = tc.feature;
+    const double to_tip = dot(Vec3{0.024, 0.024, 0.036} - tf.mid, tf.along);  // from the press point to the tip [m]
+    for (int rv = 1; rv <= 3; ++rv)
+      for (const int n : {1, 10}) {
+        HriParams p = tool_params(rv * 1e-3, n);
+        p.stiffness_n_per_m = 800;
+        p.damping_n_s_per_m = 1.0;
+        p.recovery_time_s = 0.02;
+        for (int l = 1; l <= 9; ++l) {
+          double f = 0;
+          ++strokes;
+          EXPECT_FALSE(isotouch::test::wraps(tf, p, 0.1 * l, tf.along, to_tip - p.tool_radius_m, SphereOverlaps(tf.field, p.tool_radius_m),
+                                             f, false))
+              << tc.voxels << " voxels, tool " << rv << " voxels, n " << n << ", level " << 0.1 * l << ": |F| " << f;
+        }
+      }
+  }
+  EXPECT_EQ(strokes, 3 * 3 * 2 * 9);
+}
+
 // Thin features hold up to the force limit for the spherical tool too: the fins and tapering
 // cylinders 1-4 voxels thick of HriContact.ThinFeaturesHoldUpToTheForceLimit (1 mm and
 // 1 x 1 x 3 mm voxels), tools of 1, 2 and 3 voxels (of the finest spacing), pressed at 0.1

@@ -348,6 +348,37 @@ std::pair<double, double> chain_floor_ms(const FloorSamples& floors, const std::
 }  // namespace
 
 namespace {
+/// The chain's passes' device times summed [ms] (NaN where one has no time).
+double passes_ms(const engine::ChainOutput& g, std::size_t np) {
+  double sum = 0;
+  for (std::size_t i = 0; i < np && i < g.passes.size(); ++i) sum += g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN;
+  return sum;
+}
+
+/// Pairs of the chain and the standalone set run back to back beside each repetition's pair
+/// (kExtraPairs more, the order alternating), so that the chain / set ratio is a median of
+/// ratios of runs at the same moment's load rather than a ratio of medians of three.
+constexpr int kExtraPairs = 4;
+void extra_pairs(engine::PassChain& chain, StandaloneSet& set, const engine::Volume& v, std::size_t np, int rep,
+                 std::vector<double>& chain_pair_ms) {
+  for (int k = 0; k < kExtraPairs; ++k) {
+    const bool set_first = (rep + k) % 2;
+    if (set_first) set.run();
+    chain_pair_ms.push_back(passes_ms(chain.run(v), np));
+    if (!set_first) set.run();
+  }
+}
+
+/// The median over pairs of chain[i] / set[i] (NaN without pairs or with a non-finite one).
+double paired_ratio(const std::vector<double>& chain, const std::vector<double>& set) {
+  if (chain.empty() || chain.size() != set.size()) return kNaN;
+  std::vector<double> r;
+  for (std::size_t i = 0; i < chain.size(); ++i) r.push_back(ratio(chain[i], set[i]));
+  for (double x : r)
+    if (!std::isfinite(x)) return kNaN;
+  return median(r);
+}
+
 /// The standalone pass set of a case (the list without closing: the same work as the dense
 /// chain), or null with r.standalone.why saying why not.
 std::unique_ptr<StandaloneSet> make_standalone(engine::VulkanContext* ctx, bool chain, const engine::Volume& v,
@@ -457,6 +488,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
 
   // The sparse CPU engines publish into recycled pools too (as the GPU chain: a run per
   // isovalue, pages resident), each engine its own recycler.
+  std::vector<double> chain_pair_ms;  // the chain's device time in each run paired with the set's
   const auto cpu_pools = std::make_shared<engine::PoolRecycler>();
   const auto cpu_mt_pools = std::make_shared<engine::PoolRecycler>();
   for (int rep = 0; rep < repetitions; ++rep) {
@@ -472,7 +504,9 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
       gpu_wall.push_back(ms_since(t0));
       for (std::size_t i = 0; i < np && i < g.passes.size(); ++i)
         gpu_ms[i].push_back(g.passes[i].ms >= 0 ? g.passes[i].ms : kNaN);
+      if (standalone) chain_pair_ms.push_back(passes_ms(g, np));
       if (standalone && rep % 2 == 0) standalone->run();
+      if (standalone) extra_pairs(*chain, *standalone, v, np, rep, chain_pair_ms);
       if (floors) try {
           floors->sample(v);
         } catch (const std::exception& e) {
@@ -540,6 +574,7 @@ CaseResult run_case(engine::VulkanContext* ctx, const std::string& gpu_why, cons
   }
   r.legacy_gpu_wall_ms = median(legacy_wall);
   if (standalone) r.standalone = standalone->figures();
+  r.chain_pair_ms = chain_pair_ms;
   if (floors) {
     r.copy_floor_ms = floors->median_of(FloorTraffic::Samples);
     std::tie(r.chain_floor_ms, r.chain_passes_floor_ms) = chain_floor_ms(*floors, dense);
@@ -672,7 +707,7 @@ void finish_case(CaseResult& r) {
   r.chain_floor_over_memcpy = ratio(r.chain_floor_ms, r.memcpy_ms);
   r.chain_over_floor = ratio(r.sum.gpu_ms, r.chain_floor_ms);
   r.chain_over_passes_floor = ratio(r.sum.gpu_ms, r.chain_passes_floor_ms);
-  r.chain_over_standalone = r.standalone.why.empty() ? ratio(r.sum.gpu_ms, r.standalone.best_set_ms) : kNaN;
+  r.chain_over_standalone = r.standalone.why.empty() ? paired_ratio(r.chain_pair_ms, r.standalone.set_ms_per_run) : kNaN;
   r.gradient_over_floor = kNaN;
   for (const PassRow& p : r.passes)
     if (p.label == "gradient") r.gradient_over_floor = ratio(p.gpu_ms, r.copy_floor_ms);
@@ -956,6 +991,14 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   }
 }
 
+/// How many chain/set pairs each case made, e.g. "head 15 pairs, chest 15 pairs".
+std::string pairs_text(const std::vector<CaseResult>& res) {
+  std::string t;
+  for (const auto& r : res)
+    if (r.standalone.why.empty()) t += (t.empty() ? "" : ", ") + r.name + " " + std::to_string(r.chain_pair_ms.size()) + " pairs";
+  return t.empty() ? "no pairs" : t;
+}
+
 /// The dense chain's passes beside the standalone set's (bench_reference.h), and the chain
 /// against the set and against the device's copy floor for its bytes.
 void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std::ostream& out, Csv& csv) {
@@ -980,7 +1023,10 @@ void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std:
       csv.row("standalone", r.name, "", s.label, "same_bits", s.same_bits ? "1" : "0", "", "");
     }
   }
-  out << "\nchain floor: copy_x4 once per pass with its loads and stores (the chain's bytes); passes floor: "
+  out << "\nchain / set: the median over the runs of the chain and the set made back to back (" << pairs_text(res)
+      << ") of the chain's device time over the set's in the same pair, so both see the same moment's load; "
+         "the two [ms] columns are medians over all runs. chain floor: copy_x4 once per pass with its loads and "
+         "stores (the chain's bytes); passes floor: "
          "copy_x4 once per pass over the field as the chain runs them (a Gaussian's x, y and z).\n\n"
          "| case | dense chain [ms] | best standalone set [ms] | chain / set | chain floor [ms] | chain / floor | "
          "passes floor [ms] | chain / passes floor | CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n";

@@ -210,7 +210,11 @@ struct CaseResult {
   /// The same work as standalone passes in the fastest forms measured on lavapipe
   /// (bench_reference.h), timed in the same repetitions; `standalone.why` says why not.
   StandaloneFigures standalone;
-  double chain_over_standalone = kNaN;    ///< sum.gpu_ms / standalone.best_set_ms
+  /// The chain's device time in each run paired with a standalone set's run beside it [ms]
+  /// (the same order as standalone.set_ms_per_run).
+  std::vector<double> chain_pair_ms;
+  /// The median over those pairs of chain / set (each pair at the same moment's load).
+  double chain_over_standalone = kNaN;
 };
 
 /// The dense pass list: filters, gradient, brick_minmax(1); the sparse list is the same

@@ -225,6 +225,9 @@ StandaloneFigures StandaloneSet::figures() const {
   const StandaloneRow& mm = f.rows[rows_faster ? kMinMaxRows : kMinMaxSegments];
   f.best_minmax = mm.label;
   f.best_set_ms = f.rows[kGauss].ms + f.rows[kGradient].ms + mm.ms;
+  const int best = rows_faster ? kMinMaxRows : kMinMaxSegments;
+  for (std::size_t i = 0; i < m.ms[kGauss].size(); ++i)
+    f.set_ms_per_run.push_back(m.ms[kGauss][i] + m.ms[kGradient][i] + m.ms[best][i]);
   if (m.ms[0].empty()) f.why = "no run";
   return f;
 }

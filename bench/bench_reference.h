@@ -36,6 +36,9 @@ struct StandaloneFigures {
   std::vector<StandaloneRow> rows;  ///< gaussian, gradient, brick min/max (rows), (segments)
   double best_set_ms = 0;           ///< gaussian + gradient + the faster brick min/max [ms]
   std::string best_minmax;          ///< the label of that brick min/max
+  /// The best set's time [ms] in each timed run, in run order (gaussian + gradient + that
+  /// brick min/max of the same run): for ratios paired with runs beside it.
+  std::vector<double> set_ms_per_run;
   bool all_same_bits = false;
 };
 

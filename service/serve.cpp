@@ -392,14 +392,20 @@ void Server::ask_isovalue(const Pending& p) {
 }
 
 /// True once every edit submitted so far was applied or refused (save sees them all).
+namespace {
+/// Every edit submitted to the session has been applied, refused or dropped.
+bool edits_settled(const session::LiveStats& st) {
+  return st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested;
+}
+}  // namespace
+
 bool Server::wait_edits_applied(double timeout_s) {
   const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   for (;;) {
     {
       std::lock_guard<std::mutex> lock(session_mu_);
       if (!session_) return true;
-      const session::LiveStats st = session_->live->stats(0);
-      if (st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested) return true;
+      if (edits_settled(session_->live->stats(0))) return true;
     }
     if (std::chrono::steady_clock::now() > until) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -421,8 +427,7 @@ std::shared_ptr<EditMirror> Server::settled_mirror(double timeout_s) {
     if (!changing) {
       std::lock_guard<std::mutex> lock(session_mu_);
       if (session_ && !preparing_) {
-        const session::LiveStats st = session_->live->stats(0);
-        if (st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested) return session_->mirror;
+        if (edits_settled(session_->live->stats(0))) return session_->mirror;
       }
     }
     if (std::chrono::steady_clock::now() > until) return nullptr;

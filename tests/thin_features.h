@@ -37,8 +37,24 @@ struct ThinFeature {
   Vec3 n_entry;        ///< outward normal of the side pressed (unit)
   double half = 0;     ///< half the thickness (fin) / the radius (cylinder) under the press point [m]
   Vec3 along, across;  ///< stroke directions (unit, perpendicular to n_entry)
-  double along_len = 0, across_len = 0;  ///< stroke lengths for a point [m] (a tool adds its radius)
+  double along_len = 0, across_len = 0;  ///< stroke lengths for a point [m] (stroke_len: a tool's)
+  /// The along stroke ends at the feature's end (a tapering cylinder's tip, along_len from
+  /// the press point): a tool's stops where its sphere reaches that end, along_len less r.
+  bool along_to_end = false;
 };
+
+/// The length of stroke `s` (0 along, 1 across) of `tf` for a tool of radius r [m] (0: a
+/// point). Across, and along a fin's edge, the tool goes r farther than the point (its
+/// sphere clears the edge by what the point does). Along a tapering cylinder the stroke ends
+/// when the tool's sphere reaches the tip: past the tip's end no material lies between the
+/// tool's centre and a HIP pressed below the axis, and a rigid burr (a god-object: the
+/// nearest free place to the HIP, reached by sliding) rolls round the end cap onto the HIP,
+/// its distance to the HIP falling all the way; a hold there would keep a burr stuck to a
+/// spike's point. HriTool.ABurrStrokedPastASpikesTipRollsOffItsEnd tests that roll-off.
+inline double stroke_len(const ThinFeature& tf, int s, double r) {
+  if (s == 0) return tf.along_to_end ? tf.along_len - r : tf.along_len + r;
+  return tf.across_len + r;
+}
 
 /// A fin: the plate |m.(x - c)| < w/2 on the side t.(x - c) < 0 of its straight free edge
 /// (t perpendicular to m), pressed on its face 1.5 voxels in from the edge; stroked along
@@ -66,7 +82,7 @@ inline ThinFeature fin(Vec3 m, Vec3 t, double w, Vec3 sp) {
 
 /// A tapering cylinder along unit a: radius R(s) = R0 (-s / L) for s = a.(x - c) in [-L, 0]
 /// (the tip at c), R0 beyond; pressed from n (perpendicular to a) where the diameter is
-/// `diam`, stroked along the axis toward the tip and across it.
+/// `diam`, stroked along the axis up to the tip (stroke_len) and across it.
 inline ThinFeature taper(Vec3 a, Vec3 n, double r0, double diam, Vec3 sp) {
   const Vec3 c{0.024, 0.024, 0.036};
   const double len = 0.024;  // taper length [m]
@@ -92,7 +108,8 @@ inline ThinFeature taper(Vec3 a, Vec3 n, double r0, double diam, Vec3 sp) {
   tf.half = 0.5 * diam;
   tf.along = a;
   tf.across = cross(n, a);
-  tf.along_len = -s0 + 0.004;
+  tf.along_len = -s0;  // to the tip
+  tf.along_to_end = true;
   tf.across_len = 0.5 * diam + 0.004;
   return tf;
 }
@@ -185,7 +202,7 @@ inline double lowest_wrapping_press(const ThinCase& tc, const servo::HriParams& 
     p.plane_update_period = n;
     for (int s = 0; s < 2; ++s) {
       const Vec3 dir = s == 0 ? tc.feature.along : tc.feature.across;
-      const double len = (s == 0 ? tc.feature.along_len : tc.feature.across_len) + p.tool_radius_m;
+      const double len = stroke_len(tc.feature, s, p.tool_radius_m);
       for (int l = 1; l <= 10; ++l) {
         double f = 0;
         ++runs;

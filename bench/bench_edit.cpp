@@ -17,6 +17,9 @@
 #include <stdexcept>
 #include <thread>
 
+#include <sys/prctl.h>
+
+#include "isotouch/bench/edit_floor.h"
 #include "isotouch/session/brush.h"
 #include "isotouch/session/edit_session.h"
 #include "isotouch/core/field_view.h"
@@ -27,6 +30,7 @@
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/servo_thread.h"
 #include "isotouch/sim/sim_device_io.h"
 #include "isotouch/servo/triple_buffer.h"
@@ -79,17 +83,25 @@ Verdict misses_verdict(long missed_edit, long ticks_edit, long missed_idle, long
   std::ostringstream o;
   o << "servo missed deadlines while editing vs idle";
   if (ticks_edit <= 0 || ticks_idle <= 0) {
-    o << ": not measured (a phase had no servo tick); target editing <= idle";
+    o << ": not measured (a phase had no servo tick); target editing <= idle + 3 sqrt(idle)";
+    v.text = o.str();
+    return v;
+  }
+  // The idle count scaled to the editing phase's ticks, and its Poisson allowance.
+  const double ref = double(missed_idle) * double(ticks_edit) / double(ticks_idle);
+  const double limit = ref + 3.0 * std::sqrt(ref);
+  o << std::fixed << std::setprecision(2) << " = " << missed_edit << " in " << ticks_edit << " ticks ("
+    << 1e4 * double(missed_edit) / double(ticks_edit) << " per 10,000) against idle " << missed_idle << " in "
+    << ticks_idle << " (" << 1e4 * double(missed_idle) / double(ticks_idle) << " per 10,000): target editing <= "
+    << ref << " + 3 sqrt(" << ref << ") = " << limit;
+  if (ticks_edit < kMinJudgedTicks || ticks_idle < kMinJudgedTicks) {
+    o << ", undecided: the target needs >= " << kMinJudgedTicks << " ticks in each phase";
     v.text = o.str();
     return v;
   }
   v.measured = true;
-  // missed_edit / ticks_edit <= missed_idle / ticks_idle, in integers (no rounding).
-  v.met = (long long)missed_edit * (long long)ticks_idle <= (long long)missed_idle * (long long)ticks_edit;
-  o << std::fixed << std::setprecision(2) << " = " << missed_edit << " in " << ticks_edit << " ticks ("
-    << 1e4 * double(missed_edit) / double(ticks_edit) << " per 10,000) against idle " << missed_idle << " in "
-    << ticks_idle << " (" << 1e4 * double(missed_idle) / double(ticks_idle)
-    << " per 10,000): target editing <= idle" << (v.met ? " met" : " NOT met");
+  v.met = double(missed_edit) <= limit;
+  o << (v.met ? " met" : " NOT met");
   v.text = o.str();
   return v;
 }
@@ -192,6 +204,8 @@ std::int64_t VersionSpy::seen_ns(std::uint64_t v) const {
 namespace {
 constexpr double kRadiiMm[] = {2.0, 5.0, 10.0};
 constexpr double kSeenTimeoutS = 2.0;  // a servo at >= 1 kHz reads a snapshot long before this
+constexpr double kTargetMedianMs = 0.25;  // one tick at 4 kHz
+constexpr double kTargetP99Ms = 1.0;
 
 std::string num(double v, int prec = 3) {
   if (!std::isfinite(v)) return "n/a";
@@ -226,6 +240,10 @@ struct EditRecord {
   double brush_ms = kNaN;         ///< BrushResult::wall_ms (GPU: dispatch + download of dirty bricks)
   double brush_gpu_ms = kNaN;     ///< BrushResult::gpu_ms (device timestamps)
   double update_ms = kNaN;        ///< LiveUpdateStats::total_ms, or the dense chain's wall time
+  double recompute_ms = kNaN;     ///< LiveUpdateStats::recompute_ms (passes on the recomputed bricks)
+  double snapshot_ms = kNaN;      ///< LiveUpdateStats::publish_ms (the new snapshot built)
+  double apply_ms = kNaN;         ///< EditOutcome::wall_ms: EditSession::apply, everything included
+  bool on_device = false;         ///< the brush ran on the Vulkan device
   double publish_to_tick_ms = kNaN;  ///< TripleBuffer::publish called -> first tick reading it
   double dirty = kNaN, recomputed = kNaN;  ///< bricks
 };
@@ -293,9 +311,13 @@ EditRecord timed_live_edit(EditSession& session, Rig& rig, const session::Brush&
   r.brush_ms = oc.brush.wall_ms;
   r.brush_gpu_ms = oc.brush.gpu_ms >= 0 ? oc.brush.gpu_ms : kNaN;
   r.dirty = double(oc.brush.dirty.size());
+  r.on_device = oc.brush.on_device;
   if (!oc.published) return r;
   r.changed = true;
   r.update_ms = oc.update.total_ms;
+  r.recompute_ms = oc.update.recompute_ms;
+  r.snapshot_ms = oc.update.publish_ms;
+  r.apply_ms = oc.wall_ms;
   r.recomputed = double(oc.update.recomputed);
   std::shared_ptr<const core::SampleField> snap = session.current();
   const std::uint64_t v = snap->version;
@@ -393,6 +415,7 @@ struct Bench {
   double max_r = 0;
   std::mt19937 jitter;
   std::vector<std::string> failures;
+  std::uint64_t next_version = 0;  ///< the first snapshot version no phase has used (floor, dense)
 
   Bench(const BenchEditOptions& opt, std::ostream& prog) : o(opt), progress(prog), jitter(opt.seed + 17) {}
   Bench(const Bench&) = delete;
@@ -404,10 +427,16 @@ struct Bench {
     const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
     return make_brush(kind, point(std::size_t(ri) * per_radius + std::size_t(i / 2)), kRadiiMm[ri] * 1e-3, targets);
   }
-  /// A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick.
+  /// A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick. The
+  /// thread's timer slack is 1 ns meanwhile: with the default 50 us the kernel may defer the
+  /// wake-up to coalesce it with the servo's own timer, which wakes just before a tick, so
+  /// the edits would arrive at a phase tied to the tick instead of a uniform one.
   void jitter_sleep() {
+    const int slack = prctl(PR_GET_TIMERSLACK, 0UL, 0UL, 0UL, 0UL);
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     std::this_thread::sleep_for(
         std::chrono::microseconds(1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
+    if (slack > 0) prctl(PR_SET_TIMERSLACK, static_cast<unsigned long>(slack), 0UL, 0UL, 0UL);
   }
 };
 
@@ -488,6 +517,7 @@ Latency measure_latency(Bench& b) {
   EditSession& session = *b.session;
   servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
   rig.note(servo, servo.start());
+  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
   // Let the probe reach the surface (<= 2 s), then warm up (first dispatches, pipelines).
   const std::int64_t until = now_ns() + 2'000'000'000;
   while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
@@ -583,6 +613,88 @@ std::vector<Phase> measure_sustained(Bench& b) {
   return phases;
 }
 
+/// One edit of the floor program [ms]; NaN where not measured.
+struct FloorRecord {
+  double radius_mm = 0;
+  double brush_ms = kNaN;      ///< CPU reference brush (one thread)
+  double brush_vk_ms = kNaN;   ///< the same brush on the Vulkan device: one submit, wait, download of the box
+  double passes_ms = kNaN, snapshot_ms = kNaN, publish_to_tick_ms = kNaN, total_ms = kNaN;
+  double recomputed = kNaN;
+};
+
+/// What the floor phase measured.
+struct Floor {
+  std::vector<FloorRecord> edits;
+  std::string vk = "none";  ///< the Vulkan brush's device, or why there is none
+  std::string why_not;      ///< non-empty: the floor could not run (the snapshot is not bricked fp32)
+};
+
+/// 2. The floor: the same latency edits, in the same order from the same volume, by the
+/// smallest program doing their work (bench/edit_floor.h: CPU brush, passes on the reached
+/// bricks, a snapshot published, first tick reading it), against the same servo; the
+/// brush also on the Vulkan device alone (one submit: dispatch, wait, download).
+Floor measure_floor(Bench& b) {
+  Floor fl;
+  Rig& rig = b.rig;
+  std::unique_ptr<EditFloor> prog;
+  try {
+    prog = std::make_unique<EditFloor>(b.original, *b.first, b.lo.passes, b.iso);
+  } catch (const std::invalid_argument& e) {
+    fl.why_not = e.what();
+    return fl;
+  }
+  std::unique_ptr<session::BrushEngine> vk;
+  engine::Volume vk_mirror;
+  if (b.ctx) {
+    auto r = session::BrushEngine::create(*b.ctx, b.original);
+    if (r) {
+      vk = std::move(*r.value);
+      vk_mirror = b.original;
+      fl.vk = b.ctx->info().name;
+    } else {
+      fl.vk = "none (" + r.error + ")";
+    }
+  }
+  std::uint64_t version = std::max(b.session->current()->version + 1, b.next_version);
+  servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
+  rig.note(servo, servo.start());
+  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
+  auto step = [&](const session::Brush& br, double radius_mm, bool keep) {
+    FloorRecord r;
+    r.radius_mm = radius_mm;
+    if (vk) r.brush_vk_ms = vk->apply(br, &vk_mirror).wall_ms;
+    if (version >= rig.spy->capacity()) throw std::runtime_error("floor: snapshot versions past the spy's capacity");
+    const std::int64_t t0 = now_ns();
+    FloorStep f = prog->apply(br, version);
+    if (!f.snapshot) return;
+    const std::int64_t t1 = now_ns();
+    rig.published.publish(std::move(f.snapshot));
+    const std::int64_t ts = wait_seen(*rig.spy, version, kSeenTimeoutS);
+    if (ts == 0) b.failures.push_back("floor: the servo did not read snapshot " + std::to_string(version));
+    ++version;
+    if (!keep || ts == 0) return;
+    r.brush_ms = f.brush_ms;
+    r.passes_ms = f.passes_ms;
+    r.snapshot_ms = f.snapshot_ms;
+    r.recomputed = double(f.recomputed);
+    r.publish_to_tick_ms = ms_between(t1, ts);
+    r.total_ms = ms_between(t0, ts);
+    fl.edits.push_back(r);
+  };
+  b.progress << "[bench edit] floor: the same edits by the smallest program doing their work\n" << std::flush;
+  const core::Vec3 warm = b.point(b.pts.size() - 1);  // the latency phase's warm-up edits, untimed
+  step(make_brush(session::BrushKind::kCarve, warm, 5e-3, b.targets), 5, false);
+  step(make_brush(session::BrushKind::kAdd, warm, 5e-3, b.targets), 5, false);
+  for (int ri = 0; ri < 3; ++ri)
+    for (int i = 0; i < b.o.edits_per_radius; ++i) {
+      b.jitter_sleep();
+      step(b.latency_brush(ri, i), kRadiiMm[ri], true);
+    }
+  servo.stop();
+  b.next_version = version;
+  return fl;
+}
+
 /// What the dense comparison measured.
 struct Dense {
   std::vector<EditRecord> edits;
@@ -607,9 +719,10 @@ Dense measure_dense(Bench& b) {
                    : "run_chain_cpu (one thread, dense fp32)" + (chain_why.empty() ? "" : ": " + chain_why);
   b.progress << "[bench edit] dense: " << d.engine << "\n" << std::flush;
   session::Sculptor sculptor(b.original, b.brush_ctx);
-  std::uint64_t version = b.session->current()->version + 1;
+  std::uint64_t version = std::max(b.session->current()->version + 1, b.next_version);
   servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
   rig.note(servo, servo.start());
+  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
   auto recompute = [&]() {
     engine::ChainOutput c = chain ? chain->run(sculptor.volume()) : engine::run_chain_cpu(sculptor.volume(), passes);
     if (!c.samples) throw std::runtime_error("dense chain: no samples (the pass list has no gradient)");
@@ -688,8 +801,7 @@ void write_header(std::ostream& out, Bench& b, const Latency& lat) {
       << (first->bricks ? std::to_string(first->bricks->active_bricks()) : std::string("?")) << " active bricks\n"
       << "- Vulkan device: " << device_text << "\n"
       << "- brushes: "
-      << (session.sculptor().on_gpu() ? std::string("on the Vulkan device (session::BrushEngine)")
-                                      : std::string("CPU reference (one thread)"))
+      << session.sculptor().describe_path()
       << "; material " << targets.material << ", empty " << targets.empty << ", strength |material - empty|, falloff 0.5\n"
       << "- servo: HRI at " << num(o.rate_hz, 0) << " Hz (K " << hp.stiffness_n_per_m << " N/m, plane every "
       << hp.plane_update_period << " ticks) on a simulated device pressing " << num(sp.press_depth_m * 1e3, 1)
@@ -788,6 +900,86 @@ LatencyFigures write_latency(std::ostream& out, Csv& csv, const Bench& b, const 
       << total_bricks << " means a full recompute.\n";
 
   return fig;
+}
+
+/// Picks `field` of the floor's edits of `radius`.
+template <class F>
+std::vector<double> pick_floor(const std::vector<FloorRecord>& recs, double radius, F field) {
+  std::vector<double> x;
+  for (const auto& r : recs)
+    if (r.radius_mm == radius) x.push_back(field(r));
+  return x;
+}
+
+/// The floor's table, and the 5 mm stages of the product beside the floor's. Returns the
+/// floor's 5 mm median [ms] (NaN if not measured).
+double write_floor(std::ostream& out, Csv& csv, const Bench& b, const Floor& fl, const Latency& lat) {
+  out << "\n## Floor: the smallest program doing the same work (same run, same servo)\n\n";
+  if (!fl.why_not.empty()) {
+    out << "Not measured: " << fl.why_not << ".\n";
+    return kNaN;
+  }
+  out << "The same edits in the same order from the same volume (bench/edit_floor.h): the CPU reference brush on "
+         "the touched bricks of its own copy, the passes (selection, exact range, samples: run_sparse_cpu's per-brick "
+         "code) on every brick the brush's voxel box reaches, a new snapshot (table and tiles copied, new slots "
+         "written, the rest shared), published into the same triple buffer and read by the same servo; no undo, no "
+         "shadow copy, no candidate bookkeeping. Vulkan brush: the same brush on "
+      << fl.vk << " alone (one submit: dispatch, wait, download of the touched box), not part of the floor's total.\n\n"
+      << "| radius [mm] | edits | median [ms] | p99 [ms] | brush CPU [ms] | brush Vulkan, one submit [ms] | passes [ms] "
+         "| snapshot [ms] | publish-to-tick [ms] | recomputed bricks |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  double floor5 = kNaN;
+  for (double rad : kRadiiMm) {
+    const Spread tot = spread(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.total_ms; }));
+    const double br = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.brush_ms; }));
+    const double vk = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.brush_vk_ms; }));
+    const double pa = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.passes_ms; }));
+    const double sn = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.snapshot_ms; }));
+    const double pt = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.publish_to_tick_ms; }));
+    const double rc = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.recomputed; }));
+    out << "| " << num(rad, 0) << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " | "
+        << num(br) << " | " << num(vk) << " | " << num(pa) << " | " << num(sn) << " | " << num(pt) << " | "
+        << num(rc, 0) << " |\n";
+    const std::string rs = num(rad, 0);
+    csv.row("floor", rs, "all", "median_ms", csv_num(tot.median), "ms");
+    csv.row("floor", rs, "all", "p99_ms", csv_num(tot.p99), "ms");
+    csv.row("floor", rs, "all", "brush_cpu_median_ms", csv_num(br), "ms");
+    csv.row("floor", rs, "all", "brush_vulkan_median_ms", csv_num(vk), "ms");
+    csv.row("floor", rs, "all", "passes_median_ms", csv_num(pa), "ms");
+    csv.row("floor", rs, "all", "snapshot_median_ms", csv_num(sn), "ms");
+    csv.row("floor", rs, "all", "publish_to_tick_median_ms", csv_num(pt), "ms");
+    if (rad == 5.0) floor5 = tot.median;
+  }
+  // 5 mm, stage by stage: the product's parts beside the floor's.
+  auto prod = [&](auto f) { return median(pick(lat.edits, 5.0, -1, f)); };
+  auto flo = [&](auto f) { return median(pick_floor(fl.edits, 5.0, f)); };
+  const double p_brush = prod([](const EditRecord& r) { return r.brush_ms; });
+  const double p_rec = prod([](const EditRecord& r) { return r.recompute_ms; });
+  const double p_snap = prod([](const EditRecord& r) { return r.snapshot_ms; });
+  const double p_rest = prod([](const EditRecord& r) { return r.apply_ms - r.brush_ms - r.update_ms; });
+  const double p_ptt = prod([](const EditRecord& r) { return r.publish_to_tick_ms; });
+  const double p_tot = prod([](const EditRecord& r) { return r.total_ms; });
+  std::size_t on_device5 = 0, n5 = 0;
+  for (const EditRecord& r : lat.edits)
+    if (r.radius_mm == 5.0 && r.changed) {
+      ++n5;
+      on_device5 += r.on_device ? 1 : 0;
+    }
+  out << "\n5 mm edits, stage by stage (medians of each stage, so they need not add up to the total's median):\n\n"
+      << "| stage | product [ms] | floor [ms] |\n|---|---:|---:|\n"
+      << "| brush | " << num(p_brush) << " | " << num(flo([](const FloorRecord& r) { return r.brush_ms; })) << " |\n"
+      << "| passes on the recomputed bricks | " << num(p_rec) << " | "
+      << num(flo([](const FloorRecord& r) { return r.passes_ms; })) << " |\n"
+      << "| snapshot built | " << num(p_snap) << " | " << num(flo([](const FloorRecord& r) { return r.snapshot_ms; }))
+      << " |\n"
+      << "| rest of EditSession::apply (undo backup, history, log) | " << num(p_rest) << " | - |\n"
+      << "| publish to the first tick reading it | " << num(p_ptt) << " | "
+      << num(flo([](const FloorRecord& r) { return r.publish_to_tick_ms; })) << " |\n"
+      << "| **edit to haptics** (target <= 0.250) | **" << num(p_tot) << "** | **" << num(floor5) << "** |\n"
+      << "\nPath of the product's brushes: " << b.session->sculptor().describe_path() << "; 5 mm brushes on the device: "
+      << on_device5 << " of " << n5 << ". Snapshot updates: " << b.session->live().describe() << ".\n"
+      << "At " << num(b.o.rate_hz, 0) << " Hz a snapshot published at a uniformly random phase waits "
+      << num(0.5e3 / b.o.rate_hz) << " ms for the next tick on average: the floor of publish-to-tick.\n";
+  return floor5;
 }
 
 void write_dense(std::ostream& out, Csv& csv, const Bench& b, const Dense& d, const LatencyFigures& fig) {
@@ -895,23 +1087,31 @@ SustainedFigures write_sustained(std::ostream& out, Csv& csv, const Bench& b, co
 
 /// The verdicts and what failed to run; returns the exit code (1 if something failed).
 int write_verdicts(std::ostream& out, Csv& csv, const Bench& b, const Latency& lat, const LatencyFigures& lf,
-                   const SustainedFigures& sf) {
+                   const SustainedFigures& sf, double floor5) {
   const double med5 = lf.med5, p99_5 = lf.p99_5, rate = sf.rate;
   int rc = 0;
   out << "\n## Verdicts (computed from the figures above)\n\n";
   std::vector<Verdict> vs;
-  vs.push_back(verdict_at_most("5 mm edit-to-haptics median [ms]", med5, 1.0, 3, "no 5 mm edit was read by the servo"));
-  vs.push_back(verdict_at_most("5 mm edit-to-haptics p99 [ms]", p99_5, 5.0, 3, "no 5 mm edit was read by the servo"));
+  vs.push_back(verdict_at_most("5 mm edit-to-haptics median, one at a time [ms]", med5, kTargetMedianMs, 3,
+                               "no 5 mm edit was read by the servo"));
+  vs.push_back(verdict_at_most("5 mm edit-to-haptics p99, one at a time [ms]", p99_5, kTargetP99Ms, 3,
+                               "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_least("sustained 5 mm edits per second", rate, 200.0, 1, "no editing phase"));
-  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(sf.ed_e2h, 0.5), 1.0,
-                               3, "no sustained edit was read by the servo"));
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(sf.ed_e2h, 0.5),
+                               kTargetMedianMs, 3, "no sustained edit was read by the servo"));
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics p99 (live session) [ms]", percentile(sf.ed_e2h, 0.99),
+                               kTargetP99Ms, 3, "no sustained edit was read by the servo"));
   vs.push_back(misses_verdict(sf.ed_missed, sf.ed_ticks, sf.id_missed, sf.id_ticks));
   for (const auto& vd : vs) {
     out << "- " << vd.text << "\n";
     csv.row("verdict", "", "", "\"" + vd.text + "\"", vd.measured ? (vd.met ? "1" : "0") : "", "");
   }
-  out << "\nTargets (on lavapipe): 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more "
-         "servo misses than idle. A missed target is a result, not a failure (exit 0).\n";
+  out << "\nFloor (the smallest program doing the same work, measured above in this run): 5 mm median " << num(floor5)
+      << " ms, beside the target " << num(kTargetMedianMs) << " ms.\n"
+      << "\nTargets: 5 mm edit-to-haptics median <= " << num(kTargetMedianMs) << " ms (one servo period at 4 kHz) one at a time and sustained, p99 <= " << num(kTargetP99Ms)
+      << " ms; >= 200 edits/s; servo misses while editing <= idle's (scaled to the same ticks) + 3 sqrt(that), "
+         "each phase >= "
+      << kMinJudgedTicks << " ticks. A missed target is a result, not a failure (exit 0).\n";
   for (const auto& f : b.failures) {
     out << "\nFAILED: " << f << "\n";
     rc = 1;
@@ -929,14 +1129,16 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   set_up(b);
   const Latency lat = measure_latency(b);
   const std::vector<Phase> phases = measure_sustained(b);
+  const Floor floor = measure_floor(b);
   const Dense dense = measure_dense(b);
 
   Csv csv;
   write_header(out, b, lat);
   const LatencyFigures lf = write_latency(out, csv, b, lat);
+  const double floor5 = write_floor(out, csv, b, floor, lat);
   write_dense(out, csv, b, dense, lf);
   const SustainedFigures sf = write_sustained(out, csv, b, phases);
-  const int rc = write_verdicts(out, csv, b, lat, lf, sf);
+  const int rc = write_verdicts(out, csv, b, lat, lf, sf, floor5);
   if (!o.out_csv.empty()) {
     write_file_atomic(o.out_csv, csv.s.str());
     progress << "[bench edit] wrote " << o.out_csv << "\n";

@@ -902,6 +902,29 @@ LatencyFigures write_latency(std::ostream& out, Csv& csv, const Bench& b, const 
   return fig;
 }
 
+/// One figure of a table row: its CSV metric (unit ms when it ends in "_ms") and value.
+struct Cell {
+  const char* metric;
+  double value;
+  int digits = 3;
+};
+
+/// "| radius | edits | median | p99 | cells... |", and the same as CSV rows of `section`.
+void table_row(std::ostream& out, Csv& csv, const std::string& section, double radius_mm, const Spread& tot,
+               const std::vector<Cell>& cells) {
+  const std::string rs = num(radius_mm, 0);
+  out << "| " << rs << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " |";
+  csv.row(section, rs, "all", "edits", std::to_string(tot.n), "");
+  csv.row(section, rs, "all", "median_ms", csv_num(tot.median), "ms");
+  csv.row(section, rs, "all", "p99_ms", csv_num(tot.p99), "ms");
+  for (const Cell& c : cells) {
+    out << " " << num(c.value, c.digits) << " |";
+    const std::string m = c.metric;
+    csv.row(section, rs, "all", m, csv_num(c.value), m.size() > 3 && m.ends_with("_ms") ? "ms" : "");
+  }
+  out << "\n";
+}
+
 /// Picks `field` of the floor's edits of `radius`.
 template <class F>
 std::vector<double> pick_floor(const std::vector<FloorRecord>& recs, double radius, F field) {
@@ -936,17 +959,9 @@ double write_floor(std::ostream& out, Csv& csv, const Bench& b, const Floor& fl,
     const double sn = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.snapshot_ms; }));
     const double pt = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.publish_to_tick_ms; }));
     const double rc = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.recomputed; }));
-    out << "| " << num(rad, 0) << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " | "
-        << num(br) << " | " << num(vk) << " | " << num(pa) << " | " << num(sn) << " | " << num(pt) << " | "
-        << num(rc, 0) << " |\n";
-    const std::string rs = num(rad, 0);
-    csv.row("floor", rs, "all", "median_ms", csv_num(tot.median), "ms");
-    csv.row("floor", rs, "all", "p99_ms", csv_num(tot.p99), "ms");
-    csv.row("floor", rs, "all", "brush_cpu_median_ms", csv_num(br), "ms");
-    csv.row("floor", rs, "all", "brush_vulkan_median_ms", csv_num(vk), "ms");
-    csv.row("floor", rs, "all", "passes_median_ms", csv_num(pa), "ms");
-    csv.row("floor", rs, "all", "snapshot_median_ms", csv_num(sn), "ms");
-    csv.row("floor", rs, "all", "publish_to_tick_median_ms", csv_num(pt), "ms");
+    table_row(out, csv, "floor", rad, tot,
+              {{"brush_cpu_median_ms", br}, {"brush_vulkan_median_ms", vk}, {"passes_median_ms", pa},
+               {"snapshot_median_ms", sn}, {"publish_to_tick_median_ms", pt}, {"recomputed_bricks_median", rc, 0}});
     if (rad == 5.0) floor5 = tot.median;
   }
   // 5 mm, stage by stage: the product's parts beside the floor's.
@@ -1000,16 +1015,9 @@ void write_dense(std::ostream& out, Csv& csv, const Bench& b, const Dense& d, co
     const double upd = median(pick(dense, rad, -1, [](const EditRecord& r) { return r.update_ms; }));
     const double ptt = median(pick(dense, rad, -1, [](const EditRecord& r) { return r.publish_to_tick_ms; }));
     const double q = ratio(tot.median, live_median[std::size_t(ri)]);
-    out << "| " << num(rad, 0) << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " | "
-        << num(brush) << " | " << num(upd) << " | " << num(ptt) << " | " << num(q, 1) << " |\n";
-    const std::string rs = num(rad, 0);
-    csv.row("dense", rs, "all", "edits", std::to_string(tot.n), "");
-    csv.row("dense", rs, "all", "median_ms", csv_num(tot.median), "ms");
-    csv.row("dense", rs, "all", "p99_ms", csv_num(tot.p99), "ms");
-    csv.row("dense", rs, "all", "brush_median_ms", csv_num(brush), "ms");
-    csv.row("dense", rs, "all", "recompute_median_ms", csv_num(upd), "ms");
-    csv.row("dense", rs, "all", "publish_to_tick_median_ms", csv_num(ptt), "ms");
-    csv.row("dense", rs, "all", "dense_over_incremental", csv_num(q), "");
+    table_row(out, csv, "dense", rad, tot,
+              {{"brush_median_ms", brush}, {"recompute_median_ms", upd}, {"publish_to_tick_median_ms", ptt},
+               {"dense_over_incremental", q, 1}});
   }
 }
 

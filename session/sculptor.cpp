@@ -91,7 +91,7 @@ BrushEngine* Sculptor::engine() {
 }
 
 std::string Sculptor::describe_path() const {
-  if (!engine_) return "CPU reference (one thread): no Vulkan device";
+  if (!engine_) return "CPU reference (one thread): no Vulkan device given to the brushes";
   return "CPU reference (one thread) for brushes touching <= " + std::to_string(cpu_max_bricks_) +
          " bricks (changed bricks uploaded to the device before its next brush), the Vulkan device (" +
          engine_->device_type() + ") above";

@@ -508,13 +508,95 @@ void set_up(Bench& b) {
   if (b.pts.empty()) throw std::runtime_error("no surface crossing away from the probe in " + b.session->volume().path);
 }
 
+/// One edit of the floor program [ms]; NaN where not measured.
+struct FloorRecord {
+  double radius_mm = 0;
+  double brush_ms = kNaN;      ///< CPU reference brush (one thread)
+  double brush_vk_ms = kNaN;   ///< the same brush on the Vulkan device: one submit, wait, download of the box
+  double passes_ms = kNaN, snapshot_ms = kNaN, publish_to_tick_ms = kNaN, total_ms = kNaN;
+  double recomputed = kNaN;
+};
+
+/// What the floor measured.
+struct Floor {
+  std::vector<FloorRecord> edits;
+  std::string vk = "none";  ///< the Vulkan brush's device, or why there is none
+  std::string why_not;      ///< non-empty: the floor could not run (the snapshot is not bricked fp32)
+};
+
+/// The floor: the latency phase's edits, in the same order from the same volume, by the
+/// smallest program doing their work (bench/edit_floor.h: CPU brush, passes on the reached
+/// bricks, a snapshot published, first tick reading it), each right after the product's
+/// own edit against the same running servo (so both meet the same machine); the brush also
+/// on the Vulkan device alone (one submit: dispatch, wait, download). Its snapshots equal
+/// the product's (tests/test_bench_edit.cpp), under versions of their own (from half the
+/// spy's capacity).
+class FloorRunner {
+ public:
+  explicit FloorRunner(Bench& b) : b_(b), version_(b.rig.spy->capacity() / 2) {
+    try {
+      prog_ = std::make_unique<EditFloor>(b.original, *b.first, b.lo.passes, b.iso);
+    } catch (const std::invalid_argument& e) {
+      floor_.why_not = e.what();
+      return;
+    }
+    if (!b.ctx) return;
+    auto r = session::BrushEngine::create(*b.ctx, b.original);
+    if (!r) {
+      floor_.vk = "none (" + r.error + ")";
+      return;
+    }
+    vk_ = std::move(*r.value);
+    vk_mirror_ = b.original;
+    floor_.vk = b.ctx->info().name;
+  }
+  /// Applies `br` (of radius `radius_mm`), publishes, waits for the servo to read it; kept
+  /// in the figures when `keep`.
+  void edit(const session::Brush& br, double radius_mm, bool keep) {
+    if (!prog_) return;
+    Rig& rig = b_.rig;
+    FloorRecord r;
+    r.radius_mm = radius_mm;
+    if (vk_) r.brush_vk_ms = vk_->apply(br, &vk_mirror_).wall_ms;
+    if (version_ >= rig.spy->capacity()) throw std::runtime_error("floor: snapshot versions past the spy's capacity");
+    const std::int64_t t0 = now_ns();
+    FloorStep f = prog_->apply(br, version_);
+    if (!f.snapshot) return;
+    const std::int64_t t1 = now_ns();
+    rig.published.publish(std::move(f.snapshot));
+    const std::int64_t ts = wait_seen(*rig.spy, version_, kSeenTimeoutS);
+    if (ts == 0) b_.failures.push_back("floor: the servo did not read snapshot " + std::to_string(version_));
+    ++version_;
+    b_.next_version = version_;
+    if (!keep || ts == 0) return;
+    r.brush_ms = f.brush_ms;
+    r.passes_ms = f.passes_ms;
+    r.snapshot_ms = f.snapshot_ms;
+    r.recomputed = double(f.recomputed);
+    r.publish_to_tick_ms = ms_between(t1, ts);
+    r.total_ms = ms_between(t0, ts);
+    floor_.edits.push_back(r);
+  }
+  Floor take() { return std::move(floor_); }
+
+ private:
+  Bench& b_;
+  std::uint64_t version_;
+  std::unique_ptr<EditFloor> prog_;
+  std::unique_ptr<session::BrushEngine> vk_;
+  engine::Volume vk_mirror_;
+  Floor floor_;
+};
+
 /// What the latency phase measured.
 struct Latency {
   std::vector<EditRecord> edits;
+  Floor floor;  ///< the same edits by the floor program, interleaved
   long contact_ticks = 0, servo_ticks = 0, missed = 0;
 };
 
-/// 1. One edit at a time through the session, each timed to the first tick reading it.
+/// 1. One edit at a time through the session, each timed to the first tick reading it,
+/// each followed by the same edit of the floor program.
 Latency measure_latency(Bench& b) {
   Latency l;
   Rig& rig = b.rig;
@@ -527,8 +609,11 @@ Latency measure_latency(Bench& b) {
   while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   b.progress << "[bench edit] warm-up\n" << std::flush;
   const core::Vec3 warm = b.point(b.pts.size() - 1);
-  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kCarve, warm, 5e-3, b.targets));
-  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kAdd, warm, 5e-3, b.targets));
+  FloorRunner floor(b);
+  for (auto kind : {session::BrushKind::kCarve, session::BrushKind::kAdd}) {
+    (void)timed_live_edit(session, rig, make_brush(kind, warm, 5e-3, b.targets));
+    floor.edit(make_brush(kind, warm, 5e-3, b.targets), 5, false);
+  }
   const long ticks0 = rig.spy->ticks(), contact0 = rig.spy->contact_ticks();
   for (int ri = 0; ri < 3; ++ri) {
     b.progress << "[bench edit] latency: " << b.o.edits_per_radius << " edits of radius " << kRadiiMm[ri] << " mm\n"
@@ -539,12 +624,16 @@ Latency measure_latency(Bench& b) {
       if (l.edits.back().changed && !l.edits.back().seen)
         b.failures.push_back("latency: the servo did not read snapshot " + std::to_string(session.current()->version) +
                              " within " + num(kSeenTimeoutS, 1) + " s");
+      b.jitter_sleep();
+      floor.edit(b.latency_brush(ri, i), kRadiiMm[ri], true);
     }
   }
   l.servo_ticks = rig.spy->ticks() - ticks0;
   l.contact_ticks = rig.spy->contact_ticks() - contact0;
   servo.stop();
   l.missed = servo.missed_deadlines();
+  l.floor = floor.take();
+  rig.published.publish(session.current());  // the product's snapshot again (the same content as the floor's last)
   return l;
 }
 
@@ -615,88 +704,6 @@ std::vector<Phase> measure_sustained(Bench& b) {
       phases.push_back(ph);
     }
   return phases;
-}
-
-/// One edit of the floor program [ms]; NaN where not measured.
-struct FloorRecord {
-  double radius_mm = 0;
-  double brush_ms = kNaN;      ///< CPU reference brush (one thread)
-  double brush_vk_ms = kNaN;   ///< the same brush on the Vulkan device: one submit, wait, download of the box
-  double passes_ms = kNaN, snapshot_ms = kNaN, publish_to_tick_ms = kNaN, total_ms = kNaN;
-  double recomputed = kNaN;
-};
-
-/// What the floor phase measured.
-struct Floor {
-  std::vector<FloorRecord> edits;
-  std::string vk = "none";  ///< the Vulkan brush's device, or why there is none
-  std::string why_not;      ///< non-empty: the floor could not run (the snapshot is not bricked fp32)
-};
-
-/// 2. The floor: the same latency edits, in the same order from the same volume, by the
-/// smallest program doing their work (bench/edit_floor.h: CPU brush, passes on the reached
-/// bricks, a snapshot published, first tick reading it), against the same servo; the
-/// brush also on the Vulkan device alone (one submit: dispatch, wait, download).
-Floor measure_floor(Bench& b) {
-  Floor fl;
-  Rig& rig = b.rig;
-  std::unique_ptr<EditFloor> prog;
-  try {
-    prog = std::make_unique<EditFloor>(b.original, *b.first, b.lo.passes, b.iso);
-  } catch (const std::invalid_argument& e) {
-    fl.why_not = e.what();
-    return fl;
-  }
-  std::unique_ptr<session::BrushEngine> vk;
-  engine::Volume vk_mirror;
-  if (b.ctx) {
-    auto r = session::BrushEngine::create(*b.ctx, b.original);
-    if (r) {
-      vk = std::move(*r.value);
-      vk_mirror = b.original;
-      fl.vk = b.ctx->info().name;
-    } else {
-      fl.vk = "none (" + r.error + ")";
-    }
-  }
-  std::uint64_t version = std::max(b.session->current()->version + 1, b.next_version);
-  servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
-  rig.note(servo, servo.start());
-  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
-  auto step = [&](const session::Brush& br, double radius_mm, bool keep) {
-    FloorRecord r;
-    r.radius_mm = radius_mm;
-    if (vk) r.brush_vk_ms = vk->apply(br, &vk_mirror).wall_ms;
-    if (version >= rig.spy->capacity()) throw std::runtime_error("floor: snapshot versions past the spy's capacity");
-    const std::int64_t t0 = now_ns();
-    FloorStep f = prog->apply(br, version);
-    if (!f.snapshot) return;
-    const std::int64_t t1 = now_ns();
-    rig.published.publish(std::move(f.snapshot));
-    const std::int64_t ts = wait_seen(*rig.spy, version, kSeenTimeoutS);
-    if (ts == 0) b.failures.push_back("floor: the servo did not read snapshot " + std::to_string(version));
-    ++version;
-    if (!keep || ts == 0) return;
-    r.brush_ms = f.brush_ms;
-    r.passes_ms = f.passes_ms;
-    r.snapshot_ms = f.snapshot_ms;
-    r.recomputed = double(f.recomputed);
-    r.publish_to_tick_ms = ms_between(t1, ts);
-    r.total_ms = ms_between(t0, ts);
-    fl.edits.push_back(r);
-  };
-  b.progress << "[bench edit] floor: the same edits by the smallest program doing their work\n" << std::flush;
-  const core::Vec3 warm = b.point(b.pts.size() - 1);  // the latency phase's warm-up edits, untimed
-  step(make_brush(session::BrushKind::kCarve, warm, 5e-3, b.targets), 5, false);
-  step(make_brush(session::BrushKind::kAdd, warm, 5e-3, b.targets), 5, false);
-  for (int ri = 0; ri < 3; ++ri)
-    for (int i = 0; i < b.o.edits_per_radius; ++i) {
-      b.jitter_sleep();
-      step(b.latency_brush(ri, i), kRadiiMm[ri], true);
-    }
-  servo.stop();
-  b.next_version = version;
-  return fl;
 }
 
 /// What the dense comparison measured.
@@ -946,7 +953,8 @@ double write_floor(std::ostream& out, Csv& csv, const Bench& b, const Floor& fl,
     out << "Not measured: " << fl.why_not << ".\n";
     return kNaN;
   }
-  out << "The same edits in the same order from the same volume (bench/edit_floor.h): the CPU reference brush on "
+  out << "The same edits in the same order from the same volume, each right after the product's own edit against "
+         "the same servo (bench/edit_floor.h): the CPU reference brush on "
          "the touched bricks of its own copy, the passes (selection, exact range, samples: run_sparse_cpu's per-brick "
          "code) on every brick the brush's voxel box reaches, a new snapshot (table and tiles copied, new slots "
          "written, the rest shared), published into the same triple buffer and read by the same servo; no undo, no "
@@ -1141,13 +1149,12 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   set_up(b);
   const Latency lat = measure_latency(b);
   const std::vector<Phase> phases = measure_sustained(b);
-  const Floor floor = measure_floor(b);
   const Dense dense = measure_dense(b);
 
   Csv csv;
   write_header(out, b, lat);
   const LatencyFigures lf = write_latency(out, csv, b, lat);
-  const double floor5 = write_floor(out, csv, b, floor, lat);
+  const double floor5 = write_floor(out, csv, b, lat.floor, lat);
   write_dense(out, csv, b, dense, lf);
   const SustainedFigures sf = write_sustained(out, csv, b, phases);
   const int rc = write_verdicts(out, csv, b, lat, lf, sf, floor5);

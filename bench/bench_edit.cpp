@@ -17,6 +17,9 @@
 #include <stdexcept>
 #include <thread>
 
+#include <sys/prctl.h>
+
+#include "isotouch/bench/edit_floor.h"
 #include "isotouch/session/brush.h"
 #include "isotouch/session/edit_session.h"
 #include "isotouch/core/field_view.h"
@@ -27,6 +30,7 @@
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/servo_thread.h"
 #include "isotouch/sim/sim_device_io.h"
 #include "isotouch/servo/triple_buffer.h"
@@ -79,17 +83,25 @@ Verdict misses_verdict(long missed_edit, long ticks_edit, long missed_idle, long
   std::ostringstream o;
   o << "servo missed deadlines while editing vs idle";
   if (ticks_edit <= 0 || ticks_idle <= 0) {
-    o << ": not measured (a phase had no servo tick); target editing <= idle";
+    o << ": not measured (a phase had no servo tick); target editing <= idle + 3 sqrt(idle)";
+    v.text = o.str();
+    return v;
+  }
+  // The idle count scaled to the editing phase's ticks, and its Poisson allowance.
+  const double ref = double(missed_idle) * double(ticks_edit) / double(ticks_idle);
+  const double limit = ref + 3.0 * std::sqrt(ref);
+  o << std::fixed << std::setprecision(2) << " = " << missed_edit << " in " << ticks_edit << " ticks ("
+    << 1e4 * double(missed_edit) / double(ticks_edit) << " per 10,000) against idle " << missed_idle << " in "
+    << ticks_idle << " (" << 1e4 * double(missed_idle) / double(ticks_idle) << " per 10,000): target editing <= "
+    << ref << " + 3 sqrt(" << ref << ") = " << limit;
+  if (ticks_edit < kMinJudgedTicks || ticks_idle < kMinJudgedTicks) {
+    o << ", undecided: the target needs >= " << kMinJudgedTicks << " ticks in each phase";
     v.text = o.str();
     return v;
   }
   v.measured = true;
-  // missed_edit / ticks_edit <= missed_idle / ticks_idle, in integers (no rounding).
-  v.met = (long long)missed_edit * (long long)ticks_idle <= (long long)missed_idle * (long long)ticks_edit;
-  o << std::fixed << std::setprecision(2) << " = " << missed_edit << " in " << ticks_edit << " ticks ("
-    << 1e4 * double(missed_edit) / double(ticks_edit) << " per 10,000) against idle " << missed_idle << " in "
-    << ticks_idle << " (" << 1e4 * double(missed_idle) / double(ticks_idle)
-    << " per 10,000): target editing <= idle" << (v.met ? " met" : " NOT met");
+  v.met = double(missed_edit) <= limit;
+  o << (v.met ? " met" : " NOT met");
   v.text = o.str();
   return v;
 }
@@ -192,6 +204,8 @@ std::int64_t VersionSpy::seen_ns(std::uint64_t v) const {
 namespace {
 constexpr double kRadiiMm[] = {2.0, 5.0, 10.0};
 constexpr double kSeenTimeoutS = 2.0;  // a servo at >= 1 kHz reads a snapshot long before this
+constexpr double kTargetMedianMs = 0.25;  // one tick at 4 kHz
+constexpr double kTargetP99Ms = 1.0;
 
 std::string num(double v, int prec = 3) {
   if (!std::isfinite(v)) return "n/a";
@@ -226,6 +240,10 @@ struct EditRecord {
   double brush_ms = kNaN;         ///< BrushResult::wall_ms (GPU: dispatch + download of dirty bricks)
   double brush_gpu_ms = kNaN;     ///< BrushResult::gpu_ms (device timestamps)
   double update_ms = kNaN;        ///< LiveUpdateStats::total_ms, or the dense chain's wall time
+  double recompute_ms = kNaN;     ///< LiveUpdateStats::recompute_ms (passes on the recomputed bricks)
+  double snapshot_ms = kNaN;      ///< LiveUpdateStats::publish_ms (the new snapshot built)
+  double apply_ms = kNaN;         ///< EditOutcome::wall_ms: EditSession::apply, everything included
+  bool on_device = false;         ///< the brush ran on the Vulkan device
   double publish_to_tick_ms = kNaN;  ///< TripleBuffer::publish called -> first tick reading it
   double dirty = kNaN, recomputed = kNaN;  ///< bricks
 };
@@ -293,9 +311,13 @@ EditRecord timed_live_edit(EditSession& session, Rig& rig, const session::Brush&
   r.brush_ms = oc.brush.wall_ms;
   r.brush_gpu_ms = oc.brush.gpu_ms >= 0 ? oc.brush.gpu_ms : kNaN;
   r.dirty = double(oc.brush.dirty.size());
+  r.on_device = oc.brush.on_device;
   if (!oc.published) return r;
   r.changed = true;
   r.update_ms = oc.update.total_ms;
+  r.recompute_ms = oc.update.recompute_ms;
+  r.snapshot_ms = oc.update.publish_ms;
+  r.apply_ms = oc.wall_ms;
   r.recomputed = double(oc.update.recomputed);
   std::shared_ptr<const core::SampleField> snap = session.current();
   const std::uint64_t v = snap->version;
@@ -393,6 +415,10 @@ struct Bench {
   double max_r = 0;
   std::mt19937 jitter;
   std::vector<std::string> failures;
+  std::uint64_t next_version = 0;  ///< the first snapshot version no phase has used (floor, dense)
+  /// Length of each sustained phase [s]: --seconds, lengthened (but with --quick) until the
+  /// rounds give each phase kMinJudgedTicks servo ticks (+5 %), what the misses verdict needs.
+  double phase_s = 0;
 
   Bench(const BenchEditOptions& opt, std::ostream& prog) : o(opt), progress(prog), jitter(opt.seed + 17) {}
   Bench(const Bench&) = delete;
@@ -404,10 +430,16 @@ struct Bench {
     const auto kind = i % 2 == 0 ? session::BrushKind::kCarve : session::BrushKind::kAdd;
     return make_brush(kind, point(std::size_t(ri) * per_radius + std::size_t(i / 2)), kRadiiMm[ri] * 1e-3, targets);
   }
-  /// A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick.
+  /// A gap of 1 ms + U[0, 1 period): edits arrive at any phase of the servo tick. The
+  /// thread's timer slack is 1 ns meanwhile: with the default 50 us the kernel may defer the
+  /// wake-up to coalesce it with the servo's own timer, which wakes just before a tick, so
+  /// the edits would arrive at a phase tied to the tick instead of a uniform one.
   void jitter_sleep() {
+    const int slack = prctl(PR_GET_TIMERSLACK, 0UL, 0UL, 0UL, 0UL);
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     std::this_thread::sleep_for(
         std::chrono::microseconds(1000 + long(std::uniform_real_distribution<double>(0, 1e6 / o.rate_hz)(jitter))));
+    if (slack > 0) prctl(PR_SET_TIMERSLACK, static_cast<unsigned long>(slack), 0UL, 0UL, 0UL);
   }
 };
 
@@ -416,6 +448,7 @@ struct Bench {
 void set_up(Bench& b) {
   const BenchEditOptions& o = b.o;
   b.load_before = load_average();
+  b.phase_s = o.quick ? o.seconds : std::max(o.seconds, 1.05 * double(kMinJudgedTicks) / (o.rounds * o.rate_hz));
   b.scene = load_scene(o.scene.empty() ? default_scene() : o.scene);
   const Scene& scene = b.scene;
   if (scene.volume_path.empty()) throw std::runtime_error(scene.file + ": bench edit needs a scene with a volume file");
@@ -475,26 +508,112 @@ void set_up(Bench& b) {
   if (b.pts.empty()) throw std::runtime_error("no surface crossing away from the probe in " + b.session->volume().path);
 }
 
+/// One edit of the floor program [ms]; NaN where not measured.
+struct FloorRecord {
+  double radius_mm = 0;
+  double brush_ms = kNaN;      ///< CPU reference brush (one thread)
+  double brush_vk_ms = kNaN;   ///< the same brush on the Vulkan device: one submit, wait, download of the box
+  double passes_ms = kNaN, snapshot_ms = kNaN, publish_to_tick_ms = kNaN, total_ms = kNaN;
+  double recomputed = kNaN;
+};
+
+/// What the floor measured.
+struct Floor {
+  std::vector<FloorRecord> edits;
+  std::string vk = "none";  ///< the Vulkan brush's device, or why there is none
+  std::string why_not;      ///< non-empty: the floor could not run (the snapshot is not bricked fp32)
+};
+
+/// The floor: the latency phase's edits, in the same order from the same volume, by the
+/// smallest program doing their work (bench/edit_floor.h: CPU brush, passes on the reached
+/// bricks, a snapshot published, first tick reading it), each right after the product's
+/// own edit against the same running servo (so both meet the same machine); the brush also
+/// on the Vulkan device alone (one submit: dispatch, wait, download). Its snapshots equal
+/// the product's (tests/test_bench_edit.cpp), under versions of their own (from half the
+/// spy's capacity).
+class FloorRunner {
+ public:
+  explicit FloorRunner(Bench& b) : b_(b), version_(b.rig.spy->capacity() / 2) {
+    try {
+      prog_ = std::make_unique<EditFloor>(b.original, *b.first, b.lo.passes, b.iso);
+    } catch (const std::invalid_argument& e) {
+      floor_.why_not = e.what();
+      return;
+    }
+    if (!b.ctx) return;
+    auto r = session::BrushEngine::create(*b.ctx, b.original);
+    if (!r) {
+      floor_.vk = "none (" + r.error + ")";
+      return;
+    }
+    vk_ = std::move(*r.value);
+    vk_mirror_ = b.original;
+    floor_.vk = b.ctx->info().name;
+  }
+  /// Applies `br` (of radius `radius_mm`), publishes, waits for the servo to read it; kept
+  /// in the figures when `keep`.
+  void edit(const session::Brush& br, double radius_mm, bool keep) {
+    if (!prog_) return;
+    Rig& rig = b_.rig;
+    FloorRecord r;
+    r.radius_mm = radius_mm;
+    if (vk_) r.brush_vk_ms = vk_->apply(br, &vk_mirror_).wall_ms;
+    if (version_ >= rig.spy->capacity()) throw std::runtime_error("floor: snapshot versions past the spy's capacity");
+    const std::int64_t t0 = now_ns();
+    FloorStep f = prog_->apply(br, version_);
+    if (!f.snapshot) return;
+    const std::int64_t t1 = now_ns();
+    rig.published.publish(std::move(f.snapshot));
+    const std::int64_t ts = wait_seen(*rig.spy, version_, kSeenTimeoutS);
+    if (ts == 0) b_.failures.push_back("floor: the servo did not read snapshot " + std::to_string(version_));
+    ++version_;
+    b_.next_version = version_;
+    if (!keep || ts == 0) return;
+    r.brush_ms = f.brush_ms;
+    r.passes_ms = f.passes_ms;
+    r.snapshot_ms = f.snapshot_ms;
+    r.recomputed = double(f.recomputed);
+    r.publish_to_tick_ms = ms_between(t1, ts);
+    r.total_ms = ms_between(t0, ts);
+    floor_.edits.push_back(r);
+  }
+  Floor take() { return std::move(floor_); }
+
+ private:
+  Bench& b_;
+  std::uint64_t version_;
+  std::unique_ptr<EditFloor> prog_;
+  std::unique_ptr<session::BrushEngine> vk_;
+  engine::Volume vk_mirror_;
+  Floor floor_;
+};
+
 /// What the latency phase measured.
 struct Latency {
   std::vector<EditRecord> edits;
+  Floor floor;  ///< the same edits by the floor program, interleaved
   long contact_ticks = 0, servo_ticks = 0, missed = 0;
 };
 
-/// 1. One edit at a time through the session, each timed to the first tick reading it.
+/// 1. One edit at a time through the session, each timed to the first tick reading it,
+/// each followed by the same edit of the floor program.
 Latency measure_latency(Bench& b) {
   Latency l;
   Rig& rig = b.rig;
   EditSession& session = *b.session;
   servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
   rig.note(servo, servo.start());
+  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
   // Let the probe reach the surface (<= 2 s), then warm up (first dispatches, pipelines).
   const std::int64_t until = now_ns() + 2'000'000'000;
   while (rig.spy->contact_ticks() == 0 && now_ns() < until) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   b.progress << "[bench edit] warm-up\n" << std::flush;
   const core::Vec3 warm = b.point(b.pts.size() - 1);
-  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kCarve, warm, 5e-3, b.targets));
-  (void)timed_live_edit(session, rig, make_brush(session::BrushKind::kAdd, warm, 5e-3, b.targets));
+  FloorRunner floor(b);
+  for (auto kind : {session::BrushKind::kCarve, session::BrushKind::kAdd}) {
+    (void)timed_live_edit(session, rig, make_brush(kind, warm, 5e-3, b.targets));
+    floor.edit(make_brush(kind, warm, 5e-3, b.targets), 5, false);
+  }
   const long ticks0 = rig.spy->ticks(), contact0 = rig.spy->contact_ticks();
   for (int ri = 0; ri < 3; ++ri) {
     b.progress << "[bench edit] latency: " << b.o.edits_per_radius << " edits of radius " << kRadiiMm[ri] << " mm\n"
@@ -505,12 +624,16 @@ Latency measure_latency(Bench& b) {
       if (l.edits.back().changed && !l.edits.back().seen)
         b.failures.push_back("latency: the servo did not read snapshot " + std::to_string(session.current()->version) +
                              " within " + num(kSeenTimeoutS, 1) + " s");
+      b.jitter_sleep();
+      floor.edit(b.latency_brush(ri, i), kRadiiMm[ri], true);
     }
   }
   l.servo_ticks = rig.spy->ticks() - ticks0;
   l.contact_ticks = rig.spy->contact_ticks() - contact0;
   servo.stop();
   l.missed = servo.missed_deadlines();
+  l.floor = floor.take();
+  rig.published.publish(session.current());  // the product's snapshot again (the same content as the floor's last)
   return l;
 }
 
@@ -523,7 +646,7 @@ Phase sustained_phase(Bench& b, bool editing, int round, std::size_t& next_point
   ph.editing = editing;
   ph.round = round;
   session::LiveSessionConfig lc;
-  lc.servo = b.rig.config(std::size_t(b.o.rate_hz * b.o.seconds * 1.5) + 64);
+  lc.servo = b.rig.config(std::size_t(b.o.rate_hz * b.phase_s * 1.5) + 64);
   std::atomic<long> applied{0};
   lc.on_applied = [&](const EditEvent& e, const EditOutcome& oc, session::EditSource) {
     if (oc.error.empty() && e.kind == EditEvent::Kind::kBrush) done.push_back(e.brush);
@@ -531,7 +654,7 @@ Phase sustained_phase(Bench& b, bool editing, int round, std::size_t& next_point
   };
   session::LiveSession live(*b.session, b.rig.published, *b.rig.spy, *b.rig.io, std::move(lc));
   b.rig.note(*live.servo_thread(), live.start());
-  const std::int64_t t0 = now_ns(), t_end = t0 + std::int64_t(b.o.seconds * 1e9);
+  const std::int64_t t0 = now_ns(), t_end = t0 + std::int64_t(b.phase_s * 1e9);
   if (!editing) {
     std::this_thread::sleep_until(Clock::time_point(std::chrono::nanoseconds(t_end)));
   } else {
@@ -567,7 +690,7 @@ std::vector<Phase> measure_sustained(Bench& b) {
   for (int round = 1; round <= b.o.rounds; ++round)
     for (bool editing : {false, true}) {
       b.progress << "[bench edit] sustained round " << round << ": " << (editing ? "editing" : "idle") << " "
-                 << b.o.seconds << " s\n"
+                 << b.phase_s << " s\n"
                  << std::flush;
       std::vector<session::Brush> done;
       std::unique_ptr<engine::Volume> start;
@@ -607,9 +730,10 @@ Dense measure_dense(Bench& b) {
                    : "run_chain_cpu (one thread, dense fp32)" + (chain_why.empty() ? "" : ": " + chain_why);
   b.progress << "[bench edit] dense: " << d.engine << "\n" << std::flush;
   session::Sculptor sculptor(b.original, b.brush_ctx);
-  std::uint64_t version = b.session->current()->version + 1;
+  std::uint64_t version = std::max(b.session->current()->version + 1, b.next_version);
   servo::ServoThread servo(rig.published, *rig.spy, *rig.io, rig.config(0));
   rig.note(servo, servo.start());
+  const servo::ScopedOffCpu off(servo.pinned_cpu());  // as a LiveSession's edit thread
   auto recompute = [&]() {
     engine::ChainOutput c = chain ? chain->run(sculptor.volume()) : engine::run_chain_cpu(sculptor.volume(), passes);
     if (!c.samples) throw std::runtime_error("dense chain: no samples (the pass list has no gradient)");
@@ -688,8 +812,7 @@ void write_header(std::ostream& out, Bench& b, const Latency& lat) {
       << (first->bricks ? std::to_string(first->bricks->active_bricks()) : std::string("?")) << " active bricks\n"
       << "- Vulkan device: " << device_text << "\n"
       << "- brushes: "
-      << (session.sculptor().on_gpu() ? std::string("on the Vulkan device (session::BrushEngine)")
-                                      : std::string("CPU reference (one thread)"))
+      << session.sculptor().describe_path()
       << "; material " << targets.material << ", empty " << targets.empty << ", strength |material - empty|, falloff 0.5\n"
       << "- servo: HRI at " << num(o.rate_hz, 0) << " Hz (K " << hp.stiffness_n_per_m << " N/m, plane every "
       << hp.plane_update_period << " ticks) on a simulated device pressing " << num(sp.press_depth_m * 1e3, 1)
@@ -790,6 +913,102 @@ LatencyFigures write_latency(std::ostream& out, Csv& csv, const Bench& b, const 
   return fig;
 }
 
+/// One figure of a table row: its CSV metric (unit ms when it ends in "_ms") and value.
+struct Cell {
+  const char* metric;
+  double value;
+  int digits = 3;
+};
+
+/// "| radius | edits | median | p99 | cells... |", and the same as CSV rows of `section`.
+void table_row(std::ostream& out, Csv& csv, const std::string& section, double radius_mm, const Spread& tot,
+               const std::vector<Cell>& cells) {
+  const std::string rs = num(radius_mm, 0);
+  out << "| " << rs << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " |";
+  csv.row(section, rs, "all", "edits", std::to_string(tot.n), "");
+  csv.row(section, rs, "all", "median_ms", csv_num(tot.median), "ms");
+  csv.row(section, rs, "all", "p99_ms", csv_num(tot.p99), "ms");
+  for (const Cell& c : cells) {
+    out << " " << num(c.value, c.digits) << " |";
+    const std::string m = c.metric;
+    csv.row(section, rs, "all", m, csv_num(c.value), m.size() > 3 && m.ends_with("_ms") ? "ms" : "");
+  }
+  out << "\n";
+}
+
+/// Picks `field` of the floor's edits of `radius`.
+template <class F>
+std::vector<double> pick_floor(const std::vector<FloorRecord>& recs, double radius, F field) {
+  std::vector<double> x;
+  for (const auto& r : recs)
+    if (r.radius_mm == radius) x.push_back(field(r));
+  return x;
+}
+
+/// The floor's table, and the 5 mm stages of the product beside the floor's. Returns the
+/// floor's 5 mm median [ms] (NaN if not measured).
+double write_floor(std::ostream& out, Csv& csv, const Bench& b, const Floor& fl, const Latency& lat) {
+  out << "\n## Floor: the smallest program doing the same work (same run, same servo)\n\n";
+  if (!fl.why_not.empty()) {
+    out << "Not measured: " << fl.why_not << ".\n";
+    return kNaN;
+  }
+  out << "The same edits in the same order from the same volume, each right after the product's own edit against "
+         "the same servo (bench/edit_floor.h): the CPU reference brush on "
+         "the touched bricks of its own copy, the passes (selection, exact range, samples: run_sparse_cpu's per-brick "
+         "code) on every brick the brush's voxel box reaches, a new snapshot (table and tiles copied, new slots "
+         "written, the rest shared), published into the same triple buffer and read by the same servo; no undo, no "
+         "shadow copy, no candidate bookkeeping. Vulkan brush: the same brush on "
+      << fl.vk << " alone (one submit: dispatch, wait, download of the touched box), not part of the floor's total.\n\n"
+      << "| radius [mm] | edits | median [ms] | p99 [ms] | brush CPU [ms] | brush Vulkan, one submit [ms] | passes [ms] "
+         "| snapshot [ms] | publish-to-tick [ms] | recomputed bricks |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  double floor5 = kNaN;
+  for (double rad : kRadiiMm) {
+    const Spread tot = spread(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.total_ms; }));
+    const double br = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.brush_ms; }));
+    const double vk = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.brush_vk_ms; }));
+    const double pa = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.passes_ms; }));
+    const double sn = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.snapshot_ms; }));
+    const double pt = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.publish_to_tick_ms; }));
+    const double rc = median(pick_floor(fl.edits, rad, [](const FloorRecord& r) { return r.recomputed; }));
+    table_row(out, csv, "floor", rad, tot,
+              {{"brush_cpu_median_ms", br}, {"brush_vulkan_median_ms", vk}, {"passes_median_ms", pa},
+               {"snapshot_median_ms", sn}, {"publish_to_tick_median_ms", pt}, {"recomputed_bricks_median", rc, 0}});
+    if (rad == 5.0) floor5 = tot.median;
+  }
+  // 5 mm, stage by stage: the product's parts beside the floor's.
+  auto prod = [&](auto f) { return median(pick(lat.edits, 5.0, -1, f)); };
+  auto flo = [&](auto f) { return median(pick_floor(fl.edits, 5.0, f)); };
+  const double p_brush = prod([](const EditRecord& r) { return r.brush_ms; });
+  const double p_rec = prod([](const EditRecord& r) { return r.recompute_ms; });
+  const double p_snap = prod([](const EditRecord& r) { return r.snapshot_ms; });
+  const double p_rest = prod([](const EditRecord& r) { return r.apply_ms - r.brush_ms - r.update_ms; });
+  const double p_ptt = prod([](const EditRecord& r) { return r.publish_to_tick_ms; });
+  const double p_tot = prod([](const EditRecord& r) { return r.total_ms; });
+  std::size_t on_device5 = 0, n5 = 0;
+  for (const EditRecord& r : lat.edits)
+    if (r.radius_mm == 5.0 && r.changed) {
+      ++n5;
+      on_device5 += r.on_device ? 1 : 0;
+    }
+  out << "\n5 mm edits, stage by stage (medians of each stage, so they need not add up to the total's median):\n\n"
+      << "| stage | product [ms] | floor [ms] |\n|---|---:|---:|\n"
+      << "| brush | " << num(p_brush) << " | " << num(flo([](const FloorRecord& r) { return r.brush_ms; })) << " |\n"
+      << "| passes on the recomputed bricks | " << num(p_rec) << " | "
+      << num(flo([](const FloorRecord& r) { return r.passes_ms; })) << " |\n"
+      << "| snapshot built | " << num(p_snap) << " | " << num(flo([](const FloorRecord& r) { return r.snapshot_ms; }))
+      << " |\n"
+      << "| rest of EditSession::apply (undo backup, history, log) | " << num(p_rest) << " | - |\n"
+      << "| publish to the first tick reading it | " << num(p_ptt) << " | "
+      << num(flo([](const FloorRecord& r) { return r.publish_to_tick_ms; })) << " |\n"
+      << "| **edit to haptics** (target <= 0.250) | **" << num(p_tot) << "** | **" << num(floor5) << "** |\n"
+      << "\nPath of the product's brushes: " << b.session->sculptor().describe_path() << "; 5 mm brushes on the device: "
+      << on_device5 << " of " << n5 << ". Snapshot updates: " << b.session->live().describe() << ".\n"
+      << "At " << num(b.o.rate_hz, 0) << " Hz a snapshot published at a uniformly random phase waits "
+      << num(0.5e3 / b.o.rate_hz) << " ms for the next tick on average: the floor of publish-to-tick.\n";
+  return floor5;
+}
+
 void write_dense(std::ostream& out, Csv& csv, const Bench& b, const Dense& d, const LatencyFigures& fig) {
   const BenchEditOptions& o = b.o;
   const std::vector<EditRecord>& dense = d.edits;
@@ -808,16 +1027,9 @@ void write_dense(std::ostream& out, Csv& csv, const Bench& b, const Dense& d, co
     const double upd = median(pick(dense, rad, -1, [](const EditRecord& r) { return r.update_ms; }));
     const double ptt = median(pick(dense, rad, -1, [](const EditRecord& r) { return r.publish_to_tick_ms; }));
     const double q = ratio(tot.median, live_median[std::size_t(ri)]);
-    out << "| " << num(rad, 0) << " | " << tot.n << " | " << num(tot.median) << " | " << num(tot.p99) << " | "
-        << num(brush) << " | " << num(upd) << " | " << num(ptt) << " | " << num(q, 1) << " |\n";
-    const std::string rs = num(rad, 0);
-    csv.row("dense", rs, "all", "edits", std::to_string(tot.n), "");
-    csv.row("dense", rs, "all", "median_ms", csv_num(tot.median), "ms");
-    csv.row("dense", rs, "all", "p99_ms", csv_num(tot.p99), "ms");
-    csv.row("dense", rs, "all", "brush_median_ms", csv_num(brush), "ms");
-    csv.row("dense", rs, "all", "recompute_median_ms", csv_num(upd), "ms");
-    csv.row("dense", rs, "all", "publish_to_tick_median_ms", csv_num(ptt), "ms");
-    csv.row("dense", rs, "all", "dense_over_incremental", csv_num(q), "");
+    table_row(out, csv, "dense", rad, tot,
+              {{"brush_median_ms", brush}, {"recompute_median_ms", upd}, {"publish_to_tick_median_ms", ptt},
+               {"dense_over_incremental", q, 1}});
   }
 }
 
@@ -834,7 +1046,7 @@ SustainedFigures write_sustained(std::ostream& out, Csv& csv, const Bench& b, co
   std::vector<double>& ed_e2h = fig.ed_e2h;
   long &ed_missed = fig.ed_missed, &ed_ticks = fig.ed_ticks, &id_missed = fig.id_missed, &id_ticks = fig.id_ticks;
   out << "\n## Sustained 5 mm edits while the servo runs at " << num(o.rate_hz, 0) << " Hz\n\n"
-      << "Back-to-back 5 mm edits (carve, add, at new surface points) for " << o.seconds << " s, against the servo "
+      << "Back-to-back 5 mm edits (carve, add, at new surface points) for " << num(b.phase_s, 2) << " s, against the servo "
       << "with the engine idle for as long, in this process, both on a session::LiveSession (the servo thread, and "
          "the edit thread applying what the bench submits, one edit in flight: the next is submitted when the last was applied); edit-to-haptics from submit() to "
          "the first tick reading the snapshot; voxel changes counted by replaying the same "
@@ -895,23 +1107,31 @@ SustainedFigures write_sustained(std::ostream& out, Csv& csv, const Bench& b, co
 
 /// The verdicts and what failed to run; returns the exit code (1 if something failed).
 int write_verdicts(std::ostream& out, Csv& csv, const Bench& b, const Latency& lat, const LatencyFigures& lf,
-                   const SustainedFigures& sf) {
+                   const SustainedFigures& sf, double floor5) {
   const double med5 = lf.med5, p99_5 = lf.p99_5, rate = sf.rate;
   int rc = 0;
   out << "\n## Verdicts (computed from the figures above)\n\n";
   std::vector<Verdict> vs;
-  vs.push_back(verdict_at_most("5 mm edit-to-haptics median [ms]", med5, 1.0, 3, "no 5 mm edit was read by the servo"));
-  vs.push_back(verdict_at_most("5 mm edit-to-haptics p99 [ms]", p99_5, 5.0, 3, "no 5 mm edit was read by the servo"));
+  vs.push_back(verdict_at_most("5 mm edit-to-haptics median, one at a time [ms]", med5, kTargetMedianMs, 3,
+                               "no 5 mm edit was read by the servo"));
+  vs.push_back(verdict_at_most("5 mm edit-to-haptics p99, one at a time [ms]", p99_5, kTargetP99Ms, 3,
+                               "no 5 mm edit was read by the servo"));
   vs.push_back(verdict_at_least("sustained 5 mm edits per second", rate, 200.0, 1, "no editing phase"));
-  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(sf.ed_e2h, 0.5), 1.0,
-                               3, "no sustained edit was read by the servo"));
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics median (live session) [ms]", percentile(sf.ed_e2h, 0.5),
+                               kTargetMedianMs, 3, "no sustained edit was read by the servo"));
+  vs.push_back(verdict_at_most("sustained 5 mm edit-to-haptics p99 (live session) [ms]", percentile(sf.ed_e2h, 0.99),
+                               kTargetP99Ms, 3, "no sustained edit was read by the servo"));
   vs.push_back(misses_verdict(sf.ed_missed, sf.ed_ticks, sf.id_missed, sf.id_ticks));
   for (const auto& vd : vs) {
     out << "- " << vd.text << "\n";
     csv.row("verdict", "", "", "\"" + vd.text + "\"", vd.measured ? (vd.met ? "1" : "0") : "", "");
   }
-  out << "\nTargets (on lavapipe): 5 mm median <= 1 ms, p99 <= 5 ms; >= 200 edits/s with no more "
-         "servo misses than idle. A missed target is a result, not a failure (exit 0).\n";
+  out << "\nFloor (the smallest program doing the same work, measured above in this run): 5 mm median " << num(floor5)
+      << " ms, beside the target " << num(kTargetMedianMs) << " ms.\n"
+      << "\nTargets: 5 mm edit-to-haptics median <= " << num(kTargetMedianMs) << " ms (one servo period at 4 kHz) one at a time and sustained, p99 <= " << num(kTargetP99Ms)
+      << " ms; >= 200 edits/s; servo misses while editing <= idle's (scaled to the same ticks) + 3 sqrt(that), "
+         "each phase >= "
+      << kMinJudgedTicks << " ticks. A missed target is a result, not a failure (exit 0).\n";
   for (const auto& f : b.failures) {
     out << "\nFAILED: " << f << "\n";
     rc = 1;
@@ -934,9 +1154,10 @@ int run(const BenchEditOptions& o, std::ostream& out, std::ostream& progress) {
   Csv csv;
   write_header(out, b, lat);
   const LatencyFigures lf = write_latency(out, csv, b, lat);
+  const double floor5 = write_floor(out, csv, b, lat.floor, lat);
   write_dense(out, csv, b, dense, lf);
   const SustainedFigures sf = write_sustained(out, csv, b, phases);
-  const int rc = write_verdicts(out, csv, b, lat, lf, sf);
+  const int rc = write_verdicts(out, csv, b, lat, lf, sf, floor5);
   if (!o.out_csv.empty()) {
     write_file_atomic(o.out_csv, csv.s.str());
     progress << "[bench edit] wrote " << o.out_csv << "\n";

@@ -62,9 +62,12 @@ struct Spread {
 };
 Spread spread(const std::vector<double>& x);
 
-/// "Editing misses no more deadlines than idle": met when misses per tick while editing
-/// <= misses per tick while idle (the phases have the same length, so this is the count
-/// comparison normalised by the ticks each phase got). Not measured if a phase has no tick.
+/// Ticks each phase needs before misses_verdict judges.
+inline constexpr long kMinJudgedTicks = 20000;
+/// "Editing misses no more deadlines than idle": with ref = the idle misses scaled to the
+/// editing phase's ticks (missed_idle * ticks_edit / ticks_idle), met when missed_edit <=
+/// ref + 3 sqrt(ref) (a Poisson count's 3-sigma allowance). Not measured (undecided, the
+/// text says why) if a phase has no tick or fewer than kMinJudgedTicks.
 Verdict misses_verdict(long missed_edit, long ticks_edit, long missed_idle, long ticks_idle);
 
 /// "At least `target` per second": met when value >= target; not measured if NaN.

@@ -86,6 +86,18 @@ ScopedRealtime::~ScopedRealtime() {
   }
 }
 
+ScopedOffCpu::ScopedOffCpu(int cpu) {
+  if (cpu < 0 || cpu >= CPU_SETSIZE || sched_getaffinity(0, sizeof(set_), &set_) != 0) return;
+  if (!CPU_ISSET(cpu, &set_) || CPU_COUNT(&set_) < 2) return;
+  cpu_set_t off = set_;
+  CPU_CLR(cpu, &off);
+  moved_ = sched_setaffinity(0, sizeof(off), &off) == 0;
+}
+
+ScopedOffCpu::~ScopedOffCpu() {
+  if (moved_) sched_setaffinity(0, sizeof(set_), &set_);
+}
+
 namespace {
 using Saved = PeerOffCpu::Saved;
 

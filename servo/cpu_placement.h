@@ -102,6 +102,25 @@ class ScopedRealtime {
   bool saved_ = false;
 };
 
+/// The calling thread kept off `cpu` for this object's lifetime: its CPU set without `cpu`,
+/// when another CPU is left in it (else, or for `cpu` < 0, nothing changes). The destructor
+/// gives the set back. For a thread that works beside a servo pinned to `cpu` (the edit
+/// thread): there it would stop for the servo's spin and tick, most of every period at 4 kHz.
+/// Construct and destroy it on the same thread.
+class ScopedOffCpu {
+ public:
+  explicit ScopedOffCpu(int cpu);
+  ~ScopedOffCpu();
+  ScopedOffCpu(const ScopedOffCpu&) = delete;
+  ScopedOffCpu& operator=(const ScopedOffCpu&) = delete;
+  /// Whether the thread was moved off the CPU.
+  bool moved() const { return moved_; }
+
+ private:
+  cpu_set_t set_{};
+  bool moved_ = false;
+};
+
 /// The process at the other end of the connected Unix socket `fd` (SO_PEERCRED: the one
 /// that listened), or -1 with the reason in `why` (not a socket, a TCP connection).
 pid_t peer_pid(int fd, std::string& why);

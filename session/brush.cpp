@@ -62,8 +62,9 @@ struct BrushEngine::Impl {
   /// per brush); the descriptor arena grows when a brush needs more z-chunks.
   std::unique_ptr<DescriptorArena> arena;
   GpuTimer timer;
+  std::string type;                         ///< the device's type (DeviceInfo::type)
   Impl(VulkanContext& c, const Volume& v)
-      : ctx(c), grid(v.grid), path(v.path), pipe(c, brush_spv, 3, "brush"), timer(c, 2) {}
+      : ctx(c), grid(v.grid), path(v.path), pipe(c, brush_spv, 3, "brush"), timer(c, 2), type(c.info().type) {}
   /// The arena, reset, with room for `sets` descriptor sets of 3 buffers.
   DescriptorArena& arena_for(std::uint32_t sets) {
     if (!arena || arena->max_sets() < sets) arena = std::make_unique<DescriptorArena>(ctx, sets, 3 * sets);
@@ -94,6 +95,7 @@ struct BrushEngine::Impl {
 BrushEngine::BrushEngine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 BrushEngine::~BrushEngine() = default;
 const core::Grid& BrushEngine::grid() const { return impl_->grid; }
+const std::string& BrushEngine::device_type() const { return impl_->type; }
 
 Result<std::unique_ptr<BrushEngine>> BrushEngine::create(VulkanContext& ctx, const Volume& vol,
                                                          std::uint64_t max_binding_bytes) {

@@ -134,6 +134,7 @@ struct BrushResult {
   double wall_ms = 0;                  ///< apply(), everything included
   double gpu_ms = -1;                  ///< GPU: timestamps around the dispatches (-1 if none / CPU)
   std::size_t dispatches = 0;          ///< GPU: dispatches (z-chunks of brick layers)
+  bool on_device = false;              ///< ran on the Vulkan device (else the CPU reference)
 };
 
 /// The CPU reference: applies `b` to `vol` in place (one thread), same float operations
@@ -161,6 +162,8 @@ class BrushEngine {
   /// The whole device volume (tests, export).
   std::vector<float> download_all();
   const core::Grid& grid() const;
+  /// The device's type as Vulkan names it ("cpu" for lavapipe, "discrete-gpu", ...).
+  const std::string& device_type() const;
 
  private:
   struct Impl;
@@ -168,8 +171,19 @@ class BrushEngine {
   std::unique_ptr<Impl> impl_;
 };
 
+/// Touched bricks up to which a Sculptor with a Vulkan device applies a brush on the CPU
+/// reference (same bits), by device type: one submit + wait + download costs more than the
+/// CPU's few microseconds per brick below these (bench edit's floor rows show both).
+inline constexpr std::size_t kCpuBrushMaxBricksOnCpuDevice = 256;  ///< lavapipe: the "GPU" is these cores
+inline constexpr std::size_t kCpuBrushMaxBricksOnGpu = 16;
+
 /// The API the sculpting app and the scene timeline call: the volume, the GPU engine (or
 /// the CPU reference without a context) and the undo history, kept in step.
+///
+/// Path per brush: with a device, a brush touching at most cpu_max_bricks() bricks runs on
+/// the CPU reference on the host volume (bit for bit the shader), and the bricks it changed
+/// are marked stale on the device; they are uploaded in one copy before the next device
+/// brush, or when engine() is asked for the device copy. Without a device: always the CPU.
 class Sculptor {
  public:
   /// @param ctx null: CPU path. @param history_limit_mib undo memory limit [MiB].
@@ -204,14 +218,29 @@ class Sculptor {
   const engine::Volume& volume() const { return vol_; }
   const EditHistory& history() const { return history_; }
   bool on_gpu() const { return engine_ != nullptr; }
-  /// The GPU copy (null on the CPU path).
-  BrushEngine* engine() { return engine_.get(); }
+  /// The GPU copy, first brought up to date with the host volume (null on the CPU path).
+  BrushEngine* engine();
+  /// Brushes touching at most this many bricks run on the CPU even with a device (0: every
+  /// brush on the device). Default: by the device's type (kCpuBrushMaxBricksOn*).
+  std::size_t cpu_max_bricks() const { return cpu_max_bricks_; }
+  void set_cpu_max_bricks(std::size_t bricks) { cpu_max_bricks_ = bricks; }
+  /// Bricks changed on the host that the device copy does not hold yet.
+  std::size_t stale_on_device() const { return stale_.size(); }
+  /// How apply() picks the path, in words.
+  std::string describe_path() const;
 
  private:
+  /// Uploads the stale bricks to the device (one copy) and forgets them.
+  void sync_device();
+  void mark_stale(const std::vector<std::uint32_t>& ids);
+
   engine::Volume vol_;
   std::unique_ptr<BrushEngine> engine_;
   EditHistory history_;
   std::uint64_t last_own_stroke_ = 0;  ///< the stroke the last apply() opened itself (0: it ran inside one)
+  std::size_t cpu_max_bricks_ = 0;
+  std::vector<std::uint32_t> stale_;       ///< bricks newer on the host than on the device (unique ids)
+  std::vector<std::uint8_t> stale_mark_;   ///< per brick: listed in stale_
 };
 
 }  // namespace isotouch::session

@@ -1,6 +1,7 @@
 // brush_engine_none.cpp - BrushEngine in a build without Vulkan (the ThreadSanitizer preset):
 // it cannot be created, so a Sculptor runs every brush on the CPU reference.
 #include <stdexcept>
+#include <string>
 
 #include "isotouch/session/brush.h"
 
@@ -27,5 +28,9 @@ BrushResult BrushEngine::apply(const Brush&, engine::Volume*) { no_vulkan(); }
 void BrushEngine::upload_bricks(const engine::Volume&, const std::vector<std::uint32_t>&) { no_vulkan(); }
 std::vector<float> BrushEngine::download_all() { no_vulkan(); }
 const core::Grid& BrushEngine::grid() const { return impl_->grid; }
+const std::string& BrushEngine::device_type() const {
+  static const std::string none = "none";
+  return none;
+}
 
 }  // namespace isotouch::session

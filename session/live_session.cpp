@@ -1,4 +1,5 @@
 #include "isotouch/session/live_session.h"
+#include "isotouch/servo/cpu_placement.h"
 
 #include "isotouch/core/exit_codes.h"
 
@@ -156,8 +157,10 @@ std::string LiveSession::start() {
   stop_edits_.store(false);
   stop_recorder_.store(false);
   if (fd_ >= 0) record_thread_ = std::thread([this] { record_loop(); });
+  // The servo first: the edit thread keeps off the CPU it was pinned to.
+  std::string note = servo_->start();
   if (edits_) edit_thread_ = std::thread([this] { edit_loop(); });
-  return servo_->start();
+  return note;
 }
 
 std::int64_t LiveSession::clock_ns() const {
@@ -342,6 +345,7 @@ void LiveSession::resolve_seen_locked() const {
 }
 
 void LiveSession::edit_loop() {
+  const servo::ScopedOffCpu off(servo_->pinned_cpu());  // not stopped by each tick and its spin
   Request q;
   while (!stop_edits_.load(std::memory_order_acquire)) {
     // One request from each queue in turn: an undo from the UI waits for at most one brush

@@ -3,6 +3,8 @@
 // engine cannot be created (brush_engine_none.cpp) and every brush runs on the CPU reference.
 #include <string>
 
+#include "isotouch/core/brick_field.h"
+
 #include "isotouch/session/brush.h"
 
 namespace isotouch::session {
@@ -16,7 +18,10 @@ Sculptor::Sculptor(Volume vol, VulkanContext* ctx, double history_limit_mib, std
     auto r = BrushEngine::create(*ctx, vol_, max_binding_bytes);
     if (!r) throw VolumeError(r.error);
     engine_ = std::move(*r.value);
-    history_.set_on_restore([this](const std::vector<std::uint32_t>& ids) { engine_->upload_bricks(vol_, ids); });
+    history_.set_on_restore([this](const std::vector<std::uint32_t>& ids) { mark_stale(ids); });
+    cpu_max_bricks_ = engine_->device_type() == "cpu" ? kCpuBrushMaxBricksOnCpuDevice : kCpuBrushMaxBricksOnGpu;
+    const auto nb = core::brick_counts(vol_.grid);
+    stale_mark_.assign(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), 0);
   }
 }
 Sculptor::~Sculptor() = default;
@@ -35,7 +40,15 @@ BrushResult Sculptor::apply(const Brush& b) {
   history_.record(vol_, touched_bricks(vol_.grid, b));
   BrushResult r;
   try {
-    r = engine_ ? engine_->apply(b, &vol_) : apply_brush_cpu(vol_, b);
+    const bool device = engine_ && touched_range(vol_.grid, b).count() > cpu_max_bricks_;
+    if (device) {
+      sync_device();
+      r = engine_->apply(b, &vol_);
+      r.on_device = true;
+    } else {
+      r = apply_brush_cpu(vol_, b);
+      if (engine_) mark_stale(r.dirty);
+    }
   } catch (...) {
     if (own) history_.end_stroke(vol_);  // a failed application leaves no stroke open
     throw;
@@ -54,7 +67,34 @@ Sculptor::BrickBackup Sculptor::save_bricks(const std::vector<std::uint32_t>& id
 
 void Sculptor::restore_bricks(const BrickBackup& b) {
   for (std::size_t k = 0; k < b.ids.size(); ++k) write_brick(vol_, b.ids[k], b.data[k].data());
-  if (engine_ && !b.ids.empty()) engine_->upload_bricks(vol_, b.ids);
+  if (engine_) mark_stale(b.ids);
+}
+
+void Sculptor::mark_stale(const std::vector<std::uint32_t>& ids) {
+  for (std::uint32_t id : ids)
+    if (id < stale_mark_.size() && !stale_mark_[id]) {
+      stale_mark_[id] = 1;
+      stale_.push_back(id);
+    }
+}
+
+void Sculptor::sync_device() {
+  if (!engine_ || stale_.empty()) return;
+  engine_->upload_bricks(vol_, stale_);
+  for (std::uint32_t id : stale_) stale_mark_[id] = 0;
+  stale_.clear();
+}
+
+BrushEngine* Sculptor::engine() {
+  sync_device();
+  return engine_.get();
+}
+
+std::string Sculptor::describe_path() const {
+  if (!engine_) return "CPU reference (one thread): no Vulkan device given to the brushes";
+  return "CPU reference (one thread) for brushes touching <= " + std::to_string(cpu_max_bricks_) +
+         " bricks (changed bricks uploaded to the device before its next brush), the Vulkan device (" +
+         engine_->device_type() + ") above";
 }
 
 void Sculptor::roll_back_apply(const BrickBackup& before) {

@@ -358,6 +358,49 @@ TEST(Brush, InvalidBrushNamesTheField) {
 
 // Not an assertion: time per application on the chest CT, GPU (this device) and CPU,
 // radii 2, 5, 10 mm, median of repeated applications. Printed for the report.
+// A Sculptor with a device picks the path per brush by touched bricks: small ones on the
+// CPU reference (the device copy marked stale), large ones on the device (stale bricks
+// uploaded first), undo in between. Truth: a CPU-only Sculptor given the same brushes, bit
+// for bit after each; the device copy equals the host; the path taken is the one asked for.
+TEST(Brush, SculptorMixesCpuAndDevicePathsBitForBit) {
+  if (!test::expects_bit_identity(vk())) GTEST_SKIP() << "this device is not bit-identical to the CPU reference";
+  Volume v = io::load_volume(kHead);
+  const auto t = session::default_targets(v, {1150.0, core::InsideIs::kAbove});
+  session::Sculptor mixed(v, &vk(), 64.0), ref(v, nullptr, 64.0);
+  mixed.set_cpu_max_bricks(8);
+  EXPECT_FALSE(ref.on_gpu());
+  const core::Vec3 c = v.grid.centre_m();
+  // Overlapping small and large brushes of every kind: each large one reads voxels the
+  // small ones before it changed on the host only.
+  std::vector<Brush> seq;
+  for (int k = 0; k < 4; ++k) {
+    seq.push_back(make(kKinds[k], c + core::Vec3{0.002 * k, 0.0, 0.0}, 4e-3, t));
+    seq.push_back(make(kKinds[(k + 1) % 4], c + core::Vec3{0.002 * k, 0.001, 0.0}, 12e-3, t));
+  }
+  std::size_t cpu_runs = 0, device_runs = 0;
+  for (std::size_t i = 0; i < seq.size(); ++i) {
+    SCOPED_TRACE(std::string(to_string(seq[i].kind)) + " #" + std::to_string(i));
+    const std::size_t touched = session::touched_range(v.grid, seq[i]).count();
+    const auto rm = mixed.apply(seq[i]);
+    const auto rr = ref.apply(seq[i]);
+    EXPECT_EQ(rm.on_device, touched > 8) << touched << " touched bricks";
+    EXPECT_FALSE(rr.on_device);
+    (rm.on_device ? device_runs : cpu_runs) += rm.dirty.empty() ? 0 : 1;  // runs that changed voxels
+    EXPECT_EQ(rm.dirty, rr.dirty);
+    ASSERT_EQ(bits_differ(mixed.volume().voxels, ref.volume().voxels), 0u) << "mixed paths vs the CPU reference";
+    if (i == 4) {  // undo restores on the host; the device copy follows at its next use
+      EXPECT_EQ(mixed.undo(), ref.undo());
+      ASSERT_EQ(bits_differ(mixed.volume().voxels, ref.volume().voxels), 0u) << "after undo";
+    }
+  }
+  EXPECT_GT(cpu_runs, 0u);
+  EXPECT_GT(device_runs, 0u);
+  ASSERT_NE(mixed.engine(), nullptr);
+  EXPECT_EQ(mixed.stale_on_device(), 0u) << "engine() uploads the stale bricks";
+  EXPECT_EQ(bits_differ(mixed.engine()->download_all(), ref.volume().voxels), 0u) << "device copy vs host";
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
 TEST(Brush, DISABLED_BenchChest) {  // run with --gtest_also_run_disabled_tests
   Volume v = io::load_volume(kChest);
   const auto t = session::default_targets(v, {-500.0, core::InsideIs::kAbove});

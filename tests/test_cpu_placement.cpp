@@ -302,3 +302,40 @@ TEST(CpuPlacement, ARefusedSchedFifoIsNamedAndNothingIsPinned) {
   if (code == isotouch::test::kCouldNotDrop) GTEST_SKIP() << "could not drop to uid 65534 (a user namespace without it?)";
   EXPECT_EQ(code, 0) << "1: FIFO granted, 2: pinned, 3/4: the note, 5: scheduling changed, 11: threw, -1: crashed";
 }
+
+// ScopedOffCpu: the calling thread's CPU set without the CPU (as the kernel reports it)
+// while it lives, the whole set again after; a thread with no other CPU, or CPU -1, stays.
+TEST(CpuPlacement, ScopedOffCpuKeepsTheThreadOffAndGivesTheSetBack) {
+  cpu_set_t mine;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  int cpu = 0;
+  while (!CPU_ISSET(cpu, &mine)) ++cpu;
+  std::thread t([&] {
+    {
+      const isotouch::servo::ScopedOffCpu off(cpu);
+      cpu_set_t now;
+      ASSERT_EQ(sched_getaffinity(0, sizeof(now), &now), 0);
+      if (CPU_COUNT(&mine) >= 2) {
+        EXPECT_TRUE(off.moved());
+        EXPECT_FALSE(CPU_ISSET(cpu, &now)) << "still allowed on CPU " << cpu;
+        EXPECT_EQ(CPU_COUNT(&now), CPU_COUNT(&mine) - 1);
+      } else {
+        EXPECT_FALSE(off.moved());
+      }
+    }
+    cpu_set_t after;
+    ASSERT_EQ(sched_getaffinity(0, sizeof(after), &after), 0);
+    EXPECT_TRUE(CPU_EQUAL(&after, &mine)) << "the set was not given back";
+    // Only that CPU: nothing moves. CPU -1: nothing moves.
+    cpu_set_t only;
+    CPU_ZERO(&only);
+    CPU_SET(cpu, &only);
+    ASSERT_EQ(sched_setaffinity(0, sizeof(only), &only), 0);
+    EXPECT_FALSE(isotouch::servo::ScopedOffCpu(cpu).moved());
+    EXPECT_FALSE(isotouch::servo::ScopedOffCpu(-1).moved());
+    cpu_set_t still;
+    ASSERT_EQ(sched_getaffinity(0, sizeof(still), &still), 0);
+    EXPECT_TRUE(CPU_EQUAL(&still, &only));
+  });
+  t.join();
+}

@@ -64,6 +64,7 @@ void undo_redo_roundtrip(engine::VulkanContext* ctx) {
   Volume v0 = io::load_volume(kHead);
   const auto t = session::default_targets(v0, {1150.0, core::InsideIs::kAbove});
   session::Sculptor s(v0, ctx, 64.0);
+  s.set_cpu_max_bricks(0);  // with a device: every brush there (the device path's test)
   const core::Vec3 c = v0.grid.centre_m();
   std::vector<std::vector<float>> states{v0.voxels};
   const BrushKind kinds[] = {BrushKind::kCarve, BrushKind::kAdd, BrushKind::kSmooth, BrushKind::kDrill};

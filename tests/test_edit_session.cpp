@@ -94,6 +94,7 @@ EditEvent plain(EditEvent::Kind k) {
 void undo_redo_round_trip(isotouch::engine::VulkanContext* ctx) {
   const Volume original = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
   EditSession s(Volume(original), ctx, sphere_options(), 16.0);
+  s.sculptor().set_cpu_max_bricks(0);  // with a device: every brush there (the device path's test)
   isotouch::servo::TripleBuffer<isotouch::core::SampleField> buf;
   buf.publish(s.current());
   EXPECT_EQ(buf.acquire()->version, 1u);
@@ -273,6 +274,7 @@ TEST(EditSession, TheEditLogIsBounded) {
 void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
   EditSession s(Volume(v), ctx, sphere_options(), 16.0);
+  s.sculptor().set_cpu_max_bricks(0);  // with a device: every brush there (the device path's test)
   const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
   const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
   ASSERT_TRUE(s.apply(brush_event(a), nullptr).published);
@@ -307,6 +309,7 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   fail = false;
   ASSERT_TRUE(s.apply(brush_event(b), nullptr).published);
   EditSession ref(Volume(v), ctx, sphere_options(), 16.0);  // the same device: the same bits
+  ref.sculptor().set_cpu_max_bricks(0);
   ref.apply(brush_event(a), nullptr);
   ref.apply(brush_event(b), nullptr);
   EXPECT_TRUE(same_bits(s.volume(), ref.volume()));

@@ -14,6 +14,7 @@
 #include <sstream>
 #include <thread>
 
+#include <sched.h>
 #include <unistd.h>
 #include <csignal>
 #include <iterator>
@@ -296,6 +297,42 @@ TEST(LiveSession, SubmittedEditsArePublishedReadAndRecorded) {
   EXPECT_EQ(differ, 0u);
   EXPECT_EQ(e, rec.edits.size());
   fs::remove_all(dir);
+}
+
+// The edit thread keeps off the CPU the servo is pinned to (there each tick's spin would
+// stop it for most of every period). Truth: the kernel's CPU set of the thread that applies
+// the edits, read in the listener (which runs on it). Needs SCHED_FIFO (the servo is pinned
+// only with it) and two CPUs: skipped otherwise.
+TEST(LiveSession, TheEditThreadKeepsOffTheServosCpu) {
+  cpu_set_t mine;
+  ASSERT_EQ(sched_getaffinity(0, sizeof(mine), &mine), 0);
+  if (CPU_COUNT(&mine) < 2) GTEST_SKIP() << "one CPU";
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  c.servo.sched_fifo = true;
+  c.servo.pin_cpu = true;
+  std::atomic<int> applied{0}, servo_cpu{-1};
+  std::atomic<bool> on_servo_cpu{false}, read_set{false};
+  c.on_applied = [&](const EditEvent&, const isotouch::session::EditOutcome&, isotouch::session::EditSource) {
+    cpu_set_t now;
+    read_set = sched_getaffinity(0, sizeof(now), &now) == 0;
+    on_servo_cpu = CPU_ISSET(servo_cpu.load(), &now);
+    applied.fetch_add(1);
+  };
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, std::move(c));
+  live.start();
+  const int pinned = live.servo_thread()->pinned_cpu();
+  if (pinned < 0) {
+    live.stop();
+    GTEST_SKIP() << "the servo was not pinned (no SCHED_FIFO here)";
+  }
+  servo_cpu = pinned;  // before the edit is submitted: the listener reads it after
+  ASSERT_TRUE(live.submit(carve(rig.vol.grid.centre_m() + Vec3{0, -0.008, 0})));
+  wait_until([&] { return applied.load() >= 1; }, 10);
+  live.stop();
+  ASSERT_EQ(applied.load(), 1);
+  EXPECT_TRUE(read_set.load());
+  EXPECT_FALSE(on_servo_cpu.load()) << "the edit thread may run on the servo's CPU " << pinned;
 }
 
 // The servo's version -> first-tick table is reused: with 2 slots, 7 edits each read

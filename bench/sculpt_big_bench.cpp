@@ -164,7 +164,7 @@ ChildRun run_sculpt(const SculptBigOptions& o, const std::vector<std::string>& i
     argv.insert(argv.end(), {"xvfb-run", "-a", "-s", "-screen 0 1280x1024x24"});
   argv.push_back(sculpt_exe(o));
   argv.insert(argv.end(), input.begin(), input.end());
-  argv.insert(argv.end(), {"--bench", "--size", std::to_string(o.width), "--render-scale", "1"});
+  argv.insert(argv.end(), {"--bench", "--bench-ticks", "0", "--size", std::to_string(o.width), "--render-scale", "1"});
   if (!o.device.empty()) argv.insert(argv.end(), {"--device", o.device});
   return run_child_exec(argv);
 }

@@ -233,19 +233,24 @@ void on_key(GLFWwindow* w, int key, int scancode, int action, int mods) {
     g_input->keys.push_back({key, (mods & GLFW_MOD_CONTROL) != 0, (mods & GLFW_MOD_SHIFT) != 0});
 }
 
-/// --bench: the probe onto the surface at the centre, a 30-frame carve stroke moving right,
-/// undo, then 30 frames of camera moves (orbit, zoom), each drawn whole.
+/// --bench: the probe onto the surface at the centre, then rounds of a 30-frame carve stroke
+/// moving right, undo, and 36 frames of camera moves (orbit, zoom, orbit back, zoom back),
+/// each drawn whole, the camera back where the round began. The rounds start at event
+/// kBenchRoundStart and repeat until the servo has ticked --bench-ticks times (Sculpt::run_script).
+constexpr std::size_t kBenchRoundStart = 5;
 std::string bench_script_text() {
   std::ostringstream t;
   t << R"({"events": [{"orbit": [20, 0]}, {"cursor": [0.5, 0.45]}, {"tool": "carve", "radius_mm": 8, "strength": 0.5},
-    {"wait": "contact", "timeout_s": 30}, {"after_frames": 5, "scroll": 2}, {"press": "left"})";
+    {"wait": "contact", "timeout_s": 30}, {"after_frames": 5, "scroll": 2},
+    {"cursor": [0.5, 0.45]}, {"wait": "contact", "timeout_s": 30}, {"press": "left"})";
   for (int i = 0; i < 30; ++i) t << R"(, {"cursor": [)" << 0.5 + 0.004 * i << ", 0.45]}";
   t << R"(, {"release": "left"}, {"wait": "edits", "timeout_s": 30}, {"key": "z", "mods": ["ctrl"]},
     {"wait": "edits", "timeout_s": 30})";
-  // Then the camera moves every frame (orbit, zoom, orbit back): frames drawn whole.
+  // Then the camera moves every frame: frames drawn whole.
   for (int i = 0; i < 12; ++i) t << R"(, {"orbit": [3, 1]})";
   for (int i = 0; i < 6; ++i) t << R"(, {"zoom": 1.05})";
   for (int i = 0; i < 12; ++i) t << R"(, {"orbit": [-3, -1]})";
+  for (int i = 0; i < 6; ++i) t << R"(, {"zoom": )" << 1.0 / 1.05 << "}";
   t << R"(, {"after_frames": 10, "quit": true}]})";
   return t.str();
 }
@@ -407,6 +412,7 @@ struct Sculpt {
   double script_now_s() const;
   bool run_script(const std::array<int, 2>& fb, std::vector<std::string>& shots);
   bool script_waits(const InputEvent& ev);
+  bool another_bench_round();
   void apply_event(const InputEvent& ev, const std::array<int, 2>& fb, std::vector<std::string>& shots, bool& quit);
   bool take_input(const std::array<int, 2>& fb);
   void handle_key(const Input::Key& k);
@@ -446,7 +452,7 @@ struct Sculpt {
   int finish();
   void settle_loads();
   void close_stroke();
-  ServoAlone servo_alone(double seconds, const session::LiveStats& sculpted);
+  ServoAlone servo_alone(const session::LiveStats& sculpted);
   void stop_session();
   void write_last_screenshot();
   void print_stats(double seconds, const session::LiveStats& st);
@@ -539,6 +545,8 @@ struct Sculpt {
   long events_submitted = 0;
   std::size_t next_event = 0;
   int wait_frames = 0;
+  bool bench_rounds = false;  // the built-in bench script: its quit repeats the rounds until --bench-ticks
+  long bench_rounds_run = 0;
   // The script's clock (its waits' timeouts): simulated time on the simulated clock.
   Clock::time_point t_wall0;
   double wait_since = 0;
@@ -586,7 +594,10 @@ bool Sculpt::load_input() {
   try {
     if (o.carried) script = o.carried->script;
     else if (!o.script.empty()) script = load_input_script(o.script);
-    else if (o.bench) script = parse_input_script(bench_script_text(), "the built-in bench script");
+    else if (o.bench) {
+      script = parse_input_script(bench_script_text(), "the built-in bench script");
+      bench_rounds = true;
+    }
     if (!o.record.empty() && fs::path(o.input).extension() != ".json")
       throw std::runtime_error("--record needs a scene file (the recording names it), got the volume " + o.input);
     check_output_names(o);
@@ -952,12 +963,25 @@ bool Sculpt::run_script(const std::array<int, 2>& fb, std::vector<std::string>& 
     const InputEvent& ev = script[next_event];
     if (wait_frames > 0) break;
     if (ev.kind == InputEvent::Kind::kWait && script_waits(ev)) break;
+    if (ev.kind == InputEvent::Kind::kQuit && another_bench_round()) continue;
     apply_event(ev, fb, shots, quit);
     ++next_event;
     if (next_event < script.size()) wait_frames = script[next_event].after_frames;
     if (iso_ctl.committed) break;  // the rest of the script runs in the restarted session
   }
   return quit;
+}
+
+/// The built-in bench's quit: true (the script goes back to the rounds' start) while the
+/// servo has ticked fewer than --bench-ticks times, so that its misses while sculpting are
+/// counted over at least that many ticks.
+bool Sculpt::another_bench_round() {
+  if (!bench_rounds) return false;
+  ++bench_rounds_run;
+  if (session->stats().ticks >= o.bench_ticks) return false;
+  next_event = kBenchRoundStart;
+  wait_frames = script[next_event].after_frames;
+  return true;
 }
 
 /// A wait event: true while it holds the script (not met, not timed out).
@@ -1570,7 +1594,7 @@ int Sculpt::finish() {
   const double seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
   close_stroke();
   const session::LiveStats sculpted = session->stats();
-  const ServoAlone alone = servo_alone(seconds, sculpted);
+  const ServoAlone alone = servo_alone(sculpted);
   stop_session();
   const session::LiveStats st = session->stats();
   write_last_screenshot();
@@ -1615,16 +1639,23 @@ void Sculpt::close_stroke() {
   session->submit(e);
 }
 
-/// --bench: the servo alone for as long (at most 5 s: the window is not redrawn meanwhile),
-/// so its misses while sculpting compare with this machine's own, measured in the same run.
-ServoAlone Sculpt::servo_alone(double seconds, const session::LiveStats& sculpted) {
+/// --bench: the servo alone right after the sculpt, until it has ticked --bench-ticks times
+/// (or twice the time that takes at the scene's rate and 5 s more: a stalled servo), so that
+/// its misses while sculpting compare with this machine's own, measured in the same run. The
+/// window is not redrawn meanwhile.
+ServoAlone Sculpt::servo_alone(const session::LiveStats& sculpted) {
   ServoAlone alone;
-  if (o.bench && !o.sim_clock) {
-    std::this_thread::sleep_for(std::chrono::duration<double>(std::min(seconds, 5.0)));
-    const session::LiveStats after = session->stats();
-    alone.ticks = after.ticks - sculpted.ticks;
-    alone.missed = after.missed_deadlines - sculpted.missed_deadlines;
+  if (!o.bench || o.sim_clock || o.bench_ticks <= 0) return alone;
+  const auto t0 = Clock::now();
+  const double limit_s = 2.0 * double(o.bench_ticks) / scene.hri.rate_hz + 5.0;
+  session::LiveStats now = session->stats();
+  while (now.ticks - sculpted.ticks < o.bench_ticks &&
+         std::chrono::duration<double>(Clock::now() - t0).count() < limit_s) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    now = session->stats();
   }
+  alone.ticks = now.ticks - sculpted.ticks;
+  alone.missed = now.missed_deadlines - sculpted.missed_deadlines;
   return alone;
 }
 
@@ -1727,35 +1758,54 @@ void Sculpt::print_device() {
   }
 }
 
-/// "verdict: WHAT X ms (needs <= L ms): PASS" (or FAIL with the ratio; no samples: FAIL).
-void verdict_line(std::ostream& log, const std::string& what, const std::vector<double>& v, double q, double limit) {
+/// "verdict: WHAT X ms (needs <= L ms[, WHY]): PASS" (or FAIL with the ratio; no samples: FAIL).
+void verdict_line(std::ostream& log, const std::string& what, const std::vector<double>& v, double q, double limit,
+                  const std::string& why = "") {
   if (v.empty()) {
     log << "verdict: " << what << ": no samples: FAIL\n";
     return;
   }
   const double x = q == 0.5 ? eval::median(v) : eval::percentile(v, q);
-  log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 0) << " ms): "
+  log << "verdict: " << what << " " << fixed(x, 1) << " ms (needs <= " << fixed(limit, 1) << " ms" << why << "): "
       << (x <= limit ? "PASS" : "FAIL (" + fixed(x / limit, 2) + "x the target)") << "\n";
 }
 
-/// --bench: the frame time, edit-to-pixels and servo figures against the targets.
+}  // namespace
+
+bool servo_misses_pass(long sculpt_missed, long sculpt_ticks, long alone_missed, long alone_ticks, double& allowed) {
+  const double ref = alone_ticks > 0 ? double(alone_missed) * double(sculpt_ticks) / double(alone_ticks) : 0.0;
+  allowed = ref + 3.0 * std::sqrt(ref);
+  return double(sculpt_missed) <= allowed;
+}
+
+namespace {
+
+/// --bench: the frame time, edit-to-pixels and servo figures against the targets: frames
+/// drawn whole (every pixel cast, render scale 1) median <= 33 ms and p95 <= 50 ms; sculpting
+/// frames and edit-to-pixels no slower than be320b6's on the chest (35.5 and 39.7 ms median,
+/// the quiet machine); the servo's misses while sculpting at most the servo alone's (scaled
+/// to the same ticks) + 3 standard deviations of a Poisson count, over >= 20,000 ticks each.
 void Sculpt::print_verdicts(const session::LiveStats& sculpted, const ServoAlone& alone) {
-  verdict_line(log, "frame time median at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]), frame_ms, 0.5, 50);
-  verdict_line(log, "frame time p95", frame_ms, 0.95, 80);
-  verdict_line(log, "edit-to-pixels median", latency_ms, 0.5, 100);
-  verdict_line(log, "frames drawn whole: frame time median", frame_full_ms, 0.5, 50);
-  verdict_line(log, "frames drawn whole: frame time p95", frame_full_ms, 0.95, 80);
-  if (o.sim_clock || alone.ticks <= 0 || sculpted.ticks <= 0) {
+  const std::string at = " at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]);
+  verdict_line(log, "frames drawn whole: frame time median" + at, frame_full_ms, 0.5, 33);
+  verdict_line(log, "frames drawn whole: frame time p95", frame_full_ms, 0.95, 50);
+  verdict_line(log, "sculpting frames (reusing the picture): frame time median", frame_reused_ms, 0.5, 35.5,
+               ", be320b6's on the chest");
+  verdict_line(log, "edit-to-pixels median", latency_ms, 0.5, 39.7, ", be320b6's on the chest");
+  if (o.sim_clock || o.bench_ticks <= 0 || alone.ticks <= 0 || sculpted.ticks <= 0) {
     log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
-        << " ticks; no idle phase (simulated clock): not measured\n";
+        << " ticks; no servo-alone phase (" << (o.sim_clock ? "simulated clock" : "--bench-ticks 0")
+        << "): not measured\n";
     return;
   }
-  const double per_sculpt = 1e4 * double(sculpted.missed_deadlines) / double(sculpted.ticks);
-  const double per_idle = 1e4 * double(alone.missed) / double(alone.ticks);
+  double allowed = 0;
+  const bool fewer = sculpted.ticks < kBenchMinTicks || alone.ticks < kBenchMinTicks;
+  const bool pass = servo_misses_pass(sculpted.missed_deadlines, sculpted.ticks, alone.missed, alone.ticks, allowed);
   log << "verdict: servo missed deadlines while sculpting " << sculpted.missed_deadlines << " of " << sculpted.ticks
-      << " ticks (" << fixed(per_sculpt, 1) << " per 10,000) against the servo alone right after " << alone.missed
-      << " of " << alone.ticks << " (" << fixed(per_idle, 1) << " per 10,000; needs sculpting <= alone): "
-      << (per_sculpt <= per_idle ? "PASS" : "FAIL") << "\n";
+      << " ticks (" << bench_rounds_run << " rounds) against the servo alone right after " << alone.missed << " of "
+      << alone.ticks << " ticks (needs sculpting <= alone scaled to the same ticks + 3 sqrt of it = "
+      << fixed(allowed, 1) << ", >= " << kBenchMinTicks << " ticks each): "
+      << (fewer ? std::string("FAIL (fewer ticks than that)") : pass ? "PASS" : "FAIL") << "\n";
 }
 
 }  // namespace

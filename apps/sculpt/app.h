@@ -31,6 +31,9 @@ struct Options {
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)
   double edit_wait_ms = 50;         ///< a frame waits this long at most for the brush it submitted (0: never)
   bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets
+  /// With the built-in bench: its rounds repeat until the servo has ticked this many times,
+  /// then the servo runs alone for as many ticks (0: no servo-alone phase, no servo verdict).
+  long bench_ticks = 20000;
   /// Feel every tool as the point (the probe of old, for comparison); by default a carve or
   /// drill brush is felt as the spherical tool of its radius, the brush cutting to its surface.
   bool point_probe = false;
@@ -68,6 +71,14 @@ struct Options {
   /// the camera and the tool.
   std::shared_ptr<const Carried> carried;
 };
+
+/// The servo verdict of --bench counts misses over at least this many ticks, sculpting and alone.
+constexpr long kBenchMinTicks = 20000;
+
+/// The servo verdict of --bench: the misses while sculpting are at most the servo alone's,
+/// scaled to the sculpting ticks (ref), + 3 sqrt(ref) (three standard deviations of a Poisson
+/// count). `allowed` gets ref + 3 sqrt(ref).
+bool servo_misses_pass(long sculpt_missed, long sculpt_ticks, long alone_missed, long alone_ticks, double& allowed);
 
 /// Runs the window until it is closed, the script quits or `frames` frames were drawn.
 /// Returns the exit code: 0, 1 on bad input or set-up failure (reason on `log`), 3 if

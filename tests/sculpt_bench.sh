@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# isotouch-sculpt --bench on the head CT, as printed: its verdict lines carry the targets
+# (frames drawn whole: median <= 33 ms, p95 <= 50 ms), the bench's rounds repeat until the
+# servo has ticked --bench-ticks times, the servo alone then ticks as many, and the servo
+# verdict's allowance is the alone misses scaled to the sculpting ticks + 3 sqrt of that
+# (recomputed here from the printed counts); fewer than 20,000 ticks is not a pass. The rounds
+# are checked on the simulated clock (deterministic), the servo-alone phase on the real one.
+# Usage: sculpt_bench.sh SCULPT_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
+set -euo pipefail
+bin=$1 src=$2
+out=${3:-$(mktemp -d)}
+if ! command -v xvfb-run >/dev/null; then
+  echo "SKIP: xvfb-run is not installed (Debian: xvfb xauth)"
+  exit 77
+fi
+mkdir -p "$out"
+# On the simulated clock (a frame's worth of ticks per frame, whatever the machine's load):
+# the rounds repeat until the servo has ticked --bench-ticks times; no servo-alone phase.
+set +e
+xvfb-run -a "$bin" "$src/scenes/head.json" --bench --bench-ticks 6000 --sim-clock --size 256 > "$out/sim.txt" 2>&1
+rc=$?
+set -e
+[ "$rc" -eq 0 ] || { cat "$out/sim.txt"; echo "FAIL: isotouch-sculpt --bench --sim-clock exited $rc"; exit 1; }
+python3 - "$out/sim.txt" <<'PY'
+import re, sys
+log = open(sys.argv[1]).read()
+m = re.search(r"^verdict: servo missed deadlines while sculpting \d+ of (\d+) ticks; no servo-alone phase \(simulated clock\): not measured$", log, re.M)
+if not m:
+    sys.exit("FAIL: no 'not measured' servo verdict on the simulated clock")
+w = re.search(r"^stats      frames drawn whole \(first, camera or style changed\): n (\d+),", log, re.M)
+ticks, whole = int(m.group(1)), int(w.group(1)) if w else 0
+if ticks < 6000:
+    sys.exit(f"FAIL: {ticks} ticks sculpting: the rounds did not repeat until --bench-ticks 6000")
+if whole < 2 * 36:
+    sys.exit(f"FAIL: {whole} frames drawn whole: fewer than two rounds' camera moves (36 each)")
+print(f"simulated clock: {ticks} ticks sculpting, {whole} frames drawn whole")
+PY
+ticks=3000
+set +e
+xvfb-run -a "$bin" "$src/scenes/head.json" --bench --bench-ticks "$ticks" --size 256 > "$out/log.txt" 2>&1
+rc=$?
+set -e
+cat "$out/log.txt"
+[ "$rc" -eq 0 ] || { echo "FAIL: isotouch-sculpt --bench exited $rc"; exit 1; }
+grep -q "^verdict: frames drawn whole: frame time median at 256x192 [0-9.]* ms (needs <= 33.0 ms): " "$out/log.txt" ||
+  { echo "FAIL: no frames-drawn-whole median verdict against 33 ms"; exit 1; }
+grep -q "^verdict: frames drawn whole: frame time p95 [0-9.]* ms (needs <= 50.0 ms): " "$out/log.txt" ||
+  { echo "FAIL: no frames-drawn-whole p95 verdict against 50 ms"; exit 1; }
+grep -q "^verdict: edit-to-pixels median [0-9.]* ms (needs <= 39.7 ms" "$out/log.txt" ||
+  { echo "FAIL: no edit-to-pixels verdict"; exit 1; }
+line=$(grep "^verdict: servo missed deadlines while sculpting" "$out/log.txt") || { echo "FAIL: no servo verdict"; exit 1; }
+python3 - "$line" "$ticks" <<'PY'
+import math, re, sys
+line, want = sys.argv[1], int(sys.argv[2])
+m = re.match(r"verdict: servo missed deadlines while sculpting (\d+) of (\d+) ticks \((\d+) rounds\) against the servo "
+             r"alone right after (\d+) of (\d+) ticks \(needs .* = ([0-9.]+), >= 20000 ticks each\): (.*)$", line)
+if not m:
+    sys.exit("FAIL: the servo verdict does not read as expected: " + line)
+sm, st, rounds, am, at, allowed, result = m.groups()
+sm, st, rounds, am, at, allowed = int(sm), int(st), int(rounds), int(am), int(at), float(allowed)
+if st < want or at < want:
+    sys.exit(f"FAIL: {st} ticks sculpting, {at} alone: --bench-ticks {want} asked for at least that many each")
+ref = am * st / at
+if abs(allowed - (ref + 3 * math.sqrt(ref))) > 0.051:
+    sys.exit(f"FAIL: allowance {allowed}, expected {ref + 3 * math.sqrt(ref):.1f} (alone {am} of {at} scaled to {st} ticks + 3 sqrt)")
+if result != "FAIL (fewer ticks than that)":
+    sys.exit(f"FAIL: {st} and {at} ticks are fewer than 20,000, yet the verdict is {result!r}")
+print(f"servo verdict: {sm} of {st} sculpting, {am} of {at} alone, allowance {allowed} ({rounds} rounds)")
+PY
+echo "PASS sculpt bench"

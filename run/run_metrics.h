@@ -43,7 +43,9 @@ struct EditFigures {
   long gpu_updates = 0;            ///< updates whose filters ran on the GPU (LiveUpdateStats::gpu)
   double update_ms_median = 0, update_ms_max = 0;  ///< session::EditSession::apply wall time, publishing events [ms]
   double brush_ms_median = 0;      ///< BrushResult::wall_ms median [ms]
-  bool brushes_on_gpu = false;     ///< Sculptor::on_gpu()
+  bool brushes_on_gpu = false;     ///< Sculptor::on_gpu(): a Vulkan device was given to the brushes
+  long brushes_on_device = 0;      ///< brush applications that ran on the Vulkan device (BrushResult::on_device)
+  long brushes_on_cpu = 0;         ///< ... on the CPU reference (no device, or few bricks: Sculptor::cpu_max_bricks)
   std::uint64_t history_bytes = 0, history_limit_bytes = 0;  ///< undo history at the end
   std::size_t history_dropped = 0; ///< strokes dropped to stay under the limit
   double first_edit_t_s = -1;      ///< time of the first brush application [s] (-1: none)

@@ -215,6 +215,7 @@ void edit_figures(const SceneSetup& setup, const EditDriver& d, const std::vecto
     if (r.event.kind == EditEvent::Kind::kBrush) {
       e.dirty_bricks += long(r.outcome.brush.dirty.size());
       brush_ms.push_back(r.outcome.brush.wall_ms);
+      ++(r.outcome.brush.on_device ? e.brushes_on_device : e.brushes_on_cpu);
     }
   }
   e.update_ms_median = upd.empty() ? 0 : median(upd);  // 0: no edit ran

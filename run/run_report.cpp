@@ -179,6 +179,8 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"every_ticks", scene.edits.every_ticks},
           {"drill", drill},
           {"brushes_on", e.brushes_on_gpu ? "GPU" : "CPU"},
+          {"brush_applications_on_device", e.brushes_on_device},
+          {"brush_applications_on_cpu", e.brushes_on_cpu},
           {"events", e.events},
           {"brush_applications", e.brushes},
           {"timeline_applications", e.timeline_brushes},
@@ -247,7 +249,8 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
                                  " of the material-to-empty range per N s (" + fmt(e.drill_rate_value_per_n_s, 6) + " value units per N s)"
                            : std::string())
      << ", applied every " << scene.edits.every_ticks << " servo ticks while the button is down and the probe is in contact"
-     << " (brushes on the " << (e.brushes_on_gpu ? "GPU" : "CPU") << ").\n\n"
+     << " (brushes on the " << (e.brushes_on_gpu ? "GPU" : "CPU") << ": " << e.brushes_on_device
+     << " application(s) on the device, " << e.brushes_on_cpu << " on the CPU reference).\n\n"
      << "| | |\n|---|---|\n"
      << "| applications | " << e.brushes << " (" << e.timeline_brushes << " from the timeline, " << e.button_brushes
      << " from the button); " << e.undos << " undo, " << e.redos << " redo; " << e.events << " events in all |\n"

@@ -231,6 +231,7 @@ void make_edit_session(const Scene& scene, SceneSetup& s, std::ostream& log) {
   s.first = s.session->current();
   log << "edits    " << scene.edits.timeline.size() << " timeline entries, " << scene.edits.button_down.size()
       << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")
+      << " (" << s.session->sculptor().describe_path() << ")"
       << ", undo limit " << fmt(scene.edits.history_limit_mib) << " MiB; first snapshot version "
       << s.first->version << " (LiveField, " << s.live.passes.size() << " pass(es))\n";
   log << "live     " << s.session->live().describe() << "\n";

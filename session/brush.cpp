@@ -140,6 +140,7 @@ BrushResult BrushEngine::apply(const Brush& b, Volume* host) {
   if (host && (host->grid.dims != g.dims || host->voxels.size() != g.voxel_count()))
     throw VolumeError(host->path + ": brush engine: the host mirror's dims differ from the device volume's");
   BrushResult res;
+  res.on_device = true;
   const BrickRange r = touched_range(g, b);
   res.touched = touched_bricks(g, b);
   if (r.empty()) return res;

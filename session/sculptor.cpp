@@ -44,7 +44,6 @@ BrushResult Sculptor::apply(const Brush& b) {
     if (device) {
       sync_device();
       r = engine_->apply(b, &vol_);
-      r.on_device = true;
     } else {
       r = apply_brush_cpu(vol_, b);
       if (engine_) mark_stale(r.dirty);

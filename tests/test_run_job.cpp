@@ -440,6 +440,13 @@ TEST(RunJob, SurfaceErrorAfterAnEditIsMeasuredOnTheEditedVolume) {
   EXPECT_GT(m.surface_err_rms_m, 0.0) << "measured on no tick";
   EXPECT_NEAR(m.surface_err_max_m, max_d, 5e-5) << "max against the analytic sphere";
   EXPECT_NEAR(m.surface_err_rms_m, std::sqrt(sum2 / double(n)), 5e-5);
+  // Where the one carve ran, as summary.json says: a 4 mm brush on 1 mm voxels touches
+  // 8 bricks, which run on the CPU reference with or without a Vulkan device.
+  std::ifstream js(dir / "out" / "summary.json");
+  const auto j = nlohmann::json::parse(js).at("edits");
+  EXPECT_EQ(j.at("brush_applications").get<long>(), 1);
+  EXPECT_EQ(j.at("brush_applications_on_cpu").get<long>(), 1);
+  EXPECT_EQ(j.at("brush_applications_on_device").get<long>(), 0);
   fs::remove_all(dir);
 }
 

@@ -22,6 +22,11 @@ void sleep_ns(std::int64_t ns) {
   const timespec ts{time_t(ns / 1000000000LL), long(ns % 1000000000LL)};
   nanosleep(&ts, nullptr);
 }
+void sleep_until_ns(std::int64_t t) {
+  const timespec ts{time_t(t / 1000000000LL), long(t % 1000000000LL)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
 constexpr std::size_t kMaxReport = 256;
 
 std::string text(double v) {
@@ -234,6 +239,7 @@ std::string ReportDevice::realtime_note() const {
 
 void ReportDevice::reader_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // a link without its own wait sleeps kPollUs
+  prctl(PR_SET_NAME, "devio-reader", 0UL, 0UL, 0UL);
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   std::array<std::uint8_t, kMaxReport> cmd{};
@@ -281,8 +287,29 @@ bool ReportDevice::send(std::span<const std::uint8_t> report) {
   return true;
 }
 
+void WriteInterval::saw(std::int64_t t_ns, std::uint64_t writes) {
+  if (last_ns_ >= 0 && writes > 0) ring_[next_++ % ring_.size()] = (t_ns - last_ns_) / std::int64_t(writes);
+  last_ns_ = t_ns;
+}
+
+std::int64_t WriteInterval::estimate_ns() const {
+  std::int64_t best = 0;
+  for (std::int64_t d : ring_)
+    if (d > 0 && (best == 0 || d < best)) best = d;
+  return best;
+}
+
+std::int64_t WriteInterval::next_look_ns(std::int64_t now_ns, std::int64_t seen_ns, std::int64_t poll_ns) const {
+  const std::int64_t poll = now_ns + poll_ns;
+  const std::int64_t T = estimate_ns();
+  if (T <= 0) return poll;
+  const std::int64_t lead = std::max(3 * poll_ns, T / 8);
+  return std::max(poll, seen_ns + T - lead);
+}
+
 void ReportDevice::writer_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
+  prctl(PR_SET_NAME, "devio-writer", 0UL, 0UL, 0UL);
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
@@ -291,13 +318,14 @@ void ReportDevice::writer_loop() {
   std::int64_t seen_at = now_ns();                   // ... and when
   std::int64_t last_send = 0;
   bool was_on = false;
+  WriteInterval interval;
   while (!stop_.load()) {
     // The clock first: a count unchanged after it means no write up to t (read the other way
     // round, a preempted writer could call a write it has not loaded yet a stall).
     const std::int64_t t = now_ns();
     const Output o = output_.load();
     const bool fresh = o.count != seen_count;
-    if (fresh) seen_count = o.count, seen_at = t;
+    if (fresh) interval.saw(t, o.count - seen_count), seen_count = o.count, seen_at = t;
     // Force only while enabled and the servo writes (none yet since enable_force(): off, not
     // a stall). After the stall time without a write (a slow renderer, a starved or stopped
     // servo thread) a stall is counted: zero with enable cleared until a write made after
@@ -313,7 +341,11 @@ void ReportDevice::writer_loop() {
       last_send = t;
       was_on = on;
     }
-    sleep_ns(poll_ns);
+    // Asleep until shortly before the servo's next write is due, then polling: not 50,000
+    // wake-ups a second at SCHED_FIFO beside the renderer. Never past the stall time or the
+    // keepalive (the window ends before either: it closes a lead before one interval).
+    const std::int64_t stall_at = seen_at + stall_ns_.load(std::memory_order_relaxed) + 1;
+    sleep_until_ns(std::min({interval.next_look_ns(t, seen_at, poll_ns), stall_at, last_send + keepalive_ns}));
   }
   const std::size_t n = protocol_->encode_output({}, false, 0, buf);
   send(std::span(buf.data(), n));

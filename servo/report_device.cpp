@@ -1,5 +1,6 @@
 #include "isotouch/servo/report_device.h"
 
+#include <pthread.h>
 #include <sys/prctl.h>
 #include <time.h>
 
@@ -93,6 +94,9 @@ void ReportDevice::open() {
   stop_ = false;
   reader_ = std::thread([this] { reader_loop(); });
   writer_ = std::thread([this] { writer_loop(); });
+  // Named for /proc/PID/task/TID/comm and top -H (before open() returns).
+  pthread_setname_np(reader_.native_handle(), "devio-reader");
+  pthread_setname_np(writer_.native_handle(), "devio-writer");
   // The servo starts on a live reading, not on the initial "disconnected" one.
   for (int i = 0; i < 1000 && reports_.load() == 0; ++i) sleep_ns(1'000'000);
   if (reports_.load() == 0) {
@@ -239,7 +243,6 @@ std::string ReportDevice::realtime_note() const {
 
 void ReportDevice::reader_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // a link without its own wait sleeps kPollUs
-  prctl(PR_SET_NAME, "devio-reader", 0UL, 0UL, 0UL);
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   std::array<std::uint8_t, kMaxReport> cmd{};
@@ -288,8 +291,14 @@ bool ReportDevice::send(std::span<const std::uint8_t> report) {
 }
 
 void WriteInterval::saw(std::int64_t t_ns, std::uint64_t writes) {
-  if (last_ns_ >= 0 && writes > 0) ring_[next_++ % ring_.size()] = (t_ns - last_ns_) / std::int64_t(writes);
-  last_ns_ = t_ns;
+  // Found on the first look after sleeping to the window, later than it was due: the writer
+  // woke late, not the servo wrote late; taken as written when due, so a late wake-up does
+  // not carry into the next window. Found while polling: when it was seen.
+  const std::int64_t T = estimate_ns();
+  std::int64_t at = t_ns;
+  if (slept_ && T > 0 && last_ns_ >= 0 && writes == 1) at = std::min(t_ns, last_ns_ + T);
+  if (last_ns_ >= 0 && writes > 0) ring_[next_++ % ring_.size()] = (at - last_ns_) / std::int64_t(writes);
+  last_ns_ = at;
 }
 
 std::int64_t WriteInterval::estimate_ns() const {
@@ -299,17 +308,19 @@ std::int64_t WriteInterval::estimate_ns() const {
   return best;
 }
 
-std::int64_t WriteInterval::next_look_ns(std::int64_t now_ns, std::int64_t seen_ns, std::int64_t poll_ns) const {
+std::int64_t WriteInterval::next_look_ns(std::int64_t now_ns, std::int64_t poll_ns) {
   const std::int64_t poll = now_ns + poll_ns;
   const std::int64_t T = estimate_ns();
-  if (T <= 0) return poll;
+  slept_ = false;
+  if (T <= 0 || last_ns_ < 0) return poll;
   const std::int64_t lead = std::max(3 * poll_ns, T / 8);
-  return std::max(poll, seen_ns + T - lead);
+  const std::int64_t window = last_ns_ + T - lead;
+  slept_ = window > poll;
+  return std::max(poll, window);
 }
 
 void ReportDevice::writer_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
-  prctl(PR_SET_NAME, "devio-writer", 0UL, 0UL, 0UL);
   ask_fifo();
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
@@ -345,7 +356,7 @@ void ReportDevice::writer_loop() {
     // wake-ups a second at SCHED_FIFO beside the renderer. Never past the stall time or the
     // keepalive (the window ends before either: it closes a lead before one interval).
     const std::int64_t stall_at = seen_at + stall_ns_.load(std::memory_order_relaxed) + 1;
-    sleep_until_ns(std::min({interval.next_look_ns(t, seen_at, poll_ns), stall_at, last_send + keepalive_ns}));
+    sleep_until_ns(std::min({interval.next_look_ns(t, poll_ns), stall_at, last_send + keepalive_ns}));
   }
   const std::size_t n = protocol_->encode_output({}, false, 0, buf);
   send(std::span(buf.data(), n));

@@ -111,18 +111,21 @@ struct ReportDeviceOptions {
 /// before the next is due, then polls. Times are CLOCK_MONOTONIC [ns]. Writer thread only.
 class WriteInterval {
  public:
-  /// The writer saw `writes` new writes (the count's step) at `t_ns`.
+  /// The writer saw `writes` new writes (the count's step) at `t_ns`. One found on the first
+  /// look after sleeping to the window, past its due time, counts as written when due (the
+  /// writer woke late: its lateness does not carry into the next window).
   void saw(std::int64_t t_ns, std::uint64_t writes);
   /// The interval between writes [ns]; 0 before two were seen.
   std::int64_t estimate_ns() const;
-  /// When to look next, at `now_ns`, the last write seen at `seen_ns`: `now_ns + poll_ns`
-  /// without an estimate or inside the window, else the window's start.
-  std::int64_t next_look_ns(std::int64_t now_ns, std::int64_t seen_ns, std::int64_t poll_ns) const;
+  /// When to look next, at `now_ns`: `now_ns + poll_ns` without an estimate or inside the
+  /// window, else the window's start (the last write + interval - lead).
+  std::int64_t next_look_ns(std::int64_t now_ns, std::int64_t poll_ns);
 
  private:
   std::array<std::int64_t, 8> ring_{};
   std::size_t next_ = 0;
-  std::int64_t last_ns_ = -1;
+  std::int64_t last_ns_ = -1;  // when the last write seen is taken to be written
+  bool slept_ = false;         // the last next_look_ns() slept to the window (not a poll)
 };
 
 /// A device behind a ReportLink and a DeviceProtocol. open() connects and reads the

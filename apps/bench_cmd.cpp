@@ -275,7 +275,8 @@ Subcommand add_bench_sculpt_device_command(CLI::App& bench) {
   s.app->add_option("--scenes", o->scenes, "Scenes, one set of runs each")->capture_default_str();
   s.app->add_option("--size", o->width, "Window width [pixels] (height 3/4 of it)")->capture_default_str()->check(CLI::Range(64, 4096));
   s.app->add_option("--min-ticks", o->min_ticks, "Servo ticks each mode gathers at least (runs repeated)")->capture_default_str()->check(CLI::Range(1L, 10000000L));
-  s.app->add_option("--max-runs", o->max_runs, "Runs per mode at most")->capture_default_str()->check(CLI::Range(1, 100));
+  s.app->add_option("--min-runs", o->min_runs, "Runs per mode at least")->capture_default_str()->check(CLI::Range(1, 100));
+  s.app->add_option("--max-runs", o->max_runs, "Runs per mode at most, for the ticks (--min-runs wins)")->capture_default_str()->check(CLI::Range(1, 100));
   s.app->add_option("--sculpt", o->sculpt_exe, "isotouch-sculpt to run (default: beside this program)");
   s.app->add_option("--devemu", o->devemu_exe, "isotouch-devemu to run (default: beside this program)");
   s.run = [o](const std::string& device) {

@@ -131,13 +131,14 @@ std::string resolve(const std::string& rel) {
 }
 
 /// Runs isotouch-sculpt --bench with `args` (after the scene) beside a fresh emulator on
-/// `socket` until the mode has min_ticks servo ticks; `haptic`: the --haptic value or "".
+/// `socket`, min_runs times and until the mode has min_ticks servo ticks (max_runs at most);
+/// `haptic`: the --haptic value or "".
 Mode run_mode(const SculptDeviceOptions& o, const std::string& name, const std::string& scene,
               const std::string& socket, const std::string& haptic, std::ostream& progress) {
   Mode m;
   m.name = name;
   const std::string emu_exe = exe_beside(o.devemu_exe, "isotouch-devemu");
-  while (m.ticks < o.min_ticks && m.runs < o.max_runs && m.error.empty()) {
+  while (m.error.empty() && (m.runs < o.min_runs || (m.ticks < o.min_ticks && m.runs < o.max_runs))) {
     Emulator emu(emu_exe, socket);
     if (!emu.ok()) {
       m.error = "isotouch-devemu (" + emu_exe + ") did not start listening on " + socket;

@@ -5,11 +5,11 @@
 // carries what (b) carries, less the link); (b) --haptic emu:SOCKET against isotouch-devemu
 // --rate 1000 --sine-mm 5; (c) --haptic playback:REC, the mouse run's own recording played
 // back (the same HIP path as (a), a device with no threads), with the idle emulator running.
-// Each mode runs again until it has at least 20,000 servo ticks. Printed: frame medians
-// (all frames, frames drawn whole, frames reusing the picture), the ratios device / mouse
-// with verdicts (<= 1.10), the emulator's and the app's CPU use, the servo's misses against
-// the mouse's (at most ref + 3 sqrt(ref), ref scaled to the same tick count), the load
-// average before and after.
+// Each mode runs at least 3 times, and again until it has at least 20,000 servo ticks.
+// Printed: frame medians (all frames, frames drawn whole, frames reusing the picture), the
+// ratios device / mouse with verdicts (<= 1.10), the emulator's and the app's CPU use, the
+// servo's misses against the mouse's (at most ref + 3 sqrt(ref), ref scaled to the same
+// tick count), the load average before and after.
 #pragma once
 #include <iosfwd>
 #include <string>
@@ -21,7 +21,8 @@ struct SculptDeviceOptions {
   std::vector<std::string> scenes{"scenes/head.json", "scenes/chest.json"};
   int width = 1024;             ///< the window's width [pixels]; its height is 3/4 of it
   long min_ticks = 20000;       ///< servo ticks each mode gathers at least (runs repeated)
-  int max_runs = 6;             ///< runs per mode at most
+  int min_runs = 3;             ///< runs per mode at least (31 frames drawn whole a run: one run's median is noisy)
+  int max_runs = 6;             ///< runs per mode at most (min_runs wins)
   std::string sculpt_exe;       ///< isotouch-sculpt (default: beside this executable)
   std::string devemu_exe;       ///< isotouch-devemu (default: beside this executable)
   std::string device;           ///< Vulkan device (substring), passed on

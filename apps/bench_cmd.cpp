@@ -12,6 +12,7 @@
 #include "isotouch/apps/cli_checks.h"
 #include "isotouch/bench/render_bench.h"
 #include "isotouch/bench/sculpt_big_bench.h"
+#include "isotouch/bench/sculpt_device_bench.h"
 #include "isotouch/bench/servo_bench.h"
 
 namespace isotouch::app {
@@ -270,6 +271,28 @@ Subcommand add_bench_sculpt_big_command(CLI::App& bench) {
   return s;
 }
 
+Subcommand add_bench_sculpt_device_command(CLI::App& bench) {
+  auto o = std::make_shared<bench::SculptDeviceOptions>();
+  Subcommand s;
+  s.app = bench.add_subcommand(
+      "sculpt-device", "isotouch-sculpt --bench driven by the mouse (an isotouch-devemu running idle beside it), by "
+                       "--haptic emu: (isotouch-devemu --sine-mm 5) and by --haptic playback: (the mouse run's recording): "
+                       "frame medians, device / mouse ratios (verdict <= 1.10), the emulator's and the app's CPU use, "
+                       "servo misses (<= ref + 3 sqrt(ref)), the load");
+  s.app->add_option("--scenes", o->scenes, "Scenes, one set of runs each")->capture_default_str();
+  s.app->add_option("--size", o->width, "Window width [pixels] (height 3/4 of it)")->capture_default_str()->check(CLI::Range(64, 4096));
+  s.app->add_option("--min-ticks", o->min_ticks, "Servo ticks each mode gathers at least (runs repeated)")->capture_default_str()->check(CLI::Range(1L, 10000000L));
+  s.app->add_option("--min-runs", o->min_runs, "Runs per mode at least")->capture_default_str()->check(CLI::Range(1, 100));
+  s.app->add_option("--max-runs", o->max_runs, "Runs per mode at most, for the ticks (--min-runs wins)")->capture_default_str()->check(CLI::Range(1, 100));
+  s.app->add_option("--sculpt", o->sculpt_exe, "isotouch-sculpt to run (default: beside this program)");
+  s.app->add_option("--devemu", o->devemu_exe, "isotouch-devemu to run (default: beside this program)");
+  s.run = [o](const std::string& device) {
+    o->device = device;
+    return bench::run_bench_sculpt_device(*o, std::cout, std::cerr);
+  };
+  return s;
+}
+
 }  // namespace
 
 std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
@@ -277,7 +300,8 @@ std::vector<Subcommand> add_bench_commands(CLI::App& cli) {
   bench->require_subcommand(1);
   return {add_bench_servo_rt_command(*bench), add_bench_table1_command(*bench), add_bench_engine_command(*bench),
           add_bench_render_command(*bench),   add_bench_edit_command(*bench),   add_bench_device_command(*bench),
-          add_bench_serve_command(*bench),    add_bench_sculpt_big_command(*bench)};
+          add_bench_serve_command(*bench),    add_bench_sculpt_big_command(*bench),
+          add_bench_sculpt_device_command(*bench)};
 }
 
 }  // namespace isotouch::app

@@ -141,6 +141,7 @@ ChildRun collect(pid_t pid, int out_fd, Clock::time_point t0) {
     return r;
   }
   r.peak_rss_bytes = std::uint64_t(ru.ru_maxrss) * 1024;  // Linux: KiB
+  r.cpu_s = double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + 1e-6 * double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
   if (WIFEXITED(status)) r.exit_code = WEXITSTATUS(status);
   if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
   return r;

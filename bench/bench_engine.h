@@ -73,6 +73,7 @@ struct ChildRun {
   std::uint64_t peak_rss_bytes = 0;  ///< wait4() ru_maxrss (KiB on Linux) x 1024
   std::string out;               ///< what the child wrote to its stdout
   std::string error;             ///< why it did not start
+  double cpu_s = kNaN;           ///< wait4() user + system time of the child and the descendants it reaped [s]
 };
 /// Fork; the child runs `body` with stdout redirected into a pipe and exits with its
 /// return value (1 on an exception); the parent collects stdout and reaps the child with

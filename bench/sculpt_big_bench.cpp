@@ -116,6 +116,32 @@ std::map<std::string, StatLine> parse_sculpt_stats(const std::string& text, std:
   return out;
 }
 
+ServoLine parse_sculpt_servo(const std::string& text) {
+  std::istringstream in(text);
+  std::string line;
+  ServoLine s;
+  while (std::getline(in, line)) {
+    long t = 0, m = 0;
+    if (std::sscanf(line.c_str(), "stats    servo %ld ticks, %ld missed deadlines", &t, &m) == 2) s = {t, m};
+  }
+  return s;
+}
+
+ChildRun run_sculpt_bench(const std::string& exe, const std::vector<std::string>& args, int width,
+                          const std::string& device) {
+  // Its figures go to stderr: read with stdout.
+  std::vector<std::string> argv = {"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1"};
+  if (std::getenv("DISPLAY") == nullptr || *std::getenv("DISPLAY") == 0)
+    argv.insert(argv.end(), {"xvfb-run", "-a", "-s", "-screen 0 1280x1024x24"});
+  argv.push_back(!exe.empty() ? exe : (fs::read_symlink("/proc/self/exe").parent_path() / "isotouch-sculpt").string());
+  argv.insert(argv.end(), args.begin(), args.end());
+  // One round of the script (--bench-ticks 0: no servo-alone phase): the callers gather
+  // their own ticks over runs.
+  argv.insert(argv.end(), {"--bench", "--bench-ticks", "0", "--size", std::to_string(width), "--render-scale", "1"});
+  if (!device.empty()) argv.insert(argv.end(), {"--device", device});
+  return run_child_exec(argv);
+}
+
 namespace {
 std::string load_average() {
   std::ifstream f("/proc/loadavg");
@@ -134,10 +160,6 @@ std::string window_text(const SculptBigOptions& o) {
   return std::to_string(o.width) + "x" + std::to_string(o.width * 3 / 4) + ", render scale 1";
 }
 
-std::string sculpt_exe(const SculptBigOptions& o) {
-  if (!o.sculpt_exe.empty()) return o.sculpt_exe;
-  return (fs::read_symlink("/proc/self/exe").parent_path() / "isotouch-sculpt").string();
-}
 
 /// The made volume: NX x NY x NZ int16 over the source's box, written into `dir`.
 std::string make_volume(const engine::Volume& src, const SculptBigOptions& o, int nz, const fs::path& dir,
@@ -156,17 +178,9 @@ std::string make_volume(const engine::Volume& src, const SculptBigOptions& o, in
   return mhd.string();
 }
 
-/// isotouch-sculpt INPUT --bench (its figures go to stderr: read with stdout), under
-/// xvfb-run when there is no display. `input`: a scene, or a volume and its isovalue options.
+/// isotouch-sculpt INPUT --bench. `input`: a scene, or a volume and its isovalue options.
 ChildRun run_sculpt(const SculptBigOptions& o, const std::vector<std::string>& input) {
-  std::vector<std::string> argv = {"/bin/sh", "-c", "exec \"$0\" \"$@\" 2>&1"};
-  if (std::getenv("DISPLAY") == nullptr || *std::getenv("DISPLAY") == 0)
-    argv.insert(argv.end(), {"xvfb-run", "-a", "-s", "-screen 0 1280x1024x24"});
-  argv.push_back(sculpt_exe(o));
-  argv.insert(argv.end(), input.begin(), input.end());
-  argv.insert(argv.end(), {"--bench", "--bench-ticks", "0", "--size", std::to_string(o.width), "--render-scale", "1"});
-  if (!o.device.empty()) argv.insert(argv.end(), {"--device", o.device});
-  return run_child_exec(argv);
+  return run_sculpt_bench(o.sculpt_exe, input, o.width, o.device);
 }
 
 std::string ms(double x) {

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/bench/bench_engine.h"
 #include "isotouch/engine/volume.h"
 
 namespace isotouch::bench {
@@ -52,6 +53,19 @@ struct StatLine {
 /// "frames drawn whole (first, camera or style changed)", ...), and "memory" -> the memory
 /// line's text in `memory`.
 std::map<std::string, StatLine> parse_sculpt_stats(const std::string& text, std::string* memory = nullptr);
+
+/// The servo line of isotouch-sculpt's --bench output ("stats    servo T ticks, M missed
+/// deadlines, ..."): ticks and missed deadlines; both -1 when the line is missing.
+struct ServoLine {
+  long ticks = -1, missed = -1;
+};
+ServoLine parse_sculpt_servo(const std::string& text);
+
+/// isotouch-sculpt at `exe` (empty: beside this executable) with `args` (the input first),
+/// then --bench --size WIDTH --render-scale 1 and --device DEVICE when given, under xvfb-run
+/// when there is no display; its stderr read with its stdout.
+ChildRun run_sculpt_bench(const std::string& exe, const std::vector<std::string>& args, int width,
+                          const std::string& device);
 
 /// Runs the bench; prints the report to `out`, progress to `progress`.
 /// @return 0 when every run completed (whether or not a target was met), 1 otherwise.

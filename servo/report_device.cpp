@@ -1,5 +1,6 @@
 #include "isotouch/servo/report_device.h"
 
+#include <pthread.h>
 #include <sys/prctl.h>
 #include <time.h>
 
@@ -21,6 +22,11 @@ std::int64_t now_ns() {
 void sleep_ns(std::int64_t ns) {
   const timespec ts{time_t(ns / 1000000000LL), long(ns % 1000000000LL)};
   nanosleep(&ts, nullptr);
+}
+void sleep_until_ns(std::int64_t t) {
+  const timespec ts{time_t(t / 1000000000LL), long(t % 1000000000LL)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
 }
 constexpr std::size_t kMaxReport = 256;
 
@@ -88,6 +94,9 @@ void ReportDevice::open() {
   stop_ = false;
   reader_ = std::thread([this] { reader_loop(); });
   writer_ = std::thread([this] { writer_loop(); });
+  // Named for /proc/PID/task/TID/comm and top -H (before open() returns).
+  pthread_setname_np(reader_.native_handle(), "devio-reader");
+  pthread_setname_np(writer_.native_handle(), "devio-writer");
   // The servo starts on a live reading, not on the initial "disconnected" one.
   for (int i = 0; i < 1000 && reports_.load() == 0; ++i) sleep_ns(1'000'000);
   if (reports_.load() == 0) {
@@ -281,6 +290,35 @@ bool ReportDevice::send(std::span<const std::uint8_t> report) {
   return true;
 }
 
+void WriteInterval::saw(std::int64_t t_ns, std::uint64_t writes) {
+  // Found on the first look after sleeping to the window, later than it was due: the writer
+  // woke late, not the servo wrote late; taken as written when due, so a late wake-up does
+  // not carry into the next window. Found while polling: when it was seen.
+  const std::int64_t T = estimate_ns();
+  std::int64_t at = t_ns;
+  if (slept_ && T > 0 && last_ns_ >= 0 && writes == 1) at = std::min(t_ns, last_ns_ + T);
+  if (last_ns_ >= 0 && writes > 0) ring_[next_++ % ring_.size()] = (at - last_ns_) / std::int64_t(writes);
+  last_ns_ = at;
+}
+
+std::int64_t WriteInterval::estimate_ns() const {
+  std::int64_t best = 0;
+  for (std::int64_t d : ring_)
+    if (d > 0 && (best == 0 || d < best)) best = d;
+  return best;
+}
+
+std::int64_t WriteInterval::next_look_ns(std::int64_t now_ns, std::int64_t poll_ns) {
+  const std::int64_t poll = now_ns + poll_ns;
+  const std::int64_t T = estimate_ns();
+  slept_ = false;
+  if (T <= 0 || last_ns_ < 0) return poll;
+  const std::int64_t lead = std::max(3 * poll_ns, T / 8);
+  const std::int64_t window = last_ns_ + T - lead;
+  slept_ = window > poll;
+  return std::max(poll, window);
+}
+
 void ReportDevice::writer_loop() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // wake on time: the poll is the latency
   ask_fifo();
@@ -291,13 +329,14 @@ void ReportDevice::writer_loop() {
   std::int64_t seen_at = now_ns();                   // ... and when
   std::int64_t last_send = 0;
   bool was_on = false;
+  WriteInterval interval;
   while (!stop_.load()) {
     // The clock first: a count unchanged after it means no write up to t (read the other way
     // round, a preempted writer could call a write it has not loaded yet a stall).
     const std::int64_t t = now_ns();
     const Output o = output_.load();
     const bool fresh = o.count != seen_count;
-    if (fresh) seen_count = o.count, seen_at = t;
+    if (fresh) interval.saw(t, o.count - seen_count), seen_count = o.count, seen_at = t;
     // Force only while enabled and the servo writes (none yet since enable_force(): off, not
     // a stall). After the stall time without a write (a slow renderer, a starved or stopped
     // servo thread) a stall is counted: zero with enable cleared until a write made after
@@ -313,7 +352,11 @@ void ReportDevice::writer_loop() {
       last_send = t;
       was_on = on;
     }
-    sleep_ns(poll_ns);
+    // Asleep until shortly before the servo's next write is due, then polling: not 50,000
+    // wake-ups a second at SCHED_FIFO beside the renderer. Never past the stall time or the
+    // keepalive (the window ends before either: it closes a lead before one interval).
+    const std::int64_t stall_at = seen_at + stall_ns_.load(std::memory_order_relaxed) + 1;
+    sleep_until_ns(std::min({interval.next_look_ns(t, poll_ns), stall_at, last_send + keepalive_ns}));
   }
   const std::size_t n = protocol_->encode_output({}, false, 0, buf);
   send(std::span(buf.data(), n));

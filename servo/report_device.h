@@ -3,6 +3,7 @@
 // with its reader and writer threads. The servo thread only touches two latest-value cells.
 #pragma once
 #include "isotouch/servo/core_names.h"
+#include <array>
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
@@ -92,7 +93,7 @@ struct LinkCounters {
 
 struct ReportDeviceOptions {
   double reconnect_interval_s = 0.05;  ///< between attempts to reopen a link that is down [s]
-  double write_poll_us = 20;           ///< the writer looks for a new force this often [us]
+  double write_poll_us = 20;           ///< the writer looks for a new force this often [us] while one is due (WriteInterval)
   /// With nothing new to send, resend the current output this often [s]: the servo's last
   /// force while it writes, zero with enable cleared once it stalled.
   double keepalive_s = 0.01;
@@ -104,11 +105,35 @@ struct ReportDeviceOptions {
   int fifo_priority = 0;
 };
 
+/// When the device's writer thread looks for the servo's next write: the servo writes once
+/// a tick, so the writer learns the interval between writes (the shortest of the last 8, per
+/// write when it saw several at once) and sleeps until a lead of max(3 polls, 1/8 interval)
+/// before the next is due, then polls. Times are CLOCK_MONOTONIC [ns]. Writer thread only.
+class WriteInterval {
+ public:
+  /// The writer saw `writes` new writes (the count's step) at `t_ns`. One found on the first
+  /// look after sleeping to the window, past its due time, counts as written when due (the
+  /// writer woke late: its lateness does not carry into the next window).
+  void saw(std::int64_t t_ns, std::uint64_t writes);
+  /// The interval between writes [ns]; 0 before two were seen.
+  std::int64_t estimate_ns() const;
+  /// When to look next, at `now_ns`: `now_ns + poll_ns` without an estimate or inside the
+  /// window, else the window's start (the last write + interval - lead).
+  std::int64_t next_look_ns(std::int64_t now_ns, std::int64_t poll_ns);
+
+ private:
+  std::array<std::int64_t, 8> ring_{};
+  std::size_t next_ = 0;
+  std::int64_t last_ns_ = -1;  // when the last write seen is taken to be written
+  bool slept_ = false;         // the last next_look_ns() slept to the window (not a poll)
+};
+
 /// A device behind a ReportLink and a DeviceProtocol. open() connects and reads the
 /// capabilities (failure: std::runtime_error naming the link and the reason); then a reader
 /// thread publishes each accepted input report (DeviceReading, received_ns = arrival) into a
 /// latest-value cell that read() loads, and a writer thread sends each force the servo
-/// wrote (polled every write_poll_us; the servo makes no syscall). Once the servo has not
+/// wrote (the servo makes no syscall: the writer polls every write_poll_us from shortly
+/// before the write its WriteInterval predicts, asleep until then). Once the servo has not
 /// written for the stall time enable_force() was given, the writer sends zero force with
 /// enable cleared (counted: LinkCounters::stalls) until a write made after the servo could
 /// see that count; the first such write is sent as zero (the servo ramps in from 0). A link that

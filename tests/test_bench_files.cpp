@@ -12,6 +12,7 @@
 
 #include "isotouch/bench/bench_serve.h"
 #include "isotouch/bench/sculpt_big_bench.h"
+#include "isotouch/bench/sculpt_device_bench.h"
 #include "isotouch/bench/servo_bench.h"
 #include "isotouch/bench/tool_bench.h"
 #include "isotouch/io/files.h"
@@ -186,6 +187,38 @@ TEST(SculptBig, ResampledVolumeReadsBackAsTheFieldOverTheSameBox) {
       }
   EXPECT_EQ(wrong, 0u);
   EXPECT_THROW(resample_int16(v, {0, 4, 4}), std::invalid_argument);
+}
+
+// The servo line `bench sculpt-device` reads: ticks and misses, -1 when it is missing.
+TEST(SculptDevice, ServoLineIsRead) {
+  const std::string text =
+      "stats    edit-to-haptics: n 2, median 5.81 ms, p95 10.08 ms, max 10.08 ms\n"
+      "stats    servo 55012 ticks, 32 missed deadlines, period error p99 86 us, 0 faults; edits 4 requested\n"
+      "verdict: servo missed deadlines while sculpting 32 of 50010 ticks\n";
+  const ServoLine s = parse_sculpt_servo(text);
+  EXPECT_EQ(s.ticks, 55012);
+  EXPECT_EQ(s.missed, 32);
+  const ServoLine none = parse_sculpt_servo("stats    frame time: n 3, median 1 ms, p95 1 ms, max 1 ms\n");
+  EXPECT_EQ(none.ticks, -1);
+  EXPECT_EQ(none.missed, -1);
+}
+
+// ref + 3 sqrt(ref), ref scaled to the device's tick count.
+TEST(SculptDevice, MissesAgainstTheReference) {
+  EXPECT_FALSE(misses_within(11, 20000, 4, 20000));
+  EXPECT_TRUE(misses_within(10, 20000, 4, 20000));    // ref 4: at most 4 + 3 * 2 = 10
+  EXPECT_TRUE(misses_within(16, 40000, 4, 20000));    // ref 8 at 40,000 ticks: at most 8 + 8.49
+  EXPECT_FALSE(misses_within(17, 40000, 4, 20000));
+  EXPECT_TRUE(misses_within(0, 20000, 0, 20000));
+  EXPECT_FALSE(misses_within(1, 20000, 0, 20000));
+  EXPECT_FALSE(misses_within(0, 0, 0, 20000));        // no ticks: not judged a pass
+}
+
+TEST(SculptDevice, RatioVerdict) {
+  EXPECT_EQ(ratio_verdict(11.0, 10.0), "device / mouse = 1.10: <= 1.10 PASS");
+  EXPECT_EQ(ratio_verdict(11.2, 10.0), "device / mouse = 1.12: <= 1.10 FAIL");
+  EXPECT_EQ(ratio_verdict(5.0, 0.0), "device / mouse = n/a: <= 1.10 FAIL");
+  EXPECT_EQ(ratio_verdict(NAN, 10.0), "device / mouse = n/a: <= 1.10 FAIL");
 }
 
 // The figures `bench sculpt-big` reads from isotouch-sculpt's --bench lines.

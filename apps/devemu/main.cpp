@@ -49,7 +49,8 @@ int main(int argc, char** argv) {
   cli.add_option("--seconds", c.seconds, "Run this long, 0 = until SIGINT/SIGTERM")->capture_default_str()->check(CLI::NonNegativeNumber);
   cli.add_option("--path", path_csv, "Hand path CSV: header, then t_s,x_m,y_m,z_m rows (device frame), from each connection, looped (isotouch run SCENE --hand-path FILE writes one)");
   cli.add_option("--hold", hold, "Without --path: the hand holds this point x,y,z [m]")->delimiter(',')->expected(3);
-  cli.add_option("--sine-mm", c.sine_amplitude_m, "Without --path: the hand moves +-this many mm along z")->check(CLI::NonNegativeNumber);
+  double sine_mm = 0;  // [mm] on the command line; the emulator takes metres
+  cli.add_option("--sine-mm", sine_mm, "Without --path: the hand moves +-this many mm along z")->check(CLI::NonNegativeNumber);
   cli.add_option("--sine-hz", c.sine_hz, "... at this frequency [Hz]")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--mass", c.device.mass_kg, "End-effector mass [kg]")->capture_default_str()->check(CLI::PositiveNumber);
   cli.add_option("--hand-stiffness", c.device.hand_stiffness_n_per_m, "Hand spring [N/m]")->capture_default_str()->check(CLI::NonNegativeNumber);
@@ -97,6 +98,7 @@ int main(int argc, char** argv) {
   c.caps.native_rate_hz = c.rate_hz;
   c.caps.watchdog_s = watchdog_ms * 1e-3;
   c.hold_m = core::Vec3{hold[0], hold[1], hold[2]};
+  c.sine_amplitude_m = sine_mm * 1e-3;
   c.fifo_priority = fifo ? 75 : 0;
   c.polhem = polhem;
   servo::hid::polhem::parse_config(polhem_config, c.polhem_config);  // checked by the option

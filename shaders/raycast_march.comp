@@ -8,6 +8,7 @@
 // scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY skips empty space
 // (march_skip); both marches return the same k.
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_basic : require  // (raycast_common.glsl: COUNT)
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_Y, local_size_z = 1) in;
@@ -24,7 +25,7 @@ layout(constant_id = 0) const bool SKIP_EMPTY = true;
 // pass of raycast_tiles.comp, for the same list entry).
 layout(constant_id = 5) const bool TILED = false;
 
-void main() {
+void march_pixel() {
   uvec2 px;
   uint start_at = 0u;  // TILED: the entry of binding 13 with this pixel's block start
   if (TILED) {
@@ -87,5 +88,13 @@ void main() {
     uint slot = atomicAdd(ctr.count, 1u);
     hits[slot] = pix;
     hit_k[pix] = redo ? uint(-(k_hit + 2)) | 0x40000000u : uint(k_hit) | (cap ? 0x80000000u : 0u);
+  }
+}
+
+void main() {
+  march_pixel();
+  if (COUNT) {  // (COUNT pipelines only)
+    atomicAdd(fetches_march, g_fetches);
+    atomicAdd(vector_fetches_march, g_vector_fetches);
   }
 }

@@ -13,8 +13,10 @@
 
 #include "isotouch/shaders/raycast_args_spv.h"
 #include "isotouch/shaders/raycast_floor_spv.h"
+#include "isotouch/shaders/raycast_march_count_spv.h"
 #include "isotouch/shaders/raycast_march_spv.h"
 #include "isotouch/shaders/raycast_overlay_spv.h"
+#include "isotouch/shaders/raycast_shade_count_spv.h"
 #include "isotouch/shaders/raycast_shade_spv.h"
 #include "isotouch/shaders/raycast_tiles_spv.h"
 #include "isotouch/engine/vk_resources.h"
@@ -592,7 +594,7 @@ struct RayCaster::Impl {
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
   GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch; then the fetch counts
-  /// The march and shade pipelines that count their texel fetches (COUNT), made on the first
+  /// The march and shade pipelines that count their texel fetches (*_count_spv), made on the first
   /// set_count_fetches(true); `counting`: render() draws with them.
   struct Counting {
     ComputePipeline<gpu::RaycastPush> march_tiled, march_skip, march_plain, shade_lin, shade;
@@ -630,11 +632,11 @@ struct RayCaster::Impl {
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
   /// 5: the march's tile starts (one workgroup per listed tile); 6 the tile pass's
-  /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4; 8 COUNT.
-  std::vector<std::uint32_t> spec(std::uint32_t variant, bool tiled = false, bool count = false) const {
+  /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4.
+  std::vector<std::uint32_t> spec(std::uint32_t variant, bool tiled = false) const {
     return {variant, std::uint32_t(field.grid.dims[0]), std::uint32_t(field.grid.dims[1]),
             std::uint32_t(field.grid.dims[2]), use_quads ? 1u : 0u, tiled ? 1u : 0u, ISOTOUCH_RAYCAST_WG_X,
-            vals4 ? 1u : 0u, count ? 1u : 0u};
+            vals4 ? 1u : 0u};
   }
   /// The counting pipelines (made once).
   Counting& counting_pipes() {
@@ -642,11 +644,11 @@ struct RayCaster::Impl {
       VulkanContext& c = ctx;
       const std::uint32_t b = ISOTOUCH_RAYCAST_BINDINGS;
       count_pipes.reset(new Counting{
-          {c, raycast_march_spv, b, "raycast march (tile starts, counting)", 1u, spec(1, true, true), kTexel},
-          {c, raycast_march_spv, b, "raycast march (skipping, counting)", 1u, spec(1, false, true), kTexel},
-          {c, raycast_march_spv, b, "raycast march (counting)", 1u, spec(0, false, true), kTexel},
-          {c, raycast_shade_spv, b, "raycast shade (linear colour, counting)", 1u, spec(1, false, true), kTexel},
-          {c, raycast_shade_spv, b, "raycast shade (counting)", 1u, spec(0, false, true), kTexel}});
+          {c, raycast_march_count_spv, b, "raycast march (tile starts, counting)", 1u, spec(1, true), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (skipping, counting)", 1u, spec(1), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (counting)", 1u, spec(0), kTexel},
+          {c, raycast_shade_count_spv, b, "raycast shade (linear colour, counting)", 1u, spec(1), kTexel},
+          {c, raycast_shade_count_spv, b, "raycast shade (counting)", 1u, spec(0), kTexel}});
       Counting& k = *count_pipes;
       for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.shade_lin, &k.shade})
         p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));

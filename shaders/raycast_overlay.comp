@@ -3,7 +3,6 @@
 // primitives: one invocation per pixel blends the HIP, VHIP, plane disc and arrows into the
 // linear colour of pass 3 (the background where depth < 0) by depth, and writes the final RGBA8.
 #extension GL_GOOGLE_include_directive : require
-#extension GL_KHR_shader_subgroup_basic : require  // (raycast_common.glsl: COUNT)
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_Y, local_size_z = 1) in;

@@ -30,7 +30,6 @@
 // eps: the march's rounding allowance (1/32 voxel + 34 float ulps of the magnitudes), which
 // covers the float rounding of the pixels' sample points and of this pass's own.
 #extension GL_GOOGLE_include_directive : require
-#extension GL_KHR_shader_subgroup_basic : require  // (raycast_common.glsl: COUNT)
 #include "isotouch_shared.h"
 
 // The workgroup size: specialization constant 6 (WG_X for tiles, the blocks of one tile for BLOCKS).

@@ -1411,11 +1411,13 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   return st;
 }
 
-RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames) {
+RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames,
+                           std::uint64_t bytes) {
   if (width < 1 || height < 1 || frames < 1)
     throw std::invalid_argument("raycast floor: " + std::to_string(width) + " x " + std::to_string(height) + ", " +
                                 std::to_string(frames) + " frames");
-  constexpr std::uint32_t kVoxels = 1u << 18;  // 1 MiB of floats, about the head CT's 381k voxels
+  // A power of two of floats in [2^14, 2^26] (64 KiB .. 256 MiB), at most `bytes`.
+  const std::uint32_t kVoxels = std::bit_floor(std::uint32_t(std::clamp<std::uint64_t>(bytes / 4, 1u << 14, 1u << 26)));
   std::vector<float> vals(kVoxels);
   for (std::uint32_t i = 0; i < kVoxels; ++i) vals[i] = float(i % 1000);
   GpuBuffer up = make_buffer_or_throw(vk, kVoxels * 4, MemoryIntent::Upload, "floor values staging");
@@ -1451,7 +1453,7 @@ RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32
   }
   std::sort(gpu.begin(), gpu.end());
   std::sort(wall.begin(), wall.end());
-  return {gpu[gpu.size() / 2], wall[wall.size() / 2]};
+  return {gpu[gpu.size() / 2], wall[wall.size() / 2], std::uint64_t(kVoxels) * 4};
 }
 
 }  // namespace isotouch::engine

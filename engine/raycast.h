@@ -189,12 +189,15 @@ std::uint32_t pack_rgba8(float r, float g, float b);
 /// `frames` (after one warm-up frame) of a pass in which each of the width x height pixels'
 /// invocations does `fetches` texel fetches of voxel values (4 floats each with `vec4`, else
 /// 1) and one store, nothing else of a ray: device time [ms] (GPU timestamps) and submit to
-/// fence [ms] (host clock).
+/// fence [ms] (host clock). The values: `bytes` (a power of two of floats in 64 KiB .. 256 MiB,
+/// at most `bytes`; pixel p's fetch i reads texel p + 67 i, wrapped).
 struct RaycastFloor {
   double gpu_ms = 0, wall_ms = 0;
+  std::uint64_t bytes = 0;  ///< the values fetched from
 };
 /// @throws std::invalid_argument on a size or frame count below 1.
-RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames);
+RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames,
+                           std::uint64_t bytes = 1u << 20);
 
 /// The CPU reference: the shader's math in float, one thread.
 RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,

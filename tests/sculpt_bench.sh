@@ -54,7 +54,7 @@ log = open(sys.argv[1]).read()
 m = re.search(r"^verdict: frames drawn whole: floor: ([0-9.]+) fetches per pixel = ([0-9.]+) ms \(march ([0-9.]+) \+ "
               r"shade ([0-9.]+) texel fetches per pixel's invocation; as whole vectors ([0-9.]+) per pixel = ([0-9.]+) ms; "
               r"counted in (\d+) of the (\d+) frames drawn whole, drawn again; a pass of only that many fetches, rounded "
-              r"\((?:4 floats|1 float) each\), and one store per pixel at 256x192, submit to fence, median of 9 frames\)$",
+              r"\((?:4 floats|1 float) each\), and one store per pixel at 256x192 from \d+ MiB, submit to fence, median of 9 frames\)$",
               log, re.M)
 if not m:
     sys.exit("FAIL: no floor line beside the frames-drawn-whole verdicts")

@@ -1792,7 +1792,8 @@ namespace {
 /// frames drawn whole, spread over them, at their cameras and sizes (the volume as it is now,
 /// after the edits), per invocation and as whole vectors (a SIMD device's fetch costs every
 /// lane of its vector); then, for each count, the time of a pass doing only that many fetches
-/// and one store per pixel at the last one's size (engine::raycast_floor), submit to fence as
+/// and one store per pixel at the last one's size from a buffer as large as the volume's
+/// texels (engine::raycast_floor), submit to fence as
 /// the frame times (lavapipe's timestamps around a lone dispatch read near 0 in this process).
 void Sculpt::print_floor() {
   if (full_views.empty()) {
@@ -1814,18 +1815,25 @@ void Sculpt::print_floor() {
   caster->set_count_fetches(false);
   const WholeFrame& last = full_views.back();
   constexpr int kFrames = 9;
+  const auto& d = caster->field().grid.dims;  // the fetched texels' bytes: the quads (or the voxels)
+  const std::uint64_t bytes = caster->quads() ? std::uint64_t(d[0] + 2) * std::uint64_t(d[1] + 2) * std::uint64_t(d[2] + 2) * 16
+                                              : caster->field().values.size() * sizeof(float);
+  std::uint64_t used = 0;  // the floor pass's buffer [bytes]
   const auto floor_ms = [&](double per_pixel) {
-    return engine::raycast_floor(*vk, last.width, last.height, std::uint32_t(std::lround(per_pixel)), caster->quads(),
-                                 kFrames).wall_ms;
+    const engine::RaycastFloor fl = engine::raycast_floor(*vk, last.width, last.height,
+                                                          std::uint32_t(std::lround(per_pixel)), caster->quads(), kFrames, bytes);
+    used = fl.bytes;
+    return fl.wall_ms;
   };
   const double per_pixel = (march + shade) / pixels, per_lane = lanes / pixels;
-  log << "verdict: frames drawn whole: floor: " << fixed(per_pixel, 1) << " fetches per pixel = "
-      << fixed(floor_ms(per_pixel), 2) << " ms (march " << fixed(march / pixels, 1) << " + shade "
-      << fixed(shade / pixels, 1) << " texel fetches per pixel's invocation; as whole vectors "
-      << fixed(per_lane, 1) << " per pixel = " << fixed(floor_ms(per_lane), 2) << " ms; counted in " << n << " of the "
+  const double ms = floor_ms(per_pixel), lane_ms = floor_ms(per_lane);
+  log << "verdict: frames drawn whole: floor: " << fixed(per_pixel, 1) << " fetches per pixel = " << fixed(ms, 2)
+      << " ms (march " << fixed(march / pixels, 1) << " + shade " << fixed(shade / pixels, 1)
+      << " texel fetches per pixel's invocation; as whole vectors " << fixed(per_lane, 1) << " per pixel = "
+      << fixed(lane_ms, 2) << " ms; counted in " << n << " of the "
       << full_views.size() << " frames drawn whole, drawn again; a pass of only that many fetches, rounded ("
       << (caster->quads() ? "4 floats" : "1 float") << " each), and one store per pixel at " << last.width << "x"
-      << last.height << ", submit to fence, median of " << kFrames << " frames)\n";
+      << last.height << " from " << (used >> 20) << " MiB, submit to fence, median of " << kFrames << " frames)\n";
 }
 
 /// --bench: the frame time, edit-to-pixels and servo figures against the targets: frames

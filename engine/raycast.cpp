@@ -12,8 +12,11 @@
 #include <tuple>
 
 #include "isotouch/shaders/raycast_args_spv.h"
+#include "isotouch/shaders/raycast_floor_spv.h"
+#include "isotouch/shaders/raycast_march_count_spv.h"
 #include "isotouch/shaders/raycast_march_spv.h"
 #include "isotouch/shaders/raycast_overlay_spv.h"
+#include "isotouch/shaders/raycast_shade_count_spv.h"
 #include "isotouch/shaders/raycast_shade_spv.h"
 #include "isotouch/shaders/raycast_tiles_spv.h"
 #include "isotouch/engine/vk_resources.h"
@@ -590,7 +593,14 @@ struct RayCaster::Impl {
   GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
   GpuBuffer params_up, prims_up;           // staging
-  GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch
+  GpuBuffer counter;                       // RaycastCounter: hit count, indirect dispatch; then the fetch counts
+  /// The march and shade pipelines that count their texel fetches (*_count_spv), made on the first
+  /// set_count_fetches(true); `counting`: render() draws with them.
+  struct Counting {
+    ComputePipeline<gpu::RaycastPush> march_tiled, march_skip, march_plain, shade_lin, shade;
+  };
+  std::unique_ptr<Counting> count_pipes;
+  bool counting = false;
   // Per pixel, device-local, sized for the last frame: image, depth, linear colour R G B,
   // hit list, hit sample.
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
@@ -627,6 +637,23 @@ struct RayCaster::Impl {
     return {variant, std::uint32_t(field.grid.dims[0]), std::uint32_t(field.grid.dims[1]),
             std::uint32_t(field.grid.dims[2]), use_quads ? 1u : 0u, tiled ? 1u : 0u, ISOTOUCH_RAYCAST_WG_X,
             vals4 ? 1u : 0u};
+  }
+  /// The counting pipelines (made once).
+  Counting& counting_pipes() {
+    if (!count_pipes) {
+      VulkanContext& c = ctx;
+      const std::uint32_t b = ISOTOUCH_RAYCAST_BINDINGS;
+      count_pipes.reset(new Counting{
+          {c, raycast_march_count_spv, b, "raycast march (tile starts, counting)", 1u, spec(1, true), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (skipping, counting)", 1u, spec(1), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (counting)", 1u, spec(0), kTexel},
+          {c, raycast_shade_count_spv, b, "raycast shade (linear colour, counting)", 1u, spec(1), kTexel},
+          {c, raycast_shade_count_spv, b, "raycast shade (counting)", 1u, spec(0), kTexel}});
+      Counting& k = *count_pipes;
+      for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.shade_lin, &k.shade})
+        p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+    }
+    return *count_pipes;
   }
   /// The tile pass's (5: the block pass; 6: its workgroup size, one tile's blocks for the block pass).
   std::vector<std::uint32_t> tile_spec(bool block_pass) const {
@@ -816,7 +843,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, Raycast
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
         std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
         std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"},
-        std::tuple{&impl->counter, sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
+        std::tuple{&impl->counter, 2 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
         std::tuple{&impl->tile_counter, 2 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast tile counter"}}) {
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) return R::fail(r.error);
@@ -969,7 +996,9 @@ void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePla
   march_push.y0 = rect.y0;
   // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
   // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
-  const auto& march = tiled ? m.march_tiled : skip_empty ? m.march_skip : m.march_plain;
+  Counting* k = m.counting ? &m.counting_pipes() : nullptr;
+  const auto& march = tiled ? (k ? k->march_tiled : m.march_tiled)
+                      : skip_empty ? (k ? k->march_skip : m.march_skip) : (k ? k->march_plain : m.march_plain);
   march.bind(cmd, m.arena, ranges);
   march.push(cmd, march_push);
   if (tiled)
@@ -983,7 +1012,7 @@ void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePla
   m.args.push(cmd, f.push);
   vkCmdDispatch(cmd, 1, 1, 1);
   barrier_compute_to_indirect(cmd);
-  const auto& shade_pass = f.linear ? m.shade_lin : m.shade;
+  const auto& shade_pass = f.linear ? (k ? k->shade_lin : m.shade_lin) : (k ? k->shade : m.shade);
   shade_pass.bind(cmd, m.arena, ranges);
   shade_pass.push(cmd, f.push);
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
@@ -1101,6 +1130,32 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
 }
 
 void RayCaster::set_in_place(bool on) { impl_->keep_on_device = on; }
+
+void RayCaster::set_count_fetches(bool on) {
+  impl_->counting = on;
+  impl_->cache_valid = false;  // the next frame is drawn whole
+}
+
+RayCaster::FetchCount RayCaster::last_fetches() {
+  Impl& m = *impl_;
+  GpuBuffer down = make_buffer_or_throw(m.ctx, m.counter.size(), MemoryIntent::Readback, "raycast counter readback");
+  VkCommandBuffer cmd = m.ctx.begin_commands();
+  record_copy(cmd, m.counter, down, m.counter.size());
+  barrier_transfer_to_host(cmd);
+  m.ctx.submit_and_wait(cmd);
+  std::uint32_t w[8];
+  std::memcpy(w, down.mapped(), sizeof w);
+  FetchCount c;
+  c.hits = w[3];
+  c.pixels = std::uint64_t(m.last_width) * std::uint64_t(m.last_height);
+  if (m.counting) {
+    c.march = w[4];
+    c.shade = w[5];
+    c.march_lanes = w[6];
+    c.shade_lanes = w[7];
+  }
+  return c;
+}
 void RayCaster::set_bgra(bool on) { impl_->bgra = on; }
 VkBuffer RayCaster::image_buffer() const { return impl_->image.handle(); }
 
@@ -1354,6 +1409,51 @@ RayCaster::UpdateStats RayCaster::update(const std::vector<float>& values, const
   }
   st.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return st;
+}
+
+RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames,
+                           std::uint64_t bytes) {
+  if (width < 1 || height < 1 || frames < 1)
+    throw std::invalid_argument("raycast floor: " + std::to_string(width) + " x " + std::to_string(height) + ", " +
+                                std::to_string(frames) + " frames");
+  // A power of two of floats in [2^14, 2^26] (64 KiB .. 256 MiB), at most `bytes`.
+  const std::uint32_t kVoxels = std::bit_floor(std::uint32_t(std::clamp<std::uint64_t>(bytes / 4, 1u << 14, 1u << 26)));
+  std::vector<float> vals(kVoxels);
+  for (std::uint32_t i = 0; i < kVoxels; ++i) vals[i] = float(i % 1000);
+  GpuBuffer up = make_buffer_or_throw(vk, kVoxels * 4, MemoryIntent::Upload, "floor values staging");
+  GpuBuffer v = make_buffer_or_throw(vk, kVoxels * 4, MemoryIntent::DeviceLocal, "floor values");
+  const std::size_t pixels = std::size_t(width) * std::size_t(height);
+  GpuBuffer out = make_buffer_or_throw(vk, pixels * 4, MemoryIntent::DeviceLocal, "floor image");
+  std::memcpy(up.mapped(), vals.data(), kVoxels * 4);
+  VkCommandBuffer cmd = vk.begin_commands();
+  record_copy(cmd, up, v, kVoxels * 4);
+  barrier_transfer_to_compute(cmd);
+  vk.submit_and_wait(cmd);
+  DescriptorArena arena(vk, 2, 4);
+  GpuTimer timer(vk, 2);
+  ComputePipeline<gpu::RaycastFloorPush> pipe(vk, raycast_floor_spv, 2, "raycast floor", 0u,
+                                              {fetches, (vec4 ? kVoxels / 4 : kVoxels) - 1, vec4 ? 1u : 0u}, 1u);
+  if (vec4) pipe.set_texel_vec4(1u);
+  std::vector<double> gpu, wall;
+  for (int k = 0; k <= frames; ++k) {
+    arena.reset();
+    VkCommandBuffer cb = vk.begin_commands();
+    timer.record_reset(cb);
+    pipe.bind(cb, arena, {{v.handle(), 0, v.size()}, {out.handle(), 0, pixels * 4}});
+    pipe.push(cb, gpu::RaycastFloorPush{std::uint32_t(width), std::uint32_t(height), 0, 0});
+    timer.mark(cb, 0);
+    vkCmdDispatch(cb, (std::uint32_t(width) + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X, std::uint32_t(height), 1);
+    barrier_compute_to_compute(cb);  // the timestamp after the dispatch's end (lavapipe may run it asynchronously)
+    timer.mark(cb, 1);
+    const double w = vk.submit_and_wait(cb);
+    const double t = timer.elapsed_ms(0, 1);
+    if (k == 0) continue;  // warm-up
+    gpu.push_back(t >= 0 ? t : w);
+    wall.push_back(w);
+  }
+  std::sort(gpu.begin(), gpu.end());
+  std::sort(wall.begin(), wall.end());
+  return {gpu[gpu.size() / 2], wall[wall.size() / 2], std::uint64_t(kVoxels) * 4};
 }
 
 }  // namespace isotouch::engine

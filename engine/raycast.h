@@ -185,6 +185,20 @@ Vec3 pixel_direction(const CameraView& view, int width, int height, int px, int 
 /// the CPU reference's own function.
 std::uint32_t pack_rgba8(float r, float g, float b);
 
+/// The floor of a ray-caster frame on this device (shaders/raycast_floor.comp): medians over
+/// `frames` (after one warm-up frame) of a pass in which each of the width x height pixels'
+/// invocations does `fetches` texel fetches of voxel values (4 floats each with `vec4`, else
+/// 1) and one store, nothing else of a ray: device time [ms] (GPU timestamps) and submit to
+/// fence [ms] (host clock). The values: `bytes` (a power of two of floats in 64 KiB .. 256 MiB,
+/// at most `bytes`; pixel p's fetch i reads texel p + 67 i, wrapped).
+struct RaycastFloor {
+  double gpu_ms = 0, wall_ms = 0;
+  std::uint64_t bytes = 0;  ///< the values fetched from
+};
+/// @throws std::invalid_argument on a size or frame count below 1.
+RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32_t fetches, bool vec4, int frames,
+                           std::uint64_t bytes = 1u << 20);
+
 /// The CPU reference: the shader's math in float, one thread.
 RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,
                         int height, const std::vector<gpu::RaycastPrim>& prims = {});
@@ -236,6 +250,18 @@ class RayCaster {
   /// Pixels packed B, G, R, A from the low byte in image_buffer() (a B8G8R8A8 swapchain's
   /// order) instead of R, G, B, A; RaycastImage::rgba and last_rgba() stay RGBA.
   void set_bgra(bool on);
+  /// On: render() draws with march and shade pipelines that count their texel fetches
+  /// (the same picture, slower: one atomic add per invocation); the next frame is drawn
+  /// whole. For the floor of a frame (isotouch-sculpt --bench), not for drawing.
+  void set_count_fetches(bool on);
+  /// The last render()'s counts (reads the device back): texel fetches (one voxel, quad or
+  /// cell-distance texel each) of the march and the shade passes' invocations, and the lanes
+  /// of the fetches their subgroups made with at least one lane active (a vector's fetch costs
+  /// all its lanes; 0 unless counting); hit pixels; the frame's pixels.
+  struct FetchCount {
+    std::uint64_t march = 0, shade = 0, march_lanes = 0, shade_lanes = 0, hits = 0, pixels = 0;
+  };
+  FetchCount last_fetches();
   /// The device buffer holding the last render()'s pixels (rows top to bottom, one 32-bit
   /// pixel each, set_bgra()'s order), written by compute shaders: a reader in a later
   /// submission needs a barrier from the compute stage's writes; the next render() waits

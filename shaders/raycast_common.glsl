@@ -77,6 +77,22 @@ layout(constant_id = 4) const bool QUADS = false;
 // on llvmpipe a fetch of 4 floats costs about what a fetch of one does. Set by the host only
 // where the voxels do not fit one single-float binding (engine/raycast.cpp).
 layout(constant_id = 7) const bool VALS4 = false;
+// ISOTOUCH_COUNT_FETCHES (the march and shade passes compiled a second time, *_count_spv.h):
+// they count their invocation's texel fetches (voxel(), quad(), cell_dist()) and, per
+// subgroup (a vector of lanes on llvmpipe), the lanes of the fetches it made with at least
+// one lane active (elected lane), and add them to the counter buffer
+// (RayCaster::set_count_fetches: the floor of isotouch-sculpt --bench). Without it
+// COUNT_FETCH() is empty: the drawing passes' SPIR-V is the one without counting.
+#ifdef ISOTOUCH_COUNT_FETCHES
+uint g_fetches = 0u, g_vector_fetches = 0u;
+void count_fetch() {
+  ++g_fetches;
+  if (subgroupElect()) g_vector_fetches += gl_SubgroupSize;  // every lane's slot of the vector's fetch
+}
+#define COUNT_FETCH() count_fetch()
+#else
+#define COUNT_FETCH()
+#endif
 layout(set = 0, binding = 12) uniform samplerBuffer quads;  // 4 voxels per texel (see above)
 layout(std430, set = 0, binding = 3) readonly buffer Prims { RaycastPrim prims[]; };
 layout(std430, set = 0, binding = 4) buffer Image { uint image[]; };      // RGBA8 (or BGRA8) per pixel
@@ -86,7 +102,17 @@ layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (
 layout(std430, set = 0, binding = 8) buffer LinB { float lin_b[]; };      //   into it)
 layout(std430, set = 0, binding = 9) buffer Hits { uint hits[]; };        // hit pixels, in no order
 layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | redo << 30 | cap << 31
+#ifdef ISOTOUCH_COUNT_FETCHES
+// After ctr: the texel fetches the march and the shade passes' invocations made, then the
+// lanes of the fetches their vectors (subgroups) made with at least one lane taking part (a
+// vector's fetch costs all its lanes' slots).
+layout(std430, set = 0, binding = 11) buffer Counter {
+  RaycastCounter ctr;
+  uint fetches_march, fetches_shade, vector_fetches_march, vector_fetches_shade;
+};
+#else
 layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
+#endif
 layout(std430, set = 0, binding = 13) buffer TileT { float tile_t[]; };  // per tile: raycast_tiles.comp
 layout(std430, set = 0, binding = 14) buffer TileCounter { RaycastCounter tctr; };  // listed tiles
 layout(std430, set = 0, binding = 15) buffer TileList { uint tile_list[]; };      // ty << 16 | tx
@@ -106,6 +132,7 @@ float voxel(ivec3 i) {
   int cx = clamp(i.x, 0, NX - 1), cy = clamp(i.y, 0, NY - 1), cz = clamp(i.z, 0, NZ - 1);
   int k = (cz * NY + cy) * NX + cx;
   float v;
+  COUNT_FETCH();
   if (VALS4) {
     vec4 t = texelFetch(vals, k >> 2);
     int c = k & 3;
@@ -122,6 +149,7 @@ float voxel(ivec3 i) {
 vec4 quad(ivec3 b) {
   bool outside = any(lessThan(b, ivec3(-1))) || b.x > NX || b.y > NY || b.z > NZ;
   int cx = clamp(b.x, -1, NX) + 1, cy = clamp(b.y, -1, NY) + 1, cz = clamp(b.z, -1, NZ) + 1;
+  COUNT_FETCH();
   vec4 q = texelFetch(quads, (cz * (NY + 2) + cy) * (NX + 2) + cx);
   return outside ? vec4(g_bg) : q;
 }
@@ -312,6 +340,7 @@ int march(vec3 e, vec3 d, float t0, float t1, float h, int K) { return march_fro
 uint cell_dist(ivec3 c) {
   int sx = clamp(c.x + 1, 0, NX + 1), sy = clamp(c.y + 1, 0, NY + 1), sz = clamp(c.z + 1, 0, NZ + 1);
   int i = (sz * (NY + 2) + sy) * (NX + 2) + sx;
+  COUNT_FETCH();
   uint w = uint(texelFetch(cdist, i >> 2).x);  // an integer below 2^24, exact in float
   return (w >> (6u * uint(i & 3))) & 63u;
 }

@@ -8,6 +8,9 @@
 // scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY skips empty space
 // (march_skip); both marches return the same k.
 #extension GL_GOOGLE_include_directive : require
+#ifdef ISOTOUCH_COUNT_FETCHES  // (raycast_common.glsl)
+#extension GL_KHR_shader_subgroup_basic : require
+#endif
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_RAYCAST_WG_X, local_size_y = ISOTOUCH_RAYCAST_WG_Y, local_size_z = 1) in;
@@ -24,7 +27,12 @@ layout(constant_id = 0) const bool SKIP_EMPTY = true;
 // pass of raycast_tiles.comp, for the same list entry).
 layout(constant_id = 5) const bool TILED = false;
 
-void main() {
+#ifdef ISOTOUCH_COUNT_FETCHES
+#define PASS_MAIN march_pixel
+#else
+#define PASS_MAIN main
+#endif
+void PASS_MAIN() {
   uvec2 px;
   uint start_at = 0u;  // TILED: the entry of binding 13 with this pixel's block start
   if (TILED) {
@@ -89,3 +97,11 @@ void main() {
     hit_k[pix] = redo ? uint(-(k_hit + 2)) | 0x40000000u : uint(k_hit) | (cap ? 0x80000000u : 0u);
   }
 }
+
+#ifdef ISOTOUCH_COUNT_FETCHES
+void main() {
+  march_pixel();
+  atomicAdd(fetches_march, g_fetches);
+  atomicAdd(vector_fetches_march, g_vector_fetches);
+}
+#endif

@@ -4,6 +4,9 @@
 // operations as the march), refines the hit in the bracket [t_{k-1}, t_k] (sample 0: t0,
 // no refinement), shades it and writes colour and depth.
 #extension GL_GOOGLE_include_directive : require
+#ifdef ISOTOUCH_COUNT_FETCHES  // (raycast_common.glsl)
+#extension GL_KHR_shader_subgroup_basic : require
+#endif
 #include "isotouch_shared.h"
 
 layout(local_size_x = ISOTOUCH_RAYCAST_SHADE_WG, local_size_y = 1, local_size_z = 1) in;
@@ -14,7 +17,12 @@ layout(local_size_x = ISOTOUCH_RAYCAST_SHADE_WG, local_size_y = 1, local_size_z 
 // pass, i.e. when the frame has primitives (a store is a per-lane scatter on llvmpipe).
 layout(constant_id = 0) const bool WRITE_LINEAR = true;
 
-void main() {
+#ifdef ISOTOUCH_COUNT_FETCHES
+#define PASS_MAIN shade_pixel
+#else
+#define PASS_MAIN main
+#endif
+void PASS_MAIN() {
   uint j = (gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x) * ISOTOUCH_RAYCAST_SHADE_WG +
            gl_LocalInvocationID.x;  // a 2-D grid of workgroups (raycast_args.comp)
   if (j >= ctr.count) return;
@@ -54,3 +62,11 @@ void main() {
   }
   image[pix] = pack_rgba(colour);
 }
+
+#ifdef ISOTOUCH_COUNT_FETCHES
+void main() {
+  shade_pixel();
+  atomicAdd(fetches_shade, g_fetches);
+  atomicAdd(vector_fetches_shade, g_vector_fetches);
+}
+#endif

@@ -46,6 +46,29 @@ grep -q "^verdict: frames drawn whole: frame time median at 256x192 [0-9.]* ms (
   { echo "FAIL: no frames-drawn-whole median verdict against 33 ms"; exit 1; }
 grep -q "^verdict: frames drawn whole: frame time p95 [0-9.]* ms (needs <= 50.0 ms): " "$out/log.txt" ||
   { echo "FAIL: no frames-drawn-whole p95 verdict against 50 ms"; exit 1; }
+# The floor beside them: the texel fetches per pixel counted in the frames drawn whole (march
+# + shade, drawn again with counting pipelines) and the time of a pass doing only those.
+python3 - "$out/log.txt" <<'PY'
+import re, sys
+log = open(sys.argv[1]).read()
+m = re.search(r"^verdict: frames drawn whole: floor: ([0-9.]+) fetches per pixel = ([0-9.]+) ms \(march ([0-9.]+) \+ "
+              r"shade ([0-9.]+) texel fetches per pixel's invocation; as whole vectors ([0-9.]+) per pixel = ([0-9.]+) ms; "
+              r"counted in (\d+) of the (\d+) frames drawn whole, drawn again; a pass of only that many fetches, rounded "
+              r"\((?:4 floats|1 float) each\), and one store per pixel at 256x192 from \d+ MiB, submit to fence, median of 9 frames\)$",
+              log, re.M)
+if not m:
+    sys.exit("FAIL: no floor line beside the frames-drawn-whole verdicts")
+per_pixel, ms, march, shade, lanes, lane_ms = (float(x) for x in m.groups()[:6])
+counted, total = (int(x) for x in m.groups()[6:])
+w = re.search(r"^stats      frames drawn whole \(first, camera or style changed\): n (\d+),", log, re.M)
+if not (per_pixel > 0 and ms > 0 and march > 0 and shade > 0 and lane_ms > 0):
+    sys.exit(f"FAIL: floor figures not positive: {m.group(0)}")
+if abs(march + shade - per_pixel) > 0.11 or lanes < per_pixel - 0.05:
+    sys.exit(f"FAIL: march + shade != fetches per pixel, or fewer vector lanes than fetches: {m.group(0)}")
+if not w or total != int(w.group(1)) or counted != min(36, total):
+    sys.exit(f"FAIL: counted {counted} of {total} frames drawn whole; the stats say {w.group(1) if w else 'none'}")
+print(f"floor: {per_pixel} fetches per pixel = {ms} ms, as vectors {lanes} = {lane_ms} ms ({counted} of {total} frames counted)")
+PY
 grep -q "^verdict: edit-to-pixels median [0-9.]* ms (needs <= 39.7 ms" "$out/log.txt" ||
   { echo "FAIL: no edit-to-pixels verdict"; exit 1; }
 line=$(grep "^verdict: servo missed deadlines while sculpting" "$out/log.txt") || { echo "FAIL: no servo verdict"; exit 1; }

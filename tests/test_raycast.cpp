@@ -123,6 +123,43 @@ TEST(Raycast, SphereGpuMatchesCpuPerPixel) {
   EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
 }
 
+// The counting pipelines (the floor of isotouch-sculpt --bench) draw the same picture and count
+// what the passes' algorithm reads: per hit pixel the shade pass loads the 27-voxel block and
+// the normal's 12 face voxels (with quads 12 + 5 texels); the march reads at least one cell
+// distance and one trilinear sample (with quads 2 texels, else 8) per hit pixel.
+TEST(Raycast, CountedFetchesMatchThePassesWork) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  for (bool quads : {true, false}) {
+    auto rc = engine::RayCaster::create(vk(), f, quads);
+    ASSERT_TRUE(rc) << rc.error;
+    engine::RayCaster& c = **rc.value;
+    const RaycastImage plain = c.render(view, RaycastStyle{}, 96, 96);
+    EXPECT_EQ(c.last_fetches().march + c.last_fetches().shade, 0u) << "not counting";
+    c.set_count_fetches(true);
+    const RaycastImage counted = c.render(view, RaycastStyle{}, 96, 96);
+    const engine::RayCaster::FetchCount n = c.last_fetches();
+    EXPECT_EQ(counted.rgba, plain.rgba) << "quads " << quads << ": counting draws another picture";
+    EXPECT_FALSE(counted.reused) << "counting draws the frame whole";
+    const std::uint64_t h = hits(counted);
+    ASSERT_GT(h, 1000u);
+    EXPECT_EQ(n.pixels, 96u * 96u);
+    EXPECT_EQ(n.hits, h);
+    EXPECT_EQ(n.shade, h * (quads ? 12 + 5 : 27 + 12)) << "quads " << quads;
+    EXPECT_GE(n.march, h * (quads ? 1 + 2 : 1 + 8)) << "quads " << quads;
+    EXPECT_GE(n.march_lanes, n.march) << "a vector's fetch counts all its lanes";
+    EXPECT_GE(n.shade_lanes, n.shade);
+    EXPECT_LE(n.shade_lanes, (h + 63) / 64 * 64 * (quads ? 12 + 5 : 27 + 12)) << "at most whole workgroups of hits";
+    c.set_count_fetches(false);
+    c.render(view, RaycastStyle{}, 96, 97);
+    EXPECT_EQ(c.last_fetches().march, 0u) << "counting off again";
+    std::printf("quads %d: %zu hits, march %.1f, shade %.1f texel fetches per pixel\n", int(quads), std::size_t(h),
+                double(n.march) / double(n.pixels), double(n.shade) / double(n.pixels));
+  }
+  EXPECT_EQ(vk().validation_messages(), 0u) << "the validation layer reported messages (see stderr)";
+}
+
 TEST(Raycast, HeadCtGpuMatchesCpuPerPixel) {
   const engine::Volume vol = io::load_volume(kHead);
   const core::Isosurface iso{1150, core::InsideIs::kAbove};

@@ -459,6 +459,7 @@ struct Sculpt {
   void print_servo(const session::LiveStats& st);
   void print_device();
   void print_verdicts(const session::LiveStats& sculpted, const ServoAlone& alone);
+  void print_floor();
 
   const Options& o;
   std::ostream& log;
@@ -540,6 +541,11 @@ struct Sculpt {
   std::vector<double> full_render_ms, full_present_ms;
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
   std::vector<double> frame_full_ms, frame_reused_ms;  // frames whose picture was drawn whole / reused
+  struct WholeFrame {
+    engine::CameraView view;
+    int width, height;  // rendered [pixels]
+  };
+  std::vector<WholeFrame> full_views;  // --bench: the frames drawn whole (print_floor)
   std::vector<Clock::time_point> brush_submitted;  // per submitted brush
   long brushes_measured = 0;
   long events_submitted = 0;
@@ -1271,6 +1277,7 @@ void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world
     shade_ms.push_back(img.shade_ms);
     overlay_ms.push_back(img.overlay_ms);
     if (!img.reused) {
+      if (o.bench && frame > 0) full_views.push_back({view, f.rw, f.rh});  // (frame 0 is not timed)
       full_march_ms.push_back(img.march_ms);
       full_shade_ms.push_back(img.shade_ms);
       full_overlay_ms.push_back(img.overlay_ms);
@@ -1780,6 +1787,55 @@ bool servo_misses_pass(long sculpt_missed, long sculpt_ticks, long alone_missed,
 
 namespace {
 
+/// Beside the frames-drawn-whole verdicts, their floor: the texel fetches per pixel the march
+/// and shade passes made, counted by drawing again (counting pipelines) up to 36 of the
+/// frames drawn whole, spread over them, at their cameras and sizes (the volume as it is now,
+/// after the edits), per invocation and as whole vectors (a SIMD device's fetch costs every
+/// lane of its vector); then, for each count, the time of a pass doing only that many fetches
+/// and one store per pixel at the last one's size from a buffer as large as the volume's
+/// texels (engine::raycast_floor), submit to fence as
+/// the frame times (lavapipe's timestamps around a lone dispatch read near 0 in this process).
+void Sculpt::print_floor() {
+  if (full_views.empty()) {
+    log << "verdict: frames drawn whole: floor: no frames drawn whole\n";
+    return;
+  }
+  const std::size_t n = std::min<std::size_t>(36, full_views.size());
+  double march = 0, shade = 0, lanes = 0, pixels = 0;
+  caster->set_count_fetches(true);
+  for (std::size_t i = 0; i < n; ++i) {
+    const WholeFrame& w = full_views[i * full_views.size() / n];
+    caster->render(w.view, style, w.width, w.height);
+    const engine::RayCaster::FetchCount c = caster->last_fetches();
+    march += double(c.march);
+    shade += double(c.shade);
+    lanes += double(c.march_lanes + c.shade_lanes);
+    pixels += double(c.pixels);
+  }
+  caster->set_count_fetches(false);
+  const WholeFrame& last = full_views.back();
+  constexpr int kFrames = 9;
+  const auto& d = caster->field().grid.dims;  // the fetched texels' bytes: the quads (or the voxels)
+  const std::uint64_t bytes = caster->quads() ? std::uint64_t(d[0] + 2) * std::uint64_t(d[1] + 2) * std::uint64_t(d[2] + 2) * 16
+                                              : caster->field().values.size() * sizeof(float);
+  std::uint64_t used = 0;  // the floor pass's buffer [bytes]
+  const auto floor_ms = [&](double per_pixel) {
+    const engine::RaycastFloor fl = engine::raycast_floor(*vk, last.width, last.height,
+                                                          std::uint32_t(std::lround(per_pixel)), caster->quads(), kFrames, bytes);
+    used = fl.bytes;
+    return fl.wall_ms;
+  };
+  const double per_pixel = (march + shade) / pixels, per_lane = lanes / pixels;
+  const double ms = floor_ms(per_pixel), lane_ms = floor_ms(per_lane);
+  log << "verdict: frames drawn whole: floor: " << fixed(per_pixel, 1) << " fetches per pixel = " << fixed(ms, 2)
+      << " ms (march " << fixed(march / pixels, 1) << " + shade " << fixed(shade / pixels, 1)
+      << " texel fetches per pixel's invocation; as whole vectors " << fixed(per_lane, 1) << " per pixel = "
+      << fixed(lane_ms, 2) << " ms; counted in " << n << " of the "
+      << full_views.size() << " frames drawn whole, drawn again; a pass of only that many fetches, rounded ("
+      << (caster->quads() ? "4 floats" : "1 float") << " each), and one store per pixel at " << last.width << "x"
+      << last.height << " from " << (used >> 20) << " MiB, submit to fence, median of " << kFrames << " frames)\n";
+}
+
 /// --bench: the frame time, edit-to-pixels and servo figures against the targets: frames
 /// drawn whole (every pixel cast, render scale 1) median <= 33 ms and p95 <= 50 ms; sculpting
 /// frames and edit-to-pixels no slower than be320b6's on the chest (35.5 and 39.7 ms median,
@@ -1789,6 +1845,7 @@ void Sculpt::print_verdicts(const session::LiveStats& sculpted, const ServoAlone
   const std::string at = " at " + std::to_string(last_fb[0]) + "x" + std::to_string(last_fb[1]);
   verdict_line(log, "frames drawn whole: frame time median" + at, frame_full_ms, 0.5, 33);
   verdict_line(log, "frames drawn whole: frame time p95", frame_full_ms, 0.95, 50);
+  print_floor();
   verdict_line(log, "sculpting frames (reusing the picture): frame time median", frame_reused_ms, 0.5, 35.5,
                ", be320b6's on the chest");
   verdict_line(log, "edit-to-pixels median", latency_ms, 0.5, 39.7, ", be320b6's on the chest");

@@ -359,7 +359,7 @@ double passes_ms(const engine::ChainOutput& g, std::size_t np) {
 /// Pairs of the chain and the standalone set run back to back beside each repetition's pair
 /// (kExtraPairs more, the order alternating), so that the chain / set ratio is a median of
 /// ratios of runs at the same moment's load rather than a ratio of medians of three.
-constexpr int kExtraPairs = 4;
+constexpr int kExtraPairs = 6;
 void extra_pairs(engine::PassChain& chain, StandaloneSet& set, const engine::Volume& v, std::size_t np, int rep,
                  std::vector<double>& chain_pair_ms) {
   for (int k = 0; k < kExtraPairs; ++k) {
@@ -370,14 +370,15 @@ void extra_pairs(engine::PassChain& chain, StandaloneSet& set, const engine::Vol
   }
 }
 
-/// The median over pairs of chain[i] / set[i] (NaN without pairs or with a non-finite one).
+/// The median over pairs of chain[i] / set[i], skipping pairs without a finite ratio (a set
+/// run whose faster brick min/max form ran untimed); NaN without such pairs, or if the two
+/// lists do not match.
 double paired_ratio(const std::vector<double>& chain, const std::vector<double>& set) {
-  if (chain.empty() || chain.size() != set.size()) return kNaN;
+  if (chain.size() != set.size()) return kNaN;
   std::vector<double> r;
-  for (std::size_t i = 0; i < chain.size(); ++i) r.push_back(ratio(chain[i], set[i]));
-  for (double x : r)
-    if (!std::isfinite(x)) return kNaN;
-  return median(r);
+  for (std::size_t i = 0; i < chain.size(); ++i)
+    if (const double x = ratio(chain[i], set[i]); std::isfinite(x)) r.push_back(x);
+  return r.empty() ? kNaN : median(r);
 }
 
 /// The standalone pass set of a case (the list without closing: the same work as the dense
@@ -1025,7 +1026,9 @@ void print_standalone(const std::vector<CaseResult>& res, const Devices& d, std:
     }
   }
   out << "\nchain / set: the median over the runs of the chain and the set made back to back (" << pairs_text(res)
-      << ") of the chain's device time over the set's in the same pair, so both see the same moment's load; "
+      << ") of the chain's device time over the set's in the same pair, so both see the same moment's load (pairs whose "
+         "set ran its faster brick min/max form untimed skipped: the two forms take turns right after the gradient, as "
+         "the chain's runs, the other one before it); "
          "the two [ms] columns are medians over all runs. chain floor: copy_x4 once per pass with its loads and "
          "stores (the chain's bytes); passes floor: "
          "copy_x4 once per pass over the field as the chain runs them (a Gaussian's x, y and z).\n\n"

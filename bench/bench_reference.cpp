@@ -2,6 +2,7 @@
 #include "isotouch/bench/bench_reference.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <stdexcept>
 
@@ -50,8 +51,9 @@ struct StandaloneSet::Impl {
   std::vector<std::unique_ptr<ComputePipeline<gpu::DensePush>>> gauss;  // x, y, z
   std::unique_ptr<ComputePipeline<gpu::DensePush>> gradient, segments_pipe;
   std::unique_ptr<ComputePipeline<gpu::BrickMinMaxPush>> rows_pipe, bricks_pipe, slices_pipe;
-  std::vector<double> ms[kRows];
+  std::vector<double> ms[kRows];  // per timed run; a brick min/max form's NaN where it ran untimed
   bool same[kRows] = {};
+  int runs = 0;  // runs recorded, for the brick min/max forms' order
 
   explicit Impl(engine::VulkanContext& c) : ctx(c) {}
 };
@@ -144,13 +146,41 @@ namespace {
 BufferRange whole(const GpuBuffer& b) { return {b.handle(), 0, b.size()}; }
 }  // namespace
 
+
+// The brick min/max form timed in a run runs right after the gradient, as the chain's brick
+// min/max does; the other runs between the Gaussian and the gradient, untimed (its output is
+// still checked). The two swap each run: a form run right after the other form would find
+// the field in the cache the other just read, which the chain's never does.
 void StandaloneSet::run(bool timed) {
   Impl& m = *impl_;
   engine::VulkanContext& ctx = m.ctx;
   engine::DescriptorArena arena(ctx, 8, 24);
-  engine::GpuTimer timer(ctx, kRows + 1);
+  engine::GpuTimer timer(ctx, 5);
   const std::uint32_t qx = std::uint32_t(m.nx / 4);
   const std::uint32_t gx = groups(qx, ISOTOUCH_DENSE_WG);
+  const bool rows_timed = m.runs++ % 2 == 0;
+  // One brick min/max form over m.a (rows: minmax_rows + minmax_bricks; else minmax_segments
+  // + minmax_slices), a barrier after it.
+  const auto record_minmax = [&](VkCommandBuffer cmd, bool rows) {
+    const gpu::BrickMinMaxPush pc = minmax_push(m.nx, m.ny, m.nz, m.bx, m.by, m.bz);
+    if (rows) {
+      m.rows_pipe->bind(cmd, arena, {whole(m.a), whole(m.rows)});
+      m.rows_pipe->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * std::uint64_t(m.ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(m.nz));
+      engine::barrier_compute_to_compute(cmd);
+      m.bricks_pipe->bind(cmd, arena, {whole(m.rows), whole(m.bricks_rows)});
+      m.bricks_pipe->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, m.bz);
+    } else {
+      m.segments_pipe->bind(cmd, arena, {whole(m.a), whole(m.segments), whole(m.a)});
+      vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t(m.nz));
+      engine::barrier_compute_to_compute(cmd);
+      m.slices_pipe->bind(cmd, arena, {whole(m.segments), whole(m.bricks_segments)});
+      m.slices_pipe->push(cmd, pc);
+      vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, m.bz);
+    }
+    engine::barrier_compute_to_compute(cmd);
+  };
   VkCommandBuffer cmd = ctx.begin_commands();
   timer.record_reset(cmd);
   timer.mark(cmd, 0);
@@ -162,31 +192,21 @@ void StandaloneSet::run(bool timed) {
     engine::barrier_compute_to_compute(cmd);
   }
   timer.mark(cmd, 1);
+  record_minmax(cmd, !rows_timed);  // the untimed form
+  timer.mark(cmd, 2);
   m.gradient->bind(cmd, arena, {whole(m.a), whole(m.samples), whole(m.a)});
   vkCmdDispatch(cmd, gx, std::uint32_t(m.ny), std::uint32_t(m.nz));
   engine::barrier_compute_to_compute(cmd);
-  timer.mark(cmd, 2);
-  const gpu::BrickMinMaxPush pc = minmax_push(m.nx, m.ny, m.nz, m.bx, m.by, m.bz);
-  m.rows_pipe->bind(cmd, arena, {whole(m.a), whole(m.rows)});
-  m.rows_pipe->push(cmd, pc);
-  vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * std::uint64_t(m.ny), ISOTOUCH_DENSE_WG), 1, std::uint32_t(m.nz));
-  engine::barrier_compute_to_compute(cmd);
-  m.bricks_pipe->bind(cmd, arena, {whole(m.rows), whole(m.bricks_rows)});
-  m.bricks_pipe->push(cmd, pc);
-  vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, m.bz);
-  engine::barrier_compute_to_compute(cmd);
   timer.mark(cmd, 3);
-  m.segments_pipe->bind(cmd, arena, {whole(m.a), whole(m.segments), whole(m.a)});
-  vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, std::uint32_t(m.nz));
-  engine::barrier_compute_to_compute(cmd);
-  m.slices_pipe->bind(cmd, arena, {whole(m.segments), whole(m.bricks_segments)});
-  m.slices_pipe->push(cmd, pc);
-  vkCmdDispatch(cmd, groups(std::uint64_t(m.bx) * m.by, ISOTOUCH_DENSE_WG), 1, m.bz);
+  record_minmax(cmd, rows_timed);
   timer.mark(cmd, 4);
   engine::barrier_compute_to_host(cmd);
   (void)ctx.submit_and_wait(cmd);
-  if (timed)
-    for (std::uint32_t r = 0; r < kRows; ++r) m.ms[r].push_back(timer.elapsed_ms(r, r + 1));  // -1: no timestamps
+  if (!timed) return;
+  m.ms[kGauss].push_back(timer.elapsed_ms(0, 1));  // -1: no timestamps
+  m.ms[kGradient].push_back(timer.elapsed_ms(2, 3));
+  m.ms[rows_timed ? kMinMaxRows : kMinMaxSegments].push_back(timer.elapsed_ms(3, 4));
+  m.ms[rows_timed ? kMinMaxSegments : kMinMaxRows].push_back(std::nan(""));  // not right after the gradient
 }
 
 void StandaloneSet::check(const engine::ChainOutput& cpu) {
@@ -209,6 +229,17 @@ void StandaloneSet::check(const engine::ChainOutput& cpu) {
   m.same[kMinMaxSegments] = same_bricks(m.bricks_segments);
 }
 
+namespace {
+/// The median of the finite values (-1: none, or a run without timestamps).
+double finite_median(const std::vector<double>& v) {
+  std::vector<double> f;
+  for (double x : v)
+    if (std::isfinite(x)) f.push_back(x);
+  if (f.empty() || *std::min_element(f.begin(), f.end()) < 0) return -1.0;
+  return eval::median(f);
+}
+}  // namespace
+
 StandaloneFigures StandaloneSet::figures() const {
   const Impl& m = *impl_;
   StandaloneFigures f;
@@ -216,7 +247,7 @@ StandaloneFigures StandaloneSet::figures() const {
   for (int r = 0; r < kRows; ++r) {
     StandaloneRow row;
     row.label = kLabels[r];
-    row.ms = m.ms[r].empty() || *std::min_element(m.ms[r].begin(), m.ms[r].end()) < 0 ? -1.0 : eval::median(m.ms[r]);
+    row.ms = finite_median(m.ms[r]);
     row.same_bits = m.same[r];
     f.all_same_bits = f.all_same_bits && row.same_bits;
     f.rows.push_back(row);
@@ -226,7 +257,7 @@ StandaloneFigures StandaloneSet::figures() const {
   f.best_minmax = mm.label;
   f.best_set_ms = f.rows[kGauss].ms + f.rows[kGradient].ms + mm.ms;
   const int best = rows_faster ? kMinMaxRows : kMinMaxSegments;
-  for (std::size_t i = 0; i < m.ms[kGauss].size(); ++i)
+  for (std::size_t i = 0; i < m.ms[kGauss].size(); ++i)  // NaN in the runs the best form ran untimed
     f.set_ms_per_run.push_back(m.ms[kGauss][i] + m.ms[kGradient][i] + m.ms[best][i]);
   if (m.ms[0].empty()) f.why = "no run";
   return f;

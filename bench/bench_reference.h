@@ -37,7 +37,8 @@ struct StandaloneFigures {
   double best_set_ms = 0;           ///< gaussian + gradient + the faster brick min/max [ms]
   std::string best_minmax;          ///< the label of that brick min/max
   /// The best set's time [ms] in each timed run, in run order (gaussian + gradient + that
-  /// brick min/max of the same run): for ratios paired with runs beside it.
+  /// brick min/max of the same run; NaN in the runs where that form ran untimed, before the
+  /// gradient): for ratios paired with runs beside it.
   std::vector<double> set_ms_per_run;
   bool all_same_bits = false;
 };

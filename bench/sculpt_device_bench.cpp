@@ -27,7 +27,7 @@ namespace isotouch::bench {
 namespace fs = std::filesystem;
 
 bool misses_within(long missed, long ticks, long ref_missed, long ref_ticks) {
-  if (ticks <= 0 || ref_ticks <= 0 || missed < 0 || ref_missed < 0) return false;
+  if (ticks < kMinVerdictTicks || ref_ticks < kMinVerdictTicks || missed < 0 || ref_missed < 0) return false;
   const double ref = double(ref_missed) * double(ticks) / double(ref_ticks);
   return double(missed) <= ref + 3 * std::sqrt(ref);
 }
@@ -189,7 +189,7 @@ void print_verdicts(const Mode& mouse, const Mode& dev, bool same_path, std::ost
   const double ref = mouse.ticks > 0 ? double(mouse.missed) * double(dev.ticks) / double(mouse.ticks) : NAN;
   out << "verdict: " << dev.name << ": servo missed " << dev.missed << " of " << dev.ticks << " ticks against the mouse's "
       << mouse.missed << " of " << mouse.ticks << " (" << fixed(ref) << " at this many ticks; needs <= ref + 3 sqrt(ref) = "
-      << fixed(ref + 3 * std::sqrt(ref)) << (std::min(dev.ticks, mouse.ticks) < 20000 ? ", fewer than 20,000 ticks" : "")
+      << fixed(ref + 3 * std::sqrt(ref)) << (std::min(dev.ticks, mouse.ticks) < kMinVerdictTicks ? ", fewer than 20,000 ticks: not a pass" : "")
       << "): " << (misses_within(dev.missed, dev.ticks, mouse.missed, mouse.ticks) ? "PASS" : "FAIL") << "\n";
 }
 

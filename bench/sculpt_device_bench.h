@@ -22,7 +22,7 @@ struct SculptDeviceOptions {
   int width = 1024;             ///< the window's width [pixels]; its height is 3/4 of it
   long min_ticks = 20000;       ///< servo ticks each mode gathers at least (runs repeated)
   int min_runs = 3;             ///< runs per mode at least (31 frames drawn whole a run: one run's median is noisy)
-  int max_runs = 6;             ///< runs per mode at most (min_runs wins)
+  int max_runs = 12;            ///< runs per mode at most (min_runs wins): a mouse run of the head ticks about 2,000
   std::string sculpt_exe;       ///< isotouch-sculpt (default: beside this executable)
   std::string devemu_exe;       ///< isotouch-devemu (default: beside this executable)
   std::string device;           ///< Vulkan device (substring), passed on
@@ -30,8 +30,10 @@ struct SculptDeviceOptions {
 
 /// Whether `missed` misses are no more than the reference `ref_missed` allows: at most
 /// ref + 3 sqrt(ref), with ref = ref_missed scaled from `ref_ticks` to `ticks` ticks
-/// (false when either has no ticks).
+/// (false when either has fewer than kMinVerdictTicks ticks).
 bool misses_within(long missed, long ticks, long ref_missed, long ref_ticks);
+/// Servo ticks each side needs before misses_within can pass.
+inline constexpr long kMinVerdictTicks = 20000;
 
 /// "device / mouse = R: <= 1.10 PASS|FAIL" for two medians [ms] (FAIL when either is not
 /// finite or positive).

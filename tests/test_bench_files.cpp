@@ -212,6 +212,8 @@ TEST(SculptDevice, MissesAgainstTheReference) {
   EXPECT_TRUE(misses_within(0, 20000, 0, 20000));
   EXPECT_FALSE(misses_within(1, 20000, 0, 20000));
   EXPECT_FALSE(misses_within(0, 0, 0, 20000));        // no ticks: not judged a pass
+  EXPECT_FALSE(misses_within(0, 19999, 0, 20000));    // fewer than 20,000 ticks on either side
+  EXPECT_FALSE(misses_within(0, 20000, 0, 19999));
 }
 
 TEST(SculptDevice, RatioVerdict) {

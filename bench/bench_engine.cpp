@@ -993,11 +993,17 @@ void print_peers(const std::vector<CaseResult>& res, const Devices& d, std::ostr
   }
 }
 
-/// How many chain/set pairs each case made, e.g. "head 15 pairs, chest 15 pairs".
+/// How many chain/set pairs each case counted of those it made, e.g. "head 10 of 21 pairs".
 std::string pairs_text(const std::vector<CaseResult>& res) {
   std::string t;
-  for (const auto& r : res)
-    if (r.standalone.why.empty()) t += (t.empty() ? "" : ", ") + r.name + " " + std::to_string(r.chain_pair_ms.size()) + " pairs";
+  for (const auto& r : res) {
+    if (!r.standalone.why.empty()) continue;
+    std::size_t counted = 0;
+    for (std::size_t i = 0; i < r.chain_pair_ms.size() && i < r.standalone.set_ms_per_run.size(); ++i)
+      counted += std::isfinite(ratio(r.chain_pair_ms[i], r.standalone.set_ms_per_run[i])) ? 1 : 0;
+    t += (t.empty() ? "" : ", ") + r.name + " " + std::to_string(counted) + " of " + std::to_string(r.chain_pair_ms.size()) +
+         " pairs";
+  }
   return t.empty() ? "no pairs" : t;
 }
 

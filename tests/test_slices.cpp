@@ -4,7 +4,9 @@
 // the slice code's axis choice. tests/cli_slices.py checks the shipped head end to end.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
+#include <cstdint>
 #include <cmath>
 
 #include "isotouch/apps/sculpt/slices.h"
@@ -107,6 +109,61 @@ TEST(Slices, ContourIsTheInsideVoxelsWithAnOutsideNeighbour) {
       const bool inside = c >= 1 && c <= 4 && r >= 1 && r <= 3, interior = c >= 2 && c <= 3 && r == 2;
       EXPECT_EQ(s.rgba[std::size_t(r * s.width + c)] == kContourRgba, inside && !interior) << c << "," << r;
     }
+}
+
+// The pane's pixels (resample_into, mapped once per column and row) are the slice pixels
+// that pane_to_slice (the mouse's mapping, SliceViews::hit) gives for each pixel centre,
+// rounded and clamped, and untouched outside the slice: slices wider, taller and square on
+// isotropic and anisotropic spacings, pane sizes even and odd, every slice pixel distinct.
+TEST(Slices, PanePixelsAreThePerPixelMapping) {
+  for (const auto& [w, h] : {std::array<int, 2>{256, 64}, {64, 256}, {93, 93}, {7, 3}})
+    for (const Vec3& sp : {Vec3{1e-3, 1e-3, 1e-3}, Vec3{1.684e-3, 1.684e-3, 5e-3}, Vec3{3.2e-3, 1.5e-3, 3.2e-3}})
+      for (int size : {16, 255, 256}) {
+        SliceImage s;
+        s.width = w;
+        s.height = h;
+        s.axes.col = 0;
+        s.axes.row = 2;
+        s.axes.normal = 1;
+        s.rgba.resize(std::size_t(w) * std::size_t(h));
+        for (std::size_t i = 0; i < s.rgba.size(); ++i) s.rgba[i] = 0x10000000u + std::uint32_t(i);
+        const SlicePane made = make_pane(s, sp, size);  // its geometry; the pixels again below
+        SlicePane p = made;
+        std::fill(p.rgba.begin(), p.rgba.end(), 0xDEADBEEFu);
+        resample_into(p, s);
+        std::size_t shown = 0;
+        for (int y = 0; y < size; ++y)
+          for (int x = 0; x < size; ++x) {
+            std::uint32_t want = 0xDEADBEEFu;
+            if (const auto cr = pane_to_slice(p, s, x + 0.5, y + 0.5)) {
+              const int c = std::clamp(int(std::lround((*cr)[0])), 0, w - 1), r = std::clamp(int(std::lround((*cr)[1])), 0, h - 1);
+              want = s.rgba[std::size_t(r) * std::size_t(w) + std::size_t(c)];
+              ++shown;
+            }
+            ASSERT_EQ(p.rgba[std::size_t(y) * std::size_t(size) + std::size_t(x)], want)
+                << w << "x" << h << " slice, pane " << size << ", pixel " << x << "," << y;
+          }
+        if (size == 256) EXPECT_GT(shown, std::size_t(size) * std::size_t(size) / 20) << w << "x" << h << " slice, pane " << size;
+      }
+}
+
+// window_grey against std::lround(255 f), f the value's place in the window clamped to
+// [0, 1]: every half-way value (rounded up), its neighbours either side, the ends, values
+// past them, NaN (black), on a window where 255 f is the value itself and on an odd one.
+TEST(Slices, WindowGreyRoundsAsLround) {
+  for (const WindowLevel wl : {WindowLevel{127.5, 255}, WindowLevel{-600, 1500}, WindowLevel{0.3, 0.7}}) {
+    const double lo = wl.level - 0.5 * wl.window;
+    std::size_t checked = 0;
+    for (int k = -3; k <= 258; ++k)
+      for (const double x : {double(k), k + 0.5, std::nextafter(k + 0.5, -1e9), std::nextafter(k + 0.5, 1e9), k + 0.25}) {
+        const double v = lo + x / 255.0 * wl.window;
+        const double f = (v - (wl.level - 0.5 * wl.window)) / wl.window;
+        ASSERT_EQ(int(window_grey(v, wl)), int(std::lround(255.0 * std::clamp(f, 0.0, 1.0)))) << "value " << v;
+        ++checked;
+      }
+    EXPECT_EQ(checked, 262u * 5u);
+  }
+  EXPECT_EQ(window_grey(std::nan(""), WindowLevel{0, 1}), 0);
 }
 
 }  // namespace

@@ -138,7 +138,10 @@ WindowLevel default_window(double lo, double hi, bool hounsfield, double iso) {
 std::uint8_t window_grey(double value, const WindowLevel& wl) {
   if (!(value == value)) return 0;  // NaN: black
   const double f = (value - (wl.level - 0.5 * wl.window)) / wl.window;
-  return std::uint8_t(std::lround(255.0 * std::clamp(f, 0.0, 1.0)));
+  // std::lround of x in [0, 255] (halves away from zero) without the library call: x - floor(x)
+  // is exact there.
+  const double x = 255.0 * std::clamp(f, 0.0, 1.0), fl = std::floor(x);
+  return std::uint8_t(x - fl >= 0.5 ? fl + 1.0 : fl);
 }
 
 SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, SliceKind k, const SliceAxes& ax,
@@ -150,23 +153,24 @@ SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, 
   s.height = dim(grid, ax.row);
   s.index = std::clamp(int(std::lround(hip_index[ax.normal])), 0, dim(grid, ax.normal) - 1);
   s.rgba.assign(std::size_t(s.width) * std::size_t(s.height), 0xFF000000u);
-  // The voxel under pixel (c, r), and whether it is inside the object.
-  const auto value = [&](int c, int r) {
-    std::array<int, 3> i{};
-    i[std::size_t(ax.col)] = ax.col_flip ? s.width - 1 - c : c;
-    i[std::size_t(ax.row)] = ax.row_flip ? s.height - 1 - r : r;
-    i[std::size_t(ax.normal)] = s.index;
-    return double(voxels[grid.index(i[0], i[1], i[2])]);
-  };
+  // The voxel under pixel (c, r): the slice's offset plus a column's and a row's (x fastest,
+  // flips applied), and whether it is inside the object.
+  const std::array<std::size_t, 3> stride{1, std::size_t(grid.dims[0]), std::size_t(grid.dims[0]) * std::size_t(grid.dims[1])};
+  const std::size_t base = std::size_t(s.index) * stride[std::size_t(ax.normal)];
+  std::vector<std::size_t> col_at(std::size_t(s.width));
+  for (int c = 0; c < s.width; ++c)
+    col_at[std::size_t(c)] = std::size_t(ax.col_flip ? s.width - 1 - c : c) * stride[std::size_t(ax.col)];
   std::vector<char> inside(s.rgba.size());
-  for (int r = 0; r < s.height; ++r)
+  for (int r = 0; r < s.height; ++r) {
+    const std::size_t row_at = base + std::size_t(ax.row_flip ? s.height - 1 - r : r) * stride[std::size_t(ax.row)];
     for (int c = 0; c < s.width; ++c) {
-      const double v = value(c, r);
+      const double v = double(voxels[row_at + col_at[std::size_t(c)]]);
       const std::size_t at = std::size_t(r) * std::size_t(s.width) + std::size_t(c);
       inside[at] = style.iso.contains(v);
       const std::uint32_t g = window_grey(v, style.wl);
       s.rgba[at] = 0xFF000000u | g << 16 | g << 8 | g;
     }
+  }
   for (int r = 0; r < s.height; ++r)
     for (int c = 0; c < s.width; ++c) {
       const std::size_t at = std::size_t(r) * std::size_t(s.width) + std::size_t(c);
@@ -197,6 +201,26 @@ Vec3 slice_pixel_index(const SliceImage& s, double col, double row) {
   return {i[0], i[1], i[2]};
 }
 
+void resample_into(SlicePane& p, const SliceImage& s) {
+  const int size = p.size;
+  // pane_to_slice's column depends on x alone and its row on y alone: both mapped once per
+  // pane column and row (-1: outside the slice), then every pixel is a lookup.
+  std::vector<int> col(std::size_t(size), -1), row(std::size_t(size), -1);
+  for (int i = 0; i < size; ++i) {
+    if (const auto cr = pane_to_slice(p, s, i + 0.5, p.y0 + 0.5 * p.px_per_row))
+      col[std::size_t(i)] = std::clamp(int(std::lround((*cr)[0])), 0, s.width - 1);
+    if (const auto cr = pane_to_slice(p, s, p.x0 + 0.5 * p.px_per_col, i + 0.5))
+      row[std::size_t(i)] = std::clamp(int(std::lround((*cr)[1])), 0, s.height - 1);
+  }
+  for (int y = 0; y < size; ++y) {
+    if (row[std::size_t(y)] < 0) continue;
+    const std::uint32_t* src = s.rgba.data() + std::size_t(row[std::size_t(y)]) * std::size_t(s.width);
+    std::uint32_t* dst = p.rgba.data() + std::size_t(y) * std::size_t(size);
+    for (int x = 0; x < size; ++x)
+      if (col[std::size_t(x)] >= 0) dst[x] = src[col[std::size_t(x)]];
+  }
+}
+
 SlicePane make_pane(const SliceImage& s, const Vec3& spacing_m, int size) {
   SlicePane p;
   p.size = size;
@@ -208,12 +232,7 @@ SlicePane make_pane(const SliceImage& s, const Vec3& spacing_m, int size) {
   p.px_per_row = scale * spacing_m[s.axes.row];
   p.x0 = 0.5 * (size - s.width * p.px_per_col);
   p.y0 = 0.5 * (size - s.height * p.px_per_row);
-  for (int y = 0; y < size; ++y)
-    for (int x = 0; x < size; ++x)
-      if (const auto cr = pane_to_slice(p, s, x + 0.5, y + 0.5)) {
-        const int c = std::clamp(int(std::lround((*cr)[0])), 0, s.width - 1), r = std::clamp(int(std::lround((*cr)[1])), 0, s.height - 1);
-        p.rgba[std::size_t(y) * std::size_t(size) + std::size_t(x)] = s.rgba[std::size_t(r) * std::size_t(s.width) + std::size_t(c)];
-      }
+  resample_into(p, s);
   // The marks again at the pane's resolution (a voxel may be less than a pixel there).
   for (const auto& [at, rgba] : {std::pair{s.proxy, kProxyRgba}, std::pair{s.hip, kHipRgba}}) {
     if (at[0] < 0 || at[1] < 0 || at[0] >= s.width || at[1] >= s.height) continue;

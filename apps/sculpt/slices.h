@@ -103,6 +103,12 @@ struct SlicePane {
 /// The pane of `s` on a grid of `spacing_m` (its physical aspect), `size` pixels square.
 SlicePane make_pane(const SliceImage& s, const core::Vec3& spacing_m, int size);
 
+/// The slice's pixels into `p` (its size, x0, y0 and scale set): pane pixel (x, y) takes the
+/// slice pixel nearest to pane_to_slice(x + 0.5, y + 0.5), rounded and clamped into the
+/// slice; pixels outside the slice are left as they are. Mapped once per pane column and row
+/// (the column depends on x alone, the row on y alone), then a lookup per pixel.
+void resample_into(SlicePane& p, const SliceImage& s);
+
 /// The slice pixel (column, row) under pane pixel (x, y); none outside the slice.
 std::optional<std::array<double, 2>> pane_to_slice(const SlicePane& p, const SliceImage& s, double x, double y);
 

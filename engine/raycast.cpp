@@ -587,8 +587,14 @@ struct RayCaster::Impl {
   // The five passes (shaders/raycast_common.glsl), one descriptor layout.
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   // tiles and the march from them (march_tiled), with args_tiles for its indirect dispatch.
+  // The march shades its hits: the variants that also write the linear colour (constant 8,
+  // frames with primitives) are made on the first such frame (march_lin()).
   ComputePipeline<gpu::RaycastPush> tiles, args_tiles, blocks, march_tiled, march_skip, march_plain, args, shade_lin,
       shade, overlay;
+  struct Marches {
+    ComputePipeline<gpu::RaycastPush> tiled, skip, plain;
+  };
+  std::unique_ptr<Marches> marches_lin;
   GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
   GpuBuffer params, prims;                 // device-local, rewritten per frame
@@ -597,7 +603,8 @@ struct RayCaster::Impl {
   /// The march and shade pipelines that count their texel fetches (*_count_spv), made on the first
   /// set_count_fetches(true); `counting`: render() draws with them.
   struct Counting {
-    ComputePipeline<gpu::RaycastPush> march_tiled, march_skip, march_plain, shade_lin, shade;
+    ComputePipeline<gpu::RaycastPush> march_tiled, march_skip, march_plain, march_tiled_lin, march_skip_lin,
+        march_plain_lin, shade_lin, shade;
   };
   std::unique_ptr<Counting> count_pipes;
   bool counting = false;
@@ -632,11 +639,26 @@ struct RayCaster::Impl {
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
   /// 5: the march's tile starts (one workgroup per listed tile); 6 the tile pass's
-  /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4.
-  std::vector<std::uint32_t> spec(std::uint32_t variant, bool tiled = false) const {
+  /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4; 8 the march
+  /// writes the linear colour of its hits.
+  std::vector<std::uint32_t> spec(std::uint32_t variant, bool tiled = false, bool linear = false) const {
     return {variant, std::uint32_t(field.grid.dims[0]), std::uint32_t(field.grid.dims[1]),
             std::uint32_t(field.grid.dims[2]), use_quads ? 1u : 0u, tiled ? 1u : 0u, ISOTOUCH_RAYCAST_WG_X,
-            vals4 ? 1u : 0u};
+            vals4 ? 1u : 0u, linear ? 1u : 0u};
+  }
+  /// The march pipelines that write the linear colour (made once).
+  Marches& march_lin() {
+    if (!marches_lin) {
+      VulkanContext& c = ctx;
+      const std::uint32_t b = ISOTOUCH_RAYCAST_BINDINGS;
+      marches_lin.reset(new Marches{
+          {c, raycast_march_spv, b, "raycast march (tile starts, linear colour)", 1u, spec(1, true, true), kTexel},
+          {c, raycast_march_spv, b, "raycast march (skipping, linear colour)", 1u, spec(1, false, true), kTexel},
+          {c, raycast_march_spv, b, "raycast march (linear colour)", 1u, spec(0, false, true), kTexel}});
+      for (auto* p : {&marches_lin->tiled, &marches_lin->skip, &marches_lin->plain})
+        p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+    }
+    return *marches_lin;
   }
   /// The counting pipelines (made once).
   Counting& counting_pipes() {
@@ -647,10 +669,14 @@ struct RayCaster::Impl {
           {c, raycast_march_count_spv, b, "raycast march (tile starts, counting)", 1u, spec(1, true), kTexel},
           {c, raycast_march_count_spv, b, "raycast march (skipping, counting)", 1u, spec(1), kTexel},
           {c, raycast_march_count_spv, b, "raycast march (counting)", 1u, spec(0), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (tile starts, linear colour, counting)", 1u, spec(1, true, true), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (skipping, linear colour, counting)", 1u, spec(1, false, true), kTexel},
+          {c, raycast_march_count_spv, b, "raycast march (linear colour, counting)", 1u, spec(0, false, true), kTexel},
           {c, raycast_shade_count_spv, b, "raycast shade (linear colour, counting)", 1u, spec(1), kTexel},
           {c, raycast_shade_count_spv, b, "raycast shade (counting)", 1u, spec(0), kTexel}});
       Counting& k = *count_pipes;
-      for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.shade_lin, &k.shade})
+      for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.march_tiled_lin, &k.march_skip_lin,
+                      &k.march_plain_lin, &k.shade_lin, &k.shade})
         p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
     }
     return *count_pipes;
@@ -843,7 +869,7 @@ Result<std::unique_ptr<RayCaster>> RayCaster::create(VulkanContext& ctx, Raycast
         std::tuple{&impl->params_up, pb, MemoryIntent::Upload, "raycast params staging"},
         std::tuple{&impl->prims, qb, MemoryIntent::DeviceLocal, "raycast primitives"},
         std::tuple{&impl->prims_up, qb, MemoryIntent::Upload, "raycast primitives staging"},
-        std::tuple{&impl->counter, 2 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
+        std::tuple{&impl->counter, 3 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast counter"},
         std::tuple{&impl->tile_counter, 2 * sizeof(gpu::RaycastCounter), MemoryIntent::DeviceLocal, "raycast tile counter"}}) {
     auto r = GpuBuffer::create(ctx, bytes, intent, what);
     if (!r) return R::fail(r.error);
@@ -997,8 +1023,11 @@ void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePla
   // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
   // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
   Counting* k = m.counting ? &m.counting_pipes() : nullptr;
-  const auto& march = tiled ? (k ? k->march_tiled : m.march_tiled)
-                      : skip_empty ? (k ? k->march_skip : m.march_skip) : (k ? k->march_plain : m.march_plain);
+  Marches* lin = f.linear && !k ? &m.march_lin() : nullptr;
+  const auto& march = k ? (f.linear ? (tiled ? k->march_tiled_lin : skip_empty ? k->march_skip_lin : k->march_plain_lin)
+                                    : (tiled ? k->march_tiled : skip_empty ? k->march_skip : k->march_plain))
+                      : lin ? (tiled ? lin->tiled : skip_empty ? lin->skip : lin->plain)
+                            : (tiled ? m.march_tiled : skip_empty ? m.march_skip : m.march_plain);
   march.bind(cmd, m.arena, ranges);
   march.push(cmd, march_push);
   if (tiled)
@@ -1143,16 +1172,17 @@ RayCaster::FetchCount RayCaster::last_fetches() {
   record_copy(cmd, m.counter, down, m.counter.size());
   barrier_transfer_to_host(cmd);
   m.ctx.submit_and_wait(cmd);
-  std::uint32_t w[8];
+  std::uint32_t w[9];
   std::memcpy(w, down.mapped(), sizeof w);
   FetchCount c;
-  c.hits = w[3];
+  c.listed = w[3];
   c.pixels = std::uint64_t(m.last_width) * std::uint64_t(m.last_height);
   if (m.counting) {
     c.march = w[4];
     c.shade = w[5];
     c.march_lanes = w[6];
     c.shade_lanes = w[7];
+    c.hits = w[8];
   }
   return c;
 }

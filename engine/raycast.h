@@ -255,11 +255,13 @@ class RayCaster {
   /// whole. For the floor of a frame (isotouch-sculpt --bench), not for drawing.
   void set_count_fetches(bool on);
   /// The last render()'s counts (reads the device back): texel fetches (one voxel, quad or
-  /// cell-distance texel each) of the march and the shade passes' invocations, and the lanes
-  /// of the fetches their subgroups made with at least one lane active (a vector's fetch costs
-  /// all its lanes; 0 unless counting); hit pixels; the frame's pixels.
+  /// cell-distance texel each) of the marches and of the shading (refinement and normal, done
+  /// by the march pass for its hits and by the shade pass for the rays it finishes), and the
+  /// lanes of the fetches their subgroups made with at least one lane active (a vector's fetch
+  /// costs all its lanes); hit pixels shaded (these 0 unless counting); the pixels the march
+  /// handed to the shade pass (rays llvmpipe's loop budget stopped); the frame's pixels.
   struct FetchCount {
-    std::uint64_t march = 0, shade = 0, march_lanes = 0, shade_lanes = 0, hits = 0, pixels = 0;
+    std::uint64_t march = 0, shade = 0, march_lanes = 0, shade_lanes = 0, hits = 0, listed = 0, pixels = 0;
   };
   FetchCount last_fetches();
   /// The device buffer holding the last render()'s pixels (rows top to bottom, one 32-bit

@@ -150,9 +150,9 @@ struct BrickMinMaxPush {
 // First-hit isosurface ray caster: five passes (raycast_tiles, raycast_march, raycast_args,
 // raycast_shade, raycast_overlay .comp; shared code raycast_common.glsl; CPU reference
 // engine/raycast_cpu.cpp). march and overlay: one invocation per pixel, rows of 64 pixels
-// (long 1-D workgroups run faster on llvmpipe than 8x8 tiles); shade: one
-// per hit pixel, ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from
-// RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
+// (long 1-D workgroups run faster on llvmpipe than 8x8 tiles); the march shades its hits;
+// shade: one per pixel the march listed (rays its loop budget stopped),
+// ISOTOUCH_RAYCAST_SHADE_WG per workgroup, dispatched indirectly from RaycastCounter. Bindings (every pass, one layout): 0 params (one RaycastParams), 1 values
 // (uniform texel buffer, R32_SFLOAT per voxel, x fastest; R32G32B32A32_SFLOAT, 4 voxels per
 // texel, where they exceed maxTexelBufferElements: VALS4), 2 cell distances (uniform texel
 // buffer, R32_SFLOAT: 4 trilinear cells per texel, 6 bits each from the low end, as an exact
@@ -298,7 +298,7 @@ struct RaycastCounter {
   uint groups_x;
   uint groups_y;
   uint groups_z;
-  uint count;        // hit pixels appended by raycast_march.comp
+  uint count;        // pixels appended by raycast_march.comp (rays for raycast_shade.comp to finish)
 };
 // The floor of a frame on this device (raycast_floor.comp, tests/bench_raycast_floor.cpp):
 // one invocation per pixel, rows of ISOTOUCH_RAYCAST_WG_X; push constants.

@@ -43,16 +43,21 @@
 // Passes (one command buffer; engine/raycast.cpp): llvmpipe runs an `if` by masking, not by
 // branching, so a pass costs its whole straight-line code for every vector of 8
 // invocations, taken or not. Code only some pixels need therefore runs in its own pass
-// over only those pixels (the host first fills image and depth with the background, -1):
+// over only those pixels (the host first fills image and depth with the background, -1),
+// unless nearly every vector needs it: the march's pixels are those of tiles where a hit
+// can be, and shading them in the march (once per vector that has a hit) costs less than
+// a pass of its own, which built every hit's ray again (chest, 1024x768: 9 of 10 marched
+// pixels hit; bench_raycast_frames 28-30 against 34-39 ms a frame):
 //   tiles   (skipping; the tiles of the march's pixels): per tile of pixels, a ray
 //            parameter before which none of its rays' samples can be inside (cone stepping),
 //            and the list of the tiles where one can be; args turns their count into the
 //            march's indirect dispatch (one workgroup per listed tile);
 //   march   (the pixels the box can project to): the ray and its march (skipping: from its
-//            tile's start); appends a hit pixel to the hit list (nothing else: a store is
-//            a per-lane scatter);
-//   args    (one invocation) : the hit count -> the indirect dispatch size of shade;
-//   shade   (hit pixels)     : refinement, normal, shading; writes colour and depth;
+//            tile's start), then, for a hit, refinement, normal and shading (shade_hit):
+//            writes colour and depth. A ray whose march llvmpipe's loop budget stopped is
+//            appended to the hit list instead;
+//   args    (one invocation) : the hit list's count -> the indirect dispatch size of shade;
+//   shade   (listed pixels: in practice none) : finishes those rays' march, then shade_hit;
 //   overlay (every pixel, only when there are primitives): HIP, VHIP, disc, arrows.
 
 // Binding 0 is a uniform buffer (std140 = std430 for a struct of 4-byte scalars whose size
@@ -85,6 +90,8 @@ layout(constant_id = 7) const bool VALS4 = false;
 // COUNT_FETCH() is empty: the drawing passes' SPIR-V is the one without counting.
 #ifdef ISOTOUCH_COUNT_FETCHES
 uint g_fetches = 0u, g_vector_fetches = 0u;
+// The fetches of shade_hit (refinement and normal), counted as the shade's in the march.
+uint g_shade_fetches = 0u, g_shade_vector_fetches = 0u, g_shaded = 0u;
 void count_fetch() {
   ++g_fetches;
   if (subgroupElect()) g_vector_fetches += gl_SubgroupSize;  // every lane's slot of the vector's fetch
@@ -109,6 +116,7 @@ layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per
 layout(std430, set = 0, binding = 11) buffer Counter {
   RaycastCounter ctr;
   uint fetches_march, fetches_shade, vector_fetches_march, vector_fetches_shade;
+  uint shaded;  // pixels shade_hit wrote
 };
 #else
 layout(std430, set = 0, binding = 11) buffer Counter { RaycastCounter ctr; };
@@ -704,3 +712,39 @@ Ray make_ray(uvec2 px) {
   return r;
 }
 
+
+// Refines the hit at lattice sample k of ray r in the bracket [t_{k-1}, t_k] (sample 0:
+// t0, no refinement), shades it and writes pixel pix's colour and depth (and its linear
+// colour with write_linear: the overlay pass blends into it). The cut face (cap: sample 0
+// on the clip plane) is flat: the clip plane's normal, cap colour.
+void shade_hit(Ray r, uint pix, int k, bool cap, bool write_linear) {
+#ifdef ISOTOUCH_COUNT_FETCHES
+  uint before = g_fetches, before_lanes = g_vector_fetches;
+#endif
+  // Sample 0 has no bracket: refine() of [t0, t0] returns t0 (and loads the block around it,
+  // which the normal reads). Unconditional: on llvmpipe an `if` would not skip it anyway.
+  float ta = k > 0 ? lattice_t(r.t0, r.t1, r.h, k - 1) : r.t0;
+  float tb = k > 0 ? lattice_t(r.t0, r.t1, r.h, k) : r.t0;
+  float t_hit = refine(r.e, r.d, ta, tb);
+  // One shade() of whichever normal applies (on llvmpipe both arms of an `if` run, so two
+  // calls would cost two).
+  vec3 n = surface_normal_block(ray_point(r.e, r.d, t_hit));  // the block holds the hit's cell
+  vec3 albedo = vec3(P.surf_r, P.surf_g, P.surf_b);
+  if (cap) {
+    n = vec3(P.clip_nx, P.clip_ny, P.clip_nz);
+    albedo = vec3(P.cap_r, P.cap_g, P.cap_b);
+  }
+  vec3 colour = shade(albedo, n, r.dir);
+  depth[pix] = t_hit;
+  if (write_linear) {
+    lin_r[pix] = colour.r;
+    lin_g[pix] = colour.g;
+    lin_b[pix] = colour.b;
+  }
+  image[pix] = pack_rgba(colour);
+#ifdef ISOTOUCH_COUNT_FETCHES
+  g_shade_fetches += g_fetches - before;
+  g_shade_vector_fetches += g_vector_fetches - before_lanes;
+  ++g_shaded;
+#endif
+}

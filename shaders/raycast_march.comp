@@ -1,12 +1,12 @@
 #version 450
 // Ray caster march pass (shaders/raycast_common.glsl): one invocation per pixel (with tile
 // starts, per pixel of the tiles raycast_tiles.comp listed).
-// A pixel whose ray reaches an inside lattice sample k (sample 0 included) is appended to
-// the hit list, with k in hit_k, for raycast_shade.comp to refine and shade (and so is a ray
-// whose skipping march llvmpipe's loop budget stopped, marked, for the shade pass to finish); nothing else is
-// written (the host fills image and depth with the background before: a store is a per-lane
-// scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY skips empty space
-// (march_skip); both marches return the same k.
+// A pixel whose ray reaches an inside lattice sample k (sample 0 included) is refined and
+// shaded here (shade_hit: colour and depth); a ray whose skipping march llvmpipe's loop
+// budget stopped is appended to the hit list, marked, for raycast_shade.comp to finish.
+// Nothing else is written (the host fills image and depth with the background before: a
+// store is a per-lane scatter on llvmpipe, masked or not). The pipeline with SKIP_EMPTY
+// skips empty space (march_skip); both marches return the same k.
 #extension GL_GOOGLE_include_directive : require
 #ifdef ISOTOUCH_COUNT_FETCHES  // (raycast_common.glsl)
 #extension GL_KHR_shader_subgroup_basic : require
@@ -26,6 +26,9 @@ layout(constant_id = 0) const bool SKIP_EMPTY = true;
 // lanes of a vector are one tile row. Each pixel starts from its block's start (the block
 // pass of raycast_tiles.comp, for the same list entry).
 layout(constant_id = 5) const bool TILED = false;
+// Specialization constant 8: shade_hit writes the linear colour too (bindings 6-8), for the
+// overlay pass (only frames with primitives: a store is a per-lane scatter on llvmpipe).
+layout(constant_id = 8) const bool WRITE_LINEAR = false;
 
 #ifdef ISOTOUCH_COUNT_FETCHES
 #define PASS_MAIN march_pixel
@@ -91,17 +94,21 @@ void PASS_MAIN() {
   // k_hit <= -2: the skipping march ran out of llvmpipe's loop budget at sample -(k_hit + 2);
   // the shade pass finishes the ray from there (bit 30).
   bool redo = k_hit <= -2;
-  if (k_hit >= 0 || redo) {
+  if (k_hit >= 0) shade_hit(r, pix, k_hit, cap, WRITE_LINEAR);
+  if (redo) {
     uint slot = atomicAdd(ctr.count, 1u);
     hits[slot] = pix;
-    hit_k[pix] = redo ? uint(-(k_hit + 2)) | 0x40000000u : uint(k_hit) | (cap ? 0x80000000u : 0u);
+    hit_k[pix] = uint(-(k_hit + 2)) | 0x40000000u;
   }
 }
 
 #ifdef ISOTOUCH_COUNT_FETCHES
 void main() {
   march_pixel();
-  atomicAdd(fetches_march, g_fetches);
-  atomicAdd(vector_fetches_march, g_vector_fetches);
+  atomicAdd(fetches_march, g_fetches - g_shade_fetches);
+  atomicAdd(vector_fetches_march, g_vector_fetches - g_shade_vector_fetches);
+  atomicAdd(fetches_shade, g_shade_fetches);
+  atomicAdd(vector_fetches_shade, g_shade_vector_fetches);
+  atomicAdd(shaded, g_shaded);
 }
 #endif

@@ -1,8 +1,10 @@
 #version 450
-// Ray caster shade pass (shaders/raycast_common.glsl): one invocation per hit
-// pixel of raycast_march.comp (indirect dispatch). Rebuilds the pixel's ray (the same float
-// operations as the march), refines the hit in the bracket [t_{k-1}, t_k] (sample 0: t0,
-// no refinement), shades it and writes colour and depth.
+// Ray caster shade pass (shaders/raycast_common.glsl): one invocation per pixel that
+// raycast_march.comp listed (indirect dispatch): rays whose skipping march llvmpipe's loop
+// budget stopped (the march shades its other hits itself). Rebuilds the pixel's ray (the
+// same float operations as the march), finishes its march with the plain one (a new
+// dispatch, a new budget) and, for a hit, shade_hit: refinement, normal, shading, colour
+// and depth.
 #extension GL_GOOGLE_include_directive : require
 #ifdef ISOTOUCH_COUNT_FETCHES  // (raycast_common.glsl)
 #extension GL_KHR_shader_subgroup_basic : require
@@ -40,27 +42,7 @@ void PASS_MAIN() {
     cap = k == 0 && r.cap_entry;
   }
   if (k < 0) return;
-  // Sample 0 has no bracket: refine() of [t0, t0] returns t0 (and loads the block around it,
-  // which the normal reads). Unconditional: on llvmpipe an `if` would not skip it anyway.
-  float ta = k > 0 ? lattice_t(r.t0, r.t1, r.h, k - 1) : r.t0;
-  float tb = k > 0 ? lattice_t(r.t0, r.t1, r.h, k) : r.t0;
-  float t_hit = refine(r.e, r.d, ta, tb);
-  // The cut face is flat (the clip plane's normal, cap colour): one shade() of whichever
-  // applies (on llvmpipe both arms of an `if` run, so two calls would cost two).
-  vec3 n = surface_normal_block(ray_point(r.e, r.d, t_hit));  // the block holds the hit's cell
-  vec3 albedo = vec3(P.surf_r, P.surf_g, P.surf_b);
-  if (cap) {
-    n = vec3(P.clip_nx, P.clip_ny, P.clip_nz);
-    albedo = vec3(P.cap_r, P.cap_g, P.cap_b);
-  }
-  vec3 colour = shade(albedo, n, r.dir);
-  depth[pix] = t_hit;
-  if (WRITE_LINEAR) {
-    lin_r[pix] = colour.r;
-    lin_g[pix] = colour.g;
-    lin_b[pix] = colour.b;
-  }
-  image[pix] = pack_rgba(colour);
+  shade_hit(r, pix, k, cap, WRITE_LINEAR);
 }
 
 #ifdef ISOTOUCH_COUNT_FETCHES
@@ -68,5 +50,6 @@ void main() {
   shade_pixel();
   atomicAdd(fetches_shade, g_fetches);
   atomicAdd(vector_fetches_shade, g_vector_fetches);
+  atomicAdd(shaded, g_shaded);
 }
 #endif

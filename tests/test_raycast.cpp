@@ -124,9 +124,9 @@ TEST(Raycast, SphereGpuMatchesCpuPerPixel) {
 }
 
 // The counting pipelines (the floor of isotouch-sculpt --bench) draw the same picture and count
-// what the passes' algorithm reads: per hit pixel the shade pass loads the 27-voxel block and
-// the normal's 12 face voxels (with quads 12 + 5 texels); the march reads at least one cell
-// distance and one trilinear sample (with quads 2 texels, else 8) per hit pixel.
+// what the passes' algorithm reads: per hit pixel the shading (in the march pass) loads the
+// 27-voxel block and the normal's 12 face voxels (with quads 12 + 5 texels); the march reads
+// at least one cell distance and one trilinear sample (with quads 2 texels, else 8) per hit pixel.
 TEST(Raycast, CountedFetchesMatchThePassesWork) {
   const SphereCase s;
   const RaycastField f = s.field();
@@ -150,7 +150,10 @@ TEST(Raycast, CountedFetchesMatchThePassesWork) {
     EXPECT_GE(n.march, h * (quads ? 1 + 2 : 1 + 8)) << "quads " << quads;
     EXPECT_GE(n.march_lanes, n.march) << "a vector's fetch counts all its lanes";
     EXPECT_GE(n.shade_lanes, n.shade);
-    EXPECT_LE(n.shade_lanes, (h + 63) / 64 * 64 * (quads ? 12 + 5 : 27 + 12)) << "at most whole workgroups of hits";
+    // The march shades its hits: a vector's shading counts all its lanes, at most every
+    // marched pixel's (whole workgroups of the frame's pixels); no ray was left to the shade pass.
+    EXPECT_LE(n.shade_lanes, (n.pixels + 63) / 64 * 64 * (quads ? 12 + 5 : 27 + 12)) << "at most the frame's vectors";
+    EXPECT_EQ(n.listed, 0u) << "no march stopped by the loop budget at this size";
     c.set_count_fetches(false);
     c.render(view, RaycastStyle{}, 96, 97);
     EXPECT_EQ(c.last_fetches().march, 0u) << "counting off again";
@@ -803,7 +806,8 @@ TEST(Raycast, IncrementalUpdateEqualsFullRebuild) {
 // draws it, and an edit on its far corner brick (the last texels) shows.
 TEST(Raycast, VolumeLargerThanOneStorageBindingRenders) {
   engine::Volume vol = engine::make_sphere({512, 512, 512}, 0.5e-3, 200);
-  ASSERT_GT(vol.voxels.size() * sizeof(float), vk().max_binding_bytes());
+  if (vol.voxels.size() * sizeof(float) <= vk().max_binding_bytes())  // lavapipe: 128 MiB; an NVIDIA GPU: 4 GiB
+    GTEST_SKIP() << "this device's storage bindings hold the 512^3 volume (" << vk().max_binding_bytes() << " bytes)";
   const core::Isosurface iso{0.0, core::InsideIs::kAbove};
   const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
   const core::Grid grid = vol.grid;

@@ -1719,8 +1719,8 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "frame time", frame_ms);
   stats_line(log, "  frames drawn whole (first, camera or style changed)", frame_full_ms);
   stats_line(log, "    render (ray caster, submit to fence and read back)", full_render_ms);
-  stats_line(log, "    march pass (GPU timestamps)", full_march_ms);
-  stats_line(log, "    shade pass (GPU timestamps)", full_shade_ms);
+  stats_line(log, "    march pass (GPU timestamps)", full_march_ms);  // with the shading of its hits
+  stats_line(log, "    shade pass (GPU timestamps)", full_shade_ms);  // rays the march's loop budget stopped
   stats_line(log, "    overlay pass (GPU timestamps)", full_overlay_ms);
   stats_line(log, "    present (and the panels)", full_present_ms);
   stats_line(log, "  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cmath>
 
+#include "isotouch/apps/sculpt/slice_views.h"
 #include "isotouch/apps/sculpt/slices.h"
 #include "isotouch/engine/volume.h"
 
@@ -164,6 +165,43 @@ TEST(Slices, WindowGreyRoundsAsLround) {
     EXPECT_EQ(checked, 262u * 5u);
   }
   EXPECT_EQ(window_grey(std::nan(""), WindowLevel{0, 1}), 0);
+}
+
+// SliceViews keeps each plane's slice while only the marks move: after every step of a path
+// (the HIP and the proxy moving within the planes, across them, an edit that changes the
+// voxels, another window/level) its column equals the three panes of the slices made from the
+// volume at that step (make_slice with the marks, make_pane).
+TEST(Slices, KeptSlicesEqualSlicesMadeAnew) {
+  engine::Volume v = volume_with({1, 0, 0, 0, 1, 0, 0, 0, 1});
+  const core::Isosurface iso{50, core::InsideIs::kAbove};
+  SliceViews kept;
+  kept.open(v, iso, false);
+  const std::array<int, 2> fb{400, 300};
+  struct Step {
+    Vec3 hip, proxy;
+    long edits;
+  };
+  const std::vector<Step> path = {{{2, 2, 1}, {2, 2, 1}, 0}, {{3, 2, 1}, {2, 2, 1}, 0}, {{3, 3, 1}, {3, 2, 1}, 0},
+                                  {{3, 3, 2}, {3, 3, 1}, 0}, {{3.4, 3, 2}, {3, 3.4, 2}, 0}, {{3, 3, 2}, {3, 3, 2}, 1},
+                                  {{4, 1, 2}, {4, 1, 2}, 1}, {{4, 1, 3}, {4, 1, 2}, 2}, {{0, 0, 0}, {5, 4, 3}, 2}};
+  std::size_t made = 0;
+  for (std::size_t i = 0; i < path.size(); ++i) {
+    const Step& st = path[i];
+    if (i == 5) v.voxels[v.grid.index(3, 3, 2)] = 1000;  // the edit counted from this step on
+    if (i == 7) v.voxels[v.grid.index(4, 1, 3)] = -5;
+    if (i == 8) kept.control().wl = {40, 90};
+    made += kept.update(v.voxels, st.hip, st.proxy, st.edits, fb);
+    // The truth: each plane's slice made from the volume with its marks, and its pane.
+    std::vector<std::uint32_t> column;
+    for (SliceKind k : kSliceKinds) {
+      const SliceImage s = make_slice(v.grid, v.voxels, k, slice_axes(v.direction, k), st.hip, st.proxy,
+                                      SliceStyle{kept.control().wl, iso, true});
+      const SlicePane p = make_pane(s, v.grid.spacing_m, SliceViews::pane_size(fb));
+      column.insert(column.end(), p.rgba.begin(), p.rgba.end());
+    }
+    ASSERT_EQ(kept.column(), column) << "step " << i;
+  }
+  EXPECT_EQ(made, path.size()) << "every step changed a mark, the voxels or the window";
 }
 
 }  // namespace

@@ -28,6 +28,7 @@ void SliceViews::open(const engine::Volume& vol, const core::Isosurface& iso, bo
   control_.presets = hounsfield ? ct_windows() : std::vector<std::pair<std::string, WindowLevel>>{};
   control_.presets.insert(control_.presets.begin(), {"range", default_window(vol.min_value, vol.max_value, false, 0)});
   shown_.reset();
+  plain_key_ = {};
 }
 
 int SliceViews::pane_size(const std::array<int, 2>& fb) { return std::max(16, std::min(fb[1] / 3, fb[0] / 4)); }
@@ -47,10 +48,18 @@ bool SliceViews::update(const std::vector<float>& voxels, const Vec3& hip_index,
   fb_ = fb;
   size_ = pane_size(fb);
   column_.assign(std::size_t(size_) * std::size_t(3 * size_), 0xFF000000u);
-  const SliceStyle style{control_.wl, iso_, true};
+  const SliceStyle plain{control_.wl, iso_, false};
   for (SliceKind k : kSliceKinds) {
     const std::size_t i = std::size_t(k);
-    images_[i] = make_slice(grid_, voxels, k, axes_[i], hip_index, proxy_index, style);
+    const int normal = axes_[i].normal;
+    const PlainKey pk{std::clamp(int(std::lround(hip_index[normal])), 0, grid_.dims[std::size_t(normal)] - 1), edits,
+                      control_.wl};
+    if (plain_key_[i] != pk) {
+      plain_[i] = make_slice(grid_, voxels, k, axes_[i], hip_index, proxy_index, plain);
+      plain_key_[i] = pk;
+    }
+    images_[i] = plain_[i];
+    mark_slice(images_[i], hip_index, proxy_index, true);
     panes_[i] = make_pane(images_[i], grid_.spacing_m, size_);
     std::copy(panes_[i].rgba.begin(), panes_[i].rgba.end(), column_.begin() + long(i * panes_[i].rgba.size()));
   }

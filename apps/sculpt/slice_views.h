@@ -2,7 +2,8 @@
 // square panes (axial, coronal, sagittal from the top) at the window's right edge, over the
 // 3-D picture, each through the HIP. They are computed again only when the HIP or the proxy
 // moves to another voxel, the volume is edited, the window/level or the window's size
-// changes (at most once a frame). The window copies the column over its picture (Window::
+// changes (at most once a frame); a plane whose voxels did not change (only its marks moved)
+// is marked again, not read from the volume again. The window copies the column over its picture (Window::
 // set_inset); screenshots get the same column. With the mouse probe, a press on a pane moves
 // the probe's target to the voxel under it (in that pane's plane).
 #pragma once
@@ -83,6 +84,16 @@ class SliceViews {
     bool operator==(const Key&) const = default;
   };
   std::optional<Key> shown_;
+  // Each plane's slice without marks and what it was made from (its voxel plane, the edits,
+  // the window/level): when only the marks moved, it is marked again, not made again.
+  struct PlainKey {
+    int index = -1;
+    long edits = -1;
+    WindowLevel wl;
+    bool operator==(const PlainKey&) const = default;
+  };
+  std::array<SliceImage, 3> plain_{};
+  std::array<std::optional<PlainKey>, 3> plain_key_{};
 };
 
 }  // namespace isotouch::sculpt

@@ -179,18 +179,23 @@ SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, 
                         (r > 0 && !inside[at - std::size_t(s.width)]) || (r + 1 < s.height && !inside[at + std::size_t(s.width)]);
       if (edge) s.rgba[at] = kContourRgba;
     }
+  mark_slice(s, hip_index, proxy_index, style.marks);
+  return s;
+}
+
+void mark_slice(SliceImage& s, const Vec3& hip_index, const Vec3& proxy_index, bool draw) {
   // The marks: the index projected onto the plane, in pixels.
+  const SliceAxes& ax = s.axes;
   const auto pixel = [&](const Vec3& idx) {
     const int ic = int(std::lround(idx[ax.col])), ir = int(std::lround(idx[ax.row]));
     return std::array<int, 2>{ax.col_flip ? s.width - 1 - ic : ic, ax.row_flip ? s.height - 1 - ir : ir};
   };
   s.hip = pixel(hip_index);
   s.proxy = pixel(proxy_index);
-  if (style.marks) {
+  if (draw) {
     draw_cross(s, s.proxy, kProxyRgba);
     draw_cross(s, s.hip, kHipRgba);
   }
-  return s;
 }
 
 Vec3 slice_pixel_index(const SliceImage& s, double col, double row) {

@@ -85,8 +85,13 @@ struct SliceStyle {
 /// isocontour: an inside voxel with a 4-neighbour in the plane outside it (kContourRgba). The
 /// proxy's mark (a green cross) and the HIP's (a yellow cross over it) at their nearest voxels
 /// projected onto the plane, arms of 2 voxels.
+/// (The same as make_slice without marks, then mark_slice.)
 SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, SliceKind k, const SliceAxes& ax,
                       const core::Vec3& hip_index, const core::Vec3& proxy_index, const SliceStyle& style);
+
+/// Sets the marks' pixels of `s` (its axes and size) for the HIP and the proxy (continuous
+/// index) and, with `draw`, draws their crosses into it.
+void mark_slice(SliceImage& s, const core::Vec3& hip_index, const core::Vec3& proxy_index, bool draw);
 
 /// The continuous voxel index of a slice's pixel (column, row: pixel centres are whole numbers).
 core::Vec3 slice_pixel_index(const SliceImage& s, double col, double row);

@@ -35,7 +35,8 @@ inline bool expects_bit_identity(const engine::VulkanContext& ctx) {
 }
 
 /// `gpu` against `cpu` (n floats each) under the rule above. Bit identity compares the bits
-/// (+0 and -0, NaN payloads differ). The GPU bound is `ulp_bound` ULPs of the largest |cpu|
+/// (+0 and -0, NaN payloads differ). Under the GPU bound equal values (+inf and +inf too) and
+/// NaN against NaN agree; otherwise at most `ulp_bound` ULPs of the largest finite |cpu|
 /// value (an absolute tolerance at the array's scale: a value near zero after cancellation
 /// is many of its own ULPs off for the same rounding error).
 inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& ctx, const float* gpu, const float* cpu,
@@ -50,8 +51,10 @@ inline ::testing::AssertionResult gpu_matches_cpu(const engine::VulkanContext& c
   const double tol = double(ulp_bound) * double(std::nextafter(scale, INFINITY) - scale);
   for (std::size_t i = 0; i < n; ++i) {
     if (std::memcmp(&a[i], &b[i], sizeof(float)) != 0 && !bits_differ++) first_bits = i;
-    const bool both_nan = std::isnan(a[i]) && std::isnan(b[i]);
-    if (!both_nan && !(std::abs(double(a[i]) - double(b[i])) <= tol) && !beyond++) first_beyond = i;
+    // Equal values (equal infinities too: their difference is NaN) and two NaNs (any payload)
+    // agree; otherwise the difference must be within the tolerance.
+    const bool same = a[i] == b[i] || (std::isnan(a[i]) && std::isnan(b[i]));
+    if (!same && !(std::abs(double(a[i]) - double(b[i])) <= tol) && !beyond++) first_beyond = i;
   }
   std::printf("  %-48s %9zu values, %zu differ, ULP max %llu p99 %llu\n", what.c_str(), s.n, bits_differ,
               static_cast<unsigned long long>(s.max), static_cast<unsigned long long>(s.p99));

@@ -64,8 +64,14 @@ const std::string kData = ISOTOUCH_TEST_DATA;
 const std::string kHead = kData + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 const std::string kChest = kData + "/ct-chest-lungdx-a0001/chest_ct_lungdx_a0001_256x256x64_int16.mhd";
 
-std::uint32_t bits(float f) { return std::bit_cast<std::uint32_t>(f); }
-std::uint64_t bits(double d) { return std::bit_cast<std::uint64_t>(d); }
+// The bits of a value, every NaN as one (the quiet NaN): a NaN's payload is the device's (an
+// NVIDIA H200 writes 0x7fffffff where the CPU reference writes 0x7fc00000) and nothing reads
+// it (the servo takes any NaN as outside); every other value compares bit for bit.
+std::uint32_t bits(float f) { return std::isnan(f) ? 0x7fc00000u : std::bit_cast<std::uint32_t>(f); }
+std::uint64_t bits(double d) { return std::isnan(d) ? 0x7ff8000000000000ull : std::bit_cast<std::uint64_t>(d); }
+bool same_bits(const core::Sample& a, const core::Sample& b) {
+  return bits(a.value) == bits(b.value) && bits(a.gx) == bits(b.gx) && bits(a.gy) == bits(b.gy) && bits(a.gz) == bits(b.gz);
+}
 
 struct Case {
   std::string name;
@@ -254,9 +260,20 @@ void expect_full_run(const core::SampleField& live, const Volume& vol, const Liv
     const BrickDump x = dump(a, id), y = dump(b, id);
     if (x == y) continue;
     std::size_t& n = x.uniform != y.uniform ? wrong_class : (x.uniform ? wrong_tile : wrong_samples);
-    if (wrong_class + wrong_tile + wrong_samples == 0)
+    if (wrong_class + wrong_tile + wrong_samples == 0) {
       first = "brick " + std::to_string(id) + (x.uniform ? " uniform" : " active") + " (full run: " +
               (y.uniform ? "uniform" : "active") + ")";
+      // Where the samples differ first: both words' bits (a NaN against a NaN of another
+      // payload, or two numbers).
+      for (std::size_t k = 0; k < std::min(x.samples.size(), y.samples.size()); ++k)
+        if (x.samples[k] != y.samples[k]) {
+          char b[96];
+          std::snprintf(b, sizeof b, ", sample word %zu: 0x%08x against 0x%08x", k, unsigned(x.samples[k]),
+                        unsigned(y.samples[k]));
+          first += b;
+          break;
+        }
+    }
     ++n;
   }
   EXPECT_EQ(wrong_class, 0u) << what << ": bricks classified differently, first " << first;
@@ -812,8 +829,20 @@ TEST(LiveField, TheGpuFilterMatchesTheCpuBrickWithAndWithoutStaging) {
             engine::sparse::brick_samples(c.vol.grid, out.field, core::brick_coords(cands[i], core::brick_counts(c.vol.grid)),
                                           c.background, a.data());
             const bool same = bits(want.lo) == bits(ranges[i].lo) && bits(want.hi) == bits(ranges[i].hi) &&
-                              want.nan == ranges[i].nan &&
-                              std::memcmp(a.data(), e.data(), a.size() * sizeof(core::Sample)) == 0;
+                              want.nan == ranges[i].nan && std::equal(a.begin(), a.end(), e.begin(), same_bits);
+            if (!same && wrong == 0) {  // the first difference, for the message: bits of both
+              std::printf("  %s: candidate %u: range [0x%08x, 0x%08x] nan %d against [0x%08x, 0x%08x] nan %d\n",
+                          what.c_str(), unsigned(cands[i]), unsigned(bits(ranges[i].lo)), unsigned(bits(ranges[i].hi)),
+                          int(ranges[i].nan), unsigned(bits(want.lo)), unsigned(bits(want.hi)), int(want.nan));
+              for (std::size_t k = 0; k < a.size(); ++k)
+                if (!same_bits(a[k], e[k])) {
+                  std::printf("    sample %zu: GPU (0x%08x 0x%08x 0x%08x 0x%08x) CPU (0x%08x 0x%08x 0x%08x 0x%08x)\n", k,
+                              unsigned(bits(a[k].value)), unsigned(bits(a[k].gx)), unsigned(bits(a[k].gy)),
+                              unsigned(bits(a[k].gz)), unsigned(bits(e[k].value)), unsigned(bits(e[k].gx)),
+                              unsigned(bits(e[k].gy)), unsigned(bits(e[k].gz)));
+                  break;
+                }
+            }
             wrong += !same;
           }
           EXPECT_EQ(wrong, 0u) << what << ": " << wrong << " of " << cands.size() << " candidates differ";

@@ -73,10 +73,18 @@ std::size_t hits(const RaycastImage& img) {
 
 int channel(std::uint32_t c, int k) { return int((c >> (8 * k)) & 0xffu); }
 
-/// GPU vs CPU: same hit/miss and depth within `tol_vox` voxels on all but 0.1 % of the
-/// pixels; colour within 3 levels on all but 0.1 %.
+/// GPU vs CPU: same hit/miss and depth within a tolerance on all but 0.1 % of the pixels;
+/// colour within 3 levels on all but 0.1 %. The depth tolerance: 1e-4 voxel on a CPU device
+/// (where every depth must also be bit-identical); on a GPU, whose division and square root
+/// are not correctly rounded (Vulkan allows 2.5 ULP and more), the refinement's last bracket
+/// at the default step (step / 2^bisections = 0.0078 voxel): a ray a few ULPs off turns a
+/// bisection whose midpoint lies within rounding of the surface the other way, and the hit
+/// then moves within that bracket, not beyond it.
 void expect_gpu_matches_cpu(const RaycastImage& g, const RaycastImage& c, double vox_per_m, const char* what) {
   ASSERT_EQ(g.depth.size(), c.depth.size());
+  const double tol_vox = isotouch::test::expects_bit_identity(vk())
+                             ? 1e-4
+                             : double(RaycastStyle{}.step_vox) / double(1 << ISOTOUCH_RAYCAST_BISECTIONS);
   std::size_t depth_bad = 0, colour_bad = 0, identical = 0;
   double worst = 0;
   for (std::size_t i = 0; i < g.depth.size(); ++i) {
@@ -87,7 +95,7 @@ void expect_gpu_matches_cpu(const RaycastImage& g, const RaycastImage& c, double
     } else if (gh) {
       const double e = std::fabs(double(g.depth[i]) - double(c.depth[i])) * vox_per_m;
       worst = std::max(worst, e);
-      depth_bad += e > 1e-4;
+      depth_bad += e > tol_vox;
     }
     for (int k = 0; k < 3; ++k)
       if (std::abs(channel(g.rgba[i], k) - channel(c.rgba[i], k)) > 3) {

@@ -578,8 +578,15 @@ struct FramePlan {
 struct RayCaster::Impl {
   /// Bindings 1 (values) and 2 (cell distances) are uniform texel buffers.
   /// Binding 12 (quads) is one too, viewed as R32G32B32A32_SFLOAT.
-  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2) | (1u << 12);
+  /// Binding 3 (the primitives) is one too, viewed as R32G32B32A32_UINT (set_views).
+  static constexpr std::uint32_t kTexel = (1u << 1) | (1u << 2) | (1u << 3) | (1u << 12);
   static constexpr std::uint32_t kVec4 = 1u << 12;
+  /// The texel bindings' views of every raycast pipeline: the quads (and the values with
+  /// VALS4) 4 floats per texel, the primitives 4 words per texel.
+  void set_views(ComputePipelineBase& p) const {
+    p.set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+    p.set_texel_uint4(1u << 3);
+  }
   VulkanContext& ctx;
   RaycastField field;
   bool use_quads = false;  // binding 12 holds the quads (shaders/raycast_common.glsl)
@@ -656,7 +663,7 @@ struct RayCaster::Impl {
           {c, raycast_march_spv, b, "raycast march (skipping, linear colour)", 1u, spec(1, false, true), kTexel},
           {c, raycast_march_spv, b, "raycast march (linear colour)", 1u, spec(0, false, true), kTexel}});
       for (auto* p : {&marches_lin->tiled, &marches_lin->skip, &marches_lin->plain})
-        p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+        set_views(*p);
     }
     return *marches_lin;
   }
@@ -677,7 +684,7 @@ struct RayCaster::Impl {
       Counting& k = *count_pipes;
       for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.march_tiled_lin, &k.march_skip_lin,
                       &k.march_plain_lin, &k.shade_lin, &k.shade})
-        p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+        set_views(*p);
     }
     return *count_pipes;
   }
@@ -728,7 +735,7 @@ struct RayCaster::Impl {
         arena(c, 7, 7 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 5) {
     for (auto* p : {&tiles, &args_tiles, &blocks, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay})
-      p->set_texel_vec4(kVec4 | (vals4 ? 1u << 1 : 0u));
+      set_views(*p);
   }
 };
 

@@ -335,7 +335,7 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
   std::uint32_t at = 0;
   for (const BufferRange& r : buffers) {
     if ((texel_ >> at) & 1u) {
-      const bool v4 = (texel_vec4_ >> at) & 1u;
+      const bool u4 = (texel_uint4_ >> at) & 1u, v4 = u4 || ((texel_vec4_ >> at) & 1u);
       const VkDeviceSize texel = v4 ? 16 : 4;
       if (r.range / texel > lim.maxTexelBufferElements || r.offset % lim.minTexelBufferOffsetAlignment != 0 ||
           r.range % texel != 0)
@@ -344,7 +344,8 @@ void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
                                std::to_string(lim.maxTexelBufferElements) + ", misses the alignment " +
                                std::to_string(lim.minTexelBufferOffsetAlignment) + " or is no whole number of " +
                                std::to_string(texel) + "-byte texels");
-      views[at] = arena.make_view(r, v4 ? VK_FORMAT_R32G32B32A32_SFLOAT : VK_FORMAT_R32_SFLOAT);
+      views[at] = arena.make_view(r, u4 ? VK_FORMAT_R32G32B32A32_UINT
+                                     : v4 ? VK_FORMAT_R32G32B32A32_SFLOAT : VK_FORMAT_R32_SFLOAT);
     } else if (r.range > limit) {
       throw std::logic_error(name_ + ": binding of " + std::to_string(r.range) +
                              " bytes exceeds maxStorageBufferRange " + std::to_string(limit));

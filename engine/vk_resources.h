@@ -170,6 +170,9 @@ class ComputePipelineBase {
   /// Bit i: texel binding i is viewed as R32G32B32A32_SFLOAT (texel q = floats 4 q .. 4 q + 3:
   /// one fetch per quad) instead of R32_SFLOAT. Its ranges must be multiples of 16 bytes.
   void set_texel_vec4(std::uint32_t mask) { texel_vec4_ = mask; }
+  /// Bit i: texel binding i is viewed as R32G32B32A32_UINT (4 words per texel, their bits as
+  /// stored: a struct of 4-byte fields read by texelFetch). Its ranges must be multiples of 16 bytes.
+  void set_texel_uint4(std::uint32_t mask) { texel_uint4_ = mask; }
   std::uint32_t bindings() const { return bindings_; }
   const std::string& name() const { return name_; }
 
@@ -184,6 +187,7 @@ class ComputePipelineBase {
   std::uint32_t uniform_ = 0;  ///< bit i: binding i is a uniform buffer
   std::uint32_t texel_ = 0;    ///< bit i: binding i is a uniform texel buffer (R32_SFLOAT)
   std::uint32_t texel_vec4_ = 0;  ///< bit i: that texel buffer's view is R32G32B32A32_SFLOAT
+  std::uint32_t texel_uint4_ = 0;  ///< bit i: that texel buffer's view is R32G32B32A32_UINT
   VkDescriptorType descriptor_type(std::uint32_t i) const {
     if ((texel_ >> i) & 1u) return VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
     return (uniform_ >> i) & 1u ? VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER : VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;

@@ -27,7 +27,7 @@ void main() {
   uint np = min(pc.prim_count & 0xffffu, 2u * ISOTOUCH_RAYCAST_MAX_PRIMS);
   uint n_opaque = min(pc.prim_count >> 16, np);
   for (uint i = 0u; i < n_opaque; ++i) {
-    RaycastPrim q = prims[i];
+    RaycastPrim q = prim_at(i);
     if (q.alpha < 1.0) continue;
     vec4 h = intersect_prim(q, eye, dir);
     if (h.x > 0.0 && h.x < t_best) {
@@ -36,7 +36,7 @@ void main() {
     }
   }
   for (uint i = n_opaque; i < np; ++i) {
-    RaycastPrim q = prims[i];
+    RaycastPrim q = prim_at(i);
     bool xray = q.pad0 > 0.0;
     if (q.alpha >= 1.0 && !xray) continue;
     vec4 h = intersect_prim(q, eye, dir);

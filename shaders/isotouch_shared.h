@@ -157,10 +157,10 @@ struct BrickMinMaxPush {
 // texel, where they exceed maxTexelBufferElements: VALS4), 2 cell distances (uniform texel
 // buffer, R32_SFLOAT: 4 trilinear cells per texel, 6 bits each from the low end, as an exact
 // integer; see ISOTOUCH_RAYCAST_DIST_MAX),
-// 3 primitives (RaycastPrim[]), 4 image (RGBA8 per pixel, R
+// 3 primitives (uniform texel buffer, R32G32B32A32_UINT: 4 texels per RaycastPrim), 4 image (RGBA8 per pixel, R
 // in the low byte), 5 depth (float per pixel: ray parameter t [m] of the isosurface hit,
-// -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 hit pixels (uint, count in
-// RaycastCounter), 10 per pixel the hit sample k | cap << 31, 11 one RaycastCounter, 12 the
+// -1 if none), 6-8 linear colour R, G, B (float per pixel), 9 listed pixels (uint, count in
+// RaycastCounter), 10 per listed pixel the sample k its march stopped at | 1 << 30, 11 one RaycastCounter, 12 the
 // voxels as quads (uniform texel buffer, R32G32B32A32_SFLOAT; shaders/raycast_common.glsl),
 // 13 per tile of pixels the ray parameter t [m] before which no sample can be inside,
 // 14 the tiles' RaycastCounter (listed tiles, the march's indirect dispatch), 15 the tiles

@@ -135,7 +135,7 @@ layout(std430, set = 0, binding = 6) buffer LinR { float lin_r[]; };      // lin
 layout(std430, set = 0, binding = 7) buffer LinG { float lin_g[]; };      //   (the overlay pass blends
 layout(std430, set = 0, binding = 8) buffer LinB { float lin_b[]; };      //   into it)
 layout(std430, set = 0, binding = 9) buffer Hits { uint hits[]; };        // hit pixels, in no order
-layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per pixel: k | redo << 30 | cap << 31
+layout(std430, set = 0, binding = 10) buffer HitK { uint hit_k[]; };      // per listed pixel: k | redo << 30 (| cap << 31)
 #ifdef ISOTOUCH_COUNT_FETCHES
 // After ctr: the texel fetches the march and the shade passes' invocations made, then the
 // lanes of the fetches their vectors (subgroups) made with at least one lane taking part (a

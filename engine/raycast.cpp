@@ -595,12 +595,27 @@ struct RayCaster::Impl {
   // march and shade in two variants each (specialization constant 0: skipping; linear colour).
   // tiles and the march from them (march_tiled), with args_tiles for its indirect dispatch.
   // The march shades its hits: the variants that also write the linear colour (constant 8,
-  // frames with primitives) are made on the first such frame (march_lin()).
-  ComputePipeline<gpu::RaycastPush> tiles, args_tiles, blocks, march_tiled, march_skip, march_plain, args, shade_lin,
-      shade, overlay;
+  // frames with primitives) are made on the first such frame (linear_marches()).
+  /// The march's three forms (tile starts, skipping, plain) of one SPIR-V and linear colour.
   struct Marches {
     ComputePipeline<gpu::RaycastPush> tiled, skip, plain;
+    template <std::size_t N>
+    Marches(const Impl& m, const std::uint32_t (&spv)[N], bool linear, const std::string& what)
+        : tiled(m.ctx, spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (tile starts" + what + ")", 1u,
+                m.spec(1, true, linear), kTexel),
+          skip(m.ctx, spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping" + what + ")", 1u,
+               m.spec(1, false, linear), kTexel),
+          plain(m.ctx, spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (no skipping" + what + ")", 1u,
+                m.spec(0, false, linear), kTexel) {
+      for (auto* p : {&tiled, &skip, &plain}) m.set_views(*p);
+    }
+    const ComputePipeline<gpu::RaycastPush>& pick(bool tiles, bool skip_empty) const {
+      return tiles ? tiled : skip_empty ? skip : plain;
+    }
   };
+  ComputePipeline<gpu::RaycastPush> tiles, args_tiles, blocks;
+  Marches marches;
+  ComputePipeline<gpu::RaycastPush> args, shade_lin, shade, overlay;
   std::unique_ptr<Marches> marches_lin;
   GpuBuffer values, cells;                 // device-local, resident (cells: one float per cell)
   GpuBuffer quads;                         // device-local, resident: binding 12 (16 bytes unused without quads)
@@ -610,8 +625,8 @@ struct RayCaster::Impl {
   /// The march and shade pipelines that count their texel fetches (*_count_spv), made on the first
   /// set_count_fetches(true); `counting`: render() draws with them.
   struct Counting {
-    ComputePipeline<gpu::RaycastPush> march_tiled, march_skip, march_plain, march_tiled_lin, march_skip_lin,
-        march_plain_lin, shade_lin, shade;
+    Marches march, march_lin;
+    ComputePipeline<gpu::RaycastPush> shade_lin, shade;
   };
   std::unique_ptr<Counting> count_pipes;
   bool counting = false;
@@ -654,17 +669,8 @@ struct RayCaster::Impl {
             vals4 ? 1u : 0u, linear ? 1u : 0u};
   }
   /// The march pipelines that write the linear colour (made once).
-  Marches& march_lin() {
-    if (!marches_lin) {
-      VulkanContext& c = ctx;
-      const std::uint32_t b = ISOTOUCH_RAYCAST_BINDINGS;
-      marches_lin.reset(new Marches{
-          {c, raycast_march_spv, b, "raycast march (tile starts, linear colour)", 1u, spec(1, true, true), kTexel},
-          {c, raycast_march_spv, b, "raycast march (skipping, linear colour)", 1u, spec(1, false, true), kTexel},
-          {c, raycast_march_spv, b, "raycast march (linear colour)", 1u, spec(0, false, true), kTexel}});
-      for (auto* p : {&marches_lin->tiled, &marches_lin->skip, &marches_lin->plain})
-        set_views(*p);
-    }
+  const Marches& linear_marches() {
+    if (!marches_lin) marches_lin = std::make_unique<Marches>(*this, raycast_march_spv, true, ", linear colour");
     return *marches_lin;
   }
   /// The counting pipelines (made once).
@@ -673,18 +679,12 @@ struct RayCaster::Impl {
       VulkanContext& c = ctx;
       const std::uint32_t b = ISOTOUCH_RAYCAST_BINDINGS;
       count_pipes.reset(new Counting{
-          {c, raycast_march_count_spv, b, "raycast march (tile starts, counting)", 1u, spec(1, true), kTexel},
-          {c, raycast_march_count_spv, b, "raycast march (skipping, counting)", 1u, spec(1), kTexel},
-          {c, raycast_march_count_spv, b, "raycast march (counting)", 1u, spec(0), kTexel},
-          {c, raycast_march_count_spv, b, "raycast march (tile starts, linear colour, counting)", 1u, spec(1, true, true), kTexel},
-          {c, raycast_march_count_spv, b, "raycast march (skipping, linear colour, counting)", 1u, spec(1, false, true), kTexel},
-          {c, raycast_march_count_spv, b, "raycast march (linear colour, counting)", 1u, spec(0, false, true), kTexel},
+          Marches(*this, raycast_march_count_spv, false, ", counting"),
+          Marches(*this, raycast_march_count_spv, true, ", linear colour, counting"),
           {c, raycast_shade_count_spv, b, "raycast shade (linear colour, counting)", 1u, spec(1), kTexel},
           {c, raycast_shade_count_spv, b, "raycast shade (counting)", 1u, spec(0), kTexel}});
       Counting& k = *count_pipes;
-      for (auto* p : {&k.march_tiled, &k.march_skip, &k.march_plain, &k.march_tiled_lin, &k.march_skip_lin,
-                      &k.march_plain_lin, &k.shade_lin, &k.shade})
-        set_views(*p);
+      for (auto* p : {&k.shade_lin, &k.shade}) set_views(*p);
     }
     return *count_pipes;
   }
@@ -722,11 +722,7 @@ struct RayCaster::Impl {
         args_tiles(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args (tiles)", 1u, {1u, kTilesPerBlockGroup},
                    kTexel),
         blocks(c, raycast_tiles_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast blocks", 1u, tile_spec(true), kTexel),
-        march_tiled(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (tile starts)", 1u,
-                    spec(1, true), kTexel),
-        march_skip(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march (skipping)", 1u, spec(1),
-                   kTexel),
-        march_plain(c, raycast_march_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast march", 1u, spec(0), kTexel),
+        marches(*this, raycast_march_spv, false, ""),
         args(c, raycast_args_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast args", 1u, {}, kTexel),
         shade_lin(c, raycast_shade_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast shade (linear colour)", 1u,
                   spec(1), kTexel),
@@ -734,7 +730,7 @@ struct RayCaster::Impl {
         overlay(c, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS, "raycast overlay", 1u, spec(0), kTexel),
         arena(c, 7, 7 * ISOTOUCH_RAYCAST_BINDINGS),
         timer(c, 5) {
-    for (auto* p : {&tiles, &args_tiles, &blocks, &march_tiled, &march_skip, &march_plain, &args, &shade_lin, &shade, &overlay})
+    for (auto* p : {&tiles, &args_tiles, &blocks, &args, &shade_lin, &shade, &overlay})
       set_views(*p);
   }
 };
@@ -1030,11 +1026,8 @@ void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePla
   // The march: over the listed tiles (tile starts; a listed tile partly outside `rect` when
   // reusing draws its pixels outside as a full frame would, i.e. as they are), else `rect`.
   Counting* k = m.counting ? &m.counting_pipes() : nullptr;
-  Marches* lin = f.linear && !k ? &m.march_lin() : nullptr;
-  const auto& march = k ? (f.linear ? (tiled ? k->march_tiled_lin : skip_empty ? k->march_skip_lin : k->march_plain_lin)
-                                    : (tiled ? k->march_tiled : skip_empty ? k->march_skip : k->march_plain))
-                      : lin ? (tiled ? lin->tiled : skip_empty ? lin->skip : lin->plain)
-                            : (tiled ? m.march_tiled : skip_empty ? m.march_skip : m.march_plain);
+  const Marches& forms = k ? (f.linear ? k->march_lin : k->march) : f.linear ? m.linear_marches() : m.marches;
+  const auto& march = forms.pick(tiled, skip_empty);
   march.bind(cmd, m.arena, ranges);
   march.push(cmd, march_push);
   if (tiled)

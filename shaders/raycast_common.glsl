@@ -47,7 +47,7 @@
 // unless nearly every vector needs it: the march's pixels are those of tiles where a hit
 // can be, and shading them in the march (once per vector that has a hit) costs less than
 // a pass of its own, which built every hit's ray again (chest, 1024x768: 9 of 10 marched
-// pixels hit; bench_raycast_frames 28-30 against 34-39 ms a frame):
+// pixels hit; bench_raycast_frames, march + shade 26.0-26.8 against 30.0-31.4 ms a frame):
 //   tiles   (skipping; the tiles of the march's pixels): per tile of pixels, a ray
 //            parameter before which none of its rays' samples can be inside (cone stepping),
 //            and the list of the tiles where one can be; args turns their count into the
@@ -738,7 +738,6 @@ Ray make_ray(uvec2 px) {
   r.K = int(min(ceil((r.t1 - r.t0) / h), float(ISOTOUCH_RAYCAST_MAX_SAMPLES)));
   return r;
 }
-
 
 // Refines the hit at lattice sample k of ray r in the bracket [t_{k-1}, t_k] (sample 0:
 // t0, no refinement), shades it and writes pixel pix's colour and depth (and its linear

@@ -144,7 +144,9 @@ TEST(Slices, PanePixelsAreThePerPixelMapping) {
             ASSERT_EQ(p.rgba[std::size_t(y) * std::size_t(size) + std::size_t(x)], want)
                 << w << "x" << h << " slice, pane " << size << ", pixel " << x << "," << y;
           }
-        if (size == 256) EXPECT_GT(shown, std::size_t(size) * std::size_t(size) / 20) << w << "x" << h << " slice, pane " << size;
+        if (size == 256) {
+          EXPECT_GT(shown, std::size_t(size) * std::size_t(size) / 20) << w << "x" << h << " slice, pane " << size;
+        }
       }
 }
 

@@ -3,9 +3,9 @@
 // 3-D picture, each through the HIP. They are computed again only when the HIP or the proxy
 // moves to another voxel, the volume is edited, the window/level or the window's size
 // changes (at most once a frame); a plane whose voxels did not change (only its marks moved)
-// is marked again, not read from the volume again. The window copies the column over its picture (Window::
-// set_inset); screenshots get the same column. With the mouse probe, a press on a pane moves
-// the probe's target to the voxel under it (in that pane's plane).
+// is marked again, not read from the volume again. The window copies the column over its
+// picture (Window::set_inset); screenshots get the same column. With the mouse probe, a press
+// on a pane moves the probe's target to the voxel under it (in that pane's plane).
 #pragma once
 #include <array>
 #include <cstdint>

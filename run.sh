@@ -19,7 +19,7 @@ PACKAGES=(
   libpng-dev libassimp-dev
   libhidapi-dev
   libopenigtlink-dev openigtlink-examples
-  libglfw3-dev libx11-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
+  libglfw3-dev libx11-dev libxext-dev libxrandr-dev libimgui-dev xvfb xauth procps python3
   pybind11-dev python3-dev python3-numpy python3-pytest python3-matplotlib
   python3-dask python3-distributed
 )

@@ -455,6 +455,7 @@ struct Sculpt {
   ServoAlone servo_alone(const session::LiveStats& sculpted);
   void stop_session();
   void write_last_screenshot();
+  void write_window_shot();
   void print_stats(double seconds, const session::LiveStats& st);
   void print_servo(const session::LiveStats& st);
   void print_device();
@@ -663,7 +664,10 @@ bool Sculpt::open_window() {
     return false;
   }
   vk = std::move(*ctx.value);
-  auto win = Window::create(*vk, o.width, o.height, "isotouch-sculpt: " + scene.name);
+  const PresentPath path = o.present == "shm" ? PresentPath::kShm
+                            : o.present == "swapchain" ? PresentPath::kSwapchain
+                                                       : PresentPath::kAuto;
+  auto win = Window::create(*vk, o.width, o.height, "isotouch-sculpt: " + scene.name, path);
   if (!win) {
     log << "isotouch-sculpt: " << win.error << "\n";
     return false;
@@ -797,6 +801,7 @@ bool Sculpt::start_session(const session::LiveSessionConfig& cfg) {
   log << "sculpt   " << scene.name << ": " << vol.grid.dims[0] << "x" << vol.grid.dims[1] << "x" << vol.grid.dims[2]
       << " voxels, isovalue " << scene.hri.tau << ", servo " << scene.hri.rate_hz << " Hz, device " << vk->info().name
       << ", present mode " << window->present_mode() << "\n";
+  if (!window->present_note().empty()) log << "sculpt   " << window->present_note() << "\n";
   if (o.sim_clock)
     log << "sculpt   simulated clock: " << sim_ticks_per_frame << " servo ticks (" << fixed(sim_frame_s * 1e3, 2)
         << " ms) per frame, on the window's thread\n";
@@ -943,7 +948,7 @@ bool Sculpt::frame_step() {
   // At most one storage binding of 4-byte pixels: a larger window is drawn at a lower scale.
   const double fit = std::sqrt(double(vk->max_binding_bytes() / 4) / (double(f.fb[0]) * double(f.fb[1])));
   const auto pixels = [&](int n) {
-    return std::max(1, int(fit < o.render_scale ? std::floor(n * fit) : std::lround(n * o.render_scale)));
+    return std::max(1, int(fit < o.render_scale ? std::floor(n * fit) : std::round(n * o.render_scale)));
   };
   f.rw = pixels(f.fb[0]);
   f.rh = pixels(f.fb[1]);
@@ -1678,6 +1683,21 @@ void Sculpt::stop_session() {
   }
 }
 
+/// --window-shot: what the X server shows in the window now, after the last present.
+void Sculpt::write_window_shot() {
+  if (o.window_shot.empty()) return;
+  try {
+    const std::array<int, 2> fb = window->framebuffer_size();
+    const std::vector<std::uint32_t> px = window->read_window();
+    if (px.empty()) throw std::runtime_error(o.window_shot + ": the window's pixels cannot be read from the X server");
+    run::write_png(o.window_shot, fb[0], fb[1], px);
+    log << "sculpt   window shot " << o.window_shot << "\n";
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    code = 1;
+  }
+}
+
 /// --screenshot: the last frame drawn.
 void Sculpt::write_last_screenshot() {
   if (!o.slices_png.empty()) {
@@ -1688,6 +1708,7 @@ void Sculpt::write_last_screenshot() {
       code = 1;
     }
   }
+  write_window_shot();
   if (o.screenshot.empty() || img.width <= 0) return;
   try {
     if (img.rgba.empty() && upscaled.empty()) img.rgba = caster->last_rgba();  // drawn straight to the window

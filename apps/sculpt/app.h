@@ -23,6 +23,12 @@ struct Options {
   std::string inside = "above";     ///< a volume's inside: "above" or "below"
   std::string script;               ///< input script (JSON), "" = none
   std::string screenshot;           ///< PNG of the last frame; script screenshots go to its folder
+  /// PNG of what the X server shows in the window at exit (after the last present: the
+  /// picture with the panels and slices as the user sees them), read back from the server.
+  std::string window_shot;
+  /// How frames reach the screen: "auto" (X shared memory on a CPU device with a local X
+  /// server, else the swapchain), "shm" or "swapchain" (sculpt/window.h).
+  std::string present = "auto";
   std::string record;               ///< the session's recording (scenes only)
   std::string save_path;            ///< Ctrl+S target (.vdb, .nrrd, .mha, .nii, .nii.gz); default INPUT-sculpted.vdb
   std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl

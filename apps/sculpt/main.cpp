@@ -35,6 +35,13 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"above", "below"}));
   cli.add_option("--script", o.script, "input events to run (JSON; docs/user-guide.md, Input scripts)")->check(CLI::ExistingFile);
   cli.add_option("--screenshot", o.screenshot, "write the last frame as PNG; the script's screenshots go to its folder");
+  cli.add_option("--window-shot", o.window_shot,
+                 "write what the X server shows in the window at exit as PNG (the picture with the panels and slice "
+                 "views, read back from the server)");
+  cli.add_option("--present", o.present,
+                 "how frames reach the screen: auto (X shared memory on a CPU device such as lavapipe with a local X "
+                 "server offering MIT-SHM, else the Vulkan swapchain), shm (fails where it cannot be set up) or swapchain")
+      ->check(CLI::IsMember({"auto", "shm", "swapchain"}));
   cli.add_option("--frames", o.frames, "stop after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
   cli.add_option("--save", o.save_path, "where Ctrl+S saves, in the format the name asks for: .vdb, or .nrrd, .mha, .nii, .nii.gz "

@@ -15,6 +15,8 @@
 #include <cerrno>
 #include <cstring>
 
+#include "isotouch/engine/device_memory.h"
+
 namespace isotouch::sculpt {
 
 using engine::Result;
@@ -81,7 +83,7 @@ engine::Result<std::vector<std::string>> init_glfw() {
 void shutdown_glfw() { glfwTerminate(); }
 
 Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int width, int height,
-                                               const std::string& title) {
+                                               const std::string& title, PresentPath path) {
   using R = Result<std::unique_ptr<Window>>;
   std::unique_ptr<Window> w(new Window(ctx));
   glfwWindowHint(GLFW_CLIENT_API, GLFW_NO_API);
@@ -106,12 +108,23 @@ Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int w
   glfwSetWindowIconifyCallback(w->win_, [](GLFWwindow* h, int iconified) {
     static_cast<Window*>(glfwGetWindowUserPointer(h))->iconified_ = iconified != 0;
   });
-  if (const VkResult r = glfwCreateWindowSurface(ctx.instance(), w->win_, nullptr, &w->surface_); r != VK_SUCCESS)
-    return R::fail(std::string("cannot create a Vulkan surface for the window: ") + engine::vk_result_name(r));
-  VkBool32 ok = VK_FALSE;
-  vkGetPhysicalDeviceSurfaceSupportKHR(ctx.physical_device(), ctx.queue_family(), w->surface_, &ok);
-  if (!ok)
-    return R::fail("Vulkan device '" + ctx.info().name + "' cannot present to this window from its compute queue");
+  if (path == PresentPath::kShm || (path == PresentPath::kAuto && ctx.info().type == "cpu")) {
+    w->shm_ = true;
+    if (std::string e = w->make_offscreen(); !e.empty()) {
+      w->destroy_offscreen();
+      w->shm_ = false;
+      if (path == PresentPath::kShm) return R::fail("cannot present through X shared memory: " + e);
+      w->present_note_ = "X shared memory not used (" + e + "): the swapchain";
+    }
+  }
+  if (!w->shm_) {
+    if (const VkResult r = glfwCreateWindowSurface(ctx.instance(), w->win_, nullptr, &w->surface_); r != VK_SUCCESS)
+      return R::fail(std::string("cannot create a Vulkan surface for the window: ") + engine::vk_result_name(r));
+    VkBool32 ok = VK_FALSE;
+    vkGetPhysicalDeviceSurfaceSupportKHR(ctx.physical_device(), ctx.queue_family(), w->surface_, &ok);
+    if (!ok)
+      return R::fail("Vulkan device '" + ctx.info().name + "' cannot present to this window from its compute queue");
+  }
   VkDevice dev = ctx.device();
   VkSemaphoreCreateInfo si{VK_STRUCTURE_TYPE_SEMAPHORE_CREATE_INFO};
   VK_CHECK(vkCreateSemaphore(dev, &si, nullptr, &w->acquired_));
@@ -126,7 +139,8 @@ Result<std::unique_ptr<Window>> Window::create(engine::VulkanContext& ctx, int w
   ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
   ai.commandBufferCount = 1;
   VK_CHECK(vkAllocateCommandBuffers(dev, &ai, &w->cmd_));
-  if (std::string e = w->make_swapchain(); !e.empty()) return R::fail(e);
+  if (!w->shm_)
+    if (std::string e = w->make_swapchain(); !e.empty()) return R::fail(e);
   return R::ok(std::move(w));
 }
 
@@ -134,6 +148,7 @@ Window::~Window() {
   VkDevice dev = ctx_.device();
   vkDeviceWaitIdle(dev);
   destroy_swapchain();
+  destroy_offscreen();
   staging_.reset();
   if (pool_) vkDestroyCommandPool(dev, pool_, nullptr);
   if (fence_) vkDestroyFence(dev, fence_, nullptr);
@@ -255,7 +270,7 @@ Result<bool> Window::attach(FrameHook* hook) {
   if (hook_ && !images_.empty()) hook_->swapchain_gone();
   hook_ = hook;
   if (!hook_) return R::ok(true);  // the images keep their usage: nothing to remake
-  if (std::string e = make_swapchain(); !e.empty()) {
+  if (std::string e = remake(); !e.empty()) {
     if (!images_.empty()) hook_->swapchain_gone();
     hook_ = nullptr;
     stale_ = true;  // the next frame remakes a swapchain without the hook
@@ -273,11 +288,16 @@ bool Window::acquire(std::uint32_t& index) {
   }
   const auto fb = framebuffer_size();
   if (fb[0] == 0 || fb[1] == 0) return false;
-  if (stale_ || !swapchain_ || std::uint32_t(fb[0]) != extent_.width || std::uint32_t(fb[1]) != extent_.height) {
+  const bool made = shm_ ? off_image_ != VK_NULL_HANDLE : swapchain_ != VK_NULL_HANDLE;
+  if (stale_ || !made || std::uint32_t(fb[0]) != extent_.width || std::uint32_t(fb[1]) != extent_.height) {
     vkQueueWaitIdle(ctx_.queue());
-    if (std::string e = make_swapchain(); !e.empty()) throw engine::VulkanError(e);
+    if (std::string e = remake(); !e.empty()) throw engine::VulkanError(e);
     ++recreations_;
-    if (!swapchain_ || stale_) return false;
+    if ((shm_ ? !off_image_ : !swapchain_) || stale_) return false;
+  }
+  if (shm_) {  // one image, free again once the last frame's fence passed (put_offscreen)
+    index = 0;
+    return true;
   }
   VkResult r = vkAcquireNextImageKHR(dev, swapchain_, UINT64_MAX, acquired_, VK_NULL_HANDLE, &index);
   if (r == VK_ERROR_OUT_OF_DATE_KHR) {
@@ -395,7 +415,7 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   copy_inset_into(images_[index]);
   if (hook_) {
     hook_->record(cmd_, index);
-  } else {
+  } else if (!shm_) {
     b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
     b.dstAccessMask = 0;
     b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
@@ -403,14 +423,26 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
     vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0, 0, nullptr, 0,
                          nullptr, 1, &b);
   }
+  if (shm_) {  // the host reads the rows next
+    b.srcAccessMask = hook_ ? VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT : VK_ACCESS_TRANSFER_WRITE_BIT;
+    b.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    b.oldLayout = hook_ ? VK_IMAGE_LAYOUT_PRESENT_SRC_KHR : VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.newLayout = VK_IMAGE_LAYOUT_GENERAL;
+    vkCmdPipelineBarrier(cmd_, hook_ ? VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT : VK_PIPELINE_STAGE_TRANSFER_BIT,
+                         VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 0, nullptr, 1, &b);
+  }
   VK_CHECK(vkEndCommandBuffer(cmd_));
   const VkPipelineStageFlags wait_stage = VK_PIPELINE_STAGE_TRANSFER_BIT;
   VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+  si.commandBufferCount = 1;
+  si.pCommandBuffers = &cmd_;
+  if (shm_) {
+    put_offscreen(si);
+    return;
+  }
   si.waitSemaphoreCount = 1;
   si.pWaitSemaphores = &acquired_;
   si.pWaitDstStageMask = &wait_stage;
-  si.commandBufferCount = 1;
-  si.pCommandBuffers = &cmd_;
   si.signalSemaphoreCount = 1;
   si.pSignalSemaphores = &done_[index];
   VK_CHECK(vkQueueSubmit(ctx_.queue(), 1, &si, fence_));
@@ -424,6 +456,108 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
   const VkResult r = present_from(ctx_.queue(), pi, present_off_ ? &present_cpus_ : nullptr, own_cpus_);
   if (r == VK_ERROR_OUT_OF_DATE_KHR || r == VK_SUBOPTIMAL_KHR) stale_ = true;
   else if (r != VK_SUCCESS) engine::vk_check_failed("vkQueuePresentKHR", r, __FILE__, __LINE__);
+}
+
+// --- the shared-memory path ----------------------------------------------------------------
+
+_XDisplay* Window::x_display() const { return glfwGetX11Display(); }
+unsigned long Window::x_window() const { return glfwGetX11Window(win_); }
+
+std::vector<std::uint32_t> Window::read_window() const {
+  const auto fb = framebuffer_size();
+  return ShmPicture::read_window(x_display(), x_window(), fb[0], fb[1]);
+}
+
+void Window::destroy_offscreen() {
+  VkDevice dev = ctx_.device();
+  if (hook_ && !images_.empty()) hook_->swapchain_gone();
+  images_.clear();
+  shm_picture_.reset();
+  if (off_image_) vkDestroyImage(dev, off_image_, nullptr);
+  if (off_memory_) {
+    vkUnmapMemory(dev, off_memory_);
+    engine::count_free(off_memory_);
+    vkFreeMemory(dev, off_memory_, nullptr);
+  }
+  off_image_ = VK_NULL_HANDLE;
+  off_memory_ = VK_NULL_HANDLE;
+  off_mapped_ = nullptr;
+}
+
+std::string Window::make_offscreen() {
+  destroy_offscreen();
+  const auto fb = framebuffer_size();
+  if (fb[0] <= 0 || fb[1] <= 0) {  // minimised: try again when restored
+    extent_ = {0, 0};
+    stale_ = true;
+    return "";
+  }
+  VkDevice dev = ctx_.device();
+  const VkFormat format = VK_FORMAT_B8G8R8A8_UNORM;  // X's B, G, R, X bytes
+  VkFormatProperties fp{};
+  vkGetPhysicalDeviceFormatProperties(ctx_.physical_device(), format, &fp);
+  VkFormatFeatureFlags need = VK_FORMAT_FEATURE_TRANSFER_DST_BIT;
+  if (hook_) need |= VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BIT | VK_FORMAT_FEATURE_COLOR_ATTACHMENT_BLEND_BIT;
+  if ((fp.linearTilingFeatures & need) != need) return "the device cannot draw into a linear B8G8R8A8 image";
+  auto picture = ShmPicture::create(x_display(), x_window(), fb[0], fb[1]);
+  if (!picture) return picture.error;
+  VkImageCreateInfo ci{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
+  ci.imageType = VK_IMAGE_TYPE_2D;
+  ci.format = format;
+  ci.extent = {std::uint32_t(fb[0]), std::uint32_t(fb[1]), 1};
+  ci.mipLevels = 1;
+  ci.arrayLayers = 1;
+  ci.samples = VK_SAMPLE_COUNT_1_BIT;
+  ci.tiling = VK_IMAGE_TILING_LINEAR;
+  ci.usage = VK_IMAGE_USAGE_TRANSFER_DST_BIT;
+  if (hook_) ci.usage |= VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT;  // the hook draws into it
+  ci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
+  ci.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+  if (const VkResult r = vkCreateImage(dev, &ci, nullptr, &off_image_); r != VK_SUCCESS)
+    return std::string("cannot create the window's image: ") + engine::vk_result_name(r);
+  VkMemoryRequirements req{};
+  vkGetImageMemoryRequirements(dev, off_image_, &req);
+  const auto& mp = ctx_.memory_properties();
+  const VkMemoryPropertyFlags want = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+  std::uint32_t type = mp.memoryTypeCount;
+  for (std::uint32_t i = 0; i < mp.memoryTypeCount && type == mp.memoryTypeCount; ++i)
+    if ((req.memoryTypeBits & (1u << i)) && (mp.memoryTypes[i].propertyFlags & want) == want) type = i;
+  if (type == mp.memoryTypeCount) return "no host-visible memory for the window's image";
+  VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+  ai.allocationSize = req.size;
+  ai.memoryTypeIndex = type;
+  if (const VkResult r = vkAllocateMemory(dev, &ai, nullptr, &off_memory_); r != VK_SUCCESS)
+    return std::string("cannot allocate the window's image: ") + engine::vk_result_name(r);
+  engine::count_allocation(off_memory_, req.size);
+  VK_CHECK(vkBindImageMemory(dev, off_image_, off_memory_, 0));
+  void* mapped = nullptr;
+  VK_CHECK(vkMapMemory(dev, off_memory_, 0, VK_WHOLE_SIZE, 0, &mapped));
+  VkImageSubresource sub{VK_IMAGE_ASPECT_COLOR_BIT, 0, 0};
+  VkSubresourceLayout layout{};
+  vkGetImageSubresourceLayout(dev, off_image_, &sub, &layout);
+  off_mapped_ = static_cast<const std::uint8_t*>(mapped) + layout.offset;
+  off_row_pitch_ = layout.rowPitch;
+  shm_picture_ = std::move(*picture.value);
+  format_ = format;
+  swizzle_ = true;
+  extent_ = {std::uint32_t(fb[0]), std::uint32_t(fb[1])};
+  images_ = {off_image_};
+  stale_ = false;
+  present_mode_name_ = "X11 shared memory";
+  if (hook_) return hook_->swapchain_ready(format_, extent_, images_);
+  return "";
+}
+
+void Window::put_offscreen(VkSubmitInfo& si) {
+  VkDevice dev = ctx_.device();
+  VK_CHECK(vkQueueSubmit(ctx_.queue(), 1, &si, fence_));
+  VK_CHECK(vkWaitForFences(dev, 1, &fence_, VK_TRUE, UINT64_MAX));
+  VK_CHECK(vkResetFences(dev, 1, &fence_));
+  std::uint8_t* dst = shm_picture_->rows();
+  const std::size_t row = std::size_t(extent_.width) * 4;
+  for (std::uint32_t y = 0; y < extent_.height; ++y)
+    std::memcpy(dst + std::size_t(y) * shm_picture_->stride(), off_mapped_ + VkDeviceSize(y) * off_row_pitch_, row);
+  shm_picture_->put();
 }
 
 }  // namespace isotouch::sculpt

@@ -1,10 +1,17 @@
-// window.h - a GLFW window that shows RGBA8 pictures through a Vulkan swapchain.
+// window.h - a GLFW window that shows RGBA8 pictures through a Vulkan swapchain, or, on a
+// CPU device and a local X server, through X shared memory.
 //
 // The compute ray caster draws into a buffer; present() copies that picture into the
 // acquired swapchain image (vkCmdCopyBufferToImage, no graphics pipeline) and presents it.
 // The swapchain is recreated when it is out of date or suboptimal or the framebuffer size
 // changed; a minimised window (size 0) presents nothing until it is restored. A FrameHook
 // (the Dear ImGui overlay) may draw over the picture before it is presented.
+//
+// The shared-memory path (PresentPath::kShm, the default on a CPU device where the X server
+// offers MIT-SHM): the picture is copied into the window's own linear, host-visible image
+// instead (the "swapchain" of one image the hook sees), and its rows go to the X server
+// through a shared segment (shm_picture.h) instead of the X socket that a CPU device's
+// swapchain writes them through.
 #pragma once
 #include <sched.h>
 
@@ -14,10 +21,12 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/apps/sculpt/shm_picture.h"
 #include "isotouch/engine/vk_context.h"
 #include "isotouch/engine/vk_resources.h"
 
 struct GLFWwindow;
+struct _XDisplay;
 
 namespace isotouch::sculpt {
 
@@ -41,13 +50,20 @@ class FrameHook {
   virtual void record(VkCommandBuffer cmd, std::uint32_t index) = 0;
 };
 
+/// How frames reach the screen: kAuto = kShm on a CPU device (lavapipe) where it can be set
+/// up (a local X server with MIT-SHM and a BGRX visual), else kSwapchain.
+enum class PresentPath { kAuto, kShm, kSwapchain };
+
 class Window {
  public:
   /// A window of `width` x `height` screen units on `ctx` (created with the extensions of
   /// init_glfw() and swapchain = true). Fails naming the step (surface, present support,
   /// surface format, transfer usage of swapchain images).
+  /// `path` kShm where it cannot be set up fails naming why; kAuto falls back to the
+  /// swapchain and says why in present_note().
   static engine::Result<std::unique_ptr<Window>> create(engine::VulkanContext& ctx, int width, int height,
-                                                        const std::string& title);
+                                                        const std::string& title,
+                                                        PresentPath path = PresentPath::kAuto);
   ~Window();
   Window(const Window&) = delete;
   Window& operator=(const Window&) = delete;
@@ -91,16 +107,33 @@ class Window {
   /// real-time thread woken on that CPU (the servo thread waited 2.4-7.5 ms behind it).
   /// Returns "" or why not (no other CPU in the set, the affinity refused): then anywhere.
   std::string keep_present_off_cpu(int cpu);
+  /// "mailbox", "immediate" or "fifo" (the swapchain's), or "X11 shared memory".
   const std::string& present_mode() const { return present_mode_name_; }
+  /// Why kAuto did not take the shared-memory path ("" if it did, or on a GPU).
+  const std::string& present_note() const { return present_note_; }
+  /// What the X server holds for the window now (framebuffer size, RGBA as present()'s,
+  /// alpha 255): the pixels the user sees, after every request so far is done. Empty when
+  /// they cannot be read (not on X11, a visual other than 8-bit TrueColor).
+  std::vector<std::uint32_t> read_window() const;
 
  private:
   Window(engine::VulkanContext& ctx) : ctx_(ctx) {}
   std::string make_swapchain();  // "" or why not
+  std::string remake() { return shm_ ? make_offscreen() : make_swapchain(); }
+  /// The shared-memory path's image (framebuffer size, linear, host-visible, mapped) and
+  /// its X picture: "" or why not.
+  std::string make_offscreen();
+  void destroy_offscreen();
+  /// The shared-memory path: waits for the frame's copy and draws, then hands its rows to X.
+  void put_offscreen(VkSubmitInfo& si);
   /// Waits for the last copy, remakes a stale swapchain, acquires an image: false if none.
   bool acquire(std::uint32_t& index);
   /// Copies `w` x `h` pixels of `src` into image `index` (the hook draws over it) and presents it.
   void copy_and_present(VkBuffer src, int w, int h, std::uint32_t index);
   void destroy_swapchain();
+  /// The window's X display and window (null / 0 when not on X11).
+  _XDisplay* x_display() const;
+  unsigned long x_window() const;
 
   engine::VulkanContext& ctx_;
   GLFWwindow* win_ = nullptr;
@@ -127,7 +160,14 @@ class Window {
   bool in_flight_ = false;
   bool stale_ = false;  // recreate before the next frame
   int recreations_ = 0;
-  std::string present_mode_name_;
+  std::string present_mode_name_, present_note_;
+  // The shared-memory path: its image and memory, where the rows lie, the X picture.
+  bool shm_ = false;
+  VkImage off_image_ = VK_NULL_HANDLE;
+  VkDeviceMemory off_memory_ = VK_NULL_HANDLE;
+  const std::uint8_t* off_mapped_ = nullptr;
+  VkDeviceSize off_row_pitch_ = 0;
+  std::unique_ptr<ShmPicture> shm_picture_;
   std::array<int, 2> fb_{0, 0};  // the framebuffer's size, from GLFW's size events
   std::array<int, 2> win_size_{0, 0};  // the window's, in screen units
   bool iconified_ = false;       // from GLFW's iconify events

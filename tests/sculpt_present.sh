@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# What the X server shows in the sculpting window, read back from the server (--window-shot),
+# for both ways a frame reaches the screen: X shared memory (--present shm, the default on a
+# CPU device) and the Vulkan swapchain (--present swapchain). Under Xvfb with validation on.
+# Checks: without panels the window holds the ray caster's picture (--screenshot) pixel for
+# pixel, both ways (a swapped channel, a row pitch, a shifted row fails it); with the panels
+# (a build with Dear ImGui, SCULPT_EXPECT_OVERLAY=1) the window differs from the picture where
+# they are drawn; --present shm on a display without MIT-SHM fails naming it, and auto falls
+# back to the swapchain saying why.
+# Usage: sculpt_present.sh SCULPT_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
+set -euo pipefail
+bin=$1 src=$2
+out=${3:-$(mktemp -d)}
+if ! command -v xvfb-run >/dev/null; then
+  echo "SKIP: xvfb-run is not installed (Debian: xvfb xauth)"
+  exit 77
+fi
+mkdir -p "$out"
+scene="$src/tests/sculpt/head-sculpt.json"
+run() {  # run NAME XVFB_ARGS SCULPT_ARGS...: one short session, its log in $out/NAME.txt
+  local name=$1 xargs=$2
+  shift 2
+  rm -f "$out/$name.png" "$out/$name-window.png"
+  set +e
+  xvfb-run -a -s "-screen 0 1280x1024x24 $xargs" "$bin" "$scene" --size 320 --frames 4 --sim-clock --validation \
+    --screenshot "$out/$name.png" --window-shot "$out/$name-window.png" "$@" > "$out/$name.txt" 2>&1
+  local rc=$?
+  set -e
+  echo "$rc"
+}
+compare() {  # compare A B: "equal" or the count of differing pixels (RGB)
+  python3 -c '
+import sys
+sys.path.insert(0, sys.argv[3])
+from png_check import read_png
+w1, h1, a = read_png(sys.argv[1])
+w2, h2, b = read_png(sys.argv[2])
+if (w1, h1) != (w2, h2):
+    print(f"sizes {w1}x{h1} and {w2}x{h2}")
+    sys.exit(0)
+n = sum(1 for p, q in zip(a, b) if p != q)
+print("equal" if n == 0 else f"{n} of {w1 * h1} pixels differ")
+' "$1" "$2" "$src/tests/sculpt"
+}
+for p in shm swapchain; do
+  rc=$(run "$p" "" --present "$p" --no-overlay --no-slices)
+  [ "$rc" = 0 ] || { cat "$out/$p.txt"; echo "FAIL: --present $p exited $rc"; exit 1; }
+  want="X11 shared memory"
+  [ "$p" = swapchain ] && want="mailbox\|immediate\|fifo"
+  grep -q "present mode \($want\)$" "$out/$p.txt" || { grep 'present mode' "$out/$p.txt"; echo "FAIL: --present $p did not present that way"; exit 1; }
+  r=$(compare "$out/$p.png" "$out/$p-window.png")
+  [ "$r" = equal ] || { echo "FAIL: --present $p: the window does not hold the picture: $r"; exit 1; }
+  echo "--present $p: the X server's window holds the ray caster's picture pixel for pixel"
+done
+if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
+  rc=$(run panels "" --present shm --no-slices)
+  [ "$rc" = 0 ] || { cat "$out/panels.txt"; echo "FAIL: the panels' run exited $rc"; exit 1; }
+  r=$(compare "$out/panels.png" "$out/panels-window.png")
+  case "$r" in *"pixels differ") ;; *) echo "FAIL: with the panels the window should differ from the picture: $r"; exit 1 ;; esac
+  echo "--present shm with the panels: $r from the picture (the panels)"
+fi
+# A display without MIT-SHM: shm refused by name, auto falls back to the swapchain.
+rc=$(run noshm "-extension MIT-SHM" --present shm --no-overlay --no-slices)
+[ "$rc" = 1 ] && grep -q "cannot present through X shared memory: the X server offers no MIT-SHM" "$out/noshm.txt" ||
+  { cat "$out/noshm.txt"; echo "FAIL: --present shm without MIT-SHM: exit $rc"; exit 1; }
+rc=$(run fallback "-extension MIT-SHM" --no-overlay --no-slices)
+[ "$rc" = 0 ] && grep -q "X shared memory not used (the X server offers no MIT-SHM): the swapchain" "$out/fallback.txt" ||
+  { cat "$out/fallback.txt"; echo "FAIL: auto without MIT-SHM: exit $rc"; exit 1; }
+r=$(compare "$out/fallback.png" "$out/fallback-window.png")
+[ "$r" = equal ] || { echo "FAIL: the fallback's window does not hold the picture: $r"; exit 1; }
+echo "without MIT-SHM: shm refused by name, auto presents through the swapchain"
+echo "PASS sculpt present"

@@ -1095,7 +1095,7 @@ void RayCaster::Impl::remember_frame(const FramePlan& f) {
 }
 
 RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style, int width, int height,
-                               const std::vector<gpu::RaycastPrim>& prims) {
+                               const std::vector<gpu::RaycastPrim>& prims, const std::function<void()>& meanwhile) {
   Impl& m = *impl_;
   if (prims.size() > ISOTOUCH_RAYCAST_MAX_PRIMS)
     throw std::invalid_argument("raycast: " + std::to_string(prims.size()) + " primitives, at most " +
@@ -1143,7 +1143,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.width = width;
   img.height = height;
   img.reused = f.reuse;
-  img.submit_wall_ms = m.ctx.submit_and_wait(cmd);
+  img.submit_wall_ms = m.ctx.submit_and_wait(cmd, meanwhile);
   m.remember_frame(f);
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);

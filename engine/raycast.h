@@ -29,6 +29,7 @@
 #include "isotouch/engine/core_names.h"
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -236,9 +237,11 @@ class RayCaster {
   /// With the last frame's camera, style and size, only the pixels the voxels changed by
   /// update() since can reach (3 voxels wider), and the overlay's last and new rectangles,
   /// are drawn again (RaycastImage::reused); the picture is the one a full frame gives.
+  /// `meanwhile` (if given) runs on this thread while the device draws (between the submit
+  /// and the wait: host work that uses neither this caster nor its context's queue).
   /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
-                      const std::vector<gpu::RaycastPrim>& prims = {});
+                      const std::vector<gpu::RaycastPrim>& prims = {}, const std::function<void()>& meanwhile = {});
   const RaycastField& field() const;
 
   /// Where render() leaves its picture. Off (the default): RaycastImage::rgba and depth hold

@@ -362,7 +362,9 @@ VkCommandBuffer VulkanContext::begin_commands() {
   return cmd;
 }
 
-double VulkanContext::submit_and_wait(VkCommandBuffer cmd) {
+double VulkanContext::submit_and_wait(VkCommandBuffer cmd) { return submit_and_wait(cmd, {}); }
+
+double VulkanContext::submit_and_wait(VkCommandBuffer cmd, const std::function<void()>& meanwhile) {
   VK_CHECK(vkEndCommandBuffer(cmd));
   VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
   si.commandBufferCount = 1;
@@ -370,6 +372,15 @@ double VulkanContext::submit_and_wait(VkCommandBuffer cmd) {
   VK_CHECK(vkResetFences(device_, 1, &fence_));
   const auto t0 = std::chrono::steady_clock::now();
   VK_CHECK(vkQueueSubmit(queue_, 1, &si, fence_));
+  if (meanwhile) {
+    try {
+      meanwhile();
+    } catch (...) {
+      vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX);
+      vkFreeCommandBuffers(device_, pool_, 1, &cmd);
+      throw;
+    }
+  }
   VK_CHECK(vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX));
   const auto t1 = std::chrono::steady_clock::now();
   vkFreeCommandBuffers(device_, pool_, 1, &cmd);

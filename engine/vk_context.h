@@ -6,6 +6,7 @@
 #include <vulkan/vulkan.h>
 
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -102,6 +103,11 @@ class VulkanContext {
   VkCommandBuffer begin_commands();
   /// Submit, wait on a fence; returns the wall time from submit to signal [ms].
   double submit_and_wait(VkCommandBuffer cmd);
+  /// submit_and_wait() with `meanwhile` run on this thread between the submit and the wait
+  /// (host work that needs neither this context's queue nor its fence): on a CPU device
+  /// it runs while the device's threads work instead of after them. If it throws, the
+  /// submission is waited for and the exception passed on.
+  double submit_and_wait(VkCommandBuffer cmd, const std::function<void()>& meanwhile);
 
   /// Validation messages of severity warning or error seen so far.
   std::uint32_t validation_messages() const { return validation_count_.load(); }

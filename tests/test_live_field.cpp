@@ -267,10 +267,10 @@ void expect_full_run(const core::SampleField& live, const Volume& vol, const Liv
       // payload, or two numbers).
       for (std::size_t k = 0; k < std::min(x.samples.size(), y.samples.size()); ++k)
         if (x.samples[k] != y.samples[k]) {
-          char b[96];
-          std::snprintf(b, sizeof b, ", sample word %zu: 0x%08x against 0x%08x", k, unsigned(x.samples[k]),
+          char msg[96];
+          std::snprintf(msg, sizeof msg, ", sample word %zu: 0x%08x against 0x%08x", k, unsigned(x.samples[k]),
                         unsigned(y.samples[k]));
-          first += b;
+          first += msg;
           break;
         }
     }

@@ -425,7 +425,8 @@ struct Sculpt {
   void dump_slices(const std::string& dir);
   void apply_tools(const session::Observed& obs);
   long take_edits();
-  void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f);
+  void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f,
+                      const std::function<void()>& meanwhile);
   void show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes);
   const std::vector<std::uint32_t>& host_picture(const FrameSize& f, bool shot);
   void build_panels();
@@ -956,8 +957,9 @@ bool Sculpt::frame_step() {
   const session::Observed obs = session->observe();
   apply_tools(obs);
   const long drawn_brushes = take_edits();
-  update_slices(obs, f.fb);
-  render_picture(obs, hand_world, f);
+  // The slice views are computed while the device draws (on a CPU device its threads hold
+  // the cores, and this thread would wait for them idle).
+  render_picture(obs, hand_world, f, [&] { update_slices(obs, f.fb); });
   show(f, shots, drawn_brushes);
   end_frame(obs, f.fb);
   return true;
@@ -1269,13 +1271,14 @@ long Sculpt::take_edits() {
 }
 
 /// The ray caster's picture with the probe glyphs, and its timings.
-void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f) {
+void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f,
+                            const std::function<void()>& meanwhile) {
   const auto r0 = Clock::now();
   const std::vector<gpu::RaycastPrim> prims =
       overlay ? overlay_prims(obs, hand_world, tool, scene.hri.force_limit_n, unit, input.down[0]) : std::vector<gpu::RaycastPrim>{};
   caster->set_in_place(f.direct());
   caster->set_bgra(f.direct() && window->bgra());
-  img = caster->render(view, style, f.rw, f.rh, prims);
+  img = caster->render(view, style, f.rw, f.rh, prims, meanwhile);
   render_ms.push_back(ms_since(r0));
   if (img.march_ms >= 0) {
     march_ms.push_back(img.march_ms);

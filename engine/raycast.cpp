@@ -1143,7 +1143,12 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.width = width;
   img.height = height;
   img.reused = f.reuse;
-  img.submit_wall_ms = m.ctx.submit_and_wait(cmd, meanwhile);
+  try {
+    img.submit_wall_ms = m.ctx.submit_and_wait(cmd, meanwhile);
+  } catch (...) {
+    m.cache_valid = false;  // what the buffers hold is not the last remembered frame's: draw the next whole
+    throw;
+  }
   m.remember_frame(f);
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);

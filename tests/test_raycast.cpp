@@ -1288,3 +1288,28 @@ TEST(Raycast, PictureKeptOnTheDeviceIsTheCopiedOne) {
   EXPECT_THROW(caster.last_depth(W, 0), std::out_of_range);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
+
+// Host work given to render() runs once, while the frame is drawn (between the submit and the
+// wait), and changes nothing in the picture; one that throws passes its exception on and
+// leaves the caster and its context usable (the submission was waited for).
+TEST(Raycast, HostWorkDuringTheFrameRunsOnceAndKeepsThePicture) {
+  const SphereCase s;
+  const RaycastField f = s.field();
+  const CameraView view = s.view(0.25, 40);
+  auto rc = engine::RayCaster::create(vk(), f);
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& caster = **rc.value;
+  const RaycastImage plain = caster.render(view, RaycastStyle{}, 80, 60);
+  int runs = 0;
+  // Drawn whole again (another camera, then this one): the reuse path would not submit the march.
+  (void)caster.render(s.view(0.3, 40), RaycastStyle{}, 80, 60);
+  const RaycastImage with = caster.render(view, RaycastStyle{}, 80, 60, {}, [&] { ++runs; });
+  EXPECT_EQ(runs, 1);
+  EXPECT_EQ(with.rgba, plain.rgba);
+  EXPECT_EQ(with.depth, plain.depth);
+  EXPECT_THROW(caster.render(s.view(0.3, 40), RaycastStyle{}, 80, 60, {}, [] { throw std::runtime_error("meanwhile"); }),
+               std::runtime_error);
+  const RaycastImage after = caster.render(view, RaycastStyle{}, 80, 60);
+  EXPECT_EQ(after.rgba, plain.rgba);
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}

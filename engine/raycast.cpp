@@ -101,54 +101,64 @@ struct Bits3 {
     return w.data() + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(words);
   }
   void set(int x, int y, int z) { row(y, z)[x >> 6] |= std::uint64_t(1) << (x & 63); }
-  /// Clears every bit with x >= ex, y >= ey or z >= ez (and the row padding).
+  std::size_t plane_words() const { return std::size_t(ny) * std::size_t(words); }
+  /// Clears every bit with x >= ex, y >= ey or z >= ez (and the row padding). One flat pass
+  /// per plane against that plane's mask (vectorized; rows are only a few words wide).
   void keep(int ex, int ey, int ez) {
-    for (int z = 0; z < nz; ++z)
-      for (int y = 0; y < ny; ++y) {
-        std::uint64_t* r = row(y, z);
-        for (int i = 0; i < words; ++i) {
-          const int first = 64 * i;
-          if (z >= ez || y >= ey || first >= ex) r[i] = 0;
-          else if (ex - first < 64) r[i] &= (std::uint64_t(1) << (ex - first)) - 1;
-        }
+    const std::size_t P = plane_words();
+    std::vector<std::uint64_t> mask(P, 0);
+    for (int y = 0; y < std::min(ey, ny); ++y)
+      for (int i = 0; i < words; ++i) {
+        const int first = 64 * i;
+        mask[std::size_t(y) * std::size_t(words) + std::size_t(i)] =
+            first >= ex ? 0 : ex - first >= 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << (ex - first)) - 1;
       }
+    for (int z = 0; z < nz; ++z) {
+      std::uint64_t* r = w.data() + std::size_t(z) * P;
+      if (z >= ez) {
+        std::fill(r, r + P, 0);
+        continue;
+      }
+      for (std::size_t k = 0; k < P; ++k) r[k] &= mask[k];
+    }
   }
 };
 
 /// out = in dilated by the box [lo, 1]^3 (lo = 0: out(x) = OR of in(x .. x + 1) per axis,
 /// lo = -1: the 3^3 cube). Bits past the set's extent read 0. All three sets have the same
-/// extent; tmp is scratch.
+/// extent; tmp is scratch. The x pass runs over the whole array as one bit string: across a
+/// row's end a shift carries a bit only into the row's last bit (x >= nx - 1, or its
+/// padding), which the caller's keep() with ex < nx clears, and with lo = -1 also out of
+/// it, zero in a set so kept. The y and z passes OR whole planes and the whole set at a
+/// row's and a plane's offset: flat loops the compiler vectorizes, where per-row loops of a
+/// few words did not (the sub-box of an edit on a 512 x 512 x 600 CT: about 4x faster).
 void dilate(const Bits3& in, Bits3& out, int lo, Bits3& tmp) {
-  const int W = in.words;
-  for (int z = 0; z < in.nz; ++z)  // x: shifting right by 1 brings bit x + 1 down to x
-    for (int y = 0; y < in.ny; ++y) {
-      const std::uint64_t* r = in.row(y, z);
-      std::uint64_t* o = tmp.row(y, z);
-      for (int i = 0; i < W; ++i) {
-        const std::uint64_t next = i + 1 < W ? r[i + 1] : 0, prev = i > 0 ? r[i - 1] : 0;
-        std::uint64_t v = r[i] | (r[i] >> 1) | (next << 63);
-        if (lo < 0) v |= (r[i] << 1) | (prev >> 63);
-        o[i] = v;
-      }
+  const std::size_t N = in.w.size(), W = std::size_t(in.words), P = in.plane_words();
+  const std::uint64_t* r = in.w.data();
+  std::uint64_t* t = tmp.w.data();
+  // x: shifting right by 1 brings bit x + 1 down to x (and left by 1, x - 1 up to x).
+  for (std::size_t k = 0; k < N; ++k) {
+    const std::uint64_t next = k + 1 < N ? r[k + 1] : 0;
+    t[k] = r[k] | (r[k] >> 1) | (next << 63);
+  }
+  if (lo < 0)
+    for (std::size_t k = 0; k < N; ++k) {
+      const std::uint64_t prev = k > 0 ? r[k - 1] : 0;
+      t[k] |= (r[k] << 1) | (prev >> 63);
     }
-  for (int z = 0; z < in.nz; ++z)  // y: OR of the rows y + lo .. y + 1
-    for (int y = 0; y < in.ny; ++y) {
-      std::uint64_t* o = out.row(y, z);
-      std::fill(o, o + W, 0);
-      for (int yy = std::max(0, y + lo); yy <= std::min(in.ny - 1, y + 1); ++yy) {
-        const std::uint64_t* r = tmp.row(yy, z);
-        for (int i = 0; i < W; ++i) o[i] |= r[i];
-      }
-    }
-  for (int z = 0; z < in.nz; ++z)  // z: OR of the planes z + lo .. z + 1
-    for (int y = 0; y < in.ny; ++y) {
-      std::uint64_t* o = tmp.row(y, z);
-      std::fill(o, o + W, 0);
-      for (int zz = std::max(0, z + lo); zz <= std::min(in.nz - 1, z + 1); ++zz) {
-        const std::uint64_t* r = out.row(y, zz);
-        for (int i = 0; i < W; ++i) o[i] |= r[i];
-      }
-    }
+  // y: OR of the rows y + lo .. y + 1, within each plane.
+  std::uint64_t* o = out.w.data();
+  std::copy(t, t + N, o);
+  for (std::size_t z0 = 0; z0 < N; z0 += P) {
+    for (std::size_t k = z0; k + W < z0 + P; ++k) o[k] |= t[k + W];
+    if (lo < 0)
+      for (std::size_t k = z0 + W; k < z0 + P; ++k) o[k] |= t[k - W];
+  }
+  // z: OR of the planes z + lo .. z + 1.
+  std::copy(o, o + N, t);
+  for (std::size_t k = 0; k + P < N; ++k) t[k] |= o[k + P];
+  if (lo < 0)
+    for (std::size_t k = P; k < N; ++k) t[k] |= o[k - P];
   std::swap(out.w, tmp.w);
 }
 
@@ -199,6 +209,10 @@ std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std:
   // Hot voxels at index [-1, n + 1] per axis (stored at + 1), the background outside the grid.
   Bits3 h(n[0] + 3, n[1] + 3, n[2] + 3);
   const bool bg_hot = hot(background);
+  // A row's flags as bytes, flags[x + 1] for voxel x (a compare loop the compiler
+  // vectorizes), then 8 bytes of 0/1 at a time into 8 bits: the multiply gathers byte j's
+  // bit into bit 56 + j (no carries: each partial product lands on its own bit).
+  std::vector<std::uint8_t> flags(std::size_t(h.words) * 64 + 8, 0);
   for (int z = 0; z < h.nz; ++z)
     for (int y = 0; y < h.ny; ++y) {
       const bool in_plane = z >= 1 && z <= n[2] && y >= 1 && y <= n[1];
@@ -213,8 +227,18 @@ std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std:
         h.set(n[0] + 1, y, z);
         h.set(n[0] + 2, y, z);
       }
+      std::uint8_t* fl = flags.data() + 1;
+      for (int x = 0; x < n[0]; ++x) fl[x] = hot(r[x]) ? 1 : 0;
       std::uint64_t* hw = h.row(y, z);
-      for (int x = 0; x < n[0]; ++x) hw[(x + 1) >> 6] |= std::uint64_t(hot(r[x])) << ((x + 1) & 63);
+      for (int i = 0; i < h.words; ++i) {
+        std::uint64_t word = 0;
+        for (int b8 = 0; b8 < 8; ++b8) {
+          std::uint64_t v;
+          std::memcpy(&v, flags.data() + 64 * i + 8 * b8, 8);
+          word |= ((v * 0x0102040810204080ull) >> 56) << (8 * b8);
+        }
+        hw[i] |= word;
+      }
     }
   // Active cells: cell c (stored s = c + 1) has corners at stored voxels s .. s + 1. All
   // sets share h's extent (n + 3 per axis); cells use the first n + 2, the rest stays 0.
@@ -223,29 +247,45 @@ std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std:
   dilate(h, cur, 0, tmp);
   cur.keep(ex, ey, ez);
   const std::size_t cx = std::size_t(ex), cy = std::size_t(ey);
-  std::vector<std::uint8_t> dist(cx * cy * std::size_t(ez), std::uint8_t(ISOTOUCH_RAYCAST_DIST_MAX));
+  // (64 bytes of slack: the level loop writes 8 bytes at a time, merged, past a row's end)
+  std::vector<std::uint8_t> dist(cx * cy * std::size_t(ez) + 64, std::uint8_t(ISOTOUCH_RAYCAST_DIST_MAX));
+  // kSpread[b]: byte j is 0xff where bit j of b is set (a level's new cells 8 at a time).
+  static const std::array<std::uint64_t, 256> kSpread = [] {
+    std::array<std::uint64_t, 256> t{};
+    for (unsigned b = 0; b < 256; ++b)
+      for (unsigned j = 0; j < 8; ++j)
+        if (b >> j & 1u) t[b] |= std::uint64_t(0xff) << (8 * j);
+    return t;
+  }();
   // Level r: the cells the r-th dilation by the 3^3 cube newly covers are at distance r.
+  const std::size_t W = std::size_t(cur.words), rows = std::size_t(cur.ny);
   for (unsigned r = 0; r < ISOTOUCH_RAYCAST_DIST_MAX; ++r) {
     bool any_new = false;
-    for (int z = 0; z < ez; ++z)
-      for (int y = 0; y < ey; ++y) {
-        const std::uint64_t* c = cur.row(y, z);
-        const std::uint64_t* p = prev.row(y, z);  // level r - 1 (all 0 before level 0)
-        std::uint8_t* out = dist.data() + (std::size_t(z) * cy + std::size_t(y)) * cx;
-        for (int i = 0; i < cur.words; ++i) {
-          std::uint64_t fresh = c[i] & ~p[i];
-          any_new = any_new || fresh != 0;
-          while (fresh) {
-            out[std::size_t(64 * i + std::countr_zero(fresh))] = std::uint8_t(r);
-            fresh &= fresh - 1;
-          }
-        }
+    const std::uint64_t* c = cur.w.data();
+    const std::uint64_t* p = prev.w.data();  // level r - 1 (all 0 before level 0)
+    for (std::size_t k = 0; k < cur.w.size(); ++k) {
+      std::uint64_t fresh = c[k] & ~p[k];  // (kept: none at y >= ey, z >= ez, x >= ex)
+      if (!fresh) continue;
+      any_new = true;
+      const std::size_t row = k / W, i = k % W, y = row % rows, z = row / rows;
+      std::uint8_t* out = dist.data() + (z * cy + y) * cx + 64 * i;
+      const std::uint64_t level = 0x0101010101010101ull * r;
+      for (int b8 = 0; b8 < 8; ++b8) {
+        const unsigned byte = unsigned(fresh >> (8 * b8)) & 0xffu;
+        if (byte == 0) continue;
+        const std::uint64_t m = kSpread[byte];
+        std::uint64_t v;
+        std::memcpy(&v, out + 8 * b8, 8);
+        v = (v & ~m) | (level & m);
+        std::memcpy(out + 8 * b8, &v, 8);
       }
+    }
     if (!any_new || r + 1 == ISOTOUCH_RAYCAST_DIST_MAX) break;  // all covered, or the cap
     std::swap(cur.w, prev.w);  // prev = level r
     dilate(prev, cur, -1, tmp);
     cur.keep(ex, ey, ez);  // cur = level r + 1
   }
+  dist.resize(cx * cy * std::size_t(ez));
   return dist;
 }
 }  // namespace

@@ -211,8 +211,10 @@ std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std:
   const bool bg_hot = hot(background);
   // A row's flags as bytes, flags[x + 1] for voxel x (a compare loop the compiler
   // vectorizes), then 8 bytes of 0/1 at a time into 8 bits: the multiply gathers byte j's
-  // bit into bit 56 + j (no carries: each partial product lands on its own bit).
-  std::vector<std::uint8_t> flags(std::size_t(h.words) * 64 + 8, 0);
+  // bit into bit 56 + j (no carries: each partial product lands on its own bit). Bytes past
+  // the row's voxels stay 0 (a row's padding stays clear). Little-endian loads.
+  static_assert(std::endian::native == std::endian::little, "cell distances pack bytes little-endian");
+  std::vector<std::uint8_t> flags(std::size_t(h.words) * 64, 0);
   for (int z = 0; z < h.nz; ++z)
     for (int y = 0; y < h.ny; ++y) {
       const bool in_plane = z >= 1 && z <= n[2] && y >= 1 && y <= n[1];
@@ -247,8 +249,8 @@ std::vector<std::uint8_t> cell_distances_with(const core::Grid& grid, const std:
   dilate(h, cur, 0, tmp);
   cur.keep(ex, ey, ez);
   const std::size_t cx = std::size_t(ex), cy = std::size_t(ey);
-  // (64 bytes of slack: the level loop writes 8 bytes at a time, merged, past a row's end)
-  std::vector<std::uint8_t> dist(cx * cy * std::size_t(ez) + 64, std::uint8_t(ISOTOUCH_RAYCAST_DIST_MAX));
+  // (8 bytes of slack: the level loop writes 8 bytes at a time, merged, up to 7 past the last cell)
+  std::vector<std::uint8_t> dist(cx * cy * std::size_t(ez) + 8, std::uint8_t(ISOTOUCH_RAYCAST_DIST_MAX));
   // kSpread[b]: byte j is 0xff where bit j of b is set (a level's new cells 8 at a time).
   static const std::array<std::uint64_t, 256> kSpread = [] {
     std::array<std::uint64_t, 256> t{};

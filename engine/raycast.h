@@ -162,7 +162,7 @@ struct RaycastImage {
   /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double tiles_ms = -1;      ///< the background fills and the tile-start pass (part of march_ms)
-  double submit_wall_ms = 0; ///< submit to fence (GPU), or the whole CPU render
+  double submit_wall_ms = 0; ///< submit to fence (GPU; to the end of render()'s host work if later), or the whole CPU render
   /// GPU: the camera, style and size were the last frame's, so only the pixels where the
   /// voxels update() changed can show, and the overlay's old and new rectangles, were drawn
   /// again (the rest of the picture is the last frame's, as a full frame would draw it).

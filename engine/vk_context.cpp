@@ -376,7 +376,7 @@ double VulkanContext::submit_and_wait(VkCommandBuffer cmd, const std::function<v
     try {
       meanwhile();
     } catch (...) {
-      vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX);
+      (void)vkWaitForFences(device_, 1, &fence_, VK_TRUE, UINT64_MAX);  // the first error is the one passed on
       vkFreeCommandBuffers(device_, pool_, 1, &cmd);
       throw;
     }

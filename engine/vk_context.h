@@ -105,7 +105,8 @@ class VulkanContext {
   double submit_and_wait(VkCommandBuffer cmd);
   /// submit_and_wait() with `meanwhile` run on this thread between the submit and the wait
   /// (host work that needs neither this context's queue nor its fence): on a CPU device
-  /// it runs while the device's threads work instead of after them. If it throws, the
+  /// it runs while the device's threads work instead of after them. Returns the wall time
+  /// from the submit to the later of the fence and `meanwhile`'s end [ms]. If it throws, the
   /// submission is waited for and the exception passed on.
   double submit_and_wait(VkCommandBuffer cmd, const std::function<void()>& meanwhile);
 

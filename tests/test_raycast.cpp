@@ -11,10 +11,12 @@
 #include <stdexcept>
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "isotouch/engine/vk_resources.h"
@@ -1303,8 +1305,13 @@ TEST(Raycast, HostWorkDuringTheFrameRunsOnceAndKeepsThePicture) {
   int runs = 0;
   // Drawn whole again (another camera, then this one): the reuse path would not submit the march.
   (void)caster.render(s.view(0.3, 40), RaycastStyle{}, 80, 60);
-  const RaycastImage with = caster.render(view, RaycastStyle{}, 80, 60, {}, [&] { ++runs; });
+  // The host work sleeps 30 ms: counted in the submit-to-wait time, it ran after the submit.
+  const RaycastImage with = caster.render(view, RaycastStyle{}, 80, 60, {}, [&] {
+    ++runs;
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+  });
   EXPECT_EQ(runs, 1);
+  EXPECT_GE(with.submit_wall_ms, 30.0) << "the host work did not run between the submit and the wait";
   EXPECT_EQ(with.rgba, plain.rgba);
   EXPECT_EQ(with.depth, plain.depth);
   EXPECT_THROW(caster.render(s.view(0.3, 40), RaycastStyle{}, 80, 60, {}, [] { throw std::runtime_error("meanwhile"); }),

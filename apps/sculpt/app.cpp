@@ -1701,7 +1701,7 @@ void Sculpt::write_window_shot() {
   }
 }
 
-/// --screenshot: the last frame drawn.
+/// --screenshot: the last frame drawn (and --window-shot, --slices-png).
 void Sculpt::write_last_screenshot() {
   if (!o.slices_png.empty()) {
     try {
@@ -1742,13 +1742,13 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
       << (style.tile_starts ? "on" : "off") << "\n";
   stats_line(log, "frame time", frame_ms);
   stats_line(log, "  frames drawn whole (first, camera or style changed)", frame_full_ms);
-  stats_line(log, "    render (ray caster, submit to fence and read back)", full_render_ms);
+  stats_line(log, "    render (ray caster, submit to fence and read back; the slice views meanwhile)", full_render_ms);
   stats_line(log, "    march pass (GPU timestamps)", full_march_ms);  // with the shading of its hits
   stats_line(log, "    shade pass (GPU timestamps)", full_shade_ms);  // rays the march's loop budget stopped
   stats_line(log, "    overlay pass (GPU timestamps)", full_overlay_ms);
   stats_line(log, "    present (and the panels)", full_present_ms);
   stats_line(log, "  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
-  stats_line(log, "render (ray caster)", render_ms);
+  stats_line(log, "render (ray caster; the slice views meanwhile)", render_ms);
   stats_line(log, "  march pass (GPU timestamps)", march_ms);
   stats_line(log, "  shade pass (GPU timestamps)", shade_ms);
   stats_line(log, "  overlay pass (GPU timestamps)", overlay_ms);

@@ -167,7 +167,7 @@ std::string Overlay::make_descriptor_pool() {
   return "";
 }
 
-std::string Overlay::make_render_pass(VkFormat format) {
+std::string Overlay::make_render_pass(VkFormat format, VkImageLayout final_layout) {
   // Draws over the picture (LOAD); record() moves the image to COLOR_ATTACHMENT_OPTIMAL first.
   VkAttachmentDescription att{};
   att.format = format;
@@ -177,34 +177,43 @@ std::string Overlay::make_render_pass(VkFormat format) {
   att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
   att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
   att.initialLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
-  att.finalLayout = VK_IMAGE_LAYOUT_PRESENT_SRC_KHR;
+  att.finalLayout = final_layout;
   VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
   VkSubpassDescription sub{};
   sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
   sub.colorAttachmentCount = 1;
   sub.pColorAttachments = &ref;
-  VkSubpassDependency dep{};
-  dep.srcSubpass = VK_SUBPASS_EXTERNAL;
-  dep.dstSubpass = 0;
-  dep.srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  dep.dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  dep.srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  dep.dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  VkSubpassDependency deps[2]{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  // Out: the drawing and the final layout transition before the COLOR_ATTACHMENT_OUTPUT
+  // stage of what follows (the window's barrier for the host's read, or the present).
+  deps[1].srcSubpass = 0;
+  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].dstAccessMask = 0;
   VkRenderPassCreateInfo ci{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
   ci.attachmentCount = 1;
   ci.pAttachments = &att;
   ci.subpassCount = 1;
   ci.pSubpasses = &sub;
-  ci.dependencyCount = 1;
-  ci.pDependencies = &dep;
+  ci.dependencyCount = 2;
+  ci.pDependencies = deps;
   if (const VkResult r = vkCreateRenderPass(ctx_.device(), &ci, nullptr, &pass_); r != VK_SUCCESS)
     return std::string("cannot create the overlay's render pass: ") + engine::vk_result_name(r);
   format_ = format;
+  final_layout_ = final_layout;
   return "";
 }
 
-std::string Overlay::init_vulkan_backend(VkFormat format) {
-  if (std::string e = make_render_pass(format); !e.empty()) return e;
+std::string Overlay::init_vulkan_backend(VkFormat format, VkImageLayout final_layout) {
+  if (std::string e = make_render_pass(format, final_layout); !e.empty()) return e;
   ImGui_ImplVulkan_InitInfo info{};
   info.Instance = ctx_.instance();
   info.PhysicalDevice = ctx_.physical_device();
@@ -237,14 +246,17 @@ void Overlay::shutdown_vulkan_backend() {
   if (pass_) vkDestroyRenderPass(ctx_.device(), pass_, nullptr);
   pass_ = VK_NULL_HANDLE;
   format_ = VK_FORMAT_UNDEFINED;
+  final_layout_ = VK_IMAGE_LAYOUT_UNDEFINED;
 }
 
-std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) {
+std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images,
+                                     VkImageLayout final_layout) {
   swapchain_gone();
   shown_.reset();  // a new size: ImGui's display size and its draw data's projection follow it
-  if (format != format_) {  // the first swapchain, or a new format: ImGui's pipeline follows the render pass
+  // The first swapchain, or a new format or final layout: ImGui's pipeline follows the render pass.
+  if (format != format_ || final_layout != final_layout_) {
     shutdown_vulkan_backend();
-    if (std::string e = init_vulkan_backend(format); !e.empty()) return e;
+    if (std::string e = init_vulkan_backend(format, final_layout); !e.empty()) return e;
   }
   VkDevice dev = ctx_.device();
   extent_ = extent;

@@ -90,15 +90,16 @@ class Overlay final : public FrameHook {
   void character(GLFWwindow* w, unsigned int c);
 
   // FrameHook
-  std::string swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) override;
+  std::string swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images,
+                              VkImageLayout final_layout) override;
   void swapchain_gone() override;
   void record(VkCommandBuffer cmd, std::uint32_t index) override;
 
  private:
   Overlay(engine::VulkanContext& ctx, Window& window) : ctx_(ctx), window_(window) {}
   std::string make_descriptor_pool();
-  std::string make_render_pass(VkFormat format);
-  std::string init_vulkan_backend(VkFormat format);
+  std::string make_render_pass(VkFormat format, VkImageLayout final_layout);
+  std::string init_vulkan_backend(VkFormat format, VkImageLayout final_layout);
   void shutdown_vulkan_backend();
 
   engine::VulkanContext& ctx_;
@@ -107,6 +108,7 @@ class Overlay final : public FrameHook {
   VkDescriptorPool pool_ = VK_NULL_HANDLE;
   VkRenderPass pass_ = VK_NULL_HANDLE;
   VkFormat format_ = VK_FORMAT_UNDEFINED;  // the render pass's
+  VkImageLayout final_layout_ = VK_IMAGE_LAYOUT_UNDEFINED;  // and its attachment's final layout
   VkExtent2D extent_{0, 0};
   std::vector<VkImage> images_;  // the swapchain's, not owned
   std::vector<VkImageView> views_;

@@ -64,7 +64,8 @@ Result<std::unique_ptr<ShmPicture>> ShmPicture::create(_XDisplay* display, unsig
   if (info->shmid < 0) return R::fail(std::string("shmget of ") + std::to_string(bytes) + " bytes: " + std::strerror(errno));
   info->shmaddr = static_cast<char*>(shmat(info->shmid, nullptr, 0));
   const int shmat_errno = errno;
-  // Marked for removal now: the kernel frees it when both sides detach, even after a crash.
+  // Marked for removal now: the kernel frees it when both sides detach, even after a crash
+  // (Linux lets the server attach a segment so marked while one process still has it).
   shmctl(info->shmid, IPC_RMID, nullptr);
   if (info->shmaddr == reinterpret_cast<char*>(-1)) {
     info->shmid = -1;  // never attached: nothing for the server to detach

@@ -34,8 +34,8 @@ class ShmPicture {
   int width() const { return w_; }
   int height() const { return h_; }
   /// The rows to fill (B, G, R, A bytes per pixel, top row first, stride() bytes apart),
-  /// once the server has read the last put(): the wait is a round trip only when one is
-  /// outstanding, and by the next frame the server has long finished.
+  /// once the server has read the last put(): a round trip (XSync) after every put, but by
+  /// the next frame the server has long finished that copy, so it answers at once.
   std::uint8_t* rows();
   std::size_t stride() const;
   /// Shows the rows in the window at (0, 0) (XShmPutImage, then a flush: no wait).

@@ -255,7 +255,7 @@ std::string Window::make_swapchain() {
   done_.resize(n);
   for (auto& s : done_) VK_CHECK(vkCreateSemaphore(dev, &si, nullptr, &s));
   stale_ = false;
-  if (hook_) return hook_->swapchain_ready(format_, extent_, images_);
+  if (hook_) return hook_->swapchain_ready(format_, extent_, images_, VK_IMAGE_LAYOUT_PRESENT_SRC_KHR);
   return "";
 }
 
@@ -291,7 +291,8 @@ bool Window::acquire(std::uint32_t& index) {
   const bool made = shm_ ? off_image_ != VK_NULL_HANDLE : swapchain_ != VK_NULL_HANDLE;
   if (stale_ || !made || std::uint32_t(fb[0]) != extent_.width || std::uint32_t(fb[1]) != extent_.height) {
     vkQueueWaitIdle(ctx_.queue());
-    if (std::string e = remake(); !e.empty()) throw engine::VulkanError(e);
+    if (std::string e = remake(); !e.empty())
+      throw engine::VulkanError(shm_ ? "the window's X shared-memory present: " + e : e);
     ++recreations_;
     if ((shm_ ? !off_image_ : !swapchain_) || stale_) return false;
   }
@@ -423,10 +424,10 @@ void Window::copy_and_present(VkBuffer src, int w, int h, std::uint32_t index) {
     vkCmdPipelineBarrier(cmd_, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, 0, 0, nullptr, 0,
                          nullptr, 1, &b);
   }
-  if (shm_) {  // the host reads the rows next
+  if (shm_) {  // the host reads the rows next (the hook left the image GENERAL: swapchain_ready)
     b.srcAccessMask = hook_ ? VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT : VK_ACCESS_TRANSFER_WRITE_BIT;
     b.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-    b.oldLayout = hook_ ? VK_IMAGE_LAYOUT_PRESENT_SRC_KHR : VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.oldLayout = hook_ ? VK_IMAGE_LAYOUT_GENERAL : VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
     b.newLayout = VK_IMAGE_LAYOUT_GENERAL;
     vkCmdPipelineBarrier(cmd_, hook_ ? VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT : VK_PIPELINE_STAGE_TRANSFER_BIT,
                          VK_PIPELINE_STAGE_HOST_BIT, 0, 0, nullptr, 0, nullptr, 1, &b);
@@ -475,7 +476,7 @@ void Window::destroy_offscreen() {
   shm_picture_.reset();
   if (off_image_) vkDestroyImage(dev, off_image_, nullptr);
   if (off_memory_) {
-    vkUnmapMemory(dev, off_memory_);
+    if (off_mapped_) vkUnmapMemory(dev, off_memory_);
     engine::count_free(off_memory_);
     vkFreeMemory(dev, off_memory_, nullptr);
   }
@@ -513,8 +514,16 @@ std::string Window::make_offscreen() {
   if (hook_) ci.usage |= VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT;  // the hook draws into it
   ci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
   ci.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-  if (const VkResult r = vkCreateImage(dev, &ci, nullptr, &off_image_); r != VK_SUCCESS)
+  VkImageFormatProperties ip{};  // a linear image's limits can be tighter than the window
+  if (vkGetPhysicalDeviceImageFormatProperties(ctx_.physical_device(), format, ci.imageType, ci.tiling, ci.usage, 0,
+                                               &ip) != VK_SUCCESS ||
+      ip.maxExtent.width < ci.extent.width || ip.maxExtent.height < ci.extent.height)
+    return "the device's linear images are at most " + std::to_string(ip.maxExtent.width) + "x" +
+           std::to_string(ip.maxExtent.height) + ", the window is " + std::to_string(fb[0]) + "x" + std::to_string(fb[1]);
+  if (const VkResult r = vkCreateImage(dev, &ci, nullptr, &off_image_); r != VK_SUCCESS) {
+    off_image_ = VK_NULL_HANDLE;
     return std::string("cannot create the window's image: ") + engine::vk_result_name(r);
+  }
   VkMemoryRequirements req{};
   vkGetImageMemoryRequirements(dev, off_image_, &req);
   const auto& mp = ctx_.memory_properties();
@@ -526,12 +535,16 @@ std::string Window::make_offscreen() {
   VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
   ai.allocationSize = req.size;
   ai.memoryTypeIndex = type;
-  if (const VkResult r = vkAllocateMemory(dev, &ai, nullptr, &off_memory_); r != VK_SUCCESS)
+  if (const VkResult r = vkAllocateMemory(dev, &ai, nullptr, &off_memory_); r != VK_SUCCESS) {
+    off_memory_ = VK_NULL_HANDLE;
     return std::string("cannot allocate the window's image: ") + engine::vk_result_name(r);
+  }
   engine::count_allocation(off_memory_, req.size);
-  VK_CHECK(vkBindImageMemory(dev, off_image_, off_memory_, 0));
+  if (const VkResult r = vkBindImageMemory(dev, off_image_, off_memory_, 0); r != VK_SUCCESS)
+    return std::string("cannot bind the window's image memory: ") + engine::vk_result_name(r);
   void* mapped = nullptr;
-  VK_CHECK(vkMapMemory(dev, off_memory_, 0, VK_WHOLE_SIZE, 0, &mapped));
+  if (const VkResult r = vkMapMemory(dev, off_memory_, 0, VK_WHOLE_SIZE, 0, &mapped); r != VK_SUCCESS)
+    return std::string("cannot map the window's image: ") + engine::vk_result_name(r);
   VkImageSubresource sub{VK_IMAGE_ASPECT_COLOR_BIT, 0, 0};
   VkSubresourceLayout layout{};
   vkGetImageSubresourceLayout(dev, off_image_, &sub, &layout);
@@ -544,7 +557,7 @@ std::string Window::make_offscreen() {
   images_ = {off_image_};
   stale_ = false;
   present_mode_name_ = "X11 shared memory";
-  if (hook_) return hook_->swapchain_ready(format_, extent_, images_);
+  if (hook_) return hook_->swapchain_ready(format_, extent_, images_, VK_IMAGE_LAYOUT_GENERAL);
   return "";
 }
 

@@ -41,12 +41,16 @@ void shutdown_glfw();
 class FrameHook {
  public:
   virtual ~FrameHook() = default;
-  /// The swapchain was (re)created with these images. Returns "" or why the hook cannot draw.
-  virtual std::string swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images) = 0;
+  /// The swapchain was (re)created with these images, which record() must leave in
+  /// `final_layout` (PRESENT_SRC_KHR for a swapchain's; GENERAL for the shared-memory path's
+  /// own image, which the host reads next), its colour writes made available to the
+  /// COLOR_ATTACHMENT_OUTPUT stage's later barriers. Returns "" or why the hook cannot draw.
+  virtual std::string swapchain_ready(VkFormat format, VkExtent2D extent, const std::vector<VkImage>& images,
+                                      VkImageLayout final_layout) = 0;
   /// The swapchain's images are about to be destroyed (the device is idle).
   virtual void swapchain_gone() = 0;
   /// Records the drawing into image `index`, which the picture's copy left in
-  /// TRANSFER_DST_OPTIMAL; the image must end in PRESENT_SRC_KHR.
+  /// TRANSFER_DST_OPTIMAL; the image must end in swapchain_ready()'s final layout.
   virtual void record(VkCommandBuffer cmd, std::uint32_t index) = 0;
 };
 

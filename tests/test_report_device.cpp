@@ -258,6 +258,15 @@ TEST(WriteInterval, LearnsTheServosIntervalAndLooksShortlyBeforeItsNextWrite) {
 // A servo writing at 1 kHz for 1 s: the writer thread sleeps between its writes (the kernel
 // counts fewer than 8 wake-ups a write: 2-5 here; polling every 20 us, 13 here and up to 50) and 90% of
 // the writes or more reach the link, half within 200 us.
+// Under ThreadSanitizer every memory access of both threads is instrumented (several times
+// slower, unevenly): the writer's timing figures (writes that reached the link, their delay)
+// are checked in the plain build; the sanitizer build runs the same code for its races.
+#if defined(__SANITIZE_THREAD__)
+constexpr bool kRealTimeFigures = false;
+#else
+constexpr bool kRealTimeFigures = true;
+#endif
+
 TEST(ReportDevice, TheWriterSleepsBetweenTheServosWritesAndSendsEachOnTime) {
   Script s;
   s.in = {input(7, 0.001)};
@@ -290,10 +299,11 @@ TEST(ReportDevice, TheWriterSleepsBetweenTheServosWritesAndSendsEachOnTime) {
     delay_ns.push_back(t - written[std::size_t(k)]);
   }
   EXPECT_LT(wakes, 8 * kWrites) << "the writer woke " << wakes << " times for " << kWrites << " writes";
+  ASSERT_FALSE(delay_ns.empty());
+  if (!kRealTimeFigures) return;  // (the writer's code ran, under the sanitizer's eyes, above)
   // A write the next one replaced before the writer looked is not sent (the latest value
   // wins); this thread's own sleeps are late now and then on a loaded machine.
   EXPECT_GE(delay_ns.size(), std::size_t(kWrites * 90 / 100)) << "writes that never reached the link";
-  ASSERT_FALSE(delay_ns.empty());
   std::nth_element(delay_ns.begin(), delay_ns.begin() + long(delay_ns.size() / 2), delay_ns.end());
   EXPECT_LE(delay_ns[delay_ns.size() / 2], 200'000) << "median write-to-link delay [ns]";
 }

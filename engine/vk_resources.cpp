@@ -19,8 +19,6 @@ const char* intent_name(MemoryIntent i) {
   return "?";
 }
 
-namespace {
-
 std::optional<std::uint32_t> find_memory(const VkPhysicalDeviceMemoryProperties& mp, std::uint32_t bits,
                                          VkMemoryPropertyFlags want, VkMemoryPropertyFlags prefer,
                                          VkDeviceSize bytes) {
@@ -35,8 +33,6 @@ std::optional<std::uint32_t> find_memory(const VkPhysicalDeviceMemoryProperties&
   }
   return fallback;
 }
-
-}  // namespace
 
 Result<GpuBuffer> GpuBuffer::create(VulkanContext& ctx, VkDeviceSize bytes, MemoryIntent intent,
                                     const std::string& what) {

@@ -19,6 +19,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <initializer_list>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -33,6 +34,13 @@ namespace isotouch::engine {
 /// side-by-side comparison. Both give the same bits.
 enum class ShaderSet { Current, Legacy };
 const char* shader_set_name(ShaderSet s);
+
+/// The memory type for a resource: among `bits` (VkMemoryRequirements::memoryTypeBits), one
+/// with every flag of `want` on a heap of at least `bytes`, the first that also has every
+/// flag of `prefer` if any does, else the first; none if no type has `want`.
+std::optional<std::uint32_t> find_memory(const VkPhysicalDeviceMemoryProperties& mp, std::uint32_t bits,
+                                         VkMemoryPropertyFlags want, VkMemoryPropertyFlags prefer,
+                                         VkDeviceSize bytes);
 
 /// What a buffer is for; decides its memory type and usage flags.
 enum class MemoryIntent {

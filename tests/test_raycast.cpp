@@ -1303,7 +1303,7 @@ TEST(Raycast, HostWorkDuringTheFrameRunsOnceAndKeepsThePicture) {
   engine::RayCaster& caster = **rc.value;
   const RaycastImage plain = caster.render(view, RaycastStyle{}, 80, 60);
   int runs = 0;
-  // Drawn whole again (another camera, then this one): the reuse path would not submit the march.
+  // Another camera first, so that `with` is drawn whole, as `plain` was (not reused).
   (void)caster.render(s.view(0.3, 40), RaycastStyle{}, 80, 60);
   // The host work sleeps 30 ms: counted in the submit-to-wait time, it ran after the submit.
   const RaycastImage with = caster.render(view, RaycastStyle{}, 80, 60, {}, [&] {

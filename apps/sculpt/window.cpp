@@ -526,15 +526,13 @@ std::string Window::make_offscreen() {
   }
   VkMemoryRequirements req{};
   vkGetImageMemoryRequirements(dev, off_image_, &req);
-  const auto& mp = ctx_.memory_properties();
-  const VkMemoryPropertyFlags want = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-  std::uint32_t type = mp.memoryTypeCount;
-  for (std::uint32_t i = 0; i < mp.memoryTypeCount && type == mp.memoryTypeCount; ++i)
-    if ((req.memoryTypeBits & (1u << i)) && (mp.memoryTypes[i].propertyFlags & want) == want) type = i;
-  if (type == mp.memoryTypeCount) return "no host-visible memory for the window's image";
+  const auto type = engine::find_memory(ctx_.memory_properties(), req.memoryTypeBits,
+                                        VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT, 0,
+                                        req.size);
+  if (!type) return "no host-visible memory for the window's image";
   VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
   ai.allocationSize = req.size;
-  ai.memoryTypeIndex = type;
+  ai.memoryTypeIndex = *type;
   if (const VkResult r = vkAllocateMemory(dev, &ai, nullptr, &off_memory_); r != VK_SUCCESS) {
     off_memory_ = VK_NULL_HANDLE;
     return std::string("cannot allocate the window's image: ") + engine::vk_result_name(r);

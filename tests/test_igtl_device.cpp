@@ -84,7 +84,7 @@ class Peer {
     return forces_;
   }
   double stopped_s() const { return stopped_s_.load(); }
-  /// When the peer closed the connection [s, steady clock's epoch] (0: not yet).
+  /// When the peer began to close the connection [s, steady clock's epoch] (0: not yet).
   double closed_at_s() const { return closed_at_s_.load(); }
 
  private:
@@ -113,8 +113,10 @@ class Peer {
     }
     stopped_s_ = since(t0);
     while (!stop_ && !(close_s_ > 0 && since(t0) >= close_s_)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    conn.shutdown();
+    // The time is taken before the shutdown: the client may see the close, and read its own
+    // clock, before this thread runs again after the call.
     closed_at_s_ = std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+    conn.shutdown();
     reader.join();
   }
 

@@ -97,19 +97,31 @@ TEST(Slices, EdgeLettersSayWhereEachViewPoints) {
   }
 }
 
+// A block inside the slice, and one that reaches three of its edges: a voxel on the slice's
+// edge is a contour voxel only through a neighbour within the slice.
 TEST(Slices, ContourIsTheInsideVoxelsWithAnOutsideNeighbour) {
-  engine::Volume v = volume_with({1, 0, 0, 0, 1, 0, 0, 0, 1});
-  for (float& x : v.voxels) x = 0;
-  for (int y = 1; y <= 3; ++y)
-    for (int x = 1; x <= 4; ++x) v.voxels[v.grid.index(x, y, 2)] = 10;  // a 4x3 block in slice z = 2
-  SliceStyle style{{5, 10}, core::Isosurface{5, core::InsideIs::kAbove}, false};
-  const SliceImage s = make_slice(v.grid, v.voxels, SliceKind::kAxial, slice_axes(v.direction, SliceKind::kAxial),
-                                  Vec3{0, 0, 2}, Vec3{0, 0, 2}, style);
-  for (int r = 0; r < s.height; ++r)
-    for (int c = 0; c < s.width; ++c) {
-      const bool inside = c >= 1 && c <= 4 && r >= 1 && r <= 3, interior = c >= 2 && c <= 3 && r == 2;
-      EXPECT_EQ(s.rgba[std::size_t(r * s.width + c)] == kContourRgba, inside && !interior) << c << "," << r;
-    }
+  struct Block {
+    int x0, x1, y0, y1;
+  };
+  for (const Block& b : {Block{1, 4, 1, 3}, Block{0, 5, 0, 2}}) {
+    engine::Volume v = volume_with({1, 0, 0, 0, 1, 0, 0, 0, 1});  // 6 x 5 x 4
+    for (float& x : v.voxels) x = 0;
+    for (int y = b.y0; y <= b.y1; ++y)
+      for (int x = b.x0; x <= b.x1; ++x) v.voxels[v.grid.index(x, y, 2)] = 10;  // in slice z = 2
+    SliceStyle style{{5, 10}, core::Isosurface{5, core::InsideIs::kAbove}, false};
+    const SliceImage s = make_slice(v.grid, v.voxels, SliceKind::kAxial, slice_axes(v.direction, SliceKind::kAxial),
+                                    Vec3{0, 0, 2}, Vec3{0, 0, 2}, style);
+    ASSERT_EQ(s.width, 6);
+    ASSERT_EQ(s.height, 5);
+    const auto in = [&](int c, int r) { return c >= b.x0 && c <= b.x1 && r >= b.y0 && r <= b.y1; };
+    const auto out_in_slice = [&](int c, int r) { return c >= 0 && r >= 0 && c < 6 && r < 5 && !in(c, r); };
+    for (int r = 0; r < s.height; ++r)
+      for (int c = 0; c < s.width; ++c) {
+        const bool contour = in(c, r) && (out_in_slice(c - 1, r) || out_in_slice(c + 1, r) ||
+                                           out_in_slice(c, r - 1) || out_in_slice(c, r + 1));
+        EXPECT_EQ(s.rgba[std::size_t(r * s.width + c)] == kContourRgba, contour) << c << "," << r << " block " << b.x0;
+      }
+  }
 }
 
 // The pane's pixels (resample_into, mapped once per column and row) are the slice pixels

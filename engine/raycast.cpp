@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <span>
 #include <limits>
 #include <stdexcept>
 #include <tuple>
@@ -542,7 +543,7 @@ PixelRect box_rect(const gpu::RaycastParams& P, std::array<double, 3> lo, std::a
 /// The pixels the primitives' bounding box (index space, 1 voxel wider) projects to (none
 /// without primitives; the whole image if one is not finite): a pixel whose ray meets no
 /// primitive keeps the colour the shade pass gave it.
-PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::RaycastPrim>& prims, int width, int height) {
+PixelRect overlay_rect(const gpu::RaycastParams& P, std::span<const gpu::RaycastPrim> prims, int width, int height) {
   if (prims.empty()) return {};
   std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
   auto grow = [&](double x, double y, double z, double r) {
@@ -563,6 +564,18 @@ PixelRect overlay_rect(const gpu::RaycastParams& P, const std::vector<gpu::Rayca
   }
   return finite ? box_rect(P, plo, phi) : PixelRect{0, 0, std::uint32_t(width), std::uint32_t(height)};
 }
+
+/// The pixels in both (empty: x1 = x0, y1 = y0). x0 stays a multiple of 8 if both are.
+PixelRect intersect(const PixelRect& a, const PixelRect& b) {
+  PixelRect r{std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
+  if (r.x1 <= r.x0 || r.y1 <= r.y0) r.x1 = r.x0, r.y1 = r.y0;
+  return r;
+}
+
+/// The overlay's stages (raycast_overlay.comp, specialization constant 9) and the most list
+/// entries drawn in stages, one dispatch each; more are drawn in one pass.
+constexpr std::uint32_t kOverlayBegin = 1, kOverlayOpaque = 2, kOverlayBlend = 3, kOverlayEnd = 4;
+constexpr std::size_t kMaxOverlayStages = 32;
 
 /// The overlay pass's primitives (binding 3): the ones its opaque loop reads (alpha 1, x-ray
 /// ones too), then the ones its blending loop reads (alpha < 1 or x-ray), each list in the
@@ -675,6 +688,29 @@ struct RayCaster::Impl {
   // Per pixel, device-local, sized for the last frame: image, depth, linear colour R G B,
   // hit list, hit sample.
   GpuBuffer image, depth, lin_r, lin_g, lin_b, hits, hit_k;
+  /// Binding 16: per pixel the overlay stages' colour and nearest depth (vec4); 16 bytes where
+  /// one binding cannot hold the frame's (the overlay is then drawn in one pass).
+  GpuBuffer overlay_state;
+  bool overlay_staged = true;  // set_overlay_stages()
+  /// The overlay's stage pipelines (raycast_overlay.comp: constant 9 the stage, 10 the
+  /// primitive kind), made on first use: begin, end, then opaque and blend per kind.
+  std::array<std::unique_ptr<ComputePipeline<gpu::RaycastPush>>, 2 + 2 * 4> overlay_stages;
+  const ComputePipeline<gpu::RaycastPush>& overlay_stage(std::uint32_t stage, std::uint32_t kind) {
+    const std::size_t at = stage == kOverlayBegin ? 0 : stage == kOverlayEnd ? 1 : 2 + (stage == kOverlayBlend ? 4 : 0) + (kind - 1);
+    auto& p = overlay_stages[at];
+    if (!p) {
+      std::vector<std::uint32_t> sp = spec(0);
+      sp.push_back(stage);
+      sp.push_back(kind);
+      sp.push_back(ISOTOUCH_RAYCAST_TILE);  // workgroup: a tile
+      sp.push_back(ISOTOUCH_RAYCAST_TILE);
+      p = std::make_unique<ComputePipeline<gpu::RaycastPush>>(
+          ctx, raycast_overlay_spv, ISOTOUCH_RAYCAST_BINDINGS,
+          "raycast overlay (stage " + std::to_string(stage) + ", kind " + std::to_string(kind) + ")", 1u, sp, kTexel);
+      set_views(*p);
+    }
+    return *p;
+  }
   GpuBuffer image_down, depth_down;        // readback
   bool keep_on_device = false;             // set_in_place(): the picture is not copied out
   bool bgra = false;                       // set_bgra(): image packed B, G, R, A
@@ -748,7 +784,7 @@ struct RayCaster::Impl {
   bool record_tiles(VkCommandBuffer cmd, const FramePlan& f, std::initializer_list<BufferRange> ranges);
   void record_march_and_shade(VkCommandBuffer cmd, const FramePlan& f, bool tiles, bool skip_empty,
                               std::initializer_list<BufferRange> ranges);
-  void record_overlay(VkCommandBuffer cmd, const FramePlan& f, std::uint32_t opaque, std::size_t listed,
+  void record_overlay(VkCommandBuffer cmd, const FramePlan& f, const OverlayLists& lists,
                       std::initializer_list<BufferRange> ranges);
   /// Barriers (and copies where device memory is not host-visible) for reading the frame
   /// back; true when image and depth are read in place.
@@ -939,6 +975,9 @@ void RayCaster::Impl::size_frame(int width, int height) {
       m.image_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast image readback");
       m.depth_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast depth readback");
     }
+    const bool state_fits = n_pixels * 16 <= m.ctx.max_binding_bytes();
+    m.overlay_state = make_buffer_or_throw(m.ctx, state_fits ? n_pixels * 16 : 16, MemoryIntent::DeviceLocal,
+                                           "raycast overlay state");
     m.pixels = n_pixels;
     m.cache_valid = false;
     m.last_width = m.last_height = 0;  // no frame in the new buffers until this one completes
@@ -1089,20 +1128,49 @@ void RayCaster::Impl::record_march_and_shade(VkCommandBuffer cmd, const FramePla
   vkCmdDispatchIndirect(cmd, m.counter.handle(), 0);
 }
 
-void RayCaster::Impl::record_overlay(VkCommandBuffer cmd, const FramePlan& f, std::uint32_t opaque, std::size_t listed,
-                               std::initializer_list<BufferRange> ranges) {
+void RayCaster::Impl::record_overlay(VkCommandBuffer cmd, const FramePlan& f, const OverlayLists& lists,
+                                     std::initializer_list<BufferRange> ranges) {
   Impl& m = *this;
   const PixelRect& od = f.overlay;
   if (od.x1 <= od.x0) return;
-  gpu::RaycastPush overlay_push = f.push;
-  overlay_push.x0 = od.x0;
-  overlay_push.y0 = od.y0;
-  overlay_push.prim_count = opaque << 16 | std::uint32_t(listed);
+  // The one pass in rows of WG_X pixels, the stages in tiles (raycast_overlay.comp).
+  const auto dispatch = [&](const ComputePipeline<gpu::RaycastPush>& p, const PixelRect& r, std::uint32_t prim_word) {
+    gpu::RaycastPush push = f.push;
+    push.x0 = r.x0;
+    push.y0 = r.y0;
+    push.prim_count = prim_word;
+    p.push(cmd, push);
+    const bool tiles = &p != &m.overlay;
+    const std::uint32_t gx = tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_X;
+    const std::uint32_t gy = tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_Y;
+    vkCmdDispatch(cmd, (r.x1 - r.x0 + gx - 1) / gx, (r.y1 - r.y0 + gy - 1) / gy, 1);
+  };
+  const std::size_t n = lists.prims.size();
   barrier_compute_to_compute(cmd);
-  m.overlay.bind(cmd, m.arena, ranges);
-  m.overlay.push(cmd, overlay_push);
-  vkCmdDispatch(cmd, (od.x1 - od.x0 + ISOTOUCH_RAYCAST_WG_X - 1) / ISOTOUCH_RAYCAST_WG_X,
-                (od.y1 - od.y0 + ISOTOUCH_RAYCAST_WG_Y - 1) / ISOTOUCH_RAYCAST_WG_Y, 1);
+  if (!m.overlay_staged || n > kMaxOverlayStages || m.overlay_state.size() < m.pixels * 16) {
+    m.overlay.bind(cmd, m.arena, ranges);
+    dispatch(m.overlay, od, lists.opaque << 16 | std::uint32_t(n));
+    return;
+  }
+  // Stages: one descriptor set for all (their pipeline layouts are defined alike, so the set
+  // bound with the first stays bound), a barrier between stages (each reads what the last wrote).
+  const auto& begin = m.overlay_stage(kOverlayBegin, 0);
+  begin.bind(cmd, m.arena, ranges);
+  dispatch(begin, od, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const gpu::RaycastPrim& q = lists.prims[i];
+    if (q.kind < ISOTOUCH_RAYCAST_PRIM_SPHERE || q.kind > ISOTOUCH_RAYCAST_PRIM_CONE) continue;  // misses every ray
+    const PixelRect r = intersect(overlay_rect(f.P, std::span(&q, 1), f.width, f.height), od);
+    if (r.x1 <= r.x0) continue;  // off the rectangle: misses every pixel drawn
+    barrier_compute_to_compute(cmd);
+    const auto& p = m.overlay_stage(i < lists.opaque ? kOverlayOpaque : kOverlayBlend, q.kind);
+    p.bind_keeping_set(cmd);
+    dispatch(p, r, std::uint32_t(i));
+  }
+  barrier_compute_to_compute(cmd);
+  const auto& end = m.overlay_stage(kOverlayEnd, 0);
+  end.bind_keeping_set(cmd);
+  dispatch(end, od, 0);
 }
 
 bool RayCaster::Impl::record_readback(VkCommandBuffer cmd, std::size_t n_pixels) {
@@ -1167,7 +1235,8 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
       {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
       {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
       {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * (1 + kBlocksPerTile) * 4},
-      {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4}};
+      {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4},
+      {m.overlay_state.handle(), 0, m.overlay_state.size()}};
   m.timer.mark(cmd, 0);
   m.record_clear(cmd, f);
   barrier_transfer_to_compute(cmd);
@@ -1177,7 +1246,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.timer.mark(cmd, 4);
   m.record_march_and_shade(cmd, f, tiles, style.skip_empty, ranges);
   m.timer.mark(cmd, 3);
-  m.record_overlay(cmd, f, lists.opaque, lists.prims.size(), ranges);
+  m.record_overlay(cmd, f, lists, ranges);
   m.timer.mark(cmd, 1);
   const bool in_place = m.record_readback(cmd, pixels);
 
@@ -1206,6 +1275,11 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
 }
 
 void RayCaster::set_in_place(bool on) { impl_->keep_on_device = on; }
+
+void RayCaster::set_overlay_stages(bool on) {
+  impl_->overlay_staged = on;
+  impl_->cache_valid = false;  // the next frame is drawn whole
+}
 
 void RayCaster::set_count_fetches(bool on) {
   impl_->counting = on;

@@ -257,6 +257,11 @@ class RayCaster {
   /// (the same picture, slower: one atomic add per invocation); the next frame is drawn
   /// whole. For the floor of a frame (isotouch-sculpt --bench), not for drawing.
   void set_count_fetches(bool on);
+  /// How the overlay pass draws the primitives. On (the default): in stages, each primitive
+  /// over only its own pixels by a pipeline made for its kind (up to 32 list entries; more,
+  /// or a frame whose stage buffer would not fit one binding, in one pass). Off: in one pass,
+  /// every primitive at every pixel of their common rectangle. The same picture either way.
+  void set_overlay_stages(bool on);
   /// The last render()'s counts (reads the device back): texel fetches (one voxel, quad or
   /// cell-distance texel each) of the marches and of the shading (refinement and normal, done
   /// by the march pass for its hits and by the shade pass for the rays it finishes), and the

@@ -319,6 +319,10 @@ ComputePipelineBase::~ComputePipelineBase() {
   if (set_layout_) vkDestroyDescriptorSetLayout(dev, set_layout_, nullptr);
 }
 
+void ComputePipelineBase::bind_keeping_set(VkCommandBuffer cmd) const {
+  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_);
+}
+
 void ComputePipelineBase::bind(VkCommandBuffer cmd, DescriptorArena& arena,
                                std::initializer_list<BufferRange> buffers) const {
   if (buffers.size() != bindings_)

@@ -175,6 +175,10 @@ class ComputePipelineBase {
   /// @throws std::logic_error if the count differs from `bindings` or a range exceeds
   ///         maxStorageBufferRange (callers plan their slabs so this cannot happen).
   void bind(VkCommandBuffer cmd, DescriptorArena& arena, std::initializer_list<BufferRange> buffers) const;
+  /// Binds only the pipeline: the descriptor set last bound stays bound where this pipeline's
+  /// layout is defined as that set's pipeline's was (Vulkan's layout compatibility: the same
+  /// bindings, types and push constant range), e.g. another specialization of one shader.
+  void bind_keeping_set(VkCommandBuffer cmd) const;
   /// Bit i: texel binding i is viewed as R32G32B32A32_SFLOAT (texel q = floats 4 q .. 4 q + 3:
   /// one fetch per quad) instead of R32_SFLOAT. Its ranges must be multiples of 16 bytes.
   void set_texel_vec4(std::uint32_t mask) { texel_vec4_ = mask; }

@@ -164,11 +164,12 @@ struct BrickMinMaxPush {
 // voxels as quads (uniform texel buffer, R32G32B32A32_SFLOAT; shaders/raycast_common.glsl),
 // 13 per tile of pixels the ray parameter t [m] before which no sample can be inside,
 // 14 the tiles' RaycastCounter (listed tiles, the march's indirect dispatch), 15 the tiles
-// that may hold a hit (ty << 16 | tx, in no order).
+// that may hold a hit (ty << 16 | tx, in no order), 16 the overlay stages' colour and depth
+// per pixel (vec4; raycast_overlay.comp).
 #define ISOTOUCH_RAYCAST_WG_X 64
 #define ISOTOUCH_RAYCAST_WG_Y 1
 #define ISOTOUCH_RAYCAST_SHADE_WG 64
-#define ISOTOUCH_RAYCAST_BINDINGS 16
+#define ISOTOUCH_RAYCAST_BINDINGS 17
 // Tile starts (raycast_tiles.comp): square tiles of TILE pixels per side, x fastest, the
 // first at pixel (0, 0); the cone march of a tile takes at most TILE_STEPS steps. With tile
 // starts the march runs one workgroup (TILE^2 = WG_X invocations) per listed tile.

@@ -1,7 +1,7 @@
 // raycast_common.glsl - what the ray caster's passes share: bindings, the
 // trilinear field, the march, the refinement, shading and the overlay primitives.
 // Included by raycast_tiles.comp, raycast_march.comp, raycast_shade.comp and
-// raycast_overlay.comp; every pass (raycast_args.comp too) binds the same 16 bindings (one descriptor layout, engine/raycast.cpp).
+// raycast_overlay.comp; every pass (raycast_args.comp too) binds the same ISOTOUCH_RAYCAST_BINDINGS bindings (one descriptor layout, engine/raycast.cpp; 16 is the overlay's alone).
 //
 // Field: the trilinear interpolation of the float voxels (voxel centres at integer index,
 // every voxel outside the grid reads `background`), i.e. the value field the servo feels
@@ -594,9 +594,11 @@ uint pack_rgba(vec3 c) {
 // Primitive intersection in a local frame: origin moved along the ray to the point
 // nearest the primitive's centre, lengths divided by the radius (well conditioned in
 // float at millimetre sizes and metre distances). Returns (t [m], unit normal) or t < 0.
-vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
+// `kind` stands for q.kind: a constant there (the overlay's stage pipelines, one per kind) leaves
+// only that kind's code (on llvmpipe every arm of an `if` runs, masked).
+vec4 intersect_prim_as(RaycastPrim q, vec3 ro, vec3 rd, uint kind) {
   vec3 a = vec3(q.ax, q.ay, q.az), b = vec3(q.bx, q.by, q.bz);
-  bool two_points = q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || q.kind == ISOTOUCH_RAYCAST_PRIM_CONE;
+  bool two_points = kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE || kind == ISOTOUCH_RAYCAST_PRIM_CONE;
   precise vec3 centre = two_points ? 0.5 * (a + b) : a;
   precise vec3 oc = centre - ro;
   precise float tc = oc.x * rd.x + oc.y * rd.y + oc.z * rd.z;
@@ -609,21 +611,21 @@ vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
   if (dot(cl, cl) > bound * bound) return vec4(-1.0);
   precise float tl = -1.0;
   precise vec3 n = vec3(0.0);
-  if (q.kind == ISOTOUCH_RAYCAST_PRIM_SPHERE) {
+  if (kind == ISOTOUCH_RAYCAST_PRIM_SPHERE) {
     precise float bb = -dot(al, rd);
     precise float c = dot(al, al) - 1.0;
     precise float h = bb * bb - c;
     if (h < 0.0) return vec4(-1.0);
     tl = -bb - sqrt(h);
     n = tl * rd - al;
-  } else if (q.kind == ISOTOUCH_RAYCAST_PRIM_DISC) {
+  } else if (kind == ISOTOUCH_RAYCAST_PRIM_DISC) {
     precise float den = dot(rd, bl);
     if (abs(den) < 1e-6) return vec4(-1.0);
     tl = dot(al, bl) / den;
     precise vec3 r = tl * rd - al;
     if (dot(r, r) > 1.0) return vec4(-1.0);
     n = bl;
-  } else if (q.kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE) {
+  } else if (kind == ISOTOUCH_RAYCAST_PRIM_CAPSULE) {
     precise vec3 ba = bl - al, oa = -al;
     precise float baba = dot(ba, ba), bard = dot(ba, rd), baoa = dot(ba, oa);
     precise float rdoa = dot(rd, oa), oaoa = dot(oa, oa);
@@ -645,7 +647,7 @@ vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
     precise vec3 p = tl * rd;
     precise float u = clamp(dot(p - al, ba) / baba, 0.0, 1.0);
     n = p - (al + u * ba);
-  } else if (q.kind == ISOTOUCH_RAYCAST_PRIM_CONE) {
+  } else if (kind == ISOTOUCH_RAYCAST_PRIM_CONE) {
     // Capped cone, radius 1 at a, 0 at b (the apex); the base disc closes it.
     precise vec3 ba = bl - al, oa = -al, ob = -bl;
     precise float m0 = dot(ba, ba), m1 = dot(oa, ba), m2 = dot(rd, ba), m3 = dot(rd, oa);
@@ -678,6 +680,7 @@ vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) {
   if (!(t > 0.0)) return vec4(-1.0);
   return vec4(t, dot_safe_normalize(n));
 }
+vec4 intersect_prim(RaycastPrim q, vec3 ro, vec3 rd) { return intersect_prim_as(q, ro, rd, q.kind); }
 
 void init_globals() {
   g_bg = P.background;

@@ -547,6 +547,7 @@ PixelRect overlay_rect(const gpu::RaycastParams& P, std::span<const gpu::Raycast
   if (prims.empty()) return {};
   std::array<double, 3> plo{1e300, 1e300, 1e300}, phi{-1e300, -1e300, -1e300};
   auto grow = [&](double x, double y, double z, double r) {
+    r = std::abs(r);  // the shader draws a primitive of radius |r0|
     const double p[3] = {x, y, z};
     const double inv[3] = {double(P.inv_sp_x), double(P.inv_sp_y), double(P.inv_sp_z)};
     const double org[3] = {double(P.origin_x), double(P.origin_y), double(P.origin_z)};
@@ -692,9 +693,20 @@ struct RayCaster::Impl {
   /// one binding cannot hold the frame's (the overlay is then drawn in one pass).
   GpuBuffer overlay_state;
   bool overlay_staged = true;  // set_overlay_stages()
+  int overlay_dispatches = 0;  // the frame being recorded's (RaycastImage::overlay_dispatches)
   /// The overlay's stage pipelines (raycast_overlay.comp: constant 9 the stage, 10 the
   /// primitive kind), made on first use: begin, end, then opaque and blend per kind.
   std::array<std::unique_ptr<ComputePipeline<gpu::RaycastPush>>, 2 + 2 * 4> overlay_stages;
+  /// Every stage pipeline, made on the first frame drawn in stages (not on the first primitive
+  /// of a kind: a disc appears at the first contact, mid-session).
+  void make_overlay_stages() {
+    overlay_stage(kOverlayBegin, 0);
+    overlay_stage(kOverlayEnd, 0);
+    for (std::uint32_t k = ISOTOUCH_RAYCAST_PRIM_SPHERE; k <= ISOTOUCH_RAYCAST_PRIM_CONE; ++k) {
+      overlay_stage(kOverlayOpaque, k);
+      overlay_stage(kOverlayBlend, k);
+    }
+  }
   const ComputePipeline<gpu::RaycastPush>& overlay_stage(std::uint32_t stage, std::uint32_t kind) {
     const std::size_t at = stage == kOverlayBegin ? 0 : stage == kOverlayEnd ? 1 : 2 + (stage == kOverlayBlend ? 4 : 0) + (kind - 1);
     auto& p = overlay_stages[at];
@@ -975,9 +987,17 @@ void RayCaster::Impl::size_frame(int width, int height) {
       m.image_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast image readback");
       m.depth_down = make_buffer_or_throw(m.ctx, n_pixels * 4, MemoryIntent::Readback, "raycast depth readback");
     }
-    const bool state_fits = n_pixels * 16 <= m.ctx.max_binding_bytes();
-    m.overlay_state = make_buffer_or_throw(m.ctx, state_fits ? n_pixels * 16 : 16, MemoryIntent::DeviceLocal,
-                                           "raycast overlay state");
+    // The overlay stages' buffer; where it would not fit one binding or cannot be had, 16
+    // bytes (the overlay is then drawn in one pass).
+    m.overlay_state = {};
+    if (n_pixels * 16 <= m.ctx.max_binding_bytes()) {
+      try {
+        m.overlay_state = make_buffer_or_throw(m.ctx, n_pixels * 16, MemoryIntent::DeviceLocal, "raycast overlay state");
+      } catch (const std::exception&) {
+      }
+    }
+    if (!m.overlay_state.handle())
+      m.overlay_state = make_buffer_or_throw(m.ctx, 16, MemoryIntent::DeviceLocal, "raycast overlay state");
     m.pixels = n_pixels;
     m.cache_valid = false;
     m.last_width = m.last_height = 0;  // no frame in the new buffers until this one completes
@@ -1150,22 +1170,29 @@ void RayCaster::Impl::record_overlay(VkCommandBuffer cmd, const FramePlan& f, co
   if (!m.overlay_staged || n > kMaxOverlayStages || m.overlay_state.size() < m.pixels * 16) {
     m.overlay.bind(cmd, m.arena, ranges);
     dispatch(m.overlay, od, lists.opaque << 16 | std::uint32_t(n));
+    m.overlay_dispatches = 1;
     return;
   }
+  m.make_overlay_stages();
   // Stages: one descriptor set for all (their pipeline layouts are defined alike, so the set
   // bound with the first stays bound), a barrier between stages (each reads what the last wrote).
   const auto& begin = m.overlay_stage(kOverlayBegin, 0);
   begin.bind(cmd, m.arena, ranges);
   dispatch(begin, od, 0);
+  m.overlay_dispatches = 2;  // BEGIN and END
   for (std::size_t i = 0; i < n; ++i) {
     const gpu::RaycastPrim& q = lists.prims[i];
     if (q.kind < ISOTOUCH_RAYCAST_PRIM_SPHERE || q.kind > ISOTOUCH_RAYCAST_PRIM_CONE) continue;  // misses every ray
-    const PixelRect r = intersect(overlay_rect(f.P, std::span(&q, 1), f.width, f.height), od);
+    PixelRect r = intersect(overlay_rect(f.P, std::span(&q, 1), f.width, f.height), od);
     if (r.x1 <= r.x0) continue;  // off the rectangle: misses every pixel drawn
+    // On BEGIN's grid of tiles (x0 is a multiple of 8 in both): every tile a stage runs is one
+    // BEGIN initialised and END packs.
+    r.y0 = od.y0 + (r.y0 - od.y0) / ISOTOUCH_RAYCAST_TILE * ISOTOUCH_RAYCAST_TILE;
     barrier_compute_to_compute(cmd);
     const auto& p = m.overlay_stage(i < lists.opaque ? kOverlayOpaque : kOverlayBlend, q.kind);
     p.bind_keeping_set(cmd);
     dispatch(p, r, std::uint32_t(i));
+    ++m.overlay_dispatches;
   }
   barrier_compute_to_compute(cmd);
   const auto& end = m.overlay_stage(kOverlayEnd, 0);
@@ -1246,6 +1273,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   m.timer.mark(cmd, 4);
   m.record_march_and_shade(cmd, f, tiles, style.skip_empty, ranges);
   m.timer.mark(cmd, 3);
+  m.overlay_dispatches = 0;
   m.record_overlay(cmd, f, lists, ranges);
   m.timer.mark(cmd, 1);
   const bool in_place = m.record_readback(cmd, pixels);
@@ -1266,6 +1294,7 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.tiles_ms = m.timer.elapsed_ms(0, 4);
   img.shade_ms = m.timer.elapsed_ms(2, 3);
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
+  img.overlay_dispatches = m.overlay_dispatches;
   if (m.keep_on_device) return img;
   img.rgba.resize(pixels);
   img.depth.resize(pixels);

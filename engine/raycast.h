@@ -162,6 +162,9 @@ struct RaycastImage {
   /// (0 without primitives).
   double march_ms = -1, shade_ms = -1, overlay_ms = -1;
   double tiles_ms = -1;      ///< the background fills and the tile-start pass (part of march_ms)
+  /// GPU: the overlay's dispatches (0: no primitive drawn; 1: one pass; more: its stages,
+  /// set_overlay_stages).
+  int overlay_dispatches = 0;
   double submit_wall_ms = 0; ///< submit to fence (GPU; to the end of render()'s host work if later), or the whole CPU render
   /// GPU: the camera, style and size were the last frame's, so only the pixels where the
   /// voxels update() changed can show, and the overlay's old and new rectangles, were drawn

@@ -287,9 +287,14 @@ TEST(DeviceEmu, GarbageIsCountedAndNamedWithoutACrash) {
 
 TEST(DeviceEmu, ReconnectionRampsTheForceIn) {
   Rig rig;
-  rig.cfg.faults.disconnect_at_s = 0.15;
+  // From the device's first connection, not the emulator's start, and late enough that the
+  // servo has ticked before the outage: on a loaded machine (CI's other test's FIFO threads)
+  // the servo has started up to 150 ms after the connection, and a device lost before the
+  // servo's first good tick gives only one ramp.
+  rig.cfg.faults.disconnect_at_s = 0.3;
   rig.cfg.faults.reconnect_after_s = 0.1;
-  rig.run(0.6);
+  rig.cfg.faults.from_first_connection = true;
+  rig.run(0.9);
   EXPECT_EQ(rig.link.reconnects, 1);
   EXPECT_GE(rig.servo_counters.ramps, 2);
   // The first ok tick after the outage forced less than half of the steady force: the
@@ -319,7 +324,7 @@ TEST(DeviceEmu, SequenceFaultsAreCounted) {
   rig.cfg.faults.duplicate = 0.05;
   rig.cfg.faults.reorder = 0.05;
   rig.cfg.faults.delay = 0.02;
-  rig.run(0.4);
+  rig.run(0.6);  // 0.4 s of forces at least after a servo that starts up to 150 ms late (a loaded machine)
   EXPECT_GT(rig.link.gaps, 5);
   EXPECT_GT(rig.link.duplicates, 5);
   EXPECT_GT(rig.link.reordered, 5);

@@ -435,7 +435,7 @@ void stalled_servo_gets_zero_within_three_periods(bool polhem) {
   rig.cfg.polhem = polhem;
   StallingWall slow;  // one tick in contact takes 300 ms
   rig.renderer = &slow;
-  rig.run(0.8);
+  rig.run(1.0);  // the 300 ms stall and 200 ms of forces after it, after a servo that starts up to 150 ms late
   ASSERT_GT(slow.start_ns.load(), 0) << "the renderer never stalled";
   const std::int64_t T = 1'000'000;  // the servo's period [ns]
   // On the wire: the last force before the stall, then zero with enable cleared within

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
-#include <span>
 #include <limits>
+#include <span>
 #include <stdexcept>
 #include <tuple>
 

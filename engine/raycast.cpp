@@ -1338,6 +1338,11 @@ RayCaster::FetchCount RayCaster::last_fetches() {
 }
 void RayCaster::set_bgra(bool on) { impl_->bgra = on; }
 VkBuffer RayCaster::image_buffer() const { return impl_->image.handle(); }
+const std::uint32_t* RayCaster::mapped_image() const {
+  const Impl& m = *impl_;
+  const bool in_place = m.ctx.device_local_is_host_visible() && m.image.mapped() && m.depth.mapped();
+  return in_place ? static_cast<const std::uint32_t*>(m.image.mapped()) : nullptr;
+}
 
 std::vector<std::uint32_t> RayCaster::last_rgba() {
   Impl& m = *impl_;

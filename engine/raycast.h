@@ -280,6 +280,10 @@ class RayCaster {
   /// submission needs a barrier from the compute stage's writes; the next render() waits
   /// for the transfers submitted before it (its first command is that barrier).
   VkBuffer image_buffer() const;
+  /// The same pixels in host memory, where the device's memory is host-visible (a CPU
+  /// device such as lavapipe: the picture is read in place, its writes made visible to the
+  /// host when render() returns); nullptr elsewhere. Valid until the next render().
+  const std::uint32_t* mapped_image() const;
   /// The last render()'s pixels, RGBA (reads the device buffer back).
   std::vector<std::uint32_t> last_rgba();
   /// The last render()'s depth at pixel (x, y): t [m] of the hit, -1 where none.

@@ -1299,8 +1299,12 @@ void Sculpt::show(const FrameSize& f, const std::vector<std::string>& shots, lon
   const auto p0 = Clock::now();
   const std::vector<std::uint32_t>& shown_px = host_picture(f, !shots.empty());
   build_panels();
-  const bool shown = f.direct() ? window->present(caster->image_buffer(), f.fb[0], f.fb[1])
-                                : window->present(shown_px, f.fb[0], f.fb[1]);
+  // A CPU device's picture lies in host memory: the shared-memory path composes the window
+  // from it on the host (no device copy; the panels drawn only when they change).
+  const std::uint32_t* host_px = f.direct() && window->host_composes() ? caster->mapped_image() : nullptr;
+  const bool shown = host_px    ? window->present(host_px, f.fb[0], f.fb[1], window->bgra())
+                     : f.direct() ? window->present(caster->image_buffer(), f.fb[0], f.fb[1])
+                                  : window->present(shown_px, f.fb[0], f.fb[1]);
   present_ms.push_back(ms_since(p0));
   if (!img.reused) {
     full_render_ms.push_back(render_ms.back());
@@ -1351,6 +1355,7 @@ void Sculpt::refresh_panel(const session::Observed& obs, std::size_t frames) {
   double sum = 0;
   for (std::size_t i = frame_ms.size() - n; i < frame_ms.size(); ++i) sum += frame_ms[i];
   panel.frame_ms = n > 0 ? sum / double(n) : 0;
+  if (o.sim_clock) panel.frame_ms = o.sim_frame_ms;  // the simulated frame: the same panels every run
   panel.force_n = norm(obs.force_n);
   panel.contact = obs.contact;
   panel.device = mouse ? std::string("mouse (simulated, coupled to the hand)")

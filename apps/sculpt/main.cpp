@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
   cli.add_flag("--sim-clock", o.sim_clock,
                "run the servo and the edits on a simulated clock, one frame's worth of ticks per frame, on the "
                "window's thread: a script then gives the same recording and screenshots every run (the window's own "
-               "mouse and keys are ignored; the mouse probe only)");
+               "mouse and keys are ignored; the mouse probe only; the stats panel shows the simulated frame time)");
   cli.add_option("--sim-frame-ms", o.sim_frame_ms, "simulated time per frame with --sim-clock [ms] (whole servo ticks)")
       ->check(CLI::Range(0.1, 1000.0));
   cli.add_flag("--validation", o.validation, "enable the Vulkan validation layer (exit 3 on any message)");

@@ -261,6 +261,12 @@ std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const s
   VkDevice dev = ctx_.device();
   extent_ = extent;
   images_ = images;
+  if (final_layout == VK_IMAGE_LAYOUT_GENERAL) {  // the shared-memory path: the host composes
+    auto layer = PanelLayer::create(ctx_, format, extent);
+    if (!layer) return layer.error;
+    layer_ = std::move(*layer.value);
+    layer_build_ = -1;
+  }
   for (VkImage image : images) {
     VkImageViewCreateInfo vi{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
     vi.image = image;
@@ -293,6 +299,7 @@ void Overlay::swapchain_gone() {
   framebuffers_.clear();
   views_.clear();
   images_.clear();
+  layer_.reset();
 }
 
 void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
@@ -318,6 +325,37 @@ void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
     ++frames_drawn_;
   }
   vkCmdEndRenderPass(cmd);
+}
+
+bool Overlay::record_layer(VkCommandBuffer cmd) {
+  if (!layer_ || layer_build_ == frames_built_) return false;
+  layer_build_ = frames_built_;
+  // Where the panels lie: per draw list (a panel), the box of its vertices (framebuffer
+  // pixels; the display's origin is (0, 0) and its scale 1 here). Its clip rectangles can
+  // be the whole display.
+  std::vector<PixelRect> rects;
+  ImDrawData* dd = ImGui::GetDrawData();
+  layer_->begin(cmd);
+  if (dd && dd->TotalVtxCount > 0) {
+    ImGui_ImplVulkan_RenderDrawData(dd, cmd);
+    for (int i = 0; i < dd->CmdListsCount; ++i) {
+      const ImVector<ImDrawVert>& v = dd->CmdLists[i]->VtxBuffer;
+      if (v.Size == 0) continue;
+      float x0 = v[0].pos.x, y0 = v[0].pos.y, x1 = x0, y1 = y0;
+      for (const ImDrawVert& q : v) {
+        x0 = std::min(x0, q.pos.x), y0 = std::min(y0, q.pos.y);
+        x1 = std::max(x1, q.pos.x), y1 = std::max(y1, q.pos.y);
+      }
+      rects.push_back({int(std::floor(x0)) - 1, int(std::floor(y0)) - 1, int(std::ceil(x1)) + 1, int(std::ceil(y1)) + 1});
+    }
+  }
+  layer_->end(cmd, std::move(rects));
+  ++layers_drawn_;
+  return true;
+}
+
+void Overlay::compose(std::uint8_t* rows, std::size_t stride, int w, int h) {
+  if (layer_ && layer_->compose(rows, stride, w, h)) ++frames_drawn_;
 }
 
 bool Overlay::changed(const Shown& now) const {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/apps/sculpt/panel_layer.h"
 #include "isotouch/apps/sculpt/slice_views.h"
 #include "isotouch/apps/sculpt/tools.h"
 #include "isotouch/apps/sculpt/window.h"
@@ -94,6 +95,12 @@ class Overlay final : public FrameHook {
                               VkImageLayout final_layout) override;
   void swapchain_gone() override;
   void record(VkCommandBuffer cmd, std::uint32_t index) override;
+  /// The shared-memory path: the panels into their own layer (panel_layer.h) only when a
+  /// build changed them, blended over each frame on the host.
+  bool record_layer(VkCommandBuffer cmd) override;
+  void compose(std::uint8_t* rows, std::size_t stride, int w, int h) override;
+  /// Frames whose panels' layer was drawn anew (the shared-memory path).
+  long layers_drawn() const { return layers_drawn_; }
 
  private:
   Overlay(engine::VulkanContext& ctx, Window& window) : ctx_(ctx), window_(window) {}
@@ -114,6 +121,9 @@ class Overlay final : public FrameHook {
   std::vector<VkImageView> views_;
   std::vector<VkFramebuffer> framebuffers_;
   long frames_drawn_ = 0;
+  std::unique_ptr<PanelLayer> layer_;  // the shared-memory path's (swapchain_ready with GENERAL)
+  long layer_build_ = -1;              // the build the layer holds (-1: none)
+  long layers_drawn_ = 0;
   // What the last build showed, and whether the user touched the panels since.
   struct Shown {
     session::BrushKind kind{};

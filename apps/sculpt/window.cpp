@@ -311,6 +311,7 @@ bool Window::acquire(std::uint32_t& index) {
 }
 
 bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
+  if (shm_) return present(rgba.data(), w, h, false);
   std::uint32_t index = 0;
   if (!acquire(index)) return false;
   const VkDeviceSize bytes = VkDeviceSize(w) * VkDeviceSize(h) * 4;
@@ -326,6 +327,20 @@ bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
     std::memcpy(dst, rgba.data(), bytes);
   }
   copy_and_present(staging_.handle(), w, h, index);
+  return true;
+}
+
+bool Window::present(const std::uint32_t* px, int w, int h, bool bgra) {
+  if (!shm_) {
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    std::vector<std::uint32_t> rgba(px, px + n);
+    if (bgra)
+      for (std::uint32_t& p : rgba) p = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
+    return present(rgba, w, h);
+  }
+  std::uint32_t index = 0;
+  if (!acquire(index)) return false;
+  compose_and_put(px, w, h, bgra);
   return true;
 }
 
@@ -557,6 +572,64 @@ std::string Window::make_offscreen() {
   present_mode_name_ = "X11 shared memory";
   if (hook_) return hook_->swapchain_ready(format_, extent_, images_, VK_IMAGE_LAYOUT_GENERAL);
   return "";
+}
+
+void Window::compose_and_put(const std::uint32_t* px, int w, int h, bool bgra) {
+  if (hook_) {
+    VK_CHECK(vkResetCommandBuffer(cmd_, 0));
+    VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    VK_CHECK(vkBeginCommandBuffer(cmd_, &bi));
+    const bool recorded = hook_->record_layer(cmd_);
+    VK_CHECK(vkEndCommandBuffer(cmd_));
+    if (recorded) {
+      VkDevice dev = ctx_.device();
+      VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+      si.commandBufferCount = 1;
+      si.pCommandBuffers = &cmd_;
+      VK_CHECK(vkQueueSubmit(ctx_.queue(), 1, &si, fence_));
+      VK_CHECK(vkWaitForFences(dev, 1, &fence_, VK_TRUE, UINT64_MAX));
+      VK_CHECK(vkResetFences(dev, 1, &fence_));
+    }
+  }
+  std::uint8_t* dst = shm_picture_->rows();
+  const std::size_t stride = shm_picture_->stride();
+  const int W = int(extent_.width), H = int(extent_.height);
+  const int cw = std::min(w, W);
+  for (int y = 0; y < H; ++y) {
+    auto* row = reinterpret_cast<std::uint32_t*>(dst + std::size_t(y) * stride);
+    int x = 0;
+    if (y < h) {
+      const std::uint32_t* src = px + std::size_t(y) * std::size_t(w);
+      if (bgra) {
+        std::memcpy(row, src, std::size_t(cw) * 4);
+      } else {
+        for (; x < cw; ++x) {
+          const std::uint32_t p = src[x];
+          row[x] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
+        }
+      }
+      x = cw;
+    }
+    std::fill(row + x, row + W, 0xFF000000u);  // black where the picture does not reach
+  }
+  compose_inset(dst, stride);
+  if (hook_) hook_->compose(dst, stride, W, H);
+  shm_picture_->put();
+}
+
+void Window::compose_inset(std::uint8_t* rows, std::size_t stride) const {
+  if (inset_.empty() || inset_x_ < 0 || inset_y_ < 0) return;
+  const int W = int(extent_.width), H = int(extent_.height);
+  const int x1 = std::min(inset_x_ + inset_w_, W), y1 = std::min(inset_y_ + inset_h_, H);
+  for (int y = inset_y_; y < y1; ++y) {
+    auto* row = reinterpret_cast<std::uint32_t*>(rows + std::size_t(y) * stride);
+    const std::uint32_t* src = inset_.data() + std::size_t(y - inset_y_) * std::size_t(inset_w_);
+    for (int x = inset_x_; x < x1; ++x) {
+      const std::uint32_t p = src[x - inset_x_];
+      row[x] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
+    }
+  }
 }
 
 void Window::put_offscreen(VkSubmitInfo& si) {

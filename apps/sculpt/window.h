@@ -52,6 +52,13 @@ class FrameHook {
   /// Records the drawing into image `index`, which the picture's copy left in
   /// TRANSFER_DST_OPTIMAL; the image must end in swapchain_ready()'s final layout.
   virtual void record(VkCommandBuffer cmd, std::uint32_t index) = 0;
+  /// The shared-memory path, where the host composes each frame: records the hook's
+  /// drawing into a layer of its own when it changed since the last call (true: recorded;
+  /// the window submits it and waits before compose()); false: the last layer stands.
+  virtual bool record_layer(VkCommandBuffer) { return false; }
+  /// Blends that layer over the frame's rows (B, G, R, X bytes, `w` x `h`, `stride` bytes
+  /// apart) on the host.
+  virtual void compose(std::uint8_t* /*rows*/, std::size_t /*stride*/, int /*w*/, int /*h*/) {}
 };
 
 /// How frames reach the screen: kAuto = kShm on a CPU device (lavapipe) where it can be set
@@ -92,6 +99,14 @@ class Window {
   /// image, the host touches no pixel. The buffer must not change until the next present()
   /// (its copy is then done) or a later submission that waits for transfers.
   bool present(VkBuffer pixels, int w, int h);
+  /// The same from host memory: `px` (`w` x `h`, rows top to bottom; B, G, R, A from the
+  /// low byte where `bgra`, else R, G, B, A), e.g. a CPU device's mapped picture
+  /// (engine::RayCaster::mapped_image()). On the shared-memory path the host composes the
+  /// frame straight into the X segment (picture, inset, the hook's layer: no device copy, and
+  /// the hook draws only when its drawing changed); elsewhere as present(rgba).
+  bool present(const std::uint32_t* px, int w, int h, bool bgra);
+  /// Frames go through X shared memory (present(px, ...) composes them on the host).
+  bool host_composes() const { return shm_; }
   /// A picture (RGBA as present()'s, `w` x `h`) copied over every presented one at pixel
   /// (x, y) from the next present() on, until set again (the slice views); an empty one:
   /// none. The part outside the swapchain's extent is cut.
@@ -130,6 +145,10 @@ class Window {
   void destroy_offscreen();
   /// The shared-memory path: waits for the frame's copy and draws, then hands its rows to X.
   void put_offscreen(VkSubmitInfo& si);
+  /// The shared-memory path composing on the host (present(px, ...)).
+  void compose_and_put(const std::uint32_t* px, int w, int h, bool bgra);
+  /// The inset's pixels over the host's rows (B, G, R, X).
+  void compose_inset(std::uint8_t* rows, std::size_t stride) const;
   /// Waits for the last copy, remakes a stale swapchain, acquires an image: false if none.
   bool acquire(std::uint32_t& index);
   /// Copies `w` x `h` pixels of `src` into image `index` (the hook draws over it) and presents it.

@@ -1766,9 +1766,12 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
       << vol.voxels.size() * sizeof(float) / (1024 * 1024) << " MiB of floats\n";
   print_servo(st);
 #if ISOTOUCH_WITH_IMGUI
-  if (panels)
+  if (panels) {
     log << "stats    overlay " << Overlay::version() << " drawn in " << panels->frames_drawn() << " of " << frame
-        << " frames, built anew in " << panels->frames_built() << "\n";
+        << " frames, built anew in " << panels->frames_built();
+    if (panels->layers_drawn() > 0) log << ", their layer drawn anew in " << panels->layers_drawn();
+    log << "\n";
+  }
 #endif
 }
 

@@ -80,7 +80,8 @@ class Overlay final : public FrameHook {
   bool wants_mouse() const;
   /// A text field (Ctrl+click on a slider) has the keyboard.
   bool wants_keyboard() const;
-  /// Frames whose panels were drawn into the swapchain image.
+  /// Frames that showed the panels: drawn into the swapchain image, or their layer blended
+  /// over the frame (the shared-memory path).
   long frames_drawn() const { return frames_drawn_; }
 
   // GLFW events the app's callbacks forward.

@@ -310,37 +310,28 @@ bool Window::acquire(std::uint32_t& index) {
   return true;
 }
 
-bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) {
-  if (shm_) return present(rgba.data(), w, h, false);
+bool Window::present(const std::vector<std::uint32_t>& rgba, int w, int h) { return present(rgba.data(), w, h, false); }
+
+bool Window::present(const std::uint32_t* px, int w, int h, bool bgra) {
   std::uint32_t index = 0;
   if (!acquire(index)) return false;
+  if (shm_) {
+    compose_and_put(px, w, h, bgra);
+    return true;
+  }
   const VkDeviceSize bytes = VkDeviceSize(w) * VkDeviceSize(h) * 4;
   if (!staging_ || staging_.size() < bytes)
     staging_ = engine::make_buffer_or_throw(ctx_, bytes, engine::MemoryIntent::Upload, "window picture staging");
   auto* dst = static_cast<std::uint32_t*>(staging_.mapped());
-  if (swizzle_) {
+  if (bgra != swizzle_) {
     for (std::size_t i = 0, e = std::size_t(w) * std::size_t(h); i < e; ++i) {
-      const std::uint32_t p = rgba[i];
+      const std::uint32_t p = px[i];
       dst[i] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
     }
   } else {
-    std::memcpy(dst, rgba.data(), bytes);
+    std::memcpy(dst, px, bytes);
   }
   copy_and_present(staging_.handle(), w, h, index);
-  return true;
-}
-
-bool Window::present(const std::uint32_t* px, int w, int h, bool bgra) {
-  if (!shm_) {
-    const std::size_t n = std::size_t(w) * std::size_t(h);
-    std::vector<std::uint32_t> rgba(px, px + n);
-    if (bgra)
-      for (std::uint32_t& p : rgba) p = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
-    return present(rgba, w, h);
-  }
-  std::uint32_t index = 0;
-  if (!acquire(index)) return false;
-  compose_and_put(px, w, h, bgra);
   return true;
 }
 

@@ -169,44 +169,12 @@ std::string Overlay::make_descriptor_pool() {
 
 std::string Overlay::make_render_pass(VkFormat format, VkImageLayout final_layout) {
   // Draws over the picture (LOAD); record() moves the image to COLOR_ATTACHMENT_OPTIMAL first.
-  VkAttachmentDescription att{};
-  att.format = format;
-  att.samples = VK_SAMPLE_COUNT_1_BIT;
-  att.loadOp = VK_ATTACHMENT_LOAD_OP_LOAD;
-  att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-  att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-  att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-  att.initialLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
-  att.finalLayout = final_layout;
-  VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-  VkSubpassDescription sub{};
-  sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-  sub.colorAttachmentCount = 1;
-  sub.pColorAttachments = &ref;
-  VkSubpassDependency deps[2]{};
-  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
-  deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  // Out: the drawing and the final layout transition before the COLOR_ATTACHMENT_OUTPUT
-  // stage of what follows (the window's barrier for the host's read, or the present).
-  deps[1].srcSubpass = 0;
-  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
-  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[1].dstAccessMask = 0;
-  VkRenderPassCreateInfo ci{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
-  ci.attachmentCount = 1;
-  ci.pAttachments = &att;
-  ci.subpassCount = 1;
-  ci.pSubpasses = &sub;
-  ci.dependencyCount = 2;
-  ci.pDependencies = deps;
-  if (const VkResult r = vkCreateRenderPass(ctx_.device(), &ci, nullptr, &pass_); r != VK_SUCCESS)
+  if (const VkResult r = make_panels_pass(ctx_.device(), format, VK_ATTACHMENT_LOAD_OP_LOAD,
+                                          VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, final_layout, &pass_);
+      r != VK_SUCCESS) {
+    pass_ = VK_NULL_HANDLE;
     return std::string("cannot create the overlay's render pass: ") + engine::vk_result_name(r);
+  }
   format_ = format;
   final_layout_ = final_layout;
   return "";

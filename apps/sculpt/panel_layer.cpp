@@ -68,6 +68,48 @@ void compose_premultiplied(std::uint8_t* rows, std::size_t stride, const std::ui
   }
 }
 
+VkResult make_panels_pass(VkDevice device, VkFormat format, VkAttachmentLoadOp load, VkImageLayout initial_layout,
+                          VkImageLayout final_layout, VkRenderPass* pass) {
+  VkAttachmentDescription att{};
+  att.format = format;
+  att.samples = VK_SAMPLE_COUNT_1_BIT;
+  att.loadOp = load;
+  att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+  att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+  att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+  att.initialLayout = initial_layout;
+  att.finalLayout = final_layout;
+  VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+  VkSubpassDescription sub{};
+  sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+  sub.colorAttachmentCount = 1;
+  sub.pColorAttachments = &ref;
+  VkSubpassDependency deps[2]{};
+  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
+  deps[0].dstSubpass = 0;
+  deps[0].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[0].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  // Out: the drawing and the final layout transition before the COLOR_ATTACHMENT_OUTPUT
+  // stage of what follows (the window's barrier for the host's read, the present, or the
+  // layer's own barrier).
+  deps[1].srcSubpass = 0;
+  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
+  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+  deps[1].dstAccessMask = 0;
+  VkRenderPassCreateInfo ci{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
+  ci.attachmentCount = 1;
+  ci.pAttachments = &att;
+  ci.subpassCount = 1;
+  ci.pSubpasses = &sub;
+  ci.dependencyCount = 2;
+  ci.pDependencies = deps;
+  return vkCreateRenderPass(device, &ci, nullptr, pass);
+}
+
 engine::Result<std::unique_ptr<PanelLayer>> PanelLayer::create(engine::VulkanContext& ctx, VkFormat format,
                                                                VkExtent2D extent) {
   using R = engine::Result<std::unique_ptr<PanelLayer>>;
@@ -124,45 +166,9 @@ engine::Result<std::unique_ptr<PanelLayer>> PanelLayer::create(engine::VulkanCon
   }
 
   // Cleared at the start; GENERAL at the end, for the host's read (end()'s barrier).
-  VkAttachmentDescription att{};
-  att.format = format;
-  att.samples = VK_SAMPLE_COUNT_1_BIT;
-  att.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
-  att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-  att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-  att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-  att.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-  att.finalLayout = VK_IMAGE_LAYOUT_GENERAL;
-  VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-  VkSubpassDescription subpass{};
-  subpass.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-  subpass.colorAttachmentCount = 1;
-  subpass.pColorAttachments = &ref;
-  // The dependencies of the overlay's own pass (overlay.cpp), so that the two passes are
-  // compatible (its pipeline draws in both). In: earlier colour writes; out: the writes
-  // before end()'s barrier (the host read the last drawing before this submission: the
-  // window waits for it).
-  VkSubpassDependency deps[2]{};
-  deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;
-  deps[0].dstSubpass = 0;
-  deps[0].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[0].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[0].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_READ_BIT | VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[1].srcSubpass = 0;
-  deps[1].dstSubpass = VK_SUBPASS_EXTERNAL;
-  deps[1].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
-  deps[1].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
-  deps[1].dstAccessMask = 0;
-  VkRenderPassCreateInfo rp{VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO};
-  rp.attachmentCount = 1;
-  rp.pAttachments = &att;
-  rp.subpassCount = 1;
-  rp.pSubpasses = &subpass;
-  rp.dependencyCount = 2;
-  rp.pDependencies = deps;
-  if (const VkResult r = vkCreateRenderPass(dev, &rp, nullptr, &p->pass_); r != VK_SUCCESS) {
+  if (const VkResult r = make_panels_pass(dev, format, VK_ATTACHMENT_LOAD_OP_CLEAR, VK_IMAGE_LAYOUT_UNDEFINED,
+                                          VK_IMAGE_LAYOUT_GENERAL, &p->pass_);
+      r != VK_SUCCESS) {
     p->pass_ = VK_NULL_HANDLE;
     return R::fail(std::string("cannot create the panels' layer pass: ") + engine::vk_result_name(r));
   }

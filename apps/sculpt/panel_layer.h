@@ -31,6 +31,13 @@ struct PixelRect {
 void compose_premultiplied(std::uint8_t* rows, std::size_t stride, const std::uint8_t* layer,
                            std::size_t layer_stride, int w, int h, const std::vector<PixelRect>& rects);
 
+/// The render pass the panels are drawn in: one colour attachment of `format`, one subpass,
+/// the same dependencies in every form, so that ImGui's pipeline, made for one form, draws in
+/// all (render passes that differ only in load op and layouts are compatible). Over the
+/// picture: LOAD, from COLOR_ATTACHMENT_OPTIMAL; into the layer: CLEAR, from UNDEFINED.
+VkResult make_panels_pass(VkDevice device, VkFormat format, VkAttachmentLoadOp load, VkImageLayout initial_layout,
+                          VkImageLayout final_layout, VkRenderPass* pass);
+
 class PanelLayer {
  public:
   /// A layer of `extent` in `format` (the window's B8G8R8A8), with a render pass that clears

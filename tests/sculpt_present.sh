@@ -57,8 +57,12 @@ if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
   # At 800 x 600 the panels (at the left edge, a few hundred pixels wide) leave the right
   # quarter to the picture: the window differs from the picture, but not there.
   for p in shm swapchain; do
-    rc=$(size=800 run panels "" --present "$p" --no-slices)
+    rc=$(size=800 run panels "" --present "$p" --no-slices --stats)
     [ "$rc" = 0 ] || { cat "$out/panels.txt"; echo "FAIL: the panels' run (--present $p) exited $rc"; exit 1; }
+    if [ "$p" = shm ]; then  # the host composed the frames: the panels came from their layer
+      grep -q "^stats    overlay .*, their layer drawn anew in [1-9][0-9]*$" "$out/panels.txt" ||
+        { grep "^stats    overlay" "$out/panels.txt"; echo "FAIL: --present shm did not draw the panels' layer"; exit 1; }
+    fi
     r=$(python3 -c '
 import sys
 sys.path.insert(0, sys.argv[3])

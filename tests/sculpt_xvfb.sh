@@ -10,8 +10,8 @@
 # window from closing.
 # With SCULPT_EXPECT_OVERLAY=1 (a build with Dear ImGui): the panels were set up and drawn
 # (the screenshots are the ray caster's picture, without them), built anew in fewer frames
-# than they were drawn in, and through X shared memory their layer drawn anew only after a
-# build; --no-overlay draws none.
+# than they were drawn in, and through X shared memory their layer drawn anew in fewer
+# frames than showed it; --no-overlay draws none.
 # Usage: sculpt_xvfb.sh SCULPT_BIN ISOTOUCH_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 iso=$2 src=$3
@@ -54,10 +54,11 @@ if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
   read -r drawn built layer < <(sed -n 's/^stats    overlay Dear ImGui [0-9.]* drawn in \([0-9]*\) of [0-9]* frames, built anew in \([0-9]*\)\(, their layer drawn anew in \([0-9]*\)\)\{0,1\}$/\1 \2 \4/p' "$out/log.txt")
   [ -n "${built:-}" ] && [ "$built" -gt 0 ] && [ "$built" -lt "$drawn" ] ||
     { echo "FAIL: the panels were built anew in ${built:-?} frames, not fewer than the ${drawn:-?} that drew them (a build every frame)"; exit 1; }
-  # Through X shared memory (the default here) the panels' layer is drawn only after a build.
+  # Through X shared memory (the default here) the panels' layer is drawn anew only when the
+  # drawing changed (a build, a remade window), not in every frame that shows it.
   if grep -q "present mode X11 shared memory$" "$out/log.txt"; then
-    [ -n "${layer:-}" ] && [ "$layer" -gt 0 ] && [ "$layer" -le "$built" ] ||
-      { echo "FAIL: the panels' layer was drawn anew in ${layer:-no} frames, against ${built} builds"; exit 1; }
+    [ -n "${layer:-}" ] && [ "$layer" -gt 0 ] && [ "$layer" -lt "$drawn" ] ||
+      { echo "FAIL: the panels' layer was drawn anew in ${layer:-no} frames of the ${drawn} that showed it"; exit 1; }
   fi
 fi
 # Ctrl+S and Ctrl+E after the carve: the edited volume as .vdb, its isosurface as STL.

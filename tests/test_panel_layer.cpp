@@ -22,7 +22,10 @@ std::uint8_t expected(int d, int l, int a) {
 TEST(PanelLayer, BlendIsLayerPlusPictureTimesOneMinusAlpha) {
   // One row per alpha; per column a picture byte d and a layer byte l <= a + 1.
   const int w = 256 * 8, h = 256;
-  std::vector<std::uint8_t> rows(std::size_t(w) * h * 4), layer(rows.size());
+  std::vector<std::uint32_t> rows32(std::size_t(w) * h), layer32(rows32.size());
+  auto* rows = reinterpret_cast<std::uint8_t*>(rows32.data());
+  auto* layer = reinterpret_cast<std::uint8_t*>(layer32.data());
+  const std::size_t bytes = rows32.size() * 4;
   for (int a = 0; a < h; ++a)
     for (int x = 0; x < w; ++x) {
       std::uint8_t* p = &rows[(std::size_t(a) * w + x) * 4];
@@ -35,10 +38,10 @@ TEST(PanelLayer, BlendIsLayerPlusPictureTimesOneMinusAlpha) {
       p[3] = 255;
       q[3] = std::uint8_t(a);
     }
-  const std::vector<std::uint8_t> before = rows;
-  compose_premultiplied(rows.data(), std::size_t(w) * 4, layer.data(), std::size_t(w) * 4, w, h, {{0, 0, w, h}});
+  const std::vector<std::uint8_t> before(rows, rows + bytes);
+  compose_premultiplied(rows, std::size_t(w) * 4, layer, std::size_t(w) * 4, w, h, {{0, 0, w, h}});
   long wrong = 0;
-  for (std::size_t i = 0; i < rows.size(); ++i) {
+  for (std::size_t i = 0; i < bytes; ++i) {
     const int a = layer[i | 3u];
     const std::uint8_t want = (i & 3u) == 3u ? 255 : expected(before[i], layer[i], a);
     wrong += rows[i] != want;
@@ -46,16 +49,35 @@ TEST(PanelLayer, BlendIsLayerPlusPictureTimesOneMinusAlpha) {
   EXPECT_EQ(wrong, 0) << "bytes off the formula";
 }
 
+TEST(PanelLayer, RowsAndLayerKeepTheirOwnStrides) {
+  // Rows of 5 pixels padded to 7 and 9 pixels: a picture row at the layer's stride, or the
+  // other way round, reads the wrong pixels.
+  const int w = 5, h = 4, rs = 7, ls = 9;
+  std::vector<std::uint32_t> rows(std::size_t(rs) * h), layer(std::size_t(ls) * h);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < rs; ++x) rows[std::size_t(y) * rs + x] = 0xFF000000u | std::uint32_t(10 * y + x);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < ls; ++x) layer[std::size_t(y) * ls + x] = std::uint32_t(100 + 10 * y + x) << 8;  // G only, alpha 0
+  const std::vector<std::uint32_t> before = rows;
+  compose_premultiplied(reinterpret_cast<std::uint8_t*>(rows.data()), std::size_t(rs) * 4,
+                        reinterpret_cast<const std::uint8_t*>(layer.data()), std::size_t(ls) * 4, w, h, {{0, 0, w, h}});
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < rs; ++x) {
+      const std::uint32_t b = before[std::size_t(y) * rs + x];
+      const std::uint32_t want = x < w ? b | (std::uint32_t(100 + 10 * y + x) << 8) : b;  // alpha 0: picture + layer
+      EXPECT_EQ(rows[std::size_t(y) * rs + x], want) << "pixel (" << x << ", " << y << ")";
+    }
+}
+
 TEST(PanelLayer, OnlyTheRectanglesOnceAndCut) {
   const int w = 40, h = 30;
-  std::vector<std::uint8_t> rows(std::size_t(w) * h * 4, 200), layer(rows.size());
-  for (std::size_t i = 0; i < layer.size(); i += 4) {
-    layer[i] = layer[i + 1] = layer[i + 2] = 10;
-    layer[i + 3] = 128;
-  }
+  // Every byte 200 in the picture; the layer 10, 10, 10 at alpha 128.
+  std::vector<std::uint32_t> rows32(std::size_t(w) * h, 0xC8C8C8C8u), layer32(rows32.size(), 0x800A0A0Au);
+  auto* rows = reinterpret_cast<std::uint8_t*>(rows32.data());
+  const auto* layer = reinterpret_cast<const std::uint8_t*>(layer32.data());
   // Two overlapping rectangles and one partly outside the picture.
   const std::vector<PixelRect> rects{{2, 3, 12, 10}, {8, 5, 20, 15}, {35, 25, 50, 40}};
-  compose_premultiplied(rows.data(), std::size_t(w) * 4, layer.data(), std::size_t(w) * 4, w, h, rects);
+  compose_premultiplied(rows, std::size_t(w) * 4, layer, std::size_t(w) * 4, w, h, rects);
   const std::uint8_t once = expected(200, 10, 128);
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {

@@ -234,6 +234,7 @@ std::string Overlay::swapchain_ready(VkFormat format, VkExtent2D extent, const s
     if (!layer) return layer.error;
     layer_ = std::move(*layer.value);
     layer_build_ = -1;
+    layer_hash_.reset();
   }
   for (VkImage image : images) {
     VkImageViewCreateInfo vi{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
@@ -295,28 +296,75 @@ void Overlay::record(VkCommandBuffer cmd, std::uint32_t index) {
   vkCmdEndRenderPass(cmd);
 }
 
+namespace {
+
+/// What ImGui's draw data would draw (vertices, indices, commands, the display), hashed: an
+/// unchanged drawing need not be drawn again (a change is built three times: ImGui lays a
+/// window out from its previous frame, so the builds after the first often draw the same).
+std::uint64_t drawing_hash(const ImDrawData& dd) {
+  std::uint64_t h = 1469598103934665603ull;
+  auto mix = [&h](const void* p, std::size_t n) {
+    const auto* b = static_cast<const unsigned char*>(p);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  };
+  const float display[6] = {dd.DisplayPos.x, dd.DisplayPos.y, dd.DisplaySize.x, dd.DisplaySize.y,
+                            dd.FramebufferScale.x, dd.FramebufferScale.y};
+  mix(display, sizeof display);
+  for (int i = 0; i < dd.CmdListsCount; ++i) {
+    const ImDrawList& l = *dd.CmdLists[i];
+    mix(l.VtxBuffer.Data, std::size_t(l.VtxBuffer.Size) * sizeof(ImDrawVert));
+    mix(l.IdxBuffer.Data, std::size_t(l.IdxBuffer.Size) * sizeof(ImDrawIdx));
+    for (const ImDrawCmd& c : l.CmdBuffer) {
+      const float clip[4] = {c.ClipRect.x, c.ClipRect.y, c.ClipRect.z, c.ClipRect.w};
+      const std::uint64_t ids[4] = {std::uint64_t(reinterpret_cast<std::uintptr_t>(c.TextureId)), c.VtxOffset,
+                                    c.IdxOffset, c.ElemCount};
+      mix(clip, sizeof clip);
+      mix(ids, sizeof ids);
+    }
+  }
+  return h;
+}
+
+/// Per draw list (a panel), the box of its vertices in framebuffer pixels (its clip
+/// rectangles can be the whole display), a pixel wider on each side.
+std::vector<PixelRect> drawing_rects(const ImDrawData& dd) {
+  std::vector<PixelRect> rects;
+  const ImVec2 o = dd.DisplayPos, sc = dd.FramebufferScale;
+  for (int i = 0; i < dd.CmdListsCount; ++i) {
+    const ImVector<ImDrawVert>& v = dd.CmdLists[i]->VtxBuffer;
+    if (v.Size == 0) continue;
+    float x0 = v[0].pos.x, y0 = v[0].pos.y, x1 = x0, y1 = y0;
+    for (const ImDrawVert& q : v) {
+      x0 = std::min(x0, q.pos.x), y0 = std::min(y0, q.pos.y);
+      x1 = std::max(x1, q.pos.x), y1 = std::max(y1, q.pos.y);
+    }
+    rects.push_back({int(std::floor((x0 - o.x) * sc.x)) - 1, int(std::floor((y0 - o.y) * sc.y)) - 1,
+                     int(std::ceil((x1 - o.x) * sc.x)) + 1, int(std::ceil((y1 - o.y) * sc.y)) + 1});
+  }
+  return rects;
+}
+
+}  // namespace
+
 bool Overlay::record_layer(VkCommandBuffer cmd) {
   if (!layer_ || layer_build_ == frames_built_) return false;
   layer_build_ = frames_built_;
-  // Where the panels lie: per draw list (a panel), the box of its vertices (framebuffer
-  // pixels; the display's origin is (0, 0) and its scale 1 here). Its clip rectangles can
-  // be the whole display.
-  std::vector<PixelRect> rects;
   ImDrawData* dd = ImGui::GetDrawData();
-  layer_->begin(cmd);
-  if (dd && dd->TotalVtxCount > 0) {
-    ImGui_ImplVulkan_RenderDrawData(dd, cmd);
-    for (int i = 0; i < dd->CmdListsCount; ++i) {
-      const ImVector<ImDrawVert>& v = dd->CmdLists[i]->VtxBuffer;
-      if (v.Size == 0) continue;
-      float x0 = v[0].pos.x, y0 = v[0].pos.y, x1 = x0, y1 = y0;
-      for (const ImDrawVert& q : v) {
-        x0 = std::min(x0, q.pos.x), y0 = std::min(y0, q.pos.y);
-        x1 = std::max(x1, q.pos.x), y1 = std::max(y1, q.pos.y);
-      }
-      rects.push_back({int(std::floor(x0)) - 1, int(std::floor(y0)) - 1, int(std::ceil(x1)) + 1, int(std::ceil(y1)) + 1});
-    }
+  // A drawing laid out for another size (the window was remade since the last build) waits
+  // for the next build, which the remake forces.
+  const bool fits = dd && dd->TotalVtxCount > 0 && std::lround(dd->DisplaySize.x * dd->FramebufferScale.x) == long(extent_.width) &&
+                    std::lround(dd->DisplaySize.y * dd->FramebufferScale.y) == long(extent_.height);
+  if (!fits) {
+    layer_->clear();
+    layer_hash_.reset();
+    return false;
   }
+  const std::uint64_t hash = drawing_hash(*dd);
+  if (layer_hash_ == hash) return false;  // the same drawing: the layer holds it
+  layer_hash_ = hash;
+  std::vector<PixelRect> rects = drawing_rects(*dd);
+  layer_->begin(cmd, rects);
+  ImGui_ImplVulkan_RenderDrawData(dd, cmd);
   layer_->end(cmd, std::move(rects));
   ++layers_drawn_;
   return true;

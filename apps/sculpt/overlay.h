@@ -124,6 +124,7 @@ class Overlay final : public FrameHook {
   long frames_drawn_ = 0;
   std::unique_ptr<PanelLayer> layer_;  // the shared-memory path's (swapchain_ready with GENERAL)
   long layer_build_ = -1;              // the build the layer holds (-1: none)
+  std::optional<std::uint64_t> layer_hash_;  // the drawing it holds (drawing_hash), none: nothing
   long layers_drawn_ = 0;
   // What the last build showed, and whether the user touched the panels since.
   struct Shown {

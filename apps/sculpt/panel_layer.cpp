@@ -199,12 +199,18 @@ PanelLayer::~PanelLayer() {
   }
 }
 
-void PanelLayer::begin(VkCommandBuffer cmd) {
+void PanelLayer::begin(VkCommandBuffer cmd, const std::vector<PixelRect>& rects) {
+  int x0 = int(extent_.width), y0 = int(extent_.height), x1 = 0, y1 = 0;
+  for (const PixelRect& r : rects) {
+    x0 = std::min(x0, std::max(r.x0, 0)), y0 = std::min(y0, std::max(r.y0, 0));
+    x1 = std::max(x1, std::min(r.x1, int(extent_.width))), y1 = std::max(y1, std::min(r.y1, int(extent_.height)));
+  }
+  if (x1 <= x0 || y1 <= y0) x0 = y0 = 0, x1 = y1 = 1;  // (an area of at least one pixel)
   VkClearValue clear{};  // transparent black: nothing drawn yet
   VkRenderPassBeginInfo rb{VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO};
   rb.renderPass = pass_;
   rb.framebuffer = framebuffer_;
-  rb.renderArea = {{0, 0}, extent_};
+  rb.renderArea = {{x0, y0}, {std::uint32_t(x1 - x0), std::uint32_t(y1 - y0)}};
   rb.clearValueCount = 1;
   rb.pClearValues = &clear;
   vkCmdBeginRenderPass(cmd, &rb, VK_SUBPASS_CONTENTS_INLINE);

@@ -49,14 +49,18 @@ class PanelLayer {
   PanelLayer(const PanelLayer&) = delete;
   PanelLayer& operator=(const PanelLayer&) = delete;
 
-  /// Begins the layer's render pass (cleared) in `cmd`; the caller draws, then end().
-  void begin(VkCommandBuffer cmd);
+  /// Begins the layer's render pass in `cmd` over the box of `rects` (cut to the layer),
+  /// cleared there; the caller draws within the rects, then end(). Outside them the layer
+  /// is never read.
+  void begin(VkCommandBuffer cmd, const std::vector<PixelRect>& rects);
   /// Ends it and makes the colour writes visible to the host. `rects`: where the drawing
   /// lies (compose() blends only there).
   void end(VkCommandBuffer cmd, std::vector<PixelRect> rects);
   /// Blends the layer over `rows` (B, G, R, X, `w` x `h`, `stride` bytes apart) after the
   /// submission of begin()..end() completed. False when nothing is drawn in it.
   bool compose(std::uint8_t* rows, std::size_t stride, int w, int h) const;
+  /// Nothing drawn: compose() blends nothing until the next end().
+  void clear() { rects_.clear(); }
 
  private:
   explicit PanelLayer(engine::VulkanContext& ctx) : ctx_(ctx) {}

@@ -6,7 +6,8 @@
 # pixel, both ways (a swapped channel, a row pitch, a shifted row fails it); with the panels
 # (a build with Dear ImGui, SCULPT_EXPECT_OVERLAY=1) the window differs from the picture where
 # they are drawn, and the two ways agree within 1 per channel (the shared-memory path blends
-# the panels' layer on the host); --present shm on a display without MIT-SHM fails naming it, and auto falls
+# the panels' layer on the host); with the slice views the window holds the screenshot both
+# ways, their inset over the right of the picture only; --present shm on a display without MIT-SHM fails naming it, and auto falls
 # back to the swapchain saying why.
 # Usage: sculpt_present.sh SCULPT_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
@@ -53,6 +54,28 @@ for p in shm swapchain; do
   [ "$r" = equal ] || { echo "FAIL: --present $p: the window does not hold the picture: $r"; exit 1; }
   echo "--present $p: the X server's window holds the ray caster's picture pixel for pixel"
 done
+# The slice views' inset (their column at the window's right edge; in the screenshots too), no
+# panels: the window holds the screenshot pixel for pixel both ways, and the screenshot differs
+# from the run without them only on the right.
+for p in shm swapchain; do
+  rc=$(run "slices-$p" "" --present "$p" --no-overlay)
+  [ "$rc" = 0 ] || { cat "$out/slices-$p.txt"; echo "FAIL: the slice views' run (--present $p) exited $rc"; exit 1; }
+  r=$(compare "$out/slices-$p.png" "$out/slices-$p-window.png")
+  [ "$r" = equal ] || { echo "FAIL: --present $p with the slice views: the window does not hold the picture: $r"; exit 1; }
+done
+r=$(python3 -c '
+import sys
+sys.path.insert(0, sys.argv[3])
+from png_check import read_png
+w, h, a = read_png(sys.argv[1])
+_, _, b = read_png(sys.argv[2])
+diff = [i for i, (p, q) in enumerate(zip(a, b)) if p != q]
+print(len(diff), sum(1 for i in diff if i % w < w // 2))
+' "$out/shm.png" "$out/slices-shm.png" "$src/tests/sculpt")
+read -r nslice nleft <<< "$r"
+[ "$nslice" -gt 0 ] && [ "$nleft" = 0 ] ||
+  { echo "FAIL: the slice views changed $nslice pixels of the picture, $nleft in the left half (want some, none there)"; exit 1; }
+echo "the slice views' inset: the window holds it both ways ($nslice pixels over the picture's right side)"
 if [ "${SCULPT_EXPECT_OVERLAY:-0}" = 1 ]; then
   # At 800 x 600 the panels (at the left edge, a few hundred pixels wide) leave the right
   # quarter to the picture: the window differs from the picture, but not there.

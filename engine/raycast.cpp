@@ -491,8 +491,6 @@ void add_arrow(std::vector<gpu::RaycastPrim>& prims, const Vec3& from, const Vec
 // ---- GPU ---------------------------------------------------------------------------------
 
 namespace {
-/// A packed pixel with its lowest and third bytes swapped (RGBA <-> BGRA).
-std::uint32_t swap_red_blue(std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); }
 /// n pixels from device memory to RGBA: copied, or with red and blue swapped back.
 void copy_pixels(std::uint32_t* dst, const void* src, std::size_t n, bool bgra) {
   if (!bgra) {

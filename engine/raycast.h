@@ -207,6 +207,10 @@ RaycastFloor raycast_floor(VulkanContext& vk, int width, int height, std::uint32
 RaycastImage render_cpu(const RaycastField& field, const CameraView& view, const RaycastStyle& style, int width,
                         int height, const std::vector<gpu::RaycastPrim>& prims = {});
 
+/// A packed pixel with its lowest and third bytes swapped (RGBA <-> BGRA, the order
+/// RayCaster::set_bgra() selects).
+inline std::uint32_t swap_red_blue(std::uint32_t p) { return (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu); }
+
 /// The GPU ray caster: created once per field (values and brick ranges uploaded and kept
 /// resident), then render() any number of frames, from one thread at a time (a RayCaster
 /// owns one descriptor arena and one timer).

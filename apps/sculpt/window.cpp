@@ -16,6 +16,7 @@
 #include <cstring>
 
 #include "isotouch/engine/device_memory.h"
+#include "isotouch/engine/raycast.h"
 
 namespace isotouch::sculpt {
 
@@ -326,7 +327,7 @@ bool Window::present(const std::uint32_t* px, int w, int h, bool bgra) {
   if (bgra != swizzle_) {
     for (std::size_t i = 0, e = std::size_t(w) * std::size_t(h); i < e; ++i) {
       const std::uint32_t p = px[i];
-      dst[i] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
+      dst[i] = engine::swap_red_blue(p);
     }
   } else {
     std::memcpy(dst, px, bytes);
@@ -361,7 +362,7 @@ void Window::upload_inset() {
   auto* dst = static_cast<std::uint32_t*>(inset_staging_.mapped());
   for (std::size_t i = 0; i < inset_.size(); ++i) {
     const std::uint32_t p = inset_[i];
-    dst[i] = swizzle_ ? (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu) : p;
+    dst[i] = swizzle_ ? engine::swap_red_blue(p) : p;
   }
   inset_dirty_ = false;
 }
@@ -595,10 +596,7 @@ void Window::compose_and_put(const std::uint32_t* px, int w, int h, bool bgra) {
       if (bgra) {
         std::memcpy(row, src, std::size_t(cw) * 4);
       } else {
-        for (; x < cw; ++x) {
-          const std::uint32_t p = src[x];
-          row[x] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
-        }
+        for (; x < cw; ++x) row[x] = engine::swap_red_blue(src[x]);
       }
       x = cw;
     }
@@ -616,10 +614,7 @@ void Window::compose_inset(std::uint8_t* rows, std::size_t stride) const {
   for (int y = inset_y_; y < y1; ++y) {
     auto* row = reinterpret_cast<std::uint32_t*>(rows + std::size_t(y) * stride);
     const std::uint32_t* src = inset_.data() + std::size_t(y - inset_y_) * std::size_t(inset_w_);
-    for (int x = inset_x_; x < x1; ++x) {
-      const std::uint32_t p = src[x - inset_x_];
-      row[x] = (p & 0xFF00FF00u) | ((p & 0xFFu) << 16) | ((p >> 16) & 0xFFu);
-    }
+    for (int x = inset_x_; x < x1; ++x) row[x] = engine::swap_red_blue(src[x - inset_x_]);
   }
 }
 

@@ -238,6 +238,25 @@ struct LiveField::Impl {
   // Per-update scratch, by generation (no clearing).
   std::vector<std::uint32_t> work_mark, content_mark, dirty_mark;
   std::uint32_t gen = 0;
+  /// This update's boxes of voxels whose bits changed (lo x, y, z, hi x, y, z; one per changed
+  /// dirty brick, find_work): a brick's selection reads only its window, so one whose window
+  /// meets none of them keeps the selection it had (`candidate`, and its tile).
+  std::vector<std::array<int, 6>> changed_boxes;
+  /// Whether brick `id`'s selection window (select_brick's: the brick +- 1 + R voxels,
+  /// clamped to the grid) holds a voxel of `changed_boxes`.
+  bool window_changed(std::uint32_t id) const {
+    const auto b = core::brick_coords(id, nb);
+    for (const auto& box : changed_boxes) {
+      bool meets = true;
+      for (int a = 0; a < 3 && meets; ++a) {
+        const int lo = std::max(8 * b[std::size_t(a)] - 1 - plan.radius[std::size_t(a)], 0);
+        const int hi = std::min(8 * b[std::size_t(a)] + 8 + plan.radius[std::size_t(a)], grid.dims[std::size_t(a)] - 1);
+        meets = lo <= box[std::size_t(a) + 3] && box[std::size_t(a)] <= hi;
+      }
+      if (meets) return true;
+    }
+    return false;
+  }
   // The GPU recompute (live_gpu.h), null where not used (gpu_reason says why).
   std::unique_ptr<LiveGpuFilter> gpu;
   std::string gpu_reason = "no Vulkan context given";
@@ -460,6 +479,7 @@ void LiveField::Impl::find_work(const Volume& vol, const std::vector<std::uint32
       }
     if (hi[0] < 0) continue;  // listed, but no bit changed
     changed.push_back(d);
+    changed_boxes.push_back({lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]});
     // Content: brick c reads raw voxels [8c - 1 - R, 8c + 9 + R] (exact range over the
     // smoothed brick +- 1 voxel; samples up to the apron 8c + 8, whose gradient reads 8c + 9).
     int clo[3], chi[3];
@@ -553,6 +573,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
   std::vector<std::uint32_t> retiring;  // then: the slots the current arena's newest store uses
   try {
     // 1. What the edit can change, then the new state of those bricks.
+    m.changed_boxes.clear();
     m.find_work(vol, dirty, work, changed, raw_undo);
     std::sort(work.begin(), work.end());
     if (m.gpu) m.gpu->set_bricks(vol.voxels.data(), changed);  // the device's copy follows the volume
@@ -566,6 +587,16 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     std::vector<std::uint32_t> recompute;  // ascending (work is sorted)
     for (std::size_t w = 0; w < work.size(); ++w) {
       const std::uint32_t id = work[w];
+      if (!m.window_changed(id)) {
+        // Its selection is the last one (no voxel it reads changed): a brick that was no
+        // candidate keeps its tile; a candidate is recomputed only where its samples read a
+        // changed voxel. (select_brick here would give the same, at ~1000 voxel loads.)
+        if (m.candidate[id] && m.content_mark[id] == m.gen) {
+          todo[w] = Todo::kRecompute;
+          recompute.push_back(id);
+        }
+        continue;
+      }
       const sparse::BrickSelection sel = sparse::select_brick(m.grid, vol.voxels.data(), m.plan, m.opt.iso, id);
       if (std::uint8_t(sel.candidate) != m.candidate[id]) cand_changes.push_back({id, std::uint8_t(sel.candidate)});
       if (!sel.candidate) {

@@ -75,8 +75,10 @@ TEST(PanelLayer, OnlyTheRectanglesOnceAndCut) {
   std::vector<std::uint32_t> rows32(std::size_t(w) * h, 0xC8C8C8C8u), layer32(rows32.size(), 0x800A0A0Au);
   auto* rows = reinterpret_cast<std::uint8_t*>(rows32.data());
   const auto* layer = reinterpret_cast<const std::uint8_t*>(layer32.data());
-  // Two overlapping rectangles and one partly outside the picture.
-  const std::vector<PixelRect> rects{{2, 3, 12, 10}, {8, 5, 20, 15}, {35, 25, 50, 40}};
+  // Two overlapping rectangles and three partly outside the picture: past its right and
+  // bottom edges, before its left edge (a panel at the window's left edge: its box has a
+  // pixel of margin) and above its top.
+  const std::vector<PixelRect> rects{{2, 3, 12, 10}, {8, 5, 20, 15}, {35, 25, 50, 40}, {-5, 20, 4, 24}, {24, -3, 30, 2}};
   compose_premultiplied(rows, std::size_t(w) * 4, layer, std::size_t(w) * 4, w, h, rects);
   const std::uint8_t once = expected(200, 10, 128);
   for (int y = 0; y < h; ++y)

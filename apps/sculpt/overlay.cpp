@@ -350,13 +350,15 @@ bool Overlay::record_layer(VkCommandBuffer cmd) {
   if (!layer_ || layer_build_ == frames_built_) return false;
   layer_build_ = frames_built_;
   ImDrawData* dd = ImGui::GetDrawData();
-  // A drawing laid out for another size (the window was remade since the last build) waits
-  // for the next build, which the remake forces.
+  // A drawing laid out for another size (the window was remade since the last build, or
+  // ImGui's backend read a size the window's events have not reached yet) waits for the
+  // next build, asked for here: a remake forces one, a size that came and went does not.
   const bool fits = dd && dd->TotalVtxCount > 0 && std::lround(dd->DisplaySize.x * dd->FramebufferScale.x) == long(extent_.width) &&
                     std::lround(dd->DisplaySize.y * dd->FramebufferScale.y) == long(extent_.height);
   if (!fits) {
     layer_->clear();
     layer_hash_.reset();
+    shown_.reset();
     return false;
   }
   const std::uint64_t hash = drawing_hash(*dd);

@@ -656,6 +656,19 @@ TEST(BrickField, BadInputIsRefusedNamingTheField) {
   copy->table = good.bricks->table;
   copy->table[0] = 5;  // not a slot start
   EXPECT_FALSE(copy->seal(good.grid.dims));
+  const std::uint32_t slots = std::uint32_t(good.bricks->active_bricks());
+  ASSERT_GT(slots, 0u);
+  copy->table = good.bricks->table;
+  copy->table.back() = slots * std::uint32_t(core::kBrickSamples);  // a slot start past the last slot
+  EXPECT_FALSE(copy->seal(good.grid.dims));
+  copy->table.back() = (slots - 1) * std::uint32_t(core::kBrickSamples);  // the last slot: in range
+  EXPECT_TRUE(copy->seal(good.grid.dims));
+  ASSERT_FALSE(good.bricks->tiles.empty());
+  copy->table = good.bricks->table;
+  copy->table[copy->table.size() / 2] = core::BrickStore::kUniform | std::uint32_t(good.bricks->tiles.size());  // no such tile
+  EXPECT_FALSE(copy->seal(good.grid.dims));
+  copy->table[copy->table.size() / 2] = core::BrickStore::kUniform | std::uint32_t(good.bricks->tiles.size() - 1);
+  EXPECT_TRUE(copy->seal(good.grid.dims));
   // Compact formats refuse what they would move across an isovalue: fp16 beyond 65504
   // (saturation), unorm16 +-Inf (no code); fp32 stores both.
   ASSERT_FALSE(in.pool.empty());

@@ -214,6 +214,11 @@ class Sculptor {
   /// stroke of its own that is still the newest undo step (not one the memory limit
   /// dropped, nor one that changed nothing). Call it before any other edit.
   void roll_back_apply(const BrickBackup& before);
+  /// The same, with the bricks `ids` (at least the ones the last apply() touched) copied
+  /// back from `voxels`, a volume of the same grid (x fastest) that holds them as they were
+  /// before it (LiveField::published_voxels() while its update has not published): nothing
+  /// is saved before the brush, and nothing is allocated here.
+  void roll_back_apply(const std::vector<std::uint32_t>& ids, const float* voxels);
 
   const engine::Volume& volume() const { return vol_; }
   const EditHistory& history() const { return history_; }

@@ -67,6 +67,14 @@ void write_brick(Volume& vol, std::uint32_t id, const float* data) {
   });
 }
 
+void copy_brick(Volume& vol, std::uint32_t id, const float* from) {
+  check_volume(vol);
+  const BrickBox b = brick_box(vol.grid, id);
+  for_rows(vol.grid, b, [&](std::size_t v, std::size_t, std::size_t n) {
+    std::memcpy(vol.voxels.data() + v, from + v, n * sizeof(float));
+  });
+}
+
 EditHistory::EditHistory(double limit_mib) {
   if (!(limit_mib >= 0) || !std::isfinite(limit_mib))
     throw std::invalid_argument("EditHistory: field 'limit_mib' must be a finite number >= 0, got " +

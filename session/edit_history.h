@@ -43,6 +43,8 @@ std::size_t brick_total(const core::Grid& grid);
 std::vector<float> read_brick(const engine::Volume& vol, std::uint32_t id);
 /// Writes `data` (brick_box(id).voxels() floats, x fastest) into the brick.
 void write_brick(engine::Volume& vol, std::uint32_t id, const float* data);
+/// Copies brick `id` of `from` (a volume of vol's grid, x fastest) into vol, row by row.
+void copy_brick(engine::Volume& vol, std::uint32_t id, const float* from);
 
 /// Undo / redo history of strokes over one engine::Volume (CPU side).
 class EditHistory {

@@ -62,13 +62,14 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   EditOutcome o;
   if (e.kind == EditEvent::Kind::kBrush) check_storable(e.brush);
   session::Sculptor& sc = *impl_->sculptor;
-  // What a brush may change, kept until its snapshot is built: if that fails, the volume
-  // goes back to it, so that volume and snapshot never disagree.
-  session::Sculptor::BrickBackup before;
+  // What a brush may change: if its snapshot cannot be built, these bricks go back to the
+  // live field's published voxels (the volume as of its current snapshot, which a failed
+  // update leaves alone), so that volume and snapshot never disagree.
+  std::vector<std::uint32_t> touched;
   std::vector<std::uint32_t> changed;
   switch (e.kind) {
     case EditEvent::Kind::kBrush:
-      before = sc.save_bricks(session::touched_bricks(sc.volume().grid, e.brush));
+      touched = session::touched_bricks(sc.volume().grid, e.brush);
       o.brush = sc.apply(e.brush);
       changed = o.brush.dirty;
       break;
@@ -86,7 +87,7 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
       // LiveField::update publishes nothing when it throws: take the edit back. The
       // update's exception is the one that goes on.
       try {
-        if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(before);
+        if (e.kind == EditEvent::Kind::kBrush) sc.roll_back_apply(touched, impl_->live->published_voxels().data());
         else if (e.kind == EditEvent::Kind::kUndo) (void)sc.redo();
         else (void)sc.undo();
       } catch (...) {

@@ -802,6 +802,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
   return m.cur;
 }
 
+const std::vector<float>& LiveField::published_voxels() const { return impl_->shadow; }
 std::shared_ptr<const core::SampleField> LiveField::current() const { return impl_->cur; }
 const LiveFieldOptions& LiveField::options() const { return impl_->opt; }
 

@@ -126,6 +126,9 @@ class LiveField {
                                                   LiveUpdateStats* stats = nullptr);
   /// The newest snapshot.
   std::shared_ptr<const core::SampleField> current() const;
+  /// The raw voxels of the volume current() was computed from (the grid's, x fastest): an
+  /// update that throws leaves them as they were, so an edit can be taken back from them.
+  const std::vector<float>& published_voxels() const;
   const LiveFieldOptions& options() const;
   /// Bytes of sample memory held for all snapshots alive now (pool slots in use: 729 samples
   /// of 16 B (fp32) or 8 B (fp16, unorm16), + 32 B of decode parameters for unorm16, per slot).

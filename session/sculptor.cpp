@@ -104,6 +104,13 @@ void Sculptor::roll_back_apply(const BrickBackup& before) {
   last_own_stroke_ = 0;
 }
 
+void Sculptor::roll_back_apply(const std::vector<std::uint32_t>& ids, const float* voxels) {
+  for (std::uint32_t id : ids) copy_brick(vol_, id, voxels);
+  if (engine_) mark_stale(ids);
+  if (last_own_stroke_ != 0 && history_.newest_stroke_serial() == last_own_stroke_) history_.discard_newest_stroke();
+  last_own_stroke_ = 0;
+}
+
 std::vector<std::uint32_t> Sculptor::undo() { return history_.undo(vol_); }
 std::vector<std::uint32_t> Sculptor::redo() { return history_.redo(vol_); }
 

@@ -190,7 +190,7 @@ struct BrickStore {
     // modulo 2^32 is at most (2^32 - 1) / kBrickSamples, and then below slots *
     // kBrickSamples exactly when its slot is below slots.
     constexpr std::uint32_t kInv = [] {
-      std::uint32_t x = std::uint32_t(kBrickSamples);  // Newton: x = x (2 - k x), 5 bits -> 32
+      std::uint32_t x = std::uint32_t(kBrickSamples);  // Newton: x = x (2 - k x), 4 bits -> 64
       for (int i = 0; i < 4; ++i) x *= 2u - std::uint32_t(kBrickSamples) * x;
       return x;
     }();

@@ -70,7 +70,17 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   switch (e.kind) {
     case EditEvent::Kind::kBrush:
       touched = session::touched_bricks(sc.volume().grid, e.brush);
-      o.brush = sc.apply(e.brush);
+      try {
+        o.brush = sc.apply(e.brush);
+      } catch (...) {
+        // A brush that failed part-way (an allocation after it wrote a brick) is taken back
+        // the same way: the volume stays the published one.
+        try {
+          sc.roll_back_apply(touched, impl_->live->published_voxels().data());
+        } catch (...) {
+        }
+        throw;
+      }
       changed = o.brush.dirty;
       break;
     case EditEvent::Kind::kBeginStroke: sc.begin_stroke(); break;

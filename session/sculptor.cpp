@@ -22,6 +22,7 @@ Sculptor::Sculptor(Volume vol, VulkanContext* ctx, double history_limit_mib, std
     cpu_max_bricks_ = engine_->device_type() == "cpu" ? kCpuBrushMaxBricksOnCpuDevice : kCpuBrushMaxBricksOnGpu;
     const auto nb = core::brick_counts(vol_.grid);
     stale_mark_.assign(std::size_t(nb[0]) * std::size_t(nb[1]) * std::size_t(nb[2]), 0);
+    stale_.reserve(stale_mark_.size());  // every brick at most once: mark_stale never allocates
   }
 }
 Sculptor::~Sculptor() = default;
@@ -33,6 +34,7 @@ void Sculptor::begin_stroke() {
 void Sculptor::end_stroke() { history_.end_stroke(vol_); }
 
 BrushResult Sculptor::apply(const Brush& b) {
+  last_own_stroke_ = 0;  // a brush refused below pushed no stroke: a roll-back drops none
   if (std::string e = validate(b); !e.empty()) throw BrushError(e);
   const bool own = !history_.stroke_open();
   if (own) history_.begin_stroke();

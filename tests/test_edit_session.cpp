@@ -247,6 +247,26 @@ TEST(EditSession, UnstorableTargetIsRefusedBeforeTheVolumeChanges) {
   EXPECT_TRUE(s.apply(brush_event(b), nullptr).published);
 }
 
+// A brush refused by its own checks (here a radius of 0) changes nothing and takes no undo
+// step with it: the one before it is still there (a refused brush must not roll back the
+// previous brush's stroke).
+TEST(EditSession, ARefusedBrushLeavesThePreviousUndoStep) {
+  const Volume v = isotouch::engine::make_sphere({32, 32, 32}, 1e-3, 10);
+  EditSession s(Volume(v), nullptr, sphere_options());
+  ASSERT_TRUE(s.apply(brush_event(carve_at(v, {16, 16, 25}, 4e-3, 1e9)), nullptr).published);
+  const Volume after = s.volume();
+  const auto snap = s.current();
+  ASSERT_EQ(s.sculptor().history().undo_depth(), 1u);
+  Brush bad = carve_at(v, {16, 16, 20}, 4e-3, 1e9);
+  bad.radius_m = 0;
+  EXPECT_THROW(s.apply(brush_event(bad), nullptr), isotouch::session::BrushError);
+  EXPECT_EQ(std::memcmp(s.volume().voxels.data(), after.voxels.data(), v.voxels.size() * sizeof(float)), 0);
+  EXPECT_EQ(s.current(), snap);
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+  EXPECT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_EQ(std::memcmp(s.volume().voxels.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0);
+}
+
 // The edit log keeps at most log_limit() events (a long live session must not grow without
 // bound); the ones past it are counted, and every event is still applied.
 TEST(EditSession, TheEditLogIsBounded) {

@@ -1158,9 +1158,9 @@ void RayCaster::Impl::record_overlay(VkCommandBuffer cmd, const FramePlan& f, co
     push.y0 = r.y0;
     push.prim_count = prim_word;
     p.push(cmd, push);
-    const bool tiles = &p != &m.overlay;
-    const std::uint32_t gx = tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_X;
-    const std::uint32_t gy = tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_Y;
+    const bool in_tiles = &p != &m.overlay;
+    const std::uint32_t gx = in_tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_X;
+    const std::uint32_t gy = in_tiles ? ISOTOUCH_RAYCAST_TILE : ISOTOUCH_RAYCAST_WG_Y;
     vkCmdDispatch(cmd, (r.x1 - r.x0 + gx - 1) / gx, (r.y1 - r.y0 + gy - 1) / gy, 1);
   };
   const std::size_t n = lists.prims.size();

@@ -191,6 +191,30 @@ struct Rig {
     for (std::size_t i = 0; i < log.n.load(); ++i) k += log.force[i] > 0.3;
     return k;
   }
+  /// What a failed count needs to be understood: the servo's, the link's and the
+  /// emulator's counters, the ticks' statuses and the largest force sent.
+  std::string summary() const {
+    long by_status[8] = {};
+    double max_f = 0;
+    for (std::size_t i = 0; i < log.n.load(); ++i) {
+      ++by_status[std::size_t(log.status[i]) & 7u];
+      max_f = std::max(max_f, log.force[i]);
+    }
+    std::string s = "ticks " + std::to_string(log.n.load()) + " (by status:";
+    for (long c : by_status) s += " " + std::to_string(c);
+    s += "), max force " + std::to_string(max_f) + " N; servo: stale " + std::to_string(servo_counters.stale) +
+         ", disconnected " + std::to_string(servo_counters.disconnected) + ", fault " +
+         std::to_string(servo_counters.fault) + ", refused " + std::to_string(servo_counters.refused) + ", ramps " +
+         std::to_string(servo_counters.ramps) + ", late restarts " + std::to_string(servo_counters.late_restarts) +
+         "; link: reports " + std::to_string(link.reports) + ", garbage " + std::to_string(link.garbage) +
+         ", writes " + std::to_string(link.writes) + ", busy reads " + std::to_string(link.busy_reads) +
+         ", stalls " + std::to_string(link.stalls) + ", watchdog " + std::to_string(link.watchdog_trips) +
+         "; emulator: sent " + std::to_string(stats.reports_sent) + ", received " +
+         std::to_string(stats.outputs_received) + ", max force " + std::to_string(stats.max_force_n) +
+         " N, watchdog trips " + std::to_string(stats.watchdog_trips) + ", connections " +
+         std::to_string(stats.connections);
+    return s;
+  }
   /// The first report on the wire at or after `t_ns` with enable cleared (wire.size(): none).
   std::size_t first_disabled_from(std::int64_t t_ns) const {
     std::size_t i = 0;
@@ -214,7 +238,7 @@ struct Rig {
 TEST(DeviceEmu, TheHandPressesAndTheForceFlowsBothWays) {
   Rig rig;
   rig.run(0.8);  // 150 forced ticks even after a servo that starts 400 ms late (TSan on a loaded machine: 250 ms seen)
-  EXPECT_GT(rig.forced_ticks(), 150);                         // the wall pushed back
+  EXPECT_GT(rig.forced_ticks(), 150) << rig.summary();  // the wall pushed back
   // Forces reached the device: most ticks' outputs arrived (relative to the ticks the servo
   // ran, which a loaded machine or a sanitizer build makes fewer than 400 in 0.4 s).
   EXPECT_GT(rig.stats.outputs_received, 150);
@@ -282,7 +306,7 @@ TEST(DeviceEmu, GarbageIsCountedAndNamedWithoutACrash) {
   rig.run(0.7);
   EXPECT_GT(rig.link.garbage, 15);
   EXPECT_NE(rig.last_refusal.find("refused input report"), std::string::npos) << rig.last_refusal;
-  EXPECT_GT(rig.forced_ticks(), 100);  // the good reports kept the force going
+  EXPECT_GT(rig.forced_ticks(), 100) << rig.summary();  // the good reports kept the force going
 }
 
 TEST(DeviceEmu, ReconnectionRampsTheForceIn) {
@@ -328,7 +352,7 @@ TEST(DeviceEmu, SequenceFaultsAreCounted) {
   EXPECT_GT(rig.link.gaps, 5);
   EXPECT_GT(rig.link.duplicates, 5);
   EXPECT_GT(rig.link.reordered, 5);
-  EXPECT_GT(rig.forced_ticks(), 200);
+  EXPECT_GT(rig.forced_ticks(), 200) << rig.summary();
 }
 
 TEST(DeviceEmu, ListenRefusesAnythingButASocketAtItsPathAndReplacesAStaleSocket) {

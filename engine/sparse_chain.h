@@ -5,11 +5,13 @@
 // against; the owner may add members but keeps these names and meanings.
 #pragma once
 #include "isotouch/engine/core_names.h"
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "isotouch/core/brick_field.h"
@@ -121,6 +123,13 @@ struct BrickSelection {
 };
 BrickSelection select_brick(const core::Grid& grid, const float* voxels, const Plan& plan,
                             const core::Isosurface& iso, std::uint32_t id);
+
+/// The voxels select_brick() reads for brick index `b` along an axis of `n` voxels with
+/// filter radius `r` (Plan::radius): [8b - 1 - r, 8b + 8 + r] clipped to [0, n - 1],
+/// both ends included (index frame).
+inline std::pair<int, int> brick_window(int b, int r, int n) {
+  return {std::max(8 * b - 1 - r, 0), std::min(8 * b + 8 + r, n - 1)};
+}
 
 /// Upper bound on the loop back-edges sparse_brick.comp executes for one candidate brick
 /// of `plan` (interior brick, every loop counted with its exit test). llvmpipe / lavapipe

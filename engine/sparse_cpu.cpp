@@ -271,8 +271,6 @@ void fold_rows_z(const float* row0, std::size_t slice, int za, int zb, std::size
   }
 }
 
-/// The window of brick index b along an axis of n voxels: [8b - 1 - r, 8b + 8 + r] clipped.
-std::pair<int, int> window(int b, int r, int n) { return {std::max(8 * b - 1 - r, 0), std::min(8 * b + 8 + r, n - 1)}; }
 }  // namespace
 
 Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, const core::Isosurface& iso,
@@ -300,7 +298,7 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
       std::fill(ylo.begin(), ylo.end(), kInf);
       std::fill(yhi.begin(), yhi.end(), -kInf);
       std::fill(ynan.begin(), ynan.end(), 0.0f);
-      const auto [za, zb] = window(int(bz), plan.radius[2], nz);
+      const auto [za, zb] = brick_window(int(bz), plan.radius[2], nz);
       // The layer's own slices copied whole (sequential writes; its rows are then in cache
       // for the folds below).
       const std::size_t own0 = 8 * bz, own1 = std::min<std::size_t>(8 * bz + 8, std::size_t(nz));
@@ -325,7 +323,7 @@ Selection select(const core::Grid& grid, const float* voxels, const Plan& plan, 
         const float *yl = ylo.data() + std::size_t(by) * sx, *yh = yhi.data() + std::size_t(by) * sx,
                     *yn = ynan.data() + std::size_t(by) * sx;
         for (int bx = 0; bx < nb[0]; ++bx) {
-          const auto [xa, xb] = window(bx, plan.radius[0], nx);
+          const auto [xa, xb] = brick_window(bx, plan.radius[0], nx);
           Fold f;
           for (int x = xa; x <= xb; ++x) {
             f.lo = yl[x] < f.lo ? yl[x] : f.lo;
@@ -386,9 +384,9 @@ std::vector<CandidateRange> candidate_ranges(const core::Grid& grid, const float
   parallel_for(candidates.size(), threads, 64, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
       const auto b = core::brick_coords(candidates[c], nb);
-      const auto [xa, xb] = window(b[0], 0, nx);
-      const auto [ya, yb] = window(b[1], 0, ny);
-      const auto [za, zb] = window(b[2], 0, nz);
+      const auto [xa, xb] = brick_window(b[0], 0, nx);
+      const auto [ya, yb] = brick_window(b[1], 0, ny);
+      const auto [za, zb] = brick_window(b[2], 0, nz);
       CandidateRange r{kInf, -kInf, false};
       if (xb - xa + 1 == 10) {
         r = box_range10(f, sx, slice, xa, ya, yb, za, zb);
@@ -409,9 +407,9 @@ BrickSelection select_brick(const core::Grid& grid, const float* voxels, const P
                             const core::Isosurface& iso, std::uint32_t id) {
   const auto b = core::brick_coords(id, core::brick_counts(grid));
   const int nx = grid.dims[0], ny = grid.dims[1];
-  const auto [x0, x1] = window(b[0], plan.radius[0], nx);
-  const auto [y0, y1] = window(b[1], plan.radius[1], ny);
-  const auto [z0, z1] = window(b[2], plan.radius[2], grid.dims[2]);
+  const auto [x0, x1] = brick_window(b[0], plan.radius[0], nx);
+  const auto [y0, y1] = brick_window(b[1], plan.radius[1], ny);
+  const auto [z0, z1] = brick_window(b[2], plan.radius[2], grid.dims[2]);
   // 4 voxels at a time; a row's last 4 overlap the ones before (min, max and the NaN flag
   // do not depend on the order or on seeing a voxel twice; -0 / +0 are made +0 below).
   typedef float v4 __attribute__((vector_size(16)));

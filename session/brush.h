@@ -201,23 +201,12 @@ class Sculptor {
   std::vector<std::uint32_t> undo();
   std::vector<std::uint32_t> redo();
 
-  /// The content of some bricks, for rolling an application back.
-  struct BrickBackup {
-    std::vector<std::uint32_t> ids;
-    std::vector<std::vector<float>> data;  ///< read_brick() of each id
-  };
-  BrickBackup save_bricks(const std::vector<std::uint32_t>& ids) const;
-  /// Writes `b` back into the volume (and the GPU copy): the bricks are as when saved.
-  void restore_bricks(const BrickBackup& b);
-  /// Rolls back the last apply(), given what save_bricks() held of its touched bricks
-  /// before it: the voxels as before, and the undo step it pushed forgotten when it was a
-  /// stroke of its own that is still the newest undo step (not one the memory limit
-  /// dropped, nor one that changed nothing). Call it before any other edit.
-  void roll_back_apply(const BrickBackup& before);
-  /// The same, with the bricks `ids` (at least the ones the last apply() touched) copied
+  /// Rolls back the last apply(): the bricks `ids` (at least the ones it touched) copied
   /// back from `voxels`, a volume of the same grid (x fastest) that holds them as they were
-  /// before it (LiveField::published_voxels() while its update has not published): nothing
-  /// is saved before the brush, and nothing is allocated here.
+  /// before it (LiveField::published_voxels() while its update has not published), and the
+  /// undo step it pushed forgotten when it was a stroke of its own that is still the newest
+  /// undo step (not one the memory limit dropped, nor one that changed nothing). Call it
+  /// before any other edit. Nothing is saved before the brush, and nothing is allocated here.
   void roll_back_apply(const std::vector<std::uint32_t>& ids, const float* voxels);
 
   const engine::Volume& volume() const { return vol_; }

@@ -43,6 +43,7 @@ struct EditSession::Impl {
   std::size_t log_limit = std::size_t(1) << 20;
   std::size_t log_dropped = 0;
   std::function<void()> update_fault;
+  std::function<void()> brush_fault;
 };
 
 EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
@@ -72,6 +73,7 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
       touched = session::touched_bricks(sc.volume().grid, e.brush);
       try {
         o.brush = sc.apply(e.brush);
+        if (impl_->brush_fault) impl_->brush_fault();
       } catch (...) {
         // A brush that failed part-way (an allocation after it wrote a brick) is taken back
         // the same way: the volume stays the published one.
@@ -114,6 +116,7 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
 }
 
 void EditSession::set_update_fault_for_test(std::function<void()> fault) { impl_->update_fault = std::move(fault); }
+void EditSession::set_brush_fault_for_test(std::function<void()> fault) { impl_->brush_fault = std::move(fault); }
 
 std::shared_ptr<const core::SampleField> EditSession::current() const { return impl_->live->current(); }
 const engine::Volume& EditSession::volume() const { return impl_->sculptor->volume(); }

@@ -65,6 +65,10 @@ class EditSession {
   /// Tests only: `fault` runs just before each snapshot update inside apply(); what it
   /// throws is handled as LiveField::update's own exception. Empty: none.
   void set_update_fault_for_test(std::function<void()> fault);
+  /// Tests only: `fault` runs inside apply() right after each brush wrote its voxels and
+  /// pushed its undo step; what it throws is handled as a brush that failed part-way (the
+  /// brush is taken back, the exception goes on). Empty: none.
+  void set_brush_fault_for_test(std::function<void()> fault);
   /// @throws session::BrushError if the brush's material / empty value cannot be stored in
   /// the snapshot's sample format (fp16: |v| > 65504 or NaN; unorm16: not finite). apply() checks
   /// it before changing anything.

@@ -249,9 +249,9 @@ struct LiveField::Impl {
     for (const auto& box : changed_boxes) {
       bool meets = true;
       for (int a = 0; a < 3 && meets; ++a) {
-        const int lo = std::max(8 * b[std::size_t(a)] - 1 - plan.radius[std::size_t(a)], 0);
-        const int hi = std::min(8 * b[std::size_t(a)] + 8 + plan.radius[std::size_t(a)], grid.dims[std::size_t(a)] - 1);
-        meets = lo <= box[std::size_t(a) + 3] && box[std::size_t(a)] <= hi;
+        const std::size_t k = std::size_t(a);
+        const auto [lo, hi] = sparse::brick_window(b[k], plan.radius[k], grid.dims[k]);
+        meets = lo <= box[k + 3] && box[k] <= hi;
       }
       if (meets) return true;
     }

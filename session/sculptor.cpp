@@ -58,19 +58,6 @@ BrushResult Sculptor::apply(const Brush& b) {
   return r;
 }
 
-Sculptor::BrickBackup Sculptor::save_bricks(const std::vector<std::uint32_t>& ids) const {
-  BrickBackup b;
-  b.ids = ids;
-  b.data.reserve(ids.size());
-  for (std::uint32_t id : ids) b.data.push_back(read_brick(vol_, id));
-  return b;
-}
-
-void Sculptor::restore_bricks(const BrickBackup& b) {
-  for (std::size_t k = 0; k < b.ids.size(); ++k) write_brick(vol_, b.ids[k], b.data[k].data());
-  if (engine_) mark_stale(b.ids);
-}
-
 void Sculptor::mark_stale(const std::vector<std::uint32_t>& ids) {
   for (std::uint32_t id : ids)
     if (id < stale_mark_.size() && !stale_mark_[id]) {
@@ -98,17 +85,11 @@ std::string Sculptor::describe_path() const {
          engine_->device_type() + ") above";
 }
 
-void Sculptor::roll_back_apply(const BrickBackup& before) {
-  restore_bricks(before);
-  // By identity, not by depth: the limit may have dropped older strokes as this one was
-  // pushed (the depth unchanged), and a stroke that changed nothing was never pushed.
-  if (last_own_stroke_ != 0 && history_.newest_stroke_serial() == last_own_stroke_) history_.discard_newest_stroke();
-  last_own_stroke_ = 0;
-}
-
 void Sculptor::roll_back_apply(const std::vector<std::uint32_t>& ids, const float* voxels) {
   for (std::uint32_t id : ids) copy_brick(vol_, id, voxels);
   if (engine_) mark_stale(ids);
+  // By identity, not by depth: the limit may have dropped older strokes as this one was
+  // pushed (the depth unchanged), and a stroke that changed nothing was never pushed.
   if (last_own_stroke_ != 0 && history_.newest_stroke_serial() == last_own_stroke_) history_.discard_newest_stroke();
   last_own_stroke_ = 0;
 }

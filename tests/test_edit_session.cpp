@@ -287,11 +287,13 @@ TEST(EditSession, TheEditLogIsBounded) {
 }
 
 // When the new snapshot cannot be built (here a std::bad_alloc thrown where LiveField::update
-// runs), apply() takes the edit back: the volume equals the one current() was built from,
-// nothing is published or logged, and the undo history is as before (a brush leaves no
-// phantom undo step; an undo is redone). Truth: the volumes of a session that never saw the
-// failing edit, bit for bit.
-void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
+// runs), or a brush fails after it wrote its voxels and pushed its undo step (thrown right
+// after Sculptor::apply), apply() takes the edit back: the volume equals the one current()
+// was built from, nothing is published or logged, and the undo history is as before (a
+// brush leaves no phantom undo step; an undo is redone). Truth: the volumes of a session
+// that never saw the failing edit, bit for bit.
+enum class FaultAt { kUpdate, kBrush };
+void failed_edit_is_taken_back(isotouch::engine::VulkanContext* ctx, FaultAt at) {
   const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
   EditSession s(Volume(v), ctx, sphere_options(), 16.0);
   s.sculptor().set_cpu_max_bricks(0);  // with a device: every brush there (the device path's test)
@@ -301,9 +303,11 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   const Volume after_a = s.volume();
   const auto snap_a = s.current();
   bool fail = true;
-  s.set_update_fault_for_test([&] {
+  const auto fault = [&] {
     if (fail) throw std::bad_alloc();
-  });
+  };
+  if (at == FaultAt::kUpdate) s.set_update_fault_for_test(fault);
+  else s.set_brush_fault_for_test(fault);
 
   // A brush of its own stroke, and one inside an open stroke.
   EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
@@ -317,11 +321,13 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
 
   // An undo that fails is redone: the carve is still there and still undoable.
-  EXPECT_THROW(s.apply(plain(EditEvent::Kind::kUndo), nullptr), std::bad_alloc);
-  EXPECT_TRUE(same_bits(s.volume(), after_a));
-  EXPECT_EQ(s.current(), snap_a);
-  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
-  EXPECT_EQ(s.sculptor().history().redo_depth(), 0u);
+  if (at == FaultAt::kUpdate) {
+    EXPECT_THROW(s.apply(plain(EditEvent::Kind::kUndo), nullptr), std::bad_alloc);
+    EXPECT_TRUE(same_bits(s.volume(), after_a));
+    EXPECT_EQ(s.current(), snap_a);
+    EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+    EXPECT_EQ(s.sculptor().history().redo_depth(), 0u);
+  }
   EXPECT_EQ(s.log().size(), 3u);  // a, begin, end: the failed events are not logged
 
   // Without the fault the same events work, and the GPU copy was rolled back too: the
@@ -355,60 +361,19 @@ void failed_update_takes_the_edit_back(isotouch::engine::VulkanContext* ctx) {
   }
 }
 
-TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackCpu) { failed_update_takes_the_edit_back(nullptr); }
+TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackCpu) { failed_edit_is_taken_back(nullptr, FaultAt::kUpdate); }
 
 TEST(EditSession, AFailedSnapshotUpdateTakesTheEditBackGpu) {
   auto& vk = isotouch::test::validated_vk();
-  failed_update_takes_the_edit_back(&vk);
+  failed_edit_is_taken_back(&vk, FaultAt::kUpdate);
   EXPECT_EQ(vk.validation_messages(), 0u);
 }
 
-// A brush that fails after it wrote its voxels and pushed its undo step (a std::bad_alloc
-// thrown there) is taken back like one whose snapshot failed: the volume (host and device)
-// is the one current() was built from, nothing is published or logged, no undo step is
-// left. Truth: a session that never saw the failing brush, bit for bit.
-void failed_brush_takes_itself_back(isotouch::engine::VulkanContext* ctx) {
-  const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
-  EditSession s(Volume(v), ctx, sphere_options(), 16.0);
-  s.sculptor().set_cpu_max_bricks(0);  // with a device: every brush there
-  const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
-  const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
-  ASSERT_TRUE(s.apply(brush_event(a), nullptr).published);
-  const Volume after_a = s.volume();
-  const auto snap_a = s.current();
-  s.set_brush_fault_for_test([] { throw std::bad_alloc(); });
-  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);  // a stroke of its own
-  EXPECT_TRUE(same_bits(s.volume(), after_a));
-  EXPECT_EQ(s.current(), snap_a);
-  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
-  s.apply(plain(EditEvent::Kind::kBeginStroke), nullptr);
-  EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);  // inside an open stroke
-  EXPECT_TRUE(same_bits(s.volume(), after_a));
-  s.apply(plain(EditEvent::Kind::kEndStroke), nullptr);
-  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
-  EXPECT_EQ(s.log().size(), 3u);  // a, begin, end
-  s.set_brush_fault_for_test({});
-  ASSERT_TRUE(s.apply(brush_event(b), nullptr).published);
-  EditSession ref(Volume(v), ctx, sphere_options(), 16.0);
-  ref.sculptor().set_cpu_max_bricks(0);
-  ref.apply(brush_event(a), nullptr);
-  ref.apply(brush_event(b), nullptr);
-  EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
-  expect_same_field(*s.current(), *ref.current());
-  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
-  ASSERT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
-  EXPECT_TRUE(same_bits(s.volume(), v));
-  if (auto* eng = s.sculptor().engine()) {
-    const std::vector<float> dev = eng->download_all();
-    EXPECT_EQ(std::memcmp(dev.data(), v.voxels.data(), v.voxels.size() * sizeof(float)), 0) << "GPU copy";
-  }
-}
-
-TEST(EditSession, ABrushThatFailsPartWayTakesItselfBackCpu) { failed_brush_takes_itself_back(nullptr); }
+TEST(EditSession, ABrushThatFailsPartWayTakesItselfBackCpu) { failed_edit_is_taken_back(nullptr, FaultAt::kBrush); }
 
 TEST(EditSession, ABrushThatFailsPartWayTakesItselfBackGpu) {
   auto& vk = isotouch::test::validated_vk();
-  failed_brush_takes_itself_back(&vk);
+  failed_edit_is_taken_back(&vk, FaultAt::kBrush);
   EXPECT_EQ(vk.validation_messages(), 0u);
 }
 

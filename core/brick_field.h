@@ -47,6 +47,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <stdexcept>
@@ -129,6 +130,22 @@ inline std::array<int, 3> stored_in_grid(const Grid& g, const std::array<int, 3>
 inline std::array<int, 3> brick_coords(std::size_t id, const std::array<int, 3>& nb) {
   const std::size_t nx = std::size_t(nb[0]), ny = std::size_t(nb[1]);
   return {int(id % nx), int(id / nx % ny), int(id / (nx * ny))};
+}
+
+/// Copies the voxels of brick `id` (its 8^3 box clipped to the grid) from `from` to `to`,
+/// two volumes of grid `g` (g.voxel_count() floats each, x fastest, index frame), row by
+/// row; a whole row of 8 is one fixed-size copy. Sizes are not checked.
+inline void copy_brick_voxels(const Grid& g, std::size_t id, const float* from, float* to) {
+  const auto b = brick_coords(id, brick_counts(g));
+  const int nx = g.dims[0], ny = g.dims[1];
+  const int x0 = kBrickSize * b[0], n = std::min(x0 + kBrickSize, nx) - x0;
+  const int y1 = std::min(kBrickSize * b[1] + kBrickSize, ny), z1 = std::min(kBrickSize * b[2] + kBrickSize, g.dims[2]);
+  for (int z = kBrickSize * b[2]; z < z1; ++z)
+    for (int y = kBrickSize * b[1]; y < y1; ++y) {
+      const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + std::size_t(x0);
+      if (n == kBrickSize) std::memcpy(to + row, from + row, kBrickSize * sizeof(float));
+      else std::memcpy(to + row, from + row, std::size_t(n) * sizeof(float));
+    }
 }
 
 /// IEEE binary16 nearest to `x` (round to nearest, ties to even). Finite values beyond

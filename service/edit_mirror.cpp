@@ -1,5 +1,7 @@
 #include "isotouch/service/edit_mirror.h"
 
+#include "isotouch/core/brick_field.h"
+
 #include <algorithm>
 
 namespace isotouch::service {
@@ -23,11 +25,7 @@ void EditMirror::copy_bricks(const engine::Volume& from, const std::vector<std::
     VoxelBox b;
     b.lo = {8 * int(id % nbx), 8 * int(id / nbx % nby), 8 * int(id / (nbx * nby))};
     for (int a = 0; a < 3; ++a) b.hi[std::size_t(a)] = std::min(n[std::size_t(a)], b.lo[std::size_t(a)] + 8);
-    for (int z = b.lo[2]; z < b.hi[2]; ++z)
-      for (int y = b.lo[1]; y < b.hi[1]; ++y) {
-        const std::size_t at = (std::size_t(z) * std::size_t(n[1]) + std::size_t(y)) * std::size_t(n[0]) + std::size_t(b.lo[0]);
-        std::copy_n(from.voxels.begin() + long(at), b.hi[0] - b.lo[0], v_.voxels.begin() + long(at));
-      }
+    core::copy_brick_voxels(v_.grid, id, from.voxels.data(), v_.voxels.data());
     changed_.add(b);
   }
 }

@@ -69,10 +69,7 @@ void write_brick(Volume& vol, std::uint32_t id, const float* data) {
 
 void copy_brick(Volume& vol, std::uint32_t id, const float* from) {
   check_volume(vol);
-  const BrickBox b = brick_box(vol.grid, id);
-  for_rows(vol.grid, b, [&](std::size_t v, std::size_t, std::size_t n) {
-    std::memcpy(vol.voxels.data() + v, from + v, n * sizeof(float));
-  });
+  core::copy_brick_voxels(vol.grid, id, from, vol.voxels.data());
 }
 
 EditHistory::EditHistory(double limit_mib) {

@@ -760,16 +760,8 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     // Committed: nothing below throws.
     taken.clear();
     raw_undo.clear();
-    const int nx = m.grid.dims[0], ny = m.grid.dims[1];
-    for (std::uint32_t d : changed) {  // the shadow follows the published volume
-      const auto b = core::brick_coords(d, m.nb);
-      const int x0 = 8 * b[0], n = std::min(x0 + 8, nx) - x0;
-      for (int z = 8 * b[2]; z < std::min(8 * b[2] + 8, m.grid.dims[2]); ++z)
-        for (int y = 8 * b[1]; y < std::min(8 * b[1] + 8, ny); ++y) {
-          const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + std::size_t(x0);
-          std::memcpy(m.shadow.data() + row, vol.voxels.data() + row, std::size_t(n) * sizeof(float));
-        }
-    }
+    for (std::uint32_t d : changed)  // the shadow follows the published volume
+      core::copy_brick_voxels(m.grid, d, vol.voxels.data(), m.shadow.data());
     for (const auto& [id, flag] : cand_changes) m.candidate[id] = flag;
     if (next->bricks != m.cur->bricks) m.tile_owner.swap(owner);
     if (fresh) {

@@ -748,3 +748,31 @@ TEST(BrickField, HriForcesOnASphereAreIdenticalOnFp32AndCloseOnCompactBricks) {
 
 }  // namespace
 }  // namespace isotouch
+
+// copy_brick_voxels copies exactly the voxels of one brick's box clipped to the grid: on a
+// grid whose sizes are no multiples of 8 (edge bricks of 5, 2 and 1 voxels) every brick,
+// against a triple loop over the box written out here; every other voxel keeps its value.
+TEST(BrickField, CopyBrickVoxelsCopiesExactlyTheBricksClippedBox) {
+  isotouch::core::Grid g;
+  g.dims = {13, 10, 9};
+  std::vector<float> from(g.voxel_count());
+  for (std::size_t i = 0; i < from.size(); ++i) from[i] = float(i) + 0.5f;
+  const auto nb = isotouch::core::brick_counts(g);
+  ASSERT_EQ(nb, (std::array<int, 3>{2, 2, 2}));
+  for (std::size_t id = 0; id < 8; ++id) {
+    std::vector<float> to(g.voxel_count(), -1.0f);
+    isotouch::core::copy_brick_voxels(g, id, from.data(), to.data());
+    const auto b = isotouch::core::brick_coords(id, nb);
+    long copied = 0;
+    for (int z = 0; z < g.dims[2]; ++z)
+      for (int y = 0; y < g.dims[1]; ++y)
+        for (int x = 0; x < g.dims[0]; ++x) {
+          const bool in = x / 8 == b[0] && y / 8 == b[1] && z / 8 == b[2];
+          const std::size_t i = g.index(x, y, z);
+          ASSERT_EQ(to[i], in ? from[i] : -1.0f) << "brick " << id << " voxel " << x << "," << y << "," << z;
+          copied += in;
+        }
+    const long want = long(std::min(8, 13 - 8 * b[0])) * std::min(8, 10 - 8 * b[1]) * std::min(8, 9 - 8 * b[2]);
+    EXPECT_EQ(copied, want) << "brick " << id;
+  }
+}

@@ -47,6 +47,16 @@ void check_volume(const Volume& vol) {
     throw std::invalid_argument(vol.path + ": volume has " + std::to_string(vol.voxels.size()) + " voxels for " +
                                 std::to_string(vol.grid.voxel_count()) + " grid points");
 }
+/// Whether brick `id` of `vol` holds `data` (read_brick()'s layout), bit for bit; reads in
+/// place (no copy, no allocation).
+bool brick_holds(const Volume& vol, std::uint32_t id, const float* data) {
+  const BrickBox b = brick_box(vol.grid, id);
+  bool same = true;
+  for_rows(vol.grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
+    same = same && std::memcmp(vol.voxels.data() + v, data + k, n * sizeof(float)) == 0;
+  });
+  return same;
+}
 }  // namespace
 
 std::vector<float> read_brick(const Volume& vol, std::uint32_t id) {
@@ -103,11 +113,11 @@ void EditHistory::record(const Volume& vol, const std::vector<std::uint32_t>& id
 
 void EditHistory::end_stroke(const Volume& vol) {
   if (!open_) return;
+  check_volume(vol);
   Stroke s = std::move(*open_);
   open_.reset();
   for (auto it = s.bricks.begin(); it != s.bricks.end();) {
-    const std::vector<float> now = read_brick(vol, it->first);
-    if (std::memcmp(now.data(), it->second.data(), now.size() * sizeof(float)) == 0) {
+    if (brick_holds(vol, it->first, it->second.data())) {  // unchanged: no undo data kept
       const std::uint64_t n = it->second.size() * sizeof(float);
       s.bytes -= n;
       bytes_ -= n;

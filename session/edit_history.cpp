@@ -79,6 +79,7 @@ void write_brick(Volume& vol, std::uint32_t id, const float* data) {
 
 void copy_brick(Volume& vol, std::uint32_t id, const float* from) {
   check_volume(vol);
+  (void)brick_box(vol.grid, id);  // std::out_of_range for an id past the grid's bricks
   core::copy_brick_voxels(vol.grid, id, from, vol.voxels.data());
 }
 

@@ -44,6 +44,8 @@ std::vector<float> read_brick(const engine::Volume& vol, std::uint32_t id);
 /// Writes `data` (brick_box(id).voxels() floats, x fastest) into the brick.
 void write_brick(engine::Volume& vol, std::uint32_t id, const float* data);
 /// Copies brick `id` of `from` (a volume of vol's grid, x fastest) into vol, row by row.
+/// @throws std::out_of_range for an id past the grid's bricks, std::invalid_argument for a
+/// volume whose voxel count is not its grid's.
 void copy_brick(engine::Volume& vol, std::uint32_t id, const float* from);
 
 /// Undo / redo history of strokes over one engine::Volume (CPU side).
@@ -61,7 +63,8 @@ class EditHistory {
   /// Closes the open stroke: drops its unchanged backups (bit-identical to `vol`), pushes it
   /// on the undo stack if anything changed, enforces the memory limit (oldest strokes first).
   /// A stroke larger than the limit alone is a barrier: it and every older stroke are
-  /// dropped (undo stops there). No-op if none is open.
+  /// dropped (undo stops there). No-op if none is open. @throws std::invalid_argument for
+  /// a volume whose voxel count is not its grid's (the stroke then stays open).
   void end_stroke(const engine::Volume& vol);
 
   /// Undoes the newest stroke (ends an open stroke first). Returns the restored brick ids

@@ -290,7 +290,7 @@ TEST(EditSession, TheEditLogIsBounded) {
 // runs), or a brush fails after it wrote its voxels and pushed its undo step (thrown right
 // after Sculptor::apply), apply() takes the edit back: the volume equals the one current()
 // was built from, nothing is published or logged, and the undo history is as before (a
-// brush leaves no phantom undo step; an undo is redone). Truth: the volumes of a session
+// brush leaves no phantom undo step; with the update's fault, an undo is redone). Truth: the volumes of a session
 // that never saw the failing edit, bit for bit.
 enum class FaultAt { kUpdate, kBrush };
 void failed_edit_is_taken_back(isotouch::engine::VulkanContext* ctx, FaultAt at) {

@@ -197,11 +197,23 @@ class Sculptor {
   void end_stroke();
   /// Applies a brush; returns the touched and dirty bricks (what the passes must redo).
   BrushResult apply(const Brush& b);
+  /// apply() without its undo step: the caller records it with record_applied() once the
+  /// new snapshot is out (EditSession: off the edit-to-haptics path). @throws as apply().
+  BrushResult apply_unrecorded(const Brush& b);
+  /// The undo step of the last apply_unrecorded(): the bricks `ids` (at least the ones it
+  /// touched) as `before` holds them, a volume of the same grid (x fastest) with their content
+  /// before that brush (LiveField::published_voxels() before its update lets it follow the
+  /// volume). Outside a stroke it is a stroke of its own, as in apply(). @throws
+  /// std::bad_alloc (the open stroke then holds what was recorded before; an own stroke is
+  /// ended), std::out_of_range for an id past the grid's bricks.
+  void record_applied(const std::vector<std::uint32_t>& ids, const float* before);
+  /// Forgets the whole undo / redo history (EditHistory::clear).
+  void drop_history() noexcept { history_.clear(); }
   /// Undo / redo one stroke; return the restored brick ids (dirty for the passes).
   std::vector<std::uint32_t> undo();
   std::vector<std::uint32_t> redo();
 
-  /// Rolls back the last apply(): the bricks `ids` (at least the ones it touched) copied
+  /// Rolls back the last apply() or apply_unrecorded(): the bricks `ids` (at least the ones it touched) copied
   /// back from `voxels`, a volume of the same grid (x fastest) that holds them as they were
   /// before it (LiveField::published_voxels() while its update has not published), and the
   /// undo step it pushed forgotten when it was a stroke of its own that is still the newest
@@ -224,6 +236,8 @@ class Sculptor {
   std::string describe_path() const;
 
  private:
+  /// The brush on the CPU reference or the device (by its touched bricks), no history.
+  BrushResult run_brush(const Brush& b);
   /// Uploads the stale bricks to the device (one copy) and forgets them.
   void sync_device();
   void mark_stale(const std::vector<std::uint32_t>& ids);

@@ -101,10 +101,19 @@ void EditHistory::begin_stroke() {
 }
 
 void EditHistory::record(const Volume& vol, const std::vector<std::uint32_t>& ids) {
+  check_volume(vol);
+  record(vol.grid, vol.voxels.data(), ids);
+}
+
+void EditHistory::record(const core::Grid& grid, const float* voxels, const std::vector<std::uint32_t>& ids) {
   if (!open_) throw std::logic_error("EditHistory::record: no open stroke (begin_stroke first)");
   for (std::uint32_t id : ids) {
     if (open_->bricks.count(id)) continue;  // first touch in this stroke only
-    std::vector<float> data = read_brick(vol, id);
+    const BrickBox b = brick_box(grid, id);
+    std::vector<float> data(b.voxels());
+    for_rows(grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
+      std::memcpy(data.data() + k, voxels + v, n * sizeof(float));
+    });
     const std::uint64_t n = data.size() * sizeof(float);
     open_->bricks.emplace(id, std::move(data));
     open_->bytes += n;
@@ -216,6 +225,15 @@ void EditHistory::discard_newest_stroke() {
   redo_ = std::move(dropped_redo_);
   dropped_redo_.clear();
   enforce_limit();
+}
+
+void EditHistory::clear() noexcept {
+  dropped_ += undo_.size() + redo_.size() + (open_ ? 1 : 0);
+  undo_.clear();
+  redo_.clear();
+  dropped_redo_.clear();
+  open_.reset();
+  bytes_ = 0;
 }
 
 std::vector<std::uint32_t> EditHistory::redo(Volume& vol) {

@@ -60,6 +60,11 @@ class EditHistory {
   /// Records the pre-edit content of the bricks in `ids` not yet recorded in the open
   /// stroke. Call BEFORE the edit changes them. @throws std::logic_error if no stroke is open.
   void record(const engine::Volume& vol, const std::vector<std::uint32_t>& ids);
+  /// The same from `voxels`, a volume of `grid` (x fastest) that holds the bricks' pre-edit
+  /// content, so that the edit may already have changed them (e.g. LiveField::published_voxels()
+  /// before its update lets it follow the volume). @throws std::logic_error if no stroke is
+  /// open, std::out_of_range for an id past the grid's bricks.
+  void record(const core::Grid& grid, const float* voxels, const std::vector<std::uint32_t>& ids);
   /// Closes the open stroke: drops its unchanged backups (bit-identical to `vol`), pushes it
   /// on the undo stack if anything changed, enforces the memory limit (oldest strokes first).
   /// A stroke larger than the limit alone is a barrier: it and every older stroke are
@@ -79,6 +84,10 @@ class EditHistory {
   /// stroke's begin_stroke() dropped. Call it right after that stroke ended. No-op if there
   /// is no undo stroke.
   void discard_newest_stroke();
+  /// Forgets every stroke: undo, redo and the open one (each counted in dropped_strokes()),
+  /// e.g. when an edit that stands could not record its undo step: undoing older strokes
+  /// past it would give a state that never existed. Allocates nothing, throws nothing.
+  void clear() noexcept;
   /// Serial numbers of strokes (1, 2, ... in the order they were opened): the open stroke's
   /// and the newest undo stroke's, 0 for none. A stroke that ended with no change, or was
   /// dropped by the memory limit, is never the newest undo stroke.

@@ -3,6 +3,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <exception>
 #include <functional>
 #include <string>
 
@@ -34,6 +35,19 @@ void check_storable_targets(const session::Brush& b, core::SampleFormat f) {
                                " cannot be stored in the " + core::to_string(f) + " snapshot");
   }
 }
+/// The message of the exception in flight (in a catch block); never throws.
+void note_exception(std::string& to) noexcept {
+  try {
+    try {
+      throw;
+    } catch (const std::exception& x) {
+      to = x.what();
+    } catch (...) {
+      to = "unknown exception";
+    }
+  } catch (...) {  // (no memory for the message)
+  }
+}
 }  // namespace
 
 struct EditSession::Impl {
@@ -44,6 +58,7 @@ struct EditSession::Impl {
   std::size_t log_dropped = 0;
   std::function<void()> update_fault;
   std::function<void()> brush_fault;
+  std::function<void()> history_fault;
 };
 
 EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
@@ -65,14 +80,15 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   session::Sculptor& sc = *impl_->sculptor;
   // What a brush may change: if its snapshot cannot be built, these bricks go back to the
   // live field's published voxels (the volume as of its current snapshot, which a failed
-  // update leaves alone), so that volume and snapshot never disagree.
+  // update leaves alone), so that volume and snapshot never disagree. Its undo step is
+  // recorded from there too, once the snapshot is out (off the edit-to-haptics path).
   std::vector<std::uint32_t> touched;
   std::vector<std::uint32_t> changed;
   switch (e.kind) {
     case EditEvent::Kind::kBrush:
       touched = session::touched_bricks(sc.volume().grid, e.brush);
       try {
-        o.brush = sc.apply(e.brush);
+        o.brush = sc.apply_unrecorded(e.brush);
         if (impl_->brush_fault) impl_->brush_fault();
       } catch (...) {
         // A brush that failed part-way (an allocation after it wrote a brick) is taken back
@@ -90,11 +106,29 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
     case EditEvent::Kind::kUndo: o.restored = sc.undo(); changed = o.restored; break;
     case EditEvent::Kind::kRedo: o.restored = sc.redo(); changed = o.restored; break;
   }
+  // The brush's undo step, from the volume as of the snapshot before it. An edit that stands
+  // without one would make undoing older strokes give a state that never existed: then the
+  // history goes (and the outcome says why).
+  auto record_undo = [&]() noexcept {
+    if (e.kind != EditEvent::Kind::kBrush) return;
+    try {
+      if (impl_->history_fault) impl_->history_fault();
+      sc.record_applied(touched, impl_->live->published_voxels().data());
+    } catch (...) {
+      sc.drop_history();
+      note_exception(o.history_error);
+    }
+  };
+  if (changed.empty()) record_undo();
   if (!changed.empty()) {
-    std::shared_ptr<const core::SampleField> snap;
+    const session::LiveField::OnCommit on_commit = [&](const std::shared_ptr<const core::SampleField>& snap) {
+      if (out) out->publish(snap);
+      o.published_at = std::chrono::steady_clock::now();
+      record_undo();
+    };
     try {
       if (impl_->update_fault) impl_->update_fault();
-      snap = impl_->live->update(sc.volume(), changed, &o.update);
+      (void)impl_->live->update(sc.volume(), changed, &o.update, on_commit);
     } catch (...) {
       // LiveField::update publishes nothing when it throws: take the edit back. The
       // update's exception is the one that goes on.
@@ -106,7 +140,6 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
       }
       throw;
     }
-    if (out) out->publish(snap);
     o.published = true;
   }
   if (impl_->log.size() < impl_->log_limit) impl_->log.push_back(e);
@@ -117,6 +150,7 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
 
 void EditSession::set_update_fault_for_test(std::function<void()> fault) { impl_->update_fault = std::move(fault); }
 void EditSession::set_brush_fault_for_test(std::function<void()> fault) { impl_->brush_fault = std::move(fault); }
+void EditSession::set_history_fault_for_test(std::function<void()> fault) { impl_->history_fault = std::move(fault); }
 
 std::shared_ptr<const core::SampleField> EditSession::current() const { return impl_->live->current(); }
 const engine::Volume& EditSession::volume() const { return impl_->sculptor->volume(); }

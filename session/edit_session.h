@@ -9,6 +9,7 @@
 // of tick k are applied AFTER tick k's render, in order, and the new snapshot is published
 // before tick k + 1 acquires (so tick k + 1 reads it).
 #pragma once
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -38,6 +39,11 @@ struct EditOutcome {
   std::vector<std::uint32_t> restored;       ///< kUndo / kRedo: bricks restored
   session::LiveUpdateStats update;            ///< the snapshot update (zero if nothing changed)
   bool published = false;                    ///< a new snapshot was published
+  /// When it was published (TripleBuffer::publish returned), if it was.
+  std::chrono::steady_clock::time_point published_at{};
+  /// A brush's undo step could not be recorded (e.g. std::bad_alloc): the edit stands and is
+  /// published, the undo / redo history was dropped (undo stops here). Empty: recorded.
+  std::string history_error;
   double wall_ms = 0;                        ///< apply(), everything included [ms]
   std::string error;                         ///< a LiveSession's listener only: apply() threw this (refused)
 };
@@ -56,19 +62,24 @@ class EditSession {
   EditSession& operator=(const EditSession&) = delete;
 
   /// Applies `e` and, when samples changed, publishes the new snapshot into `out` (if not
-  /// null). Appends `e` to log(). @throws session::BrushError on an invalid brush.
+  /// null) as soon as it is built: a brush's undo step is recorded after that (from the live
+  /// field's published voxels), outside the edit-to-haptics time. Appends `e` to log().
+  /// @throws session::BrushError on an invalid brush.
   /// Strong guarantee: when the new snapshot cannot be built (LiveField::update throws,
   /// e.g. std::bad_alloc), the edit is taken back (a brush's voxels restored on the host and
-  /// the device and its undo step forgotten; an undo redone; a redo undone), nothing is
+  /// the device, no undo step recorded; an undo redone; a redo undone), nothing is
   /// published or logged, and the exception goes on: volume and current() still agree.
   EditOutcome apply(const EditEvent& e, servo::TripleBuffer<core::SampleField>* out);
   /// Tests only: `fault` runs just before each snapshot update inside apply(); what it
   /// throws is handled as LiveField::update's own exception. Empty: none.
   void set_update_fault_for_test(std::function<void()> fault);
-  /// Tests only: `fault` runs inside apply() right after each brush wrote its voxels and
-  /// pushed its undo step; what it throws is handled as a brush that failed part-way (the
+  /// Tests only: `fault` runs inside apply() right after each brush wrote its voxels (its
+  /// undo step is recorded after the snapshot is out); what it throws is handled as a brush that failed part-way (the
   /// brush is taken back, the exception goes on). Empty: none.
   void set_brush_fault_for_test(std::function<void()> fault);
+  /// Tests only: `fault` runs inside apply() just before a brush's undo step is recorded
+  /// (after its snapshot was published); what it throws is handled as a failed recording.
+  void set_history_fault_for_test(std::function<void()> fault);
   /// @throws session::BrushError if the brush's material / empty value cannot be stored in
   /// the snapshot's sample format (fp16: |v| > 65504 or NaN; unorm16: not finite). apply() checks
   /// it before changing anything.

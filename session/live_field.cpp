@@ -548,7 +548,7 @@ std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldO
 }
 
 std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, const std::vector<std::uint32_t>& dirty,
-                                                           LiveUpdateStats* stats) {
+                                                           LiveUpdateStats* stats, const OnCommit& on_commit) {
   const auto t0 = Clock::now();
   Impl& m = *impl_;
   for (std::uint32_t id : dirty)
@@ -760,8 +760,6 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     // Committed: nothing below throws.
     taken.clear();
     raw_undo.clear();
-    for (std::uint32_t d : changed)  // the shadow follows the published volume
-      core::copy_brick_voxels(m.grid, d, vol.voxels.data(), m.shadow.data());
     for (const auto& [id, flag] : cand_changes) m.candidate[id] = flag;
     if (next->bricks != m.cur->bricks) m.tile_owner.swap(owner);
     if (fresh) {
@@ -791,6 +789,9 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     throw;
   }
   if (stats) *stats = st;
+  if (on_commit) [&]() noexcept { on_commit(m.cur); }();
+  for (std::uint32_t d : changed)  // the shadow follows the published volume
+    core::copy_brick_voxels(m.grid, d, vol.voxels.data(), m.shadow.data());
   return m.cur;
 }
 

@@ -55,6 +55,7 @@
 //   whole arena.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -122,8 +123,14 @@ class LiveField {
   /// core/brick_field.h, any order, duplicates allowed; ids out of range throw
   /// std::out_of_range naming the id). Returns the new snapshot (version + 1), which
   /// shares every brick the edit could not change with the previous one.
+  ///
+  /// `on_commit` (if set) is called once with the new snapshot as soon as it is committed
+  /// (current() returns it, nothing can be taken back): to publish it at once. It runs
+  /// before published_voxels() follows the volume, so that it still reads the content as of
+  /// the previous snapshot then (an edit's undo step), and must not throw (std::terminate).
+  using OnCommit = std::function<void(const std::shared_ptr<const core::SampleField>&)>;
   std::shared_ptr<const core::SampleField> update(const engine::Volume& vol, const std::vector<std::uint32_t>& dirty,
-                                                  LiveUpdateStats* stats = nullptr);
+                                                  LiveUpdateStats* stats = nullptr, const OnCommit& on_commit = {});
   /// The newest snapshot.
   std::shared_ptr<const core::SampleField> current() const;
   /// The raw voxels of the volume current() was computed from (the grid's, x fastest): an

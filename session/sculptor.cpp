@@ -42,19 +42,40 @@ BrushResult Sculptor::apply(const Brush& b) {
   history_.record(vol_, touched_bricks(vol_.grid, b));
   BrushResult r;
   try {
-    const bool device = engine_ && touched_range(vol_.grid, b).count() > cpu_max_bricks_;
-    if (device) {
-      sync_device();
-      r = engine_->apply(b, &vol_);
-    } else {
-      r = apply_brush_cpu(vol_, b);
-      if (engine_) mark_stale(r.dirty);
-    }
+    r = run_brush(b);
   } catch (...) {
     if (own) history_.end_stroke(vol_);  // a failed application leaves no stroke open
     throw;
   }
   if (own) history_.end_stroke(vol_);
+  return r;
+}
+
+BrushResult Sculptor::apply_unrecorded(const Brush& b) {
+  last_own_stroke_ = 0;
+  if (std::string e = validate(b); !e.empty()) throw BrushError(e);
+  return run_brush(b);
+}
+
+void Sculptor::record_applied(const std::vector<std::uint32_t>& ids, const float* before) {
+  const bool own = !history_.stroke_open();
+  if (own) history_.begin_stroke();
+  try {
+    history_.record(vol_.grid, before, ids);
+  } catch (...) {
+    if (own) history_.end_stroke(vol_);  // (what it recorded is dropped there if unchanged)
+    throw;
+  }
+  if (own) history_.end_stroke(vol_);
+}
+
+BrushResult Sculptor::run_brush(const Brush& b) {
+  if (engine_ && touched_range(vol_.grid, b).count() > cpu_max_bricks_) {
+    sync_device();
+    return engine_->apply(b, &vol_);
+  }
+  BrushResult r = apply_brush_cpu(vol_, b);
+  if (engine_) mark_stale(r.dirty);
   return r;
 }
 

@@ -31,6 +31,7 @@
 namespace fs = std::filesystem;
 using isotouch::session::EditEvent;
 using isotouch::session::EditSession;
+using isotouch::session::EditOutcome;
 using isotouch::session::Brush;
 using isotouch::session::BrushKind;
 using isotouch::engine::Volume;
@@ -377,12 +378,12 @@ TEST(EditSession, ABrushThatFailsPartWayTakesItselfBackGpu) {
   EXPECT_EQ(vk.validation_messages(), 0u);
 }
 
-// A brush whose stroke fits the undo history's memory limit only by pushing the older
-// stroke out, and whose snapshot then fails, is taken back without leaving an undo step:
-// its voxels are restored, so undoing its step would change nothing. The older stroke is
-// gone for good (the limit dropped it), so nothing is left to undo. Truth: the volume after
-// the first brush, bit for bit, and an undo that restores nothing.
-TEST(EditSession, AFailedBrushThatPushedAStrokeOutLeavesNoUndoStep) {
+// A brush whose stroke would fit the undo history's memory limit only by pushing the older
+// stroke out, and whose snapshot then fails, leaves the history as it was: its undo step is
+// recorded only once its snapshot is out, so the older stroke is not pushed out for an edit
+// that was taken back. Truth: the volume after the first brush, bit for bit, and an undo
+// that restores the unedited volume.
+TEST(EditSession, AFailedBrushLeavesTheHistoryAsItWas) {
   const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
   const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
   const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
@@ -402,10 +403,45 @@ TEST(EditSession, AFailedBrushThatPushedAStrokeOutLeavesNoUndoStep) {
   EXPECT_THROW(s.apply(brush_event(b), nullptr), std::bad_alloc);
   s.set_update_fault_for_test({});
   EXPECT_TRUE(same_bits(s.volume(), after_a));
-  EXPECT_EQ(s.sculptor().history().dropped_strokes(), 1u) << "b's stroke pushed a's out";
-  EXPECT_EQ(s.sculptor().history().undo_depth(), 0u) << "the failed brush left an undo step";
-  EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty()) << "an undo step that changes nothing";
-  EXPECT_TRUE(same_bits(s.volume(), after_a));
+  EXPECT_EQ(s.sculptor().history().dropped_strokes(), 0u) << "the failed brush pushed a's stroke out";
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+  EXPECT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), v));
+}
+
+// The undo step is recorded after the snapshot is published, from the volume as of the
+// snapshot before. When it cannot be recorded the edit stands (published, the volume and
+// the snapshot agree) and the whole history goes, said in the outcome: undoing the older
+// stroke past the edit would give a state that never existed. Truth: what the triple buffer
+// holds, the volume against a session that never failed, and an undo that restores nothing.
+TEST(EditSession, AnUndoStepThatCannotBeRecordedDropsTheHistory) {
+  const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
+  const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
+  const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
+  EditSession s(Volume(v), nullptr, sphere_options(), 16.0);
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> buf;
+  ASSERT_TRUE(s.apply(brush_event(a), &buf).published);
+  s.set_history_fault_for_test([] { throw std::bad_alloc(); });
+  const EditOutcome o = s.apply(brush_event(b), &buf);
+  s.set_history_fault_for_test({});
+  EXPECT_TRUE(o.published);
+  EXPECT_FALSE(o.history_error.empty());
+  EXPECT_EQ(buf.acquire(), s.current().get()) << "the edit's snapshot is the one published";
+  EditSession ref(Volume(v), nullptr, sphere_options(), 16.0);
+  ref.apply(brush_event(a), nullptr);
+  ref.apply(brush_event(b), nullptr);
+  EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
+  expect_same_field(*s.current(), *ref.current());
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 0u);
+  EXPECT_EQ(s.sculptor().history().bytes(), 0u);
+  EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
+  // The next brush records its step again.
+  const EditOutcome o2 = s.apply(brush_event(carve_at(v, {31, 20, 20}, 4e-3, 1e9)), &buf);
+  EXPECT_TRUE(o2.history_error.empty());
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
+  EXPECT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
 }
 
 // The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook

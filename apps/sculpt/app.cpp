@@ -343,7 +343,8 @@ session::EditListener picture_feeder(PictureFeed& feed, session::EditSession* es
         feed.pending.push_back(id);
       }
     else
-      feed.last_error = out.error;
+      feed.last_error = "edit refused: " + out.error;
+    if (!out.history_error.empty()) feed.last_error = "edit applied, undo history dropped: " + out.history_error;
     if (e.kind == K::kBrush) {
       ++feed.brushes_done;
       feed.brush_changed.push_back(out.error.empty() && !ids.empty());
@@ -1263,7 +1264,7 @@ long Sculpt::take_edits() {
     feed.pending.clear();
   }
   if (!feed.last_error.empty()) {
-    status = "edit refused: " + feed.last_error;
+    status = feed.last_error;
     log << "sculpt   " << status << "\n";
     feed.last_error.clear();
   }

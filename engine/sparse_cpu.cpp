@@ -700,12 +700,13 @@ class BrickCpu {
       vhi_[a] = std::min(S_[a] - 1, n - 1 - g0_[a]);
     }
     const int nx = vol_.grid.dims[0], ny = vol_.grid.dims[1];
+    const std::size_t row_bytes = std::size_t(vhi_[0] - vlo_[0] + 1) * sizeof(float);
     for (int z = vlo_[2]; z <= vhi_[2]; ++z)
       for (int y = vlo_[1]; y <= vhi_[1]; ++y)
-        for (int x = vlo_[0]; x <= vhi_[0]; ++x)
-          buf_[0][at(x, y, z)] = vol_.voxels[(std::size_t(g0_[2] + z) * std::size_t(ny) + std::size_t(g0_[1] + y)) *
-                                                 std::size_t(nx) +
-                                             std::size_t(g0_[0] + x)];
+        std::memcpy(&buf_[0][at(vlo_[0], y, z)],
+                    &vol_.voxels[(std::size_t(g0_[2] + z) * std::size_t(ny) + std::size_t(g0_[1] + y)) * std::size_t(nx) +
+                                 std::size_t(g0_[0] + vlo_[0])],
+                    row_bytes);
     cur_ = 0;
     int m[3] = {0, 0, 0};
     for (const Op& op : plan_.ops) {
@@ -751,14 +752,38 @@ class BrickCpu {
     }
     CandidateRange rg{kInf, -kInf, false};
     const float* f = buf_[cur_].data();
+    // 4 values at a time; a row's last 4 overlap the ones before (min, max and the NaN flag
+    // do not depend on the order or on seeing a value twice; -0 / +0 are made +0 below).
+    typedef float v4 __attribute__((vector_size(16)));
+    const v4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+    v4 lo = {kInf, kInf, kInf, kInf}, hi = -lo, nn = one - one;
+    const int x0 = std::max(plan_.radius[0], vlo_[0]), w = std::min(plan_.radius[0] + 9, vhi_[0]) - x0 + 1;
     for (int z = std::max(plan_.radius[2], vlo_[2]); z <= std::min(plan_.radius[2] + 9, vhi_[2]); ++z)
-      for (int y = std::max(plan_.radius[1], vlo_[1]); y <= std::min(plan_.radius[1] + 9, vhi_[1]); ++y)
-        for (int x = std::max(plan_.radius[0], vlo_[0]); x <= std::min(plan_.radius[0] + 9, vhi_[0]); ++x) {
-          const float v = f[at(x, y, z)];
-          rg.nan = rg.nan || v != v;
-          rg.lo = v < rg.lo ? v : rg.lo;
-          rg.hi = v > rg.hi ? v : rg.hi;
+      for (int y = std::max(plan_.radius[1], vlo_[1]); y <= std::min(plan_.radius[1] + 9, vhi_[1]); ++y) {
+        const float* row = f + at(x0, y, z);
+        if (w < 4) {
+          for (int x = 0; x < w; ++x) {
+            const float v = row[x];
+            rg.nan = rg.nan || v != v;
+            rg.lo = v < rg.lo ? v : rg.lo;
+            rg.hi = v > rg.hi ? v : rg.hi;
+          }
+          continue;
         }
+        for (int o = 0;; o = std::min(o + 4, w - 4)) {
+          v4 v;
+          std::memcpy(&v, row + o, sizeof v);
+          lo = v < lo ? v : lo;
+          hi = v > hi ? v : hi;
+          nn = v != v ? one : nn;
+          if (o == w - 4) break;
+        }
+      }
+    for (int i = 0; i < 4; ++i) {
+      rg.lo = lo[i] < rg.lo ? lo[i] : rg.lo;
+      rg.hi = hi[i] > rg.hi ? hi[i] : rg.hi;
+      rg.nan = rg.nan || nn[i] != 0.0f;
+    }
     rg.lo = rg.lo + 0.0f;  // -0 -> +0, as the shader (whose reduction order differs)
     rg.hi = rg.hi + 0.0f;
     return rg;

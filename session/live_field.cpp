@@ -230,7 +230,8 @@ struct LiveField::Impl {
   std::vector<float> shadow;             ///< the raw voxels as of `cur`
   sparse::RawRanges raw;                 ///< their per-brick ranges
   std::vector<std::uint8_t> candidate;   ///< per brick: select() made it a candidate (as of `cur`)
-  std::vector<std::uint32_t> tile_owner; ///< per tile of cur's store: its brick
+  std::vector<std::uint32_t> tile_owner; ///< per tile of cur's store: its brick (capacity: every brick)
+  std::function<void()> commit_fault;    ///< set_commit_fault_for_test
   std::shared_ptr<Arena> arena;          ///< cur's arena
   std::vector<std::weak_ptr<Arena>> old_arenas;
   std::shared_ptr<const core::SampleField> cur;
@@ -571,6 +572,13 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
   std::vector<std::pair<std::uint32_t, std::array<float, 3>>> raw_undo;
   std::shared_ptr<Arena> fresh;  // a new arena when the current one is full
   std::vector<std::uint32_t> retiring;  // then: the slots the current arena's newest store uses
+  // tile_owner's changes, to undo them in reverse if the update throws: a tile dropped (its
+  // index, its owner, the last tile's owner that took its place) or a tile appended (kPushed).
+  struct OwnerUndo {
+    std::uint32_t at, owner, last;
+  };
+  constexpr std::uint32_t kPushed = ~std::uint32_t(0);
+  std::vector<OwnerUndo> owner_undo;
   try {
     // 1. What the edit can change, then the new state of those bricks.
     m.changed_boxes.clear();
@@ -677,8 +685,10 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
       deactivated += !c.active && !was_uniform;
     }
     std::vector<std::uint32_t> table = old.table;
-    std::vector<core::Sample> tiles = old.tiles;
-    std::vector<std::uint32_t> owner = m.tile_owner;
+    std::vector<core::Sample> tiles;
+    tiles.reserve(old.tiles.size() + deactivated);  // (one copy: no reallocation below)
+    tiles.assign(old.tiles.begin(), old.tiles.end());
+    owner_undo.reserve(changes.size());  // tile_owner is changed in place (below), undone on a throw
     std::vector<std::uint32_t> born;
     Arena* target = m.arena.get();
     if (!m.arena->take(need, taken)) {
@@ -714,6 +724,8 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
         m.write_slot(*target, c.slot, c.id, scratch.data() + c.scratch);
         if (was_uniform) {  // drop its tile: the last tile takes its index
           const std::uint32_t t = e & ~BrickStore::kUniform;
+          std::vector<std::uint32_t>& owner = m.tile_owner;
+          owner_undo.push_back({t, owner[t], owner.back()});
           tiles[t] = tiles.back();
           owner[t] = owner.back();
           table[owner[t]] = BrickStore::kUniform | t;
@@ -726,10 +738,12 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
       } else {
         table[c.id] = BrickStore::kUniform | std::uint32_t(tiles.size());
         tiles.push_back({c.tile, 0.f, 0.f, 0.f});
-        owner.push_back(c.id);
+        owner_undo.push_back({kPushed, 0, 0});
+        m.tile_owner.push_back(c.id);  // within its capacity (every brick): no allocation
       }
     }
     born.insert(born.end(), taken.begin(), taken.end());
+    if (m.commit_fault) m.commit_fault();
     st.new_bytes += std::uint64_t(need) * slot_bytes(fmt);
     st.activated = activated;
     st.deactivated = deactivated;
@@ -761,7 +775,7 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
     taken.clear();
     raw_undo.clear();
     for (const auto& [id, flag] : cand_changes) m.candidate[id] = flag;
-    if (next->bricks != m.cur->bricks) m.tile_owner.swap(owner);
+    owner_undo.clear();
     if (fresh) {
       m.arena->retire(v, retiring);
       m.old_arenas.push_back(m.arena);
@@ -786,6 +800,14 @@ std::shared_ptr<const core::SampleField> LiveField::update(const Volume& vol, co
       m.raw.nan[it->first] = it->second[2] != 0.f ? 1 : 0;
     }
     if (!taken.empty() && !fresh) m.arena->give_back(taken);
+    for (auto it = owner_undo.rbegin(); it != owner_undo.rend(); ++it) {
+      if (it->at == kPushed) {
+        m.tile_owner.pop_back();
+      } else {
+        m.tile_owner.push_back(it->last);  // (back where it was popped: within capacity)
+        m.tile_owner[it->at] = it->owner;
+      }
+    }
     throw;
   }
   if (stats) *stats = st;
@@ -810,6 +832,7 @@ bool LiveField::gpu_enabled() const { return impl_->gpu != nullptr; }
 const std::string& LiveField::gpu_reason() const { return impl_->gpu_reason; }
 std::size_t LiveField::gpu_min_bricks() const { return impl_->gpu_min_bricks; }
 void LiveField::set_gpu_min_bricks(std::size_t bricks) { impl_->gpu_min_bricks = bricks; }
+void LiveField::set_commit_fault_for_test(std::function<void()> fault) { impl_->commit_fault = std::move(fault); }
 void LiveField::set_gpu_filter(std::unique_ptr<LiveGpuFilter> filter, const std::string& reason_if_none) {
   impl_->gpu = std::move(filter);
   impl_->gpu_reason = impl_->gpu ? std::string() : reason_if_none;

@@ -131,6 +131,10 @@ class LiveField {
   using OnCommit = std::function<void(const std::shared_ptr<const core::SampleField>&)>;
   std::shared_ptr<const core::SampleField> update(const engine::Volume& vol, const std::vector<std::uint32_t>& dirty,
                                                   LiveUpdateStats* stats = nullptr, const OnCommit& on_commit = {});
+  /// Tests only: `fault` runs inside update() once the new table, tiles and slots are
+  /// patched, before the store is made; what it throws is handled as update()'s own
+  /// failure (nothing published, everything as it was). Empty: none.
+  void set_commit_fault_for_test(std::function<void()> fault);
   /// The newest snapshot.
   std::shared_ptr<const core::SampleField> current() const;
   /// The raw voxels of the volume current() was computed from (the grid's, x fastest): an

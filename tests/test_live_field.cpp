@@ -385,6 +385,43 @@ const void* address(const BrickStore& s, std::uint32_t entry) {
                                          : static_cast<const void*>(s.compact->data() + entry);
 }
 
+// An update that fails once it patched the table, the tiles and the tile owners (kept in
+// place, undone on a throw) publishes nothing and leaves nothing behind: the same update
+// again then matches a full run, edit after edit (bricks emptied and filled: tiles dropped
+// and appended).
+TEST(LiveField, AnUpdateThatFailsAfterPatchingLeavesNothingBehind) {
+  Case c = cached("sphere");
+  const LiveFieldOptions o = options(c, "gradient", SampleFormat::kFp32);
+  auto lf = LiveField::create(c.vol, o);
+  std::size_t activated = 0, deactivated = 0;
+  int k = 0;
+  // The sequence, then again with carve and add swapped: bricks emptied are filled again,
+  // tiles appended by a failed update dropped by a later one.
+  std::vector<Brush> edits = sequence(c, 13);
+  for (std::size_t i = 0, n = edits.size(); i < n; ++i) {
+    Brush b = edits[i];
+    if (b.kind == BrushKind::kCarve) b.kind = BrushKind::kAdd;
+    else if (b.kind == BrushKind::kAdd) b.kind = BrushKind::kCarve;
+    edits.push_back(b);
+  }
+  for (const Brush& b : edits) {
+    const std::string what = "edit " + std::to_string(k++) + " (" + session::to_string(b.kind) + ")";
+    const session::BrushResult r = session::apply_brush_cpu(c.vol, b);
+    const auto before = lf->current();
+    lf->set_commit_fault_for_test([] { throw std::bad_alloc(); });
+    EXPECT_THROW((void)lf->update(c.vol, r.dirty), std::bad_alloc) << what;
+    lf->set_commit_fault_for_test({});
+    EXPECT_EQ(lf->current(), before) << what;
+    session::LiveUpdateStats st;
+    const auto snap = lf->update(c.vol, r.dirty, &st);
+    expect_full_run(*snap, c.vol, o, what);
+    activated += st.activated;
+    deactivated += st.deactivated;
+  }
+  EXPECT_GT(activated, 0u);
+  EXPECT_GT(deactivated, 0u);
+}
+
 TEST(LiveField, UnchangedBricksShareThePoolAndSmallEditsStaySmall) {
   for (SampleFormat f : {SampleFormat::kFp32, SampleFormat::kFp16, SampleFormat::kUnorm16}) {
     Case c = cached("chest");

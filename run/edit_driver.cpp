@@ -106,6 +106,9 @@ void EditDriver::on_applied(const EditEvent& applied, const EditOutcome& outcome
   if (kind == EditEvent::Kind::kUndo) ++figures.undos;
   if (kind == EditEvent::Kind::kRedo) ++figures.redos;
   said_if_nothing(kind, e.brush, r.outcome, e.t_s);
+  if (!outcome.history_error.empty())
+    note("t = " + fmt(e.t_s, 4) + " s: the brush's undo step could not be recorded (" + outcome.history_error +
+         "): the undo history was dropped, the edit stands");
   if (r.outcome.published) inside_now_ = inside_voxels(setup_.session->volume(), iso_);
   r.removed_mm3 = double(inside0_ - inside_now_) * voxel_mm3_;
   rows.push_back(std::move(r));

@@ -203,9 +203,10 @@ class Sculptor {
   /// The undo step of the last apply_unrecorded(): the bricks `ids` (at least the ones it
   /// touched) as `before` holds them, a volume of the same grid (x fastest) with their content
   /// before that brush (LiveField::published_voxels() before its update lets it follow the
-  /// volume). Outside a stroke it is a stroke of its own, as in apply(). @throws
-  /// std::bad_alloc (the open stroke then holds what was recorded before; an own stroke is
-  /// ended), std::out_of_range for an id past the grid's bricks.
+  /// volume). Outside a stroke it is a stroke of its own, as in apply(); empty `ids` record
+  /// nothing (outside a stroke: the redo branch dropped, as by a brush that changed nothing).
+  /// @throws std::bad_alloc, or std::out_of_range for an id past the grid's bricks: the whole
+  /// history is dropped first (EditHistory::clear; a stroke the caller opened stays open).
   void record_applied(const std::vector<std::uint32_t>& ids, const float* before);
   /// Forgets the whole undo / redo history (EditHistory::clear).
   void drop_history() noexcept { history_.clear(); }

@@ -232,7 +232,11 @@ void EditHistory::clear() noexcept {
   undo_.clear();
   redo_.clear();
   dropped_redo_.clear();
-  open_.reset();
+  if (open_) {  // still open (its end_stroke to come), from now on, under a new serial
+    open_->bricks.clear();
+    open_->bytes = 0;
+    open_->serial = ++serials_;
+  }
   bytes_ = 0;
 }
 

@@ -84,9 +84,11 @@ class EditHistory {
   /// stroke's begin_stroke() dropped. Call it right after that stroke ended. No-op if there
   /// is no undo stroke.
   void discard_newest_stroke();
-  /// Forgets every stroke: undo, redo and the open one (each counted in dropped_strokes()),
-  /// e.g. when an edit that stands could not record its undo step: undoing older strokes
-  /// past it would give a state that never existed. Allocates nothing, throws nothing.
+  /// Forgets every stroke: undo, redo and what the open one recorded (each counted in
+  /// dropped_strokes()), e.g. when an edit that stands could not record its undo step:
+  /// undoing older strokes past it would give a state that never existed. An open stroke
+  /// stays open, empty, under a new serial (the rest of a press is still one step). Allocates
+  /// nothing, throws nothing.
   void clear() noexcept;
   /// Serial numbers of strokes (1, 2, ... in the order they were opened): the open stroke's
   /// and the newest undo stroke's, 0 for none. A stroke that ended with no change, or was
@@ -103,7 +105,7 @@ class EditHistory {
   /// Payload bytes held now: 4 per backed-up voxel, undo + redo + the open stroke.
   std::uint64_t bytes() const { return bytes_; }
   std::uint64_t limit_bytes() const { return limit_; }
-  /// Strokes dropped so far to stay under the limit (oldest first).
+  /// Strokes dropped so far: to stay under the limit (oldest first), and by clear().
   std::size_t dropped_strokes() const { return dropped_; }
 
  private:

@@ -106,28 +106,37 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
     case EditEvent::Kind::kUndo: o.restored = sc.undo(); changed = o.restored; break;
     case EditEvent::Kind::kRedo: o.restored = sc.redo(); changed = o.restored; break;
   }
-  // The brush's undo step, from the volume as of the snapshot before it. An edit that stands
-  // without one would make undoing older strokes give a state that never existed: then the
-  // history goes (and the outcome says why).
-  auto record_undo = [&]() noexcept {
+  // The brush's undo step, from the volume as of the snapshot before it (a brush that changed
+  // nothing records none: outside a stroke it only drops the redo branch, as a stroke of its
+  // own that changed nothing). An edit that stands without its step would make undoing older
+  // strokes give a state that never existed: then the history goes, and the outcome says why.
+  const std::vector<std::uint32_t> none;
+  auto record_undo = [&](const std::vector<std::uint32_t>& ids) noexcept {
     if (e.kind != EditEvent::Kind::kBrush) return;
     try {
-      if (impl_->history_fault) impl_->history_fault();
-      sc.record_applied(touched, impl_->live->published_voxels().data());
+      if (impl_->history_fault && !ids.empty()) impl_->history_fault();
+      sc.record_applied(ids, impl_->live->published_voxels().data());
     } catch (...) {
       sc.drop_history();
       note_exception(o.history_error);
     }
   };
-  if (changed.empty()) record_undo();
+  if (changed.empty()) record_undo(none);
   if (!changed.empty()) {
-    const session::LiveField::OnCommit on_commit = [&](const std::shared_ptr<const core::SampleField>& snap) {
-      if (out) out->publish(snap);
-      o.published_at = std::chrono::steady_clock::now();
-      record_undo();
-    };
     try {
       if (impl_->update_fault) impl_->update_fault();
+      // (one pointer captured: the std::function holds it without allocating)
+      struct Commit {
+        servo::TripleBuffer<core::SampleField>* out;
+        EditOutcome* o;
+        decltype(record_undo)* record;
+        const std::vector<std::uint32_t>* touched;
+      } commit{out, &o, &record_undo, &touched};
+      const session::LiveField::OnCommit on_commit = [c = &commit](const std::shared_ptr<const core::SampleField>& snap) {
+        c->o->published_at = std::chrono::steady_clock::now();
+        if (c->out) c->out->publish(snap);
+        (*c->record)(*c->touched);
+      };
       (void)impl_->live->update(sc.volume(), changed, &o.update, on_commit);
     } catch (...) {
       // LiveField::update publishes nothing when it throws: take the edit back. The
@@ -144,7 +153,9 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   }
   if (impl_->log.size() < impl_->log_limit) impl_->log.push_back(e);
   else ++impl_->log_dropped;
-  o.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  const auto t_end = std::chrono::steady_clock::now();
+  o.wall_ms = std::chrono::duration<double, std::milli>(t_end - t0).count();
+  if (o.published) o.after_publish_ms = std::chrono::duration<double, std::milli>(t_end - o.published_at).count();
   return o;
 }
 

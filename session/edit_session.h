@@ -39,10 +39,14 @@ struct EditOutcome {
   std::vector<std::uint32_t> restored;       ///< kUndo / kRedo: bricks restored
   session::LiveUpdateStats update;            ///< the snapshot update (zero if nothing changed)
   bool published = false;                    ///< a new snapshot was published
-  /// When it was published (TripleBuffer::publish returned), if it was.
+  /// When it was published (right before TripleBuffer::publish), if it was.
   std::chrono::steady_clock::time_point published_at{};
+  /// apply() after published_at (publish, the undo step, the log) [ms]; 0 if nothing was published.
+  double after_publish_ms = 0;
   /// A brush's undo step could not be recorded (e.g. std::bad_alloc): the edit stands and is
-  /// published, the undo / redo history was dropped (undo stops here). Empty: recorded.
+  /// published, the undo / redo history was dropped (undo stops here; a stroke that was open
+  /// stays open). Empty: recorded. (The log does not note it: a replay of log() keeps its
+  /// history.)
   std::string history_error;
   double wall_ms = 0;                        ///< apply(), everything included [ms]
   std::string error;                         ///< a LiveSession's listener only: apply() threw this (refused)

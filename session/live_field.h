@@ -94,7 +94,7 @@ struct LiveUpdateStats {
   bool gpu_failed = false;      ///< the GPU failed on this update: the CPU ran it, and runs every later one
   double gpu_submit_ms = 0;     ///< with gpu: submit to fence [ms] (inside recompute_ms)
   double publish_ms = 0;        ///< building the new snapshot (table, tiles, pool slots) [ms]
-  double total_ms = 0;          ///< update(), everything included [ms]
+  double total_ms = 0;          ///< update() up to the snapshot committed (not on_commit, not the shadow's copy) [ms]
   std::uint64_t version = 0;    ///< the new snapshot's SampleField::version
 };
 
@@ -139,6 +139,7 @@ class LiveField {
   std::shared_ptr<const core::SampleField> current() const;
   /// The raw voxels of the volume current() was computed from (the grid's, x fastest): an
   /// update that throws leaves them as they were, so an edit can be taken back from them.
+  /// While update()'s on_commit runs they are still the previous snapshot's.
   const std::vector<float>& published_voxels() const;
   const LiveFieldOptions& options() const;
   /// Bytes of sample memory held for all snapshots alive now (pool slots in use: 729 samples

@@ -62,11 +62,14 @@ void Sculptor::record_applied(const std::vector<std::uint32_t>& ids, const float
   if (own) history_.begin_stroke();
   try {
     history_.record(vol_.grid, before, ids);
+    if (own) history_.end_stroke(vol_);
   } catch (...) {
-    if (own) history_.end_stroke(vol_);  // (what it recorded is dropped there if unchanged)
+    // A step with some of its bricks would undo part of the brush: no step, and no older
+    // stroke either (undoing one past the brush would give a state that never existed).
+    history_.clear();
+    if (own) history_.end_stroke(vol_);  // (empty: pushes nothing)
     throw;
   }
-  if (own) history_.end_stroke(vol_);
 }
 
 BrushResult Sculptor::run_brush(const Brush& b) {

@@ -224,3 +224,49 @@ TEST(EditHistory, AStrokeLargerThanTheLimitIsABarrier) {
 }
 
 }  // namespace
+
+// clear(): undo and redo strokes and what the open stroke recorded are gone (counted as
+// dropped, no payload held), the open stroke stays open under a new serial, and a stroke
+// recorded after it undoes only itself; record() from a buffer takes the buffer's content,
+// not the volume's. Truth: the volumes written before, bit for bit.
+TEST(EditHistory, ClearDropsEveryStrokeAndKeepsTheOpenOneOpen) {
+  Volume v = engine::make_random({19, 10, 9}, {1e-3, 1e-3, 1e-3}, 0.0f, 1.0f, 5);
+  const std::vector<float> v0 = v.voxels;
+  session::EditHistory h(16.0);
+  auto stroke = [&](std::uint32_t id, float value) {  // brick `id` set to `value`, one stroke
+    h.begin_stroke();
+    h.record(v, {id});
+    std::vector<float> d(session::brick_box(v.grid, id).voxels(), value);
+    session::write_brick(v, id, d.data());
+    h.end_stroke(v);
+  };
+  stroke(0, 5.f);
+  stroke(1, 6.f);
+  stroke(2, 7.f);
+  ASSERT_FALSE(h.undo(v).empty());  // one redo stroke
+  ASSERT_EQ(h.undo_depth(), 2u);
+  ASSERT_EQ(h.redo_depth(), 1u);
+  h.begin_stroke();
+  const std::uint64_t serial = h.open_stroke_serial();
+  h.record(v, {3});
+  ASSERT_GT(h.bytes(), 0u);
+  const std::size_t dropped = h.dropped_strokes();
+  h.clear();
+  EXPECT_EQ(h.undo_depth(), 0u);
+  EXPECT_EQ(h.redo_depth(), 0u);
+  EXPECT_EQ(h.bytes(), 0u);
+  EXPECT_EQ(h.dropped_strokes(), dropped + 2u + 1u);  // two undo strokes and the open one (begin_stroke set the redo branch aside)
+  ASSERT_TRUE(h.stroke_open());
+  EXPECT_GT(h.open_stroke_serial(), serial);
+  // The open stroke goes on: brick 4 recorded from a buffer (its old content), then changed.
+  const std::vector<float> before = v.voxels;
+  std::vector<float> d(session::brick_box(v.grid, 4).voxels(), 9.f);
+  session::write_brick(v, 4, d.data());
+  h.record(v.grid, before.data(), {4});
+  h.end_stroke(v);
+  EXPECT_EQ(h.undo_depth(), 1u);
+  EXPECT_FALSE(h.undo(v).empty());
+  EXPECT_TRUE(same_bits(v.voxels, before));
+  EXPECT_TRUE(h.undo(v).empty());
+  EXPECT_FALSE(same_bits(v.voxels, v0));  // bricks 0 and 1 stay as the dropped strokes left them
+}

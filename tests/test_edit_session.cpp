@@ -288,8 +288,8 @@ TEST(EditSession, TheEditLogIsBounded) {
 }
 
 // When the new snapshot cannot be built (here a std::bad_alloc thrown where LiveField::update
-// runs), or a brush fails after it wrote its voxels and pushed its undo step (thrown right
-// after Sculptor::apply), apply() takes the edit back: the volume equals the one current()
+// runs), or a brush fails after it wrote its voxels (thrown right after the brush; its undo
+// step would be recorded only once its snapshot is out), apply() takes the edit back: the volume equals the one current()
 // was built from, nothing is published or logged, and the undo history is as before (a
 // brush leaves no phantom undo step; with the update's fault, an undo is redone). Truth: the volumes of a session
 // that never saw the failing edit, bit for bit.
@@ -442,6 +442,38 @@ TEST(EditSession, AnUndoStepThatCannotBeRecordedDropsTheHistory) {
   EXPECT_EQ(s.sculptor().history().undo_depth(), 1u);
   EXPECT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
   EXPECT_TRUE(same_bits(s.volume(), ref.volume()));
+}
+
+// Inside a press (begin_stroke .. end_stroke) a step that cannot be recorded drops the
+// history but not the press: the brushes after it are still one undo step, and that step
+// takes the volume back to where the failed recording left it. A brush that changes nothing
+// records nothing, so a fault there drops nothing. Truth: a session that never failed,
+// bit for bit.
+TEST(EditSession, ADroppedHistoryKeepsThePressOneStep) {
+  const Volume v = isotouch::engine::make_sphere({40, 40, 40}, 1e-3, 12);
+  const Brush a = carve_at(v, {20, 20, 31}, 4e-3, 1e9);
+  const Brush b = carve_at(v, {20, 31, 20}, 4e-3, 1e9);
+  const Brush c = carve_at(v, {31, 20, 20}, 4e-3, 1e9);
+  const Brush d = carve_at(v, {20, 20, 9}, 4e-3, 1e9);
+  EditSession s(Volume(v), nullptr, sphere_options(), 16.0);
+  ASSERT_TRUE(s.apply(brush_event(a), nullptr).published);
+  s.apply(plain(EditEvent::Kind::kBeginStroke), nullptr);
+  s.set_history_fault_for_test([] { throw std::bad_alloc(); });
+  const EditOutcome again = s.apply(brush_event(a), nullptr);  // a again: changes nothing
+  EXPECT_FALSE(again.published);
+  EXPECT_TRUE(again.history_error.empty());
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u) << "a brush that changed nothing dropped the history";
+  EXPECT_FALSE(s.apply(brush_event(b), nullptr).history_error.empty());
+  s.set_history_fault_for_test({});
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 0u);
+  const Volume after_b = s.volume();
+  ASSERT_TRUE(s.apply(brush_event(c), nullptr).published);
+  ASSERT_TRUE(s.apply(brush_event(d), nullptr).published);
+  s.apply(plain(EditEvent::Kind::kEndStroke), nullptr);
+  EXPECT_EQ(s.sculptor().history().undo_depth(), 1u) << "c and d are one step of the press";
+  EXPECT_FALSE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
+  EXPECT_TRUE(same_bits(s.volume(), after_b));
+  EXPECT_TRUE(s.apply(plain(EditEvent::Kind::kUndo), nullptr).restored.empty());
 }
 
 // The hook runs after tick k's render; what it publishes, tick k + 1 reads; without a hook

@@ -831,6 +831,48 @@ void bench_case(const Volume& v, double tau, int reps) {
 // ISOTOUCH_BENCH_REPS (default 7) runs each, interleaved: the selection with and without the
 // input copy written in the same pass, a plain memcpy of the input, the candidate ranges.
 //   test_sparse_chain --gtest_also_run_disabled_tests --gtest_filter='*DISABLED_HostStagesChest*'
+// CandidateCpu (the live field's and the CPU reference's per-brick code): each brick's range
+// over its window (8 b - 1 .. 8 b + 8, clamped) against brute force, on grids whose last x
+// brick leaves a window row of 2 and of 3 voxels (the reduction's scalar tail) and of 10,
+// with NaN and -0 among the values. Gradient only (no filter): the range is the raw voxels'.
+TEST(SparseChain, CandidateCpuRangesAreTheBruteForceRanges) {
+  for (int nx : {33, 34, 40}) {
+    Volume v = engine::make_random({nx, 19, 11}, {1e-3, 1e-3, 1e-3}, -1.0f, 1.0f, 7);
+    std::vector<float>& f = v.voxels;
+    for (std::size_t i = 5; i < f.size(); i += 211) f[i] = std::numeric_limits<float>::quiet_NaN();
+    for (std::size_t i = 2; i < f.size(); i += 23) f[i] = -0.0f;
+    for (std::size_t i = 7; i < f.size(); i += 29) f[i] = 0.0f;
+    const core::Grid& g = v.grid;
+    const engine::sparse::Plan plan = engine::sparse::make_plan(g, {PassDesc::gradient()}, "random");
+    engine::sparse::CandidateCpu cpu(v, plan);
+    const auto nb = core::brick_counts(g);
+    std::size_t differ = 0, with_nan = 0, bricks = 0;
+    for (std::uint32_t id = 0; id < std::uint32_t(nb[0] * nb[1] * nb[2]); ++id, ++bricks) {
+      const auto b = core::brick_coords(id, nb);
+      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+      bool nan = false;
+      for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
+        for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
+          for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
+            const float val = f[g.index(x, y, z)];
+            if (val != val) {
+              nan = true;
+              continue;
+            }
+            lo = std::min(lo, val);
+            hi = std::max(hi, val);
+          }
+      lo += 0.0f;
+      hi += 0.0f;
+      const auto r = cpu.range(id);
+      with_nan += nan;
+      differ += bits(r.lo) != bits(lo) || bits(r.hi) != bits(hi) || r.nan != nan;
+    }
+    EXPECT_EQ(differ, 0u) << "nx " << nx << ", " << bricks << " bricks";
+    EXPECT_GT(with_nan, 0u);
+  }
+}
+
 TEST(SparseChain, DISABLED_HostStagesChest) {
   const char* e = std::getenv("ISOTOUCH_BENCH_REPS");
   const int reps = e ? std::max(1, std::atoi(e)) : 7;

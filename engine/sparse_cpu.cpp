@@ -224,6 +224,38 @@ struct Fold {
     hi = v > hi ? v : hi;
   }
 };
+/// Fold over rows 4 values at a time; a row's last 4 overlap the ones before (min, max and
+/// the NaN flag do not depend on the order or on seeing a value twice; -0 / +0 are for the
+/// caller to make +0). GCC / Clang vector extensions.
+struct RowFold {
+  typedef float v4 __attribute__((vector_size(16)));
+  v4 lo = {kInf, kInf, kInf, kInf}, hi = -lo, nn = {0.0f, 0.0f, 0.0f, 0.0f};
+  Fold tail;  ///< rows shorter than 4
+  void row(const float* r, int w) {
+    if (w < 4) {
+      for (int x = 0; x < w; ++x) tail.add(r[x]);
+      return;
+    }
+    const v4 one = {1.0f, 1.0f, 1.0f, 1.0f};
+    for (int o = 0;; o = std::min(o + 4, w - 4)) {
+      v4 v;
+      std::memcpy(&v, r + o, sizeof v);
+      lo = v < lo ? v : lo;
+      hi = v > hi ? v : hi;
+      nn = v != v ? one : nn;
+      if (o == w - 4) break;
+    }
+  }
+  Fold result() const {
+    Fold f = tail;
+    for (int i = 0; i < 4; ++i) {
+      f.lo = lo[i] < f.lo ? lo[i] : f.lo;
+      f.hi = hi[i] > f.hi ? hi[i] : f.hi;
+      f.nan = f.nan || nn[i] != 0.0f;
+    }
+    return f;
+  }
+};
 /// Element-wise fold over slices za .. zb of one row (`row0` the row in slice 0, slices
 /// `slice` floats apart), elements 0 .. sx - 1: lo / hi the min / max of the non-NaN values
 /// (+-Inf where all are NaN), nn 1 where a NaN was seen, else 0. 16 elements at a time with
@@ -410,34 +442,13 @@ BrickSelection select_brick(const core::Grid& grid, const float* voxels, const P
   const auto [x0, x1] = brick_window(b[0], plan.radius[0], nx);
   const auto [y0, y1] = brick_window(b[1], plan.radius[1], ny);
   const auto [z0, z1] = brick_window(b[2], plan.radius[2], grid.dims[2]);
-  // 4 voxels at a time; a row's last 4 overlap the ones before (min, max and the NaN flag
-  // do not depend on the order or on seeing a voxel twice; -0 / +0 are made +0 below).
-  typedef float v4 __attribute__((vector_size(16)));
-  const v4 one = {1.0f, 1.0f, 1.0f, 1.0f};
-  v4 lo = {kInf, kInf, kInf, kInf}, hi = -lo, nn = one - one;
-  Fold f;
+  // 4 voxels at a time (RowFold; -0 / +0 are made +0 below).
+  RowFold rf;
   const int w = x1 - x0 + 1;
   for (int z = z0; z <= z1; ++z)
-    for (int y = y0; y <= y1; ++y) {
-      const float* row = voxels + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + x0;
-      if (w < 4) {
-        for (int x = 0; x < w; ++x) f.add(row[x]);
-        continue;
-      }
-      for (int o = 0;; o = std::min(o + 4, w - 4)) {
-        v4 v;
-        std::memcpy(&v, row + o, sizeof v);
-        lo = v < lo ? v : lo;
-        hi = v > hi ? v : hi;
-        nn = v != v ? one : nn;
-        if (o == w - 4) break;
-      }
-    }
-  for (int i = 0; i < 4; ++i) {
-    f.lo = lo[i] < f.lo ? lo[i] : f.lo;
-    f.hi = hi[i] > f.hi ? hi[i] : f.hi;
-    f.nan = f.nan || nn[i] != 0.0f;
-  }
+    for (int y = y0; y <= y1; ++y)
+      rf.row(voxels + (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + x0, w);
+  const Fold f = rf.result();
   BrickSelection out{f.lo + 0.0f, f.hi + 0.0f, f.nan, false};
   out.candidate = widen_and_decide(out.lo, out.hi, out.nan, plan, iso);
   return out;
@@ -750,40 +761,14 @@ class BrickCpu {
       for (int a = 0; a < 3; ++a) m[a] += e[a];
       cur_ = 1 - cur_;
     }
-    CandidateRange rg{kInf, -kInf, false};
     const float* f = buf_[cur_].data();
-    // 4 values at a time; a row's last 4 overlap the ones before (min, max and the NaN flag
-    // do not depend on the order or on seeing a value twice; -0 / +0 are made +0 below).
-    typedef float v4 __attribute__((vector_size(16)));
-    const v4 one = {1.0f, 1.0f, 1.0f, 1.0f};
-    v4 lo = {kInf, kInf, kInf, kInf}, hi = -lo, nn = one - one;
+    RowFold rf;  // 4 values at a time (-0 / +0 made +0 below)
     const int x0 = std::max(plan_.radius[0], vlo_[0]), w = std::min(plan_.radius[0] + 9, vhi_[0]) - x0 + 1;
     for (int z = std::max(plan_.radius[2], vlo_[2]); z <= std::min(plan_.radius[2] + 9, vhi_[2]); ++z)
-      for (int y = std::max(plan_.radius[1], vlo_[1]); y <= std::min(plan_.radius[1] + 9, vhi_[1]); ++y) {
-        const float* row = f + at(x0, y, z);
-        if (w < 4) {
-          for (int x = 0; x < w; ++x) {
-            const float v = row[x];
-            rg.nan = rg.nan || v != v;
-            rg.lo = v < rg.lo ? v : rg.lo;
-            rg.hi = v > rg.hi ? v : rg.hi;
-          }
-          continue;
-        }
-        for (int o = 0;; o = std::min(o + 4, w - 4)) {
-          v4 v;
-          std::memcpy(&v, row + o, sizeof v);
-          lo = v < lo ? v : lo;
-          hi = v > hi ? v : hi;
-          nn = v != v ? one : nn;
-          if (o == w - 4) break;
-        }
-      }
-    for (int i = 0; i < 4; ++i) {
-      rg.lo = lo[i] < rg.lo ? lo[i] : rg.lo;
-      rg.hi = hi[i] > rg.hi ? hi[i] : rg.hi;
-      rg.nan = rg.nan || nn[i] != 0.0f;
-    }
+      for (int y = std::max(plan_.radius[1], vlo_[1]); y <= std::min(plan_.radius[1] + 9, vhi_[1]); ++y)
+        rf.row(f + at(x0, y, z), w);
+    const Fold fo = rf.result();
+    CandidateRange rg{fo.lo, fo.hi, fo.nan};
     rg.lo = rg.lo + 0.0f;  // -0 -> +0, as the shader (whose reduction order differs)
     rg.hi = rg.hi + 0.0f;
     return rg;

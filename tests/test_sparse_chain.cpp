@@ -732,6 +732,30 @@ TEST(SparseChain, SelectionOverTheWindowsPerBrickAndBulkAgree) {
 // candidate_ranges (the lists strategy's host step) against a brute-force fold over each
 // brick + 1 voxel, every brick a candidate, on odd dims (bricks cut by the grid on every
 // axis, rows of 10 and of fewer voxels), NaN voxels and -0, 1 and 2 threads.
+/// Min and max of the non-NaN values (+0 for -0) and whether a NaN was seen, over brick `b`'s
+/// window (8 b - 1 .. 8 b + 8 on each axis, clamped to the grid) of `f`: brute force.
+struct BruteRange {
+  float lo, hi;
+  bool nan;
+};
+BruteRange brute_range(const core::Grid& g, const float* f, const std::array<int, 3>& b) {
+  BruteRange e{std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(), false};
+  for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
+    for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
+      for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
+        const float v = f[g.index(x, y, z)];
+        if (v != v) {
+          e.nan = true;
+          continue;
+        }
+        e.lo = std::min(e.lo, v);
+        e.hi = std::max(e.hi, v);
+      }
+  e.lo += 0.0f;
+  e.hi += 0.0f;
+  return e;
+}
+
 TEST(SparseChain, CandidateRangesAreTheBruteForceRanges) {
   core::Grid g;
   g.dims = {301, 61, 37};  // x bricks of 10 voxels and a last one of 6; 1520 bricks: 2 threads run
@@ -752,24 +776,9 @@ TEST(SparseChain, CandidateRangesAreTheBruteForceRanges) {
     ASSERT_EQ(r.size(), all.size());
     std::size_t differ = 0, with_nan = 0;
     for (std::uint32_t id : all) {
-      const auto b = core::brick_coords(id, nb);
-      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-      bool nan = false;
-      for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
-        for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
-          for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
-            const float v = f[g.index(x, y, z)];
-            if (v != v) {
-              nan = true;
-              continue;
-            }
-            lo = std::min(lo, v);
-            hi = std::max(hi, v);
-          }
-      lo += 0.0f;
-      hi += 0.0f;
-      with_nan += nan;
-      differ += bits(r[id].lo) != bits(lo) || bits(r[id].hi) != bits(hi) || r[id].nan != nan;
+      const BruteRange e = brute_range(g, f.data(), core::brick_coords(id, nb));
+      with_nan += e.nan;
+      differ += bits(r[id].lo) != bits(e.lo) || bits(r[id].hi) != bits(e.hi) || r[id].nan != e.nan;
     }
     EXPECT_EQ(differ, 0u) << threads << " thread(s)";
     EXPECT_GT(with_nan, 0u);
@@ -848,25 +857,10 @@ TEST(SparseChain, CandidateCpuRangesAreTheBruteForceRanges) {
     const auto nb = core::brick_counts(g);
     std::size_t differ = 0, with_nan = 0, bricks = 0;
     for (std::uint32_t id = 0; id < std::uint32_t(nb[0] * nb[1] * nb[2]); ++id, ++bricks) {
-      const auto b = core::brick_coords(id, nb);
-      float lo = std::numeric_limits<float>::infinity(), hi = -lo;
-      bool nan = false;
-      for (int z = std::max(8 * b[2] - 1, 0); z <= std::min(8 * b[2] + 8, g.dims[2] - 1); ++z)
-        for (int y = std::max(8 * b[1] - 1, 0); y <= std::min(8 * b[1] + 8, g.dims[1] - 1); ++y)
-          for (int x = std::max(8 * b[0] - 1, 0); x <= std::min(8 * b[0] + 8, g.dims[0] - 1); ++x) {
-            const float val = f[g.index(x, y, z)];
-            if (val != val) {
-              nan = true;
-              continue;
-            }
-            lo = std::min(lo, val);
-            hi = std::max(hi, val);
-          }
-      lo += 0.0f;
-      hi += 0.0f;
+      const BruteRange e = brute_range(g, f.data(), core::brick_coords(id, nb));
       const auto r = cpu.range(id);
-      with_nan += nan;
-      differ += bits(r.lo) != bits(lo) || bits(r.hi) != bits(hi) || r.nan != nan;
+      with_nan += e.nan;
+      differ += bits(r.lo) != bits(e.lo) || bits(r.hi) != bits(e.hi) || r.nan != e.nan;
     }
     EXPECT_EQ(differ, 0u) << "nx " << nx << ", " << bricks << " bricks";
     EXPECT_GT(with_nan, 0u);

@@ -134,7 +134,7 @@ inline std::array<int, 3> brick_coords(std::size_t id, const std::array<int, 3>&
 
 /// Copies the voxels of brick `id` (its 8^3 box clipped to the grid) from `from` to `to`,
 /// two volumes of grid `g` (g.voxel_count() floats each, x fastest, index frame), row by
-/// row; a whole row of 8 is one fixed-size copy. Sizes are not checked.
+/// row. Sizes are not checked.
 inline void copy_brick_voxels(const Grid& g, std::size_t id, const float* from, float* to) {
   const auto b = brick_coords(id, brick_counts(g));
   const int nx = g.dims[0], ny = g.dims[1];
@@ -143,8 +143,7 @@ inline void copy_brick_voxels(const Grid& g, std::size_t id, const float* from, 
   for (int z = kBrickSize * b[2]; z < z1; ++z)
     for (int y = kBrickSize * b[1]; y < y1; ++y) {
       const std::size_t row = (std::size_t(z) * std::size_t(ny) + std::size_t(y)) * std::size_t(nx) + std::size_t(x0);
-      if (n == kBrickSize) std::memcpy(to + row, from + row, kBrickSize * sizeof(float));
-      else std::memcpy(to + row, from + row, std::size_t(n) * sizeof(float));
+      std::memcpy(to + row, from + row, std::size_t(n) * sizeof(float));
     }
 }
 

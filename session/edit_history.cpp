@@ -57,16 +57,20 @@ bool brick_holds(const Volume& vol, std::uint32_t id, const float* data) {
   });
   return same;
 }
+/// Brick `id` of `voxels`, a volume of `grid` (x fastest), in read_brick()'s layout.
+std::vector<float> read_box(const core::Grid& grid, const float* voxels, std::uint32_t id) {
+  const BrickBox b = brick_box(grid, id);
+  std::vector<float> out(b.voxels());
+  for_rows(grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
+    std::memcpy(out.data() + k, voxels + v, n * sizeof(float));
+  });
+  return out;
+}
 }  // namespace
 
 std::vector<float> read_brick(const Volume& vol, std::uint32_t id) {
   check_volume(vol);
-  const BrickBox b = brick_box(vol.grid, id);
-  std::vector<float> out(b.voxels());
-  for_rows(vol.grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
-    std::memcpy(out.data() + k, vol.voxels.data() + v, n * sizeof(float));
-  });
-  return out;
+  return read_box(vol.grid, vol.voxels.data(), id);
 }
 
 void write_brick(Volume& vol, std::uint32_t id, const float* data) {
@@ -109,11 +113,7 @@ void EditHistory::record(const core::Grid& grid, const float* voxels, const std:
   if (!open_) throw std::logic_error("EditHistory::record: no open stroke (begin_stroke first)");
   for (std::uint32_t id : ids) {
     if (open_->bricks.count(id)) continue;  // first touch in this stroke only
-    const BrickBox b = brick_box(grid, id);
-    std::vector<float> data(b.voxels());
-    for_rows(grid, b, [&](std::size_t v, std::size_t k, std::size_t n) {
-      std::memcpy(data.data() + k, voxels + v, n * sizeof(float));
-    });
+    std::vector<float> data = read_box(grid, voxels, id);
     const std::uint64_t n = data.size() * sizeof(float);
     open_->bricks.emplace(id, std::move(data));
     open_->bytes += n;

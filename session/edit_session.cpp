@@ -125,17 +125,10 @@ EditOutcome EditSession::apply(const EditEvent& e, servo::TripleBuffer<core::Sam
   if (!changed.empty()) {
     try {
       if (impl_->update_fault) impl_->update_fault();
-      // (one pointer captured: the std::function holds it without allocating)
-      struct Commit {
-        servo::TripleBuffer<core::SampleField>* out;
-        EditOutcome* o;
-        decltype(record_undo)* record;
-        const std::vector<std::uint32_t>* touched;
-      } commit{out, &o, &record_undo, &touched};
-      const session::LiveField::OnCommit on_commit = [c = &commit](const std::shared_ptr<const core::SampleField>& snap) {
-        c->o->published_at = std::chrono::steady_clock::now();
-        if (c->out) c->out->publish(snap);
-        (*c->record)(*c->touched);
+      const session::LiveField::OnCommit on_commit = [&](const std::shared_ptr<const core::SampleField>& snap) {
+        o.published_at = std::chrono::steady_clock::now();
+        if (out) out->publish(snap);
+        record_undo(touched);
       };
       (void)impl_->live->update(sc.volume(), changed, &o.update, on_commit);
     } catch (...) {

@@ -1,6 +1,7 @@
 #include "isotouch/bench/bench_device.h"
 #include "isotouch/io/files.h"
 
+#include <dlfcn.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -269,11 +270,135 @@ std::string sdk_row(const char* kind, double seconds, bool fifo) {
          " | " + fixed(r.p99_us) + " | " + fixed(r.max_us) + " | " + std::to_string(r.ticks) + " | " +
          std::to_string(r.missed) + " | " + std::to_string(r.stale) + " |\n";
 }
+/// 0 N for `quiet_ticks`, then `force` along device x; once (at `stall_at` > 0 ticks) a tick
+/// takes `stall_ms`.
+class Push final : public servo::Renderer {
+ public:
+  Push(double force, long quiet_ticks, long stall_at, int stall_ms)
+      : force_(force), quiet_(quiet_ticks), stall_at_(stall_at), stall_ms_(stall_ms) {}
+  const char* name() const override { return "push"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView&, const Vec3&, double) override {
+    ++ticks_;
+    if (ticks_ == stall_at_) std::this_thread::sleep_for(std::chrono::milliseconds(stall_ms_));
+    servo::HriTick t;
+    if (ticks_ > quiet_) t.force_n = {force_, 0, 0};
+    return t;
+  }
+
+ private:
+  double force_;
+  long quiet_, stall_at_;
+  int stall_ms_;
+  long ticks_ = 0;
+};
+
+using Rows = std::vector<std::array<double, 5>>;  // t_s, fx, fy, fz [N, the SDK's frame], flags
+
+/// `kind`'s device opened, the servo at 1 kHz (force limit 3.3 N) rendering `r` for `seconds`,
+/// closed; what the library received (its double's log: dlsym; empty for a real SDK).
+Rows sdk_run(const std::string& kind, servo::Renderer& r, double seconds, bool fifo, double& rate_limit,
+             std::string& why_not) {
+  std::unique_ptr<servo::SdkDevice> dev;
+  try {
+    if (kind == "openhaptics") {
+      auto d = std::make_unique<servo::OpenHapticsDevice>();
+      d->open();
+      dev = std::move(d);
+    } else {
+      auto d = std::make_unique<servo::ForceDimensionDevice>(0, 1000);
+      d->open();
+      dev = std::move(d);
+    }
+  } catch (const std::exception& e) {
+    why_not = e.what();
+    return {};
+  }
+  using LogFn = int (*)(double*, int);
+  const auto log = reinterpret_cast<LogFn>(dlsym(RTLD_DEFAULT, kind == "openhaptics" ? "hdDoubleLog" : "dhdDoubleLog"));
+  using ClearFn = void (*)();
+  const auto clear = reinterpret_cast<ClearFn>(dlsym(RTLD_DEFAULT, kind == "openhaptics" ? "hdDoubleClearLog" : "dhdDoubleClearLog"));
+  if (!log || !clear) {
+    dev->close();
+    why_not = "the library does not log what the device received (a real SDK): not judged";
+    return {};
+  }
+  clear();
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = 1000;
+  sc.force_limit_n = 3.3;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
+  servo::ServoThread servo(published, r, *dev, sc);
+  rate_limit = servo::force_limits(dev->caps(), sc.force_limit_n).rate_n_per_s;
+  servo.start();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  servo.stop();
+  dev->close();
+  Rows rows(1 << 16);
+  const int n = log(rows.front().data(), int(rows.size()));
+  rows.resize(std::size_t(std::clamp(n, 0, int(rows.size()))));
+  return rows;
+}
+
+double row_norm(const std::array<double, 5>& r) { return std::sqrt(r[1] * r[1] + r[2] * r[2] + r[3] * r[3]); }
+
+/// The stall (a 100 ms renderer tick while pushing 1 N) and the step (0 -> 3 N) on `kind`.
+SdkTrial sdk_trial(const std::string& kind, bool fifo) {
+  SdkTrial t;
+  t.kind = kind;
+  Push stalling(1.0, 50, 400, 100);
+  const Rows stall = sdk_run(kind, stalling, 0.8, fifo, t.rate_limit_n_per_s, t.not_measured);
+  if (!t.not_measured.empty()) return t;
+  // The last force before the first zero after the push began, then the first force after it.
+  std::size_t i = 0;
+  while (i < stall.size() && row_norm(stall[i]) < 0.999) ++i;  // pushing 1 N
+  for (; i + 1 < stall.size(); ++i)
+    if (row_norm(stall[i]) > 0 && row_norm(stall[i + 1]) == 0) break;
+  if (i + 1 < stall.size()) {
+    t.steady_n = row_norm(stall[i]);
+    t.stall_zero_after_us = (stall[i + 1][0] - stall[i][0]) * 1e6;
+    std::size_t j = i + 1;
+    while (j < stall.size() && row_norm(stall[j]) == 0) ++j;
+    if (j < stall.size()) t.stall_resumed_n = row_norm(stall[j]);
+  }
+  Push step(3.0, 200, 0, 0);
+  std::string why;
+  double rate = 0;
+  const Rows rows = sdk_run(kind, step, 0.5, fifo, rate, why);
+  std::size_t k = 0;
+  while (k < rows.size() && row_norm(rows[k]) == 0) ++k;
+  t.step_max_rate_n_per_s = t.step_bound_n_per_s = 0;
+  const std::size_t first = k;
+  for (k = std::max<std::size_t>(first, 1); k < rows.size(); ++k) {
+    const double dt = rows[k][0] - rows[k - 1][0];
+    if (!(dt > 0)) continue;
+    const double df = std::sqrt(std::pow(rows[k][1] - rows[k - 1][1], 2) + std::pow(rows[k][2] - rows[k - 1][2], 2) +
+                                std::pow(rows[k][3] - rows[k - 1][3], 2));
+    if (df / dt > t.step_max_rate_n_per_s) {
+      t.step_max_rate_n_per_s = df / dt;
+      t.step_bound_n_per_s = rate * (dt + 1e-3) / dt;  // the servo may have written twice in a frame
+    }
+    if (std::isnan(t.step_rise_ms) && row_norm(rows[k]) > 3.0 - 1e-9 && first < rows.size())
+      t.step_rise_ms = (rows[k][0] - rows[first][0]) * 1e3;
+  }
+  return t;
+}
+
+std::string sdk_trial_line(const SdkTrial& t) {
+  if (!t.not_measured.empty()) return "  " + t.kind + ": not measured: " + t.not_measured + "\n";
+  return "  " + t.kind + ": stall: zero " + fixed(t.stall_zero_after_us) + " us after the last " + fixed(t.steady_n, 3) +
+         " N force, first force after it " + fixed(t.stall_resumed_n, 3) + " N; step 0 -> 3 N: largest |dF|/dt " +
+         fixed(t.step_max_rate_n_per_s) + " N/s (allowed " + fixed(t.step_bound_n_per_s) + " over that frame, rate limit " +
+         fixed(t.rate_limit_n_per_s) + " N/s), 3 N reached " + fixed(t.step_rise_ms, 2) + " ms after the first force\n";
+}
 }  // namespace
 
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
                                                const std::vector<DisconnectTrial>& trials,
-                                               const std::vector<StallTrial>& stalls) {
+                                               const std::vector<StallTrial>& stalls,
+                                               const std::vector<SdkTrial>& sdk) {
   std::vector<std::string> v;
   const auto one = std::find_if(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.rate_hz == 1000; });
   if (one == rows.end() || one->answered == 0 || !std::isfinite(one->p99_us))
@@ -297,6 +422,18 @@ std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>
   v.push_back("zero force with enable cleared within 3 periods of a servo stall (none during it, back through the "
               "ramp) in " + std::to_string(ok) + " of " + std::to_string(stalls.size()) + " trials, worst " +
               fixed(worst) + " us: " + (!stalls.empty() && ok == long(stalls.size()) ? "met" : "NOT met"));
+  // Each vendor SDK that logs what it received: the stall's zero within 3 periods of the last
+  // force and the force back from a ramp (under a tenth of the steady force); the step's
+  // change per frame within the gate's rate.
+  for (const SdkTrial& t : sdk) {
+    if (!t.not_measured.empty()) continue;
+    const bool stall_ok = t.stall_zero_after_us <= 3000 && t.stall_resumed_n < 0.1 * t.steady_n;
+    v.push_back(t.kind + ": zero within 3 periods of a servo stall (" + fixed(t.stall_zero_after_us) +
+                " us), back through the ramp (" + fixed(t.stall_resumed_n, 3) + " N first): " + (stall_ok ? "met" : "NOT met"));
+    const bool step_ok = t.step_max_rate_n_per_s <= t.step_bound_n_per_s * (1 + 1e-9) && std::isfinite(t.step_rise_ms);
+    v.push_back(t.kind + ": a 0 -> 3 N step held to the rate limit (largest " + fixed(t.step_max_rate_n_per_s) +
+                " N/s against " + fixed(t.step_bound_n_per_s) + "): " + (step_ok ? "met" : "NOT met"));
+  }
   return v;
 }
 
@@ -332,8 +469,13 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
     log << "  trial " << i + 1 << ": zero with enable cleared " << fixed(stalls[i].zero_after_us)
         << " us after the last force, " << stalls[i].forced_during << " forced outputs during the stall, first force after it "
         << fixed(stalls[i].resumed_n, 3) << " N, " << stalls[i].watchdog_trips << " watchdog trips\n";
+  std::vector<SdkTrial> sdk;
+  for (const char* kind : {"openhaptics", "forcedimension"}) sdk.push_back(sdk_trial(kind, o.sched_fifo));
+  log << "\nvendor SDK trials at 1 kHz (a 100 ms renderer stall while pushing 1 N; a 0 -> 3 N step under a 3.3 N "
+         "limit), judged on what the library received:\n";
+  for (const SdkTrial& t : sdk) log << sdk_trial_line(t);
   log << "\n";
-  for (const std::string& v : bench_device_verdicts(rows, trials, stalls)) log << "verdict  " << v << "\n";
+  for (const std::string& v : bench_device_verdicts(rows, trials, stalls, sdk)) log << "verdict  " << v << "\n";
   if (!o.out_csv.empty()) {
     std::ostringstream csv;
     csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";

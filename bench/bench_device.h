@@ -1,6 +1,7 @@
 // bench_device.h - `isotouch bench device`: the device link measured against the emulator
 // (sim/device_emulator.h over the Unix-domain socket link, protocol v1), in real time.
 #pragma once
+#include <cmath>
 #include <iosfwd>
 #include <string>
 #include <vector>
@@ -42,13 +43,28 @@ struct StallTrial {
   long watchdog_trips = 0;       ///< the device's own watchdog (the host's zero should come first)
 };
 
+/// A vendor SDK device's stall and step trials at 1 kHz, judged on what its library received
+/// (the test doubles log it; a real SDK does not, and is then not judged).
+struct SdkTrial {
+  std::string kind;                  ///< "openhaptics", "forcedimension"
+  std::string not_measured;          ///< why not ("" measured)
+  double stall_zero_after_us = NAN;  ///< last force received -> first zero received [us]
+  double stall_resumed_n = NAN;      ///< |F| of the first force after the stall's zeros [N]
+  double steady_n = NAN;             ///< |F| before the stall [N]
+  double step_max_rate_n_per_s = NAN;  ///< the largest |dF| / dt between two frames after a 0 -> 3 N step [N/s]
+  double step_bound_n_per_s = NAN;     ///< what the gate allows over those frames (rate x (dt + one servo period) / dt)
+  double rate_limit_n_per_s = NAN;     ///< the gate's rate limit [N/s]
+  double step_rise_ms = NAN;           ///< from the first nonzero frame to the first at 3 N [ms]
+};
+
 /// "p99 report-to-force at 1 kHz = X us: target <= 1000 us met|NOT met", "zero force
 /// within one tick of a disconnect in k of N trials: met|NOT met" and "zero force with
 /// enable cleared within 3 periods of a servo stall ... in k of N trials: met|NOT met",
 /// from the data.
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
                                                const std::vector<DisconnectTrial>& trials,
-                                               const std::vector<StallTrial>& stalls);
+                                               const std::vector<StallTrial>& stalls,
+                                               const std::vector<SdkTrial>& sdk = {});
 
 /// Measures 1, 4 and 8 kHz and the disconnect trials; prints a table, the verdicts and
 /// the machine. @return 0; 1 if nothing could be measured.

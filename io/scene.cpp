@@ -602,6 +602,7 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
   }
   s.workspace_scale = r.number(dv, "device", "workspace_scale");
   check_workspace_scale(r, dv, s);
+  s.allow_no_watchdog = r.boolean(dv, "device", "allow_no_watchdog", false);
   s.hri.world_per_device = s.workspace_scale;
 }
 

@@ -109,6 +109,10 @@ struct Scene {
   /// kMaxWorkspaceScale]. The force is stiffness x the hand's travel, the probe's depth in
   /// the volume / workspace_scale.
   double workspace_scale = 1.0;
+  /// device.allow_no_watchdog (default false): drive a report device whose capabilities say
+  /// it has no watchdog (0 ms: its last force stays on if the host stops sending) instead of
+  /// refusing it.
+  bool allow_no_watchdog = false;
   /// servo.allow_unstable_stiffness (default false): run a servo.stiffness_n_per_m above
   /// the Colgate-Schenkel bound 2 (b - |B|) / T (b: device + hand damping [N s/m], B: servo
   /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the

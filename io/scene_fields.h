@@ -67,6 +67,7 @@ inline constexpr SceneField kSceneFields[] = {
     {"device", "hand_damping_n_s_per_m", "N s/m", "[0, 1e3]", "5"},
     {"device", "substeps", "", "integer [1, 10000]", "20"},
     {"device", "workspace_scale", "world m per device m", "(0, 1e3]", "1.0"},
+    {"device", "allow_no_watchdog", "", "true, false", "false"},
     {"script", "ray_origin_frac", "fractions of the volume box", "vector, each in [-2, 3]", "[0.5, 0.5, 1.2]"},
     {"script", "ray_direction", "", "vector, not zero", "[0, 0, -1]"},
     {"script", "stroke_direction", "", "vector; not zero when `stroke_length_m` > 0", "[1, 0, 0]"},

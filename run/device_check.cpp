@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include "isotouch/run/safety_drill.h"
 #include "isotouch/run/sdk_haptic_device.h"
 #include "isotouch/servo/device_protocols.h"
 #include "isotouch/servo/hid_device.h"
@@ -134,7 +135,16 @@ int check_device(const DeviceCheckOptions& o, std::istream& in, std::ostream& ou
   const servo::DeviceCounters dc = servo.device_counters();
   out << "wall     " << servo.ticks() << " ticks; stale " << dc.stale << ", disconnected " << dc.disconnected
       << ", fault " << dc.fault << "; push down to feel it\n";
-  return 0;
+  SafetyDrillOptions drill;
+  drill.force_n = std::min(o.wall_force_n, 1.0);
+  out << "run the safety drill: " << std::min(drill.force_n, c.max_force_n)
+      << " N up, a step (the rate limit), a " << drill.stall_ms
+      << " ms renderer stall (the force off) and the ramp back? Hold the handle. [y/N] " << std::flush;
+  answer.clear();
+  std::getline(in, answer);
+  out << "\n";
+  if (answer != "y" && answer != "Y") return 0;
+  return run_safety_drill(*dev, drill, out) ? 0 : 1;
 }
 
 }  // namespace isotouch::run

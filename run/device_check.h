@@ -18,7 +18,9 @@ struct DeviceCheckOptions {
 
 /// Runs the check: prints the device, its capabilities, the pose every 0.5 s and the range
 /// moved, asks on `in` ("y" renders the wall, anything else ends), and the wall's largest
-/// force. @return 0; 1 if the device cannot be opened or its pose is not finite or stale.
+/// force; then asks again ("y" runs the safety drill at <= 1 N: safety_drill.h).
+/// @return 0; 1 if the device cannot be opened, its pose is not finite or stale, or a rule
+///         of the drill did not hold.
 int check_device(const DeviceCheckOptions& o, std::istream& in, std::ostream& out);
 
 }  // namespace isotouch::run

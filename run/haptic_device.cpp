@@ -131,6 +131,10 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   }
   if (const std::string e = check_caps(ds.hri, d.io->caps()); !e.empty())
     throw std::runtime_error("--haptic " + spec + ": the scene's renderer does not fit the device: " + e);
+  // A device that keeps its last force when the host stops sending is driven only on purpose.
+  if (d.report && !(d.io->caps().watchdog_s > 0) && !scene.allow_no_watchdog)
+    throw std::runtime_error("--haptic " + spec + ": " + d.report->warning() +
+                             "; refused (the scene's device.allow_no_watchdog: true drives it anyway)");
   return d;
 }
 

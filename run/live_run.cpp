@@ -70,6 +70,7 @@ session::LiveSessionConfig live_config(const io::Scene& scene, const SceneSetup&
                                        const LiveOptions& o) {
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene.hri.rate_hz;
+  c.servo.force_limit_n = scene.hri.force_limit_n;  // the gate: min(scene, device)
   c.servo.sched_fifo = o.sched_fifo;
   c.servo.pin_cpu = o.sched_fifo;
   c.servo.lock_memory = o.sched_fifo;

@@ -83,6 +83,7 @@ std::vector<sim::TraceRow> simulate(const Scene& scene, SceneSetup& setup, const
   servo::HriRenderer renderer(hp);
   session::LiveSessionConfig lc;
   lc.servo.rate_hz = hp.rate_hz;
+  lc.servo.force_limit_n = hp.force_limit_n;
   lc.servo.world_T_device = xf;
   if (edits) {
     lc.drill = edits->drill();

@@ -11,7 +11,11 @@ void RasEcho::set_frame(const engine::Volume& v) {
 core::Vec3 RasEcho::force_ras_n(double stall_s) const {
   const Force f = force_.load();
   if (f.written_ns == 0 || double(now_ns() - f.written_ns) * 1e-9 > stall_s) return {0, 0, 0};
-  const core::Vec3 lps = frame_.direction_apply(f.f);
+  return to_ras_n(f.f);
+}
+
+core::Vec3 RasEcho::to_ras_n(const core::Vec3& f) const {
+  const core::Vec3 lps = frame_.direction_apply(f);
   return {-lps.x, -lps.y, lps.z};
 }
 

@@ -28,6 +28,8 @@ class RasEcho {
   /// The force to send now [N, RAS]: the servo's newest, or zero when the servo has not
   /// written one for `stall_s` (stopped or stalled: no force left on). Any thread.
   core::Vec3 force_ras_n(double stall_s) const;
+  /// A force in grid axes [N] -> RAS [N].
+  core::Vec3 to_ras_n(const core::Vec3& f) const;
   /// Grid frame point [m] -> RAS [mm] (for the HIP and proxy sent out).
   core::Vec3 grid_to_ras_mm(const core::Vec3& g) const;
 

@@ -1,5 +1,6 @@
 #include "isotouch/service/igtl_device.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -58,12 +59,17 @@ IgtlDevice::IgtlDevice(const IgtlDeviceOptions& o) : o_(o) {
     reader_.join();
     throw;
   }
+  const double zero[3] = {0, 0, 0};
+  const std::vector<std::uint8_t> z = pack_translation("Force", zero);
+  exit_zero_ = std::make_unique<servo::ExitZero>(conn_->fd(), z.data(), z.size());
+  rule_.restart(now_ns());
   writer_ = std::thread([this] { write_loop(); });
 }
 
 IgtlDevice::~IgtlDevice() {
   stop_ = true;
   if (writer_.joinable()) writer_.join();  // its last act: a zero force
+  exit_zero_.reset();
   conn_->shutdown();
   if (reader_.joinable()) reader_.join();
 }
@@ -112,8 +118,7 @@ servo::DeviceReading IgtlDevice::read() {
 }
 
 void IgtlDevice::write_force_n(const core::Vec3& f) {
-  if (!(std::isfinite(f.x) && std::isfinite(f.y) && std::isfinite(f.z))) return;  // never sent
-  force_.store({f, now_ns()});
+  rule_.write(f, last_.sequence, now_ns());  // non-finite: zero; the first write after a stall: zero
 }
 
 servo::DeviceCaps IgtlDevice::caps() const {
@@ -125,40 +130,45 @@ servo::DeviceCaps IgtlDevice::caps() const {
 }
 
 const std::atomic<std::uint64_t>* IgtlDevice::enable_force(bool on, double stall_s) {
-  if (std::isfinite(stall_s) && stall_s > 0) stall_s_ = stall_s;
-  on_ = on;
-  return &stalls_;
+  return rule_.enable(on, stall_s, 0.05, now_ns());  // the writer polls: no look period to allow for
 }
 
 void IgtlDevice::send_force(const core::Vec3& f) {
   const double t[3] = {f.x, f.y, f.z};
-  if (conn_->send(pack_translation("Force", t))) sent_.fetch_add(1);
+  const std::vector<std::uint8_t> msg = pack_translation("Force", t);
+  if (!exit_zero_->begin_send()) return;  // the process's last zero went out: nothing after it
+  if (conn_->send(msg)) sent_.fetch_add(1);
+  exit_zero_->end_send();
 }
 
-/// Polls every 0.2 ms: a new pose the servo has answered (or 2 ms old) gets the newest force;
-/// a stalled servo or force off gives zero; a stale stream gets one zero.
+/// Polls every 0.2 ms (a fifth of the stall time when that is shorter: a stall is found within
+/// stall time + a fifth of it): a new pose the servo has answered (or 2 ms old) gets the
+/// newest force; a stall sends a zero at once; force off gives zero; a stale stream gets one
+/// zero.
 void IgtlDevice::write_loop() {
   std::uint64_t answered = 0;
-  bool zero_sent = true, was_stalled = true;
+  bool zero_sent = true;
   const std::int64_t stale_ns = std::int64_t(3e9 / rate_hz_);
   while (!stop_) {
-    std::this_thread::sleep_for(std::chrono::microseconds(200));
+    const std::int64_t poll_ns = std::min<std::int64_t>(200'000, std::max<std::int64_t>(rule_.stall_ns() / 5, 10'000));
+    std::this_thread::sleep_for(std::chrono::nanoseconds(poll_ns));
     const Pose p = pose_.load();
-    const Force f = force_.load();
-    const std::int64_t t = now_ns();
-    const bool stalled = !on_ || f.written_ns == 0 || double(t - f.written_ns) * 1e-9 > stall_s_.load();
-    if (stalled && !was_stalled && on_) stalls_.fetch_add(1);
-    was_stalled = stalled;
+    const std::int64_t t = now_ns();  // the clock before the cell (StallRule::look)
+    const servo::StallLook l = rule_.look(t);
+    if (l.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose
+      send_force({0, 0, 0});
+      zero_sent = true;
+      continue;
+    }
     if (t - p.received_ns > stale_ns) {
       if (!zero_sent) send_force({0, 0, 0});
       zero_sent = true;
       continue;
     }
-    if (p.sequence == answered || (!stalled && f.written_ns < p.received_ns && t - p.received_ns < 2'000'000)) continue;
-    const core::Vec3 out = stalled ? core::Vec3{0, 0, 0} : f.f;
-    send_force(out);
+    if (p.sequence == answered || (l.on && l.last_write_ns < p.received_ns && t - p.received_ns < 2'000'000)) continue;
+    send_force(l.force_n);  // zero unless on
     answered = p.sequence;
-    zero_sent = out.x == 0 && out.y == 0 && out.z == 0;
+    zero_sent = l.force_n.x == 0 && l.force_n.y == 0 && l.force_n.z == 0;
   }
   send_force({0, 0, 0});
 }

@@ -6,8 +6,15 @@
 //     [mm] -> device [m], in the stream's own frame (PLUS: RAS); the world map is the scene's
 //   writer thread: once the servo has read a new pose, the servo's newest force goes back as
 //     a TRANSFORM "Force" whose translation is the force [N] in the same frame (PLUS's
-//     convention); zero once the servo stopped writing (its stall time) and, once, as soon as
-//     the stream is stale, so that the peer never holds a contact force; zero at close.
+//     convention). The stall rule (servo/stall_rule.h): once the servo has not written for
+//     its stall time a zero goes out at once (not with the next pose), and the servo's first
+//     write after it is a zero (it ramps in). Zero, once, as soon as the stream is stale, so
+//     that the peer never holds a contact force; zero at close; and a zero however the
+//     process ends (servo/exit_zero.h: a stuck servo's _Exit, a second stop signal, a crash).
+//
+// Limits: the peer's device is not known here (PLUS drives it), so caps() give no force limit
+// or workspace: the servo's gate clamps to the scene's force_limit_n and limits the force's
+// rate to that limit over 2 ms (servo/force_gate.h).
 //
 // The force loop closes over the network at the stream's rate, not the servo's: the device
 // measures it when it opens and reports it as DeviceCaps::native_rate_hz, with a stale
@@ -23,7 +30,9 @@
 
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/servo/device_io.h"
+#include "isotouch/servo/exit_zero.h"
 #include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/stall_rule.h"
 
 namespace isotouch::service {
 
@@ -64,6 +73,8 @@ class IgtlDevice final : public servo::HapticDeviceIO {
   double measured_rate_hz() const { return rate_hz_; }
   /// Force TRANSFORMs sent so far.
   long forces_sent() const { return sent_.load(); }
+  /// Times the writer took the force off because the servo stopped writing.
+  std::uint64_t stalls() const { return rule_.stalls(); }
 
   // Servo thread: no allocation, lock or syscall.
   core::Vec3 read_position_m() override { return read().position_m; }
@@ -78,10 +89,6 @@ class IgtlDevice final : public servo::HapticDeviceIO {
     std::int64_t received_ns = 0;  // 0: none yet
     std::uint64_t sequence = 0;
   };
-  struct Force {
-    core::Vec3 f;
-    std::int64_t written_ns = 0;
-  };
   void read_loop();
   void write_loop();
   void send_force(const core::Vec3& f);
@@ -91,10 +98,9 @@ class IgtlDevice final : public servo::HapticDeviceIO {
   std::shared_ptr<Connection> conn_;
   servo::LatestValue<Pose> pose_;
   Pose last_;  // servo thread
-  servo::LatestValue<Force> force_;
-  std::atomic<bool> stop_{false}, on_{false}, closed_{false};
-  std::atomic<double> stall_s_{0.05};
-  std::atomic<std::uint64_t> stalls_{0};
+  servo::StallRule rule_;  // the servo's force (stamped) and the stall rule
+  std::unique_ptr<servo::ExitZero> exit_zero_;  // the zero the peer gets however the process ends
+  std::atomic<bool> stop_{false}, closed_{false};
   std::atomic<long> poses_{0}, sent_{0};
   std::atomic<std::int64_t> first_ns_{0}, last_ns_{0};
   std::atomic<long> others_{0};  // messages that were not the stream

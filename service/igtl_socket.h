@@ -61,6 +61,8 @@ class Connection final : public ByteSource {
   /// and the connection is marked dead.
   bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
   bool alive() const { return alive_.load(); }
+  /// The socket (for ExitZero's last message: servo/exit_zero.h).
+  int fd() const { return fd_; }
   /// Shuts the socket down (a blocked read returns).
   void shutdown();
 

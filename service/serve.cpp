@@ -529,22 +529,27 @@ void Server::command_loop() {
 }
 
 /// reply_force: polls every 0.1 ms; a new pose on the stream, once the servo has written a
-/// force after it arrived (or 2 ms later: no session runs, the stall rule gives zero), is
-/// answered with that force, the pose's stamp echoed.
+/// force after it arrived (or 2 ms later: no session runs, the force is off), is answered
+/// with that force, the pose's stamp echoed. The stall rule (stall_rule.h): once the servo
+/// has not written for its stall time, a zero goes to the stream's client at once (the servo
+/// ramps in after it), and nothing but zeros until the servo writes again.
 void Server::reply_loop() {
   if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
     if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note; !note.empty())
       log_.line("reply    " + note);
   std::uint64_t answered = 0;
-  const double stall_s = std::max(0.05, 4.0 / scene_.hri.rate_hz);
+  device_.restart_force(TransformDevice::now_ns());
   while (!stop_) {
     std::this_thread::sleep_for(std::chrono::microseconds(100));
     const TransformDevice::PoseId p = device_.newest_pose();
-    if (p.sequence == answered) continue;
-    const bool rendered = device_.force_written_ns() >= p.received_ns;
-    if (!rendered && TransformDevice::now_ns() - p.received_ns < 2'000'000) continue;
+    const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
+    const servo::StallLook l = device_.look_force(now);
+    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new
+    if (!stall_zero && p.sequence == answered) continue;
+    const bool rendered = l.last_write_ns >= p.received_ns;
+    if (!stall_zero && !rendered && now - p.received_ns < 2'000'000) continue;
     answered = p.sequence;
-    const core::Vec3 f = device_.force_ras_n(stall_s);
+    const core::Vec3 f = device_.echo().to_ras_n(l.force_n);  // zero unless on
     const double t[3] = {f.x, f.y, f.z};
     std::shared_ptr<Connection> to;
     {
@@ -602,13 +607,20 @@ std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
   s->image_name = v.path.rfind("igtl:", 0) == 0 ? v.path.substr(5) : "isotouch";
   s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), setup_.live, scene_.edits.history_limit_mib);
   s->buffer.publish(s->edits->current());
-  s->hri = std::make_unique<servo::HriRenderer>(setup_.hri);
+  // The renderer's force is stiffness x depth / world_per_device: the TRANSFORM stream's map
+  // is the identity (its points are the volume's own), so its renderer must not scale by the
+  // scene's workspace_scale (at 0.1 that was 10x the stiffness the stability check saw); a
+  // `--haptic` device is mapped with the scale (start_session), and its renderer scales.
+  servo::HriParams hp = setup_.hri;
+  if (!echo_device_) hp.world_per_device = 1.0;
+  s->hri = std::make_unique<servo::HriRenderer>(hp);
   return s;
 }
 
 void Server::start_session(std::unique_ptr<Session> s) {
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene_.hri.rate_hz;
+  c.servo.force_limit_n = scene_.hri.force_limit_n;  // the gate: min(scene, device)
   c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = o_.sched_fifo;
   if (echo_device_) {  // no servo runs now
     echo_device_->echo().set_frame(s->frame);

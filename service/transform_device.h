@@ -15,6 +15,7 @@
 #include "isotouch/service/device_echo.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/stall_rule.h"
 
 namespace isotouch::service {
 
@@ -40,7 +41,20 @@ class TransformDevice final : public servo::HapticDeviceIO {
   // Servo thread: no allocation, lock or syscall (the clock is the vDSO's).
   core::Vec3 read_position_m() override { return read().position_m; }
   servo::DeviceReading read() override;
-  void write_force_n(const core::Vec3& f) override { echo_.store(f); }
+  void write_force_n(const core::Vec3& f) override {
+    echo_.store(f);
+    rule_.write(f, last_.sequence, now_ns());  // stamped: the stall is timed from the write
+  }
+  /// The servo's stall time (ServoThread: 2.5 periods): the reply thread sends a zero within
+  /// it + its poll of a stall, and the servo ramps in after (the stall rule, stall_rule.h).
+  const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
+    return rule_.enable(on, stall_s, 0.05, now_ns());
+  }
+  /// Reply thread only: before its first look_force(), then once a poll (clock read first).
+  void restart_force(std::int64_t t_ns) { rule_.restart(t_ns); }
+  servo::StallLook look_force(std::int64_t t_ns) { return rule_.look(t_ns); }
+  /// Times the reply thread took the force off because the servo stopped writing.
+  std::uint64_t stalls() const { return rule_.stalls(); }
 
   /// The servo's force and the volume's frame, for the TRANSFORMs sent out (device_echo.h).
   const RasEcho& echo() const { return echo_; }
@@ -61,6 +75,7 @@ class TransformDevice final : public servo::HapticDeviceIO {
   std::mutex push_mu_;
   std::atomic<long> pushed_{0};
   RasEcho echo_;
+  servo::StallRule rule_;
   core::Vec3 offset_mm_;
 };
 

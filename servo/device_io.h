@@ -19,7 +19,19 @@ struct DeviceCaps {
   int dof = 3;                  ///< translational degrees of freedom with force
   Vec3 workspace_min_m{-INFINITY, -INFINITY, -INFINITY};  ///< workspace box, device [m]
   Vec3 workspace_max_m{INFINITY, INFINITY, INFINITY};
-  double max_force_n = INFINITY;              ///< largest |F| the device renders [N]
+  double max_force_n = INFINITY;              ///< largest |F| the device renders [N] (its peak)
+  /// Largest |F| the device sustains [N] (OpenHaptics' HD_NOMINAL_MAX_CONTINUOUS_FORCE): the
+  /// servo's gate keeps the RMS |F| over continuous_window_s at or below it (force_gate.h).
+  double max_continuous_force_n = INFINITY;
+  double continuous_window_s = 0;             ///< that RMS's window [s] (0: the gate's default, 10 s)
+  /// Largest rate of change of the force the device should be sent [N/s] (0: the gate's
+  /// default, max_force_n over 2 ms when the peak is finite).
+  double max_force_rate_n_per_s = 0;
+  /// The device applies each force in its own loop at this rate [Hz] (OpenHaptics' servo
+  /// loop, Force Dimension's thread): a servo faster than it is refused, as its ticks between
+  /// two of the device's would be lost and its stall rule would act in the device's periods.
+  /// 0: the device applies what it is sent as it comes (report devices, links, simulation).
+  double output_rate_hz = 0;
   double max_stiffness_n_per_m = INFINITY;    ///< largest stable stiffness [N/m]
   double max_damping_n_s_per_m = INFINITY;    ///< largest stable damping [N s/m]
   double native_rate_hz = 0;                  ///< the device's own report rate [Hz] (0: the servo's)

@@ -2,7 +2,11 @@
 
 #include <time.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
+
+#include "isotouch/servo/cpu_placement.h"
 
 namespace isotouch::servo {
 namespace {
@@ -49,6 +53,8 @@ std::string load_dhd_api(DhdApi& a) {
   sdk_symbol(a.lib, "dhdSetForce", a.dhdSetForce, missing);
   sdk_symbol(a.lib, "dhdEnableForce", a.dhdEnableForce, missing);
   sdk_symbol(a.lib, "dhdErrorGetLastStr", a.dhdErrorGetLastStr, optional);
+  sdk_symbol(a.lib, "dhdEnableExpertMode", a.dhdEnableExpertMode, optional);
+  sdk_symbol(a.lib, "dhdSetWatchdog", a.dhdSetWatchdog, optional);
   if (!missing.empty()) return a.lib.path + " lacks " + missing + " (not the Force Dimension DHD library?)";
   return {};
 }
@@ -106,10 +112,36 @@ void ForceDimensionDevice::open() {
   const int type = api_.dhdGetSystemType(id_);
   caps_ = dhd_system_caps(type);
   caps_.native_rate_hz = rate_hz_;
-  description_ = who + " (" + caps_.name + ", system type " + std::to_string(type) + ", " + api_.lib.path + ")";
+  // The device thread applies each force once a period: a servo faster than it is refused,
+  // and the stall rule acts in its periods (SdkDevice::enable_force).
+  caps_.output_rate_hz = rate_hz_;
+  device_period_s_ = 1.0 / rate_hz_;
+  set_watchdog();
+  const std::string watchdog = caps_.watchdog_s > 0
+                                   ? "firmware watchdog " + std::to_string(int(std::lround(caps_.watchdog_s * 1e3))) + " ms"
+                                   : "no firmware watchdog (the SDK has no dhdSetWatchdog: SDK 3.3.2 or later sets one)";
+  description_ = who + " (" + caps_.name + ", system type " + std::to_string(type) + ", " + watchdog + ", " +
+                 api_.lib.path + ")";
   stop_ = false;
   thread_ = std::thread([this] { loop(); });
   for (int i = 0; i < 1000 && periods_.load() == 0; ++i) sleep_until_ns(sdk_now_ns() + 1'000'000);
+}
+
+/// The firmware's own watchdog (dhdSetWatchdog, in 125 us units): forces off when no force
+/// command came for max(10 device periods, 10 ms), so a killed or hung isotouch leaves no force
+/// on. The device thread commands a force every period. CHAI3D enables expert mode first.
+void ForceDimensionDevice::set_watchdog() {
+  if (!api_.dhdSetWatchdog) return;  // an SDK before 3.3.2: said in the description
+  const double want_s = std::max(10.0 / rate_hz_, 0.010);
+  const double units = std::clamp(std::ceil(want_s / (dhd::kWatchdogUnitUs * 1e-6)), 1.0, double(dhd::kWatchdogMax));
+  if (api_.dhdEnableExpertMode) api_.dhdEnableExpertMode();
+  if (api_.dhdSetWatchdog((unsigned char)units, id_) < 0) return note_error("dhdSetWatchdog");
+  caps_.watchdog_s = units * dhd::kWatchdogUnitUs * 1e-6;
+}
+
+std::string ForceDimensionDevice::realtime_note() const {
+  std::lock_guard lock(note_mu_);
+  return realtime_note_;
 }
 
 void ForceDimensionDevice::close() {
@@ -143,6 +175,13 @@ void ForceDimensionDevice::period(std::int64_t now, bool& force_on) {
 }
 
 void ForceDimensionDevice::loop() {
+  // The servo's priority where the system allows it (root, CAP_SYS_NICE): this thread applies
+  // its forces. Refused: the default scheduler, said by realtime_note().
+  const std::string note = make_thread_realtime("forcedimension device thread", true, 80, false, -1).note;
+  {
+    std::lock_guard lock(note_mu_);
+    realtime_note_ = note;
+  }
   const auto step = std::int64_t(1e9 / rate_hz_);
   std::int64_t next = sdk_now_ns();
   reset_device_thread(next);

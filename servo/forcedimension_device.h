@@ -29,6 +29,8 @@ struct DhdApi {
   DhdSetForce dhdSetForce = nullptr;
   DhdEnableForce dhdEnableForce = nullptr;
   DhdErrorGetLastStr dhdErrorGetLastStr = nullptr;
+  DhdEnableExpertMode dhdEnableExpertMode = nullptr;  // optional (expert SDK)
+  DhdSetWatchdog dhdSetWatchdog = nullptr;            // optional (SDK 3.3.2 and later)
   SdkLibrary lib;
 };
 
@@ -58,6 +60,12 @@ class ForceDimensionDevice final : public SdkDevice {
   void open();
   /// The device thread's last act: an exact zero force, force disabled, the device closed.
   void close() override;
+  /// The firmware watchdog set at open() [s] (0: the SDK has no dhdSetWatchdog): the device
+  /// disables its forces by itself when no force command comes for this long (isotouch
+  /// killed, hung, or its device thread starved).
+  double watchdog_s() const { return caps_.watchdog_s; }
+  /// "" or why the device thread did not get SCHED_FIFO (valid after open()).
+  std::string realtime_note() const;
   std::string description() const { return description_; }
   std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
   long errors() const { return errors_.load(); }
@@ -68,6 +76,7 @@ class ForceDimensionDevice final : public SdkDevice {
   void loop();
   void period(std::int64_t now, bool& force_on);
   void note_error(const char* call);
+  void set_watchdog();
 
   int index_;
   double rate_hz_;
@@ -79,6 +88,7 @@ class ForceDimensionDevice final : public SdkDevice {
   std::atomic<long> errors_{0}, periods_{0};
   mutable std::mutex note_mu_;
   std::string last_error_;  // note_mu_
+  std::string realtime_note_;  // note_mu_
   Vec3 last_position_;  // device thread
   bool down_ = false;   // device thread: the last read failed
 };

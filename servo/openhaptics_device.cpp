@@ -13,6 +13,7 @@ const char* error_name(HDerror code) {
     case kInvalidEnum: return "HD_INVALID_ENUM";
     case kInvalidValue: return "HD_INVALID_VALUE";
     case kInvalidOperation: return "HD_INVALID_OPERATION";
+    case kInvalidInputType: return "HD_INVALID_INPUT_TYPE";
     case kBadHandle: return "HD_BAD_HANDLE";
     case kWarmMotors: return "HD_WARM_MOTORS";
     case kExceededMaxForce: return "HD_EXCEEDED_MAX_FORCE";
@@ -68,6 +69,7 @@ std::string load_hd_api(HdApi& a) {
   sdk_symbol(a.lib, "hdScheduleAsynchronous", a.hdScheduleAsynchronous, missing);
   sdk_symbol(a.lib, "hdUnschedule", a.hdUnschedule, missing);
   sdk_symbol(a.lib, "hdCheckCalibration", a.hdCheckCalibration, missing);
+  sdk_symbol(a.lib, "hdUpdateCalibration", a.hdUpdateCalibration, missing);
   if (!missing.empty()) return a.lib.path + " lacks " + missing + " (not the OpenHaptics HD library?)";
   return {};
 }
@@ -92,6 +94,12 @@ void OpenHapticsDevice::read_caps() {
   const char* model = a.hdGetString(hd::kDeviceModelType);
   c.name = std::string("OpenHaptics ") + (model ? model : "device");
   a.hdGetDoublev(hd::kNominalMaxForce, &v), c.max_force_n = v;
+  // What the motors sustain without heating (the SDK's PreventWarmMotors example clamps to
+  // it): the servo's gate holds the RMS |F| over its window there. 0 or an error: none said.
+  v = 0;
+  a.hdGetDoublev(hd::kNominalMaxContinuousForce, &v);
+  if (hd_error("hdGetDoublev(HD_NOMINAL_MAX_CONTINUOUS_FORCE)").empty() && v > 0 && v <= c.max_force_n)
+    c.max_continuous_force_n = v;
   a.hdGetDoublev(hd::kNominalMaxStiffness, &v), c.max_stiffness_n_per_m = v * 1e3;  // N/mm -> N/m
   a.hdGetDoublev(hd::kNominalMaxDamping, &v), c.max_damping_n_s_per_m = v * 1e3;   // N s/mm -> N s/m
   a.hdGetDoublev(hd::kUsableWorkspaceDimensions, ws);  // min x, y, z, max x, y, z [mm]
@@ -100,6 +108,10 @@ void OpenHapticsDevice::read_caps() {
   c.workspace_max_m = Vec3{ws[3], -ws[2], ws[4]} * 1e-3;
   a.hdGetIntegerv(hd::kOutputDof, &n), c.dof = n;
   a.hdGetIntegerv(hd::kUpdateRate, &n), c.native_rate_hz = n;
+  // The HD scheduler applies each force once a frame: a servo faster than it is refused, and
+  // the stall rule acts in its periods (SdkDevice::enable_force).
+  c.output_rate_hz = n > 0 ? n : 1000;
+  device_period_s_ = 1.0 / c.output_rate_hz;
   c.buttons = 2;  // Touch, Phantom: two stylus buttons (HD_DEVICE_BUTTON_1, _2)
   caps_ = c;
   const char* serial = a.hdGetString(hd::kDeviceSerialNumber);
@@ -108,10 +120,43 @@ void OpenHapticsDevice::read_caps() {
                          : cal == hd::kCalibrationNeedsUpdate ? "needs update"
                          : cal == hd::kCalibrationNeedsManualInput ? "needs manual input (put the stylus in its inkwell)"
                                                                    : "unknown";
-  if (cal != hd::kCalibrationOk)
-    warning_ = "openhaptics: calibration " + std::string(cal_text) + ": positions may be offset until it is done";
+  choose_calibration_style();
+  calibrated_ = cal == hd::kCalibrationOk;
+  if (!calibrated_)
+    warning_ = "openhaptics: calibration " + std::string(cal_text) +
+               (cal_style_ == 0 ? ": the device offers no automatic or inkwell calibration; no force until it is done "
+                                  "(Touch Setup / the device's own calibration)"
+                                : ": updated from the HD scheduler as the SDK's Calibration example does; no force until "
+                                  "hdCheckCalibration says ok");
   description_ = "openhaptics:" + (name_.empty() ? std::string("default") : name_) + " (" + c.name + ", serial " +
                  (serial ? serial : "?") + ", calibration " + cal_text + ", " + api_.lib.path + ")";
+}
+
+/// The style the SDK's Calibration example prefers among those the device offers: automatic,
+/// then the inkwell (both updated from a scheduler callback). Encoder reset needs the device
+/// held at its reset position before the scheduler starts (a prompt isotouch cannot make):
+/// not chosen, the force stays off until the device is calibrated otherwise.
+void OpenHapticsDevice::choose_calibration_style() {
+  int styles = 0;
+  api_.hdGetIntegerv(hd::kCalibrationStyle, &styles);
+  if (!hd_error("hdGetIntegerv(HD_CALIBRATION_STYLE)").empty()) styles = 0;
+  cal_style_ = (styles & int(hd::kCalibrationAuto))      ? hd::kCalibrationAuto
+               : (styles & int(hd::kCalibrationInkwell)) ? hd::kCalibrationInkwell
+                                                         : 0;
+}
+
+/// Scheduler thread, inside a frame: until the device says its calibration is ok, update it
+/// in the chosen style whenever it needs an update (NEEDS_MANUAL_INPUT: the user puts the
+/// stylus in its inkwell; the next frames see NEEDS_UPDATE). True once calibrated.
+bool OpenHapticsDevice::calibrate_in_frame() {
+  if (calibrated_.load(std::memory_order_relaxed)) return true;
+  const HDenum cal = api_.hdCheckCalibration();
+  if (cal == hd::kCalibrationNeedsUpdate && cal_style_ != 0) {
+    api_.hdUpdateCalibration(cal_style_);
+    calibration_updates_.fetch_add(1, std::memory_order_relaxed);
+  }
+  if (cal == hd::kCalibrationOk) calibrated_.store(true, std::memory_order_relaxed);
+  return cal == hd::kCalibrationOk;
 }
 
 void OpenHapticsDevice::open() {
@@ -176,9 +221,11 @@ HDCallbackCode OpenHapticsDevice::tick() {
   api_.hdBeginFrame(hhd_);
   api_.hdGetDoublev(hd::kCurrentPosition, p);
   api_.hdGetIntegerv(hd::kCurrentButtons, &buttons);
+  const bool calibrated = calibrate_in_frame();
   bool on = false;
   const Vec3 force = force_now(now, on);
-  const bool zero = closing_.load() || !on || down_;  // down: the last frame lost the device
+  // down: the last frame lost the device; not calibrated: the pose is not where it reads.
+  const bool zero = closing_.load() || !on || down_ || !calibrated;
   if (!zero) device_to_hd_force(force, f);
   api_.hdSetDoublev(hd::kCurrentForce, f);
   api_.hdEndFrame(hhd_);
@@ -187,7 +234,8 @@ HDCallbackCode OpenHapticsDevice::tick() {
   DeviceReading r;
   r.position_m = hd_to_device_m(p);
   r.buttons = std::uint32_t(buttons);
-  r.force_off = !enabled_output_;
+  r.force_off = !enabled_output_ || !calibrated;
+  if (!calibrated) r.status = DeviceStatus::kFault;  // zero force; the servo ramps in once calibrated
   if (e.errorCode != hd::kSuccess) {
     errors_.fetch_add(1);
     last_error_.store(e.errorCode);

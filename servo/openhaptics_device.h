@@ -34,6 +34,7 @@ struct HdApi {
   HDSchedulerHandle (*hdScheduleAsynchronous)(HDSchedulerCallback, void*, HDushort) = nullptr;
   void (*hdUnschedule)(HDSchedulerHandle) = nullptr;
   HDenum (*hdCheckCalibration)() = nullptr;
+  void (*hdUpdateCalibration)(HDenum) = nullptr;
   SdkLibrary lib;
 };
 
@@ -70,12 +71,19 @@ class OpenHapticsDevice final : public SdkDevice {
   long errors() const { return errors_.load(); }   ///< HD errors seen by the callback
   long frames() const { return frames_.load(); }   ///< callback runs
   std::string sdk_status() const override;
+  /// hdCheckCalibration said ok (at open, or after the scheduler updated it). Until then
+  /// every reading is a fault and the device gets zero force.
+  bool calibrated() const { return calibrated_.load(); }
+  /// hdUpdateCalibration calls made by the scheduler callback.
+  long calibration_updates() const { return calibration_updates_.load(); }
 
  private:
   static HDCallbackCode callback(void* self);
   HDCallbackCode tick();
   std::string hd_error(const char* call) const;
   void read_caps();
+  void choose_calibration_style();
+  bool calibrate_in_frame();
 
   std::string name_, description_, warning_;
   HdApi api_;
@@ -87,6 +95,9 @@ class OpenHapticsDevice final : public SdkDevice {
   std::atomic<HDerror> last_error_{hd::kSuccess};
   bool enabled_output_ = false;  // HD_FORCE_OUTPUT as last set
   bool down_ = false;            // callback thread: the last frame reported a device error
+  HDenum cal_style_ = 0;         // the style hdUpdateCalibration is given (0: none usable)
+  std::atomic<bool> calibrated_{false};
+  std::atomic<long> calibration_updates_{0};
 };
 
 }  // namespace isotouch::servo

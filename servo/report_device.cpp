@@ -108,7 +108,7 @@ void ReportDevice::open() {
 
 void ReportDevice::close() {
   if (!reader_.joinable()) return;
-  enabled_ = false;
+  rule_.disable();
   stop_ = true;
   writer_.join();  // its last report: a disabled zero force
   reader_.join();
@@ -118,21 +118,13 @@ void ReportDevice::close() {
 }
 
 void ReportDevice::write_force_n(const Vec3& force_n) {
-  // Servo thread: one store into the latest-value cell, no syscall. Non-finite: zero.
-  const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
-  Vec3 f = ok ? force_n : Vec3{};
-  const std::uint64_t stalls = stalls_.load(std::memory_order_acquire);
-  if (stalls != stalls_seen_) f = Vec3{};  // the first write after the writer took the force off: no jump back
-  stalls_seen_ = stalls;
-  output_.store(Output{f, answers_, ++writes_, stalls});
+  // Servo thread: one store into the latest-value cell, no syscall (non-finite: zero; the
+  // first write after a stall: zero). Unstamped: the writer polls every write_poll_us.
+  rule_.write(force_n, answers_);
 }
 
 const std::atomic<std::uint64_t>* ReportDevice::enable_force(bool on, double stall_s) {
-  if (!(stall_s > 0) || !std::isfinite(stall_s)) stall_s = opt_.default_stall_s;
-  stall_ns_.store(std::int64_t(stall_s * 1e9), std::memory_order_relaxed);
-  enabled_ns_.store(now_ns(), std::memory_order_relaxed);
-  enabled_.store(on, std::memory_order_release);
-  return &stalls_;
+  return rule_.enable(on, stall_s, opt_.default_stall_s, now_ns());
 }
 
 DeviceCaps ReportDevice::caps() const { return caps_; }
@@ -143,7 +135,7 @@ LinkCounters ReportDevice::counters() const {
   c.duplicates = duplicates_.load(), c.reordered = reordered_.load(), c.disconnects = disconnects_.load();
   c.reconnects = reconnects_.load(), c.writes = sent_.load(), c.write_errors = write_errors_.load();
   c.watchdog_trips = watchdog_trips_.load(), c.busy_reads = long(reading_.misses());
-  c.stalls = stalls_.load();
+  c.stalls = long(rule_.stalls());
   return c;
 }
 
@@ -325,38 +317,30 @@ void ReportDevice::writer_loop() {
   std::array<std::uint8_t, kMaxReport> buf{};
   const auto poll_ns = std::int64_t(opt_.write_poll_us * 1e3);
   const auto keepalive_ns = std::int64_t(opt_.keepalive_s * 1e9);
-  std::uint64_t seen_count = output_.load().count;  // the servo's last write seen ...
-  std::int64_t seen_at = now_ns();                   // ... and when
+  rule_.restart(now_ns());
   std::int64_t last_send = 0;
   bool was_on = false;
   WriteInterval interval;
   while (!stop_.load()) {
     // The clock first: a count unchanged after it means no write up to t (read the other way
-    // round, a preempted writer could call a write it has not loaded yet a stall).
+    // round, a preempted writer could call a write it has not loaded yet a stall). The stall
+    // rule (stall_rule.h): force only while enabled and the servo writes; after the stall
+    // time without a write (a slow renderer, a starved or stopped servo thread) zero with
+    // enable cleared until a write made after the servo could see it.
     const std::int64_t t = now_ns();
-    const Output o = output_.load();
-    const bool fresh = o.count != seen_count;
-    if (fresh) interval.saw(t, o.count - seen_count), seen_count = o.count, seen_at = t;
-    // Force only while enabled and the servo writes (none yet since enable_force(): off, not
-    // a stall). After the stall time without a write (a slow renderer, a starved or stopped
-    // servo thread) a stall is counted: zero with enable cleared until a write made after
-    // the servo could see it (the first such is a zero; the servo ramps in from 0).
-    bool on = enabled_.load(std::memory_order_acquire) && seen_at >= enabled_ns_.load(std::memory_order_relaxed);
-    const bool stalled = t - seen_at > stall_ns_.load(std::memory_order_relaxed);
-    if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);
-    if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
-    if (fresh || on != was_on || t - last_send >= keepalive_ns) {
+    const StallLook l = rule_.look(t);
+    if (l.fresh) interval.saw(t, l.new_writes);
+    if (l.fresh || l.on != was_on || t - last_send >= keepalive_ns) {
       // Disabled or stalled: a zero force with enable cleared (the device keeps reporting).
-      const std::size_t n = protocol_->encode_output(on ? o.force_n : Vec3{}, on, o.answers, buf);
+      const std::size_t n = protocol_->encode_output(l.force_n, l.on, l.answers, buf);
       send(std::span(buf.data(), n));
       last_send = t;
-      was_on = on;
+      was_on = l.on;
     }
     // Asleep until shortly before the servo's next write is due, then polling: not 50,000
     // wake-ups a second at SCHED_FIFO beside the renderer. Never past the stall time or the
     // keepalive (the window ends before either: it closes a lead before one interval).
-    const std::int64_t stall_at = seen_at + stall_ns_.load(std::memory_order_relaxed) + 1;
-    sleep_until_ns(std::min({interval.next_look_ns(t, poll_ns), stall_at, last_send + keepalive_ns}));
+    sleep_until_ns(std::min({interval.next_look_ns(t, poll_ns), rule_.stall_at_ns(), last_send + keepalive_ns}));
   }
   const std::size_t n = protocol_->encode_output({}, false, 0, buf);
   send(std::span(buf.data(), n));

@@ -15,6 +15,7 @@
 
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/stall_rule.h"
 
 namespace isotouch::servo {
 
@@ -177,12 +178,6 @@ class ReportDevice final : public HapticDeviceIO {
   std::string realtime_note() const;
 
  private:
-  struct Output {
-    Vec3 force_n;
-    std::uint64_t answers = 0;
-    std::uint64_t count = 0;  // +1 per write_force_n()
-    std::uint64_t stalls = 0; // the writer's stall count this write was made after
-  };
   void reader_loop();
   void ask_fifo();
   void writer_loop();
@@ -197,14 +192,10 @@ class ReportDevice final : public HapticDeviceIO {
   ReportDeviceOptions opt_;
   DeviceCaps caps_;
   LatestValue<DeviceReading> reading_;
-  LatestValue<Output> output_;
-  std::uint64_t answers_ = 0, writes_ = 0;  // servo thread only
+  StallRule rule_;                          // the servo's force and the stall rule (stall_rule.h)
+  std::uint64_t answers_ = 0;               // servo thread only
   DeviceReading last_read_;                 // servo thread only: read()'s fallback
-  std::uint64_t stalls_seen_ = 0;            // servo thread: stalls_ at its last write
-  std::atomic<bool> enabled_{false}, stop_{false}, up_{false};
-  std::atomic<std::int64_t> stall_ns_{0};   // enable_force()'s stall time [ns]
-  std::atomic<std::int64_t> enabled_ns_{0}; // when enable_force() was last called
-  std::atomic<std::uint64_t> stalls_{0};    // the writer took the force off (servo reads it)
+  std::atomic<bool> stop_{false}, up_{false};
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set

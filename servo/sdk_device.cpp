@@ -48,21 +48,10 @@ SdkDevice::SdkDevice() {
   last_read_ = r;
 }
 
-void SdkDevice::write_force_n(const Vec3& force_n) {
-  const bool ok = std::isfinite(force_n.x) && std::isfinite(force_n.y) && std::isfinite(force_n.z);
-  Vec3 f = ok ? force_n : Vec3{};
-  const std::uint64_t stalls = stalls_.load(std::memory_order_acquire);
-  if (stalls != stalls_seen_) f = Vec3{};  // no jump back to the force before the stall
-  stalls_seen_ = stalls;
-  output_.store(Output{f, ++writes_, stalls, answers_});
-}
+void SdkDevice::write_force_n(const Vec3& force_n) { rule_.write(force_n, answers_, sdk_now_ns()); }
 
 const std::atomic<std::uint64_t>* SdkDevice::enable_force(bool on, double stall_s) {
-  if (!(stall_s > 0) || !std::isfinite(stall_s)) stall_s = default_stall_s_;
-  stall_ns_.store(std::int64_t(stall_s * 1e9), std::memory_order_relaxed);
-  enabled_ns_.store(sdk_now_ns(), std::memory_order_relaxed);
-  enabled_.store(on, std::memory_order_release);
-  return &stalls_;
+  return rule_.enable(on, stall_s, default_stall_s_, sdk_now_ns(), device_period_s_);
 }
 
 void SdkDevice::publish(DeviceReading r, std::int64_t now_ns) {
@@ -75,26 +64,17 @@ void SdkDevice::publish(DeviceReading r, std::int64_t now_ns) {
   reading_.store(r);
 }
 
-void SdkDevice::reset_device_thread(std::int64_t now_ns) {
-  seen_count_ = output_.load().count;
-  seen_at_ = now_ns;
-  was_on_ = false;
-}
+void SdkDevice::reset_device_thread(std::int64_t now_ns) { rule_.restart(now_ns); }
 
 Vec3 SdkDevice::force_now(std::int64_t now_ns, bool& on) {
-  // The clock was read before the cell: a count unchanged after it means no write up to now.
-  const Output o = output_.load();
-  if (o.count != seen_count_) seen_count_ = o.count, seen_at_ = now_ns;
-  on = enabled_.load(std::memory_order_acquire) && seen_at_ >= enabled_ns_.load(std::memory_order_relaxed);
-  const bool stalled = now_ns - seen_at_ > stall_ns_.load(std::memory_order_relaxed);
-  if (on && was_on_ && stalled) stalls_.fetch_add(1, std::memory_order_release);
-  if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;
-  was_on_ = on;
-  const bool recent = o.answers + kPublishRing > sequence_;
-  if (o.answers != answered_ && o.answers != 0 && recent && latency_us_.size() < latency_us_.capacity())
-    latency_us_.push_back(double(now_ns - published_ns_[o.answers % kPublishRing]) * 1e-3);
-  answered_ = o.answers;
-  return on ? o.force_n : Vec3{};
+  // The clock was read before the cell (StallRule::look).
+  const StallLook l = rule_.look(now_ns);
+  on = l.on;
+  const bool recent = l.answers + kPublishRing > sequence_;
+  if (l.answers != answered_ && l.answers != 0 && recent && latency_us_.size() < latency_us_.capacity())
+    latency_us_.push_back(double(now_ns - published_ns_[l.answers % kPublishRing]) * 1e-3);
+  answered_ = l.answers;
+  return l.force_n;
 }
 
 }  // namespace isotouch::servo

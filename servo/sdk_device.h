@@ -15,6 +15,7 @@
 
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/stall_rule.h"
 
 namespace isotouch::servo {
 
@@ -54,11 +55,14 @@ class SdkDevice : public HapticDeviceIO {
   }
   Vec3 read_position_m() override { return read().position_m; }
   std::uint32_t buttons() override { return read().buttons; }
-  /// Servo thread: one store. A non-finite force is stored as zero; the first write after a
-  /// stall is stored as zero (the servo ramps in from 0).
+  /// Servo thread: one store, stamped with the clock (vDSO: no syscall). A non-finite force
+  /// is stored as zero; the first write after a stall is stored as zero (the servo ramps in).
   void write_force_n(const Vec3& force_n) override;
   DeviceCaps caps() const override { return caps_; }
-  /// Returns the device thread's stall count.
+  /// Returns the device thread's stall count. The device thread looks once a device period
+  /// (device_period_s_), so the stall time it acts on is stall_s less half that period: the
+  /// force is off within stall_s + half a device period of the last write (ServoThread: 2.5
+  /// of its periods, and it runs no faster than the device: within 3 servo periods).
   const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override;
   /// Servo thread: the reading the next write answers (DeviceReading::sequence).
   void answer(std::uint64_t sequence) override { answers_ = sequence; }
@@ -66,7 +70,9 @@ class SdkDevice : public HapticDeviceIO {
   /// that answers it (handed to the SDK), one per answered reading. Read after close().
   const std::vector<double>& latencies_us() const { return latency_us_; }
   /// Times the device thread took the force off because the servo stopped writing.
-  std::uint64_t stalls() const { return stalls_.load(); }
+  std::uint64_t stalls() const { return rule_.stalls(); }
+  /// The stall time the device thread acts on [ns] (after enable_force()).
+  std::int64_t stall_ns() const { return rule_.stall_ns(); }
   /// Exact zero force, the device thread stopped, the device released. Idempotent.
   virtual void close() = 0;
   /// One line for the run's summary: the device thread's periods and SDK errors, the last one.
@@ -85,26 +91,16 @@ class SdkDevice : public HapticDeviceIO {
   void reset_device_thread(std::int64_t now_ns);
   DeviceCaps caps_;
   double default_stall_s_ = 0.0025;  ///< when enable_force() is given none [s]
+  double device_period_s_ = 0.001;   ///< how often the device thread calls force_now() [s]
 
  private:
-  struct Output {
-    Vec3 force_n;
-    std::uint64_t count = 0;   // +1 per write_force_n()
-    std::uint64_t stalls = 0;  // the stall count the write was made after
-    std::uint64_t answers = 0; // the reading's sequence it answers
-  };
   static constexpr std::size_t kPublishRing = 64;  // readings whose publish time is kept
   LatestValue<DeviceReading> reading_;
-  LatestValue<Output> output_;
+  StallRule rule_;                    // the servo's force and the stall rule (stall_rule.h)
   DeviceReading last_read_;           // servo thread: read()'s fallback
-  std::uint64_t writes_ = 0, stalls_seen_ = 0, answers_ = 0;  // servo thread
-  std::atomic<bool> enabled_{false};
-  std::atomic<std::int64_t> stall_ns_{2'500'000}, enabled_ns_{0};
-  std::atomic<std::uint64_t> stalls_{0};
+  std::uint64_t answers_ = 0;         // servo thread
   // device thread
-  std::uint64_t seen_count_ = 0;
-  std::int64_t seen_at_ = 0;
-  bool was_on_ = false, was_down_ = false;
+  bool was_down_ = false;
   std::uint32_t connection_ = 0;
   std::uint64_t sequence_ = 0, answered_ = 0;
   std::array<std::int64_t, kPublishRing> published_ns_{};

@@ -57,16 +57,6 @@ constexpr double kStallPeriods = 2.5;
 // Handoff::state: where the servo thread is, and whether stop() gave up on it.
 constexpr int kOutside = 0, kInRenderer = 1, kAbandoned = 2;
 
-/// `f` [N] scaled by the ramp factor in [0, 1] and clamped to |F| <= max_n (direction
-/// kept); a non-finite result is an exact zero.
-Vec3 ramp_and_clamp(const Vec3& f, double ramp, double max_n, bool& clamped) {
-  Vec3 out = f * ramp;
-  const double m = norm(out);
-  clamped = m > max_n;
-  if (clamped) out = out * (max_n / m);
-  if (!std::isfinite(out.x) || !std::isfinite(out.y) || !std::isfinite(out.z)) return {};
-  return out;
-}
 
 }  // namespace
 
@@ -90,6 +80,12 @@ std::string ServoThread::start() {
   ready_.store(false);
   period_err_.clear();
   caps_ = device_.caps();
+  if (caps_.output_rate_hz > 0 && cfg_.rate_hz > caps_.output_rate_hz * 1.001)
+    throw std::invalid_argument("servo thread: servo rate " + std::to_string(cfg_.rate_hz) + " Hz is above " +
+                                caps_.name + "'s own output loop (" + std::to_string(caps_.output_rate_hz) +
+                                " Hz): its ticks between two of the device's would be lost; run the servo at " +
+                                "or below the device's rate");
+  gate_ = ForceGate(force_limits(caps_, cfg_.force_limit_n, cfg_.max_force_rate_n_per_s));
   device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
   seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();
@@ -224,6 +220,7 @@ void ServoThread::loop(Handoff& h) {
   std::int64_t last_render = -1;  // start of the renderer's last tick; -1: none since a reset
   std::uint64_t last_version = 0;
   bool was_paused = false;
+  std::int64_t gate_prev = -1;  // the gate's last step or zero; -1: none yet
   const std::int64_t stale_ns =
       cfg_.stale_timeout_s > 0   ? std::int64_t(cfg_.stale_timeout_s * 1e9)
       : caps_.stale_timeout_s > 0 ? std::int64_t(caps_.stale_timeout_s * 1e9)
@@ -261,8 +258,12 @@ void ServoThread::loop(Handoff& h) {
     // ---- the tick: no allocation, no lock, no syscall ----
     const SampleField* field = samples_.acquire();
     const bool paused = paused_.load(std::memory_order_relaxed);
+    // Since the gate's last tick; the first tick is given the nominal period.
+    const double gate_dt = gate_prev >= 0 ? double(t - gate_prev) * 1e-9 : 1.0 / cfg_.rate_hz;
+    gate_prev = t;
     if (!field) {
       device_.write_force_n({});
+      gate_.zero(gate_dt);
       empty_.fetch_add(1, std::memory_order_relaxed);
     } else {
       if (field->version != last_version) {
@@ -290,6 +291,7 @@ void ServoThread::loop(Handoff& h) {
       status_.store(std::uint8_t(rec.device_status), std::memory_order_relaxed);
       if (rec.device_status != DeviceStatus::kOk) {
         device_.write_force_n({});  // within this tick
+        gate_.zero(gate_dt);
         count_not_ok(rec.device_status, refused);
         if (not_ok_since < 0) not_ok_since = t;
         // A blip of stale ticks keeps the contact state and the force level; anything
@@ -301,6 +303,7 @@ void ServoThread::loop(Handoff& h) {
         }
       } else if (paused) {
         device_.write_force_n({});
+        gate_.zero(gate_dt);
         was_paused = true;
         last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
@@ -333,9 +336,11 @@ void ServoThread::loop(Handoff& h) {
         seen_stalls_ = stalls;
         double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
         if (ramp_start < 0) ramp = 0;
-        bool clamped = false;
-        rec.force_sent_n = ramp_and_clamp(rec.out.force_n, ramp, caps_.max_force_n, clamped);
-        if (clamped) clamped_.fetch_add(1, std::memory_order_relaxed);
+        std::uint8_t gated = 0;
+        rec.force_sent_n = gate_.step(rec.out.force_n * ramp, gate_dt, gated);
+        if (gated & kGatePeak) clamped_.fetch_add(1, std::memory_order_relaxed);
+        if (gated & kGateRate) rate_limited_.fetch_add(1, std::memory_order_relaxed);
+        if (gated & kGateContinuous) continuous_limited_.fetch_add(1, std::memory_order_relaxed);
         device_.answer(d.sequence);
         device_.write_force_n(rec.force_sent_n);
         if (rec.out.fault) faults_.fetch_add(1, std::memory_order_relaxed);
@@ -363,6 +368,8 @@ DeviceCounters ServoThread::device_counters() const {
   c.refused = refused_.load(std::memory_order_relaxed);
   c.ramps = ramps_.load(std::memory_order_relaxed);
   c.clamped = clamped_.load(std::memory_order_relaxed);
+  c.rate_limited = rate_limited_.load(std::memory_order_relaxed);
+  c.continuous_limited = continuous_limited_.load(std::memory_order_relaxed);
   c.late_restarts = late_.load(std::memory_order_relaxed);
   return c;
 }

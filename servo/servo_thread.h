@@ -2,6 +2,7 @@
 #pragma once
 #include "isotouch/servo/core_names.h"
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "isotouch/servo/device_io.h"
+#include "isotouch/servo/force_gate.h"
 #include "isotouch/servo/memory_range.h"
 #include "isotouch/servo/renderer.h"
 #include "isotouch/servo/triple_buffer.h"
@@ -105,6 +107,12 @@ struct ServoThreadConfig {
   /// stop() waits this long for a renderer that does not return, then abandons the thread
   /// with the force off and returns an error [s].
   double stop_timeout_s = 0.5;
+  /// The scene's force limit [N]: the gate clamps |F| to min(this, DeviceCaps::max_force_n).
+  /// INFINITY: the device's alone.
+  double force_limit_n = INFINITY;
+  /// The gate's force-rate limit [N/s]; 0: the device's (DeviceCaps::max_force_rate_n_per_s),
+  /// else the peak over kDefaultPeakRiseS (force_gate.h).
+  double max_force_rate_n_per_s = 0;
 };
 
 /// Counters of the device side of the servo (ticks unless said otherwise).
@@ -114,7 +122,9 @@ struct DeviceCounters {
   long fault = 0;         ///< ticks the device reported a fault
   long refused = 0;       ///< ticks whose report was refused (non-finite or outside the workspace)
   long ramps = 0;         ///< force ramp-ins started (enable, recovery, reconnection)
-  long clamped = 0;       ///< ticks whose force was clamped to the device's maximum
+  long clamped = 0;       ///< ticks whose force was clamped to the peak (min(scene, device))
+  long rate_limited = 0;  ///< ticks whose force change was limited to the gate's rate
+  long continuous_limited = 0;  ///< ticks whose |F| was capped at the device's continuous limit
   /// Times the device had taken the force off because the servo did not write for its
   /// stall time (2.5 periods: a late tick, a slow renderer): the force ramped in from 0.
   long late_restarts = 0;
@@ -136,8 +146,10 @@ struct DeviceCounters {
 /// than stale_timeout_s, or that is refused (non-finite or outside the device's workspace
 /// box) gives an exact zero force in that same tick and is counted (DeviceCounters); the
 /// renderer is not ticked; unless it was a short run of stale ticks (stale_restart_s) it is
-/// reset before the next good tick and the force ramps in over ramp_in_s. |F| is clamped to
-/// DeviceCaps::max_force_n.
+/// reset before the next good tick and the force ramps in over ramp_in_s. The ramped force
+/// then passes the ForceGate (force_gate.h): |F| clamped to min(force_limit_n,
+/// DeviceCaps::max_force_n), capped at the device's continuous limit while its RMS is there,
+/// its change limited to the rate limit (also rising from a zero tick), non-finite -> zero.
 ///
 /// Stalls: start() tells the device to take the force off by itself after 2.5 periods
 /// without a write (HapticDeviceIO::enable_force). A device that does (one with its own
@@ -156,6 +168,8 @@ class ServoThread {
   /// Start the thread, wait until its real-time setup is done (before the first tick), and
   /// return "" or one line per thing the system did not allow (SCHED_FIFO, pinning, memory
   /// locking), each with the reason; those are not fatal, the loop runs anyway.
+  /// @throws std::invalid_argument (nothing started, the force left off) when rate_hz is
+  ///         above the device's DeviceCaps::output_rate_hz.
   std::string start();
   /// Ask the loop to stop and join it: "", and the device's last force is an exact zero.
   /// A thread still inside Renderer::tick after stop_timeout_s is abandoned instead: the
@@ -223,6 +237,8 @@ class ServoThread {
   std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0}, late_{0};
   std::atomic<std::uint8_t> status_{0};
   DeviceCaps caps_;  // read once at start()
+  ForceGate gate_;   // set by start(); servo thread after it
+  std::atomic<long> rate_limited_{0}, continuous_limited_{0};
   std::shared_ptr<Handoff> handoff_;
   bool abandoned_ = false;  // a thread was left stuck in the renderer
   // The device's count of times it took the force off because writes stopped (null: it

@@ -1,5 +1,6 @@
 #include "isotouch/session/live_session.h"
 #include "isotouch/servo/cpu_placement.h"
+#include "isotouch/servo/exit_zero.h"
 
 #include "isotouch/core/exit_codes.h"
 
@@ -562,6 +563,7 @@ void end_process_servo_stuck(const std::string& program, const std::string& what
   std::fprintf(stderr, "%s: %s; ending the process (exit %d) without freeing what the stuck servo thread may read\n",
                program.c_str(), what.c_str(), exit_code::kServoStuck);
   std::fflush(stderr);
+  servo::send_exit_zeros(5000);  // a link's peer (PLUS) holds the last force it got (exit_zero.h)
   std::_Exit(exit_code::kServoStuck);
 }
 

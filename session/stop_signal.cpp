@@ -8,6 +8,8 @@
 
 #include <atomic>
 #include <memory>
+
+#include "isotouch/servo/exit_zero.h"
 #include <mutex>
 #include <vector>
 
@@ -48,6 +50,7 @@ extern "C" void on_stop_signal(int sig) {
   int expected = 0;
   if (!g_signal.compare_exchange_strong(expected, sig)) {
     write_last_words(sig);
+    servo::send_exit_zeros(2000);  // the links' peers keep no force (exit_zero.h)
     std::signal(sig, SIG_DFL);  // asked twice: stop now
     std::raise(sig);
   }
@@ -94,6 +97,7 @@ void set_last_words(const std::string& path, const std::string& on_sigint, const
 
 void end_process_now(int sig) {
   write_last_words(sig);
+  servo::send_exit_zeros(2000);
   std::signal(sig, SIG_DFL);
   std::raise(sig);
   std::_Exit(128 + sig);  // the signal was blocked or ignored: the same status

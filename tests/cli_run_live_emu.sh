@@ -134,4 +134,44 @@ kill -TERM "$emu_pid"; wait "$emu_pid"
 cat "$out/check.log"
 [ "$rc" -eq 1 ] && grep -q "^check: .*the unit is not a polhem_v1 (a polhem_v3? --haptic polhem:...,config=v3)" "$out/check.log" ||
   fail "devices --check of a v3 unit as polhem_v1: exit $rc, or the reason is not given"
+# 5. A v1 device whose capabilities declare no watchdog (0 ms: its last force stays on if
+# isotouch stops sending) is refused, naming the field that drives it anyway; with that field
+# the same device is driven.
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 --watchdog-ms 0 > "$out/emu_nowd.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+"$exe" run "$scene" --live --haptic "emu:$sock" --quiet > "$out/run_nowd.log" 2>&1; rc=$?
+cat "$out/run_nowd.log"
+[ "$rc" -ne 0 ] || fail "a device without a watchdog was driven (exit 0)"
+grep -q "has no watchdog (0 ms in its capabilities).*refused (the scene's device.allow_no_watchdog: true drives it anyway)" \
+  "$out/run_nowd.log" || fail "the refusal of a device without a watchdog does not name device.allow_no_watchdog"
+kill -TERM "$emu_pid"; wait "$emu_pid"
+grep -q "max |F| 0 N" "$out/emu_nowd.log" || fail "a refused device received force"
+python3 - "$scene" "$out/allow_nowd.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+base = os.path.dirname(os.path.abspath(sys.argv[1]))
+v = s["volume"]
+if "path" in v and not os.path.isabs(v["path"]): v["path"] = os.path.join(base, v["path"])
+s.setdefault("device", {})["allow_no_watchdog"] = True
+json.dump(s, open(sys.argv[2], "w"))
+PY
+"$emu" --socket "$sock" --path "$out/hand.csv" --seconds 20 --watchdog-ms 0 > "$out/emu_allow.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+"$exe" run "$out/allow_nowd.json" --live --haptic "emu:$sock" --quiet --out "$out/allow_nowd" > "$out/run_allow.log" 2>&1; rc=$?
+kill -TERM "$emu_pid"; wait "$emu_pid"
+cat "$out/run_allow.log"
+[ "$rc" -eq 0 ] || fail "device.allow_no_watchdog: true, the device was still refused (exit $rc)"
+# 6. `devices --check`'s safety drill on the v1 emulator (a device with a writer thread): the
+# step held to the rate limit, the stall taking the force off and the ramp back, each "held".
+"$emu" --socket "$sock" --hold 0,0,0 --seconds 20 > "$out/emu_drill.log" 2>&1 &
+emu_pid=$!
+for _ in $(seq 1 100); do [ -S "$sock" ] && break; sleep 0.05; done
+printf 'y\ny\n' | "$exe" devices --check "emu:$sock" --seconds 0.3 --wall-seconds 0.3 > "$out/drill.log" 2>&1; rc=$?
+kill -TERM "$emu_pid"; wait "$emu_pid"
+cat "$out/drill.log"
+[ "$rc" -eq 0 ] || fail "devices --check's safety drill exited $rc"
+[ "$(grep -c '^drill .*: held$' "$out/drill.log")" -eq 3 ] || fail "the safety drill did not print three rules held"
+grep -Eq "^drill .*the device took the force off \([1-9][0-9]* stall\(s\)\)" "$out/drill.log" || fail "the drill's stall did not take the force off"
 echo "PASS run --live --haptic emu"

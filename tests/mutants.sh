@@ -55,20 +55,59 @@ m servo-device-force-off    $S 'if ((d.force_off || d.watchdog_tripped) && ramp_
 m servo-late-restart        $S 'ramp_start = -1;  // the next tick starts the ramp' '' \
   $T 'ServoThread.ADeviceThatTookTheForceOff*'
 
-# The device writer's stall rule and the emulator that checks it on the wire.
-R=servo/report_device.cpp E=sim/device_emulator.cpp
-m writer-stall-counted      $R 'if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);' '' \
-  test_report_device 'ReportDevice.AServoThatStops*'
-m writer-stall-off          $R 'if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;' '' \
-  test_report_device 'ReportDevice.AServoThatStops*'
-m writer-no-jump-back       $R 'if (stalls != stalls_seen_) f = Vec3{};  // the first write after the writer took the force off: no jump back' '' \
-  test_report_device 'ReportDevice.AServoThatStops*'
-m writer-stall-on-the-wire  $R 'if (on && was_on && stalled) stalls_.fetch_add(1, std::memory_order_release);' '' \
+# The force gate every force passes (servo/force_gate.cpp), judged on what the device received.
+G=servo/force_gate.cpp
+m gate-peak-at-2x           $G 'if (m > lim_.peak_n) f = f * (lim_.peak_n / m), m = lim_.peak_n, flags |= kGatePeak;' \
+                               'if (m > 2 * lim_.peak_n) f = f * (lim_.peak_n / m), m = lim_.peak_n, flags |= kGatePeak;' $T "$F"
+m gate-rate-off             $G 'if (c > allowed) f = last_ + change * (allowed / c), flags |= kGateRate;' '' \
+  $T 'ServoSafety.AStepDemand*'
+m gate-nonfinite-zero       $G 'if (!all_finite(f)) f = {}, flags |= kGateNonFinite;' '' $T 'ServoSafety.ANonFinite*'
+m gate-continuous-off       $G 'if (const double cap = continuous_cap(dt_s); m > cap) f = f * (cap / m), flags |= kGateContinuous;' '' \
+  test_force_gate 'ForceGate.*'
+m gate-scene-limit          $G 'l.peak_n = std::min(limit_or_inf(scene_limit_n), limit_or_inf(caps.max_force_n));' \
+                               'l.peak_n = limit_or_inf(caps.max_force_n);' $T 'ServoSafety.TheScenesLimit*'
+m gate-zero-on-bad-tick     $S $'device_.write_force_n({});  // within this tick\n        gate_.zero(gate_dt);' \
+                               'device_.write_force_n({});  // within this tick' $T 'ServoSafety.AStepDemand*'
+m servo-faster-than-device  $S 'if (caps_.output_rate_hz > 0 && cfg_.rate_hz > caps_.output_rate_hz * 1.001)' 'if (false)' \
+  $T 'ServoSafety.AServoFaster*'
+
+# The device side's stall rule (servo/stall_rule.cpp), on a simulated clock and on the wire of
+# every backend with a thread of its own, and the emulator that checks it.
+R=servo/stall_rule.cpp E=sim/device_emulator.cpp
+m stall-counted             $R 'if (on && was_on_ && stalled) {' 'if (false) {' test_stall_rule 'StallRule.*'
+m stall-off                 $R 'if (o.stalls != stalls_.load(std::memory_order_relaxed)) on = false;' '' test_stall_rule 'StallRule.*'
+m stall-no-jump-back        $R 'if (stalls != stalls_seen_) f = Vec3{};  // the first write after a stall: no jump back' '' \
+  test_stall_rule 'StallRule.*'
+m stall-half-period         $R 'std::max(stall_s - p / 2, p)' 'std::max(stall_s, p)' test_stall_rule 'StallRule.*'
+m writer-stall-counted      $R 'if (on && was_on_ && stalled) {' 'if (false) {' test_report_device 'ReportDevice.AServoThatStops*'
+m writer-stall-on-the-wire  $R 'if (on && was_on_ && stalled) {' 'if (false) {' \
   test_device_emu 'DeviceEmu.AStalledServo*:DeviceEmu.ARendererThatNeverReturns*'
+m sdk-nonfinite-backstop    $R 'Vec3 f = ok ? force_n : Vec3{};' 'Vec3 f = force_n;' test_sdk_devices 'OpenHaptics.ANonFinite*'
 m emu-watchdog              $E 'enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;' '' \
   test_device_emu 'DeviceEmu.AFrozenWriterTripsTheDevicesWatchdog'
 m emu-output-log            $E 'log_[logged_ % log_.size()] = ReceivedOutput{now, o.force_n, o.enable, o.answers};' '' \
   test_device_emu 'DeviceEmu.*'
+
+# The vendor SDK backends against their doubles (what the library received).
+OH=servo/openhaptics_device.cpp FD=servo/forcedimension_device.cpp
+m hd-disable-at-close       $OH 'api_.hdDisable(hd::kForceOutput);' '' test_sdk_devices 'OpenHaptics.CloseDisables*'
+m hd-calibration-gate       $OH 'const bool zero = closing_.load() || !on || down_ || !calibrated;' \
+                               'const bool zero = closing_.load() || !on || down_;' test_sdk_devices 'OpenHaptics.NoForceUntil*'
+m hd-calibration-update     $OH 'api_.hdUpdateCalibration(cal_style_);' '' test_sdk_devices 'OpenHaptics.ACalibrationThatNeeds*'
+m hd-continuous-force       $OH '    c.max_continuous_force_n = v;' '' test_sdk_devices 'OpenHaptics.ContinuousForce*'
+m fd-watchdog               $FD 'if (api_.dhdSetWatchdog((unsigned char)units, id_) < 0) return note_error("dhdSetWatchdog");' \
+                               'return;' test_sdk_devices 'ForceDimension.OpenSets*'
+
+# The OpenIGTLink link: the zero at a stall and however the process ends (what the peer got).
+IG=service/igtl_device.cpp X=servo/exit_zero.cpp
+m igtl-stall-zero-at-once   $IG '    if (l.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose' \
+                               '    if (false) {' test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
+m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
+                               'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
+m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\n    return false;' \
+                               $'  if (false) {\n    s.busy.store(0);\n    return false;' test_exit_zero 'ExitZero.*'
+m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) continue;  // inside a send that does not end: the stream cannot take a zero' \
+                               '' test_exit_zero 'ExitZero.*'
 
 # HRI's own limits, wherever in servo/ the line now lives.
 H=servo T=test_hri F='Hri.*'

@@ -3,8 +3,12 @@
 // this test's thread as the servo (read, write the force, every millisecond). The truth is
 // what the peer RECEIVED. Built without Vulkan, so it also runs under ThreadSanitizer.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <csignal>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -16,6 +20,7 @@
 #include "isotouch/service/igtl_device.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
+#include "isotouch/servo/exit_zero.h"
 
 namespace isotouch::service {
 namespace {
@@ -211,6 +216,100 @@ TEST(ServiceIgtlDevice, APeerThatClosesReadsAsDisconnected) {
   ASSERT_GT(first_disconnected, 0) << "the device never read as disconnected";
   EXPECT_GE(first_disconnected, closed) << "disconnected before the peer closed";
   EXPECT_LT(first_disconnected - closed, 0.1) << "the close was seen late";
+}
+
+
+// The servo stops writing between two poses of a slow stream (20 Hz: 50 ms apart): the peer
+// gets a zero within the stall time and the writer's poll (here 2.5 ms + 0.2 ms, well under
+// 10 ms), not with the next pose 45 ms later; the stall is counted.
+TEST(ServiceIgtlDevice, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
+  Peer peer(20, 5.0);
+  IgtlDeviceOptions o;
+  o.host = "127.0.0.1";
+  o.port = peer.port();
+  o.measure_s = 0.7;
+  IgtlDevice d(o);
+  d.enable_force(true, 0.0025);
+  const core::Vec3 f{0.5, 0, 0};
+  const Clock::time_point t0 = Clock::now();
+  std::uint64_t seq = d.read().sequence;
+  int poses_seen = 0;
+  // Write every ms until the third new pose, then 5 ms more, then stop.
+  for (long k = 0; since(t0) < 2.0; ++k) {
+    const std::uint64_t now_seq = d.read().sequence;
+    if (now_seq != seq) seq = now_seq, ++poses_seen;
+    d.write_force_n(f);
+    std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + 1)));
+    if (poses_seen >= 3) {
+      const Clock::time_point pose_at = Clock::now();
+      while (since(pose_at) < 0.005) {
+        d.write_force_n(f);
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      break;
+    }
+  }
+  const std::size_t before = peer.forces().size();
+  const Clock::time_point stopped = Clock::now();
+  for (int i = 0; i < 100 && d.stalls() == 0; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(15));
+  const double waited = since(stopped);
+  const std::vector<Peer::Got> got = peer.forces();
+  ASSERT_GE(poses_seen, 3) << "the stream did not flow";
+  EXPECT_EQ(d.stalls(), 1u);
+  ASSERT_GT(got.size(), before) << "no zero within " << waited * 1e3 << " ms of the servo's last write";
+  EXPECT_EQ(core::norm(got.back().f), 0.0) << "the peer's last force is not a zero";
+  // The zero arrived before the next pose (which comes ~45 ms after the stall began).
+  EXPECT_EQ(got.size(), before + 1) << "more than the stall's zero arrived within " << waited * 1e3 << " ms";
+}
+
+/// A child process that opens the device on `port`, has a thread write 0.5 N every ms as the
+/// servo would for 300 ms, then ends as `how` says: "crash" (SIGSEGV: the fatal-signal
+/// handler), "exit" (send_exit_zeros then _Exit, as a servo stuck in its renderer ends).
+void child_then_end(int port, const char* how) {
+  struct rlimit none {0, 0};
+  setrlimit(RLIMIT_CORE, &none);  // no core file from the crash
+  IgtlDeviceOptions o;
+  o.host = "127.0.0.1";
+  o.port = port;
+  o.measure_s = 0.3;
+  IgtlDevice d(o);
+  d.enable_force(true, 0.0025);
+  std::atomic<bool> go{true};
+  std::thread servo([&] {
+    while (go.load()) {
+      d.read();
+      d.write_force_n({0.5, 0, 0});
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  if (std::string(how) == "crash") std::raise(SIGSEGV);  // the servo thread still writing
+  servo::send_exit_zeros(5000);
+  std::_Exit(3);
+}
+
+// However the process ends - a crash, or the _Exit of a servo stuck in its renderer - the
+// peer's last Force is an exact zero, after forces of 0.5 N (PLUS applies the latest Force
+// it got with no age check).
+TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
+  for (const char* how : {"crash", "exit"}) {
+    Peer peer(500, 3.0);
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) child_then_end(peer.port(), how);  // never returns
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    if (std::string(how) == "crash") EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGSEGV) << how;
+    else EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 3) << how;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the peer reads what was sent
+    const std::vector<Peer::Got> got = peer.forces();
+    long forced = 0;
+    for (const Peer::Got& g : got) forced += g.f.x == 0.5;
+    EXPECT_GT(forced, 20) << how << ": the servo's force did not flow";
+    ASSERT_FALSE(got.empty()) << how;
+    EXPECT_EQ(core::norm(got.back().f), 0.0) << how << ": the peer's last force is " << got.back().f.x << " N";
+  }
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -42,6 +43,10 @@ struct HdControls : DoubleLog {
   void (*set_target)(const double*);
   void (*clear_log)();
   long (*illegal)();
+  int (*force_output)();
+  void (*inkwell)();
+  long (*calibration_updates)();
+  long (*calibration_updates_off_scheduler)();
   HdControls() {
     void* h = dlopen(HD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
     if (!h) throw std::runtime_error(dlerror());
@@ -50,6 +55,10 @@ struct HdControls : DoubleLog {
     log = reinterpret_cast<int (*)(double*, int)>(dlsym(h, "hdDoubleLog"));
     clear_log = reinterpret_cast<void (*)()>(dlsym(h, "hdDoubleClearLog"));
     illegal = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleIllegalCalls"));
+    force_output = reinterpret_cast<int (*)()>(dlsym(h, "hdDoubleForceOutput"));
+    inkwell = reinterpret_cast<void (*)()>(dlsym(h, "hdDoubleInkwell"));
+    calibration_updates = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleCalibrationUpdates"));
+    calibration_updates_off_scheduler = reinterpret_cast<long (*)()>(dlsym(h, "hdDoubleCalibrationUpdatesOffScheduler"));
   }
 };
 
@@ -205,6 +214,94 @@ TEST_F(OpenHaptics, ForcesArriveInHdFrameAndStopAtExactZero) {
   EXPECT_EQ(ctl.illegal(), 0);
 }
 
+// close() leaves HD_FORCE_OUTPUT disabled in the library (what the driver holds), after an
+// exact zero was the last force applied.
+TEST_F(OpenHaptics, CloseDisablesForceOutput) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  EXPECT_EQ(ctl.force_output(), 1) << "open() enables force output";
+  d.enable_force(true, kTestStallS);
+  write_for(d, {0.5, 0, 0}, 20);
+  d.close();
+  EXPECT_EQ(ctl.force_output(), 0) << "close() left HD_FORCE_OUTPUT enabled";
+  const auto r = ctl.received().back();
+  EXPECT_TRUE(r[1] == 0.0 && r[2] == 0.0 && r[3] == 0.0);
+}
+
+// Non-finite forces written by the servo never reach the device: the double's own limit
+// check lets NaN through (NaN > max is false), so what it received is the backend's backstop.
+TEST_F(OpenHaptics, ANonFiniteForceReachesTheDeviceAsAnExactZero) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const Vec3 bad : {Vec3{NAN, 0, 0}, Vec3{0, inf, 0}, Vec3{0, 0, -inf}}) write_for(d, bad, 15);
+  const auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 20u);
+  for (const auto& r : rows)
+    EXPECT_TRUE(r[1] == 0.0 && r[2] == 0.0 && r[3] == 0.0) << "t " << r[0] << ": " << r[1] << ", " << r[2] << ", " << r[3];
+  d.close();
+}
+
+// The continuous force and the scheduler's rate are read; a servo faster than the scheduler
+// applies forces is refused by the servo thread (its ticks between frames would be lost).
+TEST_F(OpenHaptics, ContinuousForceAndOutputRateAreRead) {
+  servo::OpenHapticsDevice d;
+  d.open();
+  const servo::DeviceCaps c = d.caps();
+  EXPECT_DOUBLE_EQ(c.max_continuous_force_n, 0.88);
+  EXPECT_DOUBLE_EQ(c.output_rate_hz, 1000);
+  // 2.5 servo periods less half a device period: the force is off within 3 periods.
+  d.enable_force(true, 0.0025);
+  EXPECT_EQ(d.stall_ns(), 2'000'000);
+  d.close();
+}
+
+// A calibration that needs an update is updated from the HD scheduler (as the SDK's
+// Calibration example does), in the automatic style the device offers; until it is ok every
+// reading is a fault and the device gets zero force.
+TEST_F(OpenHaptics, ACalibrationThatNeedsAnUpdateIsUpdatedBeforeAnyForce) {
+  setenv("HD_DOUBLE_CALIBRATION", "update", 1);
+  servo::OpenHapticsDevice d;
+  d.open();
+  unsetenv("HD_DOUBLE_CALIBRATION");
+  EXPECT_NE(d.warning().find("needs update"), std::string::npos) << d.warning();
+  EXPECT_TRUE(wait_for([&] { return d.calibrated(); }));
+  EXPECT_GE(ctl.calibration_updates(), 1);
+  EXPECT_EQ(ctl.calibration_updates_off_scheduler(), 0) << "hdUpdateCalibration called off the scheduler";
+  EXPECT_TRUE(wait_for([&] { return d.read().status == DeviceStatus::kOk; }));
+  d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  write_for(d, {0.5, 0, 0}, 30);
+  EXPECT_EQ(ctl.received().back()[1], 0.5);
+  d.close();
+}
+
+// A device that needs the stylus in its inkwell, or whose calibration never gets ok: no force
+// reaches it (every row the double received is an exact zero) and readings are faults, until
+// the stylus is put in the inkwell.
+TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
+  setenv("HD_DOUBLE_CALIBRATION", "manual", 1);
+  servo::OpenHapticsDevice d;
+  d.open();
+  unsetenv("HD_DOUBLE_CALIBRATION");
+  EXPECT_NE(d.warning().find("manual input"), std::string::npos) << d.warning();
+  d.enable_force(true, kTestStallS);
+  ctl.clear_log();
+  write_for(d, {0.5, 0, 0}, 60);
+  EXPECT_EQ(d.read().status, DeviceStatus::kFault);
+  EXPECT_FALSE(d.calibrated());
+  auto rows = ctl.received();
+  ASSERT_GT(rows.size(), 30u);
+  for (const auto& r : rows) EXPECT_EQ(r[1], 0.0) << "a force reached an uncalibrated device at t " << r[0];
+  ctl.inkwell();
+  EXPECT_TRUE(wait_for([&] { return d.calibrated(); }));
+  write_for(d, {0.5, 0, 0}, 30);
+  EXPECT_EQ(ctl.received().back()[1], 0.5);
+  d.close();
+}
+
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
   servo::OpenHapticsDevice d;
   d.open();
@@ -218,6 +315,7 @@ struct DhdControls : DoubleLog {
   void (*clear_log)();
   long (*calls_on)(unsigned long);
   int (*force_on)();
+  int (*watchdog)();
   DhdControls() {
     void* h = dlopen(DHD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
     if (!h) throw std::runtime_error(dlerror());
@@ -227,6 +325,7 @@ struct DhdControls : DoubleLog {
     clear_log = reinterpret_cast<void (*)()>(dlsym(h, "dhdDoubleClearLog"));
     calls_on = reinterpret_cast<long (*)(unsigned long)>(dlsym(h, "dhdDoubleCallsOn"));
     force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
+    watchdog = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleWatchdog"));
   }
 };
 
@@ -287,6 +386,19 @@ TEST_F(ForceDimension, PoseAndForcesInFdFrameFromADeviceThread) {
   EXPECT_EQ(ctl.calls_on(static_cast<unsigned long>(pthread_self())), 0) << "a dhd call on the servo's thread";
   check_stall_then_close(d, ctl, *stalls);
   EXPECT_EQ(ctl.force_on(), 0) << "force left enabled at close";
+}
+
+// open() sets the firmware's watchdog (what the double's firmware holds: 125 us units), so a
+// killed isotouch leaves no force on: 10 ms at 2 kHz (10 periods would be 5 ms); the device
+// thread's rate is its output rate (a faster servo is refused).
+TEST_F(ForceDimension, OpenSetsTheFirmwareWatchdog) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  EXPECT_EQ(ctl.watchdog(), 80) << "10 ms in 125 us units";
+  EXPECT_DOUBLE_EQ(d.watchdog_s(), 0.010);
+  EXPECT_DOUBLE_EQ(d.caps().output_rate_hz, 2000);
+  EXPECT_NE(d.description().find("firmware watchdog 10 ms"), std::string::npos) << d.description();
+  d.close();
 }
 
 TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {

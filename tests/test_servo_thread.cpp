@@ -477,7 +477,10 @@ struct SafetyRig {
   TickLog log;
   std::unique_ptr<ServoThread> servo;
   double ramp_in_s;
-  explicit SafetyRig(double ramp_in_s_ = 0.0, double stale_restart_s = 0.02, double max_force_n = INFINITY)
+  /// rate_n_per_s: the gate's rate limit (default: none to speak of, so that each other rule
+  /// is seen alone); scene_limit_n: ServoThreadConfig::force_limit_n.
+  explicit SafetyRig(double ramp_in_s_ = 0.0, double stale_restart_s = 0.02, double max_force_n = INFINITY,
+                     double rate_n_per_s = 1e12, double scene_limit_n = INFINITY)
       : ramp_in_s(ramp_in_s_) {
     published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
     dev.c.workspace_min_m = Vec3{-0.1, -0.1, -0.1};
@@ -489,6 +492,8 @@ struct SafetyRig {
     cfg.observer = &log;
     cfg.ramp_in_s = ramp_in_s;
     cfg.stale_restart_s = stale_restart_s;
+    cfg.max_force_rate_n_per_s = rate_n_per_s;
+    cfg.force_limit_n = scene_limit_n;
     servo = std::make_unique<ServoThread>(published, renderer, dev, cfg);
   }
   void run_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
@@ -774,6 +779,97 @@ TEST(ServoSafety, ForceIsClampedToTheDeviceMaximum) {
     if (max_n < 1) EXPECT_EQ(clamped, good);
     else EXPECT_EQ(clamped, 0);
   }
+}
+
+// The scene's force limit below the device's peak: the device gets at most the scene's limit,
+// the direction kept (the gate clamps to min(scene, device)).
+TEST(ServoSafety, TheScenesLimitBelowTheDevicesPeakHolds) {
+  const Vec3 f{0.6, 0, 0.8};  // |F| = 1 N
+  SafetyRig rig(0.0, 0.02, 5.0, 1e12, 0.7);
+  rig.renderer.set(f);
+  rig.servo->start();
+  rig.run_ticks(40);
+  rig.servo->stop();
+  long good = 0;
+  for (std::size_t i = 0; i < rig.dev.logged(); ++i) {
+    const WireTick& t = rig.dev.ticks[i];
+    if (!t.ticked) continue;
+    ++good;
+    EXPECT_NEAR(norm(t.force), 0.7, 1e-12) << "tick " << i;
+    EXPECT_NEAR(norm(cross(t.force, f)), 0.0, 1e-12) << "tick " << i << ": turned";
+  }
+  EXPECT_GT(good, 30);
+  EXPECT_EQ(rig.servo->device_counters().clamped, good);
+}
+
+// A step demand (0 -> 1 N, then 1 N turned by 90 degrees, then 0 -> 1 N after a fault's
+// zero ticks) reaches the device at the rate limit: between two ticks the force sent changes
+// by at most rate x (the ticks' starts apart), judged on what the device received, and the
+// steps take several ticks (counted).
+TEST(ServoSafety, AStepDemandReachesTheDeviceAtTheRateLimit) {
+  constexpr double kRate = 50;  // N/s: 1 N in 20 ms, 20 ticks at 1 kHz
+  SafetyRig rig(0.0, 0.02, 3.3, kRate);
+  rig.renderer.set({0, 0, 0});
+  rig.servo->start();
+  rig.run_ticks(20);
+  rig.renderer.set({0, 0, 1});
+  rig.run_ticks(60);
+  rig.renderer.set({1, 0, 0});
+  rig.run_ticks(60);
+  rig.dev.status = int(DeviceStatus::kFault);
+  rig.run_ticks(10);
+  rig.dev.status = int(DeviceStatus::kOk);
+  rig.run_ticks(60);
+  rig.servo->stop();
+  const std::size_t n = std::min(rig.dev.logged(), rig.log.n.load());
+  long between = 0, limited_checks = 0;
+  for (std::size_t i = 1; i < n; ++i) {
+    const WireTick &a = rig.dev.ticks[i - 1], &b = rig.dev.ticks[i];
+    if (!a.wrote || !b.wrote) continue;
+    const double dt = double(rig.log.t_ns[i] - rig.log.t_ns[i - 1]) * 1e-9;
+    const bool zero_tick = b.status != DeviceStatus::kOk;  // a fault's zero is at once, by design
+    if (!zero_tick) {
+      ++limited_checks;
+      EXPECT_LE(norm(b.force - a.force), kRate * dt + 1e-9) << "tick " << i << ": " << str(a.force) << " -> " << str(b.force);
+    } else {
+      EXPECT_TRUE(exact_zero(b.force)) << "tick " << i;
+    }
+    const double m = norm(b.force);
+    between += !zero_tick && m > 0.01 && m < 0.99 && (b.force.x == 0 || b.force.z == 0);  // rising, not turning
+  }
+  EXPECT_GT(limited_checks, 150);
+  EXPECT_GE(between, 2 * 10) << "both rises from zero take ~20 ticks";
+  EXPECT_GT(rig.servo->device_counters().rate_limited, 30);
+}
+
+// A device that applies each force in its own loop (an SDK's scheduler) at 1 kHz refuses a
+// 2 kHz servo before anything starts (its ticks between two device frames would be lost, and
+// its stall rule acts in the device's periods); at 1 kHz it runs.
+TEST(ServoSafety, AServoFasterThanTheDevicesOwnLoopIsRefused) {
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+  SteeredDevice dev;
+  dev.c.output_rate_hz = 1000;
+  SteeredForce renderer{dev};
+  ServoThreadConfig cfg;
+  cfg.sched_fifo = cfg.pin_cpu = cfg.lock_memory = false;
+  cfg.rate_hz = 2000;
+  {
+    ServoThread servo(published, renderer, dev, cfg);
+    try {
+      servo.start();
+      FAIL() << "a 2 kHz servo started on a 1 kHz device loop";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("1000"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_EQ(dev.n_writes.load(), 0u) << "the refused servo wrote to the device";
+  cfg.rate_hz = 1000;
+  ServoThread servo(published, renderer, dev, cfg);
+  servo.start();
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  servo.stop();
+  EXPECT_GT(dev.n_writes.load(), 5u);
 }
 
 // A renderer that answers NaN or an infinite force: the device gets an exact zero in those

@@ -735,6 +735,7 @@ bool Sculpt::open_edits() {
 session::LiveSessionConfig Sculpt::session_config() {
   session::LiveSessionConfig cfg;
   cfg.servo.rate_hz = scene.hri.rate_hz;
+  cfg.servo.force_limit_n = scene.hri.force_limit_n;  // the gate: min(scene, device)
   cfg.servo.sched_fifo = o.sched_fifo;
   cfg.servo.pin_cpu = o.sched_fifo;
   cfg.servo.lock_memory = o.sched_fifo;

@@ -88,6 +88,7 @@ class Live {
   session::LiveSessionConfig config(const std::string& record, bool realtime, double flush_interval_s) const {
     session::LiveSessionConfig c;
     c.servo.rate_hz = scene_.hri.rate_hz;
+    c.servo.force_limit_n = scene_.hri.force_limit_n;  // the gate: min(scene, device)
     c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = realtime;
     c.servo.world_T_device = setup_.world_T_device;
     // Period errors kept: the script's length, at least a minute.

@@ -21,6 +21,8 @@ namespace {
 DoubleDevice g_dev("DHD_DOUBLE", [](double x, double y, double z) { return std::array<double, 3>{-y, x, z}; });
 std::atomic<bool> g_open{false}, g_force_on{false}, g_running{false};
 std::atomic<long> g_bad_ids{0};
+std::atomic<bool> g_expert{false};
+std::atomic<int> g_watchdog{0};
 std::thread g_clock;
 std::atomic<const char*> g_error{"no error"};
 std::mutex g_callers_mu;
@@ -97,6 +99,17 @@ int dhdEnableForce(unsigned char val, char id) {
   return 0;
 }
 const char* dhdErrorGetLastStr(void) { return g_error; }
+int dhdEnableExpertMode(void) {
+  g_expert = true;
+  return 0;
+}
+/// The firmware's watchdog: val x 125 us without a force command disables forces (0: off).
+/// Expert mode first, as CHAI3D does.
+int dhdSetWatchdog(unsigned char val, char id) {
+  if (!usable(id) || !g_expert.load()) return -1;
+  g_watchdog = val;
+  return 0;
+}
 
 // Test controls.
 void dhdDoubleVanish(int on) { g_dev.vanish(on != 0); }
@@ -107,6 +120,8 @@ void dhdDoubleClearLog() { g_dev.clear_log(); }
 /// 1 while force output is enabled (dhdEnableForce(DHD_ON)).
 int dhdDoubleForceOn() { return g_force_on.load() ? 1 : 0; }
 long dhdDoubleBadIds() { return g_bad_ids.load(); }
+/// The watchdog value set (125 us units; 0: none).
+int dhdDoubleWatchdog() { return g_watchdog.load(); }
 /// dhdGetPosition and dhdSetForce calls made on the thread whose pthread_self() is `thread`.
 long dhdDoubleCallsOn(unsigned long thread) {
   std::lock_guard l(g_callers_mu);

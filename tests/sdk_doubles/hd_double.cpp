@@ -4,10 +4,15 @@
 // callbacks on its own thread at 1 kHz, hdBeginFrame/hdEndFrame frames (a force set outside
 // one, or a frame begun off the scheduler thread, raises an error), an error stack read by
 // hdGetError, and a device that vanishes (HD_COMM_ERROR on every frame). Declarations from
-// isotouch/servo/hd_api.h (from pyOpenHaptics' hd_define.py, cited there).
+// isotouch/servo/hd_api.h (types and signatures only); the constants' values below.
 // Test controls: hdDouble* below. Environment: HD_DOUBLE_PATH, HD_DOUBLE_LOG (double_device.h),
-// HD_DOUBLE_CALIBRATION=update (hdCheckCalibration says it needs an update).
+// HD_DOUBLE_CALIBRATION=update (hdCheckCalibration says it needs an update until
+// hdUpdateCalibration is called with a style the device offers, from the scheduler thread),
+// =manual (it needs manual input until hdDoubleInkwell(), then an update), =never (it never
+// gets ok); HD_DOUBLE_STYLES: the HD_CALIBRATION_STYLE mask (default 6: auto and inkwell).
 #include <atomic>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <thread>
 #include <vector>
@@ -15,7 +20,47 @@
 #include "isotouch/servo/hd_api.h"
 #include "isotouch/tests/sdk_doubles/double_device.h"
 
-namespace hd = isotouch::servo::hd;
+// The vendor's values, written out here rather than taken from isotouch's hd_api.h, so that
+// a wrong constant there cannot hide behind the same one here: OpenHaptics' hdDefines.h and
+// hdScheduler.h (github.com/danepowell/openhaptics, usr/include/HD/, commit
+// f7fef1bb6c0d3b017742bf3cda5a2a285d616b02; the same values in github.com/hhmai/PhantomAPI
+// include/HD/hdDefines.h at e01998cb43cf04cdafa7595392b3a352ce7f4941).
+namespace hd {
+constexpr unsigned kSuccess = 0x0000;  // HD_SUCCESS
+constexpr unsigned kInvalidEnum = 0x0100;  // HD_INVALID_ENUM
+constexpr unsigned kInvalidOperation = 0x0102;  // HD_INVALID_OPERATION
+constexpr unsigned kBadHandle = 0x0104;  // HD_BAD_HANDLE
+constexpr unsigned kExceededMaxForce = 0x0201;  // HD_EXCEEDED_MAX_FORCE
+constexpr unsigned kCommError = 0x0302;  // HD_COMM_ERROR
+constexpr unsigned kDeviceAlreadyInitiated = 0x0301;  // HD_DEVICE_ALREADY_INITIATED
+constexpr unsigned kCommConfigError = 0x0303;  // HD_COMM_CONFIG_ERROR
+constexpr unsigned kIllegalBegin = 0x0400;  // HD_ILLEGAL_BEGIN
+constexpr unsigned kIllegalEnd = 0x0401;  // HD_ILLEGAL_END
+constexpr unsigned kCurrentButtons = 0x2000;  // HD_CURRENT_BUTTONS
+constexpr unsigned kCurrentPosition = 0x2050;  // HD_CURRENT_POSITION
+constexpr unsigned kCurrentVelocity = 0x2051;  // HD_CURRENT_VELOCITY
+constexpr unsigned kDeviceModelType = 0x2501;  // HD_DEVICE_MODEL_TYPE
+constexpr unsigned kDeviceVendor = 0x2503;  // HD_DEVICE_VENDOR
+constexpr unsigned kDeviceSerialNumber = 0x2504;  // HD_DEVICE_SERIAL_NUMBER
+constexpr unsigned kUsableWorkspaceDimensions = 0x2551;  // HD_USABLE_WORKSPACE_DIMENSIONS
+constexpr unsigned kInputDof = 0x2553;  // HD_INPUT_DOF
+constexpr unsigned kOutputDof = 0x2554;  // HD_OUTPUT_DOF
+constexpr unsigned kCalibrationStyle = 0x2555;  // HD_CALIBRATION_STYLE
+constexpr unsigned kUpdateRate = 0x2600;  // HD_UPDATE_RATE
+constexpr unsigned kNominalMaxStiffness = 0x2602;  // HD_NOMINAL_MAX_STIFFNESS
+constexpr unsigned kNominalMaxForce = 0x2603;  // HD_NOMINAL_MAX_FORCE
+constexpr unsigned kNominalMaxContinuousForce = 0x2604;  // HD_NOMINAL_MAX_CONTINUOUS_FORCE
+constexpr unsigned kNominalMaxDamping = 0x2609;  // HD_NOMINAL_MAX_DAMPING
+constexpr unsigned kCurrentForce = 0x2700;  // HD_CURRENT_FORCE
+constexpr unsigned kForceOutput = 0x4000;  // HD_FORCE_OUTPUT
+constexpr unsigned kCalibrationOk = 0x5000;  // HD_CALIBRATION_OK
+constexpr unsigned kCalibrationNeedsUpdate = 0x5001;  // HD_CALIBRATION_NEEDS_UPDATE
+constexpr unsigned kCalibrationNeedsManualInput = 0x5002;  // HD_CALIBRATION_NEEDS_MANUAL_INPUT
+constexpr unsigned kCalibrationAuto = 0x0002;  // HD_CALIBRATION_AUTO
+constexpr unsigned kInvalidValue = 0x0101;  // HD_INVALID_VALUE
+constexpr HDCallbackCode kCallbackDone = 0;  // HD_CALLBACK_DONE
+constexpr HHD kInvalidHandle = 0xFFFFFFFFu;  // HD_INVALID_HANDLE
+}  // namespace hd
 using isotouch_double::DoubleDevice;
 
 namespace {
@@ -37,7 +82,22 @@ std::atomic<long> g_illegal{0}, g_frames{0};
 thread_local bool t_on_scheduler = false, t_in_frame = false;
 thread_local double t_force[3];
 thread_local bool t_force_set = false;
-constexpr double kMaxForceN = 3.3;
+constexpr double kMaxForceN = 3.3, kMaxContinuousForceN = 0.88;
+// The calibration state hdCheckCalibration reports (HD_DOUBLE_CALIBRATION sets the start).
+std::atomic<unsigned> g_calibration{0};
+std::atomic<long> g_calibration_updates{0}, g_calibration_updates_off_scheduler{0};
+std::atomic<bool> g_never_calibrated{false};
+unsigned calibration_at_start() {
+  const char* c = std::getenv("HD_DOUBLE_CALIBRATION");
+  g_never_calibrated = c && std::strcmp(c, "never") == 0;
+  if (c && (std::strcmp(c, "update") == 0 || g_never_calibrated)) return hd::kCalibrationNeedsUpdate;
+  if (c && std::strcmp(c, "manual") == 0) return hd::kCalibrationNeedsManualInput;
+  return hd::kCalibrationOk;
+}
+int styles() {
+  const char* s = std::getenv("HD_DOUBLE_STYLES");
+  return s ? std::atoi(s) : 6;
+}
 
 void push_error(HDerror e) {
   std::lock_guard l(g_mu);
@@ -81,6 +141,7 @@ HHD hdInitDevice(HDstring name) {
     }
     g_inited = true;
   }
+  g_calibration = calibration_at_start();
   g_dev.start();
   return 1;
 }
@@ -127,6 +188,7 @@ void hdGetDoublev(HDenum what, HDdouble* v) {
     case hd::kCurrentPosition: for (int i = 0; i < 3; ++i) v[i] = p[i] * 1e3; return;   // mm
     case hd::kCurrentVelocity: for (int i = 0; i < 3; ++i) v[i] = vel[i] * 1e3; return;  // mm/s
     case hd::kNominalMaxForce: v[0] = kMaxForceN; return;
+    case hd::kNominalMaxContinuousForce: v[0] = kMaxContinuousForceN; return;
     case hd::kNominalMaxStiffness: v[0] = 1.0; return;   // N/mm
     case hd::kNominalMaxDamping: v[0] = 0.005; return;   // N s/mm
     case hd::kUsableWorkspaceDimensions: {
@@ -143,6 +205,7 @@ void hdGetIntegerv(HDenum what, HDint* v) {
     case hd::kOutputDof: v[0] = 3; return;
     case hd::kInputDof: v[0] = 6; return;
     case hd::kUpdateRate: v[0] = 1000; return;
+    case hd::kCalibrationStyle: v[0] = styles(); return;
   }
   push_error(hd::kInvalidEnum);
 }
@@ -188,13 +251,30 @@ void hdUnschedule(HDSchedulerHandle h) {
   std::lock_guard l(g_mu);
   std::erase_if(g_callbacks, [&](const Scheduled& c) { return c.handle == h; });
 }
-HDenum hdCheckCalibration() {
-  const char* c = std::getenv("HD_DOUBLE_CALIBRATION");
-  return c && std::strcmp(c, "update") == 0 ? hd::kCalibrationNeedsUpdate : hd::kCalibrationOk;
+HDenum hdCheckCalibration() { return g_calibration.load(); }
+void hdUpdateCalibration(HDenum style) {
+  g_calibration_updates.fetch_add(1);
+  if (!t_on_scheduler) g_calibration_updates_off_scheduler.fetch_add(1);
+  // One style bit the device offers; only an update that is needed takes.
+  const bool one_bit = style != 0 && (style & (style - 1)) == 0;
+  if (!one_bit || (int(style) & styles()) == 0) return push_error(hd::kInvalidValue);
+  if (g_calibration.load() == hd::kCalibrationNeedsUpdate && !g_never_calibrated) g_calibration = hd::kCalibrationOk;
 }
 
 // Test controls.
 void hdDoubleVanish(int on) { g_dev.vanish(on != 0); }
+/// The user puts the stylus in its inkwell: a calibration that needed manual input needs an update.
+void hdDoubleInkwell() {
+  unsigned manual = hd::kCalibrationNeedsManualInput;
+  g_calibration.compare_exchange_strong(manual, hd::kCalibrationNeedsUpdate);
+}
+long hdDoubleCalibrationUpdates() { return g_calibration_updates.load(); }
+long hdDoubleCalibrationUpdatesOffScheduler() { return g_calibration_updates_off_scheduler.load(); }
+/// HD_FORCE_OUTPUT as last set by hdEnable / hdDisable (1 on).
+int hdDoubleForceOutput() {
+  std::lock_guard l(g_mu);
+  return g_force_output ? 1 : 0;
+}
 void hdDoubleSetTarget(const double mm[3]) {
   const double m[3] = {mm[0] * 1e-3, mm[1] * 1e-3, mm[2] * 1e-3};
   g_dev.set_target(m);

@@ -13,6 +13,7 @@
 #include <iomanip>
 #include <iostream>
 #include <memory>
+#include <mutex>
 #include <sstream>
 #include <thread>
 
@@ -25,6 +26,9 @@
 #include "isotouch/servo/report_device.h"
 #include "isotouch/servo/servo_thread.h"
 #include "isotouch/servo/socket_link.h"
+#include "isotouch/service/igtl_device.h"
+#include "isotouch/service/igtl_message.h"
+#include "isotouch/service/igtl_socket.h"
 #include "isotouch/eval/stats.h"
 
 namespace isotouch::bench {
@@ -386,6 +390,119 @@ SdkTrial sdk_trial(const std::string& kind, bool fifo) {
   return t;
 }
 
+/// A PLUS-like peer on loopback: streams "StylusToTracker" at `rate_hz`, keeps when each pose
+/// went out and when each Force came back with its |F|.
+class LoopbackPeer {
+ public:
+  explicit LoopbackPeer(double rate_hz) : listener_("127.0.0.1", 0), rate_hz_(rate_hz) {
+    sent_ns_.reserve(1 << 16), got_.reserve(1 << 16);
+    thread_ = std::thread([this] { serve(); });
+  }
+  ~LoopbackPeer() { finish(); }
+  /// Stops the stream and joins: the logs below are complete.
+  void finish() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  int port() const { return listener_.port(); }
+  /// After finish(): the poses' send times and the forces (time, |F|) [ns steady].
+  std::vector<std::int64_t> sent_ns_;
+  std::vector<std::pair<std::int64_t, double>> got_;
+
+ private:
+  static std::int64_t now() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  }
+  void serve() {
+    int fd = -1;
+    while (fd < 0 && !stop_) fd = listener_.accept(50);
+    if (fd < 0) return;
+    service::Connection conn(fd, 2000, 2000, &stop_);
+    std::thread reader([&] {
+      for (;;) {
+        const service::Incoming in = service::read_message(conn, service::MessageLimits{});
+        if (in.kind == service::Incoming::Kind::kClosed || in.kind == service::Incoming::Kind::kBroken) break;
+        if (in.kind != service::Incoming::Kind::kTransform || in.device != "Force") continue;
+        const double f = std::sqrt(in.matrix[0][3] * in.matrix[0][3] + in.matrix[1][3] * in.matrix[1][3] +
+                                   in.matrix[2][3] * in.matrix[2][3]);
+        std::lock_guard<std::mutex> lock(mu_);
+        got_.push_back({now(), f});
+      }
+    });
+    const double pose[3] = {0, 0, -5};  // 5 mm below the device's origin: inside Push's wall
+    const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / rate_hz_));
+    for (auto next = std::chrono::steady_clock::now(); !stop_;) {
+      std::this_thread::sleep_until(next);
+      const auto msg = service::pack_translation("StylusToTracker", pose);
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        sent_ns_.push_back(now());
+      }
+      conn.send(msg);
+      next = std::max(next + period, std::chrono::steady_clock::now());
+    }
+    conn.shutdown();
+    reader.join();
+  }
+  service::Listener listener_;
+  double rate_hz_;
+  std::atomic<bool> stop_{false};
+  std::mutex mu_;
+  std::thread thread_;
+};
+
+/// `--haptic igtl:` against the loopback peer at 1 kHz, the servo at 1 kHz pushing 0.5 N with
+/// one 100 ms renderer stall.
+IgtlRow igtl_row(double seconds, bool fifo) {
+  IgtlRow row;
+  auto peer = std::make_unique<LoopbackPeer>(1000);
+  try {
+    service::IgtlDeviceOptions opt;
+    opt.host = "127.0.0.1";
+    opt.port = peer->port();
+    opt.stream = "StylusToTracker";
+    opt.measure_s = 0.3;
+    service::IgtlDevice dev(opt);
+    row.stream_hz = dev.measured_rate_hz();
+    Push push(0.5, 50, long(seconds * 500), 100);
+    servo::TripleBuffer<core::SampleField> published;
+    published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+    servo::ServoThreadConfig sc;
+    sc.rate_hz = 1000;
+    sc.force_limit_n = 3.3;
+    sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
+    servo::ServoThread servo(published, push, dev, sc);
+    servo.start();
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+    servo.stop();
+  } catch (const std::exception& e) {
+    row.not_measured = e.what();
+    return row;
+  }
+  peer->finish();
+  const std::vector<std::int64_t>& sent = peer->sent_ns_;
+  const auto& got = peer->got_;
+  row.forces = long(got.size());
+  std::vector<double> delay_us;
+  for (const auto& [t, f] : got) {
+    const auto it = std::upper_bound(sent.begin(), sent.end(), t);  // the newest pose sent before it
+    if (it != sent.begin()) delay_us.push_back(double(t - *(it - 1)) * 1e-3);
+  }
+  if (!delay_us.empty()) {
+    row.p50_us = eval::percentile(delay_us, 0.5);
+    row.p99_us = eval::percentile(delay_us, 0.99);
+    row.max_us = *std::max_element(delay_us.begin(), delay_us.end());
+  }
+  std::size_t i = 0;
+  while (i < got.size() && got[i].second < 0.499) ++i;  // pushing 0.5 N
+  for (; i + 1 < got.size(); ++i)
+    if (got[i].second > 0 && got[i + 1].second == 0) {
+      row.stall_zero_after_us = double(got[i + 1].first - got[i].first) * 1e-3;
+      break;
+    }
+  return row;
+}
+
 std::string sdk_trial_line(const SdkTrial& t) {
   if (!t.not_measured.empty()) return "  " + t.kind + ": not measured: " + t.not_measured + "\n";
   return "  " + t.kind + ": stall: zero " + fixed(t.stall_zero_after_us) + " us after the last " + fixed(t.steady_n, 3) +
@@ -398,7 +515,7 @@ std::string sdk_trial_line(const SdkTrial& t) {
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
                                                const std::vector<DisconnectTrial>& trials,
                                                const std::vector<StallTrial>& stalls,
-                                               const std::vector<SdkTrial>& sdk) {
+                                               const std::vector<SdkTrial>& sdk, const IgtlRow* igtl) {
   std::vector<std::string> v;
   const auto one = std::find_if(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.rate_hz == 1000; });
   if (one == rows.end() || one->answered == 0 || !std::isfinite(one->p99_us))
@@ -434,6 +551,10 @@ std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>
     v.push_back(t.kind + ": a 0 -> 3 N step held to the rate limit (largest " + fixed(t.step_max_rate_n_per_s) +
                 " N/s against " + fixed(t.step_bound_n_per_s) + "): " + (step_ok ? "met" : "NOT met"));
   }
+  // The link: the stall's zero reaches the peer within 3 servo periods of the last force.
+  if (igtl && igtl->not_measured.empty())
+    v.push_back("igtl: zero at the peer within 3 periods of a servo stall (" + fixed(igtl->stall_zero_after_us) +
+                " us after its last force): " + (igtl->stall_zero_after_us <= 3000 ? "met" : "NOT met"));
   return v;
 }
 
@@ -474,8 +595,17 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
   log << "\nvendor SDK trials at 1 kHz (a 100 ms renderer stall while pushing 1 N; a 0 -> 3 N step under a 3.3 N "
          "limit), judged on what the library received:\n";
   for (const SdkTrial& t : sdk) log << sdk_trial_line(t);
+  const IgtlRow ig = igtl_row(std::min(o.seconds, 2.0), o.sched_fifo);
+  log << "\n--haptic igtl: on loopback (a PLUS-like peer in this process streaming poses at 1 kHz; the servo at 1 kHz "
+         "pushing 0.5 N, one 100 ms renderer stall; relay delay = a Force's arrival at the peer after the newest pose "
+         "it had sent):\n";
+  if (!ig.not_measured.empty()) log << "  not measured: " << ig.not_measured << "\n";
+  else
+    log << "  stream " << fixed(ig.stream_hz) << " Hz measured, " << ig.forces << " forces; relay delay p50 "
+        << fixed(ig.p50_us) << " us, p99 " << fixed(ig.p99_us) << " us, max " << fixed(ig.max_us) << " us; the stall's zero "
+        << fixed(ig.stall_zero_after_us) << " us after the last force\n";
   log << "\n";
-  for (const std::string& v : bench_device_verdicts(rows, trials, stalls, sdk)) log << "verdict  " << v << "\n";
+  for (const std::string& v : bench_device_verdicts(rows, trials, stalls, sdk, &ig)) log << "verdict  " << v << "\n";
   if (!o.out_csv.empty()) {
     std::ostringstream csv;
     csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";

@@ -57,6 +57,18 @@ struct SdkTrial {
   double step_rise_ms = NAN;           ///< from the first nonzero frame to the first at 3 N [ms]
 };
 
+/// The OpenIGTLink link (`--haptic igtl:`) on loopback against a PLUS-like peer in the same
+/// process streaming poses at 1 kHz: the relay delay the peer sees (a Force's arrival after
+/// the newest pose it had sent), and a 100 ms renderer stall (the zero's delay after the
+/// last force at the peer).
+struct IgtlRow {
+  std::string not_measured;        ///< why not ("" measured)
+  double stream_hz = 0;            ///< the rate the device measured [Hz]
+  long forces = 0;                 ///< Force TRANSFORMs the peer received
+  double p50_us = NAN, p99_us = NAN, max_us = NAN;  ///< relay delay [us]
+  double stall_zero_after_us = NAN;  ///< the peer's last force before the stall -> its zero [us]
+};
+
 /// "p99 report-to-force at 1 kHz = X us: target <= 1000 us met|NOT met", "zero force
 /// within one tick of a disconnect in k of N trials: met|NOT met" and "zero force with
 /// enable cleared within 3 periods of a servo stall ... in k of N trials: met|NOT met",
@@ -64,7 +76,8 @@ struct SdkTrial {
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
                                                const std::vector<DisconnectTrial>& trials,
                                                const std::vector<StallTrial>& stalls,
-                                               const std::vector<SdkTrial>& sdk = {});
+                                               const std::vector<SdkTrial>& sdk = {},
+                                               const IgtlRow* igtl = nullptr);
 
 /// Measures 1, 4 and 8 kHz and the disconnect trials; prints a table, the verdicts and
 /// the machine. @return 0; 1 if nothing could be measured.

@@ -9,6 +9,7 @@
 
 #include "isotouch/servo/device_protocols.h"
 #include "isotouch/servo/hid_report.h"
+#include "isotouch/servo/report_device.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -267,6 +268,19 @@ std::array<std::int16_t, 6> counts_seen(polhem::Config unit, polhem::Config host
 }
 }  // namespace
 
+namespace {
+// Calibrates `p` as a unit would be: it asks (info 1) and the protocol answers with the
+// calibration command; the unit's next report (info 0) acknowledges it.
+void command_calibration(PolhemProtocol& p) {
+  polhem::Input in;
+  in.info = 1;
+  DeviceReading r;
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  std::array<std::uint8_t, 64> buf{};
+  ASSERT_EQ(p.pending_command(buf), 15u);
+}
+}  // namespace
+
 TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
   const Vec3 poses[] = {Vec3{0, 0, 0}, Vec3{0.05, 0, 0}, Vec3{-0.05, 0.05, 0.05}, Vec3{0.05, -0.05, -0.05}};
   for (const polhem::Config host : kConfigs) {
@@ -277,6 +291,7 @@ TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
     int caught = 0;
     for (const Vec3& q : poses) {
       PolhemProtocol p(host);
+      command_calibration(p);  // judged once calibrated
       polhem::Input in;
       in.encoder = counts_seen(unit, host, q);
       DeviceReading r;
@@ -396,5 +411,83 @@ TEST(Polhem, CurrentsOverTheCapAreScaledAsOneVectorKeepingTheForcesDirection) {
       ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{bad[0], bad[1], bad[2]}), sent));
       EXPECT_EQ(norm(sent), 0.0) << "motor " << i;
     }
+  }
+}
+
+// The firmware's info is its switch's latched flag, clear at power-up, cleared again only by
+// the calibration command; its counters start at 0 wherever the handle is, and it drives any
+// current it is sent. So info 0 is no proof of calibration: the protocol sends no current
+// until it has itself answered an info 1 with the command and then seen info 0.
+namespace {
+/// The Polhem's handshake reads no feature report: a link that has none.
+class NoLink final : public ReportLink {
+ public:
+  std::string name() const override { return "none"; }
+  std::string open() override { return {}; }
+  void close() override {}
+  int read(std::span<std::uint8_t>, int) override { return 0; }
+  bool write(std::span<const std::uint8_t>) override { return false; }
+  int get_feature(std::uint8_t, std::span<std::uint8_t>) override { return -1; }
+};
+}  // namespace
+
+TEST(Polhem, ProtocolSendsNoCurrentUntilItsOwnCalibrationCommandIsAcknowledged) {
+  for (const polhem::Config c : kConfigs) {
+    PolhemProtocol p(c);
+    DeviceCaps caps;
+    NoLink link;
+    ASSERT_EQ(p.handshake(link, caps), "");
+    std::array<std::uint8_t, 64> buf{};
+    auto sent_amps = [&](const Vec3& f) {
+      Vec3 amps{NAN, NAN, NAN};
+      const std::size_t n = p.encode_output(f, true, 0, buf);
+      EXPECT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, n - 1), amps)) << "not a current command";
+      return amps;
+    };
+    polhem::Input in;
+    in.encoder = polhem::encoders_for(Vec3{0.01, 0, -0.01}, c);  // counts a calibrated unit could give
+    DeviceReading r;
+    // Power-up: info 0, plausible counts. Faulted, force off, zero current, and it says why.
+    for (int i = 0; i < 3; ++i) {
+      ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+      EXPECT_EQ(r.status, DeviceStatus::kFault) << polhem::config_name(c);
+      EXPECT_TRUE(r.force_off);
+      EXPECT_EQ(p.fault(), PolhemProtocol::kNotCalibrated);
+      EXPECT_EQ(p.pending_command(buf), 0u) << "a command sent unasked sets the counters wherever the handle is";
+      EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current before calibration";
+    }
+    // The switch pressed: it asks. Still no current while it asks (its counts are not set).
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current while it asks";
+    // info 0 without our command (none sent yet): nothing proves the counters were set.
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    // It asks, we answer, it stops asking: calibrated, and the force flows.
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    ASSERT_EQ(p.pending_command(buf), 15u);
+    EXPECT_EQ(buf[1 + 6], 1);  // command 1
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kOk);
+    EXPECT_FALSE(r.force_off);
+    EXPECT_EQ(p.fault(), "");
+    EXPECT_GT(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    // Docked again: it asks; the old counts stay valid until the command runs, so the force stays.
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kOk);
+    EXPECT_GT(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    ASSERT_EQ(p.pending_command(buf), 15u);
+    // Opened again (a reconnect: it may have been power-cycled): uncalibrated until asked and answered.
+    ASSERT_EQ(p.handshake(link, caps), "");
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current after a reopen, before calibration";
   }
 }

@@ -46,7 +46,16 @@ std::string PolhemProtocol::handshake(ReportLink& link, DeviceCaps& caps) {
   caps = hid::polhem::caps(config_);
   mismatch_.clear();  // opened again: judged anew
   faulted_.store(false);
+  // Opened or reconnected: it may have been powered up since (info 0, counters 0 wherever the
+  // handle is), which no report shows. Calibrated again only by a command of ours.
+  calibrated_.store(false);
+  calibrate_ = commanded_ = false;
   return {};
+}
+
+std::string_view PolhemProtocol::fault() const {
+  if (!mismatch_.empty()) return mismatch_;
+  return calibrated_.load() ? std::string_view{} : kNotCalibrated;
 }
 
 std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, DeviceReading& r) {
@@ -55,11 +64,22 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
   encoders_.store(in.encoder);
   r.position_m = hid::polhem::position_m(in.encoder, config_);
   r.buttons = in.encoder[3] > 5000 ? 1u : 0u;
-  // Calibrated (it does not ask), a pose the configuration cannot give: the unit is of the
-  // other one. Latched: its positions are wrong and its motors would push the wrong way.
-  if (in.info == 0 && mismatch_.empty()) mismatch_ = hid::polhem::check_pose(r.position_m, config_);
-  if (!mismatch_.empty()) faulted_.store(true);
-  r.status = mismatch_.empty() ? DeviceStatus::kOk : DeviceStatus::kFault;
+  // info 0 after our command: only a command clears the switch's flag, so the command ran
+  // and these counts are the calibration's (encoders_ above holds them before the writer can
+  // see calibrated_). info 0 without one proves nothing (the flag starts clear at power-up).
+  if (in.info == 0 && commanded_) calibrated_.store(true), commanded_ = false;
+  if (!calibrated_.load()) {
+    // Uncalibrated counts: a wrong pose and a wrong Jacobian. No force until calibrated.
+    r.status = DeviceStatus::kFault;
+    r.force_off = true;
+  } else {
+    r.force_off = false;  // the firmware drives what it is sent
+    // Calibrated (it does not ask), a pose the configuration cannot give: the unit is of the
+    // other one. Latched: its positions are wrong and its motors would push the wrong way.
+    if (in.info == 0 && mismatch_.empty()) mismatch_ = hid::polhem::check_pose(r.position_m, config_);
+    if (!mismatch_.empty()) faulted_.store(true);
+    r.status = mismatch_.empty() ? DeviceStatus::kOk : DeviceStatus::kFault;
+  }
   // Asked again after a command was sent: it was lost (the firmware keeps only the last
   // queued report), so it is sent again, once per report that asks, until it stops asking.
   calibrate_ = in.info == 1;
@@ -69,7 +89,8 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
 std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
                                           std::span<std::uint8_t> buf) {
   (void)answers;  // the Polhem's reports carry no sequence
-  const bool on = enable && !faulted_.load();
+  // calibrated_ before encoders_: once it reads true, the counts are the calibrated ones.
+  const bool on = enable && !faulted_.load() && calibrated_.load();
   const Vec3 amps = on ? hid::polhem::motor_currents_a(force_n, encoders_.load(), config_) : Vec3{};
   const auto b = hid::polhem::encode_currents(amps);
   buf[0] = 0;  // no report IDs: hidapi wants a leading 0
@@ -80,6 +101,7 @@ std::size_t PolhemProtocol::encode_output(const Vec3& force_n, bool enable, std:
 std::size_t PolhemProtocol::pending_command(std::span<std::uint8_t> buf) {
   if (!calibrate_) return 0;
   calibrate_ = false;  // once per report that asks
+  commanded_ = true;   // the next info 0 acknowledges it
   const auto b = hid::polhem::encode_calibrate(config_);
   buf[0] = 0;
   std::copy(b.begin(), b.end(), buf.begin() + 1);

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 
 #include "isotouch/servo/hid_report.h"
 #include "isotouch/servo/latest_value.h"
@@ -32,12 +33,27 @@ class V1Protocol final : public DeviceProtocol {
 /// The Polhem (haptikfabriken): 14-byte reports without ID, encoder counts in, motor
 /// currents out, the kinematics of its configuration (polhem_v1 or polhem_v3) on the host.
 /// No sequence numbers or timestamps. Button 0: encoder d above 5000 (haptikfabrikenapi's
-/// convention). While the device flags its calibration switch (info 1), the calibration
-/// command (the configuration's counts) follows each of its reports (the firmware keeps only
-/// its last queued report, so a command can be lost; upstream sends it in place of a current
-/// command until the device stops asking). Once calibrated, a position the configuration
-/// cannot give (hid::polhem::check_pose: the unit is of the other configuration) faults the
-/// device until it is opened again: zero current, and fault() says why.
+/// convention).
+///
+/// Calibration. The firmware (forsslund/haptikfabrikenapi firmware/main.cpp) reports `info`
+/// as a latched flag: 1 once its calibration switch closed, 0 again only after a calibration
+/// command (command 1) set the counters. The flag starts at 0 at power-up and the counters at
+/// 0 wherever the handle is, so info 0 alone does not mean calibrated; and the firmware drives
+/// any currents it is sent. So the device counts as uncalibrated from handshake() (every open
+/// and reconnect: it may have been power-cycled) until this protocol has itself sent the
+/// command in answer to an info 1 and then seen info 0 (only the command clears the flag).
+/// Until then every reading is DeviceStatus::kFault with force_off set, fault() says to press
+/// the handle into the switch, and encode_output() sends zero currents. While the device asks
+/// (info 1) the command follows each of its reports (the firmware keeps only its last queued
+/// report, so a command can be lost; upstream sends it in place of a current command until
+/// the device stops asking). A calibrated unit docked again keeps its force meanwhile (its
+/// counts stay valid until the new command runs). Not done: telling a switch latched before
+/// the host connected (the command then sets the counters wherever the handle has gone) from
+/// a live press, and checking that the acknowledging report's counts are the calibration pose.
+///
+/// Once calibrated, a position the configuration cannot give (hid::polhem::check_pose: the
+/// unit is of the other configuration) faults the device until it is opened again: zero
+/// current, and fault() says why.
 class PolhemProtocol final : public DeviceProtocol {
  public:
   explicit PolhemProtocol(hid::polhem::Config config = hid::polhem::kDefaultConfig) : config_(config) {}
@@ -48,14 +64,20 @@ class PolhemProtocol final : public DeviceProtocol {
   std::size_t encode_output(const Vec3& force_n, bool enable, std::uint64_t answers,
                             std::span<std::uint8_t> buf) override;
   std::size_t pending_command(std::span<std::uint8_t> buf) override;
-  std::string fault() const override { return mismatch_; }
+  /// The mismatch (latched), else the missing calibration, else "".
+  std::string_view fault() const override;
   hid::polhem::Config config() const { return config_; }
+  /// fault() while the device is not calibrated since handshake().
+  static constexpr std::string_view kNotCalibrated =
+      "Polhem: not calibrated since isotouch opened it: press the handle into its calibration switch";
 
  private:
   hid::polhem::Config config_;
   LatestValue<std::array<std::int16_t, 6>> encoders_;  // reader -> writer (the Jacobian's pose)
   std::atomic<bool> faulted_{false};                    // reader -> writer: no current
+  std::atomic<bool> calibrated_{false};                 // reader -> writer: our command acknowledged
   bool calibrate_ = false;                              // reader thread: the last report asked
+  bool commanded_ = false;                              // reader thread: a command sent since it last said info 0
   std::string mismatch_;                                // reader thread: why it faulted
 };
 

@@ -324,13 +324,29 @@ std::array<std::uint8_t, kReportSize> encode(const Input& in) {
   return b;
 }
 
+Vec3 limit_currents_a(const Vec3& amps, double cap) {
+  double a[3] = {amps.x, amps.y, amps.z};
+  // One non-finite current makes the whole vector meaningless: zeroing only that motor would
+  // push the other two in a direction nobody asked for.
+  if (!std::isfinite(a[0]) || !std::isfinite(a[1]) || !std::isfinite(a[2])) return {};
+  std::size_t big = 0;  // the motor with the largest |current|
+  for (std::size_t i = 1; i < 3; ++i)
+    if (std::abs(a[i]) > std::abs(a[big])) big = i;
+  if (!(std::abs(a[big]) > cap)) return amps;
+  // min over i of cap / |a_i| is the largest one's: all three scaled by it (the force keeps
+  // its direction, smaller), and the largest set to the cap itself (x * (cap / x) can be an
+  // ulp off it).
+  const double s = cap / std::abs(a[big]);
+  for (double& v : a) v *= s;
+  a[big] = std::copysign(cap, a[big]);
+  return Vec3{a[0], a[1], a[2]};
+}
+
 std::array<std::uint8_t, kReportSize> encode_currents(const Vec3& amps) {
   std::array<std::uint8_t, kReportSize> b{};
-  const double a[3] = {amps.x, amps.y, amps.z};
-  for (std::size_t i = 0; i < 3; ++i) {
-    const double ma = std::isfinite(a[i]) ? std::clamp(a[i], -kMaxCurrentA, kMaxCurrentA) * 1e3 : 0.0;
-    put16(b, 2 * i, std::int16_t(std::lround(ma)));
-  }
+  const Vec3 lim = limit_currents_a(amps);
+  const double a[3] = {lim.x, lim.y, lim.z};
+  for (std::size_t i = 0; i < 3; ++i) put16(b, 2 * i, std::int16_t(std::lround(a[i] * 1e3)));  // |a_i| <= 2 A: fits
   return b;  // command 0: currents
 }
 

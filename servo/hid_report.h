@@ -83,7 +83,9 @@ std::uint16_t crc16(std::span<const std::uint8_t> bytes);
 namespace polhem {
 constexpr std::uint16_t kVid = 0x1234, kPid = 0x0006;
 constexpr std::size_t kReportSize = 14;
-constexpr double kMaxCurrentA = 2.0;  ///< the host caps each motor here (ESCON 24/4)
+/// The host caps each motor's current here (ESCON 24/4): the whole vector is scaled down
+/// until its largest component is at the cap (limit_currents_a), so the force keeps its direction.
+constexpr double kMaxCurrentA = 2.0;
 
 /// The kinematic configuration of the unit (haptikfabriken's Kinematics::configuration).
 enum class Config { kV1, kV3 };
@@ -105,7 +107,13 @@ struct Input {
 };
 Decoded decode(std::span<const std::uint8_t> bytes, Input& out);
 std::array<std::uint8_t, kReportSize> encode(const Input& in);
-/// The 14 bytes of a current command (each clamped to +-kMaxCurrentA; non-finite: 0).
+/// `amps` [A] scaled as one vector so that no motor's current exceeds `cap`: multiplied by
+/// min over i of cap / |amps_i| where one exceeds it (the largest then exactly +-cap), else
+/// unchanged. Clamping each motor on its own would turn the force (the currents are J^T F, linear
+/// in F at a pose: scaling them scales F and keeps its direction). Any non-finite component:
+/// all three zero.
+Vec3 limit_currents_a(const Vec3& amps, double cap = kMaxCurrentA);
+/// The 14 bytes of a current command: `amps` through limit_currents_a, rounded to mA.
 std::array<std::uint8_t, kReportSize> encode_currents(const Vec3& amps);
 /// The calibration command: sets the encoder counters to calibration_counts(c) (a-c in
 /// attr 0-2, d-f in the current fields, as upstream sends it).

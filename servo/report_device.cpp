@@ -264,8 +264,15 @@ void ReportDevice::reader_loop() {
       continue;
     }
     accept(r);
-    if (r.status == DeviceStatus::kFault && !fault_noted_) {  // once: the reader allocates no more
-      if (const std::string why = protocol_->fault(); !why.empty()) note(link_->name() + ": " + why, true), fault_noted_ = true;
+    // The protocol's reason, noted when it changes (the reader allocates only then, not per
+    // report); a reading without a fault ends the run, so a later fault is noted again.
+    if (r.status == DeviceStatus::kFault) {
+      if (const std::string_view why = protocol_->fault(); !why.empty() && why != fault_noted_) {
+        fault_noted_.assign(why);
+        note(link_->name() + ": " + fault_noted_, true);
+      }
+    } else if (!fault_noted_.empty()) {
+      fault_noted_.clear();  // keeps its capacity: no allocation
     }
     if (const std::size_t m = protocol_->pending_command(cmd)) send(std::span(cmd.data(), m));
   }

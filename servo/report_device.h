@@ -11,6 +11,7 @@
 #include <mutex>
 #include <span>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include "isotouch/servo/device_io.h"
@@ -71,9 +72,11 @@ class DeviceProtocol {
     return 0;
   }
   /// Why decode_input() set DeviceStatus::kFault, when the protocol itself found the fault
-  /// (Polhem: the unit is not of the configured kinematics); "" otherwise. Reader thread;
-  /// noted once as the device's last refusal (the host refuses to drive it).
-  virtual std::string fault() const { return {}; }
+  /// (Polhem: not calibrated yet, or the unit is not of the configured kinematics); ""
+  /// otherwise. Reader thread (the view lives until the next decode_input()); noted as the
+  /// device's last refusal (the host refuses to drive it) once per run of faulted readings
+  /// and again whenever the reason changes (not calibrated, then of the other kinematics).
+  virtual std::string_view fault() const { return {}; }
 };
 
 /// Counters of the link (reader and writer threads; any thread may read).
@@ -199,7 +202,7 @@ class ReportDevice final : public HapticDeviceIO {
   std::uint32_t connection_ = 0;            // reader thread
   std::uint32_t last_sequence_ = 0;         // reader thread
   bool have_sequence_ = false;              // reader thread: last_sequence_ is set
-  bool fault_noted_ = false;                // reader thread: the protocol's fault() was noted
+  std::string fault_noted_;                 // reader thread: the protocol's fault() last noted ("": none in this run of faults)
   bool tripped_ = false;                    // reader thread: the last report had the watchdog flag
   mutable std::mutex link_mu_;              // every link call but wait_readable (not the servo)
   mutable std::mutex note_mu_;

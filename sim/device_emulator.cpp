@@ -44,6 +44,10 @@ DeviceEmulator::DeviceEmulator(EmuConfig config)
   stats_.latency_us.reserve(std::size_t(std::max(1.0, cfg_.seconds) * cfg_.rate_hz) + 16);
   log_.resize(cfg_.output_log_size);
   if (cfg_.polhem) cfg_.caps = servo::hid::polhem::caps(cfg_.polhem_config);  // its firmware's: 0.5 s watchdog, limits
+  // The switch's flag: clear at power-up (the firmware's), set from the start otherwise.
+  polhem_flag_ = !cfg_.polhem_power_up;
+  if (cfg_.polhem && cfg_.polhem_power_up)
+    polhem_power_up_counts_ = servo::hid::polhem::encoders_for(cfg_.polhem_power_up_m.value_or(dev_.position()), cfg_.polhem_config);
 }
 
 DeviceEmulator::~DeviceEmulator() {
@@ -179,6 +183,11 @@ std::array<std::int16_t, 6> DeviceEmulator::polhem_counts() const {
   const auto here = ph::encoders_for(dev_.position(), cfg_.polhem_config);
   const auto home = ph::calibration_counts(cfg_.polhem_config);
   std::array<std::int16_t, 6> e{};
+  if (cfg_.polhem_power_up && !polhem_calibrated_) {  // counted from 0 where it powered up; d-f 0
+    for (std::size_t i = 0; i < 3; ++i)
+      e[i] = std::int16_t(std::clamp(long(here[i]) - polhem_power_up_counts_[i], -32768L, 32767L));
+    return e;
+  }
   for (std::size_t i = 0; i < 6; ++i) {
     const long moved = i < 3 ? long(here[i]) - home[i] : 0;  // d-f: no gimbal, it stays where calibrated
     const long at_home = polhem_calibrated_ ? polhem_set_[i] : i < 3 ? long(home[i]) + cfg_.polhem_offset_counts : 0;
@@ -204,7 +213,10 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
     }
     if (!polhem_calibrated_) stats_.calibrated_ns = now;
     polhem_calibrated_ = true;
+    polhem_flag_ = false;  // only the command clears it
     polhem_set_ = set;
+    // The firmware's loop: no current this period (f[] stays 0), the watchdog re-armed.
+    force_n_ = {}, enabled_ = false, last_output_ns_ = now, watchdog_tripped_ = false;
     polhem_owed_ = true;
     return;
   }
@@ -222,6 +234,7 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
   enabled_ = on;
   force_n_ = f;
   if (on) stats_.max_force_n = std::max(stats_.max_force_n, norm(f));
+  if (on && !polhem_calibrated_) ++stats_.currents_while_uncalibrated;
   polhem_owed_ = true;  // lock-step: this command is answered by one report
 }
 
@@ -230,7 +243,7 @@ void DeviceEmulator::polhem_report() {
   polhem_owed_ = false;
   servo::hid::polhem::Input in;
   in.encoder = polhem_counts();
-  in.info = polhem_calibrated_ ? 0 : 1;
+  in.info = polhem_flag_ ? 1 : 0;
   const auto bytes = servo::hid::polhem::encode(in);
   transmit(bytes.data(), bytes.size());
   std::lock_guard lock(stats_mu_);
@@ -301,6 +314,14 @@ void DeviceEmulator::tick(std::int64_t now, double t_s) {
   if (disconnected_ && !relistened_ && f.reconnect_after_s >= 0 && ft >= f.disconnect_at_s + f.reconnect_after_s) {
     relistened_ = true;
     listen();
+  }
+  // The handle pressed into the calibration switch: the firmware latches the edge (info 1
+  // until a calibration command), whether or not a host is connected.
+  if (cfg_.polhem && cfg_.polhem_power_up && cfg_.polhem_switch_at_s >= 0 && !polhem_pressed_ &&
+      t_s >= cfg_.polhem_switch_at_s) {
+    polhem_pressed_ = polhem_flag_ = true;
+    std::lock_guard lock(stats_mu_);
+    ++stats_.switch_presses;
   }
   accept_host();
   serve_host(now);

@@ -8,6 +8,7 @@
 #include <atomic>
 #include <cstdint>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <span>
 #include <string>
@@ -59,14 +60,32 @@ struct EmuConfig {
   std::size_t output_log_size = 1 << 16;  ///< output reports kept in the log (the newest; preallocated)
   /// Speak the Polhem's USB reports instead of protocol v1 (servo/hid_report.h): lock-step
   /// (one 14-byte input report answers each output report, none unasked), encoder counts by
-  /// the kinematics of polhem_config, currents in, the firmware's 0.5 s watchdog; until a
-  /// calibration command arrives the counts are off by polhem_offset_counts and info asks
-  /// for calibration. The command is taken as made in the unit's calibration pose: the
-  /// counters read what it sets there (a host of the other configuration sets its own).
+  /// the kinematics of polhem_config, currents in (applied whether calibrated or not, as the
+  /// firmware does), the firmware's 0.5 s watchdog. info is the firmware's latched switch
+  /// flag: set when the calibration switch closes, cleared only by a calibration command.
+  /// By default the unit asks at once (the flag set from the first report) and until a
+  /// command arrives its counts are off by polhem_offset_counts; polhem_power_up starts it as
+  /// the firmware really starts. The command is taken as made in the unit's calibration
+  /// pose: the counters read what it sets there (a host of the other configuration sets its
+  /// own); it zeroes the force for its period, as the firmware does.
   bool polhem = false;
   servo::hid::polhem::Config polhem_config = servo::hid::polhem::kDefaultConfig;  ///< the unit's kinematics
   int polhem_lose_calibrations = 0;  ///< the first N calibration commands are lost (overwritten in the firmware's one-report queue)
-  int polhem_offset_counts = 400;    ///< the uncalibrated counters' error on a, b, c
+  int polhem_offset_counts = 400;    ///< the uncalibrated counters' error on a, b, c (not polhem_power_up)
+  /// Power-up as forsslund/haptikfabrikenapi firmware/main.cpp starts: info 0 (the flag
+  /// starts clear: info 0 is not "calibrated"), counters 0 at the pose where it powered up
+  /// (polhem_power_up_m) and counting from there. It asks for calibration (info 1) only once
+  /// the handle is pressed into the calibration switch, at polhem_switch_at_s.
+  bool polhem_power_up = false;
+  /// With polhem_power_up: where the counters read 0 [m, device]; unset: where the handle
+  /// starts. A pose servo::hid::polhem::encoders_for solves (Newton from the calibration pose:
+  /// far outside the workspace it may find another branch of the v3 linkage).
+  std::optional<Vec3> polhem_power_up_m;
+  /// With polhem_power_up: when the hand presses the handle into the calibration switch [s of
+  /// the emulator's clock since run() began, i.e. since power-up]; < 0: never. The press is an
+  /// event (the hand's target does not move to the calibration pose; a command is taken as
+  /// made there, as above).
+  double polhem_switch_at_s = -1;
 };
 
 /// One output report as the emulator received it.
@@ -93,6 +112,10 @@ struct EmuStats {
   long calibrations = 0;           ///< Polhem: calibration commands received (lost ones included)
   long calibrations_lost = 0;      ///< Polhem: of those, lost (polhem_lose_calibrations)
   std::int64_t calibrated_ns = 0;  ///< Polhem: CLOCK_MONOTONIC when a calibration took (0: never)
+  long switch_presses = 0;         ///< Polhem: times the calibration switch closed (polhem_switch_at_s)
+  /// Polhem: current commands with a nonzero current received before any calibration command
+  /// took since power-up (the firmware drives them: a force from uncalibrated counts).
+  long currents_while_uncalibrated = 0;
 };
 
 /// The emulated device. run() blocks until `seconds` passed or stop() was called.
@@ -150,7 +173,10 @@ class DeviceEmulator {
   double first_connected_at_s_ = -1;         // when the first host connected [s]; -1: none yet
   bool hold_next_ = false;
   bool polhem_owed_ = false, polhem_calibrated_ = false;  // Polhem: a report is owed; calibrated
+  bool polhem_flag_ = false;     // Polhem: the firmware's latched switch flag (info)
+  bool polhem_pressed_ = false;  // Polhem: polhem_switch_at_s has come
   std::array<std::int16_t, 6> polhem_set_{};              // Polhem: the counts the calibration set
+  std::array<std::int16_t, 6> polhem_power_up_counts_{};  // Polhem, polhem_power_up: the true counts where it powered up
   Pending held_{};
   mutable std::mutex stats_mu_;
   EmuStats stats_;

@@ -518,7 +518,9 @@ void calibrated_lock_step_forces_flow(hid::polhem::Config config) {
   EXPECT_LE(rig.stats.reports_sent, rig.stats.outputs_received + rig.stats.calibrations);
   EXPECT_GT(rig.link.reports, 300);
   EXPECT_EQ(rig.link.garbage, 0);
-  EXPECT_EQ(rig.servo_counters.fault, 0);
+  // No mismatch fault (that would be every tick). A tick or two may read the unit's first
+  // report, which asks: uncalibrated until the command's answer arrives a period later.
+  EXPECT_LE(rig.servo_counters.fault, 5);
 }
 
 /// A unit of one configuration driven with the other's kinematics, held at `hold` [m]:
@@ -615,4 +617,50 @@ TEST(DeviceEmu, ARendererThatNeverReturnsIsAbandonedWithTheForceOff) {
   // The abandoned thread, released, leaves without touching the (destroyed) servo or device.
   g_stuck.release.store(true);
   while (g_stuck.end_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+}
+
+// The Polhem from power-up, as its firmware starts (forsslund/haptikfabrikenapi
+// firmware/main.cpp): info 0 (the switch's latched flag starts clear), counters 0 where it
+// powered up, and any current it is sent driven. The host must send none until it has
+// answered the switch's request (info 1) with the calibration command and seen info 0 again;
+// then the force flows from the calibrated counts. Asserted on what the unit received.
+TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
+  Rig rig;
+  rig.cfg.polhem = true;
+  rig.cfg.polhem_power_up = true;
+  rig.cfg.polhem_switch_at_s = 0.5;  // the handle pressed into the calibration switch
+  // polhem_v1: its counts solve back to the power-up pose below (encoders_for, the emulator's
+  // inverse kinematics, finds another branch of the v3 linkage that far out).
+  const hid::polhem::Config c = rig.cfg.polhem_config = rig.host_config = hid::polhem::Config::kV1;
+  // Where it powered up (140 mm back, at the height of the v1's origin): chosen so that, with
+  // the hand holding the handle at hold_m, its counters read a pose inside the workspace 10 mm
+  // into the wall. A host that took info 0 as calibrated would render the wall there (its
+  // 5 N limit) and the unit would push.
+  const Vec3 seen{0, 0, -0.010};
+  const auto at_hold = hid::polhem::encoders_for(rig.cfg.hold_m, c), reads = hid::polhem::encoders_for(seen, c);
+  std::array<std::int16_t, 6> zero{};
+  for (std::size_t i = 0; i < 3; ++i) zero[i] = std::int16_t(at_hold[i] - reads[i]);
+  rig.cfg.polhem_power_up_m = hid::polhem::position_m(zero, c);
+  {  // the premise: those counters read `seen` (and a pose the servo would render)
+    const auto z = hid::polhem::encoders_for(*rig.cfg.polhem_power_up_m, c);
+    std::array<std::int16_t, 6> e{};
+    for (std::size_t i = 0; i < 3; ++i) e[i] = std::int16_t(at_hold[i] - z[i]);
+    ASSERT_LT(norm(hid::polhem::position_m(e, c) - seen), 0.001);
+    ASSERT_TRUE(hid::polhem::caps(c).contains(seen));
+  }
+  rig.run(1.2);  // 0.5 s before the press, 0.7 s after
+  ASSERT_EQ(rig.stats.switch_presses, 1);
+  ASSERT_GT(rig.stats.calibrated_ns, 0) << "never calibrated: " << rig.summary();
+  EXPECT_GE(rig.stats.calibrated_ns - rig.stats.start_ns, 500'000'000) << "calibrated before the switch was pressed";
+  EXPECT_EQ(rig.stats.calibrations_lost, 0);
+  // Before calibration: no current reached the unit, by its own count and on the wire.
+  EXPECT_EQ(rig.stats.currents_while_uncalibrated, 0) << rig.summary();
+  EXPECT_EQ(rig.forced_on_wire(0, rig.stats.calibrated_ns), 0) << "current on the wire before calibration";
+  EXPECT_GT(rig.servo_counters.fault, 200) << "the servo did not see the uncalibrated unit faulted: " << rig.summary();
+  EXPECT_NE(rig.last_refusal.find("not calibrated since isotouch opened it"), std::string::npos) << rig.last_refusal;
+  // After: the wall's force at the hand's true pose, 3 mm in (~0.5 N; the uncalibrated
+  // reading, 10 mm in, would be the 5 N limit).
+  EXPECT_GT(rig.forced_on_wire(rig.stats.calibrated_ns, INT64_MAX), 300) << rig.summary();
+  EXPECT_GT(rig.stats.max_force_n, 0.3);
+  EXPECT_LT(rig.stats.max_force_n, 1.5);
 }

@@ -3,11 +3,13 @@
 // Polhem's 14-byte reports and kinematics (position, Jacobian transpose by virtual work).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
 #include "isotouch/servo/device_protocols.h"
 #include "isotouch/servo/hid_report.h"
+#include "isotouch/servo/report_device.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -150,10 +152,12 @@ TEST(Polhem, ReportsRoundTripAndCurrentsAreCapped) {
   EXPECT_NE(polhem::decode(bad, out).error.find("info 7"), std::string::npos);
   EXPECT_FALSE(polhem::decode(std::vector<std::uint8_t>(15, 0), out));
   Vec3 amps;
-  ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{0.5, -9, NAN}), amps));
-  EXPECT_DOUBLE_EQ(amps.x, 0.5);
+  ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{0.5, -9, 0.25}), amps));
+  EXPECT_DOUBLE_EQ(amps.x, 0.111);                  // 0.5 * 2 / 9, to the mA: the vector scaled
   EXPECT_DOUBLE_EQ(amps.y, -polhem::kMaxCurrentA);  // capped
-  EXPECT_DOUBLE_EQ(amps.z, 0.0);                    // non-finite: no current
+  EXPECT_DOUBLE_EQ(amps.z, 0.056);                  // 0.25 * 2 / 9
+  ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{0.5, -1, NAN}), amps));
+  EXPECT_EQ(norm(amps), 0.0);                       // non-finite: no current on any motor
   EXPECT_FALSE(polhem::decode_currents(polhem::encode_calibrate(polhem::Config::kV1), amps));  // a command
 }
 
@@ -264,6 +268,19 @@ std::array<std::int16_t, 6> counts_seen(polhem::Config unit, polhem::Config host
 }
 }  // namespace
 
+namespace {
+// Calibrates `p` as a unit would be: it asks (info 1) and the protocol answers with the
+// calibration command; the unit's next report (info 0) acknowledges it.
+void command_calibration(PolhemProtocol& p) {
+  polhem::Input in;
+  in.info = 1;
+  DeviceReading r;
+  ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+  std::array<std::uint8_t, 64> buf{};
+  ASSERT_EQ(p.pending_command(buf), 15u);
+}
+}  // namespace
+
 TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
   const Vec3 poses[] = {Vec3{0, 0, 0}, Vec3{0.05, 0, 0}, Vec3{-0.05, 0.05, 0.05}, Vec3{0.05, -0.05, -0.05}};
   for (const polhem::Config host : kConfigs) {
@@ -274,6 +291,7 @@ TEST(Polhem, ProtocolFaultsAUnitOfTheOtherConfigurationAndSendsNoCurrent) {
     int caught = 0;
     for (const Vec3& q : poses) {
       PolhemProtocol p(host);
+      command_calibration(p);  // judged once calibrated
       polhem::Input in;
       in.encoder = counts_seen(unit, host, q);
       DeviceReading r;
@@ -339,4 +357,137 @@ TEST(Polhem, CapsCarryALockStepStaleTimeout) {
   }
   EXPECT_EQ(polhem::caps(polhem::Config::kV3).max_stiffness_n_per_m, 2000.0);  // hfab_math.h polhem_v3
   EXPECT_EQ(polhem::caps(polhem::Config::kV1).max_stiffness_n_per_m, 800.0);
+}
+
+// A force that needs more than the cap on one motor: the host scales the three currents as
+// one vector (the largest exactly at the cap), so the force the unit makes keeps the
+// demand's direction, only smaller. Clamping each motor alone would turn it (the motor at
+// the cap gives less than its share, the others their full share).
+namespace {
+Vec3 unit(const Vec3& v) { return v / norm(v); }
+}  // namespace
+
+TEST(Polhem, CurrentsOverTheCapAreScaledAsOneVectorKeepingTheForcesDirection) {
+  const double cap = polhem::kMaxCurrentA;
+  for (const polhem::Config c : kConfigs) {
+    const auto e = polhem::encoders_for(Vec3{0.01, -0.02, 0.015}, c);
+    const Vec3 dir = unit(Vec3{1.0, 0.3, -0.5});
+    const Vec3 per_n = polhem::motor_currents_a(dir, e, c);  // [A per N]
+    const double most = std::max({std::abs(per_n.x), std::abs(per_n.y), std::abs(per_n.z)});
+    const Vec3 f = dir * (1.3 * cap / most);  // its largest current is 1.3 x the cap
+    const Vec3 amps = polhem::motor_currents_a(f, e, c);
+    // The case that matters: one motor over the cap, another carrying current below it (a
+    // per-motor clamp then turns the force; checked so the test cannot pass vacuously).
+    const double a[3] = {amps.x, amps.y, amps.z};
+    int over = 0, under = 0;
+    for (double v : a) over += std::abs(v) > cap, under += std::abs(v) > 0.05 && std::abs(v) < cap;
+    ASSERT_EQ(over, 1) << polhem::config_name(c);
+    ASSERT_GE(under, 1) << polhem::config_name(c);
+    const Vec3 clamped{std::clamp(amps.x, -cap, cap), std::clamp(amps.y, -cap, cap), std::clamp(amps.z, -cap, cap)};
+    EXPECT_GT(norm(unit(polhem::force_from_currents(clamped, e, c)) - dir), 1e-3) << "a per-motor clamp would not turn it";
+
+    const Vec3 lim = polhem::limit_currents_a(amps);
+    const double l[3] = {lim.x, lim.y, lim.z};
+    EXPECT_EQ(std::max({std::abs(l[0]), std::abs(l[1]), std::abs(l[2])}), cap) << polhem::config_name(c);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(l[i], a[i] / 1.3, 1e-12) << polhem::config_name(c) << " motor " << i;  // proportional
+    const Vec3 made = polhem::force_from_currents(lim, e, c);
+    EXPECT_LT(norm(unit(made) - dir), 1e-9) << polhem::config_name(c) << ": the force turned";
+    EXPECT_NEAR(norm(made), norm(f) / 1.3, 1e-9);
+
+    // On the wire: the largest motor at exactly 2000 mA, the others the scaled currents to the mA.
+    Vec3 sent;
+    ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(amps), sent));
+    const double w[3] = {sent.x, sent.y, sent.z};
+    EXPECT_EQ(std::max({std::abs(w[0]), std::abs(w[1]), std::abs(w[2])}), cap);
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(w[i], l[i], 0.5e-3) << polhem::config_name(c) << " motor " << i << " on the wire";
+    EXPECT_LT(norm(unit(polhem::force_from_currents(sent, e, c)) - dir), 1e-3) << "the force sent turned (beyond mA rounding)";
+
+    // Under the cap: unchanged. Any non-finite component: all three zero.
+    EXPECT_EQ(norm(polhem::limit_currents_a(amps / 2.0) - amps / 2.0), 0.0);
+    for (int i = 0; i < 3; ++i) {
+      double bad[3] = {a[0] / 2, a[1] / 2, a[2] / 2};
+      bad[i] = i == 1 ? double(INFINITY) : double(NAN);
+      EXPECT_EQ(norm(polhem::limit_currents_a(Vec3{bad[0], bad[1], bad[2]})), 0.0) << "motor " << i;
+      ASSERT_TRUE(polhem::decode_currents(polhem::encode_currents(Vec3{bad[0], bad[1], bad[2]}), sent));
+      EXPECT_EQ(norm(sent), 0.0) << "motor " << i;
+    }
+  }
+}
+
+// The firmware's info is its switch's latched flag, clear at power-up, cleared again only by
+// the calibration command; its counters start at 0 wherever the handle is, and it drives any
+// current it is sent. So info 0 is no proof of calibration: the protocol sends no current
+// until it has itself answered an info 1 with the command and then seen info 0.
+namespace {
+/// The Polhem's handshake reads no feature report: a link that has none.
+class NoLink final : public ReportLink {
+ public:
+  std::string name() const override { return "none"; }
+  std::string open() override { return {}; }
+  void close() override {}
+  int read(std::span<std::uint8_t>, int) override { return 0; }
+  bool write(std::span<const std::uint8_t>) override { return false; }
+  int get_feature(std::uint8_t, std::span<std::uint8_t>) override { return -1; }
+};
+}  // namespace
+
+TEST(Polhem, ProtocolSendsNoCurrentUntilItsOwnCalibrationCommandIsAcknowledged) {
+  for (const polhem::Config c : kConfigs) {
+    PolhemProtocol p(c);
+    DeviceCaps caps;
+    NoLink link;
+    ASSERT_EQ(p.handshake(link, caps), "");
+    std::array<std::uint8_t, 64> buf{};
+    auto sent_amps = [&](const Vec3& f) {
+      Vec3 amps{NAN, NAN, NAN};
+      const std::size_t n = p.encode_output(f, true, 0, buf);
+      EXPECT_TRUE(polhem::decode_currents(std::span(buf.data() + 1, n - 1), amps)) << "not a current command";
+      return amps;
+    };
+    polhem::Input in;
+    in.encoder = polhem::encoders_for(Vec3{0.01, 0, -0.01}, c);  // counts a calibrated unit could give
+    DeviceReading r;
+    // Power-up: info 0, plausible counts. Faulted, force off, zero current, and it says why.
+    for (int i = 0; i < 3; ++i) {
+      ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+      EXPECT_EQ(r.status, DeviceStatus::kFault) << polhem::config_name(c);
+      EXPECT_TRUE(r.force_off);
+      EXPECT_EQ(p.fault(), PolhemProtocol::kNotCalibrated);
+      EXPECT_EQ(p.pending_command(buf), 0u) << "a command sent unasked sets the counters wherever the handle is";
+      EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current before calibration";
+    }
+    // The switch pressed: it asks. Still no current while it asks (its counts are not set).
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current while it asks";
+    // info 0 without our command (none sent yet): nothing proves the counters were set.
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    // It asks, we answer, it stops asking: calibrated, and the force flows.
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    ASSERT_EQ(p.pending_command(buf), 15u);
+    EXPECT_EQ(buf[1 + 6], 1);  // command 1
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kOk);
+    EXPECT_FALSE(r.force_off);
+    EXPECT_EQ(p.fault(), "");
+    EXPECT_GT(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    // Docked again: it asks; the old counts stay valid until the command runs, so the force stays.
+    in.info = 1;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kOk);
+    EXPECT_GT(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
+    ASSERT_EQ(p.pending_command(buf), 15u);
+    // Opened again (a reconnect: it may have been power-cycled): uncalibrated until asked and answered.
+    ASSERT_EQ(p.handshake(link, caps), "");
+    in.info = 0;
+    ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
+    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current after a reopen, before calibration";
+  }
 }

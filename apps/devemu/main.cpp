@@ -68,6 +68,11 @@ int main(int argc, char** argv) {
   cli.add_option("--polhem-lose-calibrations", c.polhem_lose_calibrations,
                  "With --polhem: the first N calibration commands are lost (the firmware keeps only its last queued report)")
       ->check(CLI::NonNegativeNumber);
+  cli.add_flag("--polhem-power-up", c.polhem_power_up,
+               "With --polhem: start as the firmware powers up (info 0, counters 0 where the handle starts); "
+               "it asks for calibration only once the switch is pressed (--polhem-switch-at)");
+  cli.add_option("--polhem-switch-at", c.polhem_switch_at_s,
+                 "With --polhem-power-up: the handle is pressed into the calibration switch at this time [s since start]");
   bool fifo = true;
   cli.add_flag("--fifo,!--no-fifo", fifo, "Run the device clock under SCHED_FIFO priority 75 when allowed (default on)");
   auto* faults = cli.add_option_group("Faults", "Probabilities are per input report; times are [s] since start");
@@ -123,7 +128,8 @@ int main(int argc, char** argv) {
               << ", max |F| " << s.max_force_n << " N\n";
     if (polhem)
       std::cout << "devemu   Polhem: " << s.calibrations << " calibration commands (" << s.calibrations_lost
-                << " lost), " << (s.calibrated_ns ? "calibrated" : "never calibrated") << "\n";
+                << " lost), " << (s.calibrated_ns ? "calibrated" : "never calibrated") << ", " << s.switch_presses
+                << " switch presses, " << s.currents_while_uncalibrated << " current commands while uncalibrated\n";
     if (!s.latency_us.empty())
       std::cout << "devemu   report-to-force [us]: p50 " << percentile(s.latency_us, 0.5) << ", p99 "
                 << percentile(s.latency_us, 0.99) << ", max " << percentile(s.latency_us, 1.0) << "\n";

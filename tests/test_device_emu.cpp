@@ -152,6 +152,18 @@ struct Rig {
     emu = std::make_unique<DeviceEmulator>(cfg);
     emu->listen();
     std::thread emu_thread([this] { stats = emu->run(); });
+    // Stopped and joined on every way out of run(): a throw before the join below (the
+    // device's open() failing, the servo not starting) would destroy a joinable std::thread,
+    // and std::terminate would end the whole test binary instead of failing this one test.
+    struct JoinEmu {
+      DeviceEmulator& emu;
+      std::thread& thread;
+      ~JoinEmu() {
+        if (!thread.joinable()) return;  // joined below: the normal way out
+        emu.stop();
+        thread.join();
+      }
+    } join_emu{*emu, emu_thread};
     std::unique_ptr<DeviceProtocol> protocol;
     if (cfg.polhem) protocol = std::make_unique<PolhemProtocol>(host_config);
     else protocol = std::make_unique<V1Protocol>();

@@ -147,6 +147,37 @@ TEST(HriEdit, CarveUnderTheVhipEasesTheForceDownToTheNewDepth) {
   for (int k = edit + kEase - 1; k < ticks; ++k) EXPECT_NEAR(norm(t[k].force_n), kK * 0.0015, 1e-5) << k;
 }
 
+// The ease cannot push |F| past the limit: the floor is carved 1 mm (16 -> 15 mm) under a
+// HIP held 3.5 mm deep (K * 3.5 mm = 2.8 N), so the ease's offset is K * 1 mm = 0.8 N along
+// +z; from the next tick the user presses on, 0.5 mm per tick for 4 ticks (HIP 12.5 ->
+// 10.5 mm). On the first pressed tick the target (K * 3 mm = 2.4 N plus the press's damping)
+// is still under the limit, but target + what is left of the offset (8/10 of 0.8 N) is not;
+// on the later ticks the target is at the limit itself and the offset comes on top. The
+// ease's own saturation must hold |F| at the limit on every one of those ticks (saturating
+// at twice the limit instead sent up to 3.78 N).
+TEST(HriEdit, TheEasedForceNeverExceedsTheLimitWhenTheUserPressesOn) {
+  const SampleField before = floor_at(0.016, 1), after = floor_at(0.015, 2);
+  const int edit = 152, ticks = 260;
+  const HipAt hip = [edit](int k) {
+    const double held = std::max(0.0125, 0.018 - 5e-5 * k);  // 3.5 mm into the old floor by tick 110
+    return Vec3{kX, kY, held - 5e-4 * std::clamp(k - edit, 0, 4)};
+  };
+  HriRenderer r(params());
+  const auto t = drive(r, ticks, switch_at(before, after, edit), hip);
+
+  EXPECT_NEAR(norm(t[edit - 1].force_n), kK * 0.0035, 1e-5);  // 2.8 N before the edit
+  // The edit tick, HIP still: the target K * 2.5 mm = 2.0 N plus 9/10 of the 0.8 N offset.
+  EXPECT_NEAR(norm(t[edit].force_n), kK * 0.0025 + 0.9 * kK * 0.001, 1e-5);
+  EXPECT_FALSE(t[edit].saturated);
+  // Pressed during the ease: target + offset over the limit, sent at the limit along +z.
+  for (int k = edit + 1; k < edit + kEase; ++k) {
+    EXPECT_TRUE(t[k].saturated) << "tick " << k;
+    EXPECT_NEAR(norm(t[k].force_n), kLimit, 1e-9) << "tick " << k;
+    EXPECT_NEAR(t[k].force_n.z, kLimit, 1e-9) << "tick " << k;  // along the floor's normal
+  }
+  for (int k = 0; k < ticks; ++k) EXPECT_LE(norm(t[k].force_n), kLimit * (1 + 1e-12)) << "tick " << k;
+}
+
 // Carve deeper than the HIP: the floor goes from z = 16 mm to 12 mm under a HIP held at
 // 14 mm (1.6 N). The HIP is now in the air: |F| eases to 0 over the edit period (along +z,
 // never a pull; the proxy shown on the receding floor, in contact), then stays 0.

@@ -1,9 +1,11 @@
 // live_py.cpp - isotouch.LiveSession: a scene's live session (session::LiveSession) on the
 // simulated, null, playback, emulated or USB device, driven from Python.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <sstream>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <thread>
 
@@ -47,17 +49,38 @@ class Live {
     live_ = std::make_unique<session::LiveSession>(*edits_, buffer_, *hri_, *device_.io,
                                                    config(record, realtime, flush_interval_s));
   }
-  ~Live() {
-    try {
-      stop();
-    } catch (const std::exception&) {  // a recording that could not be completed: said by stop() if called
-    }
-  }
+  /// Reached through DeleteLive only, after stop_quietly(), and never for an abandoned servo
+  /// thread: the members' destructors free the renderer, the snapshots and the device.
+  ~Live() { stop_quietly(); }
 
   std::string start() { return live_->start(); }
+  /// @throws session::ServoAbandoned (isotouch.ServoAbandoned) if the servo thread was left
+  ///         inside the renderer: remembered, so this object is then never freed (DeleteLive).
   void stop() {
-    if (live_) live_->stop();
+    if (!live_) return;
+    try {
+      live_->stop();
+    } catch (const session::ServoAbandoned&) {
+      abandoned_.store(true);
+      throw;
+    }
   }
+  /// stop() for a destructor: an abandoned servo thread is remembered (abandoned()) and
+  /// said on stderr, any other error (a recording that could not be completed) dropped: it
+  /// cannot be raised from here, and stop() called explicitly raises it.
+  void stop_quietly() noexcept {
+    try {
+      stop();
+    } catch (const session::ServoAbandoned& e) {
+      std::fprintf(stderr,
+                   "isotouch.LiveSession: %s; the session's renderer, snapshots and device are kept (never freed) "
+                   "while that thread may still read them\n",
+                   e.what());
+    } catch (...) {
+    }
+  }
+  /// A stop() left the servo thread stuck in the renderer (session::ServoAbandoned).
+  bool abandoned() const { return abandoned_.load(); }
   void pause(bool p) { live_->pause(p); }
   double elapsed_s() const { return live_->elapsed_s(); }
   double duration_s() const { return setup_.script.duration_s; }
@@ -115,6 +138,21 @@ class Live {
   std::unique_ptr<servo::HriRenderer> hri_;
   run::HapticDevice device_;
   std::unique_ptr<session::LiveSession> live_;
+  std::atomic<bool> abandoned_{false};  // set by stop() (GIL released), read by DeleteLive
+};
+
+/// How the Python object frees its Live: stopped first; if that stop (or an earlier one)
+/// abandoned the servo thread inside the renderer, the Live is leaked on purpose, whole: the
+/// thread may still read the renderer (hri_), the snapshots it holds (buffer_, the edit
+/// session's) and the device, and freeing them would be a use after free should the renderer
+/// ever return (ServoThread::stop). The C++ callers end the process instead
+/// (session::stop_or_end_process); a Python interpreter is not the binding's to end.
+struct DeleteLive {
+  void operator()(Live* l) const noexcept {
+    l->stop_quietly();
+    if (l->abandoned()) return;  // leaked: see above
+    delete l;
+  }
 };
 
 py::dict observed(const session::Observed& o) {
@@ -163,7 +201,7 @@ void wait_session(Live& l, double seconds) {
 
 void bind_live(py::module_& m) {
   using K = session::EditEvent::Kind;
-  py::class_<Live>(m, "LiveSession", R"(A scene live: the servo thread at the scene's rate on a device,
+  py::class_<Live, std::unique_ptr<Live, DeleteLive>>(m, "LiveSession", R"(A scene live: the servo thread at the scene's rate on a device,
 an edit thread applying brushes, a streaming recorder (session/live_session.h).
 
 LiveSession(scene, haptic='sim', record='', device='cpu', realtime=False, flush_interval_s=0.1):
@@ -174,7 +212,9 @@ manager: leaving it stops the session (servo first, its last force an exact zero
            py::arg("scene"), py::arg("haptic") = "sim", py::arg("record") = "", py::arg("device") = "cpu",
            py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1, py::call_guard<py::gil_scoped_release>())
       .def("start", &Live::start, "start the recorder, edit and servo threads; returns what the system refused")
-      .def("stop", &Live::stop, py::call_guard<py::gil_scoped_release>(), "stop (idempotent)")
+      .def("stop", &Live::stop, py::call_guard<py::gil_scoped_release>(),
+           "stop (idempotent); raises isotouch.ServoAbandoned if the servo thread was left stuck in the renderer "
+           "(force off, recording completed; the session is then never freed)")
       .def("pause", &Live::pause, py::arg("paused") = true, "zero force every tick while paused")
       .def("wait", &wait_session, py::arg("seconds"), "sleep, GIL released; Ctrl-C stops the session and raises")
       .def_property_readonly("elapsed_s", &Live::elapsed_s, "[s] since start")

@@ -9,6 +9,7 @@
 #include "isotouch/io/record.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/python/common.h"
+#include "isotouch/session/live_session.h"
 #include "isotouch/version.h"
 
 namespace isotouch::python {
@@ -81,6 +82,8 @@ PYBIND11_MODULE(_isotouch, m) {
   static py::exception<engine::VolumeError> volume_error(m, "VolumeError", error.ptr());
   static py::exception<io::SceneError> scene_error(m, "SceneError", error.ptr());
   static py::exception<io::RecordingError> recording_error(m, "RecordingError", error.ptr());
+  // LiveSession.stop(): the servo thread was left stuck in the renderer (force off).
+  static py::exception<session::ServoAbandoned> servo_abandoned(m, "ServoAbandoned", error.ptr());
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
@@ -90,6 +93,8 @@ PYBIND11_MODULE(_isotouch, m) {
       scene_error(e.what());
     } catch (const io::RecordingError& e) {
       recording_error(e.what());
+    } catch (const session::ServoAbandoned& e) {
+      servo_abandoned(e.what());
     }
   });
   python::bind_volume(m);

@@ -1,5 +1,6 @@
 """The isotouch Python module against what lies outside it: the files' headers, the command
 line's own outputs and messages, the recordings the CLI writes, a second Python thread."""
+import gc
 import json
 import os
 import re
@@ -331,6 +332,41 @@ def test_live_session_on_the_device_emulator(cli, root, tmp_path):
     assert stats["ticks"] > 1000 and stats["faults"] == 0
     assert received > 1000 and refused == 0
     assert 0.5 < fmax <= 3.3, f"max |F| the emulator received: {fmax} N"
+
+
+def test_a_live_session_dropped_while_running_is_stopped_and_freed(root, tmp_path):
+    """Neither stop() nor a with block: dropping the object stops the session (the recording
+    completed) and, no servo thread having been abandoned in the renderer, frees it: its device
+    closes the link, so the emulator (one host at a time) serves the next session. A session
+    whose servo thread was abandoned is never freed instead (stop() raises ServoAbandoned);
+    no renderer reachable from Python stalls, so that case is not run here."""
+    emu = os.environ.get("ISOTOUCH_DEVEMU")
+    assert emu, "ISOTOUCH_DEVEMU is not set (ctest sets it)"
+    scene, sock, rec = str(root / "scenes/sphere.json"), str(tmp_path / "dev.sock"), str(tmp_path / "dropped.rec")
+    dev = subprocess.Popen([emu, "--socket", sock, "--seconds", "30"], stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+    try:
+        for _ in range(200):
+            if os.path.exists(sock):
+                break
+            time.sleep(0.05)
+        first = isotouch.LiveSession(scene, haptic="emu:" + sock, record=rec)
+        first.start()
+        first.wait(0.3)
+        del first
+        gc.collect()
+        r = isotouch.load_recording(rec)
+        assert r["complete"] and len(r["ticks"]["t"]) > 100
+        with isotouch.LiveSession(scene, haptic="emu:" + sock) as second:
+            second.wait(0.3)
+        stats = second.stats()
+    finally:
+        dev.send_signal(signal.SIGTERM)
+        log = dev.communicate(timeout=60)[0]
+    assert stats["ticks"] > 100 and stats["faults"] == 0
+    m = re.search(r"(\d+) connections", log)
+    assert m and int(m.group(1)) == 2, log
+    assert issubclass(isotouch.ServoAbandoned, isotouch.Error)
 
 
 def test_ctrl_c_stops_a_live_session_cleanly(root, tmp_path):

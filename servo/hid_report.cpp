@@ -37,6 +37,14 @@ bool fixed(double v, double unit, std::int32_t& out) {
   out = std::int32_t(q);
   return true;
 }
+/// A force component in `unit`, rounded toward zero: the device never gets more than was
+/// asked (rounded to nearest, each component could add half a unit: |F| past the limit).
+bool fixed_force(double v, double unit, std::int32_t& out) {
+  const double q = std::trunc(v / unit);
+  if (!(q >= -2147483647.0 && q <= 2147483647.0)) return false;
+  out = std::int32_t(q);
+  return true;
+}
 std::int32_t fixed_or_zero(double v, double unit) {
   std::int32_t q = 0;
   return fixed(v, unit, q) ? q : 0;
@@ -107,8 +115,8 @@ Decoded decode(std::span<const std::uint8_t> b, InputReport& out) {
 std::array<std::uint8_t, kOutputSize> encode(const OutputReport& r) {
   std::array<std::uint8_t, kOutputSize> b{};
   std::int32_t f[3];
-  const bool ok = fixed(r.force_n.x, kForceUnitN, f[0]) && fixed(r.force_n.y, kForceUnitN, f[1]) &&
-                  fixed(r.force_n.z, kForceUnitN, f[2]);
+  const bool ok = fixed_force(r.force_n.x, kForceUnitN, f[0]) && fixed_force(r.force_n.y, kForceUnitN, f[1]) &&
+                  fixed_force(r.force_n.z, kForceUnitN, f[2]);
   if (!ok) f[0] = f[1] = f[2] = 0;
   Writer w{b.data()};
   w.u8(kOutputId), w.u8(kVersion), w.u16(ok && r.enable ? 1 : 0), w.u32(r.sequence), w.u32(r.answers);

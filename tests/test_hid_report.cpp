@@ -3,6 +3,8 @@
 // Polhem's 14-byte reports and kinematics (position, Jacobian transpose by virtual work).
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -44,8 +46,8 @@ TEST(HidReport, OutputRoundTripsAndNonFiniteForceIsADisabledZero) {
   EXPECT_TRUE(back.enable);
   EXPECT_EQ(back.sequence, 7u);
   EXPECT_EQ(back.answers, 41u);
-  EXPECT_NEAR(back.force_n.x, 1.234, 0.5e-3);
-  EXPECT_NEAR(back.force_n.y, -3.3, 0.5e-3);
+  EXPECT_NEAR(back.force_n.x, 1.234, 1e-3);  // rounded toward zero: within one unit
+  EXPECT_NEAR(back.force_n.y, -3.3, 1e-3);
   EXPECT_EQ(back.force_n.z, 0.0);
   for (double bad : {double(NAN), double(INFINITY), 1e12}) {
     o.force_n = Vec3{1, bad, 1};
@@ -54,6 +56,24 @@ TEST(HidReport, OutputRoundTripsAndNonFiniteForceIsADisabledZero) {
     EXPECT_EQ(back.force_n.x, 0.0);
     EXPECT_EQ(back.force_n.y, 0.0);
   }
+}
+
+// A force at the limit in any direction reaches the device no larger than it was (each
+// component rounded toward zero; rounded to nearest, |F| could pass the limit by 0.87 mN).
+TEST(HidReport, AnEncodedForceIsNeverLargerThanTheForceAsked) {
+  OutputReport o, back;
+  o.enable = true;
+  double worst = 0;
+  for (int i = 0; i < 2000; ++i) {
+    const double th = 0.0137 * i, ph = 0.731 * i;
+    const Vec3 u{std::sin(th) * std::cos(ph), std::sin(th) * std::sin(ph), std::cos(th)};
+    o.force_n = u * 3.3;
+    ASSERT_TRUE(decode(encode(o), back));
+    worst = std::max(worst, norm(back.force_n) - norm(o.force_n));
+    EXPECT_LE(norm(back.force_n), norm(o.force_n)) << "direction " << i;
+    EXPECT_LT(norm(back.force_n - o.force_n), 1.8e-3) << "direction " << i;  // within one unit per axis
+  }
+  std::printf("largest |F| received - |F| asked: %.3g N\n", worst);
 }
 
 TEST(HidReport, CapabilitiesRoundTrip) {

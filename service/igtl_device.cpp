@@ -6,6 +6,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "isotouch/servo/cpu_placement.h"
 #include "isotouch/sim/stability.h"
 
 namespace isotouch::service {
@@ -146,6 +147,7 @@ void IgtlDevice::send_force(const core::Vec3& f) {
 /// newest force; a stall sends a zero at once; force off gives zero; a stale stream gets one
 /// zero.
 void IgtlDevice::write_loop() {
+  if (o_.fifo_priority > 0) servo::make_thread_realtime("igtl writer", true, o_.fifo_priority, false, -1);
   std::uint64_t answered = 0;
   bool zero_sent = true;
   const std::int64_t stale_ns = std::int64_t(3e9 / rate_hz_);
@@ -173,8 +175,11 @@ void IgtlDevice::write_loop() {
   send_force({0, 0, 0});
 }
 
-std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description) {
-  auto d = std::make_unique<IgtlDevice>(parse_igtl_spec(arg));
+std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description,
+                                             int fifo_priority) {
+  IgtlDeviceOptions o = parse_igtl_spec(arg);
+  o.fifo_priority = fifo_priority;
+  auto d = std::make_unique<IgtlDevice>(o);
   const double rate = d->measured_rate_hz();
   const double loop_hz = std::min(rate, loop.servo_rate_hz);
   const double bound = sim::colgate_k_max(loop.handle_damping_n_s_per_m, loop.servo_damping_n_s_per_m, 1.0 / loop_hz);

@@ -43,6 +43,10 @@ struct IgtlDeviceOptions {
   double measure_s = 1.0;                   ///< how long opening listens to measure the stream's rate [s]
   int connect_timeout_ms = 3000;
   int receive_timeout_ms = 2000;            ///< longest silence inside a message [ms]
+  /// > 0: the writer thread asks for SCHED_FIFO at this priority (below the servo's 80: it
+  /// sends the servo's forces; starved, it would send an old force late and the new one
+  /// right after, a step at the peer). Refused: the default scheduler.
+  int fifo_priority = 0;
 };
 
 /// "HOST:PORT[:STREAM]" -> options. @throws std::invalid_argument naming the part and value.
@@ -112,6 +116,7 @@ class IgtlDevice final : public servo::HapticDeviceIO {
 /// measured rate and the stiffness bound it implies. @throws std::invalid_argument on a bad
 /// spec; std::runtime_error if it cannot be opened, or if loop.stiffness_n_per_m is above
 /// the bound and loop.allow_unstable_stiffness is not set (the message says how to allow it).
-std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description);
+std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description,
+                                             int fifo_priority = 0);
 
 }  // namespace isotouch::service

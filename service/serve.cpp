@@ -24,6 +24,7 @@
 #include "isotouch/service/device_echo.h"
 #include "isotouch/service/edit_mirror.h"
 #include "isotouch/core/exit_codes.h"
+#include "isotouch/servo/exit_zero.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
@@ -539,6 +540,12 @@ void Server::reply_loop() {
       log_.line("reply    " + note);
   std::uint64_t answered = 0;
   device_.restart_force(TransformDevice::now_ns());
+  // The stream client's zero however serve ends (servo/exit_zero.h): registered for the
+  // connection the replies go to, kept alive (its socket open) while registered.
+  std::shared_ptr<Connection> fenced;
+  std::unique_ptr<servo::ExitZero> exit_zero;
+  const double zero3[3] = {0, 0, 0};
+  const std::vector<std::uint8_t> zero_msg = pack_translation("Force", zero3);
   while (!stop_) {
     std::this_thread::sleep_for(std::chrono::microseconds(100));
     const TransformDevice::PoseId p = device_.newest_pose();
@@ -556,10 +563,24 @@ void Server::reply_loop() {
       std::lock_guard<std::mutex> lock(stream_mu_);
       to = stream_from_;
     }
-    if (to && to->send_droppable(pack_translation("Force", t, p.stamp))) {
-      replies_.fetch_add(1);
-      stall_replies_.fetch_add(!rendered);
+    if (to != fenced) {
+      exit_zero.reset();
+      fenced = to;
+      if (to) exit_zero = std::make_unique<servo::ExitZero>(to->fd(), zero_msg.data(), zero_msg.size());
     }
+    const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
+    if (to && exit_zero->begin_send()) {  // false once the process's last zero went out
+      if (to->send_droppable(msg)) {
+        replies_.fetch_add(1);
+        stall_replies_.fetch_add(!rendered);
+      }
+      exit_zero->end_send();
+    }
+  }
+  // The last act: the stream client (PLUS holds the last Force it got) is left with a zero.
+  if (fenced && exit_zero->begin_send()) {
+    fenced->send(zero_msg);
+    exit_zero->end_send();
   }
 }
 
@@ -570,7 +591,7 @@ void Server::display_loop() {
   while (!stop_) {
     next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
     std::this_thread::sleep_until(next);
-    std::vector<std::uint8_t> out;
+    std::vector<std::uint8_t> out, points;  // HIP, Proxy and Force; HIP and Proxy
     {
       std::lock_guard<std::mutex> lock(session_mu_);
       if (!session_) continue;
@@ -581,14 +602,24 @@ void Server::display_loop() {
       for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
         const double t[3] = {v.x, v.y, v.z};
         const auto b = pack_translation(name, t);
+        if (std::string(name) == "Force") points = out;
         out.insert(out.end(), b.begin(), b.end());
       }
+    }
+    // With --reply-force the stream's client applies every Force it gets (PLUS): it gets its
+    // forces from the reply thread alone (the stall rule, the last zero), not this display copy.
+    std::shared_ptr<Connection> stream;
+    if (o_.reply_force) {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      stream = stream_from_;
     }
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (Client& c : clients_) {
       if (c.done || !c.conn->alive()) continue;
-      if (c.conn->send_droppable(out)) n_.sent.fetch_add(3);
-      else n_.dropped_sends.fetch_add(3);
+      const bool to_stream = stream && c.conn == stream;
+      const long n = to_stream ? 2 : 3;
+      if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
+      else n_.dropped_sends.fetch_add(n);
     }
   }
 }

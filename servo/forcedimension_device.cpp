@@ -116,7 +116,7 @@ void ForceDimensionDevice::open() {
   // and the stall rule acts in its periods (SdkDevice::enable_force).
   caps_.output_rate_hz = rate_hz_;
   device_period_s_ = 1.0 / rate_hz_;
-  set_watchdog();
+  set_watchdog(true);
   const std::string watchdog = caps_.watchdog_s > 0
                                    ? "firmware watchdog " + std::to_string(int(std::lround(caps_.watchdog_s * 1e3))) + " ms"
                                    : "no firmware watchdog (the SDK has no dhdSetWatchdog: SDK 3.3.2 or later sets one)";
@@ -130,13 +130,13 @@ void ForceDimensionDevice::open() {
 /// The firmware's own watchdog (dhdSetWatchdog, in 125 us units): forces off when no force
 /// command came for max(10 device periods, 10 ms), so a killed or hung isotouch leaves no force
 /// on. The device thread commands a force every period. CHAI3D enables expert mode first.
-void ForceDimensionDevice::set_watchdog() {
+void ForceDimensionDevice::set_watchdog(bool record) {
   if (!api_.dhdSetWatchdog) return;  // an SDK before 3.3.2: said in the description
   const double want_s = std::max(10.0 / rate_hz_, 0.010);
   const double units = std::clamp(std::ceil(want_s / (dhd::kWatchdogUnitUs * 1e-6)), 1.0, double(dhd::kWatchdogMax));
   if (api_.dhdEnableExpertMode) api_.dhdEnableExpertMode();
   if (api_.dhdSetWatchdog((unsigned char)units, id_) < 0) return note_error("dhdSetWatchdog");
-  caps_.watchdog_s = units * dhd::kWatchdogUnitUs * 1e-6;
+  if (record) caps_.watchdog_s = units * dhd::kWatchdogUnitUs * 1e-6;
 }
 
 std::string ForceDimensionDevice::realtime_note() const {
@@ -150,11 +150,27 @@ void ForceDimensionDevice::close() {
   thread_.join();
 }
 
+/// Device thread, while the device is gone: every 100 ms, close its old ID and open the index
+/// again (an unplugged device's ID stays invalid after it is plugged back); the watchdog is set
+/// again on the new ID. Force output starts off (force_on false): the servo ramps in.
+void ForceDimensionDevice::reopen(std::int64_t now, bool& force_on) {
+  if (now - last_reopen_ns_ < 100'000'000) return;
+  last_reopen_ns_ = now;
+  api_.dhdClose(id_);
+  const int id = api_.dhdOpenID(char(index_));
+  if (id < 0) return;  // not back yet
+  id_ = char(id);
+  force_on = false;
+  set_watchdog(false);  // caps_ keeps what open() set (other threads read it)
+  reopens_.fetch_add(1);
+}
+
 void ForceDimensionDevice::period(std::int64_t now, bool& force_on) {
   double x = 0, y = 0, z = 0;
   DeviceReading r;
+  if (down_) reopen(now, force_on);
   if (api_.dhdGetPosition(&x, &y, &z, id_) < 0) {
-    if (!down_) note_error("dhdGetPosition");
+    if (!down_) note_error("dhdGetPosition"), last_reopen_ns_ = now;
     down_ = true;
     r.status = DeviceStatus::kDisconnected;  // the servo holds; we send zero below
     r.position_m = last_position_;

@@ -66,6 +66,8 @@ class ForceDimensionDevice final : public SdkDevice {
   double watchdog_s() const { return caps_.watchdog_s; }
   /// "" or why the device thread did not get SCHED_FIFO (valid after open()).
   std::string realtime_note() const;
+  /// Times the device was opened again after it was gone (unplugged, powered off).
+  long reopens() const { return reopens_.load(); }
   std::string description() const { return description_; }
   std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
   long errors() const { return errors_.load(); }
@@ -76,7 +78,8 @@ class ForceDimensionDevice final : public SdkDevice {
   void loop();
   void period(std::int64_t now, bool& force_on);
   void note_error(const char* call);
-  void set_watchdog();
+  void set_watchdog(bool record);
+  void reopen(std::int64_t now, bool& force_on);
 
   int index_;
   double rate_hz_;
@@ -85,12 +88,13 @@ class ForceDimensionDevice final : public SdkDevice {
   std::string description_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
-  std::atomic<long> errors_{0}, periods_{0};
+  std::atomic<long> errors_{0}, periods_{0}, reopens_{0};
   mutable std::mutex note_mu_;
   std::string last_error_;  // note_mu_
   std::string realtime_note_;  // note_mu_
   Vec3 last_position_;  // device thread
   bool down_ = false;   // device thread: the last read failed
+  std::int64_t last_reopen_ns_ = 0;  // device thread: the last attempt to open the device again
 };
 
 }  // namespace isotouch::servo

@@ -335,9 +335,13 @@ void ServoThread::loop(Handoff& h) {
         }
         seen_stalls_ = stalls;
         double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
-        if (ramp_start < 0) ramp = 0;
         std::uint8_t gated = 0;
-        rec.force_sent_n = gate_.step(rec.out.force_n * ramp, gate_dt, gated);
+        if (ramp_start < 0) {  // the device took the force off: an exact zero, the gate rises from it
+          rec.force_sent_n = {};
+          gate_.zero(gate_dt);
+        } else {
+          rec.force_sent_n = gate_.step(rec.out.force_n * ramp, gate_dt, gated);
+        }
         if (gated & kGatePeak) clamped_.fetch_add(1, std::memory_order_relaxed);
         if (gated & kGateRate) rate_limited_.fetch_add(1, std::memory_order_relaxed);
         if (gated & kGateContinuous) continuous_limited_.fetch_add(1, std::memory_order_relaxed);

@@ -72,6 +72,7 @@ m gate-peak-at-2x           $G 'if (m > lim_.peak_n) f = f * (lim_.peak_n / m), 
 m gate-rate-off             $G 'if (c > allowed) f = last_ + change * (allowed / c), flags |= kGateRate;' '' \
   $T 'ServoSafety.AStepDemand*'
 m gate-nonfinite-zero       $G 'if (!all_finite(f)) f = {}, flags |= kGateNonFinite;' '' $T 'ServoSafety.ANonFinite*'
+m backend-step-every-kind   $G 'if (c > allowed) f = last_ + change * (allowed / c), flags |= kGateRate;' '' test_backend_faults '*_Step'
 m gate-continuous-off       $G 'if (const double cap = continuous_cap(dt_s); m > cap) f = f * (cap / m), flags |= kGateContinuous;' '' \
   test_force_gate 'ForceGate.*'
 m gate-scene-limit          $G 'l.peak_n = std::min(limit_or_inf(scene_limit_n), limit_or_inf(caps.max_force_n));' \
@@ -92,6 +93,7 @@ m stall-half-period         $R 'std::max(stall_s - p / 2, p)' 'std::max(stall_s,
 m writer-stall-counted      $R 'if (on && was_on_ && stalled) {' 'if (false) {' test_report_device 'ReportDevice.AServoThatStops*'
 m writer-stall-on-the-wire  $R 'if (on && was_on_ && stalled) {' 'if (false) {' \
   test_device_emu 'DeviceEmu.AStalledServo*:DeviceEmu.ARendererThatNeverReturns*'
+m backend-stall-every-kind  $R 'if (on && was_on_ && stalled) {' 'if (false) {' test_backend_faults '*_Stall'
 m sdk-nonfinite-backstop    $R 'Vec3 f = ok ? force_n : Vec3{};' 'Vec3 f = force_n;' test_sdk_devices 'OpenHaptics.ANonFinite*'
 m emu-watchdog              $E 'enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;' '' \
   test_device_emu 'DeviceEmu.AFrozenWriterTripsTheDevicesWatchdog'
@@ -107,6 +109,20 @@ m hd-calibration-update     $OH 'api_.hdUpdateCalibration(cal_style_);' '' test_
 m hd-continuous-force       $OH '    c.max_continuous_force_n = v;' '' test_sdk_devices 'OpenHaptics.ContinuousForce*'
 m fd-watchdog               $FD 'if (api_.dhdSetWatchdog((unsigned char)units, id_) < 0) return note_error("dhdSetWatchdog");' \
                                'return;' test_sdk_devices 'ForceDimension.OpenSets*'
+
+m fd-reopen                 $FD '  if (down_) reopen(now, force_on);' '' test_sdk_devices 'ForceDimension.Vanished*'
+
+# What the report devices put on the wire: forces rounded toward zero (v1), the Polhem's
+# currents scaled as one vector and none before isotouch's own calibration is acknowledged.
+HR=servo/hid_report.cpp DP=servo/device_protocols.cpp
+m v1-force-toward-zero      $HR 'const double q = std::trunc(v / unit);' 'const double q = std::round(v / unit);' \
+  test_hid_report 'HidReport.AnEncoded*'
+m polhem-scale-vector       $HR '  for (double& v : a) v *= s;' '' test_hid_report 'Polhem.CurrentsOverTheCap*'
+m polhem-calibration-gate   $DP 'const bool on = enable && !faulted_.load() && calibrated_.load();' \
+                               'const bool on = enable && !faulted_.load();' test_hid_report 'Polhem.ProtocolSendsNoCurrent*'
+m polhem-own-command        $DP 'if (in.info == 0 && commanded_) calibrated_.store(true), commanded_ = false;' \
+                               'if (in.info == 0) calibrated_.store(true), commanded_ = false;' \
+  test_device_emu 'DeviceEmuPolhem.FromPowerUp*'
 
 # The OpenIGTLink link: the zero at a stall and however the process ends (what the peer got).
 IG=service/igtl_device.cpp X=servo/exit_zero.cpp
@@ -139,6 +155,9 @@ m hri-speed-quick-at-2x     $H 'if (dot(moved, moved) > max_move * max_move) ret
                                'if (dot(moved, moved) > 4 * max_move * max_move) return tick_robust_full(' $T "$F"
 m core-saturate-at-2x       core/vec3.h 'if (!(m > limit)) return false;' 'if (!(m > 2 * limit)) return false;' $T "$F"
 m hri-edit-ease-off         $H 'if (edited && !out.fault) {' 'if (false) {' test_hri_edit 'HriEdit.*'
+m hri-edit-resaturate       $H $'if (sent > params_.force_limit_n) {\n    out.saturated = saturate(force, params_.force_limit_n);' \
+                               $'if (sent > params_.force_limit_n) {\n    out.saturated = saturate(force, 2 * params_.force_limit_n);' \
+                               test_hri_edit 'HriEdit.*'
 m hri-edit-ease-half-period $H 'const Vec3 offset = edit_ease_from_ * (edit_ease_left_s_ / params_.edit_period_s);' \
                                'const Vec3 offset = edit_ease_from_ * std::max(0.0, 2 * edit_ease_left_s_ / params_.edit_period_s - 1);' \
                                test_hri_edit 'HriEdit.*'

@@ -316,6 +316,7 @@ struct DhdControls : DoubleLog {
   long (*calls_on)(unsigned long);
   int (*force_on)();
   int (*watchdog)();
+  long (*opens)();
   DhdControls() {
     void* h = dlopen(DHD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
     if (!h) throw std::runtime_error(dlerror());
@@ -326,6 +327,7 @@ struct DhdControls : DoubleLog {
     calls_on = reinterpret_cast<long (*)(unsigned long)>(dlsym(h, "dhdDoubleCallsOn"));
     force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
     watchdog = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleWatchdog"));
+    opens = reinterpret_cast<long (*)()>(dlsym(h, "dhdDoubleOpens"));
   }
 };
 
@@ -403,6 +405,11 @@ TEST_F(ForceDimension, OpenSetsTheFirmwareWatchdog) {
 
 TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
   servo::ForceDimensionDevice d(0, 2000);
+  const long opens = ctl.opens();
   d.open();
+  // The double's ID stays invalid after the device is back (as the SDK's): back only because
+  // the device thread closed it and opened the index again.
   check_vanish(d, ctl, 2, "dhdGetPosition failed: communication error");  // isotouch x is FD y
+  EXPECT_GE(d.reopens(), 1);
+  EXPECT_EQ(ctl.opens(), opens + 1 + d.reopens());
 }

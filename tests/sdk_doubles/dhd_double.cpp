@@ -22,6 +22,10 @@ DoubleDevice g_dev("DHD_DOUBLE", [](double x, double y, double z) { return std::
 std::atomic<bool> g_open{false}, g_force_on{false}, g_running{false};
 std::atomic<long> g_bad_ids{0};
 std::atomic<bool> g_expert{false};
+// An unplugged device's ID stays invalid after it is back, until it is closed and opened again
+// (as the SDK's handles do); opens counted.
+std::atomic<bool> g_stale_id{false};
+std::atomic<long> g_opens{0};
 std::atomic<int> g_watchdog{0};
 std::thread g_clock;
 std::atomic<const char*> g_error{"no error"};
@@ -43,6 +47,7 @@ bool usable(char id) {
   }
   if (!g_open.load()) g_error = "device not open";
   else if (g_dev.vanished()) g_error = "communication error (device unplugged)";
+  else if (g_stale_id.load()) g_error = "communication error (the device was unplugged: open it again)";
   else return true;
   return false;
 }
@@ -66,6 +71,8 @@ int dhdOpenID(char id) {
   }
   g_dev.start();
   g_open = true;
+  g_stale_id = false;
+  g_opens.fetch_add(1);
   g_running = true;
   g_clock = std::thread(clock_loop);
   return 0;
@@ -91,7 +98,7 @@ int dhdSetForce(double fx, double fy, double fz, char id) {
   if (id != 0 || !g_open.load()) return -1;
   const double f[3] = {fx, fy, fz};
   g_dev.receive(f, g_force_on.load());  // logged also when vanished (flagged): what the host sent
-  return g_dev.vanished() ? -1 : 0;
+  return g_dev.vanished() || g_stale_id.load() ? -1 : 0;
 }
 int dhdEnableForce(unsigned char val, char id) {
   if (!usable(id)) return -1;
@@ -112,7 +119,12 @@ int dhdSetWatchdog(unsigned char val, char id) {
 }
 
 // Test controls.
-void dhdDoubleVanish(int on) { g_dev.vanish(on != 0); }
+void dhdDoubleVanish(int on) {
+  if (on) g_stale_id = true;
+  g_dev.vanish(on != 0);
+}
+/// dhdOpenID calls that opened the device.
+long dhdDoubleOpens() { return g_opens.load(); }
 void dhdDoubleSetTarget(const double m[3]) { g_dev.set_target(m); }
 /// As hdDoubleLog (hd_double.cpp), forces in the FD frame [N].
 int dhdDoubleLog(double* out, int max) { return g_dev.copy_log(out, max); }
@@ -120,6 +132,8 @@ void dhdDoubleClearLog() { g_dev.clear_log(); }
 /// 1 while force output is enabled (dhdEnableForce(DHD_ON)).
 int dhdDoubleForceOn() { return g_force_on.load() ? 1 : 0; }
 long dhdDoubleBadIds() { return g_bad_ids.load(); }
+/// CLOCK_MONOTONIC of the log's 0 s [s].
+double dhdDoubleStartS() { return g_dev.start_s(); }
 /// The watchdog value set (125 us units; 0: none).
 int dhdDoubleWatchdog() { return g_watchdog.load(); }
 /// dhdGetPosition and dhdSetForce calls made on the thread whose pthread_self() is `thread`.

@@ -40,7 +40,7 @@ class DoubleDevice {
 
   void start() {
     std::lock_guard l(mu_);
-    t0_ = now_s();
+    if (t0_ == 0) t0_ = now_s();  // once: a device opened again (after an unplug) keeps one clock
     x_ = v_ = f_ = {};
     load_path();
     const char* at = std::getenv((env_ + "_VANISH_AT").c_str());
@@ -80,6 +80,8 @@ class DoubleDevice {
     return int(log_.size());
   }
   void clear_log() { std::lock_guard l(mu_); log_.clear(); }
+  /// CLOCK_MONOTONIC of the log's 0 s [s] (0: not started).
+  double start_s() { std::lock_guard l(mu_); return t0_; }
   /// Writes PREFIX_LOG if set: t_s,fx_n,fy_n,fz_n,enabled,vanished (SDK frame).
   void write_log() {
     const char* file = std::getenv((env_ + "_LOG").c_str());

@@ -286,4 +286,6 @@ void hdDoubleClearLog() { g_dev.clear_log(); }
 /// HD calls made against its conventions (a frame begun off the scheduler, a force set outside one).
 long hdDoubleIllegalCalls() { return g_illegal.load(); }
 long hdDoubleFrames() { return g_frames.load(); }
+/// CLOCK_MONOTONIC of the log's 0 s [s].
+double hdDoubleStartS() { return g_dev.start_s(); }
 }

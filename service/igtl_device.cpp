@@ -1,7 +1,10 @@
 #include "isotouch/service/igtl_device.h"
 
+#include <pthread.h>
+
 #include <algorithm>
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -62,7 +65,8 @@ IgtlDevice::IgtlDevice(const IgtlDeviceOptions& o) : o_(o) {
   }
   const double zero[3] = {0, 0, 0};
   const std::vector<std::uint8_t> z = pack_translation("Force", zero);
-  exit_zero_ = std::make_unique<servo::ExitZero>(conn_->fd(), z.data(), z.size());
+  exit_zero_ = std::make_unique<ExitZeroFence>(conn_->fd(), z);
+  conn_->set_fence(exit_zero_.get());
   rule_.restart(now_ns());
   writer_ = std::thread([this] { write_loop(); });
 }
@@ -70,6 +74,7 @@ IgtlDevice::IgtlDevice(const IgtlDeviceOptions& o) : o_(o) {
 IgtlDevice::~IgtlDevice() {
   stop_ = true;
   if (writer_.joinable()) writer_.join();  // its last act: a zero force
+  conn_->set_fence(nullptr);
   exit_zero_.reset();
   conn_->shutdown();
   if (reader_.joinable()) reader_.join();
@@ -89,7 +94,15 @@ void IgtlDevice::measure(double seconds) {
   rate_hz_ = double(n - 1) / span_s;
 }
 
+void block_stop_signals() {
+  sigset_t s;
+  sigemptyset(&s);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) sigaddset(&s, sig);
+  pthread_sigmask(SIG_BLOCK, &s, nullptr);
+}
+
 void IgtlDevice::read_loop() {
+  block_stop_signals();
   for (;;) {
     Incoming in = read_message(*conn_, MessageLimits{});
     if (in.kind == Incoming::Kind::kClosed || in.kind == Incoming::Kind::kBroken) break;
@@ -136,10 +149,7 @@ const std::atomic<std::uint64_t>* IgtlDevice::enable_force(bool on, double stall
 
 void IgtlDevice::send_force(const core::Vec3& f) {
   const double t[3] = {f.x, f.y, f.z};
-  const std::vector<std::uint8_t> msg = pack_translation("Force", t);
-  if (!exit_zero_->begin_send()) return;  // the process's last zero went out: nothing after it
-  if (conn_->send(msg)) sent_.fetch_add(1);
-  exit_zero_->end_send();
+  if (conn_->send(pack_translation("Force", t))) sent_.fetch_add(1);  // fenced (ExitZeroFence)
 }
 
 /// Polls every 0.2 ms (a fifth of the stall time when that is shorter: a stall is found within
@@ -147,6 +157,7 @@ void IgtlDevice::send_force(const core::Vec3& f) {
 /// newest force; a stall sends a zero at once; force off gives zero; a stale stream gets one
 /// zero.
 void IgtlDevice::write_loop() {
+  block_stop_signals();
   if (o_.fifo_priority > 0) servo::make_thread_realtime("igtl writer", true, o_.fifo_priority, false, -1);
   std::uint64_t answered = 0;
   bool zero_sent = true;

@@ -27,6 +27,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/servo/device_io.h"
@@ -48,6 +49,24 @@ struct IgtlDeviceOptions {
   /// right after, a step at the peer). Refused: the default scheduler.
   int fifo_priority = 0;
 };
+
+/// A connection's last message however the process ends (servo/exit_zero.h: `zero`, sent on
+/// a crash, a second stop signal or a stuck servo's _Exit), fencing every send on it
+/// (Connection::set_fence), so that it never lands inside another message and nothing follows.
+class ExitZeroFence final : public SendFence {
+ public:
+  ExitZeroFence(int fd, const std::vector<std::uint8_t>& zero) : zero_(fd, zero.data(), zero.size()) {}
+  bool begin_send() override { return zero_.begin_send(); }
+  void end_send() override { zero_.end_send(); }
+  bool registered() const { return zero_.registered(); }
+
+ private:
+  servo::ExitZero zero_;
+};
+
+/// The calling thread takes no stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT): a link's own
+/// threads, so that the handler that sends the last zero never runs inside one of its sends.
+void block_stop_signals();
 
 /// "HOST:PORT[:STREAM]" -> options. @throws std::invalid_argument naming the part and value.
 IgtlDeviceOptions parse_igtl_spec(const std::string& arg);
@@ -103,7 +122,7 @@ class IgtlDevice final : public servo::HapticDeviceIO {
   servo::LatestValue<Pose> pose_;
   Pose last_;  // servo thread
   servo::StallRule rule_;  // the servo's force (stamped) and the stall rule
-  std::unique_ptr<servo::ExitZero> exit_zero_;  // the zero the peer gets however the process ends
+  std::unique_ptr<ExitZeroFence> exit_zero_;  // the zero the peer gets however the process ends
   std::atomic<bool> stop_{false}, closed_{false};
   std::atomic<long> poses_{0}, sent_{0};
   std::atomic<std::int64_t> first_ns_{0}, last_ns_{0};

@@ -155,6 +155,14 @@ bool Connection::send(const void* data, std::size_t n, bool droppable) {
   std::unique_lock<std::mutex> lock(send_mu_, std::defer_lock);
   if (!droppable) lock.lock();
   else if (!lock.try_lock()) return false;  // another send is under way: dropped, never waited for
+  SendFence* fence = fence_.load();
+  if (fence && !fence->begin_send()) return false;  // the process's last message went out
+  struct EndSend {
+    SendFence* f;
+    ~EndSend() {
+      if (f) f->end_send();
+    }
+  } end_send{fence};
   const auto* p = static_cast<const std::uint8_t*>(data);
   std::size_t sent = 0;
   if (droppable && alive_) {

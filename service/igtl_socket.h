@@ -38,6 +38,16 @@ class Listener {
 int connect_tcp(const std::string& host, int port, int timeout_ms);
 
 /// One connected client: reads with deadlines, sends that never raise SIGPIPE.
+/// Called around each of a connection's sends, under its send lock: begin_send() false
+/// refuses the send (the process's last message to the peer already went out), and the last
+/// message is never put into the middle of one (servo/exit_zero.h).
+class SendFence {
+ public:
+  virtual ~SendFence() = default;
+  virtual bool begin_send() = 0;
+  virtual void end_send() = 0;
+};
+
 class Connection final : public ByteSource {
  public:
   /// Owns `fd`. `receive_timeout_ms`: the longest wait for the next byte inside a message;
@@ -63,6 +73,9 @@ class Connection final : public ByteSource {
   bool alive() const { return alive_.load(); }
   /// The socket (for ExitZero's last message: servo/exit_zero.h).
   int fd() const { return fd_; }
+  /// Every send from now on goes through `fence` (null: none). The fence must outlive its use:
+  /// set null before it is destroyed. Any thread.
+  void set_fence(SendFence* fence) { fence_.store(fence); }
   /// Shuts the socket down (a blocked read returns).
   void shutdown();
 
@@ -74,6 +87,7 @@ class Connection final : public ByteSource {
   const std::atomic<bool>* stop_;
   std::string why_;
   std::mutex send_mu_;
+  std::atomic<SendFence*> fence_{nullptr};
   std::atomic<bool> alive_{true};
 };
 

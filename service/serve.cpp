@@ -24,7 +24,7 @@
 #include "isotouch/service/device_echo.h"
 #include "isotouch/service/edit_mirror.h"
 #include "isotouch/core/exit_codes.h"
-#include "isotouch/servo/exit_zero.h"
+#include "isotouch/service/igtl_device.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
@@ -64,6 +64,9 @@ struct Client {
   std::atomic<bool> done{false};
   /// Sent an IMAGE or a command: gets the edited volume back.
   std::atomic<bool> subscribed{false};
+  /// Was the stream's client (--reply-force) at some time: gets its forces from the reply
+  /// thread alone, never the display loop's Force copy (PLUS applies every Force it gets).
+  std::atomic<bool> reply_target{false};
   int id = 0;
 };
 
@@ -229,6 +232,7 @@ void Server::handle(Client& c, Incoming& in) {
         if (o_.reply_force) {
           std::lock_guard<std::mutex> lock(stream_mu_);
           stream_from_ = c.conn;
+          c.reply_target = true;
         }
         device_.push_mm(t, in.stamp);
       }
@@ -540,12 +544,21 @@ void Server::reply_loop() {
       log_.line("reply    " + note);
   std::uint64_t answered = 0;
   device_.restart_force(TransformDevice::now_ns());
+  block_stop_signals();  // a stop signal's handler sends the last zero: never inside a send of this thread
   // The stream client's zero however serve ends (servo/exit_zero.h): registered for the
-  // connection the replies go to, kept alive (its socket open) while registered.
+  // connection the replies go to, fencing every send on it, kept alive (its socket open)
+  // while registered. A client that stops being the stream's is left a zero.
   std::shared_ptr<Connection> fenced;
-  std::unique_ptr<servo::ExitZero> exit_zero;
+  std::unique_ptr<ExitZeroFence> exit_zero;
   const double zero3[3] = {0, 0, 0};
   const std::vector<std::uint8_t> zero_msg = pack_translation("Force", zero3);
+  const auto unfence = [&] {
+    if (!fenced) return;
+    fenced->send(zero_msg);  // blocking: the zero is not dropped
+    fenced->set_fence(nullptr);
+    exit_zero.reset();
+    fenced.reset();
+  };
   while (!stop_) {
     std::this_thread::sleep_for(std::chrono::microseconds(100));
     const TransformDevice::PoseId p = device_.newest_pose();
@@ -564,24 +577,24 @@ void Server::reply_loop() {
       to = stream_from_;
     }
     if (to != fenced) {
-      exit_zero.reset();
-      fenced = to;
-      if (to) exit_zero = std::make_unique<servo::ExitZero>(to->fd(), zero_msg.data(), zero_msg.size());
-    }
-    const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
-    if (to && exit_zero->begin_send()) {  // false once the process's last zero went out
-      if (to->send_droppable(msg)) {
-        replies_.fetch_add(1);
-        stall_replies_.fetch_add(!rendered);
+      unfence();
+      if (to) {
+        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);
+        to->set_fence(exit_zero.get());
+        fenced = to;
       }
-      exit_zero->end_send();
+    }
+    if (!to) continue;
+    // The stall's zero is never dropped (the client would keep the last force): sent whole,
+    // waiting for the client if need be; the rest never wait (a client that does not read).
+    const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
+    if (stall_zero ? to->send(msg) : to->send_droppable(msg)) {
+      replies_.fetch_add(1);
+      stall_replies_.fetch_add(!rendered);
     }
   }
   // The last act: the stream client (PLUS holds the last Force it got) is left with a zero.
-  if (fenced && exit_zero->begin_send()) {
-    fenced->send(zero_msg);
-    exit_zero->end_send();
-  }
+  unfence();
 }
 
 void Server::display_loop() {
@@ -606,17 +619,13 @@ void Server::display_loop() {
         out.insert(out.end(), b.begin(), b.end());
       }
     }
-    // With --reply-force the stream's client applies every Force it gets (PLUS): it gets its
-    // forces from the reply thread alone (the stall rule, the last zero), not this display copy.
-    std::shared_ptr<Connection> stream;
-    if (o_.reply_force) {
-      std::lock_guard<std::mutex> lock(stream_mu_);
-      stream = stream_from_;
-    }
+    // With --reply-force a stream's client applies every Force it gets (PLUS): it gets its
+    // forces from the reply thread alone (the stall rule, the last zero), not this display
+    // copy, also once another client took the stream over.
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (Client& c : clients_) {
       if (c.done || !c.conn->alive()) continue;
-      const bool to_stream = stream && c.conn == stream;
+      const bool to_stream = c.reply_target.load();
       const long n = to_stream ? 2 : 3;
       if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
       else n_.dropped_sends.fetch_add(n);

@@ -11,7 +11,9 @@
 namespace isotouch::servo {
 namespace {
 
-constexpr int kFree = 0, kFilling = 1, kUsed = 2;
+// A slot's state: free, being filled by its link, registered, or being sent by
+// send_exit_zeros() (its link's destructor waits: the socket stays open, the bytes whole).
+constexpr int kFree = 0, kFilling = 1, kUsed = 2, kSending = 3;
 
 struct Slot {
   std::atomic<int> state{kFree};
@@ -75,7 +77,10 @@ ExitZero::ExitZero(int fd, const std::uint8_t* bytes, std::size_t n) {
 }
 
 ExitZero::~ExitZero() {
-  if (slot_ >= 0) g_slots[std::size_t(slot_)].state.store(kFree, std::memory_order_release);
+  if (slot_ < 0) return;
+  Slot& s = g_slots[std::size_t(slot_)];
+  for (int used = kUsed; !s.state.compare_exchange_weak(used, kFree, std::memory_order_acq_rel); used = kUsed) {
+  }  // a zero being sent from this slot: wait until it is out
 }
 
 bool ExitZero::begin_send() {
@@ -99,11 +104,15 @@ int send_exit_zeros(int wait_us) noexcept {
   g_sealed.store(true);
   int sent = 0;
   for (Slot& s : g_slots) {
-    if (s.state.load(std::memory_order_acquire) != kUsed) continue;
+    int used = kUsed;
+    if (!s.state.compare_exchange_strong(used, kSending, std::memory_order_acq_rel)) continue;
     const std::int64_t give_up = mono_ns() + std::int64_t(wait_us) * 1000;
     while (s.busy.load() != 0 && mono_ns() < give_up) {
     }
-    if (s.busy.load() != 0) continue;  // inside a send that does not end: the stream cannot take a zero
+    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero
+      s.state.store(kUsed, std::memory_order_release);
+      continue;
+    }
     std::size_t done = 0;
     while (done < s.n) {
       const ssize_t k = ::send(s.fd, s.bytes + done, s.n - done, MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -111,6 +120,7 @@ int send_exit_zeros(int wait_us) noexcept {
       done += std::size_t(k);
     }
     sent += done == s.n;
+    s.state.store(kUsed, std::memory_order_release);
   }
   return sent;
 }

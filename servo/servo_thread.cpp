@@ -336,7 +336,11 @@ void ServoThread::loop(Handoff& h) {
         seen_stalls_ = stalls;
         double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;
         std::uint8_t gated = 0;
-        if (ramp_start < 0) {  // the device took the force off: an exact zero, the gate rises from it
+        // An exact zero, the gate rising from it afterwards: the device took the force off (a
+        // stall: the ramp restarts next tick), the ramp starts on this tick (enable, a
+        // reconnection, the device's force off or its watchdog), or the renderer reports a
+        // fault (its force is not to be ramped down, it is to stop).
+        if (ramp_start < 0 || ramp == 0 || rec.out.fault) {
           rec.force_sent_n = {};
           gate_.zero(gate_dt);
         } else {

@@ -47,9 +47,6 @@ S=servo/servo_thread.cpp T=test_servo_thread F='ServoSafety.*'
 m servo-bad-tick-zero       $S 'device_.write_force_n({});  // within this tick' '' $T "$F"
 m servo-stale-judged        $S 'if (d.received_ns != 0 && t - d.received_ns > stale_ns) return DeviceStatus::kStale;' '' $T "$F"
 m servo-refused-position    $S 'if (!caps.contains(d.position_m)) {' 'if (false) {' $T "$F"
-m servo-nonfinite-zero      $S 'if (!std::isfinite(out.x) || !std::isfinite(out.y) || !std::isfinite(out.z)) return {};' '' $T "$F"
-m servo-clamp-at-2x         $S 'clamped = m > max_n;' 'clamped = m > 2 * max_n;' $T "$F"
-m servo-clamp-scale         $S 'if (clamped) out = out * (max_n / m);' '' $T "$F"
 m servo-ramp-factor         $S 'double ramp = ramp_ns > 0 ? std::min(1.0, double(t - ramp_start) / ramp_ns) : 1.0;' \
                                'double ramp = 1.0;' $T "$F"
 m servo-ramp-reconnect      $S 'if (first || d.connection != connection) ramp_start = -1;' '' $T "$F"
@@ -79,6 +76,8 @@ m gate-scene-limit          $G 'l.peak_n = std::min(limit_or_inf(scene_limit_n),
                                'l.peak_n = limit_or_inf(caps.max_force_n);' $T 'ServoSafety.TheScenesLimit*'
 m gate-zero-on-bad-tick     $S $'device_.write_force_n({});  // within this tick\n        gate_.zero(gate_dt);' \
                                'device_.write_force_n({});  // within this tick' $T 'ServoSafety.AStepDemand*'
+m servo-exact-zero-at-once  $S 'if (ramp_start < 0 || ramp == 0 || rec.out.fault) {' 'if (ramp_start < 0) {' \
+  $T 'ServoSafety.AFaultOrTheDevices*'
 m servo-faster-than-device  $S 'if (caps_.output_rate_hz > 0 && cfg_.rate_hz > caps_.output_rate_hz * 1.001)' 'if (false)' \
   $T 'ServoSafety.AServoFaster*'
 
@@ -97,7 +96,7 @@ m backend-stall-every-kind  $R 'if (on && was_on_ && stalled) {' 'if (false) {' 
 m sdk-nonfinite-backstop    $R 'Vec3 f = ok ? force_n : Vec3{};' 'Vec3 f = force_n;' test_sdk_devices 'OpenHaptics.ANonFinite*'
 m emu-watchdog              $E 'enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;' '' \
   test_device_emu 'DeviceEmu.AFrozenWriterTripsTheDevicesWatchdog'
-m emu-output-log            $E 'log_[logged_ % log_.size()] = ReceivedOutput{now, o.force_n, o.enable, o.answers};' '' \
+m emu-output-log            $E 'log_[logged_ % log_.size()] = ReceivedOutput{now, force_n, enable, answers};' '' \
   test_device_emu 'DeviceEmu.*'
 
 # The vendor SDK backends against their doubles (what the library received).
@@ -106,7 +105,7 @@ m hd-disable-at-close       $OH 'api_.hdDisable(hd::kForceOutput);' '' test_sdk_
 m hd-calibration-gate       $OH 'const bool zero = closing_.load() || !on || down_ || !calibrated;' \
                                'const bool zero = closing_.load() || !on || down_;' test_sdk_devices 'OpenHaptics.NoForceUntil*'
 m hd-calibration-update     $OH 'api_.hdUpdateCalibration(cal_style_);' '' test_sdk_devices 'OpenHaptics.ACalibrationThatNeeds*'
-m hd-continuous-force       $OH '    c.max_continuous_force_n = v;' '' test_sdk_devices 'OpenHaptics.ContinuousForce*'
+m hd-continuous-force       $OH '    c.max_continuous_force_n = v;' '    ;' test_sdk_devices 'OpenHaptics.ContinuousForce*'
 m fd-watchdog               $FD 'if (api_.dhdSetWatchdog((unsigned char)units, id_) < 0) return note_error("dhdSetWatchdog");' \
                                'return;' test_sdk_devices 'ForceDimension.OpenSets*'
 
@@ -132,8 +131,8 @@ m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  s
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\n    return false;' \
                                $'  if (false) {\n    s.busy.store(0);\n    return false;' test_exit_zero 'ExitZero.*'
-m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) continue;  // inside a send that does not end: the stream cannot take a zero' \
-                               '' test_exit_zero 'ExitZero.*'
+m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
+                               '    if (false) {' test_exit_zero 'ExitZero.*'
 
 # HRI's own limits, wherever in servo/ the line now lives.
 H=servo T=test_hri F='Hri.*'

@@ -363,7 +363,7 @@ TEST_P(BackendFaults, WhatTheDeviceReceivedKeepsTheRules) {
   if (const std::string why = b->why_not(fault); !why.empty()) GTEST_SKIP() << name << ": " << why;
   FaultyPush push(fault);
   const std::vector<Received> r = run_scenario(*b, fault, push);
-  ASSERT_GT(r.size(), 300u) << "the device received too little";
+  ASSERT_GT(r.size(), 100u) << "the device received too little";
   // Always: finite, within the push (and so the limit).
   for (std::size_t i = 0; i < r.size(); ++i) {
     ASSERT_TRUE(r[i].finite) << "row " << i << ": a non-finite force reached the device";

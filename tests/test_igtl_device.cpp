@@ -94,6 +94,8 @@ class Peer {
     return poses_;
   }
   double stopped_s() const { return stopped_s_.load(); }
+  /// The client's connection ended (the peer's reader saw it close).
+  bool client_gone() const { return client_gone_.load(); }
   /// When the peer began to close the connection [s, steady clock's epoch] (0: not yet).
   double closed_at_s() const { return closed_at_s_.load(); }
 
@@ -112,6 +114,7 @@ class Peer {
         std::lock_guard<std::mutex> lock(mu_);
         forces_.push_back({since(t0), {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]}});
       }
+      client_gone_ = true;
     });
     const double pose[3] = {10, 20, 30};
     const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate_hz_));
@@ -138,6 +141,7 @@ class Peer {
   double rate_hz_, stream_s_, close_s_;
   std::atomic<bool> stop_{false};
   std::atomic<double> stopped_s_{1e9}, closed_at_s_{0};
+  std::atomic<bool> client_gone_{false};
   std::mutex mu_;
   std::vector<Got> forces_;
   std::vector<double> poses_;
@@ -309,6 +313,11 @@ void child_then_end(int port, const char* how) {
 // peer's last Force is an exact zero, after forces of 0.5 N (PLUS applies the latest Force
 // it got with no age check).
 TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
+#if defined(__SANITIZE_THREAD__)
+  // ThreadSanitizer ends a child forked from a process with threads (die_after_fork); the
+  // release build runs this test.
+  GTEST_SKIP() << "fork() from a multi-threaded process under ThreadSanitizer";
+#endif
   for (const char* how : {"crash", "exit"}) {
     Peer peer(500, 3.0);
     const pid_t pid = fork();
@@ -318,7 +327,9 @@ TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
     ASSERT_EQ(waitpid(pid, &status, 0), pid);
     if (std::string(how) == "crash") EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGSEGV) << how;
     else EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 3) << how;
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // the peer reads what was sent
+    // The peer has read all that was sent once its reader saw the connection end.
+    for (int i = 0; i < 5000 && !peer.client_gone(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_TRUE(peer.client_gone()) << how << ": the dead child's connection did not end";
     const std::vector<Peer::Got> got = peer.forces();
     long forced = 0;
     for (const Peer::Got& g : got) forced += g.f.x == 0.5;

@@ -435,6 +435,7 @@ class SteeredForce final : public Renderer {
   HriTick tick(const FieldView&, const Vec3&, double) override {
     HriTick t;
     t.force_n = {fx.load(), fy.load(), fz.load()};
+    t.fault = fault.load();
     dev_.note_rendered(t.force_n);
     return t;
   }
@@ -444,6 +445,7 @@ class SteeredForce final : public Renderer {
     fz = f.z;
   }
   std::atomic<double> fx{0}, fy{0}, fz{1};
+  std::atomic<bool> fault{false};  ///< the renderer reports a fault (with the force set)
   std::atomic<long> resets{0};
 
  private:
@@ -878,6 +880,35 @@ TEST(ServoSafety, AServoFasterThanTheDevicesOwnLoopIsRefused) {
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   servo.stop();
   EXPECT_GT(dev.n_writes.load(), 5u);
+}
+
+// With a rate limit (50 N/s: a release from 1 N would take 20 ms), three things still stop
+// the force at once, an exact zero in the very tick: the device saying its force is off (its
+// watchdog tripped), and a renderer reporting a fault (whatever force it answers).
+TEST(ServoSafety, AFaultOrTheDevicesForceOffIsAnExactZeroInThatTickDespiteTheRateLimit) {
+  SafetyRig rig(0.05, 0.02, 3.3, 50);
+  rig.servo->start();
+  rig.run_ticks(80);  // 1 N reached (the 50 ms ramp-in, slower than 50 N/s)
+  const std::size_t before_trip = rig.dev.logged();
+  rig.dev.watchdog_tripped = true;
+  rig.run_ticks(20);
+  const std::size_t tripped = rig.dev.logged();
+  rig.dev.watchdog_tripped = false;
+  rig.run_ticks(80);  // ramped in again
+  const std::size_t before_fault = rig.dev.logged();
+  rig.renderer.fault = true;  // still answering (0, 0, 1) N
+  rig.run_ticks(20);
+  const std::size_t faulted = rig.dev.logged();
+  rig.renderer.fault = false;
+  rig.run_ticks(20);
+  rig.servo->stop();
+  ASSERT_EQ(rig.dev.ticks[before_trip - 1].force.z, 1.0) << "1 N before the trip";
+  // The tick in progress when the flag was set may not have read it: from the next one on.
+  for (std::size_t i = before_trip + 1; i < tripped; ++i)
+    EXPECT_TRUE(exact_zero(rig.dev.ticks[i].force)) << "tick " << i << " after the trip: " << str(rig.dev.ticks[i].force);
+  ASSERT_EQ(rig.dev.ticks[before_fault - 1].force.z, 1.0) << "1 N again before the fault";
+  for (std::size_t i = before_fault + 1; i < faulted; ++i)
+    EXPECT_TRUE(exact_zero(rig.dev.ticks[i].force)) << "tick " << i << " of the fault: " << str(rig.dev.ticks[i].force);
 }
 
 // A renderer that answers NaN or an infinite force: the device gets an exact zero in those

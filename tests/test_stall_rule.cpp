@@ -79,8 +79,9 @@ TEST(StallRule, TheForceIsOffWithinThreeServoPeriodsAtEveryRate) {
   }
 }
 
-// A servo a whole period late (a missed deadline) is no stall for a polling output thread
-// (2.5 periods), and none for one as fast as the servo (2 periods of silence is not over 2).
+// Two periods without a write (one tick missed) is no stall, for a polling output thread
+// (its stall time 2.5 periods) nor for one as fast as the servo (2 periods, not over 2); a
+// silence a little longer is one for the latter (its force must be off within 3 periods).
 TEST(StallRule, AMissedDeadlineIsNoStall) {
   for (const double look_frac : {0.0, 1.0}) {
     const double servo_hz = 1000, period = 1e-3;

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # tests/mutants.sh - breaks each safety-guarding source line once and shows that the tests
 # guarding it fail. Not run by ctest: it rebuilds a copy of the tree per mutation; .ci/run
-# runs a rotating share of the mutations after the suite (--shard).
+# runs every mutation after the suite (--shard splits them over several runs, if ever needed).
 #
 # usage: tests/mutants.sh [-k] [--shard K/N] [NAME_REGEX]
 #   NAME_REGEX  run only the mutations whose name matches (grep -E)
@@ -161,7 +161,8 @@ m hri-edit-ease-half-period $H 'const Vec3 offset = edit_ease_from_ * (edit_ease
                                'const Vec3 offset = edit_ease_from_ * std::max(0.0, 2 * edit_ease_left_s_ / params_.edit_period_s - 1);' \
                                test_hri_edit 'HriEdit.*'
 m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_ticks_;' \
-                               $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' $T "$F"
+                               $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' \
+                               $T 'HriRecovery.AReleaseByAPlaneUpdate*'
 
 # ---- The run ----
 work=$root/build-mutants

@@ -48,7 +48,7 @@ struct StallTrial {
 struct SdkTrial {
   std::string kind;                  ///< "openhaptics", "forcedimension"
   std::string not_measured;          ///< why not ("" measured)
-  double stall_zero_after_us = NAN;  ///< last force received -> first zero received [us]
+  double stall_zero_after_us = NAN;  ///< the renderer's stall began -> the first zero received [us]
   double stall_resumed_n = NAN;      ///< |F| of the first force after the stall's zeros [N]
   double steady_n = NAN;             ///< |F| before the stall [N]
   double step_max_rate_n_per_s = NAN;  ///< the largest |dF| / dt between two frames after a 0 -> 3 N step [N/s]

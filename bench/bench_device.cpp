@@ -20,6 +20,8 @@
 #include "isotouch/sim/analytic_fields.h"
 #include "isotouch/bench/servo_bench.h"
 #include "isotouch/sim/device_emulator.h"
+#include "isotouch/run/sdk_haptic_device.h"
+#include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/device_protocols.h"
 #include "isotouch/servo/forcedimension_device.h"
 #include "isotouch/servo/openhaptics_device.h"
@@ -253,17 +255,7 @@ std::string sdk_row(const char* kind, double seconds, bool fifo) {
   std::unique_ptr<servo::SdkDevice> dev;
   std::string what;
   try {
-    if (std::string(kind) == "openhaptics") {
-      auto d = std::make_unique<servo::OpenHapticsDevice>();
-      d->open();
-      what = d->description();
-      dev = std::move(d);
-    } else {
-      auto d = std::make_unique<servo::ForceDimensionDevice>(0);
-      d->open();
-      what = d->description();
-      dev = std::move(d);
-    }
+    dev = run::open_sdk_device(kind, "", what);
   } catch (const std::exception& e) {
     return std::string("| ") + kind + " | not measured: " + e.what() + " |\n";
   }
@@ -303,21 +295,30 @@ class Push final : public servo::Renderer {
 
 using Rows = std::vector<std::array<double, 5>>;  // t_s, fx, fy, fz [N, the SDK's frame], flags
 
+/// The servo at 1 kHz under a 3.3 N limit rendering `r` on `dev` for `seconds`; the gate's
+/// rate limit it ran with [N/s].
+double run_servo_on(servo::HapticDeviceIO& dev, servo::Renderer& r, double seconds, bool fifo) {
+  servo::TripleBuffer<core::SampleField> published;
+  published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = 1000;
+  sc.force_limit_n = 3.3;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
+  servo::ServoThread servo(published, r, dev, sc);
+  servo.start();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  servo.stop();
+  return servo::force_limits(dev.caps(), sc.force_limit_n).rate_n_per_s;
+}
+
 /// `kind`'s device opened, the servo at 1 kHz (force limit 3.3 N) rendering `r` for `seconds`,
 /// closed; what the library received (its double's log: dlsym; empty for a real SDK).
 Rows sdk_run(const std::string& kind, servo::Renderer& r, double seconds, bool fifo, double& rate_limit,
              std::string& why_not) {
   std::unique_ptr<servo::SdkDevice> dev;
   try {
-    if (kind == "openhaptics") {
-      auto d = std::make_unique<servo::OpenHapticsDevice>();
-      d->open();
-      dev = std::move(d);
-    } else {
-      auto d = std::make_unique<servo::ForceDimensionDevice>(0, 1000);
-      d->open();
-      dev = std::move(d);
-    }
+    std::string what;
+    dev = run::open_sdk_device(kind, "", what);
   } catch (const std::exception& e) {
     why_not = e.what();
     return {};
@@ -332,17 +333,7 @@ Rows sdk_run(const std::string& kind, servo::Renderer& r, double seconds, bool f
     return {};
   }
   clear();
-  servo::TripleBuffer<core::SampleField> published;
-  published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
-  servo::ServoThreadConfig sc;
-  sc.rate_hz = 1000;
-  sc.force_limit_n = 3.3;
-  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
-  servo::ServoThread servo(published, r, *dev, sc);
-  rate_limit = servo::force_limits(dev->caps(), sc.force_limit_n).rate_n_per_s;
-  servo.start();
-  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-  servo.stop();
+  rate_limit = run_servo_on(*dev, r, seconds, fifo);
   dev->close();
   Rows rows(1 << 16);
   const int n = log(rows.front().data(), int(rows.size()));
@@ -395,7 +386,9 @@ SdkTrial sdk_trial(const std::string& kind, bool fifo) {
                                 std::pow(rows[k][3] - rows[k - 1][3], 2));
     if (df / dt > t.step_max_rate_n_per_s) {
       t.step_max_rate_n_per_s = df / dt;
-      t.step_bound_n_per_s = rate * (dt + 1e-3) / dt;  // the servo may have written twice in a frame
+      // Each servo write changes the force by at most rate x its period; a frame's interval
+      // holds its own writes and, with a late tick and the next one on time, two more.
+      t.step_bound_n_per_s = rate * (dt + 2e-3) / dt;
     }
     if (std::isnan(t.step_rise_ms) && row_norm(rows[k]) > 3.0 - 1e-9 && first < rows.size())
       t.step_rise_ms = (rows[k][0] - rows[first][0]) * 1e3;
@@ -407,7 +400,7 @@ SdkTrial sdk_trial(const std::string& kind, bool fifo) {
 /// went out and when each Force came back with its |F|.
 class LoopbackPeer {
  public:
-  explicit LoopbackPeer(double rate_hz) : listener_("127.0.0.1", 0), rate_hz_(rate_hz) {
+  LoopbackPeer(double rate_hz, bool fifo) : listener_("127.0.0.1", 0), rate_hz_(rate_hz), fifo_(fifo) {
     sent_ns_.reserve(1 << 16), got_.reserve(1 << 16);
     thread_ = std::thread([this] { serve(); });
   }
@@ -427,11 +420,14 @@ class LoopbackPeer {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
   }
   void serve() {
+    // A device loop's priority where allowed (PLUS's is): the figures are the link's.
+    if (fifo_) servo::make_thread_realtime("bench peer", true, 60, false, -1);
     int fd = -1;
     while (fd < 0 && !stop_) fd = listener_.accept(50);
     if (fd < 0) return;
     service::Connection conn(fd, 2000, 2000, &stop_);
     std::thread reader([&] {
+      if (fifo_) servo::make_thread_realtime("bench peer reader", true, 60, false, -1);
       for (;;) {
         const service::Incoming in = service::read_message(conn, service::MessageLimits{});
         if (in.kind == service::Incoming::Kind::kClosed || in.kind == service::Incoming::Kind::kBroken) break;
@@ -459,6 +455,7 @@ class LoopbackPeer {
   }
   service::Listener listener_;
   double rate_hz_;
+  bool fifo_;
   std::atomic<bool> stop_{false};
   std::mutex mu_;
   std::thread thread_;
@@ -468,26 +465,18 @@ class LoopbackPeer {
 /// one 100 ms renderer stall.
 IgtlRow igtl_row(double seconds, bool fifo) {
   IgtlRow row;
-  auto peer = std::make_unique<LoopbackPeer>(1000);
+  auto peer = std::make_unique<LoopbackPeer>(1000, fifo);
   try {
     service::IgtlDeviceOptions opt;
     opt.host = "127.0.0.1";
     opt.port = peer->port();
     opt.stream = "StylusToTracker";
     opt.measure_s = 0.3;
+    opt.fifo_priority = fifo ? 70 : 0;  // as `run --live --haptic igtl:` with SCHED_FIFO
     service::IgtlDevice dev(opt);
     row.stream_hz = dev.measured_rate_hz();
     Push push(0.5, 50, long(seconds * 500), 100);
-    servo::TripleBuffer<core::SampleField> published;
-    published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
-    servo::ServoThreadConfig sc;
-    sc.rate_hz = 1000;
-    sc.force_limit_n = 3.3;
-    sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
-    servo::ServoThread servo(published, push, dev, sc);
-    servo.start();
-    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
-    servo.stop();
+    run_servo_on(dev, push, seconds, fifo);
   } catch (const std::exception& e) {
     row.not_measured = e.what();
     return row;

@@ -42,7 +42,7 @@ class DrillPush final : public servo::Renderer {
 
 /// Every tick's start and the force sent (preallocated).
 struct DrillLog final : servo::TickObserver {
-  explicit DrillLog(std::size_t n) : t_ns(n), f(n) {}
+  explicit DrillLog(std::size_t capacity) : t_ns(capacity), f(capacity) {}
   void on_tick(const servo::TickRecord& r) noexcept override {
     const std::size_t i = n.load(std::memory_order_relaxed);
     if (i >= t_ns.size()) return;

@@ -55,7 +55,7 @@ Vec3 ForceGate::step(const Vec3& demand, double dt_s, std::uint8_t& flags) {
   if (m > lim_.peak_n) f = f * (lim_.peak_n / m), m = lim_.peak_n, flags |= kGatePeak;
   if (const double cap = continuous_cap(dt_s); m > cap) f = f * (cap / m), flags |= kGateContinuous;
   const Vec3 change = f - last_;
-  const double c = norm(change), allowed = lim_.rate_n_per_s * dt_s;
+  const double c = norm(change), allowed = lim_.rate_n_per_s * std::min(dt_s, lim_.rate_dt_cap_s);
   if (c > allowed) f = last_ + change * (allowed / c), flags |= kGateRate;
   if (!all_finite(f)) f = {}, flags |= kGateNonFinite;
   last_ = f;

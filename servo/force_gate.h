@@ -26,6 +26,9 @@ struct ForceLimits {
   double continuous_n = INFINITY;
   /// The window of the RMS [s] (the motor's thermal time constant). <= 0: no continuous limit.
   double continuous_window_s = 10.0;
+  /// The longest time one step's rate allowance counts [s] (the servo's period): a late tick
+  /// does not catch up, so no two device frames see more than the rate over a period each.
+  double rate_dt_cap_s = INFINITY;
 };
 
 /// Without a rate of the device's own, a change of the whole peak takes this long [s]: at

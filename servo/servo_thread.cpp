@@ -85,7 +85,9 @@ std::string ServoThread::start() {
                                 caps_.name + "'s own output loop (" + std::to_string(caps_.output_rate_hz) +
                                 " Hz): its ticks between two of the device's would be lost; run the servo at " +
                                 "or below the device's rate");
-  gate_ = ForceGate(force_limits(caps_, cfg_.force_limit_n, cfg_.max_force_rate_n_per_s));
+  ForceLimits limits = force_limits(caps_, cfg_.force_limit_n, cfg_.max_force_rate_n_per_s);
+  limits.rate_dt_cap_s = 1.0 / cfg_.rate_hz;  // a late tick changes the force no more than an on-time one
+  gate_ = ForceGate(limits);
   device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
   seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();

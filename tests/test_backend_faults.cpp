@@ -409,14 +409,15 @@ TEST_P(BackendFaults, WhatTheDeviceReceivedKeepsTheRules) {
   const double bound = ramped ? kPushN * since_s / 0.05 : kRateNPerS * since_s;
   EXPECT_LE(r[back].f, bound + 2e-3) << "the force came back " << (ramped ? "with a jump, not the ramp" : "faster than the rate")
                                      << " (" << since_s * 1e3 << " ms after the row before)";
-  // The rise to the full push: row to row within the rate over the rows' distance (one servo
-  // period more: two writes may fall between two frames), and no faster overall.
+  // The rise to the full push: row to row within the rate over the rows' distance (two servo
+  // periods more: a late tick's write and the next on-time one may fall between two frames;
+  // each write changes the force by at most the rate over a period), and no faster overall.
   std::size_t full = back;
   while (full < r.size() && r[full].f < kPushN - 2e-3) ++full;
   ASSERT_LT(full, r.size()) << "the push never came back";
   for (std::size_t i = back + 1; i <= full; ++i) {
     const double dt = double(r[i].t_ns - r[i - 1].t_ns) * 1e-9;
-    EXPECT_LE(r[i].f - r[i - 1].f, kRateNPerS * (dt + kPeriodS) + 2e-3) << "row " << i << " of the rise";
+    EXPECT_LE(r[i].f - r[i - 1].f, kRateNPerS * (dt + 2 * kPeriodS) + 2e-3) << "row " << i << " of the rise";
   }
   EXPECT_GE(double(r[full].t_ns - r[back - 1].t_ns) * 1e-9, (kPushN - 2e-3) / kRateNPerS - 2 * kPeriodS)
       << "the rise from zero was faster than the rate limit";

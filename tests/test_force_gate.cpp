@@ -77,6 +77,11 @@ TEST(ForceGate, AStepDemandRisesAtTheRateLimit) {
   // No time, no change.
   ForceGate z(l);
   EXPECT_TRUE(exact_zero(z.step({0, 0, 3}, 0, flags)));
+  // With the servo's period as the cap (1 ms), a late 2.5 ms tick is allowed one period's 1 N.
+  ForceLimits capped = l;
+  capped.rate_dt_cap_s = 0.001;
+  ForceGate c(capped);
+  EXPECT_NEAR(c.step({0, 0, 3}, 0.0025, flags).z, 1.0, 1e-12);
 }
 
 // After a zero tick (a fault, a stale report, a stall) the force rises from 0 again, at the

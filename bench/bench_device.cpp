@@ -31,6 +31,8 @@
 #include "isotouch/service/igtl_device.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
+#include "isotouch/service/plus_peer.h"
+#include "isotouch/service/stream_host.h"
 #include "isotouch/eval/stats.h"
 
 namespace isotouch::bench {
@@ -297,12 +299,13 @@ using Rows = std::vector<std::array<double, 5>>;  // t_s, fx, fy, fz [N, the SDK
 
 /// The servo at 1 kHz under a 3.3 N limit rendering `r` on `dev` for `seconds`; the gate's
 /// rate limit it ran with [N/s].
-double run_servo_on(servo::HapticDeviceIO& dev, servo::Renderer& r, double seconds, bool fifo) {
+double run_servo_on(servo::HapticDeviceIO& dev, servo::Renderer& r, double seconds, bool fifo, double stale_s = 0) {
   servo::TripleBuffer<core::SampleField> published;
   published.publish(std::make_shared<const core::SampleField>(sim::plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
   servo::ServoThreadConfig sc;
   sc.rate_hz = 1000;
   sc.force_limit_n = 3.3;
+  sc.stale_timeout_s = stale_s;
   sc.sched_fifo = sc.pin_cpu = sc.lock_memory = fifo;
   servo::ServoThread servo(published, r, dev, sc);
   servo.start();
@@ -396,112 +399,87 @@ SdkTrial sdk_trial(const std::string& kind, bool fifo) {
   return t;
 }
 
-/// A PLUS-like peer on loopback: streams "StylusToTracker" at `rate_hz`, keeps when each pose
-/// went out and when each Force came back with its |F|.
-class LoopbackPeer {
- public:
-  LoopbackPeer(double rate_hz, bool fifo) : listener_("127.0.0.1", 0), rate_hz_(rate_hz), fifo_(fifo) {
-    sent_ns_.reserve(1 << 16), got_.reserve(1 << 16);
-    thread_ = std::thread([this] { serve(); });
-  }
-  ~LoopbackPeer() { finish(); }
-  /// Stops the stream and joins: the logs below are complete.
-  void finish() {
-    stop_ = true;
-    if (thread_.joinable()) thread_.join();
-  }
-  int port() const { return listener_.port(); }
-  /// After finish(): the poses' send times and the forces (time, |F|) [ns steady].
-  std::vector<std::int64_t> sent_ns_;
-  std::vector<std::pair<std::int64_t, double>> got_;
-
- private:
-  static std::int64_t now() {
-    return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
-  }
-  void serve() {
-    // A device loop's priority where allowed (PLUS's is): the figures are the link's.
-    if (fifo_) servo::make_thread_realtime("bench peer", true, 60, false, -1);
-    int fd = -1;
-    while (fd < 0 && !stop_) fd = listener_.accept(50);
-    if (fd < 0) return;
-    service::Connection conn(fd, 2000, 2000, &stop_);
-    std::thread reader([&] {
-      if (fifo_) servo::make_thread_realtime("bench peer reader", true, 60, false, -1);
-      for (;;) {
-        const service::Incoming in = service::read_message(conn, service::MessageLimits{});
-        if (in.kind == service::Incoming::Kind::kClosed || in.kind == service::Incoming::Kind::kBroken) break;
-        if (in.kind != service::Incoming::Kind::kTransform || in.device != "Force") continue;
-        const double f = std::sqrt(in.matrix[0][3] * in.matrix[0][3] + in.matrix[1][3] * in.matrix[1][3] +
-                                   in.matrix[2][3] * in.matrix[2][3]);
-        std::lock_guard<std::mutex> lock(mu_);
-        got_.push_back({now(), f});
-      }
-    });
-    const double pose[3] = {0, 0, -5};  // 5 mm below the device's origin: inside Push's wall
-    const auto period = std::chrono::nanoseconds(std::int64_t(1e9 / rate_hz_));
-    for (auto next = std::chrono::steady_clock::now(); !stop_;) {
-      std::this_thread::sleep_until(next);
-      const auto msg = service::pack_translation("StylusToTracker", pose);
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        sent_ns_.push_back(now());
-      }
-      conn.send(msg);
-      next = std::max(next + period, std::chrono::steady_clock::now());
-    }
-    conn.shutdown();
-    reader.join();
-  }
-  service::Listener listener_;
-  double rate_hz_;
-  bool fifo_;
-  std::atomic<bool> stop_{false};
-  std::mutex mu_;
-  std::thread thread_;
-};
-
-/// `--haptic igtl:` against the loopback peer at 1 kHz, the servo at 1 kHz pushing 0.5 N with
-/// one 100 ms renderer stall.
-IgtlRow igtl_row(double seconds, bool fifo) {
-  IgtlRow row;
-  auto peer = std::make_unique<LoopbackPeer>(1000, fifo);
-  try {
-    service::IgtlDeviceOptions opt;
-    opt.host = "127.0.0.1";
-    opt.port = peer->port();
-    opt.stream = "StylusToTracker";
-    opt.measure_s = 0.3;
-    opt.fifo_priority = fifo ? 70 : 0;  // as `run --live --haptic igtl:` with SCHED_FIFO
-    service::IgtlDevice dev(opt);
-    row.stream_hz = dev.measured_rate_hz();
-    Push push(0.5, 50, long(seconds * 500), 100);
-    run_servo_on(dev, push, seconds, fifo);
-  } catch (const std::exception& e) {
-    row.not_measured = e.what();
-    return row;
-  }
-  peer->finish();
-  const std::vector<std::int64_t>& sent = peer->sent_ns_;
-  const auto& got = peer->got_;
+/// What the PLUS-like peer got over a link run: the relay delay (a Force's arrival after the
+/// newest pose it had sent), the step's rise held to the gate's rate, and the stall's zero.
+void judge_link(const service::PlusPeer& peer, double rate_limit_n_per_s, double step_n, IgtlRow& row) {
+  const std::vector<std::int64_t> sent = peer.poses_ns();
+  const std::vector<service::PeerForce> got = peer.forces();
   row.forces = long(got.size());
+  if (sent.size() > 1)
+    row.stream_hz = double(sent.size() - 1) / (double(sent.back() - sent.front()) * 1e-9);
   std::vector<double> delay_us;
-  for (const auto& [t, f] : got) {
-    const auto it = std::upper_bound(sent.begin(), sent.end(), t);  // the newest pose sent before it
-    if (it != sent.begin()) delay_us.push_back(double(t - *(it - 1)) * 1e-3);
+  for (const service::PeerForce& g : got) {
+    const auto it = std::upper_bound(sent.begin(), sent.end(), g.t_ns);  // the newest pose sent before it
+    if (it != sent.begin()) delay_us.push_back(double(g.t_ns - *(it - 1)) * 1e-3);
   }
   if (!delay_us.empty()) {
     row.p50_us = eval::percentile(delay_us, 0.5);
     row.p99_us = eval::percentile(delay_us, 0.99);
     row.max_us = *std::max_element(delay_us.begin(), delay_us.end());
   }
+  // The step: from the first force after the quiet ticks to the first at the full step, each
+  // change against the rate over the time since the row before plus one servo period (a
+  // Force answers the newest pose: two servo writes may fall between two Forces).
   std::size_t i = 0;
-  while (i < got.size() && got[i].second < 0.499) ++i;  // pushing 0.5 N
+  while (i < got.size() && core::norm(got[i].f) == 0) ++i;
+  const std::size_t rise_from = i;
+  row.step_rate_n_per_s = 0, row.step_allowed_n_per_s = rate_limit_n_per_s;
+  while (i < got.size() && core::norm(got[i].f) < step_n - 1e-3) ++i;  // the first at the full step
+  for (std::size_t k = std::max<std::size_t>(rise_from, 1); k < got.size() && k <= i; ++k) {
+    const double dt = double(got[k].t_ns - got[k - 1].t_ns) * 1e-9;
+    const double df = core::norm(got[k].f) - core::norm(got[k - 1].f);
+    if (dt <= 0) continue;
+    if (df / dt > row.step_rate_n_per_s)
+      row.step_rate_n_per_s = df / dt, row.step_allowed_n_per_s = rate_limit_n_per_s * (dt + 1e-3) / dt;
+  }
+  if (i < got.size() && rise_from < got.size()) row.step_rise_ms = double(got[i].t_ns - got[rise_from].t_ns) * 1e-6;
+  // The stall: the last force before it -> the zero after it.
   for (; i + 1 < got.size(); ++i)
-    if (got[i].second > 0 && got[i + 1].second == 0) {
-      row.stall_zero_after_us = double(got[i + 1].first - got[i].first) * 1e-3;
+    if (core::norm(got[i].f) > 0 && core::norm(got[i + 1].f) == 0) {
+      row.stall_zero_after_us = double(got[i + 1].t_ns - got[i].t_ns) * 1e-3;
       break;
     }
+}
+
+/// A link on loopback against a PLUS-like peer (service/plus_peer.h) streaming poses at
+/// 1 kHz: `--haptic igtl:` (the peer listens, isotouch connects) or serve's TRANSFORM stream
+/// (`serve --reply-force`: the peer is its client; service/stream_host.h runs serve's reply
+/// thread). The servo at 1 kHz under a 3.3 N limit: 50 quiet ticks, a step to 3 N, one 100 ms
+/// renderer stall half-way.
+IgtlRow link_row(const std::string& kind, double seconds, bool fifo) {
+  IgtlRow row;
+  row.kind = kind;
+  const double step_n = 3.0;
+  Push push(step_n, 50, long(seconds * 500), 100);
+  service::PlusPeerOptions po;
+  po.fifo_priority = fifo ? 60 : 0;  // a device loop's priority where allowed (PLUS's is)
+  std::unique_ptr<service::PlusPeer> peer;
+  double rate_limit = 0;
+  try {
+    if (kind == "igtl") {
+      peer = std::make_unique<service::PlusPeer>(po);
+      service::IgtlDeviceOptions opt;
+      opt.host = "127.0.0.1";
+      opt.port = peer->port();
+      opt.measure_s = 0.3;
+      opt.fifo_priority = fifo ? 70 : 0;  // as `run --live --haptic igtl:` with SCHED_FIFO
+      service::IgtlDevice dev(opt);
+      rate_limit = run_servo_on(dev, push, seconds, fifo);
+    } else {
+      // Stale after 3 of the stream's periods, as `--haptic igtl:` measures its own.
+      service::StreamHost host(service::StreamReplyOptions{fifo, 3e-3});
+      po.connect_host = "127.0.0.1", po.connect_port = host.port();
+      peer = std::make_unique<service::PlusPeer>(po);
+      rate_limit = run_servo_on(host.device(), push, seconds, fifo, 3e-3);
+      host.stop();  // its last act: a zero
+    }
+  } catch (const std::exception& e) {
+    row.not_measured = e.what();
+    return row;
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the last zero in flight
+  peer->finish();
+  judge_link(*peer, rate_limit, step_n, row);
   return row;
 }
 
@@ -517,7 +495,7 @@ std::string sdk_trial_line(const SdkTrial& t) {
 std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>& rows,
                                                const std::vector<DisconnectTrial>& trials,
                                                const std::vector<StallTrial>& stalls,
-                                               const std::vector<SdkTrial>& sdk, const IgtlRow* igtl) {
+                                               const std::vector<SdkTrial>& sdk, const std::vector<IgtlRow>& links) {
   std::vector<std::string> v;
   const auto one = std::find_if(rows.begin(), rows.end(), [](const BenchDeviceRow& r) { return r.rate_hz == 1000; });
   if (one == rows.end() || one->answered == 0 || !std::isfinite(one->p99_us))
@@ -554,10 +532,19 @@ std::vector<std::string> bench_device_verdicts(const std::vector<BenchDeviceRow>
     v.push_back(t.kind + ": a 0 -> 3 N step held to the rate limit (largest " + fixed(t.step_max_rate_n_per_s) +
                 " N/s against " + fixed(t.step_bound_n_per_s) + "): " + (step_ok ? "met" : "NOT met"));
   }
-  // The link: the stall's zero reaches the peer within 3 servo periods of the last force.
-  if (igtl && igtl->not_measured.empty())
-    v.push_back("igtl: zero at the peer within 3 periods of a servo stall (" + fixed(igtl->stall_zero_after_us) +
-                " us after its last force): " + (igtl->stall_zero_after_us <= 3000 ? "met" : "NOT met"));
+  // Each link: the stall's zero reaches the peer within 3 servo periods of the last force;
+  // the step's rise at the peer within the gate's rate.
+  for (const IgtlRow& l : links) {
+    if (!l.not_measured.empty()) {
+      v.push_back(l.kind + ": not measured: NOT met");
+      continue;
+    }
+    v.push_back(l.kind + ": zero at the peer within 3 periods of a servo stall (" + fixed(l.stall_zero_after_us) +
+                " us after its last force): " + (l.stall_zero_after_us <= 3000 ? "met" : "NOT met"));
+    const bool step_ok = l.step_rate_n_per_s <= l.step_allowed_n_per_s * (1 + 1e-9) && std::isfinite(l.step_rise_ms);
+    v.push_back(l.kind + ": a 0 -> 3 N step held to the rate limit at the peer (largest " + fixed(l.step_rate_n_per_s) +
+                " N/s against " + fixed(l.step_allowed_n_per_s) + "): " + (step_ok ? "met" : "NOT met"));
+  }
   return v;
 }
 
@@ -598,17 +585,24 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
   log << "\nvendor SDK trials at 1 kHz (a 100 ms renderer stall while pushing 1 N; a 0 -> 3 N step under a 3.3 N "
          "limit), judged on what the library received:\n";
   for (const SdkTrial& t : sdk) log << sdk_trial_line(t);
-  const IgtlRow ig = igtl_row(std::min(o.seconds, 2.0), o.sched_fifo);
-  log << "\n--haptic igtl: on loopback (a PLUS-like peer in this process streaming poses at 1 kHz; the servo at 1 kHz "
-         "pushing 0.5 N, one 100 ms renderer stall; relay delay = a Force's arrival at the peer after the newest pose "
-         "it had sent):\n";
-  if (!ig.not_measured.empty()) log << "  not measured: " << ig.not_measured << "\n";
-  else
-    log << "  stream " << fixed(ig.stream_hz) << " Hz measured, " << ig.forces << " forces; relay delay p50 "
-        << fixed(ig.p50_us) << " us, p99 " << fixed(ig.p99_us) << " us, max " << fixed(ig.max_us) << " us; the stall's zero "
-        << fixed(ig.stall_zero_after_us) << " us after the last force\n";
+  std::vector<IgtlRow> links;
+  for (const char* kind : {"igtl", "serve stream"}) links.push_back(link_row(kind, std::min(o.seconds, 2.0), o.sched_fifo));
+  log << "\nlinks on loopback (a PLUS-like peer in this process streaming poses at 1 kHz: `--haptic igtl:` connects to "
+         "it, serve's TRANSFORM stream answers it; the servo at 1 kHz under 3.3 N: a 0 -> 3 N step, one 100 ms renderer "
+         "stall; relay delay = a Force's arrival at the peer after the newest pose it had sent):\n";
+  for (const IgtlRow& l : links) {
+    if (!l.not_measured.empty()) {
+      log << "  " << l.kind << ": not measured: " << l.not_measured << "\n";
+      continue;
+    }
+    log << "  " << l.kind << ": stream " << fixed(l.stream_hz) << " Hz, " << l.forces << " forces; relay delay p50 "
+        << fixed(l.p50_us) << " us, p99 " << fixed(l.p99_us) << " us, max " << fixed(l.max_us) << " us; step: largest dF/dt "
+        << fixed(l.step_rate_n_per_s) << " N/s (allowed " << fixed(l.step_allowed_n_per_s) << "), 3 N "
+        << fixed(l.step_rise_ms, 2) << " ms after the first force; the stall's zero " << fixed(l.stall_zero_after_us)
+        << " us after the last force\n";
+  }
   log << "\n";
-  for (const std::string& v : bench_device_verdicts(rows, trials, stalls, sdk, &ig)) log << "verdict  " << v << "\n";
+  for (const std::string& v : bench_device_verdicts(rows, trials, stalls, sdk, links)) log << "verdict  " << v << "\n";
   if (!o.out_csv.empty()) {
     std::ostringstream csv;
     csv << "rate_hz,report_rate_hz,answered,p50_us,p99_us,max_us,ticks,missed,stale\n";

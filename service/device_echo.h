@@ -3,7 +3,7 @@
 // `--haptic` device (EchoDevice, every call forwarded to the factory's device).
 // Frames: the servo works in the grid frame [m] (engine/volume.h); clients get RAS [mm] for
 // points and RAS [N] for the force (grid axes -> LPS by the volume's direction -> RAS).
-// Part of isotouch::serve.
+// Part of isotouch::igtl_device.
 #pragma once
 #include <chrono>
 #include <cstdint>

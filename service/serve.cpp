@@ -32,6 +32,7 @@
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/session/stop_signal.h"
+#include "isotouch/service/stream_replies.h"
 #include "isotouch/service/transform_device.h"
 #include "isotouch/servo/triple_buffer.h"
 #include "isotouch/servo/cpu_placement.h"
@@ -110,7 +111,6 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   void display_loop();
-  void reply_loop();
   std::unique_ptr<Session> prepare_session(engine::Volume v);
   void start_session(std::unique_ptr<Session> s);
   void start_session(engine::Volume v) { start_session(prepare_session(std::move(v))); }
@@ -163,11 +163,16 @@ class Server {
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
   std::mutex stream_mu_;
   std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
-  std::atomic<long> replies_{0}, stall_replies_{0};
+  StreamReplies replies_{device_, StreamReplyOptions{o_.sched_fifo, o_.stale_s},
+                         [this] {
+                           std::lock_guard<std::mutex> lock(stream_mu_);
+                           return stream_from_;
+                         },
+                         [this](const std::string& l) { log_.line(l); }};
 
  public:
   ServeStats stats() const {
-    return {ticks_, missed_, faults_, stale_, sessions_, n_.images.load(), replies_.load(), stall_replies_.load()};
+    return {ticks_, missed_, faults_, stale_, sessions_, n_.images.load(), replies_.replies(), replies_.stall_replies()};
   }
 
  private:
@@ -533,70 +538,6 @@ void Server::command_loop() {
   }
 }
 
-/// reply_force: polls every 0.1 ms; a new pose on the stream, once the servo has written a
-/// force after it arrived (or 2 ms later: no session runs, the force is off), is answered
-/// with that force, the pose's stamp echoed. The stall rule (stall_rule.h): once the servo
-/// has not written for its stall time, a zero goes to the stream's client at once (the servo
-/// ramps in after it), and nothing but zeros until the servo writes again.
-void Server::reply_loop() {
-  if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
-    if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note; !note.empty())
-      log_.line("reply    " + note);
-  std::uint64_t answered = 0;
-  device_.restart_force(TransformDevice::now_ns());
-  block_stop_signals();  // a stop signal's handler sends the last zero: never inside a send of this thread
-  // The stream client's zero however serve ends (servo/exit_zero.h): registered for the
-  // connection the replies go to, fencing every send on it, kept alive (its socket open)
-  // while registered. A client that stops being the stream's is left a zero.
-  std::shared_ptr<Connection> fenced;
-  std::unique_ptr<ExitZeroFence> exit_zero;
-  const double zero3[3] = {0, 0, 0};
-  const std::vector<std::uint8_t> zero_msg = pack_translation("Force", zero3);
-  const auto unfence = [&] {
-    if (!fenced) return;
-    fenced->send(zero_msg);  // blocking: the zero is not dropped
-    fenced->set_fence(nullptr);
-    exit_zero.reset();
-    fenced.reset();
-  };
-  while (!stop_) {
-    std::this_thread::sleep_for(std::chrono::microseconds(100));
-    const TransformDevice::PoseId p = device_.newest_pose();
-    const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
-    const servo::StallLook l = device_.look_force(now);
-    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new
-    if (!stall_zero && p.sequence == answered) continue;
-    const bool rendered = l.last_write_ns >= p.received_ns;
-    if (!stall_zero && !rendered && now - p.received_ns < 2'000'000) continue;
-    answered = p.sequence;
-    const core::Vec3 f = device_.echo().to_ras_n(l.force_n);  // zero unless on
-    const double t[3] = {f.x, f.y, f.z};
-    std::shared_ptr<Connection> to;
-    {
-      std::lock_guard<std::mutex> lock(stream_mu_);
-      to = stream_from_;
-    }
-    if (to != fenced) {
-      unfence();
-      if (to) {
-        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);
-        to->set_fence(exit_zero.get());
-        fenced = to;
-      }
-    }
-    if (!to) continue;
-    // The stall's zero is never dropped (the client would keep the last force): sent whole,
-    // waiting for the client if need be; the rest never wait (a client that does not read).
-    const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
-    if (stall_zero ? to->send(msg) : to->send_droppable(msg)) {
-      replies_.fetch_add(1);
-      stall_replies_.fetch_add(!rendered);
-    }
-  }
-  // The last act: the stream client (PLUS holds the last Force it got) is left with a zero.
-  unfence();
-}
-
 void Server::display_loop() {
   const auto period = std::chrono::duration<double>(1.0 / o_.display_hz);
   auto next = std::chrono::steady_clock::now();
@@ -792,7 +733,7 @@ int Server::run() {
   std::thread display([this] { display_loop(); });
   std::thread commands([this] { command_loop(); });
   std::thread replies;
-  if (o_.reply_force) replies = std::thread([this] { reply_loop(); });
+  if (o_.reply_force) replies = std::thread([this] { replies_.run(stop_); });
   struct Join {
     std::thread& t;
     ~Join() {

@@ -1,5 +1,5 @@
 // transform_device.h - a tracked tool's TRANSFORM stream as a haptic device, and the force
-// the servo renders for it, for `isotouch serve`. Part of isotouch::serve.
+// the servo renders for it, for `isotouch serve`. Part of isotouch::igtl_device.
 //
 // Frames: the stream's translation is in mm in RAS (Slicer's and PLUS's frame); `offset_mm`
 // (RAS) is added to it (the workspace transform that maps a tracker's workspace into the

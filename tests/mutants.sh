@@ -134,6 +134,15 @@ m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\
 m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
                                '    if (false) {' test_exit_zero 'ExitZero.*'
 
+# serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
+SR=service/stream_replies.cpp T=test_stream_replies
+m stream-stall-zero         $SR '    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new' \
+                               '    const bool stall_zero = false;' test_backend_faults 'EveryBackend/BackendFaults.*/ServeStream_Stall'
+m stream-stale-zero         $SR '    const bool stale_zero = stale && !zero_sent && !stall_zero;' \
+                               '    const bool stale_zero = false;' $T 'StreamReplies.AStaleStream*'
+m stream-switch-zero        $SR '    fenced->send(zero_msg);  // blocking: the zero is not dropped' '' $T 'StreamReplies.AClientThatStops*'
+m stream-exit-zero          $SR '        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);' '' $T 'StreamReplies.ACrashOr*'
+
 # HRI's own limits, wherever in servo/ the line now lives.
 H=servo T=test_hri F='Hri.*'
 m hri-limit-robust-at-2x    $H '} else if (mag > params_.force_limit_n) {' '} else if (mag > 2 * params_.force_limit_n) {' $T "$F"

@@ -20,6 +20,7 @@
 #include "isotouch/service/igtl_device.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
+#include "isotouch/service/plus_peer.h"
 #include "isotouch/servo/exit_zero.h"
 
 namespace isotouch::service {
@@ -66,93 +67,34 @@ TEST(ServiceIgtlDevice, SpecAndConnectionErrorsNameThePart) {
   }
 }
 
-/// A PLUS-like peer: accepts one client, streams "StylusToTracker" at `rate_hz` for
-/// `stream_s`, then stays silent, or closes the connection at `close_s` (> 0); keeps every
-/// "Force" it receives with its time.
-class Peer {
- public:
-  Peer(double rate_hz, double stream_s, double close_s = -1)
-      : listener_("127.0.0.1", 0), rate_hz_(rate_hz), stream_s_(stream_s), close_s_(close_s) {
-    thread_ = std::thread([this] { serve(); });
-  }
-  ~Peer() {
-    stop_ = true;
-    thread_.join();
-  }
-  int port() const { return listener_.port(); }
-  struct Got {
-    double t_s;  // since the stream began
-    core::Vec3 f;
-  };
-  std::vector<Got> forces() {
-    std::lock_guard<std::mutex> lock(mu_);
-    return forces_;
-  }
-  /// When each pose went out [s since the stream began].
-  std::vector<double> poses() {
-    std::lock_guard<std::mutex> lock(mu_);
-    return poses_;
-  }
-  double stopped_s() const { return stopped_s_.load(); }
-  /// The client's connection ended (the peer's reader saw it close).
-  bool client_gone() const { return client_gone_.load(); }
-  /// When the peer began to close the connection [s, steady clock's epoch] (0: not yet).
-  double closed_at_s() const { return closed_at_s_.load(); }
-
- private:
-  void serve() {
-    int fd = -1;
-    while (fd < 0 && !stop_) fd = listener_.accept(50);
-    if (fd < 0) return;
-    Connection conn(fd, 2000, 2000, &stop_);
-    const Clock::time_point t0 = Clock::now();
-    std::thread reader([&] {
-      for (;;) {
-        Incoming in = read_message(conn, MessageLimits{});
-        if (in.kind == Incoming::Kind::kClosed || in.kind == Incoming::Kind::kBroken) break;
-        if (in.kind != Incoming::Kind::kTransform || in.device != "Force") continue;
-        std::lock_guard<std::mutex> lock(mu_);
-        forces_.push_back({since(t0), {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]}});
-      }
-      client_gone_ = true;
-    });
-    const double pose[3] = {10, 20, 30};
-    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate_hz_));
-    for (Clock::time_point next = t0; !stop_;) {  // a late thread skips poses, never bursts them
-      std::this_thread::sleep_until(next);
-      if (since(t0) >= stream_s_) break;  // stopped: one period after the last pose
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        poses_.push_back(since(t0));
-      }
-      conn.send(pack_translation("StylusToTracker", pose));
-      next = std::max(next + period, Clock::now());
-    }
-    stopped_s_ = since(t0);
-    while (!stop_ && !(close_s_ > 0 && since(t0) >= close_s_)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    // The time is taken before the shutdown: the client may see the close, and read its own
-    // clock, before this thread runs again after the call.
-    closed_at_s_ = std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
-    conn.shutdown();
-    reader.join();
-  }
-
-  Listener listener_;
-  double rate_hz_, stream_s_, close_s_;
-  std::atomic<bool> stop_{false};
-  std::atomic<double> stopped_s_{1e9}, closed_at_s_{0};
-  std::atomic<bool> client_gone_{false};
-  std::mutex mu_;
-  std::vector<Got> forces_;
-  std::vector<double> poses_;
-  std::thread thread_;
+/// A PLUS-like peer (service/plus_peer.h) the device connects to: streams "StylusToTracker"
+/// (10, 20, 30 mm) at `rate_hz` for `stream_s`, then stays silent, or closes the connection at
+/// `close_s` (> 0); keeps every "Force" it receives with its time.
+PlusPeerOptions peer_options(double rate_hz, double stream_s, double close_s = 0) {
+  PlusPeerOptions o;
+  o.rate_hz = rate_hz;
+  o.stream_s = stream_s;
+  o.close_s = close_s;
+  o.pose_mm = {10, 20, 30};
+  return o;
+}
+double since_stream_s(const PlusPeer& p, std::int64_t t_ns) { return double(t_ns - p.started_ns()) * 1e-9; }
+/// A Force the peer got, timed since its stream began [s].
+struct Got {
+  double t_s;
+  core::Vec3 f;
 };
+std::vector<Got> forces_s(const PlusPeer& p) {
+  std::vector<Got> g;
+  for (const PeerForce& f : p.forces()) g.push_back({since_stream_s(p, f.t_ns), f.f});
+  return g;
+}
 
 // The servo's force answers the stream's poses; when the stream stops (the servo still
 // writing, as a servo that has not yet judged it stale), the peer gets an exact zero within
 // the stale timeout (3 stream periods) and nothing else after; closing sends zero.
 TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
-  Peer peer(500, 0.8);
+  PlusPeer peer(peer_options(500, 0.8));
   IgtlDeviceOptions o;
   o.host = "127.0.0.1";
   o.port = peer.port();
@@ -176,10 +118,10 @@ TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
     until_close = peer.forces().size();
   }  // the destructor sends zero
   for (int i = 0; i < 200 && peer.forces().size() <= until_close; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  const std::vector<Peer::Got> got = peer.forces();
-  const double stopped = peer.stopped_s();
+  const std::vector<Got> got = forces_s(peer);
+  const double stopped = peer.stopped_ns() > 0 ? since_stream_s(peer, peer.stopped_ns()) : 1e9;
   std::size_t exact = 0;
-  for (const Peer::Got& g : got) {
+  for (const Got& g : got) {
     if (g.t_s >= stopped) break;
     const bool is_f = g.f.x == f.x && g.f.y == f.y && g.f.z == f.z;
     exact += is_f;
@@ -189,9 +131,9 @@ TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
   EXPECT_GT(exact, 100u) << "the servo's force answering the stream's poses";
   // After the stream stopped: late answers to its last poses (the servo's force), then a zero
   // and nothing but zeros.
-  const Peer::Got* first_zero = nullptr;
+  const Got* first_zero = nullptr;
   int late_answers = 0;
-  for (const Peer::Got& g : got) {
+  for (const Got& g : got) {
     if (g.t_s < stopped) continue;
     if (!first_zero && core::norm(g.f) == 0.0) first_zero = &g;
     if (!first_zero) {
@@ -210,7 +152,7 @@ TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
 // The peer closes the connection while the servo reads: the reading says disconnected (the
 // servo's zero force and exit 5 follow from it) within a few milliseconds, not before.
 TEST(ServiceIgtlDevice, APeerThatClosesReadsAsDisconnected) {
-  Peer peer(500, 0.5, 0.6);
+  PlusPeer peer(peer_options(500, 0.5, 0.6));
   IgtlDeviceOptions o;
   o.host = "127.0.0.1";
   o.port = peer.port();
@@ -220,12 +162,11 @@ TEST(ServiceIgtlDevice, APeerThatClosesReadsAsDisconnected) {
   double first_disconnected = 0;
   const Clock::time_point t0 = Clock::now();
   for (long k = 0; since(t0) < 0.6 && first_disconnected == 0; ++k) {
-    if (d.read().status == servo::DeviceStatus::kDisconnected)
-      first_disconnected = std::chrono::duration<double>(Clock::now().time_since_epoch()).count();
+    if (d.read().status == servo::DeviceStatus::kDisconnected) first_disconnected = double(PlusPeer::now_ns()) * 1e-9;
     d.write_force_n({0.5, 0, 0});
     std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + 1)));
   }
-  const double closed = peer.closed_at_s();
+  const double closed = double(peer.closed_ns()) * 1e-9;
   ASSERT_GT(closed, 0) << "the peer did not close";
   ASSERT_GT(first_disconnected, 0) << "the device never read as disconnected";
   EXPECT_GE(first_disconnected, closed) << "disconnected before the peer closed";
@@ -239,7 +180,7 @@ TEST(ServiceIgtlDevice, APeerThatClosesReadsAsDisconnected) {
 // machine), not with the next pose ~95 ms later (judged on the peer's clock: no pose went out
 // between the last force and the zero); the stall is counted.
 TEST(ServiceIgtlDevice, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
-  Peer peer(10, 6.0);
+  PlusPeer peer(peer_options(10, 6.0));
   IgtlDeviceOptions o;
   o.host = "127.0.0.1";
   o.port = peer.port();
@@ -269,8 +210,9 @@ TEST(ServiceIgtlDevice, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
   const std::uint64_t stalls_before = d.stalls();
   for (int i = 0; i < 200 && d.stalls() == stalls_before; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  const std::vector<Peer::Got> got = peer.forces();
-  const std::vector<double> poses = peer.poses();
+  const std::vector<Got> got = forces_s(peer);
+  std::vector<double> poses;
+  for (std::int64_t t : peer.poses_ns()) poses.push_back(since_stream_s(peer, t));
   ASSERT_GE(poses_seen, 3) << "the stream did not flow";
   EXPECT_EQ(d.stalls(), stalls_before + 1);
   ASSERT_GT(before, 0u) << "no force before the stall";
@@ -319,7 +261,7 @@ TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
   GTEST_SKIP() << "fork() from a multi-threaded process under ThreadSanitizer";
 #endif
   for (const char* how : {"crash", "exit"}) {
-    Peer peer(500, 3.0);
+    PlusPeer peer(peer_options(500, 3.0));
     const pid_t pid = fork();
     ASSERT_GE(pid, 0);
     if (pid == 0) child_then_end(peer.port(), how);  // never returns
@@ -330,9 +272,9 @@ TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
     // The peer has read all that was sent once its reader saw the connection end.
     for (int i = 0; i < 5000 && !peer.client_gone(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     EXPECT_TRUE(peer.client_gone()) << how << ": the dead child's connection did not end";
-    const std::vector<Peer::Got> got = peer.forces();
+    const std::vector<Got> got = forces_s(peer);
     long forced = 0;
-    for (const Peer::Got& g : got) forced += g.f.x == 0.5;
+    for (const Got& g : got) forced += g.f.x == 0.5;
     EXPECT_GT(forced, 20) << how << ": the servo's force did not flow";
     ASSERT_FALSE(got.empty()) << how;
     EXPECT_EQ(core::norm(got.back().f), 0.0) << how << ": the peer's last force is " << got.back().f.x << " N";

@@ -1,0 +1,81 @@
+#include "isotouch/service/stream_replies.h"
+
+#include <chrono>
+#include <thread>
+#include <vector>
+
+#include "isotouch/service/igtl_device.h"
+#include "isotouch/servo/cpu_placement.h"
+
+namespace isotouch::service {
+
+StreamReplies::StreamReplies(TransformDevice& device, StreamReplyOptions o, Target target,
+                             std::function<void(const std::string&)> log)
+    : device_(device), o_(o), target_(std::move(target)), log_(std::move(log)) {}
+
+/// Polls every 0.1 ms; a new pose on the stream, once the servo has written a force after it
+/// arrived (or 2 ms later), is answered with that force; while the force is off (no session
+/// runs, the servo stalled) at once with a zero.
+void StreamReplies::run(const std::atomic<bool>& stop) {
+  if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
+    if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note;
+        !note.empty() && log_)
+      log_("reply    " + note);
+  std::uint64_t answered = 0;
+  bool zero_sent = true;  // the last Force the client got was a zero (or none)
+  const std::int64_t stale_ns = std::int64_t(o_.stale_s * 1e9);
+  device_.restart_force(TransformDevice::now_ns());
+  block_stop_signals();  // a stop signal's handler sends the last zero: never inside a send of this thread
+  // The stream client's zero however serve ends: registered for the connection the replies go
+  // to, fencing every send on it, kept alive (its socket open) while registered.
+  std::shared_ptr<Connection> fenced;
+  std::unique_ptr<ExitZeroFence> exit_zero;
+  const double zero3[3] = {0, 0, 0};
+  const std::vector<std::uint8_t> zero_msg = pack_translation("Force", zero3);
+  const auto unfence = [&] {
+    if (!fenced) return;
+    fenced->send(zero_msg);  // blocking: the zero is not dropped
+    fenced->set_fence(nullptr);
+    exit_zero.reset();
+    fenced.reset();
+  };
+  while (!stop) {
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+    const TransformDevice::PoseId p = device_.newest_pose();
+    const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
+    const servo::StallLook l = device_.look_force(now);
+    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new
+    const bool stale = p.sequence > 0 && now - p.received_ns > stale_ns;
+    const bool stale_zero = stale && !zero_sent && !stall_zero;
+    if (!stall_zero && !stale_zero && p.sequence == answered) continue;
+    const bool rendered = l.last_write_ns >= p.received_ns;
+    // Force on: wait for the servo's answer to this pose (up to 2 ms); off: a zero at once.
+    if (!stall_zero && !stale_zero && l.on && !rendered && now - p.received_ns < 2'000'000) continue;
+    if (!stale_zero) answered = p.sequence;
+    const core::Vec3 f = stale_zero ? core::Vec3{} : device_.echo().to_ras_n(l.force_n);  // zero unless on
+    const double t[3] = {f.x, f.y, f.z};
+    std::shared_ptr<Connection> to = target_();
+    if (to != fenced) {
+      unfence();  // a client that stops being the stream's is left a zero
+      if (to) {
+        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);
+        to->set_fence(exit_zero.get());
+        fenced = to;
+      }
+    }
+    if (!to) continue;
+    // A zero for a stall or a stale stream is never dropped (the client would keep the last
+    // force): sent whole, waiting for the client if need be; the rest never wait (a client
+    // that does not read).
+    const bool whole = stall_zero || stale_zero;
+    const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
+    if (whole ? to->send(msg) : to->send_droppable(msg)) {
+      zero_sent = f.x == 0 && f.y == 0 && f.z == 0;
+      replies_.fetch_add(1);
+      stall_replies_.fetch_add(!stale_zero && !rendered);
+    }
+  }
+  unfence();  // the last act: the stream client (PLUS holds the last Force it got) is left a zero
+}
+
+}  // namespace isotouch::service

@@ -1,0 +1,52 @@
+// stream_replies.h - `isotouch serve --reply-force`: each pose of the TRANSFORM stream is
+// answered, on a thread of its own, with the force the servo rendered for it, sent to the
+// client whose pose it was, as PLUS's device loop expects (lock-step: the pose's header stamp
+// echoed). The safety rules of every force path (servo/stall_rule.h) hold here too:
+//   - the servo stops writing for its stall time: a zero goes out at once, whole, and nothing
+//     but zeros until the servo writes again (it ramps in after);
+//   - the stream goes stale (no pose for `stale_s`): one zero, whole (the client holds the
+//     last Force it got);
+//   - a client that stops being the stream's is left a zero; the loop's last act is a zero;
+//   - however the process ends (a crash, a second stop signal, a stuck servo's _Exit) the
+//     client's last message is a zero (ExitZeroFence, servo/exit_zero.h).
+// Part of isotouch::igtl_device.
+#pragma once
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "isotouch/service/igtl_socket.h"
+#include "isotouch/service/transform_device.h"
+
+namespace isotouch::service {
+
+struct StreamReplyOptions {
+  bool sched_fifo = false;  ///< SCHED_FIFO 70 (below the servo's 80) for the reply thread where allowed
+  double stale_s = 0.1;     ///< no pose for this long [s]: the client is sent one zero
+};
+
+class StreamReplies {
+ public:
+  /// The connection the replies go to now (the client whose TRANSFORM moved the HIP last);
+  /// null: none. Called once a reply, never on the servo thread.
+  using Target = std::function<std::shared_ptr<Connection>()>;
+  /// `log` gets one line if the thread's priority could not be raised.
+  StreamReplies(TransformDevice& device, StreamReplyOptions o, Target target,
+                std::function<void(const std::string&)> log = {});
+  /// The reply loop, on the calling thread, until `stop`; its last act: a zero to the client.
+  /// The thread takes no stop signal from then on (block_stop_signals).
+  void run(const std::atomic<bool>& stop);
+  long replies() const { return replies_.load(); }  ///< Force replies sent
+  /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
+  long stall_replies() const { return stall_replies_.load(); }
+
+ private:
+  TransformDevice& device_;
+  StreamReplyOptions o_;
+  Target target_;
+  std::function<void(const std::string&)> log_;
+  std::atomic<long> replies_{0}, stall_replies_{0};
+};
+
+}  // namespace isotouch::service

@@ -1,0 +1,179 @@
+// serve's TRANSFORM stream replies (`serve --reply-force`, service/stream_replies.h) judged on
+// what a PLUS-like client RECEIVED (service/plus_peer.h): the servo's force answers each pose;
+// a stale stream, a client that stops being the stream's, the end of the loop and a crash of
+// the process each leave the client an exact zero as its last Force. This test's thread is the
+// servo (read, write the force, every millisecond). No Vulkan: also under ThreadSanitizer.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <csignal>
+#include <functional>
+#include <thread>
+#include <vector>
+
+#include "isotouch/service/plus_peer.h"
+#include "isotouch/service/stream_host.h"
+#include "isotouch/service/stream_replies.h"
+#include "isotouch/servo/exit_zero.h"
+
+namespace isotouch {
+namespace {
+
+using service::PeerForce;
+using service::PlusPeer;
+using service::PlusPeerOptions;
+
+PlusPeerOptions client_of(int port, double stream_s = 0) {
+  PlusPeerOptions o;
+  o.connect_host = "127.0.0.1";
+  o.connect_port = port;
+  o.rate_hz = 500;
+  o.stream_s = stream_s;
+  return o;
+}
+
+/// The servo, on this thread: writes `f` every ms while `more()`, with the force enabled at a
+/// stall time of 20 ms (a loaded machine's late tick is not the stall under test).
+void serve_forces(service::TransformDevice& d, const core::Vec3& f, const std::function<bool()>& more) {
+  d.enable_force(true, 0.020);
+  const auto t0 = std::chrono::steady_clock::now();
+  for (long k = 0; more(); ++k) {
+    d.read();
+    d.write_force_n(f);
+    std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + 1)));
+  }
+}
+
+bool is(const core::Vec3& a, const core::Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+/// Waits up to 2 s for `done`.
+void wait_for(const std::function<bool()>& done) {
+  for (int i = 0; i < 2000 && !done(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+}
+
+// Each pose is answered with the servo's force (RAS: the grid's x and y negated with the
+// default frame's identity direction) and the pose's stamp; when the loop stops, its last
+// act leaves the client a zero.
+TEST(StreamReplies, PosesAreAnsweredWithTheServosForceAndTheLastActIsAZero) {
+  service::StreamHost host({false, 0.1});
+  PlusPeer peer(client_of(host.port()));
+  const core::Vec3 f{0.25, -0.5, 1.0}, ras{-0.25, 0.5, 1.0};  // exact in float32
+  const std::int64_t t0 = PlusPeer::now_ns();
+  serve_forces(host.device(), f, [&] { return PlusPeer::now_ns() - t0 < 400'000'000; });
+  host.stop();
+  wait_for([&] { const auto g = peer.forces(); return !g.empty() && core::norm(g.back().f) == 0.0; });
+  peer.finish();
+  const std::vector<PeerForce> got = peer.forces();
+  long answers = 0, stamped = 0;
+  for (const PeerForce& g : got) {
+    answers += is(g.f, ras);
+    stamped += g.stamp != 0;
+    EXPECT_TRUE(is(g.f, ras) || core::norm(g.f) == 0.0) << "neither the servo's force nor zero";
+  }
+  EXPECT_GT(answers, 100) << "500 poses a second for 0.4 s";
+  EXPECT_EQ(stamped, long(got.size())) << "every reply carries a stamp";
+  ASSERT_FALSE(got.empty());
+  EXPECT_EQ(core::norm(got.back().f), 0.0) << "the client was left holding " << got.back().f.z << " N";
+  EXPECT_EQ(host.replies().replies(), long(got.size()) - 1) << "replies counted, the last zero apart";
+}
+
+// The client stops sending poses while the servo still writes (it has not judged the stream
+// stale yet): the client gets one zero within the reply thread's stale time, and nothing after.
+TEST(StreamReplies, AStaleStreamLeavesTheClientAZero) {
+  service::StreamHost host({false, 0.006});
+  PlusPeer peer(client_of(host.port(), 0.3));
+  const std::int64_t t0 = PlusPeer::now_ns();
+  serve_forces(host.device(), {0, 0, 0.5}, [&] { return PlusPeer::now_ns() - t0 < 600'000'000; });
+  const std::vector<PeerForce> got = peer.forces();
+  const std::int64_t stopped = peer.stopped_ns();
+  ASSERT_GT(stopped, 0) << "the stream did not stop";
+  std::size_t first_zero = got.size();
+  long forced = 0;
+  for (std::size_t i = 0; i < got.size(); ++i) {
+    forced += got[i].f.z == 0.5;
+    if (got[i].t_ns > stopped && core::norm(got[i].f) == 0.0 && first_zero == got.size()) first_zero = i;
+  }
+  EXPECT_GT(forced, 50);
+  ASSERT_LT(first_zero, got.size()) << "no zero after the stream stopped: the client holds 0.5 N";
+  for (std::size_t i = first_zero; i < got.size(); ++i) EXPECT_EQ(core::norm(got[i].f), 0.0) << "a force after the zero";
+  EXPECT_LT(got[first_zero].t_ns - stopped, 100'000'000) << "the stale zero came late";
+  EXPECT_EQ(got.size() - first_zero, 1u) << "one zero, not one a poll";
+}
+
+// Client A streams and gets the force; then client B takes the stream over: A's last Force is
+// a zero (it applies the last one it got), B gets the servo's force.
+TEST(StreamReplies, AClientThatStopsBeingTheStreamsIsLeftAZero) {
+  service::StreamHost host({false, 0.1});
+  PlusPeer a(client_of(host.port()));
+  std::unique_ptr<PlusPeer> b;
+  const std::int64_t t0 = PlusPeer::now_ns();
+  serve_forces(host.device(), {0, 0, 0.5}, [&] {
+    const std::int64_t t = PlusPeer::now_ns() - t0;
+    if (t > 200'000'000 && !b) a.pause(true), b = std::make_unique<PlusPeer>(client_of(host.port()));
+    return t < 500'000'000;
+  });
+  host.stop();
+  const std::vector<PeerForce> got_a = a.forces(), got_b = b->forces();
+  long a_forced = 0, b_forced = 0;
+  for (const PeerForce& g : got_a) a_forced += g.f.z == 0.5;
+  for (const PeerForce& g : got_b) b_forced += g.f.z == 0.5;
+  EXPECT_GT(a_forced, 20);
+  EXPECT_GT(b_forced, 20);
+  ASSERT_FALSE(got_a.empty());
+  EXPECT_EQ(core::norm(got_a.back().f), 0.0) << "A was left holding a force";
+  // A's zero came when B took over, not at the end (it is A's last message well before).
+  EXPECT_LT(got_a.back().t_ns, got_b.back().t_ns - 100'000'000);
+}
+
+/// A child process that serves the stream on a port it writes to `fd`, writes 0.5 N every ms
+/// as the servo would for 400 ms, then crashes (SIGSEGV: the fatal-signal handler), or ends
+/// as a servo stuck in its renderer ends ("exit": send_exit_zeros, then _Exit).
+[[noreturn]] void child_then_end(int fd, const char* how) {
+  struct rlimit none {0, 0};
+  setrlimit(RLIMIT_CORE, &none);  // no core file from the crash
+  service::StreamHost host({false, 0.1});
+  const int port = host.port();
+  if (write(fd, &port, sizeof port) != sizeof port) std::_Exit(2);
+  const std::int64_t t0 = PlusPeer::now_ns();
+  serve_forces(host.device(), {0, 0, 0.5}, [&] { return PlusPeer::now_ns() - t0 < 400'000'000; });
+  if (std::string(how) == "crash") std::raise(SIGSEGV);  // the reply thread still answering
+  servo::send_exit_zeros(5000);
+  std::_Exit(3);
+}
+
+TEST(StreamReplies, ACrashOrAStuckServosExitLeavesTheClientAZero) {
+#if defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "fork() from a multi-threaded process under ThreadSanitizer (die_after_fork)";
+#endif
+  for (const char* how : {"crash", "exit"}) {
+    int p[2];
+    ASSERT_EQ(pipe(p), 0);
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) child_then_end(p[1], how);
+    close(p[1]);
+    int port = 0;
+    ASSERT_EQ(read(p[0], &port, sizeof port), ssize_t(sizeof port)) << how;
+    close(p[0]);
+    PlusPeer peer(client_of(port));
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    if (std::string(how) == "crash") EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGSEGV) << how;
+    else EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 3) << how;
+    wait_for([&] { return peer.client_gone(); });
+    EXPECT_TRUE(peer.client_gone()) << how << ": the dead server's connection did not end";
+    peer.finish();
+    const std::vector<PeerForce> got = peer.forces();
+    long forced = 0;
+    for (const PeerForce& g : got) forced += g.f.z == 0.5;
+    EXPECT_GT(forced, 20) << how << ": the servo's force did not flow";
+    ASSERT_FALSE(got.empty()) << how;
+    EXPECT_EQ(core::norm(got.back().f), 0.0) << how << ": the client's last force is " << got.back().f.z << " N";
+  }
+}
+
+}  // namespace
+}  // namespace isotouch

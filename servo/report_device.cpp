@@ -266,7 +266,7 @@ void ReportDevice::reader_loop() {
     accept(r);
     // The protocol's reason, noted when it changes (the reader allocates only then, not per
     // report); a reading without a fault ends the run, so a later fault is noted again.
-    if (r.status == DeviceStatus::kFault) {
+    if (r.status == DeviceStatus::kFault || r.status == DeviceStatus::kUncalibrated) {
       if (const std::string_view why = protocol_->fault(); !why.empty() && why != fault_noted_) {
         fault_noted_.assign(why);
         note(link_->name() + ": " + fault_noted_, true);

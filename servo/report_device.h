@@ -71,11 +71,11 @@ class DeviceProtocol {
     (void)buf;
     return 0;
   }
-  /// Why decode_input() set DeviceStatus::kFault, when the protocol itself found the fault
-  /// (Polhem: not calibrated yet, or the unit is not of the configured kinematics); ""
-  /// otherwise. Reader thread (the view lives until the next decode_input()); noted as the
-  /// device's last refusal (the host refuses to drive it) once per run of faulted readings
-  /// and again whenever the reason changes (not calibrated, then of the other kinematics).
+  /// Why decode_input() set DeviceStatus::kFault or kUncalibrated, when the protocol itself
+  /// found it (Polhem: not calibrated yet, or the unit is not of the configured kinematics);
+  /// "" otherwise. Reader thread (the view lives until the next decode_input()); noted as the
+  /// device's last refusal (the host refuses to drive it) once per run of such readings and
+  /// again whenever the reason changes (not calibrated, then of the other kinematics).
   virtual std::string_view fault() const { return {}; }
 };
 
@@ -173,7 +173,8 @@ class ReportDevice final : public HapticDeviceIO {
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
-  std::string last_refusal() const;  ///< why the last refused report (or the device, by its protocol's fault()) was refused ("" none)
+  /// Why the last refused report (or the device, by its protocol's fault()) was refused ("" none).
+  std::string last_refusal() const;
   std::string name() const { return link_->name(); }
   /// "" or a warning about the device's capabilities (no watchdog), valid after open().
   std::string warning() const { return warning_; }

@@ -15,6 +15,8 @@
 
 #include "isotouch/servo/forcedimension_device.h"
 #include "isotouch/servo/openhaptics_device.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/triple_buffer.h"
 
 using namespace isotouch;
 using servo::DeviceStatus;
@@ -279,8 +281,8 @@ TEST_F(OpenHaptics, ACalibrationThatNeedsAnUpdateIsUpdatedBeforeAnyForce) {
 }
 
 // A device that needs the stylus in its inkwell, or whose calibration never gets ok: no force
-// reaches it (every row the double received is an exact zero) and readings are faults, until
-// the stylus is put in the inkwell.
+// reaches it (every row the double received is an exact zero) and readings are uncalibrated
+// (not faults), until the stylus is put in the inkwell.
 TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   setenv("HD_DOUBLE_CALIBRATION", "manual", 1);
   servo::OpenHapticsDevice d;
@@ -290,7 +292,8 @@ TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   d.enable_force(true, kTestStallS);
   ctl.clear_log();
   write_for(d, {0.5, 0, 0}, 60);
-  EXPECT_EQ(d.read().status, DeviceStatus::kFault);
+  EXPECT_EQ(d.read().status, DeviceStatus::kUncalibrated);  // zero force, not a fault
+  EXPECT_TRUE(d.read().force_off);
   EXPECT_FALSE(d.calibrated());
   auto rows = ctl.received();
   ASSERT_GT(rows.size(), 30u);
@@ -300,6 +303,64 @@ TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   write_for(d, {0.5, 0, 0}, 30);
   EXPECT_EQ(ctl.received().back()[1], 0.5);
   d.close();
+}
+
+namespace {
+/// Pushes along isotouch x wherever the HIP is (a hand leaning into a wall).
+class Push final : public servo::Renderer {
+ public:
+  const char* name() const override { return "push"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView&, const Vec3&, double) override {
+    servo::HriTick t;
+    t.force_n = {0.5, 0, 0};
+    t.contact = true;
+    return t;
+  }
+};
+}  // namespace
+
+// Calibrated only after the servo started (the stylus put in its inkwell 150 ms in): until
+// then every force the double received is an exact zero and the servo counts the ticks as
+// uncalibrated, not as faults (`isotouch run --live` does not exit 5 for it); once calibrated
+// the force ramps in (50 ms) to the renderer's 0.5 N, what the double received.
+TEST_F(OpenHaptics, CalibratedAfterTheStartTheForceRampsInAndNoFaultIsCounted) {
+  setenv("HD_DOUBLE_CALIBRATION", "manual", 1);
+  servo::OpenHapticsDevice d;
+  d.open();
+  unsetenv("HD_DOUBLE_CALIBRATION");
+  servo::TripleBuffer<core::SampleField> none;  // the push reads no field
+  none.publish(std::make_shared<const core::SampleField>());
+  Push push;
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = 1000;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = false;
+  sc.ramp_in_s = 0.05;
+  servo::ServoThread servo(none, push, d, sc);
+  ctl.clear_log();
+  servo.start();
+  sleep_ms(150);
+  EXPECT_EQ(servo.device_status(), DeviceStatus::kUncalibrated);
+  const std::size_t before = ctl.received().size();
+  ctl.inkwell();
+  EXPECT_TRUE(wait_for([&] { return d.calibrated(); }));
+  EXPECT_TRUE(wait_for([&] { return ctl.received().back()[1] == 0.5; })) << "the force never came";
+  servo.stop();
+  const servo::DeviceCounters c = servo.device_counters();
+  EXPECT_EQ(c.fault, 0) << "waiting for calibration counted as a fault";
+  EXPECT_GT(c.uncalibrated, 50);
+  const Rows rows = ctl.received();
+  ASSERT_GT(before, 50u);
+  for (std::size_t i = 0; i < before; ++i)
+    EXPECT_EQ(rows[i][1], 0.0) << "a force reached the uncalibrated device at t " << rows[i][0];
+  // The ramp: the first forces after calibration rise from zero, over about 50 ms.
+  std::size_t first = before;
+  while (first < rows.size() && rows[first][1] == 0.0) ++first;
+  ASSERT_LT(first, rows.size());
+  EXPECT_LT(rows[first][1], 0.1) << "the force stepped in";
+  long rising = 0;
+  for (std::size_t i = first; i < rows.size(); ++i) rising += rows[i][1] > 0 && rows[i][1] < 0.25;
+  EXPECT_GE(rising, 10) << "no ramp: the force came in within " << rising << " frames";
 }
 
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {

@@ -155,6 +155,12 @@ void ReportDevice::note(const std::string& error, bool refusal) {
   if (refusal) last_refusal_ = error;
 }
 
+void ReportDevice::unnote(const std::string& error) {
+  std::lock_guard lock(note_mu_);
+  if (last_refusal_ == error) last_refusal_.clear();
+  if (last_error_ == error) last_error_.clear();
+}
+
 void ReportDevice::link_down(const std::string& why) {
   DeviceReading r = reading_.load();
   r.status = DeviceStatus::kDisconnected;
@@ -272,7 +278,9 @@ void ReportDevice::reader_loop() {
         note(link_->name() + ": " + fault_noted_, true);
       }
     } else if (!fault_noted_.empty()) {
-      fault_noted_.clear();  // keeps its capacity: no allocation
+      // Over (calibrated since): the reason no longer holds, and is taken back.
+      unnote(link_->name() + ": " + fault_noted_);
+      fault_noted_.clear();  // keeps its capacity
     }
     if (const std::size_t m = protocol_->pending_command(cmd)) send(std::span(cmd.data(), m));
   }

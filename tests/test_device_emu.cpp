@@ -661,6 +661,11 @@ TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
     ASSERT_LT(norm(hid::polhem::position_m(e, c) - seen), 0.001);
     ASSERT_TRUE(hid::polhem::caps(c).contains(seen));
   }
+  std::string said_before;  // the device's last refusal while it waits for the press
+  rig.while_running = [&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(350));
+    said_before = rig.dev->last_refusal();
+  };
   rig.run(1.2);  // 0.5 s before the press, 0.7 s after
   ASSERT_EQ(rig.stats.switch_presses, 1);
   ASSERT_GT(rig.stats.calibrated_ns, 0) << "never calibrated: " << rig.summary();
@@ -672,7 +677,10 @@ TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
   // Waiting for calibration is no fault (`isotouch run --live` does not exit 5 for it).
   EXPECT_GT(rig.servo_counters.uncalibrated, 200) << "the servo did not see the unit uncalibrated: " << rig.summary();
   EXPECT_EQ(rig.servo_counters.fault, 0) << rig.summary();
-  EXPECT_NE(rig.last_refusal.find("not calibrated since isotouch opened it"), std::string::npos) << rig.last_refusal;
+  EXPECT_NE(said_before.find("not calibrated since isotouch opened it"), std::string::npos) << said_before;
+  // Calibrated since: the reason no longer holds and is not kept as the last refusal.
+  EXPECT_EQ(rig.last_refusal, "") << "kept after the calibration";
+  EXPECT_EQ(rig.last_error.find("not calibrated"), std::string::npos) << rig.last_error;
   // The servo ramped in from zero once calibrated (50 ms): at most the wall's force at the
   // hand (10 % for overshoot) times the time since the first calibrated tick (1 ms slack).
   std::size_t ok = 0;

@@ -242,6 +242,8 @@ void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
       << ms(meter.max_force_n()) << " N; stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
       << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped, "
       << c.late_restarts << " late restarts\n";
+  if (c.uncalibrated > 0)
+    log << "device   waiting for calibration " << c.uncalibrated << " ticks (zero force; not a fault)\n";
   if (d.report) {
     const servo::LinkCounters l = d.report->counters();
     log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "
@@ -310,9 +312,17 @@ int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* fol
   if (const std::string note = live.start(); !note.empty()) log << "servo    " << note << "\n";
   int last_second = 0;
   const bool tty = o.run.progress && ::isatty(STDERR_FILENO);
+  bool waiting = false;  // the device was last seen uncalibrated
   while (live.elapsed_s() < duration && session::stop_signal() == 0) {
     submit_due(due, next, live.elapsed_s(), scene, setup, live);
     std::this_thread::sleep_for(std::chrono::microseconds(500));
+    // Not calibrated yet: zero force, not a fault (the run goes on; the force ramps in once it is).
+    if (const bool now = live.servo_thread()->device_status() == servo::DeviceStatus::kUncalibrated; now != waiting) {
+      waiting = now;
+      log << "device   " << (now ? "waiting for calibration (zero force until the device is calibrated)"
+                                   : "calibrated: the force ramps in")
+          << " at " << ms(live.elapsed_s()) << " s\n";
+    }
     if (o.run.progress && int(live.elapsed_s()) > last_second) {
       last_second = int(live.elapsed_s());
       const session::LiveStats s = live.stats();

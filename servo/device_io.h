@@ -59,6 +59,14 @@ enum class DeviceStatus : std::uint8_t {
   kStale,         ///< no fresh report within the backend's own timeout
   kDisconnected,  ///< the link is down (unplugged, emulator gone); the backend reconnects
   kFault,         ///< the device reports a fault (or sent a report that is refused)
+  /// The device is there but not calibrated yet (a Polhem since it was opened, an OpenHaptics
+  /// device whose hdCheckCalibration is not ok): its pose is not where it reads, so the servo
+  /// sends zero force and does not tick the renderer, as for a fault, and once calibrated
+  /// resets the renderer and ramps the force in. Not a fault: a user who calibrates after
+  /// the start is expected (counted as DeviceCounters::uncalibrated, not as fault; the front
+  /// ends say "waiting for calibration" and do not exit with kDeviceLost for it). Last, so
+  /// the values before it keep their numbers.
+  kUncalibrated,
 };
 
 inline const char* to_string(DeviceStatus s) {
@@ -67,6 +75,7 @@ inline const char* to_string(DeviceStatus s) {
     case DeviceStatus::kStale: return "stale";
     case DeviceStatus::kDisconnected: return "disconnected";
     case DeviceStatus::kFault: return "fault";
+    case DeviceStatus::kUncalibrated: return "waiting for calibration";
   }
   return "?";
 }

@@ -69,8 +69,9 @@ std::string PolhemProtocol::decode_input(std::span<const std::uint8_t> bytes, De
   // see calibrated_). info 0 without one proves nothing (the flag starts clear at power-up).
   if (in.info == 0 && commanded_) calibrated_.store(true), commanded_ = false;
   if (!calibrated_.load()) {
-    // Uncalibrated counts: a wrong pose and a wrong Jacobian. No force until calibrated.
-    r.status = DeviceStatus::kFault;
+    // Uncalibrated counts: a wrong pose and a wrong Jacobian. No force until calibrated; not
+    // a fault (the user calibrates when they will): the servo ramps in once it is.
+    r.status = DeviceStatus::kUncalibrated;
     r.force_off = true;
   } else {
     r.force_off = false;  // the firmware drives what it is sent

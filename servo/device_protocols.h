@@ -42,7 +42,8 @@ class V1Protocol final : public DeviceProtocol {
 /// any currents it is sent. So the device counts as uncalibrated from handshake() (every open
 /// and reconnect: it may have been power-cycled) until this protocol has itself sent the
 /// command in answer to an info 1 and then seen info 0 (only the command clears the flag).
-/// Until then every reading is DeviceStatus::kFault with force_off set, fault() says to press
+/// Until then every reading is DeviceStatus::kUncalibrated (zero force, not counted as a
+/// fault; the servo ramps in once calibrated) with force_off set, fault() says to press
 /// the handle into the switch, and encode_output() sends zero currents. While the device asks
 /// (info 1) the command follows each of its reports (the firmware keeps only its last queued
 /// report, so a command can be lost; upstream sends it in place of a current command until

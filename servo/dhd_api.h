@@ -74,6 +74,11 @@ constexpr int kErrNone = 0, kErr = 1, kErrCom = 2, kErrDhcBusy = 3, kErrNoDriver
 constexpr int kComModeSync = 0, kComModeAsync = 1, kComModeVirtual = 3, kComModeNetwork = 4;
 // dhdGetStatus(): the status vector's length and the entries isotouch may read. DHD_MAX_STATUS
 // is 16 in dhdc.h 3.7/3.10 and 17 in CHAI3D 2022 and the 3.14+ bindings; pass a buffer of 17.
+// DHD_STATUS_FORCE 5, DHD_STATUS_FORCEOFFCAUSE 14 and the DHD_FORCEOFF_* causes checked again
+// against github.com/BezniF/fdo6 include/dhdc.h at 6dde728f (SDK 3.10.0, "status codes",
+// "causes for device FORCE OFF state"). status[kStatusForce]: 1 while forces are on. The
+// firmware watchdog's trip turns forces off (cause kForceOffWatchdog); dhdEnableForce(DHD_ON)
+// turns them on again (the bindings' setWatchdog: "the device firmware will disable forces").
 constexpr int kMaxStatus = 17;
 constexpr int kStatusPower = 0, kStatusConnected = 1, kStatusForce = 5, kStatusBrake = 6, kStatusError = 9,
               kStatusForceOffCause = 14;

@@ -55,6 +55,7 @@ std::string load_dhd_api(DhdApi& a) {
   sdk_symbol(a.lib, "dhdErrorGetLastStr", a.dhdErrorGetLastStr, optional);
   sdk_symbol(a.lib, "dhdEnableExpertMode", a.dhdEnableExpertMode, optional);
   sdk_symbol(a.lib, "dhdSetWatchdog", a.dhdSetWatchdog, optional);
+  sdk_symbol(a.lib, "dhdGetStatus", a.dhdGetStatus, optional);
   if (!missing.empty()) return a.lib.path + " lacks " + missing + " (not the Force Dimension DHD library?)";
   return {};
 }
@@ -120,8 +121,10 @@ void ForceDimensionDevice::open() {
   const std::string watchdog = caps_.watchdog_s > 0
                                    ? "firmware watchdog " + std::to_string(int(std::lround(caps_.watchdog_s * 1e3))) + " ms"
                                    : "no firmware watchdog (the SDK has no dhdSetWatchdog: SDK 3.3.2 or later sets one)";
-  description_ = who + " (" + caps_.name + ", system type " + std::to_string(type) + ", " + watchdog + ", " +
+  description_ = who + " (" + caps_.name + ", system type " + std::to_string(type) + ", " + watchdog +
+                 (api_.dhdGetStatus ? "" : ", no dhdGetStatus: a force-off by the firmware is not seen") + ", " +
                  api_.lib.path + ")";
+  status_every_ = std::max(1, int(std::lround(rate_hz_ / 1000.0)));
   stop_ = false;
   thread_ = std::thread([this] { loop(); });
   for (int i = 0; i < 1000 && periods_.load() == 0; ++i) sleep_until_ns(sdk_now_ns() + 1'000'000);
@@ -161,6 +164,7 @@ void ForceDimensionDevice::reopen(std::int64_t now, bool& force_on) {
   if (id < 0) return;  // not back yet
   id_ = char(id);
   force_on = false;
+  fw_off_ = false;  // opened anew: its force state starts off, and the servo ramps in
   set_watchdog(false);  // caps_ keeps what open() set (other threads read it)
   reopens_.fetch_add(1);
 }
@@ -178,16 +182,52 @@ void ForceDimensionDevice::period(std::int64_t now, bool& force_on) {
     down_ = false;
     r.position_m = last_position_ = dhd_to_device_m(x, y, z);
     r.buttons = api_.dhdGetButtonMask(id_);
+    if (periods_.load(std::memory_order_relaxed) % status_every_ == 0) read_status(force_on);
   }
-  r.force_off = !force_on;
+  r.force_off = !force_on;  // also while the firmware has them off (read_status)
+  r.watchdog_tripped = fw_off_ && fw_off_cause_ == dhd::kForceOffWatchdog;
   publish(r, now);
+  if (fw_off_ && fw_off_reading_ == 0) fw_off_reading_ = published_sequence();
   bool on = false;
   Vec3 f = force_now(now, on);
   if (down_) on = false;
+  if (fw_off_) {
+    // Back on (below: dhdEnableForce) once the servo's force is an exact zero answering a
+    // reading that said force_off, and, unless the watchdog turned them off, once the user
+    // turned them on again at the device.
+    const bool servo_zero = answered_sequence() >= fw_off_reading_ && f.x == 0.0 && f.y == 0.0 && f.z == 0.0;
+    if (servo_zero && (fw_off_cause_ == dhd::kForceOffWatchdog || fw_on_)) fw_off_ = false;
+    else on = false;
+  }
   if (on != force_on && api_.dhdEnableForce(on ? dhd::kOn : dhd::kOff, id_) >= 0) force_on = on;
   if (!on) f = Vec3{};
   const Vec3 fd = device_to_dhd_force(f);
   if (api_.dhdSetForce(fd.x, fd.y, fd.z, id_) < 0 && !down_) note_error("dhdSetForce");
+}
+
+/// Device thread: the firmware's force state (dhdGetStatus). Forces off while this thread has
+/// them on: the firmware turned them off by itself (its watchdog: this thread starved past
+/// watchdog_s(); a button, a velocity or deadman switch): counted, noted, and held off
+/// (period()) with `force_on` cleared, so readings say force_off and the servo holds its ramp.
+void ForceDimensionDevice::read_status(bool& force_on) {
+  if (!api_.dhdGetStatus) return;
+  int st[dhd::kMaxStatus] = {};
+  if (api_.dhdGetStatus(st, id_) < 0) return;  // a device going away: dhdGetPosition says so
+  fw_on_ = st[dhd::kStatusForce] != 0;
+  if (!force_on || fw_on_ || fw_off_) return;
+  fw_off_ = true;
+  fw_off_cause_ = st[dhd::kStatusForceOffCause];
+  fw_off_reading_ = 0;
+  force_on = false;  // the firmware's state; dhdEnableForce(DHD_ON) turns them on again
+  force_offs_.fetch_add(1);
+  const bool watchdog = fw_off_cause_ == dhd::kForceOffWatchdog;
+  if (watchdog) watchdog_trips_.fetch_add(1);
+  std::lock_guard lock(note_mu_);
+  last_error_ = watchdog ? "the firmware's watchdog turned the forces off (no force command within " +
+                               std::to_string(int(std::lround(caps_.watchdog_s * 1e3))) +
+                               " ms: the device thread was starved); on again from zero"
+                         : "the device turned the forces off (cause " + std::to_string(fw_off_cause_) +
+                               ": a button, a velocity or deadman switch); on again from zero once the device is";
 }
 
 void ForceDimensionDevice::loop() {

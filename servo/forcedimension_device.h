@@ -31,6 +31,7 @@ struct DhdApi {
   DhdErrorGetLastStr dhdErrorGetLastStr = nullptr;
   DhdEnableExpertMode dhdEnableExpertMode = nullptr;  // optional (expert SDK)
   DhdSetWatchdog dhdSetWatchdog = nullptr;            // optional (SDK 3.3.2 and later)
+  DhdGetStatus dhdGetStatus = nullptr;                // optional: without it a firmware force-off is not seen
   SdkLibrary lib;
 };
 
@@ -72,6 +73,10 @@ class ForceDimensionDevice final : public SdkDevice {
   std::string last_error() const;     ///< the last failed call and the SDK's reason ("" none)
   long errors() const { return errors_.load(); }
   long periods() const { return periods_.load(); }
+  /// Times the firmware turned the forces off by itself while isotouch had them on, read from
+  /// dhdGetStatus: its watchdog (the device thread starved past watchdog_s()), and any cause.
+  long watchdog_trips() const { return watchdog_trips_.load(); }
+  long firmware_force_offs() const { return force_offs_.load(); }
   std::string sdk_status() const override;
 
  private:
@@ -80,6 +85,7 @@ class ForceDimensionDevice final : public SdkDevice {
   void note_error(const char* call);
   void set_watchdog(bool record);
   void reopen(std::int64_t now, bool& force_on);
+  void read_status(bool& force_on);
 
   int index_;
   double rate_hz_;
@@ -88,13 +94,24 @@ class ForceDimensionDevice final : public SdkDevice {
   std::string description_;
   std::thread thread_;
   std::atomic<bool> stop_{false};
-  std::atomic<long> errors_{0}, periods_{0}, reopens_{0};
+  std::atomic<long> errors_{0}, periods_{0}, reopens_{0}, watchdog_trips_{0}, force_offs_{0};
   mutable std::mutex note_mu_;
   std::string last_error_;  // note_mu_
   std::string realtime_note_;  // note_mu_
   Vec3 last_position_;  // device thread
   bool down_ = false;   // device thread: the last read failed
   std::int64_t last_reopen_ns_ = 0;  // device thread: the last attempt to open the device again
+  // Device thread: the firmware turned the forces off by itself (dhdGetStatus). Held off, with
+  // zero force and readings that say force_off (watchdog_tripped for its watchdog), until the
+  // firmware's force is on again (after a watchdog trip: turned on again by this thread; any
+  // other cause, a button or a velocity or deadman switch: by the user at the device) and the
+  // servo's latest force is an exact zero made after it read such a reading (it holds its
+  // ramp at 0 while force_off is set): the force then ramps in from 0, never steps back.
+  bool fw_off_ = false;
+  bool fw_on_ = false;                // the firmware's force state at the last dhdGetStatus
+  int status_every_ = 1;              // dhdGetStatus every this many periods (about 1 kHz)
+  int fw_off_cause_ = 0;
+  std::uint64_t fw_off_reading_ = 0;  // the sequence of the first reading that said so
 };
 
 }  // namespace isotouch::servo

@@ -235,7 +235,9 @@ HDCallbackCode OpenHapticsDevice::tick() {
   r.position_m = hd_to_device_m(p);
   r.buttons = std::uint32_t(buttons);
   r.force_off = !enabled_output_ || !calibrated;
-  if (!calibrated) r.status = DeviceStatus::kFault;  // zero force; the servo ramps in once calibrated
+  // Zero force, not a fault (calibrating after the start is expected); the servo ramps in once
+  // calibrated.
+  if (!calibrated) r.status = DeviceStatus::kUncalibrated;
   if (e.errorCode != hd::kSuccess) {
     errors_.fetch_add(1);
     last_error_.store(e.errorCode);

@@ -155,6 +155,12 @@ void ReportDevice::note(const std::string& error, bool refusal) {
   if (refusal) last_refusal_ = error;
 }
 
+void ReportDevice::unnote(const std::string& error) {
+  std::lock_guard lock(note_mu_);
+  if (last_refusal_ == error) last_refusal_.clear();
+  if (last_error_ == error) last_error_.clear();
+}
+
 void ReportDevice::link_down(const std::string& why) {
   DeviceReading r = reading_.load();
   r.status = DeviceStatus::kDisconnected;
@@ -266,13 +272,15 @@ void ReportDevice::reader_loop() {
     accept(r);
     // The protocol's reason, noted when it changes (the reader allocates only then, not per
     // report); a reading without a fault ends the run, so a later fault is noted again.
-    if (r.status == DeviceStatus::kFault) {
+    if (r.status == DeviceStatus::kFault || r.status == DeviceStatus::kUncalibrated) {
       if (const std::string_view why = protocol_->fault(); !why.empty() && why != fault_noted_) {
         fault_noted_.assign(why);
         note(link_->name() + ": " + fault_noted_, true);
       }
     } else if (!fault_noted_.empty()) {
-      fault_noted_.clear();  // keeps its capacity: no allocation
+      // Over (calibrated since): the reason no longer holds, and is taken back.
+      unnote(link_->name() + ": " + fault_noted_);
+      fault_noted_.clear();  // keeps its capacity
     }
     if (const std::size_t m = protocol_->pending_command(cmd)) send(std::span(cmd.data(), m));
   }

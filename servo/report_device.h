@@ -71,11 +71,13 @@ class DeviceProtocol {
     (void)buf;
     return 0;
   }
-  /// Why decode_input() set DeviceStatus::kFault, when the protocol itself found the fault
-  /// (Polhem: not calibrated yet, or the unit is not of the configured kinematics); ""
-  /// otherwise. Reader thread (the view lives until the next decode_input()); noted as the
-  /// device's last refusal (the host refuses to drive it) once per run of faulted readings
-  /// and again whenever the reason changes (not calibrated, then of the other kinematics).
+  /// Why decode_input() set DeviceStatus::kFault or kUncalibrated, when the protocol itself
+  /// found it (Polhem: not calibrated yet, or the unit is not of the configured kinematics);
+  /// "" otherwise. Reader thread (the view lives until the next decode_input()); noted as the
+  /// device's last refusal (the host refuses to drive it) once per run of such readings and
+  /// again whenever the reason changes (not calibrated, then of the other kinematics); the
+  /// note is taken back (last_refusal() and last_error() "" again, unless something else was
+  /// noted since) by the first reading that is neither.
   virtual std::string_view fault() const { return {}; }
 };
 
@@ -173,7 +175,9 @@ class ReportDevice final : public HapticDeviceIO {
 
   LinkCounters counters() const;
   std::string last_error() const;    ///< why the link last dropped or a report was last refused ("" none)
-  std::string last_refusal() const;  ///< why the last refused report (or the device, by its protocol's fault()) was refused ("" none)
+  /// Why the last refused report (or the device, by its protocol's fault(), while it lasts)
+  /// was refused ("" none).
+  std::string last_refusal() const;
   std::string name() const { return link_->name(); }
   /// "" or a warning about the device's capabilities (no watchdog), valid after open().
   std::string warning() const { return warning_; }
@@ -188,6 +192,8 @@ class ReportDevice final : public HapticDeviceIO {
   void accept(const DeviceReading& r);
   void link_down(const std::string& why);
   void note(const std::string& error, bool refusal = false);
+  /// Takes back a note of `error` (last_refusal(), last_error()) if nothing was noted since.
+  void unnote(const std::string& error);
   bool send(std::span<const std::uint8_t> report);
 
   std::unique_ptr<ReportLink> link_;

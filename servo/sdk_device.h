@@ -89,6 +89,10 @@ class SdkDevice : public HapticDeviceIO {
   Vec3 force_now(std::int64_t now_ns, bool& on);
   /// Device thread: after open, before the first force_now().
   void reset_device_thread(std::int64_t now_ns);
+  /// Device thread: the sequence of the last reading published, and of the reading the force
+  /// the last force_now() returned answers (DeviceReading::sequence; 0: none).
+  std::uint64_t published_sequence() const { return sequence_; }
+  std::uint64_t answered_sequence() const { return answered_; }
   DeviceCaps caps_;
   double default_stall_s_ = 0.0025;  ///< when enable_force() is given none [s]
   double device_period_s_ = 0.001;   ///< how often the device thread calls force_now() [s]

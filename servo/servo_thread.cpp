@@ -367,6 +367,7 @@ void ServoThread::count_not_ok(DeviceStatus s, bool refused) {
   if (refused) refused_.fetch_add(1, std::memory_order_relaxed);
   else if (s == DeviceStatus::kStale) stale_.fetch_add(1, std::memory_order_relaxed);
   else if (s == DeviceStatus::kDisconnected) disconnected_.fetch_add(1, std::memory_order_relaxed);
+  else if (s == DeviceStatus::kUncalibrated) uncalibrated_.fetch_add(1, std::memory_order_relaxed);
   else dev_fault_.fetch_add(1, std::memory_order_relaxed);
 }
 
@@ -375,6 +376,7 @@ DeviceCounters ServoThread::device_counters() const {
   c.stale = stale_.load(std::memory_order_relaxed);
   c.disconnected = disconnected_.load(std::memory_order_relaxed);
   c.fault = dev_fault_.load(std::memory_order_relaxed);
+  c.uncalibrated = uncalibrated_.load(std::memory_order_relaxed);
   c.refused = refused_.load(std::memory_order_relaxed);
   c.ramps = ramps_.load(std::memory_order_relaxed);
   c.clamped = clamped_.load(std::memory_order_relaxed);

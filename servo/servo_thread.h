@@ -120,6 +120,9 @@ struct DeviceCounters {
   long stale = 0;         ///< ticks with no fresh report within the timeout
   long disconnected = 0;  ///< ticks with the link down
   long fault = 0;         ///< ticks the device reported a fault
+  /// Ticks the device was not calibrated yet (DeviceStatus::kUncalibrated): zero force, not a
+  /// fault (the front ends say "waiting for calibration").
+  long uncalibrated = 0;
   long refused = 0;       ///< ticks whose report was refused (non-finite or outside the workspace)
   long ramps = 0;         ///< force ramp-ins started (enable, recovery, reconnection)
   long clamped = 0;       ///< ticks whose force was clamped to the peak (min(scene, device))
@@ -234,7 +237,8 @@ class ServoThread {
   std::size_t locked_bytes_ = 0;
   int pinned_cpu_ = -1;
   std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
-  std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, refused_{0}, ramps_{0}, clamped_{0}, late_{0};
+  std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, uncalibrated_{0}, refused_{0}, ramps_{0}, clamped_{0},
+      late_{0};
   std::atomic<std::uint8_t> status_{0};
   DeviceCaps caps_;  // read once at start()
   ForceGate gate_;   // set by start(); servo thread after it

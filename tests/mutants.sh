@@ -110,6 +110,24 @@ m fd-watchdog               $FD 'if (api_.dhdSetWatchdog((unsigned char)units, i
                                'return;' test_sdk_devices 'ForceDimension.OpenSets*'
 
 m fd-reopen                 $FD '  if (down_) reopen(now, force_on);' '' test_sdk_devices 'ForceDimension.Vanished*'
+# A force-off by the firmware (its watchdog, the force button) read from dhdGetStatus: held
+# off until the servo's force is an exact zero; not turned on again by isotouch unless its
+# watchdog turned it off.
+m fd-status-read            $FD 'if (periods_.load(std::memory_order_relaxed) % status_every_ == 0) read_status(force_on);' '' \
+  test_sdk_devices 'ForceDimension.AFirmwareWatchdogTrip*'
+m fd-watchdog-flag          $FD 'r.watchdog_tripped = fw_off_ && fw_off_cause_ == dhd::kForceOffWatchdog;' '' \
+  test_sdk_devices 'ForceDimension.AFirmwareWatchdogTrip*'
+m fd-back-from-zero         $FD 'if (servo_zero && (fw_off_cause_ == dhd::kForceOffWatchdog || fw_on_)) fw_off_ = false;' \
+                               'if (fw_off_cause_ == dhd::kForceOffWatchdog || fw_on_) fw_off_ = false;' \
+  test_sdk_devices 'ForceDimension.AFirmwareWatchdogTrip*'
+m fd-user-turns-forces-on   $FD 'if (servo_zero && (fw_off_cause_ == dhd::kForceOffWatchdog || fw_on_)) fw_off_ = false;' \
+                               'if (servo_zero) fw_off_ = false;' test_sdk_devices 'ForceDimension.ForcesTurnedOff*'
+# Not calibrated yet: zero force, counted apart from faults (run --live does not exit 5).
+m hd-uncalibrated-not-fault $OH 'if (!calibrated) r.status = DeviceStatus::kUncalibrated;' \
+                               'if (!calibrated) r.status = DeviceStatus::kFault;' test_sdk_devices 'OpenHaptics.CalibratedAfter*'
+m servo-uncalibrated-count  servo/servo_thread.cpp \
+                               'else if (s == DeviceStatus::kUncalibrated) uncalibrated_.fetch_add(1, std::memory_order_relaxed);' '' \
+  test_sdk_devices 'OpenHaptics.CalibratedAfter*'
 
 # What the report devices put on the wire: forces rounded toward zero (v1), the Polhem's
 # currents scaled as one vector and none before isotouch's own calibration is acknowledged.
@@ -121,6 +139,11 @@ m polhem-calibration-gate   $DP 'const bool on = enable && !faulted_.load() && c
                                'const bool on = enable && !faulted_.load();' test_hid_report 'Polhem.ProtocolSendsNoCurrent*'
 m polhem-own-command        $DP 'if (in.info == 0 && commanded_) calibrated_.store(true), commanded_ = false;' \
                                'if (in.info == 0) calibrated_.store(true), commanded_ = false;' \
+  test_device_emu 'DeviceEmuPolhem.FromPowerUp*'
+m polhem-uncalibrated-not-fault $DP $'    r.status = DeviceStatus::kUncalibrated;\n    r.force_off = true;' \
+                               $'    r.status = DeviceStatus::kFault;\n    r.force_off = true;' \
+  test_device_emu 'DeviceEmuPolhem.FromPowerUp*'
+m polhem-refusal-cleared    servo/report_device.cpp '      unnote(link_->name() + ": " + fault_noted_);' '' \
   test_device_emu 'DeviceEmuPolhem.FromPowerUp*'
 
 # The OpenIGTLink link: the zero at a stall and however the process ends (what the peer got).

@@ -206,17 +206,18 @@ struct Rig {
   /// What a failed count needs to be understood: the servo's, the link's and the
   /// emulator's counters, the ticks' statuses and the largest force sent.
   std::string summary() const {
-    long by_status[4] = {};  // ok, stale, disconnected, fault (DeviceStatus)
+    long by_status[5] = {};  // ok, stale, disconnected, fault, uncalibrated (DeviceStatus)
     double max_f = 0;
     for (std::size_t i = 0; i < log.n.load(); ++i) {
-      ++by_status[std::min<std::size_t>(std::size_t(log.status[i]), 3)];
+      ++by_status[std::min<std::size_t>(std::size_t(log.status[i]), 4)];
       max_f = std::max(max_f, log.force[i]);
     }
     std::string s = "ticks " + std::to_string(log.n.load()) + " (by status:";
     for (long c : by_status) s += " " + std::to_string(c);
     s += "), max force " + std::to_string(max_f) + " N; servo: stale " + std::to_string(servo_counters.stale) +
          ", disconnected " + std::to_string(servo_counters.disconnected) + ", fault " +
-         std::to_string(servo_counters.fault) + ", refused " + std::to_string(servo_counters.refused) + ", ramps " +
+         std::to_string(servo_counters.fault) + ", uncalibrated " + std::to_string(servo_counters.uncalibrated) +
+         ", refused " + std::to_string(servo_counters.refused) + ", ramps " +
          std::to_string(servo_counters.ramps) + ", late restarts " + std::to_string(servo_counters.late_restarts) +
          "; link: reports " + std::to_string(link.reports) + ", garbage " + std::to_string(link.garbage) +
          ", writes " + std::to_string(link.writes) + ", busy reads " + std::to_string(link.busy_reads) +
@@ -660,6 +661,11 @@ TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
     ASSERT_LT(norm(hid::polhem::position_m(e, c) - seen), 0.001);
     ASSERT_TRUE(hid::polhem::caps(c).contains(seen));
   }
+  std::string said_before;  // the device's last refusal while it waits for the press
+  rig.while_running = [&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(350));
+    said_before = rig.dev->last_refusal();
+  };
   rig.run(1.2);  // 0.5 s before the press, 0.7 s after
   ASSERT_EQ(rig.stats.switch_presses, 1);
   ASSERT_GT(rig.stats.calibrated_ns, 0) << "never calibrated: " << rig.summary();
@@ -668,8 +674,24 @@ TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
   // Before calibration: no current reached the unit, by its own count and on the wire.
   EXPECT_EQ(rig.stats.currents_while_uncalibrated, 0) << rig.summary();
   EXPECT_EQ(rig.forced_on_wire(0, rig.stats.calibrated_ns), 0) << "current on the wire before calibration";
-  EXPECT_GT(rig.servo_counters.fault, 200) << "the servo did not see the uncalibrated unit faulted: " << rig.summary();
-  EXPECT_NE(rig.last_refusal.find("not calibrated since isotouch opened it"), std::string::npos) << rig.last_refusal;
+  // Waiting for calibration is no fault (`isotouch run --live` does not exit 5 for it).
+  EXPECT_GT(rig.servo_counters.uncalibrated, 200) << "the servo did not see the unit uncalibrated: " << rig.summary();
+  EXPECT_EQ(rig.servo_counters.fault, 0) << rig.summary();
+  EXPECT_NE(said_before.find("not calibrated since isotouch opened it"), std::string::npos) << said_before;
+  // Calibrated since: the reason no longer holds and is not kept as the last refusal.
+  EXPECT_EQ(rig.last_refusal, "") << "kept after the calibration";
+  EXPECT_EQ(rig.last_error.find("not calibrated"), std::string::npos) << rig.last_error;
+  // The servo ramped in from zero once calibrated (50 ms): at most the wall's force at the
+  // hand (10 % for overshoot) times the time since the first calibrated tick (1 ms slack).
+  std::size_t ok = 0;
+  const std::size_t n = rig.log.n.load();
+  while (ok < n && rig.log.status[ok] != DeviceStatus::kOk) ++ok;
+  ASSERT_LT(ok + 5, n) << rig.summary();
+  for (std::size_t i = 0; i < ok; ++i) EXPECT_EQ(rig.log.force[i], 0.0) << "tick " << i << " before calibration";
+  const double deepest = 500.0 * -rig.cfg.hold_m.z * 1.1;
+  for (std::size_t i = ok; i < ok + 5; ++i)
+    EXPECT_LE(rig.log.force[i], deepest * (double(rig.log.t_ns[i] - rig.log.t_ns[ok] + 1'000'000) / 50e6))
+        << "tick " << i - ok << " after calibration";
   // After: the wall's force at the hand's true pose, 3 mm in (~0.5 N; the uncalibrated
   // reading, 10 mm in, would be the 5 N limit).
   EXPECT_GT(rig.forced_on_wire(rig.stats.calibrated_ns, INT64_MAX), 300) << rig.summary();

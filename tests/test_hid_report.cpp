@@ -467,10 +467,11 @@ TEST(Polhem, ProtocolSendsNoCurrentUntilItsOwnCalibrationCommandIsAcknowledged) 
     polhem::Input in;
     in.encoder = polhem::encoders_for(Vec3{0.01, 0, -0.01}, c);  // counts a calibrated unit could give
     DeviceReading r;
-    // Power-up: info 0, plausible counts. Faulted, force off, zero current, and it says why.
+    // Power-up: info 0, plausible counts. Uncalibrated (not a fault), force off, zero current,
+    // and it says why.
     for (int i = 0; i < 3; ++i) {
       ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
-      EXPECT_EQ(r.status, DeviceStatus::kFault) << polhem::config_name(c);
+      EXPECT_EQ(r.status, DeviceStatus::kUncalibrated) << polhem::config_name(c);
       EXPECT_TRUE(r.force_off);
       EXPECT_EQ(p.fault(), PolhemProtocol::kNotCalibrated);
       EXPECT_EQ(p.pending_command(buf), 0u) << "a command sent unasked sets the counters wherever the handle is";
@@ -479,12 +480,12 @@ TEST(Polhem, ProtocolSendsNoCurrentUntilItsOwnCalibrationCommandIsAcknowledged) 
     // The switch pressed: it asks. Still no current while it asks (its counts are not set).
     in.info = 1;
     ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
-    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(r.status, DeviceStatus::kUncalibrated);
     EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current while it asks";
     // info 0 without our command (none sent yet): nothing proves the counters were set.
     in.info = 0;
     ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
-    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(r.status, DeviceStatus::kUncalibrated);
     EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0);
     // It asks, we answer, it stops asking: calibrated, and the force flows.
     in.info = 1;
@@ -507,7 +508,7 @@ TEST(Polhem, ProtocolSendsNoCurrentUntilItsOwnCalibrationCommandIsAcknowledged) 
     ASSERT_EQ(p.handshake(link, caps), "");
     in.info = 0;
     ASSERT_EQ(p.decode_input(polhem::encode(in), r), "");
-    EXPECT_EQ(r.status, DeviceStatus::kFault);
+    EXPECT_EQ(r.status, DeviceStatus::kUncalibrated);
     EXPECT_EQ(norm(sent_amps(Vec3{1, 2, 3})), 0.0) << "current after a reopen, before calibration";
   }
 }

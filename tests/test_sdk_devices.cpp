@@ -15,6 +15,8 @@
 
 #include "isotouch/servo/forcedimension_device.h"
 #include "isotouch/servo/openhaptics_device.h"
+#include "isotouch/servo/servo_thread.h"
+#include "isotouch/servo/triple_buffer.h"
 
 using namespace isotouch;
 using servo::DeviceStatus;
@@ -279,8 +281,8 @@ TEST_F(OpenHaptics, ACalibrationThatNeedsAnUpdateIsUpdatedBeforeAnyForce) {
 }
 
 // A device that needs the stylus in its inkwell, or whose calibration never gets ok: no force
-// reaches it (every row the double received is an exact zero) and readings are faults, until
-// the stylus is put in the inkwell.
+// reaches it (every row the double received is an exact zero) and readings are uncalibrated
+// (not faults), until the stylus is put in the inkwell.
 TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   setenv("HD_DOUBLE_CALIBRATION", "manual", 1);
   servo::OpenHapticsDevice d;
@@ -290,7 +292,8 @@ TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   d.enable_force(true, kTestStallS);
   ctl.clear_log();
   write_for(d, {0.5, 0, 0}, 60);
-  EXPECT_EQ(d.read().status, DeviceStatus::kFault);
+  EXPECT_EQ(d.read().status, DeviceStatus::kUncalibrated);  // zero force, not a fault
+  EXPECT_TRUE(d.read().force_off);
   EXPECT_FALSE(d.calibrated());
   auto rows = ctl.received();
   ASSERT_GT(rows.size(), 30u);
@@ -300,6 +303,64 @@ TEST_F(OpenHaptics, NoForceUntilTheCalibrationIsOk) {
   write_for(d, {0.5, 0, 0}, 30);
   EXPECT_EQ(ctl.received().back()[1], 0.5);
   d.close();
+}
+
+namespace {
+/// Pushes along isotouch x wherever the HIP is (a hand leaning into a wall).
+class Push final : public servo::Renderer {
+ public:
+  const char* name() const override { return "push"; }
+  void reset() override {}
+  servo::HriTick tick(const core::FieldView&, const Vec3&, double) override {
+    servo::HriTick t;
+    t.force_n = {0.5, 0, 0};
+    t.contact = true;
+    return t;
+  }
+};
+}  // namespace
+
+// Calibrated only after the servo started (the stylus put in its inkwell 150 ms in): until
+// then every force the double received is an exact zero and the servo counts the ticks as
+// uncalibrated, not as faults (`isotouch run --live` does not exit 5 for it); once calibrated
+// the force ramps in (50 ms) to the renderer's 0.5 N, what the double received.
+TEST_F(OpenHaptics, CalibratedAfterTheStartTheForceRampsInAndNoFaultIsCounted) {
+  setenv("HD_DOUBLE_CALIBRATION", "manual", 1);
+  servo::OpenHapticsDevice d;
+  d.open();
+  unsetenv("HD_DOUBLE_CALIBRATION");
+  servo::TripleBuffer<core::SampleField> none;  // the push reads no field
+  none.publish(std::make_shared<const core::SampleField>());
+  Push push;
+  servo::ServoThreadConfig sc;
+  sc.rate_hz = 1000;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = false;
+  sc.ramp_in_s = 0.05;
+  servo::ServoThread servo(none, push, d, sc);
+  ctl.clear_log();
+  servo.start();
+  sleep_ms(150);
+  EXPECT_EQ(servo.device_status(), DeviceStatus::kUncalibrated);
+  const std::size_t before = ctl.received().size();
+  ctl.inkwell();
+  EXPECT_TRUE(wait_for([&] { return d.calibrated(); }));
+  EXPECT_TRUE(wait_for([&] { return ctl.received().back()[1] == 0.5; })) << "the force never came";
+  servo.stop();
+  const servo::DeviceCounters c = servo.device_counters();
+  EXPECT_EQ(c.fault, 0) << "waiting for calibration counted as a fault";
+  EXPECT_GT(c.uncalibrated, 50);
+  const Rows rows = ctl.received();
+  ASSERT_GT(before, 50u);
+  for (std::size_t i = 0; i < before; ++i)
+    EXPECT_EQ(rows[i][1], 0.0) << "a force reached the uncalibrated device at t " << rows[i][0];
+  // The ramp: the first forces after calibration rise from zero, over about 50 ms.
+  std::size_t first = before;
+  while (first < rows.size() && rows[first][1] == 0.0) ++first;
+  ASSERT_LT(first, rows.size());
+  EXPECT_LT(rows[first][1], 0.1) << "the force stepped in";
+  long rising = 0;
+  for (std::size_t i = first; i < rows.size(); ++i) rising += rows[i][1] > 0 && rows[i][1] < 0.25;
+  EXPECT_GE(rising, 10) << "no ramp: the force came in within " << rising << " frames";
 }
 
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {
@@ -317,6 +378,11 @@ struct DhdControls : DoubleLog {
   int (*force_on)();
   int (*watchdog)();
   long (*opens)();
+  void (*arm_watchdog)(int);
+  void (*starve)(int);
+  void (*force_button)(int);
+  long (*watchdog_trips)();
+  long (*enables)();
   DhdControls() {
     void* h = dlopen(DHD_DOUBLE, RTLD_NOW | RTLD_GLOBAL);
     if (!h) throw std::runtime_error(dlerror());
@@ -328,13 +394,54 @@ struct DhdControls : DoubleLog {
     force_on = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleForceOn"));
     watchdog = reinterpret_cast<int (*)()>(dlsym(h, "dhdDoubleWatchdog"));
     opens = reinterpret_cast<long (*)()>(dlsym(h, "dhdDoubleOpens"));
+    arm_watchdog = reinterpret_cast<void (*)(int)>(dlsym(h, "dhdDoubleArmWatchdog"));
+    starve = reinterpret_cast<void (*)(int)>(dlsym(h, "dhdDoubleStarve"));
+    force_button = reinterpret_cast<void (*)(int)>(dlsym(h, "dhdDoubleForceButton"));
+    watchdog_trips = reinterpret_cast<long (*)()>(dlsym(h, "dhdDoubleWatchdogTrips"));
+    enables = reinterpret_cast<long (*)()>(dlsym(h, "dhdDoubleEnables"));
   }
 };
 
 struct ForceDimension : ::testing::Test {
   void SetUp() override { setenv("ISOTOUCH_DHD_LIBRARY", DHD_DOUBLE, 1); }
+  void TearDown() override { ctl.arm_watchdog(0); }
   DhdControls ctl;
 };
+
+/// A servo on its own thread, as ServoThread treats the reading's force_off: holds its force
+/// at an exact zero (its ramp at 0) while the device says its force is off, else pushes
+/// `push`; counts the readings that said the watchdog tripped.
+struct FdServo {
+  servo::HapticDeviceIO& d;
+  Vec3 push;
+  std::atomic<bool> stop{false};
+  std::atomic<long> tripped{0};
+  std::thread thread{[this] {
+    while (!stop.load()) {
+      const servo::DeviceReading r = d.read();
+      if (r.watchdog_tripped) tripped.fetch_add(1);
+      d.answer(r.sequence);
+      d.write_force_n(r.force_off ? Vec3{} : push);
+      sleep_ms(0.5);
+    }
+  }};
+  ~FdServo() { end(); }
+  void end() {
+    stop = true;
+    if (thread.joinable()) thread.join();
+  }
+};
+
+/// The index of the first row at or after `from` that the double received with forces on
+/// after one with forces off (rows.size(): none).
+std::size_t first_on_after_off(const Rows& rows, std::size_t from = 0) {
+  bool off = false;
+  for (std::size_t i = from; i < rows.size(); ++i) {
+    if (!(int(rows[i][4]) & 1)) off = true;
+    else if (off) return i;
+  }
+  return rows.size();
+}
 }  // namespace
 
 TEST(ForceDimensionLoad, MissingLibraryNamesWhatWasSearched) {
@@ -412,4 +519,76 @@ TEST_F(ForceDimension, VanishedDeviceReadsDisconnectedAndGetsZero) {
   check_vanish(d, ctl, 2, "dhdGetPosition failed: communication error");  // isotouch x is FD y
   EXPECT_GE(d.reopens(), 1);
   EXPECT_EQ(ctl.opens(), opens + 1 + d.reopens());
+}
+
+// The device thread starves 25 ms (the double's dhdGetPosition blocks) past the firmware's
+// 10 ms watchdog, which turns the forces off. The device thread reads that from dhdGetStatus
+// (DHD_STATUS_FORCE 0, DHD_STATUS_FORCEOFFCAUSE DHD_FORCEOFF_WATCHDOG: the double's literal
+// vendor values): its readings say force_off and watchdog_tripped (the servo holds its ramp at
+// 0), and it turns the forces on again (dhdEnableForce) only once the servo's force is an exact
+// zero made after it read that: the first force the double received with forces on again is
+// an exact zero, then the servo's push is back.
+TEST_F(ForceDimension, AFirmwareWatchdogTripIsReadAndTheForceComesBackFromZero) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  d.enable_force(true, kTestStallS);
+  FdServo servo{d, {0.5, 0, 0}};  // isotouch x is FD y
+  const auto pushing = [&] {
+    const Rows rows = ctl.received();
+    return !rows.empty() && rows.back()[2] == 0.5 && (int(rows.back()[4]) & 1);
+  };
+  ASSERT_TRUE(wait_for(pushing));
+  const long enables = ctl.enables(), trips = ctl.watchdog_trips();
+  ctl.clear_log();
+  // Armed only around the starvation: a loaded machine's device thread late by 10 ms would
+  // trip it too.
+  ctl.arm_watchdog(1);
+  ctl.starve(25);
+  ASSERT_TRUE(wait_for([&] { return ctl.watchdog_trips() == trips + 1; })) << "the double's watchdog did not trip";
+  ctl.arm_watchdog(0);
+  EXPECT_TRUE(wait_for([&] { return d.watchdog_trips() == 1; })) << "the trip was not read from dhdGetStatus";
+  EXPECT_TRUE(wait_for([&] { return ctl.enables() == enables + 1 && pushing(); })) << "forces not on again";
+  servo.end();
+  EXPECT_GT(servo.tripped.load(), 0) << "no reading said the watchdog tripped";
+  EXPECT_EQ(d.firmware_force_offs(), 1);
+  EXPECT_NE(d.last_error().find("watchdog turned the forces off"), std::string::npos) << d.last_error();
+  const Rows rows = ctl.received();
+  const std::size_t back = first_on_after_off(rows);
+  ASSERT_LT(back, rows.size()) << "no force received with forces on again";
+  EXPECT_EQ(rows[back][2], 0.0) << "the force stepped back in at " << rows[back][0] << " s";
+  EXPECT_EQ(ctl.watchdog_trips(), trips + 1);
+  d.close();
+}
+
+// The user turns the forces off with the device's force button (DHD_FORCEOFF_BUTTON): the
+// device thread does not turn them on by itself; once the user does, the servo's force comes
+// back from an exact zero.
+TEST_F(ForceDimension, ForcesTurnedOffAtTheDeviceStayOffUntilTheUserTurnsThemOn) {
+  servo::ForceDimensionDevice d(0, 2000);
+  d.open();
+  d.enable_force(true, kTestStallS);
+  FdServo servo{d, {0.5, 0, 0}};
+  const auto pushing = [&] {
+    const Rows rows = ctl.received();
+    return !rows.empty() && rows.back()[2] == 0.5 && (int(rows.back()[4]) & 1);
+  };
+  ASSERT_TRUE(wait_for(pushing));
+  const long enables = ctl.enables();
+  ctl.force_button(0);
+  EXPECT_TRUE(wait_for([&] { return d.firmware_force_offs() == 1 && d.read().force_off; }));
+  sleep_ms(30);
+  EXPECT_EQ(ctl.enables(), enables) << "forces turned on again by isotouch, not by the user";
+  EXPECT_EQ(ctl.force_on(), 0);
+  EXPECT_EQ(d.watchdog_trips(), 0);
+  ctl.clear_log();
+  ctl.force_button(1);
+  EXPECT_TRUE(wait_for(pushing)) << "the force did not come back";
+  servo.end();
+  const Rows rows = ctl.received();
+  ASSERT_FALSE(rows.empty());
+  std::size_t first = 0;
+  while (first < rows.size() && !(int(rows[first][4]) & 1)) ++first;
+  ASSERT_LT(first, rows.size());
+  EXPECT_EQ(rows[first][2], 0.0) << "the force stepped back in when the user turned the forces on";
+  d.close();
 }

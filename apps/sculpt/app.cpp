@@ -1792,6 +1792,8 @@ void Sculpt::print_device() {
   const servo::DeviceCounters c = session->servo_thread()->device_counters();
   log << "device   " << haptic.description << ": stale " << c.stale << ", disconnected " << c.disconnected << ", fault "
       << c.fault << ", refused " << c.refused << " ticks; " << c.ramps << " ramp-ins, " << c.clamped << " clamped\n";
+  if (c.uncalibrated > 0)
+    log << "device   waiting for calibration " << c.uncalibrated << " ticks (zero force; not a fault)\n";
   if (haptic.report) {
     const servo::LinkCounters l = haptic.report->counters();
     log << "link     " << l.reports << " reports, " << l.garbage << " refused, " << l.gaps << " missing (gaps), "

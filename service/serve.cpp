@@ -161,6 +161,7 @@ class Server {
   std::unique_ptr<Session> session_;
   long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
+  long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
   std::mutex stream_mu_;
   std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
   StreamReplies replies_{device_, StreamReplyOptions{o_.sched_fifo, o_.stale_s},
@@ -692,6 +693,7 @@ void Server::stop_session() {
   stale_ += dc.stale;  // zero force on each
   disconnected_ += dc.disconnected;
   device_faults_ += dc.fault;
+  uncalibrated_ += dc.uncalibrated;
   refused_reports_ += dc.refused;
 }
 
@@ -779,7 +781,8 @@ int Server::run() {
   const bool device_lost = disconnected_ + device_faults_ + refused_reports_ > 0;
   if (haptic_)
     log_.line("device   " + haptic_->description + ": disconnected " + std::to_string(disconnected_) + ", fault " +
-              std::to_string(device_faults_) + ", refused " + std::to_string(refused_reports_) + " ticks (zero force on each)");
+              std::to_string(device_faults_) + ", refused " + std::to_string(refused_reports_) +
+              ", waiting for calibration " + std::to_string(uncalibrated_) + " ticks (zero force on each)");
   if (session::stop_signal() != 0) return exit_code::signalled(session::stop_signal());
   if (faults_ > 0) return exit_code::kServoFaults;
   if (device_lost) return exit_code::kDeviceLost;

@@ -160,7 +160,7 @@ m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies
 m stream-stall-zero         $SR '    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new' \
-                               '    const bool stall_zero = false;' test_backend_faults 'EveryBackend/BackendFaults.*/ServeStream_Stall'
+                               '    const bool stall_zero = false;' $T 'StreamReplies.AStalledServo*'
 m stream-stale-zero         $SR '    const bool stale_zero = stale && !zero_sent && !stall_zero;' \
                                '    const bool stale_zero = false;' $T 'StreamReplies.AStaleStream*'
 m stream-switch-zero        $SR '    fenced->send(zero_msg);  // blocking: the zero is not dropped' '' $T 'StreamReplies.AClientThatStops*'

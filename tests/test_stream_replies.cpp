@@ -80,6 +80,43 @@ TEST(StreamReplies, PosesAreAnsweredWithTheServosForceAndTheLastActIsAZero) {
   EXPECT_EQ(host.replies().replies(), long(got.size()) - 1) << "replies counted, the last zero apart";
 }
 
+// The servo stops writing between two poses of a slow stream (10 Hz: 100 ms apart): the
+// client gets a zero within the stall time (20 ms here) and the reply thread's poll, not with
+// the next pose; judged on the client's clock (no pose went out between the last force and
+// the zero).
+TEST(StreamReplies, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
+  service::StreamHost host({false, 1.0});
+  PlusPeerOptions o = client_of(host.port());
+  o.rate_hz = 10;
+  PlusPeer peer(o);
+  service::TransformDevice& d = host.device();
+  std::uint64_t seq = 0;
+  int poses_seen = 0;
+  std::int64_t stop_at = 0;  // 5 ms after the third pose the servo saw
+  serve_forces(d, {0, 0, 0.5}, [&] {
+    const std::uint64_t now_seq = d.read().sequence;
+    if (now_seq != seq) seq = now_seq, ++poses_seen;
+    if (poses_seen == 3 && stop_at == 0) stop_at = PlusPeer::now_ns() + 5'000'000;
+    return PlusPeer::now_ns() - stop_at < 0 || stop_at == 0;
+  });
+  const std::uint64_t stalls = d.stalls();
+  wait_for([&] { return d.stalls() > stalls; });
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const std::vector<PeerForce> got = peer.forces();
+  const std::vector<std::int64_t> poses = peer.poses_ns();
+  ASSERT_GE(poses_seen, 3) << "the stream did not flow";
+  std::size_t last_force = got.size();
+  for (std::size_t i = 0; i < got.size(); ++i)
+    if (got[i].f.z == 0.5) last_force = i;
+  ASSERT_LT(last_force + 1, got.size()) << "no zero after the servo's last write";
+  const PeerForce& zero = got[last_force + 1];
+  EXPECT_EQ(core::norm(zero.f), 0.0);
+  long poses_between = 0;
+  for (std::int64_t t : poses) poses_between += t > got[last_force].t_ns && t < zero.t_ns;
+  EXPECT_EQ(poses_between, 0) << "the zero came " << double(zero.t_ns - got[last_force].t_ns) * 1e-6
+                              << " ms after the last force, with a pose";
+}
+
 // The client stops sending poses while the servo still writes (it has not judged the stream
 // stale yet): the client gets one zero within the reply thread's stale time, and nothing after.
 TEST(StreamReplies, AStaleStreamLeavesTheClientAZero) {

@@ -60,15 +60,15 @@ struct SdkTrial {
 /// An OpenIGTLink link on loopback against a PLUS-like peer in the same process streaming
 /// poses at 1 kHz (`--haptic igtl:`, or serve's TRANSFORM stream): the relay delay the peer
 /// sees (a Force's arrival after the newest pose it had sent), a 0 -> 3 N step (the rise at
-/// the peer against the gate's rate) and a 100 ms renderer stall (the zero's delay after the
-/// last force at the peer).
+/// the peer against the gate's rate) and a 100 ms renderer stall (the first zero at the peer
+/// after it began).
 struct IgtlRow {
   std::string kind;                ///< "igtl" or "serve stream"
   std::string not_measured;        ///< why not ("" measured)
   double stream_hz = 0;            ///< the poses' rate as the peer sent them [Hz]
   long forces = 0;                 ///< Force TRANSFORMs the peer received
   double p50_us = NAN, p99_us = NAN, max_us = NAN;  ///< relay delay [us]
-  double stall_zero_after_us = NAN;  ///< the peer's last force before the stall -> its zero [us]
+  double stall_zero_after_us = NAN;  ///< the renderer's stall began -> the first zero at the peer [us]
   double step_rate_n_per_s = NAN;    ///< the step's largest rise between two Forces [N/s]
   double step_allowed_n_per_s = NAN; ///< what the gate allows over that gap (rate x (dt + one servo period) / dt)
   double step_rise_ms = NAN;         ///< from the first nonzero Force to the first at 3 N [ms]

@@ -211,7 +211,7 @@ Subcommand add_bench_device_command(CLI::App& bench) {
                 "with enable cleared within 3 periods)");
   sub->add_option("--seconds", o->seconds, "Seconds per rate")->capture_default_str()->check(CLI::Range(0.1, 600.0));
   sub->add_option("--trials", o->disconnect_trials, "Disconnect trials at 1 kHz")->capture_default_str()->check(CLI::Range(1, 1000));
-  sub->add_option("--stall-trials", o->stall_trials, "Servo stall trials at 1 kHz (the renderer takes 100 ms once)")
+  sub->add_option("--stall-trials", o->stall_trials, "Servo stall trials at 1 kHz (the renderer takes 100 ms once), on the emulator and on each link")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   sub->add_flag("--fifo,!--no-fifo", o->sched_fifo, "SCHED_FIFO for the servo thread (default on; refused -> a note)");

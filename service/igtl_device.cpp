@@ -103,6 +103,7 @@ void block_stop_signals() {
 
 void IgtlDevice::read_loop() {
   block_stop_signals();
+  servo::ensure_signal_stack();  // a stack overflow here still sends the peer its zero
   for (;;) {
     Incoming in = read_message(*conn_, MessageLimits{});
     if (in.kind == Incoming::Kind::kClosed || in.kind == Incoming::Kind::kBroken) break;
@@ -158,6 +159,7 @@ void IgtlDevice::send_force(const core::Vec3& f) {
 /// zero.
 void IgtlDevice::write_loop() {
   block_stop_signals();
+  servo::ensure_signal_stack();
   if (o_.fifo_priority > 0) servo::make_thread_realtime("igtl writer", true, o_.fifo_priority, false, -1);
   std::uint64_t answered = 0;
   bool zero_sent = true;

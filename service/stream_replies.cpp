@@ -26,6 +26,7 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
   const std::int64_t stale_ns = std::int64_t(o_.stale_s * 1e9);
   device_.restart_force(TransformDevice::now_ns());
   block_stop_signals();  // a stop signal's handler sends the last zero: never inside a send of this thread
+  servo::ensure_signal_stack();  // a stack overflow here still sends the client its zero
   // The stream client's zero however serve ends: registered for the connection the replies go
   // to, fencing every send on it, kept alive (its socket open) while registered.
   std::shared_ptr<Connection> fenced;

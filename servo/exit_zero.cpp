@@ -3,8 +3,10 @@
 #include <sys/socket.h>
 #include <time.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
+#include <memory>
 #include <csignal>
 #include <cstring>
 
@@ -52,12 +54,42 @@ void install_fatal_handlers() {
     struct sigaction a {};
     a.sa_handler = on_fatal_signal;
     sigemptyset(&a.sa_mask);
-    a.sa_flags = SA_NODEFER;  // the handler re-raises with the previous action in place
+    // SA_NODEFER: the handler re-raises with the previous action in place. SA_ONSTACK: on a
+    // thread with an alternate stack (ensure_signal_stack) a stack overflow's SIGSEGV still
+    // runs it.
+    a.sa_flags = SA_NODEFER | SA_ONSTACK;
     sigaction(kFatal[i], &a, &g_previous[i]);
   }
 }
 
+/// The calling thread's alternate signal stack, freed when the thread ends (after it is taken
+/// off: the kernel must not keep a pointer into freed memory).
+struct SignalStack {
+  std::unique_ptr<std::uint8_t[]> mem;
+  ~SignalStack() {
+    if (!mem) return;
+    stack_t off{};
+    off.ss_flags = SS_DISABLE;
+    sigaltstack(&off, nullptr);
+  }
+};
+
 }  // namespace
+
+bool ensure_signal_stack() {
+  thread_local SignalStack stack;
+  if (stack.mem) return true;
+  stack_t now{};
+  if (sigaltstack(nullptr, &now) == 0 && !(now.ss_flags & SS_DISABLE)) return true;  // one set by others (a sanitizer)
+  const std::size_t size = std::max<std::size_t>(SIGSTKSZ, 64 * 1024);
+  auto mem = std::make_unique<std::uint8_t[]>(size);
+  stack_t ss{};
+  ss.ss_sp = mem.get();
+  ss.ss_size = size;
+  if (sigaltstack(&ss, nullptr) != 0) return false;
+  stack.mem = std::move(mem);
+  return true;
+}
 
 ExitZero::ExitZero(int fd, const std::uint8_t* bytes, std::size_t n) {
   if (n > kMaxBytes || fd < 0) return;
@@ -74,6 +106,7 @@ ExitZero::ExitZero(int fd, const std::uint8_t* bytes, std::size_t n) {
     break;
   }
   install_fatal_handlers();
+  ensure_signal_stack();  // the thread that opens the link
 }
 
 ExitZero::~ExitZero() {

@@ -37,6 +37,12 @@ class ExitZero {
   int slot_ = -1;
 };
 
+/// Gives the calling thread an alternate signal stack (once; kept until the thread ends), so
+/// that a stack overflow's SIGSEGV on it still runs the fatal-signal handler that sends the
+/// zeros. Allocates: call it when a thread starts, never on the servo's tick. A thread that
+/// already has one (a sanitizer's) keeps it. False if the system refused it.
+bool ensure_signal_stack();
+
 /// Sends every registered link its zero (send(2), MSG_NOSIGNAL | MSG_DONTWAIT), each after
 /// waiting up to `wait_us` for a send of its own under way to finish (a link whose send does
 /// not finish, such as one the crashing thread was inside, is skipped). From then on the

@@ -15,6 +15,7 @@
 #include <string>
 
 #include "isotouch/servo/cpu_placement.h"
+#include "isotouch/servo/exit_zero.h"
 
 namespace isotouch::servo {
 namespace {
@@ -92,6 +93,7 @@ std::string ServoThread::start() {
   seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();
   thread_ = std::thread([this, h = handoff_] {
+    ensure_signal_stack();  // a stack overflow in the renderer still sends the links' zeros
     loop(*h);
     h->done.store(true, std::memory_order_release);
   });

@@ -154,6 +154,7 @@ m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  s
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\n    return false;' \
                                $'  if (false) {\n    s.busy.store(0);\n    return false;' test_exit_zero 'ExitZero.*'
+m exit-zero-alt-stack       $X '    a.sa_flags = SA_NODEFER | SA_ONSTACK;' '    a.sa_flags = SA_NODEFER;' test_exit_zero 'ExitZero.AStackOverflow*'
 m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
                                '    if (false) {' test_exit_zero 'ExitZero.*'
 

@@ -1,9 +1,13 @@
 // serve_cmd.cpp - `isotouch serve SCENE`: options and exit codes; the server is service/serve.h.
 #include "isotouch/apps/serve_cmd.h"
 
+#include <cstdlib>
 #include <iostream>
 #include <memory>
+#include <mutex>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/io/scene.h"
@@ -36,6 +40,28 @@ constexpr const char* kHelp =
       "Exit 0 after --seconds; 1 bad input (scene, port, a device that cannot be opened or refuses the scene);\n"
       "2 usage error; 4 servo faults; 5 the --haptic device was disconnected, faulty or sent refused reports (the\n"
       "server went on serving); 6 a save command could not write (the session went on); 128 + N on signal N.";
+/// ISOTOUCH_SERVE_TEST_FAULT="WHERE[:IMAGE],...": each entry makes the server fail once at
+/// WHERE (ServeOptions::fault_for_test), for the image named IMAGE or any: what the serve
+/// tests use to reach the failures a CPU Vulkan driver does not produce.
+std::function<bool(const std::string&, const std::string&)> test_faults(const std::string& spec) {
+  struct Entry {
+    std::string where, image;
+    bool fired = false;
+  };
+  auto entries = std::make_shared<std::vector<Entry>>();
+  std::istringstream in(spec);
+  for (std::string e; std::getline(in, e, ',');) {
+    const auto colon = e.find(':');
+    entries->push_back({e.substr(0, colon), colon == std::string::npos ? "" : e.substr(colon + 1)});
+  }
+  auto mu = std::make_shared<std::mutex>();
+  return [entries, mu](const std::string& where, const std::string& image) {
+    std::lock_guard<std::mutex> lock(*mu);
+    for (Entry& e : *entries)
+      if (!e.fired && e.where == where && (e.image.empty() || e.image == image)) return e.fired = true;
+    return false;
+  };
+}
 }  // namespace
 
 Subcommand add_serve_command(CLI::App& cli) {
@@ -85,6 +111,10 @@ Subcommand add_serve_command(CLI::App& cli) {
   auto* reply = sub->add_flag("--reply-force", a->o.reply_force,
                 "Answer each TRANSFORM of --stream with a TRANSFORM 'Force' to its sender once the servo rendered it "
                 "(lock-step, its header stamp echoed; never waited for)");
+  sub->add_option("--memory-mib", a->o.memory_mib,
+                  "Memory the server may use [MiB] (default: this machine's, its address-space and cgroup limits): "
+                  "an IMAGE whose session would pass 3/4 of it is refused with a STATUS")
+      ->check(CLI::Range(1.0, 1e9));
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
   haptic->excludes(stream)->excludes(offset)->excludes(stale)->excludes(reply);  // the stream's, not a device's
   return {sub, [a](const std::string& device) {
@@ -93,6 +123,7 @@ Subcommand add_serve_command(CLI::App& cli) {
             o.stale_s = a->stale_ms * 1e-3;
             o.run.device = device;
             o.run.progress = false;
+            if (const char* f = std::getenv("ISOTOUCH_SERVE_TEST_FAULT")) o.fault_for_test = test_faults(f);
             io::Scene scene = io::load_scene(a->scene);
             scene.allow_unstable_stiffness = scene.allow_unstable_stiffness || a->allow_unstable;
             return service::serve(scene, o, std::cout);

@@ -48,6 +48,11 @@ VoxelBox EditMirror::take_changed(engine::Volume& out) const {
   return b;
 }
 
+void EditMirror::restore_changed(const VoxelBox& box) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  changed_.add(box);
+}
+
 long EditMirror::edits() const {
   std::lock_guard<std::mutex> lock(mu_);
   return edits_;

@@ -24,6 +24,9 @@ class EditMirror {
   /// The edited volume and the box changed since the last call (empty: nothing changed);
   /// the box is cleared. Any thread.
   VoxelBox take_changed(engine::Volume& out) const;
+  /// Gives back a box take_changed returned whose voxels could not be sent: it joins the
+  /// box the next take_changed returns. Any thread.
+  void restore_changed(const VoxelBox& box) const;
   /// Edits seen by the listener so far.
   long edits() const;
 

@@ -20,6 +20,7 @@
 
 #include "isotouch/session/edit_session.h"
 #include "isotouch/io/vdb_io.h"
+#include "isotouch/io/volume_io.h"
 #include "isotouch/service/commands.h"
 #include "isotouch/service/device_echo.h"
 #include "isotouch/service/edit_mirror.h"
@@ -79,6 +80,16 @@ struct Pending {
   int client = 0;
 };
 
+/// A received IMAGE's volume waiting for the main thread, and whom to answer once it is
+/// the session's (or could not be made so).
+struct PendingVolume {
+  engine::Volume volume;
+  std::shared_ptr<Connection> from;
+  std::string device;  // the IMAGE's device name, the STATUS's
+  std::string dims;    // "X x Y x Z"
+  int client = 0;
+};
+
 /// One session on one volume: the edits, the buffer the servo reads, the renderer, the
 /// live session around them.
 struct Session {
@@ -111,10 +122,18 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   void display_loop();
-  std::unique_ptr<Session> prepare_session(engine::Volume v);
+  void display_tick(double stall_s);
+  std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
+                                           const servo::HriParams& hri);
   void start_session(std::unique_ptr<Session> s);
-  void start_session(engine::Volume v) { start_session(prepare_session(std::move(v))); }
-  void swap_volume(engine::Volume v);
+  std::string memory_refusal(igtl::ImageMessage& image);
+  void swap_volume(PendingVolume p);
+  void answer_image(const PendingVolume& p, int code, const std::string& text);
+  void send_edited_or_say_why();
+  /// The test fault hook: true when `where` is to fail for the image named `image`.
+  bool fault(const char* where, const std::string& image) const {
+    return o_.fault_for_test && o_.fault_for_test(where, image);
+  }
   void stop_session();
   void take_command(Client& c, const Incoming& in);
   void command_loop();
@@ -178,7 +197,8 @@ class Server {
 
  private:
   std::mutex volume_mu_;
-  std::optional<engine::Volume> next_volume_;  // a received IMAGE waiting for the main thread
+  std::mutex image_mu_;  // one IMAGE checked against the memory budget and converted at a time
+  std::optional<PendingVolume> next_volume_;  // a received IMAGE waiting for the main thread
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
   bool changing_ = false;  // guarded by volume_mu_: the main thread took one of the two and is applying it
   std::mutex labels_mu_;
@@ -217,16 +237,29 @@ void Server::handle(Client& c, Incoming& in) {
             throw engine::VolumeError("igtl:" + in.device + ": a LABELMETA describes '" + in.device +
                                       "' as a label map; label maps are not supported yet (send a scalar image)");
         }
-        engine::Volume v = volume_from_image(*in.image);
-        const std::string dims = std::to_string(v.grid.dims[0]) + " x " + std::to_string(v.grid.dims[1]) + " x " +
-                                 std::to_string(v.grid.dims[2]);
+        std::optional<PendingVolume> superseded;
+        std::string dims;
         {
+          std::lock_guard<std::mutex> image_lock(image_mu_);
+          if (const std::string why = memory_refusal(*in.image); !why.empty()) {
+            refuse(c, in, igtl::StatusMessage::STATUS_RESOURCE_ERROR, why);
+            break;
+          }
+          engine::Volume v = volume_from_image(*in.image);
+          dims = std::to_string(v.grid.dims[0]) + " x " + std::to_string(v.grid.dims[1]) + " x " +
+                 std::to_string(v.grid.dims[2]);
           std::lock_guard<std::mutex> lock(volume_mu_);
-          next_volume_ = std::move(v);
+          superseded.swap(next_volume_);
+          next_volume_ = PendingVolume{std::move(v), c.conn, in.device, dims, c.id};
         }
-        n_.images.fetch_add(1);
-        log_.line("image    client " + std::to_string(c.id) + ", '" + in.device + "': " + dims + " taken");
-        c.conn->send(pack_status(igtl::StatusMessage::STATUS_OK, in.device, "volume taken: " + dims));
+        log_.line("image    client " + std::to_string(c.id) + ", '" + in.device + "': " + dims +
+                  " received; its session is built before it is answered");
+        if (superseded)
+          answer_image(*superseded, igtl::StatusMessage::STATUS_BUSY,
+                       "igtl:" + superseded->device + ": not taken: a newer IMAGE ('" + in.device +
+                           "') came before its session was built");
+      } catch (const std::bad_alloc& e) {
+        refuse(c, in, igtl::StatusMessage::STATUS_RESOURCE_ERROR, "igtl:" + in.device + ": " + e.what());
       } catch (const std::exception& e) {
         refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, e.what());
       }
@@ -487,6 +520,40 @@ void Server::run_command(const Pending& p) {
   answer(p, igtl::StatusMessage::STATUS_OK, what + ": done");
 }
 
+/// send_edited(); when it throws (std::bad_alloc copying or packing the volume), a line and a
+/// STATUS to the subscribed clients say so, and the changed voxels wait for the next try.
+void Server::send_edited_or_say_why() {
+  std::exception_ptr error;
+  try {
+    send_edited();
+    return;
+  } catch (...) {
+    error = std::current_exception();
+  }
+  try {
+    std::string what = "an unknown exception";
+    try {
+      std::rethrow_exception(error);
+    } catch (const std::exception& e) {
+      what = e.what();
+    } catch (...) {
+    }
+    std::string name;
+    {
+      std::lock_guard<std::mutex> lock(session_mu_);
+      name = session_ ? session_->image_name : "isotouch";
+    }
+    const std::string why = "edited '" + name + "': the edited voxels could not be sent (" + what +
+                            "); they go with the next IMAGE";
+    log_.line("refused  " + why);
+    const std::vector<std::uint8_t> status = pack_status(igtl::StatusMessage::STATUS_RESOURCE_ERROR, name, why);
+    std::lock_guard<std::mutex> lock(clients_mu_);
+    for (Client& c : clients_)
+      if (c.subscribed && !c.done && c.conn->alive()) c.conn->send_droppable(status);
+  } catch (...) {  // no memory even for the line: the next tick tries again
+  }
+}
+
 /// The voxels changed since the last call, as an IMAGE to every subscribed client.
 void Server::send_edited() {
   std::shared_ptr<EditMirror> mirror;
@@ -498,9 +565,16 @@ void Server::send_edited() {
     name = session_->image_name;
   }
   engine::Volume v;
-  const VoxelBox box = mirror->take_changed(v);
+  const VoxelBox box = mirror->take_changed(v);  // when it throws, the box stays
   if (box.empty()) return;
-  const std::vector<std::uint8_t> bytes = pack_image(v, name, o_.image_whole ? VoxelBox{} : box);
+  std::vector<std::uint8_t> bytes;
+  try {
+    if (fault("edited", name)) throw std::bad_alloc();
+    bytes = pack_image(v, name, o_.image_whole ? VoxelBox{} : box);
+  } catch (...) {
+    mirror->restore_changed(box);  // these voxels go with the next IMAGE
+    throw;
+  }
   std::vector<std::shared_ptr<Connection>> to;
   {
     std::lock_guard<std::mutex> lock(clients_mu_);
@@ -529,10 +603,28 @@ void Server::command_loop() {
       std::lock_guard<std::mutex> lock(cmd_mu_);
       todo.swap(commands_);
     }
-    for (const Pending& p : todo) run_command(p);
-    feed_tool(period_s);
+    // What a command, the tool or the edited IMAGE throws (std::bad_alloc) is answered or
+    // logged here: the command thread, and with it the server and the device's force, go on.
+    for (const Pending& p : todo) {
+      try {
+        run_command(p);
+      } catch (const std::exception& e) {
+        try {
+          answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR, to_string(p.cmd) + ": failed (" + e.what() + ")");
+        } catch (...) {
+        }
+      }
+    }
+    try {
+      feed_tool(period_s);
+    } catch (const std::exception& e) {
+      try {
+        log_.line(std::string("tool     not applied this tick: ") + e.what());
+      } catch (...) {
+      }
+    }
     if (o_.image_hz > 0 && std::chrono::steady_clock::now() >= next_image) {
-      send_edited();
+      send_edited_or_say_why();
       next_image = std::chrono::steady_clock::now() +
                    std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / o_.image_hz));
     }
@@ -546,38 +638,51 @@ void Server::display_loop() {
   while (!stop_) {
     next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
     std::this_thread::sleep_until(next);
-    std::vector<std::uint8_t> out, points;  // HIP, Proxy and Force; HIP and Proxy
-    {
-      std::lock_guard<std::mutex> lock(session_mu_);
-      if (!session_) continue;
-      const session::Observed ob = session_->live->observe();
-      if (ob.tick < 0) continue;
-      const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
-      const core::Vec3 f = echo().force_ras_n(stall_s);
-      for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
-        const double t[3] = {v.x, v.y, v.z};
-        const auto b = pack_translation(name, t);
-        if (std::string(name) == "Force") points = out;
-        out.insert(out.end(), b.begin(), b.end());
+    try {
+      display_tick(stall_s);
+    } catch (const std::exception& e) {  // e.g. std::bad_alloc: this tick's transforms are not sent
+      try {
+        log_.line(std::string("display  a tick not sent: ") + e.what());
+      } catch (...) {
       }
     }
-    // With --reply-force a stream's client applies every Force it gets (PLUS): it gets its
-    // forces from the reply thread alone (the stall rule, the last zero), not this display
-    // copy, also once another client took the stream over.
-    std::lock_guard<std::mutex> lock(clients_mu_);
-    for (Client& c : clients_) {
-      if (c.done || !c.conn->alive()) continue;
-      const bool to_stream = c.reply_target.load();
-      const long n = to_stream ? 2 : 3;
-      if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
-      else n_.dropped_sends.fetch_add(n);
+  }
+}
+
+/// One display tick: HIP, Proxy and Force to every client.
+void Server::display_tick(double stall_s) {
+  std::vector<std::uint8_t> out, points;  // HIP, Proxy and Force; HIP and Proxy
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (!session_) return;
+    const session::Observed ob = session_->live->observe();
+    if (ob.tick < 0) return;
+    const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
+    const core::Vec3 f = echo().force_ras_n(stall_s);
+    for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
+      const double t[3] = {v.x, v.y, v.z};
+      const auto b = pack_translation(name, t);
+      if (std::string(name) == "Force") points = out;
+      out.insert(out.end(), b.begin(), b.end());
     }
+  }
+  // With --reply-force a stream's client applies every Force it gets (PLUS): it gets its
+  // forces from the reply thread alone (the stall rule, the last zero), not this display
+  // copy, also once another client took the stream over.
+  std::lock_guard<std::mutex> lock(clients_mu_);
+  for (Client& c : clients_) {
+    if (c.done || !c.conn->alive()) continue;
+    const bool to_stream = c.reply_target.load();
+    const long n = to_stream ? 2 : 3;
+    if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
+    else n_.dropped_sends.fetch_add(n);
   }
 }
 
 /// A session on `v`, built (its snapshot, field, renderer) but not started: the running
 /// one goes on meanwhile.
-std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
+std::unique_ptr<Session> Server::prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
+                                                 const servo::HriParams& hri) {
   auto s = std::make_unique<Session>();
   s->mirror = std::make_shared<EditMirror>(v);
   s->frame.grid = v.grid;
@@ -585,15 +690,16 @@ std::unique_ptr<Session> Server::prepare_session(engine::Volume v) {
   s->frame.direction_is_identity = v.direction_is_identity;
   s->frame.min_value = v.min_value;
   s->frame.max_value = v.max_value;
-  s->targets = session::default_targets(v, setup_.live.iso);
+  s->targets = session::default_targets(v, live.iso);
   s->image_name = v.path.rfind("igtl:", 0) == 0 ? v.path.substr(5) : "isotouch";
-  s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), setup_.live, scene_.edits.history_limit_mib);
+  if (fault("prepare", s->image_name)) throw std::bad_alloc();
+  s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), live, scene_.edits.history_limit_mib);
   s->buffer.publish(s->edits->current());
   // The renderer's force is stiffness x depth / world_per_device: the TRANSFORM stream's map
   // is the identity (its points are the volume's own), so its renderer must not scale by the
   // scene's workspace_scale (at 0.1 that was 10x the stiffness the stability check saw); a
   // `--haptic` device is mapped with the scale (start_session), and its renderer scales.
-  servo::HriParams hp = setup_.hri;
+  servo::HriParams hp = hri;
   if (!echo_device_) hp.world_per_device = 1.0;
   s->hri = std::make_unique<servo::HriRenderer>(hp);
   return s;
@@ -621,58 +727,142 @@ void Server::start_session(std::unique_ptr<Session> s) {
   session_ = std::move(s);
 }
 
+/// While it lives, the command thread submits no edit (Server::submit): a new session is
+/// being built on the GPU context the running one edits with.
+struct HoldEdits {
+  std::mutex& mu;
+  bool& preparing;
+  HoldEdits(std::mutex& m, bool& p) : mu(m), preparing(p) {
+    std::lock_guard<std::mutex> lock(mu);
+    preparing = true;
+  }
+  ~HoldEdits() {
+    std::lock_guard<std::mutex> lock(mu);
+    preparing = false;
+  }
+  HoldEdits(const HoldEdits&) = delete;
+  HoldEdits& operator=(const HoldEdits&) = delete;
+};
+
+/// How long the running session's edits may take to settle before a new session is built;
+/// past it the change is refused (never built beside edits still running: the two would
+/// share the GPU context's one queue, pool and fence).
+constexpr double kSettleS = 5.0;
+
 /// `isovalue V` (checked by the command thread): the session restarts on its edited volume
 /// at V (the renderer, the live field's active bricks and the tool's targets follow it; the
-/// undo history starts afresh).
+/// undo history starts afresh). The new session is built first, while the old one serves
+/// with its edits held: when it cannot be built the isovalue is refused and nothing changes.
 void Server::restart_at_isovalue(const Pending& p) {
   std::shared_ptr<EditMirror> mirror;
-  {
-    std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) mirror = session_->mirror;
-  }
-  if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
   std::string name;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
-    name = session_->image_name;
+    if (session_) mirror = session_->mirror, name = session_->image_name;
   }
-  stop_session();  // its edits all applied: the mirror is the edited volume
-  engine::Volume v = mirror->volume();
-  v.path = name == "isotouch" ? v.path : "igtl:" + name;
-  setup_.live.iso.tau = p.cmd.value;
-  setup_.live.background = float(setup_.live.iso.outside_value(v.min_value, v.max_value));
-  setup_.hri.tau = p.cmd.value;
-  start_session(std::move(v));
-  answer(p, igtl::StatusMessage::STATUS_OK, to_string(p.cmd) + ": done (the session restarted on the edited volume)");
+  if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
+  const HoldEdits hold(session_mu_, preparing_);
+  const std::string what = to_string(p.cmd);
+  std::ostringstream settle;
+  settle << what << ": the session's edits did not settle in " << kSettleS << " s; the isovalue is unchanged";
+  if (!wait_edits_applied(kSettleS) || fault("settle", name))
+    return answer(p, igtl::StatusMessage::STATUS_BUSY, settle.str());
+  std::unique_ptr<Session> next;
+  session::LiveFieldOptions live = setup_.live;
+  servo::HriParams hri = setup_.hri;
+  try {
+    engine::Volume v = mirror->volume();  // every edit applied: the edited volume
+    v.path = name == "isotouch" ? v.path : "igtl:" + name;
+    live.iso.tau = p.cmd.value;
+    live.background = float(live.iso.outside_value(v.min_value, v.max_value));
+    hri.tau = p.cmd.value;
+    next = prepare_session(std::move(v), live, hri);
+  } catch (const std::exception& e) {
+    return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
+                  what + ": the session could not be rebuilt at it (" + e.what() + "); the isovalue is unchanged");
+  }
+  setup_.live = live;
+  setup_.hri = hri;
+  stop_session();
+  start_session(std::move(next));
+  answer(p, igtl::StatusMessage::STATUS_OK, what + ": done (the session restarted on the edited volume)");
+}
+
+void Server::answer_image(const PendingVolume& p, int code, const std::string& text) {
+  if (code != igtl::StatusMessage::STATUS_OK) {
+    n_.refused.fetch_add(1);
+    log_.line("refused  client " + std::to_string(p.client) + ", IMAGE '" + p.device + "': " + text);
+  }
+  p.from->send(pack_status(code, p.device, text));
+}
+
+/// What taking `image` would need, against the memory budget (the loaders' rule: at most
+/// 3/4 of what the process may use, io::memory_budget_bytes, or of --memory-mib): the
+/// image as received, the new session (its volume, the mirror, the live field's shadow,
+/// its samples, an edited IMAGE's copy and bytes), the running session, which serves while
+/// the new one is built, and an IMAGE already waiting. "" when it fits.
+std::string Server::memory_refusal(igtl::ImageMessage& image) {
+  int d[3];
+  image.GetDimensions(d);
+  const std::uint64_t n = std::uint64_t(std::max(d[0], 0)) * std::uint64_t(std::max(d[1], 0)) * std::uint64_t(std::max(d[2], 0));
+  const std::uint64_t sample = setup_.live.format == core::SampleFormat::kFp16 ? 8 : 16;
+  const std::uint64_t per_voxel = 4 + 4 + 4 + sample + 8;
+  std::uint64_t others = 0;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_) others += session_->frame.grid.voxel_count() * per_voxel;
+  }
+  {
+    std::lock_guard<std::mutex> lock(volume_mu_);
+    if (next_volume_) others += next_volume_->volume.voxels.size() * sizeof(float);
+  }
+  const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
+  const std::uint64_t need = n * (stored + per_voxel) + others;
+  std::uint64_t have = io::memory_budget_bytes();
+  if (o_.memory_mib > 0) have = have == 0 ? std::uint64_t(o_.memory_mib) << 20 : std::min(have, std::uint64_t(o_.memory_mib) << 20);
+  if (have == 0 || need <= have / 4 * 3) return "";
+  std::ostringstream s;
+  s << "igtl:" << image.GetDeviceName() << ": not taken: " << d[0] << " x " << d[1] << " x " << d[2] << " voxels need "
+    << (need >> 20) << " MiB (the image as received, its session: volume, mirror, shadow, samples and an edited "
+    << "copy, " << per_voxel << " bytes a voxel, and the " << (others >> 20) << " MiB of the running session and any "
+    << "image waiting), more than 3/4 of the " << (have >> 20) << " MiB of memory this server may use";
+  return s.str();
 }
 
 /// A received volume becomes the session's: the new session is built while the old one goes
-/// on serving (its edits held and drained first: the two must not use the GPU at once), then
-/// the servo moves over; the force stops only for that stop and start.
-void Server::swap_volume(engine::Volume v) {
-  {
-    std::lock_guard<std::mutex> lock(session_mu_);
-    preparing_ = true;
+/// on serving (its edits held and settled first: the two must not use the GPU at once), then
+/// the servo moves over; the force stops only for that stop and start. The sender is
+/// answered once that is done ("volume taken"), or why not: the running session goes on.
+void Server::swap_volume(PendingVolume p) {
+  const HoldEdits hold(session_mu_, preparing_);
+  const std::string keep = "; the session goes on with the volume it had";
+  if (!wait_edits_applied(kSettleS) || fault("settle", p.device)) {
+    std::ostringstream s;
+    s << "igtl:" << p.device << ": not taken: the running session's edits did not settle in " << kSettleS
+      << " s (its session is never built beside them)" << keep << "; send the image again";
+    return answer_image(p, igtl::StatusMessage::STATUS_BUSY, s.str());
   }
-  struct Release {
-    Server& s;
-    ~Release() {
-      std::lock_guard<std::mutex> lock(s.session_mu_);
-      s.preparing_ = false;
-    }
-  } release{*this};
-  if (!wait_edits_applied(5.0)) log_.line("volume   the old session's edits did not settle in 5 s; swapping anyway");
   const auto t0 = std::chrono::steady_clock::now();
-  std::unique_ptr<Session> next = prepare_session(std::move(v));
+  std::unique_ptr<Session> next;
+  try {
+    next = prepare_session(std::move(p.volume), setup_.live, setup_.hri);
+  } catch (const std::exception& e) {
+    return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
+                        "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
+                            e.what() + ")" + keep);
+  }
   const auto t1 = std::chrono::steady_clock::now();
   stop_session();
   start_session(std::move(next));
   const auto t2 = std::chrono::steady_clock::now();
+  n_.images.fetch_add(1);
   std::ostringstream s;
-  s << std::fixed << std::setprecision(1) << "volume   now the session's volume (isovalue and tool kept; built in "
+  s << std::fixed << std::setprecision(1) << "volume   client " << p.client << ", '" << p.device << "': " << p.dims
+    << " taken, now the session's volume (isovalue and tool kept; built in "
     << std::chrono::duration<double, std::milli>(t1 - t0).count() << " ms while the old one served, servo off for "
     << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms)";
   log_.line(s.str());
+  answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims);
 }
 
 void Server::stop_session() {
@@ -728,7 +918,7 @@ int Server::run() {
                                      : "stream '" + o_.stream + "' + offset " + mm3(o_.offset_mm) + " mm (RAS)";
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
             std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
-  start_session(setup_.volume);
+  start_session(prepare_session(setup_.volume, setup_.live, setup_.hri));
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());
   tool_ = scene_.edits.brush;
@@ -749,7 +939,7 @@ int Server::run() {
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   while (session::stop_signal() == 0 && (o_.seconds <= 0 || elapsed() < o_.seconds)) {
     accept_clients();
-    std::optional<engine::Volume> v;
+    std::optional<PendingVolume> v;
     std::optional<Pending> iso;
     {
       std::lock_guard<std::mutex> lock(volume_mu_);

@@ -61,6 +61,15 @@ struct ServeOptions {
   bool reply_force = false;  ///< not with `haptic`
   std::function<void(int port)> on_listening;  ///< called once listening (benches, tests)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
+  /// The memory the server may use [MiB] (0: io::memory_budget_bytes, the machine's and its
+  /// limits'; else the smaller of the two): an IMAGE whose session, with the running one's,
+  /// would pass 3/4 of it is refused with a STATUS naming the need and the budget.
+  double memory_mib = 0;
+  /// Tests only: asked at each spot where the server can fail for a cause a CPU Vulkan driver
+  /// does not produce ("prepare": the new session's build throws std::bad_alloc; "settle":
+  /// the running session's edits did not settle; "edited": packing the edited IMAGE throws
+  /// std::bad_alloc), with the image's device name; true: fail there. Empty: never.
+  std::function<bool(const std::string& where, const std::string& image)> fault_for_test;
   MessageLimits limits;
   run::RunOptions run;                ///< the Vulkan device (scene setup)
 };

@@ -7,6 +7,7 @@
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
+//                     (the first STATUS under the device name sent; so for `image` and `ramp`)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms and how many came so far
@@ -17,6 +18,9 @@
 //                     IMAGE's dimensions, spacing, directions and centre were BASE's within 1e-3)
 //   labelmeta NAME    a LBMETA describing the image NAME as a label map
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
+//   ramp NAME NX NY NZ  an NX x NY x NZ uint8 IMAGE named NAME (1 mm voxels, RAS, centred on
+//                     the origin; value x % 256); prints the STATUS answer
+//   statuses SECS     waits SECS, then prints the STATUS answers not printed yet
 //   rebase            the copy starts again from BASE (what the server holds once it took
 //                     an `image`); IMAGEs received later apply to it
 // Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
@@ -51,7 +55,7 @@ using Clock = std::chrono::steady_clock;
 struct Shared {
   std::mutex mu;
   std::condition_variable cv;
-  std::deque<std::string> statuses;
+  std::deque<std::pair<std::string, std::string>> statuses;  // device name, "STATUS code C: TEXT"
   std::deque<std::array<double, 3>> forces;
   long forces_received = 0;
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
@@ -118,7 +122,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
     std::lock_guard<std::mutex> lock(s.mu);
     if (type == "STATUS") {
       if (auto st = body_of<igtl::StatusMessage>(sock, h))
-        s.statuses.push_back("STATUS code " + std::to_string(st->GetCode()) + ": " + st->GetStatusString());
+        s.statuses.emplace_back(name, "STATUS code " + std::to_string(st->GetCode()) + ": " + st->GetStatusString());
     } else if (type == "TRANSFORM" && name == "Force") {
       if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
         igtl::Matrix4x4 m;
@@ -179,14 +183,21 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& 
   }
 }
 
-bool wait_status(Shared& s) {
+/// Prints the first STATUS under `device` (the answer to what was sent under it; others,
+/// such as the server's own about the edited IMAGE, wait for `statuses`).
+bool wait_status(Shared& s, const std::string& device) {
   std::unique_lock<std::mutex> lock(s.mu);
-  if (!s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return !s.statuses.empty() || s.closed; }) || s.statuses.empty()) {
+  auto mine = [&] {
+    return std::find_if(s.statuses.begin(), s.statuses.end(), [&](const auto& st) { return st.first == device; });
+  };
+  if (!s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return mine() != s.statuses.end() || s.closed; }) ||
+      mine() == s.statuses.end()) {
     std::cout << "no STATUS came back\n";
     return false;
   }
-  std::cout << s.statuses.front() << "\n";
-  s.statuses.pop_front();
+  const auto it = mine();
+  std::cout << it->second << "\n";
+  s.statuses.erase(it);
   return true;
 }
 
@@ -232,7 +243,7 @@ bool Client::action(const std::string& a) {
     m->SetDeviceName("CMD");
     m->SetString(arg().c_str());
     send(sock, m);
-    return wait_status(s);
+    return wait_status(s, "CMD");
   }
   if (a == "force") {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -282,6 +293,30 @@ bool Client::action(const std::string& a) {
     s.copy = base;
     return true;
   }
+  if (a == "ramp") {
+    const std::string name = arg();
+    int dims[3];
+    for (int& d : dims) d = int(num());
+    igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+    float sp[3] = {1, 1, 1};
+    m->SetDimensions(dims);
+    m->SetSpacing(sp);
+    m->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+    m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+    m->SetDeviceName(name.c_str());
+    m->AllocateScalars();
+    auto* out = static_cast<std::uint8_t*>(m->GetScalarPointer());
+    const std::size_t n = std::size_t(dims[0]) * std::size_t(dims[1]) * std::size_t(dims[2]);
+    for (std::size_t k = 0; k < n; ++k) out[k] = std::uint8_t(k % std::size_t(dims[0]) % 256);
+    send(sock, m);
+    return wait_status(s, name);
+  }
+  if (a == "statuses") {
+    std::this_thread::sleep_for(std::chrono::duration<double>(num()));
+    std::lock_guard<std::mutex> lock(s.mu);
+    for (; !s.statuses.empty(); s.statuses.pop_front()) std::cout << s.statuses.front().second << "\n";
+    return true;
+  }
   if (a == "image") {
     const std::string name = arg();
     const std::vector<std::uint8_t> b = isotouch::test::image_of(base, igtl::ImageMessage::ENDIAN_LITTLE, name.c_str());
@@ -289,7 +324,7 @@ bool Client::action(const std::string& a) {
       std::lock_guard<std::mutex> lock(send_mu);
       sock->Send(b.data(), int(b.size()));
     }
-    return wait_status(s);
+    return wait_status(s, name);
   }
   std::cout << "unknown action '" << a << "'\n";
   return false;

@@ -29,6 +29,7 @@
 #include "isotouch/servo/report_device.h"
 #include "isotouch/servo/servo_thread.h"
 #include "isotouch/servo/socket_link.h"
+#include "isotouch/tests/sched_canary.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -134,6 +135,9 @@ struct Rig {
   std::string last_error, last_refusal, stop_error;
   hid::polhem::Config host_config = hid::polhem::kDefaultConfig;  // the host's, for a Polhem
   double stop_s = 0;                    // how long servo.stop() took [s]
+  /// How long the machine was gone, measured beside the run: a wall-clock bound on the wire
+  /// widens by the canaries' lost time in the interval it bounds, and by nothing else.
+  isotouch::test::SchedCanary canary;
 
   Rig() {
     cfg.socket_path = "/tmp/isotouch-test-emu-" + std::to_string(::getpid()) + ".sock";
@@ -305,7 +309,9 @@ TEST(DeviceEmu, FrozenDeviceGivesZeroForceAfterTheTimeout) {
   EXPECT_GT(rig.forced_after(rig.wire[begin + len].t_ns + 50'000'000), 50);
   long zero_enabled = 0, checked = 0;
   for (std::size_t i = begin; i < begin + len; ++i) {
-    if (rig.wire[i].t_ns - rig.wire[begin].t_ns < 3'000'000) continue;
+    // (3 periods after the freeze's start, and the time the machine was gone in them.)
+    if (rig.wire[i].t_ns - rig.wire[begin].t_ns < 3'000'000 + rig.canary.lost_ns(rig.wire[begin].t_ns, rig.wire[i].t_ns))
+      continue;
     ++checked;
     ASSERT_EQ(norm(rig.wire[i].force_n), 0.0) << "output " << i - begin << " of the freeze";
     zero_enabled += rig.wire[i].enable;
@@ -482,7 +488,8 @@ void stalled_servo_gets_zero_within_three_periods(bool polhem) {
   const std::size_t on = rig.last_forced_before(off);
   ASSERT_LT(on, off) << "no force before the stall";
   EXPECT_GT(norm(rig.wire[on].force_n), 0.3);
-  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3 * T) << "zero force came late";
+  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3 * T + rig.canary.lost_ns(rig.wire[on].t_ns, rig.wire[off].t_ns))
+      << "zero force came late; " << rig.canary.describe(rig.wire[on].t_ns, rig.wire[off].t_ns);
   EXPECT_EQ(norm(rig.wire[off].force_n), 0.0);
   EXPECT_EQ(rig.forced_on_wire(rig.wire[off].t_ns, slow.end_ns.load()), 0) << "force during the stall";
   EXPECT_EQ(rig.stats.watchdog_trips, 0);
@@ -604,7 +611,9 @@ TEST(DeviceEmu, AFrozenWriterTripsTheDevicesWatchdog) {
   while (last + 1 < rig.wire.size() && rig.wire[last + 1].t_ns < rig.stats.first_watchdog_ns) ++last;
   const std::int64_t silence = rig.stats.first_watchdog_ns - rig.wire[last].t_ns;
   EXPECT_GE(silence, std::int64_t(rig.cfg.caps.watchdog_s * 1e9));
-  EXPECT_LE(silence, std::int64_t(rig.cfg.caps.watchdog_s * 1e9) + 3'000'000);
+  EXPECT_LE(silence, std::int64_t(rig.cfg.caps.watchdog_s * 1e9) + 3'000'000 +
+                        rig.canary.lost_ns(rig.wire[last].t_ns, rig.stats.first_watchdog_ns))
+      << rig.canary.describe(rig.wire[last].t_ns, rig.stats.first_watchdog_ns);
   EXPECT_TRUE(rig.wire[last].enable);  // it was pushing when the writer froze
 }
 
@@ -625,7 +634,8 @@ TEST(DeviceEmu, ARendererThatNeverReturnsIsAbandonedWithTheForceOff) {
   ASSERT_LT(off, rig.wire.size()) << "no disabled output after the renderer stuck";
   const std::size_t on = rig.last_forced_before(off);
   ASSERT_LT(on, off);
-  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3'000'000);
+  EXPECT_LE(rig.wire[off].t_ns - rig.wire[on].t_ns, 3'000'000 + rig.canary.lost_ns(rig.wire[on].t_ns, rig.wire[off].t_ns))
+      << rig.canary.describe(rig.wire[on].t_ns, rig.wire[off].t_ns);
   EXPECT_EQ(rig.forced_on_wire(rig.wire[off].t_ns, INT64_MAX), 0) << "force after the renderer stuck";
   // The abandoned thread, released, leaves without touching the (destroyed) servo or device.
   g_stuck.release.store(true);

@@ -47,7 +47,13 @@ fi
 echo "run.sh: configuring and building (cmake preset 'release' -> build/)"
 cmake --preset release >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
 rm -f build-configure.log
-cmake --build --preset release -j"$(nproc)"
+if [[ "${1:-}" == "test" ]]; then
+  cmake --build --preset release -j"$(nproc)"
+else
+  # The programs only (build/bin/isotouch, isotouch-sculpt, isotouch-devemu): the tests, the
+  # benchmarks' helpers and the fuzzers are built by `./run.sh test`.
+  cmake --build --preset release -j"$(nproc)" --target programs
+fi
 
 if [[ "${1:-}" == "test" ]]; then
   shift

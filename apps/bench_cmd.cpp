@@ -260,7 +260,7 @@ Subcommand add_bench_sculpt_big_command(CLI::App& bench) {
   s.app->add_option("--source", o->source, "Scan to resample")->capture_default_str();
   s.app->add_option("--reference", o->reference, "Also run on this scene, in the same run (\"\": not)")->capture_default_str();
   s.app->add_option("--slices", o->slices, "Slice counts, one run each")->capture_default_str()->check(CLI::Range(1, 4096));
-  s.app->add_option("--iso", o->iso, "Isovalue (inside above)")->capture_default_str();
+  s.app->add_option("--iso", o->iso, "Isovalue (inside above)")->capture_default_str()->check(finite_number());
   s.app->add_option("--size", o->width, "Window width [pixels] (height 3/4 of it)")->capture_default_str()->check(CLI::Range(64, 4096));
   s.app->add_option("--sculpt", o->sculpt_exe, "isotouch-sculpt to run (default: beside this program)");
   s.app->add_option("--keep", o->keep_dir, "Keep the made volumes in this folder (default: a temporary one, removed)");

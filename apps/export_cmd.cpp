@@ -1,6 +1,7 @@
 // export_cmd.cpp - `isotouch export`: options only; the export is run/export.h.
 #include "isotouch/apps/export_cmd.h"
 
+#include "isotouch/apps/cli_checks.h"
 #include "isotouch/core/exit_codes.h"
 
 #include <iostream>
@@ -34,7 +35,8 @@ Subcommand add_export_command(CLI::App& cli) {
   s.app->add_option("--iso", o->iso,
                     "Isovalue tau (value units); overrides the scene's or the .vdb's. Without it (and without one "
                     "in the scene or the .vdb) the volume's own: bone for CT in HU, else the upper three-class Otsu "
-                    "threshold (the rule is printed)");
+                    "threshold (the rule is printed)")
+      ->check(finite_number("the isovalue in the volume's units, e.g. --iso 300 for bone in HU"));
   s.app->add_option("--inside", o->inside, "Which side of tau is the object: above (CT density) or below (signed distance)");
   s.app->add_option("--vdb", o->vdb, "Write the volume as OpenVDB .vdb (FloatGrid 'volume')");
   s.app->add_option("--volume", o->volume_out,

@@ -1,6 +1,7 @@
 #include "isotouch/engine/iso_choice.h"
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 
@@ -71,13 +72,43 @@ const std::vector<IsoPreset>& ct_hu_presets() {
   return presets;
 }
 
-bool is_ct_hounsfield(const Volume& vol, const std::string& modality, std::string* why) {
+std::string hu_by_histogram(const Volume& vol) {
+  if (vol.finite_voxels == 0 || vol.min_value < -3100 || vol.max_value < 300) return "";
+  std::uint64_t n = 0, air = 0, soft = 0, bone = 0;
+  for (const float v : vol.voxels) {
+    if (!std::isfinite(v)) continue;
+    ++n;
+    air += v >= -1100 && v <= -850;
+    soft += v >= -150 && v <= 150;
+    bone += v >= 300 && v <= 3100;
+  }
+  const double fa = double(air) / double(n), fs = double(soft) / double(n), fb = double(bone) / double(n);
+  if (fa < 0.01 || fs < 0.02 || fb < 0.0005) return "";
+  const auto pct = [](double f) { return num(std::round(f * 1000) / 10) + " %"; };
+  return "histogram: air " + pct(fa) + " in -1100 to -850, soft tissue " + pct(fs) + " in -150 to 150, bone " +
+         pct(fb) + " in 300 to 3100";
+}
+
+bool is_ct_hounsfield(const Volume& vol, const VolumeHints& hints, std::string* why) {
   std::string reason;
-  if (modality == "CT") reason = "modality CT";
+  // Free text in a header is a claim the values must bear out: air below -500.
+  const bool air = vol.finite_voxels > 0 && vol.min_value < -500;
+  if (hints.modality == "CT" && (hints.modality_from.empty() || air))
+    reason = hints.modality_from.empty() ? "modality CT" : hints.modality_from;
+  else if (hints.units == "HU" && air)
+    reason = hints.units_from;
   else if (vol.finite_voxels > 0 && std::abs(double(vol.min_value) + 1024.0) <= 100.0)
     reason = "minimum " + num(vol.min_value) + ", air in HU";
+  else if (hints.modality.empty() || hints.modality == "CT")  // an MR's histogram is not asked
+    reason = hu_by_histogram(vol);
   if (why) *why = reason;
   return !reason.empty();
+}
+
+bool is_ct_hounsfield(const Volume& vol, const std::string& modality, std::string* why) {
+  VolumeHints h;
+  h.modality = modality;
+  return is_ct_hounsfield(vol, h, why);
 }
 
 IsoChoice choose_isovalue(const Volume& vol, const VolumeHints& hints) {
@@ -95,7 +126,7 @@ IsoChoice choose_isovalue(const Volume& vol, const VolumeHints& hints) {
     return c;
   }
   std::string why;
-  if (is_ct_hounsfield(vol, hints.modality, &why)) {
+  if (is_ct_hounsfield(vol, hints, &why)) {
     c.hounsfield = true;
     c.presets = ct_hu_presets();
     const IsoPreset& bone = c.presets.front();

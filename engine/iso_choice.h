@@ -53,6 +53,12 @@ const std::vector<IsoPreset>& ct_hu_presets();
 /// What a file says about its data beyond the voxels (io::load_scan fills it).
 struct VolumeHints {
   std::string modality;                  ///< DICOM (0008,0060) or MetaImage `Modality` as "CT", "MR"; "" unknown
+  /// Where `modality` came from when a header's free text said it (a NIfTI `descrip`, a NRRD
+  /// `content`: "NIfTI descrip 'CT abdomen'"); "" when a modality field said it. Free text
+  /// counts as CT in HU only where the values agree (air: a minimum below -500).
+  std::string modality_from;
+  std::string units;                     ///< "HU" when a header's text says Hounsfield units; "" unknown
+  std::string units_from;                ///< where `units` came from, as `modality_from`
   std::optional<core::Isosurface> stored;  ///< an isovalue the file stores (a .vdb's metadata, a level set)
   std::string stored_from;               ///< where `stored` came from, e.g. ".vdb metadata isotouch_isovalue"
 };
@@ -65,12 +71,24 @@ struct IsoChoice {
   std::vector<IsoPreset> presets;    ///< CT in HU: ct_hu_presets(); empty otherwise
 };
 
-/// True when `vol` is taken to be CT in Hounsfield units: `modality` is "CT" (DICOM CT pixels
-/// are rescaled to HU on loading; a MetaImage says MET_MOD_CT), or the smallest finite value
-/// is within 100 of -1024 (air in a CT stored as HU). `why` gets the reason, for the rule.
+/// True when `vol` is taken to be CT in Hounsfield units, by the first of: `hints.modality`
+/// "CT" (DICOM CT pixels are rescaled to HU on loading; a MetaImage says MET_MOD_CT; free
+/// text only with a minimum below -500); `hints.units` "HU" (the same condition); the smallest
+/// finite value within 100 of -1024 (air in a CT stored as HU); the histogram (hu_by_histogram;
+/// not for another modality).
+/// `why` gets the reason, for the rule.
+bool is_ct_hounsfield(const Volume& vol, const VolumeHints& hints, std::string* why = nullptr);
+/// The same with only a modality known ("" for none).
 bool is_ct_hounsfield(const Volume& vol, const std::string& modality, std::string* why = nullptr);
 
-/// The isovalue `vol` opens at: (1) `hints.stored`; (2) CT in HU: the bone preset (inside
+/// The histogram's evidence of CT in HU, for scans whose header says nothing and whose
+/// minimum is not air's -1024 (a resampled or cropped CT): at least 1 % of the finite voxels
+/// in air's band [-1100, -850], 2 % in soft tissue's [-150, 150] and 0.05 % in a bone tail
+/// [300, 3100], and nothing below -3100 (a scanner's padding is -3024 at the lowest).
+/// @return the reason ("air 31 % near -1000, soft tissue ..."), or "" when it does not hold.
+std::string hu_by_histogram(const Volume& vol);
+
+/// The isovalue `vol` opens at: (1) `hints.stored`; (2) CT in HU (is_ct_hounsfield): the bone preset (inside
 /// above); (3) otherwise the upper threshold of a three-class Otsu over histogram(vol, 256)
 /// (inside above). A volume with no finite voxels or a single value: the middle of its range
 /// (said so in the rule). Never NaN.

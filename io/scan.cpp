@@ -5,6 +5,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <utility>
+#include <vector>
 
 #include "isotouch/io/dicom_series.h"
 #include "isotouch/io/volume_io.h"
@@ -23,12 +25,45 @@ std::string suggested_source(const LoadedVdb& l) {
 }
 
 namespace {
+bool is_nrrd_name(const std::string& path) {
+  const std::string ext = lower_extension(path);
+  return ext == ".nrrd" || ext == ".nhdr";
+}
+
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r");
   const auto e = s.find_last_not_of(" \t\r");
   return b == std::string::npos ? "" : s.substr(b, e - b + 1);
 }
+
+/// The words of a header's text, lower case, split at anything but letters and digits.
+std::vector<std::string> words(const std::string& text) {
+  std::vector<std::string> out;
+  std::string w;
+  for (const char ch : text + " ") {
+    if (std::isalnum(static_cast<unsigned char>(ch))) w += char(std::tolower(static_cast<unsigned char>(ch)));
+    else if (!w.empty()) out.push_back(w), w.clear();
+  }
+  return out;
+}
 }  // namespace
+
+void read_text_hints(const std::string& format, const std::vector<std::pair<std::string, std::string>>& fields,
+                     engine::VolumeHints& hints) {
+  for (const auto& [field, value] : fields) {
+    const std::vector<std::string> w = words(value);
+    const auto has = [&](const std::string& x) { return std::find(w.begin(), w.end(), x) != w.end(); };
+    const auto has_pair = [&](const std::string& a, const std::string& b) {
+      for (std::size_t i = 0; i + 1 < w.size(); ++i)
+        if (w[i] == a && w[i + 1] == b) return true;
+      return false;
+    };
+    const std::string from = format + " " + field + " '" + value.substr(0, 60) + "'";
+    if (hints.modality.empty() && (has("ct") || has_pair("computed", "tomography")))
+      hints.modality = "CT", hints.modality_from = from;
+    if (hints.units.empty() && (has("hu") || has("hounsfield"))) hints.units = "HU", hints.units_from = from;
+  }
+}
 
 std::string metaimage_modality(const std::string& path) {
   const std::string ext = lower_extension(path);
@@ -64,6 +99,9 @@ Scan load_scan(const std::string& path) {
   } else {
     s.volume = load_volume(path);
     s.hints.modality = metaimage_modality(path);
+    // NIfTI and NRRD have no modality field: their description and key/value text may say it.
+    if (s.hints.modality.empty())
+      read_text_hints(is_nrrd_name(path) ? "NRRD" : "NIfTI", header_text_fields(path), s.hints);
   }
   return s;
 }

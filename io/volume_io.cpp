@@ -7,6 +7,7 @@
 
 #include <itkImageIOBase.h>
 #include <itkImageIORegion.h>
+#include <itkMetaDataObject.h>
 #include <itkMetaImageIO.h>
 #include <itkNiftiImageIO.h>
 #include <itkNrrdImageIO.h>
@@ -481,7 +482,12 @@ Volume load_itk(const std::string& path) {
   quiet.release();
 
   const unsigned nd = io->GetNumberOfDimensions();
-  if (nd < 2 || nd > 4) fail(path, "has " + std::to_string(nd) + " dimensions (need 3; 2 is read as one slice)");
+  if (nd == 2) {
+    const std::string field = cls == "MetaImageIO" ? "NDims" : cls == "NiftiImageIO" ? "dim[0]" : "dimension";
+    fail(path, field + " 2: a 2-D image, not a volume (isotouch touches 3-D volumes: stack the slices, or "
+                       "give the folder of a DICOM series)");
+  }
+  if (nd < 2 || nd > 4) fail(path, "has " + std::to_string(nd) + " dimensions (need 3)");
   if (io->GetNumberOfComponents() != 1)
     fail(path, "has " + std::to_string(io->GetNumberOfComponents()) +
                    " components per voxel (need a scalar volume)");
@@ -594,6 +600,8 @@ Volume load_teem(const std::string& path) {
     std::unique_ptr<NrrdIoState, IoDel> head_only(nrrdIoStateNew());
     nrrdIoStateSet(head_only.get(), nrrdIoStateSkipData, AIR_TRUE);
     if (nrrdLoad(nin.get(), path.c_str(), head_only.get())) fail(path, "teem: " + biff_error());
+    if (nin->dim == 2)
+      fail(path, "dimension 2: a 2-D image, not a volume (isotouch touches 3-D volumes: stack the slices)");
     if (nin->dim < 2 || nin->dim > 3) fail(path, "has " + std::to_string(nin->dim) + " axes (need 3)");
     std::array<std::uint64_t, 3> hd{1, 1, 1};
     for (unsigned a = 0; a < nin->dim; ++a) hd[a] = nin->axis[a].size;
@@ -820,6 +828,33 @@ Volume load_volume(const std::string& path) {
   finish_direction(v);
   v.update_stats();
   return v;
+}
+
+std::vector<std::pair<std::string, std::string>> header_text_fields(const std::string& path) {
+  std::vector<std::pair<std::string, std::string>> out;
+  const std::string l = lower(path);
+  const bool nrrd = is_nrrd(path), nifti = ends_with(l, ".nii") || ends_with(l, ".nii.gz");
+  if (!nrrd && !nifti) return out;
+  try {
+    if (nifti) check_nifti_header(path);  // (ITK's matrix code aborts on bad orientation fields)
+    QuietCerr quiet;
+    itk::ImageIOBase::Pointer io;
+    if (nrrd) io = itk::NrrdImageIO::New().GetPointer();
+    else io = itk::NiftiImageIO::New().GetPointer();
+    io->SetFileName(path);
+    io->ReadImageInformation();
+    const itk::MetaDataDictionary& d = io->GetMetaDataDictionary();
+    for (const std::string& key : d.GetKeys()) {
+      std::string value;
+      if (!itk::ExposeMetaData<std::string>(d, key, value) || value.empty()) continue;
+      if (nifti && key != "descrip" && key != "intent_name" && key != "aux_file") continue;
+      if (nrrd && key.rfind("ITK_", 0) == 0) continue;  // ITK's own, not the file's
+      out.emplace_back(nrrd && key == "NRRD_content" ? "content" : key, value);
+    }
+  } catch (const std::exception&) {
+    out.clear();  // unreadable: load_volume says why
+  }
+  return out;
 }
 
 }  // namespace isotouch::io

@@ -4,6 +4,8 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "isotouch/engine/volume.h"
 
@@ -69,5 +71,11 @@ void require_regular_file(const std::string& path, const std::string& why);
 ///         ElementType bytes (too short, or longer as when MET_UCHAR is declared over
 ///         16-bit data).
 engine::Volume load_volume(const std::string& path);
+
+/// The free text a NIfTI or NRRD header says about its data, as (field, value) pairs: NIfTI's
+/// `descrip`, `intent_name` and `aux_file`; NRRD's `content` and every key/value pair. Empty
+/// for other formats, or when the header cannot be read (load_volume names why). Reads the
+/// header only.
+std::vector<std::pair<std::string, std::string>> header_text_fields(const std::string& path);
 
 }  // namespace isotouch::io

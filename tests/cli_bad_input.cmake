@@ -79,6 +79,12 @@ file(WRITE ${OUT}/order.raw "${raw128}")
 file(WRITE ${OUT}/order.mhd "ObjectType = Image\nDimSize = 8 8\nNDims = 2\nElementType = MET_SHORT\nElementDataFile = order.raw\n")
 expect(mhd_2d_field_order 1 "^\n?[^\n]*order.mhd: MetaIO cannot read the header: DimSize defined prior to defining NDims\n$"
        check ${OUT}/order.mhd)
+# A 2-D image is refused naming the field (it was read as one slice, 4 x 4 x 1, and touched).
+file(WRITE ${OUT}/flat.raw "${raw128}")
+file(WRITE ${OUT}/flat.mhd "ObjectType = Image\nNDims = 2\nDimSize = 8 8\nElementType = MET_SHORT\nElementDataFile = flat.raw\n")
+expect(mhd_2d_image 1 "flat.mhd: NDims 2: a 2-D image, not a volume" check ${OUT}/flat.mhd)
+file(WRITE ${OUT}/flat.nrrd "NRRD0004\ntype: float\ndimension: 2\nsizes: 2 2\nencoding: ascii\n\n1 2 3 4\n")
+expect(nrrd_2d_image 1 "flat.nrrd: .*dimension 2: a 2-D image, not a volume" check ${OUT}/flat.nrrd)
 file(WRITE ${OUT}/nodata.mhd "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\nElementType = MET_SHORT\nElementDataFile = gone.raw\n")
 expect(mhd_missing_data_file 1 "nodata.mhd: field 'ElementDataFile' = 'gone.raw': no such file" check ${OUT}/nodata.mhd)
 
@@ -126,8 +132,12 @@ expect(export_vdb_named_nrrd 2 "--vdb ${OUT}/y.nrrd: the name must end in .vdb \
        export ${head} --vdb ${OUT}/y.nrrd)
 expect(export_ply_named_xyz 2 "--ply ${OUT}/y.xyz: the name must end in .ply; nothing was written"
        export ${head} --iso 1150 --inside above --ply ${OUT}/y.xyz)
+# A NaN isovalue is a usage error before anything is loaded or meshed (it used to mesh, then
+# refuse with exit 2 naming the empty mesh).
+expect(export_iso_nan 2 "--iso: must be a finite number \\(the isovalue in the volume's units.*\\), got nan"
+       export ${head} --iso nan --inside above --stl ${OUT}/nan.stl)
 file(READ ${OUT}/keep.obj kept)
-if(NOT kept STREQUAL "kept\n" OR EXISTS ${OUT}/y.nrrd OR EXISTS ${OUT}/y.xyz)
+if(NOT kept STREQUAL "kept\n" OR EXISTS ${OUT}/y.nrrd OR EXISTS ${OUT}/y.xyz OR EXISTS ${OUT}/nan.stl)
   set(failures "${failures}\n[export names] an output was written or clobbered")
 endif()
 

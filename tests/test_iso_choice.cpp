@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -137,6 +139,69 @@ TEST(ChooseIsovalue, CtInHuOpensAtTheBonePreset) {
   EXPECT_FALSE(engine::is_ct_hounsfield(volume_of({-1200, 0, 100}), ""));
 }
 
+/// A CT's histogram in HU without air's -1024 as its minimum (a resampled abdomen, whose
+/// interpolation and padding reach -1207): air around -1000, soft tissue 0-60, a bone tail.
+std::vector<float> resampled_ct_hu(double shift = 0) {
+  std::vector<float> x;
+  add_uniform(x, -1207 + shift, -1100 + shift, 200);
+  add_uniform(x, -1040 + shift, -960 + shift, 30000);
+  add_uniform(x, -120 + shift, -60 + shift, 8000);  // fat
+  add_uniform(x, 0 + shift, 60 + shift, 50000);
+  add_uniform(x, 300 + shift, 1400 + shift, 3000);
+  return x;
+}
+
+TEST(ChooseIsovalue, ACtInHuWhoseMinimumIsNotAirIsRecognisedByItsHistogram) {
+  const Volume v = volume_of(resampled_ct_hu());
+  const auto c = engine::choose_isovalue(v, {});
+  EXPECT_TRUE(c.hounsfield) << c.rule;  // (before: -24, the three-class Otsu between air and tissue)
+  EXPECT_EQ(c.iso.tau, 300);
+  EXPECT_EQ(c.presets.size(), 3u);
+  EXPECT_NE(c.rule.find("histogram: air 32.9 % in -1100 to -850, soft tissue 63.6 %"), std::string::npos) << c.rule;
+  // Not HU: the same scan in scanner units (shifted by +1024: no air band), an MR, or a
+  // volume without a bone tail (a phantom of water and air) go to the histogram's Otsu.
+  EXPECT_FALSE(engine::choose_isovalue(volume_of(resampled_ct_hu(1024)), {}).hounsfield);
+  engine::VolumeHints mr;
+  mr.modality = "MR";
+  EXPECT_FALSE(engine::choose_isovalue(v, mr).hounsfield);
+  std::vector<float> water;
+  add_uniform(water, -1040, -960, 30000);
+  add_uniform(water, -20, 20, 30000);
+  water.push_back(-1207);
+  EXPECT_EQ(engine::hu_by_histogram(volume_of(water)), "");
+  // Padding below any scanner's (-3024) is not a CT's.
+  std::vector<float> padded = resampled_ct_hu();
+  padded.push_back(-5000);
+  EXPECT_EQ(engine::hu_by_histogram(volume_of(padded)), "");
+}
+
+TEST(ChooseIsovalue, HeaderTextSaysCtOrHuWhereTheValuesAgree) {
+  // A CT in HU cropped inside the body: no air band, minimum -600; only the header says it.
+  std::vector<float> x;
+  add_uniform(x, -600, -100, 1000);
+  add_uniform(x, 0, 60, 5000);
+  add_uniform(x, 300, 1200, 500);
+  engine::VolumeHints h;
+  io::read_text_hints("NIfTI", {{"descrip", "Abdomen CT, resampled 1 mm"}}, h);
+  EXPECT_EQ(h.modality, "CT");
+  EXPECT_EQ(h.modality_from, "NIfTI descrip 'Abdomen CT, resampled 1 mm'");
+  const auto c = engine::choose_isovalue(volume_of(x), h);
+  EXPECT_TRUE(c.hounsfield);
+  EXPECT_NE(c.rule.find("CT in HU (NIfTI descrip 'Abdomen CT"), std::string::npos) << c.rule;
+  engine::VolumeHints u;
+  io::read_text_hints("NRRD", {{"content", "liver"}, {"units", "Hounsfield"}}, u);
+  EXPECT_EQ(u.modality, "");
+  EXPECT_EQ(u.units, "HU");
+  EXPECT_TRUE(engine::choose_isovalue(volume_of(x), u).hounsfield);
+  // An industrial CT in 8 bits says "CT" too: its values (no air below -500) overrule it.
+  EXPECT_FALSE(engine::choose_isovalue(volume_of({0, 10, 120, 255}), h).hounsfield);
+  // Words, not letters inside words: "ACT", "strict", "HUB" say nothing.
+  engine::VolumeHints none;
+  io::read_text_hints("NIfTI", {{"descrip", "ACT strict HUB protocol"}}, none);
+  EXPECT_EQ(none.modality, "");
+  EXPECT_EQ(none.units, "");
+}
+
 TEST(ChooseIsovalue, OtherDataAtTheUpperThreeClassOtsuThreshold) {
   std::vector<float> x;
   add_uniform(x, 0, 50, 50000);
@@ -177,6 +242,56 @@ TEST(Scan, ChestIsHuByItsMinimumAndItsDicomSeriesByTheModality) {
   const io::Scan dcm = io::load_scan(kData + "/ct-chest-lungdx-a0001/dicom-5mm");
   EXPECT_EQ(dcm.hints.modality, "CT");
   EXPECT_NE(io::choose_isovalue(dcm).rule.find("modality CT"), std::string::npos);
+}
+
+/// A NIfTI-1 file (.nii) of int16 voxels with `descrip` in its header, written byte by byte
+/// from the format's definition (nifti1.h), not by the code under test.
+void write_nifti(const fs::path& p, const std::string& descrip, int nx, int ny, int nz, const std::vector<std::int16_t>& v) {
+  std::vector<char> h(352, 0);
+  const auto put = [&](std::size_t off, const void* src, std::size_t n) { std::memcpy(h.data() + off, src, n); };
+  const std::int32_t sizeof_hdr = 348;
+  put(0, &sizeof_hdr, 4);
+  const std::int16_t dim[8] = {3, std::int16_t(nx), std::int16_t(ny), std::int16_t(nz), 1, 1, 1, 1};
+  put(40, dim, 16);
+  const std::int16_t datatype = 4, bitpix = 16;  // DT_INT16
+  put(70, &datatype, 2);
+  put(72, &bitpix, 2);
+  const float pixdim[8] = {1, 1, 1, 1, 1, 1, 1, 1};
+  put(76, pixdim, 32);
+  const float vox_offset = 352, scl_slope = 1;
+  put(108, &vox_offset, 4);
+  put(112, &scl_slope, 4);
+  put(148, descrip.data(), std::min<std::size_t>(descrip.size(), 79));
+  put(344, "n+1", 4);
+  std::ofstream out(p, std::ios::binary);
+  out.write(h.data(), std::streamsize(h.size()));
+  out.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * 2));
+}
+
+TEST(Scan, NiftiDescriptionAndNrrdContentAreRead) {
+  test::TempDir dir;
+  // 8 x 8 x 8, values -600 .. 1100: HU only by the header's word.
+  std::vector<std::int16_t> v(512);
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::int16_t(-600 + int(i) * 1700 / 512);
+  write_nifti(dir.path / "ct.nii", "CT abdomen", 8, 8, 8, v);
+  const io::Scan nii = io::load_scan((dir.path / "ct.nii").string());
+  EXPECT_EQ(nii.hints.modality, "CT");
+  const auto c = io::choose_isovalue(nii);
+  EXPECT_TRUE(c.hounsfield);
+  EXPECT_NE(c.rule.find("NIfTI descrip 'CT abdomen'"), std::string::npos) << c.rule;
+  write_nifti(dir.path / "mr.nii", "T1 MPRAGE", 8, 8, 8, v);
+  EXPECT_FALSE(io::choose_isovalue(io::load_scan((dir.path / "mr.nii").string())).hounsfield);
+  // NRRD: its content and key/value pairs.
+  std::ofstream(dir.path / "ct.nrrd") << "NRRD0004\ntype: float\ndimension: 3\nsizes: 2 2 2\nspacings: 1 1 1\n"
+                                          "encoding: ascii\ncontent: liver\nmodality:=CT\n\n-600 -100 0 40 60 300 900 1100\n";
+  const io::Scan nrrd = io::load_scan((dir.path / "ct.nrrd").string());
+  EXPECT_EQ(nrrd.hints.modality, "CT");
+  EXPECT_EQ(nrrd.hints.modality_from, "NRRD modality 'CT'");
+  EXPECT_TRUE(io::choose_isovalue(nrrd).hounsfield);
+  // The shipped engine block (NIfTI, industrial CT in 8 bits) says no modality.
+  const io::Scan engine_ct = io::load_scan(kData + "/ct-engine/engine.nii.gz");
+  EXPECT_EQ(engine_ct.hints.modality, "");
+  EXPECT_FALSE(io::choose_isovalue(engine_ct).hounsfield);
 }
 
 TEST(Scan, MetaImageModalityIsRead) {

@@ -31,12 +31,12 @@ fail() {
 }
 
 # 1. A connection during a build.
-"$exe" serve "$scene" --port 0 --stream Stylus --seconds 60 >"$out/serve1.log" 2>&1 &
+"$exe" serve "$scene" --port 0 --stream Stylus --seconds 150 >"$out/serve1.log" 2>&1 &
 serve_pid=$!; pids+=($serve_pid)
 port=$(wait_port "$out/serve1.log" $serve_pid)
 [[ -n $port ]] || fail "serve never said it was listening"
 # shellcheck disable=SC2086
-timeout 90 "$client" 127.0.0.1 "$port" "$head" checker Big $ramp >"$out/big.log" 2>&1 &
+timeout 120 "$client" 127.0.0.1 "$port" "$head" checker Big $ramp >"$out/big.log" 2>&1 &
 big_pid=$!; pids+=($big_pid)
 for _ in $(seq 600); do grep -q "'Big': .* received" "$out/serve1.log" && break; sleep 0.05; done
 grep -q "'Big': .* received" "$out/serve1.log" || fail "serve never said it received the big IMAGE"

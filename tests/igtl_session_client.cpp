@@ -7,7 +7,8 @@
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
-//                     (the first STATUS under the device name sent; so for `image` and `ramp`)
+//                     (the first STATUS under the device name sent, within 15 s; so for `image`,
+//                     and for `ramp` and `checker` within 90 s)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms and how many came so far
@@ -229,12 +230,12 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& 
 
 /// Prints the first STATUS under `device` (the answer to what was sent under it; others,
 /// such as the server's own about the edited IMAGE, wait for `statuses`).
-bool wait_status(Shared& s, const std::string& device) {
+bool wait_status(Shared& s, const std::string& device, int timeout_s = 15) {
   std::unique_lock<std::mutex> lock(s.mu);
   auto mine = [&] {
     return std::find_if(s.statuses.begin(), s.statuses.end(), [&](const auto& st) { return st.first == device; });
   };
-  if (!s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return mine() != s.statuses.end() || s.closed; }) ||
+  if (!s.cv.wait_for(lock, std::chrono::seconds(timeout_s), [&] { return mine() != s.statuses.end() || s.closed; }) ||
       mine() == s.statuses.end()) {
     std::cout << "no STATUS came back\n";
     return false;
@@ -361,7 +362,7 @@ bool Client::action(const std::string& a) {
       for (std::size_t k = 0; k < n; ++k) out[k] = std::uint8_t(k % nx % 256);
     }
     send(sock, m);
-    return wait_status(s, name);
+    return wait_status(s, name, 90);  // its session is built first (a large one: seconds)
   }
   if (a == "statuses") {
     std::this_thread::sleep_for(std::chrono::duration<double>(num()));

@@ -100,6 +100,8 @@ Connection::Connection(int fd, int receive_timeout_ms, int message_timeout_ms, c
 
 Connection::~Connection() { ::close(fd_); }
 
+std::int64_t Connection::quiet_ms() const { return (now_ns() - last_in_ns_.load()) / 1000000; }
+
 void Connection::shutdown() {
   alive_ = false;
   ::shutdown(fd_, SHUT_RDWR);
@@ -132,14 +134,6 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
         return between ? 0 : got;
       }
       waited_ms += slice;
-      if (between && idle_timeout_ms_ > 0) {
-        const std::int64_t quiet_ms = (now_ns() - last_in_ns_.load()) / 1000000;
-        if (quiet_ms >= idle_timeout_ms_) {
-          why_ = "idle: nothing received for " + std::to_string(quiet_ms) + " ms";
-          idle_ = true;
-          return 0;
-        }
-      }
       if (!between && waited_ms >= timeout_ms_) {
         why_ = std::to_string(got) + " of " + std::to_string(n) + " bytes arrived, then nothing for " +
                std::to_string(timeout_ms_) + " ms";

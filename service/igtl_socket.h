@@ -85,11 +85,9 @@ class Connection final : public ByteSource {
   Sent try_send(const void* data, std::size_t n);
   Sent try_send(const std::vector<std::uint8_t>& bytes) { return try_send(bytes.data(), bytes.size()); }
   bool alive() const { return alive_.load(); }
-  /// From now on, read() waiting for a new message ends the connection (returns 0; why() and
-  /// idle() say so) once the peer has sent no byte for `ms` (0: never). Any thread.
-  void set_idle_timeout_ms(int ms) { idle_timeout_ms_.store(ms); }
-  /// read() ended the connection for idleness.
-  bool idle() const { return idle_.load(); }
+  /// How long the peer has sent no byte [ms]: since the last byte read() received, or since
+  /// the connection was made when none came (the monotonic clock). Any thread.
+  std::int64_t quiet_ms() const;
   /// The socket (for ExitZero's last message: servo/exit_zero.h).
   int fd() const { return fd_; }
   /// Every send from now on goes through `fence` (null: none). The fence must outlive its use:
@@ -108,9 +106,7 @@ class Connection final : public ByteSource {
   std::mutex send_mu_;
   std::atomic<SendFence*> fence_{nullptr};
   std::atomic<bool> alive_{true};
-  std::atomic<int> idle_timeout_ms_{0};
-  std::atomic<bool> idle_{false};
-  std::atomic<std::int64_t> last_in_ns_;  ///< steady_clock nanoseconds of the last byte received
+  std::atomic<std::int64_t> last_in_ns_;  ///< steady_clock (CLOCK_MONOTONIC) nanoseconds of the last byte received, or of the connection
 };
 
 }  // namespace isotouch::service

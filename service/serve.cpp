@@ -1,5 +1,6 @@
 #include "isotouch/service/serve.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -77,6 +78,9 @@ struct Client {
   /// Was the stream's client (--reply-force) at some time: gets its forces from the reply
   /// thread alone, never the display loop's Force copy (PLUS applies every Force it gets).
   std::atomic<bool> reply_target{false};
+  /// Closed to give its slot to a new connection (the accept thread's, under clients_mu_): its
+  /// slot counts as free while its thread ends.
+  bool evicted = false;
   int id = 0;
 };
 
@@ -126,6 +130,7 @@ class Server {
  private:
   void client_loop(Client& c);
   void read_messages(Client& c);
+  bool evict_quietest();
   void refuse_connection(int fd);
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
@@ -239,7 +244,6 @@ void Server::handle(Client& c, Incoming& in) {
   switch (in.kind) {
     case K::kImage:
       c.subscribed = true;
-      c.conn->set_idle_timeout_ms(0);  // a session's client: may only read from now on
       try {
         {
           std::lock_guard<std::mutex> lock(labels_mu_);
@@ -314,10 +318,6 @@ void Server::client_loop(Client& c) {
   } catch (...) {
     log_.line("client   " + std::to_string(c.id) + " dropped: an unknown exception");
   }
-  if (c.conn->idle()) {
-    n_.idle.fetch_add(1);
-    log_.line("client   " + std::to_string(c.id) + " timed out: " + c.conn->why());
-  }
   log_.line("client   " + std::to_string(c.id) + " gone");
   c.conn->shutdown();
   c.done = true;
@@ -338,7 +338,8 @@ void Server::read_messages(Client& c) {
 }
 
 /// The accept thread: takes connections throughout, while the main thread builds a volume's
-/// session too, and frees the slots of the clients gone.
+/// session too, and frees the slots of the clients gone. With every slot taken, a new
+/// connection gets the slot of the client quiet longest (evict_quietest), else is refused.
 void Server::accept_clients() {
   const int fd = listener_.accept(50);
   std::lock_guard<std::mutex> lock(clients_mu_);
@@ -352,7 +353,8 @@ void Server::accept_clients() {
     }
   }
   if (fd < 0) return;
-  if (int(clients_.size()) >= o_.max_clients) return refuse_connection(fd);
+  const auto taken = std::count_if(clients_.begin(), clients_.end(), [](const Client& c) { return !c.evicted; });
+  if (taken >= o_.max_clients && !evict_quietest()) return refuse_connection(fd);
   Client& c = clients_.emplace_back();
   try {
     c.id = next_id_++;
@@ -363,7 +365,6 @@ void Server::accept_clients() {
     throw;
   }
   try {
-    if (o_.idle_timeout_s > 0) c.conn->set_idle_timeout_ms(int(std::min(o_.idle_timeout_s, 1e6) * 1000));
     c.outbox = std::make_shared<Outbox>(c.conn, kOutboxBytes, [this, id = c.id](const std::string& why) {
       n_.dropped_clients.fetch_add(1);
       log_.line("client   " + std::to_string(id) + " dropped: " + why);
@@ -378,6 +379,32 @@ void Server::accept_clients() {
   }
 }
 
+/// Every slot taken and a new connection: the client quiet longest (no byte received for at
+/// least --idle-timeout-s), if any, is closed and its slot counted as free. Never a session's
+/// client (it sent an IMAGE or a command: it may only read for long); a client only quiet is
+/// never closed while nobody needs its slot (3D Slicer watching the TRANSFORMs sends nothing).
+/// Under clients_mu_.
+bool Server::evict_quietest() {
+  if (o_.idle_timeout_s <= 0) return false;
+  const auto least_ms = std::int64_t(std::min(o_.idle_timeout_s, 1e6) * 1000);
+  Client* quietest = nullptr;
+  std::int64_t quietest_ms = 0;
+  for (Client& c : clients_) {
+    if (c.evicted || c.done || c.subscribed || !c.conn->alive()) continue;
+    const std::int64_t ms = c.conn->quiet_ms();
+    if (ms >= least_ms && ms > quietest_ms) quietest = &c, quietest_ms = ms;
+  }
+  if (!quietest) return false;
+  quietest->evicted = true;
+  quietest->conn->shutdown();  // its reader ends, its thread is reaped with the finished
+  n_.idle.fetch_add(1);
+  std::ostringstream s;
+  s << "client   " << quietest->id << " closed: quiet for " << std::fixed << std::setprecision(1)
+    << double(quietest_ms) / 1000 << " s, its slot given to a new connection";
+  log_.line(s.str());
+  return true;
+}
+
 /// One connection past max_clients: a STATUS saying so (never waited for), then closed.
 void Server::refuse_connection(int fd) {
   Connection extra(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
@@ -389,7 +416,6 @@ void Server::refuse_connection(int fd) {
 
 void Server::take_command(Client& c, const Incoming& in) {
   c.subscribed = true;
-  c.conn->set_idle_timeout_ms(0);  // a session's client: may only read from now on
   auto parsed = parse_command(in.text);
   if (auto* why = std::get_if<std::string>(&parsed)) {
     const bool unknown = why->rfind("unknown command", 0) == 0 || why->rfind("empty command", 0) == 0;
@@ -1026,7 +1052,7 @@ int Server::run() {
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
     << " transforms (" << n_.dropped_sends << " dropped: a client not reading, " << n_.busy_sends
     << " skipped: another send to that client under way), " << n_.images_sent << " edited images; " << n_.idle
-    << " clients timed out idle, " << n_.dropped_clients << " dropped not reading; " << n_.commands << " commands; " << sessions_ << " sessions, "
+    << " quiet clients closed for a new connection, " << n_.dropped_clients << " dropped not reading; " << n_.commands << " commands; " << sessions_ << " sessions, "
     << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh "
     << (haptic_ ? "reading" : "TRANSFORM") << ": zero force), " << faults_ << " faults";
   log_.line(s.str());

@@ -1,6 +1,6 @@
 // test_outbox - a client's Outbox (service/outbox.h) on loopback TCP: what the peer receives
 // when it reads, and when it does not (the pusher never waits; the client is dropped, its
-// connection shut down), and a Connection's idle timeout and send deadline.
+// connection shut down), and a Connection's quiet time and send deadline.
 #include <gtest/gtest.h>
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -107,31 +107,26 @@ TEST(Outbox, AMessageNotTakenWithinItsDeadlineDropsTheClient) {
   EXPECT_LT(s, 3.0) << "the deadline is for the whole message";
 }
 
-TEST(ServiceSocket, AnIdlePeerIsTimedOutAndOneSendingIsNot) {
+TEST(ServiceSocket, QuietTimeCountsFromTheConnectionThenFromTheLastByteAndNeverClosesIt) {
   Pair p;
   Connection c(p.server, 2000, 60000, nullptr);
-  c.set_idle_timeout_ms(300);
-  std::uint8_t b[8];
-  const auto t0 = Clock::now();
-  EXPECT_EQ(c.read(b, sizeof b, true), 0u);
-  const double s = std::chrono::duration<double>(Clock::now() - t0).count();
-  EXPECT_TRUE(c.idle());
-  EXPECT_NE(c.why().find("idle"), std::string::npos) << c.why();
-  EXPECT_GT(s, 0.25);
-  EXPECT_LT(s, 1.5);
+  EXPECT_LT(c.quiet_ms(), 200);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_GE(c.quiet_ms(), 300) << "no byte yet: quiet since the connection";
+  EXPECT_LT(c.quiet_ms(), 1500);
 
-  Pair q;
-  Connection d(q.server, 2000, 60000, nullptr);
-  d.set_idle_timeout_ms(300);
+  // A peer only quiet is never closed by reading: read() waits on (here until the byte comes).
   std::thread writer([&] {
-    for (int i = 0; i < 8; ++i) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(100));
-      ::send(q.peer, "x", 1, MSG_NOSIGNAL);
-    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    ::send(p.peer, "x", 1, MSG_NOSIGNAL);
   });
-  for (int i = 0; i < 8; ++i) EXPECT_EQ(d.read(b, 1, true), 1u) << i;
+  std::uint8_t b[1];
+  EXPECT_EQ(c.read(b, 1, true), 1u);
   writer.join();
-  EXPECT_FALSE(d.idle());
+  EXPECT_LT(c.quiet_ms(), 200) << "a byte came: quiet from it";
+  EXPECT_TRUE(c.alive());
+  std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  EXPECT_GE(c.quiet_ms(), 250);
 }
 
 }  // namespace

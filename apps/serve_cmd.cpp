@@ -101,6 +101,11 @@ Subcommand add_serve_command(CLI::App& cli) {
   sub->add_option("--max-clients", a->o.max_clients,
                   "Clients connected at once (default 8); one more is answered with a STATUS and closed")
       ->check(CLI::Range(1, 1000));
+  sub->add_option("--idle-timeout-s", a->o.idle_timeout_s,
+                  "A quiet client keeps its connection until the slots are full and a new one comes: then the "
+                  "client that has sent no byte for longest, at least this long, is closed and the new one gets "
+                  "its slot (default 60; 0: never); never a client that sent an IMAGE or a command")
+      ->check(CLI::Range(0.0, 1e6));
   sub->add_option("--seconds", a->o.seconds, "Stop after this long (default: on SIGINT / SIGTERM only)")
       ->check(CLI::Range(0.0, 1e7));
   sub->add_option("--save-dir", a->o.save_dir, "Folder the 'save NAME' command writes into (default: the current one)");

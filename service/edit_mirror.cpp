@@ -40,12 +40,23 @@ engine::Volume EditMirror::volume() const {
   return out;
 }
 
-VoxelBox EditMirror::take_changed(engine::Volume& out) const {
+VoxelBox EditMirror::take_changed() const {
   std::lock_guard<std::mutex> lock(mu_);
-  out = v_;
   const VoxelBox b = changed_;
   changed_ = VoxelBox{};
   return b;
+}
+
+void EditMirror::copy_box(const VoxelBox& b, float* out) const {
+  const std::size_t nx = std::size_t(v_.grid.dims[0]), ny = std::size_t(v_.grid.dims[1]);  // fixed: no lock
+  const long row = b.hi[0] - b.lo[0];
+  for (int z = b.lo[2]; z < b.hi[2]; ++z) {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (int y = b.lo[1]; y < b.hi[1]; ++y) {
+      const std::size_t at = (std::size_t(z) * ny + std::size_t(y)) * nx + std::size_t(b.lo[0]);
+      out = std::copy_n(v_.voxels.begin() + long(at), row, out);
+    }
+  }
 }
 
 void EditMirror::restore_changed(const VoxelBox& box) const {

@@ -21,9 +21,13 @@ class EditMirror {
   session::EditListener listener(const session::EditSession& es);
   /// The edited volume (statistics updated). Any thread.
   engine::Volume volume() const;
-  /// The edited volume and the box changed since the last call (empty: nothing changed);
-  /// the box is cleared. Any thread.
-  VoxelBox take_changed(engine::Volume& out) const;
+  /// The box changed since the last call (empty: nothing changed); the box is cleared. No
+  /// voxel is copied. Any thread.
+  VoxelBox take_changed() const;
+  /// Copies the voxels of `box` (inside the volume) into `out`, x fastest, then y, then z: the
+  /// lock (which the edit thread's listener takes) is held for one slice at a time, never for
+  /// the whole copy. A brick written meanwhile is in the changed box again (the next take).
+  void copy_box(const VoxelBox& box, float* out) const;
   /// Gives back a box take_changed returned whose voxels could not be sent: it joins the
   /// box the next take_changed returns. Any thread.
   void restore_changed(const VoxelBox& box) const;

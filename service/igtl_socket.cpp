@@ -26,6 +26,10 @@ int wait_for(int fd, short events, int ms) {
   }
 }
 
+std::int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 }  // namespace
 
 Listener::Listener(const std::string& host, int port) {
@@ -91,9 +95,12 @@ int connect_tcp(const std::string& host, int port, int timeout_ms) {
 }
 
 Connection::Connection(int fd, int receive_timeout_ms, int message_timeout_ms, const std::atomic<bool>* stop)
-    : fd_(fd), timeout_ms_(receive_timeout_ms), message_timeout_ms_(message_timeout_ms), stop_(stop) {}
+    : fd_(fd), timeout_ms_(receive_timeout_ms), message_timeout_ms_(message_timeout_ms), stop_(stop),
+      last_in_ns_(now_ns()) {}
 
 Connection::~Connection() { ::close(fd_); }
+
+std::int64_t Connection::quiet_ms() const { return (now_ns() - last_in_ns_.load()) / 1000000; }
 
 void Connection::shutdown() {
   alive_ = false;
@@ -145,16 +152,36 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
       break;
     }
     if (between) message_start_ = Clock::now();  // the message's clock starts at its first byte
+    last_in_ns_ = now_ns();
     got += std::size_t(k);
     waited_ms = 0;
   }
   return got;
 }
 
+Sent Connection::try_send(const void* data, std::size_t n) {
+  std::unique_lock<std::mutex> lock(send_mu_, std::try_to_lock);
+  if (!lock.owns_lock()) return Sent::kBusy;  // another send is under way: dropped, never waited for
+  if (!alive_) return Sent::kDead;
+  SendFence* fence = fence_.load();
+  if (fence && !fence->begin_send()) return Sent::kDead;  // the process's last message went out
+  struct EndSend {
+    SendFence* f;
+    ~EndSend() {
+      if (f) f->end_send();
+    }
+  } end_send{fence};
+  const ssize_t k = ::send(fd_, data, n, MSG_NOSIGNAL | MSG_DONTWAIT);
+  if (k < 0 && (errno == EAGAIN || errno == EINTR)) return Sent::kFull;  // not reading: dropped, the connection kept
+  if (k == ssize_t(n)) return Sent::kSent;
+  alive_ = false;  // gone, or cut mid-message: the stream cannot go on
+  ::shutdown(fd_, SHUT_RDWR);
+  return Sent::kDead;
+}
+
 bool Connection::send(const void* data, std::size_t n, bool droppable) {
-  std::unique_lock<std::mutex> lock(send_mu_, std::defer_lock);
-  if (!droppable) lock.lock();
-  else if (!lock.try_lock()) return false;  // another send is under way: dropped, never waited for
+  if (droppable) return try_send(data, n) == Sent::kSent;
+  std::lock_guard<std::mutex> lock(send_mu_);
   SendFence* fence = fence_.load();
   if (fence && !fence->begin_send()) return false;  // the process's last message went out
   struct EndSend {
@@ -165,22 +192,18 @@ bool Connection::send(const void* data, std::size_t n, bool droppable) {
   } end_send{fence};
   const auto* p = static_cast<const std::uint8_t*>(data);
   std::size_t sent = 0;
-  if (droppable && alive_) {
-    const ssize_t k = ::send(fd_, p, n, MSG_NOSIGNAL | MSG_DONTWAIT);
-    if (k < 0 && (errno == EAGAIN || errno == EINTR)) return false;  // not reading: dropped, the connection kept
-    if (k == ssize_t(n)) return true;
-    alive_ = false;  // gone, or cut mid-message: the stream cannot go on
-    ::shutdown(fd_, SHUT_RDWR);
-    return false;
-  }
+  // One deadline for the whole message: the receive timeout, plus 0.1 s per MB it holds.
+  const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms_) +
+                     std::chrono::microseconds(std::int64_t(n / 10));
   while (alive_ && sent < n) {
-    if (wait_for(fd_, POLLOUT, timeout_ms_) <= 0) break;
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(until - std::chrono::steady_clock::now()).count();
+    if (left <= 0 || wait_for(fd_, POLLOUT, int(std::min<std::int64_t>(left, 1 << 30))) <= 0) break;
     const ssize_t k = ::send(fd_, p + sent, n - sent, MSG_NOSIGNAL | MSG_DONTWAIT);
     if (k < 0 && (errno == EINTR || errno == EAGAIN)) continue;
     if (k <= 0) break;
     sent += std::size_t(k);
   }
-  if (sent < n) alive_ = false;
+  if (sent < n && alive_.exchange(false)) ::shutdown(fd_, SHUT_RDWR);  // dropped: its reader ends too
   return sent == n;
 }
 

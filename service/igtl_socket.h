@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include "isotouch/service/igtl_message.h"
 
@@ -48,6 +49,14 @@ class SendFence {
   virtual void end_send() = 0;
 };
 
+/// What a droppable send did (Connection::try_send).
+enum class Sent {
+  kSent,  ///< all of it went out
+  kFull,  ///< the peer's buffers are full (it is not reading): dropped, the connection kept
+  kBusy,  ///< another send to this peer was under way: dropped, the connection kept
+  kDead,  ///< the connection is gone or was cut now (the peer gone, or only part fitted)
+};
+
 class Connection final : public ByteSource {
  public:
   /// Owns `fd`. `receive_timeout_ms`: the longest wait for the next byte inside a message;
@@ -61,8 +70,10 @@ class Connection final : public ByteSource {
 
   std::size_t read(void* dst, std::size_t n, bool first) override;
   std::string why() const override { return why_; }
-  /// Sends all `n` bytes within the receive timeout (any thread; sends are serialised).
-  /// False, and the connection marked dead, when the peer is gone or does not read.
+  /// Sends all `n` bytes (any thread; sends are serialised) within one deadline for the whole
+  /// message: the receive timeout plus 0.1 s per MB (a peer that takes a byte now and then
+  /// does not stretch it). False, and the connection cut (shut down: its reader ends), when the
+  /// peer is gone or does not take the message in time.
   bool send(const void* data, std::size_t n, bool droppable);
   bool send(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), false); }
   /// As send(), but never waits: when the peer's receive buffer is full (a client that never
@@ -70,7 +81,13 @@ class Connection final : public ByteSource {
   /// returned, the connection kept; when only part of them fit, the stream is cut mid-message
   /// and the connection is marked dead.
   bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
+  /// As send_droppable(), saying why a send was dropped.
+  Sent try_send(const void* data, std::size_t n);
+  Sent try_send(const std::vector<std::uint8_t>& bytes) { return try_send(bytes.data(), bytes.size()); }
   bool alive() const { return alive_.load(); }
+  /// How long the peer has sent no byte [ms]: since the last byte read() received, or since
+  /// the connection was made when none came (the monotonic clock). Any thread.
+  std::int64_t quiet_ms() const;
   /// The socket (for ExitZero's last message: servo/exit_zero.h).
   int fd() const { return fd_; }
   /// Every send from now on goes through `fence` (null: none). The fence must outlive its use:
@@ -89,6 +106,7 @@ class Connection final : public ByteSource {
   std::mutex send_mu_;
   std::atomic<SendFence*> fence_{nullptr};
   std::atomic<bool> alive_{true};
+  std::atomic<std::int64_t> last_in_ns_;  ///< steady_clock (CLOCK_MONOTONIC) nanoseconds of the last byte received, or of the connection
 };
 
 }  // namespace isotouch::service

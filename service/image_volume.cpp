@@ -154,6 +154,20 @@ void VoxelBox::add(const VoxelBox& o) {
 }
 
 std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string& device, const VoxelBox& box) {
+  VoxelBox b = box;
+  if (b.empty()) b.hi = {v.grid.dims[0], v.grid.dims[1], v.grid.dims[2]};
+  const std::size_t nx = std::size_t(v.grid.dims[0]), ny = std::size_t(v.grid.dims[1]);
+  return pack_image(v, device, b, [&](float* out) {
+    for (int z = b.lo[2]; z < b.hi[2]; ++z)
+      for (int y = b.lo[1]; y < b.hi[1]; ++y) {
+        const std::size_t at = (std::size_t(z) * ny + std::size_t(y)) * nx + std::size_t(b.lo[0]);
+        out = std::copy_n(v.voxels.begin() + long(at), b.hi[0] - b.lo[0], out);
+      }
+  });
+}
+
+std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string& device, const VoxelBox& box,
+                                     const std::function<void(float* out)>& fill) {
   igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
   int dims[3] = {v.grid.dims[0], v.grid.dims[1], v.grid.dims[2]};
   VoxelBox b = box;
@@ -179,13 +193,7 @@ std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string&
   m->SetMatrix(mat);
   m->AllocateScalars();
   static_assert(std::endian::native == std::endian::little, "the IMAGE is announced little-endian");
-  auto* out = static_cast<float*>(m->GetScalarPointer());
-  const std::size_t nx = std::size_t(dims[0]), ny = std::size_t(dims[1]);
-  for (int z = b.lo[2]; z < b.hi[2]; ++z)
-    for (int y = b.lo[1]; y < b.hi[1]; ++y) {
-      const std::size_t at = (std::size_t(z) * ny + std::size_t(y)) * nx + std::size_t(b.lo[0]);
-      out = std::copy_n(v.voxels.begin() + long(at), size[0], out);
-    }
+  fill(static_cast<float*>(m->GetScalarPointer()));
   igtl::TimeStamp::Pointer now = igtl::TimeStamp::New();
   now->GetTime();
   m->SetTimeStamp(now);

@@ -10,6 +10,7 @@
 #pragma once
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -41,5 +42,10 @@ struct VoxelBox {
 /// spacing, directions and centre still the whole image's); else the whole image. Time
 /// stamped now, packed for sending. `box` must lie inside the volume.
 std::vector<std::uint8_t> pack_image(const engine::Volume& v, const std::string& device, const VoxelBox& box);
+/// As pack_image(), the voxels of `box` (not empty, inside the volume) written by `fill` into
+/// the IMAGE's buffer (x fastest, then y, then z, box.hi - box.lo of each); `frame`'s voxels
+/// are not read (its grid and direction place the image).
+std::vector<std::uint8_t> pack_image(const engine::Volume& frame, const std::string& device, const VoxelBox& box,
+                                     const std::function<void(float* out)>& fill);
 
 }  // namespace isotouch::service

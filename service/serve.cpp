@@ -1,5 +1,6 @@
 #include "isotouch/service/serve.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -15,6 +16,7 @@
 #include <ostream>
 #include <sstream>
 #include <thread>
+#include <unistd.h>
 
 #include <igtlStatusMessage.h>
 
@@ -29,6 +31,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
+#include "isotouch/service/outbox.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
@@ -57,11 +60,17 @@ class Log {
 
 struct Counters {
   std::atomic<long> clients{0}, images{0}, refused{0}, transforms{0}, strings{0}, skipped{0}, broken{0};
-  std::atomic<long> sent{0}, dropped_sends{0}, commands{0}, images_sent{0};
+  std::atomic<long> sent{0}, dropped_sends{0}, busy_sends{0}, commands{0}, images_sent{0};
+  std::atomic<long> idle{0}, dropped_clients{0};
 };
+
+/// The most bytes that may wait in a client's Outbox behind the message being sent; past it
+/// the client is not reading and is dropped.
+constexpr std::size_t kOutboxBytes = std::size_t(64) << 20;
 
 struct Client {
   std::shared_ptr<Connection> conn;
+  std::shared_ptr<Outbox> outbox;  // the STATUS answers and edited IMAGEs, sent by its own thread
   std::thread thread;
   std::atomic<bool> done{false};
   /// Sent an IMAGE or a command: gets the edited volume back.
@@ -69,13 +78,16 @@ struct Client {
   /// Was the stream's client (--reply-force) at some time: gets its forces from the reply
   /// thread alone, never the display loop's Force copy (PLUS applies every Force it gets).
   std::atomic<bool> reply_target{false};
+  /// Closed to give its slot to a new connection (the accept thread's, under clients_mu_): its
+  /// slot counts as free while its thread ends.
+  bool evicted = false;
   int id = 0;
 };
 
 /// A command on its way to the command thread, and whom to answer.
 struct Pending {
   Command cmd;
-  std::shared_ptr<Connection> from;
+  std::shared_ptr<Outbox> from;
   std::string device;  // the STRING's device name, the STATUS's
   int client = 0;
 };
@@ -84,7 +96,7 @@ struct Pending {
 /// the session's (or could not be made so).
 struct PendingVolume {
   engine::Volume volume;
-  std::shared_ptr<Connection> from;
+  std::shared_ptr<Outbox> from;
   std::string device;  // the IMAGE's device name, the STATUS's
   std::string dims;    // "X x Y x Z"
   int client = 0;
@@ -118,6 +130,7 @@ class Server {
  private:
   void client_loop(Client& c);
   void read_messages(Client& c);
+  bool evict_quietest();
   void refuse_connection(int fd);
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
@@ -175,6 +188,7 @@ class Server {
   std::atomic<bool> stop_{false};
   std::mutex clients_mu_;
   std::list<Client> clients_;
+  std::thread acceptor_;  // accept_clients() until stop_
   int next_id_ = 1;
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
   std::unique_ptr<Session> session_;
@@ -222,7 +236,7 @@ std::string mm3(const core::Vec3& v) {
 void Server::refuse(Client& c, const Incoming& in, int code, const std::string& why) {
   n_.refused.fetch_add(1);
   log_.line("refused  client " + std::to_string(c.id) + ", " + in.type + " '" + in.device + "': " + why);
-  c.conn->send(pack_status(code, in.device, why));
+  c.outbox->push(pack_status(code, in.device, why));  // after the answers queued before it
 }
 
 void Server::handle(Client& c, Incoming& in) {
@@ -250,7 +264,7 @@ void Server::handle(Client& c, Incoming& in) {
                  std::to_string(v.grid.dims[2]);
           std::lock_guard<std::mutex> lock(volume_mu_);
           superseded.swap(next_volume_);
-          next_volume_ = PendingVolume{std::move(v), c.conn, in.device, dims, c.id};
+          next_volume_ = PendingVolume{std::move(v), c.outbox, in.device, dims, c.id};
         }
         log_.line("image    client " + std::to_string(c.id) + ", '" + in.device + "': " + dims +
                   " received; its session is built before it is answered");
@@ -316,31 +330,79 @@ void Server::read_messages(Client& c) {
     if (in.kind == Incoming::Kind::kBroken) {
       n_.broken.fetch_add(1);
       refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, in.why + "; closing the connection");
+      c.outbox->flush(o_.receive_timeout_ms);  // the STATUS goes before the connection
       break;
     }
     handle(c, in);
   }
 }
 
+/// The accept thread: takes connections throughout, while the main thread builds a volume's
+/// session too, and frees the slots of the clients gone. With every slot taken, a new
+/// connection gets the slot of the client quiet longest (evict_quietest), else is refused.
 void Server::accept_clients() {
   const int fd = listener_.accept(50);
   std::lock_guard<std::mutex> lock(clients_mu_);
   for (auto it = clients_.begin(); it != clients_.end();) {  // reap the finished
     if (it->done) {
       it->thread.join();
+      it->outbox->close();  // its reader ended (the connection shut): nothing more to send
       it = clients_.erase(it);
     } else {
       ++it;
     }
   }
   if (fd < 0) return;
-  if (int(clients_.size()) >= o_.max_clients) return refuse_connection(fd);
+  const auto taken = std::count_if(clients_.begin(), clients_.end(), [](const Client& c) { return !c.evicted; });
+  if (taken >= o_.max_clients && !evict_quietest()) return refuse_connection(fd);
   Client& c = clients_.emplace_back();
-  c.id = next_id_++;
-  c.conn = std::make_shared<Connection>(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
-  n_.clients.fetch_add(1);
-  log_.line("client   " + std::to_string(c.id) + " connected");
-  c.thread = std::thread([this, &c] { client_loop(c); });
+  try {
+    c.id = next_id_++;
+    c.conn = std::make_shared<Connection>(fd, o_.receive_timeout_ms, o_.message_timeout_ms, &stop_);
+  } catch (...) {
+    ::close(fd);
+    clients_.pop_back();
+    throw;
+  }
+  try {
+    c.outbox = std::make_shared<Outbox>(c.conn, kOutboxBytes, [this, id = c.id](const std::string& why) {
+      n_.dropped_clients.fetch_add(1);
+      log_.line("client   " + std::to_string(id) + " dropped: " + why);
+    });
+    n_.clients.fetch_add(1);
+    log_.line("client   " + std::to_string(c.id) + " connected");
+    c.thread = std::thread([this, &c] { client_loop(c); });
+  } catch (...) {  // the slot is not kept: the connection closes with its Connection
+    if (c.outbox) c.outbox->close();
+    clients_.pop_back();
+    throw;
+  }
+}
+
+/// Every slot taken and a new connection: the client quiet longest (no byte received for at
+/// least --idle-timeout-s), if any, is closed and its slot counted as free. Never a session's
+/// client (it sent an IMAGE or a command: it may only read for long); a client only quiet is
+/// never closed while nobody needs its slot (3D Slicer watching the TRANSFORMs sends nothing).
+/// Under clients_mu_.
+bool Server::evict_quietest() {
+  if (o_.idle_timeout_s <= 0) return false;
+  const auto least_ms = std::int64_t(std::min(o_.idle_timeout_s, 1e6) * 1000);
+  Client* quietest = nullptr;
+  std::int64_t quietest_ms = 0;
+  for (Client& c : clients_) {
+    if (c.evicted || c.done || c.subscribed || !c.conn->alive()) continue;
+    const std::int64_t ms = c.conn->quiet_ms();
+    if (ms >= least_ms && ms > quietest_ms) quietest = &c, quietest_ms = ms;
+  }
+  if (!quietest) return false;
+  quietest->evicted = true;
+  quietest->conn->shutdown();  // its reader ends, its thread is reaped with the finished
+  n_.idle.fetch_add(1);
+  std::ostringstream s;
+  s << "client   " << quietest->id << " closed: quiet for " << std::fixed << std::setprecision(1)
+    << double(quietest_ms) / 1000 << " s, its slot given to a new connection";
+  log_.line(s.str());
+  return true;
 }
 
 /// One connection past max_clients: a STATUS saying so (never waited for), then closed.
@@ -361,7 +423,7 @@ void Server::take_command(Client& c, const Incoming& in) {
                   *why);
   }
   std::lock_guard<std::mutex> lock(cmd_mu_);
-  commands_.push_back({std::get<Command>(parsed), c.conn, in.device, c.id});
+  commands_.push_back({std::get<Command>(parsed), c.outbox, in.device, c.id});
 }
 
 void Server::answer(const Pending& p, int code, const std::string& text) {
@@ -369,7 +431,7 @@ void Server::answer(const Pending& p, int code, const std::string& text) {
   if (code != igtl::StatusMessage::STATUS_OK) n_.refused.fetch_add(1);
   log_.line(std::string(code == igtl::StatusMessage::STATUS_OK ? "command  " : "refused  ") + "client " +
             std::to_string(p.client) + ", " + text);
-  p.from->send(pack_status(code, p.device, text));
+  p.from->push(pack_status(code, p.device, text));  // never waited for: a client not reading is dropped
 }
 
 /// Submits one edit to the running session (command thread: the session's one API producer).
@@ -558,36 +620,41 @@ void Server::send_edited_or_say_why() {
 void Server::send_edited() {
   std::shared_ptr<EditMirror> mirror;
   std::string name;
+  engine::Volume frame;  // the grid and direction, no voxels
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (!session_) return;
     mirror = session_->mirror;
     name = session_->image_name;
+    frame = session_->frame;
   }
-  engine::Volume v;
-  const VoxelBox box = mirror->take_changed(v);  // when it throws, the box stays
+  const VoxelBox box = mirror->take_changed();  // nothing changed: nothing copied, nothing sent
   if (box.empty()) return;
-  std::vector<std::uint8_t> bytes;
+  VoxelBox part = box;
+  if (o_.image_whole) part.lo = {0, 0, 0}, part.hi = frame.grid.dims;
+  Outbox::Bytes bytes;
   try {
     if (fault("edited", name)) throw std::bad_alloc();
-    bytes = pack_image(v, name, o_.image_whole ? VoxelBox{} : box);
+    // The voxels copied straight into the IMAGE, the mirror's lock held a slice at a time.
+    bytes = std::make_shared<const std::vector<std::uint8_t>>(
+        pack_image(frame, name, part, [&](float* out) { mirror->copy_box(part, out); }));
   } catch (...) {
     mirror->restore_changed(box);  // these voxels go with the next IMAGE
     throw;
   }
-  std::vector<std::shared_ptr<Connection>> to;
+  std::vector<std::shared_ptr<Outbox>> to;
   {
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (Client& c : clients_)
-      if (c.subscribed && !c.done && c.conn->alive()) to.push_back(c.conn);
+      if (c.subscribed && !c.done && c.conn->alive()) to.push_back(c.outbox);
   }
-  int sent = 0;
-  for (auto& c : to) sent += c->send(bytes);
+  int sent = 0;  // queued: each client's thread sends it, a client not reading is dropped
+  for (auto& c : to) sent += c->push(bytes);
   n_.images_sent.fetch_add(sent);
   std::ostringstream s;
   s << "edited   '" << name << "' voxels [" << box.lo[0] << ", " << box.hi[0] << ") x [" << box.lo[1] << ", " << box.hi[1]
     << ") x [" << box.lo[2] << ", " << box.hi[2] << ") sent as " << (o_.image_whole ? "the whole image" : "a sub-volume")
-    << " (" << bytes.size() << " bytes) to " << sent << " of " << to.size() << " clients";
+    << " (" << bytes->size() << " bytes) to " << sent << " of " << to.size() << " clients";
   log_.line(s.str());
 }
 
@@ -674,8 +741,12 @@ void Server::display_tick(double stall_s) {
     if (c.done || !c.conn->alive()) continue;
     const bool to_stream = c.reply_target.load();
     const long n = to_stream ? 2 : 3;
-    if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
-    else n_.dropped_sends.fetch_add(n);
+    switch (c.conn->try_send(to_stream ? points : out)) {
+      case Sent::kSent: n_.sent.fetch_add(n); break;
+      case Sent::kFull: n_.dropped_sends.fetch_add(n); break;  // not reading
+      case Sent::kBusy: n_.busy_sends.fetch_add(n); break;     // its Outbox or reply under way
+      case Sent::kDead: break;
+    }
   }
 }
 
@@ -793,7 +864,7 @@ void Server::answer_image(const PendingVolume& p, int code, const std::string& t
     n_.refused.fetch_add(1);
     log_.line("refused  client " + std::to_string(p.client) + ", IMAGE '" + p.device + "': " + text);
   }
-  p.from->send(pack_status(code, p.device, text));
+  p.from->push(pack_status(code, p.device, text));
 }
 
 /// What taking `image` would need, against the memory budget (the loaders' rule: at most
@@ -889,14 +960,17 @@ void Server::stop_session() {
 
 void Server::join_threads(std::thread& display, std::thread& commands) noexcept {
   stop_ = true;
+  if (acceptor_.joinable()) acceptor_.join();  // clients_ is this thread's alone from here
   if (display.joinable()) display.join();
   if (commands.joinable()) commands.join();
   {
     std::lock_guard<std::mutex> lock(clients_mu_);
     for (Client& c : clients_) c.conn->shutdown();
   }
-  for (Client& c : clients_)
+  for (Client& c : clients_) {
     if (c.thread.joinable()) c.thread.join();
+    if (c.outbox) c.outbox->close();
+  }
 }
 
 /// --haptic: the factory's device, as `isotouch run --live` opens it (no scripted hand:
@@ -922,6 +996,19 @@ int Server::run() {
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());
   tool_ = scene_.edits.brush;
+  acceptor_ = std::thread([this] {
+    while (!stop_) {
+      try {
+        accept_clients();
+      } catch (const std::exception& e) {  // e.g. no thread for a client: it is not taken, the server goes on
+        try {
+          log_.line(std::string("client   a connection not taken: ") + e.what());
+        } catch (...) {
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+    }
+  });
   std::thread display([this] { display_loop(); });
   std::thread commands([this] { command_loop(); });
   std::thread replies;
@@ -938,7 +1025,7 @@ int Server::run() {
   const auto t0 = std::chrono::steady_clock::now();
   auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
   while (session::stop_signal() == 0 && (o_.seconds <= 0 || elapsed() < o_.seconds)) {
-    accept_clients();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // connections: the accept thread
     std::optional<PendingVolume> v;
     std::optional<Pending> iso;
     {
@@ -963,8 +1050,9 @@ int Server::run() {
   s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
-    << " transforms (" << n_.dropped_sends << " dropped: a client not reading), " << n_.images_sent
-    << " edited images; " << n_.commands << " commands; " << sessions_ << " sessions, "
+    << " transforms (" << n_.dropped_sends << " dropped: a client not reading, " << n_.busy_sends
+    << " skipped: another send to that client under way), " << n_.images_sent << " edited images; " << n_.idle
+    << " quiet clients closed for a new connection, " << n_.dropped_clients << " dropped not reading; " << n_.commands << " commands; " << sessions_ << " sessions, "
     << ticks_ << " servo ticks (" << missed_ << " missed deadlines), " << stale_ << " stale (no fresh "
     << (haptic_ ? "reading" : "TRANSFORM") << ": zero force), " << faults_ << " faults";
   log_.line(s.str());

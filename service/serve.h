@@ -17,8 +17,13 @@
 //   haptic device (`haptic`, the `--haptic` factory's: openhaptics, forcedimension, igtl, emu,
 //     hid, ...): its own threads hand the servo the pose and take the force, through the
 //     servo's safety gate and the device's stall rule, as in `isotouch run --live`
-//   main thread: accepts connections, starts and swaps the session (a new volume, a new
-//     isovalue), stops on a signal or after `seconds`.
+//   accept thread: accepts connections throughout (also while a volume's session is built),
+//     frees the slots of the clients gone (closed, dropped, or quiet and closed to give a new
+//     connection their slot)
+//   each client's Outbox thread (outbox.h): sends it the STATUS answers and edited IMAGEs, so
+//     no other thread waits for a peer; a client that does not take them is dropped
+//   main thread: starts and swaps the session (a new volume, a new isovalue), stops on a
+//     signal or after `seconds`.
 // Part of isotouch::serve.
 #pragma once
 #include <functional>
@@ -50,6 +55,11 @@ struct ServeOptions {
   int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped
   int message_timeout_ms = 60000;     ///< longest a whole message may take from its first byte [ms]
   int max_clients = 8;                ///< more connected at once: refused with a STATUS
+  /// With every slot taken, a new connection gets the slot of the client quiet longest, if it
+  /// has sent no byte for at least this long [s] (0: never) and is not a session's client (it
+  /// sent an IMAGE or a command). A quiet client (a viewer that only reads the TRANSFORMs) keeps
+  /// its connection until the slots are full and a new one comes.
+  double idle_timeout_s = 60;
   double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
   std::string save_dir = ".";         ///< the folder `save NAME` writes into
   double image_hz = 2;                ///< edited-volume IMAGEs sent per second at most (0: none)

@@ -7,7 +7,8 @@
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
-//                     (the first STATUS under the device name sent; so for `image` and `ramp`)
+//                     (the first STATUS under the device name sent, within 15 s; so for `image`,
+//                     and for `ramp` and `checker` within 90 s)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms and how many came so far
@@ -20,9 +21,22 @@
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
 //   ramp NAME NX NY NZ  an NX x NY x NZ uint8 IMAGE named NAME (1 mm voxels, RAS, centred on
 //                     the origin; value x % 256); prints the STATUS answer
+//   checker NAME NX NY NZ  as ramp, int16, 0 and 2000 in 5-voxel cubes (surfaces in every
+//                     brick: a session slow to build)
 //   statuses SECS     waits SECS, then prints the STATUS answers not printed yet
 //   rebase            the copy starts again from BASE (what the server holds once it took
 //                     an `image`); IMAGEs received later apply to it
+//   first SECS        waits up to SECS for the first TRANSFORM "HIP"; prints "first transform
+//                     T s after connecting" (fails when none came: "no transform within SECS s")
+//   mark              the HIP arrival times kept for `gaps` start again from now
+//   gaps              prints "gaps N transforms, p50 A p99 B max C ms": the times between the
+//                     HIP TRANSFORMs received since `mark` (or the connection)
+//   cmds N TEXT       N STRING commands TEXT (device "CMDS"), one every 20 ms whether answered
+//                     or not; prints "cmds N answered, p50 A p99 B max C ms" (each one's send to
+//                     its STATUS; fails when not all were answered within 15 s)
+//   noread            stops reading what the server sends (a client that does not read)
+//   closed SECS       waits up to SECS for the server to close the connection; prints "closed
+//                     after T s" (T since connecting) or "open after SECS s"
 // Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
 #include <igtlClientSocket.h>
 #include <igtlImageMessage.h>
@@ -37,11 +51,14 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <iostream>
 #include <mutex>
+#include <optional>
+#include <cstdio>
 #include <string>
 #include <thread>
 #include <vector>
@@ -62,7 +79,22 @@ struct Shared {
   int images = 0;
   bool geometry_ok = true;
   bool closed = false;
+  bool noread = false;  // `noread`: the reader stops
+  Clock::time_point connected = Clock::now(), closed_at;
+  std::vector<Clock::time_point> hips;  // HIP arrivals since `mark`
+  std::vector<Clock::time_point> cmds_answered;  // arrivals of the STATUS answers to `cmds`
+  std::optional<Clock::time_point> first_hip;
 };
+
+/// "p50 A p99 B max C ms" of `v` [ms] (sorted here).
+std::string percentiles(std::vector<double> v) {
+  if (v.empty()) return "p50 - p99 - max - ms";
+  std::sort(v.begin(), v.end());
+  auto at = [&](double q) { return v[std::min(v.size() - 1, std::size_t(q * double(v.size() - 1) + 0.5))]; };
+  char b[128];
+  std::snprintf(b, sizeof b, "p50 %.1f p99 %.1f max %.1f ms", at(0.5), at(0.99), v.back());
+  return b;
+}
 
 /// The header of `m` matches BASE's as the server must send it (RAS, centre).
 bool same_geometry(igtl::ImageMessage& m, const isotouch::engine::Volume& v) {
@@ -114,13 +146,25 @@ typename M::Pointer body_of(igtl::ClientSocket* sock, igtl::MessageHeader* h) {
 
 void read_loop(igtl::ClientSocket* sock, Shared& s) {
   for (;;) {
+    {
+      std::unique_lock<std::mutex> lock(s.mu);
+      s.cv.wait(lock, [&] { return !s.noread || s.closed; });
+      if (s.closed) break;
+    }
     igtl::MessageHeader::Pointer h = igtl::MessageHeader::New();
     h->InitPack();
     if (sock->Receive(h->GetPackPointer(), h->GetPackSize()) != h->GetPackSize()) break;
     h->Unpack();
     const std::string type = h->GetDeviceType(), name = h->GetDeviceName();
     std::lock_guard<std::mutex> lock(s.mu);
-    if (type == "STATUS") {
+    if (type == "TRANSFORM" && name == "HIP") {
+      const auto now = Clock::now();
+      if (!s.first_hip) s.first_hip = now;
+      s.hips.push_back(now);
+    }
+    if (type == "STATUS" && name == "CMDS") {
+      if (body_of<igtl::StatusMessage>(sock, h)) s.cmds_answered.push_back(Clock::now());
+    } else if (type == "STATUS") {
       if (auto st = body_of<igtl::StatusMessage>(sock, h))
         s.statuses.emplace_back(name, "STATUS code " + std::to_string(st->GetCode()) + ": " + st->GetStatusString());
     } else if (type == "TRANSFORM" && name == "Force") {
@@ -139,6 +183,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
     s.cv.notify_all();
   }
   std::lock_guard<std::mutex> lock(s.mu);
+  if (!s.closed) s.closed_at = Clock::now();
   s.closed = true;
   s.cv.notify_all();
 }
@@ -185,12 +230,12 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& 
 
 /// Prints the first STATUS under `device` (the answer to what was sent under it; others,
 /// such as the server's own about the edited IMAGE, wait for `statuses`).
-bool wait_status(Shared& s, const std::string& device) {
+bool wait_status(Shared& s, const std::string& device, int timeout_s = 15) {
   std::unique_lock<std::mutex> lock(s.mu);
   auto mine = [&] {
     return std::find_if(s.statuses.begin(), s.statuses.end(), [&](const auto& st) { return st.first == device; });
   };
-  if (!s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return mine() != s.statuses.end() || s.closed; }) ||
+  if (!s.cv.wait_for(lock, std::chrono::seconds(timeout_s), [&] { return mine() != s.statuses.end() || s.closed; }) ||
       mine() == s.statuses.end()) {
     std::cout << "no STATUS came back\n";
     return false;
@@ -293,28 +338,102 @@ bool Client::action(const std::string& a) {
     s.copy = base;
     return true;
   }
-  if (a == "ramp") {
+  if (a == "ramp" || a == "checker") {
     const std::string name = arg();
     int dims[3];
     for (int& d : dims) d = int(num());
+    const bool checker = a == "checker";
     igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
     float sp[3] = {1, 1, 1};
     m->SetDimensions(dims);
     m->SetSpacing(sp);
-    m->SetScalarType(igtl::ImageMessage::TYPE_UINT8);
+    m->SetScalarType(checker ? igtl::ImageMessage::TYPE_INT16 : igtl::ImageMessage::TYPE_UINT8);
     m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
     m->SetDeviceName(name.c_str());
     m->AllocateScalars();
-    auto* out = static_cast<std::uint8_t*>(m->GetScalarPointer());
-    const std::size_t n = std::size_t(dims[0]) * std::size_t(dims[1]) * std::size_t(dims[2]);
-    for (std::size_t k = 0; k < n; ++k) out[k] = std::uint8_t(k % std::size_t(dims[0]) % 256);
+    const std::size_t nx = std::size_t(dims[0]), ny = std::size_t(dims[1]);
+    const std::size_t n = nx * ny * std::size_t(dims[2]);
+    if (checker) {  // 0 and 2000 in 5-voxel cubes: surfaces through every brick
+      auto* out = static_cast<std::int16_t*>(m->GetScalarPointer());
+      for (std::size_t k = 0; k < n; ++k)
+        out[k] = std::int16_t(((k % nx) / 5 + (k / nx % ny) / 5 + k / (nx * ny) / 5) % 2 * 2000);
+    } else {
+      auto* out = static_cast<std::uint8_t*>(m->GetScalarPointer());
+      for (std::size_t k = 0; k < n; ++k) out[k] = std::uint8_t(k % nx % 256);
+    }
     send(sock, m);
-    return wait_status(s, name);
+    return wait_status(s, name, 90);  // its session is built first (a large one: seconds)
   }
   if (a == "statuses") {
     std::this_thread::sleep_for(std::chrono::duration<double>(num()));
     std::lock_guard<std::mutex> lock(s.mu);
     for (; !s.statuses.empty(); s.statuses.pop_front()) std::cout << s.statuses.front().second << "\n";
+    return true;
+  }
+  if (a == "first") {
+    const double secs = num();
+    std::unique_lock<std::mutex> lock(s.mu);
+    s.cv.wait_until(lock, s.connected + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(secs)),
+                    [&] { return s.first_hip.has_value() || s.closed; });
+    if (!s.first_hip) return std::cout << "no transform within " << secs << " s\n", false;
+    std::cout << "first transform " << std::chrono::duration<double>(*s.first_hip - s.connected).count()
+              << " s after connecting\n";
+    return true;
+  }
+  if (a == "mark") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    s.hips.clear();
+    return true;
+  }
+  if (a == "gaps") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::vector<double> ms;
+    for (std::size_t k = 1; k < s.hips.size(); ++k)
+      ms.push_back(std::chrono::duration<double, std::milli>(s.hips[k] - s.hips[k - 1]).count());
+    std::cout << "gaps " << s.hips.size() << " transforms, " << percentiles(ms) << "\n";
+    return s.hips.size() > 1;
+  }
+  if (a == "cmds") {
+    const int n = int(num());
+    const std::string text = arg();
+    {
+      std::lock_guard<std::mutex> lock(s.mu);
+      s.cmds_answered.clear();
+    }
+    std::vector<Clock::time_point> sent;
+    const auto t0 = Clock::now();
+    for (int k = 0; k < n; ++k) {  // one every 20 ms, answered or not (as a UI sends them)
+      std::this_thread::sleep_until(t0 + std::chrono::milliseconds(20 * k));
+      igtl::StringMessage::Pointer m = igtl::StringMessage::New();
+      m->SetDeviceName("CMDS");
+      m->SetString(text.c_str());
+      sent.push_back(Clock::now());
+      send(sock, m);
+    }
+    std::unique_lock<std::mutex> lock(s.mu);
+    s.cv.wait_for(lock, std::chrono::seconds(15), [&] { return s.cmds_answered.size() >= sent.size() || s.closed; });
+    if (s.cmds_answered.size() < sent.size())
+      return std::cout << "cmds " << s.cmds_answered.size() << " of " << n << " answered\n", false;
+    std::vector<double> ms;  // answered in the order sent
+    for (std::size_t k = 0; k < sent.size(); ++k)
+      ms.push_back(std::chrono::duration<double, std::milli>(s.cmds_answered[k] - sent[k]).count());
+    std::cout << "cmds " << n << " answered, " << percentiles(ms) << "\n";
+    return true;
+  }
+  if (a == "noread") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    s.noread = true;
+    return true;
+  }
+  if (a == "closed") {
+    const double secs = num();
+    std::unique_lock<std::mutex> lock(s.mu);
+    s.noread = false;  // a closed connection is seen by reading it
+    s.cv.notify_all();
+    if (s.cv.wait_for(lock, std::chrono::duration<double>(secs), [&] { return s.closed; }))
+      std::cout << "closed after " << std::chrono::duration<double>(s.closed_at - s.connected).count() << " s\n";
+    else
+      std::cout << "open after " << secs << " s\n";
     return true;
   }
   if (a == "image") {
@@ -337,6 +456,7 @@ int main(int argc, char** argv) {
     std::cerr << "usage: igtl_session_client HOST PORT BASE ACTION...\n";
     return 2;
   }
+  std::signal(SIGPIPE, SIG_IGN);  // a server that dropped this client: the sends fail, the process goes on
   Shared s;
   const isotouch::engine::Volume base = isotouch::io::load_volume(argv[3]);
   s.copy = base;
@@ -345,6 +465,7 @@ int main(int argc, char** argv) {
     std::cerr << "igtl_session_client: cannot connect to " << argv[1] << ":" << argv[2] << "\n";
     return 1;
   }
+  s.connected = Clock::now();
   Path path;
   std::atomic<bool> done{false};
   std::thread reader([&] { read_loop(sock, s); });
@@ -354,6 +475,11 @@ int main(int argc, char** argv) {
   while (ok && c.i < argc) ok = c.action(c.arg());
   done = true;
   streamer.join();
+  {
+    std::lock_guard<std::mutex> lock(s.mu);
+    s.noread = false;  // the reader sees the close
+    s.cv.notify_all();
+  }
   sock->CloseSocket();
   reader.join();
   return ok ? 0 : 1;

@@ -9,6 +9,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -24,6 +25,7 @@
 #include <igtlTransformMessage.h>
 
 #include "isotouch/service/commands.h"
+#include "isotouch/service/edit_mirror.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
@@ -488,6 +490,28 @@ TEST(ServiceImage, EditedVolumeGoesBackWhereItCameFrom) {
     for (int y = 10; y < 12; ++y)
       for (int x = 3; x < 11; ++x) differ += *p++ != file.voxels[std::size_t((z * 64 + y) * 64 + x)];
   EXPECT_EQ(differ, 0u);
+}
+
+TEST(ServiceImage, TheMirrorsChangedBoxCopiedIntoTheImageIsTheSubVolume) {
+  // EditMirror: nothing changed, nothing to copy; a changed box once, then cleared; its voxels
+  // copied straight into the IMAGE (a slice per lock) give the IMAGE pack_image gives.
+  const engine::Volume file = rotated_head();
+  const EditMirror mirror(file);
+  EXPECT_TRUE(mirror.take_changed().empty());
+  VoxelBox box;
+  box.lo = {3, 10, 20};
+  box.hi = {11, 12, 29};
+  mirror.restore_changed(box);
+  const VoxelBox got = mirror.take_changed();
+  EXPECT_EQ(got.lo, box.lo);
+  EXPECT_EQ(got.hi, box.hi);
+  EXPECT_TRUE(mirror.take_changed().empty());
+  engine::Volume frame = file;
+  frame.voxels.clear();  // the frame alone: its voxels are not read
+  const auto a = pack_image(frame, "Head", box, [&](float* out) { mirror.copy_box(box, out); });
+  const auto b = pack_image(file, "Head", box);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_TRUE(std::equal(a.begin() + 58, a.end(), b.begin() + 58)) << "the bodies differ";  // headers: time stamps
 }
 
 TEST(ServiceMessages, LabelMetaNamesItsImages) {

@@ -437,10 +437,10 @@ void Server::ask_isovalue(const Pending& p) {
 
 /// True once every edit submitted so far was applied or refused (save sees them all).
 namespace {
-/// Every edit submitted to the session has been applied, refused or dropped.
-bool edits_settled(const session::LiveStats& st) {
-  return st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested;
-}
+/// Every edit submitted to the session has been applied (its bricks in the mirror: the
+/// count follows the listener), refused, dropped or merged (a stroke's end whose begin the
+/// full queue dropped).
+bool edits_settled(const session::LiveStats& st) { return st.settled(); }
 }  // namespace
 
 bool Server::wait_edits_applied(double timeout_s) {

@@ -29,6 +29,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
+#include "isotouch/service/image_isovalue.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
@@ -210,8 +211,18 @@ class Server {
   bool applying_ = false;
   std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
   bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
+  // Main thread: the isovalue a client's `isovalue V` set (a received IMAGE keeps it while
+  // inside its values; none: each IMAGE's own, image_isovalue.h).
+  std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
+
+/// "isovalue 300 (inside above)".
+std::string iso_text(const core::Isosurface& iso) {
+  std::ostringstream s;
+  s << "isovalue " << iso.tau << " (inside " << core::to_string(iso.inside) << ")";
+  return s.str();
+}
 
 std::string mm3(const core::Vec3& v) {
   std::ostringstream s;
@@ -783,8 +794,11 @@ void Server::restart_at_isovalue(const Pending& p) {
   }
   setup_.live = live;
   setup_.hri = hri;
+  client_iso_ = live.iso;
   stop_session();
   start_session(std::move(next));
+  log_.line("isovalue client " + std::to_string(p.client) + " set it: " + iso_text(live.iso) +
+            " (kept for later images while inside their values)");
   answer(p, igtl::StatusMessage::STATUS_OK, what + ": done (the session restarted on the edited volume)");
 }
 
@@ -844,25 +858,35 @@ void Server::swap_volume(PendingVolume p) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<Session> next;
+  // The image's own isovalue (as `isotouch run VOLUME` chooses it), or the one a client set.
+  const engine::IsoChoice choice = image_isovalue(p.volume, client_iso_);
+  session::LiveFieldOptions live = setup_.live;
+  servo::HriParams hri = setup_.hri;
+  live.iso = choice.iso;
+  live.background = float(live.iso.outside_value(p.volume.min_value, p.volume.max_value));
+  hri.tau = choice.iso.tau;
+  hri.inside = choice.iso.inside;
   try {
-    next = prepare_session(std::move(p.volume), setup_.live, setup_.hri);
+    next = prepare_session(std::move(p.volume), live, hri);
   } catch (const std::exception& e) {
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
                             e.what() + ")" + keep);
   }
   const auto t1 = std::chrono::steady_clock::now();
+  setup_.live = live;
+  setup_.hri = hri;
   stop_session();
   start_session(std::move(next));
   const auto t2 = std::chrono::steady_clock::now();
   n_.images.fetch_add(1);
   std::ostringstream s;
   s << std::fixed << std::setprecision(1) << "volume   client " << p.client << ", '" << p.device << "': " << p.dims
-    << " taken, now the session's volume (isovalue and tool kept; built in "
+    << " taken, now the session's volume (tool kept; built in "
     << std::chrono::duration<double, std::milli>(t1 - t0).count() << " ms while the old one served, servo off for "
-    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms)";
+    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms); " << engine::iso_line(choice);
   log_.line(s.str());
-  answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims);
+  answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
 void Server::stop_session() {
@@ -917,7 +941,8 @@ int Server::run() {
   const std::string device = haptic_ ? "device --haptic " + o_.haptic
                                      : "stream '" + o_.stream + "' + offset " + mm3(o_.offset_mm) + " mm (RAS)";
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
-            std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
+            std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
+            iso_text(setup_.live.iso) + " (the scene's)");
   start_session(prepare_session(setup_.volume, setup_.live, setup_.hri));
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());

@@ -20,6 +20,9 @@
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
 //   ramp NAME NX NY NZ  an NX x NY x NZ uint8 IMAGE named NAME (1 mm voxels, RAS, centred on
 //                     the origin; value x % 256); prints the STATUS answer
+//   ball NAME N R1 R2 an N^3 int16 IMAGE named NAME in Hounsfield units (1 mm voxels, RAS,
+//                     centred on the origin): bone (1000 HU) within R1 mm of the centre,
+//                     tissue (40 HU) to R2 mm, air (-1024 HU) beyond; prints the STATUS answer
 //   statuses SECS     waits SECS, then prints the STATUS answers not printed yet
 //   rebase            the copy starts again from BASE (what the server holds once it took
 //                     an `image`); IMAGEs received later apply to it
@@ -308,6 +311,31 @@ bool Client::action(const std::string& a) {
     auto* out = static_cast<std::uint8_t*>(m->GetScalarPointer());
     const std::size_t n = std::size_t(dims[0]) * std::size_t(dims[1]) * std::size_t(dims[2]);
     for (std::size_t k = 0; k < n; ++k) out[k] = std::uint8_t(k % std::size_t(dims[0]) % 256);
+    send(sock, m);
+    return wait_status(s, name);
+  }
+  if (a == "ball") {
+    const std::string name = arg();
+    const int n = int(num());
+    const double r1 = num(), r2 = num();
+    igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+    int dims[3] = {n, n, n};
+    float sp[3] = {1, 1, 1};
+    m->SetDimensions(dims);
+    m->SetSpacing(sp);
+    m->SetScalarType(igtl::ImageMessage::TYPE_INT16);
+    m->SetEndian(igtl::ImageMessage::ENDIAN_LITTLE);  // written in this (x86) host's order
+    m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+    m->SetDeviceName(name.c_str());
+    m->AllocateScalars();
+    auto* out = static_cast<std::int16_t*>(m->GetScalarPointer());
+    const double c = (n - 1) / 2.0;
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+          const double r = std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + (z - c) * (z - c));
+          *out++ = std::int16_t(r <= r1 ? 1000 : r <= r2 ? 40 : -1024);
+        }
     send(sock, m);
     return wait_status(s, name);
   }

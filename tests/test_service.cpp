@@ -25,6 +25,7 @@
 
 #include "isotouch/service/commands.h"
 #include "isotouch/service/image_volume.h"
+#include "isotouch/service/image_isovalue.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
@@ -520,6 +521,46 @@ TEST(ServiceMessages, LabelMetaNamesItsImages) {
   std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
   odd.insert(odd.end(), next.begin(), next.end());
   expect_refused_then_the_next(odd, "LBMETA body of 100 bytes");
+}
+
+
+// The isovalue a received IMAGE opens at (issue 62: a new IMAGE kept the scene's isovalue in
+// the scene volume's units). Truth from outside the chooser: three-layer volumes whose
+// classes are known. A CT in HU (air -1024, tissue 40, bone 1200) opens at the bone preset,
+// 300 HU; a client's isovalue inside its values is kept, one outside them is not; a uint8
+// volume of 0 / 100 / 200 opens between its tissue and its dense class, also after a client
+// set the head scene's 1150 (scanner units: outside its values).
+engine::Volume three_layers(float air, float tissue, float dense) {
+  engine::Volume v;
+  v.grid.dims = {16, 16, 24};
+  v.voxels.resize(v.grid.voxel_count());
+  for (int z = 0; z < 24; ++z)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) v.voxels[v.grid.index(x, y, z)] = z < 8 ? air : z < 16 ? tissue : dense;
+  v.update_stats();
+  return v;
+}
+
+TEST(ServeIsovalue, AnImageOpensAtItsOwnIsovalueUnlessAClientSetOne) {
+  const engine::Volume ct = three_layers(-1024.f, 40.f, 1200.f);
+  engine::IsoChoice c = image_isovalue(ct, std::nullopt);
+  EXPECT_EQ(c.iso.tau, 300.0) << c.rule;
+  EXPECT_EQ(c.iso.inside, core::InsideIs::kAbove);
+  // A client's value inside the image's values is kept; one outside it is not.
+  c = image_isovalue(ct, core::Isosurface{800.0, core::InsideIs::kAbove});
+  EXPECT_EQ(c.iso.tau, 800.0);
+  EXPECT_NE(c.rule.find("client"), std::string::npos) << c.rule;
+  c = image_isovalue(ct, core::Isosurface{5000.0, core::InsideIs::kAbove});
+  EXPECT_EQ(c.iso.tau, 300.0) << c.rule;
+  EXPECT_NE(c.rule.find("outside this image's values"), std::string::npos) << c.rule;
+
+  const engine::Volume u8 = three_layers(0.f, 100.f, 200.f);
+  c = image_isovalue(u8, std::nullopt);
+  EXPECT_GT(c.iso.tau, 100.0) << c.rule;
+  EXPECT_LE(c.iso.tau, 200.0) << c.rule;
+  c = image_isovalue(u8, core::Isosurface{1150.0, core::InsideIs::kAbove});  // the head scene's, in other units
+  EXPECT_GT(c.iso.tau, 100.0) << c.rule;
+  EXPECT_LE(c.iso.tau, 200.0) << c.rule;
 }
 
 }  // namespace

@@ -122,6 +122,8 @@ class Server {
   void refuse_connection(int fd);
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
+  bool own_stream(Client& c, const Incoming& in);
+  void release_stream(int client);
   void display_loop();
   void display_tick(double stall_s);
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
@@ -184,6 +186,9 @@ class Server {
   long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
   std::mutex stream_mu_;
   std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
+  int stream_owner_ = 0;                     // guarded by stream_mu_: the client that owns the stream (0: none)
+  std::int64_t stream_owner_ns_ = 0;         // its last pose [ns, steady]
+  std::set<int> stream_denied_;              // clients told the stream is not theirs (this owner)
   StreamReplies replies_{device_, StreamReplyOptions{o_.sched_fifo, o_.stale_s},
                          [this] {
                            std::lock_guard<std::mutex> lock(stream_mu_);
@@ -278,6 +283,7 @@ void Server::handle(Client& c, Incoming& in) {
     case K::kTransform:
       n_.transforms.fetch_add(1);
       if (in.device == o_.stream && !haptic_) {
+        if (!own_stream(c, in)) break;
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
         if (o_.reply_force) {
           std::lock_guard<std::mutex> lock(stream_mu_);
@@ -307,6 +313,53 @@ void Server::handle(Client& c, Incoming& in) {
   }
 }
 
+/// One client owns the stream: the first whose TRANSFORM came, until it sends none for the
+/// stale time (stale_s) or disconnects; then the next one to send takes it (logged). Another
+/// client's poses meanwhile move nothing, and it gets one STATUS saying so (once per owner):
+/// two trackers on one name no longer make the HIP alternate between them.
+bool Server::own_stream(Client& c, const Incoming& in) {
+  const std::int64_t now = TransformDevice::now_ns();
+  int owner = 0, before = 0;
+  bool tell = false;
+  {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    const bool owner_gone = stream_owner_ == 0 || now - stream_owner_ns_ > std::int64_t(o_.stale_s * 1e9);
+    before = stream_owner_;
+    if (stream_owner_ == c.id || owner_gone) {
+      if (stream_owner_ != c.id) stream_owner_ = c.id, stream_denied_.clear();
+      stream_owner_ns_ = now;
+    } else {
+      tell = stream_denied_.insert(c.id).second;
+    }
+    owner = stream_owner_;
+  }
+  if (owner == c.id) {
+    if (before != c.id)
+      log_.line("stream   '" + o_.stream + "' is client " + std::to_string(c.id) + "'s" +
+                (before == 0 ? std::string() : " (client " + std::to_string(before) + "'s stopped)"));
+    return true;
+  }
+  if (tell) {  // outside the lock: the send may wait for the client
+    std::ostringstream why;
+    why << "stream '" << in.device << "' is client " << owner << "'s (its poses move the HIP until it sends none for "
+        << o_.stale_s * 1e3 << " ms or disconnects); this client's poses are ignored";
+    refuse(c, in, igtl::StatusMessage::STATUS_ACCESS_DENIED, why.str());
+  }
+  return false;
+}
+
+/// A client gone gives the stream up at once.
+void Server::release_stream(int client) {
+  bool owned = false;
+  {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    owned = stream_owner_ == client;
+    if (owned) stream_owner_ = 0;
+    stream_denied_.erase(client);
+  }
+  if (owned) log_.line("stream   '" + o_.stream + "' free: its client " + std::to_string(client) + " is gone");
+}
+
 void Server::client_loop(Client& c) {
   try {
     read_messages(c);
@@ -316,6 +369,7 @@ void Server::client_loop(Client& c) {
     log_.line("client   " + std::to_string(c.id) + " dropped: an unknown exception");
   }
   log_.line("client   " + std::to_string(c.id) + " gone");
+  release_stream(c.id);
   c.conn->shutdown();
   c.done = true;
 }
@@ -663,6 +717,7 @@ void Server::display_loop() {
 /// One display tick: HIP, Proxy and Force to every client.
 void Server::display_tick(double stall_s) {
   std::vector<std::uint8_t> out, points;  // HIP, Proxy and Force; HIP and Proxy
+  long n_out = 0, n_points = 0;            // the TRANSFORMs in each
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (!session_) return;
@@ -671,10 +726,16 @@ void Server::display_tick(double stall_s) {
     const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
     const core::Vec3 f = echo().force_ras_n(stall_s);
     for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
+      // No fresh pose (none yet, a pause past the stale time, the tracker gone): the servo
+      // rendered nothing, and its HIP and proxy are no place (the proxy a zero, the HIP the
+      // origin before the first pose). Not sent: the clients keep the last true ones. The
+      // force (zero then) is sent.
+      if (!ob.rendered && std::string(name) != "Force") continue;
       const double t[3] = {v.x, v.y, v.z};
       const auto b = pack_translation(name, t);
-      if (std::string(name) == "Force") points = out;
+      if (std::string(name) == "Force") points = out, n_points = n_out;
       out.insert(out.end(), b.begin(), b.end());
+      ++n_out;
     }
   }
   // With --reply-force a stream's client applies every Force it gets (PLUS): it gets its
@@ -684,8 +745,10 @@ void Server::display_tick(double stall_s) {
   for (Client& c : clients_) {
     if (c.done || !c.conn->alive()) continue;
     const bool to_stream = c.reply_target.load();
-    const long n = to_stream ? 2 : 3;
-    if (c.conn->send_droppable(to_stream ? points : out)) n_.sent.fetch_add(n);
+    const std::vector<std::uint8_t>& bytes = to_stream ? points : out;
+    if (bytes.empty()) continue;  // a stream's client, and no fresh pose: nothing to send
+    const long n = to_stream ? n_points : n_out;
+    if (c.conn->send_droppable(bytes)) n_.sent.fetch_add(n);
     else n_.dropped_sends.fetch_add(n);
   }
 }

@@ -3,13 +3,15 @@
 //
 //   client threads (one per connection): read_message ->
 //     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
-//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force),
+//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force;
+//                                     one client's: the first, until it stops for stale_s or goes),
 //                                     unless `haptic` names the device (then ignored)
 //     STRING                       -> parse_command (commands.h) -> the command thread
 //     LBMETA                       -> the images it names are label maps: refused when they come
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
 //   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
-//     (translation in mm, RAS) and "Force" (translation = force in N, RAS; PLUS's convention)
+//     (translation in mm, RAS; only while the servo renders a fresh pose) and "Force"
+//     (translation = force in N, RAS; PLUS's convention)
 //   command thread: every 1 / display_hz, runs the commands in the order they came (a
 //     STATUS back for each), submits the tool's brush at the proxy while applying and in
 //     contact, and at most image_hz times a second sends the edited voxels as an IMAGE to

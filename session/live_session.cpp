@@ -204,6 +204,7 @@ void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
   o.plane = r.out.plane;
   o.contact = r.out.contact;
   o.version = r.version;
+  o.rendered = r.device_status == servo::DeviceStatus::kOk && !r.paused;
   observed_.store(o);
 }
 

@@ -129,6 +129,10 @@ struct Observed {
   servo::VirtualPlane plane;
   bool contact = false;
   std::uint64_t version = 0;  ///< snapshot version that tick read
+  /// The renderer ran this tick (the device's reading was fresh and the session not paused):
+  /// vhip_m is a true proxy. False (stale, lost, faulty device, paused): vhip_m and force_n
+  /// are zeros, no place, and hip_m the device's last reading (before any: its default).
+  bool rendered = false;
 };
 
 /// Counters of a running or stopped session.

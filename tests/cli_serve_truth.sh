@@ -8,7 +8,14 @@
 #      opens at the bone preset, 300 HU, said in its STATUS, not at the head scene's 1150
 #      scanner units (above every voxel: nothing to touch): the tool 2 mm inside the ball's
 #      surface feels ~800 N/m x 2 mm outward (+S); after a client's `isovalue 500` the next
-#      image keeps 500, said so.
+#      image keeps 500, said so;
+#   3. HIP and Proxy are sent only while the servo renders a fresh pose: none before the
+#      client's first pose (0.5 s connected without one), none at a false place during a
+#      0.5 s pause of its stream (each HIP within 10 mm, each Proxy within 20 mm of the last
+#      pose it sent; before, the HIP sat at RAS (0, 0, 0) and the Proxy jumped to the grid's origin);
+#   4. two trackers on one stream name: the first owns it, its HIP never takes the second's
+#      pose, the second gets one STATUS (code 5) naming the owner; once the first is gone
+#      the second's stream is taken (logged).
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -27,10 +34,10 @@ grep -q "listening on .*isovalue 1150 (inside above) (the scene's)" "$out/serve.
 out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"
 # shellcheck disable=SC2086
 timeout 60 "$client" 127.0.0.1 "$port" "$head" \
-  move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop move $out_p 0.3 \
+  wait 0.5 points move $out_p 0.3 move $in_p 0.5 pause 0.5 move $in_p 0.2 cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop move $out_p 0.3 \
   cmd undo cmd undo cmd undo cmd undo cmd undo cmd undo cmd "save undone.mha" rebase compare "$out/undone.mha" \
   ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 force \
-  cmd "isovalue 500" ball Ball2 48 15 20 statuses 0.3 >"$out/client.log" 2>&1 ||
+  cmd "isovalue 500" ball Ball2 48 15 20 statuses 0.3 points >"$out/client.log" 2>&1 ||
   fail "the client failed (exit $?)"
 wait $serve_pid
 rc=$?
@@ -63,6 +70,37 @@ fx, fy, fz, fn = (float(v) for v in f[0][1:5])
 # 2 mm into a surface at radius 15 mm (+-0.7 mm: where 300 HU falls between voxels) at 800 N/m.
 if not (0.8 < fn < 2.6 and fz > 0.9 * fn):
     fail(f"force ({fx}, {fy}, {fz}) |F| {fn} N 2 mm inside the 300 HU ball: not ~1.6 N outward (+S)")
-print(f"truth ok: the saved undo is the head; the HU ball opens at 300 HU (|F| {fn:.2f} N, +S); a client's 500 kept")
+pts = [re.match(r"points HIP (\d+) Proxy (\d+), off: HIP (\d+) Proxy (\d+)", l) for l in log if l.startswith("points ")]
+if len(pts) != 2 or not all(pts): fail(f"not two points lines: {pts}")
+first, last = [tuple(int(g) for g in m.groups()) for m in pts]
+if first != (0, 0, 0, 0): fail(f"HIP / Proxy sent before the client's first pose: {pts[0].group(0)}")
+if last[0] < 100 or last[1] < 100: fail(f"too few HIP / Proxy transforms: {pts[1].group(0)}")
+if last[2] or last[3]: fail(f"HIP / Proxy off the tool (none yet, a pause): {pts[1].group(0)}")
+print(f"truth ok: the saved undo is the head; the HU ball opens at 300 HU (|F| {fn:.2f} N, +S); a client's 500 kept; "
+      f"{last[0]} HIP and {last[1]} Proxy transforms, none before the first pose or off the tool")
 PY
+[[ $? == 0 ]] || exit 1
+
+# 4. Two trackers on 'Stylus': client A from the start, B from 0.8 s (another pose, 40 mm away).
+"$exe" serve "$scene" --port 0 --stream Stylus --seconds 6 >"$out/serve2.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve2.log" $serve_pid)
+[[ -n $port ]] || fail "the second serve never said it was listening"
+# shellcheck disable=SC2086
+timeout 30 "$client" 127.0.0.1 "$port" "$head" move $in_p 0.3 wait 1.7 points statuses 0.1 >"$out/a.log" 2>&1 &
+a_pid=$!
+# shellcheck disable=SC2086
+timeout 30 "$client" 127.0.0.1 "$port" "$head" wait 0.8 move $out_p 2.4 statuses 0.1 >"$out/b.log" 2>&1 ||
+  fail "client B failed: $(cat "$out/b.log")"
+wait $a_pid || fail "client A failed: $(cat "$out/a.log")"
+wait $serve_pid
+grep -q "^points HIP [1-9][0-9]* Proxy [1-9][0-9]*, off: HIP 0 Proxy 0" "$out/a.log" ||
+  fail "tracker A's HIP / Proxy took tracker B's pose: $(cat "$out/a.log")"
+[[ $(grep -c "^STATUS" "$out/a.log") == 0 ]] || fail "tracker A got a STATUS: $(cat "$out/a.log")"
+[[ $(grep -c "^STATUS code 5: stream 'Stylus' is client 1's" "$out/b.log") == 1 ]] ||
+  fail "tracker B did not get one STATUS 5 naming client 1: $(cat "$out/b.log")"
+grep -q "stream   'Stylus' is client 2's" "$out/serve2.log" ||
+  fail "tracker B never took the stream once A was gone: $(tail -n 20 "$out/serve2.log")"
+echo "two trackers ok: $(grep '^points' "$out/a.log"); B told once"
+
 echo "PASS serve truth"

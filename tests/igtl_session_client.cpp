@@ -6,6 +6,11 @@
 //   move X Y Z SECS   the tool "Stylus" moves in a line to X Y Z [mm, RAS] over SECS, then
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
+//   pause SECS        the tool's stream stops for SECS (then goes on where it was)
+//   points            prints the HIP and Proxy TRANSFORMs received so far and how many were off
+//                     the tool: "points HIP K Proxy L, off: HIP A Proxy B" (off: more than 10 mm
+//                     (HIP) or 20 mm (Proxy) from the last pose this client sent, or any before
+//                     it sent one)
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
 //                     (the first STATUS under the device name sent; so for `image` and `ramp`)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
@@ -60,6 +65,9 @@ struct Shared {
   std::condition_variable cv;
   std::deque<std::pair<std::string, std::string>> statuses;  // device name, "STATUS code C: TEXT"
   std::deque<std::array<double, 3>> forces;
+  long hips = 0, proxies = 0, hips_off = 0, proxies_off = 0;  // HIP / Proxy received, and off the tool
+  bool sent_pose = false;
+  std::array<double, 3> last_pose{0, 0, 0};  // [mm, RAS], the last the stream sent
   long forces_received = 0;
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
   int images = 0;
@@ -134,6 +142,15 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
       }
+    } else if (type == "TRANSFORM" && (name == "HIP" || name == "Proxy")) {
+      if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
+        igtl::Matrix4x4 m;
+        t->GetMatrix(m);
+        const double d = std::hypot(m[0][3] - s.last_pose[0], m[1][3] - s.last_pose[1], m[2][3] - s.last_pose[2]);
+        const bool hip = name == "HIP";
+        (hip ? s.hips : s.proxies) += 1;
+        if (!s.sent_pose || d > (hip ? 10.0 : 20.0)) (hip ? s.hips_off : s.proxies_off) += 1;
+      }
     } else if (type == "IMAGE") {
       if (auto im = body_of<igtl::ImageMessage>(sock, h)) apply_image(*im, s);
     } else {
@@ -152,6 +169,7 @@ struct Path {
   double from[3] = {0, 0, 0}, to[3] = {0, 0, 0};
   Clock::time_point t0, t1;
   bool started = false;
+  Clock::time_point paused_until;  // no pose sent before it
   void at(Clock::time_point t, double out[3]) {
     std::lock_guard<std::mutex> lock(mu);
     const double span = std::chrono::duration<double>(t1 - t0).count();
@@ -167,14 +185,14 @@ void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
   sock->Send(m->GetPackPointer(), m->GetPackSize());
 }
 
-void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& done) {
+void stream_loop(igtl::ClientSocket* sock, Path& path, Shared& shared, const std::atomic<bool>& done) {
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("Stylus");
   while (!done) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
     {
       std::lock_guard<std::mutex> lock(path.mu);
-      if (!path.started) continue;
+      if (!path.started || Clock::now() < path.paused_until) continue;
     }
     double p[3];
     path.at(Clock::now(), p);
@@ -182,6 +200,11 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& 
     igtl::IdentityMatrix(m);
     for (int a = 0; a < 3; ++a) m[a][3] = float(p[a]);
     t->SetMatrix(m);
+    {
+      std::lock_guard<std::mutex> lock(shared.mu);  // before it can arrive: the HIP it moves is never "off"
+      for (int a = 0; a < 3; ++a) shared.last_pose[std::size_t(a)] = m[a][3];
+      shared.sent_pose = true;
+    }
     send(sock, t);
   }
 }
@@ -239,6 +262,20 @@ bool Client::action(const std::string& a) {
     const double at = num(), now = std::chrono::duration<double>(Clock::now() - started).count();
     if (now > at) return std::cout << "at " << at << ": already " << now << " s\n", false;
     return std::this_thread::sleep_for(std::chrono::duration<double>(at - now)), true;
+  }
+  if (a == "pause") {
+    const double secs = num();
+    {
+      std::lock_guard<std::mutex> lock(path.mu);
+      path.paused_until = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(secs));
+    }
+    return std::this_thread::sleep_for(std::chrono::duration<double>(secs)), true;
+  }
+  if (a == "points") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::cout << "points HIP " << s.hips << " Proxy " << s.proxies << ", off: HIP " << s.hips_off << " Proxy "
+              << s.proxies_off << "\n";
+    return true;
   }
   if (a == "wait") return std::this_thread::sleep_for(std::chrono::duration<double>(num())), true;
   if (a == "cmd") {
@@ -376,7 +413,7 @@ int main(int argc, char** argv) {
   Path path;
   std::atomic<bool> done{false};
   std::thread reader([&] { read_loop(sock, s); });
-  std::thread streamer([&] { stream_loop(sock, path, done); });
+  std::thread streamer([&] { stream_loop(sock, path, s, done); });
   Client c{sock, s, path, base, argv, argc, 4};
   bool ok = true;
   while (ok && c.i < argc) ok = c.action(c.arg());

@@ -112,6 +112,9 @@ class Server {
     if (!o.haptic.empty() && o.reply_force)
       throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
                                   " the stream is not the device");
+    if (!o.haptic.empty() && !o.registration.is_identity())
+      throw std::invalid_argument("--registration maps the TRANSFORM stream's poses; with --haptic " + o.haptic +
+                                  " the stream is not the device");
   }
 
   int run();
@@ -123,6 +126,7 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   bool own_stream(Client& c, const Incoming& in);
+  void take_registration(Client& c, const Incoming& in);
   void release_stream(int client);
   void display_loop();
   void display_tick(double stall_s);
@@ -282,6 +286,10 @@ void Server::handle(Client& c, Incoming& in) {
       break;
     case K::kTransform:
       n_.transforms.fetch_add(1);
+      if (!o_.registration_name.empty() && in.device == o_.registration_name && in.device != o_.stream) {
+        take_registration(c, in);
+        break;
+      }
       if (in.device == o_.stream && !haptic_) {
         if (!own_stream(c, in)) break;
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
@@ -346,6 +354,26 @@ bool Server::own_stream(Client& c, const Incoming& in) {
     refuse(c, in, igtl::StatusMessage::STATUS_ACCESS_DENIED, why.str());
   }
   return false;
+}
+
+/// A TRANSFORM named registration_name: the tracker's registration to the image from now on
+/// (the stream's poses, the Force replies), answered with a STATUS; one that is not rigid
+/// is refused and the registration kept.
+void Server::take_registration(Client& c, const Incoming& in) {
+  if (haptic_)
+    return refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "registration '" + in.device + "': the device is --haptic " + o_.haptic + ", not the TRANSFORM stream");
+  Registration r;
+  try {
+    r = registration_from_matrix(in.matrix);
+  } catch (const std::exception& e) {
+    return refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "registration '" + in.device + "': " + e.what() + "; the registration is unchanged");
+  }
+  device_.set_registration(r);
+  const std::string text = "registration taken: tracker -> image " + r.describe();
+  log_.line("register client " + std::to_string(c.id) + ", '" + in.device + "': " + r.describe());
+  c.conn->send(pack_status(igtl::StatusMessage::STATUS_OK, in.device, text));
 }
 
 /// A client gone gives the stream up at once.
@@ -1001,8 +1029,12 @@ int Server::run() {
   std::ostringstream setup_log;
   setup_ = run::setup_scene(scene_, o_.run, setup_log);
   if (!o_.haptic.empty()) open_haptic();
-  const std::string device = haptic_ ? "device --haptic " + o_.haptic
-                                     : "stream '" + o_.stream + "' + offset " + mm3(o_.offset_mm) + " mm (RAS)";
+  if (!haptic_) device_.set_registration(o_.registration);
+  const std::string device =
+      haptic_ ? "device --haptic " + o_.haptic
+              : "stream '" + o_.stream + "'" +
+                    (o_.registration.is_identity() ? std::string() : " registered (" + o_.registration.describe() + ")") +
+                    " + offset " + mm3(o_.offset_mm) + " mm (RAS)";
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
             std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
             iso_text(setup_.live.iso) + " (the scene's)");

@@ -29,6 +29,7 @@
 #include <string>
 
 #include "isotouch/service/igtl_message.h"
+#include "isotouch/service/registration.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/core/vec3.h"
@@ -46,7 +47,14 @@ struct ServeOptions {
   /// force goes to it, and TRANSFORMs named `stream` move nothing; an `igtl:` device's rate
   /// is measured and the scene's stiffness checked against it (Scene::allow_unstable_stiffness).
   std::string haptic;
-  core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS]
+  core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS], after `registration`
+  /// The tracker's rigid registration to the image (registration.h): the stream's poses
+  /// [mm, tracker RAS] -> image RAS (R p + t), the Force replies (`reply_force`) back with
+  /// R^T. Identity: the stream is in the image's frame. Not with `haptic`.
+  Registration registration;
+  /// A TRANSFORM under this name from any client replaces `registration` (PLUS's
+  /// TrackerToImage); answered with a STATUS (taken, or refused when not rigid). "": none.
+  std::string registration_name = "TrackerToImage";
   double display_hz = 60;             ///< HIP / proxy / force TRANSFORMs sent per second
   double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s] (not with `haptic`)
   int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped

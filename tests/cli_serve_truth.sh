@@ -15,7 +15,9 @@
 #      pose it sent; before, the HIP sat at RAS (0, 0, 0) and the Proxy jumped to the grid's origin);
 #   4. two trackers on one stream name: the first owns it, its HIP never takes the second's
 #      pose, the second gets one STATUS (code 5) naming the owner; once the first is gone
-#      the second's stream is taken (logged).
+#      the second's stream is taken (logged);
+#   5. a rotated registration (--registration FILE, then a client's TrackerToImage) applied
+#      to the poses and, transposed, to the Force replies.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -70,7 +72,7 @@ fx, fy, fz, fn = (float(v) for v in f[0][1:5])
 # 2 mm into a surface at radius 15 mm (+-0.7 mm: where 300 HU falls between voxels) at 800 N/m.
 if not (0.8 < fn < 2.6 and fz > 0.9 * fn):
     fail(f"force ({fx}, {fy}, {fz}) |F| {fn} N 2 mm inside the 300 HU ball: not ~1.6 N outward (+S)")
-pts = [re.match(r"points HIP (\d+) Proxy (\d+), off: HIP (\d+) Proxy (\d+)", l) for l in log if l.startswith("points ")]
+pts = [re.match(r"points HIP (\d+) Proxy (\d+), off: HIP (\d+) Proxy (\d+),", l) for l in log if l.startswith("points ")]
 if len(pts) != 2 or not all(pts): fail(f"not two points lines: {pts}")
 first, last = [tuple(int(g) for g in m.groups()) for m in pts]
 if first != (0, 0, 0, 0): fail(f"HIP / Proxy sent before the client's first pose: {pts[0].group(0)}")
@@ -89,6 +91,7 @@ port=$(wait_port "$out/serve2.log" $serve_pid)
 # shellcheck disable=SC2086
 timeout 30 "$client" 127.0.0.1 "$port" "$head" move $in_p 0.3 wait 1.7 points statuses 0.1 >"$out/a.log" 2>&1 &
 a_pid=$!
+for _ in $(seq 100); do grep -q "client   1 connected" "$out/serve2.log" && break; sleep 0.05; done  # A is client 1
 # shellcheck disable=SC2086
 timeout 30 "$client" 127.0.0.1 "$port" "$head" wait 0.8 move $out_p 2.4 statuses 0.1 >"$out/b.log" 2>&1 ||
   fail "client B failed: $(cat "$out/b.log")"
@@ -103,4 +106,40 @@ grep -q "stream   'Stylus' is client 2's" "$out/serve2.log" ||
   fail "tracker B never took the stream once A was gone: $(tail -n 20 "$out/serve2.log")"
 echo "two trackers ok: $(grep '^points' "$out/a.log"); B told once"
 
+# 5. A rotated registration, tracker -> image = 90 degrees about R (tracker +A is image +S,
+#    tracker +S is image -A), from --registration FILE, worked out by hand: the tracker's pose
+#    (0, 13, 0) is image (0, 0, 13), 2 mm inside the 300 HU ball's surface at +S; the HIP sent
+#    is there, and the Force reply (--reply-force, in the tracker's frame: R^T f) points along
+#    tracker +A (image +S: outward); without the transpose it would point along tracker +S.
+#    Then a TrackerToImage TRANSFORM from the client (the identity) replaces it: the HIP is
+#    the pose itself, (0, 13, 0).
+printf '# tracker -> image: 90 degrees about R\n1 0 0 0\n0 0 -1 0\n0 1 0 0\n0 0 0 1\n' >"$out/reg.txt"
+"$exe" serve "$scene" --port 0 --stream Stylus --registration "$out/reg.txt" --reply-force --seconds 8 \
+  >"$out/serve3.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve3.log" $serve_pid)
+[[ -n $port ]] || fail "the third serve never said it was listening: $(cat "$out/serve3.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 24 0 0.4 move 0 13 0 0.6 force points \
+  register TrackerToImage 1 0 0 0 0 1 0 0 0 0 1 0 wait 0.3 points >"$out/r.log" 2>&1 ||
+  fail "the registration client failed: $(cat "$out/r.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+log = open(f"{sys.argv[1]}/r.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+f = [l.split() for l in log if l.startswith("force ")]
+if len(f) != 1: fail("no force line")
+fx, fy, fz, fn = (float(v) for v in f[0][1:5])
+if not (0.8 < fn < 2.6 and fy > 0.9 * fn):
+    fail(f"Force reply ({fx}, {fy}, {fz}) |F| {fn} N: not ~1.6 N along tracker +A (R^T of image +S)")
+hips = [[float(v) for v in l.split("last HIP ")[1].split()] for l in log if l.startswith("points ")]
+if len(hips) != 2: fail("not two points lines")
+if max(abs(a - b) for a, b in zip(hips[0], (0, 0, 13))) > 1.0: fail(f"HIP {hips[0]} mm, not image (0, 0, 13) = R (0, 13, 0)")
+if max(abs(a - b) for a, b in zip(hips[1], (0, 13, 0))) > 1.0: fail(f"HIP {hips[1]} mm after the identity TrackerToImage, not (0, 13, 0)")
+if not any("STATUS code 1: registration taken: tracker -> image rotation [[1 0 0] [0 1 0] [0 0 1]]" in l for l in log):
+    fail("no STATUS taking the TrackerToImage TRANSFORM")
+print(f"registration ok: pose (0, 13, 0) -> HIP {hips[0]}, Force reply ({fx:.2f}, {fy:.2f}, {fz:.2f}) N in the tracker's frame; "
+      f"TrackerToImage identity -> HIP {hips[1]}")
+PY
 echo "PASS serve truth"

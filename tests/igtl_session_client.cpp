@@ -8,9 +8,11 @@
 //   wait SECS
 //   pause SECS        the tool's stream stops for SECS (then goes on where it was)
 //   points            prints the HIP and Proxy TRANSFORMs received so far and how many were off
-//                     the tool: "points HIP K Proxy L, off: HIP A Proxy B" (off: more than 10 mm
-//                     (HIP) or 20 mm (Proxy) from the last pose this client sent, or any before
-//                     it sent one)
+//                     the tool: "points HIP K Proxy L, off: HIP A Proxy B, last HIP X Y Z" (off:
+//                     more than 10 mm (HIP) or 20 mm (Proxy) from the last pose this client
+//                     sent, or any before it sent one; X Y Z the newest HIP [mm, RAS])
+//   register NAME M00 M01 M02 M03 M10 ... M23   a TRANSFORM named NAME, the 4x4's first three
+//                     rows (the last 0 0 0 1); prints the STATUS answer
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
 //                     (the first STATUS under the device name sent; so for `image` and `ramp`)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
@@ -66,6 +68,7 @@ struct Shared {
   std::deque<std::pair<std::string, std::string>> statuses;  // device name, "STATUS code C: TEXT"
   std::deque<std::array<double, 3>> forces;
   long hips = 0, proxies = 0, hips_off = 0, proxies_off = 0;  // HIP / Proxy received, and off the tool
+  std::array<double, 3> last_hip{0, 0, 0};
   bool sent_pose = false;
   std::array<double, 3> last_pose{0, 0, 0};  // [mm, RAS], the last the stream sent
   long forces_received = 0;
@@ -149,6 +152,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         const double d = std::hypot(m[0][3] - s.last_pose[0], m[1][3] - s.last_pose[1], m[2][3] - s.last_pose[2]);
         const bool hip = name == "HIP";
         (hip ? s.hips : s.proxies) += 1;
+        if (hip) s.last_hip = {m[0][3], m[1][3], m[2][3]};
         if (!s.sent_pose || d > (hip ? 10.0 : 20.0)) (hip ? s.hips_off : s.proxies_off) += 1;
       }
     } else if (type == "IMAGE") {
@@ -274,8 +278,20 @@ bool Client::action(const std::string& a) {
   if (a == "points") {
     std::lock_guard<std::mutex> lock(s.mu);
     std::cout << "points HIP " << s.hips << " Proxy " << s.proxies << ", off: HIP " << s.hips_off << " Proxy "
-              << s.proxies_off << "\n";
+              << s.proxies_off << ", last HIP " << s.last_hip[0] << " " << s.last_hip[1] << " " << s.last_hip[2] << "\n";
     return true;
+  }
+  if (a == "register") {
+    const std::string name = arg();
+    igtl::Matrix4x4 m;
+    igtl::IdentityMatrix(m);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) m[r][c] = float(num());
+    igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+    t->SetDeviceName(name.c_str());
+    t->SetMatrix(m);
+    send(sock, t);
+    return wait_status(s, name);
   }
   if (a == "wait") return std::this_thread::sleep_for(std::chrono::duration<double>(num())), true;
   if (a == "cmd") {

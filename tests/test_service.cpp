@@ -26,6 +26,7 @@
 #include "isotouch/service/commands.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/image_isovalue.h"
+#include "isotouch/service/registration.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
@@ -314,6 +315,60 @@ TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
   EXPECT_NEAR(ras.x, 15, 1e-9);
   EXPECT_NEAR(ras.y, 26, 1e-9);
   EXPECT_NEAR(ras.z, 37, 1e-9);
+}
+
+// The tracker registered to the image by a rotation (90 degrees about S: tracker +R is image
+// +A, tracker +A is image -R) and a translation (10, 20, 30) mm, worked out by hand: the
+// pose (1, 2, 3) lands at image (-2 + 10, 1 + 20, 3 + 30) = (8, 21, 33), plus the offset
+// (5, 6, 7); a force of image RAS (0, -2, 0) goes back to the tracker as (-2, 0, 0) (R^T).
+TEST(ServiceDevice, ARotatedRegistrationMapsPosesAndForcesBack) {
+  engine::Volume v;
+  v.grid.dims = {4, 4, 4};
+  v.grid.spacing_m = {1e-3, 2e-3, 3e-3};
+  v.grid.origin_m = {0.01, -0.02, 0.03};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  v.direction_is_identity = false;
+  TransformDevice d;
+  d.set_frame(v, {5, 6, 7});
+  const double m[4][4] = {{0, -1, 0, 10}, {1, 0, 0, 20}, {0, 0, 1, 30}, {0, 0, 0, 1}};
+  d.set_registration(registration_from_matrix(m));
+  const double t[3] = {1, 2, 3};  // tracker RAS mm
+  d.push_mm(t);
+  const core::Vec3 ras = d.grid_to_ras_mm(d.read().position_m);
+  EXPECT_NEAR(ras.x, 8 + 5, 1e-9);
+  EXPECT_NEAR(ras.y, 21 + 6, 1e-9);
+  EXPECT_NEAR(ras.z, 33 + 7, 1e-9);
+  d.write_force_n({2, 0, 0});  // grid +x: image RAS (0, -2, 0) (the test above)
+  const core::Vec3 f = d.to_tracker_n(d.force_ras_n(0.5));
+  EXPECT_NEAR(f.x, -2, 1e-12);
+  EXPECT_NEAR(f.y, 0, 1e-12);
+  EXPECT_NEAR(f.z, 0, 1e-12);
+}
+
+// Only rigid registrations are taken (a scale, a mirror, a last row other than 0 0 0 1 are
+// refused naming why); a file holds the 4x4 row by row, 12 numbers without the last row.
+TEST(ServiceDevice, RegistrationsAreRigidAndReadFromAFile) {
+  const double scaled[4][4] = {{2, 0, 0, 0}, {0, 2, 0, 0}, {0, 0, 2, 0}, {0, 0, 0, 1}};
+  const double mirror[4][4] = {{-1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+  const double row[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 1, 1}};
+  for (const auto* m : {scaled, mirror})
+    try {
+      registration_from_matrix(m);
+      ADD_FAILURE() << "a scale or mirror was taken as a registration";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("not rigid"), std::string::npos) << e.what();
+    }
+  EXPECT_THROW(registration_from_matrix(row), std::invalid_argument);
+  const test::TempDir dir("isotouch-registration");
+  const std::string file = (dir.path / "r.txt").string();
+  std::ofstream(file) << "# 90 degrees about R, then 5 mm along S\n1 0 0 0\n0 0 -1 0\n0, 1, 0, 5\n";
+  const Registration r = load_registration(file);
+  const core::Vec3 p = r.to_image_mm({0, 1, 0});  // tracker +A -> image +S
+  EXPECT_NEAR(p.x, 0, 1e-12);
+  EXPECT_NEAR(p.y, 0, 1e-12);
+  EXPECT_NEAR(p.z, 6, 1e-12);
+  std::ofstream(file) << "1 0 0\n";
+  EXPECT_THROW(load_registration(file), std::runtime_error);
 }
 
 }  // namespace

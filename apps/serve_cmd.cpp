@@ -21,13 +21,17 @@ constexpr const char* kHelp =
       "at once. The session starts on the scene's volume, isovalue, passes and HRI parameters.\n"
       "In:  IMAGE (3-D, one scalar: int8..float64, any spacing and orientation, RAS or LPS): the session's new\n"
       "     volume, in the same physical place as the file it came from (single slices, sub-volumes, label\n"
-      "     maps refused); TRANSFORM named --stream: the device (translation in mm, RAS, plus --offset-mm);\n"
+      "     maps refused), at the isovalue a client set (`isovalue V`, while inside its values), else at its own\n"
+      "     as `isotouch run VOLUME` chooses it (said in the STATUS and the log); TRANSFORM named --stream:\n"
+      "     the device (translation in mm, RAS, plus --offset-mm; one client's at a time: the first, until it\n"
+      "     stops for --stale-ms or goes; another's get a STATUS);\n"
       "     no TRANSFORM for --stale-ms: zero force; STRING commands: isovalue V | tool KIND [RADIUS_MM\n"
       "     [STRENGTH]] | apply | stop | undo | redo | save NAME (into --save-dir), each answered with a STATUS;\n"
       "     LBMETA: the images it names are label maps (refused). What is refused is answered with a STATUS\n"
       "     saying why; wrong CRC, truncated or oversized bodies and unknown types never stop the server.\n"
-      "Out: TRANSFORMs 'HIP' and 'Proxy' (translation in mm, RAS) and 'Force' (translation = force in N, RAS:\n"
-      "     PLUS's convention; zero when the servo stops writing) at --display-hz to every client; the edited\n"
+      "Out: TRANSFORMs 'HIP' and 'Proxy' (translation in mm, RAS; only while a fresh pose is rendered) and\n"
+      "     'Force' (translation = force in N, RAS: PLUS's convention; zero when the servo stops writing) at\n"
+      "     --display-hz to every client; the edited\n"
       "     voxels as an IMAGE (the changed sub-volume, or --image-whole) at most --image-hz times a second\n"
       "     to the clients that sent an IMAGE or a command.\n"
       "Device: the TRANSFORM stream (above), or with --haptic SPEC a device of `isotouch run --live`'s factory\n"
@@ -69,6 +73,7 @@ Subcommand add_serve_command(CLI::App& cli) {
     std::string scene;
     service::ServeOptions o;
     std::vector<double> offset;
+    std::string registration;
     double stale_ms = 100;
     bool allow_unstable = false;
   };
@@ -88,6 +93,12 @@ Subcommand add_serve_command(CLI::App& cli) {
                 "rate), as the scene's servo.allow_unstable_stiffness");
   auto* stream = sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
   auto* offset = sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
+  auto* registration = sub->add_option("--registration", a->registration,
+                  "FILE: the tracker's rigid registration to the image, a 4x4 row by row (16 numbers, or 12 without "
+                  "0 0 0 1; translation in mm, RAS): poses p -> R p + t, Force replies f -> R^T f; a TRANSFORM named "
+                  "--registration-name from a client replaces it");
+  sub->add_option("--registration-name", a->o.registration_name,
+                  "Device name of a client's registration TRANSFORM (default TrackerToImage; \"\": none)");
   sub->add_option("--display-hz", a->o.display_hz, "HIP / proxy / force TRANSFORMs per second (default 60)")
       ->check(CLI::Range(1.0, 1000.0));
   auto* stale = sub->add_option("--stale-ms", a->stale_ms, "No TRANSFORM on the stream for this long: zero force (default 100)")
@@ -121,10 +132,11 @@ Subcommand add_serve_command(CLI::App& cli) {
                   "an IMAGE whose session would pass 3/4 of it is refused with a STATUS")
       ->check(CLI::Range(1.0, 1e9));
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
-  haptic->excludes(stream)->excludes(offset)->excludes(stale)->excludes(reply);  // the stream's, not a device's
+  haptic->excludes(stream)->excludes(offset)->excludes(stale)->excludes(reply)->excludes(registration);  // the stream's, not a device's
   return {sub, [a](const std::string& device) {
             service::ServeOptions o = a->o;
             if (a->offset.size() == 3) o.offset_mm = {a->offset[0], a->offset[1], a->offset[2]};
+            if (!a->registration.empty()) o.registration = service::load_registration(a->registration);
             o.stale_s = a->stale_ms * 1e-3;
             o.run.device = device;
             o.run.progress = false;

@@ -31,6 +31,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
+#include "isotouch/service/image_isovalue.h"
 #include "isotouch/service/outbox.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/run/haptic_device.h"
@@ -123,6 +124,9 @@ class Server {
     if (!o.haptic.empty() && o.reply_force)
       throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
                                   " the stream is not the device");
+    if (!o.haptic.empty() && !o.registration.is_identity())
+      throw std::invalid_argument("--registration maps the TRANSFORM stream's poses; with --haptic " + o.haptic +
+                                  " the stream is not the device");
   }
 
   int run();
@@ -134,6 +138,9 @@ class Server {
   void refuse_connection(int fd);
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
+  bool own_stream(Client& c, const Incoming& in);
+  void take_registration(Client& c, const Incoming& in);
+  void release_stream(int client);
   void display_loop();
   void display_tick(double stall_s);
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
@@ -197,6 +204,9 @@ class Server {
   long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
   std::mutex stream_mu_;
   std::shared_ptr<Connection> stream_from_;  // the client whose TRANSFORM moved the HIP last
+  int stream_owner_ = 0;                     // guarded by stream_mu_: the client that owns the stream (0: none)
+  std::int64_t stream_owner_ns_ = 0;         // its last pose [ns, steady]
+  std::set<int> stream_denied_;              // clients told the stream is not theirs (this owner)
   StreamReplies replies_{device_, StreamReplyOptions{o_.sched_fifo, o_.stale_s},
                          [this] {
                            std::lock_guard<std::mutex> lock(stream_mu_);
@@ -224,8 +234,18 @@ class Server {
   bool applying_ = false;
   std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
   bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
+  // Main thread: the isovalue a client's `isovalue V` set (a received IMAGE keeps it while
+  // inside its values; none: each IMAGE's own, image_isovalue.h).
+  std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
+
+/// "isovalue 300 (inside above)".
+std::string iso_text(const core::Isosurface& iso) {
+  std::ostringstream s;
+  s << "isovalue " << iso.tau << " (inside " << core::to_string(iso.inside) << ")";
+  return s.str();
+}
 
 std::string mm3(const core::Vec3& v) {
   std::ostringstream s;
@@ -280,7 +300,12 @@ void Server::handle(Client& c, Incoming& in) {
       break;
     case K::kTransform:
       n_.transforms.fetch_add(1);
+      if (!o_.registration_name.empty() && in.device == o_.registration_name && in.device != o_.stream) {
+        take_registration(c, in);
+        break;
+      }
       if (in.device == o_.stream && !haptic_) {
+        if (!own_stream(c, in)) break;
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
         if (o_.reply_force) {
           std::lock_guard<std::mutex> lock(stream_mu_);
@@ -310,6 +335,73 @@ void Server::handle(Client& c, Incoming& in) {
   }
 }
 
+/// One client owns the stream: the first whose TRANSFORM came, until it sends none for the
+/// stale time (stale_s) or disconnects; then the next one to send takes it (logged). Another
+/// client's poses meanwhile move nothing, and it gets one STATUS saying so (once per owner):
+/// two trackers on one name no longer make the HIP alternate between them.
+bool Server::own_stream(Client& c, const Incoming& in) {
+  const std::int64_t now = TransformDevice::now_ns();
+  int owner = 0, before = 0;
+  bool tell = false;
+  {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    const bool owner_gone = stream_owner_ == 0 || now - stream_owner_ns_ > std::int64_t(o_.stale_s * 1e9);
+    before = stream_owner_;
+    if (stream_owner_ == c.id || owner_gone) {
+      if (stream_owner_ != c.id) stream_owner_ = c.id, stream_denied_.clear();
+      stream_owner_ns_ = now;
+    } else {
+      tell = stream_denied_.insert(c.id).second;
+    }
+    owner = stream_owner_;
+  }
+  if (owner == c.id) {
+    if (before != c.id)
+      log_.line("stream   '" + o_.stream + "' is client " + std::to_string(c.id) + "'s" +
+                (before == 0 ? std::string() : " (client " + std::to_string(before) + "'s stopped)"));
+    return true;
+  }
+  if (tell) {  // outside the lock: the send may wait for the client
+    std::ostringstream why;
+    why << "stream '" << in.device << "' is client " << owner << "'s (its poses move the HIP until it sends none for "
+        << o_.stale_s * 1e3 << " ms or disconnects); this client's poses are ignored";
+    refuse(c, in, igtl::StatusMessage::STATUS_ACCESS_DENIED, why.str());
+  }
+  return false;
+}
+
+/// A TRANSFORM named registration_name: the tracker's registration to the image from now on
+/// (the stream's poses, the Force replies), answered with a STATUS; one that is not rigid
+/// is refused and the registration kept.
+void Server::take_registration(Client& c, const Incoming& in) {
+  if (haptic_)
+    return refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "registration '" + in.device + "': the device is --haptic " + o_.haptic + ", not the TRANSFORM stream");
+  Registration r;
+  try {
+    r = registration_from_matrix(in.matrix);
+  } catch (const std::exception& e) {
+    return refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR,
+                  "registration '" + in.device + "': " + e.what() + "; the registration is unchanged");
+  }
+  device_.set_registration(r);
+  const std::string text = "registration taken: tracker -> image " + r.describe();
+  log_.line("register client " + std::to_string(c.id) + ", '" + in.device + "': " + r.describe());
+  c.conn->send(pack_status(igtl::StatusMessage::STATUS_OK, in.device, text));
+}
+
+/// A client gone gives the stream up at once.
+void Server::release_stream(int client) {
+  bool owned = false;
+  {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    owned = stream_owner_ == client;
+    if (owned) stream_owner_ = 0;
+    stream_denied_.erase(client);
+  }
+  if (owned) log_.line("stream   '" + o_.stream + "' free: its client " + std::to_string(client) + " is gone");
+}
+
 void Server::client_loop(Client& c) {
   try {
     read_messages(c);
@@ -319,6 +411,7 @@ void Server::client_loop(Client& c) {
     log_.line("client   " + std::to_string(c.id) + " dropped: an unknown exception");
   }
   log_.line("client   " + std::to_string(c.id) + " gone");
+  release_stream(c.id);
   c.conn->shutdown();
   c.done = true;
 }
@@ -499,10 +592,10 @@ void Server::ask_isovalue(const Pending& p) {
 
 /// True once every edit submitted so far was applied or refused (save sees them all).
 namespace {
-/// Every edit submitted to the session has been applied, refused or dropped.
-bool edits_settled(const session::LiveStats& st) {
-  return st.edits_applied + st.edits_refused + st.edits_dropped >= st.edits_requested;
-}
+/// Every edit submitted to the session has been applied (its bricks in the mirror: the
+/// count follows the listener), refused, dropped or merged (a stroke's end whose begin the
+/// full queue dropped).
+bool edits_settled(const session::LiveStats& st) { return st.settled(); }
 }  // namespace
 
 bool Server::wait_edits_applied(double timeout_s) {
@@ -719,6 +812,7 @@ void Server::display_loop() {
 /// One display tick: HIP, Proxy and Force to every client.
 void Server::display_tick(double stall_s) {
   std::vector<std::uint8_t> out, points;  // HIP, Proxy and Force; HIP and Proxy
+  long n_out = 0, n_points = 0;            // the TRANSFORMs in each
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (!session_) return;
@@ -727,10 +821,16 @@ void Server::display_tick(double stall_s) {
     const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
     const core::Vec3 f = echo().force_ras_n(stall_s);
     for (const auto& [name, v] : {std::pair{"HIP", hip}, std::pair{"Proxy", vhip}, std::pair{"Force", f}}) {
+      // No fresh pose (none yet, a pause past the stale time, the tracker gone): the servo
+      // rendered nothing, and its HIP and proxy are no place (the proxy a zero, the HIP the
+      // origin before the first pose). Not sent: the clients keep the last true ones. The
+      // force (zero then) is sent.
+      if (!ob.rendered && std::string(name) != "Force") continue;
       const double t[3] = {v.x, v.y, v.z};
       const auto b = pack_translation(name, t);
-      if (std::string(name) == "Force") points = out;
+      if (std::string(name) == "Force") points = out, n_points = n_out;
       out.insert(out.end(), b.begin(), b.end());
+      ++n_out;
     }
   }
   // With --reply-force a stream's client applies every Force it gets (PLUS): it gets its
@@ -740,8 +840,10 @@ void Server::display_tick(double stall_s) {
   for (Client& c : clients_) {
     if (c.done || !c.conn->alive()) continue;
     const bool to_stream = c.reply_target.load();
-    const long n = to_stream ? 2 : 3;
-    switch (c.conn->try_send(to_stream ? points : out)) {
+    const std::vector<std::uint8_t>& bytes = to_stream ? points : out;
+    if (bytes.empty()) continue;  // a stream's client, and no fresh pose: nothing to send
+    const long n = to_stream ? n_points : n_out;
+    switch (c.conn->try_send(bytes)) {
       case Sent::kSent: n_.sent.fetch_add(n); break;
       case Sent::kFull: n_.dropped_sends.fetch_add(n); break;  // not reading
       case Sent::kBusy: n_.busy_sends.fetch_add(n); break;     // its Outbox or reply under way
@@ -854,8 +956,11 @@ void Server::restart_at_isovalue(const Pending& p) {
   }
   setup_.live = live;
   setup_.hri = hri;
+  client_iso_ = live.iso;
   stop_session();
   start_session(std::move(next));
+  log_.line("isovalue client " + std::to_string(p.client) + " set it: " + iso_text(live.iso) +
+            " (kept for later images while inside their values)");
   answer(p, igtl::StatusMessage::STATUS_OK, what + ": done (the session restarted on the edited volume)");
 }
 
@@ -915,25 +1020,35 @@ void Server::swap_volume(PendingVolume p) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<Session> next;
+  // The image's own isovalue (as `isotouch run VOLUME` chooses it), or the one a client set.
+  const engine::IsoChoice choice = image_isovalue(p.volume, client_iso_);
+  session::LiveFieldOptions live = setup_.live;
+  servo::HriParams hri = setup_.hri;
+  live.iso = choice.iso;
+  live.background = float(live.iso.outside_value(p.volume.min_value, p.volume.max_value));
+  hri.tau = choice.iso.tau;
+  hri.inside = choice.iso.inside;
   try {
-    next = prepare_session(std::move(p.volume), setup_.live, setup_.hri);
+    next = prepare_session(std::move(p.volume), live, hri);
   } catch (const std::exception& e) {
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
                             e.what() + ")" + keep);
   }
   const auto t1 = std::chrono::steady_clock::now();
+  setup_.live = live;
+  setup_.hri = hri;
   stop_session();
   start_session(std::move(next));
   const auto t2 = std::chrono::steady_clock::now();
   n_.images.fetch_add(1);
   std::ostringstream s;
   s << std::fixed << std::setprecision(1) << "volume   client " << p.client << ", '" << p.device << "': " << p.dims
-    << " taken, now the session's volume (isovalue and tool kept; built in "
+    << " taken, now the session's volume (tool kept; built in "
     << std::chrono::duration<double, std::milli>(t1 - t0).count() << " ms while the old one served, servo off for "
-    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms)";
+    << std::chrono::duration<double, std::milli>(t2 - t1).count() << " ms); " << engine::iso_line(choice);
   log_.line(s.str());
-  answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims);
+  answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
 void Server::stop_session() {
@@ -988,10 +1103,15 @@ int Server::run() {
   std::ostringstream setup_log;
   setup_ = run::setup_scene(scene_, o_.run, setup_log);
   if (!o_.haptic.empty()) open_haptic();
-  const std::string device = haptic_ ? "device --haptic " + o_.haptic
-                                     : "stream '" + o_.stream + "' + offset " + mm3(o_.offset_mm) + " mm (RAS)";
+  if (!haptic_) device_.set_registration(o_.registration);
+  const std::string device =
+      haptic_ ? "device --haptic " + o_.haptic
+              : "stream '" + o_.stream + "'" +
+                    (o_.registration.is_identity() ? std::string() : " registered (" + o_.registration.describe() + ")") +
+                    " + offset " + mm3(o_.offset_mm) + " mm (RAS)";
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
-            std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz");
+            std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
+            iso_text(setup_.live.iso) + " (the scene's)");
   start_session(prepare_session(setup_.volume, setup_.live, setup_.hri));
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());

@@ -3,13 +3,15 @@
 //
 //   client threads (one per connection): read_message ->
 //     IMAGE (3-D, scalar)          -> volume_from_image -> the main thread swaps the session's volume
-//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force),
+//     TRANSFORM named `stream`     -> TransformDevice (the servo's device; stale: zero force;
+//                                     one client's: the first, until it stops for stale_s or goes),
 //                                     unless `haptic` names the device (then ignored)
 //     STRING                       -> parse_command (commands.h) -> the command thread
 //     LBMETA                       -> the images it names are label maps: refused when they come
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
 //   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
-//     (translation in mm, RAS) and "Force" (translation = force in N, RAS; PLUS's convention)
+//     (translation in mm, RAS; only while the servo renders a fresh pose) and "Force"
+//     (translation = force in N, RAS; PLUS's convention)
 //   command thread: every 1 / display_hz, runs the commands in the order they came (a
 //     STATUS back for each), submits the tool's brush at the proxy while applying and in
 //     contact, and at most image_hz times a second sends the edited voxels as an IMAGE to
@@ -32,6 +34,7 @@
 #include <string>
 
 #include "isotouch/service/igtl_message.h"
+#include "isotouch/service/registration.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/core/vec3.h"
@@ -49,7 +52,14 @@ struct ServeOptions {
   /// force goes to it, and TRANSFORMs named `stream` move nothing; an `igtl:` device's rate
   /// is measured and the scene's stiffness checked against it (Scene::allow_unstable_stiffness).
   std::string haptic;
-  core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS]
+  core::Vec3 offset_mm;               ///< added to the stream's translation [mm, RAS], after `registration`
+  /// The tracker's rigid registration to the image (registration.h): the stream's poses
+  /// [mm, tracker RAS] -> image RAS (R p + t), the Force replies (`reply_force`) back with
+  /// R^T. Identity: the stream is in the image's frame. Not with `haptic`.
+  Registration registration;
+  /// A TRANSFORM under this name from any client replaces `registration` (PLUS's
+  /// TrackerToImage); answered with a STATUS (taken, or refused when not rigid). "": none.
+  std::string registration_name = "TrackerToImage";
   double display_hz = 60;             ///< HIP / proxy / force TRANSFORMs sent per second
   double stale_s = 0.1;               ///< no TRANSFORM for this long: stale, zero force [s] (not with `haptic`)
   int receive_timeout_ms = 2000;      ///< longest silence inside a message before the client is dropped

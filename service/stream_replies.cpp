@@ -53,7 +53,8 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     // Force on: wait for the servo's answer to this pose (up to 2 ms); off: a zero at once.
     if (!stall_zero && !stale_zero && l.on && !rendered && now - p.received_ns < 2'000'000) continue;
     if (!stale_zero) answered = p.sequence;
-    const core::Vec3 f = stale_zero ? core::Vec3{} : device_.echo().to_ras_n(l.force_n);  // zero unless on
+    // Zero unless on; in the tracker's frame (the registration's R^T): the client applies it there.
+    const core::Vec3 f = stale_zero ? core::Vec3{} : device_.to_tracker_n(device_.echo().to_ras_n(l.force_n));
     const double t[3] = {f.x, f.y, f.z};
     std::shared_ptr<Connection> to = target_();
     if (to != fenced) {

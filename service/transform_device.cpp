@@ -10,12 +10,19 @@ void TransformDevice::set_frame(const engine::Volume& v, const core::Vec3& offse
 void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   std::lock_guard<std::mutex> lock(push_mu_);  // one writer at a time (any client's thread)
   Pose p = pose_.load();
-  for (int a = 0; a < 3; ++a) p.mm[a] = t_mm[a];
+  const core::Vec3 image = reg_.to_image_mm({t_mm[0], t_mm[1], t_mm[2]});
+  p.mm[0] = image.x, p.mm[1] = image.y, p.mm[2] = image.z;
   p.received_ns = now_ns();  // steady_clock is CLOCK_MONOTONIC, the servo's clock
   p.stamp = stamp;
   ++p.sequence;
   pose_.store(p);
   pushed_.fetch_add(1);
+}
+
+void TransformDevice::set_registration(const Registration& r) {
+  std::lock_guard<std::mutex> lock(push_mu_);
+  reg_ = r;
+  reg_cell_.store(r);
 }
 
 TransformDevice::PoseId TransformDevice::newest_pose() const {

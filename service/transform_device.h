@@ -1,11 +1,14 @@
 // transform_device.h - a tracked tool's TRANSFORM stream as a haptic device, and the force
 // the servo renders for it, for `isotouch serve`. Part of isotouch::igtl_device.
 //
-// Frames: the stream's translation is in mm in RAS (Slicer's and PLUS's frame); `offset_mm`
-// (RAS) is added to it (the workspace transform that maps a tracker's workspace into the
-// volume); the result is the point in the volume's physical frame, converted here to the
-// grid frame [m] the servo works in (engine/volume.h), so the servo's world_T_device is the
-// identity. The force goes the other way: grid axes -> LPS -> RAS [N].
+// Frames: the stream's translation is in mm in the tracker's RAS (Slicer's and PLUS's
+// frame); the registration (registration.h: p_image = R p + t, identity unless set) takes it
+// into the image's RAS, and `offset_mm` (RAS) is added to that (the workspace transform that
+// maps a tracker's workspace into the volume); the result is the point in the volume's
+// physical frame, converted here to the grid frame [m] the servo works in (engine/volume.h),
+// so the servo's world_T_device is the identity. The force goes the other way: grid axes ->
+// LPS -> RAS [N] (image), and to_tracker_n() -> the tracker's RAS (R^T f) for the stream's
+// client.
 #pragma once
 #include <atomic>
 #include <chrono>
@@ -13,6 +16,7 @@
 #include <mutex>
 
 #include "isotouch/service/device_echo.h"
+#include "isotouch/service/registration.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/latest_value.h"
 #include "isotouch/servo/stall_rule.h"
@@ -23,9 +27,16 @@ class TransformDevice final : public servo::HapticDeviceIO {
  public:
   /// The volume whose physical frame the stream's points are in. Only while no servo runs.
   void set_frame(const engine::Volume& v, const core::Vec3& offset_mm);
-  /// A TRANSFORM's translation [mm, RAS] arrived now (network thread); `stamp`: its header's
-  /// raw time stamp, echoed in the force that answers it.
+  /// A TRANSFORM's translation [mm, tracker RAS] arrived now (network thread); `stamp`: its
+  /// header's raw time stamp, echoed in the force that answers it. The registration in force
+  /// now maps it into the image.
   void push_mm(const double t_mm[3], std::uint64_t stamp = 0);
+  /// The tracker's registration to the image, for the poses pushed from now on and the forces
+  /// sent back (to_tracker_n). Any thread, any time.
+  void set_registration(const Registration& r);
+  Registration registration() const { return reg_cell_.load(); }
+  /// An image-RAS vector (a force [N]) in the tracker's RAS: R^T f. Any thread, lock-free.
+  core::Vec3 to_tracker_n(const core::Vec3& f_ras) const { return reg_cell_.load().to_tracker(f_ras); }
   /// The newest pose: its sequence number (0: none yet), when it arrived [ns, steady], its stamp.
   struct PoseId {
     std::uint64_t sequence = 0;
@@ -73,6 +84,8 @@ class TransformDevice final : public servo::HapticDeviceIO {
   servo::LatestValue<Pose> pose_;
   Pose last_;  // servo thread
   std::mutex push_mu_;
+  Registration reg_;                          // push_mu_: the one push_mm applies
+  servo::LatestValue<Registration> reg_cell_;  // written under push_mu_: the one forces go back through
   std::atomic<long> pushed_{0};
   RasEcho echo_;
   servo::StallRule rule_;

@@ -204,6 +204,7 @@ void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
   o.plane = r.out.plane;
   o.contact = r.out.contact;
   o.version = r.version;
+  o.rendered = r.device_status == servo::DeviceStatus::kOk && !r.paused;
   observed_.store(o);
 }
 
@@ -266,18 +267,33 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
   if (source == EditSource::kButton && e.kind == Kind::kEndStroke) button_stroke_ = false;
   // Strokes nest: a stroke opened by one source while the other's is open joins it; only
   // the outermost begin and end reach the history (one undo step).
-  if (e.kind == Kind::kBeginStroke && stroke_depth_++ > 0) return;
-  if (e.kind == Kind::kEndStroke && (stroke_depth_ == 0 || --stroke_depth_ > 0)) return;
+  // Nothing to apply (counted as merged: requested = applied + refused + dropped + merged
+  // once the queues are empty).
+  const bool merged = (e.kind == Kind::kBeginStroke && stroke_depth_++ > 0) ||
+                      (e.kind == Kind::kEndStroke && (stroke_depth_ == 0 || --stroke_depth_ > 0));
+  if (merged) {
+    std::lock_guard lock(edits_mu_);
+    ++merged_;
+    return;
+  }
   EditOutcome out;
   try {
     out = edits_->apply(e, &buffer_);
   } catch (...) {
-    {
+    if (rethrow) {
       std::lock_guard lock(edits_mu_);
       ++refused_;
+      throw;
     }
-    if (rethrow) throw;
     out.error = what_of(std::current_exception());
+    // Counted after the listener has seen it (LiveStats: a settled count is the listener's too).
+    struct Count {
+      LiveSession& s;
+      ~Count() {
+        std::lock_guard lock(s.edits_mu_);
+        ++s.refused_;
+      }
+    } count{*this};
     notify(e, out, source, rethrow);
     return;
   }
@@ -285,7 +301,6 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
   if (undo_or_redo) stroke_depth_ = 0;  // they end an open stroke
   {
     std::lock_guard lock(edits_mu_);
-    ++applied_;
     applied_pending_.push_back(e);
     if (out.published) {
       ++publications_;
@@ -293,7 +308,18 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
       resolve_seen_locked();
     }
   }
-  notify(e, out, source, rethrow);
+  {
+    // Counted once the listener has seen it (also when it throws): a caller that waits for
+    // the count (serve's save) reads what the listener wrote (its mirror of the bricks).
+    struct Count {
+      LiveSession& s;
+      ~Count() {
+        std::lock_guard lock(s.edits_mu_);
+        ++s.applied_;
+      }
+    } count{*this};
+    notify(e, out, source, rethrow);
+  }
   // A press still held goes on in a stroke of its own (one undo step), as a new press would.
   if (undo_or_redo && button_stroke_) {
     Request begin;
@@ -621,6 +647,7 @@ LiveStats LiveSession::stats(std::size_t latency_tail) const {
   std::lock_guard lock(edits_mu_);
   s.edits_applied = applied_;
   s.edits_refused = refused_;
+  s.edits_merged = merged_;
   s.publications = publications_;
   resolve_seen_locked();
   const std::size_t tail = std::min(latency_tail, edit_to_haptics_ms_.size());

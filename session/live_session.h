@@ -129,6 +129,10 @@ struct Observed {
   servo::VirtualPlane plane;
   bool contact = false;
   std::uint64_t version = 0;  ///< snapshot version that tick read
+  /// The renderer ran this tick (the device's reading was fresh and the session not paused):
+  /// vhip_m is a true proxy. False (stale, lost, faulty device, paused): vhip_m and force_n
+  /// are zeros, no place, and hip_m the device's last reading (before any: its default).
+  bool rendered = false;
 };
 
 /// Counters of a running or stopped session.
@@ -140,8 +144,16 @@ inline constexpr double kPeriodRangeUs = double(kPeriodBins - 1) * kPeriodBinUs;
 
 struct LiveStats {
   long ticks = 0, missed_deadlines = 0, faults = 0;
+  /// Each counted once its listener (LiveSessionConfig::on_applied) has returned: a caller
+  /// that sees an edit counted sees what the listener did with it (serve's mirror, a save).
   long edits_requested = 0, edits_applied = 0, edits_refused = 0;
   long edits_dropped = 0;     ///< the edit queue was full (servo side or submit())
+  /// A stroke's begin or end with nothing to apply: a begin inside an open stroke (it joins
+  /// it), an end inside an outer stroke or with none open (its begin was dropped, or an undo
+  /// ended it).
+  long edits_merged = 0;
+  /// Every edit requested so far has been applied, refused, dropped or merged.
+  bool settled() const { return edits_applied + edits_refused + edits_dropped + edits_merged >= edits_requested; }
   long ticks_not_recorded = 0;  ///< the recorder's ring was full (recording incomplete)
   long publications = 0;
   /// Per published edit: from the start of the tick that asked for it (servo side) or the
@@ -311,7 +323,7 @@ class LiveSession final : private servo::TickObserver {
   // (version, asked_ns) not yet read; latencies of the versions read (stats() resolves too).
   mutable std::vector<std::pair<std::uint64_t, std::int64_t>> published_;
   mutable std::vector<double> edit_to_haptics_ms_;
-  long applied_ = 0, refused_ = 0, publications_ = 0;
+  long applied_ = 0, refused_ = 0, merged_ = 0, publications_ = 0;
   long listener_errors_ = 0;
   std::string listener_error_;
 

@@ -6,6 +6,13 @@
 //   move X Y Z SECS   the tool "Stylus" moves in a line to X Y Z [mm, RAS] over SECS, then
 //                     stays (streamed at 500 Hz from the first move on)
 //   wait SECS
+//   pause SECS        the tool's stream stops for SECS (then goes on where it was)
+//   points            prints the HIP and Proxy TRANSFORMs received so far and how many were off
+//                     the tool: "points HIP K Proxy L, off: HIP A Proxy B, last HIP X Y Z" (off:
+//                     more than 10 mm (HIP) or 20 mm (Proxy) from the last pose this client
+//                     sent, or any before it sent one; X Y Z the newest HIP [mm, RAS])
+//   register NAME M00 M01 M02 M03 M10 ... M23   a TRANSFORM named NAME, the 4x4's first three
+//                     rows (the last 0 0 0 1); prints the STATUS answer
 //   cmd TEXT          a STRING (device "CMD"); prints the STATUS answer "STATUS code C: TEXT"
 //                     (the first STATUS under the device name sent, within 15 s; so for `image`,
 //                     and for `ramp` and `checker` within 90 s)
@@ -23,6 +30,9 @@
 //                     the origin; value x % 256); prints the STATUS answer
 //   checker NAME NX NY NZ  as ramp, int16, 0 and 2000 in 5-voxel cubes (surfaces in every
 //                     brick: a session slow to build)
+//   ball NAME N R1 R2 an N^3 int16 IMAGE named NAME in Hounsfield units (1 mm voxels, RAS,
+//                     centred on the origin): bone (1000 HU) within R1 mm of the centre,
+//                     tissue (40 HU) to R2 mm, air (-1024 HU) beyond; prints the STATUS answer
 //   statuses SECS     waits SECS, then prints the STATUS answers not printed yet
 //   rebase            the copy starts again from BASE (what the server holds once it took
 //                     an `image`); IMAGEs received later apply to it
@@ -74,6 +84,10 @@ struct Shared {
   std::condition_variable cv;
   std::deque<std::pair<std::string, std::string>> statuses;  // device name, "STATUS code C: TEXT"
   std::deque<std::array<double, 3>> forces;
+  long hips = 0, proxies = 0, hips_off = 0, proxies_off = 0;  // HIP / Proxy received, and off the tool
+  std::array<double, 3> last_hip{0, 0, 0};
+  bool sent_pose = false;
+  std::array<double, 3> last_pose{0, 0, 0};  // [mm, RAS], the last the stream sent
   long forces_received = 0;
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
   int images = 0;
@@ -175,6 +189,16 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
       }
+    } else if (type == "TRANSFORM" && (name == "HIP" || name == "Proxy")) {
+      if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
+        igtl::Matrix4x4 m;
+        t->GetMatrix(m);
+        const double d = std::hypot(m[0][3] - s.last_pose[0], m[1][3] - s.last_pose[1], m[2][3] - s.last_pose[2]);
+        const bool hip = name == "HIP";
+        (hip ? s.hips : s.proxies) += 1;
+        if (hip) s.last_hip = {m[0][3], m[1][3], m[2][3]};
+        if (!s.sent_pose || d > (hip ? 10.0 : 20.0)) (hip ? s.hips_off : s.proxies_off) += 1;
+      }
     } else if (type == "IMAGE") {
       if (auto im = body_of<igtl::ImageMessage>(sock, h)) apply_image(*im, s);
     } else {
@@ -194,6 +218,7 @@ struct Path {
   double from[3] = {0, 0, 0}, to[3] = {0, 0, 0};
   Clock::time_point t0, t1;
   bool started = false;
+  Clock::time_point paused_until;  // no pose sent before it
   void at(Clock::time_point t, double out[3]) {
     std::lock_guard<std::mutex> lock(mu);
     const double span = std::chrono::duration<double>(t1 - t0).count();
@@ -209,14 +234,14 @@ void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
   sock->Send(m->GetPackPointer(), m->GetPackSize());
 }
 
-void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& done) {
+void stream_loop(igtl::ClientSocket* sock, Path& path, Shared& shared, const std::atomic<bool>& done) {
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("Stylus");
   while (!done) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
     {
       std::lock_guard<std::mutex> lock(path.mu);
-      if (!path.started) continue;
+      if (!path.started || Clock::now() < path.paused_until) continue;
     }
     double p[3];
     path.at(Clock::now(), p);
@@ -224,6 +249,11 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, const std::atomic<bool>& 
     igtl::IdentityMatrix(m);
     for (int a = 0; a < 3; ++a) m[a][3] = float(p[a]);
     t->SetMatrix(m);
+    {
+      std::lock_guard<std::mutex> lock(shared.mu);  // before it can arrive: the HIP it moves is never "off"
+      for (int a = 0; a < 3; ++a) shared.last_pose[std::size_t(a)] = m[a][3];
+      shared.sent_pose = true;
+    }
     send(sock, t);
   }
 }
@@ -281,6 +311,32 @@ bool Client::action(const std::string& a) {
     const double at = num(), now = std::chrono::duration<double>(Clock::now() - started).count();
     if (now > at) return std::cout << "at " << at << ": already " << now << " s\n", false;
     return std::this_thread::sleep_for(std::chrono::duration<double>(at - now)), true;
+  }
+  if (a == "pause") {
+    const double secs = num();
+    {
+      std::lock_guard<std::mutex> lock(path.mu);
+      path.paused_until = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(secs));
+    }
+    return std::this_thread::sleep_for(std::chrono::duration<double>(secs)), true;
+  }
+  if (a == "points") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::cout << "points HIP " << s.hips << " Proxy " << s.proxies << ", off: HIP " << s.hips_off << " Proxy "
+              << s.proxies_off << ", last HIP " << s.last_hip[0] << " " << s.last_hip[1] << " " << s.last_hip[2] << "\n";
+    return true;
+  }
+  if (a == "register") {
+    const std::string name = arg();
+    igtl::Matrix4x4 m;
+    igtl::IdentityMatrix(m);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) m[r][c] = float(num());
+    igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
+    t->SetDeviceName(name.c_str());
+    t->SetMatrix(m);
+    send(sock, t);
+    return wait_status(s, name);
   }
   if (a == "wait") return std::this_thread::sleep_for(std::chrono::duration<double>(num())), true;
   if (a == "cmd") {
@@ -363,6 +419,31 @@ bool Client::action(const std::string& a) {
     }
     send(sock, m);
     return wait_status(s, name, 90);  // its session is built first (a large one: seconds)
+  }
+  if (a == "ball") {
+    const std::string name = arg();
+    const int n = int(num());
+    const double r1 = num(), r2 = num();
+    igtl::ImageMessage::Pointer m = igtl::ImageMessage::New();
+    int dims[3] = {n, n, n};
+    float sp[3] = {1, 1, 1};
+    m->SetDimensions(dims);
+    m->SetSpacing(sp);
+    m->SetScalarType(igtl::ImageMessage::TYPE_INT16);
+    m->SetEndian(igtl::ImageMessage::ENDIAN_LITTLE);  // written in this (x86) host's order
+    m->SetCoordinateSystem(igtl::ImageMessage::COORDINATE_RAS);
+    m->SetDeviceName(name.c_str());
+    m->AllocateScalars();
+    auto* out = static_cast<std::int16_t*>(m->GetScalarPointer());
+    const double c = (n - 1) / 2.0;
+    for (int z = 0; z < n; ++z)
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+          const double r = std::sqrt((x - c) * (x - c) + (y - c) * (y - c) + (z - c) * (z - c));
+          *out++ = std::int16_t(r <= r1 ? 1000 : r <= r2 ? 40 : -1024);
+        }
+    send(sock, m);
+    return wait_status(s, name);
   }
   if (a == "statuses") {
     std::this_thread::sleep_for(std::chrono::duration<double>(num()));
@@ -469,7 +550,7 @@ int main(int argc, char** argv) {
   Path path;
   std::atomic<bool> done{false};
   std::thread reader([&] { read_loop(sock, s); });
-  std::thread streamer([&] { stream_loop(sock, path, done); });
+  std::thread streamer([&] { stream_loop(sock, path, s, done); });
   Client c{sock, s, path, base, argv, argc, 4};
   bool ok = true;
   while (ok && c.i < argc) ok = c.action(c.arg());

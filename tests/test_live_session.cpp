@@ -928,3 +928,67 @@ TEST(LiveSessionSimulated, SteppedInPiecesItIsOneRun) {
   }
   fs::remove_all(dir);
 }
+
+// An edit is counted (applied or refused) only once its listener has returned: serve saves
+// what its mirror (the listener) holds once the count says every edit settled, so a count
+// taken before the listener ran saved the volume before the edit (issue 62: `save` wrote the
+// pre-undo volume). Truth: the listener's own flag, set when it returns, 300 ms after it began.
+TEST(LiveSession, AnEditIsCountedOnlyOnceItsListenerReturned) {
+  Rig rig;
+  LiveSessionConfig c = rig.config();
+  std::atomic<int> began{0}, returned{0};
+  c.on_applied = [&](const EditEvent&, const isotouch::session::EditOutcome&, isotouch::session::EditSource) {
+    began.fetch_add(1);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    returned.fetch_add(1);
+  };
+  LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+  live.start();
+  ASSERT_TRUE(live.submit(carve(rig.vol.grid.centre_m())));
+  ASSERT_TRUE(live.submit(undo_event()));
+  int counted_early = 0;
+  for (long seen = 0; seen < 2;) {
+    const auto s = live.stats(0);
+    const long now = s.edits_applied + s.edits_refused;
+    if (now > seen) {
+      counted_early += returned.load() < now;  // counted while its listener still ran
+      seen = now;
+    }
+    if (s.settled() && now == 2) break;
+    std::this_thread::sleep_for(std::chrono::microseconds(200));
+  }
+  live.stop();
+  EXPECT_EQ(began.load(), 2);
+  EXPECT_EQ(counted_early, 0) << "an edit was counted applied while its listener (serve's mirror) was still copying it";
+}
+
+// A full edit queue drops a stroke's begin; its end, later, has no stroke to close and is
+// merged: every request is then accounted for (settled), as serve's save and volume swap
+// wait for (issue 62: `requested` stayed one above the settled count, every later save
+// failed after 30 s). Stepped simulated mode: the queue is drained only between steps.
+TEST(LiveSessionSimulated, AStrokeEndWhoseBeginWasDroppedStillSettles) {
+  SimRig rig;
+  LiveSessionConfig c = rig.config();
+  c.edit_queue = 2;
+  LiveSession live(&rig.edits, rig.buffer, *rig.renderer, c);
+  auto run = rig.run();
+  live.step_simulated(run, 1);
+  ASSERT_TRUE(live.submit(undo_event()));
+  ASSERT_TRUE(live.submit(undo_event()));
+  EditEvent begin, end;
+  begin.kind = EditEvent::Kind::kBeginStroke;
+  end.kind = EditEvent::Kind::kEndStroke;
+  EXPECT_FALSE(live.submit(begin)) << "the queue of 2 took a third request";
+  live.step_simulated(run, 1);
+  ASSERT_TRUE(live.submit(end));
+  live.step_simulated(run, 1);
+  const auto s = live.stats();
+  EXPECT_EQ(s.edits_requested, 4);
+  EXPECT_EQ(s.edits_dropped, 1);
+  EXPECT_EQ(s.edits_applied + s.edits_refused, 2);
+  EXPECT_EQ(s.edits_merged, 1);
+  EXPECT_TRUE(s.settled()) << s.edits_requested << " requested, " << s.edits_applied << " applied, " << s.edits_refused
+                           << " refused, " << s.edits_dropped << " dropped, " << s.edits_merged << " merged";
+  live.finish_simulated();
+  live.stop();
+}

@@ -27,6 +27,8 @@
 #include "isotouch/service/commands.h"
 #include "isotouch/service/edit_mirror.h"
 #include "isotouch/service/image_volume.h"
+#include "isotouch/service/image_isovalue.h"
+#include "isotouch/service/registration.h"
 #include "isotouch/service/igtl_message.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
@@ -317,6 +319,60 @@ TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
   EXPECT_NEAR(ras.z, 37, 1e-9);
 }
 
+// The tracker registered to the image by a rotation (90 degrees about S: tracker +R is image
+// +A, tracker +A is image -R) and a translation (10, 20, 30) mm, worked out by hand: the
+// pose (1, 2, 3) lands at image (-2 + 10, 1 + 20, 3 + 30) = (8, 21, 33), plus the offset
+// (5, 6, 7); a force of image RAS (0, -2, 0) goes back to the tracker as (-2, 0, 0) (R^T).
+TEST(ServiceDevice, ARotatedRegistrationMapsPosesAndForcesBack) {
+  engine::Volume v;
+  v.grid.dims = {4, 4, 4};
+  v.grid.spacing_m = {1e-3, 2e-3, 3e-3};
+  v.grid.origin_m = {0.01, -0.02, 0.03};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  v.direction_is_identity = false;
+  TransformDevice d;
+  d.set_frame(v, {5, 6, 7});
+  const double m[4][4] = {{0, -1, 0, 10}, {1, 0, 0, 20}, {0, 0, 1, 30}, {0, 0, 0, 1}};
+  d.set_registration(registration_from_matrix(m));
+  const double t[3] = {1, 2, 3};  // tracker RAS mm
+  d.push_mm(t);
+  const core::Vec3 ras = d.grid_to_ras_mm(d.read().position_m);
+  EXPECT_NEAR(ras.x, 8 + 5, 1e-9);
+  EXPECT_NEAR(ras.y, 21 + 6, 1e-9);
+  EXPECT_NEAR(ras.z, 33 + 7, 1e-9);
+  d.write_force_n({2, 0, 0});  // grid +x: image RAS (0, -2, 0) (the test above)
+  const core::Vec3 f = d.to_tracker_n(d.force_ras_n(0.5));
+  EXPECT_NEAR(f.x, -2, 1e-12);
+  EXPECT_NEAR(f.y, 0, 1e-12);
+  EXPECT_NEAR(f.z, 0, 1e-12);
+}
+
+// Only rigid registrations are taken (a scale, a mirror, a last row other than 0 0 0 1 are
+// refused naming why); a file holds the 4x4 row by row, 12 numbers without the last row.
+TEST(ServiceDevice, RegistrationsAreRigidAndReadFromAFile) {
+  const double scaled[4][4] = {{2, 0, 0, 0}, {0, 2, 0, 0}, {0, 0, 2, 0}, {0, 0, 0, 1}};
+  const double mirror[4][4] = {{-1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+  const double row[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 1, 1}};
+  for (const auto* m : {scaled, mirror})
+    try {
+      registration_from_matrix(m);
+      ADD_FAILURE() << "a scale or mirror was taken as a registration";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("not rigid"), std::string::npos) << e.what();
+    }
+  EXPECT_THROW(registration_from_matrix(row), std::invalid_argument);
+  const test::TempDir dir("isotouch-registration");
+  const std::string file = (dir.path / "r.txt").string();
+  std::ofstream(file) << "# 90 degrees about R, then 5 mm along S\n1 0 0 0\n0 0 -1 0\n0, 1, 0, 5\n";
+  const Registration r = load_registration(file);
+  const core::Vec3 p = r.to_image_mm({0, 1, 0});  // tracker +A -> image +S
+  EXPECT_NEAR(p.x, 0, 1e-12);
+  EXPECT_NEAR(p.y, 0, 1e-12);
+  EXPECT_NEAR(p.z, 6, 1e-12);
+  std::ofstream(file) << "1 0 0\n";
+  EXPECT_THROW(load_registration(file), std::runtime_error);
+}
+
 }  // namespace
 }  // namespace isotouch::service
 
@@ -544,6 +600,46 @@ TEST(ServiceMessages, LabelMetaNamesItsImages) {
   std::vector<std::uint8_t> odd = announced("LBMETA", 100, std::vector<std::uint8_t>(100, 0));
   odd.insert(odd.end(), next.begin(), next.end());
   expect_refused_then_the_next(odd, "LBMETA body of 100 bytes");
+}
+
+
+// The isovalue a received IMAGE opens at (issue 62: a new IMAGE kept the scene's isovalue in
+// the scene volume's units). Truth from outside the chooser: three-layer volumes whose
+// classes are known. A CT in HU (air -1024, tissue 40, bone 1200) opens at the bone preset,
+// 300 HU; a client's isovalue inside its values is kept, one outside them is not; a uint8
+// volume of 0 / 100 / 200 opens between its tissue and its dense class, also after a client
+// set the head scene's 1150 (scanner units: outside its values).
+engine::Volume three_layers(float air, float tissue, float dense) {
+  engine::Volume v;
+  v.grid.dims = {16, 16, 24};
+  v.voxels.resize(v.grid.voxel_count());
+  for (int z = 0; z < 24; ++z)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 16; ++x) v.voxels[v.grid.index(x, y, z)] = z < 8 ? air : z < 16 ? tissue : dense;
+  v.update_stats();
+  return v;
+}
+
+TEST(ServeIsovalue, AnImageOpensAtItsOwnIsovalueUnlessAClientSetOne) {
+  const engine::Volume ct = three_layers(-1024.f, 40.f, 1200.f);
+  engine::IsoChoice c = image_isovalue(ct, std::nullopt);
+  EXPECT_EQ(c.iso.tau, 300.0) << c.rule;
+  EXPECT_EQ(c.iso.inside, core::InsideIs::kAbove);
+  // A client's value inside the image's values is kept; one outside it is not.
+  c = image_isovalue(ct, core::Isosurface{800.0, core::InsideIs::kAbove});
+  EXPECT_EQ(c.iso.tau, 800.0);
+  EXPECT_NE(c.rule.find("client"), std::string::npos) << c.rule;
+  c = image_isovalue(ct, core::Isosurface{5000.0, core::InsideIs::kAbove});
+  EXPECT_EQ(c.iso.tau, 300.0) << c.rule;
+  EXPECT_NE(c.rule.find("outside this image's values"), std::string::npos) << c.rule;
+
+  const engine::Volume u8 = three_layers(0.f, 100.f, 200.f);
+  c = image_isovalue(u8, std::nullopt);
+  EXPECT_GT(c.iso.tau, 100.0) << c.rule;
+  EXPECT_LE(c.iso.tau, 200.0) << c.rule;
+  c = image_isovalue(u8, core::Isosurface{1150.0, core::InsideIs::kAbove});  // the head scene's, in other units
+  EXPECT_GT(c.iso.tau, 100.0) << c.rule;
+  EXPECT_LE(c.iso.tau, 200.0) << c.rule;
 }
 
 }  // namespace

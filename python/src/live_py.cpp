@@ -170,7 +170,7 @@ py::dict stats(const session::LiveStats& s) {
   py::dict d;
   d["ticks"] = s.ticks, d["missed_deadlines"] = s.missed_deadlines, d["faults"] = s.faults;
   d["edits_requested"] = s.edits_requested, d["edits_applied"] = s.edits_applied;
-  d["edits_refused"] = s.edits_refused, d["edits_dropped"] = s.edits_dropped;
+  d["edits_refused"] = s.edits_refused, d["edits_dropped"] = s.edits_dropped, d["edits_merged"] = s.edits_merged;
   d["ticks_not_recorded"] = s.ticks_not_recorded, d["publications"] = s.publications;
   d["edit_to_haptics_ms"] = py::array_t<double>(py::ssize_t(s.edit_to_haptics_ms.size()), s.edit_to_haptics_ms.data());
   d["period_error_p99_us"] = s.period_error_p99_us;

@@ -1,0 +1,145 @@
+#!/usr/bin/env bash
+# `isotouch serve`: what a client sees is what is true (issue 62 section 3), judged on what
+# igtl_session_client received and on the files serve wrote:
+#   1. a carve undone (six undos: one per stroke, contact may have come and gone), then
+#      saved: the file is the head as sent (0 voxels differ);
+#   2. the isovalue in force is printed (the scene's, at listening); a CT in HU received as
+#      an IMAGE (a bone ball of radius 15 mm, 1000 HU, in 40 HU tissue to 20 mm, in air)
+#      opens at the bone preset, 300 HU, said in its STATUS, not at the head scene's 1150
+#      scanner units (above every voxel: nothing to touch): the tool 2 mm inside the ball's
+#      surface feels ~800 N/m x 2 mm outward (+S); after a client's `isovalue 500` the next
+#      image keeps 500, said so;
+#   3. HIP and Proxy are sent only while the servo renders a fresh pose: none before the
+#      client's first pose (0.5 s connected without one), none at a false place during a
+#      0.5 s pause of its stream (each HIP within 10 mm, each Proxy within 20 mm of the last
+#      pose it sent; before, the HIP sat at RAS (0, 0, 0) and the Proxy jumped to the grid's origin);
+#   4. two trackers on one stream name: the first owns it, its HIP never takes the second's
+#      pose, the second gets one STATUS (code 5) naming the owner; once the first is gone
+#      the second's stream is taken (logged);
+#   5. a rotated registration (--registration FILE, then a client's TrackerToImage) applied
+#      to the poses and, transposed, to the Force replies.
+# "PASS serve truth" is printed once, last, after every check.
+# Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
+set -u
+source "$(dirname "$0")/serve_port.sh"
+exe=$1; scene=$2; client=$3; out=$4; head=$5
+[[ $out == */cli_serve_truth ]] || { echo "FAIL serve truth: OUT_DIR must end in /cli_serve_truth: $out"; exit 1; }
+rm -rf "$out"; mkdir -p "$out"
+fail() { echo "FAIL serve truth: $*"; echo "--- client.log"; cat "$out/client.log"; echo "--- serve.log"; tail -n 30 "$out/serve.log"; exit 1; }
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 --seconds 14 >"$out/serve.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve.log" $serve_pid)
+[[ -n $port ]] || fail "serve never said it was listening"
+grep -q "listening on .*isovalue 1150 (inside above) (the scene's)" "$out/serve.log" ||
+  fail "the listening line does not name the scene's isovalue 1150"
+# RAS [mm]: outside the skull and 2.6 voxels into it (as cli_serve_session.sh).
+out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"
+# shellcheck disable=SC2086
+timeout 60 "$client" 127.0.0.1 "$port" "$head" \
+  wait 0.5 points move $out_p 0.3 move $in_p 0.5 pause 0.5 move $in_p 0.2 cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop move $out_p 0.3 \
+  cmd undo cmd undo cmd undo cmd undo cmd undo cmd undo cmd "save undone.mha" rebase compare "$out/undone.mha" \
+  ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 force \
+  cmd "isovalue 500" ball Ball2 48 15 20 statuses 0.3 points >"$out/client.log" 2>&1 ||
+  fail "the client failed (exit $?)"
+wait $serve_pid
+rc=$?
+[[ $rc == 0 ]] || fail "serve exited $rc, not 0"
+grep -q " 0 faults" "$out/serve.log" || fail "servo faults"
+grep -q "volume   client 1, 'Ball': 48 x 48 x 48 taken.*isovalue 300 (inside above), chosen by CT in HU" "$out/serve.log" ||
+  fail "the log does not name the ball's isovalue"
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+log = open(f"{out}/client.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+cmp = [l for l in log if l.startswith("compare ")]
+if len(cmp) != 1 or int(re.search(r": (\d+) voxels differ", cmp[0]).group(1)) != 0:
+    fail(f"the file saved after the undo is not the head as sent: {cmp}")
+status = [l for l in log if l.startswith("STATUS")]
+want = [("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",)] + [("code 1: undo: done",)] * 6 + [
+        ("code 1: save undone.mha: wrote",),
+        ("code 1: volume taken: 48 x 48 x 48; isovalue 300 (inside above), chosen by CT in HU",),
+        ("code 1: isovalue 500: done",),
+        ("code 1: volume taken: 48 x 48 x 48; isovalue 500 (inside above), chosen by a client's isovalue command",)]
+status = [l for l in status if "the edited voxels could not be sent" not in l]
+if len(status) != len(want): fail(f"{len(status)} STATUS answers, not {len(want)}: {status}")
+for got, w in zip(status, want):
+    if not all(p in got for p in w): fail(f"STATUS '{got}' does not say {w}")
+f = [l.split() for l in log if l.startswith("force ")]
+if len(f) != 1: fail("no force line")
+fx, fy, fz, fn = (float(v) for v in f[0][1:5])
+# 2 mm into a surface at radius 15 mm (+-0.7 mm: where 300 HU falls between voxels) at 800 N/m.
+if not (0.8 < fn < 2.6 and fz > 0.9 * fn):
+    fail(f"force ({fx}, {fy}, {fz}) |F| {fn} N 2 mm inside the 300 HU ball: not ~1.6 N outward (+S)")
+pts = [re.match(r"points HIP (\d+) Proxy (\d+), off: HIP (\d+) Proxy (\d+),", l) for l in log if l.startswith("points ")]
+if len(pts) != 2 or not all(pts): fail(f"not two points lines: {pts}")
+first, last = [tuple(int(g) for g in m.groups()) for m in pts]
+if first != (0, 0, 0, 0): fail(f"HIP / Proxy sent before the client's first pose: {pts[0].group(0)}")
+if last[0] < 100 or last[1] < 100: fail(f"too few HIP / Proxy transforms: {pts[1].group(0)}")
+if last[2] or last[3]: fail(f"HIP / Proxy off the tool (none yet, a pause): {pts[1].group(0)}")
+print(f"truth ok: the saved undo is the head; the HU ball opens at 300 HU (|F| {fn:.2f} N, +S); a client's 500 kept; "
+      f"{last[0]} HIP and {last[1]} Proxy transforms, none before the first pose or off the tool")
+PY
+[[ $? == 0 ]] || exit 1
+
+# 4. Two trackers on 'Stylus': client A from the start, B from 0.8 s (another pose, 40 mm away).
+"$exe" serve "$scene" --port 0 --stream Stylus --seconds 6 >"$out/serve2.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve2.log" $serve_pid)
+[[ -n $port ]] || fail "the second serve never said it was listening"
+# shellcheck disable=SC2086
+timeout 30 "$client" 127.0.0.1 "$port" "$head" move $in_p 0.3 wait 1.7 points statuses 0.1 >"$out/a.log" 2>&1 &
+a_pid=$!
+for _ in $(seq 100); do grep -q "client   1 connected" "$out/serve2.log" && break; sleep 0.05; done  # A is client 1
+# shellcheck disable=SC2086
+timeout 30 "$client" 127.0.0.1 "$port" "$head" wait 0.8 move $out_p 2.4 statuses 0.1 >"$out/b.log" 2>&1 ||
+  fail "client B failed: $(cat "$out/b.log")"
+wait $a_pid || fail "client A failed: $(cat "$out/a.log")"
+wait $serve_pid
+grep -q "^points HIP [1-9][0-9]* Proxy [1-9][0-9]*, off: HIP 0 Proxy 0" "$out/a.log" ||
+  fail "tracker A's HIP / Proxy took tracker B's pose: $(cat "$out/a.log")"
+[[ $(grep -c "^STATUS" "$out/a.log") == 0 ]] || fail "tracker A got a STATUS: $(cat "$out/a.log")"
+[[ $(grep -c "^STATUS code 5: stream 'Stylus' is client 1's" "$out/b.log") == 1 ]] ||
+  fail "tracker B did not get one STATUS 5 naming client 1: $(cat "$out/b.log")"
+grep -q "stream   'Stylus' is client 2's" "$out/serve2.log" ||
+  fail "tracker B never took the stream once A was gone: $(tail -n 20 "$out/serve2.log")"
+echo "two trackers ok: $(grep '^points' "$out/a.log"); B told once"
+
+# 5. A rotated registration, tracker -> image = 90 degrees about R (tracker +A is image +S,
+#    tracker +S is image -A), from --registration FILE, worked out by hand: the tracker's pose
+#    (0, 13, 0) is image (0, 0, 13), 2 mm inside the 300 HU ball's surface at +S; the HIP sent
+#    is there, and the Force reply (--reply-force, in the tracker's frame: R^T f) points along
+#    tracker +A (image +S: outward); without the transpose it would point along tracker +S.
+#    Then a TrackerToImage TRANSFORM from the client (the identity) replaces it: the HIP is
+#    the pose itself, (0, 13, 0).
+printf '# tracker -> image: 90 degrees about R\n1 0 0 0\n0 0 -1 0\n0 1 0 0\n0 0 0 1\n' >"$out/reg.txt"
+"$exe" serve "$scene" --port 0 --stream Stylus --registration "$out/reg.txt" --reply-force --seconds 8 \
+  >"$out/serve3.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve3.log" $serve_pid)
+[[ -n $port ]] || fail "the third serve never said it was listening: $(cat "$out/serve3.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 24 0 0.4 move 0 13 0 0.6 force points \
+  register TrackerToImage 1 0 0 0 0 1 0 0 0 0 1 0 wait 0.3 points >"$out/r.log" 2>&1 ||
+  fail "the registration client failed: $(cat "$out/r.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+log = open(f"{sys.argv[1]}/r.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+f = [l.split() for l in log if l.startswith("force ")]
+if len(f) != 1: fail("no force line")
+fx, fy, fz, fn = (float(v) for v in f[0][1:5])
+if not (0.8 < fn < 2.6 and fy > 0.9 * fn):
+    fail(f"Force reply ({fx}, {fy}, {fz}) |F| {fn} N: not ~1.6 N along tracker +A (R^T of image +S)")
+hips = [[float(v) for v in l.split("last HIP ")[1].split()] for l in log if l.startswith("points ")]
+if len(hips) != 2: fail("not two points lines")
+if max(abs(a - b) for a, b in zip(hips[0], (0, 0, 13))) > 1.0: fail(f"HIP {hips[0]} mm, not image (0, 0, 13) = R (0, 13, 0)")
+if max(abs(a - b) for a, b in zip(hips[1], (0, 13, 0))) > 1.0: fail(f"HIP {hips[1]} mm after the identity TrackerToImage, not (0, 13, 0)")
+if not any("STATUS code 1: registration taken: tracker -> image rotation [[1 0 0] [0 1 0] [0 0 1]]" in l for l in log):
+    fail("no STATUS taking the TrackerToImage TRANSFORM")
+print(f"registration ok: pose (0, 13, 0) -> HIP {hips[0]}, Force reply ({fx:.2f}, {fy:.2f}, {fz:.2f}) N in the tracker's frame; "
+      f"TrackerToImage identity -> HIP {hips[1]}")
+PY
+echo "PASS serve truth"

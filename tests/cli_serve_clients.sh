@@ -7,7 +7,7 @@
 #   2. with 7 idle clients (connected, sending and reading nothing) and 1 slow one (a session
 #      client carving, sent the whole edited head, 1.5 MB, up to 4 times a second, that stops
 #      reading): a
-#      session client's STATUS answers (300 commands, one every 20 ms) and its HIP TRANSFORMs' inter-arrival times have
+#      session client's STATUS answers (300 commands, one every 20 ms) and its Force TRANSFORMs' inter-arrival times have
 #      p99 < 100 ms;
 #   3. a quiet client is never closed while nobody needs its slot (--idle-timeout-s 2): the 7
 #      idle clients are still open when looked at 5 s after connecting (they have 1 MB receive
@@ -162,7 +162,7 @@ g = re.search(r"gaps (\d+) transforms, p50 ([\d.]+) p99 ([\d.]+) max ([\d.]+) ms
 if not c: fail("no command timings: " + log)
 if not g: fail("no transform timings: " + log)
 if float(c.group(2)) >= 100: fail(f"STATUS answers p99 {c.group(2)} ms (max {c.group(3)} ms), not < 100 ms beside a slow and 7 idle clients")
-if float(g.group(3)) >= 100: fail(f"HIP inter-arrival p99 {g.group(3)} ms (max {g.group(4)} ms), not < 100 ms")
+if float(g.group(3)) >= 100: fail(f"Force TRANSFORM inter-arrival p99 {g.group(3)} ms (max {g.group(4)} ms), not < 100 ms")
 if "open after" not in log: fail("the session client itself was closed: " + log)
 watcher = open(f"{out}/watcher.log").read()
 w = re.search(r"gaps (\d+) transforms", watcher)

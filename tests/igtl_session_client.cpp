@@ -36,11 +36,11 @@
 //   statuses SECS     waits SECS, then prints the STATUS answers not printed yet
 //   rebase            the copy starts again from BASE (what the server holds once it took
 //                     an `image`); IMAGEs received later apply to it
-//   first SECS        waits up to SECS for the first TRANSFORM "HIP"; prints "first transform
+//   first SECS        waits up to SECS for the first TRANSFORM "Force"; prints "first transform
 //                     T s after connecting" (fails when none came: "no transform within SECS s")
-//   mark              the HIP arrival times kept for `gaps` start again from now
+//   mark              the Force arrival times kept for `gaps` start again from now
 //   gaps              prints "gaps N transforms, p50 A p99 B max C ms": the times between the
-//                     HIP TRANSFORMs received since `mark` (or the connection)
+//                     Force TRANSFORMs received since `mark` (or the connection)
 //   cmds N TEXT       N STRING commands TEXT (device "CMDS"), one every 20 ms whether answered
 //                     or not; prints "cmds N answered, p50 A p99 B max C ms" (each one's send to
 //                     its STATUS; fails when not all were answered within 15 s)
@@ -95,9 +95,9 @@ struct Shared {
   bool closed = false;
   bool noread = false;  // `noread`: the reader stops
   Clock::time_point connected = Clock::now(), closed_at;
-  std::vector<Clock::time_point> hips;  // HIP arrivals since `mark`
+  std::vector<Clock::time_point> force_times;  // Force TRANSFORM arrivals since `mark` (sent every display tick)
   std::vector<Clock::time_point> cmds_answered;  // arrivals of the STATUS answers to `cmds`
-  std::optional<Clock::time_point> first_hip;
+  std::optional<Clock::time_point> first_force;
 };
 
 /// "p50 A p99 B max C ms" of `v` [ms] (sorted here).
@@ -171,10 +171,12 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
     h->Unpack();
     const std::string type = h->GetDeviceType(), name = h->GetDeviceName();
     std::lock_guard<std::mutex> lock(s.mu);
-    if (type == "TRANSFORM" && name == "HIP") {
+    // The display stream's Force goes every tick (HIP and Proxy only while a fresh pose is
+    // rendered: none without a tracker).
+    if (type == "TRANSFORM" && name == "Force") {
       const auto now = Clock::now();
-      if (!s.first_hip) s.first_hip = now;
-      s.hips.push_back(now);
+      if (!s.first_force) s.first_force = now;
+      s.force_times.push_back(now);
     }
     if (type == "STATUS" && name == "CMDS") {
       if (body_of<igtl::StatusMessage>(sock, h)) s.cmds_answered.push_back(Clock::now());
@@ -455,24 +457,24 @@ bool Client::action(const std::string& a) {
     const double secs = num();
     std::unique_lock<std::mutex> lock(s.mu);
     s.cv.wait_until(lock, s.connected + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(secs)),
-                    [&] { return s.first_hip.has_value() || s.closed; });
-    if (!s.first_hip) return std::cout << "no transform within " << secs << " s\n", false;
-    std::cout << "first transform " << std::chrono::duration<double>(*s.first_hip - s.connected).count()
+                    [&] { return s.first_force.has_value() || s.closed; });
+    if (!s.first_force) return std::cout << "no transform within " << secs << " s\n", false;
+    std::cout << "first transform " << std::chrono::duration<double>(*s.first_force - s.connected).count()
               << " s after connecting\n";
     return true;
   }
   if (a == "mark") {
     std::lock_guard<std::mutex> lock(s.mu);
-    s.hips.clear();
+    s.force_times.clear();
     return true;
   }
   if (a == "gaps") {
     std::lock_guard<std::mutex> lock(s.mu);
     std::vector<double> ms;
-    for (std::size_t k = 1; k < s.hips.size(); ++k)
-      ms.push_back(std::chrono::duration<double, std::milli>(s.hips[k] - s.hips[k - 1]).count());
-    std::cout << "gaps " << s.hips.size() << " transforms, " << percentiles(ms) << "\n";
-    return s.hips.size() > 1;
+    for (std::size_t k = 1; k < s.force_times.size(); ++k)
+      ms.push_back(std::chrono::duration<double, std::milli>(s.force_times[k] - s.force_times[k - 1]).count());
+    std::cout << "gaps " << s.force_times.size() << " transforms, " << percentiles(ms) << "\n";
+    return s.force_times.size() > 1;
   }
   if (a == "cmds") {
     const int n = int(num());

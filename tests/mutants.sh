@@ -152,6 +152,10 @@ m igtl-stall-zero-at-once   $IG '    if (l.stalled_now) {  // the servo stopped 
                                '    if (false) {' test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
+# A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.
+m registration-force-back   service/registration.h \
+  $'    return {r[0] * f.x + r[3] * f.y + r[6] * f.z, r[1] * f.x + r[4] * f.y + r[7] * f.z,\n            r[2] * f.x + r[5] * f.y + r[8] * f.z};' \
+  '    return f;' test_service 'ServiceDevice.ARotatedRegistration*'
 m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\n    return false;' \
                                $'  if (false) {\n    s.busy.store(0);\n    return false;' test_exit_zero 'ExitZero.*'
 m exit-zero-alt-stack       $X '    a.sa_flags = SA_NODEFER | SA_ONSTACK;' '    a.sa_flags = SA_NODEFER;' test_exit_zero 'ExitZero.AStackOverflow*'

@@ -12,6 +12,8 @@
 #      bone, a carve is saved and equals the edited IMAGEs received, though the first of them
 #      failed to be packed (std::bad_alloc through the seam: a STATUS, its voxels sent with
 #      the next); serve ends by itself with exit 0 and no servo faults.
+# Step 1 runs where serve's Vulkan device is lavapipe (a discrete GPU's binding holds the
+# image: there the seam of step 2 is the check).
 # "PASS serve faults" is printed once, last, after every check.
 # Usage: cli_serve_faults.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -26,11 +28,18 @@ ISOTOUCH_SERVE_TEST_FAULT="prepare:Faulty,settle:Stuck,edited" \
 serve_pid=$!
 port=$(wait_port "$out/serve.log" $serve_pid)
 [[ -n $port ]] || fail "serve never said it was listening"
+# The device serve opens: the first discrete GPU, else lavapipe (unless ISOTOUCH_DEVICE says).
+wide=(ramp Wide 2048 2048 2)
+if [[ -z ${ISOTOUCH_DEVICE:-} ]] && "$exe" devices 2>/dev/null | grep -q "(discrete-gpu"; then
+  wide=()
+  echo "note: a discrete GPU opens: its storage binding holds the 2048 x 2048 x 2 image, step 1 skipped"
+fi
+export WIDE_SENT=$(( ${#wide[@]} > 0 ))
 # RAS [mm]: outside the skull and 2.6 voxels into it (as cli_serve_session.sh).
 out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"
 # shellcheck disable=SC2086
 timeout 60 "$client" 127.0.0.1 "$port" "$head" \
-  ramp Wide 2048 2048 2 image Faulty image Stuck ramp Big 256 256 256 \
+  "${wide[@]}" image Faulty image Stuck ramp Big 256 256 256 \
   move $out_p 0.3 move $in_p 0.5 force \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop images 1 cmd "save carved.mha" \
   compare "$out/carved.mha" compare "$head" statuses 0.5 >"$out/client.log" 2>&1 ||
@@ -41,7 +50,7 @@ rc=$?
 grep -q " 0 faults" "$out/serve.log" || fail "servo faults"
 grep -q "images taken 0," "$out/serve.log" || fail "an image was taken"
 python3 - "$out" <<'PY' || exit 1
-import re, sys
+import os, re, sys
 out = sys.argv[1]
 log = open(f"{out}/client.log").read().splitlines()
 def fail(msg):
@@ -58,6 +67,7 @@ want = [("code 11: igtl:Wide: not taken: a session on its 2048 x 2048 x 2 voxels
         ("code 11: igtl:Big: not taken: 256 x 256 x 256 voxels need ", "more than 3/4 of the 600 MiB"),
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",)]
+if os.environ.get("WIDE_SENT") == "0": want = want[1:]
 if len(status) != len(want): fail(f"{len(status)} STATUS answers, not {len(want)}")
 for got, w in zip(status, want):
     if not all(p in got for p in w): fail(f"STATUS '{got}' does not say {w}")
@@ -69,7 +79,7 @@ def differ(i): return int(re.search(r": (\d+) voxels differ", cmp[i]).group(1))
 if len(cmp) != 2: fail(f"{len(cmp)} comparisons, not 2")
 if differ(0) != 0: fail("the received edits differ from the saved file: " + cmp[0])
 if differ(1) < 10: fail("carving changed fewer than 10 voxels of the head: " + cmp[1])
-print(f"faults ok: 4 images refused with a STATUS each, the head kept (|F| {forces[0]:.2f} N), "
+print(f"faults ok: {len(want) - 4} images refused with a STATUS each, the head kept (|F| {forces[0]:.2f} N), "
       f"{differ(1)} voxels carved and received though one edited IMAGE failed")
 PY
 echo "PASS serve faults"

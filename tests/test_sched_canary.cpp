@@ -17,7 +17,7 @@ using isotouch::test::SchedCanary;
 
 namespace {
 constexpr std::int64_t kStopNs = 40'000'000;  // how long the parent stops the child
-constexpr std::int64_t kPeriodNs = 250'000;   // the canaries' (SchedCanary's default)
+constexpr std::int64_t kPeriodNs = 100'000;   // the canaries' (SchedCanary's default)
 
 struct Seen {
   std::int64_t in_stop, second_half, outside, canaries, fifo;

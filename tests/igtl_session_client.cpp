@@ -18,8 +18,8 @@
 //                     and for `ramp` and `checker` within 90 s)
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
 //                     when that time has passed (the actions before it were too slow)
-//   force             prints the mean of the newest 10 Force transforms and how many came so far
-//                     "force X Y Z |F| N, K received"
+//   force             prints the mean of the newest 10 Force transforms once they settle (3 s at
+//                     most) and how many came so far: "force X Y Z |F| N, K received, ..."
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -292,6 +292,30 @@ struct Client {
   bool action(const std::string& a);
 };
 
+// The mean of the newest 10 Force transforms once they have settled: at least 300 ms after
+// the call, and their spread (largest distance from their mean) within 2 % of the mean's
+// size or 5 mN; after 3 s unsettled, the figures as they are and false. The forces follow the
+// last move's end through the display stream's filter, so a fixed wait read them mid-rise.
+bool print_settled_force(Shared& s) {
+  const auto t0 = std::chrono::steady_clock::now();
+  for (;;) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::lock_guard<std::mutex> lock(s.mu);
+    double f[3] = {0, 0, 0}, spread = 0;
+    for (const auto& v : s.forces)
+      for (int k = 0; k < 3; ++k) f[k] += v[std::size_t(k)] / double(s.forces.size());
+    for (const auto& v : s.forces) spread = std::max(spread, std::hypot(v[0] - f[0], v[1] - f[1], v[2] - f[2]));
+    const double mag = std::hypot(f[0], f[1], f[2]);
+    const bool settled = s.forces.size() == 10 && spread <= std::max(0.02 * mag, 0.005);
+    if (waited < 0.3 || (!settled && waited < 3.0)) continue;
+    std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << mag << " N, " << s.forces_received
+              << " received, spread " << spread << " N, " << (settled ? "settled" : "NOT settled") << " after "
+              << waited << " s\n";
+    return settled;
+  }
+}
+
 bool Client::action(const std::string& a) {
   if (a == "move") {
     double to[3] = {num(), num(), num()};
@@ -348,16 +372,7 @@ bool Client::action(const std::string& a) {
     send(sock, m);
     return wait_status(s, "CMD");
   }
-  if (a == "force") {
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    std::lock_guard<std::mutex> lock(s.mu);
-    double f[3] = {0, 0, 0};
-    for (const auto& v : s.forces)
-      for (int k = 0; k < 3; ++k) f[k] += v[std::size_t(k)] / double(s.forces.size());
-    std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << std::hypot(f[0], f[1], f[2]) << " N, "
-              << s.forces_received << " received\n";
-    return !s.forces.empty();
-  }
+  if (a == "force") return print_settled_force(s);
   if (a == "images") {
     const double quiet = num();
     std::unique_lock<std::mutex> lock(s.mu);

@@ -154,7 +154,8 @@ class Server {
   bool fault(const char* where, const std::string& image) const {
     return o_.fault_for_test && o_.fault_for_test(where, image);
   }
-  void stop_session();
+  std::unique_ptr<Session> stop_session();
+  std::string switch_session(std::unique_ptr<Session> next);
   void take_command(Client& c, const Incoming& in);
   void command_loop();
   void run_command(const Pending& p);
@@ -894,6 +895,7 @@ void Server::start_session(std::unique_ptr<Session> s) {
   servo::HapticDeviceIO& device = echo_device_ ? static_cast<servo::HapticDeviceIO&>(*echo_device_) : device_;
   s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device, c);
   if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
+  if (fault("start", s->image_name)) throw std::bad_alloc();  // (s->live stops as it unwinds)
   ++sessions_;
   std::lock_guard<std::mutex> lock(session_mu_);
   s->generation = std::uint64_t(sessions_);
@@ -954,11 +956,12 @@ void Server::restart_at_isovalue(const Pending& p) {
     return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                   what + ": the session could not be rebuilt at it (" + e.what() + "); the isovalue is unchanged");
   }
+  if (const std::string why = switch_session(std::move(next)); !why.empty())
+    return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
+                  what + ": the session at it could not be started (" + why + "); the isovalue is unchanged");
   setup_.live = live;
   setup_.hri = hri;
   client_iso_ = live.iso;
-  stop_session();
-  start_session(std::move(next));
   log_.line("isovalue client " + std::to_string(p.client) + " set it: " + iso_text(live.iso) +
             " (kept for later images while inside their values)");
   answer(p, igtl::StatusMessage::STATUS_OK, what + ": done (the session restarted on the edited volume)");
@@ -1036,10 +1039,12 @@ void Server::swap_volume(PendingVolume p) {
                             e.what() + ")" + keep);
   }
   const auto t1 = std::chrono::steady_clock::now();
+  if (const std::string why = switch_session(std::move(next)); !why.empty())
+    return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
+                        "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be started (" +
+                            why + ")" + keep);
   setup_.live = live;
   setup_.hri = hri;
-  stop_session();
-  start_session(std::move(next));
   const auto t2 = std::chrono::steady_clock::now();
   n_.images.fetch_add(1);
   std::ostringstream s;
@@ -1051,13 +1056,15 @@ void Server::swap_volume(PendingVolume p) {
   answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
-void Server::stop_session() {
+/// Stops the running session's servo and edits and counts its figures; returns the stopped
+/// session (nullptr when none ran), which start_session() can run again.
+std::unique_ptr<Session> Server::stop_session() {
   std::unique_ptr<Session> s;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     s = std::move(session_);
   }
-  if (!s) return;
+  if (!s) return s;
   // Abandoned in the renderer: the process ends there (the session and device_ outlive
   // the stuck thread).
   session::stop_or_end_process(*s->live, "isotouch serve");
@@ -1071,6 +1078,26 @@ void Server::stop_session() {
   device_faults_ += dc.fault;
   uncalibrated_ += dc.uncalibrated;
   refused_reports_ += dc.refused;
+  return s;
+}
+
+/// The servo moves from the running session to `next`. When `next` cannot be started
+/// (a thread, memory, the device), the old session is started again on its own volume and
+/// edits, and the reason is returned for the sender's STATUS ("" when `next` runs). Only
+/// when the old one cannot be started either does the exception end the server.
+std::string Server::switch_session(std::unique_ptr<Session> next) {
+  std::unique_ptr<Session> old = stop_session();
+  try {
+    start_session(std::move(next));
+    return "";
+  } catch (const std::exception& e) {
+    const std::string why = e.what();
+    log_.line("session  the new session could not be started (" + why + "); the old one goes on");
+    if (!old) throw;
+    old->live.reset();
+    start_session(std::move(old));
+    return why;
+  }
 }
 
 void Server::join_threads(std::thread& display, std::thread& commands) noexcept {

@@ -5,10 +5,12 @@
 #      128 MiB storage binding) answered with a STATUS (code 11) naming why, not "volume taken";
 #   2. the same through the fault seam (ISOTOUCH_SERVE_TEST_FAULT: std::bad_alloc inside the
 #      session's build, for a GPU with a larger binding), and the running session's edits not
-#      settling before the build (code 6: the new session never shares the GPU with them);
+#      settling before the build (code 6: the new session never shares the GPU with them),
+#      and the new session failing to start after the old one stopped (the old one starts
+#      again on its volume and edits: code 11);
 #   3. a 256^3 uint8 IMAGE past the memory budget (--memory-mib 600) refused with a STATUS
 #      naming the need and the budget;
-#   4. after all four the head is still the session: the tool 2.6 voxels into the skull feels
+#   4. after all five the head is still the session: the tool 2.6 voxels into the skull feels
 #      bone, a carve is saved and equals the edited IMAGEs received, though the first of them
 #      failed to be packed (std::bad_alloc through the seam: a STATUS, its voxels sent with
 #      the next); serve ends by itself with exit 0 and no servo faults.
@@ -22,7 +24,7 @@ exe=$1; scene=$2; client=$3; out=$4; head=$5
 [[ $out == */cli_serve_faults ]] || { echo "FAIL serve faults: OUT_DIR must end in /cli_serve_faults: $out"; exit 1; }
 rm -rf "$out"; mkdir -p "$out"
 fail() { echo "FAIL serve faults: $*"; echo "--- client.log"; cat "$out/client.log"; echo "--- serve.log"; tail -n 30 "$out/serve.log"; exit 1; }
-ISOTOUCH_SERVE_TEST_FAULT="prepare:Faulty,settle:Stuck,edited" \
+ISOTOUCH_SERVE_TEST_FAULT="prepare:Faulty,settle:Stuck,start:Restart,edited" \
   "$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 --memory-mib 600 --seconds 15 \
   >"$out/serve.log" 2>&1 &
 serve_pid=$!
@@ -39,7 +41,7 @@ export WIDE_SENT=$(( ${#wide[@]} > 0 ))
 out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"
 # shellcheck disable=SC2086
 timeout 60 "$client" 127.0.0.1 "$port" "$head" \
-  "${wide[@]}" image Faulty image Stuck ramp Big 256 256 256 \
+  "${wide[@]}" image Faulty image Stuck image Restart ramp Big 256 256 256 \
   move $out_p 0.3 move $in_p 0.5 force \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop images 1 cmd "save carved.mha" \
   compare "$out/carved.mha" compare "$head" statuses 0.5 >"$out/client.log" 2>&1 ||
@@ -64,6 +66,8 @@ want = [("code 11: igtl:Wide: not taken: a session on its 2048 x 2048 x 2 voxels
          "the session goes on with the volume it had"),
         ("code 11: igtl:Faulty: not taken: a session on its 64 x 64 x 93 voxels could not be built (std::bad_alloc)",),
         ("code 6: igtl:Stuck: not taken: the running session's edits did not settle in 5 s",),
+        ("code 11: igtl:Restart: not taken: a session on its 64 x 64 x 93 voxels could not be started (std::bad_alloc)",
+         "the session goes on with the volume it had"),
         ("code 11: igtl:Big: not taken: 256 x 256 x 256 voxels need ", "more than 3/4 of the 600 MiB"),
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",)]

@@ -13,6 +13,7 @@ void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   const core::Vec3 image = reg_.to_image_mm({t_mm[0], t_mm[1], t_mm[2]});
   p.mm[0] = image.x, p.mm[1] = image.y, p.mm[2] = image.z;
   p.received_ns = now_ns();  // steady_clock is CLOCK_MONOTONIC, the servo's clock
+  arrivals_.arrived(p.received_ns);
   p.stamp = stamp;
   ++p.sequence;
   pose_.store(p);

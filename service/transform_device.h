@@ -61,6 +61,8 @@ class TransformDevice final : public servo::HapticDeviceIO {
   const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
     return rule_.enable(on, stall_s, 0.05, now_ns());
   }
+  /// When the stream's next pose is due: the servo ticks just after it (input_phase.h).
+  servo::InputPhase input_phase() const override { return arrivals_.phase(); }
   /// Reply thread only: before its first look_force(), then once a poll (clock read first).
   void restart_force(std::int64_t t_ns) { rule_.restart(t_ns); }
   servo::StallLook look_force(std::int64_t t_ns) { return rule_.look(t_ns); }
@@ -84,6 +86,7 @@ class TransformDevice final : public servo::HapticDeviceIO {
   servo::LatestValue<Pose> pose_;
   Pose last_;  // servo thread
   std::mutex push_mu_;
+  servo::ArrivalClock arrivals_;  // under push_mu_
   Registration reg_;                          // push_mu_: the one push_mm applies
   servo::LatestValue<Registration> reg_cell_;  // written under push_mu_: the one forces go back through
   std::atomic<long> pushed_{0};

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "isotouch/core/vec3.h"
+#include "isotouch/servo/input_phase.h"
 
 namespace isotouch::servo {
 
@@ -137,6 +138,9 @@ class HapticDeviceIO {
   /// The sequence number of the report the next write_force_n() answers (echoed in the
   /// output report, so the device can measure report-to-force latency). Servo thread.
   virtual void answer(std::uint64_t sequence) { (void)sequence; }
+  /// A link that sends an input and waits for the force answering it: when its next input
+  /// is due and its period (input_phase.h); unknown by default. Servo thread: lock-free.
+  virtual InputPhase input_phase() const { return {}; }
 };
 
 }  // namespace isotouch::servo

@@ -85,6 +85,12 @@ struct ServoThreadConfig {
   /// on a 2-vCPU VM under compile load, a 10 kHz FIFO loop had p99.9 period errors of
   /// 34-71 us with 0.3 and 19-27 us with 0.5 (0.8 no better); it costs half a CPU at 10 kHz.
   double max_spin_fraction = 0.5;
+  /// A device that says when its next input is due (HapticDeviceIO::input_phase: a link
+  /// waiting for the answer) gets its ticks moved to input_lead_us after each arrival, at
+  /// most 1/8 period a tick (input_phase.h): its round trip is the lead and the tick, not
+  /// 0 to 1 period by the clocks' luck. The lead covers the arrivals' jitter.
+  bool follow_input_phase = true;
+  double input_lead_us = 100;
   std::size_t record_ticks = 0;   ///< period errors kept (preallocated, prefaulted) for statistics
   WorkspaceTransform world_T_device;
   /// Called once on the servo thread after the real-time setup, right before the first

@@ -1,0 +1,48 @@
+#include "isotouch/servo/input_phase.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+namespace isotouch::servo {
+
+void ArrivalClock::arrived(std::int64_t t_ns) {
+  const std::int64_t d = last_ns_ >= 0 ? t_ns - last_ns_ : 0;
+  last_ns_ = t_ns;
+  if (d <= 0) return;
+  if (period_ns_ == 0 || outliers_ >= 8) {  // the first interval, or a new rate: start over
+    period_ns_ = d;
+    anchor_ns_ = t_ns;
+    outliers_ = 0;
+  } else if (2 * d < period_ns_ || 2 * d > 3 * period_ns_) {
+    ++outliers_;  // a burst or a gap: neither the period nor the phase
+    anchor_ns_ = t_ns;
+    due_.store(-1, std::memory_order_relaxed);
+    return;
+  } else {
+    outliers_ = 0;
+    period_ns_ += (d - period_ns_) / 16;
+    // The phase: predicted one period on, pulled 1/8 of the way to the arrival; jitter that
+    // only ever delays an arrival leaves the anchor near the early ones.
+    const std::int64_t predicted = anchor_ns_ + period_ns_;
+    const std::int64_t r = t_ns - predicted;
+    anchor_ns_ = predicted + (r < 0 ? r / 2 : r / 8);
+  }
+  period_.store(period_ns_, std::memory_order_relaxed);
+  due_.store(anchor_ns_ + period_ns_, std::memory_order_relaxed);
+}
+
+std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns) {
+  if (in.due_ns < 0 || in.period_ns <= 0 || period_ns <= 0) return next_ns;
+  if (next_ns - in.due_ns > 4 * in.period_ns) return next_ns;  // the input paused
+  const double ratio = double(in.period_ns) / double(period_ns);
+  const double whole = std::round(ratio);
+  if (whole < 1 || std::abs(ratio - whole) > 0.03) return next_ns;
+  // How far the next deadline lies after the wanted one, in (-period/2, period/2].
+  std::int64_t e = (next_ns - (in.due_ns + lead_ns)) % period_ns;
+  if (e < 0) e += period_ns;
+  if (e > period_ns / 2) e -= period_ns;
+  return next_ns - std::clamp(e, -period_ns / 8, period_ns / 8);
+}
+
+}  // namespace isotouch::servo

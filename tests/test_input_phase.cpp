@@ -1,0 +1,125 @@
+// The servo's ticks follow a link's inputs (servo/input_phase.h): judged on simulated clocks,
+// against the arrival times the test itself generated.
+#include "isotouch/servo/input_phase.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <cstdlib>
+#include <vector>
+
+namespace {
+using isotouch::servo::ArrivalClock;
+using isotouch::servo::follow_input_phase;
+using isotouch::servo::InputPhase;
+
+constexpr std::int64_t kMs = 1'000'000;
+
+/// A deterministic jitter in [0, max_ns): arrivals are only ever delayed.
+struct Jitter {
+  std::uint64_t s = 12345;
+  std::int64_t next(std::int64_t max_ns) {
+    s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+    return std::int64_t((s >> 33) % std::uint64_t(max_ns));
+  }
+};
+
+/// The first servo tick at or after `t` (the one that renders an input arriving at `t`);
+/// each deadline is chosen at the tick before it, from the phase known then.
+struct Servo {
+  std::int64_t next, period, lead;
+  bool follow = true;
+  std::int64_t first_tick_after(std::int64_t t, const ArrivalClock& c, std::vector<std::int64_t>* steps = nullptr) {
+    while (next < t) {
+      std::int64_t n = next + period;
+      if (follow) n = follow_input_phase(n, period, c.phase(), lead);
+      if (steps) steps->push_back(n - next);
+      next = n;
+    }
+    return next;
+  }
+};
+
+TEST(ArrivalClock, LearnsTheStreamsPeriodAndItsEarliestPhaseThroughJitter) {
+  ArrivalClock c;
+  Jitter j;
+  EXPECT_LT(c.phase().due_ns, 0) << "due before any input";
+  const std::int64_t t0 = 5 * kMs, latency = 40'000;
+  int late = 0;  // predictions later than the earliest arrivals' phase + 40 us (one arrival's jitter kept)
+  for (int k = 0; k < 400; ++k) {
+    c.arrived(t0 + k * kMs + latency + j.next(80'000));
+    if (k >= 50 && c.phase().due_ns > t0 + (k + 1) * kMs + latency + 40'000) ++late;
+  }
+  // Taken from each arrival, half the predictions would be late (the jitter is uniform).
+  EXPECT_LT(late, 350 / 4) << "of 350 predictions: the phase follows each arrival's jitter";
+  const InputPhase p = c.phase();
+  EXPECT_NEAR(double(p.period_ns), double(kMs), 0.01 * kMs);
+  // The next pose is sent at t0 + 400 ms and arrives 40-120 us later.
+  const std::int64_t sent = t0 + 400 * kMs;
+  EXPECT_GE(p.due_ns, sent + latency - 20'000);
+  EXPECT_LE(p.due_ns, sent + latency + 60'000);
+}
+
+TEST(ArrivalClock, AGapIsNoPhaseAndANewRateIsLearnedAgain) {
+  ArrivalClock c;
+  std::int64_t t = 0;
+  for (int k = 0; k < 50; ++k) c.arrived(t += kMs);
+  c.arrived(t += 10 * kMs);  // a 10 ms gap
+  EXPECT_LT(c.phase().due_ns, 0) << "a gap still predicting the old phase";
+  for (int k = 0; k < 20; ++k) c.arrived(t += 4 * kMs);  // now 250 Hz
+  EXPECT_NEAR(double(c.phase().period_ns), 4.0 * kMs, 0.01 * kMs);
+  EXPECT_EQ(c.phase().due_ns, t + 4 * kMs);
+}
+
+TEST(FollowInputPhase, TheTickMovesToTheLeadAfterEachArrivalInSmallSteps) {
+  ArrivalClock c;
+  Jitter j;
+  const std::int64_t lead = 100'000;
+  // The worst phase: each pose arrives 0.1 ms after a tick, so it waits 0.9 ms.
+  Servo s{0, kMs, lead}, fixed{0, kMs, lead, false};
+  std::vector<std::int64_t> steps;
+  std::vector<std::int64_t> wait_follow, wait_fixed;
+  for (int k = 1; k <= 200; ++k) {
+    const std::int64_t arrival = k * kMs + 100'000 + j.next(30'000);
+    c.arrived(arrival);
+    wait_follow.push_back(s.first_tick_after(arrival, c, &steps) - arrival);
+    wait_fixed.push_back(fixed.first_tick_after(arrival, c) - arrival);
+  }
+  for (std::int64_t d : steps) {
+    EXPECT_GE(d, kMs - kMs / 8) << "a servo period shortened by more than 1/8";
+    EXPECT_LE(d, kMs + kMs / 8) << "a servo period lengthened by more than 1/8";
+  }
+  for (std::size_t k = 20; k < wait_follow.size(); ++k) {
+    EXPECT_LE(wait_follow[k], lead + 30'000) << "pose " << k << " waited for the servo";
+    EXPECT_GE(wait_fixed[k], 800'000) << "pose " << k << ": the fixed-phase servo is not the worst case";
+  }
+}
+
+TEST(FollowInputPhase, ASlowerStreamIsFollowedAtAWholeMultipleAndNotOtherwise) {
+  const std::int64_t lead = 100'000;
+  for (const std::int64_t input : {10 * kMs, 3'333'333L}) {
+    ArrivalClock c;
+    Servo s{0, kMs, lead};
+    std::int64_t worst = 0;
+    for (int k = 1; k <= 100; ++k) {
+      const std::int64_t arrival = k * input + 550'000;
+      c.arrived(arrival);
+      if (k > 20) worst = std::max(worst, s.first_tick_after(arrival, c) - arrival);
+      else s.first_tick_after(arrival, c);
+    }
+    if (input == 10 * kMs) {
+      EXPECT_LE(worst, lead + 1'000) << "a 100 Hz stream on a 1 kHz servo not followed";
+    } else {  // 300 Hz: no whole number of servo periods; the ticks keep their own phase
+      EXPECT_EQ(s.next % kMs, 0) << "the servo followed a stream it cannot stay aligned with";
+    }
+  }
+}
+
+TEST(FollowInputPhase, NothingMovesWithoutAnInputOrAfterItPaused) {
+  EXPECT_EQ(follow_input_phase(7 * kMs, kMs, InputPhase{}, 100'000), 7 * kMs);
+  const InputPhase old{2 * kMs + 500'000, kMs};
+  EXPECT_EQ(follow_input_phase(20 * kMs, kMs, old, 100'000), 20 * kMs) << "followed a stream paused for 17 periods";
+  EXPECT_NE(follow_input_phase(4 * kMs, kMs, old, 100'000), 4 * kMs);
+}
+
+}  // namespace

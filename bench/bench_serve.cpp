@@ -187,6 +187,8 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   ph.ticks = st.ticks;
   ph.missed = st.missed_deadlines;
   ph.stall_answers = st.stall_replies;
+  ph.to_servo_p50_us = st.to_servo_p50_us, ph.to_servo_p99_us = st.to_servo_p99_us;
+  ph.to_send_p50_us = st.to_send_p50_us, ph.to_send_p99_us = st.to_send_p99_us;
   return ph;
 }
 
@@ -198,6 +200,12 @@ std::vector<std::string> bench_serve_verdicts(const BenchServePhase& alone, cons
   v.push_back("p99 round trip (TRANSFORM in to force TRANSFORM out) with Slicer-like traffic = " +
               (measured ? fixed(traffic.p99_us) : std::string("none answered")) + " us: target <= 1000 us " +
               (measured && traffic.p99_us <= 1000 ? "met" : "NOT met"));
+  for (const BenchServePhase* p : {&alone, &traffic}) {
+    const double pct = p->poses > 0 ? 100.0 * double(p->answered) / double(p->poses) : 0.0;
+    v.push_back("poses answered " + (p == &alone ? std::string("alone") : std::string("with traffic")) + " " +
+                std::to_string(p->answered) + " of " + std::to_string(p->poses) + " = " + fixed(pct, 2) +
+                " %: target >= 99 % " + (p->poses > 0 && 100 * p->answered >= 99 * p->poses ? "met" : "NOT met"));
+  }
   const double ref = double(alone.missed), limit = ref + 3 * std::sqrt(ref);
   v.push_back("servo misses with traffic " + std::to_string(traffic.missed) + " <= " + std::to_string(alone.missed) +
               " without + 3 sqrt(" + std::to_string(alone.missed) + ") = " + fixed(limit) + ": " +
@@ -223,6 +231,14 @@ int run_bench_serve(const BenchServeOptions& o, std::ostream& log) {
     log << "| " << p->name << " | " << p->poses << " | " << p->answered << " | " << p->stall_answers << " | " << fixed(p->p50_us)
         << " | " << fixed(p->p99_us) << " | " << fixed(p->max_us) << " | " << p->images << " | " << p->ticks << " | "
         << p->missed << " |\n";
+  log << "\nWhere the time goes (inside the server, 10 us bins; the rest of the round trip is the two\n"
+      << "loopback messages and the tracker's threads):\n\n"
+      << "| phase | pose -> servo's write p50 / p99 [us] | write -> reply sent p50 / p99 [us] | rest at p50 [us] |\n"
+      << "|---|---|---|---|\n";
+  for (const BenchServePhase* p : {&alone, &traffic})
+    log << "| " << p->name << " | " << fixed(p->to_servo_p50_us) << " / " << fixed(p->to_servo_p99_us) << " | "
+        << fixed(p->to_send_p50_us) << " / " << fixed(p->to_send_p99_us) << " | "
+        << fixed(p->p50_us - p->to_servo_p50_us - p->to_send_p50_us) << " |\n";
   log << "\n";
   for (const std::string& v : bench_serve_verdicts(alone, traffic)) log << "verdict  " << v << "\n";
   log << "machine  " << cpu_model() << ", " << std::thread::hardware_concurrency() << " CPUs; load average before "

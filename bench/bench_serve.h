@@ -28,9 +28,13 @@ struct BenchServePhase {
   double p50_us = 0, p99_us = 0, max_us = 0;  ///< round trip, pose sent to its force received [us]
   long images = 0;             ///< IMAGEs taken as the session's volume
   long ticks = 0, missed = 0;  ///< servo ticks and missed deadlines
+  /// Inside the server, for the replies the servo rendered [us]: the pose's arrival to the
+  /// servo's write (the wait for a tick and the tick), and that write to the send (p50, p99).
+  double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
 };
 
-/// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met" and "servo misses
+/// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered
+/// alone|with traffic A of P = X %: target >= 99 % met|NOT met" (one each) and "servo misses
 /// with traffic M <= R + 3 sqrt(R) = L (R without): met|NOT met", from the figures.
 std::vector<std::string> bench_serve_verdicts(const BenchServePhase& alone, const BenchServePhase& traffic);
 

@@ -217,7 +217,19 @@ class Server {
 
  public:
   ServeStats stats() const {
-    return {ticks_, missed_, faults_, stale_, sessions_, n_.images.load(), replies_.replies(), replies_.stall_replies()};
+    const StreamReplies::Split sp = replies_.split();
+    return {ticks_,
+            missed_,
+            faults_,
+            stale_,
+            sessions_,
+            n_.images.load(),
+            replies_.replies(),
+            replies_.stall_replies(),
+            sp.to_servo_p50_us,
+            sp.to_servo_p99_us,
+            sp.to_send_p50_us,
+            sp.to_send_p99_us};
   }
 
  private:

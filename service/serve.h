@@ -109,6 +109,8 @@ struct ServeStats {
   long ticks = 0, missed_deadlines = 0, faults = 0, stale = 0, sessions = 0, images = 0;
   long replies = 0;        ///< Force replies sent (reply_force)
   long stall_replies = 0;  ///< of those: a pose the servo did not render within 2 ms (no session running: zero)
+  /// The rendered replies' time [us]: pose arrival -> the servo's write, that write -> sent (p50, p99).
+  double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

@@ -1,6 +1,8 @@
 #include "isotouch/service/stream_replies.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <thread>
 #include <vector>
 
@@ -16,7 +18,31 @@ StreamReplies::StreamReplies(TransformDevice& device, StreamReplyOptions o, Targ
 /// Polls every 0.1 ms; a new pose on the stream, once the servo has written a force after it
 /// arrived (or 2 ms later), is answered with that force; while the force is off (no session
 /// runs, the servo stalled) at once with a zero.
+namespace {
+/// The 10 us bin of a delay [ns], the last of `bins` for all beyond.
+std::size_t bin(std::int64_t ns, int bins) { return std::size_t(std::clamp<std::int64_t>(ns / 10'000, 0, bins - 1)); }
+
+/// The q-quantile of a 10 us histogram [us] (the bin's middle); 0 when empty.
+double quantile_us(const std::vector<long>& h, double q) {
+  long n = 0;
+  for (long c : h) n += c;
+  if (n == 0) return 0;
+  const auto want = long(std::ceil(q * double(n)));
+  long seen = 0;
+  for (std::size_t i = 0; i < h.size(); ++i)
+    if ((seen += h[i]) >= want) return double(i) * 10 + 5;
+  return double(h.size()) * 10;
+}
+}  // namespace
+
+StreamReplies::Split StreamReplies::split() const {
+  return {quantile_us(to_servo_, 0.5), quantile_us(to_servo_, 0.99), quantile_us(to_send_, 0.5),
+          quantile_us(to_send_, 0.99)};
+}
+
 void StreamReplies::run(const std::atomic<bool>& stop) {
+  to_servo_.assign(kBins, 0);  // before the loop: no allocation in it
+  to_send_.assign(kBins, 0);
   if (o_.sched_fifo)  // below the servo (80): the answer waits for nothing but the servo's tick
     if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note;
         !note.empty() && log_)
@@ -40,8 +66,10 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     exit_zero.reset();
     fenced.reset();
   };
+  bool waiting = false;  // a pose the servo has not rendered yet: looked for every 20 us, else 100 us
   while (!stop) {
-    std::this_thread::sleep_for(std::chrono::microseconds(100));
+    std::this_thread::sleep_for(std::chrono::microseconds(waiting ? 20 : 100));
+    waiting = false;
     const TransformDevice::PoseId p = device_.newest_pose();
     const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
     const servo::StallLook l = device_.look_force(now);
@@ -51,7 +79,10 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     if (!stall_zero && !stale_zero && p.sequence == answered) continue;
     const bool rendered = l.last_write_ns >= p.received_ns;
     // Force on: wait for the servo's answer to this pose (up to 2 ms); off: a zero at once.
-    if (!stall_zero && !stale_zero && l.on && !rendered && now - p.received_ns < 2'000'000) continue;
+    if (!stall_zero && !stale_zero && l.on && !rendered && now - p.received_ns < 2'000'000) {
+      waiting = true;
+      continue;
+    }
     if (!stale_zero) answered = p.sequence;
     // Zero unless on; in the tracker's frame (the registration's R^T): the client applies it there.
     const core::Vec3 f = stale_zero ? core::Vec3{} : device_.to_tracker_n(device_.echo().to_ras_n(l.force_n));
@@ -75,6 +106,11 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
       zero_sent = f.x == 0 && f.y == 0 && f.z == 0;
       replies_.fetch_add(1);
       stall_replies_.fetch_add(!stale_zero && !rendered);
+      if (rendered && !whole && p.received_ns > 0) {
+        const std::int64_t sent = TransformDevice::now_ns();
+        ++to_servo_[bin(l.last_write_ns - p.received_ns, kBins)];
+        ++to_send_[bin(sent - l.last_write_ns, kBins)];
+      }
     }
   }
   unfence();  // the last act: the stream client (PLUS holds the last Force it got) is left a zero

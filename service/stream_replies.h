@@ -15,6 +15,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
@@ -40,6 +41,12 @@ class StreamReplies {
   long replies() const { return replies_.load(); }  ///< Force replies sent
   /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
   long stall_replies() const { return stall_replies_.load(); }
+  /// Where a rendered reply's time went [us], for each reply the servo rendered: from the
+  /// pose's arrival to the servo's write, and from that write to the send. After run().
+  struct Split {
+    double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
+  };
+  Split split() const;
 
  private:
   TransformDevice& device_;
@@ -47,6 +54,10 @@ class StreamReplies {
   Target target_;
   std::function<void(const std::string&)> log_;
   std::atomic<long> replies_{0}, stall_replies_{0};
+  // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:
+  // beyond); the reply thread's own until run() returns.
+  static constexpr int kBins = 1000;
+  std::vector<long> to_servo_, to_send_;
 };
 
 }  // namespace isotouch::service

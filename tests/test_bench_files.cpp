@@ -127,18 +127,25 @@ TEST(BenchServe, VerdictsFollowTheFiguresAtTheirBounds) {
   BenchServePhase alone, traffic;
   alone.ticks = traffic.ticks = 10000;
   alone.missed = 4;  // limit 4 + 3 sqrt(4) = 10
-  traffic.answered = 100;
+  traffic.answered = 99;
+  traffic.poses = 100;
+  alone.answered = 989;
+  alone.poses = 1000;
   traffic.p99_us = 1000;
   traffic.missed = 10;
   auto v = bench_serve_verdicts(alone, traffic);
-  ASSERT_EQ(v.size(), 2u);
+  ASSERT_EQ(v.size(), 4u);
   EXPECT_NE(v[0].find("= 1000.0 us: target <= 1000 us met"), std::string::npos) << v[0];
-  EXPECT_NE(v[1].find("10 <= 4 without + 3 sqrt(4) = 10.0: met"), std::string::npos) << v[1];
+  EXPECT_NE(v[1].find("alone 989 of 1000 = 98.90 %: target >= 99 % NOT met"), std::string::npos) << v[1];
+  EXPECT_NE(v[2].find("with traffic 99 of 100 = 99.00 %: target >= 99 % met"), std::string::npos) << v[2];
+  EXPECT_NE(v[3].find("10 <= 4 without + 3 sqrt(4) = 10.0: met"), std::string::npos) << v[3];
   traffic.p99_us = 1000.5;
   traffic.missed = 11;
+  traffic.answered = 98;
   v = bench_serve_verdicts(alone, traffic);
   EXPECT_NE(v[0].find("NOT met"), std::string::npos) << v[0];
-  EXPECT_NE(v[1].find("NOT met"), std::string::npos) << v[1];
+  EXPECT_NE(v[2].find("NOT met"), std::string::npos) << v[2];
+  EXPECT_NE(v[3].find("NOT met"), std::string::npos) << v[3];
   traffic.answered = 0;  // nothing measured is never met
   traffic.p99_us = 0;
   EXPECT_NE(bench_serve_verdicts(alone, traffic)[0].find("none answered"), std::string::npos);

@@ -78,6 +78,7 @@ struct EditFigures {
   bool channel_section_drawn = false;
   std::string channel_section_note;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
+  std::string stl_units;           ///< drilled.stl's coordinates: "mm" or "m" (physical frame, LPS)
   std::string files_note;          ///< why a file was not written
   /// drilled.stl's mesh (io::extract_mesh: coincident vertices welded, zero-area triangles
   /// dropped; io::mesh_stats): closed when every edge is in exactly two triangles; its

@@ -219,6 +219,8 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"files_note", e.files_note},
           {"mesh", !e.mesh_measured ? nlohmann::ordered_json(nullptr)
                                     : nlohmann::ordered_json{{"file", e.stl_file},
+                                                             {"units", e.stl_units},
+                                                             {"space", "LPS"},
                                                              {"triangles", e.mesh_triangles},
                                                              {"zero_area_triangles_dropped", e.mesh_dropped_triangles},
                                                              {"closed", e.mesh_closed},
@@ -303,7 +305,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   md << "Files: `edits.csv` (one row per event)"
      << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
      << (e.nrrd_file.empty() ? std::string() : ", `" + e.nrrd_file + "` (the same as NRRD, for 3D Slicer)")
-     << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL)")
+     << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL, LPS in " + e.stl_units + ")")
      << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
   return md.str();
 }

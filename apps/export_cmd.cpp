@@ -2,6 +2,7 @@
 #include "isotouch/apps/export_cmd.h"
 
 #include "isotouch/apps/cli_checks.h"
+#include "isotouch/apps/mesh_units_option.h"
 #include "isotouch/core/exit_codes.h"
 
 #include <iostream>
@@ -19,12 +20,13 @@ Subcommand add_export_command(CLI::App& cli) {
   s.app->footer(
       "Usage: isotouch export (VOLUME | --scene SCENE) [--iso TAU --inside above|below]\n"
       "                  [--vdb OUT.vdb] [--volume OUT.nrrd|.mha|.nii|.nii.gz] [--stl OUT.stl] [--obj OUT.obj]\n"
-      "                  [--ply OUT.ply] [--adaptivity A]\n"
+      "                  [--ply OUT.ply] [--adaptivity A] [--mesh-units mm|m]\n"
       "VOLUME: .mhd/.mha, .nrrd/.nhdr, .nii/.nii.gz, .vdb (a FloatGrid; a level set means tau 0, inside below)\n"
       "or a DICOM series folder (its slices, in HU; with several series, the one with the most slices).\n"
       "The .vdb keeps every voxel exactly (transform = grid frame [m], direction + isosurface as metadata).\n"
-      "Meshes (OpenVDB volumeToMesh) are in the physical frame [m], triangles counter-clockwise seen from\n"
-      "outside. Every file is written whole or not at all (temp file, fsync, rename); a device, FIFO or '-'\n"
+      "Meshes (OpenVDB volumeToMesh) are in the physical frame (LPS) in millimetres (--mesh-units m: metres),\n"
+      "as the file's header says (SPACE=LPS UNITS=mm), triangles counter-clockwise seen from outside.\n"
+      "Every file is written whole or not at all (temp file, fsync, rename); a device, FIFO or '-'\n"
       "(standard output, the figures then go to stderr) is written as a stream; a folder is refused.\n"
       "Exit: 0 done, 1 error (names the file), 2 bad usage, 3 mesh written but not closed.\n"
       "Example: isotouch export data/ct-head-headsq/headsq_64x64x93_int16.mhd --iso 1150 --inside above "
@@ -45,6 +47,7 @@ Subcommand add_export_command(CLI::App& cli) {
   s.app->add_option("--stl", o->stl, "Write the isosurface as binary STL (3D printing)");
   s.app->add_option("--obj", o->obj, "Write the isosurface as Wavefront OBJ (with vertex normals)");
   s.app->add_option("--ply", o->ply, "Write the isosurface as binary little-endian PLY (with vertex normals)");
+  add_mesh_units_option(*s.app, o->mesh_units);
   s.app->add_option("--adaptivity", o->adaptivity, "volumeToMesh adaptivity in [0, 1]: 0 uniform, more = fewer triangles")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));

@@ -14,6 +14,7 @@
 #include "isotouch/run/live_run.h"
 #include "isotouch/apps/run_job.h"
 #include "isotouch/apps/cli_checks.h"
+#include "isotouch/apps/mesh_units_option.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/files.h"
 #include "isotouch/run/volume_scene.h"
@@ -160,7 +161,7 @@ int cmd_run_live(const RunInput& in, std::string out_dir, const std::string& dev
 }
 
 int cmd_run(const RunInput& in, std::string out_dir, const std::string& device, bool quiet,
-            const std::string& record_path) {
+            const std::string& record_path, io::MeshUnits mesh_units) {
   const io::Scene scene = run_input_scene(in, &out_dir, std::cout);
   const std::string& scene_path = in.path;
   if (out_dir.empty()) out_dir = (fs::path("out") / scene.name).string();
@@ -169,6 +170,7 @@ int cmd_run(const RunInput& in, std::string out_dir, const std::string& device, 
   opt.device = device;
   opt.progress = !quiet;
   opt.record_path = record_path;
+  opt.mesh_units = mesh_units;
   std::cout << "isotouch run: scene " << scene_path << " -> " << out_dir << "/\n";
   {
     const double dt = 1.0 / scene.hri.rate_hz;
@@ -229,6 +231,7 @@ Subcommand add_run_command(CLI::App& cli) {
     RunInput in;
     std::string out_dir, record_path, haptic = "sim", hand_path;
     bool quiet = false, live = false, allow_unstable = false;
+    io::MeshUnits mesh_units = io::MeshUnits::kMillimetre;
   };
   auto a = std::make_shared<Args>();
   auto* run = cli.add_subcommand("run", "Simulate a probe touching and stroking the isosurface of a scene; "
@@ -267,16 +270,21 @@ Subcommand add_run_command(CLI::App& cli) {
   run->add_option("--hand-path", a->hand_path,
                   "Write the scene's scripted hand (device frame, t_s,x_m,y_m,z_m every ms) to FILE for "
                   "isotouch-devemu --path, and exit");
+  add_mesh_units_option(*run, a->mesh_units)->description(
+      "Unit of drilled.stl's coordinates (a scene with edits; physical frame, LPS): mm (default, what 3D Slicer and "
+      "3D-printing slicers read) or m");
   run->footer(kSceneHelp);
   run->parse_complete_callback([a, run] {
     if (!a->live && run->count("--haptic") > 0)
       throw CLI::ValidationError("--haptic needs --live (a simulated run drives the scene's simulated device)");
+    if (a->live && run->count("--mesh-units") > 0)
+      throw CLI::ValidationError("--mesh-units is for drilled.stl, which a simulated run writes, not --live");
   });
   return {run, [a](const std::string& device) {
             if (!a->hand_path.empty())
               return write_hand_path(run_input_scene(a->in, nullptr, std::cout), a->hand_path, std::cout);
             if (a->live) return cmd_run_live(a->in, a->out_dir, device, a->quiet, a->record_path, a->haptic, a->allow_unstable);
-            return cmd_run(a->in, a->out_dir, device, a->quiet, a->record_path);
+            return cmd_run(a->in, a->out_dir, device, a->quiet, a->record_path, a->mesh_units);
           }};
 }
 

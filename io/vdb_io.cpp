@@ -1,6 +1,6 @@
-// vdb_io.cpp - OpenVDB in and out, and the isosurface as STL / OBJ / PLY.
-// The only translation unit besides openvdb_check.cpp that includes OpenVDB, and the only
-// one that includes Assimp (mesh file writers). See vdb_io.h for the frames and contracts.
+// vdb_io.cpp - OpenVDB in and out, and the isosurface as a mesh (its files: mesh_write.cpp).
+// The only translation unit besides openvdb_check.cpp that includes OpenVDB. See vdb_io.h
+// for the frames and contracts.
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/scan.h"
 
@@ -29,10 +29,6 @@
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #endif
-#ifdef ISOTOUCH_HAVE_ASSIMP
-#include <assimp/Exporter.hpp>
-#include <assimp/scene.h>
-#endif
 
 namespace isotouch::io {
 namespace {
@@ -41,11 +37,6 @@ namespace {
 // Atomic writes: temp file in the target's folder, fsync, rename over the target, fsync
 // the folder. A crash (SIGKILL, power loss after the rename's fsync) leaves the old file
 // or the new one, never a mix.
-
-std::string os_error(const std::string& path, const std::string& what) {
-  return path + ": " + what + ": " + std::strerror(errno);
-}
-
 
 /// Writes `path` whole or not at all through the one output writer (io/output_file.h):
 /// `write(tmp)` fills a fresh temp file, renamed over a regular file or copied into a
@@ -56,26 +47,6 @@ void write_atomically(const std::string& path, const std::function<void(const st
   } catch (const io::OutputError& e) {
     throw VdbError(e.what());
   }
-}
-
-/// Writes raw bytes to an existing (temp) file, checking every step.
-void write_bytes(const std::string& tmp, const void* data, std::size_t size) {
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_TRUNC | O_CLOEXEC);
-  if (fd < 0) throw VdbError(os_error(tmp, "cannot open for writing"));
-  const char* p = static_cast<const char*>(data);
-  while (size > 0) {
-    const ssize_t n = ::write(fd, p, size);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      const int err = errno;
-      ::close(fd);
-      errno = err;
-      throw VdbError(os_error(tmp, "write failed"));
-    }
-    p += n;
-    size -= std::size_t(n);
-  }
-  if (::close(fd) != 0) throw VdbError(os_error(tmp, "close failed"));
 }
 
 [[maybe_unused]] void require_openvdb(const std::string& path) {
@@ -513,98 +484,6 @@ MeshStats mesh_stats(const Mesh& m) {
     if (n >= 3) ++s.nonmanifold_edges;
   }
   return s;
-}
-
-// Mesh files through Assimp's exporters (Debian libassimp-dev): a well-kept library rather
-// than our own writers. The scene is built in memory, exported to a memory blob, and the
-// blob written atomically (Assimp's own file output is not atomic).
-namespace {
-#ifdef ISOTOUCH_HAVE_ASSIMP
-/// One mesh, one default material, one root node. `soup`: 3 vertices per triangle with the
-/// triangle's exact normal (STL); else shared vertices with area-weighted vertex normals.
-std::unique_ptr<aiScene> to_assimp(const Mesh& m, bool soup) {
-  auto scene = std::make_unique<aiScene>();
-  scene->mRootNode = new aiNode();
-  scene->mRootNode->mNumMeshes = 1;
-  scene->mRootNode->mMeshes = new unsigned[1]{0};
-  scene->mNumMaterials = 1;
-  scene->mMaterials = new aiMaterial*[1]{new aiMaterial()};
-  scene->mNumMeshes = 1;
-  auto* am = new aiMesh();
-  scene->mMeshes = new aiMesh*[1]{am};
-  am->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
-  am->mMaterialIndex = 0;
-  const std::size_t nt = m.triangles.size();
-  const std::size_t nv = soup ? 3 * nt : m.vertices.size();
-  am->mNumVertices = unsigned(nv);
-  am->mVertices = new aiVector3D[nv];
-  am->mNormals = new aiVector3D[nv];
-  for (std::size_t i = 0; i < nv && !soup; ++i) {
-    am->mVertices[i] = aiVector3D(float(m.vertices[i][0]), float(m.vertices[i][1]), float(m.vertices[i][2]));
-    am->mNormals[i] = aiVector3D(0, 0, 0);
-  }
-  am->mNumFaces = unsigned(nt);
-  am->mFaces = new aiFace[nt];
-  for (std::size_t f = 0; f < nt; ++f) {
-    const auto& t = m.triangles[f];
-    const auto& a = m.vertices[t[0]];
-    const auto& b = m.vertices[t[1]];
-    const auto& c = m.vertices[t[2]];
-    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double n[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};  // 2 x area
-    aiFace& face = am->mFaces[f];
-    face.mNumIndices = 3;
-    face.mIndices = new unsigned[3];
-    if (soup) {
-      const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      const aiVector3D normal = len > 0 ? aiVector3D(float(n[0] / len), float(n[1] / len), float(n[2] / len)) : aiVector3D(0, 0, 0);
-      for (unsigned k = 0; k < 3; ++k) {
-        const auto& p = m.vertices[t[k]];
-        am->mVertices[3 * f + k] = aiVector3D(float(p[0]), float(p[1]), float(p[2]));
-        am->mNormals[3 * f + k] = normal;
-        face.mIndices[k] = unsigned(3 * f + k);
-      }
-    } else {
-      for (unsigned k = 0; k < 3; ++k) {
-        face.mIndices[k] = t[k];
-        am->mNormals[t[k]] += aiVector3D(float(n[0]), float(n[1]), float(n[2]));
-      }
-    }
-  }
-  for (std::size_t i = 0; i < nv && !soup; ++i) am->mNormals[i].NormalizeSafe();
-  return scene;
-}
-
-void export_mesh(const Mesh& m, const std::string& path, const char* format, bool soup) {
-  if (m.triangles.empty()) throw VdbError(path + ": the mesh is empty (no surface at this isovalue?), nothing written");
-  const auto scene = to_assimp(m, soup);
-  Assimp::Exporter exporter;
-  const aiExportDataBlob* blob = exporter.ExportToBlob(scene.get(), format, 0u);
-  if (!blob) throw VdbError(path + ": Assimp's '" + format + "' exporter failed: " + exporter.GetErrorString());
-  write_atomically(path, [&](const std::string& tmp) { write_bytes(tmp, blob->data, blob->size); });
-}
-#else
-void export_mesh(const Mesh&, const std::string& path, const char*, bool) {
-  throw VdbError(path + ": built without Assimp (Debian: libassimp-dev), mesh files unavailable");
-}
-#endif
-}  // namespace
-
-void write_stl_binary(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "stlb", true); }
-void write_obj(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "objnomtl", false); }
-void write_ply(const Mesh& mesh, const std::string& path) { export_mesh(mesh, path, "plyb", false); }
-
-std::string mesh_format(const std::string& path) {
-  const std::string ext = lower_extension(path);
-  return ext == ".stl" || ext == ".obj" || ext == ".ply" ? ext.substr(1) : "";
-}
-
-void write_mesh(const Mesh& mesh, const std::string& path) {
-  const std::string f = mesh_format(path);
-  if (f == "stl") write_stl_binary(mesh, path);
-  else if (f == "obj") write_obj(mesh, path);
-  else if (f == "ply") write_ply(mesh, path);
-  else throw VdbError(path + ": unknown mesh format: the name must end in .stl (binary STL), .obj or .ply");
 }
 
 bool volume_writable(const std::string& path) { return lower_extension(path) == ".vdb" || itk_writable(path); }

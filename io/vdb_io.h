@@ -6,9 +6,9 @@
 // Frames. The .vdb transform holds the *grid-world* frame [m] (core/grid.h): index (i, j, k)
 // -> origin + spacing * (i, j, k), a scale + translation, which every OpenVDB tool reads;
 // the volume's direction matrix D (engine::Volume) travels in the grid's metadata. Meshes
-// are written in the *physical* frame [m] (origin + D (world - origin)), the frame every
-// point shown to a user is in; with D = identity (all synthetic volumes, MetaImage/NRRD in
-// LPS without rotation) the two coincide.
+// are made in the *physical* frame [m] (origin + D (world - origin)), ITK's LPS, the frame
+// every point shown to a user is in, and written in it in millimetres (io/mesh_units.h); with
+// D = identity (all synthetic volumes, MetaImage/NRRD in LPS without rotation) the two coincide.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -19,6 +19,7 @@
 
 #include "isotouch/core/isosurface.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/io/mesh_units.h"
 #include "isotouch/io/volume_io.h"
 
 namespace isotouch::io {
@@ -149,21 +150,29 @@ struct MeshStats {
 MeshStats mesh_stats(const Mesh& mesh);
 
 /// Mesh writers, each atomic (temp file in the same folder + fsync + rename), through
-/// Assimp's exporters ("stlb", "objnomtl", "plyb"). Coordinates as float32 [m].
+/// Assimp's exporters ("stlb", "objnomtl", "plyb"). Coordinates as float32 in the physical
+/// frame (LPS) in `units`: millimetres by default, as 3D Slicer and 3D-printing slicers read
+/// them; metres on request. The file says both where its format has room for text, in the
+/// words 3D Slicer looks for ("SPACE=LPS"): binary STL's 80-byte header, the first line of
+/// the OBJ ("# ..."), a PLY "comment" line.
 /// Binary STL (little-endian, 3D printing: one facet normal per triangle, the exact
 /// right-hand normal of its vertices); OBJ (text, no material file: v, vn, f); PLY
 /// (binary little-endian: vertex x y z nx ny nz float, face vertex_indices).
 /// @throws VdbError naming the path and the problem.
-void write_stl_binary(const Mesh& mesh, const std::string& path);
-void write_obj(const Mesh& mesh, const std::string& path);
-void write_ply(const Mesh& mesh, const std::string& path);
+void write_stl_binary(const Mesh& mesh, const std::string& path, MeshUnits units = MeshUnits::kMillimetre);
+void write_obj(const Mesh& mesh, const std::string& path, MeshUnits units = MeshUnits::kMillimetre);
+void write_ply(const Mesh& mesh, const std::string& path, MeshUnits units = MeshUnits::kMillimetre);
+
+/// The text a mesh file carries about its frame and unit, e.g.
+/// "isotouch mesh SPACE=LPS UNITS=mm" (what the writers above put in the header).
+std::string mesh_header_text(MeshUnits units);
 
 /// The mesh format a name asks for: "stl", "obj" or "ply" (its extension, any case), else "".
 std::string mesh_format(const std::string& path);
 
 /// Writes `mesh` in the format its name asks for (mesh_format): binary STL, OBJ or PLY.
 /// @throws VdbError naming the path and the names taken for any other name, before writing.
-void write_mesh(const Mesh& mesh, const std::string& path);
+void write_mesh(const Mesh& mesh, const std::string& path, MeshUnits units = MeshUnits::kMillimetre);
 
 /// Test helpers: .vdb files made with OpenVDB itself, so tests need not include OpenVDB.
 enum class TestVdb {

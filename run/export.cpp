@@ -87,15 +87,17 @@ Input load_input(const ExportOptions& o, std::ostream& err) {
   return in;
 }
 
-void print_mesh(const MeshStats& s, std::ostream& out) {
+/// The mesh's figures; its bounds in the files' unit `u`, so they read as the files do.
+void print_mesh(const MeshStats& s, io::MeshUnits u, std::ostream& out) {
+  const double k = io::units_per_metre(u);
   char line[512];
   std::snprintf(line, sizeof line,
                 "mesh        %zu triangles, %zu vertices\n"
                 "area        %.6g m^2 (%.6g cm^2)\n"
                 "volume      %.6g m^3 (%.6g cm^3) enclosed, signed (> 0: normals point out)\n"
-                "bounds      [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] m (physical frame)\n",
+                "bounds      [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] %s (physical frame, LPS, as in the files)\n",
                 s.triangles, s.vertices, s.area_m2, s.area_m2 * 1e4, s.signed_volume_m3, s.signed_volume_m3 * 1e6,
-                s.min[0], s.max[0], s.min[1], s.max[1], s.min[2], s.max[2]);
+                s.min[0] * k, s.max[0] * k, s.min[1] * k, s.max[1] * k, s.min[2] * k, s.max[2] * k, io::to_string(u));
   out << line;
   if (s.closed())
     out << "closed      yes (each of " << s.edges << " edges in exactly 2 triangles)\n";
@@ -229,7 +231,7 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
   const Mesh mesh = extract_mesh(v, *iso, o.adaptivity);
   err << "export: meshed in " << seconds_since(tm) << " s\n";
   const MeshStats st = mesh_stats(mesh);
-  print_mesh(st, out);
+  print_mesh(st, o.mesh_units, out);
   if (mesh.welded_vertices || mesh.dropped_triangles)
     out << "cleaned     " << mesh.welded_vertices << " coincident vertices welded, " << mesh.dropped_triangles
         << " zero-area triangles dropped\n";
@@ -238,13 +240,13 @@ int run_export(const ExportOptions& o, std::ostream& out_stream, std::ostream& e
         << ") does not cross the volume (values " << v.min_value << " to " << v.max_value << "): no mesh written\n";
     return 2;
   }
-  const std::pair<const std::string*, void (*)(const Mesh&, const std::string&)> writers[] = {
+  const std::pair<const std::string*, void (*)(const Mesh&, const std::string&, io::MeshUnits)> writers[] = {
       {&o.stl, write_stl_binary}, {&o.obj, write_obj}, {&o.ply, write_ply}};
   for (const auto& [path, write] : writers) {
     if (path->empty()) continue;
     const auto t = std::chrono::steady_clock::now();
     err << "export: writing " << *path << "\n";
-    write(mesh, *path);
+    write(mesh, *path, o.mesh_units);
     out << "wrote       " << *path << " " << written_text(*path, seconds_since(t)) << "\n";
   }
   if (!st.closed()) {

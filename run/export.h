@@ -5,6 +5,7 @@
 #include <ostream>
 #include <string>
 
+#include "isotouch/io/mesh_units.h"
 
 namespace isotouch::run {
 
@@ -17,13 +18,15 @@ struct ExportOptions {
   std::string vdb, stl, obj, ply;     ///< outputs ("" = not written)
   std::string volume_out;             ///< --volume: .mha / .nrrd / .nii / .nii.gz through ITK ("" = not written)
   double adaptivity = 0;              ///< volumeToMesh adaptivity in [0, 1]
+  io::MeshUnits mesh_units = io::MeshUnits::kMillimetre;  ///< --mesh-units: the meshes' coordinates, mm or m
 };
 
 /// Runs the export: loads the volume, resolves the isosurface (--iso/--inside, else the
 /// scene's, else the .vdb's suggestion: level set -> tau 0 inside below, or save_vdb's
 /// metadata, else the isovalue the volume opens at: engine::choose_isovalue, its rule printed
-/// on the isosurface line), writes each requested output atomically, prints the mesh figures (triangles,
-/// vertices, area [m^2], enclosed volume [m^3], closedness) on `out` and progress on `err`.
+/// on the isosurface line), writes each requested output atomically (meshes in the physical
+/// frame, LPS, in options.mesh_units), prints the mesh figures (triangles, vertices, size [mm],
+/// area [m^2], enclosed volume [m^3], closedness) on `out` and progress on `err`.
 /// @return 0 on success; 2 on bad usage (no input or both, no output, no isosurface for a
 ///         mesh with --iso or --inside alone and nothing to complete it, bad --inside); 3 when a mesh was written but is not closed.
 /// @throws VdbError / VolumeError / SceneError naming the file and the problem.

@@ -78,6 +78,7 @@ struct EditFigures {
   bool channel_section_drawn = false;
   std::string channel_section_note;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
+  std::string stl_units;           ///< drilled.stl's coordinates: "mm" or "m" (physical frame, LPS)
   std::string files_note;          ///< why a file was not written
   /// drilled.stl's mesh (io::extract_mesh: coincident vertices welded, zero-area triangles
   /// dropped; io::mesh_stats): closed when every edge is in exactly two triangles; its
@@ -142,9 +143,13 @@ struct RunMetrics {
   double surface_err_rms_m = 0, surface_err_max_m = 0;
   long surface_err_not_found_ticks = 0;  ///< contact ticks with no surface within the radius
   double surface_search_radius_m = 0;
-  /// The old first-order estimate |f - tau| / |grad f| (unbounded where the field is
-  /// flat), kept beside the true distance to show the difference.
+  /// The old first-order estimate |f - tau| / |grad f|, kept beside the true distance to
+  /// show the difference, over the contact ticks where it is a distance at all: finite and
+  /// at most first_order_bound_m, the volume's diagonal (where |grad f| is near 0 it grows
+  /// without bound). The ticks left out are counted; both figures 0 when none is kept.
   double first_order_err_rms_m = 0, first_order_err_max_m = 0;
+  long first_order_kept_ticks = 0, first_order_left_out_ticks = 0;
+  double first_order_bound_m = 0;  ///< the volume's diagonal [m]
   std::string orientation;               ///< e.g. "LPS" (engine::Volume::orientation)
   std::array<double, 9> direction{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major D
   std::size_t nan_voxels = 0, inf_voxels = 0;

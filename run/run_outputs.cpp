@@ -269,8 +269,8 @@ void mesh_figures(const io::Mesh& mesh, const engine::Volume& after, EditFigures
 
 // The edited volume (.vdb, .nrrd) and its isosurface (.stl) as the scene asks; a failure is
 // said in e.files_note, never fatal.
-void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::string& dir, EditFigures& e,
-                        std::ostream& log) {
+void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::string& dir, io::MeshUnits mesh_units,
+                        EditFigures& e, std::ostream& log) {
   const engine::Volume& after = setup.session->volume();
   try {
     if (scene.edits.write_vdb) {
@@ -286,8 +286,9 @@ void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::
     }
     if (scene.edits.write_stl) {
       const io::Mesh mesh = extract_mesh(after, setup.live.iso);
-      write_stl_binary(mesh, (fs::path(dir) / "drilled.stl").string());
+      write_stl_binary(mesh, (fs::path(dir) / "drilled.stl").string(), mesh_units);
       e.stl_file = "drilled.stl";
+      e.stl_units = io::to_string(mesh_units);
       mesh_figures(mesh, after, e, log);
     }
   } catch (const std::exception& x) {
@@ -347,13 +348,13 @@ void edit_pictures(const Scene& scene, const SceneSetup& setup, const std::vecto
 }  // namespace
 
 void finish_edits(const Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
-                  const std::string& dir, RunMetrics& m, std::ostream& log) {
+                  const std::string& dir, io::MeshUnits mesh_units, RunMetrics& m, std::ostream& log) {
   EditFigures& e = m.edits;
   edit_figures(setup, d, trace, e);
   if (scene.edits.brush.kind == "drill") drill_figures(scene, setup, trace, setup.session->volume(), dir, e, log);
   log_edits(e, log);
   write_file_atomic((fs::path(dir) / "edits.csv").string(), edits_csv(d.rows, setup.volume));
-  write_edited_files(scene, setup, dir, e, log);
+  write_edited_files(scene, setup, dir, mesh_units, e, log);
   if (scene.draw_plots) edit_pictures(scene, setup, trace, dir, m.picture_drawn, e, log);
 }
 

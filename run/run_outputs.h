@@ -22,8 +22,9 @@ bool draw_plots(const io::Scene& scene, const std::string& dir, const sim::Touch
 // tests: a 6000-tick path takes minutes on lavapipe); the tick of the largest force kept.
 std::vector<sim::TraceRow> thin_path(const std::vector<sim::TraceRow>& trace);
 
-// The figures, files and pictures of a run with edits, into m.edits.
+// The figures, files and pictures of a run with edits, into m.edits; drilled.stl's
+// coordinates in `mesh_units` (physical frame, LPS).
 void finish_edits(const io::Scene& scene, SceneSetup& setup, const EditDriver& d, const std::vector<sim::TraceRow>& trace,
-                  const std::string& dir, RunMetrics& m, std::ostream& log);
+                  const std::string& dir, io::MeshUnits mesh_units, RunMetrics& m, std::ostream& log);
 
 }  // namespace isotouch::run

@@ -219,6 +219,8 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"files_note", e.files_note},
           {"mesh", !e.mesh_measured ? nlohmann::ordered_json(nullptr)
                                     : nlohmann::ordered_json{{"file", e.stl_file},
+                                                             {"units", e.stl_units},
+                                                             {"space", "LPS"},
                                                              {"triangles", e.mesh_triangles},
                                                              {"zero_area_triangles_dropped", e.mesh_dropped_triangles},
                                                              {"closed", e.mesh_closed},
@@ -303,7 +305,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   md << "Files: `edits.csv` (one row per event)"
      << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
      << (e.nrrd_file.empty() ? std::string() : ", `" + e.nrrd_file + "` (the same as NRRD, for 3D Slicer)")
-     << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL)")
+     << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL, LPS in " + e.stl_units + ")")
      << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
   return md.str();
 }
@@ -410,6 +412,21 @@ nlohmann::ordered_json contact_json(const RunMetrics& m, const servo::HriParams&
           {"edit_ripple_ticks", m.ripple_ticks}};
 }
 
+// The first-order estimate beside the true distance, on the ticks where it is a distance
+// (finite, within the volume's diagonal); the ticks left out and why.
+std::string first_order_sentence(const RunMetrics& m) {
+  const std::string why = "|grad f| near 0 made it infinite or longer than the volume's diagonal (" +
+                          fmt(m.first_order_bound_m * 1e3, 4) + " mm), no distance";
+  if (m.first_order_kept_ticks == 0)
+    return "The first-order estimate |f - tau| / |grad f| is left out: on every contact tick " + why + ".";
+  std::string s = "The first-order estimate |f - tau| / |grad f| would have said RMS " +
+                  fmt(m.first_order_err_rms_m * 1e3, 4) + " mm, max " + fmt(m.first_order_err_max_m * 1e3, 4) + " mm";
+  if (m.first_order_left_out_ticks > 0)
+    s += " on " + std::to_string(m.first_order_kept_ticks) + " contact ticks (" +
+         std::to_string(m.first_order_left_out_ticks) + " left out: " + why + ")";
+  return s + ".";
+}
+
 // summary.json "error": the VHIP's true distance from the isosurface (and from the unfiltered
 // data's), and the first-order estimate beside it; null where nothing was measured.
 nlohmann::ordered_json error_json(const RunMetrics& m, const servo::HriParams& hp, long found, long raw_found) {
@@ -435,10 +452,13 @@ nlohmann::ordered_json error_json(const RunMetrics& m, const servo::HriParams& h
             {"max", or_null(m.has_unfiltered && raw_found > 0, m.unfiltered_err_max_m)},
             {"method", "with filters in the pass list: true distance from the VHIP to the isosurface of the "
                        "unfiltered data (gradient only); null without filters"}}},
-          {"first_order_estimate_m", {{"rms", or_null(m.contact_ticks > 0, m.first_order_err_rms_m)},
-                                      {"max", or_null(m.contact_ticks > 0, m.first_order_err_max_m)},
+          {"first_order_estimate_m", {{"rms", or_null(m.first_order_kept_ticks > 0, m.first_order_err_rms_m)},
+                                      {"max", or_null(m.first_order_kept_ticks > 0, m.first_order_err_max_m)},
+                                      {"ticks_left_out", m.first_order_left_out_ticks},
+                                      {"bound_m", m.first_order_bound_m},
                                       {"method", "|f(VHIP) - tau| / |grad f(VHIP)|: not a distance, unbounded "
-                                                 "where the field is flat; shown for comparison only"}}}};
+                                                 "where the field is flat; shown for comparison only, on the contact "
+                                                 "ticks where it is finite and at most bound_m (the volume's diagonal)"}}}};
 }
 
 // summary.json "script": the contact point and normal (physical), the phases, stroke and lift-off.
@@ -635,8 +655,7 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
      << " stayed within " << fmt(m.surface_err_max_m * 1e3, 4)
      << " mm of the trilinear isosurface (RMS " << fmt(m.surface_err_rms_m * 1e3, 4) << " mm) on the "
      << m.contact_ticks - m.surface_err_not_found_ticks << " contact ticks where a surface was found. "
-     << "The first-order estimate |f - tau| / |grad f| would have said RMS " << fmt(m.first_order_err_rms_m * 1e3, 4)
-     << " mm, max " << fmt(m.first_order_err_max_m * 1e3, 4) << " mm.\n\n";
+     << first_order_sentence(m) << "\n\n";
   if (with_edits) md << edits_markdown(m.edits, scene);
   md << engine_markdown(m);
   if (m.picture_drawn)

@@ -202,7 +202,7 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, const RunF
     else log << "picture  surface.png, up: " << pic.up << "\n";
   }
   throw_if_stop_requested("outputs (trace, plots and picture written)");
-  if (edits) finish_edits(scene, setup, *edits, trace, dir, m, log);
+  if (edits) finish_edits(scene, setup, *edits, trace, dir, opt.mesh_units, m, log);
   throw_if_stop_requested("outputs (all but summary.json and report.md written)");
 
   const std::string summary_text = summary_json(scene, setup, m, found, raw_found, edits.has_value()).dump(2) + "\n";

@@ -12,6 +12,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_field.h"
 #include "isotouch/engine/passes.h"
+#include "isotouch/io/mesh_units.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/run_metrics.h"
 #include "isotouch/io/scene.h"
@@ -37,6 +38,8 @@ struct RunOptions {
   /// `run --record FILE`: also write the recording (io/record.h: every device input,
   /// button and edit with its tick and time, and the forces) to this file; "" = none.
   std::string record_path;
+  /// `run --mesh-units`: the unit of drilled.stl's coordinates (physical frame, LPS).
+  io::MeshUnits mesh_units = io::MeshUnits::kMillimetre;
 };
 
 /// The scene's pass list as engine passes (engine.passes), checked with

@@ -15,7 +15,7 @@ namespace {
 
 /// Sums over the contact ticks, turned into RMS figures at the end.
 struct ContactSums {
-  double err2 = 0, fo2 = 0, raw2 = 0, fsum = 0;
+  double err2 = 0, fo2 = 0, raw2 = 0, fsum = 0;  // fo2: over the ticks where it is a distance
   long found = 0, raw_found = 0;
 };
 
@@ -74,10 +74,22 @@ bool vhip_inside(const core::SampleField& field, const core::Isosurface& iso, co
   return iso.contains(core::FieldView(field).value(r.vhip_m));
 }
 
+/// One contact tick's first-order estimate into the figures where it is a distance; counted
+/// as left out where it is not.
+void add_first_order(double fo, RunMetrics& m, ContactSums& s) {
+  const std::optional<double> d = first_order_as_distance(fo, m.first_order_bound_m);
+  if (!d) {
+    ++m.first_order_left_out_ticks;
+    return;
+  }
+  ++m.first_order_kept_ticks;
+  s.fo2 += *d * *d;
+  m.first_order_err_max_m = std::max(m.first_order_err_max_m, *d);
+}
+
 /// One contact tick's surface error (true distance, first-order estimate) into the figures.
 void add_error(SurfaceDistance d, double fo, bool inside, double r, RunMetrics& m, ContactSums& s) {
   if (d.found) d.distance_m = tool_error(d.distance_m, inside, r);
-  fo = tool_error(fo, inside, r);
   m.surface_search_radius_m = std::max(m.surface_search_radius_m, d.searched_radius_m);
   if (d.found) {
     ++s.found;
@@ -86,8 +98,7 @@ void add_error(SurfaceDistance d, double fo, bool inside, double r, RunMetrics& 
   } else {
     ++m.surface_err_not_found_ticks;
   }
-  s.fo2 += fo * fo;
-  m.first_order_err_max_m = std::max(m.first_order_err_max_m, fo);
+  add_first_order(tool_error(fo, inside, r), m, s);
 }
 
 /// The VHIP's distance from the unfiltered data's isosurface on one contact tick.
@@ -207,12 +218,29 @@ void DirectionSteps::add(double t_s, bool contact, const core::Vec3& force_n) {
 
 double DirectionSteps::rms_deg() const { return pairs ? std::sqrt(sum2_ / double(pairs)) : 0.0; }
 
+namespace {
+
+/// The length of the volume's box [m], corner to corner.
+double volume_diagonal_m(const engine::Volume& v) {
+  const double x = v.grid.dims[0] * v.grid.spacing_m.x, y = v.grid.dims[1] * v.grid.spacing_m.y,
+               z = v.grid.dims[2] * v.grid.spacing_m.z;
+  return std::sqrt(x * x + y * y + z * z);
+}
+
+}  // namespace
+
+std::optional<double> first_order_as_distance(double estimate_m, double bound_m) {
+  if (!std::isfinite(estimate_m) || !(estimate_m <= bound_m)) return std::nullopt;
+  return estimate_m;
+}
+
 std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, const SceneSetup& setup,
                                     const EditDriver* edits, RunMetrics& m) {
   const double tau = setup.hri.tau, tool_r = setup.hri.tool_radius_m;
   const core::Isosurface iso = setup.live.iso;
   const core::SampleField& truth = *setup.truth;
   m.ticks = long(trace.size());
+  m.first_order_bound_m = volume_diagonal_m(setup.volume);
   ContactSums s;
   DirectionSteps dirs;
   const std::optional<core::SampleField> unfiltered = unfiltered_field(setup, m);
@@ -249,8 +277,8 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
   tick_times(trace, m);
   if (m.contact_ticks) {
     m.mean_contact_force_n = s.fsum / double(m.contact_ticks);
-    m.first_order_err_rms_m = std::sqrt(s.fo2 / double(m.contact_ticks));
   }
+  if (m.first_order_kept_ticks) m.first_order_err_rms_m = std::sqrt(s.fo2 / double(m.first_order_kept_ticks));
   if (s.found) m.surface_err_rms_m = std::sqrt(s.err2 / double(s.found));
   m.force_dir_step_rms_deg = dirs.rms_deg();
   m.force_dir_step_max_deg = dirs.max_deg;

@@ -1,6 +1,7 @@
 // trace_figures.h - the figures of a run's ticks: tick times, contact forces and their
 // steps, the stroke and lift-off, and the VHIP's true distance from the isosurface.
 #pragma once
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -27,6 +28,11 @@ struct DirectionSteps {
   core::Vec3 last_{};
   bool have_last_ = false;
 };
+
+/// The first-order estimate |f - tau| / |grad f| [m] as a distance: itself when finite and at
+/// most `bound_m` (the volume's diagonal, farther than any point of the volume is from a
+/// surface in it), else nullopt: where |grad f| is near 0 it is no distance at all.
+std::optional<double> first_order_as_distance(double estimate_m, double bound_m);
 
 // The trace's figures into `m`: tick times, contact forces and their steps, the stroke and
 // lift-off, and the VHIP's surface error (against the edited volume a tick read, with edits).

@@ -136,8 +136,14 @@ expect(export_ply_named_xyz 2 "--ply ${OUT}/y.xyz: the name must end in .ply; no
 # refuse with exit 2 naming the empty mesh).
 expect(export_iso_nan 2 "--iso: must be a finite number \\(the isovalue in the volume's units.*\\), got nan"
        export ${head} --iso nan --inside above --stl ${OUT}/nan.stl)
+# Mesh units are mm or m, nothing else (a usage error naming the value, nothing written).
+expect(export_mesh_units_cm 2 "--mesh-units: must be mm or m, got cm"
+       export ${head} --iso 1150 --inside above --stl ${OUT}/cm.stl --mesh-units cm)
+expect(run_mesh_units_live 2 "--mesh-units is for drilled.stl, which a simulated run writes, not --live"
+       run ${head} --live --mesh-units m)
 file(READ ${OUT}/keep.obj kept)
-if(NOT kept STREQUAL "kept\n" OR EXISTS ${OUT}/y.nrrd OR EXISTS ${OUT}/y.xyz OR EXISTS ${OUT}/nan.stl)
+if(NOT kept STREQUAL "kept\n" OR EXISTS ${OUT}/y.nrrd OR EXISTS ${OUT}/y.xyz OR EXISTS ${OUT}/nan.stl
+   OR EXISTS ${OUT}/cm.stl)
   set(failures "${failures}\n[export names] an output was written or clobbered")
 endif()
 

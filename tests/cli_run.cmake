@@ -88,10 +88,22 @@ endif()
 if(NOT nf EQUAL 0 OR NOT err MATCHES "^[0-9]" OR err GREATER 0.005)
   message(FATAL_ERROR "error.surface_distance_m.max = ${err} m, ${nf} ticks without a surface")
 endif()
+# The first-order estimate |f - tau| / |grad f| beside it is shown only where it is a
+# distance: no figure beyond the longest distance in a volume isotouch reads (extents above
+# 10 m are refused: 10 m x sqrt(3) = 17.33 m) in summary.json or report.md.
+string(JSON fo_max GET "${js}" error first_order_estimate_m max)
+if(fo_max MATCHES "^[0-9]" AND fo_max GREATER 17.33)
+  message(FATAL_ERROR "error.first_order_estimate_m.max = ${fo_max} m: not a distance in a volume")
+endif()
+file(READ ${OUT}/report.md md)
+if(md MATCHES "first-order estimate [^\n]* said RMS ([^ ]+) mm, max ([^ ]+) mm")
+  if(CMAKE_MATCH_1 GREATER 17330 OR CMAKE_MATCH_2 GREATER 17330)
+    message(FATAL_ERROR "report.md: first-order estimate RMS ${CMAKE_MATCH_1} mm, max ${CMAKE_MATCH_2} mm: not a distance in a volume")
+  endif()
+endif()
 if(NOT orient MATCHES "^[LRPASI][LRPASI][LRPASI]$" OR NOT ndir EQUAL 9)
   message(FATAL_ERROR "volume.orientation = '${orient}', direction with ${ndir} entries")
 endif()
-file(READ ${OUT}/report.md md)
 if(NOT md MATCHES "largest force step in contact" OR NOT md MATCHES "largest release step" OR
    NOT md MATCHES "largest force step, any ticks" OR NOT md MATCHES "\\| orientation \\|")
   message(FATAL_ERROR "report.md lacks the force step or the orientation")

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Every relative link in README.md and docs/*.md resolves, and README.md stays short.
+"""Every relative link in README.md and docs/*.md resolves, README.md stays short, and
+the README's commands (`isotouch ...`) come after its line that puts build/bin on the PATH.
 
 A link [text](target) or image ![alt](target) outside code is checked when its target is
 relative: the file or folder must exist (relative to the linking file), and a #anchor must
@@ -100,6 +101,29 @@ def check_file(path):
     return errors
 
 
+PATH_LINE = "export PATH=$PWD/build/bin:$PATH"
+PROGRAM = re.compile(r"(^|[\s`&|;(])isotouch(-sculpt|-devemu)? ")
+
+
+def readme_commands_on_path(lines):
+    """The README's commands name the programs plainly (`isotouch run ...`): each command,
+    a code block's line or a table's last cell, must come after the line that puts
+    build/bin on the PATH."""
+    errors = []
+    path_at = next((i for i, l in enumerate(lines, 1) if l.strip() == PATH_LINE), None)
+    in_code = False
+    for i, line in enumerate(lines, 1):
+        if line.startswith("```"):
+            in_code = not in_code
+            continue
+        command = line if in_code else (line.rstrip().rstrip("|").rsplit("|", 1)[-1] if line.startswith("|") else "")
+        if not PROGRAM.search(command.split("#")[0]):
+            continue
+        if path_at is None or i < path_at:
+            errors.append("README.md:%d: '%s' runs before build/bin is on the PATH (%s)" % (i, line.strip()[:60], PATH_LINE))
+    return errors
+
+
 def main():
     root = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), ".."))
     os.chdir(root)
@@ -109,6 +133,8 @@ def main():
         errors += check_file(f)
     with open("README.md", encoding="utf-8") as f:
         n = len(f.read().splitlines())
+    with open("README.md", encoding="utf-8") as f:
+        errors += readme_commands_on_path(f.read().splitlines())
     if n > README_MAX_LINES:
         errors.append("README.md: %d lines, more than %d: move the details into docs/" % (n, README_MAX_LINES))
     for e in errors:

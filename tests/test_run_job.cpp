@@ -512,7 +512,8 @@ std::string sphere40(const std::string& name) {
 }
 
 /// Runs a scene given as JSON text (written to DIR/scene.json) into DIR/out.
-RunMetrics run_text(const fs::path& dir, const std::string& json) {
+RunMetrics run_text(const fs::path& dir, const std::string& json,
+                    isotouch::io::MeshUnits mesh_units = isotouch::io::MeshUnits::kMillimetre) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   std::ofstream(dir / "scene.json") << json;
@@ -520,6 +521,7 @@ RunMetrics run_text(const fs::path& dir, const std::string& json) {
   isotouch::run::RunOptions opt;
   opt.out_dir = (dir / "out").string();
   opt.progress = false;
+  opt.mesh_units = mesh_units;
   std::ostringstream log;
   return isotouch::run::run_scene(sc, opt, log);
 }
@@ -586,11 +588,13 @@ TEST(RunJob, SurfaceErrorWithAToolIsThatOfItsSurface) {
 
 namespace {
 /// drilled.stl read back on its own (binary STL: 80-byte header, count, 50 bytes a facet):
-/// its triangles, whether each edge (vertices welded by exact float position) is in exactly
-/// two triangles, zero-area triangles, and the enclosed volume (divergence theorem) [m^3].
+/// its header's text, its triangles, whether each edge (vertices welded by exact float
+/// position) is in exactly two triangles, zero-area triangles, and the enclosed volume
+/// (divergence theorem) in the file's units cubed.
 struct StlFigures {
+  std::string header;
   std::size_t triangles = 0, zero_area = 0, open_edges = 0;
-  double volume_m3 = 0;
+  double volume = 0;
 };
 StlFigures read_stl(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
@@ -599,6 +603,7 @@ StlFigures read_stl(const fs::path& path) {
   in.read(header, 80);
   in.read(reinterpret_cast<char*>(&n), 4);
   StlFigures f;
+  f.header.assign(header, std::find(header, header + 80, '\0'));
   f.triangles = n;
   std::map<std::array<float, 3>, std::uint32_t> ids;
   std::map<std::pair<std::uint32_t, std::uint32_t>, int> edges;
@@ -620,7 +625,7 @@ StlFigures read_stl(const fs::path& path) {
     const auto u = sub(p[1], p[0]), v = sub(p[2], p[0]);
     const std::array<double, 3> x{u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
     if (x[0] == 0 && x[1] == 0 && x[2] == 0) ++f.zero_area;
-    f.volume_m3 += (p[0][0] * (p[1][1] * p[2][2] - p[1][2] * p[2][1]) - p[0][1] * (p[1][0] * p[2][2] - p[1][2] * p[2][0]) +
+    f.volume += (p[0][0] * (p[1][1] * p[2][2] - p[1][2] * p[2][1]) - p[0][1] * (p[1][0] * p[2][2] - p[1][2] * p[2][0]) +
                     p[0][2] * (p[1][0] * p[2][1] - p[1][1] * p[2][0])) / 6.0;
     for (int k = 0; k < 3; ++k) ++edges[std::minmax(id[k], id[(k + 1) % 3])];
   }
@@ -629,31 +634,54 @@ StlFigures read_stl(const fs::path& path) {
 }
 }  // namespace
 
-TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
-  // A carve into the sphere with drilled.stl written: summary.json says whether the mesh is
-  // closed and what volume it encloses; both recomputed here from the STL file itself.
-  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_" + std::to_string(::getpid()));
-  const RunMetrics m = run_text(dir, sphere40("mesh") + R"(
+/// A carve into the sphere (1 mm voxels) with drilled.stl written in `units`.
+RunMetrics carved_sphere_with_stl(const fs::path& dir, isotouch::io::MeshUnits units) {
+  return run_text(dir, sphere40("mesh") + R"(
     "script": {"hold_s": 0.05, "stroke_length_m": 0.002}, "outputs": {"plots": false},
     "edits": {"write_vdb": false, "write_nrrd": false, "write_stl": true,
-      "timeline": [{"t_s": 0.05, "kind": "carve", "at": [19.5, 19.5, 31.5], "radius_mm": 5, "strength": 1000}]}})");
+      "timeline": [{"t_s": 0.05, "kind": "carve", "at": [19.5, 19.5, 31.5], "radius_mm": 5, "strength": 1000}]}})",
+                  units);
+}
+
+TEST(RunJob, TheEditedMeshIsClosedAndItsVolumeIsReported) {
+  // A carve into the sphere with drilled.stl written: summary.json says whether the mesh is
+  // closed and what volume it encloses; both recomputed here from the STL file itself, whose
+  // coordinates are millimetres in LPS, as its header says.
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_" + std::to_string(::getpid()));
+  const RunMetrics m = carved_sphere_with_stl(dir, isotouch::io::MeshUnits::kMillimetre);
   ASSERT_EQ(m.edits.stl_file, "drilled.stl") << m.edits.files_note;
   std::ifstream js(dir / "out" / "summary.json");
   const auto j = nlohmann::json::parse(js);
   const auto& mesh = j.at("edits").at("mesh");
   ASSERT_TRUE(mesh.is_object()) << "summary.json reports no mesh";
+  EXPECT_EQ(mesh.at("units"), "mm");
   const StlFigures f = read_stl(dir / "out" / "drilled.stl");
+  EXPECT_NE(f.header.find("SPACE=LPS"), std::string::npos) << f.header;
+  EXPECT_NE(f.header.find("UNITS=mm"), std::string::npos) << f.header;
   ASSERT_GT(f.triangles, 100u);
   EXPECT_EQ(mesh.at("triangles").get<std::size_t>(), f.triangles);
   EXPECT_EQ(f.zero_area, 0u) << "degenerate triangles in the STL";
   EXPECT_EQ(mesh.at("closed").get<bool>(), f.open_edges == 0);
   EXPECT_TRUE(mesh.at("closed").get<bool>());
-  const double v_mm3 = f.volume_m3 * 1e9;
+  const double v_mm3 = f.volume;  // the file holds millimetres
   EXPECT_NEAR(mesh.at("enclosed_volume_mm3").get<double>(), v_mm3, 1e-5 * std::abs(v_mm3)) << "float32 coordinates";
   // The inside voxels' volume after the carve, counted here from the edited volume's figures.
   EXPECT_NEAR(mesh.at("inside_voxels_volume_mm3").get<double>(), double(m.edits.inside_voxels_after), 1e-9);
   EXPECT_NEAR(v_mm3, double(m.edits.inside_voxels_after), 0.1 * double(m.edits.inside_voxels_after))
       << "the mesh encloses about the inside voxels' volume (1 mm^3 voxels)";
+  fs::remove_all(dir);
+}
+
+// run --mesh-units m: the same mesh in metres, and the header says so.
+TEST(RunJob, TheEditedMeshInMetresOnRequest) {
+  const fs::path dir = fs::temp_directory_path() / ("isotouch_run_job_mesh_m_" + std::to_string(::getpid()));
+  const RunMetrics m = carved_sphere_with_stl(dir, isotouch::io::MeshUnits::kMetre);
+  ASSERT_EQ(m.edits.stl_file, "drilled.stl") << m.edits.files_note;
+  const StlFigures f = read_stl(dir / "out" / "drilled.stl");
+  EXPECT_NE(f.header.find("UNITS=m"), std::string::npos) << f.header;
+  EXPECT_EQ(f.header.find("UNITS=mm"), std::string::npos) << f.header;
+  const double v_mm3 = f.volume * 1e9;  // m^3 -> mm^3
+  EXPECT_NEAR(v_mm3, double(m.edits.inside_voxels_after), 0.1 * double(m.edits.inside_voxels_after));
   fs::remove_all(dir);
 }
 

@@ -1,5 +1,6 @@
 // The force-direction steps of a run's contact ticks (run/trace_figures.h): angles between
-// analytic force vectors, a flip through a zero force, and a contact that ends.
+// analytic force vectors, a flip through a zero force, and a contact that ends; and the
+// first-order estimate kept only where it is a distance.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -42,4 +43,18 @@ TEST(DirectionSteps, AContactThatEndsStartsAfresh) {
   EXPECT_EQ(d.pairs, 0);
   EXPECT_EQ(d.max_deg, 0.0);
   EXPECT_EQ(d.rms_deg(), 0.0);
+}
+
+// The first-order estimate |f - tau| / |grad f| is a distance only where it is finite and no
+// longer than the volume's diagonal; where |grad f| is near 0 (a flat field) it is left out.
+TEST(FirstOrderEstimate, IsADistanceOnlyWithinTheVolume) {
+  using isotouch::run::first_order_as_distance;
+  const double diagonal_m = 0.1;
+  EXPECT_EQ(first_order_as_distance(0.0, diagonal_m), 0.0);
+  EXPECT_EQ(first_order_as_distance(2e-4, diagonal_m), 2e-4);
+  EXPECT_EQ(first_order_as_distance(0.1, diagonal_m), 0.1);
+  EXPECT_FALSE(first_order_as_distance(0.1000001, diagonal_m));
+  EXPECT_FALSE(first_order_as_distance(3.9e11, diagonal_m)) << "|grad f| near 0: 3.9e14 mm";
+  EXPECT_FALSE(first_order_as_distance(INFINITY, diagonal_m));
+  EXPECT_FALSE(first_order_as_distance(NAN, diagonal_m));
 }

@@ -346,6 +346,9 @@ Figures figures(const std::vector<std::array<double, 3>>& v, const std::vector<s
 
 // Tiny readers, independent of the writers (binary STL, OBJ, binary little-endian PLY).
 struct ReadMesh {
+  /// The text the file gives besides the geometry: STL's 80-byte header (up to its first
+  /// zero byte), OBJ's first line if a comment, PLY's comment lines (joined by newlines).
+  std::string header;
   std::vector<std::array<double, 3>> v;
   std::vector<std::array<std::uint32_t, 3>> t;
   std::vector<std::array<float, 3>> facet_normal;  // STL only
@@ -356,6 +359,7 @@ ReadMesh read_stl(const std::string& path) {
   std::string bytes((std::istreambuf_iterator<char>(in)), {});
   ReadMesh m;
   if (bytes.size() < 84) return m;
+  m.header = bytes.substr(0, std::min(bytes.find('\0'), std::size_t(80)));
   std::uint32_t n;
   std::memcpy(&n, bytes.data() + 80, 4);
   EXPECT_EQ(bytes.size(), 84 + 50 * std::size_t(n)) << path << ": size is not 84 + 50 x triangles";
@@ -374,10 +378,11 @@ ReadMesh read_obj(const std::string& path) {
   std::ifstream in(path);
   ReadMesh m;
   std::string line;
-  while (std::getline(in, line)) {
+  for (bool first = true; std::getline(in, line); first = false) {
     std::istringstream s(line);
     std::string tag;
     s >> tag;
+    if (first && tag.rfind('#', 0) == 0) m.header = line;
     if (tag == "v") {
       std::array<double, 3> p{};
       s >> p[0] >> p[1] >> p[2];
@@ -407,6 +412,7 @@ ReadMesh read_ply(const std::string& path) {
     std::string w;
     s >> w;
     if (w == "format") s >> format;
+    if (w == "comment") m.header += line + "\n";
     if (w == "element") {
       std::size_t n = 0;
       s >> current >> n;
@@ -446,9 +452,11 @@ ReadMesh read_ply(const std::string& path) {
   return m;
 }
 
-/// Checks the sphere mesh of `v` (radius r [m]) against the analytic sphere, then the
-/// three files written from it against the mesh.
-void check_sphere_mesh(const engine::Volume& v, const Isosurface& iso, double r, const TempDir& tmp) {
+/// Checks the sphere mesh of `v` (radius r [m], centre `centre_mm` in the physical frame,
+/// LPS, in mm) against the analytic sphere, then the three files written from it against
+/// the sphere in millimetres and against the mesh.
+void check_sphere_mesh(const engine::Volume& v, const Isosurface& iso, double r, const std::array<double, 3>& centre_mm,
+                       const TempDir& tmp) {
   const Mesh mesh = extract_mesh(v, iso);
   ASSERT_GT(mesh.triangles.size(), 1000u);
   // Closed: every undirected edge in exactly two triangles (brute force).
@@ -476,16 +484,23 @@ void check_sphere_mesh(const engine::Volume& v, const Isosurface& iso, double r,
   write_ply(mesh, tmp / "s.ply");
   const std::pair<const char*, ReadMesh> files[] = {
       {"stl", read_stl(tmp / "s.stl")}, {"obj", read_obj(tmp / "s.obj")}, {"ply", read_ply(tmp / "s.ply")}};
+  // The files hold millimetres in LPS (the volume's physical frame), and say so.
+  const double r_mm = r * 1e3;
   for (const auto& [what, m] : files) {
     SCOPED_TRACE(what);
+    EXPECT_NE(m.header.find("SPACE=LPS"), std::string::npos) << m.header;
+    EXPECT_NE(m.header.find("UNITS=mm"), std::string::npos) << m.header;
     EXPECT_EQ(m.t.size(), mesh.triangles.size());
     const Figures g = figures(m.v, m.t);
     for (int a = 0; a < 3; ++a) {
-      EXPECT_NEAR(g.lo[a], f.lo[a], 1e-7);  // float32 coordinates of ~0.05 m: ~4e-9 m
-      EXPECT_NEAR(g.hi[a], f.hi[a], 1e-7);
+      EXPECT_NEAR((g.hi[a] - g.lo[a]) / 2, r_mm, 0.01 * r_mm) << "axis " << a << ": the sphere's radius in mm";
+      EXPECT_NEAR((g.hi[a] + g.lo[a]) / 2, centre_mm[a], 0.01 * r_mm) << "axis " << a << ": its centre in LPS mm";
+      EXPECT_NEAR(g.lo[a], f.lo[a] * 1e3, 1e-4);  // float32 coordinates of ~50 mm: ~4e-6 mm
+      EXPECT_NEAR(g.hi[a], f.hi[a] * 1e3, 1e-4);
     }
-    EXPECT_NEAR(g.area / f.area, 1.0, 1e-5);
-    EXPECT_NEAR(g.volume / f.volume, 1.0, 1e-5) << "winding changed in the file";
+    EXPECT_NEAR(g.area / (4 * std::numbers::pi * r_mm * r_mm), 1.0, 0.01) << "area in mm^2";
+    EXPECT_NEAR(g.area / (f.area * 1e6), 1.0, 1e-5);
+    EXPECT_NEAR(g.volume / (f.volume * 1e9), 1.0, 1e-5) << "winding changed in the file";
     if (std::string(what) != "stl") {
       EXPECT_TRUE(closed(m.t)) << "shared vertices lost";
     }
@@ -506,14 +521,64 @@ void check_sphere_mesh(const engine::Volume& v, const Isosurface& iso, double r,
   EXPECT_EQ(wrong, 0u) << "STL facet normals that are not the unit right-hand normal";
 }
 
+/// sdf_sphere's centre, physical = origin + D (spacing * index) at index (n - 1) / 2 on
+/// each axis, in mm.
+std::array<double, 3> sphere_centre_mm(const engine::Volume& v) {
+  const double c = (v.grid.dims[0] - 1) / 2.0 * v.grid.spacing_m.x;  // cubic grid, equal spacing
+  const auto& d = v.direction;  // row-major
+  const double o[3] = {v.grid.origin_m.x, v.grid.origin_m.y, v.grid.origin_m.z};
+  std::array<double, 3> p{};
+  for (int i = 0; i < 3; ++i) p[i] = 1e3 * (o[i] + c * (d[3 * i] + d[3 * i + 1] + d[3 * i + 2]));
+  return p;
+}
+
 TEST(VdbMesh, SdfSphereInsideBelowIsClosedWithTheRightAreaFacingOut) {
   TempDir tmp;
-  check_sphere_mesh(sdf_sphere(52, 1e-3, 20.0, InsideIs::kBelow), {0.0, InsideIs::kBelow}, 20e-3, tmp);
+  const engine::Volume v = sdf_sphere(52, 1e-3, 20.0, InsideIs::kBelow);
+  check_sphere_mesh(v, {0.0, InsideIs::kBelow}, 20e-3, sphere_centre_mm(v), tmp);
 }
 
 TEST(VdbMesh, SdfSphereInsideAboveIsClosedWithTheRightAreaFacingOut) {
   TempDir tmp;
-  check_sphere_mesh(sdf_sphere(52, 0.5e-3, 20.0, InsideIs::kAbove), {0.0, InsideIs::kAbove}, 10e-3, tmp);
+  const engine::Volume v = sdf_sphere(52, 0.5e-3, 20.0, InsideIs::kAbove);
+  check_sphere_mesh(v, {0.0, InsideIs::kAbove}, 10e-3, sphere_centre_mm(v), tmp);
+}
+
+// A volume turned 90 degrees about z (index x along physical +y, index y along -x) with its
+// origin off zero: the files hold the sphere where the direction matrix puts it, in LPS mm.
+TEST(VdbMesh, RotatedVolumeMeshIsInLpsMillimetres) {
+  TempDir tmp;
+  engine::Volume v = sdf_sphere(52, 1e-3, 20.0, InsideIs::kBelow);
+  v.grid.origin_m = {0.1, -0.05, 0.2};
+  v.direction = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  v.direction_is_identity = false;
+  const std::array<double, 3> c = sphere_centre_mm(v);
+  EXPECT_NEAR(c[0], 100 - 25.5, 1e-9);  // 0.1 m - 25.5 voxels of 1 mm along -x
+  EXPECT_NEAR(c[1], -50 + 25.5, 1e-9);
+  check_sphere_mesh(v, {0.0, InsideIs::kBelow}, 20e-3, c, tmp);
+}
+
+// --mesh-units m: the same files in metres, and their headers say so.
+TEST(VdbMesh, MetresOnRequest) {
+  TempDir tmp;
+  const engine::Volume v = sdf_sphere(52, 1e-3, 20.0, InsideIs::kBelow);
+  const Mesh mesh = extract_mesh(v, {0.0, InsideIs::kBelow});
+  write_stl_binary(mesh, tmp / "m.stl", io::MeshUnits::kMetre);
+  write_obj(mesh, tmp / "m.obj", io::MeshUnits::kMetre);
+  write_ply(mesh, tmp / "m.ply", io::MeshUnits::kMetre);
+  const std::pair<const char*, ReadMesh> files[] = {
+      {"stl", read_stl(tmp / "m.stl")}, {"obj", read_obj(tmp / "m.obj")}, {"ply", read_ply(tmp / "m.ply")}};
+  const std::array<double, 3> c = sphere_centre_mm(v);
+  for (const auto& [what, m] : files) {
+    SCOPED_TRACE(what);
+    EXPECT_NE(m.header.find("SPACE=LPS UNITS=m"), std::string::npos) << m.header;
+    EXPECT_EQ(m.header.find("UNITS=mm"), std::string::npos) << m.header;
+    const Figures g = figures(m.v, m.t);
+    for (int a = 0; a < 3; ++a) {
+      EXPECT_NEAR((g.hi[a] - g.lo[a]) / 2, 20e-3, 0.01 * 20e-3) << "axis " << a << ": the radius in m";
+      EXPECT_NEAR((g.hi[a] + g.lo[a]) / 2, c[a] * 1e-3, 0.01 * 20e-3) << "axis " << a;
+    }
+  }
 }
 
 // A mirroring direction matrix (det D = -1): the mesh in the physical frame still faces out.
@@ -719,6 +784,24 @@ TEST(VdbExportCmd, HeadCtToVdbAndMeshesThenVdbToStl) {
   EXPECT_NE(out.str().find("closed      yes"), std::string::npos) << out.str();
   const ReadMesh stl = read_stl(o.stl);
   EXPECT_GT(stl.t.size(), 1000u);
+  // In millimetres: the skull fills most of the CT's box, which its header gives (physical
+  // frame, LPS: origin + D (spacing * index)), one voxel of margin on each side.
+  const engine::Volume head = io::load_any_volume(o.volume);
+  const Figures g = figures(stl.v, stl.t);
+  const double sp[3] = {head.grid.spacing_m.x, head.grid.spacing_m.y, head.grid.spacing_m.z};
+  for (int a = 0; a < 3; ++a) {
+    double lo = 1e300, hi = -1e300;
+    for (int corner = 0; corner < 8; ++corner) {  // index -1 or dims on each axis: a voxel beyond the end voxels
+      double p = (&head.grid.origin_m.x)[a];
+      for (int j = 0; j < 3; ++j)
+        p += head.direction[std::size_t(3 * a + j)] * ((corner >> j & 1) ? head.grid.dims[j] : -1) * sp[j];
+      lo = std::min(lo, p * 1e3), hi = std::max(hi, p * 1e3);
+    }
+    SCOPED_TRACE("axis " + std::to_string(a) + ": box [" + std::to_string(lo) + ", " + std::to_string(hi) + "] mm");
+    EXPECT_GE(g.lo[a], lo);
+    EXPECT_LE(g.hi[a], hi);
+    EXPECT_GT(g.hi[a] - g.lo[a], 0.5 * (hi - lo)) << "the mesh spans under half the box: not in mm?";
+  }
   EXPECT_NE(out.str().find("mesh        " + std::to_string(stl.t.size()) + " triangles"), std::string::npos);
   EXPECT_TRUE(closed(read_ply(o.ply).t));
   EXPECT_GT(figures(read_obj(o.obj).v, read_obj(o.obj).t).volume, 0.0);

@@ -1446,8 +1446,8 @@ void Sculpt::export_mesh(const std::string& path) {
   const engine::Volume out = edited_volume();
   try {
     const io::Mesh mesh = io::extract_mesh(out, live.iso);
-    io::write_mesh(mesh, path);  // the format the name asks for
-    status = "exported " + path;
+    io::write_mesh(mesh, path, o.mesh_units);  // the format the name asks for
+    status = "exported " + path + " (LPS, " + io::to_string(o.mesh_units) + ")";
   } catch (const std::exception& e) {
     status = std::string("export failed: ") + e.what();
     if (code == 0) code = exit_code::kSaveFailed;

@@ -11,6 +11,8 @@
 #include <ostream>
 #include <string>
 
+#include "isotouch/io/mesh_units.h"
+
 namespace isotouch::sculpt {
 
 /// What a session restarted at a new isovalue keeps: the edited volume, the camera, the
@@ -32,6 +34,7 @@ struct Options {
   std::string record;               ///< the session's recording (scenes only)
   std::string save_path;            ///< Ctrl+S target (.vdb, .nrrd, .mha, .nii, .nii.gz); default INPUT-sculpted.vdb
   std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl
+  io::MeshUnits mesh_units = io::MeshUnits::kMillimetre;  ///< Ctrl+E's coordinates (physical frame, LPS)
   int frames = 0;                   ///< exit 0 after this many frames (0: until closed)
   int width = 1024, height = 768;
   double render_scale = 1.0;        ///< the ray caster draws at this fraction of the window's pixels (upscaled)

@@ -3,13 +3,33 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <iostream>
 #include <optional>
 
 #include "isotouch/apps/sculpt/app.h"
 #include "isotouch/apps/cli_checks.h"
 #include "isotouch/apps/cli_common.h"
+#include "isotouch/apps/mesh_units_option.h"
+#include "isotouch/apps/sculpt/scan_input.h"
 #include "isotouch/session/stop_signal.h"
+
+namespace isotouch::sculpt {
+namespace {
+
+/// A recording names the scene it replays, so --record takes a scene, not a volume: a usage
+/// error (exit 2) that says how to get a scene for the volume.
+void check_record_input(const Options& o) {
+  if (o.record.empty() || is_scene_path(o.input)) return;
+  const std::string dir = "out/" + std::filesystem::path(o.input).stem().string();
+  throw CLI::ValidationError("--record", "needs a scene file (the recording names it), got the volume " + o.input +
+                                             ": `isotouch run " + o.input + " --out " + dir + "` writes " + dir +
+                                             "/scene.json for it; then `isotouch-sculpt " + dir +
+                                             "/scene.json --record " + o.record + "`");
+}
+
+}  // namespace
+}  // namespace isotouch::sculpt
 
 int main(int argc, char** argv) {
   isotouch::sculpt::Options o;
@@ -43,10 +63,13 @@ int main(int argc, char** argv) {
                  "server offering MIT-SHM, else the Vulkan swapchain), shm (fails where it cannot be set up) or swapchain")
       ->check(CLI::IsMember({"auto", "shm", "swapchain"}));
   cli.add_option("--frames", o.frames, "stop after N frames (0: until the window is closed)")->check(CLI::NonNegativeNumber);
-  cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
+  cli.add_option("--record", o.record,
+                 "record the session (ticks and edits) for isotouch replay; the input must be a scene (.json): "
+                 "`isotouch run VOLUME --out DIR` writes DIR/scene.json for a volume");
   cli.add_option("--save", o.save_path, "where Ctrl+S saves, in the format the name asks for: .vdb, or .nrrd, .mha, .nii, .nii.gz "
                  "(3D Slicer; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
+  isotouch::app::add_mesh_units_option(cli, o.mesh_units);
   // 4096 x 3072 pixels of 4 bytes fit the 128 MiB storage binding every Vulkan device
   // offers (a larger framebuffer, a resized window, is drawn at a lower scale to fit).
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 4096));
@@ -105,6 +128,7 @@ int main(int argc, char** argv) {
   cli.add_flag("--allow-unstable-stiffness", o.allow_unstable_stiffness,
                "run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured rate), "
                "as the scene's servo.allow_unstable_stiffness");
+  cli.parse_complete_callback([&o] { isotouch::sculpt::check_record_input(o); });
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,5 +1,5 @@
-// journal.cpp - the edit journal (see journal.h): a locked file, a writer thread that
-// appends and fdatasyncs, and the reader of what a killed session left.
+// journal.cpp - the edit journal (see journal.h): a locked file, appends written at once,
+// a thread that fdatasyncs them, and the reader of what a killed session left.
 #include "isotouch/io/journal.h"
 
 #include <fcntl.h>
@@ -29,7 +29,8 @@ std::string hex8(std::uint32_t v) {
   return s;
 }
 
-/// Writes all of `text` at the file's end. @throws JournalError naming the file.
+/// Writes all of `text` at the file's end (into the page cache: a killed process's writes
+/// stay). @throws JournalError naming the file.
 void write_all(int fd, const std::string& text, const std::string& path) {
   std::size_t done = 0;
   while (done < text.size()) {
@@ -38,6 +39,10 @@ void write_all(int fd, const std::string& text, const std::string& path) {
     if (n <= 0) throw JournalError(os_error(path, "journal write failed"));
     done += std::size_t(n);
   }
+}
+
+/// To the disk (a power cut). @throws JournalError naming the file.
+void sync(int fd, const std::string& path) {
   if (::fdatasync(fd) != 0) throw JournalError(os_error(path, "journal fdatasync failed"));
 }
 
@@ -83,44 +88,40 @@ struct Journal::Impl {
   double flush_interval_s = 0.25;
   std::mutex mu;
   std::condition_variable cv;
-  std::string pending;   // lines not yet written (guarded by mu)
   long edits = 0;        // guarded by mu
+  bool unsynced = false; // written since the last fdatasync (guarded by mu)
   bool stop = false;     // guarded by mu
-  std::string error;     // the first failed write (guarded by mu)
-  std::mutex write_mu;   // one writer at a time: the thread or flush()
-  std::thread writer;
+  std::string error;     // the first failed write or sync (guarded by mu)
+  std::thread syncer;
 
-  void write_pending(const std::string& path) {
-    std::lock_guard<std::mutex> w(write_mu);
-    std::string text;
-    {
-      std::lock_guard<std::mutex> lock(mu);
-      text.swap(pending);
+  /// fdatasync if something was written since the last one. Holds `lock` (of mu) on entry and exit.
+  void sync_locked(std::unique_lock<std::mutex>& lock, const std::string& path) {
+    if (!unsynced || !error.empty()) return;
+    unsynced = false;
+    lock.unlock();
+    std::string failed;
+    try {
+      sync(fd, path);
+    } catch (const JournalError& e) {
+      failed = e.what();
     }
-    if (!text.empty()) write_all(fd, text, path);
+    lock.lock();
+    if (!failed.empty() && error.empty()) error = failed;
   }
   void loop(const std::string& path) {
     std::unique_lock<std::mutex> lock(mu);
     while (!stop) {
       cv.wait_for(lock, std::chrono::duration<double>(flush_interval_s));
-      if (!error.empty()) continue;
-      lock.unlock();
-      try {
-        write_pending(path);
-      } catch (const JournalError& e) {
-        std::lock_guard<std::mutex> again(mu);
-        error = e.what();
-      }
-      lock.lock();
+      sync_locked(lock, path);
     }
   }
-  void stop_writer() {
+  void stop_syncer() {
     {
       std::lock_guard<std::mutex> lock(mu);
       stop = true;
     }
     cv.notify_all();
-    if (writer.joinable()) writer.join();
+    if (syncer.joinable()) syncer.join();
   }
 };
 
@@ -144,10 +145,10 @@ Journal::Journal(std::string path, double flush_interval_s) : path_(std::move(pa
 }
 
 Journal::~Journal() {
-  impl_->stop_writer();
-  try {
-    impl_->write_pending(path_);
-  } catch (const JournalError&) {  // the file keeps what was written before
+  impl_->stop_syncer();
+  {
+    std::unique_lock<std::mutex> lock(impl_->mu);
+    impl_->sync_locked(lock, path_);
   }
   if (impl_->fd >= 0) ::close(impl_->fd);
 }
@@ -189,27 +190,37 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
   if (::ftruncate(impl_->fd, 0) != 0) throw JournalError(os_error(path_, "cannot empty the edit journal"));
   if (::lseek(impl_->fd, 0, SEEK_SET) < 0) throw JournalError(os_error(path_, "cannot rewind the edit journal"));
   write_all(impl_->fd, text, path_);
+  sync(impl_->fd, path_);
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
     impl_->edits = long(restored.size());
   }
-  impl_->writer = std::thread([this] { impl_->loop(path_); });
+  impl_->syncer = std::thread([this] { impl_->loop(path_); });
 }
 
-void Journal::append(const session::EditEvent& e) {
-  std::string line = recording_edit_line(e, path_);
+void Journal::append(const session::EditEvent& e) noexcept {
   std::lock_guard<std::mutex> lock(impl_->mu);
-  impl_->pending += line;
-  ++impl_->edits;
+  if (!impl_->error.empty()) return;
+  try {
+    write_all(impl_->fd, recording_edit_line(e, path_), path_);
+    impl_->unsynced = true;
+    ++impl_->edits;
+  } catch (const std::exception& x) {
+    impl_->error = x.what();
+  }
 }
 
-void Journal::flush() { impl_->write_pending(path_); }
+void Journal::flush() {
+  std::unique_lock<std::mutex> lock(impl_->mu);
+  impl_->sync_locked(lock, path_);
+  if (!impl_->error.empty()) throw JournalError(impl_->error);
+}
 
 void Journal::close() {
-  impl_->stop_writer();
-  impl_->write_pending(path_);
+  impl_->stop_syncer();
   {
-    std::lock_guard<std::mutex> lock(impl_->mu);
+    std::unique_lock<std::mutex> lock(impl_->mu);
+    impl_->sync_locked(lock, path_);
     if (!impl_->error.empty()) throw JournalError(impl_->error + " (the journal is kept)");
   }
   if (::unlink(path_.c_str()) != 0) throw JournalError(os_error(path_, "cannot delete the edit journal"));

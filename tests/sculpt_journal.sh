@@ -23,9 +23,9 @@ cat > "$out/edits.json" <<EOF
   {"wait": "contact", "timeout_s": 60},
   {"scroll": 2},
   $stroke,
-  {"cursor": [0.56, 0.45]}, $stroke,
-  {"key": "z", "mods": ["ctrl"]}, {"wait": "edits", "timeout_s": 60},
-  {"cursor": [0.46, 0.5]}, $stroke,
+  {"cursor": [0.56, 0.45]}, {"wait": "contact", "timeout_s": 60}, $stroke,
+  {"after_frames": 3, "key": "z", "mods": ["ctrl"]}, {"wait": "edits", "timeout_s": 60},
+  {"cursor": [0.46, 0.5]}, {"wait": "contact", "timeout_s": 60}, $stroke,
   {"key": "s", "mods": ["ctrl"]},
   {"after_frames": 1000000, "quit": true}
 ]}

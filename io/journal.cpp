@@ -161,7 +161,7 @@ std::optional<JournalLeft> Journal::left(std::uint32_t volume_crc32) const {
   out.dropped_bytes = text.size() - whole;
   Recording r;
   try {
-    r = parse_recording(text.substr(0, whole), path_, true);
+    r = parse_recording(text, path_, true);  // drops the cut last line
   } catch (const RecordingError& e) {
     throw JournalError(std::string(e.what()) + " (not an edit journal; nothing restored)");
   }

@@ -133,6 +133,18 @@ TEST(Journal, ATornTailGivesBackEveryWholeRecordAndTheBytesDropped) {
   EXPECT_NE(q.find(std::to_string(last_line - 10) + " bytes dropped"), std::string::npos) << q;
 }
 
+TEST(Journal, StartReplacesWhatTheLastSessionLeft) {
+  const fs::path p = temp_file("replaced");
+  { Journal(p.string()).start(header(), {brush_at(0.01, 1), brush_at(0.02, 2)}); }
+  Journal again(p.string());
+  ASSERT_EQ(again.left(kCrc)->edits.size(), 2u);
+  again.start(header(), {});  // not restored: this session's journal starts empty
+  again.append(brush_at(0.05, 1));
+  const Recording r = parsed(p);
+  ASSERT_EQ(r.edits.size(), 1u);
+  EXPECT_EQ(r.edits[0].brush.centre_m.x, 0.05);
+}
+
 TEST(Journal, AJournalOfAnotherVolumeIsRefusedNamingBoth) {
   const fs::path p = temp_file("other");
   { Journal(p.string()).start(header(0x00c0ffeeu), {brush_at(0.01, 1)}); }

@@ -21,6 +21,7 @@
 #include <igtlStatusMessage.h>
 
 #include "isotouch/session/edit_session.h"
+#include "isotouch/io/journal_offer.h"
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/volume_io.h"
 #include "isotouch/service/commands.h"
@@ -115,6 +116,7 @@ struct Session {
   session::BrushTargets targets;  // the tool's material and empty values at this isovalue
   std::string image_name;  // the device name the edited volume goes back under
   std::uint64_t generation = 0;  // a new one per start_session
+  bool journaled = false;  // its edits go to the edit journal (the session on the scene's volume)
 };
 
 class Server {
@@ -146,6 +148,8 @@ class Server {
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
                                            const servo::HriParams& hri);
   void start_session(std::unique_ptr<Session> s);
+  void open_journal(Session& s);
+  void close_journal();
   std::string memory_refusal(igtl::ImageMessage& image);
   void swap_volume(PendingVolume p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
@@ -238,6 +242,7 @@ class Server {
   // inside its values; none: each IMAGE's own, image_isovalue.h).
   std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
+  io::OpenedJournal journal_;  // the scene's volume's session's edit journal (off: null)
 };
 
 /// "isovalue 300 (inside above)".
@@ -891,6 +896,12 @@ void Server::start_session(std::unique_ptr<Session> s) {
     c.servo.stale_timeout_s = o_.stale_s;
   }
   c.on_applied = s->mirror->listener(*s->edits);
+  if (s->journaled)
+    c.on_applied = [j = journal_.journal.get(), mirror = std::move(c.on_applied)](
+                       const session::EditEvent& e, const session::EditOutcome& out, session::EditSource source) {
+      if (out.error.empty()) j->append(e);  // what a recording records: the edits applied
+      mirror(e, out, source);
+    };
   servo::HapticDeviceIO& device = echo_device_ ? static_cast<servo::HapticDeviceIO&>(*echo_device_) : device_;
   s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device, c);
   if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
@@ -1051,6 +1062,50 @@ void Server::swap_volume(PendingVolume p) {
   answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
+/// The edit journal of the scene's volume (io/journal_offer.h): a journal a killed serve
+/// left is restored into `s` (before its live session starts) or not, as --restore says; the
+/// journal then starts afresh with what was restored. The log says what was done.
+void Server::open_journal(Session& s) {
+  if (!o_.journal) return;
+  const std::uint32_t crc = io::volume_crc32(setup_.volume);
+  std::ostringstream said;
+  std::istringstream no_terminal;
+  journal_ = io::open_journal("serve", crc, o_.restore ? io::RestoreChoice::kYes : io::RestoreChoice::kNo, said,
+                              no_terminal, false);
+  std::istringstream lines(said.str());
+  for (std::string l; std::getline(lines, l);) log_.line(l);
+  if (!journal_.journal) return;
+  io::apply_restored(*s.edits, journal_.restore, &s.buffer);
+  if (!journal_.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
+    s.mirror = std::make_shared<EditMirror>(s.edits->volume());
+    VoxelBox all;
+    all.hi = s.frame.grid.dims;
+    s.mirror->restore_changed(all);
+    log_.line("journal  restored " + std::to_string(journal_.restore.size()) + " edits");
+  }
+  io::Recording header;
+  header.scene_path = std::filesystem::absolute(scene_.file).string();
+  header.rate_hz = scene_.hri.rate_hz;
+  header.volume_crc32 = crc;
+  journal_.journal->start(header, journal_.restore);
+  s.journaled = true;
+  log_.line("journal  " + journal_.journal->path() + " (this session's edits, kept through a crash)");
+}
+
+/// The session on the scene's volume ended (serve stops, or an IMAGE or an isovalue replaced
+/// it): its journal is deleted.
+void Server::close_journal() {
+  if (!journal_.journal) return;
+  try {
+    journal_.journal->close();
+    log_.line("journal  closed: the session on the scene's volume ended (" + std::to_string(journal_.journal->edits()) +
+              " edits; a later session is not journaled)");
+  } catch (const std::exception& e) {
+    log_.line(std::string("journal  ") + e.what());
+  }
+  journal_.journal.reset();
+}
+
 void Server::stop_session() {
   std::unique_ptr<Session> s;
   {
@@ -1061,6 +1116,7 @@ void Server::stop_session() {
   // Abandoned in the renderer: the process ends there (the session and device_ outlive
   // the stuck thread).
   session::stop_or_end_process(*s->live, "isotouch serve");
+  if (s->journaled) close_journal();
   const session::LiveStats st = s->live->stats();
   ticks_ += st.ticks;
   faults_ += st.faults;
@@ -1112,7 +1168,11 @@ int Server::run() {
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
             std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
             iso_text(setup_.live.iso) + " (the scene's)");
-  start_session(prepare_session(setup_.volume, setup_.live, setup_.hri));
+  {
+    std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
+    open_journal(*first);
+    start_session(std::move(first));
+  }
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());
   tool_ = scene_.edits.brush;

@@ -46,11 +46,11 @@ int main(int argc, char** argv) {
   cli.add_option("--record", o.record, "record the session (ticks and edits) for isotouch replay (scenes only)");
   cli.add_flag("--journal,!--no-journal", o.journal,
                "keep every applied edit in the edit journal, $XDG_STATE_HOME/isotouch/sculpt-CRC.journal (else "
-               "~/.local/state/isotouch; CRC: the volume's), written at least every second and deleted at a clean "
-               "exit: a crash or kill loses no edit (default on)");
+               "~/.local/state/isotouch; CRC: the volume's), each edit written as applied (fdatasync'ed every 0.25 s) "
+               "and the file deleted at a clean exit: a crash or kill loses no edit (default on)");
   cli.add_option("--restore", o.restore,
                  "a journal left by a session that did not end cleanly on the same volume: yes restores its edits "
-                 "(undo and redo included) before the session starts, no drops it, ask (default) asks \"restore N "
+                 "(undo and redo included) before the session starts, no does not, ask (default) asks \"restore N "
                  "edits from HH:MM?\" on the terminal (none: not restored); one not restored is kept as "
                  "JOURNAL.unrestored")
       ->check(CLI::IsMember({"yes", "no", "ask"}));

@@ -751,8 +751,11 @@ void Sculpt::open_journal() {
     return;
   }
   volume_crc = io::volume_crc32(vol);
-  journal = io::open_journal("sculpt", volume_crc, io::restore_choice(o.restore), log, std::cin,
-                             ::isatty(STDIN_FILENO) == 1);
+  // A recording replays from the volume's file: edits restored before it started would not be in it.
+  if (!o.record.empty())
+    log << "journal  --record: a journal left on this volume is not restored (the recording replays from the file)\n";
+  const io::RestoreChoice choice = o.record.empty() ? io::restore_choice(o.restore) : io::RestoreChoice::kNo;
+  journal = io::open_journal("sculpt", volume_crc, choice, log, std::cin, ::isatty(STDIN_FILENO) == 1);
 }
 
 /// Applies the journal's restored edits to the edit session and the picture, then starts

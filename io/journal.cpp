@@ -1,5 +1,6 @@
-// journal.cpp - the edit journal (see journal.h): a locked file, appends written at once,
-// a thread that fdatasyncs them, and the reader of what a killed session left.
+// journal.cpp - the edit journal (see journal.h): a locked file, a writer thread that
+// writes each append as it comes and fdatasyncs every flush interval, and the reader of
+// what a killed session left.
 #include "isotouch/io/journal.h"
 
 #include <fcntl.h>
@@ -88,40 +89,57 @@ struct Journal::Impl {
   double flush_interval_s = 0.25;
   std::mutex mu;
   std::condition_variable cv;
+  std::string pending;   // lines appended, not yet written (guarded by mu)
   long edits = 0;        // guarded by mu
-  bool unsynced = false; // written since the last fdatasync (guarded by mu)
   bool stop = false;     // guarded by mu
   std::string error;     // the first failed write or sync (guarded by mu)
-  std::thread syncer;
+  std::mutex io_mu;      // one writer of the file at a time: the thread, flush(), close()
+  bool unsynced = false; // written since the last fdatasync (guarded by io_mu)
+  std::thread writer;
 
-  /// fdatasync if something was written since the last one. Holds `lock` (of mu) on entry and exit.
-  void sync_locked(std::unique_lock<std::mutex>& lock, const std::string& path) {
-    if (!unsynced || !error.empty()) return;
-    unsynced = false;
-    lock.unlock();
-    std::string failed;
-    try {
-      sync(fd, path);
-    } catch (const JournalError& e) {
-      failed = e.what();
+  /// Writes what is pending, and fdatasyncs what was written when `sync_now`. A failure is
+  /// kept in `error` (nothing more is written then).
+  void drain(const std::string& path, bool sync_now) {
+    std::lock_guard<std::mutex> io(io_mu);
+    std::string text;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      if (!error.empty()) return;
+      text.swap(pending);
     }
-    lock.lock();
-    if (!failed.empty() && error.empty()) error = failed;
+    try {
+      if (!text.empty()) write_all(fd, text, path);
+      unsynced = unsynced || !text.empty();
+      if (sync_now && unsynced) sync(fd, path);
+      unsynced = unsynced && !sync_now;
+    } catch (const JournalError& e) {
+      std::lock_guard<std::mutex> lock(mu);
+      error = e.what();
+    }
   }
+  /// Writes each append as soon as it comes (a fdatasync in progress holds it back, not the
+  /// appender); fdatasyncs every flush interval.
   void loop(const std::string& path) {
+    const auto interval = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(flush_interval_s));
+    auto next_sync = std::chrono::steady_clock::now() + interval;
     std::unique_lock<std::mutex> lock(mu);
     while (!stop) {
-      cv.wait_for(lock, std::chrono::duration<double>(flush_interval_s));
-      sync_locked(lock, path);
+      cv.wait_until(lock, next_sync, [&] { return stop || !pending.empty(); });
+      const bool sync_now = std::chrono::steady_clock::now() >= next_sync;
+      lock.unlock();
+      drain(path, sync_now);
+      if (sync_now) next_sync = std::chrono::steady_clock::now() + interval;
+      lock.lock();
     }
   }
-  void stop_syncer() {
+  void stop_writer() {
     {
       std::lock_guard<std::mutex> lock(mu);
       stop = true;
     }
     cv.notify_all();
-    if (syncer.joinable()) syncer.join();
+    if (writer.joinable()) writer.join();
   }
 };
 
@@ -145,11 +163,8 @@ Journal::Journal(std::string path, double flush_interval_s) : path_(std::move(pa
 }
 
 Journal::~Journal() {
-  impl_->stop_syncer();
-  {
-    std::unique_lock<std::mutex> lock(impl_->mu);
-    impl_->sync_locked(lock, path_);
-  }
+  impl_->stop_writer();
+  impl_->drain(path_, true);
   if (impl_->fd >= 0) ::close(impl_->fd);
 }
 
@@ -195,32 +210,34 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
     std::lock_guard<std::mutex> lock(impl_->mu);
     impl_->edits = long(restored.size());
   }
-  impl_->syncer = std::thread([this] { impl_->loop(path_); });
+  impl_->writer = std::thread([this] { impl_->loop(path_); });
 }
 
 void Journal::append(const session::EditEvent& e) noexcept {
-  std::lock_guard<std::mutex> lock(impl_->mu);
-  if (!impl_->error.empty()) return;
-  try {
-    write_all(impl_->fd, recording_edit_line(e, path_), path_);
-    impl_->unsynced = true;
-    ++impl_->edits;
-  } catch (const std::exception& x) {
-    impl_->error = x.what();
+  {
+    std::lock_guard<std::mutex> lock(impl_->mu);
+    if (!impl_->error.empty()) return;
+    try {
+      impl_->pending += recording_edit_line(e, path_);
+      ++impl_->edits;
+    } catch (const std::exception& x) {
+      impl_->error = x.what();
+    }
   }
+  impl_->cv.notify_one();
 }
 
 void Journal::flush() {
-  std::unique_lock<std::mutex> lock(impl_->mu);
-  impl_->sync_locked(lock, path_);
+  impl_->drain(path_, true);
+  std::lock_guard<std::mutex> lock(impl_->mu);
   if (!impl_->error.empty()) throw JournalError(impl_->error);
 }
 
 void Journal::close() {
-  impl_->stop_syncer();
+  impl_->stop_writer();
+  impl_->drain(path_, true);
   {
-    std::unique_lock<std::mutex> lock(impl_->mu);
-    impl_->sync_locked(lock, path_);
+    std::lock_guard<std::mutex> lock(impl_->mu);
     if (!impl_->error.empty()) throw JournalError(impl_->error + " (the journal is kept)");
   }
   if (::unlink(path_.c_str()) != 0) throw JournalError(os_error(path_, "cannot delete the edit journal"));

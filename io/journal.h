@@ -3,9 +3,10 @@
 //
 // The file is a recording without ticks (io/record.h, format 3): the header (the volume's
 // CRC-32, the program and input it was opened by) and one edit line per applied edit, in
-// the order applied. Each append is written at once (one write(): a killed process loses
-// no edit it applied), never from the servo tick (the edit thread calls it); a thread
-// fdatasyncs what was written every flush interval (at most 1 s: a power cut). The file
+// the order applied. Appending costs a mutex and a string (the edit thread's: never the
+// servo tick, never a wait for the disk); a writer thread writes each append as it comes
+// (a killed process loses only what it had not yet written: microseconds, or a fdatasync in
+// progress) and fdatasyncs every flush interval (at most 1 s: a power cut). The file
 // is locked (flock) while a session holds it, so a journal whose lock is free was left by a
 // process that did not end cleanly: that is the journal offered for restore.
 //
@@ -56,8 +57,8 @@ class Journal {
   /// @throws JournalError naming the file: it cannot be created, or another running process
   ///         holds it (a second session on the same volume).
   explicit Journal(std::string path, double flush_interval_s = 0.25);
-  /// Stops the syncer after a last fdatasync and keeps the file (an error exit: the next
-  /// start offers it); close() is the clean end.
+  /// Stops the writer after writing and fdatasyncing what is pending, and keeps the file (an
+  /// error exit: the next start offers it); close() is the clean end.
   ~Journal();
   Journal(const Journal&) = delete;
   Journal& operator=(const Journal&) = delete;
@@ -70,16 +71,16 @@ class Journal {
   std::optional<JournalLeft> left(std::uint32_t volume_crc32) const;
   /// Starts this session's journal: the file is emptied, then holds `header` (a format 3
   /// recording header: volume_crc32 and rate_hz required, no ticks) and `restored` (the
-  /// edits restored from the last one, their tick set to 0), fdatasync'ed; then the syncer runs.
+  /// edits restored from the last one, their tick set to 0), fdatasync'ed; then the writer runs.
   /// @throws JournalError naming the file (write failed), RecordingError (bad header).
   void start(Recording header, const std::vector<session::EditEvent>& restored);
-  /// Writes one applied edit's line now (fdatasync'ed within the flush interval). Any
-  /// thread but the servo's (a system call). A failed write is kept, reported by flush()
-  /// and close(); no later edit is written then.
+  /// Queues one applied edit's line for the writer (written at once, fdatasync'ed within the
+  /// flush interval). Any thread; no wait for the disk. A failed write is kept, reported by
+  /// flush() and close(); nothing later is written then.
   void append(const session::EditEvent& e) noexcept;
-  /// fdatasyncs what was written. @throws JournalError on a failed write or sync.
+  /// Writes what is queued and fdatasyncs it now. @throws JournalError on a failed write or sync.
   void flush();
-  /// The clean end: fdatasyncs, stops the syncer, deletes the file.
+  /// The clean end: writes and fdatasyncs what is queued, stops the writer, deletes the file.
   /// @throws JournalError when a write failed at some point (the file is kept).
   void close();
   const std::string& path() const { return path_; }

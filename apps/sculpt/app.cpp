@@ -775,6 +775,7 @@ bool Sculpt::restore_journal() {
     header.rate_hz = scene.hri.rate_hz;
     header.volume_crc32 = volume_crc;
     journal.journal->start(header, journal.restore);
+    journal.restore = {};  // applied and in the new journal
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << (journal.journal ? journal.journal->path() : std::string()) << ": " << e.what() << "\n";
     return false;

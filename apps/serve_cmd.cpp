@@ -76,6 +76,7 @@ Subcommand add_serve_command(CLI::App& cli) {
     std::string registration;
     double stale_ms = 100;
     bool allow_unstable = false;
+    std::string restore = "yes";
   };
   auto a = std::make_shared<Args>();
   auto* sub = cli.add_subcommand("serve", kHelp);
@@ -119,6 +120,15 @@ Subcommand add_serve_command(CLI::App& cli) {
       ->check(CLI::Range(0.0, 1e6));
   sub->add_option("--seconds", a->o.seconds, "Stop after this long (default: on SIGINT / SIGTERM only)")
       ->check(CLI::Range(0.0, 1e7));
+  sub->add_flag("--journal,!--no-journal", a->o.journal,
+                "Keep every edit of the session on the scene's volume in the edit journal, "
+                "$XDG_STATE_HOME/isotouch/serve-CRC.journal (else ~/.local/state/isotouch; CRC: the volume's), written "
+                "as applied and deleted when that session ends: a crash or kill loses no edit (default on)");
+  sub->add_option("--restore", a->restore,
+                  "A journal a killed serve left on this volume: yes (default) restores its edits, undo and redo "
+                  "included, before the session starts (the log says \"restore N edits from HH:MM?\" and what was "
+                  "done); no keeps it aside as JOURNAL.unrestored")
+      ->check(CLI::IsMember({"yes", "no"}));
   sub->add_option("--save-dir", a->o.save_dir, "Folder the 'save NAME' command writes into (default: the current one)");
   sub->add_option("--image-hz", a->o.image_hz, "Edited-volume IMAGEs sent per second at most (default 2; 0: none)")
       ->check(CLI::Range(0.0, 100.0));
@@ -138,6 +148,7 @@ Subcommand add_serve_command(CLI::App& cli) {
             if (a->offset.size() == 3) o.offset_mm = {a->offset[0], a->offset[1], a->offset[2]};
             if (!a->registration.empty()) o.registration = service::load_registration(a->registration);
             o.stale_s = a->stale_ms * 1e-3;
+            o.restore = a->restore == "yes";
             o.run.device = device;
             o.run.progress = false;
             if (const char* f = std::getenv("ISOTOUCH_SERVE_TEST_FAULT")) o.fault_for_test = test_faults(f);

@@ -126,6 +126,7 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   so.reply_force = true;
   so.image_hz = 0;
   so.seconds = o.seconds + 3;
+  so.journal = false;  // a bench keeps no edits: no journal in the user's state folder
   so.sched_fifo = o.sched_fifo;
   so.run.device = o.device;
   so.run.progress = false;

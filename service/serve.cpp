@@ -21,6 +21,7 @@
 #include <igtlStatusMessage.h>
 
 #include "isotouch/session/edit_session.h"
+#include "isotouch/io/journal_offer.h"
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/volume_io.h"
 #include "isotouch/service/commands.h"
@@ -115,6 +116,7 @@ struct Session {
   session::BrushTargets targets;  // the tool's material and empty values at this isovalue
   std::string image_name;  // the device name the edited volume goes back under
   std::uint64_t generation = 0;  // a new one per start_session
+  bool journaled = false;  // its edits go to the edit journal (the session on the scene's volume)
 };
 
 class Server {
@@ -146,6 +148,8 @@ class Server {
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
                                            const servo::HriParams& hri);
   void start_session(std::unique_ptr<Session> s);
+  void open_journal(Session& s);
+  void close_journal();
   std::string memory_refusal(igtl::ImageMessage& image);
   void swap_volume(PendingVolume p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
@@ -251,6 +255,7 @@ class Server {
   // inside its values; none: each IMAGE's own, image_isovalue.h).
   std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
+  io::OpenedJournal journal_;  // the scene's volume's session's edit journal (off: null)
 };
 
 /// "isovalue 300 (inside above)".
@@ -904,6 +909,12 @@ void Server::start_session(std::unique_ptr<Session> s) {
     c.servo.stale_timeout_s = o_.stale_s;
   }
   c.on_applied = s->mirror->listener(*s->edits);
+  if (s->journaled)
+    c.on_applied = [j = journal_.journal.get(), mirror = std::move(c.on_applied)](
+                       const session::EditEvent& e, const session::EditOutcome& out, session::EditSource source) {
+      if (out.error.empty()) j->append(e);  // what a recording records: the edits applied
+      mirror(e, out, source);
+    };
   servo::HapticDeviceIO& device = echo_device_ ? static_cast<servo::HapticDeviceIO&>(*echo_device_) : device_;
   s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device, c);
   if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
@@ -1068,8 +1079,53 @@ void Server::swap_volume(PendingVolume p) {
   answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
+/// The edit journal of the scene's volume (io/journal_offer.h): a journal a killed serve
+/// left is restored into `s` (before its live session starts) or not, as --restore says; the
+/// journal then starts afresh with what was restored. The log says what was done.
+void Server::open_journal(Session& s) {
+  if (!o_.journal) return;
+  const std::uint32_t crc = io::volume_crc32(setup_.volume);
+  std::ostringstream said;
+  std::istringstream no_terminal;
+  journal_ = io::open_journal("serve", crc, o_.restore ? io::RestoreChoice::kYes : io::RestoreChoice::kNo, said,
+                              no_terminal, false);
+  std::istringstream lines(said.str());
+  for (std::string l; std::getline(lines, l);) log_.line(l);
+  if (!journal_.journal) return;
+  io::apply_restored(*s.edits, journal_.restore, &s.buffer);
+  if (!journal_.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
+    s.mirror = std::make_shared<EditMirror>(s.edits->volume());
+    VoxelBox all;
+    all.hi = s.frame.grid.dims;
+    s.mirror->restore_changed(all);
+    log_.line("journal  restored " + std::to_string(journal_.restore.size()) + " edits");
+  }
+  io::Recording header;
+  header.scene_path = std::filesystem::absolute(scene_.file).string();
+  header.rate_hz = scene_.hri.rate_hz;
+  header.volume_crc32 = crc;
+  journal_.journal->start(header, journal_.restore);
+  s.journaled = true;
+  log_.line("journal  " + journal_.journal->path() + " (this session's edits, kept through a crash)");
+}
+
+/// The session on the scene's volume ended (serve stops, or an IMAGE or an isovalue replaced
+/// it): its journal is deleted.
+void Server::close_journal() {
+  if (!journal_.journal) return;
+  try {
+    journal_.journal->close();
+    log_.line("journal  closed: the session on the scene's volume ended (" + std::to_string(journal_.journal->edits()) +
+              " edits; a later session is not journaled)");
+  } catch (const std::exception& e) {
+    log_.line(std::string("journal  ") + e.what());
+  }
+  journal_.journal.reset();
+}
+
 /// Stops the running session's servo and edits and counts its figures; returns the stopped
-/// session (nullptr when none ran), which start_session() can run again.
+/// session (nullptr when none ran), which start_session() can run again (its journal stays
+/// open until the caller knows it ended: close_journal()).
 std::unique_ptr<Session> Server::stop_session() {
   std::unique_ptr<Session> s;
   {
@@ -1101,6 +1157,7 @@ std::string Server::switch_session(std::unique_ptr<Session> next) {
   std::unique_ptr<Session> old = stop_session();
   try {
     start_session(std::move(next));
+    if (old && old->journaled) close_journal();  // the session on the scene's volume ended
     return "";
   } catch (const std::exception& e) {
     const std::string why = e.what();
@@ -1151,7 +1208,11 @@ int Server::run() {
   log_.line("serve    listening on " + o_.host + ":" + std::to_string(listener_.port()) + ", " + device + ", display " +
             std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
             iso_text(setup_.live.iso) + " (the scene's)");
-  start_session(prepare_session(setup_.volume, setup_.live, setup_.hri));
+  {
+    std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
+    open_journal(*first);
+    start_session(std::move(first));
+  }
   session::install_stop_handlers();
   if (o_.on_listening) o_.on_listening(listener_.port());
   tool_ = scene_.edits.brush;
@@ -1204,7 +1265,7 @@ int Server::run() {
     if (iso) restart_at_isovalue(*iso);
   }
   join_threads(display, commands);
-  stop_session();
+  if (const std::unique_ptr<Session> last = stop_session(); last && last->journaled) close_journal();
   std::ostringstream s;
   s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "

@@ -72,6 +72,14 @@ struct ServeOptions {
   double idle_timeout_s = 60;
   double seconds = 0;                 ///< stop after this long (0: on SIGINT / SIGTERM only)
   std::string save_dir = ".";         ///< the folder `save NAME` writes into
+  /// The edit journal (io/journal.h) of the session on the scene's volume:
+  /// $XDG_STATE_HOME/isotouch/serve-CRC.journal (CRC: the volume's as read), every applied
+  /// edit written at once, deleted when that session ends (serve stops, or an IMAGE or an
+  /// isovalue replaces it); a kill leaves it. False: none.
+  bool journal = true;
+  /// A journal a killed serve left on this volume: restored before the session starts
+  /// (true), or kept aside as JOURNAL.unrestored (false). The log says which.
+  bool restore = true;
   double image_hz = 2;                ///< edited-volume IMAGEs sent per second at most (0: none)
   bool image_whole = false;           ///< send the whole image, not the changed sub-volume
   /// Answer each TRANSFORM of the stream with a TRANSFORM "Force" (translation = force in N,

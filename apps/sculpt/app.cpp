@@ -19,7 +19,10 @@
 #include <mutex>
 #include <optional>
 #include <sstream>
+#include <iostream>
 #include <thread>
+
+#include <unistd.h>
 
 #include "isotouch/sim/coupled_hand_device.h"
 #include "isotouch/servo/cpu_placement.h"
@@ -34,11 +37,13 @@
 #include "isotouch/apps/sculpt/overlay.h"
 #include "isotouch/engine/device_memory.h"
 #include "isotouch/engine/raycast.h"
+#include "isotouch/io/journal_offer.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/picture.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/session/edit_history.h"
 #include "isotouch/session/stop_signal.h"
 #include "isotouch/eval/stats.h"
 #include "isotouch/apps/sculpt/tools.h"
@@ -395,6 +400,8 @@ struct Sculpt {
   bool open_window();
   void open_panels();
   bool open_edits();
+  void open_journal();
+  bool restore_journal();
   session::LiveSessionConfig session_config();
   bool open_device();
   bool start_session(const session::LiveSessionConfig& cfg);
@@ -456,6 +463,7 @@ struct Sculpt {
   void close_stroke();
   ServoAlone servo_alone(const session::LiveStats& sculpted);
   void stop_session();
+  void close_journal();
   void write_last_screenshot();
   void write_window_shot();
   void print_stats(double seconds, const session::LiveStats& st);
@@ -500,6 +508,8 @@ struct Sculpt {
   // picture and the servo.
   session::LiveFieldOptions live;
   std::unique_ptr<session::EditSession> edits;
+  io::OpenedJournal journal;  // the edit journal (off: null) and the edits it restores; outlives the session
+  std::uint32_t volume_crc = 0;  // io::volume_crc32 of the volume as read: the journal's key
   servo::TripleBuffer<core::SampleField> buffer;
   std::optional<servo::HriRenderer> renderer;
   std::optional<FeltTool> felt;  // what the servo ticks: the renderer with the tool's radius
@@ -731,6 +741,49 @@ bool Sculpt::open_edits() {
   return true;
 }
 
+/// The edit journal of the volume as read (journal_offer.h), and what a killed session left
+/// in it, as --restore says. A volume carried over from an isovalue change is no file's: no
+/// journal (the log says so).
+void Sculpt::open_journal() {
+  if (!o.journal) return;
+  if (o.carried) {
+    log << "journal  off: the volume carried over from the isovalue change is not its file's (Ctrl+S saves it)\n";
+    return;
+  }
+  volume_crc = io::volume_crc32(vol);
+  // A recording replays from the volume's file: edits restored before it started would not be in it.
+  if (!o.record.empty())
+    log << "journal  --record: a journal left on this volume is not restored (the recording replays from the file)\n";
+  const io::RestoreChoice choice = o.record.empty() ? io::restore_choice(o.restore) : io::RestoreChoice::kNo;
+  journal = io::open_journal("sculpt", volume_crc, choice, log, std::cin, ::isatty(STDIN_FILENO) == 1);
+}
+
+/// Applies the journal's restored edits to the edit session and the picture, then starts
+/// the journal afresh with them. False: an edit could not be applied (logged; the journal
+/// file is untouched).
+bool Sculpt::restore_journal() {
+  if (!journal.journal) return true;
+  try {
+    io::apply_restored(*edits, journal.restore, &buffer);
+    if (!journal.restore.empty()) {
+      feed.values = edits->volume().voxels;
+      for (std::uint32_t id = 0; id < std::uint32_t(session::brick_total(vol.grid)); ++id) feed.pending.push_back(id);
+      log << "journal  restored " << journal.restore.size() << " edits\n";
+    }
+    io::Recording header;
+    header.scene_path = fs::absolute(o.input).string();
+    header.rate_hz = scene.hri.rate_hz;
+    header.volume_crc32 = volume_crc;
+    journal.journal->start(header, journal.restore);
+    journal.restore = {};  // applied and in the new journal
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << (journal.journal ? journal.journal->path() : std::string()) << ": " << e.what() << "\n";
+    return false;
+  }
+  log << "journal  " << journal.journal->path() << "\n";
+  return true;
+}
+
 /// The live session's configuration: the servo, the recording, the picture's feed.
 session::LiveSessionConfig Sculpt::session_config() {
   session::LiveSessionConfig cfg;
@@ -754,6 +807,12 @@ session::LiveSessionConfig Sculpt::session_config() {
         io::RecordedEditSession{edits->sculptor().on_gpu(), scene.edits.history_limit_mib, renderer->params().edit_period_s};
   }
   cfg.on_applied = picture_feeder(feed, edits.get());
+  if (io::Journal* j = journal.journal.get())
+    cfg.on_applied = [j, feeder = std::move(cfg.on_applied)](const session::EditEvent& e, const session::EditOutcome& out,
+                                                              session::EditSource source) {
+      if (out.error.empty()) j->append(e);  // what the recording records: the edits applied
+      feeder(e, out, source);
+    };
   return cfg;
 }
 
@@ -1633,6 +1692,7 @@ int Sculpt::finish() {
     if (dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0) code = exit_code::kDeviceLost;
   }
   if (!o.record.empty() && code == 0) log << "recorded " << o.record << " (replay: isotouch replay " << o.record << ")\n";
+  close_journal();
   if (vk->validation_messages() > 0) {
     log << "isotouch-sculpt: " << vk->validation_messages() << " Vulkan validation messages\n";
     if (code == 0) code = exit_code::kCheckFailed;
@@ -1687,6 +1747,21 @@ void Sculpt::stop_session() {
     // Abandoned in the renderer: the process ends there (no screenshot, no stats, no
     // destructors: the renderer, its field and the device outlive the stuck thread).
     session::stop_or_end_process(*session, "isotouch-sculpt");
+  } catch (const std::exception& e) {
+    log << "isotouch-sculpt: " << e.what() << "\n";
+    code = 1;
+  }
+}
+
+/// A clean end (exit 0, no signal) deletes the journal; any other keeps it for the next start.
+void Sculpt::close_journal() {
+  if (!journal.journal) return;
+  if (code != 0 || session::stop_signal() != 0) {
+    log << "journal  kept: " << journal.journal->path() << " (" << journal.journal->edits() << " edits)\n";
+    return;
+  }
+  try {
+    journal.journal->close();
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << e.what() << "\n";
     code = 1;
@@ -1907,9 +1982,11 @@ int loads_running() { return g_loads_running.load(); }
 
 int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
   Sculpt s(o, log, reopen);
-  if (!s.load_input() || !s.place_probe() || !s.open_window()) return 1;
+  if (!s.load_input() || !s.place_probe()) return 1;
+  s.open_journal();
+  if (!s.open_window()) return 1;
   s.open_panels();
-  if (!s.open_edits()) return 1;
+  if (!s.open_edits() || !s.restore_journal()) return 1;
   const session::LiveSessionConfig cfg = s.session_config();
   if (!s.open_device() || !s.start_session(cfg)) return 1;
   s.init_tools();

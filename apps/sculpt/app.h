@@ -32,6 +32,12 @@ struct Options {
   /// server, else the swapchain), "shm" or "swapchain" (sculpt/window.h).
   std::string present = "auto";
   std::string record;               ///< the session's recording (scenes only)
+  /// The edit journal (io/journal.h): every applied edit appended to
+  /// $XDG_STATE_HOME/isotouch/sculpt-CRC.journal, so a crash loses none (false: --no-journal).
+  bool journal = true;
+  /// A journal a session that did not end cleanly left: "yes" restore it, "no" drop it (kept
+  /// aside), "ask" on the terminal (without one: not restored, kept aside).
+  std::string restore = "ask";
   std::string save_path;            ///< Ctrl+S target (.vdb, .nrrd, .mha, .nii, .nii.gz); default INPUT-sculpted.vdb
   std::string export_path;          ///< Ctrl+E target (.stl, .obj or .ply); default INPUT-sculpted.stl
   io::MeshUnits mesh_units = io::MeshUnits::kMillimetre;  ///< Ctrl+E's coordinates (physical frame, LPS)

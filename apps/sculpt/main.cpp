@@ -66,6 +66,16 @@ int main(int argc, char** argv) {
   cli.add_option("--record", o.record,
                  "record the session (ticks and edits) for isotouch replay; the input must be a scene (.json): "
                  "`isotouch run VOLUME --out DIR` writes DIR/scene.json for a volume");
+  cli.add_flag("--journal,!--no-journal", o.journal,
+               "keep every applied edit in the edit journal, $XDG_STATE_HOME/isotouch/sculpt-CRC.journal (else "
+               "~/.local/state/isotouch; CRC: the volume's), each edit written as applied (fdatasync'ed every 0.25 s) "
+               "and the file deleted at a clean exit: a crash or kill loses no edit (default on)");
+  cli.add_option("--restore", o.restore,
+                 "a journal left by a session that did not end cleanly on the same volume: yes restores its edits "
+                 "(undo and redo included) before the session starts, no does not, ask (default) asks \"restore N "
+                 "edits from HH:MM?\" on the terminal (none: not restored); one not restored is kept as "
+                 "JOURNAL.unrestored")
+      ->check(CLI::IsMember({"yes", "no", "ask"}));
   cli.add_option("--save", o.save_path, "where Ctrl+S saves, in the format the name asks for: .vdb, or .nrrd, .mha, .nii, .nii.gz "
                  "(3D Slicer; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");

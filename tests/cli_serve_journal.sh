@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# `isotouch serve`'s edit journal through a kill -9 (issue 62): a client carves two strokes
+# into the head and undoes the second, saves (`save carved.mha`: the volume at the kill,
+# written by serve itself), and serve is killed with SIGKILL. Its journal
+# ($XDG_STATE_HOME/isotouch/serve-CRC.journal) holds the edits and the undo; serve started
+# again restores them by default ("restore N edits from HH:MM?" and what was done in the
+# log): its `save restored.mha` equals carved.mha byte for byte and differs from the head
+# (the client's comparison); stopped by SIGTERM, it deletes the journal.
+# Usage: cli_serve_journal.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
+set -u
+source "$(dirname "$0")/serve_port.sh"
+exe=$1; scene=$2; client=$3; out=$4; head=$5
+rm -rf "$out"; mkdir -p "$out"
+export XDG_STATE_HOME="$out/state"
+fail() { echo "FAIL serve journal: $*"; for f in "$out"/*.log; do echo "--- $f"; tail -n 30 "$f"; done; exit 1; }
+# RAS [mm]: outside the skull and 2.6 voxels into it (as cli_serve_session.sh), at slice z 11
+# and 7 slices further (z 18).
+out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"; out_q="-9.6 -102.4 110.5"; in_q="-37.12 -102.4 110.5"
+
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve1.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve1.log" $pid)
+[[ -n $port ]] || fail "serve never said it was listening"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" \
+  cmd apply wait 0.6 cmd stop cmd "save first.mha" move $out_q 0.3 move $in_q 0.5 cmd apply wait 0.6 cmd stop \
+  cmd "save both.mha" cmd undo cmd "save carved.mha" \
+  >"$out/client1.log" 2>&1 || fail "the first client failed (exit $?)"
+kill -KILL $pid; wait $pid; rc=$?
+[[ $rc == 137 ]] || fail "serve exited $rc, not killed"
+grep -q "save carved.mha: wrote" "$out/client1.log" || fail "carved.mha was not written"
+journal=$(ls "$out"/state/isotouch/serve-*.journal 2>/dev/null)
+[[ -f $journal ]] || fail "no journal left after the kill"
+edits=$(grep -c '^{"edit"' "$journal"); brushes=$(grep -c '^{"edit":"brush"' "$journal"); undos=$(grep -c '^{"edit":"undo"' "$journal")
+(( brushes > 0 && undos == 1 )) || fail "the journal holds $brushes brushes and $undos undos: the check says little"
+cmp -s "$out/first.mha" "$out/carved.mha" || fail "the undo did not give the first stroke back"
+cmp -s "$out/both.mha" "$out/carved.mha" && fail "the second stroke changed nothing: the undo says little"
+
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 >"$out/serve2.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve2.log" $pid)
+[[ -n $port ]] || fail "serve did not start again"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save restored.mha" compare "$out/restored.mha" \
+  >"$out/client2.log" 2>&1 || fail "the second client failed (exit $?)"
+kill -TERM $pid; wait $pid; rc=$?
+[[ $rc == 143 ]] || fail "serve exited $rc after SIGTERM, not 143"
+grep -q "^journal  restore $edits edits from [0-9][0-9]:[0-9][0-9]?" "$out/serve2.log" || fail "the restore was not offered for $edits edits"
+grep -q "^journal  restoring $edits edits from $journal" "$out/serve2.log" || fail "the $edits edits were not restored"
+cmp "$out/restored.mha" "$out/carved.mha" || fail "restored.mha differs from carved.mha (the volume at the kill)"
+carved=$(sed -n "s|^compare $out/restored.mha: \([0-9]*\) voxels differ.*|\1|p" "$out/client2.log")
+(( ${carved:-0} >= 10 )) || fail "the restored volume differs from the head in ${carved:-no} voxels"
+[[ ! -e $journal ]] || fail "the journal was not deleted when serve stopped"
+echo "PASS serve journal: $edits edits ($brushes brushes, 1 undo) restored after kill -9, byte for byte ($carved voxels carved)"

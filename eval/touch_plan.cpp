@@ -18,6 +18,10 @@ constexpr long kMaxStrokeSteps = 10000;
 // at which the scene's own direction is kept without trying the others.
 constexpr int kDirections = 8;
 constexpr double kGoodEnough = 0.5;
+// Where the ray's contact holds no stroke that good: other starts, every kStartEvery stroke
+// steps along walks of kStartReach [m] from it in each direction.
+constexpr double kStartReach = 0.012;
+constexpr std::size_t kStartEvery = 6;
 
 double smallest_spacing(const core::Grid& g) { return std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z}); }
 
@@ -35,8 +39,8 @@ bool in_box(const core::Grid& g, const Vec3& p) {
 
 /// The wall's thickness under surface point `s` along -n: from s to where the line leaves the
 /// object after having entered it (within a voxel of s), marched in quarter voxels up to
-/// `reach` [m] and bisected; +inf if still inside there, if the line leaves the box first, or
-/// if it never enters near s (a point the march cannot judge).
+/// `reach` [m] and bisected; +inf if still inside there or if the line leaves the box first;
+/// 0 if it never enters within a voxel of s (the normal does not lead into the object).
 double thickness_under(const core::SampleField& f, const core::Isosurface& iso, const Vec3& s, const Vec3& n,
                        double reach) {
   const double h = 0.25 * smallest_spacing(f.grid);
@@ -51,7 +55,7 @@ double thickness_under(const core::SampleField& f, const core::Isosurface& iso, 
       for (int k = 0; k < 40; ++k) (inside(0.5 * (lo + hi)) ? lo : hi) = 0.5 * (lo + hi);
       return 0.5 * (lo + hi);
     } else if (t > 4 * h) {
-      break;
+      return 0.0;  // -n does not lead into the object here: no press can be judged safe
     }
   }
   return std::numeric_limits<double>::infinity();
@@ -130,6 +134,54 @@ void add_waypoints(const sim::ScriptParams& p, TouchPlan& plan) {
   s.duration_s = t;
 }
 
+/// What every candidate plan shares.
+struct Ctx {
+  const core::SampleField& f;
+  core::Isosurface iso;
+  const TouchPlanOptions& o;
+  const sim::ScriptParams& p;
+  double force_depth;
+};
+
+/// A plan from surface point `s` (outward normal `n`) walking `length` along `t`, its depths chosen.
+TouchPlan walked(const Ctx& c, const Vec3& s, const Vec3& n, const Vec3& t, double length, double direction_deg) {
+  TouchPlan plan;
+  plan.script.contact_point_m = s;
+  plan.script.contact_normal = n;
+  plan.script.lift_retrace = c.p.lift_retrace;
+  plan.stroke_surface_m = {s};
+  plan.stroke_normal = {n};
+  plan.force_depth_m = c.force_depth;
+  plan.direction_deg = direction_deg;
+  walk_stroke(c.f, c.iso, t, length, plan);
+  choose_depths(c.f, c.iso, c.o, plan);
+  return plan;
+}
+
+/// From `s`: along `t` (the scene's direction), unless the wall thins or the surface ends
+/// along it; then the best of kDirections directions around `n` (the first kept on a tie).
+TouchPlan best_direction(const Ctx& c, const Vec3& s, const Vec3& n, const Vec3& t) {
+  TouchPlan plan;
+  for (int k = 0; k < kDirections; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / kDirections;
+    TouchPlan cand = walked(c, s, n, t * std::cos(a) + core::cross(n, t) * std::sin(a), c.p.stroke_length_m,
+                            360.0 * k / kDirections);
+    if (k == 0 || score(cand, c.p.stroke_length_m) > score(plan, c.p.stroke_length_m)) plan = std::move(cand);
+    plan.directions_tried = k + 1;
+    if (k == 0 && score(plan, c.p.stroke_length_m) >= kGoodEnough * c.force_depth) break;
+  }
+  return plan;
+}
+
+/// True where the hand's approach to `s` (approach_distance_m along `n`) stays outside the
+/// object, sampled every quarter voxel.
+bool approach_clear(const Ctx& c, const Vec3& s, const Vec3& n) {
+  const double h = 0.25 * smallest_spacing(c.f.grid);
+  for (double t = 2 * h; t <= c.p.approach_distance_m; t += h)
+    if (c.iso.contains(servo::sample_value(c.f, s + n * t))) return false;
+  return true;
+}
+
 }  // namespace
 
 double force_press_depth_m(const servo::HriParams& hri, const sim::SimDeviceParams& device, double force_fraction) {
@@ -143,29 +195,25 @@ TouchPlan plan_touch(const core::SampleField& truth, const servo::HriParams& hri
   sim::ScriptParams ray = p;
   ray.stroke_length_m = 0;
   const sim::TouchScript cast = sim::make_touch_script(truth, hri, ray);
-  const core::Isosurface iso{hri.tau, hri.inside};
-  TouchPlan base;
-  base.script.contact_point_m = cast.contact_point_m;
-  base.script.contact_normal = cast.contact_normal;
-  base.script.lift_retrace = p.lift_retrace;
-  base.stroke_surface_m = {cast.contact_point_m};
-  base.stroke_normal = {cast.contact_normal};
-  base.force_depth_m = force_press_depth_m(hri, device, o.force_fraction);
+  const Ctx c{truth, core::Isosurface{hri.tau, hri.inside}, o, p, force_press_depth_m(hri, device, o.force_fraction)};
   const Vec3 n0 = cast.contact_normal;
   const Vec3 t0 = core::normalized_or(p.stroke_direction - n0 * core::dot(p.stroke_direction, n0),
                                       core::normalized_or(core::cross(n0, {0, 0, 1}), {1, 0, 0}));
-  // The scene's direction, unless the wall thins or the surface ends along it: then the best
-  // of kDirections directions around the normal (the scene's first, kept on a tie).
-  TouchPlan plan;
-  for (int k = 0; k < kDirections; ++k) {
-    const double a = 2.0 * std::numbers::pi * k / kDirections;
-    TouchPlan cand = base;
-    walk_stroke(truth, iso, t0 * std::cos(a) + core::cross(n0, t0) * std::sin(a), p.stroke_length_m, cand);
-    choose_depths(truth, iso, o, cand);
-    cand.direction_deg = 360.0 * k / kDirections;
-    if (k == 0 || score(cand, p.stroke_length_m) > score(plan, p.stroke_length_m)) plan = std::move(cand);
-    plan.directions_tried = k + 1;
-    if (k == 0 && score(plan, p.stroke_length_m) >= kGoodEnough * plan.force_depth_m) break;
+  TouchPlan plan = best_direction(c, cast.contact_point_m, n0, t0);
+  // A thin wall at the ray's contact: the best start near it on the surface, by the same score.
+  if (score(plan, p.stroke_length_m) < kGoodEnough * c.force_depth) {
+    for (int k = 0; k < kDirections; ++k) {
+      const double a = 2.0 * std::numbers::pi * k / kDirections;
+      const TouchPlan probe = walked(c, cast.contact_point_m, n0, t0 * std::cos(a) + core::cross(n0, t0) * std::sin(a),
+                                     kStartReach, 0.0);
+      for (std::size_t j = kStartEvery; j < probe.stroke_surface_m.size(); j += kStartEvery) {
+        const Vec3 s = probe.stroke_surface_m[j], n = probe.stroke_normal[j];
+        if (!approach_clear(c, s, n)) continue;
+        const Vec3 t = core::normalized_or(t0 - n * core::dot(t0, n), core::normalized_or(core::cross(n, {0, 0, 1}), {1, 0, 0}));
+        TouchPlan cand = best_direction(c, s, n, t);
+        if (score(cand, p.stroke_length_m) > score(plan, p.stroke_length_m)) plan = std::move(cand);
+      }
+    }
   }
   add_waypoints(p, plan);
   return plan;

@@ -17,6 +17,7 @@
 #include "isotouch/apps/mesh_units_option.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/files.h"
+#include "isotouch/run/stroke_warning.h"
 #include "isotouch/run/volume_scene.h"
 #include "isotouch/sim/sim_device.h"
 #include "isotouch/session/stop_signal.h"
@@ -214,6 +215,7 @@ int cmd_run(const RunInput& in, std::string out_dir, const std::string& device, 
             << "  surface error RMS " << m.surface_err_rms_m * 1e3 << " mm, max " << m.surface_err_max_m * 1e3 << " mm\n"
             << "  report        " << (fs::path(out_dir) / "report.md").string()
             << (m.plots_drawn ? "  (with plots)" : ("  (" + m.plot_note + ")")) << "\n";
+  if (const std::string w = run::stroke_contact_warning(m); !w.empty()) std::cerr << "\nisotouch: warning: " << w << "\n";
   if (m.fault_ticks > 0) {
     std::cerr << "\nisotouch: error: " << m.fault_ticks << " of " << m.ticks
               << " servo ticks were faults (non-finite input or state; zero force sent): the run is not "

@@ -630,6 +630,11 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
   p.stroke_speed_m_s = r.number(sc, "script", "stroke_speed_m_s");
   p.rest_s = r.number(sc, "script", "rest_s");
   p.lift_retrace = r.boolean(sc, "script", "lift_retrace", p.lift_retrace);
+  p.plan = r.string(sc, "script", "plan", p.plan);
+  if (p.plan != "ray" && p.plan != "surface")
+    r.fail("script.plan", "must be \"ray\" (the press at press_depth_m, the stroke re-cast along the first normal) or "
+                          "\"surface\" (planned on the true isosurface), got \"" + p.plan + "\"");
+  p.press_force_fraction = r.number(sc, "script", "press_force_fraction");
 }
 
 }  // namespace

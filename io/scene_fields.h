@@ -80,6 +80,8 @@ inline constexpr SceneField kSceneFields[] = {
     {"script", "stroke_speed_m_s", "m/s", "(0, 10]", "0.040"},
     {"script", "rest_s", "s", "[0, 3600]", "0.1"},
     {"script", "lift_retrace", "", "true, false", "false"},
+    {"script", "plan", "", "`\"ray\"`, `\"surface\"`", "`\"ray\"`"},
+    {"script", "press_force_fraction", "fraction of `servo.force_limit_n`", "(0, 0.95]", "0.6"},
     {"engine", "passes", "", "non-empty array", "`[\"gradient\"]`"},
     {"engine", "mode", "", "`\"sparse\"`, `\"dense\"`", "`\"sparse\"`"},
     {"engine", "samples", "", "`\"fp32\"`, `\"fp16\"`, `\"unorm16\"`", "`\"fp32\"`"},

@@ -4,6 +4,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -180,6 +181,15 @@ struct RunMetrics {
   /// Ticks of the stroke phase (script t_stroke <= t < t_lift) and how many of them were in
   /// contact: a stroke that stays on the surface it starts on has a share near 1.
   long stroke_ticks = 0, stroke_contact_ticks = 0;
+  /// The hand path's plan (script.plan: "ray" or "surface", run/scene_script.h): the press
+  /// depth of the hand's target [m]; for "surface" also its least along the stroke [m], the depth the force allows [m], the
+  /// thinnest wall under the stroke [m] (+inf: none thin enough to bind) and the stroke's
+  /// length walked on the surface [m].
+  std::string plan = "ray";
+  double plan_press_depth_m = 0, plan_min_press_depth_m = 0, plan_force_depth_m = 0, plan_stroke_length_m = 0;
+  double plan_min_wall_m = std::numeric_limits<double>::infinity();
+  /// Contact ticks whose |F| is under 0.95 of the force limit (the rest sit at the limit).
+  long contact_ticks_under_95pct_limit = 0;
   /// The lift-off (t >= script t_lift): contact ticks and the largest |F| [N] while the hand
   /// pulls the probe back out (a clean retraction has few and small).
   long lift_contact_ticks = 0;

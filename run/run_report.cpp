@@ -1,4 +1,5 @@
 #include "isotouch/run/run_report.h"
+#include "isotouch/run/stroke_warning.h"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -402,6 +403,9 @@ nlohmann::ordered_json contact_json(const RunMetrics& m, const servo::HriParams&
           {"max_direction_step_t_s", m.force_dir_step_max_t_s},
           {"force_direction_step_deg", {{"rms", m.force_dir_step_rms_deg}, {"max", m.force_dir_step_max_deg}}},
           {"saturated_ticks", m.saturated_ticks},
+          {"ticks_under_95pct_limit", m.contact_ticks_under_95pct_limit},
+          {"fraction_under_95pct_limit", m.contact_ticks ? nlohmann::ordered_json(double(m.contact_ticks_under_95pct_limit) / double(m.contact_ticks))
+                                                         : nlohmann::ordered_json(nullptr)},
           {"stiffness_bound_n_per_m", m.k_bound_n_per_m},
           {"stiffness_above_bound", m.k_above_bound},
           {"fault_ticks", m.fault_ticks},
@@ -461,6 +465,18 @@ nlohmann::ordered_json error_json(const RunMetrics& m, const servo::HriParams& h
                                                  "ticks where it is finite and at most bound_m (the volume's diagonal)"}}}};
 }
 
+// summary.json "script.plan": how the hand path was made (run/scene_script.h).
+nlohmann::ordered_json plan_json(const RunMetrics& m) {
+  const auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr); };
+  nlohmann::ordered_json j{{"kind", m.plan}, {"press_depth_m", m.plan_press_depth_m}};
+  if (m.plan != "surface") return j;
+  j["min_press_depth_m"] = m.plan_min_press_depth_m;
+  j["force_depth_m"] = m.plan_force_depth_m;
+  j["min_wall_m"] = finite_or_null(m.plan_min_wall_m);
+  j["stroke_length_m"] = m.plan_stroke_length_m;
+  return j;
+}
+
 // summary.json "script": the contact point and normal (physical), the phases, stroke and lift-off.
 nlohmann::ordered_json script_json(const engine::Volume& vol, const sim::TouchScript& script, const RunMetrics& m) {
   const Vec3 contact_phys = vol.to_physical(script.contact_point_m);
@@ -473,6 +489,9 @@ nlohmann::ordered_json script_json(const engine::Volume& vol, const sim::TouchSc
           {"stroke_contact_ticks", m.stroke_contact_ticks},
           {"stroke_contact_fraction", m.stroke_ticks ? nlohmann::ordered_json(double(m.stroke_contact_ticks) / double(m.stroke_ticks))
                                                      : nlohmann::ordered_json(nullptr)},
+          {"stroke_contact_warning", stroke_contact_warning(m).empty() ? nlohmann::ordered_json(nullptr)
+                                                                       : nlohmann::ordered_json(stroke_contact_warning(m))},
+          {"plan", plan_json(m)},
           {"lift_contact_ticks", m.lift_contact_ticks},
           {"lift_max_force_n", m.lift_max_force_n},
           {"lift_inward_ticks", m.lift_inward_ticks},
@@ -562,7 +581,10 @@ std::string servo_rows(const RunMetrics& m, const servo::HriParams& hp) {
      << " ns, max " << fmt(m.tick_ns_max) << " ns |\n"
      << "| stroke | " << (m.stroke_ticks ? std::to_string(m.stroke_contact_ticks) + " of " + std::to_string(m.stroke_ticks) +
                               " stroke ticks in contact (" + fmt(100.0 * double(m.stroke_contact_ticks) / double(m.stroke_ticks), 3) + " %)"
-                        : std::string("no stroke in the script")) << " |\n"
+                        : std::string("no stroke in the script"))
+     << "; hand path planned by \"" << m.plan << "\", the hand's target " << fmt(m.plan_press_depth_m * 1e3, 4)
+     << " mm under the surface; " << m.contact_ticks_under_95pct_limit << " of " << m.contact_ticks
+     << " contact ticks under 0.95 of the force limit |\n"
      << "| lift-off | " << m.lift_contact_ticks << " contact ticks while the hand pulls the probe out, largest |F| "
      << fmt(m.lift_max_force_n, 4) << " N; " << m.lift_inward_ticks
      << " of them pull the probe into the object (largest inward component " << fmt(m.lift_max_inward_force_n, 4)
@@ -636,6 +658,7 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
      << (paper ? "the paper's Figure 2 as printed" : "robust variant: the paper's Figure 2 plus the departures listed in servo/hri.h")
      << ") reading the sample field that the Vulkan gradient pass wrote.\n\n";
   md << volume_rows(m, vol, hp) << servo_rows(m, hp) << contact_rows(m, hp, found, raw_found);
+  if (const std::string w = stroke_contact_warning(m); !w.empty()) md << "**Warning: " << w << ".**\n\n";
   md << (m.fault_ticks == 0
              ? std::string("No faults: every tick had a finite HIP and a finite force.\n\n")
              : "**Faults: " + std::to_string(m.fault_ticks) + " of " + std::to_string(m.ticks) + " ticks (" +

@@ -19,6 +19,7 @@
 #include "isotouch/run/names.h"
 #include "isotouch/engine/parallel.h"
 #include "isotouch/run/run_report.h"
+#include "isotouch/run/scene_script.h"
 #include "isotouch/eval/shapes.h"
 #include "isotouch/engine/synthetic.h"
 #include "isotouch/run/text.h"
@@ -249,7 +250,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   s.hri = scene.hri;
   // An edit stands for every_ticks of cutting: its force step is eased over that time.
   s.hri.edit_period_s = scene.edits.every_ticks / scene.hri.rate_hz;
-  s.script = sim::make_touch_script(*s.truth, s.hri, scene.script);
+  s.script = scene_script(scene, *s.truth, s.hri, s.metrics, log);
   s.world_T_device.scale = scene.workspace_scale;
   s.world_T_device.translation_m = s.volume.grid.centre_m();
   make_edit_session(scene, s, log);

@@ -256,6 +256,7 @@ std::pair<long, long> trace_figures(const std::vector<sim::TraceRow>& trace, con
     if (!r.contact) continue;
     ++m.contact_ticks;
     const double f = core::norm(r.force_n);
+    m.contact_ticks_under_95pct_limit += f < 0.95 * setup.hri.force_limit_n;
     if (last && last->contact) contact_steps(r, *last, f, m);
     s.fsum += f;
     m.max_force_n = std::max(m.max_force_n, f);

@@ -129,7 +129,12 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
   out.approach = choose_approach(scan.volume, out.choice.iso);
   out.approach_text = describe_approach(scan.volume, out.approach);
   const Approach& a = out.approach;
-  std::array<double, 3> origin{0.5, 0.5, 0.5}, dir{0, 0, 0}, stroke{0, 0, 0};
+  // The ray runs along the index line through the centre voxel that choose_approach looked
+  // along (its fraction of the box, not the box's centre half a voxel beside it: a thin
+  // crossing on that line may be missed beside it).
+  const auto& d = scan.volume.grid.dims;
+  std::array<double, 3> origin{}, dir{0, 0, 0}, stroke{0, 0, 0};
+  for (std::size_t k = 0; k < 3; ++k) origin[k] = d[k] > 1 ? double(d[k] / 2) / double(d[k] - 1) : 0.5;
   origin[std::size_t(a.axis)] = a.sign > 0 ? -0.2 : 1.2;
   dir[std::size_t(a.axis)] = a.sign;
   const int s_axis = (a.axis + 1) % 3;
@@ -140,12 +145,12 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
   std::ostringstream j;
   j << std::setprecision(17) << "{\n  \"name\": " << quoted(scene_name(volume_path)) << ",\n  \"description\": "
     << quoted("Made by isotouch run for " + volume_path + ": isovalue " + engine::iso_line(out.choice) +
-              "; the probe approaches " + out.approach_text + ", presses and strokes along +" +
-              char('x' + s_axis) + ". Edit and run it as a scene.")
+              "; the probe approaches " + out.approach_text + ", presses along the surface normal and strokes on the surface from +" +
+              char('x' + s_axis) + " (planned on the true isosurface: script.plan). Edit and run it as a scene.")
     << ",\n  \"volume\": {\"path\": " << quoted(fs::absolute(volume_path).lexically_normal().string())
     << "},\n  \"isovalue\": " << out.choice.iso.tau << ",\n  \"inside\": \"" << core::to_string(out.choice.iso.inside)
     << "\",\n  \"script\": {\n    \"ray_origin_frac\": " << vec(origin) << ",\n    \"ray_direction\": " << vec(dir)
-    << ",\n    \"stroke_direction\": " << vec(stroke) << ",\n    \"stroke_length_m\": " << stroke_m << "\n  }\n}\n";
+    << ",\n    \"stroke_direction\": " << vec(stroke) << ",\n    \"stroke_length_m\": " << stroke_m << ",\n    \"plan\": \"surface\"\n  }\n}\n";
   out.json = j.str();
   out.scene = io::parse_scene(out.json, volume_path + " (the scene made for it)");
   return out;

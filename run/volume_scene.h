@@ -2,7 +2,8 @@
 // DICOM folder, instead of a hand-written scene. The isovalue is the one the file chooses
 // (engine/iso_choice.h) unless given; the probe approaches along the index axis through the
 // volume's centre whose first isosurface crossing is nearest its face of the box (but not on
-// it: a crossing on the face is where the scan was cropped), presses and strokes.
+// it: a crossing on the face is where the scan was cropped), presses along the surface normal
+// and strokes on the surface (the touch planned on the true isosurface).
 #pragma once
 #include <optional>
 #include <string>
@@ -52,8 +53,9 @@ bool is_volume_path(const std::string& path);
 
 /// Builds the default scene for `volume_path`: its absolute path, the isovalue (`iso`, inside
 /// `inside`, or the file's choice), a script along choose_approach with a stroke along the next
-/// index axis (length 40 mm, at most a quarter of the box along it), the other fields at their
-/// scene defaults. @throws engine::VolumeError (loading) or io::SceneError.
+/// index axis (length 40 mm, at most a quarter of the box along it) planned on the true
+/// isosurface (script.plan "surface", eval/touch_plan.h), the other fields at their scene
+/// defaults. @throws engine::VolumeError (loading) or io::SceneError.
 VolumeScene make_volume_scene(const std::string& volume_path, std::optional<double> iso,
                               const std::string& inside = "above");
 

@@ -30,6 +30,13 @@ struct ScriptParams {
   /// the path): an operator withdraws a burr along the channel it drilled, not along the
   /// straight line the hand aimed at when the hand drifted while drilling.
   bool lift_retrace = false;
+  /// How the hand path is made. "ray": this file's make_touch_script (the press at
+  /// press_depth_m, the stroke re-cast along the first contact's normal). "surface": planned
+  /// on the true isosurface (eval/touch_plan.h, which the run calls): the press at the depth
+  /// where the hand's static force is press_force_fraction of the force limit, the stroke
+  /// following the surface; press_depth_m is not used.
+  std::string plan = "ray";
+  double press_force_fraction = 0.6;  ///< f of the "surface" plan (0, 0.95]
 };
 
 /// A piecewise-linear hand-target trajectory in world [m].

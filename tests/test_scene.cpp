@@ -571,7 +571,7 @@ TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
       {"script.approach_speed_m_s", s.script.approach_speed_m_s}, {"script.press_depth_m", s.script.press_depth_m},
       {"script.press_speed_m_s", s.script.press_speed_m_s}, {"script.hold_s", s.script.hold_s},
       {"script.stroke_length_m", s.script.stroke_length_m}, {"script.stroke_speed_m_s", s.script.stroke_speed_m_s},
-      {"script.rest_s", s.script.rest_s},
+      {"script.rest_s", s.script.rest_s}, {"script.press_force_fraction", s.script.press_force_fraction},
       {"engine.passes.brick_minmax.halo", s.engine.passes.at(0).halo},
       {"edits.every_ticks", s.edits.every_ticks}, {"edits.history_limit_mib", s.edits.history_limit_mib},
       {"edits.brush.radius_mm", s.edits.brush.radius_mm}, {"edits.brush.strength", s.edits.brush.strength},

@@ -5,6 +5,7 @@
 
 #include <cmath>
 
+#include "isotouch/run/stroke_warning.h"
 #include "isotouch/run/trace_figures.h"
 
 using isotouch::core::Vec3;
@@ -57,4 +58,18 @@ TEST(FirstOrderEstimate, IsADistanceOnlyWithinTheVolume) {
   EXPECT_FALSE(first_order_as_distance(3.9e11, diagonal_m)) << "|grad f| near 0: 3.9e14 mm";
   EXPECT_FALSE(first_order_as_distance(INFINITY, diagonal_m));
   EXPECT_FALSE(first_order_as_distance(NAN, diagonal_m));
+}
+
+// The run's warning: under half the stroke's ticks in contact, with the figures; not at half.
+TEST(StrokeWarning, UnderHalfTheStrokeInContactIsWarnedWithItsFigures) {
+  isotouch::run::RunMetrics m;
+  m.stroke_ticks = 1000;
+  m.stroke_contact_ticks = 499;
+  const std::string w = isotouch::run::stroke_contact_warning(m);
+  EXPECT_NE(w.find("499 of its 1000 ticks"), std::string::npos) << w;
+  EXPECT_NE(w.find("49.9 %"), std::string::npos) << w;
+  m.stroke_contact_ticks = 500;
+  EXPECT_EQ(isotouch::run::stroke_contact_warning(m), "");
+  m.stroke_ticks = m.stroke_contact_ticks = 0;  // no stroke in the script: nothing to warn about
+  EXPECT_EQ(isotouch::run::stroke_contact_warning(m), "");
 }

@@ -22,6 +22,12 @@ constexpr double kGoodEnough = 0.5;
 // steps along walks of kStartReach [m] from it in each direction.
 constexpr double kStartReach = 0.012;
 constexpr std::size_t kStartEvery = 6;
+// The planner's cost whatever the grid (a 0.05 mm micro-CT would otherwise take hours): each
+// march at most kMaxMarch samples, at most kMaxWallChecks wall checks a stroke (evenly
+// spread), at most kMaxStarts other starts a direction.
+constexpr double kMaxMarch = 1024;
+constexpr std::size_t kMaxWallChecks = 256;
+constexpr std::size_t kMaxStarts = 8;
 
 double smallest_spacing(const core::Grid& g) { return std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z}); }
 
@@ -43,7 +49,7 @@ bool in_box(const core::Grid& g, const Vec3& p) {
 /// 0 if it never enters within a voxel of s (the normal does not lead into the object).
 double thickness_under(const core::SampleField& f, const core::Isosurface& iso, const Vec3& s, const Vec3& n,
                        double reach) {
-  const double h = 0.25 * smallest_spacing(f.grid);
+  const double h = std::max(0.25 * smallest_spacing(f.grid), reach / kMaxMarch);
   const auto inside = [&](double t) { return iso.contains(servo::sample_value(f, s - n * t)); };
   bool entered = false;
   for (double t = h; t <= reach; t += h) {
@@ -89,10 +95,14 @@ void choose_depths(const core::SampleField& f, const core::Isosurface& iso, cons
   const double reach = plan.force_depth_m / o.thickness_fraction;
   plan.stroke_depth_m.clear();
   plan.min_thickness_m = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < plan.stroke_surface_m.size(); ++i) {
+  const std::size_t n = plan.stroke_surface_m.size();
+  const std::size_t every = std::max<std::size_t>(1, (n + kMaxWallChecks - 1) / kMaxWallChecks);
+  const auto check = [&](std::size_t i) {
     const double wall = thickness_under(f, iso, plan.stroke_surface_m[i], plan.stroke_normal[i], reach);
     plan.min_thickness_m = std::min(plan.min_thickness_m, wall);
-  }
+  };
+  for (std::size_t i = 0; i < n; i += every) check(i);
+  if (n > 0 && (n - 1) % every != 0) check(n - 1);  // the stroke's end too
   plan.press_depth_m = plan.min_press_depth_m = std::min(plan.force_depth_m, o.thickness_fraction * plan.min_thickness_m);
   plan.stroke_depth_m.assign(plan.stroke_surface_m.size(), plan.press_depth_m);
 }
@@ -176,7 +186,7 @@ TouchPlan best_direction(const Ctx& c, const Vec3& s, const Vec3& n, const Vec3&
 /// True where the hand's approach to `s` (approach_distance_m along `n`) stays outside the
 /// object, sampled every quarter voxel.
 bool approach_clear(const Ctx& c, const Vec3& s, const Vec3& n) {
-  const double h = 0.25 * smallest_spacing(c.f.grid);
+  const double h = std::max(0.25 * smallest_spacing(c.f.grid), c.p.approach_distance_m / kMaxMarch);
   for (double t = 2 * h; t <= c.p.approach_distance_m; t += h)
     if (c.iso.contains(servo::sample_value(c.f, s + n * t))) return false;
   return true;
@@ -206,7 +216,8 @@ TouchPlan plan_touch(const core::SampleField& truth, const servo::HriParams& hri
       const double a = 2.0 * std::numbers::pi * k / kDirections;
       const TouchPlan probe = walked(c, cast.contact_point_m, n0, t0 * std::cos(a) + core::cross(n0, t0) * std::sin(a),
                                      kStartReach, 0.0);
-      for (std::size_t j = kStartEvery; j < probe.stroke_surface_m.size(); j += kStartEvery) {
+      const std::size_t every = std::max(kStartEvery, probe.stroke_surface_m.size() / kMaxStarts);
+      for (std::size_t j = every; j < probe.stroke_surface_m.size(); j += every) {
         const Vec3 s = probe.stroke_surface_m[j], n = probe.stroke_normal[j];
         if (!approach_clear(c, s, n)) continue;
         const Vec3 t = core::normalized_or(t0 - n * core::dot(t0, n), core::normalized_or(core::cross(n, {0, 0, 1}), {1, 0, 0}));

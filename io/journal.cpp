@@ -47,6 +47,16 @@ void sync(int fd, const std::string& path) {
   if (::fdatasync(fd) != 0) throw JournalError(os_error(path, "journal fdatasync failed"));
 }
 
+/// The rename of a file in `path`'s folder made durable (best effort: a folder that cannot
+/// be opened or synced leaves the rename to the file system's own schedule).
+void sync_folder(const std::string& path) {
+  const auto dir = std::filesystem::path(path).parent_path();
+  const int d = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (d < 0) return;
+  (void)::fsync(d);
+  ::close(d);
+}
+
 std::string read_all(int fd, const std::string& path) {
   std::string out;
   char buf[1 << 16];
@@ -202,10 +212,24 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
     e.tick = 0;  // applied before this session's first tick
     text += recording_edit_line(e, path_);
   }
-  if (::ftruncate(impl_->fd, 0) != 0) throw JournalError(os_error(path_, "cannot empty the edit journal"));
-  if (::lseek(impl_->fd, 0, SEEK_SET) < 0) throw JournalError(os_error(path_, "cannot rewind the edit journal"));
-  write_all(impl_->fd, text, path_);
-  sync(impl_->fd, path_);
+  // Written whole beside the journal, locked, synced, then renamed over it: until the rename
+  // the journal a crash left stays as it was (its edits may be in memory only now).
+  const std::string next = path_ + ".new";
+  const int fd = ::open(next.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) throw JournalError(os_error(next, "cannot create the edit journal"));
+  try {
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) throw JournalError(os_error(next, "cannot lock the edit journal"));
+    write_all(fd, text, next);
+    sync(fd, next);
+    if (::rename(next.c_str(), path_.c_str()) != 0) throw JournalError(os_error(path_, "cannot replace the edit journal"));
+  } catch (...) {
+    ::close(fd);
+    ::unlink(next.c_str());
+    throw;
+  }
+  sync_folder(path_);
+  ::close(impl_->fd);  // the old file's lock goes with it; the new one is locked already
+  impl_->fd = fd;
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
     impl_->edits = long(restored.size());

@@ -11,13 +11,20 @@
 namespace isotouch::io {
 namespace {
 
-/// Copies the journal aside (PATH + suffix) before it is started afresh; returns the copy's
-/// name, or why there is none.
-std::string keep_aside(const std::string& path, const char* suffix) {
-  const std::string to = path + suffix;
+/// Copies the journal aside before it is started afresh: to PATH + suffix, or PATH + suffix
+/// + ".N" (N = 2, 3, ...) where an earlier one is there (never overwritten). `said` gets the
+/// copy's name or why there is none; false: no copy (the journal must not be started).
+bool keep_aside(const std::string& path, const char* suffix, std::string& said) {
+  std::string to = path + suffix;
+  for (int n = 2; std::filesystem::exists(to) && n < 1000; ++n) to = path + suffix + "." + std::to_string(n);
   std::error_code ec;
-  std::filesystem::copy_file(path, to, std::filesystem::copy_options::overwrite_existing, ec);
-  return ec ? "could not be kept (" + to + ": " + ec.message() + ")" : "kept in " + to;
+  if (!std::filesystem::copy_file(path, to, std::filesystem::copy_options::none, ec) || ec) {
+    said = "could not be kept (" + to + ": " + (ec ? ec.message() : std::string("exists")) +
+           "); the journal is left as it is and this session's edits are not journaled";
+    return false;
+  }
+  said = "kept in " + to;
+  return true;
 }
 
 bool answered_yes(std::istream& answers) {
@@ -50,7 +57,9 @@ OpenedJournal open_journal(const std::string& program, std::uint32_t volume_crc3
   try {
     left = out.journal->left(volume_crc32);
   } catch (const JournalError& e) {
-    log << "journal  " << e.what() << "; " << keep_aside(path, ".refused") << "\n";
+    std::string said;
+    if (!keep_aside(path, ".refused", said)) out.journal.reset();
+    log << "journal  " << e.what() << "; " << said << "\n";
     return out;
   }
   if (!left || left->edits.empty()) return out;  // new, closed, or killed before any edit
@@ -70,7 +79,9 @@ OpenedJournal open_journal(const std::string& program, std::uint32_t volume_crc3
   const char* why = choice == RestoreChoice::kNo ? "--restore no"
                     : ask_terminal               ? "answered no"
                                                  : "no terminal to ask; --restore yes restores";
-  log << "journal  not restored (" << why << "): " << keep_aside(path, ".unrestored") << "\n";
+  std::string said;
+  if (!keep_aside(path, ".unrestored", said)) out.journal.reset();
+  log << "journal  not restored (" << why << "): " << said << "\n";
   return out;
 }
 

@@ -203,6 +203,8 @@ class Server {
   std::thread acceptor_;  // accept_clients() until stop_
   int next_id_ = 1;
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
+  io::OpenedJournal journal_;  // the scene's volume's session's edit journal (off: null); before session_:
+  // destroyed after it, so a session still running while run() unwinds never appends to a freed one
   std::unique_ptr<Session> session_;
   long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
@@ -255,7 +257,6 @@ class Server {
   // inside its values; none: each IMAGE's own, image_isovalue.h).
   std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
-  io::OpenedJournal journal_;  // the scene's volume's session's edit journal (off: null)
 };
 
 /// "isovalue 300 (inside above)".

@@ -14,6 +14,7 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     period_ns_ = d;
     anchor_ns_ = t_ns;
     outliers_ = 0;
+    intervals_ = 1;
   } else if (2 * d < period_ns_ || 2 * d > 3 * period_ns_) {
     ++outliers_;  // a burst or a gap: neither the period nor the phase
     anchor_ns_ = t_ns;
@@ -21,7 +22,8 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     return;
   } else {
     outliers_ = 0;
-    period_ns_ += (d - period_ns_) / 16;
+    intervals_ = std::min(intervals_ + 1, 16);  // the mean of the first 16, then a running one
+    period_ns_ += (d - period_ns_) / intervals_;
     // The phase: predicted one period on, pulled 1/8 of the way to the arrival; jitter that
     // only ever delays an arrival leaves the anchor near the early ones.
     const std::int64_t predicted = anchor_ns_ + period_ns_;
@@ -37,12 +39,12 @@ std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, In
   if (next_ns - in.due_ns > 4 * in.period_ns) return next_ns;  // the input paused
   const double ratio = double(in.period_ns) / double(period_ns);
   const double whole = std::round(ratio);
-  if (whole < 1 || std::abs(ratio - whole) > 0.03) return next_ns;
+  if (whole < 1 || std::abs(ratio - whole) > 0.005 * whole) return next_ns;
   // How far the next deadline lies after the wanted one, in (-period/2, period/2].
   std::int64_t e = (next_ns - (in.due_ns + lead_ns)) % period_ns;
   if (e < 0) e += period_ns;
   if (e > period_ns / 2) e -= period_ns;
-  return next_ns - std::clamp(e, -period_ns / 8, period_ns / 8);
+  return next_ns - std::clamp(e, -period_ns / 16, period_ns / 16);
 }
 
 }  // namespace isotouch::servo

@@ -5,9 +5,10 @@
 // stream's, a pose waits for the next tick anywhere from 0 to one servo period, fixed for a
 // whole session by the two clocks' start (at 1 kHz: a round trip of 0.1 or 1.1 ms, by luck).
 // ArrivalClock learns the input's period and phase from the arrival times; the servo moves
-// its next deadline towards `lead` after the next arrival, at most 1/8 period a tick, only
+// its next deadline towards `lead` after the next arrival, at most 1/16 period a tick, only
 // where the input's period is a whole number of servo periods (else the ticks could never
-// stay aligned and the servo's period would wander).
+// stay aligned and the servo's period would wander). Following, the servo runs at the input's
+// rate, within 0.5 % of its own: what the stiffness check assumed.
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -24,6 +25,8 @@ struct InputPhase {
 /// The input's period and phase from its arrival times. arrived(): one thread at a time
 /// (the caller's lock); phase(): any thread, lock-free (the two fields may be one arrival
 /// apart, which moves the servo by at most a step it takes anyway).
+static_assert(std::atomic<std::int64_t>::is_always_lock_free, "the servo reads the phase lock-free");
+
 class ArrivalClock {
  public:
   void arrived(std::int64_t t_ns);
@@ -36,12 +39,13 @@ class ArrivalClock {
   std::int64_t period_ns_ = 0;   // the smoothed interval; 0: none yet
   std::int64_t anchor_ns_ = -1;  // the smoothed arrival phase (an arrival's time less its jitter)
   int outliers_ = 0;             // intervals in a row far from the period: the rate changed
+  int intervals_ = 0;            // intervals in the period's mean, at most 16
   std::atomic<std::int64_t> due_{-1}, period_{0};
 };
 
-/// `next_ns` (the servo's next deadline at period `period_ns`) moved by at most period / 8
+/// `next_ns` (the servo's next deadline at period `period_ns`) moved by at most period / 16
 /// towards the nearest deadline that falls `lead_ns` after an arrival of `in`; unchanged when
-/// `in` is unknown, paused for more than 4 of its periods, or its period is not within 3 %
+/// `in` is unknown, paused for more than 4 of its periods, or its period is not within 0.5 %
 /// of a whole number of servo periods.
 std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns);
 

@@ -235,7 +235,7 @@ void ServoThread::loop(Handoff& h) {
   const auto restart_ns = std::int64_t(std::max(cfg_.stale_restart_s, 0.0) * 1e9);
   std::uint32_t connection = 0;
   bool first = true;
-  const auto input_lead = std::int64_t(cfg_.input_lead_us * 1e3);
+  const auto input_lead = std::int64_t(std::clamp(std::isfinite(cfg_.input_lead_us) ? cfg_.input_lead_us : 100.0, 0.0, 1e6) * 1e3);
   while (!stop_.load(std::memory_order_relaxed)) {
     next += period;
     if (cfg_.follow_input_phase) next = follow_input_phase(next, period, device_.input_phase(), input_lead);

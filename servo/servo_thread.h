@@ -87,7 +87,7 @@ struct ServoThreadConfig {
   double max_spin_fraction = 0.5;
   /// A device that says when its next input is due (HapticDeviceIO::input_phase: a link
   /// waiting for the answer) gets its ticks moved to input_lead_us after each arrival, at
-  /// most 1/8 period a tick (input_phase.h): its round trip is the lead and the tick, not
+  /// most 1/16 period a tick (input_phase.h): its round trip is the lead and the tick, not
   /// 0 to 1 period by the clocks' luck. The lead covers the arrivals' jitter.
   bool follow_input_phase = true;
   double input_lead_us = 100;

@@ -91,6 +91,22 @@ TEST(JournalOffer, NoKeepsTheJournalAsUnrestored) {
   EXPECT_EQ(read(path + ".unrestored"), before);
 }
 
+// A second journal not restored is kept beside the first, which is never overwritten.
+TEST(JournalOffer, ASecondUnrestoredJournalDoesNotReplaceTheFirst) {
+  state_home("no_twice");
+  std::ostringstream log;
+  std::istringstream none;
+  const std::string path = leave_journal("p", kCrc, kCrc, 3);
+  const std::string first = read(path);
+  (void)open_journal("p", kCrc, RestoreChoice::kNo, log, none, false);
+  leave_journal("p", kCrc, kCrc, 5);
+  const std::string second = read(path);
+  ASSERT_NE(first, second);
+  (void)open_journal("p", kCrc, RestoreChoice::kNo, log, none, false);
+  EXPECT_EQ(read(path + ".unrestored"), first) << log.str();
+  EXPECT_EQ(read(path + ".unrestored.2"), second) << log.str();
+}
+
 TEST(JournalOffer, TheTerminalsAnswerDecides) {
   state_home("ask");
   leave_journal("p", kCrc, kCrc, 2);

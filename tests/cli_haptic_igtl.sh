@@ -5,8 +5,9 @@
 #   1. at 500 Hz: the run says the measured rate and the Colgate-Schenkel bound it implies;
 #      the stylus moved 2.6 voxels into the skull gets forces back (|F| about 1.5 N, pushing
 #      the stylus back out, -x in the device frame); when the stream stops while the run goes
-#      on, the next force the peer gets is an exact zero, within the stale timeout (3 stream
-#      periods) and 100 ms for a loaded machine, and no non-zero force after it;
+#      on, the peer gets an exact zero within the stale timeout (3 stream periods) and 100 ms
+#      for a loaded machine (before it, only the answers to its last poses, within the same
+#      time), and no non-zero force after it;
 #   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
 #      exit 1, the message naming the bound and the way to allow it; with
 #      --allow-unstable-stiffness it runs, warning.
@@ -71,10 +72,21 @@ if any(f[0] >= 0 for f in pushing): fail("a contact force that does not push the
 # just before the stream stopped answers the last poses with zeros: the peer then holds zero
 # with nothing more to send, and the next message is the close's, a second later).
 last_before = during_forces[-1] if (during_forces := [f for t, f in forces if t < stopped]) else [0.0, 0.0, 0.0]
+# Forces in flight when the peer stopped (the answers to its last poses, sent while they were
+# fresh) may arrive after it: non-zero forces before the zero are allowed only within the
+# stale timeout of the stop (and the loaded machine's 100 ms), as the zero itself.
+answers = []
+for t, f in after:
+    if f == [0.0, 0.0, 0.0]: break
+    answers.append((t, f))
+if any(t - stopped > 3.0 / rate + 0.1 for t, _ in answers):
+    fail(f"a non-zero force {max(t for t, _ in answers) - stopped:.3f} s after the stream stopped, before any zero: "
+         f"{answers[:3]}")
+last_before = answers[-1][1] if answers else last_before
+after = after[len(answers):]
 if last_before != [0.0, 0.0, 0.0]:
-    if not after: fail("no force came after the stream stopped: the peer is left holding the last contact force")
+    if not after: fail("no zero force came after the stream stopped: the peer is left holding the last contact force")
     t_zero, f_zero = after[0]
-    if f_zero != [0.0, 0.0, 0.0]: fail(f"the first force after the stream stopped is {f_zero}, not zero")
     late = t_zero - stopped
     # a loaded machine may delay the writer thread; without the stale zero it is the close, a second later
     if late > 3.0 / rate + 0.1: fail(f"the zero force came {late * 1e3:.1f} ms after the stream stopped (stale timeout {3e3 / rate:.1f} ms)")

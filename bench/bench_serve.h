@@ -31,6 +31,7 @@ struct BenchServePhase {
   /// Inside the server, for the replies the servo rendered [us]: the pose's arrival to the
   /// servo's write (the wait for a tick and the tick), and that write to the send (p50, p99).
   double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
+  double stream_late_us = 0;  ///< the stream's arrival lateness (99.5th percentile) at the end [us]
 };
 
 /// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered

@@ -235,7 +235,8 @@ class Server {
             sp.to_servo_p50_us,
             sp.to_servo_p99_us,
             sp.to_send_p50_us,
-            sp.to_send_p99_us};
+            sp.to_send_p99_us,
+            double(device_.input_phase().late_ns) * 1e-3};
   }
 
  private:

@@ -119,6 +119,9 @@ struct ServeStats {
   long stall_replies = 0;  ///< of those: a pose the servo did not render within 2 ms (no session running: zero)
   /// The rendered replies' time [us]: pose arrival -> the servo's write, that write -> sent (p50, p99).
   double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
+  /// How late the stream's poses ran behind their predicted arrival at the end [us], the 99.5th
+  /// percentile of the last 256: the servo's ticks lead the arrivals by at least this + 25 us.
+  double stream_late_us = 0;
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

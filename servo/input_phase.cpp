@@ -28,10 +28,28 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     // only ever delays an arrival leaves the anchor near the early ones.
     const std::int64_t predicted = anchor_ns_ + period_ns_;
     const std::int64_t r = t_ns - predicted;
+    note_lateness(r);
     anchor_ns_ = predicted + (r < 0 ? r / 2 : r / 8);
   }
   period_.store(period_ns_, std::memory_order_relaxed);
   due_.store(anchor_ns_ + period_ns_, std::memory_order_relaxed);
+}
+
+void ArrivalClock::note_lateness(std::int64_t late_ns) {
+  const auto bin = std::int16_t(std::clamp<std::int64_t>(late_ns / kLateBinNs, 0, kLateBins - 1));
+  if (late_count_ == kLateWindow) --late_hist_[late_ring_[late_next_]];
+  else ++late_count_;
+  late_ring_[late_next_] = bin;
+  ++late_hist_[bin];
+  late_next_ = (late_next_ + 1) % kLateWindow;
+  // The 99.5th percentile: the bin below which all but 0.5 % of the window fall (its top).
+  const int beyond = late_count_ / 200;
+  int above = 0, b = kLateBins - 1;
+  for (; b > 0; --b) {
+    if (above + late_hist_[b] > beyond) break;
+    above += late_hist_[b];
+  }
+  late_.store(late_count_ >= 16 ? (b + 1) * kLateBinNs : 0, std::memory_order_relaxed);
 }
 
 std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns) {
@@ -40,8 +58,9 @@ std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, In
   const double ratio = double(in.period_ns) / double(period_ns);
   const double whole = std::round(ratio);
   if (whole < 1 || std::abs(ratio - whole) > 0.005 * whole) return next_ns;
+  const std::int64_t lead = std::max(lead_ns, std::min(in.late_ns + kLateMarginNs, 3 * period_ns / 4));
   // How far the next deadline lies after the wanted one, in (-period/2, period/2].
-  std::int64_t e = (next_ns - (in.due_ns + lead_ns)) % period_ns;
+  std::int64_t e = (next_ns - (in.due_ns + lead)) % period_ns;
   if (e < 0) e += period_ns;
   if (e > period_ns / 2) e -= period_ns;
   return next_ns - std::clamp(e, -period_ns / 16, period_ns / 16);

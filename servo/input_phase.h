@@ -9,6 +9,11 @@
 // where the input's period is a whole number of servo periods (else the ticks could never
 // stay aligned and the servo's period would wander). Following, the servo runs at the input's
 // rate, within 0.5 % of its own: what the stiffness check assumed.
+// An input that arrives after the tick meant for it waits a whole period and is overtaken by
+// the next one (only the newest pose is answered), so the lead grows to cover how late the
+// stream's arrivals run: the 99.5th percentile of the last 256 arrivals' lateness behind their
+// predicted time, plus a margin (a few late poses cost a little more round trip for every
+// pose; fewer poses go unanswered).
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -16,10 +21,12 @@
 namespace isotouch::servo {
 
 /// When a link's next input is due [ns, steady clock] and the input's period [ns];
-/// due_ns < 0: unknown (fewer than two inputs, or the stream has paused).
+/// due_ns < 0: unknown (fewer than two inputs, or the stream has paused). late_ns: how late
+/// behind its predicted time an arrival runs [ns], the 99.5th percentile of the last 256.
 struct InputPhase {
   std::int64_t due_ns = -1;
   std::int64_t period_ns = 0;
+  std::int64_t late_ns = 0;
 };
 
 /// The input's period and phase from its arrival times. arrived(): one thread at a time
@@ -31,22 +38,34 @@ class ArrivalClock {
  public:
   void arrived(std::int64_t t_ns);
   InputPhase phase() const {
-    return {due_.load(std::memory_order_relaxed), period_.load(std::memory_order_relaxed)};
+    return {due_.load(std::memory_order_relaxed), period_.load(std::memory_order_relaxed),
+            late_.load(std::memory_order_relaxed)};
   }
 
+  static constexpr int kLateWindow = 256;       // arrivals in the lateness percentile
+  static constexpr std::int64_t kLateBinNs = 5000;  // its histogram's bin [ns]
+  static constexpr int kLateBins = 400;         // 0-2 ms; later arrivals count in the last bin
+
  private:
+  void note_lateness(std::int64_t late_ns);
+  std::int16_t late_ring_[kLateWindow] = {};  // the window's bins, oldest overwritten first
+  std::int32_t late_hist_[kLateBins] = {};    // how many of the window fall in each bin
+  int late_count_ = 0, late_next_ = 0;
+
   std::int64_t last_ns_ = -1;    // the previous arrival
   std::int64_t period_ns_ = 0;   // the smoothed interval; 0: none yet
   std::int64_t anchor_ns_ = -1;  // the smoothed arrival phase (an arrival's time less its jitter)
   int outliers_ = 0;             // intervals in a row far from the period: the rate changed
   int intervals_ = 0;            // intervals in the period's mean, at most 16
-  std::atomic<std::int64_t> due_{-1}, period_{0};
+  std::atomic<std::int64_t> due_{-1}, period_{0}, late_{0};
 };
 
 /// `next_ns` (the servo's next deadline at period `period_ns`) moved by at most period / 16
-/// towards the nearest deadline that falls `lead_ns` after an arrival of `in`; unchanged when
+/// towards the nearest deadline that falls a lead after an arrival of `in`: `lead_ns`, or
+/// in.late_ns + kLateMarginNs (at most 3/4 of the period) where that is more; unchanged when
 /// `in` is unknown, paused for more than 4 of its periods, or its period is not within 0.5 %
 /// of a whole number of servo periods.
+inline constexpr std::int64_t kLateMarginNs = 25000;
 std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns);
 
 }  // namespace isotouch::servo

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstdlib>
 #include <vector>
@@ -123,3 +124,55 @@ TEST(FollowInputPhase, NothingMovesWithoutAnInputOrAfterItPaused) {
 }
 
 }  // namespace
+
+/// Arrivals at 1 kHz with 0-30 us of jitter, and every 40th (2.5 %) 300 us late: how many
+/// poses of `n` the next one overtakes (arrives before the servo tick that renders it) once the
+/// clock has seen 300 arrivals, and the largest wait of an on-time pose then [ns].
+struct Overtaken {
+  int poses = 0, overtaken = 0;
+  std::int64_t on_time_wait = 0;
+};
+Overtaken run_late_stream(bool use_lateness, int n) {
+  ArrivalClock c;
+  Jitter j;
+  std::vector<std::int64_t> a(std::size_t(n) + 1);
+  for (int k = 0; k <= n; ++k) a[std::size_t(k)] = (k + 1) * kMs + j.next(30'000) + (k % 40 == 39 ? 300'000 : 0);
+  Servo s{0, kMs, 100'000};
+  Overtaken o;
+  for (int k = 0; k < n; ++k) {
+    c.arrived(a[std::size_t(k)]);
+    std::int64_t tick = s.next;
+    while (tick < a[std::size_t(k)]) {  // as Servo::first_tick_after, with the lateness kept or not
+      InputPhase p = c.phase();
+      if (!use_lateness) p.late_ns = 0;
+      tick = s.next = follow_input_phase(s.next + kMs, kMs, p, s.lead);
+    }
+    if (k < 300) continue;
+    ++o.poses;
+    if (a[std::size_t(k) + 1] <= tick) ++o.overtaken;
+    if (k % 40 != 39) o.on_time_wait = std::max(o.on_time_wait, tick - a[std::size_t(k)]);
+  }
+  return o;
+}
+
+TEST(FollowInputPhase, TheLeadGrowsToCoverLateArrivalsSoFewArePassedOver) {
+  const Overtaken fixed = run_late_stream(false, 2300), adaptive = run_late_stream(true, 2300);
+  // With a fixed 100 us lead each 300 us late pose misses its tick and the next overtakes it.
+  EXPECT_GE(fixed.overtaken, fixed.poses / 50) << "the case does not test late arrivals";
+  EXPECT_LE(adaptive.overtaken, adaptive.poses / 200) << "of " << adaptive.poses << " poses";
+  // The price: on-time poses wait up to the grown lead (~300 us + margin), not a period.
+  EXPECT_LE(adaptive.on_time_wait, 300'000 + 2 * isotouch::servo::ArrivalClock::kLateBinNs +
+                                       isotouch::servo::kLateMarginNs + 30'000);
+}
+
+TEST(ArrivalClock, TheLatenessIsTheWindowsHighPercentileAndForgetsOldArrivals) {
+  ArrivalClock c;
+  std::int64_t t = 0;
+  for (int k = 0; k < 300; ++k) c.arrived(t += kMs);
+  EXPECT_LE(c.phase().late_ns, ArrivalClock::kLateBinNs) << "a steady stream is not late";
+  for (int k = 0; k < 300; ++k) c.arrived(t += kMs + (k % 20 == 0 ? 200'000 : 0) - (k % 20 == 1 ? 200'000 : 0));
+  EXPECT_GE(c.phase().late_ns, 150'000) << "5 % of arrivals 200 us late are in the 99.5th percentile";
+  EXPECT_LE(c.phase().late_ns, 210'000);
+  for (int k = 0; k < 300; ++k) c.arrived(t += kMs);
+  EXPECT_LE(c.phase().late_ns, ArrivalClock::kLateBinNs) << "the window holds old arrivals";
+}

@@ -37,6 +37,9 @@
 #include "isotouch/apps/sculpt/overlay.h"
 #include "isotouch/engine/device_memory.h"
 #include "isotouch/engine/raycast.h"
+#include "isotouch/engine/frame_budget.h"
+#include "isotouch/engine/upscale.h"
+#include "isotouch/bench/moving_frames.h"
 #include "isotouch/io/journal_offer.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/picture.h"
@@ -389,7 +392,8 @@ struct ServoAlone {
 /// feed and the edits it uses; the overlay before the window, the window before Vulkan, GLFW
 /// before the devices the session used.
 struct Sculpt {
-  Sculpt(const Options& opts, std::ostream& out, std::optional<Options>* next) : o(opts), log(out), reopen(next) {}
+  Sculpt(const Options& opts, std::ostream& out, std::optional<Options>* next)
+      : o(opts), log(out), reopen(next), budget(engine::FrameBudgetOptions{opts.frame_budget_ms}) {}
   ~Sculpt();
   Sculpt(const Sculpt&) = delete;
   Sculpt& operator=(const Sculpt&) = delete;
@@ -575,6 +579,10 @@ struct Sculpt {
   engine::RaycastImage img;
   std::vector<std::uint32_t> upscaled;
   std::array<int, 2> last_fb{0, 0};
+  engine::FrameBudget budget;           // the moving view's scale (--frame-budget-ms)
+  engine::OrbitCamera last_cam;         // the camera of the last frame, to see the view move
+  double picture_scale(const std::array<int, 2>& fb);
+  void print_moving_frames();
   int frame = 0;
   Clock::time_point last_frame;
   std::string status;
@@ -1009,8 +1017,9 @@ bool Sculpt::frame_step() {
   view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
   // At most one storage binding of 4-byte pixels: a larger window is drawn at a lower scale.
   const double fit = std::sqrt(double(vk->max_binding_bytes() / 4) / (double(f.fb[0]) * double(f.fb[1])));
+  const double scale = picture_scale(f.fb);
   const auto pixels = [&](int n) {
-    return std::max(1, int(fit < o.render_scale ? std::floor(n * fit) : std::round(n * o.render_scale)));
+    return std::max(1, int(fit < scale ? std::floor(n * fit) : std::round(n * scale)));
   };
   f.rw = pixels(f.fb[0]);
   f.rh = pixels(f.fb[1]);
@@ -1024,6 +1033,36 @@ bool Sculpt::frame_step() {
   show(f, shots, drawn_brushes);
   end_frame(obs, f.fb);
   return true;
+}
+
+static bool same_vec(const Vec3& a, const Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+static bool same_camera(const engine::OrbitCamera& a, const engine::OrbitCamera& b) {
+  const bool same_target = a.target_m.has_value() == b.target_m.has_value() && (!a.target_m || same_vec(*a.target_m, *b.target_m));
+  return a.azimuth_deg == b.azimuth_deg && a.elevation_deg == b.elevation_deg && a.distance_m == b.distance_m &&
+         a.zoom == b.zoom && a.fov_y_deg == b.fov_y_deg && same_target && same_vec(a.up_phys, b.up_phys) &&
+         same_vec(a.front_phys, b.front_phys);
+}
+
+/// This frame's picture scale: while the view moves (camera or window size), what the frame
+/// budget allows (at most --render-scale); still, --render-scale. The built-in bench's rounds
+/// draw at --render-scale: their verdicts measure the renderer.
+double Sculpt::picture_scale(const std::array<int, 2>& fb) {
+  const bool moving = frame > 0 && (!same_camera(camera.cam, last_cam) || fb != last_fb);
+  last_cam = camera.cam;
+  if (!moving || o.frame_budget_ms <= 0 || bench_rounds) return o.render_scale;
+  return std::min(o.render_scale, budget.moving_scale());
+}
+
+/// --bench: frames drawn whole while the view orbits, at the frame budget's scale, after the
+/// rounds (the session stopped), at the window's last size from the last camera.
+void Sculpt::print_moving_frames() {
+  if (o.frame_budget_ms <= 0 || last_fb[0] <= 0 || last_fb[1] <= 0) return;
+  bench::MovingFramesOptions mo;
+  mo.budget_ms = o.frame_budget_ms;
+  caster->set_in_place(false);
+  const bench::MovingFramesResult r =
+      bench::run_moving_frames(*caster, vol.grid, vol.direction, camera.cam, style, last_fb[0], last_fb[1], mo);
+  bench::print_moving_frames(log, r, mo, last_fb[0], last_fb[1]);
 }
 
 double Sculpt::script_now_s() const {
@@ -1359,6 +1398,8 @@ void Sculpt::render_picture(const session::Observed& obs, const Vec3& hand_world
 void Sculpt::show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes) {
   const auto p0 = Clock::now();
   const std::vector<std::uint32_t>& shown_px = host_picture(f, !shots.empty());
+  // The frame budget learns what a picture drawn whole costs with its upscale to the window.
+  if (!img.reused) budget.measured_whole(double(f.rw) / double(f.fb[0]), render_ms.back() + (f.direct() ? 0.0 : ms_since(p0)));
   build_panels();
   // A CPU device's picture lies in host memory: the shared-memory path composes the window
   // from it on the host (no device copy; the panels drawn only when they change).
@@ -1376,7 +1417,7 @@ void Sculpt::show(const FrameSize& f, const std::vector<std::string>& shots, lon
 }
 
 /// The picture on the host when it is needed there: read back for a screenshot at the
-/// window's size, or scaled up (nearest neighbour) from a lower render scale.
+/// window's size, or scaled up (bilinear) from a lower render scale.
 const std::vector<std::uint32_t>& Sculpt::host_picture(const FrameSize& f, bool shot) {
   if (f.direct()) {
     if (shot) img.rgba = caster->last_rgba();
@@ -1385,10 +1426,7 @@ const std::vector<std::uint32_t>& Sculpt::host_picture(const FrameSize& f, bool 
   const auto& fb = f.fb;
   const int rw = f.rw, rh = f.rh;
   upscaled.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
-  for (int y = 0; y < fb[1]; ++y) {
-    const std::size_t sy = std::size_t(std::min(rh - 1, y * rh / fb[1])) * std::size_t(rw);
-    for (int x = 0; x < fb[0]; ++x) upscaled[std::size_t(y) * std::size_t(fb[0]) + std::size_t(x)] = img.rgba[sy + std::size_t(std::min(rw - 1, x * rw / fb[0]))];
-  }
+  engine::upscale_bilinear(img.rgba.data(), rw, rh, upscaled.data(), fb[0], fb[1]);
   return upscaled;
 }
 
@@ -1685,6 +1723,7 @@ int Sculpt::finish() {
   if (o.stats || o.bench) log << "stats    felt tool: " << felt->changes() << " radius changes applied on the servo thread\n";
   if (!mouse) print_device();
   if (o.bench) print_verdicts(sculpted, alone);
+  if (o.bench) print_moving_frames();
   // A device that was lost, faulty or refused during the session: as `run --live` (a
   // simulated clock has no servo thread and no device to lose).
   if (const servo::ServoThread* servo = session->servo_thread(); servo != nullptr && code == 0) {

@@ -85,6 +85,10 @@ int main(int argc, char** argv) {
   cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 4096));
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
       ->check(CLI::Range(0.1, 1.0));
+  cli.add_option("--frame-budget-ms", o.frame_budget_ms,
+                 "while the view moves, draw at the resolution that keeps a frame within this many ms (upscaled; "
+                 "full resolution when it stops; 0: always --render-scale)")
+      ->check(CLI::Range(0.0, 1000.0));
   cli.add_option("--edit-wait-ms", o.edit_wait_ms,
                  "a frame waits at most this long for the brush it submitted, so that it shows it (0: never)")
       ->check(CLI::Range(0.0, 1000.0));

@@ -1,0 +1,42 @@
+// moving_frames.h - frames drawn whole while the view moves, at the scale the frame-budget
+// controller (engine/frame_budget.h) chooses, against the budget, with the image error over
+// the object's pixels and the time from the view stopping to the full-resolution picture.
+#pragma once
+#include <array>
+#include <iosfwd>
+#include <vector>
+
+#include "isotouch/engine/frame_budget.h"
+#include "isotouch/engine/picture_error.h"
+#include "isotouch/engine/raycast.h"
+
+namespace isotouch::bench {
+
+struct MovingFramesOptions {
+  double budget_ms = 33;          ///< the frame budget [ms]
+  int frames = 60;                ///< moving frames drawn
+  double degrees_per_frame = 3;   ///< the orbit's azimuth step per frame [deg]
+  int compare_every = 10;         ///< every this many frames the same view is drawn at scale 1 too (not timed)
+};
+
+struct MovingFramesResult {
+  std::vector<double> ms;        ///< each moving frame: render at the chosen scale + bilinear upscale [ms]
+  std::vector<double> render_ms; ///< of which the ray caster's render() [ms]
+  std::vector<double> scales;    ///< the scale each was drawn at
+  std::vector<engine::PictureError> errors;  ///< the compared frames' error over the object's pixels
+  double still_to_full_ms = 0;   ///< from the view stopping to the full-resolution picture [ms]
+  int still_frames = 0;          ///< frames that took
+};
+
+/// Orbits `cam` about its target in `caster`'s volume (`grid`, `direction`: its frame, see
+/// engine::orbit_view) at a W x H window; the probe's pixel for the error's near figure is the
+/// picture's centre (the orbit's target).
+MovingFramesResult run_moving_frames(engine::RayCaster& caster, const core::Grid& grid,
+                                     const std::array<double, 9>& direction, engine::OrbitCamera cam,
+                                     const engine::RaycastStyle& style, int W, int H, const MovingFramesOptions& o);
+
+/// The figures and the verdicts: moving frames median <= budget and p95 <= 1.5 budget, full
+/// resolution within 250 ms of the view stopping, PSNR >= 30 dB and SSIM >= 0.95 (worst compared frame).
+void print_moving_frames(std::ostream& log, const MovingFramesResult& r, const MovingFramesOptions& o, int W, int H);
+
+}  // namespace isotouch::bench

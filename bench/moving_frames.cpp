@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <ostream>
 #include <sstream>
 
@@ -71,7 +72,7 @@ void print_moving_frames(std::ostream& out, const MovingFramesResult& r, const M
   log << std::fixed << std::setprecision(1);
   const double med = eval::percentile(r.ms, 0.5), p95 = eval::percentile(r.ms, 0.95);
   const auto [lo, hi] = std::minmax_element(r.scales.begin(), r.scales.end());
-  double psnr = 1e9, ssim = 1;
+  double psnr = std::numeric_limits<double>::infinity(), ssim = 1;  // inf: equal pictures
   int near = 0;
   for (const engine::PictureError& e : r.errors) psnr = std::min(psnr, e.psnr_db), ssim = std::min(ssim, e.ssim), near = std::max(near, e.max_near);
   auto verdict = [](bool ok) { return ok ? "met" : "NOT met"; };

@@ -69,6 +69,26 @@ if not w or total != int(w.group(1)) or counted != min(36, total):
     sys.exit(f"FAIL: counted {counted} of {total} frames drawn whole; the stats say {w.group(1) if w else 'none'}")
 print(f"floor: {per_pixel} fetches per pixel = {ms} ms, as vectors {lanes} = {lane_ms} ms ({counted} of {total} frames counted)")
 PY
+# The moving frames after the rounds: an orbit at the frame budget's scale, its figures and
+# verdicts (met or not: the figures depend on the load), the scales within [0.25, 1].
+python3 - "$out/log.txt" <<'PY'
+import re, sys
+log = open(sys.argv[1]).read()
+m = re.search(r"^moving   (\d+) frames drawn whole while the view orbits [0-9.]+ deg per frame at 256x192, scale chosen by "
+              r"the frame budget \(33\.0 ms\): scales ([0-9.]+)-([0-9.]+) ", log, re.M)
+if not m:
+    sys.exit("FAIL: no moving-frames line")
+n, lo, hi = int(m.group(1)), float(m.group(2)), float(m.group(3))
+if n != 60 or not (0.25 <= lo <= hi <= 1.0):
+    sys.exit(f"FAIL: {n} moving frames at scales {lo}-{hi}")
+for pat in [r"^verdict: moving frames median [0-9.]+ ms: target <= 33\.0 ms (met|NOT met)$",
+            r"^verdict: moving frames p95 [0-9.]+ ms: target <= 49\.5 ms (met|NOT met)$",
+            r"^verdict: view stopped to full resolution [0-9.]+ ms \(1 frame drawn whole\): target <= 250 ms (met|NOT met)$",
+            r"^verdict: moving frames against full resolution over the object's pixels \(worst of 6 frames\): PSNR "]:
+    if not re.search(pat, log, re.M):
+        sys.exit("FAIL: no line matching " + pat)
+print(f"moving frames: {n} at scales {lo}-{hi}")
+PY
 grep -q "^verdict: edit-to-pixels median [0-9.]* ms (needs <= 39.7 ms" "$out/log.txt" ||
   { echo "FAIL: no edit-to-pixels verdict"; exit 1; }
 line=$(grep "^verdict: servo missed deadlines while sculpting" "$out/log.txt") || { echo "FAIL: no servo verdict"; exit 1; }

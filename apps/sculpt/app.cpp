@@ -581,7 +581,7 @@ struct Sculpt {
   std::array<int, 2> last_fb{0, 0};
   engine::FrameBudget budget;           // the moving view's scale (--frame-budget-ms)
   engine::OrbitCamera last_cam;         // the camera of the last frame, to see the view move
-  double picture_scale(const std::array<int, 2>& fb);
+  double picture_scale(const std::array<int, 2>& fb, bool shot);
   void print_moving_frames();
   int frame = 0;
   Clock::time_point last_frame;
@@ -1017,7 +1017,7 @@ bool Sculpt::frame_step() {
   view = engine::orbit_view(vol.grid, vol.direction, camera.cam);
   // At most one storage binding of 4-byte pixels: a larger window is drawn at a lower scale.
   const double fit = std::sqrt(double(vk->max_binding_bytes() / 4) / (double(f.fb[0]) * double(f.fb[1])));
-  const double scale = picture_scale(f.fb);
+  const double scale = picture_scale(f.fb, !shots.empty());
   const auto pixels = [&](int n) {
     return std::max(1, int(fit < scale ? std::floor(n * fit) : std::round(n * scale)));
   };
@@ -1044,12 +1044,13 @@ static bool same_camera(const engine::OrbitCamera& a, const engine::OrbitCamera&
 }
 
 /// This frame's picture scale: while the view moves (camera or window size), what the frame
-/// budget allows (at most --render-scale); still, --render-scale. The built-in bench's rounds
-/// draw at --render-scale: their verdicts measure the renderer.
-double Sculpt::picture_scale(const std::array<int, 2>& fb) {
+/// budget allows (at most --render-scale); still, --render-scale. At --render-scale always:
+/// the built-in bench's rounds (their verdicts measure the renderer), a frame a script takes a
+/// screenshot of, and the simulated clock (a wall-clock budget would make its pictures vary).
+double Sculpt::picture_scale(const std::array<int, 2>& fb, bool shot) {
   const bool moving = frame > 0 && (!same_camera(camera.cam, last_cam) || fb != last_fb);
   last_cam = camera.cam;
-  if (!moving || o.frame_budget_ms <= 0 || bench_rounds) return o.render_scale;
+  if (!moving || o.frame_budget_ms <= 0 || bench_rounds || shot || o.sim_clock) return o.render_scale;
   return std::min(o.render_scale, budget.moving_scale());
 }
 

@@ -47,8 +47,8 @@ struct Options {
   /// While the view moves (camera or window), frames drawn whole keep within this budget [ms]:
   /// the ray caster's scale (at most render_scale) chosen per frame from the last frames'
   /// cost (engine/frame_budget.h), upscaled bilinearly; a still view is drawn at render_scale.
-  /// 0: always render_scale. --bench's rounds draw at render_scale (they measure the
-  /// renderer); its moving-frames phase uses the budget.
+  /// 0: always render_scale; so are --bench's rounds (they measure the renderer; its
+  /// moving-frames phase uses the budget), script screenshots and --sim-clock runs.
   double frame_budget_ms = 33;
   double edit_wait_ms = 50;         ///< a frame waits this long at most for the brush it submitted (0: never)
   bool bench = false;               ///< run the built-in sculpt (unless --script) and print verdicts against the targets

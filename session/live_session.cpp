@@ -153,6 +153,11 @@ LiveSession::~LiveSession() {
 std::string LiveSession::start() {
   if (!servo_) throw std::logic_error("live session: start() needs a device (this session is for run_simulated() only)");
   if (simulated_) throw std::logic_error("live session: start() after run_simulated()");
+  // Without a snapshot every tick would render nothing and send zero force, silently.
+  if (!buffer_.ever_published())
+    throw std::logic_error(
+        "live session: start() before the first snapshot was published: call "
+        "buffer.publish(edits.current()) (TripleBuffer::publish) before start()");
   if (running_.exchange(true)) return "";
   start_ns_ = now_ns();
   stop_edits_.store(false);

@@ -195,6 +195,8 @@ class LiveSession final : private servo::TickObserver {
 
   /// Starts the recorder, the edit thread, then the servo thread. Returns what the system
   /// refused of the real-time setup ("" if nothing), as ServoThread::start.
+  /// @throws std::logic_error if nothing was ever published into the buffer (the servo
+  ///         would feel nothing: zero force every tick); names the missing publish().
   std::string start();
   /// Paused: zero force every tick (the servo keeps running, edits still apply).
   void pause(bool paused) {

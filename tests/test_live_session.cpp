@@ -539,6 +539,29 @@ TEST(LiveSession, AnUnwritableRecordingIsRefusedUpFront) {
   fs::remove_all(dir);
 }
 
+// A buffer nothing was published into: start() refuses, naming the missing publish(),
+// before the servo writes a single force (it would otherwise run with zero force).
+TEST(LiveSession, StartRefusesABufferWithNoSnapshot) {
+  Rig rig;
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> empty;
+  const fs::path dir = temp_dir("isotouch-live-empty");
+  const std::string rec_path = (dir / "s.rec").string();
+  {
+    LiveSession live(rig.edits, empty, *rig.renderer, *rig.io, rig.config(rec_path));
+    try {
+      live.start();
+      ADD_FAILURE() << "a session with no snapshot started";
+    } catch (const std::logic_error& e) {
+      EXPECT_NE(std::string(e.what()).find("publish"), std::string::npos) << e.what();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(rig.io->writes.load(), 0) << "the servo ran";
+  }
+  EXPECT_FALSE(fs::exists(rec_path + ".part"));  // nothing ran: no recording left
+  EXPECT_FALSE(fs::exists(rec_path));
+  fs::remove_all(dir);
+}
+
 namespace {
 /// A drill that asks every tick with a brush too weak to end the contact it needs.
 isotouch::session::ButtonDrill weak_drill() {

@@ -562,6 +562,30 @@ TEST(LiveSession, StartRefusesABufferWithNoSnapshot) {
   fs::remove_all(dir);
 }
 
+// A recording asked for by its path alone: the session fills the servo rate and the
+// volume's checksum itself; truth: the file's header against the rig's rate and the
+// checksum of the rig's own copy of the volume.
+TEST(LiveSession, RecordPathAloneFillsRateAndVolumeChecksum) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live-path");
+  const std::string rec_path = (dir / "s.rec").string();
+  LiveSessionConfig c = rig.config();
+  c.record_header = {};
+  c.record_path = rec_path;
+  {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+    live.start();
+    wait_until([&] { return live.observe().tick > 20; }, 10);
+    live.stop();
+  }
+  const auto rec = isotouch::io::load_recording(rec_path);
+  EXPECT_EQ(rec.rate_hz, rig.hp.rate_hz);
+  ASSERT_TRUE(rec.volume_crc32.has_value());
+  EXPECT_EQ(*rec.volume_crc32, isotouch::io::volume_crc32(rig.vol));
+  EXPECT_GT(rec.ticks.size(), 20u);
+  fs::remove_all(dir);
+}
+
 namespace {
 /// A drill that asks every tick with a brush too weak to end the contact it needs.
 isotouch::session::ButtonDrill weak_drill() {

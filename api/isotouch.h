@@ -13,6 +13,8 @@
 //                             "sim", "null", "playback:FILE", "hid:VID:PID", "emu:SOCKET")
 //   5. the live session       session::LiveSession(edits, buffer, renderer, device, config)
 //                             start(), observe(), submit(), stats(), stop()          (session/live_session.h)
+//      or 2, 3 and 5 owned together: session::Session::open(volume, options),
+//                             attach(device, config), live()->start()                 (session/session.h)
 //   6. record and replay      LiveSessionConfig::record_path; io::load_recording;   (io/record.h,
 //                             run::replay_recording (scene-based sessions)           run/replay.h)
 //
@@ -71,6 +73,7 @@
 #include "isotouch/session/edit_session.h"
 #include "isotouch/session/live_field.h"
 #include "isotouch/session/live_session.h"
+#include "isotouch/session/session.h"
 #include "isotouch/sim/script.h"
 #include "isotouch/sim/sim_device.h"
 #include "isotouch/sim/sim_device_io.h"

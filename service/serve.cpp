@@ -35,6 +35,7 @@
 #include "isotouch/service/image_isovalue.h"
 #include "isotouch/service/outbox.h"
 #include "isotouch/session/live_session.h"
+#include "isotouch/session/session.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/session/stop_signal.h"
@@ -107,11 +108,10 @@ struct PendingVolume {
 /// One session on one volume: the edits, the buffer the servo reads, the renderer, the
 /// live session around them.
 struct Session {
-  std::unique_ptr<session::EditSession> edits;
-  servo::TripleBuffer<core::SampleField> buffer;
-  std::unique_ptr<servo::HriRenderer> hri;
-  std::shared_ptr<EditMirror> mirror;  // before live: the session's listener writes it
-  std::unique_ptr<session::LiveSession> live;
+  std::shared_ptr<EditMirror> mirror;  // before parts: the live session's listener writes it
+  /// The edit session, its snapshots, the renderer and (once started) the live session.
+  std::unique_ptr<session::Session> parts;
+  session::LiveSession& live() { return *parts->live(); }
   engine::Volume frame;  // the volume's grid, direction and value range (voxels dropped)
   session::BrushTargets targets;  // the tool's material and empty values at this isovalue
   std::string image_name;  // the device name the edited volume goes back under
@@ -558,7 +558,7 @@ bool Server::submit(session::EditEvent::Kind kind, const session::Brush* brush) 
   if (kind == session::EditEvent::Kind::kBeginStroke) stroke_generation_ = session_->generation;
   if (kind == session::EditEvent::Kind::kEndStroke && stroke_generation_ != session_->generation) return false;
   if (kind == session::EditEvent::Kind::kEndStroke) stroke_generation_ = 0;
-  return session_->live->submit(e);
+  return session_->live().submit(e);
 }
 
 void Server::end_stroke() {
@@ -575,7 +575,7 @@ void Server::feed_tool(double dt_s) {
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (!session_) return;
-    const session::Observed ob = session_->live->observe();
+    const session::Observed ob = session_->live().observe();
     generation = session_->generation;
     if (ob.tick >= 0 && ob.contact)
       brush = run::make_brush(run::brush_at_tool(scene_, session_->frame, tool_), session_->targets, ob.vhip_m, dt_s,
@@ -624,7 +624,7 @@ bool Server::wait_edits_applied(double timeout_s) {
     {
       std::lock_guard<std::mutex> lock(session_mu_);
       if (!session_) return true;
-      if (edits_settled(session_->live->stats(0))) return true;
+      if (edits_settled(session_->live().stats(0))) return true;
     }
     if (std::chrono::steady_clock::now() > until) return false;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
@@ -646,7 +646,7 @@ std::shared_ptr<EditMirror> Server::settled_mirror(double timeout_s) {
     if (!changing) {
       std::lock_guard<std::mutex> lock(session_mu_);
       if (session_ && !preparing_) {
-        if (edits_settled(session_->live->stats(0))) return session_->mirror;
+        if (edits_settled(session_->live().stats(0))) return session_->mirror;
       }
     }
     if (std::chrono::steady_clock::now() > until) return nullptr;
@@ -836,7 +836,7 @@ void Server::display_tick(double stall_s) {
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (!session_) return;
-    const session::Observed ob = session_->live->observe();
+    const session::Observed ob = session_->live().observe();
     if (ob.tick < 0) return;
     const core::Vec3 hip = echo().grid_to_ras_mm(ob.hip_m), vhip = echo().grid_to_ras_mm(ob.vhip_m);
     const core::Vec3 f = echo().force_ras_n(stall_s);
@@ -886,15 +886,19 @@ std::unique_ptr<Session> Server::prepare_session(engine::Volume v, const session
   s->targets = session::default_targets(v, live.iso);
   s->image_name = v.path.rfind("igtl:", 0) == 0 ? v.path.substr(5) : "isotouch";
   if (fault("prepare", s->image_name)) throw std::bad_alloc();
-  s->edits = std::make_unique<session::EditSession>(std::move(v), setup_.vk.get(), live, scene_.edits.history_limit_mib);
-  s->buffer.publish(s->edits->current());
   // The renderer's force is stiffness x depth / world_per_device: the TRANSFORM stream's map
   // is the identity (its points are the volume's own), so its renderer must not scale by the
   // scene's workspace_scale (at 0.1 that was 10x the stiffness the stability check saw); a
   // `--haptic` device is mapped with the scale (start_session), and its renderer scales.
-  servo::HriParams hp = hri;
-  if (!echo_device_) hp.world_per_device = 1.0;
-  s->hri = std::make_unique<servo::HriRenderer>(hp);
+  session::SessionOptions so;
+  so.field = live;
+  so.hri = hri;
+  if (!echo_device_) so.hri.world_per_device = 1.0;
+  so.vk = setup_.vk.get();
+  so.history_limit_mib = scene_.edits.history_limit_mib;
+  session::Opened opened = session::Session::open(std::move(v), so);
+  opened.throw_if_failed();
+  s->parts = std::move(opened.session);
   return s;
 }
 
@@ -910,7 +914,7 @@ void Server::start_session(std::unique_ptr<Session> s) {
     device_.set_frame(s->frame, o_.offset_mm);
     c.servo.stale_timeout_s = o_.stale_s;
   }
-  c.on_applied = s->mirror->listener(*s->edits);
+  c.on_applied = s->mirror->listener(s->parts->edits());
   if (s->journaled)
     c.on_applied = [j = journal_.journal.get(), mirror = std::move(c.on_applied)](
                        const session::EditEvent& e, const session::EditOutcome& out, session::EditSource source) {
@@ -918,8 +922,8 @@ void Server::start_session(std::unique_ptr<Session> s) {
       mirror(e, out, source);
     };
   servo::HapticDeviceIO& device = echo_device_ ? static_cast<servo::HapticDeviceIO&>(*echo_device_) : device_;
-  s->live = std::make_unique<session::LiveSession>(*s->edits, s->buffer, *s->hri, device, c);
-  if (const std::string note = s->live->start(); !note.empty()) log_.line("servo    " + note);
+  s->parts->attach(device, std::move(c)).throw_if_failed();
+  if (const std::string note = s->live().start(); !note.empty()) log_.line("servo    " + note);
   if (fault("start", s->image_name)) throw std::bad_alloc();  // (s->live stops as it unwinds)
   ++sessions_;
   std::lock_guard<std::mutex> lock(session_mu_);
@@ -1094,9 +1098,9 @@ void Server::open_journal(Session& s) {
   std::istringstream lines(said.str());
   for (std::string l; std::getline(lines, l);) log_.line(l);
   if (!journal_.journal) return;
-  io::apply_restored(*s.edits, journal_.restore, &s.buffer);
+  io::apply_restored(s.parts->edits(), journal_.restore, &s.parts->buffer());
   if (!journal_.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
-    s.mirror = std::make_shared<EditMirror>(s.edits->volume());
+    s.mirror = std::make_shared<EditMirror>(s.parts->edits().volume());
     VoxelBox all;
     all.hi = s.frame.grid.dims;
     s.mirror->restore_changed(all);
@@ -1137,12 +1141,12 @@ std::unique_ptr<Session> Server::stop_session() {
   if (!s) return s;
   // Abandoned in the renderer: the process ends there (the session and device_ outlive
   // the stuck thread).
-  session::stop_or_end_process(*s->live, "isotouch serve");
-  const session::LiveStats st = s->live->stats();
+  session::stop_or_end_process(s->live(), "isotouch serve");
+  const session::LiveStats st = s->live().stats();
   ticks_ += st.ticks;
   faults_ += st.faults;
   missed_ += st.missed_deadlines;
-  const servo::DeviceCounters dc = s->live->servo_thread()->device_counters();
+  const servo::DeviceCounters dc = s->live().servo_thread()->device_counters();
   stale_ += dc.stale;  // zero force on each
   disconnected_ += dc.disconnected;
   device_faults_ += dc.fault;
@@ -1165,7 +1169,7 @@ std::string Server::switch_session(std::unique_ptr<Session> next) {
     const std::string why = e.what();
     log_.line("session  the new session could not be started (" + why + "); the old one goes on");
     if (!old) throw;
-    old->live.reset();
+    old->parts->detach();
     start_session(std::move(old));
     return why;
   }

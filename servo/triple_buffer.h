@@ -23,7 +23,11 @@ class TripleBuffer {
     const std::uint8_t prev = middle_.exchange(std::uint8_t(back_ | kFresh),
                                                std::memory_order_acq_rel);
     back_ = prev & kIndex;
+    ever_published_.store(true, std::memory_order_release);
   }
+
+  /// Any thread. True once publish() has been called: acquire() no longer returns nullptr.
+  bool ever_published() const { return ever_published_.load(std::memory_order_acquire); }
 
   /// Servo thread. The newest published snapshot, or nullptr before the first publish.
   /// The reference stays valid until the next acquire() on the same thread.
@@ -42,6 +46,7 @@ class TripleBuffer {
   std::uint8_t back_ = 0;                  // publisher-owned
   std::uint8_t front_ = 1;                 // consumer-owned
   std::atomic<std::uint8_t> middle_{2};    // shared; kFresh = not yet read
+  std::atomic<bool> ever_published_{false};  // set by the first publish()
   static_assert(std::atomic<std::uint8_t>::is_always_lock_free);
 };
 

@@ -108,6 +108,9 @@ LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleFie
 
 void LiveSession::open_recording() {
   cfg_.record_header.format_version = 3;
+  // What the session knows itself: the servo's rate and the volume it edits (as it starts).
+  if (cfg_.record_header.rate_hz == 0) cfg_.record_header.rate_hz = cfg_.servo.rate_hz;
+  if (!cfg_.record_header.volume_crc32 && edits_) cfg_.record_header.volume_crc32 = io::volume_crc32(edits_->volume());
   cfg_.record_header.ticks.clear();
   cfg_.record_header.edits.clear();
   part_path_ = cfg_.record_path + ".part";
@@ -153,6 +156,11 @@ LiveSession::~LiveSession() {
 std::string LiveSession::start() {
   if (!servo_) throw std::logic_error("live session: start() needs a device (this session is for run_simulated() only)");
   if (simulated_) throw std::logic_error("live session: start() after run_simulated()");
+  // Without a snapshot every tick would render nothing and send zero force, silently.
+  if (!buffer_.ever_published())
+    throw std::logic_error(
+        "live session: start() before the first snapshot was published: call "
+        "buffer.publish(edits.current()) (TripleBuffer::publish) before start()");
   if (running_.exchange(true)) return "";
   start_ns_ = now_ns();
   stop_edits_.store(false);

@@ -73,7 +73,10 @@ struct LiveSessionConfig {
   std::optional<ButtonDrill> drill;
   /// "" = no recording. Else streamed to record_path + ".part" and renamed at stop().
   std::string record_path;
-  io::Recording record_header;     ///< scene path and text, rate, volume CRC (format set to 3)
+  /// Scene path and text, rate, volume CRC (format set to 3). A rate of 0 is the servo's
+  /// (servo.rate_hz); a CRC not set is io::volume_crc32 of the edit session's volume as the
+  /// session is built (none without an edit session: then it must be given).
+  io::Recording record_header;
   double flush_interval_s = 0.1;   ///< the recorder writes and fdatasyncs a chunk this often
   std::size_t edit_queue = 4096;   ///< requests each edit queue holds
   /// Slots of the servo's version -> first-tick table, from which each publication's
@@ -195,6 +198,8 @@ class LiveSession final : private servo::TickObserver {
 
   /// Starts the recorder, the edit thread, then the servo thread. Returns what the system
   /// refused of the real-time setup ("" if nothing), as ServoThread::start.
+  /// @throws std::logic_error if nothing was ever published into the buffer (the servo
+  ///         would feel nothing: zero force every tick); names the missing publish().
   std::string start();
   /// Paused: zero force every tick (the servo keeps running, edits still apply).
   void pause(bool paused) {

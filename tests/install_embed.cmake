@@ -149,6 +149,37 @@ if(NOT step_out MATCHES "^renderer [A-Za-z]")
 endif()
 message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
 
+# 4b. A consumer that enables CXX alone (project(x LANGUAGES CXX)) and asks for everything:
+# ITK's HDF5 needs C, which the package config enables (before, FindHDF5's try_compile
+# failed: "works only for enabled languages"); the consumer's cache then names a C compiler.
+# Called inside a function, where C cannot be enabled: one clear message at find_package.
+set(cxx_src ${WORK}/cxx-only)
+file(WRITE ${cxx_src}/CMakeLists.txt [=[
+cmake_minimum_required(VERSION 3.22)
+project(cxx_only LANGUAGES CXX)
+if(FIND_IN_FUNCTION)
+  function(find_isotouch)
+    find_package(isotouch CONFIG REQUIRED)
+  endfunction()
+  find_isotouch()
+else()
+  find_package(isotouch CONFIG REQUIRED)
+endif()
+]=])
+run_step("configuring a CXX-only consumer" ${CMAKE_COMMAND} -S ${cxx_src} -B ${WORK}/cxx-only-build -G Ninja
+  -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF)
+file(STRINGS ${WORK}/cxx-only-build/CMakeCache.txt found_itk REGEX "^ITK_DIR:PATH=.+")
+if(NOT found_itk)
+  message(FATAL_ERROR "install_embed: the CXX-only consumer's configure did not find ITK")
+endif()
+execute_process(COMMAND ${CMAKE_COMMAND} -S ${cxx_src} -B ${WORK}/cxx-only-fn-build -G Ninja -DFIND_IN_FUNCTION=ON
+  -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF
+  RESULT_VARIABLE fn_rc OUTPUT_VARIABLE fn_out ERROR_VARIABLE fn_err)
+if(fn_rc EQUAL 0 OR NOT fn_err MATCHES "isotouch: ITK \\(isotouch::volume_io\\) needs the C language")
+  message(FATAL_ERROR "install_embed: find_package(isotouch) in a function of a CXX-only project gave exit ${fn_rc}:\n${fn_err}")
+endif()
+message(STATUS "install_embed: a CXX-only consumer configures (C enabled by the package); in a function: one message")
+
 # 5. pkg-config: the flags compile the example (which is not linked this way: ITK and OpenVDB
 # have no .pc file), and build and link the servo-only program.
 find_program(PKG_CONFIG pkg-config)

@@ -539,6 +539,53 @@ TEST(LiveSession, AnUnwritableRecordingIsRefusedUpFront) {
   fs::remove_all(dir);
 }
 
+// A buffer nothing was published into: start() refuses, naming the missing publish(),
+// before the servo writes a single force (it would otherwise run with zero force).
+TEST(LiveSession, StartRefusesABufferWithNoSnapshot) {
+  Rig rig;
+  isotouch::servo::TripleBuffer<isotouch::core::SampleField> empty;
+  const fs::path dir = temp_dir("isotouch-live-empty");
+  const std::string rec_path = (dir / "s.rec").string();
+  {
+    LiveSession live(rig.edits, empty, *rig.renderer, *rig.io, rig.config(rec_path));
+    try {
+      live.start();
+      ADD_FAILURE() << "a session with no snapshot started";
+    } catch (const std::logic_error& e) {
+      EXPECT_NE(std::string(e.what()).find("publish"), std::string::npos) << e.what();
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(rig.io->writes.load(), 0) << "the servo ran";
+  }
+  EXPECT_FALSE(fs::exists(rec_path + ".part"));  // nothing ran: no recording left
+  EXPECT_FALSE(fs::exists(rec_path));
+  fs::remove_all(dir);
+}
+
+// A recording asked for by its path alone: the session fills the servo rate and the
+// volume's checksum itself; truth: the file's header against the rig's rate and the
+// checksum of the rig's own copy of the volume.
+TEST(LiveSession, RecordPathAloneFillsRateAndVolumeChecksum) {
+  Rig rig;
+  const fs::path dir = temp_dir("isotouch-live-path");
+  const std::string rec_path = (dir / "s.rec").string();
+  LiveSessionConfig c = rig.config();
+  c.record_header = {};
+  c.record_path = rec_path;
+  {
+    LiveSession live(rig.edits, rig.buffer, *rig.renderer, *rig.io, c);
+    live.start();
+    wait_until([&] { return live.observe().tick > 20; }, 10);
+    live.stop();
+  }
+  const auto rec = isotouch::io::load_recording(rec_path);
+  EXPECT_EQ(rec.rate_hz, rig.hp.rate_hz);
+  ASSERT_TRUE(rec.volume_crc32.has_value());
+  EXPECT_EQ(*rec.volume_crc32, isotouch::io::volume_crc32(rig.vol));
+  EXPECT_GT(rec.ticks.size(), 20u);
+  fs::remove_all(dir);
+}
+
 namespace {
 /// A drill that asks every tick with a brush too weak to end the contact it needs.
 isotouch::session::ButtonDrill weak_drill() {

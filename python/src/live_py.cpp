@@ -15,6 +15,7 @@
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
+#include "isotouch/session/session.h"
 
 namespace isotouch::python {
 namespace {
@@ -37,17 +38,22 @@ class Live {
     ro.progress = false;
     std::ostringstream log;
     setup_ = run::setup_scene(scene_, ro, log);
-    edits_ = setup_.session.get();
-    if (!edits_) {
-      own_ = std::make_unique<session::EditSession>(setup_.volume, setup_.vk.get(), setup_.live,
-                                                    scene_.edits.history_limit_mib);
-      edits_ = own_.get();
-    }
-    buffer_.publish(edits_->current());
-    hri_ = std::make_unique<servo::HriRenderer>(setup_.hri);
     device_ = run::open_haptic_device(haptic, run::device_setup(scene_, setup_), realtime ? 70 : 0);
-    live_ = std::make_unique<session::LiveSession>(*edits_, buffer_, *hri_, *device_.io,
-                                                   config(record, realtime, flush_interval_s));
+    session::Opened opened;
+    if (setup_.session) {  // the scene's edit session
+      opened = session::Session::open(std::move(setup_.session), setup_.hri);
+    } else {
+      session::SessionOptions so;
+      so.field = setup_.live;
+      so.hri = setup_.hri;
+      so.vk = setup_.vk.get();
+      so.history_limit_mib = scene_.edits.history_limit_mib;
+      opened = session::Session::open(engine::Volume(setup_.volume), so);
+    }
+    opened.throw_if_failed();
+    parts_ = std::move(opened.session);
+    parts_->attach(*device_.io, config(record, realtime, flush_interval_s)).throw_if_failed();
+    live_ = parts_->live();
   }
   /// Reached through DeleteLive only, after stop_quietly(), and never for an abandoned servo
   /// thread: the members' destructors free the renderer, the snapshots and the device.
@@ -132,18 +138,16 @@ class Live {
 
   io::Scene scene_;
   run::SceneSetup setup_;
-  std::unique_ptr<session::EditSession> own_;
-  session::EditSession* edits_ = nullptr;
-  servo::TripleBuffer<core::SampleField> buffer_;
-  std::unique_ptr<servo::HriRenderer> hri_;
-  run::HapticDevice device_;
-  std::unique_ptr<session::LiveSession> live_;
+  run::HapticDevice device_;  // before parts_: outlives the live session that drives it
+  /// The edit session, its snapshots, the renderer and the live session (session::Session).
+  std::unique_ptr<session::Session> parts_;
+  session::LiveSession* live_ = nullptr;  // parts_'s
   std::atomic<bool> abandoned_{false};  // set by stop() (GIL released), read by DeleteLive
 };
 
 /// How the Python object frees its Live: stopped first; if that stop (or an earlier one)
 /// abandoned the servo thread inside the renderer, the Live is leaked on purpose, whole: the
-/// thread may still read the renderer (hri_), the snapshots it holds (buffer_, the edit
+/// thread may still read the renderer, the snapshots it holds (parts_: the buffer, the edit
 /// session's) and the device, and freeing them would be a use after free should the renderer
 /// ever return (ServoThread::stop). The C++ callers end the process instead
 /// (session::stop_or_end_process); a Python interpreter is not the binding's to end.

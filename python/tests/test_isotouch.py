@@ -291,6 +291,21 @@ def test_live_session_edits_undo_and_recording(root, tmp_path):
     with pytest.raises(ValueError, match="kind"):
         live.brush("paint", centre)
 
+def test_edits_after_stop_are_refused_not_accepted(root, tmp_path):
+    """An edit after stop() can never be applied: it raises, and the session's counters show none."""
+    live = isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim")
+    live.start()
+    live.wait(0.1)
+    centre = live.observe()["vhip"]
+    live.stop()
+    before = live.stats()["edits_requested"]
+    with pytest.raises(RuntimeError, match="brush: the session is stopped"):
+        live.brush("carve", centre)
+    with pytest.raises(RuntimeError, match="undo: the session is stopped"):
+        live.undo()
+    assert live.stats()["edits_requested"] == before
+
+
 def test_live_session_on_a_playback_device(root, tmp_path):
     """A trace.csv whose HIPs no scripted hand would reach: the session is given those."""
     k = np.arange(3000)

@@ -196,9 +196,17 @@ py::dict render(const FieldPtr& field, const py::handle& hip, const std::string&
     out.penetration = column_out<double>(d, "penetration", n);
     out.plane_valid = column_out<bool>(d, "plane_valid", n);
   }
-  py::gil_scoped_release nogil;
+  // In chunks of a few milliseconds, the GIL released in each; between them the signals:
+  // Ctrl-C raises KeyboardInterrupt within a chunk, not at the end of the trajectory.
+  constexpr std::size_t kChunkTicks = 16384;
   const core::SampleField& f = *field;
-  for (std::size_t k = 0; k < hips.n; ++k) out.put(k, r->tick(f, hips.at(k), dt_s));
+  for (std::size_t k0 = 0; k0 < hips.n; k0 += kChunkTicks) {
+    {
+      py::gil_scoped_release nogil;
+      for (std::size_t k = k0; k < std::min(hips.n, k0 + kChunkTicks); ++k) out.put(k, r->tick(f, hips.at(k), dt_s));
+    }
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+  }
   return d;
 }
 
@@ -425,7 +433,8 @@ fault tick: zero force, as the servo answers a device's NaN); algorithm 'hri' (p
 HriParams), 'avila' or 'blezek' (params: BaselineParams); tau: the isovalue (volume value
 units), given here or as params.tau (both: they must agree; neither: ValueError, a Field does
 not carry its isovalue); params of the other renderer: TypeError; dt: the period given each tick [s]
-(0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released throughout.
+(0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released but for a
+signal check every 16384 ticks (Ctrl-C raises KeyboardInterrupt within one such chunk).
 Returns a dict of arrays: force (N, 3) [N] device axes, vhip (N, 3) [m], contact, plane_update,
 saturated, fault (N,) bool; with planes=True also the plane after each tick, plane_n (N, 3) unit
 outward normal and plane_p (N, 3) [m] (HRI; zero for the baselines), plane_valid (N,) bool, and

@@ -37,8 +37,8 @@ struct RecordedTick {
   /// Format 3 (a live session): the measured period the renderer was given [s]; 0 on the
   /// first tick (the renderer then takes the nominal one).
   double dt_s = 0;
-  /// Format 3: the renderer was not ticked (paused, or the device not ok): zero force sent,
-  /// no VHIP (0, 0, 0). A replay skips the renderer on this tick. Written only when true.
+  /// Format 3: the renderer was not ticked (paused, device not ok, a live session's last
+  /// tick: the stop's zero): zero force, no VHIP (0, 0, 0). A replay skips it. Written if true.
   bool held = false;
   /// Format 3: the renderer was reset before this tick (the first good tick after held
   /// ones that ended its contact state); its dt is then 0. Written only when true.

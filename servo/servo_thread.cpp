@@ -221,6 +221,7 @@ void ServoThread::loop(Handoff& h) {
                                      std::int64_t(std::clamp(cfg_.max_spin_fraction, 0.0, 1.0) * double(period)));
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
+  Vec3 last_hip;  // the last tick's HIP, world [m]: the stop's held tick records it
   std::int64_t last_render = -1;  // start of the renderer's last tick; -1: none since a reset
   std::uint64_t last_version = 0;
   bool was_paused = false;
@@ -290,6 +291,7 @@ void ServoThread::loop(Handoff& h) {
       connection = d.connection;
       rec.buttons = d.buttons;
       rec.hip_m = cfg_.world_T_device.to_world(d.position_m);
+      last_hip = rec.hip_m;
       rec.report_ns = d.received_ns;
       rec.paused = paused;
       bool refused = false;
@@ -363,7 +365,21 @@ void ServoThread::loop(Handoff& h) {
     }
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }
-  device_.write_force_n({});  // leave the device with no force
+  // Leave the device with no force, and record that zero as the last tick (held: the renderer
+  // not ticked; the HIP of the tick before), so a recording ends with what the device was left with.
+  const std::int64_t t_stop = now_ns();
+  device_.write_force_n({});
+  if (const SampleField* field = samples_.acquire(); field && cfg_.observer && prev_start >= 0) {
+    TickRecord rec;
+    rec.k = ticks_.load(std::memory_order_relaxed);
+    rec.t_ns = t_stop;
+    rec.period_s = double(t_stop - prev_start) * 1e-9;
+    rec.version = field->version;
+    rec.hip_m = last_hip;
+    rec.paused = true;
+    cfg_.observer->on_tick(rec);
+    ticks_.fetch_add(1, std::memory_order_relaxed);
+  }
   device_.enable_force(false, 0);  // at once: the writes end here, which is no stall
 }
 

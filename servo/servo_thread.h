@@ -31,7 +31,7 @@ struct TickRecord {
   std::uint32_t buttons = 0;  ///< the device's buttons (bit i: button i down)
   HriTick out;                ///< the renderer's answer (force, VHIP, plane, contact, fault)
   std::uint64_t version = 0;  ///< SampleField::version of the snapshot the tick read
-  bool paused = false;        ///< paused: zero force sent, the renderer not ticked
+  bool paused = false;        ///< paused (or the stop's last tick): zero force sent, the renderer not ticked
   /// The renderer was reset before this tick (the first good tick after a pause, a device
   /// outage or a fault): a replay resets it at the same tick.
   bool reset = false;

@@ -6,6 +6,7 @@ the frame renderers, strokes and brushes use; physical [m] = origin + D (spacing
 file's frame (trace.csv). Arrays of voxels are (nz, ny, nx), x fastest, as SimpleITK's.
 Errors: isotouch.VolumeError, SceneError, RecordingError (subclasses of isotouch.Error, a
 RuntimeError) carry the command line's messages; bad arguments raise ValueError.
+isotouch.UnitsWarning (a UserWarning): a spacing or origin that looks like the other unit.
 LiveSession.stop() raises isotouch.ServoAbandoned (an Error) when the servo thread was left
 stuck in the renderer: the force is off, and the session is never freed (that thread may
 still read its renderer, snapshots and device).
@@ -38,6 +39,7 @@ from ._isotouch import (  # noqa: F401
     ServoAbandoned,
     StrokeScene,
     SurfaceFriction,
+    UnitsWarning,
     Variant,
     Volume,
     VolumeError,

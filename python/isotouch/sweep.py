@@ -20,6 +20,7 @@ import hashlib
 import io
 import itertools
 import json
+import logging
 import os
 import pathlib
 import socket
@@ -342,8 +343,8 @@ def run_task(task):
     and on Dask workers; every column but TIMES depends on the task alone."""
     import isotouch
 
-    t0 = time.perf_counter()
     scene, prepare_s = _scene(task["scene_path"], task["isovalue"])
+    t0 = time.perf_counter()  # task_s: the measurement alone; preparing the scene is prepare_s
     algorithm = "hri" if task["algorithm"] in HRI_ALGORITHMS else task["algorithm"]
     figures = isotouch.measure_stroke(scene, algorithm, renderer_params(scene, task), task["timing_replays"])
     row = {k: task[k] for k in IDENTITY}
@@ -452,28 +453,31 @@ def summary_markdown(rows, figures=DEFAULT_FIGURES):
 
 
 def plot_error_vs_time(rows, path):
-    """Surface error RMS [voxel] against mean tick [ns], log axes, a panel per scene, a colour
-    per algorithm (as `isotouch report` plots it)."""
+    """Surface error RMS [voxel] against mean tick [ns], log axes, a panel per scene, a series
+    per configuration (config_label: HRI's n, options and grid values apart), its label in the
+    legend: a colour family per algorithm, a shade and a marker per configuration."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    matplotlib.rcParams["svg.fonttype"] = "none"  # an .svg keeps its labels as text
     scenes = list(dict.fromkeys((r["scene"], r["isovalue"]) for r in rows))
+    configs = sorted({_plot_label(r) for r in rows})
+    style = _series_styles(configs, {c: r["algorithm"] for r in rows for c in [_plot_label(r)]})
     cols = min(3, len(scenes))
     lines = (len(scenes) + cols - 1) // cols
-    fig, axes = plt.subplots(lines, cols, figsize=(4.2 * cols, 3.4 * lines), squeeze=False)
-    colours = dict(zip(ALGORITHMS, ("tab:blue", "tab:purple", "tab:red", "tab:green")))
+    fig, axes = plt.subplots(lines, cols, figsize=(5.2 * cols, 3.8 * lines), squeeze=False)
     for ax, (scene, iso) in zip(axes.flat, scenes):
-        for alg in ALGORITHMS:
+        for label in configs:
             pts = [(_f(r, "tick_ns_mean"), _f(r, "surface_err_rms_m") / _f(r, "voxel_m"))
-                   for r in rows if (r["scene"], r["isovalue"]) == (scene, iso) and r["algorithm"] == alg]
+                   for r in rows if (r["scene"], r["isovalue"]) == (scene, iso) and _plot_label(r) == label]
             pts = [(x, y) for x, y in pts if x > 0 and y > 0]  # log axes
             if pts:
-                ax.scatter(*zip(*pts), s=14, color=colours[alg], label=ALGORITHMS[alg])
+                ax.scatter(*zip(*pts), s=16, label=label, **style[label])
         title = scene + (f" at isovalue {iso}" if iso != "" else "")
         ax.set(xscale="log", yscale="log", title=title, xlabel="mean tick [ns]", ylabel="surface error RMS [voxel]")
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6)
     for ax in list(axes.flat)[len(scenes):]:
         ax.set_visible(False)
     fig.tight_layout()
@@ -481,55 +485,158 @@ def plot_error_vs_time(rows, path):
     plt.close(fig)
 
 
+def _plot_label(row):
+    """config_label without the isovalue (each isovalue has its own panel)."""
+    return config_label(dict(row, isovalue=""))
+
+
+def _series_styles(labels, algorithm_of):
+    """{label: scatter style}: the algorithm's colour map (HRI blues, HRI-paper purples, Avila
+    reds, Blezek greens), shades spread over its configurations, markers cycling."""
+    import matplotlib
+
+    maps = {"hri": "Blues", "hri-paper": "Purples", "avila": "Reds", "blezek": "Greens"}
+    markers = "osD^v<>pXh*"
+    out = {}
+    for alg, cmap in maps.items():
+        mine = [lb for lb in labels if algorithm_of[lb] == alg]
+        for i, lb in enumerate(mine):
+            shade = 0.85 if len(mine) == 1 else 0.45 + 0.5 * i / (len(mine) - 1)
+            out[lb] = {"color": matplotlib.colormaps[cmap](shade), "marker": markers[i % len(markers)]}
+    return out
+
+
 # ---------------------------------------------------------------------------------------------
 # Running
 
 
-def run_sweep(sweep, out_dir, client=None, log=print):
+class SweepTaskError(RuntimeError):
+    """Tasks raised: the others' rows are written; the message names how many and why."""
+
+
+def run_sweep(sweep, out_dir, client=None, log=print, progress_s=30.0):
     """Runs the tasks of `sweep` (load_sweep's dict) not yet in OUT/results.csv, on `client`
     (a dask.distributed Client) or, when None, serially in this process; then writes the summary
-    and the plot. Returns the results' rows (dicts of strings). A task's exception propagates
-    after the rows finished before it are written."""
+    and the plot. Says how far it is (tasks done, failed, the time left estimated from the
+    tasks finished so far) at most every `progress_s` seconds [s] and when the last finishes.
+    Returns the results' rows (dicts of strings). A task that raises is logged and counted;
+    the rest run, and then SweepTaskError names how many failed (run again to retry them)."""
     out = pathlib.Path(out_dir)
     tasks = make_tasks(sweep)
     results = Results(out / "results.csv")
+    failures = []
     try:
         done = results.keys()
         todo = [t for t in tasks if t["key"] not in done]
         log(f"sweep: {len(tasks)} tasks; {len(tasks) - len(todo)} already in {results.path}: skipped; "
             f"{len(todo)} to run on {'this process' if client is None else _describe(client)}", flush=True)
-        for row in _rows(todo, client):
-            results.append(row)
+        progress = Progress(len(todo), log, progress_s)
+        for task, row, error in _rows(todo, client):
+            if error is None:
+                results.append(row)
+            else:
+                failures.append(task)
+                log(f"sweep: task {task['key']} ({task['scene']}, {config_label(task)}, rep {task['rep']}) failed: "
+                    f"{type(error).__name__}: {error}", flush=True)
+            progress.step(failed=error is not None)
     finally:
         results.close()
     rows = [r for r in results.rows if r["key"] in {t["key"] for t in tasks}]
     figures = sweep.get("figures", DEFAULT_FIGURES)
     (out / "summary.md").write_text(summary_markdown(rows, figures), encoding="utf-8")
     wrote = "summary.md"
-    if "surface_error" in figures and "tick_time" in figures:
+    if rows and "surface_error" in figures and "tick_time" in figures:
         plot_error_vs_time(rows, out / "error_vs_time.png")
         wrote += ", error_vs_time.png"
     else:
         (out / "error_vs_time.png").unlink(missing_ok=True)
     log(f"sweep: {len(rows)} rows in {results.path}; {wrote} in {out}", flush=True)
+    if failures:
+        raise SweepTaskError(f"{len(failures)} of {len(todo)} tasks failed (each said above); "
+                             f"their rows are not in {results.path}: run again to retry them")
     return rows
 
 
+class Progress:
+    """`sweep: 120/333 tasks done, 1 failed, 1m40s elapsed, about 3m05s left` at most every
+    `every_s` seconds and after the last task; the time left is the elapsed time per finished
+    task times the tasks left (tasks in flight at the start count as not yet begun)."""
+
+    def __init__(self, total, log, every_s, clock=time.monotonic):
+        self.total, self.log, self.every_s, self.clock = total, log, every_s, clock
+        self.done = self.failed = 0
+        self.start = self.last = clock()
+
+    def step(self, failed=False):
+        self.done += 1
+        self.failed += failed
+        now = self.clock()
+        if now - self.last >= self.every_s or self.done == self.total:
+            self.last = now
+            self.log(self.line(now), flush=True)
+
+    def line(self, now):
+        elapsed = now - self.start
+        left = elapsed / self.done * (self.total - self.done)
+        return (f"sweep: {self.done}/{self.total} tasks done, {self.failed} failed, {_duration(elapsed)} elapsed, "
+                f"about {_duration(left)} left")
+
+
+def _duration(seconds):
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s" if m else f"{s}s"
+
+
 def _rows(todo, client):
-    """Rows of `todo` as they finish (serially, or through Dask: a task lost with its worker is
-    rescheduled on another by the scheduler, so each key yields exactly one row)."""
+    """(task, row, None) or (task, None, exception) for each task of `todo` as it finishes
+    (serially, or through Dask: a task lost with its worker is rescheduled on another by the
+    scheduler, so each key yields exactly once)."""
     if client is None:
         for t in todo:
-            yield run_task(t)
+            try:
+                yield t, run_task(t), None
+            except Exception as e:  # noqa: BLE001 - counted and said; Ctrl-C still stops the sweep
+                yield t, None, e
         return
     from dask.distributed import as_completed
 
+    quiet_recovered_gathers()
     futures = client.map(run_task, todo, key=[f"isotouch-sweep-{t['key']}" for t in todo], pure=True)
+    task_of = {f.key: t for f, t in zip(futures, todo)}
     try:
         for fut in as_completed(futures):
-            yield fut.result()
+            if fut.status == "error":
+                yield task_of[fut.key], None, fut.exception()
+            else:
+                yield task_of[fut.key], fut.result(), None
     finally:
         client.cancel(futures)
+
+
+class _RecoveredGather(logging.Filter):
+    """distributed's "Couldn't gather keys" (an ERROR with a traceback from the scheduler, a
+    WARNING from the client) after a worker died holding finished results: the scheduler
+    computes those tasks again elsewhere, so nothing is lost. Said as one WARNING that says so."""
+
+    def filter(self, record):
+        if "Couldn't gather" not in str(record.msg):
+            return True
+        keys = record.args[0] if record.args and "keys %s" in str(record.msg) else record.args[-1] if record.args else ""
+        record.msg = ("sweep: a worker was lost holding finished task results (%s); the scheduler runs those "
+                      "tasks again on the other workers and nothing is lost (distributed: Couldn't gather keys)")
+        record.args = (keys,)
+        record.levelno, record.levelname = logging.WARNING, "WARNING"
+        record.exc_info = record.exc_text = None
+        return True
+
+
+def quiet_recovered_gathers():
+    """Installs _RecoveredGather on distributed's scheduler and client loggers (once)."""
+    for name in ("distributed.scheduler", "distributed.client"):
+        lg = logging.getLogger(name)
+        if not any(isinstance(f, _RecoveredGather) for f in lg.filters):
+            lg.addFilter(_RecoveredGather())
 
 
 def _describe(client):
@@ -561,7 +668,11 @@ def main(argv=None):
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
     where.add_argument("--scheduler-file", metavar="FILE", help="the scheduler's address from its scheduler file")
     where.add_argument("--serial", action="store_true", help="every task in this process (the serial reference)")
+    ap.add_argument("--progress-s", type=float, default=30.0, metavar="S",
+                    help="a progress line (done, failed, time left) at most every S seconds (default 30)")
     args = ap.parse_args(argv)
+    if args.progress_s < 0:
+        ap.error(f"--progress-s: {args.progress_s}: must be >= 0")
     if args.local_workers is not None and args.local_workers < 1:
         ap.error(f"--local-workers: {args.local_workers}: must be >= 1")
     try:
@@ -573,8 +684,11 @@ def main(argv=None):
     try:
         if not args.serial:
             client, cluster = connect(args.local_workers, args.scheduler, args.scheduler_file)
-        run_sweep(sweep, args.out, client)
+        run_sweep(sweep, args.out, client, progress_s=args.progress_s)
         return 0
+    except SweepTaskError as e:
+        print(f"sweep: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         rows = read_results(pathlib.Path(args.out) / "results.csv")
         print(f"sweep: interrupted; {len(rows)} of {len(make_tasks(sweep))} tasks written in "

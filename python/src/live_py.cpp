@@ -64,6 +64,7 @@ class Live {
   ///         inside the renderer: remembered, so this object is then never freed (DeleteLive).
   void stop() {
     if (!live_) return;
+    stopped_.store(true);
     try {
       live_->stop();
     } catch (const session::ServoAbandoned&) {
@@ -105,15 +106,22 @@ class Live {
     e.brush.targets = session::default_targets(setup_.volume, setup_.live.iso);
     e.brush.dt_s = 1.0 / scene_.hri.rate_hz;
     if (const std::string why = session::validate(e.brush); !why.empty()) throw py::value_error("brush: " + why);
+    refuse_if_stopped("brush");
     return live_->submit(e);
   }
-  bool event(session::EditEvent::Kind k) {
+  bool event(session::EditEvent::Kind k, const char* what) {
+    refuse_if_stopped(what);
     session::EditEvent e;
     e.kind = k;
     return live_->submit(e);
   }
 
  private:
+  /// An edit after stop() would never be applied: a RuntimeError, never a silent True.
+  void refuse_if_stopped(const char* what) const {
+    if (stopped_.load())
+      throw std::runtime_error(std::string(what) + ": the session is stopped; edits apply only between start() and stop()");
+  }
   session::LiveSessionConfig config(const std::string& record, bool realtime, double flush_interval_s) const {
     session::LiveSessionConfig c;
     c.servo.rate_hz = scene_.hri.rate_hz;
@@ -143,6 +151,7 @@ class Live {
   std::unique_ptr<session::Session> parts_;
   session::LiveSession* live_ = nullptr;  // parts_'s
   std::atomic<bool> abandoned_{false};  // set by stop() (GIL released), read by DeleteLive
+  std::atomic<bool> stopped_{false};    // stop() was called: edits are refused
 };
 
 /// How the Python object frees its Live: stopped first; if that stop (or an earlier one)
@@ -227,11 +236,12 @@ manager: leaving it stops the session (servo first, its last force an exact zero
                              "a copy of the unedited volume")
       .def("brush", &Live::brush, py::arg("kind"), py::arg("centre"), py::arg("radius_m") = 2e-3,
            py::arg("strength") = 100.0, py::arg("falloff") = 0.5, py::arg("force_n") = 0.0,
-           "submit a brush ('add', 'carve', 'smooth', 'drill'), centre grid-world [m]; False if the queue is full")
-      .def("begin_stroke", [](Live& l) { return l.event(K::kBeginStroke); })
-      .def("end_stroke", [](Live& l) { return l.event(K::kEndStroke); })
-      .def("undo", [](Live& l) { return l.event(K::kUndo); })
-      .def("redo", [](Live& l) { return l.event(K::kRedo); })
+           "submit a brush ('add', 'carve', 'smooth', 'drill'), centre grid-world [m]; False if the queue is full; "
+           "RuntimeError after stop()")
+      .def("begin_stroke", [](Live& l) { return l.event(K::kBeginStroke, "begin_stroke"); })
+      .def("end_stroke", [](Live& l) { return l.event(K::kEndStroke, "end_stroke"); })
+      .def("undo", [](Live& l) { return l.event(K::kUndo, "undo"); })
+      .def("redo", [](Live& l) { return l.event(K::kRedo, "redo"); })
       .def("observe", [](Live& l) { return observed(l.session().observe()); },
            "the latest tick: hip, vhip [m, grid-world], force [N], contact, version")
       .def("stats", [](Live& l) { return stats(l.session().stats()); }, "counters (complete after stop())")

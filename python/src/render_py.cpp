@@ -40,15 +40,90 @@ py::array sample_view(py::object self, int first, int comps) {
   return a;
 }
 
-/// One renderer for `algorithm` ("hri", "avila", "blezek") with `params` (HriParams for HRI,
-/// BaselineParams for the baselines; None: the defaults).
-std::unique_ptr<servo::Renderer> make_renderer(const std::string& algorithm, const py::object& params) {
-  if (algorithm == "hri") {
-    const servo::HriParams p = params.is_none() ? servo::HriParams{} : params.cast<servo::HriParams>();
-    return std::make_unique<servo::HriRenderer>(p);
+/// The data fields of a bound parameter object (its class's properties), in definition order.
+py::list field_list(const py::object& o) {
+  py::list out;
+  const py::dict attrs = py::type::of(o).attr("__dict__");
+  for (const auto& [key, value] : attrs)
+    if (py::isinstance(value, py::module_::import("builtins").attr("property"))) out.append(key);
+  return out;
+}
+
+std::string field_names(const py::object& o) {
+  return py::str(", ").attr("join")(field_list(o)).cast<std::string>();
+}
+
+/// A parameter struct from keyword arguments: the defaults (tau NaN: not given), then each
+/// keyword set as its attribute. @throws TypeError naming a keyword that is no field (and the fields there are).
+template <class P>
+P params_from_kwargs(const py::kwargs& kw) {
+  P defaults{};
+  if constexpr (requires { defaults.tau; }) defaults.tau = std::nan("");  // no isovalue until one is given
+  py::object o = py::cast(defaults);
+  for (const auto& [key, value] : kw) {
+    const std::string k = py::str(key);
+    if (!field_list(o).contains(key)) {
+      const std::string type = py::str(py::type::of(o).attr("__name__"));
+      throw py::type_error(type + "(): no field '" + k + "' (fields: " + field_names(o) + ")");
+    }
+    py::setattr(o, key, value);
   }
+  return o.cast<P>();
+}
+
+/// "Name(tau=400.0, inside=InsideIs.above, ...)": every data field, as the constructor takes it.
+template <class Class>
+void def_params_repr(Class& c, const char* name) {
+  c.def("__repr__", [name](py::object self) {
+    std::string s = std::string(name) + "(";
+    bool first = true;
+    for (const py::handle f : field_list(self)) {
+      const py::object v = py::getattr(self, f);
+      const bool is_enum = py::hasattr(py::type::of(v), "__members__");  // InsideIs.above, not <InsideIs.above: 0>
+      s += (first ? "" : ", ") + std::string(py::str(f)) + "=" + std::string(is_enum ? py::str(v) : py::repr(v));
+      first = false;
+    }
+    return s + ")";
+  });
+}
+
+/// `params` as a P (None: the defaults, tau not given), its tau resolved with `tau`: either
+/// one, or both when equal. @throws TypeError naming what was given and `expected`;
+/// ValueError when no isovalue is given or two differ.
+template <class P>
+P params_arg(const py::object& params, const std::string& algorithm, const char* expected, std::optional<double> tau,
+             const char* tau_name = "tau") {
+  P p{};
+  p.tau = std::nan("");
+  if (!params.is_none()) {
+    if (!py::isinstance<P>(params))
+      throw py::type_error("params: " + std::string(py::str(py::type::of(params).attr("__name__"))) + " given for '" +
+                           algorithm + "', expected isotouch." + expected);
+    p = params.cast<P>();
+  }
+  if (tau) {
+    if (!std::isnan(p.tau) && p.tau != *tau) {
+      std::ostringstream s;
+      s << tau_name << ": " << *tau << " given, but params.tau is " << p.tau << ": give the isovalue once";
+      throw py::value_error(s.str());
+    }
+    p.tau = *tau;
+  }
+  if (!std::isfinite(p.tau))
+    throw py::value_error("tau: no isovalue given for '" + algorithm + "' (a Field does not carry one): pass tau=" +
+                          "VALUE (volume value units) or params=isotouch." + expected + "(tau=VALUE)");
+  return p;
+}
+
+/// One renderer for `algorithm` ("hri", "avila", "blezek") with `params` (HriParams for HRI,
+/// BaselineParams for the baselines; None: the defaults) and the isovalue `tau` (params_arg).
+std::unique_ptr<servo::Renderer> make_renderer(const std::string& algorithm, const py::object& params,
+                                               std::optional<double> tau, const char* tau_name = "tau") {
+  if (algorithm == "hri")
+    return std::make_unique<servo::HriRenderer>(
+        params_arg<servo::HriParams>(params, algorithm, "HriParams", tau, tau_name));
   if (algorithm == "avila" || algorithm == "blezek") {
-    const servo::BaselineParams p = params.is_none() ? servo::BaselineParams{} : params.cast<servo::BaselineParams>();
+    const auto p = params_arg<servo::BaselineParams>(params, algorithm, "BaselineParams", tau, tau_name);
     if (algorithm == "avila") return std::make_unique<servo::AvilaRenderer>(p);
     return std::make_unique<servo::BlezekRenderer>(p);
   }
@@ -107,11 +182,11 @@ bool* flags_out(py::dict& d, py::ssize_t n) {
 }
 
 py::dict render(const FieldPtr& field, const py::handle& hip, const std::string& algorithm, const py::object& params,
-                double dt_s, bool planes) {
+                double dt_s, bool planes, std::optional<double> tau) {
   // The caller's buffer when it is float64 (N, 3) C-contiguous. Not checked finite: a
   // non-finite HIP is the renderer's to refuse (zero force, fault), as on a device.
   const PointsIn hips = points_in(hip, "hip", false);
-  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params, tau);
   const auto n = py::ssize_t(hips.n);
   py::dict d;
   Outputs out{points_out(d, "force", n), points_out(d, "vhip", n), flags_out(d, n)};
@@ -121,22 +196,30 @@ py::dict render(const FieldPtr& field, const py::handle& hip, const std::string&
     out.penetration = column_out<double>(d, "penetration", n);
     out.plane_valid = column_out<bool>(d, "plane_valid", n);
   }
-  py::gil_scoped_release nogil;
+  // In chunks of a few milliseconds, the GIL released in each; between them the signals:
+  // Ctrl-C raises KeyboardInterrupt within a chunk, not at the end of the trajectory.
+  constexpr std::size_t kChunkTicks = 16384;
   const core::SampleField& f = *field;
-  for (std::size_t k = 0; k < hips.n; ++k) out.put(k, r->tick(f, hips.at(k), dt_s));
+  for (std::size_t k0 = 0; k0 < hips.n; k0 += kChunkTicks) {
+    {
+      py::gil_scoped_release nogil;
+      for (std::size_t k = k0; k < std::min(hips.n, k0 + kChunkTicks); ++k) out.put(k, r->tick(f, hips.at(k), dt_s));
+    }
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+  }
   return d;
 }
 
 /// The C++ figure beside a Python timing: eval::median_ns_per_tick (what `bench table1` times)
 /// over the same field and trajectory [ns per tick].
 double cpp_ns_per_tick(const FieldPtr& field, const py::handle& hip, const std::string& algorithm,
-                       const py::object& params, int warmup, int repetitions) {
+                       const py::object& params, int warmup, int repetitions, std::optional<double> tau) {
   if (repetitions < 1 || warmup < 0) throw py::value_error("repetitions must be >= 1 and warmup >= 0");
   eval::SweepScene s;
   s.field = field;
   s.hip = points_arg(hip, "hip");
   if (s.hip.empty()) throw py::value_error("hip: no points");
-  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params, tau);
   py::gil_scoped_release nogil;
   return eval::median_ns_per_tick(*r, s, warmup, repetitions);
 }
@@ -183,7 +266,7 @@ std::shared_ptr<eval::SweepScene> stroke_scene(const std::string& name, const st
 py::dict measure_stroke(const std::shared_ptr<eval::SweepScene>& s, const std::string& algorithm,
                         const py::object& params, int repetitions) {
   if (repetitions < 1) throw py::value_error("repetitions: " + std::to_string(repetitions) + ", must be >= 1");
-  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params);
+  std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params, s->tau, "the scene's isovalue");
   eval::ErrorFigures e;
   {
     py::gil_scoped_release nogil;
@@ -243,37 +326,57 @@ void bind_params(py::module_& m) {
       .value("samples", servo::NormalSource::kSamples)
       .value("central", servo::NormalSource::kCentral)
       .value("trilinear_exact", servo::NormalSource::kTrilinearExact);
-  py::class_<servo::SurfaceFriction>(m, "SurfaceFriction", "§3.1 surface effects (coefficients; viscous [N s/m])")
-      .def(py::init<>())
-      .def_readwrite("mu_s", &servo::SurfaceFriction::mu_s)
-      .def_readwrite("mu_d", &servo::SurfaceFriction::mu_d)
-      .def_readwrite("viscous_n_s_per_m", &servo::SurfaceFriction::viscous_n_s_per_m);
+  py::class_<servo::SurfaceFriction> friction(m, "SurfaceFriction",
+                                              "§3.1 surface effects: SurfaceFriction(mu_s=0.3, mu_d=0.2, ...)");
+  friction.def(py::init(&params_from_kwargs<servo::SurfaceFriction>))
+      .def_readwrite("mu_s", &servo::SurfaceFriction::mu_s, "static friction coefficient")
+      .def_readwrite("mu_d", &servo::SurfaceFriction::mu_d, "dynamic friction coefficient")
+      .def_readwrite("viscous_n_s_per_m", &servo::SurfaceFriction::viscous_n_s_per_m, "viscous friction [N s/m]");
+  def_params_repr(friction, "SurfaceFriction");
   using H = servo::HriParams;
-  py::class_<H>(m, "HriParams", "HRI parameters (servo/hri.h); K and B in device space [N/m], [N s/m]")
-      .def(py::init<>())
-      .def_readwrite("variant", &H::variant).def_readwrite("tau", &H::tau).def_readwrite("inside", &H::inside)
-      .def_readwrite("stiffness_n_per_m", &H::stiffness_n_per_m)
-      .def_readwrite("damping_n_s_per_m", &H::damping_n_s_per_m)
-      .def_readwrite("plane_update_period", &H::plane_update_period).def_readwrite("rate_hz", &H::rate_hz)
-      .def_readwrite("force_limit_n", &H::force_limit_n).def_readwrite("world_per_device", &H::world_per_device)
-      .def_readwrite("max_reach_m", &H::max_reach_m).def_readwrite("intersection", &H::intersection)
-      .def_readwrite("intersection_steps", &H::intersection_steps).def_readwrite("normal", &H::normal)
-      .def_readwrite("friction", &H::friction).def_readwrite("force_shading", &H::force_shading)
-      .def_readwrite("recovery_time_s", &H::recovery_time_s)
-      .def_readwrite("velocity_cutoff_hz", &H::velocity_cutoff_hz).def_readwrite("max_speed_m_s", &H::max_speed_m_s)
-      .def_readwrite("march_budget", &H::march_budget)
-      .def_readwrite("edit_period_s", &H::edit_period_s).def_readwrite("tool_radius_m", &H::tool_radius_m)
-      .def_readwrite("short_way", &H::short_way);
+  py::class_<H> hri(m, "HriParams", R"(HRI parameters (servo/hri.h): HriParams(tau=400.0, stiffness_n_per_m=500, ...)
+takes any field as a keyword. tau is the isovalue in the volume's value units; K and B act
+on device motion [N/m], [N s/m]; lengths in metres, grid-world.)");
+  hri.def(py::init(&params_from_kwargs<H>))
+      .def_readwrite("variant", &H::variant, "Variant.robust (default) or Variant.paper (Figure 2 as printed)")
+      .def_readwrite("tau", &H::tau, "isovalue [volume value units]")
+      .def_readwrite("inside", &H::inside, "InsideIs.above: values above tau are inside")
+      .def_readwrite("stiffness_n_per_m", &H::stiffness_n_per_m, "K [N/m] of device motion")
+      .def_readwrite("damping_n_s_per_m", &H::damping_n_s_per_m, "B [N s/m] along the penetration")
+      .def_readwrite("plane_update_period", &H::plane_update_period, "n: the plane is recomputed every n ticks")
+      .def_readwrite("rate_hz", &H::rate_hz, "servo rate [Hz]")
+      .def_readwrite("force_limit_n", &H::force_limit_n, "|F| saturated here [N], direction kept")
+      .def_readwrite("world_per_device", &H::world_per_device, "workspace scale: world [m] per device [m]")
+      .def_readwrite("max_reach_m", &H::max_reach_m, "a HIP farther than this from the volume centre is a fault [m]")
+      .def_readwrite("intersection", &H::intersection, "Intersection.linear, secant or bisection")
+      .def_readwrite("intersection_steps", &H::intersection_steps, "secant / bisection steps")
+      .def_readwrite("normal", &H::normal, "NormalSource: samples, central or trilinear_exact")
+      .def_readwrite("friction", &H::friction, "SurfaceFriction")
+      .def_readwrite("force_shading", &H::force_shading, "shading plane from the normal at the previous VHIP")
+      .def_readwrite("recovery_time_s", &H::recovery_time_s, "> 0 turns recovery time on [s]")
+      .def_readwrite("velocity_cutoff_hz", &H::velocity_cutoff_hz, "velocity filter cut-off [Hz]")
+      .def_readwrite("max_speed_m_s", &H::max_speed_m_s, "fastest HIP motion believed [m/s]")
+      .def_readwrite("march_budget", &H::march_budget, "most cells marched per tick")
+      .def_readwrite("edit_period_s", &H::edit_period_s, "how often edits arrive [s]")
+      .def_readwrite("tool_radius_m", &H::tool_radius_m, "spherical tool radius [m, world]; 0: a point")
+      .def_readwrite("short_way", &H::short_way, "march each point once (same bits as the long way)");
+  def_params_repr(hri, "HriParams");
   using B = servo::BaselineParams;
-  py::class_<B>(m, "BaselineParams", "Avila-Sobierajski and Blezek-Robb parameters (servo/baselines.h)")
-      .def(py::init<>())
-      .def_readwrite("tau", &B::tau).def_readwrite("inside", &B::inside)
-      .def_readwrite("stiffness_n_per_m", &B::stiffness_n_per_m)
-      .def_readwrite("damping_n_s_per_m", &B::damping_n_s_per_m).def_readwrite("rate_hz", &B::rate_hz)
-      .def_readwrite("force_limit_n", &B::force_limit_n).def_readwrite("world_per_device", &B::world_per_device)
-      .def_readwrite("max_reach_m", &B::max_reach_m).def_readwrite("inch_iterations", &B::inch_iterations)
-      .def_readwrite("inch_step_voxels", &B::inch_step_voxels)
-      .def_readwrite("central_h_voxels", &B::central_h_voxels);
+  py::class_<B> base(m, "BaselineParams", R"(Avila-Sobierajski and Blezek-Robb parameters (servo/baselines.h):
+BaselineParams(tau=400.0, ...) takes any field as a keyword. tau in the volume's value units.)");
+  base.def(py::init(&params_from_kwargs<B>))
+      .def_readwrite("tau", &B::tau, "isovalue [volume value units]")
+      .def_readwrite("inside", &B::inside, "InsideIs.above: values above tau are inside")
+      .def_readwrite("stiffness_n_per_m", &B::stiffness_n_per_m, "K [N/m] of device motion")
+      .def_readwrite("damping_n_s_per_m", &B::damping_n_s_per_m, "B [N s/m]")
+      .def_readwrite("rate_hz", &B::rate_hz, "servo rate [Hz]")
+      .def_readwrite("force_limit_n", &B::force_limit_n, "|F| saturated here [N], direction kept")
+      .def_readwrite("world_per_device", &B::world_per_device, "workspace scale: world [m] per device [m]")
+      .def_readwrite("max_reach_m", &B::max_reach_m, "a HIP farther than this from the volume centre is a fault [m]")
+      .def_readwrite("inch_iterations", &B::inch_iterations, "Blezek-Robb: inching steps per tick")
+      .def_readwrite("inch_step_voxels", &B::inch_step_voxels, "Blezek-Robb: longest inching step [voxels]")
+      .def_readwrite("central_h_voxels", &B::central_h_voxels, "Blezek-Robb: central-difference half step [voxels]");
+  def_params_repr(base, "BaselineParams");
 }
 
 void bind_field(py::module_& m) {
@@ -322,13 +425,16 @@ void bind_render(py::module_& m) {
   bind_field(m);
   bind_strokes(m);
   m.def("render", &render, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
-        py::arg("params") = py::none(), py::arg("dt") = 0.0, py::arg("planes") = false,
+        py::arg("params") = py::none(), py::arg("dt") = 0.0, py::arg("planes") = false, py::arg("tau") = py::none(),
         R"(Run one renderer over a HIP trajectory.
 
 field: an isotouch.Field; hip: (N, 3) HIP per tick, grid-world [m] (a non-finite row is a
 fault tick: zero force, as the servo answers a device's NaN); algorithm 'hri' (params:
-HriParams), 'avila' or 'blezek' (params: BaselineParams); dt: the period given each tick [s]
-(0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released throughout.
+HriParams), 'avila' or 'blezek' (params: BaselineParams); tau: the isovalue (volume value
+units), given here or as params.tau (both: they must agree; neither: ValueError, a Field does
+not carry its isovalue); params of the other renderer: TypeError; dt: the period given each tick [s]
+(0: the nominal 1 / rate). A fresh renderer runs every call, the GIL released but for a
+signal check every 16384 ticks (Ctrl-C raises KeyboardInterrupt within one such chunk).
 Returns a dict of arrays: force (N, 3) [N] device axes, vhip (N, 3) [m], contact, plane_update,
 saturated, fault (N,) bool; with planes=True also the plane after each tick, plane_n (N, 3) unit
 outward normal and plane_p (N, 3) [m] (HRI; zero for the baselines), plane_valid (N,) bool, and
@@ -336,13 +442,14 @@ penetration (N,) [m].)");
   m.def("measure_stroke", &measure_stroke, py::arg("scene"), py::arg("algorithm") = "hri",
         py::arg("params") = py::none(), py::arg("repetitions") = 5,
         R"(One configuration on a StrokeScene's recorded stroke, as `isotouch report` measures it.
+params.tau, if given, must be the scene's isovalue (scene.tau; None: the scene's).
 
 Returns a dict: tick_ns_mean (median of `repetitions` whole replays) and tick_ns_p99 [ns],
 surface_err_rms_m [m], angle_err_rms_deg, force_err_rms_n [N], max_force_step_n and
 max_force_step_slide_n [N], contact_ticks, pop_throughs, ticks. All but the tick times depend
 on the inputs only. The GIL is released while it runs.)");
   m.def("cpp_ns_per_tick", &cpp_ns_per_tick, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
-        py::arg("params") = py::none(), py::arg("warmup") = 3, py::arg("repetitions") = 21,
+        py::arg("params") = py::none(), py::arg("warmup") = 3, py::arg("repetitions") = 21, py::arg("tau") = py::none(),
         "median C++ time per Renderer::tick over the trajectory [ns] (eval::median_ns_per_tick, as bench table1)");
 }
 

@@ -12,15 +12,23 @@
 namespace isotouch::python {
 namespace {
 
+/// isotouch.UnitsWarning: a spacing or origin that looks like the other unit (m vs mm).
+PyObject* units_warning() {
+  static PyObject* w = PyErr_NewExceptionWithDoc(
+      "isotouch.UnitsWarning",
+      "a spacing or origin that looks like millimetres given as metres, or the reverse", PyExc_UserWarning, nullptr);
+  return w;
+}
+
 using VolumePtr = std::shared_ptr<engine::Volume>;
 
-std::array<double, 3> finite3(const py::handle& seq, const char* what, bool positive) {
+std::array<double, 3> finite3(const py::handle& seq, const char* what, bool positive, const std::string& unit) {
   const core::Vec3 v = vec3_arg(seq, what);
   const std::array<double, 3> a{v.x, v.y, v.z};
   for (int i = 0; i < 3; ++i)
     if (positive && !(a[i] > 0)) {
       std::ostringstream s;
-      s << what << "[" << i << "] is " << a[i] << ": must be finite and > 0 [m]";
+      s << what << "[" << i << "] is " << a[i] << ": must be finite and > 0 [" << unit << "]";
       throw py::value_error(s.str());
     }
   return a;
@@ -36,19 +44,72 @@ std::array<double, 9> direction_arg(const py::object& d) {
   return out;
 }
 
-/// Checks the array, spacing, origin and direction like a file's header, then copies the voxels.
-VolumePtr volume_from_numpy(const py::array& array, const py::handle& spacing, const py::handle& origin,
-                            const py::object& direction) {
+/// The array as (nz, ny, nx), x fastest in memory, whatever `axes` says it is indexed by:
+/// 'zyx' (array[z, y, x], SimpleITK's order) as given, C-contiguous; 'xyz' (array[x, y, z],
+/// nibabel's order) transposed, copied only when it is not F-contiguous. No stride check can
+/// tell an (nx, ny, nz) array from an (nz, ny, nx) one: the caller says which.
+py::array zyx_array(const py::array& array, const std::string& axes) {
   if (!array.dtype().is(py::dtype::of<float>()))
     throw py::value_error("array: dtype " + std::string(py::str(array.dtype())) +
                           ", must be float32 (convert with array.astype(numpy.float32))");
   if (array.ndim() != 3)
-    throw py::value_error("array: " + std::to_string(array.ndim()) + " dimensions, must be 3 (nz, ny, nx)");
+    throw py::value_error("array: " + std::to_string(array.ndim()) + " dimensions, must be 3 (axes='" + axes + "')");
+  if (axes == "xyz")
+    return py::module_::import("numpy").attr("ascontiguousarray")(array.attr("transpose")());
+  if (axes != "zyx")
+    throw py::value_error("axes: '" + axes + "', must be 'zyx' (array[z, y, x], SimpleITK's order) or 'xyz' "
+                          "(array[x, y, z], nibabel's order)");
   if (!(array.flags() & py::array::c_style))
-    throw py::value_error("array: not C-contiguous (x fastest); use numpy.ascontiguousarray(array)");
+    throw py::value_error("array: not C-contiguous (x fastest); an array indexed [x, y, z] (nibabel's "
+                          "get_fdata()) takes axes='xyz', an (nz, ny, nx) one numpy.ascontiguousarray(array)");
+  return array;
+}
+
+/// A Python warning of `category` (raises when warnings are errors).
+void warn(PyObject* category, const std::string& text) {
+  if (PyErr_WarnEx(category, text.c_str(), 1) != 0) throw py::error_already_set();
+}
+
+std::string triple(const std::array<double, 3>& a) {
+  std::ostringstream s;
+  s << "(" << a[0] << ", " << a[1] << ", " << a[2] << ")";
+  return s.str();
+}
+
+/// Warns (UnitsWarning) where spacing or origin, given in `unit` ("m" or "mm"), look like the
+/// other unit: in metres a voxel over 50 mm or an origin over 2 m from the scanner's centre
+/// (millimetres given as metres); in millimetres every voxel under 10 um (metres given as mm).
+void warn_units(const std::array<double, 3>& sp, const std::array<double, 3>& org, const std::string& unit) {
+  const auto any = [](const std::array<double, 3>& a, auto f) { return f(a[0]) || f(a[1]) || f(a[2]); };
+  if (unit == "m") {
+    if (any(sp, [](double x) { return x > 0.05; }))
+      warn(units_warning(), "spacing " + triple(sp) + " m: a voxel over 50 mm looks like millimetres given as "
+                            "metres; Volume.from_mm(array, spacing_mm, origin_mm) takes millimetres");
+    if (any(org, [](double x) { return std::abs(x) > 2.0; }))
+      warn(units_warning(), "origin " + triple(org) + " m: over 2 m from the scanner's centre looks like "
+                            "millimetres given as metres; Volume.from_mm(array, spacing_mm, origin_mm) takes millimetres");
+  } else if (sp[0] < 0.01 && sp[1] < 0.01 && sp[2] < 0.01) {
+    warn(units_warning(), "spacing_mm " + triple(sp) + " mm: voxels under 10 um look like metres given as "
+                          "millimetres; Volume(array, spacing, origin) takes metres");
+  }
+}
+
+std::array<double, 3> scaled(std::array<double, 3> a, double k) {
+  for (double& x : a) x *= k;
+  return a;
+}
+
+/// Checks the array, spacing, origin and direction like a file's header, then copies the voxels.
+/// spacing and origin in `unit` ("m" or "mm").
+VolumePtr volume_from_numpy(const py::array& given, const py::handle& spacing, const py::handle& origin,
+                            const py::object& direction, const std::string& axes, const std::string& unit) {
+  const py::array array = zyx_array(given, axes);
   auto v = std::make_shared<engine::Volume>();
-  const std::array<double, 3> sp = finite3(spacing, "spacing", true);
-  const std::array<double, 3> org = finite3(origin, "origin", false);
+  const std::array<double, 3> sp_in = finite3(spacing, unit == "m" ? "spacing" : "spacing_mm", true, unit);
+  const std::array<double, 3> org_in = finite3(origin, unit == "m" ? "origin" : "origin_mm", false, unit);
+  warn_units(sp_in, org_in, unit);
+  const double to_m = unit == "m" ? 1.0 : 1e-3;
+  const std::array<double, 3> sp = scaled(sp_in, to_m), org = scaled(org_in, to_m);
   v->grid.dims = {int(array.shape(2)), int(array.shape(1)), int(array.shape(0))};
   v->grid.spacing_m = {sp[0], sp[1], sp[2]};
   v->grid.origin_m = {org[0], org[1], org[2]};
@@ -92,17 +153,38 @@ py::array_t<double> map_points(const py::handle& pts, core::Vec3 (*f)(const engi
 void bind_volume(py::module_& m) {
   py::class_<engine::Volume, VolumePtr> volume(m, "Volume", R"(A scalar volume on a regular grid (float voxels, x fastest).
 
-Volume(array, spacing, origin=(0, 0, 0), direction=None): from a float32, C-contiguous
-(nz, ny, nx) numpy array (copied once); spacing (sx, sy, sz) [m], finite and > 0; origin
+Volume(array, spacing, origin=(0, 0, 0), direction=None, axes='zyx'): from a float32 numpy
+array (copied once): axes='zyx' an (nz, ny, nx) C-contiguous array indexed [z, y, x]
+(SimpleITK's order, x fastest); axes='xyz' an (nx, ny, nz) array indexed [x, y, z] (nibabel's
+order; F-ordered, any other order copied). The two orders give the same volume; an array given
+in the other order than `axes` says has its axes swapped (no check can see that: say which).
+spacing (sx, sy, sz) [m], finite and > 0; origin
 (x, y, z) [m], the physical position of voxel (0, 0, 0); direction 3x3, column a the physical
 unit direction of index axis a (identity if None). A bad array, spacing, origin or direction
-raises ValueError naming it.
+raises ValueError naming it. Volume.from_mm takes spacing and origin in millimetres (the
+imaging convention); a metre value that looks like millimetres (a voxel over 50 mm, an origin
+over 2 m) raises isotouch.UnitsWarning.
 
 Frames: index (x, y, z) continuous voxel coordinates; grid-world [m] = origin + spacing *
 index (what renderers and strokes use); physical [m] = origin + D (spacing * index).)");
   def_grid_properties(volume, "(x, y, z) of voxel (0, 0, 0) [m], physical and grid-world")
-      .def(py::init(&volume_from_numpy), py::arg("array"), py::arg("spacing"),
-           py::arg("origin") = py::make_tuple(0.0, 0.0, 0.0), py::arg("direction") = py::none())
+      .def(py::init([](const py::array& a, const py::handle& sp, const py::handle& org, const py::object& dir,
+                       const std::string& axes) { return volume_from_numpy(a, sp, org, dir, axes, "m"); }),
+           py::arg("array"), py::arg("spacing"),
+           py::arg("origin") = py::make_tuple(0.0, 0.0, 0.0), py::arg("direction") = py::none(),
+           py::arg("axes") = "zyx")
+      .def_static("from_mm", [](const py::array& a, const py::handle& sp, const py::handle& org, const py::object& dir,
+                                const std::string& axes) { return volume_from_numpy(a, sp, org, dir, axes, "mm"); },
+                  py::arg("array"), py::arg("spacing_mm"), py::arg("origin_mm") = py::make_tuple(0.0, 0.0, 0.0),
+                  py::arg("direction") = py::none(), py::arg("axes") = "zyx",
+                  "Volume(...) with spacing and origin in millimetres, as SimpleITK, nibabel and 3D Slicer give "
+                  "them (UnitsWarning where every voxel is under 10 um: metres given as mm)")
+      .def_property_readonly("spacing_mm", [](const engine::Volume& v) {
+        return py::make_tuple(v.grid.spacing_m.x * 1e3, v.grid.spacing_m.y * 1e3, v.grid.spacing_m.z * 1e3);
+      }, "(sx, sy, sz) [mm]")
+      .def_property_readonly("origin_mm", [](const engine::Volume& v) {
+        return py::make_tuple(v.grid.origin_m.x * 1e3, v.grid.origin_m.y * 1e3, v.grid.origin_m.z * 1e3);
+      }, "(x, y, z) of voxel (0, 0, 0) [mm]")
       .def_property_readonly(
           "array", [](py::object self) { return voxel_view(self.cast<engine::Volume&>(), self); },
           "The voxels without a copy: (nz, ny, nx) float32, C-contiguous, x fastest, in the file's "
@@ -145,6 +227,7 @@ index (what renderers and strokes use); physical [m] = origin + D (spacing * ind
         return s.str();
       });
 
+  m.attr("UnitsWarning") = py::reinterpret_borrow<py::object>(units_warning());
   m.def("load_volume", [](const std::string& path) {
     py::gil_scoped_release nogil;
     return std::make_shared<engine::Volume>(io::load_any_volume(path));

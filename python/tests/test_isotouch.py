@@ -291,6 +291,39 @@ def test_live_session_edits_undo_and_recording(root, tmp_path):
     with pytest.raises(ValueError, match="kind"):
         live.brush("paint", centre)
 
+def test_edits_after_stop_are_refused_not_accepted(root, tmp_path):
+    """An edit after stop() can never be applied: it raises, and the session's counters show none."""
+    live = isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim")
+    live.start()
+    live.wait(0.1)
+    centre = live.observe()["vhip"]
+    live.stop()
+    before = live.stats()["edits_requested"]
+    with pytest.raises(RuntimeError, match="brush: the session is stopped"):
+        live.brush("carve", centre)
+    with pytest.raises(RuntimeError, match="undo: the session is stopped"):
+        live.undo()
+    assert live.stats()["edits_requested"] == before
+
+
+def test_the_zero_sent_at_stop_is_the_recordings_last_tick(cli, root, tmp_path):
+    """The device is left with an exact zero: the recording's last tick says so (held: the
+    renderer not ticked, force 0), and the recording still replays bit for bit."""
+    rec = str(tmp_path / "stop.rec")
+    with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim", record=rec) as live:
+        while not live.observe()["contact"] and live.elapsed_s < live.duration_s:
+            live.wait(0.02)
+        assert live.observe()["contact"], "the script never touched the sphere"
+    r = isotouch.load_recording(rec)
+    ticks = r["ticks"]
+    assert r["complete"] and len(ticks["t"]) == live.stats()["ticks"]
+    assert np.linalg.norm(ticks["force"][-2]) > 0  # stopped while pressing
+    assert ticks["held"][-1]
+    assert np.array_equal(ticks["force"][-1], [0.0, 0.0, 0.0])
+    p = subprocess.run([cli, "replay", rec, "--quiet"], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
 def test_live_session_on_a_playback_device(root, tmp_path):
     """A trace.csv whose HIPs no scripted hand would reach: the session is given those."""
     k = np.arange(3000)

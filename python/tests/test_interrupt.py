@@ -1,0 +1,39 @@
+"""Ctrl-C during a long offline render: a SIGINT sent from a timer thread to the process raises
+KeyboardInterrupt long before the trajectory's end (the time of the whole call, measured here)."""
+import os
+import subprocess
+import sys
+import textwrap
+
+
+def test_ctrl_c_interrupts_a_long_render():
+    script = textwrap.dedent("""
+        import os, signal, threading, time
+        import numpy as np
+        import isotouch
+        s = isotouch.stroke_scene("sphere", device="cpu")
+        p = s.table1_hri_params()
+        t0 = time.perf_counter()
+        isotouch.render(s.field, s.hip, "hri", p)
+        per_tick = (time.perf_counter() - t0) / len(s.hip)
+        reps = max(1, int(3.0 / per_tick / (2 * len(s.hip))))  # a call of about 3 s
+        hip = np.concatenate([s.hip, s.hip[::-1]] * reps)
+        t0 = time.perf_counter()
+        isotouch.render(s.field, hip, "hri", p)
+        whole = time.perf_counter() - t0
+        threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+        t0 = time.perf_counter()
+        try:
+            isotouch.render(s.field, hip, "hri", p)
+            print("finished", whole)
+        except KeyboardInterrupt:
+            print("interrupted", time.perf_counter() - t0, whole)
+    """)
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                       env=dict(os.environ))
+    assert p.returncode == 0, p.stderr
+    words = p.stdout.split()
+    assert words[0] == "interrupted", p.stdout
+    took, whole = float(words[1]), float(words[2])
+    assert whole > 1.0, f"the whole call took {whole:.2f} s: too short to show anything"
+    assert took < whole / 2, f"KeyboardInterrupt after {took:.2f} s of a {whole:.2f} s call"

@@ -16,7 +16,7 @@ struct MovingFramesOptions {
   double budget_ms = 33;          ///< the frame budget [ms]
   int frames = 60;                ///< moving frames drawn
   double degrees_per_frame = 3;   ///< the orbit's azimuth step per frame [deg]
-  int compare_every = 10;         ///< every this many frames the same view is drawn at scale 1 too (not timed)
+  int compare_every = 10;         ///< every this many frames (at least 2) the same view is drawn at scale 1 too (not timed)
 };
 
 struct MovingFramesResult {
@@ -25,15 +25,18 @@ struct MovingFramesResult {
   std::vector<double> scales;    ///< the scale each was drawn at
   std::vector<engine::PictureError> errors;  ///< the compared frames' error over the object's pixels
   double still_to_full_ms = 0;   ///< from the view stopping to the full-resolution picture [ms]
-  int still_frames = 0;          ///< frames that took
+  int still_frames = 0;          ///< frames drawn whole for it (0: the last moving frame was at full resolution)
 };
 
 /// Orbits `cam` about its target in `caster`'s volume (`grid`, `direction`: its frame, see
-/// engine::orbit_view) at a W x H window; the probe's pixel for the error's near figure is the
-/// picture's centre (the orbit's target).
+/// engine::orbit_view) at a W x H window, each frame at the budget's scale, at most
+/// `max_scale` (what one storage binding of the device holds at that window); the probe's
+/// pixel for the error's near figure is the picture's centre (the orbit's target). The view
+/// stopping after a frame already at full resolution costs no frame (0 ms).
 MovingFramesResult run_moving_frames(engine::RayCaster& caster, const core::Grid& grid,
                                      const std::array<double, 9>& direction, engine::OrbitCamera cam,
-                                     const engine::RaycastStyle& style, int W, int H, const MovingFramesOptions& o);
+                                     const engine::RaycastStyle& style, int W, int H, const MovingFramesOptions& o,
+                                     double max_scale = 1.0);
 
 /// The figures and the verdicts: moving frames median <= budget and p95 <= 1.5 budget, full
 /// resolution within 250 ms of the view stopping, PSNR >= 30 dB and SSIM >= 0.95 (worst compared frame).

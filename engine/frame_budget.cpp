@@ -13,33 +13,25 @@ FrameBudget::FrameBudget(FrameBudgetOptions o) : o_(o) {
 
 double FrameBudget::moving_scale() const {
   if (o_.budget_ms <= 0 || full_ms_ <= 0) return 1.0;
-  const double s = std::sqrt(o_.target * o_.budget_ms / full_ms_);
+  const double room = o_.target * o_.budget_ms - fixed_ms_;
+  if (room <= 0) return o_.min_scale;
+  const double s = std::sqrt(room / full_ms_);
   return std::clamp(std::floor(s * 32) / 32, o_.min_scale, 1.0);
 }
 
-int FrameBudget::refine_steps(int steps, int steps_left) const {
-  if (steps_left <= 0) return 0;
-  if (o_.budget_ms <= 0 || full_ms_ <= 0 || steps <= 0) return steps_left;
-  const double part_ms = full_ms_ / steps;
-  const int fit = int(std::floor(o_.target * o_.budget_ms / part_ms));
-  return std::clamp(fit, 1, steps_left);
-}
-
-void FrameBudget::measured_whole(double scale, double ms) {
-  if (!(scale > 0) || !std::isfinite(scale) || !(ms > 0) || !std::isfinite(ms)) return;
-  learn(ms / (scale * scale));
-}
-
-void FrameBudget::measured_parts(int parts, int steps, double ms) {
-  if (parts <= 0 || steps <= 0 || !(ms > 0) || !std::isfinite(ms)) return;
-  learn(ms * steps / parts);
-}
-
 /// A rise is taken at once (a frame over the budget is what the user feels); a fall at half
-/// weight, so one cheap frame does not make the next one large.
-void FrameBudget::learn(double full_ms) {
-  if (samples_++ == 0 || full_ms > full_ms_) full_ms_ = full_ms;
-  else full_ms_ += 0.5 * (full_ms - full_ms_);
+/// weight, so that one cheap frame does not make the next one large.
+void FrameBudget::measured_whole(double scale, double ms, double fixed_ms) {
+  if (!(scale > 0) || !std::isfinite(scale) || !(ms > 0) || !std::isfinite(ms)) return;
+  const double fixed = std::isfinite(fixed_ms) ? std::clamp(fixed_ms, 0.0, ms) : 0.0;
+  const double full = (ms - fixed) / (scale * scale);
+  const auto follow = [first = samples_ == 0](double& est, double v) {
+    if (first || v > est) est = v;
+    else est += 0.5 * (v - est);
+  };
+  follow(full_ms_, full);
+  follow(fixed_ms_, fixed);
+  ++samples_;
 }
 
 }  // namespace isotouch::engine

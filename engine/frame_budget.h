@@ -2,15 +2,13 @@
 //
 // Interactive volume renderers (VTK's and 3D Slicer's interactive vs still update rates,
 // ParaView's LOD) draw at reduced resolution while the view moves and refine when it stops.
-// FrameBudget is that choice as a controller, not a switch: it keeps an estimate of what a
-// frame drawn whole costs at full resolution, from the measured cost of each frame at the
-// scale it was drawn (cost ~ pixels ~ scale^2), and gives
-// - while the view moves: the largest scale whose predicted cost fits the budget's target
-//   (a 0.9 share of the budget), on a grid of 1/32 so small cost noise does not change the
-//   picture's size every frame;
-// - when the view is still: how many full-resolution refinement steps (of `steps` equal parts
-//   of the picture, e.g. interleaved pixel sets) the next frame can draw within the target,
-//   at least one, until the picture is whole.
+// FrameBudget is that choice as a controller, not a switch. A frame drawn whole costs a part
+// that scales with its pixels (the ray caster's passes: scale^2) and a part that does not
+// (submission, the upscale to the window, overlays); from each frame's measured cost and
+// fixed part it keeps estimates of both and gives, while the view moves, the largest scale
+// whose predicted cost fits the budget's target (a 0.9 share of the budget), on a grid of
+// 1/32 so that small cost noise does not change the picture's size every frame. A fixed part
+// above the target leaves the smallest scale (the cheapest frame there is).
 // No wall clock inside: the caller measures and reports costs (deterministic tests).
 #pragma once
 
@@ -30,24 +28,21 @@ class FrameBudget {
   /// next moving frame at. Before any cost is known: 1 (the first frame measures).
   double moving_scale() const;
 
-  /// How many of `steps` equal full-resolution parts the next still frame should draw (at
-  /// least 1, at most `steps_left`).
-  int refine_steps(int steps, int steps_left) const;
+  /// A frame drawn whole at `scale` cost `ms` [ms], of which `fixed_ms` does not scale with
+  /// its pixels (clamped to [0, ms]); ignored when not finite or not positive.
+  void measured_whole(double scale, double ms, double fixed_ms = 0);
 
-  /// A frame drawn whole at `scale` cost `ms` (the ray caster's time, not the upscale or the
-  /// overlays); ignored when not finite or not positive.
-  void measured_whole(double scale, double ms);
-  /// A still frame drew `parts` of `steps` full-resolution parts in `ms`.
-  void measured_parts(int parts, int steps, double ms);
-
-  /// The estimate of a frame drawn whole at scale 1 [ms]; 0 before any measurement.
+  /// The estimate of the scaling part of a frame drawn whole at scale 1 [ms]; 0 before any
+  /// measurement.
   double full_cost_ms() const { return full_ms_; }
+  /// The estimate of a frame's fixed part [ms].
+  double fixed_cost_ms() const { return fixed_ms_; }
   const FrameBudgetOptions& options() const { return o_; }
 
  private:
-  void learn(double full_ms);
   FrameBudgetOptions o_;
-  double full_ms_ = 0;  // smoothed estimate of a whole frame at scale 1 [ms]
+  double full_ms_ = 0;   // smoothed estimate of the scaling part at scale 1 [ms]
+  double fixed_ms_ = 0;  // smoothed estimate of the fixed part [ms]
   int samples_ = 0;
 };
 

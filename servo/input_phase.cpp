@@ -15,7 +15,11 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     anchor_ns_ = t_ns;
     outliers_ = 0;
     intervals_ = 1;
+    forget_lateness();
   } else if (2 * d < period_ns_ || 2 * d > 3 * period_ns_) {
+    // An arrival over half a period late (but under a whole one: longer is a pause, which
+    // no lead covers) is lateness the lead must cover, though it is no period.
+    if (d < 2 * period_ns_ && 2 * d > 3 * period_ns_) note_lateness(t_ns - (anchor_ns_ + period_ns_));
     ++outliers_;  // a burst or a gap: neither the period nor the phase
     anchor_ns_ = t_ns;
     due_.store(-1, std::memory_order_relaxed);
@@ -33,6 +37,12 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
   }
   period_.store(period_ns_, std::memory_order_relaxed);
   due_.store(anchor_ns_ + period_ns_, std::memory_order_relaxed);
+}
+
+void ArrivalClock::forget_lateness() {
+  std::fill(std::begin(late_hist_), std::end(late_hist_), 0);
+  late_count_ = late_next_ = 0;
+  late_.store(0, std::memory_order_relaxed);
 }
 
 void ArrivalClock::note_lateness(std::int64_t late_ns) {

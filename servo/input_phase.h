@@ -48,6 +48,7 @@ class ArrivalClock {
 
  private:
   void note_lateness(std::int64_t late_ns);
+  void forget_lateness();  // a new stream or rate: the old one's lateness is not this one's
   std::int16_t late_ring_[kLateWindow] = {};  // the window's bins, oldest overwritten first
   std::int32_t late_hist_[kLateBins] = {};    // how many of the window fall in each bin
   int late_count_ = 0, late_next_ = 0;

@@ -221,7 +221,9 @@ void ServoThread::loop(Handoff& h) {
                                      std::int64_t(std::clamp(cfg_.max_spin_fraction, 0.0, 1.0) * double(period)));
   std::int64_t next = now_ns();
   std::int64_t prev_start = -1;
-  Vec3 last_hip;  // the last tick's HIP, world [m]: the stop's held tick records it
+  Vec3 last_hip;  // the last tick's HIP, world [m], buttons and status: the stop's held tick records them
+  std::uint32_t last_buttons = 0;
+  DeviceStatus last_status = DeviceStatus::kOk;
   std::int64_t last_render = -1;  // start of the renderer's last tick; -1: none since a reset
   std::uint64_t last_version = 0;
   bool was_paused = false;
@@ -292,10 +294,12 @@ void ServoThread::loop(Handoff& h) {
       rec.buttons = d.buttons;
       rec.hip_m = cfg_.world_T_device.to_world(d.position_m);
       last_hip = rec.hip_m;
+      last_buttons = d.buttons;
       rec.report_ns = d.received_ns;
       rec.paused = paused;
       bool refused = false;
       rec.device_status = judge(d, t, stale_ns, caps_, refused);
+      last_status = rec.device_status;
       status_.store(std::uint8_t(rec.device_status), std::memory_order_relaxed);
       if (rec.device_status != DeviceStatus::kOk) {
         device_.write_force_n({});  // within this tick
@@ -373,9 +377,11 @@ void ServoThread::loop(Handoff& h) {
     TickRecord rec;
     rec.k = ticks_.load(std::memory_order_relaxed);
     rec.t_ns = t_stop;
-    rec.period_s = double(t_stop - prev_start) * 1e-9;
+    rec.period_s = 0;  // not a scheduled period: no period error, no renderer step
     rec.version = field->version;
     rec.hip_m = last_hip;
+    rec.buttons = last_buttons;  // a button held at the stop is not a release
+    rec.device_status = last_status;
     rec.paused = true;
     cfg_.observer->on_tick(rec);
     ticks_.fetch_add(1, std::memory_order_relaxed);

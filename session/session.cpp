@@ -1,5 +1,7 @@
 #include "isotouch/session/session.h"
 
+#include <string>
+
 #include <utility>
 
 namespace isotouch::session {
@@ -27,6 +29,13 @@ void SetupResult::throw_if_failed() const {
 }
 
 Opened Session::open(engine::Volume volume, const SessionOptions& options) {
+  const core::Isosurface& iso = options.field.iso;
+  if (options.hri.tau != iso.tau || options.hri.inside != iso.inside) {
+    Opened o;  // the felt surface would not be the one whose bricks are active
+    o.error = "session: the renderer's isosurface (hri.tau " + std::to_string(options.hri.tau) +
+              ") is not the field's (field.iso.tau " + std::to_string(iso.tau) + "), or their inside sides differ";
+    return o;
+  }
   std::unique_ptr<EditSession> edits;
   try {
     edits = std::make_unique<EditSession>(std::move(volume), options.vk, options.field, options.history_limit_mib);

@@ -63,29 +63,28 @@ TEST(FrameBudget, RecoversWithinFiveFramesAfterACostStep) {
   }
 }
 
-TEST(FrameBudget, AStillViewRefinesInPartsThatFitTheBudgetAndEnds) {
-  CostModel m{0, 120};  // a whole frame at full resolution: 120 ms, 3.6 budgets
+TEST(FrameBudget, AFixedPartIsLeftOutOfTheScaling) {
+  // 12 ms that no scale changes (the upscale, submission) and 80 ms of pixels at scale 1:
+  // told the fixed part, the controller fits the rest into the target.
+  CostModel m{12, 80};
   FrameBudget fb(FrameBudgetOptions{33, 0.125});
-  moving_frames(fb, m, 10);
-  const int steps = 16;
-  int left = steps, frames = 0;
-  while (left > 0 && frames < 100) {
-    const int parts = fb.refine_steps(steps, left);
-    ASSERT_GE(parts, 1);
-    const double c = m.per_full_ms * parts / steps;
-    EXPECT_LE(c, 33) << "a refining frame of " << parts << " parts";
-    fb.measured_parts(parts, steps, c);
-    left -= parts, ++frames;
+  for (int k = 0; k < 20; ++k) {
+    const double s = fb.moving_scale(), c = m.cost(s);
+    fb.measured_whole(s, c, m.fixed_ms);
   }
-  EXPECT_EQ(left, 0);
-  EXPECT_LE(frames, 6) << "refinement took more frames than 120 ms / (0.9 x 33 ms) needs";
+  const double s = fb.moving_scale();
+  EXPECT_LE(m.cost(s), 33.0);
+  EXPECT_GE(m.cost(s), 0.8 * 0.9 * 33) << "scale " << s << " leaves the budget unused";
+  // A fixed part above the target: the cheapest frame there is, and no division by <= 0.
+  FrameBudget over(FrameBudgetOptions{33, 0.25});
+  over.measured_whole(0.5, 45, 40);
+  EXPECT_EQ(over.moving_scale(), 0.25);
 }
 
 TEST(FrameBudget, NoBudgetOrNoMeasurementDrawsWhole) {
   FrameBudget none(FrameBudgetOptions{0});
   none.measured_whole(1.0, 500);
   EXPECT_EQ(none.moving_scale(), 1.0);
-  EXPECT_EQ(none.refine_steps(16, 16), 16);
   FrameBudget fresh;
   EXPECT_EQ(fresh.moving_scale(), 1.0);
   fresh.measured_whole(0.5, std::nan(""));

@@ -176,3 +176,26 @@ TEST(ArrivalClock, TheLatenessIsTheWindowsHighPercentileAndForgetsOldArrivals) {
   for (int k = 0; k < 300; ++k) c.arrived(t += kMs);
   EXPECT_LE(c.phase().late_ns, ArrivalClock::kLateBinNs) << "the window holds old arrivals";
 }
+
+TEST(ArrivalClock, OneLateArrivalIn256IsOutsideThePercentileTwoAreIn) {
+  for (const int late : {1, 2}) {
+    ArrivalClock c;
+    std::int64_t t = 0;
+    for (int k = 0; k < 256; ++k) c.arrived(t += kMs);
+    for (int k = 0; k < 256; ++k) {
+      const bool slow = k % 128 == 50 && k / 128 < late;
+      c.arrived(t += kMs + (slow ? 300'000 : 0) - (k % 128 == 51 && (k - 1) / 128 < late ? 300'000 : 0));
+    }
+    if (late == 1) EXPECT_LE(c.phase().late_ns, ArrivalClock::kLateBinNs) << "one arrival in 256 is the 99.6th percentile's outlier";
+    else EXPECT_GE(c.phase().late_ns, 250'000) << "two arrivals in 256 are within the 99.5th percentile";
+  }
+}
+
+TEST(ArrivalClock, ArrivalsOverHalfAPeriodLateCountAndANewStreamForgetsThem) {
+  ArrivalClock c;
+  std::int64_t t = 0;
+  for (int k = 0; k < 300; ++k) c.arrived(t += kMs + (k % 20 == 0 ? 600'000 : 0) - (k % 20 == 1 ? 600'000 : 0));
+  EXPECT_GE(c.phase().late_ns, 550'000) << "arrivals 0.6 period late are the lateness the lead must cover";
+  for (int k = 0; k < 20; ++k) c.arrived(t += 4 * kMs);  // the stream restarts at 250 Hz
+  EXPECT_LE(c.phase().late_ns, ArrivalClock::kLateBinNs) << "the old stream's lateness kept";
+}

@@ -92,6 +92,16 @@ TEST(Session, ASetUpThatFailsIsReported) {
   EXPECT_NE(bad.error.find("building the edit session"), std::string::npos) << bad.error;
   EXPECT_TRUE(bad.cause);
 
+  // A renderer told another isovalue than the field's would feel a surface whose bricks are
+  // not the active ones: refused, naming both.
+  isotouch::session::SessionOptions other = sphere_options();
+  other.hri.tau = 0.5;
+  isotouch::session::Opened mismatch =
+      Session::open(isotouch::engine::make_sphere({40, 40, 40}, kSpacing, kRadiusVox), other);
+  EXPECT_FALSE(mismatch);
+  EXPECT_NE(mismatch.error.find("hri.tau 0.5"), std::string::npos) << mismatch.error;
+  EXPECT_NE(mismatch.error.find("field.iso.tau 0"), std::string::npos) << mismatch.error;
+
   isotouch::session::Opened o =
       Session::open(isotouch::engine::make_sphere({40, 40, 40}, kSpacing, kRadiusVox), sphere_options());
   ASSERT_TRUE(o) << o.error;

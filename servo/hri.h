@@ -235,7 +235,14 @@ struct ToolPlane {
 ///   kEntryConeDeg from the normal the contact entered with (entry_n_: the normal of the
 ///   new contact, refreshed at every update that turns that far with the HIP not past the
 ///   middle) keeps the held plane if the HIP is past the middle and behind it: the proxy
-///   stays on the entry side and the force grows with the press up to the limit. Not on
+///   stays on the entry side and the force grows with the press up to the limit. The turn
+///   is also checked along the new plane's normal: a HIP at or past the middle of the chord
+///   that way is no nearer the new face than the opposite one (the plane iteration carrying
+///   the proxy round; at n = 1 it runs every tick and turned entry_n_ with it before the HIP
+///   reached the middle along it). While held, the held plane's point is lifted to the face
+///   found from the HIP along its normal where that face lies in front of it (face_along):
+///   a held plane tilted from the face slid the proxy down it on a stroke along the feature;
+///   it is never lowered (at a crest the face below it is the crest's rounded corner). Not on
 ///   edit ticks. In bulk material (no far side within the depth) nothing changes.
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
@@ -467,6 +474,10 @@ class HriRenderer final : public Renderer {
   /// [m], along -n no later than a quarter voxel after along n (fifth-voxel steps, at most
   /// march_budget samples in all): the HIP is past the middle of a thin feature.
   bool past_middle(const FieldView& field, const Vec3& hip, const Vec3& n, double depth, double voxel) const;
+  /// Thin features: from the inside `hip` along unit n, the first point where the material
+  /// ends within `reach` [m] (fifth-voxel steps, then 20 bisection steps; q the outside end
+  /// of the bracket); false if none.
+  bool face_along(const FieldView& field, const Vec3& hip, const Vec3& n, double reach, double voxel, Vec3& q) const;
   /// The robust tick after the short way: the general path (updates, entries, the god-object
   /// rules, the proxy path), from the HIP's value when the short way read it.
   void tick_general(const FieldView& field, const Vec3& hip, double voxel, double elapsed, bool edited,

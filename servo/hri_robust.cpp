@@ -426,6 +426,23 @@ bool HriRenderer::past_middle(const FieldView& field, const Vec3& hip, const Vec
   return far_out > 0 && near_out > 0 && far_out <= near_out + slack;
 }
 
+bool HriRenderer::face_along(const FieldView& field, const Vec3& hip, const Vec3& n, double reach, double voxel,
+                             Vec3& q) const {
+  const int steps = chord_steps(reach, voxel);
+  FieldView::Segment seg(field, hip, hip + n * reach);
+  int out_i = 0;
+  for (int i = 1; i <= steps && out_i == 0; ++i)
+    if (!(excess(seg.value(double(i) / steps)) > 0.0)) out_i = i;
+  if (out_i == 0) return false;
+  double lo = double(out_i - 1) / steps, hi = double(out_i) / steps;  // lo inside, hi outside
+  for (int k = 0; k < 20; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (excess(seg.value(mid)) > 0.0 ? lo : hi) = mid;
+  }
+  q = hip + n * (reach * hi);
+  return finite(q);
+}
+
 int HriRenderer::chord_steps(double reach, double voxel) const {
   return int(std::clamp(std::ceil(reach / (0.2 * voxel)), 2.0, double(std::max(2, params_.march_budget / 2))));
 }
@@ -450,9 +467,21 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // the test can go either way from one update to the next, and a side that followed one
   // turn let the next one go on round.
   const double depth = held.valid ? dot(held.n, held.p - hip) : 0.0;  // the HIP behind the held plane [m]
-  if (depth > 0.0 && (entry_held_ || past_middle(field, hip, entry_n_, depth, voxel))) {
+  // Along the new plane's normal too: a HIP at or past the middle of the chord that way is
+  // no nearer the new face than the opposite one, and the turn is the plane iteration
+  // carrying the proxy round the feature (each update projects the pressed HIP onto a plane
+  // tilted a little more), not a slide over a curved surface. Checked along entry_n_ alone,
+  // the turns made before the HIP reached the middle along it moved entry_n_ with them: at
+  // n = 1 the iteration runs ten times as often as at n = 10 and a 2-voxel cylinder wrapped
+  // at 0.6 of the limit at n = 1, none at n = 10.
+  const double new_depth = dot(plane_.n, plane_.p - hip);
+  if (depth > 0.0 && (entry_held_ || past_middle(field, hip, entry_n_, depth, voxel) ||
+                      past_middle(field, hip, plane_.n, new_depth, voxel))) {
     entry_held_ = true;
-    adopt_plane(held, hip, out);
+    VirtualPlane kept = held;
+    Vec3 q;
+    if (face_along(field, hip, held.n, depth + voxel, voxel, q) && dot(held.n, q - held.p) > 0.0) kept.p = q;
+    adopt_plane(kept, hip, out);
     plane_grad_norm_ = held_grad_norm;
   } else {
     entry_n_ = plane_.n;

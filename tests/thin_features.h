@@ -41,6 +41,10 @@ struct ThinFeature {
   /// The along stroke ends at the feature's end (a tapering cylinder's tip, along_len from
   /// the press point): a tool's stops where its sphere reaches that end, along_len less r.
   bool along_to_end = false;
+  /// A scan-like feature (noise, partial-volume edges: thin_ridges.h): the normal of its
+  /// crest wobbles a few degrees, so a point probe's force beside the crest counts as turned
+  /// against the entry normal only beyond 0.1 of |F| (a tool's slack), not at any sign.
+  bool scan_like = false;
 };
 
 /// The length of stroke `s` (0 along, 1 across) of `tf` for a tool of radius r [m] (0: a
@@ -174,9 +178,10 @@ inline bool wraps(const ThinFeature& tf, const servo::HriParams& p, double level
     // Past the middle by more than a tenth of a voxel (at the middle itself, with the HIP
     // there, either side is as near), or a force toward the far side: for a tool, more than
     // 0.1 of |F| toward it (a tool beside a fin's edge face, level with the HIP, pushes
-    // sideways, a few degrees either way on the trilinear face).
+    // sideways, a few degrees either way on the trilinear face; so does a point beside a
+    // scan-like crest).
     const Vec3& sp = tf.field.grid.spacing_m;
-    const double toward_far = p.tool_radius_m > 0.0 ? -0.1 * norm(out.force_n) : 0.0;
+    const double toward_far = p.tool_radius_m > 0.0 || tf.scan_like ? -0.1 * norm(out.force_n) : 0.0;
     const bool far = side < -0.1 * std::min({sp.x, sp.y, sp.z}) || dot(out.force_n, tf.n_entry) < toward_far;
     if (far && norm(out.force_n) < 0.999 * p.force_limit_n) {
       if (debug)
@@ -190,14 +195,14 @@ inline bool wraps(const ThinFeature& tf, const servo::HriParams& p, double level
 }
 
 /// The lowest press (0.1, 0.2, ... 1.0 of the limit) that wraps in any stroke of `tc` (along
-/// and across the feature, n = 1 and 10, the rest of `base`); 2 if none does. `runs` counts
-/// the strokes. HRI_THIN_DEBUG=1 lists the wrap ticks, HRI_THIN_TICKS=1 too every tick
-/// before them.
+/// and across the feature, plane update periods `periods`, the rest of `base`); 2 if none
+/// does. `runs` counts the strokes. HRI_THIN_DEBUG=1 lists the wrap ticks, HRI_THIN_TICKS=1
+/// too every tick before them.
 inline double lowest_wrapping_press(const ThinCase& tc, const servo::HriParams& base, const InsideTest& inside,
-                                    long& runs) {
+                                    long& runs, const std::vector<int>& periods = {1, 10}) {
   const bool debug = std::getenv("HRI_THIN_DEBUG") != nullptr;
   double lowest = 2;
-  for (const int n : {1, 10}) {
+  for (const int n : periods) {
     servo::HriParams p = base;
     p.plane_update_period = n;
     for (int s = 0; s < 2; ++s) {

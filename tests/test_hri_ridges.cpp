@@ -1,0 +1,72 @@
+// test_hri_ridges.cpp - the point probe on scan-like thin features nobody tuned for: ridges
+// and long cylinders 2-4 voxels thick, tilted 20-45 deg, with partial-volume edges, noise and
+// anisotropic voxels (tests/thin_ridges.h draws them), pressed and stroked along and across
+// their crest at every plane update period n in {1, 2, 5, 10, 20}, judged by the thin-feature
+// wrap check (tests/thin_features.h: the proxy past the feature's middle, or the force
+// turned against the entry normal, below the force limit).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+
+#include "isotouch/servo/hri.h"
+#include "isotouch/servo/sampling.h"
+#include "isotouch/tests/thin_ridges.h"
+
+using namespace isotouch::core;
+using namespace isotouch::servo;
+using isotouch::test::lowest_wrapping_press;
+using isotouch::test::press_text;
+using isotouch::test::ridge_cases;
+using isotouch::test::RidgeCase;
+
+namespace {
+/// The shipped scenes' servo: K = 800 N/m, limit 3.3 N, B = 1 N s/m, secant p, 20 ms ramp.
+HriParams scene_servo() {
+  HriParams p;
+  p.tau = 0;
+  p.stiffness_n_per_m = 800;
+  p.damping_n_s_per_m = 1.0;
+  p.force_limit_n = 3.3;
+  p.intersection = Intersection::kSecant;
+  p.recovery_time_s = 0.02;
+  return p;
+}
+}  // namespace
+
+// A point probe holds every drawn ridge and cylinder to 0.9 of the force limit at every n:
+// no press below 0.9 of the limit (K = 800 N/m: 3.7 mm at 0.9) wraps, the bar the analytic
+// fins meet (HriContact.ThinFeaturesHoldUpToTheForceLimit). ISOTOUCH_RIDGE_SEED draws
+// another set (the default is fixed so a run is repeatable), ISOTOUCH_RIDGE_ONLY=i runs case i.
+// Disabled until the renderer holds them all: 2 of the 12 default cases still wrap below 0.9
+// of the limit (a 4-voxel ridge at 0.6 at n = 1-2 across its crest: the HIP leaving through
+// the crest's top, where the noisy crest's normal turns 8 deg toward the far side; a 2-voxel
+// ridge on 1 x 1 x 3 mm voxels at 0.7 at every n across its crest: a held plane turned 43 deg
+// slides the proxy past the middle). Before the renderer's entry-side checks along the new
+// normal and the held plane's lift, 4 did (a 2-voxel cylinder at 0.3 at every n, another at
+// 0.6 at n = 1 and none at n >= 5).
+// Run it with --gtest_also_run_disabled_tests.
+TEST(HriRidges, DISABLED_ScanLikeRidgesHoldToNineTenthsOfTheLimitAtEveryUpdatePeriod) {
+  const char* env = std::getenv("ISOTOUCH_RIDGE_SEED");
+  const unsigned seed = env ? unsigned(std::strtoul(env, nullptr, 10)) : 64u;
+  const char* only = std::getenv("ISOTOUCH_RIDGE_ONLY");  // one case's index (debugging)
+  long runs = 0, index = -1;
+  for (const RidgeCase& rc : ridge_cases(seed, 12)) {
+    if (++index, only && index != std::strtol(only, nullptr, 10)) continue;
+    const SampleField& f = rc.thin.feature.field;
+    std::printf("%s, %d voxels: lowest press that wraps", rc.name.c_str(), rc.thin.voxels);
+    double lowest = 2;
+    for (const int n : {1, 2, 5, 10, 20}) {
+      const double l = lowest_wrapping_press(
+          rc.thin, scene_servo(), [&](const Vec3& hip) { return sample_value(f, hip) > 0.0; }, runs, {n});
+      std::printf("%s n = %d: %s", n == 1 ? "" : ";", n, press_text(l).c_str());
+      lowest = std::min(lowest, l);
+    }
+    std::printf("\n");
+    EXPECT_GE(lowest, 0.9 - 1e-9) << rc.name << " (seed " << seed << ")";
+  }
+  if (!only) {
+    EXPECT_GT(runs, 12 * 5 * 2);
+  }
+}

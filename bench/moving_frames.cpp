@@ -82,6 +82,8 @@ void print_moving_frames(std::ostream& out, const MovingFramesResult& r, const M
   const auto [lo, hi] = std::minmax_element(r.scales.begin(), r.scales.end());
   double psnr = std::numeric_limits<double>::infinity(), ssim = 1;  // inf: equal pictures
   int near = 0;
+  bool object = true;
+  for (const engine::PictureError& e : r.errors) object = object && e.pixels > 0;
   for (const engine::PictureError& e : r.errors) psnr = std::min(psnr, e.psnr_db), ssim = std::min(ssim, e.ssim), near = std::max(near, e.max_near);
   auto verdict = [](bool ok) { return ok ? "met" : "NOT met"; };
   log << "moving   " << r.ms.size() << " frames drawn whole while the view orbits " << o.degrees_per_frame << " deg per frame at "
@@ -97,7 +99,7 @@ void print_moving_frames(std::ostream& out, const MovingFramesResult& r, const M
   if (r.errors.empty()) return (void)(out << log.str());
   log << "verdict: moving frames against full resolution over the object's pixels (worst of " << r.errors.size()
       << " frames): PSNR " << psnr << " dB (target >= 30) SSIM " << std::setprecision(3) << ssim << " (target >= 0.95): "
-      << verdict(psnr >= 30 && ssim >= 0.95) << "; largest channel error within 20 px of the centre " << near << " of 255\n";
+      << verdict(psnr >= 30 && ssim >= 0.95 && object) << (object ? "" : " (a compared picture showed no object)") << "; largest channel error within 20 px of the centre " << near << " of 255\n";
   out << log.str();
 }
 

@@ -36,12 +36,13 @@ PictureError picture_error(const std::vector<std::uint32_t>& ref, const std::vec
   const std::size_t n = std::size_t(std::max(w, 0)) * std::size_t(std::max(h, 0));
   if (ref.size() < n || test.size() < n || mask.size() < n) return e;
   double sq = 0;
+  const bool probe_inside = probe[0] >= 0 && probe[0] < w && probe[1] >= 0 && probe[1] < h;
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const std::size_t i = std::size_t(y) * std::size_t(w) + std::size_t(x);
       if (!mask[i]) continue;
       ++e.pixels;
-      const bool near = std::abs(x - probe[0]) <= near_px && std::abs(y - probe[1]) <= near_px;
+      const bool near = probe_inside && std::abs(x - probe[0]) <= near_px && std::abs(y - probe[1]) <= near_px;
       for (int c = 0; c < 3; ++c) {
         const int d = std::abs(channel(ref[i], c) - channel(test[i], c));
         sq += double(d) * d;

@@ -15,7 +15,8 @@ struct PictureError {
 };
 
 /// `mask`: w * h bytes, non-zero where the object is (a ray hit the surface in either picture).
-/// `probe`: the probe's pixel (x, y); outside the picture: max_near stays 0.
+/// `probe`: the probe's pixel (x, y); outside the picture: max_near stays 0. An empty mask
+/// gives pixels 0 (and PSNR inf, SSIM 1: a caller judging pictures must check pixels first).
 PictureError picture_error(const std::vector<std::uint32_t>& ref, const std::vector<std::uint32_t>& test,
                            const std::vector<std::uint8_t>& mask, int w, int h, std::array<int, 2> probe,
                            int near_px = 20);

@@ -50,6 +50,27 @@ TEST(PictureError, AUniformOffsetGivesTheAnalyticPsnrAndOnlyTheMaskCounts) {
   EXPECT_GT(e.ssim, 0.95) << "an offset of 5 keeps the structure";
   const auto far = picture_error(p.ref, p.test, p.mask, p.w, p.h, {-100, -100});
   EXPECT_EQ(far.max_near, 0) << "no object pixel near a probe outside the picture";
+  const auto edge = picture_error(p.ref, p.test, p.mask, p.w, p.h, {-5, 10});
+  EXPECT_EQ(edge.max_near, 0) << "a probe just outside the picture has no near pixels";
+}
+
+// SSIM of a window whose test luma is the reference's plus a constant c: the structure and
+// contrast terms are 1, the luminance term (2 ma mb + C1) / (ma^2 + mb^2 + C1) with mb = ma + c.
+TEST(PictureError, SsimOfALumaOffsetIsTheLuminanceTerm) {
+  const int w = 8, h = 8;
+  std::vector<std::uint32_t> ref(64), test(64);
+  std::vector<std::uint8_t> mask(64, 1);
+  double sum = 0;
+  for (int i = 0; i < 64; ++i) {
+    const int g = 60 + (i * 37) % 100;
+    ref[std::size_t(i)] = rgb(g, g, g), test[std::size_t(i)] = rgb(g + 20, g + 20, g + 20);
+    sum += g;
+  }
+  const double ma = sum / 64, mb = ma + 20, c1 = (0.01 * 255) * (0.01 * 255);
+  const double want = (2 * ma * mb + c1) / (ma * ma + mb * mb + c1);
+  const auto e = picture_error(ref, test, mask, w, h, {0, 0});
+  EXPECT_NEAR(e.ssim, want, 1e-9);
+  EXPECT_NEAR(e.psnr_db, 20 * std::log10(255.0 / 20.0), 1e-9);
 }
 
 TEST(PictureError, ScrambledStructureLowersSsim) {

@@ -29,6 +29,30 @@ TEST(UpscaleBilinear, ARampStaysARampBetweenTheEdgeSamples) {
     }
 }
 
+// Each channel its own ramp (R along x, G along y, B along x + y, A fixed at 255, the lanes'
+// largest value): every lane and both directions interpolate, none bleeds into another.
+TEST(UpscaleBilinear, EveryChannelAndBothAxesInterpolate) {
+  const int w = 9, h = 7, W = 36, H = 28;
+  std::vector<std::uint32_t> src(std::size_t(w * h)), dst(std::size_t(W * H));
+  const auto r = [](double x) { return 255.0 * x / 8; };
+  const auto g = [](double y) { return 255.0 * y / 6; };
+  const auto b = [](double x, double y) { return 255.0 * (x + y) / 14; };
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      src[std::size_t(y * w + x)] = std::uint32_t(std::lround(r(x))) | std::uint32_t(std::lround(g(y))) << 8 |
+                                    std::uint32_t(std::lround(b(x, y))) << 16 | 0xff000000u;
+  upscale_bilinear(src.data(), w, h, dst.data(), W, H);
+  for (int Y = 2; Y < H - 2; ++Y)
+    for (int X = 2; X < W - 2; ++X) {
+      const double u = (X + 0.5) * w / W - 0.5, v = (Y + 0.5) * h / H - 0.5;  // source coordinates
+      const std::uint32_t p = dst[std::size_t(Y * W + X)];
+      EXPECT_NEAR(double(p & 255u), r(u), 1.5) << X << "," << Y;
+      EXPECT_NEAR(double(p >> 8 & 255u), g(v), 1.5) << X << "," << Y;
+      EXPECT_NEAR(double(p >> 16 & 255u), b(u, v), 1.5) << X << "," << Y;
+      EXPECT_EQ(p >> 24, 255u);
+    }
+}
+
 TEST(UpscaleBilinear, SameSizeIsACopyAndEdgesAreClamped) {
   const int w = 5, h = 3;
   std::vector<std::uint32_t> src(std::size_t(w * h)), dst(std::size_t(w * h));

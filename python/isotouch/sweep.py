@@ -608,6 +608,8 @@ def _rows(todo, client):
         for fut in as_completed(futures):
             if fut.status == "error":
                 yield task_of[fut.key], None, fut.exception()
+            elif fut.status == "cancelled":  # a task the cluster gave up on is a failed task, not the sweep's end
+                yield task_of[fut.key], None, RuntimeError(f"task {task_of[fut.key]['key']} was cancelled by the cluster")
             else:
                 yield task_of[fut.key], fut.result(), None
     finally:
@@ -622,7 +624,8 @@ class _RecoveredGather(logging.Filter):
     def filter(self, record):
         if "Couldn't gather" not in str(record.msg):
             return True
-        keys = record.args[0] if record.args and "keys %s" in str(record.msg) else record.args[-1] if record.args else ""
+        args = record.args if isinstance(record.args, tuple) else ()  # a dict of named args: no keys to quote
+        keys = args[0] if args and "keys %s" in str(record.msg) else args[-1] if args else ""
         record.msg = ("sweep: a worker was lost holding finished task results (%s); the scheduler runs those "
                       "tasks again on the other workers and nothing is lost (distributed: Couldn't gather keys)")
         record.args = (keys,)

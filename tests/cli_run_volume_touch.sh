@@ -45,5 +45,5 @@ print("overview.png shown in report.md, superior up" if overview_ok else "FAIL: 
 ok = stroke > 0 and share >= 0.8 and under_share >= 0.9 and walked >= min_walked and overview_ok
 ok = ok and abs(s["script"]["stroke_contact_fraction"] - share) < 1e-9
 ok = ok and abs(s["contact"]["fraction_under_95pct_limit"] - under_share) < 1e-9
-print("PASS planned touch" if ok else "FAIL: want >= 80 % of the stroke in contact and >= 90 % of contact ticks under 0.95 of the limit, the summary agreeing")
+print("PASS planned touch" if ok else f"FAIL: want >= 80 % of the stroke in contact, >= 90 % of contact ticks under 0.95 of the limit, the summary agreeing, >= {100 * min_walked:.0f} % of the asked stroke walked and the overview shown")
 PY

@@ -4,6 +4,7 @@
 // Frames: the trace is grid-world [m] (sim::TraceRow); the camera's angles are physical
 // (LPS for medical images: +z superior), turned into the grid frame by the volume's D.
 #pragma once
+#include <array>
 #include <string>
 #include <vector>
 

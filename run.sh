@@ -50,9 +50,10 @@ rm -f build-configure.log
 if [[ "${1:-}" == "test" ]]; then
   cmake --build --preset release -j"$(nproc)"
 else
-  # The programs only (build/bin/isotouch, isotouch-sculpt, isotouch-devemu): the tests, the
+  # The main job's program first (build/bin/isotouch): the scenes run as soon as it is built;
+  # the other programs (isotouch-sculpt, isotouch-devemu) are built after them. The tests, the
   # benchmarks' helpers and the fuzzers are built by `./run.sh test`.
-  cmake --build --preset release -j"$(nproc)" --target programs
+  cmake --build --preset release -j"$(nproc)" --target isotouch
 fi
 
 if [[ "${1:-}" == "test" ]]; then
@@ -103,6 +104,9 @@ if (($# == 0)); then
   # with the burr as a sphere (its hole the burr's size).
   build/bin/isotouch run scenes/head.json
   build/bin/isotouch run scenes/drill-skull.json
-  exec build/bin/isotouch run scenes/drill-burr.json
+  build/bin/isotouch run scenes/drill-burr.json
+else
+  build/bin/isotouch run "$@"
 fi
-exec build/bin/isotouch run "$@"
+echo "run.sh: building the other programs (isotouch-sculpt, isotouch-devemu)"
+exec cmake --build --preset release -j"$(nproc)" --target programs

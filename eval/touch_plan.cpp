@@ -28,6 +28,11 @@ constexpr std::size_t kStartEvery = 6;
 constexpr double kMaxMarch = 1024;
 constexpr std::size_t kMaxWallChecks = 256;
 constexpr std::size_t kMaxStarts = 8;
+// Where no start within kStartReach holds a good stroke either (a thin rib under the ray):
+// the first contacts of rays parallel to the scene's, from a kFarGrid x kFarGrid grid over
+// the middle of the box (fractions kFarLo..kFarHi across it).
+constexpr int kFarGrid = 5;
+constexpr double kFarLo = 0.2, kFarHi = 0.8;
 
 double smallest_spacing(const core::Grid& g) { return std::min({g.spacing_m.x, g.spacing_m.y, g.spacing_m.z}); }
 
@@ -192,6 +197,58 @@ bool approach_clear(const Ctx& c, const Vec3& s, const Vec3& n) {
   return true;
 }
 
+/// The tangent nearest `t0` at a point of outward normal `n`.
+Vec3 tangent_near(const Vec3& t0, const Vec3& n) {
+  return core::normalized_or(t0 - n * core::dot(t0, n), core::normalized_or(core::cross(n, {0, 0, 1}), {1, 0, 0}));
+}
+
+/// The best start near the ray's contact (walks of kStartReach from it in kDirections
+/// directions, a start every kStartEvery steps), or `plan` if none scores higher.
+TouchPlan best_near_start(const Ctx& c, const sim::TouchScript& cast, const Vec3& t0, TouchPlan plan) {
+  const Vec3 n0 = cast.contact_normal;
+  for (int k = 0; k < kDirections; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / kDirections;
+    const TouchPlan probe = walked(c, cast.contact_point_m, n0, t0 * std::cos(a) + core::cross(n0, t0) * std::sin(a),
+                                   kStartReach, 0.0);
+    const std::size_t every = std::max(kStartEvery, probe.stroke_surface_m.size() / kMaxStarts);
+    for (std::size_t j = every; j < probe.stroke_surface_m.size(); j += every) {
+      const Vec3 s = probe.stroke_surface_m[j], n = probe.stroke_normal[j];
+      if (!approach_clear(c, s, n)) continue;
+      TouchPlan cand = best_direction(c, s, n, tangent_near(t0, n));
+      if (score(cand, c.p.stroke_length_m) > score(plan, c.p.stroke_length_m)) plan = std::move(cand);
+    }
+  }
+  return plan;
+}
+
+/// The best start among the first contacts of rays parallel to the scene's ray from a grid
+/// over the middle of the box (across the two axes the ray runs least along), or `plan` if
+/// none scores higher. A ray that meets no surface is skipped.
+TouchPlan best_far_start(const Ctx& c, const servo::HriParams& hri, const Vec3& t0, TouchPlan plan) {
+  const Vec3 d = c.p.ray_direction;
+  const int along = std::abs(d.x) >= std::max(std::abs(d.y), std::abs(d.z)) ? 0 : std::abs(d.y) >= std::abs(d.z) ? 1 : 2;
+  const int u = (along + 1) % 3, v = (along + 2) % 3;
+  for (int i = 0; i < kFarGrid; ++i)
+    for (int j = 0; j < kFarGrid; ++j) {
+      sim::ScriptParams ray = c.p;
+      ray.stroke_length_m = 0;
+      double* frac[3] = {&ray.ray_origin_frac.x, &ray.ray_origin_frac.y, &ray.ray_origin_frac.z};
+      *frac[u] = kFarLo + (kFarHi - kFarLo) * i / (kFarGrid - 1);
+      *frac[v] = kFarLo + (kFarHi - kFarLo) * j / (kFarGrid - 1);
+      sim::TouchScript cast;
+      try {
+        cast = sim::make_touch_script(c.f, hri, ray);
+      } catch (const std::runtime_error&) {
+        continue;  // this ray meets no surface
+      }
+      const Vec3 s = cast.contact_point_m, n = cast.contact_normal;
+      if (!approach_clear(c, s, n)) continue;
+      TouchPlan cand = best_direction(c, s, n, tangent_near(t0, n));
+      if (score(cand, c.p.stroke_length_m) > score(plan, c.p.stroke_length_m)) plan = std::move(cand);
+    }
+  return plan;
+}
+
 }  // namespace
 
 double force_press_depth_m(const servo::HriParams& hri, const sim::SimDeviceParams& device, double force_fraction) {
@@ -207,25 +264,13 @@ TouchPlan plan_touch(const core::SampleField& truth, const servo::HriParams& hri
   const sim::TouchScript cast = sim::make_touch_script(truth, hri, ray);
   const Ctx c{truth, core::Isosurface{hri.tau, hri.inside}, o, p, force_press_depth_m(hri, device, o.force_fraction)};
   const Vec3 n0 = cast.contact_normal;
-  const Vec3 t0 = core::normalized_or(p.stroke_direction - n0 * core::dot(p.stroke_direction, n0),
-                                      core::normalized_or(core::cross(n0, {0, 0, 1}), {1, 0, 0}));
+  const Vec3 t0 = tangent_near(p.stroke_direction, n0);
   TouchPlan plan = best_direction(c, cast.contact_point_m, n0, t0);
-  // A thin wall at the ray's contact: the best start near it on the surface, by the same score.
-  if (score(plan, p.stroke_length_m) < kGoodEnough * c.force_depth) {
-    for (int k = 0; k < kDirections; ++k) {
-      const double a = 2.0 * std::numbers::pi * k / kDirections;
-      const TouchPlan probe = walked(c, cast.contact_point_m, n0, t0 * std::cos(a) + core::cross(n0, t0) * std::sin(a),
-                                     kStartReach, 0.0);
-      const std::size_t every = std::max(kStartEvery, probe.stroke_surface_m.size() / kMaxStarts);
-      for (std::size_t j = every; j < probe.stroke_surface_m.size(); j += every) {
-        const Vec3 s = probe.stroke_surface_m[j], n = probe.stroke_normal[j];
-        if (!approach_clear(c, s, n)) continue;
-        const Vec3 t = core::normalized_or(t0 - n * core::dot(t0, n), core::normalized_or(core::cross(n, {0, 0, 1}), {1, 0, 0}));
-        TouchPlan cand = best_direction(c, s, n, t);
-        if (score(cand, p.stroke_length_m) > score(plan, p.stroke_length_m)) plan = std::move(cand);
-      }
-    }
-  }
+  // A thin wall at the ray's contact: the best start near it on the surface, by the same
+  // score; still none good: the best of other rays' contacts (a larger, thicker patch).
+  const double good = kGoodEnough * c.force_depth;
+  if (score(plan, p.stroke_length_m) < good) plan = best_near_start(c, cast, t0, std::move(plan));
+  if (score(plan, p.stroke_length_m) < good) plan = best_far_start(c, hri, t0, std::move(plan));
   add_waypoints(p, plan);
   return plan;
 }

@@ -69,7 +69,10 @@ double force_press_depth_m(const servo::HriParams& hri, const sim::SimDevicePara
 /// the nearest is another sheet's (its normal turned more than 90 degrees). The stroke starts along stroke_direction unless its shallowest press is under half the
 /// force's depth times the share of the length walked (the wall thins or the surface ends
 /// along it): then it starts along the best of 8 directions around the contact normal by
-/// that score (the shallowest press times the share walked).
+/// that score (the shallowest press times the share walked). Still under that mark: the best
+/// start within 12 mm of the contact on the surface; still under it (a thin rib under the
+/// ray): the best of the first contacts of 25 rays parallel to the scene's from a grid over
+/// the middle 60 % of the box, by the same score.
 /// @throws std::runtime_error as sim::make_touch_script (the ray never meets the surface).
 TouchPlan plan_touch(const core::SampleField& truth, const servo::HriParams& hri, const sim::SimDeviceParams& device,
                      const sim::ScriptParams& p, const TouchPlanOptions& options = {});

@@ -160,6 +160,10 @@ struct RunMetrics {
   /// by |F| (run::render_run_picture); caption, or why it was not drawn.
   bool picture_drawn = false;
   std::string picture_note;
+  /// overview.png: the whole object upright with the HIP's path (run::render_overview);
+  /// report.md's sentence on it (run::overview_sentence), or why it was not drawn.
+  bool overview_drawn = false;
+  std::string overview_note;
 
   // Engine: what computed the published samples.
   std::string engine_mode;     ///< "dense" or "sparse" (the scene's engine.mode)

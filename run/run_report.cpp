@@ -529,6 +529,8 @@ nlohmann::ordered_json summary_json(const Scene& scene, const SceneSetup& setup,
   j["script"] = script_json(vol, setup.script, m);
   j["picture"] = {{"file", m.picture_drawn ? nlohmann::ordered_json("surface.png") : nlohmann::ordered_json(nullptr)},
                   {"note", m.picture_note}};
+  j["overview"] = {{"file", m.overview_drawn ? nlohmann::ordered_json("overview.png") : nlohmann::ordered_json(nullptr)},
+                   {"note", m.overview_note}};
   j["plots"] = m.plots_drawn ? nlohmann::ordered_json::array({"force_depth.png", "tick_time.png"})
                              : nlohmann::ordered_json::array();
   if (with_edits) j["edits"] = edits_json(m.edits, scene);
@@ -681,6 +683,10 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
      << first_order_sentence(m) << "\n\n";
   if (with_edits) md << edits_markdown(m.edits, scene);
   md << engine_markdown(m);
+  if (m.overview_drawn)
+    md << "## Overview\n\n![the whole object, the probe's path](overview.png)\n\n" << m.overview_note << "\n\n";
+  else if (!m.overview_note.empty())
+    md << "Overview: " << m.overview_note << "\n\n";
   if (m.picture_drawn)
     md << "## Where the probe touched\n\n![isosurface, probe path and contact points](surface.png)\n\n"
        << m.picture_note << "\n\n";

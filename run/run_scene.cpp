@@ -22,6 +22,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/run/names.h"
+#include "isotouch/run/overview.h"
 #include "isotouch/run/picture.h"
 #include "isotouch/run/run_outputs.h"
 #include "isotouch/run/run_report.h"
@@ -200,6 +201,16 @@ RunMetrics run_scene_steps(const Scene& scene, const RunOptions& opt, const RunF
     m.picture_note = m.picture_drawn ? pic.caption : pic.error;
     if (!m.picture_drawn) log << "picture  not drawn: " << pic.error << "\n";
     else log << "picture  surface.png, up: " << pic.up << "\n";
+    // The overview: the whole object upright with the path on it (the picture a user recognises).
+    const RunPicture over = picture_or_stop(
+        [&] {
+          return render_overview(scene, vol, *field, path, (fs::path(dir) / kOverviewFile).string(), setup.vk.get(),
+                                 setup.device);
+        },
+        folder, log);
+    m.overview_drawn = over.error.empty();
+    m.overview_note = overview_sentence(over);
+    log << "picture  " << m.overview_note << "\n";
   }
   throw_if_stop_requested("outputs (trace, plots and picture written)");
   if (edits) finish_edits(scene, setup, *edits, trace, dir, opt.mesh_units, m, log);

@@ -1,0 +1,139 @@
+// test_overview.cpp - the run's overview picture (run/overview.h): upright from the volume's
+// direction matrix, the probe's path where the camera projects it. The picture is read back
+// from the PNG file the function wrote; the truth is an analytic shape whose superior part is
+// known and a pinhole projection written here.
+#include <gtest/gtest.h>
+#include <png.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "isotouch/run/overview.h"
+#include "isotouch/run/scene_setup.h"
+
+namespace {
+using isotouch::core::Vec3;
+namespace engine = isotouch::engine;
+namespace run = isotouch::run;
+namespace fs = std::filesystem;
+
+struct Rgb {
+  int w = 0, h = 0;
+  std::vector<unsigned char> px;  // rows top to bottom, 3 bytes a pixel
+  const unsigned char* at(int x, int y) const { return &px[3 * (std::size_t(y) * std::size_t(w) + std::size_t(x))]; }
+};
+
+Rgb read_png(const std::string& path) {
+  png_image img{};
+  img.version = PNG_IMAGE_VERSION;
+  Rgb out;
+  if (!png_image_begin_read_from_file(&img, path.c_str())) return out;
+  img.format = PNG_FORMAT_RGB;
+  out.w = int(img.width);
+  out.h = int(img.height);
+  out.px.resize(PNG_IMAGE_SIZE(img));
+  if (!png_image_finish_read(&img, nullptr, out.px.data(), 0, nullptr)) out.w = out.h = 0;
+  return out;
+}
+
+/// A snowman in the physical frame: a ball of radius 14 voxels 6 below the centre and one
+/// of 6 voxels 14 above it (physical +z: superior), stored upside down (D = diag(1, -1, -1):
+/// index z runs inferior), 2 mm voxels; value = mm inside the nearer ball's surface.
+engine::Volume snowman() {
+  engine::Volume v;
+  const int n = 48;
+  const double h = 2e-3;
+  v.grid.dims = {n, n, n};
+  v.grid.spacing_m = {h, h, h};
+  v.direction = {1, 0, 0, 0, -1, 0, 0, 0, -1};
+  v.direction_is_identity = false;
+  v.path = "synthetic:snowman";
+  v.voxels.resize(std::size_t(n) * n * n);
+  const Vec3 c = v.to_physical(v.grid.centre_m());
+  const Vec3 big = c + Vec3{0, 0, -6 * h}, small = c + Vec3{0, 0, 14 * h};
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const Vec3 p = v.index_to_physical({double(x), double(y), double(z)});
+        const double d = std::max(14 * h - norm(p - big), 6 * h - norm(p - small));
+        v.voxels[v.grid.index(x, y, z)] = float(d * 1e3);
+      }
+  v.update_stats();
+  return v;
+}
+
+isotouch::io::Scene iso_zero_scene() {
+  isotouch::io::Scene s;
+  s.hri.tau = 0;
+  s.hri.inside = isotouch::core::InsideIs::kAbove;
+  return s;
+}
+
+bool magenta(const unsigned char* p) { return p[0] > p[1] + 80 && p[2] > p[1] + 80; }
+/// A pixel of the object: neither the background's colour (`bg`, a corner's) nor the path's.
+bool surface(const unsigned char* p, const unsigned char* bg) {
+  return std::abs(p[0] - bg[0]) + std::abs(p[1] - bg[1]) + std::abs(p[2] - bg[2]) > 30 && !magenta(p);
+}
+
+/// The pixel a grid-world point projects to through the pinhole camera `v` (the ray of pixel
+/// (px, py) runs along forward * focal + right * (px + 0.5 - W / 2) + up * (H / 2 - py - 0.5)).
+std::pair<double, double> project(const engine::CameraView& v, int w, int h, const Vec3& p) {
+  const double focal = 0.5 * h / std::tan(0.5 * v.fov_y_deg * M_PI / 180);
+  const Vec3 d = p - v.eye;
+  const double z = dot(d, v.forward);
+  return {focal * dot(d, v.right) / z + 0.5 * w - 0.5, 0.5 * h - 0.5 - focal * dot(d, v.up) / z};
+}
+
+}  // namespace
+
+TEST(Overview, SuperiorIsUpAndThePathLiesWhereItProjects) {
+  const engine::Volume vol = snowman();
+  isotouch::core::SampleField field;
+  field.background = -1000;
+  // The path: a horizontal line (physical x) across the big ball's front (anterior, -y).
+  const Vec3 c = vol.to_physical(vol.grid.centre_m());
+  std::vector<isotouch::sim::TraceRow> trace(400);
+  for (std::size_t i = 0; i < trace.size(); ++i) {
+    const double s = double(i) / double(trace.size() - 1) - 0.5;
+    trace[i].t_s = 1e-3 * double(i);
+    trace[i].hip_m = vol.to_grid(c + Vec3{0.030 * s, -0.032, -0.012});
+    trace[i].vhip_m = trace[i].hip_m;
+  }
+  const std::string png = (fs::temp_directory_path() / ("test_overview_" + std::to_string(::getpid()) + ".png")).string();
+  const int W = 320, H = 320;
+  const run::RunPicture pic = run::render_overview(iso_zero_scene(), vol, field, trace, png, nullptr, run::kCpuDevice, W, H);
+  ASSERT_EQ(pic.error, "");
+  EXPECT_EQ(pic.up, "superior");
+  EXPECT_NE(run::overview_sentence(pic).find("superior up"), std::string::npos) << run::overview_sentence(pic);
+  const Rgb img = read_png(png);
+  fs::remove(png);
+  ASSERT_EQ(img.w, W);
+  ASSERT_EQ(img.h, H);
+  // Upright: the widest row of the silhouette (the big ball's equator) lies in the lower half
+  // of the object's rows; the small ball, superior, is drawn above it.
+  int top = H, bottom = -1, widest_row = -1, widest = 0;
+  for (int y = 0; y < H; ++y) {
+    int width = 0;
+    for (int x = 0; x < W; ++x) width += surface(img.at(x, y), img.at(0, 0));
+    if (width > 0) top = std::min(top, y), bottom = std::max(bottom, y);
+    if (width > widest) widest = width, widest_row = y;
+  }
+  ASSERT_GT(bottom, top) << "no surface drawn";
+  EXPECT_GT(widest_row, (top + bottom) / 2) << "rows " << top << ".." << bottom << ": the widest (big ball) is not below";
+  // The path: the pixels at its projected points are magenta; 12 pixels above them are not.
+  const engine::CameraView view = run::overview_view(vol);
+  int on = 0, off = 0, samples = 0;
+  for (std::size_t i = 20; i + 20 < trace.size(); i += 10, ++samples) {
+    const auto [px, py] = project(view, W, H, trace[i].hip_m);
+    const int x = int(std::lround(px)), y = int(std::lround(py));
+    ASSERT_TRUE(x >= 0 && x < W && y >= 12 && y < H) << x << ", " << y;
+    on += magenta(img.at(x, y));
+    off += magenta(img.at(x, y - 12));
+  }
+  EXPECT_EQ(on, samples) << "path pixels at the projected path";
+  EXPECT_EQ(off, 0) << "path pixels 12 px above it";
+}

@@ -60,6 +60,18 @@ inline double stroke_len(const ThinFeature& tf, int s, double r) {
   return tf.across_len + r;
 }
 
+/// A fin-like feature's press and strokes: the plate of width w along m with its edge along
+/// cross(m, t), c - t edge_in its press point's middle; stroked 16 mm along, edge_in + 4 mm across.
+inline void plate_frame(ThinFeature& tf, Vec3 c, Vec3 m, Vec3 t, double w, double edge_in) {
+  tf.mid = c - t * edge_in;
+  tf.n_entry = m;
+  tf.half = 0.5 * w;
+  tf.along = cross(m, t);
+  tf.across = t;
+  tf.along_len = 0.016;
+  tf.across_len = edge_in + 0.004;
+}
+
 /// A fin: the plate |m.(x - c)| < w/2 on the side t.(x - c) < 0 of its straight free edge
 /// (t perpendicular to m), pressed on its face 1.5 voxels in from the edge; stroked along
 /// the edge and across it (toward the edge and past it).
@@ -74,13 +86,7 @@ inline ThinFeature fin(Vec3 m, Vec3 t, double w, Vec3 sp) {
         const double a = 0.5 * w - std::abs(dot(m, x - c)), b = -dot(t, x - c);
         return a < b ? m * (dot(m, x - c) >= 0 ? -1000.0 : 1000.0) : t * -1000.0;
       });
-  tf.mid = c - t * edge_in;
-  tf.n_entry = m;
-  tf.half = 0.5 * w;
-  tf.along = cross(m, t);
-  tf.across = t;
-  tf.along_len = 0.016;
-  tf.across_len = edge_in + 0.004;
+  plate_frame(tf, c, m, t, w, edge_in);
   return tf;
 }
 

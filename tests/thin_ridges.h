@@ -84,13 +84,7 @@ inline ThinFeature ridge(Vec3 m, Vec3 t, double w, Vec3 sp, double sigma, double
         return 1000.0 * (across * phi(-v / sigma) - 0.5);
       },
       noise, seed);
-  tf.mid = c - t * edge_in;
-  tf.n_entry = m;
-  tf.half = 0.5 * w;
-  tf.along = cross(m, t);
-  tf.across = t;
-  tf.along_len = 0.016;
-  tf.across_len = edge_in + 0.004;
+  plate_frame(tf, c, m, t, w, edge_in);
   return tf;
 }
 

@@ -369,10 +369,10 @@ void ServoThread::loop(Handoff& h) {
     }
     ticks_.fetch_add(1, std::memory_order_relaxed);
   }
-  // Leave the device with no force, and record that zero as the last tick (held: the renderer
-  // not ticked; the HIP of the tick before), so a recording ends with what the device was left with.
+  // Record the zero left on the device as the last tick (held: the renderer not ticked; the
+  // HIP of the tick before), so a recording ends with what the device was left with.
   const std::int64_t t_stop = now_ns();
-  device_.write_force_n({});
+  device_.write_force_n({});  // leave the device with no force
   if (const SampleField* field = samples_.acquire(); field && cfg_.observer && prev_start >= 0) {
     TickRecord rec;
     rec.k = ticks_.load(std::memory_order_relaxed);

@@ -16,6 +16,9 @@ namespace {
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
+void stop_if_cancelled(const std::atomic<bool>* cancel, const std::string& where) {
+  if (cancel && cancel->load(std::memory_order_relaxed)) throw ChainCancelled("pass chain cancelled before " + where);
+}
 }  // namespace
 
 const char* pass_name(PassKind k) {
@@ -63,7 +66,8 @@ std::string validate_passes(const std::vector<PassDesc>& p) {
   return {};
 }
 
-ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes, unsigned threads) {
+ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes, unsigned threads,
+                          const std::atomic<bool>* cancel) {
   if (std::string e = validate_passes(passes); !e.empty()) throw std::invalid_argument("pass chain: " + e);
   threads = threads_for(vol.grid.voxel_count(), threads);
   ChainOutput out;
@@ -73,12 +77,14 @@ ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes
   for (const PassDesc& p : passes) {
     PassTiming pt;
     pt.label = p.label();
+    stop_if_cancelled(cancel, pt.label);
     const auto t0 = std::chrono::steady_clock::now();
     switch (p.kind) {
       case PassKind::Gaussian: {
         const GaussianAxes a = gaussian_axes(cur.grid, p.sigma_mm);
         std::vector<float> tmp;
         for (int axis = 0; axis < 3; ++axis) {
+          if (axis > 0) stop_if_cancelled(cancel, pt.label + "'s axis " + std::to_string(axis));
           gaussian_axis_cpu(cur.voxels, tmp, cur.grid, axis, a.kernel[std::size_t(axis)], threads);
           cur.voxels.swap(tmp);
         }
@@ -89,6 +95,7 @@ ChainOutput run_chain_cpu(const Volume& vol, const std::vector<PassDesc>& passes
         const auto r = closing_radii(cur.grid, p.radius_mm);
         std::vector<float> tmp;
         for (int k = 0; k < 6; ++k) {
+          if (k > 0) stop_if_cancelled(cancel, pt.label + "'s sweep " + std::to_string(k));
           morph_axis_cpu(cur.voxels, tmp, cur.grid, k % 3, r[std::size_t(k % 3)], k < 3, threads);
           cur.voxels.swap(tmp);
         }

@@ -4,8 +4,10 @@
 // chain that runs the same list is PassChain (passes.h).
 #pragma once
 #include "isotouch/engine/core_names.h"
+#include <atomic>
 #include <cstdint>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -57,7 +59,15 @@ struct ChainOutput {
 /// The CPU reference of a chain, same outputs; PassTiming::ms is wall time. One thread by
 /// default (the reference); `threads` > 1 is the multi-threaded CPU backend (where no Vulkan
 /// device exists): every pass's rows split among that many threads, bit for bit the same.
-/// @throws std::invalid_argument if validate_passes() fails.
-ChainOutput run_chain_cpu(const Volume& volume, const std::vector<PassDesc>& passes, unsigned threads = 1);
+/// `cancel` (may be null), read between passes and between a filter's axis sweeps: once
+/// set, the run stops there and throws ChainCancelled (a caller's Ctrl-C, within one sweep).
+/// @throws std::invalid_argument if validate_passes() fails; ChainCancelled.
+ChainOutput run_chain_cpu(const Volume& volume, const std::vector<PassDesc>& passes, unsigned threads = 1,
+                          const std::atomic<bool>* cancel = nullptr);
+
+/// run_chain_cpu stopped by its cancel flag; nothing was returned.
+struct ChainCancelled : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
 }  // namespace isotouch::engine

@@ -150,6 +150,8 @@ m polhem-refusal-cleared    servo/report_device.cpp '      unnote(link_->name() 
 IG=service/igtl_device.cpp X=servo/exit_zero.cpp
 m igtl-stall-zero-at-once   $IG '    if (l.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose' \
                                '    if (false) {' test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
+m igtl-stale-stream-zero    $IG '      if (!zero_sent) send_force({0, 0, 0});' \
+                               '      if (false) send_force({0, 0, 0});' test_igtl_device 'ServiceIgtlDevice.ForcesAnswerPoses*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 # A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.

@@ -5,7 +5,9 @@
 // test_sparse_chain), on synthetic volumes.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstring>
+#include <string>
 
 #include "isotouch/engine/parallel.h"
 #include "isotouch/engine/pass_desc.h"
@@ -45,6 +47,25 @@ TEST(CpuBackends, DenseChainThreadsGiveTheReferenceBitForBit) {
     ASSERT_EQ(one.field->size(), many.field->size());
     EXPECT_EQ(std::memcmp(one.field->data(), many.field->data(), one.field->size() * sizeof(float)), 0)
         << threads << " threads: filtered field";
+  }
+}
+
+// The cancel flag: unset, the run is the reference bit for bit; set, the run stops with
+// ChainCancelled naming where, and returns nothing.
+TEST(CpuBackends, ACancelledChainStopsWithChainCancelled) {
+  const engine::Volume v = engine::make_random({40, 36, 30}, {1e-3, 1e-3, 2e-3}, -1000.0f, 3000.0f, 5);
+  const std::vector<PassDesc> p = {PassDesc::gaussian(1.0), PassDesc::closing(1.0), PassDesc::gradient()};
+  std::atomic<bool> cancel{false};
+  const engine::ChainOutput ref = engine::run_chain_cpu(v, p, 1);
+  const engine::ChainOutput with_flag = engine::run_chain_cpu(v, p, 1, &cancel);
+  ASSERT_TRUE(ref.samples && with_flag.samples);
+  EXPECT_EQ(differing_samples(ref.samples->samples, with_flag.samples->samples), 0u);
+  cancel = true;
+  try {
+    engine::run_chain_cpu(v, p, 2, &cancel);
+    ADD_FAILURE() << "a cancelled chain returned";
+  } catch (const engine::ChainCancelled& e) {
+    EXPECT_STREQ(e.what(), "pass chain cancelled before gaussian(sigma 1 mm)") << "the first pass does not start";
   }
 }
 

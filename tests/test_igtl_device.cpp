@@ -103,10 +103,16 @@ TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
   std::size_t until_close = 0;  // forces the peer had before the device closed
   {
     IgtlDevice d(o);
-    EXPECT_GT(d.measured_rate_hz(), 200.0) << "a 500 Hz stream";
+    // The rate the peer really sent at (a loaded machine slows its 500 Hz), from its own clock.
+    const std::vector<std::int64_t> sent = peer.poses_ns();
+    ASSERT_GE(sent.size(), 10u) << "the peer sent almost nothing while the device measured";
+    const double peer_hz = double(sent.size() - 1) / (double(sent.back() - sent.front()) * 1e-9);
+    EXPECT_NEAR(d.measured_rate_hz(), peer_hz, 0.25 * peer_hz) << "the peer sent at " << peer_hz << " Hz";
     EXPECT_LT(d.measured_rate_hz(), 520.0) << "the peer never sends faster than 500 Hz";
     EXPECT_NEAR(d.caps().stale_timeout_s, 3.0 / d.measured_rate_hz(), 1e-12);
-    d.enable_force(true, 0.0025);
+    // A stall time far above this thread's hiccups under load: the zeros this test judges are
+    // the stale stream's, not a stall's (AStalledServoGetsTheZeroAtOnceNotWithTheNextPose).
+    d.enable_force(true, 0.2);
     const Clock::time_point t0 = Clock::now();
     for (long k = 0; since(t0) < 0.9; ++k) {  // the stream stops 0.5 s in (0.3 s went to measuring)
       const servo::DeviceReading r = d.read();
@@ -119,30 +125,36 @@ TEST(ServiceIgtlDevice, ForcesAnswerPosesAndAStaleStreamGetsZero) {
   }  // the destructor sends zero
   for (int i = 0; i < 200 && peer.forces().size() <= until_close; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const std::vector<Got> got = forces_s(peer);
+  ASSERT_FALSE(got.empty()) << "the peer got no Force";
   const double stopped = peer.stopped_ns() > 0 ? since_stream_s(peer, peer.stopped_ns()) : 1e9;
   std::size_t exact = 0;
   for (const Got& g : got) {
     if (g.t_s >= stopped) break;
     const bool is_f = g.f.x == f.x && g.f.y == f.y && g.f.z == f.z;
     exact += is_f;
-    // Zero before the servo's first write, or after a stall of this thread (> 2.5 ms).
+    // Zero before the servo's first write, or after a stall of this thread (> 0.2 s).
     EXPECT_TRUE(is_f || core::norm(g.f) == 0.0) << "a force neither the servo's nor zero at " << g.t_s << " s";
   }
-  EXPECT_GT(exact, 100u) << "the servo's force answering the stream's poses";
-  // After the stream stopped: late answers to its last poses (the servo's force), then a zero
-  // and nothing but zeros.
-  const Got* first_zero = nullptr;
+  std::size_t streamed = 0;  // poses sent while the servo wrote (after the measurement)
+  for (std::int64_t t : peer.poses_ns()) streamed += since_stream_s(peer, t) >= got.front().t_s;
+  EXPECT_GT(exact, streamed / 4) << "the servo's force answering the stream's " << streamed << " poses";
+  EXPECT_GT(exact, 10u) << "the servo's force answering the stream's poses";
+  // After the stream stopped: late answers to its last poses (the servo's force, possibly
+  // after a zero of this thread's own stall), then a zero and nothing but zeros.
+  const Got* last_force = nullptr;
   int late_answers = 0;
   for (const Got& g : got) {
-    if (g.t_s < stopped) continue;
-    if (!first_zero && core::norm(g.f) == 0.0) first_zero = &g;
-    if (!first_zero) {
-      ++late_answers;
-      EXPECT_TRUE(g.f.x == f.x && g.f.y == f.y && g.f.z == f.z) << "a late answer not the servo's force, at " << g.t_s << " s";
-    } else {
-      EXPECT_EQ(core::norm(g.f), 0.0) << "a force after the stale zero, at " << g.t_s << " s";
-    }
+    if (g.t_s < stopped || core::norm(g.f) == 0.0) continue;
+    ++late_answers;
+    last_force = &g;
+    EXPECT_TRUE(g.f.x == f.x && g.f.y == f.y && g.f.z == f.z) << "a late answer not the servo's force, at " << g.t_s << " s";
   }
+  const Got* first_zero = nullptr;
+  for (const Got& g : got)
+    if (g.t_s >= stopped && (!last_force || &g > last_force)) {
+      first_zero = &g;  // every force after the last late answer is a zero (checked above)
+      break;
+    }
   ASSERT_NE(first_zero, nullptr) << "no zero after the stream stopped: the peer holds the last force";
   EXPECT_LE(late_answers, 3) << "answers long after the stream stopped";
   EXPECT_LT(first_zero->t_s - stopped, 3.0 / 500 + 0.1) << "the stale zero came late";

@@ -1,5 +1,8 @@
 // engine_py.cpp - the engine from Python: a pass list run on a Vulkan device or on the CPU
 // reference, its outputs as arrays, and `isotouch check --all`.
+#include <atomic>
+#include <chrono>
+#include <future>
 #include <memory>
 #include <sstream>
 
@@ -26,10 +29,11 @@ std::vector<engine::PassDesc> passes_arg(const py::object& passes) {
 /// The chain on `device` ("cpu": the one-thread CPU reference, or `threads` of them; else a
 /// Vulkan device by name substring or index, "" the default). Also returns the device's name.
 engine::ChainOutput run_chain(const engine::Volume& v, const std::vector<engine::PassDesc>& passes,
-                              const std::string& device, unsigned threads, std::string& device_name) {
+                              const std::string& device, unsigned threads, std::string& device_name,
+                              const std::atomic<bool>& cancel) {
   if (device == "cpu") {
     device_name = threads > 1 ? "CPU backend (" + std::to_string(threads) + " threads)" : "CPU reference";
-    return engine::run_chain_cpu(v, passes, threads);
+    return engine::run_chain_cpu(v, passes, threads, &cancel);
   }
   engine::ContextOptions co;
   co.device = device;
@@ -38,18 +42,42 @@ engine::ChainOutput run_chain(const engine::Volume& v, const std::vector<engine:
   device_name = (*ctx.value)->info().name;
   auto chain = engine::PassChain::create(**ctx.value, passes);
   if (!chain) throw std::runtime_error("Vulkan pass chain: " + chain.error);
+  if (cancel.load()) throw engine::ChainCancelled("pass chain cancelled before its command buffer");
   return (*chain.value)->run(v);
+}
+
+/// run_chain on a worker thread while this one (GIL released between looks) checks for
+/// signals every 50 ms: Ctrl-C sets the cancel flag (the CPU chain stops within one axis
+/// sweep; a Vulkan chain's one command buffer runs to its end), waits for the worker and
+/// raises KeyboardInterrupt. The worker's own exceptions reach the caller as they are.
+engine::ChainOutput run_chain_interruptible(const engine::Volume& v, const std::vector<engine::PassDesc>& passes,
+                                            const std::string& device, unsigned threads, std::string& device_name) {
+  std::atomic<bool> cancel{false};
+  std::future<engine::ChainOutput> work = std::async(std::launch::async, [&] {
+    return run_chain(v, passes, device, threads, device_name, cancel);
+  });
+  for (;;) {
+    {
+      py::gil_scoped_release nogil;
+      if (work.wait_for(std::chrono::milliseconds(50)) == std::future_status::ready) break;
+    }
+    if (PyErr_CheckSignals() != 0) {
+      cancel = true;
+      {
+        py::gil_scoped_release nogil;
+        work.wait();
+      }
+      throw py::error_already_set();
+    }
+  }
+  return work.get();
 }
 
 py::dict run_passes(const std::shared_ptr<engine::Volume>& volume, const py::object& passes_in,
                     const std::string& device, unsigned threads, const py::object& tau, core::InsideIs inside) {
   const std::vector<engine::PassDesc> passes = passes_arg(passes_in);
   std::string name;
-  engine::ChainOutput out;
-  {
-    py::gil_scoped_release nogil;
-    out = run_chain(*volume, passes, device, threads, name);
-  }
+  engine::ChainOutput out = run_chain_interruptible(*volume, passes, device, threads, name);
   py::dict d;
   d["device"] = name;
   if (out.samples) {
@@ -96,7 +124,8 @@ void bind_engine(py::module_& m) {
         py::arg("threads") = 1, py::arg("tau") = py::none(), py::arg("inside") = core::InsideIs::kAbove,
         R"(Run a pass list (default: [Pass.gradient()]) on `device`: 'cpu' the one-thread CPU reference
 (threads > 1: the threaded CPU backend, the same bits), else a Vulkan device (name substring or
-index; '' the default). GIL released. Returns a dict: 'samples' (a Field, with a gradient pass;
+index; '' the default). GIL released; Ctrl-C stops a CPU chain within one axis sweep (a Vulkan
+chain after its one command buffer) and raises KeyboardInterrupt. Returns a dict: 'samples' (a Field, with a gradient pass;
 its background set for the isosurface when tau is given), 'field' ((nz, ny, nx) float32 after the
 last filter, if any), 'timings_ms' [(label, ms)], 'device'.)");
   m.def("scene_passes", [](const std::string& scene_path) { return run::scene_passes(io::load_scene(scene_path)); },

@@ -37,3 +37,38 @@ def test_ctrl_c_interrupts_a_long_render():
     took, whole = float(words[1]), float(words[2])
     assert whole > 1.0, f"the whole call took {whole:.2f} s: too short to show anything"
     assert took < whole / 2, f"KeyboardInterrupt after {took:.2f} s of a {whole:.2f} s call"
+
+
+def test_ctrl_c_interrupts_a_long_pass_chain():
+    """run_passes on the CPU: a chain of many axis sweeps (Gaussians and closings, about 3 s)
+    is stopped within one sweep, not at its end."""
+    script = textwrap.dedent("""
+        import os, signal, threading, time
+        import numpy as np
+        import isotouch
+        rng = np.random.default_rng(1)
+        v = isotouch.Volume(rng.random((96, 96, 96), dtype=np.float32), spacing=(1e-3,) * 3)
+        one = [isotouch.Pass.gaussian(1.5), isotouch.Pass.closing(2.0)]
+        t0 = time.perf_counter()
+        isotouch.run_passes(v, one + [isotouch.Pass.gradient()])
+        per = time.perf_counter() - t0
+        chain = one * max(1, int(3.0 / per)) + [isotouch.Pass.gradient()]  # about 3 s
+        t0 = time.perf_counter()
+        isotouch.run_passes(v, chain)
+        whole = time.perf_counter() - t0
+        threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+        t0 = time.perf_counter()
+        try:
+            isotouch.run_passes(v, chain)
+            print("finished", whole)
+        except KeyboardInterrupt:
+            print("interrupted", time.perf_counter() - t0, whole)
+    """)
+    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                       env=dict(os.environ))
+    assert p.returncode == 0, p.stderr
+    words = p.stdout.split()
+    assert words[0] == "interrupted", p.stdout
+    took, whole = float(words[1]), float(words[2])
+    assert whole > 1.0, f"the whole call took {whole:.2f} s: too short to show anything"
+    assert took < whole / 2, f"KeyboardInterrupt after {took:.2f} s of a {whole:.2f} s call"

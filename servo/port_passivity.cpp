@@ -4,7 +4,7 @@
 
 namespace isotouch::servo {
 
-Vec3 PortPassivity::step(double t, const Vec3& x, const Vec3& f_want, double e_ref) {
+Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const double* e_ref_j) {
   alpha_ = 0;
   if (!finite(x) || !finite(f_want) || !(t == t)) {
     // Zero force now; the next sane tick starts the velocity afresh.
@@ -26,7 +26,7 @@ Vec3 PortPassivity::step(double t, const Vec3& x, const Vec3& f_want, double e_r
   if (enabled_ && started_ && dt > 0) {
     const double v2 = dot(v, v);
     // E_out after this tick if the velocity holds: the reference may not be exceeded.
-    const double excess = e_out_ + std::max(0.0, dot(f, v) * dt) - e_ref;
+    const double excess = e_out_ + std::max(0.0, dot(f, v) * dt) - (e_ref_j ? *e_ref_j : e_in_);
     if (excess > 0 && v2 > 1e-18) {
       alpha_ = std::min(alpha_max_, excess / (dt * v2));
       damp = v * -alpha_;

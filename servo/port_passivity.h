@@ -30,11 +30,14 @@ class PortPassivity {
       : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n) {}
 
   /// One tick at device time t_s [s] (device clock; the period is the difference of two
-  /// successive t_s). @param x position read this tick, device frame [m].
-  /// @param f_want force the link delivers this tick [N]. @param e_ref_j energy the force
-  /// may hand out in all [J]; pass energy_in_j() for the one-port rule.
+  /// successive t_s), one-port rule: E_out may not exceed E_in, both updated this tick.
+  /// @param x position read this tick, device frame [m]
+  /// @param f_want force the link delivers this tick [N], device frame
   /// @return the force to hold until the next tick [N], device frame.
-  Vec3 step(double t_s, const Vec3& x, const Vec3& f_want, double e_ref_j);
+  Vec3 step(double t_s, const Vec3& x, const Vec3& f_want) { return tick(t_s, x, f_want, nullptr); }
+  /// The same with the reference given: E_out may not exceed e_ref_j [J] (two-port form:
+  /// the energy the far side reports it put into the channel).
+  Vec3 step(double t_s, const Vec3& x, const Vec3& f_want, double e_ref_j) { return tick(t_s, x, f_want, &e_ref_j); }
 
   /// Energy the user put into the port since the start [J] (>= 0).
   double energy_in_j() const { return e_in_; }
@@ -48,6 +51,7 @@ class PortPassivity {
   bool enabled() const { return enabled_; }
 
  private:
+  Vec3 tick(double t_s, const Vec3& x, const Vec3& f_want, const double* e_ref_j);
   bool enabled_;
   double alpha_max_;
   double f_max_;

@@ -4,7 +4,6 @@
 // ones behind it, as on one TCP stream). The receiver holds the last value received
 // (zero-order hold), as PLUS's own loop holds the last TRANSFORM.
 #pragma once
-#include <algorithm>
 #include <cstdint>
 #include <deque>
 #include <random>
@@ -28,13 +27,11 @@ class DelayLine {
   DelayLine(const LinkParams& p, std::uint64_t stream)
       : one_way_s_(0.5 * p.round_trip_delay_s), jitter_s_(p.jitter_s), rng_(p.seed * 2 + stream) {}
 
-  /// Sends `value` at time t_s [s]; it arrives at t_s + one way + jitter, never before the
-  /// message sent ahead of it.
+  /// Sends `value` at time t_s [s]; it arrives at t_s + one way + jitter, or with the
+  /// message sent ahead of it if that one is later (receive() takes them in order).
   void send(double t_s, const T& value) {
     double arrive = t_s + one_way_s_;
     if (jitter_s_ > 0) arrive += jitter_s_ * std::uniform_real_distribution<double>(0.0, 1.0)(rng_);
-    arrive = std::max(arrive, last_arrival_s_);
-    last_arrival_s_ = arrive;
     queue_.push_back({arrive, value});
   }
 
@@ -56,7 +53,6 @@ class DelayLine {
     T value;
   };
   double one_way_s_, jitter_s_;
-  double last_arrival_s_ = -1e300;
   std::mt19937_64 rng_;
   std::deque<Message> queue_;
 };

@@ -91,7 +91,7 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
     if (k % link_every == 0) up.send(t, {x});
     if (up.receive(t, pose_in) > 0) down.send(t, servo.render(field, pose_in.x));
     down.receive(t, force_held);
-    const Vec3 f = pc.step(t, x, force_held.f, pc.energy_in_j());
+    const Vec3 f = pc.step(t, x, force_held.f);
     dev.command_force(f);
     dev.step(T, hand_target(cfg, p0, n, t), hand_target_velocity(cfg, n, t));
     if (!finite(f) || !finite(dev.true_position())) r.nonfinite = true;

@@ -107,3 +107,17 @@ TEST(LinkedContact, SlowPressForceIsWithinTenPercentOfKDepthWithTheController) {
   EXPECT_GT(r.max_force_n, 1.0);
   EXPECT_LT(r.max_force_error_ratio, 0.10);
 }
+
+TEST(LinkedContact, TheHeldForceChangesOnlyWhenAMessageArrivesAtTheLinkRate) {
+  LinkedContact c;
+  c.link.rate_hz = 100;  // one pose every 10 device ticks; no delay: the answer comes the same tick
+  c.motion = LinkedMotion::kSlowPress;
+  const LinkedContactResult r = simulate_linked_contact(wall(), kP, kUp, c);
+  long changes = 0;
+  for (std::size_t k = 1; k < r.force_trace_n.size(); ++k)
+    if (r.force_trace_n[k] != r.force_trace_n[k - 1]) {
+      ++changes;
+      EXPECT_EQ(k % 10, 0u) << "the force changed at device tick " << k;
+    }
+  EXPECT_GT(changes, 10);
+}

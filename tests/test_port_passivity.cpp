@@ -1,0 +1,52 @@
+// The time-domain passivity observer/controller at a device port (servo/port_passivity.h),
+// against energies and dampings worked out by hand.
+#include <gtest/gtest.h>
+
+#include "isotouch/servo/port_passivity.h"
+
+using isotouch::core::Vec3;
+using isotouch::servo::PortPassivity;
+
+// A held force of 1 N along +x while the device moves +1 mm per 1 ms tick (1 m/s): the
+// force does 1 mJ of work on the user per tick, which the user never put in.
+TEST(PortPassivity, DampsExactlyTheEnergyTheHeldForceWouldHandOut) {
+  PortPassivity pc(true, 100, 10);
+  const Vec3 f{1, 0, 0};
+  EXPECT_EQ(pc.step(0.000, {0, 0, 0}, f).x, 1.0);  // first tick: no velocity yet
+  // E_out = 1 mJ; with the next tick's 1 mJ the excess is 2 mJ: alpha = 2e-3 / (1e-3 * 1^2) = 2.
+  const Vec3 a = pc.step(0.001, {0.001, 0, 0}, f);
+  EXPECT_NEAR(pc.energy_out_j(), 1e-3, 1e-15);
+  EXPECT_NEAR(pc.alpha(), 2.0, 1e-12);
+  EXPECT_NEAR(a.x, -1.0, 1e-12);
+  // The held -1 N over +1 mm: E_in = 1 mJ, the damper took 2 mJ; excess 1 + 1 - 1 mJ: alpha 1.
+  const Vec3 b = pc.step(0.002, {0.002, 0, 0}, f);
+  EXPECT_NEAR(pc.energy_in_j(), 1e-3, 1e-15);
+  EXPECT_NEAR(pc.dissipated_j(), 2e-3, 1e-15);
+  EXPECT_NEAR(pc.alpha(), 1.0, 1e-12);
+  EXPECT_NEAR(b.x, 0.0, 1e-12);
+  EXPECT_EQ(pc.active_ticks(), 2);
+}
+
+TEST(PortPassivity, VelocityIsTakenOnTheDevicesClock) {
+  PortPassivity pc(true, 100, 10);
+  const Vec3 f{1, 0, 0};
+  pc.step(0.000, {0, 0, 0}, f, 0);
+  // 1 mm in 2 ms (a late report): v = 0.5 m/s, E_out = 1 mJ, next-tick work 1 * 0.5 * 2 ms
+  // = 1 mJ: alpha = 2e-3 / (2e-3 * 0.25) = 4.
+  pc.step(0.002, {0.001, 0, 0}, f, 0);
+  EXPECT_NEAR(pc.alpha(), 4.0, 1e-12);
+}
+
+TEST(PortPassivity, ObservesWithoutActingWhenDisabledAndClipsAtTheLimits) {
+  PortPassivity off(false, 100, 10);
+  off.step(0.000, {0, 0, 0}, {1, 0, 0}, 0);
+  EXPECT_EQ(off.step(0.001, {0.001, 0, 0}, {1, 0, 0}, 0).x, 1.0);
+  EXPECT_NEAR(off.energy_out_j(), 1e-3, 1e-15);
+  EXPECT_EQ(off.active_ticks(), 0);
+  PortPassivity capped(true, 0.5, 10);
+  capped.step(0.000, {0, 0, 0}, {1, 0, 0}, 0);
+  EXPECT_NEAR(capped.step(0.001, {0.001, 0, 0}, {1, 0, 0}, 0).x, 0.5, 1e-12);  // alpha_max = 0.5
+  PortPassivity sat(false, 100, 2);
+  EXPECT_NEAR(sat.step(0.000, {0, 0, 0}, {3, 4, 0}, 0).y, 1.6, 1e-12);  // |F| 5 N clipped to 2 N
+  EXPECT_EQ(sat.step(0.001, {NAN, 0, 0}, {3, 4, 0}, 0).y, 0.0);          // bad input: zero force
+}

@@ -13,28 +13,33 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
     return {};
   }
   const double dt = t - prev_t_;
-  Vec3 v;
-  if (started_ && dt > 0) {
-    const Vec3 dx = x - prev_x_;
+  const bool moving = started_ && dt > 0;
+  Vec3 dx;  // the motion over the last period, device [m]; the velocity is dx / dt
+  if (moving) {
+    dx = x - prev_x_;
     const double w = dot(prev_f_, dx);  // work the held force did on the user
-    (w > 0 ? e_out_ : e_in_) += std::abs(w);
+    e_out_ += std::max(w, 0.0);  // both, without a branch: w's sign changes from tick to tick
+    e_in_ += std::max(-w, 0.0);
     dissipated_ -= dot(prev_damp_, dx);
-    v = dx / dt;
   }
   Vec3 f = f_want;
   Vec3 damp;
-  if (enabled_ && started_ && dt > 0) {
-    const double v2 = dot(v, v);
-    // E_out after this tick if the velocity holds: the reference may not be exceeded.
-    const double excess = e_out_ + std::max(0.0, dot(f, v) * dt) - (e_ref_j ? *e_ref_j : e_in_);
-    if (excess > 0 && v2 > 1e-18) {
-      alpha_ = std::min(alpha_max_, excess / (dt * v2));
-      damp = v * -alpha_;
+  if (enabled_ && moving) {
+    // E_out after this tick if the velocity holds (work f.v dt = f.dx): the reference may
+    // not be exceeded. alpha = excess / (dt v^2) = excess dt / dx^2, and the damping force
+    // -alpha v = -dx excess / dx^2: no division on a tick that needs no damping.
+    const double dx2 = dot(dx, dx);
+    const double excess = e_out_ + std::max(0.0, dot(f, dx)) - (e_ref_j ? *e_ref_j : e_in_);
+    if (excess > 0 && dx2 > 1e-30) {
+      const bool capped = excess * dt > alpha_max_ * dx2;
+      const double per_m = capped ? alpha_max_ / dt : excess / dx2;  // [N/m] on dx
+      alpha_ = per_m * dt;
+      damp = dx * -per_m;
       f += damp;
       ++active_;
     }
   }
-  saturate(f, f_max_);
+  if (dot(f, f) > f_max_ * f_max_ * (1 - 1e-9)) saturate(f, f_max_);  // the square root only near the limit
   prev_t_ = t;
   prev_x_ = x;
   prev_f_ = f;

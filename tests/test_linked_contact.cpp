@@ -95,6 +95,17 @@ TEST(LinkedContact, WallAt100HzWith10msSettlesWithTheController) {
   EXPECT_LE(r.device_energy_out_j, 0.0);
 }
 
+TEST(LinkedContact, WallAt100HzWith10msAndJitterSettlesWithTheController) {
+  LinkedContact c = press_100hz_10ms(true);
+  c.link.jitter_s = 0.004;  // each message up to 4 ms later still
+  const LinkedContactResult r = simulate_linked_contact(wall(), kP, kUp, c);
+  print("100 Hz, 10 ms + up to 4 ms jitter, K = 800, controller", r);
+  EXPECT_LT(r.settled_amplitude_m, 1e-4);
+  EXPECT_LE(r.device_energy_out_j, 0.0);
+  c.passivity_controller = false;
+  EXPECT_FALSE(simulate_linked_contact(wall(), kP, kUp, c).stable(c.stiffness_n_per_m, c));
+}
+
 TEST(LinkedContact, SlowPressForceIsWithinTenPercentOfKDepthWithTheController) {
   LinkedContact c = press_100hz_10ms(true);
   c.motion = LinkedMotion::kSlowPress;

@@ -47,9 +47,11 @@ Vec3 hand_target_velocity(const LinkedContact& cfg, const Vec3& n, double t) {
   return n * -cfg.press_speed_m_s;
 }
 
-double half_span(const std::vector<double>& s, std::size_t from) {
-  if (from >= s.size()) return 0;
-  const auto [lo, hi] = std::minmax_element(s.begin() + long(from), s.end());
+/// Half the peak-to-peak of s over [from, to) (to clipped at the end).
+double half_span(const std::vector<double>& s, std::size_t from, std::size_t to) {
+  to = std::min(to, s.size());
+  if (from >= to) return 0;
+  const auto [lo, hi] = std::minmax_element(s.begin() + long(from), s.begin() + long(to));
   return 0.5 * (*hi - *lo);
 }
 
@@ -62,6 +64,17 @@ double windowed_stiffness_error(const std::vector<double>& force, const std::vec
     if (d / double(w) > 1e-3) worst = std::max(worst, std::abs(f / (k * d) - 1));
   }
   return worst;
+}
+
+/// The figures of the device's motion, from its height above the wall at each tick [m].
+void judge_motion(LinkedContactResult& r, const std::vector<double>& height, const LinkedContact& cfg, double T) {
+  const std::size_t n = height.size(), never = n;
+  const std::size_t settled = r.contact_time_s < 0 ? never : std::size_t(std::ceil((r.contact_time_s + 0.2) / T));
+  r.settled_amplitude_m = half_span(height, settled, n);
+  r.early_amplitude_m = half_span(height, std::size_t(0.2 * double(n)), std::size_t(0.45 * double(n)));
+  r.late_amplitude_m = half_span(height, n - n / 4, n);
+  if (cfg.motion == LinkedMotion::kSlowPress)
+    r.max_force_error_ratio = windowed_stiffness_error(r.force_trace_n, height, cfg.stiffness_n_per_m, long(0.1 / T));
 }
 
 }  // namespace
@@ -106,12 +119,7 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
     height[std::size_t(k)] = dot(dev.true_position() - p0, n);
     r.device_energy_out_j = std::max(r.device_energy_out_j, dev.rendered_work_j() - dev.damping_dissipated_j());
   }
-  const long settled = r.contact_time_s < 0 ? r.ticks : long(std::ceil((r.contact_time_s + 0.2) / T));
-  r.settled_amplitude_m = half_span(height, std::size_t(settled));
-  r.late_amplitude_m = half_span(height, std::size_t(r.ticks - r.ticks / 4));
-  height.resize(std::size_t(0.45 * double(r.ticks)));
-  r.early_amplitude_m = half_span(height, std::size_t(0.2 * double(r.ticks)));
-  if (!press) r.max_force_error_ratio = windowed_stiffness_error(r.force_trace_n, height, cfg.stiffness_n_per_m, long(0.1 / T));
+  judge_motion(r, height, cfg, T);
   r.pc_energy_in_j = pc.energy_in_j();
   r.pc_energy_out_j = pc.energy_out_j();
   r.pc_dissipated_j = pc.dissipated_j();

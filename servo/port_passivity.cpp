@@ -13,9 +13,11 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
     return {};
   }
   const double dt = t - prev_t_;
+  // The work needs no dt: it is counted on every tick after the first, even one whose clock
+  // repeated or stepped back. Only the damping, a velocity, needs a period.
   const bool moving = started_ && dt > 0;
   Vec3 dx;  // the motion over the last period, device [m]; the velocity is dx / dt
-  if (moving) {
+  if (started_) {
     dx = x - prev_x_;
     const double w = dot(prev_f_, dx);  // work the held force did on the user
     e_out_ += std::max(w, 0.0);  // both, without a branch: w's sign changes from tick to tick

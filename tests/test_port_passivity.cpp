@@ -50,3 +50,15 @@ TEST(PortPassivity, ObservesWithoutActingWhenDisabledAndClipsAtTheLimits) {
   EXPECT_NEAR(sat.step(0.000, {0, 0, 0}, {3, 4, 0}, 0).y, 1.6, 1e-12);  // |F| 5 N clipped to 2 N
   EXPECT_EQ(sat.step(0.001, {NAN, 0, 0}, {3, 4, 0}, 0).y, 0.0);          // bad input: zero force
 }
+
+// A device clock that repeats or steps back still moved the device: the held force's work
+// (f . dx, no dt in it) must reach the energies.
+TEST(PortPassivity, MotionOnARepeatedOrBackwardTimestampIsStillCounted) {
+  PortPassivity pc(false, 100, 10);
+  const Vec3 f{1, 0, 0};
+  pc.step(0.001, {0, 0, 0}, f);
+  pc.step(0.001, {0.001, 0, 0}, f);  // repeated t: +1 mm along the 1 N force, 1 mJ out
+  EXPECT_NEAR(pc.energy_out_j(), 1e-3, 1e-15);
+  pc.step(0.0005, {0, 0, 0}, f);  // backward t: -1 mm against it, 1 mJ in
+  EXPECT_NEAR(pc.energy_in_j(), 1e-3, 1e-15);
+}

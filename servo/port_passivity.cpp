@@ -2,7 +2,15 @@
 
 #include <algorithm>
 
+#include "isotouch/core/setting_check.h"
+
 namespace isotouch::servo {
+
+PortPassivity::PortPassivity(bool enabled, double alpha_max, double force_limit_n)
+    : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n) {
+  core::require_non_negative("PortPassivity", "alpha_max", alpha_max, "N s/m");
+  core::require_positive("PortPassivity", "force_limit_n", force_limit_n, "N");
+}
 
 Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const double* e_ref_j) {
   alpha_ = 0;

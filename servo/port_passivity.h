@@ -26,8 +26,9 @@ class PortPassivity {
   /// @param enabled false: observe only. @param alpha_max largest added damping [N s/m];
   /// keep it below m / T (a sampled damper alpha with alpha T / m > 2 is itself active).
   /// @param force_limit_n forces are clipped here (direction kept) [N].
-  PortPassivity(bool enabled, double alpha_max, double force_limit_n)
-      : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n) {}
+  /// @throws std::invalid_argument naming the setting and its value unless alpha_max is
+  /// finite and >= 0 and force_limit_n finite and > 0.
+  PortPassivity(bool enabled, double alpha_max, double force_limit_n);
 
   /// One tick at device time t_s [s] (device clock; the period is the difference of two
   /// successive t_s), one-port rule: E_out may not exceed E_in, both updated this tick.

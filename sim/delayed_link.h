@@ -8,6 +8,8 @@
 #include <deque>
 #include <random>
 
+#include "isotouch/core/setting_check.h"
+
 namespace isotouch::sim {
 
 /// Timing of one link [s]. Rates and delays are those of the sweep: 50-1000 Hz,
@@ -18,6 +20,13 @@ struct LinkParams {
   double jitter_s = 0;              ///< each message is late by U(0, jitter_s) more [s]
   std::uint64_t seed = 1;           ///< jitter draws
   double period_s() const { return 1.0 / rate_hz; }
+  /// @throws std::invalid_argument naming the field and its value unless rate_hz is finite
+  /// and > 0 and the delay and the jitter are finite and >= 0.
+  void validate() const {
+    core::require_positive("LinkParams", "rate_hz", rate_hz, "Hz");
+    core::require_non_negative("LinkParams", "round_trip_delay_s", round_trip_delay_s, "s");
+    core::require_non_negative("LinkParams", "jitter_s", jitter_s, "s");
+  }
 };
 
 /// One direction of the link, carrying values of type T.
@@ -25,7 +34,9 @@ template <class T>
 class DelayLine {
  public:
   DelayLine(const LinkParams& p, std::uint64_t stream)
-      : one_way_s_(0.5 * p.round_trip_delay_s), jitter_s_(p.jitter_s), rng_(p.seed * 2 + stream) {}
+      : one_way_s_(0.5 * p.round_trip_delay_s), jitter_s_(p.jitter_s), rng_(p.seed * 2 + stream) {
+    p.validate();
+  }
 
   /// Sends `value` at time t_s [s]; it arrives at t_s + one way + jitter, or with the
   /// message sent ahead of it if that one is later (receive() takes them in order).

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "isotouch/core/setting_check.h"
 #include "isotouch/servo/port_passivity.h"
 
 namespace isotouch::sim {
@@ -34,6 +35,20 @@ class ServoEnd {
   }
   HriRenderer renderer_;
 };
+
+/// The device ticks per link message [1]; throws unless the timing can be honoured: a
+/// finite positive device period and a link period that is a whole number of them (the
+/// servo is told the link's rate; a rounded one would be another rate).
+long device_ticks_per_message(const LinkedContact& cfg) {
+  cfg.link.validate();
+  core::require_positive("LinkedContact", "device_period_s", cfg.device_period_s, "s");
+  core::require_positive("LinkedContact", "duration_s", cfg.duration_s, "s");
+  const double ticks = cfg.link.period_s() / cfg.device_period_s;
+  const double whole = std::round(ticks);
+  core::require_setting(whole >= 1 && std::abs(ticks - whole) <= 1e-9 * whole, "LinkedContact", "link.rate_hz",
+                        cfg.link.rate_hz, "its period must be a whole number (>= 1) of device_period_s");
+  return long(whole);
+}
 
 /// Where the hand pulls the device at time t [s].
 Vec3 hand_target(const LinkedContact& cfg, const Vec3& p0, const Vec3& n, double t) {
@@ -83,7 +98,7 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
                                             const LinkedContact& cfg) {
   const Vec3 n = normalized_or(normal, {0, 0, 1});
   const double T = cfg.device_period_s;
-  const long link_every = std::max(1L, long(std::lround(cfg.link.period_s() / T)));
+  const long link_every = device_ticks_per_message(cfg);
   DelayLine<PoseMessage> up(cfg.link, 0);
   DelayLine<ForceMessage> down(cfg.link, 1);
   ServoEnd servo(cfg);

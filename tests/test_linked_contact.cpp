@@ -3,7 +3,10 @@
 // simulated device's own motion and energy.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
+#include <stdexcept>
+#include <string>
 
 #include "isotouch/sim/analytic_fields.h"
 #include "isotouch/sim/linked_contact.h"
@@ -131,4 +134,36 @@ TEST(LinkedContact, TheHeldForceChangesOnlyWhenAMessageArrivesAtTheLinkRate) {
       EXPECT_EQ(k % 10, 0u) << "the force changed at device tick " << k;
     }
   EXPECT_GT(changes, 10);
+}
+
+// Timing the simulation cannot honour is refused by field and value, not rounded or
+// left to undefined behaviour.
+TEST(LinkedContact, RejectsLinkAndDeviceTimingItCannotHonour) {
+  auto message = [](const LinkedContact& c) {
+    try {
+      simulate_linked_contact(wall(), kP, kUp, c);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  auto with = [](auto change) {
+    LinkedContact c;
+    c.duration_s = 0.05;
+    change(c);
+    return c;
+  };
+  const std::pair<LinkedContact, const char*> cases[] = {
+      {with([](LinkedContact& c) { c.link.rate_hz = 0; }), "rate_hz = 0"},
+      {with([](LinkedContact& c) { c.link.rate_hz = -100; }), "rate_hz = -100"},
+      {with([](LinkedContact& c) { c.link.rate_hz = NAN; }), "rate_hz = nan"},
+      {with([](LinkedContact& c) { c.link.rate_hz = 300; }), "rate_hz = 300"},  // 3.33 device ticks
+      {with([](LinkedContact& c) { c.link.round_trip_delay_s = -0.001; }), "round_trip_delay_s = -0.001"},
+      {with([](LinkedContact& c) { c.link.jitter_s = -0.002; }), "jitter_s = -0.002"},
+      {with([](LinkedContact& c) { c.device_period_s = 0; }), "device_period_s = 0"},
+      {with([](LinkedContact& c) { c.device_period_s = -1e-3; }), "device_period_s = -0.001"},
+      {with([](LinkedContact& c) { c.pc_alpha_max_n_s_per_m = NAN; }), "alpha_max = nan"},
+  };
+  for (const auto& [cfg, expected] : cases) EXPECT_NE(message(cfg).find(expected), std::string::npos) << message(cfg);
+  EXPECT_EQ(message(with([](LinkedContact& c) { c.link.rate_hz = 250; })), "accepted");  // 4 device ticks
 }

@@ -2,6 +2,10 @@
 // against energies and dampings worked out by hand.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
 #include "isotouch/servo/port_passivity.h"
 
 using isotouch::core::Vec3;
@@ -61,4 +65,23 @@ TEST(PortPassivity, MotionOnARepeatedOrBackwardTimestampIsStillCounted) {
   EXPECT_NEAR(pc.energy_out_j(), 1e-3, 1e-15);
   pc.step(0.0005, {0, 0, 0}, f);  // backward t: -1 mm against it, 1 mJ in
   EXPECT_NEAR(pc.energy_in_j(), 1e-3, 1e-15);
+}
+
+// Bad settings are refused by name and value: a NaN, zero or negative force limit would
+// leave the force unclipped, a NaN or negative alpha_max the damping uncapped or active.
+TEST(PortPassivity, RejectsSettingsThatWouldLeaveTheForceUnbounded) {
+  auto message = [](double alpha_max, double limit) {
+    try {
+      PortPassivity pc(true, alpha_max, limit);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message(40, NAN).find("force_limit_n = nan"), std::string::npos) << message(40, NAN);
+  EXPECT_NE(message(40, 0).find("force_limit_n = 0"), std::string::npos) << message(40, 0);
+  EXPECT_NE(message(40, -1).find("force_limit_n = -1"), std::string::npos) << message(40, -1);
+  EXPECT_NE(message(NAN, 10).find("alpha_max = nan"), std::string::npos) << message(NAN, 10);
+  EXPECT_NE(message(-1, 10).find("alpha_max = -1"), std::string::npos) << message(-1, 10);
+  EXPECT_EQ(message(0, 10), "accepted");  // no damping at all is a valid (observing) setting
 }

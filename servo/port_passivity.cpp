@@ -1,10 +1,16 @@
 #include "isotouch/servo/port_passivity.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "isotouch/core/setting_check.h"
 
 namespace isotouch::servo {
+namespace {
+/// The shortest period the damping's cap alpha_max / dt is taken over [s]: a clock step far
+/// below any device loop's would make the cap infinite and the damping NaN.
+constexpr double kMinPeriodS = 1e-6;
+}  // namespace
 
 PortPassivity::PortPassivity(bool enabled, double alpha_max, double force_limit_n)
     : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n) {
@@ -14,7 +20,7 @@ PortPassivity::PortPassivity(bool enabled, double alpha_max, double force_limit_
 
 Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const double* e_ref_j) {
   alpha_ = 0;
-  if (!finite(x) || !finite(f_want) || !(t == t)) {
+  if (!finite(x) || !finite(f_want) || !std::isfinite(t)) {
     // Zero force now; the next sane tick starts the velocity afresh.
     prev_f_ = {};
     started_ = false;
@@ -41,15 +47,17 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
     const double dx2 = dot(dx, dx);
     const double excess = e_out_ + std::max(0.0, dot(f, dx)) - (e_ref_j ? *e_ref_j : e_in_);
     if (excess > 0 && dx2 > 1e-30) {
-      const bool capped = excess * dt > alpha_max_ * dx2;
-      const double per_m = capped ? alpha_max_ / dt : excess / dx2;  // [N/m] on dx
-      alpha_ = per_m * dt;
+      const double period = std::max(dt, kMinPeriodS);
+      const bool capped = excess * period > alpha_max_ * dx2;
+      const double per_m = capped ? alpha_max_ / period : excess / dx2;  // [N/m] on dx
+      alpha_ = per_m * period;
       damp = dx * -per_m;
       f += damp;
       ++active_;
     }
   }
   if (dot(f, f) > f_max_ * f_max_ * (1 - 1e-9)) saturate(f, f_max_);  // the square root only near the limit
+  if (!finite(f)) f = {};  // never hand the device a NaN, whatever the arithmetic met
   prev_t_ = t;
   prev_x_ = x;
   prev_f_ = f;

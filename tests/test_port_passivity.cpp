@@ -85,3 +85,15 @@ TEST(PortPassivity, RejectsSettingsThatWouldLeaveTheForceUnbounded) {
   EXPECT_NE(message(-1, 10).find("alpha_max = -1"), std::string::npos) << message(-1, 10);
   EXPECT_EQ(message(0, 10), "accepted");  // no damping at all is a valid (observing) setting
 }
+
+// An infinite timestamp is bad input like a NaN one: zero force, and the next sane tick
+// starts afresh (it passed t == t and the held force went out undamped).
+TEST(PortPassivity, InfiniteTimestampGivesZeroForce) {
+  PortPassivity pc(true, 100, 10);
+  const Vec3 f{1, 0, 0};
+  pc.step(0.000, {0, 0, 0}, f);
+  EXPECT_EQ(pc.step(INFINITY, {0.001, 0, 0}, f).x, 0.0);
+  EXPECT_EQ(pc.step(-INFINITY, {0.002, 0, 0}, f).x, 0.0);
+  EXPECT_EQ(pc.step(0.003, {0.003, 0, 0}, f).x, 1.0);  // first tick again: no velocity yet
+  EXPECT_EQ(pc.energy_out_j(), 0.0);
+}

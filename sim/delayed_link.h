@@ -33,6 +33,10 @@ struct LinkParams {
 template <class T>
 class DelayLine {
  public:
+  /// Rounding slack on arrival times [s]: far below any tick, far above double's error on
+  /// times of hours.
+  static constexpr double kArrivalSlackS = 1e-9;
+
   DelayLine(const LinkParams& p, std::uint64_t stream)
       : one_way_s_(0.5 * p.round_trip_delay_s), jitter_s_(p.jitter_s), rng_(p.seed * 2 + stream) {
     p.validate();
@@ -46,11 +50,13 @@ class DelayLine {
     queue_.push_back({arrive, value});
   }
 
-  /// Takes every message that has arrived by t_s [s] into `held` (the last one wins).
+  /// Takes every message that has arrived by t_s [s] into `held` (the last one wins); one
+  /// due within kArrivalSlackS after t_s counts as arrived (t + one way is rounded in
+  /// floating point: 0.026 + 0.005 > 0.031 would serve it a tick late).
   /// @return the number taken.
   int receive(double t_s, T& held) {
     int n = 0;
-    while (!queue_.empty() && queue_.front().arrive_s <= t_s) {
+    while (!queue_.empty() && queue_.front().arrive_s <= t_s + kArrivalSlackS) {
       held = queue_.front().value;
       queue_.pop_front();
       ++n;

@@ -10,17 +10,21 @@ namespace isotouch::sim {
 namespace {
 
 struct PoseMessage {
-  Vec3 x;  ///< device position [m]
+  Vec3 x;              ///< device position [m]
+  double sent_s = 0;   ///< device time it was sent [s]
 };
 struct ForceMessage {
-  Vec3 f;  ///< force the servo rendered [N]
+  Vec3 f;                  ///< force the servo rendered [N]
+  double pose_sent_s = 0;  ///< when the pose it answers was sent [s]
 };
 
 /// The servo end: one HRI tick on each pose received.
 class ServoEnd {
  public:
   explicit ServoEnd(const LinkedContact& cfg) : renderer_(params(cfg)) {}
-  ForceMessage render(const SampleField& field, const Vec3& x) { return {renderer_.tick(field, x).force_n}; }
+  ForceMessage render(const SampleField& field, const PoseMessage& p) {
+    return {renderer_.tick(field, p.x).force_n, p.sent_s};
+  }
 
  private:
   static HriParams params(const LinkedContact& cfg) {
@@ -60,6 +64,12 @@ Vec3 hand_target(const LinkedContact& cfg, const Vec3& p0, const Vec3& n, double
 Vec3 hand_target_velocity(const LinkedContact& cfg, const Vec3& n, double t) {
   if (cfg.motion == LinkedMotion::kPress || cfg.press_speed_m_s * t - 1e-3 >= cfg.press_depth_m) return {};
   return n * -cfg.press_speed_m_s;
+}
+
+void record_round_trip(LinkedContactResult& r, double s) {
+  r.round_trip_min_s = r.round_trips == 0 ? s : std::min(r.round_trip_min_s, s);
+  r.round_trip_max_s = std::max(r.round_trip_max_s, s);
+  ++r.round_trips;
 }
 
 /// Half the peak-to-peak of s over [from, to) (to clipped at the end).
@@ -116,9 +126,9 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
   for (long k = 0; k < r.ticks; ++k) {
     const double t = double(k) * T;
     const Vec3 x = dev.position();
-    if (k % link_every == 0) up.send(t, {x});
-    if (up.receive(t, pose_in) > 0) down.send(t, servo.render(field, pose_in.x));
-    down.receive(t, force_held);
+    if (k % link_every == 0) up.send(t, {x, t});
+    if (up.receive(t, pose_in) > 0) down.send(t, servo.render(field, pose_in));
+    if (down.receive(t, force_held) > 0) record_round_trip(r, t - force_held.pose_sent_s);
     const Vec3 f = pc.step(t, x, force_held.f);
     dev.command_force(f);
     dev.step(T, hand_target(cfg, p0, n, t), hand_target_velocity(cfg, n, t));

@@ -65,6 +65,11 @@ struct LinkedContactResult {
   double max_tick_force_error_ratio = 0;
   /// Normal force the device applied at each device tick [N] (for comparisons of runs).
   std::vector<double> force_trace_n;
+  /// Time from a pose's sending to the device's receipt of the force rendered from it,
+  /// over every force received [s] (the round trip as the simulation served it), and the
+  /// number received.
+  double round_trip_min_s = 0, round_trip_max_s = 0;
+  long round_trips = 0;
   double pc_energy_in_j = 0, pc_energy_out_j = 0, pc_dissipated_j = 0;
   long pc_active_ticks = 0, ticks = 0;
   /// Stable: finite, no sustained oscillation (the late amplitude is under 1 um or under

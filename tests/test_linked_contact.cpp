@@ -167,3 +167,18 @@ TEST(LinkedContact, RejectsLinkAndDeviceTimingItCannotHonour) {
   for (const auto& [cfg, expected] : cases) EXPECT_NE(message(cfg).find(expected), std::string::npos) << message(cfg);
   EXPECT_EQ(message(with([](LinkedContact& c) { c.link.rate_hz = 250; })), "accepted");  // 4 device ticks
 }
+
+// The round trip a pose's force takes through the simulation, for each swept delay: each
+// half is served at the device's next 1 ms tick (0.5 ms -> 1 ms, 2.5 ms -> 3 ms), and never
+// a tick later from floating-point error in t + one way.
+TEST(LinkedContact, RoundTripIsEachHalfRoundedUpToADeviceTick) {
+  const std::pair<double, double> delay_and_served_ms[] = {{0, 0}, {1, 2}, {2, 2}, {5, 6}, {10, 10}, {20, 20}};
+  for (const auto& [delay_ms, served_ms] : delay_and_served_ms) {
+    LinkedContact c;
+    c.link.round_trip_delay_s = delay_ms * 1e-3;
+    const LinkedContactResult r = simulate_linked_contact(wall(), kP, kUp, c);
+    EXPECT_GT(r.round_trips, 1000) << delay_ms << " ms";
+    EXPECT_NEAR(r.round_trip_min_s * 1e3, served_ms, 1e-9) << delay_ms << " ms";
+    EXPECT_NEAR(r.round_trip_max_s * 1e3, served_ms, 1e-9) << delay_ms << " ms";
+  }
+}

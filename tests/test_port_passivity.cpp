@@ -97,3 +97,14 @@ TEST(PortPassivity, InfiniteTimestampGivesZeroForce) {
   EXPECT_EQ(pc.step(0.003, {0.003, 0, 0}, f).x, 1.0);  // first tick again: no velocity yet
   EXPECT_EQ(pc.energy_out_j(), 0.0);
 }
+
+// At the cap the damping is alpha_max v, with v over the device's own period: 1 mm in 2 ms
+// is 0.5 m/s, and alpha_max = 0.5 N s/m takes 0.25 N off the held 1 N (0.5 N if the
+// period were taken as 1 ms).
+TEST(PortPassivity, CappedDampingUsesTheDevicesPeriod) {
+  PortPassivity pc(true, 0.5, 10);
+  const Vec3 f{1, 0, 0};
+  pc.step(0.000, {0, 0, 0}, f);
+  EXPECT_NEAR(pc.step(0.002, {0.001, 0, 0}, f).x, 0.75, 1e-12);
+  EXPECT_NEAR(pc.alpha(), 0.5, 1e-12);
+}

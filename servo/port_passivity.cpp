@@ -56,7 +56,12 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
       ++active_;
     }
   }
-  if (dot(f, f) > f_max_ * f_max_ * (1 - 1e-9)) saturate(f, f_max_);  // the square root only near the limit
+  const double f2 = dot(f, f);
+  if (f2 > f_max_ * f_max_) {  // clip, direction kept; the damping's share shrinks with it
+    const double scale = f_max_ / std::sqrt(f2);
+    f = f * scale;
+    damp = damp * scale;
+  }
   if (!finite(f)) f = {};  // never hand the device a NaN, whatever the arithmetic met
   prev_t_ = t;
   prev_x_ = x;

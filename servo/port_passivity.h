@@ -44,7 +44,10 @@ class PortPassivity {
   double energy_in_j() const { return e_in_; }
   /// Energy the held force handed the user since the start [J] (>= 0).
   double energy_out_j() const { return e_out_; }
-  /// Energy the added damping took out since the start [J] (>= 0).
+  /// Work the added damping (its share of the held force, after the clip) did against the
+  /// user's motion since the start [J]. The damping is set from the last period's motion, so
+  /// a tick on which the motion reverses books a negative amount: the sum is not bounded
+  /// below by 0 tick by tick.
   double dissipated_j() const { return dissipated_; }
   /// Damping added at the last tick [N s/m]; ticks with alpha > 0 so far.
   double alpha() const { return alpha_; }

@@ -108,3 +108,17 @@ TEST(PortPassivity, CappedDampingUsesTheDevicesPeriod) {
   EXPECT_NEAR(pc.step(0.002, {0.001, 0, 0}, f).x, 0.75, 1e-12);
   EXPECT_NEAR(pc.alpha(), 0.5, 1e-12);
 }
+
+// The damping's share of a clipped force is booked, not the damping asked for: a -9 N
+// damping on a 3 N request, clipped from -6 N to the 1 N limit (factor 1/6), holds -1.5 N
+// of damping; over the next +1 mm that takes out 1.5 mJ (9 mJ was booked before).
+TEST(PortPassivity, DissipationIsBookedAfterTheClip) {
+  PortPassivity pc(true, 100, 1);
+  const Vec3 f{3, 0, 0};
+  const double e_ref = -5e-3;  // two-port reference: the far side took 5 mJ out
+  pc.step(0.000, {0, 0, 0}, f, e_ref);  // clipped to 1 N, no damping yet
+  // E_out 1 mJ, next tick's 3 mJ, reference -5 mJ: excess 9 mJ, per metre 9 mJ / (1 mm)^2.
+  EXPECT_NEAR(pc.step(0.001, {0.001, 0, 0}, f, e_ref).x, -1.0, 1e-12);
+  pc.step(0.002, {0.002, 0, 0}, f, e_ref);
+  EXPECT_NEAR(pc.dissipated_j(), 1.5e-3, 1e-15);
+}

@@ -24,7 +24,8 @@ namespace isotouch::servo {
 class PortPassivity {
  public:
   /// @param enabled false: observe only. @param alpha_max largest added damping [N s/m];
-  /// keep it below m / T (a sampled damper alpha with alpha T / m > 2 is itself active).
+  /// keep it well below 2 m / T (m the device's mass, T its period): a sampled damper with
+  /// alpha T / m > 2 is itself active.
   /// @param force_limit_n forces are clipped here (direction kept) [N].
   /// @throws std::invalid_argument naming the setting and its value unless alpha_max is
   /// finite and >= 0 and force_limit_n finite and > 0.

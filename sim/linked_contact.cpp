@@ -112,7 +112,7 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
   DelayLine<PoseMessage> up(cfg.link, 0);
   DelayLine<ForceMessage> down(cfg.link, 1);
   ServoEnd servo(cfg);
-  servo::PortPassivity pc(cfg.passivity_controller, cfg.pc_alpha_max_n_s_per_m, cfg.device.force_max_n);
+  servo::PortPassivity pc(cfg.passivity_controller, cfg.pc_alpha_max(), cfg.device.force_max_n);
   const bool press = cfg.motion == LinkedMotion::kPress;
   SimDevice dev(cfg.device, press ? p0 + n * 2e-4 : p0 + n * 1e-3);
   if (press) dev.set_state(p0 + n * 2e-4, n * -cfg.approach_speed_m_s);

@@ -8,6 +8,7 @@
 #pragma once
 #include "isotouch/sim/servo_names.h"
 
+#include <optional>
 #include <vector>
 
 #include "isotouch/core/sample_field.h"
@@ -40,8 +41,13 @@ struct LinkedContact {
   double press_depth_m = 0.008;         ///< slow press: the hand target stops this deep [m]
   double duration_s = 1.5;
   bool passivity_controller = false;
-  /// Largest damping the controller adds [N s/m]: half of m / T_device (stable sampled damper).
-  double pc_alpha_max_n_s_per_m = 40;
+  /// Largest damping the controller adds [N s/m]; unset: pc_alpha_max() below.
+  std::optional<double> pc_alpha_max_n_s_per_m;
+  /// The damping cap in use [N s/m]: the one set, else 0.5 m / T_device from device.mass_kg
+  /// and device_period_s (a sampled damper turns active at 2 m / T: a margin of 4).
+  double pc_alpha_max() const {
+    return pc_alpha_max_n_s_per_m ? *pc_alpha_max_n_s_per_m : 0.5 * device.mass_kg / device_period_s;
+  }
 };
 
 struct LinkedContactResult {

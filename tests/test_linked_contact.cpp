@@ -182,3 +182,18 @@ TEST(LinkedContact, RoundTripIsEachHalfRoundedUpToADeviceTick) {
     EXPECT_NEAR(r.round_trip_max_s * 1e3, served_ms, 1e-9) << delay_ms << " ms";
   }
 }
+
+// The controller's damping cap follows the device: 0.5 m / T unless set.
+TEST(LinkedContact, DampingCapIsHalfTheMassOverTheDevicePeriod) {
+  LinkedContact c;
+  c.device.mass_kg = 0.16;
+  c.device_period_s = 2e-3;
+  EXPECT_NEAR(c.pc_alpha_max(), 40.0, 1e-12);  // 0.5 * 0.16 kg / 2 ms
+  c.device.mass_kg = 0.08;
+  c.device_period_s = 1e-3;
+  EXPECT_NEAR(c.pc_alpha_max(), 40.0, 1e-12);  // the former fixed value, now derived
+  c.device_period_s = 0.5e-3;
+  EXPECT_NEAR(c.pc_alpha_max(), 80.0, 1e-12);
+  c.pc_alpha_max_n_s_per_m = 12.5;
+  EXPECT_EQ(c.pc_alpha_max(), 12.5);
+}

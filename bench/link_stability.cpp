@@ -82,6 +82,7 @@ Cell measure(const SampleField& wall, double delay, double rate, bool quick, con
 
 std::string k_text(double k) {
   std::ostringstream o;
+  if (k <= 0) return "<" + std::to_string(int(kSearchLo));  // below the search's floor
   o << std::setprecision(4) << k << (k >= kSearchHi * 0.999 ? "+" : "");
   return o.str();
 }
@@ -119,7 +120,7 @@ void write_md(const std::string& dir, const std::vector<Cell>& cells, const std:
         "over its own 1 kHz loop and runs the time-domain passivity controller (servo/port_passivity.h, one-port "
         "rule). Stable: no sustained oscillation of the device (late amplitude under 1 um or under half the early "
         "one) and the device never got net energy from the link above 1 % of the wall's stored energy. K_max: log "
-        "bisection over " << kSearchLo << "-" << kSearchHi << " N/m (+: the search's top). Slow press: the hand "
+        "bisection over " << kSearchLo << "-" << kSearchHi << " N/m (+: the search's top; <: below its floor, 0 in the csv). Slow press: the hand "
         "target moves in at " << slow_press(0, 100, true).press_speed_m_s * 1e3 << " mm/s (hand 300 N/m, 5 N s/m); "
         "stiffness error: the worst |mean F / (K mean depth) - 1| over 100 ms windows deeper than 1 mm; force RMS "
         "error: against the undelayed 1 kHz run without the controller. Served round trip: from a pose's sending to "

@@ -165,7 +165,7 @@ double find_k_max_linked(const SampleField& field, const Vec3& p0, const Vec3& n
     cfg.stiffness_n_per_m = k;
     return simulate_linked_contact(field, p0, normal, cfg).stable(k, cfg);
   };
-  if (!stable(lo)) return lo;
+  if (!stable(lo)) return 0;
   if (stable(hi)) return hi;
   for (int i = 0; i < iterations; ++i) {
     const double mid = std::sqrt(lo * hi);

@@ -89,7 +89,8 @@ struct LinkedContactResult {
 LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3& surface_point,
                                             const Vec3& normal, const LinkedContact& cfg);
 
-/// Largest K in [k_lo, k_hi] (log bisection) whose press is stable through the link.
+/// Largest K in [k_lo, k_hi] (log bisection) whose press is stable through the link [N/m];
+/// 0 when k_lo itself is unstable (K_max below the search).
 double find_k_max_linked(const SampleField& field, const Vec3& surface_point, const Vec3& normal,
                          LinkedContact cfg, double k_lo, double k_hi, int iterations);
 

@@ -197,3 +197,10 @@ TEST(LinkedContact, DampingCapIsHalfTheMassOverTheDevicePeriod) {
   c.pc_alpha_max_n_s_per_m = 12.5;
   EXPECT_EQ(c.pc_alpha_max(), 12.5);
 }
+
+// When even the search's lowest K is unstable the answer is 0 (below the search), never
+// that lowest K, which a K_max found at the floor would also read.
+TEST(LinkedContact, KMaxBelowTheSearchIsZero) {
+  const LinkedContact c = press_100hz_10ms(false);  // 800 N/m oscillates here (test above)
+  EXPECT_EQ(find_k_max_linked(wall(), kP, kUp, c, 800, 1600, 2), 0.0);
+}

@@ -28,7 +28,7 @@ struct Cell {
   double delay_s, rate_hz;
   double kmax, kmax_pc;
   bool k800_stable, k800_stable_pc;
-  double k800_energy_j, k800_energy_pc_j;  // the device's net energy from the link [J]
+  double k800_energy_j, k800_energy_pc_j;  // applied force's work on the device less its damper's loss [J]
   double settled_pc_m;                     // amplitude from 200 ms after contact, controller on [m]
   double stiffness_err_pc, rms_err_pc;     // slow press with the controller
   double served_min_s, served_max_s;       // pose-to-force round trip as the simulation served it [s]
@@ -119,15 +119,16 @@ void write_md(const std::string& dir, const std::vector<Cell>& cells, const std:
         "up and forces down at the link rate, each after half the round trip; the device end holds the last force "
         "over its own 1 kHz loop and runs the time-domain passivity controller (servo/port_passivity.h, one-port "
         "rule). Stable: no sustained oscillation of the device (late amplitude under 1 um or under half the early "
-        "one) and the device never got net energy from the link above 1 % of the wall's stored energy. K_max: log "
+        "one) and the applied force's work on the device, less its own damper's loss, never exceeded 1 % of the "
+        "wall's stored energy. K_max: log "
         "bisection over " << kSearchLo << "-" << kSearchHi << " N/m (+: the search's top; <: below its floor, 0 in the csv). Slow press: the hand "
         "target moves in at " << slow_press(0, 100, true).press_speed_m_s * 1e3 << " mm/s (hand 300 N/m, 5 N s/m); "
         "stiffness error: the worst |mean F / (K mean depth) - 1| over 100 ms windows deeper than 1 mm; force RMS "
         "error: against the undelayed 1 kHz run without the controller. Served round trip: from a pose's sending to "
         "the device's receipt of the force rendered from it, min-max over the slow press's messages (each half is "
         "served at the device's next tick).\n\n" << reading << "\n\n"
-     << "| round trip [ms] | served [ms] | rate [Hz] | K_max [N/m] | K_max with PC [N/m] | K = 800 stable | with PC | device net "
-        "energy at 800, with PC [J] | amplitude from +200 ms, PC [mm] | slow press stiffness error, PC | force RMS "
+     << "| round trip [ms] | served [ms] | rate [Hz] | K_max [N/m] | K_max with PC [N/m] | K = 800 stable | with PC | work on the device less "
+        "its damper's loss at 800, with PC [J] | amplitude from +200 ms, PC [mm] | slow press stiffness error, PC | force RMS "
         "error vs undelayed, PC |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const Cell& c : cells)
     md << "| " << c.delay_s * 1e3 << " | " << served_text(c) << " | " << c.rate_hz << " | " << k_text(c.kmax) << " | " << k_text(c.kmax_pc)

@@ -59,8 +59,10 @@ struct LinkedContactResult {
   /// The same over [0.2, 0.45] and over [0.75, 1] of the run [m].
   double early_amplitude_m = 0;
   double late_amplitude_m = 0;
-  /// Largest net energy the link handed the device: max over t of (work of the applied
-  /// force - the device damper's loss) [J]; > 0 means the wall gave out energy.
+  /// Largest work the applied force did on the device less the device's own viscous loss
+  /// (device.damping_n_s_per_m): max over t [J]. > 0: the link's force did more work than
+  /// the device's damper took out (not the link's own balance, which may be positive by up
+  /// to that loss and still read <= 0 here).
   double device_energy_out_j = 0;
   double max_force_n = 0;
   /// Slow press: largest |mean F.N / (K mean depth) - 1| over 100 ms windows whose mean
@@ -79,8 +81,8 @@ struct LinkedContactResult {
   double pc_energy_in_j = 0, pc_energy_out_j = 0, pc_dissipated_j = 0;
   long pc_active_ticks = 0, ticks = 0;
   /// Stable: finite, no sustained oscillation (the late amplitude is under 1 um or under
-  /// half the early one) and the device never got net energy above 1 % of the wall's
-  /// stored energy at the press's equilibrium.
+  /// half the early one) and device_energy_out_j at most 1 % of the wall's stored energy
+  /// at the press's equilibrium.
   bool stable(double stiffness_n_per_m, const LinkedContact& cfg) const;
 };
 

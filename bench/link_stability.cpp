@@ -68,7 +68,7 @@ Cell measure(const SampleField& wall, double delay, double rate, bool quick, con
   for (bool pc : {false, true}) {
     const LinkedContact cfg = press(delay, rate, pc, quick);
     const LinkedContactResult r = sim::simulate_linked_contact(wall, kP, kUp, cfg);
-    (pc ? c.k800_stable_pc : c.k800_stable) = r.stable(kWallK, cfg);
+    (pc ? c.k800_stable_pc : c.k800_stable) = r.stable(cfg);
     (pc ? c.k800_energy_pc_j : c.k800_energy_j) = r.device_energy_out_j;
     if (pc) c.settled_pc_m = r.settled_amplitude_m;
   }
@@ -118,9 +118,10 @@ void write_md(const std::string& dir, const std::vector<Cell>& cells, const std:
      << " m/s) on a flat HRI wall rendered at the servo end of a simulated link (sim/linked_contact.h): poses go "
         "up and forces down at the link rate, each after half the round trip; the device end holds the last force "
         "over its own 1 kHz loop and runs the time-domain passivity controller (servo/port_passivity.h, one-port "
-        "rule). Stable: no sustained oscillation of the device (late amplitude under 1 um or under half the early "
-        "one) and the applied force's work on the device, less its own damper's loss, never exceeded 1 % of the "
-        "wall's stored energy. K_max: log "
+        "rule). Stable: no sustained oscillation of the device (late amplitude under "
+     << LinkedContactResult::kStillAmplitudeM * 1e6 << " um or under " << LinkedContactResult::kDecayRatio
+     << " of the early one) and the applied force's work on the device, less its own damper's loss, never exceeded "
+     << 100 * LinkedContactResult::kEnergyTolerance << " % of the wall's stored energy. K_max: log "
         "bisection over " << kSearchLo << "-" << kSearchHi << " N/m (+: the search's top; <: below its floor, 0 in the csv). Slow press: the hand "
         "target moves in at " << slow_press(0, 100, true).press_speed_m_s * 1e3 << " mm/s (hand 300 N/m, 5 N s/m); "
         "stiffness error: the worst |mean F / (K mean depth) - 1| over 100 ms windows deeper than 1 mm; force RMS "

@@ -152,10 +152,11 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
   return r;
 }
 
-bool LinkedContactResult::stable(double k, const LinkedContact& cfg) const {
+bool LinkedContactResult::stable(const LinkedContact& cfg) const {
+  const double k = cfg.stiffness_n_per_m;
   const double d_eq = cfg.push_force_n / (k + cfg.device.hand_stiffness_n_per_m);
-  const double tolerance_j = 0.01 * 0.5 * k * d_eq * d_eq;
-  const bool sustained = late_amplitude_m > 1e-6 && late_amplitude_m > 0.5 * early_amplitude_m;
+  const double tolerance_j = kEnergyTolerance * 0.5 * k * d_eq * d_eq;
+  const bool sustained = late_amplitude_m > kStillAmplitudeM && late_amplitude_m > kDecayRatio * early_amplitude_m;
   return !nonfinite && !sustained && device_energy_out_j <= tolerance_j;
 }
 
@@ -163,7 +164,7 @@ double find_k_max_linked(const SampleField& field, const Vec3& p0, const Vec3& n
                          double lo, double hi, int iterations) {
   auto stable = [&](double k) {
     cfg.stiffness_n_per_m = k;
-    return simulate_linked_contact(field, p0, normal, cfg).stable(k, cfg);
+    return simulate_linked_contact(field, p0, normal, cfg).stable(cfg);
   };
   if (!stable(lo)) return 0;
   if (stable(hi)) return hi;

@@ -80,10 +80,13 @@ struct LinkedContactResult {
   long round_trips = 0;
   double pc_energy_in_j = 0, pc_energy_out_j = 0, pc_dissipated_j = 0;
   long pc_active_ticks = 0, ticks = 0;
-  /// Stable: finite, no sustained oscillation (the late amplitude is under 1 um or under
-  /// half the early one) and device_energy_out_j at most 1 % of the wall's stored energy
-  /// at the press's equilibrium.
-  bool stable(double stiffness_n_per_m, const LinkedContact& cfg) const;
+  /// Stable: finite, no sustained oscillation (the late amplitude is under
+  /// kStillAmplitudeM or under kDecayRatio of the early one) and device_energy_out_j at most
+  /// kEnergyTolerance of the wall's stored energy at the press's equilibrium (K from cfg).
+  bool stable(const LinkedContact& cfg) const;
+  static constexpr double kStillAmplitudeM = 1e-6;  ///< [m]
+  static constexpr double kDecayRatio = 0.5;        ///< late / early amplitude [1]
+  static constexpr double kEnergyTolerance = 0.01;  ///< of 0.5 K d_eq^2 [1]
 };
 
 /// Simulate `cfg` against `field`'s isosurface tau = 0 (inside above) at `surface_point`,

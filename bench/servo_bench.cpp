@@ -12,6 +12,7 @@
 #include <sstream>
 #include <thread>
 
+#include "isotouch/bench/passivity_cost.h"
 #include "isotouch/engine/cpu_gradient.h"
 #include "isotouch/io/files.h"
 #include "isotouch/engine/gradient_pass.h"
@@ -465,6 +466,9 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
              << int(n) << ": " << contact_stroke << " ns (" << std::setprecision(2)
              << contact_stroke / (1e3 * row.avila_us) << " x Avila); HRI as shipped " << std::setprecision(1)
              << 1e3 * row.hri_us << " ns, Avila " << 1e3 * row.avila_us << " ns\n";
+      const double pc_ns = port_passivity_ns_per_tick(s.hip, 1000000, 5);
+      floors << "    passivity controller (servo/port_passivity, on, 10^6 ticks of the stroke): " << std::setprecision(1)
+             << pc_ns << " ns per tick, " << 100.0 * pc_ns / fl.update_ns << " % of the update's floor (target < 10 %)\n";
     }
     tools << std::fixed << std::setprecision(3) << "  " << pr.scene << ": HRI with a spherical tool of radius "
           << hp_tool.tool_radius_m * 1e3 << " mm (2 voxels) " << med[6] << " us per tick, " << std::setprecision(2)

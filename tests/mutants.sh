@@ -203,6 +203,27 @@ m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_tick
                                $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' \
                                $T 'HriRecovery.AReleaseByAPlaneUpdate*'
 
+# The time-domain passivity controller at the device end of a delayed link (port_passivity)
+# and the link the simulation puts in front of it (delayed_link).
+P=servo/port_passivity.cpp
+m passivity-damping         $P '      f += damp;' '' test_linked_contact 'LinkedContact.*'
+m passivity-device-clock    $P 'capped ? alpha_max_ / period : excess' 'capped ? alpha_max_ / 1e-3 : excess' \
+                               test_port_passivity 'PortPassivity.*'
+m passivity-energy-in       $P '    e_in_ += std::max(-w, 0.0);' '' test_port_passivity 'PortPassivity.*'
+m passivity-reported-alpha  $P '      alpha_ = per_m * period;' '      alpha_ = per_m * 1e-3;' test_port_passivity 'PortPassivity.*'
+m passivity-stalled-clock   $P $'  if (started_) {\n    dx = x - prev_x_;' $'  if (moving) {\n    dx = x - prev_x_;' \
+                               test_port_passivity 'PortPassivity.*'
+m passivity-infinite-time   $P '!std::isfinite(t)' '!(t == t)' test_port_passivity 'PortPassivity.*'
+m passivity-clip-dissipated $P '    damp = damp * scale;' '' test_port_passivity 'PortPassivity.*'
+m passivity-force-limit     $P '  core::require_positive("PortPassivity", "force_limit_n", force_limit_n, "N");' '' \
+                               test_port_passivity 'PortPassivity.*'
+m link-delay                sim/delayed_link.h 'one_way_s_(0.5 * p.round_trip_delay_s)' 'one_way_s_(0.0)' \
+                               test_linked_contact 'DelayLine.*:LinkedContact.*'
+m link-arrival-slack        sim/delayed_link.h 'arrive_s <= t_s + kArrivalSlackS' 'arrive_s <= t_s' \
+                               test_linked_contact 'DelayLine.*:LinkedContact.*'
+m link-whole-ticks          sim/linked_contact.cpp 'whole >= 1 && std::abs(ticks - whole) <= 1e-9 * whole' 'whole >= 1' \
+                               test_linked_contact 'DelayLine.*:LinkedContact.*'
+
 # ---- The run ----
 work=$root/build-mutants
 copy=$work/src

@@ -151,8 +151,10 @@ LabelVolume load_label_volume(const MaterialsSpec& spec, const engine::Volume& s
   } else {
     const bool seg = is_seg_nrrd(spec.labels_path);
     out.source = (seg ? "3D Slicer segmentation " : "label map ") + spec.labels_path;
-    if (seg) from_segments(spec.labels_path, out.materials);
+    // The voxels first: an unreadable file is named by the volume reader, not taken for a
+    // header without segments.
     const engine::Volume map = io::load_volume(spec.labels_path);
+    if (seg) from_segments(spec.labels_path, out.materials);
     to_ids(spec.labels_path, on_scan_grid(map, label_values(map), scan, out), scan, out);
   }
   out.voxels.assign(out.materials.size() + 1, 0);

@@ -244,6 +244,21 @@ TEST(Materials, MaterialWithNoSegmentOfItsNameIsAnError) {
   EXPECT_NE(e.find(p + ": materials.list[0] \"enamel\": no segment of that name (segments: pulp = 1)"), std::string::npos) << e;
 }
 
+TEST(Materials, MissingSegNrrdIsNamedByTheVolumeReaderNotTakenForAHeaderWithoutSegments) {
+  test::TempDir dir;
+  MaterialsSpec spec;
+  spec.labels_path = (dir.path / "gone.seg.nrrd").string();
+  spec.list = {mat("enamel", -1)};
+  try {
+    materials::load_label_volume(spec, scan(kD));
+    ADD_FAILURE() << "no error";
+  } catch (const engine::VolumeError& e) {
+    EXPECT_NE(std::string(e.what()).find(spec.labels_path), std::string::npos) << e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "not the volume reader's error: " << e.what();
+  }
+}
+
 // The .seg.nrrd header's segments, key by key.
 namespace {
 using Keys = std::vector<std::pair<std::string, std::string>>;

@@ -83,9 +83,9 @@ if [[ "${1:-}" == "test" ]]; then
   cmake --preset fuzz >build-configure.log 2>&1 || { cat build-configure.log; exit 1; }
   rm -f build-configure.log
   cmake --build --preset fuzz -j"$(nproc)"
-  # scene, recording, hid_report and igtl: libFuzzer (clang); volume and vdb: a mutation loop built by GCC in
+  # scene, recording, hid_report, igtl and seg_nrrd: libFuzzer (clang); volume and vdb: a mutation loop built by GCC in
   # build/ (Debian's ITK headers refuse clang).
-  for t in scene recording hid_report igtl volume vdb; do
+  for t in scene recording hid_report igtl seg_nrrd volume vdb; do
     bin=build-fuzz/bin/fuzz_$t
     [[ $t == volume || $t == vdb ]] && bin=build/bin/fuzz_$t
     mkdir -p "build-fuzz/corpus_$t"

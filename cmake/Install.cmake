@@ -53,7 +53,7 @@ foreach(p isotouch isotouch-sculpt isotouch-devemu)
 endforeach()
 
 # Headers: every *.h of each library folder, under include/isotouch/<folder>/.
-foreach(folder core servo sim engine io session eval run service bench shaders)
+foreach(folder core servo sim engine io materials session eval run service bench shaders)
   install(DIRECTORY ${PROJECT_SOURCE_DIR}/${folder}/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/isotouch/${folder}
     FILES_MATCHING PATTERN "*.h")
 endforeach()
@@ -122,7 +122,7 @@ install(FILES ${CMAKE_BINARY_DIR}/isotouchConfig.cmake ${CMAKE_BINARY_DIR}/isoto
 # pkg-config: the libraries in link order (each before what it needs). A static library
 # exported above but missing here stops the configuration, so the .pc cannot fall behind.
 set(ISOTOUCH_PC_LIBS "")
-set(_pc_order bench serve run plus_peer igtl_device service eval vdb_io volume_io live record session scene io engine
+set(_pc_order bench serve run plus_peer igtl_device service eval materials seg_nrrd vdb_io volume_io live record session scene io engine
     engine_cpu sim hid servo)
 foreach(l ${_pc_order})
   if(TARGET isotouch_${l})

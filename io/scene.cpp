@@ -637,6 +637,83 @@ void parse_script(const Reader& r, const json& root, Scene& s) {
   p.press_force_fraction = r.number(sc, "script", "press_force_fraction");
 }
 
+// One entry of "materials.list": {"name", "label" | "range", "stiffness_n_per_m", "mu_s",
+// "mu_d", "rate", "density_scale", "color", "critical", "margin_mm"}.
+materials::Material parse_material(const Reader& r, const json& m, const std::string& f, bool label_map, bool seg) {
+  constexpr std::string_view kSec = "materials.list";
+  r.only(m, f, scene_keys(kSec));
+  materials::Material out;
+  if (!m.contains("name")) r.fail(f + ".name", "is required");
+  out.name = r.string(m, f, "name", "");
+  if (out.name.empty()) r.fail(f + ".name", "must not be empty");
+  if (!label_map && m.contains("label"))
+    r.fail(f + ".label", "applies to a label map (\"materials.labels\"); a transfer function gives \"range\"");
+  if (label_map && m.contains("range"))
+    r.fail(f + ".range", "applies to a transfer function; with \"materials.labels\" give \"label\"");
+  if (label_map && !seg && !m.contains("label")) r.fail(f + ".label", "is required with a label map (its value in the map)");
+  if (m.contains("label")) out.label = r.integer(m, f, "label", {}, kSec);
+  if (!label_map) {
+    if (!m.contains("range")) r.fail(f + ".range", "is required with a transfer function: [lo, hi) in the volume's units");
+    const json& v = m.at("range");
+    if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number() ||
+        !std::isfinite(v[0].get<double>()) || !std::isfinite(v[1].get<double>()) || !(v[0].get<double>() < v[1].get<double>()))
+      r.fail(f + ".range", "must be [lo, hi) with lo < hi, finite, got " + v.dump());
+    out.range_lo = v[0].get<double>();
+    out.range_hi = v[1].get<double>();
+  }
+  out.stiffness_n_per_m = r.number(m, f, "stiffness_n_per_m", {}, kSec);
+  out.mu_s = r.number(m, f, "mu_s", {}, kSec);
+  out.mu_d = r.number(m, f, "mu_d", {}, kSec);
+  if (out.mu_d > out.mu_s) r.fail(f + ".mu_d", "must be at most mu_s (" + std::to_string(out.mu_s) + "), got " + m.at("mu_d").dump());
+  out.rate = r.number(m, f, "rate", {}, kSec);
+  out.density_scale = r.number(m, f, "density_scale", {}, kSec);
+  if (m.contains("color")) {
+    const json& c = m.at("color");
+    if (!c.is_array() || c.size() != 3) r.fail(f + ".color", "must be [r, g, b], each in [0, 1], got " + c.dump());
+    for (std::size_t k = 0; k < 3; ++k) {
+      if (!c[k].is_number() || !(c[k].get<double>() >= 0.0 && c[k].get<double>() <= 1.0))
+        r.fail(f + ".color", "must be [r, g, b], each in [0, 1], got " + c.dump());
+      out.color[k] = c[k].get<double>();
+    }
+    out.has_color = true;
+  }
+  out.critical = r.boolean(m, f, "critical", false);
+  out.margin_mm = r.number(m, f, "margin_mm", {}, kSec);
+  return out;
+}
+
+// "materials": {"labels": PATH (a label map or .seg.nrrd; absent: a transfer function),
+//               "list": [material, ...]}
+void parse_materials(const Reader& r, const json& root, const std::string& path, materials::MaterialsSpec& spec) {
+  if (!root.contains("materials")) return;
+  const json& m = root.at("materials");
+  r.only(m, "materials", scene_keys("materials"));
+  spec.present = true;
+  if (m.contains("labels")) {
+    const std::string p = r.string(m, "materials", "labels", "");
+    if (p.empty()) r.fail("materials.labels", "must not be empty");
+    const fs::path pp(p);
+    spec.labels_path = pp.is_absolute() ? p : (fs::path(path).parent_path() / pp).lexically_normal().string();
+  }
+  if (!m.contains("list")) r.fail("materials.list", "is required: the materials, [{\"name\": ..., ...}, ...]");
+  const json& list = m.at("list");
+  if (!list.is_array() || list.empty() || list.size() > 255)
+    r.fail("materials.list", "must be an array of 1 to 255 materials, got " + (list.is_array() ? std::to_string(list.size()) + " entries" : list.dump()));
+  const bool label_map = !spec.labels_path.empty(), seg = materials::is_seg_nrrd(spec.labels_path);
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string f = "materials.list[" + std::to_string(i) + "]";
+    const materials::Material mat = parse_material(r, list[i], f, label_map, seg);
+    for (const materials::Material& o : spec.list) {
+      if (o.name == mat.name) r.fail(f + ".name", "\"" + mat.name + "\" names an earlier material too");
+      if (label_map && mat.label >= 0 && o.label == mat.label)
+        r.fail(f + ".label", std::to_string(mat.label) + " is \"" + o.name + "\"'s label too");
+      if (!label_map && mat.range_lo < o.range_hi && o.range_lo < mat.range_hi)
+        r.fail(f + ".range", list[i].at("range").dump() + " overlaps \"" + o.name + "\"'s");
+    }
+    spec.list.push_back(mat);
+  }
+}
+
 }  // namespace
 
 Scene parse_scene(const std::string& text, const std::string& path) {
@@ -660,6 +737,7 @@ Scene parse_scene(const std::string& text, const std::string& path) {
                           s.engine.mode + "\"");
     tool_from_brush(r, s);
   }
+  parse_materials(r, root, path, s.materials);
   const json& out = r.section(root, "outputs");
   r.only(out, "outputs", scene_keys("outputs"));
   s.write_trace = r.boolean(out, "outputs", "trace_csv", true);

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/materials/material.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/sim/script.h"
 #include "isotouch/sim/sim_device.h"
@@ -129,6 +130,9 @@ struct Scene {
   bool draw_plots = true;
   EngineSpec engine;         ///< the "engine" section (defaults: gradient only, sparse, fp32)
   EditsSpec edits;           ///< the "edits" section (present = false without one)
+  /// The "materials" section (present = false without one: the scan is one material);
+  /// labels_path resolved against the scene file's folder. Read by materials::load_label_volume.
+  materials::MaterialsSpec materials;
 };
 
 /// Parse and validate a scene file. Unknown keys are errors (they are usually typos).

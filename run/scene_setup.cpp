@@ -21,6 +21,7 @@
 #include "isotouch/run/run_report.h"
 #include "isotouch/run/scene_script.h"
 #include "isotouch/eval/shapes.h"
+#include "isotouch/materials/label_volume.h"
 #include "isotouch/engine/synthetic.h"
 #include "isotouch/run/text.h"
 
@@ -170,6 +171,20 @@ void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 }
 
+// 1b. The scene's materials read onto the volume's grid and logged, so that a bad label map
+// stops the run here with its error. The servo, the drill and the pictures do not use them
+// yet (docs/architecture.md, "How a material reaches the servo").
+void load_materials(const Scene& scene, const SceneSetup& s, std::ostream& log) {
+  if (!scene.materials.present) return;
+  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, s.volume);
+  log << "materials " << lv.materials.size() << " from " << lv.source << ":";
+  for (std::size_t i = 0; i < lv.materials.size(); ++i)
+    log << (i ? ", " : " ") << lv.materials[i].name << " " << lv.voxels[i + 1] << " voxels"
+        << (lv.materials[i].critical ? " (critical)" : "");
+  log << "; " << lv.voxels[0] << " voxels unlabelled (the servo does not use materials yet)\n";
+  for (const std::string& n : lv.notes) log << "         note: " << n << "\n";
+}
+
 // The Vulkan context of opt.device into s.vk, or none: the CPU backend when it is asked for,
 // or when no device was asked for and none opens (the reason is logged). A device asked for
 // by name that does not open is an error.
@@ -245,6 +260,7 @@ SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& 
   (void)scene_passes(scene);  // a bad pass list fails before the volume is read
   (void)scene_sample_format(scene);
   load_volume(scene, s, log);
+  load_materials(scene, s, log);
   run_engine_step(scene, opt, s, log);
   // 3. Script, servo parameters, workspace.
   s.hri = scene.hri;

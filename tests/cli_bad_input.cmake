@@ -90,6 +90,11 @@ expect(mhd_missing_data_file 1 "nodata.mhd: field 'ElementDataFile' = 'gone.raw'
 
 # Scenes.
 set(vol "\"volume\": {\"synthetic\": \"sphere\", \"dims\": [32, 32, 32], \"radius_vox\": 10}, \"isovalue\": 0")
+# A label map whose values (the ramp, 0 to 63) no material but label 1 claims: the run stops
+# before the engine with the file and the first unknown value.
+file(WRITE ${OUT}/labels.json "{${vol}, \"materials\": {\"labels\": \"ramp.nrrd\", \"list\": [{\"name\": \"a\", \"label\": 1}]}}")
+expect(scene_unknown_label 1 "ramp.nrrd: label value 2 \\(first at scan voxel \\([0-9, ]+\\)\\) is no material's: materials.list has labels 1"
+       run ${OUT}/labels.json --out ${OUT}/o)
 file(WRITE ${OUT}/dup.json "{${vol}, \"servo\": {\"stiffness_n_per_m\": 800, \"stiffness_n_per_m\": 80000}}")
 expect(scene_duplicate_key 1 "dup.json: field 'servo.stiffness_n_per_m': appears twice" run ${OUT}/dup.json --out ${OUT}/o)
 file(WRITE ${OUT}/overflow.json "{${vol}, \"servo\": {\"stiffness_n_per_m\": 1e999}}")

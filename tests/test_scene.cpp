@@ -437,7 +437,8 @@ DocRows documented_rows(const std::string& doc) {
       {"servo.friction", "`servo.friction` ("}, {"servo.tool", "`servo.tool` ("}, {"device", "### `device`"},
       {"script", "### `script`"}, {"engine", "### `engine`"}, {"edits", "### `edits`"},
       {"edits.brush", "A brush (in `edits.brush`"}, {"edits.timeline", "A timeline entry is"},
-      {"outputs", "### `outputs`"}};
+      {"outputs", "### `outputs`"}, {"materials", "### `materials`"},
+      {"materials.list", "A material (in `materials.list`"}};
   DocRows rows;
   for (const auto& [section, anchor] : anchors) {
     const auto table = isotouch::test::table_after(doc, anchor);
@@ -551,7 +552,8 @@ TEST(SceneDocs, ParserChecksTheTablesRanges) {
 TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
   const auto s = parse_scene(
       sphere_with(R"("servo": {"friction": {}, "tool": {}}, "engine": {"passes": [{"brick_minmax": {}}, "gradient"]},)"
-                  R"( "edits": {"timeline": [{"t_s": 1, "kind": "carve", "at": "vhip"}]})"),
+                  R"( "edits": {"timeline": [{"t_s": 1, "kind": "carve", "at": "vhip"}]},)"
+                  R"( "materials": {"list": [{"name": "a", "range": [0, 1]}]})"),
       "ok.json");
   const std::map<std::string, double> parsed{
       {"volume.spacing_m", s.synthetic.spacing_m}, {"volume.radius_vox", s.synthetic.radius_vox},
@@ -577,6 +579,11 @@ TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
       {"edits.brush.radius_mm", s.edits.brush.radius_mm}, {"edits.brush.strength", s.edits.brush.strength},
       {"edits.brush.falloff", s.edits.brush.falloff}, {"edits.brush.force_threshold_n", s.edits.brush.force_threshold_n},
       {"edits.brush.rate", s.edits.brush.rate}, {"edits.timeline.duration_s", s.edits.timeline.at(0).duration_s},
+      {"materials.list.stiffness_n_per_m", s.materials.list.at(0).stiffness_n_per_m},
+      {"materials.list.mu_s", s.materials.list.at(0).mu_s}, {"materials.list.mu_d", s.materials.list.at(0).mu_d},
+      {"materials.list.rate", s.materials.list.at(0).rate},
+      {"materials.list.density_scale", s.materials.list.at(0).density_scale},
+      {"materials.list.margin_mm", s.materials.list.at(0).margin_mm},
   };
   for (const isotouch::io::SceneField& f : isotouch::io::kSceneFields) {
     const auto def = isotouch::io::plain_number(f.default_text);

@@ -84,7 +84,7 @@ if n != 60 or not (0.25 <= lo <= hi <= 1.0):
 for pat in [r"^verdict: moving frames median [0-9.]+ ms: target <= 33\.0 ms (met|NOT met)$",
             r"^verdict: moving frames p95 [0-9.]+ ms: target <= 49\.5 ms (met|NOT met)$",
             r"^verdict: view stopped to full resolution [0-9.]+ ms \((0 frames|1 frame) drawn whole\): target <= 250 ms (met|NOT met)$",
-            r"^verdict: moving frames against full resolution over the object's pixels \(worst of 6 frames\): PSNR "]:
+            r"^verdict: moving frames against full resolution over the object's pixels \(worst of 6 frames, [a-z-]+ upscale\): PSNR "]:
     if not re.search(pat, log, re.M):
         sys.exit("FAIL: no line matching " + pat)
 print(f"moving frames: {n} at scales {lo}-{hi}")

@@ -11,9 +11,9 @@
 namespace isotouch::bench {
 
 struct ScaleQuality {
-  double scale = 1;                      ///< the fraction of the window's resolution drawn
-  std::array<double, 3> psnr_db{};       ///< per upscale (kUpscales' order): the worst view's PSNR [dB]
-  std::array<double, 3> ssim{};          ///< per upscale: the worst view's SSIM
+  double scale = 1;                                ///< the fraction of the window's resolution drawn
+  std::array<double, std::size(kUpscales)> psnr_db{};  ///< per upscale (kUpscales' order): the worst view's PSNR [dB]
+  std::array<double, std::size(kUpscales)> ssim{};     ///< per upscale: the worst view's SSIM
 };
 
 /// Each of `scales` at `views` views of the orbit (`o.degrees_per_frame` * `o.frames` /

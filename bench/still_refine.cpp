@@ -36,30 +36,35 @@ StillRefinement refine_still(engine::RayCaster& caster, const engine::CameraView
   const engine::RaycastImage truth = caster.render(view, style, W, H);
   const std::vector<double> weight = row_weights(caster.render(view, style, rw, rh), H);  // as the last moving frame left the buffers
   const engine::FrameBudgetOptions& o = budget.options();
-  const double room = std::max(0.0, o.target * o.budget_ms - budget.fixed_cost_ms());
-  // [ms per unit of weight]: at first from the frames drawn whole, then from the bands drawn
-  // (their fixed part included).
+  // A band costs a fixed part (submission, the clears; at first the moving frames' fixed part)
+  // and a part per unit of row weight: at first the frames drawn whole's, then the bands'.
+  double fixed = budget.fixed_cost_ms();  // then at most the cheapest band's
   double rate = budget.full_cost_ms() / std::max(1e-9, std::accumulate(weight.begin(), weight.end(), 0.0));
-  double measured = 0;
-  engine::RaycastImage band;
+  bool learned = false;
+  bool equal = true;  // every band's rows the truth's
+  const int least = std::max(1, H / 16);  // at most 16 frames, whatever the estimates
   for (int y = 0; y < H;) {
-    const double planned = measured > 0 ? o.target * o.budget_ms : room;
+    const double room = o.target * o.budget_ms - fixed;
     int n = 1;
     double w = weight[std::size_t(y)];
-    while (y + n < H && (w + weight[std::size_t(y + n)]) * rate <= planned) w += weight[std::size_t(y + n++)];
+    while (y + n < H && (n < least || (w + weight[std::size_t(y + n)]) * rate <= room)) w += weight[std::size_t(y + n++)];
     const auto t0 = Clock::now();
-    band = caster.render_rows(view, style, W, H, y, y + n);
-    std::copy_n(band.rgba.begin() + std::ptrdiff_t(y) * W, std::ptrdiff_t(n) * W, shown.begin() + std::ptrdiff_t(y) * W);
+    const engine::RaycastImage band = caster.render_rows(view, style, W, H, y, y + n);
+    std::copy(band.rgba.begin(), band.rgba.end(), shown.begin() + std::ptrdiff_t(y) * W);
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    equal = equal && std::equal(band.rgba.begin(), band.rgba.end(), truth.rgba.begin() + std::ptrdiff_t(y) * W) &&
+            std::equal(band.depth.begin(), band.depth.end(), truth.depth.begin() + std::ptrdiff_t(y) * W);
     r.ms.push_back(ms);
     r.rows.push_back(n);
-    // As engine::FrameBudget learns: a rise at once, a fall at half weight.
-    const double now = ms / w;
-    rate = measured == 0 || now > rate ? now : rate + 0.5 * (now - rate);
-    measured = now;
+    // As engine::FrameBudget learns: a rise at once, a fall at half weight; a band no dearer
+    // than the fixed part says nothing of the rate.
+    fixed = std::min(fixed, ms);
+    const double now = (ms - fixed) / w;
+    if (now > 0) rate = !learned || now > rate ? now : rate + 0.5 * (now - rate), learned = true;
     y += n;
   }
-  r.equal = band.rgba == truth.rgba && band.depth == truth.depth && shown == truth.rgba;
+  const engine::RaycastImage after = caster.render(view, style, W, H);  // reuses the bands' picture
+  r.equal = equal && after.reused && after.rgba == truth.rgba && after.depth == truth.depth && shown == truth.rgba;
   return r;
 }
 

@@ -13,7 +13,7 @@ namespace isotouch::bench {
 struct StillRefinement {
   std::vector<double> ms;  ///< each frame: its band's render_rows + its rows into the shown picture [ms]
   std::vector<int> rows;   ///< the rows each frame drew
-  bool equal = false;      ///< the picture after the last band is a full frame's (render()), bit for bit
+  bool equal = false;      ///< each band's rows, and the picture the bands leave, are a full frame's (render()), bit for bit
   double total_ms() const;
   double max_ms() const;
 };
@@ -21,10 +21,12 @@ struct StillRefinement {
 /// The view `view` stopped after a frame drawn at rw x rh and shown upscaled to W x H in
 /// `shown`. First (not timed) a full frame of the view, the truth, and the rw x rh frame
 /// again (the buffers as the moving frames left them; its hits weigh each row's cost); then
-/// bands from row 0 down, each as many rows as fit the plan at the cost per weight: the first
-/// band the budget's room (its target share less the fixed part, `budget`'s estimates) at the
-/// mean of a frame drawn whole; each next one the target share at the bands' cost, their fixed
-/// part included (a rise taken at once, a fall at half weight, as engine::FrameBudget learns). Each band's rows replace the upscaled ones in `shown`.
+/// bands from row 0 down, each as many rows (at least H / 16) as the budget's target share
+/// holds at a fixed part per band (`budget`'s fixed part, then at most the cheapest band's)
+/// and a cost per unit of row weight,
+/// at first the frames drawn whole's (`budget`'s), then the bands' (a rise taken at once, a
+/// fall at half weight, as engine::FrameBudget learns). Each band's rows replace the upscaled
+/// ones in `shown`; after the last, a render() of the view reuses the bands' picture.
 StillRefinement refine_still(engine::RayCaster& caster, const engine::CameraView& view,
                              const engine::RaycastStyle& style, int W, int H, int rw, int rh,
                              const engine::FrameBudget& budget, std::vector<std::uint32_t>& shown);

@@ -1359,10 +1359,17 @@ RaycastImage RayCaster::Impl::draw(const FramePlan& f, const RaycastStyle& style
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.overlay_dispatches = m.overlay_dispatches;
   if (m.keep_on_device) return img;
-  img.rgba.resize(n_px);
-  img.depth.resize(n_px);
-  copy_pixels(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), n_px, m.bgra);
-  std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), n_px * 4);
+  // A band's image holds its rows only (the host copy of a whole picture per band would be
+  // most of a band's cost at a large window).
+  const std::size_t first = f.band_y0 < 0 ? 0 : std::size_t(f.band_y0) * std::size_t(width);
+  const std::size_t count = f.band_y0 < 0 ? n_px : std::size_t(f.band_y1 - f.band_y0) * std::size_t(width);
+  if (f.band_y0 >= 0) img.height = f.band_y1 - f.band_y0;
+  img.rgba.resize(count);
+  img.depth.resize(count);
+  const auto* rgba = static_cast<const std::uint32_t*>(in_place ? m.image.mapped() : m.image_down.mapped());
+  const auto* depths = static_cast<const float*>(in_place ? m.depth.mapped() : m.depth_down.mapped());
+  copy_pixels(img.rgba.data(), rgba + first, count, m.bgra);
+  std::memcpy(img.depth.data(), depths + first, count * 4);
   return img;
 }
 

@@ -254,8 +254,9 @@ class RayCaster {
   /// order from row 0 to `height` with one camera, style and size (progressive refinement of
   /// a still view, a band per frame), the bands leave that picture, bit for bit, and the next
   /// render() with them reuses it (RaycastImage::reused: only what update() changed since the
-  /// first band is drawn again). The image returned holds every row: those not yet drawn
-  /// are whatever the buffers held (another frame's, or undefined after a size change).
+  /// first band is drawn again). The image returned holds the band's rows only (height y1 -
+  /// y0, its first row the picture's row y0); the buffers' other rows hold what the earlier
+  /// bands drew, or another frame's (undefined after a size change).
   /// @throws std::invalid_argument on rows outside the picture or a size outside [1, 8192].
   RaycastImage render_rows(const CameraView& view, const RaycastStyle& style, int width, int height, int y0, int y1);
   const RaycastField& field() const;

@@ -37,9 +37,9 @@ StillRefinement refine_still(engine::RayCaster& caster, const engine::CameraView
   const std::vector<double> weight = row_weights(caster.render(view, style, rw, rh), H);  // as the last moving frame left the buffers
   const engine::FrameBudgetOptions& o = budget.options();
   // A band costs a fixed part (submission, the clears; at first the moving frames' fixed part)
-  // and a part per unit of row weight: at first the frames drawn whole's, then the bands'.
+  // and a part per unit of row weight, learned from the bands.
   double fixed = budget.fixed_cost_ms();  // then at most the cheapest band's
-  double rate = budget.full_cost_ms() / std::max(1e-9, std::accumulate(weight.begin(), weight.end(), 0.0));
+  double rate = 0;
   bool learned = false;
   bool equal = true;  // every band's rows the truth's
   const int least = std::max(1, H / 16);  // at most 16 frames, whatever the estimates
@@ -47,7 +47,10 @@ StillRefinement refine_still(engine::RayCaster& caster, const engine::CameraView
     const double room = o.target * o.budget_ms - fixed;
     int n = 1;
     double w = weight[std::size_t(y)];
-    while (y + n < H && (n < least || (w + weight[std::size_t(y + n)]) * rate <= room)) w += weight[std::size_t(y + n++)];
+    // Until a band has measured the rate, bands of `least` rows (the frames drawn whole's rate,
+    // extrapolated from the moving frames' scales, can be several times low).
+    while (y + n < H && (n < least || (learned && (w + weight[std::size_t(y + n)]) * rate <= room)))
+      w += weight[std::size_t(y + n++)];
     const auto t0 = Clock::now();
     const engine::RaycastImage band = caster.render_rows(view, style, W, H, y, y + n);
     std::copy(band.rgba.begin(), band.rgba.end(), shown.begin() + std::ptrdiff_t(y) * W);

@@ -625,6 +625,7 @@ struct FramePlan {
   PixelRect rect, orect, overlay;
   bool reuse = false;
   bool linear = false;  // the shade pass writes the linear colour (bindings 6-8)
+  int band_y0 = -1, band_y1 = -1;  // render_rows: only these rows are cleared and drawn (-1: none)
   int width = 0, height = 0;
   std::size_t pixels = 0, tile_count = 0;
 };
@@ -747,6 +748,10 @@ struct RayCaster::Impl {
   std::uint32_t cache_flags = 0;
   PixelRect cache_orect;
   std::array<int, 3> dirty_lo{1, 1, 1}, dirty_hi{0, 0, 0};
+  // render_rows: the rows [0, band_next) drawn so far for band_key / band_flags at this size.
+  int band_next = 0, last_band_width = 0, last_band_height = 0;
+  gpu::RaycastParams band_key{};
+  std::uint32_t band_flags = 0;
   /// Specialization constants: 0 the pass's variant, 1-3 the grid's size, 4 quads.
   /// 5: the march's tile starts (one workgroup per listed tile); 6 the tile pass's
   /// workgroup size (tile_spec; the other passes do not read it); 7 VALS4; 8 the march
@@ -801,6 +806,9 @@ struct RayCaster::Impl {
   bool record_readback(VkCommandBuffer cmd, std::size_t pixels);
   /// After the frame completed: what the next frame's reuse compares with.
   void remember_frame(const FramePlan& f);
+  /// Records, submits and waits for the frame `f` plans; reads it back (RayCaster::render).
+  RaycastImage draw(const FramePlan& f, const RaycastStyle& style, const std::vector<gpu::RaycastPrim>& prims,
+                    const std::function<void()>& meanwhile);
   Impl(VulkanContext& c, RaycastField f, bool q, bool v4)
       : ctx(c),
         field(std::move(f)),
@@ -1077,6 +1085,15 @@ void RayCaster::Impl::record_clear(VkCommandBuffer cmd, const FramePlan& f) cons
   std::uint32_t bg = pack_rgba8(f.P.bg_r, f.P.bg_g, f.P.bg_b);
   if (m.bgra) bg = swap_red_blue(bg);
   const std::uint32_t no_hit = std::bit_cast<std::uint32_t>(-1.0f);
+  if (f.band_y0 >= 0) {  // the band's rows whole: what they held was another frame's
+    const VkDeviceSize at = VkDeviceSize(f.band_y0) * std::uint32_t(f.width) * 4,
+                       n = VkDeviceSize(f.band_y1 - f.band_y0) * std::uint32_t(f.width) * 4;
+    if (n > 0) {
+      vkCmdFillBuffer(cmd, m.image.handle(), at, n, bg);
+      vkCmdFillBuffer(cmd, m.depth.handle(), at, n, no_hit);
+    }
+    return;
+  }
   if (!f.reuse) {
     vkCmdFillBuffer(cmd, m.image.handle(), 0, f.pixels * 4, bg);
     vkCmdFillBuffer(cmd, m.depth.handle(), 0, f.pixels * 4, no_hit);
@@ -1237,9 +1254,48 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
                                 std::to_string(ISOTOUCH_RAYCAST_MAX_PRIMS));
   m.size_frame(width, height);
   const FramePlan f = m.plan_frame(view, style, width, height, prims);
-  const std::size_t pixels = f.pixels, tile_count = f.tile_count;
+  m.band_next = 0;  // a whole frame ends any bands drawn so far (render_rows)
+  return m.draw(f, style, prims, meanwhile);
+}
+
+RaycastImage RayCaster::render_rows(const CameraView& view, const RaycastStyle& style, int width, int height, int y0,
+                                    int y1) {
+  Impl& m = *impl_;
+  if (y0 < 0 || y1 <= y0 || y1 > height)
+    throw std::invalid_argument("raycast: render_rows: rows [" + std::to_string(y0) + ", " + std::to_string(y1) +
+                                ") outside the picture's " + std::to_string(height));
+  m.size_frame(width, height);
+  FramePlan f = m.plan_frame(view, style, width, height, {});
+  // Only the band's rows: cleared whole, marched where the box projects; no overlay.
+  f.reuse = false;
+  f.linear = false;
+  f.band_y0 = y0;
+  f.band_y1 = y1;
+  PixelRect& r = f.rect;
+  r.y0 = std::max(r.y0, std::uint32_t(y0));
+  r.y1 = std::min(r.y1, std::uint32_t(y1));
+  if (r.x1 <= r.x0 || r.y1 <= r.y0) r = PixelRect{};
+  f.orect = f.overlay = PixelRect{};
+  // The bands so far continue only from the last one, for the same parameters and size.
+  const bool continues = y0 == m.band_next && y0 > 0 && m.band_flags == f.push.flags &&
+                         std::memcmp(&m.band_key, &f.key, sizeof f.key) == 0 && m.last_band_width == width &&
+                         m.last_band_height == height;
+  if (!continues && y0 != 0) m.band_next = 0;
+  if (y0 == 0 || continues) m.band_next = y1;
+  m.band_key = f.key;
+  m.band_flags = f.push.flags;
+  m.last_band_width = width;
+  m.last_band_height = height;
+  return m.draw(f, style, {}, {});
+}
+
+RaycastImage RayCaster::Impl::draw(const FramePlan& f, const RaycastStyle& style,
+                                   const std::vector<gpu::RaycastPrim>& frame_prims, const std::function<void()>& meanwhile) {
+  Impl& m = *this;
+  const int width = f.width, height = f.height;
+  const std::size_t n_px = f.pixels, n_tiles = f.tile_count;
   std::memcpy(m.params_up.mapped(), &f.P, sizeof(f.P));
-  const OverlayLists lists = overlay_lists(prims);
+  const OverlayLists lists = overlay_lists(frame_prims);
   if (!lists.prims.empty())
     std::memcpy(m.prims_up.mapped(), lists.prims.data(), lists.prims.size() * sizeof(gpu::RaycastPrim));
 
@@ -1255,26 +1311,26 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   const std::initializer_list<BufferRange> ranges = {
       {m.params.handle(), 0, m.params.size()}, {m.values.handle(), 0, m.values.size()},
       {m.cells.handle(), 0, m.cells.size()},   {m.prims.handle(), 0, m.prims.size()},
-      {m.image.handle(), 0, pixels * 4},       {m.depth.handle(), 0, pixels * 4},
-      {m.lin_r.handle(), 0, pixels * 4},       {m.lin_g.handle(), 0, pixels * 4},
-      {m.lin_b.handle(), 0, pixels * 4},       {m.hits.handle(), 0, pixels * 4},
-      {m.hit_k.handle(), 0, pixels * 4},       {m.counter.handle(), 0, m.counter.size()},
-      {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, tile_count * (1 + kBlocksPerTile) * 4},
-      {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, tile_count * 4},
+      {m.image.handle(), 0, n_px * 4},         {m.depth.handle(), 0, n_px * 4},
+      {m.lin_r.handle(), 0, n_px * 4},         {m.lin_g.handle(), 0, n_px * 4},
+      {m.lin_b.handle(), 0, n_px * 4},         {m.hits.handle(), 0, n_px * 4},
+      {m.hit_k.handle(), 0, n_px * 4},         {m.counter.handle(), 0, m.counter.size()},
+      {m.quads.handle(), 0, m.quads.size()},   {m.tile_t.handle(), 0, n_tiles * (1 + kBlocksPerTile) * 4},
+      {m.tile_counter.handle(), 0, m.tile_counter.size()}, {m.tile_list.handle(), 0, n_tiles * 4},
       {m.overlay_state.handle(), 0, m.overlay_state.size()}};
   m.timer.mark(cmd, 0);
   m.record_clear(cmd, f);
   barrier_transfer_to_compute(cmd);
   // 0. tile starts (skipping); 1. march every pixel; 2. hit count -> dispatch size; 3. shade
   // the hits; 4. overlays.
-  const bool tiles = m.record_tiles(cmd, f, ranges);
+  const bool tiled = m.record_tiles(cmd, f, ranges);
   m.timer.mark(cmd, 4);
-  m.record_march_and_shade(cmd, f, tiles, style.skip_empty, ranges);
+  m.record_march_and_shade(cmd, f, tiled, style.skip_empty, ranges);
   m.timer.mark(cmd, 3);
   m.overlay_dispatches = 0;
   m.record_overlay(cmd, f, lists, ranges);
   m.timer.mark(cmd, 1);
-  const bool in_place = m.record_readback(cmd, pixels);
+  const bool in_place = m.record_readback(cmd, n_px);
 
   RaycastImage img;
   img.width = width;
@@ -1286,7 +1342,16 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
     m.cache_valid = false;  // what the buffers hold is not the last remembered frame's: draw the next whole
     throw;
   }
-  m.remember_frame(f);
+  if (f.band_y0 < 0) {
+    m.remember_frame(f);
+  } else if (m.band_next == height) {  // the bands cover the picture: it is the frame render() draws
+    const std::array<int, 3> lo = m.dirty_lo, hi = m.dirty_hi;  // changed while the bands were drawn:
+    m.remember_frame(f);                                         // the next frame draws them again
+    m.dirty_lo = lo, m.dirty_hi = hi;
+    m.band_next = 0;
+  } else {
+    m.cache_valid = false;  // a part of a picture: the next render() draws whole
+  }
   img.gpu_ms = m.timer.elapsed_ms(0, 1);
   img.march_ms = m.timer.elapsed_ms(0, 2);
   img.tiles_ms = m.timer.elapsed_ms(0, 4);
@@ -1294,10 +1359,17 @@ RaycastImage RayCaster::render(const CameraView& view, const RaycastStyle& style
   img.overlay_ms = m.timer.elapsed_ms(3, 1);
   img.overlay_dispatches = m.overlay_dispatches;
   if (m.keep_on_device) return img;
-  img.rgba.resize(pixels);
-  img.depth.resize(pixels);
-  copy_pixels(img.rgba.data(), in_place ? m.image.mapped() : m.image_down.mapped(), pixels, m.bgra);
-  std::memcpy(img.depth.data(), in_place ? m.depth.mapped() : m.depth_down.mapped(), pixels * 4);
+  // A band's image holds its rows only (the host copy of a whole picture per band would be
+  // most of a band's cost at a large window).
+  const std::size_t first = f.band_y0 < 0 ? 0 : std::size_t(f.band_y0) * std::size_t(width);
+  const std::size_t count = f.band_y0 < 0 ? n_px : std::size_t(f.band_y1 - f.band_y0) * std::size_t(width);
+  if (f.band_y0 >= 0) img.height = f.band_y1 - f.band_y0;
+  img.rgba.resize(count);
+  img.depth.resize(count);
+  const auto* rgba = static_cast<const std::uint32_t*>(in_place ? m.image.mapped() : m.image_down.mapped());
+  const auto* depths = static_cast<const float*>(in_place ? m.depth.mapped() : m.depth_down.mapped());
+  copy_pixels(img.rgba.data(), rgba + first, count, m.bgra);
+  std::memcpy(img.depth.data(), depths + first, count * 4);
   return img;
 }
 

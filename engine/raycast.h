@@ -249,6 +249,16 @@ class RayCaster {
   /// @throws std::invalid_argument on a size outside [1, 8192] or too many primitives.
   RaycastImage render(const CameraView& view, const RaycastStyle& style, int width, int height,
                       const std::vector<gpu::RaycastPrim>& prims = {}, const std::function<void()>& meanwhile = {});
+  /// Rows [y0, y1) of the picture render(view, style, width, height) draws without
+  /// primitives (0 <= y0 < y1 <= height): the other rows keep what the buffers held. Drawn in
+  /// order from row 0 to `height` with one camera, style and size (progressive refinement of
+  /// a still view, a band per frame), the bands leave that picture, bit for bit, and the next
+  /// render() with them reuses it (RaycastImage::reused: only what update() changed since the
+  /// first band is drawn again). The image returned holds the band's rows only (height y1 -
+  /// y0, its first row the picture's row y0); the buffers' other rows hold what the earlier
+  /// bands drew, or another frame's (undefined after a size change).
+  /// @throws std::invalid_argument on rows outside the picture or a size outside [1, 8192].
+  RaycastImage render_rows(const CameraView& view, const RaycastStyle& style, int width, int height, int y0, int y1);
   const RaycastField& field() const;
 
   /// Where render() leaves its picture. Off (the default): RaycastImage::rgba and depth hold

@@ -17,6 +17,7 @@
 #include <limits>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <set>
 #include <vector>
 
@@ -1022,6 +1023,56 @@ TEST(Raycast, ReusedFramesEqualFullFrames) {
   r.update(vol.voxels, dirty);
   expect_same(r.render(view, clipped, 320, 240, at_b), truth(vol.voxels, clipped, at_b), true, "the edits undone, clipped");
   EXPECT_NE(carved.rgba, truth(vol.voxels, RaycastStyle{}, at_a).rgba) << "the carve is not visible";
+  EXPECT_EQ(vk().validation_messages(), 0u);
+}
+
+// Progressive refinement of a still view (RayCaster::render_rows): bands of rows drawn one
+// per frame after a frame of another view at the same size (its rows must not survive) or at
+// a lower resolution (the buffers resized), in order, uneven: each band's rows are the
+// truth's (a full frame of a new ray caster) bit for bit as soon as it is drawn, and the
+// frame after the last band reuses the picture they leave, the truth bit for bit.
+TEST(Raycast, RowBandsOfAStillViewEndEqualToTheFullFrame) {
+  const engine::Volume vol = io::load_volume(kHead);
+  const core::Isosurface iso{1150, core::InsideIs::kAbove};
+  const float bg = float(iso.outside_value(vol.min_value, vol.max_value));
+  engine::OrbitCamera cam = run::default_camera(vol);
+  const CameraView view = engine::orbit_view(vol.grid, vol.direction, cam);
+  cam.azimuth_deg += 40;
+  const CameraView other = engine::orbit_view(vol.grid, vol.direction, cam);
+  const int W = 320, H = 240;
+  const RaycastImage truth = [&] {
+    auto fresh = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+    EXPECT_TRUE(fresh) << fresh.error;
+    return (*fresh.value)->render(view, RaycastStyle{}, W, H);
+  }();
+  auto rc = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+  ASSERT_TRUE(rc) << rc.error;
+  engine::RayCaster& r = **rc.value;
+  // The truth's rows [y0, y0 + got.height) are `got`'s pixels.
+  const auto rows_equal = [&](const RaycastImage& got, int y0) {
+    const auto at = std::ptrdiff_t(y0) * W, n = std::ptrdiff_t(got.height) * W;
+    return got.width == W && std::ptrdiff_t(got.rgba.size()) == n && std::ptrdiff_t(got.depth.size()) == n &&
+           std::equal(got.rgba.begin(), got.rgba.end(), truth.rgba.begin() + at) &&
+           std::equal(got.depth.begin(), got.depth.end(), truth.depth.begin() + at);
+  };
+  for (const auto& [before_w, before_h, what] : {std::tuple{W, H, "after another view"}, std::tuple{W / 2, H / 2, "after a half-size frame"}}) {
+    const RaycastImage moving = r.render(other, RaycastStyle{}, before_w, before_h);
+    if (before_w == W) ASSERT_FALSE(rows_equal(moving, 0)) << "the other view is the truth (the test's premise)";
+    const int bands[][2] = {{0, 37}, {37, 100}, {100, 101}, {101, 200}, {200, H}};
+    for (const auto& b : bands) {
+      const RaycastImage band = r.render_rows(view, RaycastStyle{}, W, H, b[0], b[1]);
+      EXPECT_FALSE(band.reused) << what;
+      EXPECT_EQ(band.height, b[1] - b[0]) << what;
+      EXPECT_TRUE(rows_equal(band, b[0])) << what << ": rows [" << b[0] << ", " << b[1] << ") differ from the full frame's";
+    }
+    // The buffers after the bands: a frame that reuses them draws nothing again (no edit, no
+    // overlay) and reads them back whole.
+    const RaycastImage next = r.render(view, RaycastStyle{}, W, H);
+    EXPECT_TRUE(next.reused) << what << ": the refined picture is not reused";
+    EXPECT_TRUE(next.rgba == truth.rgba && next.depth == truth.depth) << what;
+  }
+  EXPECT_THROW(r.render_rows(view, RaycastStyle{}, W, H, 10, 10), std::invalid_argument);
+  EXPECT_THROW(r.render_rows(view, RaycastStyle{}, W, H, 0, H + 1), std::invalid_argument);
   EXPECT_EQ(vk().validation_messages(), 0u);
 }
 

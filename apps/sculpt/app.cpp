@@ -40,6 +40,7 @@
 #include "isotouch/engine/frame_budget.h"
 #include "isotouch/engine/upscale.h"
 #include "isotouch/bench/moving_frames.h"
+#include "isotouch/bench/scale_quality.h"
 #include "isotouch/io/journal_offer.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/picture.h"
@@ -1061,7 +1062,8 @@ double Sculpt::picture_scale(const std::array<int, 2>& fb, bool shot) {
 }
 
 /// --bench: frames drawn whole while the view orbits, at the frame budget's scale, after the
-/// rounds (the session stopped), at the window's last size from the last camera.
+/// rounds (the session stopped), at the window's last size from the last camera; then the
+/// picture error of each upscale at fixed scales on three of the orbit's views.
 void Sculpt::print_moving_frames() {
   if (o.frame_budget_ms <= 0 || last_fb[0] <= 0 || last_fb[1] <= 0) return;
   bench::MovingFramesOptions mo;
@@ -1073,6 +1075,14 @@ void Sculpt::print_moving_frames() {
     const bench::MovingFramesResult r = bench::run_moving_frames(*caster, vol.grid, vol.direction, camera.cam, style,
                                                                  last_fb[0], last_fb[1], mo, std::min(1.0, fit));
     bench::print_moving_frames(log, r, mo, last_fb[0], last_fb[1]);
+    // What scale a picture quality needs: the error at fixed scales (each upscale).
+    const int views = 3;
+    std::vector<double> scales;
+    for (double s : {0.5, 0.625, 0.75, 0.875})
+      if (s <= fit) scales.push_back(s);
+    bench::print_scale_quality(
+        log, bench::scale_quality(*caster, vol.grid, vol.direction, camera.cam, style, last_fb[0], last_fb[1], mo, scales, views),
+        views);
   } catch (const std::exception& e) {
     log << "moving   not measured: " << e.what() << "\n";
   }

@@ -390,3 +390,19 @@ TEST(MaterialsScene, ShippedToothScenesAgreeVoxelForVoxelInEveryForm) {
   for (std::size_t m = 0; m < forms[0].materials.size(); ++m)
     EXPECT_EQ(forms[1].materials[m].color, forms[0].materials[m].color) << forms[0].materials[m].name;
 }
+
+TEST(Materials, SegNrrdMaterialWhoseSegmentHasAnotherMaterialsLabelIsAnError) {
+  test::TempDir dir;
+  const std::string p = (dir.path / "two.seg.nrrd").string();
+  const auto v = by_x(kD, {0, 4, 4, 9, 9, 9});
+  write_nrrd(p, kD, "uint8", v.data(), v.size(), 1.0, {0, 0, 0},
+             {"Segment0_Name:=dentin", "Segment0_LabelValue:=9", "Segment0_Layer:=0", "Segment0_Color:=0.9 0.8 0.5",
+              "Segment1_Name:=enamel", "Segment1_LabelValue:=4", "Segment1_Layer:=0", "Segment1_Color:=1 1 0.25"});
+  MaterialsSpec spec;
+  spec.labels_path = p;
+  spec.list = {mat("enamel", -1), mat("bone", 4)};  // "enamel" is filled in as 4, "bone" writes 4
+  const std::string e = error_of([&] { materials::load_label_volume(spec, scan(kD)); });
+  EXPECT_NE(e.find(p + ": materials.list[1] \"bone\" and materials.list[0] \"enamel\" both have label value 4"),
+            std::string::npos)
+      << e;
+}

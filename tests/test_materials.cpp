@@ -406,3 +406,17 @@ TEST(Materials, SegNrrdMaterialWhoseSegmentHasAnotherMaterialsLabelIsAnError) {
             std::string::npos)
       << e;
 }
+
+TEST(SegNrrd, SegmentKeyWhoseIndexDoesNotParseCleanlyIsNamed) {
+  for (const char* k : {"Segment99999999999999999999_Name", "Segment-1_Name", "Segment01_Name", "Segment+1_Name"}) {
+    Keys keys = two_segments();
+    keys.push_back({k, "x"});
+    EXPECT_NE(seg_error(keys).find(std::string("t.seg.nrrd: header key '") + k + "'"), std::string::npos) << k;
+  }
+}
+
+TEST(SegNrrd, TwoKeysForOneSegmentFieldAreNamed) {
+  Keys keys = {{"Segment0_Name", "enamel"}, {"Segment0_LabelValue", "1"}, {"Segment0_Layer", "0"}, {"Segment0_Color", "1 1 1"},
+               {"Segment0_Name", "dentin"}};
+  EXPECT_NE(seg_error(keys).find("t.seg.nrrd: header key 'Segment0_Name': given twice"), std::string::npos) << seg_error(keys);
+}

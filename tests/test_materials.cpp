@@ -420,3 +420,14 @@ TEST(SegNrrd, TwoKeysForOneSegmentFieldAreNamed) {
                {"Segment0_Name", "dentin"}};
   EXPECT_NE(seg_error(keys).find("t.seg.nrrd: header key 'Segment0_Name': given twice"), std::string::npos) << seg_error(keys);
 }
+
+TEST(MaterialsScene, MarginIsForCriticalMaterialsOnly) {
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "margin_mm": 1}]})")
+                .find("field 'materials.list[0].margin_mm': only a critical material has a margin, got 1"),
+            std::string::npos)
+      << scene_error(R"({"list": [{"name": "a", "range": [0, 5], "margin_mm": 1}]})");
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "critical": true}]})")
+                .find("field 'materials.list[0].margin_mm': is required above 0 for a critical material, got 0"),
+            std::string::npos)
+      << scene_error(R"({"list": [{"name": "a", "range": [0, 5], "critical": true}]})");
+}

@@ -431,3 +431,35 @@ TEST(MaterialsScene, MarginIsForCriticalMaterialsOnly) {
             std::string::npos)
       << scene_error(R"({"list": [{"name": "a", "range": [0, 5], "critical": true}]})");
 }
+
+TEST(SegNrrd, SegmentIndex255IsReadAnd256Refused) {
+  Keys keys = two_segments();
+  for (int n = 2; n <= 255; ++n)
+    for (const auto& [f, v] : Keys{{"Name", "s" + std::to_string(n)}, {"LabelValue", std::to_string(n + 2)}, {"Layer", "0"}, {"Color", "0 0 0"}})
+      keys.push_back({"Segment" + std::to_string(n) + "_" + f, v});
+  EXPECT_EQ(materials::parse_seg_nrrd_segments(keys, "t.seg.nrrd").size(), 256u);
+  keys.push_back({"Segment256_Name", "s256"});
+  EXPECT_NE(seg_error(keys).find("header key 'Segment256_Name': segment index 256 above 255"), std::string::npos) << seg_error(keys);
+}
+
+TEST(SegNrrd, LabelValueBoundaries) {
+  for (const char* bad : {"0", "65536", "-1"})
+    EXPECT_NE(seg_error(with(two_segments(), "Segment1_LabelValue", bad))
+                  .find(std::string("'Segment1_LabelValue': must be an integer in [1, 65535], got \"") + bad + "\""),
+              std::string::npos)
+        << bad;
+  EXPECT_EQ(materials::parse_seg_nrrd_segments(with(two_segments(), "Segment1_LabelValue", "65535"), "t.seg.nrrd")[1].label_value, 65535);
+  for (const char* bad : {"1.0001 0 0", "-0.01 0 0"})
+    EXPECT_NE(seg_error(with(two_segments(), "Segment1_Color", bad)).find("'Segment1_Color': must be \"R G B\""), std::string::npos) << bad;
+}
+
+TEST(MaterialsScene, BoundaryValues) {
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "stiffness_n_per_m": 0}]})")
+                .find("field 'materials.list[0].stiffness_n_per_m': must be in (0, 1e6], got 0"),
+            std::string::npos);
+  for (const char* c : {"[1.0001, 0, 0]", "[-0.01, 0, 0]"})
+    EXPECT_NE(scene_error(std::string(R"({"list": [{"name": "a", "range": [0, 5], "color": )") + c + "}]}")
+                  .find("field 'materials.list[0].color': must be [r, g, b], each in [0, 1]"),
+              std::string::npos)
+        << c;
+}

@@ -679,6 +679,13 @@ materials::Material parse_material(const Reader& r, const json& m, const std::st
   }
   out.critical = r.boolean(m, f, "critical", false);
   out.margin_mm = r.number(m, f, "margin_mm", {}, kSec);
+  // A margin is the warning distance of a critical material: on another it would be ignored,
+  // and a critical one without it could never warn.
+  if (!out.critical && out.margin_mm > 0)
+    r.fail(f + ".margin_mm", "only a critical material has a margin, got " + m.at("margin_mm").dump());
+  if (out.critical && out.margin_mm <= 0)
+    r.fail(f + ".margin_mm", "is required above 0 for a critical material, got " +
+                                 (m.contains("margin_mm") ? m.at("margin_mm").dump() : std::string("0 (absent)")));
   return out;
 }
 

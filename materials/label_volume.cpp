@@ -103,12 +103,18 @@ void from_segments(const std::string& path, std::vector<Material>& list) {
   }
 }
 
-/// Ids from label values; a non-zero value no material claims is an error.
+/// Ids from label values; a non-zero value no material claims, or one two materials claim
+/// (one written in the scene, one filled in from its segment), is an error.
 void to_ids(const std::string& path, const std::vector<int>& values, const engine::Volume& scan, LabelVolume& out) {
   std::map<int, std::uint8_t> id_of;
   std::string known;
   for (std::size_t i = 0; i < out.materials.size(); ++i) {
-    id_of[out.materials[i].label] = std::uint8_t(i + 1);
+    const auto [at, fresh] = id_of.emplace(out.materials[i].label, std::uint8_t(i + 1));
+    if (!fresh)
+      throw MaterialError(path + ": materials.list[" + std::to_string(i) + "] \"" + out.materials[i].name +
+                          "\" and materials.list[" + std::to_string(at->second - 1) + "] \"" +
+                          out.materials[at->second - 1].name + "\" both have label value " +
+                          std::to_string(out.materials[i].label));
     known += (known.empty() ? "" : ", ") + std::to_string(out.materials[i].label);
   }
   const auto& d = scan.grid.dims;

@@ -16,15 +16,23 @@ const char* const kFields[] = {"Name", "LabelValue", "Layer", "Color"};
   throw MaterialError(path + ": header key '" + key + "': " + what);
 }
 
-/// "SegmentN_FIELD" -> (N, FIELD); false for keys of other forms or N beyond int.
-bool split_key(const std::string& key, long& index, std::string& field) {
+/// "SegmentN_FIELD" -> (N, FIELD); false for keys of other forms. A key shaped like a segment's,
+/// "Segment" then a sign or digit up to '_', whose N is not a plain decimal in range (a sign,
+/// a leading zero, too many digits) is an error: skipping it would drop a segment silently,
+/// and "Segment01_" would be read as segment 1.
+bool split_key(const std::string& path, const std::string& key, long& index, std::string& field) {
   constexpr std::string_view kPrefix = "Segment";
   if (key.size() <= kPrefix.size() || key.compare(0, kPrefix.size(), kPrefix) != 0) return false;
-  const char* b = key.data() + kPrefix.size();
-  const char* e = key.data() + key.size();
-  const auto [p, ec] = std::from_chars(b, e, index);
-  if (ec != std::errc() || p == b || p == e || *p != '_' || index < 0) return false;
-  field = std::string(p + 1, e);
+  const std::size_t us = key.find('_', kPrefix.size());
+  if (us == std::string::npos || us == kPrefix.size()) return false;
+  const std::string n = key.substr(kPrefix.size(), us - kPrefix.size());
+  if (n.find_first_not_of("+-0123456789") != std::string::npos) return false;
+  const char* e = n.data() + n.size();
+  const auto [p, ec] = std::from_chars(n.data(), e, index);
+  if (ec != std::errc() || p != e || index < 0 || (n.size() > 1 && n[0] == '0'))
+    fail(path, key, "segment index \"" + n + "\" is not a whole number 0 to " + std::to_string(kMaxSegments - 1) +
+                        " written plainly");
+  field = key.substr(us + 1);
   return true;
 }
 
@@ -56,9 +64,9 @@ std::vector<Segment> parse_seg_nrrd_segments(const std::vector<std::pair<std::st
   for (const auto& [key, value] : keys) {
     long n = 0;
     std::string field;
-    if (!split_key(key, n, field)) continue;
+    if (!split_key(path, key, n, field)) continue;
     if (n >= kMaxSegments) fail(path, key, "segment index " + std::to_string(n) + " above " + std::to_string(kMaxSegments - 1));
-    by_index[n][field] = value;
+    if (!by_index[n].emplace(field, value).second) fail(path, key, "given twice");
   }
   if (by_index.empty())
     fail(path, "Segment0_Name", "missing: no SegmentN_ keys, not a 3D Slicer segmentation (give a label map instead)");

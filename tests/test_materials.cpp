@@ -390,3 +390,76 @@ TEST(MaterialsScene, ShippedToothScenesAgreeVoxelForVoxelInEveryForm) {
   for (std::size_t m = 0; m < forms[0].materials.size(); ++m)
     EXPECT_EQ(forms[1].materials[m].color, forms[0].materials[m].color) << forms[0].materials[m].name;
 }
+
+TEST(Materials, SegNrrdMaterialWhoseSegmentHasAnotherMaterialsLabelIsAnError) {
+  test::TempDir dir;
+  const std::string p = (dir.path / "two.seg.nrrd").string();
+  const auto v = by_x(kD, {0, 4, 4, 9, 9, 9});
+  write_nrrd(p, kD, "uint8", v.data(), v.size(), 1.0, {0, 0, 0},
+             {"Segment0_Name:=dentin", "Segment0_LabelValue:=9", "Segment0_Layer:=0", "Segment0_Color:=0.9 0.8 0.5",
+              "Segment1_Name:=enamel", "Segment1_LabelValue:=4", "Segment1_Layer:=0", "Segment1_Color:=1 1 0.25"});
+  MaterialsSpec spec;
+  spec.labels_path = p;
+  spec.list = {mat("enamel", -1), mat("bone", 4)};  // "enamel" is filled in as 4, "bone" writes 4
+  const std::string e = error_of([&] { materials::load_label_volume(spec, scan(kD)); });
+  EXPECT_NE(e.find(p + ": materials.list[1] \"bone\" and materials.list[0] \"enamel\" both have label value 4"),
+            std::string::npos)
+      << e;
+}
+
+TEST(SegNrrd, SegmentKeyWhoseIndexDoesNotParseCleanlyIsNamed) {
+  for (const char* k : {"Segment99999999999999999999_Name", "Segment-1_Name", "Segment01_Name", "Segment+1_Name"}) {
+    Keys keys = two_segments();
+    keys.push_back({k, "x"});
+    EXPECT_NE(seg_error(keys).find(std::string("t.seg.nrrd: header key '") + k + "'"), std::string::npos) << k;
+  }
+}
+
+TEST(SegNrrd, TwoKeysForOneSegmentFieldAreNamed) {
+  Keys keys = {{"Segment0_Name", "enamel"}, {"Segment0_LabelValue", "1"}, {"Segment0_Layer", "0"}, {"Segment0_Color", "1 1 1"},
+               {"Segment0_Name", "dentin"}};
+  EXPECT_NE(seg_error(keys).find("t.seg.nrrd: header key 'Segment0_Name': given twice"), std::string::npos) << seg_error(keys);
+}
+
+TEST(MaterialsScene, MarginIsForCriticalMaterialsOnly) {
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "margin_mm": 1}]})")
+                .find("field 'materials.list[0].margin_mm': only a critical material has a margin, got 1"),
+            std::string::npos)
+      << scene_error(R"({"list": [{"name": "a", "range": [0, 5], "margin_mm": 1}]})");
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "critical": true}]})")
+                .find("field 'materials.list[0].margin_mm': is required above 0 for a critical material, got 0"),
+            std::string::npos)
+      << scene_error(R"({"list": [{"name": "a", "range": [0, 5], "critical": true}]})");
+}
+
+TEST(SegNrrd, SegmentIndex255IsReadAnd256Refused) {
+  Keys keys = two_segments();
+  for (int n = 2; n <= 255; ++n)
+    for (const auto& [f, v] : Keys{{"Name", "s" + std::to_string(n)}, {"LabelValue", std::to_string(n + 2)}, {"Layer", "0"}, {"Color", "0 0 0"}})
+      keys.push_back({"Segment" + std::to_string(n) + "_" + f, v});
+  EXPECT_EQ(materials::parse_seg_nrrd_segments(keys, "t.seg.nrrd").size(), 256u);
+  keys.push_back({"Segment256_Name", "s256"});
+  EXPECT_NE(seg_error(keys).find("header key 'Segment256_Name': segment index 256 above 255"), std::string::npos) << seg_error(keys);
+}
+
+TEST(SegNrrd, LabelValueBoundaries) {
+  for (const char* bad : {"0", "65536", "-1"})
+    EXPECT_NE(seg_error(with(two_segments(), "Segment1_LabelValue", bad))
+                  .find(std::string("'Segment1_LabelValue': must be an integer in [1, 65535], got \"") + bad + "\""),
+              std::string::npos)
+        << bad;
+  EXPECT_EQ(materials::parse_seg_nrrd_segments(with(two_segments(), "Segment1_LabelValue", "65535"), "t.seg.nrrd")[1].label_value, 65535);
+  for (const char* bad : {"1.0001 0 0", "-0.01 0 0"})
+    EXPECT_NE(seg_error(with(two_segments(), "Segment1_Color", bad)).find("'Segment1_Color': must be \"R G B\""), std::string::npos) << bad;
+}
+
+TEST(MaterialsScene, BoundaryValues) {
+  EXPECT_NE(scene_error(R"({"list": [{"name": "a", "range": [0, 5], "stiffness_n_per_m": 0}]})")
+                .find("field 'materials.list[0].stiffness_n_per_m': must be in (0, 1e6], got 0"),
+            std::string::npos);
+  for (const char* c : {"[1.0001, 0, 0]", "[-0.01, 0, 0]"})
+    EXPECT_NE(scene_error(std::string(R"({"list": [{"name": "a", "range": [0, 5], "color": )") + c + "}]}")
+                  .find("field 'materials.list[0].color': must be [r, g, b], each in [0, 1]"),
+              std::string::npos)
+        << c;
+}

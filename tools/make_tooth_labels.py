@@ -9,6 +9,11 @@ the air, ~200-300):
     pulp    [0, 300)       label 3
     none    anything else  label 0  (air, the mount, and the partial-volume shell between
                                      dentin and pulp, which passes through the air's values)
+The enamel's outer rim is partial volume too: 3,559 voxels with values in [600, 1000) that
+touch both enamel (>= 1000) and air ([300, 600)) across a face are labelled dentin, a thin
+dentin skin over the enamel where the tooth meets the air (counted by face neighbours on the
+shipped scan). A label by value alone cannot tell them from dentin; they are kept so the
+three forms stay the same thresholds.
 The same ranges are scenes/tooth-transfer.json's transfer function, so the three shipped
 forms hold the same labels voxel for voxel (tests/test_materials.cpp checks it).
 

@@ -29,14 +29,7 @@ def test_ctrl_c_interrupts_a_long_render():
         except KeyboardInterrupt:
             print("interrupted", time.perf_counter() - t0, whole)
     """)
-    p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
-                       env=dict(os.environ))
-    assert p.returncode == 0, p.stderr
-    words = p.stdout.split()
-    assert words[0] == "interrupted", p.stdout
-    took, whole = float(words[1]), float(words[2])
-    assert whole > 1.0, f"the whole call took {whole:.2f} s: too short to show anything"
-    assert took < whole / 2, f"KeyboardInterrupt after {took:.2f} s of a {whole:.2f} s call"
+    interrupted_early(script)
 
 
 def test_ctrl_c_interrupts_a_long_pass_chain():
@@ -64,6 +57,12 @@ def test_ctrl_c_interrupts_a_long_pass_chain():
         except KeyboardInterrupt:
             print("interrupted", time.perf_counter() - t0, whole)
     """)
+    interrupted_early(script)
+
+
+def interrupted_early(script):
+    """Runs `script` (which prints 'interrupted TOOK WHOLE' or 'finished WHOLE') in its own
+    Python: the SIGINT must have stopped the call in less than half its uninterrupted time."""
     p = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
                        env=dict(os.environ))
     assert p.returncode == 0, p.stderr

@@ -489,13 +489,8 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // surface that changes under a still HIP is followed.
   auto across = [&](const Vec3& d) { return norm(d - entry_n_ * dot(entry_n_, d)); };
   const Vec3 hip_moved = hip - entry_hip_;
-  // Only on a thin feature: its far face within the HIP's depth and two voxels along
-  // -entry_n_ (in bulk material a long stroke over a noisy surface gathers that much drift,
-  // and a held plane there stuck the proxy flat: the head CT's ticks took twice as long).
-  Vec3 far_face;
   const bool pressed_round = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
-                             across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel && depth > 0.0 &&
-                             face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);
+                             across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel;
   if (depth > 0.0 && (entry_held_ || pressed_round || past_middle(field, hip, entry_n_, depth, voxel) ||
                       past_middle(field, hip, plane_.n, new_depth, voxel))) {
     VirtualPlane kept = held;

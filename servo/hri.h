@@ -242,13 +242,8 @@ struct ToolPlane {
 ///   reached the middle along it). While held, the held plane's point is lifted to the face
 ///   found from the HIP along its normal where that face lies in front of it (face_along):
 ///   a held plane tilted from the face slid the proxy down it on a stroke along the feature;
-///   it is never lowered (at a crest the face below it is the crest's rounded corner). The
-///   hold's plane faces entry_n_ (the last plane may have turned up to kEntryConeDeg further
-///   round) and, once held, every update keeps it while the HIP is inside, within the cone
-///   too. A turn the hand did not make is held as if past the middle: since entry_n_ was set
-///   the HIP moved and the proxy went farther across entry_n_ than the HIP, by more than a
-///   quarter voxel (the iteration carrying it round a rounded crest). Not on edit ticks. In
-///   bulk material (no far side within the depth) nothing changes.
+///   it is never lowered (at a crest the face below it is the crest's rounded corner). Not on
+///   edit ticks. In bulk material (no far side within the depth) nothing changes.
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
 ///   behind it, a wall drilled away) fades that force out along its direction over
@@ -472,9 +467,7 @@ class HriRenderer final : public Renderer {
                                 double held_grad_norm, double voxel, const double* f_vhip) const;
   /// Thin features (see the class docs): after an update of tick_general that turned the
   /// plane more than kEntryConeDeg from entry_n_ with the HIP inside (hip_inside), keeps
-  /// `held` (facing entry_n_ when the hold starts) where the HIP is past the feature's middle
-  /// or the proxy was carried across farther than the HIP moved, and behind it; once held,
-  /// at every update while the HIP is inside; else entry_n_ follows.
+  /// `held` where the HIP is past the feature's middle and behind it; else entry_n_ follows.
   void hold_entry_side(const FieldView& field, const Vec3& hip, bool hip_inside, const VirtualPlane& held,
                        double held_grad_norm, double voxel, TickOut& out);
   /// From the inside `hip`, the material ends both ways along n within `depth` plus a voxel

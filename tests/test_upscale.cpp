@@ -105,9 +105,9 @@ TEST(UpscaleDepthAware, NoPixelMixesAcrossTheSilhouetteOrADepthStep) {
       const int x = std::min(w - 1, (2 * X + 1) * w / (2 * W)), y = std::min(h - 1, (2 * Y + 1) * h / (2 * H));
       const float d = depth[std::size_t(y * w + x)];
       const bool red = (p & 255u) > 0, blue = (p >> 16 & 255u) > 0;
-      if (d < 0) EXPECT_EQ(p, 0xff000000u) << "background at " << X << "," << Y;
-      if (d == 2.0f) EXPECT_EQ(p, 0xffff0000u) << "plane at " << X << "," << Y;
-      if (d == 1.0f) EXPECT_TRUE(red && !blue && (p & 255u) >= 100) << "disc at " << X << "," << Y << ": " << std::hex << p;
+      if (d < 0) { EXPECT_EQ(p, 0xff000000u) << "background at " << X << "," << Y; }
+      if (d == 2.0f) { EXPECT_EQ(p, 0xffff0000u) << "plane at " << X << "," << Y; }
+      if (d == 1.0f) { EXPECT_TRUE(red && !blue && (p & 255u) >= 100) << "disc at " << X << "," << Y << ": " << std::hex << p; }
       mixed_by_bilinear += (d < 0 && b != 0xff000000u) || (d == 2.0f && b != 0xffff0000u);
       // Away from the edges (all four samples on one surface) the two upscales agree.
       const double u = (X + 0.5) * w / W - 0.5, v = (Y + 0.5) * h / H - 0.5;
@@ -115,7 +115,7 @@ TEST(UpscaleDepthAware, NoPixelMixesAcrossTheSilhouetteOrADepthStep) {
       const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
       const float d4[4] = {depth[std::size_t(y0 * w + x0)], depth[std::size_t(y0 * w + x1)], depth[std::size_t(y1 * w + x0)],
                            depth[std::size_t(y1 * w + x1)]};
-      if (d4[0] == d4[1] && d4[0] == d4[2] && d4[0] == d4[3]) EXPECT_EQ(p, b) << X << "," << Y;
+      if (d4[0] == d4[1] && d4[0] == d4[2] && d4[0] == d4[3]) { EXPECT_EQ(p, b) << X << "," << Y; }
     }
   EXPECT_GT(mixed_by_bilinear, 100) << "the scene's edges are where bilinear mixes (the test's premise)";
 }
@@ -124,7 +124,7 @@ TEST(UpscaleDepthAware, SameSizeIsACopy) {
   const int w = 5, h = 3;
   std::vector<std::uint32_t> src(std::size_t(w * h)), dst(src.size());
   std::vector<float> depth(src.size());
-  for (int i = 0; i < w * h; ++i) src[std::size_t(i)] = std::uint32_t(i * 2654435761u), depth[std::size_t(i)] = i % 3 - 1.0f;
+  for (int i = 0; i < w * h; ++i) src[std::size_t(i)] = std::uint32_t(i * 2654435761u), depth[std::size_t(i)] = float(i % 3) - 1.0f;
   upscale_depth_aware(src.data(), depth.data(), w, h, dst.data(), w, h);
   EXPECT_EQ(dst, src);
 }

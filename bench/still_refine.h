@@ -21,10 +21,7 @@ struct StillRefinement {
 /// The view `view` stopped after a frame drawn at rw x rh and shown upscaled to W x H in
 /// `shown`. First (not timed) a full frame of the view, the truth, and the rw x rh frame
 /// again (the buffers as the moving frames left them; its hits weigh each row's cost); then
-/// bands from row 0 down: H / 16 rows each until a band has cost more than the fixed part,
-/// then as many rows (at least H / 16) as the budget's target share holds at a fixed part per
-/// band (`budget`'s fixed part, then at most the cheapest band's) and the bands' cost per unit
-/// of row weight (a rise taken at once, a fall at half weight, as engine::FrameBudget learns).
+/// the bands engine::RefineBands plans from row 0 down, each timed with its copy into `shown`.
 /// Each band's rows replace the upscaled ones in `shown`; after the last, a render() of the
 /// view reuses the bands' picture.
 StillRefinement refine_still(engine::RayCaster& caster, const engine::CameraView& view,

@@ -1266,9 +1266,11 @@ RaycastImage RayCaster::render_rows(const CameraView& view, const RaycastStyle& 
                                 ") outside the picture's " + std::to_string(height));
   m.size_frame(width, height);
   FramePlan f = m.plan_frame(view, style, width, height, {});
-  // Only the band's rows: cleared whole, marched where the box projects; no overlay.
+  // Only the band's rows: cleared whole, marched where the box projects; no overlay. The
+  // linear colour too (bindings 6-8): a render() with primitives after the last band draws
+  // them over it and reuses the rest of the bands' picture.
   f.reuse = false;
-  f.linear = false;
+  f.linear = true;
   f.band_y0 = y0;
   f.band_y1 = y1;
   PixelRect& r = f.rect;

@@ -1071,6 +1071,21 @@ TEST(Raycast, RowBandsOfAStillViewEndEqualToTheFullFrame) {
     EXPECT_TRUE(next.reused) << what << ": the refined picture is not reused";
     EXPECT_TRUE(next.rgba == truth.rgba && next.depth == truth.depth) << what;
   }
+  // With the probe's glyph (the window's case): the render after the bands draws it over the
+  // bands' picture (from their linear colour) and reuses the rest.
+  const Vec3 centre = vol.grid.to_world({vol.grid.dims[0] / 2.0, vol.grid.dims[1] / 2.0, vol.grid.dims[2] / 2.0});
+  const std::vector<gpu::RaycastPrim> glyph = {engine::prim_sphere(centre, 0.02, {0.9f, 0.2f, 0.2f})};
+  const RaycastImage truth_glyph = [&] {
+    auto fresh = engine::RayCaster::create(vk(), engine::make_raycast_field(vol.grid, vol.voxels, iso, bg));
+    EXPECT_TRUE(fresh) << fresh.error;
+    return (*fresh.value)->render(view, RaycastStyle{}, W, H, glyph);
+  }();
+  ASSERT_NE(truth_glyph.rgba, truth.rgba) << "the glyph is drawn (the test's premise)";
+  r.render(other, RaycastStyle{}, W / 2, H / 2, glyph);
+  for (int y = 0; y < H; y += 60) r.render_rows(view, RaycastStyle{}, W, H, y, std::min(H, y + 60));
+  const RaycastImage with_glyph = r.render(view, RaycastStyle{}, W, H, glyph);
+  EXPECT_TRUE(with_glyph.reused) << "the bands' picture is not reused under a glyph";
+  EXPECT_TRUE(with_glyph.rgba == truth_glyph.rgba && with_glyph.depth == truth_glyph.depth);
   EXPECT_THROW(r.render_rows(view, RaycastStyle{}, W, H, 10, 10), std::invalid_argument);
   EXPECT_THROW(r.render_rows(view, RaycastStyle{}, W, H, 0, H + 1), std::invalid_argument);
   EXPECT_EQ(vk().validation_messages(), 0u);

@@ -57,6 +57,7 @@
 #include "isotouch/apps/sculpt/scan_input.h"
 #include "isotouch/apps/sculpt/iso_panel.h"
 #include "isotouch/apps/sculpt/slice_views.h"
+#include "isotouch/apps/sculpt/still_view.h"
 
 namespace isotouch::sculpt {
 
@@ -441,6 +442,8 @@ struct Sculpt {
   void render_picture(const session::Observed& obs, const Vec3& hand_world, const FrameSize& f,
                       const std::function<void()>& meanwhile);
   void show(const FrameSize& f, const std::vector<std::string>& shots, long drawn_brushes);
+  bool refine_still(const FrameSize& f, bool shot, bool edited);
+  void show_band(const FrameSize& f, long drawn_brushes);
   const std::vector<std::uint32_t>& host_picture(const FrameSize& f, bool shot);
   void build_panels();
   void refresh_panel(const session::Observed& obs, std::size_t frames);
@@ -559,6 +562,7 @@ struct Sculpt {
   std::vector<double> full_render_ms, full_present_ms;
   std::vector<double> frame_ms, render_ms, present_ms, latency_ms, update_ms;
   std::vector<double> frame_full_ms, frame_reused_ms;  // frames whose picture was drawn whole / reused
+  std::vector<double> frame_band_ms;                   // frames drawing a band of a still view (StillView)
   struct WholeFrame {
     engine::CameraView view;
     int width, height;  // rendered [pixels]
@@ -582,6 +586,12 @@ struct Sculpt {
   std::array<int, 2> last_fb{0, 0};
   engine::FrameBudget budget;           // the moving view's scale (--frame-budget-ms)
   engine::OrbitCamera last_cam;         // the camera of the last frame, to see the view move
+  bool moving_now = false;              // this frame's view moves (picture_scale)
+  sculpt::StillView still;              // a still view refined over frames after moving ones
+  std::vector<std::uint32_t> band_px;   // the picture a band frame shows (window size, RGBA)
+  bool band_frame = false;              // this frame drew a band
+  long refinements = 0, refinements_done = 0, refined_reused = 0;
+  bool check_reuse = false;             // the last band was drawn: the next render() should reuse it
   double picture_scale(const std::array<int, 2>& fb, bool shot);
   void print_moving_frames();
   int frame = 0;
@@ -1027,10 +1037,20 @@ bool Sculpt::frame_step() {
   const Vec3 hand_world = steer_hand(f);
   const session::Observed obs = session->observe();
   apply_tools(obs);
+  const std::size_t updates = update_ms.size();
   const long drawn_brushes = take_edits();
+  band_frame = refine_still(f, !shots.empty(), update_ms.size() != updates);
+  if (band_frame) {
+    update_slices(obs, f.fb);
+    show_band(f, drawn_brushes);
+    end_frame(obs, f.fb);
+    return true;
+  }
   // The slice views are computed while the device draws (on a CPU device its threads hold
   // the cores, and this thread would wait for them idle).
   render_picture(obs, hand_world, f, [&] { update_slices(obs, f.fb); });
+  if (check_reuse) refined_reused += img.reused;
+  check_reuse = false;
   show(f, shots, drawn_brushes);
   end_frame(obs, f.fb);
   return true;
@@ -1057,8 +1077,42 @@ static bool same_camera(const engine::OrbitCamera& a, const engine::OrbitCamera&
 double Sculpt::picture_scale(const std::array<int, 2>& fb, bool shot) {
   const bool moving = frame > 0 && (!same_camera(camera.cam, last_cam) || fb != last_fb);
   last_cam = camera.cam;
+  moving_now = moving;
   if (!moving || o.frame_budget_ms <= 0 || bench_rounds || shot || o.sim_clock) return o.render_scale;
   return std::min(o.render_scale, budget.moving_scale());
+}
+
+/// A still view after moving frames drawn smaller: this frame draws the next band of its
+/// full-resolution picture (StillView) within the frame budget. False: the frame is drawn by
+/// render() as ever (a moving view, an edit shown at once, a screenshot, the bench's rounds,
+/// the simulated clock, no budget, or the picture already at this size).
+bool Sculpt::refine_still(const FrameSize& f, bool shot, bool edited) {
+  if (o.frame_budget_ms <= 0 || moving_now || shot || edited || bench_rounds || o.sim_clock) {
+    still.stop();
+    return false;
+  }
+  if (!still.active()) {
+    if (check_reuse || img.reused || !still.start(img, f.rw, f.rh, budget)) return false;
+    ++refinements;
+  }
+  caster->set_bgra(f.direct() && window->bgra());  // as the render() after the bands: it reuses them
+  const auto r0 = Clock::now();
+  still.band(*caster, view, style, f.fb, band_px);
+  render_ms.push_back(ms_since(r0));
+  if (!still.active()) {
+    ++refinements_done;
+    check_reuse = true;
+  }
+  return true;
+}
+
+/// A band frame's picture into the window with the panels.
+void Sculpt::show_band(const FrameSize& f, long drawn_brushes) {
+  const auto p0 = Clock::now();
+  build_panels();
+  const bool shown = window->present(band_px, f.fb[0], f.fb[1]);
+  present_ms.push_back(ms_since(p0));
+  if (shown) measure_latency(drawn_brushes);
 }
 
 /// --bench: frames drawn whole while the view orbits, at the frame budget's scale, after the
@@ -1520,7 +1574,7 @@ void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& f
   const auto end = Clock::now();
   if (frame > 0) {
     frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
-    (img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
+    (band_frame ? frame_band_ms : img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
   }
   last_frame = end;
   ++frame;
@@ -1896,6 +1950,9 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "    overlay pass (GPU timestamps)", full_overlay_ms);
   stats_line(log, "    present (and the panels)", full_present_ms);
   stats_line(log, "  frames reusing the last picture (only the probe and the edits drawn again)", frame_reused_ms);
+  stats_line(log, "  frames refining a still view (a band of rows each)", frame_band_ms);
+  log << "stats    still views refined over frames: " << refinements << " started, " << refinements_done
+      << " finished, " << refined_reused << " followed by a frame reusing the bands' picture\n";
   stats_line(log, "render (ray caster; the slice views meanwhile)", render_ms);
   stats_line(log, "  march pass (GPU timestamps)", march_ms);
   stats_line(log, "  shade pass (GPU timestamps)", shade_ms);

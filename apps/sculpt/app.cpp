@@ -592,6 +592,9 @@ struct Sculpt {
   bool band_frame = false;              // this frame drew a band
   long refinements = 0, refinements_done = 0, refined_reused = 0;
   bool check_reuse = false;             // the last band was drawn: the next render() should reuse it
+  Clock::time_point frame_began;        // this frame's start
+  Clock::time_point refine_t0;          // the first band's frame began (the view stopped)
+  std::vector<double> refined_ms;       // each refinement: its first band to the frame after its last
   double picture_scale(const std::array<int, 2>& fb, bool shot);
   void print_moving_frames();
   int frame = 0;
@@ -1014,6 +1017,7 @@ void Sculpt::frame_loop() {
 
 /// One frame: the script, the input, the hand, the tools, the edits, the picture, the window.
 bool Sculpt::frame_step() {
+  frame_began = Clock::now();
   glfwPollEvents();
   FrameSize f;
   f.fb = window->framebuffer_size();
@@ -1050,8 +1054,9 @@ bool Sculpt::frame_step() {
   // the cores, and this thread would wait for them idle).
   render_picture(obs, hand_world, f, [&] { update_slices(obs, f.fb); });
   if (check_reuse) refined_reused += img.reused;
-  check_reuse = false;
   show(f, shots, drawn_brushes);
+  if (check_reuse) refined_ms.push_back(ms_since(refine_t0));
+  check_reuse = false;
   end_frame(obs, f.fb);
   return true;
 }
@@ -1094,11 +1099,13 @@ bool Sculpt::refine_still(const FrameSize& f, bool shot, bool edited) {
   if (!still.active()) {
     if (check_reuse || img.reused || !still.start(img, f.rw, f.rh, budget)) return false;
     ++refinements;
+    refine_t0 = frame_began;
   }
   caster->set_bgra(f.direct() && window->bgra());  // as the render() after the bands: it reuses them
   const auto r0 = Clock::now();
   still.band(*caster, view, style, f.fb, band_px);
   render_ms.push_back(ms_since(r0));
+  img = engine::RaycastImage{};  // the caster's buffers no longer hold that frame (steer_hand reads their depth)
   if (!still.active()) {
     ++refinements_done;
     check_reuse = true;
@@ -1953,6 +1960,7 @@ void Sculpt::print_stats(double seconds, const session::LiveStats& st) {
   stats_line(log, "  frames refining a still view (a band of rows each)", frame_band_ms);
   log << "stats    still views refined over frames: " << refinements << " started, " << refinements_done
       << " finished, " << refined_reused << " followed by a frame reusing the bands' picture\n";
+  stats_line(log, "  the view stopping to its full-resolution picture (its bands and the frame after them)", refined_ms);
   stats_line(log, "render (ray caster; the slice views meanwhile)", render_ms);
   stats_line(log, "  march pass (GPU timestamps)", march_ms);
   stats_line(log, "  shade pass (GPU timestamps)", shade_ms);

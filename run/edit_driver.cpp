@@ -49,6 +49,13 @@ EditDriver::EditDriver(const Scene& scene, SceneSetup& setup)
       plan_.push_back({last, i, Plan::kEnd});
     }
   }
+  if (setup.critical) {
+    margin_.emplace(setup.critical_margin_m);
+    cut_radius_m_ = at_tool(e.brush).radius_mm * 1e-3;
+    figures.critical = true;
+    figures.critical_names = setup.critical_names;
+    figures.margin_m = setup.critical_margin_m;
+  }
   std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
   const double end_s = setup.script.duration_s;
   for (std::size_t i = 0; i < e.timeline.size(); ++i)
@@ -62,6 +69,7 @@ EditDriver::EditDriver(const Scene& scene, SceneSetup& setup)
 void EditDriver::operator()(session::LiveSession& live, long k, const sim::TraceRow& row) {
   const double t = double(k) / scene_.hri.rate_hz;
   contact_seen_ = contact_seen_ || row.contact;
+  if (margin_) watch_margin(k, row);
   if (row.contact && row.version > 1) measure_edited(k, row);
   // What tick k read (before this tick's edits): the release check's inside test.
   hip_inside.push_back(iso_.contains(core::FieldView(*setup_.session->current()).value(row.hip_m)) ? 1 : 0);
@@ -121,6 +129,21 @@ void EditDriver::submit(session::LiveSession& live, long k, double t, EditEvent:
   e.t_s = t;
   if (kind == EditEvent::Kind::kBrush) e.brush = b;
   if (!live.submit(e)) throw std::runtime_error("edits: the session's edit queue is full at t = " + fmt(t, 4) + " s");
+}
+
+void EditDriver::watch_margin(long k, const sim::TraceRow& row) {
+  const double t = double(k) / scene_.hri.rate_hz;
+  const double surface = setup_.critical->lower_bound(row.vhip_m) - cut_radius_m_;
+  const long before = margin_->entries();
+  margin_->update(t, 1.0 / scene_.hri.rate_hz, surface);
+  if (margin_->entries() > before && margin_->entries() <= 3)
+    note("t = " + fmt(t, 4) + " s: WARNING the burr's surface entered the " + fmt(margin_->margin_m() * 1e3, 4) +
+         " mm margin of the critical " + setup_.critical_names + " (" + fmt(surface * 1e3, 4) + " mm away)" +
+         (margin_->entries() == 3 ? "; later entries are counted in summary.json edits.critical_margin" : ""));
+  figures.margin_entries = margin_->entries();
+  figures.margin_time_s = margin_->time_inside_s();
+  figures.closest_approach_m = margin_->closest_m();
+  figures.first_entry_t_s = margin_->first_entry_t_s();
 }
 
 void EditDriver::measure_edited(long k, const sim::TraceRow& row) {

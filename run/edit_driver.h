@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -16,6 +17,7 @@
 #include "isotouch/io/scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/eval/surface_distance.h"
+#include "isotouch/materials/critical_margin.h"
 
 namespace isotouch::run {
 
@@ -84,6 +86,9 @@ class EditDriver {
   void measure_edited(long k, const sim::TraceRow& row);
 
   void note(const std::string& s) { figures.notes.push_back(s); }
+  /// Tick k's margin warning: the cutting brush's surface at the VHIP against the critical
+  /// structures' distance; the figures and, on each entry, a note.
+  void watch_margin(long k, const sim::TraceRow& row);
   /// One line per kind of edit that did nothing (the first time), into figures.notes.
   void said_if_nothing(EditEvent::Kind kind, const session::Brush& b, const EditOutcome& o, double t);
 
@@ -95,6 +100,9 @@ class EditDriver {
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
+  /// The margin warning (labelled scenes with a critical material; else unset).
+  std::optional<materials::CriticalMargin> margin_;
+  double cut_radius_m_ = 0;  ///< the cutting brush's radius [m]: its surface is what must keep off
   std::shared_ptr<core::SampleField> truth_;
   std::uint64_t truth_version_ = 0;
   bool contact_seen_ = false;

@@ -98,6 +98,17 @@ struct EditFigures {
   bool site_figure_drawn = false;
   std::string site_figure_note;    ///< why it was not drawn
   bool plot_drawn = false;         ///< edits.png written
+  /// Labelled scenes with a critical material: the margin warning (materials::CriticalMargin)
+  /// fed every tick with the cutting brush's surface distance to the nearest critical voxel
+  /// (materials::CriticalDistance::lower_bound of the VHIP minus cut_radius_m).
+  bool critical = false;
+  std::string critical_names;      ///< the critical materials, comma separated
+  double margin_m = 0;             ///< the warning distance: their largest margin_mm [m]
+  long margin_entries = 0;         ///< times the burr's surface entered the margin
+  double margin_time_s = 0;        ///< time inside the margin [s]
+  double closest_approach_m = 0;   ///< smallest surface distance [m] (< 0: the brush overlapped the structure's voxel centres)
+  double first_entry_t_s = -1;     ///< [s], -1: never entered
+  long critical_voxels_changed = 0; ///< critical voxels whose value differs after the run (0: never removed)
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };
 

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -202,6 +203,15 @@ void edit_figures(const SceneSetup& setup, const EditDriver& d, const std::vecto
   e.contact_ticks_after_edit = after_edit;
   e.present = true;
   EditSession& session = *setup.session;
+  if (setup.critical) {  // every critical voxel against the volume as loaded
+    const std::vector<float>& now = session.volume().voxels;
+    const session::MaterialCut& cut = *setup.cut;
+    for (std::size_t i = 0; i < now.size(); ++i) {
+      const std::uint8_t id = cut.ids[i];
+      if (id && cut.table[id - 1u].critical && std::memcmp(&now[i], &setup.volume.voxels[i], sizeof(float)) != 0)
+        ++e.critical_voxels_changed;
+    }
+  }
   e.events = long(d.rows.size());
   std::vector<double> upd, brush_ms;
   for (const EditRow& r : d.rows) {

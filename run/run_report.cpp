@@ -240,8 +240,36 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
              return a;
            }()},
           {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
+          {"critical_margin", !e.critical ? nlohmann::ordered_json(nullptr)
+                                          : nlohmann::ordered_json{
+                                                {"critical", e.critical_names},
+                                                {"margin_mm", e.margin_m * 1e3},
+                                                {"entries", e.margin_entries},
+                                                {"time_inside_s", e.margin_time_s},
+                                                {"closest_approach_mm", std::isfinite(e.closest_approach_m)
+                                                                            ? nlohmann::ordered_json(e.closest_approach_m * 1e3)
+                                                                            : nlohmann::ordered_json(nullptr)},
+                                                {"first_entry_t_s", or_null(e.first_entry_t_s >= 0, e.first_entry_t_s)},
+                                                {"critical_voxels_changed", e.critical_voxels_changed},
+                                                {"method", "every tick: distance from the VHIP to the nearest critical voxel centre "
+                                                           "(exact distance transform, lower bound between voxel centres) minus "
+                                                           "the cutting brush's radius"}}},
           {"csv", "edits.csv"}};
 }
+
+namespace {
+// The margin warning's row: entries, time inside, closest approach (labelled scenes with a critical material).
+std::string margin_row(const EditFigures& e) {
+  if (!e.critical) return {};
+  std::ostringstream r;
+  r << "| critical margin | " << e.critical_names << ", margin " << fmt(e.margin_m * 1e3, 4) << " mm: "
+    << (e.margin_entries ? "**WARNING** " : "") << e.margin_entries << " entr" << (e.margin_entries == 1 ? "y" : "ies")
+    << ", " << fmt(e.margin_time_s, 4) << " s inside, closest approach "
+    << (std::isfinite(e.closest_approach_m) ? fmt(e.closest_approach_m * 1e3, 4) + " mm" : std::string("none"))
+    << " (the cutting brush's surface); " << e.critical_voxels_changed << " critical voxels changed |\n";
+  return r.str();
+}
+}  // namespace
 
 std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   std::ostringstream md;
@@ -267,7 +295,7 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
      << " after, times the voxel volume) |\n"
      << "| depth below the initial surface | HIP " << fmt(e.max_hip_depth_m * 1e3, 4) << " mm, VHIP "
      << fmt(e.max_vhip_depth_m * 1e3, 4) << " mm (deepest, along the press direction from the first contact point) |\n"
-     << drill_rows(e, scene) << mesh_row(e)
+     << drill_rows(e, scene) << mesh_row(e) << margin_row(e)
      << "| undo history | " << e.history_bytes << " B of the " << e.history_limit_bytes << " B limit ("
      << e.history_dropped << " strokes dropped) |\n"
      << "| surface error | every contact tick against the volume whose snapshot it read; " << e.contact_ticks_after_edit

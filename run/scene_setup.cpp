@@ -171,17 +171,38 @@ void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 }
 
+// The drill's cut and the critical structures' distance field from the labels.
+void make_cut(const materials::LabelVolume& lv, SceneSetup& s) {
+  auto cut = std::make_shared<session::MaterialCut>();
+  cut->ids = lv.ids;
+  std::vector<bool> critical(lv.materials.size() + 1, false);
+  for (std::size_t i = 0; i < lv.materials.size(); ++i) {
+    const materials::Material& m = lv.materials[i];
+    cut->table.push_back({m.rate, m.density_scale, m.critical});
+    critical[i + 1] = m.critical;
+    if (!m.critical) continue;
+    s.critical_names += (s.critical_names.empty() ? "" : ", ") + m.name;
+    s.critical_margin_m = std::max(s.critical_margin_m, m.margin_mm * 1e-3);
+  }
+  s.cut = std::move(cut);
+  if (!s.critical_names.empty())
+    s.critical = std::make_shared<const materials::CriticalDistance>(s.volume.grid, lv.ids, critical);
+}
+
 // 1b. The scene's materials read onto the volume's grid and logged, so that a bad label map
-// stops the run here with its error. The servo, the drill and the pictures do not use them
-// yet (docs/architecture.md, "How a material reaches the servo").
-void load_materials(const Scene& scene, const SceneSetup& s, std::ostream& log) {
+// stops the run here with its error. The drill cuts per material (make_cut); the servo and
+// the pictures do not use them yet (docs/architecture.md, "How a material reaches the servo").
+void load_materials(const Scene& scene, SceneSetup& s, std::ostream& log) {
   if (!scene.materials.present) return;
   const materials::LabelVolume lv = materials::load_label_volume(scene.materials, s.volume);
+  make_cut(lv, s);
   log << "materials " << lv.materials.size() << " from " << lv.source << ":";
   for (std::size_t i = 0; i < lv.materials.size(); ++i)
     log << (i ? ", " : " ") << lv.materials[i].name << " " << lv.voxels[i + 1] << " voxels"
         << (lv.materials[i].critical ? " (critical)" : "");
-  log << "; " << lv.voxels[0] << " voxels unlabelled (the servo does not use materials yet)\n";
+  log << "; " << lv.voxels[0] << " voxels unlabelled (the drill cuts per material";
+  if (s.critical) log << ", never the critical ones, warning within " << fmt(s.critical_margin_m * 1e3, 4) << " mm of them";
+  log << "; the servo does not feel materials yet)\n";
   for (const std::string& n : lv.notes) log << "         note: " << n << "\n";
 }
 
@@ -244,6 +265,7 @@ void make_edit_session(const Scene& scene, SceneSetup& s, std::ostream& log) {
   if (!scene.edits.present) return;
   check_scene_brushes(scene, s.volume);
   s.session = std::make_unique<EditSession>(engine::Volume(s.volume), s.vk.get(), s.live, scene.edits.history_limit_mib);
+  if (s.cut) s.session->sculptor().set_material_cut(s.cut);
   s.first = s.session->current();
   log << "edits    " << scene.edits.timeline.size() << " timeline entries, " << scene.edits.button_down.size()
       << " button press(es), brushes on the " << (s.session->sculptor().on_gpu() ? "GPU" : "CPU")

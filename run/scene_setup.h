@@ -18,6 +18,8 @@
 #include "isotouch/io/scene.h"
 #include "isotouch/engine/vk_context.h"
 #include "isotouch/servo/workspace.h"
+#include "isotouch/session/material_cut.h"
+#include "isotouch/materials/critical_distance.h"
 
 namespace isotouch::run {
 
@@ -90,6 +92,14 @@ struct SceneSetup {
   /// when the scene has an "edits" section, else null. Built from a copy of `volume`.
   std::unique_ptr<session::EditSession> session;
   RunMetrics metrics;                            ///< the volume and engine figures (what run_scene reports)
+  /// Labelled scenes (a "materials" section): the drill's per-material cut, given to the
+  /// edit session's Sculptor (null without materials: one material, today's path).
+  std::shared_ptr<const session::MaterialCut> cut;
+  /// The distance to the critical materials' voxels (null when none is critical), their
+  /// names and the margin warning's distance (their largest margin_mm) [m].
+  std::shared_ptr<const materials::CriticalDistance> critical;
+  std::string critical_names;
+  double critical_margin_m = 0;
   SceneSetup();
   SceneSetup(SceneSetup&&) noexcept;
   SceneSetup& operator=(SceneSetup&&) noexcept;

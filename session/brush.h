@@ -34,6 +34,12 @@
 //            - empty): f grows with the voxel's distance from empty toward material, so bone
 //            (1500 HU) is removed more slowly than soft tissue (40 HU); nothing is removed
 //            at or below the force threshold; never past the empty value.
+//            With a MaterialCut (labelled scenes: Sculptor::set_material_cut), a voxel of
+//            material i takes that material's rate (a_i = rate_i * dt * max(0, |F| -
+//            F_threshold), in place of the brush's rate) and density_scale (0: the brush's);
+//            a voxel of a critical material keeps its value (drill and carve); label 0 takes
+//            the brush's own. Such brushes run on the CPU reference only: the shader has no
+//            label channel, so a Sculptor with a cut never sends a brush to the device.
 //                      rate [value units / (N s)], dt [s], forces [N], density_scale [value units]
 // The float constants (c, 1/(radius - inner), amount, ...) are computed once on the host
 // (make_brush_push) and shared by the shader and the CPU reference, which do the same float
@@ -53,6 +59,7 @@
 #include <vector>
 
 #include "isotouch/session/edit_history.h"
+#include "isotouch/session/material_cut.h"
 #include "isotouch/core/isosurface.h"
 #include "isotouch/shaders/isotouch_shared.h"
 #include "isotouch/engine/result.h"
@@ -138,8 +145,9 @@ struct BrushResult {
 };
 
 /// The CPU reference: applies `b` to `vol` in place (one thread), same float operations
-/// as shaders/brush.comp. @throws BrushError on an invalid brush, VolumeError on a bad volume.
-BrushResult apply_brush_cpu(engine::Volume& vol, const Brush& b);
+/// as shaders/brush.comp. With `cut` (labels on vol's grid), the per-material drill above.
+/// @throws BrushError on an invalid brush or cut, VolumeError on a bad volume.
+BrushResult apply_brush_cpu(engine::Volume& vol, const Brush& b, const MaterialCut* cut = nullptr);
 
 /// The GPU brush engine: keeps the raw volume resident on the device between edits.
 /// Volumes up to maxMemoryAllocationSize bytes and 2^32 voxels; each dispatch binds a
@@ -235,6 +243,11 @@ class Sculptor {
   std::size_t stale_on_device() const { return stale_.size(); }
   /// How apply() picks the path, in words.
   std::string describe_path() const;
+  /// Labelled scenes: every later brush removes per material (apply_brush_cpu's `cut`, on
+  /// the CPU reference, whatever the device). Null: one material (today's path and bits).
+  /// @throws BrushError if `cut` does not fit the volume (validate(MaterialCut)).
+  void set_material_cut(std::shared_ptr<const MaterialCut> cut);
+  const MaterialCut* material_cut() const { return cut_.get(); }
 
  private:
   /// The brush on the CPU reference or the device (by its touched bricks), no history.
@@ -250,6 +263,7 @@ class Sculptor {
   std::size_t cpu_max_bricks_ = 0;
   std::vector<std::uint32_t> stale_;       ///< bricks newer on the host than on the device (unique ids)
   std::vector<std::uint8_t> stale_mark_;   ///< per brick: listed in stale_
+  std::shared_ptr<const MaterialCut> cut_; ///< labelled scenes: per-material drilling (CPU path)
 };
 
 }  // namespace isotouch::session

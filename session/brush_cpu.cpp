@@ -177,6 +177,29 @@ struct PreEdit {
   std::vector<float> v;
 };
 
+/// The drill's per-material constants: per material id, the removal per application and
+/// 1 / density scale (float, computed once as make_brush_push does for the brush's own),
+/// and which ids are critical. Id 0 takes the brush's own (p.amount, p.inv_dens_scale).
+struct CutConstants {
+  std::vector<float> amount, inv_dens;
+  std::vector<std::uint8_t> critical;
+};
+CutConstants cut_constants(const Brush& b, const gpu::BrushPush& p, const MaterialCut& cut) {
+  CutConstants c;
+  const std::size_t n = cut.table.size() + 1;
+  c.amount.assign(n, p.amount);
+  c.inv_dens.assign(n, p.inv_dens_scale);
+  c.critical.assign(n, 0);
+  const double excess = std::max(0.0, b.force_n - b.force_threshold_n);
+  for (std::size_t i = 1; i < n; ++i) {
+    const CutMaterial& m = cut.table[i - 1];
+    if (b.kind == BrushKind::kDrill) c.amount[i] = float(m.rate * b.dt_s * excess);
+    if (m.density_scale > 0) c.inv_dens[i] = float(1.0 / m.density_scale);
+    c.critical[i] = m.critical ? 1 : 0;
+  }
+  return c;
+}
+
 float new_value(const gpu::BrushPush& p, const core::Grid& g, const PreEdit& pre, int x, int y, int z, float v,
                 float w) {
   switch (p.kind) {
@@ -206,9 +229,30 @@ float new_value(const gpu::BrushPush& p, const core::Grid& g, const PreEdit& pre
 }
 }  // namespace
 
-BrushResult apply_brush_cpu(Volume& vol, const Brush& b) {
+std::string validate(const MaterialCut& cut, std::size_t voxels) {
+  if (cut.ids.size() != voxels)
+    return "material cut: field 'ids' holds " + std::to_string(cut.ids.size()) + " labels for a volume of " +
+           std::to_string(voxels) + " voxels";
+  if (cut.table.size() > 255) return "material cut: field 'table' has " + std::to_string(cut.table.size()) + " materials (at most 255)";
+  for (std::size_t i = 0; i < cut.table.size(); ++i) {
+    const CutMaterial& m = cut.table[i];
+    const std::string f = "material cut: material " + std::to_string(i + 1) + ": field '";
+    if (!(m.rate >= 0) || !std::isfinite(m.rate)) return f + "rate' must be finite and >= 0, got " + num(m.rate);
+    if (!(m.density_scale >= 0) || !std::isfinite(m.density_scale))
+      return f + "density_scale' must be finite and >= 0, got " + num(m.density_scale);
+  }
+  for (std::size_t v = 0; v < cut.ids.size(); ++v)
+    if (cut.ids[v] > cut.table.size())
+      return "material cut: field 'ids': voxel " + std::to_string(v) + " has label " + std::to_string(cut.ids[v]) +
+             ", past the " + std::to_string(cut.table.size()) + " materials";
+  return {};
+}
+
+BrushResult apply_brush_cpu(Volume& vol, const Brush& b, const MaterialCut* cut) {
   const auto t0 = std::chrono::steady_clock::now();
   if (std::string e = validate(b); !e.empty()) throw BrushError(e);
+  if (cut)
+    if (std::string e = validate(*cut, vol.voxels.size()); !e.empty()) throw BrushError(vol.path + ": " + e);
   const core::Grid& g = vol.grid;
   if (g.empty() || vol.voxels.size() != g.voxel_count())
     throw VolumeError(vol.path + ": brush: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
@@ -229,6 +273,10 @@ BrushResult apply_brush_cpu(Volume& vol, const Brush& b) {
       for (int y = bx.lo[1]; y < bx.hi[1]; ++y, k += w)
         std::memcpy(pre.v.data() + k, vol.voxels.data() + g.index(bx.lo[0], y, z), w * sizeof(float));
   }
+  // Only the removing brushes read the labels: add and smooth are one material's.
+  const bool per_material = cut && (b.kind == BrushKind::kDrill || b.kind == BrushKind::kCarve);
+  const CutConstants cc = per_material ? cut_constants(b, p, *cut) : CutConstants{};
+  gpu::BrushPush pm = p;  // p with the voxel's material's constants
   const auto nb = core::brick_counts(g);
   for (int bz = r.lo[2]; bz < r.hi[2]; ++bz)
     for (int by = r.lo[1]; by < r.hi[1]; ++by)
@@ -242,8 +290,17 @@ BrushResult apply_brush_cpu(Volume& vol, const Brush& b) {
             for (int x = box.lo[0]; x < box.hi[0]; ++x) {
               float w = 0;
               if (!weight(p, x, y, z, w)) continue;
-              float& v = vol.voxels[g.index(x, y, z)];
-              const float nv = new_value(p, g, pre, x, y, z, v, w);
+              const std::size_t at = g.index(x, y, z);
+              float& v = vol.voxels[at];
+              const gpu::BrushPush* q = &p;
+              if (per_material) {
+                const std::uint8_t mat = cut->ids[at];
+                if (cc.critical[mat]) continue;  // a critical structure is never removed
+                pm.amount = cc.amount[mat];
+                pm.inv_dens_scale = cc.inv_dens[mat];
+                q = &pm;
+              }
+              const float nv = new_value(*q, g, pre, x, y, z, v, w);
               if (std::bit_cast<std::uint32_t>(nv) != std::bit_cast<std::uint32_t>(v)) changed = true;
               v = nv;
             }

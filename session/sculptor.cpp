@@ -73,11 +73,11 @@ void Sculptor::record_applied(const std::vector<std::uint32_t>& ids, const float
 }
 
 BrushResult Sculptor::run_brush(const Brush& b) {
-  if (engine_ && touched_range(vol_.grid, b).count() > cpu_max_bricks_) {
+  if (engine_ && !cut_ && touched_range(vol_.grid, b).count() > cpu_max_bricks_) {
     sync_device();
     return engine_->apply(b, &vol_);
   }
-  BrushResult r = apply_brush_cpu(vol_, b);
+  BrushResult r = apply_brush_cpu(vol_, b, cut_.get());
   if (engine_) mark_stale(r.dirty);
   return r;
 }
@@ -102,7 +102,15 @@ BrushEngine* Sculptor::engine() {
   return engine_.get();
 }
 
+void Sculptor::set_material_cut(std::shared_ptr<const MaterialCut> cut) {
+  if (cut)
+    if (std::string e = validate(*cut, vol_.voxels.size()); !e.empty()) throw BrushError(vol_.path + ": " + e);
+  cut_ = std::move(cut);
+}
+
 std::string Sculptor::describe_path() const {
+  if (cut_)
+    return "CPU reference (one thread), per material (labelled scene: the GPU brush has no label channel)";
   if (!engine_) return "CPU reference (one thread): no Vulkan device given to the brushes";
   return "CPU reference (one thread) for brushes touching <= " + std::to_string(cpu_max_bricks_) +
          " bricks (changed bricks uploaded to the device before its next brush), the Vulkan device (" +

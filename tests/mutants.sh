@@ -224,6 +224,13 @@ m link-arrival-slack        sim/delayed_link.h 'arrive_s <= t_s + kArrivalSlackS
 m link-whole-ticks          sim/linked_contact.cpp 'whole >= 1 && std::abs(ticks - whole) <= 1e-9 * whole' 'whole >= 1' \
                                test_linked_contact 'DelayLine.*:LinkedContact.*'
 
+# Per-material drilling: a critical structure is never removed, and each material takes its own rate.
+C=session/brush_cpu.cpp
+m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical structure is never removed' '' \
+                               test_material_cut 'MaterialCut.*'
+m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
+                               test_material_cut 'MaterialCut.*'
+
 # ---- The run ----
 work=$root/build-mutants
 copy=$work/src

@@ -1,0 +1,281 @@
+// Per-material drilling and the critical margin on analytic layered phantoms whose truth
+// is exact (labels made here from the geometry, not by the code under test):
+//  - a critical tube inside a bone slab, drilled toward from 8 directions: no critical voxel
+//    changes, and the margin warning fires before the burr reaches the tube, in every drill
+//    (reach judged by brute force over the tube's voxels);
+//  - a soft layer above a hard one: the soft one loses value faster by the ratio of the
+//    rates (tolerance from the brush's float formula);
+//  - the distance field against brute force; a cut of label 0 only is bit for bit no cut;
+//  - a Sculptor with a Vulkan device and a cut keeps every brush on the CPU reference.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <cstdint>
+#include <memory>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "isotouch/materials/critical_distance.h"
+#include "isotouch/materials/critical_margin.h"
+#include "isotouch/session/brush.h"
+#include "isotouch/tests/vk_test_context.h"
+
+using namespace isotouch;
+using core::Vec3;
+using session::Brush;
+using session::BrushKind;
+using session::CutMaterial;
+using session::MaterialCut;
+
+namespace {
+constexpr float kBone = 1000.0f, kEmpty = 0.0f;
+constexpr std::uint8_t kSlab = 1, kTube = 2;
+
+/// A bone slab (the whole grid, value 1000) with a critical tube along x through the grid's
+/// centre, radius tube_r_m, on an anisotropic grid.
+struct TubePhantom {
+  engine::Volume vol;
+  std::shared_ptr<MaterialCut> cut = std::make_shared<MaterialCut>();
+  double tube_r_m = 2.5e-3;
+  Vec3 axis_point;                      ///< a point on the tube's axis [m]
+  std::vector<Vec3> tube_voxels;        ///< centres of the tube's voxels [m]
+  std::vector<std::size_t> tube_index;  ///< their offsets
+
+  TubePhantom() {
+    vol.grid.dims = {24, 56, 52};
+    vol.grid.spacing_m = {0.5e-3, 0.5e-3, 0.55e-3};
+    vol.path = "synthetic:tube-phantom";
+    vol.voxels.assign(vol.grid.voxel_count(), kBone);
+    vol.update_stats();
+    axis_point = vol.grid.centre_m();
+    cut->ids.assign(vol.grid.voxel_count(), kSlab);
+    cut->table = {CutMaterial{4000, 0, false}, CutMaterial{4000, 0, true}};
+    const auto& g = vol.grid;
+    for (int z = 0; z < g.dims[2]; ++z)
+      for (int y = 0; y < g.dims[1]; ++y)
+        for (int x = 0; x < g.dims[0]; ++x) {
+          const Vec3 p = g.to_world(Vec3{double(x), double(y), double(z)});
+          if (std::hypot(p.y - axis_point.y, p.z - axis_point.z) < tube_r_m) {
+            cut->ids[g.index(x, y, z)] = kTube;
+            tube_voxels.push_back(p);
+            tube_index.push_back(g.index(x, y, z));
+          }
+        }
+  }
+  /// Exact distance from p to the nearest tube voxel centre (brute force) [m].
+  double exact_distance(const Vec3& p) const {
+    double best = 1e9;
+    for (const Vec3& q : tube_voxels) best = std::min(best, core::norm(p - q));
+    return best;
+  }
+};
+
+Brush drill_at(const Vec3& c, double radius_m, double force_n) {
+  Brush b;
+  b.kind = BrushKind::kDrill;
+  b.centre_m = c;
+  b.radius_m = radius_m;
+  b.falloff = 0.5;
+  b.targets = {kBone, kEmpty, 1000.0f};
+  b.force_n = force_n;
+  b.force_threshold_n = 1.0;
+  b.rate = 4000;
+  b.dt_s = 1e-2;
+  return b;
+}
+
+std::vector<bool> critical_flags(const MaterialCut& cut) {
+  std::vector<bool> f(cut.table.size() + 1, false);
+  for (std::size_t i = 0; i < cut.table.size(); ++i) f[i + 1] = cut.table[i].critical;
+  return f;
+}
+}  // namespace
+
+// The distance field: a lower bound of the brute-force distance everywhere (also outside the
+// grid), exact at voxel centres, at most one cell diagonal short between them.
+TEST(MaterialCut, CriticalDistanceMatchesBruteForce) {
+  const TubePhantom ph;
+  const materials::CriticalDistance cd(ph.vol.grid, ph.cut->ids, critical_flags(*ph.cut));
+  ASSERT_TRUE(cd.any());
+  const auto& g = ph.vol.grid;
+  const double diag = core::norm(g.spacing_m);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-2.0, 1.0);
+  for (int i = 0; i < 300; ++i) {
+    const Vec3 f{u(rng) + 0.5, u(rng) + 0.5, u(rng) + 0.5};  // some points outside the grid
+    const Vec3 idx{f.x * g.dims[0], f.y * g.dims[1], f.z * g.dims[2]};
+    const Vec3 p = g.to_world(idx);
+    const double exact = ph.exact_distance(p), lb = cd.lower_bound(p);
+    EXPECT_LE(lb, exact + 1e-6) << "at index " << idx.x << " " << idx.y << " " << idx.z;
+    const bool inside = idx.x >= 0 && idx.y >= 0 && idx.z >= 0 && idx.x <= g.dims[0] - 1 && idx.y <= g.dims[1] - 1 &&
+                        idx.z <= g.dims[2] - 1;
+    if (inside) {
+      EXPECT_GE(lb, exact - diag - 1e-6) << "at index " << idx.x << " " << idx.y << " " << idx.z;
+    }
+  }
+  for (int i = 0; i < 200; ++i) {
+    const int x = int(rng() % unsigned(g.dims[0])), y = int(rng() % unsigned(g.dims[1])), z = int(rng() % unsigned(g.dims[2]));
+    const double exact = ph.exact_distance(g.to_world(Vec3{double(x), double(y), double(z)}));
+    EXPECT_NEAR(cd.at(x, y, z), exact, 1e-6 + 1e-6 * exact) << x << " " << y << " " << z;
+  }
+}
+
+// 8 drills toward the tube, perpendicular to its axis, the burr advancing 0.1 mm per
+// application at 3 N: the slab is removed up to the tube, no tube voxel changes, and the
+// margin (1.5 mm) warns as the burr's surface enters it, before its sphere holds any tube
+// voxel centre.
+TEST(MaterialCut, DrillsTowardTheTubeNeverTouchItAndWarnFirst) {
+  TubePhantom ph;
+  const materials::CriticalDistance cd(ph.vol.grid, ph.cut->ids, critical_flags(*ph.cut));
+  const double burr_r = 1.5e-3, margin = 1.5e-3, step = 0.1e-3;
+  const double diag = core::norm(ph.vol.grid.spacing_m);
+  for (int dir = 0; dir < 8; ++dir) {
+    engine::Volume vol = ph.vol;
+    const double a = dir * std::numbers::pi / 4;
+    const Vec3 u{0, std::cos(a), std::sin(a)};  // from the axis outward
+    materials::CriticalMargin warn(margin);
+    int warned_at = -1, reached_at = -1;
+    double surface_at_warning = 0;  // the exact surface distance when the warning fired [m]
+    long removed = 0;
+    for (int k = 0;; ++k) {
+      const double from_axis = 10e-3 - k * step;
+      if (from_axis < 1e-3) break;  // the centre well inside the tube
+      const Vec3 c = ph.axis_point + u * from_axis;
+      if (warn.update(k * 1e-2, 1e-2, cd.lower_bound(c) - burr_r) && warned_at < 0) {
+        warned_at = k;
+        surface_at_warning = ph.exact_distance(c) - burr_r;
+      }
+      if (reached_at < 0 && ph.exact_distance(c) < burr_r) reached_at = k;
+      session::apply_brush_cpu(vol, drill_at(c, burr_r, 3.0), ph.cut.get());
+    }
+    for (std::size_t i : ph.tube_index) ASSERT_EQ(vol.voxels[i], kBone) << "direction " << dir << ": tube voxel " << i;
+    for (std::size_t i = 0; i < vol.voxels.size(); ++i) removed += vol.voxels[i] < kBone ? 1 : 0;
+    EXPECT_GT(removed, 100) << "direction " << dir << ": the drill removed no slab";
+    ASSERT_GE(reached_at, 0) << "direction " << dir;
+    EXPECT_GE(warned_at, 0) << "direction " << dir << ": no warning";
+    EXPECT_LT(warned_at, reached_at) << "direction " << dir;
+    // It fires as the surface enters the margin: not before (the distance is a lower bound,
+    // at most a cell diagonal short), and at most one step after.
+    EXPECT_GE(surface_at_warning, margin - step - 1e-9) << "direction " << dir;
+    EXPECT_LT(surface_at_warning, margin + diag) << "direction " << dir;
+    EXPECT_GE(warn.entries(), 1) << "direction " << dir;
+    EXPECT_LT(warn.closest_m(), 0.0) << "direction " << dir << ": the burr overlapped the tube's centres";
+  }
+}
+
+// The monitor's figures on a hand-made approach: out, in twice, out.
+TEST(MaterialCut, MarginCountsEntriesTimeAndClosest) {
+  materials::CriticalMargin m(1e-3);
+  const double d[] = {3e-3, 2e-3, 0.9e-3, 0.4e-3, 1.2e-3, 0.8e-3, 2e-3};
+  for (int k = 0; k < 7; ++k) m.update(k * 0.01, 0.01, d[k]);
+  EXPECT_EQ(m.entries(), 2);
+  EXPECT_NEAR(m.time_inside_s(), 0.03, 1e-12);
+  EXPECT_EQ(m.closest_m(), 0.4e-3);
+  EXPECT_EQ(m.first_entry_t_s(), 0.02);
+  EXPECT_FALSE(m.inside());
+}
+
+// A carve over the tube leaves it too.
+TEST(MaterialCut, CarveLeavesTheCriticalTube) {
+  TubePhantom ph;
+  Brush b = drill_at(ph.axis_point, 4e-3, 0);
+  b.kind = BrushKind::kCarve;
+  b.strength = 1e4;
+  session::apply_brush_cpu(ph.vol, b, ph.cut.get());
+  for (std::size_t i : ph.tube_index) ASSERT_EQ(ph.vol.voxels[i], kBone);
+  EXPECT_EQ(ph.vol.voxels[ph.vol.grid.index(12, 28, 26 + 6)], kEmpty);  // 3.6 mm from the axis: slab, removed
+}
+
+// Soft above hard, the interface midway between two voxel layers and the burr centred on it:
+// mirrored voxels have the same weight and value, so each soft voxel loses rate_s / rate_h
+// times what its hard mirror loses (per voxel: float(a_i * w) / f, as brush.h's formula).
+TEST(MaterialCut, SoftLayerGoesFasterByTheRateRatio) {
+  engine::Volume vol;
+  vol.grid.dims = {24, 24, 24};
+  vol.grid.spacing_m = {0.5e-3, 0.5e-3, 0.5e-3};
+  vol.path = "synthetic:soft-over-hard";
+  vol.voxels.assign(vol.grid.voxel_count(), kBone);
+  vol.update_stats();
+  auto cut = std::make_shared<MaterialCut>();
+  const double rate_soft = 3000, rate_hard = 500;
+  cut->table = {CutMaterial{rate_soft, 0, false}, CutMaterial{rate_hard, 0, false}};
+  cut->ids.resize(vol.grid.voxel_count());
+  for (int z = 0; z < 24; ++z)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) cut->ids[vol.grid.index(x, y, z)] = z >= 12 ? 1 : 2;  // soft above z = 11.5
+  const Vec3 c = vol.grid.to_world(Vec3{11.5, 11.5, 11.5});
+  const Brush b = drill_at(c, 2e-3, 1.5);  // small removal: no voxel reaches empty
+  const engine::Volume before = vol;
+  session::apply_brush_cpu(vol, b, cut.get());
+  int pairs = 0;
+  for (int dz = 0; dz < 12; ++dz)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) {
+        const std::size_t s = vol.grid.index(x, y, 12 + dz), h = vol.grid.index(x, y, 11 - dz);
+        const double ds = double(before.voxels[s]) - vol.voxels[s], dh = double(before.voxels[h]) - vol.voxels[h];
+        const double ratio = rate_soft / rate_hard, half_ulp = 6.1035e-5;  // ulp(1000) / 2
+        if (dh == 0) {  // a hard step below the float resolution at 1000
+          EXPECT_LE(ds, ratio * 2 * half_ulp);
+          continue;
+        }
+        ++pairs;
+        // Each removal is float(float(a_i * w) / f) (a_i = float(rate_i dt (|F| - F_t)), the
+        // same w and f for a voxel and its mirror) subtracted from 1000 in float: relative
+        // errors of 3 roundings (2^-24 each) per side, and half an ulp of 1000 absolute.
+        const double rel = 6 * 5.97e-8 + half_ulp / (ratio * dh) + half_ulp / dh;
+        EXPECT_NEAR(ds / dh, ratio, ratio * rel) << x << " " << y << " " << dz;
+      }
+  EXPECT_GT(pairs, 50);
+}
+
+// Label 0 everywhere takes the brush's own constants: bit for bit the brush without a cut.
+TEST(MaterialCut, LabelZeroIsTheOneMaterialBrush) {
+  TubePhantom ph;
+  MaterialCut none = *ph.cut;
+  std::fill(none.ids.begin(), none.ids.end(), std::uint8_t(0));
+  engine::Volume a = ph.vol, b = ph.vol;
+  for (int k = 0; k < 20; ++k) {
+    const Brush br = drill_at(ph.axis_point + Vec3{0, 4e-3 - k * 2e-4, 0}, 2e-3, 2.5);
+    session::apply_brush_cpu(a, br);
+    session::apply_brush_cpu(b, br, &none);
+  }
+  ASSERT_EQ(a.voxels.size(), b.voxels.size());
+  EXPECT_EQ(std::memcmp(a.voxels.data(), b.voxels.data(), a.voxels.size() * sizeof(float)), 0);
+}
+
+TEST(MaterialCut, BadCutIsRefusedNamingTheField) {
+  TubePhantom ph;
+  MaterialCut bad = *ph.cut;
+  bad.ids[5] = 9;
+  try {
+    session::apply_brush_cpu(ph.vol, drill_at(ph.axis_point, 1e-3, 2), &bad);
+    ADD_FAILURE() << "no error";
+  } catch (const session::BrushError& e) {
+    EXPECT_NE(std::string(e.what()).find("field 'ids': voxel 5 has label 9"), std::string::npos) << e.what();
+  }
+  bad = *ph.cut;
+  bad.table[0].rate = -1;
+  EXPECT_NE(session::validate(bad, bad.ids.size()).find("material 1: field 'rate' must be finite and >= 0, got -1"),
+            std::string::npos);
+}
+
+// A Sculptor with a device and a cut: every brush on the CPU reference (the shader has no
+// labels), the same bits as apply_brush_cpu with the cut, even when told to send all to the device.
+TEST(MaterialCut, SculptorWithCutStaysOnTheCpuReference) {
+  TubePhantom ph;
+  session::Sculptor s(ph.vol, &test::validated_vk());
+  s.set_material_cut(ph.cut);
+  s.set_cpu_max_bricks(0);
+  engine::Volume ref = ph.vol;
+  for (int k = 0; k < 30; ++k) {
+    const Brush b = drill_at(ph.axis_point + Vec3{0, 0, 6e-3 - k * 2e-4}, 2e-3, 3.0);
+    const session::BrushResult r = s.apply(b);
+    EXPECT_FALSE(r.on_device);
+    session::apply_brush_cpu(ref, b, ph.cut.get());
+  }
+  EXPECT_EQ(std::memcmp(s.volume().voxels.data(), ref.voxels.data(), ref.voxels.size() * sizeof(float)), 0);
+  EXPECT_EQ(test::validated_vk().validation_messages(), 0u);
+}

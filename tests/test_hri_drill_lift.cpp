@@ -12,6 +12,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/sampling.h"
 #include "isotouch/tests/drilled_walls.h"
+#include "isotouch/tests/scene_servo.h"
 
 using namespace isotouch::core;
 using namespace isotouch::servo;
@@ -22,22 +23,6 @@ using isotouch::test::WallCase;
 namespace {
 
 constexpr double kTilt = 20.0 * M_PI / 180.0;  ///< the press from the wall's normal [rad]
-
-/// The shipped drill scenes' servo: K = 800 N/m, limit 3.3 N, B = 1 N s/m, 20 ms ramp, edits
-/// eased over their 10 ms period; a tool of radius r [m] (0: the point).
-HriParams drill_servo(double r, int n) {
-  HriParams p;
-  p.tau = 0;
-  p.stiffness_n_per_m = 800;
-  p.damping_n_s_per_m = 1.0;
-  p.force_limit_n = 3.3;
-  p.intersection = Intersection::kSecant;
-  p.recovery_time_s = 0.02;
-  p.edit_period_s = 0.01;
-  p.plane_update_period = n;
-  p.tool_radius_m = r;
-  return p;
-}
 
 /// What one drill-and-lift showed.
 struct DrillRun {
@@ -64,7 +49,11 @@ DrillRun drill_and_lift(const WallCase& wc, double r, int n, double tilt) {
   const Vec3 side = normalized_or(cross(wc.m, Vec3{0, 1, 0}), Vec3{1, 0, 0});
   const Vec3 press = wc.m * std::cos(tilt) + side * std::sin(tilt);  // the hand's press direction (unit)
   const double cut = r > 0 ? r + 0.5e-3 : 1.5e-3, top = 0.5 * wc.w + r + 3e-3, bottom = -(0.5 * wc.w + r + 2e-3);
-  HriRenderer renderer(drill_servo(r, n));
+  HriParams params = isotouch::test::scene_servo();  // edits eased over their 10 ms period
+  params.edit_period_s = 0.01;
+  params.plane_update_period = n;
+  params.tool_radius_m = r;
+  HriRenderer renderer(params);
   std::uint64_t version = 1;
   SampleField field = drilled_wall(wc, c, c, c, 0.0, version);
   bool cutting = false;

@@ -12,6 +12,7 @@
 
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/sampling.h"
+#include "isotouch/tests/scene_servo.h"
 #include "isotouch/tests/thin_ridges.h"
 
 using namespace isotouch::core;
@@ -20,20 +21,7 @@ using isotouch::test::lowest_wrapping_press;
 using isotouch::test::press_text;
 using isotouch::test::ridge_cases;
 using isotouch::test::RidgeCase;
-
-namespace {
-/// The shipped scenes' servo: K = 800 N/m, limit 3.3 N, B = 1 N s/m, secant p, 20 ms ramp.
-HriParams scene_servo() {
-  HriParams p;
-  p.tau = 0;
-  p.stiffness_n_per_m = 800;
-  p.damping_n_s_per_m = 1.0;
-  p.force_limit_n = 3.3;
-  p.intersection = Intersection::kSecant;
-  p.recovery_time_s = 0.02;
-  return p;
-}
-}  // namespace
+using isotouch::test::scene_servo;
 
 // A point probe holds every drawn ridge and cylinder to 0.9 of the force limit at every n:
 // no press below 0.9 of the limit (K = 800 N/m: 3.7 mm at 0.9) wraps, the bar the analytic

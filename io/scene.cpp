@@ -665,7 +665,7 @@ materials::Material parse_material(const Reader& r, const json& m, const std::st
   out.mu_s = r.number(m, f, "mu_s", {}, kSec);
   out.mu_d = r.number(m, f, "mu_d", {}, kSec);
   if (out.mu_d > out.mu_s) r.fail(f + ".mu_d", "must be at most mu_s (" + std::to_string(out.mu_s) + "), got " + m.at("mu_d").dump());
-  out.rate = r.number(m, f, "rate", {}, kSec);
+  out.rate = m.contains("rate") ? r.number(m, f, "rate", {}, kSec) : -1;  // absent: the drill's own
   out.density_scale = r.number(m, f, "density_scale", {}, kSec);
   if (m.contains("color")) {
     const json& c = m.at("color");

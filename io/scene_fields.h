@@ -118,7 +118,7 @@ inline constexpr SceneField kSceneFields[] = {
     {"materials.list", "stiffness_n_per_m", "N/m", "(0, 1e6]", "800"},
     {"materials.list", "mu_s", "", "[0, 10]", "0"},
     {"materials.list", "mu_d", "", "[0, 10]; at most `mu_s`", "0"},
-    {"materials.list", "rate", "value units per N s", "[0, 1e12]", "1000"},
+    {"materials.list", "rate", "value units per N s", "[0, 1e12]", "the drill's (`edits.brush`)"},
     {"materials.list", "density_scale", "value units", "[0, 1e30]", "0"},
     {"materials.list", "color", "", "3 numbers, each in [0, 1]", "the segment's colour, else grey"},
     {"materials.list", "critical", "", "true, false", "false"},

@@ -28,7 +28,7 @@ struct Material {
   double range_lo = 0, range_hi = 0;
   double stiffness_n_per_m = 800;    ///< K [N/m]
   double mu_s = 0, mu_d = 0;         ///< static and dynamic friction coefficients
-  double rate = 1000;                ///< drill: value units removed per (N above the threshold) per s
+  double rate = -1;                  ///< drill: value units removed per (N above the threshold) per s; < 0: the brush's
   double density_scale = 0;          ///< drill: density factor [value units]; 0 = the brush's default
   /// Display colour, RGB in [0, 1]; has_color false = the `.seg.nrrd`'s SegmentN_Color, else grey.
   std::array<double, 3> color{0.8, 0.8, 0.8};

@@ -106,7 +106,7 @@ struct EditFigures {
   double margin_m = 0;             ///< the warning distance: their largest margin_mm [m]
   long margin_entries = 0;         ///< times the burr's surface entered the margin
   double margin_time_s = 0;        ///< time inside the margin [s]
-  double closest_approach_m = 0;   ///< smallest surface distance [m] (< 0: the brush overlapped the structure's voxel centres)
+  double closest_approach_m = std::numeric_limits<double>::infinity();  ///< smallest surface distance [m] (< 0: the brush overlapped the structure's voxel centres; inf: never measured)
   double first_entry_t_s = -1;     ///< [s], -1: never entered
   long critical_voxels_changed = 0; ///< critical voxels whose value differs after the run (0: never removed)
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn

@@ -186,14 +186,17 @@ struct CutConstants {
 };
 CutConstants cut_constants(const Brush& b, const gpu::BrushPush& p, const MaterialCut& cut) {
   CutConstants c;
+  // Every id has an entry: one past the table (refused by validate(), which the Sculptor runs
+  // once) is left unchanged, as a critical one.
   const std::size_t n = cut.table.size() + 1;
-  c.amount.assign(n, p.amount);
-  c.inv_dens.assign(n, p.inv_dens_scale);
-  c.critical.assign(n, 0);
+  c.amount.assign(256, p.amount);
+  c.inv_dens.assign(256, p.inv_dens_scale);
+  c.critical.assign(256, 1);
+  std::fill(c.critical.begin(), c.critical.begin() + std::ptrdiff_t(n), std::uint8_t(0));
   const double excess = std::max(0.0, b.force_n - b.force_threshold_n);
   for (std::size_t i = 1; i < n; ++i) {
     const CutMaterial& m = cut.table[i - 1];
-    if (b.kind == BrushKind::kDrill) c.amount[i] = float(m.rate * b.dt_s * excess);
+    if (b.kind == BrushKind::kDrill && m.rate >= 0) c.amount[i] = float(m.rate * b.dt_s * excess);
     if (m.density_scale > 0) c.inv_dens[i] = float(1.0 / m.density_scale);
     c.critical[i] = m.critical ? 1 : 0;
   }
@@ -237,9 +240,11 @@ std::string validate(const MaterialCut& cut, std::size_t voxels) {
   for (std::size_t i = 0; i < cut.table.size(); ++i) {
     const CutMaterial& m = cut.table[i];
     const std::string f = "material cut: material " + std::to_string(i + 1) + ": field '";
-    if (!(m.rate >= 0) || !std::isfinite(m.rate)) return f + "rate' must be finite and >= 0, got " + num(m.rate);
-    if (!(m.density_scale >= 0) || !std::isfinite(m.density_scale))
-      return f + "density_scale' must be finite and >= 0, got " + num(m.density_scale);
+    if (!std::isfinite(m.rate) || !std::isfinite(float(m.rate)))
+      return f + "rate' must be finite (< 0: the brush's), got " + num(m.rate);
+    if (!(m.density_scale >= 0) || !std::isfinite(m.density_scale) ||
+        (m.density_scale > 0 && !std::isfinite(float(1.0 / m.density_scale))))
+      return f + "density_scale' must be 0 or a finite value whose inverse is a finite float, got " + num(m.density_scale);
   }
   for (std::size_t v = 0; v < cut.ids.size(); ++v)
     if (cut.ids[v] > cut.table.size())
@@ -251,8 +256,13 @@ std::string validate(const MaterialCut& cut, std::size_t voxels) {
 BrushResult apply_brush_cpu(Volume& vol, const Brush& b, const MaterialCut* cut) {
   const auto t0 = std::chrono::steady_clock::now();
   if (std::string e = validate(b); !e.empty()) throw BrushError(e);
-  if (cut)
-    if (std::string e = validate(*cut, vol.voxels.size()); !e.empty()) throw BrushError(vol.path + ": " + e);
+  // The labels' ids are checked once (Sculptor::set_material_cut): here the sizes only (an id
+  // past the table is left unchanged, never read past an array).
+  if (cut && cut->ids.size() != vol.voxels.size())
+    throw BrushError(vol.path + ": material cut: field 'ids' holds " + std::to_string(cut->ids.size()) +
+                     " labels for a volume of " + std::to_string(vol.voxels.size()) + " voxels");
+  if (cut && cut->table.size() > 255)
+    throw BrushError(vol.path + ": material cut: field 'table' has " + std::to_string(cut->table.size()) + " materials (at most 255)");
   const core::Grid& g = vol.grid;
   if (g.empty() || vol.voxels.size() != g.voxel_count())
     throw VolumeError(vol.path + ": brush: " + std::to_string(vol.voxels.size()) + " voxels for dims " +
@@ -273,9 +283,10 @@ BrushResult apply_brush_cpu(Volume& vol, const Brush& b, const MaterialCut* cut)
       for (int y = bx.lo[1]; y < bx.hi[1]; ++y, k += w)
         std::memcpy(pre.v.data() + k, vol.voxels.data() + g.index(bx.lo[0], y, z), w * sizeof(float));
   }
-  // Only the removing brushes read the labels: add and smooth are one material's.
+  // Every brush leaves a critical voxel as it is; the removing brushes take each material's
+  // rate and density factor.
   const bool per_material = cut && (b.kind == BrushKind::kDrill || b.kind == BrushKind::kCarve);
-  const CutConstants cc = per_material ? cut_constants(b, p, *cut) : CutConstants{};
+  const CutConstants cc = cut ? cut_constants(b, p, *cut) : CutConstants{};
   gpu::BrushPush pm = p;  // p with the voxel's material's constants
   const auto nb = core::brick_counts(g);
   for (int bz = r.lo[2]; bz < r.hi[2]; ++bz)
@@ -293,9 +304,12 @@ BrushResult apply_brush_cpu(Volume& vol, const Brush& b, const MaterialCut* cut)
               const std::size_t at = g.index(x, y, z);
               float& v = vol.voxels[at];
               const gpu::BrushPush* q = &p;
+              if (cut) {
+                const std::uint8_t mat = cut->ids[at];
+                if (cc.critical[mat]) continue;  // a critical structure is never changed
+              }
               if (per_material) {
                 const std::uint8_t mat = cut->ids[at];
-                if (cc.critical[mat]) continue;  // a critical structure is never removed
                 pm.amount = cc.amount[mat];
                 pm.inv_dens_scale = cc.inv_dens[mat];
                 q = &pm;

@@ -11,14 +11,14 @@ namespace isotouch::session {
 
 /// How the drill treats one material.
 struct CutMaterial {
-  double rate = 1000;         ///< [value units / (N s)] at density factor 1 (Brush::rate's unit)
+  double rate = -1;           ///< [value units / (N s)] at density factor 1 (Brush::rate's unit); < 0: the brush's
   double density_scale = 0;   ///< [value units]; 0 = the brush's own targets.density_scale
-  bool critical = false;      ///< never removed: its voxels keep their value under the drill and carve
+  bool critical = false;      ///< never changed: its voxels keep their value under every brush (drill, carve, add, smooth)
 };
 
 /// The label of every voxel of the edited volume's grid and the per-label cut.
 struct MaterialCut {
-  std::vector<std::uint8_t> ids;     ///< one per voxel, x fastest: 0 = no material (the brush's own rate), i = table[i - 1]
+  std::vector<std::uint8_t> ids;     ///< one per voxel, x fastest: 0 = no material (the brush's own rate), i = table[i - 1]; past the table: left unchanged
   std::vector<CutMaterial> table;    ///< per material id - 1
 };
 

@@ -226,9 +226,9 @@ m link-whole-ticks          sim/linked_contact.cpp 'whole >= 1 && std::abs(ticks
 
 # Per-material drilling: a critical structure is never removed, and each material takes its own rate.
 C=session/brush_cpu.cpp
-m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical structure is never removed' '' \
+m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical structure is never changed' '' \
                                test_material_cut 'MaterialCut.*'
-m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
+m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill && m.rate >= 0) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
                                test_material_cut 'MaterialCut.*'
 
 # ---- The run ----

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <random>
@@ -244,22 +245,74 @@ TEST(MaterialCut, LabelZeroIsTheOneMaterialBrush) {
   }
   ASSERT_EQ(a.voxels.size(), b.voxels.size());
   EXPECT_EQ(std::memcmp(a.voxels.data(), b.voxels.data(), a.voxels.size() * sizeof(float)), 0);
+  // A material without its own rate or density scale (rate < 0, density_scale 0) drills as
+  // the brush does.
+  MaterialCut own = *ph.cut;
+  std::fill(own.ids.begin(), own.ids.end(), kSlab);
+  own.table[0] = CutMaterial{-1, 0, false};
+  engine::Volume c = ph.vol;
+  for (int k = 0; k < 20; ++k)
+    session::apply_brush_cpu(c, drill_at(ph.axis_point + Vec3{0, 4e-3 - k * 2e-4, 0}, 2e-3, 2.5), &own);
+  EXPECT_EQ(std::memcmp(a.voxels.data(), c.voxels.data(), a.voxels.size() * sizeof(float)), 0);
 }
 
 TEST(MaterialCut, BadCutIsRefusedNamingTheField) {
   TubePhantom ph;
   MaterialCut bad = *ph.cut;
   bad.ids[5] = 9;
+  EXPECT_NE(session::validate(bad, bad.ids.size()).find("field 'ids': voxel 5 has label 9"), std::string::npos);
+  // The brush checks the sizes only (the Sculptor validates once); an id past the table under
+  // the brush is left unchanged.
+  const std::size_t under = ph.vol.grid.index(12, 28, 26 + 6);  // slab, 3.6 mm from the axis
+  bad.ids[under] = 9;
+  engine::Volume vol = ph.vol;
+  session::apply_brush_cpu(vol, drill_at(ph.axis_point, 4e-3, 50), &bad);
+  EXPECT_EQ(vol.voxels[under], kBone) << "a voxel of an unknown label was changed";
+  EXPECT_LT(vol.voxels[ph.vol.grid.index(12, 28, 26 + 7)], kBone) << "the test's premise: the drill removes there";
+  bad.ids.pop_back();
   try {
-    session::apply_brush_cpu(ph.vol, drill_at(ph.axis_point, 1e-3, 2), &bad);
+    session::apply_brush_cpu(vol, drill_at(ph.axis_point, 1e-3, 2), &bad);
     ADD_FAILURE() << "no error";
   } catch (const session::BrushError& e) {
-    EXPECT_NE(std::string(e.what()).find("field 'ids': voxel 5 has label 9"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("field 'ids' holds"), std::string::npos) << e.what();
   }
   bad = *ph.cut;
-  bad.table[0].rate = -1;
-  EXPECT_NE(session::validate(bad, bad.ids.size()).find("material 1: field 'rate' must be finite and >= 0, got -1"),
-            std::string::npos);
+  bad.table[0].rate = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(session::validate(bad, bad.ids.size()).find("material 1: field 'rate' must be finite"), std::string::npos);
+  bad = *ph.cut;
+  bad.table[1].density_scale = 1e-39;  // its inverse is past a float
+  EXPECT_NE(session::validate(bad, bad.ids.size()).find("material 2: field 'density_scale'"), std::string::npos);
+}
+
+// Smooth and add change no critical voxel either: smoothing next to a hole would pull the
+// tube's voxels toward empty, adding would raise them.
+TEST(MaterialCut, SmoothAndAddLeaveTheCriticalTube) {
+  TubePhantom ph;
+  const auto& g = ph.vol.grid;
+  for (int z = 0; z < g.dims[2]; ++z)  // a hole above the tube's axis (slab only)
+    for (int y = 0; y < g.dims[1]; ++y)
+      for (int x = 0; x < g.dims[0]; ++x)
+        if (ph.cut->ids[g.index(x, y, z)] == kSlab && g.to_world(Vec3{double(x), double(y), double(z)}).z > ph.axis_point.z)
+          ph.vol.voxels[g.index(x, y, z)] = kEmpty;
+  for (std::size_t i : ph.tube_index) ph.vol.voxels[i] = 800.0f;
+  const engine::Volume before = ph.vol;
+  Brush smooth = drill_at(ph.axis_point, 4e-3, 0);
+  smooth.kind = BrushKind::kSmooth;
+  smooth.strength = 1;
+  Brush add = smooth;
+  add.kind = BrushKind::kAdd;
+  add.strength = 100;
+  for (const Brush& b : {smooth, add}) {
+    engine::Volume plain = before, cut = before;
+    session::apply_brush_cpu(plain, b);
+    session::apply_brush_cpu(cut, b, ph.cut.get());
+    int would_change = 0;
+    for (std::size_t i : ph.tube_index) {
+      would_change += plain.voxels[i] != before.voxels[i];
+      ASSERT_EQ(cut.voxels[i], before.voxels[i]) << (b.kind == BrushKind::kSmooth ? "smooth" : "add");
+    }
+    EXPECT_GT(would_change, 10) << "the test's premise: without the cut the brush changes the tube";
+  }
 }
 
 // A Sculptor with a device and a cut: every brush on the CPU reference (the shader has no

@@ -11,6 +11,7 @@
 #include "isotouch/engine/vk_context.h"
 #include "isotouch/eval/sweep.h"
 #include "isotouch/python/common.h"
+#include "isotouch/python/params_arg.h"
 #include "isotouch/servo/baselines.h"
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/hri.h"
@@ -85,34 +86,6 @@ void def_params_repr(Class& c, const char* name) {
     }
     return s + ")";
   });
-}
-
-/// `params` as a P (None: the defaults, tau not given), its tau resolved with `tau`: either
-/// one, or both when equal. @throws TypeError naming what was given and `expected`;
-/// ValueError when no isovalue is given or two differ.
-template <class P>
-P params_arg(const py::object& params, const std::string& algorithm, const char* expected, std::optional<double> tau,
-             const char* tau_name = "tau") {
-  P p{};
-  p.tau = std::nan("");
-  if (!params.is_none()) {
-    if (!py::isinstance<P>(params))
-      throw py::type_error("params: " + std::string(py::str(py::type::of(params).attr("__name__"))) + " given for '" +
-                           algorithm + "', expected isotouch." + expected);
-    p = params.cast<P>();
-  }
-  if (tau) {
-    if (!std::isnan(p.tau) && p.tau != *tau) {
-      std::ostringstream s;
-      s << tau_name << ": " << *tau << " given, but params.tau is " << p.tau << ": give the isovalue once";
-      throw py::value_error(s.str());
-    }
-    p.tau = *tau;
-  }
-  if (!std::isfinite(p.tau))
-    throw py::value_error("tau: no isovalue given for '" + algorithm + "' (a Field does not carry one): pass tau=" +
-                          "VALUE (volume value units) or params=isotouch." + expected + "(tau=VALUE)");
-  return p;
 }
 
 /// One renderer for `algorithm` ("hri", "avila", "blezek") with `params` (HriParams for HRI,

@@ -234,16 +234,18 @@ ErrorFigures measure(const SweepScene& s, const Playback& p) {
   return e;
 }
 
-double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps) {
-  return median_ns_per_tick(r, s, *s.field, warmup, reps);
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps,
+                          const std::atomic<bool>* cancel) {
+  return median_ns_per_tick(r, s, *s.field, warmup, reps, cancel);
 }
 
 double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, const core::SampleField& f, int warmup,
-                          int reps) {
+                          int reps, const std::atomic<bool>* cancel) {
   using clock = std::chrono::steady_clock;
   std::vector<double> per_tick;
   volatile double sink = 0;
   for (int i = 0; i < warmup + reps; ++i) {
+    if (cancel && cancel->load()) return std::nan("");
     r.reset();
     const auto t0 = clock::now();
     for (const Vec3& h : s.hip) sink = sink + r.tick(f, h).force_n.x;

@@ -1,5 +1,6 @@
 // sweep.h - scenes with a recorded stroke, replayed through any renderer configuration.
 #pragma once
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <iosfwd>
@@ -105,10 +106,12 @@ struct ErrorFigures {
 ErrorFigures measure(const SweepScene& s, const Playback& p);
 
 /// Total time of `reps` replays after `warmup` ones, each divided by the tick count;
-/// returns the median [ns per tick].
-double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps);
+/// returns the median [ns per tick]. `cancel` (if given) is looked at between replays: once
+/// set, no further replay starts and the result is NaN (a caller that was interrupted).
+double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, int warmup, int reps,
+                          const std::atomic<bool>* cancel = nullptr);
 /// The same on another snapshot of the scene's samples.
 double median_ns_per_tick(servo::Renderer& r, const SweepScene& s, const core::SampleField& field, int warmup,
-                          int reps);
+                          int reps, const std::atomic<bool>* cancel = nullptr);
 
 }  // namespace isotouch::eval

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/core/isosurface.h"
 #include "isotouch/engine/raycast.h"
 #include "isotouch/engine/volume.h"
 #include "isotouch/io/scene.h"
@@ -19,9 +20,11 @@ namespace isotouch::run {
 /// The overview's file name in a run folder.
 inline constexpr const char* kOverviewFile = "overview.png";
 
-/// The overview's camera: `isotouch render`'s default (run::default_camera: physical +z up,
-/// the eye anterior, 10 deg above, the whole volume in view), grid-world.
-engine::CameraView overview_view(const engine::Volume& vol);
+/// The overview's camera, grid-world: `isotouch render`'s angles (run::default_camera:
+/// physical +z up, the eye anterior, 10 deg above) aimed at the centre of the box of the voxels
+/// inside `iso` (the object, not the scan around it) from where that box's bounding sphere
+/// fills the picture's height; the whole volume's view when no voxel is inside.
+engine::CameraView overview_view(const engine::Volume& vol, const core::Isosurface& iso);
 
 /// The probe's path colour in the overview (linear RGB 0..1): magenta, seen through the surface.
 inline constexpr std::array<float, 3> kOverviewPathRgb{1.0f, 0.1f, 1.0f};

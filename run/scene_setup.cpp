@@ -134,19 +134,22 @@ long edit_tick(double t_s, double rate_hz) { return std::max(0L, long(std::ceil(
 
 namespace {
 
-// 1. Volume in: the scene's file or synthetic shape, its figures into m; a volume without
-// finite voxels, or an isovalue outside their range, has no isosurface.
-void load_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
-  RunMetrics& m = s.metrics;
-  engine::Volume& vol = s.volume;
+// 1. Volume in: the scene's file or synthetic shape.
+engine::Volume load_volume(const Scene& scene, std::ostream& log) {
   if (!scene.volume_path.empty()) {
     log << "volume   " << scene.volume_path << "\n";
-    vol = load_any_volume(scene.volume_path);
-  } else if (scene.synthetic.kind == "sphere") {
-    vol = engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
-  } else {
-    vol = std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
+    return load_any_volume(scene.volume_path);
   }
+  if (scene.synthetic.kind == "sphere")
+    return engine::make_sphere(scene.synthetic.dims, scene.synthetic.spacing_m, scene.synthetic.radius_vox);
+  return std::move(eval::make_synthetic_scene(scene.synthetic.kind).volume);
+}
+
+// 1a. The volume's figures into m; a volume without finite voxels, or an isovalue outside
+// their range, has no isosurface.
+void check_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
+  RunMetrics& m = s.metrics;
+  const engine::Volume& vol = s.volume;
   m.volume_path = vol.path;
   m.dims = vol.grid.dims;
   m.spacing_m = vol.grid.spacing_m;
@@ -278,10 +281,17 @@ void make_edit_session(const Scene& scene, SceneSetup& s, std::ostream& log) {
 }  // namespace
 
 SceneSetup setup_scene(const Scene& scene, const RunOptions& opt, std::ostream& log) {
-  SceneSetup s;
   (void)scene_passes(scene);  // a bad pass list fails before the volume is read
   (void)scene_sample_format(scene);
-  load_volume(scene, s, log);
+  return setup_scene(scene, load_volume(scene, log), opt, log);
+}
+
+SceneSetup setup_scene(const Scene& scene, engine::Volume volume, const RunOptions& opt, std::ostream& log) {
+  SceneSetup s;
+  (void)scene_passes(scene);
+  (void)scene_sample_format(scene);
+  s.volume = std::move(volume);
+  check_volume(scene, s, log);
   load_materials(scene, s, log);
   run_engine_step(scene, opt, s, log);
   // 3. Script, servo parameters, workspace.

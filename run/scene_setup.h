@@ -110,6 +110,9 @@ struct SceneSetup {
 /// figures), builds the script and, with edits, the session::EditSession. run_scene starts with it.
 /// @throws as run_scene.
 SceneSetup setup_scene(const io::Scene& scene, const RunOptions& options, std::ostream& log);
+/// The same on `volume` (already in memory: scene.volume_path is not read), e.g. a volume
+/// made in Python. @throws as run_scene.
+SceneSetup setup_scene(const io::Scene& scene, engine::Volume volume, const RunOptions& options, std::ostream& log);
 
 /// The tick after whose render an event at time t_s [s] is applied: the first tick k with
 /// k / rate_hz >= t_s (to 1e-9 tick).

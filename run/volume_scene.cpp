@@ -118,28 +118,35 @@ bool is_volume_path(const std::string& path) {
 }
 
 VolumeScene make_volume_scene(const std::string& volume_path, std::optional<double> iso, const std::string& inside) {
-  VolumeScene out;
   const io::Scan scan = io::load_scan(volume_path);
+  engine::IsoChoice choice;
   if (iso) {
-    out.choice.iso = core::Isosurface{*iso, inside == "below" ? core::InsideIs::kBelow : core::InsideIs::kAbove};
-    out.choice.rule = "given with --iso";
+    choice.iso = core::Isosurface{*iso, inside == "below" ? core::InsideIs::kBelow : core::InsideIs::kAbove};
+    choice.rule = "given with --iso";
   } else {
-    out.choice = io::choose_isovalue(scan);
+    choice = io::choose_isovalue(scan);
   }
-  out.approach = choose_approach(scan.volume, out.choice.iso);
-  out.approach_text = describe_approach(scan.volume, out.approach);
+  return make_volume_scene(scan.volume, choice, volume_path);
+}
+
+VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoChoice& choice,
+                              const std::string& volume_path) {
+  VolumeScene out;
+  out.choice = choice;
+  out.approach = choose_approach(volume, out.choice.iso);
+  out.approach_text = describe_approach(volume, out.approach);
   const Approach& a = out.approach;
   // The ray runs along the index line through the centre voxel that choose_approach looked
   // along (its fraction of the box, not the box's centre half a voxel beside it: a thin
   // crossing on that line may be missed beside it).
-  const auto& d = scan.volume.grid.dims;
+  const auto& d = volume.grid.dims;
   std::array<double, 3> origin{}, dir{0, 0, 0}, stroke{0, 0, 0};
   for (std::size_t k = 0; k < 3; ++k) origin[k] = d[k] > 1 ? double(d[k] / 2) / double(d[k] - 1) : 0.5;
   origin[std::size_t(a.axis)] = a.sign > 0 ? -0.2 : 1.2;
   dir[std::size_t(a.axis)] = a.sign;
   const int s_axis = (a.axis + 1) % 3;
   stroke[std::size_t(s_axis)] = 1;
-  const auto& g = scan.volume.grid;
+  const auto& g = volume.grid;
   const double box = (g.dims[std::size_t(s_axis)] - 1) * spacing(g, s_axis);
   const double stroke_m = std::min(0.04, std::max(0.25 * box, 1e-3));
   std::ostringstream j;

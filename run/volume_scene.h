@@ -58,5 +58,10 @@ bool is_volume_path(const std::string& path);
 /// defaults. @throws engine::VolumeError (loading) or io::SceneError.
 VolumeScene make_volume_scene(const std::string& volume_path, std::optional<double> iso,
                               const std::string& inside = "above");
+/// The same for a volume already in memory at the isovalue `choice` (its rule said in the
+/// scene's description): `volume_path` is only written into the scene (a recording's scene
+/// names it), never read. @throws io::SceneError.
+VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoChoice& choice,
+                              const std::string& volume_path);
 
 }  // namespace isotouch::run

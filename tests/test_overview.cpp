@@ -9,11 +9,14 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "isotouch/run/overview.h"
+#include "isotouch/run/picture.h"
 #include "isotouch/run/scene_setup.h"
+#include "isotouch/run/volume_scene.h"
 
 namespace {
 using isotouch::core::Vec3;
@@ -125,7 +128,7 @@ TEST(Overview, SuperiorIsUpAndThePathLiesWhereItProjects) {
   ASSERT_GT(bottom, top) << "no surface drawn";
   EXPECT_GT(widest_row, (top + bottom) / 2) << "rows " << top << ".." << bottom << ": the widest (big ball) is not below";
   // The path: the pixels at its projected points are magenta; 12 pixels above them are not.
-  const engine::CameraView view = run::overview_view(vol);
+  const engine::CameraView view = run::overview_view(vol, {0.0, isotouch::core::InsideIs::kAbove});
   int on = 0, off = 0, samples = 0;
   for (std::size_t i = 20; i + 20 < trace.size(); i += 10, ++samples) {
     const auto [px, py] = project(view, W, H, trace[i].hip_m);
@@ -136,4 +139,47 @@ TEST(Overview, SuperiorIsUpAndThePathLiesWhereItProjects) {
   }
   EXPECT_EQ(on, samples) << "path pixels at the projected path";
   EXPECT_EQ(off, 0) << "path pixels 12 px above it";
+}
+
+namespace {
+
+/// The object's pixels' centroid in the overview `isotouch run VOLUME` draws for `path` (its
+/// scene, its isovalue; no path drawn), as fractions of the width and height from the centre.
+std::pair<double, double> object_offset(const std::string& path) {
+  const run::VolumeScene vs = run::make_volume_scene(path, std::nullopt);
+  const engine::Volume vol = run::load_scene_volume(vs.scene);
+  isotouch::core::SampleField field;
+  field.background = float(vs.choice.iso.outside_value(vol.min_value, vol.max_value));
+  const std::string png =
+      (fs::temp_directory_path() / ("test_overview_centre_" + std::to_string(::getpid()) + ".png")).string();
+  const int W = 320, H = 320;
+  const run::RunPicture pic = run::render_overview(vs.scene, vol, field, {}, png, nullptr, run::kCpuDevice, W, H);
+  EXPECT_EQ(pic.error, "");
+  EXPECT_EQ(pic.up, "superior");
+  const Rgb img = read_png(png);
+  fs::remove(png);
+  EXPECT_EQ(img.w, W);
+  double sx = 0, sy = 0, n = 0;
+  for (int y = 0; y < img.h; ++y)
+    for (int x = 0; x < img.w; ++x)
+      if (surface(img.at(x, y), img.at(0, 0))) sx += x + 0.5, sy += y + 0.5, n += 1;
+  EXPECT_GT(n, 0.02 * W * H) << path << ": the object covers " << n << " pixels";
+  const std::pair<double, double> off{sx / std::max(n, 1.0) / W - 0.5, sy / std::max(n, 1.0) / H - 0.5};
+  std::printf("%s: %.0f object pixels, centroid (%+.3f, %+.3f) of the picture from its centre\n", path.c_str(), n,
+              off.first, off.second);
+  return off;
+}
+
+}  // namespace
+
+// The overview frames the object (the box of its isosurface), not the volume's box: a tooth
+// in the lower part of its scan is drawn in the middle. The centroid of a silhouette is not
+// its box's projected centre: 5 % of the picture is the tolerance (framing the volume's box,
+// the tooth's centroid sat 20.5 % of the height above the centre, the head's 3.9 %).
+TEST(Overview, TheObjectIsInTheMiddleOfThePicture) {
+  for (const char* file : {"/ct-tooth/tooth.nhdr", "/ct-head-headsq/headsq_64x64x93_int16.mhd"}) {
+    const auto [dx, dy] = object_offset(std::string(ISOTOUCH_TEST_DATA) + file);
+    EXPECT_LT(std::abs(dx), 0.05) << file << ": centroid " << dx << " of the width right of the centre";
+    EXPECT_LT(std::abs(dy), 0.05) << file << ": centroid " << dy << " of the height below the centre";
+  }
 }

@@ -6,10 +6,15 @@
 
 #include <array>
 #include <cstddef>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "isotouch/core/vec3.h"
+
+namespace isotouch::engine {
+struct Volume;
+}
 
 namespace isotouch::python {
 namespace py = pybind11;
@@ -30,6 +35,13 @@ struct PointsIn {
   core::Vec3 at(std::size_t k) const { return {p[3 * k], p[3 * k + 1], p[3 * k + 2]}; }
 };
 PointsIn points_in(const py::handle& a, const char* what, bool finite = true);
+
+/// A Volume from a numpy array (isotouch.Volume's constructor): axes 'zyx' or 'xyz', spacing
+/// and origin in `unit` ("m" or "mm"), direction None or 3x3. @throws ValueError naming the
+/// argument; warns isotouch.UnitsWarning where a value looks like the other unit.
+std::shared_ptr<engine::Volume> volume_from_numpy(const py::array& array, const py::handle& spacing,
+                                                  const py::handle& origin, const py::object& direction,
+                                                  const std::string& axes, const std::string& unit);
 
 /// Points as an (N, 3) float64 array.
 py::array_t<double> points_array(const std::vector<core::Vec3>& p);

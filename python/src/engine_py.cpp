@@ -1,8 +1,6 @@
 // engine_py.cpp - the engine from Python: a pass list run on a Vulkan device or on the CPU
 // reference, its outputs as arrays, and `isotouch check --all`.
 #include <atomic>
-#include <chrono>
-#include <future>
 #include <memory>
 #include <sstream>
 
@@ -14,6 +12,7 @@
 #include "isotouch/io/scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/python/common.h"
+#include "isotouch/python/interruptible.h"
 #include <pybind11/stl.h>
 
 namespace isotouch::python {
@@ -46,38 +45,14 @@ engine::ChainOutput run_chain(const engine::Volume& v, const std::vector<engine:
   return (*chain.value)->run(v);
 }
 
-/// run_chain on a worker thread while this one (GIL released between looks) checks for
-/// signals every 50 ms: Ctrl-C sets the cancel flag (the CPU chain stops within one axis
-/// sweep; a Vulkan chain's one command buffer runs to its end), waits for the worker and
-/// raises KeyboardInterrupt. The worker's own exceptions reach the caller as they are.
-engine::ChainOutput run_chain_interruptible(const engine::Volume& v, const std::vector<engine::PassDesc>& passes,
-                                            const std::string& device, unsigned threads, std::string& device_name) {
-  std::atomic<bool> cancel{false};
-  std::future<engine::ChainOutput> work = std::async(std::launch::async, [&] {
-    return run_chain(v, passes, device, threads, device_name, cancel);
-  });
-  for (;;) {
-    {
-      py::gil_scoped_release nogil;
-      if (work.wait_for(std::chrono::milliseconds(50)) == std::future_status::ready) break;
-    }
-    if (PyErr_CheckSignals() != 0) {
-      cancel = true;
-      {
-        py::gil_scoped_release nogil;
-        work.wait();
-      }
-      throw py::error_already_set();
-    }
-  }
-  return work.get();
-}
-
 py::dict run_passes(const std::shared_ptr<engine::Volume>& volume, const py::object& passes_in,
                     const std::string& device, unsigned threads, const py::object& tau, core::InsideIs inside) {
   const std::vector<engine::PassDesc> passes = passes_arg(passes_in);
   std::string name;
-  engine::ChainOutput out = run_chain_interruptible(*volume, passes, device, threads, name);
+  // Ctrl-C stops the CPU chain within one axis sweep; a Vulkan chain's one command buffer
+  // runs to its end.
+  engine::ChainOutput out = run_interruptible(
+      [&](const std::atomic<bool>& cancel) { return run_chain(*volume, passes, device, threads, name, cancel); });
   py::dict d;
   d["device"] = name;
   if (out.samples) {

@@ -7,15 +7,20 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include "isotouch/io/scene.h"
 #include "isotouch/python/common.h"
+#include "isotouch/python/params_arg.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
+#include "isotouch/run/volume_scene.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/session/session.h"
+
+#include <pybind11/stl.h>
 
 namespace isotouch::python {
 namespace {
@@ -27,17 +32,48 @@ session::BrushKind brush_kind(const std::string& name) {
   throw py::value_error("kind: '" + name + "', must be 'add', 'carve', 'smooth' or 'drill'");
 }
 
+/// The default touch scene `isotouch run VOLUME` makes (run/volume_scene.h) for `vol` at the
+/// isovalue and renderer `hri` (`scene_hri`: keep the scene's renderer defaults, only tau and
+/// inside from `hri`). Its file name says where it came from; nothing is read from it.
+io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri) {
+  engine::IsoChoice choice;
+  choice.iso = core::Isosurface{hri.tau, hri.inside};
+  choice.rule = "given as tau";
+  io::Scene s = run::make_volume_scene(vol, choice, vol.path).scene;
+  if (!scene_hri) s.hri = hri;
+  s.file = "isotouch.LiveSession(volume)";
+  return s;
+}
+
 /// Everything one live session needs, owned together and torn down in order (session first).
 class Live {
  public:
   Live(const std::string& scene_path, const std::string& haptic, const std::string& record, const std::string& device,
        bool realtime, double flush_interval_s)
       : scene_(io::load_scene(scene_path)) {
+    std::ostringstream log;
+    setup_ = run::setup_scene(scene_, run_options(device), log);
+    open(haptic, record, realtime, flush_interval_s);
+  }
+  /// On `volume` at `hri`'s isovalue (scene_hri: the scene defaults' renderer), no recording
+  /// (a recording replays from a scene file).
+  Live(engine::Volume volume, const servo::HriParams& hri, bool scene_hri, const std::string& haptic,
+       const std::string& device, bool realtime, double flush_interval_s)
+      : scene_(volume_scene(volume, hri, scene_hri)) {
+    std::ostringstream log;
+    setup_ = run::setup_scene(scene_, std::move(volume), run_options(device), log);
+    open(haptic, "", realtime, flush_interval_s);
+  }
+
+ private:
+  static run::RunOptions run_options(const std::string& device) {
     run::RunOptions ro;
     ro.device = device;
     ro.progress = false;
-    std::ostringstream log;
-    setup_ = run::setup_scene(scene_, ro, log);
+    return ro;
+  }
+  /// The device, the parts (session::Session::open) and the live session, not started.
+  void open(const std::string& haptic, const std::string& record, bool realtime, double flush_interval_s) {
     device_ = run::open_haptic_device(haptic, run::device_setup(scene_, setup_), realtime ? 70 : 0);
     session::Opened opened;
     if (setup_.session) {  // the scene's edit session
@@ -55,6 +91,8 @@ class Live {
     parts_->attach(*device_.io, config(record, realtime, flush_interval_s)).throw_if_failed();
     live_ = parts_->live();
   }
+
+ public:
   /// Reached through DeleteLive only, after stop_quietly(), and never for an abandoned servo
   /// thread: the members' destructors free the renderer, the snapshots and the device.
   ~Live() { stop_quietly(); }
@@ -210,20 +248,70 @@ void wait_session(Live& l, double seconds) {
   }
 }
 
+using LivePtr = std::unique_ptr<Live, DeleteLive>;
+
+LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const std::string& record,
+                      const std::string& device, bool realtime, double flush_interval_s, std::optional<double> tau) {
+  if (tau) throw py::value_error("tau: the scene " + scene + " gives its own isovalue (its 'isovalue'); tau is for a "
+                                 "Volume or an array");
+  py::gil_scoped_release nogil;
+  return LivePtr(new Live(scene, haptic, record, device, realtime, flush_interval_s));
+}
+
+LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, const py::object& params,
+                       const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
+                       double flush_interval_s) {
+  if (!record.empty())
+    throw py::value_error("record: '" + record + "': a recording replays from a scene file; a LiveSession on a volume "
+                          "does not record (write the scene with `isotouch run VOLUME` and open that)");
+  const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
+  engine::Volume copy = volume;  // the session edits its own copy
+  if (copy.path.empty()) copy.path = "a volume from Python";  // named in its scene and errors
+  py::gil_scoped_release nogil;
+  return LivePtr(new Live(std::move(copy), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
+}
+
+LivePtr live_on_array(const py::array& array, const py::handle& spacing, const py::handle& origin,
+                      const std::string& axes, std::optional<double> tau, const py::object& params,
+                      const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
+                      double flush_interval_s) {
+  const auto volume = volume_from_numpy(array, spacing, origin, py::none(), axes, "m");
+  return live_on_volume(*volume, tau, params, haptic, record, device, realtime, flush_interval_s);
+}
+
 }  // namespace
 
 void bind_live(py::module_& m) {
   using K = session::EditEvent::Kind;
-  py::class_<Live, std::unique_ptr<Live, DeleteLive>>(m, "LiveSession", R"(A scene live: the servo thread at the scene's rate on a device,
-an edit thread applying brushes, a streaming recorder (session/live_session.h).
+  py::class_<Live, LivePtr>(m, "LiveSession", R"(A volume live: the servo thread at the scene's rate on a device,
+an edit thread applying brushes, a streaming recorder (session/live_session.h), all built by
+the one owning entry point session::Session::open.
 
 LiveSession(scene, haptic='sim', record='', device='cpu', realtime=False, flush_interval_s=0.1):
+a scene JSON file (its volume, isovalue, renderer, script).
+LiveSession(volume, *, tau, params=None, haptic='sim', device='cpu', ...): an isotouch.Volume
+at the isovalue tau [volume value units] (required: a volume carries none; or params.tau).
+params an isotouch.HriParams for the renderer (None: the scene defaults, values above tau
+inside); the scripted hand of 'sim' is `isotouch run VOLUME`'s default touch.
+LiveSession(array, *, spacing, origin=(0, 0, 0), axes='zyx', tau, ...): the same on a float32
+numpy array, spacing and origin [m] as isotouch.Volume(array, spacing, origin, axes=axes) takes
+them (Volume.from_mm for millimetres).
+
 haptic as `run --live --haptic` (sim, null, playback:FILE, emu:SOCKET, hid:VID:PID); record a
-recording file ('' none); device 'cpu' (CPU brushes) or a Vulkan device. Use as a context
-manager: leaving it stops the session (servo first, its last force an exact zero).)")
-      .def(py::init<const std::string&, const std::string&, const std::string&, const std::string&, bool, double>(),
-           py::arg("scene"), py::arg("haptic") = "sim", py::arg("record") = "", py::arg("device") = "cpu",
-           py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1, py::call_guard<py::gil_scoped_release>())
+recording file ('' none; a scene's session only: a recording replays from its scene file);
+device 'cpu' (CPU brushes) or a Vulkan device. Frames: points (centre, hip, vhip) are
+grid-world [m] (origin + spacing * index). Use as a context manager: leaving it stops the
+session (servo first, its last force an exact zero).)")
+      .def(py::init(&live_on_scene), py::arg("scene"), py::arg("haptic") = "sim", py::arg("record") = "",
+           py::arg("device") = "cpu", py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1, py::kw_only(),
+           py::arg("tau") = py::none())
+      .def(py::init(&live_on_volume), py::arg("volume"), py::kw_only(), py::arg("tau") = py::none(),
+           py::arg("params") = py::none(), py::arg("haptic") = "sim", py::arg("record") = "", py::arg("device") = "cpu",
+           py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1)
+      .def(py::init(&live_on_array), py::arg("array"), py::kw_only(), py::arg("spacing"),
+           py::arg("origin") = py::make_tuple(0.0, 0.0, 0.0), py::arg("axes") = "zyx", py::arg("tau") = py::none(),
+           py::arg("params") = py::none(), py::arg("haptic") = "sim", py::arg("record") = "", py::arg("device") = "cpu",
+           py::arg("realtime") = false, py::arg("flush_interval_s") = 0.1)
       .def("start", &Live::start, "start the recorder, edit and servo threads; returns what the system refused")
       .def("stop", &Live::stop, py::call_guard<py::gil_scoped_release>(),
            "stop (idempotent); raises isotouch.ServoAbandoned if the servo thread was left stuck in the renderer "

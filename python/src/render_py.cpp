@@ -11,6 +11,8 @@
 #include "isotouch/engine/vk_context.h"
 #include "isotouch/eval/sweep.h"
 #include "isotouch/python/common.h"
+#include "isotouch/python/interruptible.h"
+#include "isotouch/python/params_arg.h"
 #include "isotouch/servo/baselines.h"
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/hri.h"
@@ -85,34 +87,6 @@ void def_params_repr(Class& c, const char* name) {
     }
     return s + ")";
   });
-}
-
-/// `params` as a P (None: the defaults, tau not given), its tau resolved with `tau`: either
-/// one, or both when equal. @throws TypeError naming what was given and `expected`;
-/// ValueError when no isovalue is given or two differ.
-template <class P>
-P params_arg(const py::object& params, const std::string& algorithm, const char* expected, std::optional<double> tau,
-             const char* tau_name = "tau") {
-  P p{};
-  p.tau = std::nan("");
-  if (!params.is_none()) {
-    if (!py::isinstance<P>(params))
-      throw py::type_error("params: " + std::string(py::str(py::type::of(params).attr("__name__"))) + " given for '" +
-                           algorithm + "', expected isotouch." + expected);
-    p = params.cast<P>();
-  }
-  if (tau) {
-    if (!std::isnan(p.tau) && p.tau != *tau) {
-      std::ostringstream s;
-      s << tau_name << ": " << *tau << " given, but params.tau is " << p.tau << ": give the isovalue once";
-      throw py::value_error(s.str());
-    }
-    p.tau = *tau;
-  }
-  if (!std::isfinite(p.tau))
-    throw py::value_error("tau: no isovalue given for '" + algorithm + "' (a Field does not carry one): pass tau=" +
-                          "VALUE (volume value units) or params=isotouch." + expected + "(tau=VALUE)");
-  return p;
 }
 
 /// One renderer for `algorithm` ("hri", "avila", "blezek") with `params` (HriParams for HRI,
@@ -220,8 +194,9 @@ double cpp_ns_per_tick(const FieldPtr& field, const py::handle& hip, const std::
   s.hip = points_arg(hip, "hip");
   if (s.hip.empty()) throw py::value_error("hip: no points");
   std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params, tau);
-  py::gil_scoped_release nogil;
-  return eval::median_ns_per_tick(*r, s, warmup, repetitions);
+  // Ctrl-C stops it between two replays of the trajectory.
+  return run_interruptible(
+      [&](const std::atomic<bool>& cancel) { return eval::median_ns_per_tick(*r, s, warmup, repetitions, &cancel); });
 }
 
 /// The HRI parameters `bench table1` times on a stroke scene (reference_params with n = 5,
@@ -267,12 +242,12 @@ py::dict measure_stroke(const std::shared_ptr<eval::SweepScene>& s, const std::s
                         const py::object& params, int repetitions) {
   if (repetitions < 1) throw py::value_error("repetitions: " + std::to_string(repetitions) + ", must be >= 1");
   std::unique_ptr<servo::Renderer> r = make_renderer(algorithm, params, s->tau, "the scene's isovalue");
-  eval::ErrorFigures e;
-  {
-    py::gil_scoped_release nogil;
-    e = eval::measure(*s, eval::playback(*r, *s));
-    e.tick_ns_mean = eval::median_ns_per_tick(*r, *s, 1, repetitions);
-  }
+  // Ctrl-C stops it after the error replay or between two timed replays.
+  const eval::ErrorFigures e = run_interruptible([&](const std::atomic<bool>& cancel) {
+    eval::ErrorFigures f = eval::measure(*s, eval::playback(*r, *s));
+    f.tick_ns_mean = eval::median_ns_per_tick(*r, *s, 1, repetitions, &cancel);
+    return f;
+  });
   py::dict d;
   d["tick_ns_mean"] = e.tick_ns_mean;
   d["tick_ns_p99"] = e.tick_ns_p99;
@@ -447,10 +422,12 @@ params.tau, if given, must be the scene's isovalue (scene.tau; None: the scene's
 Returns a dict: tick_ns_mean (median of `repetitions` whole replays) and tick_ns_p99 [ns],
 surface_err_rms_m [m], angle_err_rms_deg, force_err_rms_n [N], max_force_step_n and
 max_force_step_slide_n [N], contact_ticks, pop_throughs, ticks. All but the tick times depend
-on the inputs only. The GIL is released while it runs.)");
+on the inputs only. The GIL is released while it runs; Ctrl-C raises KeyboardInterrupt between
+two replays.)");
   m.def("cpp_ns_per_tick", &cpp_ns_per_tick, py::arg("field"), py::arg("hip"), py::arg("algorithm") = "hri",
         py::arg("params") = py::none(), py::arg("warmup") = 3, py::arg("repetitions") = 21, py::arg("tau") = py::none(),
-        "median C++ time per Renderer::tick over the trajectory [ns] (eval::median_ns_per_tick, as bench table1)");
+        "median C++ time per Renderer::tick over the trajectory [ns] (eval::median_ns_per_tick, as bench table1); "
+        "GIL released, Ctrl-C raises KeyboardInterrupt between two replays");
 }
 
 }  // namespace isotouch::python

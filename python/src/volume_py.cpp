@@ -99,6 +99,24 @@ std::array<double, 3> scaled(std::array<double, 3> a, double k) {
   return a;
 }
 
+
+/// The voxels as an (nz, ny, nx) float32 view; `owner` keeps the volume alive.
+py::array voxel_view(engine::Volume& v, py::handle owner) {
+  const auto& d = v.grid.dims;
+  const py::ssize_t f = sizeof(float);
+  return py::array_t<float>({py::ssize_t(d[2]), py::ssize_t(d[1]), py::ssize_t(d[0])},
+                            {f * d[1] * d[0], f * d[0], f}, v.voxels.data(), owner);
+}
+
+py::array_t<double> map_points(const py::handle& pts, core::Vec3 (*f)(const engine::Volume&, const core::Vec3&),
+                               const engine::Volume& v) {
+  std::vector<core::Vec3> p = points_arg(pts, "points");
+  for (core::Vec3& x : p) x = f(v, x);
+  return points_array(p);
+}
+
+}  // namespace
+
 /// Checks the array, spacing, origin and direction like a file's header, then copies the voxels.
 /// spacing and origin in `unit` ("m" or "mm").
 VolumePtr volume_from_numpy(const py::array& given, const py::handle& spacing, const py::handle& origin,
@@ -132,23 +150,6 @@ VolumePtr volume_from_numpy(const py::array& given, const py::handle& spacing, c
   v->update_stats();
   return v;
 }
-
-/// The voxels as an (nz, ny, nx) float32 view; `owner` keeps the volume alive.
-py::array voxel_view(engine::Volume& v, py::handle owner) {
-  const auto& d = v.grid.dims;
-  const py::ssize_t f = sizeof(float);
-  return py::array_t<float>({py::ssize_t(d[2]), py::ssize_t(d[1]), py::ssize_t(d[0])},
-                            {f * d[1] * d[0], f * d[0], f}, v.voxels.data(), owner);
-}
-
-py::array_t<double> map_points(const py::handle& pts, core::Vec3 (*f)(const engine::Volume&, const core::Vec3&),
-                               const engine::Volume& v) {
-  std::vector<core::Vec3> p = points_arg(pts, "points");
-  for (core::Vec3& x : p) x = f(v, x);
-  return points_array(p);
-}
-
-}  // namespace
 
 void bind_volume(py::module_& m) {
   py::class_<engine::Volume, VolumePtr> volume(m, "Volume", R"(A scalar volume on a regular grid (float voxels, x fastest).

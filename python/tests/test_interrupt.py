@@ -1,5 +1,6 @@
-"""Ctrl-C during a long offline render: a SIGINT sent from a timer thread to the process raises
-KeyboardInterrupt long before the trajectory's end (the time of the whole call, measured here)."""
+"""Ctrl-C during a long call (an offline render, a pass chain, measure_stroke, cpp_ns_per_tick):
+a SIGINT sent from a timer thread to the process raises KeyboardInterrupt long before the
+call's end (the time of the whole call, measured here)."""
 import os
 import subprocess
 import sys
@@ -53,6 +54,56 @@ def test_ctrl_c_interrupts_a_long_pass_chain():
         t0 = time.perf_counter()
         try:
             isotouch.run_passes(v, chain)
+            print("finished", whole)
+        except KeyboardInterrupt:
+            print("interrupted", time.perf_counter() - t0, whole)
+    """)
+    interrupted_early(script)
+
+
+def test_ctrl_c_interrupts_a_long_measure_stroke():
+    """measure_stroke's timed replays (repetitions doubled until a call takes 2 s) stop between
+    two replays, not after the last."""
+    script = textwrap.dedent("""
+        import os, signal, threading, time
+        import isotouch
+        s = isotouch.stroke_scene("sphere", device="cpu")
+        p = s.table1_hri_params()
+        reps, whole = 1, 0.0
+        while whole < 2.0 and reps <= 1 << 20:  # a call of at least 2 s, however fast this machine is now
+            reps *= 2
+            t0 = time.perf_counter()
+            isotouch.measure_stroke(s, "hri", p, repetitions=reps)
+            whole = time.perf_counter() - t0
+        threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+        t0 = time.perf_counter()
+        try:
+            isotouch.measure_stroke(s, "hri", p, repetitions=reps)
+            print("finished", whole)
+        except KeyboardInterrupt:
+            print("interrupted", time.perf_counter() - t0, whole)
+    """)
+    interrupted_early(script)
+
+
+def test_ctrl_c_interrupts_a_long_cpp_ns_per_tick():
+    """cpp_ns_per_tick's replays (repetitions doubled until a call takes 2 s) stop between two
+    replays, not after the last."""
+    script = textwrap.dedent("""
+        import os, signal, threading, time
+        import isotouch
+        s = isotouch.stroke_scene("sphere", device="cpu")
+        p = s.table1_hri_params()
+        reps, whole = 1, 0.0
+        while whole < 2.0 and reps <= 1 << 20:  # a call of at least 2 s, however fast this machine is now
+            reps *= 2
+            t0 = time.perf_counter()
+            isotouch.cpp_ns_per_tick(s.field, s.hip, "hri", p, warmup=0, repetitions=reps)
+            whole = time.perf_counter() - t0
+        threading.Timer(0.2, lambda: os.kill(os.getpid(), signal.SIGINT)).start()
+        t0 = time.perf_counter()
+        try:
+            isotouch.cpp_ns_per_tick(s.field, s.hip, "hri", p, warmup=0, repetitions=reps)
             print("finished", whole)
         except KeyboardInterrupt:
             print("interrupted", time.perf_counter() - t0, whole)

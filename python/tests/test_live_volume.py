@@ -1,0 +1,77 @@
+"""A live session on a volume made in Python (no scene file): an isotouch.Volume or a numpy
+array, the isovalue given as tau. The scripted hand of 'sim' must press on the isosurface the
+array holds: a sphere of known centre and radius, checked from the geometry, not the renderer."""
+import numpy as np
+import pytest
+
+import isotouch
+
+N, SPACING, RADIUS = 48, 1e-3, 15e-3  # voxels per axis, [m], [m]
+
+
+def sphere_array():
+    """(nz, ny, nx) float32: RADIUS - distance to the box's centre [m]; tau = 0 is the sphere."""
+    i = np.arange(N) * SPACING
+    z, y, x = np.meshgrid(i, i, i, indexing="ij")
+    c = (N - 1) * SPACING / 2
+    return (RADIUS - np.sqrt((x - c) ** 2 + (y - c) ** 2 + (z - c) ** 2)).astype(np.float32)
+
+
+def pressed_points(live):
+    """The VHIPs [m, grid-world] of the ticks seen in contact with a force, over the script."""
+    points = []
+    while live.elapsed_s < live.duration_s:
+        o = live.observe()
+        if o["contact"] and np.linalg.norm(o["force"]) > 0:
+            points.append(o["vhip"])
+        live.wait(0.01)
+    return np.array(points)
+
+
+def assert_on_sphere(points):
+    assert len(points) > 5, "the scripted hand never pressed on the sphere"
+    c = (N - 1) * SPACING / 2
+    r = np.linalg.norm(points - c, axis=1)
+    np.testing.assert_allclose(r, RADIUS, atol=SPACING)  # the proxy stays on the surface, within a voxel
+
+
+@pytest.mark.parametrize("how", ["array", "volume"])
+def test_a_live_session_on_a_python_volume_presses_on_its_isosurface(how):
+    a = sphere_array()
+    if how == "array":
+        live = isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=0.0, haptic="sim")
+    else:
+        live = isotouch.LiveSession(isotouch.Volume(a, spacing=(SPACING,) * 3), tau=0.0, haptic="sim")
+    with live:
+        assert live.duration_s > 0
+        points = pressed_points(live)
+    assert live.stats()["faults"] == 0
+    assert_on_sphere(points)
+
+
+def test_the_isovalue_from_params_with_its_renderer():
+    p = isotouch.HriParams(tau=0.0, stiffness_n_per_m=300.0)
+    with isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3, params=p) as live:
+        points = pressed_points(live)
+    assert_on_sphere(points)
+
+
+def test_a_volume_without_an_isovalue_is_refused_not_run_at_zero():
+    with pytest.raises(ValueError, match=r"tau: no isovalue given .*a Volume does not carry one"):
+        isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3)
+    with pytest.raises(ValueError, match="tau: no isovalue given"):
+        isotouch.LiveSession(isotouch.Volume(sphere_array(), spacing=(SPACING,) * 3))
+
+
+def test_argument_errors_name_the_argument(root, tmp_path):
+    a = sphere_array()
+    with pytest.raises(ValueError, match=r"tau: 1 given, but params.tau is 0"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=1.0, params=isotouch.HriParams(tau=0.0))
+    with pytest.raises(ValueError, match="record: .*replays from a scene file"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=0.0, record=str(tmp_path / "x.rec"))
+    with pytest.raises(ValueError, match="tau: the scene .* gives its own isovalue"):
+        isotouch.LiveSession(str(root / "scenes/sphere.json"), tau=0.0)
+    with pytest.raises(RuntimeError, match=r"isovalue.*outside the finite data range"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=1.0)
+    with pytest.raises(ValueError, match=r"spacing\[1\] is -1"):
+        isotouch.LiveSession(a, spacing=(SPACING, -1.0, SPACING), tau=0.0)

@@ -71,4 +71,10 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
   return f;
 }
 
+void PortPassivity::sent(const Vec3& f_sent) {
+  const double want = norm(prev_f_), got = norm(f_sent);
+  prev_damp_ = got < want && want > 0 ? prev_damp_ * (got / want) : prev_damp_;
+  prev_f_ = finite(f_sent) ? f_sent : Vec3{};
+}
+
 }  // namespace isotouch::servo

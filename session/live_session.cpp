@@ -632,6 +632,7 @@ LiveStats LiveSession::stats(std::size_t latency_tail) const {
     s.ticks = servo_->ticks();
     s.missed_deadlines = servo_->missed_deadlines();
     s.faults = servo_->faults();
+    s.passivity = servo_->passivity();
   } else {
     s.ticks = sim_ticks_;
   }

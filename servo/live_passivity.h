@@ -48,6 +48,8 @@ class LivePassivity {
   Vec3 step(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m, const Vec3& demand_n);
   /// What was actually written this tick [N] (the gate's output; zero on a held tick).
   void sent(const Vec3& f_n);
+  /// The clock the last step() used [s] since the first good tick (servo thread).
+  double last_clock_s() const { return last_clock_s_; }
   /// The figures so far (any thread; each figure consistent on its own).
   PassivityStats stats() const;
 
@@ -61,6 +63,7 @@ class LivePassivity {
   std::uint32_t last_us_ = 0;   // the device clock's last raw value (it wraps)
   std::int64_t device_us_ = 0;  // unwrapped device time since the first tick [us]
   std::int64_t first_ns_ = 0;   // the servo's first good tick [ns]
+  double last_clock_s_ = 0;
   std::atomic<double> e_in_{0}, e_out_{0}, dissipated_{0};
   std::atomic<long> active_{0};
   std::atomic<bool> control_pub_{false}, device_clock_pub_{false};

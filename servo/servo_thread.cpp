@@ -370,6 +370,7 @@ void ServoThread::loop(Handoff& h) {
           // The passivity stage before the gate: the gate's limits hold whatever it adds.
           const Vec3 damped = passivity_.step(t, d.device_time_us, d.position_m, rec.out.force_n * ramp);
           rec.force_sent_n = gate_.step(damped, gate_dt, gated);
+          rec.passivity_clock_s = passivity_.last_clock_s();
         }
         passivity_.sent(rec.force_sent_n);  // the observer books what was written
         if (gated & kGatePeak) clamped_.fetch_add(1, std::memory_order_relaxed);

@@ -42,6 +42,9 @@ struct TickRecord {
   DeviceStatus device_status = DeviceStatus::kOk;
   Vec3 force_sent_n;          ///< what was written: out.force_n ramped in and clamped [N], device axes
   std::int64_t report_ns = 0; ///< when the host received the report this tick read [ns] (0: synchronous)
+  /// The clock the passivity stage (live_passivity.h) stepped on this tick [s] since its
+  /// first tick (the device's where it has one); -1: the stage did not step (a held tick).
+  double passivity_clock_s = -1;
 };
 
 /// Sees every tick on the servo thread, after the force was written. on_tick() runs inside

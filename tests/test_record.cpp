@@ -333,7 +333,7 @@ TEST(Record, PassivityClockAndSentForceComeTogetherAndAreNamedWhenBad) {
       {"\"pt\":0.25,", "line 5 (tick 3): field 'sent': missing"},
       {"\"sent\":[0,0,1],", "line 5 (tick 3): field 'pt': missing"},
       {"\"pt\":-1,\"sent\":[0,0,1],", "field 'pt': must be in [0, 1e9) s, got -1"},
-      {"\"pt\":1,\"sent\":[0,\"x\",1],", "field 'sent'"},
+      {"\"pt\":1,\"sent\":[0,\"x\",1],", "field 'sent[1]': must be a finite number"},
   };
   for (const auto& [fields, expect] : bad) {
     try {
@@ -355,7 +355,7 @@ TEST(Record, PassivityClockAndSentForceComeTogetherAndAreNamedWhenBad) {
 TEST(Record, HeldAndResetFlagsAreFormatThreesAndWrittenOnlyWhenTrue) {
   std::mt19937_64 rng(7);
   Recording r = live_recording(rng, 10, 0);
-  for (auto& t : r.ticks) t.held = t.reset = false;
+  for (auto& t : r.ticks) t.held = t.reset = false, t.passivity_clock_s.reset();
   const std::string text = recording_text(r, "mem");
   const std::string tick3 = "{\"k\":3,";
   const std::size_t at = text.find(tick3);

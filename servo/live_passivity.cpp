@@ -38,6 +38,7 @@ void LivePassivity::sent(const Vec3& f_n) {
 }
 
 void LivePassivity::publish() {
+  // Relaxed stores: plain moves on x86-64, no fence; a reader gets each figure whole.
   e_in_.store(pc_.energy_in_j(), std::memory_order_relaxed);
   e_out_.store(pc_.energy_out_j(), std::memory_order_relaxed);
   dissipated_.store(pc_.dissipated_j(), std::memory_order_relaxed);

@@ -29,6 +29,9 @@ double LivePassivity::clock_s(std::int64_t servo_ns, std::uint32_t device_time_u
 Vec3 LivePassivity::step(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m, const Vec3& demand_n) {
   const double t = clock_s(servo_ns, device_time_us);
   last_clock_s_ = t;
+  // A non-finite demand goes to the gate as it is: the gate's rule for it is an exact zero
+  // at once (a zero from here would be rate-limited down instead). sent() books that zero.
+  if (!finite(demand_n)) return demand_n;
   return pc_.step(t, x_m, demand_n);
 }
 

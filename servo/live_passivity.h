@@ -44,7 +44,8 @@ class LivePassivity {
   void start(bool control, double alpha_max_n_s_per_m, double force_limit_n);
   /// A good tick: the device reported `x_m` (device frame [m]) with its clock
   /// `device_time_us` (0: none), the servo's tick started at `servo_ns` [ns]; `demand_n` is
-  /// the ramped renderer force [N]. Returns the demand with the damping added [N].
+  /// the ramped renderer force [N]. Returns the demand with the damping added [N]; a
+  /// non-finite demand unchanged (the gate turns it into an exact zero at once).
   Vec3 step(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m, const Vec3& demand_n);
   /// What was actually written this tick [N] (the gate's output; zero on a held tick).
   void sent(const Vec3& f_n);

@@ -13,4 +13,8 @@ namespace isotouch::bench {
 /// contact's size of force, under the 10 N limit as a rendered force mostly is), controller on.
 double port_passivity_ns_per_tick(const std::vector<core::Vec3>& hips, long ticks, int reps);
 
+/// The same for the servo's live stage (servo/live_passivity.h: step() and sent(), with the
+/// device's clock unwrapped and the figures published as atomics) [ns per tick].
+double live_passivity_ns_per_tick(const std::vector<core::Vec3>& hips, long ticks, int reps);
+
 }  // namespace isotouch::bench

@@ -469,6 +469,9 @@ int run_bench_table1(const Table1Options& o, std::ostream& log) {
       const double pc_ns = port_passivity_ns_per_tick(s.hip, 1000000, 5);
       floors << "    passivity controller (servo/port_passivity, on, 10^6 ticks of the stroke): " << std::setprecision(1)
              << pc_ns << " ns per tick, " << 100.0 * pc_ns / fl.update_ns << " % of the update's floor (target < 10 %)\n";
+      const double live_ns = live_passivity_ns_per_tick(s.hip, 1000000, 5);
+      floors << "    passivity stage on the live path (servo/live_passivity: step and sent, the device's clock, "
+             << "atomics): " << live_ns << " ns per tick, " << 100.0 * live_ns / fl.update_ns << " % of the update's floor\n";
     }
     tools << std::fixed << std::setprecision(3) << "  " << pr.scene << ": HRI with a spherical tool of radius "
           << hp_tool.tool_radius_m * 1e3 << " mm (2 voxels) " << med[6] << " us per tick, " << std::setprecision(2)

@@ -300,10 +300,21 @@ void parse_header(const json& h, Recording& r, const Where& w) {
   if (!(r.rate_hz > 0)) throw RecordingError(w.at("rate_hz") + ": must be > 0, got " + num(r.rate_hz));
 }
 
+/// A format 3 tick's passivity stage: "pt" (its clock, [0, 1e9) s) and "sent", both or neither.
+void parse_passivity(const json& j, RecordedTick& t, const Where& w) {
+  if (j.contains("pt") != j.contains("sent"))
+    throw RecordingError(w.at(j.contains("pt") ? "sent" : "pt") + ": missing (\"pt\" and \"sent\" come together)");
+  if (!j.contains("pt")) return;
+  const double pt = member_number(j, "pt", w);
+  if (!(pt >= 0) || !(pt < 1e9)) throw RecordingError(w.at("pt") + ": must be in [0, 1e9) s, got " + num(pt));
+  t.passivity_clock_s = pt;
+  t.sent_n = vec3(j, "sent", w);
+}
+
 void parse_tick(const json& j, Recording& r, const Where& w) {
   if (r.format_version == 1) only_keys(j, {"k", "t", "hip", "button", "force"}, "", w);
   else if (r.format_version == 2) only_keys(j, {"k", "t", "hip", "button", "force", "vhip", "version", "fault"}, "", w);
-  else only_keys(j, {"k", "t", "dt", "hip", "button", "force", "vhip", "version", "fault", "held", "reset"}, "", w);
+  else only_keys(j, {"k", "t", "dt", "hip", "button", "force", "vhip", "version", "fault", "held", "reset", "pt", "sent"}, "", w);
   const long k = integer(j, "k", w);
   if (k != long(r.ticks.size()))
     throw RecordingError(w.at("k") + ": expected tick " + std::to_string(r.ticks.size()) + ", got " + std::to_string(k));
@@ -334,6 +345,7 @@ void parse_tick(const json& j, Recording& r, const Where& w) {
         if (!*flag) throw RecordingError(w.at(key) + ": written only when true, got false");
       }
     if (t.held && t.reset) throw RecordingError(w.at("reset") + ": a held tick is not rendered, so not reset");
+    parse_passivity(j, t, w);
   }
   r.ticks.push_back(t);
 }
@@ -447,6 +459,14 @@ std::string recording_tick_line(long k, const RecordedTick& t, int format_versio
     if (t.held && t.reset)
       throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'reset': a held tick is not rendered, so not reset");
     tick[field] = true;
+  }
+  if (t.passivity_clock_s) {
+    const double pt = *t.passivity_clock_s;
+    if (format_version < 3 || !(pt >= 0) || !(pt < 1e9) || !finite(t.sent_n))
+      throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'pt': needs format 3, a clock in [0, 1e9) s " +
+                           "and a finite 'sent', got format " + std::to_string(format_version) + ", " + num(pt) + " s");
+    tick["pt"] = pt;
+    tick["sent"] = vec_json(t.sent_n);
   }
   return dump_line(tick);
 }

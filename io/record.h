@@ -43,6 +43,13 @@ struct RecordedTick {
   /// Format 3: the renderer was reset before this tick (the first good tick after held
   /// ones that ended its contact state); its dt is then 0. Written only when true.
   bool reset = false;
+  /// Format 3 (a live servo's passivity stage, servo/live_passivity.h): the clock its
+  /// observer stepped on [s] (the device's own where it has one) and the force actually
+  /// sent [N], device axes: the observer's inputs beside the HIP. Absent on a tick the stage
+  /// did not step (held, ramp start) and in files written before; not checked on replay
+  /// (the replay checks the renderer, before the stage).
+  std::optional<double> passivity_clock_s;
+  core::Vec3 sent_n;
 };
 
 /// The edit session a recording's edits were applied through, where it is not the scene's
@@ -95,7 +102,8 @@ struct Recording {
 /// format_version 3 (live sessions) differs in these places: each tick line also has
 /// "dt":D (the measured period given to the renderer [s], 0 on the first tick), "held":true
 /// on a tick where the renderer was not ticked (paused, device not ok) and "reset":true on
-/// one before which it was reset (each written only when true), and an edit
+/// one before which it was reset (each written only when true), "pt":D and "sent":[D,D,D]
+/// (the passivity stage's clock [s] and the force sent [N], both or neither), and an edit
 /// line's "tick" is the number of servo ticks that had run when the edit was applied (edits
 /// in the order applied, ticks ascending; the line may come later than that tick's line:
 /// the streams of ticks and edits are written in chunks). A format 3 file without its end

@@ -539,6 +539,7 @@ void parse_servo(const Reader& r, const json& root, Scene& s) {
   parse_friction(r, sv, s);
   parse_tool(r, sv, s);
   s.allow_unstable_stiffness = r.boolean(sv, "servo", "allow_unstable_stiffness", false);
+  s.passivity_control = r.boolean(sv, "servo", "passivity_control", false);
 }
 
 // The force is stiffness x the hand's travel past the surface [N], the travel being the

@@ -119,6 +119,10 @@ struct Scene {
   /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the
   /// run warns and reports the bound (stability experiments).
   bool allow_unstable_stiffness = false;
+  /// servo.passivity_control (default false): the live servo's passivity controller adds the
+  /// damping that keeps the energy its force hands the user at or below what the user put in
+  /// (servo/live_passivity.h; docs/haptics.md says where it helps and where it does not).
+  bool passivity_control = false;
   /// servo.tool.point (default false): the button's carve or drill brush is felt as a
   /// point, not as the spherical tool of the brush's radius (for comparison with the burr).
   bool point_probe = false;

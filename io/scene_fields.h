@@ -54,6 +54,7 @@ inline constexpr SceneField kSceneFields[] = {
     {"servo", "friction", "", "object, below", "none"},
     {"servo", "tool", "", "object, below", "see below"},
     {"servo", "allow_unstable_stiffness", "", "true, false", "false"},
+    {"servo", "passivity_control", "", "true, false", "false"},
     {"servo.friction", "mu_s", "", "[0, 10]", "0"},
     {"servo.friction", "mu_d", "", "[0, 10]; at most `mu_s`", "0"},
     {"servo.friction", "viscous_n_s_per_m", "N s/m", "[0, 1e3]", "0"},

@@ -71,6 +71,7 @@ session::LiveSessionConfig live_config(const io::Scene& scene, const SceneSetup&
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene.hri.rate_hz;
   c.servo.force_limit_n = scene.hri.force_limit_n;  // the gate: min(scene, device)
+  c.servo.passivity_control = scene.passivity_control;
   c.servo.sched_fifo = o.sched_fifo;
   c.servo.pin_cpu = o.sched_fifo;
   c.servo.lock_memory = o.sched_fifo;
@@ -222,6 +223,7 @@ void write_live_outputs(const io::Scene& scene, SceneSetup& setup, const Tracing
                {"missed_deadlines", s.missed_deadlines},
                {"faults", s.faults},
                {"edits_applied", s.edits_applied},
+               {"passivity", passivity_json(s.passivity)},
                {"note", "trace.csv holds the renderer's ticks (its force before the servo's ramp-in and clamp); "
                         "ticks the servo held (device not ok) are not in it; the surface error is measured against "
                         "the volume before any edit"}};

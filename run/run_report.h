@@ -9,6 +9,7 @@
 #include "isotouch/io/scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/servo/live_passivity.h"
 
 namespace isotouch::run {
 
@@ -20,6 +21,10 @@ std::string direction_text(const std::array<double, 9>& d);
 // The run's summary.json ("status": "complete": written last, once every other output is whole).
 nlohmann::ordered_json summary_json(const io::Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,
                                     long raw_found, bool with_edits);
+
+/// summary.json's "passivity": the live servo's passivity observer and controller (energies
+/// in J, device frame; active_ticks: ticks the controller added damping).
+nlohmann::ordered_json passivity_json(const servo::PassivityStats& p);
 
 // The run's report.md.
 std::string report_markdown(const io::Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,

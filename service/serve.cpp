@@ -906,6 +906,7 @@ void Server::start_session(std::unique_ptr<Session> s) {
   session::LiveSessionConfig c;
   c.servo.rate_hz = scene_.hri.rate_hz;
   c.servo.force_limit_n = scene_.hri.force_limit_n;  // the gate: min(scene, device)
+  c.servo.passivity_control = scene_.passivity_control;
   c.servo.sched_fifo = c.servo.pin_cpu = c.servo.lock_memory = o_.sched_fifo;
   if (echo_device_) {  // no servo runs now
     echo_device_->echo().set_frame(s->frame);

@@ -71,4 +71,11 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
   return f;
 }
 
+void PortPassivity::sent(const Vec3& f_sent) {
+  // Squared norms: a root only on a tick whose force a later stage shrank.
+  const double want2 = dot(prev_f_, prev_f_), got2 = dot(f_sent, f_sent);
+  if (got2 < want2) prev_damp_ = prev_damp_ * std::sqrt(got2 / want2);
+  prev_f_ = finite(f_sent) ? f_sent : Vec3{};
+}
+
 }  // namespace isotouch::servo

@@ -41,6 +41,11 @@ class PortPassivity {
   /// the energy the far side reports it put into the channel).
   Vec3 step(double t_s, const Vec3& x, const Vec3& f_want, double e_ref_j) { return tick(t_s, x, f_want, &e_ref_j); }
 
+  /// The force actually held until the next tick was `f_sent` [N], device frame, not the one
+  /// step() returned (a later stage clamped or rate-limited it, or sent zero): the next
+  /// tick's work is booked with it. The damping's share is scaled down with it.
+  void sent(const Vec3& f_sent);
+
   /// Energy the user put into the port since the start [J] (>= 0).
   double energy_in_j() const { return e_in_; }
   /// Energy the held force handed the user since the start [J] (>= 0).

@@ -57,6 +57,8 @@ DeviceStatus judge(const DeviceReading& d, std::int64_t t, std::int64_t stale_ns
 constexpr double kStallPeriods = 2.5;
 // Handoff::state: where the servo thread is, and whether stop() gave up on it.
 constexpr int kOutside = 0, kInRenderer = 1, kAbandoned = 2;
+// The live passivity stage's own |F| clip [N]: far above any device's peak.
+constexpr double kPassivityClipN = 1e9;
 
 
 }  // namespace
@@ -89,6 +91,12 @@ std::string ServoThread::start() {
   ForceLimits limits = force_limits(caps_, cfg_.force_limit_n, cfg_.max_force_rate_n_per_s);
   limits.rate_dt_cap_s = 1.0 / cfg_.rate_hz;  // a late tick changes the force no more than an on-time one
   gate_ = ForceGate(limits);
+  const double alpha_max = cfg_.passivity_alpha_max_n_s_per_m > 0 ? cfg_.passivity_alpha_max_n_s_per_m
+                           : std::isfinite(caps_.max_damping_n_s_per_m) ? caps_.max_damping_n_s_per_m
+                                                                        : kDefaultPassivityAlphaS * cfg_.rate_hz;
+  // Its own clip out of the way: the gate clamps (and counts it), and the observer books
+  // what the gate let through.
+  passivity_.start(cfg_.passivity_control, alpha_max, kPassivityClipN);
   device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
   seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();
@@ -273,6 +281,7 @@ void ServoThread::loop(Handoff& h) {
     if (!field) {
       device_.write_force_n({});
       gate_.zero(gate_dt);
+      passivity_.sent({});
       empty_.fetch_add(1, std::memory_order_relaxed);
     } else {
       if (field->version != last_version) {
@@ -304,6 +313,7 @@ void ServoThread::loop(Handoff& h) {
       if (rec.device_status != DeviceStatus::kOk) {
         device_.write_force_n({});  // within this tick
         gate_.zero(gate_dt);
+        passivity_.sent({});
         count_not_ok(rec.device_status, refused);
         if (not_ok_since < 0) not_ok_since = t;
         // A blip of stale ticks keeps the contact state and the force level; anything
@@ -316,6 +326,7 @@ void ServoThread::loop(Handoff& h) {
       } else if (paused) {
         device_.write_force_n({});
         gate_.zero(gate_dt);
+        passivity_.sent({});
         was_paused = true;
         last_render = -1;
         ramp_start = -1;  // resumed: ramp in again
@@ -356,8 +367,12 @@ void ServoThread::loop(Handoff& h) {
           rec.force_sent_n = {};
           gate_.zero(gate_dt);
         } else {
-          rec.force_sent_n = gate_.step(rec.out.force_n * ramp, gate_dt, gated);
+          // The passivity stage before the gate: the gate's limits hold whatever it adds.
+          const Vec3 damped = passivity_.step(t, d.device_time_us, d.position_m, rec.out.force_n * ramp);
+          rec.force_sent_n = gate_.step(damped, gate_dt, gated);
+          rec.passivity_clock_s = passivity_.last_clock_s();
         }
+        passivity_.sent(rec.force_sent_n);  // the observer books what was written
         if (gated & kGatePeak) clamped_.fetch_add(1, std::memory_order_relaxed);
         if (gated & kGateRate) rate_limited_.fetch_add(1, std::memory_order_relaxed);
         if (gated & kGateContinuous) continuous_limited_.fetch_add(1, std::memory_order_relaxed);

@@ -12,6 +12,7 @@
 
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/force_gate.h"
+#include "isotouch/servo/live_passivity.h"
 #include "isotouch/servo/memory_range.h"
 #include "isotouch/servo/renderer.h"
 #include "isotouch/servo/triple_buffer.h"
@@ -41,6 +42,9 @@ struct TickRecord {
   DeviceStatus device_status = DeviceStatus::kOk;
   Vec3 force_sent_n;          ///< what was written: out.force_n ramped in and clamped [N], device axes
   std::int64_t report_ns = 0; ///< when the host received the report this tick read [ns] (0: synchronous)
+  /// The clock the passivity stage (live_passivity.h) stepped on this tick [s] since its
+  /// first tick (the device's where it has one); -1: the stage did not step (a held tick).
+  double passivity_clock_s = -1;
 };
 
 /// Sees every tick on the servo thread, after the force was written. on_tick() runs inside
@@ -119,7 +123,18 @@ struct ServoThreadConfig {
   /// The gate's force-rate limit [N/s]; 0: the device's (DeviceCaps::max_force_rate_n_per_s),
   /// else the peak over kDefaultPeakRiseS (force_gate.h).
   double max_force_rate_n_per_s = 0;
+  /// The live stage's passivity controller (live_passivity.h): add the damping that keeps
+  /// the energy the sent force hands the user at or below what the user put in (one-port,
+  /// Hannaford-Ryu). Off: the observer still runs (stats in passivity()).
+  bool passivity_control = false;
+  /// Its largest added damping [N s/m]; 0: DeviceCaps::max_damping_n_s_per_m where finite,
+  /// else kDefaultPassivityAlphaS times the servo rate (0.5 m / T for an 80 g,
+  /// Phantom-class end effector: a sampled damper turns active at 2 m / T).
+  double passivity_alpha_max_n_s_per_m = 0;
 };
+
+/// The default damping cap's mass term [kg]: 0.5 x 0.08 kg (see passivity_alpha_max_n_s_per_m).
+inline constexpr double kDefaultPassivityAlphaS = 0.04;
 
 /// Counters of the device side of the servo (ticks unless said otherwise).
 struct DeviceCounters {
@@ -204,6 +219,8 @@ class ServoThread {
   long empty_ticks() const { return empty_.load(std::memory_order_relaxed); }
   /// The device side's counters (any thread; consistent per counter).
   DeviceCounters device_counters() const;
+  /// The live stage's passivity observer and controller so far (any thread).
+  PassivityStats passivity() const { return passivity_.stats(); }
   /// The status the last tick judged (any thread).
   DeviceStatus device_status() const { return DeviceStatus(status_.load(std::memory_order_relaxed)); }
   /// What the real-time setup got (valid after start()).
@@ -248,6 +265,7 @@ class ServoThread {
   std::atomic<std::uint8_t> status_{0};
   DeviceCaps caps_;  // read once at start()
   ForceGate gate_;   // set by start(); servo thread after it
+  LivePassivity passivity_;  // set by start(); servo thread after it (stats: any thread)
   std::atomic<long> rate_limited_{0}, continuous_limited_{0};
   std::shared_ptr<Handoff> handoff_;
   bool abandoned_ = false;  // a thread was left stuck in the renderer

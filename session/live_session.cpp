@@ -59,6 +59,10 @@ io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
   t.fault = r.out.fault;
   t.held = r.paused || r.device_status != servo::DeviceStatus::kOk;
   t.reset = r.reset;
+  if (r.passivity_clock_s >= 0) {
+    t.passivity_clock_s = r.passivity_clock_s;
+    t.sent_n = r.force_sent_n;
+  }
   return t;
 }
 
@@ -632,6 +636,7 @@ LiveStats LiveSession::stats(std::size_t latency_tail) const {
     s.ticks = servo_->ticks();
     s.missed_deadlines = servo_->missed_deadlines();
     s.faults = servo_->faults();
+    s.passivity = servo_->passivity();
   } else {
     s.ticks = sim_ticks_;
   }

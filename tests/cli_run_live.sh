@@ -25,6 +25,15 @@ rows=$(( $(wc -l < "$out/folder/trace.csv") - 1 ))
   fail "--out: trace.csv has $rows rows for ${ticks:-?} servo ticks"
 grep -q '"status": "complete"' "$out/folder/summary.json" || fail "--out: summary.json not complete"
 grep -q '"live": {' "$out/folder/summary.json" || fail "--out: summary.json has no live section"
+# The servo's passivity stage observed the simulated hand (the scene leaves the controller off).
+python3 - "$out/folder/summary.json" <<'PY' || fail "--out: summary.json's live.passivity is not the observer's"
+import json, math, sys
+p = json.load(open(sys.argv[1]))["live"]["passivity"]
+assert p["control"] is False and p["active_ticks"] == 0, p
+assert p["clock"] in ("device", "servo"), p
+assert all(math.isfinite(p[k]) for k in ("energy_in_j", "energy_out_j", "dissipated_j")), p
+assert p["energy_in_j"] > 0 and p["energy_out_j"] > 0, p  # the probe pressed and was pushed back
+PY
 [ -s "$out/folder/report.md" ] || fail "--out: no report.md"
 [ -f "$rec" ] || fail "no recording"
 [ ! -e "$rec.part" ] || fail "$rec.part left after a clean stop"

@@ -214,6 +214,11 @@ m passivity-reported-alpha  $P '      alpha_ = per_m * period;' '      alpha_ = 
 m passivity-stalled-clock   $P $'  if (started_) {\n    dx = x - prev_x_;' $'  if (moving) {\n    dx = x - prev_x_;' \
                                test_port_passivity 'PortPassivity.*'
 m passivity-infinite-time   $P '!std::isfinite(t)' '!(t == t)' test_port_passivity 'PortPassivity.*'
+# The same controller on the servo's live output stage: the gate is given the demand with
+# the damping added (a stiff wall above the Colgate bound, through the real servo thread).
+m passivity-live-stage      servo/servo_thread.cpp 'rec.force_sent_n = gate_.step(damped, gate_dt, gated);' \
+                               'rec.force_sent_n = gate_.step(rec.out.force_n * ramp, gate_dt, gated);' \
+                               test_live_passivity 'LivePassivity.*'
 m passivity-clip-dissipated $P '    damp = damp * scale;' '' test_port_passivity 'PortPassivity.*'
 m passivity-force-limit     $P '  core::require_positive("PortPassivity", "force_limit_n", force_limit_n, "N");' '' \
                                test_port_passivity 'PortPassivity.*'

@@ -152,7 +152,9 @@ bool identical(const Recording& a, const Recording& b, std::string& why) {
     const auto &x = a.ticks[k], &y = b.ticks[k];
     if (!same_bits(x.t_s, y.t_s) || !same_bits(x.hip_m, y.hip_m) || !same_bits(x.force_n, y.force_n) ||
         x.button != y.button || !same_bits(x.vhip_m, y.vhip_m) || x.version != y.version || x.fault != y.fault ||
-        !same_bits(x.dt_s, y.dt_s) || x.held != y.held || x.reset != y.reset)
+        !same_bits(x.dt_s, y.dt_s) || x.held != y.held || x.reset != y.reset ||
+        x.passivity_clock_s.has_value() != y.passivity_clock_s.has_value() ||
+        (x.passivity_clock_s && (!same_bits(*x.passivity_clock_s, *y.passivity_clock_s) || !same_bits(x.sent_n, y.sent_n))))
       return why = "tick " + std::to_string(k), false;
   }
   for (std::size_t i = 0; i < a.edits.size(); ++i) {
@@ -234,6 +236,11 @@ Recording live_recording(std::mt19937_64& rng, std::size_t ticks, std::size_t ed
     const unsigned h = unsigned(rng() % 9);
     r.ticks[k].held = h == 0;
     r.ticks[k].reset = h == 1;
+    // The passivity stage's clock and the force sent, on the ticks it stepped.
+    if (!r.ticks[k].held && h % 2 == 0) {
+      r.ticks[k].passivity_clock_s = std::ldexp(double(rng() % 1000000), -20);
+      r.ticks[k].sent_n = {std::ldexp(double(rng() % 4096), -10), -0.0, 1.0 / 3.0};
+    }
   }
   if (!r.edits.empty()) r.edits.back().tick = long(ticks);  // applied after the last tick ran
   return r;
@@ -301,10 +308,54 @@ TEST(Record, LiveRecordingsRefuseBadDtAndEditsOutOfOrder) {
   EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
 }
 
+// The passivity stage's clock and sent force: both or neither, format 3, finite; old files
+// (without them) load with neither.
+TEST(Record, PassivityClockAndSentForceComeTogetherAndAreNamedWhenBad) {
+  std::mt19937_64 rng(11);
+  Recording r = live_recording(rng, 10, 0);
+  for (auto& t : r.ticks) t.held = t.reset = false, t.passivity_clock_s.reset();
+  const std::string text = recording_text(r, "mem");
+  EXPECT_EQ(text.find("\"pt\""), std::string::npos);
+  for (const auto& t : parse_recording(text, "mem").ticks) EXPECT_FALSE(t.passivity_clock_s);
+  const std::string tick3 = "{\"k\":3,";
+  const std::size_t at = text.find(tick3);
+  ASSERT_NE(at, std::string::npos);
+  auto with = [&](const std::string& fields) {
+    std::string t = text;
+    t.insert(at + tick3.size(), fields);
+    return t;
+  };
+  const Recording ok = parse_recording(with("\"pt\":0.25,\"sent\":[0,0,1.5],"), "mem");
+  ASSERT_TRUE(ok.ticks[3].passivity_clock_s);
+  EXPECT_EQ(*ok.ticks[3].passivity_clock_s, 0.25);
+  EXPECT_EQ(ok.ticks[3].sent_n.z, 1.5);
+  const std::pair<std::string, std::string> bad[] = {
+      {"\"pt\":0.25,", "line 5 (tick 3): field 'sent': missing"},
+      {"\"sent\":[0,0,1],", "line 5 (tick 3): field 'pt': missing"},
+      {"\"pt\":-1,\"sent\":[0,0,1],", "field 'pt': must be in [0, 1e9) s, got -1"},
+      {"\"pt\":1,\"sent\":[0,\"x\",1],", "field 'sent[1]': must be a finite number"},
+  };
+  for (const auto& [fields, expect] : bad) {
+    try {
+      (void)parse_recording(with(fields), "mem");
+      ADD_FAILURE() << fields << " accepted";
+    } catch (const RecordingError& e) {
+      EXPECT_NE(std::string(e.what()).find(expect), std::string::npos) << e.what();
+    }
+  }
+  Recording two = r;
+  two.format_version = 2;
+  two.ticks[3].passivity_clock_s = 1.0;
+  EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
+  r.ticks[3].passivity_clock_s = 1.0;
+  r.ticks[3].sent_n = {0, NAN, 0};
+  EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
+}
+
 TEST(Record, HeldAndResetFlagsAreFormatThreesAndWrittenOnlyWhenTrue) {
   std::mt19937_64 rng(7);
   Recording r = live_recording(rng, 10, 0);
-  for (auto& t : r.ticks) t.held = t.reset = false;
+  for (auto& t : r.ticks) t.held = t.reset = false, t.passivity_clock_s.reset();
   const std::string text = recording_text(r, "mem");
   const std::string tick3 = "{\"k\":3,";
   const std::size_t at = text.find(tick3);

@@ -210,6 +210,14 @@ TEST(Scene, StiffnessAboveTheStabilityBoundNeedsTheSceneToSaySo) {
   expect_error(base + R"(800, "rate_hz": 10}})", {"'servo.stiffness_n_per_m'", "80.2"});
 }
 
+// The live servo's passivity controller: off unless the scene says so; a non-boolean is refused.
+TEST(Scene, PassivityControlIsOffUnlessTheSceneSaysSo) {
+  const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1)";
+  EXPECT_FALSE(parse_scene(base + "}", "ok.json").passivity_control);
+  EXPECT_TRUE(parse_scene(base + R"(, "servo": {"passivity_control": true}})", "ok.json").passivity_control);
+  expect_error(base + R"(, "servo": {"passivity_control": 1}})", {"'servo.passivity_control'"});
+}
+
 TEST(Scene, RayOriginFracRange) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_origin_frac": [0.5, 0.5, -1e6]}})",
                {"'script.ray_origin_frac'", "[-2, 3]", "-1000000"});

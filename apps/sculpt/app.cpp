@@ -811,6 +811,7 @@ session::LiveSessionConfig Sculpt::session_config() {
   session::LiveSessionConfig cfg;
   cfg.servo.rate_hz = scene.hri.rate_hz;
   cfg.servo.force_limit_n = scene.hri.force_limit_n;  // the gate: min(scene, device)
+  cfg.servo.passivity_control = scene.passivity_control;
   cfg.servo.sched_fifo = o.sched_fifo;
   cfg.servo.pin_cpu = o.sched_fifo;
   cfg.servo.lock_memory = o.sched_fifo;

@@ -1,0 +1,73 @@
+// live_passivity.h - the time-domain passivity observer and controller on the servo's live
+// output stage (servo_thread.cpp): every renderer's force passes it, after the ramp-in and
+// before the ForceGate, for every backend. The gate stays the last stage: whatever damping
+// the controller adds is clamped and rate-limited like any demand, and the observer books
+// the force the gate actually let through (sent()), not the one it asked for.
+//
+// Clock: the device's own (DeviceReading::device_time_us, unwrapped) where the backend
+// reports one (nonzero), else the servo's tick start. On the device clock a tick that reads
+// the same report again has no period: its work is booked (zero, the position did not
+// move) and no damping is added.
+//
+// Scope (measured in simulation, docs/haptics.md): this is the one-port rule of
+// Hannaford-Ryu at the servo's end. It makes a sampled wall passive where the servo's force
+// reaches the device within its own tick (report devices, vendor SDK threads); it does not
+// make a link with delay passive (igtl, serve's stream): there the damping arrives a round
+// trip late, and the controller has to run at the device end (sim/linked_contact.h).
+// Allocation-free, lock-free, no syscall; stats() is safe from any thread.
+#pragma once
+#include "isotouch/servo/core_names.h"
+#include <atomic>
+#include <cstdint>
+
+#include "isotouch/core/vec3.h"
+#include "isotouch/servo/port_passivity.h"
+
+namespace isotouch::servo {
+
+/// What the live stage's observer measured since the servo started (device frame, SI).
+struct PassivityStats {
+  bool control = false;       ///< the controller was on (else observe only)
+  bool device_clock = false;  ///< the device's clock was used (else the servo's)
+  double energy_in_j = 0;     ///< energy the user put into the port [J] (>= 0)
+  double energy_out_j = 0;    ///< energy the sent force handed the user [J] (>= 0)
+  double dissipated_j = 0;    ///< work of the added damping against the motion [J]
+  long active_ticks = 0;      ///< ticks the controller added damping
+};
+
+class LivePassivity {
+ public:
+  /// Forget everything and start afresh (ServoThread::start(), before the thread).
+  /// @param control add damping (else observe only); @param alpha_max_n_s_per_m largest
+  /// added damping [N s/m]; @param force_limit_n |F| clip [N] (finite, > 0).
+  /// @throws std::invalid_argument naming the setting and its value (PortPassivity).
+  void start(bool control, double alpha_max_n_s_per_m, double force_limit_n);
+  /// A good tick: the device reported `x_m` (device frame [m]) with its clock
+  /// `device_time_us` (0: none), the servo's tick started at `servo_ns` [ns]; `demand_n` is
+  /// the ramped renderer force [N]. Returns the demand with the damping added [N]; a
+  /// non-finite demand unchanged (the gate turns it into an exact zero at once).
+  Vec3 step(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m, const Vec3& demand_n);
+  /// What was actually written this tick [N] (the gate's output; zero on a held tick).
+  void sent(const Vec3& f_n);
+  /// The clock the last step() used [s] since the first good tick (servo thread).
+  double last_clock_s() const { return last_clock_s_; }
+  /// The figures so far (any thread; each figure consistent on its own).
+  PassivityStats stats() const;
+
+ private:
+  double clock_s(std::int64_t servo_ns, std::uint32_t device_time_us);
+  void publish();
+  PortPassivity pc_{false, 0.0, 1.0};
+  bool control_ = false;
+  bool started_ = false;        // a clock was chosen (the first good tick)
+  bool device_clock_ = false;
+  std::uint32_t last_us_ = 0;   // the device clock's last raw value (it wraps)
+  std::int64_t device_us_ = 0;  // unwrapped device time since the first tick [us]
+  std::int64_t first_ns_ = 0;   // the servo's first good tick [ns]
+  double last_clock_s_ = 0;
+  std::atomic<double> e_in_{0}, e_out_{0}, dissipated_{0};
+  std::atomic<long> active_{0};
+  std::atomic<bool> control_pub_{false}, device_clock_pub_{false};
+};
+
+}  // namespace isotouch::servo

@@ -19,6 +19,7 @@
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/session/session.h"
+#include "isotouch/sim/stability.h"
 
 #include <pybind11/stl.h>
 
@@ -32,6 +33,31 @@ session::BrushKind brush_kind(const std::string& name) {
   throw py::value_error("kind: '" + name + "', must be 'add', 'carve', 'smooth' or 'drill'");
 }
 
+/// The checks a scene file's servo section gets (io/scene.cpp), for a renderer given as
+/// HriParams: the ranges of the stiffness, damping and force limit, and the passivity bound
+/// K <= 2 (b - |B|) / T for the scene's device and hand damping b at the servo's rate.
+/// @throws ValueError naming the field and its value.
+void check_servo(const io::Scene& s) {
+  const servo::HriParams& p = s.hri;
+  const auto bad = [](const std::string& field, double v, const std::string& want) {
+    std::ostringstream e;
+    e << field << ": " << v << ", must be " << want;
+    throw py::value_error(e.str());
+  };
+  if (!(p.stiffness_n_per_m > 0 && p.stiffness_n_per_m <= 1e6)) bad("stiffness_n_per_m", p.stiffness_n_per_m, "in (0, 1e6] N/m");
+  if (!(p.force_limit_n > 0 && p.force_limit_n <= 1000)) bad("force_limit_n", p.force_limit_n, "in (0, 1000] N");
+  if (!std::isfinite(p.damping_n_s_per_m)) bad("damping_n_s_per_m", p.damping_n_s_per_m, "finite [N s/m]");
+  const double b = s.device.damping_n_s_per_m + s.device.hand_damping_n_s_per_m;
+  const double bound = sim::colgate_k_max(b, p.damping_n_s_per_m, 1.0 / s.hri.rate_hz);
+  if (p.stiffness_n_per_m > bound) {
+    std::ostringstream want;
+    want << "at most the stability bound K_max = 2 (b - |B|) / T = " << bound << " N/m (b = device + hand damping "
+         << b << " N s/m, B = damping_n_s_per_m " << p.damping_n_s_per_m << ", T = 1 / " << s.hri.rate_hz
+         << " Hz): the contact may buzz";
+    bad("stiffness_n_per_m", p.stiffness_n_per_m, want.str());
+  }
+}
+
 /// The default touch scene `isotouch run VOLUME` makes (run/volume_scene.h) for `vol` at the
 /// isovalue and renderer `hri` (`scene_hri`: keep the scene's renderer defaults, only tau and
 /// inside from `hri`). Its file name says where it came from; nothing is read from it.
@@ -40,7 +66,12 @@ io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, b
   choice.iso = core::Isosurface{hri.tau, hri.inside};
   choice.rule = "given as tau";
   io::Scene s = run::make_volume_scene(vol, choice, vol.path).scene;
-  if (!scene_hri) s.hri = hri;
+  if (!scene_hri) {
+    const double wpd = s.hri.world_per_device;  // the scene's workspace scale (device section)
+    s.hri = hri;
+    s.hri.world_per_device = wpd;
+    check_servo(s);
+  }
   s.file = "isotouch.LiveSession(volume)";
   return s;
 }

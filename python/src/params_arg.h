@@ -25,6 +25,11 @@ P params_arg(const py::object& params, const std::string& algorithm, const char*
     p = params.cast<P>();
   }
   if (tau) {
+    if (!std::isfinite(*tau)) {
+      std::ostringstream s;
+      s << tau_name << ": " << *tau << " given, must be a finite isovalue (volume value units)";
+      throw py::value_error(s.str());
+    }
     if (!std::isnan(p.tau) && p.tau != *tau) {
       std::ostringstream s;
       s << tau_name << ": " << *tau << " given, but params.tau is " << p.tau << ": give the isovalue once";

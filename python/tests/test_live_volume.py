@@ -56,6 +56,16 @@ def test_the_isovalue_from_params_with_its_renderer():
     assert_on_sphere(points)
 
 
+def test_a_renderer_given_as_params_gets_the_scene_files_checks():
+    a = sphere_array()
+    with pytest.raises(ValueError, match=r"stiffness_n_per_m: 100000, must be at most the stability bound"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=isotouch.HriParams(tau=0.0, stiffness_n_per_m=1e5))
+    with pytest.raises(ValueError, match=r"tau: nan given, must be a finite isovalue"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=float("nan"))
+    with pytest.raises(ValueError, match=r"force_limit_n: .*must be in \(0, 1000\] N"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=isotouch.HriParams(tau=0.0, force_limit_n=5000.0))
+
+
 def test_a_volume_without_an_isovalue_is_refused_not_run_at_zero():
     with pytest.raises(ValueError, match=r"tau: no isovalue given .*a Volume does not carry one"):
         isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3)

@@ -5,9 +5,9 @@
 // the force the gate actually let through (sent()), not the one it asked for.
 //
 // Clock: the device's own (DeviceReading::device_time_us, unwrapped) where the backend
-// reports one (nonzero), else the servo's tick start. On the device clock a tick that reads
-// the same report again has no period: its work is booked (zero, the position did not
-// move) and no damping is added.
+// reports one (nonzero), else the servo's tick start, standing still while the position
+// repeats (a re-read report). A tick that reads the same report again has no period: its
+// work is booked (zero, the position did not move) and no damping is added.
 //
 // Scope (measured in simulation, docs/haptics.md): this is the one-port rule of
 // Hannaford-Ryu at the servo's end. It makes a sampled wall passive where the servo's force
@@ -55,7 +55,7 @@ class LivePassivity {
   PassivityStats stats() const;
 
  private:
-  double clock_s(std::int64_t servo_ns, std::uint32_t device_time_us);
+  double clock_s(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m);
   void publish();
   PortPassivity pc_{false, 0.0, 1.0};
   bool control_ = false;
@@ -64,6 +64,8 @@ class LivePassivity {
   std::uint32_t last_us_ = 0;   // the device clock's last raw value (it wraps)
   std::int64_t device_us_ = 0;  // unwrapped device time since the first tick [us]
   std::int64_t first_ns_ = 0;   // the servo's first good tick [ns]
+  double servo_t_ = 0;          // servo clock: the tick that last read a new position [s]
+  Vec3 last_x_;                 // the last position read (device frame [m])
   double last_clock_s_ = 0;
   std::atomic<double> e_in_{0}, e_out_{0}, dissipated_{0};
   std::atomic<long> active_{0};

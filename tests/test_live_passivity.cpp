@@ -125,3 +125,28 @@ TEST(LivePassivity, WithoutTheControllerTheSameWallOscillates) {
   EXPECT_EQ(off.stats.active_ticks, 0);
   EXPECT_GT(off.stats.energy_out_j, off.stats.energy_in_j);  // the observer saw the wall active
 }
+
+// A backend without a clock (device_time_us 0: an SDK's frame, a link) re-reads its last
+// report on the servo's faster ticks: each position below repeats 4 times. The held force
+// pushes along the motion (it hands the user energy), so the controller damps; its damping
+// must answer the true velocity (4 mm/s), never the 4-fold one a one-period step over a
+// 4-period motion would give: at most alpha_max x v on every tick.
+TEST(LivePassivity, AReportReadAgainOnTheServosClockDoesNotMultiplyTheDamping) {
+  constexpr double alpha_max = 2.0, v = 4e-3, T = 1e-3;
+  constexpr int repeats = 4;
+  LivePassivity lp;
+  lp.start(true, alpha_max, 10.0);
+  const Vec3 push{0, 0, 1.0};  // [N] along +z, the motion's direction
+  double largest = 0;
+  long damped = 0;
+  for (int k = 0; k < 400; ++k) {
+    const double z = v * T * repeats * double(k / repeats);  // a new report every 4 ticks
+    const Vec3 out = lp.step(std::int64_t(k) * 1000000, 0, {0, 0, z}, push);
+    const double damping = std::abs(out.z - push.z);
+    largest = std::max(largest, damping);
+    damped += damping > 0;
+    lp.sent(out);
+  }
+  EXPECT_GT(damped, 10) << "the test's premise: the controller damps";
+  EXPECT_LE(largest, alpha_max * v * (1 + 1e-9)) << "damping past alpha_max x the true velocity";
+}

@@ -189,7 +189,9 @@ void ForceDimensionDevice::period(std::int64_t now, bool& force_on) {
   publish(r, now);
   if (fw_off_ && fw_off_reading_ == 0) fw_off_reading_ = published_sequence();
   bool on = false;
-  Vec3 f = force_now(now, on);
+  // The stall is judged at the clock of this look, after the device's reads (USB time): a
+  // stall that came due during them is acted on now, not a device period later.
+  Vec3 f = force_now(sdk_now_ns(), on);
   if (down_) on = false;
   if (fw_off_) {
     // Back on (below: dhdEnableForce) once the servo's force is an exact zero answering a

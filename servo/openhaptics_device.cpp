@@ -223,7 +223,9 @@ HDCallbackCode OpenHapticsDevice::tick() {
   api_.hdGetIntegerv(hd::kCurrentButtons, &buttons);
   const bool calibrated = calibrate_in_frame();
   bool on = false;
-  const Vec3 force = force_now(now, on);
+  // The stall is judged at the clock of this look, after the frame's reads (a stall that came
+  // due during them is acted on in this frame, not the next).
+  const Vec3 force = force_now(sdk_now_ns(), on);
   // down: the last frame lost the device; not calibrated: the pose is not where it reads.
   const bool zero = closing_.load() || !on || down_ || !calibrated;
   if (!zero) device_to_hd_force(force, f);

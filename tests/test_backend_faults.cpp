@@ -85,11 +85,18 @@ class FaultyPush final : public servo::Renderer {
   const char* name() const override { return "faulty push"; }
   void reset() override {}
   std::atomic<std::int64_t> from_ns{0}, to_ns{0};
+  /// When the last tick before the fault returned its force: the servo's last write to the
+  /// device comes after it, so a bound timed from here is never looser than one timed from
+  /// that write.
+  std::atomic<std::int64_t> last_push_ns{0};
   servo::HriTick tick(const core::FieldView&, const Vec3&, double) override {
     const long k = ++ticks_;
     servo::HriTick t;
     t.force_n = {0, 0, kPushN};
-    if (k < kFaultTick) return t;
+    if (k < kFaultTick) {
+      last_push_ns = mono_ns();
+      return t;
+    }
     if (k == kFaultTick) from_ns = mono_ns();
     if (fault_ == Fault::kStall && k == kFaultTick) {
       std::this_thread::sleep_for(std::chrono::milliseconds(60));
@@ -135,10 +142,12 @@ class Backend {
   virtual bool answers_poses() const { return false; }
   virtual void close() = 0;
   virtual std::vector<Received> received() = 0;
-  /// Servo periods of slack for the stall's zero beyond 3 (a link answers poses, 1 ms apart).
+  /// Servo periods of slack beyond 3 for the zeros of a fault other than a stall (a link
+  /// answers poses, 1 ms apart).
   virtual double stall_slack_periods() const { return 0; }
   /// The servo's stale timeout with this device [s] (set when the scenario runs).
   double stale_s = 0;
+  double own_rate_hz = 0;  ///< the rate of the loop the device applies forces in (0: none of its own)
   /// How far the force received may lie from the force sent [N].
   virtual double tolerance_n() const { return 1e-9; }
 };
@@ -382,6 +391,7 @@ std::vector<Received> run_scenario(Backend& b, Fault fault, FaultyPush& push) {
   b.configure(sc);
   // As ServoThread judges it: the front end's, else the device's own, else two periods.
   const double device_stale_s = b.io().caps().stale_timeout_s;
+  b.own_rate_hz = b.io().caps().output_rate_hz;
   b.stale_s = sc.stale_timeout_s > 0 ? sc.stale_timeout_s : device_stale_s > 0 ? device_stale_s : 2 * kPeriodS;
   {
     servo::ServoThread servo(published, push, b.io(), sc);
@@ -432,19 +442,42 @@ TEST_P(BackendFaults, WhatTheDeviceReceivedKeepsTheRules) {
   const std::int64_t from = device_side ? b->outage_from_ns : push.from_ns.load();
   const std::int64_t to = device_side ? b->outage_to_ns : push.to_ns.load();
   ASSERT_TRUE(from > 0 && to > from) << "the fault never happened";
-  // Inside it, after 3 servo periods (the link's slack more, 1 ms for the device's own thread
-  // to run, and the time the canaries saw the machine gone until the row): nothing but exact
-  // zeros. A gap in the device's reports is judged stale after the servo's stale timeout with
-  // the device, and a tick later written as zero. The step's window starts with a
-  // rate-limited release.
+  // Inside it, after 3 servo periods (and the time the canaries saw the machine gone until
+  // the row): nothing but exact zeros. A stall is timed from the servo's last write before
+  // it, on every backend and link alike (the zero arrives in time); the other faults from
+  // their start, with the link's slack and 1 ms more for the device's own thread to run. A gap in the device's reports is judged stale after the
+  // servo's stale timeout with the device, and a tick later written as zero. The step's
+  // window starts with a rate-limited release.
   const double settle_s = fault == Fault::kStep ? kPushN / kRateNPerS : 0.0;
   const double off_s = fault == Fault::kPoseGap ? b->stale_s + kPeriodS : 3 * kPeriodS;
-  const auto zero_from = from + std::int64_t((off_s + b->stall_slack_periods() * kPeriodS + 1e-3 + settle_s) * 1e9);
+  // A stall is timed from the servo's last write before it (the rule's promise: a disabled
+  // zero within 3 periods of it), the other renderer faults from their first faulty tick.
+  const std::int64_t judged_from = fault == Fault::kStall ? push.last_push_ns.load() : from;
+  // A device that applies forces in its own loop (OpenHaptics, Force Dimension) looks for the
+  // stall at its own ticks, half a device period early (servo/stall_rule.cpp): at worst half a
+  // device period past 2.5 servo periods, then its frame's reads before the zero is set.
+  const double own_hz = b->own_rate_hz;
+  const double stall_slack_s = own_hz > 0 ? 0.5 / own_hz : 0.0;
+  const std::int64_t slack_ns = fault == Fault::kStall
+                                    ? std::int64_t(stall_slack_s * 1e9)
+                                    : std::int64_t(b->stall_slack_periods() * kPeriodS * 1e9) + 1'000'000;
+  const auto zero_from = judged_from + std::int64_t((off_s + settle_s) * 1e9) + slack_ns;
+  if (fault == Fault::kStall) {  // the zero itself arrived in time, not only no force after it
+    std::size_t z = 0;
+    while (z < r.size() && !(r[z].t_ns > from && r[z].f == 0.0)) ++z;
+    ASSERT_LT(z, r.size()) << "no zero during the stall";
+    const double ms = double(r[z].t_ns - judged_from) * 1e-6;
+    std::printf("%s / Stall: the first zero arrived %.3f ms after the last write (%s)\n", name.c_str(), ms,
+                canary.describe(judged_from, r[z].t_ns).c_str());
+    EXPECT_LE(r[z].t_ns, zero_from + canary.lost_ns(judged_from, r[z].t_ns))
+        << "the zero arrived " << ms << " ms after the last write, past 3 periods; "
+        << canary.describe(judged_from, r[z].t_ns);
+  }
   long zeros = 0;
   for (std::size_t i = 0; i < r.size(); ++i) {
-    if (r[i].t_ns <= zero_from + canary.lost_ns(from, r[i].t_ns) || r[i].t_ns >= to) continue;
-    EXPECT_EQ(r[i].f, 0.0) << "row " << i << ", " << double(r[i].t_ns - from) * 1e-6 << " ms into the fault; "
-                           << canary.describe(from, r[i].t_ns);
+    if (r[i].t_ns <= zero_from + canary.lost_ns(judged_from, r[i].t_ns) || r[i].t_ns >= to) continue;
+    EXPECT_EQ(r[i].f, 0.0) << "row " << i << ", " << double(r[i].t_ns - judged_from) * 1e-6
+                           << " ms after the fault's judged start; " << canary.describe(judged_from, r[i].t_ns);
     ++zeros;
   }
   // A device that keeps receiving got zeros in there; a link that answers poses got one zero
@@ -458,7 +491,7 @@ TEST_P(BackendFaults, WhatTheDeviceReceivedKeepsTheRules) {
   } else if (b->rows_while_down() || fault != Fault::kReconnect) {
     // Rows to judge are owed only where the machine ran for a few periods of the judged
     // window: the canaries' lost time shortens it as it delays each row.
-    const std::int64_t left_ns = to - zero_from - canary.lost_ns(from, to);
+    const std::int64_t left_ns = to - zero_from - canary.lost_ns(judged_from, to);
     if (left_ns > std::int64_t(3 * kPeriodS * 1e9)) {
       EXPECT_GE(zeros, 1) << "no row inside the fault; " << canary.describe(from, to);
     } else {

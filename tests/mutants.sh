@@ -172,6 +172,8 @@ m stream-stall-zero         $SR '    const bool stall_zero = l.stalled_now;  // 
                                '    const bool stall_zero = false;' $T 'StreamReplies.AStalledServo*'
 m stream-stale-zero         $SR '    const bool stale_zero = stale && !zero_sent && !stall_zero;' \
                                '    const bool stale_zero = false;' $T 'StreamReplies.AStaleStream*'
+m stream-stale-late         $SR 'const bool stale = p.sequence > 0 && now - p.received_ns > stale_ns;' \
+                               'const bool stale = p.sequence > 0 && now - p.received_ns > 2 * stale_ns;' $T 'StreamReplies.AStaleStream*'
 m stream-switch-zero        $SR '    fenced->send(zero_msg);  // blocking: the zero is not dropped' '' $T 'StreamReplies.AClientThatStops*'
 m stream-exit-zero          $SR '        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);' '' $T 'StreamReplies.ACrashOr*'
 

@@ -116,7 +116,7 @@ struct Session {
   session::BrushTargets targets;  // the tool's material and empty values at this isovalue
   std::string image_name;  // the device name the edited volume goes back under
   std::uint64_t generation = 0;  // a new one per start_session
-  bool journaled = false;  // its edits go to the edit journal (the session on the scene's volume)
+  io::Journal* journal = nullptr;  // where its edits go (the scene's volume's session, an IMAGE's): Server-owned
 };
 
 class Server {
@@ -148,7 +148,7 @@ class Server {
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
                                            const servo::HriParams& hri);
   void start_session(std::unique_ptr<Session> s);
-  void open_journal(Session& s);
+  io::OpenedJournal open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input);
   void close_journal();
   std::string memory_refusal(igtl::ImageMessage& image);
   void swap_volume(PendingVolume p);
@@ -159,7 +159,7 @@ class Server {
     return o_.fault_for_test && o_.fault_for_test(where, image);
   }
   std::unique_ptr<Session> stop_session();
-  std::string switch_session(std::unique_ptr<Session> next);
+  std::string switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal = nullptr);
   void take_command(Client& c, const Incoming& in);
   void command_loop();
   void run_command(const Pending& p);
@@ -203,9 +203,10 @@ class Server {
   std::thread acceptor_;  // accept_clients() until stop_
   int next_id_ = 1;
   std::mutex session_mu_;  // guards session_ (swapped by the main thread, read by the display thread)
-  io::OpenedJournal journal_;  // the scene's volume's session's edit journal (off: null); before session_:
+  io::OpenedJournal journal_;  // the running session's edit journal (off: null); before session_:
   // destroyed after it, so a session still running while run() unwinds never appends to a freed one
   std::unique_ptr<Session> session_;
+  std::uint32_t journal_crc_ = 0;  // the volume journal_ belongs to
   long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
   long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
@@ -916,8 +917,8 @@ void Server::start_session(std::unique_ptr<Session> s) {
     c.servo.stale_timeout_s = o_.stale_s;
   }
   c.on_applied = s->mirror->listener(s->parts->edits());
-  if (s->journaled)
-    c.on_applied = [j = journal_.journal.get(), mirror = std::move(c.on_applied)](
+  if (s->journal)
+    c.on_applied = [j = s->journal, mirror = std::move(c.on_applied)](
                        const session::EditEvent& e, const session::EditOutcome& out, session::EditSource source) {
       if (out.error.empty()) j->append(e);  // what a recording records: the edits applied
       mirror(e, out, source);
@@ -1061,20 +1062,27 @@ void Server::swap_volume(PendingVolume p) {
   live.background = float(live.iso.outside_value(p.volume.min_value, p.volume.max_value));
   hri.tau = choice.iso.tau;
   hri.inside = choice.iso.inside;
+  const std::uint32_t crc = o_.journal ? io::volume_crc32(p.volume) : 0;
+  io::OpenedJournal journal;
   try {
     next = prepare_session(std::move(p.volume), live, hri);
+    // The same volume again: its session starts afresh (as the old one's edits are dropped),
+    // and one journal file serves one session.
+    if (journal_.journal && crc == journal_crc_) close_journal();
+    journal = open_journal(*next, crc, "igtl:" + p.device);  // a journal a crash left for it: restored
   } catch (const std::exception& e) {
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
                             e.what() + ")" + keep);
   }
   const auto t1 = std::chrono::steady_clock::now();
-  if (const std::string why = switch_session(std::move(next)); !why.empty())
+  if (const std::string why = switch_session(std::move(next), &journal); !why.empty())
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be started (" +
                             why + ")" + keep);
   setup_.live = live;
   setup_.hri = hri;
+  journal_crc_ = crc;
   const auto t2 = std::chrono::steady_clock::now();
   n_.images.fetch_add(1);
   std::ostringstream s;
@@ -1086,44 +1094,47 @@ void Server::swap_volume(PendingVolume p) {
   answer_image(p, igtl::StatusMessage::STATUS_OK, "volume taken: " + p.dims + "; " + engine::iso_line(choice));
 }
 
-/// The edit journal of the scene's volume (io/journal_offer.h): a journal a killed serve
-/// left is restored into `s` (before its live session starts) or not, as --restore says; the
-/// journal then starts afresh with what was restored. The log says what was done.
-void Server::open_journal(Session& s) {
-  if (!o_.journal) return;
-  const std::uint32_t crc = io::volume_crc32(setup_.volume);
+/// The edit journal of a session on a volume of CRC `volume_crc32` (the scene's, or an
+/// IMAGE's: io/journal_offer.h): a journal a killed serve left for that volume is restored
+/// into `s` (before its live session starts) or not, as --restore says; the journal then
+/// starts afresh with what was restored, and `s` appends to it. `input` names the volume in
+/// the journal's header. The log says what was done. Returned for the caller to own (off:
+/// a null journal).
+io::OpenedJournal Server::open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input) {
+  if (!o_.journal) return {};
   std::ostringstream said;
   std::istringstream no_terminal;
-  journal_ = io::open_journal("serve", crc, o_.restore ? io::RestoreChoice::kYes : io::RestoreChoice::kNo, said,
-                              no_terminal, false);
+  io::OpenedJournal j = io::open_journal("serve", volume_crc32, o_.restore ? io::RestoreChoice::kYes : io::RestoreChoice::kNo,
+                                         said, no_terminal, false);
   std::istringstream lines(said.str());
   for (std::string l; std::getline(lines, l);) log_.line(l);
-  if (!journal_.journal) return;
-  io::apply_restored(s.parts->edits(), journal_.restore, &s.parts->buffer());
-  if (!journal_.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
+  if (!j.journal) return j;
+  io::apply_restored(s.parts->edits(), j.restore, &s.parts->buffer());
+  if (!j.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
     s.mirror = std::make_shared<EditMirror>(s.parts->edits().volume());
     VoxelBox all;
     all.hi = s.frame.grid.dims;
     s.mirror->restore_changed(all);
-    log_.line("journal  restored " + std::to_string(journal_.restore.size()) + " edits");
+    log_.line("journal  restored " + std::to_string(j.restore.size()) + " edits");
   }
   io::Recording header;
-  header.scene_path = std::filesystem::absolute(scene_.file).string();
+  header.scene_path = input;
   header.rate_hz = scene_.hri.rate_hz;
-  header.volume_crc32 = crc;
-  journal_.journal->start(header, journal_.restore);
-  s.journaled = true;
-  log_.line("journal  " + journal_.journal->path() + " (this session's edits, kept through a crash)");
+  header.volume_crc32 = volume_crc32;
+  j.journal->start(header, j.restore);
+  s.journal = j.journal.get();
+  log_.line("journal  " + j.journal->path() + " (this session's edits, kept through a crash)");
+  return j;
 }
 
-/// The session on the scene's volume ended (serve stops, or an IMAGE or an isovalue replaced
-/// it): its journal is deleted.
+/// The running session ended (serve stops, or an IMAGE or an isovalue replaced it): its
+/// journal is deleted.
 void Server::close_journal() {
   if (!journal_.journal) return;
   try {
     journal_.journal->close();
-    log_.line("journal  closed: the session on the scene's volume ended (" + std::to_string(journal_.journal->edits()) +
-              " edits; a later session is not journaled)");
+    log_.line("journal  closed: the session's edits are no longer kept (" + std::to_string(journal_.journal->edits()) +
+              " edits; the session ended)");
   } catch (const std::exception& e) {
     log_.line(std::string("journal  ") + e.what());
   }
@@ -1160,11 +1171,12 @@ std::unique_ptr<Session> Server::stop_session() {
 /// (a thread, memory, the device), the old session is started again on its own volume and
 /// edits, and the reason is returned for the sender's STATUS ("" when `next` runs). Only
 /// when the old one cannot be started either does the exception end the server.
-std::string Server::switch_session(std::unique_ptr<Session> next) {
+std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal) {
   std::unique_ptr<Session> old = stop_session();
   try {
     start_session(std::move(next));
-    if (old && old->journaled) close_journal();  // the session on the scene's volume ended
+    if (old && old->journal) close_journal();  // the old session ended
+    if (next_journal) journal_ = std::move(*next_journal);
     return "";
   } catch (const std::exception& e) {
     const std::string why = e.what();
@@ -1217,7 +1229,8 @@ int Server::run() {
             iso_text(setup_.live.iso) + " (the scene's)");
   {
     std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
-    open_journal(*first);
+    journal_crc_ = io::volume_crc32(setup_.volume);
+    journal_ = open_journal(*first, journal_crc_, std::filesystem::absolute(scene_.file).string());
     start_session(std::move(first));
   }
   session::install_stop_handlers();
@@ -1272,7 +1285,7 @@ int Server::run() {
     if (iso) restart_at_isovalue(*iso);
   }
   join_threads(display, commands);
-  if (const std::unique_ptr<Session> last = stop_session(); last && last->journaled) close_journal();
+  if (const std::unique_ptr<Session> last = stop_session(); last && last->journal) close_journal();
   std::ostringstream s;
   s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "

@@ -5,7 +5,8 @@
 # ($XDG_STATE_HOME/isotouch/serve-CRC.journal) holds the edits and the undo; serve started
 # again restores them by default ("restore N edits from HH:MM?" and what was done in the
 # log): its `save restored.mha` equals carved.mha byte for byte and differs from the head
-# (the client's comparison); stopped by SIGTERM, it deletes the journal.
+# (the client's comparison); stopped by SIGTERM, it deletes the journal. The same for a
+# session on a client's IMAGE: restored when the same IMAGE is sent to the next serve.
 # Usage: cli_serve_journal.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
 source "$(dirname "$0")/serve_port.sh"
@@ -49,4 +50,34 @@ cmp "$out/restored.mha" "$out/carved.mha" || fail "restored.mha differs from car
 carved=$(sed -n "s|^compare $out/restored.mha: \([0-9]*\) voxels differ.*|\1|p" "$out/client2.log")
 (( ${carved:-0} >= 10 )) || fail "the restored volume differs from the head in ${carved:-no} voxels"
 [[ ! -e $journal ]] || fail "the journal was not deleted when serve stopped"
-echo "PASS serve journal: $edits edits ($brushes brushes, 1 undo) restored after kill -9, byte for byte ($carved voxels carved)"
+echo "ok serve journal: $edits edits ($brushes brushes, 1 undo) restored after kill -9, byte for byte ($carved voxels carved)"
+
+# A session on a client's IMAGE (Slicer's way) keeps its edits through a kill -9 too: the
+# journal of the IMAGE's volume is restored when the same IMAGE is sent to the next serve.
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve3.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve3.log" $pid)
+[[ -n $port ]] || fail "serve did not start a third time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
+  cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save ballcarved.mha" \
+  >"$out/client3.log" 2>&1 || fail "the IMAGE client failed (exit $?)"
+kill -KILL $pid; wait $pid
+grep -q "save ballcarved.mha: wrote" "$out/client3.log" || fail "ballcarved.mha was not written"
+left=( "$out"/state/isotouch/serve-*.journal )
+(( ${#left[@]} == 1 )) && [[ -f ${left[0]} ]] || fail "not one journal left after the kill: ${left[*]}"
+ball_journal=${left[0]}
+ball_edits=$(grep -c '^{"edit"' "$ball_journal"); ball_brushes=$(grep -c '^{"edit":"brush"' "$ball_journal")
+(( ball_brushes > 0 )) || fail "the IMAGE session's journal holds no brush: the check says little"
+grep -q "igtl:Ball" "$ball_journal" || fail "the journal does not name the IMAGE it belongs to"
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve4.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve4.log" $pid)
+[[ -n $port ]] || fail "serve did not start a fourth time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 cmd "save ballrestored.mha" \
+  >"$out/client4.log" 2>&1 || fail "the second IMAGE client failed (exit $?)"
+kill -TERM $pid; wait $pid
+grep -q "^journal  restoring $ball_edits edits from $ball_journal" "$out/serve4.log" ||
+  fail "the IMAGE session's $ball_edits edits were not restored when the IMAGE came again"
+cmp "$out/ballrestored.mha" "$out/ballcarved.mha" || fail "ballrestored.mha differs from ballcarved.mha (the volume at the kill)"
+[[ ! -e $ball_journal ]] || fail "the IMAGE session's journal was not deleted when serve stopped"
+echo "PASS serve journal: an IMAGE session's $ball_edits edits restored after kill -9 when the IMAGE came again, byte for byte"

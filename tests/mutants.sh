@@ -70,6 +70,9 @@ m gate-rate-off             $G 'if (c > allowed) f = last_ + change * (allowed /
   $T 'ServoSafety.AStepDemand*'
 m gate-nonfinite-zero       $G 'if (!all_finite(f)) f = {}, flags |= kGateNonFinite;' '' $T 'ServoSafety.ANonFinite*'
 m backend-step-every-kind   $G 'if (c > allowed) f = last_ + change * (allowed / c), flags |= kGateRate;' '' test_backend_faults '*_Step'
+m backend-nan-every-kind    $G 'if (!all_finite(f)) f = {}, flags |= kGateNonFinite;' '' test_backend_faults '*_NaN'
+m backend-gap-every-kind    $S 'if (d.received_ns != 0 && t - d.received_ns > stale_ns) return DeviceStatus::kStale;' '' \
+  test_backend_faults '*_PoseGap'
 m gate-continuous-off       $G 'if (const double cap = continuous_cap(dt_s); m > cap) f = f * (cap / m), flags |= kGateContinuous;' '' \
   test_force_gate 'ForceGate.*'
 m gate-scene-limit          $G 'l.peak_n = std::min(limit_or_inf(scene_limit_n), limit_or_inf(caps.max_force_n));' \

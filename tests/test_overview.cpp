@@ -17,6 +17,7 @@
 
 #include "isotouch/run/overview.h"
 #include "isotouch/run/picture.h"
+#include "isotouch/run/render_job.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/run/volume_scene.h"
 
@@ -250,5 +251,32 @@ TEST(Overview, AnInfVoxelAndAStrayVoxelDoNotMoveTheObject) {
   EXPECT_LT(std::abs(s.dy), 0.05) << "centroid " << s.dy << " of the height below the centre";
   // Framed on the ball's box its disc covers 24 % of the picture (the box's bounding sphere
   // fills the height); framed on the scan's box, 2 %.
+  EXPECT_GT(s.pixels, 0.15 * 200 * 200);
+}
+
+// `isotouch render` frames the object as the overview does (run::frame_object): a ball off the
+// centre of its scan is drawn in the middle of the picture, filling it (framing the scan's
+// box, its centroid sat (-0.119, +0.100) of the picture off the centre, on 1.6 % of it).
+TEST(Overview, IsotouchRenderFramesTheObjectAsTheOverviewDoes) {
+  const fs::path dir = fs::temp_directory_path() / ("test_overview_render_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const engine::Volume vol = ball_off_centre(false);
+  {
+    std::ofstream mha(dir / "ball.mha", std::ios::binary);
+    mha << "ObjectType = Image\nNDims = 3\nDimSize = 64 64 64\nElementSpacing = 1 1 1\nOffset = 0 0 0\n"
+           "ElementType = MET_FLOAT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n";
+    mha.write(reinterpret_cast<const char*>(vol.voxels.data()), std::streamsize(vol.voxels.size() * sizeof(float)));
+    std::ofstream(dir / "ball.json") << R"({"name": "ball", "volume": {"path": "ball.mha"}, "isovalue": 0, "inside": "above"})";
+  }
+  run::RenderOptions o;
+  o.scene = (dir / "ball.json").string();
+  o.out = (dir / "ball.png").string();
+  o.width = o.height = 200;
+  o.cpu = true;
+  ASSERT_EQ(run::run_render(o, run::kCpuDevice), 0);
+  const Silhouette s = silhouette(o.out);
+  fs::remove_all(dir);
+  EXPECT_LT(std::abs(s.dx), 0.05) << "centroid " << s.dx << " of the width right of the centre";
+  EXPECT_LT(std::abs(s.dy), 0.05) << "centroid " << s.dy << " of the height below the centre";
   EXPECT_GT(s.pixels, 0.15 * 200 * 200);
 }

@@ -160,6 +160,9 @@ class Live {
   void pause(bool p) { live_->pause(p); }
   double elapsed_s() const { return live_->elapsed_s(); }
   double duration_s() const { return setup_.script.duration_s; }
+  /// The script's length in servo ticks: the simulated hand moves on the servo's ticks, not
+  /// on the wall clock.
+  long script_ticks() const { return long(std::ceil(setup_.script.duration_s * scene_.hri.rate_hz)); }
   session::LiveSession& session() { return *live_; }
   const run::SceneSetup& setup() const { return setup_; }
 
@@ -279,6 +282,33 @@ void wait_session(Live& l, double seconds) {
   }
 }
 
+/// Sleeps, GIL released, until the servo has run `ticks` ticks since start (what the simulated
+/// hand moves on: a loaded machine runs them later, never fewer), looking for signals every
+/// 2 ms as wait_session does. @throws TimeoutError naming the tick reached when `timeout_s`
+/// [s] of wall clock pass first (a stalled or never started servo).
+void wait_ticks(Live& l, long ticks, double timeout_s) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (l.session().observe().tick + 1 < ticks) {
+    if (std::chrono::steady_clock::now() >= end) {
+      const std::string why = "wait_ticks: " + std::to_string(l.session().observe().tick + 1) + " of " +
+                              std::to_string(ticks) + " ticks run after timeout_s " + std::to_string(timeout_s) + " s";
+      PyErr_SetString(PyExc_TimeoutError, why.c_str());
+      throw py::error_already_set();
+    }
+    {
+      py::gil_scoped_release nogil;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    if (PyErr_CheckSignals() != 0) {
+      {
+        py::gil_scoped_release nogil;
+        l.stop();
+      }
+      throw py::error_already_set();
+    }
+  }
+}
+
 using LivePtr = std::unique_ptr<Live, DeleteLive>;
 
 LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const std::string& record,
@@ -351,6 +381,12 @@ session (servo first, its last force an exact zero).)")
       .def("wait", &wait_session, py::arg("seconds"), "sleep, GIL released; Ctrl-C stops the session and raises")
       .def_property_readonly("elapsed_s", &Live::elapsed_s, "[s] since start")
       .def_property_readonly("duration_s", &Live::duration_s, "the scene script's length [s]")
+      .def_property_readonly("script_ticks", &Live::script_ticks,
+                             "the scene script's length in servo ticks (duration_s x the servo's rate): the "
+                             "simulated hand moves on ticks, so wait_ticks(script_ticks) sees the whole script")
+      .def("wait_ticks", &wait_ticks, py::arg("ticks"), py::arg("timeout_s") = 120.0,
+           "sleep, GIL released, until the servo has run `ticks` ticks since start(); TimeoutError after "
+           "timeout_s [s] of wall clock; Ctrl-C stops the session and raises")
       .def_property_readonly("volume", [](const Live& l) { return std::make_shared<engine::Volume>(l.setup().volume); },
                              "a copy of the unedited volume")
       .def("brush", &Live::brush, py::arg("kind"), py::arg("centre"), py::arg("radius_m") = 2e-3,

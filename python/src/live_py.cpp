@@ -327,7 +327,7 @@ LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, 
                           "does not record (write the scene with `isotouch run VOLUME` and open that)");
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
   engine::Volume copy = volume;  // the session edits its own copy
-  if (copy.path.empty()) copy.path = "a volume from Python";  // named in its scene and errors
+  if (copy.path.empty()) copy.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
   py::gil_scoped_release nogil;
   return LivePtr(new Live(std::move(copy), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
 }

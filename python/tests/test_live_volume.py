@@ -1,6 +1,8 @@
 """A live session on a volume made in Python (no scene file): an isotouch.Volume or a numpy
 array, the isovalue given as tau. The scripted hand of 'sim' must press on the isosurface the
 array holds: a sphere of known centre and radius, checked from the geometry, not the renderer."""
+import os
+
 import numpy as np
 import pytest
 
@@ -99,4 +101,17 @@ def test_the_script_is_waited_for_on_the_servos_ticks():
         assert live.observe()["tick"] + 1 >= live.script_ticks
     with pytest.raises(TimeoutError, match=r"wait_ticks: 0 of 10 ticks run after timeout_s"):
         isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3, tau=0.0).wait_ticks(10, timeout_s=0.05)
+
+
+def test_an_array_is_named_in_memory_and_nothing_is_written_in_the_working_folder(tmp_path, monkeypatch):
+    """A numpy array has no file: its scene and errors name it as in memory, never as a file
+    of the working folder; a session on it writes nothing there."""
+    monkeypatch.chdir(tmp_path)
+    a = sphere_array()
+    assert isotouch.Volume(a, spacing=(SPACING,) * 3).path == "memory:numpy array"
+    with isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=0.0) as live:
+        live.wait_ticks(100)
+    with pytest.raises(RuntimeError, match=r"outside the finite data range .* of memory:numpy array: there is no isosurface"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=1.0)
+    assert sorted(os.listdir(tmp_path)) == []
 

@@ -319,17 +319,24 @@ LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const
   return LivePtr(new Live(scene, haptic, record, device, realtime, flush_interval_s));
 }
 
-LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, const py::object& params,
-                       const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
-                       double flush_interval_s) {
+/// A live session on `volume` (moved in: the caller's own copy, which the session edits).
+LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, const py::object& params,
+                           const std::string& haptic, const std::string& record, const std::string& device,
+                           bool realtime, double flush_interval_s) {
   if (!record.empty())
     throw py::value_error("record: '" + record + "': a recording replays from a scene file; a LiveSession on a volume "
                           "does not record (write the scene with `isotouch run VOLUME` and open that)");
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
-  engine::Volume copy = volume;  // the session edits its own copy
-  if (copy.path.empty()) copy.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
+  if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
   py::gil_scoped_release nogil;
-  return LivePtr(new Live(std::move(copy), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
+  return LivePtr(new Live(std::move(volume), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
+}
+
+LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, const py::object& params,
+                       const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
+                       double flush_interval_s) {
+  // The session edits its own copy: the caller's Volume stays as it was.
+  return live_on_own_volume(engine::Volume(volume), tau, params, haptic, record, device, realtime, flush_interval_s);
 }
 
 LivePtr live_on_array(const py::array& array, const py::handle& spacing, const py::handle& origin,
@@ -337,7 +344,8 @@ LivePtr live_on_array(const py::array& array, const py::handle& spacing, const p
                       const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
                       double flush_interval_s) {
   const auto volume = volume_from_numpy(array, spacing, origin, py::none(), axes, "m");
-  return live_on_volume(*volume, tau, params, haptic, record, device, realtime, flush_interval_s);
+  // The volume was made here for the session alone: moved in, not copied again.
+  return live_on_own_volume(std::move(*volume), tau, params, haptic, record, device, realtime, flush_interval_s);
 }
 
 }  // namespace

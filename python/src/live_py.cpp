@@ -10,7 +10,9 @@
 #include <optional>
 #include <thread>
 
+#include "isotouch/io/files.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/io/vdb_io.h"
 #include "isotouch/python/common.h"
 #include "isotouch/python/params_arg.h"
 #include "isotouch/run/haptic_device.h"
@@ -60,12 +62,21 @@ void check_servo(const io::Scene& s) {
 
 /// The default touch scene `isotouch run VOLUME` makes (run/volume_scene.h) for `vol` at the
 /// isovalue and renderer `hri` (`scene_hri`: keep the scene's renderer defaults, only tau and
-/// inside from `hri`). Its file name says where it came from; nothing is read from it.
-io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri) {
+/// inside from `hri`). Its file name says where it came from; nothing is read from it. With
+/// `scene_file` (a recorded session's), the scene's text is written there (atomically) and
+/// is its file: what the recording carries and `isotouch replay` reads.
+io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri,
+                       const std::string& scene_file) {
   engine::IsoChoice choice;
   choice.iso = core::Isosurface{hri.tau, hri.inside};
   choice.rule = "given as tau";
-  io::Scene s = run::make_volume_scene(vol, choice, vol.path).scene;
+  const run::VolumeScene vs = run::make_volume_scene(vol, choice, vol.path);
+  io::Scene s = vs.scene;
+  if (!scene_file.empty()) {
+    io::write_file_atomic(scene_file, vs.json);
+    s.file = scene_file;
+    return s;  // scene_hri: a recording's renderer is the scene file's
+  }
   if (!scene_hri) {
     const double wpd = s.hri.world_per_device;  // the scene's workspace scale (device section)
     s.hri = hri;
@@ -86,15 +97,18 @@ class Live {
     setup_ = run::setup_scene(scene_, run_options(device), log);
     open(haptic, record, realtime, flush_interval_s);
   }
-  /// On `volume` at `hri`'s isovalue (scene_hri: the scene defaults' renderer), no recording
-  /// (a recording replays from a scene file).
+  /// On `volume` at `hri`'s isovalue (scene_hri: the scene defaults' renderer); with `record`,
+  /// its scene written to RECORD.scene.json first (the volume must be the file it names).
   Live(engine::Volume volume, const servo::HriParams& hri, bool scene_hri, const std::string& haptic,
-       const std::string& device, bool realtime, double flush_interval_s)
-      : scene_(volume_scene(volume, hri, scene_hri)) {
+       const std::string& record, const std::string& device, bool realtime, double flush_interval_s)
+      : scene_(volume_scene(volume, hri, scene_hri, record.empty() ? "" : record + kSceneSuffix)) {
     std::ostringstream log;
     setup_ = run::setup_scene(scene_, std::move(volume), run_options(device), log);
-    open(haptic, "", realtime, flush_interval_s);
+    open(haptic, record, realtime, flush_interval_s);
   }
+  /// A recorded volume session's files beside its recording: RECORD + these.
+  static constexpr const char* kSceneSuffix = ".scene.json";
+  static constexpr const char* kVolumeSuffix = ".nrrd";
 
  private:
   static run::RunOptions run_options(const std::string& device) {
@@ -323,13 +337,19 @@ LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const
 LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, const py::object& params,
                            const std::string& haptic, const std::string& record, const std::string& device,
                            bool realtime, double flush_interval_s) {
-  if (!record.empty())
-    throw py::value_error("record: '" + record + "': a recording replays from a scene file; a LiveSession on a volume "
-                          "does not record (write the scene with `isotouch run VOLUME` and open that)");
+  if (!record.empty() && !params.is_none())
+    throw py::value_error("record: '" + record + "': a recording carries the scene `isotouch run VOLUME` makes, whose "
+                          "renderer is the scene defaults: give tau= without params=, or write a scene file with "
+                          "your servo section and open that");
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
   if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
   py::gil_scoped_release nogil;
-  return LivePtr(new Live(std::move(volume), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
+  if (!record.empty()) {  // the volume as a file beside the recording, read back: replay reads the same bits
+    const std::string file = record + Live::kVolumeSuffix;
+    io::save_any_volume(volume, file);
+    volume = io::load_any_volume(file);
+  }
+  return LivePtr(new Live(std::move(volume), hri, params.is_none(), haptic, record, device, realtime, flush_interval_s));
 }
 
 LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, const py::object& params,
@@ -367,7 +387,8 @@ numpy array, spacing and origin [m] as isotouch.Volume(array, spacing, origin, a
 them (Volume.from_mm for millimetres).
 
 haptic as `run --live --haptic` (sim, null, playback:FILE, emu:SOCKET, hid:VID:PID); record a
-recording file ('' none; a scene's session only: a recording replays from its scene file);
+recording file ('' none; on a volume or array, its volume and scene are written beside it as
+RECORD.nrrd and RECORD.scene.json, and params= cannot be recorded: the scene defaults' renderer);
 device 'cpu' (CPU brushes) or a Vulkan device. Frames: points (centre, hip, vhip) are
 grid-world [m] (origin + spacing * index). Use as a context manager: leaving it stops the
 session (servo first, its last force an exact zero).)")

@@ -85,8 +85,9 @@ def test_argument_errors_name_the_argument(root, tmp_path):
     a = sphere_array()
     with pytest.raises(ValueError, match=r"tau: 1 given, but params.tau is 0"):
         isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=1.0, params=isotouch.HriParams(tau=0.0))
-    with pytest.raises(ValueError, match="record: .*replays from a scene file"):
-        isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=0.0, record=str(tmp_path / "x.rec"))
+    with pytest.raises(ValueError, match="record: .*give tau= without params="):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=isotouch.HriParams(tau=0.0), record=str(tmp_path / "x.rec"))
+    assert os.listdir(tmp_path) == []
     with pytest.raises(ValueError, match="tau: the scene .* gives its own isovalue"):
         isotouch.LiveSession(str(root / "scenes/sphere.json"), tau=0.0)
     with pytest.raises(RuntimeError, match=r"isovalue.*outside the finite data range"):
@@ -161,3 +162,21 @@ def test_a_session_on_an_array_makes_one_copy_fewer_than_on_a_volume():
     print(f"peak above the RSS before a 256^3 float32 array: LiveSession(array) {on_array:.2f} x the array, "
           f"LiveSession(Volume(array)) {on_volume:.2f} x")
     assert on_array <= on_volume - 0.5
+
+
+def test_a_recorded_session_on_an_array_replays_bit_for_bit(cli, tmp_path):
+    """record= on an array: the volume (RECORD.nrrd) and its scene (RECORD.scene.json) are
+    written beside the recording, which carries that scene; `isotouch replay` replays it bit
+    for bit, and the volume it reads holds the array's voxels."""
+    rec = tmp_path / "array.rec"
+    a = sphere_array()
+    with isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=0.0, record=str(rec)) as live:
+        live.wait_ticks(live.script_ticks)
+    assert sorted(os.listdir(tmp_path)) == ["array.rec", "array.rec.nrrd", "array.rec.scene.json"]
+    r = isotouch.load_recording(str(rec))
+    assert r["complete"] and len(r["ticks"]["t"]) == live.stats()["ticks"] >= live.script_ticks
+    assert r["scene_path"] == str(tmp_path / "array.rec.scene.json")
+    np.testing.assert_array_equal(isotouch.load_volume(str(tmp_path / "array.rec.nrrd")).array, a)
+    p = subprocess.run([cli, "replay", str(rec)], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "IDENTICAL: every force, VHIP and snapshot version equals the recorded one bit for bit" in p.stdout, p.stdout

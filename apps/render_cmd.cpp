@@ -48,10 +48,10 @@ Subcommand add_render_command(CLI::App& cli) {
   s.app->add_option("--elevation", o->cam.elevation_deg, "Camera elevation [deg], in (-90, 90)")
       ->capture_default_str()
       ->check(CLI::Range(-89.9, 89.9));
-  s.app->add_option("--zoom", o->cam.zoom, "Zoom: 1 fits the whole volume, 2 is twice as close")
+  s.app->add_option("--zoom", o->cam.zoom, "Zoom: 1 fits the object (its isosurface's box, stray voxels left out), 2 is twice as close")
       ->capture_default_str()
       ->check(positive_number());
-  s.app->add_option("--distance", o->cam.distance_m, "Eye to volume centre [m] before zoom (0: fit the volume)")
+  s.app->add_option("--distance", o->cam.distance_m, "Eye to the object's centre [m] before zoom (0: fit the object)")
       ->capture_default_str()
       ->check(non_negative_number());
   s.app->add_option("--fov", o->cam.fov_y_deg, "Vertical field of view [deg]")->capture_default_str()->check(CLI::Range(1.0, 120.0));

@@ -4,11 +4,10 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
-#include <numbers>
-#include <optional>
 #include <stdexcept>
 #include <utility>
 
+#include "isotouch/run/object_box.h"
 #include "isotouch/run/scene_setup.h"
 
 namespace isotouch::run {
@@ -16,38 +15,8 @@ using core::finite;
 using core::norm;
 using core::Vec3;
 
-namespace {
-
-/// The box of the voxel centres inside `iso` [m, grid-world] as {low, high}; none when no
-/// voxel is inside.
-std::optional<std::pair<Vec3, Vec3>> inside_box(const engine::Volume& vol, const core::Isosurface& iso) {
-  const auto& d = vol.grid.dims;
-  int lo[3] = {d[0], d[1], d[2]}, hi[3] = {-1, -1, -1};
-  for (int z = 0; z < d[2]; ++z)
-    for (int y = 0; y < d[1]; ++y)
-      for (int x = 0; x < d[0]; ++x) {
-        if (!iso.contains(vol.voxels[vol.grid.index(x, y, z)])) continue;
-        const int i[3] = {x, y, z};
-        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], i[a]), hi[a] = std::max(hi[a], i[a]);
-      }
-  if (hi[0] < 0) return std::nullopt;
-  const Vec3 o = vol.grid.origin_m, s = vol.grid.spacing_m;
-  return std::pair{Vec3{o.x + s.x * lo[0], o.y + s.y * lo[1], o.z + s.z * lo[2]},
-                   Vec3{o.x + s.x * hi[0], o.y + s.y * hi[1], o.z + s.z * hi[2]}};
-}
-
-}  // namespace
-
 engine::CameraView overview_view(const engine::Volume& vol, const core::Isosurface& iso) {
-  engine::OrbitCamera cam = default_camera(vol);
-  if (const auto box = inside_box(vol, iso)) {
-    // The bounding sphere of the object's box (plus a voxel each side) fits the view's height,
-    // as orbit_view fits the volume's.
-    const Vec3 ext = box->second - box->first + vol.grid.spacing_m * 2.0;
-    cam.target_m = (box->first + box->second) * 0.5;
-    cam.distance_m = 0.5 * norm(ext) / std::sin(0.5 * cam.fov_y_deg * std::numbers::pi / 180.0) * 1.02;
-  }
-  return engine::orbit_view(vol.grid, vol.direction, cam);
+  return engine::orbit_view(vol.grid, vol.direction, frame_object(default_camera(vol), vol, iso));
 }
 
 namespace {

@@ -21,9 +21,9 @@ namespace isotouch::run {
 inline constexpr const char* kOverviewFile = "overview.png";
 
 /// The overview's camera, grid-world: `isotouch render`'s angles (run::default_camera:
-/// physical +z up, the eye anterior, 10 deg above) aimed at the centre of the box of the voxels
-/// inside `iso` (the object, not the scan around it) from where that box's bounding sphere
-/// fills the picture's height; the whole volume's view when no voxel is inside.
+/// physical +z up, the eye anterior, 10 deg above) framing the object (run::frame_object: the
+/// box of its finite voxels inside `iso`, stray specks left out) as `isotouch render` does;
+/// the whole volume's view when no voxel is inside.
 engine::CameraView overview_view(const engine::Volume& vol, const core::Isosurface& iso);
 
 /// The probe's path colour in the overview (linear RGB 0..1): magenta, seen through the surface.

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "isotouch/run/names.h"
+#include "isotouch/run/object_box.h"
 #include "isotouch/run/picture.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/trace_csv.h"
@@ -103,7 +104,8 @@ int run_render(const RenderOptions& o, const std::string& device) {
   PictureRequest req;
   req.width = o.width;
   req.height = o.height;
-  req.camera = o.cam;
+  // The object framed, not the scan around it: the overview's framing (run::frame_object).
+  req.camera = frame_object(o.cam, vol, core::Isosurface{scene.hri.tau, scene.hri.inside});
   const engine::OrbitCamera def = default_camera(vol);
   req.camera.up_phys = o.up.empty() ? def.up_phys : parse_axis(o.up, "--up");
   req.camera.front_phys = o.front.empty() ? def.front_phys : parse_axis(o.front, "--front");

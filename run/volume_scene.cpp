@@ -154,7 +154,7 @@ VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoCho
     << quoted("Made by isotouch run for " + volume_path + ": isovalue " + engine::iso_line(out.choice) +
               "; the probe approaches " + out.approach_text + ", presses along the surface normal and strokes on the surface from +" +
               char('x' + s_axis) + " (planned on the true isosurface: script.plan). Edit and run it as a scene.")
-    << ",\n  \"volume\": {\"path\": " << quoted(fs::absolute(volume_path).lexically_normal().string())
+    << ",\n  \"volume\": {\"path\": " << quoted(is_in_memory_name(volume_path) ? volume_path : fs::absolute(volume_path).lexically_normal().string())
     << "},\n  \"isovalue\": " << out.choice.iso.tau << ",\n  \"inside\": \"" << core::to_string(out.choice.iso.inside)
     << "\",\n  \"script\": {\n    \"ray_origin_frac\": " << vec(origin) << ",\n    \"ray_direction\": " << vec(dir)
     << ",\n    \"stroke_direction\": " << vec(stroke) << ",\n    \"stroke_length_m\": " << stroke_m << ",\n    \"plan\": \"surface\"\n  }\n}\n";

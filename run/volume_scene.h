@@ -51,6 +51,13 @@ struct VolumeScene {
 /// .vdb); false for anything else (a scene is .json).
 bool is_volume_path(const std::string& path);
 
+/// The name prefix of a volume made in memory (Python's numpy arrays): "memory:numpy array".
+/// Such a name is no file: a scene keeps it as it is (never made absolute against the working
+/// folder) and errors name it.
+inline constexpr const char* kInMemoryPrefix = "memory:";
+/// `name` is an in-memory volume's (kInMemoryPrefix), not a file's.
+inline bool is_in_memory_name(const std::string& name) { return name.starts_with(kInMemoryPrefix); }
+
 /// Builds the default scene for `volume_path`: its absolute path, the isovalue (`iso`, inside
 /// `inside`, or the file's choice), a script along choose_approach with a stroke along the next
 /// index axis (length 40 mm, at most a quarter of the box along it) planned on the true
@@ -60,7 +67,7 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
                               const std::string& inside = "above");
 /// The same for a volume already in memory at the isovalue `choice` (its rule said in the
 /// scene's description): `volume_path` is only written into the scene (a recording's scene
-/// names it), never read. @throws io::SceneError.
+/// names it), never read; an in-memory name (is_in_memory_name) is written as it is. @throws io::SceneError.
 VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoChoice& choice,
                               const std::string& volume_path);
 

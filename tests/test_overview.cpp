@@ -9,12 +9,15 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "isotouch/run/overview.h"
 #include "isotouch/run/picture.h"
+#include "isotouch/run/render_job.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/run/volume_scene.h"
 
@@ -182,4 +185,98 @@ TEST(Overview, TheObjectIsInTheMiddleOfThePicture) {
     EXPECT_LT(std::abs(dx), 0.05) << file << ": centroid " << dx << " of the width right of the centre";
     EXPECT_LT(std::abs(dy), 0.05) << file << ": centroid " << dy << " of the height below the centre";
   }
+}
+
+namespace {
+
+/// A ball of radius 8 voxels (value: mm inside its surface, tau = 0) centred at voxel (18, 20, 22)
+/// of a 64^3 grid of 1 mm voxels, off the grid's centre; with `strays`, a block of +Inf voxels
+/// and a lone voxel above the isovalue in far corners.
+engine::Volume ball_off_centre(bool strays) {
+  engine::Volume v;
+  const int n = 64;
+  v.grid.dims = {n, n, n};
+  v.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  v.path = "synthetic:ball_off_centre";
+  v.voxels.resize(std::size_t(n) * n * n);
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x)
+        v.voxels[v.grid.index(x, y, z)] = float(8.0 - std::sqrt((x - 18.0) * (x - 18.0) + (y - 20.0) * (y - 20.0) +
+                                                                (z - 22.0) * (z - 22.0)));
+  if (strays) {
+    for (int z = 56; z < 62; ++z)  // a 6^3 block of +Inf (a tenth of the ball's voxels): no stray
+      for (int y = 56; y < 62; ++y)
+        for (int x = 56; x < 62; ++x) v.voxels[v.grid.index(x, y, z)] = std::numeric_limits<float>::infinity();
+    v.voxels[v.grid.index(62, 3, 60)] = 5.0f;
+  }
+  v.update_stats();
+  return v;
+}
+
+/// The object's pixels (neither the corner's colour nor the path's) in `png`: their count and
+/// their centroid as fractions of the width and height from the picture's centre.
+struct Silhouette {
+  double pixels = 0, dx = 0, dy = 0;
+};
+Silhouette silhouette(const std::string& png) {
+  const Rgb img = read_png(png);
+  Silhouette s;
+  double sx = 0, sy = 0;
+  for (int y = 0; y < img.h; ++y)
+    for (int x = 0; x < img.w; ++x)
+      if (surface(img.at(x, y), img.at(0, 0))) sx += x + 0.5, sy += y + 0.5, s.pixels += 1;
+  if (s.pixels > 0) s.dx = sx / s.pixels / img.w - 0.5, s.dy = sy / s.pixels / img.h - 0.5;
+  std::printf("%s: %.0f object pixels, centroid (%+.3f, %+.3f) of the picture from its centre\n", png.c_str(), s.pixels,
+              s.dx, s.dy);
+  return s;
+}
+
+}  // namespace
+
+// A block of +Inf voxels and a lone bright voxel far from the object do not stretch the
+// overview's frame: the ball stays in the middle and fills the picture (framing the box of
+// every voxel above tau, Inf and the stray included, put its centroid (-0.196, +0.189) of the
+// picture off the centre, on 2 % of its pixels; counting Inf alone or the stray alone, 21 %).
+TEST(Overview, AnInfVoxelAndAStrayVoxelDoNotMoveTheObject) {
+  const engine::Volume vol = ball_off_centre(true);
+  isotouch::core::SampleField field;
+  field.background = -1000;
+  const std::string png = (fs::temp_directory_path() / ("test_overview_strays_" + std::to_string(::getpid()) + ".png")).string();
+  const run::RunPicture pic = run::render_overview(iso_zero_scene(), vol, field, {}, png, nullptr, run::kCpuDevice, 200, 200);
+  ASSERT_EQ(pic.error, "");
+  const Silhouette s = silhouette(png);
+  fs::remove(png);
+  EXPECT_LT(std::abs(s.dx), 0.05) << "centroid " << s.dx << " of the width right of the centre";
+  EXPECT_LT(std::abs(s.dy), 0.05) << "centroid " << s.dy << " of the height below the centre";
+  // Framed on the ball's box its disc covers 24 % of the picture (the box's bounding sphere
+  // fills the height); framed on the scan's box, 2 %.
+  EXPECT_GT(s.pixels, 0.15 * 200 * 200);
+}
+
+// `isotouch render` frames the object as the overview does (run::frame_object): a ball off the
+// centre of its scan is drawn in the middle of the picture, filling it (framing the scan's
+// box, its centroid sat (-0.119, +0.100) of the picture off the centre, on 1.6 % of it).
+TEST(Overview, IsotouchRenderFramesTheObjectAsTheOverviewDoes) {
+  const fs::path dir = fs::temp_directory_path() / ("test_overview_render_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const engine::Volume vol = ball_off_centre(false);
+  {
+    std::ofstream mha(dir / "ball.mha", std::ios::binary);
+    mha << "ObjectType = Image\nNDims = 3\nDimSize = 64 64 64\nElementSpacing = 1 1 1\nOffset = 0 0 0\n"
+           "ElementType = MET_FLOAT\nElementByteOrderMSB = False\nElementDataFile = LOCAL\n";
+    mha.write(reinterpret_cast<const char*>(vol.voxels.data()), std::streamsize(vol.voxels.size() * sizeof(float)));
+    std::ofstream(dir / "ball.json") << R"({"name": "ball", "volume": {"path": "ball.mha"}, "isovalue": 0, "inside": "above"})";
+  }
+  run::RenderOptions o;
+  o.scene = (dir / "ball.json").string();
+  o.out = (dir / "ball.png").string();
+  o.width = o.height = 200;
+  o.cpu = true;
+  ASSERT_EQ(run::run_render(o, run::kCpuDevice), 0);
+  const Silhouette s = silhouette(o.out);
+  fs::remove_all(dir);
+  EXPECT_LT(std::abs(s.dx), 0.05) << "centroid " << s.dx << " of the width right of the centre";
+  EXPECT_LT(std::abs(s.dy), 0.05) << "centroid " << s.dy << " of the height below the centre";
+  EXPECT_GT(s.pixels, 0.15 * 200 * 200);
 }

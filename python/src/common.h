@@ -36,6 +36,11 @@ struct PointsIn {
 };
 PointsIn points_in(const py::handle& a, const char* what, bool finite = true);
 
+/// The names of volumes made in Python (run::kInMemoryPrefix: no file, never resolved against
+/// the working folder): a numpy array's, and an isotouch.Volume's that has none.
+inline constexpr const char* kNumpyVolumeName = "memory:numpy array";
+inline constexpr const char* kInMemoryVolumeName = "memory:volume from Python";
+
 /// A Volume from a numpy array (isotouch.Volume's constructor): axes 'zyx' or 'xyz', spacing
 /// and origin in `unit` ("m" or "mm"), direction None or 3x3. @throws ValueError naming the
 /// argument; warns isotouch.UnitsWarning where a value looks like the other unit.

@@ -10,7 +10,9 @@
 #include <optional>
 #include <thread>
 
+#include "isotouch/io/files.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/io/vdb_io.h"
 #include "isotouch/python/common.h"
 #include "isotouch/python/params_arg.h"
 #include "isotouch/run/haptic_device.h"
@@ -60,12 +62,21 @@ void check_servo(const io::Scene& s) {
 
 /// The default touch scene `isotouch run VOLUME` makes (run/volume_scene.h) for `vol` at the
 /// isovalue and renderer `hri` (`scene_hri`: keep the scene's renderer defaults, only tau and
-/// inside from `hri`). Its file name says where it came from; nothing is read from it.
-io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri) {
+/// inside from `hri`). Its file name says where it came from; nothing is read from it. With
+/// `scene_file` (a recorded session's), the scene's text is written there (atomically) and
+/// is its file: what the recording carries and `isotouch replay` reads.
+io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri,
+                       const std::string& scene_file) {
   engine::IsoChoice choice;
   choice.iso = core::Isosurface{hri.tau, hri.inside};
   choice.rule = "given as tau";
-  io::Scene s = run::make_volume_scene(vol, choice, vol.path).scene;
+  const run::VolumeScene vs = run::make_volume_scene(vol, choice, vol.path);
+  io::Scene s = vs.scene;
+  if (!scene_file.empty()) {
+    io::write_file_atomic(scene_file, vs.json);
+    s.file = scene_file;
+    return s;  // scene_hri: a recording's renderer is the scene file's
+  }
   if (!scene_hri) {
     const double wpd = s.hri.world_per_device;  // the scene's workspace scale (device section)
     s.hri = hri;
@@ -86,15 +97,18 @@ class Live {
     setup_ = run::setup_scene(scene_, run_options(device), log);
     open(haptic, record, realtime, flush_interval_s);
   }
-  /// On `volume` at `hri`'s isovalue (scene_hri: the scene defaults' renderer), no recording
-  /// (a recording replays from a scene file).
+  /// On `volume` at `hri`'s isovalue (scene_hri: the scene defaults' renderer); with `record`,
+  /// its scene written to RECORD.scene.json first (the volume must be the file it names).
   Live(engine::Volume volume, const servo::HriParams& hri, bool scene_hri, const std::string& haptic,
-       const std::string& device, bool realtime, double flush_interval_s)
-      : scene_(volume_scene(volume, hri, scene_hri)) {
+       const std::string& record, const std::string& device, bool realtime, double flush_interval_s)
+      : scene_(volume_scene(volume, hri, scene_hri, record.empty() ? "" : record + kSceneSuffix)) {
     std::ostringstream log;
     setup_ = run::setup_scene(scene_, std::move(volume), run_options(device), log);
-    open(haptic, "", realtime, flush_interval_s);
+    open(haptic, record, realtime, flush_interval_s);
   }
+  /// A recorded volume session's files beside its recording: RECORD + these.
+  static constexpr const char* kSceneSuffix = ".scene.json";
+  static constexpr const char* kVolumeSuffix = ".nrrd";
 
  private:
   static run::RunOptions run_options(const std::string& device) {
@@ -160,6 +174,9 @@ class Live {
   void pause(bool p) { live_->pause(p); }
   double elapsed_s() const { return live_->elapsed_s(); }
   double duration_s() const { return setup_.script.duration_s; }
+  /// The script's length in servo ticks: the simulated hand moves on the servo's ticks, not
+  /// on the wall clock.
+  long script_ticks() const { return long(std::ceil(setup_.script.duration_s * scene_.hri.rate_hz)); }
   session::LiveSession& session() { return *live_; }
   const run::SceneSetup& setup() const { return setup_; }
 
@@ -279,6 +296,33 @@ void wait_session(Live& l, double seconds) {
   }
 }
 
+/// Sleeps, GIL released, until the servo has run `ticks` ticks since start (what the simulated
+/// hand moves on: a loaded machine runs them later, never fewer), looking for signals every
+/// 2 ms as wait_session does. @throws TimeoutError naming the tick reached when `timeout_s`
+/// [s] of wall clock pass first (a stalled or never started servo).
+void wait_ticks(Live& l, long ticks, double timeout_s) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (l.session().observe().tick + 1 < ticks) {
+    if (std::chrono::steady_clock::now() >= end) {
+      const std::string why = "wait_ticks: " + std::to_string(l.session().observe().tick + 1) + " of " +
+                              std::to_string(ticks) + " ticks run after timeout_s " + std::to_string(timeout_s) + " s";
+      PyErr_SetString(PyExc_TimeoutError, why.c_str());
+      throw py::error_already_set();
+    }
+    {
+      py::gil_scoped_release nogil;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    if (PyErr_CheckSignals() != 0) {
+      {
+        py::gil_scoped_release nogil;
+        l.stop();
+      }
+      throw py::error_already_set();
+    }
+  }
+}
+
 using LivePtr = std::unique_ptr<Live, DeleteLive>;
 
 LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const std::string& record,
@@ -289,17 +333,30 @@ LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const
   return LivePtr(new Live(scene, haptic, record, device, realtime, flush_interval_s));
 }
 
+/// A live session on `volume` (moved in: the caller's own copy, which the session edits).
+LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, const py::object& params,
+                           const std::string& haptic, const std::string& record, const std::string& device,
+                           bool realtime, double flush_interval_s) {
+  if (!record.empty() && !params.is_none())
+    throw py::value_error("record: '" + record + "': a recording carries the scene `isotouch run VOLUME` makes, whose "
+                          "renderer is the scene defaults: give tau= without params=, or write a scene file with "
+                          "your servo section and open that");
+  const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
+  if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
+  py::gil_scoped_release nogil;
+  if (!record.empty()) {  // the volume as a file beside the recording, read back: replay reads the same bits
+    const std::string file = record + Live::kVolumeSuffix;
+    io::save_any_volume(volume, file);
+    volume = io::load_any_volume(file);
+  }
+  return LivePtr(new Live(std::move(volume), hri, params.is_none(), haptic, record, device, realtime, flush_interval_s));
+}
+
 LivePtr live_on_volume(const engine::Volume& volume, std::optional<double> tau, const py::object& params,
                        const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
                        double flush_interval_s) {
-  if (!record.empty())
-    throw py::value_error("record: '" + record + "': a recording replays from a scene file; a LiveSession on a volume "
-                          "does not record (write the scene with `isotouch run VOLUME` and open that)");
-  const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
-  engine::Volume copy = volume;  // the session edits its own copy
-  if (copy.path.empty()) copy.path = "a volume from Python";  // named in its scene and errors
-  py::gil_scoped_release nogil;
-  return LivePtr(new Live(std::move(copy), hri, params.is_none(), haptic, device, realtime, flush_interval_s));
+  // The session edits its own copy: the caller's Volume stays as it was.
+  return live_on_own_volume(engine::Volume(volume), tau, params, haptic, record, device, realtime, flush_interval_s);
 }
 
 LivePtr live_on_array(const py::array& array, const py::handle& spacing, const py::handle& origin,
@@ -307,7 +364,8 @@ LivePtr live_on_array(const py::array& array, const py::handle& spacing, const p
                       const std::string& haptic, const std::string& record, const std::string& device, bool realtime,
                       double flush_interval_s) {
   const auto volume = volume_from_numpy(array, spacing, origin, py::none(), axes, "m");
-  return live_on_volume(*volume, tau, params, haptic, record, device, realtime, flush_interval_s);
+  // The volume was made here for the session alone: moved in, not copied again.
+  return live_on_own_volume(std::move(*volume), tau, params, haptic, record, device, realtime, flush_interval_s);
 }
 
 }  // namespace
@@ -329,7 +387,8 @@ numpy array, spacing and origin [m] as isotouch.Volume(array, spacing, origin, a
 them (Volume.from_mm for millimetres).
 
 haptic as `run --live --haptic` (sim, null, playback:FILE, emu:SOCKET, hid:VID:PID); record a
-recording file ('' none; a scene's session only: a recording replays from its scene file);
+recording file ('' none; on a volume or array, its volume and scene are written beside it as
+RECORD.nrrd and RECORD.scene.json, and params= cannot be recorded: the scene defaults' renderer);
 device 'cpu' (CPU brushes) or a Vulkan device. Frames: points (centre, hip, vhip) are
 grid-world [m] (origin + spacing * index). Use as a context manager: leaving it stops the
 session (servo first, its last force an exact zero).)")
@@ -351,6 +410,12 @@ session (servo first, its last force an exact zero).)")
       .def("wait", &wait_session, py::arg("seconds"), "sleep, GIL released; Ctrl-C stops the session and raises")
       .def_property_readonly("elapsed_s", &Live::elapsed_s, "[s] since start")
       .def_property_readonly("duration_s", &Live::duration_s, "the scene script's length [s]")
+      .def_property_readonly("script_ticks", &Live::script_ticks,
+                             "the scene script's length in servo ticks (duration_s x the servo's rate): the "
+                             "simulated hand moves on ticks, so wait_ticks(script_ticks) sees the whole script")
+      .def("wait_ticks", &wait_ticks, py::arg("ticks"), py::arg("timeout_s") = 120.0,
+           "sleep, GIL released, until the servo has run `ticks` ticks since start(); TimeoutError after "
+           "timeout_s [s] of wall clock; Ctrl-C stops the session and raises")
       .def_property_readonly("volume", [](const Live& l) { return std::make_shared<engine::Volume>(l.setup().volume); },
                              "a copy of the unedited volume")
       .def("brush", &Live::brush, py::arg("kind"), py::arg("centre"), py::arg("radius_m") = 2e-3,

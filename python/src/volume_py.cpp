@@ -132,7 +132,7 @@ VolumePtr volume_from_numpy(const py::array& given, const py::handle& spacing, c
   v->grid.spacing_m = {sp[0], sp[1], sp[2]};
   v->grid.origin_m = {org[0], org[1], org[2]};
   v->direction = direction_arg(direction);
-  v->path = "numpy";
+  v->path = kNumpyVolumeName;  // no file: named in scenes and errors as in memory
   v->reader = "numpy";
   v->component_type = "float";
   try {  // the limits every file meets (dims, extent, origin, memory; direction orthonormal)

@@ -273,12 +273,12 @@ def test_check_all_is_the_cli_report(head_path):
 def test_live_session_edits_undo_and_recording(root, tmp_path):
     rec = str(tmp_path / "live.rec")
     with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim", record=rec) as live:
-        live.wait(0.3)
+        live.wait_ticks(300)
         centre = live.observe()["vhip"]
         assert live.begin_stroke() and live.brush("carve", centre, radius_m=3e-3) and live.end_stroke()
-        live.wait(0.2)
+        live.wait_ticks(500)
         assert live.undo()
-        live.wait(0.2)
+        live.wait_ticks(700)
         running = live.stats()
     stats = live.stats()
     assert running["ticks"] > 100 and stats["ticks"] >= running["ticks"]
@@ -295,7 +295,7 @@ def test_edits_after_stop_are_refused_not_accepted(root, tmp_path):
     """An edit after stop() can never be applied: it raises, and the session's counters show none."""
     live = isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim")
     live.start()
-    live.wait(0.1)
+    live.wait_ticks(100)
     centre = live.observe()["vhip"]
     live.stop()
     before = live.stats()["edits_requested"]
@@ -311,8 +311,8 @@ def test_the_zero_sent_at_stop_is_the_recordings_last_tick(cli, root, tmp_path):
     renderer not ticked, force 0), and the recording still replays bit for bit."""
     rec = str(tmp_path / "stop.rec")
     with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic="sim", record=rec) as live:
-        while not live.observe()["contact"] and live.elapsed_s < live.duration_s:
-            live.wait(0.02)
+        while not live.observe()["contact"] and live.observe()["tick"] + 1 < live.script_ticks:
+            live.wait_ticks(live.observe()["tick"] + 11)
         assert live.observe()["contact"], "the script never touched the sphere"
     r = isotouch.load_recording(rec)
     ticks = r["ticks"]
@@ -334,7 +334,7 @@ def test_live_session_on_a_playback_device(root, tmp_path):
                header="t_s,hip_x_m,hip_y_m,hip_z_m,vhip_x_m,vhip_y_m,vhip_z_m,f_x_n,f_y_n,f_z_n,contact,"
                       "plane_update,tick_ns")
     with isotouch.LiveSession(str(root / "scenes/sphere.json"), haptic=f"playback:{trace}") as pb:
-        pb.wait(0.3)
+        pb.wait_ticks(300)
         seen = pb.observe()
     assert seen["tick"] > 100
     assert np.min(np.linalg.norm(hip - np.array(seen["hip"]), axis=1)) < 1e-9
@@ -354,7 +354,7 @@ def test_live_session_on_the_device_emulator(cli, root, tmp_path):
                 break
             time.sleep(0.05)
         with isotouch.LiveSession(scene, haptic="emu:" + sock) as live:
-            live.wait(live.duration_s)
+            live.wait_ticks(live.script_ticks)
         stats = live.stats()
     finally:
         dev.send_signal(signal.SIGTERM)
@@ -385,13 +385,13 @@ def test_a_live_session_dropped_while_running_is_stopped_and_freed(root, tmp_pat
             time.sleep(0.05)
         first = isotouch.LiveSession(scene, haptic="emu:" + sock, record=rec)
         first.start()
-        first.wait(0.3)
+        first.wait_ticks(300)
         del first
         gc.collect()
         r = isotouch.load_recording(rec)
         assert r["complete"] and len(r["ticks"]["t"]) > 100
         with isotouch.LiveSession(scene, haptic="emu:" + sock) as second:
-            second.wait(0.3)
+            second.wait_ticks(300)
         stats = second.stats()
     finally:
         dev.send_signal(signal.SIGTERM)

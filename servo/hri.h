@@ -642,6 +642,8 @@ class HriRenderer final : public Renderer {
   Vec3 release_from_;                ///< robust: force sent on the last contact tick [N]
   Vec3 entry_n_;                     ///< robust: the normal the contact entered with (hold_entry_side)
   bool entry_held_ = false;          ///< robust: the HIP was found past a thin feature's middle (hold_entry_side)
+  Vec3 entry_hip_;                   ///< robust: the HIP when entry_n_ was set [m] (hold_entry_side)
+  Vec3 entry_vhip_;                  ///< robust: the VHIP when entry_n_ was set [m] (hold_entry_side)
   // Spherical tool:
  public:
   static constexpr double kEntryConeDeg = 20.0;  ///< thin features: the turn from entry_n_ checked [deg]

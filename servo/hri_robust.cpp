@@ -497,8 +497,26 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
     // A turn the iteration made is undone: the plane faces entry_n_ again (the HIP behind it).
     if (!entry_held_ && dot(entry_n_, hip - held.p) < 0.0) kept.n = entry_n_;
     entry_held_ = true;
+    // The material under the face found from the HIP is about as thick along the held normal
+    // (within half a voxel) as under the point where the side was taken: a wall whose surface
+    // falls away under the stroke and goes on lower (never lowered, the head CT's held plane
+    // stayed 2.8 mm above it and the hold ended with 2.4 N released in one tick), not the
+    // thinning corner round a crest (lowered there, ridges wrapped at 0.5-0.9 of the limit).
+    auto as_thick_as_entry = [&](const Vec3& at) {
+      const double reach = 12.0 * voxel, in = 0.5 * voxel;
+      Vec3 a, b;
+      if (!face_along(field, at - kept.n * in, kept.n * -1.0, reach, voxel, a)) return true;
+      if (!face_along(field, entry_vhip_ - kept.n * in, kept.n * -1.0, reach, voxel, b)) return false;
+      return norm(a - at) >= norm(b - entry_vhip_) - 0.5 * voxel;
+    };
+    // The held plane's point goes to the face found from the HIP along its normal: up always
+    // (a tilted held plane slid the proxy down it on a stroke along the feature), down only
+    // with the HIP short of the middle along that normal and the wall as thick there.
     Vec3 q;
-    if (face_along(field, hip, kept.n, depth + voxel, voxel, q) && dot(kept.n, q - kept.p) > 0.0) kept.p = q;
+    if (face_along(field, hip, kept.n, depth + voxel, voxel, q) &&
+        (dot(kept.n, q - kept.p) > 0.0 ||
+         (!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))))
+      kept.p = q;
     adopt_plane(kept, hip, out);
     plane_grad_norm_ = held_grad_norm;
   } else {

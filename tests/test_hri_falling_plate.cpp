@@ -37,6 +37,7 @@ double top_z(double y) { return 0.020 - 0.4 * std::max(0.0, y - 0.020); }
 //   test passes (0.10 N / 0.07 mm at n = 1, 0 N / 0.40 mm at n = 10), the head run releases
 //   0 N (VHIP RMS 0.25 mm) and HriRidges holds on seeds 1-12, 64, 65, but the sphere's run
 //   (cli_run_sphere) turns its force 59.6 deg at 4 mN on the lift (t = 2.508 s; bar 15 deg).
+//   The hold rules without the lowering release 1.015 N on that run (t = 1.631 s; main 0 N).
 TEST(HriFallingPlate, DISABLED_TheProxyFollowsASurfaceFallingAwayAndLetsGoWithoutAStep) {
   const double thick = 0.004, sigma = 0.0004;  // 4 voxels of 1 mm, partial-volume edges
   const SampleField f = isotouch::test::scan_like_field(

@@ -28,10 +28,10 @@ struct DeviceCaps {
   /// Largest rate of change of the force the device should be sent [N/s] (0: the gate's
   /// default, max_force_n over 2 ms when the peak is finite).
   double max_force_rate_n_per_s = 0;
-  /// The device applies each force in its own loop at this rate [Hz] (OpenHaptics' servo
-  /// loop, Force Dimension's thread): a servo faster than it is refused, as its ticks between
-  /// two of the device's would be lost and its stall rule would act in the device's periods.
-  /// 0: the device applies what it is sent as it comes (report devices, links, simulation).
+  /// The device applies each force in its own loop at this rate [Hz] (OpenHaptics' servo loop,
+  /// Force Dimension's thread, a v1 device's firmware at its report rate): a faster servo is
+  /// refused, as its ticks between two of the device's would be lost (and read stale). 0: the
+  /// device applies what it is sent as it comes (the lock-step Polhem, links, simulation).
   double output_rate_hz = 0;
   double max_stiffness_n_per_m = INFINITY;    ///< largest stable stiffness [N/m]
   double max_damping_n_s_per_m = INFINITY;    ///< largest stable damping [N s/m]

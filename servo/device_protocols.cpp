@@ -13,6 +13,10 @@ std::string V1Protocol::handshake(ReportLink& link, DeviceCaps& caps) {
   const int n = link.get_feature(hid::kFeatureId, buf);
   if (n < 0) return "no capabilities feature report (is this an isotouch protocol v1 device?)";
   if (hid::Decoded d = hid::decode_caps(std::span(buf.data(), std::size_t(n)), caps); !d) return d.error;
+  // A v1 device applies the newest force it was sent once per report period (its firmware's
+  // loop, docs/hid-protocol.md): the servo may not run faster (ServoThread::start refuses).
+  // A device declaring no rate (0) leaves the servo's rate unchecked.
+  caps.output_rate_hz = caps.native_rate_hz;
   return {};
 }
 

@@ -65,10 +65,11 @@ Opened Session::open(std::unique_ptr<EditSession> edits, const servo::HriParams&
   return o;
 }
 
-SetupResult Session::attach(servo::HapticDeviceIO& device, LiveSessionConfig config) {
+SetupResult Session::attach(servo::HapticDeviceIO& device, LiveSessionConfig config, servo::Renderer* renderer) {
   if (live_) return {"session: attach() while a live session is attached (detach() it first)", {}};
   try {
-    live_ = std::make_unique<LiveSession>(*edits_, buffer_, *renderer_, device, std::move(config));
+    servo::Renderer& ticked = renderer ? *renderer : static_cast<servo::Renderer&>(*renderer_);
+    live_ = std::make_unique<LiveSession>(*edits_, buffer_, ticked, device, std::move(config));
   } catch (...) {
     return failed("session: building the live session");
   }

@@ -60,8 +60,10 @@ class Session {
   /// Builds the live session on `device` (not owned: it must outlive this Session, or the
   /// next detach()) with `config`, not started (live()->start()). Refused while one is
   /// attached. The returned error names what was refused (the config, a recording that
-  /// cannot be created); nothing is built then.
-  SetupResult attach(servo::HapticDeviceIO& device, LiveSessionConfig config);
+  /// cannot be created); nothing is built then. `renderer`, when given, is ticked instead of
+  /// renderer() (a wrapper of it: a test's stuck renderer); not owned, it must outlive the
+  /// live session's servo thread.
+  SetupResult attach(servo::HapticDeviceIO& device, LiveSessionConfig config, servo::Renderer* renderer = nullptr);
   /// Stops and frees the live session (as ~LiveSession); the edit session, its snapshots and
   /// the renderer stay, for another attach(). Nothing without one.
   void detach() { live_.reset(); }

@@ -171,6 +171,8 @@ void DeviceEmulator::serve_host(std::int64_t now) {
 
 void DeviceEmulator::log_output(std::int64_t now, const Vec3& force_n, bool enable, std::uint64_t answers) {
   ++stats_.outputs_received;  // stats_mu_ held
+  stats_.last_enable = enable;
+  stats_.last_force_n = norm(force_n);
   if (log_.empty()) return;
   log_[logged_ % log_.size()] = ReceivedOutput{now, force_n, enable, answers};
   if (++logged_ > log_.size()) ++stats_.outputs_unlogged;

@@ -105,6 +105,8 @@ struct EmuStats {
   /// that answers N [us], one per answered report (the first answer of each).
   std::vector<double> latency_us;
   double max_force_n = 0;          ///< largest |F| received with enable set [N]
+  bool last_enable = false;        ///< the enable flag of the last output received
+  double last_force_n = 0;         ///< |F| of the last output received, enable set or not [N]
   std::int64_t disconnect_ns = 0;  ///< CLOCK_MONOTONIC when the timed disconnect closed the link (0: none)
   std::int64_t start_ns = 0;       ///< CLOCK_MONOTONIC when run() began (its clock's 0 s)
   std::int64_t first_watchdog_ns = 0;  ///< CLOCK_MONOTONIC of the first watchdog trip (0: none)

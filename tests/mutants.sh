@@ -242,6 +242,12 @@ m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical 
                                test_material_cut 'MaterialCut.*'
 m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill && m.rate >= 0) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
                                test_material_cut 'MaterialCut.*'
+# A v1 device's report rate bounds the servo's; a scene over a device's stiffness is refused.
+m v1-output-rate             servo/device_protocols.cpp 'caps.output_rate_hz = caps.native_rate_hz;' '' \
+                               test_device_emu 'DeviceEmu.AServoFasterThanTheDeclaredReportRateIsRefused'
+m check-caps-stiffness       run/haptic_device.cpp \
+  'over("servo.stiffness_n_per_m", hri.stiffness_n_per_m, "maximum stiffness", caps.max_stiffness_n_per_m);' '' \
+                               test_device_refusals 'DeviceRefusals.*'
 
 # ---- The run ----
 work=$root/build-mutants

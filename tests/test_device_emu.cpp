@@ -708,3 +708,59 @@ TEST(DeviceEmuPolhem, FromPowerUpNoCurrentReachesTheUnitUntilItIsCalibrated) {
   EXPECT_GT(rig.stats.max_force_n, 0.3);
   EXPECT_LT(rig.stats.max_force_n, 1.5);
 }
+
+// A v1 device applies the force it is sent once per report period (docs/hid-protocol.md,
+// capabilities bytes 4-5): a servo faster than its declared report rate is refused before it
+// writes (its ticks between two reports would be lost, and read stale), as for the SDK
+// devices' own loops; at the declared rate it runs. The emulator is the device here.
+TEST(DeviceEmu, AServoFasterThanTheDeclaredReportRateIsRefused) {
+  EmuConfig cfg;
+  cfg.socket_path = "/tmp/isotouch-test-emu-rate-" + std::to_string(::getpid()) + ".sock";
+  cfg.rate_hz = 500;
+  cfg.seconds = 0;  // until stop()
+  cfg.caps.name = "test-emu";
+  cfg.caps.max_force_n = 10;
+  cfg.caps.native_rate_hz = cfg.rate_hz;
+  cfg.caps.watchdog_s = 0.05;
+  DeviceEmulator emu(cfg);
+  emu.listen();
+  std::thread emu_thread([&] { emu.run(); });
+  ReportDevice dev(std::make_unique<SocketLink>(cfg.socket_path), std::make_unique<V1Protocol>());
+  dev.open();
+  EXPECT_DOUBLE_EQ(dev.caps().output_rate_hz, 500);
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.016})));
+  Wall wall;
+  ServoThreadConfig sc;
+  sc.sched_fifo = sc.pin_cpu = sc.lock_memory = false;
+  sc.rate_hz = 1000;
+  std::string refusal;
+  {
+    ServoThread servo(published, wall, dev, sc);
+    try {
+      servo.start();
+    } catch (const std::invalid_argument& e) {
+      refusal = e.what();
+    }
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(30));  // a write would be on the wire by now
+  const auto enabled = [&] {
+    long n = 0;
+    for (const ReceivedOutput& o : emu.output_log()) n += o.enable ? 1 : 0;
+    return n;
+  };
+  const long before = enabled();
+  sc.rate_hz = 500;
+  {
+    ServoThread servo(published, wall, dev, sc);
+    servo.start();
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    servo.stop();
+  }
+  dev.close();
+  emu.stop();
+  emu_thread.join();
+  EXPECT_NE(refusal.find("above test-emu's own output loop (500"), std::string::npos) << "refusal: '" << refusal << "'";
+  EXPECT_EQ(before, 0) << "the refused servo enabled the device's force";
+  EXPECT_GT(enabled(), 10) << "the servo at the device's rate sent nothing";
+}

@@ -126,6 +126,8 @@ int main(int argc, char** argv) {
               << s.dropped << ", duplicated " << s.duplicated << ", reordered " << s.reordered << ", garbled "
               << s.garbled << ", delayed " << s.delayed << ", watchdog trips " << s.watchdog_trips
               << ", max |F| " << s.max_force_n << " N\n";
+    if (s.outputs_received > 0)
+      std::cout << "devemu   last output: enable " << (s.last_enable ? 1 : 0) << ", |F| " << s.last_force_n << " N\n";
     if (polhem)
       std::cout << "devemu   Polhem: " << s.calibrations << " calibration commands (" << s.calibrations_lost
                 << " lost), " << (s.calibrated_ns ? "calibrated" : "never calibrated") << ", " << s.switch_presses

@@ -15,6 +15,7 @@
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/python/common.h"
 #include "isotouch/python/params_arg.h"
+#include "isotouch/python/stuck_renderer.h"
 #include "isotouch/run/haptic_device.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/run/volume_scene.h"
@@ -133,7 +134,9 @@ class Live {
     }
     opened.throw_if_failed();
     parts_ = std::move(opened.session);
-    parts_->attach(*device_.io, config(record, realtime, flush_interval_s)).throw_if_failed();
+    if (const long at = stuck_at_tick_from_env(); at > 0)  // test seam: stop() abandons the servo thread
+      stuck_ = std::make_unique<StuckRenderer>(parts_->renderer(), at);
+    parts_->attach(*device_.io, config(record, realtime, flush_interval_s), stuck_.get()).throw_if_failed();
     live_ = parts_->live();
   }
 
@@ -233,6 +236,8 @@ class Live {
   io::Scene scene_;
   run::SceneSetup setup_;
   run::HapticDevice device_;  // before parts_: outlives the live session that drives it
+  /// Null unless the test seam is on (kStuckAtTickEnv); before parts_: outlives the servo thread.
+  std::unique_ptr<StuckRenderer> stuck_;
   /// The edit session, its snapshots, the renderer and the live session (session::Session).
   std::unique_ptr<session::Session> parts_;
   session::LiveSession* live_ = nullptr;  // parts_'s

@@ -371,8 +371,8 @@ def test_a_live_session_dropped_while_running_is_stopped_and_freed(root, tmp_pat
     """Neither stop() nor a with block: dropping the object stops the session (the recording
     completed) and, no servo thread having been abandoned in the renderer, frees it: its device
     closes the link, so the emulator (one host at a time) serves the next session. A session
-    whose servo thread was abandoned is never freed instead (stop() raises ServoAbandoned);
-    no renderer reachable from Python stalls, so that case is not run here."""
+    whose servo thread was abandoned is never freed instead (stop() raises ServoAbandoned):
+    test_a_stuck_renderer_is_abandoned_with_the_force_off_and_the_session_kept."""
     emu = os.environ.get("ISOTOUCH_DEVEMU")
     assert emu, "ISOTOUCH_DEVEMU is not set (ctest sets it)"
     scene, sock, rec = str(root / "scenes/sphere.json"), str(tmp_path / "dev.sock"), str(tmp_path / "dropped.rec")
@@ -400,6 +400,65 @@ def test_a_live_session_dropped_while_running_is_stopped_and_freed(root, tmp_pat
     m = re.search(r"(\d+) connections", log)
     assert m and int(m.group(1)) == 2, log
     assert issubclass(isotouch.ServoAbandoned, isotouch.Error)
+
+
+
+@pytest.mark.parametrize("how", ["stop", "with"])
+def test_a_stuck_renderer_is_abandoned_with_the_force_off_and_the_session_kept(root, tmp_path, how):
+    """A renderer that stops returning (the test seam ISOTOUCH_PY_TEST_STUCK_AT_TICK, in a
+    child process): stop(), or leaving the with block, raises ServoAbandoned; the session is
+    never freed under the stuck thread (the seam aborts the process if it is), the
+    interpreter exits 0, and the emulator's last output received is a disabled zero after
+    forces in contact."""
+    emu = os.environ.get("ISOTOUCH_DEVEMU")
+    assert emu, "ISOTOUCH_DEVEMU is not set (ctest sets it)"
+    scene, sock = str(root / "scenes/sphere.json"), str(tmp_path / "dev.sock")
+    # The hand 2 mm outside the sphere's top (radius 20 mm about the device origin), +-5 mm: in contact half the time.
+    dev = subprocess.Popen([emu, "--socket", sock, "--hold", "0,0,0.022", "--sine-mm", "5", "--seconds", "60"],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    script = textwrap.dedent(f"""
+        import gc, sys, time, isotouch
+        def until_stuck(live):  # the seam's tick is 1000: the servo thread stays inside the renderer from there
+            give_up = time.monotonic() + 30
+            while live.stats()["ticks"] < 999:
+                if time.monotonic() > give_up:
+                    sys.exit("the servo never reached tick 999")
+                live.wait(0.05)
+            live.wait(0.1)
+        try:
+            if {how!r} == "stop":
+                live = isotouch.LiveSession({scene!r}, haptic={"emu:" + sock!r})
+                live.start()
+                until_stuck(live)
+                live.stop()
+            else:
+                with isotouch.LiveSession({scene!r}, haptic={"emu:" + sock!r}) as live:
+                    until_stuck(live)
+            print("returned")
+        except isotouch.ServoAbandoned as e:
+            print("raised:", e)
+        live.stop()  # idempotent: the abandonment was raised once
+        del live
+        gc.collect()
+        print("dropped")
+    """)
+    try:
+        for _ in range(200):
+            if os.path.exists(sock):
+                break
+            time.sleep(0.05)
+        env = dict(os.environ, ISOTOUCH_PY_TEST_STUCK_AT_TICK="1000")
+        r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    finally:
+        dev.send_signal(signal.SIGTERM)
+        log = dev.communicate(timeout=60)[0]
+    out = r.stdout + r.stderr
+    assert r.returncode == 0, out
+    assert "raised: live session: servo thread: the renderer has not returned" in r.stdout, out
+    assert r.stdout.rstrip().endswith("dropped"), out
+    fmax = float(re.search(r"max \|F\| ([\d.e+-]+) N", log).group(1))
+    assert fmax > 0.5, f"no force in contact before the renderer stuck: {log}"
+    assert re.search(r"last output: enable 0, \|F\| 0 N", log), log
 
 
 def test_ctrl_c_stops_a_live_session_cleanly(root, tmp_path):

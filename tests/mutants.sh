@@ -239,6 +239,8 @@ m passivity-nan-tick        $L $'    pc_.observe(t, x_m);\n    return demand_n;'
                                test_live_passivity 'LivePassivity.TicksThatSkipTheStage*'
 m passivity-gate-clamp      servo/force_gate.cpp 'if (m > lim_.peak_n) f = f * (lim_.peak_n / m), m = lim_.peak_n, flags |= kGatePeak;' '' \
                                test_live_passivity 'LivePassivity.TheGateClamps*'
+m passivity-not-run         run/run_report.cpp '  if (!stats) return {{"status", "not run"}, {"note", "no servo thread: nothing was observed"}};' '' \
+                               test_run_job 'RunJob.LivePassivityWithoutAServoThread*'
 m record-held-pt            io/record.cpp '  if (t.held) throw RecordingError(w.at("pt") + ": a held tick has no passivity stage, got " + num(pt) + " s");' '' \
                                test_record 'Record.PassivityClock*'
 m link-delay                sim/delayed_link.h 'one_way_s_(0.5 * p.round_trip_delay_s)' 'one_way_s_(0.0)' \

@@ -11,6 +11,8 @@ void LivePassivity::start(bool control, double alpha_max_n_s_per_m, double force
   device_us_ = 0;
   first_ns_ = 0;
   banked_ = {};
+  control_pub_.store(control, std::memory_order_relaxed);  // set once: not on every tick
+  device_clock_pub_.store(false, std::memory_order_relaxed);
   publish();
 }
 
@@ -28,16 +30,19 @@ void LivePassivity::restart() {
 bool LivePassivity::clock_broke(std::int64_t servo_ns, std::uint32_t device_time_us) const {
   if (device_time_us == 0) return true;  // a reset device, or one without a clock now
   // Modulo 2^32 a wrap is one step, and a step back reads as one of 35 minutes or more: a jump.
+  // Integers: no conversion on the tick's path.
   const std::uint32_t step = device_time_us - last_us_;
-  return double(step) * 1e-6 > double(servo_ns - last_ns_) * 1e-9 + kClockJumpS;
+  return std::int64_t(step) * 1000 > servo_ns - last_ns_ + kClockJumpNs;
 }
 
 double LivePassivity::clock_s(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m) {
   // A clock that broke, or one that appeared (the servo's clock stood in for it): afresh.
-  if (started_ && (device_clock_ ? clock_broke(servo_ns, device_time_us) : device_time_us != 0)) restart();
+  if (started_ && (device_clock_ ? clock_broke(servo_ns, device_time_us) : device_time_us != 0)) [[unlikely]]
+    restart();
   if (!started_) {
     started_ = true;
     device_clock_ = device_time_us != 0;
+    device_clock_pub_.store(device_clock_, std::memory_order_relaxed);  // chosen: published once
     last_us_ = device_time_us;
     device_us_ = 0;
     first_ns_ = last_ns_ = servo_ns;
@@ -66,7 +71,7 @@ Vec3 LivePassivity::step(std::int64_t servo_ns, std::uint32_t device_time_us, co
   // A non-finite demand goes to the gate as it is: the gate's rule for it is an exact zero
   // at once (a zero from here would be rate-limited down instead). The motion is booked;
   // sent() books that zero.
-  if (!finite(demand_n)) {
+  if (!finite(demand_n)) [[unlikely]] {
     pc_.observe(t, x_m);
     return demand_n;
   }
@@ -89,8 +94,6 @@ void LivePassivity::publish() {
   dissipated_.store(banked_.dissipated_j + pc_.dissipated_j(), std::memory_order_relaxed);
   active_.store(banked_.active_ticks + pc_.active_ticks(), std::memory_order_relaxed);
   restarts_.store(banked_.restarts, std::memory_order_relaxed);
-  control_pub_.store(control_, std::memory_order_relaxed);
-  device_clock_pub_.store(device_clock_, std::memory_order_relaxed);
 }
 
 PassivityStats LivePassivity::stats() const {

@@ -13,7 +13,7 @@
 // energy so far is kept in the totals) on a reconnection (restart()) and when the device's
 // clock goes back, reads 0 (a reset device, or one that lost its clock: the servo's clock
 // takes over until a clock is reported again) or jumps ahead of the servo's by more than
-// kClockJumpS. Without it a device
+// kClockJumpNs (0.1 s). Without it a device
 // reporting 0 after a reset freezes the clock, and with no period there is no damping.
 //
 // Scope (measured in simulation, docs/haptics.md): this is the one-port rule of
@@ -43,8 +43,8 @@ struct PassivityStats {
   long restarts = 0;          ///< observer restarts: reconnections, device clock resets or jumps
 };
 
-/// A device clock step this much past the servo's own over the same ticks is a jump [s].
-inline constexpr double kClockJumpS = 0.1;
+/// A device clock step this much past the servo's own over the same ticks is a jump [ns].
+inline constexpr std::int64_t kClockJumpNs = 100000000;
 
 class LivePassivity {
  public:
@@ -66,8 +66,9 @@ class LivePassivity {
   void skip(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m);
   /// What was actually written this tick [N] (the gate's output; zero on a held tick).
   void sent(const Vec3& f_n);
-  /// The device reconnected: start the observer afresh at its next tick (counted).
-  void restart();
+  /// The device reconnected: start the observer afresh at its next tick (counted). Out of
+  /// line and cold: kept off the every-tick path's code.
+  [[gnu::noinline, gnu::cold]] void restart();
   /// The clock the last step() used [s] since the first good tick (servo thread).
   double last_clock_s() const { return last_clock_s_; }
   /// The figures so far (any thread; each figure consistent on its own).

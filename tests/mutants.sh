@@ -229,7 +229,7 @@ m passivity-hold-period     $P '  min_period_s_ = std::max(kMinPeriodS, hold_per
                                test_live_passivity 'LivePassivity.TheDampingCapIsTakenOverTheHoldPeriod*'
 m passivity-clock-zero      $L '  if (device_time_us == 0) return true;  // a reset device, or one without a clock now' '' \
                                test_live_passivity 'LivePassivity.ADeviceClockResetToZero*'
-m passivity-clock-jump      $L '  return double(step) * 1e-6 > double(servo_ns - last_ns_) * 1e-9 + kClockJumpS;' '  return false;' \
+m passivity-clock-jump      $L '  return std::int64_t(step) * 1000 > servo_ns - last_ns_ + kClockJumpNs;' '  return false;' \
                                test_live_passivity 'LivePassivity.ABackwardOrJumpingClock*'
 m passivity-reconnect       $S '      if (!first && d.connection != connection) passivity_.restart();  // a new device: no old books' '' \
                                test_live_passivity 'LivePassivity.ABackwardOrJumpingClock*'

@@ -47,7 +47,7 @@ double port_passivity_ns_per_tick(const std::vector<core::Vec3>& hips, long tick
 double live_passivity_ns_per_tick(const std::vector<core::Vec3>& hips, long ticks, int reps) {
   return ns_per_tick(hips, ticks, reps, [] {
     auto stage = std::make_unique<servo::LivePassivity>();  // holds atomics: not movable
-    stage->start(true, 40, 1e9);
+    stage->start(true, 40, 1e9, 1e-3);
     return [s = std::shared_ptr<servo::LivePassivity>(std::move(stage))](long k, const core::Vec3& x,
                                                                         const core::Vec3& f) {
       // The device's clock at 1 kHz, in us (wraps as a uint32 does); the servo's in ns.

@@ -307,6 +307,8 @@ void parse_passivity(const json& j, RecordedTick& t, const Where& w) {
   if (!j.contains("pt")) return;
   const double pt = member_number(j, "pt", w);
   if (!(pt >= 0) || !(pt < 1e9)) throw RecordingError(w.at("pt") + ": must be in [0, 1e9) s, got " + num(pt));
+  // A held tick (paused, device not ok) wrote an exact zero without the stage: no clock.
+  if (t.held) throw RecordingError(w.at("pt") + ": a held tick has no passivity stage, got " + num(pt) + " s");
   t.passivity_clock_s = pt;
   t.sent_n = vec3(j, "sent", w);
 }
@@ -462,9 +464,10 @@ std::string recording_tick_line(long k, const RecordedTick& t, int format_versio
   }
   if (t.passivity_clock_s) {
     const double pt = *t.passivity_clock_s;
-    if (format_version < 3 || !(pt >= 0) || !(pt < 1e9) || !finite(t.sent_n))
-      throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'pt': needs format 3, a clock in [0, 1e9) s " +
-                           "and a finite 'sent', got format " + std::to_string(format_version) + ", " + num(pt) + " s");
+    if (format_version < 3 || !(pt >= 0) || !(pt < 1e9) || !finite(t.sent_n) || t.held)
+      throw RecordingError(name + ": tick " + std::to_string(k) + ": field 'pt': needs format 3, a clock in [0, 1e9) s, " +
+                           "a finite 'sent' and a tick that is not held, got format " + std::to_string(format_version) +
+                           ", " + num(pt) + " s" + (t.held ? ", held" : ""));
     tick["pt"] = pt;
     tick["sent"] = vec_json(t.sent_n);
   }

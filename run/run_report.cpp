@@ -729,13 +729,17 @@ std::string report_markdown(const Scene& scene, const SceneSetup& setup, const R
   return md.str();
 }
 
-nlohmann::ordered_json passivity_json(const servo::PassivityStats& p) {
-  return {{"control", p.control},
+nlohmann::ordered_json passivity_json(const std::optional<servo::PassivityStats>& stats) {
+  if (!stats) return {{"status", "not run"}, {"note", "no servo thread: nothing was observed"}};
+  const servo::PassivityStats& p = *stats;
+  return {{"status", "run"},
+          {"control", p.control},
           {"clock", p.device_clock ? "device" : "servo"},
           {"energy_in_j", p.energy_in_j},
           {"energy_out_j", p.energy_out_j},
           {"dissipated_j", p.dissipated_j},
-          {"active_ticks", p.active_ticks}};
+          {"active_ticks", p.active_ticks},
+          {"restarts", p.restarts}};
 }
 
 }  // namespace isotouch::run

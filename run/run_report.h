@@ -1,6 +1,8 @@
 // run_report.h - a run's summary.json and report.md, from its figures.
 #pragma once
 #include <array>
+#include <optional>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -23,8 +25,10 @@ nlohmann::ordered_json summary_json(const io::Scene& scene, const SceneSetup& se
                                     long raw_found, bool with_edits);
 
 /// summary.json's "passivity": the live servo's passivity observer and controller (energies
-/// in J, device frame; active_ticks: ticks the controller added damping).
-nlohmann::ordered_json passivity_json(const servo::PassivityStats& p);
+/// in J, device frame; active_ticks: ticks the controller added damping; restarts: the
+/// observer started afresh on a reconnection or a device clock reset or jump). "status":
+/// "run", or "not run" (no servo thread: no figures, rather than zeros that look measured).
+nlohmann::ordered_json passivity_json(const std::optional<servo::PassivityStats>& p);
 
 // The run's report.md.
 std::string report_markdown(const io::Scene& scene, const SceneSetup& setup, const RunMetrics& m, long found,

@@ -2,23 +2,50 @@
 
 namespace isotouch::servo {
 
-void LivePassivity::start(bool control, double alpha_max_n_s_per_m, double force_limit_n) {
-  pc_ = PortPassivity(control, alpha_max_n_s_per_m, force_limit_n);
+void LivePassivity::start(bool control, double alpha_max_n_s_per_m, double force_limit_n, double hold_s) {
+  pc_ = PortPassivity(control, alpha_max_n_s_per_m, force_limit_n, hold_s);
   control_ = control;
   started_ = false;
   device_clock_ = false;
   last_us_ = 0;
   device_us_ = 0;
   first_ns_ = 0;
+  banked_ = {};
+  control_pub_.store(control, std::memory_order_relaxed);  // set once: not on every tick
+  device_clock_pub_.store(false, std::memory_order_relaxed);
   publish();
 }
 
+void LivePassivity::restart() {
+  banked_.energy_in_j += pc_.energy_in_j();
+  banked_.energy_out_j += pc_.energy_out_j();
+  banked_.dissipated_j += pc_.dissipated_j();
+  banked_.active_ticks += pc_.active_ticks();
+  ++banked_.restarts;
+  pc_.restart();
+  started_ = false;  // the next tick chooses the clock again and has no period
+  publish();
+}
+
+bool LivePassivity::clock_broke(std::int64_t servo_ns, std::uint32_t device_time_us) const {
+  if (device_time_us == 0) return true;  // a reset device, or one without a clock now
+  // Modulo 2^32 a wrap is one step, and a step back reads as one of 35 minutes or more: a jump.
+  // Integers: no conversion on the tick's path.
+  const std::uint32_t step = device_time_us - last_us_;
+  return std::int64_t(step) * 1000 > servo_ns - last_ns_ + kClockJumpNs;
+}
+
 double LivePassivity::clock_s(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m) {
+  // A clock that broke, or one that appeared (the servo's clock stood in for it): afresh.
+  if (started_ && (device_clock_ ? clock_broke(servo_ns, device_time_us) : device_time_us != 0)) [[unlikely]]
+    restart();
   if (!started_) {
     started_ = true;
     device_clock_ = device_time_us != 0;
+    device_clock_pub_.store(device_clock_, std::memory_order_relaxed);  // chosen: published once
     last_us_ = device_time_us;
-    first_ns_ = servo_ns;
+    device_us_ = 0;
+    first_ns_ = last_ns_ = servo_ns;
     servo_t_ = 0;
     last_x_ = x_m;
     return 0;
@@ -34,6 +61,7 @@ double LivePassivity::clock_s(std::int64_t servo_ns, std::uint32_t device_time_u
   }
   device_us_ += std::uint32_t(device_time_us - last_us_);  // modulo 2^32: the wrap is one step
   last_us_ = device_time_us;
+  last_ns_ = servo_ns;
   return double(device_us_) * 1e-6;
 }
 
@@ -41,9 +69,17 @@ Vec3 LivePassivity::step(std::int64_t servo_ns, std::uint32_t device_time_us, co
   const double t = clock_s(servo_ns, device_time_us, x_m);
   last_clock_s_ = t;
   // A non-finite demand goes to the gate as it is: the gate's rule for it is an exact zero
-  // at once (a zero from here would be rate-limited down instead). sent() books that zero.
-  if (!finite(demand_n)) return demand_n;
+  // at once (a zero from here would be rate-limited down instead). The motion is booked;
+  // sent() books that zero.
+  if (!finite(demand_n)) [[unlikely]] {
+    pc_.observe(t, x_m);
+    return demand_n;
+  }
   return pc_.step(t, x_m, demand_n);
+}
+
+void LivePassivity::skip(std::int64_t servo_ns, std::uint32_t device_time_us, const Vec3& x_m) {
+  pc_.observe(clock_s(servo_ns, device_time_us, x_m), x_m);
 }
 
 void LivePassivity::sent(const Vec3& f_n) {
@@ -53,12 +89,11 @@ void LivePassivity::sent(const Vec3& f_n) {
 
 void LivePassivity::publish() {
   // Relaxed stores: plain moves on x86-64, no fence; a reader gets each figure whole.
-  e_in_.store(pc_.energy_in_j(), std::memory_order_relaxed);
-  e_out_.store(pc_.energy_out_j(), std::memory_order_relaxed);
-  dissipated_.store(pc_.dissipated_j(), std::memory_order_relaxed);
-  active_.store(pc_.active_ticks(), std::memory_order_relaxed);
-  control_pub_.store(control_, std::memory_order_relaxed);
-  device_clock_pub_.store(device_clock_, std::memory_order_relaxed);
+  e_in_.store(banked_.energy_in_j + pc_.energy_in_j(), std::memory_order_relaxed);
+  e_out_.store(banked_.energy_out_j + pc_.energy_out_j(), std::memory_order_relaxed);
+  dissipated_.store(banked_.dissipated_j + pc_.dissipated_j(), std::memory_order_relaxed);
+  active_.store(banked_.active_ticks + pc_.active_ticks(), std::memory_order_relaxed);
+  restarts_.store(banked_.restarts, std::memory_order_relaxed);
 }
 
 PassivityStats LivePassivity::stats() const {
@@ -69,6 +104,7 @@ PassivityStats LivePassivity::stats() const {
   s.energy_out_j = e_out_.load(std::memory_order_relaxed);
   s.dissipated_j = dissipated_.load(std::memory_order_relaxed);
   s.active_ticks = active_.load(std::memory_order_relaxed);
+  s.restarts = restarts_.load(std::memory_order_relaxed);
   return s;
 }
 

@@ -12,13 +12,15 @@ namespace {
 constexpr double kMinPeriodS = 1e-6;
 }  // namespace
 
-PortPassivity::PortPassivity(bool enabled, double alpha_max, double force_limit_n)
-    : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n) {
+PortPassivity::PortPassivity(bool enabled, double alpha_max, double force_limit_n, double hold_period_s)
+    : enabled_(enabled), alpha_max_(alpha_max), f_max_(force_limit_n), min_period_s_(kMinPeriodS) {
   core::require_non_negative("PortPassivity", "alpha_max", alpha_max, "N s/m");
   core::require_positive("PortPassivity", "force_limit_n", force_limit_n, "N");
+  core::require_non_negative("PortPassivity", "hold_period_s", hold_period_s, "s");
+  min_period_s_ = std::max(kMinPeriodS, hold_period_s);
 }
 
-Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const double* e_ref_j) {
+Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const double* e_ref_j, bool control) {
   alpha_ = 0;
   if (!finite(x) || !finite(f_want) || !std::isfinite(t)) {
     // Zero force now; the next sane tick starts the velocity afresh.
@@ -40,14 +42,14 @@ Vec3 PortPassivity::tick(double t, const Vec3& x, const Vec3& f_want, const doub
   }
   Vec3 f = f_want;
   Vec3 damp;
-  if (enabled_ && moving) {
+  if (control && moving) {
     // E_out after this tick if the velocity holds (work f.v dt = f.dx): the reference may
     // not be exceeded. alpha = excess / (dt v^2) = excess dt / dx^2, and the damping force
     // -alpha v = -dx excess / dx^2: no division on a tick that needs no damping.
     const double dx2 = dot(dx, dx);
     const double excess = e_out_ + std::max(0.0, dot(f, dx)) - (e_ref_j ? *e_ref_j : e_in_);
     if (excess > 0 && dx2 > 1e-30) {
-      const double period = std::max(dt, kMinPeriodS);
+      const double period = std::max(dt, min_period_s_);
       const bool capped = excess * period > alpha_max_ * dx2;
       const double per_m = capped ? alpha_max_ / period : excess / dx2;  // [N/m] on dx
       alpha_ = per_m * period;

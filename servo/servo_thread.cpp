@@ -96,7 +96,7 @@ std::string ServoThread::start() {
                                                                         : kDefaultPassivityAlphaS * cfg_.rate_hz;
   // Its own clip out of the way: the gate clamps (and counts it), and the observer books
   // what the gate let through.
-  passivity_.start(cfg_.passivity_control, alpha_max, kPassivityClipN);
+  passivity_.start(cfg_.passivity_control, alpha_max, kPassivityClipN, 1.0 / cfg_.rate_hz);
   device_stalls_ = device_.enable_force(true, kStallPeriods / cfg_.rate_hz);
   seen_stalls_ = device_stalls_ ? device_stalls_->load(std::memory_order_acquire) : 0;
   handoff_ = std::make_shared<Handoff>();
@@ -296,6 +296,7 @@ void ServoThread::loop(Handoff& h) {
       rec.version = field->version;
       const DeviceReading d = device_.read();
       if (first || d.connection != connection) ramp_start = -1;  // enabled, or reconnected
+      if (!first && d.connection != connection) passivity_.restart();  // a new device: no old books
       // The device's force is off (its watchdog tripped): ramp in from 0 when it is back on.
       if ((d.force_off || d.watchdog_tripped) && ramp_start >= 0) ramp_start = t;
       first = false;
@@ -313,6 +314,9 @@ void ServoThread::loop(Handoff& h) {
       if (rec.device_status != DeviceStatus::kOk) {
         device_.write_force_n({});  // within this tick
         gate_.zero(gate_dt);
+        // A stale report is a real, old position: its motion is booked. Any other bad reading
+        // is not (a lost or faulty device's position): the motion over it books no work.
+        if (rec.device_status == DeviceStatus::kStale) passivity_.skip(t, d.device_time_us, d.position_m);
         passivity_.sent({});
         count_not_ok(rec.device_status, refused);
         if (not_ok_since < 0) not_ok_since = t;
@@ -326,6 +330,7 @@ void ServoThread::loop(Handoff& h) {
       } else if (paused) {
         device_.write_force_n({});
         gate_.zero(gate_dt);
+        passivity_.skip(t, d.device_time_us, d.position_m);
         passivity_.sent({});
         was_paused = true;
         last_render = -1;
@@ -366,6 +371,7 @@ void ServoThread::loop(Handoff& h) {
         if (ramp_start < 0 || ramp == 0 || rec.out.fault) {
           rec.force_sent_n = {};
           gate_.zero(gate_dt);
+          passivity_.skip(t, d.device_time_us, d.position_m);  // the held force's work is booked
         } else {
           // The passivity stage before the gate: the gate's limits hold whatever it adds.
           const Vec3 damped = passivity_.step(t, d.device_time_us, d.position_m, rec.out.force_n * ramp);

@@ -175,8 +175,9 @@ struct LiveStats {
   std::string setup_note;     ///< what the system refused at start (SCHED_FIFO, pinning, locking)
   std::string record_error;   ///< "" or why the recording failed
   long listener_errors = 0;   ///< calls of LiveSessionConfig::on_applied that threw (the edit stands)
-  /// The servo's live passivity stage (servo/live_passivity.h); zeros without a servo thread.
-  servo::PassivityStats passivity;
+  /// The servo's live passivity stage (servo/live_passivity.h); empty without a servo thread
+  /// (a simulated session): nothing was observed, which zeros would not say.
+  std::optional<servo::PassivityStats> passivity;
   std::string listener_error; ///< what the first of them said
 };
 

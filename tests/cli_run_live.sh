@@ -25,14 +25,25 @@ rows=$(( $(wc -l < "$out/folder/trace.csv") - 1 ))
   fail "--out: trace.csv has $rows rows for ${ticks:-?} servo ticks"
 grep -q '"status": "complete"' "$out/folder/summary.json" || fail "--out: summary.json not complete"
 grep -q '"live": {' "$out/folder/summary.json" || fail "--out: summary.json has no live section"
-# The servo's passivity stage observed the simulated hand (the scene leaves the controller off).
-python3 - "$out/folder/summary.json" <<'PY' || fail "--out: summary.json's live.passivity is not the observer's"
+# The servo's passivity stage observed the simulated hand (the scene leaves the controller
+# off): its net energy out is the work of the forces written over the motion, worked out here
+# from the recording (device frame = world less the volume's centre at workspace_scale 1):
+# sum over ticks of sent(k) . (hip(k+1) - hip(k)), a held tick's force being zero.
+python3 - "$out/folder/summary.json" "$rec" <<'PY' || fail "--out: summary.json's live.passivity is not the observer's"
 import json, math, sys
 p = json.load(open(sys.argv[1]))["live"]["passivity"]
-assert p["control"] is False and p["active_ticks"] == 0, p
-assert p["clock"] in ("device", "servo"), p
+assert p["status"] == "run" and p["control"] is False and p["active_ticks"] == 0, p
+assert p["clock"] in ("device", "servo") and p["restarts"] == 0, p
 assert all(math.isfinite(p[k]) for k in ("energy_in_j", "energy_out_j", "dissipated_j")), p
 assert p["energy_in_j"] > 0 and p["energy_out_j"] > 0, p  # the probe pressed and was pushed back
+ticks = [t for t in map(json.loads, open(sys.argv[2])) if "k" in t]
+work = scale = 0.0
+for a, b in zip(ticks, ticks[1:]):
+    w = sum(f * (y - x) for f, x, y in zip(a.get("sent", [0, 0, 0]), a["hip"], b["hip"]))
+    work, scale = work + w, scale + abs(w)
+net = p["energy_out_j"] - p["energy_in_j"]
+print(f"live.passivity: net energy out {net:.9g} J, the recording's work {work:.9g} J (sum |w| {scale:.3g} J)")
+assert abs(net - work) <= 1e-6 * scale, (net, work, scale)
 PY
 [ -s "$out/folder/report.md" ] || fail "--out: no report.md"
 [ -f "$rec" ] || fail "no recording"

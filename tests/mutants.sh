@@ -229,6 +229,27 @@ m passivity-live-stage      servo/servo_thread.cpp 'rec.force_sent_n = gate_.ste
 m passivity-clip-dissipated $P '    damp = damp * scale;' '' test_port_passivity 'PortPassivity.*'
 m passivity-force-limit     $P '  core::require_positive("PortPassivity", "force_limit_n", force_limit_n, "N");' '' \
                                test_port_passivity 'PortPassivity.*'
+# The live stage's review rules, judged on what the test-double device received, what
+# summary.json holds and what the recording loads (issue 67).
+L=servo/live_passivity.cpp S=servo/servo_thread.cpp
+m passivity-hold-period     $P '  min_period_s_ = std::max(kMinPeriodS, hold_period_s);' '  min_period_s_ = kMinPeriodS;' \
+                               test_live_passivity 'LivePassivity.TheDampingCapIsTakenOverTheHoldPeriod*'
+m passivity-clock-zero      $L '  if (device_time_us == 0) return true;  // a reset device, or one without a clock now' '' \
+                               test_live_passivity 'LivePassivity.ADeviceClockResetToZero*'
+m passivity-clock-jump      $L '  return std::int64_t(step) * 1000 > servo_ns - last_ns_ + kClockJumpNs;' '  return false;' \
+                               test_live_passivity 'LivePassivity.ABackwardOrJumpingClock*'
+m passivity-reconnect       $S '      if (!first && d.connection != connection) passivity_.restart();  // a new device: no old books' '' \
+                               test_live_passivity 'LivePassivity.ABackwardOrJumpingClock*'
+m passivity-skipped-ticks   $S '          passivity_.skip(t, d.device_time_us, d.position_m);  // the held force'"'"'s work is booked' '' \
+                               test_live_passivity 'LivePassivity.TicksThatSkipTheStage*'
+m passivity-nan-tick        $L $'    pc_.observe(t, x_m);\n    return demand_n;' '    return demand_n;' \
+                               test_live_passivity 'LivePassivity.TicksThatSkipTheStage*'
+m passivity-gate-clamp      servo/force_gate.cpp 'if (m > lim_.peak_n) f = f * (lim_.peak_n / m), m = lim_.peak_n, flags |= kGatePeak;' '' \
+                               test_live_passivity 'LivePassivity.TheGateClamps*'
+m passivity-not-run         run/run_report.cpp '  if (!stats) return {{"status", "not run"}, {"note", "no servo thread: nothing was observed"}};' '' \
+                               test_run_job 'RunJob.LivePassivityWithoutAServoThread*'
+m record-held-pt            io/record.cpp '  if (t.held) throw RecordingError(w.at("pt") + ": a held tick has no passivity stage, got " + num(pt) + " s");' '' \
+                               test_record 'Record.PassivityClock*'
 m link-delay                sim/delayed_link.h 'one_way_s_(0.5 * p.round_trip_delay_s)' 'one_way_s_(0.0)' \
                                test_linked_contact 'DelayLine.*:LinkedContact.*'
 m link-arrival-slack        sim/delayed_link.h 'arrive_s <= t_s + kArrivalSlackS' 'arrive_s <= t_s' \

@@ -825,6 +825,7 @@ TEST(LiveSessionSimulated, WithoutEditsItIsTheHeadlessLoop) {
   EXPECT_GT(contact, 100) << "the script never touched the sphere: the comparison says little";
   EXPECT_FALSE(live.submit(carve({}))) << "a session without an EditSession accepted an edit";
   EXPECT_EQ(live.stats().ticks, long(ta.size()));
+  EXPECT_FALSE(live.stats().passivity) << "no servo thread ran: the passivity stage has no figures";
 }
 
 // The button drill in simulated time: what tick k asks for is applied before tick k + 1,

@@ -334,6 +334,8 @@ TEST(Record, PassivityClockAndSentForceComeTogetherAndAreNamedWhenBad) {
       {"\"sent\":[0,0,1],", "line 5 (tick 3): field 'pt': missing"},
       {"\"pt\":-1,\"sent\":[0,0,1],", "field 'pt': must be in [0, 1e9) s, got -1"},
       {"\"pt\":1,\"sent\":[0,\"x\",1],", "field 'sent[1]': must be a finite number"},
+      // A held tick sent its zero without the stage: it has no stage clock.
+      {"\"held\":true,\"pt\":0.5,\"sent\":[0,0,0],", "mem: line 5 (tick 3): field 'pt': a held tick has no passivity stage, got 0.5 s"},
   };
   for (const auto& [fields, expect] : bad) {
     try {
@@ -349,6 +351,9 @@ TEST(Record, PassivityClockAndSentForceComeTogetherAndAreNamedWhenBad) {
   EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
   r.ticks[3].passivity_clock_s = 1.0;
   r.ticks[3].sent_n = {0, NAN, 0};
+  EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
+  r.ticks[3].sent_n = {};
+  r.ticks[3].held = true;  // the writer refuses what the reader would
   EXPECT_THROW((void)recording_text(r, "mem"), RecordingError);
 }
 

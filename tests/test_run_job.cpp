@@ -24,6 +24,7 @@
 #include "isotouch/tests/drilled_slab.h"
 #include "isotouch/tests/voxel_probe.h"
 #include "isotouch/run/channel_section.h"
+#include "isotouch/run/run_report.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
@@ -802,4 +803,18 @@ TEST(RunJob, EditRippleMatchesTheTrace) {
   EXPECT_DOUBLE_EQ(c.at("rate_limits").at("edit_ease").at("period_s").get<double>(), 0.01);
   std::cout << "sphere drill: edit ripple " << m.ripple_n << " N over " << n << " ticks\n";
   fs::remove_all(dir);
+}
+
+// summary.json's live.passivity: without a servo thread it says "not run" and shows no figure
+// (zeros would read as measured); with one, its figures and the observer's restarts.
+TEST(RunJob, LivePassivityWithoutAServoThreadSaysNotRun) {
+  const nlohmann::ordered_json none = isotouch::run::passivity_json(std::nullopt);
+  EXPECT_EQ(none["status"], "not run");
+  EXPECT_FALSE(none.contains("energy_in_j") || none.contains("active_ticks") || none.contains("control")) << none.dump();
+  isotouch::servo::PassivityStats p;
+  p.energy_in_j = 0.5, p.restarts = 2;
+  const nlohmann::ordered_json run = isotouch::run::passivity_json(p);
+  EXPECT_EQ(run["status"], "run");
+  EXPECT_EQ(run["energy_in_j"], 0.5);
+  EXPECT_EQ(run["restarts"], 2);
 }

@@ -10,7 +10,10 @@
 #      time), and no non-zero force after it;
 #   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
 #      exit 1, the message naming the bound and the way to allow it; with
-#      --allow-unstable-stiffness it runs, warning.
+#      --allow-unstable-stiffness it runs, warning;
+#   3. the link's device limit: a scene whose servo allows 40 N (K 3000 N/m, stable at 500 Hz)
+#      pushed 2.6 voxels into bone asks for about 6 N; the peer never receives more than the
+#      default device.link_max_force_n (3.3 N, the Touch's peak) and receives about that.
 # "PASS haptic igtl" is printed once, last, after every check.
 # Usage: cli_haptic_igtl.sh ISOTOUCH SCENE PEER OUT_DIR
 set -u
@@ -40,6 +43,17 @@ run() {
 run fast 500 3.2
 run slow 50 3
 run allowed 50 5 --allow-unstable-stiffness
+python3 - "$scene" "$out/strong.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+s["servo"]["force_limit_n"] = 40
+s["servo"]["stiffness_n_per_m"] = 3000
+json.dump(s, open(sys.argv[2], "w"), indent=1)
+PY
+scene_default=$scene; scene=$out/strong.json
+run strong 500 3.2
+scene=$scene_default
 grep -q "Hz measured" "$out/fast.log" || fail "the run did not say the stream's measured rate"
 [[ $(cat "$out/slow.rc") == 1 ]] || fail "the 50 Hz stream against K 800 N/m exited $(cat "$out/slow.rc"), not 1"
 grep -qE "servo.stiffness_n_per_m 800 is above the bound (39[0-9]|40[0-9])" "$out/slow.log" || fail "the refusal does not name the bound"
@@ -96,5 +110,16 @@ else:
 if any(f != [0.0, 0.0, 0.0] for _, f in after): fail("a non-zero force after the stream was lost")
 print(f"igtl ok: {rate:.0f} Hz measured, bound {bound:.0f} N/m; {len(during)} forces, {len(pushing)} above 0.8 N "
       f"(max {max(norms):.2f} N); zero {late * 1e3:.1f} ms after the stream stopped")
+PY
+python3 - "$out/strong.peer.log" <<'PY' || exit 1
+import sys
+forces = [[float(v) for v in l.split()[2:5]] for l in open(sys.argv[1]) if l.startswith("force ")]
+norms = [sum(c * c for c in f) ** 0.5 for f in forces]
+if not norms: print("FAIL haptic igtl: no forces came back to the peer of the 40 N scene"); sys.exit(1)
+if max(norms) > 3.3 + 1e-6:
+    print(f"FAIL haptic igtl: the peer received {max(norms):.3f} N, past the link's 3.3 N (the scene allows 40 N)"); sys.exit(1)
+if max(norms) < 3.0:
+    print(f"FAIL haptic igtl: the 40 N scene's push peaked at {max(norms):.3f} N: it never reached the link's limit"); sys.exit(1)
+print(f"igtl link limit ok: the 40 N scene's push peaked at {max(norms):.3f} N at the peer (link limit 3.3 N)")
 PY
 echo "PASS haptic igtl"

@@ -39,7 +39,9 @@ only=${1:-}
 #   OLD     the exact text to replace; it must occur exactly once (use $'...\n...' to take in
 #           a neighbouring line where the text alone occurs twice)
 #   NEW     its replacement ("" deletes it)
-#   TARGET  the build target whose test must fail; FILTER its --gtest_filter
+#   TARGET  the build target whose test must fail; FILTER its --gtest_filter. A FILTER
+#           "ctest:NAME" runs the ctest test NAME instead (a cli_*.sh test judged on what a
+#           peer or a file got), TARGET then the targets it runs, space-separated
 names=() wheres=() olds=() news=() targets=() filters=()
 m() { names+=("$1"); wheres+=("$2"); olds+=("$3"); news+=("$4"); targets+=("$5"); filters+=("$6"); }
 
@@ -164,6 +166,10 @@ m exit-zero-alt-stack       $X '    a.sa_flags = SA_NODEFER | SA_ONSTACK;' '    
 m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
                                '    if (false) {' test_exit_zero 'ExitZero.*'
 
+# A link's device limit (device.link_max_force_n) is the gate's clamp: what the peer got.
+m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_force_n;  // the peer'"'"'s device, as the scene declares it' \
+                               '' 'isotouch igtl_plus_peer' 'ctest:cli_haptic_igtl'
+
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies
 m stream-stall-zero         $SR '    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new' \
@@ -285,9 +291,17 @@ print(os.path.relpath(f, copy))
 EOF
 }
 
-build() { (cd "$copy" && cmake --build --preset release -j"$jobs" --target "$1") > "$work/build.log" 2>&1; }
+# shellcheck disable=SC2086
+build() { (cd "$copy" && cmake --build --preset release -j"$jobs" --target $1) > "$work/build.log" 2>&1; }
 # Runs TARGET's tests with FILTER (5 minutes at most); the failing tests' names on stdout.
 run_test() {
+  if [[ $2 == ctest:* ]]; then
+    timeout 300 ctest --test-dir "$copy/build" -R "^${2#ctest:}\$" --output-on-failure > "$work/test.log" 2>&1
+    local rc=$?
+    grep -q "tests passed, 0 tests failed out of 1" "$work/test.log" && return 0
+    echo "${2#ctest:}"
+    return $(( rc ? rc : 1 ))
+  fi
   timeout 300 "$copy/build/bin/$1" --gtest_filter="$2" > "$work/test.log" 2>&1
   local rc=$?
   sed -n 's/^\[  FAILED  \] \([A-Za-z0-9_]*\.[A-Za-z0-9_./]*\).*/\1/p' "$work/test.log" | sort -u | tr '\n' ' '

@@ -13,7 +13,10 @@
 #      --allow-unstable-stiffness it runs, warning;
 #   3. the link's device limit: a scene whose servo allows 40 N (K 3000 N/m, stable at 500 Hz)
 #      pushed 2.6 voxels into bone asks for about 6 N; the peer never receives more than the
-#      default device.link_max_force_n (3.3 N, the Touch's peak) and receives about that.
+#      default device.link_max_force_n (3.3 N, the Touch's peak) and receives about that;
+#   4. a run stopped by SIGINT, and one by SIGTERM, while the peer holds a contact force: the
+#      peer's last Force is an exact zero, within the stale timeout of the signal and the
+#      time the machine was measured to be gone (igtl_signal_check.py).
 # "PASS haptic igtl" is printed once, last, after every check.
 # Usage: cli_haptic_igtl.sh ISOTOUCH SCENE PEER OUT_DIR
 set -u
@@ -54,6 +57,22 @@ PY
 scene_default=$scene; scene=$out/strong.json
 run strong 500 3.2
 scene=$scene_default
+# killed NAME SIG: the peer streams for 8 s; the run is stopped by SIG once it pushes.
+killed() {
+  local name=$1 sig=$2 port; port=$(free_port)
+  # shellcheck disable=SC2086
+  "$peer" "$port" 500 8 1.6 0.5 1 $path >"$out/$name.peer.log" 2>&1 &
+  local peer_pid=$!
+  for _ in $(seq 100); do grep -q listening "$out/$name.peer.log" && break; sleep 0.05; done
+  timeout 60 "$exe" run "$scene" --live -q --haptic "igtl:127.0.0.1:$port" >"$out/$name.log" 2>&1 &
+  local run_pid=$!
+  python3 "$(dirname "$0")/igtl_signal_check.py" "$out/$name.peer.log" $run_pid "$sig" 500 >"$out/$name.check" 2>&1
+  echo $? >"$out/$name.check.rc"
+  wait $run_pid 2>/dev/null
+  kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
+}
+killed sigint INT
+killed sigterm TERM
 grep -q "Hz measured" "$out/fast.log" || fail "the run did not say the stream's measured rate"
 [[ $(cat "$out/slow.rc") == 1 ]] || fail "the 50 Hz stream against K 800 N/m exited $(cat "$out/slow.rc"), not 1"
 grep -qE "servo.stiffness_n_per_m 800 is above the bound (39[0-9]|40[0-9])" "$out/slow.log" || fail "the refusal does not name the bound"
@@ -111,6 +130,10 @@ if any(f != [0.0, 0.0, 0.0] for _, f in after): fail("a non-zero force after the
 print(f"igtl ok: {rate:.0f} Hz measured, bound {bound:.0f} N/m; {len(during)} forces, {len(pushing)} above 0.8 N "
       f"(max {max(norms):.2f} N); zero {late * 1e3:.1f} ms after the stream stopped")
 PY
+for sig in sigint sigterm; do
+  cat "$out/$sig.check"
+  [[ $(cat "$out/$sig.check.rc") == 0 ]] || fail "the run stopped by $sig: $(cat "$out/$sig.check")"
+done
 python3 - "$out/strong.peer.log" <<'PY' || exit 1
 import sys
 forces = [[float(v) for v in l.split()[2:5]] for l in open(sys.argv[1]) if l.startswith("force ")]

@@ -166,6 +166,12 @@ m exit-zero-alt-stack       $X '    a.sa_flags = SA_NODEFER | SA_ONSTACK;' '    
 m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
                                '    if (false) {' test_exit_zero 'ExitZero.*'
 
+# A process ended for a stuck servo sends each link its zero before _Exit (what the peer got).
+m live-stuck-exit-zero      session/live_session.cpp '  servo::send_exit_zeros(5000);  // a link'"'"'s peer (PLUS) holds the last force it got (exit_zero.h)' \
+                               '' test_live_session 'LiveSession.AServoStuckEnd*'
+# A v1 report device without a watchdog is refused unless the scene allows it.
+m run-no-watchdog-refused   run/haptic_device.cpp 'if (d.report && !(d.io->caps().watchdog_s > 0) && !scene.allow_no_watchdog)' \
+                               'if (false)' 'isotouch isotouch-devemu' 'ctest:cli_run_live_emu'
 # A link's device limit (device.link_max_force_n) is the gate's clamp: what the peer got.
 m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_force_n;  // the peer'"'"'s device, as the scene declares it' \
                                '' 'isotouch igtl_plus_peer' 'ctest:cli_haptic_igtl'

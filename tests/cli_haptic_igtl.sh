@@ -11,9 +11,11 @@
 #   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
 #      exit 1, the message naming the bound and the way to allow it; with
 #      --allow-unstable-stiffness it runs, warning;
-#   3. the link's device limit: a scene whose servo allows 40 N (K 3000 N/m, stable at 500 Hz)
-#      pushed 2.6 voxels into bone asks for about 6 N; the peer never receives more than the
-#      default device.link_max_force_n (3.3 N, the Touch's peak) and receives about that;
+#   3. the link's device limit: a scene whose servo allows 40 N (K 3000 N/m, stable at 500 Hz;
+#      2.6 voxels into bone it asks for about 6 N) does not fit the default
+#      device.link_max_force_n (3.3 N, the Touch's peak): refused, exit 1, naming both, and the
+#      peer receives no force above 3.3 N; with device.link_max_force_n 40 it runs and the
+#      peer receives more than 3.3 N (the key, not a fixed cap, decides);
 #   4. a run stopped by SIGINT, and one by SIGTERM, while the peer holds a contact force: the
 #      peer's last Force is an exact zero, within the stale timeout of the signal and the
 #      time the machine was measured to be gone (igtl_signal_check.py).
@@ -53,9 +55,13 @@ s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1]))
 s["servo"]["force_limit_n"] = 40
 s["servo"]["stiffness_n_per_m"] = 3000
 json.dump(s, open(sys.argv[2], "w"), indent=1)
+s["device"]["link_max_force_n"] = 40
+json.dump(s, open(sys.argv[2].replace(".json", "_link40.json"), "w"), indent=1)
 PY
 scene_default=$scene; scene=$out/strong.json
 run strong 500 3.2
+scene=$out/strong_link40.json
+run strong40 500 3.2
 scene=$scene_default
 # killed NAME SIG: the peer streams for 8 s; the run is stopped by SIG once it pushes.
 killed() {
@@ -134,15 +140,19 @@ for sig in sigint sigterm; do
   cat "$out/$sig.check"
   [[ $(cat "$out/$sig.check.rc") == 0 ]] || fail "the run stopped by $sig: $(cat "$out/$sig.check")"
 done
-python3 - "$out/strong.peer.log" <<'PY' || exit 1
+[[ $(cat "$out/strong.rc") == 1 ]] || fail "the 40 N scene through a 3.3 N link exited $(cat "$out/strong.rc"), not 1"
+grep -q "servo.force_limit_n 40 exceeds the device's maximum force 3.3" "$out/strong.log" ||
+  fail "the 40 N scene's refusal does not name servo.force_limit_n 40 and the link's 3.3 N"
+python3 - "$out" <<'PY' || exit 1
 import sys
-forces = [[float(v) for v in l.split()[2:5]] for l in open(sys.argv[1]) if l.startswith("force ")]
-norms = [sum(c * c for c in f) ** 0.5 for f in forces]
-if not norms: print("FAIL haptic igtl: no forces came back to the peer of the 40 N scene"); sys.exit(1)
-if max(norms) > 3.3 + 1e-6:
-    print(f"FAIL haptic igtl: the peer received {max(norms):.3f} N, past the link's 3.3 N (the scene allows 40 N)"); sys.exit(1)
-if max(norms) < 3.0:
-    print(f"FAIL haptic igtl: the 40 N scene's push peaked at {max(norms):.3f} N: it never reached the link's limit"); sys.exit(1)
-print(f"igtl link limit ok: the 40 N scene's push peaked at {max(norms):.3f} N at the peer (link limit 3.3 N)")
+def peak(name):
+    f = [[float(v) for v in l.split()[2:5]] for l in open(f"{sys.argv[1]}/{name}.peer.log") if l.startswith("force ")]
+    return max((sum(c * c for c in x) ** 0.5 for x in f), default=0.0)
+refused, allowed = peak("strong"), peak("strong40")
+if refused > 3.3 + 1e-6:
+    print(f"FAIL haptic igtl: the peer received {refused:.3f} N from the 40 N scene, past the link's 3.3 N"); sys.exit(1)
+if allowed <= 3.3 + 1e-3:
+    print(f"FAIL haptic igtl: with device.link_max_force_n 40 the push peaked at {allowed:.3f} N: the key is not read"); sys.exit(1)
+print(f"igtl link limit ok: the 40 N scene refused (peer peak {refused:.3f} N); with link_max_force_n 40 {allowed:.2f} N")
 PY
 echo "PASS haptic igtl"

@@ -3,6 +3,8 @@ force, and checks what the peer got: its last Force is exactly zero, and it arri
 stale timeout (3 stream periods) of the signal, widened by the time the machine was measured
 to be gone in that interval and by nothing else (a canary process per CPU, as
 tests/sched_canary.h: each wake-up later than its slack marks [deadline, wake-up] as lost).
+The canaries run in the scheduling class of the run and the peer (the default: neither asks
+for SCHED_FIFO here), so they lose the CPU when those do: a peer that reads late is timed late.
 
 usage: igtl_signal_check.py PEER_LOG PID SIGNAL RATE_HZ
   PEER_LOG  the peer's output ("clock S": its t = 0 on CLOCK_MONOTONIC; "force T FX FY FZ")
@@ -20,11 +22,7 @@ PERIOD_S, SLACK_S = 0.0005, 0.0003
 
 def canary(cpu, stop, out):
     """Wakes every PERIOD_S on `cpu`; sends each late wake-up's [deadline, wake-up]."""
-    os.sched_setaffinity(0, {cpu})
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(99))
-    except (PermissionError, OSError):
-        pass  # not root: the default scheduler (it then counts its own delays as lost: wider, never narrower)
+    os.sched_setaffinity(0, {cpu})  # the default scheduler, as the run and the peer: it loses what they lose
     lost, deadline = [], time.monotonic()
     while not stop.is_set():
         deadline += PERIOD_S

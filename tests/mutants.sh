@@ -175,10 +175,6 @@ m run-no-watchdog-refused   run/haptic_device.cpp 'if (d.report && !(d.io->caps(
 # A link's device limit (device.link_max_force_n) is the gate's clamp: what the peer got.
 m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_force_n;  // the peer'"'"'s device, as the scene declares it' \
                                '' 'isotouch igtl_plus_peer' 'ctest:cli_haptic_igtl'
-# A stop signal in contact: the writer's last act is the zero the peer then holds.
-m igtl-writer-last-zero     $IG $'    zero_sent = l.force_n.x == 0 && l.force_n.y == 0 && l.force_n.z == 0;\n  }\n  send_force({0, 0, 0});' \
-                               $'    zero_sent = l.force_n.x == 0 && l.force_n.y == 0 && l.force_n.z == 0;\n  }' \
-                               'isotouch igtl_plus_peer' 'ctest:cli_haptic_igtl'
 # serve's stream renders at the identity map: no 1 / workspace_scale in its force.
 m serve-stream-unscaled     service/serve.cpp '  if (!echo_device_) so.hri.world_per_device = 1.0;' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'

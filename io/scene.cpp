@@ -604,6 +604,7 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
   s.workspace_scale = r.number(dv, "device", "workspace_scale");
   check_workspace_scale(r, dv, s);
   s.allow_no_watchdog = r.boolean(dv, "device", "allow_no_watchdog", false);
+  s.link_max_force_n = r.number(dv, "device", "link_max_force_n");
   s.hri.world_per_device = s.workspace_scale;
 }
 

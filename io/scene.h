@@ -114,6 +114,11 @@ struct Scene {
   /// it has no watchdog (0 ms: its last force stays on if the host stops sending) instead of
   /// refusing it.
   bool allow_no_watchdog = false;
+  /// device.link_max_force_n (default 3.3 N, the Touch's peak, the device behind a PlusServer):
+  /// the peak force [N] a link's device is sent (`--haptic igtl:`, serve's TRANSFORM stream),
+  /// whose device isotouch cannot ask. The servo's gate clamps to min(servo.force_limit_n,
+  /// this) and limits the force's rate to that over 2 ms.
+  double link_max_force_n = 3.3;
   /// servo.allow_unstable_stiffness (default false): run a servo.stiffness_n_per_m above
   /// the Colgate-Schenkel bound 2 (b - |B|) / T (b: device + hand damping [N s/m], B: servo
   /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the

@@ -141,6 +141,7 @@ servo::DeviceCaps IgtlDevice::caps() const {
   c.name = "OpenIGTLink '" + o_.stream + "'";
   c.native_rate_hz = rate_hz_;
   c.stale_timeout_s = 3.0 / rate_hz_;
+  c.max_force_n = o_.max_force_n;  // the peer's device, as the scene declares it
   return c;
 }
 
@@ -189,9 +190,10 @@ void IgtlDevice::write_loop() {
 }
 
 std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description,
-                                             int fifo_priority) {
+                                             int fifo_priority, double max_force_n) {
   IgtlDeviceOptions o = parse_igtl_spec(arg);
   o.fifo_priority = fifo_priority;
+  o.max_force_n = max_force_n;
   auto d = std::make_unique<IgtlDevice>(o);
   const double rate = d->measured_rate_hz();
   const double loop_hz = std::min(rate, loop.servo_rate_hz);
@@ -200,7 +202,8 @@ std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlL
   s << "igtl:" << arg << " (" << d->caps().name << " at " << num(rate) << " Hz measured; the force loop closes at "
     << num(loop_hz) << " Hz: Colgate-Schenkel K <= 2 (b - |B|) / T = " << num(bound) << " N/m with b "
     << loop.handle_damping_n_s_per_m << " N s/m, B " << loop.servo_damping_n_s_per_m << " N s/m; the scene's K "
-    << loop.stiffness_n_per_m << " N/m)";
+    << loop.stiffness_n_per_m << " N/m; the peer's device is sent at most " << num(max_force_n)
+    << " N, the scene's device.link_max_force_n)";
   description = s.str();
   if (loop.stiffness_n_per_m > bound) {
     if (!loop.allow_unstable_stiffness)

@@ -12,9 +12,10 @@
 //     that the peer never holds a contact force; zero at close; and a zero however the
 //     process ends (servo/exit_zero.h: a stuck servo's _Exit, a second stop signal, a crash).
 //
-// Limits: the peer's device is not known here (PLUS drives it), so caps() give no force limit
-// or workspace: the servo's gate clamps to the scene's force_limit_n and limits the force's
-// rate to that limit over 2 ms (servo/force_gate.h).
+// Limits: the peer's device is not known here (PLUS drives it): caps() give the force limit
+// the scene declares for links (IgtlDeviceOptions::max_force_n, default the Touch's 3.3 N) and
+// no workspace: the servo's gate clamps to min(scene's force_limit_n, that) and limits the
+// force's rate to it over 2 ms (servo/force_gate.h).
 //
 // The force loop closes over the network at the stream's rate, not the servo's: the device
 // measures it when it opens and reports it as DeviceCaps::native_rate_hz, with a stale
@@ -48,6 +49,10 @@ struct IgtlDeviceOptions {
   /// sends the servo's forces; starved, it would send an old force late and the new one
   /// right after, a step at the peer). Refused: the default scheduler.
   int fifo_priority = 0;
+  /// The peer's device's peak force [N] (caps().max_force_n: the servo's gate clamps to it
+  /// and limits the force's rate to it over 2 ms): PLUS drives the device, isotouch cannot
+  /// ask it. The scene's device.link_max_force_n; the default is the Touch's 3.3 N.
+  double max_force_n = 3.3;
 };
 
 /// A connection's last message however the process ends (servo/exit_zero.h: `zero`, sent on
@@ -135,7 +140,8 @@ class IgtlDevice final : public servo::HapticDeviceIO {
 /// measured rate and the stiffness bound it implies. @throws std::invalid_argument on a bad
 /// spec; std::runtime_error if it cannot be opened, or if loop.stiffness_n_per_m is above
 /// the bound and loop.allow_unstable_stiffness is not set (the message says how to allow it).
+/// `max_force_n`: the peer's device's peak force [N] (IgtlDeviceOptions::max_force_n).
 std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description,
-                                             int fifo_priority = 0);
+                                             int fifo_priority = 0, double max_force_n = 3.3);
 
 }  // namespace isotouch::service

@@ -914,6 +914,7 @@ void Server::start_session(std::unique_ptr<Session> s) {
     c.servo.world_T_device = {scene_.workspace_scale, s->frame.grid.centre_m()};  // as setup_scene's
   } else {
     device_.set_frame(s->frame, o_.offset_mm);
+    device_.set_max_force_n(scene_.link_max_force_n);  // the gate clamps to min(scene, link)
     c.servo.stale_timeout_s = o_.stale_s;
   }
   c.on_applied = s->mirror->listener(s->parts->edits());

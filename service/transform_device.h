@@ -61,6 +61,17 @@ class TransformDevice final : public servo::HapticDeviceIO {
   const std::atomic<std::uint64_t>* enable_force(bool on, double stall_s) override {
     return rule_.enable(on, stall_s, 0.05, now_ns());
   }
+  /// The stream client's device's peak force [N] (the scene's device.link_max_force_n; the
+  /// client drives it, isotouch cannot ask it). Only while no servo runs.
+  void set_max_force_n(double f_n) { max_force_n_ = f_n; }
+  /// That peak as the device's force limit: the servo's gate clamps to min(scene, it) and
+  /// limits the force's rate to it over 2 ms (servo/force_gate.h).
+  servo::DeviceCaps caps() const override {
+    servo::DeviceCaps c;
+    c.name = "serve's TRANSFORM stream";
+    c.max_force_n = max_force_n_;
+    return c;
+  }
   /// When the stream's next pose is due: the servo ticks just after it (input_phase.h).
   servo::InputPhase input_phase() const override { return arrivals_.phase(); }
   /// Reply thread only: before its first look_force(), then once a poll (clock read first).
@@ -93,6 +104,7 @@ class TransformDevice final : public servo::HapticDeviceIO {
   RasEcho echo_;
   servo::StallRule rule_;
   core::Vec3 offset_mm_;
+  double max_force_n_ = 3.3;
 };
 
 }  // namespace isotouch::service

@@ -10,7 +10,15 @@
 #      time), and no non-zero force after it;
 #   2. at 50 Hz the bound (2 (5.01 - 1) / 0.02 = 401 N/m, as measured) is below the scene's 800 N/m: refused,
 #      exit 1, the message naming the bound and the way to allow it; with
-#      --allow-unstable-stiffness it runs, warning.
+#      --allow-unstable-stiffness it runs, warning;
+#   3. the link's device limit: a scene whose servo allows 40 N (K 3000 N/m, stable at 500 Hz;
+#      2.6 voxels into bone it asks for about 6 N) does not fit the default
+#      device.link_max_force_n (3.3 N, the Touch's peak): refused, exit 1, naming both, and the
+#      peer receives no force above 3.3 N; with device.link_max_force_n 40 it runs and the
+#      peer receives more than 3.3 N (the key, not a fixed cap, decides);
+#   4. a run stopped by SIGINT, and one by SIGTERM, while the peer holds a contact force: the
+#      peer's last Force is an exact zero, within the stale timeout of the signal and the
+#      time the machine was measured to be gone (igtl_signal_check.py).
 # "PASS haptic igtl" is printed once, last, after every check.
 # Usage: cli_haptic_igtl.sh ISOTOUCH SCENE PEER OUT_DIR
 set -u
@@ -40,6 +48,37 @@ run() {
 run fast 500 3.2
 run slow 50 3
 run allowed 50 5 --allow-unstable-stiffness
+python3 - "$scene" "$out/strong.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+s["servo"]["force_limit_n"] = 40
+s["servo"]["stiffness_n_per_m"] = 3000
+json.dump(s, open(sys.argv[2], "w"), indent=1)
+s["device"]["link_max_force_n"] = 40
+json.dump(s, open(sys.argv[2].replace(".json", "_link40.json"), "w"), indent=1)
+PY
+scene_default=$scene; scene=$out/strong.json
+run strong 500 3.2
+scene=$out/strong_link40.json
+run strong40 500 3.2
+scene=$scene_default
+# killed NAME SIG: the peer streams for 8 s; the run is stopped by SIG once it pushes.
+killed() {
+  local name=$1 sig=$2 port; port=$(free_port)
+  # shellcheck disable=SC2086
+  "$peer" "$port" 500 8 1.6 0.5 1 $path >"$out/$name.peer.log" 2>&1 &
+  local peer_pid=$!
+  for _ in $(seq 100); do grep -q listening "$out/$name.peer.log" && break; sleep 0.05; done
+  timeout 60 "$exe" run "$scene" --live -q --haptic "igtl:127.0.0.1:$port" >"$out/$name.log" 2>&1 &
+  local run_pid=$!
+  python3 "$(dirname "$0")/igtl_signal_check.py" "$out/$name.peer.log" $run_pid "$sig" 500 >"$out/$name.check" 2>&1
+  echo $? >"$out/$name.check.rc"
+  wait $run_pid 2>/dev/null
+  kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
+}
+killed sigint INT
+killed sigterm TERM
 grep -q "Hz measured" "$out/fast.log" || fail "the run did not say the stream's measured rate"
 [[ $(cat "$out/slow.rc") == 1 ]] || fail "the 50 Hz stream against K 800 N/m exited $(cat "$out/slow.rc"), not 1"
 grep -qE "servo.stiffness_n_per_m 800 is above the bound (39[0-9]|40[0-9])" "$out/slow.log" || fail "the refusal does not name the bound"
@@ -96,5 +135,24 @@ else:
 if any(f != [0.0, 0.0, 0.0] for _, f in after): fail("a non-zero force after the stream was lost")
 print(f"igtl ok: {rate:.0f} Hz measured, bound {bound:.0f} N/m; {len(during)} forces, {len(pushing)} above 0.8 N "
       f"(max {max(norms):.2f} N); zero {late * 1e3:.1f} ms after the stream stopped")
+PY
+for sig in sigint sigterm; do
+  cat "$out/$sig.check"
+  [[ $(cat "$out/$sig.check.rc") == 0 ]] || fail "the run stopped by $sig: $(cat "$out/$sig.check")"
+done
+[[ $(cat "$out/strong.rc") == 1 ]] || fail "the 40 N scene through a 3.3 N link exited $(cat "$out/strong.rc"), not 1"
+grep -q "servo.force_limit_n 40 exceeds the device's maximum force 3.3" "$out/strong.log" ||
+  fail "the 40 N scene's refusal does not name servo.force_limit_n 40 and the link's 3.3 N"
+python3 - "$out" <<'PY' || exit 1
+import sys
+def peak(name):
+    f = [[float(v) for v in l.split()[2:5]] for l in open(f"{sys.argv[1]}/{name}.peer.log") if l.startswith("force ")]
+    return max((sum(c * c for c in x) ** 0.5 for x in f), default=0.0)
+refused, allowed = peak("strong"), peak("strong40")
+if refused > 3.3 + 1e-6:
+    print(f"FAIL haptic igtl: the peer received {refused:.3f} N from the 40 N scene, past the link's 3.3 N"); sys.exit(1)
+if allowed <= 3.3 + 1e-3:
+    print(f"FAIL haptic igtl: with device.link_max_force_n 40 the push peaked at {allowed:.3f} N: the key is not read"); sys.exit(1)
+print(f"igtl link limit ok: the 40 N scene refused (peer peak {refused:.3f} N); with link_max_force_n 40 {allowed:.2f} N")
 PY
 echo "PASS haptic igtl"

@@ -17,7 +17,10 @@
 #      pose, the second gets one STATUS (code 5) naming the owner; once the first is gone
 #      the second's stream is taken (logged);
 #   5. a rotated registration (--registration FILE, then a client's TrackerToImage) applied
-#      to the poses and, transposed, to the Force replies.
+#      to the poses and, transposed, to the Force replies;
+#   6. the stream's force at a scene's workspace_scale 0.1: the stream's points are the
+#      volume's own (its map is the identity), so the client 2 mm inside the 300 HU ball feels
+#      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N).
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -141,5 +144,36 @@ if not any("STATUS code 1: registration taken: tracker -> image rotation [[1 0 0
     fail("no STATUS taking the TrackerToImage TRANSFORM")
 print(f"registration ok: pose (0, 13, 0) -> HIP {hips[0]}, Force reply ({fx:.2f}, {fy:.2f}, {fz:.2f}) N in the tracker's frame; "
       f"TrackerToImage identity -> HIP {hips[1]}")
+PY
+
+# 6. workspace_scale 0.1: the same ball, the same 2 mm, through the Force replies.
+python3 - "$scene" "$out/scale.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+s["device"]["workspace_scale"] = 0.1
+json.dump(s, open(sys.argv[2], "w"), indent=1)
+PY
+"$exe" serve "$out/scale.json" --port 0 --stream Stylus --reply-force --seconds 6 >"$out/serve4.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve4.log" $serve_pid)
+[[ -n $port ]] || fail "the workspace_scale 0.1 serve never said it was listening: $(cat "$out/serve4.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 force \
+  >"$out/s.log" 2>&1 || fail "the workspace_scale client failed: $(cat "$out/s.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import sys
+log = open(f"{sys.argv[1]}/s.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+f = [l.split() for l in log if l.startswith("force ")]
+if len(f) != 1: fail("no force line")
+fx, fy, fz, fn = (float(v) for v in f[0][1:5])
+# K x depth, the depth 2 mm +- 0.7 mm (where 300 HU falls between the 1 mm voxels): [1.04, 2.16] N.
+k, lo, hi = 800.0, 1.3e-3, 2.7e-3
+if not (k * lo <= fn <= k * hi and fz > 0.9 * fn):
+    fail(f"at workspace_scale 0.1 the Force reply is ({fx}, {fy}, {fz}) |F| {fn:.3f} N 2 mm inside the ball: "
+         f"not K x depth = {k * lo:.2f}..{k * hi:.2f} N outward (+S)")
+print(f"workspace_scale ok: |F| {fn:.2f} N at 0.1, K x depth")
 PY
 echo "PASS serve truth"

@@ -5,7 +5,8 @@
 // SILENT_S seconds and closes; prints every "Force" TRANSFORM it receives.
 // Usage: igtl_plus_peer PORT RATE_HZ STREAM_S MOVE_AT MOVE_S SILENT_S X0 Y0 Z0 X1 Y1 Z1
 // Prints (t: seconds since the client connected):
-//   "connected", "pose T X Y Z" for the last pose sent, "stopped T" when the stream stops,
+//   "connected", "clock S" (t = 0 on the steady clock, CLOCK_MONOTONIC [s]: a test's
+//   python time.monotonic() on the same machine), "pose T X Y Z" for the last pose sent, "stopped T" when the stream stops,
 //   "force T FX FY FZ" per Force TRANSFORM received, "closed T" when the client closed.
 #include <igtlMessageHeader.h>
 #include <igtlServerSocket.h>
@@ -79,7 +80,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   t0 = Clock::now();
-  std::printf("connected\n");
+  std::printf("connected\nclock %.6f\n", std::chrono::duration<double>(t0.time_since_epoch()).count());
   std::thread reader([&] { read_forces(sock); });
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("StylusToTracker");

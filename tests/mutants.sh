@@ -39,7 +39,9 @@ only=${1:-}
 #   OLD     the exact text to replace; it must occur exactly once (use $'...\n...' to take in
 #           a neighbouring line where the text alone occurs twice)
 #   NEW     its replacement ("" deletes it)
-#   TARGET  the build target whose test must fail; FILTER its --gtest_filter
+#   TARGET  the build target whose test must fail; FILTER its --gtest_filter. A FILTER
+#           "ctest:NAME" runs the ctest test NAME instead (a cli_*.sh test judged on what a
+#           peer or a file got), TARGET then the targets it runs, space-separated
 names=() wheres=() olds=() news=() targets=() filters=()
 m() { names+=("$1"); wheres+=("$2"); olds+=("$3"); news+=("$4"); targets+=("$5"); filters+=("$6"); }
 
@@ -168,6 +170,19 @@ m exit-zero-sealed          $X $'  if (g_sealed.load()) {\n    s.busy.store(0);\
 m exit-zero-alt-stack       $X '    a.sa_flags = SA_NODEFER | SA_ONSTACK;' '    a.sa_flags = SA_NODEFER;' test_exit_zero 'ExitZero.AStackOverflow*'
 m exit-zero-not-mid-send    $X '    if (s.busy.load() != 0) {  // inside a send that does not end: the stream cannot take a zero' \
                                '    if (false) {' test_exit_zero 'ExitZero.*'
+
+# A process ended for a stuck servo sends each link its zero before _Exit (what the peer got).
+m live-stuck-exit-zero      session/live_session.cpp '  servo::send_exit_zeros(5000);  // a link'"'"'s peer (PLUS) holds the last force it got (exit_zero.h)' \
+                               '' test_live_session 'LiveSession.AServoStuckEnd*'
+# A v1 report device without a watchdog is refused unless the scene allows it.
+m run-no-watchdog-refused   run/haptic_device.cpp 'if (d.report && !(d.io->caps().watchdog_s > 0) && !scene.allow_no_watchdog)' \
+                               'if (false)' 'isotouch isotouch-devemu' 'ctest:cli_run_live_emu'
+# A link's device limit (device.link_max_force_n) is the gate's clamp: what the peer got.
+m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_force_n;  // the peer'"'"'s device, as the scene declares it' \
+                               '' 'isotouch igtl_plus_peer' 'ctest:cli_haptic_igtl'
+# serve's stream renders at the identity map: no 1 / workspace_scale in its force.
+m serve-stream-unscaled     service/serve.cpp '  if (!echo_device_) so.hri.world_per_device = 1.0;' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies
@@ -319,9 +334,17 @@ print(os.path.relpath(f, copy))
 EOF
 }
 
-build() { (cd "$copy" && cmake --build --preset release -j"$jobs" --target "$1") > "$work/build.log" 2>&1; }
+# shellcheck disable=SC2086
+build() { (cd "$copy" && cmake --build --preset release -j"$jobs" --target $1) > "$work/build.log" 2>&1; }
 # Runs TARGET's tests with FILTER (5 minutes at most); the failing tests' names on stdout.
 run_test() {
+  if [[ $2 == ctest:* ]]; then
+    timeout 300 ctest --test-dir "$copy/build" -R "^${2#ctest:}\$" --output-on-failure > "$work/test.log" 2>&1
+    local rc=$?
+    grep -q "tests passed, 0 tests failed out of 1" "$work/test.log" && return 0
+    echo "${2#ctest:}"
+    return $(( rc ? rc : 1 ))
+  fi
   timeout 300 "$copy/build/bin/$1" --gtest_filter="$2" > "$work/test.log" 2>&1
   local rc=$?
   sed -n 's/^\[  FAILED  \] \([A-Za-z0-9_]*\.[A-Za-z0-9_./]*\).*/\1/p' "$work/test.log" | sort -u | tr '\n' ' '

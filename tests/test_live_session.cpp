@@ -21,10 +21,12 @@
 #include <mutex>
 #include <optional>
 #include <sys/resource.h>
+#include <sys/socket.h>
 
 #include "isotouch/session/edit_session.h"
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/core/field_view.h"
+#include "isotouch/servo/exit_zero.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/io/record.h"
@@ -243,6 +245,31 @@ TEST(LiveSession, DestroyedWithTheServoStuckEndsTheProcess) {
   EXPECT_EXIT(stop_a_stuck_session(rec, "", true), testing::ExitedWithCode(isotouch::exit_code::kServoStuck),
               "live session \\(destroyed while running\\): .*the renderer has not returned");
   EXPECT_TRUE(fs::exists(rec)) << "the recording was not completed";
+  fs::remove_all(dir);
+}
+
+// A link's peer (PLUS) holds the last force it got: a process ended for a stuck servo sends
+// each registered link its zero before it _Exits. The link here is a socket pair; what its
+// other end received after the child ended is the peer's view.
+TEST(LiveSession, AServoStuckEndSendsTheLinksZero) {
+  const fs::path dir = temp_dir("live-stuck-zero");
+  const std::string rec = (dir / "stuck.rec").string(), marker = (dir / "marker.txt").string();
+  int sv[2];
+  ASSERT_EQ(socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  const std::string zero = "the link's zero";
+  EXPECT_EXIT(
+      {
+        isotouch::servo::ExitZero link(sv[0], reinterpret_cast<const std::uint8_t*>(zero.data()), zero.size());
+        if (!link.registered()) std::_Exit(3);
+        stop_a_stuck_session(rec, marker);
+      },
+      testing::ExitedWithCode(isotouch::exit_code::kServoStuck), "ending the process");
+  close(sv[0]);  // the child's copy is gone with it: the peer reads to the end
+  std::string got;
+  char buf[256];
+  for (ssize_t n; (n = read(sv[1], buf, sizeof buf)) > 0;) got.append(buf, std::size_t(n));
+  close(sv[1]);
+  EXPECT_EQ(got, zero) << "the link's peer did not get its zero from the process ended for a stuck servo";
   fs::remove_all(dir);
 }
 

@@ -576,7 +576,7 @@ TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
       {"device.encoder_resolution_m", s.device.encoder_resolution_m}, {"device.force_max_n", s.device.force_max_n},
       {"device.hand_stiffness_n_per_m", s.device.hand_stiffness_n_per_m},
       {"device.hand_damping_n_s_per_m", s.device.hand_damping_n_s_per_m}, {"device.substeps", s.device.substeps},
-      {"device.workspace_scale", s.workspace_scale},
+      {"device.workspace_scale", s.workspace_scale}, {"device.link_max_force_n", s.link_max_force_n},
       {"script.approach_distance_m", s.script.approach_distance_m},
       {"script.approach_speed_m_s", s.script.approach_speed_m_s}, {"script.press_depth_m", s.script.press_depth_m},
       {"script.press_speed_m_s", s.script.press_speed_m_s}, {"script.hold_s", s.script.hold_s},

@@ -100,7 +100,9 @@ struct EditFigures {
   bool plot_drawn = false;         ///< edits.png written
   /// Labelled scenes with a critical material: the margin warning (materials::CriticalMargin)
   /// fed every tick with the cutting brush's surface distance to the nearest critical voxel
-  /// (materials::CriticalDistance::lower_bound of the VHIP minus cut_radius_m).
+  /// (materials::CriticalDistance::lower_bound of its centre minus its radius): a timeline
+  /// drill or carve of that tick (or of its open stroke) with its own centre and radius, else
+  /// the button drill's burr at the VHIP.
   bool critical = false;
   std::string critical_names;      ///< the critical materials, comma separated
   double margin_m = 0;             ///< the warning distance: their largest margin_mm [m]

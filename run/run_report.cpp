@@ -251,9 +251,10 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
                                                                             : nlohmann::ordered_json(nullptr)},
                                                 {"first_entry_t_s", or_null(e.first_entry_t_s >= 0, e.first_entry_t_s)},
                                                 {"critical_voxels_changed", e.critical_voxels_changed},
-                                                {"method", "every tick: distance from the VHIP to the nearest critical voxel centre "
-                                                           "(exact distance transform, lower bound between voxel centres) minus "
-                                                           "the cutting brush's radius"}}},
+                                                {"method", "every tick: distance from the centre of the brush cutting that tick (a "
+                                                           "timeline drill or carve, else the button drill at the VHIP) to the "
+                                                           "nearest critical voxel centre (exact distance transform, lower bound "
+                                                           "between voxel centres) minus that brush's radius"}}},
           {"csv", "edits.csv"}};
 }
 

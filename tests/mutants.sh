@@ -235,6 +235,10 @@ m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical 
                                test_material_cut 'MaterialCut.*'
 m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill && m.rate >= 0) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
                                test_material_cut 'MaterialCut.*'
+# The distance transform takes each axis's own spacing (an oblique shape on three spacings).
+m cut-edt-axis-spacing       materials/critical_distance.cpp 'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.x, f, v, z)' \
+                               'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.y, f, v, z)' \
+                               test_material_cut 'MaterialCut.*'
 # The margin warning watches the brush that cuts each tick (a timeline brush's own centre and radius).
 m cut-margin-cutting-brush   run/edit_driver.cpp 'if (removes(b)) cutters_.push_back({b.centre_m, b.radius_m});' '' \
                                test_material_margin_run 'MaterialMarginRun.*'

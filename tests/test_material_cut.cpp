@@ -5,7 +5,8 @@
 //    (reach judged by brute force over the tube's voxels);
 //  - a soft layer above a hard one: the soft one loses value faster by the ratio of the
 //    rates (tolerance from the brush's float formula);
-//  - the distance field against brute force; a cut of label 0 only is bit for bit no cut;
+//  - the distance field against brute force (also an oblique shape on three different
+//    spacings); a cut of label 0 only is bit for bit no cut;
 //  - a Sculptor with a Vulkan device and a cut keeps every brush on the CPU reference.
 #include <gtest/gtest.h>
 
@@ -332,3 +333,38 @@ TEST(MaterialCut, SculptorWithCutStaysOnTheCpuReference) {
   EXPECT_EQ(std::memcmp(s.volume().voxels.data(), ref.voxels.data(), ref.voxels.size() * sizeof(float)), 0);
   EXPECT_EQ(test::validated_vk().validation_messages(), 0u);
 }
+
+// The distance transform on a grid with three different spacings, for an oblique shape (a
+// tube along (1, 2, 3) plus a ball off its axis): every voxel's distance is the brute-force
+// distance to the shape's voxel centres. An axis run with another axis's spacing would miss.
+TEST(MaterialCut, CriticalDistanceIsExactOnAnObliqueShapeWithThreeSpacings) {
+  core::Grid g;
+  g.dims = {20, 17, 15};
+  g.spacing_m = {0.3e-3, 0.5e-3, 0.8e-3};
+  std::vector<std::uint8_t> ids(g.voxel_count(), 1);
+  const Vec3 p0 = g.to_world(Vec3{2, 3, 1}), dir = Vec3{1, 2, 3} * (1 / std::sqrt(14.0));
+  const Vec3 ball = g.to_world(Vec3{16, 4, 11});
+  std::vector<Vec3> shape;
+  for (int z = 0; z < g.dims[2]; ++z)
+    for (int y = 0; y < g.dims[1]; ++y)
+      for (int x = 0; x < g.dims[0]; ++x) {
+        const Vec3 p = g.to_world(Vec3{double(x), double(y), double(z)});
+        const Vec3 d = p - p0;
+        const bool tube = core::norm(d - dir * core::dot(d, dir)) < 0.6e-3;
+        if (tube || core::norm(p - ball) < 1.0e-3) {
+          ids[g.index(x, y, z)] = 2;
+          shape.push_back(p);
+        }
+      }
+  ASSERT_GT(shape.size(), 20u);
+  const materials::CriticalDistance cd(g, ids, {false, false, true});
+  for (int z = 0; z < g.dims[2]; ++z)
+    for (int y = 0; y < g.dims[1]; ++y)
+      for (int x = 0; x < g.dims[0]; ++x) {
+        const Vec3 p = g.to_world(Vec3{double(x), double(y), double(z)});
+        double exact = 1e9;
+        for (const Vec3& q : shape) exact = std::min(exact, core::norm(p - q));
+        ASSERT_NEAR(cd.at(x, y, z), exact, 1e-7 + 1e-6 * exact) << x << " " << y << " " << z;
+      }
+}
+

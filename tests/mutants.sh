@@ -235,6 +235,8 @@ m cut-critical-never-removed $C 'if (cc.critical[mat]) continue;  // a critical 
                                test_material_cut 'MaterialCut.*'
 m cut-material-rate          $C 'if (b.kind == BrushKind::kDrill && m.rate >= 0) c.amount[i] = float(m.rate * b.dt_s * excess);' '' \
                                test_material_cut 'MaterialCut.*'
+m cut-material-density-scale $C 'if (m.density_scale > 0) c.inv_dens[i] = float(1.0 / m.density_scale);' '' \
+                               test_material_cut 'MaterialCut.*'
 # The distance transform takes each axis's own spacing (an oblique shape on three spacings).
 m cut-edt-axis-spacing       materials/critical_distance.cpp 'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.x, f, v, z)' \
                                'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.y, f, v, z)' \

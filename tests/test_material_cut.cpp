@@ -4,7 +4,8 @@
 //    changes, and the margin warning fires before the burr reaches the tube, in every drill
 //    (reach judged by brute force over the tube's voxels);
 //  - a soft layer above a hard one: the soft one loses value faster by the ratio of the
-//    rates (tolerance from the brush's float formula);
+//    rates, and two materials differing in density_scale by the ratio of their density
+//    factors (tolerances from the brush's float formula);
 //  - the distance field against brute force (also an oblique shape on three different
 //    spacings); a cut of label 0 only is bit for bit no cut;
 //  - a Sculptor with a Vulkan device and a cut keeps every brush on the CPU reference.
@@ -368,3 +369,43 @@ TEST(MaterialCut, CriticalDistanceIsExactOnAnObliqueShapeWithThreeSpacings) {
       }
 }
 
+// Per-material density_scale: two materials of the same rate, mirrored about the burr's
+// centre, differ only in density_scale. Each loses amount * w / f with f = 1 + (v - empty) /
+// density_scale (brush.h), so a voxel of A loses f_B / f_A times what its mirror of B loses.
+TEST(MaterialCut, DensityScaleScalesTheRemovedAmount) {
+  engine::Volume vol;
+  vol.grid.dims = {24, 24, 24};
+  vol.grid.spacing_m = {0.5e-3, 0.5e-3, 0.5e-3};
+  vol.path = "synthetic:two-densities";
+  vol.voxels.assign(vol.grid.voxel_count(), kBone);
+  vol.update_stats();
+  auto cut = std::make_shared<MaterialCut>();
+  const double ds_a = 4000, ds_b = 250;
+  cut->table = {CutMaterial{4000, ds_a, false}, CutMaterial{4000, ds_b, false}};
+  cut->ids.resize(vol.grid.voxel_count());
+  for (int z = 0; z < 24; ++z)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) cut->ids[vol.grid.index(x, y, z)] = z >= 12 ? 1 : 2;
+  const Brush b = drill_at(vol.grid.to_world(Vec3{11.5, 11.5, 11.5}), 2e-3, 1.5);
+  const engine::Volume before = vol;
+  session::apply_brush_cpu(vol, b, cut.get());
+  const double ratio = (1 + kBone / ds_b) / (1 + kBone / ds_a);
+  const double half_ulp = 6.1035e-5;  // ulp(1000) / 2
+  int pairs = 0;
+  for (int dz = 0; dz < 12; ++dz)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) {
+        const std::size_t s = vol.grid.index(x, y, 12 + dz), h = vol.grid.index(x, y, 11 - dz);
+        const double da = double(before.voxels[s]) - vol.voxels[s], db = double(before.voxels[h]) - vol.voxels[h];
+        if (db == 0) {
+          EXPECT_LE(da, ratio * 2 * half_ulp);
+          continue;
+        }
+        ++pairs;
+        // float(float(a * w) / f) with f's own 3 roundings (inverse, product, sum) per side,
+        // subtracted from 1000 in float: 6 relative roundings and half an ulp of 1000.
+        const double rel = 10 * 5.97e-8 + half_ulp / (ratio * db) + half_ulp / db;
+        EXPECT_NEAR(da / db, ratio, ratio * rel) << x << " " << y << " " << dz;
+      }
+  EXPECT_GT(pairs, 50);
+}

@@ -204,7 +204,9 @@ void load_materials(const Scene& scene, SceneSetup& s, std::ostream& log) {
     log << (i ? ", " : " ") << lv.materials[i].name << " " << lv.voxels[i + 1] << " voxels"
         << (lv.materials[i].critical ? " (critical)" : "");
   log << "; " << lv.voxels[0] << " voxels unlabelled (the drill cuts per material";
-  if (s.critical) log << ", never the critical ones, warning within " << fmt(s.critical_margin_m * 1e3, 4) << " mm of them";
+  if (s.critical) log << ", never the critical ones";
+  if (s.critical && scene.edits.present)  // the margin warning watches the edits only (run::EditDriver)
+    log << ", warning within " << fmt(s.critical_margin_m * 1e3, 4) << " mm of them";
   log << "; the servo does not feel materials yet)\n";
   for (const std::string& n : lv.notes) log << "         note: " << n << "\n";
 }

@@ -121,3 +121,26 @@ TEST(MaterialMarginRun, TheBrushCuttingEachTickIsWatched) {
   EXPECT_LT(exact, vhip_only - diag) << "the test's premise: the carves come closer than the probe";
   fs::remove_all(out);
 }
+
+// The run log promises the margin warning only where it runs: with edits (run::EditDriver
+// watches them), not in a scene without an "edits" section.
+TEST(MaterialMarginRun, TheLogPromisesTheWarningOnlyWithEdits) {
+  const std::string base = R"({"name": "margin-log", "volume": {"synthetic": "sphere", "dims": [32, 32, 32],
+      "spacing_m": 0.001, "radius_vox": 12}, "isovalue": 0, "inside": "above",
+      "script": {"hold_s": 0.05, "stroke_length_m": 0.0}, "outputs": {"plots": false, "trace_csv": false},
+      "materials": {"list": [{"name": "core", "range": [6, 100], "critical": true, "margin_mm": 2}]})";
+  for (const bool with_edits : {false, true}) {
+    const auto scene = isotouch::io::parse_scene(
+        base + (with_edits ? R"(, "edits": {"brush": {"kind": "carve", "radius_mm": 1}}})" : "}"), "margin-log.json");
+    const fs::path out = temp_dir("isotouch_margin_log");
+    isotouch::run::RunOptions opt;
+    opt.out_dir = out.string();
+    opt.progress = false;
+    std::ostringstream log;
+    isotouch::run::run_scene(scene, opt, log);
+    const std::string text = log.str();
+    EXPECT_NE(text.find("(critical)"), std::string::npos) << text;
+    EXPECT_EQ(text.find("warning within") != std::string::npos, with_edits) << (with_edits ? "edits" : "no edits") << ":\n" << text;
+    fs::remove_all(out);
+  }
+}

@@ -50,12 +50,10 @@ EditDriver::EditDriver(const Scene& scene, SceneSetup& setup)
       plan_.push_back({last, i, Plan::kEnd});
     }
   }
-  if (setup.critical) {
-    margin_.emplace(setup.critical_margin_m);
-    tool_radius_m_ = at_tool(e.brush).radius_mm * 1e-3;
-    figures.critical = true;
-    figures.critical_names = setup.critical_names;
-    figures.margin_m = setup.critical_margin_m;
+  tool_radius_m_ = at_tool(e.brush).radius_mm * 1e-3;
+  for (const SceneSetup::CriticalStructure& c : setup.critical) {
+    margins_.emplace_back(c.margin_m);
+    figures.critical.push_back({c.name, c.margin_m});
   }
   std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
   const double end_s = setup.script.duration_s;
@@ -104,7 +102,7 @@ void EditDriver::operator()(session::LiveSession& live, long k, const sim::Trace
       }
     }
   }
-  if (margin_) watch_margin(k, row);
+  if (!margins_.empty()) watch_margin(k, row);
 }
 
 bool EditDriver::removes(const session::Brush& b) {
@@ -165,18 +163,23 @@ void EditDriver::submit(session::LiveSession& live, long k, double t, EditEvent:
 void EditDriver::watch_margin(long k, const sim::TraceRow& row) {
   const double t = double(k) / scene_.hri.rate_hz;
   add_cutters(row);
-  double surface = std::numeric_limits<double>::infinity();
-  for (const Cutter& c : cutters_) surface = std::min(surface, setup_.critical->lower_bound(c.centre_m) - c.radius_m);
-  const long before = margin_->entries();
-  margin_->update(t, 1.0 / scene_.hri.rate_hz, surface);
-  if (margin_->entries() > before && margin_->entries() <= 3)
-    note("t = " + fmt(t, 4) + " s: WARNING the burr's surface entered the " + fmt(margin_->margin_m() * 1e3, 4) +
-         " mm margin of the critical " + setup_.critical_names + " (" + fmt(surface * 1e3, 4) + " mm away)" +
-         (margin_->entries() == 3 ? "; later entries are counted in summary.json edits.critical_margin" : ""));
-  figures.margin_entries = margin_->entries();
-  figures.margin_time_s = margin_->time_inside_s();
-  figures.closest_approach_m = margin_->closest_m();
-  figures.first_entry_t_s = margin_->first_entry_t_s();
+  for (std::size_t m = 0; m < margins_.size(); ++m) {
+    const SceneSetup::CriticalStructure& cs = setup_.critical[m];
+    materials::CriticalMargin& margin = margins_[m];
+    double surface = std::numeric_limits<double>::infinity();
+    for (const Cutter& c : cutters_) surface = std::min(surface, cs.distance->lower_bound(c.centre_m) - c.radius_m);
+    const long before = margin.entries();
+    margin.update(t, 1.0 / scene_.hri.rate_hz, surface);
+    if (margin.entries() > before && margin.entries() <= 3)
+      note("t = " + fmt(t, 4) + " s: WARNING the burr's surface entered the " + fmt(margin.margin_m() * 1e3, 4) +
+           " mm margin of the critical " + cs.name + " (" + fmt(surface * 1e3, 4) + " mm away)" +
+           (margin.entries() == 3 ? "; later entries are counted in summary.json edits.critical_margin" : ""));
+    EditFigures::CriticalFigures& f = figures.critical[m];
+    f.entries = margin.entries();
+    f.time_inside_s = margin.time_inside_s();
+    f.closest_approach_m = margin.closest_m();
+    f.first_entry_t_s = margin.first_entry_t_s();
+  }
 }
 
 void EditDriver::measure_edited(long k, const sim::TraceRow& row) {

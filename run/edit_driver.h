@@ -104,8 +104,8 @@ class EditDriver {
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
-  /// The margin warning (labelled scenes with a critical material; else unset).
-  std::optional<materials::CriticalMargin> margin_;
+  /// The margin warning, one per critical material (setup_.critical's order; else empty).
+  std::vector<materials::CriticalMargin> margins_;
   double tool_radius_m_ = 0;  ///< the button drill's radius at the VHIP [m]
   /// A brush that cuts this tick: its surface is what must keep off the critical structures.
   struct Cutter {

@@ -244,8 +244,12 @@ m cut-edt-axis-spacing       materials/critical_distance.cpp 'envelope_1d(&sq[k 
 # The margin warning watches the brush that cuts each tick (a timeline brush's own centre and radius).
 m cut-margin-cutting-brush   run/edit_driver.cpp 'if (removes(b)) cutters_.push_back({b.centre_m, b.radius_m});' '' \
                                test_material_margin_run 'MaterialMarginRun.*'
+# Each critical material has its own distance field (not the union of them all).
+m cut-margin-per-material    run/scene_setup.cpp 'only[i + 1] = true;' \
+                               'for (std::size_t j = 0; j < lv.materials.size(); ++j) only[j + 1] = lv.materials[j].critical;' \
+                               test_material_margin_run 'MaterialMarginRun.*'
 # The run log promises the margin warning only where it runs (with edits).
-m cut-margin-log-with-edits  run/scene_setup.cpp 'if (s.critical && scene.edits.present)' 'if (s.critical)' \
+m cut-margin-log-with-edits  run/scene_setup.cpp 'if (!s.critical.empty() && scene.edits.present)' 'if (!s.critical.empty())' \
                                test_material_margin_run 'MaterialMarginRun.*'
 
 # ---- The run ----

@@ -1,14 +1,16 @@
 // The margin warning in `isotouch run` (run_scene) on an analytic phantom whose truth is exact:
 // a sphere (value = 20 mm - distance from its centre) cut into shells by a transfer function,
 // two of them critical (a ring and the core). Timeline carves with their own centres and radii
-// cut near them; summary.json's closest approach must be the one of the brush that cut each
-// tick (brute force over the critical voxels' centres here, not the code's distance field).
+// cut near them; summary.json's closest approach per critical material must be the one of the
+// brush that cut each tick (brute force over that material's voxel centres here, not the
+// code's distance field), its entries counted at its own margin.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -112,13 +114,34 @@ TEST(MaterialMarginRun, TheBrushCuttingEachTickIsWatched) {
     core_exact = std::min(core_exact, nearest(core, p) - 0.5e-3);
     vhip_only = std::min(vhip_only, std::min(nearest(ring, p), nearest(core, p)) - 0.5e-3);
   }
+  EXPECT_LT(std::min(ring_exact, core_exact), vhip_only - diag) << "the test's premise: the carves come closer than the probe";
+  // Per material: its own closest approach, and entries at its own margin (the ring: both
+  // carves, about 1 mm and -0.4 mm from it, the probe between them about 4.5 mm; the core:
+  // the second carve only, about 1.3 mm from it, the first about 8.4 mm).
   std::ifstream js(out / "summary.json");
-  const auto cm = nlohmann::json::parse(js).at("edits").at("critical_margin");
-  const double closest = cm.at("closest_approach_mm").get<double>() * 1e-3;
-  const double exact = std::min(ring_exact, core_exact);
-  EXPECT_LE(closest, exact + 1e-9);
-  EXPECT_GE(closest, exact - diag - 1e-9);
-  EXPECT_LT(exact, vhip_only - diag) << "the test's premise: the carves come closer than the probe";
+  const auto list = nlohmann::json::parse(js).at("edits").at("critical_margin").at("materials");
+  ASSERT_EQ(list.size(), 2u);
+  const struct {
+    const char* name;
+    double margin_mm, exact;
+    long entries;
+  } want[] = {{"ring", 2.5, ring_exact, 2}, {"core", 4, core_exact, 1}};
+  for (std::size_t i = 0; i < 2; ++i) {
+    const auto& m = list[i];
+    EXPECT_EQ(m.at("name"), want[i].name);
+    EXPECT_DOUBLE_EQ(m.at("margin_mm").get<double>(), want[i].margin_mm);
+    const double closest = m.at("closest_approach_mm").get<double>() * 1e-3;
+    EXPECT_LE(closest, want[i].exact + 1e-9) << want[i].name;
+    EXPECT_GE(closest, want[i].exact - diag - 1e-9) << want[i].name;
+    EXPECT_EQ(m.at("entries").get<long>(), want[i].entries) << want[i].name;
+    EXPECT_GT(m.at("time_inside_s").get<double>(), 0.0) << want[i].name;
+    EXPECT_EQ(m.at("voxels_changed").get<long>(), 0) << want[i].name;
+  }
+  // report.md: a row per critical material.
+  std::ifstream md_in(out / "report.md");
+  const std::string md((std::istreambuf_iterator<char>(md_in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(md.find("| critical margin | ring, margin 2.5 mm: **WARNING** 2 entries"), std::string::npos) << md;
+  EXPECT_NE(md.find("| critical margin | core, margin 4 mm: **WARNING** 1 entry,"), std::string::npos) << md;
   fs::remove_all(out);
 }
 

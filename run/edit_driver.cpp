@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -49,12 +50,10 @@ EditDriver::EditDriver(const Scene& scene, SceneSetup& setup)
       plan_.push_back({last, i, Plan::kEnd});
     }
   }
-  if (setup.critical) {
-    margin_.emplace(setup.critical_margin_m);
-    cut_radius_m_ = at_tool(e.brush).radius_mm * 1e-3;
-    figures.critical = true;
-    figures.critical_names = setup.critical_names;
-    figures.margin_m = setup.critical_margin_m;
+  tool_radius_m_ = at_tool(e.brush).radius_mm * 1e-3;
+  for (const SceneSetup::CriticalStructure& c : setup.critical) {
+    margins_.emplace_back(c.margin_m);
+    figures.critical.push_back({c.name, c.margin_m});
   }
   std::stable_sort(plan_.begin(), plan_.end(), [](const Plan& a, const Plan& b) { return a.tick < b.tick; });
   const double end_s = setup.script.duration_s;
@@ -69,7 +68,7 @@ EditDriver::EditDriver(const Scene& scene, SceneSetup& setup)
 void EditDriver::operator()(session::LiveSession& live, long k, const sim::TraceRow& row) {
   const double t = double(k) / scene_.hri.rate_hz;
   contact_seen_ = contact_seen_ || row.contact;
-  if (margin_) watch_margin(k, row);
+  cutters_.clear();
   if (row.contact && row.version > 1) measure_edited(k, row);
   // What tick k read (before this tick's edits): the release check's inside test.
   hip_inside.push_back(iso_.contains(core::FieldView(*setup_.session->current()).value(row.hip_m)) ? 1 : 0);
@@ -79,8 +78,14 @@ void EditDriver::operator()(session::LiveSession& live, long k, const sim::Trace
     switch (p.what) {
       case Plan::kUndo: submit(live, k, t, EditEvent::Kind::kUndo, {}); break;
       case Plan::kRedo: submit(live, k, t, EditEvent::Kind::kRedo, {}); break;
-      case Plan::kBegin: submit(live, k, t, EditEvent::Kind::kBeginStroke, {}); break;
-      case Plan::kEnd: submit(live, k, t, EditEvent::Kind::kEndStroke, {}); break;
+      case Plan::kBegin:
+        submit(live, k, t, EditEvent::Kind::kBeginStroke, {});
+        stroke_ = p.entry;
+        break;
+      case Plan::kEnd:
+        submit(live, k, t, EditEvent::Kind::kEndStroke, {});
+        stroke_.reset();
+        break;
       case Plan::kApply: {
         if (te.at_vhip && !contact_seen_ && !row.contact) {
           if (figures.vhip_before_contact++ == 0)
@@ -89,12 +94,36 @@ void EditDriver::operator()(session::LiveSession& live, long k, const sim::Trace
         }
         const Vec3 c = te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m);
         const double f = te.brush.force_n >= 0 ? te.brush.force_n : core::norm(row.force_n);
-        submit(live, k, t, EditEvent::Kind::kBrush, make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f));
+        const session::Brush b = make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_, c, dt_, f);
+        submit(live, k, t, EditEvent::Kind::kBrush, b);
+        if (removes(b)) cutters_.push_back({b.centre_m, b.radius_m});
         ++figures.timeline_brushes;
         break;
       }
     }
   }
+  if (!margins_.empty()) watch_margin(k, row);
+}
+
+bool EditDriver::removes(const session::Brush& b) {
+  return b.kind == session::BrushKind::kDrill || b.kind == session::BrushKind::kCarve;
+}
+
+// The brushes that cut at tick k: the timeline's drill and carve applications of this tick;
+// between the applications of an open timeline stroke, its brush where the next one goes;
+// else the button drill's burr at the VHIP.
+void EditDriver::add_cutters(const sim::TraceRow& row) {
+  if (!cutters_.empty()) return;
+  if (stroke_) {
+    const TimedEdit& te = scene_.edits.timeline[*stroke_];
+    const session::Brush b = make_brush(te.at_vhip ? at_tool(te.brush) : te.brush, targets_,
+                                        te.at_vhip ? row.vhip_m : setup_.volume.to_grid(te.at_m), dt_, 0);
+    if (removes(b)) {
+      cutters_.push_back({b.centre_m, b.radius_m});
+      return;
+    }
+  }
+  cutters_.push_back({row.vhip_m, tool_radius_m_});
 }
 
 void EditDriver::on_applied(const EditEvent& applied, const EditOutcome& outcome, session::EditSource source) {
@@ -133,17 +162,24 @@ void EditDriver::submit(session::LiveSession& live, long k, double t, EditEvent:
 
 void EditDriver::watch_margin(long k, const sim::TraceRow& row) {
   const double t = double(k) / scene_.hri.rate_hz;
-  const double surface = setup_.critical->lower_bound(row.vhip_m) - cut_radius_m_;
-  const long before = margin_->entries();
-  margin_->update(t, 1.0 / scene_.hri.rate_hz, surface);
-  if (margin_->entries() > before && margin_->entries() <= 3)
-    note("t = " + fmt(t, 4) + " s: WARNING the burr's surface entered the " + fmt(margin_->margin_m() * 1e3, 4) +
-         " mm margin of the critical " + setup_.critical_names + " (" + fmt(surface * 1e3, 4) + " mm away)" +
-         (margin_->entries() == 3 ? "; later entries are counted in summary.json edits.critical_margin" : ""));
-  figures.margin_entries = margin_->entries();
-  figures.margin_time_s = margin_->time_inside_s();
-  figures.closest_approach_m = margin_->closest_m();
-  figures.first_entry_t_s = margin_->first_entry_t_s();
+  add_cutters(row);
+  for (std::size_t m = 0; m < margins_.size(); ++m) {
+    const SceneSetup::CriticalStructure& cs = setup_.critical[m];
+    materials::CriticalMargin& margin = margins_[m];
+    double surface = std::numeric_limits<double>::infinity();
+    for (const Cutter& c : cutters_) surface = std::min(surface, cs.distance->lower_bound(c.centre_m) - c.radius_m);
+    const long before = margin.entries();
+    margin.update(t, 1.0 / scene_.hri.rate_hz, surface);
+    if (margin.entries() > before && margin.entries() <= 3)
+      note("t = " + fmt(t, 4) + " s: WARNING the burr's surface entered the " + fmt(margin.margin_m() * 1e3, 4) +
+           " mm margin of the critical " + cs.name + " (" + fmt(surface * 1e3, 4) + " mm away)" +
+           (margin.entries() == 3 ? "; later entries are counted in summary.json edits.critical_margin" : ""));
+    EditFigures::CriticalFigures& f = figures.critical[m];
+    f.entries = margin.entries();
+    f.time_inside_s = margin.time_inside_s();
+    f.closest_approach_m = margin.closest_m();
+    f.first_entry_t_s = margin.first_entry_t_s();
+  }
 }
 
 void EditDriver::measure_edited(long k, const sim::TraceRow& row) {

@@ -86,9 +86,13 @@ class EditDriver {
   void measure_edited(long k, const sim::TraceRow& row);
 
   void note(const std::string& s) { figures.notes.push_back(s); }
-  /// Tick k's margin warning: the cutting brush's surface at the VHIP against the critical
-  /// structures' distance; the figures and, on each entry, a note.
+  /// Tick k's margin warning: the surface of the brush cutting that tick (add_cutters: its own
+  /// centre and radius) against the critical structures' distance; the figures and, on each
+  /// entry, a note.
   void watch_margin(long k, const sim::TraceRow& row);
+  /// With no timeline brush cutting this tick: the open stroke's brush, else the button drill at the VHIP.
+  void add_cutters(const sim::TraceRow& row);
+  static bool removes(const session::Brush& b);  ///< a drill or a carve
   /// One line per kind of edit that did nothing (the first time), into figures.notes.
   void said_if_nothing(EditEvent::Kind kind, const session::Brush& b, const EditOutcome& o, double t);
 
@@ -100,9 +104,16 @@ class EditDriver {
   long inside0_, inside_now_ = inside0_;
   std::vector<Plan> plan_;
   std::size_t next_ = 0;
-  /// The margin warning (labelled scenes with a critical material; else unset).
-  std::optional<materials::CriticalMargin> margin_;
-  double cut_radius_m_ = 0;  ///< the cutting brush's radius [m]: its surface is what must keep off
+  /// The margin warning, one per critical material (setup_.critical's order; else empty).
+  std::vector<materials::CriticalMargin> margins_;
+  double tool_radius_m_ = 0;  ///< the button drill's radius at the VHIP [m]
+  /// A brush that cuts this tick: its surface is what must keep off the critical structures.
+  struct Cutter {
+    Vec3 centre_m;    ///< grid-world [m]
+    double radius_m;  ///< [m]
+  };
+  std::vector<Cutter> cutters_;          ///< this tick's (add_cutters)
+  std::optional<std::size_t> stroke_;    ///< the timeline entry whose stroke is open
   std::shared_ptr<core::SampleField> truth_;
   std::uint64_t truth_version_ = 0;
   bool contact_seen_ = false;

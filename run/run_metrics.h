@@ -100,15 +100,20 @@ struct EditFigures {
   bool plot_drawn = false;         ///< edits.png written
   /// Labelled scenes with a critical material: the margin warning (materials::CriticalMargin)
   /// fed every tick with the cutting brush's surface distance to the nearest critical voxel
-  /// (materials::CriticalDistance::lower_bound of the VHIP minus cut_radius_m).
-  bool critical = false;
-  std::string critical_names;      ///< the critical materials, comma separated
-  double margin_m = 0;             ///< the warning distance: their largest margin_mm [m]
-  long margin_entries = 0;         ///< times the burr's surface entered the margin
-  double margin_time_s = 0;        ///< time inside the margin [s]
-  double closest_approach_m = std::numeric_limits<double>::infinity();  ///< smallest surface distance [m] (< 0: the brush overlapped the structure's voxel centres; inf: never measured)
-  double first_entry_t_s = -1;     ///< [s], -1: never entered
-  long critical_voxels_changed = 0; ///< critical voxels whose value differs after the run (0: never removed)
+  /// (materials::CriticalDistance::lower_bound of its centre minus its radius): a timeline
+  /// drill or carve of that tick (or of its open stroke) with its own centre and radius, else
+  /// the button drill's burr at the VHIP. One per critical material, each at its own margin
+  /// against the distance to its own voxels.
+  struct CriticalFigures {
+    std::string name;
+    double margin_m = 0;             ///< the warning distance: its margin_mm [m]
+    long entries = 0;                ///< times the burr's surface entered the margin
+    double time_inside_s = 0;        ///< time inside the margin [s]
+    double closest_approach_m = std::numeric_limits<double>::infinity();  ///< smallest surface distance [m] (< 0: the brush overlapped the structure's voxel centres; inf: never measured)
+    double first_entry_t_s = -1;     ///< [s], -1: never entered
+    long voxels_changed = 0;         ///< its voxels whose value differs after the run (0: never removed)
+  };
+  std::vector<CriticalFigures> critical;
   std::string before_after_note;   ///< caption, or why pictures / plot were not drawn
 };
 

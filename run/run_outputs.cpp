@@ -203,14 +203,12 @@ void edit_figures(const SceneSetup& setup, const EditDriver& d, const std::vecto
   e.contact_ticks_after_edit = after_edit;
   e.present = true;
   EditSession& session = *setup.session;
-  if (setup.critical) {  // every critical voxel against the volume as loaded
+  for (std::size_t k = 0; k < setup.critical.size(); ++k) {  // each critical material against the volume as loaded
     const std::vector<float>& now = session.volume().voxels;
-    const session::MaterialCut& cut = *setup.cut;
-    for (std::size_t i = 0; i < now.size(); ++i) {
-      const std::uint8_t id = cut.ids[i];
-      if (id && cut.table[id - 1u].critical && std::memcmp(&now[i], &setup.volume.voxels[i], sizeof(float)) != 0)
-        ++e.critical_voxels_changed;
-    }
+    const std::vector<std::uint8_t>& ids = setup.cut->ids;
+    for (std::size_t i = 0; i < now.size(); ++i)
+      if (ids[i] == setup.critical[k].id && std::memcmp(&now[i], &setup.volume.voxels[i], sizeof(float)) != 0)
+        ++e.critical[k].voxels_changed;
   }
   e.events = long(d.rows.size());
   std::vector<double> upd, brush_ms;

@@ -155,6 +155,26 @@ std::string drill_rows(const EditFigures& e, const Scene& scene) {
   return md.str();
 }
 
+// summary.json edits.critical_margin: one entry per critical material.
+nlohmann::ordered_json critical_json(const EditFigures& e) {
+  nlohmann::ordered_json list = nlohmann::ordered_json::array();
+  for (const EditFigures::CriticalFigures& c : e.critical)
+    list.push_back(nlohmann::ordered_json{{"name", c.name},
+                    {"margin_mm", c.margin_m * 1e3},
+                    {"entries", c.entries},
+                    {"time_inside_s", c.time_inside_s},
+                    {"closest_approach_mm", std::isfinite(c.closest_approach_m) ? nlohmann::ordered_json(c.closest_approach_m * 1e3)
+                                                                                : nlohmann::ordered_json(nullptr)},
+                    {"first_entry_t_s", c.first_entry_t_s >= 0 ? nlohmann::ordered_json(c.first_entry_t_s)
+                                                               : nlohmann::ordered_json(nullptr)},
+                    {"voxels_changed", c.voxels_changed}});
+  return {{"materials", list},
+          {"method", "per critical material, every tick: distance from the centre of the brush cutting that tick (a "
+                     "timeline drill or carve, else the button drill at the VHIP) to the nearest voxel centre of that "
+                     "material (exact distance transform, lower bound between voxel centres) minus that brush's radius, "
+                     "against that material's margin_mm"}};
+}
+
 nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
   const nlohmann::ordered_json drill =
       !e.drill ? nlohmann::ordered_json(nullptr)
@@ -240,33 +260,20 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
              return a;
            }()},
           {"plot", e.plot_drawn ? nlohmann::ordered_json("edits.png") : nlohmann::ordered_json(nullptr)},
-          {"critical_margin", !e.critical ? nlohmann::ordered_json(nullptr)
-                                          : nlohmann::ordered_json{
-                                                {"critical", e.critical_names},
-                                                {"margin_mm", e.margin_m * 1e3},
-                                                {"entries", e.margin_entries},
-                                                {"time_inside_s", e.margin_time_s},
-                                                {"closest_approach_mm", std::isfinite(e.closest_approach_m)
-                                                                            ? nlohmann::ordered_json(e.closest_approach_m * 1e3)
-                                                                            : nlohmann::ordered_json(nullptr)},
-                                                {"first_entry_t_s", or_null(e.first_entry_t_s >= 0, e.first_entry_t_s)},
-                                                {"critical_voxels_changed", e.critical_voxels_changed},
-                                                {"method", "every tick: distance from the VHIP to the nearest critical voxel centre "
-                                                           "(exact distance transform, lower bound between voxel centres) minus "
-                                                           "the cutting brush's radius"}}},
+          {"critical_margin", e.critical.empty() ? nlohmann::ordered_json(nullptr) : critical_json(e)},
           {"csv", "edits.csv"}};
 }
 
 namespace {
-// The margin warning's row: entries, time inside, closest approach (labelled scenes with a critical material).
+// The margin warning's rows, one per critical material: entries, time inside, closest approach.
 std::string margin_row(const EditFigures& e) {
-  if (!e.critical) return {};
   std::ostringstream r;
-  r << "| critical margin | " << e.critical_names << ", margin " << fmt(e.margin_m * 1e3, 4) << " mm: "
-    << (e.margin_entries ? "**WARNING** " : "") << e.margin_entries << " entr" << (e.margin_entries == 1 ? "y" : "ies")
-    << ", " << fmt(e.margin_time_s, 4) << " s inside, closest approach "
-    << (std::isfinite(e.closest_approach_m) ? fmt(e.closest_approach_m * 1e3, 4) + " mm" : std::string("none"))
-    << " (the cutting brush's surface); " << e.critical_voxels_changed << " critical voxels changed |\n";
+  for (const EditFigures::CriticalFigures& c : e.critical)
+    r << "| critical margin | " << c.name << ", margin " << fmt(c.margin_m * 1e3, 4) << " mm: "
+      << (c.entries ? "**WARNING** " : "") << c.entries << " entr" << (c.entries == 1 ? "y" : "ies") << ", "
+      << fmt(c.time_inside_s, 4) << " s inside, closest approach "
+      << (std::isfinite(c.closest_approach_m) ? fmt(c.closest_approach_m * 1e3, 4) + " mm" : std::string("none"))
+      << " (the cutting brush's surface); " << c.voxels_changed << " of its voxels changed |\n";
   return r.str();
 }
 }  // namespace

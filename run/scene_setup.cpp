@@ -174,22 +174,27 @@ void check_volume(const Scene& scene, SceneSetup& s, std::ostream& log) {
                              fmt(vol.max_value) + "] of " + vol.path + ": there is no isosurface");
 }
 
-// The drill's cut and the critical structures' distance field from the labels.
-void make_cut(const materials::LabelVolume& lv, SceneSetup& s) {
+}  // namespace
+
+std::shared_ptr<const session::MaterialCut> material_cut(const materials::LabelVolume& lv) {
   auto cut = std::make_shared<session::MaterialCut>();
   cut->ids = lv.ids;
-  std::vector<bool> critical(lv.materials.size() + 1, false);
+  for (const materials::Material& m : lv.materials) cut->table.push_back({m.rate, m.density_scale, m.critical});
+  return cut;
+}
+
+namespace {
+// The drill's cut and the critical structures' distance field from the labels.
+void make_cut(const materials::LabelVolume& lv, SceneSetup& s) {
+  s.cut = material_cut(lv);
   for (std::size_t i = 0; i < lv.materials.size(); ++i) {
     const materials::Material& m = lv.materials[i];
-    cut->table.push_back({m.rate, m.density_scale, m.critical});
-    critical[i + 1] = m.critical;
     if (!m.critical) continue;
-    s.critical_names += (s.critical_names.empty() ? "" : ", ") + m.name;
-    s.critical_margin_m = std::max(s.critical_margin_m, m.margin_mm * 1e-3);
+    std::vector<bool> only(lv.materials.size() + 1, false);
+    only[i + 1] = true;
+    s.critical.push_back({m.name, std::uint8_t(i + 1), m.margin_mm * 1e-3,
+                          std::make_shared<const materials::CriticalDistance>(s.volume.grid, lv.ids, only)});
   }
-  s.cut = std::move(cut);
-  if (!s.critical_names.empty())
-    s.critical = std::make_shared<const materials::CriticalDistance>(s.volume.grid, lv.ids, critical);
 }
 
 // 1b. The scene's materials read onto the volume's grid and logged, so that a bad label map
@@ -204,7 +209,10 @@ void load_materials(const Scene& scene, SceneSetup& s, std::ostream& log) {
     log << (i ? ", " : " ") << lv.materials[i].name << " " << lv.voxels[i + 1] << " voxels"
         << (lv.materials[i].critical ? " (critical)" : "");
   log << "; " << lv.voxels[0] << " voxels unlabelled (the drill cuts per material";
-  if (s.critical) log << ", never the critical ones, warning within " << fmt(s.critical_margin_m * 1e3, 4) << " mm of them";
+  if (!s.critical.empty()) log << ", never the critical ones";
+  if (!s.critical.empty() && scene.edits.present)  // the margin warning watches the edits only (run::EditDriver)
+    for (std::size_t i = 0; i < s.critical.size(); ++i)
+      log << (i ? ", " : ", warning within ") << fmt(s.critical[i].margin_m * 1e3, 4) << " mm of " << s.critical[i].name;
   log << "; the servo does not feel materials yet)\n";
   for (const std::string& n : lv.notes) log << "         note: " << n << "\n";
 }

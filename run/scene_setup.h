@@ -20,6 +20,7 @@
 #include "isotouch/servo/workspace.h"
 #include "isotouch/session/material_cut.h"
 #include "isotouch/materials/critical_distance.h"
+#include "isotouch/materials/label_volume.h"
 
 namespace isotouch::run {
 
@@ -52,6 +53,9 @@ std::vector<engine::PassDesc> scene_passes(const io::Scene& scene);
 /// sets them.
 session::Brush make_brush(const io::BrushSpec& b, const session::BrushTargets& defaults, const core::Vec3& centre_m,
                           double dt_s, double force_n);
+/// The drill's per-material cut of a labelled scene: `lv`'s ids and, per material, its rate,
+/// density scale and critical flag (for session::Sculptor::set_material_cut).
+std::shared_ptr<const session::MaterialCut> material_cut(const materials::LabelVolume& lv);
 /// The drill's rate in value units per (N s): "rate" as given, or "removal_per_n_s" times
 /// the targets' |material - empty|.
 double drill_rate(const io::BrushSpec& b, const session::BrushTargets& t);
@@ -95,11 +99,15 @@ struct SceneSetup {
   /// Labelled scenes (a "materials" section): the drill's per-material cut, given to the
   /// edit session's Sculptor (null without materials: one material, today's path).
   std::shared_ptr<const session::MaterialCut> cut;
-  /// The distance to the critical materials' voxels (null when none is critical), their
-  /// names and the margin warning's distance (their largest margin_mm) [m].
-  std::shared_ptr<const materials::CriticalDistance> critical;
-  std::string critical_names;
-  double critical_margin_m = 0;
+  /// One per critical material (empty when none is): its name, id, margin and the distance
+  /// to its own voxels, so that each is warned about at its own margin_mm.
+  struct CriticalStructure {
+    std::string name;
+    std::uint8_t id = 0;      ///< its id in cut->ids
+    double margin_m = 0;      ///< the warning distance [m] (its margin_mm)
+    std::shared_ptr<const materials::CriticalDistance> distance;
+  };
+  std::vector<CriticalStructure> critical;
   SceneSetup();
   SceneSetup(SceneSetup&&) noexcept;
   SceneSetup& operator=(SceneSetup&&) noexcept;

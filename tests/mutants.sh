@@ -284,6 +284,22 @@ m v1-output-rate             servo/device_protocols.cpp 'caps.output_rate_hz = c
 m check-caps-stiffness       run/haptic_device.cpp \
   'over("servo.stiffness_n_per_m", hri.stiffness_n_per_m, "maximum stiffness", caps.max_stiffness_n_per_m);' '' \
                                test_device_refusals 'DeviceRefusals.*'
+m cut-material-density-scale $C 'if (m.density_scale > 0) c.inv_dens[i] = float(1.0 / m.density_scale);' '' \
+                               test_material_cut 'MaterialCut.*'
+# The distance transform takes each axis's own spacing (an oblique shape on three spacings).
+m cut-edt-axis-spacing       materials/critical_distance.cpp 'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.x, f, v, z)' \
+                               'envelope_1d(&sq[k * sz + j * sy], nx, sx, grid.spacing_m.y, f, v, z)' \
+                               test_material_cut 'MaterialCut.*'
+# The margin warning watches the brush that cuts each tick (a timeline brush's own centre and radius).
+m cut-margin-cutting-brush   run/edit_driver.cpp 'if (removes(b)) cutters_.push_back({b.centre_m, b.radius_m});' '' \
+                               test_material_margin_run 'MaterialMarginRun.*'
+# Each critical material has its own distance field (not the union of them all).
+m cut-margin-per-material    run/scene_setup.cpp 'only[i + 1] = true;' \
+                               'for (std::size_t j = 0; j < lv.materials.size(); ++j) only[j + 1] = lv.materials[j].critical;' \
+                               test_material_margin_run 'MaterialMarginRun.*'
+# The run log promises the margin warning only where it runs (with edits).
+m cut-margin-log-with-edits  run/scene_setup.cpp 'if (!s.critical.empty() && scene.edits.present)' 'if (!s.critical.empty())' \
+                               test_material_margin_run 'MaterialMarginRun.*'
 
 # ---- The run ----
 work=$root/build-mutants

@@ -4,8 +4,10 @@
 //    changes, and the margin warning fires before the burr reaches the tube, in every drill
 //    (reach judged by brute force over the tube's voxels);
 //  - a soft layer above a hard one: the soft one loses value faster by the ratio of the
-//    rates (tolerance from the brush's float formula);
-//  - the distance field against brute force; a cut of label 0 only is bit for bit no cut;
+//    rates, and two materials differing in density_scale by the ratio of their density
+//    factors (tolerances from the brush's float formula);
+//  - the distance field against brute force (also an oblique shape on three different
+//    spacings); a cut of label 0 only is bit for bit no cut;
 //  - a Sculptor with a Vulkan device and a cut keeps every brush on the CPU reference.
 #include <gtest/gtest.h>
 
@@ -331,4 +333,79 @@ TEST(MaterialCut, SculptorWithCutStaysOnTheCpuReference) {
   }
   EXPECT_EQ(std::memcmp(s.volume().voxels.data(), ref.voxels.data(), ref.voxels.size() * sizeof(float)), 0);
   EXPECT_EQ(test::validated_vk().validation_messages(), 0u);
+}
+
+// The distance transform on a grid with three different spacings, for an oblique shape (a
+// tube along (1, 2, 3) plus a ball off its axis): every voxel's distance is the brute-force
+// distance to the shape's voxel centres. An axis run with another axis's spacing would miss.
+TEST(MaterialCut, CriticalDistanceIsExactOnAnObliqueShapeWithThreeSpacings) {
+  core::Grid g;
+  g.dims = {20, 17, 15};
+  g.spacing_m = {0.3e-3, 0.5e-3, 0.8e-3};
+  std::vector<std::uint8_t> ids(g.voxel_count(), 1);
+  const Vec3 p0 = g.to_world(Vec3{2, 3, 1}), dir = Vec3{1, 2, 3} * (1 / std::sqrt(14.0));
+  const Vec3 ball = g.to_world(Vec3{16, 4, 11});
+  std::vector<Vec3> shape;
+  for (int z = 0; z < g.dims[2]; ++z)
+    for (int y = 0; y < g.dims[1]; ++y)
+      for (int x = 0; x < g.dims[0]; ++x) {
+        const Vec3 p = g.to_world(Vec3{double(x), double(y), double(z)});
+        const Vec3 d = p - p0;
+        const bool tube = core::norm(d - dir * core::dot(d, dir)) < 0.6e-3;
+        if (tube || core::norm(p - ball) < 1.0e-3) {
+          ids[g.index(x, y, z)] = 2;
+          shape.push_back(p);
+        }
+      }
+  ASSERT_GT(shape.size(), 20u);
+  const materials::CriticalDistance cd(g, ids, {false, false, true});
+  for (int z = 0; z < g.dims[2]; ++z)
+    for (int y = 0; y < g.dims[1]; ++y)
+      for (int x = 0; x < g.dims[0]; ++x) {
+        const Vec3 p = g.to_world(Vec3{double(x), double(y), double(z)});
+        double exact = 1e9;
+        for (const Vec3& q : shape) exact = std::min(exact, core::norm(p - q));
+        ASSERT_NEAR(cd.at(x, y, z), exact, 1e-7 + 1e-6 * exact) << x << " " << y << " " << z;
+      }
+}
+
+// Per-material density_scale: two materials of the same rate, mirrored about the burr's
+// centre, differ only in density_scale. Each loses amount * w / f with f = 1 + (v - empty) /
+// density_scale (brush.h), so a voxel of A loses f_B / f_A times what its mirror of B loses.
+TEST(MaterialCut, DensityScaleScalesTheRemovedAmount) {
+  engine::Volume vol;
+  vol.grid.dims = {24, 24, 24};
+  vol.grid.spacing_m = {0.5e-3, 0.5e-3, 0.5e-3};
+  vol.path = "synthetic:two-densities";
+  vol.voxels.assign(vol.grid.voxel_count(), kBone);
+  vol.update_stats();
+  auto cut = std::make_shared<MaterialCut>();
+  const double ds_a = 4000, ds_b = 250;
+  cut->table = {CutMaterial{4000, ds_a, false}, CutMaterial{4000, ds_b, false}};
+  cut->ids.resize(vol.grid.voxel_count());
+  for (int z = 0; z < 24; ++z)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) cut->ids[vol.grid.index(x, y, z)] = z >= 12 ? 1 : 2;
+  const Brush b = drill_at(vol.grid.to_world(Vec3{11.5, 11.5, 11.5}), 2e-3, 1.5);
+  const engine::Volume before = vol;
+  session::apply_brush_cpu(vol, b, cut.get());
+  const double ratio = (1 + kBone / ds_b) / (1 + kBone / ds_a);
+  const double half_ulp = 6.1035e-5;  // ulp(1000) / 2
+  int pairs = 0;
+  for (int dz = 0; dz < 12; ++dz)
+    for (int y = 0; y < 24; ++y)
+      for (int x = 0; x < 24; ++x) {
+        const std::size_t s = vol.grid.index(x, y, 12 + dz), h = vol.grid.index(x, y, 11 - dz);
+        const double da = double(before.voxels[s]) - vol.voxels[s], db = double(before.voxels[h]) - vol.voxels[h];
+        if (db == 0) {
+          EXPECT_LE(da, ratio * 2 * half_ulp);
+          continue;
+        }
+        ++pairs;
+        // float(float(a * w) / f) with f's own 3 roundings (inverse, product, sum) per side,
+        // subtracted from 1000 in float: 6 relative roundings and half an ulp of 1000.
+        const double rel = 10 * 5.97e-8 + half_ulp / (ratio * db) + half_ulp / db;
+        EXPECT_NEAR(da / db, ratio, ratio * rel) << x << " " << y << " " << dz;
+      }
+  EXPECT_GT(pairs, 50);
 }

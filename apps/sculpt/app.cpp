@@ -46,6 +46,8 @@
 #include "isotouch/run/picture.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
+#include "isotouch/materials/label_volume.h"
+#include "isotouch/run/scene_setup.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/session/edit_history.h"
 #include "isotouch/session/stop_signal.h"
@@ -478,6 +480,7 @@ struct Sculpt {
   void print_servo(const session::LiveStats& st);
   void print_device();
   void print_verdicts(const session::LiveStats& sculpted, const ServoAlone& alone);
+  void cut_by_material();
   void print_floor();
 
   const Options& o;
@@ -735,6 +738,19 @@ void Sculpt::open_panels() {
 #endif
 }
 
+/// A labelled scene: the Sculptor removes each material at its own rate and density scale and
+/// never changes a critical one (what `isotouch run` does, run::material_cut).
+/// @throws materials::MaterialError, engine::VolumeError as materials::load_label_volume.
+void Sculpt::cut_by_material() {
+  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, vol);
+  edits->sculptor().set_material_cut(run::material_cut(lv));
+  log << "sculpt   cuts by material (" << lv.source << "):";
+  for (std::size_t i = 0; i < lv.materials.size(); ++i)
+    log << (i ? ", " : " ") << lv.materials[i].name << (lv.materials[i].critical ? " (critical: never changed)" : "");
+  log << "\n";
+  for (const std::string& n : lv.notes) log << "         note: " << n << "\n";
+}
+
 /// The edit session on the volume, its first snapshot, the renderer, and the ray caster on the
 /// raw volume at the scene's isovalue (what `isotouch render` draws).
 bool Sculpt::open_edits() {
@@ -744,6 +760,7 @@ bool Sculpt::open_edits() {
   live.format = run::scene_sample_format(scene);
   try {
     edits = std::make_unique<session::EditSession>(engine::Volume(vol), nullptr, live, scene.edits.history_limit_mib);
+    if (scene.materials.present) cut_by_material();
   } catch (const std::exception& e) {
     log << "isotouch-sculpt: " << o.input << ": " << e.what() << "\n";
     return false;

@@ -159,7 +159,8 @@ class Server {
     return o_.fault_for_test && o_.fault_for_test(where, image);
   }
   std::unique_ptr<Session> stop_session();
-  std::string switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal = nullptr);
+  std::string switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal = nullptr,
+                             const std::function<io::OpenedJournal(Session&)>& journal_after_stop = {});
   void take_command(Client& c, const Incoming& in);
   void command_loop();
   void run_command(const Pending& p);
@@ -1064,20 +1065,23 @@ void Server::swap_volume(PendingVolume p) {
   hri.tau = choice.iso.tau;
   hri.inside = choice.iso.inside;
   const std::uint32_t crc = o_.journal ? io::volume_crc32(p.volume) : 0;
+  // The running session's volume again: its session starts afresh (the old one's edits are
+  // dropped, as for any new volume), and its journal with it once the old one has stopped.
+  const bool same_volume = journal_.journal && crc == journal_crc_;
+  const std::string input = "igtl:" + p.device;
   io::OpenedJournal journal;
   try {
     next = prepare_session(std::move(p.volume), live, hri);
-    // The same volume again: its session starts afresh (as the old one's edits are dropped),
-    // and one journal file serves one session.
-    if (journal_.journal && crc == journal_crc_) close_journal();
-    journal = open_journal(*next, crc, "igtl:" + p.device);  // a journal a crash left for it: restored
+    if (!same_volume) journal = open_journal(*next, crc, input);  // a journal a crash left for it: restored
   } catch (const std::exception& e) {
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
                             e.what() + ")" + keep);
   }
   const auto t1 = std::chrono::steady_clock::now();
-  if (const std::string why = switch_session(std::move(next), &journal); !why.empty())
+  std::function<io::OpenedJournal(Session&)> reopen;
+  if (same_volume) reopen = [this, crc, input](Session& s) { return open_journal(s, crc, input); };
+  if (const std::string why = switch_session(std::move(next), &journal, reopen); !why.empty())
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be started (" +
                             why + ")" + keep);
@@ -1172,9 +1176,16 @@ std::unique_ptr<Session> Server::stop_session() {
 /// (a thread, memory, the device), the old session is started again on its own volume and
 /// edits, and the reason is returned for the sender's STATUS ("" when `next` runs). Only
 /// when the old one cannot be started either does the exception end the server.
-std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal) {
+/// `journal_after_stop` (the same volume again: one journal file serves one session) opens
+/// the new session's journal once the old session has stopped appending to it and it is closed.
+std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal,
+                                   const std::function<io::OpenedJournal(Session&)>& journal_after_stop) {
   std::unique_ptr<Session> old = stop_session();
   try {
+    if (journal_after_stop && next_journal) {
+      close_journal();
+      *next_journal = journal_after_stop(*next);
+    }
     start_session(std::move(next));
     if (old && old->journal) close_journal();  // the old session ended
     if (next_journal) journal_ = std::move(*next_journal);
@@ -1183,6 +1194,10 @@ std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJour
     const std::string why = e.what();
     log_.line("session  the new session could not be started (" + why + "); the old one goes on");
     if (!old) throw;
+    if (old->journal && old->journal != journal_.journal.get()) {  // closed for the new session: not appended to
+      old->journal = nullptr;
+      log_.line("journal  the old session goes on without its journal (it was closed for the new one)");
+    }
     old->parts->detach();
     start_session(std::move(old));
     return why;

@@ -58,9 +58,12 @@ echo "ok serve journal: $edits edits ($brushes brushes, 1 undo) restored after k
 pid=$!
 port=$(wait_port "$out/serve3.log" $pid)
 [[ -n $port ]] || fail "serve did not start a third time"
+# The same IMAGE sent again mid-session starts its session and journal afresh (one file).
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
-  cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save ballcarved.mha" \
+  cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
+  cmd apply wait 0.6 cmd stop cmd "save ballcarved.mha" \
   >"$out/client3.log" 2>&1 || fail "the IMAGE client failed (exit $?)"
+(( $(grep -c "volume taken" "$out/client3.log") == 2 )) || fail "the IMAGE was not taken twice"
 kill -KILL $pid; wait $pid
 grep -q "save ballcarved.mha: wrote" "$out/client3.log" || fail "ballcarved.mha was not written"
 left=( "$out"/state/isotouch/serve-*.journal )

@@ -754,7 +754,8 @@ TEST(DeviceEmu, AServoFasterThanTheDeclaredReportRateIsRefused) {
   {
     ServoThread servo(published, wall, dev, sc);
     servo.start();
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    // 11 enabled outputs, however long a loaded machine takes for them (20 s at most).
+    for (int i = 0; i < 2000 && enabled() <= 10; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
     servo.stop();
   }
   dev.close();

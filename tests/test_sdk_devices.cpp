@@ -320,7 +320,7 @@ class Push final : public servo::Renderer {
 };
 }  // namespace
 
-// Calibrated only after the servo started (the stylus put in its inkwell 150 ms in): until
+// Calibrated only after the servo started (the stylus put in its inkwell after 60 frames): until
 // then every force the double received is an exact zero and the servo counts the ticks as
 // uncalibrated, not as faults (`isotouch run --live` does not exit 5 for it); once calibrated
 // the force ramps in (50 ms) to the renderer's 0.5 N, what the double received.
@@ -361,13 +361,14 @@ TEST_F(OpenHaptics, CalibratedAfterTheStartTheForceRampsInAndNoFaultIsCounted) {
   while (first < rows.size() && rows[first][1] == 0.0) ++first;
   ASSERT_LT(first, rows.size());
   EXPECT_LT(rows[first][1], 0.1) << "the force stepped in";
-  // It rose over the ramp's time (50 ms, less two servo periods), not in a few frames: judged
-  // on the frames' times, so a starved device thread that ran fewer frames still passes.
+  // It rose over the ramp's time (50 ms; judged at half of it, so late ticks at either end do
+  // not count), not in a few frames: on the frames' times, so a starved device thread that ran
+  // fewer frames still passes.
   std::size_t full = first;
   while (full < rows.size() && rows[full][1] < 0.5) ++full;
   ASSERT_LT(full, rows.size()) << "the force never reached 0.5 N";
-  EXPECT_GE(rows[full][0] - rows[first][0], 0.05 - 0.002) << "no ramp: the force came in within "
-                                                          << (rows[full][0] - rows[first][0]) * 1e3 << " ms";
+  EXPECT_GE(rows[full][0] - rows[first][0], 0.025) << "no ramp: the force came in within "
+                                                   << (rows[full][0] - rows[first][0]) * 1e3 << " ms";
 }
 
 TEST_F(OpenHaptics, VanishedDeviceReadsDisconnectedAndGetsZero) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <sstream>
 #include <cmath>
 #include <cstdio>
@@ -306,6 +307,8 @@ void wait_session(Live& l, double seconds) {
 /// 2 ms as wait_session does. @throws TimeoutError naming the tick reached when `timeout_s`
 /// [s] of wall clock pass first (a stalled or never started servo).
 void wait_ticks(Live& l, long ticks, double timeout_s) {
+  if (!std::isfinite(timeout_s) || timeout_s < 0)
+    throw py::value_error("wait_ticks: timeout_s must be a finite number of seconds >= 0, not " + std::to_string(timeout_s));
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (l.session().observe().tick + 1 < ticks) {
     if (std::chrono::steady_clock::now() >= end) {
@@ -348,6 +351,11 @@ LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, con
                           "your servo section and open that");
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
   if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
+  if (!record.empty())  // the files beside the recording are new: a user's own file is never replaced
+    for (const char* suffix : {Live::kVolumeSuffix, Live::kSceneSuffix})
+      if (std::filesystem::exists(record + suffix))
+        throw py::value_error("record: '" + record + "': " + record + suffix +
+                              " exists (a session on a volume writes its volume and scene there): give another record path");
   py::gil_scoped_release nogil;
   if (!record.empty()) {  // the volume as a file beside the recording, read back: replay reads the same bits
     const std::string file = record + Live::kVolumeSuffix;

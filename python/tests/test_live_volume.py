@@ -180,3 +180,15 @@ def test_a_recorded_session_on_an_array_replays_bit_for_bit(cli, tmp_path):
     p = subprocess.run([cli, "replay", str(rec)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "IDENTICAL: every force, VHIP and snapshot version equals the recorded one bit for bit" in p.stdout, p.stdout
+
+
+def test_record_never_replaces_a_file_beside_it(tmp_path):
+    """record= writes RECORD.nrrd and RECORD.scene.json: where one already exists (the user's
+    own ct.nrrd for record="ct") the session is refused naming it, and the file is kept."""
+    rec = tmp_path / "ct"
+    own = tmp_path / "ct.nrrd"
+    own.write_bytes(b"the user's own scan")
+    with pytest.raises(ValueError, match="ct.nrrd exists"):
+        isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3, tau=0.0, record=str(rec))
+    assert own.read_bytes() == b"the user's own scan"
+    assert sorted(os.listdir(tmp_path)) == ["ct.nrrd"]

@@ -98,8 +98,6 @@ m writer-stall-counted      $R 'if (on && was_on_ && stalled) {' 'if (false) {' 
 m writer-stall-on-the-wire  $R 'if (on && was_on_ && stalled) {' 'if (false) {' \
   test_device_emu 'DeviceEmu.AStalledServo*:DeviceEmu.ARendererThatNeverReturns*'
 m backend-stall-every-kind  $R 'if (on && was_on_ && stalled) {' 'if (false) {' test_backend_faults '*_Stall'
-m stall-half-period-early   $R 'stall_ns_.store(std::llround(std::max(stall_s - p / 2, p) * 1e9)' 'stall_ns_.store(std::llround(std::max(stall_s + p / 2, p) * 1e9)' \
-  test_backend_faults '*ForceDimension_Stall*'
 m sdk-nonfinite-backstop    $R 'Vec3 f = ok ? force_n : Vec3{};' 'Vec3 f = force_n;' test_sdk_devices 'OpenHaptics.ANonFinite*'
 m emu-watchdog              $E 'enabled_ = false, force_n_ = {}, watchdog_tripped_ = true;' '' \
   test_device_emu 'DeviceEmu.AFrozenWriterTripsTheDevicesWatchdog'

@@ -31,7 +31,7 @@ Subcommand add_render_command(CLI::App& cli) {
       "render",
       "Ray-cast the scene's isosurface to a PNG (headless, any Vulkan device).\n"
       "The surface is the trilinear field the servo feels, at the scene's isovalue. Camera: an orbit\n"
-      "around the volume centre; angles in the volume's physical frame (LPS for medical images):\n"
+      "around the object's centre (--frame-scan: the scan's); angles in the volume's physical frame (LPS for medical images):\n"
       "azimuth 0 looks at the face from the front (eye anterior), 90 from the patient's left, -90\n"
       "from the right, 180 from behind; elevation > 0 looks down from above; physical +z is up.\n"
       "With --time T the probe at that time of the scene's run is drawn in: HIP (yellow, seen\n"
@@ -54,6 +54,8 @@ Subcommand add_render_command(CLI::App& cli) {
   s.app->add_option("--distance", o->cam.distance_m, "Eye to the object's centre [m] before zoom (0: fit the object)")
       ->capture_default_str()
       ->check(non_negative_number());
+  s.app->add_flag("--frame-scan", o->frame_scan,
+                  "Aim at the scan's box instead of the object's (one camera for volumes on one grid)");
   s.app->add_option("--fov", o->cam.fov_y_deg, "Vertical field of view [deg]")->capture_default_str()->check(CLI::Range(1.0, 120.0));
   s.app->add_option("--up", o->up, "Physical axis shown up: x, -x, y, -y, z, -z (default z: superior for a medical "
                     "image, whose direction matrix says where that is)");

@@ -105,7 +105,7 @@ int run_render(const RenderOptions& o, const std::string& device) {
   req.width = o.width;
   req.height = o.height;
   // The object framed, not the scan around it: the overview's framing (run::frame_object).
-  req.camera = frame_object(o.cam, vol, core::Isosurface{scene.hri.tau, scene.hri.inside});
+  req.camera = o.frame_scan ? o.cam : frame_object(o.cam, vol, core::Isosurface{scene.hri.tau, scene.hri.inside});
   const engine::OrbitCamera def = default_camera(vol);
   req.camera.up_phys = o.up.empty() ? def.up_phys : parse_axis(o.up, "--up");
   req.camera.front_phys = o.front.empty() ? def.front_phys : parse_axis(o.front, "--front");

@@ -16,6 +16,8 @@ struct RenderOptions {
   std::string out;        ///< PNG to write; "" = <scene name>.png; "-" = standard output
   int width = 640, height = 640;  ///< [pixels]
   engine::OrbitCamera cam;
+  /// Aim at the scan's box, not the object's (--frame-scan: one camera for volumes on one grid).
+  bool frame_scan = false;
   std::optional<double> time_s;
   std::string trace;
   std::string clip_axis;

@@ -124,7 +124,8 @@ check(n > 0.01 * 160 * 160, f"... and not the same unmirrored ({n} pixels differ
 
 # Upright: slice 0 is the top of the head (VTK's data set; the vertex region), the last slices
 # hold the jaw. A copy holding only slices 0-9 and one holding only slices 70-92 (the rest
-# air), under the shipped header, drawn with the same default camera: the first in the
+# air), under the shipped header, drawn with the same camera (the scan's box: --frame-scan;
+# the default frames each object): the first in the
 # picture's upper part, the second below it.
 def rows_with_surface(picture):
     bg = picture[2][0][0:3]
@@ -138,7 +139,7 @@ def only_slices(tag, first, last):
     text = re.sub(r"ElementDataFile = .*", "ElementDataFile = " + tag + ".raw", header)
     path = os.path.join(out, tag + ".mhd")
     open(path, "w").write(text)
-    return render(tag, path)[1]
+    return render(tag, path, "--frame-scan")[1]
 
 
 t, b = rows_with_surface(only_slices("slices-0-9", 0, 9)), rows_with_surface(only_slices("slices-70-92", 70, 92))

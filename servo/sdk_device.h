@@ -53,6 +53,12 @@ class SdkDevice : public HapticDeviceIO {
     reading_.load(last_read_);
     return last_read_;
   }
+  /// Any thread: the newest reading (a load into a copy; read() is the servo thread's).
+  DeviceReading latest() const {
+    DeviceReading r;
+    reading_.load(r);
+    return r;
+  }
   Vec3 read_position_m() override { return read().position_m; }
   std::uint32_t buttons() override { return read().buttons; }
   /// Servo thread: one store, stamped with the clock (vDSO: no syscall). A non-finite force

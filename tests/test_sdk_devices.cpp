@@ -583,7 +583,7 @@ TEST_F(ForceDimension, ForcesTurnedOffAtTheDeviceStayOffUntilTheUserTurnsThemOn)
   ASSERT_TRUE(wait_for(pushing));
   const long enables = ctl.enables();
   ctl.force_button(0);
-  EXPECT_TRUE(wait_for([&] { return d.firmware_force_offs() == 1 && d.read().force_off; }));
+  EXPECT_TRUE(wait_for([&] { return d.firmware_force_offs() == 1 && d.latest().force_off; }));
   sleep_ms(30);
   EXPECT_EQ(ctl.enables(), enables) << "forces turned on again by isotouch, not by the user";
   EXPECT_EQ(ctl.force_on(), 0);

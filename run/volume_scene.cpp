@@ -122,7 +122,7 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
   engine::IsoChoice choice;
   if (iso) {
     choice.iso = core::Isosurface{*iso, inside == "below" ? core::InsideIs::kBelow : core::InsideIs::kAbove};
-    choice.rule = "given with --iso";
+    choice.rule = "hand (--iso)";
   } else {
     choice = io::choose_isovalue(scan);
   }
@@ -151,7 +151,7 @@ VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoCho
   const double stroke_m = std::min(0.04, std::max(0.25 * box, 1e-3));
   std::ostringstream j;
   j << std::setprecision(17) << "{\n  \"name\": " << quoted(scene_name(volume_path)) << ",\n  \"description\": "
-    << quoted("Made by isotouch run for " + volume_path + ": isovalue " + engine::iso_line(out.choice) +
+    << quoted("Made by isotouch run for " + volume_path + ": " + engine::iso_line(out.choice) +
               "; the probe approaches " + out.approach_text + ", presses along the surface normal and strokes on the surface from +" +
               char('x' + s_axis) + " (planned on the true isosurface: script.plan). Edit and run it as a scene.")
     << ",\n  \"volume\": {\"path\": " << quoted(is_in_memory_name(volume_path) ? volume_path : fs::absolute(volume_path).lexically_normal().string())

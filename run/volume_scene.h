@@ -42,7 +42,7 @@ std::string describe_approach(const engine::Volume& vol, const Approach& a);
 struct VolumeScene {
   std::string json;       ///< the scene file's text (what `isotouch run` writes as scene.json)
   io::Scene scene;        ///< parsed from `json` (so the file written is the scene run)
-  engine::IsoChoice choice;  ///< the isovalue and its rule (rule "given with --iso" when given)
+  engine::IsoChoice choice;  ///< the isovalue and its rule (rule "hand (--iso)" when given)
   Approach approach;
   std::string approach_text;
 };

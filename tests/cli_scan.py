@@ -223,6 +223,9 @@ def run_volume(tag, volume, expect_iso):
         check(False, f"run {tag}: scene.json and summary.json read back ({e})")
         return None, None
     check(abs(scene["isovalue"] - expect_iso) <= 1e-3 * max(1, abs(expect_iso)), f"run {tag}: scene.json holds the isovalue")
+    rule = m.group(2) if m else "?"
+    check(f": isovalue {m.group(1) if m else '?'} (inside above), chosen by {rule}; the probe approaches" in scene.get("description", ""),
+          f"run {tag}: scene.json's description says the isovalue and its rule once ({scene.get('description', '')[:160]!r})")
     check(summary["status"] == "complete" and summary["contact"]["ticks"] > 100 and summary["contact"]["max_force_n"] > 0.1,
           f"run {tag}: the probe touched ({summary['contact']['ticks']} contact ticks, max {summary['contact']['max_force_n']:.3g} N)")
     return summary, scene_file

@@ -71,7 +71,7 @@ io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, b
                        const std::string& scene_file) {
   engine::IsoChoice choice;
   choice.iso = core::Isosurface{hri.tau, hri.inside};
-  choice.rule = "given as tau";
+  choice.rule = "the program (LiveSession's tau)";
   const run::VolumeScene vs = run::make_volume_scene(vol, choice, vol.path);
   io::Scene s = vs.scene;
   if (!scene_file.empty()) {

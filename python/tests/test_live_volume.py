@@ -1,6 +1,7 @@
 """A live session on a volume made in Python (no scene file): an isotouch.Volume or a numpy
 array, the isovalue given as tau. The scripted hand of 'sim' must press on the isosurface the
 array holds: a sphere of known centre and radius, checked from the geometry, not the renderer."""
+import json
 import os
 import subprocess
 import sys
@@ -177,6 +178,9 @@ def test_a_recorded_session_on_an_array_replays_bit_for_bit(cli, tmp_path):
     assert r["complete"] and len(r["ticks"]["t"]) == live.stats()["ticks"] >= live.script_ticks
     assert r["scene_path"] == str(tmp_path / "array.rec.scene.json")
     np.testing.assert_array_equal(isotouch.load_volume(str(tmp_path / "array.rec.nrrd")).array, a)
+    with open(tmp_path / "array.rec.scene.json") as f:
+        description = json.load(f)["description"]
+    assert ": isovalue 0 (inside above), chosen by the program (LiveSession's tau); the probe" in description, description
     p = subprocess.run([cli, "replay", str(rec)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "IDENTICAL: every force, VHIP and snapshot version equals the recorded one bit for bit" in p.stdout, p.stdout

@@ -31,9 +31,12 @@ def judge(path):
     if contact is None:
         print(f"FAIL {path}: the stylus never touched the skull (largest force {max(f for _, _, f in ticks):.3f} N)")
         sys.exit(1)
-    # Up to 0.3 s before the peer's last tick: the run's stop takes the force off (its ramp)
-    # and the hand then pushes the stylus in.
-    end = ticks[-1][0] - 0.3
+    # Up to 0.1 s before the run's stop reached the device: the stop's zero force (the trailing
+    # ticks with no force at all), after which the hand pushes the stylus in.
+    stop = len(ticks)
+    while stop > 0 and ticks[stop - 1][2] == 0.0:
+        stop -= 1
+    end = ticks[min(stop, len(ticks) - 1)][0] - 0.1
     settled = [s for t, s, _ in ticks if max(contact, still) + 0.2 <= t <= end]
     if len(settled) < 1000:
         print(f"FAIL {path}: only {len(settled)} ticks from 200 ms after contact")

@@ -105,10 +105,12 @@ struct EmuRun {
 };
 
 /// The emulator at `rate_hz` for `seconds` (faults as given) against a servo at the same
-/// rate rendering `renderer` (null: the wall).
+/// rate rendering `renderer` (null: the wall); `polhem`: speaking the Polhem's reports
+/// (lock-step: each currents command answered by one report) instead of protocol v1.
 EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults& faults, bool fifo, TickLog* log,
-                            servo::Renderer* renderer = nullptr) {
+                            servo::Renderer* renderer = nullptr, bool polhem = false) {
   sim::EmuConfig c;
+  c.polhem = polhem;
   c.socket_path = "/tmp/isotouch-bench-device-" + std::to_string(::getpid()) + ".sock";
   c.rate_hz = rate_hz;
   c.seconds = seconds;
@@ -127,7 +129,10 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   std::thread emu_thread([&] { out.emu = emu.run(); });
   servo::ReportDeviceOptions ro;
   ro.fifo_priority = fifo ? 70 : 0;
-  servo::ReportDevice dev(std::make_unique<servo::SocketLink>(c.socket_path), std::make_unique<servo::V1Protocol>(), ro);
+  std::unique_ptr<servo::DeviceProtocol> protocol;
+  if (polhem) protocol = std::make_unique<servo::PolhemProtocol>(c.polhem_config);
+  else protocol = std::make_unique<servo::V1Protocol>();
+  servo::ReportDevice dev(std::make_unique<servo::SocketLink>(c.socket_path), std::move(protocol), ro);
   try {
     dev.open();
   } catch (...) {
@@ -157,8 +162,8 @@ EmuRun run_against_emulator(double rate_hz, double seconds, const sim::EmuFaults
   return out;
 }
 
-BenchDeviceRow measure_rate(double rate_hz, double seconds, bool fifo, std::string& note) {
-  const EmuRun r = run_against_emulator(rate_hz, seconds, {}, fifo, nullptr);
+BenchDeviceRow measure_rate(double rate_hz, double seconds, bool fifo, std::string& note, bool polhem = false) {
+  const EmuRun r = run_against_emulator(rate_hz, seconds, {}, fifo, nullptr, nullptr, polhem);
   if (note.empty()) note = r.setup_note;
   BenchDeviceRow row;
   row.rate_hz = rate_hz;
@@ -574,6 +579,15 @@ int run_bench_device(const BenchDeviceOptions& o, std::ostream& log) {
     log << "| " << r.rate_hz << " | " << fixed(r.report_rate_hz) << " | " << r.answered << " | " << fixed(r.p50_us)
         << " | " << fixed(r.p99_us) << " | " << fixed(r.max_us) << " | " << r.ticks << " | " << r.missed << " | "
         << r.stale << " |\n";
+  {
+    std::string polhem_note;
+    const BenchDeviceRow p = measure_rate(1000, o.seconds, o.sched_fifo, polhem_note, true);
+    log << "\nthe Polhem's reports over the same emulator (lock-step: a report answered by the next currents "
+           "command; relay delay = that command's arrival after the report was sent), 1 kHz: "
+        << fixed(p.report_rate_hz) << " reports/s, " << p.answered << " answered; relay delay p50 " << fixed(p.p50_us)
+        << " us, p99 " << fixed(p.p99_us) << " us, max " << fixed(p.max_us) << " us; " << p.ticks << " servo ticks, "
+        << p.missed << " missed, " << p.stale << " stale\n";
+  }
   log << "\nvendor SDKs at 1 kHz (ISOTOUCH_HD_LIBRARY, ISOTOUCH_DHD_LIBRARY: the test doubles in "
          "build/tests/sdk_doubles or the SDKs; latency from the pose published on the SDK's thread to the force "
          "handed to the SDK):\n"

@@ -237,12 +237,15 @@ void DeviceEmulator::polhem_output(std::int64_t now, std::span<const std::uint8_
   force_n_ = f;
   if (on) stats_.max_force_n = std::max(stats_.max_force_n, norm(f));
   if (on && !polhem_calibrated_) ++stats_.currents_while_uncalibrated;
+  if (polhem_report_ns_ > 0) stats_.latency_us.push_back(double(now - polhem_report_ns_) * 1e-3);
+  polhem_report_ns_ = 0;  // the first command after a report answers it
   polhem_owed_ = true;  // lock-step: this command is answered by one report
 }
 
-void DeviceEmulator::polhem_report() {
+void DeviceEmulator::polhem_report(std::int64_t now) {
   if (!polhem_owed_) return;
   polhem_owed_ = false;
+  polhem_report_ns_ = now;
   servo::hid::polhem::Input in;
   in.encoder = polhem_counts();
   in.info = polhem_flag_ ? 1 : 0;
@@ -253,7 +256,7 @@ void DeviceEmulator::polhem_report() {
 }
 
 void DeviceEmulator::send_report(std::int64_t now, double t_s) {
-  if (cfg_.polhem) return polhem_report();
+  if (cfg_.polhem) return polhem_report(now);
   servo::hid::InputReport r;
   r.sequence = ++seq_;
   r.device_time_us = std::uint32_t(std::int64_t(t_s * 1e6));

@@ -102,7 +102,8 @@ struct EmuStats {
   long dropped = 0, duplicated = 0, reordered = 0, garbled = 0, delayed = 0;
   long watchdog_trips = 0;
   /// Report-to-force latency: from sending input report N to receiving the output report
-  /// that answers N [us], one per answered report (the first answer of each).
+  /// that answers N [us], one per answered report (the first answer of each). The Polhem
+  /// (lock-step, no sequence): from sending a report to receiving the next currents command.
   std::vector<double> latency_us;
   double max_force_n = 0;          ///< largest |F| received with enable set [N]
   bool last_enable = false;        ///< the enable flag of the last output received
@@ -149,7 +150,7 @@ class DeviceEmulator {
   void wait_until(std::int64_t t);
   void send_report(std::int64_t now, double t_s);
   void polhem_output(std::int64_t now, std::span<const std::uint8_t> bytes);
-  void polhem_report();
+  void polhem_report(std::int64_t now);
   std::array<std::int16_t, 6> polhem_counts() const;
   void log_output(std::int64_t now, const Vec3& force_n, bool enable, std::uint64_t answers);
   void transmit(const std::uint8_t* b, std::size_t n);
@@ -175,6 +176,7 @@ class DeviceEmulator {
   double first_connected_at_s_ = -1;         // when the first host connected [s]; -1: none yet
   bool hold_next_ = false;
   bool polhem_owed_ = false, polhem_calibrated_ = false;  // Polhem: a report is owed; calibrated
+  std::int64_t polhem_report_ns_ = 0;  // Polhem: when the report not yet answered by currents was sent (0: none)
   bool polhem_flag_ = false;     // Polhem: the firmware's latched switch flag (info)
   bool polhem_pressed_ = false;  // Polhem: polhem_switch_at_s has come
   std::array<std::int16_t, 6> polhem_set_{};              // Polhem: the counts the calibration set

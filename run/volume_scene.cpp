@@ -130,7 +130,7 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
 }
 
 VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoChoice& choice,
-                              const std::string& volume_path) {
+                              const std::string& volume_path, const std::string& servo_json) {
   VolumeScene out;
   out.choice = choice;
   out.approach = choose_approach(volume, out.choice.iso);
@@ -156,7 +156,7 @@ VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoCho
               char('x' + s_axis) + " (planned on the true isosurface: script.plan). Edit and run it as a scene.")
     << ",\n  \"volume\": {\"path\": " << quoted(is_in_memory_name(volume_path) ? volume_path : fs::absolute(volume_path).lexically_normal().string())
     << "},\n  \"isovalue\": " << out.choice.iso.tau << ",\n  \"inside\": \"" << core::to_string(out.choice.iso.inside)
-    << "\",\n  \"script\": {\n    \"ray_origin_frac\": " << vec(origin) << ",\n    \"ray_direction\": " << vec(dir)
+    << "\",\n" << (servo_json.empty() ? "" : "  \"servo\": " + servo_json + ",\n") << "  \"script\": {\n    \"ray_origin_frac\": " << vec(origin) << ",\n    \"ray_direction\": " << vec(dir)
     << ",\n    \"stroke_direction\": " << vec(stroke) << ",\n    \"stroke_length_m\": " << stroke_m << ",\n    \"plan\": \"surface\"\n  }\n}\n";
   out.json = j.str();
   out.scene = io::parse_scene(out.json, volume_path + " (the scene made for it)");

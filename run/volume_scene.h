@@ -67,8 +67,10 @@ VolumeScene make_volume_scene(const std::string& volume_path, std::optional<doub
                               const std::string& inside = "above");
 /// The same for a volume already in memory at the isovalue `choice` (its rule said in the
 /// scene's description): `volume_path` is only written into the scene (a recording's scene
-/// names it), never read; an in-memory name (is_in_memory_name) is written as it is. @throws io::SceneError.
+/// names it), never read; an in-memory name (is_in_memory_name) is written as it is.
+/// `servo_json`: the scene's "servo" section (io::servo_section_json; "": the defaults).
+/// @throws io::SceneError.
 VolumeScene make_volume_scene(const engine::Volume& volume, const engine::IsoChoice& choice,
-                              const std::string& volume_path);
+                              const std::string& volume_path, const std::string& servo_json = "");
 
 }  // namespace isotouch::run

@@ -13,6 +13,7 @@
 
 #include "isotouch/io/files.h"
 #include "isotouch/io/scene.h"
+#include "isotouch/io/scene_servo.h"
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/python/common.h"
 #include "isotouch/python/params_arg.h"
@@ -62,23 +63,49 @@ void check_servo(const io::Scene& s) {
   }
 }
 
+/// The isovalue a program gave (tau= or params.tau), said so in the scene's description.
+engine::IsoChoice iso_given(const servo::HriParams& hri) {
+  engine::IsoChoice choice;
+  choice.iso = core::Isosurface{hri.tau, hri.inside};
+  choice.rule = "the program (LiveSession's tau)";
+  return choice;
+}
+
+/// The scene a recorded session on `vol` writes beside its recording: `hri` as its "servo"
+/// section (scene_hri: the defaults'), parsed back and compared field by field, so that
+/// `isotouch replay` rebuilds the same renderer. @throws std::invalid_argument naming a field
+/// of params a scene cannot carry (or would read back otherwise) and its value.
+run::VolumeScene recordable_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri) {
+  run::VolumeScene vs = run::make_volume_scene(vol, iso_given(hri), vol.path, scene_hri ? "" : io::servo_section_json(hri));
+  if (scene_hri) return vs;
+  servo::HriParams want = hri;
+  want.world_per_device = vs.scene.hri.world_per_device;  // the scene's device section owns it
+  want.edit_period_s = vs.scene.hri.edit_period_s;        // every session's is set from its scene's edits
+  if (const std::string f = io::unrecordable_field(want, vs.scene.hri); !f.empty())
+    throw std::invalid_argument("record: params." + f + " cannot be recorded: the scene written beside the recording "
+                                "has no such key or reads it back otherwise, so a replay would render differently; "
+                                "leave it at its default to record");
+  check_servo(vs.scene);
+  return vs;
+}
+
 /// The default touch scene `isotouch run VOLUME` makes (run/volume_scene.h) for `vol` at the
 /// isovalue and renderer `hri` (`scene_hri`: keep the scene's renderer defaults, only tau and
 /// inside from `hri`). Its file name says where it came from; nothing is read from it. With
 /// `scene_file` (a recorded session's), the scene's text is written there (atomically) and
-/// is its file: what the recording carries and `isotouch replay` reads.
+/// is its file: what the recording carries and `isotouch replay` reads; `hri` (unless
+/// scene_hri) is then its "servo" section, read back equal or refused (recordable_scene).
 io::Scene volume_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri,
                        const std::string& scene_file) {
-  engine::IsoChoice choice;
-  choice.iso = core::Isosurface{hri.tau, hri.inside};
-  choice.rule = "the program (LiveSession's tau)";
-  const run::VolumeScene vs = run::make_volume_scene(vol, choice, vol.path);
-  io::Scene s = vs.scene;
   if (!scene_file.empty()) {
+    const run::VolumeScene vs = recordable_scene(vol, hri, scene_hri);
     io::write_file_atomic(scene_file, vs.json);
+    io::Scene s = vs.scene;
     s.file = scene_file;
-    return s;  // scene_hri: a recording's renderer is the scene file's
+    return s;  // a recording's renderer is the scene file's
   }
+  const run::VolumeScene vs = run::make_volume_scene(vol, iso_given(hri), vol.path);
+  io::Scene s = vs.scene;
   if (!scene_hri) {
     const double wpd = s.hri.world_per_device;  // the scene's workspace scale (device section)
     s.hri = hri;
@@ -345,12 +372,10 @@ LivePtr live_on_scene(const std::string& scene, const std::string& haptic, const
 LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, const py::object& params,
                            const std::string& haptic, const std::string& record, const std::string& device,
                            bool realtime, double flush_interval_s) {
-  if (!record.empty() && !params.is_none())
-    throw py::value_error("record: '" + record + "': a recording carries the scene `isotouch run VOLUME` makes, whose "
-                          "renderer is the scene defaults: give tau= without params=, or write a scene file with "
-                          "your servo section and open that");
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
   if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
+  // params a recording's scene cannot carry: refused before any file is written.
+  if (!record.empty() && !params.is_none()) recordable_scene(volume, hri, false);
   if (!record.empty())  // the files beside the recording are new: a user's own file is never replaced
     for (const char* suffix : {Live::kVolumeSuffix, Live::kSceneSuffix})
       if (std::filesystem::exists(record + suffix))
@@ -401,7 +426,8 @@ them (Volume.from_mm for millimetres).
 
 haptic as `run --live --haptic` (sim, null, playback:FILE, emu:SOCKET, hid:VID:PID); record a
 recording file ('' none; on a volume or array, its volume and scene are written beside it as
-RECORD.nrrd and RECORD.scene.json, and params= cannot be recorded: the scene defaults' renderer);
+RECORD.nrrd and RECORD.scene.json, params= as the scene's servo section: ValueError for one no
+scene key carries);
 device 'cpu' (CPU brushes) or a Vulkan device. Frames: points (centre, hip, vhip) are
 grid-world [m] (origin + spacing * index). Use as a context manager: leaving it stops the
 session (servo first, its last force an exact zero).)")

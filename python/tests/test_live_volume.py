@@ -86,8 +86,10 @@ def test_argument_errors_name_the_argument(root, tmp_path):
     a = sphere_array()
     with pytest.raises(ValueError, match=r"tau: 1 given, but params.tau is 0"):
         isotouch.LiveSession(a, spacing=(SPACING,) * 3, tau=1.0, params=isotouch.HriParams(tau=0.0))
-    with pytest.raises(ValueError, match="record: .*give tau= without params="):
-        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=isotouch.HriParams(tau=0.0), record=str(tmp_path / "x.rec"))
+    p = isotouch.HriParams(tau=0.0)
+    p.velocity_cutoff_hz = 150.0  # no scene key carries it: a replay would render otherwise
+    with pytest.raises(ValueError, match="record: params.velocity_cutoff_hz 150 cannot be recorded"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=p, record=str(tmp_path / "x.rec"))
     assert os.listdir(tmp_path) == []
     with pytest.raises(ValueError, match="tau: the scene .* gives its own isovalue"):
         isotouch.LiveSession(str(root / "scenes/sphere.json"), tau=0.0)
@@ -184,6 +186,22 @@ def test_a_recorded_session_on_an_array_replays_bit_for_bit(cli, tmp_path):
     p = subprocess.run([cli, "replay", str(rec)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "IDENTICAL: every force, VHIP and snapshot version equals the recorded one bit for bit" in p.stdout, p.stdout
+
+
+def test_a_recorded_session_with_params_replays_bit_for_bit(cli, tmp_path):
+    """record= with params=: the renderer's parameters are the scene's servo section (read
+    back equal, or refused), so `isotouch replay` renders the same forces bit for bit."""
+    rec = tmp_path / "params.rec"
+    p = isotouch.HriParams(tau=0.0, stiffness_n_per_m=500.0, plane_update_period=3)
+    p.intersection_steps = 6
+    with isotouch.LiveSession(sphere_array(), spacing=(SPACING,) * 3, params=p, record=str(rec)) as live:
+        live.wait_ticks(live.script_ticks)
+    with open(tmp_path / "params.rec.scene.json") as f:
+        servo = json.load(f)["servo"]
+    assert (servo["stiffness_n_per_m"], servo["plane_update_period"], servo["intersection_steps"]) == (500.0, 3, 6), servo
+    r = subprocess.run([cli, "replay", str(rec)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "IDENTICAL: every force, VHIP and snapshot version equals the recorded one bit for bit" in r.stdout, r.stdout
 
 
 def test_record_never_replaces_a_file_beside_it(tmp_path):

@@ -19,7 +19,8 @@
 //   at SECS           waits until SECS after the client started; fails ("at SECS: already T s")
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms once they settle (3 s at
-//                     most) and how many came so far: "force X Y Z |F| N, K received, ..."
+//                     most) and how many came so far: "force X Y Z |F| N, K received, ..., from
+//                     A to B s" (A, B: when it began and printed, since the client started)
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -296,7 +297,7 @@ struct Client {
 // the call, and their spread (largest distance from their mean) within 2 % of the mean's
 // size or 5 mN; after 3 s unsettled, the figures as they are and false. The forces follow the
 // last move's end through the display stream's filter, so a fixed wait read them mid-rise.
-bool print_settled_force(Shared& s) {
+bool print_settled_force(Shared& s, std::chrono::steady_clock::time_point started) {
   const auto t0 = std::chrono::steady_clock::now();
   for (;;) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -311,7 +312,8 @@ bool print_settled_force(Shared& s) {
     if (waited < 0.3 || (!settled && waited < 3.0)) continue;
     std::cout << "force " << f[0] << " " << f[1] << " " << f[2] << " " << mag << " N, " << s.forces_received
               << " received, spread " << spread << " N, " << (settled ? "settled" : "NOT settled") << " after "
-              << waited << " s\n";
+              << waited << " s, from " << std::chrono::duration<double>(t0 - started).count() << " to "
+              << std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() << " s\n";
     return settled;
   }
 }
@@ -372,7 +374,7 @@ bool Client::action(const std::string& a) {
     send(sock, m);
     return wait_status(s, "CMD");
   }
-  if (a == "force") return print_settled_force(s);
+  if (a == "force") return print_settled_force(s, started);
   if (a == "images") {
     const double quiet = num();
     std::unique_lock<std::mutex> lock(s.mu);

@@ -1,8 +1,8 @@
 """Stops `isotouch run --haptic igtl:` with a signal while tests/igtl_plus_peer holds a contact
 force, and checks what the peer got: its last Force is exactly zero, and it arrived within the
 stale timeout (3 stream periods) of the signal, widened by the time the machine was measured
-to be gone in that interval and by nothing else (a canary process per CPU, as
-tests/sched_canary.h: each wake-up later than its slack marks [deadline, wake-up] as lost).
+to be gone in that interval and by nothing else (tests/sched_canary.py: a canary process per
+CPU, each wake-up later than its slack marking [deadline, wake-up] as lost).
 The canaries run in the scheduling class of the run and the peer (the default: neither asks
 for SCHED_FIFO here), so they lose the CPU when those do: a peer that reads late is timed late.
 
@@ -11,40 +11,12 @@ usage: igtl_signal_check.py PEER_LOG PID SIGNAL RATE_HZ
   PID       the isotouch run; SIGNAL INT or TERM; RATE_HZ the peer's stream rate
 Waits (10 s at most) for 50 forces above 0.8 N, sends the signal, waits for the run to end.
 Prints "signal ok: ..." and exits 0, or "FAIL ..." and exits 1."""
-import multiprocessing as mp
 import os
 import signal
 import sys
 import time
 
-PERIOD_S, SLACK_S = 0.0005, 0.0003
-
-
-def canary(cpu, stop, out):
-    """Wakes every PERIOD_S on `cpu`; sends each late wake-up's [deadline, wake-up]."""
-    os.sched_setaffinity(0, {cpu})  # the default scheduler, as the run and the peer: it loses what they lose
-    lost, deadline = [], time.monotonic()
-    while not stop.is_set():
-        deadline += PERIOD_S
-        delay = deadline - time.monotonic()
-        if delay > 0:
-            time.sleep(delay)
-        woke = time.monotonic()
-        if woke - deadline > SLACK_S:
-            lost.append((deadline, woke))
-            deadline = woke
-    out.put(lost)
-
-
-def lost_in(intervals, t0, t1):
-    """Seconds of [t0, t1] that some CPU's canary marked lost (the CPUs' losses merged)."""
-    cut = sorted((max(a, t0), min(b, t1)) for a, b in intervals if b > t0 and a < t1)
-    total, end = 0.0, t0
-    for a, b in cut:
-        a = max(a, end)
-        if b > a:
-            total, end = total + b - a, b
-    return total
+from sched_canary import Canaries, lost_in
 
 
 def forces(log_path):
@@ -74,11 +46,7 @@ def main():
         if time.monotonic() > t_end:
             return fail("the stylus never pushed into the skull (50 forces above 0.8 N) within 10 s")
         time.sleep(0.02)
-    stop, out = mp.Event(), mp.Queue()
-    cpus = sorted(os.sched_getaffinity(0))
-    canaries = [mp.Process(target=canary, args=(c, stop, out)) for c in cpus]
-    for c in canaries:
-        c.start()
+    canaries = Canaries().start()
     time.sleep(0.05)
     held = forces(log)[1][-1][1]
     t_sig = time.monotonic()
@@ -90,10 +58,7 @@ def main():
             break
         time.sleep(0.01)
     time.sleep(0.2)  # the peer prints what is still in flight
-    stop.set()
-    lost = [iv for _ in canaries for iv in out.get()]
-    for c in canaries:
-        c.join()
+    lost = canaries.stop()
     clock, got = forces(log)
     if clock is None:
         return fail("the peer printed no clock line")

@@ -13,8 +13,8 @@
 #      and exits 5 (the device was lost);
 #   2. igtl:, the PLUS-like peer at 500 Hz: serve says the measured rate and bound; the peer
 #      gets forces pushing its stylus out, the client the same force in RAS; when the stream
-#      stops, the peer gets an exact zero within the stale timeout (widened by the time the
-#      machine was measured to be gone: sched_canary.py) and the client's Force is zero; exit 0;
+#      stops, the peer gets an exact zero within the stale timeout and the client's Force is
+#      zero; exit 0;
 #   3. igtl: at 50 Hz: the head's 800 N/m is above the bound (about 400 N/m): serve refuses,
 #      exit 1, naming the bound and how to allow it; --allow-unstable-stiffness serves;
 #   4. --haptic with the stream's options: usage, exit 2; --haptic sim (no scripted hand): exit 1.
@@ -65,9 +65,6 @@ serve_igtl() {
   local opts=() port; port=$(free_port)
   while [[ $# -gt 0 && $1 != -- ]]; do opts+=("$1"); shift; done
   shift
-  # How long the machine was gone while the zero was due (igtl_peer_check.py's bound).
-  python3 "$(dirname "$0")/sched_canary.py" "$out/$name.lost" &
-  local canary_pid=$!
   "$peer" "$port" "$rate" "$stream_s" 1.6 0.5 10 -91.2 1.6 -52.5 -63.68 1.6 -52.5 >"$out/$name.peer.log" 2>&1 &
   local peer_pid=$!
   for _ in $(seq 100); do grep -q listening "$out/$name.peer.log" && break; sleep 0.05; done
@@ -78,7 +75,6 @@ serve_igtl() {
   wait $serve_pid
   echo $? >"$out/$name.rc"
   kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
-  kill -TERM $canary_pid; wait $canary_pid
 }
 # The peer's clock starts when serve's device connects; serve listens after its 1 s measurement.
 for _ in 1 2; do  # once more if the contact was lost before the stream stopped (igtl_peer_check.py)
@@ -159,7 +155,7 @@ mm = re.search(r"at ([0-9.]+) Hz measured.*?K <= 2 \(b - \|B\|\) / T = ([0-9.]+)
 if not mm: fail("serve did not say the stream's measured rate and bound")
 rate = float(mm.group(1))
 if not 400 <= rate <= 600: fail(f"measured {rate} Hz for a 500 Hz stream")
-during, pushing, late = check_peer_forces(f"{out}/fast.peer.log", 2.5, 0.8, 300, rate, fail, f"{out}/fast.lost")
+during, pushing, late = check_peer_forces(f"{out}/fast.peer.log", 2.5, 0.8, 300, rate, fail)
 forces = client_forces("fast")
 if len(forces) != 3: fail(f"{len(forces)} force readings from the client, not 3")
 typical = median(pushing)

@@ -157,8 +157,6 @@ m igtl-stall-zero-at-once   $IG '    if (l.stalled_now) {  // the servo stopped 
                                '    if (false) {' test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
 m igtl-stale-stream-zero    $IG '      if (!zero_sent) send_force({0, 0, 0});' \
                                '      if (false) send_force({0, 0, 0});' test_igtl_device 'ServiceIgtlDevice.ForcesAnswerPoses*'
-m igtl-stale-late           $IG '  const std::int64_t stale_ns = std::int64_t(3e9 / rate_hz_);' \
-                               '  const std::int64_t stale_ns = std::int64_t(6e9 / rate_hz_);' test_igtl_device 'ServiceIgtlDevice.ForcesAnswerPoses*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 # A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.

@@ -3,14 +3,10 @@ tests/sched_canary.h does inside a C++ test): a canary process per CPU wakes eve
 absolute deadlines; a wake-up later than SLACK_S marks [deadline, wake-up] as lost. The
 canaries run in the default scheduling class, as the programs under test do here, so they lose
 the CPU when those do: a test widens a wall-clock bound by lost_in() over the interval it
-bounds, and by nothing else.
-
-As a program: `python3 sched_canary.py OUT` watches every CPU until SIGTERM or SIGINT, then
-writes OUT: one "lost A B" line per lost interval (time.monotonic() = CLOCK_MONOTONIC [s])."""
+bounds, and by nothing else (igtl_signal_check.py)."""
 import multiprocessing as mp
 import os
 import signal
-import sys
 import time
 
 PERIOD_S, SLACK_S = 0.0005, 0.0003
@@ -64,25 +60,3 @@ class Canaries:
         for p in self.procs:
             p.join()
         return lost
-
-
-def read_lost(path):
-    """The intervals a `sched_canary.py OUT` run wrote."""
-    return [(float(w[1]), float(w[2])) for w in (l.split() for l in open(path)) if w[:1] == ["lost"]]
-
-
-if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        print(__doc__)
-        sys.exit(2)
-    done = []
-    for s in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(s, lambda *_: done.append(1))
-    c = Canaries().start()
-    while not done:
-        time.sleep(0.05)
-    lost = c.stop()
-    tmp = sys.argv[1] + ".part"
-    with open(tmp, "w") as f:
-        f.writelines(f"lost {a:.6f} {b:.6f}\n" for a, b in lost)
-    os.replace(tmp, sys.argv[1])

@@ -20,7 +20,12 @@
 #      to the poses and, transposed, to the Force replies;
 #   6. the stream's force at a scene's workspace_scale 0.1: the stream's points are the
 #      volume's own (its map is the identity), so the client 2 mm inside the 300 HU ball feels
-#      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N).
+#      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N);
+#   7. the link's force limit: a scene whose servo allows 40 N (K 3000 N/m) over a link
+#      declared at 2 N (device.link_max_force_n) is served, clamped, not refused; the client
+#      5 mm inside the ball (K x depth = 15 N asked) is sent no Force above 2 N (every Force it
+#      received, float32 rounding aside), and its settled force is at least 0.9 x 2 N (the
+#      clamp, not a weak contact, held it there; 2 N, not the 3.3 N default, so the key is read).
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -176,4 +181,41 @@ if not (k * lo <= fn <= k * hi and fz > 0.9 * fn):
          f"not K x depth = {k * lo:.2f}..{k * hi:.2f} N outward (+S)")
 print(f"workspace_scale ok: |F| {fn:.2f} N at 0.1, K x depth")
 PY
+[[ $? == 0 ]] || exit 1
+
+# 7. A 40 N scene over a 2 N link: clamped to the link's limit at the client.
+python3 - "$scene" "$out/link.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+s["servo"]["force_limit_n"] = 40
+s["servo"]["stiffness_n_per_m"] = 3000
+s["device"]["link_max_force_n"] = 2
+json.dump(s, open(sys.argv[2], "w"), indent=1)
+PY
+"$exe" serve "$out/link.json" --port 0 --stream Stylus --reply-force --seconds 6 >"$out/serve5.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve5.log" $serve_pid)
+[[ -n $port ]] || fail "the 40 N scene over a 2 N link was not served: $(cat "$out/serve5.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 10 0.6 force peak \
+  >"$out/l.log" 2>&1 || fail "the link-limit client failed: $(cat "$out/l.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import sys
+log = open(f"{sys.argv[1]}/l.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+link = 2.0
+f = [l.split() for l in log if l.startswith("force ")]
+p = [l.split() for l in log if l.startswith("peak ")]
+if len(f) != 1 or len(p) != 1: fail("no force or peak line")
+fn, peak, n = float(f[0][4]), float(p[0][2]), int(p[0][5])
+if n < 10: fail(f"only {n} Force transforms received")
+if peak > link + 1e-5:  # float32 components: |F| rounds within 1e-6 N of the clamp
+    fail(f"the client was sent {peak:.6f} N through a link declared at {link} N (the scene allows 40 N)")
+if fn < 0.9 * link:
+    fail(f"5 mm inside the ball at 3000 N/m the settled force is {fn:.3f} N, not the link's {link} N: the test cannot tell a clamp")
+print(f"link limit ok: a 40 N scene over a {link} N link, 15 N asked: peak {peak:.4f} N of {n} Forces, settled {fn:.3f} N")
+PY
+[[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -20,6 +20,8 @@
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms once they settle (3 s at
 //                     most) and how many came so far: "force X Y Z |F| N, K received, ..."
+//   peak              prints the largest |F| of every Force transform received so far:
+//                     "peak |F| P N of K received" (what the peer's device was sent at most)
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -89,6 +91,7 @@ struct Shared {
   bool sent_pose = false;
   std::array<double, 3> last_pose{0, 0, 0};  // [mm, RAS], the last the stream sent
   long forces_received = 0;
+  double peak_force = 0;  // the largest |F| of every Force received [N]
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
   int images = 0;
   bool geometry_ok = true;
@@ -188,6 +191,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         igtl::Matrix4x4 m;
         t->GetMatrix(m);
         s.forces.push_back({m[0][3], m[1][3], m[2][3]});
+        s.peak_force = std::max(s.peak_force, std::hypot(double(m[0][3]), double(m[1][3]), double(m[2][3])));
         ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
       }
@@ -373,6 +377,11 @@ bool Client::action(const std::string& a) {
     return wait_status(s, "CMD");
   }
   if (a == "force") return print_settled_force(s);
+  if (a == "peak") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::cout << "peak |F| " << s.peak_force << " N of " << s.forces_received << " received\n";
+    return true;
+  }
   if (a == "images") {
     const double quiet = num();
     std::unique_lock<std::mutex> lock(s.mu);

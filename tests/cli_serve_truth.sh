@@ -26,6 +26,11 @@
 #      5 mm inside the ball (K x depth = 15 N asked) is sent no Force above 2 N (every Force it
 #      received, its 6 printed digits aside), and its settled force is at least 0.9 x 2 N (the
 #      clamp, not a weak contact, held it there; 2 N, not the 3.3 N default, so the key is read).
+#   8. the stiffness bound at the stream's rate (as `--haptic igtl:`'s): the head scene's 800 N/m
+#      over a 50 Hz stream (bound 2 (5.01 - 1) / 0.02 = 401 N/m) is refused to that client (a
+#      STATUS naming servo.stiffness_n_per_m 800 and the bound) before its tool reaches the
+#      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
+#      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -216,6 +221,45 @@ if peak > link * (1 + 1e-5):  # float32 components, printed to 6 significant dig
 if fn < 0.9 * link:
     fail(f"5 mm inside the ball at 3000 N/m the settled force is {fn:.3f} N, not the link's {link} N: the test cannot tell a clamp")
 print(f"link limit ok: a 40 N scene over a {link} N link, 15 N asked: peak {peak:.4f} N of {n} Forces, settled {fn:.3f} N")
+PY
+[[ $? == 0 ]] || exit 1
+
+# 8. A 50 Hz stream: refused for the head scene's stiffness; served when allowed.
+slow() {  # slow NAME [serve options]
+  local name=$1; shift
+  "$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 "$@" >"$out/serve_$name.log" 2>&1 &
+  serve_pid=$!
+  port=$(wait_port "$out/serve_$name.log" $serve_pid)
+  [[ -n $port ]] || fail "the $name serve never said it was listening: $(cat "$out/serve_$name.log")"
+  timeout 30 "$client" 127.0.0.1 "$port" "$head" hz 50 ball Ball 48 15 20 move 0 0 24 0.5 move 0 0 13 0.6 wait 0.5 \
+    peak statuses 0.2 >"$out/$name.log" 2>&1 || fail "the $name client failed: $(cat "$out/$name.log")"
+  wait $serve_pid
+}
+slow slow
+slow slowallowed --allow-unstable-stiffness
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+def fail(msg, name):
+    print("FAIL serve truth:", msg); print(open(f"{out}/{name}.log").read()); print(open(f"{out}/serve_{name}.log").read()); sys.exit(1)
+def peak(name):
+    p = [l.split() for l in open(f"{out}/{name}.log") if l.startswith("peak ")]
+    if len(p) != 1: fail("no peak line", name)
+    return float(p[0][2]), int(p[0][5])
+slow, n = peak("slow")
+refusal = [l for l in open(f"{out}/slow.log") if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]
+if len(refusal) != 1: fail("no one STATUS refusing the 50 Hz stream for servo.stiffness_n_per_m", "slow")
+m = re.search(r"at (\d+) Hz .*servo.stiffness_n_per_m 800 is above the Colgate-Schenkel bound 2 \(b - \|B\|\) / T = (\d+) N/m", refusal[0])
+if not m: fail(f"the refusal does not name the value 800 and the bound: {refusal[0]}", "slow")
+rate, bound = int(m.group(1)), int(m.group(2))
+if not (40 <= rate <= 60) or abs(bound - 2 * (5.01 - 1.0) * rate) > 0.02 * bound + 10:
+    fail(f"rate {rate} Hz, bound {bound} N/m: not a 50 Hz stream's 2 (b - |B|) rate", "slow")
+if n < 1 or slow != 0.0: fail(f"the refused stream's client got {slow} N (of {n} Forces), not only zeros", "slow")
+allowed, n2 = peak("slowallowed")
+if "(allowed)" not in open(f"{out}/serve_slowallowed.log").read(): fail("no warning for the allowed stream", "slowallowed")
+if allowed <= 0.8: fail(f"allowed, the 50 Hz stream 2 mm in the ball got {allowed} N", "slowallowed")
+print(f"stream stiffness bound ok: 50 Hz ({rate} measured) refused, bound {bound} N/m, its client got only zeros ({n}); "
+      f"allowed: peak {allowed:.2f} N")
 PY
 [[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

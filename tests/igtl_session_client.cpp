@@ -20,6 +20,7 @@
 //                     when that time has passed (the actions before it were too slow)
 //   force             prints the mean of the newest 10 Force transforms once they settle (3 s at
 //                     most) and how many came so far: "force X Y Z |F| N, K received, ..."
+//   hz N              the stream's rate from now on: a pose every 1 / N s (default 500 Hz)
 //   peak              prints the largest |F| of every Force transform received so far:
 //                     "peak |F| P N of K received" (what the peer's device was sent at most)
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
@@ -234,6 +235,7 @@ struct Path {
 };
 
 std::mutex send_mu;
+std::atomic<long> stream_period_us{2000};  // `hz`: the time between the stream's poses
 void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
   m->Pack();
   std::lock_guard<std::mutex> lock(send_mu);
@@ -244,7 +246,7 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, Shared& shared, const std
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("Stylus");
   while (!done) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    std::this_thread::sleep_for(std::chrono::microseconds(stream_period_us.load()));
     {
       std::lock_guard<std::mutex> lock(path.mu);
       if (!path.started || Clock::now() < path.paused_until) continue;
@@ -377,6 +379,12 @@ bool Client::action(const std::string& a) {
     return wait_status(s, "CMD");
   }
   if (a == "force") return print_settled_force(s);
+  if (a == "hz") {
+    const double hz = num();
+    if (!(hz > 0)) return false;
+    stream_period_us = long(1e6 / hz);
+    return true;
+  }
   if (a == "peak") {
     std::lock_guard<std::mutex> lock(s.mu);
     std::cout << "peak |F| " << s.peak_force << " N of " << s.forces_received << " received\n";

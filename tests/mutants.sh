@@ -187,6 +187,9 @@ m serve-link-max-force      service/transform_device.h '    c.max_force_n = max_
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene_.link_max_force_n);' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
+m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;' '  return true;' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

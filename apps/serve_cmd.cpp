@@ -90,8 +90,8 @@ Subcommand add_serve_command(CLI::App& cli) {
                                  "openhaptics[:NAME], forcedimension[:INDEX], emu:SOCKET, hid:..., polhem:..., null, "
                                  "playback:FILE (docs/devices.md)");
   sub->add_flag("--allow-unstable-stiffness", a->allow_unstable,
-                "Run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured "
-                "rate), as the scene's servo.allow_unstable_stiffness");
+                "Run a stiffness above the stability bound at the force loop's rate (the TRANSFORM stream's, or a "
+                "--haptic igtl: stream's, measured rate), as the scene's servo.allow_unstable_stiffness");
   auto* stream = sub->add_option("--stream", a->o.stream, "Device name of the TRANSFORMs that move the HIP (default StylusToTracker)");
   auto* offset = sub->add_option("--offset-mm", a->offset, "X,Y,Z added to the stream's translation [mm, RAS]")->expected(3)->delimiter(',');
   auto* registration = sub->add_option("--registration", a->registration,

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <thread>
 #include <unistd.h>
+#include <vector>
 
 #include <igtlStatusMessage.h>
 
@@ -41,6 +42,7 @@
 #include "isotouch/session/stop_signal.h"
 #include "isotouch/service/stream_replies.h"
 #include "isotouch/service/transform_device.h"
+#include "isotouch/sim/stability.h"
 #include "isotouch/servo/triple_buffer.h"
 #include "isotouch/servo/cpu_placement.h"
 
@@ -85,6 +87,11 @@ struct Client {
   /// slot counts as free while its thread ends.
   bool evicted = false;
   int id = 0;
+  /// Its stream's rate check (Server::check_stream_rate; this client's thread only): the
+  /// times between its first poses [ns], whether they were judged, whether it was refused.
+  std::vector<std::int64_t> stream_gaps_ns;
+  std::int64_t stream_last_ns = 0;
+  bool stream_checked = false, stream_refused = false;
 };
 
 /// A command on its way to the command thread, and whom to answer.
@@ -141,6 +148,7 @@ class Server {
   void handle(Client& c, Incoming& in);
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   bool own_stream(Client& c, const Incoming& in);
+  bool check_stream_rate(Client& c, const Incoming& in);
   void take_registration(Client& c, const Incoming& in);
   void release_stream(int client);
   void display_loop();
@@ -327,7 +335,8 @@ void Server::handle(Client& c, Incoming& in) {
         break;
       }
       if (in.device == o_.stream && !haptic_) {
-        if (!own_stream(c, in)) break;
+        if (c.stream_refused) break;  // too slow for the scene's stiffness: its poses move nothing
+        if (!own_stream(c, in) || !check_stream_rate(c, in)) break;
         const double t[3] = {in.matrix[0][3], in.matrix[1][3], in.matrix[2][3]};
         if (o_.reply_force) {
           std::lock_guard<std::mutex> lock(stream_mu_);
@@ -389,6 +398,47 @@ bool Server::own_stream(Client& c, const Incoming& in) {
         << o_.stale_s * 1e3 << " ms or disconnects); this client's poses are ignored";
     refuse(c, in, igtl::StatusMessage::STATUS_ACCESS_DENIED, why.str());
   }
+  return false;
+}
+
+/// The force loop closes at the stream's rate (as `--haptic igtl:`'s, igtl_device.cpp): once a
+/// client has streamed kRatePoses poses, the median time between them gives its rate, and the
+/// scene's servo.stiffness_n_per_m is checked against the Colgate-Schenkel bound 2 (b - |B|) / T
+/// at min(that rate, the servo's) (b: the scene's device + hand damping, B: the servo's damping).
+/// A stiffer scene is refused to that client unless allowed (servo.allow_unstable_stiffness,
+/// --allow-unstable-stiffness: logged): a STATUS naming the field, its value, the bound and the
+/// rate; its poses move nothing from then on, so the stream goes stale (zero force, one zero
+/// reply). The median: a pause in the stream does not make it look slow.
+bool Server::check_stream_rate(Client& c, const Incoming& in) {
+  constexpr std::size_t kRatePoses = 16;
+  if (c.stream_checked) return true;
+  const std::int64_t now = TransformDevice::now_ns();
+  if (c.stream_last_ns != 0) c.stream_gaps_ns.push_back(now - c.stream_last_ns);
+  c.stream_last_ns = now;
+  if (c.stream_gaps_ns.size() + 1 < kRatePoses) return true;
+  c.stream_checked = true;
+  std::vector<std::int64_t> g = c.stream_gaps_ns;
+  std::nth_element(g.begin(), g.begin() + std::ptrdiff_t(g.size() / 2), g.end());
+  const double rate = 1e9 / double(std::max<std::int64_t>(g[g.size() / 2], 1));
+  const double loop_hz = std::min(rate, scene_.hri.rate_hz);
+  const double b = scene_.device.damping_n_s_per_m + scene_.device.hand_damping_n_s_per_m;
+  const double bound = sim::colgate_k_max(b, scene_.hri.damping_n_s_per_m, 1.0 / loop_hz);
+  const double k = scene_.hri.stiffness_n_per_m;
+  if (!(k > bound)) return true;
+  std::ostringstream why;
+  why << "stream '" << in.device << "' at " << std::lround(rate) << " Hz (median of its first " << kRatePoses
+      << " poses): servo.stiffness_n_per_m " << k << " is above the Colgate-Schenkel bound 2 (b - |B|) / T = "
+      << std::lround(bound) << " N/m with the loop closing at " << std::lround(loop_hz) << " Hz (b " << b << " N s/m, B "
+      << scene_.hri.damping_n_s_per_m << " N s/m)";
+  if (scene_.allow_unstable_stiffness) {
+    log_.line("stream   client " + std::to_string(c.id) + ": warning: " + why.str() + " (allowed)");
+    return true;
+  }
+  why << "; the contact may buzz: its poses move nothing (lower the stiffness, raise the stream's rate, or allow it: "
+         "--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
+  c.stream_refused = true;
+  log_.line("stream   client " + std::to_string(c.id) + " refused: " + why.str());
+  refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, why.str());
   return false;
 }
 

@@ -20,7 +20,17 @@
 #      to the poses and, transposed, to the Force replies;
 #   6. the stream's force at a scene's workspace_scale 0.1: the stream's points are the
 #      volume's own (its map is the identity), so the client 2 mm inside the 300 HU ball feels
-#      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N).
+#      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N);
+#   7. the link's force limit: a scene whose servo allows 40 N (K 3000 N/m) over a link
+#      declared at 2 N (device.link_max_force_n) is served, clamped, not refused; the client
+#      5 mm inside the ball (K x depth = 15 N asked) is sent no Force above 2 N (every Force it
+#      received, its 6 printed digits aside), and its settled force is at least 0.9 x 2 N (the
+#      clamp, not a weak contact, held it there; 2 N, not the 3.3 N default, so the key is read).
+#   8. the stiffness bound at the stream's rate (as `--haptic igtl:`'s): the head scene's 800 N/m
+#      over a 50 Hz stream (bound 2 (5.01 - 1) / 0.02 = 401 N/m) is refused to that client (a
+#      STATUS naming servo.stiffness_n_per_m 800 and the bound) before its tool reaches the
+#      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
+#      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -176,4 +186,80 @@ if not (k * lo <= fn <= k * hi and fz > 0.9 * fn):
          f"not K x depth = {k * lo:.2f}..{k * hi:.2f} N outward (+S)")
 print(f"workspace_scale ok: |F| {fn:.2f} N at 0.1, K x depth")
 PY
+[[ $? == 0 ]] || exit 1
+
+# 7. A 40 N scene over a 2 N link: clamped to the link's limit at the client.
+python3 - "$scene" "$out/link.json" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+s["servo"]["force_limit_n"] = 40
+s["servo"]["stiffness_n_per_m"] = 3000
+s["device"]["link_max_force_n"] = 2
+json.dump(s, open(sys.argv[2], "w"), indent=1)
+PY
+"$exe" serve "$out/link.json" --port 0 --stream Stylus --reply-force --seconds 6 >"$out/serve5.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve5.log" $serve_pid)
+[[ -n $port ]] || fail "the 40 N scene over a 2 N link was not served: $(cat "$out/serve5.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 10 0.6 force peak \
+  >"$out/l.log" 2>&1 || fail "the link-limit client failed: $(cat "$out/l.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import sys
+log = open(f"{sys.argv[1]}/l.log").read().splitlines()
+def fail(msg):
+    print("FAIL serve truth:", msg); print("\n".join(log)); sys.exit(1)
+link = 2.0
+f = [l.split() for l in log if l.startswith("force ")]
+p = [l.split() for l in log if l.startswith("peak ")]
+if len(f) != 1 or len(p) != 1: fail("no force or peak line")
+fn, peak, n = float(f[0][4]), float(p[0][2]), int(p[0][5])
+if n < 10: fail(f"only {n} Force transforms received")
+if peak > link * (1 + 1e-5):  # float32 components, printed to 6 significant digits: within 5e-6 of it, relative
+    fail(f"the client was sent {peak:.6f} N through a link declared at {link} N (the scene allows 40 N)")
+if fn < 0.9 * link:
+    fail(f"5 mm inside the ball at 3000 N/m the settled force is {fn:.3f} N, not the link's {link} N: the test cannot tell a clamp")
+print(f"link limit ok: a 40 N scene over a {link} N link, 15 N asked: peak {peak:.4f} N of {n} Forces, settled {fn:.3f} N")
+PY
+[[ $? == 0 ]] || exit 1
+
+# 8. A 50 Hz stream: refused for the head scene's stiffness; served when allowed.
+slow() {  # slow NAME [serve options]
+  local name=$1; shift
+  "$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 "$@" >"$out/serve_$name.log" 2>&1 &
+  serve_pid=$!
+  port=$(wait_port "$out/serve_$name.log" $serve_pid)
+  [[ -n $port ]] || fail "the $name serve never said it was listening: $(cat "$out/serve_$name.log")"
+  timeout 30 "$client" 127.0.0.1 "$port" "$head" hz 50 ball Ball 48 15 20 move 0 0 24 0.5 move 0 0 13 0.6 wait 0.5 \
+    peak statuses 0.2 >"$out/$name.log" 2>&1 || fail "the $name client failed: $(cat "$out/$name.log")"
+  wait $serve_pid
+}
+slow slow
+slow slowallowed --allow-unstable-stiffness
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+def fail(msg, name):
+    print("FAIL serve truth:", msg); print(open(f"{out}/{name}.log").read()); print(open(f"{out}/serve_{name}.log").read()); sys.exit(1)
+def peak(name):
+    p = [l.split() for l in open(f"{out}/{name}.log") if l.startswith("peak ")]
+    if len(p) != 1: fail("no peak line", name)
+    return float(p[0][2]), int(p[0][5])
+slow, n = peak("slow")
+refusal = [l for l in open(f"{out}/slow.log") if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]
+if len(refusal) != 1: fail("no one STATUS refusing the 50 Hz stream for servo.stiffness_n_per_m", "slow")
+m = re.search(r"at (\d+) Hz .*servo.stiffness_n_per_m 800 is above the Colgate-Schenkel bound 2 \(b - \|B\|\) / T = (\d+) N/m", refusal[0])
+if not m: fail(f"the refusal does not name the value 800 and the bound: {refusal[0]}", "slow")
+rate, bound = int(m.group(1)), int(m.group(2))
+if not (40 <= rate <= 60) or abs(bound - 2 * (5.01 - 1.0) * rate) > 0.02 * bound + 10:
+    fail(f"rate {rate} Hz, bound {bound} N/m: not a 50 Hz stream's 2 (b - |B|) rate", "slow")
+if n < 1 or slow != 0.0: fail(f"the refused stream's client got {slow} N (of {n} Forces), not only zeros", "slow")
+allowed, n2 = peak("slowallowed")
+if "(allowed)" not in open(f"{out}/serve_slowallowed.log").read(): fail("no warning for the allowed stream", "slowallowed")
+if allowed <= 0.8: fail(f"allowed, the 50 Hz stream 2 mm in the ball got {allowed} N", "slowallowed")
+print(f"stream stiffness bound ok: 50 Hz ({rate} measured) refused, bound {bound} N/m, its client got only zeros ({n}); "
+      f"allowed: peak {allowed:.2f} N")
+PY
+[[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -21,6 +21,9 @@
 //   force             prints the mean of the newest 10 Force transforms once they settle (3 s at
 //                     most) and how many came so far: "force X Y Z |F| N, K received, ..., from
 //                     A to B s" (A, B: when it began and printed, since the client started)
+//   hz N              the stream's rate from now on: a pose every 1 / N s (default 500 Hz)
+//   peak              prints the largest |F| of every Force transform received so far:
+//                     "peak |F| P N of K received" (what the peer's device was sent at most)
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -90,6 +93,7 @@ struct Shared {
   bool sent_pose = false;
   std::array<double, 3> last_pose{0, 0, 0};  // [mm, RAS], the last the stream sent
   long forces_received = 0;
+  double peak_force = 0;  // the largest |F| of every Force received [N]
   isotouch::engine::Volume copy;  // BASE with the received IMAGEs applied
   int images = 0;
   bool geometry_ok = true;
@@ -189,6 +193,7 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         igtl::Matrix4x4 m;
         t->GetMatrix(m);
         s.forces.push_back({m[0][3], m[1][3], m[2][3]});
+        s.peak_force = std::max(s.peak_force, std::hypot(double(m[0][3]), double(m[1][3]), double(m[2][3])));
         ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
       }
@@ -231,6 +236,7 @@ struct Path {
 };
 
 std::mutex send_mu;
+std::atomic<long> stream_period_us{2000};  // `hz`: the time between the stream's poses
 void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
   m->Pack();
   std::lock_guard<std::mutex> lock(send_mu);
@@ -241,7 +247,7 @@ void stream_loop(igtl::ClientSocket* sock, Path& path, Shared& shared, const std
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("Stylus");
   while (!done) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    std::this_thread::sleep_for(std::chrono::microseconds(stream_period_us.load()));
     {
       std::lock_guard<std::mutex> lock(path.mu);
       if (!path.started || Clock::now() < path.paused_until) continue;
@@ -375,6 +381,17 @@ bool Client::action(const std::string& a) {
     return wait_status(s, "CMD");
   }
   if (a == "force") return print_settled_force(s, started);
+  if (a == "hz") {
+    const double hz = num();
+    if (!(hz > 0)) return false;
+    stream_period_us = long(1e6 / hz);
+    return true;
+  }
+  if (a == "peak") {
+    std::lock_guard<std::mutex> lock(s.mu);
+    std::cout << "peak |F| " << s.peak_force << " N of " << s.forces_received << " received\n";
+    return true;
+  }
   if (a == "images") {
     const double quiet = num();
     std::unique_lock<std::mutex> lock(s.mu);

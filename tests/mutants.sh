@@ -181,6 +181,15 @@ m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_fo
 # serve's stream renders at the identity map: no 1 / workspace_scale in its force.
 m serve-stream-unscaled     service/serve.cpp '  if (!echo_device_) so.hri.world_per_device = 1.0;' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's stream is clamped to the link's limit (device.link_max_force_n), not only the scene's:
+# the caps the gate reads, and serve setting them from the scene.
+m serve-link-max-force      service/transform_device.h '    c.max_force_n = max_force_n_;' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene_.link_max_force_n);' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
+m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;' '  return true;' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

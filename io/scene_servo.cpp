@@ -1,5 +1,6 @@
 #include "isotouch/io/scene_servo.h"
 
+#include <cmath>
 #include <iomanip>
 #include <sstream>
 
@@ -24,6 +25,14 @@ const char* normal_name(servo::NormalSource n) {
   }
 }
 
+/// The tool's radius in millimetres that the parser's 1e-3 * mm turns back into `r_m` exactly
+/// (r_m * 1e3 alone does not for some radii: 4.5 mm), or the nearest there is.
+double radius_mm(double r_m) {
+  double mm = r_m * 1e3;
+  for (int i = 0; i < 8 && 1e-3 * mm != r_m; ++i) mm = std::nextafter(mm, 1e-3 * mm < r_m ? INFINITY : -INFINITY);
+  return mm;
+}
+
 }  // namespace
 
 std::string servo_section_json(const servo::HriParams& h) {
@@ -41,7 +50,7 @@ std::string servo_section_json(const servo::HriParams& h) {
   if (h.friction.any())
     j << ", \"friction\": {\"mu_s\": " << h.friction.mu_s << ", \"mu_d\": " << h.friction.mu_d
       << ", \"viscous_n_s_per_m\": " << h.friction.viscous_n_s_per_m << "}";
-  if (h.tool_radius_m > 0) j << ", \"tool\": {\"radius_mm\": " << h.tool_radius_m * 1e3 << "}";
+  if (h.tool_radius_m > 0) j << ", \"tool\": {\"radius_mm\": " << radius_mm(h.tool_radius_m) << "}";
   j << "}";
   return j.str();
 }

@@ -12,7 +12,8 @@ namespace isotouch::io {
 /// The "servo" section for `hri` (docs/user-guide.md's field table): variant, stiffness_n_per_m,
 /// damping_n_s_per_m, plane_update_period, rate_hz, force_limit_n, intersection,
 /// intersection_steps, normal, force_shading, recovery_time_s, friction (when any), tool
-/// (radius_mm when > 0), as a JSON object whose numbers read back exactly (17 digits).
+/// (radius_mm when > 0, the millimetres whose 1e-3 * mm is the radius where there are such:
+/// not for 4.5 mm), as a JSON object whose numbers read back exactly (17 digits).
 std::string servo_section_json(const servo::HriParams& hri);
 
 /// The first field of `wanted` that `parsed` (the scene's renderer read back, world_per_device

@@ -2,7 +2,8 @@
 # `isotouch run --live --haptic igtl:` over a slow, delayed link (issue 67): the PLUS-like
 # peer igtl_hand_peer streams its stylus at 100 Hz and takes each message up 5 ms late either
 # way (a 10 ms round trip); its stylus is a simulated 80 g device on a weak hand (50 N/m, no
-# damping) that presses the head scene's skull (K 800 N/m) with about 1 N. Judged by the
+# damping) whose target goes 40 mm in, pressing the head scene's skull (K 800 N/m; at rest
+# about 0.54 N, the hand's spring 11 mm stretched). Judged by the
 # peer's device's own motion and energy (not by any observer of ours):
 #   1. without a controller the press does not settle: the stylus's half peak-to-peak from
 #      200 ms after contact and the hand's target's stop is over 0.5 mm (the link's delay makes the wall active; shown,
@@ -47,5 +48,8 @@ run() {
 }
 run plain 0
 run controlled 1
+for name in plain controlled; do
+  [[ $(cat "$out/$name.rc") == 0 ]] || fail "isotouch run ($name) exited $(cat "$out/$name.rc"), not 0"
+done
 python3 "$(dirname "$0")/igtl_hand_check.py" "$out/plain.peer.log" "$out/controlled.peer.log" || fail "see above"
 echo "PASS haptic igtl delay"

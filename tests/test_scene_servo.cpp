@@ -59,6 +59,11 @@ TEST(SceneServo, TheToolAndThePaperVariantReadBackEqual) {
   tool.recovery_time_s = 0.02;
   EXPECT_EQ(read_back(tool).tool_radius_m, 0.002);
   EXPECT_EQ(unrecordable_field(tool, read_back(tool)), "");
+  tool.tool_radius_m = 0.0009;  // 0.9 mm * 1e-3 is not 0.0009 in doubles: written as 0.8999999999999999 mm
+  EXPECT_EQ(read_back(tool).tool_radius_m, 0.0009);
+  // No millimetre value reads back as 0.0045 m (the parser's 1e-3 * mm): named, not silently changed.
+  tool.tool_radius_m = 0.0045;
+  EXPECT_EQ(unrecordable_field(tool, read_back(tool)), "tool_radius_m 0.0044999999999999997");
   HriParams paper;
   paper.variant = isotouch::servo::Variant::kPaper;
   paper.intersection = isotouch::servo::Intersection::kLinear;

@@ -76,8 +76,13 @@ engine::IsoChoice iso_given(const servo::HriParams& hri) {
 /// `isotouch replay` rebuilds the same renderer. @throws std::invalid_argument naming a field
 /// of params a scene cannot carry (or would read back otherwise) and its value.
 run::VolumeScene recordable_scene(const engine::Volume& vol, const servo::HriParams& hri, bool scene_hri) {
-  run::VolumeScene vs = run::make_volume_scene(vol, iso_given(hri), vol.path, scene_hri ? "" : io::servo_section_json(hri));
-  if (scene_hri) return vs;
+  if (scene_hri) return run::make_volume_scene(vol, iso_given(hri), vol.path);
+  run::VolumeScene vs;
+  try {
+    vs = run::make_volume_scene(vol, iso_given(hri), vol.path, io::servo_section_json(hri));
+  } catch (const io::SceneError& e) {  // params the scene's parser refuses (a NaN, a tool on the paper variant)
+    throw std::invalid_argument(std::string("record: params cannot be recorded as a scene's servo section: ") + e.what());
+  }
   servo::HriParams want = hri;
   want.world_per_device = vs.scene.hri.world_per_device;  // the scene's device section owns it
   want.edit_period_s = vs.scene.hri.edit_period_s;        // every session's is set from its scene's edits
@@ -374,14 +379,14 @@ LivePtr live_on_own_volume(engine::Volume volume, std::optional<double> tau, con
                            bool realtime, double flush_interval_s) {
   const auto hri = params_arg<servo::HriParams>(params, "LiveSession", "HriParams", tau, "tau", "a Volume");
   if (volume.path.empty()) volume.path = kInMemoryVolumeName;  // named in its scene and errors, never a file
-  // params a recording's scene cannot carry: refused before any file is written.
-  if (!record.empty() && !params.is_none()) recordable_scene(volume, hri, false);
   if (!record.empty())  // the files beside the recording are new: a user's own file is never replaced
     for (const char* suffix : {Live::kVolumeSuffix, Live::kSceneSuffix})
       if (std::filesystem::exists(record + suffix))
         throw py::value_error("record: '" + record + "': " + record + suffix +
                               " exists (a session on a volume writes its volume and scene there): give another record path");
   py::gil_scoped_release nogil;
+  // params a recording's scene cannot carry: refused before any file is written.
+  if (!record.empty() && !params.is_none()) recordable_scene(volume, hri, false);
   if (!record.empty()) {  // the volume as a file beside the recording, read back: replay reads the same bits
     const std::string file = record + Live::kVolumeSuffix;
     io::save_any_volume(volume, file);

@@ -91,6 +91,12 @@ def test_argument_errors_name_the_argument(root, tmp_path):
     with pytest.raises(ValueError, match="record: params.velocity_cutoff_hz 150 cannot be recorded"):
         isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=p, record=str(tmp_path / "x.rec"))
     assert os.listdir(tmp_path) == []
+    paper_tool = isotouch.HriParams(tau=0.0)
+    paper_tool.variant = isotouch.Variant.paper
+    paper_tool.tool_radius_m = 0.002  # the paper variant renders a point: the scene's parser refuses it
+    with pytest.raises(ValueError, match=r"record: params cannot be recorded as a scene's servo section: .*radius_mm"):
+        isotouch.LiveSession(a, spacing=(SPACING,) * 3, params=paper_tool, record=str(tmp_path / "x.rec"))
+    assert os.listdir(tmp_path) == []
     with pytest.raises(ValueError, match="tau: the scene .* gives its own isovalue"):
         isotouch.LiveSession(str(root / "scenes/sphere.json"), tau=0.0)
     with pytest.raises(RuntimeError, match=r"isovalue.*outside the finite data range"):

@@ -31,20 +31,22 @@ def judge(path):
     if contact is None:
         print(f"FAIL {path}: the stylus never touched the skull (largest force {max(f for _, _, f in ticks):.3f} N)")
         sys.exit(1)
-    # Up to 0.1 s before the run's stop reached the device: the stop's zero force (the trailing
-    # ticks with no force at all), after which the hand pushes the stylus in.
-    stop = len(ticks)
-    while stop > 0 and ticks[stop - 1][2] == 0.0:
-        stop -= 1
-    end = ticks[min(stop, len(ticks) - 1)][0] - 0.1
-    settled = [s for t, s, _ in ticks if max(contact, still) + 0.2 <= t <= end]
+    # A fixed window, 2.5 s from 200 ms after the contact and the hand's stop: the run's stop
+    # (its force ramped off, the hand then pushing the stylus in) comes later, its live part
+    # lasting 6.3 s from after its 1 s rate measurement, both counted from the connection.
+    since = max(contact, still) + 0.2
+    end = since + 2.5
+    if ticks[-1][0] < end + 0.5:
+        print(f"FAIL {path}: the run ended at {ticks[-1][0]:.3f} s, before the judged window's end {end:.3f} s + 0.5 s")
+        sys.exit(1)
+    settled = [s for t, s, _ in ticks if since <= t <= end]
     if len(settled) < 1000:
         print(f"FAIL {path}: only {len(settled)} ticks from 200 ms after contact")
         sys.exit(1)
     last = [(s, f) for t, s, f in ticks if end - 0.5 <= t <= end]
     mean_s = sum(s for s, _ in last) / len(last)
     mean_f = sum(f for _, f in last) / len(last)
-    return contact, 0.5 * (max(settled) - min(settled)), mean_s, mean_f, energy, pc, max(contact, still) + 0.2, end
+    return contact, 0.5 * (max(settled) - min(settled)), mean_s, mean_f, energy, pc, since, end
 
 
 plain = judge(sys.argv[1])

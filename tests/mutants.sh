@@ -236,7 +236,6 @@ m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_tick
 # and the link the simulation puts in front of it (delayed_link).
 P=servo/port_passivity.cpp
 m passivity-damping         $P '      f += damp;' '' test_linked_contact 'LinkedContact.*'
-m passivity-damping-igtl    $P '      f += damp;' '' 'isotouch igtl_hand_peer' 'ctest:cli_haptic_igtl_delay'
 m passivity-device-clock    $P 'capped ? alpha_max_ / period : excess' 'capped ? alpha_max_ / 1e-3 : excess' \
                                test_port_passivity 'PortPassivity.*'
 m passivity-energy-in       $P '    e_in_ += std::max(-w, 0.0);' '' test_port_passivity 'PortPassivity.*'

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "isotouch/service/igtl_reply_rule.h"
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/sim/stability.h"
 
@@ -155,36 +156,19 @@ void IgtlDevice::send_force(const core::Vec3& f) {
 }
 
 /// Polls every 0.2 ms (a fifth of the stall time when that is shorter: a stall is found within
-/// stall time + a fifth of it): a new pose the servo has answered (or 2 ms old) gets the
-/// newest force; a stall sends a zero at once; force off gives zero; a stale stream gets one
-/// zero.
+/// stall time + a fifth of it) and sends what IgtlReplyRule says.
 void IgtlDevice::write_loop() {
   block_stop_signals();
   servo::ensure_signal_stack();
   if (o_.fifo_priority > 0) servo::make_thread_realtime("igtl writer", true, o_.fifo_priority, false, -1);
-  std::uint64_t answered = 0;
-  bool zero_sent = true;
-  const std::int64_t stale_ns = std::int64_t(3e9 / rate_hz_);
+  IgtlReplyRule reply(std::int64_t(3e9 / rate_hz_));
   while (!stop_) {
     const std::int64_t poll_ns = std::min<std::int64_t>(200'000, std::max<std::int64_t>(rule_.stall_ns() / 5, 10'000));
     std::this_thread::sleep_for(std::chrono::nanoseconds(poll_ns));
     const Pose p = pose_.load();
     const std::int64_t t = now_ns();  // the clock before the cell (StallRule::look)
-    const servo::StallLook l = rule_.look(t);
-    if (l.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose
-      send_force({0, 0, 0});
-      zero_sent = true;
-      continue;
-    }
-    if (t - p.received_ns > stale_ns) {
-      if (!zero_sent) send_force({0, 0, 0});
-      zero_sent = true;
-      continue;
-    }
-    if (p.sequence == answered || (l.on && l.last_write_ns < p.received_ns && t - p.received_ns < 2'000'000)) continue;
-    send_force(l.force_n);  // zero unless on
-    answered = p.sequence;
-    zero_sent = l.force_n.x == 0 && l.force_n.y == 0 && l.force_n.z == 0;
+    const IgtlReply r = reply.step(p.sequence, p.received_ns, rule_.look(t), t);
+    if (r.send) send_force(r.force_n);
   }
   send_force({0, 0, 0});
 }

@@ -14,16 +14,19 @@
 // the device follows on the hand's spring. Ends after DURATION_S and closes.
 // Usage: igtl_hand_peer PORT RATE_HZ ROUND_TRIP_MS DURATION_S CONTROLLER X0 Y0 Z0 DX DY DZ TRAVEL_MM
 // Prints "listening", "connected", then one line per device tick once the hand moves:
-//   "tick T S F" - T device time [s], S the device's true position along DIR from P0 [mm],
-//   F the force it applied along -DIR (pushing it back out) [N]; "still T" when the hand's
+//   "tick T S F H" - T device time [s], S the device's true position along DIR from P0 [mm],
+//   F the force it applied along -DIR (pushing it back out) [N], H the force it holds from
+//   the link along -DIR (before its controller) [N]; "still T" when the hand's
 //   target stops;
 // and at the end "energy J" (the largest work the applied force did on the device less its
-// own damper's loss, over the run [J]) and "pc ACTIVE_TICKS DISSIPATED_J".
+// own damper's loss, over the run [J]), "pc ACTIVE_TICKS DISSIPATED_J" and "late TICKS
+// WORST_S" (ticks that began over 2 ms late, and the largest lag: the loop lost the CPU).
 #include <igtlMessageHeader.h>
 #include <igtlServerSocket.h>
 #include <igtlTransformMessage.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -42,15 +45,14 @@ using Clock = std::chrono::steady_clock;
 using isotouch::core::Vec3;
 
 struct Timed {
-  double t_s;  ///< when it was sent (steady clock, since connection) [s]
+  double t_s;  ///< when it was sent or arrived, on the device loop's own clock [s]
   Vec3 v;
 };
 
 std::mutex forces_mu;
 std::deque<Timed> forces_in;  // Force TRANSFORMs received, in order, with their arrival time
 Clock::time_point t0;
-
-double since() { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+std::atomic<double> loop_now_s{0};  // the device loop's clock: the time of its latest tick [s]
 
 void read_forces(igtl::ClientSocket* sock) {
   for (;;) {
@@ -70,7 +72,9 @@ void read_forces(igtl::ClientSocket* sock) {
     igtl::Matrix4x4 m;
     t->GetMatrix(m);
     std::lock_guard<std::mutex> lock(forces_mu);
-    forces_in.push_back({since(), {m[0][3], m[1][3], m[2][3]}});
+    // Stamped on the loop's clock, not the wall's: a loop that fell behind and catches up
+    // still applies each force half the round trip after it arrived, in its own time.
+    forces_in.push_back({loop_now_s.load(), {m[0][3], m[1][3], m[2][3]}});
   }
 }
 
@@ -133,9 +137,15 @@ int main(int argc, char** argv) {
   Vec3 held{};                  // the force the device holds [N], device frame
   double energy = 0;
   bool open = true, still = false;
+  long late = 0;  // ticks that began more than 2 ms after their time (the loop lost the CPU)
+  double worst_lag = 0;
   for (long k = 0; open && double(k) * T < duration; ++k) {
     const double t = double(k) * T;
-    std::this_thread::sleep_until(t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t)));
+    const Clock::time_point due = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t));
+    std::this_thread::sleep_until(due);
+    const double lag = std::chrono::duration<double>(Clock::now() - due).count();
+    late += lag > 2e-3, worst_lag = std::max(worst_lag, lag);
+    loop_now_s.store(t);
     const Vec3 x = dev.position();
     if (k % link_every == 0) poses_out.push_back({t, x * 1e3});
     while (open && !poses_out.empty() && poses_out.front().t_s + half_s <= t) {
@@ -153,9 +163,10 @@ int main(int argc, char** argv) {
     dev.step(T, p0_m + dir * s, moving && s < travel_m ? dir * kHandSpeed : Vec3{});
     energy = std::max(energy, dev.rendered_work_j() - dev.damping_dissipated_j());
     if (moving)
-      std::printf("tick %.4f %.6f %.6f\n", t, dot(dev.true_position() - p0_m, dir) * 1e3, -dot(dev.applied_force(), dir));
+      std::printf("tick %.4f %.6f %.6f %.6f\n", t, dot(dev.true_position() - p0_m, dir) * 1e3, -dot(dev.applied_force(), dir),
+                  -dot(held, dir));
   }
-  std::printf("energy %.9g\npc %ld %.9g\n", energy, pc.active_ticks(), pc.dissipated_j());
+  std::printf("energy %.9g\npc %ld %.9g\nlate %ld %.6f\n", energy, pc.active_ticks(), pc.dissipated_j(), late, worst_lag);
   std::fflush(stdout);
   sock->CloseSocket();
   reader.join();

@@ -152,11 +152,15 @@ m polhem-refusal-cleared    servo/report_device.cpp '      unnote(link_->name() 
   test_device_emu 'DeviceEmuPolhem.FromPowerUp*'
 
 # The OpenIGTLink link: the zero at a stall and however the process ends (what the peer got).
-IG=service/igtl_device.cpp X=servo/exit_zero.cpp
-m igtl-stall-zero-at-once   $IG '    if (l.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose' \
-                               '    if (false) {' test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
-m igtl-stale-stream-zero    $IG '      if (!zero_sent) send_force({0, 0, 0});' \
-                               '      if (false) send_force({0, 0, 0});' test_igtl_device 'ServiceIgtlDevice.ForcesAnswerPoses*'
+IG=service/igtl_reply_rule.cpp X=servo/exit_zero.cpp
+m igtl-stall-zero-at-once   $IG '  if (look.stalled_now) {' '  if (false) {' \
+  test_igtl_device 'ServiceIgtlDevice.AStalledServo*'
+m igtl-stale-stream-zero    $IG '    const bool send = !zero_sent_;' '    const bool send = false;' \
+  test_igtl_device 'ServiceIgtlDevice.ForcesAnswerPoses*'
+m igtl-rule-stall-zero      $IG '  if (look.stalled_now) {' '  if (false) {' test_igtl_reply_rule 'IgtlReplyRule.*'
+m igtl-rule-stale-once      $IG '    const bool send = !zero_sent_;' '    const bool send = true;' test_igtl_reply_rule 'IgtlReplyRule.*'
+m igtl-rule-stale-late      $IG '  if (t - pose_received_ns > stale_ns_) {' '  if (t - pose_received_ns > 2 * stale_ns_) {' \
+  test_igtl_reply_rule 'IgtlReplyRule.*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 # A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.
@@ -236,6 +240,7 @@ m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_tick
 # and the link the simulation puts in front of it (delayed_link).
 P=servo/port_passivity.cpp
 m passivity-damping         $P '      f += damp;' '' test_linked_contact 'LinkedContact.*'
+m passivity-damping-igtl    $P '      f += damp;' '' 'isotouch igtl_hand_peer' 'ctest:cli_haptic_igtl_delay'
 m passivity-device-clock    $P 'capped ? alpha_max_ / period : excess' 'capped ? alpha_max_ / 1e-3 : excess' \
                                test_port_passivity 'PortPassivity.*'
 m passivity-energy-in       $P '    e_in_ += std::max(-w, 0.0);' '' test_port_passivity 'PortPassivity.*'

@@ -1,0 +1,24 @@
+#include "isotouch/service/igtl_reply_rule.h"
+
+namespace isotouch::service {
+
+IgtlReply IgtlReplyRule::step(std::uint64_t pose_sequence, std::int64_t pose_received_ns,
+                              const servo::StallLook& look, std::int64_t t) {
+  if (look.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose
+    zero_sent_ = true;
+    return {true, {}};
+  }
+  if (t - pose_received_ns > stale_ns_) {  // the stream stopped (or never began): one zero
+    const bool send = !zero_sent_;
+    zero_sent_ = true;
+    return {send, {}};
+  }
+  // Wait for the servo to answer the newest pose (at most 2 ms): the force answers it.
+  if (pose_sequence == answered_ || (look.on && look.last_write_ns < pose_received_ns && t - pose_received_ns < 2'000'000))
+    return {};
+  answered_ = pose_sequence;
+  zero_sent_ = look.force_n.x == 0 && look.force_n.y == 0 && look.force_n.z == 0;
+  return {true, look.force_n};  // zero unless on
+}
+
+}  // namespace isotouch::service

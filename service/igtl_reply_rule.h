@@ -1,0 +1,39 @@
+#pragma once
+// isotouch::service::IgtlReplyRule - what `--haptic igtl:`'s writer sends its peer at each
+// poll, as a function of the stream, the servo's stall rule and the time (no clock, no I/O):
+// the writer thread (IgtlDevice::write_loop) polls it on the steady clock, the tests on a
+// simulated one.
+#include <cstdint>
+
+#include "isotouch/core/vec3.h"
+#include "isotouch/servo/stall_rule.h"
+
+namespace isotouch::service {
+
+/// One poll's answer: send `force_n` [N, the stream's frame] when `send`.
+struct IgtlReply {
+  bool send = false;
+  core::Vec3 force_n;
+};
+
+/// The writer's rule. In order, at a poll at time t [ns]:
+///   - the servo just stalled (StallLook::stalled_now): a zero at once, not with the next pose;
+///   - the stream is stale (its newest pose older than stale_ns): one zero, then nothing;
+///   - a pose not answered yet: the servo's newest force (zero while off), once the servo
+///     has answered it or the pose is 2 ms old.
+class IgtlReplyRule {
+ public:
+  /// stale_ns: no pose for this long [ns] and the peer is sent one zero (3 stream periods).
+  explicit IgtlReplyRule(std::int64_t stale_ns) : stale_ns_(stale_ns) {}
+  /// pose_sequence / pose_received_ns: the newest pose (0, 0 before any);
+  /// look: the stall rule's look at t; t: the poll's time [ns].
+  IgtlReply step(std::uint64_t pose_sequence, std::int64_t pose_received_ns, const servo::StallLook& look,
+                 std::int64_t t);
+
+ private:
+  std::int64_t stale_ns_;
+  std::uint64_t answered_ = 0;
+  bool zero_sent_ = true;  // nothing sent yet: the peer holds no force
+};
+
+}  // namespace isotouch::service

@@ -1,0 +1,117 @@
+// IgtlReplyRule on a simulated clock: what `--haptic igtl:`'s writer sends its peer at each
+// poll, timed exactly (the wall-clock tests in test_igtl_device.cpp check the same over a real
+// socket with slack for the machine's scheduling). The servo's side is the real StallRule.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <vector>
+
+#include "isotouch/service/igtl_reply_rule.h"
+#include "isotouch/servo/stall_rule.h"
+
+namespace isotouch::service {
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+
+struct Sent {
+  std::int64_t t;
+  core::Vec3 f;
+};
+
+/// A stream (a pose every `period` from 1 ms: 500 Hz unless said), a 1 kHz servo writing `f` 0.4 ms after each
+/// ms while t < servo_until, the writer polling every 0.2 ms until `end`; the stream stops
+/// after stream_until. The stall time 2.5 ms (the servo's 2.5 periods); stale after 3 periods.
+struct Sim {
+  std::int64_t period = 2 * kMs, stream_until = 1000 * kMs, servo_until = 1000 * kMs, end = 100 * kMs;
+  core::Vec3 f{0.5, -0.25, 1.0};
+  std::int64_t last_pose_ns = 0;
+  std::vector<Sent> run() {
+    servo::StallRule rule;
+    rule.enable(true, 0.0025, 0.05, 0);
+    rule.restart(0);
+    IgtlReplyRule reply(3 * period);
+    std::vector<Sent> sent;
+    std::uint64_t seq = 0;
+    std::int64_t received = 0;
+    for (std::int64_t t = 0; t <= end; t += kMs / 5) {
+      if (t % period == kMs && t <= stream_until) ++seq, received = t, last_pose_ns = t;
+      if (t % kMs == 2 * kMs / 5 && t < servo_until) rule.write(f, seq, t);
+      const IgtlReply r = reply.step(seq, received, rule.look(t), t);
+      if (r.send) sent.push_back({t, r.force_n});
+    }
+    return sent;
+  }
+};
+
+bool is_zero(const core::Vec3& f) { return f.x == 0 && f.y == 0 && f.z == 0; }
+
+// Each pose is answered once with the servo's force, after the servo has answered it.
+TEST(IgtlReplyRule, EachPoseGetsTheServosForceOnce) {
+  Sim sim;
+  sim.end = 40 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  ASSERT_EQ(sent.size(), 20u);  // poses at 1, 3, ..., 39 ms
+  for (std::size_t i = 0; i < sent.size(); ++i) {
+    const std::int64_t pose = std::int64_t(2 * i + 1) * kMs;
+    EXPECT_GE(sent[i].t, pose) << i;
+    EXPECT_LE(sent[i].t, pose + kMs) << "pose " << i << " waited past the servo's next write";
+    if (i > 0) {
+      EXPECT_TRUE(sent[i].f.x == sim.f.x && sent[i].f.y == sim.f.y && sent[i].f.z == sim.f.z) << i;
+    }
+  }
+}
+
+// The stream stops: exactly one zero, at the first poll more than 3 stream periods (6 ms) after
+// the last pose, nothing after it.
+TEST(IgtlReplyRule, AStaleStreamGetsOneZeroAtThreePeriods) {
+  Sim sim;
+  sim.stream_until = 30 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  ASSERT_FALSE(sent.empty());
+  const Sent& last = sent.back();
+  EXPECT_TRUE(is_zero(last.f)) << "the peer holds the last force: " << last.f.x;
+  EXPECT_GT(last.t - sim.last_pose_ns, 6 * kMs);
+  EXPECT_LE(last.t - sim.last_pose_ns, 6 * kMs + kMs / 5) << "the stale zero came after the first poll past 6 ms";
+  for (std::size_t i = 0; i + 1 < sent.size(); ++i) EXPECT_FALSE(is_zero(sent[i].f) && sent[i].t > kMs) << i;
+}
+
+// The servo stops writing between two poses of a 100 Hz stream: the zero goes out at the poll
+// that counts the stall (2.5 ms after the last write, plus at most a poll), not with the next
+// pose.
+TEST(IgtlReplyRule, AStalledServoGetsTheZeroAtOnce) {
+  Sim sim;
+  sim.period = 10 * kMs;
+  sim.servo_until = 14 * kMs;  // last write at 13.4 ms; poses at 11 and 21 ms
+  sim.end = 25 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  const std::int64_t last_write = 13 * kMs + 2 * kMs / 5;
+  const Sent* first_zero = nullptr;  // then the pose at 21 ms is answered: a zero too
+  for (const Sent& s : sent)
+    if (s.t > last_write && is_zero(s.f) && !first_zero) first_zero = &s;
+  ASSERT_NE(first_zero, nullptr) << "no zero after the servo stopped";
+  const Sent& zero = *first_zero;
+  EXPECT_GT(zero.t - last_write, 5 * kMs / 2);
+  EXPECT_LE(zero.t - last_write, 5 * kMs / 2 + kMs / 5) << "the zero waited";
+  EXPECT_LT(zero.t, 21 * kMs) << "the zero waited for the next pose";
+}
+
+// A servo that has not answered the newest pose is waited for 2 ms at most; before any write
+// (force off) the answer is an exact zero.
+TEST(IgtlReplyRule, AnUnansweredPoseWaitsTwoMillisecondsAtMost) {
+  servo::StallRule rule;
+  rule.enable(true, 0.010, 0.05, 0);
+  rule.restart(0);
+  IgtlReplyRule reply(60 * kMs);
+  EXPECT_TRUE(is_zero(reply.step(1, 0, rule.look(0), 0).force_n));  // nothing written yet: off, zero
+  EXPECT_TRUE(reply.step(1, 0, rule.look(0), 0).send == false);     // answered once
+  rule.write({1, 0, 0}, 1, kMs);
+  EXPECT_FALSE(reply.step(2, 2 * kMs, rule.look(2 * kMs), 2 * kMs).send);  // the servo wrote before the pose
+  EXPECT_FALSE(reply.step(2, 2 * kMs, rule.look(3 * kMs), 3 * kMs).send);
+  const IgtlReply late = reply.step(2, 2 * kMs, rule.look(4 * kMs + 1), 4 * kMs + 1);
+  EXPECT_TRUE(late.send) << "a pose the servo has not answered in 2 ms is answered with its newest force";
+  EXPECT_EQ(late.force_n.x, 1.0);
+}
+
+}  // namespace
+}  // namespace isotouch::service

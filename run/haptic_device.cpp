@@ -125,7 +125,9 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
   } else if (kind == "igtl") {  // the loop closes at the stream's rate: its stiffness bound is checked there
     const service::IgtlLoop loop{scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
                                  scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness};
-    d.io = service::open_igtl_device(arg, loop, d.description, io_fifo_priority, scene.link_max_force_n);
+    auto dev = service::open_igtl_device(arg, loop, d.description, io_fifo_priority, scene.link_max_force_n);
+    d.igtl = dev.get();
+    d.io = std::move(dev);
   } else {
     d = open_report(kind, arg, io_fifo_priority);
   }

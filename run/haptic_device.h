@@ -23,6 +23,10 @@
 #include "isotouch/sim/sim_device.h"
 #include "isotouch/servo/workspace.h"
 
+namespace isotouch::service {
+class IgtlDevice;
+}
+
 namespace isotouch::run {
 
 /// An opened device and what it needs to live.
@@ -32,6 +36,7 @@ struct HapticDevice {
   std::unique_ptr<servo::HapticDeviceIO> io;
   servo::ReportDevice* report = nullptr;    ///< io as a report device (hid, emu), else null
   servo::SdkDevice* sdk = nullptr;          ///< io as a vendor SDK device (openhaptics, forcedimension), else null
+  service::IgtlDevice* igtl = nullptr;      ///< io as an OpenIGTLink stream (igtl), else null
   std::unique_ptr<sim::SimDevice> sim;      ///< the simulated device behind io (sim only)
 };
 

@@ -1,4 +1,5 @@
 #include "isotouch/run/live_run.h"
+#include "isotouch/service/igtl_device.h"
 
 #include <unistd.h>
 
@@ -256,6 +257,9 @@ void print_device(const HapticDevice& d, const ForceMeter& meter, const servo::S
       log << "link     last error: " << d.report->last_error() << "\n";
   }
   if (d.sdk) log << "sdk      " << d.sdk->stalls() << " stalls; " << d.sdk->sdk_status() << "\n";
+  if (d.igtl)
+    log << "link     " << d.igtl->forces_sent() << " Force TRANSFORMs sent, " << d.igtl->stalls()
+        << " stalls (the servo silent for its stall time: the peer got a zero at once, then the servo's ramp)\n";
 }
 
 }  // namespace
@@ -349,7 +353,7 @@ int run_live_in(const io::Scene& scene, const LiveOptions& o, io::RunFolder* fol
   // only when the servo refused or zeroed something (a non-finite simulated HIP).
   const servo::DeviceCounters dc = live.servo_thread()->device_counters();
   const bool device_lost = dc.disconnected > 0 || dc.fault > 0 || dc.refused > 0;
-  if (device.report || device.sdk || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
+  if (device.report || device.sdk || device.igtl || device_lost || dc.stale > 0) print_device(device, meter, *live.servo_thread(), log);
   if (!o.run.record_path.empty()) log << "recorded " << o.run.record_path << " (replay: isotouch replay " << o.run.record_path << ")\n";
   if (folder) {
     session::clear_last_words();  // the folder's final status follows

@@ -156,7 +156,8 @@ void IgtlDevice::send_force(const core::Vec3& f) {
 }
 
 /// Polls every 0.2 ms (a fifth of the stall time when that is shorter: a stall is found within
-/// stall time + a fifth of it) and sends what IgtlReplyRule says.
+/// stall time + a fifth of it; one poll more after this thread was itself frozen) and sends
+/// what IgtlReplyRule says.
 void IgtlDevice::write_loop() {
   block_stop_signals();
   servo::ensure_signal_stack();
@@ -167,6 +168,7 @@ void IgtlDevice::write_loop() {
     std::this_thread::sleep_for(std::chrono::nanoseconds(poll_ns));
     const Pose p = pose_.load();
     const std::int64_t t = now_ns();  // the clock before the cell (StallRule::look)
+    if (!reply.judge_now(t, rule_.stall_ns())) continue;  // this thread was frozen: look again in a poll
     const IgtlReply r = reply.step(p.sequence, p.received_ns, rule_.look(t), t);
     if (r.send) send_force(r.force_n);
   }

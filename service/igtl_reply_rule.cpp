@@ -2,6 +2,12 @@
 
 namespace isotouch::service {
 
+bool IgtlReplyRule::judge_now(std::int64_t t, std::int64_t stall_ns) {
+  const bool away = last_poll_ns_ != 0 && t - last_poll_ns_ > stall_ns;
+  last_poll_ns_ = t;
+  return !away;
+}
+
 IgtlReply IgtlReplyRule::step(std::uint64_t pose_sequence, std::int64_t pose_received_ns,
                               const servo::StallLook& look, std::int64_t t) {
   if (look.stalled_now) {  // the servo stopped writing: the peer gets a zero now, not with the next pose

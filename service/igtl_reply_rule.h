@@ -16,7 +16,8 @@ struct IgtlReply {
   core::Vec3 force_n;
 };
 
-/// The writer's rule. In order, at a poll at time t [ns]:
+/// The writer's rule. At a poll at time t [ns] where the writer was not away (judge_now), in
+/// order:
 ///   - the servo just stalled (StallLook::stalled_now): a zero at once, not with the next pose;
 ///   - the stream is stale (its newest pose older than stale_ns): one zero, then nothing;
 ///   - a pose not answered yet: the servo's newest force (zero while off), once the servo
@@ -29,9 +30,16 @@ class IgtlReplyRule {
   /// look: the stall rule's look at t; t: the poll's time [ns].
   IgtlReply step(std::uint64_t pose_sequence, std::int64_t pose_received_ns, const servo::StallLook& look,
                  std::int64_t t);
+  /// Before the stall rule's look at a poll at t [ns]: false when the writer itself was away
+  /// (its previous poll more than stall_ns ago: the machine froze this thread, and the servo's
+  /// with it as likely as not): this poll judges nothing, and the next, one poll later, judges
+  /// the servo that has had the CPU back. A servo that really stopped still gets its zero, one
+  /// poll later than the frozen writer could have sent it.
+  bool judge_now(std::int64_t t, std::int64_t stall_ns);
 
  private:
   std::int64_t stale_ns_;
+  std::int64_t last_poll_ns_ = 0;  // 0: no poll yet
   std::uint64_t answered_ = 0;
   bool zero_sent_ = true;  // nothing sent yet: the peer holds no force
 };

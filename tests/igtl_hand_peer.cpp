@@ -20,7 +20,8 @@
 //   target stops;
 // and at the end "energy J" (the largest work the applied force did on the device less its
 // own damper's loss, over the run [J]), "pc ACTIVE_TICKS DISSIPATED_J" and "late TICKS
-// WORST_S" (ticks that began over 2 ms late, and the largest lag: the loop lost the CPU).
+// WORST_S" (ticks that began over 2 ms late, and the largest lag: the loop lost the CPU);
+// "lag T L" for each tick that began more than 10 ms (a link period) late.
 #include <igtlMessageHeader.h>
 #include <igtlServerSocket.h>
 #include <igtlTransformMessage.h>
@@ -145,6 +146,7 @@ int main(int argc, char** argv) {
     std::this_thread::sleep_until(due);
     const double lag = std::chrono::duration<double>(Clock::now() - due).count();
     late += lag > 2e-3, worst_lag = std::max(worst_lag, lag);
+    if (lag > 10e-3) std::printf("lag %.4f %.6f\n", t, lag);  // a link period lost: the device's time stood still
     loop_now_s.store(t);
     const Vec3 x = dev.position();
     if (k % link_every == 0) poses_out.push_back({t, x * 1e3});

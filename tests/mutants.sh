@@ -161,6 +161,7 @@ m igtl-rule-stall-zero      $IG '  if (look.stalled_now) {' '  if (false) {' tes
 m igtl-rule-stale-once      $IG '    const bool send = !zero_sent_;' '    const bool send = true;' test_igtl_reply_rule 'IgtlReplyRule.*'
 m igtl-rule-stale-late      $IG '  if (t - pose_received_ns > stale_ns_) {' '  if (t - pose_received_ns > 2 * stale_ns_) {' \
   test_igtl_reply_rule 'IgtlReplyRule.*'
+m igtl-rule-frozen-writer   $IG '  return !away;' '  return true;' test_igtl_reply_rule 'IgtlReplyRule.*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 # A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.
@@ -320,10 +321,19 @@ cleanup() { [ "$keep" = 1 ] || rm -rf "$work"; }
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM HUP
 mkdir -p "$copy"
-# The working tree as it is (deleted files left out), over whatever an older kept copy held.
-git -C "$root" ls-files -z -co --exclude-standard |
-  (cd "$root" && while IFS= read -r -d '' f; do [ -e "$f" ] && printf '%s\0' "$f"; done) |
-  tar -C "$root" --null -T - -cf - | tar -C "$copy" -xf - || { echo "ERROR: cannot copy the tree"; exit 2; }
+# The working tree as it is (deleted files left out), over whatever an older kept copy held:
+# only the files whose content differs are copied, stamped now, so that an object built from a
+# mutated file of a kept copy is rebuilt (the tree's own older time stamp would hide it).
+git -C "$root" ls-files -z -co --exclude-standard | python3 -c '
+import filecmp, os, shutil, sys
+root, copy = sys.argv[1:3]
+for f in sys.stdin.buffer.read().decode().split("\0"):
+    src, dst = os.path.join(root, f), os.path.join(copy, f)
+    if not f or not os.path.isfile(src) or (os.path.isfile(dst) and filecmp.cmp(src, dst, shallow=False)):
+        continue
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    shutil.copy(src, dst)
+' "$root" "$copy" || { echo "ERROR: cannot copy the tree"; exit 2; }
 
 export CCACHE_BASEDIR=${CCACHE_BASEDIR:-$root}  # the copy's files hit the tree's cache entries
 export CMAKE_CXX_COMPILER_LAUNCHER=${CMAKE_CXX_COMPILER_LAUNCHER:-ccache}

@@ -24,6 +24,10 @@ struct Sent {
 /// after stream_until. The stall time 2.5 ms (the servo's 2.5 periods); stale after 3 periods.
 struct Sim {
   std::int64_t period = 2 * kMs, stream_until = 1000 * kMs, servo_until = 1000 * kMs, end = 100 * kMs;
+  /// The machine froze every thread over [freeze_from, freeze_to): no pose taken, no write or
+  /// poll; 0.2 ms after it the servo, whose deadline passed, writes (if it still runs) and the
+  /// reader takes the newest of the poses the peer (another machine) sent meanwhile.
+  std::int64_t freeze_from = -1, freeze_to = -1;
   core::Vec3 f{0.5, -0.25, 1.0};
   std::int64_t last_pose_ns = 0;
   std::vector<Sent> run() {
@@ -35,8 +39,11 @@ struct Sim {
     std::uint64_t seq = 0;
     std::int64_t received = 0;
     for (std::int64_t t = 0; t <= end; t += kMs / 5) {
-      if (t % period == kMs && t <= stream_until) ++seq, received = t, last_pose_ns = t;
-      if (t % kMs == 2 * kMs / 5 && t < servo_until) rule.write(f, seq, t);
+      if (t >= freeze_from && t < freeze_to) continue;
+      const bool resumed = t == freeze_to + kMs / 5;
+      if ((t % period == kMs || resumed) && t <= stream_until) ++seq, received = t, last_pose_ns = t;
+      if ((t % kMs == 2 * kMs / 5 || resumed) && t < servo_until) rule.write(f, seq, t);
+      if (!reply.judge_now(t, rule.stall_ns())) continue;
       const IgtlReply r = reply.step(seq, received, rule.look(t), t);
       if (r.send) sent.push_back({t, r.force_n});
     }
@@ -94,6 +101,32 @@ TEST(IgtlReplyRule, AStalledServoGetsTheZeroAtOnce) {
   EXPECT_GT(zero.t - last_write, 5 * kMs / 2);
   EXPECT_LE(zero.t - last_write, 5 * kMs / 2 + kMs / 5) << "the zero waited";
   EXPECT_LT(zero.t, 21 * kMs) << "the zero waited for the next pose";
+}
+
+// The machine freezes every thread for 10 ms (a VM losing the CPU): the writer, back first,
+// does not judge the servo stalled before it has had one poll to write; no zero, the force
+// goes on.
+TEST(IgtlReplyRule, AFrozenMachineIsNotAServoStall) {
+  Sim sim;
+  sim.freeze_from = 10 * kMs, sim.freeze_to = 20 * kMs;
+  sim.end = 30 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  ASSERT_GT(sent.size(), 5u);
+  for (std::size_t i = 1; i < sent.size(); ++i) EXPECT_FALSE(is_zero(sent[i].f)) << "a zero at " << double(sent[i].t) * 1e-6 << " ms";
+}
+
+// The same freeze, and the servo does not come back: its zero at the second poll after it.
+TEST(IgtlReplyRule, AServoStoppedThroughAFreezeGetsItsZeroOnePollLater) {
+  Sim sim;
+  sim.freeze_from = 10 * kMs, sim.freeze_to = 20 * kMs;
+  sim.servo_until = 10 * kMs;
+  sim.end = 30 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  const Sent* zero = nullptr;
+  for (const Sent& s : sent)
+    if (s.t > kMs && is_zero(s.f) && !zero) zero = &s;
+  ASSERT_NE(zero, nullptr) << "no zero for a servo that stopped";
+  EXPECT_EQ(zero->t, 20 * kMs + kMs / 5) << "the zero came at " << double(zero->t) * 1e-6 << " ms";
 }
 
 // A servo that has not answered the newest pose is waited for 2 ms at most; before any write

@@ -18,7 +18,8 @@
 #      rule on a loaded machine, then its ramp) or the peer's own loop lost more than a link
 #      period - each printed; the
 #      stylus rests in contact, and the force applied did no more work on the device than
-#      its own damper took out, within 1 % of the wall's stored energy.
+#      its own damper took out, within 1 % of the wall's stored energy;
+#   3. the same as 2 through `isotouch serve SCENE --haptic igtl:` (serve's session and servo).
 # The scene's K is at Colgate-Schenkel's bound for 100 Hz (802 N/m), so the runs pass
 # --allow-unstable-stiffness (a measured 99.9 Hz would refuse it).
 # "PASS haptic igtl delay" is printed once, last.
@@ -52,10 +53,26 @@ run() {
   for _ in $(seq 150); do kill -0 $peer_pid 2>/dev/null || break; sleep 0.1; done
   kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
 }
+# The same controlled press through `isotouch serve --haptic igtl:` (its own session and servo):
+# 10 s from listening, so it stops before the peer (12 s from the connection) closes.
+serve_run() {
+  local port; port=$(free_port)
+  # shellcheck disable=SC2086
+  "$peer" "$port" 100 10 12 1 $start 1 0 0 40 >"$out/served.peer.log" 2>&1 &
+  local peer_pid=$!
+  for _ in $(seq 100); do grep -q listening "$out/served.peer.log" && break; sleep 0.05; done
+  timeout 60 "$exe" serve "$scene" --port 0 --seconds 10 --allow-unstable-stiffness --haptic "igtl:127.0.0.1:$port" \
+    >"$out/served.log" 2>&1
+  echo $? >"$out/served.rc"
+  for _ in $(seq 150); do kill -0 $peer_pid 2>/dev/null || break; sleep 0.1; done
+  kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
+}
 run plain 0
 run controlled 1
-for name in plain controlled; do
-  [[ $(cat "$out/$name.rc") == 0 ]] || fail "isotouch run ($name) exited $(cat "$out/$name.rc"), not 0"
+serve_run
+for name in plain controlled served; do
+  [[ $(cat "$out/$name.rc") == 0 ]] || fail "isotouch run or serve ($name) exited $(cat "$out/$name.rc"), not 0"
 done
-python3 "$(dirname "$0")/igtl_hand_check.py" "$out/plain.peer.log" "$out/controlled.peer.log" || fail "see above"
+python3 "$(dirname "$0")/igtl_hand_check.py" "$out/plain.peer.log" "$out/controlled.peer.log" "$out/served.peer.log" ||
+  fail "see above"
 echo "PASS haptic igtl delay"

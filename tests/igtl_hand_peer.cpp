@@ -40,6 +40,7 @@
 
 #include "isotouch/servo/port_passivity.h"
 #include "isotouch/sim/sim_device.h"
+#include "igtl_force_reader.h"
 
 namespace {
 using Clock = std::chrono::steady_clock;
@@ -56,27 +57,12 @@ Clock::time_point t0;
 std::atomic<double> loop_now_s{0};  // the device loop's clock: the time of its latest tick [s]
 
 void read_forces(igtl::ClientSocket* sock) {
-  for (;;) {
-    igtl::MessageHeader::Pointer h = igtl::MessageHeader::New();
-    h->InitPack();
-    if (sock->Receive(h->GetPackPointer(), h->GetPackSize()) != h->GetPackSize()) return;
-    h->Unpack();
-    if (std::strcmp(h->GetDeviceType(), "TRANSFORM") != 0 || std::strcmp(h->GetDeviceName(), "Force") != 0) {
-      sock->Skip(h->GetBodySizeToRead(), 0);
-      continue;
-    }
-    igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
-    t->SetMessageHeader(h);
-    t->AllocatePack();
-    if (sock->Receive(t->GetPackBodyPointer(), t->GetPackBodySize()) != t->GetPackBodySize()) return;
-    if (!(t->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) continue;
-    igtl::Matrix4x4 m;
-    t->GetMatrix(m);
-    std::lock_guard<std::mutex> lock(forces_mu);
+  isotouch::test::read_forces(sock, [](float fx, float fy, float fz) {
     // Stamped on the loop's clock, not the wall's: a loop that fell behind and catches up
     // still applies each force half the round trip after it arrived, in its own time.
-    forces_in.push_back({loop_now_s.load(), {m[0][3], m[1][3], m[2][3]}});
-  }
+    std::lock_guard<std::mutex> lock(forces_mu);
+    forces_in.push_back({loop_now_s.load(), {fx, fy, fz}});
+  });
 }
 
 bool send_pose(igtl::ClientSocket* sock, igtl::TransformMessage* t, const Vec3& p_mm) {

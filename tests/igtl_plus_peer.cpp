@@ -23,6 +23,8 @@
 #include <string>
 #include <thread>
 
+#include "igtl_force_reader.h"
+
 namespace {
 using Clock = std::chrono::steady_clock;
 std::mutex out_mu;
@@ -31,25 +33,10 @@ Clock::time_point t0;
 double since() { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 void read_forces(igtl::ClientSocket* sock) {
-  for (;;) {
-    igtl::MessageHeader::Pointer h = igtl::MessageHeader::New();
-    h->InitPack();
-    if (sock->Receive(h->GetPackPointer(), h->GetPackSize()) != h->GetPackSize()) break;
-    h->Unpack();
-    if (std::strcmp(h->GetDeviceType(), "TRANSFORM") != 0 || std::strcmp(h->GetDeviceName(), "Force") != 0) {
-      sock->Skip(h->GetBodySizeToRead(), 0);
-      continue;
-    }
-    igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
-    t->SetMessageHeader(h);
-    t->AllocatePack();
-    if (sock->Receive(t->GetPackBodyPointer(), t->GetPackBodySize()) != t->GetPackBodySize()) break;
-    if (!(t->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) continue;
-    igtl::Matrix4x4 m;
-    t->GetMatrix(m);
+  isotouch::test::read_forces(sock, [](float fx, float fy, float fz) {
     std::lock_guard<std::mutex> lock(out_mu);
-    std::printf("force %.6f %.6g %.6g %.6g\n", since(), m[0][3], m[1][3], m[2][3]);
-  }
+    std::printf("force %.6f %.6g %.6g %.6g\n", since(), fx, fy, fz);
+  });
   std::lock_guard<std::mutex> lock(out_mu);
   std::printf("closed %.6f\n", since());
 }

@@ -1,6 +1,7 @@
 #include "isotouch/service/serve.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -88,10 +89,12 @@ struct Client {
   bool evicted = false;
   int id = 0;
   /// Its stream's rate check (Server::check_stream_rate; this client's thread only): the
-  /// times between its first poses [ns], whether they were judged, whether it was refused.
-  std::vector<std::int64_t> stream_gaps_ns;
+  /// times between its latest poses [ns] (a ring), how many gaps so far, whether a stiffness
+  /// over the bound was allowed (said once) or refused.
+  std::array<std::int64_t, 15> stream_gaps_ns{};
+  std::size_t stream_gap_count = 0;
   std::int64_t stream_last_ns = 0;
-  bool stream_checked = false, stream_refused = false;
+  bool stream_warned = false, stream_refused = false;
 };
 
 /// A command on its way to the command thread, and whom to answer.
@@ -401,23 +404,23 @@ bool Server::own_stream(Client& c, const Incoming& in) {
   return false;
 }
 
-/// The force loop closes at the stream's rate (as `--haptic igtl:`'s, igtl_device.cpp): once a
-/// client has streamed kRatePoses poses, the median time between them gives its rate, and the
-/// scene's servo.stiffness_n_per_m is checked against the Colgate-Schenkel bound 2 (b - |B|) / T
-/// at min(that rate, the servo's) (b: the scene's device + hand damping, B: the servo's damping).
-/// A stiffer scene is refused to that client unless allowed (servo.allow_unstable_stiffness,
-/// --allow-unstable-stiffness: logged): a STATUS naming the field, its value, the bound and the
-/// rate; its poses move nothing from then on, so the stream goes stale (zero force, one zero
-/// reply). The median: a pause in the stream does not make it look slow.
+/// The force loop closes at the stream's rate (as `--haptic igtl:`'s, igtl_device.cpp): at
+/// every pose from a client's 16th on, the median time between its latest 16 poses gives its
+/// rate, and the scene's servo.stiffness_n_per_m is checked against the Colgate-Schenkel bound
+/// 2 (b - |B|) / T at min(that rate, the servo's) (b: the scene's device + hand damping, B: the
+/// servo's damping): a stream that slows down later is judged too. A stiffer scene is refused
+/// to that client unless allowed (servo.allow_unstable_stiffness, --allow-unstable-stiffness:
+/// logged once): a STATUS naming the field, its value, the bound and the rate; its poses move
+/// nothing from then on, so the stream goes stale (zero force, one zero reply). The median: a
+/// pause in the stream does not make it look slow.
 bool Server::check_stream_rate(Client& c, const Incoming& in) {
   constexpr std::size_t kRatePoses = 16;
-  if (c.stream_checked) return true;
+  static_assert(kRatePoses == std::tuple_size_v<decltype(c.stream_gaps_ns)> + 1);
   const std::int64_t now = TransformDevice::now_ns();
-  if (c.stream_last_ns != 0) c.stream_gaps_ns.push_back(now - c.stream_last_ns);
+  if (c.stream_last_ns != 0) c.stream_gaps_ns[c.stream_gap_count++ % c.stream_gaps_ns.size()] = now - c.stream_last_ns;
   c.stream_last_ns = now;
-  if (c.stream_gaps_ns.size() + 1 < kRatePoses) return true;
-  c.stream_checked = true;
-  std::vector<std::int64_t> g = c.stream_gaps_ns;
+  if (c.stream_gap_count + 1 < kRatePoses) return true;
+  std::array<std::int64_t, kRatePoses - 1> g = c.stream_gaps_ns;
   std::nth_element(g.begin(), g.begin() + std::ptrdiff_t(g.size() / 2), g.end());
   const double rate = 1e9 / double(std::max<std::int64_t>(g[g.size() / 2], 1));
   const double loop_hz = std::min(rate, scene_.hri.rate_hz);
@@ -425,13 +428,15 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   const double bound = sim::colgate_k_max(b, scene_.hri.damping_n_s_per_m, 1.0 / loop_hz);
   const double k = scene_.hri.stiffness_n_per_m;
   if (!(k > bound)) return true;
+  if (scene_.allow_unstable_stiffness && c.stream_warned) return true;
   std::ostringstream why;
-  why << "stream '" << in.device << "' at " << std::lround(rate) << " Hz (median of its first " << kRatePoses
+  why << "stream '" << in.device << "' at " << std::lround(rate) << " Hz (median of its latest " << kRatePoses
       << " poses): servo.stiffness_n_per_m " << k << " is above the Colgate-Schenkel bound 2 (b - |B|) / T = "
       << std::lround(bound) << " N/m with the loop closing at " << std::lround(loop_hz) << " Hz (b " << b << " N s/m, B "
       << scene_.hri.damping_n_s_per_m << " N s/m)";
   if (scene_.allow_unstable_stiffness) {
     log_.line("stream   client " + std::to_string(c.id) + ": warning: " + why.str() + " (allowed)");
+    c.stream_warned = true;
     return true;
   }
   why << "; the contact may buzz: its poses move nothing (lower the stiffness, raise the stream's rate, or allow it: "

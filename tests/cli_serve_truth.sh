@@ -30,7 +30,9 @@
 #      over a 50 Hz stream (bound 2 (5.01 - 1) / 0.02 = 401 N/m) is refused to that client (a
 #      STATUS naming servo.stiffness_n_per_m 800 and the bound) before its tool reaches the
 #      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
-#      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N.
+#      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N;
+#   9. a stream judged fine at 500 Hz that slows to 50 Hz before its tool reaches the ball is
+#      refused then (the rate is judged at every pose over the latest 16): only zeros.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -260,6 +262,32 @@ if "(allowed)" not in open(f"{out}/serve_slowallowed.log").read(): fail("no warn
 if allowed <= 0.8: fail(f"allowed, the 50 Hz stream 2 mm in the ball got {allowed} N", "slowallowed")
 print(f"stream stiffness bound ok: 50 Hz ({rate} measured) refused, bound {bound} N/m, its client got only zeros ({n}); "
       f"allowed: peak {allowed:.2f} N")
+PY
+[[ $? == 0 ]] || exit 1
+
+# 9. A stream that slows down: 500 Hz while it approaches (judged, fine), then 50 Hz before its
+# tool reaches the ball: refused when its latest 16 poses say 50 Hz, so it gets only zeros.
+"$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 >"$out/serve_slower.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve_slower.log" $serve_pid)
+[[ -n $port ]] || fail "the slower serve never said it was listening: $(cat "$out/serve_slower.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 26 0.3 hz 50 move 0 0 24 0.4 \
+  move 0 0 13 0.6 wait 0.5 peak statuses 0.2 >"$out/slower.log" 2>&1 || fail "the slower client failed: $(cat "$out/slower.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+log = open(f"{out}/slower.log").read()
+def fail(msg):
+    print("FAIL serve truth:", msg); print(log); print(open(f"{out}/serve_slower.log").read()); sys.exit(1)
+refusal = [l for l in log.splitlines() if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]
+if len(refusal) != 1: fail("no one STATUS refusing the stream once it slowed to 50 Hz")
+m = re.search(r"at (\d+) Hz \(median of its latest 16 poses\)", refusal[0])
+if not m or not 40 <= int(m.group(1)) <= 60: fail(f"the refusal does not name a 50 Hz rate: {refusal[0]}")
+p = [l.split() for l in log.splitlines() if l.startswith("peak ")]
+if len(p) != 1: fail("no peak line")
+if float(p[0][2]) != 0.0: fail(f"the slowed stream's client got {p[0][2]} N, not only zeros")
+print(f"a slowed stream refused at {m.group(1)} Hz, its client got only zeros ({p[0][5]} Forces)")
 PY
 [[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -195,6 +195,9 @@ m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene
 # serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
 m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;' '  return true;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# The stream's rate is judged at every pose over its latest 16, not once: a stream that slows is refused.
+m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kRatePoses) return true;' '  if (c.stream_gap_count + 1 != kRatePoses) return true;' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

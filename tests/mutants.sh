@@ -190,6 +190,12 @@ m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene
 # serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
 m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;' '  return true;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's edit journal through an `isovalue V` (issue 62): it goes on for the rebuilt session, and
+# a restore drops the undo history where the session was rebuilt (cli_serve_journal's last part).
+m serve-journal-isovalue    service/serve.cpp $'  if (journal_.journal)\n    carry = ' $'  if (false)\n    carry = ' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_journal'
+m journal-history-restart   io/journal_offer.cpp '++next) es.sculptor().drop_history();' '++next) {}' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_journal'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

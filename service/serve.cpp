@@ -130,6 +130,7 @@ class Server {
  public:
   Server(const io::Scene& scene, const ServeOptions& o, std::ostream& out)
       : scene_(scene), o_(o), log_(out), listener_(o.host, o.port) {
+    o_.limits.hold_image = [this](const std::string& device, std::uint64_t bytes) { return hold_image(device, bytes); };
     if (!o.haptic.empty() && o.reply_force)
       throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
                                   " the stream is not the device");
@@ -164,7 +165,9 @@ class Server {
   io::OpenedJournal carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                   const std::vector<std::size_t>& restarts);
   void close_journal();
-  std::string memory_refusal(igtl::ImageMessage& image);
+  std::string memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes);
+  std::shared_ptr<void> hold_image(const std::string& device, std::uint64_t bytes);
+  std::uint64_t session_bytes_per_voxel() const;
   void swap_volume(PendingVolume p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
   void send_edited_or_say_why();
@@ -259,6 +262,11 @@ class Server {
  private:
   std::mutex volume_mu_;
   std::mutex image_mu_;  // one IMAGE checked against the memory budget and converted at a time
+  // The IMAGE bodies arriving or received from every client and not yet converted or refused
+  // (MessageLimits::hold_image), and the session being built for one (swap_volume, an
+  // isovalue's restart) [bytes]: counted against the one memory budget.
+  std::atomic<std::uint64_t> images_held_bytes_{0};
+  std::atomic<std::uint64_t> building_bytes_{0};
   std::optional<PendingVolume> next_volume_;  // a received IMAGE waiting for the main thread
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
   bool changing_ = false;  // guarded by volume_mu_: the main thread took one of the two and is applying it
@@ -276,6 +284,11 @@ class Server {
   std::optional<core::Isosurface> client_iso_;
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
+
+/// The memory a server whose machine's memory is unknown (io::memory_budget_bytes 0, no
+/// --memory-mib) may use for its IMAGEs' sessions: 4 GiB (3 GiB of budget: a 512 x 512 x
+/// 150 int16 CT with its session), not everything.
+constexpr std::uint64_t kUnknownMemoryBytes = std::uint64_t(4) << 30;
 
 /// "isovalue 300 (inside above)".
 std::string iso_text(const core::Isosurface& iso) {
@@ -320,7 +333,7 @@ void Server::handle(Client& c, Incoming& in) {
         std::string dims;
         {
           std::lock_guard<std::mutex> image_lock(image_mu_);
-          if (const std::string why = memory_refusal(*in.image); !why.empty()) {
+          if (const std::string why = memory_refusal(*in.image, in.held_bytes); !why.empty()) {
             refuse(c, in, igtl::StatusMessage::STATUS_RESOURCE_ERROR, why);
             break;
           }
@@ -1017,6 +1030,16 @@ struct HoldEdits {
   HoldEdits& operator=(const HoldEdits&) = delete;
 };
 
+/// A session being built, counted against the memory budget while it lives.
+struct BuildingBytes {
+  std::atomic<std::uint64_t>& bytes;
+  std::uint64_t n;
+  BuildingBytes(std::atomic<std::uint64_t>& b, std::uint64_t k) : bytes(b), n(k) { bytes.fetch_add(n); }
+  ~BuildingBytes() { bytes.fetch_sub(n); }
+  BuildingBytes(const BuildingBytes&) = delete;
+  BuildingBytes& operator=(const BuildingBytes&) = delete;
+};
+
 /// How long the running session's edits may take to settle before a new session is built;
 /// past it the change is refused (never built beside edits still running: the two would
 /// share the GPU context's one queue, pool and fence).
@@ -1029,9 +1052,10 @@ constexpr double kSettleS = 5.0;
 void Server::restart_at_isovalue(const Pending& p) {
   std::shared_ptr<EditMirror> mirror;
   std::string name;
+  std::uint64_t voxels = 0;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) mirror = session_->mirror, name = session_->image_name;
+    if (session_) mirror = session_->mirror, name = session_->image_name, voxels = session_->frame.grid.voxel_count();
   }
   if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
   const HoldEdits hold(session_mu_, preparing_);
@@ -1043,6 +1067,7 @@ void Server::restart_at_isovalue(const Pending& p) {
   std::unique_ptr<Session> next;
   session::LiveFieldOptions live = setup_.live;
   servo::HriParams hri = setup_.hri;
+  const BuildingBytes building(building_bytes_, voxels * session_bytes_per_voxel());
   try {
     engine::Volume v = mirror->volume();  // every edit applied: the edited volume
     v.path = name == "isotouch" ? v.path : "igtl:" + name;
@@ -1084,36 +1109,67 @@ void Server::answer_image(const PendingVolume& p, int code, const std::string& t
   p.from->push(pack_status(code, p.device, text));
 }
 
-/// What taking `image` would need, against the memory budget (the loaders' rule: at most
-/// 3/4 of what the process may use, io::memory_budget_bytes, or of --memory-mib): the
-/// image as received, the new session (its volume, the mirror, the live field's shadow,
-/// its samples, an edited IMAGE's copy and bytes), the running session, which serves while
-/// the new one is built, and an IMAGE already waiting. "" when it fits.
-std::string Server::memory_refusal(igtl::ImageMessage& image) {
+/// The bytes a session takes per voxel: its volume, the mirror, the live field's shadow, its
+/// samples, an edited IMAGE's copy and bytes.
+std::uint64_t Server::session_bytes_per_voxel() const {
+  const std::uint64_t sample = setup_.live.format == core::SampleFormat::kFp16 ? 8 : 16;
+  return 4 + 4 + 4 + sample + 8;
+}
+
+/// MessageLimits::hold_image: an IMAGE's body counted against the memory budget from before
+/// its voxels arrive until its Incoming is gone (converted, or refused).
+std::shared_ptr<void> Server::hold_image(const std::string& device, std::uint64_t bytes) {
+  images_held_bytes_.fetch_add(bytes);
+  std::ostringstream s;
+  s << "image    '" << device << "': " << bytes << " bytes arriving, counted against the memory budget";
+  log_.line(s.str());
+  return std::shared_ptr<void>(nullptr, [this, bytes](void*) { images_held_bytes_.fetch_sub(bytes); });
+}
+
+/// What taking `image` would need, against the one memory budget of every client's IMAGEs
+/// (the loaders' rule: at most 3/4 of what the process may use, io::memory_budget_bytes, or
+/// of --memory-mib; where that is unknown, kUnknownMemoryBytes): the image as received and
+/// its new session (session_bytes_per_voxel), the running session, which serves while the
+/// new one is built, and the IMAGEs in flight: an image waiting, a session being built for
+/// one, and every other client's IMAGE arriving or received (`own_held_bytes`: this one's,
+/// not counted twice). "" when it fits; else the STATUS, naming the sizes.
+std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes) {
   int d[3];
   image.GetDimensions(d);
   const std::uint64_t n = std::uint64_t(std::max(d[0], 0)) * std::uint64_t(std::max(d[1], 0)) * std::uint64_t(std::max(d[2], 0));
-  const std::uint64_t sample = setup_.live.format == core::SampleFormat::kFp16 ? 8 : 16;
-  const std::uint64_t per_voxel = 4 + 4 + 4 + sample + 8;
-  std::uint64_t others = 0;
+  const std::uint64_t per_voxel = session_bytes_per_voxel();
+  std::uint64_t running = 0, in_flight = 0;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) others += session_->frame.grid.voxel_count() * per_voxel;
+    if (session_) running = session_->frame.grid.voxel_count() * per_voxel;
   }
   {
     std::lock_guard<std::mutex> lock(volume_mu_);
-    if (next_volume_) others += next_volume_->volume.voxels.size() * sizeof(float);
+    if (next_volume_) in_flight += next_volume_->volume.voxels.size() * sizeof(float);
   }
+  in_flight += building_bytes_.load();
+  const std::uint64_t held = images_held_bytes_.load();
+  in_flight += held > own_held_bytes ? held - own_held_bytes : 0;
   const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
-  const std::uint64_t need = n * (stored + per_voxel) + others;
-  std::uint64_t have = io::memory_budget_bytes();
+  const std::uint64_t mine = n * (stored + per_voxel);
+  const std::uint64_t need = mine + running + in_flight;
+  std::uint64_t have = fault("budget", image.GetDeviceName()) ? 0 : io::memory_budget_bytes();
+  const bool unknown = have == 0;
   if (o_.memory_mib > 0) have = have == 0 ? std::uint64_t(o_.memory_mib) << 20 : std::min(have, std::uint64_t(o_.memory_mib) << 20);
-  if (have == 0 || need <= have / 4 * 3) return "";
+  const bool by_default = have == 0;
+  if (by_default) have = kUnknownMemoryBytes;
+  const std::uint64_t budget = have / 4 * 3;
+  if (need <= budget) return "";
   std::ostringstream s;
   s << "igtl:" << image.GetDeviceName() << ": not taken: " << d[0] << " x " << d[1] << " x " << d[2] << " voxels need "
-    << (need >> 20) << " MiB (the image as received, its session: volume, mirror, shadow, samples and an edited "
-    << "copy, " << per_voxel << " bytes a voxel, and the " << (others >> 20) << " MiB of the running session and any "
-    << "image waiting), more than 3/4 of the " << (have >> 20) << " MiB of memory this server may use";
+    << (need >> 20) << " MiB, more than the budget of " << (budget >> 20) << " MiB (3/4 of the " << (have >> 20)
+    << " MiB of memory this server may use"
+    << (by_default ? std::string(", a default: this machine's memory is unknown")
+                   : unknown ? std::string(", --memory-mib: this machine's memory is unknown") : std::string())
+    << "): " << (mine >> 20) << " MiB this image (as received and its session: volume, mirror, shadow, samples and an "
+    << "edited copy, " << per_voxel << " bytes a voxel), " << (running >> 20) << " MiB the running session, "
+    << (in_flight >> 20) << " MiB in flight (IMAGEs arriving, received or waiting from every client, and a session "
+    << "being built); send it again once those are done, or a smaller one";
   return s.str();
 }
 
@@ -1122,6 +1178,8 @@ std::string Server::memory_refusal(igtl::ImageMessage& image) {
 /// the servo moves over; the force stops only for that stop and start. The sender is
 /// answered once that is done ("volume taken"), or why not: the running session goes on.
 void Server::swap_volume(PendingVolume p) {
+  // Its voxels, then its session: in flight until it runs or is refused.
+  const BuildingBytes building(building_bytes_, p.volume.grid.voxel_count() * session_bytes_per_voxel());
   const HoldEdits hold(session_mu_, preparing_);
   const std::string keep = "; the session goes on with the volume it had";
   if (!wait_edits_applied(kSettleS) || fault("settle", p.device)) {

@@ -2,8 +2,9 @@
 // beside the session so that a crash or `kill -9` loses none of them.
 //
 // The file is a recording without ticks (io/record.h, format 3): the header (the volume's
-// CRC-32, the program and input it was opened by) and one edit line per applied edit, in
-// the order applied. Appending costs a mutex and a string (the edit thread's: never the
+// CRC-32, the program and input it was opened by; for `isotouch serve`, the session's
+// isovalue and where an `isovalue V` restarted its undo history) and one edit line per
+// applied edit, in the order applied. Appending costs a mutex and a string (the edit thread's: never the
 // servo tick, never a wait for the disk); a writer thread writes each append as it comes
 // (a killed process loses only what it had not yet written: microseconds, or a fdatasync in
 // progress) and fdatasyncs every flush interval (at most 1 s: a power cut). The file

@@ -124,4 +124,37 @@ grep -q "volume taken: 48 x 48 x 48; isovalue -500 " "$out/client6.log" ||
   fail "the restored session does not run at the isovalue -500 (the client was told: $(grep 'volume taken' "$out/client6.log"))"
 cmp "$out/isorestored.mha" "$out/isocarved.mha" || fail "isorestored.mha differs from isocarved.mha (the volume at the kill)"
 [[ ! -e $iso_journal ]] || fail "the journal was not deleted when serve stopped"
-echo "PASS serve journal: the IMAGE sessions' edits restored after kill -9 when the IMAGE came again, byte for byte ($ball_edits edits; $iso_edits across an isovalue change, at -500)"
+echo "ok serve journal: the IMAGE session's $iso_edits edits across an isovalue change restored at -500, byte for byte"
+
+# The same for the scene's volume: a stroke at the scene's 1150, `isovalue 500`, an undo and a
+# stroke after it, kill -9; the next serve of the scene restores the session at 500 (not the
+# scene's 1150), every edit.
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve7.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve7.log" $pid)
+[[ -n $port ]] || fail "serve did not start a seventh time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" \
+  cmd apply wait 0.6 cmd stop cmd "save scenefirst.mha" cmd "isovalue 500" cmd undo \
+  move $out_q 0.3 move $in_q 0.5 cmd apply wait 0.6 cmd stop cmd "save scenecarved.mha" \
+  >"$out/client7.log" 2>&1 || fail "the scene's isovalue client failed (exit $?)"
+kill -KILL $pid; wait $pid
+grep -q "isovalue 500: done" "$out/client7.log" || fail "the isovalue 500 was not taken"
+grep -q "save scenecarved.mha: wrote" "$out/client7.log" || fail "scenecarved.mha was not written"
+cmp -s "$out/scenefirst.mha" "$out/scenecarved.mha" && fail "nothing was carved after the scene's isovalue: the check says little"
+[[ -f $journal ]] || fail "no journal of the scene's volume left after the kill past an isovalue"
+scene_edits=$(grep -c '^{"edit"' "$journal")
+head -n 1 "$journal" | grep -q '"isovalue":{"tau":500' || fail "the scene journal's header does not hold the isovalue 500"
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve8.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve8.log" $pid)
+[[ -n $port ]] || fail "serve did not start an eighth time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save scenerestored.mha" >"$out/client8.log" 2>&1 ||
+  fail "the client after the scene's kill failed (exit $?)"
+kill -TERM $pid; wait $pid
+grep -q "^journal  restoring $scene_edits edits from $journal" "$out/serve8.log" ||
+  fail "the scene's $scene_edits edits around the isovalue were not restored"
+grep -q "^journal  the restored session runs at isovalue 500 (inside above), a client's" "$out/serve8.log" ||
+  fail "the restored scene session does not run at the isovalue 500"
+cmp "$out/scenerestored.mha" "$out/scenecarved.mha" || fail "scenerestored.mha differs from scenecarved.mha (the volume at the kill)"
+[[ ! -e $journal ]] || fail "the scene's journal was not deleted when serve stopped"
+echo "PASS serve journal: the sessions' edits restored after kill -9, byte for byte ($edits and $ball_edits edits; $iso_edits on an IMAGE and $scene_edits on the scene across an isovalue change)"

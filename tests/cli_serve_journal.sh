@@ -153,8 +153,8 @@ timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save scenerestored.mha" >"$o
 kill -TERM $pid; wait $pid
 grep -q "^journal  restoring $scene_edits edits from $journal" "$out/serve8.log" ||
   fail "the scene's $scene_edits edits around the isovalue were not restored"
-grep -q "^journal  the restored session runs at isovalue 500 (inside above), a client's" "$out/serve8.log" ||
-  fail "the restored scene session does not run at the isovalue 500"
+grep -q "^journal  restored $scene_edits edits at isovalue 500 (inside above)" "$out/serve8.log" ||
+  fail "the restored scene session was not built at the isovalue 500"
 cmp "$out/scenerestored.mha" "$out/scenecarved.mha" || fail "scenerestored.mha differs from scenecarved.mha (the volume at the kill)"
 [[ ! -e $journal ]] || fail "the scene's journal was not deleted when serve stopped"
 echo "PASS serve journal: the sessions' edits restored after kill -9, byte for byte ($edits and $ball_edits edits; $iso_edits on an IMAGE and $scene_edits on the scene across an isovalue change)"

@@ -138,8 +138,9 @@ Subcommand add_serve_command(CLI::App& cli) {
                 "Answer each TRANSFORM of --stream with a TRANSFORM 'Force' to its sender once the servo rendered it "
                 "(lock-step, its header stamp echoed; never waited for)");
   sub->add_option("--memory-mib", a->o.memory_mib,
-                  "Memory the server may use [MiB] (default: this machine's, its address-space and cgroup limits): "
-                  "an IMAGE whose session would pass 3/4 of it is refused with a STATUS")
+                  "Memory the server may use [MiB] (default: this machine's, its address-space and cgroup limits; "
+                  "4096 where unknown): an IMAGE whose session, with every client's IMAGEs in flight, would pass "
+                  "3/4 of it is refused with a STATUS")
       ->check(CLI::Range(1.0, 1e9));
   sub->add_flag("--realtime", a->o.sched_fifo, "Ask for SCHED_FIFO and pinning for the servo thread");
   haptic->excludes(stream)->excludes(offset)->excludes(stale)->excludes(reply)->excludes(registration);  // the stream's, not a device's

@@ -198,8 +198,13 @@ std::optional<JournalLeft> Journal::left(std::uint32_t volume_crc32) const {
                        ", this one is " + hex8(volume_crc32) + "); nothing restored");
   struct stat st {};
   if (::fstat(impl_->fd, &st) == 0) out.written = st.st_mtime;
+  if (!r.history_restarts.empty() && r.history_restarts.back() > r.edits.size())
+    throw JournalError(path_ + ": field 'history_restarts': " + std::to_string(r.history_restarts.back()) +
+                       " is past the journal's " + std::to_string(r.edits.size()) + " edits; nothing restored");
   out.edits = std::move(r.edits);
   out.input = r.scene_path;
+  out.isovalue = r.isovalue;
+  out.history_restarts = std::move(r.history_restarts);
   return out;
 }
 

@@ -2,8 +2,9 @@
 // beside the session so that a crash or `kill -9` loses none of them.
 //
 // The file is a recording without ticks (io/record.h, format 3): the header (the volume's
-// CRC-32, the program and input it was opened by) and one edit line per applied edit, in
-// the order applied. Appending costs a mutex and a string (the edit thread's: never the
+// CRC-32, the program and input it was opened by; for `isotouch serve`, the session's
+// isovalue and where an `isovalue V` restarted its undo history) and one edit line per
+// applied edit, in the order applied. Appending costs a mutex and a string (the edit thread's: never the
 // servo tick, never a wait for the disk); a writer thread writes each append as it comes
 // (a killed process loses only what it had not yet written: microseconds, or a fdatasync in
 // progress) and fdatasyncs every flush interval (at most 1 s: a power cut). The file
@@ -45,6 +46,10 @@ struct JournalLeft {
   std::size_t dropped_bytes = 0;          ///< a record cut by the kill (no newline): dropped
   std::time_t written = 0;                ///< the file's last write (its mtime) [s since the epoch]
   std::string input;                      ///< the input the session opened (the header's scene_path)
+  /// The isovalue the session ran at, where a client's `isovalue V` rebuilt it (Recording::isovalue).
+  std::optional<core::Isosurface> isovalue;
+  /// After how many of `edits` its undo history started afresh (Recording::history_restarts).
+  std::vector<std::size_t> history_restarts;
 };
 
 /// "restore 214 edits from 14:02?" (HH:MM: `left.written`, local time), with the dropped
@@ -67,7 +72,7 @@ class Journal {
   /// (new, or closed). Call before start().
   /// @throws JournalError naming the file when its header's volume_crc32 is not
   ///         `volume_crc32` (a journal of another volume: nothing is applied), or it is not a
-  ///         journal (names the line and field).
+  ///         journal (names the line and field; a history restart past its edits too).
   std::optional<JournalLeft> left(std::uint32_t volume_crc32) const;
   /// Starts this session's journal: the file is emptied, then holds `header` (a format 3
   /// recording header: volume_crc32 and rate_hz required, no ticks) and `restored` (the

@@ -74,6 +74,8 @@ OpenedJournal open_journal(const std::string& program, std::uint32_t volume_crc3
   if (yes) {
     log << "journal  restoring " << left->edits.size() << " edits from " << path << "\n";
     out.restore = std::move(left->edits);
+    out.isovalue = left->isovalue;
+    out.history_restarts = std::move(left->history_restarts);
     return out;
   }
   const char* why = choice == RestoreChoice::kNo ? "--restore no"
@@ -86,8 +88,12 @@ OpenedJournal open_journal(const std::string& program, std::uint32_t volume_crc3
 }
 
 void apply_restored(session::EditSession& es, std::vector<session::EditEvent>& edits,
-                    servo::TripleBuffer<core::SampleField>* out) {
-  for (const session::EditEvent& e : edits) (void)es.apply(e, out);
+                    servo::TripleBuffer<core::SampleField>* out, const std::vector<std::size_t>& history_restarts) {
+  std::size_t next = 0;
+  for (std::size_t i = 0; i <= edits.size(); ++i) {
+    for (; next < history_restarts.size() && history_restarts[next] == i; ++next) es.sculptor().drop_history();
+    if (i < edits.size()) (void)es.apply(edits[i], out);
+  }
   if (!es.sculptor().history().stroke_open()) return;
   session::EditEvent end;
   end.kind = session::EditEvent::Kind::kEndStroke;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,6 +23,10 @@ RestoreChoice restore_choice(const std::string& s);
 struct OpenedJournal {
   std::unique_ptr<Journal> journal;        ///< null: journal off (the log says why)
   std::vector<session::EditEvent> restore; ///< the edits to apply before the session starts
+  /// With `restore`: the isovalue the journaled session ran at (absent: the volume's own)
+  /// and where its undo history started afresh (JournalLeft).
+  std::optional<core::Isosurface> isovalue;
+  std::vector<std::size_t> history_restarts;
 };
 
 /// Opens PROGRAM's journal of the volume of CRC `volume_crc32` in journal_dir(), and decides
@@ -34,10 +39,12 @@ OpenedJournal open_journal(const std::string& program, std::uint32_t volume_crc3
                            std::ostream& log, std::istream& answers, bool ask_terminal);
 
 /// Applies a journal's `edits` to `es` in order (undo and redo included: the volume and its
-/// history become those at the crash), publishing into `out` (may be null). A stroke the
-/// crash left open is closed: that end_stroke is appended to `edits`, so the new journal
-/// holds it too. @throws what EditSession::apply throws (the journal file is untouched).
+/// history become those at the crash), publishing into `out` (may be null); the undo
+/// history is dropped after each count in `history_restarts` (ascending: where the journaled
+/// session was rebuilt). A stroke the crash left open is closed: that end_stroke is appended
+/// to `edits`, so the new journal holds it too. @throws what EditSession::apply throws (the
+/// journal file is untouched).
 void apply_restored(session::EditSession& es, std::vector<session::EditEvent>& edits,
-                    servo::TripleBuffer<core::SampleField>* out);
+                    servo::TripleBuffer<core::SampleField>* out, const std::vector<std::size_t>& history_restarts = {});
 
 }  // namespace isotouch::io

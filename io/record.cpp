@@ -274,6 +274,36 @@ RecordedEditSession parse_edit_session(const json& h, const Where& w) {
   return s;
 }
 
+core::Isosurface parse_isovalue(const json& h, const Where& w) {
+  const json& e = h.at("isovalue");
+  if (!e.is_object()) throw RecordingError(w.at("isovalue") + ": must be an object, got " + shown(e));
+  only_keys(e, {"tau", "inside"}, "isovalue.", w);
+  core::Isosurface iso;
+  iso.tau = finite_number(member(e, "tau", w), "isovalue.tau", w);
+  const json& inside = member(e, "inside", w);
+  if (inside == "above") iso.inside = core::InsideIs::kAbove;
+  else if (inside == "below") iso.inside = core::InsideIs::kBelow;
+  else throw RecordingError(w.at("isovalue.inside") + ": must be \"above\" or \"below\", got " + shown(inside));
+  return iso;
+}
+
+std::vector<std::size_t> parse_history_restarts(const json& h, const Where& w) {
+  const json& a = h.at("history_restarts");
+  if (!a.is_array()) throw RecordingError(w.at("history_restarts") + ": must be an array of edit counts, got " + shown(a));
+  std::vector<std::size_t> out;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const std::string field = "history_restarts[" + std::to_string(i) + "]";
+    if (!a[i].is_number_integer() || a[i].get<long long>() < 0)
+      throw RecordingError(w.at(field) + ": must be an integer >= 0, got " + shown(a[i]));
+    const std::size_t n = a[i].get<std::size_t>();
+    if (!out.empty() && n < out.back())
+      throw RecordingError(w.at(field) + ": " + std::to_string(n) + " is less than the one before it (" +
+                           std::to_string(out.back()) + "): must be ascending");
+    out.push_back(n);
+  }
+  return out;
+}
+
 void parse_header(const json& h, Recording& r, const Where& w) {
   const std::string format = text(h, "format", w);
   if (format != kRecordingFormat)
@@ -285,9 +315,12 @@ void parse_header(const json& h, Recording& r, const Where& w) {
   if (v == 1) only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz"}, "", w);
   else if (v == 2) only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32"}, "", w);
   else
-    only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32", "edit_session"}, "",
-              w);
+    only_keys(h, {"format", "format_version", "scene_path", "scene_text", "rate_hz", "volume_crc32", "edit_session",
+                  "isovalue", "history_restarts"},
+              "", w);
   if (h.contains("edit_session")) r.edit_session = parse_edit_session(h, w);
+  if (h.contains("isovalue")) r.isovalue = parse_isovalue(h, w);
+  if (h.contains("history_restarts")) r.history_restarts = parse_history_restarts(h, w);
   if (v >= 2) {
     const long crc = integer(h, "volume_crc32", w);
     if (crc < 0 || crc > long(UINT32_MAX))
@@ -431,6 +464,19 @@ std::string recording_header_line(const Recording& r, const std::string& name) {
     header["edit_session"] = {{"gpu_brushes", r.edit_session->gpu_brushes},
                               {"history_limit_mib", r.edit_session->history_limit_mib}};
     if (r.edit_session->edit_period_s > 0) header["edit_session"]["edit_period_s"] = r.edit_session->edit_period_s;
+  }
+  if ((r.isovalue || !r.history_restarts.empty()) && r.format_version < 3)
+    throw RecordingError(name + ": fields 'isovalue' and 'history_restarts' (an edit journal's) need format 3, got format " +
+                         std::to_string(r.format_version));
+  if (r.isovalue) {
+    if (!std::isfinite(r.isovalue->tau))
+      throw RecordingError(name + ": field 'isovalue.tau': must be finite, got " + num(r.isovalue->tau));
+    header["isovalue"] = {{"tau", r.isovalue->tau}, {"inside", core::to_string(r.isovalue->inside)}};
+  }
+  if (!r.history_restarts.empty()) {
+    if (!std::is_sorted(r.history_restarts.begin(), r.history_restarts.end()))
+      throw RecordingError(name + ": field 'history_restarts': must be ascending");
+    header["history_restarts"] = r.history_restarts;
   }
   return dump_line(header);
 }

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "isotouch/session/edit_session.h"
+#include "isotouch/core/isosurface.h"
 #include "isotouch/core/vec3.h"
 
 namespace isotouch::io {
@@ -80,6 +81,16 @@ struct Recording {
   std::optional<std::uint32_t> volume_crc32;
   /// Format 3: the edit session of the sculpting app (absent: the scene's "edits" section).
   std::optional<RecordedEditSession> edit_session;
+  /// Format 3, an edit journal of `isotouch serve` (io/journal.h): the isovalue its session
+  /// ran at when a client's `isovalue V` rebuilt it (absent: the volume's own). The edits
+  /// replay on the volume of volume_crc32 at any isovalue (a brush carries its targets);
+  /// a restore builds the session at this one.
+  std::optional<core::Isosurface> isovalue;
+  /// Format 3, an edit journal: after how many of `edits` the undo history started afresh
+  /// (each `isovalue V` rebuilt the session on its edited volume): ascending, each at most
+  /// the number of edits. A restore drops the history there, so an undo after it undoes
+  /// what it undid in the session (nothing before the rebuild).
+  std::vector<std::size_t> history_restarts;
   std::vector<RecordedTick> ticks;  ///< one per tick, tick k at index k
   std::vector<session::EditEvent> edits;     ///< in the order applied (session::EditEvent::tick ascending)
 };
@@ -91,7 +102,9 @@ struct Recording {
 ///                                                    one per tick, k = 0, 1, ...; a fault
 ///                                                    tick also has "fault":true
 ///   (format 3 may add "edit_session":{"gpu_brushes":B,"history_limit_mib":D} to the
-///    header: the edit session the edits went through, where the scene has no "edits")
+///    header: the edit session the edits went through, where the scene has no "edits";
+///    and, in an edit journal, "isovalue":{"tau":D,"inside":"above"|"below"} and
+///    "history_restarts":[N,...]: Recording::isovalue, Recording::history_restarts)
 ///   (format_version 1, still read: no volume_crc32, no vhip, no version)
 ///   {"edit":"brush","tick":K,"t":D,"brush":{...}}   after tick K's line (K ascending): the
 ///        edits applied after tick K's render; "brush" holds every session::Brush field

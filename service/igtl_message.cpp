@@ -130,7 +130,7 @@ bool read_growing(ByteSource& src, std::vector<std::uint8_t>& body, std::uint64_
 /// allocated: sizes from the message header, an IMAGE's voxel count from its 72-byte image
 /// header. "" when read and acceptable; else why not (`truncated`: the stream cannot go on).
 std::string read_body(ByteSource& src, const std::string& type, std::uint64_t n, std::vector<std::uint8_t>& body,
-                      bool& truncated) {
+                      bool& truncated, const std::function<void()>& before_growing) {
   truncated = false;
   const std::uint64_t first = type == "IMAGE" ? std::min<std::uint64_t>(n, IGTL_IMAGE_HEADER_SIZE) : 0;
   std::string why = check_size(type, n);
@@ -143,12 +143,14 @@ std::string read_body(ByteSource& src, const std::string& type, std::uint64_t n,
     if (!skip(src, n - body.size())) return truncated = true, type + " body truncated: " + src.why();
     return why;
   }
+  if (before_growing) before_growing();
   if (!read_growing(src, body, n)) return truncated = true, type + " body truncated: " + src.why();
   return check_body(type, body.data(), n);
 }
 
 /// The kept message of `header`'s type, its body read from `src` and checked; unpacked.
-Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, std::uint64_t body_bytes) {
+Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, std::uint64_t body_bytes,
+                   const MessageLimits& limits) {
   igtl::MessageBase::Pointer msg;
   igtl::ImageMessage::Pointer image;
   igtl::TransformMessage::Pointer transform;
@@ -163,7 +165,13 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   // body size).
   std::vector<std::uint8_t> body;
   bool truncated = false;
-  if (std::string why = read_body(src, in.type, body_bytes, body, truncated); !why.empty())
+  std::function<void()> hold;
+  if (image && limits.hold_image)
+    hold = [&] {
+      in.held = limits.hold_image(in.device, body_bytes);
+      in.held_bytes = body_bytes;
+    };
+  if (std::string why = read_body(src, in.type, body_bytes, body, truncated, hold); !why.empty())
     return truncated ? broken(in, why) : refused(in, why);
   msg->SetMessageHeader(header);
   msg->AllocatePack();
@@ -233,7 +241,7 @@ Incoming read_message(ByteSource& src, const MessageLimits& limits) {
     return in;
   }
   header->Unpack();
-  return read_kept(src, header, in, body_bytes);
+  return read_kept(src, header, in, body_bytes, limits);
 }
 
 std::vector<std::uint8_t> pack_status(int code, const std::string& device, const std::string& why) {

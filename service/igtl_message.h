@@ -10,6 +10,8 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -33,6 +35,11 @@ class ByteSource {
 struct MessageLimits {
   /// Largest body accepted [bytes]: 512^3 float32 voxels and the IMAGE header.
   std::uint64_t max_body_bytes = std::uint64_t(512) * 512 * 512 * 4 + 72;
+  /// Called for an IMAGE once its image header is checked, before its voxels arrive, with
+  /// its device name and body size [bytes]: what it returns is kept in the Incoming
+  /// (Incoming::held) until that is destroyed (a server counts the IMAGEs arriving or held
+  /// against its memory budget). Empty: nothing held.
+  std::function<std::shared_ptr<void>(const std::string& device, std::uint64_t body_bytes)> hold_image;
 };
 
 /// One message read from a source.
@@ -56,6 +63,9 @@ struct Incoming {
   double matrix[4][4] = {};
   std::string text;
   std::vector<std::string> labels;
+  /// An IMAGE's: MessageLimits::hold_image's token (null: none) and the body bytes it holds.
+  std::shared_ptr<void> held;
+  std::uint64_t held_bytes = 0;
 };
 
 /// Reads and validates the next message from `src`. Never throws for what the bytes say.

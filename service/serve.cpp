@@ -133,6 +133,7 @@ class Server {
  public:
   Server(const io::Scene& scene, const ServeOptions& o, std::ostream& out)
       : scene_(scene), o_(o), log_(out), listener_(o.host, o.port) {
+    o_.limits.hold_image = [this](const std::string& device, std::uint64_t bytes) { return hold_image(device, bytes); };
     if (!o.haptic.empty() && o.reply_force)
       throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
                                   " the stream is not the device");
@@ -159,9 +160,17 @@ class Server {
   std::unique_ptr<Session> prepare_session(engine::Volume v, const session::LiveFieldOptions& live,
                                            const servo::HriParams& hri);
   void start_session(std::unique_ptr<Session> s);
-  io::OpenedJournal open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input);
+  io::OpenedJournal find_journal(std::uint32_t volume_crc32);
+  void start_journal(Session& s, io::OpenedJournal& j, std::uint32_t volume_crc32, const std::string& input,
+                     const core::Isosurface& iso);
+  io::OpenedJournal open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input,
+                                 const core::Isosurface& iso);
+  io::OpenedJournal carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
+                                  const std::vector<std::size_t>& restarts);
   void close_journal();
-  std::string memory_refusal(igtl::ImageMessage& image);
+  std::string memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes);
+  std::shared_ptr<void> hold_image(const std::string& device, std::uint64_t bytes);
+  std::uint64_t session_bytes_per_voxel() const;
   void swap_volume(PendingVolume p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
   void send_edited_or_say_why();
@@ -171,7 +180,8 @@ class Server {
   }
   std::unique_ptr<Session> stop_session();
   std::string switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal = nullptr,
-                             const std::function<io::OpenedJournal(Session&)>& journal_after_stop = {});
+                             const std::function<io::OpenedJournal(Session&)>& journal_after_stop = {},
+                             bool carried = false);
   void take_command(Client& c, const Incoming& in);
   void command_loop();
   void run_command(const Pending& p);
@@ -255,6 +265,11 @@ class Server {
  private:
   std::mutex volume_mu_;
   std::mutex image_mu_;  // one IMAGE checked against the memory budget and converted at a time
+  // The IMAGE bodies arriving or received from every client and not yet converted or refused
+  // (MessageLimits::hold_image), and the session being built for one (swap_volume, an
+  // isovalue's restart) [bytes]: counted against the one memory budget.
+  std::atomic<std::uint64_t> images_held_bytes_{0};
+  std::atomic<std::uint64_t> building_bytes_{0};
   std::optional<PendingVolume> next_volume_;  // a received IMAGE waiting for the main thread
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
   bool changing_ = false;  // guarded by volume_mu_: the main thread took one of the two and is applying it
@@ -273,11 +288,24 @@ class Server {
   std::atomic<bool> save_failed_{false};  // a save command could not write: the exit says so
 };
 
+/// The memory a server whose machine's memory is unknown (io::memory_budget_bytes 0, no
+/// --memory-mib) may use for its IMAGEs' sessions: 4 GiB (3 GiB of budget: a 512 x 512 x
+/// 150 int16 CT with its session), not everything.
+constexpr std::uint64_t kUnknownMemoryBytes = std::uint64_t(4) << 30;
+
 /// "isovalue 300 (inside above)".
 std::string iso_text(const core::Isosurface& iso) {
   std::ostringstream s;
   s << "isovalue " << iso.tau << " (inside " << core::to_string(iso.inside) << ")";
   return s.str();
+}
+
+/// The live field and the renderer at `iso` on a volume of values [lo, hi].
+void at_isovalue(const core::Isosurface& iso, float lo, float hi, session::LiveFieldOptions& live, servo::HriParams& hri) {
+  live.iso = iso;
+  live.background = float(live.iso.outside_value(lo, hi));
+  hri.tau = iso.tau;
+  hri.inside = iso.inside;
 }
 
 std::string mm3(const core::Vec3& v) {
@@ -308,7 +336,7 @@ void Server::handle(Client& c, Incoming& in) {
         std::string dims;
         {
           std::lock_guard<std::mutex> image_lock(image_mu_);
-          if (const std::string why = memory_refusal(*in.image); !why.empty()) {
+          if (const std::string why = memory_refusal(*in.image, in.held_bytes); !why.empty()) {
             refuse(c, in, igtl::StatusMessage::STATUS_RESOURCE_ERROR, why);
             break;
           }
@@ -1007,6 +1035,16 @@ struct HoldEdits {
   HoldEdits& operator=(const HoldEdits&) = delete;
 };
 
+/// A session being built, counted against the memory budget while it lives.
+struct BuildingBytes {
+  std::atomic<std::uint64_t>& bytes;
+  std::uint64_t n;
+  BuildingBytes(std::atomic<std::uint64_t>& b, std::uint64_t k) : bytes(b), n(k) { bytes.fetch_add(n); }
+  ~BuildingBytes() { bytes.fetch_sub(n); }
+  BuildingBytes(const BuildingBytes&) = delete;
+  BuildingBytes& operator=(const BuildingBytes&) = delete;
+};
+
 /// How long the running session's edits may take to settle before a new session is built;
 /// past it the change is refused (never built beside edits still running: the two would
 /// share the GPU context's one queue, pool and fence).
@@ -1019,9 +1057,10 @@ constexpr double kSettleS = 5.0;
 void Server::restart_at_isovalue(const Pending& p) {
   std::shared_ptr<EditMirror> mirror;
   std::string name;
+  std::uint64_t voxels = 0;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) mirror = session_->mirror, name = session_->image_name;
+    if (session_) mirror = session_->mirror, name = session_->image_name, voxels = session_->frame.grid.voxel_count();
   }
   if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
   const HoldEdits hold(session_mu_, preparing_);
@@ -1033,6 +1072,7 @@ void Server::restart_at_isovalue(const Pending& p) {
   std::unique_ptr<Session> next;
   session::LiveFieldOptions live = setup_.live;
   servo::HriParams hri = setup_.hri;
+  const BuildingBytes building(building_bytes_, voxels * session_bytes_per_voxel());
   try {
     engine::Volume v = mirror->volume();  // every edit applied: the edited volume
     v.path = name == "isotouch" ? v.path : "igtl:" + name;
@@ -1044,7 +1084,18 @@ void Server::restart_at_isovalue(const Pending& p) {
     return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                   what + ": the session could not be rebuilt at it (" + e.what() + "); the isovalue is unchanged");
   }
-  if (const std::string why = switch_session(std::move(next)); !why.empty())
+  // The session's journal goes on in the same file (its volume's: the one a restore is
+  // offered for), its edits so far kept and the new isovalue and history restart in its header.
+  io::OpenedJournal journal;
+  const std::optional<core::Isosurface> journal_iso = live.iso;
+  std::function<io::OpenedJournal(Session&)> carry;
+  if (journal_.journal)
+    carry = [this, journal_iso](Session& s) {
+      std::vector<std::size_t> restarts = journal_.history_restarts;
+      restarts.push_back(std::size_t(-1));  // carry_journal: at the edits so far
+      return carry_journal(journal_, s, journal_iso, restarts);
+    };
+  if (const std::string why = switch_session(std::move(next), &journal, carry, bool(carry)); !why.empty())
     return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                   what + ": the session at it could not be started (" + why + "); the isovalue is unchanged");
   setup_.live = live;
@@ -1063,36 +1114,67 @@ void Server::answer_image(const PendingVolume& p, int code, const std::string& t
   p.from->push(pack_status(code, p.device, text));
 }
 
-/// What taking `image` would need, against the memory budget (the loaders' rule: at most
-/// 3/4 of what the process may use, io::memory_budget_bytes, or of --memory-mib): the
-/// image as received, the new session (its volume, the mirror, the live field's shadow,
-/// its samples, an edited IMAGE's copy and bytes), the running session, which serves while
-/// the new one is built, and an IMAGE already waiting. "" when it fits.
-std::string Server::memory_refusal(igtl::ImageMessage& image) {
+/// The bytes a session takes per voxel: its volume, the mirror, the live field's shadow, its
+/// samples, an edited IMAGE's copy and bytes.
+std::uint64_t Server::session_bytes_per_voxel() const {
+  const std::uint64_t sample = setup_.live.format == core::SampleFormat::kFp16 ? 8 : 16;
+  return 4 + 4 + 4 + sample + 8;
+}
+
+/// MessageLimits::hold_image: an IMAGE's body counted against the memory budget from before
+/// its voxels arrive until its Incoming is gone (converted, or refused).
+std::shared_ptr<void> Server::hold_image(const std::string& device, std::uint64_t bytes) {
+  images_held_bytes_.fetch_add(bytes);
+  std::ostringstream s;
+  s << "image    '" << device << "': " << bytes << " bytes arriving, counted against the memory budget";
+  log_.line(s.str());
+  return std::shared_ptr<void>(nullptr, [this, bytes](void*) { images_held_bytes_.fetch_sub(bytes); });
+}
+
+/// What taking `image` would need, against the one memory budget of every client's IMAGEs
+/// (the loaders' rule: at most 3/4 of what the process may use, io::memory_budget_bytes, or
+/// of --memory-mib; where that is unknown, kUnknownMemoryBytes): the image as received and
+/// its new session (session_bytes_per_voxel), the running session, which serves while the
+/// new one is built, and the IMAGEs in flight: an image waiting, a session being built for
+/// one, and every other client's IMAGE arriving or received (`own_held_bytes`: this one's,
+/// not counted twice). "" when it fits; else the STATUS, naming the sizes.
+std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes) {
   int d[3];
   image.GetDimensions(d);
   const std::uint64_t n = std::uint64_t(std::max(d[0], 0)) * std::uint64_t(std::max(d[1], 0)) * std::uint64_t(std::max(d[2], 0));
-  const std::uint64_t sample = setup_.live.format == core::SampleFormat::kFp16 ? 8 : 16;
-  const std::uint64_t per_voxel = 4 + 4 + 4 + sample + 8;
-  std::uint64_t others = 0;
+  const std::uint64_t per_voxel = session_bytes_per_voxel();
+  std::uint64_t running = 0, in_flight = 0;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
-    if (session_) others += session_->frame.grid.voxel_count() * per_voxel;
+    if (session_) running = session_->frame.grid.voxel_count() * per_voxel;
   }
   {
     std::lock_guard<std::mutex> lock(volume_mu_);
-    if (next_volume_) others += next_volume_->volume.voxels.size() * sizeof(float);
+    if (next_volume_) in_flight += next_volume_->volume.voxels.size() * sizeof(float);
   }
+  in_flight += building_bytes_.load();
+  const std::uint64_t held = images_held_bytes_.load();
+  in_flight += held > own_held_bytes ? held - own_held_bytes : 0;
   const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
-  const std::uint64_t need = n * (stored + per_voxel) + others;
-  std::uint64_t have = io::memory_budget_bytes();
+  const std::uint64_t mine = n * (stored + per_voxel);
+  const std::uint64_t need = mine + running + in_flight;
+  std::uint64_t have = fault("budget", image.GetDeviceName()) ? 0 : io::memory_budget_bytes();
+  const bool unknown = have == 0;
   if (o_.memory_mib > 0) have = have == 0 ? std::uint64_t(o_.memory_mib) << 20 : std::min(have, std::uint64_t(o_.memory_mib) << 20);
-  if (have == 0 || need <= have / 4 * 3) return "";
+  const bool by_default = have == 0;
+  if (by_default) have = kUnknownMemoryBytes;
+  const std::uint64_t budget = have / 4 * 3;
+  if (need <= budget) return "";
   std::ostringstream s;
   s << "igtl:" << image.GetDeviceName() << ": not taken: " << d[0] << " x " << d[1] << " x " << d[2] << " voxels need "
-    << (need >> 20) << " MiB (the image as received, its session: volume, mirror, shadow, samples and an edited "
-    << "copy, " << per_voxel << " bytes a voxel, and the " << (others >> 20) << " MiB of the running session and any "
-    << "image waiting), more than 3/4 of the " << (have >> 20) << " MiB of memory this server may use";
+    << (need >> 20) << " MiB, more than the budget of " << (budget >> 20) << " MiB (3/4 of the " << (have >> 20)
+    << " MiB of memory this server may use"
+    << (by_default ? std::string(", a default: this machine's memory is unknown")
+                   : unknown ? std::string(", --memory-mib: this machine's memory is unknown") : std::string())
+    << "): " << (mine >> 20) << " MiB this image (as received and its session: volume, mirror, shadow, samples and an "
+    << "edited copy, " << per_voxel << " bytes a voxel), " << (running >> 20) << " MiB the running session, "
+    << (in_flight >> 20) << " MiB in flight (IMAGEs arriving, received or waiting from every client, and a session "
+    << "being built); send it again once those are done, or a smaller one";
   return s.str();
 }
 
@@ -1101,6 +1183,8 @@ std::string Server::memory_refusal(igtl::ImageMessage& image) {
 /// the servo moves over; the force stops only for that stop and start. The sender is
 /// answered once that is done ("volume taken"), or why not: the running session goes on.
 void Server::swap_volume(PendingVolume p) {
+  // Its voxels, then its session: in flight until it runs or is refused.
+  const BuildingBytes building(building_bytes_, p.volume.grid.voxel_count() * session_bytes_per_voxel());
   const HoldEdits hold(session_mu_, preparing_);
   const std::string keep = "; the session goes on with the volume it had";
   if (!wait_edits_applied(kSettleS) || fault("settle", p.device)) {
@@ -1112,22 +1196,32 @@ void Server::swap_volume(PendingVolume p) {
   const auto t0 = std::chrono::steady_clock::now();
   std::unique_ptr<Session> next;
   // The image's own isovalue (as `isotouch run VOLUME` chooses it), or the one a client set.
-  const engine::IsoChoice choice = image_isovalue(p.volume, client_iso_);
+  engine::IsoChoice choice = image_isovalue(p.volume, client_iso_);
   session::LiveFieldOptions live = setup_.live;
   servo::HriParams hri = setup_.hri;
-  live.iso = choice.iso;
-  live.background = float(live.iso.outside_value(p.volume.min_value, p.volume.max_value));
-  hri.tau = choice.iso.tau;
-  hri.inside = choice.iso.inside;
+  at_isovalue(choice.iso, p.volume.min_value, p.volume.max_value, live, hri);
   const std::uint32_t crc = o_.journal ? io::volume_crc32(p.volume) : 0;
   // The running session's volume again: its session starts afresh (the old one's edits are
   // dropped, as for any new volume), and its journal with it once the old one has stopped.
   const bool same_volume = journal_.journal && crc == journal_crc_;
   const std::string input = "igtl:" + p.device;
   io::OpenedJournal journal;
+  if (!same_volume) journal = find_journal(crc);  // a journal a crash left for it: restored
+  // A restored session runs at the isovalue it ran at (a client's `isovalue V` rebuilt it).
+  const std::optional<core::Isosurface> restored_iso =
+      journal.restore.empty() ? std::nullopt : journal.isovalue;
+  // (as the client's `isovalue V` had set it, kept for later images: where it is not the one
+  // this image opens at)
+  const bool restored_client_iso =
+      restored_iso && (restored_iso->tau != choice.iso.tau || restored_iso->inside != choice.iso.inside);
+  if (restored_iso) {
+    choice.iso = *restored_iso;
+    choice.rule = "the isovalue its session ran at, restored with its edit journal";
+    at_isovalue(choice.iso, p.volume.min_value, p.volume.max_value, live, hri);
+  }
   try {
     next = prepare_session(std::move(p.volume), live, hri);
-    if (!same_volume) journal = open_journal(*next, crc, input);  // a journal a crash left for it: restored
+    if (!same_volume) start_journal(*next, journal, crc, input, live.iso);
   } catch (const std::exception& e) {
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be built (" +
@@ -1135,7 +1229,11 @@ void Server::swap_volume(PendingVolume p) {
   }
   const auto t1 = std::chrono::steady_clock::now();
   std::function<io::OpenedJournal(Session&)> reopen;
-  if (same_volume) reopen = [this, crc, input](Session& s) { return open_journal(s, crc, input); };
+  if (same_volume)
+    reopen = [this, crc, input, iso = live.iso](Session& s) {
+      close_journal();  // one journal file serves one session
+      return open_journal(s, crc, input, iso);
+    };
   if (const std::string why = switch_session(std::move(next), &journal, reopen); !why.empty())
     return answer_image(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                         "igtl:" + p.device + ": not taken: a session on its " + p.dims + " voxels could not be started (" +
@@ -1143,6 +1241,7 @@ void Server::swap_volume(PendingVolume p) {
   setup_.live = live;
   setup_.hri = hri;
   journal_crc_ = crc;
+  if (restored_client_iso) client_iso_ = restored_iso;
   const auto t2 = std::chrono::steady_clock::now();
   n_.images.fetch_add(1);
   std::ostringstream s;
@@ -1160,7 +1259,18 @@ void Server::swap_volume(PendingVolume p) {
 /// starts afresh with what was restored, and `s` appends to it. `input` names the volume in
 /// the journal's header. The log says what was done. Returned for the caller to own (off:
 /// a null journal).
-io::OpenedJournal Server::open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input) {
+io::OpenedJournal Server::open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input,
+                                        const core::Isosurface& iso) {
+  io::OpenedJournal j = find_journal(volume_crc32);
+  start_journal(s, j, volume_crc32, input, iso);
+  return j;
+}
+
+/// The first half of open_journal(): the journal of the volume of CRC `volume_crc32` opened
+/// (locked), and what a killed serve left in it taken or not, as --restore says (the log says
+/// which). A restored journal's isovalue (OpenedJournal::isovalue) is the one its session
+/// must be built at. Off: a null journal.
+io::OpenedJournal Server::find_journal(std::uint32_t volume_crc32) {
   if (!o_.journal) return {};
   std::ostringstream said;
   std::istringstream no_terminal;
@@ -1168,22 +1278,79 @@ io::OpenedJournal Server::open_journal(Session& s, std::uint32_t volume_crc32, c
                                          said, no_terminal, false);
   std::istringstream lines(said.str());
   for (std::string l; std::getline(lines, l);) log_.line(l);
-  if (!j.journal) return j;
-  io::apply_restored(s.parts->edits(), j.restore, &s.parts->buffer());
+  if (j.restore.empty()) j.isovalue.reset(), j.history_restarts.clear();  // a new session: the volume's own
+  return j;
+}
+
+/// The second half: `j`'s restored edits applied to `s` (built at `iso`: j.isovalue where it
+/// has one; the undo history dropped where the journaled session was rebuilt), then the
+/// journal started afresh with them, `iso` and the restarts, and `s` appending to it.
+void Server::start_journal(Session& s, io::OpenedJournal& j, std::uint32_t volume_crc32, const std::string& input,
+                           const core::Isosurface& iso) {
+  if (!j.journal) return;
+  j.isovalue = iso;
+  io::apply_restored(s.parts->edits(), j.restore, &s.parts->buffer(), j.history_restarts);
   if (!j.restore.empty()) {  // the mirror (saves, IMAGEs sent) starts as the restored volume, all of it new
     s.mirror = std::make_shared<EditMirror>(s.parts->edits().volume());
     VoxelBox all;
     all.hi = s.frame.grid.dims;
     s.mirror->restore_changed(all);
-    log_.line("journal  restored " + std::to_string(j.restore.size()) + " edits");
+    log_.line("journal  restored " + std::to_string(j.restore.size()) + " edits at " + iso_text(iso) +
+              " (the session's at the crash)");
   }
   io::Recording header;
   header.scene_path = input;
   header.rate_hz = scene_.hri.rate_hz;
   header.volume_crc32 = volume_crc32;
+  header.isovalue = j.isovalue;
+  header.history_restarts = j.history_restarts;
   j.journal->start(header, j.restore);
   s.journal = j.journal.get();
   log_.line("journal  " + j.journal->path() + " (this session's edits, kept through a crash)");
+}
+
+/// `from` (the journal of the session just stopped, on the volume journal_crc_) goes on for
+/// `s`, the session rebuilt on its edited volume at `iso` (`isovalue V`): the same file
+/// started afresh with every edit it holds, `iso` and `restarts` in its header (a restart
+/// of std::size_t(-1): at the edits it holds; the undo history started afresh there), and
+/// `s` appending to it. A restore then rebuilds the same session: the volume, the edits,
+/// the isovalue. Until the new file replaces the old one, the old one holds the session
+/// before the change. When it cannot go on, the log says why and `s` runs without one.
+io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
+                                        const std::vector<std::size_t>& restarts) {
+  io::OpenedJournal j;
+  if (!from.journal) return j;
+  const std::string path = from.journal->path();
+  std::optional<io::JournalLeft> held;
+  try {
+    from.journal->flush();
+    held = from.journal->left(journal_crc_);
+  } catch (const std::exception& e) {
+    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (the file is kept)");
+    from.journal.reset();
+    return j;
+  }
+  std::vector<session::EditEvent> edits = held ? std::move(held->edits) : std::vector<session::EditEvent>{};
+  j.history_restarts = restarts;
+  for (std::size_t& r : j.history_restarts) r = std::min(r, edits.size());
+  j.isovalue = iso;
+  from.journal.reset();  // its lock released; the file holds the old session until the new one replaces it
+  try {
+    j.journal = std::make_unique<io::Journal>(path);
+    io::Recording header;
+    header.scene_path = held ? held->input : std::string();
+    header.rate_hz = scene_.hri.rate_hz;
+    header.volume_crc32 = journal_crc_;
+    header.isovalue = j.isovalue;
+    header.history_restarts = j.history_restarts;
+    j.journal->start(header, edits);
+  } catch (const std::exception& e) {
+    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (the file is kept)");
+    return {};
+  }
+  s.journal = j.journal.get();
+  log_.line("journal  " + path + " goes on" + (iso ? " at " + iso_text(*iso) : std::string()) + " (" +
+            std::to_string(edits.size()) + " edits kept, the undo history restarts after them)");
   return j;
 }
 
@@ -1231,18 +1398,19 @@ std::unique_ptr<Session> Server::stop_session() {
 /// (a thread, memory, the device), the old session is started again on its own volume and
 /// edits, and the reason is returned for the sender's STATUS ("" when `next` runs). Only
 /// when the old one cannot be started either does the exception end the server.
-/// `journal_after_stop` (the same volume again: one journal file serves one session) opens
-/// the new session's journal once the old session has stopped appending to it and it is closed.
+/// `journal_after_stop` (the same volume again: one journal file serves one session; an
+/// isovalue: the session goes on) closes the running journal or carries it on, and gives the
+/// new session's, once the old session has stopped appending to it. `carried`: it carried it
+/// on (carry_journal), so when `next` cannot start, the old session gets it back as it was.
 std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJournal* next_journal,
-                                   const std::function<io::OpenedJournal(Session&)>& journal_after_stop) {
+                                   const std::function<io::OpenedJournal(Session&)>& journal_after_stop, bool carried) {
   std::unique_ptr<Session> old = stop_session();
+  const std::optional<core::Isosurface> old_iso = journal_.isovalue;
+  const std::vector<std::size_t> old_restarts = journal_.history_restarts;
   try {
-    if (journal_after_stop && next_journal) {
-      close_journal();
-      *next_journal = journal_after_stop(*next);
-    }
+    if (journal_after_stop && next_journal) *next_journal = journal_after_stop(*next);  // closes journal_, or carries it on
     start_session(std::move(next));
-    if (old && old->journal) close_journal();  // the old session ended
+    if (old && old->journal && old->journal == journal_.journal.get()) close_journal();  // the old session ended
     if (next_journal) journal_ = std::move(*next_journal);
     return "";
   } catch (const std::exception& e) {
@@ -1251,7 +1419,10 @@ std::string Server::switch_session(std::unique_ptr<Session> next, io::OpenedJour
     if (!old) throw;
     if (old->journal && old->journal != journal_.journal.get()) {  // closed for the new session: not appended to
       old->journal = nullptr;
-      log_.line("journal  the old session goes on without its journal (it was closed for the new one)");
+      if (carried && next_journal && next_journal->journal) {  // the same file again, as it was before the change
+        journal_ = carry_journal(*next_journal, *old, old_iso, old_restarts);
+      }
+      if (!old->journal) log_.line("journal  the old session goes on without its journal (it was closed for the new one)");
     }
     old->parts->detach();
     start_session(std::move(old));
@@ -1299,9 +1470,17 @@ int Server::run() {
             std::to_string(int(o_.display_hz)) + " Hz, servo " + std::to_string(int(scene_.hri.rate_hz)) + " Hz, " +
             iso_text(setup_.live.iso) + " (the scene's)");
   {
-    std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
     journal_crc_ = io::volume_crc32(setup_.volume);
-    journal_ = open_journal(*first, journal_crc_, std::filesystem::absolute(scene_.file).string());
+    io::OpenedJournal j = find_journal(journal_crc_);
+    if (j.isovalue && (j.isovalue->tau != setup_.live.iso.tau || j.isovalue->inside != setup_.live.iso.inside)) {
+      // a restored session runs at the isovalue a client set (`isovalue V` rebuilt it)
+      at_isovalue(*j.isovalue, setup_.volume.min_value, setup_.volume.max_value, setup_.live, setup_.hri);
+      client_iso_ = j.isovalue;
+      log_.line("journal  the restored session runs at " + iso_text(*j.isovalue) + ", a client's (not the scene's)");
+    }
+    std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
+    start_journal(*first, j, journal_crc_, std::filesystem::absolute(scene_.file).string(), setup_.live.iso);
+    journal_ = std::move(j);
     start_session(std::move(first));
   }
   session::install_stop_handlers();

@@ -90,8 +90,9 @@ struct ServeOptions {
   std::function<void(int port)> on_listening;  ///< called once listening (benches, tests)
   bool sched_fifo = false;            ///< ask for SCHED_FIFO and pinning for the servo
   /// The memory the server may use [MiB] (0: io::memory_budget_bytes, the machine's and its
-  /// limits'; else the smaller of the two): an IMAGE whose session, with the running one's,
-  /// would pass 3/4 of it is refused with a STATUS naming the need and the budget.
+  /// limits', or 4096 MiB where that is unknown; else the smaller of the two): an IMAGE whose
+  /// session, with the running one's and every client's IMAGEs in flight, would pass 3/4 of
+  /// it is refused with a STATUS naming the need, the budget and the part in flight.
   double memory_mib = 0;
   /// Tests only: asked at each spot where the server can fail for a cause a CPU Vulkan driver
   /// does not produce ("prepare": the new session's build throws std::bad_alloc; "settle":

@@ -7,6 +7,7 @@
 # log): its `save restored.mha` equals carved.mha byte for byte and differs from the head
 # (the client's comparison); stopped by SIGTERM, it deletes the journal. The same for a
 # session on a client's IMAGE: restored when the same IMAGE is sent to the next serve.
+# (A session an `isovalue V` rebuilt: see the last part.)
 # Usage: cli_serve_journal.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
 source "$(dirname "$0")/serve_port.sh"
@@ -83,4 +84,77 @@ grep -q "^journal  restoring $ball_edits edits from $ball_journal" "$out/serve4.
   fail "the IMAGE session's $ball_edits edits were not restored when the IMAGE came again"
 cmp "$out/ballrestored.mha" "$out/ballcarved.mha" || fail "ballrestored.mha differs from ballcarved.mha (the volume at the kill)"
 [[ ! -e $ball_journal ]] || fail "the IMAGE session's journal was not deleted when serve stopped"
-echo "PASS serve journal: an IMAGE session's $ball_edits edits restored after kill -9 when the IMAGE came again, byte for byte"
+echo "ok serve journal: an IMAGE session's $ball_edits edits restored after kill -9 when the IMAGE came again, byte for byte"
+
+# An `isovalue V` rebuilds the session on its edited volume (the undo history starts afresh):
+# its edits, before and after the change, go on being journaled in the IMAGE's journal, and
+# the next serve given the same IMAGE restores the session at V. A stroke carved at the
+# image's own isovalue (300 HU: bone), `isovalue -500` (the tissue's surface), an undo (the
+# rebuilt session has nothing to undo: a restore that undid the first stroke would differ),
+# a second stroke on another side; then kill -9.
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve5.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve5.log" $pid)
+[[ -n $port ]] || fail "serve did not start a fifth time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
+  cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save isofirst.mha" cmd "isovalue -500" cmd undo \
+  move 24 0 0 0.4 move 13 0 0 0.6 cmd apply wait 0.6 cmd stop cmd "save isocarved.mha" \
+  >"$out/client5.log" 2>&1 || fail "the isovalue client failed (exit $?)"
+kill -KILL $pid; wait $pid
+grep -q "isovalue -500: done" "$out/client5.log" || fail "the isovalue -500 was not taken"
+grep -q "save isocarved.mha: wrote" "$out/client5.log" || fail "isocarved.mha was not written"
+cmp -s "$out/isofirst.mha" "$out/isocarved.mha" && fail "nothing was carved after the isovalue: the check says little"
+left=( "$out"/state/isotouch/serve-*.journal )
+(( ${#left[@]} == 1 )) && [[ -f ${left[0]} ]] || fail "not one journal left after the kill past an isovalue: ${left[*]}"
+iso_journal=${left[0]}
+[[ $iso_journal == "$ball_journal" ]] || fail "the journal is not the IMAGE's ($iso_journal, not $ball_journal)"
+iso_edits=$(grep -c '^{"edit"' "$iso_journal"); iso_undos=$(grep -c '^{"edit":"undo"' "$iso_journal")
+head -n 1 "$iso_journal" | grep -q '"isovalue":{"tau":-500' || fail "the journal's header does not hold the isovalue -500"
+(( iso_undos == 1 )) || fail "the journal holds $iso_undos undos, not the one after the isovalue"
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve6.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve6.log" $pid)
+[[ -n $port ]] || fail "serve did not start a sixth time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 cmd "save isorestored.mha" \
+  >"$out/client6.log" 2>&1 || fail "the client after the isovalue's kill failed (exit $?)"
+kill -TERM $pid; wait $pid
+grep -q "^journal  restoring $iso_edits edits from $iso_journal" "$out/serve6.log" ||
+  fail "the $iso_edits edits around the isovalue were not restored when the IMAGE came again"
+grep -q "volume taken: 48 x 48 x 48; isovalue -500 " "$out/client6.log" ||
+  fail "the restored session does not run at the isovalue -500 (the client was told: $(grep 'volume taken' "$out/client6.log"))"
+cmp "$out/isorestored.mha" "$out/isocarved.mha" || fail "isorestored.mha differs from isocarved.mha (the volume at the kill)"
+[[ ! -e $iso_journal ]] || fail "the journal was not deleted when serve stopped"
+echo "ok serve journal: the IMAGE session's $iso_edits edits across an isovalue change restored at -500, byte for byte"
+
+# The same for the scene's volume: a stroke at the scene's 1150, `isovalue 500`, an undo and a
+# stroke after it, kill -9; the next serve of the scene restores the session at 500 (not the
+# scene's 1150), every edit.
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve7.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve7.log" $pid)
+[[ -n $port ]] || fail "serve did not start a seventh time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" \
+  cmd apply wait 0.6 cmd stop cmd "save scenefirst.mha" cmd "isovalue 500" cmd undo \
+  move $out_q 0.3 move $in_q 0.5 cmd apply wait 0.6 cmd stop cmd "save scenecarved.mha" \
+  >"$out/client7.log" 2>&1 || fail "the scene's isovalue client failed (exit $?)"
+kill -KILL $pid; wait $pid
+grep -q "isovalue 500: done" "$out/client7.log" || fail "the isovalue 500 was not taken"
+grep -q "save scenecarved.mha: wrote" "$out/client7.log" || fail "scenecarved.mha was not written"
+cmp -s "$out/scenefirst.mha" "$out/scenecarved.mha" && fail "nothing was carved after the scene's isovalue: the check says little"
+[[ -f $journal ]] || fail "no journal of the scene's volume left after the kill past an isovalue"
+scene_edits=$(grep -c '^{"edit"' "$journal")
+head -n 1 "$journal" | grep -q '"isovalue":{"tau":500' || fail "the scene journal's header does not hold the isovalue 500"
+"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve8.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve8.log" $pid)
+[[ -n $port ]] || fail "serve did not start an eighth time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save scenerestored.mha" >"$out/client8.log" 2>&1 ||
+  fail "the client after the scene's kill failed (exit $?)"
+kill -TERM $pid; wait $pid
+grep -q "^journal  restoring $scene_edits edits from $journal" "$out/serve8.log" ||
+  fail "the scene's $scene_edits edits around the isovalue were not restored"
+grep -q "^journal  restored $scene_edits edits at isovalue 500 (inside above)" "$out/serve8.log" ||
+  fail "the restored scene session was not built at the isovalue 500"
+cmp "$out/scenerestored.mha" "$out/scenecarved.mha" || fail "scenerestored.mha differs from scenecarved.mha (the volume at the kill)"
+[[ ! -e $journal ]] || fail "the scene's journal was not deleted when serve stopped"
+echo "PASS serve journal: the sessions' edits restored after kill -9, byte for byte ($edits and $ball_edits edits; $iso_edits on an IMAGE and $scene_edits on the scene across an isovalue change)"

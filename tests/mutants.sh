@@ -198,6 +198,18 @@ m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;'
 # The stream's rate is judged at every pose over its latest 16, not once: a stream that slows is refused.
 m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kRatePoses) return true;' '  if (c.stream_gap_count + 1 != kRatePoses) return true;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's edit journal through an `isovalue V` (issue 62): it goes on for the rebuilt session, and
+# a restore drops the undo history where the session was rebuilt (cli_serve_journal's last part).
+m serve-journal-isovalue    service/serve.cpp $'  if (journal_.journal)\n    carry = ' $'  if (false)\n    carry = ' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_journal'
+m journal-history-restart   io/journal_offer.cpp '++next) es.sculptor().drop_history();' '++next) {}' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_journal'
+# serve's one memory budget (issue 62): other clients' IMAGEs in flight counted, and an
+# unknown memory's default (cli_serve_budget; its fault seam keeps a wrongly taken image small).
+m serve-budget-in-flight    service/serve.cpp '  in_flight += held > own_held_bytes ? held - own_held_bytes : 0;' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_budget'
+m serve-budget-default      service/serve.cpp '  if (by_default) have = kUnknownMemoryBytes;' '  if (by_default) return "";' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

@@ -594,6 +594,43 @@ TEST(Record, EditSessionRoundTripsAndBadOnesAreNamed) {
   EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
 }
 
+// serve's edit journal: the isovalue its session ran at and where its undo history restarted
+// (an `isovalue V` rebuilt it) travel in the format 3 header: written, read back, checked.
+TEST(Record, AJournalsIsovalueAndHistoryRestartsRoundTripAndBadOnesAreNamed) {
+  std::mt19937_64 rng(9);
+  Recording r = live_recording(rng, 20, 3);
+  r.isovalue = isotouch::core::Isosurface{-500.25, isotouch::core::InsideIs::kBelow};
+  r.history_restarts = {2, 2, 7};
+  const std::string text = recording_text(r, "mem");
+  EXPECT_NE(text.find("\"isovalue\":{\"tau\":-500.25,\"inside\":\"below\"}"), std::string::npos) << text.substr(0, 300);
+  EXPECT_NE(text.find("\"history_restarts\":[2,2,7]"), std::string::npos) << text.substr(0, 300);
+  const Recording back = parse_recording(text, "mem");
+  ASSERT_TRUE(back.isovalue.has_value());
+  EXPECT_EQ(back.isovalue->tau, -500.25);
+  EXPECT_EQ(back.isovalue->inside, isotouch::core::InsideIs::kBelow);
+  EXPECT_EQ(back.history_restarts, (std::vector<std::size_t>{2, 2, 7}));
+  EXPECT_EQ(recording_text(back, "mem"), text);
+  const auto refused = [&](const std::string& from, const std::string& to, const std::string& says) {
+    std::string bad = text;
+    bad.replace(bad.find(from), from.size(), to);
+    try {
+      (void)parse_recording(bad, "bad.rec");
+      ADD_FAILURE() << "accepted " << to;
+    } catch (const RecordingError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  };
+  refused("\"inside\":\"below\"", "\"inside\":\"up\"",
+          "bad.rec: line 1 (header): field 'isovalue.inside': must be \"above\" or \"below\", got \"up\"");
+  refused("\"tau\":-500.25", "\"tau\":\"x\"", "field 'isovalue.tau'");
+  refused("[2,2,7]", "[2,1]", "field 'history_restarts[1]': 1 is less than the one before it (2): must be ascending");
+  refused("[2,2,7]", "[-1]", "field 'history_restarts[0]': must be an integer >= 0, got -1");
+  refused("\"format_version\":3", "\"format_version\":2", "field 'history_restarts': unknown field");
+  Recording two = random_recording(rng, 5, 0);
+  two.history_restarts = {1};
+  EXPECT_THROW((void)recording_text(two, "mem"), RecordingError);
+}
+
 // A FIFO named as a recording is refused before open() (which would wait for a writer).
 TEST(Record, AFifoIsRefusedBeforeItIsOpened) {
   const fs::path d = temp_dir("fifo");

@@ -434,6 +434,43 @@ TEST(ServiceMemory, AnnouncedBodiesAreNotAllocatedBeforeTheyArrive) {
   EXPECT_EQ(kind_under_address_cap(image_of(file, igtl::ImageMessage::ENDIAN_BIG), 64), int(Incoming::Kind::kImage));
 }
 
+// MessageLimits::hold_image (serve's one memory budget): an IMAGE's body is held from its
+// checked image header until its Incoming is gone, with the bytes the header announced; an
+// IMAGE cut short holds until the broken Incoming goes; a TRANSFORM holds nothing.
+TEST(ServiceMemory, AnImagesBodyIsHeldWhileItsIncomingLives) {
+  std::uint64_t held = 0;
+  std::vector<std::string> devices;
+  MessageLimits limits;
+  limits.hold_image = [&](const std::string& device, std::uint64_t bytes) {
+    held += bytes;
+    devices.push_back(device);
+    return std::shared_ptr<void>(nullptr, [&held, bytes](void*) { held -= bytes; });
+  };
+  const engine::Volume file = io::load_volume(kHead);
+  const std::vector<std::uint8_t> bytes = image_of(file, igtl::ImageMessage::ENDIAN_BIG);
+  const std::uint64_t body = 72 + std::uint64_t(64) * 64 * 93 * 2;  // the head's int16 voxels
+  {
+    MemorySource src(bytes);
+    const Incoming in = read_message(src, limits);
+    ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
+    EXPECT_EQ(held, body);
+    EXPECT_EQ(in.held_bytes, body);
+    ASSERT_EQ(devices.size(), 1u);
+    EXPECT_EQ(devices[0], in.device);
+  }
+  EXPECT_EQ(held, 0u) << "the Incoming is gone: nothing held";
+  {
+    MemorySource src(std::vector<std::uint8_t>(bytes.begin(), bytes.begin() + 58 + 72 + 1000));  // cut in its voxels
+    const Incoming in = read_message(src, limits);
+    EXPECT_EQ(in.kind, Incoming::Kind::kBroken);
+    EXPECT_EQ(held, body) << "held while the cut IMAGE arrived, until its Incoming goes";
+  }
+  EXPECT_EQ(held, 0u);
+  MemorySource src(transform_bytes("T", 1, 2, 3));
+  EXPECT_EQ(read_message(src, limits).kind, Incoming::Kind::kTransform);
+  EXPECT_EQ(devices.size(), 2u) << "a TRANSFORM is not held";
+}
+
 TEST(ServiceMemory, WrongSizesAreRefusedFromTheHeaderAndTheStreamGoesOn) {
   std::vector<std::uint8_t> all = announced("TRANSFORM", 10, std::vector<std::uint8_t>(10, 7));
   const auto next = transform_bytes("T", 4, 5, 6);

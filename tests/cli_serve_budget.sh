@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# `isotouch serve`'s memory budget for the IMAGEs of every client (issue 62), judged on the
+# STATUS answers igtl_session_client got:
+#   1. with --memory-mib 600 (a budget of 450 MiB), a peer (python, raw OpenIGTLink) sends the
+#      message and image headers of a 512 x 512 x 1600 uint8 IMAGE (400 MiB of voxels) and then
+#      its voxels a byte at a time: while it arrives, a 128^3 uint8 IMAGE (its session about
+#      80 MiB) from another client is refused with code 11 naming the need, the budget
+#      (450 MiB) and the 400 MiB in flight; once the peer has gone, the same IMAGE is taken;
+#   2. where the machine's memory is unknown (the fault seam ISOTOUCH_SERVE_TEST_FAULT
+#      "budget:NAME": io::memory_budget_bytes read as 0 for the image NAME) and no
+#      --memory-mib, a 512 x 512 x 400 uint8 IMAGE (about 3.6 GiB with its session) is refused
+#      against the default of 4096 MiB (a budget of 3072 MiB), named as such; a 128^3 one is
+#      taken after it. ("prepare:Huge" makes a wrongly taken Huge fail fast, not build 3.6 GiB.)
+# "PASS serve budget" is printed once, last.
+# Usage: cli_serve_budget.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
+set -u
+source "$(dirname "$0")/serve_port.sh"
+exe=$1; scene=$2; client=$3; out=$4; head=$5
+rm -rf "$out"; mkdir -p "$out"
+export XDG_STATE_HOME="$out/state"
+fail() { echo "FAIL serve budget: $*"; for f in "$out"/*.log; do echo "--- $f"; tail -n 20 "$f"; done; exit 1; }
+holder=""
+trap '[[ -n $holder ]] && kill $holder 2>/dev/null' EXIT
+
+"$exe" serve "$scene" --port 0 --stream Stylus --image-hz 0 --memory-mib 600 >"$out/serve1.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve1.log" $pid)
+[[ -n $port ]] || fail "serve never said it was listening"
+# The peer: an IGTL header announcing the IMAGE's body, its 72-byte image header, then one
+# voxel byte every 0.2 s (serve drops a client silent 2 s inside a message) for at most 60 s.
+python3 - "$port" >"$out/holder.log" 2>&1 <<'PY' &
+import socket, struct, sys, time
+dims = (512, 512, 1600)
+voxels = dims[0] * dims[1] * dims[2]
+body = 72 + voxels
+head = struct.pack(">H12s20sQQQ", 1, b"IMAGE", b"Held", 0, body, 0)
+image = struct.pack(">HBBBB3H12f3H3H", 1, 1, 3, 2, 1, *dims, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, *dims)
+assert len(head) == 58 and len(image) == 72
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])))
+s.sendall(head + image)
+print(f"held {body} bytes announced", flush=True)
+end = time.time() + 60
+while time.time() < end:
+    s.sendall(b"\0")
+    time.sleep(0.2)
+PY
+holder=$!
+for _ in $(seq 300); do
+  grep -q "image    'Held': 419430472 bytes arriving" "$out/serve1.log" && break
+  kill -0 $holder 2>/dev/null || break
+  sleep 0.1
+done
+grep -q "image    'Held': 419430472 bytes arriving" "$out/serve1.log" || fail "serve never counted the peer's IMAGE"
+timeout 60 "$client" 127.0.0.1 "$port" "$head" ramp Mid 128 128 128 >"$out/client1.log" 2>&1 ||
+  fail "the first client failed (exit $?)"
+kill $holder; wait $holder 2>/dev/null; holder=""
+for _ in $(seq 100); do  # the peer's IMAGE is dropped once its connection ends
+  grep -q "IMAGE 'Held': IMAGE body truncated" "$out/serve1.log" && break
+  sleep 0.1
+done
+grep -q "IMAGE 'Held': IMAGE body truncated" "$out/serve1.log" || fail "serve did not drop the peer's IMAGE"
+timeout 60 "$client" 127.0.0.1 "$port" "$head" ramp Mid 128 128 128 >"$out/client2.log" 2>&1 ||
+  fail "the second client failed (exit $?)"
+kill -TERM $pid; wait $pid
+refused=$(grep "STATUS" "$out/client1.log")
+[[ $refused == "STATUS code 11: igtl:Mid: not taken: 128 x 128 x 128 voxels need "* ]] ||
+  fail "the IMAGE beside the one arriving was not refused with code 11: $refused"
+[[ $refused == *"more than the budget of 450 MiB (3/4 of the 600 MiB"* ]] || fail "the STATUS does not name the budget: $refused"
+[[ $refused == *" 400 MiB in flight"* ]] || fail "the STATUS does not name the 400 MiB in flight: $refused"
+need=$(sed -n 's/.* voxels need \([0-9]*\) MiB,.*/\1/p' <<<"$refused")
+(( need > 450 && need < 600 )) || fail "the need of $need MiB is not the ~490 MiB of the image, the head and the 400 MiB"
+grep -q "STATUS code 1: volume taken: 128 x 128 x 128" "$out/client2.log" ||
+  fail "the same IMAGE was not taken once the peer had gone: $(grep STATUS "$out/client2.log")"
+echo "ok serve budget: a 128^3 IMAGE refused beside 400 MiB arriving ($need MiB needed, 450 MiB budget), taken after"
+
+ISOTOUCH_SERVE_TEST_FAULT="budget:Huge,prepare:Huge" \
+  "$exe" serve "$scene" --port 0 --stream Stylus --image-hz 0 >"$out/serve2.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve2.log" $pid)
+[[ -n $port ]] || fail "serve did not start again"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ramp Huge 512 512 400 ramp Mid 128 128 128 >"$out/client3.log" 2>&1 ||
+  fail "the third client failed (exit $?)"
+kill -TERM $pid; wait $pid
+huge=$(grep "STATUS.*Huge" "$out/client3.log")
+[[ $huge == "STATUS code 11: igtl:Huge: not taken: 512 x 512 x 400 voxels need "* ]] ||
+  fail "the large IMAGE was not refused with code 11 where the memory is unknown: $huge"
+[[ $huge == *"more than the budget of 3072 MiB (3/4 of the 4096 MiB of memory this server may use, a default: this machine's memory is unknown)"* ]] ||
+  fail "the STATUS does not name the default budget: $huge"
+grep -q "STATUS code 1: volume taken: 128 x 128 x 128" "$out/client3.log" ||
+  fail "serve did not take an IMAGE after the refusal: $(grep STATUS "$out/client3.log")"
+echo "PASS serve budget: every client's IMAGEs in flight counted against the one budget; an unknown memory takes the 4096 MiB default"

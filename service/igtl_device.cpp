@@ -168,7 +168,7 @@ void IgtlDevice::write_loop() {
     std::this_thread::sleep_for(std::chrono::nanoseconds(poll_ns));
     const Pose p = pose_.load();
     const std::int64_t t = now_ns();  // the clock before the cell (StallRule::look)
-    if (!reply.judge_now(t, rule_.stall_ns())) continue;  // this thread was frozen: look again in a poll
+    if (!reply.judge_now(t, 5 * poll_ns)) continue;  // this thread was frozen: look again in a poll
     const IgtlReply r = reply.step(p.sequence, p.received_ns, rule_.look(t), t);
     if (r.send) send_force(r.force_n);
   }

@@ -2,9 +2,10 @@
 
 namespace isotouch::service {
 
-bool IgtlReplyRule::judge_now(std::int64_t t, std::int64_t stall_ns) {
-  const bool away = last_poll_ns_ != 0 && t - last_poll_ns_ > stall_ns;
+bool IgtlReplyRule::judge_now(std::int64_t t, std::int64_t away_ns) {
+  const bool away = last_poll_ns_ != 0 && t - last_poll_ns_ > away_ns && !skipped_;
   last_poll_ns_ = t;
+  skipped_ = away;  // never two in a row: a writer that is always late still judges every other poll
   return !away;
 }
 
@@ -19,8 +20,9 @@ IgtlReply IgtlReplyRule::step(std::uint64_t pose_sequence, std::int64_t pose_rec
     zero_sent_ = true;
     return {send, {}};
   }
-  // Wait for the servo to answer the newest pose (at most 2 ms): the force answers it.
-  if (pose_sequence == answered_ || (look.on && look.last_write_ns < pose_received_ns && t - pose_received_ns < 2'000'000))
+  // Wait for the servo to answer the newest pose (at most 2 ms): the force answers it (a write
+  // made after the pose came but from the pose before is not its answer).
+  if (pose_sequence == answered_ || (look.on && look.answers < pose_sequence && t - pose_received_ns < 2'000'000))
     return {};
   answered_ = pose_sequence;
   zero_sent_ = look.force_n.x == 0 && look.force_n.y == 0 && look.force_n.z == 0;

@@ -20,8 +20,8 @@ struct IgtlReply {
 /// order:
 ///   - the servo just stalled (StallLook::stalled_now): a zero at once, not with the next pose;
 ///   - the stream is stale (its newest pose older than stale_ns): one zero, then nothing;
-///   - a pose not answered yet: the servo's newest force (zero while off), once the servo
-///     has answered it or the pose is 2 ms old.
+///   - a pose not answered yet: the servo's newest force (zero while off), once the servo's
+///     force answers it (StallLook::answers) or the pose is 2 ms old.
 class IgtlReplyRule {
  public:
   /// stale_ns: no pose for this long [ns] and the peer is sent one zero (3 stream periods).
@@ -31,15 +31,19 @@ class IgtlReplyRule {
   IgtlReply step(std::uint64_t pose_sequence, std::int64_t pose_received_ns, const servo::StallLook& look,
                  std::int64_t t);
   /// Before the stall rule's look at a poll at t [ns]: false when the writer itself was away
-  /// (its previous poll more than stall_ns ago: the machine froze this thread, and the servo's
-  /// with it as likely as not): this poll judges nothing, and the next, one poll later, judges
-  /// the servo that has had the CPU back. A servo that really stopped still gets its zero, one
-  /// poll later than the frozen writer could have sent it.
-  bool judge_now(std::int64_t t, std::int64_t stall_ns);
+  /// (its previous poll more than away_ns ago, e.g. 5 polls: the machine froze this thread,
+  /// and the servo's with it as likely as not) and the previous poll was judged: this poll
+  /// judges nothing, and the next, one poll later, judges the servo that has had the CPU
+  /// back. Never two polls in a row, so a servo that really stopped gets its zero at most one
+  /// poll later than without this rule, also from a writer that is always late. It makes a
+  /// frozen machine's false stall less likely, not impossible (a servo that gets the CPU back
+  /// more than a poll after the writer is still judged stalled).
+  bool judge_now(std::int64_t t, std::int64_t away_ns);
 
  private:
   std::int64_t stale_ns_;
   std::int64_t last_poll_ns_ = 0;  // 0: no poll yet
+  bool skipped_ = false;           // the previous poll judged nothing
   std::uint64_t answered_ = 0;
   bool zero_sent_ = true;  // nothing sent yet: the peer holds no force
 };

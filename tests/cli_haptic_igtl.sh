@@ -106,6 +106,12 @@ if abs(bound - 2 * (5.01 - 1.0) * rate) > 0.01 * bound: fail(f"bound {bound} N/m
 peer = open(f"{out}/fast.peer.log").read().splitlines()
 stopped = float(next(l.split()[1] for l in peer if l.startswith("stopped ")))
 forces = [(float(l.split()[1]), [float(v) for v in l.split()[2:5]]) for l in peer if l.startswith("force ")]
+# The run's log counts what it sent before it closed: every Force the peer got but the close's
+# zero (sent after the log), and at most the few that went into the socket as the peer closed.
+m = re.search(r"^link +(\d+) Force TRANSFORMs sent, (\d+) stalls", log, re.M)
+if not m: fail("no 'link N Force TRANSFORMs sent, S stalls' line in the run's log")
+if not -1 <= int(m.group(1)) - len(forces) <= 3:
+    fail(f"the run says it sent {m.group(1)} Forces, the peer received {len(forces)}")
 during = [f for t, f in forces if t < stopped]
 after = [(t, f) for t, f in forces if t >= stopped]
 norms = [sum(c * c for c in f) ** 0.5 for f in during]

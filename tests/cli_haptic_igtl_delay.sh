@@ -20,6 +20,9 @@
 #      stylus rests in contact, and the force applied did no more work on the device than
 #      its own damper took out, within 1 % of the wall's stored energy;
 #   3. the same as 2 through `isotouch serve SCENE --haptic igtl:` (serve's session and servo).
+# A controlled stylus that bounces off the skull in the judged window fails (the zero then is
+# the wall's answer, not a disturbance). Where disturbances leave fewer than 3 clean parts the
+# press is not judged: "SKIP haptic igtl delay", exit 77 (ctest: skipped; a loaded machine).
 # The scene's K is at Colgate-Schenkel's bound for 100 Hz (802 N/m), so the runs pass
 # --allow-unstable-stiffness (a measured 99.9 Hz would refuse it).
 # "PASS haptic igtl delay" is printed once, last.
@@ -45,7 +48,7 @@ scene=$out/held.json
 run() {
   local name=$1 pc=$2 port; port=$(free_port)
   # shellcheck disable=SC2086
-  "$peer" "$port" 100 10 12 "$pc" $start 1 0 0 40 >"$out/$name.peer.log" 2>&1 &
+  "$peer" "$port" 100 10 14 "$pc" $start 1 0 0 40 >"$out/$name.peer.log" 2>&1 &
   local peer_pid=$!
   for _ in $(seq 100); do grep -q listening "$out/$name.peer.log" && break; sleep 0.05; done
   timeout 60 "$exe" run "$scene" --live -q --allow-unstable-stiffness --haptic "igtl:127.0.0.1:$port" >"$out/$name.log" 2>&1
@@ -54,11 +57,12 @@ run() {
   kill $peer_pid 2>/dev/null; wait $peer_pid 2>/dev/null
 }
 # The same controlled press through `isotouch serve --haptic igtl:` (its own session and servo):
-# 10 s from listening, so it stops before the peer (12 s from the connection) closes.
+# 10 s from serving (its timer starts after the device's 1 s rate measurement and the
+# session's build), so it stops before the peer (14 s from the connection) closes.
 serve_run() {
   local port; port=$(free_port)
   # shellcheck disable=SC2086
-  "$peer" "$port" 100 10 12 1 $start 1 0 0 40 >"$out/served.peer.log" 2>&1 &
+  "$peer" "$port" 100 10 14 1 $start 1 0 0 40 >"$out/served.peer.log" 2>&1 &
   local peer_pid=$!
   for _ in $(seq 100); do grep -q listening "$out/served.peer.log" && break; sleep 0.05; done
   timeout 60 "$exe" serve "$scene" --port 0 --seconds 10 --allow-unstable-stiffness --haptic "igtl:127.0.0.1:$port" \
@@ -73,6 +77,9 @@ serve_run
 for name in plain controlled served; do
   [[ $(cat "$out/$name.rc") == 0 ]] || fail "isotouch run or serve ($name) exited $(cat "$out/$name.rc"), not 0"
 done
-python3 "$(dirname "$0")/igtl_hand_check.py" "$out/plain.peer.log" "$out/controlled.peer.log" "$out/served.peer.log" ||
-  fail "see above"
+python3 "$(dirname "$0")/igtl_hand_check.py" "$out/plain.peer.log" "$out/controlled.peer.log" "$out/served.peer.log"
+rc=$?
+# 77: not judged (the machine disturbed the link too often): ctest's SKIP_RETURN_CODE.
+[[ $rc == 77 ]] && { echo "SKIP haptic igtl delay: see above"; exit 77; }
+[[ $rc == 0 ]] || fail "see above"
 echo "PASS haptic igtl delay"

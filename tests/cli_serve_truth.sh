@@ -32,7 +32,9 @@
 #      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
 #      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N;
 #   9. a stream judged fine at 500 Hz that slows to 50 Hz before its tool reaches the ball is
-#      refused then (the rate is judged at every pose over the latest 16): only zeros.
+#      refused then (the rate is judged at every pose over the latest 16): only zeros;
+#  10. a stream in contact that slows for 0.2 s (10 poses at 50 Hz) and comes back to 500 Hz
+#      is not refused (16 judgements in a row over the bound are needed): its force is back.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -288,6 +290,29 @@ p = [l.split() for l in log.splitlines() if l.startswith("peak ")]
 if len(p) != 1: fail("no peak line")
 if float(p[0][2]) != 0.0: fail(f"the slowed stream's client got {p[0][2]} N, not only zeros")
 print(f"a slowed stream refused at {m.group(1)} Hz, its client got only zeros ({p[0][5]} Forces)")
+PY
+[[ $? == 0 ]] || exit 1
+
+# 10. A moment's slowdown is not a slow stream: 10 poses at 50 Hz in contact, then 500 Hz
+# again: not refused (16 judgements in a row over the bound are needed), the force goes on.
+"$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 >"$out/serve_blip.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve_blip.log" $serve_pid)
+[[ -n $port ]] || fail "the blip serve never said it was listening: $(cat "$out/serve_blip.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.3 move 0 0 13 0.6 hz 50 wait 0.2 \
+  hz 500 wait 0.5 force statuses 0.2 >"$out/blip.log" 2>&1 || fail "the blip client failed: $(cat "$out/blip.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import sys
+out = sys.argv[1]
+log = open(f"{out}/blip.log").read()
+def fail(msg):
+    print("FAIL serve truth:", msg); print(log); print(open(f"{out}/serve_blip.log").read()); sys.exit(1)
+if any(l.startswith("STATUS") and "servo.stiffness_n_per_m" in l for l in log.splitlines()):
+    fail("a 0.2 s slowdown (10 poses at 50 Hz) refused the stream")
+f = [l.split() for l in log.splitlines() if l.startswith("force ")]
+if len(f) != 1 or not float(f[0][4]) > 0.8: fail(f"after the slowdown, 2 mm inside the ball, the force is not back: {f}")
+print(f"a 0.2 s slowdown not refused; the force after it {float(f[0][4]):.2f} N")
 PY
 [[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -36,15 +36,21 @@ def half_peak_to_peak(s, w=100):
     return max(0.5 * (max(s[i:i + w]) - min(s[i:i + w])) for i in range(0, len(s) - w + 1, 10))
 
 
-def dropouts(window, resting_n):
-    """Times [s] where the force held from the link stepped from over half the resting force
-    to an exact zero: a zero isotouch sent while the stylus pressed (its stall rule's zero
-    when its servo lost the CPU for more than 2.5 periods, then its ramp)."""
-    out, step = [], max(0.5 * resting_n, 0.05)  # a stylus that does not rest (the plain run): 50 mN
-    for (_, _, _, h0), (t, _, _, h) in zip(window, window[1:]):
+def dropouts(window, resting_n, surface_mm, judged_from_s):
+    """(pressed, bounced): times [s] where the force held from the link stepped from over half
+    the resting force to an exact zero. Pressed: the stylus was inside the surface (deeper
+    than at contact) a round trip (10 ticks) before: a zero isotouch sent while it pressed
+    (its stale or stall rule's zero on a loaded machine, then its ramp). Bounced: it was not -
+    the stylus left the skull, and the zero is the wall's own answer (judged, not excused),
+    from judged_from_s on (before it the hand still moves the stylus in)."""
+    pressed, bounced = [], []
+    step = max(0.5 * resting_n, 0.05)  # a stylus that does not rest (the plain run): 50 mN
+    for i in range(11, len(window)):
+        (_, _, _, h0), (t, _, _, h) = window[i - 1], window[i]
         if h0 > step and h == 0.0:
-            out.append(t)
-    return out
+            (pressed if window[i - 10][1] > surface_mm else bounced).append(t)
+    bounced = [t for t in bounced if t >= judged_from_s]
+    return pressed, bounced
 
 
 def judge(path):
@@ -75,7 +81,8 @@ def judge(path):
     last = [tk for tk in window if tk[0] >= end - 0.5]
     mean_s = sum(tk[1] for tk in last) / len(last)
     mean_f = sum(tk[2] for tk in last) / len(last)
-    drops = dropouts([tk for tk in ticks if since - SETTLE_S <= tk[0] < end], mean_f)
+    surface = next(s for t, s, f, _ in ticks if f > 0.05)  # the stylus at contact [mm]
+    drops, bounces = dropouts([tk for tk in ticks if since - SETTLE_S <= tk[0] < end], mean_f, surface, since)
     events = sorted(drops + lags)
     parts, clean = [], []
     for i in range(round(WINDOW_S / PART_S)):
@@ -84,7 +91,8 @@ def judge(path):
         if not any(a - SETTLE_S <= t < b for t in events):
             clean.append(parts[-1])
     return dict(contact=contact, median=statistics.median(parts), largest=max(parts), parts=len(parts), clean=clean,
-                s=mean_s, f=mean_f, energy=energy, pc=pc, late=late, since=since, end=end, drops=drops, lags=lags)
+                s=mean_s, f=mean_f, energy=energy, pc=pc, late=late, since=since, end=end, drops=drops, lags=lags,
+                bounces=bounces)
 
 
 plain = judge(sys.argv[1])
@@ -96,8 +104,9 @@ for name, r in [("without controller", plain)] + controlled:
     print(f"{name}: contact at {r['contact']:.3f} s; from {r['since']:.3f} s to {r['end']:.3f} s the oscillation "
           f"(half peak-to-peak within 100 ms) of {r['parts']} parts of {1e3 * PART_S:.0f} ms: median "
           f"{r['median']:.4f} mm, largest {r['largest']:.4f} mm, largest of the {len(r['clean'])} parts clean of "
-          f"disturbances {clean}; dropouts (the link's force stepping to an exact zero) {len(r['drops'])} (at {drops} "
-          f"s); the peer loop's lags over 10 ms {len(r['lags'])}; resting "
+          f"disturbances {clean}; dropouts (the link's force stepping to an exact zero while the stylus pressed) "
+          f"{len(r['drops'])} (at {drops} s), bounces off the skull {len(r['bounces'])}; the peer loop's lags over "
+          f"10 ms {len(r['lags'])}; resting "
           f"{r['s']:.2f} mm in with {r['f']:.3f} N; device energy out {r['energy']:.3g} J; controller active "
           f"{r['pc'][0]} ticks ({r['pc'][1]:.3g} J); the peer's loop late (> 2 ms) on {r['late'][0]} ticks, "
           f"worst {1e3 * r['late'][1]:.1f} ms")
@@ -105,12 +114,17 @@ ok = True
 if plain["median"] <= 0.5:
     print(f"FAIL: without the controller the press settled (median {plain['median']:.4f} mm): the test shows nothing")
     ok = False
+skipped = False
 for name, r in controlled:
-    if len(r["clean"]) < 3:
-        why = ("the stylus bounces (a limit cycle: the link's force drops to zero as it leaves the skull)"
-               if r["median"] > 0.5 else "the link's dropouts or the peer's lags disturbed most of the window")
-        print(f"FAIL: {name} only {len(r['clean'])} of {r['parts']} parts are clean of disturbances (3 needed): {why}")
+    if r["bounces"]:
+        print(f"FAIL: {name} the stylus bounced off the skull {len(r['bounces'])} times (at "
+              f"{', '.join(f'{t:.3f}' for t in r['bounces'][:5])} s)")
         ok = False
+    elif len(r["clean"]) < 3:
+        # Not judged: the machine disturbed the link (isotouch's zeros, the peer's lags) too often.
+        print(f"SKIP: {name} only {len(r['clean'])} of {r['parts']} parts are clean of disturbances (3 needed): "
+              "the link's dropouts or the peer's lags disturbed most of the window (a loaded machine)")
+        skipped = True
     elif max(r["clean"]) >= 0.1:
         print(f"FAIL: {name} at the device end the stylus moves {max(r['clean']):.4f} mm (>= 0.1 mm) in a part clean "
               "of disturbances")
@@ -124,4 +138,4 @@ for name, r in controlled:
         print(f"FAIL: {name} the force did {r['energy']:.3g} J more work on the device than its damper took out "
               f"(allowed {tolerance:.3g} J)")
         ok = False
-sys.exit(0 if ok else 1)
+sys.exit(1 if not ok else 77 if skipped else 0)

@@ -162,6 +162,9 @@ m igtl-rule-stale-once      $IG '    const bool send = !zero_sent_;' '    const 
 m igtl-rule-stale-late      $IG '  if (t - pose_received_ns > stale_ns_) {' '  if (t - pose_received_ns > 2 * stale_ns_) {' \
   test_igtl_reply_rule 'IgtlReplyRule.*'
 m igtl-rule-frozen-writer   $IG '  return !away;' '  return true;' test_igtl_reply_rule 'IgtlReplyRule.*'
+m igtl-rule-never-twice     $IG ' && !skipped_;' ';' test_igtl_reply_rule 'IgtlReplyRule.*'
+m igtl-rule-answers         $IG 'look.answers < pose_sequence' 'look.last_write_ns < pose_received_ns' \
+  test_igtl_reply_rule 'IgtlReplyRule.*'
 m exit-zero-on-crash        $X $'extern "C" void on_fatal_signal(int sig) {\n  send_exit_zeros(2000);' \
                                'extern "C" void on_fatal_signal(int sig) {' test_igtl_device 'ServiceIgtlDevice.ACrashOr*'
 # A registered tracker's force goes back in the tracker's frame: R^T f, not the image's f.
@@ -197,6 +200,9 @@ m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;'
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # The stream's rate is judged at every pose over its latest 16, not once: a stream that slows is refused.
 m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kRatePoses) return true;' '  if (c.stream_gap_count + 1 != kRatePoses) return true;' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# ... over the bound at 16 judgements in a row: a moment's slowdown is not refused (part 10).
+m serve-stream-hysteresis   service/serve.cpp '  if (++c.stream_over < kRatePoses) return true;' '  ++c.stream_over;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # serve's edit journal through an `isovalue V` (issue 62): it goes on for the rebuilt session, and
 # a restore drops the undo history where the session was rebuilt (cli_serve_journal's last part).

@@ -28,6 +28,9 @@ struct Sim {
   /// poll; 0.2 ms after it the servo, whose deadline passed, writes (if it still runs) and the
   /// reader takes the newest of the poses the peer (another machine) sent meanwhile.
   std::int64_t freeze_from = -1, freeze_to = -1;
+  /// The writer polls every `poll` (0.2 ms, as IgtlDevice's) and judges a gap over 5 nominal
+  /// polls (1 ms) as its own freeze.
+  std::int64_t poll = kMs / 5, away = kMs;
   core::Vec3 f{0.5, -0.25, 1.0};
   std::int64_t last_pose_ns = 0;
   std::vector<Sent> run() {
@@ -43,7 +46,8 @@ struct Sim {
       const bool resumed = t == freeze_to + kMs / 5;
       if ((t % period == kMs || resumed) && t <= stream_until) ++seq, received = t, last_pose_ns = t;
       if ((t % kMs == 2 * kMs / 5 || resumed) && t < servo_until) rule.write(f, seq, t);
-      if (!reply.judge_now(t, rule.stall_ns())) continue;
+      if (t % poll != 0) continue;
+      if (!reply.judge_now(t, away)) continue;
       const IgtlReply r = reply.step(seq, received, rule.look(t), t);
       if (r.send) sent.push_back({t, r.force_n});
     }
@@ -127,6 +131,39 @@ TEST(IgtlReplyRule, AServoStoppedThroughAFreezeGetsItsZeroOnePollLater) {
     if (s.t > kMs && is_zero(s.f) && !zero) zero = &s;
   ASSERT_NE(zero, nullptr) << "no zero for a servo that stopped";
   EXPECT_EQ(zero->t, 20 * kMs + kMs / 5) << "the zero came at " << double(zero->t) * 1e-6 << " ms";
+}
+
+// A writer that is always late (a poll every 3 ms, over its 1 ms "away") still judges every
+// other poll: a servo that stops gets its zero within the stall time and two polls.
+TEST(IgtlReplyRule, AnAlwaysLateWriterStillSendsTheStallsZero) {
+  Sim sim;
+  sim.poll = 3 * kMs;
+  sim.servo_until = 10 * kMs;  // last write at 9.4 ms
+  sim.end = 40 * kMs;
+  const std::vector<Sent> sent = sim.run();
+  const std::int64_t last_write = 9 * kMs + 2 * kMs / 5;
+  const Sent* zero = nullptr;
+  for (const Sent& s : sent)
+    if (s.t > last_write && is_zero(s.f) && !zero) zero = &s;
+  ASSERT_NE(zero, nullptr) << "no zero: the late writer judged nothing";
+  EXPECT_LE(zero->t - last_write, 5 * kMs / 2 + 2 * sim.poll) << "the zero came at " << double(zero->t) * 1e-6 << " ms";
+}
+
+// A write made after a pose came but computed from the pose before is not its answer: the
+// writer waits for the write that answers it.
+TEST(IgtlReplyRule, AWriteFromThePoseBeforeIsNotTheAnswer) {
+  servo::StallRule rule;
+  rule.enable(true, 0.010, 0.05, 0);
+  rule.restart(0);
+  IgtlReplyRule reply(60 * kMs);
+  rule.write({1, 0, 0}, 1, kMs / 2);
+  (void)reply.step(1, 0, rule.look(kMs / 2), kMs / 2);       // pose 1 answered
+  rule.write({2, 0, 0}, 1, 2 * kMs + kMs / 5);                 // after pose 2 came, from pose 1
+  EXPECT_FALSE(reply.step(2, 2 * kMs, rule.look(2 * kMs + kMs / 5), 2 * kMs + kMs / 5).send);
+  rule.write({3, 0, 0}, 2, 3 * kMs);                           // pose 2's answer
+  const IgtlReply r = reply.step(2, 2 * kMs, rule.look(3 * kMs), 3 * kMs);
+  EXPECT_TRUE(r.send);
+  EXPECT_EQ(r.force_n.x, 3.0) << "pose 2 answered with a force from pose 1";
 }
 
 // A servo that has not answered the newest pose is waited for 2 ms at most; before any write

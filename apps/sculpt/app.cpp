@@ -1067,7 +1067,7 @@ bool Sculpt::refine_still(const FrameSize& f, bool shot, bool edited) {
   still.band(*caster, view, style, f.fb, band_px);
   render_ms.push_back(ms_since(r0));
   img = engine::RaycastImage{};  // the caster's buffers no longer hold that frame (steer_hand reads their depth)
-  if (!still.active()) {
+  if (still.last_band()) {
     ++refinements_done;
     check_reuse = true;
   }
@@ -1544,6 +1544,8 @@ void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& f
     frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
     (band_frame ? frame_band_ms : img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
   }
+  // A band's frame, all of it, sizes the next band (no time for a first frame: still advanced).
+  if (band_frame) still.frame_drawn(frame > 0 ? frame_ms.back() : std::numeric_limits<double>::quiet_NaN());
   last_frame = end;
   ++frame;
   if (frame == 2) refresh_panel(obs, 1);  // the first frame time, until the first refresh

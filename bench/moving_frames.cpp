@@ -131,10 +131,18 @@ void print_moving_frames(std::ostream& out, const MovingFramesResult& r, const M
   log << "verdict: moving frames median " << med << " ms: target <= " << o.budget_ms << " ms " << verdict(med <= o.budget_ms) << "\n";
   log << "verdict: moving frames p95 " << p95 << " ms: target <= " << 1.5 * o.budget_ms << " ms " << verdict(p95 <= 1.5 * o.budget_ms) << "\n";
   log << "verdict: view stopped to full resolution " << r.still_to_full_ms << " ms (" << r.still_frames
-      << (r.still_frames == 1 ? " frame" : " frames") << " in bands of rows, the largest " << r.still.max_ms()
-      << " ms): target <= 250 ms, each <= " << o.budget_ms << " ms: "
-      << verdict(r.still_to_full_ms <= 250 && r.still.max_ms() <= o.budget_ms) << "; the full frame bit for bit: "
+      << (r.still_frames == 1 ? " frame" : " frames") << " in bands of rows): target <= 250 ms: "
+      << verdict(r.still_to_full_ms <= 250) << "; the full frame bit for bit: "
       << (r.still_frames == 0 ? "yes (drawn whole while moving)" : r.still.equal ? "yes" : "NO") << "\n";
+  // Each band is a frame: the largest against the budget (the refinement's promise).
+  if (r.still_frames > 0) {
+    const auto big = std::max_element(r.still.ms.begin(), r.still.ms.end()) - r.still.ms.begin();
+    log << "verdict: refinement bands: the largest " << r.still.ms[std::size_t(big)] << " ms (band " << big + 1 << " of "
+        << r.still_frames << ", " << r.still.rows[std::size_t(big)] << " of " << H << " rows): each <= " << o.budget_ms
+        << " ms (the frame budget): " << verdict(r.still.max_ms() <= o.budget_ms) << "\n";
+  } else {
+    log << "verdict: refinement bands: none (drawn whole while moving): each <= " << o.budget_ms << " ms (the frame budget): met\n";
+  }
   if (!r.still.ms.empty()) {
     log << "moving   the bands (rows: ms):";
     for (std::size_t i = 0; i < r.still.ms.size(); ++i) log << " " << r.still.rows[i] << ": " << r.still.ms[i];

@@ -58,8 +58,9 @@ MovingFramesResult run_moving_frames(engine::RayCaster& caster, const core::Grid
                                      double max_scale = 1.0);
 
 /// The figures and the verdicts: moving frames median <= budget and p95 <= 1.5 budget, full
-/// resolution within 250 ms of the view stopping with each refining frame within the budget
-/// (and whether it ended equal to a full frame), PSNR >= 30 dB and SSIM >= 0.95 (worst compared frame).
+/// resolution within 250 ms of the view stopping (and whether it ended equal to a full frame),
+/// the largest refining band (a frame) within the budget, PSNR >= 30 dB and SSIM >= 0.95
+/// (worst compared frame).
 void print_moving_frames(std::ostream& log, const MovingFramesResult& r, const MovingFramesOptions& o, int W, int H);
 
 }  // namespace isotouch::bench

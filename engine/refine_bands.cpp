@@ -7,47 +7,97 @@
 
 namespace isotouch::engine {
 
+namespace {
+constexpr double kHitPerMiss = 5;  // a hit row's cost over a miss row's until measured
+}
+
 RefineBands::RefineBands(const std::vector<float>& low_depth, int lw, int lh, int H, const FrameBudget& budget)
-    : H_(H),
-      least_(std::max(1, H / 16)),
-      budget_ms_(budget.options().budget_ms),
-      target_(budget.options().target),
-      fixed_(budget.fixed_cost_ms()) {
+    : H_(H), budget_ms_(budget.options().budget_ms), target_(budget.options().target), fixed_(budget.fixed_cost_ms()) {
   if (H <= 0 || lw <= 0 || lh <= 0 || low_depth.size() != std::size_t(lw) * std::size_t(lh))
     throw std::invalid_argument("refine bands: a " + std::to_string(H) + "-row picture from a " + std::to_string(lw) +
                                 " x " + std::to_string(lh) + " frame with " + std::to_string(low_depth.size()) +
                                 " depths");
-  weight_.assign(std::size_t(H), 0.0);
+  hit_.assign(std::size_t(H), 0.0);
   for (int y = 0; y < H; ++y) {
     const int ly = std::min(lh - 1, int(std::int64_t(y) * lh / H));
-    int hits = 0;
-    for (int x = 0; x < lw; ++x) hits += low_depth[std::size_t(ly) * std::size_t(lw) + std::size_t(x)] >= 0;
-    weight_[std::size_t(y)] = 0.2 + 0.8 * double(hits) / lw;
+    int n = 0;
+    for (int x = 0; x < lw; ++x) n += low_depth[std::size_t(ly) * std::size_t(lw) + std::size_t(x)] >= 0;
+    hit_[std::size_t(y)] = double(n) / lw;
   }
 }
 
+double RefineBands::band_cost(double hits, double misses) const { return fixed_ + a_ * hits + b_ * misses + over_; }
+
 int RefineBands::next_rows() const {
   if (done()) return 0;
-  const double room = target_ * budget_ms_ - fixed_;
+  // The first band is one row: its cost measured, not extrapolated. Then slow start: at most
+  // twice the largest drawn band's hit rows and miss rows (at least one row of each).
+  if (drawn_.empty()) return 1;
+  const double room = target_ * budget_ms_;
+  const double max_hits = std::max(1.0, 2 * most_hits_), max_misses = std::max(1.0, 2 * most_misses_);
   int n = 1;
-  double w = weight_[std::size_t(next_)];
-  while (next_ + n < H_ && (n < least_ || (learned_ && (w + weight_[std::size_t(next_ + n)]) * rate_ <= room)))
-    w += weight_[std::size_t(next_ + n++)];
+  double h = hit_[std::size_t(next_)];
+  while (next_ + n < H_) {
+    const double h2 = h + hit_[std::size_t(next_ + n)], m2 = (n + 1) - h2;
+    if (band_cost(h2, m2) > room || h2 > max_hits || m2 > max_misses) break;
+    h = h2;
+    ++n;
+  }
   return n;
 }
 
-/// As FrameBudget learns: a rise at once, a fall at half weight; a band no dearer than the
-/// fixed part says nothing of the rate.
+double RefineBands::next_ms() const {
+  const int n = next_rows();
+  double h = 0;
+  for (int y = next_; y < next_ + n; ++y) h += hit_[std::size_t(y)];
+  return n == 0 ? 0.0 : band_cost(h, n - h);
+}
+
+/// Non-negative least squares of (ms - fixed) = a hits + b misses over the bands drawn. A
+/// coefficient the bands cannot tell (no hits drawn, or no misses) is 5:1 of the other, as is
+/// a fit with a negative coefficient (then one coefficient fitted).
+void RefineBands::fit() {
+  double shh = 0, shm = 0, smm = 0, shy = 0, smy = 0;
+  for (const Drawn& d : drawn_) {
+    const double y = std::max(0.0, d.ms - fixed_);
+    shh += d.hits * d.hits, shm += d.hits * d.misses, smm += d.misses * d.misses;
+    shy += d.hits * y, smy += d.misses * y;
+  }
+  double a, b;
+  const double det = shh * smm - shm * shm;
+  if (shh <= 0) {  // misses only
+    b = smy / smm;
+    a = kHitPerMiss * b;
+  } else if (smm <= 0) {  // hits only
+    a = shy / shh;
+    b = a / kHitPerMiss;
+  } else {
+    a = det > 1e-9 * shh * smm ? (shy * smm - smy * shm) / det : -1;
+    b = det > 1e-9 * shh * smm ? (smy * shh - shy * shm) / det : -1;
+    if (!(a >= 0 && b >= 0)) {
+      const double sw = kHitPerMiss * kHitPerMiss * shh + 2 * kHitPerMiss * shm + smm;
+      b = (kHitPerMiss * shy + smy) / sw;
+      a = kHitPerMiss * b;
+    }
+  }
+  a_ = std::isfinite(a) ? std::max(0.0, a) : a_;
+  b_ = std::isfinite(b) ? std::max(0.0, b) : b_;
+}
+
 void RefineBands::drawn(double ms) {
   const int n = next_rows();
   if (n == 0) return;
-  double w = 0;
-  for (int y = next_; y < next_ + n; ++y) w += weight_[std::size_t(y)];
+  double h = 0;
+  for (int y = next_; y < next_ + n; ++y) h += hit_[std::size_t(y)];
   next_ += n;
   if (!std::isfinite(ms) || ms < 0) return;
+  // What the band cost over the prediction it was sized on (the first: none) stays as room.
+  if (!drawn_.empty()) over_ = std::max(over_, ms - (fixed_ + a_ * h + b_ * (n - h)));
   fixed_ = std::min(fixed_, ms);
-  const double now = (ms - fixed_) / w;
-  if (now > 0) rate_ = !learned_ || now > rate_ ? now : rate_ + 0.5 * (now - rate_), learned_ = true;
+  drawn_.push_back({h, n - h, ms});
+  most_hits_ = std::max(most_hits_, h);
+  most_misses_ = std::max(most_misses_, n - h);
+  fit();
 }
 
 }  // namespace isotouch::engine

@@ -3,13 +3,20 @@
 // After moving frames drawn at a lower resolution (FrameBudget), a view that stops is drawn
 // whole at full resolution over the next frames, a band of rows each (RayCaster::render_rows),
 // each band sized so that its frame keeps the budget: VTK's and 3D Slicer's "still update
-// rate", spread over frames instead of one long frame. The bands go from row 0 down; a band
-// costs a fixed part (submission, the clears) and a part per unit of row weight, where a row
-// weighs by its hits in the last moving frame (a hit is marched to the surface and shaded:
-// 1; a miss 0.2). Until a band has measured the rate, bands hold `least` rows (H / 16: at most
-// 16 frames whatever the estimates; the whole frames' rate extrapolated from the moving
-// frames' scales can be several times low); then as many rows (at least `least`) as the
-// budget's target share holds. No wall clock inside: the caller measures each band.
+// rate", spread over frames instead of one long frame. The bands go from row 0 down.
+//
+// A band costs a fixed part (submission, the clears; the budget's fixed part, then at most
+// the cheapest band's) and a part per full-resolution row, a row's cost split by the last
+// moving frame's hits along it: a full row of hits costs a (marched to the surface and
+// shaded), a full row of misses b. a and b are measured, not extrapolated from the moving
+// frames (their estimate of a whole frame was about 4 times low on the head at 1920x1440):
+// fitted (least squares, non-negative) to the bands drawn so far, each band's cost less the
+// fixed part; while the bands have held no hits (no misses), a is 5 b (b is a / 5). The first
+// band is one row; then a band holds the most rows whose predicted cost, plus the most a drawn
+// band cost over the prediction it was sized on (a load spike is kept as room), stays within the budget's target
+// share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
+// band drawn, at least one of each. No floor on rows: a full frame of many budgets takes as
+// many frames. No wall clock inside: the caller measures each band.
 #pragma once
 #include <vector>
 
@@ -21,7 +28,7 @@ class RefineBands {
  public:
   /// @param low_depth the last moving frame's depth, lw x lh row-major (< 0: no hit)
   /// @param H the full picture's rows (> 0)
-  /// @param budget its fixed part starts the band's (then at most the cheapest band's)
+  /// @param budget its budget and target share; its fixed part starts the band's
   /// @throws std::invalid_argument if H <= 0, lw or lh <= 0 or low_depth.size() != lw * lh.
   RefineBands(const std::vector<float>& low_depth, int lw, int lh, int H, const FrameBudget& budget);
 
@@ -31,16 +38,30 @@ class RefineBands {
   int next_row() const { return next_; }
   /// The rows the next band holds (>= 1; 0 when done()).
   int next_rows() const;
+  /// The predicted cost of the next band [ms] (fixed part included; 0 when done()).
+  double next_ms() const;
   /// The next band (next_row(), next_rows()) was drawn in `ms` [ms] (including what the
   /// caller does with its rows); moves on to the rows after it.
   void drawn(double ms);
 
+  /// The fitted cost of a full row of hits and of misses [ms].
+  double hit_row_ms() const { return a_; }
+  double miss_row_ms() const { return b_; }
+
  private:
-  std::vector<double> weight_;  // each full-resolution row's cost share
-  int H_ = 0, least_ = 1, next_ = 0;
+  struct Drawn {
+    double hits, misses, ms;
+  };
+  void fit();
+  double band_cost(double hits, double misses) const;  // predicted, fixed part and margin included
+  std::vector<double> hit_;  // each full-resolution row's share of hits (0..1)
+  std::vector<Drawn> drawn_;
+  int H_ = 0, next_ = 0;
   double budget_ms_ = 0, target_ = 0.9;
-  double fixed_ = 0, rate_ = 0;  // [ms] per band; [ms] per unit of row weight
-  bool learned_ = false;
+  double fixed_ = 0;                    // [ms] per band
+  double a_ = 0, b_ = 0;                // [ms] per full row of hits, of misses
+  double over_ = 0;                     // the most a drawn band cost over its prediction [ms]
+  double most_hits_ = 0, most_misses_ = 0;  // the largest drawn band's hit and miss rows
 };
 
 }  // namespace isotouch::engine

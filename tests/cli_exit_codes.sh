@@ -41,7 +41,7 @@ if [ -n "$sculpt" ]; then
       "$sculpt" "$out/v.mhd" --iso "$v"
     grep -qi "json" "$out/sculpt_iso_$v.log" && fail "--iso $v: JSON parser text reached the user"
   done
-  expect sculpt_size 2 "--size: Value 8192 not in range 64 to 4096" "$sculpt" "$out/v.mhd" --iso 1 --size 8192
+  expect sculpt_size 2 "--size: must be W \(height 3/4 of it\) or WxH .*got '8192': width 8192 outside 64 to 4096" "$sculpt" "$out/v.mhd" --iso 1 --size 8192
   expect sculpt_unknown_option 2 "--bogus" "$sculpt" "$out/v.mhd" --bogus
 fi
 echo "PASS cli exit codes"

@@ -4,7 +4,9 @@
 # bands' picture (docs/user-guide.md, frame budget). Under Xvfb, wall clock (the budget needs
 # it), a budget of 2 ms so that the orbit's frames are drawn at the smallest scale: the log
 # must show one refinement started and finished, at least two band frames, and the frame
-# after it reusing the picture; with --frame-budget-ms 0 none.
+# after it reusing the picture; with --frame-budget-ms 0 none. The script quits 260 frames
+# after the orbit: a band holds at least one row, so the 240 rows are refined by then
+# whatever the bands cost.
 # Usage: sculpt_refine.sh SCULPT_BIN SOURCE_DIR [OUT_DIR]. Exit 77 (skipped) without xvfb-run.
 set -euo pipefail
 bin=$1 src=$2

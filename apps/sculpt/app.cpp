@@ -57,6 +57,7 @@
 #include "isotouch/io/volume_io.h"
 #include "isotouch/apps/sculpt/window.h"
 #include "isotouch/apps/sculpt/scan_input.h"
+#include "isotouch/apps/sculpt/background_load.h"
 #include "isotouch/apps/sculpt/iso_panel.h"
 #include "isotouch/apps/sculpt/slice_views.h"
 #include "isotouch/apps/sculpt/still_view.h"
@@ -76,64 +77,6 @@ using core::Vec3;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-std::atomic<int> g_loads_running{0};
-
-/// A dropped file loading on a detached thread of its own: a session that ends while it runs
-/// (the window closed, the isovalue changed) abandons it instead of waiting for it (a reader
-/// may block as long as its file system does); its result is then dropped when it comes.
-class BackgroundLoad {
- public:
-  explicit BackgroundLoad(std::function<std::shared_ptr<Carried>()> work) : st_(std::make_shared<State>()) {
-    g_loads_running.fetch_add(1);
-    std::thread([st = st_, work = std::move(work)] {
-      std::shared_ptr<Carried> value;
-      std::exception_ptr error;
-      try {
-        value = work();
-      } catch (...) {
-        error = std::current_exception();
-      }
-      {
-        std::lock_guard<std::mutex> lock(st->mu);
-        st->value = std::move(value);
-        st->error = error;
-        st->done = true;
-      }
-      st->cv.notify_all();
-      g_loads_running.fetch_sub(1);
-    }).detach();
-  }
-  bool ready() const {
-    std::lock_guard<std::mutex> lock(st_->mu);
-    return st_->done;
-  }
-  void wait() const {
-    std::unique_lock<std::mutex> lock(st_->mu);
-    st_->cv.wait(lock, [&] { return st_->done; });
-  }
-  /// Waits at most `seconds`; true if it is done.
-  bool wait_for(double seconds) const {
-    std::unique_lock<std::mutex> lock(st_->mu);
-    return st_->cv.wait_for(lock, std::chrono::duration<double>(seconds), [&] { return st_->done; });
-  }
-  /// The loaded volume (after ready()); rethrows what the load threw.
-  std::shared_ptr<Carried> get() const {
-    std::lock_guard<std::mutex> lock(st_->mu);
-    if (st_->error) std::rethrow_exception(st_->error);
-    return st_->value;
-  }
-
- private:
-  struct State {
-    mutable std::mutex mu;
-    std::condition_variable cv;
-    bool done = false;
-    std::shared_ptr<Carried> value;
-    std::exception_ptr error;
-  };
-  std::shared_ptr<State> st_;
-};
 
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
@@ -1124,7 +1067,7 @@ bool Sculpt::refine_still(const FrameSize& f, bool shot, bool edited) {
   still.band(*caster, view, style, f.fb, band_px);
   render_ms.push_back(ms_since(r0));
   img = engine::RaycastImage{};  // the caster's buffers no longer hold that frame (steer_hand reads their depth)
-  if (!still.active()) {
+  if (still.last_band()) {
     ++refinements_done;
     check_reuse = true;
   }
@@ -1601,6 +1544,8 @@ void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& f
     frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
     (band_frame ? frame_band_ms : img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
   }
+  // A band's frame, all of it, sizes the next band (no time for a first frame: still advanced).
+  if (band_frame) still.frame_drawn(frame > 0 ? frame_ms.back() : std::numeric_limits<double>::quiet_NaN());
   last_frame = end;
   ++frame;
   if (frame == 2) refresh_panel(obs, 1);  // the first frame time, until the first refresh
@@ -2126,8 +2071,6 @@ void Sculpt::print_verdicts(const session::LiveStats& sculpted, const ServoAlone
 }
 
 }  // namespace
-
-int loads_running() { return g_loads_running.load(); }
 
 int run_sculpt(const Options& o, std::ostream& log, std::optional<Options>* reopen) {
   Sculpt s(o, log, reopen);

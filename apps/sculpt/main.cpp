@@ -1,11 +1,13 @@
 // isotouch-sculpt - a window where a person sculpts a volume and feels it (apps/sculpt/app.h).
 #include <CLI/CLI.hpp>
 
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <optional>
+#include <string>
 
 #include "isotouch/apps/sculpt/app.h"
 #include "isotouch/apps/cli_checks.h"
@@ -26,6 +28,30 @@ void check_record_input(const Options& o) {
                                              ": `isotouch run " + o.input + " --out " + dir + "` writes " + dir +
                                              "/scene.json for it; then `isotouch-sculpt " + dir +
                                              "/scene.json --record " + o.record + "`");
+}
+
+/// --size: W (a 4:3 window, height 3/4 of W) or WxH. Width 64 to 4096, height 48 (3/4 of 64)
+/// to 4096 pixels, and at most
+/// 4096 x 3072 pixels in all: 4-byte pixels within the 128 MiB storage binding every Vulkan
+/// device offers (a larger framebuffer, a resized window, is drawn at a lower scale to fit).
+void parse_size(const std::string& text, Options& o) {
+  const auto bad = [&text](const std::string& why) {
+    return CLI::ValidationError("--size", "must be W (height 3/4 of it) or WxH in pixels, width 64 to 4096, height 48 to "
+                                          "4096, at most 4096x3072 pixels in all, got '" + text + "'" + (why.empty() ? "" : ": " + why));
+  };
+  const auto number = [&](const std::string& s) {
+    if (s.empty() || s.size() > 5 || s.find_first_not_of("0123456789") != std::string::npos) throw bad("");
+    return std::stoi(s);
+  };
+  const std::size_t x = text.find_first_of("xX");
+  const int w = number(text.substr(0, x));
+  const int h = x == std::string::npos ? w * 3 / 4 : number(text.substr(x + 1));
+  if (w < 64 || w > 4096) throw bad("width " + std::to_string(w) + " outside 64 to 4096");
+  if (h < 48 || h > 4096) throw bad("height " + std::to_string(h) + " outside 48 to 4096");
+  if (std::int64_t(w) * h > std::int64_t(4096) * 3072)
+    throw bad(std::to_string(std::int64_t(w) * h) + " pixels, more than 4096x3072 = 12582912");
+  o.width = w;
+  o.height = h;
 }
 
 }  // namespace
@@ -80,9 +106,10 @@ int main(int argc, char** argv) {
                  "(3D Slicer; default INPUT-sculpted.vdb in the working folder)");
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
   isotouch::app::add_mesh_units_option(cli, o.mesh_units);
-  // 4096 x 3072 pixels of 4 bytes fit the 128 MiB storage binding every Vulkan device
-  // offers (a larger framebuffer, a resized window, is drawn at a lower scale to fit).
-  cli.add_option("--size", o.width, "window width in pixels (height = 3/4 of it)")->check(CLI::Range(64, 4096));
+  std::string size;
+  cli.add_option("--size", size,
+                 "the window's size in pixels: W (height 3/4 of it; default 1024) or WxH (e.g. 1920x1080); width 64 to "
+                 "4096, height 48 to 4096, at most 4096x3072 pixels in all");
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
       ->check(CLI::Range(0.1, 1.0));
   cli.add_option("--frame-budget-ms", o.frame_budget_ms,
@@ -142,13 +169,15 @@ int main(int argc, char** argv) {
   cli.add_flag("--allow-unstable-stiffness", o.allow_unstable_stiffness,
                "run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured rate), "
                "as the scene's servo.allow_unstable_stiffness");
-  cli.parse_complete_callback([&o] { isotouch::sculpt::check_record_input(o); });
+  cli.parse_complete_callback([&o, &size] {
+    if (!size.empty()) isotouch::sculpt::parse_size(size, o);
+    isotouch::sculpt::check_record_input(o);
+  });
   try {
     cli.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return isotouch::app::parse_exit(cli, e);
   }
-  o.height = o.width * 3 / 4;
   int rc = isotouch::exit_code::kError;
   // SIGINT / SIGTERM / SIGHUP / SIGQUIT end the frame loop, so that the session stops, the recording is
   // completed and the X server gets its CPUs back (exit 128 + the signal).

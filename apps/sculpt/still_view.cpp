@@ -1,7 +1,6 @@
 #include "isotouch/apps/sculpt/still_view.h"
 
 #include <algorithm>
-#include <chrono>
 
 #include "isotouch/engine/upscale.h"
 
@@ -24,7 +23,6 @@ bool StillView::start(const engine::RaycastImage& low, int rw, int rh, const eng
 int StillView::band(engine::RayCaster& caster, const engine::CameraView& view, const engine::RaycastStyle& style,
                     const std::array<int, 2>& fb, std::vector<std::uint32_t>& px) {
   if (!bands_) return 0;
-  const auto t0 = std::chrono::steady_clock::now();
   const int y = bands_->next_row(), n = bands_->next_rows();
   caster.set_in_place(false);
   const engine::RaycastImage rows = caster.render_rows(view, style, rw_, rh_, y, y + n);
@@ -35,9 +33,13 @@ int StillView::band(engine::RayCaster& caster, const engine::CameraView& view, c
     px.resize(std::size_t(fb[0]) * std::size_t(fb[1]));
     engine::upscale_bilinear(still_.data(), rw_, rh_, px.data(), fb[0], fb[1]);
   }
-  bands_->drawn(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-  if (bands_->done()) bands_.reset();
   return n;
+}
+
+void StillView::frame_drawn(double ms) {
+  if (!bands_) return;
+  bands_->drawn(ms);
+  if (bands_->done()) bands_.reset();
 }
 
 }  // namespace isotouch::sculpt

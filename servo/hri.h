@@ -239,10 +239,17 @@ struct ToolPlane {
 ///   is also checked along the new plane's normal: a HIP at or past the middle of the chord
 ///   that way is no nearer the new face than the opposite one (the plane iteration carrying
 ///   the proxy round; at n = 1 it runs every tick and turned entry_n_ with it before the HIP
-///   reached the middle along it). While held, the held plane's point is lifted to the face
+///   reached the middle along it). On a thin feature only (its far face within the HIP's
+///   depth plus two of the smallest voxels behind the HIP along -entry_n_), the side is also held
+///   when the proxy went farther across entry_n_ than the HIP since entry_n_ was set (the
+///   iteration carrying it round a crest); convex bulk material does that too, by
+///   R / (R - depth), and held there the plane kept its normal round a sphere. While held, the held plane's point is lifted to the face
 ///   found from the HIP along its normal where that face lies in front of it (face_along):
-///   a held plane tilted from the face slid the proxy down it on a stroke along the feature;
-///   it is never lowered (at a crest the face below it is the crest's rounded corner). Not on
+///   a held plane tilted from the face slid the proxy down it on a stroke along the feature.
+///   It is lowered to that face only with the HIP short of the middle along the held normal
+///   and the material under the face as thick along it (within half a voxel) as under the
+///   point where the side was taken: a wall falling away under the stroke, not a crest's
+///   rounded corner (never lowered, the head CT's hold ended releasing 2.4 N in one tick). Not on
 ///   edit ticks. In bulk material (no far side within the depth) nothing changes.
 /// - Release fade, when recovery_time_s > 0: a tick that ends contact while the force sent
 ///   the tick before exceeds 1 % of the limit (an update dropped the plane under a HIP still
@@ -642,6 +649,8 @@ class HriRenderer final : public Renderer {
   Vec3 release_from_;                ///< robust: force sent on the last contact tick [N]
   Vec3 entry_n_;                     ///< robust: the normal the contact entered with (hold_entry_side)
   bool entry_held_ = false;          ///< robust: the HIP was found past a thin feature's middle (hold_entry_side)
+  Vec3 entry_hip_;                   ///< robust: the HIP when entry_n_ was set [m] (hold_entry_side)
+  Vec3 entry_vhip_;                  ///< robust: the VHIP when entry_n_ was set [m] (hold_entry_side)
   // Spherical tool:
  public:
   static constexpr double kEntryConeDeg = 20.0;  ///< thin features: the turn from entry_n_ checked [deg]

@@ -355,6 +355,8 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
 
   if (!holding || edited) {  // a new contact (or new material): its side
     entry_n_ = plane_.n;
+    entry_hip_ = hip;
+    entry_vhip_ = vhip_;
     entry_held_ = false;
   }
   else if (out.plane_update) hold_entry_side(field, hip, have_f_hip && excess(f_hip) > 0.0, held, held_grad_norm, voxel, out);
@@ -460,7 +462,10 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
                                   double held_grad_norm, double voxel, TickOut& out) {
   static const double kCos = std::cos(kEntryConeDeg * M_PI / 180.0);
   if (!hip_inside) entry_held_ = false;  // the HIP left the material: the side is free again
-  if (!plane_.valid || !hip_inside || dot(plane_.n, entry_n_) >= kCos) return;
+  // Once held, every update keeps the held plane while the HIP stays inside: a plane within
+  // the cone of entry_n_ is still up to 20 deg from it, and the proxy sliding on one turned
+  // toward the far side crossed the middle (on a noisy crest each update turned it that way).
+  if (!plane_.valid || !hip_inside || (!entry_held_ && dot(plane_.n, entry_n_) >= kCos)) return;
   // The plane turned beyond the cone: over a thin feature's edge with the HIP past its
   // middle (the wrap-around), or sliding over a curved surface (the side follows). Once
   // past the middle the side is held until the HIP leaves the material: near the middle
@@ -475,16 +480,60 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // n = 1 the iteration runs ten times as often as at n = 10 and a 2-voxel cylinder wrapped
   // at 0.6 of the limit at n = 1, none at n = 10.
   const double new_depth = dot(plane_.n, plane_.p - hip);
-  if (depth > 0.0 && (entry_held_ || past_middle(field, hip, entry_n_, depth, voxel) ||
+  // A turn the hand did not make: since entry_n_ was set the HIP moved (a quarter voxel) and
+  // the proxy went farther across entry_n_ than the HIP did, by more than a quarter voxel.
+  // Sliding over a surface (curved or pressed obliquely) carries the proxy as far across as
+  // the HIP; here the plane iteration carries it on round a rounded crest (each update
+  // projects the HIP onto a plane already tilted toward the crest, which tilts the next one
+  // more; entry_n_ followed in 20-deg steps and a 4-voxel ridge wrapped at n = 1-2). A
+  // surface that changes under a still HIP is followed.
+  auto across = [&](const Vec3& d) { return norm(d - entry_n_ * dot(entry_n_, d)); };
+  // Only on a thin feature: its far face within the HIP's depth and two voxels (the smallest
+  // spacing) along -entry_n_. Sliding pressed over convex bulk material carries the proxy
+  // farther across than the HIP too, by R / (R - depth): on the sphere of scenes/sphere.json
+  // (1.1 mm deep on a 20 mm radius) 7.18 against 6.84 mm by a 20 deg turn; held there, the
+  // plane kept the 20 deg normal round the sphere's side and turned 60 deg at the lift. On the
+  // chest CT's bone wall (1.68 x 1.68 x 5 mm voxels; far face 9.2 mm behind a HIP 1.46 mm
+  // deep) a hold kept the plane while the lift went out along the far side's normal, 3.3 N
+  // until the HIP left the bone; with the voxel's width along entry_n_ (5 mm there) the wall
+  // counted as thin. There is no far side there to wrap round to.
+  const Vec3 hip_moved = hip - entry_hip_;
+  Vec3 far_face;
+  const bool pressed_round = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
+                             across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel && depth > 0.0 &&
+                             face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);
+  if (depth > 0.0 && (entry_held_ || pressed_round || past_middle(field, hip, entry_n_, depth, voxel) ||
                       past_middle(field, hip, plane_.n, new_depth, voxel))) {
-    entry_held_ = true;
     VirtualPlane kept = held;
+    // A turn the iteration made is undone: the plane faces entry_n_ again (the HIP behind it).
+    if (!entry_held_ && dot(entry_n_, hip - held.p) < 0.0) kept.n = entry_n_;
+    entry_held_ = true;
+    // The material under the face found from the HIP is about as thick along the held normal
+    // (within half a voxel) as under the point where the side was taken: a wall whose surface
+    // falls away under the stroke and goes on lower (never lowered, the head CT's held plane
+    // stayed 2.8 mm above it and the hold ended with 2.4 N released in one tick), not the
+    // thinning corner round a crest (lowered there, ridges wrapped at 0.5-0.9 of the limit).
+    auto as_thick_as_entry = [&](const Vec3& at) {
+      const double reach = 12.0 * voxel, in = 0.5 * voxel;
+      Vec3 a, b;
+      if (!face_along(field, at - kept.n * in, kept.n * -1.0, reach, voxel, a)) return true;
+      if (!face_along(field, entry_vhip_ - kept.n * in, kept.n * -1.0, reach, voxel, b)) return false;
+      return norm(a - at) >= norm(b - entry_vhip_) - 0.5 * voxel;
+    };
+    // The held plane's point goes to the face found from the HIP along its normal: up always
+    // (a tilted held plane slid the proxy down it on a stroke along the feature), down only
+    // with the HIP short of the middle along that normal and the wall as thick there.
     Vec3 q;
-    if (face_along(field, hip, held.n, depth + voxel, voxel, q) && dot(held.n, q - held.p) > 0.0) kept.p = q;
+    if (face_along(field, hip, kept.n, depth + voxel, voxel, q) &&
+        (dot(kept.n, q - kept.p) > 0.0 ||
+         (!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))))
+      kept.p = q;
     adopt_plane(kept, hip, out);
     plane_grad_norm_ = held_grad_norm;
   } else {
     entry_n_ = plane_.n;
+    entry_hip_ = hip;
+    entry_vhip_ = vhip_;
   }
 }
 

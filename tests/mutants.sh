@@ -258,6 +258,24 @@ m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_tick
                                $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' \
                                $T 'HriRecovery.AReleaseByAPlaneUpdate*'
 
+# The point's thin-feature hold (hold_entry_side): each rule alone lets a scan-like ridge wrap
+# below 0.9 of the limit; the held plane's point lowered to a face falling away under the
+# stroke (short of the middle, the wall as thick as at entry) lets a plate's hold end with no
+# release step, and never where the material under the face thins (a crest's corner).
+R=test_hri_ridges G='HriRidges.*'
+m hri-hold-faces-entry      $H 'if (!entry_held_ && dot(entry_n_, hip - held.p) < 0.0) kept.n = entry_n_;' '' $R "$G"
+m hri-hold-stays            $H '(!entry_held_ && dot(plane_.n, entry_n_) >= kCos)' 'dot(plane_.n, entry_n_) >= kCos' $R "$G"
+m hri-hold-pressed-round    $H '(entry_held_ || pressed_round ||' '(entry_held_ ||' $R "$G"
+m hri-hold-face-lowered     $H '(!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))' \
+                               'false' test_hri_falling_plate 'HriFallingPlate.*'
+m hri-hold-face-thick       $H '&& as_thick_as_entry(q))))' ')))' $R "$G"
+# The pressed-round rule only on a thin feature (its far face within the depth and two of the
+# smallest voxels): on convex bulk material (the sphere's run) it held a 20 deg plane round the
+# side and the force turned 60 deg at the lift.
+m hri-hold-round-thin       $H 'face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);' \
+                               '(face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face) || true);' \
+                               isotouch 'ctest:cli_run_sphere'
+
 # The time-domain passivity controller at the device end of a delayed link (port_passivity)
 # and the link the simulation puts in front of it (delayed_link).
 P=servo/port_passivity.cpp

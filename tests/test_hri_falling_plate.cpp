@@ -23,22 +23,12 @@ double top_z(double y) { return 0.020 - 0.4 * std::max(0.0, y - 0.020); }
 
 }  // namespace
 
-// DISABLED: no renderer passes it yet (K = 800 N/m, limit 3.3 N, bar 0.165 N and 0.5 mm):
-// - main's renderer: n = 1 releases 0.615 N at the lift (HIP 0.07 mm deep, the plane 0.7 mm
-//   above the fallen surface; VHIP RMS 0.34 mm, max 0.71 mm); n = 10 releases 0.174 N.
-// - with the thin-feature hold rules (HriRidges 12/12 on seed 64): n = 1 0.29 N, RMS 0.14 mm;
-//   n = 10 2.41 N, RMS 1.35 mm, max 2.88 mm - the head CT's failure (2.40 N, t = 1.95 s).
-// - with those rules and the held point lowered to the face below it where no far face lies
-//   within the HIP's depth + 2 voxels along the held normal (nor past the middle along the
-//   face's normal): n = 1 0 N, RMS 0.09 mm; n = 10
-//   still 2.41 N (this plate is thin by that measure, as the skull is for part of its stroke).
-// - with those rules and the held point lowered only where the material under the new face
-//   is as thick along the held normal (within half a voxel) as under the entry point: this
-//   test passes (0.10 N / 0.07 mm at n = 1, 0 N / 0.40 mm at n = 10), the head run releases
-//   0 N (VHIP RMS 0.25 mm) and HriRidges holds on seeds 1-12, 64, 65, but the sphere's run
-//   (cli_run_sphere) turns its force 59.6 deg at 4 mN on the lift (t = 2.508 s; bar 15 deg).
-//   The hold rules without the lowering release 1.015 N on that run (t = 1.631 s; main 0 N).
-TEST(HriFallingPlate, DISABLED_TheProxyFollowsASurfaceFallingAwayAndLetsGoWithoutAStep) {
+// K = 800 N/m, limit 3.3 N, bar 0.165 N and 0.5 mm. Main's renderer before the thin-feature
+// hold released 0.615 N at n = 1 (HIP 0.07 mm deep, the plane 0.7 mm above the fallen
+// surface); the hold rules without lowering the held point 2.41 N at n = 10 (the head CT's
+// failure). With the held point lowered where the wall under the new face is as thick as at
+// entry: n = 1 0.10 N, RMS 0.07 mm; n = 10 0 N, RMS 0.40 mm.
+TEST(HriFallingPlate, TheProxyFollowsASurfaceFallingAwayAndLetsGoWithoutAStep) {
   const double thick = 0.004, sigma = 0.0004;  // 4 voxels of 1 mm, partial-volume edges
   const SampleField f = isotouch::test::scan_like_field(
       {48, 48, 32}, {1e-3, 1e-3, 1e-3},

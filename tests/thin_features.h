@@ -178,8 +178,8 @@ inline bool wraps(const ThinFeature& tf, const servo::HriParams& p, double level
     if (!inside_since) break;
     const double side = dot(out.vhip_m - tf.mid - dir * dot(out.vhip_m - tf.mid, dir), tf.n_entry);
     if (debug && std::getenv("HRI_THIN_TICKS"))
-      std::printf("      k %d c %d u %d plane n.n %.3f valid %d side %.3f hip side %.3f |F| %.3f\n", k, int(out.contact),
-                  int(out.plane_update), dot(out.plane.n, tf.n_entry), int(out.plane.valid), side * 1e3,
+      std::printf("      k %d c %d u %d plane n.d %.3f n.n %.3f valid %d side %.3f hip side %.3f |F| %.3f\n", k, int(out.contact),
+                  int(out.plane_update), dot(out.plane.n, dir), dot(out.plane.n, tf.n_entry), int(out.plane.valid), side * 1e3,
                   1e3 * dot(hip - tf.mid, tf.n_entry), norm(out.force_n));
     // Past the middle by more than a tenth of a voxel (at the middle itself, with the HIP
     // there, either side is as near), or a force toward the far side: for a tool, more than

@@ -196,7 +196,7 @@ m serve-link-max-force      service/transform_device.h '    c.max_force_n = max_
 m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene_.link_max_force_n);' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
-m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) return true;' '  return true;' \
+m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) {' '  if (true) {' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # The stream's rate is judged at every pose over its latest 16, not once: a stream that slows is refused.
 m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kRatePoses) return true;' '  if (c.stream_gap_count + 1 != kRatePoses) return true;' \

@@ -27,6 +27,7 @@
 #include "isotouch/io/vdb_io.h"
 #include "isotouch/io/volume_io.h"
 #include "isotouch/service/commands.h"
+#include "isotouch/service/tool_ticks.h"
 #include "isotouch/service/device_echo.h"
 #include "isotouch/service/edit_mirror.h"
 #include "isotouch/core/exit_codes.h"
@@ -281,6 +282,7 @@ class Server {
   io::BrushSpec tool_;
   bool applying_ = false;
   std::uint64_t stroke_generation_ = 0;  // the session whose stroke is open (0: none)
+  StrokeGap stroke_gap_;  // the open stroke's probe out of contact
   bool preparing_ = false;  // guarded by session_mu_: a new session is being built, edits held
   // Main thread: the isovalue a client's `isovalue V` set (a received IMAGE keeps it while
   // inside its values; none: each IMAGE's own, image_isovalue.h).
@@ -656,10 +658,12 @@ bool Server::submit(session::EditEvent::Kind kind, const session::Brush* brush) 
 void Server::end_stroke() {
   if (stroke_generation_ != 0) submit(session::EditEvent::Kind::kEndStroke);
   stroke_generation_ = 0;
+  stroke_gap_.reset();
 }
 
-/// While applying: one brush of the tool at the proxy per command tick in contact (a press
-/// opens a stroke, one undo step; leaving contact closes it).
+/// While applying: one brush of the tool at the proxy per command tick in contact, over
+/// `dt_s` (tool_dt): a press opens a stroke, one undo step; out of contact for kStrokeGapS
+/// closes it (tool_ticks.h).
 void Server::feed_tool(double dt_s) {
   if (!applying_) return;
   std::optional<session::Brush> brush;
@@ -673,7 +677,11 @@ void Server::feed_tool(double dt_s) {
       brush = run::make_brush(run::brush_at_tool(scene_, session_->frame, tool_), session_->targets, ob.vhip_m, dt_s,
                               core::norm(ob.force_n));
   }
-  if (!brush) return end_stroke();
+  if (!brush) {
+    if (stroke_gap_.out_of_contact(dt_s) || stroke_generation_ != generation) end_stroke();
+    return;
+  }
+  stroke_gap_.in_contact();
   if (stroke_generation_ != generation) submit(session::EditEvent::Kind::kBeginStroke);
   submit(session::EditEvent::Kind::kBrush, &*brush);
 }
@@ -863,13 +871,18 @@ void Server::send_edited() {
   log_.line(s.str());
 }
 
+/// The command thread: the commands received, then the tool, once a display period; one that
+/// fell behind does not catch up in a burst of tool ticks (next_tick, tool_dt: tool_ticks.h).
 void Server::command_loop() {
+  using Clock = std::chrono::steady_clock;
   const double period_s = 1.0 / o_.display_hz;
-  auto next = std::chrono::steady_clock::now();
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(period_s));
+  auto next = Clock::now();
   auto next_image = next;
+  auto last_tool = next;
   while (!stop_) {
-    next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period_s));
     std::this_thread::sleep_until(next);
+    next = next_tick(next, Clock::now(), period);
     std::deque<Pending> todo;
     {
       std::lock_guard<std::mutex> lock(cmd_mu_);
@@ -888,7 +901,9 @@ void Server::command_loop() {
       }
     }
     try {
-      feed_tool(period_s);
+      const double since_s = std::chrono::duration<double>(Clock::now() - last_tool).count();
+      last_tool = Clock::now();
+      feed_tool(tool_dt(since_s, period_s));
     } catch (const std::exception& e) {
       try {
         log_.line(std::string("tool     not applied this tick: ") + e.what());

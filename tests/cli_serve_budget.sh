@@ -22,10 +22,8 @@ fail() { echo "FAIL serve budget: $*"; for f in "$out"/*.log; do echo "--- $f"; 
 holder=""
 trap '[[ -n $holder ]] && kill $holder 2>/dev/null' EXIT
 
-"$exe" serve "$scene" --port 0 --stream Stylus --image-hz 0 --memory-mib 600 >"$out/serve1.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve1.log" $pid)
-[[ -n $port ]] || fail "serve never said it was listening"
+start_serve "$out/serve1.log" "$scene" --port 0 --stream Stylus --image-hz 0 --memory-mib 600 ||
+  fail "serve never said it was listening"
 # The peer: an IGTL header announcing the IMAGE's body, its 72-byte image header, then one
 # voxel byte every 0.2 s (serve drops a client silent 2 s inside a message) for at most 60 s.
 python3 - "$port" >"$out/holder.log" 2>&1 <<'PY' &
@@ -73,11 +71,8 @@ grep -q "STATUS code 1: volume taken: 128 x 128 x 128" "$out/client2.log" ||
   fail "the same IMAGE was not taken once the peer had gone: $(grep STATUS "$out/client2.log")"
 echo "ok serve budget: a 128^3 IMAGE refused beside 400 MiB arriving ($need MiB needed, 450 MiB budget), taken after"
 
-ISOTOUCH_SERVE_TEST_FAULT="budget:Huge,prepare:Huge" \
-  "$exe" serve "$scene" --port 0 --stream Stylus --image-hz 0 >"$out/serve2.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve2.log" $pid)
-[[ -n $port ]] || fail "serve did not start again"
+ISOTOUCH_SERVE_TEST_FAULT="budget:Huge,prepare:Huge" start_serve "$out/serve2.log" "$scene" --port 0 --stream Stylus \
+  --image-hz 0 || fail "serve did not start again"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ramp Huge 512 512 400 ramp Mid 128 128 128 >"$out/client3.log" 2>&1 ||
   fail "the third client failed (exit $?)"
 kill -TERM $pid; wait $pid

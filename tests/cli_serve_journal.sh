@@ -8,22 +8,33 @@
 # (the client's comparison); stopped by SIGTERM, it deletes the journal. The same for a
 # session on a client's IMAGE: restored when the same IMAGE is sent to the next serve.
 # (A session an `isovalue V` rebuilt: see the last part.)
+# The client's first message is the tool command: its answer says the server reads this client
+# (a serve still starting would take the poses queued in the socket at once, the probe already
+# in the bone, and the renderer rightly feels no contact from inside).
 # Usage: cli_serve_journal.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
 source "$(dirname "$0")/serve_port.sh"
 exe=$1; scene=$2; client=$3; out=$4; head=$5
 rm -rf "$out"; mkdir -p "$out"
 export XDG_STATE_HOME="$out/state"
-fail() { echo "FAIL serve journal: $*"; for f in "$out"/*.log; do echo "--- $f"; tail -n 30 "$f"; done; exit 1; }
+# On failure: the logs' ends, and each journal left as its edits in order (runs of a kind
+# counted: which strokes the server made of the client's presses).
+fail() {
+  echo "FAIL serve journal: $*"
+  for f in "$out"/*.log; do echo "--- $f"; tail -n 30 "$f"; done
+  for j in "$out"/state/isotouch/*.journal; do
+    [[ -f $j ]] && echo "--- $j: $(grep -o '^{"edit":"[a-z_]*"' "$j" | sed 's/.*:"//; s/"//' | uniq -c | tr -s ' \n' ' ')"
+  done
+  exit 1
+}
 # RAS [mm]: outside the skull and 2.6 voxels into it (as cli_serve_session.sh), at slice z 11
 # and 7 slices further (z 18).
+# serve_n N HZ: the Nth serve of the head (log serveN.log), edited images sent at HZ.
+serve_n() { start_serve "$out/serve$1.log" "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz "$2"; }
 out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"; out_q="-9.6 -102.4 110.5"; in_q="-37.12 -102.4 110.5"
 
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve1.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve1.log" $pid)
-[[ -n $port ]] || fail "serve never said it was listening"
-timeout 90 "$client" 127.0.0.1 "$port" "$head" move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" \
+serve_n 1 0 || fail "serve never said it was listening"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "tool carve 4 300" move $out_p 0.3 move $in_p 0.5 \
   cmd apply wait 0.6 cmd stop cmd "save first.mha" move $out_q 0.3 move $in_q 0.5 cmd apply wait 0.6 cmd stop \
   cmd "save both.mha" cmd undo cmd "save carved.mha" \
   >"$out/client1.log" 2>&1 || fail "the first client failed (exit $?)"
@@ -37,10 +48,7 @@ edits=$(grep -c '^{"edit"' "$journal"); brushes=$(grep -c '^{"edit":"brush"' "$j
 cmp -s "$out/first.mha" "$out/carved.mha" || fail "the undo did not give the first stroke back"
 cmp -s "$out/both.mha" "$out/carved.mha" && fail "the second stroke changed nothing: the undo says little"
 
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 4 >"$out/serve2.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve2.log" $pid)
-[[ -n $port ]] || fail "serve did not start again"
+serve_n 2 4 || fail "serve did not start again"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save restored.mha" compare "$out/restored.mha" \
   >"$out/client2.log" 2>&1 || fail "the second client failed (exit $?)"
 kill -TERM $pid; wait $pid; rc=$?
@@ -55,10 +63,7 @@ echo "ok serve journal: $edits edits ($brushes brushes, 1 undo) restored after k
 
 # A session on a client's IMAGE (Slicer's way) keeps its edits through a kill -9 too: the
 # journal of the IMAGE's volume is restored when the same IMAGE is sent to the next serve.
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve3.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve3.log" $pid)
-[[ -n $port ]] || fail "serve did not start a third time"
+serve_n 3 0 || fail "serve did not start a third time"
 # The same IMAGE sent again mid-session starts its session and journal afresh (one file).
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
@@ -73,10 +78,7 @@ ball_journal=${left[0]}
 ball_edits=$(grep -c '^{"edit"' "$ball_journal"); ball_brushes=$(grep -c '^{"edit":"brush"' "$ball_journal")
 (( ball_brushes > 0 )) || fail "the IMAGE session's journal holds no brush: the check says little"
 grep -q "igtl:Ball" "$ball_journal" || fail "the journal does not name the IMAGE it belongs to"
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve4.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve4.log" $pid)
-[[ -n $port ]] || fail "serve did not start a fourth time"
+serve_n 4 0 || fail "serve did not start a fourth time"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 cmd "save ballrestored.mha" \
   >"$out/client4.log" 2>&1 || fail "the second IMAGE client failed (exit $?)"
 kill -TERM $pid; wait $pid
@@ -92,10 +94,7 @@ echo "ok serve journal: an IMAGE session's $ball_edits edits restored after kill
 # image's own isovalue (300 HU: bone), `isovalue -500` (the tissue's surface), an undo (the
 # rebuilt session has nothing to undo: a restore that undid the first stroke would differ),
 # a second stroke on another side; then kill -9.
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve5.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve5.log" $pid)
-[[ -n $port ]] || fail "serve did not start a fifth time"
+serve_n 5 0 || fail "serve did not start a fifth time"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.4 move 0 0 13 0.6 \
   cmd "tool carve 4 300" cmd apply wait 0.6 cmd stop cmd "save isofirst.mha" cmd "isovalue -500" cmd undo \
   move 24 0 0 0.4 move 13 0 0 0.6 cmd apply wait 0.6 cmd stop cmd "save isocarved.mha" \
@@ -111,10 +110,7 @@ iso_journal=${left[0]}
 iso_edits=$(grep -c '^{"edit"' "$iso_journal"); iso_undos=$(grep -c '^{"edit":"undo"' "$iso_journal")
 head -n 1 "$iso_journal" | grep -q '"isovalue":{"tau":-500' || fail "the journal's header does not hold the isovalue -500"
 (( iso_undos == 1 )) || fail "the journal holds $iso_undos undos, not the one after the isovalue"
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve6.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve6.log" $pid)
-[[ -n $port ]] || fail "serve did not start a sixth time"
+serve_n 6 0 || fail "serve did not start a sixth time"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 cmd "save isorestored.mha" \
   >"$out/client6.log" 2>&1 || fail "the client after the isovalue's kill failed (exit $?)"
 kill -TERM $pid; wait $pid
@@ -129,11 +125,8 @@ echo "ok serve journal: the IMAGE session's $iso_edits edits across an isovalue 
 # The same for the scene's volume: a stroke at the scene's 1150, `isovalue 500`, an undo and a
 # stroke after it, kill -9; the next serve of the scene restores the session at 500 (not the
 # scene's 1150), every edit.
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve7.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve7.log" $pid)
-[[ -n $port ]] || fail "serve did not start a seventh time"
-timeout 90 "$client" 127.0.0.1 "$port" "$head" move $out_p 0.3 move $in_p 0.5 cmd "tool carve 4 300" \
+serve_n 7 0 || fail "serve did not start a seventh time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "tool carve 4 300" move $out_p 0.3 move $in_p 0.5 \
   cmd apply wait 0.6 cmd stop cmd "save scenefirst.mha" cmd "isovalue 500" cmd undo \
   move $out_q 0.3 move $in_q 0.5 cmd apply wait 0.6 cmd stop cmd "save scenecarved.mha" \
   >"$out/client7.log" 2>&1 || fail "the scene's isovalue client failed (exit $?)"
@@ -144,10 +137,7 @@ cmp -s "$out/scenefirst.mha" "$out/scenecarved.mha" && fail "nothing was carved 
 [[ -f $journal ]] || fail "no journal of the scene's volume left after the kill past an isovalue"
 scene_edits=$(grep -c '^{"edit"' "$journal")
 head -n 1 "$journal" | grep -q '"isovalue":{"tau":500' || fail "the scene journal's header does not hold the isovalue 500"
-"$exe" serve "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz 0 >"$out/serve8.log" 2>&1 &
-pid=$!
-port=$(wait_port "$out/serve8.log" $pid)
-[[ -n $port ]] || fail "serve did not start an eighth time"
+serve_n 8 0 || fail "serve did not start an eighth time"
 timeout 90 "$client" 127.0.0.1 "$port" "$head" cmd "save scenerestored.mha" >"$out/client8.log" 2>&1 ||
   fail "the client after the scene's kill failed (exit $?)"
 kill -TERM $pid; wait $pid

@@ -204,6 +204,11 @@ m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kR
 # ... over the bound at 16 judgements in a row: a moment's slowdown is not refused (part 10).
 m serve-stream-hysteresis   service/serve.cpp '  if (++c.stream_over < kRatePoses) return true;' '  ++c.stream_over;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# serve's command thread: no burst of missed tool ticks, a stroke through a moment out of contact.
+m serve-tool-no-burst       service/tool_ticks.cpp '  return (now > due + period ? now : due) + period;' '  return due + period;' \
+                               test_tool_ticks 'ToolTicks.*'
+m serve-stroke-gap          service/tool_ticks.cpp '  if (apart_s_ + 1e-9 < kStrokeGapS) return false;' '' \
+                               test_tool_ticks 'ToolTicks.*'
 # serve's edit journal through an `isovalue V` (issue 62): it goes on for the rebuilt session, and
 # a restore drops the undo history where the session was rebuilt (cli_serve_journal's last part).
 m serve-journal-isovalue    service/serve.cpp $'  if (journal_.journal)\n    carry = ' $'  if (false)\n    carry = ' \

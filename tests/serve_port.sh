@@ -11,3 +11,13 @@ wait_port() {
   done
   echo "$port"
 }
+
+# start_serve LOG ARG...: starts "$exe" serve ARG... in the background, its output in LOG;
+# sets pid and port (wait_port's). Fails (status 1) when serve never said it was listening.
+start_serve() {
+  local log=$1; shift
+  "$exe" serve "$@" >"$log" 2>&1 &
+  pid=$!
+  port=$(wait_port "$log" $pid)
+  [[ -n $port ]]
+}

@@ -242,6 +242,24 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
   impl_->writer = std::thread([this] { impl_->loop(path_); });
 }
 
+void Journal::restart(Recording header, const std::vector<session::EditEvent>& kept) {
+  impl_->stop_writer();
+  impl_->drain(path_, true);
+  {
+    std::lock_guard<std::mutex> lock(impl_->mu);
+    if (!impl_->error.empty()) throw JournalError(impl_->error + " (the journal is kept)");
+    impl_->stop = false;
+  }
+  try {
+    start(std::move(header), kept);
+  } catch (const std::exception& e) {
+    std::lock_guard<std::mutex> lock(impl_->mu);
+    impl_->error = e.what();  // appends are dropped from now on, not queued for no writer
+    impl_->stop = true;
+    throw;
+  }
+}
+
 void Journal::append(const session::EditEvent& e) noexcept {
   {
     std::lock_guard<std::mutex> lock(impl_->mu);

@@ -79,6 +79,13 @@ class Journal {
   /// edits restored from the last one, their tick set to 0), fdatasync'ed; then the writer runs.
   /// @throws JournalError naming the file (write failed), RecordingError (bad header).
   void start(Recording header, const std::vector<session::EditEvent>& restored);
+  /// start() again on this running journal, for the session that replaces its own on the
+  /// same volume (serve's `isovalue V`): the writer stopped, what is queued written, then
+  /// `header` and `kept` replace the file as in start(), the lock held throughout (no other
+  /// session can take the file between the two). When it throws, the file is as it was and
+  /// still locked, and nothing more is written to it.
+  /// @throws JournalError naming the file (an earlier write failed, or this one did).
+  void restart(Recording header, const std::vector<session::EditEvent>& kept);
   /// Queues one applied edit's line for the writer (written at once, fdatasync'ed within the
   /// flush interval). Any thread; no wait for the disk. A failed write is kept, reported by
   /// flush() and close(); nothing later is written then.

@@ -1337,7 +1337,9 @@ void Server::start_journal(Session& s, io::OpenedJournal& j, std::uint32_t volum
 /// of std::size_t(-1): at the edits it holds; the undo history started afresh there), and
 /// `s` appending to it. A restore then rebuilds the same session: the volume, the edits,
 /// the isovalue. Until the new file replaces the old one, the old one holds the session
-/// before the change. When it cannot go on, the log says why and `s` runs without one.
+/// before the change, locked throughout (Journal::restart). When it cannot go on, the log
+/// says why, the old file is moved aside (PATH.before-change: never offered as this
+/// session's) and `s` runs without one.
 io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                         const std::vector<std::size_t>& restarts) {
   io::OpenedJournal j;
@@ -1356,20 +1358,25 @@ io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, con
   j.history_restarts = restarts;
   for (std::size_t& r : j.history_restarts) r = std::min(r, edits.size());
   j.isovalue = iso;
-  from.journal.reset();  // its lock released; the file holds the old session until the new one replaces it
+  io::Recording header;
+  header.scene_path = held ? held->input : std::string();
+  header.rate_hz = scene_.hri.rate_hz;
+  header.volume_crc32 = journal_crc_;
+  header.isovalue = j.isovalue;
+  header.history_restarts = j.history_restarts;
   try {
-    j.journal = std::make_unique<io::Journal>(path);
-    io::Recording header;
-    header.scene_path = held ? held->input : std::string();
-    header.rate_hz = scene_.hri.rate_hz;
-    header.volume_crc32 = journal_crc_;
-    header.isovalue = j.isovalue;
-    header.history_restarts = j.history_restarts;
-    j.journal->start(header, edits);
+    from.journal->restart(header, edits);  // its lock held throughout
   } catch (const std::exception& e) {
-    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (the file is kept)");
+    // The file still holds the session before the change: never offered as this one's.
+    const std::string aside = path + ".before-change";
+    std::error_code ec;
+    std::filesystem::rename(path, aside, ec);
+    from.journal.reset();
+    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (" +
+              (ec ? "the file could not be moved aside: " + ec.message() : "the file moved aside to " + aside) + ")");
     return {};
   }
+  j.journal = std::move(from.journal);
   s.journal = j.journal.get();
   log_.line("journal  " + path + " goes on" + (iso ? " at " + iso_text(*iso) : std::string()) + " (" +
             std::to_string(edits.size()) + " edits kept, the undo history restarts after them)");

@@ -29,6 +29,7 @@ fail() {
 }
 # RAS [mm]: outside the skull and 2.6 voxels into it (as cli_serve_session.sh), at slice z 11
 # and 7 slices further (z 18).
+trap 'kill -KILL $(jobs -p) 2>/dev/null' EXIT  # a failed part leaves no serve running
 # serve_n N HZ: the Nth serve of the head (log serveN.log), edited images sent at HZ.
 serve_n() { start_serve "$out/serve$1.log" "$scene" --port 0 --stream Stylus --save-dir "$out" --image-hz "$2"; }
 out_p="-9.6 -102.4 121.5"; in_p="-37.12 -102.4 121.5"; out_q="-9.6 -102.4 110.5"; in_q="-37.12 -102.4 110.5"

@@ -150,6 +150,32 @@ TEST(Journal, StartReplacesWhatTheLastSessionLeft) {
   EXPECT_EQ(r.edits[0].brush.centre_m.x, 0.05);
 }
 
+// serve's `isovalue V`: the running journal goes on for the rebuilt session, its file
+// replaced with the edits kept and the new header, and no other session can take the file
+// at any point (its lock held throughout); appends after it follow the kept edits.
+TEST(Journal, RestartReplacesTheFileAndKeepsItsLock) {
+  const fs::path p = temp_file("restart");
+  Journal j(p.string());
+  j.start(header(), {});
+  j.append(brush_at(0.01, 1));
+  j.append(brush_at(0.02, 2));
+  Recording after = header();
+  after.isovalue = isotouch::core::Isosurface{-500, isotouch::core::InsideIs::kAbove};
+  j.restart(after, {brush_at(0.01, 1), brush_at(0.02, 2)});
+  EXPECT_THROW(Journal(p.string()), JournalError);  // still held
+  j.append(brush_at(0.03, 3));
+  j.flush();
+  const Recording r = parsed(p);
+  ASSERT_TRUE(r.isovalue.has_value());
+  EXPECT_EQ(r.isovalue->tau, -500);
+  ASSERT_EQ(r.edits.size(), 3u);
+  EXPECT_EQ(r.edits[0].tick, 0);  // kept: before the rebuilt session's first tick
+  EXPECT_EQ(r.edits[2].brush.centre_m.x, 0.03);
+  EXPECT_FALSE(fs::exists(p.string() + ".new"));
+  j.close();
+  EXPECT_FALSE(fs::exists(p));
+}
+
 TEST(Journal, AJournalOfAnotherVolumeIsRefusedNamingBoth) {
   const fs::path p = temp_file("other");
   { Journal(p.string()).start(header(0x00c0ffeeu), {brush_at(0.01, 1)}); }

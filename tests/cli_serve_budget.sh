@@ -20,7 +20,7 @@ rm -rf "$out"; mkdir -p "$out"
 export XDG_STATE_HOME="$out/state"
 fail() { echo "FAIL serve budget: $*"; for f in "$out"/*.log; do echo "--- $f"; tail -n 20 "$f"; done; exit 1; }
 holder=""
-trap '[[ -n $holder ]] && kill $holder 2>/dev/null' EXIT
+trap 'kill -KILL $(jobs -p) 2>/dev/null' EXIT  # the holder, and any serve a failed part left
 
 start_serve "$out/serve1.log" "$scene" --port 0 --stream Stylus --image-hz 0 --memory-mib 600 ||
   fail "serve never said it was listening"

@@ -8,9 +8,15 @@
 #include <sstream>
 #include <vector>
 
+#include "isotouch/engine/cpu_gradient.h"
 #include "isotouch/io/files.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/io/vdb_io.h"
 #include "isotouch/sim/analytic_fields.h"
 #include "isotouch/sim/linked_contact.h"
+#include "isotouch/sim/script.h"
+#include <stdexcept>
+#include <thread>
 
 namespace isotouch::bench {
 namespace {
@@ -60,19 +66,26 @@ double rms_relative(const std::vector<double>& a, const std::vector<double>& b) 
   return s > 0 ? std::sqrt(d / s) : 0;
 }
 
-Cell measure(const SampleField& wall, double delay, double rate, bool quick, const std::vector<double>& reference) {
+/// What the hand presses: a field whose isosurface is tau = 0, inside above (as the link's
+/// renderer reads it), the point the press aims at and the outward normal there (world [m]).
+struct Surface {
+  SampleField field;
+  Vec3 p, n;
+};
+
+Cell measure(const Surface& at, double delay, double rate, bool quick, const std::vector<double>& reference) {
   Cell c{delay, rate, 0, 0, false, false, 0, 0, 0, 0, 0, 0, 0};
   const int it = quick ? 6 : 10;
-  c.kmax = sim::find_k_max_linked(wall, kP, kUp, press(delay, rate, false, quick), kSearchLo, kSearchHi, it);
-  c.kmax_pc = sim::find_k_max_linked(wall, kP, kUp, press(delay, rate, true, quick), kSearchLo, kSearchHi, it);
+  c.kmax = sim::find_k_max_linked(at.field, at.p, at.n, press(delay, rate, false, quick), kSearchLo, kSearchHi, it);
+  c.kmax_pc = sim::find_k_max_linked(at.field, at.p, at.n, press(delay, rate, true, quick), kSearchLo, kSearchHi, it);
   for (bool pc : {false, true}) {
     const LinkedContact cfg = press(delay, rate, pc, quick);
-    const LinkedContactResult r = sim::simulate_linked_contact(wall, kP, kUp, cfg);
+    const LinkedContactResult r = sim::simulate_linked_contact(at.field, at.p, at.n, cfg);
     (pc ? c.k800_stable_pc : c.k800_stable) = r.stable(cfg);
     (pc ? c.k800_energy_pc_j : c.k800_energy_j) = r.device_energy_out_j;
     if (pc) c.settled_pc_m = r.settled_amplitude_m;
   }
-  const LinkedContactResult s = sim::simulate_linked_contact(wall, kP, kUp, slow_press(delay, rate, true));
+  const LinkedContactResult s = sim::simulate_linked_contact(at.field, at.p, at.n, slow_press(delay, rate, true));
   c.stiffness_err_pc = s.max_force_error_ratio;
   c.rms_err_pc = rms_relative(s.force_trace_n, reference);
   c.served_min_s = s.round_trip_min_s;
@@ -94,7 +107,7 @@ std::string served_text(const Cell& c) {
   return o.str();
 }
 
-void write_csv(const std::string& dir, const std::vector<Cell>& cells) {
+void write_csv(const std::string& dir, const std::string& stem, const std::vector<Cell>& cells) {
   std::ostringstream csv;
   csv << "round_trip_ms,rate_hz,k_max_n_per_m,k_max_with_pc_n_per_m,k800_stable,k800_stable_with_pc,"
          "k800_device_energy_j,k800_device_energy_with_pc_j,k800_settled_amplitude_with_pc_mm,"
@@ -106,16 +119,18 @@ void write_csv(const std::string& dir, const std::vector<Cell>& cells) {
         << c.k800_stable_pc << ',' << c.k800_energy_j << ',' << c.k800_energy_pc_j << ',' << c.settled_pc_m * 1e3
         << ',' << c.stiffness_err_pc << ',' << c.rms_err_pc << ',' << c.served_min_s * 1e3 << ','
         << c.served_max_s * 1e3 << '\n';
-  io::write_file_atomic((fs::path(dir) / "link_stability.csv").string(), csv.str());
+  io::write_file_atomic((fs::path(dir) / (stem + ".csv")).string(), csv.str());
 }
 
-void write_md(const std::string& dir, const std::vector<Cell>& cells, const std::string& reading) {
+/// `title`: the markdown's title; `surface`: what is pressed, said after "on".
+void write_md(const std::string& dir, const std::string& stem, const std::string& title, const std::string& surface,
+              const std::vector<Cell>& cells, const std::string& reading) {
   const LinkedContact h = press(0, 100, false, false);
   std::ostringstream md;
-  md << "# A wall through a delayed link\n\nPress (device mass " << h.device.mass_kg * 1e3 << " g, damping "
+  md << "# " << title << "\n\nPress (device mass " << h.device.mass_kg * 1e3 << " g, damping "
      << h.device.damping_n_s_per_m << " N s/m, hand spring " << h.device.hand_stiffness_n_per_m
      << " N/m without damping, " << h.push_force_n << " N pre-load, impact at " << h.approach_speed_m_s
-     << " m/s) on a flat HRI wall rendered at the servo end of a simulated link (sim/linked_contact.h): poses go "
+     << " m/s) on " << surface << " rendered by HRI at the servo end of a simulated link (sim/linked_contact.h): poses go "
         "up and forces down at the link rate, each after half the round trip; the device end holds the last force "
         "over its own 1 kHz loop and runs the time-domain passivity controller (servo/port_passivity.h, one-port "
         "rule). Stable: no sustained oscillation of the device (late amplitude under "
@@ -136,7 +151,7 @@ void write_md(const std::string& dir, const std::vector<Cell>& cells, const std:
        << " | " << (c.k800_stable ? "yes" : "no") << " | " << (c.k800_stable_pc ? "yes" : "**no**") << " | "
        << std::setprecision(3) << c.k800_energy_pc_j << " | " << c.settled_pc_m * 1e3 << " | "
        << 100 * c.stiffness_err_pc << " % | " << 100 * c.rms_err_pc << " % |\n";
-  io::write_file_atomic((fs::path(dir) / "link_stability.md").string(), md.str());
+  io::write_file_atomic((fs::path(dir) / (stem + ".md")).string(), md.str());
 }
 
 /// The transparency target: the slow press's stiffness (mean force over mean depth,
@@ -166,31 +181,76 @@ std::string reading_of(const std::vector<Cell>& cells) {
   return o.str();
 }
 
-}  // namespace
 
-int run_link_stability(const std::string& dir, bool quick, std::ostream& log) {
-  fs::create_directories(dir);
-  const SampleField wall = sim::plane_field(kUp, kP);
+/// Every cell's rows on `at`, written to DIR/STEM.csv and .md. @return 0, or 4 if K = 800 with
+/// the controller is unstable in some cell (or its slow press misses the stiffness target).
+/// `label` starts each progress line.
+int sweep(const Surface& at, const std::string& dir, const std::string& stem, const std::string& label,
+          const std::string& title, const std::string& surface, bool quick, std::ostream& log) {
   const std::vector<double> reference =
-      sim::simulate_linked_contact(wall, kP, kUp, slow_press(0, 1000, false)).force_trace_n;
+      sim::simulate_linked_contact(at.field, at.p, at.n, slow_press(0, 1000, false)).force_trace_n;
   std::vector<Cell> cells;
   const std::vector<double> delays = {0, 1e-3, 2e-3, 5e-3, 10e-3, 20e-3}, rates = {100, 250, 500, 1000};
   for (double d : delays)
     for (double r : rates) {
-      cells.push_back(measure(wall, d, r, quick, reference));
+      cells.push_back(measure(at, d, r, quick, reference));
       const Cell& c = cells.back();
-      log << "link " << std::setw(2) << cells.size() << "/" << delays.size() * rates.size() << "  round trip "
+      log << label << " " << std::setw(2) << cells.size() << "/" << delays.size() * rates.size() << "  round trip "
           << std::setw(2) << d * 1e3 << " ms  " << std::setw(4) << r << " Hz  K_max " << std::setw(7) << k_text(c.kmax)
           << " N/m, with PC " << std::setw(7) << k_text(c.kmax_pc) << " N/m; K = 800 " << (c.k800_stable ? "stable" : "unstable")
           << ", with PC " << (c.k800_stable_pc ? "stable" : "UNSTABLE") << std::setprecision(3) << " (slow press "
           << 100 * c.stiffness_err_pc << " % stiffness, " << 100 * c.rms_err_pc << " % RMS force error)\n";
     }
   const std::string reading = reading_of(cells);
-  write_csv(dir, cells);
-  write_md(dir, cells, reading);
-  log << reading << "\nwrote " << dir << "/link_stability.csv, link_stability.md\n";
+  write_csv(dir, stem, cells);
+  write_md(dir, stem, title, surface, cells, reading);
+  log << reading << "\nwrote " << dir << "/" << stem << ".csv, " << stem << ".md\n";
   const bool all = std::all_of(cells.begin(), cells.end(), meets_targets);
   return all ? 0 : 4;
+}
+
+/// The scene's scan as the link's renderer reads it: values shifted (and turned, inside
+/// below) so its isosurface is tau = 0 inside above, the samples on the CPU; the press aims
+/// where the scene's script ray first meets it, along the outward normal there.
+Surface scene_surface(const std::string& scene_path, std::string& what) {
+  const io::Scene scene = io::load_scene(scene_path);
+  if (scene.volume_path.empty())
+    throw std::runtime_error(scene_path + ": field 'volume': a synthetic volume; `--scene` wants a scan");
+  engine::Volume v = io::load_any_volume(scene.volume_path);
+  const double tau = scene.hri.tau;
+  const bool above = scene.hri.inside == core::InsideIs::kAbove;
+  for (float& x : v.voxels) x = float(above ? double(x) - tau : tau - double(x));
+  v.update_stats();
+  Surface at{engine::compute_samples_cpu(v, std::max(1u, std::thread::hardware_concurrency())), {}, {}};
+  servo::HriParams hp = scene.hri;
+  hp.tau = 0;
+  hp.inside = core::InsideIs::kAbove;
+  const sim::TouchScript script = sim::make_touch_script(at.field, hp, scene.script);
+  at.p = script.contact_point_m;
+  at.n = script.contact_normal;
+  std::ostringstream o;
+  o << std::setprecision(4) << "the isosurface of " << fs::path(scene.volume_path).filename().string() << " at "
+    << tau << " (scene " << fs::path(scene_path).filename().string() << "), where its script's ray first meets it ("
+    << at.p.x * 1e3 << ", " << at.p.y * 1e3 << ", " << at.p.z * 1e3 << ") mm grid-world, normal (" << at.n.x << ", "
+    << at.n.y << ", " << at.n.z << ")";
+  what = o.str();
+  return at;
+}
+
+}  // namespace
+
+int run_link_stability(const std::string& dir, bool quick, std::ostream& log) {
+  fs::create_directories(dir);
+  const Surface wall{sim::plane_field(kUp, kP), kP, kUp};
+  return sweep(wall, dir, "link_stability", "link", "A wall through a delayed link", "a flat wall", quick, log);
+}
+
+int run_link_stability_on_scene(const std::string& scene_path, const std::string& dir, bool quick, std::ostream& log) {
+  fs::create_directories(dir);
+  std::string what;
+  const Surface at = scene_surface(scene_path, what);
+  log << "link scene: presses on " << what << "\n";
+  return sweep(at, dir, "link_stability_scene", "link scene", "A scan through a delayed link", what, quick, log);
 }
 
 }  // namespace isotouch::bench

@@ -16,4 +16,13 @@ namespace isotouch::bench {
 /// @return 0, or 4 if K = 800 with the controller is unstable in some cell.
 int run_link_stability(const std::string& out_dir, bool quick, std::ostream& log);
 
+/// The same sweep on a scan: presses on the isosurface of `scene_path`'s volume (its
+/// isovalue and inside) where the scene's script ray first meets it, along the outward
+/// normal there, through the same link and device; DIR/link_stability_scene.csv and .md.
+/// @throws io::SceneError, engine::VolumeError naming the file; std::runtime_error when the
+///         scene's volume is synthetic or its ray never meets the isosurface.
+/// @return as run_link_stability.
+int run_link_stability_on_scene(const std::string& scene_path, const std::string& out_dir, bool quick,
+                                std::ostream& log);
+
 }  // namespace isotouch::bench

@@ -1,6 +1,8 @@
-# `isotouch stability --quick`: exits 0 (every extreme case passed) and writes its files.
+# `isotouch stability --quick --scene SCENE`: exits 0 (every extreme case passed, K = 800 N/m
+# stable with the controller in every link cell, on the wall and on SCENE's scan) and writes its files.
 file(REMOVE_RECURSE ${OUT})
-execute_process(COMMAND ${EXE} stability --quick --out ${OUT} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+execute_process(COMMAND ${EXE} stability --quick --out ${OUT} --scene ${SCENE} RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "isotouch stability failed (${rc}):\n${out}\n${err}")
 endif()
@@ -44,4 +46,23 @@ if(NOT lmd MATCHES "K = 800 N/m is stable in [0-9]+ of 24 cells without the cont
 endif()
 if(NOT out MATCHES "link 24/24")
   message(FATAL_ERROR "no progress line for the link sweep's last cell")
+endif()
+# The same sweep on the scene's scan (the head CT's skull where its script's ray meets it).
+file(STRINGS ${OUT}/link_stability_scene.csv scene_rows)
+list(LENGTH scene_rows sn)
+if(NOT sn EQUAL 25)
+  message(FATAL_ERROR "link_stability_scene.csv has ${sn} lines, expected a header and 24 rows")
+endif()
+file(READ ${OUT}/link_stability_scene.md smd)
+if(NOT smd MATCHES "on the isosurface of headsq_64x64x93_int16.mhd at 1150 \\(scene head.json\\), where its script's ray first meets it")
+  message(FATAL_ERROR "link_stability_scene.md: does not say it pressed the head's isosurface")
+endif()
+if(NOT smd MATCHES "K = 800 N/m is stable in [0-9]+ of 24 cells without the controller and in 24 of 24 with it")
+  message(FATAL_ERROR "link_stability_scene.md: K = 800 N/m not stable in every cell with the controller on the scan")
+endif()
+if(NOT smd MATCHES "target 10 %: met in 24 of 24 cells")
+  message(FATAL_ERROR "link_stability_scene.md: the slow press's 10 % stiffness target not met in every cell on the scan")
+endif()
+if(NOT out MATCHES "link scene 24/24")
+  message(FATAL_ERROR "no progress line for the scan sweep's last cell")
 endif()

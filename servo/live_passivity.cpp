@@ -1,5 +1,7 @@
 #include "isotouch/servo/live_passivity.h"
 
+#include <cstdio>
+
 namespace isotouch::servo {
 
 void LivePassivity::start(bool control, double alpha_max_n_s_per_m, double force_limit_n, double hold_s) {
@@ -94,6 +96,18 @@ void LivePassivity::publish() {
   dissipated_.store(banked_.dissipated_j + pc_.dissipated_j(), std::memory_order_relaxed);
   active_.store(banked_.active_ticks + pc_.active_ticks(), std::memory_order_relaxed);
   restarts_.store(banked_.restarts, std::memory_order_relaxed);
+}
+
+std::string describe(const PassivityStats& s) {
+  auto mj = [](double j) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.3g mJ", j * 1e3);
+    return std::string(b);
+  };
+  return std::string(s.control ? "controller on" : "observer only") + " (" +
+         (s.device_clock ? "device clock" : "servo clock") + "): in " + mj(s.energy_in_j) + ", out " +
+         mj(s.energy_out_j) + ", dissipated " + mj(s.dissipated_j) + "; damping added on " +
+         std::to_string(s.active_ticks) + " ticks, " + std::to_string(s.restarts) + " restarts";
 }
 
 PassivityStats LivePassivity::stats() const {

@@ -26,6 +26,7 @@
 #include "isotouch/servo/core_names.h"
 #include <atomic>
 #include <cstdint>
+#include <string>
 
 #include "isotouch/core/vec3.h"
 #include "isotouch/servo/port_passivity.h"
@@ -42,6 +43,12 @@ struct PassivityStats {
   long active_ticks = 0;      ///< ticks the controller added damping
   long restarts = 0;          ///< observer restarts: reconnections, device clock resets or jumps
 };
+
+/// One line for a log or a panel: "controller on (device clock): in 12.3 mJ, out 4.56 mJ,
+/// dissipated 0.789 mJ; damping added on 12 ticks, 0 restarts" (energies in mJ, 3
+/// significant digits; "observer only" when the controller is off; "servo clock" when the
+/// device reports none). Not for the servo tick (it allocates).
+std::string describe(const PassivityStats& s);
 
 /// A device clock step this much past the servo's own over the same ticks is a jump [ns].
 inline constexpr std::int64_t kClockJumpNs = 100000000;

@@ -43,4 +43,9 @@ fmax=$(sed -nE 's/.*max \|F\| ([0-9.e+-]+) N.*/\1/p' "$out/emu.log")
 # Felt through the window, and never beyond the scene's 3.3 N force limit (plus the
 # protocol's fixed-point rounding): a stalled servo lets the hand push in up to the clamp.
 awk -v f="$fmax" 'BEGIN { exit !(f > 0.5 && f <= 3.31) }' || fail "the emulator's max |F| $fmax N: not felt through the window, or beyond the 3.3 N limit"
-echo "PASS sculpt --haptic emu"
+# The servo's passivity stage, as the stats panel shows it (servo::describe): the hand that
+# pressed the skull put energy into the port.
+pin=$(sed -n 's/^stats    passivity [a-z ]* ([a-z]* clock): in \([-0-9.e+]*\) mJ, out [-0-9.e+]* mJ, .*/\1/p' "$out/sculpt.log" | head -1)
+[ -n "$pin" ] || fail "no passivity line among the stats"
+awk -v e="$pin" 'BEGIN { exit !(e > 0) }' || fail "the passivity observer saw $pin mJ put in by a hand that pressed the skull"
+echo "PASS sculpt --haptic emu (passivity: $pin mJ in)"

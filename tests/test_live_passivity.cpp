@@ -341,3 +341,20 @@ TEST(LivePassivity, TheGateClampsTheDampedForceToASmallLimit) {
   EXPECT_GT(largest, 0.9 * limit) << "the test's premise: the wall pushes at the limit";
   EXPECT_GT(d.stats.active_ticks, 0) << "the test's premise: the controller damps";
 }
+
+// The line the sculpting app's stats panel and its --stats print show: hand-written values.
+TEST(LivePassivity, DescribeSaysWhatTheObserverMeasuredInMillijoules) {
+  isotouch::servo::PassivityStats s;
+  s.control = true;
+  s.device_clock = true;
+  s.energy_in_j = 0.0123;
+  s.energy_out_j = 0.00456;
+  s.dissipated_j = 0.000789;
+  s.active_ticks = 12;
+  s.restarts = 1;
+  EXPECT_EQ(isotouch::servo::describe(s), "controller on (device clock): in 12.3 mJ, out 4.56 mJ, dissipated 0.789 mJ; "
+                                          "damping added on 12 ticks, 1 restarts");
+  s.control = false;
+  s.device_clock = false;
+  EXPECT_EQ(isotouch::servo::describe(s).substr(0, 29), "observer only (servo clock): ");
+}

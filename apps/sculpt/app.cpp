@@ -25,6 +25,7 @@
 #include <unistd.h>
 
 #include "isotouch/sim/coupled_hand_device.h"
+#include "isotouch/servo/live_passivity.h"
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/session/edit_session.h"
 #include "isotouch/core/exit_codes.h"
@@ -264,6 +265,7 @@ void refresh_servo(PanelStats& p, const session::LiveStats& st, double seconds) 
   p.faults = st.faults;
   if (st.period_error_p99_us >= 0) p.tick_p99_us = st.period_error_p99_us;
   p.tick_p99_beyond = st.period_error_p99_beyond;
+  p.passivity = st.passivity ? servo::describe(*st.passivity) : std::string();
   if (!st.edit_to_haptics_ms.empty()) {
     p.edit_to_haptics_last_ms = st.edit_to_haptics_ms.back();
     p.edit_to_haptics_median_ms = eval::median(st.edit_to_haptics_ms);
@@ -1954,6 +1956,7 @@ void Sculpt::print_servo(const session::LiveStats& st) {
       << " faults; edits " << st.edits_requested << " requested, " << st.edits_applied << " applied, "
       << st.edits_refused << " refused, " << st.edits_dropped << " dropped; swapchain recreated "
       << window->recreations() << " times\n";
+  if (st.passivity) log << "stats    passivity " << servo::describe(*st.passivity) << "\n";
 }
 
 /// A --haptic device's counters and its link's.

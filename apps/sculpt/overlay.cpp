@@ -105,6 +105,7 @@ void stats_panel(const PanelStats& s) {
   else ImGui::TextDisabled("edit->feel  no edit yet");
   ImGui::Text("frame       %.1f ms (%.0f fps)", s.frame_ms, s.frame_ms > 0 ? 1e3 / s.frame_ms : 0.0);
   ImGui::Text("|F|         %.2f N%s", s.force_n, s.contact ? ", contact" : "");
+  if (!s.passivity.empty()) ImGui::TextWrapped("passivity   %s", s.passivity.c_str());
   ImGui::Separator();
   ImGui::TextUnformatted(("volume      " + s.volume).c_str());
   if (!s.isovalue.empty()) ImGui::TextWrapped("%s", s.isovalue.c_str());

@@ -44,6 +44,7 @@ struct PanelStats {
   double frame_ms = 0;                ///< the mean over the frames since the last refresh (every 15 frames)
   double force_n = 0;                 ///< |F| and contact at the last refresh
   bool contact = false;
+  std::string passivity;              ///< the servo's passivity stage (servo::describe; "" = no servo thread)
   std::string volume;                 ///< dims, spacing, orientation
   std::string isovalue;               ///< the chosen isovalue and its rule ("" = given by the user or scene)
   std::string device;                 ///< the haptic device and the status its last tick judged

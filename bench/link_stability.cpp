@@ -225,7 +225,15 @@ Surface scene_surface(const std::string& scene_path, std::string& what) {
   servo::HriParams hp = scene.hri;
   hp.tau = 0;
   hp.inside = core::InsideIs::kAbove;
-  const sim::TouchScript script = sim::make_touch_script(at.field, hp, scene.script);
+  sim::TouchScript script;
+  try {
+    script = sim::make_touch_script(at.field, hp, scene.script);
+  } catch (const std::runtime_error& e) {  // it names the shifted field's isovalue 0: say the scene's
+    std::ostringstream o;
+    o << scene_path << ": field 'script': its ray does not find the isosurface at " << tau << " ("
+      << (above ? "inside above" : "inside below") << ") to press: " << e.what();
+    throw std::runtime_error(o.str());
+  }
   at.p = script.contact_point_m;
   at.n = script.contact_normal;
   std::ostringstream o;

@@ -222,6 +222,19 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
   const std::string next = path_ + ".new";
   const int fd = ::open(next.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
   if (fd < 0) throw JournalError(os_error(next, "cannot create the edit journal"));
+  // The writer first (std::system_error where no thread can be made): nothing that can fail
+  // comes after the rename. It writes nothing before an append, and appends come after start().
+  try {
+    {
+      std::lock_guard<std::mutex> lock(impl_->mu);
+      impl_->stop = false;  // a start after a failed one
+    }
+    impl_->writer = std::thread([this] { impl_->loop(path_); });
+  } catch (...) {
+    ::close(fd);
+    ::unlink(next.c_str());
+    throw;
+  }
   try {
     if (::flock(fd, LOCK_EX | LOCK_NB) != 0) throw JournalError(os_error(next, "cannot lock the edit journal"));
     write_all(fd, text, next);
@@ -230,16 +243,17 @@ void Journal::start(Recording header, const std::vector<session::EditEvent>& res
   } catch (...) {
     ::close(fd);
     ::unlink(next.c_str());
+    impl_->stop_writer();
     throw;
   }
   sync_folder(path_);
-  ::close(impl_->fd);  // the old file's lock goes with it; the new one is locked already
-  impl_->fd = fd;
   {
-    std::lock_guard<std::mutex> lock(impl_->mu);
-    impl_->edits = long(restored.size());
+    std::lock_guard<std::mutex> io(impl_->io_mu);  // the writer's file from here
+    ::close(impl_->fd);  // the old file's lock goes with it; the new one is locked already
+    impl_->fd = fd;
   }
-  impl_->writer = std::thread([this] { impl_->loop(path_); });
+  std::lock_guard<std::mutex> lock(impl_->mu);
+  impl_->edits = long(restored.size());
 }
 
 void Journal::restart(Recording header, const std::vector<session::EditEvent>& kept) {
@@ -248,7 +262,6 @@ void Journal::restart(Recording header, const std::vector<session::EditEvent>& k
   {
     std::lock_guard<std::mutex> lock(impl_->mu);
     if (!impl_->error.empty()) throw JournalError(impl_->error + " (the journal is kept)");
-    impl_->stop = false;
   }
   try {
     start(std::move(header), kept);

@@ -84,7 +84,8 @@ class Journal {
   /// `header` and `kept` replace the file as in start(), the lock held throughout (no other
   /// session can take the file between the two). When it throws, the file is as it was and
   /// still locked, and nothing more is written to it.
-  /// @throws JournalError naming the file (an earlier write failed, or this one did).
+  /// @throws JournalError naming the file (an earlier write failed, or this one did),
+  ///         RecordingError (a bad header), std::system_error (no writer thread).
   void restart(Recording header, const std::vector<session::EditEvent>& kept);
   /// Queues one applied edit's line for the writer (written at once, fdatasync'ed within the
   /// flush interval). Any thread; no wait for the disk. A failed write is kept, reported by

@@ -166,6 +166,7 @@ class Server {
                      const core::Isosurface& iso);
   io::OpenedJournal open_journal(Session& s, std::uint32_t volume_crc32, const std::string& input,
                                  const core::Isosurface& iso);
+  void set_journal_aside(std::unique_ptr<io::Journal>& journal, const std::string& why);
   io::OpenedJournal carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                   const std::vector<std::size_t>& restarts);
   void close_journal();
@@ -882,7 +883,6 @@ void Server::command_loop() {
   auto last_tool = next;
   while (!stop_) {
     std::this_thread::sleep_until(next);
-    next = next_tick(next, Clock::now(), period);
     std::deque<Pending> todo;
     {
       std::lock_guard<std::mutex> lock(cmd_mu_);
@@ -915,6 +915,7 @@ void Server::command_loop() {
       next_image = std::chrono::steady_clock::now() +
                    std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(1.0 / o_.image_hz));
     }
+    next = next_tick(next, Clock::now(), period);  // after the work: a save that took seconds is not followed by a burst
   }
 }
 
@@ -1340,6 +1341,18 @@ void Server::start_journal(Session& s, io::OpenedJournal& j, std::uint32_t volum
 /// before the change, locked throughout (Journal::restart). When it cannot go on, the log
 /// says why, the old file is moved aside (PATH.before-change: never offered as this
 /// session's) and `s` runs without one.
+/// A journal that cannot go on past a change: the file holds the session before it, and is
+/// moved aside (PATH.before-change, replacing an older one) before its lock goes, so that it
+/// is never offered as the session that ran; the log says why.
+void Server::set_journal_aside(std::unique_ptr<io::Journal>& journal, const std::string& why) {
+  const std::string path = journal->path(), aside = path + ".before-change";
+  std::error_code ec;
+  std::filesystem::rename(path, aside, ec);
+  journal.reset();
+  log_.line("journal  " + why + "; the session goes on without its journal (" +
+            (ec ? "the file could not be moved aside: " + ec.message() : "the file moved aside to " + aside) + ")");
+}
+
 io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                         const std::vector<std::size_t>& restarts) {
   io::OpenedJournal j;
@@ -1347,11 +1360,10 @@ io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, con
   const std::string path = from.journal->path();
   std::optional<io::JournalLeft> held;
   try {
-    from.journal->flush();
+    from.journal->flush();  // throws when an earlier write failed (a full disk): the file is behind
     held = from.journal->left(journal_crc_);
   } catch (const std::exception& e) {
-    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (the file is kept)");
-    from.journal.reset();
+    set_journal_aside(from.journal, e.what());
     return j;
   }
   std::vector<session::EditEvent> edits = held ? std::move(held->edits) : std::vector<session::EditEvent>{};
@@ -1367,13 +1379,7 @@ io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, con
   try {
     from.journal->restart(header, edits);  // its lock held throughout
   } catch (const std::exception& e) {
-    // The file still holds the session before the change: never offered as this one's.
-    const std::string aside = path + ".before-change";
-    std::error_code ec;
-    std::filesystem::rename(path, aside, ec);
-    from.journal.reset();
-    log_.line(std::string("journal  ") + e.what() + "; the session goes on without its journal (" +
-              (ec ? "the file could not be moved aside: " + ec.message() : "the file moved aside to " + aside) + ")");
+    set_journal_aside(from.journal, e.what());
     return {};
   }
   j.journal = std::move(from.journal);

@@ -6,7 +6,9 @@
 //     it did not run is not carved at once;
 //   - a stroke (one undo step) goes on through a contact lost for less than kStrokeGapS (a carve
 //     breaking through under a still probe finds the material again a few ticks later: one
-//     press, not several), and ends once the probe has been out of contact that long.
+//     press, not several), and ends once the probe has been out of contact for kStrokeGapS of
+//     tool time (the ticks' tool_dt: on a thread held up past two periods a tick counts two
+//     periods, so the stroke may outlast kStrokeGapS of wall time).
 // Pure functions of the clock values given: tests/test_tool_ticks.cpp. Part of isotouch::service.
 #pragma once
 #include <chrono>

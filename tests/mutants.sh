@@ -209,6 +209,9 @@ m serve-tool-no-burst       service/tool_ticks.cpp '  return (now > due + period
                                test_tool_ticks 'ToolTicks.*'
 m serve-stroke-gap          service/tool_ticks.cpp '  if (apart_s_ + 1e-9 < kStrokeGapS) return false;' '' \
                                test_tool_ticks 'ToolTicks.*'
+# A journal whose rewrite failed writes nothing more (its file stays the session before the change).
+m journal-restart-fails-quiet io/journal.cpp '    impl_->error = e.what();  // appends are dropped from now on, not queued for no writer' '    (void)e;' \
+                               test_journal 'Journal.*'
 # serve's edit journal through an `isovalue V` (issue 62): it goes on for the rebuilt session, and
 # a restore drops the undo history where the session was rebuilt (cli_serve_journal's last part).
 m serve-journal-isovalue    service/serve.cpp $'  if (journal_.journal)\n    carry = ' $'  if (false)\n    carry = ' \

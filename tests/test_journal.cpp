@@ -176,6 +176,31 @@ TEST(Journal, RestartReplacesTheFileAndKeepsItsLock) {
   EXPECT_FALSE(fs::exists(p));
 }
 
+// A rewrite that fails (here its file cannot be made: a folder stands in its place) leaves
+// the file as it was and locked, and nothing is written to it after: serve moves it aside.
+TEST(Journal, AFailedRestartLeavesTheFileAsItWasLockedAndWritesNothingMore) {
+  const fs::path p = temp_file("restart_fails");
+  const fs::path blocker = p.string() + ".new";
+  fs::remove_all(blocker);
+  std::string before;
+  {
+    Journal j(p.string());
+    j.start(header(), {});
+    j.append(brush_at(0.01, 1));
+    j.flush();
+    before = read(p);
+    fs::create_directory(blocker);
+    EXPECT_THROW(j.restart(header(), {brush_at(0.01, 1)}), JournalError);
+    EXPECT_EQ(read(p), before);
+    EXPECT_THROW(Journal(p.string()), JournalError);  // still held: no other session took it
+    j.append(brush_at(0.02, 2));
+    EXPECT_THROW(j.flush(), JournalError);
+    EXPECT_EQ(read(p), before);
+  }
+  EXPECT_EQ(read(p), before);  // kept (not closed): the next start would offer it, serve moves it aside
+  fs::remove_all(blocker);
+}
+
 TEST(Journal, AJournalOfAnotherVolumeIsRefusedNamingBoth) {
   const fs::path p = temp_file("other");
   { Journal(p.string()).start(header(0x00c0ffeeu), {brush_at(0.01, 1)}); }

@@ -213,9 +213,8 @@ std::string error_of(const std::string& text) {
 
 /// `text` with its first `from` made `to` must be refused, the message holding `says`.
 void expect_refused(const std::string& text, const std::string& from, const std::string& to, const std::string& says) {
-  std::string bad = text;
-  bad.replace(bad.find(from), from.size(), to);
-  const std::string why = error_of(bad);
+  SCOPED_TRACE(to);
+  const std::string why = error_of(replaced(text, from, to));
   EXPECT_NE(why, "") << "accepted " << to;
   EXPECT_NE(why.find(says), std::string::npos) << why;
 }

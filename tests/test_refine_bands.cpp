@@ -147,6 +147,55 @@ TEST(RefineBands, ALoadSpikeMakesTheNextBandsSmaller) {
   EXPECT_LE(s.band_ms(spiked.next_row(), spiked.next_rows(), 1, 3e-4) + 10, 0.9 * 33);
 }
 
+/// A window's band frames: each band's render costs `band_fixed` + `row_ms` a row (hit or
+/// miss alike), and the frame around it (the slices, the panels, the present) `overhead` more.
+/// The planner is told both, as the app measures them. The bands' rows and frame times.
+struct WindowFrames {
+  std::vector<int> rows;
+  std::vector<double> frame_ms;
+};
+WindowFrames refine_in_window(RefineBands& bands, int H, double band_fixed, double row_ms, double overhead,
+                              int stall_at = -1, double stall_ms = 0, bool stall_in_band = false) {
+  WindowFrames r;
+  while (!bands.done() && int(r.rows.size()) < 10 * H) {
+    const int n = bands.next_rows();
+    double band = band_fixed + row_ms * n, frame = band + overhead;
+    if (int(r.rows.size()) == stall_at) {  // a stall: the machine suspended, the window minimised
+      frame += stall_ms;
+      if (stall_in_band) band += stall_ms;
+    }
+    r.rows.push_back(n);
+    r.frame_ms.push_back(frame);
+    bands.drawn(band, frame);
+  }
+  return r;
+}
+
+TEST(RefineBands, AFrameOverheadOutsideTheBandIsNotCountedPerRow) {
+  // A 1440-row view whose frames cost 20 ms besides the band's rows (0.01 ms a row; 25 and 28
+  // ms: bands the budget holds before the picture's end), against a 33 ms budget: a band of
+  // R = floor((0.9 x 33 - overhead) / 0.01) rows fits the target share, so the refinement takes
+  // the slow start's doublings up to R (1, 2, 4 ... rows) and ceil(1440 / R) bands after them
+  // at most; each frame within the budget. Whether the band's render has a fixed part of its
+  // own or not (the budget's moving frames measured one of 1 ms).
+  const int H = 1440;
+  const double budget = 33, row_ms = 0.01;
+  for (const double overhead : {20.0, 25.0, 28.0})
+  for (const double band_fixed : {0.0, 1.0}) {
+    const Scene s{1920, H, 0, H, 0.6};  // every row alike: the slow start doubles both hits and misses
+    RefineBands bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+    const WindowFrames r = refine_in_window(bands, H, band_fixed, row_ms, overhead - band_fixed);
+    SCOPED_TRACE("frame overhead " + std::to_string(overhead) + " ms, the band's own fixed part " +
+                 std::to_string(band_fixed) + " ms");
+    const double R = std::floor((0.9 * budget - overhead) / row_ms);
+    const double most = 1 + std::ceil(std::log2(R)) + std::ceil(H / R);
+    std::string rows;
+    for (int n : r.rows) rows += " " + std::to_string(n);
+    EXPECT_LE(double(r.rows.size()), most) << "bands' rows:" << rows;
+    for (std::size_t k = 0; k < r.frame_ms.size(); ++k) EXPECT_LE(r.frame_ms[k], budget) << "band " << k;
+  }
+}
+
 TEST(RefineBands, RowsWithMoreHitsGetSmallerBands) {
   // The object in the lower half: the bands there hold fewer rows than the empty top's.
   const Scene s{800, 800, 400, 800, 1.0};

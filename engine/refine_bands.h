@@ -16,11 +16,13 @@
 // frames (their estimate of a whole frame was about 4 times low on the head at 1920x1440):
 // fitted (least squares, non-negative) to the bands drawn so far, each band's cost less the
 // fixed part; while the bands have held no hits (no misses), a is 5 b (b is a / 5). The first
-// band is one row; then a band holds the most rows whose predicted cost, plus the most a drawn
-// band cost over the prediction it was sized on (a load spike is kept as room), stays within the budget's target
-// share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
+// band is one row; then a band holds the most rows whose predicted cost, plus what the drawn
+// bands cost over the predictions they were sized on (a load spike is kept as room, halved
+// each band after it), stays within the budget's target share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
 // band drawn, at least one of each. No floor on rows: a full frame of many budgets takes as
-// many frames. No wall clock inside: the caller measures each band.
+// many frames. A band's frame over 4 budgets (a stall: the window minimised, the machine
+// suspended) is not a cost: not fitted, not kept as room, not grown from; its rows are drawn.
+// No wall clock inside: the caller measures each band.
 #pragma once
 #include <vector>
 
@@ -69,7 +71,7 @@ class RefineBands {
   double fixed_ = 0;                    // [ms] per band, of its render
   double rest_ = 0;                     // [ms] per band frame, outside its render (slices, panels, present)
   double a_ = 0, b_ = 0;                // [ms] per full row of hits, of misses
-  double over_ = 0;                     // the most a drawn band cost over its prediction [ms]
+  double over_ = 0;                     // what a drawn band cost over its prediction, halved each band [ms]
   double most_hits_ = 0, most_misses_ = 0;  // the largest drawn band's hit and miss rows
 };
 

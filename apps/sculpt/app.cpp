@@ -985,6 +985,9 @@ bool Sculpt::frame_step() {
   f.fb = window->framebuffer_size();
   if (f.fb[0] == 0 || f.fb[1] == 0) {  // minimised: the session keeps running, nothing is drawn
     glfwWaitEventsTimeout(0.05);
+    // No frame: the next one's time (a refinement band's frame among them) starts here, not
+    // before the window was minimised.
+    last_frame = Clock::now();
     return true;
   }
   std::vector<std::string> shots;

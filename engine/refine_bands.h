@@ -10,8 +10,8 @@
 // taken at once, a fall at half weight), the band's fixed part (submission, the clears; the
 // budget's fixed part, then at most the cheapest band's) and a part per full-resolution row
 // (the band's own time less its fixed part: the rest of the frame is never fitted per row,
-// where a frame's 20 ms outside its band made every band one row), a row's cost split by the last
-// moving frame's hits along it: a full row of hits costs a (marched to the surface and
+// where a frame's 20 ms outside its band made every band one row), a row's cost split by the
+// last moving frame's hits along it: a full row of hits costs a (marched to the surface and
 // shaded), a full row of misses b. a and b are measured, not extrapolated from the moving
 // frames (their estimate of a whole frame was about 4 times low on the head at 1920x1440):
 // fitted (least squares, non-negative) to the bands drawn so far, each band's cost less the

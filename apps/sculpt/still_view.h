@@ -7,9 +7,10 @@
 // engine::RefineBands), each band put over the last moving frame's picture scaled up, and the
 // frame after the last band is an ordinary render() that reuses the bands' picture and draws
 // the probe's glyphs over it. Each band is sized by the bands' own times (per row) and the
-// rest of their frames (the slices, the panels, the present: a part of every band's frame). While bands are drawn the glyphs show only in the rows not yet
-// refined (render_rows draws no primitives); an edit, a camera move or a resize ends the
-// refinement (the edited picture is drawn at once, as without a budget).
+// rest of their frames (the slices, the panels, the present: a part of every band's frame).
+// While bands are drawn the glyphs show only in the rows not yet refined (render_rows draws
+// no primitives); an edit, a camera move or a resize ends the refinement (the edited picture
+// is drawn at once, as without a budget).
 #pragma once
 #include <array>
 #include <cstdint>

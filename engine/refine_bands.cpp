@@ -9,6 +9,7 @@ namespace isotouch::engine {
 
 namespace {
 constexpr double kHitPerMiss = 5;  // a hit row's cost over a miss row's until measured
+constexpr double kStall = 4;       // a frame over this many budgets is a stall, not a cost
 }
 
 RefineBands::RefineBands(const std::vector<float>& low_depth, int lw, int lh, int H, const FrameBudget& budget)
@@ -26,7 +27,9 @@ RefineBands::RefineBands(const std::vector<float>& low_depth, int lw, int lh, in
   }
 }
 
-double RefineBands::band_cost(double hits, double misses) const { return fixed_ + a_ * hits + b_ * misses + over_; }
+double RefineBands::band_cost(double hits, double misses) const {
+  return rest_ + fixed_ + a_ * hits + b_ * misses + over_;
+}
 
 int RefineBands::next_rows() const {
   if (done()) return 0;
@@ -84,15 +87,22 @@ void RefineBands::fit() {
   b_ = std::isfinite(b) ? std::max(0.0, b) : b_;
 }
 
-void RefineBands::drawn(double ms) {
+void RefineBands::drawn(double band_ms, double frame_ms) {
   const int n = next_rows();
   if (n == 0) return;
   double h = 0;
   for (int y = next_; y < next_ + n; ++y) h += hit_[std::size_t(y)];
   next_ += n;
-  if (!std::isfinite(ms) || ms < 0) return;
-  // What the band cost over the prediction it was sized on (the first: none) stays as room.
-  if (!drawn_.empty()) over_ = std::max(over_, ms - (fixed_ + a_ * h + b_ * (n - h)));
+  if (!std::isfinite(band_ms) || band_ms < 0 || !std::isfinite(frame_ms)) return;
+  // A stall (the window minimised, the machine suspended: a frame of many budgets) says nothing
+  // of what rows cost: not fitted, not kept as room, not grown from (slow start).
+  if (budget_ms_ > 0 && std::max(band_ms, frame_ms) > kStall * budget_ms_) return;
+  const double ms = band_ms, rest = std::max(0.0, frame_ms - band_ms);
+  // The rest of the frame (slices, panels, present): a rise taken at once, a fall at half weight.
+  rest_ = drawn_.empty() ? rest : rest > rest_ ? rest : rest_ + 0.5 * (rest - rest_);
+  // What the band cost over the prediction it was sized on (the first: none) stays as room,
+  // halved each band after it (a load spike passes).
+  if (!drawn_.empty()) over_ = std::max(0.5 * over_, ms - (fixed_ + a_ * h + b_ * (n - h)));
   fixed_ = std::min(fixed_, ms);
   drawn_.push_back({h, n - h, ms});
   most_hits_ = std::max(most_hits_, h);

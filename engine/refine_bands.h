@@ -5,18 +5,24 @@
 // each band sized so that its frame keeps the budget: VTK's and 3D Slicer's "still update
 // rate", spread over frames instead of one long frame. The bands go from row 0 down.
 //
-// A band costs a fixed part (submission, the clears; the budget's fixed part, then at most
-// the cheapest band's) and a part per full-resolution row, a row's cost split by the last
-// moving frame's hits along it: a full row of hits costs a (marched to the surface and
+// A band's frame costs the rest of the frame (what the frame does besides the band: in the
+// window the slices, the panels, the present; measured as the frame less the band, a rise
+// taken at once, a fall at half weight), the band's fixed part (submission, the clears; the
+// budget's fixed part, then at most the cheapest band's) and a part per full-resolution row
+// (the band's own time less its fixed part: the rest of the frame is never fitted per row,
+// where a frame's 20 ms outside its band made every band one row), a row's cost split by the
+// last moving frame's hits along it: a full row of hits costs a (marched to the surface and
 // shaded), a full row of misses b. a and b are measured, not extrapolated from the moving
 // frames (their estimate of a whole frame was about 4 times low on the head at 1920x1440):
 // fitted (least squares, non-negative) to the bands drawn so far, each band's cost less the
 // fixed part; while the bands have held no hits (no misses), a is 5 b (b is a / 5). The first
-// band is one row; then a band holds the most rows whose predicted cost, plus the most a drawn
-// band cost over the prediction it was sized on (a load spike is kept as room), stays within the budget's target
-// share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
+// band is one row; then a band holds the most rows whose predicted cost, plus what the drawn
+// bands cost over the predictions they were sized on (a load spike is kept as room, halved
+// each band after it), stays within the budget's target share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
 // band drawn, at least one of each. No floor on rows: a full frame of many budgets takes as
-// many frames. No wall clock inside: the caller measures each band.
+// many frames. A band's frame over 4 budgets (a stall: the window minimised, the machine
+// suspended) is not a cost: not fitted, not kept as room, not grown from; its rows are drawn.
+// No wall clock inside: the caller measures each band.
 #pragma once
 #include <vector>
 
@@ -40,9 +46,13 @@ class RefineBands {
   int next_rows() const;
   /// The predicted cost of the next band [ms] (fixed part included; 0 when done()).
   double next_ms() const;
-  /// The next band (next_row(), next_rows()) was drawn in `ms` [ms] (including what the
-  /// caller does with its rows); moves on to the rows after it.
-  void drawn(double ms);
+  /// The next band (next_row(), next_rows()) was drawn in `band_ms` [ms] (its render and what
+  /// the caller does with its rows) in a frame of `frame_ms` [ms] all told (the band, the rest
+  /// of the frame, the present); moves on to the rows after it. The band's time is fitted per
+  /// row; the rest of the frame (frame_ms - band_ms) is a part of every band's frame.
+  void drawn(double band_ms, double frame_ms);
+  /// A band that was its frame's whole cost (nothing else in the frame).
+  void drawn(double ms) { drawn(ms, ms); }
 
   /// The fitted cost of a full row of hits and of misses [ms].
   double hit_row_ms() const { return a_; }
@@ -58,9 +68,10 @@ class RefineBands {
   std::vector<Drawn> drawn_;
   int H_ = 0, next_ = 0;
   double budget_ms_ = 0, target_ = 0.9;
-  double fixed_ = 0;                    // [ms] per band
+  double fixed_ = 0;                    // [ms] per band, of its render
+  double rest_ = 0;                     // [ms] per band frame, outside its render (slices, panels, present)
   double a_ = 0, b_ = 0;                // [ms] per full row of hits, of misses
-  double over_ = 0;                     // the most a drawn band cost over its prediction [ms]
+  double over_ = 0;                     // what a drawn band cost over its prediction, halved each band [ms]
   double most_hits_ = 0, most_misses_ = 0;  // the largest drawn band's hit and miss rows
 };
 

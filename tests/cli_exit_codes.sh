@@ -42,6 +42,9 @@ if [ -n "$sculpt" ]; then
     grep -qi "json" "$out/sculpt_iso_$v.log" && fail "--iso $v: JSON parser text reached the user"
   done
   expect sculpt_size 2 "--size: must be W \(height 3/4 of it\) or WxH .*got '8192': width 8192 outside 64 to 4096" "$sculpt" "$out/v.mhd" --iso 1 --size 8192
+  # An empty size is refused, not taken as the default 1024x768.
+  expect sculpt_size_empty 2 "--size: must be W \(height 3/4 of it\) or WxH .*got '': empty" "$sculpt" "$out/v.mhd" --iso 1 --size ""
+  expect sculpt_size_empty_eq 2 "--size" "$sculpt" "$out/v.mhd" --iso 1 --size=
   expect sculpt_unknown_option 2 "--bogus" "$sculpt" "$out/v.mhd" --bogus
 fi
 echo "PASS cli exit codes"

@@ -147,6 +147,125 @@ TEST(RefineBands, ALoadSpikeMakesTheNextBandsSmaller) {
   EXPECT_LE(s.band_ms(spiked.next_row(), spiked.next_rows(), 1, 3e-4) + 10, 0.9 * 33);
 }
 
+/// A window's band frames: each band's render costs `band_fixed` + `row_ms` a row (hit or
+/// miss alike), and the frame around it (the slices, the panels, the present) `overhead` more.
+/// The planner is told both, as the app measures them. The bands' rows and frame times.
+struct WindowFrames {
+  std::vector<int> rows;
+  std::vector<double> frame_ms;
+};
+WindowFrames refine_in_window(RefineBands& bands, int H, double band_fixed, double row_ms, double overhead,
+                              int stall_at = -1, double stall_ms = 0, bool stall_in_band = false) {
+  WindowFrames r;
+  while (!bands.done() && int(r.rows.size()) < 10 * H) {
+    const int n = bands.next_rows();
+    double band = band_fixed + row_ms * n, frame = band + overhead;
+    if (int(r.rows.size()) == stall_at) {  // a stall: the machine suspended, the window minimised
+      frame += stall_ms;
+      if (stall_in_band) band += stall_ms;
+    }
+    r.rows.push_back(n);
+    r.frame_ms.push_back(frame);
+    bands.drawn(band, frame);
+  }
+  return r;
+}
+
+TEST(RefineBands, AFrameOverheadOutsideTheBandIsNotCountedPerRow) {
+  // A 1440-row view whose frames cost 20 ms besides the band's rows (0.01 ms a row; 25 and 28
+  // ms: bands the budget holds before the picture's end), against a 33 ms budget: a band of
+  // R = floor((0.9 x 33 - overhead) / 0.01) rows fits the target share, so the refinement takes
+  // the slow start's doublings up to R (1, 2, 4 ... rows) and ceil(1440 / R) bands after them
+  // at most; each frame within the budget. Whether the band's render has a fixed part of its
+  // own or not (the budget's moving frames measured one of 1 ms).
+  const int H = 1440;
+  const double budget = 33, row_ms = 0.01;
+  for (const double overhead : {20.0, 25.0, 28.0})
+  for (const double band_fixed : {0.0, 1.0}) {
+    const Scene s{1920, H, 0, H, 0.6};  // every row alike: the slow start doubles both hits and misses
+    RefineBands bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+    const WindowFrames r = refine_in_window(bands, H, band_fixed, row_ms, overhead - band_fixed);
+    SCOPED_TRACE("frame overhead " + std::to_string(overhead) + " ms, the band's own fixed part " +
+                 std::to_string(band_fixed) + " ms");
+    const double R = std::floor((0.9 * budget - overhead) / row_ms);
+    const double most = 1 + std::ceil(std::log2(R)) + std::ceil(H / R);
+    std::string rows;
+    for (int n : r.rows) rows += " " + std::to_string(n);
+    EXPECT_LE(double(r.rows.size()), most) << "bands' rows:" << rows;
+    for (std::size_t k = 0; k < r.frame_ms.size(); ++k) EXPECT_LE(r.frame_ms[k], budget) << "band " << k;
+  }
+}
+
+TEST(RefineBands, AStallIsNotACost) {
+  // One frame of 2 s more (the window was minimised, the machine suspended; in the frame or in
+  // the band's render) among frames of 25 ms besides the band and 0.011 ms a row: the rows cost
+  // what they did, so the bands after it are the calm refinement's (a row either way: the fits
+  // differ in rounding); after a stall in the slow start (the stalled band not measured, not
+  // grown from) one band more at most. Every other frame within the budget.
+  const int H = 2880;
+  const double budget = 33, row_ms = 0.011, band_fixed = 1, overhead = 25;
+  const Scene s{1920, H, 0, H, 0.6};
+  RefineBands calm_bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+  const WindowFrames calm = refine_in_window(calm_bands, H, band_fixed, row_ms, overhead - band_fixed);
+  ASSERT_GT(calm.rows.size(), 13u);
+  const int budget_bound = 9;  // 1 2 4 ... 256 rows, then bands of floor((0.9 x 33 - 25) / 0.011) = 427
+  ASSERT_LT(calm.rows[budget_bound], 2 * calm.rows[budget_bound - 1]) << "the budget holds band 9, not the slow start";
+  for (const bool in_band : {false, true}) {
+    for (const int k : {2, 5, budget_bound, 12}) {
+      RefineBands bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+      const WindowFrames r = refine_in_window(bands, H, band_fixed, row_ms, overhead - band_fixed, k, 2000, in_band);
+      SCOPED_TRACE(std::string("a 2 s stall in ") + (in_band ? "the band's render" : "the frame") + " of band " +
+                   std::to_string(k));
+      std::string rows;
+      for (std::size_t j = 0; j < std::min<std::size_t>(r.rows.size(), 40); ++j) rows += " " + std::to_string(r.rows[j]);
+      // As AFrameOverheadOutsideTheBandIsNotCountedPerRow: the slow start's doublings up to R
+      // rows, then ceil(H / R) bands (one more after a stall in the slow start).
+      const double R = std::floor((0.9 * budget - overhead) / row_ms);
+      EXPECT_LE(double(r.rows.size()), 1 + std::ceil(std::log2(R)) + std::ceil(H / R) + (k < budget_bound))
+          << "bands' rows:" << rows;
+      if (k >= budget_bound) {
+        ASSERT_EQ(r.rows.size(), calm.rows.size()) << "bands' rows:" << rows;
+        for (std::size_t j = std::size_t(k) + 1; j + 1 < r.rows.size(); ++j)
+          EXPECT_NEAR(r.rows[j], calm.rows[j], 1) << "band " << j << "; bands' rows:" << rows;
+      } else {
+        EXPECT_LE(r.rows.size(), calm.rows.size() + 1) << "bands' rows:" << rows;
+      }
+      for (std::size_t j = 0; j < r.frame_ms.size(); ++j)
+        if (int(j) != k) EXPECT_LE(r.frame_ms[j], budget) << "band " << j;
+    }
+  }
+}
+
+TEST(RefineBands, ALoadSpikesRoomHalvesEachBand) {
+  // A band 4 ms dearer than its rows (the machine was busy; in its render or in the rest of its
+  // frame) among frames of 25 ms besides the band and 0.011 ms a row: the next band leaves the
+  // 4 ms, the one after it 2, then 1 ...: band j after the spike costs at most the target share
+  // less 4 / 2^(j-1) ms, and at least that less one row (bands hold whole rows), the last
+  // band excepted. In the band's render the spike also enters the least-squares fit of a row's
+  // cost (every row alike here: one cost a row, fitted to the bands' times less their fixed
+  // 1 ms): a row costs row_ms + spike n_k / sum(n_i^2) over the bands drawn, which the band
+  // leaves as well.
+  const int H = 2880;
+  const double budget = 33, row_ms = 0.011, band_fixed = 1, overhead = 25, spike = 4;
+  const Scene s{1920, H, 0, H, 0.6};
+  const int k = 9;  // a band the budget holds (AStallIsNotACost)
+  for (const bool in_band : {false, true}) {
+    RefineBands bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+    const WindowFrames r = refine_in_window(bands, H, band_fixed, row_ms, overhead - band_fixed, k, spike, in_band);
+    SCOPED_TRACE(std::string("a 4 ms spike in ") + (in_band ? "the band's render" : "the frame"));
+    ASSERT_GT(r.rows.size(), std::size_t(k + 4));
+    double sum_n2 = 0;  // over the bands drawn before band k + j
+    for (std::size_t j = 0; j <= std::size_t(k); ++j) sum_n2 += double(r.rows[j]) * r.rows[j];
+    for (std::size_t j = 1; k + j + 1 < r.rows.size(); ++j) {
+      const double n = r.rows[k + j], fitted_row = row_ms + (in_band ? spike * r.rows[k] / sum_n2 : 0.0);
+      const double frame = r.frame_ms[k + j], room = spike / std::pow(2.0, double(j) - 1) + (fitted_row - row_ms) * n;
+      EXPECT_LE(frame + room, 0.9 * budget + 1e-9) << "band " << j << " after the spike leaves its room";
+      EXPECT_GE(frame + room + fitted_row, 0.9 * budget - 1e-9) << "band " << j << " after the spike: " << n << " rows";
+      sum_n2 += n * n;
+    }
+  }
+}
+
 TEST(RefineBands, RowsWithMoreHitsGetSmallerBands) {
   // The object in the lower half: the bands there hold fewer rows than the empty top's.
   const Scene s{800, 800, 400, 800, 1.0};

@@ -538,6 +538,7 @@ struct Sculpt {
   sculpt::StillView still;              // a still view refined over frames after moving ones
   std::vector<std::uint32_t> band_px;   // the picture a band frame shows (window size, RGBA)
   bool band_frame = false;              // this frame drew a band
+  double band_ms = 0;                   // its band's render and copy into the window's picture [ms]
   long refinements = 0, refinements_done = 0, refined_reused = 0;
   bool check_reuse = false;             // the last band was drawn: the next render() should reuse it
   Clock::time_point frame_began;        // this frame's start
@@ -986,6 +987,9 @@ bool Sculpt::frame_step() {
   f.fb = window->framebuffer_size();
   if (f.fb[0] == 0 || f.fb[1] == 0) {  // minimised: the session keeps running, nothing is drawn
     glfwWaitEventsTimeout(0.05);
+    // No frame: the next one's time (a refinement band's frame among them) starts here, not
+    // before the window was minimised.
+    last_frame = Clock::now();
     return true;
   }
   std::vector<std::string> shots;
@@ -1067,7 +1071,8 @@ bool Sculpt::refine_still(const FrameSize& f, bool shot, bool edited) {
   caster->set_bgra(f.direct() && window->bgra());  // as the render() after the bands: it reuses them
   const auto r0 = Clock::now();
   still.band(*caster, view, style, f.fb, band_px);
-  render_ms.push_back(ms_since(r0));
+  band_ms = ms_since(r0);
+  render_ms.push_back(band_ms);
   img = engine::RaycastImage{};  // the caster's buffers no longer hold that frame (steer_hand reads their depth)
   if (still.last_band()) {
     ++refinements_done;
@@ -1546,8 +1551,9 @@ void Sculpt::end_frame(const session::Observed& obs, const std::array<int, 2>& f
     frame_ms.push_back(std::chrono::duration<double, std::milli>(end - last_frame).count());
     (band_frame ? frame_band_ms : img.reused ? frame_reused_ms : frame_full_ms).push_back(frame_ms.back());
   }
-  // A band's frame, all of it, sizes the next band (no time for a first frame: still advanced).
-  if (band_frame) still.frame_drawn(frame > 0 ? frame_ms.back() : std::numeric_limits<double>::quiet_NaN());
+  // A band's render (per row) and its frame, all of it (the rest: a part of every band's
+  // frame), size the next band (no time for a first frame: still advanced).
+  if (band_frame) still.frame_drawn(band_ms, frame > 0 ? frame_ms.back() : std::numeric_limits<double>::quiet_NaN());
   last_frame = end;
   ++frame;
   if (frame == 2) refresh_panel(obs, 1);  // the first frame time, until the first refresh

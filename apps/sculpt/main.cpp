@@ -39,6 +39,7 @@ void parse_size(const std::string& text, Options& o) {
     return CLI::ValidationError("--size", "must be W (height 3/4 of it) or WxH in pixels, width 64 to 4096, height 48 to "
                                           "4096, at most 4096x3072 pixels in all, got '" + text + "'" + (why.empty() ? "" : ": " + why));
   };
+  if (text.empty()) throw bad("empty");
   const auto number = [&](const std::string& s) {
     if (s.empty() || s.size() > 5 || s.find_first_not_of("0123456789") != std::string::npos) throw bad("");
     return std::stoi(s);
@@ -107,7 +108,7 @@ int main(int argc, char** argv) {
   cli.add_option("--export", o.export_path, "where Ctrl+E writes the isosurface mesh (.stl, .obj, .ply; default INPUT-sculpted.stl)");
   isotouch::app::add_mesh_units_option(cli, o.mesh_units);
   std::string size;
-  cli.add_option("--size", size,
+  CLI::Option* size_opt = cli.add_option("--size", size,
                  "the window's size in pixels: W (height 3/4 of it; default 1024) or WxH (e.g. 1920x1080); width 64 to "
                  "4096, height 48 to 4096, at most 4096x3072 pixels in all");
   cli.add_option("--render-scale", o.render_scale, "draw at this fraction of the window's resolution (faster on a CPU device)")
@@ -169,8 +170,9 @@ int main(int argc, char** argv) {
   cli.add_flag("--allow-unstable-stiffness", o.allow_unstable_stiffness,
                "run a stiffness above the stability bound (for --haptic igtl:, the one at the stream's measured rate), "
                "as the scene's servo.allow_unstable_stiffness");
-  cli.parse_complete_callback([&o, &size] {
-    if (!size.empty()) isotouch::sculpt::parse_size(size, o);
+  cli.parse_complete_callback([&o, &size, size_opt] {
+    // Given at all, parsed: CLI11 takes `--size ""` as an empty value, not as no option.
+    if (size_opt->count() > 0) isotouch::sculpt::parse_size(size, o);
     isotouch::sculpt::check_record_input(o);
   });
   try {

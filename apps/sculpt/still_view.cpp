@@ -36,9 +36,9 @@ int StillView::band(engine::RayCaster& caster, const engine::CameraView& view, c
   return n;
 }
 
-void StillView::frame_drawn(double ms) {
+void StillView::frame_drawn(double band_ms, double frame_ms) {
   if (!bands_) return;
-  bands_->drawn(ms);
+  bands_->drawn(band_ms, frame_ms);
   if (bands_->done()) bands_.reset();
 }
 

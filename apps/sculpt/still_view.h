@@ -6,10 +6,11 @@
 // the full picture is drawn a band of rows per frame (RayCaster::render_rows, bands planned by
 // engine::RefineBands), each band put over the last moving frame's picture scaled up, and the
 // frame after the last band is an ordinary render() that reuses the bands' picture and draws
-// the probe's glyphs over it. Each band is sized by the band frames' whole times (the present
-// and the panels included). While bands are drawn the glyphs show only in the rows not yet
-// refined (render_rows draws no primitives); an edit, a camera move or a resize ends the
-// refinement (the edited picture is drawn at once, as without a budget).
+// the probe's glyphs over it. Each band is sized by the bands' own times (per row) and the
+// rest of their frames (the slices, the panels, the present: a part of every band's frame).
+// While bands are drawn the glyphs show only in the rows not yet refined (render_rows draws
+// no primitives); an edit, a camera move or a resize ends the refinement (the edited picture
+// is drawn at once, as without a budget).
 #pragma once
 #include <array>
 #include <cstdint>
@@ -37,10 +38,11 @@ class StillView {
            const std::array<int, 2>& fb, std::vector<std::uint32_t>& px);
   /// The band drawn last holds the picture's last rows (after band(), before frame_drawn()).
   bool last_band() const { return bands_ && bands_->next_row() + bands_->next_rows() >= rh_; }
-  /// The frame that showed the band took `ms` [ms], all of it (the band, the rest of the
-  /// frame, the present): the next band is sized on what a frame costs. After the last band
-  /// active() is false: the next render() of the view reuses the bands.
-  void frame_drawn(double ms);
+  /// The band took `band_ms` [ms] (band()) and the frame that showed it `frame_ms`, all of it
+  /// (the band, the rest of the frame, the present): the next band is sized on what its rows
+  /// cost and what the rest of a frame costs. After the last band active() is false: the next
+  /// render() of the view reuses the bands.
+  void frame_drawn(double band_ms, double frame_ms);
 
  private:
   std::optional<engine::RefineBands> bands_;

@@ -336,6 +336,7 @@ struct ToolPlane {
 /// updates read nothing for it. Friction and force shading do not apply to the tool (the
 /// scene refuses them).
 class HriRenderer final : public Renderer {
+  friend struct HriRendererTest;  // tests/test_hri_entry_side.cpp: one hold_entry_side on a set state
  public:
   explicit HriRenderer(const HriParams& params);
 

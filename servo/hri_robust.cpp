@@ -523,10 +523,14 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
     // The held plane's point goes to the face found from the HIP along its normal: up always
     // (a tilted held plane slid the proxy down it on a stroke along the feature), down only
     // with the HIP short of the middle along that normal and the wall as thick there.
+    // The reach: the HIP's depth along the normal kept (entry_n_ where the turn was undone;
+    // along held.n, 20-45 deg off it, a held point lying to the side gave a longer reach and
+    // the proxy went up past depth + voxel in one update: HriEntrySide).
+    const double kept_depth = dot(kept.n, kept.p - hip);
     Vec3 q;
-    if (face_along(field, hip, kept.n, depth + voxel, voxel, q) &&
+    if (face_along(field, hip, kept.n, kept_depth + voxel, voxel, q) &&
         (dot(kept.n, q - kept.p) > 0.0 ||
-         (!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))))
+         (!past_middle(field, hip, kept.n, kept_depth, voxel) && as_thick_as_entry(q))))
       kept.p = q;
     adopt_plane(kept, hip, out);
     plane_grad_norm_ = held_grad_norm;

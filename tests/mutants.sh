@@ -276,9 +276,12 @@ m hri-hold-reach-kept       $H 'face_along(field, hip, kept.n, kept_depth + voxe
 # The pressed-round rule only on a thin feature (its far face within the depth and two of the
 # smallest voxels): on convex bulk material (the sphere's run) it held a 20 deg plane round the
 # side and the force turned 60 deg at the lift.
-m hri-hold-round-thin       $H 'face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);' \
-                               '(face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face) || true);' \
+m hri-hold-round-thin       $H 'face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face);' \
+                               '(face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face) || true);' \
                                isotouch 'ctest:cli_run_sphere'
+# Thin also where the feature is at most twice limit / K thick (its middle within the press the
+# limit allows): with two voxels alone, 2-3-voxel ridges on 1 x 1 x 3 mm voxels wrapped at 0.7.
+m hri-hold-round-limit      $H 'std::max(depth + 2.0 * voxel, thin_wall - depth)' 'depth + 2.0 * voxel' $R "$G"
 
 # The time-domain passivity controller at the device end of a delayed link (port_passivity)
 # and the link the simulation puts in front of it (delayed_link).

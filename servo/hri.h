@@ -240,7 +240,8 @@ struct ToolPlane {
 ///   that way is no nearer the new face than the opposite one (the plane iteration carrying
 ///   the proxy round; at n = 1 it runs every tick and turned entry_n_ with it before the HIP
 ///   reached the middle along it). On a thin feature only (its far face within the HIP's
-///   depth plus two of the smallest voxels behind the HIP along -entry_n_), the side is also held
+///   depth plus two of the smallest voxels behind the HIP along -entry_n_, or the feature at
+///   most twice limit / K thick: its middle within the press the limit allows), the side is also held
 ///   when the proxy went farther across entry_n_ than the HIP since entry_n_ was set (the
 ///   iteration carrying it round a crest); convex bulk material does that too, by
 ///   R / (R - depth), and held there the plane kept its normal round a sphere. While held, the held plane's point is lifted to the face
@@ -336,6 +337,7 @@ struct ToolPlane {
 /// updates read nothing for it. Friction and force shading do not apply to the tool (the
 /// scene refuses them).
 class HriRenderer final : public Renderer {
+  friend struct HriRendererTest;  // tests/test_hri_entry_side.cpp: one hold_entry_side on a set state
  public:
   explicit HriRenderer(const HriParams& params);
 

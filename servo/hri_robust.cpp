@@ -497,11 +497,21 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // deep) a hold kept the plane while the lift went out along the far side's normal, 3.3 N
   // until the HIP left the bone; with the voxel's width along entry_n_ (5 mm there) the wall
   // counted as thin. There is no far side there to wrap round to.
+  // Or thin for this servo: the middle within the depth the force limit presses to (a wall
+  // up to twice that thick: limit / K, world [m]), which a hand pressing below the limit
+  // reaches. Two of the smallest voxels missed ridges of 2-3 voxels on 1 x 1 x 3 mm voxels
+  // (5.4-8 mm thick along the press; pressed on the crest's rounded corner the plane turned
+  // with the proxy onto the crest in sub-20-deg steps and the across stroke wrapped at 0.7
+  // of the limit: HriRidges seeds 5, 6, 11, 12). The chest's bone wall (10.7 mm, its middle
+  // 5.3 mm in) and the sphere lie beyond it.
+  const double k = params_.stiffness_n_per_m;
+  const double thin_wall = k > 0.0 ? 2.0 * params_.force_limit_n / k * params_.world_per_device : 0.0;
   const Vec3 hip_moved = hip - entry_hip_;
   Vec3 far_face;
+  const double far_reach = std::max(depth + 2.0 * voxel, thin_wall - depth);  // a far face within: thin
   const bool pressed_round = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
                              across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel && depth > 0.0 &&
-                             face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);
+                             face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face);
   if (depth > 0.0 && (entry_held_ || pressed_round || past_middle(field, hip, entry_n_, depth, voxel) ||
                       past_middle(field, hip, plane_.n, new_depth, voxel))) {
     VirtualPlane kept = held;
@@ -523,10 +533,14 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
     // The held plane's point goes to the face found from the HIP along its normal: up always
     // (a tilted held plane slid the proxy down it on a stroke along the feature), down only
     // with the HIP short of the middle along that normal and the wall as thick there.
+    // The reach: the HIP's depth along the normal kept (entry_n_ where the turn was undone;
+    // along held.n, 20-45 deg off it, a held point lying to the side gave a longer reach and
+    // the proxy went up past depth + voxel in one update: HriEntrySide).
+    const double kept_depth = dot(kept.n, kept.p - hip);
     Vec3 q;
-    if (face_along(field, hip, kept.n, depth + voxel, voxel, q) &&
+    if (face_along(field, hip, kept.n, kept_depth + voxel, voxel, q) &&
         (dot(kept.n, q - kept.p) > 0.0 ||
-         (!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))))
+         (!past_middle(field, hip, kept.n, kept_depth, voxel) && as_thick_as_entry(q))))
       kept.p = q;
     adopt_plane(kept, hip, out);
     plane_grad_norm_ = held_grad_norm;

@@ -274,15 +274,22 @@ R=test_hri_ridges G='HriRidges.*'
 m hri-hold-faces-entry      $H 'if (!entry_held_ && dot(entry_n_, hip - held.p) < 0.0) kept.n = entry_n_;' '' $R "$G"
 m hri-hold-stays            $H '(!entry_held_ && dot(plane_.n, entry_n_) >= kCos)' 'dot(plane_.n, entry_n_) >= kCos' $R "$G"
 m hri-hold-pressed-round    $H '(entry_held_ || pressed_round ||' '(entry_held_ ||' $R "$G"
-m hri-hold-face-lowered     $H '(!past_middle(field, hip, kept.n, dot(kept.n, kept.p - hip), voxel) && as_thick_as_entry(q))' \
+m hri-hold-face-lowered     $H '(!past_middle(field, hip, kept.n, kept_depth, voxel) && as_thick_as_entry(q))' \
                                'false' test_hri_falling_plate 'HriFallingPlate.*'
 m hri-hold-face-thick       $H '&& as_thick_as_entry(q))))' ')))' $R "$G"
+# The face search's reach: the HIP's depth along the normal kept (entry_n_ after a turn undone),
+# not along the held one (a held point to the side: the proxy went up past depth + voxel).
+m hri-hold-reach-kept       $H 'face_along(field, hip, kept.n, kept_depth + voxel, voxel, q)' \
+                               'face_along(field, hip, kept.n, depth + voxel, voxel, q)' test_hri_entry_side 'HriEntrySide.*'
 # The pressed-round rule only on a thin feature (its far face within the depth and two of the
 # smallest voxels): on convex bulk material (the sphere's run) it held a 20 deg plane round the
 # side and the force turned 60 deg at the lift.
-m hri-hold-round-thin       $H 'face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face);' \
-                               '(face_along(field, hip, entry_n_ * -1.0, depth + 2.0 * voxel, voxel, far_face) || true);' \
+m hri-hold-round-thin       $H 'face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face);' \
+                               '(face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face) || true);' \
                                isotouch 'ctest:cli_run_sphere'
+# Thin also where the feature is at most twice limit / K thick (its middle within the press the
+# limit allows): with two voxels alone, 2-3-voxel ridges on 1 x 1 x 3 mm voxels wrapped at 0.7.
+m hri-hold-round-limit      $H 'std::max(depth + 2.0 * voxel, thin_wall - depth)' 'depth + 2.0 * voxel' $R "$G"
 
 # The time-domain passivity controller at the device end of a delayed link (port_passivity)
 # and the link the simulation puts in front of it (delayed_link).

@@ -440,7 +440,9 @@ bool Server::own_stream(Client& c, const Incoming& in) {
 /// judgements in a row: a moment's slowdown is not a slow stream) is refused to that client
 /// unless allowed (servo.allow_unstable_stiffness, --allow-unstable-stiffness:
 /// logged once): a STATUS naming the field, its value, the bound and the rate; its poses move
-/// nothing from then on, so the stream goes stale (zero force, one zero reply). The median: a
+/// nothing from then on, so the stream goes stale (zero force). With --reply-force the client
+/// (which applies the last Force it got) is sent a zero through the reply thread at once,
+/// before that STATUS, not at the stale time (issue 61). The median: a
 /// pause in the stream does not make it look slow.
 bool Server::check_stream_rate(Client& c, const Incoming& in) {
   constexpr std::size_t kRatePoses = 16;
@@ -478,6 +480,13 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
          "--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
   c.stream_refused = true;
   log_.line("stream   client " + std::to_string(c.id) + " refused: " + why.str());
+  if (o_.reply_force) {  // it applies the last Force it got: a zero at once, through the reply thread, before its STATUS
+    {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      if (stream_from_ == c.conn) stream_from_.reset();
+    }
+    if (!replies_.retarget(1.0)) log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
+  }
   refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, why.str());
   return false;
 }

@@ -40,6 +40,16 @@ StreamReplies::Split StreamReplies::split() const {
           quantile_us(to_send_, 0.99)};
 }
 
+bool StreamReplies::retarget(double timeout_s) {
+  const std::uint64_t ask = retarget_asked_.fetch_add(1) + 1;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (retarget_done_.load() < ask) {
+    if (!running_.load() || std::chrono::steady_clock::now() > until) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  }
+  return true;
+}
+
 void StreamReplies::run(const std::atomic<bool>& stop) {
   to_servo_.assign(kBins, 0);  // before the loop: no allocation in it
   to_send_.assign(kBins, 0);
@@ -67,9 +77,14 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     fenced.reset();
   };
   bool waiting = false;  // a pose the servo has not rendered yet: looked for every 20 us, else 100 us
+  running_ = true;
   while (!stop) {
     std::this_thread::sleep_for(std::chrono::microseconds(waiting ? 20 : 100));
     waiting = false;
+    if (const std::uint64_t ask = retarget_asked_.load(); ask != retarget_done_.load()) {
+      if (target_() != fenced) unfence(), zero_sent = true;  // the client that stopped being it: a zero now
+      retarget_done_ = ask;
+    }
     const TransformDevice::PoseId p = device_.newest_pose();
     const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
     const servo::StallLook l = device_.look_force(now);
@@ -113,6 +128,7 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
       }
     }
   }
+  running_ = false;
   unfence();  // the last act: the stream client (PLUS holds the last Force it got) is left a zero
 }
 

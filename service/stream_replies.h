@@ -12,6 +12,7 @@
 // Part of isotouch::igtl_device.
 #pragma once
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -38,6 +39,12 @@ class StreamReplies {
   /// The reply loop, on the calling thread, until `stop`; its last act: a zero to the client.
   /// The thread takes no stop signal from then on (block_stop_signals).
   void run(const std::atomic<bool>& stop);
+  /// The target changed at once (serve refused its client's stream): the reply thread asks
+  /// target() at its next poll, and a connection that stopped being it is left a zero, whole,
+  /// there and then (the path every Force takes, not the stale timeout's). Returns true once
+  /// that was done; false after `timeout_s`, or at once when run() is not running. Not on the
+  /// servo thread (it sleeps).
+  bool retarget(double timeout_s);
   long replies() const { return replies_.load(); }  ///< Force replies sent
   /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
   long stall_replies() const { return stall_replies_.load(); }
@@ -54,6 +61,8 @@ class StreamReplies {
   Target target_;
   std::function<void(const std::string&)> log_;
   std::atomic<long> replies_{0}, stall_replies_{0};
+  std::atomic<std::uint64_t> retarget_asked_{0}, retarget_done_{0};  // retarget(): asked, handled up to
+  std::atomic<bool> running_{false};
   // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:
   // beyond); the reply thread's own until run() returns.
   static constexpr int kBins = 1000;

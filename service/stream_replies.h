@@ -18,10 +18,37 @@
 #include <string>
 #include <vector>
 
+#include "isotouch/service/igtl_reply_rule.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
 
 namespace isotouch::service {
+
+/// The reply thread's decision at one poll, without its clock and socket (the tests drive it
+/// on a simulated clock): IgtlReplyRule's, the one rule of every igtl force path (`--haptic
+/// igtl:`'s writer too): each pose answered once, one zero when the stream goes stale, a
+/// stall's zero at once; a stall's or a stale stream's zero goes whole (IgtlReply::whole).
+class StreamReplyPoll {
+ public:
+  static constexpr std::int64_t kPollNs = 100'000;    ///< the reply thread's poll [ns]
+  static constexpr std::int64_t kAwayNs = 5 * kPollNs;  ///< a gap this long: the thread itself was away
+  explicit StreamReplyPoll(std::int64_t stale_ns) : rule_(stale_ns) {}
+  /// Before the stall rule's look at t [ns]: false when this poll judges nothing (the reply
+  /// thread was itself away: IgtlReplyRule::judge_now).
+  bool judge_now(std::int64_t t) { return rule_.judge_now(t, kAwayNs); }
+  IgtlReply step(const TransformDevice::PoseId& p, const servo::StallLook& l, std::int64_t t) {
+    return rule_.step(p.sequence, p.received_ns, l, t);
+  }
+  /// What became of what step() said to send: a dropped send leaves a stale zero owed.
+  void sent(bool delivered) {
+    if (!delivered) rule_.undelivered();
+  }
+  /// The client was left a zero outside step() (it stopped being the replies' target).
+  void zero_given() { rule_.zero_given(); }
+
+ private:
+  IgtlReplyRule rule_;
+};
 
 struct StreamReplyOptions {
   bool sched_fifo = false;  ///< SCHED_FIFO 70 (below the servo's 80) for the reply thread where allowed

@@ -1165,10 +1165,10 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
     if (session_) running = session_->frame.grid.voxel_count() * per_voxel;
   }
   {
-    std::lock_guard<std::mutex> lock(volume_mu_);
+    std::lock_guard<std::mutex> lock(volume_mu_);  // a taken image moves from the one to the other under it
     if (next_volume_) in_flight += next_volume_->volume.voxels.size() * sizeof(float);
+    in_flight += building_bytes_.load();
   }
-  in_flight += building_bytes_.load();
   const std::uint64_t held = images_held_bytes_.load();
   in_flight += held > own_held_bytes ? held - own_held_bytes : 0;
   const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
@@ -1199,8 +1199,8 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
 /// the servo moves over; the force stops only for that stop and start. The sender is
 /// answered once that is done ("volume taken"), or why not: the running session goes on.
 void Server::swap_volume(PendingVolume p) {
-  // Its voxels, then its session: in flight until it runs or is refused.
-  const BuildingBytes building(building_bytes_, p.volume.grid.voxel_count() * session_bytes_per_voxel());
+  // Its voxels, then its session: in flight until it runs or is refused (counted by run()
+  // from the moment it took `p`, BuildingBytes).
   const HoldEdits hold(session_mu_, preparing_);
   const std::string keep = "; the session goes on with the volume it had";
   if (!wait_edits_applied(kSettleS) || fault("settle", p.device)) {
@@ -1534,9 +1534,14 @@ int Server::run() {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));  // connections: the accept thread
     std::optional<PendingVolume> v;
     std::optional<Pending> iso;
+    // A taken IMAGE's voxels and session count against the memory budget from the moment it
+    // stops being next_volume_ (under the same lock) until it runs or is refused: between the
+    // two it counted nowhere, and a second IMAGE could pass beside it.
+    std::optional<BuildingBytes> building;
     {
       std::lock_guard<std::mutex> lock(volume_mu_);
       v.swap(next_volume_);
+      if (v) building.emplace(building_bytes_, v->volume.grid.voxel_count() * session_bytes_per_voxel());
       if (!v) iso.swap(next_iso_);
       changing_ = v || iso;
     }
@@ -1547,6 +1552,10 @@ int Server::run() {
         s.changing_ = false;
       }
     } changed{*this};
+    if (v && fault("taken", v->device)) {  // the test seam: the taken IMAGE held 5 s before its build
+      log_.line("test     '" + v->device + "' taken, held 5 s before its session is built (ISOTOUCH_SERVE_TEST_FAULT)");
+      std::this_thread::sleep_for(std::chrono::seconds(5));
+    }
     if (v) swap_volume(std::move(*v));
     if (iso) restart_at_isovalue(*iso);
   }

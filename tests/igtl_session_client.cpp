@@ -56,7 +56,7 @@
 //                     H N at the STATUS, K Forces before it; first Force after it |F| A N, T ms
 //                     later" (H: the last Force received before the STATUS, what the peer's
 //                     device applies when the stream is refused; "none after it" when no Force
-//                     followed); fails ("no refusal") when no such STATUS came
+//                     followed); fails ("no refusal within SECS s") when no such STATUS came
 // Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
 #include <igtlClientSocket.h>
 #include <igtlImageMessage.h>

@@ -216,6 +216,9 @@ m serve-budget-in-flight    service/serve.cpp '  in_flight += held > own_held_by
                                'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 m serve-budget-default      service/serve.cpp '  if (by_default) have = kUnknownMemoryBytes;' '  if (by_default) return "";' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_budget'
+# An IMAGE the main thread took counts until its session runs (cli_serve_budget part 3).
+m serve-budget-taken        service/serve.cpp '      if (v) building.emplace(' '      if (false) building.emplace(' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies

@@ -10,10 +10,20 @@
 
 namespace isotouch::service {
 
-/// One poll's answer: send `force_n` [N, the stream's frame] when `send`.
+/// One poll's answer: send `force_n` [N, the stream's frame] when `send`, for `why`.
 struct IgtlReply {
+  enum class Why {
+    kNone,    ///< nothing to send
+    kStall,   ///< the servo just stalled: a zero
+    kStale,   ///< the stream went stale: its one zero
+    kAnswer,  ///< the servo's answer to the newest pose (zero while off)
+    kLate,    ///< the newest pose, not answered by the servo (off, or not within 2 ms): its newest force (zero while off)
+  };
   bool send = false;
   core::Vec3 force_n;
+  Why why = Why::kNone;
+  /// A stall's or a stale stream's zero: never to be dropped (the peer keeps its last force).
+  bool whole() const { return why == Why::kStall || why == Why::kStale; }
 };
 
 /// The writer's rule. At a poll at time t [ns] where the writer was not away (judge_now), in
@@ -39,6 +49,11 @@ class IgtlReplyRule {
   /// frozen machine's false stall less likely, not impossible (a servo that gets the CPU back
   /// more than a poll after the writer is still judged stalled).
   bool judge_now(std::int64_t t, std::int64_t away_ns);
+  /// The peer was given a zero outside step() (serve's reply target changed): no stale zero owed.
+  void zero_given() { zero_sent_ = true; }
+  /// The last force step() said to send did not reach the peer (a dropped send): it may hold
+  /// an older force, so a stale stream is still owed its zero.
+  void undelivered() { zero_sent_ = false; }
 
  private:
   std::int64_t stale_ns_;

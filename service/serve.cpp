@@ -443,7 +443,9 @@ bool Server::own_stream(Client& c, const Incoming& in) {
 /// judgements in a row: a moment's slowdown is not a slow stream) is refused to that client
 /// unless allowed (servo.allow_unstable_stiffness, --allow-unstable-stiffness:
 /// logged once): a STATUS naming the field, its value, the bound and the rate; its poses move
-/// nothing from then on, so the stream goes stale (zero force, one zero reply). The median: a
+/// nothing from then on, so the stream goes stale (zero force). With --reply-force the client
+/// (which applies the last Force it got) is sent a zero through the reply thread at once,
+/// before that STATUS, not at the stale time (issue 61). The median: a
 /// pause in the stream does not make it look slow.
 bool Server::check_stream_rate(Client& c, const Incoming& in) {
   constexpr std::size_t kRatePoses = 16;
@@ -481,6 +483,13 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
          "--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
   c.stream_refused = true;
   log_.line("stream   client " + std::to_string(c.id) + " refused: " + why.str());
+  if (o_.reply_force) {  // it applies the last Force it got: a zero at once, through the reply thread, before its STATUS
+    {
+      std::lock_guard<std::mutex> lock(stream_mu_);
+      if (stream_from_ == c.conn) stream_from_.reset();
+    }
+    if (!replies_.retarget(1.0)) log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
+  }
   refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, why.str());
   return false;
 }
@@ -1172,10 +1181,10 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
     if (session_) running = session_->frame.grid.voxel_count() * per_voxel;
   }
   {
-    std::lock_guard<std::mutex> lock(volume_mu_);
+    std::lock_guard<std::mutex> lock(volume_mu_);  // a taken image moves from the one to the other under it
     if (next_volume_) in_flight += next_volume_->volume.voxels.size() * sizeof(float);
+    in_flight += building_bytes_.load();
   }
-  in_flight += building_bytes_.load();
   const std::uint64_t held = images_held_bytes_.load();
   in_flight += held > own_held_bytes ? held - own_held_bytes : 0;
   const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
@@ -1206,8 +1215,8 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
 /// the servo moves over; the force stops only for that stop and start. The sender is
 /// answered once that is done ("volume taken"), or why not: the running session goes on.
 void Server::swap_volume(PendingVolume p) {
-  // Its voxels, then its session: in flight until it runs or is refused.
-  const BuildingBytes building(building_bytes_, p.volume.grid.voxel_count() * session_bytes_per_voxel());
+  // Its voxels, then its session: in flight until it runs or is refused (counted by run()
+  // from the moment it took `p`, BuildingBytes).
   const HoldEdits hold(session_mu_, preparing_);
   const std::string keep = "; the session goes on with the volume it had";
   if (!wait_edits_applied(kSettleS) || fault("settle", p.device)) {
@@ -1553,9 +1562,14 @@ int Server::run() {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));  // connections: the accept thread
     std::optional<PendingVolume> v;
     std::optional<Pending> iso;
+    // A taken IMAGE's voxels and session count against the memory budget from the moment it
+    // stops being next_volume_ (under the same lock) until it runs or is refused: between the
+    // two it counted nowhere, and a second IMAGE could pass beside it.
+    std::optional<BuildingBytes> building;
     {
       std::lock_guard<std::mutex> lock(volume_mu_);
       v.swap(next_volume_);
+      if (v) building.emplace(building_bytes_, v->volume.grid.voxel_count() * session_bytes_per_voxel());
       if (!v) iso.swap(next_iso_);
       changing_ = v || iso;
     }
@@ -1566,6 +1580,10 @@ int Server::run() {
         s.changing_ = false;
       }
     } changed{*this};
+    if (v && fault("taken", v->device)) {  // the test seam: the taken IMAGE held 5 s before its build
+      log_.line("test     '" + v->device + "' taken, held 5 s before its session is built (ISOTOUCH_SERVE_TEST_FAULT)");
+      std::this_thread::sleep_for(std::chrono::seconds(5));
+    }
     if (v) swap_volume(std::move(*v));
     if (iso) restart_at_isovalue(*iso);
   }

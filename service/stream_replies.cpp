@@ -15,9 +15,9 @@ StreamReplies::StreamReplies(TransformDevice& device, StreamReplyOptions o, Targ
                              std::function<void(const std::string&)> log)
     : device_(device), o_(o), target_(std::move(target)), log_(std::move(log)) {}
 
-/// Polls every 0.1 ms; a new pose on the stream, once the servo has written a force after it
-/// arrived (or 2 ms later), is answered with that force; while the force is off (no session
-/// runs, the servo stalled) at once with a zero.
+/// Polls every 0.1 ms and sends what IgtlReplyRule (StreamReplyPoll) says: a new pose on the
+/// stream, once the servo's force answers it (or 2 ms later), is answered with that force;
+/// while the force is off (no session runs, the servo stalled) at once with a zero.
 namespace {
 /// The 10 us bin of a delay [ns], the last of `bins` for all beyond.
 std::size_t bin(std::int64_t ns, int bins) { return std::size_t(std::clamp<std::int64_t>(ns / 10'000, 0, bins - 1)); }
@@ -40,6 +40,16 @@ StreamReplies::Split StreamReplies::split() const {
           quantile_us(to_send_, 0.99)};
 }
 
+bool StreamReplies::retarget(double timeout_s) {
+  const std::uint64_t ask = retarget_asked_.fetch_add(1) + 1;
+  const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (retarget_done_.load() < ask) {
+    if (!running_.load() || std::chrono::steady_clock::now() > until) return false;
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  }
+  return true;
+}
+
 void StreamReplies::run(const std::atomic<bool>& stop) {
   to_servo_.assign(kBins, 0);  // before the loop: no allocation in it
   to_send_.assign(kBins, 0);
@@ -47,9 +57,7 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     if (const std::string note = servo::make_thread_realtime("serve reply thread", true, 70, false, -1).note;
         !note.empty() && log_)
       log_("reply    " + note);
-  std::uint64_t answered = 0;
-  bool zero_sent = true;  // the last Force the client got was a zero (or none)
-  const std::int64_t stale_ns = std::int64_t(o_.stale_s * 1e9);
+  StreamReplyPoll poll(std::int64_t(o_.stale_s * 1e9));  // IgtlReplyRule: the one rule of the igtl force paths
   device_.restart_force(TransformDevice::now_ns());
   block_stop_signals();  // a stop signal's handler sends the last zero: never inside a send of this thread
   servo::ensure_signal_stack();  // a stack overflow here still sends the client its zero
@@ -66,26 +74,23 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     exit_zero.reset();
     fenced.reset();
   };
-  bool waiting = false;  // a pose the servo has not rendered yet: looked for every 20 us, else 100 us
+  bool waiting = false;  // a pose the servo has not answered yet: looked for every 20 us, else 100 us
+  running_ = true;
   while (!stop) {
-    std::this_thread::sleep_for(std::chrono::microseconds(waiting ? 20 : 100));
-    waiting = false;
+    std::this_thread::sleep_for(std::chrono::nanoseconds(waiting ? StreamReplyPoll::kPollNs / 5 : StreamReplyPoll::kPollNs));
+    if (const std::uint64_t ask = retarget_asked_.load(); ask != retarget_done_.load()) {
+      if (target_() != fenced) unfence(), poll.zero_given();  // the client that stopped being it: a zero now
+      retarget_done_ = ask;
+    }
     const TransformDevice::PoseId p = device_.newest_pose();
     const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
+    if (!poll.judge_now(now)) continue;  // this thread was away: the servo gets a poll to write first
     const servo::StallLook l = device_.look_force(now);
-    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new
-    const bool stale = p.sequence > 0 && now - p.received_ns > stale_ns;
-    const bool stale_zero = stale && !zero_sent && !stall_zero;
-    if (!stall_zero && !stale_zero && p.sequence == answered) continue;
-    const bool rendered = l.last_write_ns >= p.received_ns;
-    // Force on: wait for the servo's answer to this pose (up to 2 ms); off: a zero at once.
-    if (!stall_zero && !stale_zero && l.on && !rendered && now - p.received_ns < 2'000'000) {
-      waiting = true;
-      continue;
-    }
-    if (!stale_zero) answered = p.sequence;
-    // Zero unless on; in the tracker's frame (the registration's R^T): the client applies it there.
-    const core::Vec3 f = stale_zero ? core::Vec3{} : device_.to_tracker_n(device_.echo().to_ras_n(l.force_n));
+    const IgtlReply r = poll.step(p, l, now);
+    waiting = !r.send && l.on && p.sequence > l.answers && now - p.received_ns < 2'000'000;
+    if (!r.send) continue;
+    // In the tracker's frame (the registration's R^T): the client applies it there.
+    const core::Vec3 f = device_.to_tracker_n(device_.echo().to_ras_n(r.force_n));
     const double t[3] = {f.x, f.y, f.z};
     std::shared_ptr<Connection> to = target_();
     if (to != fenced) {
@@ -100,19 +105,21 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     // A zero for a stall or a stale stream is never dropped (the client would keep the last
     // force): sent whole, waiting for the client if need be; the rest never wait (a client
     // that does not read).
-    const bool whole = stall_zero || stale_zero;
+    const bool rendered = r.why == IgtlReply::Why::kAnswer;
     const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
-    if (whole ? to->send(msg) : to->send_droppable(msg)) {
-      zero_sent = f.x == 0 && f.y == 0 && f.z == 0;
+    const bool delivered = r.whole() ? to->send(msg) : to->send_droppable(msg);
+    poll.sent(delivered);
+    if (delivered) {
       replies_.fetch_add(1);
-      stall_replies_.fetch_add(!stale_zero && !rendered);
-      if (rendered && !whole && p.received_ns > 0) {
+      stall_replies_.fetch_add(r.why == IgtlReply::Why::kLate);
+      if (rendered && p.received_ns > 0) {
         const std::int64_t sent = TransformDevice::now_ns();
         ++to_servo_[bin(l.last_write_ns - p.received_ns, kBins)];
         ++to_send_[bin(sent - l.last_write_ns, kBins)];
       }
     }
   }
+  running_ = false;
   unfence();  // the last act: the stream client (PLUS holds the last Force it got) is left a zero
 }
 

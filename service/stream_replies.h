@@ -12,15 +12,43 @@
 // Part of isotouch::igtl_device.
 #pragma once
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "isotouch/service/igtl_reply_rule.h"
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
 
 namespace isotouch::service {
+
+/// The reply thread's decision at one poll, without its clock and socket (the tests drive it
+/// on a simulated clock): IgtlReplyRule's, the one rule of every igtl force path (`--haptic
+/// igtl:`'s writer too): each pose answered once, one zero when the stream goes stale, a
+/// stall's zero at once; a stall's or a stale stream's zero goes whole (IgtlReply::whole).
+class StreamReplyPoll {
+ public:
+  static constexpr std::int64_t kPollNs = 100'000;    ///< the reply thread's poll [ns]
+  static constexpr std::int64_t kAwayNs = 5 * kPollNs;  ///< a gap this long: the thread itself was away
+  explicit StreamReplyPoll(std::int64_t stale_ns) : rule_(stale_ns) {}
+  /// Before the stall rule's look at t [ns]: false when this poll judges nothing (the reply
+  /// thread was itself away: IgtlReplyRule::judge_now).
+  bool judge_now(std::int64_t t) { return rule_.judge_now(t, kAwayNs); }
+  IgtlReply step(const TransformDevice::PoseId& p, const servo::StallLook& l, std::int64_t t) {
+    return rule_.step(p.sequence, p.received_ns, l, t);
+  }
+  /// What became of what step() said to send: a dropped send leaves a stale zero owed.
+  void sent(bool delivered) {
+    if (!delivered) rule_.undelivered();
+  }
+  /// The client was left a zero outside step() (it stopped being the replies' target).
+  void zero_given() { rule_.zero_given(); }
+
+ private:
+  IgtlReplyRule rule_;
+};
 
 struct StreamReplyOptions {
   bool sched_fifo = false;  ///< SCHED_FIFO 70 (below the servo's 80) for the reply thread where allowed
@@ -38,6 +66,12 @@ class StreamReplies {
   /// The reply loop, on the calling thread, until `stop`; its last act: a zero to the client.
   /// The thread takes no stop signal from then on (block_stop_signals).
   void run(const std::atomic<bool>& stop);
+  /// The target changed at once (serve refused its client's stream): the reply thread asks
+  /// target() at its next poll, and a connection that stopped being it is left a zero, whole,
+  /// there and then (the path every Force takes, not the stale timeout's). Returns true once
+  /// that was done; false after `timeout_s`, or at once when run() is not running. Not on the
+  /// servo thread (it sleeps).
+  bool retarget(double timeout_s);
   long replies() const { return replies_.load(); }  ///< Force replies sent
   /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
   long stall_replies() const { return stall_replies_.load(); }
@@ -54,6 +88,8 @@ class StreamReplies {
   Target target_;
   std::function<void(const std::string&)> log_;
   std::atomic<long> replies_{0}, stall_replies_{0};
+  std::atomic<std::uint64_t> retarget_asked_{0}, retarget_done_{0};  // retarget(): asked, handled up to
+  std::atomic<bool> running_{false};
   // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:
   // beyond); the reply thread's own until run() returns.
   static constexpr int kBins = 1000;

@@ -11,6 +11,8 @@
 #      --memory-mib, a 512 x 512 x 400 uint8 IMAGE (about 3.6 GiB with its session) is refused
 #      against the default of 4096 MiB (a budget of 3072 MiB), named as such; a 128^3 one is
 #      taken after it. ("prepare:Huge" makes a wrongly taken Huge fail fast, not build 3.6 GiB.)
+#   3. an IMAGE the main thread took counts until its session runs ("taken:A" holds it 5 s
+#      after the take): a second one sent meanwhile is refused with code 11 (two do not fit).
 # "PASS serve budget" is printed once, last.
 # Usage: cli_serve_budget.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -83,4 +85,31 @@ huge=$(grep "STATUS.*Huge" "$out/client3.log")
   fail "the STATUS does not name the default budget: $huge"
 grep -q "STATUS code 1: volume taken: 128 x 128 x 128" "$out/client3.log" ||
   fail "serve did not take an IMAGE after the refusal: $(grep STATUS "$out/client3.log")"
+echo "ok serve budget: an unknown memory takes the 4096 MiB default"
+
+# 3. An IMAGE taken by the main thread counts from the take until its session runs: with
+#    --memory-mib 160 (a budget of 120 MiB) and the head's running session (~13 MiB), one
+#    128^3 uint8 IMAGE fits (~74 MiB with its session), two do not. "taken:A" holds A 5 s
+#    between the take and its build (the window where it counted nowhere): B, sent then, is
+#    refused with code 11 naming A's ~72 MiB in flight; A is taken.
+ISOTOUCH_SERVE_TEST_FAULT="taken:A" \
+  "$exe" serve "$scene" --port 0 --stream Stylus --image-hz 0 --memory-mib 160 >"$out/serve3.log" 2>&1 &
+pid=$!
+port=$(wait_port "$out/serve3.log" $pid)
+[[ -n $port ]] || fail "serve did not start a third time"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ramp A 128 128 128 >"$out/client4.log" 2>&1 &
+a=$!
+for _ in $(seq 300); do grep -q "test     'A' taken, held 5 s" "$out/serve3.log" && break; sleep 0.05; done
+grep -q "test     'A' taken, held 5 s" "$out/serve3.log" || fail "A was never taken"
+timeout 90 "$client" 127.0.0.1 "$port" "$head" ramp B 128 128 128 >"$out/client5.log" 2>&1 ||
+  fail "client B failed (exit $?)"
+wait $a || fail "client A failed (exit $?)"
+kill -TERM $pid; wait $pid
+b=$(grep "STATUS" "$out/client5.log")
+[[ $b == "STATUS code 11: igtl:B: not taken: 128 x 128 x 128 voxels need "* ]] ||
+  fail "the IMAGE sent while A was taken but not yet built was not refused with code 11: $b"
+flight=$(sed -n 's/.* MiB the running session, \([0-9]*\) MiB in flight.*/\1/p' <<<"$b")
+(( flight >= 72 )) || fail "B's refusal counts $flight MiB in flight, not A's 72 MiB session: $b"
+grep -q "STATUS code 1: volume taken: 128 x 128 x 128" "$out/client4.log" || fail "A was not taken: $(cat "$out/client4.log")"
+echo "ok serve budget: an IMAGE sent while another was taken and not yet built refused ($flight MiB in flight)"
 echo "PASS serve budget: every client's IMAGEs in flight counted against the one budget; an unknown memory takes the 4096 MiB default"

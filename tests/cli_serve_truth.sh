@@ -32,7 +32,9 @@
 #      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
 #      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N;
 #   9. a stream judged fine at 500 Hz that slows to 50 Hz before its tool reaches the ball is
-#      refused then (the rate is judged at every pose over the latest 16): only zeros;
+#      refused then (the rate is judged at every pose over the latest 16): only zeros; one that
+#      slows in contact: its client holds an exact zero when the refusal STATUS comes (the
+#      zero sent before it, not at the stale time) and gets no other Force after it;
 #  10. a stream in contact that slows for 0.2 s (10 poses at 50 Hz) and comes back to 500 Hz
 #      is not refused (16 judgements in a row over the bound are needed): its force is back.
 # "PASS serve truth" is printed once, last, after every check.
@@ -290,6 +292,35 @@ p = [l.split() for l in log.splitlines() if l.startswith("peak ")]
 if len(p) != 1: fail("no peak line")
 if float(p[0][2]) != 0.0: fail(f"the slowed stream's client got {p[0][2]} N, not only zeros")
 print(f"a slowed stream refused at {m.group(1)} Hz, its client got only zeros ({p[0][5]} Forces)")
+PY
+[[ $? == 0 ]] || exit 1
+# 9b. The same slowdown in contact (2 mm inside the ball at 500 Hz, then 50 Hz): when it is
+# refused the client (which applies the last Force it got) holds a zero at once, sent before
+# the refusal STATUS; before, it held the contact force until the stale time (100 ms).
+"$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 >"$out/serve_slowin.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve_slowin.log" $serve_pid)
+[[ -n $port ]] || fail "the slowin serve never said it was listening: $(cat "$out/serve_slowin.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.3 move 0 0 13 0.6 force hz 50 \
+  refusal 3 statuses 0.2 >"$out/slowin.log" 2>&1 || fail "the slowin client failed: $(cat "$out/slowin.log")"
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+log = open(f"{out}/slowin.log").read()
+def fail(msg):
+    print("FAIL serve truth:", msg); print(log); print(open(f"{out}/serve_slowin.log").read()); sys.exit(1)
+if len([l for l in log.splitlines() if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]) != 1:
+    fail("no one STATUS refusing the stream once it slowed to 50 Hz in contact")
+f = [l.split() for l in log.splitlines() if l.startswith("force ")]
+if len(f) != 1 or not float(f[0][4]) > 0.8: fail(f"not in contact before the slowdown (2 mm inside the ball): {f}")
+r = re.search(r"refusal: held \|F\| (\S+) N at the STATUS, (\d+) Forces before it; (.*)", log)
+if not r: fail("no refusal line")
+held, after = float(r.group(1)), r.group(3)
+if held != 0.0: fail(f"the refused client held {held} N when its refusal STATUS came, not a zero")
+if after != "none after it" and not after.startswith("first Force after it |F| 0 N"):
+    fail(f"a Force other than zero after the refusal: {after}")
+print(f"a stream refused in contact ({float(f[0][4]):.2f} N): its client held an exact zero at the STATUS; {after}")
 PY
 [[ $? == 0 ]] || exit 1
 

@@ -51,6 +51,12 @@
 //   noread            stops reading what the server sends (a client that does not read)
 //   closed SECS       waits up to SECS for the server to close the connection; prints "closed
 //                     after T s" (T since connecting) or "open after SECS s"
+//   refusal SECS      waits up to SECS for the first STATUS under the stream's name ("Stylus":
+//                     the server refusing the stream), then 0.3 s more; prints "refusal: held |F|
+//                     H N at the STATUS, K Forces before it; first Force after it |F| A N, T ms
+//                     later" (H: the last Force received before the STATUS, what the peer's
+//                     device applies when the stream is refused; "none after it" when no Force
+//                     followed); fails ("no refusal within SECS s") when no such STATUS came
 // Exit 0 when every action completed, 1 otherwise (a STATUS that never came, ...).
 #include <igtlClientSocket.h>
 #include <igtlImageMessage.h>
@@ -103,6 +109,11 @@ struct Shared {
   std::vector<Clock::time_point> force_times;  // Force TRANSFORM arrivals since `mark` (sent every display tick)
   std::vector<Clock::time_point> cmds_answered;  // arrivals of the STATUS answers to `cmds`
   std::optional<Clock::time_point> first_force;
+  // `refusal`: the first STATUS under the stream's name, the Force held then, the Force after.
+  long forces_at_refusal = -1;  // Forces received before it (-1: none came)
+  double held_at_refusal = 0;   // |F| of the last Force before it [N] (0: none)
+  Clock::time_point refused_at;
+  std::optional<std::pair<double, Clock::time_point>> after_refusal;  // |F| and arrival of the first Force after it
 };
 
 /// "p50 A p99 B max C ms" of `v` [ms] (sorted here).
@@ -186,8 +197,14 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
     if (type == "STATUS" && name == "CMDS") {
       if (body_of<igtl::StatusMessage>(sock, h)) s.cmds_answered.push_back(Clock::now());
     } else if (type == "STATUS") {
-      if (auto st = body_of<igtl::StatusMessage>(sock, h))
+      if (auto st = body_of<igtl::StatusMessage>(sock, h)) {
         s.statuses.emplace_back(name, "STATUS code " + std::to_string(st->GetCode()) + ": " + st->GetStatusString());
+        if (name == "Stylus" && s.forces_at_refusal < 0) {
+          s.forces_at_refusal = s.forces_received;
+          s.held_at_refusal = s.forces.empty() ? 0.0 : std::hypot(s.forces.back()[0], s.forces.back()[1], s.forces.back()[2]);
+          s.refused_at = Clock::now();
+        }
+      }
     } else if (type == "TRANSFORM" && name == "Force") {
       if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
         igtl::Matrix4x4 m;
@@ -196,6 +213,8 @@ void read_loop(igtl::ClientSocket* sock, Shared& s) {
         s.peak_force = std::max(s.peak_force, std::hypot(double(m[0][3]), double(m[1][3]), double(m[2][3])));
         ++s.forces_received;
         if (s.forces.size() > 10) s.forces.pop_front();
+        if (s.forces_at_refusal >= 0 && !s.after_refusal)
+          s.after_refusal.emplace(std::hypot(double(m[0][3]), double(m[1][3]), double(m[2][3])), Clock::now());
       }
     } else if (type == "TRANSFORM" && (name == "HIP" || name == "Proxy")) {
       if (auto t = body_of<igtl::TransformMessage>(sock, h)) {
@@ -551,6 +570,22 @@ bool Client::action(const std::string& a) {
       std::cout << "closed after " << std::chrono::duration<double>(s.closed_at - s.connected).count() << " s\n";
     else
       std::cout << "open after " << secs << " s\n";
+    return true;
+  }
+  if (a == "refusal") {
+    const double secs = num();
+    std::unique_lock<std::mutex> lock(s.mu);
+    if (!s.cv.wait_for(lock, std::chrono::duration<double>(secs), [&] { return s.forces_at_refusal >= 0 || s.closed; }) ||
+        s.forces_at_refusal < 0)
+      return std::cout << "no refusal within " << secs << " s\n", false;
+    s.cv.wait_for(lock, std::chrono::milliseconds(300), [&] { return s.closed; });
+    std::cout << "refusal: held |F| " << s.held_at_refusal << " N at the STATUS, " << s.forces_at_refusal
+              << " Forces before it; ";
+    if (s.after_refusal)
+      std::cout << "first Force after it |F| " << s.after_refusal->first << " N, "
+                << std::chrono::duration<double, std::milli>(s.after_refusal->second - s.refused_at).count() << " ms later\n";
+    else
+      std::cout << "none after it\n";
     return true;
   }
   if (a == "image") {

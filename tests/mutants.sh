@@ -224,15 +224,18 @@ m serve-budget-in-flight    service/serve.cpp '  in_flight += held > own_held_by
                                'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 m serve-budget-default      service/serve.cpp '  if (by_default) have = kUnknownMemoryBytes;' '  if (by_default) return "";' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_budget'
+# An IMAGE the main thread took counts until its session runs (cli_serve_budget part 3).
+m serve-budget-taken        service/serve.cpp '      if (v) building.emplace(' '      if (false) building.emplace(' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies
-m stream-stall-zero         $SR '    const bool stall_zero = l.stalled_now;  // answered at once, whether or not a pose is new' \
-                               '    const bool stall_zero = false;' $T 'StreamReplies.AStalledServo*'
-m stream-stale-zero         $SR '    const bool stale_zero = stale && !zero_sent && !stall_zero;' \
-                               '    const bool stale_zero = false;' $T 'StreamReplies.AStaleStream*'
-m stream-stale-late         $SR 'const bool stale = p.sequence > 0 && now - p.received_ns > stale_ns;' \
-                               'const bool stale = p.sequence > 0 && now - p.received_ns > 2 * stale_ns;' $T 'StreamReplies.AStaleStream*'
+m stream-stall-zero         $SR '    const IgtlReply r = poll.step(p, l, now);' \
+                               '    IgtlReply r = poll.step(p, l, now); if (r.why == IgtlReply::Why::kStall) r.send = false;' $T 'StreamReplies.AStalledServo*'
+m stream-stale-zero         $SR '    const IgtlReply r = poll.step(p, l, now);' \
+                               '    IgtlReply r = poll.step(p, l, now); if (r.why == IgtlReply::Why::kStale) r.send = false;' $T 'StreamReplies.AStaleStream*'
+m stream-stale-late         $SR 'StreamReplyPoll poll(std::int64_t(o_.stale_s * 1e9));' \
+                               'StreamReplyPoll poll(std::int64_t(o_.stale_s * 2e9));' $T 'StreamReplies.AStaleStream*'
 m stream-switch-zero        $SR '    fenced->send(zero_msg);  // blocking: the zero is not dropped' '' $T 'StreamReplies.AClientThatStops*'
 m stream-exit-zero          $SR '        exit_zero = std::make_unique<ExitZeroFence>(to->fd(), zero_msg);' '' $T 'StreamReplies.ACrashOr*'
 

@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <set>
 #include <vector>
 
 #include "isotouch/service/igtl_reply_rule.h"
+#include "isotouch/service/stream_replies.h"
 #include "isotouch/servo/stall_rule.h"
 
 namespace isotouch::service {
@@ -181,6 +183,74 @@ TEST(IgtlReplyRule, AnUnansweredPoseWaitsTwoMillisecondsAtMost) {
   const IgtlReply late = reply.step(2, 2 * kMs, rule.look(4 * kMs + 1), 4 * kMs + 1);
   EXPECT_TRUE(late.send) << "a pose the servo has not answered in 2 ms is answered with its newest force";
   EXPECT_EQ(late.force_n.x, 1.0);
+}
+
+
+// serve's reply thread (`serve --reply-force`, StreamReplyPoll) and `--haptic igtl:`'s writer
+// (IgtlReplyRule, as IgtlDevice::write_loop polls it) decide alike, poll by poll, on one
+// scripted stream and servo: a 500 Hz stream, a 1 kHz servo, a write made after a pose came
+// but from the pose before, a 10 ms freeze of every thread, a servo that stalls for 10 ms and
+// comes back, a stream that stops. Each side has its own StallRule written alike (a look
+// counts a stall once). And what they agree on is what the script says is due: each pose
+// answered once, the stall's zero within the stall time and a poll, one stale zero at the
+// first poll past the stale time and nothing after it.
+TEST(IgtlReplyRule, ServesReplyThreadAndTheIgtlWriterDecideAlike) {
+  constexpr std::int64_t kPoll = kMs / 10, kStale = 6 * kMs, kStall = 5 * kMs / 2;
+  servo::StallRule writer_stall, replies_stall;
+  for (servo::StallRule* r : {&writer_stall, &replies_stall}) r->enable(true, 0.0025, 0.05, 0), r->restart(0);
+  IgtlReplyRule writer(kStale);
+  service::StreamReplyPoll replies(kStale);
+  std::uint64_t seq = 0;
+  std::int64_t received = 0, last_pose = 0, last_write_before_stall = 0;
+  const std::int64_t freeze_from = 30 * kMs, freeze_to = 40 * kMs, stall_from = 50 * kMs, stall_to = 60 * kMs,
+                     stream_until = 80 * kMs;
+  std::vector<Sent> sent;
+  std::vector<std::uint64_t> answered;  // the pose each answer went to
+  long polls = 0;
+  for (std::int64_t t = 0; t <= 100 * kMs; t += kPoll) {
+    if (t >= freeze_from && t < freeze_to) continue;
+    const bool resumed = t == freeze_to;
+    if ((t % (2 * kMs) == kMs || resumed) && t <= stream_until) ++seq, received = t, last_pose = t;
+    const core::Vec3 f{0.5 * double(seq % 3 + 1), -0.25, 1.0};
+    auto write = [&](const core::Vec3& v, std::uint64_t answers) {
+      writer_stall.write(v, answers, t), replies_stall.write(v, answers, t);
+    };
+    const bool servo_runs = t < stall_from || t >= stall_to;
+    if (t % (2 * kMs) == kMs + kPoll && seq > 1 && servo_runs) write(f * 2.0, seq - 1);  // after the pose came, from the one before
+    if ((t % kMs == 4 * kPoll || resumed) && servo_runs) {
+      write(f, seq);
+      if (t < stall_from) last_write_before_stall = t;
+    }
+    const bool judge_w = writer.judge_now(t, 5 * kPoll), judge_r = replies.judge_now(t);
+    ASSERT_EQ(judge_w, judge_r) << "at " << double(t) * 1e-6 << " ms";
+    if (!judge_w) continue;
+    ++polls;
+    const IgtlReply w = writer.step(seq, received, writer_stall.look(t), t);
+    const IgtlReply r = replies.step({seq, received, 0}, replies_stall.look(t), t);
+    ASSERT_EQ(w.send, r.send) << "at " << double(t) * 1e-6 << " ms";
+    ASSERT_TRUE(w.why == r.why && w.force_n.x == r.force_n.x && w.force_n.y == r.force_n.y && w.force_n.z == r.force_n.z)
+        << "at " << double(t) * 1e-6 << " ms: " << w.force_n.x << " against " << r.force_n.x;
+    if (!r.send) continue;
+    replies.sent(true);
+    sent.push_back({t, r.force_n});
+    if (r.why == IgtlReply::Why::kAnswer || r.why == IgtlReply::Why::kLate) answered.push_back(seq);
+  }
+  ASSERT_GT(polls, 800);
+  // Each pose answered once.
+  EXPECT_EQ(std::set<std::uint64_t>(answered.begin(), answered.end()).size(), answered.size()) << "a pose answered twice";
+  EXPECT_EQ(answered.size(), std::size_t(seq)) << "poses not answered";
+  // The stall's zero: the first zero after the servo's last write before it.
+  const Sent* stall_zero = nullptr;
+  for (const Sent& x : sent)
+    if (x.t > last_write_before_stall && is_zero(x.f) && !stall_zero) stall_zero = &x;
+  ASSERT_NE(stall_zero, nullptr) << "no zero for the stall";
+  EXPECT_GT(stall_zero->t - last_write_before_stall, kStall);
+  EXPECT_LE(stall_zero->t - last_write_before_stall, kStall + kPoll) << "the stall's zero waited";
+  // The stale stream: its last send is one zero at the first poll past the stale time.
+  ASSERT_FALSE(sent.empty());
+  EXPECT_TRUE(is_zero(sent.back().f));
+  EXPECT_EQ(sent.back().t, last_pose + kStale + kPoll) << "the stale zero at " << double(sent.back().t) * 1e-6 << " ms";
+  EXPECT_FALSE(is_zero(sent[sent.size() - 2].f)) << "more than one zero for the stale stream";
 }
 
 }  // namespace

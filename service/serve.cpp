@@ -1341,15 +1341,6 @@ void Server::start_journal(Session& s, io::OpenedJournal& j, std::uint32_t volum
   log_.line("journal  " + j.journal->path() + " (this session's edits, kept through a crash)");
 }
 
-/// `from` (the journal of the session just stopped, on the volume journal_crc_) goes on for
-/// `s`, the session rebuilt on its edited volume at `iso` (`isovalue V`): the same file
-/// started afresh with every edit it holds, `iso` and `restarts` in its header (a restart
-/// of std::size_t(-1): at the edits it holds; the undo history started afresh there), and
-/// `s` appending to it. A restore then rebuilds the same session: the volume, the edits,
-/// the isovalue. Until the new file replaces the old one, the old one holds the session
-/// before the change, locked throughout (Journal::restart). When it cannot go on, the log
-/// says why, the old file is moved aside (PATH.before-change: never offered as this
-/// session's) and `s` runs without one.
 /// A journal that cannot go on past a change: the file holds the session before it, and is
 /// moved aside (PATH.before-change, replacing an older one) before its lock goes, so that it
 /// is never offered as the session that ran; the log says why.
@@ -1362,6 +1353,15 @@ void Server::set_journal_aside(std::unique_ptr<io::Journal>& journal, const std:
             (ec ? "the file could not be moved aside: " + ec.message() : "the file moved aside to " + aside) + ")");
 }
 
+/// `from` (the journal of the session just stopped, on the volume journal_crc_) goes on for
+/// `s`, the session rebuilt on its edited volume at `iso` (`isovalue V`): the same file
+/// started afresh with every edit it holds, `iso` and `restarts` in its header (a restart
+/// of std::size_t(-1): at the edits it holds; the undo history started afresh there), and
+/// `s` appending to it. A restore then rebuilds the same session: the volume, the edits,
+/// the isovalue. Until the new file replaces the old one, the old one holds the session
+/// before the change, locked throughout (Journal::restart). When it cannot go on, the log
+/// says why, the old file is moved aside (PATH.before-change: never offered as this
+/// session's) and `s` runs without one.
 io::OpenedJournal Server::carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                         const std::vector<std::size_t>& restarts) {
   io::OpenedJournal j;

@@ -231,7 +231,7 @@ class Server {
   // destroyed after it, so a session still running while run() unwinds never appends to a freed one
   std::unique_ptr<Session> session_;
   std::uint32_t journal_crc_ = 0;  // the volume journal_ belongs to
-  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0;
+  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0, input_waits_ = 0;
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
   long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
   std::mutex stream_mu_;
@@ -261,7 +261,8 @@ class Server {
             sp.to_servo_p99_us,
             sp.to_send_p50_us,
             sp.to_send_p99_us,
-            double(device_.input_phase().late_ns) * 1e-3};
+            double(device_.input_phase().late_ns) * 1e-3,
+            input_waits_};
   }
 
  private:
@@ -1429,6 +1430,7 @@ std::unique_ptr<Session> Server::stop_session() {
   ticks_ += st.ticks;
   faults_ += st.faults;
   missed_ += st.missed_deadlines;
+  input_waits_ += s->live().servo_thread()->input_waits();
   const servo::DeviceCounters dc = s->live().servo_thread()->device_counters();
   stale_ += dc.stale;  // zero force on each
   disconnected_ += dc.disconnected;

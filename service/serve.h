@@ -123,6 +123,8 @@ struct ServeStats {
   /// How late the stream's poses ran behind their predicted arrival at the end [us], the 99.5th
   /// percentile of the last 256: the servo's ticks lead the arrivals by at least this + 25 us.
   double stream_late_us = 0;
+  /// Servo ticks that waited past their deadline for a pose that ran later than the lead.
+  long input_waits = 0;
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

@@ -62,18 +62,32 @@ void ArrivalClock::note_lateness(std::int64_t late_ns) {
   late_.store(late_count_ >= 16 ? (b + 1) * kLateBinNs : 0, std::memory_order_relaxed);
 }
 
-std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns) {
-  if (in.due_ns < 0 || in.period_ns <= 0 || period_ns <= 0) return next_ns;
-  if (next_ns - in.due_ns > 4 * in.period_ns) return next_ns;  // the input paused
+namespace {
+// The input's period is a whole number of servo periods (within 0.5 %): ticks can follow it.
+bool whole_periods(InputPhase in, std::int64_t period_ns) {
+  if (in.due_ns < 0 || in.period_ns <= 0 || period_ns <= 0) return false;
   const double ratio = double(in.period_ns) / double(period_ns);
   const double whole = std::round(ratio);
-  if (whole < 1 || std::abs(ratio - whole) > 0.005 * whole) return next_ns;
+  return whole >= 1 && std::abs(ratio - whole) <= 0.005 * whole;
+}
+}  // namespace
+
+std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns) {
+  if (!whole_periods(in, period_ns)) return next_ns;
+  if (next_ns - in.due_ns > 4 * in.period_ns) return next_ns;  // the input paused
   const std::int64_t lead = std::max(lead_ns, std::min(in.late_ns + kLateMarginNs, 3 * period_ns / 4));
   // How far the next deadline lies after the wanted one, in (-period/2, period/2].
   std::int64_t e = (next_ns - (in.due_ns + lead)) % period_ns;
   if (e < 0) e += period_ns;
   if (e > period_ns / 2) e -= period_ns;
   return next_ns - std::clamp(e, -period_ns / 16, period_ns / 16);
+}
+
+std::int64_t input_wait_until(std::int64_t t_ns, std::int64_t deadline_ns, std::int64_t period_ns, InputPhase in) {
+  if (!whole_periods(in, period_ns)) return -1;
+  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;  // arrived (due moved on), or paused
+  const std::int64_t until = deadline_ns + period_ns / 2;
+  return until > t_ns ? until : -1;
 }
 
 }  // namespace isotouch::servo

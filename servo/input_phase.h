@@ -69,4 +69,13 @@ class ArrivalClock {
 inline constexpr std::int64_t kLateMarginNs = 25000;
 std::int64_t follow_input_phase(std::int64_t next_ns, std::int64_t period_ns, InputPhase in, std::int64_t lead_ns);
 
+/// A tick placed after an input that has not arrived: until when it waits for it [ns], or -1
+/// (no wait). The lead covers all but the latest 0.5 % of arrivals; one later than the tick
+/// would wait a whole period and be overtaken by the next (never answered), so the tick
+/// waits for it instead, at most until `deadline_ns` + half a servo period (the next tick's
+/// time stays where it was). Only where the input is due and followed (its period a whole
+/// number of servo periods, as follow_input_phase requires) and due at most a servo period
+/// before `t_ns`: an input due longer ago has paused, and none is waited for.
+std::int64_t input_wait_until(std::int64_t t_ns, std::int64_t deadline_ns, std::int64_t period_ns, InputPhase in);
+
 }  // namespace isotouch::servo

@@ -218,6 +218,18 @@ void ServoThread::unlock_servo_memory() {
   locked_.clear();
 }
 
+std::int64_t ServoThread::wait_for_input(std::int64_t t, std::int64_t next, std::int64_t period) {
+  const InputPhase in = device_.input_phase();
+  const std::int64_t until = input_wait_until(t, next, period, in);
+  if (until < 0) return t;
+  while (t < until && device_.input_phase().due_ns == in.due_ns) {
+    cpu_relax();
+    t = now_ns();
+  }
+  input_waits_.fetch_add(1, std::memory_order_relaxed);
+  return t;
+}
+
 void ServoThread::loop(Handoff& h) {
   setup_note_ = setup_realtime();
   ready_.store(true, std::memory_order_release);
@@ -259,6 +271,7 @@ void ServoThread::loop(Handoff& h) {
       }
     }
     while ((t = now_ns()) < next) cpu_relax();
+    if (cfg_.follow_input_phase) t = wait_for_input(t, next, period);
     if (t - next >= period) {  // started a whole period late: missed; re-anchor
       missed_.fetch_add((t - next) / period, std::memory_order_relaxed);
       next = t;

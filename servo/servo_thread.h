@@ -92,7 +92,9 @@ struct ServoThreadConfig {
   /// A device that says when its next input is due (HapticDeviceIO::input_phase: a link
   /// waiting for the answer) gets its ticks moved to input_lead_us after each arrival, at
   /// most 1/16 period a tick (input_phase.h): its round trip is the lead and the tick, not
-  /// 0 to 1 period by the clocks' luck. The lead covers the arrivals' jitter.
+  /// 0 to 1 period by the clocks' luck. The lead covers the arrivals' jitter; a tick whose
+  /// input runs later than the lead waits for it (spinning, up to half a period past the
+  /// deadline: input_wait_until) rather than leave it to be overtaken by the next one.
   bool follow_input_phase = true;
   double input_lead_us = 100;
   std::size_t record_ticks = 0;   ///< period errors kept (preallocated, prefaulted) for statistics
@@ -217,6 +219,8 @@ class ServoThread {
   long faults() const { return faults_.load(std::memory_order_relaxed); }
   long snapshot_changes() const { return snapshot_changes_.load(std::memory_order_relaxed); }
   long empty_ticks() const { return empty_.load(std::memory_order_relaxed); }
+  /// Ticks that waited past their deadline for a late input (input_wait_until).
+  long input_waits() const { return input_waits_.load(std::memory_order_relaxed); }
   /// The device side's counters (any thread; consistent per counter).
   DeviceCounters device_counters() const;
   /// The live stage's passivity observer and controller so far (any thread).
@@ -246,6 +250,8 @@ class ServoThread {
   std::string lock_servo_memory();
   void unlock_servo_memory();
   void count_not_ok(DeviceStatus s, bool refused);
+  // Before a tick: waits (spinning) for a late input the tick was placed after; the time now.
+  std::int64_t wait_for_input(std::int64_t t, std::int64_t next, std::int64_t period);
   TripleBuffer<SampleField>& samples_;
   Renderer& renderer_;
   HapticDeviceIO& device_;
@@ -259,7 +265,7 @@ class ServoThread {
   std::vector<MemoryRange> locked_;  // page-aligned ranges locked now (released by stop())
   std::size_t locked_bytes_ = 0;
   int pinned_cpu_ = -1;
-  std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0};
+  std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0}, input_waits_{0};
   std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, uncalibrated_{0}, refused_{0}, ramps_{0}, clamped_{0},
       late_{0};
   std::atomic<std::uint8_t> status_{0};

@@ -204,6 +204,9 @@ m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kR
 # ... over the bound at 16 judgements in a row: a moment's slowdown is not refused (part 10).
 m serve-stream-hysteresis   service/serve.cpp '  if (++c.stream_over < kRatePoses) return true;' '  ++c.stream_over;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# A servo tick waits for its late input instead of letting the next one overtake it.
+m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
+                               test_input_phase 'InputWaitUntil.*'
 # serve's command thread: no burst of missed tool ticks, a stroke through a moment out of contact.
 m serve-tool-no-burst       service/tool_ticks.cpp '  return (now > due + period ? now : due) + period;' '  return due + period;' \
                                test_tool_ticks 'ToolTicks.*'

@@ -128,9 +128,11 @@ bool read_growing(ByteSource& src, std::vector<std::uint8_t>& body, std::uint64_
 
 /// Reads the body of a kept message into `body`, checked before the whole of it is
 /// allocated: sizes from the message header, an IMAGE's voxel count from its 72-byte image
-/// header. "" when read and acceptable; else why not (`truncated`: the stream cannot go on).
+/// header, then `before_growing` on that header (an IMAGE's: "" to read its voxels, else why
+/// it is refused). "" when read and acceptable; else why not (`truncated`: the stream
+/// cannot go on); a refused body is read and dropped, never held.
 std::string read_body(ByteSource& src, const std::string& type, std::uint64_t n, std::vector<std::uint8_t>& body,
-                      bool& truncated, const std::function<void()>& before_growing) {
+                      bool& truncated, const std::function<std::string(const std::uint8_t*)>& before_growing) {
   truncated = false;
   const std::uint64_t first = type == "IMAGE" ? std::min<std::uint64_t>(n, IGTL_IMAGE_HEADER_SIZE) : 0;
   std::string why = check_size(type, n);
@@ -138,12 +140,12 @@ std::string read_body(ByteSource& src, const std::string& type, std::uint64_t n,
     body.resize(std::size_t(first));
     if (src.read(body.data(), body.size(), false) != body.size()) return truncated = true, type + " body truncated: " + src.why();
     if (first == IGTL_IMAGE_HEADER_SIZE) why = check_image_body(body.data(), n);  // only the header is read
+    if (why.empty() && first == IGTL_IMAGE_HEADER_SIZE && before_growing) why = before_growing(body.data());
   }
   if (!why.empty()) {  // refused: the rest is read and dropped so that the stream goes on
     if (!skip(src, n - body.size())) return truncated = true, type + " body truncated: " + src.why();
     return why;
   }
-  if (before_growing) before_growing();
   if (!read_growing(src, body, n)) return truncated = true, type + " body truncated: " + src.why();
   return check_body(type, body.data(), n);
 }
@@ -165,14 +167,22 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
   // body size).
   std::vector<std::uint8_t> body;
   bool truncated = false;
-  std::function<void()> hold;
-  if (image && limits.hold_image)
-    hold = [&] {
-      in.held = limits.hold_image(in.device, body_bytes);
-      in.held_bytes = body_bytes;
+  std::function<std::string(const std::uint8_t*)> hold;
+  if (image && limits.admit_image)
+    hold = [&](const std::uint8_t* h) -> std::string {
+      ImageSize size;
+      for (int a = 0; a < 3; ++a) size.dims[a] = int(be(h + 6 + 2 * a, 2));
+      size.stored_bytes = std::uint64_t(scalar_bytes(h[3])) * std::uint64_t(h[2]);
+      AdmittedImage a = limits.admit_image(in.device, size);
+      if (!a.refusal.empty()) return in.over_budget = true, a.refusal;
+      in.held = std::move(a.token);
+      in.held_bytes = a.bytes;
+      return "";
     };
-  if (std::string why = read_body(src, in.type, body_bytes, body, truncated, hold); !why.empty())
+  if (std::string why = read_body(src, in.type, body_bytes, body, truncated, hold); !why.empty()) {
+    in.over_budget = in.over_budget && !truncated;
     return truncated ? broken(in, why) : refused(in, why);
+  }
   msg->SetMessageHeader(header);
   msg->AllocatePack();
   if (std::uint64_t(msg->GetPackBodySize()) != body_bytes)

@@ -31,15 +31,30 @@ class ByteSource {
   virtual std::string why() const = 0;
 };
 
+/// An IMAGE's size as its 72-byte image header says, before its voxels arrive.
+struct ImageSize {
+  int dims[3] = {0, 0, 0};         ///< the image's voxels along each axis
+  std::uint64_t stored_bytes = 0;  ///< bytes a voxel as sent (scalar size x components)
+};
+
+/// MessageLimits::admit_image's answer: the IMAGE refused (`refusal`), or read with what
+/// it counts while it lives.
+struct AdmittedImage {
+  std::string refusal;          ///< "" to read its voxels, else why not
+  std::shared_ptr<void> token;  ///< kept in the Incoming (Incoming::held) until it is destroyed
+  std::uint64_t bytes = 0;      ///< what the token counts [bytes]
+};
+
 /// Bounds on what a message may announce.
 struct MessageLimits {
   /// Largest body accepted [bytes]: 512^3 float32 voxels and the IMAGE header.
   std::uint64_t max_body_bytes = std::uint64_t(512) * 512 * 512 * 4 + 72;
   /// Called for an IMAGE once its image header is checked, before its voxels arrive, with
-  /// its device name and body size [bytes]: what it returns is kept in the Incoming
-  /// (Incoming::held) until that is destroyed (a server counts the IMAGEs arriving or held
-  /// against its memory budget). Empty: nothing held.
-  std::function<std::shared_ptr<void>(const std::string& device, std::uint64_t body_bytes)> hold_image;
+  /// its device name and size: a refusal (its voxels are then read and dropped, never held:
+  /// Incoming::kRefused with over_budget set), or a token the Incoming keeps (Incoming::held)
+  /// until it is destroyed (a server counts the IMAGEs arriving or held against its memory
+  /// budget). Empty: every IMAGE read, nothing held.
+  std::function<AdmittedImage(const std::string& device, const ImageSize& size)> admit_image;
 };
 
 /// One message read from a source.
@@ -63,9 +78,11 @@ struct Incoming {
   double matrix[4][4] = {};
   std::string text;
   std::vector<std::string> labels;
-  /// An IMAGE's: MessageLimits::hold_image's token (null: none) and the body bytes it holds.
+  /// An IMAGE's: MessageLimits::hold_image's token (null: none) and the bytes it counts.
   std::shared_ptr<void> held;
   std::uint64_t held_bytes = 0;
+  /// kRefused by MessageLimits::admit_image (memory, not a malformed message).
+  bool over_budget = false;
 };
 
 /// Reads and validates the next message from `src`. Never throws for what the bytes say.

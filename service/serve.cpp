@@ -134,7 +134,7 @@ class Server {
  public:
   Server(const io::Scene& scene, const ServeOptions& o, std::ostream& out)
       : scene_(scene), o_(o), log_(out), listener_(o.host, o.port) {
-    o_.limits.hold_image = [this](const std::string& device, std::uint64_t bytes) { return hold_image(device, bytes); };
+    o_.limits.admit_image = [this](const std::string& device, const ImageSize& size) { return admit_image(device, size); };
     if (!o.haptic.empty() && o.reply_force)
       throw std::invalid_argument("--reply-force answers the TRANSFORM stream's poses; with --haptic " + o.haptic +
                                   " the stream is not the device");
@@ -170,8 +170,9 @@ class Server {
   io::OpenedJournal carry_journal(io::OpenedJournal& from, Session& s, const std::optional<core::Isosurface>& iso,
                                   const std::vector<std::size_t>& restarts);
   void close_journal();
+  std::string memory_refusal(const std::string& device, const ImageSize& size, std::uint64_t own_held_bytes);
   std::string memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes);
-  std::shared_ptr<void> hold_image(const std::string& device, std::uint64_t bytes);
+  AdmittedImage admit_image(const std::string& device, const ImageSize& size);
   std::uint64_t session_bytes_per_voxel() const;
   void swap_volume(PendingVolume p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
@@ -394,8 +395,11 @@ void Server::handle(Client& c, Incoming& in) {
     }
     case K::kSkipped: n_.skipped.fetch_add(1); break;
     case K::kRefused:
-      refuse(c, in, in.why.find("CRC") != std::string::npos ? igtl::StatusMessage::STATUS_CHECKSUM_ERROR
-                                                             : igtl::StatusMessage::STATUS_CONFIG_ERROR, in.why);
+      refuse(c, in,
+             in.over_budget                           ? igtl::StatusMessage::STATUS_RESOURCE_ERROR
+             : in.why.find("CRC") != std::string::npos ? igtl::StatusMessage::STATUS_CHECKSUM_ERROR
+                                                       : igtl::StatusMessage::STATUS_CONFIG_ERROR,
+             in.why);
       break;
     default: break;
   }
@@ -1154,14 +1158,21 @@ std::uint64_t Server::session_bytes_per_voxel() const {
   return 4 + 4 + 4 + sample + 8;
 }
 
-/// MessageLimits::hold_image: an IMAGE's body counted against the memory budget from before
-/// its voxels arrive until its Incoming is gone (converted, or refused).
-std::shared_ptr<void> Server::hold_image(const std::string& device, std::uint64_t bytes) {
+/// MessageLimits::admit_image: an IMAGE whose header alone says it does not fit the memory
+/// budget is refused before its voxels arrive (they are read and dropped); one that fits is
+/// counted against the budget with its session (what taking it will need) from then until
+/// its Incoming is gone (converted, or refused).
+AdmittedImage Server::admit_image(const std::string& device, const ImageSize& size) {
+  std::lock_guard<std::mutex> image_lock(image_mu_);  // checked and counted as one step
+  if (std::string why = memory_refusal(device, size, 0); !why.empty()) return {std::move(why), nullptr, 0};
+  const std::uint64_t bytes = std::uint64_t(std::max(size.dims[0], 0)) * std::uint64_t(std::max(size.dims[1], 0)) *
+                              std::uint64_t(std::max(size.dims[2], 0)) * (size.stored_bytes + session_bytes_per_voxel());
   images_held_bytes_.fetch_add(bytes);
   std::ostringstream s;
-  s << "image    '" << device << "': " << bytes << " bytes arriving, counted against the memory budget";
+  s << "image    '" << device << "': " << size.dims[0] << " x " << size.dims[1] << " x " << size.dims[2]
+    << " arriving, " << bytes << " bytes (as received and its session) counted against the memory budget";
   log_.line(s.str());
-  return std::shared_ptr<void>(nullptr, [this, bytes](void*) { images_held_bytes_.fetch_sub(bytes); });
+  return {"", std::shared_ptr<void>(nullptr, [this, bytes](void*) { images_held_bytes_.fetch_sub(bytes); }), bytes};
 }
 
 /// What taking `image` would need, against the one memory budget of every client's IMAGEs
@@ -1172,8 +1183,14 @@ std::shared_ptr<void> Server::hold_image(const std::string& device, std::uint64_
 /// one, and every other client's IMAGE arriving or received (`own_held_bytes`: this one's,
 /// not counted twice). "" when it fits; else the STATUS, naming the sizes.
 std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_held_bytes) {
-  int d[3];
-  image.GetDimensions(d);
+  ImageSize size;
+  image.GetDimensions(size.dims);
+  size.stored_bytes = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
+  return memory_refusal(image.GetDeviceName(), size, own_held_bytes);
+}
+
+std::string Server::memory_refusal(const std::string& device, const ImageSize& size, std::uint64_t own_held_bytes) {
+  const int* d = size.dims;
   const std::uint64_t n = std::uint64_t(std::max(d[0], 0)) * std::uint64_t(std::max(d[1], 0)) * std::uint64_t(std::max(d[2], 0));
   const std::uint64_t per_voxel = session_bytes_per_voxel();
   std::uint64_t running = 0, in_flight = 0;
@@ -1188,10 +1205,9 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
   }
   const std::uint64_t held = images_held_bytes_.load();
   in_flight += held > own_held_bytes ? held - own_held_bytes : 0;
-  const std::uint64_t stored = std::uint64_t(image.GetScalarSize()) * std::uint64_t(std::max(image.GetNumComponents(), 1));
-  const std::uint64_t mine = n * (stored + per_voxel);
+  const std::uint64_t mine = n * (size.stored_bytes + per_voxel);
   const std::uint64_t need = mine + running + in_flight;
-  std::uint64_t have = fault("budget", image.GetDeviceName()) ? 0 : io::memory_budget_bytes();
+  std::uint64_t have = fault("budget", device) ? 0 : io::memory_budget_bytes();
   const bool unknown = have == 0;
   if (o_.memory_mib > 0) have = have == 0 ? std::uint64_t(o_.memory_mib) << 20 : std::min(have, std::uint64_t(o_.memory_mib) << 20);
   const bool by_default = have == 0;
@@ -1199,7 +1215,7 @@ std::string Server::memory_refusal(igtl::ImageMessage& image, std::uint64_t own_
   const std::uint64_t budget = have / 4 * 3;
   if (need <= budget) return "";
   std::ostringstream s;
-  s << "igtl:" << image.GetDeviceName() << ": not taken: " << d[0] << " x " << d[1] << " x " << d[2] << " voxels need "
+  s << "igtl:" << device << ": not taken: " << d[0] << " x " << d[1] << " x " << d[2] << " voxels need "
     << (need >> 20) << " MiB, more than the budget of " << (budget >> 20) << " MiB (3/4 of the " << (have >> 20)
     << " MiB of memory this server may use"
     << (by_default ? std::string(", a default: this machine's memory is unknown")

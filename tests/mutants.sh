@@ -204,6 +204,9 @@ m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kR
 # ... over the bound at 16 judgements in a row: a moment's slowdown is not refused (part 10).
 m serve-stream-hysteresis   service/serve.cpp '  if (++c.stream_over < kRatePoses) return true;' '  ++c.stream_over;' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# An IMAGE over the memory budget by its header alone is refused before its voxels are read.
+m serve-budget-header       service/serve.cpp '  if (std::string why = memory_refusal(device, size, 0); !why.empty()) return {std::move(why), nullptr, 0};' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_budget'
 # A servo tick waits for its late input instead of letting the next one overtake it.
 m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
                                test_input_phase 'InputWaitUntil.*'

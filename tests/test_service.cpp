@@ -434,21 +434,26 @@ TEST(ServiceMemory, AnnouncedBodiesAreNotAllocatedBeforeTheyArrive) {
   EXPECT_EQ(kind_under_address_cap(image_of(file, igtl::ImageMessage::ENDIAN_BIG), 64), int(Incoming::Kind::kImage));
 }
 
-// MessageLimits::hold_image (serve's one memory budget): an IMAGE's body is held from its
-// checked image header until its Incoming is gone, with the bytes the header announced; an
-// IMAGE cut short holds until the broken Incoming goes; a TRANSFORM holds nothing.
+// MessageLimits::admit_image (serve's one memory budget): an IMAGE is admitted from its
+// checked image header (its dims and bytes a voxel as the header says) and held until its
+// Incoming is gone; an IMAGE cut short holds until the broken Incoming goes; a TRANSFORM
+// holds nothing.
 TEST(ServiceMemory, AnImagesBodyIsHeldWhileItsIncomingLives) {
   std::uint64_t held = 0;
   std::vector<std::string> devices;
   MessageLimits limits;
-  limits.hold_image = [&](const std::string& device, std::uint64_t bytes) {
-    held += bytes;
+  const std::uint64_t body = 72 + std::uint64_t(64) * 64 * 93 * 2;  // the head's int16 voxels
+  limits.admit_image = [&](const std::string& device, const ImageSize& size) {
+    EXPECT_EQ(size.dims[0], 64);
+    EXPECT_EQ(size.dims[1], 64);
+    EXPECT_EQ(size.dims[2], 93);
+    EXPECT_EQ(size.stored_bytes, 2u);
+    held += body;
     devices.push_back(device);
-    return std::shared_ptr<void>(nullptr, [&held, bytes](void*) { held -= bytes; });
+    return AdmittedImage{"", std::shared_ptr<void>(nullptr, [&held, body](void*) { held -= body; }), body};
   };
   const engine::Volume file = io::load_volume(kHead);
   const std::vector<std::uint8_t> bytes = image_of(file, igtl::ImageMessage::ENDIAN_BIG);
-  const std::uint64_t body = 72 + std::uint64_t(64) * 64 * 93 * 2;  // the head's int16 voxels
   {
     MemorySource src(bytes);
     const Incoming in = read_message(src, limits);
@@ -469,6 +474,32 @@ TEST(ServiceMemory, AnImagesBodyIsHeldWhileItsIncomingLives) {
   MemorySource src(transform_bytes("T", 1, 2, 3));
   EXPECT_EQ(read_message(src, limits).kind, Incoming::Kind::kTransform);
   EXPECT_EQ(devices.size(), 2u) << "a TRANSFORM is not held";
+}
+
+// An IMAGE admit_image refuses at its header is read and dropped (its voxels never held):
+// refused as over the budget, nothing held, and the stream goes on with the next message.
+TEST(ServiceMemory, AnImageRefusedAtItsHeaderIsDroppedAndTheStreamGoesOn) {
+  MessageLimits limits;
+  int asked = 0;
+  limits.admit_image = [&](const std::string&, const ImageSize&) {
+    ++asked;
+    return AdmittedImage{"over the budget", nullptr, 0};
+  };
+  const engine::Volume file = io::load_volume(kHead);
+  std::vector<std::uint8_t> all = image_of(file, igtl::ImageMessage::ENDIAN_BIG);
+  const auto next = transform_bytes("T", 4, 5, 6);
+  all.insert(all.end(), next.begin(), next.end());
+  MemorySource src(all);
+  const Incoming in = read_message(src, limits);
+  EXPECT_EQ(in.kind, Incoming::Kind::kRefused);
+  EXPECT_TRUE(in.over_budget);
+  EXPECT_EQ(in.why, "over the budget");
+  EXPECT_EQ(in.image, nullptr);
+  EXPECT_EQ(in.held, nullptr);
+  EXPECT_EQ(asked, 1);
+  const Incoming after = read_message(src, limits);
+  EXPECT_EQ(after.kind, Incoming::Kind::kTransform) << after.why;
+  EXPECT_FALSE(after.over_budget);
 }
 
 TEST(ServiceMemory, WrongSizesAreRefusedFromTheHeaderAndTheStreamGoesOn) {

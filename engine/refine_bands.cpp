@@ -36,7 +36,13 @@ int RefineBands::next_rows() const {
   // The first band is one row: its cost measured, not extrapolated. Then slow start: at most
   // twice the largest drawn band's hit rows and miss rows (at least one row of each).
   if (drawn_.empty()) return 1;
-  const double room = target_ * budget_ms_;
+  double room = target_ * budget_ms_;
+  // Where the rest of the frame leaves no room for one row (every frame is over the target
+  // whatever the band), a band gets the budget's margin, (1 - target) of it, on top of the
+  // rest: the frames run over by what the rest costs, not by the band, and the picture still
+  // ends in a bounded number of frames (not one row a frame).
+  const double first = hit_[std::size_t(next_)];
+  if (band_cost(first, 1 - first) > room) room = band_cost(0, 0) + (1 - target_) * budget_ms_;
   const double max_hits = std::max(1.0, 2 * most_hits_), max_misses = std::max(1.0, 2 * most_misses_);
   int n = 1;
   double h = hit_[std::size_t(next_)];

@@ -207,6 +207,9 @@ m serve-stream-hysteresis   service/serve.cpp '  if (++c.stream_over < kRatePose
 # An IMAGE over the memory budget by its header alone is refused before its voxels are read.
 m serve-budget-header       service/serve.cpp '  if (std::string why = memory_refusal(device, size, 0); !why.empty()) return {std::move(why), nullptr, 0};' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_budget'
+# A still view whose frame is over the budget without its band still refines in bands of the margin.
+m refine-bands-margin       engine/refine_bands.cpp '  if (band_cost(first, 1 - first) > room) room = band_cost(0, 0) + (1 - target_) * budget_ms_;' '' \
+                               test_refine_bands 'RefineBands.*'
 # A servo tick waits for its late input instead of letting the next one overtake it.
 m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
                                test_input_phase 'InputWaitUntil.*'

@@ -196,6 +196,32 @@ TEST(RefineBands, AFrameOverheadOutsideTheBandIsNotCountedPerRow) {
   }
 }
 
+TEST(RefineBands, AFrameOverTheBudgetWithoutItsBandStillGetsBandsOfTheMargin) {
+  // Frames that cost 35 and 45 ms besides the band (the slices and panels of a large window:
+  // over the 33 ms budget whatever the band) and 0.01 ms a row: no band can keep the budget,
+  // so each band's rows get the budget's margin, 0.1 x 33 = 3.3 ms (R = 330 rows), on top of
+  // the rest: the slow start's doublings up to R and ceil(1440 / R) bands after them at most
+  // (one row a frame would take 1440 frames), each frame within the rest + the margin, give or
+  // take the fit's error on the rows (5 % of the margin: its first bands take the moving
+  // frames' 1 ms fixed part for the band's).
+  const int H = 1440;
+  const double budget = 33, row_ms = 0.01;
+  for (const double overhead : {35.0, 45.0})
+    for (const double band_fixed : {0.0, 1.0}) {
+      const Scene s{1920, H, 0, H, 0.6};
+      RefineBands bands(s.low(480, 360), 480, 360, H, learned_budget(budget, 1));
+      const WindowFrames r = refine_in_window(bands, H, band_fixed, row_ms, overhead - band_fixed);
+      SCOPED_TRACE("frame overhead " + std::to_string(overhead) + " ms, the band's own fixed part " +
+                   std::to_string(band_fixed) + " ms");
+      const double R = std::floor(0.1 * budget / row_ms);
+      std::string rows;
+      for (int n : r.rows) rows += " " + std::to_string(n);
+      EXPECT_LE(double(r.rows.size()), 1 + std::ceil(std::log2(R)) + std::ceil(H / R)) << "bands' rows:" << rows;
+      for (std::size_t k = 0; k < r.frame_ms.size(); ++k)
+        EXPECT_LE(r.frame_ms[k], overhead + 1.05 * 0.1 * budget) << "band " << k;
+    }
+}
+
 TEST(RefineBands, AStallIsNotACost) {
   // One frame of 2 s more (the window was minimised, the machine suspended; in the frame or in
   // the band's render) among frames of 25 ms besides the band and 0.011 ms a row: the rows cost

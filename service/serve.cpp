@@ -493,7 +493,11 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
       std::lock_guard<std::mutex> lock(stream_mu_);
       if (stream_from_ == c.conn) stream_from_.reset();
     }
-    if (!replies_.retarget(1.0)) log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
+    const long zeros = replies_.retarget_zeros();
+    if (!replies_.retarget(1.0))
+      log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
+    else if (replies_.retarget_zeros() > zeros)
+      log_.line("stream   client " + std::to_string(c.id) + ": a zero Force sent to it before its refusal");
   }
   refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, why.str());
   return false;

@@ -79,7 +79,11 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
   while (!stop) {
     std::this_thread::sleep_for(std::chrono::nanoseconds(waiting ? StreamReplyPoll::kPollNs / 5 : StreamReplyPoll::kPollNs));
     if (const std::uint64_t ask = retarget_asked_.load(); ask != retarget_done_.load()) {
-      if (target_() != fenced) unfence(), poll.zero_given();  // the client that stopped being it: a zero now
+      if (target_() != fenced) {  // the client that stopped being it: a zero now
+        if (fenced) retarget_zeros_.fetch_add(1);
+        unfence();
+        poll.zero_given();
+      }
       retarget_done_ = ask;
     }
     const TransformDevice::PoseId p = device_.newest_pose();

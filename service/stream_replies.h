@@ -72,6 +72,8 @@ class StreamReplies {
   /// that was done; false after `timeout_s`, or at once when run() is not running. Not on the
   /// servo thread (it sleeps).
   bool retarget(double timeout_s);
+  /// Zeros sent by retarget() to a connection that stopped being the target.
+  long retarget_zeros() const { return retarget_zeros_.load(); }
   long replies() const { return replies_.load(); }  ///< Force replies sent
   /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
   long stall_replies() const { return stall_replies_.load(); }
@@ -87,7 +89,7 @@ class StreamReplies {
   StreamReplyOptions o_;
   Target target_;
   std::function<void(const std::string&)> log_;
-  std::atomic<long> replies_{0}, stall_replies_{0};
+  std::atomic<long> replies_{0}, stall_replies_{0}, retarget_zeros_{0};
   std::atomic<std::uint64_t> retarget_asked_{0}, retarget_done_{0};  // retarget(): asked, handled up to
   std::atomic<bool> running_{false};
   // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:

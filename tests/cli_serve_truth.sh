@@ -297,6 +297,7 @@ PY
 # 9b. The same slowdown in contact (2 mm inside the ball at 500 Hz, then 50 Hz): when it is
 # refused the client (which applies the last Force it got) holds a zero at once, sent before
 # the refusal STATUS; before, it held the contact force until the stale time (100 ms).
+# (the server says it sent that zero: a stall's zero arriving last would otherwise pass).
 "$exe" serve "$scene" --port 0 --stream Stylus --reply-force --seconds 5 >"$out/serve_slowin.log" 2>&1 &
 serve_pid=$!
 port=$(wait_port "$out/serve_slowin.log" $serve_pid)
@@ -320,6 +321,9 @@ held, after = float(r.group(1)), r.group(3)
 if held != 0.0: fail(f"the refused client held {held} N when its refusal STATUS came, not a zero")
 if after != "none after it" and not after.startswith("first Force after it |F| 0 N"):
     fail(f"a Force other than zero after the refusal: {after}")
+# The zero was the refusal's, not a stall's that happened to come last: the server sent it.
+if "a zero Force sent to it before its refusal" not in open(f"{out}/serve_slowin.log").read():
+    fail("the server did not send the refused client a zero before its STATUS")
 print(f"a stream refused in contact ({float(f[0][4]):.2f} N): its client held an exact zero at the STATUS; {after}")
 PY
 [[ $? == 0 ]] || exit 1

@@ -210,6 +210,9 @@ m serve-budget-header       service/serve.cpp '  if (std::string why = memory_re
 # A still view whose frame is over the budget without its band still refines in bands of the margin.
 m refine-bands-margin       engine/refine_bands.cpp '  if (band_cost(first, 1 - first) > room) room = band_cost(0, 0) + (1 - target_) * budget_ms_;' '' \
                                test_refine_bands 'RefineBands.*'
+# A stream refused in contact: its client is sent a zero before the STATUS (part 9b).
+m serve-refused-zero        service/serve.cpp '      if (stream_from_ == c.conn) stream_from_.reset();' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # A servo tick waits for its late input instead of letting the next one overtake it.
 m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
                                test_input_phase 'InputWaitUntil.*'

@@ -192,6 +192,7 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   ph.to_send_p50_us = st.to_send_p50_us, ph.to_send_p99_us = st.to_send_p99_us;
   ph.stream_late_us = st.stream_late_us;
   ph.input_waits = st.input_waits;
+  ph.input_wait_timeouts = st.input_wait_timeouts;
   return ph;
 }
 
@@ -237,12 +238,12 @@ int run_bench_serve(const BenchServeOptions& o, std::ostream& log) {
   log << "\nWhere the time goes (inside the server, 10 us bins; the rest of the round trip is the two\n"
       << "loopback messages and the tracker's threads):\n\n"
       << "| phase | pose -> servo's write p50 / p99 [us] | write -> reply sent p50 / p99 [us] | rest at p50 [us] | "
-         "poses' lateness p99.5 at the end (the servo's lead >= it + 25 us) [us] | ticks that waited for a later pose |\n"
+         "poses' lateness p99.5 at the end (the servo's lead >= it + 25 us) [us] | ticks that waited for a later pose (of them, in vain) |\n"
       << "|---|---|---|---|---|---|\n";
   for (const BenchServePhase* p : {&alone, &traffic})
     log << "| " << p->name << " | " << fixed(p->to_servo_p50_us) << " / " << fixed(p->to_servo_p99_us) << " | "
         << fixed(p->to_send_p50_us) << " / " << fixed(p->to_send_p99_us) << " | "
-        << fixed(p->p50_us - p->to_servo_p50_us - p->to_send_p50_us) << " | " << fixed(p->stream_late_us) << " | " << p->input_waits << " |\n";
+        << fixed(p->p50_us - p->to_servo_p50_us - p->to_send_p50_us) << " | " << fixed(p->stream_late_us) << " | " << p->input_waits << " (" << p->input_wait_timeouts << ") |\n";
   log << "\n";
   for (const std::string& v : bench_serve_verdicts(alone, traffic)) log << "verdict  " << v << "\n";
   log << "machine  " << cpu_model() << ", " << std::thread::hardware_concurrency() << " CPUs; load average before "

@@ -33,6 +33,7 @@ struct BenchServePhase {
   double to_servo_p50_us = 0, to_servo_p99_us = 0, to_send_p50_us = 0, to_send_p99_us = 0;
   double stream_late_us = 0;  ///< the stream's arrival lateness (99.5th percentile) at the end [us]
   long input_waits = 0;       ///< servo ticks that waited for a pose later than the lead
+  long input_wait_timeouts = 0;  ///< of those, the waits that ended without the pose
 };
 
 /// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered

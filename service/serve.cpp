@@ -232,7 +232,7 @@ class Server {
   // destroyed after it, so a session still running while run() unwinds never appends to a freed one
   std::unique_ptr<Session> session_;
   std::uint32_t journal_crc_ = 0;  // the volume journal_ belongs to
-  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0, input_waits_ = 0;
+  long sessions_ = 0, ticks_ = 0, faults_ = 0, stale_ = 0, missed_ = 0, input_waits_ = 0, input_wait_timeouts_ = 0;
   long disconnected_ = 0, device_faults_ = 0, refused_reports_ = 0;  // the haptic device's ticks
   long uncalibrated_ = 0;  // ticks the haptic device waited for calibration (zero force; not a fault)
   std::mutex stream_mu_;
@@ -263,7 +263,8 @@ class Server {
             sp.to_send_p50_us,
             sp.to_send_p99_us,
             double(device_.input_phase().late_ns) * 1e-3,
-            input_waits_};
+            input_waits_,
+            input_wait_timeouts_};
   }
 
  private:
@@ -1451,6 +1452,7 @@ std::unique_ptr<Session> Server::stop_session() {
   faults_ += st.faults;
   missed_ += st.missed_deadlines;
   input_waits_ += s->live().servo_thread()->input_waits();
+  input_wait_timeouts_ += s->live().servo_thread()->input_wait_timeouts();
   const servo::DeviceCounters dc = s->live().servo_thread()->device_counters();
   stale_ += dc.stale;  // zero force on each
   disconnected_ += dc.disconnected;

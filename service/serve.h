@@ -125,6 +125,7 @@ struct ServeStats {
   double stream_late_us = 0;
   /// Servo ticks that waited past their deadline for a pose that ran later than the lead.
   long input_waits = 0;
+  long input_wait_timeouts = 0;  ///< of those, the waits the pose did not end (half a period past the deadline)
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

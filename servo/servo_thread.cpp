@@ -227,6 +227,7 @@ std::int64_t ServoThread::wait_for_input(std::int64_t t, std::int64_t next, std:
     t = now_ns();
   }
   input_waits_.fetch_add(1, std::memory_order_relaxed);
+  if (t >= until) input_wait_timeouts_.fetch_add(1, std::memory_order_relaxed);  // the pose did not come
   return t;
 }
 

@@ -221,6 +221,8 @@ class ServoThread {
   long empty_ticks() const { return empty_.load(std::memory_order_relaxed); }
   /// Ticks that waited past their deadline for a late input (input_wait_until).
   long input_waits() const { return input_waits_.load(std::memory_order_relaxed); }
+  /// Of those, the waits that ended without the input (half a period past the deadline).
+  long input_wait_timeouts() const { return input_wait_timeouts_.load(std::memory_order_relaxed); }
   /// The device side's counters (any thread; consistent per counter).
   DeviceCounters device_counters() const;
   /// The live stage's passivity observer and controller so far (any thread).
@@ -265,7 +267,8 @@ class ServoThread {
   std::vector<MemoryRange> locked_;  // page-aligned ranges locked now (released by stop())
   std::size_t locked_bytes_ = 0;
   int pinned_cpu_ = -1;
-  std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0}, input_waits_{0};
+  std::atomic<long> ticks_{0}, missed_{0}, faults_{0}, snapshot_changes_{0}, empty_{0}, input_waits_{0},
+      input_wait_timeouts_{0};
   std::atomic<long> stale_{0}, disconnected_{0}, dev_fault_{0}, uncalibrated_{0}, refused_{0}, ramps_{0}, clamped_{0},
       late_{0};
   std::atomic<std::uint8_t> status_{0};

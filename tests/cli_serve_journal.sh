@@ -8,6 +8,10 @@
 # (the client's comparison); stopped by SIGTERM, it deletes the journal. The same for a
 # session on a client's IMAGE: restored when the same IMAGE is sent to the next serve.
 # (A session an `isovalue V` rebuilt: see the last part.)
+# Where the first press carved nothing because it never pressed (no brush of its stroke over
+# the carve's force threshold: the client's stream went stale under load and the renderer, reset with the
+# probe in the bone, rightly felt nothing from inside), the restore's comparison with the head
+# says nothing: not judged, "SKIP serve journal", exit 77 (ctest: skipped).
 # The client's first message is the tool command: its answer says the server reads this client
 # (a serve still starting would take the poses queued in the socket at once, the probe already
 # in the bone, and the renderer rightly feels no contact from inside).
@@ -51,6 +55,19 @@ edits=$(grep -c '^{"edit"' "$journal"); brushes=$(grep -c '^{"edit":"brush"' "$j
 strokes=$(grep -c '^{"edit":"begin_stroke"' "$journal")
 (( strokes == 2 )) || fail "the journal holds $strokes strokes for the client's 2 presses"
 cmp -s "$out/first.mha" "$out/carved.mha" || fail "the undo did not give the first stroke back"
+# The first stroke's largest brush force over the carve's threshold [N] (its brushes before
+# its end_stroke; the carve removes at rate x max(0, |F| - threshold)): 0 when it never pressed.
+first_force=$(python3 -c '
+import json, sys
+top = 0.0
+for line in open(sys.argv[1]):
+    if line.startswith("{\"edit\""):
+        e = json.loads(line)
+        if e["edit"] == "end_stroke": break
+        if e["edit"] == "brush":
+            b = e["brush"]
+            top = max(top, b.get("force_n", 0.0) - b.get("force_threshold_n", 0.0))
+print(top)' "$journal")
 cmp -s "$out/both.mha" "$out/carved.mha" && fail "the second stroke changed nothing: the undo says little"
 
 serve_n 2 4 || fail "serve did not start again"
@@ -62,7 +79,13 @@ grep -q "^journal  restore $edits edits from [0-9][0-9]:[0-9][0-9]?" "$out/serve
 grep -q "^journal  restoring $edits edits from $journal" "$out/serve2.log" || fail "the $edits edits were not restored"
 cmp "$out/restored.mha" "$out/carved.mha" || fail "restored.mha differs from carved.mha (the volume at the kill)"
 carved=$(sed -n "s|^compare $out/restored.mha: \([0-9]*\) voxels differ.*|\1|p" "$out/client2.log")
-(( ${carved:-0} >= 10 )) || fail "the restored volume differs from the head in ${carved:-no} voxels"
+if (( ${carved:-0} < 10 )); then
+  if [[ $first_force == 0.0 ]] && ! cmp -s "$out/both.mha" "$out/carved.mha"; then
+    echo "SKIP serve journal: the first press never pressed (no brush of its stroke over the carve's threshold; the second carved): the restore's comparison with the head says nothing"
+    exit 77
+  fi
+  fail "the restored volume differs from the head in ${carved:-no} voxels (the first press's largest force over the threshold $first_force N)"
+fi
 [[ ! -e $journal ]] || fail "the journal was not deleted when serve stopped"
 echo "ok serve journal: $edits edits ($brushes brushes, 1 undo) restored after kill -9, byte for byte ($carved voxels carved)"
 

@@ -222,8 +222,13 @@ std::int64_t ServoThread::wait_for_input(std::int64_t t, std::int64_t next, std:
   const InputPhase in = device_.input_phase();
   const std::int64_t until = input_wait_until(t, next, period, in);
   if (until < 0) return t;
+  // Slept in short slices, not spun: the thread that receives the pose may be queued on this
+  // CPU behind a real-time servo that never sleeps (a 2-CPU machine), and a spin would hold
+  // off the very arrival it waits for.
+  constexpr std::int64_t kSliceNs = 20'000;
   while (t < until && device_.input_phase().due_ns == in.due_ns) {
-    cpu_relax();
+    const timespec ts{0, long(std::min(kSliceNs, until - t))};
+    nanosleep(&ts, nullptr);
     t = now_ns();
   }
   input_waits_.fetch_add(1, std::memory_order_relaxed);

@@ -93,8 +93,8 @@ struct ServoThreadConfig {
   /// waiting for the answer) gets its ticks moved to input_lead_us after each arrival, at
   /// most 1/16 period a tick (input_phase.h): its round trip is the lead and the tick, not
   /// 0 to 1 period by the clocks' luck. The lead covers the arrivals' jitter; a tick whose
-  /// input runs later than the lead waits for it (spinning, up to half a period past the
-  /// deadline: input_wait_until) rather than leave it to be overtaken by the next one.
+  /// input runs later than the lead waits for it (sleeping in short slices, up to half a
+  /// period past the deadline: input_wait_until) rather than leave it to be overtaken by the next one.
   bool follow_input_phase = true;
   double input_lead_us = 100;
   std::size_t record_ticks = 0;   ///< period errors kept (preallocated, prefaulted) for statistics
@@ -252,7 +252,7 @@ class ServoThread {
   std::string lock_servo_memory();
   void unlock_servo_memory();
   void count_not_ok(DeviceStatus s, bool refused);
-  // Before a tick: waits (spinning) for a late input the tick was placed after; the time now.
+  // Before a tick: waits (sleeping in 20 us slices) for a late input the tick was placed after; the time now.
   std::int64_t wait_for_input(std::int64_t t, std::int64_t next, std::int64_t period);
   TripleBuffer<SampleField>& samples_;
   Renderer& renderer_;

@@ -66,6 +66,13 @@ file(STRINGS ${embed}/CMakeCache.txt found_dir REGEX "^isotouch_DIR:")
 if(NOT found_dir STREQUAL "isotouch_DIR:PATH=${prefix}/lib/cmake/isotouch")
   message(FATAL_ERROR "install_embed: the example found isotouch elsewhere: ${found_dir}")
 endif()
+# ITK's config finds GDCM, whose targets file names each command-line tool that is not
+# installed: the package config finds ITK with status messages off (isotouchConfig.cmake.in).
+string(REGEX MATCHALL "The imported target \"gdcm[^\"]*\"" gdcm_notes "${step_out}${step_err}")
+if(gdcm_notes)
+  list(LENGTH gdcm_notes n_gdcm_notes)
+  message(FATAL_ERROR "install_embed: the example's configure printed ${n_gdcm_notes} GDCM notes: ${gdcm_notes}")
+endif()
 run_step("building examples/embed" ${CMAKE_COMMAND} --build ${embed})
 set(recording ${WORK}/embed.rec)
 execute_process(COMMAND ${embed}/isotouch-embed ${VOLUME} 1150 ${recording} RESULT_VARIABLE rc OUTPUT_VARIABLE out

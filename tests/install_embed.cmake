@@ -203,10 +203,13 @@ int main() {
   if (it::session::SetupResult r = s.attach(io, config); !r) { std::fprintf(stderr, "live-only: %s\n", r.error.c_str()); return 1; }
   it::session::LiveSession& live = *s.live();
   live.start();
-  // The hand is pressed in by the stroke's start; 1 s more for a loaded machine.
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(script.t_stroke + 1.0);
+  // The hand is pressed in by the stroke's start (script time: the servo's ticks, which a
+  // loaded machine delays), 1 s of ticks more; 60 s of wall time for a servo that stalls.
+  const long last_tick = long((script.t_stroke + 1.0) * options.hri.rate_hz);
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   it::session::Observed o = live.observe();
-  while (!(o.contact && it::core::norm(o.force_n) > 0.5) && std::chrono::steady_clock::now() < end) {
+  while (!(o.contact && it::core::norm(o.force_n) > 0.5) && o.tick < last_tick &&
+         std::chrono::steady_clock::now() < end) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
     o = live.observe();
   }

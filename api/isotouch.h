@@ -36,7 +36,9 @@
 // device) returns engine::Result with the reason. The library writes nothing to stdout; a
 // few notes go to stderr (which series of a DICOM folder was taken).
 //
-// Internal (installed because the headers below include them, but not an API to code
+// This header includes none of the engine's Vulkan headers (engine/vk_context.h: include it
+// for a GPU engine) nor the run job's internals (run/names.h, the report and SDK devices).
+// Internal (installed because other headers include them, but not an API to code
 // against; they change without notice): the engine's Vulkan passes and resources
 // (engine/vk_resources.h, passes.h, sparse_*.h, gradient_pass.h, raycast.h; of
 // engine/vk_context.h only VulkanContext::create and ContextOptions), the sparse and brick
@@ -56,7 +58,6 @@
 #include "isotouch/core/sample_field.h"
 #include "isotouch/core/vec3.h"
 #include "isotouch/engine/volume.h"
-#include "isotouch/engine/vk_context.h"
 #include "isotouch/io/record.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/vdb_io.h"
@@ -77,6 +78,13 @@
 #include "isotouch/sim/script.h"
 #include "isotouch/sim/sim_device.h"
 #include "isotouch/sim/sim_device_io.h"
+
+// The Vulkan context is named by pointer only: a program that runs the engine on a GPU
+// includes "isotouch/engine/vk_context.h" (VulkanContext::create, ContextOptions; it brings
+// Vulkan's headers, about 16,000 lines, that a CPU-only program does not need).
+namespace isotouch::engine {
+class VulkanContext;
+}
 
 namespace isotouch {
 
@@ -105,7 +113,7 @@ inline session::LiveFieldOptions field_options(const engine::Volume& volume, dou
 /// snapshot, version 1: EditSession::current(), a core::SampleField of Sample{value, gx, gy,
 /// gz} per voxel, bricked) and applies edits afterwards. `vk` null: the CPU engine and CPU
 /// brushes (bit for bit the Vulkan ones); else the brushes and large updates run on that
-/// device (engine::VulkanContext::create). `history_limit_mib`: the undo memory [MiB].
+/// device (engine::VulkanContext::create, isotouch/engine/vk_context.h). `history_limit_mib`: the undo memory [MiB].
 /// @throws engine::VolumeError, std::invalid_argument (bad passes or options).
 inline std::unique_ptr<session::EditSession> make_edit_session(engine::Volume volume,
                                                                const session::LiveFieldOptions& options,

@@ -9,6 +9,7 @@
 
 #include "isotouch/core/field_view.h"
 #include "isotouch/engine/pass_desc.h"
+#include "isotouch/materials/critical_distance.h"
 #include "isotouch/run/text.h"
 
 namespace isotouch::run {

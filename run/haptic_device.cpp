@@ -1,4 +1,10 @@
 #include "isotouch/run/haptic_device.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/run/names.h"
+#include "isotouch/run/run_scene.h"
+#include "isotouch/run/scene_setup.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/servo/sdk_device.h"
 
 #include <sstream>
 #include <stdexcept>

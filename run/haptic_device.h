@@ -13,18 +13,30 @@
 #include <memory>
 #include <string>
 
+#include "isotouch/core/vec3.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/hri.h"
-#include "isotouch/servo/report_device.h"
-#include "isotouch/servo/sdk_device.h"
-#include "isotouch/run/names.h"
-#include "isotouch/run/run_scene.h"
-#include "isotouch/run/scene_setup.h"
-#include "isotouch/sim/sim_device.h"
 #include "isotouch/servo/workspace.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
 
+// Named by pointer or reference only: the back-ends' classes (internal: servo/report_device.h,
+// sdk_device.h, service/igtl_device.h) and the scene's types (io/scene.h, run/scene_setup.h).
 namespace isotouch::service {
 class IgtlDevice;
+}
+namespace isotouch::servo {
+class ReportDevice;
+class SdkDevice;
+}  // namespace isotouch::servo
+namespace isotouch::engine {
+struct Volume;
+}
+namespace isotouch::io {
+struct Scene;
+}
+namespace isotouch::run {
+struct SceneSetup;
 }
 
 namespace isotouch::run {

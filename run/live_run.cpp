@@ -19,6 +19,8 @@
 #include "isotouch/core/exit_codes.h"
 #include "isotouch/io/files.h"
 #include "isotouch/run/haptic_device.h"
+#include "isotouch/servo/report_device.h"
+#include "isotouch/servo/sdk_device.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/io/record.h"

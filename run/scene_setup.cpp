@@ -22,6 +22,12 @@
 #include "isotouch/run/scene_script.h"
 #include "isotouch/eval/shapes.h"
 #include "isotouch/materials/label_volume.h"
+#include "isotouch/materials/critical_distance.h"
+#include "isotouch/session/material_cut.h"
+#include "isotouch/engine/passes.h"
+#include "isotouch/engine/vk_context.h"
+#include "isotouch/core/brick_field.h"
+#include "isotouch/sim/headless.h"
 #include "isotouch/engine/synthetic.h"
 #include "isotouch/run/text.h"
 

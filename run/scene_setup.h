@@ -6,21 +6,30 @@
 #include <string>
 #include <vector>
 
-#include "isotouch/core/brick_field.h"
+#include "isotouch/core/sample_field.h"
 #include "isotouch/session/edit_session.h"
-#include "isotouch/sim/headless.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/session/live_field.h"
-#include "isotouch/engine/passes.h"
 #include "isotouch/io/mesh_units.h"
 #include "isotouch/io/record.h"
 #include "isotouch/run/run_metrics.h"
 #include "isotouch/io/scene.h"
-#include "isotouch/engine/vk_context.h"
 #include "isotouch/servo/workspace.h"
-#include "isotouch/session/material_cut.h"
-#include "isotouch/materials/critical_distance.h"
-#include "isotouch/materials/label_volume.h"
+#include "isotouch/sim/script.h"
+
+// Held by pointer here: the Vulkan context (engine/vk_context.h, which includes Vulkan's
+// headers), the labelled scene's materials (materials/, session/material_cut.h). A source
+// that uses them includes their headers; this one stays on the public API (api/isotouch.h).
+namespace isotouch::engine {
+class VulkanContext;
+}
+namespace isotouch::materials {
+class CriticalDistance;
+struct LabelVolume;
+}  // namespace isotouch::materials
+namespace isotouch::session {
+struct MaterialCut;
+}
 
 namespace isotouch::run {
 

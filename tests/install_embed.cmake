@@ -3,7 +3,8 @@
 # folder, -DCMAKE_PREFIX_PATH=PREFIX, no package registry), built and run on the head CT
 # (contact force, one carve read by the servo, the session's recording).
 # Also: every installed header's "isotouch/..." includes resolve inside the prefix; a consumer
-# of one component finds only that component's packages; the pkg-config file's flags compile
+# of one component finds only that component's packages; a consumer of servo and live alone
+# neither finds nor loads ITK or OpenVDB; the pkg-config file's flags compile
 # the example; the archives are position-independent.
 #   cmake -DBUILD=DIR -DSOURCE=DIR -DWORK=DIR -DVOLUME=FILE -P install_embed.cmake
 foreach(v BUILD SOURCE WORK VOLUME)
@@ -64,6 +65,13 @@ run_step("configuring examples/embed" ${CMAKE_COMMAND} -S ${SOURCE}/examples/emb
 file(STRINGS ${embed}/CMakeCache.txt found_dir REGEX "^isotouch_DIR:")
 if(NOT found_dir STREQUAL "isotouch_DIR:PATH=${prefix}/lib/cmake/isotouch")
   message(FATAL_ERROR "install_embed: the example found isotouch elsewhere: ${found_dir}")
+endif()
+# ITK's config finds GDCM, whose targets file names each command-line tool that is not
+# installed: the package config finds ITK with status messages off (isotouchConfig.cmake.in).
+string(REGEX MATCHALL "The imported target \"gdcm[^\"]*\"" gdcm_notes "${step_out}${step_err}")
+if(gdcm_notes)
+  list(LENGTH gdcm_notes n_gdcm_notes)
+  message(FATAL_ERROR "install_embed: the example's configure printed ${n_gdcm_notes} GDCM notes: ${gdcm_notes}")
 endif()
 run_step("building examples/embed" ${CMAKE_COMMAND} --build ${embed})
 set(recording ${WORK}/embed.rec)
@@ -148,6 +156,89 @@ if(NOT step_out MATCHES "^renderer [A-Za-z]")
   message(FATAL_ERROR "install_embed: the servo-only consumer printed: ${step_out}")
 endif()
 message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
+
+# 4a. The live path alone: a program that links isotouch::servo and isotouch::live (a sphere
+# volume made in memory, the live session on a simulated device until contact) finds neither
+# ITK nor OpenVDB (nor assimp, OpenIGTLink, hidapi) at configure, and none of their shared
+# libraries is loaded by the program (ldd, what the dynamic loader resolves for the binary).
+set(live_src ${WORK}/live-only)
+file(WRITE ${live_src}/CMakeLists.txt [=[
+cmake_minimum_required(VERSION 3.22)
+project(live_only LANGUAGES CXX)
+find_package(isotouch CONFIG REQUIRED COMPONENTS servo live)
+add_executable(live-only main.cpp)
+target_compile_features(live-only PRIVATE cxx_std_20)
+target_link_libraries(live-only PRIVATE isotouch::servo isotouch::live)
+]=])
+file(WRITE ${live_src}/main.cpp [=[
+#include <chrono>
+#include <cstdio>
+#include <thread>
+#include "isotouch/engine/synthetic.h"
+#include "isotouch/session/session.h"
+#include "isotouch/sim/script.h"
+#include "isotouch/sim/sim_device.h"
+#include "isotouch/sim/sim_device_io.h"
+namespace it = isotouch;
+int main() {
+  // A sphere of radius 20 mm (signed distance in mm, positive inside), felt at isovalue 0.
+  it::engine::Volume volume = it::engine::make_sphere({64, 64, 64}, 1e-3, 20.0);
+  it::servo::WorkspaceTransform world_T_device;
+  world_T_device.translation_m = volume.grid.centre_m();
+  it::session::SessionOptions options;
+  options.field.iso = it::core::Isosurface{0.0, it::core::InsideIs::kAbove};
+  options.field.background = float(options.field.iso.outside_value(volume.min_value, volume.max_value));
+  options.hri.tau = 0.0;
+  options.hri.inside = it::core::InsideIs::kAbove;
+  it::session::Opened opened = it::session::Session::open(std::move(volume), options);
+  if (!opened) { std::fprintf(stderr, "live-only: %s\n", opened.error.c_str()); return 1; }
+  it::session::Session& s = *opened.session;
+  const it::sim::TouchScript script = it::sim::make_touch_script(*s.edits().current(), options.hri, {});
+  it::sim::SimDevice device({}, world_T_device.to_device(script.waypoints.front().pos_m));
+  it::sim::SimDeviceIO io(device, script, 1.0 / options.hri.rate_hz, world_T_device);
+  it::session::LiveSessionConfig config;
+  config.servo.rate_hz = options.hri.rate_hz;
+  config.servo.sched_fifo = config.servo.pin_cpu = config.servo.lock_memory = false;
+  config.servo.world_T_device = world_T_device;
+  if (it::session::SetupResult r = s.attach(io, config); !r) { std::fprintf(stderr, "live-only: %s\n", r.error.c_str()); return 1; }
+  it::session::LiveSession& live = *s.live();
+  live.start();
+  // The hand is pressed in by the stroke's start (script time: the servo's ticks, which a
+  // loaded machine delays), 1 s of ticks more; 60 s of wall time for a servo that stalls.
+  const long last_tick = long((script.t_stroke + 1.0) * options.hri.rate_hz);
+  const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  it::session::Observed o = live.observe();
+  while (!(o.contact && it::core::norm(o.force_n) > 0.5) && o.tick < last_tick &&
+         std::chrono::steady_clock::now() < end) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    o = live.observe();
+  }
+  it::session::stop_or_end_process(live, "live-only");
+  std::printf("live-only contact %d |F| = %.4f N at tick %ld\n", int(o.contact), it::core::norm(o.force_n), o.tick);
+  return o.contact ? 0 : 3;
+}
+]=])
+run_step("configuring a servo + live consumer" ${CMAKE_COMMAND} -S ${live_src} -B ${WORK}/live-only-build -G Ninja
+  -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
+file(STRINGS ${WORK}/live-only-build/CMakeCache.txt heavy REGEX "^(ITK_DIR|GDCM_DIR|OpenVDB_[A-Za-z_]*|assimp_DIR|OpenIGTLink_DIR|HIDAPI_[A-Za-z_]*):")
+if(heavy)
+  message(FATAL_ERROR "install_embed: COMPONENTS servo live found what the live path does not need: ${heavy}")
+endif()
+run_step("building a servo + live consumer" ${CMAKE_COMMAND} --build ${WORK}/live-only-build)
+run_step("running the servo + live consumer" ${WORK}/live-only-build/live-only)
+if(NOT step_out MATCHES "^live-only contact 1 \\|F\\| = [0-9.]+ N")
+  message(FATAL_ERROR "install_embed: the servo + live consumer printed: ${step_out}")
+endif()
+set(live_out "${step_out}")
+run_step("ldd of the servo + live consumer" ldd ${WORK}/live-only-build/live-only)
+string(REGEX MATCHALL "lib(ITK|itk|gdcm|teem|openvdb|assimp|OpenIGTLink|hidapi)[^ \t\n]*" loaded "${step_out}")
+if(loaded)
+  message(FATAL_ERROR "install_embed: the servo + live consumer loads ${loaded}:\n${step_out}")
+endif()
+string(REGEX MATCHALL "\n" ldd_lines "${step_out}")
+list(LENGTH ldd_lines n_ldd)
+message(STATUS "install_embed: COMPONENTS servo live: no ITK, OpenVDB, assimp, OpenIGTLink or hidapi found or loaded "
+               "(${n_ldd} ldd lines); ${live_out}")
 
 # 4b. A consumer that enables CXX alone (project(x LANGUAGES CXX)) and asks for everything:
 # ITK's HDF5 needs C, which the package config enables (before, FindHDF5's try_compile

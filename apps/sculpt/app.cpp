@@ -32,6 +32,7 @@
 #include "isotouch/apps/sculpt/burr.h"
 #include "isotouch/apps/sculpt/frame.h"
 #include "isotouch/run/haptic_device.h"
+#include "isotouch/servo/report_device.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/apps/sculpt/input_script.h"
 #include "isotouch/session/live_session.h"

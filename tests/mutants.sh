@@ -349,7 +349,7 @@ m link-whole-ticks          sim/linked_contact.cpp 'whole >= 1 && std::abs(ticks
 # and refuses above the bound.
 m link-kmax-controller      sim/linked_contact.cpp '    base.passivity_controller = pc;' '    base.passivity_controller = false;' \
                                test_linked_contact 'LinkKMax.*'
-m link-kmax-measured-rate   sim/linked_contact.cpp '    base.device_period_s = period / std::max(1.0, std::round(period / 1e-3));' '' \
+m link-kmax-measured-rate   sim/linked_contact.cpp '    base.device_period_s = period / std::max(1.0, std::round(period / 1e-3));' '    (void)0;' \
                                test_linked_contact 'LinkKMax.*'
 m igtl-link-bound-peer-pc   service/igtl_device.cpp \
                                'j.limit_n_per_m = loop.peer_passivity_control ? j.bound.k_max_with_pc_n_per_m : j.bound.k_max_n_per_m;' \

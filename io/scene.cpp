@@ -605,6 +605,8 @@ void parse_device(const Reader& r, const json& root, Scene& s) {
   check_workspace_scale(r, dv, s);
   s.allow_no_watchdog = r.boolean(dv, "device", "allow_no_watchdog", false);
   s.link_max_force_n = r.number(dv, "device", "link_max_force_n");
+  s.link_round_trip_s = 1e-3 * r.number(dv, "device", "link_round_trip_ms");
+  s.link_passivity_control = r.boolean(dv, "device", "link_passivity_control", false);
   s.hri.world_per_device = s.workspace_scale;
 }
 

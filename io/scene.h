@@ -119,6 +119,16 @@ struct Scene {
   /// whose device isotouch cannot ask. The servo's gate clamps to min(servo.force_limit_n,
   /// this) and limits the force's rate to that over 2 ms.
   double link_max_force_n = 3.3;
+  /// device.link_round_trip_ms (default 0): a link's round trip beyond its hold [s here]
+  /// (`--haptic igtl:`): the peer's transport and its own loop, which an OpenIGTLink stream
+  /// cannot measure. The stiffness check simulates the stream's hold (one measured period)
+  /// plus this (sim::link_k_max).
+  double link_round_trip_s = 0;
+  /// device.link_passivity_control (default false): the link's device end (the peer) runs
+  /// the time-domain passivity controller on its own loop (as tests/igtl_hand_peer.cpp and
+  /// sim/linked_contact.h do; isotouch cannot put it there nor see it). With it the stiffness
+  /// check of `--haptic igtl:` takes the bound with the controller.
+  bool link_passivity_control = false;
   /// servo.allow_unstable_stiffness (default false): run a servo.stiffness_n_per_m above
   /// the Colgate-Schenkel bound 2 (b - |B|) / T (b: device + hand damping [N s/m], B: servo
   /// damping [N s/m], T: 1 / rate_hz [s]). Without it such a scene is refused; with it the

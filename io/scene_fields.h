@@ -71,6 +71,8 @@ inline constexpr SceneField kSceneFields[] = {
     {"device", "workspace_scale", "world m per device m", "(0, 1e3]", "1.0"},
     {"device", "allow_no_watchdog", "", "true, false", "false"},
     {"device", "link_max_force_n", "N", "(0, 1000]", "3.3"},
+    {"device", "link_round_trip_ms", "ms", "[0, 1000]", "0"},
+    {"device", "link_passivity_control", "", "true, false", "false"},
     {"script", "ray_origin_frac", "fractions of the volume box", "vector, each in [-2, 3]", "[0.5, 0.5, 1.2]"},
     {"script", "ray_direction", "", "vector, not zero", "[0, 0, -1]"},
     {"script", "stroke_direction", "", "vector; not zero when `stroke_length_m` > 0", "[1, 0, 0]"},

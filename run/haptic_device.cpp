@@ -130,7 +130,8 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
     d.io = std::move(dev);
   } else if (kind == "igtl") {  // the loop closes at the stream's rate: its stiffness bound is checked there
     const service::IgtlLoop loop{scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
-                                 scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness};
+                                 scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness,
+                                 scene.device, scene.link_round_trip_s, scene.link_passivity_control};
     auto dev = service::open_igtl_device(arg, loop, d.description, io_fifo_priority, scene.link_max_force_n);
     d.igtl = dev.get();
     d.io = std::move(dev);

@@ -175,6 +175,28 @@ void IgtlDevice::write_loop() {
   send_force({0, 0, 0});
 }
 
+LinkStiffness judge_link_stiffness(const IgtlLoop& loop, double rate_hz) {
+  LinkStiffness j;
+  j.loop_hz = std::min(rate_hz, loop.servo_rate_hz);
+  j.colgate_n_per_m = sim::colgate_k_max(loop.handle_damping_n_s_per_m, loop.servo_damping_n_s_per_m, 1.0 / j.loop_hz);
+  sim::LinkedContact press;  // the link sweep's press, with the scene's device, hand and B
+  press.device = loop.device;
+  press.device.force_max_n = 1e3;  // as the sweep: what the link does, not the motor's limit
+  press.servo_damping_n_s_per_m = loop.servo_damping_n_s_per_m;
+  j.bound = sim::link_k_max(press, j.loop_hz, loop.round_trip_s);
+  j.limit_n_per_m = loop.peer_passivity_control ? j.bound.k_max_with_pc_n_per_m : j.bound.k_max_n_per_m;
+  j.over = loop.stiffness_n_per_m > j.limit_n_per_m;
+  std::ostringstream s;
+  s << "through the link (simulated: the scene's device and hand pressing a wall at " << num(j.loop_hz)
+    << " Hz, each force held one period, round trip " << num(loop.round_trip_s * 1e3)
+    << " ms beyond the hold, device.link_round_trip_ms: the stream cannot measure it) K_max "
+    << num(j.bound.k_max_n_per_m) << " N/m without the passivity controller, " << num(j.bound.k_max_with_pc_n_per_m)
+    << " N/m with it at the peer's end (device.link_passivity_control "
+    << (loop.peer_passivity_control ? "true: the bound with it applies" : "false: the bound without it applies") << ")";
+  j.text = s.str();
+  return j;
+}
+
 std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlLoop& loop, std::string& description,
                                              int fifo_priority, double max_force_n) {
   IgtlDeviceOptions o = parse_igtl_spec(arg);
@@ -182,21 +204,28 @@ std::unique_ptr<IgtlDevice> open_igtl_device(const std::string& arg, const IgtlL
   o.max_force_n = max_force_n;
   auto d = std::make_unique<IgtlDevice>(o);
   const double rate = d->measured_rate_hz();
-  const double loop_hz = std::min(rate, loop.servo_rate_hz);
-  const double bound = sim::colgate_k_max(loop.handle_damping_n_s_per_m, loop.servo_damping_n_s_per_m, 1.0 / loop_hz);
+  const LinkStiffness j = judge_link_stiffness(loop, rate);
   std::ostringstream s;
   s << "igtl:" << arg << " (" << d->caps().name << " at " << num(rate) << " Hz measured; the force loop closes at "
-    << num(loop_hz) << " Hz: Colgate-Schenkel K <= 2 (b - |B|) / T = " << num(bound) << " N/m with b "
-    << loop.handle_damping_n_s_per_m << " N s/m, B " << loop.servo_damping_n_s_per_m << " N s/m; the scene's K "
-    << loop.stiffness_n_per_m << " N/m; the peer's device is sent at most " << num(max_force_n)
+    << num(j.loop_hz) << " Hz: Colgate-Schenkel K <= 2 (b - |B|) / T = " << num(j.colgate_n_per_m) << " N/m with b "
+    << loop.handle_damping_n_s_per_m << " N s/m, B " << loop.servo_damping_n_s_per_m << " N s/m; " << j.text
+    << "; the scene's K " << loop.stiffness_n_per_m << " N/m; the peer's device is sent at most " << num(max_force_n)
     << " N, the scene's device.link_max_force_n)";
   description = s.str();
-  if (loop.stiffness_n_per_m > bound) {
-    if (!loop.allow_unstable_stiffness)
-      throw std::runtime_error(description + ": servo.stiffness_n_per_m " + num(loop.stiffness_n_per_m) +
-                               " is above the bound " + num(bound) +
-                               " N/m at this rate; the contact may buzz: lower the stiffness, raise the stream's rate, or "
-                               "allow it (--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)");
+  if (j.over) {
+    if (!loop.allow_unstable_stiffness) {
+      const bool pc_would = !loop.peer_passivity_control && !(loop.stiffness_n_per_m > j.bound.k_max_with_pc_n_per_m);
+      throw std::runtime_error(
+          description + ": servo.stiffness_n_per_m " + num(loop.stiffness_n_per_m) + " is above the bound " +
+          num(j.limit_n_per_m) + " N/m " + (loop.peer_passivity_control ? "with" : "without") +
+          " the passivity controller at the peer's end (" + num(j.bound.k_max_n_per_m) + " N/m without it, " +
+          num(j.bound.k_max_with_pc_n_per_m) + " N/m with it) at this rate and delay; the contact may buzz: lower the "
+          "stiffness, raise the stream's rate, " +
+          (pc_would ? std::string("run the passivity controller on the peer and say so (the scene's "
+                                  "device.link_passivity_control: true), ")
+                    : std::string()) +
+          "or allow it (--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)");
+    }
     description += "; warning: K is above the bound (allowed)";
   }
   return d;

@@ -35,6 +35,7 @@
 #include "isotouch/servo/exit_zero.h"
 #include "isotouch/servo/latest_value.h"
 #include "isotouch/servo/stall_rule.h"
+#include "isotouch/sim/linked_contact.h"
 
 namespace isotouch::service {
 
@@ -76,16 +77,33 @@ void block_stop_signals();
 /// "HOST:PORT[:STREAM]" -> options. @throws std::invalid_argument naming the part and value.
 IgtlDeviceOptions parse_igtl_spec(const std::string& arg);
 
-/// What the stream's rate must allow: the scene's stiffness against the Colgate-Schenkel
-/// bound K_max = 2 (b - |B|) / T with T the loop's period (the stream's, or the servo's
-/// when that is slower).
+/// What the stream's rate and delay must allow: the scene's stiffness against the bound of
+/// a wall pressed through the link (sim::link_k_max: the scene's device and hand behind a
+/// link at the loop's rate - the stream's, or the servo's when that is slower - holding each
+/// force one period, plus round_trip_s), without and with the device end's passivity
+/// controller; Colgate-Schenkel's 2 (b - |B|) / T is said beside it.
 struct IgtlLoop {
   double servo_rate_hz = 1000;
   double handle_damping_n_s_per_m = 0;  ///< b: device + hand [N s/m]
   double servo_damping_n_s_per_m = 0;   ///< B [N s/m]
   double stiffness_n_per_m = 0;         ///< K [N/m]
   bool allow_unstable_stiffness = false;
+  sim::SimDeviceParams device;          ///< the scene's device and hand (the simulated press's)
+  double round_trip_s = 0;              ///< beyond the hold (device.link_round_trip_ms) [s]
+  bool peer_passivity_control = false;  ///< the peer runs the controller (device.link_passivity_control)
 };
+
+/// The stiffness check of a link: its figures, its words and its verdict.
+struct LinkStiffness {
+  double loop_hz = 0;                   ///< min(stream, servo) [Hz]
+  double colgate_n_per_m = 0;           ///< 2 (b - |B|) / T at loop_hz [N/m]
+  sim::LinkBound bound;                 ///< simulated, without and with the controller
+  double limit_n_per_m = 0;             ///< the bound that applies (with the controller when the peer runs it) [N/m]
+  std::string text;                     ///< the bounds, the delay and what applies, for the description
+  bool over = false;                    ///< K above limit_n_per_m
+};
+/// Judges `loop` at the stream's measured `rate_hz` (pure: the simulation only, 20-30 ms).
+LinkStiffness judge_link_stiffness(const IgtlLoop& loop, double rate_hz);
 
 class IgtlDevice final : public servo::HapticDeviceIO {
  public:

@@ -4,10 +4,13 @@
 #include <cmath>
 
 #include "isotouch/core/setting_check.h"
+#include "isotouch/sim/analytic_fields.h"
 #include "isotouch/servo/port_passivity.h"
 
 namespace isotouch::sim {
 namespace {
+
+const Vec3 kLinkWallPoint{0.016, 0.016, 0.010}, kLinkWallNormal{0, 0, 1};  // the link sweep's wall
 
 struct PoseMessage {
   Vec3 x;              ///< device position [m]
@@ -31,7 +34,7 @@ class ServoEnd {
     HriParams hp;
     hp.tau = 0;
     hp.stiffness_n_per_m = cfg.stiffness_n_per_m;
-    hp.damping_n_s_per_m = 0;
+    hp.damping_n_s_per_m = cfg.servo_damping_n_s_per_m;
     hp.plane_update_period = 1;
     hp.rate_hz = cfg.link.rate_hz;
     hp.force_limit_n = cfg.device.force_max_n;
@@ -173,6 +176,31 @@ double find_k_max_linked(const SampleField& field, const Vec3& p0, const Vec3& n
     (stable(mid) ? lo : hi) = mid;
   }
   return lo;
+}
+
+LinkBound link_k_max(LinkedContact base, double rate_hz, double round_trip_s, int iterations) {
+  core::require_positive("link_k_max", "rate_hz", rate_hz, "Hz");
+  core::require_non_negative("link_k_max", "round_trip_s", round_trip_s, "s");
+  const double period = 1.0 / rate_hz;
+  // base's own device loop where the link's period is a whole number of it (the sweep's
+  // rates), else the whole number of ticks nearest 1 ms.
+  const double as_is = period / base.device_period_s;
+  if (!(std::round(as_is) >= 1 && std::abs(as_is - std::round(as_is)) <= 1e-9 * std::round(as_is)))
+    base.device_period_s = period / std::max(1.0, std::round(period / 1e-3));
+  base.link.rate_hz = rate_hz;
+  base.link.round_trip_delay_s = round_trip_s;
+  base.motion = LinkedMotion::kPress;
+  const SampleField wall = plane_field(kLinkWallNormal, kLinkWallPoint);
+  LinkBound b;
+  b.rate_hz = rate_hz;
+  b.round_trip_s = round_trip_s;
+  b.device_period_s = base.device_period_s;
+  for (bool pc : {false, true}) {
+    base.passivity_controller = pc;
+    (pc ? b.k_max_with_pc_n_per_m : b.k_max_n_per_m) = find_k_max_linked(
+        wall, kLinkWallPoint, kLinkWallNormal, base, kLinkSearchLoNPerM, kLinkSearchHiNPerM, iterations);
+  }
+  return b;
 }
 
 }  // namespace isotouch::sim

@@ -25,6 +25,7 @@ struct LinkedContact {
   LinkParams link;
   double device_period_s = 1e-3;        ///< the device end's loop [s]: holds the force, runs the controller
   double stiffness_n_per_m = 800;       ///< K of the wall [N/m]
+  double servo_damping_n_s_per_m = 0;   ///< B: the servo's virtual damping (HRI eq. 3) [N s/m]
   LinkedMotion motion = LinkedMotion::kPress;
   SimDeviceParams device = [] {
     SimDeviceParams d;
@@ -98,5 +99,32 @@ LinkedContactResult simulate_linked_contact(const SampleField& field, const Vec3
 /// 0 when k_lo itself is unstable (K_max below the search).
 double find_k_max_linked(const SampleField& field, const Vec3& surface_point, const Vec3& normal,
                          LinkedContact cfg, double k_lo, double k_hi, int iterations);
+
+/// The stiffness bound of a wall through a link: the largest stable K of the press
+/// `isotouch stability`'s link sweep runs (a flat wall, LinkedMotion::kPress, K searched by
+/// find_k_max_linked over [kLinkSearchLoNPerM, kLinkSearchHiNPerM]) without and with the
+/// device end's passivity controller [N/m]; 0 when even the search's floor is unstable.
+struct LinkBound {
+  double rate_hz = 0;            ///< the link rate simulated [Hz]
+  double round_trip_s = 0;       ///< the round trip simulated [s]
+  double device_period_s = 0;    ///< the device end's loop simulated [s] (a whole fraction of the link's period)
+  double k_max_n_per_m = 0;      ///< without the controller [N/m]
+  double k_max_with_pc_n_per_m = 0;  ///< with the device end's controller [N/m]
+};
+inline constexpr double kLinkSearchLoNPerM = 10, kLinkSearchHiNPerM = 1e5;
+/// The bisection's steps in the link sweep (and at a link's open).
+inline constexpr int kLinkSearchIterations = 10;
+
+/// LinkBound for `base` (its device, hand, servo damping, press and duration; its K,
+/// controller and link timing are set here) over a link at `rate_hz` with `round_trip_s`: the
+/// device end's loop is base.device_period_s where the link's period is a whole number of it
+/// (the sweep's rates), else the whole number of ticks per link period nearest 1 ms (at
+/// least one), so that any measured rate is simulated as it is. Pure: the same arguments
+/// give the same numbers. Each K's verdict is LinkedContactResult::stable (a stable K is
+/// returned, never an unstable one: the bound errs low by at most one bisection step).
+/// @throws std::invalid_argument naming the argument unless the rate is finite and > 0 and
+/// the round trip finite and >= 0.
+LinkBound link_k_max(LinkedContact base, double rate_hz, double round_trip_s,
+                     int iterations = kLinkSearchIterations);
 
 }  // namespace isotouch::sim

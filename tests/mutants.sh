@@ -356,6 +356,18 @@ m link-arrival-slack        sim/delayed_link.h 'arrive_s <= t_s + kArrivalSlackS
                                test_linked_contact 'DelayLine.*:LinkedContact.*'
 m link-whole-ticks          sim/linked_contact.cpp 'whole >= 1 && std::abs(ticks - whole) <= 1e-9 * whole' 'whole >= 1' \
                                test_linked_contact 'DelayLine.*:LinkedContact.*'
+# A link's stiffness bound (sim::link_k_max): the search with the device end's controller, at
+# the measured rate as it is; the igtl check takes the bound with it only when the peer runs it,
+# and refuses above the bound.
+m link-kmax-controller      sim/linked_contact.cpp '    base.passivity_controller = pc;' '    base.passivity_controller = false;' \
+                               test_linked_contact 'LinkKMax.*'
+m link-kmax-measured-rate   sim/linked_contact.cpp '    base.device_period_s = period / std::max(1.0, std::round(period / 1e-3));' '    (void)0;' \
+                               test_linked_contact 'LinkKMax.*'
+m igtl-link-bound-peer-pc   service/igtl_device.cpp \
+                               'j.limit_n_per_m = loop.peer_passivity_control ? j.bound.k_max_with_pc_n_per_m : j.bound.k_max_n_per_m;' \
+                               'j.limit_n_per_m = j.bound.k_max_with_pc_n_per_m;' test_igtl_device 'ServiceIgtlDevice.TheStiffnessBound*'
+m igtl-link-bound-refused   service/igtl_device.cpp 'j.over = loop.stiffness_n_per_m > j.limit_n_per_m;' 'j.over = false;' \
+                               test_igtl_device 'ServiceIgtlDevice.TheStiffnessBound*'
 
 # Per-material drilling: a critical structure is never removed, and each material takes its own rate.
 C=session/brush_cpu.cpp

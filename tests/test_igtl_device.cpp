@@ -13,6 +13,8 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <sstream>
+#include <string>
 #include <stdexcept>
 #include <thread>
 #include <vector>
@@ -292,6 +294,80 @@ TEST(ServiceIgtlDevice, ACrashOrAStuckServosExitLeavesThePeerAZero) {
     EXPECT_GT(forced, 20) << how << ": the servo's force did not flow";
     ASSERT_FALSE(got.empty()) << how;
     EXPECT_EQ(core::norm(got.back().f), 0.0) << how << ": the peer's last force is " << got.back().f.x << " N";
+  }
+}
+
+
+// The stiffness check of `--haptic igtl:` (issue 67) at the boundary: open_igtl_device against a
+// PLUS-like peer streaming at 100 Hz, the scene's device that of tests/igtl_hand_peer.cpp and
+// the link sweep (80 g, b 1 N s/m, a 50 N/m hand without damping; B 0), K 800 N/m. Colgate and
+// Schenkel allow 2 b / T = 200 N/m at 100 Hz, so K 800 was refused before the link's
+// simulated bound came in. The bounds the refusal names are checked against sim::link_k_max
+// at the rate the description says was measured (its numbers equal `isotouch stability`'s
+// table: test_linked_contact LinkKMax.*); the verdicts against that table's 100 Hz, 0 ms row
+// (176 N/m without, 6043 N/m with the controller at the device end).
+IgtlLoop hand_peer_loop(double k, bool peer_pc) {
+  IgtlLoop l;
+  l.servo_rate_hz = 1000;
+  l.device = sim::LinkedContact{}.device;  // igtl_hand_peer's device, the sweep's press
+  l.handle_damping_n_s_per_m = l.device.damping_n_s_per_m + l.device.hand_damping_n_s_per_m;
+  l.servo_damping_n_s_per_m = 0;
+  l.stiffness_n_per_m = k;
+  l.peer_passivity_control = peer_pc;
+  return l;
+}
+
+/// The rate the description says was measured [Hz].
+double measured_in(const std::string& text) {
+  const std::size_t at = text.find(" Hz measured");
+  EXPECT_NE(at, std::string::npos) << text;
+  if (at == std::string::npos) return 0;
+  const std::size_t from = text.rfind(" at ", at);
+  return std::stod(text.substr(from + 4, at - from - 4));
+}
+
+std::string num4(double v) {
+  std::ostringstream o;
+  o.precision(4);
+  o << v;
+  return o.str();
+}
+
+TEST(ServiceIgtlDevice, TheStiffnessBoundIsTheLinksWithThePeersControllerOnlyWhenItRunsOne) {
+  struct Case {
+    double k;
+    bool peer_pc, opens;
+  };
+  for (const Case c : {Case{800, false, false}, Case{800, true, true}, Case{8000, true, false}}) {
+    PlusPeer peer(peer_options(100, 2.0));
+    std::string description, refusal;
+    try {
+      auto d = open_igtl_device("127.0.0.1:" + std::to_string(peer.port()), hand_peer_loop(c.k, c.peer_pc), description);
+    } catch (const std::runtime_error& e) {
+      refusal = e.what();
+    }
+    const std::string& text = refusal.empty() ? description : refusal;
+    SCOPED_TRACE("K " + num4(c.k) + ", the peer's controller " + (c.peer_pc ? "on" : "off") + ": " + text);
+    EXPECT_EQ(refusal.empty(), c.opens);
+    const double rate = measured_in(text);
+    ASSERT_GT(rate, 20) << "the 100 Hz peer was measured at " << rate << " Hz";
+    // Both bounds, each the simulation's at the measured rate with no round trip beyond the hold.
+    const sim::LinkBound b = sim::link_k_max([] {
+      sim::LinkedContact p;
+      p.device.force_max_n = 1e3;
+      return p;
+    }(), rate, 0);
+    EXPECT_NE(text.find("K_max " + num4(b.k_max_n_per_m) + " N/m without the passivity controller, " +
+                        num4(b.k_max_with_pc_n_per_m) + " N/m with it"),
+              std::string::npos);
+    EXPECT_NE(text.find("round trip 0 ms beyond the hold"), std::string::npos);
+    EXPECT_EQ(text.find("warning"), std::string::npos);
+    if (!c.opens) {
+      EXPECT_NE(refusal.find("servo.stiffness_n_per_m " + num4(c.k) + " is above the bound"), std::string::npos);
+      EXPECT_NE(refusal.find("--allow-unstable-stiffness"), std::string::npos);
+      // Only a K the controller makes passive is told to run it.
+      EXPECT_EQ(refusal.find("device.link_passivity_control: true") == std::string::npos, c.peer_pc);
+    }
   }
 }
 

@@ -3,10 +3,12 @@
 // simulated device's own motion and energy.
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "isotouch/sim/analytic_fields.h"
 #include "isotouch/sim/linked_contact.h"
@@ -203,4 +205,81 @@ TEST(LinkedContact, DampingCapIsHalfTheMassOverTheDevicePeriod) {
 TEST(LinkedContact, KMaxBelowTheSearchIsZero) {
   const LinkedContact c = press_100hz_10ms(false);  // 800 N/m oscillates here (test above)
   EXPECT_EQ(find_k_max_linked(wall(), kP, kUp, c, 800, 1600, 2), 0.0);
+}
+
+// sim::link_k_max: the stiffness check's bound of a link (service/igtl_device.cpp). It is
+// the link sweep's search (bench/link_stability.cpp calls it for the wall's table): checked
+// here against find_k_max_linked run by hand on the sweep's wall and press, and at no delay
+// against Colgate and Schenkel's 2 (b - |B|) / T computed from the press's own device.
+namespace {
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+}  // namespace
+
+TEST(LinkKMax, IsTheSweepsSearchOnItsWallWithoutAndWithTheController) {
+  for (const auto& [rate, delay] : {std::pair{100.0, 0.010}, std::pair{250.0, 0.002}}) {
+    LinkedContact c;  // the sweep's press: bench/link_stability.cpp press()
+    c.link.rate_hz = rate;
+    c.link.round_trip_delay_s = delay;
+    const double by_hand = find_k_max_linked(wall(), kP, kUp, c, 10, 1e5, 10);
+    c.passivity_controller = true;
+    const double by_hand_pc = find_k_max_linked(wall(), kP, kUp, c, 10, 1e5, 10);
+    const auto t0 = std::chrono::steady_clock::now();
+    const LinkBound b = link_k_max(LinkedContact{}, rate, delay);
+    std::printf("%g Hz, %g ms: K_max %.1f N/m, with the controller %.1f N/m (by hand %.1f, %.1f); one call %.3f s\n",
+                rate, delay * 1e3, b.k_max_n_per_m, b.k_max_with_pc_n_per_m, by_hand, by_hand_pc, seconds_since(t0));
+    EXPECT_EQ(b.k_max_n_per_m, by_hand);
+    EXPECT_EQ(b.k_max_with_pc_n_per_m, by_hand_pc);
+    EXPECT_EQ(b.device_period_s, 1e-3);  // the sweep's device loop, unchanged
+    EXPECT_GT(b.k_max_with_pc_n_per_m, b.k_max_n_per_m);
+  }
+}
+
+TEST(LinkKMax, WithoutDelayAndControllerItIsNearColgateSchenkel) {
+  // Colgate and Schenkel's b is the device's own damping to ground (the hand's damping acts
+  // through its spring, not in b: with b 0.01 + hand 5 N s/m the simulation's bound is 0.17-0.36
+  // of 2 (b + b_hand) / T at 100-1000 Hz, measured, which the stiffness check now uses).
+  // Tolerance +-15 %: the bisection's step (10 steps over 10-1e5 N/m: a factor
+  // 1e4^(1/1024), 0.9 %), the 1.5 s press judged by its late oscillation (a wall just under
+  // the bound decays too slowly to be judged stable: low) and the hand's spring to ground
+  // (50 N/m: high). Measured 0.87-1.05.
+  for (double rate : {100.0, 250.0, 1000.0})
+    for (double b : {1.0, 4.0}) {
+      LinkedContact c;
+      c.device.damping_n_s_per_m = b;
+      const double colgate = 2.0 * b * rate;  // 2 (b - |B|) / T with B = 0
+      const LinkBound lb = link_k_max(c, rate, 0);
+      std::printf("%g Hz, b %g N s/m: K_max %.1f N/m, Colgate-Schenkel %.1f N/m (%.3f)\n", rate, b, lb.k_max_n_per_m,
+                  colgate, lb.k_max_n_per_m / colgate);
+      EXPECT_GE(lb.k_max_n_per_m, 0.85 * colgate) << rate << " Hz, b " << b;
+      EXPECT_LE(lb.k_max_n_per_m, 1.15 * colgate) << rate << " Hz, b " << b;
+    }
+}
+
+TEST(LinkKMax, AMeasuredRateIsSimulatedAsItIs) {
+  // 99.9 Hz: 10.01 ms, ten device ticks of 1.001 ms; the bound falls with the rate.
+  const LinkBound slow = link_k_max(LinkedContact{}, 99.9, 0.01001);
+  EXPECT_DOUBLE_EQ(slow.device_period_s, 1.0 / 99.9 / 10);
+  EXPECT_DOUBLE_EQ(slow.rate_hz, 99.9);
+  const LinkBound fast = link_k_max(LinkedContact{}, 2000, 0);  // faster than 1 kHz: one tick a message
+  EXPECT_DOUBLE_EQ(fast.device_period_s, 1.0 / 2000);
+  EXPECT_GT(fast.k_max_n_per_m, slow.k_max_n_per_m);
+}
+
+TEST(LinkKMax, RefusesARateOrDelayItCannotSimulate) {
+  for (double r : {0.0, -5.0, std::nan("")}) {
+    try {
+      link_k_max(LinkedContact{}, r, 0);
+      ADD_FAILURE() << r;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find("rate_hz"), std::string::npos) << e.what();
+    }
+  }
+  try {
+    link_k_max(LinkedContact{}, 100, -0.001);
+    ADD_FAILURE();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("round_trip_s"), std::string::npos) << e.what();
+  }
 }

@@ -218,6 +218,21 @@ TEST(Scene, PassivityControlIsOffUnlessTheSceneSaysSo) {
   expect_error(base + R"(, "servo": {"passivity_control": 1}})", {"'servo.passivity_control'"});
 }
 
+// The link's stiffness check (`--haptic igtl:`, issue 67): a round trip beyond the stream's
+// hold [ms in the file, s parsed] and whether the peer runs the passivity controller.
+TEST(Scene, LinkRoundTripAndThePeersControllerAreTheScenesToSay) {
+  const std::string base = R"({"volume": {"path": "v.mhd"}, "isovalue": 1)";
+  const auto plain = parse_scene(base + "}", "ok.json");
+  EXPECT_EQ(plain.link_round_trip_s, 0.0);
+  EXPECT_FALSE(plain.link_passivity_control);
+  const auto said =
+      parse_scene(base + R"(, "device": {"link_round_trip_ms": 12.5, "link_passivity_control": true}})", "ok.json");
+  EXPECT_DOUBLE_EQ(said.link_round_trip_s, 0.0125);
+  EXPECT_TRUE(said.link_passivity_control);
+  expect_error(base + R"(, "device": {"link_round_trip_ms": -1}})", {"'device.link_round_trip_ms'", "-1"});
+  expect_error(base + R"(, "device": {"link_passivity_control": "yes"}})", {"'device.link_passivity_control'"});
+}
+
 TEST(Scene, RayOriginFracRange) {
   expect_error(R"({"volume": {"path": "v.mhd"}, "isovalue": 1, "script": {"ray_origin_frac": [0.5, 0.5, -1e6]}})",
                {"'script.ray_origin_frac'", "[-2, 3]", "-1000000"});
@@ -577,6 +592,7 @@ TEST(SceneDocs, AbsentFieldsTakeTheTablesDefaults) {
       {"device.hand_stiffness_n_per_m", s.device.hand_stiffness_n_per_m},
       {"device.hand_damping_n_s_per_m", s.device.hand_damping_n_s_per_m}, {"device.substeps", s.device.substeps},
       {"device.workspace_scale", s.workspace_scale}, {"device.link_max_force_n", s.link_max_force_n},
+      {"device.link_round_trip_ms", s.link_round_trip_s * 1e3},
       {"script.approach_distance_m", s.script.approach_distance_m},
       {"script.approach_speed_m_s", s.script.approach_speed_m_s}, {"script.press_depth_m", s.script.press_depth_m},
       {"script.press_speed_m_s", s.script.press_speed_m_s}, {"script.hold_s", s.script.hold_s},

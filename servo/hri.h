@@ -490,6 +490,10 @@ class HriRenderer final : public Renderer {
   /// [m], along -n no later than a quarter voxel after along n (fifth-voxel steps, at most
   /// march_budget samples in all): the HIP is past the middle of a thin feature.
   bool past_middle(const FieldView& field, const Vec3& hip, const Vec3& n, double depth, double voxel) const;
+  /// Where the plane held now puts the proxy for `hip` (eq. 2; the HIP itself without a plane).
+  Vec3 proxy_on_plane(const Vec3& hip) const {
+    return plane_.valid ? hip + plane_.n * dot(plane_.n, plane_.p - hip) : hip;
+  }
   /// Thin features: from the inside `hip` along unit n, the first point where the material
   /// ends within `reach` [m] (fifth-voxel steps, then 20 bisection steps; q the outside end
   /// of the bracket); false if none.
@@ -660,6 +664,7 @@ class HriRenderer final : public Renderer {
   bool entry_held_ = false;          ///< robust: the HIP was found past a thin feature's middle (hold_entry_side)
   Vec3 entry_hip_;                   ///< robust: the HIP when entry_n_ was set [m] (hold_entry_side)
   Vec3 entry_vhip_;                  ///< robust: the VHIP when entry_n_ was set [m] (hold_entry_side)
+  Vec3 entry_proxy_;                 ///< robust: the proxy the plane gave the HIP when entry_n_ was set [m] (hold_entry_side)
   Vec3 entry_deep_hip_;              ///< robust: the deepest HIP along entry_n_ at an update since it was set [m]
   double entry_deep_depth_ = 0;      ///< robust: that HIP's depth behind the plane held then [m] (hold_entry_side)
   // Spherical tool:

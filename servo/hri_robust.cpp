@@ -357,6 +357,7 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     entry_n_ = plane_.n;
     entry_hip_ = hip;
     entry_vhip_ = vhip_;
+    entry_proxy_ = proxy_on_plane(hip);
     entry_deep_hip_ = hip;
     entry_deep_depth_ = 0.0;
     entry_held_ = false;
@@ -489,9 +490,14 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // wrapped at 0.4-0.7 so too).
   auto across = [&](const Vec3& d) { return norm(d - entry_n_ * dot(entry_n_, d)); };
   const Vec3 hip_moved = hip - entry_hip_;
-  const bool carried = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
-                       across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel && depth > 0.0;
   const bool in_cone = !entry_held_ && dot(plane_.n, entry_n_) >= kCos;
+  // Inside the cone, from the proxy the entry plane gave (entry_proxy_): the VHIP when
+  // entry_n_ was set was the proxy on the plane before, and its step onto the new one (on the
+  // engine block's metal, 1.5 mm across a face whose normal followed a 90-deg turn) counted
+  // as a carry; the hold then kept that face's plane through the lift, pulling inward.
+  const Vec3 proxy_then = in_cone ? entry_proxy_ : entry_vhip_;
+  const bool carried = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
+                       across(vhip_ - proxy_then) > across(hip_moved) + 0.25 * voxel && depth > 0.0;
   if (in_cone && !carried) return;
   // The plane turned beyond the cone: over a thin feature's edge with the HIP past its
   // middle (the wrap-around), or sliding over a curved surface (the side follows). Once
@@ -580,6 +586,7 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
     entry_n_ = plane_.n;
     entry_hip_ = hip;
     entry_vhip_ = vhip_;
+    entry_proxy_ = proxy_on_plane(hip);
     entry_deep_hip_ = hip;
     entry_deep_depth_ = 0.0;
   }

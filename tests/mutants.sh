@@ -282,6 +282,11 @@ m hri-hold-pressed-round    $H '(entry_held_ || pressed_round ||' '(entry_held_ 
 # (each fails its HriEntrySide case; HriRidges seeds 23/28/29 and 13/17 wrapped at 0.4-0.7).
 m hri-hold-carried-in-cone  $H 'if (in_cone && !carried) return;' 'if (in_cone) return;' test_hri_entry_side 'HriEntrySide.*'
 m hri-hold-deep-past        $H ' || deep_past()))' '))' test_hri_entry_side 'HriEntrySide.*'
+# Inside the cone the carry counts from the proxy the entry plane gave, not from the VHIP of
+# the plane before (its step onto a followed face on the engine block's metal held that face
+# through the lift: 1001 lift ticks pulled inward, up to 0.90 N).
+m hri-hold-carried-from-proxy $H 'const Vec3 proxy_then = in_cone ? entry_proxy_ : entry_vhip_;' 'const Vec3 proxy_then = entry_vhip_;' \
+                               isotouch 'ctest:cli_run_engine_lift'
 m hri-hold-face-lowered     $H '(!past_middle(field, hip, kept.n, kept_depth, voxel) && as_thick_as_entry(q))' \
                                'false' test_hri_falling_plate 'HriFallingPlate.*'
 m hri-hold-face-thick       $H '&& as_thick_as_entry(q))))' ')))' $R "$G"

@@ -21,6 +21,7 @@ struct HriRendererTest {
     r.entry_n_ = entry_n;
     r.entry_hip_ = hip;
     r.entry_vhip_ = vhip;
+    r.entry_proxy_ = vhip;
     r.entry_held_ = false;
     r.vhip_ = vhip;
     HriRenderer::TickOut out;
@@ -38,6 +39,7 @@ struct HriRendererTest {
     r.entry_n_ = entry_n;
     r.entry_hip_ = entry_hip;
     r.entry_vhip_ = entry_vhip;
+    r.entry_proxy_ = entry_vhip;
     r.entry_deep_hip_ = deep_hip;
     r.entry_deep_depth_ = deep_depth;
     r.entry_held_ = false;

@@ -244,7 +244,14 @@ struct ToolPlane {
 ///   most twice limit / K thick: its middle within the press the limit allows), the side is also held
 ///   when the proxy went farther across entry_n_ than the HIP since entry_n_ was set (the
 ///   iteration carrying it round a crest); convex bulk material does that too, by
-///   R / (R - depth), and held there the plane kept its normal round a sphere. While held, the held plane's point is lifted to the face
+///   R / (R - depth), and held there the plane kept its normal round a sphere. That turn
+///   (the proxy a quarter voxel farther across than the HIP, on a thin feature) is held
+///   also while the plane stays within the cone: where the contact's normal came 25 deg
+///   off a crest's, the iteration carried the proxy round in steps inside the cone of it.
+///   And a HIP past the middle along entry_n_ at its deepest since entry_n_ was set holds
+///   the side at a turn too (checked there, no read before the turn): stroked across a
+///   cylinder, the HIP pressed past its axis is short of the middle along a tilted entry_n_
+///   again. While held, the held plane's point is lifted to the face
 ///   found from the HIP along its normal where that face lies in front of it (face_along):
 ///   a held plane tilted from the face slid the proxy down it on a stroke along the feature.
 ///   It is lowered to that face only with the HIP short of the middle along the held normal
@@ -483,6 +490,10 @@ class HriRenderer final : public Renderer {
   /// [m], along -n no later than a quarter voxel after along n (fifth-voxel steps, at most
   /// march_budget samples in all): the HIP is past the middle of a thin feature.
   bool past_middle(const FieldView& field, const Vec3& hip, const Vec3& n, double depth, double voxel) const;
+  /// Where the plane held now puts the proxy for `hip` (eq. 2; the HIP itself without a plane).
+  Vec3 proxy_on_plane(const Vec3& hip) const {
+    return plane_.valid ? hip + plane_.n * dot(plane_.n, plane_.p - hip) : hip;
+  }
   /// Thin features: from the inside `hip` along unit n, the first point where the material
   /// ends within `reach` [m] (fifth-voxel steps, then 20 bisection steps; q the outside end
   /// of the bracket); false if none.
@@ -653,6 +664,9 @@ class HriRenderer final : public Renderer {
   bool entry_held_ = false;          ///< robust: the HIP was found past a thin feature's middle (hold_entry_side)
   Vec3 entry_hip_;                   ///< robust: the HIP when entry_n_ was set [m] (hold_entry_side)
   Vec3 entry_vhip_;                  ///< robust: the VHIP when entry_n_ was set [m] (hold_entry_side)
+  Vec3 entry_proxy_;                 ///< robust: the proxy the plane gave the HIP when entry_n_ was set [m] (hold_entry_side)
+  Vec3 entry_deep_hip_;              ///< robust: the deepest HIP along entry_n_ at an update since it was set [m]
+  double entry_deep_depth_ = 0;      ///< robust: that HIP's depth behind the plane held then [m] (hold_entry_side)
   // Spherical tool:
  public:
   static constexpr double kEntryConeDeg = 20.0;  ///< thin features: the turn from entry_n_ checked [deg]

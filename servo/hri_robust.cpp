@@ -357,6 +357,9 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     entry_n_ = plane_.n;
     entry_hip_ = hip;
     entry_vhip_ = vhip_;
+    entry_proxy_ = proxy_on_plane(hip);
+    entry_deep_hip_ = hip;
+    entry_deep_depth_ = 0.0;
     entry_held_ = false;
   }
   else if (out.plane_update) hold_entry_side(field, hip, have_f_hip && excess(f_hip) > 0.0, held, held_grad_norm, voxel, out);
@@ -461,17 +464,46 @@ void HriRenderer::material_ends(FieldView::Segment& a, FieldView::Segment& b, in
 void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool hip_inside, const VirtualPlane& held,
                                   double held_grad_norm, double voxel, TickOut& out) {
   static const double kCos = std::cos(kEntryConeDeg * M_PI / 180.0);
-  if (!hip_inside) entry_held_ = false;  // the HIP left the material: the side is free again
+  if (!hip_inside) {  // the HIP left the material: the side is free again
+    entry_held_ = false;
+    entry_deep_depth_ = 0.0;
+  }
   // Once held, every update keeps the held plane while the HIP stays inside: a plane within
   // the cone of entry_n_ is still up to 20 deg from it, and the proxy sliding on one turned
   // toward the far side crossed the middle (on a noisy crest each update turned it that way).
-  if (!plane_.valid || !hip_inside || (!entry_held_ && dot(plane_.n, entry_n_) >= kCos)) return;
+  const double depth = held.valid ? dot(held.n, held.p - hip) : 0.0;  // the HIP behind the held plane [m]
+  // The deepest HIP along entry_n_ since it was set (no read): a turn that comes after the
+  // HIP went past the middle and then moved on (stroked across a cylinder's crest it is
+  // nearer the near face along entry_n_ again) is checked from there too, below.
+  if (hip_inside && depth > 0.0 && dot(entry_n_, entry_deep_hip_ - hip) > 0.0) {
+    entry_deep_hip_ = hip;
+    entry_deep_depth_ = depth;
+  }
+  if (!plane_.valid || !hip_inside) return;
+  // A turn the hand did not make (pressed_round below: the proxy went a quarter voxel
+  // farther across entry_n_ than the HIP) is checked within the cone too, where its
+  // no-read part holds: on a 2-voxel cylinder on 1 x 1 x 3 mm voxels the contact's normal
+  // came 25 deg off the crest's, and with the HIP pressed straight down past the axis the
+  // iteration carried the proxy round in steps that stayed inside the cone of that normal
+  // until it was 42 deg off the crest's, then held that plane and the across stroke slid
+  // the proxy down it past the axis at 0.6 of the limit (HriRidges seed 13; 23, 28 and 29
+  // wrapped at 0.4-0.7 so too).
+  auto across = [&](const Vec3& d) { return norm(d - entry_n_ * dot(entry_n_, d)); };
+  const Vec3 hip_moved = hip - entry_hip_;
+  const bool in_cone = !entry_held_ && dot(plane_.n, entry_n_) >= kCos;
+  // Inside the cone, from the proxy the entry plane gave (entry_proxy_): the VHIP when
+  // entry_n_ was set was the proxy on the plane before, and its step onto the new one (on the
+  // engine block's metal, 1.5 mm across a face whose normal followed a 90-deg turn) counted
+  // as a carry; the hold then kept that face's plane through the lift, pulling inward.
+  const Vec3 proxy_then = in_cone ? entry_proxy_ : entry_vhip_;
+  const bool carried = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
+                       across(vhip_ - proxy_then) > across(hip_moved) + 0.25 * voxel && depth > 0.0;
+  if (in_cone && !carried) return;
   // The plane turned beyond the cone: over a thin feature's edge with the HIP past its
   // middle (the wrap-around), or sliding over a curved surface (the side follows). Once
   // past the middle the side is held until the HIP leaves the material: near the middle
   // the test can go either way from one update to the next, and a side that followed one
   // turn let the next one go on round.
-  const double depth = held.valid ? dot(held.n, held.p - hip) : 0.0;  // the HIP behind the held plane [m]
   // Along the new plane's normal too: a HIP at or past the middle of the chord that way is
   // no nearer the new face than the opposite one, and the turn is the plane iteration
   // carrying the proxy round the feature (each update projects the pressed HIP onto a plane
@@ -487,7 +519,6 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // projects the HIP onto a plane already tilted toward the crest, which tilts the next one
   // more; entry_n_ followed in 20-deg steps and a 4-voxel ridge wrapped at n = 1-2). A
   // surface that changes under a still HIP is followed.
-  auto across = [&](const Vec3& d) { return norm(d - entry_n_ * dot(entry_n_, d)); };
   // Only on a thin feature: its far face within the HIP's depth and two voxels (the smallest
   // spacing) along -entry_n_. Sliding pressed over convex bulk material carries the proxy
   // farther across than the HIP too, by R / (R - depth): on the sphere of scenes/sphere.json
@@ -506,14 +537,21 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
   // 5.3 mm in) and the sphere lie beyond it.
   const double k = params_.stiffness_n_per_m;
   const double thin_wall = k > 0.0 ? 2.0 * params_.force_limit_n / k * params_.world_per_device : 0.0;
-  const Vec3 hip_moved = hip - entry_hip_;
   Vec3 far_face;
   const double far_reach = std::max(depth + 2.0 * voxel, thin_wall - depth);  // a far face within: thin
-  const bool pressed_round = dot(hip_moved, hip_moved) > 0.0625 * voxel * voxel &&
-                             across(vhip_ - entry_vhip_) > across(hip_moved) + 0.25 * voxel && depth > 0.0 &&
-                             face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face);
+  const bool pressed_round = carried && face_along(field, hip, entry_n_ * -1.0, far_reach, voxel, far_face);
+  if (in_cone && !pressed_round) return;  // within the cone only that turn is held
+  // Past the middle at the deepest HIP since entry_n_ was set: the HIP pressed past a
+  // cylinder's axis along a normal 25 deg off the crest's and then stroked across it was
+  // no longer past the middle along entry_n_ when the turn came, and the proxy slid round
+  // to the far side at 0.4 of the limit (HriRidges seed 13; 17 at 0.5).
+  auto deep_past = [&]() {
+    const Vec3 d = entry_deep_hip_ - hip;
+    return entry_deep_depth_ > 0.0 && dot(d, d) > 0.0 &&
+           past_middle(field, entry_deep_hip_, entry_n_, entry_deep_depth_, voxel);
+  };
   if (depth > 0.0 && (entry_held_ || pressed_round || past_middle(field, hip, entry_n_, depth, voxel) ||
-                      past_middle(field, hip, plane_.n, new_depth, voxel))) {
+                      past_middle(field, hip, plane_.n, new_depth, voxel) || deep_past())) {
     VirtualPlane kept = held;
     // A turn the iteration made is undone: the plane faces entry_n_ again (the HIP behind it).
     if (!entry_held_ && dot(entry_n_, hip - held.p) < 0.0) kept.n = entry_n_;
@@ -548,6 +586,9 @@ void HriRenderer::hold_entry_side(const FieldView& field, const Vec3& hip, bool 
     entry_n_ = plane_.n;
     entry_hip_ = hip;
     entry_vhip_ = vhip_;
+    entry_proxy_ = proxy_on_plane(hip);
+    entry_deep_hip_ = hip;
+    entry_deep_depth_ = 0.0;
   }
 }
 

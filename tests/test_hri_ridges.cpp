@@ -37,11 +37,19 @@ using isotouch::test::scene_servo;
 // 12 (2-3-voxel ridges on 1 x 1 x 3 and 1 x 1 x 2 mm voxels, pressed on the crest's rounded
 // corner) wrapped at 0.7 across the crest while "pressed round" counted a feature as thin only
 // with its far face within two of the smallest voxels: it now counts too one whose middle the
-// force limit reaches (twice limit / K thick, docs/haptics.md). Seed 13 does not hold yet (a
-// 4-voxel cylinder on 1 x 1 x 3 mm voxels wraps at 0.4): not in the list.
+// force limit reaches (twice limit / K thick, docs/haptics.md). Seeds 13, 17, 23, 28 and 29
+// (2-voxel cylinders and ridges on 1 x 1 x 2 and 1 x 1 x 3 mm voxels, whose contact normal
+// came about 25 deg off the crest's) wrapped at 0.4-0.7 across the crest: the iteration
+// carried the proxy round inside the entry cone (now held there too:
+// HriEntrySide.APlaneTheIterationTurnedInsideTheEntryConeIsTurnedBack), and a HIP past the
+// middle at its deepest was short of it along entry_n_ once stroked across (now checked at
+// its deepest too: HriEntrySide.AHipThatWentPastTheMiddleHoldsTheSideAfterAStrokeAcross).
+// Seeds 16 and 31 do not hold yet (2-voxel cylinders on 1 x 1 x 2 and 1 x 1 x 3 mm voxels,
+// 0.6 and 0.5 at n = 1; on 31 the plane kept at the hold is 38 deg off the crest's normal,
+// toward the stroke, and the proxy slides down it past the axis): not in the list.
 TEST(HriRidges, ScanLikeRidgesHoldToNineTenthsOfTheLimitAtEveryUpdatePeriod) {
   const char* env = std::getenv("ISOTOUCH_RIDGE_SEED");
-  std::vector<unsigned> seeds = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 14, 15, 64, 65};
+  std::vector<unsigned> seeds = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 17, 23, 28, 29, 64, 65};
   if (env) seeds = {unsigned(std::strtoul(env, nullptr, 10))};
   const char* only = std::getenv("ISOTOUCH_RIDGE_ONLY");  // one case's index (debugging)
   for (const unsigned seed : seeds) {

@@ -103,7 +103,10 @@ print(f"streams ok: {len(r1)} transforms at {rate:.1f} Hz, {len(moving)} HIPs on
 PY
 
 # 6. The client cap, and a client thread's exception (bad_alloc) dropping only that client.
-"$exe" serve "$scene" --port 0 --max-clients 2 --seconds 8 >"$out/serve2.log" 2>&1 &
+# The IMAGE must pass the memory budget at its header to be read at all: "budget:Big" makes
+# serve take the machine's memory as unknown for it (the 4096 MiB default, not the capped
+# address space), so its voxels are read and their buffer meets the cap.
+ISOTOUCH_SERVE_TEST_FAULT="budget:Big" "$exe" serve "$scene" --port 0 --max-clients 2 --seconds 8 >"$out/serve2.log" 2>&1 &
 serve2_pid=$!
 port2=$(wait_port "$out/serve2.log" $serve2_pid)
 [[ -n $port2 ]] || { echo "FAIL serve: the second serve (default host 127.0.0.1) never said it listened"; cat "$out/serve2.log"; exit 1; }
@@ -127,18 +130,19 @@ while True:
 if got[2:8] != b"STATUS" or b"2 clients" not in got: fail(f"the third connection got {got[:120]!r}, not a STATUS naming the cap")
 for s in held: s.close()
 time.sleep(0.3)
-# An IMAGE announcing 512^3 float32 voxels (a valid image header), its body streamed while
-# the server's address space is capped 200 MiB above what it maps.
+# An IMAGE announcing 256 x 256 x 1000 float32 voxels (a valid image header; 250 MiB of
+# voxels, about 2.5 GiB with its session: within the default budget), its body streamed
+# while the server's address space is capped 200 MiB above what it maps.
 vm = int(open(f"/proc/{pid}/statm").read().split()[0]) * 4096
 subprocess.run(["prlimit", f"--pid={pid}", f"--as={vm + (200 << 20)}:"], check=True)
-body = 512 * 512 * 512 * 4 + 72
+body = 256 * 256 * 1000 * 4 + 72
 hdr = struct.pack(">H12s20sQQ", 1, b"IMAGE", b"Big", 0, body) + bytes(8)
-ih = struct.pack(">HBBBB3H12f3H3H", 1, 1, 10, 2, 1, 512, 512, 512, *([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]), 0, 0, 0, 512, 512, 512)
+ih = struct.pack(">HBBBB3H12f3H3H", 1, 1, 10, 2, 1, 256, 256, 1000, *([1.0, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0]), 0, 0, 0, 256, 256, 1000)
 c = connect()
 c.sendall(hdr + ih)
 chunk = bytes(1 << 20)
 try:
-    for _ in range(400): c.sendall(chunk)
+    for _ in range(250): c.sendall(chunk)
 except OSError: pass
 c.close()
 for _ in range(50):

@@ -18,11 +18,13 @@
 // fixed part; while the bands have held no hits (no misses), a is 5 b (b is a / 5). The first
 // band is one row; then a band holds the most rows whose predicted cost, plus what the drawn
 // bands cost over the predictions they were sized on (a load spike is kept as room, halved
-// each band after it), stays within the budget's target share, and (slow start) at most twice the hit rows and twice the miss rows of the largest
-// band drawn, at least one of each. Where the rest of the frame alone leaves no room for a
-// row, a band's rows get the budget's margin ((1 - target) of it) on top of the rest, not one
-// row a frame. No floor on rows: a full frame of many budgets takes as many frames. A band's frame over 4 budgets (a stall: the window minimised, the machine
-// suspended) is not a cost: not fitted, not kept as room, not grown from; its rows are drawn.
+// each band after it), stays within the budget's target share, and (slow start) at most
+// twice the hit rows and twice the miss rows of the largest band drawn, at least one of each.
+// Where the rest of the frame alone leaves no room for a row, a band's rows get the budget's
+// margin ((1 - target) of it) on top of the rest, not one row a frame. No floor on rows: a
+// full frame of many budgets takes as many frames. A band's frame over 4 budgets (a stall:
+// the window minimised, the machine suspended) is not a cost: not fitted, not kept as room,
+// not grown from; its rows are drawn.
 // No wall clock inside: the caller measures each band.
 #pragma once
 #include <vector>

@@ -78,7 +78,7 @@ struct Incoming {
   double matrix[4][4] = {};
   std::string text;
   std::vector<std::string> labels;
-  /// An IMAGE's: MessageLimits::hold_image's token (null: none) and the bytes it counts.
+  /// An IMAGE's: MessageLimits::admit_image's token (null: none) and the bytes it counts.
   std::shared_ptr<void> held;
   std::uint64_t held_bytes = 0;
   /// kRefused by MessageLimits::admit_image (memory, not a malformed message).

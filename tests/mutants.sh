@@ -216,6 +216,8 @@ m serve-refused-zero        service/serve.cpp '      if (stream_from_ == c.conn)
 # A servo tick waits for its late input instead of letting the next one overtake it.
 m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
                                test_input_phase 'InputWaitUntil.*'
+m servo-input-wait-call     servo/servo_thread.cpp '    if (cfg_.follow_input_phase) t = wait_for_input(t, next, period);' '' \
+                               test_servo_thread 'ServoThread.ATickWaitsForALatePoseInsteadOfLeavingItToTheNext'
 # serve's command thread: no burst of missed tool ticks, a stroke through a moment out of contact.
 m serve-tool-no-burst       service/tool_ticks.cpp '  return (now > due + period ? now : due) + period;' '  return due + period;' \
                                test_tool_ticks 'ToolTicks.*'

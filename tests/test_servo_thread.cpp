@@ -11,6 +11,7 @@
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -1132,4 +1133,73 @@ TEST(ServoThread, StopGivesUpOnARendererThatNeverReturnsWithTheForceOff) {
   while (g_never.end_ns.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   std::this_thread::sleep_for(std::chrono::milliseconds(20));
   EXPECT_EQ(g_never_device.n.load(), writes);
+}
+
+namespace {
+/// A link that sends a pose each millisecond on its own schedule and waits for the force:
+/// every 20th pose 300 us late. Its phase (when the next pose is due, servo/input_phase.h)
+/// is the schedule's own; it keeps the newest pose's number each tick read (preallocated).
+struct PacedLink final : HapticDeviceIO {
+  static constexpr std::int64_t kPeriodNs = 1'000'000, kLateNs = 300'000;
+  static constexpr std::size_t kMax = 8192;
+  std::int64_t t0_ns = 0;                 // pose k is due at t0_ns + k periods
+  std::atomic<std::uint64_t> delivered{0};  // poses arrived; the newest is number delivered - 1
+  std::array<std::uint64_t, kMax> newest_read{};
+  std::atomic<std::size_t> reads{0};
+  static bool late(std::uint64_t k) { return k % 20 == 19; }
+  Vec3 read_position_m() override { return {0.016, 0.016, 0.030}; }  // far above the floor: no force
+  DeviceReading read() override {
+    DeviceReading d;
+    d.position_m = read_position_m();
+    d.sequence = delivered.load();
+    if (const std::size_t i = reads.load(std::memory_order_relaxed); i < kMax) {
+      newest_read[i] = d.sequence;
+      reads.store(i + 1, std::memory_order_release);
+    }
+    return d;
+  }
+  void write_force_n(const Vec3&) override {}
+  InputPhase input_phase() const override {
+    return {t0_ns + std::int64_t(delivered.load()) * kPeriodNs, kPeriodNs, 0};
+  }
+  /// Delivers poses 0 .. n-1 on the schedule (this thread sleeps to each arrival).
+  void feed(std::uint64_t n) {
+    for (std::uint64_t k = 0; k < n; ++k) {
+      const std::int64_t at = t0_ns + std::int64_t(k) * kPeriodNs + (late(k) ? kLateNs : 0);
+      const timespec ts{time_t(at / 1000000000LL), long(at % 1000000000LL)};
+      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+      }
+      delivered.store(k + 1);
+    }
+  }
+};
+}  // namespace
+
+// A pose 300 us late, past the tick placed 100 us after it was due: the tick waits for it
+// (servo/input_phase.h, input_wait_until) and reads it while it is the newest. Without the
+// wait the next pose, on time, comes first and the late one is never read.
+TEST(ServoThread, ATickWaitsForALatePoseInsteadOfLeavingItToTheNext) {
+  TripleBuffer<SampleField> published;
+  published.publish(std::make_shared<const SampleField>(plane_field({0, 0, 1}, {0.016, 0.016, 0.010})));
+  HriParams hp;
+  HriRenderer renderer(hp);
+  PacedLink link;
+  ServoThreadConfig cfg = stall_config();
+  cfg.ramp_in_s = 0;
+  cfg.input_lead_us = 100;
+  link.t0_ns = mono_ns() + 20'000'000;
+  ServoThread servo(published, renderer, link, cfg);
+  servo.start();
+  link.feed(1500);
+  EXPECT_EQ(servo.stop(), "");
+  // The late poses after the first 200 (the ticks have moved to the stream's phase by then):
+  // each read by a tick while it was the newest.
+  std::vector<bool> seen(1501, false);
+  for (std::size_t i = 0; i < link.reads.load(); ++i) seen[std::size_t(link.newest_read[i])] = true;
+  int late = 0, read = 0;
+  for (std::uint64_t k = 200; k + 1 < 1500; ++k)
+    if (PacedLink::late(k)) ++late, read += seen[std::size_t(k + 1)];
+  EXPECT_GT(servo.input_waits(), 0);
+  EXPECT_GE(read, late * 4 / 5) << read << " of " << late << " late poses read while the newest ("
+                                << servo.input_waits() << " waits, " << servo.input_wait_timeouts() << " in vain)";
 }

@@ -1,5 +1,6 @@
 #include "isotouch/bench/bench_serve.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -75,29 +76,67 @@ struct Tracker {
   std::mutex mu;
   std::vector<double> rtt_us;
   std::int64_t t0_ns = 0;
+  // Per pose, in sending order: its send time, how late the tracker sent it against its
+  // schedule [ns], and whether a force answered it (which poses go unanswered, and when).
+  std::vector<std::int64_t> sent_ns, sent_late_ns;
+  std::vector<char> answered;
 
   void send_loop(double rate_hz) {
     const auto start = Clock::now();
     for (long k = 0; !stop; ++k) {
-      std::this_thread::sleep_until(start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(double(k) / rate_hz)));
+      const auto due = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(double(k) / rate_hz));
+      std::this_thread::sleep_until(due);
       const double u = 0.5 - 0.5 * std::cos(2 * M_PI * double(k) / rate_hz);  // 0 .. 1 .. 0 each second
       const double t[3] = {-9.6 - u * 30.0, -102.4, 16.5};  // RAS [mm]: outside, then 3.6 voxels into bone
-      if (!conn->send(service::pack_translation("Stylus", t, to_stamp(now_ns())))) break;
+      const std::int64_t ns = now_ns();
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        sent_ns.push_back(ns);
+        sent_late_ns.push_back(ns - std::chrono::duration_cast<std::chrono::nanoseconds>(due.time_since_epoch()).count());
+        answered.push_back(0);
+      }
+      if (!conn->send(service::pack_translation("Stylus", t, to_stamp(ns)))) break;
       sent.fetch_add(1);
     }
+  }
+  /// Marks the pose sent at `ns` (an echoed stamp, within 2 ns of it) answered; mu held.
+  void mark(std::int64_t ns) {
+    const auto it = std::lower_bound(sent_ns.begin(), sent_ns.end(), ns - 2);
+    if (it != sent_ns.end() && *it <= ns + 2) answered[std::size_t(it - sent_ns.begin())] = 1;
   }
   void read_loop() {
     for (;;) {
       const service::Incoming in = service::read_message(*conn, service::MessageLimits{});
       if (in.kind == service::Incoming::Kind::kClosed || in.kind == service::Incoming::Kind::kBroken) break;
       if (in.kind != service::Incoming::Kind::kTransform || in.device != "Force") continue;
-      const std::int64_t now = now_ns(), sent_ns = from_stamp(in.stamp);
-      if (sent_ns < t0_ns || sent_ns > now) continue;  // the display's Force (wall-clock stamp), not an answer
+      const std::int64_t now = now_ns(), echoed = from_stamp(in.stamp);
+      if (echoed < t0_ns || echoed > now) continue;  // the display's Force (wall-clock stamp), not an answer
       std::lock_guard<std::mutex> lock(mu);
-      rtt_us.push_back(double(now - sent_ns) * 1e-3);
+      rtt_us.push_back(double(now - echoed) * 1e-3);
+      mark(echoed);
     }
   }
 };
+
+/// Which poses no force answered: those in the phase's first second (the servo learning the
+/// stream's phase), those the tracker itself sent kLateNs or more behind its schedule, and
+/// those right after another unanswered one; and the tracker's own lateness (p99, p99.9).
+void unanswered(const Tracker& tr, double rate_hz, BenchServePhase& ph) {
+  constexpr std::int64_t kLateNs = 250'000;
+  const auto first_second = std::size_t(rate_hz);
+  std::vector<double> late_us;
+  for (std::size_t k = 0; k < tr.answered.size(); ++k) {
+    late_us.push_back(double(tr.sent_late_ns[k]) * 1e-3);
+    if (tr.answered[k]) continue;
+    ++ph.unanswered;
+    ph.unanswered_first_second += k < first_second;
+    ph.unanswered_sent_late += tr.sent_late_ns[k] >= kLateNs;
+    ph.unanswered_after_unanswered += k > 0 && !tr.answered[k - 1];
+  }
+  if (late_us.empty()) return;
+  ph.tracker_late_p99_us = eval::percentile(late_us, 0.99);
+  ph.tracker_late_p999_us = eval::percentile(late_us, 0.999);
+}
 
 /// Slicer's side: an IMAGE every `every_s`, its answers read and dropped.
 void send_images(service::Connection& c, const std::vector<std::uint8_t>& image, double every_s, const std::atomic<bool>& stop,
@@ -175,6 +214,7 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
     reader.join();
     ph.poses = tr.sent;
     ph.answered = long(tr.rtt_us.size());
+    unanswered(tr, o.rate_hz, ph);
     if (!tr.rtt_us.empty()) {
       ph.p50_us = eval::percentile(tr.rtt_us, 0.50);
       ph.p99_us = eval::percentile(tr.rtt_us, 0.99);
@@ -193,6 +233,8 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   ph.stream_late_us = st.stream_late_us;
   ph.input_waits = st.input_waits;
   ph.input_wait_timeouts = st.input_wait_timeouts;
+  ph.passed_over = st.passed_over;
+  ph.overtaken = st.overtaken;
   return ph;
 }
 
@@ -244,6 +286,14 @@ int run_bench_serve(const BenchServeOptions& o, std::ostream& log) {
     log << "| " << p->name << " | " << fixed(p->to_servo_p50_us) << " / " << fixed(p->to_servo_p99_us) << " | "
         << fixed(p->to_send_p50_us) << " / " << fixed(p->to_send_p99_us) << " | "
         << fixed(p->p50_us - p->to_servo_p50_us - p->to_send_p50_us) << " | " << fixed(p->stream_late_us) << " | " << p->input_waits << " (" << p->input_wait_timeouts << ") |\n";
+  log << "\nWhich poses no force answered (the tracker's lateness: its send time against its own schedule):\n\n"
+      << "| phase | unanswered | in the phase's first second | sent >= 250 us late by the tracker | right after another unanswered | "
+         "the tracker's lateness p99 / p99.9 [us] | the server passed over (of them, the servo never read) |\n"
+      << "|---|---|---|---|---|---|---|\n";
+  for (const BenchServePhase* p : {&alone, &traffic})
+    log << "| " << p->name << " | " << p->unanswered << " | " << p->unanswered_first_second << " | " << p->unanswered_sent_late
+        << " | " << p->unanswered_after_unanswered << " | " << fixed(p->tracker_late_p99_us) << " / "
+        << fixed(p->tracker_late_p999_us) << " | " << p->passed_over << " (" << p->overtaken << ") |\n";
   log << "\n";
   for (const std::string& v : bench_serve_verdicts(alone, traffic)) log << "verdict  " << v << "\n";
   log << "machine  " << cpu_model() << ", " << std::thread::hardware_concurrency() << " CPUs; load average before "

@@ -34,6 +34,13 @@ struct BenchServePhase {
   double stream_late_us = 0;  ///< the stream's arrival lateness (99.5th percentile) at the end [us]
   long input_waits = 0;       ///< servo ticks that waited for a pose later than the lead
   long input_wait_timeouts = 0;  ///< of those, the waits that ended without the pose
+  long unanswered = 0;                  ///< poses sent that no force answered
+  long unanswered_first_second = 0;     ///< of those, in the phase's first second
+  long unanswered_sent_late = 0;        ///< of those, sent >= 250 us behind the tracker's own schedule
+  long unanswered_after_unanswered = 0; ///< of those, right after another unanswered pose
+  double tracker_late_p99_us = 0, tracker_late_p999_us = 0;  ///< the tracker's send lateness [us]
+  long passed_over = 0;  ///< poses the server's replies passed over (ServeStats::passed_over)
+  long overtaken = 0;    ///< of those, poses the servo never read (ServeStats::overtaken)
 };
 
 /// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered

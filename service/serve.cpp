@@ -264,7 +264,9 @@ class Server {
             sp.to_send_p99_us,
             double(device_.input_phase().late_ns) * 1e-3,
             input_waits_,
-            input_wait_timeouts_};
+            input_wait_timeouts_,
+            replies_.passed_over(),
+            device_.overtaken()};
   }
 
  private:

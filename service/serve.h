@@ -126,6 +126,9 @@ struct ServeStats {
   /// Servo ticks that waited past their deadline for a pose that ran later than the lead.
   long input_waits = 0;
   long input_wait_timeouts = 0;  ///< of those, the waits the pose did not end (half a period past the deadline)
+  /// Poses no reply answered (between two answered: StreamReplies::passed_over), and of
+  /// them those the servo never read (TransformDevice::overtaken, counted over the whole run).
+  long passed_over = 0, overtaken = 0;
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

@@ -75,6 +75,7 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     fenced.reset();
   };
   bool waiting = false;  // a pose the servo has not answered yet: looked for every 20 us, else 100 us
+  std::uint64_t answered = 0;  // the last pose the rule said to answer
   running_ = true;
   while (!stop) {
     std::this_thread::sleep_for(std::chrono::nanoseconds(waiting ? StreamReplyPoll::kPollNs / 5 : StreamReplyPoll::kPollNs));
@@ -86,13 +87,21 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
       }
       retarget_done_ = ask;
     }
-    const TransformDevice::PoseId p = device_.newest_pose();
+    TransformDevice::PoseId p = device_.newest_pose();
     const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
     if (!poll.judge_now(now)) continue;  // this thread was away: the servo gets a poll to write first
     const servo::StallLook l = device_.look_force(now);
+    // The servo answered a pose that a newer one overtook before this poll: that pose gets its
+    // answer (its force, its stamp) instead of being passed over for the newer one.
+    if (l.on && l.answers > answered && l.answers < p.sequence)
+      if (const TransformDevice::PoseId a = device_.recent_pose(l.answers); a.sequence != 0) p = a;
     const IgtlReply r = poll.step(p, l, now);
     waiting = !r.send && l.on && p.sequence > l.answers && now - p.received_ns < 2'000'000;
     if (!r.send) continue;
+    if (r.why == IgtlReply::Why::kAnswer || r.why == IgtlReply::Why::kLate) {
+      if (answered != 0 && p.sequence > answered + 1) passed_over_.fetch_add(long(p.sequence - answered - 1));
+      answered = std::max(answered, p.sequence);
+    }
     // In the tracker's frame (the registration's R^T): the client applies it there.
     const core::Vec3 f = device_.to_tracker_n(device_.echo().to_ras_n(r.force_n));
     const double t[3] = {f.x, f.y, f.z};

@@ -77,6 +77,10 @@ class StreamReplies {
   long replies() const { return replies_.load(); }  ///< Force replies sent
   /// Of those: a pose the servo did not render within 2 ms (no session running: zero).
   long stall_replies() const { return stall_replies_.load(); }
+  /// Poses the replies passed over: between two poses answered, those not answered (the
+  /// servo never read them, TransformDevice::overtaken(), or the servo's answer to them was
+  /// replaced by its next before this thread's poll saw it).
+  long passed_over() const { return passed_over_.load(); }
   /// Where a rendered reply's time went [us], for each reply the servo rendered: from the
   /// pose's arrival to the servo's write, and from that write to the send. After run().
   struct Split {
@@ -89,7 +93,7 @@ class StreamReplies {
   StreamReplyOptions o_;
   Target target_;
   std::function<void(const std::string&)> log_;
-  std::atomic<long> replies_{0}, stall_replies_{0}, retarget_zeros_{0};
+  std::atomic<long> replies_{0}, stall_replies_{0}, retarget_zeros_{0}, passed_over_{0};
   std::atomic<std::uint64_t> retarget_asked_{0}, retarget_done_{0};  // retarget(): asked, handled up to
   std::atomic<bool> running_{false};
   // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:

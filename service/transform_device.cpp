@@ -17,7 +17,21 @@ void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   p.stamp = stamp;
   ++p.sequence;
   pose_.store(p);
+  RecentSlot& slot = recent_[p.sequence % kRecent];
+  slot.sequence.store(0, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  slot.received_ns.store(p.received_ns, std::memory_order_relaxed);
+  slot.stamp.store(p.stamp, std::memory_order_relaxed);
+  slot.sequence.store(p.sequence, std::memory_order_release);
   pushed_.fetch_add(1);
+}
+
+TransformDevice::PoseId TransformDevice::recent_pose(std::uint64_t sequence) const {
+  const RecentSlot& slot = recent_[sequence % kRecent];
+  if (sequence == 0 || slot.sequence.load(std::memory_order_acquire) != sequence) return {};
+  const PoseId id{sequence, slot.received_ns.load(std::memory_order_relaxed), slot.stamp.load(std::memory_order_relaxed)};
+  std::atomic_thread_fence(std::memory_order_acquire);
+  return slot.sequence.load(std::memory_order_relaxed) == sequence ? id : PoseId{};
 }
 
 void TransformDevice::set_registration(const Registration& r) {
@@ -32,8 +46,11 @@ TransformDevice::PoseId TransformDevice::newest_pose() const {
 }
 
 servo::DeviceReading TransformDevice::read() {
+  const std::uint64_t before = last_.sequence;
   pose_.load(last_);  // bounded: keeps the last pose if a store stays in progress
   const Pose& p = last_;
+  if (before != 0 && p.sequence > before + 1)  // one writer: a plain add, no read-modify-write
+    overtaken_.store(overtaken_.load(std::memory_order_relaxed) + long(p.sequence - before - 1), std::memory_order_relaxed);
   servo::DeviceReading r;
   // RAS mm + offset -> LPS m -> grid m.
   const core::Vec3 lps{-(p.mm[0] + offset_mm_.x) * 1e-3, -(p.mm[1] + offset_mm_.y) * 1e-3, (p.mm[2] + offset_mm_.z) * 1e-3};

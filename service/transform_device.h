@@ -44,10 +44,17 @@ class TransformDevice final : public servo::HapticDeviceIO {
     std::uint64_t stamp = 0;
   };
   PoseId newest_pose() const;
+  /// The pose numbered `sequence` if it is among the last kRecent pushed (its sequence 0
+  /// otherwise): the reply thread answers a pose the servo answered after a newer one came.
+  /// Lock-free, any thread.
+  static constexpr std::size_t kRecent = 16;
+  PoseId recent_pose(std::uint64_t sequence) const;
   /// When the servo last wrote a force [ns, steady] (0: never).
   std::int64_t force_written_ns() const { return echo_.written_ns(); }
   /// Messages pushed so far.
   long pushed() const { return pushed_.load(); }
+  /// Poses the servo never read: a newer one had arrived before its tick (or during a swap).
+  long overtaken() const { return overtaken_.load(std::memory_order_relaxed); }
 
   // Servo thread: no allocation, lock or syscall (the clock is the vDSO's).
   core::Vec3 read_position_m() override { return read().position_m; }
@@ -101,6 +108,15 @@ class TransformDevice final : public servo::HapticDeviceIO {
   Registration reg_;                          // push_mu_: the one push_mm applies
   servo::LatestValue<Registration> reg_cell_;  // written under push_mu_: the one forces go back through
   std::atomic<long> pushed_{0};
+  std::atomic<long> overtaken_{0};  // written by the servo thread only
+  // The last kRecent poses' ids by sequence % kRecent, each slot a sequence lock (its
+  // sequence 0 while written); written under push_mu_.
+  struct RecentSlot {
+    std::atomic<std::uint64_t> sequence{0};
+    std::atomic<std::int64_t> received_ns{0};
+    std::atomic<std::uint64_t> stamp{0};
+  };
+  std::array<RecentSlot, kRecent> recent_;
   RasEcho echo_;
   servo::StallRule rule_;
   core::Vec3 offset_mm_;

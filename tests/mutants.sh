@@ -218,6 +218,9 @@ m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_n
                                test_input_phase 'InputWaitUntil.*'
 m servo-input-wait-call     servo/servo_thread.cpp '    if (cfg_.follow_input_phase) t = wait_for_input(t, next, period);' '' \
                                test_servo_thread 'ServoThread.ATickWaitsForALatePoseInsteadOfLeavingItToTheNext'
+# A pose the servo answered after a newer one came is still answered (its own force and stamp).
+m serve-reply-overtaken     service/stream_replies.cpp '      if (const TransformDevice::PoseId a = device_.recent_pose(l.answers); a.sequence != 0) p = a;' '      {}' \
+                               test_stream_replies 'StreamReplies.APoseTheServoAnsweredIsAnsweredThoughANewerOneCame'
 # serve's command thread: no burst of missed tool ticks, a stroke through a moment out of contact.
 m serve-tool-no-burst       service/tool_ticks.cpp '  return (now > due + period ? now : due) + period;' '  return due + period;' \
                                test_tool_ticks 'ToolTicks.*'

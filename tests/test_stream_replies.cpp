@@ -131,6 +131,53 @@ TEST(StreamReplies, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
                               << " ms after the last force, with a pose";
 }
 
+// The next pose arrives right after the servo's answer to the last, before the reply thread's
+// poll (this test's servo pushes it itself): each pose the servo answered still gets its reply,
+// its own force with its own stamp, instead of being passed over for the newer pose (which
+// the servo answers a tick later, by which time the next has come). Before, the replies
+// waited for the servo to answer the newest pose and almost none went out.
+TEST(StreamReplies, APoseTheServoAnsweredIsAnsweredThoughANewerOneCame) {
+  service::StreamHost host({kFifo, 1.0});
+  PlusPeer peer(client_of(host.port(), 0.02));  // a few poses: the client becomes the replies' target
+  wait_for([&] { return peer.stopped_ns() > 0; });
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // its poses read and answered
+  service::TransformDevice& d = host.device();
+  constexpr std::uint64_t kStamp0 = std::uint64_t(1) << 40;
+  constexpr long kPoses = 200, kRamp = 80;  // the first 80 ms: the force's ramp-in (stall rule), not judged
+  const double mm[3] = {0, 0, 0};
+  d.enable_force(true, 0.020);
+  d.push_mm(mm, kStamp0 - kRamp);
+  std::thread servo([&] {
+    if (kFifo) servo::make_thread_realtime("test servo", true, 80, false, -1);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (long k = -kRamp; k < kPoses; ++k) {
+      const std::uint64_t stamp = kStamp0 + std::uint64_t(k);
+      d.read();
+      d.write_force_n({0, 0, double(k + 1) / 1024});  // pose k's force: exact in float32
+      d.push_mm(mm, stamp + 1);                        // the next pose, at once
+      std::this_thread::sleep_until(t0 + std::chrono::microseconds(1000 * (k + kRamp + 1)));
+    }
+  });
+  servo.join();
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  host.stop();
+  peer.finish();
+  long answered = 0;
+  std::uint64_t last = 0;
+  for (const PeerForce& g : peer.forces()) {
+    if (g.stamp < kStamp0 || g.stamp >= kStamp0 + kPoses) continue;
+    ++answered;
+    EXPECT_EQ(g.f.z, double(g.stamp - kStamp0 + 1) / 1024) << "the reply to the pose stamped " << g.stamp - kStamp0
+                                                             << " carries another pose's force";
+    EXPECT_GT(g.stamp, last) << "a pose answered twice or out of order";
+    last = g.stamp;
+  }
+  // The reply thread (SCHED_FIFO below this servo where allowed) polls every 20-100 us; a
+  // poll later than a whole servo period passes one pose over.
+  EXPECT_GE(answered, kPoses * 3 / 4) << "of " << kPoses << " poses the servo answered, " << answered
+                                      << " were answered to the client; passed over: " << host.replies().passed_over();
+}
+
 // The client stops sending poses while the servo still writes (it has not judged the stream
 // stale yet): once the host has had no pose for the reply thread's stale time, the client gets
 // one zero and nothing but zeros after it (timed from the last pose the host received: a

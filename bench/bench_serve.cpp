@@ -235,6 +235,7 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   ph.input_wait_timeouts = st.input_wait_timeouts;
   ph.passed_over = st.passed_over;
   ph.overtaken = st.overtaken;
+  ph.dropped = st.replies_dropped;
   return ph;
 }
 
@@ -288,12 +289,12 @@ int run_bench_serve(const BenchServeOptions& o, std::ostream& log) {
         << fixed(p->p50_us - p->to_servo_p50_us - p->to_send_p50_us) << " | " << fixed(p->stream_late_us) << " | " << p->input_waits << " (" << p->input_wait_timeouts << ") |\n";
   log << "\nWhich poses no force answered (the tracker's lateness: its send time against its own schedule):\n\n"
       << "| phase | unanswered | in the phase's first second | sent >= 250 us late by the tracker | right after another unanswered | "
-         "the tracker's lateness p99 / p99.9 [us] | the server passed over (of them, the servo never read) |\n"
-      << "|---|---|---|---|---|---|---|\n";
+         "the tracker's lateness p99 / p99.9 [us] | the server passed over (of them, the servo never read) | replies the server dropped |\n"
+      << "|---|---|---|---|---|---|---|---|\n";
   for (const BenchServePhase* p : {&alone, &traffic})
     log << "| " << p->name << " | " << p->unanswered << " | " << p->unanswered_first_second << " | " << p->unanswered_sent_late
         << " | " << p->unanswered_after_unanswered << " | " << fixed(p->tracker_late_p99_us) << " / "
-        << fixed(p->tracker_late_p999_us) << " | " << p->passed_over << " (" << p->overtaken << ") |\n";
+        << fixed(p->tracker_late_p999_us) << " | " << p->passed_over << " (" << p->overtaken << ") | " << p->dropped << " |\n";
   log << "\n";
   for (const std::string& v : bench_serve_verdicts(alone, traffic)) log << "verdict  " << v << "\n";
   log << "machine  " << cpu_model() << ", " << std::thread::hardware_concurrency() << " CPUs; load average before "

@@ -41,6 +41,7 @@ struct BenchServePhase {
   double tracker_late_p99_us = 0, tracker_late_p999_us = 0;  ///< the tracker's send lateness [us]
   long passed_over = 0;  ///< poses the server's replies passed over (ServeStats::passed_over)
   long overtaken = 0;    ///< of those, poses the servo never read (ServeStats::overtaken)
+  long dropped = 0;      ///< replies the server dropped (ServeStats::replies_dropped)
 };
 
 /// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered

@@ -159,9 +159,10 @@ std::size_t Connection::read(void* dst, std::size_t n, bool first) {
   return got;
 }
 
-Sent Connection::try_send(const void* data, std::size_t n) {
-  std::unique_lock<std::mutex> lock(send_mu_, std::try_to_lock);
-  if (!lock.owns_lock()) return Sent::kBusy;  // another send is under way: dropped, never waited for
+Sent Connection::try_send(const void* data, std::size_t n, std::int64_t busy_wait_ns) {
+  std::unique_lock<std::timed_mutex> lock(send_mu_, std::defer_lock);
+  const bool locked = busy_wait_ns > 0 ? lock.try_lock_for(std::chrono::nanoseconds(busy_wait_ns)) : lock.try_lock();
+  if (!locked) return Sent::kBusy;  // another send is under way (past busy_wait_ns): dropped
   if (!alive_) return Sent::kDead;
   SendFence* fence = fence_.load();
   if (fence && !fence->begin_send()) return Sent::kDead;  // the process's last message went out
@@ -181,7 +182,7 @@ Sent Connection::try_send(const void* data, std::size_t n) {
 
 bool Connection::send(const void* data, std::size_t n, bool droppable) {
   if (droppable) return try_send(data, n) == Sent::kSent;
-  std::lock_guard<std::mutex> lock(send_mu_);
+  std::lock_guard<std::timed_mutex> lock(send_mu_);
   SendFence* fence = fence_.load();
   if (fence && !fence->begin_send()) return false;  // the process's last message went out
   struct EndSend {

@@ -81,9 +81,12 @@ class Connection final : public ByteSource {
   /// returned, the connection kept; when only part of them fit, the stream is cut mid-message
   /// and the connection is marked dead.
   bool send_droppable(const std::vector<std::uint8_t>& bytes) { return send(bytes.data(), bytes.size(), true); }
-  /// As send_droppable(), saying why a send was dropped.
-  Sent try_send(const void* data, std::size_t n);
-  Sent try_send(const std::vector<std::uint8_t>& bytes) { return try_send(bytes.data(), bytes.size()); }
+  /// As send_droppable(), saying why a send was dropped. `busy_wait_ns` > 0: another send
+  /// under way is waited for that long before kBusy (never the peer's buffers: kFull at once).
+  Sent try_send(const void* data, std::size_t n, std::int64_t busy_wait_ns = 0);
+  Sent try_send(const std::vector<std::uint8_t>& bytes, std::int64_t busy_wait_ns = 0) {
+    return try_send(bytes.data(), bytes.size(), busy_wait_ns);
+  }
   bool alive() const { return alive_.load(); }
   /// How long the peer has sent no byte [ms]: since the last byte read() received, or since
   /// the connection was made when none came (the monotonic clock). Any thread.
@@ -103,7 +106,7 @@ class Connection final : public ByteSource {
   std::chrono::steady_clock::time_point message_start_;
   const std::atomic<bool>* stop_;
   std::string why_;
-  std::mutex send_mu_;
+  std::timed_mutex send_mu_;
   std::atomic<SendFence*> fence_{nullptr};
   std::atomic<bool> alive_{true};
   std::atomic<std::int64_t> last_in_ns_;  ///< steady_clock (CLOCK_MONOTONIC) nanoseconds of the last byte received, or of the connection

@@ -266,7 +266,8 @@ class Server {
             input_waits_,
             input_wait_timeouts_,
             replies_.passed_over(),
-            device_.overtaken()};
+            device_.overtaken(),
+            replies_.dropped()};
   }
 
  private:

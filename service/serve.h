@@ -129,6 +129,7 @@ struct ServeStats {
   /// Poses no reply answered (between two answered: StreamReplies::passed_over), and of
   /// them those the servo never read (TransformDevice::overtaken, counted over the whole run).
   long passed_over = 0, overtaken = 0;
+  long replies_dropped = 0;  ///< replies dropped, the connection kept (StreamReplies::dropped)
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

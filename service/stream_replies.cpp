@@ -120,7 +120,9 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
     // that does not read).
     const bool rendered = r.why == IgtlReply::Why::kAnswer;
     const std::vector<std::uint8_t> msg = pack_translation("Force", t, p.stamp);
-    const bool delivered = r.whole() ? to->send(msg) : to->send_droppable(msg);
+    const Sent sent = r.whole() ? (to->send(msg) ? Sent::kSent : Sent::kDead) : to->try_send(msg, StreamReplyPoll::kBusyWaitNs);
+    const bool delivered = sent == Sent::kSent;
+    if (sent == Sent::kBusy || sent == Sent::kFull) dropped_.fetch_add(1);
     poll.sent(delivered);
     if (delivered) {
       replies_.fetch_add(1);

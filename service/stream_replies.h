@@ -32,6 +32,9 @@ class StreamReplyPoll {
  public:
   static constexpr std::int64_t kPollNs = 100'000;    ///< the reply thread's poll [ns]
   static constexpr std::int64_t kAwayNs = 5 * kPollNs;  ///< a gap this long: the thread itself was away
+  /// Another send to the client under way (serve's display TRANSFORMs to the same client: a
+  /// few microseconds) is waited for this long before a reply is dropped [ns].
+  static constexpr std::int64_t kBusyWaitNs = 300'000;
   explicit StreamReplyPoll(std::int64_t stale_ns) : rule_(stale_ns) {}
   /// Before the stall rule's look at t [ns]: false when this poll judges nothing (the reply
   /// thread was itself away: IgtlReplyRule::judge_now).
@@ -81,6 +84,9 @@ class StreamReplies {
   /// servo never read them, TransformDevice::overtaken(), or the servo's answer to them was
   /// replaced by its next before this thread's poll saw it).
   long passed_over() const { return passed_over_.load(); }
+  /// Replies dropped, the connection kept: another send to the client was under way, or its
+  /// buffers were full (Connection::try_send).
+  long dropped() const { return dropped_.load(); }
   /// Where a rendered reply's time went [us], for each reply the servo rendered: from the
   /// pose's arrival to the servo's write, and from that write to the send. After run().
   struct Split {
@@ -93,7 +99,7 @@ class StreamReplies {
   StreamReplyOptions o_;
   Target target_;
   std::function<void(const std::string&)> log_;
-  std::atomic<long> replies_{0}, stall_replies_{0}, retarget_zeros_{0}, passed_over_{0};
+  std::atomic<long> replies_{0}, stall_replies_{0}, retarget_zeros_{0}, passed_over_{0}, dropped_{0};
   std::atomic<std::uint64_t> retarget_asked_{0}, retarget_done_{0};  // retarget(): asked, handled up to
   std::atomic<bool> running_{false};
   // Histograms of the two parts of each rendered reply, 10 us bins up to 10 ms (the last:

@@ -5,6 +5,7 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/resource.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -555,6 +556,49 @@ TEST(ServiceSocket, DroppableSendToAPeerNotReadingNeverWaits) {
   EXPECT_LT(s, 1.0) << ok << " sends, " << dropped << " dropped in " << s << " s (a send waited for the peer)";
   std::cout << ok << " sends fitted, " << dropped << " dropped, alive " << c.alive() << ", " << s << " s\n";
   ::close(peer);
+}
+
+// serve's reply to a pose while the display loop's send to the same client is under way: a
+// send with a busy wait waits for it (and the peer gets both messages whole, in order) where
+// one without drops at once. The other send holds the connection from its first byte in the
+// peer's buffer until the peer reads, which it starts 50 ms after that.
+TEST(ServiceSocket, ADroppableSendWaitsForAnotherSendUnderWayWithinItsBusyWait) {
+  int sv[2];
+  ASSERT_EQ(::socketpair(AF_UNIX, SOCK_STREAM, 0, sv), 0);
+  int small = 4096;  // the smallest buffers: the large message fills them at once
+  ::setsockopt(sv[0], SOL_SOCKET, SO_SNDBUF, &small, sizeof small);
+  ::setsockopt(sv[1], SOL_SOCKET, SO_RCVBUF, &small, sizeof small);
+  Connection c(sv[0], 5000, 60000, nullptr);
+  const std::vector<std::uint8_t> large(1 << 20, 7), reply(64, 9);
+  std::thread other([&] {
+    EXPECT_TRUE(c.send(large));  // blocks, holding the connection, until the peer reads
+  });
+  int queued = 0;  // the large message's first bytes at the peer: its send holds the connection
+  for (int i = 0; i < 100000 && (::ioctl(sv[1], FIONREAD, &queued) != 0 || queued == 0); ++i)
+    std::this_thread::sleep_for(std::chrono::microseconds(100));
+  ASSERT_GT(queued, 0) << "the other send never began";
+  EXPECT_EQ(c.try_send(reply), Sent::kBusy) << "without a busy wait the reply is dropped at once";
+  std::vector<std::uint8_t> got;
+  std::thread peer([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::uint8_t buf[65536];
+    while (got.size() < large.size() + reply.size()) {
+      const ssize_t k = ::read(sv[1], buf, sizeof buf);
+      if (k <= 0) break;
+      got.insert(got.end(), buf, buf + k);
+    }
+  });
+  const auto t0 = std::chrono::steady_clock::now();
+  const Sent sent = c.try_send(reply, 10'000'000'000);  // waits for the other send, however long it takes here
+  const double waited_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  other.join();
+  c.shutdown();  // the peer reads what was sent, then the end (a dropped reply: no hang)
+  peer.join();
+  EXPECT_EQ(sent, Sent::kSent) << "the reply was dropped after waiting " << waited_ms << " ms";
+  ASSERT_EQ(got.size(), large.size() + reply.size());
+  EXPECT_TRUE(std::equal(large.begin(), large.end(), got.begin())) << "the large message is not whole";
+  EXPECT_TRUE(std::equal(reply.begin(), reply.end(), got.begin() + std::ptrdiff_t(large.size()))) << "the reply is not whole, after it";
+  ::close(sv[1]);
 }
 
 }  // namespace

@@ -236,6 +236,7 @@ BenchServePhase run_phase(const io::Scene& scene, const BenchServeOptions& o, co
   ph.passed_over = st.passed_over;
   ph.overtaken = st.overtaken;
   ph.dropped = st.replies_dropped;
+  ph.overtaken_gaps = st.overtaken_gaps;
   return ph;
 }
 
@@ -295,6 +296,14 @@ int run_bench_serve(const BenchServeOptions& o, std::ostream& log) {
     log << "| " << p->name << " | " << p->unanswered << " | " << p->unanswered_first_second << " | " << p->unanswered_sent_late
         << " | " << p->unanswered_after_unanswered << " | " << fixed(p->tracker_late_p99_us) << " / "
         << fixed(p->tracker_late_p999_us) << " | " << p->passed_over << " (" << p->overtaken << ") | " << p->dropped << " |\n";
+  log << "\nThe poses the servo never read, by how soon the next pose came after them (a burst from the\n"
+      << "tracker, or a servo tick not made in between):\n\n"
+      << "| phase | < 0.1 ms | 0.1-0.3 ms | 0.3-0.7 ms | 0.7-1.3 ms | > 1.3 ms |\n|---|---|---|---|---|---|\n";
+  for (const BenchServePhase* p : {&alone, &traffic}) {
+    log << "| " << p->name;
+    for (long n : p->overtaken_gaps) log << " | " << n;
+    log << " |\n";
+  }
   log << "\n";
   for (const std::string& v : bench_serve_verdicts(alone, traffic)) log << "verdict  " << v << "\n";
   log << "machine  " << cpu_model() << ", " << std::thread::hardware_concurrency() << " CPUs; load average before "

@@ -3,6 +3,7 @@
 // without Slicer-like traffic in the same run (a large IMAGE every few seconds, each one
 // becoming the session's volume), and the servo's missed deadlines in both.
 #pragma once
+#include <array>
 #include <iosfwd>
 #include <string>
 #include <vector>
@@ -42,6 +43,7 @@ struct BenchServePhase {
   long passed_over = 0;  ///< poses the server's replies passed over (ServeStats::passed_over)
   long overtaken = 0;    ///< of those, poses the servo never read (ServeStats::overtaken)
   long dropped = 0;      ///< replies the server dropped (ServeStats::replies_dropped)
+  std::array<long, 5> overtaken_gaps{};  ///< the poses never read by how soon the next came (ServeStats)
 };
 
 /// "p99 round trip with traffic = X us: target <= 1000 us met|NOT met", "poses answered

@@ -267,7 +267,8 @@ class Server {
             input_wait_timeouts_,
             replies_.passed_over(),
             device_.overtaken(),
-            replies_.dropped()};
+            replies_.dropped(),
+            device_.overtaken_gaps()};
   }
 
  private:

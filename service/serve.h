@@ -28,6 +28,7 @@
 //     signal or after `seconds`.
 // Part of isotouch::serve.
 #pragma once
+#include <array>
 #include <functional>
 #include <iosfwd>
 #include <memory>
@@ -130,6 +131,8 @@ struct ServeStats {
   /// them those the servo never read (TransformDevice::overtaken, counted over the whole run).
   long passed_over = 0, overtaken = 0;
   long replies_dropped = 0;  ///< replies dropped, the connection kept (StreamReplies::dropped)
+  /// The poses never read, by how soon the next came (TransformDevice::overtaken_gaps).
+  std::array<long, 5> overtaken_gaps{};
 };
 /// As serve(), filling `stats` at the end.
 int serve(const io::Scene& scene, const ServeOptions& options, std::ostream& log, ServeStats& stats);

@@ -10,9 +10,17 @@ void TransformDevice::set_frame(const engine::Volume& v, const core::Vec3& offse
 void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   std::lock_guard<std::mutex> lock(push_mu_);  // one writer at a time (any client's thread)
   Pose p = pose_.load();
+  const std::int64_t now = now_ns();  // steady_clock is CLOCK_MONOTONIC, the servo's clock
+  if (p.sequence != 0 && read_sequence_.load(std::memory_order_relaxed) < p.sequence) {  // p is never to be read
+    constexpr std::int64_t kEdgesNs[kGapBins - 1] = {100'000, 300'000, 700'000, 1'300'000};
+    const std::int64_t gap = now - p.received_ns;
+    int bin = 0;
+    while (bin < kGapBins - 1 && gap >= kEdgesNs[bin]) ++bin;
+    overtaken_gaps_[std::size_t(bin)].fetch_add(1, std::memory_order_relaxed);
+  }
   const core::Vec3 image = reg_.to_image_mm({t_mm[0], t_mm[1], t_mm[2]});
   p.mm[0] = image.x, p.mm[1] = image.y, p.mm[2] = image.z;
-  p.received_ns = now_ns();  // steady_clock is CLOCK_MONOTONIC, the servo's clock
+  p.received_ns = now;
   arrivals_.arrived(p.received_ns);
   p.stamp = stamp;
   ++p.sequence;
@@ -24,6 +32,12 @@ void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   slot.stamp.store(p.stamp, std::memory_order_relaxed);
   slot.sequence.store(p.sequence, std::memory_order_release);
   pushed_.fetch_add(1);
+}
+
+std::array<long, TransformDevice::kGapBins> TransformDevice::overtaken_gaps() const {
+  std::array<long, kGapBins> g{};
+  for (std::size_t i = 0; i < g.size(); ++i) g[i] = overtaken_gaps_[i].load(std::memory_order_relaxed);
+  return g;
 }
 
 TransformDevice::PoseId TransformDevice::recent_pose(std::uint64_t sequence) const {
@@ -49,6 +63,7 @@ servo::DeviceReading TransformDevice::read() {
   const std::uint64_t before = last_.sequence;
   pose_.load(last_);  // bounded: keeps the last pose if a store stays in progress
   const Pose& p = last_;
+  read_sequence_.store(p.sequence, std::memory_order_relaxed);
   if (before != 0 && p.sequence > before + 1)  // one writer: a plain add, no read-modify-write
     overtaken_.store(overtaken_.load(std::memory_order_relaxed) + long(p.sequence - before - 1), std::memory_order_relaxed);
   servo::DeviceReading r;

@@ -10,6 +10,7 @@
 // LPS -> RAS [N] (image), and to_tracker_n() -> the tracker's RAS (R^T f) for the stream's
 // client.
 #pragma once
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -55,6 +56,10 @@ class TransformDevice final : public servo::HapticDeviceIO {
   long pushed() const { return pushed_.load(); }
   /// Poses the servo never read: a newer one had arrived before its tick (or during a swap).
   long overtaken() const { return overtaken_.load(std::memory_order_relaxed); }
+  /// Those poses by how soon the next came after them: < 0.1, 0.1-0.3, 0.3-0.7, 0.7-1.3 and
+  /// over 1.3 ms (a burst from the sender, or a tick the servo did not make in between).
+  static constexpr int kGapBins = 5;
+  std::array<long, kGapBins> overtaken_gaps() const;
 
   // Servo thread: no allocation, lock or syscall (the clock is the vDSO's).
   core::Vec3 read_position_m() override { return read().position_m; }
@@ -109,6 +114,8 @@ class TransformDevice final : public servo::HapticDeviceIO {
   servo::LatestValue<Registration> reg_cell_;  // written under push_mu_: the one forces go back through
   std::atomic<long> pushed_{0};
   std::atomic<long> overtaken_{0};  // written by the servo thread only
+  std::atomic<std::uint64_t> read_sequence_{0};  // the last pose the servo read (servo thread)
+  std::array<std::atomic<long>, kGapBins> overtaken_gaps_{};  // under push_mu_
   // The last kRecent poses' ids by sequence % kRecent, each slot a sequence lock (its
   // sequence 0 while written); written under push_mu_.
   struct RecentSlot {

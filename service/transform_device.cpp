@@ -21,16 +21,18 @@ void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   const core::Vec3 image = reg_.to_image_mm({t_mm[0], t_mm[1], t_mm[2]});
   p.mm[0] = image.x, p.mm[1] = image.y, p.mm[2] = image.z;
   p.received_ns = now;
-  arrivals_.arrived(p.received_ns);
   p.stamp = stamp;
   ++p.sequence;
-  pose_.store(p);
-  RecentSlot& slot = recent_[p.sequence % kRecent];
+  RecentSlot& slot = recent_[p.sequence % kRecent];  // before the pose: the reply thread looks it up once the servo read it
   slot.sequence.store(0, std::memory_order_relaxed);
   std::atomic_thread_fence(std::memory_order_release);
   slot.received_ns.store(p.received_ns, std::memory_order_relaxed);
   slot.stamp.store(p.stamp, std::memory_order_relaxed);
   slot.sequence.store(p.sequence, std::memory_order_release);
+  pose_.store(p);
+  // The arrival announced after the pose is readable: a servo tick waiting for it
+  // (ServoThread::wait_for_input) ends when the clock moves, and reads the pose then.
+  arrivals_.arrived(p.received_ns);
   pushed_.fetch_add(1);
 }
 

@@ -22,7 +22,7 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     if (d < 2 * period_ns_ && 2 * d > 3 * period_ns_) note_lateness(t_ns - (anchor_ns_ + period_ns_));
     ++outliers_;  // a burst or a gap: neither the period nor the phase
     anchor_ns_ = t_ns;
-    due_.store(-1, std::memory_order_relaxed);
+    due_.store(-1, std::memory_order_release);
     return;
   } else {
     outliers_ = 0;
@@ -36,7 +36,7 @@ void ArrivalClock::arrived(std::int64_t t_ns) {
     anchor_ns_ = predicted + (r < 0 ? r / 2 : r / 8);
   }
   period_.store(period_ns_, std::memory_order_relaxed);
-  due_.store(anchor_ns_ + period_ns_, std::memory_order_relaxed);
+  due_.store(anchor_ns_ + period_ns_, std::memory_order_release);
 }
 
 void ArrivalClock::forget_lateness() {

@@ -38,7 +38,8 @@ class ArrivalClock {
  public:
   void arrived(std::int64_t t_ns);
   InputPhase phase() const {
-    return {due_.load(std::memory_order_relaxed), period_.load(std::memory_order_relaxed),
+    // Acquire: what the arriving thread stored before the arrival (the pose) is visible.
+    return {due_.load(std::memory_order_acquire), period_.load(std::memory_order_relaxed),
             late_.load(std::memory_order_relaxed)};
   }
 

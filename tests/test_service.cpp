@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -18,6 +19,7 @@
 #include <iostream>
 #include <iterator>
 #include <thread>
+#include <unordered_map>
 
 #include <igtlImageMessage.h>
 #include <igtlLabelMetaMessage.h>
@@ -318,6 +320,61 @@ TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
   EXPECT_NEAR(ras.x, 15, 1e-9);
   EXPECT_NEAR(ras.y, 26, 1e-9);
   EXPECT_NEAR(ras.z, 37, 1e-9);
+}
+
+// The servo's wait for a late pose ends when the arrival clock moves on
+// (ServoThread::wait_for_input), and the tick then reads the pose: it must be there by then,
+// or the tick reads the one before and the late pose is overtaken by the next. A thread
+// pushes a pose every 50 us and notes the predicted arrival each push left; this thread
+// watches the clock as the servo does and, each time the prediction moves, reads the pose.
+// Afterwards each prediction seen is matched to the push that made it: the pose read then
+// must be that push's or a newer one.
+TEST(ServiceDevice, APoseIsReadableOnceItsArrivalMovedTheClock) {
+  engine::Volume v;
+  v.grid.dims = {4, 4, 4};
+  v.grid.spacing_m = {1e-3, 1e-3, 1e-3};
+  TransformDevice d;
+  d.set_frame(v, {0, 0, 0});
+  constexpr int kPushes = 60000;
+  std::vector<std::int64_t> due_after(kPushes);  // the pusher's; read after it joined
+  std::atomic<bool> done{false};
+  std::thread pusher([&] {
+    const double t[3] = {1, 2, 3};
+    for (int i = 0; i < kPushes; ++i) {
+      const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(50);
+      d.push_mm(t, std::uint64_t(i) + 1);
+      due_after[std::size_t(i)] = d.input_phase().due_ns;  // the only writer of the clock: push i's
+      while (std::chrono::steady_clock::now() < until) {
+      }
+    }
+    done = true;
+  });
+  std::vector<std::pair<std::int64_t, std::uint64_t>> seen;  // (prediction, the pose's sequence then)
+  seen.reserve(std::size_t(kPushes) + 1);
+  std::int64_t due = d.input_phase().due_ns;
+  while (!done && seen.size() < seen.capacity()) {
+    const std::int64_t now_due = d.input_phase().due_ns;
+    if (now_due == due) continue;
+    due = now_due;
+    // The pose as a waiting reader sees it (read() also gives up on a store preempted midway,
+    // keeping its last pose: another rule, LatestValue's).
+    if (now_due >= 0) seen.emplace_back(now_due, d.newest_pose().sequence);
+  }
+  pusher.join();
+  std::unordered_map<std::int64_t, std::uint64_t> push_of;  // prediction -> the first push (sequence) that made it
+  for (int i = kPushes - 1; i >= 0; --i)
+    if (due_after[std::size_t(i)] >= 0) push_of[due_after[std::size_t(i)]] = std::uint64_t(i) + 1;
+  long matched = 0, behind = 0;
+  for (const auto& [prediction, sequence] : seen) {
+    const auto it = push_of.find(prediction);
+    if (it == push_of.end()) continue;
+    ++matched;
+    behind += sequence < it->second;
+  }
+  std::printf("the prediction moved %zu times seen (%ld matched); the pose read was older than its push %ld times\n",
+              seen.size(), matched, behind);
+  EXPECT_GT(matched, 100) << "the clock never had a prediction";
+  EXPECT_EQ(behind, 0) << "the arrival clock moved before its pose could be read";
 }
 
 // The tracker registered to the image by a rotation (90 degrees about S: tracker +R is image

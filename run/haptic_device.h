@@ -14,6 +14,7 @@
 #include <string>
 
 #include "isotouch/core/vec3.h"
+#include "isotouch/service/igtl_device.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/workspace.h"
@@ -74,6 +75,11 @@ DeviceSetup device_setup(const io::Scene& scene, const SceneSetup& setup);
 /// scene's renderer (check_caps).
 /// `io_fifo_priority` > 0: a hid or emu device's reader and writer threads ask for SCHED_FIFO.
 HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, int io_fifo_priority = 0);
+
+/// The loop a link to the scene's device closes (its servo, hand, device, round trip and the
+/// peer's controller): what `--haptic igtl:` and serve's TRANSFORM stream judge their
+/// stiffness by (service::judge_link_stiffness).
+service::IgtlLoop scene_link_loop(const io::Scene& scene);
 
 /// "" if the renderer's stiffness, damping and force limit are within the device's
 /// capabilities, else one line naming each offending value and the device's limit.

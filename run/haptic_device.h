@@ -14,17 +14,17 @@
 #include <string>
 
 #include "isotouch/core/vec3.h"
-#include "isotouch/service/igtl_device.h"
 #include "isotouch/servo/device_io.h"
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/workspace.h"
 #include "isotouch/sim/script.h"
 #include "isotouch/sim/sim_device.h"
 
-// Named by pointer or reference only: the back-ends' classes (internal: servo/report_device.h,
+// Named by pointer or reference only (IgtlLoop: a declaration's return): the back-ends' classes (internal: servo/report_device.h,
 // sdk_device.h, service/igtl_device.h) and the scene's types (io/scene.h, run/scene_setup.h).
 namespace isotouch::service {
 class IgtlDevice;
+struct IgtlLoop;
 }
 namespace isotouch::servo {
 class ReportDevice;

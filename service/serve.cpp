@@ -7,6 +7,7 @@
 #include <cmath>
 #include <deque>
 #include <filesystem>
+#include <future>
 #include <set>
 #include <iomanip>
 #include <list>
@@ -98,8 +99,11 @@ struct Client {
   std::int64_t stream_last_ns = 0;
   bool stream_warned = false, stream_refused = false;
   /// The link's stiffness bounds it was judged by, by the rate simulated (its rate's bucket,
-  /// Server::check_stream_rate): each simulated once (20-30 ms), in this thread.
+  /// Server::check_stream_rate): each simulated once (20-30 ms), in a thread of its own
+  /// (stream_bound_next, for the rate stream_bound_next_hz), one at a time.
   std::map<double, LinkStiffness> stream_bounds;
+  std::future<LinkStiffness> stream_bound_next;
+  double stream_bound_next_hz = 0;
 };
 
 /// A command on its way to the command thread, and whom to answer.
@@ -454,7 +458,7 @@ bool Server::own_stream(Client& c, const Incoming& in) {
 /// period, plus device.link_round_trip_ms; the bound with the passivity controller when the
 /// peer runs it (device.link_passivity_control), without it otherwise; Colgate-Schenkel's
 /// 2 (b - |B|) / T is said beside it. The simulation takes 20-30 ms: it runs once per rate
-/// bucket per client, in the client's reader thread (not real-time), and is kept: a rate
+/// bucket per client, in a thread of its own (the pose is not judged until it is known), and is kept: a rate
 /// slower than the servo's is simulated at the floor of its 2 % bucket (1.02^floor(log_1.02
 /// rate): at most 2 % slower than measured, the lower bound of the bucket), one at or above
 /// the servo's at the servo's; a stream jittering about a rate meets at most two buckets.
@@ -480,15 +484,27 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   const double sim_hz = rate >= scene_.hri.rate_hz
                             ? scene_.hri.rate_hz
                             : std::pow(kRateBucket, std::floor(std::log(rate) / std::log(kRateBucket)));
-  auto at = c.stream_bounds.find(sim_hz);
   const double k = scene_.hri.stiffness_n_per_m;
-  if (at == c.stream_bounds.end()) {
-    at = c.stream_bounds.emplace(sim_hz, judge_link_stiffness(link_loop_, sim_hz)).first;
+  // A rate not simulated yet is simulated in a thread of its own: in this one, the
+  // simulation's stall would make the poses queued behind it look like a slower stream (a
+  // new bucket, another stall). Until its bound is known, a pose is not judged (the
+  // judgements over the bound in a row neither grow nor restart).
+  if (c.stream_bound_next.valid() && c.stream_bound_next.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+    const LinkStiffness& n = c.stream_bounds.emplace(c.stream_bound_next_hz, c.stream_bound_next.get()).first->second;
     std::ostringstream s;
-    s << "stream   client " << c.id << " at " << std::lround(rate) << " Hz: the loop closes at " << at->second.loop_hz
-      << " Hz: Colgate-Schenkel 2 (b - |B|) / T = " << std::lround(at->second.colgate_n_per_m) << " N/m; "
-      << at->second.text << "; the scene's K " << k << " N/m is " << (at->second.over ? "above" : "within") << " it";
+    s << "stream   client " << c.id << ": the loop closing at " << n.loop_hz
+      << " Hz: Colgate-Schenkel 2 (b - |B|) / T = " << std::lround(n.colgate_n_per_m) << " N/m; " << n.text
+      << "; the scene's K " << k << " N/m is " << (n.over ? "above" : "within") << " it";
     log_.line(s.str());
+  }
+  const auto at = c.stream_bounds.find(sim_hz);
+  if (at == c.stream_bounds.end()) {
+    if (!c.stream_bound_next.valid()) {
+      c.stream_bound_next_hz = sim_hz;
+      c.stream_bound_next =
+          std::async(std::launch::async, [loop = link_loop_, sim_hz] { return judge_link_stiffness(loop, sim_hz); });
+    }
+    return true;
   }
   const LinkStiffness& j = at->second;
   if (!j.over) {

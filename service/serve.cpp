@@ -458,10 +458,11 @@ bool Server::own_stream(Client& c, const Incoming& in) {
 /// period, plus device.link_round_trip_ms; the bound with the passivity controller when the
 /// peer runs it (device.link_passivity_control), without it otherwise; Colgate-Schenkel's
 /// 2 (b - |B|) / T is said beside it. The simulation takes 20-30 ms: it runs once per rate
-/// bucket per client, in a thread of its own (the pose is not judged until it is known), and is kept: a rate
-/// slower than the servo's is simulated at the floor of its 2 % bucket (1.02^floor(log_1.02
-/// rate): at most 2 % slower than measured, the lower bound of the bucket), one at or above
-/// the servo's at the servo's; a stream jittering about a rate meets at most two buckets.
+/// bucket per client, in a thread of its own (the pose is not judged until it is known), and
+/// is kept: a rate slower than the servo's is simulated at the floor of its 2 % bucket
+/// (1.02^floor(log_1.02 rate): at most 2 % slower than measured), one at or above the
+/// servo's at the servo's; a stream jittering about a rate meets a few buckets, each
+/// simulated once.
 /// A stream that slows down later is judged too. A stiffer scene (at 16
 /// judgements in a row: a moment's slowdown is not a slow stream) is refused to that client
 /// unless allowed (servo.allow_unstable_stiffness, --allow-unstable-stiffness:
@@ -489,7 +490,8 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   // simulation's stall would make the poses queued behind it look like a slower stream (a
   // new bucket, another stall). Until its bound is known, a pose is not judged (the
   // judgements over the bound in a row neither grow nor restart).
-  if (c.stream_bound_next.valid() && c.stream_bound_next.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+  if (c.stream_bound_next.valid() &&
+      c.stream_bound_next.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
     const LinkStiffness& n = c.stream_bounds.emplace(c.stream_bound_next_hz, c.stream_bound_next.get()).first->second;
     std::ostringstream s;
     s << "stream   client " << c.id << ": the loop closing at " << n.loop_hz

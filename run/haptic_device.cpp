@@ -94,6 +94,12 @@ DeviceSetup device_setup(const io::Scene& scene, const SceneSetup& setup) {
   return ds;
 }
 
+service::IgtlLoop scene_link_loop(const io::Scene& scene) {
+  return {scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
+          scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness,
+          scene.device, scene.link_round_trip_s, scene.link_passivity_control};
+}
+
 HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, int io_fifo_priority) {
   const std::size_t colon = spec.find(':');
   const std::string kind = spec.substr(0, colon);
@@ -129,10 +135,7 @@ HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, 
     d.sdk = dev.get();
     d.io = std::move(dev);
   } else if (kind == "igtl") {  // the loop closes at the stream's rate: its stiffness bound is checked there
-    const service::IgtlLoop loop{scene.hri.rate_hz, scene.device.damping_n_s_per_m + scene.device.hand_damping_n_s_per_m,
-                                 scene.hri.damping_n_s_per_m, scene.hri.stiffness_n_per_m, scene.allow_unstable_stiffness,
-                                 scene.device, scene.link_round_trip_s, scene.link_passivity_control};
-    auto dev = service::open_igtl_device(arg, loop, d.description, io_fifo_priority, scene.link_max_force_n);
+    auto dev = service::open_igtl_device(arg, scene_link_loop(scene), d.description, io_fifo_priority, scene.link_max_force_n);
     d.igtl = dev.get();
     d.io = std::move(dev);
   } else {

@@ -20,10 +20,11 @@
 #include "isotouch/sim/script.h"
 #include "isotouch/sim/sim_device.h"
 
-// Named by pointer or reference only: the back-ends' classes (internal: servo/report_device.h,
+// Named by pointer or reference only (IgtlLoop: a declaration's return): the back-ends' classes (internal: servo/report_device.h,
 // sdk_device.h, service/igtl_device.h) and the scene's types (io/scene.h, run/scene_setup.h).
 namespace isotouch::service {
 class IgtlDevice;
+struct IgtlLoop;
 }
 namespace isotouch::servo {
 class ReportDevice;
@@ -74,6 +75,11 @@ DeviceSetup device_setup(const io::Scene& scene, const SceneSetup& setup);
 /// scene's renderer (check_caps).
 /// `io_fifo_priority` > 0: a hid or emu device's reader and writer threads ask for SCHED_FIFO.
 HapticDevice open_haptic_device(const std::string& spec, const DeviceSetup& ds, int io_fifo_priority = 0);
+
+/// The loop a link to the scene's device closes (its servo, hand, device, round trip and the
+/// peer's controller): what `--haptic igtl:` and serve's TRANSFORM stream judge their
+/// stiffness by (service::judge_link_stiffness).
+service::IgtlLoop scene_link_loop(const io::Scene& scene);
 
 /// "" if the renderer's stiffness, damping and force limit are within the device's
 /// capabilities, else one line naming each offending value and the device's limit.

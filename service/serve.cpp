@@ -7,9 +7,11 @@
 #include <cmath>
 #include <deque>
 #include <filesystem>
+#include <future>
 #include <set>
 #include <iomanip>
 #include <list>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -96,6 +98,12 @@ struct Client {
   std::size_t stream_gap_count = 0, stream_over = 0;  // gaps seen; judgements over the bound in a row
   std::int64_t stream_last_ns = 0;
   bool stream_warned = false, stream_refused = false;
+  /// The link's stiffness bounds it was judged by, by the rate simulated (its rate's bucket,
+  /// Server::check_stream_rate): each simulated once (20-30 ms), in a thread of its own
+  /// (stream_bound_next, for the rate stream_bound_next_hz), one at a time.
+  std::map<double, LinkStiffness> stream_bounds;
+  std::future<LinkStiffness> stream_bound_next;
+  double stream_bound_next_hz = 0;
 };
 
 /// A command on its way to the command thread, and whom to answer.
@@ -214,6 +222,7 @@ class Server {
   };
 
   const io::Scene& scene_;
+  const IgtlLoop link_loop_ = run::scene_link_loop(scene_);  // what a stream's stiffness is judged by
   ServeOptions o_;
   Log log_;
   Listener listener_;
@@ -447,18 +456,28 @@ bool Server::own_stream(Client& c, const Incoming& in) {
 
 /// The force loop closes at the stream's rate (as `--haptic igtl:`'s, igtl_device.cpp): at
 /// every pose from a client's 16th on, the median time between its latest 16 poses gives its
-/// rate, and the scene's servo.stiffness_n_per_m is checked against the Colgate-Schenkel bound
-/// 2 (b - |B|) / T at min(that rate, the servo's) (b: the scene's device + hand damping, B: the
-/// servo's damping): a stream that slows down later is judged too. A stiffer scene (at 16
+/// rate, and the scene's servo.stiffness_n_per_m is judged as `--haptic igtl:` judges it
+/// (judge_link_stiffness, the scene's loop run::scene_link_loop): against the simulated bound
+/// of a wall pressed through a link at min(that rate, the servo's) holding each force one
+/// period, plus device.link_round_trip_ms; the bound with the passivity controller when the
+/// peer runs it (device.link_passivity_control), without it otherwise; Colgate-Schenkel's
+/// 2 (b - |B|) / T is said beside it. The simulation takes 20-30 ms: it runs once per rate
+/// bucket per client, in a thread of its own (the pose is not judged until it is known), and
+/// is kept: a rate slower than the servo's is simulated at the floor of its 2 % bucket
+/// (1.02^floor(log_1.02 rate): at most 2 % slower than measured), one at or above the
+/// servo's at the servo's; a stream jittering about a rate meets a few buckets, each
+/// simulated once.
+/// A stream that slows down later is judged too. A stiffer scene (at 16
 /// judgements in a row: a moment's slowdown is not a slow stream) is refused to that client
 /// unless allowed (servo.allow_unstable_stiffness, --allow-unstable-stiffness:
-/// logged once): a STATUS naming the field, its value, the bound and the rate; its poses move
+/// logged once): a STATUS naming the field, its value, the bounds and the rate; its poses move
 /// nothing from then on, so the stream goes stale (zero force). With --reply-force the client
 /// (which applies the last Force it got) is sent a zero through the reply thread at once,
 /// before that STATUS, not at the stale time (issue 61). The median: a
 /// pause in the stream does not make it look slow.
 bool Server::check_stream_rate(Client& c, const Incoming& in) {
   constexpr std::size_t kRatePoses = 16;
+  constexpr double kRateBucket = 1.02;
   static_assert(kRatePoses == std::tuple_size_v<decltype(c.stream_gaps_ns)> + 1);
   const std::int64_t now = TransformDevice::now_ns();
   if (c.stream_last_ns != 0) c.stream_gaps_ns[c.stream_gap_count++ % c.stream_gaps_ns.size()] = now - c.stream_last_ns;
@@ -467,11 +486,34 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   std::array<std::int64_t, kRatePoses - 1> g = c.stream_gaps_ns;
   std::nth_element(g.begin(), g.begin() + std::ptrdiff_t(g.size() / 2), g.end());
   const double rate = 1e9 / double(std::max<std::int64_t>(g[g.size() / 2], 1));
-  const double loop_hz = std::min(rate, scene_.hri.rate_hz);
-  const double b = scene_.device.damping_n_s_per_m + scene_.device.hand_damping_n_s_per_m;
-  const double bound = sim::colgate_k_max(b, scene_.hri.damping_n_s_per_m, 1.0 / loop_hz);
+  const double sim_hz = rate >= scene_.hri.rate_hz
+                            ? scene_.hri.rate_hz
+                            : std::pow(kRateBucket, std::floor(std::log(rate) / std::log(kRateBucket)));
   const double k = scene_.hri.stiffness_n_per_m;
-  if (!(k > bound)) {
+  // A rate not simulated yet is simulated in a thread of its own: in this one, the
+  // simulation's stall would make the poses queued behind it look like a slower stream (a
+  // new bucket, another stall). Until its bound is known, a pose is not judged (the
+  // judgements over the bound in a row neither grow nor restart).
+  if (c.stream_bound_next.valid() &&
+      c.stream_bound_next.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
+    const LinkStiffness& n = c.stream_bounds.emplace(c.stream_bound_next_hz, c.stream_bound_next.get()).first->second;
+    std::ostringstream s;
+    s << "stream   client " << c.id << ": the loop closing at " << n.loop_hz
+      << " Hz: Colgate-Schenkel 2 (b - |B|) / T = " << std::lround(n.colgate_n_per_m) << " N/m; " << n.text
+      << "; the scene's K " << k << " N/m is " << (n.over ? "above" : "within") << " it";
+    log_.line(s.str());
+  }
+  const auto at = c.stream_bounds.find(sim_hz);
+  if (at == c.stream_bounds.end()) {
+    if (!c.stream_bound_next.valid()) {
+      c.stream_bound_next_hz = sim_hz;
+      c.stream_bound_next =
+          std::async(std::launch::async, [loop = link_loop_, sim_hz] { return judge_link_stiffness(loop, sim_hz); });
+    }
+    return true;
+  }
+  const LinkStiffness& j = at->second;
+  if (!j.over) {
     c.stream_over = 0;
     return true;
   }
@@ -479,18 +521,26 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   // loaded client is not a slow stream.
   if (++c.stream_over < kRatePoses) return true;
   if (scene_.allow_unstable_stiffness && c.stream_warned) return true;
+  const double b = link_loop_.handle_damping_n_s_per_m;
   std::ostringstream why;
   why << "stream '" << in.device << "' at " << std::lround(rate) << " Hz (median of its latest " << kRatePoses
-      << " poses): servo.stiffness_n_per_m " << k << " is above the Colgate-Schenkel bound 2 (b - |B|) / T = "
-      << std::lround(bound) << " N/m with the loop closing at " << std::lround(loop_hz) << " Hz (b " << b << " N s/m, B "
+      << " poses): servo.stiffness_n_per_m " << k << " is above the bound " << std::lround(j.limit_n_per_m) << " N/m "
+      << (link_loop_.peer_passivity_control ? "with" : "without")
+      << " the passivity controller at the peer's end with the loop closing at " << j.loop_hz
+      << " Hz (the stream's rate, to its 2 % bucket's floor, or the servo's); " << j.text
+      << "; Colgate-Schenkel 2 (b - |B|) / T = " << std::lround(j.colgate_n_per_m) << " N/m (b " << b << " N s/m, B "
       << scene_.hri.damping_n_s_per_m << " N s/m)";
   if (scene_.allow_unstable_stiffness) {
     log_.line("stream   client " + std::to_string(c.id) + ": warning: " + why.str() + " (allowed)");
     c.stream_warned = true;
     return true;
   }
-  why << "; the contact may buzz: its poses move nothing (lower the stiffness, raise the stream's rate, or allow it: "
-         "--allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
+  const bool pc_would = !link_loop_.peer_passivity_control && !(k > j.bound.k_max_with_pc_n_per_m);
+  why << "; the contact may buzz: its poses move nothing (lower the stiffness, raise the stream's rate, "
+      << (pc_would ? "run the passivity controller on the peer and say so (the scene's device.link_passivity_control: "
+                     "true), "
+                   : "")
+      << "or allow it: --allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
   c.stream_refused = true;
   log_.line("stream   client " + std::to_string(c.id) + " refused: " + why.str());
   if (o_.reply_force) {  // it applies the last Force it got: a zero at once, through the reply thread, before its STATUS

@@ -5,9 +5,9 @@
 #      lies in the head; ReceiveClient gets HIP / proxy / force TRANSFORMs at the display rate,
 #      each HIP one of the positions the tracker printed plus the offset, forces non-zero;
 #      its 100 Hz (about 98 Hz measured: it sleeps 10 ms between poses) puts the head scene's
-#      800 N/m at the stream's stiffness bound (802 N/m at 100 Hz): serve runs with
-#      --allow-unstable-stiffness: the stream is not refused (a warning when it measures below
-#      the bound; the refusal itself is cli_serve_truth part 8's);
+#      800 N/m above the stream's stiffness bound (the link's, about 380 N/m at 100 Hz;
+#      Colgate-Schenkel's 802): serve runs with --allow-unstable-stiffness: the stream is not
+#      refused (a warning; the refusal itself is cli_serve_truth parts 8 and 11's);
 #   3. the tracker is killed (SIGKILL): a new ReceiveClient is served, the force is zero (stale);
 #   4. igtl_send_image (built on igtl::ImageMessage): a single slice answered by a STATUS naming
 #      why; the shipped head as a 3-D IMAGE answered "volume taken" and swapped in;

@@ -21,13 +21,14 @@
 #   6. the stream's force at a scene's workspace_scale 0.1: the stream's points are the
 #      volume's own (its map is the identity), so the client 2 mm inside the 300 HU ball feels
 #      K x depth = 800 N/m x 2 mm, as at scale 1, not 1 / 0.1 times it (clamped to 3.3 N);
-#   7. the link's force limit: a scene whose servo allows 40 N (K 3000 N/m) over a link
+#   7. the link's force limit: a scene whose servo allows 40 N (K 1000 N/m: under the link's bound at 500 Hz, ~1500 N/m) over a link
 #      declared at 2 N (device.link_max_force_n) is served, clamped, not refused; the client
-#      5 mm inside the ball (K x depth = 15 N asked) is sent no Force above 2 N (every Force it
+#      5 mm inside the ball (K x depth = 5 N asked) is sent no Force above 2 N (every Force it
 #      received, its 6 printed digits aside), and its settled force is at least 0.9 x 2 N (the
 #      clamp, not a weak contact, held it there; 2 N, not the 3.3 N default, so the key is read).
 #   8. the stiffness bound at the stream's rate (as `--haptic igtl:`'s): the head scene's 800 N/m
-#      over a 50 Hz stream (bound 2 (5.01 - 1) / 0.02 = 401 N/m) is refused to that client (a
+#      over a 50 Hz stream (the link's simulated bound, under Colgate's 2 (5.01 - 1) / 0.02 =
+#      401 N/m; both named) is refused to that client (a
 #      STATUS naming servo.stiffness_n_per_m 800 and the bound) before its tool reaches the
 #      ball: every Force it gets is an exact zero; with --allow-unstable-stiffness the same
 #      stream is served (warned in the log) and the client 2 mm inside the ball gets > 0.8 N;
@@ -37,6 +38,10 @@
 #      zero sent before it, not at the stale time) and gets no other Force after it;
 #  10. a stream in contact that slows for 0.2 s (10 poses at 50 Hz) and comes back to 500 Hz
 #      is not refused (16 judgements in a row over the bound are needed): its force is back.
+#  11. the bound is the link's (simulated, as `--haptic igtl:`'s), not Colgate-Schenkel's: over a
+#      100 Hz stream K 600 N/m (under Colgate's ~790) is refused without the peer's passivity
+#      controller (bound ~370) and served with device.link_passivity_control: true (~900);
+#      K 1200 is refused either way; refused clients get only zeros.
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -200,7 +205,7 @@ import json, os, sys
 s = json.load(open(sys.argv[1]))
 s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
 s["servo"]["force_limit_n"] = 40
-s["servo"]["stiffness_n_per_m"] = 3000
+s["servo"]["stiffness_n_per_m"] = 1000
 s["device"]["link_max_force_n"] = 2
 json.dump(s, open(sys.argv[2], "w"), indent=1)
 PY
@@ -225,8 +230,8 @@ if n < 10: fail(f"only {n} Force transforms received")
 if peak > link * (1 + 1e-5):  # float32 components, printed to 6 significant digits: within 5e-6 of it, relative
     fail(f"the client was sent {peak:.6f} N through a link declared at {link} N (the scene allows 40 N)")
 if fn < 0.9 * link:
-    fail(f"5 mm inside the ball at 3000 N/m the settled force is {fn:.3f} N, not the link's {link} N: the test cannot tell a clamp")
-print(f"link limit ok: a 40 N scene over a {link} N link, 15 N asked: peak {peak:.4f} N of {n} Forces, settled {fn:.3f} N")
+    fail(f"5 mm inside the ball at 1000 N/m the settled force is {fn:.3f} N, not the link's {link} N: the test cannot tell a clamp")
+print(f"link limit ok: a 40 N scene over a {link} N link, 5 N asked: peak {peak:.4f} N of {n} Forces, settled {fn:.3f} N")
 PY
 [[ $? == 0 ]] || exit 1
 
@@ -255,11 +260,14 @@ def peak(name):
 slow, n = peak("slow")
 refusal = [l for l in open(f"{out}/slow.log") if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]
 if len(refusal) != 1: fail("no one STATUS refusing the 50 Hz stream for servo.stiffness_n_per_m", "slow")
-m = re.search(r"at (\d+) Hz .*servo.stiffness_n_per_m 800 is above the Colgate-Schenkel bound 2 \(b - \|B\|\) / T = (\d+) N/m", refusal[0])
-if not m: fail(f"the refusal does not name the value 800 and the bound: {refusal[0]}", "slow")
-rate, bound = int(m.group(1)), int(m.group(2))
-if not (40 <= rate <= 60) or abs(bound - 2 * (5.01 - 1.0) * rate) > 0.02 * bound + 10:
-    fail(f"rate {rate} Hz, bound {bound} N/m: not a 50 Hz stream's 2 (b - |B|) rate", "slow")
+m = re.search(r"at (\d+) Hz .*servo.stiffness_n_per_m 800 is above the bound (\d+) N/m without the passivity controller "
+              r"at the peer's end with the loop closing at ([0-9.]+) Hz.*Colgate-Schenkel 2 \(b - \|B\|\) / T = (\d+) N/m", refusal[0])
+if not m: fail(f"the refusal does not name the value 800, the link's bound and Colgate's: {refusal[0]}", "slow")
+rate, bound, loop, colgate = int(m.group(1)), int(m.group(2)), float(m.group(3)), int(m.group(4))
+# The loop: the measured rate to its 2 % bucket's floor; Colgate's at it, b 5.01, B 1 (the head scene's).
+if not (40 <= rate <= 60) or not rate / 1.02 - 1 <= loop <= rate + 0.5 or abs(colgate - 2 * (5.01 - 1.0) * loop) > 1:
+    fail(f"rate {rate} Hz, loop {loop} Hz, Colgate {colgate} N/m: not a 50 Hz stream's 2 (b - |B|) rate", "slow")
+if not 0 < bound < 800: fail(f"the link's bound {bound} N/m", "slow")
 if n < 1 or slow != 0.0: fail(f"the refused stream's client got {slow} N (of {n} Forces), not only zeros", "slow")
 allowed, n2 = peak("slowallowed")
 if "(allowed)" not in open(f"{out}/serve_slowallowed.log").read(): fail("no warning for the allowed stream", "slowallowed")
@@ -348,6 +356,68 @@ if any(l.startswith("STATUS") and "servo.stiffness_n_per_m" in l for l in log.sp
 f = [l.split() for l in log.splitlines() if l.startswith("force ")]
 if len(f) != 1 or not float(f[0][4]) > 0.8: fail(f"after the slowdown, 2 mm inside the ball, the force is not back: {f}")
 print(f"a 0.2 s slowdown not refused; the force after it {float(f[0][4]):.2f} N")
+PY
+[[ $? == 0 ]] || exit 1
+# 11. The link's bound, not Colgate-Schenkel's (issue 67): at 100 Hz the head scene's device and
+# hand through a link holding each force one period pass below Colgate's 2 (b - |B|) / T
+# (~790 N/m) without the peer's passivity controller, above it with it. K 600 (under Colgate's)
+# is refused without the controller and served with it (device.link_passivity_control: true);
+# K 1200 (over both) is refused either way. Judged by what the client got: its STATUS, its Forces.
+python3 - "$scene" "$out" <<'PY'
+import json, os, sys
+s = json.load(open(sys.argv[1]))
+s["volume"]["path"] = os.path.join(os.path.dirname(os.path.abspath(sys.argv[1])), s["volume"]["path"])
+for k, pc in ((600, False), (600, True), (1200, True)):
+    s["servo"]["stiffness_n_per_m"] = k
+    s["device"]["link_passivity_control"] = pc
+    json.dump(s, open(f"{sys.argv[2]}/k{k}_{'pc' if pc else 'nopc'}.json", "w"), indent=1)
+PY
+for name in k600_nopc k600_pc k1200_pc; do
+  "$exe" serve "$out/$name.json" --port 0 --stream Stylus --reply-force --seconds 5 >"$out/serve_$name.log" 2>&1 &
+  serve_pid=$!
+  port=$(wait_port "$out/serve_$name.log" $serve_pid)
+  [[ -n $port ]] || fail "the $name serve never said it was listening: $(cat "$out/serve_$name.log")"
+  timeout 30 "$client" 127.0.0.1 "$port" "$head" hz 100 ball Ball 48 15 20 move 0 0 24 0.5 move 0 0 13 0.6 wait 0.5 \
+    peak statuses 0.2 >"$out/$name.log" 2>&1 || fail "the $name client failed: $(cat "$out/$name.log")"
+  wait $serve_pid
+done
+python3 - "$out" <<'PY' || exit 1
+import re, sys
+out = sys.argv[1]
+def fail(msg, name):
+    print("FAIL serve truth:", msg); print(open(f"{out}/{name}.log").read()); print(open(f"{out}/serve_{name}.log").read()); sys.exit(1)
+said = []
+for name, k, pc, served in (("k600_nopc", 600, False, False), ("k600_pc", 600, True, True), ("k1200_pc", 1200, True, False)):
+    log = open(f"{out}/{name}.log").read()
+    p = [l.split() for l in log.splitlines() if l.startswith("peak ")]
+    if len(p) != 1: fail("no peak line", name)
+    peak, n = float(p[0][2]), int(p[0][5])
+    refusal = [l for l in log.splitlines() if l.startswith("STATUS") and "servo.stiffness_n_per_m" in l]
+    if served:
+        if refusal: fail(f"K {k} with the peer's controller refused: {refusal[0]}", name)
+        # 2 mm inside the ball: K x 2 mm = 1.2 N asked.
+        if not peak > 0.5 * k * 2e-3: fail(f"served, K {k} 2 mm inside the ball got {peak} N", name)
+        said.append(f"K {k} with the controller served (peak {peak:.2f} N)")
+        continue
+    if len(refusal) != 1: fail(f"no one STATUS refusing K {k} at 100 Hz", name)
+    m = re.search(r"at (\d+) Hz .*servo.stiffness_n_per_m (\d+) is above the bound (\d+) N/m (with|without) the passivity controller"
+                  r".*K_max ([0-9.]+) N/m without the passivity controller, ([0-9.]+) N/m with it.*"
+                  r"Colgate-Schenkel 2 \(b - \|B\|\) / T = (\d+) N/m", refusal[0])
+    if not m: fail(f"the refusal does not name K, the bound that applies, both simulated bounds and Colgate's: {refusal[0]}", name)
+    rate, kk, bound, which, without, with_pc, colgate = m.groups()
+    rate, kk, bound, without, with_pc, colgate = int(rate), int(kk), int(bound), float(without), float(with_pc), int(colgate)
+    if not 80 <= rate <= 110 or kk != k: fail(f"not K {k} over a 100 Hz stream: {refusal[0]}", name)
+    if which != ("with" if pc else "without") or abs(bound - (with_pc if pc else without)) > 1:
+        fail(f"the bound that applies is not the one {'with' if pc else 'without'} the peer's controller: {refusal[0]}", name)
+    if not bound < k: fail(f"K {k} refused under a bound {bound} N/m above it", name)
+    if not pc and not without < k < colgate:
+        fail(f"the case does not tell the link's bound from Colgate's: without {without}, Colgate {colgate}, K {k}", name)
+    if ("device.link_passivity_control: true" in refusal[0]) != (not pc and k <= with_pc):
+        fail("the refusal tells to run the peer's controller where it would not help (or not where it would)", name)
+    if n < 1 or peak != 0.0: fail(f"the refused client got {peak} N (of {n} Forces), not only zeros", name)
+    said.append(f"K {k} {'with' if pc else 'without'} the controller refused at {rate} Hz (bound {bound}, "
+                f"Colgate {colgate} N/m; only zeros, {n} Forces)")
+print("the link's bound at 100 Hz: " + "; ".join(said))
 PY
 [[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -196,7 +196,14 @@ m serve-link-max-force      service/transform_device.h '    c.max_force_n = max_
 m serve-link-max-force-set  service/serve.cpp '    device_.set_max_force_n(scene_.link_max_force_n);' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # serve's stream: the stiffness bound at its measured rate (as igtl:'s), a slower stream refused.
-m serve-stream-k-bound      service/serve.cpp '  if (!(k > bound)) {' '  if (true) {' \
+m serve-stream-k-bound      service/serve.cpp '  if (!j.over) {' '  if (true) {' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# ... the link's simulated bound (as igtl:'s), not Colgate-Schenkel's: K 600 over 100 Hz refused (part 11).
+m serve-stream-link-bound   service/serve.cpp '  if (!j.over) {' '  if (!(k > j.colgate_n_per_m)) {' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# ... with the peer's controller when the scene says it runs one: K 600 over 100 Hz served (part 11).
+m serve-stream-peer-pc      run/haptic_device.cpp '          scene.device, scene.link_round_trip_s, scene.link_passivity_control};' \
+                               '          scene.device, scene.link_round_trip_s, false};' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # The stream's rate is judged at every pose over its latest 16, not once: a stream that slows is refused.
 m serve-stream-rolling      service/serve.cpp '  if (c.stream_gap_count + 1 < kRatePoses) return true;' '  if (c.stream_gap_count + 1 != kRatePoses) return true;' \

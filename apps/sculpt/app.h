@@ -16,7 +16,7 @@
 namespace isotouch::sculpt {
 
 /// What a session restarted at a new isovalue keeps: the edited volume, the camera, the
-/// tool (defined in app.cpp).
+/// tool (defined in sculpt_app.h).
 struct Carried;
 
 struct Options {

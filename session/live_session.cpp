@@ -1,4 +1,12 @@
 #include "isotouch/session/live_session.h"
+
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "isotouch/servo/latest_value.h"
+#include "isotouch/servo/spsc_ring.h"
 #include "isotouch/servo/cpu_placement.h"
 #include "isotouch/servo/exit_zero.h"
 
@@ -68,9 +76,123 @@ io::RecordedTick recorded(const servo::TickRecord& r, double t_s) {
 
 }  // namespace
 
-LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+// The session's state and threads (live_session.h keeps only a pointer to it). It is the
+// servo thread's TickObserver itself: a tick calls Impl::on_tick through the one virtual
+// call it always made, not through LiveSession.
+class LiveSession::Impl final : private servo::TickObserver {
+ public:
+  Impl(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+       servo::HapticDeviceIO& device, LiveSessionConfig config);
+  Impl(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+       LiveSessionConfig config);
+  ~Impl();
+  Impl(const Impl&) = delete;
+  Impl& operator=(const Impl&) = delete;
+
+  std::string start();
+  void pause(bool paused) {
+    if (servo_) servo_->pause(paused);
+  }
+  void stop();
+  std::vector<sim::TraceRow> run_simulated(const SimulatedRun& run);
+  std::vector<sim::TraceRow> step_simulated(const SimulatedRun& run, long ticks);
+  void finish_simulated();
+  bool submit(const EditEvent& e);
+  Observed observe() const;
+  double elapsed_s() const;
+  LiveStats stats(std::size_t latency_tail) const;
+  const servo::ServoThread* servo_thread() const { return servo_.get(); }
+
+ private:
+  struct Request {            // an edit on its way to the edit thread
+    EditEvent event;
+    std::int64_t asked_ns = 0;  // when it was asked for (tick start or submit())
+  };
+  // Applies one request (stroke nesting, listener, counters); `rethrow`: simulated mode.
+  void apply_request(Request& q, EditSource source, long ticks_done, bool rethrow);
+  void notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow);
+  std::int64_t clock_ns() const;
+  void on_tick(const servo::TickRecord& r) noexcept override;
+  void edit_loop();
+  void resolve_seen_locked() const;
+  void wake_edit_thread();  // API side: submit(), stop()
+  void record_loop();
+  void record_chunk(bool final);
+  void publish_observed(const servo::TickRecord& r) noexcept;
+
+  void open_recording();
+  void finish_recording();  // end record, fsync, rename (after the producers stopped)
+  void drain_simulated(long ticks_done);
+  void begin_simulated(bool stepped);
+  // The session's side of simulated tick k (its row already rendered): the tick record, the
+  // after-tick hook, the observer, the queued edits, the recorder's chunk.
+  void simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row);
+
+  EditSession* edits_;  // null: nothing to edit
+  servo::TripleBuffer<core::SampleField>& buffer_;
+  servo::Renderer& renderer_;
+  LiveSessionConfig cfg_;
+  std::unique_ptr<servo::ServoThread> servo_;  // null: simulated only
+  servo::SpscRing<servo::TickRecord> ticks_;
+  servo::SpscRing<Request> servo_edits_, api_edits_;
+  // submit() wakes the edit thread at once (the servo side cannot: no syscall in a tick, so
+  // the edit thread also looks at the servo's ring every 0.2 ms).
+  std::mutex wake_mu_;
+  std::condition_variable wake_cv_;
+  bool api_pending_ = false;  // guarded by wake_mu_
+  std::atomic<bool> running_{false}, stop_edits_{false}, stop_recorder_{false};
+  std::thread edit_thread_, record_thread_;
+  std::int64_t start_ns_ = 0;
+  // Simulated mode: the simulated clock (start of the current tick) and ticks run.
+  bool simulated_ = false;
+  bool stepped_ = false;   // simulated by step_simulated()
+  bool finished_ = false;  // finish_simulated() ran: no more ticks
+  std::atomic<std::int64_t> sim_now_ns_{0};
+  long sim_ticks_ = 0;
+  int stroke_depth_ = 0;  // strokes opened by either source and not closed (edit thread only)
+  bool button_stroke_ = false;  // the button's press is held: its begin seen, its end not (edit thread)
+
+  // Servo-thread state (on_tick only).
+  bool button_ = false;
+  long press_tick_ = 0;
+  std::uint64_t last_version_ = 0;
+  // The first tick that read each version: its start and the version, in slot version % size.
+  // The servo writes both when the version changes; the edit thread reads them (the version
+  // matches: that version's tick; a later version may have taken the slot only after `size`
+  // more publications read, far beyond any backlog).
+  std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
+  std::unique_ptr<std::atomic<std::uint64_t>[]> seen_version_;
+  std::size_t seen_size_ = 0;
+
+  // |period error| histogram (servo writes with relaxed increments; stats() reads).
+  std::array<std::atomic<std::uint32_t>, kPeriodBins> period_hist_{};
+
+  // What observe() reads: the last tick, written by the servo thread (a seqlock).
+  servo::LatestValue<Observed> observed_;
+
+  std::atomic<long> dropped_edits_{0}, dropped_ticks_{0}, requested_{0};
+  // Edit thread -> recorder and stats (not real time: a mutex is fine here).
+  mutable std::mutex edits_mu_;
+  std::vector<EditEvent> applied_pending_;  // not yet written
+  // (version, asked_ns) not yet read; latencies of the versions read (stats() resolves too).
+  mutable std::vector<std::pair<std::uint64_t, std::int64_t>> published_;
+  mutable std::vector<double> edit_to_haptics_ms_;
+  long applied_ = 0, refused_ = 0, merged_ = 0, publications_ = 0;
+  long listener_errors_ = 0;
+  std::string listener_error_;
+
+  // Recorder thread.
+  int fd_ = -1;
+  std::string part_path_;
+  long recorded_ticks_ = 0, recorded_edits_ = 0;
+  double last_t_ = 0;
+  std::string record_error_;  // written by the recorder (or stop()) under edits_mu_: stats() reads it
+  bool stopped_ = false;
+};
+
+LiveSession::Impl::Impl(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
                          servo::HapticDeviceIO& device, LiveSessionConfig config)
-    : LiveSession(&edits, buffer, renderer, std::move(config)) {
+    : Impl(&edits, buffer, renderer, std::move(config)) {
   servo::ServoThreadConfig c = cfg_.servo;
   c.observer = this;
   // What on_tick touches, locked with the servo's own memory (ServoThreadConfig::lock_memory).
@@ -82,7 +204,7 @@ LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleFie
   servo_ = std::make_unique<servo::ServoThread>(buffer, renderer, device, std::move(c));
 }
 
-LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+LiveSession::Impl::Impl(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
                          LiveSessionConfig config)
     : edits_(edits),
       buffer_(buffer),
@@ -110,7 +232,7 @@ LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleFie
   if (!cfg_.record_path.empty()) open_recording();
 }
 
-void LiveSession::open_recording() {
+void LiveSession::Impl::open_recording() {
   cfg_.record_header.format_version = 3;
   // What the session knows itself: the servo's rate and the volume it edits (as it starts).
   if (cfg_.record_header.rate_hz == 0) cfg_.record_header.rate_hz = cfg_.servo.rate_hz;
@@ -144,7 +266,7 @@ void LiveSession::open_recording() {
   }
 }
 
-LiveSession::~LiveSession() {
+LiveSession::Impl::~Impl() {
   try {
     stop();
   } catch (const ServoAbandoned& e) {
@@ -157,7 +279,7 @@ LiveSession::~LiveSession() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-std::string LiveSession::start() {
+std::string LiveSession::Impl::start() {
   if (!servo_) throw std::logic_error("live session: start() needs a device (this session is for run_simulated() only)");
   if (simulated_) throw std::logic_error("live session: start() after run_simulated()");
   // Without a snapshot every tick would render nothing and send zero force, silently.
@@ -176,13 +298,13 @@ std::string LiveSession::start() {
   return note;
 }
 
-std::int64_t LiveSession::clock_ns() const {
+std::int64_t LiveSession::Impl::clock_ns() const {
   return simulated_ ? sim_now_ns_.load(std::memory_order_relaxed) : now_ns();
 }
 
-double LiveSession::elapsed_s() const { return double(clock_ns() - start_ns_) * 1e-9; }
+double LiveSession::Impl::elapsed_s() const { return double(clock_ns() - start_ns_) * 1e-9; }
 
-bool LiveSession::submit(const EditEvent& e) {
+bool LiveSession::Impl::submit(const EditEvent& e) {
   requested_.fetch_add(1, std::memory_order_relaxed);
   if (!edits_) {  // nothing to edit: refused, never queued
     std::lock_guard lock(edits_mu_);
@@ -197,7 +319,7 @@ bool LiveSession::submit(const EditEvent& e) {
   return true;
 }
 
-void LiveSession::wake_edit_thread() {
+void LiveSession::Impl::wake_edit_thread() {
   {
     std::lock_guard lock(wake_mu_);
     api_pending_ = true;
@@ -207,7 +329,7 @@ void LiveSession::wake_edit_thread() {
 
 // ---------------------------------------------------------------- servo thread
 
-void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
+void LiveSession::Impl::publish_observed(const servo::TickRecord& r) noexcept {
   Observed o;
   o.tick = r.k;
   o.hip_m = r.hip_m;
@@ -220,9 +342,9 @@ void LiveSession::publish_observed(const servo::TickRecord& r) noexcept {
   observed_.store(o);
 }
 
-Observed LiveSession::observe() const { return observed_.load(); }
+Observed LiveSession::Impl::observe() const { return observed_.load(); }
 
-void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
+void LiveSession::Impl::on_tick(const servo::TickRecord& r) noexcept {
   if (r.version != last_version_) {
     last_version_ = r.version;
     const std::size_t slot = r.version % seen_size_;
@@ -269,7 +391,7 @@ void LiveSession::on_tick(const servo::TickRecord& r) noexcept {
 
 // ---------------------------------------------------------------- edit thread
 
-void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, bool rethrow) {
+void LiveSession::Impl::apply_request(Request& q, EditSource source, long ticks_done, bool rethrow) {
   using Kind = EditEvent::Kind;
   EditEvent& e = q.event;
   // The tick after which it is applied: ticks from ticks_done on may read it.
@@ -300,7 +422,7 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
     out.error = what_of(std::current_exception());
     // Counted after the listener has seen it (LiveStats: a settled count is the listener's too).
     struct Count {
-      LiveSession& s;
+      Impl& s;
       ~Count() {
         std::lock_guard lock(s.edits_mu_);
         ++s.refused_;
@@ -324,7 +446,7 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
     // Counted once the listener has seen it (also when it throws): a caller that waits for
     // the count (serve's save) reads what the listener wrote (its mirror of the bricks).
     struct Count {
-      LiveSession& s;
+      Impl& s;
       ~Count() {
         std::lock_guard lock(s.edits_mu_);
         ++s.applied_;
@@ -344,7 +466,7 @@ void LiveSession::apply_request(Request& q, EditSource source, long ticks_done, 
 
 // The listener sees the edit; what it throws is counted, not let through to the edit
 // thread (where it would end the process); simulated mode (`rethrow`) lets it through.
-void LiveSession::notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow) {
+void LiveSession::Impl::notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow) {
   if (!cfg_.on_applied) return;
   try {
     cfg_.on_applied(e, out, source);
@@ -359,7 +481,7 @@ void LiveSession::notify(const EditEvent& e, const EditOutcome& out, EditSource 
 // start - submit) if a tick read it. Older ones no tick read are dropped: the servo reads
 // the newest snapshot only, so it never will. Publications after that stay pending.
 // Holds edits_mu_.
-void LiveSession::resolve_seen_locked() const {
+void LiveSession::Impl::resolve_seen_locked() const {
   auto read_at = [&](std::uint64_t version, std::int64_t& t_ns) {
     const std::size_t slot = version % seen_size_;
     if (seen_version_[slot].load(std::memory_order_acquire) != version) return false;
@@ -383,7 +505,7 @@ void LiveSession::resolve_seen_locked() const {
   published_.erase(published_.begin(), published_.begin() + std::ptrdiff_t(read));
 }
 
-void LiveSession::edit_loop() {
+void LiveSession::Impl::edit_loop() {
   const servo::ScopedOffCpu off(servo_->pinned_cpu());  // not stopped by each tick and its spin
   Request q;
   while (!stop_edits_.load(std::memory_order_acquire)) {
@@ -412,7 +534,7 @@ void LiveSession::edit_loop() {
 
 // ---------------------------------------------------------------- simulated mode
 
-void LiveSession::drain_simulated(long ticks_done) {
+void LiveSession::Impl::drain_simulated(long ticks_done) {
   Request q;
   // The API side first (a scene's timeline), then the button drill: the order `isotouch run`
   // has always applied them in.
@@ -420,7 +542,7 @@ void LiveSession::drain_simulated(long ticks_done) {
   while (servo_edits_.pop(q)) apply_request(q, EditSource::kButton, ticks_done, !stepped_);
 }
 
-void LiveSession::begin_simulated(bool stepped) {
+void LiveSession::Impl::begin_simulated(bool stepped) {
   if (running_.load()) throw std::logic_error("live session: simulated mode on a session that was started");
   if (simulated_ && (!stepped_ || !stepped)) throw std::logic_error("live session: run_simulated() on a session that ran");
   if (finished_) throw std::logic_error("live session: step_simulated() after finish_simulated()");
@@ -429,7 +551,7 @@ void LiveSession::begin_simulated(bool stepped) {
   start_ns_ = 0;
 }
 
-void LiveSession::simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row) {
+void LiveSession::Impl::simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row) {
   const double rate = cfg_.servo.rate_hz;
   const long flush_ticks = std::max(1L, long(std::llround(cfg_.flush_interval_s * rate)));
   servo::TickRecord r;
@@ -458,7 +580,7 @@ void LiveSession::simulated_tick(const SimulatedRun& run, long k, sim::TraceRow&
   if (fd_ >= 0 && sim_ticks_ % flush_ticks == 0) record_chunk(false);
 }
 
-std::vector<sim::TraceRow> LiveSession::run_simulated(const SimulatedRun& run) {
+std::vector<sim::TraceRow> LiveSession::Impl::run_simulated(const SimulatedRun& run) {
   if (!run.device || !run.script) throw std::invalid_argument("live session: run_simulated() needs a device and a script");
   begin_simulated(false);
   const sim::TickHook hook = [&](long k, sim::TraceRow& row) { simulated_tick(run, k, row); };
@@ -468,7 +590,7 @@ std::vector<sim::TraceRow> LiveSession::run_simulated(const SimulatedRun& run) {
   return trace;
 }
 
-std::vector<sim::TraceRow> LiveSession::step_simulated(const SimulatedRun& run, long ticks) {
+std::vector<sim::TraceRow> LiveSession::Impl::step_simulated(const SimulatedRun& run, long ticks) {
   if (!run.device || !run.script) throw std::invalid_argument("live session: step_simulated() needs a device and a script");
   if (ticks < 0) throw std::invalid_argument("live session: step_simulated() of " + std::to_string(ticks) + " ticks");
   begin_simulated(true);
@@ -483,7 +605,7 @@ std::vector<sim::TraceRow> LiveSession::step_simulated(const SimulatedRun& run, 
   return rows;
 }
 
-void LiveSession::finish_simulated() {
+void LiveSession::Impl::finish_simulated() {
   if (!simulated_ || finished_) return;
   finished_ = true;
   if (!edits_) return;
@@ -500,7 +622,7 @@ void LiveSession::finish_simulated() {
 
 // ---------------------------------------------------------------- recorder thread
 
-void LiveSession::record_chunk(bool final) {
+void LiveSession::Impl::record_chunk(bool final) {
   std::string text;
   std::vector<EditEvent> edits;
   {
@@ -527,7 +649,7 @@ void LiveSession::record_chunk(bool final) {
   if (::fdatasync(fd_) != 0) throw io::RecordingError(os_error(part_path_, "fdatasync failed"));
 }
 
-void LiveSession::record_loop() {
+void LiveSession::Impl::record_loop() {
   const auto interval = std::chrono::duration<double>(cfg_.flush_interval_s);
   auto next = std::chrono::steady_clock::now() + interval;
   while (!stop_recorder_.load(std::memory_order_acquire)) {
@@ -547,7 +669,7 @@ void LiveSession::record_loop() {
 
 // ---------------------------------------------------------------- stop
 
-void LiveSession::stop() {
+void LiveSession::Impl::stop() {
   if (simulated_) {
     if (stopped_) return;
     stopped_ = true;
@@ -605,7 +727,7 @@ void end_process_servo_stuck(const std::string& program, const std::string& what
   std::_Exit(exit_code::kServoStuck);
 }
 
-void LiveSession::finish_recording() {
+void LiveSession::Impl::finish_recording() {
   if (fd_ < 0) return;
   if (record_error_.empty()) {
     try {
@@ -630,7 +752,7 @@ void LiveSession::finish_recording() {
   }
 }
 
-LiveStats LiveSession::stats(std::size_t latency_tail) const {
+LiveStats LiveSession::Impl::stats(std::size_t latency_tail) const {
   LiveStats s;
   if (servo_) {
     s.ticks = servo_->ticks();
@@ -671,5 +793,31 @@ LiveStats LiveSession::stats(std::size_t latency_tail) const {
   s.listener_error = listener_error_;
   return s;
 }
+
+// ---------------------------------------------------------------- LiveSession: forwards to Impl
+
+LiveSession::LiveSession(EditSession& edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+                         servo::HapticDeviceIO& device, LiveSessionConfig config)
+    : impl_(std::make_unique<Impl>(edits, buffer, renderer, device, std::move(config))) {}
+
+LiveSession::LiveSession(EditSession* edits, servo::TripleBuffer<core::SampleField>& buffer, servo::Renderer& renderer,
+                         LiveSessionConfig config)
+    : impl_(std::make_unique<Impl>(edits, buffer, renderer, std::move(config))) {}
+
+LiveSession::~LiveSession() = default;
+
+std::string LiveSession::start() { return impl_->start(); }
+void LiveSession::pause(bool paused) { impl_->pause(paused); }
+void LiveSession::stop() { impl_->stop(); }
+std::vector<sim::TraceRow> LiveSession::run_simulated(const SimulatedRun& run) { return impl_->run_simulated(run); }
+std::vector<sim::TraceRow> LiveSession::step_simulated(const SimulatedRun& run, long ticks) {
+  return impl_->step_simulated(run, ticks);
+}
+void LiveSession::finish_simulated() { impl_->finish_simulated(); }
+bool LiveSession::submit(const EditEvent& e) { return impl_->submit(e); }
+Observed LiveSession::observe() const { return impl_->observe(); }
+double LiveSession::elapsed_s() const { return impl_->elapsed_s(); }
+LiveStats LiveSession::stats(std::size_t latency_tail) const { return impl_->stats(latency_tail); }
+const servo::ServoThread* LiveSession::servo_thread() const { return impl_->servo_thread(); }
 
 }  // namespace isotouch::session

@@ -24,15 +24,11 @@
 // the dt it measured; edits are applied in the recorded order. A SIGKILLed session leaves
 // FILE.part, readable up to its last chunk (load_recording(..., allow_incomplete)).
 #pragma once
-#include <atomic>
-#include <condition_variable>
 #include <cstdint>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include <array>
@@ -40,11 +36,9 @@
 
 #include "isotouch/session/edit_session.h"
 #include "isotouch/sim/headless.h"
-#include "isotouch/servo/latest_value.h"
 #include "isotouch/io/record.h"
 #include "isotouch/servo/renderer.h"
 #include "isotouch/servo/servo_thread.h"
-#include "isotouch/servo/spsc_ring.h"
 
 namespace isotouch::session {
 
@@ -181,7 +175,7 @@ struct LiveStats {
   std::string listener_error; ///< what the first of them said
 };
 
-class LiveSession final : private servo::TickObserver {
+class LiveSession final {
  public:
   /// `edits` holds the volume and publishes into `buffer` (its first snapshot already
   /// published); `renderer` and `device` are used by the servo thread only. None owned.
@@ -205,9 +199,7 @@ class LiveSession final : private servo::TickObserver {
   ///         would feel nothing: zero force every tick); names the missing publish().
   std::string start();
   /// Paused: zero force every tick (the servo keeps running, edits still apply).
-  void pause(bool paused) {
-    if (servo_) servo_->pause(paused);
-  }
+  void pause(bool paused);
   /// Stops the servo (its last force an exact zero), then the edit thread (requests still
   /// queued are dropped and counted), then the recorder (end record, fsync, rename).
   /// Idempotent. @throws io::RecordingError if the recording could not be completed;
@@ -255,93 +247,15 @@ class LiveSession final : private servo::TickObserver {
   LiveStats stats(std::size_t latency_tail = SIZE_MAX) const;
   /// The servo thread (its real-time set-up, period errors after stop()); null in a
   /// session for run_simulated() only.
-  const servo::ServoThread* servo_thread() const { return servo_.get(); }
+  const servo::ServoThread* servo_thread() const;
 
  private:
-  struct Request {            // an edit on its way to the edit thread
-    EditEvent event;
-    std::int64_t asked_ns = 0;  // when it was asked for (tick start or submit())
-  };
-  // Applies one request (stroke nesting, listener, counters); `rethrow`: simulated mode.
-  void apply_request(Request& q, EditSource source, long ticks_done, bool rethrow);
-  void notify(const EditEvent& e, const EditOutcome& out, EditSource source, bool rethrow);
-  std::int64_t clock_ns() const;
-  void on_tick(const servo::TickRecord& r) noexcept override;
-  void edit_loop();
-  void resolve_seen_locked() const;
-  void wake_edit_thread();  // API side: submit(), stop()
-  void record_loop();
-  void record_chunk(bool final);
-  void publish_observed(const servo::TickRecord& r) noexcept;
-
-  void open_recording();
-  void finish_recording();  // end record, fsync, rename (after the producers stopped)
-  void drain_simulated(long ticks_done);
-  void begin_simulated(bool stepped);
-  // The session's side of simulated tick k (its row already rendered): the tick record, the
-  // after-tick hook, the observer, the queued edits, the recorder's chunk.
-  void simulated_tick(const SimulatedRun& run, long k, sim::TraceRow& row);
-
-  EditSession* edits_;  // null: nothing to edit
-  servo::TripleBuffer<core::SampleField>& buffer_;
-  servo::Renderer& renderer_;
-  LiveSessionConfig cfg_;
-  std::unique_ptr<servo::ServoThread> servo_;  // null: simulated only
-  servo::SpscRing<servo::TickRecord> ticks_;
-  servo::SpscRing<Request> servo_edits_, api_edits_;
-  // submit() wakes the edit thread at once (the servo side cannot: no syscall in a tick, so
-  // the edit thread also looks at the servo's ring every 0.2 ms).
-  std::mutex wake_mu_;
-  std::condition_variable wake_cv_;
-  bool api_pending_ = false;  // guarded by wake_mu_
-  std::atomic<bool> running_{false}, stop_edits_{false}, stop_recorder_{false};
-  std::thread edit_thread_, record_thread_;
-  std::int64_t start_ns_ = 0;
-  // Simulated mode: the simulated clock (start of the current tick) and ticks run.
-  bool simulated_ = false;
-  bool stepped_ = false;   // simulated by step_simulated()
-  bool finished_ = false;  // finish_simulated() ran: no more ticks
-  std::atomic<std::int64_t> sim_now_ns_{0};
-  long sim_ticks_ = 0;
-  int stroke_depth_ = 0;  // strokes opened by either source and not closed (edit thread only)
-  bool button_stroke_ = false;  // the button's press is held: its begin seen, its end not (edit thread)
-
-  // Servo-thread state (on_tick only).
-  bool button_ = false;
-  long press_tick_ = 0;
-  std::uint64_t last_version_ = 0;
-  // The first tick that read each version: its start and the version, in slot version % size.
-  // The servo writes both when the version changes; the edit thread reads them (the version
-  // matches: that version's tick; a later version may have taken the slot only after `size`
-  // more publications read, far beyond any backlog).
-  std::unique_ptr<std::atomic<std::int64_t>[]> seen_ns_;
-  std::unique_ptr<std::atomic<std::uint64_t>[]> seen_version_;
-  std::size_t seen_size_ = 0;
-
-  // |period error| histogram (servo writes with relaxed increments; stats() reads).
-  std::array<std::atomic<std::uint32_t>, kPeriodBins> period_hist_{};
-
-  // What observe() reads: the last tick, written by the servo thread (a seqlock).
-  servo::LatestValue<Observed> observed_;
-
-  std::atomic<long> dropped_edits_{0}, dropped_ticks_{0}, requested_{0};
-  // Edit thread -> recorder and stats (not real time: a mutex is fine here).
-  mutable std::mutex edits_mu_;
-  std::vector<EditEvent> applied_pending_;  // not yet written
-  // (version, asked_ns) not yet read; latencies of the versions read (stats() resolves too).
-  mutable std::vector<std::pair<std::uint64_t, std::int64_t>> published_;
-  mutable std::vector<double> edit_to_haptics_ms_;
-  long applied_ = 0, refused_ = 0, merged_ = 0, publications_ = 0;
-  long listener_errors_ = 0;
-  std::string listener_error_;
-
-  // Recorder thread.
-  int fd_ = -1;
-  std::string part_path_;
-  long recorded_ticks_ = 0, recorded_edits_ = 0;
-  double last_t_ = 0;
-  std::string record_error_;  // written by the recorder (or stop()) under edits_mu_: stats() reads it
-  bool stopped_ = false;
+  // Everything the servo, edit and recorder threads share (rings, seqlock, threads, the
+  // recording's file): defined in live_session.cpp, so this header (and isotouch.h) does
+  // not include them. The servo thread's observer is the Impl itself: each tick calls its
+  // on_tick() directly, through no forwarding of this class.
+  class Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace isotouch::session

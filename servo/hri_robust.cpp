@@ -252,7 +252,27 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     }
     return excess(f_hip);
   };
-  auto set_plane = [&](const VirtualPlane& pl) { adopt_plane(pl, hip, out); };
+  // A plane found by an update is re-seated where the HIP's projection on it (eq. 2, the
+  // proxy) lies more than half a voxel from its point p: over a sharp metal edge the point
+  // lies on the rounded edge or on another face (the engine block, plan "ray": p 3.5 mm away,
+  // the proxy 2.3 mm from p, in air) and nothing else bounds how far off the surface the
+  // proxy goes (HriSharpEdge: 1.1 mm off a 1 mm box). Then N points from the HIP to p and the
+  // proxy is p, on the surface. Half a voxel: the slide a held plane allows (slid_far). On
+  // a smooth surface the projection stays within the step VHIP -> HIP of p: no change.
+  auto set_plane = [&](const VirtualPlane& pl) {
+    const Vec3 to_p = pl.p - hip;
+    const Vec3 off = pl.n * dot(pl.n, to_p) - to_p;  // the proxy minus p
+    if (pl.valid && dot(off, off) > 0.25 * voxel * voxel) {
+      const double len = norm(to_p);
+      if (len > 0.0 && std::isfinite(len)) {
+        VirtualPlane seated = pl;
+        seated.n = to_p * (1.0 / len);
+        adopt_plane(seated, hip, out);
+        return;
+      }
+    }
+    adopt_plane(pl, hip, out);
+  };
   // The VHIP's value: in free motion the VHIP is the HIP of the tick before, whose
   // value that tick read (cached), so free motion costs one sample per tick.
   // The VHIP does not move before the force is computed: one read serves every rule.

@@ -252,48 +252,7 @@ HriTick HriRenderer::tick_robust_full_body(const FieldView& field, const Vec3& h
     }
     return excess(f_hip);
   };
-  // A plane found by an update whose proxy (the HIP projected on it, eq. 2) lies in air more
-  // than half a voxel from its point p is re-seated: over a sharp metal edge p lies on the
-  // rounded edge or on another face, and nothing else bounds how far off the surface the
-  // proxy goes (the engine block, plan "ray": p 3.5 mm away, the proxy 2.3 mm from p, in
-  // air; HriSharpEdge: 1.1 mm off a box's edge). The plane goes to the surface under the
-  // proxy (along -N, as far as the proxy is from p); none there (past the edge), or its
-  // proxy again more than half a voxel off, N points from the HIP to that plane's point
-  // and the proxy is that point, on the surface. Half a voxel: the slide a held plane allows
-  // (slid_far). A proxy inside the material, or within half a voxel of p, keeps the plane.
-  auto proxy_off = [&](const VirtualPlane& pl) {
-    const Vec3 to_p = pl.p - hip;
-    const Vec3 off = pl.n * dot(pl.n, to_p) - to_p;  // the proxy minus p
-    return dot(off, off) > 0.25 * voxel * voxel;
-  };
-  auto pinned = [&](VirtualPlane pl) {
-    const Vec3 to_p = pl.p - hip;
-    const double len = norm(to_p);
-    if (len > 0.0 && std::isfinite(len)) pl.n = to_p * (1.0 / len);
-    return pl;
-  };
-  auto set_plane = [&](const VirtualPlane& pl) {
-    if (pl.valid && proxy_off(pl)) {
-      const Vec3 q = hip + pl.n * dot(pl.n, pl.p - hip);
-      if (!(excess(sample_value(field, q)) > 0.0)) {
-        Vec3 p2;
-        VirtualPlane seated = pinned(pl);
-        if (first_crossing(field, q, q - pl.n * norm(q - pl.p), p2, 0.2)) {
-          seated = plane_at(field, p2, hip);
-          if (!seated.valid || !(dot(seated.n, hip - seated.p) < 0.0) || proxy_off(seated)) {
-            seated.p = p2;
-            seated = pinned(seated);
-          }
-        }
-        seated.valid = finite(seated.p) && finite(seated.n);
-        if (seated.valid) {
-          adopt_plane(seated, hip, out);
-          return;
-        }
-      }
-    }
-    adopt_plane(pl, hip, out);
-  };
+  auto set_plane = [&](const VirtualPlane& pl) { adopt_plane(pl, hip, out); };
   // The VHIP's value: in free motion the VHIP is the HIP of the tick before, whose
   // value that tick read (cached), so free motion costs one sample per tick.
   // The VHIP does not move before the force is computed: one read serves every rule.

@@ -282,11 +282,6 @@ m hri-edit-ease-half-period $H 'const Vec3 offset = edit_ease_from_ * (edit_ease
 m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_ticks_;' \
                                $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' \
                                $T 'HriRecovery.AReleaseByAPlaneUpdate*'
-# A plane update whose proxy lies in air more than half a voxel from its point p is re-seated (on
-# the surface under the proxy, else N from the HIP to p): without it the VHIP went 1.1 mm off
-# a box's 90-deg metal edge (issue 64).
-m hri-update-reseat         $H 'if (pl.valid && proxy_off(pl)) {' 'if (false) {' \
-                               test_hri_sharp_edge 'HriSharpEdge.*'
 
 # The point's thin-feature hold (hold_entry_side): each rule alone lets a scan-like ridge wrap
 # below 0.9 of the limit; the held plane's point lowered to a face falling away under the

@@ -106,7 +106,7 @@ class Connection final : public ByteSource {
   std::chrono::steady_clock::time_point message_start_;
   const std::atomic<bool>* stop_;
   std::string why_;
-  std::timed_mutex send_mu_;
+  std::mutex send_mu_;
   std::atomic<SendFence*> fence_{nullptr};
   std::atomic<bool> alive_{true};
   std::atomic<std::int64_t> last_in_ns_;  ///< steady_clock (CLOCK_MONOTONIC) nanoseconds of the last byte received, or of the connection

@@ -163,19 +163,24 @@ TEST(StreamReplies, APoseTheServoAnsweredIsAnsweredThoughANewerOneCame) {
   std::this_thread::sleep_for(std::chrono::milliseconds(5));
   host.stop();
   peer.finish();
-  long answered = 0;
+  long answered = 0, other = 0;
   std::uint64_t last = 0;
   for (const PeerForce& g : peer.forces()) {
     if (g.stamp < kStamp0 || g.stamp >= kStamp0 + kPoses) continue;
-    ++answered;
-    EXPECT_EQ(g.f.z, double(g.stamp - kStamp0 + 1) / 1024) << "the reply to the pose stamped " << g.stamp - kStamp0
-                                                             << " carries another pose's force";
+    const double own = double(g.stamp - kStamp0 + 1) / 1024;
+    // Its own force, or (the stall rule: a pose the servo has not answered within 2 ms, as
+    // this test's servo on a loaded machine) an older pose's: never a newer one's.
+    if (g.f.z == own) ++answered;
+    else ++other;
+    EXPECT_LE(g.f.z, own) << "the reply to the pose stamped " << g.stamp - kStamp0 << " carries a newer pose's force";
     EXPECT_GT(g.stamp, last) << "a pose answered twice or out of order";
     last = g.stamp;
   }
   // The reply thread (SCHED_FIFO below this servo where allowed) polls every 20-100 us; a
   // poll later than a whole servo period passes one pose over.
-  std::printf("%ld of %ld poses answered, %ld passed over\n", answered, kPoses, host.replies().passed_over());
+  std::printf("%ld of %ld poses answered with their own force, %ld with an older one's (stall rule: %ld replies), %ld passed over\n",
+              answered, kPoses, other, host.replies().stall_replies(), host.replies().passed_over());
+  EXPECT_LE(other, host.replies().stall_replies()) << "replies with another pose's force the stall rule did not send";
   EXPECT_GE(answered, kPoses * 3 / 4) << "of " << kPoses << " poses the servo answered, " << answered
                                       << " were answered to the client; passed over: " << host.replies().passed_over();
 }

@@ -45,8 +45,15 @@ constexpr const char* kHelp =
       "2 usage error; 4 servo faults; 5 the --haptic device was disconnected, faulty or sent refused reports (the\n"
       "server went on serving); 6 a save command could not write (the session went on); 128 + N on signal N.";
 /// ISOTOUCH_SERVE_TEST_FAULT="WHERE[:IMAGE],...": each entry makes the server fail once at
-/// WHERE (ServeOptions::fault_for_test), for the image named IMAGE or any: what the serve
-/// tests use to reach the failures a CPU Vulkan driver does not produce.
+/// WHERE (ServeOptions::fault_for_test), for the image named IMAGE (a trailing '*': any name
+/// it begins) or any: what the serve tests use to reach the failures a CPU Vulkan driver does
+/// not produce.
+/// Whether a test fault's IMAGE `pattern` names `image` (empty: any; "NAME*": any beginning NAME).
+bool names(const std::string& pattern, const std::string& image) {
+  if (!pattern.empty() && pattern.back() == '*') return image.rfind(pattern.substr(0, pattern.size() - 1), 0) == 0;
+  return pattern.empty() || pattern == image;
+}
+
 std::function<bool(const std::string&, const std::string&)> test_faults(const std::string& spec) {
   struct Entry {
     std::string where, image;
@@ -62,7 +69,7 @@ std::function<bool(const std::string&, const std::string&)> test_faults(const st
   return [entries, mu](const std::string& where, const std::string& image) {
     std::lock_guard<std::mutex> lock(*mu);
     for (Entry& e : *entries)
-      if (!e.fired && e.where == where && (e.image.empty() || e.image == image)) return e.fired = true;
+      if (!e.fired && e.where == where && names(e.image, image)) return e.fired = true;
     return false;
   };
 }

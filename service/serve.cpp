@@ -162,6 +162,7 @@ class Server {
   void refuse(Client& c, const Incoming& in, int code, const std::string& why);
   bool own_stream(Client& c, const Incoming& in);
   bool check_stream_rate(Client& c, const Incoming& in);
+  void leave_stream_zero(Client& c, const std::string& before);
   void take_registration(Client& c, const Incoming& in);
   void release_stream(int client);
   void display_loop();
@@ -507,8 +508,12 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
   if (at == c.stream_bounds.end()) {
     if (!c.stream_bound_next.valid()) {
       c.stream_bound_next_hz = sim_hz;
-      c.stream_bound_next =
-          std::async(std::launch::async, [loop = link_loop_, sim_hz] { return judge_link_stiffness(loop, sim_hz); });
+      // The test seam: the simulation of a rate throws ("link:DEVICE@HZ", HZ the bucket's, whole).
+      const bool fail = fault("link", in.device + "@" + std::to_string(std::lround(sim_hz)));
+      c.stream_bound_next = std::async(std::launch::async, [loop = link_loop_, sim_hz, fail] {
+        if (fail) throw std::bad_alloc();
+        return judge_link_stiffness(loop, sim_hz);
+      });
     }
     return true;
   }
@@ -543,19 +548,25 @@ bool Server::check_stream_rate(Client& c, const Incoming& in) {
       << "or allow it: --allow-unstable-stiffness, or the scene's servo.allow_unstable_stiffness)";
   c.stream_refused = true;
   log_.line("stream   client " + std::to_string(c.id) + " refused: " + why.str());
-  if (o_.reply_force) {  // it applies the last Force it got: a zero at once, through the reply thread, before its STATUS
-    {
-      std::lock_guard<std::mutex> lock(stream_mu_);
-      if (stream_from_ == c.conn) stream_from_.reset();
-    }
-    const long zeros = replies_.retarget_zeros();
-    if (!replies_.retarget(1.0))
-      log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
-    else if (replies_.retarget_zeros() > zeros)
-      log_.line("stream   client " + std::to_string(c.id) + ": a zero Force sent to it before its refusal");
-  }
+  leave_stream_zero(c, "its refusal");  // before its STATUS
   refuse(c, in, igtl::StatusMessage::STATUS_CONFIG_ERROR, why.str());
   return false;
+}
+
+/// With --reply-force, a client that stops being the stream's (refused, or dropped by an
+/// exception in its thread) applies the last Force it got: it is sent a zero at once, through
+/// the reply thread, before `before` (its STATUS, or its connection's shutdown).
+void Server::leave_stream_zero(Client& c, const std::string& before) {
+  if (!o_.reply_force) return;
+  {
+    std::lock_guard<std::mutex> lock(stream_mu_);
+    if (stream_from_ == c.conn) stream_from_.reset();
+  }
+  const long zeros = replies_.retarget_zeros();
+  if (!replies_.retarget(1.0))
+    log_.line("stream   client " + std::to_string(c.id) + ": the reply thread did not send its zero within 1 s");
+  else if (replies_.retarget_zeros() > zeros)
+    log_.line("stream   client " + std::to_string(c.id) + ": a zero Force sent to it before " + before);
 }
 
 /// A TRANSFORM named registration_name: the tracker's registration to the image from now on
@@ -591,16 +602,22 @@ void Server::release_stream(int client) {
 }
 
 void Server::client_loop(Client& c) {
+  bool dropped = true;
   try {
     read_messages(c);
+    dropped = false;
   } catch (const std::exception& e) {  // e.g. bad_alloc: this client is dropped, the server goes on
     log_.line("client   " + std::to_string(c.id) + " dropped: " + e.what());
   } catch (...) {
     log_.line("client   " + std::to_string(c.id) + " dropped: an unknown exception");
   }
+  if (dropped) leave_stream_zero(c, "its connection closed");  // it would hold the last Force it got
   log_.line("client   " + std::to_string(c.id) + " gone");
   release_stream(c.id);
   c.conn->shutdown();
+  // A link simulation still running ends here, not in the reaper's erase (under clients_mu_,
+  // which the display loop takes: a 20-60 ms wait there).
+  if (c.stream_bound_next.valid()) c.stream_bound_next.wait();
   c.done = true;
 }
 

@@ -98,7 +98,9 @@ struct ServeOptions {
   /// Tests only: asked at each spot where the server can fail for a cause a CPU Vulkan driver
   /// does not produce ("prepare": the new session's build throws std::bad_alloc; "settle":
   /// the running session's edits did not settle; "edited": packing the edited IMAGE throws
-  /// std::bad_alloc), with the image's device name; true: fail there. Empty: never.
+  /// std::bad_alloc), with the image's device name ("link": a stream's link simulation,
+  /// check_stream_rate's, throws std::bad_alloc, with "DEVICE@HZ": its stream's device name
+  /// and its rate bucket's rate [Hz], rounded); true: fail there. Empty: never.
   std::function<bool(const std::string& where, const std::string& image)> fault_for_test;
   MessageLimits limits;
   run::RunOptions run;                ///< the Vulkan device (scene setup)

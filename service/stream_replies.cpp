@@ -87,16 +87,12 @@ void StreamReplies::run(const std::atomic<bool>& stop) {
       }
       retarget_done_ = ask;
     }
-    TransformDevice::PoseId p = device_.newest_pose();
+    const TransformDevice::PoseId newest = device_.newest_pose();
     const std::int64_t now = TransformDevice::now_ns();  // the clock before the cell
     if (!poll.judge_now(now)) continue;  // this thread was away: the servo gets a poll to write first
     const servo::StallLook l = device_.look_force(now);
-    // The servo answered a pose other than the newest read above (a newer one overtook it
-    // before this poll, or the servo read one that came between the two reads): that pose
-    // gets the answer, with its own stamp, so a force never goes out with another pose's.
-    if (l.on && l.answers > answered && l.answers != p.sequence)
-      if (const TransformDevice::PoseId a = device_.recent_pose(l.answers); a.sequence != 0) p = a;
-    const IgtlReply r = poll.step(p, l, now);
+    const TransformDevice::PoseId p = StreamReplyPoll::pick(newest, device_.recent_pose(l.answers), l, answered);
+    const IgtlReply r = poll.step(p, newest, l, now);
     waiting = !r.send && l.on && p.sequence > l.answers && now - p.received_ns < 2'000'000;
     if (!r.send) continue;
     if (r.why == IgtlReply::Why::kAnswer || r.why == IgtlReply::Why::kLate) {

@@ -11,6 +11,7 @@
 //     client's last message is a zero (ExitZeroFence, servo/exit_zero.h).
 // Part of isotouch::igtl_device.
 #pragma once
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <functional>
@@ -39,8 +40,21 @@ class StreamReplyPoll {
   /// Before the stall rule's look at t [ns]: false when this poll judges nothing (the reply
   /// thread was itself away: IgtlReplyRule::judge_now).
   bool judge_now(std::int64_t t) { return rule_.judge_now(t, kAwayNs); }
-  IgtlReply step(const TransformDevice::PoseId& p, const servo::StallLook& l, std::int64_t t) {
-    return rule_.step(p.sequence, p.received_ns, l, t);
+  /// The pose this poll answers: `newest`, or the pose the servo answered (`servo_answered`,
+  /// TransformDevice::recent_pose(l.answers); sequence 0 when no longer kept) when it is newer
+  /// than the last one answered (`last_answered`) and is not the newest: a newer pose overtook
+  /// it before this poll, or the servo read one that came between the two reads. So a force
+  /// never goes out with another pose's stamp.
+  static TransformDevice::PoseId pick(const TransformDevice::PoseId& newest, const TransformDevice::PoseId& servo_answered,
+                                      const servo::StallLook& l, std::uint64_t last_answered) {
+    const bool other = l.on && l.answers > last_answered && l.answers != newest.sequence;
+    return other && servo_answered.sequence == l.answers ? servo_answered : newest;
+  }
+  /// p: the pose picked; newest: the newest pose read (the stream is stale by its age, not by
+  /// an older pose's the servo answered late).
+  IgtlReply step(const TransformDevice::PoseId& p, const TransformDevice::PoseId& newest, const servo::StallLook& l,
+                 std::int64_t t) {
+    return rule_.step(p.sequence, std::max(p.received_ns, newest.received_ns), l, t);
   }
   /// What became of what step() said to send: a dropped send leaves a stale zero owed.
   void sent(bool delivered) {

@@ -36,6 +36,12 @@ void TransformDevice::push_mm(const double t_mm[3], std::uint64_t stamp) {
   pushed_.fetch_add(1);
 }
 
+long TransformDevice::overtaken() const {
+  long n = 0;
+  for (long g : overtaken_gaps()) n += g;
+  return n;
+}
+
 std::array<long, TransformDevice::kGapBins> TransformDevice::overtaken_gaps() const {
   std::array<long, kGapBins> g{};
   for (std::size_t i = 0; i < g.size(); ++i) g[i] = overtaken_gaps_[i].load(std::memory_order_relaxed);
@@ -62,12 +68,9 @@ TransformDevice::PoseId TransformDevice::newest_pose() const {
 }
 
 servo::DeviceReading TransformDevice::read() {
-  const std::uint64_t before = last_.sequence;
   pose_.load(last_);  // bounded: keeps the last pose if a store stays in progress
   const Pose& p = last_;
-  read_sequence_.store(p.sequence, std::memory_order_relaxed);
-  if (before != 0 && p.sequence > before + 1)  // one writer: a plain add, no read-modify-write
-    overtaken_.store(overtaken_.load(std::memory_order_relaxed) + long(p.sequence - before - 1), std::memory_order_relaxed);
+  read_sequence_.store(p.sequence, std::memory_order_relaxed);  // push_mm counts the poses never read
   servo::DeviceReading r;
   // RAS mm + offset -> LPS m -> grid m.
   const core::Vec3 lps{-(p.mm[0] + offset_mm_.x) * 1e-3, -(p.mm[1] + offset_mm_.y) * 1e-3, (p.mm[2] + offset_mm_.z) * 1e-3};

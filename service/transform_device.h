@@ -54,8 +54,9 @@ class TransformDevice final : public servo::HapticDeviceIO {
   std::int64_t force_written_ns() const { return echo_.written_ns(); }
   /// Messages pushed so far.
   long pushed() const { return pushed_.load(); }
-  /// Poses the servo never read: a newer one had arrived before its tick (or during a swap).
-  long overtaken() const { return overtaken_.load(std::memory_order_relaxed); }
+  /// Poses the servo never read: a newer one had arrived before its tick (or during a swap);
+  /// counted when the newer one is pushed (the sum of overtaken_gaps()).
+  long overtaken() const;
   /// Those poses by how soon the next came after them: < 0.1, 0.1-0.3, 0.3-0.7, 0.7-1.3 and
   /// over 1.3 ms (a burst from the sender, or a tick the servo did not make in between).
   static constexpr int kGapBins = 5;
@@ -113,7 +114,6 @@ class TransformDevice final : public servo::HapticDeviceIO {
   Registration reg_;                          // push_mu_: the one push_mm applies
   servo::LatestValue<Registration> reg_cell_;  // written under push_mu_: the one forces go back through
   std::atomic<long> pushed_{0};
-  std::atomic<long> overtaken_{0};  // written by the servo thread only
   std::atomic<std::uint64_t> read_sequence_{0};  // the last pose the servo read (servo thread)
   std::array<std::atomic<long>, kGapBins> overtaken_gaps_{};  // under push_mu_
   // The last kRecent poses' ids by sequence % kRecent, each slot a sequence lock (its

@@ -41,7 +41,10 @@
 #  11. the bound is the link's (simulated, as `--haptic igtl:`'s), not Colgate-Schenkel's: over a
 #      100 Hz stream K 600 N/m (under Colgate's ~790) is refused without the peer's passivity
 #      controller (bound ~370) and served with device.link_passivity_control: true (~900);
-#      K 1200 is refused either way; refused clients get only zeros.
+#      K 1200 is refused either way; refused clients get only zeros;
+#  12. a stream client dropped by an exception in its thread (the seam: its link simulation
+#      throws std::bad_alloc) is left a zero Force before its connection closes (it would hold
+#      the last Force it got).
 # "PASS serve truth" is printed once, last, after every check.
 # Usage: cli_serve_truth.sh ISOTOUCH SCENE CLIENT OUT_DIR HEAD_MHD
 set -u
@@ -418,6 +421,35 @@ for name, k, pc, served in (("k600_nopc", 600, False, False), ("k600_pc", 600, T
     said.append(f"K {k} {'with' if pc else 'without'} the controller refused at {rate} Hz (bound {bound}, "
                 f"Colgate {colgate} N/m; only zeros, {n} Forces)")
 print("the link's bound at 100 Hz: " + "; ".join(said))
+PY
+[[ $? == 0 ]] || exit 1
+# 12. A stream client dropped by an exception in its thread is left a zero: pressed into the
+# ball at 500 Hz (K 600 served with the peer's controller), then slowed to 100 Hz: the new
+# rate's link simulation throws (ISOTOUCH_SERVE_TEST_FAULT link:Stylus@9*: a 90-99 Hz bucket) and the client is
+# dropped. Judged by what the client got: its last Force before the connection closed.
+ISOTOUCH_SERVE_TEST_FAULT="link:Stylus@9*" "$exe" serve "$out/k600_pc.json" --port 0 --stream Stylus --reply-force \
+  --seconds 6 >"$out/serve_dropped.log" 2>&1 &
+serve_pid=$!
+port=$(wait_port "$out/serve_dropped.log" $serve_pid)
+[[ -n $port ]] || fail "the dropped-client serve never said it was listening: $(cat "$out/serve_dropped.log")"
+timeout 30 "$client" 127.0.0.1 "$port" "$head" ball Ball 48 15 20 move 0 0 24 0.5 move 0 0 13 0.6 force hz 100 \
+  closed 3 peak >"$out/dropped.log" 2>&1
+wait $serve_pid
+python3 - "$out" <<'PY' || exit 1
+import sys
+out = sys.argv[1]
+log, slog = open(f"{out}/dropped.log").read(), open(f"{out}/serve_dropped.log").read()
+def fail(msg):
+    print("FAIL serve truth:", msg); print(log); print(slog); sys.exit(1)
+f = [l.split() for l in log.splitlines() if l.startswith("force ")]
+p = [l.split() for l in log.splitlines() if l.startswith("peak ")]
+if len(f) != 1 or len(p) != 1: fail("no force or peak line from the dropped client")
+pressed, last = float(f[0][4]), float(p[0][9])
+if "dropped: std::bad_alloc" not in slog: fail("the link simulation's fault did not drop the client")
+if "closed after" not in log: fail("the dropped client's connection was not closed")
+if not pressed > 0.5: fail(f"the client was not pressed into the ball before the fault: {pressed} N")
+if last != 0.0: fail(f"the dropped client holds {last} N: its last Force before the connection closed was not a zero")
+print(f"a client dropped by its link simulation's fault: pressed {pressed:.2f} N, then left a zero before its connection closed")
 PY
 [[ $? == 0 ]] || exit 1
 echo "PASS serve truth"

@@ -23,7 +23,8 @@
 //                     A to B s" (A, B: when it began and printed, since the client started)
 //   hz N              the stream's rate from now on: a pose every 1 / N s (default 500 Hz)
 //   peak              prints the largest |F| of every Force transform received so far:
-//                     "peak |F| P N of K received" (what the peer's device was sent at most)
+//                     "peak |F| P N of K received, last |F| L N" (what the peer's device was sent
+//                     at most, and holds now)
 //   images SECS       waits until no IMAGE has arrived for SECS; prints "images K" (K: all so far)
 //   compare FILE      prints "compare FILE: D voxels differ, geometry G" (D: the copy of BASE
 //                     with every IMAGE received applied against FILE; G: "ok" when every
@@ -265,8 +266,16 @@ void send(igtl::ClientSocket* sock, igtl::MessageBase* m) {
 void stream_loop(igtl::ClientSocket* sock, Path& path, Shared& shared, const std::atomic<bool>& done) {
   igtl::TransformMessage::Pointer t = igtl::TransformMessage::New();
   t->SetDeviceName("Stylus");
+  // Paced on its own schedule, as a tracker's device clock paces PLUS's stream: a late wake-up
+  // (a loaded machine) is caught up with the next poses, so the stream's rate stays the one
+  // asked (a stream of sleeps would slow down with the machine's load); more than 5 periods
+  // behind, the schedule starts again from now (no burst).
+  auto next = Clock::now();
   while (!done) {
-    std::this_thread::sleep_for(std::chrono::microseconds(stream_period_us.load()));
+    const auto period = std::chrono::microseconds(stream_period_us.load());
+    next += period;
+    if (Clock::now() - next > 5 * period) next = Clock::now();
+    std::this_thread::sleep_until(next);
     {
       std::lock_guard<std::mutex> lock(path.mu);
       if (!path.started || Clock::now() < path.paused_until) continue;
@@ -408,7 +417,8 @@ bool Client::action(const std::string& a) {
   }
   if (a == "peak") {
     std::lock_guard<std::mutex> lock(s.mu);
-    std::cout << "peak |F| " << s.peak_force << " N of " << s.forces_received << " received\n";
+    const double last = s.forces.empty() ? 0 : std::hypot(s.forces.back()[0], s.forces.back()[1], s.forces.back()[2]);
+    std::cout << "peak |F| " << s.peak_force << " N of " << s.forces_received << " received, last |F| " << last << " N\n";
     return true;
   }
   if (a == "images") {

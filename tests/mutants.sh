@@ -189,6 +189,12 @@ m igtl-link-max-force       service/igtl_device.cpp '  c.max_force_n = o_.max_fo
 # serve's stream renders at the identity map: no 1 / workspace_scale in its force.
 m serve-stream-unscaled     service/serve.cpp '  if (!echo_device_) so.hri.world_per_device = 1.0;' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# A pose the servo never read is counted when a newer one replaces it, a pose it read is not.
+m device-overtaken-unread   service/transform_device.cpp 'read_sequence_.load(std::memory_order_relaxed) < p.sequence' 'true' \
+                               test_service 'ServiceDevice.EachPoseNeverReadIsCountedOnce'
+# A stream client dropped by an exception in its thread is left a zero before its connection closes.
+m serve-dropped-zero        service/serve.cpp '  if (dropped) leave_stream_zero(c, "its connection closed");' '  (void)dropped;' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_truth'
 # serve's stream is clamped to the link's limit (device.link_max_force_n), not only the scene's:
 # the caps the gate reads, and serve setting them from the scene.
 m serve-link-max-force      service/transform_device.h '    c.max_force_n = max_force_n_;' '' \
@@ -218,16 +224,23 @@ m serve-budget-header       service/serve.cpp '  if (std::string why = memory_re
 m refine-bands-margin       engine/refine_bands.cpp '  if (band_cost(first, 1 - first) > room) room = band_cost(0, 0) + (1 - target_) * budget_ms_;' '' \
                                test_refine_bands 'RefineBands.*'
 # A stream refused in contact: its client is sent a zero before the STATUS (part 9b).
-m serve-refused-zero        service/serve.cpp '      if (stream_from_ == c.conn) stream_from_.reset();' '' \
+m serve-refused-zero        service/serve.cpp '    if (stream_from_ == c.conn) stream_from_.reset();' '' \
                                'isotouch igtl_session_client' 'ctest:cli_serve_truth'
+# Once learned, the period moves at most 1/64 / 16 of it per interval: one late arrival does
+# not stop the next ticks following and waiting.
+m input-period-clamp        servo/input_phase.cpp 'std::clamp(d - period_ns_, -period_ns_ / 64, period_ns_ / 64)' 'd - period_ns_' \
+                               test_input_phase 'InputWaitUntil.TwoLatePosesInARowAreBothRendered'
 # A servo tick waits for its late input instead of letting the next one overtake it.
 m servo-input-wait          servo/input_phase.cpp '  if (in.due_ns > t_ns || t_ns - in.due_ns > period_ns) return -1;' '  return -1;' \
                                test_input_phase 'InputWaitUntil.*'
 m servo-input-wait-call     servo/servo_thread.cpp '    if (cfg_.follow_input_phase) t = wait_for_input(t, next, period);' '' \
                                test_servo_thread 'ServoThread.ATickWaitsForALatePoseInsteadOfLeavingItToTheNext'
 # A pose the servo answered after a newer one came is still answered (its own force and stamp).
-m serve-reply-overtaken     service/stream_replies.cpp '      if (const TransformDevice::PoseId a = device_.recent_pose(l.answers); a.sequence != 0) p = a;' '      {}' \
+m serve-reply-overtaken     service/stream_replies.h '    return other && servo_answered.sequence == l.answers ? servo_answered : newest;' '    return newest;' \
                                test_stream_replies 'StreamReplies.APoseTheServoAnsweredIsAnsweredThoughANewerOneCame'
+# The stream's age is the newest pose's, not that of an older pose the servo answered late.
+m serve-reply-stale-newest   service/stream_replies.h 'std::max(p.received_ns, newest.received_ns)' 'p.received_ns' \
+                               test_igtl_reply_rule 'IgtlReplyRule.ServesReplyToAnOlderPoseJudgesStalenessByTheNewest'
 # A reply waits (bounded) for another send to the same client instead of being dropped.
 m socket-busy-wait          service/igtl_socket.cpp '    if (std::chrono::steady_clock::now() >= until) return Sent::kBusy;' '    return Sent::kBusy;' \
                                test_service 'ServiceSocket.ADroppableSendWaitsForAnotherSendUnderWayWithinItsBusyWait'
@@ -257,10 +270,10 @@ m serve-budget-taken        service/serve.cpp '      if (v) building.emplace(' '
 
 # serve's TRANSFORM stream replies (`serve --reply-force`): what its client got.
 SR=service/stream_replies.cpp T=test_stream_replies
-m stream-stall-zero         $SR '    const IgtlReply r = poll.step(p, l, now);' \
-                               '    IgtlReply r = poll.step(p, l, now); if (r.why == IgtlReply::Why::kStall) r.send = false;' $T 'StreamReplies.AStalledServo*'
-m stream-stale-zero         $SR '    const IgtlReply r = poll.step(p, l, now);' \
-                               '    IgtlReply r = poll.step(p, l, now); if (r.why == IgtlReply::Why::kStale) r.send = false;' $T 'StreamReplies.AStaleStream*'
+m stream-stall-zero         $SR '    const IgtlReply r = poll.step(p, newest, l, now);' \
+                               '    IgtlReply r = poll.step(p, newest, l, now); if (r.why == IgtlReply::Why::kStall) r.send = false;' $T 'StreamReplies.AStalledServo*'
+m stream-stale-zero         $SR '    const IgtlReply r = poll.step(p, newest, l, now);' \
+                               '    IgtlReply r = poll.step(p, newest, l, now); if (r.why == IgtlReply::Why::kStale) r.send = false;' $T 'StreamReplies.AStaleStream*'
 m stream-stale-late         $SR 'StreamReplyPoll poll(std::int64_t(o_.stale_s * 1e9));' \
                                'StreamReplyPoll poll(std::int64_t(o_.stale_s * 2e9));' $T 'StreamReplies.AStaleStream*'
 m stream-switch-zero        $SR '    fenced->send(zero_msg);  // blocking: the zero is not dropped' '' $T 'StreamReplies.AClientThatStops*'

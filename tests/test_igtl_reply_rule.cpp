@@ -226,7 +226,7 @@ TEST(IgtlReplyRule, ServesReplyThreadAndTheIgtlWriterDecideAlike) {
     if (!judge_w) continue;
     ++polls;
     const IgtlReply w = writer.step(seq, received, writer_stall.look(t), t);
-    const IgtlReply r = replies.step({seq, received, 0}, replies_stall.look(t), t);
+    const IgtlReply r = replies.step({seq, received, 0}, {seq, received, 0}, replies_stall.look(t), t);
     ASSERT_EQ(w.send, r.send) << "at " << double(t) * 1e-6 << " ms";
     ASSERT_TRUE(w.why == r.why && w.force_n.x == r.force_n.x && w.force_n.y == r.force_n.y && w.force_n.z == r.force_n.z)
         << "at " << double(t) * 1e-6 << " ms: " << w.force_n.x << " against " << r.force_n.x;
@@ -251,6 +251,30 @@ TEST(IgtlReplyRule, ServesReplyThreadAndTheIgtlWriterDecideAlike) {
   EXPECT_TRUE(is_zero(sent.back().f));
   EXPECT_EQ(sent.back().t, last_pose + kStale + kPoll) << "the stale zero at " << double(sent.back().t) * 1e-6 << " ms";
   EXPECT_FALSE(is_zero(sent[sent.size() - 2].f)) << "more than one zero for the stale stream";
+}
+
+// A pose the servo answered after a newer pose came is answered with its own force, and the
+// stream's age is the newest pose's: the servo's late answer to an older pose (older than the
+// stale time) is still an answer, not the stale stream's zero.
+TEST(IgtlReplyRule, ServesReplyToAnOlderPoseJudgesStalenessByTheNewest) {
+  constexpr std::int64_t kStale = 6 * kMs;
+  servo::StallRule stall;
+  stall.enable(true, 0.0025, 0.05, 0), stall.restart(0);
+  service::StreamReplyPoll replies(kStale);
+  const TransformDevice::PoseId older{7, 1 * kMs, 70}, newest{8, 8 * kMs, 80};
+  const core::Vec3 f{0.5, -0.25, 1.0};
+  const std::int64_t t = 8 * kMs + kMs / 5;  // the older pose is 7.2 ms old, past the stale time
+  stall.write(f, older.sequence, t - kMs / 10);  // the servo's answer to pose 7, after pose 8 came
+  const servo::StallLook l = stall.look(t);
+  ASSERT_TRUE(replies.judge_now(t));
+  const TransformDevice::PoseId p = service::StreamReplyPoll::pick(newest, older, l, 6);
+  ASSERT_EQ(p.sequence, older.sequence) << "the servo's pose is not the one answered";
+  const IgtlReply r = replies.step(p, newest, l, t);
+  ASSERT_TRUE(r.send);
+  EXPECT_EQ(int(r.why), int(IgtlReply::Why::kAnswer)) << "the older pose's age was taken for the stream's";
+  EXPECT_EQ(r.force_n.x, f.x);
+  // A pose the ring no longer keeps (sequence 0) leaves the newest to answer.
+  EXPECT_EQ(service::StreamReplyPoll::pick(newest, {}, l, 6).sequence, newest.sequence);
 }
 
 }  // namespace

@@ -72,6 +72,7 @@ struct Counters {
   std::atomic<long> clients{0}, images{0}, refused{0}, transforms{0}, strings{0}, skipped{0}, broken{0};
   std::atomic<long> sent{0}, dropped_sends{0}, busy_sends{0}, commands{0}, images_sent{0};
   std::atomic<long> idle{0}, dropped_clients{0};
+  std::atomic<long> label_maps{0};  // label map IMAGEs taken as the session's materials
 };
 
 /// The most bytes that may wait in a client's Outbox behind the message being sent; past it
@@ -1253,6 +1254,7 @@ void Server::apply_labels(PendingLabels p) {
             std::to_string(p.labels->voxels[0]) + " voxels unlabelled (the drill cuts per material, never the "
             "critical ones; the servo does not feel materials yet)");
   for (const std::string& n : p.labels->notes) log_.line("         note: " + n);
+  n_.label_maps.fetch_add(1);
   answer_labels(igtl::StatusMessage::STATUS_OK, "label map taken: " + std::to_string(p.labels->materials.size()) +
                                                     " materials: " + what);
 }
@@ -1787,7 +1789,7 @@ int Server::run() {
   join_threads(display, commands);
   if (const std::unique_ptr<Session> last = stop_session(); last && last->journal) close_journal();
   std::ostringstream s;
-  s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
+  s << "served   " << n_.clients << " clients; images taken " << n_.images << ", label maps taken " << n_.label_maps << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
     << " transforms (" << n_.dropped_sends << " dropped: a client not reading, " << n_.busy_sends

@@ -71,6 +71,7 @@ if int(u.group(1)) != 0: fail(f"{u.group(1)} bone voxels (critical) were removed
 if int(u.group(2)) < 1: fail("the carve removed nothing at all: the test shows nothing")
 serve = open(f"{out}/serve.log").read()
 if "materials client" not in serve or "from label map IMAGE 'Seg'" not in serve: fail("no materials line in the log")
+if "images taken 0, label maps taken 1, refused 2 messages" not in serve: fail("the served line does not count 1 label map taken, 2 refused")
 print(f"labels ok: tissue {t.group(1)} and bone {b.group(1)} voxels; carving changed {u.group(2)} voxels, no bone")
 PY
 echo "PASS serve labels"

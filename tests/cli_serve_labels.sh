@@ -6,7 +6,8 @@
 #   1. a label map 3 mm off the head's grid: STATUS 10 naming the origin and both values;
 #   2. a label map holding a value (3) its LBMETA does not name: STATUS 10 naming the value;
 #   3. a good one (tissue = 1 where the head is >= 300, bone = 2 where >= 1150): STATUS 1
-#      naming each material's label, colour (the LBMETA's RGB) and voxel count, bone critical
+#      naming each material's label, colour (the LBMETA's RGB) and voxel count (the client's
+#      own count of what it sent), bone critical
 #      (the scene's material of that name lends it its fields);
 #   4. carving into the skull then removes tissue but no voxel of the client's bone: the saved
 #      volume against the head, voxel for voxel.
@@ -62,7 +63,10 @@ if "code 1: label map taken: 2 materials:" not in taken: fail(f"the good label m
 t = re.search(r"tissue \(label 1, colour #ff0000, (\d+) voxels\)", taken)
 b = re.search(r"bone \(label 2, colour #e6dcc8, (\d+) voxels, critical\)", taken)
 if not (t and b): fail(f"names, values, colours or critical not as the LBMETA and scene say: {taken}")
-if int(t.group(1)) < 1000 or int(b.group(1)) < 1000: fail(f"too few voxels labelled: {taken}")
+sent = [l for l in log if l.startswith("labelmap Seg: voxels")]
+if len(sent) != 3: fail(f"{len(sent)} label maps sent, not 3")
+counts = [int(x) for x in sent[2].split()[3:]]  # the good one's voxels of value 0, 1, 2, counted by the client
+if [int(t.group(1)), int(b.group(1))] != counts[1:]: fail(f"the voxels named {taken} are not the {counts[1:]} sent")
 if not all("code 1:" in s for s in status[3:]): fail(f"a command failed: {status[3:]}")
 # 4. the carve removed tissue, never the client's bone (the head's voxels >= 1150)
 u = re.search(r"unchanged .*: (\d+) voxels differ where BASE >= 1150, (\d+) below", "\n".join(log))

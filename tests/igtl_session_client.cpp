@@ -33,7 +33,8 @@
 //                     each a label LABEL of voxel value VALUE and colour R G B (0-255, alpha 255)
 //   labelmap NAME DX N T1..TN  an int16 label map IMAGE named NAME on BASE's grid, its centre
 //                     moved DX mm along R; each voxel the number of thresholds Ti at or below
-//                     BASE's value there; prints the STATUS answer
+//                     BASE's value there; prints "labelmap NAME: voxels C0 C1 ... CN" (how
+//                     many voxels hold each value 0..N), then the STATUS answer
 //   unchanged FILE LO prints "unchanged FILE: A voxels differ where BASE >= LO, B below" (FILE
 //                     against BASE itself, voxel for voxel)
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
@@ -475,6 +476,11 @@ bool Client::action(const std::string& a) {
     for (double& v : t) v = num();
     isotouch::engine::Volume l = base;
     for (float& v : l.voxels) v = float(std::count_if(t.begin(), t.end(), [&](double x) { return x <= v; }));
+    std::vector<std::size_t> counts(t.size() + 1, 0);
+    for (const float v : l.voxels) ++counts[std::size_t(v)];
+    std::cout << "labelmap " << name << ": voxels";
+    for (const std::size_t c : counts) std::cout << " " << c;
+    std::cout << "\n";
     l.grid.origin_m.x -= dx * 1e-3;  // R is -x in LPS
     const std::vector<std::uint8_t> b = isotouch::test::image_of(l, igtl::ImageMessage::ENDIAN_LITTLE, name.c_str());
     {

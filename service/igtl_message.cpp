@@ -210,6 +210,13 @@ Incoming read_kept(ByteSource& src, igtl::MessageHeader* header, Incoming in, st
       labels->GetLabelMetaElement(i, e);
       const std::string name = e->GetDeviceName();
       in.labels.push_back(printable(name.c_str(), std::min<std::size_t>(name.size(), IGTL_LBMETA_LEN_DEVICE_NAME)));
+      const std::string label_name = e->GetName();
+      LabelMetaEntry entry;
+      entry.name = printable(label_name.c_str(), std::min<std::size_t>(label_name.size(), IGTL_LBMETA_LEN_NAME));
+      entry.image = in.labels.back();
+      entry.label = int(e->GetLabel());
+      e->GetRGBA(entry.rgba.data());
+      in.label_meta.push_back(std::move(entry));
     }
   } else {
     in.kind = Incoming::Kind::kString;

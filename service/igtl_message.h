@@ -8,6 +8,7 @@
 // IMAGE's voxels and a STRING's text past a short body). Kept: IMAGE, TRANSFORM, STRING,
 // LBMETA (LABELMETA: which images are label maps); other types are read and skipped. A refusal says why, for the STATUS sent back.
 #pragma once
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -57,6 +58,14 @@ struct MessageLimits {
   std::function<AdmittedImage(const std::string& device, const ImageSize& size)> admit_image;
 };
 
+/// One element of a LBMETA (LABELMETA): a label of the label map IMAGE `image`.
+struct LabelMetaEntry {
+  std::string name;   ///< the label's name (the element's Name, printable, at most 64 characters)
+  std::string image;  ///< the label map IMAGE's device name (the element's DeviceName)
+  int label = 0;      ///< its voxel value in that image (0-255)
+  std::array<std::uint8_t, 4> rgba{0, 0, 0, 0};  ///< its colour, RGBA 0-255
+};
+
 /// One message read from a source.
 struct Incoming {
   enum class Kind {
@@ -78,6 +87,7 @@ struct Incoming {
   double matrix[4][4] = {};
   std::string text;
   std::vector<std::string> labels;
+  std::vector<LabelMetaEntry> label_meta;  ///< kLabelMeta: every element, in the message's order
   /// An IMAGE's: MessageLimits::admit_image's token (null: none) and the bytes it counts.
   std::shared_ptr<void> held;
   std::uint64_t held_bytes = 0;

@@ -124,12 +124,8 @@ void place(igtl::ImageMessage& image, const std::string& dev, engine::Volume& v)
 
 }  // namespace
 
-engine::Volume volume_from_image(igtl::ImageMessage& image) {
-  const std::string dev = image.GetDeviceName();
-  std::string lower = dev;
-  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
-  if (lower.find("label") != std::string::npos)
-    refuse(dev, "the device name says label map; label maps are not supported yet (send a scalar image)");
+namespace {
+engine::Volume read_volume(igtl::ImageMessage& image, const std::string& dev) {
   engine::Volume v;
   check_size(image, dev, v);
   place(image, dev, v);
@@ -139,6 +135,27 @@ engine::Volume volume_from_image(igtl::ImageMessage& image) {
   copy_voxels(image, v);
   v.update_stats();
   return v;
+}
+}  // namespace
+
+engine::Volume volume_from_image(igtl::ImageMessage& image) {
+  const std::string dev = image.GetDeviceName();
+  std::string lower = dev;
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  if (lower.find("label") != std::string::npos)
+    refuse(dev, "the device name says label map; a label map is taken only after a LBMETA naming it (send a "
+                "scalar image, or the LBMETA first)");
+  return read_volume(image, dev);
+}
+
+engine::Volume label_map_from_image(igtl::ImageMessage& image) {
+  const std::string dev = image.GetDeviceName();
+  using I = igtl::ImageMessage;
+  const int t = image.GetScalarType();
+  if (t == I::TYPE_FLOAT32 || t == I::TYPE_FLOAT64)
+    refuse(dev, std::string("a label map's scalar type is ") + type_name(t) +
+                    "; label maps are integer images (char, short, int, signed or unsigned)");
+  return read_volume(image, dev);
 }
 
 void VoxelBox::add(const VoxelBox& o) {

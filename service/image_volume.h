@@ -28,6 +28,12 @@ namespace isotouch::service {
 /// not unit and perpendicular within 1e-3, a centre that is not finite.
 engine::Volume volume_from_image(igtl::ImageMessage& image);
 
+/// A label map IMAGE (one a LBMETA named) read as volume_from_image reads an image, its
+/// voxels the label values (whole numbers as sent), whatever its device name. Refuses, with
+/// engine::VolumeError naming the field and value, what volume_from_image refuses (but the
+/// name) and a float scalar type (label maps are integer images).
+engine::Volume label_map_from_image(igtl::ImageMessage& image);
+
 /// A box of voxels [lo, hi) in index space.
 struct VoxelBox {
   std::array<int, 3> lo{0, 0, 0}, hi{0, 0, 0};

@@ -38,6 +38,7 @@
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/image_isovalue.h"
+#include "isotouch/service/label_map.h"
 #include "isotouch/service/outbox.h"
 #include "isotouch/session/live_session.h"
 #include "isotouch/session/session.h"
@@ -71,6 +72,7 @@ struct Counters {
   std::atomic<long> clients{0}, images{0}, refused{0}, transforms{0}, strings{0}, skipped{0}, broken{0};
   std::atomic<long> sent{0}, dropped_sends{0}, busy_sends{0}, commands{0}, images_sent{0};
   std::atomic<long> idle{0}, dropped_clients{0};
+  std::atomic<long> label_maps{0};  // label map IMAGEs taken as the session's materials
 };
 
 /// The most bytes that may wait in a client's Outbox behind the message being sent; past it
@@ -114,6 +116,16 @@ struct Pending {
   int client = 0;
 };
 
+/// A received label map's materials waiting for the main thread, for the session of
+/// `generation` (the one its grid was checked against).
+struct PendingLabels {
+  std::shared_ptr<const materials::LabelVolume> labels;
+  std::shared_ptr<Outbox> from;
+  std::string device;
+  std::uint64_t generation = 0;
+  int client = 0;
+};
+
 /// A received IMAGE's volume waiting for the main thread, and whom to answer once it is
 /// the session's (or could not be made so).
 struct PendingVolume {
@@ -135,6 +147,9 @@ struct Session {
   session::BrushTargets targets;  // the tool's material and empty values at this isovalue
   std::string image_name;  // the device name the edited volume goes back under
   std::uint64_t generation = 0;  // a new one per start_session
+  /// A client's label map (its LBMETA's materials) the drill cuts by; null: none (the scene's
+  /// own materials, if any, for the scene's volume).
+  std::shared_ptr<const materials::LabelVolume> labels;
   io::Journal* journal = nullptr;  // where its edits go (the scene's volume's session, an IMAGE's): Server-owned
 };
 
@@ -184,6 +199,8 @@ class Server {
   AdmittedImage admit_image(const std::string& device, const ImageSize& size);
   std::uint64_t session_bytes_per_voxel() const;
   void swap_volume(PendingVolume p);
+  void take_label_map(Client& c, const Incoming& in, const std::vector<LabelMetaEntry>& meta);
+  void apply_labels(PendingLabels p);
   void answer_image(const PendingVolume& p, int code, const std::string& text);
   void send_edited_or_say_why();
   /// The test fault hook: true when `where` is to fail for the image named `image`.
@@ -293,7 +310,10 @@ class Server {
   std::optional<Pending> next_iso_;            // an isovalue command waiting for the main thread
   bool changing_ = false;  // guarded by volume_mu_: the main thread took one of the two and is applying it
   std::mutex labels_mu_;
-  std::set<std::string> label_images_;  // device names a LBMETA described as label maps
+  // Device names a LBMETA described as label maps, and its elements for each (a later LBMETA
+  // naming an image replaces that image's).
+  std::map<std::string, std::vector<LabelMetaEntry>> label_images_;
+  std::optional<PendingLabels> next_labels_;  // guarded by volume_mu_: a label map for the main thread
   std::mutex cmd_mu_;
   std::deque<Pending> commands_;  // parsed, in arrival order, for the command thread
   // Command thread only: the tool, whether it is applied, the stroke it has open.
@@ -346,11 +366,14 @@ void Server::handle(Client& c, Incoming& in) {
     case K::kImage:
       c.subscribed = true;
       try {
+        std::optional<std::vector<LabelMetaEntry>> meta;
         {
           std::lock_guard<std::mutex> lock(labels_mu_);
-          if (label_images_.count(in.device))
-            throw engine::VolumeError("igtl:" + in.device + ": a LABELMETA describes '" + in.device +
-                                      "' as a label map; label maps are not supported yet (send a scalar image)");
+          if (const auto it = label_images_.find(in.device); it != label_images_.end()) meta = it->second;
+        }
+        if (meta) {
+          take_label_map(c, in, *meta);
+          break;
         }
         std::optional<PendingVolume> superseded;
         std::string dims;
@@ -403,9 +426,18 @@ void Server::handle(Client& c, Incoming& in) {
       break;
     case K::kLabelMeta: {
       std::lock_guard<std::mutex> lock(labels_mu_);
+      std::map<std::string, std::vector<LabelMetaEntry>> by_image;
+      for (const LabelMetaEntry& e : in.label_meta) by_image[e.image].push_back(e);
       std::string names;
-      for (const std::string& l : in.labels) label_images_.insert(l), names += " '" + l + "'";
-      log_.line("labels   client " + std::to_string(c.id) + ": label maps" + names + " (their IMAGEs are refused)");
+      for (auto& [image, entries] : by_image) {
+        names += " '" + image + "' (";
+        for (std::size_t i = 0; i < entries.size(); ++i)
+          names += (i ? ", " : "") + entries[i].name + " " + std::to_string(entries[i].label);
+        names += ")";
+        label_images_[image] = std::move(entries);
+      }
+      log_.line("labels   client " + std::to_string(c.id) + ": label maps" + names +
+                " (their IMAGEs become the session's materials)");
       break;
     }
     case K::kSkipped: n_.skipped.fetch_add(1); break;
@@ -1163,17 +1195,100 @@ struct BuildingBytes {
 /// share the GPU context's one queue, pool and fence).
 constexpr double kSettleS = 5.0;
 
+/// A label map IMAGE (a LBMETA named it, `meta` its elements): checked against the running
+/// session's grid and its labels here, then handed to the main thread (apply_labels), which
+/// answers it. What is wrong is refused with a STATUS naming the field and both values.
+void Server::take_label_map(Client& c, const Incoming& in, const std::vector<LabelMetaEntry>& meta) {
+  engine::Volume frame;
+  std::uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_) frame = session_->frame, generation = session_->generation;
+  }
+  if (generation == 0)
+    return refuse(c, in, igtl::StatusMessage::STATUS_NOT_READY, "igtl:" + in.device + ": no session for its labels yet");
+  std::shared_ptr<const materials::LabelVolume> lv;
+  {
+    std::lock_guard<std::mutex> image_lock(image_mu_);
+    if (const std::string why = memory_refusal(*in.image, in.held_bytes); !why.empty())
+      return refuse(c, in, igtl::StatusMessage::STATUS_RESOURCE_ERROR, why);
+    const engine::Volume labels = label_map_from_image(*in.image);
+    lv = std::make_shared<const materials::LabelVolume>(
+        labels_from_image(labels, in.device, meta, frame, scene_.materials.list));
+  }
+  log_.line("labels   client " + std::to_string(c.id) + ", '" + in.device + "': a label map on the volume's grid, " +
+            std::to_string(lv->materials.size()) + " materials; the session takes them once its edits settle");
+  std::optional<PendingLabels> superseded;
+  {
+    std::lock_guard<std::mutex> lock(volume_mu_);
+    superseded.swap(next_labels_);
+    next_labels_ = PendingLabels{std::move(lv), c.outbox, in.device, generation, c.id};
+  }
+  if (superseded) {
+    n_.refused.fetch_add(1);
+    superseded->from->push(pack_status(igtl::StatusMessage::STATUS_BUSY, superseded->device,
+                                       "igtl:" + superseded->device + ": not taken: a newer label map ('" + in.device +
+                                           "') came before the session took it"));
+  }
+}
+
+/// Main thread: the label map's materials become the running session's (the drill's cut per
+/// material, the names and colours in the log and the STATUS), its edits held and settled
+/// first; refused when the session it was checked against is gone (a new volume came).
+void Server::apply_labels(PendingLabels p) {
+  auto answer_labels = [&](int code, const std::string& text) {
+    if (code != igtl::StatusMessage::STATUS_OK) {
+      n_.refused.fetch_add(1);
+      log_.line("refused  client " + std::to_string(p.client) + ", IMAGE '" + p.device + "': " + text);
+    }
+    p.from->push(pack_status(code, p.device, text));
+  };
+  const HoldEdits hold(session_mu_, preparing_);
+  const std::string keep = "; the session goes on with the materials it had";
+  if (!wait_edits_applied(kSettleS))
+    return answer_labels(igtl::StatusMessage::STATUS_BUSY,
+                         "igtl:" + p.device + ": not taken: the running session's edits did not settle" + keep);
+  Session* s = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    if (session_ && session_->generation == p.generation) s = session_.get();
+  }
+  if (!s)
+    return answer_labels(igtl::StatusMessage::STATUS_NOT_READY,
+                         "igtl:" + p.device + ": not taken: the session's volume changed since it came; send it again");
+  try {
+    s->parts->edits().sculptor().set_material_cut(run::material_cut(*p.labels));
+  } catch (const std::exception& e) {
+    return answer_labels(igtl::StatusMessage::STATUS_CONFIG_ERROR, "igtl:" + p.device + ": not taken: " + e.what() + keep);
+  }
+  {
+    std::lock_guard<std::mutex> lock(session_mu_);
+    s->labels = p.labels;
+  }
+  const std::string what = describe_materials(*p.labels);
+  log_.line("materials client " + std::to_string(p.client) + ", '" + p.device + "': " +
+            std::to_string(p.labels->materials.size()) + " from " + p.labels->source + ": " + what + "; " +
+            std::to_string(p.labels->voxels[0]) + " voxels unlabelled (the drill cuts per material, never the "
+            "critical ones; the servo does not feel materials yet)");
+  for (const std::string& n : p.labels->notes) log_.line("         note: " + n);
+  n_.label_maps.fetch_add(1);
+  answer_labels(igtl::StatusMessage::STATUS_OK, "label map taken: " + std::to_string(p.labels->materials.size()) +
+                                                    " materials: " + what);
+}
+
 /// `isovalue V` (checked by the command thread): the session restarts on its edited volume
 /// at V (the renderer, the live field's active bricks and the tool's targets follow it; the
 /// undo history starts afresh). The new session is built first, while the old one serves
 /// with its edits held: when it cannot be built the isovalue is refused and nothing changes.
 void Server::restart_at_isovalue(const Pending& p) {
   std::shared_ptr<EditMirror> mirror;
+  std::shared_ptr<const materials::LabelVolume> labels;  // a client's label map: kept (same grid)
   std::string name;
   std::uint64_t voxels = 0;
   {
     std::lock_guard<std::mutex> lock(session_mu_);
     if (session_) mirror = session_->mirror, name = session_->image_name, voxels = session_->frame.grid.voxel_count();
+    if (session_) labels = session_->labels;
   }
   if (!mirror) return answer(p, igtl::StatusMessage::STATUS_NOT_READY, "isovalue: no session");
   const HoldEdits hold(session_mu_, preparing_);
@@ -1193,6 +1308,8 @@ void Server::restart_at_isovalue(const Pending& p) {
     live.background = float(live.iso.outside_value(v.min_value, v.max_value));
     hri.tau = p.cmd.value;
     next = prepare_session(std::move(v), live, hri);
+    if (labels) next->parts->edits().sculptor().set_material_cut(run::material_cut(*labels)), next->labels = labels;
+    else if (setup_.cut && name == "isotouch") next->parts->edits().sculptor().set_material_cut(setup_.cut);
   } catch (const std::exception& e) {
     return answer(p, igtl::StatusMessage::STATUS_RESOURCE_ERROR,
                   what + ": the session could not be rebuilt at it (" + e.what() + "); the isovalue is unchanged");
@@ -1618,6 +1735,7 @@ int Server::run() {
       log_.line("journal  the restored session runs at " + iso_text(*j.isovalue) + ", a client's (not the scene's)");
     }
     std::unique_ptr<Session> first = prepare_session(setup_.volume, setup_.live, setup_.hri);
+    if (setup_.cut) first->parts->edits().sculptor().set_material_cut(setup_.cut);  // the scene's materials
     start_journal(*first, j, journal_crc_, std::filesystem::absolute(scene_.file).string(), setup_.live.iso);
     journal_ = std::move(j);
     start_session(std::move(first));
@@ -1657,6 +1775,7 @@ int Server::run() {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));  // connections: the accept thread
     std::optional<PendingVolume> v;
     std::optional<Pending> iso;
+    std::optional<PendingLabels> labels;
     // A taken IMAGE's voxels and session count against the memory budget from the moment it
     // stops being next_volume_ (under the same lock) until it runs or is refused: between the
     // two it counted nowhere, and a second IMAGE could pass beside it.
@@ -1666,6 +1785,7 @@ int Server::run() {
       v.swap(next_volume_);
       if (v) building.emplace(building_bytes_, v->volume.grid.voxel_count() * session_bytes_per_voxel());
       if (!v) iso.swap(next_iso_);
+      if (!v && !iso) labels.swap(next_labels_);
       changing_ = v || iso;
     }
     struct Changed {
@@ -1681,11 +1801,12 @@ int Server::run() {
     }
     if (v) swap_volume(std::move(*v));
     if (iso) restart_at_isovalue(*iso);
+    if (labels) apply_labels(std::move(*labels));
   }
   join_threads(display, commands);
   if (const std::unique_ptr<Session> last = stop_session(); last && last->journal) close_journal();
   std::ostringstream s;
-  s << "served   " << n_.clients << " clients; images taken " << n_.images << ", refused " << n_.refused
+  s << "served   " << n_.clients << " clients; images taken " << n_.images << ", label maps taken " << n_.label_maps << ", refused " << n_.refused
     << " messages, transforms " << n_.transforms << " (" << device_.pushed() << " on '" << o_.stream << "'), strings "
     << n_.strings << ", skipped " << n_.skipped << ", broken streams " << n_.broken << "; sent " << n_.sent
     << " transforms (" << n_.dropped_sends << " dropped: a client not reading, " << n_.busy_sends

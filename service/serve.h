@@ -7,7 +7,9 @@
 //                                     one client's: the first, until it stops for stale_s or goes),
 //                                     unless `haptic` names the device (then ignored)
 //     STRING                       -> parse_command (commands.h) -> the command thread
-//     LBMETA                       -> the images it names are label maps: refused when they come
+//     LBMETA                       -> the images it names are label maps: such an IMAGE (on the
+//                                     session volume's grid, every value named) becomes the
+//                                     session's materials (label_map.h), the drill's cut per material
 //     anything refused             -> a STATUS back naming why; the connection goes on when it can
 //   display thread: every 1 / display_hz, to every client: TRANSFORMs "HIP" and "Proxy"
 //     (translation in mm, RAS; only while the servo renders a fresh pose) and "Force"

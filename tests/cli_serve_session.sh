@@ -9,7 +9,8 @@
 #   3. carve (tool, apply, stop): the edited IMAGEs the client received, applied to the head,
 #      equal the file `save` wrote, and differ from the head; undo gives the head back voxel
 #      for voxel; redo the carved file again; every IMAGE in the head's place;
-#   4. an IMAGE named by a LABELMETA, or with "label" in its name, refused with a STATUS; a
+#   4. an IMAGE named by a LABELMETA holding values it does not name (the head), or with
+#      "label" in its name and no LABELMETA, refused with a STATUS; a
 #      scalar image taken, and a save right after it writes that image (not the session it
 #      replaces, and not refused while the sessions change over);
 #   5. a save that cannot write (its name is a folder) answered with STATUS 11; serve ends by
@@ -64,7 +65,7 @@ want = [("code 1: isovalue 1900: done",), ("code 1: isovalue 500: done",), ("cod
         ("code 10: save name '../x.mha'",), ("code 10: save name 'x.txt': not a format",), ("code 10: tool radius '0'",),
         ("code 1: tool carve 4 300: done",), ("code 1: apply: done",), ("code 1: stop: done",),
         ("code 1: save carved.mha: wrote",), ("code 1: undo: done",), ("code 1: redo: done",),
-        ("code 10: ", "a LABELMETA describes 'Seg' as a label map"), ("code 10: ", "label map"),
+        ("code 10: ", "igtl:Seg: label value ", "is no label of the LBMETA"), ("code 10: ", "label map"),
         ("code 1: volume taken: 64 x 64 x 93",), ("code 1: save taken.mha: wrote",), ("code 11: save blocked.mha: ",)]
 if len(status) != len(want): fail(f"{len(status)} STATUS answers, not {len(want)}")
 for got, w in zip(status, want):

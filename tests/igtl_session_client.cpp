@@ -30,6 +30,14 @@
 //                     with every IMAGE received applied against FILE; G: "ok" when every
 //                     IMAGE's dimensions, spacing, directions and centre were BASE's within 1e-3)
 //   labelmeta NAME    a LBMETA describing the image NAME as a label map
+//   lbmeta NAME N (LABEL VALUE R G B) x N   a LBMETA of N elements for the label map NAME:
+//                     each a label LABEL of voxel value VALUE and colour R G B (0-255, alpha 255)
+//   labelmap NAME DX N T1..TN  an int16 label map IMAGE named NAME on BASE's grid, its centre
+//                     moved DX mm along R; each voxel the number of thresholds Ti at or below
+//                     BASE's value there; prints "labelmap NAME: voxels C0 C1 ... CN" (how
+//                     many voxels hold each value 0..N), then the STATUS answer
+//   unchanged FILE LO prints "unchanged FILE: A voxels differ where BASE >= LO, B below" (FILE
+//                     against BASE itself, voxel for voxel)
 //   image NAME        BASE as an IMAGE named NAME; prints the STATUS answer
 //   ramp NAME NX NY NZ  an NX x NY x NZ uint8 IMAGE named NAME (1 mm voxels, RAS, centred on
 //                     the origin; value x % 256); prints the STATUS answer
@@ -452,6 +460,55 @@ bool Client::action(const std::string& a) {
     e->SetLabel(1);
     m->AddLabelMetaElement(e);
     send(sock, m);
+    return true;
+  }
+  if (a == "lbmeta") {
+    igtl::LabelMetaMessage::Pointer m = igtl::LabelMetaMessage::New();
+    m->SetDeviceName("Labels");
+    const std::string image = arg();
+    const int n = int(num());
+    for (int i = 0; i < n; ++i) {
+      igtl::LabelMetaElement::Pointer e = igtl::LabelMetaElement::New();
+      e->SetName(arg().c_str());
+      e->SetDeviceName(image.c_str());
+      e->SetLabel(igtlUint8(num()));
+      const int r = int(num()), g = int(num()), b = int(num());
+      e->SetRGBA(igtlUint8(r), igtlUint8(g), igtlUint8(b), 255);
+      m->AddLabelMetaElement(e);
+    }
+    send(sock, m);
+    return true;
+  }
+  if (a == "labelmap") {
+    const std::string name = arg();
+    const double dx = num();
+    std::vector<double> t(std::size_t(std::max(0.0, num())));
+    for (double& v : t) v = num();
+    isotouch::engine::Volume l = base;
+    for (float& v : l.voxels) v = float(std::count_if(t.begin(), t.end(), [&](double x) { return x <= v; }));
+    std::vector<std::size_t> counts(t.size() + 1, 0);
+    for (const float v : l.voxels) ++counts[std::size_t(v)];
+    std::cout << "labelmap " << name << ": voxels";
+    for (const std::size_t c : counts) std::cout << " " << c;
+    std::cout << "\n";
+    l.grid.origin_m.x -= dx * 1e-3;  // R is -x in LPS
+    const std::vector<std::uint8_t> b = isotouch::test::image_of(l, igtl::ImageMessage::ENDIAN_LITTLE, name.c_str());
+    {
+      std::lock_guard<std::mutex> lock(send_mu);
+      sock->Send(b.data(), int(b.size()));
+    }
+    return wait_status(s, name);
+  }
+  if (a == "unchanged") {
+    const std::string file = arg();
+    const double lo = num();
+    const isotouch::engine::Volume f = isotouch::io::load_volume(file);
+    if (f.voxels.size() != base.voxels.size()) return std::cout << "unchanged " << file << ": another size\n", false;
+    std::size_t above = 0, below = 0;
+    for (std::size_t k = 0; k < f.voxels.size(); ++k)
+      if (f.voxels[k] != base.voxels[k]) ++(base.voxels[k] >= lo ? above : below);
+    std::cout << "unchanged " << file << ": " << above << " voxels differ where BASE >= " << lo << ", " << below
+              << " below\n";
     return true;
   }
   if (a == "rebase") {

@@ -435,6 +435,19 @@ m cut-margin-per-material    run/scene_setup.cpp 'only[i + 1] = true;' \
 # The run log promises the margin warning only where it runs (with edits).
 m cut-margin-log-with-edits  run/scene_setup.cpp 'if (!s.critical.empty() && scene.edits.present)' 'if (!s.critical.empty())' \
                                test_material_margin_run 'MaterialMarginRun.*'
+# serve's label map (issue 66): on the session volume's grid, every value named by its LBMETA,
+# the LBMETA's values kept, a scene material of the same name lending its fields.
+L=service/label_map.cpp
+m label-map-origin           $L 'if (!(std::abs(lo - fo) <= kLabelOriginTolerance * smallest))' 'if (false)' \
+                               test_serve_labels 'ServeLabels.*'
+m label-map-unknown-value    $L ' && (v == 0.f || table[std::size_t(v)] != 0);' ';' \
+                               test_serve_labels 'ServeLabels.*'
+m label-map-scene-fields     $L '      m = *same;' '' test_serve_labels 'ServeLabels.*'
+m label-meta-value           service/igtl_message.cpp '      entry.label = int(e->GetLabel());' '' \
+                               test_serve_labels 'ServeLabels.*'
+# ... and serve's drill then cuts by it: the client's critical bone is never carved.
+m serve-label-map-cut        service/serve.cpp '    s->parts->edits().sculptor().set_material_cut(run::material_cut(*p.labels));' '' \
+                               'isotouch igtl_session_client' 'ctest:cli_serve_labels'
 
 # ---- The run ----
 work=$root/build-mutants

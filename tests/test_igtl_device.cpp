@@ -200,7 +200,7 @@ TEST(ServiceIgtlDevice, AStalledServoGetsTheZeroAtOnceNotWithTheNextPose) {
   IgtlDeviceOptions o;
   o.host = "127.0.0.1";
   o.port = peer.port();
-  o.measure_s = 1.1;
+  o.measure_s = 1.5;  // 15 poses expected, 10 needed: a loaded machine may delay the peer's (9 of 11 in 1.1 s once, load 13)
   IgtlDevice d(o);
   d.enable_force(true, 0.020);
   const core::Vec3 f{0.5, 0, 0};

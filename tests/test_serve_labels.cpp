@@ -18,25 +18,12 @@
 #include "isotouch/service/image_volume.h"
 #include "isotouch/service/label_map.h"
 #include "isotouch/tests/igtl_test_sender.h"
+#include "isotouch/tests/memory_source.h"
 
 namespace isotouch::service {
 namespace {
 
-class BufferSource : public ByteSource {
- public:
-  explicit BufferSource(std::vector<std::uint8_t> b) : b_(std::move(b)) {}
-  std::size_t read(void* dst, std::size_t n, bool) override {
-    const std::size_t k = std::min(n, b_.size() - at_);
-    std::memcpy(dst, b_.data() + at_, k);
-    at_ += k;
-    return k;
-  }
-  std::string why() const override { return "end of buffer"; }
-
- private:
-  std::vector<std::uint8_t> b_;
-  std::size_t at_ = 0;
-};
+using test::MemorySource;
 
 TEST(ServeLabels, LabelMetaKeepsNamesValuesAndColours) {
   igtl::LabelMetaMessage::Pointer m = igtl::LabelMetaMessage::New();
@@ -51,7 +38,7 @@ TEST(ServeLabels, LabelMetaKeepsNamesValuesAndColours) {
     e->SetRGBA(s.rgba[0], s.rgba[1], s.rgba[2], s.rgba[3]);
     m->AddLabelMetaElement(e);
   }
-  BufferSource src(test::bytes_of(m));
+  MemorySource src(test::bytes_of(m));
   const Incoming in = read_message(src, MessageLimits{});
   ASSERT_EQ(in.kind, Incoming::Kind::kLabelMeta) << in.why;
   ASSERT_EQ(in.label_meta.size(), 2u);
@@ -198,7 +185,7 @@ TEST(ServeLabels, LabelMapImageMustBeIntegerAndMayBeNamedLabel) {
   for (std::size_t i = 0; i < v.voxels.size(); ++i) v.voxels[i] = float(i % 3);
   // int16 (what igtl_test_sender sends), named as Slicer names a labelmap: read
   std::vector<std::uint8_t> b = test::image_of(v, igtl::ImageMessage::ENDIAN_LITTLE, "HeadLabelMap");
-  BufferSource src(b);
+  MemorySource src(b);
   Incoming in = read_message(src, MessageLimits{});
   ASSERT_EQ(in.kind, Incoming::Kind::kImage) << in.why;
   const engine::Volume l = label_map_from_image(*in.image);

@@ -36,6 +36,7 @@
 #include "isotouch/service/igtl_socket.h"
 #include "isotouch/service/transform_device.h"
 #include "isotouch/tests/igtl_test_sender.h"
+#include "isotouch/tests/memory_source.h"
 #include "isotouch/tests/temp_dir.h"
 #include "isotouch/io/volume_io.h"
 
@@ -46,22 +47,7 @@ using test::image_of;
 
 const std::string kHead = std::string(ISOTOUCH_TEST_DATA) + "/ct-head-headsq/headsq_64x64x93_int16.mhd";
 
-/// Bytes from a buffer (what a client sent), one read at a time.
-class MemorySource final : public ByteSource {
- public:
-  explicit MemorySource(std::vector<std::uint8_t> b) : b_(std::move(b)) {}
-  std::size_t read(void* dst, std::size_t n, bool) override {
-    const std::size_t k = std::min(n, b_.size() - at_);
-    std::memcpy(dst, b_.data() + at_, k);
-    at_ += k;
-    return k;
-  }
-  std::string why() const override { return "end of buffer"; }
-
- private:
-  std::vector<std::uint8_t> b_;
-  std::size_t at_ = 0;
-};
+using test::MemorySource;
 
 engine::Volume received_volume(std::vector<std::uint8_t> bytes) {
   MemorySource src(std::move(bytes));
@@ -325,12 +311,17 @@ TEST(ServiceDevice, StreamPointsAndForcesInTheVolumesFrames) {
 // The poses the servo never read are counted once each, when a newer pose replaces them, by
 // how soon it came: pushed 1-2 read, 3-4-5 pushed with one read after 5: poses 3 and 4 were
 // never read; pose 5, read, and pose 6, pushed last and not read yet, are not counted.
-TEST(ServiceDevice, EachPoseNeverReadIsCountedOnce) {
+/// A device streaming into a 4^3 volume of 1 mm voxels, no offset.
+void set_unit_frame(TransformDevice& d) {
   engine::Volume v;
   v.grid.dims = {4, 4, 4};
   v.grid.spacing_m = {1e-3, 1e-3, 1e-3};
-  TransformDevice d;
   d.set_frame(v, {0, 0, 0});
+}
+
+TEST(ServiceDevice, EachPoseNeverReadIsCountedOnce) {
+  TransformDevice d;
+  set_unit_frame(d);
   const double t[3] = {1, 2, 3};
   d.push_mm(t), d.read(), d.push_mm(t), d.read();
   d.push_mm(t), d.push_mm(t), d.push_mm(t), d.read(), d.read();
@@ -349,11 +340,8 @@ TEST(ServiceDevice, EachPoseNeverReadIsCountedOnce) {
 // Afterwards each prediction seen is matched to the push that made it: the pose read then
 // must be that push's or a newer one.
 TEST(ServiceDevice, APoseIsReadableOnceItsArrivalMovedTheClock) {
-  engine::Volume v;
-  v.grid.dims = {4, 4, 4};
-  v.grid.spacing_m = {1e-3, 1e-3, 1e-3};
   TransformDevice d;
-  d.set_frame(v, {0, 0, 0});
+  set_unit_frame(d);
   constexpr int kPushes = 60000;
   std::vector<std::int64_t> due_after(kPushes);  // the pusher's; read after it joined
   std::atomic<bool> done{false};

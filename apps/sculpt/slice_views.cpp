@@ -31,6 +31,12 @@ void SliceViews::open(const engine::Volume& vol, const core::Isosurface& iso, bo
   plain_key_ = {};
 }
 
+void SliceViews::set_labels(SliceLabels labels) {
+  labels_ = std::move(labels);
+  shown_.reset();
+  plain_key_ = {};
+}
+
 int SliceViews::pane_size(const std::array<int, 2>& fb) { return std::max(16, std::min(fb[1] / 3, fb[0] / 4)); }
 
 bool SliceViews::update(const std::vector<float>& voxels, const Vec3& hip_index, const Vec3& proxy_index, long edits,
@@ -48,7 +54,7 @@ bool SliceViews::update(const std::vector<float>& voxels, const Vec3& hip_index,
   fb_ = fb;
   size_ = pane_size(fb);
   column_.assign(std::size_t(size_) * std::size_t(3 * size_), 0xFF000000u);
-  const SliceStyle plain{control_.wl, iso_, false};
+  const SliceStyle plain{control_.wl, iso_, false, labels_.ids ? &labels_ : nullptr};
   for (SliceKind k : kSliceKinds) {
     const std::size_t i = std::size_t(k);
     const int normal = axes_[i].normal;

@@ -36,6 +36,9 @@ class SliceViews {
  public:
   /// The planes of `vol` (its direction matrix), the isocontour at `iso`, the default window.
   void open(const engine::Volume& vol, const core::Isosurface& iso, bool hounsfield);
+  /// A labelled scene's materials (slices.h, SliceLabels): its pointers must outlive the views.
+  /// Shown from the next update on.
+  void set_labels(SliceLabels labels);
   SliceControl& control() { return control_; }
   const SliceControl& control() const { return control_; }
   /// The panes' size for a framebuffer of `fb` pixels: a third of its height, at most a quarter of its width.
@@ -69,6 +72,7 @@ class SliceViews {
   core::Grid grid_;
   core::Isosurface iso_;
   SliceControl control_;
+  SliceLabels labels_;
   std::array<SliceAxes, 3> axes_{};
   std::array<SliceImage, 3> images_{};
   std::array<SlicePane, 3> panes_{};

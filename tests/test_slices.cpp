@@ -336,5 +336,56 @@ TEST(SliceLabels, ToothSlicesShowEachMaterialsColourWhereTheLabelVolumeHasIt) {
   EXPECT_GT(cleared, 0u) << "the ball is in no slice: the check says little";
 }
 
+// The Materials panel's visibility and colours reach the slice views (SliceViews::update
+// made again when they change): a hidden material's voxels show no material (grey, or the
+// isocontour's colour), a recoloured one its new colour; truth: the label volume.
+TEST(SliceLabels, HiddenAndRecolouredMaterialsInTheSliceViews) {
+  const io::Scene scene = io::load_scene(std::string(ISOTOUCH_TEST_DATA) + "/../scenes/tooth-labels.json");
+  const engine::Volume vol = io::load_volume(scene.volume_path);
+  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, vol);
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  SliceViews views;
+  views.open(vol, iso, false);
+  MaterialsControl mc;
+  for (const materials::Material& m : lv.materials)
+    mc.rows.push_back({m.name, {float(m.color[0]), float(m.color[1]), float(m.color[2])}, true, m.critical, m.margin_mm,
+                       m.stiffness_n_per_m, 0});
+  views.set_labels(&lv.ids, &vol.voxels, mc);
+  const Vec3 centre = vol.grid.to_index(vol.grid.centre_m());
+  const std::array<int, 2> fb{640, 480};
+  // The axial slice through the centre: its dentin (id 2) pixels off the marks, beside the
+  // same slice without labels.
+  const auto dentin_pixels = [&](const std::string& tag) {
+    EXPECT_TRUE(views.update(vol.voxels, centre, centre, 0, fb)) << tag << ": computed again";
+    const SliceImage& shown = views.image(SliceKind::kAxial);
+    SliceStyle plain{views.control().wl, iso, false, nullptr};
+    const SliceImage grey = make_slice(vol.grid, vol.voxels, SliceKind::kAxial, shown.axes, centre, centre, plain);
+    std::vector<std::array<std::uint32_t, 2>> out;  // (the grey slice's pixel, the view's)
+    for (int r = 0; r < grey.height; ++r)
+      for (int c = 0; c < grey.width; ++c) {
+        const Vec3 i = slice_pixel_index(grey, c, r);
+        if (lv.at(int(i.x), int(i.y), int(i.z)) != 2 || std::abs(c - shown.hip[0]) <= 2 || std::abs(r - shown.hip[1]) <= 2)
+          continue;
+        const std::size_t k = std::size_t(r) * std::size_t(grey.width) + std::size_t(c);
+        out.push_back({grey.rgba[k], shown.rgba[k]});
+      }
+    EXPECT_GT(out.size(), 100u) << tag << ": the slice holds dentin";
+    return out;
+  };
+  std::size_t coloured = 0;
+  for (const auto& p : dentin_pixels("as the scene says")) coloured += p[1] != p[0];
+  EXPECT_GT(coloured, 0u) << "dentin shows its colour";
+  views.materials().rows[1].visible = false;
+  for (const auto& p : dentin_pixels("dentin hidden")) ASSERT_EQ(p[1], p[0]) << "hidden dentin shows the grey slice's pixel";
+  views.materials().rows[1].visible = true;
+  views.materials().rows[1].color = {0.0f, 0.0f, 1.0f};  // blue: its boundary pixels are pure blue
+  std::size_t blue = 0;
+  for (const auto& p : dentin_pixels("dentin blue")) {
+    blue += p[1] == 0xFFFF0000u ? 1 : 0;
+    ASSERT_GE(int(p[1] >> 16 & 0xFF), int(p[1] & 0xFF)) << "dentin's pixels lean blue";
+  }
+  EXPECT_GT(blue, 0u) << "dentin's boundary in its new colour";
+}
+
 }  // namespace
 }  // namespace isotouch::sculpt

@@ -386,12 +386,13 @@ void Sculpt::init_tools() {
   slices.open(vol, live.iso, chosen ? chosen->hounsfield : engine::is_ct_hounsfield(vol, ""));
   slices.control().shown = o.slices;
   if (labels) {  // each voxel's material colour over the grey, each material's boundary in its colour
-    SliceLabels sl;
-    sl.ids = &labels->ids;
-    sl.before = &vol.voxels;
-    sl.rgba.assign(1, 0);
-    for (const materials::Material& m : labels->materials) sl.rgba.push_back(label_rgba(m.color));
-    slices.set_labels(std::move(sl));
+    MaterialsControl mc;
+    for (std::size_t i = 0; i < labels->materials.size(); ++i) {
+      const materials::Material& m = labels->materials[i];
+      mc.rows.push_back({m.name, {float(m.color[0]), float(m.color[1]), float(m.color[2])}, true, m.critical, m.margin_mm,
+                         m.stiffness_n_per_m, long(labels->voxels[i + 1])});
+    }
+    slices.set_labels(&labels->ids, &vol.voxels, std::move(mc));
   }
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);

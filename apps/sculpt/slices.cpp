@@ -214,7 +214,7 @@ SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, 
         const std::size_t v = row_at + col_at[std::size_t(c)];
         std::uint8_t m = (*lab->ids)[v];
         if (lab->before) m = materials::edited_id(m, (*lab->before)[v], voxels[v], style.iso);
-        if (m >= lab->rgba.size()) m = 0;  // no colour for it: shown as no material
+        if (m >= lab->rgba.size() || (lab->rgba[m] >> 24) == 0) m = 0;  // no colour, or hidden: no material
         at[c] = m;
         if (m) out[c] = label_fill(std::uint8_t(out[c] & 0xFFu), lab->rgba[m]);
       }

@@ -80,7 +80,9 @@ struct SliceLabels {
   /// The voxels as loaded: a voxel an edit removed (inside the isosurface here, not in the
   /// voxels shown: materials::edited_id) shows no material. Null: every voxel keeps its id.
   const std::vector<float>* before = nullptr;
-  std::vector<std::uint32_t> rgba;  ///< per id (index 0 unused): the material's colour, RGBA8 (A ignored)
+  /// Per id (index 0 unused): the material's colour, RGBA8; alpha 0 = hidden (its voxels are
+  /// shown as no material's), any other alpha is ignored.
+  std::vector<std::uint32_t> rgba;
 };
 
 /// The opacity of a material's colour over the grey inside it (3D Slicer's default 2-D fill

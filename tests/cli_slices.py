@@ -292,7 +292,7 @@ ndim = struct.unpack("<8h", nii[40:56])
 check(ndim[1:4] == tdims and struct.unpack("<h", nii[70:72])[0] == 2, "tooth-labels.nii.gz: uint8 on the scan's 103x94x161 grid")
 off = int(struct.unpack("<f", nii[108:112])[0])
 labels = nii[off:off + tdims[0] * tdims[1] * tdims[2]]
-colour = {m["label"]: tuple(round(255 * c) for c in m["color"]) for m in tscene["materials"]["list"]}
+colour = {m["label"]: tuple(math.floor(255 * c + 0.5) for c in m["color"]) for m in tscene["materials"]["list"]}
 _, tdump = sculpt_run("labels", os.path.join(src, "scenes", "tooth-labels.json"), [{"after_frames": 3, "quit": True}])
 tmeta = json.load(open(os.path.join(tdump, "slices.json")))
 lo, hi = min(tvox), max(tvox)

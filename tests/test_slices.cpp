@@ -348,8 +348,7 @@ TEST(SliceLabels, HiddenAndRecolouredMaterialsInTheSliceViews) {
   views.open(vol, iso, false);
   MaterialsControl mc;
   for (const materials::Material& m : lv.materials)
-    mc.rows.push_back({m.name, {float(m.color[0]), float(m.color[1]), float(m.color[2])}, true, m.critical, m.margin_mm,
-                       m.stiffness_n_per_m, 0});
+    mc.rows.push_back({m.name, m.color, true, m.critical, m.margin_mm, m.stiffness_n_per_m, 0});
   views.set_labels(&lv.ids, &vol.voxels, mc);
   const Vec3 centre = vol.grid.to_index(vol.grid.centre_m());
   const std::array<int, 2> fb{640, 480};
@@ -378,7 +377,7 @@ TEST(SliceLabels, HiddenAndRecolouredMaterialsInTheSliceViews) {
   views.materials().rows[1].visible = false;
   for (const auto& p : dentin_pixels("dentin hidden")) ASSERT_EQ(p[1], p[0]) << "hidden dentin shows the grey slice's pixel";
   views.materials().rows[1].visible = true;
-  views.materials().rows[1].color = {0.0f, 0.0f, 1.0f};  // blue: its boundary pixels are pure blue
+  views.materials().rows[1].color = {0.0, 0.0, 1.0};  // blue: its boundary pixels are pure blue
   std::size_t blue = 0;
   for (const auto& p : dentin_pixels("dentin blue")) {
     blue += p[1] == 0xFFFF0000u ? 1 : 0;

@@ -389,8 +389,7 @@ void Sculpt::init_tools() {
     MaterialsControl mc;
     for (std::size_t i = 0; i < labels->materials.size(); ++i) {
       const materials::Material& m = labels->materials[i];
-      mc.rows.push_back({m.name, {float(m.color[0]), float(m.color[1]), float(m.color[2])}, true, m.critical, m.margin_mm,
-                         m.stiffness_n_per_m, long(labels->voxels[i + 1])});
+      mc.rows.push_back({m.name, m.color, true, m.critical, m.margin_mm, m.stiffness_n_per_m, long(labels->voxels[i + 1])});
     }
     slices.set_labels(&labels->ids, &vol.voxels, std::move(mc));
   }

@@ -43,7 +43,7 @@ void SliceViews::set_labels(const std::vector<std::uint8_t>* ids, const std::vec
 std::vector<std::uint32_t> material_rgba(const MaterialsControl& c) {
   std::vector<std::uint32_t> out(1, 0);
   for (const MaterialRow& r : c.rows) {
-    const std::uint32_t rgba = label_rgba({double(r.color[0]), double(r.color[1]), double(r.color[2])});
+    const std::uint32_t rgba = label_rgba(r.color);
     out.push_back(r.visible ? rgba : rgba & 0x00FFFFFFu);
   }
   return out;
@@ -173,7 +173,10 @@ void material_widgets(MaterialsControl& c) {
     ImGui::PushID(int(i));
     ImGui::Checkbox("##visible", &r.visible);
     ImGui::SameLine();
-    ImGui::ColorEdit3("##colour", r.color.data(), ImGuiColorEditFlags_NoInputs);
+    // ImGui edits floats: the scene's colour (doubles) is replaced only when the user picks one.
+    float rgb[3] = {float(r.color[0]), float(r.color[1]), float(r.color[2])};
+    if (ImGui::ColorEdit3("##colour", rgb, ImGuiColorEditFlags_NoInputs))
+      r.color = {double(rgb[0]), double(rgb[1]), double(rgb[2])};
     ImGui::SameLine();
     ImGui::Text("%s  K %.0f N/m", r.name.c_str(), r.stiffness_n_per_m);
     if (ImGui::IsItemHovered()) ImGui::SetTooltip("%ld voxels as loaded", r.voxels);

@@ -36,7 +36,7 @@ void slice_widgets(SliceControl& c);
 /// (visible, colour: the user changes them) and what the scene says of it (shown only).
 struct MaterialRow {
   std::string name;
-  std::array<float, 3> color{0.8f, 0.8f, 0.8f};  ///< RGB in [0, 1]
+  std::array<double, 3> color{0.8, 0.8, 0.8};    ///< RGB in [0, 1] (the scene's until the user picks another)
   bool visible = true;                           ///< false: the slice views show its voxels as no material's
   bool critical = false;                         ///< the drill never removes it
   double margin_mm = 0;                          ///< critical: its warning distance

@@ -79,6 +79,9 @@ struct EditFigures {
   bool channel_section_drawn = false;
   std::string channel_section_note;
   std::string vdb_file, nrrd_file, stl_file;  ///< drilled.vdb / .nrrd / .stl as written ("" if not)
+  /// drilled.seg.nrrd as written ("" if not): a labelled scene's label map after the edits
+  /// (removed voxels 0), beside the saved volume, for 3D Slicer (materials/label_export.h).
+  std::string seg_file;
   std::string stl_units;           ///< drilled.stl's coordinates: "mm" or "m" (physical frame, LPS)
   std::string files_note;          ///< why a file was not written
   /// drilled.stl's mesh (io::extract_mesh: coincident vertices welded, zero-area triangles

@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 #include "isotouch/eval/drill_channel.h"
+#include "isotouch/materials/label_export.h"
+#include "isotouch/materials/label_volume.h"
 #include "isotouch/run/channel_section.h"
 #include "isotouch/run/drill_figure.h"
 #include "isotouch/run/names.h"
@@ -291,6 +293,12 @@ void write_edited_files(const Scene& scene, const SceneSetup& setup, const std::
     if (scene.edits.write_nrrd) {
       io::save_volume_itk(after, (fs::path(dir) / "drilled.nrrd").string());
       e.nrrd_file = "drilled.nrrd";
+    }
+    if (setup.labels && (scene.edits.write_vdb || scene.edits.write_nrrd)) {  // beside the saved volume
+      materials::write_seg_nrrd((fs::path(dir) / "drilled.seg.nrrd").string(),
+                                materials::edited_ids(setup.labels->ids, setup.volume.voxels, after.voxels, setup.live.iso),
+                                setup.labels->materials, after);
+      e.seg_file = "drilled.seg.nrrd";
     }
     if (scene.edits.write_stl) {
       const io::Mesh mesh = extract_mesh(after, setup.live.iso);

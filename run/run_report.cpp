@@ -236,6 +236,7 @@ nlohmann::ordered_json edits_json(const EditFigures& e, const Scene& scene) {
           {"contact_ticks_after_edit", e.contact_ticks_after_edit},
           {"vdb", or_null(!e.vdb_file.empty(), e.vdb_file)},
           {"nrrd", or_null(!e.nrrd_file.empty(), e.nrrd_file)},
+          {"seg_nrrd", or_null(!e.seg_file.empty(), e.seg_file)},
           {"stl", or_null(!e.stl_file.empty(), e.stl_file)},
           {"files_note", e.files_note},
           {"mesh", !e.mesh_measured ? nlohmann::ordered_json(nullptr)
@@ -341,6 +342,8 @@ std::string edits_markdown(const EditFigures& e, const Scene& scene) {
   md << "Files: `edits.csv` (one row per event)"
      << (e.vdb_file.empty() ? std::string() : ", `" + e.vdb_file + "` (the edited volume, OpenVDB FloatGrid)")
      << (e.nrrd_file.empty() ? std::string() : ", `" + e.nrrd_file + "` (the same as NRRD, for 3D Slicer)")
+     << (e.seg_file.empty() ? std::string()
+                            : ", `" + e.seg_file + "` (the label map after the edits, removed voxels 0: a 3D Slicer segmentation)")
      << (e.stl_file.empty() ? std::string() : ", `" + e.stl_file + "` (its isosurface, binary STL, LPS in " + e.stl_units + ")")
      << (e.files_note.empty() ? std::string() : "; not written: " + e.files_note) << ".\n\n";
   return md.str();

@@ -208,7 +208,8 @@ void make_cut(const materials::LabelVolume& lv, SceneSetup& s) {
 // the pictures do not use them yet (docs/architecture.md, "How a material reaches the servo").
 void load_materials(const Scene& scene, SceneSetup& s, std::ostream& log) {
   if (!scene.materials.present) return;
-  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, s.volume);
+  s.labels = std::make_shared<const materials::LabelVolume>(materials::load_label_volume(scene.materials, s.volume));
+  const materials::LabelVolume& lv = *s.labels;
   make_cut(lv, s);
   log << "materials " << lv.materials.size() << " from " << lv.source << ":";
   for (std::size_t i = 0; i < lv.materials.size(); ++i)

@@ -108,6 +108,9 @@ struct SceneSetup {
   /// Labelled scenes (a "materials" section): the drill's per-material cut, given to the
   /// edit session's Sculptor (null without materials: one material, today's path).
   std::shared_ptr<const session::MaterialCut> cut;
+  /// Labelled scenes: the materials on the volume's grid as loaded (their names, label values
+  /// and colours: the edited label map drilled.seg.nrrd). Null without materials.
+  std::shared_ptr<const materials::LabelVolume> labels;
   /// One per critical material (empty when none is): its name, id, margin and the distance
   /// to its own voxels, so that each is warned about at its own margin_mm.
   struct CriticalStructure {

@@ -19,10 +19,14 @@ voxel, and slices.json).
    with the probe at rest in air.
 6. The head stored the other way (slices reversed along z, identity direction: the same
    physical volume) gives the same three slice pictures and the same window picture.
+7. A labelled scene (scenes/tooth-labels.json): judged by its NIfTI label map read here, every
+   pixel of a material off the marks shows that material's colour from the scene file,
+   either half over its voxel's grey (the fill) or opaque (its boundary), a pixel of no
+   material grey or the isocontour's colour; every material shows both ways in some plane.
 
 Usage: cli_slices.py ISOTOUCH_SCULPT SOURCE_DIR OUT_DIR; exit 0 and "PASS cli_slices" (77: no xvfb-run).
 """
-import array, json, math, os, re, shutil, subprocess, sys
+import array, gzip, json, math, os, re, shutil, struct, subprocess, sys
 
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, here)
@@ -275,5 +279,49 @@ if os.path.exists(edited_mha):
     check_slice("away", "axial", ameta, away_dump, header(etext), edited, dims, window_of=vox)
 else:
     check(False, "carved: Ctrl+S saved the edited volume")
+
+# 7. The labelled tooth at rest: the slices' colours against its label map read here.
+tooth_dir = os.path.join(src, "data", "ct-tooth")
+tscene = json.load(open(os.path.join(src, "scenes", "tooth-labels.json")))
+thdr = header(open(os.path.join(tooth_dir, "tooth.mhd")).read())
+tdims = (103, 94, 161)
+traw = open(os.path.join(tooth_dir, "tooth.raw"), "rb").read()
+tvox = list(struct.unpack(">%dH" % (len(traw) // 2), traw))  # MET_USHORT, MSB first
+nii = gzip.open(os.path.join(tooth_dir, "tooth-labels.nii.gz")).read()
+ndim = struct.unpack("<8h", nii[40:56])
+check(ndim[1:4] == tdims and struct.unpack("<h", nii[70:72])[0] == 2, "tooth-labels.nii.gz: uint8 on the scan's 103x94x161 grid")
+off = int(struct.unpack("<f", nii[108:112])[0])
+labels = nii[off:off + tdims[0] * tdims[1] * tdims[2]]
+colour = {m["label"]: tuple(math.floor(255 * c + 0.5) for c in m["color"]) for m in tscene["materials"]["list"]}
+_, tdump = sculpt_run("labels", os.path.join(src, "scenes", "tooth-labels.json"), [{"after_frames": 3, "quit": True}])
+tmeta = json.load(open(os.path.join(tdump, "slices.json")))
+lo, hi = min(tvox), max(tvox)
+L, W = (lo + hi) / 2, hi - lo
+fills = {l: 0 for l in colour}
+edges = {l: 0 for l in colour}
+for plane in PLANES:
+    s = tmeta[plane]
+    w, h, px = read_png(os.path.join(tdump, plane + ".png"))
+    bad = 0
+    for r in range(h):
+        for c in range(w):
+            if near_mark(s, c, r):
+                continue
+            lab = voxel_of(plane, s["index"], c, r, thdr, labels, tdims)
+            # The grey as the app rounds it (halves away from zero: 76.5 is 77)
+            g = math.floor(255 * min(max((voxel_of(plane, s["index"], c, r, thdr, tvox, tdims) - (L - W / 2)) / W, 0.0), 1.0) + 0.5)
+            p = px[r * w + c]
+            if lab == 0:
+                bad += not (p == CONTOUR or p == (g, g, g))
+            elif p == colour[lab]:
+                edges[lab] += 1
+            elif all(abs(p[k] - (g + colour[lab][k]) / 2) <= 0.5 + 1e-9 for k in range(3)):
+                fills[lab] += 1
+            else:
+                bad += 1
+    check(bad == 0, f"labels {plane}: every pixel off the marks shows its label map's material colour, or grey "
+          f"where there is none ({bad} do not)")
+for lab, n in sorted(colour.items()):
+    check(fills[lab] > 0 and edges[lab] > 0, f"labels: label {lab} filled in {fills[lab]} pixels and drawn as a boundary in {edges[lab]}")
 
 check.finish("cli_slices")

@@ -3,6 +3,12 @@
 //   critical_changed N next_to_critical_changed M changed K
 // N: critical voxels whose value differs; M: non-critical voxels with a critical face
 // neighbour whose value differs (the brush reached the structure); K: all that differ.
+// With SEG (the edited label map saved beside it, a .seg.nrrd), also reads SEG's segments by
+// the scene's material names (materials::load_label_volume) and compares each voxel's label
+// with the scene's label map, a voxel inside the scene's isosurface before and not in SAVED
+// expected 0 (removed); appends:
+//   labels_removed R labels_wrong W
+// R: voxels of a material expected 0; W: voxels whose label in SEG is not the expected one.
 // Exit 1 if the files cannot be read or the grids differ.
 #include <cstdio>
 #include <cstring>
@@ -14,8 +20,8 @@
 #include "isotouch/run/picture.h"
 
 int main(int argc, char** argv) {
-  if (argc != 3) {
-    std::fprintf(stderr, "usage: critical_voxels_check SCENE SAVED\n");
+  if (argc != 3 && argc != 4) {
+    std::fprintf(stderr, "usage: critical_voxels_check SCENE SAVED [SEG]\n");
     return 2;
   }
   try {
@@ -51,7 +57,28 @@ int main(int argc, char** argv) {
               break;
             }
         }
-    std::printf("critical_changed %ld next_to_critical_changed %ld changed %ld\n", crit, next, changed);
+    std::printf("critical_changed %ld next_to_critical_changed %ld changed %ld", crit, next, changed);
+    if (argc == 4) {
+      materials::MaterialsSpec spec;
+      spec.present = true;
+      spec.labels_path = argv[3];
+      for (const materials::Material& m : scene.materials.list) {
+        materials::Material by_name;
+        by_name.name = m.name;
+        spec.list.push_back(by_name);
+      }
+      const materials::LabelVolume seg = materials::load_label_volume(spec, before);
+      const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+      long removed = 0, wrong = 0;
+      for (std::size_t i = 0; i < lv.ids.size(); ++i) {
+        const bool gone = iso.contains(before.voxels[i]) && !iso.contains(after.voxels[i]);
+        const std::uint8_t want = gone ? 0 : lv.ids[i];
+        removed += gone && lv.ids[i] != 0 ? 1 : 0;
+        wrong += seg.ids[i] != want ? 1 : 0;
+      }
+      std::printf(" labels_removed %ld labels_wrong %ld", removed, wrong);
+    }
+    std::printf("\n");
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "critical_voxels_check: %s\n", e.what());

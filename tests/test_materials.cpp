@@ -6,6 +6,8 @@
 
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
+#include <iostream>
 #include <fstream>
 #include <functional>
 #include <string>
@@ -14,6 +16,7 @@
 #include "isotouch/engine/volume.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/io/volume_io.h"
+#include "isotouch/materials/label_export.h"
 #include "isotouch/materials/label_volume.h"
 #include "isotouch/materials/seg_nrrd.h"
 #include "isotouch/tests/temp_dir.h"
@@ -462,4 +465,117 @@ TEST(MaterialsScene, BoundaryValues) {
                   .find("field 'materials.list[0].color': must be [r, g, b], each in [0, 1]"),
               std::string::npos)
         << c;
+}
+
+// The edited label map for 3D Slicer (materials/label_export.h), round trip through this
+// project's own readers: the shipped tooth's labels, "drilled" here by the test (a ball of
+// voxels set to 0, the empty value below the isovalue), written as .seg.nrrd and read back by
+// load_label_volume by segment name alone. Truth: the label volume as loaded and the ball's
+// geometry, not the writer.
+TEST(LabelExport, DrilledToothRoundTripsThroughTheSegNrrdReader) {
+  const std::string scenes = std::string(ISOTOUCH_TEST_DATA) + "/../scenes/";
+  const io::Scene s = io::load_scene(scenes + "tooth-labels.json");
+  const engine::Volume tooth = io::load_volume(s.volume_path);
+  const materials::LabelVolume lv = materials::load_label_volume(s.materials, tooth);
+  const core::Isosurface iso{s.hri.tau, s.hri.inside};
+  // The ball: centred on the first inside voxel met going +y at x = 51, z = 92 (the drill
+  // scene's path), radius 6 voxels.
+  const auto& d = tooth.grid.dims;
+  int cy = 0;
+  while (cy < d[1] && !iso.contains(tooth.voxels[tooth.grid.index(51, cy, 92)])) ++cy;
+  ASSERT_LT(cy, d[1]);
+  std::vector<float> after = tooth.voxels;
+  std::vector<std::uint8_t> want = lv.ids;
+  std::vector<std::size_t> removed_per_id(lv.materials.size() + 1, 0);
+  std::size_t kept_outside = 0;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) {
+        const int dx = x - 51, dy = y - cy, dz = z - 92;
+        if (dx * dx + dy * dy + dz * dz > 36) continue;
+        const std::size_t i = tooth.grid.index(x, y, z);
+        after[i] = 0.0f;
+        if (double(tooth.voxels[i]) > s.hri.tau) {  // inside before (the scene's inside is above): removed
+          ++removed_per_id[lv.ids[i]];
+          want[i] = 0;
+        } else if (lv.ids[i] != 0) {
+          ++kept_outside;  // a labelled voxel outside the surface from the start keeps its label
+        }
+      }
+  ASSERT_GT(removed_per_id[1] + removed_per_id[2], 0u) << "the ball removed no enamel or dentin";
+  const std::vector<std::uint8_t> edited = materials::edited_ids(lv.ids, tooth.voxels, after, iso);
+  test::TempDir dir;
+  const std::string out = (dir.path / "tooth-drilled.seg.nrrd").string();
+  materials::write_seg_nrrd(out, edited, lv.materials, tooth);
+  // Read back by segment name alone: label values and colours from the file's segments.
+  MaterialsSpec back;
+  back.present = true;
+  back.labels_path = out;
+  for (const Material& m : s.materials.list) back.list.push_back(mat(m.name, -1));
+  const materials::LabelVolume rt = materials::load_label_volume(back, tooth);
+  EXPECT_TRUE(rt.notes.empty()) << rt.notes[0];  // on the scan's grid: not resampled
+  ASSERT_EQ(rt.ids.size(), want.size());
+  std::size_t zeroed = 0, unchanged = 0;
+  for (std::size_t i = 0; i < want.size(); ++i) {
+    ASSERT_EQ(int(rt.ids[i]), int(want[i])) << "voxel " << i << " was " << int(lv.ids[i]);
+    (want[i] != lv.ids[i] ? zeroed : unchanged) += 1;
+  }
+  EXPECT_EQ(zeroed, removed_per_id[1] + removed_per_id[2] + removed_per_id[3]);
+  EXPECT_EQ(unchanged + zeroed, want.size());
+  for (std::size_t m = 0; m < lv.materials.size(); ++m) {
+    EXPECT_EQ(rt.materials[m].label, lv.materials[m].label) << lv.materials[m].name;
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rt.materials[m].color[c], lv.materials[m].color[c], 1e-12) << lv.materials[m].name;
+  }
+  std::cout << "removed " << zeroed << " voxels (enamel " << removed_per_id[1] << ", dentin " << removed_per_id[2]
+            << ", pulp " << removed_per_id[3] << "), " << kept_outside << " labelled voxels in the ball were outside the surface\n";
+}
+
+// The writer's geometry and voxel type: a scan with an oblique-free but flipped direction,
+// anisotropic spacing and an origin off zero reads back on the same grid (io::load_volume),
+// and label values above 255 are written as unsigned short and read back exactly.
+TEST(LabelExport, GeometryAndWideLabelValuesRoundTrip) {
+  engine::Volume v = scan(kD, {-1, 0, 0, 0, -1, 0, 0, 0, 1});
+  v.grid.spacing_m = {0.5e-3, 1.25e-3, 3e-3};
+  v.grid.origin_m = {-12.5e-3, 40e-3, 7e-3};
+  std::vector<std::uint8_t> ids(kD.count());
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = std::uint8_t(i % 3);
+  std::vector<Material> list{mat("low", 7), mat("high", 300)};
+  list[1].color = {0.1, 0.2, 0.3};
+  test::TempDir dir;
+  const std::string out = (dir.path / "wide.seg.nrrd").string();
+  materials::write_seg_nrrd(out, ids, list, v);
+  const engine::Volume back = io::load_volume(out);
+  EXPECT_EQ(back.component_type, "unsigned_short");
+  EXPECT_EQ(back.grid.dims, v.grid.dims);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(back.grid.spacing_m[k], v.grid.spacing_m[k], 1e-12);
+    EXPECT_NEAR(back.grid.origin_m[k], v.grid.origin_m[k], 1e-12);
+  }
+  for (std::size_t k = 0; k < 9; ++k) EXPECT_NEAR(back.direction[k], v.direction[k], 1e-12) << k;
+  for (std::size_t i = 0; i < ids.size(); ++i)
+    ASSERT_EQ(back.voxels[i], ids[i] == 0 ? 0.f : ids[i] == 1 ? 7.f : 300.f) << "voxel " << i;
+  MaterialsSpec spec;
+  spec.present = true;
+  spec.labels_path = out;
+  spec.list = {mat("low", -1), mat("high", -1)};
+  const materials::LabelVolume rt = materials::load_label_volume(spec, v);
+  EXPECT_TRUE(rt.ids == ids);
+  EXPECT_EQ(rt.materials[1].color, list[1].color);
+}
+
+TEST(LabelExport, BadInputIsNamed) {
+  const engine::Volume v = scan(kD);
+  test::TempDir dir;
+  const std::string out = (dir.path / "bad.seg.nrrd").string();
+  std::vector<Material> list{mat("one", 1)};
+  EXPECT_NE(error_of([&] { materials::write_seg_nrrd(out, std::vector<std::uint8_t>(3), list, v); }).find("3 labels"),
+            std::string::npos);
+  std::vector<std::uint8_t> ids(kD.count(), 0);
+  ids[5] = 2;
+  EXPECT_NE(error_of([&] { materials::write_seg_nrrd(out, ids, list, v); }).find("material id 2"), std::string::npos);
+  list[0].name = "two\nlines";
+  EXPECT_NE(error_of([&] { materials::write_seg_nrrd(out, std::vector<std::uint8_t>(kD.count()), list, v); })
+                .find("materials.list[0].name"),
+            std::string::npos);
+  EXPECT_FALSE(std::filesystem::exists(out));
 }

@@ -12,6 +12,9 @@
 #include "isotouch/apps/sculpt/slice_views.h"
 #include "isotouch/apps/sculpt/slices.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/io/scene.h"
+#include "isotouch/io/volume_io.h"
+#include "isotouch/materials/label_volume.h"
 
 namespace isotouch::sculpt {
 namespace {
@@ -216,6 +219,171 @@ TEST(Slices, KeptSlicesEqualSlicesMadeAnew) {
     ASSERT_EQ(kept.column(), column) << "step " << i;
   }
   EXPECT_EQ(made, path.size()) << "every step changed a mark, the voxels or the window";
+}
+
+// A labelled scene's slices (scenes/tooth-labels.json: enamel, dentin, pulp from its NIfTI
+// label map) through the pulp's centre, in the three planes: every pixel's colour is judged
+// by the label volume as loaded (materials::load_label_volume), not by the drawing code: a
+// pixel of a material shows that material's colour from the scene file, blended half over
+// its grey inside the material (3D Slicer's fill) and opaque on its boundary (a 4-neighbour
+// in the plane of another material, or an isocontour voxel); a pixel of no material is
+// grey, or the isocontour's colour. Then a ball "drilled" by the test (set to 0): its
+// voxels that were inside show no material.
+TEST(SliceLabels, ToothSlicesShowEachMaterialsColourWhereTheLabelVolumeHasIt) {
+  const io::Scene scene = io::load_scene(std::string(ISOTOUCH_TEST_DATA) + "/../scenes/tooth-labels.json");
+  const engine::Volume vol = io::load_volume(scene.volume_path);
+  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, vol);
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  // The colours as the scene file gives them, RGBA8.
+  std::vector<std::array<int, 3>> want_rgb(1);
+  for (const materials::Material& m : scene.materials.list)
+    want_rgb.push_back({int(std::lround(255 * m.color[0])), int(std::lround(255 * m.color[1])), int(std::lround(255 * m.color[2]))});
+  SliceLabels labels;
+  labels.ids = &lv.ids;
+  labels.before = &vol.voxels;
+  labels.rgba.assign(1, 0);
+  for (const materials::Material& m : lv.materials) labels.rgba.push_back(label_rgba(m.color));
+  // The pulp's centre: the mean index of its voxels.
+  Vec3 centre{0, 0, 0};
+  std::size_t n = 0;
+  const auto& d = vol.grid.dims;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x)
+        if (lv.materials[std::max(1, int(lv.at(x, y, z))) - 1].name == "pulp" && lv.at(x, y, z) != 0) {
+          centre = centre + Vec3{double(x), double(y), double(z)};
+          ++n;
+        }
+  ASSERT_GT(n, 0u);
+  centre = centre * (1.0 / double(n));
+  const auto rgb = [](std::uint32_t p) { return std::array<int, 3>{int(p & 0xFF), int(p >> 8 & 0xFF), int(p >> 16 & 0xFF)}; };
+  // `cleared`: pixels of a material as loaded that show none after the edit.
+  const auto check = [&](const std::vector<float>& shown, const std::vector<std::uint8_t>& truth, const std::string& what,
+                         std::size_t& cleared) {
+    std::vector<std::size_t> fill(want_rgb.size(), 0), edge(want_rgb.size(), 0);
+    cleared = 0;
+    for (SliceKind k : kSliceKinds) {
+      SCOPED_TRACE(what + ", " + to_string(k));
+      SliceStyle style{{1000, 2000}, iso, false, &labels};
+      const SliceImage s = make_slice(vol.grid, shown, k, slice_axes(vol.direction, k), centre, centre, style);
+      const auto voxel = [&](int c, int r) {
+        const Vec3 i = slice_pixel_index(s, c, r);
+        return vol.grid.index(int(i.x), int(i.y), int(i.z));
+      };
+      for (int r = 0; r < s.height; ++r)
+        for (int c = 0; c < s.width; ++c) {
+          const std::size_t v = voxel(c, r);
+          const int id = truth[v];
+          const bool in = iso.contains(shown[v]);
+          bool other = false, out_nb = false;
+          for (const auto& [dc, dr] : {std::array<int, 2>{-1, 0}, {1, 0}, {0, -1}, {0, 1}}) {
+            if (c + dc < 0 || r + dr < 0 || c + dc >= s.width || r + dr >= s.height) continue;
+            const std::size_t u = voxel(c + dc, r + dr);
+            other = other || truth[u] != id;
+            out_nb = out_nb || !iso.contains(shown[u]);
+          }
+          const std::uint32_t px = s.rgba[std::size_t(r) * std::size_t(s.width) + std::size_t(c)];
+          const int g = window_grey(shown[v], style.wl);
+          if (id == 0) {
+            cleared += lv.ids[v] != 0 ? 1 : 0;
+            if (in && out_nb) ASSERT_EQ(px, kContourRgba) << c << "," << r;
+            else ASSERT_EQ(rgb(px), (std::array<int, 3>{g, g, g})) << c << "," << r;
+            continue;
+          }
+          const auto& w = want_rgb[std::size_t(id)];
+          if (other || (in && out_nb)) {
+            ASSERT_EQ(rgb(px), w) << c << "," << r << " boundary of " << lv.materials[std::size_t(id) - 1].name;
+            ++edge[std::size_t(id)];
+          } else {
+            for (int ch = 0; ch < 3; ++ch)  // half and half, rounded
+              ASSERT_NEAR(rgb(px)[std::size_t(ch)], 0.5 * (g + w[std::size_t(ch)]), 0.5 + 1e-9)
+                  << c << "," << r << " inside " << lv.materials[std::size_t(id) - 1].name << " channel " << ch;
+            ++fill[std::size_t(id)];
+          }
+        }
+    }
+    for (std::size_t id = 1; id < want_rgb.size(); ++id) {
+      EXPECT_GT(fill[id], 0u) << what << ": no filled pixel of " << lv.materials[id - 1].name;
+      EXPECT_GT(edge[id], 0u) << what << ": no boundary pixel of " << lv.materials[id - 1].name;
+    }
+  };
+  std::size_t cleared = 1;
+  check(vol.voxels, lv.ids, "as loaded", cleared);
+  EXPECT_EQ(cleared, 0u);
+  // Drilled: a ball of radius 8 voxels around the first inside voxel met going +y from the
+  // pulp's centre's column at its height, set to 0 (below the isovalue); its voxels that
+  // were inside show no material, those outside from the start (the pulp) keep theirs.
+  std::vector<float> drilled = vol.voxels;
+  std::vector<std::uint8_t> truth = lv.ids;
+  const int cx = int(std::lround(centre.x)), cz = int(std::lround(centre.z));
+  int cy = 0;
+  while (cy < d[1] && !iso.contains(vol.voxels[vol.grid.index(cx, cy, cz)])) ++cy;
+  ASSERT_LT(cy, d[1]);
+  std::size_t gone = 0;
+  for (int z = 0; z < d[2]; ++z)
+    for (int y = 0; y < d[1]; ++y)
+      for (int x = 0; x < d[0]; ++x) {
+        if ((x - cx) * (x - cx) + (y - cy) * (y - cy) + (z - cz) * (z - cz) > 64) continue;
+        const std::size_t i = vol.grid.index(x, y, z);
+        if (double(vol.voxels[i]) > scene.hri.tau && truth[i] != 0) {  // inside above the isovalue
+          truth[i] = 0;
+          ++gone;
+        }
+        drilled[i] = 0;
+      }
+  ASSERT_GT(gone, 0u);
+  check(drilled, truth, "drilled", cleared);
+  EXPECT_GT(cleared, 0u) << "the ball is in no slice: the check says little";
+}
+
+// The Materials panel's visibility and colours reach the slice views (SliceViews::update
+// made again when they change): a hidden material's voxels show no material (grey, or the
+// isocontour's colour), a recoloured one its new colour; truth: the label volume.
+TEST(SliceLabels, HiddenAndRecolouredMaterialsInTheSliceViews) {
+  const io::Scene scene = io::load_scene(std::string(ISOTOUCH_TEST_DATA) + "/../scenes/tooth-labels.json");
+  const engine::Volume vol = io::load_volume(scene.volume_path);
+  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, vol);
+  const core::Isosurface iso{scene.hri.tau, scene.hri.inside};
+  SliceViews views;
+  views.open(vol, iso, false);
+  MaterialsControl mc;
+  for (const materials::Material& m : lv.materials)
+    mc.rows.push_back({m.name, m.color, true, m.critical, m.margin_mm, m.stiffness_n_per_m, 0});
+  views.set_labels(&lv.ids, &vol.voxels, mc);
+  const Vec3 centre = vol.grid.to_index(vol.grid.centre_m());
+  const std::array<int, 2> fb{640, 480};
+  // The axial slice through the centre: its dentin (id 2) pixels off the marks, beside the
+  // same slice without labels.
+  const auto dentin_pixels = [&](const std::string& tag) {
+    EXPECT_TRUE(views.update(vol.voxels, centre, centre, 0, fb)) << tag << ": computed again";
+    const SliceImage& shown = views.image(SliceKind::kAxial);
+    SliceStyle plain{views.control().wl, iso, false, nullptr};
+    const SliceImage grey = make_slice(vol.grid, vol.voxels, SliceKind::kAxial, shown.axes, centre, centre, plain);
+    std::vector<std::array<std::uint32_t, 2>> out;  // (the grey slice's pixel, the view's)
+    for (int r = 0; r < grey.height; ++r)
+      for (int c = 0; c < grey.width; ++c) {
+        const Vec3 i = slice_pixel_index(grey, c, r);
+        if (lv.at(int(i.x), int(i.y), int(i.z)) != 2 || std::abs(c - shown.hip[0]) <= 2 || std::abs(r - shown.hip[1]) <= 2)
+          continue;
+        const std::size_t k = std::size_t(r) * std::size_t(grey.width) + std::size_t(c);
+        out.push_back({grey.rgba[k], shown.rgba[k]});
+      }
+    EXPECT_GT(out.size(), 100u) << tag << ": the slice holds dentin";
+    return out;
+  };
+  std::size_t coloured = 0;
+  for (const auto& p : dentin_pixels("as the scene says")) coloured += p[1] != p[0];
+  EXPECT_GT(coloured, 0u) << "dentin shows its colour";
+  views.materials().rows[1].visible = false;
+  for (const auto& p : dentin_pixels("dentin hidden")) ASSERT_EQ(p[1], p[0]) << "hidden dentin shows the grey slice's pixel";
+  views.materials().rows[1].visible = true;
+  views.materials().rows[1].color = {0.0, 0.0, 1.0};  // blue: its boundary pixels are pure blue
+  std::size_t blue = 0;
+  for (const auto& p : dentin_pixels("dentin blue")) {
+    blue += p[1] == 0xFFFF0000u ? 1 : 0;
+    ASSERT_GE(int(p[1] >> 16 & 0xFF), int(p[1] & 0xFF)) << "dentin's pixels lean blue";
+  }
+  EXPECT_GT(blue, 0u) << "dentin's boundary in its new colour";
 }
 
 }  // namespace

@@ -32,11 +32,35 @@ engine::Volume Sculpt::edited_volume() {
   return out;
 }
 
+namespace {
+
+/// Where the edited label map goes beside a saved volume: its name without the volume's
+/// extension (.vdb, .nrrd, .mha, .nii, .nii.gz), then ".seg.nrrd".
+std::string seg_nrrd_beside(const std::string& volume_path) {
+  std::string stem = volume_path;
+  for (const char* ext : {".nii.gz", ".vdb", ".nrrd", ".mha", ".nii"}) {
+    const std::size_t n = std::strlen(ext);
+    if (stem.size() > n && stem.compare(stem.size() - n, n, ext) == 0) {
+      stem.resize(stem.size() - n);
+      break;
+    }
+  }
+  return stem + ".seg.nrrd";
+}
+
+}  // namespace
+
 void Sculpt::save(const std::string& path) {
   const engine::Volume out = edited_volume();
   try {
     io::save_any_volume(out, path, io::SaveVdbOptions{});  // the format the name asks for
     status = "saved " + path;
+    if (labels) {  // the edited label map beside it, for 3D Slicer: removed voxels 0
+      const std::string seg = seg_nrrd_beside(path);
+      materials::write_seg_nrrd(seg, materials::edited_ids(labels->ids, vol.voxels, out.voxels, live.iso),
+                                labels->materials, out);
+      status += " and its label map " + seg;
+    }
   } catch (const std::exception& e) {
     status = std::string("save failed: ") + e.what();
     if (code == 0) code = exit_code::kSaveFailed;  // the session goes on; its exit says so

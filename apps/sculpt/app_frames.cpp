@@ -364,7 +364,7 @@ void Sculpt::build_panels() {
     panel.loading.clear();
     panel.loading_s = 0;
   }
-  panels->build(tool, iso_ctl, slices.control(), panel, overlay);
+  panels->build(tool, iso_ctl, slices.control(), slices.materials(), panel, overlay);
 #endif
 }
 

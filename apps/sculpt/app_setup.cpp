@@ -184,7 +184,7 @@ void Sculpt::open_panels() {
 /// never changes a critical one (what `isotouch run` does, run::material_cut).
 /// @throws materials::MaterialError, engine::VolumeError as materials::load_label_volume.
 void Sculpt::cut_by_material() {
-  const materials::LabelVolume lv = materials::load_label_volume(scene.materials, vol);
+  const materials::LabelVolume& lv = labels.emplace(materials::load_label_volume(scene.materials, vol));
   edits->sculptor().set_material_cut(run::material_cut(lv));
   log << "sculpt   cuts by material (" << lv.source << "):";
   for (std::size_t i = 0; i < lv.materials.size(); ++i)
@@ -385,6 +385,14 @@ void Sculpt::init_tools() {
   fill_iso_panel(iso_ctl, vol, chosen);
   slices.open(vol, live.iso, chosen ? chosen->hounsfield : engine::is_ct_hounsfield(vol, ""));
   slices.control().shown = o.slices;
+  if (labels) {  // each voxel's material colour over the grey, each material's boundary in its colour
+    MaterialsControl mc;
+    for (std::size_t i = 0; i < labels->materials.size(); ++i) {
+      const materials::Material& m = labels->materials[i];
+      mc.rows.push_back({m.name, m.color, true, m.critical, m.margin_mm, m.stiffness_n_per_m, long(labels->voxels[i + 1])});
+    }
+    slices.set_labels(&labels->ids, &vol.voxels, std::move(mc));
+  }
   panel.servo_target_hz = scene.hri.rate_hz;
   panel.volume = volume_line(vol);
   panel_refreshed = Clock::now();

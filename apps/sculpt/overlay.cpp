@@ -44,7 +44,7 @@ void step_buttons(const char* id, ToolState& tool, Step step) {
   ImGui::PopID();
 }
 
-void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices) {
+void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices, MaterialsControl& materials) {
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("Tool", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
@@ -77,6 +77,7 @@ void tool_panel(ToolState& tool, IsoControl& iso, SliceControl& slices) {
   }
   iso_histogram_widgets(iso);
   slice_widgets(slices);
+  material_widgets(materials);
   ImGui::End();
 }
 
@@ -383,9 +384,11 @@ bool Overlay::changed(const Shown& now) const {
   return ImGui::IsAnyItemActive() || io.WantCaptureMouse || io.WantTextInput;
 }
 
-void Overlay::build(ToolState& tool, IsoControl& iso, SliceControl& slices, const PanelStats& stats, bool visible) {
+void Overlay::build(ToolState& tool, IsoControl& iso, SliceControl& slices, MaterialsControl& materials,
+                    const PanelStats& stats, bool visible) {
   if (!vulkan_backend_) return;  // no swapchain yet (a minimised window): no font atlas either
-  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, slices.wl, slices.shown, stats, visible};
+  const Shown now{tool.kind, tool.radius_m, tool.strength, iso.value, iso.lo, iso.hi, slices.wl, slices.shown,
+                  materials, stats, visible};
   if (changed(now)) settling_ = 3;  // this build and the two after it
   if (settling_ == 0) return;
   --settling_;
@@ -396,7 +399,7 @@ void Overlay::build(ToolState& tool, IsoControl& iso, SliceControl& slices, cons
   ImGui_ImplGlfw_NewFrame();
   ImGui::NewFrame();
   if (visible) {
-    tool_panel(tool, iso, slices);
+    tool_panel(tool, iso, slices, materials);
     stats_panel(stats);
   }
   ImGui::Render();

@@ -74,7 +74,10 @@ class Overlay final : public FrameHook {
   /// lays a window out from its previous frame); otherwise the window draws the last
   /// build again (ImGui keeps its draw data until the next frame starts): a build costs the
   /// GLFW backend's X server round trips (focus, cursor, window and framebuffer size).
-  void build(ToolState& tool, IsoControl& iso, SliceControl& slices, const PanelStats& stats, bool visible);
+  /// `materials`: a labelled scene's materials section of the tool panel (slice_views.h;
+  /// empty: none).
+  void build(ToolState& tool, IsoControl& iso, SliceControl& slices, MaterialsControl& materials, const PanelStats& stats,
+             bool visible);
   /// The frames whose panels were built anew (the rest drew the last build again).
   long frames_built() const { return frames_built_; }
   /// The mouse is over a panel or dragging a widget: clicks and the wheel are ImGui's.
@@ -133,6 +136,7 @@ class Overlay final : public FrameHook {
     double radius_m = 0, strength = 0, iso = 0, iso_lo = 0, iso_hi = 0;
     WindowLevel wl;
     bool slices = false;
+    MaterialsControl materials;
     PanelStats stats;
     bool visible = false;
     bool operator==(const Shown&) const = default;

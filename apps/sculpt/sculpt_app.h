@@ -24,6 +24,7 @@
 #include <functional>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -62,6 +63,7 @@
 #include "isotouch/run/picture.h"
 #include "isotouch/run/run_scene.h"
 #include "isotouch/run/scene_setup.h"
+#include "isotouch/materials/label_export.h"
 #include "isotouch/materials/label_volume.h"
 #include "isotouch/io/scene.h"
 #include "isotouch/session/edit_history.h"
@@ -320,6 +322,9 @@ struct Sculpt {
   // The slice views (slice_views.h): the edits they show so far, whether the left button is
   // on a pane (moving the probe's target, not the tool), the HIP they go through.
   SliceViews slices;
+  // A labelled scene's materials (cut_by_material): the slice views' colours, the edited
+  // label map saved beside the volume (save).
+  std::optional<materials::LabelVolume> labels;
   long slice_edits = 0;
   bool slice_drag = false;
   bool inset_on = false;

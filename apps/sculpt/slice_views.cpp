@@ -31,6 +31,24 @@ void SliceViews::open(const engine::Volume& vol, const core::Isosurface& iso, bo
   plain_key_ = {};
 }
 
+void SliceViews::set_labels(const std::vector<std::uint8_t>* ids, const std::vector<float>* before,
+                            MaterialsControl materials) {
+  labels_.ids = ids;
+  labels_.before = before;
+  materials_ = std::move(materials);
+  shown_.reset();
+  plain_key_ = {};
+}
+
+std::vector<std::uint32_t> material_rgba(const MaterialsControl& c) {
+  std::vector<std::uint32_t> out(1, 0);
+  for (const MaterialRow& r : c.rows) {
+    const std::uint32_t rgba = label_rgba(r.color);
+    out.push_back(r.visible ? rgba : rgba & 0x00FFFFFFu);
+  }
+  return out;
+}
+
 int SliceViews::pane_size(const std::array<int, 2>& fb) { return std::max(16, std::min(fb[1] / 3, fb[0] / 4)); }
 
 bool SliceViews::update(const std::vector<float>& voxels, const Vec3& hip_index, const Vec3& proxy_index, long edits,
@@ -43,17 +61,19 @@ bool SliceViews::update(const std::vector<float>& voxels, const Vec3& hip_index,
   key.edits = edits;
   key.wl = control_.wl;
   key.fb = fb;
+  if (labels_.ids) key.colours = material_rgba(materials_);
   if (shown_ && *shown_ == key) return false;
+  labels_.rgba = key.colours;
   shown_ = key;
   fb_ = fb;
   size_ = pane_size(fb);
   column_.assign(std::size_t(size_) * std::size_t(3 * size_), 0xFF000000u);
-  const SliceStyle plain{control_.wl, iso_, false};
+  const SliceStyle plain{control_.wl, iso_, false, labels_.ids ? &labels_ : nullptr};
   for (SliceKind k : kSliceKinds) {
     const std::size_t i = std::size_t(k);
     const int normal = axes_[i].normal;
     const PlainKey pk{std::clamp(int(std::lround(hip_index[normal])), 0, grid_.dims[std::size_t(normal)] - 1), edits,
-                      control_.wl};
+                      control_.wl, key.colours};
     if (plain_key_[i] != pk) {
       plain_[i] = make_slice(grid_, voxels, k, axes_[i], hip_index, proxy_index, plain);
       plain_key_[i] = pk;
@@ -144,8 +164,32 @@ void slice_widgets(SliceControl& c) {
     if (ImGui::Button((c.presets[i].first + "##wl").c_str())) c.wl = c.presets[i].second;
   }
 }
+void material_widgets(MaterialsControl& c) {
+  if (c.rows.empty()) return;
+  ImGui::Separator();
+  ImGui::TextUnformatted("materials (shown in the slice views, colour)");
+  for (std::size_t i = 0; i < c.rows.size(); ++i) {
+    MaterialRow& r = c.rows[i];
+    ImGui::PushID(int(i));
+    ImGui::Checkbox("##visible", &r.visible);
+    ImGui::SameLine();
+    // ImGui edits floats: the scene's colour (doubles) is replaced only when the user picks one.
+    float rgb[3] = {float(r.color[0]), float(r.color[1]), float(r.color[2])};
+    if (ImGui::ColorEdit3("##colour", rgb, ImGuiColorEditFlags_NoInputs))
+      r.color = {double(rgb[0]), double(rgb[1]), double(rgb[2])};
+    ImGui::SameLine();
+    ImGui::Text("%s  K %.0f N/m", r.name.c_str(), r.stiffness_n_per_m);
+    if (ImGui::IsItemHovered()) ImGui::SetTooltip("%ld voxels as loaded", r.voxels);
+    if (r.critical) {
+      ImGui::SameLine();
+      ImGui::TextColored(ImVec4(1.0f, 0.35f, 0.3f, 1.0f), "critical, %.1f mm", r.margin_mm);
+    }
+    ImGui::PopID();
+  }
+}
 #else
 void slice_widgets(SliceControl&) {}
+void material_widgets(MaterialsControl&) {}
 #endif
 
 }  // namespace isotouch::sculpt

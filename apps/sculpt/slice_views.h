@@ -32,10 +32,43 @@ struct SliceControl {
 /// (a build with Dear ImGui; a no-op otherwise).
 void slice_widgets(SliceControl& c);
 
+/// One material of a labelled scene in the Materials panel: what the slice views show of it
+/// (visible, colour: the user changes them) and what the scene says of it (shown only).
+struct MaterialRow {
+  std::string name;
+  std::array<double, 3> color{0.8, 0.8, 0.8};    ///< RGB in [0, 1] (the scene's until the user picks another)
+  bool visible = true;                           ///< false: the slice views show its voxels as no material's
+  bool critical = false;                         ///< the drill never removes it
+  double margin_mm = 0;                          ///< critical: its warning distance
+  double stiffness_n_per_m = 0;                  ///< K
+  long voxels = 0;                               ///< its voxels as loaded
+  bool operator==(const MaterialRow&) const = default;
+};
+
+/// The Materials panel: one row per material, id = index + 1; empty without materials.
+struct MaterialsControl {
+  std::vector<MaterialRow> rows;
+  bool operator==(const MaterialsControl&) const = default;
+};
+
+/// Draws the materials section into the current ImGui window (the tool panel) when there are
+/// materials: per material a visibility checkbox and a colour editor (the slice views follow
+/// them), its name, K, critical and margin, its voxels as loaded (a build with Dear ImGui; a
+/// no-op otherwise).
+void material_widgets(MaterialsControl& c);
+
+/// The slice colours of `c`: per id its colour RGBA8 (label_rgba), alpha 0 when hidden.
+std::vector<std::uint32_t> material_rgba(const MaterialsControl& c);
+
 class SliceViews {
  public:
   /// The planes of `vol` (its direction matrix), the isocontour at `iso`, the default window.
   void open(const engine::Volume& vol, const core::Isosurface& iso, bool hounsfield);
+  /// A labelled scene's materials: `ids` (one per voxel) and `before` (the voxels as loaded,
+  /// slices.h SliceLabels) must outlive the views; `materials` the Materials panel's rows,
+  /// whose colours and visibility the views follow (materials()). Shown from the next update on.
+  void set_labels(const std::vector<std::uint8_t>* ids, const std::vector<float>* before, MaterialsControl materials);
+  MaterialsControl& materials() { return materials_; }
   SliceControl& control() { return control_; }
   const SliceControl& control() const { return control_; }
   /// The panes' size for a framebuffer of `fb` pixels: a third of its height, at most a quarter of its width.
@@ -50,6 +83,8 @@ class SliceViews {
   int size() const { return size_; }
   /// The column's left edge in the framebuffer [pixels].
   int column_x() const { return fb_[0] - size_; }
+  /// Plane `k`'s slice as last computed (one pixel per voxel, marks drawn).
+  const SliceImage& image(SliceKind k) const { return images_[std::size_t(k)]; }
   /// The index axis across plane `k`.
   int normal_axis(SliceKind k) const { return axes_[std::size_t(k)].normal; }
   /// Framebuffer pixel (x, y) is on the column of panes.
@@ -69,6 +104,8 @@ class SliceViews {
   core::Grid grid_;
   core::Isosurface iso_;
   SliceControl control_;
+  SliceLabels labels_;
+  MaterialsControl materials_;
   std::array<SliceAxes, 3> axes_{};
   std::array<SliceImage, 3> images_{};
   std::array<SlicePane, 3> panes_{};
@@ -81,6 +118,7 @@ class SliceViews {
     long edits = -1;
     WindowLevel wl;
     std::array<int, 2> fb{0, 0};
+    std::vector<std::uint32_t> colours;  // the materials' (material_rgba)
     bool operator==(const Key&) const = default;
   };
   std::optional<Key> shown_;
@@ -90,6 +128,7 @@ class SliceViews {
     int index = -1;
     long edits = -1;
     WindowLevel wl;
+    std::vector<std::uint32_t> colours;
     bool operator==(const PlainKey&) const = default;
   };
   std::array<SliceImage, 3> plain_{};

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "isotouch/materials/label_export.h"
+
 namespace isotouch::sculpt {
 
 using core::Vec3;
@@ -135,6 +137,22 @@ WindowLevel default_window(double lo, double hi, bool hounsfield, double iso) {
   return {0.5 * (lo + hi), hi > lo ? hi - lo : 1.0};
 }
 
+std::uint32_t label_rgba(const std::array<double, 3>& rgb) {
+  std::uint32_t out = 0xFF000000u;
+  for (int k = 0; k < 3; ++k)
+    out |= std::uint32_t(std::lround(255.0 * std::clamp(rgb[std::size_t(k)], 0.0, 1.0))) << (8 * k);
+  return out;
+}
+
+std::uint32_t label_fill(std::uint8_t grey, std::uint32_t rgba) {
+  std::uint32_t out = 0xFF000000u;
+  for (int k = 0; k < 3; ++k) {
+    const double c = double(rgba >> (8 * k) & 0xFFu);
+    out |= std::uint32_t(std::lround((1.0 - kLabelFillOpacity) * grey + kLabelFillOpacity * c)) << (8 * k);
+  }
+  return out;
+}
+
 std::uint8_t window_grey(double value, const WindowLevel& wl) {
   const bool nan = !(value == value);  // NaN: black
   const double f = ((nan ? 0.0 : value) - (wl.level - 0.5 * wl.window)) / wl.window;
@@ -180,12 +198,49 @@ SliceImage make_slice(const core::Grid& grid, const std::vector<float>& voxels, 
       out[c] = 0xFF000000u | g << 16 | g << 8 | g;
     }
   }
+  // A labelled scene: each pixel's material after edits (0 none), the same border trick
+  // (the border repeats no id: a pixel on the slice's edge is a boundary only by a
+  // neighbour within the slice).
+  const SliceLabels* lab = style.labels && style.labels->ids ? style.labels : nullptr;
+  constexpr std::uint16_t kBorder = 0xFFFF;
+  std::vector<std::uint16_t> id;
+  if (lab) {
+    id.assign(inside.size(), kBorder);
+    for (int r = 0; r < s.height; ++r) {
+      const std::size_t row_at = base + std::size_t(ax.row_flip ? s.height - 1 - r : r) * stride[std::size_t(ax.row)];
+      std::uint32_t* out = s.rgba.data() + std::size_t(r) * std::size_t(s.width);
+      std::uint16_t* at = id.data() + (std::size_t(r) + 1) * W + 1;
+      for (int c = 0; c < s.width; ++c) {
+        const std::size_t v = row_at + col_at[std::size_t(c)];
+        std::uint8_t m = (*lab->ids)[v];
+        if (lab->before) m = materials::edited_id(m, (*lab->before)[v], voxels[v], style.iso);
+        if (m >= lab->rgba.size() || (lab->rgba[m] >> 24) == 0) m = 0;  // no colour, or hidden: no material
+        at[c] = m;
+        if (m) out[c] = label_fill(std::uint8_t(out[c] & 0xFFu), lab->rgba[m]);
+      }
+    }
+  }
   for (int r = 0; r < s.height; ++r) {
     std::uint32_t* out = s.rgba.data() + std::size_t(r) * std::size_t(s.width);
     const std::uint8_t* in = inside.data() + (std::size_t(r) + 1) * W + 1;
+    if (!lab) {
+      for (int c = 0; c < s.width; ++c) {
+        const bool edge = in[c] & ~(in[c - 1] & in[c + 1] & in[std::ptrdiff_t(c) - std::ptrdiff_t(W)] & in[c + W]);
+        out[c] = edge ? kContourRgba : out[c];
+      }
+      continue;
+    }
+    // The isocontour per material: an isocontour voxel, or one with a 4-neighbour of another
+    // id, in its material's colour (the isocontour where no material is).
+    const std::uint16_t* at = id.data() + (std::size_t(r) + 1) * W + 1;
     for (int c = 0; c < s.width; ++c) {
-      const bool edge = in[c] & ~(in[c - 1] & in[c + 1] & in[std::ptrdiff_t(c) - std::ptrdiff_t(W)] & in[c + W]);
-      out[c] = edge ? kContourRgba : out[c];
+      const bool iso_edge = in[c] & ~(in[c - 1] & in[c + 1] & in[std::ptrdiff_t(c) - std::ptrdiff_t(W)] & in[c + W]);
+      const std::uint16_t m = at[c];
+      const auto other = [m](std::uint16_t n) { return n != m && n != kBorder; };
+      const bool label_edge = m != 0 && (other(at[c - 1]) || other(at[c + 1]) ||
+                                         other(at[std::ptrdiff_t(c) - std::ptrdiff_t(W)]) || other(at[c + W]));
+      if (m != 0 && (iso_edge || label_edge)) out[c] = lab->rgba[m] | 0xFF000000u;
+      else if (iso_edge) out[c] = kContourRgba;
     }
   }
   mark_slice(s, hip_index, proxy_index, style.marks);

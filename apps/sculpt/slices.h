@@ -73,16 +73,44 @@ struct SliceImage {
   std::array<int, 2> hip{-1, -1}, proxy{-1, -1};  ///< the marks' pixels (column, row)
 };
 
+/// A labelled scene's materials on a slice (materials/label_volume.h): each voxel's material
+/// colour blended over its grey, and each material's boundary drawn in its colour.
+struct SliceLabels {
+  const std::vector<std::uint8_t>* ids = nullptr;  ///< one material id per voxel (0 none); null: no labels
+  /// The voxels as loaded: a voxel an edit removed (inside the isosurface here, not in the
+  /// voxels shown: materials::edited_id) shows no material. Null: every voxel keeps its id.
+  const std::vector<float>* before = nullptr;
+  /// Per id (index 0 unused): the material's colour, RGBA8; alpha 0 = hidden (its voxels are
+  /// shown as no material's), any other alpha is ignored.
+  std::vector<std::uint32_t> rgba;
+};
+
+/// The opacity of a material's colour over the grey inside it (3D Slicer's default 2-D fill
+/// opacity); its boundary is drawn opaque (Slicer's outline).
+inline constexpr double kLabelFillOpacity = 0.5;
+
+/// The colour RGB in [0, 1] as RGBA8 (each channel rounded from 255 x c), opaque.
+std::uint32_t label_rgba(const std::array<double, 3>& rgb);
+
+/// A label's fill over a grey (0-255): each channel round((1 - kLabelFillOpacity) x grey +
+/// kLabelFillOpacity x the colour's channel), opaque.
+std::uint32_t label_fill(std::uint8_t grey, std::uint32_t rgba);
+
 /// What a slice shows besides the voxels.
 struct SliceStyle {
   WindowLevel wl;
   core::Isosurface iso;
   bool marks = true;  ///< the HIP and proxy marks
+  const SliceLabels* labels = nullptr;  ///< a labelled scene's materials; null: grey only
 };
 
 /// The slice of `voxels` (on `grid`: x fastest, then y, then z) along `ax` through the voxel
-/// plane nearest `hip_index` (continuous index). Grey: the voxel through the window. The
-/// isocontour: an inside voxel with a 4-neighbour in the plane outside it (kContourRgba). The
+/// plane nearest `hip_index` (continuous index). Grey: the voxel through the window; with
+/// style.labels, a voxel of a material (its id after edits) takes label_fill of its grey, and
+/// a material's boundary voxel (one with a 4-neighbour in the plane of another id, or an
+/// isocontour voxel) is drawn in the material's colour: the isocontour per material. The
+/// isocontour: an inside voxel with a 4-neighbour in the plane outside it (kContourRgba where
+/// no material is). The
 /// proxy's mark (a green cross) and the HIP's (a yellow cross over it) at their nearest voxels
 /// projected onto the plane, arms of 2 voxels.
 /// (The same as make_slice without marks, then mark_slice.)

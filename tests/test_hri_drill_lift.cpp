@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 
 #include "isotouch/servo/hri.h"
 #include "isotouch/servo/sampling.h"
@@ -83,15 +84,22 @@ DrillRun drill_and_lift(const WallCase& wc, double r, int n, double tilt) {
 }
 
 /// As drill_and_lift, with the app's drill (tests/drilled_walls.h, BrushedWall) at the proxy:
-/// the shipped scenes' brushes, 4.5 mm with falloff 0.2 and 10.19 / (N s) for the burr
-/// (drill-burr.json), falloff 0.5 and 2.038 / (N s) for the point (drill-skull.json), threshold
+/// the shipped scenes' brushes, falloff 0.2 and 10.19 / (N s) for the 4.5 mm burr (drill-burr.json;
+/// the brush's radius the tool's and half the largest voxel, as run/scene_setup.cpp makes it),
+/// 4.5 mm, falloff 0.5 and 2.038 / (N s) for the point (drill-skull.json), threshold
 /// 0.2 N, every 10 ms. The hand presses on to 2 mm past the far face and holds there until the
-/// hole is through (at most 4 s), rests 0.1 s and lifts back along the press line.
+/// hole is through (at most 4 s) and rests 0.1 s. Then it is lifted as an operator withdraws a
+/// burr (the scenes' lift_retrace): from the HIP to the proxy (along the contact normal), back
+/// along the proxy's path (every point of it was outside when the proxy was there, and the drill
+/// only removes material since: the path is free), and 5 mm on along the press line, at 40 mm/s.
+/// The pull is the force against the hand's motion on each lift tick.
 DrillRun brush_drill_and_lift(const WallCase& wc, double r, int n, double tilt) {
   const Vec3 c = wc.box * 0.5;
   const Vec3 side = normalized_or(cross(wc.m, Vec3{0, 1, 0}), Vec3{1, 0, 0});
   const Vec3 press = wc.m * std::cos(tilt) + side * std::sin(tilt);
   const double falloff = r > 0 ? 0.2 : 0.5, rate = (r > 0 ? 10.19 : 2.038) * wc.full;
+  // The burr's brush: the tool's radius and half the largest voxel (run/scene_setup.cpp, brush_at_tool).
+  const double brush = r > 0 ? r + 0.5 * std::max({wc.sp.x, wc.sp.y, wc.sp.z}) : 4.5e-3;
   const double top = 0.5 * wc.w + r + 3e-3, bottom = -(0.5 * wc.w + r + 2e-3);
   HriParams params = isotouch::test::scene_servo();
   params.edit_period_s = 0.01;
@@ -102,27 +110,58 @@ DrillRun brush_drill_and_lift(const WallCase& wc, double r, int n, double tilt) 
   isotouch::test::BrushedWall wall(wc, c);
   SampleField field = wall.field(version);
   DrillRun run;
-  Vec3 last_force;
-  double t_up = 1e9;
-  for (int k = 0;; ++k) {
+  std::vector<Vec3> path;  // the proxy's path, then the lift's
+  Vec3 hip, last_force;
+  int k = 0;
+  for (double t_rest = 1e9;; ++k) {
     const double t = k * 1e-3;
-    const double u = std::max(bottom, top - 0.01 * t), up = t < t_up ? 0.0 : 0.04 * (t - t_up);
-    if (up > top - bottom + 0.008) break;
-    const HriTick out = renderer.tick(field, c + press * (u + up));
-    if (t >= t_up) {
-      run.worst_pull = std::max(run.worst_pull, -dot(out.force_n, press));
-      run.worst_step = std::max(run.worst_step, norm(out.force_n - last_force));
-      run.lift_contact += out.contact;
-    } else if (k % 10 == 9) {
+    if (t >= t_rest) break;
+    const double u = std::max(bottom, top - 0.01 * t);
+    hip = c + press * u;
+    const HriTick out = renderer.tick(field, hip);
+    if (path.empty() || norm(out.vhip_m - path.back()) > 0.05e-3) path.push_back(out.vhip_m);
+    if (k % 10 == 9) {
       if (norm(out.force_n) > 0.2) {
-        wall.drill(out.vhip_m, 4.5e-3, falloff, rate * 0.01 * (norm(out.force_n) - 0.2));
+        wall.drill(out.vhip_m, brush, falloff, rate * 0.01 * (norm(out.force_n) - 0.2));
         field = wall.field(++version);
       }
-      if (t_up > 1e8 && u <= bottom && (through(field, c, wc) || t > 4.0)) {
+      if (t_rest > 1e8 && u <= bottom && (through(field, c, wc) || t > 4.0)) {
         run.broke_through = through(field, c, wc);
-        t_up = t + 0.1;
+        t_rest = t + 0.1;
       }
     }
+    last_force = out.force_n;
+  }
+  // The lift's waypoints: the proxy's path backwards from the HIP, then 5 mm on along the press.
+  std::vector<Vec3> lift{hip};
+  for (auto it = path.rbegin(); it != path.rend(); ++it) lift.push_back(*it);
+  lift.push_back(path.front() + press * 5e-3);
+  const double step = 0.04 * 1e-3;  // 40 mm/s at 1 kHz
+  std::size_t i = 0;
+  Vec3 x = hip;
+  while (i + 1 < lift.size()) {
+    double left = step;
+    Vec3 dir;
+    while (i + 1 < lift.size() && left > 0) {
+      const Vec3 to = lift[i + 1] - x;
+      const double d = norm(to);
+      if (d > 0) dir = to * (1.0 / d);
+      if (d <= left) {
+        x = lift[++i];
+        left -= d;
+      } else {
+        x = x + to * (left / d);
+        left = 0;
+      }
+    }
+    const HriTick out = renderer.tick(field, x);
+    run.worst_pull = std::max(run.worst_pull, -dot(out.force_n, dir));
+    run.worst_step = std::max(run.worst_step, norm(out.force_n - last_force));
+    run.lift_contact += out.contact;
+    if (std::getenv("DRILL_TRACE") && out.contact)
+      std::printf("TR lift %zu/%zu hip_val %.1f vhip_val %.1f F %.3f pull %.3f upd %d pen %.2f mm\n", i, lift.size(),
+                  sample_value(field, x), sample_value(field, out.vhip_m), norm(out.force_n), -dot(out.force_n, dir),
+                  int(out.plane_update), 1e3 * out.penetration_m);
     last_force = out.force_n;
   }
   return run;
@@ -160,6 +199,7 @@ TEST(HriDrillLift, NoInwardPullLiftingOutOfAnAnisotropic8BitScanWall) {
   for (const WallCase& wc : isotouch::test::scan_wall_cases())
     for (const double r : {0.0, 4.5e-3})
       for (const int n : {1, 10}) {
+        if (const char* only = std::getenv("DRILL_ONLY"); only && (wc.name + (r > 0 ? " burr" : " point") + " n" + std::to_string(n)).find(only) == std::string::npos) { ++runs; continue; }
         const DrillRun d = brush_drill_and_lift(wc, r, n, kTilt);
         ++runs;
         std::printf("%s, %s, n = %d: breakthrough %s, lift contact ticks %ld, largest inward pull %.3f N, "

@@ -122,7 +122,7 @@ install(FILES ${CMAKE_BINARY_DIR}/isotouchConfig.cmake ${CMAKE_BINARY_DIR}/isoto
 # pkg-config: the libraries in link order (each before what it needs). A static library
 # exported above but missing here stops the configuration, so the .pc cannot fall behind.
 set(ISOTOUCH_PC_LIBS "")
-set(_pc_order bench serve run plus_peer igtl_device service eval materials seg_nrrd vdb_io volume_io live record session scene io engine
+set(_pc_order bench serve run plus_peer igtl_device service eval materials seg_nrrd vdb_io volume_io live record session_gpu session scene io engine
     engine_cpu sim hid servo)
 foreach(l ${_pc_order})
   if(TARGET isotouch_${l})

@@ -1,4 +1,4 @@
-// brush.cpp - the GPU brush engine (shaders/brush.comp) and the Sculptor API (brush.h).
+// brush.cpp - the GPU brush engine (shaders/brush.comp, brush.h), in isotouch::session_gpu.
 //
 // One application = one command buffer: (smooth only) copy of the pre-edit slices the
 // brush reads into a scratch buffer; the dirty flags zeroed; one box dispatch per z-chunk of
@@ -130,6 +130,11 @@ Result<std::unique_ptr<BrushEngine>> BrushEngine::create(VulkanContext& ctx, con
   barrier_transfer_to_compute(cmd);
   ctx.submit_and_wait(cmd);
   return R::ok(std::unique_ptr<BrushEngine>(new BrushEngine(std::move(impl))));
+}
+
+Result<std::unique_ptr<BrushEngine>> make_gpu_brush_engine(VulkanContext& ctx, const Volume& vol,
+                                                           std::uint64_t max_binding_bytes) {
+  return BrushEngine::create(ctx, vol, max_binding_bytes);
 }
 
 BrushResult BrushEngine::apply(const Brush& b, Volume* host) {

@@ -64,6 +64,7 @@
 #include "isotouch/shaders/isotouch_shared.h"
 #include "isotouch/engine/result.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/session/gpu_parts.h"
 
 namespace isotouch::engine {
 class VulkanContext;
@@ -153,25 +154,28 @@ BrushResult apply_brush_cpu(engine::Volume& vol, const Brush& b, const MaterialC
 /// Volumes up to maxMemoryAllocationSize bytes and 2^32 voxels; each dispatch binds a
 /// window of whole slices that fits maxStorageBufferRange (or `max_binding_bytes`), so a
 /// large brush is split into z-chunks of brick layers.
+///
+/// In isotouch::session_gpu (gpu_parts.h): the session library calls it through its virtual
+/// functions only, so it links without the Vulkan code.
 class BrushEngine {
  public:
   /// Uploads `vol`. @return an error naming the volume and the limit if it does not fit.
   static engine::Result<std::unique_ptr<BrushEngine>> create(engine::VulkanContext& ctx, const engine::Volume& vol,
                                                      std::uint64_t max_binding_bytes = 0);
-  ~BrushEngine();
+  virtual ~BrushEngine();
   BrushEngine(const BrushEngine&) = delete;
   BrushEngine& operator=(const BrushEngine&) = delete;
 
   /// Applies `b` on the device. With `host`, also downloads the dirty bricks into it (it
   /// must be the volume the engine mirrors). @throws BrushError on an invalid brush.
-  BrushResult apply(const Brush& b, engine::Volume* host = nullptr);
+  virtual BrushResult apply(const Brush& b, engine::Volume* host = nullptr);
   /// Copies bricks `ids` of `vol` (the host mirror) to the device (after undo / redo).
-  void upload_bricks(const engine::Volume& vol, const std::vector<std::uint32_t>& ids);
+  virtual void upload_bricks(const engine::Volume& vol, const std::vector<std::uint32_t>& ids);
   /// The whole device volume (tests, export).
-  std::vector<float> download_all();
-  const core::Grid& grid() const;
+  virtual std::vector<float> download_all();
+  virtual const core::Grid& grid() const;
   /// The device's type as Vulkan names it ("cpu" for lavapipe, "discrete-gpu", ...).
-  const std::string& device_type() const;
+  virtual const std::string& device_type() const;
 
  private:
   struct Impl;
@@ -194,9 +198,9 @@ inline constexpr std::size_t kCpuBrushMaxBricksOnGpu = 16;
 /// brush, or when engine() is asked for the device copy. Without a device: always the CPU.
 class Sculptor {
  public:
-  /// @param ctx null: CPU path. @param history_limit_mib undo memory limit [MiB].
-  /// @throws VolumeError if the GPU engine cannot hold the volume.
-  Sculptor(engine::Volume vol, engine::VulkanContext* ctx, double history_limit_mib = 256.0,
+  /// @param gpu a VulkanContext* (gpu_parts.h); null: CPU path. @param history_limit_mib
+  /// undo memory limit [MiB]. @throws VolumeError if the GPU engine cannot hold the volume.
+  Sculptor(engine::Volume vol, GpuParts gpu, double history_limit_mib = 256.0,
            std::uint64_t max_binding_bytes = 0);
   ~Sculptor();
   /// Strokes group applications for undo (e.g. a button press to its release). apply()

@@ -20,6 +20,12 @@ engine::Result<std::unique_ptr<BrushEngine>> BrushEngine::create(engine::VulkanC
                                                             ": this build of isotouch has no Vulkan: no GPU brushes");
 }
 
+engine::Result<std::unique_ptr<BrushEngine>> make_gpu_brush_engine(engine::VulkanContext& ctx,
+                                                                   const engine::Volume& vol,
+                                                                   std::uint64_t max_binding_bytes) {
+  return BrushEngine::create(ctx, vol, max_binding_bytes);
+}
+
 namespace {
 [[noreturn]] void no_vulkan() { throw std::logic_error("BrushEngine: this build of isotouch has no Vulkan"); }
 }  // namespace

@@ -61,11 +61,11 @@ struct EditSession::Impl {
   std::function<void()> history_fault;
 };
 
-EditSession::EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
+EditSession::EditSession(engine::Volume vol, GpuParts gpu, const session::LiveFieldOptions& options,
                          double history_limit_mib)
     : impl_(std::make_unique<Impl>()) {
-  impl_->live = session::LiveField::create(vol, options, ctx);
-  impl_->sculptor = std::make_unique<session::Sculptor>(std::move(vol), ctx, history_limit_mib);
+  impl_->live = session::LiveField::create(vol, options, gpu);
+  impl_->sculptor = std::make_unique<session::Sculptor>(std::move(vol), gpu, history_limit_mib);
 }
 EditSession::~EditSession() = default;
 

@@ -54,12 +54,12 @@ struct EditOutcome {
 
 class EditSession {
  public:
-  /// @param vol the raw volume (moved in); @param ctx null: CPU brushes and CPU recompute (else GPU
+  /// @param vol the raw volume (moved in); @param gpu a VulkanContext* (gpu_parts.h), null: CPU brushes and CPU recompute (else GPU
   /// brushes, and the live field's filters on the GPU for large updates: LiveField::create); @param options the
   /// scene's passes, isosurface, background and sample format; @param history_limit_mib undo
   /// memory limit [MiB]. Builds the first snapshot (version 1).
   /// @throws engine::VolumeError / std::invalid_argument as LiveField::create and Sculptor.
-  EditSession(engine::Volume vol, engine::VulkanContext* ctx, const session::LiveFieldOptions& options,
+  EditSession(engine::Volume vol, GpuParts gpu, const session::LiveFieldOptions& options,
               double history_limit_mib = 256.0);
   ~EditSession();
   EditSession(const EditSession&) = delete;

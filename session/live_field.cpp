@@ -513,7 +513,7 @@ std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldO
 }
 
 std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldOptions& options,
-                                             engine::VulkanContext* ctx) {
+                                             GpuParts gpu) {
   const std::string why = sparse::validate(options.passes);
   if (!why.empty()) throw std::invalid_argument("live field: " + why);
   if (vol.grid.empty() || vol.voxels.size() != vol.grid.voxel_count())
@@ -532,11 +532,11 @@ std::unique_ptr<LiveField> LiveField::create(const Volume& vol, const LiveFieldO
   impl->content_mark.assign(impl->total, 0);
   impl->dirty_mark.assign(impl->total, 0);
   impl->build(vol);
-  if (ctx) {
+  if (gpu) {
     if (impl->plan.ops.empty()) {
       impl->gpu_reason = "no filter in the pass list (" + impl->plan.text + "): the gradient needs no GPU pass";
     } else {
-      auto g = make_live_gpu_filter(*ctx, vol, options.passes);
+      auto g = gpu.live_filter(*gpu.ctx, vol, options.passes);
       if (g) {
         impl->gpu = std::move(*g.value);
         impl->gpu_reason.clear();

@@ -64,6 +64,7 @@
 #include "isotouch/engine/pass_desc.h"
 #include "isotouch/core/sample_field.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/session/gpu_parts.h"
 
 namespace isotouch::engine {
 class VulkanContext;
@@ -108,13 +109,14 @@ class LiveField {
   /// @throws VolumeError naming the volume, or std::invalid_argument naming the pass, if
   ///         the pass list does not suit the sparse chain.
   static std::unique_ptr<LiveField> create(const engine::Volume& vol, const LiveFieldOptions& options);
-  /// The same, recomputing the filters on the GPU of `ctx` (null: CPU only) for updates of
+  /// The same, recomputing the filters on the GPU of `gpu` (a VulkanContext*: gpu_parts.h;
+  /// null: CPU only) for updates of
   /// at least gpu_min_bricks() recomputed bricks. Where the GPU cannot be used (no filter in
   /// the pass list, this build has no Vulkan, the device refuses a buffer or pipeline) the
   /// field recomputes on the CPU and gpu_reason() says why: set-up never fails for it.
-  /// `ctx` must outlive the LiveField and be used from the updating thread only meanwhile.
+  /// The context must outlive the LiveField and be used from the updating thread only meanwhile.
   static std::unique_ptr<LiveField> create(const engine::Volume& vol, const LiveFieldOptions& options,
-                                           engine::VulkanContext* ctx);
+                                           GpuParts gpu);
   ~LiveField();
   LiveField(const LiveField&) = delete;
   LiveField& operator=(const LiveField&) = delete;

@@ -1,7 +1,7 @@
 // live_gpu.h - the live field's GPU recompute (session/live_field.h), behind a seam so that
-// the session library builds without the Vulkan engine (ISOTOUCH_BUILD_ENGINE=OFF, the
-// ThreadSanitizer preset): live_gpu.cpp runs engine::SparseFilter (the sparse chain's list
-// kernels), live_gpu_none.cpp says that this build has no Vulkan.
+// the session library holds no Vulkan code (gpu_parts.h): live_gpu.cpp (isotouch::session_gpu)
+// runs engine::SparseFilter (the sparse chain's list kernels); live_gpu_none.cpp, its
+// stand-in without Vulkan (ISOTOUCH_BUILD_ENGINE=OFF), says that this build has no Vulkan.
 #pragma once
 #include <cstdint>
 #include <memory>
@@ -11,6 +11,7 @@
 #include "isotouch/engine/pass_desc.h"
 #include "isotouch/engine/result.h"
 #include "isotouch/engine/volume.h"
+#include "isotouch/session/gpu_parts.h"
 
 namespace isotouch::engine {
 class VulkanContext;
@@ -32,10 +33,7 @@ class LiveGpuFilter {
   virtual std::string describe() const = 0;
 };
 
-/// @return error (no throw) where this build has no Vulkan, the pass list has no filter, or
-///         the device cannot run the kernels.
-engine::Result<std::unique_ptr<LiveGpuFilter>> make_live_gpu_filter(engine::VulkanContext& ctx,
-                                                                     const engine::Volume& vol,
-                                                                     const std::vector<engine::PassDesc>& passes);
+// make_live_gpu_filter(ctx, vol, passes) (gpu_parts.h): an error (no throw) where this build
+// has no Vulkan, the pass list has no filter, or the device cannot run the kernels.
 
 }  // namespace isotouch::session

@@ -1,6 +1,6 @@
 // sculptor.cpp - Sculptor: the volume, the GPU brush engine (or the CPU reference) and the
-// undo history kept in step (session/brush.h). Builds without Vulkan too: there the brush
-// engine cannot be created (brush_engine_none.cpp) and every brush runs on the CPU reference.
+// undo history kept in step (session/brush.h). Holds no Vulkan code: the GPU brush engine
+// comes from the caller's GpuParts (gpu_parts.h; none: every brush on the CPU reference).
 #include <string>
 
 #include "isotouch/core/brick_field.h"
@@ -10,12 +10,11 @@
 namespace isotouch::session {
 using engine::Volume;
 using engine::VolumeError;
-using engine::VulkanContext;
 
-Sculptor::Sculptor(Volume vol, VulkanContext* ctx, double history_limit_mib, std::uint64_t max_binding_bytes)
+Sculptor::Sculptor(Volume vol, GpuParts gpu, double history_limit_mib, std::uint64_t max_binding_bytes)
     : vol_(std::move(vol)), history_(history_limit_mib) {
-  if (ctx) {
-    auto r = BrushEngine::create(*ctx, vol_, max_binding_bytes);
+  if (gpu) {
+    auto r = gpu.brush_engine(*gpu.ctx, vol_, max_binding_bytes);
     if (!r) throw VolumeError(r.error);
     engine_ = std::move(*r.value);
     history_.set_on_restore([this](const std::vector<std::uint32_t>& ids) { mark_stale(ids); });

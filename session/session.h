@@ -27,7 +27,7 @@ namespace isotouch::session {
 struct SessionOptions {
   LiveFieldOptions field;                ///< passes, isosurface [value units], background, sample format
   servo::HriParams hri;                  ///< the renderer; its tau and inside must be field.iso's (else open() refuses)
-  engine::VulkanContext* vk = nullptr;   ///< not owned, outlives the session; null: CPU engine and brushes
+  GpuParts vk = nullptr;                 ///< a VulkanContext* (not owned, outlives the session); null: CPU engine and brushes
   double history_limit_mib = 256.0;      ///< undo memory [MiB]
 };
 

@@ -159,8 +159,9 @@ message(STATUS "install_embed: COMPONENTS servo: Threads only; ${step_out}")
 
 # 4a. The live path alone: a program that links isotouch::servo and isotouch::live (a sphere
 # volume made in memory, the live session on a simulated device until contact) finds neither
-# ITK nor OpenVDB (nor assimp, OpenIGTLink, hidapi) at configure, and none of their shared
-# libraries is loaded by the program (ldd, what the dynamic loader resolves for the binary).
+# Vulkan, ITK nor OpenVDB (nor assimp, OpenIGTLink, hidapi) at configure, and none of their
+# shared libraries is loaded by the program (ldd, what the dynamic loader resolves for the
+# binary): the session's GPU parts are in isotouch::session_gpu (session/gpu_parts.h).
 set(live_src ${WORK}/live-only)
 file(WRITE ${live_src}/CMakeLists.txt [=[
 cmake_minimum_required(VERSION 3.22)
@@ -220,7 +221,8 @@ int main() {
 ]=])
 run_step("configuring a servo + live consumer" ${CMAKE_COMMAND} -S ${live_src} -B ${WORK}/live-only-build -G Ninja
   -DCMAKE_PREFIX_PATH=${prefix} -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF ${launcher})
-file(STRINGS ${WORK}/live-only-build/CMakeCache.txt heavy REGEX "^(ITK_DIR|GDCM_DIR|OpenVDB_[A-Za-z_]*|assimp_DIR|OpenIGTLink_DIR|HIDAPI_[A-Za-z_]*):")
+file(STRINGS ${WORK}/live-only-build/CMakeCache.txt heavy
+     REGEX "^(Vulkan_LIBRARY|ITK_DIR|GDCM_DIR|OpenVDB_[A-Za-z_]*|assimp_DIR|OpenIGTLink_DIR|HIDAPI_[A-Za-z_]*):")
 if(heavy)
   message(FATAL_ERROR "install_embed: COMPONENTS servo live found what the live path does not need: ${heavy}")
 endif()
@@ -231,14 +233,18 @@ if(NOT step_out MATCHES "^live-only contact 1 \\|F\\| = [0-9.]+ N")
 endif()
 set(live_out "${step_out}")
 run_step("ldd of the servo + live consumer" ldd ${WORK}/live-only-build/live-only)
-string(REGEX MATCHALL "lib(ITK|itk|gdcm|teem|openvdb|assimp|OpenIGTLink|hidapi)[^ \t\n]*" loaded "${step_out}")
+string(REGEX MATCHALL "lib(vulkan|ITK|itk|gdcm|teem|openvdb|assimp|OpenIGTLink|hidapi)[^ \t\n]*" loaded "${step_out}")
 if(loaded)
   message(FATAL_ERROR "install_embed: the servo + live consumer loads ${loaded}:\n${step_out}")
 endif()
 string(REGEX MATCHALL "\n" ldd_lines "${step_out}")
 list(LENGTH ldd_lines n_ldd)
-message(STATUS "install_embed: COMPONENTS servo live: no ITK, OpenVDB, assimp, OpenIGTLink or hidapi found or loaded "
-               "(${n_ldd} ldd lines); ${live_out}")
+# The isotouch archives on its link line (what the build linked, for the log).
+file(STRINGS ${WORK}/live-only-build/build.ninja link_line REGEX "^ +LINK_LIBRARIES = ")
+string(REGEX MATCHALL "libisotouch_[a-z_]+\\.a" archives_linked "${link_line}")
+list(REMOVE_DUPLICATES archives_linked)
+message(STATUS "install_embed: COMPONENTS servo live: no Vulkan, ITK, OpenVDB, assimp, OpenIGTLink or hidapi found "
+               "or loaded (${n_ldd} ldd lines); links ${archives_linked}; ${live_out}")
 
 # 4b. A consumer that enables CXX alone (project(x LANGUAGES CXX)) and asks for everything:
 # ITK's HDF5 needs C, which the package config enables (before, FindHDF5's try_compile

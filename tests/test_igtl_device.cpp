@@ -261,7 +261,12 @@ void child_then_end(int port, const char* how) {
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  // 0.3 s, and on a loaded machine on until the force has flowed (40 Forces sent: the parent
+  // asks for more than 20 of 0.5 N), 5 s at most.
+  const auto t0 = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(300) ||
+         (d.forces_sent() < 40 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(5)))
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
   if (std::string(how) == "crash") std::raise(SIGSEGV);  // the servo thread still writing
   servo::send_exit_zeros(5000);
   std::_Exit(3);

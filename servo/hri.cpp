@@ -66,7 +66,6 @@ void HriRenderer::clear_contact() {
   prev_force_ = {};
   tool_plane_count_ = 0;
   scan_valid_ = false;
-  tool_leashed_ = false;
   release_left_s_ = 0;
   prev_target_f_ = {};
   ramp_from_dir_ = {};

@@ -321,15 +321,7 @@ struct ToolPlane {
 /// faces of a corner and the blobs of a one-voxel plate each get their plane, including
 /// those within the margin that the proxy reaches only while it slides. If the proxy so
 /// placed moved more than a quarter voxel from the scan's centre, the scan is repeated
-/// there (at most twice). The proxy moves at most one voxel from a scan's centre (the
-/// scanned margin) and no nearer than r (nor nearer than it is) to a scanned point that no
-/// chosen plane covers (more than kMaxToolPlanes of them: a channel a drill left narrower
-/// than the tool holds it all round); where that stops it short of the planes' solution it
-/// stays there (the leash) and the next tick updates again, so it reaches a HIP far past the
-/// planes (a breakthrough with the hand deep) through scanned free space, a few voxels a
-/// tick, the force falling as it goes, never across the material (it was: 9 mm in a tick,
-/// and withdrawing the burr the surface held it on the far side and pulled it back in, up to
-/// the limit). Updates: every n ticks, and early when the proxy is more than
+/// there (at most twice). Updates: every n ticks, and early when the proxy is more than
 /// 0.2 voxel from the last scan's centre (so no surface beyond the scanned margin can come
 /// within r), or on an edit tick. In free motion the tick reads no sample: the last scan
 /// proved the surface no nearer than its nearest point, and the next scan comes when the
@@ -347,8 +339,7 @@ struct ToolPlane {
 /// kEntryConeDeg), with the new ones that do not face away from it, replace the new set if
 /// they hold the HIP and the HIP is past the middle of the chord of material along entry_n_
 /// through the point just behind the nearest surface point (the HIP itself when inside),
-/// or was found past it since, and their proxy is within a voxel of the tick before's (the
-/// first scan's margin); else entry_n_ follows the turn. The hold ends when the
+/// or was found past it since; else entry_n_ follows the turn. The hold ends when the
 /// sphere leaves the material, the contact ends, an edit or a new radius comes. Other
 /// updates read nothing for it. Friction and force shading do not apply to the tool (the
 /// scene refuses them).
@@ -569,9 +560,6 @@ class HriRenderer final : public Renderer {
   double edit_ease(const Vec3& hip, Vec3& force, double mag, TickOut& out);
   /// Spherical tool: rebuild the planes from the proxy of the tick before toward `hip`.
   void tool_rebuild(const FieldView& field, const Vec3& hip);
-  /// The fraction of the proxy's move from x by `move` that keeps the sphere clear of the
-  /// last scan's points within reach no held plane covers (tool_rebuild).
-  double tool_uncovered_room(const Vec3& x, const Vec3& move, double reach, double voxel) const;
   /// Spherical tool: the planes from Newton searches (tools too large for surface_scan).
   void tool_rebuild_newton(const FieldView& field, const Vec3& hip);
   /// Spherical tool: fills scan_ with the surface points of the cells within `reach` of x
@@ -699,10 +687,6 @@ class HriRenderer final : public Renderer {
   double scan_clear_m_ = 0;     ///< distance of the nearest surface point of the last scan [m]
   bool tool_reseat_ = false;    ///< set_tool_radius(): the next tool tick rebuilds its planes
   bool scan_valid_ = false;     ///< anchor_ is the centre of a complete scan of the field version
-  /// The last update's proxy is where its scans reach, short of the planes' solution: the
-  /// scanned margin ends there (tool_rebuild); it is the proxy, and the next tick updates.
-  bool tool_leashed_ = false;
-  Vec3 tool_leash_;             ///< that proxy (world [m])
   float scan_excess_[kScanSide * kScanSide * kScanSide];
 };
 

@@ -522,29 +522,6 @@ int HriRenderer::tool_add_uncovered(const Vec3& x, double reach, double voxel) {
   return added;
 }
 
-double HriRenderer::tool_uncovered_room(const Vec3& x, const Vec3& move, double reach, double voxel) const {
-  // The largest t in [0, 1] with |x + t move - q| >= min(r, |x - q|) for every scanned point
-  // q within reach that no held plane covers (tool_add_uncovered's test).
-  const double r = params_.tool_radius_m, cover = 0.01 * voxel, mm = dot(move, move);
-  double t = 1.0;
-  if (!(mm > 0.0)) return t;
-  for (int c = 0; c < scan_count_; ++c) {
-    const ScanPoint& s = scan_[c];
-    if (s.d > reach) break;
-    bool covered = false;
-    for (int i = 0; i < tool_plane_count_ && !covered; ++i)
-      covered = dot(tool_planes_[i].n, s.q - tool_planes_[i].p) < cover;
-    if (covered) continue;
-    const Vec3 a = x - s.q;
-    const double am = dot(a, move), aa = dot(a, a), rho2 = std::min(r * r, aa);
-    if (am >= 0.0) continue;  // moving away from it
-    const double disc = am * am - mm * (aa - rho2);
-    if (disc < 0.0) continue;  // passes it farther than rho
-    t = std::min(t, std::max(0.0, (-am - std::sqrt(disc)) / mm));
-  }
-  return t;
-}
-
 void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   // The planes from scans of the cells around the proxy (see the class docs); a tool too
   // large for the scan box: Newton searches (tool_rebuild_newton).
@@ -554,41 +531,18 @@ void HriRenderer::tool_rebuild(const FieldView& field, const Vec3& hip) {
   const double reach = r + voxel;
   Vec3 centre = vhip_;
   scan_valid_ = false;
-  tool_leashed_ = false;
   for (int pass = 0; pass < 3; ++pass) {
     if (!surface_scan(field, centre, reach)) {
       if (pass == 0) tool_rebuild_newton(field, hip);
-      tool_leashed_ = false;
       return;
     }
     if (pass == 0) tool_plane_count_ = 0;
     tool_add_uncovered(centre, reach, voxel);
     anchor_ = centre;
     scan_valid_ = true;
-    tool_leashed_ = false;
-    Vec3 y = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
-    Vec3 moved = y - centre;
-    const double d2 = dot(moved, moved);
-    if (d2 <= 0.0625 * voxel * voxel) break;
-    // The scan saw the surface within r + 1 voxel of its centre: no other surface comes
-    // within r of a proxy at most a voxel from it. Farther (the planes let go of a HIP far
-    // past them: a breakthrough with the hand deep, the HIP beyond a ring the drill left
-    // narrower than the tool) the sphere's way is unseen, and a proxy put there crossed
-    // the material in between (then held on its far side: the lift pulled the tool back
-    // in). So it goes one voxel along the way (inside the planes' half-spaces: the way
-    // starts at a feasible centre and ends at a feasible y) and is scanned again there; at
-    // the last pass it stays on the leash and the next tick goes on (tool_tick).
-    double t = d2 > voxel * voxel ? voxel / std::sqrt(d2) : 1.0;
-    // And the scanned points no plane covers (more than kMaxToolPlanes of them: a channel
-    // the drill left narrower than the tool holds it all round) bound the way too: the
-    // sphere comes no nearer than r to any (nor nearer than it is, where it is nearer
-    // now). Without it the proxy slid into the material they stand for, and crossed it.
-    t = std::min(t, tool_uncovered_room(centre, moved, reach, voxel));
-    if (t < 1.0) {
-      y = centre + moved * t;
-      tool_leashed_ = true;
-      tool_leash_ = y;
-    }
+    const Vec3 y = tool_plane_count_ > 0 ? tool_solve(hip) : hip;
+    const Vec3 moved = y - centre;
+    if (dot(moved, moved) <= 0.0625 * voxel * voxel) break;
     centre = y;
   }
 }
@@ -694,13 +648,7 @@ void HriRenderer::tool_hold_entry_side(const FieldView& field, const Vec3& hip, 
   const Vec3 held = entry_side > 0 ? tool_solve(hip) : hip;
   const double held_pen = norm(held - hip);
   const double reach = 2.0 * std::max(0.0, held_pen - params_.tool_radius_m) + voxel;
-  // The held proxy no farther than a voxel from the proxy of the tick before: the update's
-  // first scan saw every surface within r + 1 voxel of that one, and the entry side's planes
-  // are not all of it. Farther, they slid the sphere across the ring a drill left narrower
-  // than the tool (9 mm in one tick) and the lift pulled it back in.
-  const Vec3 held_move = held - vhip_;
-  if (held_pen > 0.0 && dot(held_move, held_move) <= voxel * voxel &&
-      (entry_held_ || (have_m && tool_past_middle(field, m, hip, entry_n_, reach, voxel)))) {
+  if (held_pen > 0.0 && (entry_held_ || (have_m && tool_past_middle(field, m, hip, entry_n_, reach, voxel)))) {
     entry_held_ = true;  // the held planes stay: the proxy on the entry side
     scan_valid_ = false;
     solved = held;
@@ -716,8 +664,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
   const Vec3& sp = field.grid().spacing_m;
   const double voxel = std::min({sp.x, sp.y, sp.z});
   const bool reseat = tool_reseat_;
-  // A proxy left on the leash (tool_rebuild) goes on toward the HIP at once.
-  bool update = reseat || tool_leashed_ || (edited && (tool_plane_count_ > 0 || was_contact_));
+  bool update = reseat || (edited && (tool_plane_count_ > 0 || was_contact_));
   tool_reseat_ = false;
   if (edited) scan_valid_ = false;  // the last scan's clearance was of the old snapshot
   // The proxy for the planes held now (tool_solve, a few dozen small solves), computed once
@@ -766,7 +713,7 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     const int kept_count = tool_plane_count_;
     std::copy(tool_planes_, tool_planes_ + kept_count, kept);
     tool_rebuild(field, hip);
-    if (!tool_leashed_ && tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
+    if (tool_plane_count_ == 0 && kept_count > 0 && excess(sample_value(field, hip)) > 0.0) {
       // No surface within reach of the proxy while the HIP is inside: material removed
       // around the tool (a drill), or a noisy scan. The proxy goes toward the HIP up to the
       // surface on the way (first crossing of the segment; the plane there, the centre r
@@ -786,15 +733,10 @@ Vec3 HriRenderer::tool_tick(const FieldView& field, const Vec3& hip, bool edited
     solved = tool_solve(hip);  // the HIP itself without a plane
     have_solved = true;
     tool_hold_entry_side(field, hip, !reseat && !edited && was_contact_ && kept_count > 0, kept, kept_count, solved);
-    if (entry_held_) tool_leashed_ = false;  // the entry side's planes hold the proxy (their solve)
     if (!scan_valid_) anchor_ = solved;
     out.plane_update = true;
   }
-  if (update && tool_leashed_) {
-    solved = tool_leash_;  // the way beyond is not scanned yet (tool_rebuild)
-    have_solved = true;
-  }
-  const Vec3 x = tool_leashed_ ? tool_leash_ : tool_plane_count_ == 0 ? hip : have_solved ? solved : tool_solve(hip);
+  const Vec3 x = tool_plane_count_ == 0 ? hip : have_solved ? solved : tool_solve(hip);
   vhip_ = x;
   const Vec3 push = (x - hip) * inv_wpd_;  // device [m]
   const double depth = norm(push);

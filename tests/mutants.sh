@@ -309,15 +309,6 @@ m hri-release-fade-contact  $H $'out.penetration_m = 0;\n    ++release_fade_tick
                                $'out.penetration_m = 0;\n    out.contact = true;\n    ++release_fade_ticks_;' \
                                $T 'HriRecovery.AReleaseByAPlaneUpdate*'
 
-# The burr's proxy moves through scanned free space only (tool_rebuild): a voxel past each scan,
-# clear of the scanned points no plane covers, and the entry side's hold within a voxel of the
-# proxy before. Each alone let it cross the ring a drill left narrower than the tool; its
-# withdrawal was then pulled back in (up to 3.29 N on the 8-bit anisotropic walls).
-D=test_hri_drill_lift E='HriDrillLift.NoInwardPullWithdrawingABurr*'
-m hri-tool-leash-voxel      $H 'double t = d2 > voxel * voxel ? voxel / std::sqrt(d2) : 1.0;' 'double t = 1.0;' $D "$E"
-m hri-tool-uncovered-room   $H '    t = std::min(t, tool_uncovered_room(centre, moved, reach, voxel));' '' $D "$E"
-m hri-tool-hold-near        $H '  if (held_pen > 0.0 && dot(held_move, held_move) <= voxel * voxel &&' '  if (held_pen > 0.0 &&' $D "$E"
-
 # The point's thin-feature hold (hold_entry_side): each rule alone lets a scan-like ridge wrap
 # below 0.9 of the limit; the held plane's point lowered to a face falling away under the
 # stroke (short of the middle, the wall as thick as at entry) lets a plate's hold end with no
